@@ -1,0 +1,311 @@
+"""The Engine: a program grounded over a graph, stepped one timestep at a time for a batch of worlds.
+
+Python here only builds integer tables and moves facts in and trace rows out; every timestep is one call
+of the compiled kernel (kernel.step_worlds) for all worlds together.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from . import kernel as K
+from .errors import FixpointError, InconsistencyError
+from .graph import Graph
+from .grounding import Grounder, GroundingTable, rule_head_bound
+from .parser import parse_literal
+from .program import (INCONSISTENCY_POLICIES, UPDATE_MODES, Fact, Program, effective_bound,
+                      ordered_nodes)
+from .vocabulary import Vocabulary
+
+TRACE_COLUMNS = ("world", "t", "pass_no", "atom", "cause_kind", "cause_id", "grounding", "n_sources",
+                 "old_lower", "old_upper", "new_lower", "new_upper")
+_TRACE_INT_DTYPES = (np.int32, np.int32, np.int32, np.int32, np.int8, np.int32, np.int32, np.int16)
+STAT_NAMES = ("firings", "rederivations", "static_ignored", "changes", "passes")
+
+
+class Engine:
+    """Runs `program` on `graph` for `worlds` independent worlds (same program, same vocabulary)."""
+
+    def __init__(self, program: Program, graph: Graph | None = None, *, worlds: int = 1,
+                 trace: bool | Sequence[bool] | np.ndarray = True, max_passes: int = 1000,
+                 max_immediate: int = 100_000) -> None:
+        if worlds < 1:
+            raise ValueError(f"worlds must be >= 1, got {worlds}")
+        self.program = program
+        self.n_worlds = worlds
+        self.t = 0
+        self.vocab = Vocabulary(ordered_nodes(program, graph.nodes if graph else ()))
+        # graph facts come first in source order (docs/language.md)
+        self.facts: list[Fact] = [*(graph.facts if graph else ()), *program.facts]
+        self.rules = program.rules
+        self.grounder = Grounder(self.rules, self.vocab)
+        self._fact_tables()
+        self._rule_tables()
+        self._cfg = np.array([UPDATE_MODES.index(program.mode), int(program.timesteps == "reset"),
+                              INCONSISTENCY_POLICIES.index(program.inconsistency), max_passes,
+                              max_immediate, 0], np.int64)
+        self.trace_on = np.broadcast_to(np.asarray(trace, np.bool_), (worlds,)).copy()
+        # per-world state, sized by _sync()
+        self.lower = np.zeros((worlds, 0))
+        self.upper = np.ones((worlds, 0))
+        self.static = np.zeros((worlds, 0), np.bool_)
+        self._last_cause = np.full((worlds, 0, 2), -1, np.int32)
+        self._unsat = np.zeros((worlds, 0), np.int16)
+        self._act = np.zeros((worlds, 0), np.int32)
+        self._act_pos = np.zeros((worlds, 0), np.int32)
+        self._act_n = np.zeros(worlds, np.int64)
+        self._pend = np.zeros((worlds, 16, 2), np.int32)
+        self._pend_n = np.zeros(worlds, np.int64)
+        self._tri = np.zeros((K.TRACE_INT_COLUMNS, 1024), np.int32)
+        self._trf = np.zeros((K.TRACE_FLOAT_COLUMNS, 1024), np.float64)
+        self._tr_n = np.zeros(1, np.int64)
+        self._stats = np.zeros((worlds, K.N_STATS), np.int64)
+        self._err = np.zeros(8, np.int64)
+        self._ext: list[tuple[int, float, float, int, bool]] = []  # atom, l, u, world (-1 all), static
+        self._ext_count = 0
+        self._n_grounded = 0
+        self._table: GroundingTable | None = None
+        self._sync()
+
+    # ---- building ----
+
+    def _fact_tables(self) -> None:
+        rows, bounds = [], []
+        for f in self.facts:
+            lit = f.literal
+            aid = self.vocab.atom_by_name(lit.pred, tuple(a.name for a in lit.args))
+            self.grounder.add_settable(aid)
+            rows.append((aid, f.start, f.end, int(f.static)))
+            bounds.append(effective_bound(lit.lower, lit.upper, lit.negated))
+        self._fact_i = np.asarray(rows, np.int64).reshape(-1, 4)
+        self._fact_f = np.asarray(bounds, np.float64).reshape(-1, 2)
+
+    def _rule_tables(self) -> None:
+        n = len(self.rules)
+        self._rule_i = np.zeros((n, 3), np.int64)
+        self._rule_f = np.zeros((n, 2), np.float64)
+        for i, r in enumerate(self.rules):
+            mode = r.mode or self.program.mode
+            self._rule_i[i] = (UPDATE_MODES.index(mode), r.delay, int(r.immediate))
+            self._rule_f[i] = rule_head_bound(r)
+
+    def _sync(self) -> None:
+        """Ground any new settable atoms and grow the per-world arrays to the vocabulary and groundings."""
+        self.grounder.close()
+        n_atoms = self.vocab.n_atoms
+        old_atoms = self.lower.shape[1]
+        if n_atoms > old_atoms:
+            grow = n_atoms - old_atoms
+            w = self.n_worlds
+            self.lower = np.concatenate([self.lower, np.zeros((w, grow))], axis=1)
+            self.upper = np.concatenate([self.upper, np.ones((w, grow))], axis=1)
+            self.static = np.concatenate([self.static, np.zeros((w, grow), np.bool_)], axis=1)
+            self._last_cause = np.concatenate(
+                [self._last_cause, np.full((w, grow, 2), -1, np.int32)], axis=1)
+        n_inst = len(self.grounder.g_rule)
+        if n_inst == self._n_grounded and n_atoms == old_atoms and hasattr(self, "_kt"):
+            return
+        self._kt = self.grounder.kernel_tables()
+        first = self._n_grounded
+        if n_inst > first:
+            grow = n_inst - first
+            w = self.n_worlds
+            self._unsat = np.concatenate([self._unsat, np.zeros((w, grow), np.int16)], axis=1)
+            self._act = np.concatenate([self._act, np.zeros((w, grow), np.int32)], axis=1)
+            self._act_pos = np.concatenate([self._act_pos, np.full((w, grow), -1, np.int32)], axis=1)
+            kt = self._kt
+            K.recount_groundings(first, self.lower, self.upper, kt["b_ptr"], kt["b_atom"], kt["b_neg"],
+                                 kt["b_bnd"], self._unsat, self._act, self._act_n, self._act_pos)
+        self._n_grounded = n_inst
+        self._table = None
+        self._si = np.zeros((n_atoms, K.N_SCRATCH_INT), np.int64)
+        self._sf = np.zeros((n_atoms, K.N_SCRATCH_FLOAT), np.float64)
+        self._touched = np.zeros(max(n_atoms, 1), np.int64)
+
+    # ---- atoms ----
+
+    def atom(self, pred: str, *args: str) -> int:
+        """The id of pred(args), interned on demand."""
+        aid = self.vocab.atom_by_name(pred, tuple(args))
+        if aid >= self.lower.shape[1]:
+            self._sync()
+        return aid
+
+    def atom_text(self, aid: int) -> str:
+        return self.vocab.atom_text(aid)
+
+    def _lookup(self, text: str) -> int | None:
+        lit = parse_literal(text)
+        label = self.vocab.label_ids.get(lit.pred)
+        nodes = [self.vocab.node_ids.get(a.name) for a in lit.args]
+        if label is None or any(n is None for n in nodes):
+            return None
+        return self.vocab.atom_ids.get(self.vocab.atom_key(label, tuple(nodes)))
+
+    # ---- facts in, steps, values out ----
+
+    def add_fact(self, atom: int, lower: float = 1.0, upper: float = 1.0, world: int | None = None,
+                 static: bool = False) -> None:
+        """An external fact, applied at pass 0 of the next step (in `world`, or in every world)."""
+        if not (0.0 <= lower <= upper <= 1.0):
+            raise ValueError(f"bound [{lower},{upper}] of {self.atom_text(atom)} is not inside [0,1] "
+                             "with lower <= upper")
+        if world is not None and not 0 <= world < self.n_worlds:
+            raise ValueError(f"world {world} out of range 0..{self.n_worlds - 1}")
+        self.grounder.add_settable(atom)
+        self._ext.append((atom, lower, upper, -1 if world is None else world, static))
+
+    def add_facts(self, atoms: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                  worlds: np.ndarray | None = None, static: bool = False) -> None:
+        """Vectorised add_fact: one external fact per element."""
+        atoms = np.asarray(atoms, np.int64)
+        lower = np.broadcast_to(np.asarray(lower, np.float64), atoms.shape)
+        upper = np.broadcast_to(np.asarray(upper, np.float64), atoms.shape)
+        worlds = np.full(atoms.shape, -1) if worlds is None else np.broadcast_to(worlds, atoms.shape)
+        bad = ~((lower >= 0) & (lower <= upper) & (upper <= 1))
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise ValueError(f"bound [{lower[i]},{upper[i]}] of {self.atom_text(int(atoms[i]))} is not "
+                             "inside [0,1] with lower <= upper")
+        for a in np.unique(atoms):
+            self.grounder.add_settable(int(a))
+        self._ext.extend(zip(atoms.tolist(), lower.tolist(), upper.tolist(), worlds.tolist(),
+                             [static] * len(atoms)))
+
+    def _external_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        w = self.n_worlds
+        if not self._ext:
+            return np.zeros(w + 1, np.int64), np.zeros((0, 3), np.int64), np.zeros((0, 2))
+        ext = self._ext
+        self._ext = []
+        atoms = np.array([e[0] for e in ext], np.int64)
+        bnd = np.array([(e[1], e[2]) for e in ext], np.float64)
+        world = np.array([e[3] for e in ext], np.int64)
+        static = np.array([e[4] for e in ext], np.int64)
+        ids = self._ext_count + np.arange(len(ext), dtype=np.int64)
+        self._ext_count += len(ext)
+        # a fact for every world is repeated per world; rows are grouped by world for the kernel
+        everywhere = world < 0
+        if everywhere.any():
+            rep = np.repeat(np.flatnonzero(everywhere), w)
+            rep_world = np.tile(np.arange(w), int(everywhere.sum()))
+            keep = np.flatnonzero(~everywhere)
+            idx = np.concatenate([keep, rep])
+            world = np.concatenate([world[keep], rep_world])
+        else:
+            idx = np.arange(len(ext))
+        order = np.argsort(world, kind="stable")
+        idx, world = idx[order], world[order]
+        ext_i = np.column_stack([atoms[idx], static[idx], ids[idx]])
+        ptr = np.zeros(w + 1, np.int64)
+        np.add.at(ptr, world + 1, 1)
+        return np.cumsum(ptr), ext_i, np.ascontiguousarray(bnd[idx])
+
+    def step(self) -> None:
+        """Compute timestep self.t in every world, then advance t."""
+        self._sync()
+        ext_ptr, ext_i, ext_f = self._external_arrays()
+        self._cfg[K.CFG_T] = self.t
+        kt = self._kt
+        status, self._tri, self._trf, self._pend = K.step_worlds(
+            self._cfg, self._rule_i, self._rule_f, kt["inst_i"], kt["w_ptr"], kt["w_inst"], kt["w_neg"],
+            kt["w_bnd"], self._fact_i, self._fact_f, ext_ptr, ext_i, ext_f,
+            self.lower, self.upper, self.static, self._last_cause, self._unsat, self._act, self._act_n,
+            self._act_pos, self._pend, self._pend_n, self.trace_on, self._tri, self._trf, self._tr_n,
+            self._stats, self._err, self._si, self._sf, self._touched)
+        if status != K.STATUS_OK:
+            self._raise(status)
+        self.t += 1
+
+    def run(self, steps: int) -> None:
+        for _ in range(steps):
+            self.step()
+
+    def bound(self, atom: int, world: int = 0) -> tuple[float, float]:
+        if atom >= self.lower.shape[1]:
+            return (0.0, 1.0)
+        return float(self.lower[world, atom]), float(self.upper[world, atom])
+
+    def query(self, text: str, world: int = 0) -> tuple[float, float]:
+        """The bound of an atom given as text, e.g. "atLoc(red-agent-1,16)"; [0,1] if never set."""
+        aid = self._lookup(text)
+        return (0.0, 1.0) if aid is None else self.bound(aid, world)
+
+    def interpretation(self, world: int = 0) -> dict[str, tuple[float, float]]:
+        """Every atom whose bound is not [0,1], by its text."""
+        lo, up = self.lower[world], self.upper[world]
+        known = np.flatnonzero((lo != 0.0) | (up != 1.0))
+        return {self.vocab.atom_text(int(a)): (float(lo[a]), float(up[a])) for a in known}
+
+    # ---- trace, vocabulary, groundings, stats ----
+
+    def take_trace(self) -> dict[str, np.ndarray]:
+        """The change rows since the last call, as columns (docs/engine-api.md); the buffer is cleared."""
+        n = int(self._tr_n[0])
+        cols: dict[str, np.ndarray] = {}
+        for i, dtype in enumerate(_TRACE_INT_DTYPES):
+            cols[TRACE_COLUMNS[i]] = self._tri[i, :n].astype(dtype)
+        for j in range(K.TRACE_FLOAT_COLUMNS):
+            cols[TRACE_COLUMNS[K.TRACE_INT_COLUMNS + j]] = self._trf[j, :n].copy()
+        self._tr_n[0] = 0
+        return cols
+
+    def vocabulary(self) -> dict[str, object]:
+        return self.vocab.arrays()
+
+    @property
+    def groundings(self) -> GroundingTable:
+        if self._table is None or len(self._table.rule) != len(self.grounder.g_rule):
+            self._table = self.grounder.table()
+        return self._table
+
+    @property
+    def stats(self) -> dict[str, np.ndarray]:
+        return {name: self._stats[:, i].copy() for i, name in enumerate(STAT_NAMES)}
+
+    def pending(self, world: int = 0) -> list[tuple[int, int]]:
+        """Scheduled firings of delayed rules: (due time, grounding id)."""
+        n = int(self._pend_n[world])
+        return [(int(d), int(g)) for d, g in self._pend[world, :n]]
+
+    # ---- errors ----
+
+    def describe_source(self, kind: int, cid: int, grounding: int = -1) -> str:
+        if kind == K.CAUSE_FACT:
+            f = self.facts[cid]
+            where = f" ({f.loc})" if f.loc else ""
+            return f"fact {f.name}{where}"
+        if kind == K.CAUSE_EXTERNAL:
+            return f"external fact #{cid}"
+        if kind == K.CAUSE_RULE:
+            r = self.rules[cid]
+            where = f" ({r.loc})" if r.loc else ""
+            if grounding >= 0:
+                vals = self.groundings.values(grounding)
+                binding = ", ".join(f"{v}={self.vocab.nodes[x]}" for v, x in zip(r.variables, vals))
+                return f"rule {r.name}{where} with {binding or 'no variables'}"
+            return f"rule {r.name}{where}"
+        if kind == K.CAUSE_POLICY:
+            return f"inconsistency policy {INCONSISTENCY_POLICIES[cid]}"
+        if kind == K.CAUSE_RESET:
+            return "the reset at the start of the step"
+        return "nothing (the atom was never set)"
+
+    def _raise(self, status: int) -> None:
+        e = self._err
+        w, t, a = int(e[0]), int(e[1]), int(e[2])
+        if status == K.STATUS_INCONSISTENT:
+            old = self.describe_source(int(e[3]), int(e[4]))
+            new = self.describe_source(int(e[5]), int(e[6]), int(e[7]))
+            lo, up = self.bound(a, w)
+            raise InconsistencyError(
+                f"inconsistent bounds for {self.atom_text(a)} at t={t} (world {w}): its bound "
+                f"[{lo:g},{up:g}] came from {old}; the incoming bound from {new} is disjoint from it")
+        if status == K.STATUS_IMMEDIATE_LIMIT:
+            raise FixpointError(
+                f"immediate rules did not settle at t={t} (world {w}) after "
+                f"{int(self._cfg[K.CFG_MAX_IMMEDIATE])} applications; still changing: {self.atom_text(a)}")
+        raise FixpointError(
+            f"no fixpoint at t={t} (world {w}) after {int(self._cfg[K.CFG_MAX_PASSES])} passes: "
+            "rules in override mode (or a policy) keep changing atoms; see the trace of that step")

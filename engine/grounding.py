@@ -1,0 +1,262 @@
+"""Grounding: every rule grounding that could ever fire, found once by joins over the atoms that can ever
+be set (by facts, external facts or rule heads), and kept as integer tables for the kernel.
+
+An atom that nothing can set stays [0,1] forever, and [0,1] satisfies no *binding* clause, so a grounding
+needs one settable atom per binding clause. Groundings are full joins: one value per variable across every
+clause. New settable atoms (rule heads, external facts on new atoms) are joined semi-naively: each round
+only joins that use at least one new atom are made.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .program import Literal, Rule, effective_bound
+from .vocabulary import Vocabulary
+
+
+@dataclass
+class GroundingTable:
+    """Rule groundings, by id. Body atoms list every clause of the rule in order (binding or not)."""
+    rule: np.ndarray  # int32[G]
+    body_ptr: np.ndarray  # int64[G+1]
+    body_atoms: np.ndarray  # int32[...]
+    var_ptr: np.ndarray  # int64[G+1]
+    var_values: np.ndarray  # int32[...] node ids, in Rule.variables order
+
+    def body(self, g: int) -> np.ndarray:
+        return self.body_atoms[self.body_ptr[g]:self.body_ptr[g + 1]]
+
+    def values(self, g: int) -> np.ndarray:
+        return self.var_values[self.var_ptr[g]:self.var_ptr[g + 1]]
+
+
+@dataclass
+class _CompiledRule:
+    index: int
+    rule: Rule
+    variables: tuple[str, ...]
+    head_label: int
+    # per clause: label id, args as ("var", index) / ("const", node id)
+    clause_labels: list[int]
+    clause_args: list[list[tuple[bool, int]]]  # (is_var, var index or node id)
+    head_args: list[tuple[bool, int]]
+    binding: list[int]  # indices of binding clauses
+
+
+@dataclass
+class Grounder:
+    rules: list[Rule]
+    vocab: Vocabulary
+    # settable atoms, indexed for joins
+    settable: set[int] = field(default_factory=set)
+    _by_label: dict[int, list[int]] = field(default_factory=dict)
+    _by_label_arg: dict[tuple[int, int, int], list[int]] = field(default_factory=dict)
+    _new: list[int] = field(default_factory=list)
+    _seen: set[tuple[int, tuple[int, ...]]] = field(default_factory=set)
+    # growing grounding tables
+    g_rule: list[int] = field(default_factory=list)
+    g_head: list[int] = field(default_factory=list)
+    g_values: list[tuple[int, ...]] = field(default_factory=list)
+    g_body: list[list[int]] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self._compiled = [self._compile(i, r) for i, r in enumerate(self.rules)]
+
+    def _compile(self, index: int, rule: Rule) -> _CompiledRule:
+        variables = rule.variables
+        var_index = {v: i for i, v in enumerate(variables)}
+
+        def args_of(lit: Literal) -> list[tuple[bool, int]]:
+            return [(True, var_index[t.name]) if t.is_var else (False, self.vocab.node(t.name))
+                    for t in lit.args]
+
+        return _CompiledRule(
+            index=index, rule=rule, variables=variables,
+            head_label=self.vocab.label(rule.head.pred, len(rule.head.args)),
+            clause_labels=[self.vocab.label(c.pred, len(c.args)) for c in rule.body],
+            clause_args=[args_of(c) for c in rule.body],
+            head_args=args_of(rule.head),
+            binding=[i for i, c in enumerate(rule.body) if c.binds],
+        )
+
+    def add_settable(self, aid: int) -> None:
+        """Declare that atom aid can be set (a fact, an external fact, a rule head)."""
+        if aid in self.settable:
+            return
+        self.settable.add(aid)
+        self._new.append(aid)
+        label = self.vocab._atom_label[aid]
+        self._by_label.setdefault(label, []).append(aid)
+        for pos, node in enumerate((self.vocab._atom_arg0[aid], self.vocab._atom_arg1[aid])):
+            if node >= 0:
+                self._by_label_arg.setdefault((label, pos, node), []).append(aid)
+
+    def close(self) -> int:
+        """Ground until no new settable atom appears. Returns the number of new groundings."""
+        before = len(self.g_rule)
+        for cr in self._compiled:  # rules without binding clauses have exactly one grounding
+            if not cr.binding and (cr.index, ()) not in self._seen:
+                self._emit(cr, [])
+        while self._new:
+            delta = set(self._new)
+            self._new = []
+            delta_by_label: dict[int, list[int]] = {}
+            for aid in sorted(delta):
+                delta_by_label.setdefault(self.vocab._atom_label[aid], []).append(aid)
+            for cr in self._compiled:
+                for ci in cr.binding:
+                    atoms = delta_by_label.get(cr.clause_labels[ci])
+                    if atoms:
+                        self._join(cr, ci, atoms)
+        return len(self.g_rule) - before
+
+    def _join(self, cr: _CompiledRule, start: int, start_atoms: list[int]) -> None:
+        n_vars = len(cr.variables)
+        binding: list[int] = [-1] * n_vars
+        rest = [ci for ci in cr.binding if ci != start]
+
+        def match(ci: int, aid: int, trail: list[int]) -> bool:
+            """Bind clause ci's variables to atom aid's arguments; False on a clash."""
+            nodes = (self.vocab._atom_arg0[aid], self.vocab._atom_arg1[aid])
+            for pos, (is_var, x) in enumerate(cr.clause_args[ci]):
+                node = nodes[pos]
+                if not is_var:
+                    if x != node:
+                        return False
+                elif binding[x] < 0:
+                    binding[x] = node
+                    trail.append(x)
+                elif binding[x] != node:
+                    return False
+            return True
+
+        def candidates(ci: int) -> list[int]:
+            label = cr.clause_labels[ci]
+            best: list[int] | None = None
+            for pos, (is_var, x) in enumerate(cr.clause_args[ci]):
+                node = binding[x] if is_var else x
+                if node >= 0:
+                    lst = self._by_label_arg.get((label, pos, node), [])
+                    if best is None or len(lst) < len(best):
+                        best = lst
+            return self._by_label.get(label, []) if best is None else best
+
+        def bound_count(ci: int) -> int:
+            return sum(1 for is_var, x in cr.clause_args[ci] if not is_var or binding[x] >= 0)
+
+        def descend(remaining: list[int]) -> None:
+            if not remaining:
+                self._emit(cr, binding)
+                return
+            # the clause with the most bound arguments next: the most selective lookup
+            ci = max(remaining, key=bound_count)
+            others = [c for c in remaining if c != ci]
+            for aid in list(candidates(ci)):
+                trail: list[int] = []
+                if match(ci, aid, trail):
+                    descend(others)
+                for x in trail:
+                    binding[x] = -1
+
+        for aid in start_atoms:
+            trail: list[int] = []
+            if match(start, aid, trail):
+                descend(rest)
+            for x in trail:
+                binding[x] = -1
+
+    def _emit(self, cr: _CompiledRule, binding: list[int]) -> None:
+        values = tuple(binding)
+        key = (cr.index, values)
+        if key in self._seen:
+            return
+        self._seen.add(key)
+
+        def ground(args: list[tuple[bool, int]]) -> tuple[int, ...]:
+            return tuple(binding[x] if is_var else x for is_var, x in args)
+
+        head = self.vocab.atom(cr.head_label, ground(cr.head_args))
+        body = [self.vocab.atom(lab, ground(args)) for lab, args in zip(cr.clause_labels, cr.clause_args)]
+        self.g_rule.append(cr.index)
+        self.g_head.append(head)
+        self.g_values.append(values)
+        self.g_body.append(body)
+        self.add_settable(head)
+
+    # ---- integer tables for the kernel and the trace ----
+
+    def ranks(self) -> np.ndarray:
+        """Canonical order of groundings: rule index, then the tuple of variable node ids."""
+        n = len(self.g_rule)
+        if n == 0:
+            return np.zeros(0, np.int64)
+        width = max((len(v) for v in self.g_values), default=0)
+        keys = np.full((n, width + 1), -1, np.int64)
+        keys[:, 0] = self.g_rule
+        for g, vals in enumerate(self.g_values):
+            keys[g, 1:1 + len(vals)] = vals
+        order = np.lexsort(keys.T[::-1])
+        rank = np.empty(n, np.int64)
+        rank[order] = np.arange(n)
+        return rank
+
+    def kernel_tables(self) -> dict[str, np.ndarray]:
+        """inst_i [G,3], watches (CSR by atom over binding clauses) and per-grounding binding clauses."""
+        n = len(self.g_rule)
+        inst_i = np.empty((n, 3), np.int64)
+        inst_i[:, 0] = self.g_rule
+        inst_i[:, 1] = self.g_head
+        inst_i[:, 2] = self.ranks()
+        b_inst, b_atom, b_neg, b_lo, b_up = [], [], [], [], []
+        b_ptr = np.zeros(n + 1, np.int64)
+        for g in range(n):
+            cr = self._compiled[self.g_rule[g]]
+            body = self.g_body[g]
+            for ci in cr.binding:
+                lit = cr.rule.body[ci]
+                b_inst.append(g)
+                b_atom.append(body[ci])
+                b_neg.append(lit.negated)
+                b_lo.append(lit.lower)
+                b_up.append(lit.upper)
+            b_ptr[g + 1] = len(b_atom)
+        b_atom_a = np.asarray(b_atom, np.int64)
+        b_bnd = np.column_stack([np.asarray(b_lo, np.float64), np.asarray(b_up, np.float64)]) \
+            if b_atom else np.zeros((0, 2), np.float64)
+        b_neg_a = np.asarray(b_neg, np.bool_)
+        order = np.argsort(b_atom_a, kind="stable")
+        n_atoms = self.vocab.n_atoms
+        w_ptr = np.zeros(n_atoms + 1, np.int64)
+        np.add.at(w_ptr, b_atom_a + 1, 1)
+        np.cumsum(w_ptr, out=w_ptr)
+        return {
+            "inst_i": inst_i,
+            "w_ptr": w_ptr,
+            "w_inst": np.asarray(b_inst, np.int64)[order],
+            "w_neg": b_neg_a[order],
+            "w_bnd": np.ascontiguousarray(b_bnd[order]),
+            "b_ptr": b_ptr,
+            "b_atom": b_atom_a,
+            "b_neg": b_neg_a,
+            "b_bnd": np.ascontiguousarray(b_bnd),
+        }
+
+    def table(self) -> GroundingTable:
+        n = len(self.g_rule)
+        body_ptr = np.zeros(n + 1, np.int64)
+        var_ptr = np.zeros(n + 1, np.int64)
+        body_ptr[1:] = np.cumsum([len(b) for b in self.g_body]) if n else []
+        var_ptr[1:] = np.cumsum([len(v) for v in self.g_values]) if n else []
+        flat_body = [a for b in self.g_body for a in b]
+        flat_vals = [x for v in self.g_values for x in v]
+        return GroundingTable(
+            rule=np.asarray(self.g_rule, np.int32), body_ptr=body_ptr,
+            body_atoms=np.asarray(flat_body, np.int32), var_ptr=var_ptr,
+            var_values=np.asarray(flat_vals, np.int32))
+
+
+def rule_head_bound(rule: Rule) -> tuple[float, float]:
+    """The interval a rule's head sets on its atom (a `~` head sets the complement)."""
+    return effective_bound(rule.head.lower, rule.head.upper, rule.head.negated)

@@ -1,0 +1,138 @@
+"""The parsed form of a rule program: plain, immutable data shared by the parser, the grounder,
+the compiled engine and the reference evaluator."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+UPDATE_MODES = ("intersection", "override")
+TIMESTEP_MODES = ("persistent", "reset")
+INCONSISTENCY_POLICIES = ("reset_freeze", "keep_old", "take_new", "hull", "abort")
+
+
+@dataclass(frozen=True)
+class SourceLoc:
+    file: str
+    line: int
+    column: int
+
+    def __str__(self) -> str:
+        return f"{self.file}:{self.line}:{self.column}"
+
+
+@dataclass(frozen=True)
+class Term:
+    name: str
+    is_var: bool
+
+
+@dataclass(frozen=True)
+class Literal:
+    pred: str
+    args: tuple[Term, ...]
+    lower: float = 1.0
+    upper: float = 1.0
+    negated: bool = False  # `~p(X)`: the complement [1-u, 1-l] of p's interval is what is tested / set
+    loc: SourceLoc | None = field(default=None, compare=False)
+
+    @property
+    def variables(self) -> tuple[str, ...]:
+        return tuple(t.name for t in self.args if t.is_var)
+
+    @property
+    def binds(self) -> bool:
+        """A clause binds its variables unless its bound contains [0,1] (then every atom satisfies it)."""
+        return not (self.lower <= 0.0 and self.upper >= 1.0)
+
+    def __str__(self) -> str:
+        args = ",".join(t.name for t in self.args)
+        neg = "~" if self.negated else ""
+        return f"{neg}{self.pred}({args}):[{self.lower:g},{self.upper:g}]"
+
+
+@dataclass(frozen=True)
+class Rule:
+    name: str
+    head: Literal
+    body: tuple[Literal, ...]
+    delay: int = 0
+    immediate: bool = False
+    mode: str | None = None  # None: the program's mode
+    loc: SourceLoc | None = field(default=None, compare=False)
+    text: str = field(default="", compare=False)
+
+    @property
+    def variables(self) -> tuple[str, ...]:
+        """Variables in order of first appearance, head first: the order that sorts groundings."""
+        seen: dict[str, None] = {}
+        for lit in (self.head, *self.body):
+            for v in lit.variables:
+                seen.setdefault(v, None)
+        return tuple(seen)
+
+
+@dataclass(frozen=True)
+class Fact:
+    name: str
+    literal: Literal  # ground
+    start: int = 0
+    end: int = 0
+    static: bool = False
+    loc: SourceLoc | None = field(default=None, compare=False)
+    text: str = field(default="", compare=False)
+
+
+@dataclass
+class Program:
+    rules: list[Rule] = field(default_factory=list)
+    facts: list[Fact] = field(default_factory=list)
+    mode: str = "intersection"
+    timesteps: str = "persistent"
+    inconsistency: str = "reset_freeze"
+    files: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+    def rule_index(self, name: str) -> int:
+        for i, r in enumerate(self.rules):
+            if r.name == name:
+                return i
+        raise KeyError(f"no rule named {name!r}")
+
+    def constants(self) -> list[str]:
+        """Every constant of the program, in order of first appearance (facts and rules in file order)."""
+        seen: dict[str, None] = {}
+        for item in sorted([*self.facts, *self.rules], key=_file_order):
+            lits = (item.literal,) if isinstance(item, Fact) else (item.head, *item.body)
+            for lit in lits:
+                for t in lit.args:
+                    if not t.is_var:
+                        seen.setdefault(t.name, None)
+        return list(seen)
+
+
+def _file_order(item: Rule | Fact) -> tuple[str, int, int]:
+    loc = item.loc
+    return (loc.file, loc.line, loc.column) if loc else ("", 0, 0)
+
+
+def ordered_nodes(program: Program, graph_nodes: list[str] | tuple[str, ...] = ()) -> list[str]:
+    """The node order both evaluators use: graph nodes first, then the program's other constants in order
+    of first appearance. Nodes met later (external facts) are appended in order of arrival."""
+    seen: dict[str, None] = dict.fromkeys(graph_nodes)
+    for c in program.constants():
+        seen.setdefault(c, None)
+    return list(seen)
+
+
+# Bounds come from text and from 1 - x (complements); a small tolerance keeps 1 - 0.9 inside [0.1, 1].
+EPS = 1e-9
+
+
+def effective_bound(lower: float, upper: float, negated: bool) -> tuple[float, float]:
+    """The interval a literal tests or sets on its atom: `~p:[l,u]` speaks of p as [1-u, 1-l]."""
+    return (1.0 - upper, 1.0 - lower) if negated else (lower, upper)
+
+
+def satisfies(atom_lower: float, atom_upper: float, lit: Literal) -> bool:
+    """I ⊨ lit iff the atom's interval (complemented for `~`) is contained in the literal's bound."""
+    a, b = effective_bound(atom_lower, atom_upper, lit.negated)
+    return a >= lit.lower - EPS and b <= lit.upper + EPS

@@ -1,0 +1,1 @@
+"""tracelab.viewers: replay and browsing of recorded traces."""
