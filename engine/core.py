@@ -61,7 +61,7 @@ class Engine:
         self._trf = np.zeros((K.TRACE_FLOAT_COLUMNS, 1024), np.float64)
         self._tr_n = np.zeros(1, np.int64)
         self._stats = np.zeros((worlds, K.N_STATS), np.int64)
-        self._err = np.zeros(8, np.int64)
+        self._err = np.zeros(12, np.int64)
         self._ext: list[tuple[int, float, float, int, bool]] = []  # atom, l, u, world (-1 all), static
         self._ext_count = 0
         self._n_grounded = 0
@@ -269,6 +269,26 @@ class Engine:
         n = int(self._pend_n[world])
         return [(int(d), int(g)) for d, g in self._pend[world, :n]]
 
+    def cause_name(self, kind: int, cid: int) -> str:
+        """A short name for a trace row's cause: the rule's name, fact:NAME, external, policy:NAME, reset."""
+        if kind == K.CAUSE_RULE:
+            return self.rules[cid].name
+        if kind == K.CAUSE_FACT:
+            return f"fact:{self.facts[cid].name}"
+        if kind == K.CAUSE_EXTERNAL:
+            return "external"
+        if kind == K.CAUSE_POLICY:
+            return f"policy:{INCONSISTENCY_POLICIES[cid]}"
+        return "reset"
+
+    def grounding_text(self, g: int) -> str:
+        """A grounding as its variable values, e.g. "X=a, Y=b" ("" for none)."""
+        if g < 0:
+            return ""
+        table = self.groundings
+        rule = self.rules[int(table.rule[g])]
+        return ", ".join(f"{v}={self.vocab.nodes[x]}" for v, x in zip(rule.variables, table.values(g)))
+
     # ---- errors ----
 
     def describe_source(self, kind: int, cid: int, grounding: int = -1) -> str:
@@ -282,9 +302,7 @@ class Engine:
             r = self.rules[cid]
             where = f" ({r.loc})" if r.loc else ""
             if grounding >= 0:
-                vals = self.groundings.values(grounding)
-                binding = ", ".join(f"{v}={self.vocab.nodes[x]}" for v, x in zip(r.variables, vals))
-                return f"rule {r.name}{where} with {binding or 'no variables'}"
+                return f"rule {r.name}{where} with {self.grounding_text(grounding) or 'no variables'}"
             return f"rule {r.name}{where}"
         if kind == K.CAUSE_POLICY:
             return f"inconsistency policy {INCONSISTENCY_POLICIES[cid]}"
@@ -296,12 +314,17 @@ class Engine:
         e = self._err
         w, t, a = int(e[0]), int(e[1]), int(e[2])
         if status == K.STATUS_INCONSISTENT:
-            old = self.describe_source(int(e[3]), int(e[4]))
-            new = self.describe_source(int(e[5]), int(e[6]), int(e[7]))
+            first = self.describe_source(int(e[5]), int(e[6]), int(e[7]))
             lo, up = self.bound(a, w)
+            if e[11]:  # the incoming sources disagree among themselves
+                last = self.describe_source(int(e[8]), int(e[9]), int(e[10]))
+                raise InconsistencyError(
+                    f"inconsistent bounds for {self.atom_text(a)} at t={t} (world {w}): {first} and "
+                    f"{last} set disjoint bounds in the same pass")
+            old = self.describe_source(int(e[3]), int(e[4]))
             raise InconsistencyError(
                 f"inconsistent bounds for {self.atom_text(a)} at t={t} (world {w}): its bound "
-                f"[{lo:g},{up:g}] came from {old}; the incoming bound from {new} is disjoint from it")
+                f"[{lo:g},{up:g}] came from {old}; the incoming bound from {first} is disjoint from it")
         if status == K.STATUS_IMMEDIATE_LIMIT:
             raise FixpointError(
                 f"immediate rules did not settle at t={t} (world {w}) after "

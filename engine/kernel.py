@@ -40,7 +40,8 @@ N_STATS = 5
 # grouping scratch: flags in S_FLAGS
 F_OVERRIDE, F_INTERSECT, F_EMPTY_O, F_EMPTY_I, F_STATIC, F_TOUCHED = 1, 2, 4, 8, 16, 32
 S_FLAGS, S_N, S_PRIM_KEY, S_PRIM_KIND, S_PRIM_ID, S_PRIM_INST, S_LAST_KEY = 0, 1, 2, 3, 4, 5, 6
-N_SCRATCH_INT = 7
+S_LAST_KIND, S_LAST_ID, S_LAST_INST = 7, 8, 9
+N_SCRATCH_INT = 10
 SF_OL, SF_OU, SF_IL, SF_IU, SF_LAST_L, SF_LAST_U, SF_HULL_L, SF_HULL_U = 0, 1, 2, 3, 4, 5, 6, 7
 N_SCRATCH_FLOAT = 8
 
@@ -146,6 +147,9 @@ def _add_source(a, l, u, override, key, kind, cid, inst, static_src, si, sf, tou
         si[a, S_PRIM_ID] = cid
         si[a, S_PRIM_INST] = inst
         si[a, S_LAST_KEY] = key
+        si[a, S_LAST_KIND] = kind
+        si[a, S_LAST_ID] = cid
+        si[a, S_LAST_INST] = inst
         sf[a, SF_LAST_L] = l
         sf[a, SF_LAST_U] = u
         sf[a, SF_HULL_L] = l
@@ -158,6 +162,9 @@ def _add_source(a, l, u, override, key, kind, cid, inst, static_src, si, sf, tou
             si[a, S_PRIM_INST] = inst
         if key >= si[a, S_LAST_KEY]:
             si[a, S_LAST_KEY] = key
+            si[a, S_LAST_KIND] = kind
+            si[a, S_LAST_ID] = cid
+            si[a, S_LAST_INST] = inst
             sf[a, SF_LAST_L] = l
             sf[a, SF_LAST_U] = u
         sf[a, SF_HULL_L] = min(sf[a, SF_HULL_L], l)
@@ -229,10 +236,15 @@ def _resolve(cl, cu, a, policy, si, sf, out):
         elif policy == POLICY_HULL:
             rl = min(cl, sf[a, SF_HULL_L])
             ru = max(cu, sf[a, SF_HULL_U])
+    incoming_disagree = (flags & (F_EMPTY_O | F_EMPTY_I)) != 0
+    if (flags & F_OVERRIDE) and (flags & F_INTERSECT):
+        if max(sf[a, SF_OL], sf[a, SF_IL]) > min(sf[a, SF_OU], sf[a, SF_IU]) + EPS:
+            incoming_disagree = True
     out[0] = rl
     out[1] = ru
     out[2] = 1.0 if inconsistent else 0.0
     out[3] = 1.0 if freeze else 0.0
+    out[4] = 1.0 if incoming_disagree else 0.0
 
 
 @njit(cache=True)
@@ -242,7 +254,7 @@ def _apply_touched(w, t, pass_no, touched, n_touched, si, sf, lo, up, static, la
     """Apply every pending group (one per touched atom). Returns (n_changed, status, tri, trf)."""
     n = n_touched[0]
     order = np.sort(touched[:n]) if sort_touched else touched[:n]
-    out = np.empty(4)
+    out = np.empty(5)
     changed = 0
     status = STATUS_OK
     for k in range(n):
@@ -270,6 +282,10 @@ def _apply_touched(w, t, pass_no, touched, n_touched, si, sf, lo, up, static, la
             err[5] = kind
             err[6] = si[a, S_PRIM_ID]
             err[7] = si[a, S_PRIM_INST]
+            err[8] = si[a, S_LAST_KIND]
+            err[9] = si[a, S_LAST_ID]
+            err[10] = si[a, S_LAST_INST]
+            err[11] = 1 if out[4] > 0.5 else 0
             si[a, S_FLAGS] = 0
             status = STATUS_INCONSISTENT
             continue
@@ -341,7 +357,7 @@ def step_worlds(cfg, rule_i, rule_f, inst_i, w_ptr, w_inst, w_neg, w_bnd,
     max_immediate = cfg[CFG_MAX_IMMEDIATE]
     n_worlds = lo.shape[0]
     n_touched = np.zeros(1, np.int64)
-    one = np.empty(4)
+    one = np.empty(5)
     for w in range(n_worlds):
         # 1. start of the step
         if cfg[CFG_RESET] == 1 and t > 0:

@@ -11,7 +11,7 @@ import sys
 # One line per subcommand module; each module adds its own parsers and sets `func` on them.
 COMMAND_MODULES = [
     "tracelab.commands.reason",
-    "tracelab.commands.bench",
+    # "tracelab.commands.bench",
 ]
 
 

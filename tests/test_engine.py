@@ -1,0 +1,207 @@
+"""The compiled engine's API: batching, stepping, interning, tracing, errors, compile-once."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from tracelab.cli import main as cli_main
+from tracelab.engine import (CAUSE_EXTERNAL, CAUSE_FACT, CAUSE_POLICY, CAUSE_RULE, TRACE_COLUMNS, Engine,
+                             FixpointError, InconsistencyError, parse_program)
+from tracelab.engine import kernel
+
+CHAIN = """
+edge(a,b) static
+edge(b,c) static
+edge(c,d) static
+spread: reach(Y) <-1 reach(X), edge(X,Y)
+mark:   seen(X) <-0 reach(X)
+"""
+
+
+def rows(eng: Engine) -> list[tuple]:
+    tr = eng.take_trace()
+    return [(int(tr["world"][i]), int(tr["t"][i]), eng.atom_text(int(tr["atom"][i])),
+             eng.cause_name(int(tr["cause_kind"][i]), int(tr["cause_id"][i])))
+            for i in range(len(tr["t"]))]
+
+
+def test_worlds_in_a_batch_evolve_independently():
+    eng = Engine(parse_program(CHAIN), worlds=3)
+    eng.add_fact(eng.atom("reach", "a"), world=0)
+    eng.add_fact(eng.atom("reach", "c"), world=2)
+    eng.run(4)  # reach(a) at t=0 reaches d at t=3
+    assert eng.query("reach(d)", 0) == (1.0, 1.0)
+    assert eng.query("reach(b)", 0) == (1.0, 1.0)
+    assert eng.query("reach(b)", 2) == (0.0, 1.0)  # world 2 started further along the chain
+    assert eng.query("reach(d)", 2) == (1.0, 1.0)
+    assert eng.interpretation(1) == {"edge(a,b)": (1, 1), "edge(b,c)": (1, 1), "edge(c,d)": (1, 1)}
+
+
+def test_delayed_rule_fires_at_t_plus_delta_and_trace_names_it():
+    eng = Engine(parse_program(CHAIN))
+    eng.add_fact(eng.atom("reach", "a"))
+    eng.run(3)
+    got = rows(eng)
+    assert (0, 0, "reach(a)", "external") in got
+    assert (0, 1, "reach(b)", "spread") in got
+    assert (0, 2, "reach(c)", "spread") in got
+    assert (0, 0, "seen(a)", "mark") in got
+    assert not any(r[2] == "reach(b)" and r[1] == 0 for r in got)
+
+
+def test_trace_columns_and_dtypes_and_clearing():
+    eng = Engine(parse_program(CHAIN))
+    eng.add_fact(eng.atom("reach", "a"))
+    eng.step()
+    tr = eng.take_trace()
+    assert tuple(tr) == TRACE_COLUMNS
+    assert tr["cause_kind"].dtype == np.int8 and tr["old_lower"].dtype == np.float64
+    assert set(tr["cause_kind"].tolist()) == {CAUSE_FACT, CAUSE_EXTERNAL, CAUSE_RULE}
+    assert len(eng.take_trace()["t"]) == 0
+
+
+def test_tracing_off_and_sampled_per_world_gives_same_interpretation():
+    on = Engine(parse_program(CHAIN), worlds=2, trace=True)
+    sampled = Engine(parse_program(CHAIN), worlds=2, trace=[False, True])
+    off = Engine(parse_program(CHAIN), worlds=2, trace=False)
+    for eng in (on, sampled, off):
+        eng.add_fact(eng.atom("reach", "a"))
+        eng.run(4)
+    assert len(off.take_trace()["t"]) == 0
+    assert set(sampled.take_trace()["world"].tolist()) == {1}
+    assert on.interpretation(0) == sampled.interpretation(0) == off.interpretation(0)
+    np.testing.assert_array_equal(on.lower, off.lower)
+
+
+def test_external_fact_on_a_new_atom_grows_groundings_mid_run():
+    eng = Engine(parse_program(CHAIN))
+    eng.run(2)
+    before = len(eng.groundings.rule)
+    eng.add_fact(eng.atom("edge", "d", "zz"), static=True)  # a node the program never named
+    eng.add_fact(eng.atom("reach", "c"))
+    eng.run(3)
+    assert len(eng.groundings.rule) > before
+    assert eng.query("reach(zz)") == (1.0, 1.0)
+
+
+def test_grounding_table_matches_rule_variables():
+    prog = parse_program(CHAIN)
+    eng = Engine(prog)
+    eng.add_fact(eng.atom("reach", "a"))
+    eng.run(2)
+    tr = eng.take_trace()
+    i = int(np.flatnonzero((tr["cause_kind"] == CAUSE_RULE) & (tr["t"] == 1))[0])
+    g = int(tr["grounding"][i])
+    assert eng.rules[eng.groundings.rule[g]].name == "spread"
+    assert eng.grounding_text(g) == "Y=b, X=a"
+    assert [eng.atom_text(int(a)) for a in eng.groundings.body(g)] == ["reach(a)", "edge(a,b)"]
+
+
+def test_true_join_does_not_mix_bindings_across_components():
+    # p(X), q(X,Y), r(Y): a per-variable candidate set would take X=a (from component 1) and Y=d
+    # (from component 2); the join has no binding with both, so h must stay unset.
+    prog = parse_program("""
+    p(a) static
+    q(a,b) static
+    q(c,d) static
+    r(d) static
+    j: h(X) <-0 p(X), q(X,Y), r(Y)
+    """)
+    eng = Engine(prog)
+    eng.run(2)
+    assert eng.query("h(a)") == (0.0, 1.0)
+
+
+def test_immediate_rules_apply_one_at_a_time_in_rule_order():
+    # `pick` fires for its lowest grounding (X=a); then `close`, earlier in the file than `pick`, fires
+    # before pick's next grounding and disables it. With the two rules swapped both picks would fire.
+    prog = parse_program("""
+    %mode override
+    cand(a)
+    cand(b)
+    done(x):[0,0]
+    close: done(x) <-! pick(X)
+    pick: pick(X) <-! cand(X), done(x):[0,0]
+    """)
+    eng = Engine(prog)
+    eng.step()
+    assert eng.query("pick(a)") == (1.0, 1.0)
+    assert eng.query("pick(b)") == (0.0, 1.0)
+
+
+def test_abort_policy_names_atom_time_and_both_sources():
+    prog = parse_program("""
+    %inconsistency abort
+    p(a) @0..9
+    flip: p(X):[0,0] <-2 p(X)
+    """, file="abort.rules")
+    eng = Engine(prog)
+    eng.run(2)
+    with pytest.raises(InconsistencyError) as e:
+        eng.run(1)
+    msg = str(e.value)
+    assert "p(a)" in msg and "t=2" in msg and "fact" in msg and "rule flip" in msg and "X=a" in msg
+
+
+def test_policy_rows_carry_the_policy():
+    prog = parse_program("""
+    %inconsistency hull
+    p(a):[0.8,1]
+    low: p(X):[0,0.2] <-1 p(X):[0.5,1]
+    """)
+    eng = Engine(prog)
+    eng.run(2)
+    assert eng.query("p(a)") == (0.0, 1.0)
+    tr = eng.take_trace()
+    assert CAUSE_POLICY in tr["cause_kind"].tolist()
+
+
+def test_oscillation_raises_fixpoint_error():
+    prog = parse_program("""
+    %mode override
+    p(a)
+    on:  p(X) <-0 p(X):[0,0]
+    off: p(X):[0,0] <-0 p(X)
+    """)
+    eng = Engine(prog, max_passes=50)
+    with pytest.raises(FixpointError, match="t=0"):
+        eng.step()
+
+
+def test_bad_external_bound_names_the_value():
+    eng = Engine(parse_program(CHAIN))
+    with pytest.raises(ValueError, match=r"\[0.7,0.2\].*reach\(a\)"):
+        eng.add_fact(eng.atom("reach", "a"), 0.7, 0.2)
+
+
+def test_a_new_program_does_not_recompile_the_kernel():
+    Engine(parse_program(CHAIN)).run(2)
+    other = parse_program("""
+    %timesteps reset
+    %mode override
+    x(a) static
+    y: y(X):[0.2,0.9] <-! x(X)
+    z: ~z(X):[0.5,1] <-3 y(X):[0.1,1]
+    """)
+    Engine(other, worlds=4).run(5)
+    assert len(kernel.step_worlds.signatures) == 1
+
+
+def test_reason_cli_json(tmp_path, capsys):
+    f = tmp_path / "p.rules"
+    f.write_text(CHAIN + "reach(a)\n")
+    assert cli_main(["reason", str(f), "--steps", "3", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["interpretation"]["reach(c)"] == [1.0, 1.0]
+    assert {"t": 1, "pass": 0, "atom": "reach(b)", "old": [0.0, 1.0], "new": [1.0, 1.0],
+            "cause": "spread", "grounding": "Y=b, X=a"} in out["changes"]
+
+
+def test_reason_cli_reports_parse_errors_with_location(tmp_path, capsys):
+    f = tmp_path / "bad.rules"
+    f.write_text("p(a)\nq(X) <-0 p(X\n")
+    assert cli_main(["reason", str(f), "--steps", "1"]) == 2
+    err = capsys.readouterr().err
+    assert f"{f}:2:" in err
