@@ -62,7 +62,8 @@ class Engine:
         self._tr_n = np.zeros(1, np.int64)
         self._stats = np.zeros((worlds, K.N_STATS), np.int64)
         self._err = np.zeros(12, np.int64)
-        self._ext: list[tuple[int, float, float, int, bool]] = []  # atom, l, u, world (-1 all), static
+        self._ext: list[tuple[np.ndarray, ...]] = []  # chunks of (atoms, lower, upper, world, static)
+        self._settable = np.zeros(0, np.bool_)
         self._ext_count = 0
         self._n_grounded = 0
         self._table: GroundingTable | None = None
@@ -94,6 +95,9 @@ class Engine:
         """Ground any new settable atoms and grow the per-world arrays to the vocabulary and groundings."""
         self.grounder.close()
         n_atoms = self.vocab.n_atoms
+        if len(self._settable) != n_atoms or len(self.grounder.settable) != int(self._settable.sum()):
+            self._settable = np.zeros(n_atoms, np.bool_)
+            self._settable[list(self.grounder.settable)] = True
         old_atoms = self.lower.shape[1]
         if n_atoms > old_atoms:
             grow = n_atoms - old_atoms
@@ -123,6 +127,48 @@ class Engine:
         self._sf = np.zeros((n_atoms, K.N_SCRATCH_FLOAT), np.float64)
         self._touched = np.zeros(max(n_atoms, 1), np.int64)
 
+    # ---- per-world snapshots (episode resets in a batch) ----
+
+    def snapshot(self) -> dict[str, object]:
+        """A copy of every world's state before step self.t, for restore()."""
+        return {"t": self.t, "lower": self.lower.copy(), "upper": self.upper.copy(),
+                "static": self.static.copy(), "last_cause": self._last_cause.copy(),
+                "unsat": self._unsat.copy(), "act": self._act.copy(), "act_pos": self._act_pos.copy(),
+                "act_n": self._act_n.copy(), "pend": self._pend.copy(), "pend_n": self._pend_n.copy()}
+
+    def restore(self, snap: dict[str, object], worlds: np.ndarray) -> None:
+        """Put `worlds` (indices or a bool mask) back into their state in `snap`. Their next step behaves
+        as the snapshot's next step did: firings scheduled then are shifted to the current clock. (Program
+        facts with time windows follow the engine's one clock; per-world restarts see them by that clock.)"""
+        worlds = np.flatnonzero(worlds) if np.asarray(worlds).dtype == np.bool_ else np.asarray(worlds)
+        if worlds.size == 0:
+            return
+        n_atoms = snap["lower"].shape[1]
+        self.lower[worlds] = 0.0
+        self.upper[worlds] = 1.0
+        self.static[worlds] = False
+        self._last_cause[worlds] = -1
+        self.lower[worlds, :n_atoms] = snap["lower"][worlds]
+        self.upper[worlds, :n_atoms] = snap["upper"][worlds]
+        self.static[worlds, :n_atoms] = snap["static"][worlds]
+        self._last_cause[worlds, :n_atoms] = snap["last_cause"][worlds]
+        if snap["unsat"].shape == self._unsat.shape and n_atoms == self.lower.shape[1]:
+            for key, arr in (("unsat", self._unsat), ("act", self._act), ("act_pos", self._act_pos),
+                             ("act_n", self._act_n)):
+                arr[worlds] = snap[key][worlds]
+        else:  # groundings grew since the snapshot: recount those worlds from their interpretation
+            kt = self._kt
+            K.recount_worlds(worlds.astype(np.int64), self.lower, self.upper, kt["b_ptr"], kt["b_atom"],
+                             kt["b_neg"], kt["b_bnd"], self._unsat, self._act, self._act_n, self._act_pos)
+        pend, pend_n = snap["pend"], snap["pend_n"]
+        if pend.shape[1] > self._pend.shape[1]:
+            grown = np.zeros((self.n_worlds, pend.shape[1], 2), np.int32)
+            grown[:, :self._pend.shape[1]] = self._pend
+            self._pend = grown
+        self._pend[worlds, :pend.shape[1]] = pend[worlds]
+        self._pend[worlds, :, 0] += self.t - snap["t"]
+        self._pend_n[worlds] = pend_n[worlds]
+
     # ---- atoms ----
 
     def atom(self, pred: str, *args: str) -> int:
@@ -148,43 +194,41 @@ class Engine:
     def add_fact(self, atom: int, lower: float = 1.0, upper: float = 1.0, world: int | None = None,
                  static: bool = False) -> None:
         """An external fact, applied at pass 0 of the next step (in `world`, or in every world)."""
-        if not (0.0 <= lower <= upper <= 1.0):
-            raise ValueError(f"bound [{lower},{upper}] of {self.atom_text(atom)} is not inside [0,1] "
-                             "with lower <= upper")
         if world is not None and not 0 <= world < self.n_worlds:
             raise ValueError(f"world {world} out of range 0..{self.n_worlds - 1}")
-        self.grounder.add_settable(atom)
-        self._ext.append((atom, lower, upper, -1 if world is None else world, static))
+        self.add_facts(np.array([atom]), lower, upper, None if world is None else np.array([world]), static)
 
-    def add_facts(self, atoms: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+    def add_facts(self, atoms: np.ndarray, lower: np.ndarray | float, upper: np.ndarray | float,
                   worlds: np.ndarray | None = None, static: bool = False) -> None:
-        """Vectorised add_fact: one external fact per element."""
-        atoms = np.asarray(atoms, np.int64)
+        """External facts, one per element (world -1 or None: every world), for the next step."""
+        atoms = np.asarray(atoms, np.int64).ravel()
         lower = np.broadcast_to(np.asarray(lower, np.float64), atoms.shape)
         upper = np.broadcast_to(np.asarray(upper, np.float64), atoms.shape)
-        worlds = np.full(atoms.shape, -1) if worlds is None else np.broadcast_to(worlds, atoms.shape)
+        worlds = np.full(atoms.shape, -1, np.int64) if worlds is None else \
+            np.broadcast_to(np.asarray(worlds, np.int64), atoms.shape)
         bad = ~((lower >= 0) & (lower <= upper) & (upper <= 1))
         if bad.any():
             i = int(np.argmax(bad))
             raise ValueError(f"bound [{lower[i]},{upper[i]}] of {self.atom_text(int(atoms[i]))} is not "
                              "inside [0,1] with lower <= upper")
-        for a in np.unique(atoms):
-            self.grounder.add_settable(int(a))
-        self._ext.extend(zip(atoms.tolist(), lower.tolist(), upper.tolist(), worlds.tolist(),
-                             [static] * len(atoms)))
+        if atoms.size and (atoms.min() < 0 or atoms.max() >= self.vocab.n_atoms):
+            raise ValueError(f"atom ids must lie in 0..{self.vocab.n_atoms - 1}")
+        if (worlds >= self.n_worlds).any():
+            raise ValueError(f"world ids must lie in 0..{self.n_worlds - 1} (or -1 for every world)")
+        known = self._settable[atoms[atoms < len(self._settable)]]
+        if known.size < atoms.size or not known.all():
+            for a in np.unique(atoms):
+                self.grounder.add_settable(int(a))
+        self._ext.append((atoms, lower, upper, worlds, np.full(atoms.shape, int(static), np.int64)))
 
     def _external_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         w = self.n_worlds
         if not self._ext:
             return np.zeros(w + 1, np.int64), np.zeros((0, 3), np.int64), np.zeros((0, 2))
-        ext = self._ext
+        atoms, lower, upper, world, static = (np.concatenate(c) for c in zip(*self._ext))
         self._ext = []
-        atoms = np.array([e[0] for e in ext], np.int64)
-        bnd = np.array([(e[1], e[2]) for e in ext], np.float64)
-        world = np.array([e[3] for e in ext], np.int64)
-        static = np.array([e[4] for e in ext], np.int64)
-        ids = self._ext_count + np.arange(len(ext), dtype=np.int64)
-        self._ext_count += len(ext)
+        ids = self._ext_count + np.arange(len(atoms), dtype=np.int64)
+        self._ext_count += len(atoms)
         # a fact for every world is repeated per world; rows are grouped by world for the kernel
         everywhere = world < 0
         if everywhere.any():
@@ -194,13 +238,14 @@ class Engine:
             idx = np.concatenate([keep, rep])
             world = np.concatenate([world[keep], rep_world])
         else:
-            idx = np.arange(len(ext))
+            idx = np.arange(len(atoms))
         order = np.argsort(world, kind="stable")
         idx, world = idx[order], world[order]
         ext_i = np.column_stack([atoms[idx], static[idx], ids[idx]])
+        ext_f = np.column_stack([lower[idx], upper[idx]])
         ptr = np.zeros(w + 1, np.int64)
         np.add.at(ptr, world + 1, 1)
-        return np.cumsum(ptr), ext_i, np.ascontiguousarray(bnd[idx])
+        return np.cumsum(ptr), ext_i, ext_f
 
     def step(self) -> None:
         """Compute timestep self.t in every world, then advance t."""

@@ -489,3 +489,21 @@ def recount_groundings(first, lo, up, b_ptr, b_atom, b_neg, b_bnd, unsat, act, a
             act_pos[w, g] = -1
             if c == 0:
                 _activate(w, g, act, act_n, act_pos)
+
+
+@njit(cache=True)
+def recount_worlds(worlds, lo, up, b_ptr, b_atom, b_neg, b_bnd, unsat, act, act_n, act_pos):
+    """Rebuild the unsatisfied-clause counts and active lists of the given worlds from scratch."""
+    for i in range(worlds.shape[0]):
+        w = worlds[i]
+        act_n[w] = 0
+        for g in range(b_ptr.shape[0] - 1):
+            c = 0
+            for e in range(b_ptr[g], b_ptr[g + 1]):
+                a = b_atom[e]
+                if not _holds(lo[w, a], up[w, a], b_bnd[e, 0], b_bnd[e, 1], b_neg[e]):
+                    c += 1
+            unsat[w, g] = c
+            act_pos[w, g] = -1
+            if c == 0:
+                _activate(w, g, act, act_n, act_pos)

@@ -205,3 +205,33 @@ def test_reason_cli_reports_parse_errors_with_location(tmp_path, capsys):
     assert cli_main(["reason", str(f), "--steps", "1"]) == 2
     err = capsys.readouterr().err
     assert f"{f}:2:" in err
+
+
+def test_restore_puts_one_world_back_and_shifts_its_schedule():
+    eng = Engine(parse_program(CHAIN), worlds=2)
+    eng.add_fact(eng.atom("reach", "a"))
+    eng.step()
+    snap = eng.snapshot()  # before t=1: reach(b) is scheduled for t=1
+    eng.run(3)
+    assert eng.query("reach(d)", 0) == (1.0, 1.0)
+    eng.restore(snap, np.array([False, True]))
+    assert eng.query("reach(b)", 1) == (0.0, 1.0) and eng.query("reach(d)", 0) == (1.0, 1.0)
+    eng.step()  # world 1 replays its t=1 now, at t=4
+    assert eng.query("reach(b)", 1) == (1.0, 1.0)
+    assert eng.query("reach(c)", 1) == (0.0, 1.0)
+    eng.run(2)
+    assert eng.interpretation(1) == eng.interpretation(0)
+
+
+def test_restore_after_groundings_grew_recounts():
+    eng = Engine(parse_program(CHAIN), worlds=2)
+    eng.add_fact(eng.atom("reach", "a"))
+    eng.step()
+    snap = eng.snapshot()
+    eng.add_fact(eng.atom("edge", "d", "e"), static=True)
+    eng.run(4)
+    eng.restore(snap, np.array([1]))
+    eng.run(5)
+    assert eng.query("reach(d)", 1) == (1.0, 1.0)
+    assert eng.query("reach(e)", 1) == (0.0, 1.0)  # edge(d,e) was added after the snapshot
+    assert eng.query("reach(e)", 0) == (1.0, 1.0)
