@@ -1,0 +1,145 @@
+"""GraphML input: attributes written by networkx come back as static facts with the right bounds."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import networkx as nx
+import pytest
+
+from tracelab.engine import Graph, ProgramCheckError, check_program, load_graphml, parse_program
+from tracelab.engine.program import Literal, Term
+
+
+def facts_of(g: Graph) -> set[tuple[str, tuple[str, ...], float, float]]:
+    out = set()
+    for f in g.facts:
+        assert f.static and f.start == f.end == 0 and not f.literal.negated
+        out.add((f.literal.pred, tuple(t.name for t in f.literal.args), f.literal.lower, f.literal.upper))
+    return out
+
+
+def write(tmp_path: Path, g: nx.Graph, name: str = "g.graphml") -> Path:
+    path = tmp_path / name
+    nx.write_graphml(g, path)
+    return path
+
+
+def test_node_and_directed_edge_attributes_round_trip(tmp_path: Path) -> None:
+    g = nx.DiGraph()
+    g.add_node("red-agent-1", agent=True, health=0.75, team_red=1, dead=False)
+    g.add_node("16", cell=True, alarm="0.2,0.9", danger="[0, .5]")
+    g.add_node("24")  # no attributes: a node without facts
+    g.add_edge("red-agent-1", "16", atLoc=1.0, seen="[0.5,1]")
+    g.add_edge("24", "16", downLoc=True)
+    graph = load_graphml(write(tmp_path, g))
+    assert graph.nodes == ["red-agent-1", "16", "24"]
+    assert facts_of(graph) == {
+        ("agent", ("red-agent-1",), 1.0, 1.0),
+        ("health", ("red-agent-1",), 0.75, 0.75),
+        ("team_red", ("red-agent-1",), 1.0, 1.0),
+        ("dead", ("red-agent-1",), 0.0, 0.0),
+        ("cell", ("16",), 1.0, 1.0),
+        ("alarm", ("16",), 0.2, 0.9),
+        ("danger", ("16",), 0.0, 0.5),
+        ("atLoc", ("red-agent-1", "16"), 1.0, 1.0),
+        ("seen", ("red-agent-1", "16"), 0.5, 1.0),
+        ("downLoc", ("24", "16"), 1.0, 1.0),  # directed: one direction only
+    }
+    assert len(graph.facts) == 10
+    assert graph.predicates() == {"agent": 1, "health": 1, "team_red": 1, "dead": 1, "cell": 1, "alarm": 1,
+                                  "danger": 1, "atLoc": 2, "seen": 2, "downLoc": 2}
+
+
+def test_undirected_edges_give_both_directions(tmp_path: Path) -> None:
+    g = nx.Graph()
+    g.add_edge("a", "b", adj=True)
+    g.add_edge("c", "c", adj=0.5)  # a self-loop once
+    graph = load_graphml(write(tmp_path, g))
+    assert sorted(f.text for f in graph.facts) == ["adj(a,b)", "adj(b,a)", "adj(c,c)"]
+    assert facts_of(graph) == {("adj", ("a", "b"), 1.0, 1.0), ("adj", ("b", "a"), 1.0, 1.0),
+                               ("adj", ("c", "c"), 0.5, 0.5)}
+
+
+def test_graph_predicates_feed_check_program(tmp_path: Path) -> None:
+    g = nx.DiGraph()
+    g.add_node("n1", agent=True)
+    g.add_edge("n1", "n2", atLoc=True)
+    graph = load_graphml(write(tmp_path, g))
+    p = parse_program("h(A) <-0 agent(A), atLoc(A,X)\n")
+    assert len(p.warnings) == 2
+    check_program(p, graph.predicates())
+    assert p.warnings == []
+    clash = parse_program("h(A) <-0 atLoc(A)\n", "c.rules")
+    with pytest.raises(ProgramCheckError, match="with 1 argument here but with 2 arguments in the graph"):
+        check_program(clash, graph.predicates())
+
+
+def test_fact_literals_are_ground_constants(tmp_path: Path) -> None:
+    g = nx.DiGraph()
+    g.add_node("Cell 3", agent=True)  # any node id is a constant (quoted in rules)
+    graph = load_graphml(write(tmp_path, g))
+    assert graph.facts[0].literal == Literal("agent", (Term("Cell 3", False),))
+
+
+@pytest.mark.parametrize("node_attrs,fragment", [
+    ({"health": 3.5}, "node 'n1', attribute 'health': value 3.5 is not a bound"),
+    ({"health": -1}, "node 'n1', attribute 'health': value -1 is not a bound"),
+    ({"color": "red"}, "node 'n1', attribute 'color': value 'red' is not a bound"),
+    ({"alarm": "0.9,0.2"}, "node 'n1', attribute 'alarm': value '0.9,0.2' is not a bound"),
+    ({"alarm": "[0.2,0.9"}, "value '[0.2,0.9' is not a bound"),
+    ({"Color": True}, "node 'n1', attribute 'Color': not a predicate name"),
+    ({"x-y": True}, "attribute 'x-y': not a predicate name"),
+])
+def test_bad_node_attributes(tmp_path: Path, node_attrs: dict, fragment: str) -> None:
+    g = nx.DiGraph()
+    g.add_node("n1", **node_attrs)
+    path = write(tmp_path, g)
+    with pytest.raises(ProgramCheckError) as e:
+        load_graphml(path)
+    assert e.value.file == str(path)
+    assert fragment in e.value.message
+    assert str(e.value).startswith(f"{path}: error: ")
+
+
+def test_bad_edge_attribute_names_the_edge(tmp_path: Path) -> None:
+    g = nx.DiGraph()
+    g.add_edge("a", "b", weight=7)
+    with pytest.raises(ProgramCheckError, match=r"edge \('a', 'b'\), attribute 'weight': value 7 is not a bound"):
+        load_graphml(write(tmp_path, g))
+
+
+def test_attribute_on_nodes_and_edges_is_an_arity_clash(tmp_path: Path) -> None:
+    g = nx.DiGraph()
+    g.add_node("a", near=True)
+    g.add_edge("a", "b", near=True)
+    with pytest.raises(ProgramCheckError, match="attribute 'near': set on nodes and on edges"):
+        load_graphml(write(tmp_path, g))
+
+
+GRAPHML_WITH_DEFAULTS_AND_IDS = """<?xml version="1.0" encoding="UTF-8"?>
+<graphml xmlns="http://graphml.graphdrawing.org/xmlns">
+  <key id="d0" for="node" attr.name="cell" attr.type="boolean"><default>true</default></key>
+  <key id="d1" for="edge" attr.name="road" attr.type="double"/>
+  <graph id="G" edgedefault="directed">
+    <node id="n0"/>
+    <node id="n1"><data key="d0">false</data></node>
+    <edge id="e0" source="n0" target="n1"><data key="d1">0.25</data></edge>
+  </graph>
+</graphml>
+"""
+
+
+def test_key_defaults_apply_and_edge_ids_are_not_labels(tmp_path: Path) -> None:
+    path = tmp_path / "h.graphml"
+    path.write_text(GRAPHML_WITH_DEFAULTS_AND_IDS)
+    graph = load_graphml(path)
+    assert facts_of(graph) == {("cell", ("n0",), 1.0, 1.0), ("cell", ("n1",), 0.0, 0.0),
+                               ("road", ("n0", "n1"), 0.25, 0.25)}
+
+
+def test_unreadable_file_is_a_located_error(tmp_path: Path) -> None:
+    path = tmp_path / "broken.graphml"
+    path.write_text("<graphml><graph>")
+    with pytest.raises(ProgramCheckError) as e:
+        load_graphml(path)
+    assert e.value.file == str(path) and "not a readable GraphML file" in e.value.message
