@@ -81,6 +81,8 @@ class Engine:
             bounds.append(effective_bound(lit.lower, lit.upper, lit.negated))
         self._fact_i = np.asarray(rows, np.int64).reshape(-1, 4)
         self._fact_f = np.asarray(bounds, np.float64).reshape(-1, 2)
+        # latest-ending first, so that each step stops at the first fact whose window has passed
+        self._fact_order = np.argsort(-self._fact_i[:, 2], kind="stable").astype(np.int64)
 
     def _rule_tables(self) -> None:
         n = len(self.rules)
@@ -255,7 +257,8 @@ class Engine:
         kt = self._kt
         status, self._tri, self._trf, self._pend = K.step_worlds(
             self._cfg, self._rule_i, self._rule_f, kt["inst_i"], kt["w_ptr"], kt["w_inst"], kt["w_neg"],
-            kt["w_bnd"], self._fact_i, self._fact_f, ext_ptr, ext_i, ext_f,
+            kt["w_bnd"], kt["ih_ptr"], kt["ih_inst"], self._fact_i, self._fact_f, self._fact_order,
+            ext_ptr, ext_i, ext_f,
             self.lower, self.upper, self.static, self._last_cause, self._unsat, self._act, self._act_n,
             self._act_pos, self._pend, self._pend_n, self.trace_on, self._tri, self._trf, self._tr_n,
             self._stats, self._err, self._si, self._sf, self._touched)

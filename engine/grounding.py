@@ -231,7 +231,17 @@ class Grounder:
         w_ptr = np.zeros(n_atoms + 1, np.int64)
         np.add.at(w_ptr, b_atom_a + 1, 1)
         np.cumsum(w_ptr, out=w_ptr)
+        # immediate groundings by the atom they set: when that atom changes they may change it back
+        heads = np.asarray(self.g_head, np.int64)
+        immediate = np.array([self._compiled[r].rule.immediate for r in self.g_rule], np.bool_)
+        imm = np.flatnonzero(immediate) if n else np.zeros(0, np.int64)
+        imm = imm[np.argsort(heads[imm], kind="stable")]
+        ih_ptr = np.zeros(n_atoms + 1, np.int64)
+        np.add.at(ih_ptr, heads[imm] + 1, 1)
+        np.cumsum(ih_ptr, out=ih_ptr)
         return {
+            "ih_ptr": ih_ptr,
+            "ih_inst": imm.astype(np.int64),
             "inst_i": inst_i,
             "w_ptr": w_ptr,
             "w_inst": np.asarray(b_inst, np.int64)[order],

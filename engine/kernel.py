@@ -79,8 +79,9 @@ def _deactivate(w, g, act, act_n, act_pos):
 
 
 @njit(cache=True)
-def _watch(w, a, ol, ou, nl, nu, w_ptr, w_inst, w_neg, w_bnd, unsat, act, act_n, act_pos):
-    """Update the unsatisfied-clause counts of the groundings that read atom a."""
+def _watch(w, a, ol, ou, nl, nu, w_ptr, w_inst, w_neg, w_bnd, unsat, act, act_n, act_pos, alog):
+    """Update the unsatisfied-clause counts of the groundings that read atom a. Groundings that become
+    active are appended to the activation log alog (alog[0] counts; on overflow it is set to -1)."""
     for e in range(w_ptr[a], w_ptr[a + 1]):
         cl = w_bnd[e, 0]
         cu = w_bnd[e, 1]
@@ -98,6 +99,13 @@ def _watch(w, a, ol, ou, nl, nu, w_ptr, w_inst, w_neg, w_bnd, unsat, act, act_n,
             unsat[w, g] -= 1
             if unsat[w, g] == 0:
                 _activate(w, g, act, act_n, act_pos)
+                n = alog[0]
+                if n >= 0:
+                    if n + 1 < alog.shape[0]:
+                        alog[n + 1] = g
+                        alog[0] = n + 1
+                    else:
+                        alog[0] = -1
 
 
 @njit(cache=True)
@@ -250,7 +258,7 @@ def _resolve(cl, cu, a, policy, si, sf, out):
 @njit(cache=True)
 def _apply_touched(w, t, pass_no, touched, n_touched, si, sf, lo, up, static, last_cause, policy,
                    w_ptr, w_inst, w_neg, w_bnd, unsat, act, act_n, act_pos,
-                   trace_on, tri, trf, tr_n, stats, err, sort_touched):
+                   trace_on, tri, trf, tr_n, stats, err, sort_touched, alog):
     """Apply every pending group (one per touched atom). Returns (n_changed, status, tri, trf)."""
     n = n_touched[0]
     order = np.sort(touched[:n]) if sort_touched else touched[:n]
@@ -301,7 +309,7 @@ def _apply_touched(w, t, pass_no, touched, n_touched, si, sf, lo, up, static, la
             up[w, a] = nu
             last_cause[w, a, 0] = cause_kind
             last_cause[w, a, 1] = cause_id
-            _watch(w, a, cl, cu, nl, nu, w_ptr, w_inst, w_neg, w_bnd, unsat, act, act_n, act_pos)
+            _watch(w, a, cl, cu, nl, nu, w_ptr, w_inst, w_neg, w_bnd, unsat, act, act_n, act_pos, alog)
         elif kind == CAUSE_RULE:
             stats[w, STAT_REDERIVATIONS] += nsrc
         if out[3] > 0.5 or si[a, S_FLAGS] & F_STATIC:
@@ -313,7 +321,7 @@ def _apply_touched(w, t, pass_no, touched, n_touched, si, sf, lo, up, static, la
 
 @njit(cache=True)
 def _reset_step(w, t, lo, up, static, last_cause, w_ptr, w_inst, w_neg, w_bnd, unsat, act, act_n,
-                act_pos, trace_on, tri, trf, tr_n, stats):
+                act_pos, trace_on, tri, trf, tr_n, stats, alog):
     """`%timesteps reset`: every non-static atom goes back to [0,1] at the start of a step."""
     for a in range(lo.shape[1]):
         if static[w, a]:
@@ -329,8 +337,67 @@ def _reset_step(w, t, lo, up, static, last_cause, w_ptr, w_inst, w_neg, w_bnd, u
         up[w, a] = 1.0
         last_cause[w, a, 0] = CAUSE_RESET
         last_cause[w, a, 1] = -1
-        _watch(w, a, cl, cu, 0.0, 1.0, w_ptr, w_inst, w_neg, w_bnd, unsat, act, act_n, act_pos)
+        _watch(w, a, cl, cu, 0.0, 1.0, w_ptr, w_inst, w_neg, w_bnd, unsat, act, act_n, act_pos, alog)
     return tri, trf
+
+
+@njit(cache=True)
+def _heap_push(heap, n, key, g):
+    i = n
+    heap[i, 0] = key
+    heap[i, 1] = g
+    while i > 0:
+        parent = (i - 1) >> 1
+        if heap[parent, 0] <= heap[i, 0]:
+            break
+        k0, g0 = heap[parent, 0], heap[parent, 1]
+        heap[parent, 0], heap[parent, 1] = heap[i, 0], heap[i, 1]
+        heap[i, 0], heap[i, 1] = k0, g0
+        i = parent
+    return n + 1
+
+
+@njit(cache=True)
+def _heap_pop(heap, n):
+    g = heap[0, 1]
+    n -= 1
+    heap[0, 0], heap[0, 1] = heap[n, 0], heap[n, 1]
+    i = 0
+    while True:
+        left = 2 * i + 1
+        if left >= n:
+            break
+        c = left
+        if left + 1 < n and heap[left + 1, 0] < heap[left, 0]:
+            c = left + 1
+        if heap[i, 0] <= heap[c, 0]:
+            break
+        k0, g0 = heap[c, 0], heap[c, 1]
+        heap[c, 0], heap[c, 1] = heap[i, 0], heap[i, 1]
+        heap[i, 0], heap[i, 1] = k0, g0
+        i = c
+    return g, n
+
+
+@njit(cache=True)
+def _would_change(cl, cu, l, u, override, policy):
+    """Would one source with bound [l,u] change an atom now [cl,cu]? (docs/language.md, one source)"""
+    if override:
+        rl, ru = l, u
+    else:
+        rl, ru = max(cl, l), min(cu, u)
+    if rl > ru + EPS:  # inconsistent: the policy decides
+        if policy == POLICY_KEEP_OLD:
+            return False
+        if policy == POLICY_ABORT:
+            return True
+        if policy == POLICY_RESET_FREEZE:
+            rl, ru = 0.0, 1.0
+        elif policy == POLICY_TAKE_NEW:
+            rl, ru = l, u
+        else:
+            rl, ru = min(cl, l), max(cu, u)
+    return rl != cl or ru != cu
 
 
 @njit(cache=True)
@@ -344,8 +411,8 @@ def _grow_pending(pend, need):
 
 
 @njit(cache=True)
-def step_worlds(cfg, rule_i, rule_f, inst_i, w_ptr, w_inst, w_neg, w_bnd,
-                fact_i, fact_f, ext_ptr, ext_i, ext_f,
+def step_worlds(cfg, rule_i, rule_f, inst_i, w_ptr, w_inst, w_neg, w_bnd, ih_ptr, ih_inst,
+                fact_i, fact_f, fact_order, ext_ptr, ext_i, ext_f,
                 lo, up, static, last_cause, unsat, act, act_n, act_pos, pend, pend_n,
                 trace_on, tri, trf, tr_n, stats, err, si, sf, touched):
     """Compute timestep cfg[CFG_T] for every world. Returns (status, tri, trf, pend): the trace and
@@ -357,16 +424,22 @@ def step_worlds(cfg, rule_i, rule_f, inst_i, w_ptr, w_inst, w_neg, w_bnd,
     max_immediate = cfg[CFG_MAX_IMMEDIATE]
     n_worlds = lo.shape[0]
     n_touched = np.zeros(1, np.int64)
-    one = np.empty(5)
+    n_inst = inst_i.shape[0]
+    heap = np.empty((max(n_inst, 1), 2), np.int64)
+    in_heap = np.zeros(max(n_inst, 1), np.bool_)
+    alog = np.zeros(n_inst + 1, np.int64)
     for w in range(n_worlds):
         # 1. start of the step
         if cfg[CFG_RESET] == 1 and t > 0:
             tri, trf = _reset_step(w, t, lo, up, static, last_cause, w_ptr, w_inst, w_neg, w_bnd,
-                                   unsat, act, act_n, act_pos, trace_on, tri, trf, tr_n, stats)
+                                   unsat, act, act_n, act_pos, trace_on, tri, trf, tr_n, stats, alog)
         # 2. pass 0: program facts in their window, external facts, firings scheduled for t
         fact_override = prog_mode == MODE_OVERRIDE
-        for f in range(fact_i.shape[0]):
-            if fact_i[f, 1] <= t <= fact_i[f, 2]:
+        for k in range(fact_order.shape[0]):
+            f = fact_order[k]
+            if fact_i[f, 2] < t:
+                break
+            if fact_i[f, 1] <= t:
                 _add_source(fact_i[f, 0], fact_f[f, 0], fact_f[f, 1], fact_override, np.int64(f),
                             CAUSE_FACT, f, -1, fact_i[f, 3] == 1, si, sf, touched, n_touched)
         for e in range(ext_ptr[w], ext_ptr[w + 1]):
@@ -389,53 +462,68 @@ def step_worlds(cfg, rule_i, rule_f, inst_i, w_ptr, w_inst, w_neg, w_bnd,
         _, status, tri, trf = _apply_touched(w, t, 0, touched, n_touched, si, sf, lo, up, static,
                                              last_cause, policy, w_ptr, w_inst, w_neg, w_bnd, unsat,
                                              act, act_n, act_pos, trace_on, tri, trf, tr_n, stats,
-                                             err, True)
+                                             err, True, alog)
         if status != STATUS_OK:
             return status, tri, trf, pend
         # 3. fixpoint: immediate phase, then one simultaneous ordinary pass, until nothing changes
         pass_no = 1
         n_immediate = 0
         while True:
-            while True:  # immediate phase: the first active immediate grounding that changes its head
-                best = -1
-                best_rank = np.int64(0)
-                for k in range(act_n[w]):
-                    g = act[w, k]
-                    r = inst_i[g, INST_RULE]
-                    if rule_i[r, RULE_IMMEDIATE] == 0:
-                        continue
-                    a = inst_i[g, INST_HEAD]
-                    if static[w, a]:
-                        continue
-                    if best >= 0 and inst_i[g, INST_RANK] >= best_rank:
-                        continue
-                    _add_source(a, rule_f[r, 0], rule_f[r, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
-                                np.int64(0), CAUSE_RULE, r, g, False, si, sf, touched, n_touched)
-                    _resolve(lo[w, a], up[w, a], a, policy, si, sf, one)
-                    si[a, S_FLAGS] = 0
-                    n_touched[0] = 0
-                    would_abort = one[2] > 0.5 and policy == POLICY_ABORT
-                    if would_abort or one[0] != lo[w, a] or one[1] != up[w, a]:
-                        best = g
-                        best_rank = inst_i[g, INST_RANK]
-                if best < 0:
-                    break
+            # immediate phase: apply the first (lowest rank) active immediate grounding that would change
+            # its head, one at a time. Candidates wait in a min-heap by rank; a grounding enters it when
+            # the phase starts, when it becomes active, and when an atom it sets changes.
+            hn = 0
+            for k in range(act_n[w]):
+                g = act[w, k]
+                if rule_i[inst_i[g, INST_RULE], RULE_IMMEDIATE] == 1 and not in_heap[g]:
+                    hn = _heap_push(heap, hn, inst_i[g, INST_RANK], g)
+                    in_heap[g] = True
+            while hn > 0:
+                g, hn = _heap_pop(heap, hn)
+                in_heap[g] = False
+                if unsat[w, g] != 0:
+                    continue
+                r = inst_i[g, INST_RULE]
+                a = inst_i[g, INST_HEAD]
+                if static[w, a]:
+                    continue
+                if not _would_change(lo[w, a], up[w, a], rule_f[r, 0], rule_f[r, 1],
+                                     rule_i[r, RULE_MODE] == MODE_OVERRIDE, policy):
+                    continue
                 n_immediate += 1
                 if n_immediate > max_immediate:
                     err[0] = w
                     err[1] = t
-                    err[2] = inst_i[best, INST_HEAD]
+                    err[2] = a
                     return STATUS_IMMEDIATE_LIMIT, tri, trf, pend
-                r = inst_i[best, INST_RULE]
-                _add_source(inst_i[best, INST_HEAD], rule_f[r, 0], rule_f[r, 1],
-                            rule_i[r, RULE_MODE] == MODE_OVERRIDE, 2 * KEY_STRIDE + inst_i[best, INST_RANK],
-                            CAUSE_RULE, r, best, False, si, sf, touched, n_touched)
+                _add_source(a, rule_f[r, 0], rule_f[r, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
+                            2 * KEY_STRIDE + inst_i[g, INST_RANK], CAUSE_RULE, r, g, False, si, sf,
+                            touched, n_touched)
+                alog[0] = 0
                 _, status, tri, trf = _apply_touched(w, t, pass_no, touched, n_touched, si, sf, lo, up,
                                                      static, last_cause, policy, w_ptr, w_inst, w_neg,
                                                      w_bnd, unsat, act, act_n, act_pos, trace_on, tri,
-                                                     trf, tr_n, stats, err, False)
+                                                     trf, tr_n, stats, err, False, alog)
                 if status != STATUS_OK:
                     return status, tri, trf, pend
+                if alog[0] < 0:  # too many activations to log: take every active grounding again
+                    for k in range(act_n[w]):
+                        g2 = act[w, k]
+                        if rule_i[inst_i[g2, INST_RULE], RULE_IMMEDIATE] == 1 and not in_heap[g2]:
+                            hn = _heap_push(heap, hn, inst_i[g2, INST_RANK], g2)
+                            in_heap[g2] = True
+                else:
+                    for k in range(1, alog[0] + 1):
+                        g2 = alog[k]
+                        if rule_i[inst_i[g2, INST_RULE], RULE_IMMEDIATE] == 1 and not in_heap[g2]:
+                            hn = _heap_push(heap, hn, inst_i[g2, INST_RANK], g2)
+                            in_heap[g2] = True
+                # the atom changed: the immediate groundings that set it may now change it back
+                for k in range(ih_ptr[a], ih_ptr[a + 1]):
+                    g2 = ih_inst[k]
+                    if unsat[w, g2] == 0 and not in_heap[g2]:
+                        hn = _heap_push(heap, hn, inst_i[g2, INST_RANK], g2)
+                        in_heap[g2] = True
             # ordinary pass: every active Δt = 0 grounding fires; heads applied together per atom
             for k in range(act_n[w]):
                 g = act[w, k]
@@ -448,7 +536,7 @@ def step_worlds(cfg, rule_i, rule_f, inst_i, w_ptr, w_inst, w_neg, w_bnd,
             changed, status, tri, trf = _apply_touched(w, t, pass_no, touched, n_touched, si, sf, lo,
                                                        up, static, last_cause, policy, w_ptr, w_inst,
                                                        w_neg, w_bnd, unsat, act, act_n, act_pos,
-                                                       trace_on, tri, trf, tr_n, stats, err, True)
+                                                       trace_on, tri, trf, tr_n, stats, err, True, alog)
             if status != STATUS_OK:
                 return status, tri, trf, pend
             stats[w, STAT_PASSES] += 1

@@ -70,7 +70,7 @@ class RuleSim:
         self._invalid = ids("invalid", agents)
         self._can_act = ids("canAct", agents)
         self._moving = ids("moving", agents)
-        self._transit = ids("transit", agents, cells) if s.slow_mask.any() else np.zeros((2 * n, 0), np.int64)
+        self._dest = ids("dest", agents, cells) if s.slow_mask.any() else None
         self._captured = ids("captured", list(TEAMS))
         self._eliminated = ids("eliminated", list(TEAMS))
         if bullets:
@@ -120,6 +120,10 @@ class RuleSim:
             spent = np.zeros((w, 2, n), np.int64)
         moving = self._true(self._moving).reshape(w, 2, n)
         dest = np.full((w, 2, n, 2), -1, np.int32)
+        if self._dest is not None:  # where a slow agent that set off this step will arrive
+            going = self._true(self._dest)
+            cell_xy = self._cell_xy[np.argmax(going, axis=2)].reshape(w, 2, n, 2)
+            dest = np.where(moving[..., None], cell_xy, -1).astype(np.int32)
         return GameState(
             t=self.t.copy(), pos=pos.astype(np.int32),
             health=np.where(alive, s.health, 0.0), ammo=(ammo - spent).astype(np.int32), alive=alive,
@@ -220,7 +224,7 @@ class RuleSim:
         # finished worlds keep their final state and earn nothing
         agent_reward[done] = 0.0
         reward[done] = 0.0
-        for f in ("pos", "health", "ammo", "alive", "moving", "bullet_pos", "bullet_dir"):
+        for f in ("pos", "health", "ammo", "alive", "moving", "dest", "bullet_pos", "bullet_dir"):
             getattr(state, f)[done] = getattr(before, f)[done]
         for arr in (unsafe, invalid):
             arr[done] = False
@@ -236,7 +240,7 @@ class RuleSim:
         self._cur, self._obs = cur, obs
         return StepResult(
             obs=obs, positions=state.pos.copy(), health=state.health.copy(), ammo=state.ammo.copy(),
-            alive=state.alive.copy(), moving=state.moving.copy(), bullet_pos=state.bullet_pos.copy(),
+            alive=state.alive.copy(), moving=state.moving.copy(), move_dest=state.dest.copy(), bullet_pos=state.bullet_pos.copy(),
             bullet_dir=state.bullet_dir.copy(),
             bullet_owner=np.stack([self._bullet_team, self._bullet_agent], axis=1).astype(np.int64),
             unsafe=unsafe, invalid=invalid, hits_made=hits_made, hits_taken=hits_taken,

@@ -1,0 +1,136 @@
+"""The scripted base policy of the spec ("Opponent (blue) base policy"), for either team.
+
+It is a function of plain state arrays so that the hand-written simulator (refsim) and the
+rule-driven one draw the same actions from the same seed. Decisions (docs/game.md, "Scripted policy"):
+
+- Shooting (advanced scenario, ammo > 0) comes first: among the *living* enemies in the same row or
+  column, it shoots towards the nearest (Manhattan distance); a tie between enemies in different
+  directions goes to the lower action id (shoot up < down < left < right). Mountains do not block this
+  test (the spec says "in line (same row or column)"). An enemy on the agent's own cell is in line in
+  every direction, so the agent shoots up (the bullet hits point blank whatever its direction).
+- Otherwise, with probability p_toward (0.7) a move towards the enemy base: the moves whose target cell
+  is on the map, not a mountain, and strictly closer (Manhattan) to the enemy base; uniform among them.
+  If there is none, or with probability 1 - p_toward, a uniformly random action of the scenario's
+  action set (shots included in the advanced scenario, even with no ammo left).
+- Dead agents get NOTHING (8).
+- Every call draws exactly three arrays of shape [worlds, agents] from the generator, whatever the
+  state, so the random stream stays aligned between simulators.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from . import scenario as _scenario
+from .scenario import Scenario, team_index
+
+P_TOWARD = 0.7
+# Literals, not imports: numba freezes globals into its disk cache, which only notices changes to this
+# file. The check below catches a change of the action table elsewhere.
+NOTHING, SHOOT_UP = 8, 4
+if (NOTHING, SHOOT_UP) != (_scenario.NOTHING, _scenario.SHOOT_UP):
+    raise ImportError("opponent.py's action ids disagree with scenario.py")
+_DX = np.array([0, 0, -1, 1], dtype=np.int64)  # up, down, left, right (scenario.DIRECTION_DELTAS)
+_DY = np.array([1, -1, 0, 0], dtype=np.int64)
+
+
+@njit(cache=True)
+def _policy_kernel(pos, alive, ammo, team, u, r, k, action_ids, blocked, goal, advanced, p_toward, out):
+    """The policy for every agent of `team` in every world; u, r, k are the pre-drawn random numbers."""
+    n_worlds, _, n = alive.shape
+    width, height = blocked.shape
+    enemy = 1 - team
+    gx, gy = goal[0], goal[1]
+    for w in range(n_worlds):
+        for j in range(n):
+            if not alive[w, team, j]:
+                out[w, j] = NOTHING
+                continue
+            x = pos[w, team, j, 0]
+            y = pos[w, team, j, 1]
+            if advanced and ammo[w, team, j] > 0:
+                best_key = -1
+                for e in range(n):
+                    if not alive[w, enemy, e]:
+                        continue
+                    dx = pos[w, enemy, e, 0] - x
+                    dy = pos[w, enemy, e, 1] - y
+                    if dx != 0 and dy != 0:
+                        continue  # not in line
+                    if dx == 0:
+                        d = 0 if dy >= 0 else 1  # same cell counts as "up"
+                    else:
+                        d = 2 if dx < 0 else 3
+                    key = (abs(dx) + abs(dy)) * 4 + d  # nearest, then the lower action id
+                    if best_key < 0 or key < best_key:
+                        best_key = key
+                if best_key >= 0:
+                    out[w, j] = SHOOT_UP + best_key % 4
+                    continue
+            dist = abs(x - gx) + abs(y - gy)
+            n_closer = 0
+            for d in range(4):
+                tx = x + _DX[d]
+                ty = y + _DY[d]
+                if 0 <= tx < width and 0 <= ty < height and not blocked[tx, ty] \
+                        and abs(tx - gx) + abs(ty - gy) < dist:
+                    n_closer += 1
+            if u[w, j] < p_toward and n_closer > 0:
+                pick = min(int(r[w, j] * n_closer), n_closer - 1)
+                for d in range(4):
+                    tx = x + _DX[d]
+                    ty = y + _DY[d]
+                    if 0 <= tx < width and 0 <= ty < height and not blocked[tx, ty] \
+                            and abs(tx - gx) + abs(ty - gy) < dist:
+                        if pick == 0:
+                            out[w, j] = d
+                            break
+                        pick -= 1
+            else:
+                out[w, j] = action_ids[k[w, j]]
+
+
+def scripted_actions(positions: np.ndarray, alive: np.ndarray, ammo: np.ndarray, team: int | str,
+                     scenario: Scenario, rng: np.random.Generator, p_toward: float = P_TOWARD) -> np.ndarray:
+    """Actions (spec ids) of `team`'s agents.
+
+    positions: int [W, 2, N, 2] (x, y) indexed [world, team, agent] (or [2, N, 2] for one world),
+    alive: bool [W, 2, N], ammo: int [W, 2, N]. Returns int64 [W, N] (or [N]).
+    """
+    pos = np.ascontiguousarray(positions, dtype=np.int64)
+    alive = np.ascontiguousarray(alive, dtype=np.bool_)
+    ammo = np.ascontiguousarray(ammo, dtype=np.int64)
+    single = pos.ndim == 3
+    if single:
+        pos, alive, ammo = pos[None], alive[None], ammo[None]
+    if pos.shape[-1] != 2 or pos.shape[:3] != alive.shape or ammo.shape != alive.shape or alive.shape[1] != 2:
+        raise ValueError(f"expected positions [W,2,N,2], alive and ammo [W,2,N]; got {pos.shape}, "
+                         f"{alive.shape}, {ammo.shape}")
+    t = team_index(team)
+    n_worlds, _, n = alive.shape
+    action_ids = np.asarray(scenario.action_ids, dtype=np.int64)
+    # Always the same draws, whatever the state, so the stream stays aligned between simulators.
+    u = rng.random((n_worlds, n))
+    r = rng.random((n_worlds, n))
+    k = rng.integers(0, len(action_ids), size=(n_worlds, n))
+    out = np.empty((n_worlds, n), dtype=np.int64)
+    _policy_kernel(pos, alive, ammo, t, u, r, k, action_ids, np.ascontiguousarray(scenario.mountain_grid),
+                   np.asarray(scenario.bases[1 - t], dtype=np.int64), scenario.advanced, float(p_toward), out)
+    return out[0] if single else out
+
+
+class ScriptedPolicy:
+    """The scripted policy bound to a scenario, a team and its own seeded generator."""
+
+    def __init__(self, scenario: Scenario, team: int | str = "blue", seed: int | None = None,
+                 p_toward: float = P_TOWARD):
+        self.scenario = scenario
+        self.team = team_index(team)
+        self.p_toward = p_toward
+        self.rng = np.random.default_rng(seed)
+
+    def reseed(self, seed: int | None) -> None:
+        self.rng = np.random.default_rng(seed)
+
+    def __call__(self, positions: np.ndarray, alive: np.ndarray, ammo: np.ndarray) -> np.ndarray:
+        return scripted_actions(positions, alive, ammo, self.team, self.scenario, self.rng, self.p_toward)
