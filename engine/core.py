@@ -21,7 +21,8 @@ from .vocabulary import Vocabulary
 TRACE_COLUMNS = ("world", "t", "pass_no", "atom", "cause_kind", "cause_id", "grounding", "n_sources",
                  "old_lower", "old_upper", "new_lower", "new_upper")
 _TRACE_INT_DTYPES = (np.int32, np.int32, np.int32, np.int32, np.int8, np.int32, np.int32, np.int16)
-STAT_NAMES = ("firings", "rederivations", "static_ignored", "changes", "passes")
+STAT_NAMES = ("firings", "rederivations", "static_ignored", "changes", "passes", "watch_visits",
+              "candidates")
 
 
 class Engine:
@@ -128,6 +129,10 @@ class Engine:
         self._si = np.zeros((n_atoms, K.N_SCRATCH_INT), np.int64)
         self._sf = np.zeros((n_atoms, K.N_SCRATCH_FLOAT), np.float64)
         self._touched = np.zeros(max(n_atoms, 1), np.int64)
+        # immediate-phase scratch: a heap of (rank, grounding), membership flags, an activation log
+        self._heap = np.zeros((max(n_inst, 1), 2), np.int64)
+        self._in_heap = np.zeros(max(n_inst, 1), np.bool_)
+        self._alog = np.zeros(n_inst + 1, np.int64)
 
     # ---- per-world snapshots (episode resets in a batch) ----
 
@@ -261,8 +266,11 @@ class Engine:
             ext_ptr, ext_i, ext_f,
             self.lower, self.upper, self.static, self._last_cause, self._unsat, self._act, self._act_n,
             self._act_pos, self._pend, self._pend_n, self.trace_on, self._tri, self._trf, self._tr_n,
-            self._stats, self._err, self._si, self._sf, self._touched)
+            self._stats, self._err, self._si, self._sf, self._touched, self._heap, self._in_heap,
+            self._alog)
         if status != K.STATUS_OK:
+            self._in_heap[:] = False  # an error may leave candidates behind
+            self._si[:] = 0
             self._raise(status)
         self.t += 1
 

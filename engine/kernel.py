@@ -35,7 +35,8 @@ TRACE_INT_COLUMNS = 8
 TRACE_FLOAT_COLUMNS = 4
 # stats columns
 STAT_FIRINGS, STAT_REDERIVATIONS, STAT_STATIC_IGNORED, STAT_CHANGES, STAT_PASSES = 0, 1, 2, 3, 4
-N_STATS = 5
+STAT_WATCH_VISITS, STAT_CANDIDATES = 5, 6  # work counters: clause checks after changes, heap pops
+N_STATS = 7
 
 # grouping scratch: flags in S_FLAGS
 F_OVERRIDE, F_INTERSECT, F_EMPTY_O, F_EMPTY_I, F_STATIC, F_TOUCHED = 1, 2, 4, 8, 16, 32
@@ -79,9 +80,10 @@ def _deactivate(w, g, act, act_n, act_pos):
 
 
 @njit(cache=True)
-def _watch(w, a, ol, ou, nl, nu, w_ptr, w_inst, w_neg, w_bnd, unsat, act, act_n, act_pos, alog):
+def _watch(w, a, ol, ou, nl, nu, w_ptr, w_inst, w_neg, w_bnd, unsat, act, act_n, act_pos, alog, stats):
     """Update the unsatisfied-clause counts of the groundings that read atom a. Groundings that become
     active are appended to the activation log alog (alog[0] counts; on overflow it is set to -1)."""
+    stats[w, STAT_WATCH_VISITS] += w_ptr[a + 1] - w_ptr[a]
     for e in range(w_ptr[a], w_ptr[a + 1]):
         cl = w_bnd[e, 0]
         cu = w_bnd[e, 1]
@@ -258,11 +260,13 @@ def _resolve(cl, cu, a, policy, si, sf, out):
 @njit(cache=True)
 def _apply_touched(w, t, pass_no, touched, n_touched, si, sf, lo, up, static, last_cause, policy,
                    w_ptr, w_inst, w_neg, w_bnd, unsat, act, act_n, act_pos,
-                   trace_on, tri, trf, tr_n, stats, err, sort_touched, alog):
-    """Apply every pending group (one per touched atom). Returns (n_changed, status, tri, trf)."""
+                   trace_on, tri, trf, tr_n, stats, err, sort_touched, alog, out):
+    """Apply every pending group (one per touched atom); `out` is float scratch of length 5.
+    Returns (n_changed, status, tri, trf)."""
     n = n_touched[0]
-    order = np.sort(touched[:n]) if sort_touched else touched[:n]
-    out = np.empty(5)
+    order = touched[:n]
+    if sort_touched:
+        _sort_small(order)
     changed = 0
     status = STATUS_OK
     for k in range(n):
@@ -309,7 +313,7 @@ def _apply_touched(w, t, pass_no, touched, n_touched, si, sf, lo, up, static, la
             up[w, a] = nu
             last_cause[w, a, 0] = cause_kind
             last_cause[w, a, 1] = cause_id
-            _watch(w, a, cl, cu, nl, nu, w_ptr, w_inst, w_neg, w_bnd, unsat, act, act_n, act_pos, alog)
+            _watch(w, a, cl, cu, nl, nu, w_ptr, w_inst, w_neg, w_bnd, unsat, act, act_n, act_pos, alog, stats)
         elif kind == CAUSE_RULE:
             stats[w, STAT_REDERIVATIONS] += nsrc
         if out[3] > 0.5 or si[a, S_FLAGS] & F_STATIC:
@@ -337,8 +341,24 @@ def _reset_step(w, t, lo, up, static, last_cause, w_ptr, w_inst, w_neg, w_bnd, u
         up[w, a] = 1.0
         last_cause[w, a, 0] = CAUSE_RESET
         last_cause[w, a, 1] = -1
-        _watch(w, a, cl, cu, 0.0, 1.0, w_ptr, w_inst, w_neg, w_bnd, unsat, act, act_n, act_pos, alog)
+        _watch(w, a, cl, cu, 0.0, 1.0, w_ptr, w_inst, w_neg, w_bnd, unsat, act, act_n, act_pos, alog, stats)
     return tri, trf
+
+
+@njit(cache=True)
+def _sort_small(a):
+    """Sort in place: insertion sort for the few atoms a pass usually touches, numpy's sort beyond."""
+    n = a.shape[0]
+    if n > 32:
+        a[:] = np.sort(a)
+        return
+    for i in range(1, n):
+        x = a[i]
+        j = i - 1
+        while j >= 0 and a[j] > x:
+            a[j + 1] = a[j]
+            j -= 1
+        a[j + 1] = x
 
 
 @njit(cache=True)
@@ -414,7 +434,7 @@ def _grow_pending(pend, need):
 def step_worlds(cfg, rule_i, rule_f, inst_i, w_ptr, w_inst, w_neg, w_bnd, ih_ptr, ih_inst,
                 fact_i, fact_f, fact_order, ext_ptr, ext_i, ext_f,
                 lo, up, static, last_cause, unsat, act, act_n, act_pos, pend, pend_n,
-                trace_on, tri, trf, tr_n, stats, err, si, sf, touched):
+                trace_on, tri, trf, tr_n, stats, err, si, sf, touched, heap, in_heap, alog):
     """Compute timestep cfg[CFG_T] for every world. Returns (status, tri, trf, pend): the trace and
     pending arrays are returned because they may have been reallocated to grow."""
     t = cfg[CFG_T]
@@ -424,10 +444,7 @@ def step_worlds(cfg, rule_i, rule_f, inst_i, w_ptr, w_inst, w_neg, w_bnd, ih_ptr
     max_immediate = cfg[CFG_MAX_IMMEDIATE]
     n_worlds = lo.shape[0]
     n_touched = np.zeros(1, np.int64)
-    n_inst = inst_i.shape[0]
-    heap = np.empty((max(n_inst, 1), 2), np.int64)
-    in_heap = np.zeros(max(n_inst, 1), np.bool_)
-    alog = np.zeros(n_inst + 1, np.int64)
+    out = np.empty(5)
     for w in range(n_worlds):
         # 1. start of the step
         if cfg[CFG_RESET] == 1 and t > 0:
@@ -462,7 +479,7 @@ def step_worlds(cfg, rule_i, rule_f, inst_i, w_ptr, w_inst, w_neg, w_bnd, ih_ptr
         _, status, tri, trf = _apply_touched(w, t, 0, touched, n_touched, si, sf, lo, up, static,
                                              last_cause, policy, w_ptr, w_inst, w_neg, w_bnd, unsat,
                                              act, act_n, act_pos, trace_on, tri, trf, tr_n, stats,
-                                             err, True, alog)
+                                             err, True, alog, out)
         if status != STATUS_OK:
             return status, tri, trf, pend
         # 3. fixpoint: immediate phase, then one simultaneous ordinary pass, until nothing changes
@@ -481,6 +498,7 @@ def step_worlds(cfg, rule_i, rule_f, inst_i, w_ptr, w_inst, w_neg, w_bnd, ih_ptr
             while hn > 0:
                 g, hn = _heap_pop(heap, hn)
                 in_heap[g] = False
+                stats[w, STAT_CANDIDATES] += 1
                 if unsat[w, g] != 0:
                     continue
                 r = inst_i[g, INST_RULE]
@@ -503,7 +521,7 @@ def step_worlds(cfg, rule_i, rule_f, inst_i, w_ptr, w_inst, w_neg, w_bnd, ih_ptr
                 _, status, tri, trf = _apply_touched(w, t, pass_no, touched, n_touched, si, sf, lo, up,
                                                      static, last_cause, policy, w_ptr, w_inst, w_neg,
                                                      w_bnd, unsat, act, act_n, act_pos, trace_on, tri,
-                                                     trf, tr_n, stats, err, False, alog)
+                                                     trf, tr_n, stats, err, False, alog, out)
                 if status != STATUS_OK:
                     return status, tri, trf, pend
                 if alog[0] < 0:  # too many activations to log: take every active grounding again
@@ -536,7 +554,7 @@ def step_worlds(cfg, rule_i, rule_f, inst_i, w_ptr, w_inst, w_neg, w_bnd, ih_ptr
             changed, status, tri, trf = _apply_touched(w, t, pass_no, touched, n_touched, si, sf, lo,
                                                        up, static, last_cause, policy, w_ptr, w_inst,
                                                        w_neg, w_bnd, unsat, act, act_n, act_pos,
-                                                       trace_on, tri, trf, tr_n, stats, err, True, alog)
+                                                       trace_on, tri, trf, tr_n, stats, err, True, alog, out)
             if status != STATUS_OK:
                 return status, tri, trf, pend
             stats[w, STAT_PASSES] += 1

@@ -101,6 +101,7 @@ def scenario_facts(scenario: Scenario) -> list[Fact]:
             sx, sy = scenario.starts(t)[j]
             fact("atLoc", a, cell(sx, sy), static=False)
             fact("alive", a, static=False)
+            fact("exposed", a, cell(sx, sy), static=False)
             fact("shotDown", a, lower=0.0, upper=0.0, static=False)
             fact("shot", a, lower=0.0, upper=0.0, static=False)
             if ammo:

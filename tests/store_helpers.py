@@ -1,0 +1,68 @@
+"""Runs for the trace store's tests.
+
+walk_run: the real engine on tests/data/store_walk.rules, three worlds played as three episodes
+(ids 10, 11, 12: the store keeps the caller's ids):
+  episode 10 (world 0): moves at t=1 and t=2, stops at t=3: a -> b -> c, alarm(r1) at t=3, outcome win
+  episode 11 (world 1): never moves, outcome truncated
+  episode 12 (world 2): moves from t=1 on: a -> b -> c -> d, outcome loss
+synthetic_trace / synthetic_vocabulary (from tracelab.store.bench): data in the engine's documented format,
+for volume (live reading, crashes)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from tracelab.engine import Engine, load_program
+from tracelab.store.bench import synthetic_trace, synthetic_vocabulary  # noqa: F401 - re-exported for tests
+from tracelab.store.writer import TraceWriter
+
+WALK_RULES = Path(__file__).resolve().parent / "data" / "store_walk.rules"
+WALK_EPISODES = (10, 11, 12)
+WALK_STEPS = 6
+WALK_OUTCOMES = {10: "win", 11: "truncated", 12: "loss"}
+
+
+def walk_action(world: int, t: int) -> int:
+    """1 = move along the path, 0 = stay."""
+    if world == 0:
+        return int(t in (1, 2))
+    if world == 2:
+        return int(t >= 1)
+    return 0
+
+
+def write_walk_run(run_dir: Path, **writer_options: object) -> Path:
+    program = load_program(str(WALK_RULES))
+    eng = Engine(program, worlds=len(WALK_EPISODES))
+    episodes = np.array(WALK_EPISODES)
+    meta = {"command": "pytest walk", "scenario": "walk", "rule_files": [str(WALK_RULES)], "seed": 7,
+            "config": {"worlds": 3}}
+    with TraceWriter(run_dir, meta, **writer_options) as w:
+        w.write_engine_program(eng)
+        for world, ep in enumerate(WALK_EPISODES):
+            w.begin_episode(ep, world=world, t_start=0, seed=world)
+        move = eng.atom("move", "r1")
+        previous = {world: 0 for world in range(len(WALK_EPISODES))}
+        for t in range(WALK_STEPS):
+            for world in range(len(WALK_EPISODES)):
+                a = walk_action(world, t)
+                if a != previous[world]:  # the action is an external fact, set when it changes
+                    eng.add_fact(move, float(a), float(a), world=world)
+                    previous[world] = a
+            eng.step()
+            w.write_engine(episodes, eng)
+            for world, ep in enumerate(WALK_EPISODES):
+                w.write_steps(ep, {"step": t, "t": t, "agent": "r1", "action": walk_action(world, t),
+                                   "reward": -2.0, "obs": [[t, world]],
+                                   "truncated": t == WALK_STEPS - 1 and ep == 11})
+            w.write_metrics(t, {"loss": 1.0 / (t + 1), "epsilon": 0.5})
+        for ep in WALK_EPISODES:
+            w.end_episode(ep, steps=WALK_STEPS, outcome=WALK_OUTCOMES[ep],
+                          reward=250.0 if ep == 10 else -12.0, rewards={"r1": 1.0}, t_end=WALK_STEPS - 1)
+    return run_dir
+
+
+def episode_rows(episode: int) -> int:
+    """How many rows the live/crash writer process writes for an episode (checked by the readers)."""
+    return 300 + 7 * episode

@@ -1,0 +1,135 @@
+"""why / why-not on real engine traces (tests/data/store_walk.rules, see store_helpers.write_walk_run)."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from store_helpers import write_walk_run
+from tracelab.store.reader import open_run
+from tracelab.store.why import WhyNode, explain, render_why, render_why_not, why_not
+
+
+@pytest.fixture(scope="module")
+def con(tmp_path_factory: pytest.TempPathFactory):  # noqa: ANN201 - a duckdb connection
+    return open_run(write_walk_run(tmp_path_factory.mktemp("why") / "walk"))
+
+
+def child(node: WhyNode, atom: str) -> WhyNode:
+    matches = [c for c in node.children if c.atom == atom]
+    assert len(matches) == 1, [c.atom for c in node.children]
+    return matches[0]
+
+
+def test_why_an_immediate_rule_fired_down_to_facts_and_actions(con) -> None:  # noqa: ANN001
+    tree = explain(con, 10, "alarm(r1)", at=4)
+    assert (tree.atom, tree.value, tree.t, tree.pass_no) == ("alarm(r1)", [1.0, 1.0], 3, 1)
+    assert (tree.cause.kind, tree.cause.name, tree.cause.immediate) == ("rule", "alarm", True)
+    assert tree.cause.bindings == {"A": "r1", "X": "c"}
+    assert [c.clause for c in tree.children] == ["agent(r1):[1,1]", "at(r1,c):[1,1]", "danger(c):[1,1]"]
+    assert all(c.holds for c in tree.children)
+    agent = child(tree, "agent(r1)")
+    assert agent.cause.kind == "fact" and agent.cause.text == "agent(r1):[1,1]" and not agent.children
+    # at(r1,c) came from the delayed rule go at t=3, which read its body at the end of t=2 ...
+    at_c = child(tree, "at(r1,c)")
+    assert (at_c.t, at_c.cause.name, at_c.cause.delay) == (3, "go", 1)
+    assert at_c.cause.reads == "body read at the end of t=2"
+    at_b = child(at_c, "at(r1,b)")
+    assert (at_b.value, at_b.t, at_b.cause.name) == ([1.0, 1.0], 2, "go")
+    # ... which in turn read the end of t=1: the start cell (a fact) and the agent's action
+    assert child(at_b, "at(r1,a)").cause.kind == "fact"
+    move = child(at_b, "move(r1)")
+    assert (move.t, move.cause.kind, move.cause.name) == (1, "action", "action")
+    # the same action is used again by the later move: shown once, then referred to
+    again = child(at_c, "move(r1)")
+    assert again.repeated and not again.children
+
+
+def test_a_delayed_rule_sees_its_body_as_it_was_when_read(con) -> None:  # noqa: ANN001
+    # at t=3 `leave` cleared at(r1,b); it read at(r1,b) = [1,1] at the end of t=2, not today's [0,0]
+    tree = explain(con, 10, "at(r1,b)", at=5)
+    assert (tree.value, tree.t, tree.cause.name) == ([0.0, 0.0], 3, "leave")
+    body = child(tree, "at(r1,b)")
+    assert body.value == [1.0, 1.0] and body.holds and body.t == 2
+    assert child(tree, "move(r1)").value == [1.0, 1.0]
+
+
+def test_an_ordinary_zero_delay_rule_reads_before_its_pass(con) -> None:  # noqa: ANN001
+    tree = explain(con, 10, "near(r1,c)", at=2)
+    assert (tree.t, tree.pass_no, tree.cause.name, tree.cause.delay) == (2, 1, "near", 0)
+    assert tree.cause.reads == "body read before ordinary pass 1 of t=2"
+    at_b = child(tree, "at(r1,b)")
+    assert (at_b.t, at_b.pass_no, at_b.cause.name) == (2, 0, "go")
+
+
+def test_every_rule_row_of_the_run_has_a_body_that_held_when_read(con) -> None:  # noqa: ANN001
+    """For each change made by a rule, why() must find every body clause satisfied at its read point."""
+    rows = con.execute("SELECT episode, atom, t, seq FROM changes c WHERE cause_kind = 2 AND seq = "
+                       "(SELECT max(seq) FROM raw.changes d WHERE d.episode = c.episode AND d.atom = c.atom_id "
+                       "AND d.t = c.t)").fetchall()
+    assert len(rows) > 10
+    for episode, atom, t, seq in rows:
+        tree = explain(con, episode, atom, at=t, depth=1)
+        assert tree.seq == seq and tree.children
+        assert all(c.holds for c in tree.children), render_why(tree, t)
+
+
+def test_atom_never_set_depth_limit_json_and_text(con) -> None:  # noqa: ANN001
+    never = explain(con, 11, "alarm(r1)", at=5)
+    assert never.value == [0.0, 1.0] and never.cause.kind == "default" and never.t is None
+    shallow = explain(con, 12, "at(r1,d)", at=5, depth=1)
+    assert shallow.children and all(not c.children for c in shallow.children)
+    assert child(shallow, "at(r1,c)").truncated
+    doc = json.loads(json.dumps(shallow.to_dict()))
+    assert doc["cause"]["name"] == "go" and len(doc["children"]) == 3
+    text = render_why(explain(con, 10, "alarm(r1)", at=4), 4)
+    assert text.splitlines()[0].startswith("alarm(r1) = [1,1] at the end of t=4: set at t=3 pass 1")
+    assert "├─ ok at(r1,c):[1,1] = [1,1]: set at t=3 pass 0 [0,1]->[1,1] by go (Δt=1" in text
+    assert "[explained above]" in text
+
+
+def test_why_errors_name_the_offending_value(con) -> None:  # noqa: ANN001
+    with pytest.raises(KeyError, match="no node 'zz'"):
+        explain(con, 10, "at(r1,zz)", at=3)
+    with pytest.raises(KeyError, match="no label 'flies'"):
+        explain(con, 10, "flies(r1)", at=3)
+    with pytest.raises(KeyError, match="episode 99 has no trace rows.*10, 11, 12"):
+        explain(con, 99, "at(r1,a)", at=3)
+    with pytest.raises(ValueError, match="not ground"):
+        explain(con, 10, "at(r1,X)", at=3)
+
+
+def test_why_not_reports_the_first_failed_clause(con) -> None:  # noqa: ANN001
+    # episode 10 stopped at t=3, so `go` did not move r1 on at t=4: move(r1) was [0,0] at the end of t=3
+    w = why_not(con, 10, "go", {"A": "r1"}, at=4)
+    assert w.reads_at == 3 and w.bindings == {"A": "r1", "X": "c", "Y": "d"}
+    assert [c.holds for c in w.checks] == [True, True, False]
+    failed = w.checks[w.failed]
+    assert (failed.clause, failed.value, failed.set_at, failed.set_by) == ("move(r1):[1,1]", [0.0, 0.0], 3, "action")
+    assert render_why_not(w).splitlines()[-1] == "first failed clause: #3 move(r1):[1,1] (move(r1) = [0,0])"
+    # episode 12 kept moving: the same question finds the rule active
+    ok = why_not(con, 12, "go", {"A": "r1"}, at=4)
+    assert ok.failed is None and ok.head == "at(r1,d)" and ok.head_value == [1.0, 1.0]
+    # a Δt=0 rule is read at the end of `at` itself; danger(b) was never set
+    w = why_not(con, 10, "alarm", {"A": "r1"}, at=2)
+    assert w.reads_at == 2 and w.checks[w.failed].atom == "danger(b)" and w.checks[w.failed].value == [0.0, 1.0]
+
+
+def test_why_not_with_an_open_pattern_and_bad_input(con) -> None:  # noqa: ANN001
+    w = why_not(con, 10, "go", {"X": "d"}, at=5)
+    assert w.failed == 0 and w.checks[0].atom is None
+    assert "no atom matching at(A,d):[1,1] holds at the end of t=4" in w.checks[0].note
+    with pytest.raises(KeyError, match="no variable\\(s\\) \\['Z'\\].*A, Y, X"):
+        why_not(con, 10, "go", {"Z": "a"}, at=3)
+    with pytest.raises(KeyError, match="no rule named 'gone' in this run; did you mean go"):
+        why_not(con, 10, "gone", {}, at=3)
+    with pytest.raises(KeyError, match="no node 'q'"):
+        why_not(con, 10, "go", {"A": "q"}, at=3)
+
+
+def test_why_reads_the_sealed_form_the_same_way(tmp_path: Path) -> None:
+    from tracelab.store.seal import seal_run
+    run = write_walk_run(tmp_path / "walk")
+    live = explain(open_run(run), 10, "alarm(r1)", at=4).to_dict()
+    assert explain(open_run(seal_run(run)), 10, "alarm(r1)", at=4).to_dict() == live

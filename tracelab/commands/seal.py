@@ -1,0 +1,23 @@
+"""`tracelab seal`: compact a finished run's Parquet parts into one read-only DuckDB file."""
+from __future__ import annotations
+
+import argparse
+
+from tracelab.commands._output import fail, store_errors
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("seal", help="compact a finished run into <run>/run.duckdb")
+    p.add_argument("run", help="run directory or run name under runs/")
+    p.add_argument("--keep-parts", action="store_true", help="keep the Parquet parts afterwards")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from tracelab.store.seal import seal_run
+    try:
+        path = seal_run(args.run, keep_parts=args.keep_parts)
+    except store_errors() as e:
+        return fail(e)
+    print(path)
+    return 0

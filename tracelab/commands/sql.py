@@ -1,0 +1,63 @@
+"""`tracelab sql`: a read-only SQL query on a run (live or sealed), or one of the saved queries."""
+from __future__ import annotations
+
+import argparse
+
+from tracelab.commands._output import (add_format_options, add_paging_options, fail, store_errors,
+                                       write_table)
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("sql", help="read-only SQL on a run: views changes, firings, episodes, steps, "
+                                   "metrics, rules, facts, atoms, groundings, run")
+    p.add_argument("run", help="run directory, .duckdb file, or run name under runs/")
+    p.add_argument("query", nargs="?", help="one SELECT statement")
+    p.add_argument("--query", "-q", dest="saved", metavar="NAME", help="run a saved query instead")
+    p.add_argument("--param", "-p", action="append", default=[], metavar="NAME=VALUE",
+                   help="a saved query's parameter (repeatable)")
+    p.add_argument("--list", action="store_true", help="list the saved queries and their parameters")
+    add_format_options(p)
+    add_paging_options(p)
+    p.set_defaults(func=run)
+
+
+def _params(items: list[str]) -> dict[str, str]:
+    out = {}
+    for item in items:
+        name, eq, value = item.partition("=")
+        if not eq:
+            raise ValueError(f"cannot read --param {item!r}; write NAME=VALUE")
+        out[name.strip()] = value.strip()
+    return out
+
+
+def print_saved_queries() -> None:
+    from tracelab.store.queries import list_queries
+    for q in list_queries():
+        print(f"{q.name}: {q.description}")
+        for p in q.params:
+            print(f"    {p.name} ({p.type}, default {p.default!r}){': ' + p.help if p.help else ''}")
+
+
+def run(args: argparse.Namespace) -> int:
+    from tracelab.store.queries import get_query
+    from tracelab.store.reader import fetch_arrow, open_run, query_readonly, retrying
+    if args.list:
+        print_saved_queries()
+        return 0
+    try:
+        if (args.query is None) == (args.saved is None):
+            raise ValueError("give either a SQL query or --query NAME (see --list)")
+        if args.saved is not None:
+            saved = get_query(args.saved)
+            sql, params = saved.sql, saved.bind(_params(args.param))
+        else:
+            if args.param:
+                raise ValueError("--param only applies to saved queries (--query NAME)")
+            sql, params = args.query, None
+        con = open_run(args.run)
+        table = retrying(lambda: fetch_arrow(query_readonly(con, sql, params), args.limit, args.offset))
+        write_table(table, args.format, args.output)
+    except store_errors() as e:
+        return fail(e)
+    return 0

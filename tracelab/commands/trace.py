@@ -1,0 +1,88 @@
+"""`tracelab trace`: the method's trace table for one episode (t, node/edge, label, old bound, new bound,
+rule fired), filtered by time, atom, label and rule."""
+from __future__ import annotations
+
+import argparse
+from typing import TYPE_CHECKING
+
+from tracelab.commands._output import (add_format_options, add_paging_options, fail, store_errors,
+                                       write_table)
+
+if TYPE_CHECKING:
+    import pyarrow as pa
+
+FULL_COLUMNS = ("t, pass_no, atom, node, label, old_lower, old_upper, new_lower, new_upper, rule, "
+                "grounding, seq")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("trace", help="the trace table of an episode: every bound change and its rule")
+    p.add_argument("run", help="run directory, .duckdb file, or run name under runs/")
+    p.add_argument("--episode", "-e", type=int, required=True)
+    p.add_argument("--from", dest="t_from", type=int, help="first timestep (default: the start)")
+    p.add_argument("--to", dest="t_to", type=int, help="last timestep (default: the end)")
+    p.add_argument("--atom", action="append", default=[],
+                   help="atom text or glob, e.g. 'atLoc(red-agent-1,*)' (repeatable)")
+    p.add_argument("--label", action="append", default=[], help="predicate name (repeatable)")
+    p.add_argument("--rule", action="append", default=[],
+                   help="rule name or glob, also fact:NAME, action, policy:NAME, reset (repeatable)")
+    add_format_options(p)
+    add_paging_options(p)
+    p.set_defaults(func=run)
+
+
+def trace_sql(args: argparse.Namespace) -> tuple[str, list[object]]:
+    where: list[str] = ["episode = ?"]
+    params: list[object] = [args.episode]
+    if args.t_from is not None:
+        where.append("t >= ?")
+        params.append(args.t_from)
+    if args.t_to is not None:
+        where.append("t <= ?")
+        params.append(args.t_to)
+    for column, values in (("atom", args.atom), ("label", args.label), ("rule", args.rule)):
+        if values:
+            where.append("(" + " OR ".join(f"{column} GLOB ?" for _ in values) + ")")
+            params.extend(values)
+    sql = f"SELECT {FULL_COLUMNS} FROM changes WHERE {' AND '.join(where)} ORDER BY seq"
+    if args.limit is not None:
+        sql += f" LIMIT {int(args.limit)}"
+    if args.offset:
+        sql += f" OFFSET {int(args.offset)}"
+    return sql, params
+
+
+def run(args: argparse.Namespace) -> int:
+    from tracelab.store.reader import open_run, retrying
+    try:
+        con = open_run(args.run)
+        sql, params = trace_sql(args)
+        table = retrying(lambda: con.sql(sql, params=params).to_arrow_table())
+        if table.num_rows == 0 and con.execute("SELECT count(*) FROM raw.changes WHERE episode = ?",
+                                               [args.episode]).fetchone()[0] == 0:
+            known = [e for (e,) in con.execute("SELECT DISTINCT episode FROM raw.changes "
+                                               "ORDER BY 1 LIMIT 20").fetchall()]
+            raise KeyError(f"episode {args.episode} has no trace rows in {args.run} "
+                           f"(episodes with rows: {known or 'none'})")
+        if args.format == "table":
+            table = paper_table(table)
+        write_table(table, args.format, args.output)
+    except store_errors() as e:
+        return fail(e)
+    return 0
+
+
+def _b(lo: float, up: float) -> str:
+    return f"[{lo:g},{up:g}]"
+
+
+def paper_table(table: "pa.Table") -> "pa.Table":
+    """The method's columns: t, node/edge, label, old, new, rule."""
+    import pyarrow as pa
+    c = table.to_pydict()
+    return pa.table({
+        "t": c["t"], "node/edge": c["node"], "label": c["label"],
+        "old": [_b(a, b) for a, b in zip(c["old_lower"], c["old_upper"])],
+        "new": [_b(a, b) for a, b in zip(c["new_lower"], c["new_upper"])],
+        "rule": c["rule"],
+    })

@@ -1,0 +1,8 @@
+-- Actions per win: how many episodes the learner won, their mean length in steps and mean number of learner actions.
+-- param win str = 'win' : the outcome that counts as a win
+-- param learner str = '%' : the agents whose step rows are learner actions (SQL LIKE, e.g. red-agent-%)
+SELECT count(*) AS wins, avg(e.steps) AS steps_per_win, avg(coalesce(a.actions, 0)) AS actions_per_win
+FROM episodes e
+LEFT JOIN (SELECT episode, count(*) AS actions FROM steps WHERE agent LIKE $learner GROUP BY episode) a
+       ON a.episode = e.episode
+WHERE e.outcome = $win

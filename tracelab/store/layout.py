@@ -1,0 +1,76 @@
+"""Where a run's files live.
+
+A run directory holds:
+  meta.json                 run metadata (written at open and at close, each time to a temp name + rename)
+  writer.lock               flock-ed by the writing process (and by `seal`) while they work
+  parts/<table>/live -> gNNNNNN
+                            a symlink to the table's live generation of parts
+  parts/<table>/gNNNNNN/NNNNNNNN.parquet
+                            immutable Parquet parts (written to a temp name, then renamed); see
+                            tracelab.store.parts for generations and compaction
+  run.duckdb                the sealed form (everything in one DuckDB file); once it exists it is the run
+A sealed run may also be a lone .duckdb file anywhere."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+META = "meta.json"
+LOCK = "writer.lock"
+PARTS = "parts"
+SEALED = "run.duckdb"
+LIVE = "live"
+PART_SUFFIX = ".parquet"
+TMP_MARK = ".tmp-"
+
+
+def meta_path(run_dir: Path) -> Path:
+    return run_dir / META
+
+
+def lock_path(run_dir: Path) -> Path:
+    return run_dir / LOCK
+
+
+def sealed_path(run_dir: Path) -> Path:
+    return run_dir / SEALED
+
+
+def table_dir(run_dir: Path, table: str) -> Path:
+    return run_dir / PARTS / table
+
+
+def part_name(number: int) -> str:
+    return f"{number:08d}{PART_SUFFIX}"
+
+
+def gen_name(gen: int) -> str:
+    return f"g{gen:06d}"
+
+
+def part_glob(run_dir: Path, table: str) -> str:
+    """The glob readers scan: the live generation's parts (temp files, `.NAME.tmp-PID`, never match)."""
+    return str(table_dir(run_dir, table) / LIVE / f"*{PART_SUFFIX}")
+
+
+def tmp_name(final: Path) -> Path:
+    return final.with_name(f".{final.name}{TMP_MARK}{os.getpid()}")
+
+
+def remove_stale_temps(run_dir: Path) -> int:
+    """Delete temp files a killed writer left behind; returns how many."""
+    n = 0
+    parts = run_dir / PARTS
+    if parts.is_dir():
+        for p in [*parts.glob(f"*/.*{TMP_MARK}*"), *parts.glob(f"*/g*/.*{TMP_MARK}*")]:
+            p.unlink(missing_ok=True)
+            n += 1
+    return n
+
+
+def replace_atomically(data: bytes, final: Path) -> None:
+    """Write `data` to a temp name beside `final`, then rename it over `final`."""
+    tmp = tmp_name(final)
+    with open(tmp, "wb") as f:
+        f.write(data)
+    os.replace(tmp, final)

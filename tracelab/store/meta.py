@@ -1,0 +1,138 @@
+"""Run metadata: what command produced a run, with which config, rules, seed and versions, and when.
+
+Stored as meta.json in the run directory (human-readable, rewritten atomically) and, in a sealed run, as
+the one-row table raw.run."""
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import json
+import os
+import platform
+import socket
+import sys
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pyarrow as pa
+
+from tracelab.store import layout
+
+FORMAT = "tracelab-run/1"
+STATUSES = ("running", "finished", "failed", "interrupted", "crashed")
+
+
+@dataclass
+class RunMeta:
+    """What the caller knows about a run; the writer fills in versions, times, pid and host."""
+    command: str = ""
+    config: dict[str, Any] = field(default_factory=dict)
+    scenario: str | None = None
+    rule_files: list[str] = field(default_factory=list)
+    seed: int | None = None
+    versions: dict[str, str] = field(default_factory=dict)
+
+
+def now_iso() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="microseconds")
+
+
+def file_sha256(path: str | Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def library_versions() -> dict[str, str]:
+    import duckdb
+    import numpy
+    import pyarrow
+
+    import tracelab
+    return {"tracelab": tracelab.__version__, "python": platform.python_version(),
+            "numpy": numpy.__version__, "duckdb": duckdb.__version__, "pyarrow": pyarrow.__version__}
+
+
+def initial_meta(run_dir: Path, meta: RunMeta | dict[str, Any] | None) -> dict[str, Any]:
+    """The meta.json document of a run being opened now by this process."""
+    if meta is None:
+        meta = RunMeta()
+    elif isinstance(meta, dict):
+        unknown = set(meta) - set(RunMeta.__dataclass_fields__)
+        if unknown:
+            raise ValueError(f"unknown run metadata field(s) {sorted(unknown)}; "
+                             f"known: {sorted(RunMeta.__dataclass_fields__)}")
+        meta = RunMeta(**meta)
+    rule_files = []
+    for p in meta.rule_files:
+        if not Path(p).is_file():
+            raise FileNotFoundError(f"rule file {str(p)!r} named in the run metadata does not exist")
+        rule_files.append({"path": str(p), "sha256": file_sha256(p)})
+    doc = asdict(meta)
+    doc.update(format=FORMAT, run_id=run_dir.name, rule_files=rule_files,
+               versions={**library_versions(), **meta.versions}, started_at=now_iso(), ended_at=None,
+               status="running", pid=os.getpid(), host=socket.gethostname(), argv=list(sys.argv),
+               sealed_at=None)
+    return doc
+
+
+def write_meta(run_dir: Path, doc: dict[str, Any]) -> None:
+    data = json.dumps(doc, indent=2, sort_keys=True, default=str).encode()
+    layout.replace_atomically(data, layout.meta_path(run_dir))
+
+
+def read_meta(run_dir: Path) -> dict[str, Any]:
+    path = layout.meta_path(run_dir)
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{str(run_dir)!r} is not a tracelab run: it has no {layout.META}") from None
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{str(path)!r} is not valid JSON: {e}") from None
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def effective_status(doc: dict[str, Any]) -> str:
+    """The recorded status, except that a 'running' run whose writer process is gone is 'crashed'."""
+    status = doc.get("status", "running")
+    if status == "running" and doc.get("host") == socket.gethostname() and doc.get("pid"):
+        if not _pid_alive(int(doc["pid"])):
+            return "crashed"
+    return status
+
+
+def _ts(value: str | None) -> _dt.datetime | None:
+    if not value:
+        return None
+    return _dt.datetime.fromisoformat(value).astimezone(_dt.timezone.utc).replace(tzinfo=None)
+
+
+def meta_table(doc: dict[str, Any], status: str) -> pa.Table:
+    """raw.run: one row; config, rule files and versions as JSON text."""
+    row = {
+        "run_id": doc.get("run_id"), "command": doc.get("command"), "scenario": doc.get("scenario"),
+        "seed": doc.get("seed"), "status": status,
+        "started_at": _ts(doc.get("started_at")), "ended_at": _ts(doc.get("ended_at")),
+        "config": json.dumps(doc.get("config", {}), sort_keys=True),
+        "rule_files": json.dumps(doc.get("rule_files", [])),
+        "versions": json.dumps(doc.get("versions", {}), sort_keys=True),
+        "pid": doc.get("pid"), "host": doc.get("host"),
+    }
+    ts = pa.timestamp("us")  # UTC
+    schema = pa.schema([("run_id", pa.string()), ("command", pa.string()), ("scenario", pa.string()),
+                        ("seed", pa.int64()), ("status", pa.string()), ("started_at", ts),
+                        ("ended_at", ts), ("config", pa.string()), ("rule_files", pa.string()),
+                        ("versions", pa.string()), ("pid", pa.int64()), ("host", pa.string())])
+    return pa.Table.from_pylist([row], schema=schema)

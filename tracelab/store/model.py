@@ -1,0 +1,185 @@
+"""A run's program and vocabulary as read back from the store, for the commands that reason about it
+(why, why-not, diff): rules with their clauses, fact and policy names, nodes, labels and atom lookups."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import duckdb
+import numpy as np
+
+DEFAULT_BOUND = (0.0, 1.0)  # an atom never set
+
+
+@dataclass(frozen=True)
+class Clause:
+    label: str
+    args: tuple[str, ...]
+    is_var: tuple[bool, ...]
+    negated: bool
+    lower: float
+    upper: float
+    text: str
+
+    @property
+    def binds(self) -> bool:
+        """False for a clause whose bound contains [0,1]: it holds for every atom."""
+        return not (self.lower <= 0.0 and self.upper >= 1.0)
+
+    def variables(self) -> tuple[str, ...]:
+        return tuple(a for a, v in zip(self.args, self.is_var) if v)
+
+    def ground_text(self, binding: dict[str, str]) -> str:
+        args = ",".join(binding.get(a, a) if v else a for a, v in zip(self.args, self.is_var))
+        return f"{'~' if self.negated else ''}{self.label}({args}):[{self.lower:g},{self.upper:g}]"
+
+
+@dataclass
+class RuleInfo:
+    rule: int
+    name: str
+    delay: int
+    immediate: bool
+    variables: tuple[str, ...]
+    text: str
+    head: Clause
+    body: list[Clause] = field(default_factory=list)
+
+
+def satisfies(bound: tuple[float, float], clause: Clause) -> bool:
+    """I ⊨ clause (the engine's own test, tracelab.engine.program.satisfies, on a stored clause)."""
+    from tracelab.engine.program import satisfies as engine_satisfies
+    return engine_satisfies(bound[0], bound[1], clause)
+
+
+class RunModel:
+    def __init__(self, con: duckdb.DuckDBPyConnection) -> None:
+        self.con = con
+        self.rules: list[RuleInfo] = []
+        rules = con.execute("SELECT rule, name, delay, immediate, variables, text FROM raw.rules "
+                            "ORDER BY rule").fetchall()
+        clauses: dict[int, list[tuple]] = {}
+        for row in con.execute("SELECT rule, pos, label, args, is_var, negated, lower, upper, text "
+                               "FROM raw.clauses ORDER BY rule, pos").fetchall():
+            clauses.setdefault(row[0], []).append(row)
+        for rid, name, delay, immediate, variables, text in rules:
+            cl = [Clause(r[2], tuple(r[3]), tuple(r[4]), r[5], r[6], r[7], r[8]) for r in clauses.get(rid, [])]
+            self.rules.append(RuleInfo(rid, name, delay, immediate, tuple(variables or ()), text,
+                                       head=cl[0], body=cl[1:]))
+        self.rule_by_name = {r.name: r for r in self.rules}
+        self.facts = {f: (n, t) for f, n, t in con.execute("SELECT fact, name, literal FROM raw.facts").fetchall()}
+        self.policies = dict(con.execute("SELECT code, name FROM raw.policies").fetchall())
+        self.nodes = [n for (n,) in con.execute("SELECT name FROM raw.nodes ORDER BY node").fetchall()]
+        self.node_ids = {n: i for i, n in enumerate(self.nodes)}
+        self.labels = {name: (lid, arity) for lid, name, arity in
+                       con.execute("SELECT label, name, arity FROM raw.labels").fetchall()}
+        self._atom_text: dict[int, str] = {}
+        self._groundings: dict[int, tuple[int, list[int], list[int]]] = {}
+
+    # ---- rules -----------------------------------------------------------------------------------------
+    def rule(self, name: str) -> RuleInfo:
+        r = self.rule_by_name.get(name)
+        if r is None:
+            import difflib
+            near = difflib.get_close_matches(name, list(self.rule_by_name), n=5)
+            hint = f"; did you mean {', '.join(near)}?" if near else ""
+            raise KeyError(f"no rule named {name!r} in this run{hint}")
+        return r
+
+    def cause_name(self, kind: int, cid: int) -> str:
+        """The `rule` column of the changes view: rule name, fact:NAME, action, policy:NAME, reset."""
+        if kind == 0:
+            return f"fact:{self.facts.get(cid, (str(cid),))[0]}"
+        if kind == 1:
+            return "action"
+        if kind == 2:
+            return self.rules[cid].name if 0 <= cid < len(self.rules) else f"rule#{cid}"
+        if kind == 3:
+            return f"policy:{self.policies.get(cid, cid)}"
+        return "reset"
+
+    # ---- groundings ------------------------------------------------------------------------------------
+    def grounding(self, g: int) -> tuple[int, list[int], list[int]]:
+        """(rule id, body atom ids in clause order, variable values as node ids)."""
+        if g not in self._groundings:
+            row = self.con.execute("SELECT rule, body_atoms, var_values FROM raw.groundings "
+                                   "WHERE grounding = ?", [g]).fetchone()
+            if row is None:
+                raise KeyError(f"grounding {g} is not in the run's grounding table")
+            self._groundings[g] = (row[0], list(row[1]), list(row[2]))
+        return self._groundings[g]
+
+    def bindings(self, g: int) -> dict[str, str]:
+        rule, _, values = self.grounding(g)
+        return {v: self.nodes[x] for v, x in zip(self.rules[rule].variables, values)}
+
+    # ---- atoms -------------------------------------------------------------------------------------------
+    def atom_texts(self, ids: list[int] | np.ndarray) -> dict[int, str]:
+        missing = sorted({int(a) for a in ids} - set(self._atom_text))
+        if missing:
+            for aid, text in self.con.execute("SELECT atom, text FROM atoms WHERE atom IN "
+                                              "(SELECT unnest(?::INTEGER[]))", [missing]).fetchall():
+                self._atom_text[aid] = text
+        return {int(a): self._atom_text.get(int(a), f"atom#{int(a)}") for a in ids}
+
+    def atom_text(self, aid: int) -> str:
+        return self.atom_texts([aid])[aid]
+
+    def label_id(self, label: str, arity: int) -> int:
+        if label not in self.labels:
+            raise KeyError(f"no label {label!r} in this run's vocabulary")
+        lid, have = self.labels[label]
+        if have != arity:
+            raise KeyError(f"label {label!r} has arity {have}, not {arity}")
+        return lid
+
+    def node_id(self, name: str) -> int:
+        if name not in self.node_ids:
+            raise KeyError(f"no node {name!r} in this run's vocabulary")
+        return self.node_ids[name]
+
+    def find_atom(self, label: str, args: tuple[str, ...]) -> int | None:
+        """The atom id of label(args), or None if it was never interned (then it is [0,1])."""
+        if label not in self.labels or any(a not in self.node_ids for a in args):
+            return None
+        lid = self.labels[label][0]
+        a0 = self.node_ids[args[0]]
+        a1 = self.node_ids[args[1]] if len(args) > 1 else -1
+        row = self.con.execute("SELECT atom FROM raw.atoms WHERE label = ? AND arg0 = ? AND arg1 = ?",
+                               [lid, a0, a1]).fetchone()
+        return None if row is None else int(row[0])
+
+    def parse_atom(self, text: str) -> int:
+        """The id of a ground atom written as text, e.g. atLoc(red-agent-1,16); errors name what is missing."""
+        from tracelab.engine import ProgramError, parse_literal
+        try:
+            lit = parse_literal(text)
+        except ProgramError as e:
+            raise ValueError(f"cannot read atom {text!r}: {e}") from None
+        if any(t.is_var for t in lit.args):
+            raise ValueError(f"atom {text!r} is not ground")
+        args = tuple(t.name for t in lit.args)
+        self.label_id(lit.pred, len(args))
+        for a in args:
+            self.node_id(a)
+        aid = self.find_atom(lit.pred, args)
+        if aid is None:
+            raise KeyError(f"atom {text!r} never occurs in this run (its label and nodes do)")
+        return aid
+
+    def atoms_matching(self, label: str, pattern: tuple[str | None, ...]) -> list[tuple[int, tuple[str, ...]]]:
+        """Atoms of `label` whose arguments equal the non-None entries of `pattern`, with their args,
+        ordered by node ids."""
+        if label not in self.labels:
+            return []
+        lid = self.labels[label][0]
+        sql = "SELECT atom, arg0, arg1 FROM raw.atoms WHERE label = ?"
+        params: list[int] = [lid]
+        for pos, value in enumerate(pattern):
+            if value is not None:
+                if value not in self.node_ids:
+                    return []
+                sql += f" AND arg{pos} = ?"
+                params.append(self.node_ids[value])
+        rows = self.con.execute(sql + " ORDER BY arg0, arg1", params).fetchall()
+        return [(aid, (self.nodes[a0],) if a1 < 0 else (self.nodes[a0], self.nodes[a1]))
+                for aid, a0, a1 in rows]

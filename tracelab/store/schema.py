@@ -1,0 +1,138 @@
+"""The trace store's tables: their Arrow schemas (the same in Parquet parts and in a sealed .duckdb file)
+and the readable SQL views built on them.
+
+Storage tables live in the DuckDB schema `raw`; the views users query (`changes`, `firings`, `episodes`,
+`steps`, `metrics`, `rules`, `facts`, `atoms`, `groundings`, `run`) live in `main` and only read `raw.*`,
+so the same view text serves a live run (raw.* are views over Parquet parts) and a sealed one (raw.* are
+tables)."""
+from __future__ import annotations
+
+import pyarrow as pa
+
+# The engine's cause kinds (tracelab.engine.CAUSE_*), as the store names them: external facts are the
+# agents' actions.
+CAUSE_NAMES = {0: "fact", 1: "action", 2: "rule", 3: "policy", 4: "reset"}
+
+_INT_LIST = pa.list_(pa.int32())
+_STR_LIST = pa.list_(pa.string())
+_TS = pa.timestamp("us")  # UTC (naive: reading TIMESTAMPTZ into Python needs pytz)
+
+# Tables in flush order: whatever a row refers to is written before it, so a reader that sees part of a
+# flush never sees a change whose atom, rule or grounding is missing, nor an ended episode without its rows.
+SCHEMAS: dict[str, pa.Schema] = {
+    "nodes": pa.schema([("node", pa.int32()), ("name", pa.string())]),
+    "labels": pa.schema([("label", pa.int32()), ("name", pa.string()), ("arity", pa.int8())]),
+    "atoms": pa.schema([("atom", pa.int32()), ("label", pa.int32()), ("arg0", pa.int32()),
+                        ("arg1", pa.int32())]),
+    "rules": pa.schema([("rule", pa.int32()), ("name", pa.string()), ("text", pa.string()),
+                        ("head", pa.string()), ("delay", pa.int32()), ("immediate", pa.bool_()),
+                        ("mode", pa.string()), ("variables", _STR_LIST), ("file", pa.string()),
+                        ("line", pa.int32())]),
+    # One row per clause of a rule: pos -1 is the head, 0.. the body in source order.
+    "clauses": pa.schema([("rule", pa.int32()), ("pos", pa.int32()), ("label", pa.string()),
+                          ("args", _STR_LIST), ("is_var", pa.list_(pa.bool_())),
+                          ("negated", pa.bool_()), ("lower", pa.float64()), ("upper", pa.float64()),
+                          ("text", pa.string())]),
+    "facts": pa.schema([("fact", pa.int32()), ("name", pa.string()), ("text", pa.string()),
+                        ("literal", pa.string()), ("start", pa.int32()), ("end", pa.int32()),
+                        ("static", pa.bool_()), ("file", pa.string()), ("line", pa.int32())]),
+    "policies": pa.schema([("code", pa.int32()), ("name", pa.string())]),
+    "groundings": pa.schema([("grounding", pa.int32()), ("rule", pa.int32()),
+                             ("body_atoms", _INT_LIST), ("var_values", _INT_LIST)]),
+    "episode_begin": pa.schema([("episode", pa.int64()), ("world", pa.int32()), ("t_start", pa.int32()),
+                                ("seed", pa.int64()), ("started_at", _TS), ("info", pa.string())]),
+    "changes": pa.schema([("seq", pa.int64()), ("episode", pa.int64()), ("world", pa.int32()),
+                          ("t", pa.int32()), ("pass_no", pa.int32()), ("atom", pa.int32()),
+                          ("old_lower", pa.float64()), ("old_upper", pa.float64()),
+                          ("new_lower", pa.float64()), ("new_upper", pa.float64()),
+                          ("cause_kind", pa.int8()), ("cause_id", pa.int32()), ("grounding", pa.int32()),
+                          ("n_sources", pa.int16())]),
+    "steps": pa.schema([("episode", pa.int64()), ("step", pa.int32()), ("t", pa.int32()),
+                        ("agent", pa.string()), ("action", pa.int32()), ("reward", pa.float64()),
+                        ("terminated", pa.bool_()), ("truncated", pa.bool_()),
+                        ("obs", pa.list_(pa.float32()))]),
+    "metrics": pa.schema([("step", pa.int64()), ("name", pa.string()), ("value", pa.float64()),
+                          ("episode", pa.int64()), ("time", _TS)]),
+    "episode_end": pa.schema([("episode", pa.int64()), ("steps", pa.int32()), ("t_end", pa.int32()),
+                              ("outcome", pa.string()), ("reward", pa.float64()), ("rewards", pa.string()),
+                              ("ended_at", _TS), ("info", pa.string())]),
+}
+TABLES: tuple[str, ...] = tuple(SCHEMAS)
+
+# The engine's trace columns (docs/engine-api.md) and the dtype each is stored as.
+TRACE_COLUMNS: dict[str, str] = {
+    "world": "int32", "t": "int32", "pass_no": "int32", "atom": "int32",
+    "old_lower": "float64", "old_upper": "float64", "new_lower": "float64", "new_upper": "float64",
+    "cause_kind": "int8", "cause_id": "int32", "grounding": "int32", "n_sources": "int16",
+}
+
+# Sort order of each table in a sealed file (point queries by episode and time).
+SEAL_ORDER: dict[str, str] = {
+    "changes": "episode, seq", "steps": "episode, step, agent", "metrics": "step, name",
+    "groundings": "grounding", "atoms": "atom", "nodes": "node", "labels": "label",
+    "episode_begin": "episode", "episode_end": "episode",
+}
+
+VIEWS_SQL = r"""
+CREATE OR REPLACE VIEW atoms AS
+SELECT a.atom, l.name AS label, n0.name AS arg0, n1.name AS arg1,
+       CASE WHEN a.arg1 < 0 THEN n0.name ELSE '(' || n0.name || ',' || n1.name || ')' END AS node,
+       l.name || '(' || n0.name || CASE WHEN a.arg1 < 0 THEN '' ELSE ',' || n1.name END || ')' AS text
+FROM raw.atoms a JOIN raw.labels l USING (label)
+LEFT JOIN raw.nodes n0 ON n0.node = a.arg0 LEFT JOIN raw.nodes n1 ON n1.node = a.arg1;
+
+CREATE OR REPLACE VIEW rules AS
+SELECT r.rule, r.name, r.delay, r.immediate, r.mode, r.head,
+       (SELECT string_agg(c.text, ', ' ORDER BY c.pos) FROM raw.clauses c
+         WHERE c.rule = r.rule AND c.pos >= 0) AS body,
+       r.variables, r.text, r.file, r.line
+FROM raw.rules r;
+
+CREATE OR REPLACE VIEW facts AS SELECT * FROM raw.facts;
+
+CREATE OR REPLACE VIEW changes AS
+SELECT c.episode, c.t, a.text AS atom, a.node, a.label,
+       c.old_lower, c.old_upper, c.new_lower, c.new_upper,
+       CASE c.cause_kind WHEN 0 THEN 'fact:' || coalesce(f.name, CAST(c.cause_id AS VARCHAR))
+                         WHEN 1 THEN 'action'
+                         WHEN 2 THEN coalesce(r.name, 'rule#' || c.cause_id)
+                         WHEN 3 THEN 'policy:' || coalesce(p.name, CAST(c.cause_id AS VARCHAR))
+                         WHEN 4 THEN 'reset'
+                         ELSE 'cause' || c.cause_kind END AS rule,
+       c.grounding, c.world, c.pass_no, c.seq, c.cause_kind, c.cause_id, c.n_sources, c.atom AS atom_id
+FROM raw.changes c
+LEFT JOIN atoms a ON a.atom = c.atom
+LEFT JOIN raw.rules r ON c.cause_kind = 2 AND r.rule = c.cause_id
+LEFT JOIN raw.facts f ON c.cause_kind = 0 AND f.fact = c.cause_id
+LEFT JOIN raw.policies p ON c.cause_kind = 3 AND p.code = c.cause_id;
+
+CREATE OR REPLACE VIEW groundings AS
+SELECT g.grounding, r.name AS rule,
+       array_to_string(list_transform(list_zip(r.variables, list_transform(g.var_values,
+           lambda v: nl.names[v + 1])), lambda x: x[1] || '=' || x[2]), ', ') AS bindings,
+       g.body_atoms, g.var_values, g.rule AS rule_id
+FROM raw.groundings g JOIN raw.rules r ON r.rule = g.rule,
+     (SELECT list(name ORDER BY node) AS names FROM raw.nodes) nl;
+
+CREATE OR REPLACE VIEW firings AS
+SELECT c.episode, c.t, r.name AS rule,
+       array_to_string(list_transform(list_zip(r.variables, list_transform(g.var_values,
+           lambda v: nl.names[v + 1])), lambda x: x[1] || '=' || x[2]), ', ') AS bindings,
+       a.text AS head, c.new_lower, c.new_upper, r.delay, r.immediate,
+       c.grounding, c.world, c.pass_no, c.seq
+FROM raw.changes c
+JOIN raw.rules r ON c.cause_kind = 2 AND r.rule = c.cause_id
+LEFT JOIN raw.groundings g ON g.grounding = c.grounding
+LEFT JOIN atoms a ON a.atom = c.atom,
+(SELECT list(name ORDER BY node) AS names FROM raw.nodes) nl;
+
+CREATE OR REPLACE VIEW episodes AS
+SELECT coalesce(b.episode, e.episode) AS episode, b.world, e.steps, e.outcome, e.reward,
+       e.rewards, b.t_start, e.t_end, b.seed, b.started_at, e.ended_at,
+       e.episode IS NOT NULL AS ended, b.info AS begin_info, e.info AS end_info
+FROM raw.episode_begin b FULL JOIN raw.episode_end e ON e.episode = b.episode;
+
+CREATE OR REPLACE VIEW steps AS SELECT * FROM raw.steps;
+CREATE OR REPLACE VIEW metrics AS SELECT * FROM raw.metrics;
+CREATE OR REPLACE VIEW run AS SELECT * FROM raw.run;
+"""

@@ -1,0 +1,62 @@
+"""Seal a finished (or crashed) run: compact its Parquet parts into one DuckDB file, run.duckdb.
+
+The file is built under a temp name and renamed into place, so a crash while sealing leaves the parts
+untouched and the run readable; once run.duckdb exists, readers use it and the parts are removed."""
+from __future__ import annotations
+
+import fcntl
+import os
+import shutil
+from pathlib import Path
+
+import duckdb
+
+from tracelab.store import layout
+from tracelab.store.meta import meta_table, now_iso, read_meta, write_meta
+from tracelab.store.reader import _create_table, _sql_str, resolve_run
+from tracelab.store.schema import SEAL_ORDER, TABLES, VIEWS_SQL
+
+
+def seal_run(run: str | Path, *, keep_parts: bool = False) -> Path:
+    """Write <run>/run.duckdb from the parts and return its path (idempotent). Refuses while a writer
+    holds the run."""
+    run_dir = resolve_run(run)
+    if not run_dir.is_dir():
+        raise ValueError(f"{str(run_dir)!r} is not a run directory (a lone .duckdb file is already sealed)")
+    sealed = layout.sealed_path(run_dir)
+    doc = read_meta(run_dir)
+    with open(layout.lock_path(run_dir), "a+") as lock:
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise RuntimeError(f"run {str(run_dir)!r} is still being written (pid {doc.get('pid')}); "
+                               "close its writer before sealing") from None
+        if not sealed.exists():
+            # We hold the writer lock, so a run still marked 'running' lost its writer.
+            status = "crashed" if doc.get("status") == "running" else doc.get("status", "finished")
+            layout.remove_stale_temps(run_dir)
+            _build(run_dir, sealed, {**doc, "status": status})
+            doc.update(status=status, sealed_at=now_iso())
+            write_meta(run_dir, doc)
+        if not keep_parts:
+            shutil.rmtree(run_dir / layout.PARTS, ignore_errors=True)
+    return sealed
+
+
+def _build(run_dir: Path, sealed: Path, doc: dict) -> None:
+    tmp = sealed.with_name(f".{sealed.name}.tmp-{os.getpid()}")
+    for leftover in (tmp, Path(f"{tmp}.wal")):
+        leftover.unlink(missing_ok=True)
+    con = duckdb.connect(str(tmp))
+    try:
+        con.execute("CREATE SCHEMA raw")
+        for t in TABLES:
+            order = f" ORDER BY {SEAL_ORDER[t]}" if t in SEAL_ORDER else ""
+            src = _sql_str(layout.part_glob(run_dir, t))
+            con.execute(f"CREATE TABLE raw.{t} AS SELECT * FROM read_parquet({src}){order}")
+        _create_table(con, "raw.run", meta_table(doc, doc["status"]))
+        con.execute(VIEWS_SQL)
+        con.execute("CHECKPOINT")
+    finally:
+        con.close()
+    os.replace(tmp, sealed)

@@ -1,0 +1,337 @@
+"""Explanations read from a stored trace.
+
+why(atom, t): the change row that set the atom's bound in force at the end of t; its cause (rule, fact,
+agent action, policy, reset); for a rule, the ground body atoms its grounding used and, recursively, why
+each held when the rule read it: just before the row for an immediate rule, before the ordinary pass for
+other Δt=0 rules, at the end of t−Δt for delayed rules. Leaves: facts, actions (external facts), resets,
+atoms never set ([0,1]), and the depth limit.
+
+why-not(rule, bindings, t): the rule's body clauses checked in order at the time the rule would have read
+them (the end of t−Δt; the end of t for Δt=0) under the given bindings, extending them through the
+atoms of the vocabulary for unbound variables; reports the first clause that could not be satisfied."""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import duckdb
+
+from tracelab.store.episode import EpisodeTrace, Row
+from tracelab.store.model import Clause, RuleInfo, RunModel, satisfies
+from tracelab.store.schema import CAUSE_NAMES
+
+def _bound_text(b: tuple[float, float] | list[float] | None) -> str:
+    return "?" if b is None else f"[{b[0]:g},{b[1]:g}]"
+
+
+@dataclass
+class Cause:
+    kind: str                      # rule | fact | action | policy | reset | default
+    name: str                      # as in the changes view's `rule` column ('' for default)
+    grounding: int = -1
+    bindings: dict[str, str] = field(default_factory=dict)
+    delay: int | None = None
+    immediate: bool | None = None
+    reads: str = ""                # when the body was read
+    text: str = ""                 # the rule's or fact's source text
+
+
+@dataclass
+class WhyNode:
+    atom: str
+    value: list[float]             # the bound in force at the point read
+    clause: str | None = None      # the ground body clause this node supports (None at the root)
+    holds: bool | None = None      # does `value` satisfy `clause`
+    t: int | None = None           # the change that set the value (None: never set)
+    pass_no: int | None = None
+    seq: int | None = None
+    old: list[float] | None = None
+    cause: Cause | None = None
+    children: list["WhyNode"] = field(default_factory=list)
+    truncated: bool = False        # the depth limit stopped the explanation here
+    repeated: bool = False         # the same change is explained higher up the tree
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+class _Explainer:
+    def __init__(self, model: RunModel, trace: EpisodeTrace) -> None:
+        self.m = model
+        self.tr = trace
+        self.immediate = {r.rule for r in model.rules if r.immediate}
+        self.seen: set[int] = set()
+
+    def node(self, atom: int, row: Row | None, depth: int, clause: Clause | None = None,
+             binding: dict[str, str] | None = None) -> WhyNode:
+        value = EpisodeTrace.bound(row)
+        n = WhyNode(atom=self.m.atom_text(atom), value=list(value),
+                    clause=None if clause is None else clause.ground_text(binding or {}),
+                    holds=None if clause is None else satisfies(value, clause))
+        if row is None:
+            n.cause = Cause("default", "", reads="never set: [0,1]")
+            return n
+        n.t, n.pass_no, n.seq, n.old = row.t, row.pass_no, row.seq, list(row.old)
+        n.cause = self._cause(row)
+        if row.seq in self.seen:
+            n.repeated = True
+            return n
+        self.seen.add(row.seq)
+        rule = self._rule_of(row)
+        if rule is None:
+            return n
+        if depth <= 0:
+            n.truncated = True
+            return n
+        _, body_atoms, _ = self.m.grounding(row.grounding)
+        self.m.atom_texts(body_atoms)
+        binding = n.cause.bindings
+        for clause_i, aid in zip(rule.body, body_atoms):
+            n.children.append(self.node(aid, self._read(rule, row, aid), depth - 1, clause_i, binding))
+        return n
+
+    def _rule_of(self, row: Row) -> RuleInfo | None:
+        if row.grounding < 0 or row.cause_kind not in (2, 3):
+            return None
+        return self.m.rules[self.m.grounding(row.grounding)[0]]
+
+    def _read(self, rule: RuleInfo, row: Row, atom: int) -> Row | None:
+        if rule.delay > 0:
+            return self.tr.last_at_end_of(atom, row.t - rule.delay)
+        if rule.immediate:
+            return self.tr.last_before(atom, row.index)
+        return self.tr.last_before(atom, self.tr.ordinary_pass_start(row.index, self.immediate))
+
+    def _cause(self, row: Row) -> Cause:
+        kind = CAUSE_NAMES.get(row.cause_kind, str(row.cause_kind))
+        c = Cause(kind, self.m.cause_name(row.cause_kind, row.cause_id), grounding=row.grounding)
+        if row.cause_kind == 0:
+            c.text = self.m.facts.get(row.cause_id, ("", ""))[1]
+        rule = self._rule_of(row)
+        if rule is not None:
+            c.bindings = self.m.bindings(row.grounding)
+            c.delay, c.immediate, c.text = rule.delay, rule.immediate, rule.text
+            if rule.delay > 0:
+                c.reads = f"body read at the end of t={row.t - rule.delay}"
+            elif rule.immediate:
+                c.reads = "body read just before this application"
+            else:
+                c.reads = f"body read before ordinary pass {row.pass_no} of t={row.t}"
+            if row.cause_kind == 3:
+                c.reads += f"; first incoming source: {rule.name}"
+        return c
+
+
+def _check_episode(con: duckdb.DuckDBPyConnection, episode: int, trace: EpisodeTrace) -> None:
+    if trace.n == 0:
+        known = [e for (e,) in con.execute(
+            "SELECT DISTINCT episode FROM raw.changes ORDER BY episode LIMIT 20").fetchall()]
+        raise KeyError(f"episode {episode} has no trace rows at or before that time "
+                       f"(episodes with rows: {known if known else 'none'})")
+
+
+def explain(con: duckdb.DuckDBPyConnection, episode: int, atom: str | int, at: int,
+            depth: int = 6) -> WhyNode:
+    """Why `atom` (text or id) had its bound at the end of timestep `at` in `episode`."""
+    model = RunModel(con)
+    aid = model.parse_atom(atom) if isinstance(atom, str) else int(atom)
+    trace = EpisodeTrace(con, episode, upto_t=at)
+    _check_episode(con, episode, trace)
+    return _Explainer(model, trace).node(aid, trace.last_at_end_of(aid, at), depth)
+
+
+def render_why(node: WhyNode, at: int | None = None) -> str:
+    """The proof tree as indented text."""
+    lines: list[str] = []
+
+    def describe(n: WhyNode) -> str:
+        c = n.cause
+        if c is None or c.kind == "default":
+            return "never set (the default [0,1])"
+        s = f"set at t={n.t} pass {n.pass_no} {_bound_text(n.old)}->{_bound_text(n.value)} by {c.name}"
+        if c.kind in ("rule", "policy"):
+            delay = "!" if c.immediate else f"Δt={c.delay}"
+            binds = ", ".join(f"{k}={v}" for k, v in c.bindings.items())
+            s += f" ({delay}{'; ' + binds if binds else ''}; {c.reads})"
+        elif c.kind == "fact" and c.text:
+            s += f" ({c.text})"
+        if n.repeated:
+            s += "  [explained above]"
+        if n.truncated:
+            s += "  [depth limit]"
+        return s
+
+    def walk(n: WhyNode, prefix: str, last: bool, root: bool) -> None:
+        if root:
+            when = f" at the end of t={at}" if at is not None else ""
+            lines.append(f"{n.atom} = {_bound_text(n.value)}{when}: {describe(n)}")
+            child_prefix = ""
+        else:
+            mark = "ok " if n.holds else "NO "
+            lines.append(f"{prefix}{'└─ ' if last else '├─ '}{mark}{n.clause} = "
+                         f"{_bound_text(n.value)}: {describe(n)}")
+            child_prefix = prefix + ("   " if last else "│  ")
+        for i, ch in enumerate(n.children):
+            walk(ch, child_prefix, i == len(n.children) - 1, False)
+
+    walk(node, "", True, True)
+    return "\n".join(lines)
+
+
+# ---- why-not ---------------------------------------------------------------------------------------------
+
+@dataclass
+class ClauseCheck:
+    pos: int                       # index of the clause in the rule body
+    clause: str                    # the clause with the bindings known when it was checked
+    atom: str | None               # the ground atom checked (None: no atom matched an open pattern)
+    value: list[float] | None
+    holds: bool
+    set_at: int | None = None      # t of the change that gave `value` (None: never set)
+    set_by: str | None = None
+    note: str = ""
+
+
+@dataclass
+class WhyNot:
+    rule: str
+    rule_text: str
+    bindings: dict[str, str]       # as given, extended by the search along the checks shown
+    at: int                        # when the head would change
+    reads_at: int                  # end of this timestep is when the body is read
+    checks: list[ClauseCheck]
+    failed: int | None             # index into checks of the first failed clause; None if all hold
+    head: str | None = None
+    head_value: list[float] | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def why_not(con: duckdb.DuckDBPyConnection, episode: int, rule_name: str, bindings: dict[str, str],
+            at: int, max_candidates: int = 100_000) -> WhyNot:
+    """Which body clause of `rule_name` under `bindings` failed for a head change at `at`."""
+    model = RunModel(con)
+    rule = model.rule(rule_name)
+    unknown = set(bindings) - set(rule.variables)
+    if unknown:
+        raise KeyError(f"rule {rule.name} has no variable(s) {sorted(unknown)}; its variables: "
+                       f"{', '.join(rule.variables) or 'none'}")
+    for value in bindings.values():
+        model.node_id(value)
+    reads_at = at - rule.delay
+    trace = EpisodeTrace(con, episode, upto_t=reads_at)
+    _check_episode(con, episode, trace)
+    search = _Search(model, trace, rule, reads_at, max_candidates)
+    checks, ok, binding = search.run(dict(bindings))
+    result = WhyNot(rule.name, rule.text, binding, at, reads_at, checks,
+                    failed=None if ok else len(checks) - 1)
+    if ok and set(rule.head.variables()) <= set(binding):
+        args = tuple(binding.get(a, a) if v else a for a, v in zip(rule.head.args, rule.head.is_var))
+        aid = model.find_atom(rule.head.label, args)
+        result.head = f"{rule.head.label}({','.join(args)})"
+        head_row = None if aid is None else EpisodeTrace(con, episode, upto_t=at).last_at_end_of(aid, at)
+        result.head_value = list(EpisodeTrace.bound(head_row))
+    return result
+
+
+class _Search:
+    """Depth-first search over the rule body, in body order (clauses that cannot bind their unbound
+    variables wait until a later clause binds them); keeps the path that got furthest."""
+
+    def __init__(self, model: RunModel, trace: EpisodeTrace, rule: RuleInfo, reads_at: int,
+                 budget: int) -> None:
+        self.m, self.tr, self.rule, self.at, self.budget = model, trace, rule, reads_at, budget
+        self.best: list[ClauseCheck] = []
+        self.best_binding: dict[str, str] = {}
+
+    def _check(self, pos: int, clause: Clause, aid: int | None, atom: str, binding: dict[str, str]
+               ) -> ClauseCheck:
+        row = None if aid is None else self.tr.last_at_end_of(aid, self.at)
+        value = EpisodeTrace.bound(row)
+        return ClauseCheck(pos, clause.ground_text(binding), atom, list(value), satisfies(value, clause),
+                           set_at=None if row is None else row.t,
+                           set_by=None if row is None else self.m.cause_name(row.cause_kind, row.cause_id))
+
+    def run(self, binding: dict[str, str]) -> tuple[list[ClauseCheck], bool, dict[str, str]]:
+        found = self._dfs(list(range(len(self.rule.body))), binding, [])
+        if found is not None:
+            return found[0], True, found[1]
+        return self.best, False, self.best_binding
+
+    def _record(self, path: list[ClauseCheck], binding: dict[str, str]) -> None:
+        if len(path) > len(self.best):
+            self.best, self.best_binding = path, dict(binding)
+
+    def _dfs(self, todo: list[int], binding: dict[str, str], path: list[ClauseCheck]
+             ) -> tuple[list[ClauseCheck], dict[str, str]] | None:
+        if not todo:
+            return path, binding
+        # the first clause in body order that is ground, or that can bind its open variables
+        for k, pos in enumerate(todo):
+            clause = self.rule.body[pos]
+            open_vars = [v for v in clause.variables() if v not in binding]
+            if not open_vars or clause.binds:
+                break
+        else:
+            k, pos = 0, todo[0]
+            clause = self.rule.body[pos]
+            open_vars = [v for v in clause.variables() if v not in binding]
+        rest = todo[:k] + todo[k + 1:]
+        args = tuple(binding.get(a) if v else a for a, v in zip(clause.args, clause.is_var))
+        if not open_vars:
+            aid = self.m.find_atom(clause.label, args)  # type: ignore[arg-type]
+            check = self._check(pos, clause, aid, f"{clause.label}({','.join(args)})", binding)  # type: ignore[arg-type]
+            if not check.holds:
+                self._record(path + [check], binding)
+                return None
+            return self._dfs(rest, binding, path + [check])
+        candidates = self.m.atoms_matching(clause.label, args)
+        tried = 0
+        for aid, cargs in candidates:
+            new = dict(binding)
+            clash = False
+            for a, is_var, value in zip(clause.args, clause.is_var, cargs):
+                if is_var:
+                    if new.setdefault(a, value) != value:
+                        clash = True
+            if clash:
+                continue
+            self.budget -= 1
+            if self.budget < 0:
+                raise RuntimeError("why-not search budget exhausted; give more variable bindings")
+            check = self._check(pos, clause, aid, f"{clause.label}({','.join(cargs)})", new)
+            if check.holds:
+                tried += 1
+                found = self._dfs(rest, new, path + [check])
+                if found is not None:
+                    return found
+        if tried == 0:
+            pattern = clause.ground_text(binding)
+            self._record(path + [ClauseCheck(
+                pos, pattern, None, None, False,
+                note=f"no atom matching {pattern} holds at the end of t={self.at} "
+                     f"({len(candidates)} candidate(s) in the vocabulary)")], binding)
+        return None
+
+
+def render_why_not(w: WhyNot) -> str:
+    lines = [f"rule {w.rule}: {w.rule_text.removeprefix(w.rule + ':').strip()}",
+             f"bindings: {', '.join(f'{k}={v}' for k, v in w.bindings.items()) or 'none'}; "
+             f"body read at the end of t={w.reads_at} (head at t={w.at})"]
+    for i, c in enumerate(w.checks):
+        mark = "ok " if c.holds else "NO "
+        if c.atom is None:
+            lines.append(f"  {mark}{c.clause}: {c.note}")
+            continue
+        src = "never set" if c.set_at is None else f"set at t={c.set_at} by {c.set_by}"
+        lines.append(f"  {mark}{c.clause}: {c.atom} = {_bound_text(c.value)} ({src})")
+    if w.failed is None:
+        lines.append("every body clause holds: the rule was active"
+                     + (f"; its head {w.head} = {_bound_text(w.head_value)} at the end of t={w.at}"
+                        if w.head else ""))
+    else:
+        c = w.checks[w.failed]
+        lines.append(f"first failed clause: #{c.pos + 1} {c.clause}"
+                     + (f" ({c.atom} = {_bound_text(c.value)})" if c.atom else ""))
+    return "\n".join(lines)

@@ -1,0 +1,342 @@
+"""TraceWriter: records one run (program, vocabulary, groundings, episodes, trace rows, steps, metrics) as
+Parquet parts that other processes can read while it writes.
+
+Callers only append to in-memory buffers (after checking and converting the data). One background thread
+publishes the buffers, table by table in dependency order (layout and atomicity: tracelab.store.parts):
+- at most `flush_interval` (1 s) after a row arrives,
+- soon after an episode ends (at most one such flush per `min_flush_gap`),
+- when the buffers hold `part_rows` rows, and on flush() / close();
+every publication is one new immutable part per table that has rows (small parts are compacted).
+A kill -9 therefore loses at most the rows of the last second (or since the last episode end), and the
+run still opens. SIGTERM and interpreter exit close open writers (status 'interrupted')."""
+from __future__ import annotations
+
+import atexit
+import fcntl
+import os
+import signal
+import threading
+import time
+import weakref
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+
+from tracelab.store import convert, layout
+from tracelab.store.meta import RunMeta, initial_meta, now_iso, write_meta
+from tracelab.store.parts import TableParts
+from tracelab.store.schema import SCHEMAS, TABLES
+
+_OPEN_WRITERS: "weakref.WeakSet[TraceWriter]" = weakref.WeakSet()
+
+
+def _close_open_writers() -> None:
+    for w in list(_OPEN_WRITERS):
+        if w._pid != os.getpid():  # a forked child inherited it: the run belongs to the parent
+            continue
+        try:
+            w.close(status="interrupted")
+        except Exception:  # noqa: BLE001 - at exit, one broken writer must not stop the others
+            pass
+
+
+atexit.register(_close_open_writers)
+_sigterm_installed = False
+
+
+def _install_sigterm_handler() -> None:
+    """Turn SIGTERM into SystemExit, so `with` blocks and atexit close writers (only if nobody else
+    handles SIGTERM, and only from the main thread, where Python allows it)."""
+    global _sigterm_installed
+    if _sigterm_installed or threading.current_thread() is not threading.main_thread():
+        return
+    if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
+        def _raise(signum: int, frame: Any) -> None:
+            raise SystemExit(128 + signum)
+        signal.signal(signal.SIGTERM, _raise)
+    _sigterm_installed = True
+
+
+class TraceWriter:
+    """Writes one run directory. Use `TraceWriter.open(run_dir, meta)` or the constructor, ideally as a
+    context manager; call close() otherwise. Call it from one thread (the flushing thread is its own)."""
+
+    def __init__(self, run_dir: str | Path, meta: RunMeta | dict[str, Any] | None = None, *,
+                 flush_interval: float = 1.0, min_flush_gap: float = 0.05, part_rows: int = 250_000,
+                 compact_files: int = 64, max_pending_rows: int = 2_000_000,
+                 compression: str = "zstd") -> None:
+        self.run_dir = Path(run_dir)
+        self._pid = os.getpid()
+        if layout.meta_path(self.run_dir).exists():
+            raise FileExistsError(f"{str(self.run_dir)!r} already holds a run; choose a new run directory")
+        if flush_interval <= 0 or part_rows <= 0:
+            raise ValueError(f"flush_interval ({flush_interval}) and part_rows ({part_rows}) must be > 0")
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        self._lock_file = open(layout.lock_path(self.run_dir), "a+")
+        try:
+            fcntl.flock(self._lock_file, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            self._lock_file.close()
+            raise RuntimeError(f"another process is writing {str(self.run_dir)!r}") from None
+        self._lock_file.truncate(0)
+        self._lock_file.write(f"{os.getpid()}\n")
+        self._lock_file.flush()
+
+        self.flush_interval = flush_interval
+        self.min_flush_gap = min_flush_gap
+        self.part_rows = part_rows
+        self.max_pending_rows = max_pending_rows
+        layout.remove_stale_temps(self.run_dir)
+        self._parts = {t: TableParts(self.run_dir, t, part_rows, compact_files, compression=compression)
+                       for t in TABLES}
+        self._meta = initial_meta(self.run_dir, meta)
+        write_meta(self.run_dir, self._meta)  # the run exists from here on
+
+        # Counts of what has been accepted (buffered or published): ids are checked against them.
+        self._vocab_have = {"nodes": 0, "labels": 0, "atoms": 0}
+        self._groundings_have = 0
+        self._seq = 0
+        self._program_written = False
+        self._open_episodes: set[int] = set()
+
+        self._cond = threading.Condition()
+        self._pending: dict[str, list[pa.Table]] = {t: [] for t in TABLES}
+        self._pending_rows = 0
+        self._pending_since: float | None = None
+        self._urgent = False
+        self._requested = 0
+        self._done = 0
+        self._last_flush = time.monotonic()
+        self._closing = False
+        self._closed = False
+        self._error: BaseException | None = None
+        self.flushes = 0
+        self._thread = threading.Thread(target=self._flusher, name=f"TraceWriter:{self.run_dir.name}",
+                                        daemon=True)
+        self._thread.start()
+        _OPEN_WRITERS.add(self)
+        _install_sigterm_handler()
+
+    @classmethod
+    def open(cls, run_dir: str | Path, meta: RunMeta | dict[str, Any] | None = None,
+             **options: Any) -> "TraceWriter":
+        return cls(run_dir, meta, **options)
+
+    # ---- context manager ---------------------------------------------------------------------------
+    def __enter__(self) -> "TraceWriter":
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        if exc_type is None:
+            status = "finished"
+        elif issubclass(exc_type, (KeyboardInterrupt, SystemExit)):
+            status = "interrupted"
+        else:
+            status = "failed"
+        self.close(status=status)
+
+    # ---- the program and the world ----------------------------------------------------------------
+    def write_program(self, program: Any, vocabulary: Mapping[str, Any] | None = None,
+                      groundings: Any = None, *, facts: Sequence[Any] | None = None) -> None:
+        """The rules and facts (tracelab.engine.program.Program) and, optionally, the vocabulary and
+        grounding table as they stand now; later growth goes through write_vocabulary().
+        facts: what the trace's fact ids index, Engine.facts (graph facts first); default program.facts.
+        With an engine at hand, write_engine_program(engine) passes all four."""
+        if self._program_written:
+            raise RuntimeError(f"the program of run {self.run_dir.name!r} was already written")
+        tables = convert.program_tables(program, facts)
+        self._append(tables)
+        self._program_written = True
+        if vocabulary is not None or groundings is not None:
+            self.write_vocabulary(vocabulary, groundings)
+
+    def write_engine_program(self, engine: Any) -> None:
+        """write_program() with an Engine's program, fact list, vocabulary and groundings."""
+        self.write_program(engine.program, engine.vocabulary(), engine.groundings, facts=engine.facts)
+
+    def write_vocabulary(self, vocabulary: Mapping[str, Any] | None,
+                         groundings: Any = None) -> None:
+        """Append the nodes, labels, atoms (Engine.vocabulary()) and groundings (Engine.groundings) that
+        are new since the last call; cheap when nothing is new."""
+        tables: dict[str, pa.Table] = {}
+        if vocabulary is not None:
+            tables.update(convert.vocabulary_tables(vocabulary, self._vocab_have))
+        if groundings is not None and convert.grounding_count(groundings) != self._groundings_have:
+            tables["groundings"] = convert.groundings_table(groundings, self._groundings_have)
+        self._append(tables)
+        for name in ("nodes", "labels", "atoms"):
+            if name in tables:
+                self._vocab_have[name] += tables[name].num_rows
+        if "groundings" in tables:
+            self._groundings_have += tables["groundings"].num_rows
+
+    # ---- episodes ------------------------------------------------------------------------------------
+    def begin_episode(self, episode: int, *, world: int = 0, t_start: int | None = None,
+                      seed: int | None = None, info: Any = None) -> None:
+        episode = int(episode)
+        if episode in self._open_episodes:
+            raise ValueError(f"episode {episode} was already begun and not yet ended")
+        self._open_episodes.add(episode)
+        row = {"episode": episode, "world": world, "t_start": t_start, "seed": seed,
+               "started_at": convert.utc_now(), "info": convert.json_text(info)}
+        self._append({"episode_begin": pa.Table.from_pylist([row], schema=SCHEMAS["episode_begin"])})
+
+    def end_episode(self, episode: int, *, steps: int, outcome: str, reward: float | None = None,
+                    rewards: Mapping[str, float] | None = None, t_end: int | None = None,
+                    info: Any = None) -> None:
+        """Close an episode. outcome: 'win', 'loss', 'draw' or 'truncated' (the saved queries use
+        these); reward: the learner's return; rewards: per-agent returns. Triggers a flush."""
+        episode = int(episode)
+        if episode not in self._open_episodes:
+            raise ValueError(f"episode {episode} is not open (begin_episode it first; open: "
+                             f"{sorted(self._open_episodes)[:10]})")
+        self._open_episodes.discard(episode)
+        row = {"episode": episode, "steps": int(steps), "t_end": t_end, "outcome": str(outcome),
+               "reward": None if reward is None else float(reward),
+               "rewards": convert.json_text(dict(rewards) if rewards is not None else None),
+               "ended_at": convert.utc_now(), "info": convert.json_text(info)}
+        self._append({"episode_end": pa.Table.from_pylist([row], schema=SCHEMAS["episode_end"])},
+                     urgent=True)
+
+    # ---- rows ------------------------------------------------------------------------------------------
+    def write_changes(self, episode: int | Sequence[int] | np.ndarray | None,
+                      arrays: Mapping[str, Any]) -> int:
+        """Trace rows as Engine.take_trace() returns them. episode: the id of every row, or an array
+        giving the episode each world is playing (indexed by the `world` column), or None if `arrays`
+        has its own `episode` column. Returns the number of rows accepted."""
+        table = convert.trace_table(arrays, episode, self._seq, self._vocab_have["atoms"],
+                                    self._groundings_have)
+        self._seq += table.num_rows
+        self._append({"changes": table})
+        return table.num_rows
+
+    def write_engine(self, episode: int | Sequence[int] | np.ndarray | None, engine: Any) -> int:
+        """write_vocabulary(engine's vocabulary and groundings) then write_changes(engine.take_trace()).
+        Cheap per step: the vocabulary is only rebuilt when the engine's counts moved."""
+        vocab = getattr(engine, "vocab", None)
+        grown = vocab is None or (len(vocab.nodes), len(vocab.labels), vocab.n_atoms) != (
+            self._vocab_have["nodes"], self._vocab_have["labels"], self._vocab_have["atoms"])
+        self.write_vocabulary(engine.vocabulary() if grown else None, engine.groundings)
+        return self.write_changes(episode, engine.take_trace())
+
+    def write_steps(self, episode: int, arrays: Mapping[str, Any]) -> int:
+        """Per-step rows (see convert.steps_table): step, action, reward [, agent, t, terminated,
+        truncated, obs]. Returns the number of rows."""
+        table = convert.steps_table(int(episode), arrays)
+        self._append({"steps": table})
+        return table.num_rows
+
+    def write_metrics(self, step: int, values: Mapping[str, float], episode: int | None = None) -> None:
+        """Training metrics at a global training step, one row per name."""
+        self._append({"metrics": convert.metrics_table(step, values, episode)})
+
+    # ---- flushing --------------------------------------------------------------------------------------
+    def _check(self) -> None:
+        if self._error is not None:
+            raise RuntimeError(f"the trace writer of {str(self.run_dir)!r} failed: {self._error!r}") \
+                from self._error
+        if self._closing:
+            raise RuntimeError(f"the trace writer of {str(self.run_dir)!r} is closed")
+
+    def _append(self, tables: Mapping[str, pa.Table], urgent: bool = False) -> None:
+        with self._cond:
+            self._check()
+            added = 0
+            for name, table in tables.items():
+                if table.num_rows:
+                    self._pending[name].append(table)
+                    added += table.num_rows
+            first = added and self._pending_since is None
+            if first:
+                self._pending_since = time.monotonic()
+            self._pending_rows += added
+            self._urgent = self._urgent or urgent
+            if first or urgent or self._pending_rows >= self.part_rows:
+                self._cond.notify_all()  # the flusher recomputes when its next flush is due
+            while self._pending_rows >= self.max_pending_rows and self._error is None:
+                self._cond.wait(0.1)  # back-pressure: let the flusher catch up
+            self._check()
+
+    def flush(self) -> None:
+        """Publish everything written so far; returns when readers can see it."""
+        with self._cond:
+            self._check()
+            self._requested += 1
+            mine = self._requested
+            self._cond.notify_all()
+            while self._done < mine and self._error is None:
+                self._cond.wait(0.1)
+            self._check()
+
+    def _due_in(self, now: float) -> float | None:
+        """Seconds until a flush is due (<= 0: now), or None if nothing is due at all."""
+        if self._closing or self._requested > self._done or self._pending_rows >= self.part_rows:
+            return 0.0
+        if self._pending_since is None:
+            return None
+        due = self._pending_since + self.flush_interval - now
+        if self._urgent:
+            due = min(due, self._last_flush + self.min_flush_gap - now)
+        return due
+
+    def _flusher(self) -> None:
+        while True:
+            with self._cond:
+                while True:
+                    due = self._due_in(time.monotonic())
+                    if due is not None and due <= 0:
+                        break
+                    self._cond.wait(due)
+                take, self._pending = self._pending, {t: [] for t in TABLES}
+                self._pending_rows, self._pending_since, self._urgent = 0, None, False
+                request, closing = self._requested, self._closing
+            try:
+                for name in TABLES:  # dependency order
+                    if take[name]:
+                        self._parts[name].publish(take[name])
+            except BaseException as e:  # noqa: BLE001 - reported to the caller by _check()
+                with self._cond:
+                    self._error = e
+                    self._cond.notify_all()
+                return
+            with self._cond:
+                self._done = request
+                self._last_flush = time.monotonic()
+                self.flushes += 1
+                self._cond.notify_all()
+            if closing:
+                return
+
+    # ---- closing -----------------------------------------------------------------------------------------
+    def close(self, status: str = "finished") -> None:
+        """Flush, stop the flusher, record the end time and status, release the run directory."""
+        if self._closed:
+            return
+        self._closed = True
+        with self._cond:
+            self._closing = True
+            self._cond.notify_all()
+        self._thread.join()
+        error = self._error
+        self._meta.update(ended_at=now_iso(), status="failed" if error else status)
+        write_meta(self.run_dir, self._meta)
+        fcntl.flock(self._lock_file, fcntl.LOCK_UN)
+        self._lock_file.close()
+        _OPEN_WRITERS.discard(self)
+        if error is not None:
+            raise RuntimeError(f"the trace writer of {str(self.run_dir)!r} failed: {error!r}") from error
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def stats(self) -> dict[str, Any]:
+        """Rows published per table, part files written, compactions and flushes so far."""
+        return {"rows": {t: p.rows_published for t, p in self._parts.items()},
+                "files": sum(p.files_written for p in self._parts.values()),
+                "compactions": sum(p.compactions for p in self._parts.values()), "flushes": self.flushes}
