@@ -10,7 +10,7 @@ import sys
 
 # One line per subcommand module; each module adds its own parsers and sets `func` on them.
 COMMAND_MODULES = [
-    "tracelab.commands.reason",
+    "tracelab.commands.play", "tracelab.commands.reason",
     "tracelab.commands.trace", "tracelab.commands.why", "tracelab.commands.why_not",
     "tracelab.commands.sql", "tracelab.commands.diff", "tracelab.commands.seal",
     # "tracelab.commands.bench",

@@ -35,6 +35,13 @@ class RuleSim:
         self.engine.add_facts(self._action_atoms[self._action_atoms >= 0], 0.0, 0.0)
         self.engine.step()
         self._start = self.engine.snapshot()
+        # the set-up rows of t = 0 (world 0's; all worlds start alike), replayed for each new episode
+        self.episode_start = np.zeros(n_worlds, np.int64)  # engine time of each world's episode t = 0
+        self.world_episode = np.zeros(n_worlds, np.int64)  # episodes each world has started, minus one
+        setup = self._localize(self.engine.take_trace())
+        first = setup["world"] == 0
+        self._setup_rows = {k: v[first] for k, v in setup.items()}
+        self._pending_rows: list[dict[str, np.ndarray]] = [setup]
         n = scenario.agents_per_team
         self._prev_action = np.full((n_worlds, 2 * n), -1, np.int64)  # atom id of the last action set
         self.t = np.zeros(n_worlds, np.int32)
@@ -148,8 +155,14 @@ class RuleSim:
             self.rng = np.random.default_rng(seed)
         sel = np.arange(self.n_worlds) if worlds is None else (
             np.flatnonzero(worlds) if np.asarray(worlds).dtype == bool else np.asarray(worlds))
+        if self.engine.trace_on.any():  # rows of the episodes that end here keep their own clock
+            self._pending_rows.append(self._localize(self.engine.take_trace()))
         self.engine.restore(self._start, sel)  # action atoms are false again there
         self._prev_action[sel] = -1
+        self.episode_start[sel] = self.engine.t - 1
+        self.world_episode[sel] += 1
+        if self.engine.trace_on[sel].any():
+            self._replay_setup(sel[self.engine.trace_on[sel]])
         self.t[sel] = 0
         self.terminated[sel] = False
         self.truncated[sel] = False
@@ -161,6 +174,30 @@ class RuleSim:
         self._cur[sel] = cur[sel]
         self._obs = obs
         return obs.copy()
+
+    def _replay_setup(self, worlds: np.ndarray) -> None:
+        """A restored world starts from the set-up state without re-deriving it; its t = 0 rows are
+        written again (at the episode's own t = 0) so each episode's trace explains itself."""
+        n = len(self._setup_rows["t"])
+        rows = {k: np.tile(v, len(worlds)) for k, v in self._setup_rows.items()}
+        rows["world"] = np.repeat(worlds, n).astype(np.int32)
+        rows["world_episode"] = np.repeat(self.world_episode[worlds], n)
+        self._pending_rows.append(rows)
+
+    def take_trace(self) -> dict[str, np.ndarray]:
+        """The engine's change rows since the last call, with `t` counted from each world's episode start
+        (0 = set-up) and `world_episode`, the number of that world's episode (0 = its first)."""
+        self._pending_rows.append(self._localize(self.engine.take_trace()))
+        rows = {k: np.concatenate([r[k] for r in self._pending_rows]) for k in self._pending_rows[0]}
+        self._pending_rows = []
+        return rows
+
+    def _localize(self, rows: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """Engine rows with t counted from their world's current episode start, and world_episode."""
+        world = rows["world"].astype(np.int64)
+        rows["t"] = (rows["t"] - self.episode_start[world]).astype(np.int32)
+        rows["world_episode"] = self.world_episode[world].copy()
+        return rows
 
     def _set_actions(self, acts: np.ndarray) -> None:
         """Action facts for the next step: the chosen action true, the previous one false (if changed)."""
