@@ -38,6 +38,7 @@ class RuleSim:
         # the set-up rows of t = 0 (world 0's; all worlds start alike), replayed for each new episode
         self.episode_start = np.zeros(n_worlds, np.int64)  # engine time of each world's episode t = 0
         self.world_episode = np.zeros(n_worlds, np.int64)  # episodes each world has started, minus one
+        self._fresh = np.ones(n_worlds, bool)  # still in the start state, its set-up rows already queued
         setup = self._localize(self.engine.take_trace())
         first = setup["world"] == 0
         self._setup_rows = {k: v[first] for k, v in setup.items()}
@@ -155,6 +156,8 @@ class RuleSim:
             self.rng = np.random.default_rng(seed)
         sel = np.arange(self.n_worlds) if worlds is None else (
             np.flatnonzero(worlds) if np.asarray(worlds).dtype == bool else np.asarray(worlds))
+        sel = sel[~self._fresh[sel]]  # a world that has not stepped since its start needs nothing
+        self._fresh[sel] = True
         if self.engine.trace_on.any():  # rows of the episodes that end here keep their own clock
             self._pending_rows.append(self._localize(self.engine.take_trace()))
         self.engine.restore(self._start, sel)  # action atoms are false again there
@@ -223,6 +226,7 @@ class RuleSim:
                         axis=1)
         done = self.terminated | self.truncated
         acts[done] = NOTHING
+        self._fresh[:] = False
         before = self.state
         self._set_actions(acts)
         self.engine.step()
