@@ -65,6 +65,7 @@ class Engine:
         self._err = np.zeros(12, np.int64)
         self._ext: list[tuple[np.ndarray, ...]] = []  # chunks of (atoms, lower, upper, world, static)
         self._settable = np.zeros(0, np.bool_)
+        self._n_settable = 0
         self._ext_count = 0
         self._n_grounded = 0
         self._table: GroundingTable | None = None
@@ -98,9 +99,10 @@ class Engine:
         """Ground any new settable atoms and grow the per-world arrays to the vocabulary and groundings."""
         self.grounder.close()
         n_atoms = self.vocab.n_atoms
-        if len(self._settable) != n_atoms or len(self.grounder.settable) != int(self._settable.sum()):
+        if len(self._settable) != n_atoms or len(self.grounder.settable) != self._n_settable:
             self._settable = np.zeros(n_atoms, np.bool_)
             self._settable[list(self.grounder.settable)] = True
+            self._n_settable = len(self.grounder.settable)
         old_atoms = self.lower.shape[1]
         if n_atoms > old_atoms:
             grow = n_atoms - old_atoms
@@ -254,10 +256,23 @@ class Engine:
         np.add.at(ptr, world + 1, 1)
         return np.cumsum(ptr), ext_i, ext_f
 
-    def step(self) -> None:
-        """Compute timestep self.t in every world, then advance t."""
+    def step(self, external: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> None:
+        """Compute timestep self.t in every world, then advance t.
+        `external` is a fast path for simulators that build their fact rows themselves: (ptr int64[W+1],
+        rows int64[R,3] (atom, static, id), bounds float64[R,2]), rows grouped by world, atoms settable
+        (given once to add_facts) and ids from `next_external_id()` on. It replaces add_fact(s)."""
         self._sync()
-        ext_ptr, ext_i, ext_f = self._external_arrays()
+        if external is None:
+            ext_ptr, ext_i, ext_f = self._external_arrays()
+        else:
+            if self._ext:
+                raise RuntimeError("step(external=...) with facts queued by add_fact(s): use one or the other")
+            ext_ptr, ext_i, ext_f = external
+            n = int(ext_ptr[-1])
+            if n and not self._settable[ext_i[:n, 0]].all():
+                raise ValueError("step(external=...) names atoms no fact or rule can set; give them to "
+                                 "add_facts once first")
+            self._ext_count += n
         self._cfg[K.CFG_T] = self.t
         kt = self._kt
         status, self._tri, self._trf, self._pend = K.step_worlds(
@@ -273,6 +288,10 @@ class Engine:
             self._si[:] = 0
             self._raise(status)
         self.t += 1
+
+    def next_external_id(self) -> int:
+        """The id the next external fact will get (trace rows name external facts by this id)."""
+        return self._ext_count
 
     def run(self, steps: int) -> None:
         for _ in range(steps):

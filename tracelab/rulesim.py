@@ -11,6 +11,7 @@ import numpy as np
 from tracelab.engine import Engine
 from tracelab.game_facts import DIRECTIONS, agent_name, bullet_name, scenario_program
 from tracelab.opponent import scripted_actions
+from tracelab.rulesim_kernel import encode_actions, read_back, settle_step
 from tracelab.refsim import (WINNER_BLUE, WINNER_DRAW, WINNER_NONE, WINNER_RED, GameState, StepResult,
                              obs_size, observe)
 from tracelab.scenario import NOTHING, TEAMS, Scenario, team_index
@@ -49,6 +50,9 @@ class RuleSim:
         self.terminated = np.zeros(n_worlds, bool)
         self.truncated = np.zeros(n_worlds, bool)
         self.winner = np.full(n_worlds, WINNER_NONE, np.int8)
+        r = scenario.rewards
+        self._weights = np.array([r.win, r.loss, r.hit_opponent, r.got_shot, r.valid_action, r.unsafe,
+                                  r.invalid], np.float64)
         self._allowed = np.zeros(9, bool)
         self._allowed[list(scenario.action_ids)] = True
         self.state = self._read_state()
@@ -73,28 +77,30 @@ class RuleSim:
             return out
 
         self._agent_loc = ids("atLoc", agents, cells)
-        self._alive = ids("alive", agents)
-        self._unsafe = ids("unsafe", agents)
-        self._invalid = ids("invalid", agents)
-        self._can_act = ids("canAct", agents)
-        self._moving = ids("moving", agents)
-        self._dest = ids("dest", agents, cells) if s.slow_mask.any() else None
-        self._captured = ids("captured", list(TEAMS))
-        self._eliminated = ids("eliminated", list(TEAMS))
+        # per agent: alive, moving, unsafe, invalid, canAct (read_back's agent_flags layout)
+        self._agent_flags = np.stack([ids(p, agents) for p in ("alive", "moving", "unsafe", "invalid",
+                                                               "canAct")], axis=1)
+        self._dest = ids("dest", agents, cells) if s.slow_mask.any() else np.zeros((2 * n, 0), np.int64)
+        self._win = np.stack([ids("captured", list(TEAMS)), ids("eliminated", list(TEAMS))], axis=1)
+        n_b = len(bullets)
         if bullets:
             self._bullet_loc = ids("atLoc", bullets, cells)
-            self._flying = ids("flying", bullets)
+            self._bullet_flags = np.stack([ids("flying", bullets), ids("spent", bullets)], axis=1)
             self._dir = ids("dir", bullets, list(DIRECTIONS))
-            self._spent = ids("spent", bullets)
-            enemies = [[agent_name(1 - (b // (n * ammo)), e) for e in range(n)] for b in range(len(bullets))]
+            enemies = [[agent_name(1 - (b // (n * ammo)), e) for e in range(n)] for b in range(n_b)]
             # hits of bullet b on its owner's enemy e, by each of the three kinds of hit
             self._hits = np.stack([
                 np.array([[eng.atom(kind, bullets[b], enemies[b][e]) for e in range(n)]
-                          for b in range(len(bullets))], np.int64)
+                          for b in range(n_b)], np.int64)
                 for kind in ("struck", "blanked", "caught")])
-        slots = np.arange(len(bullets))
-        self._bullet_team = (slots // max(n * ammo, 1)).astype(np.int8)
-        self._bullet_agent = ((slots // max(ammo, 1)) % n).astype(np.int16)
+        else:
+            self._bullet_loc = np.zeros((0, len(cells)), np.int64)
+            self._bullet_flags = np.zeros((0, 2), np.int64)
+            self._dir = np.zeros((0, 4), np.int64)
+            self._hits = np.zeros((3, 0, n), np.int64)
+        slots = np.arange(n_b)
+        self._bullet_team = (slots // max(n * ammo, 1)).astype(np.int64)
+        self._bullet_agent = ((slots // max(ammo, 1)) % n).astype(np.int64)
         # action atom per (agent, spec action id); -1 for "do nothing"
         acts = np.full((2 * n, 9), -1, np.int64)
         for i, a in enumerate(agents):
@@ -106,38 +112,34 @@ class RuleSim:
 
     # ---- reading the world back ----
 
-    def _true(self, ids: np.ndarray) -> np.ndarray:
-        return self.engine.lower[:, ids] >= 1.0
-
     def _read_state(self) -> GameState:
+        """The game state of every world, read from atoms (and the events of the last step into
+        self._events: unsafe, invalid, acted [W, 2, N]; hits made / taken; which team won)."""
         s = self.scenario
-        w, n, ammo = self.n_worlds, s.agents_per_team, s.ammo
-        at = self._true(self._agent_loc)  # [W, 2N, C]
-        pos = self._cell_xy[np.argmax(at, axis=2)].reshape(w, 2, n, 2)
-        alive = self._true(self._alive).reshape(w, 2, n)
-        n_b = 2 * n * ammo
-        if n_b:
-            flying = self._true(self._flying)
-            bcell = np.argmax(self._true(self._bullet_loc), axis=2)
-            bpos = np.where(flying[..., None], self._cell_xy[bcell], -1).astype(np.int32)
-            bdir = np.where(flying, np.argmax(self._true(self._dir), axis=2), -1).astype(np.int8)
-            spent = self._true(self._spent).reshape(w, 2, n, ammo).sum(axis=3)
-        else:
-            bpos = np.zeros((w, 0, 2), np.int32)
-            bdir = np.zeros((w, 0), np.int8)
-            spent = np.zeros((w, 2, n), np.int64)
-        moving = self._true(self._moving).reshape(w, 2, n)
-        dest = np.full((w, 2, n, 2), -1, np.int32)
-        if self._dest is not None:  # where a slow agent that set off this step will arrive
-            going = self._true(self._dest)
-            cell_xy = self._cell_xy[np.argmax(going, axis=2)].reshape(w, 2, n, 2)
-            dest = np.where(moving[..., None], cell_xy, -1).astype(np.int32)
+        w, n = self.n_worlds, s.agents_per_team
+        n_b = len(self._bullet_team)
+        pos = np.empty((w, 2, n, 2), np.int32)
+        alive = np.empty((w, 2, n), bool)
+        ammo = np.empty((w, 2, n), np.int32)
+        moving = np.empty((w, 2, n), bool)
+        dest = np.empty((w, 2, n, 2), np.int32)
+        flags = np.empty((w, 2 * n, 3), bool)
+        bpos = np.empty((w, n_b, 2), np.int32)
+        bdir = np.empty((w, n_b), np.int8)
+        hits_made = np.empty((w, 2, n), np.int32)
+        hits_taken = np.empty((w, 2, n), np.int32)
+        win = np.empty((w, 2), bool)
+        read_back(self.engine.lower, self._agent_loc, self._cell_xy, self._agent_flags, self._dest,
+                  self._bullet_loc, self._bullet_flags, self._dir, self._hits, self._bullet_team,
+                  self._bullet_agent, self._win, s.ammo, pos, alive, ammo, moving, dest, flags, bpos, bdir,
+                  hits_made, hits_taken, win)
+        flags = flags.reshape(w, 2, n, 3)
+        self._events = (flags[..., 0], flags[..., 1], flags[..., 2], hits_made, hits_taken, win)
         return GameState(
-            t=self.t.copy(), pos=pos.astype(np.int32),
-            health=np.where(alive, s.health, 0.0), ammo=(ammo - spent).astype(np.int32), alive=alive,
+            t=self.t.copy(), pos=pos, health=np.where(alive, s.health, 0.0), ammo=ammo, alive=alive,
             moving=moving, dest=dest, bullet_pos=bpos, bullet_dir=bdir,
             terminated=self.terminated.copy(), truncated=self.truncated.copy(), winner=self.winner.copy(),
-            bullet_team=self._bullet_team, bullet_agent=self._bullet_agent)
+            bullet_team=self._bullet_team.astype(np.int8), bullet_agent=self._bullet_agent.astype(np.int16))
 
     def _observe_both(self, state: GameState) -> np.ndarray:
         return np.stack([observe(state, t, self.scenario) for t in (0, 1)], axis=1)
@@ -190,9 +192,11 @@ class RuleSim:
     def take_trace(self) -> dict[str, np.ndarray]:
         """The engine's change rows since the last call, with `t` counted from each world's episode start
         (0 = set-up) and `world_episode`, the number of that world's episode (0 = its first)."""
-        self._pending_rows.append(self._localize(self.engine.take_trace()))
-        rows = {k: np.concatenate([r[k] for r in self._pending_rows]) for k in self._pending_rows[0]}
-        self._pending_rows = []
+        rows = self._localize(self.engine.take_trace())
+        if self._pending_rows:
+            self._pending_rows.append(rows)
+            rows = {k: np.concatenate([r[k] for r in self._pending_rows]) for k in rows}
+            self._pending_rows = []
         return rows
 
     def _localize(self, rows: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -202,20 +206,16 @@ class RuleSim:
         rows["world_episode"] = self.world_episode[world].copy()
         return rows
 
-    def _set_actions(self, acts: np.ndarray) -> None:
-        """Action facts for the next step: the chosen action true, the previous one false (if changed)."""
-        n_worlds, n_agents = self._prev_action.shape
-        new = self._action_atoms[np.arange(n_agents)[None, :], acts.reshape(n_worlds, n_agents)]
-        prev = self._prev_action
-        changed = new != prev
-        worlds = np.broadcast_to(np.arange(n_worlds)[:, None], new.shape)
-        off = changed & (prev >= 0)
-        on = changed & (new >= 0)
-        atoms = np.concatenate([prev[off], new[on]])
-        bounds = np.concatenate([np.zeros(int(off.sum())), np.ones(int(on.sum()))])
-        if atoms.size:
-            self.engine.add_facts(atoms, bounds, bounds, np.concatenate([worlds[off], worlds[on]]))
-        self._prev_action = new
+    def _action_rows(self, acts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The engine's external-fact rows for the chosen actions (see encode_actions)."""
+        n_worlds, m = self._prev_action.shape
+        cap = 2 * n_worlds * m
+        ptr = np.empty(n_worlds + 1, np.int64)
+        rows = np.empty((cap, 3), np.int64)
+        bounds = np.empty((cap, 2), np.float64)
+        k = encode_actions(acts.reshape(n_worlds, m), self._action_atoms, self._prev_action,
+                           self.engine.next_external_id(), ptr, rows, bounds)
+        return ptr, rows[:k], bounds[:k]
 
     def step(self, red_actions: np.ndarray, blue_actions: np.ndarray) -> StepResult:
         """One step of every world (spec action ids, int [W, N] per team). Finished worlds do not change
@@ -228,49 +228,16 @@ class RuleSim:
         acts[done] = NOTHING
         self._fresh[:] = False
         before = self.state
-        self._set_actions(acts)
-        self.engine.step()
+        self.engine.step(external=self._action_rows(acts))
         state = self._read_state()
-        # events of this step, per agent [W, 2, N]
-        unsafe = self._true(self._unsafe).reshape(n_worlds, 2, n)
-        invalid = self._true(self._invalid).reshape(n_worlds, 2, n)
-        acted = self._true(self._can_act).reshape(n_worlds, 2, n)
-        hits_taken = np.zeros((n_worlds, 2, n), np.int32)
-        hits_made = np.zeros((n_worlds, 2, n), np.int32)
-        if s.ammo:
-            hit = self._true(self._hits).sum(axis=1)  # [W, B, N enemies]
-            per_bullet = hit.sum(axis=2)
-            for b in range(per_bullet.shape[1]):  # credited to the bullet's owner
-                hits_made[:, self._bullet_team[b], self._bullet_agent[b]] += per_bullet[:, b]
-            for team in (0, 1):
-                from_enemy = self._bullet_team == 1 - team
-                hits_taken[:, team] = hit[:, from_enemy].sum(axis=1)
-        r = s.rewards
-        agent_reward = (np.where(acted & ~unsafe & ~invalid, r.valid_action, 0.0) + unsafe * r.unsafe
-                        + invalid * r.invalid + hits_made * r.hit_opponent + hits_taken * r.got_shot)
-        win = np.stack([self._true(self._captured) | self._true(self._eliminated)[:, ::-1]], axis=0)[0]
-        live = ~done
-        self.t[live] += 1
-        ended = live & win.any(axis=1)
-        self.terminated |= ended
-        self.winner[ended] = np.where(win[ended].all(axis=1), WINNER_DRAW,
-                                      np.where(win[ended, 0], WINNER_RED, WINNER_BLUE))
-        self.truncated |= live & ~ended & (self.t >= s.max_steps)
-        decided = ended & ~win.all(axis=1)
-        terminal = np.zeros((n_worlds, 2))
-        red_won = self.winner == WINNER_RED
-        terminal[decided] = np.where(red_won[decided, None], [r.win, r.loss], [r.loss, r.win])
-        agent_reward = agent_reward + terminal[:, :, None]
-        reward = agent_reward.sum(axis=2) - terminal * (n - 1)  # the terminal term counts once per team
-        # finished worlds keep their final state and earn nothing
-        agent_reward[done] = 0.0
-        reward[done] = 0.0
+        unsafe, invalid, acted, hits_made, hits_taken, win = self._events
+        agent_reward = np.empty((n_worlds, 2, n))
+        reward = np.empty((n_worlds, 2))
+        settle_step(done, win, unsafe, invalid, acted, hits_made, hits_taken, self._weights, s.max_steps,
+                    self.t, self.terminated, self.truncated, self.winner, agent_reward, reward)
+        # finished worlds keep their final state
         for f in ("pos", "health", "ammo", "alive", "moving", "dest", "bullet_pos", "bullet_dir"):
             getattr(state, f)[done] = getattr(before, f)[done]
-        for arr in (unsafe, invalid):
-            arr[done] = False
-        hits_made[done] = 0
-        hits_taken[done] = 0
         state.t, state.terminated, state.truncated = self.t.copy(), self.terminated.copy(), self.truncated.copy()
         state.winner = self.winner.copy()
         self.state = state
@@ -283,7 +250,7 @@ class RuleSim:
             obs=obs, positions=state.pos.copy(), health=state.health.copy(), ammo=state.ammo.copy(),
             alive=state.alive.copy(), moving=state.moving.copy(), move_dest=state.dest.copy(), bullet_pos=state.bullet_pos.copy(),
             bullet_dir=state.bullet_dir.copy(),
-            bullet_owner=np.stack([self._bullet_team, self._bullet_agent], axis=1).astype(np.int64),
+            bullet_owner=np.stack([self._bullet_team, self._bullet_agent], axis=1),
             unsafe=unsafe, invalid=invalid, hits_made=hits_made, hits_taken=hits_taken,
             agent_reward=agent_reward, reward=reward, terminated=self.terminated.copy(),
             truncated=self.truncated.copy(), winner=self.winner.copy(), t=self.t.copy())

@@ -1,0 +1,162 @@
+"""Compiled I/O of the rule-driven simulator: actions to fact rows, and atoms back to game state.
+
+Nothing here decides anything about the game: encode_actions turns chosen actions into external-fact
+rows for the engine, read_back gathers the atoms the rules set into arrays. Kept apart from
+engine/kernel.py on purpose: neither module calls into the other (numba's cache does not track callees
+across modules).
+"""
+from __future__ import annotations
+
+from numba import njit
+
+
+@njit(cache=True)
+def encode_actions(acts, action_atoms, prev, first_id, ext_ptr, ext_i, ext_f):
+    """Rows for the engine's external facts, grouped by world: each agent's chosen action atom becomes
+    [1,1] and its previous one [0,0] when they differ. acts [W, M] spec ids; action_atoms [M, 9]
+    (-1: no atom); prev [W, M] atom ids, updated in place. Returns the number of rows."""
+    n_worlds, m = acts.shape
+    k = 0
+    for w in range(n_worlds):
+        ext_ptr[w] = k
+        for j in range(m):
+            new = action_atoms[j, acts[w, j]]
+            old = prev[w, j]
+            if new == old:
+                continue
+            if old >= 0:
+                ext_i[k, 0] = old
+                ext_i[k, 1] = 0
+                ext_i[k, 2] = first_id + k
+                ext_f[k, 0] = 0.0
+                ext_f[k, 1] = 0.0
+                k += 1
+            if new >= 0:
+                ext_i[k, 0] = new
+                ext_i[k, 1] = 0
+                ext_i[k, 2] = first_id + k
+                ext_f[k, 0] = 1.0
+                ext_f[k, 1] = 1.0
+                k += 1
+            prev[w, j] = new
+    ext_ptr[n_worlds] = k
+    return k
+
+
+@njit(cache=True)
+def _first_true(lower, w, ids, row):
+    for c in range(ids.shape[1]):
+        if lower[w, ids[row, c]] >= 1.0:
+            return c
+    return -1
+
+
+@njit(cache=True)
+def read_back(lower, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc, bullet_flags, dir_ids,
+              hits, bullet_team, bullet_agent, win_ids, ammo0,
+              pos, alive, ammo, moving, dest, flags, bpos, bdir, hits_made, hits_taken, win):
+    """Gather the game state of every world from atoms into the given arrays.
+    agent_flags [M, 5]: atom ids of alive, moving, unsafe, invalid, canAct per agent (M = 2N);
+    flags [W, M, 3] receives unsafe, invalid, canAct. bullet_flags [B, 2]: flying, spent.
+    hits [3, B, N]: struck / blanked / caught atoms of bullet b on enemy e. win_ids [2, 2]: captured,
+    eliminated per team; win [W, 2] receives 'team won' (captured, or the enemy eliminated)."""
+    n_worlds = lower.shape[0]
+    m = agent_loc.shape[0]
+    n = m // 2
+    n_b = bullet_loc.shape[0]
+    for w in range(n_worlds):
+        for j in range(m):
+            tm = j // n
+            i = j % n
+            c = _first_true(lower, w, agent_loc, j)
+            pos[w, tm, i, 0] = cell_xy[c, 0]
+            pos[w, tm, i, 1] = cell_xy[c, 1]
+            alive[w, tm, i] = lower[w, agent_flags[j, 0]] >= 1.0
+            moving[w, tm, i] = lower[w, agent_flags[j, 1]] >= 1.0
+            for f in range(3):
+                flags[w, j, f] = lower[w, agent_flags[j, 2 + f]] >= 1.0
+            dest[w, tm, i, 0] = -1
+            dest[w, tm, i, 1] = -1
+            if moving[w, tm, i] and dest_ids.shape[1] > 0:
+                d = _first_true(lower, w, dest_ids, j)
+                if d >= 0:
+                    dest[w, tm, i, 0] = cell_xy[d, 0]
+                    dest[w, tm, i, 1] = cell_xy[d, 1]
+            ammo[w, tm, i] = ammo0
+            hits_made[w, tm, i] = 0
+            hits_taken[w, tm, i] = 0
+        for b in range(n_b):
+            tm = bullet_team[b]
+            i = bullet_agent[b]
+            if lower[w, bullet_flags[b, 1]] >= 1.0:
+                ammo[w, tm, i] -= 1
+            bpos[w, b, 0] = -1
+            bpos[w, b, 1] = -1
+            bdir[w, b] = -1
+            if lower[w, bullet_flags[b, 0]] >= 1.0:
+                c = _first_true(lower, w, bullet_loc, b)
+                if c >= 0:
+                    bpos[w, b, 0] = cell_xy[c, 0]
+                    bpos[w, b, 1] = cell_xy[c, 1]
+                for d in range(4):
+                    if lower[w, dir_ids[b, d]] >= 1.0:
+                        bdir[w, b] = d
+            for e in range(hits.shape[2]):
+                for kind in range(3):
+                    if lower[w, hits[kind, b, e]] >= 1.0:
+                        hits_made[w, tm, i] += 1
+                        hits_taken[w, 1 - tm, e] += 1
+        for tm in range(2):
+            win[w, tm] = lower[w, win_ids[tm, 0]] >= 1.0 or lower[w, win_ids[1 - tm, 1]] >= 1.0
+
+
+@njit(cache=True)
+def settle_step(done, win, unsafe, invalid, acted, hits_made, hits_taken, weights, max_steps,
+                t, terminated, truncated, winner, agent_reward, reward):
+    """Rewards and the end of the game from the step's events (docs/game.md, Rewards / End of game).
+    weights: win, loss, hit_opponent, got_shot, valid_action, unsafe, invalid. Worlds already done
+    earn nothing and keep their flags; t, terminated, truncated, winner are updated in place."""
+    r_win, r_loss, r_hit, r_shot, r_valid, r_unsafe, r_invalid = (
+        weights[0], weights[1], weights[2], weights[3], weights[4], weights[5], weights[6])
+    n_worlds = done.shape[0]
+    n = unsafe.shape[2]
+    for w in range(n_worlds):
+        if done[w]:
+            for tm in range(2):
+                reward[w, tm] = 0.0
+                for i in range(n):
+                    agent_reward[w, tm, i] = 0.0
+                    unsafe[w, tm, i] = False
+                    invalid[w, tm, i] = False
+                    hits_made[w, tm, i] = 0
+                    hits_taken[w, tm, i] = 0
+            continue
+        t[w] += 1
+        terminal0 = 0.0
+        terminal1 = 0.0
+        if win[w, 0] or win[w, 1]:
+            terminated[w] = True
+            if win[w, 0] and win[w, 1]:
+                winner[w] = 2
+            elif win[w, 0]:
+                winner[w] = 0
+                terminal0, terminal1 = r_win, r_loss
+            else:
+                winner[w] = 1
+                terminal0, terminal1 = r_loss, r_win
+        elif t[w] >= max_steps:
+            truncated[w] = True
+        for tm in range(2):
+            terminal = terminal0 if tm == 0 else terminal1
+            total = terminal  # the team's terminal term counts once
+            for i in range(n):
+                x = hits_made[w, tm, i] * r_hit + hits_taken[w, tm, i] * r_shot
+                if unsafe[w, tm, i]:
+                    x += r_unsafe
+                elif invalid[w, tm, i]:
+                    x += r_invalid
+                elif acted[w, tm, i]:
+                    x += r_valid
+                total += x
+                agent_reward[w, tm, i] = x + terminal
+            reward[w, tm] = total
