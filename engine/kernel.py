@@ -42,7 +42,8 @@ N_STATS = 7
 F_OVERRIDE, F_INTERSECT, F_EMPTY_O, F_EMPTY_I, F_STATIC, F_TOUCHED = 1, 2, 4, 8, 16, 32
 S_FLAGS, S_N, S_PRIM_KEY, S_PRIM_KIND, S_PRIM_ID, S_PRIM_INST, S_LAST_KEY = 0, 1, 2, 3, 4, 5, 6
 S_LAST_KIND, S_LAST_ID, S_LAST_INST = 7, 8, 9
-N_SCRATCH_INT = 10
+S_RULE_KEY, S_RULE_INST = 10, 11  # the first rule source (named by policy rows)
+N_SCRATCH_INT = 12
 SF_OL, SF_OU, SF_IL, SF_IU, SF_LAST_L, SF_LAST_U, SF_HULL_L, SF_HULL_U = 0, 1, 2, 3, 4, 5, 6, 7
 N_SCRATCH_FLOAT = 8
 
@@ -160,11 +161,16 @@ def _add_source(a, l, u, override, key, kind, cid, inst, static_src, si, sf, tou
         si[a, S_LAST_KIND] = kind
         si[a, S_LAST_ID] = cid
         si[a, S_LAST_INST] = inst
+        si[a, S_RULE_KEY] = key if kind == CAUSE_RULE else -1
+        si[a, S_RULE_INST] = inst if kind == CAUSE_RULE else -1
         sf[a, SF_LAST_L] = l
         sf[a, SF_LAST_U] = u
         sf[a, SF_HULL_L] = l
         sf[a, SF_HULL_U] = u
     else:
+        if kind == CAUSE_RULE and (si[a, S_RULE_KEY] < 0 or key < si[a, S_RULE_KEY]):
+            si[a, S_RULE_KEY] = key
+            si[a, S_RULE_INST] = inst
         if key < si[a, S_PRIM_KEY]:
             si[a, S_PRIM_KEY] = key
             si[a, S_PRIM_KIND] = kind
@@ -303,12 +309,13 @@ def _apply_touched(w, t, pass_no, touched, n_touched, si, sf, lo, up, static, la
             continue
         cause_kind = CAUSE_POLICY if inconsistent else kind
         cause_id = policy if inconsistent else si[a, S_PRIM_ID]
+        grounding = si[a, S_RULE_INST] if inconsistent else si[a, S_PRIM_INST]
         if nl != cl or nu != cu:
             changed += 1
             stats[w, STAT_CHANGES] += 1
             if trace_on[w]:
                 tri, trf = _log(tri, trf, tr_n, w, t, pass_no, a, cl, cu, nl, nu,
-                                cause_kind, cause_id, si[a, S_PRIM_INST], nsrc)
+                                cause_kind, cause_id, grounding, nsrc)
             lo[w, a] = nl
             up[w, a] = nu
             last_cause[w, a, 0] = cause_kind

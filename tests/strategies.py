@@ -1,0 +1,247 @@
+"""Hypothesis strategies: small random rule programs (as text, then parsed), small graphs and external facts.
+
+Programs are emitted as TEXT so that every example also exercises the parser and its checks. Every rule is
+safe by construction (each variable occurs in a binding clause, one whose bound does not contain [0,1]).
+Bounds come from a quarter grid, so 1 - x and intersections are exact in binary and the reference and the
+compiled engine can be compared with ==.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from hypothesis import strategies as st
+
+from tracelab.engine.graph import Graph
+from tracelab.engine.parser import parse_program
+from tracelab.engine.program import INCONSISTENCY_POLICIES, Fact, Literal, Program, Term
+
+GRID = (0.0, 0.25, 0.5, 0.75, 1.0)
+VARIABLES = ("X", "Y", "Z")
+FRESH_NODES = ("m0", "m1")  # constants no program mentions: external facts introduce them as new nodes
+POLICIES = tuple(p for p in INCONSISTENCY_POLICIES if p != "abort")  # abort stops the run: tested apart
+
+Bound = tuple[float, float]
+
+
+@dataclass(frozen=True)
+class ExtFact:
+    pred: str
+    args: tuple[str, ...]
+    lower: float
+    upper: float
+    static: bool = False
+
+    def __str__(self) -> str:
+        static = " static" if self.static else ""
+        return f"{self.pred}({','.join(self.args)}):[{self.lower:g},{self.upper:g}]{static}"
+
+
+@dataclass
+class Scenario:
+    """A program with its graph and the external facts to add before each step."""
+    text: str
+    program: Program
+    steps: int
+    graph: Graph
+    externals: list[list[ExtFact]]  # per step, the same in every world
+    world_externals: list[list[list[ExtFact]]] = field(default_factory=list)  # [world][step]
+
+    def __str__(self) -> str:  # what hypothesis prints for a falsifying example
+        lines = [self.text.rstrip(), f"# graph nodes {self.graph.nodes}",
+                 *(f"# graph fact {f.literal} @{f.start}" for f in self.graph.facts),
+                 *(f"# before step {t}: {', '.join(map(str, fs))}" for t, fs in enumerate(self.externals) if fs)]
+        for w, per_step in enumerate(self.world_externals):
+            lines += [f"# world {w} before step {t}: {', '.join(map(str, fs))}"
+                      for t, fs in enumerate(per_step) if fs]
+        return "\n".join(lines)
+
+    __repr__ = __str__
+
+    def _repr_pretty_(self, printer: object, cycle: bool) -> None:  # hypothesis's printer uses this
+        printer.text(str(self))  # type: ignore[attr-defined]
+
+
+def _chance(draw: st.DrawFn, n: int) -> bool:
+    """True with probability about 1/n; False is hypothesis's simplest value, so shrinking removes it."""
+    return draw(st.sampled_from(range(n))) == n - 1
+
+
+def _fmt(x: float) -> str:
+    return f"{x:g}"
+
+
+def _bound_text(b: Bound) -> str:
+    return f"[{_fmt(b[0])},{_fmt(b[1])}]"
+
+
+@st.composite
+def bounds(draw: st.DrawFn, binding: bool | None = None) -> Bound:
+    """A bound from the grid, mostly [1,1], [0,0] or a half so that rules actually fire. binding=True
+    excludes [0,1]; binding=False gives [0,1]."""
+    if binding is False:
+        return (0.0, 1.0)
+    common = draw(st.sampled_from(((1.0, 1.0),) * 12 + ((0.0, 0.0),) * 3 + ((0.5, 1.0),) * 2
+                                  + ((0.0, 0.5), None, None, None)))
+    if common is not None:
+        return common
+    lo = draw(st.sampled_from(GRID))
+    up = draw(st.sampled_from([g for g in GRID if g >= lo]))
+    if binding and (lo, up) == (0.0, 1.0):
+        return (1.0, 1.0)
+    return (lo, up)
+
+
+@dataclass
+class _Sig:
+    """The vocabulary of one scenario: predicates with arities, nodes split into components."""
+    arity: dict[str, int]
+    groups: list[list[str]]
+
+    @property
+    def nodes(self) -> list[str]:
+        return [n for g in self.groups for n in g]
+
+
+@st.composite
+def signatures(draw: st.DrawFn) -> _Sig:
+    n_preds = draw(st.sampled_from((2, 2, 3, 3, 4)))  # few predicates: rules feed each other
+    arity = {f"p{i}": draw(st.sampled_from((1, 2))) for i in range(n_preds)}
+    n_nodes = draw(st.sampled_from((2, 3, 3, 4, 5)))
+    nodes = [f"n{i}" for i in range(n_nodes)]
+    # one or two components: binary facts never cross them, so joins that mix components are wrong
+    cut = draw(st.integers(1, n_nodes))
+    groups = [nodes[:cut], nodes[cut:]] if cut < n_nodes else [nodes]
+    return _Sig(arity, groups)
+
+
+@st.composite
+def ground_args(draw: st.DrawFn, sig: _Sig, pred: str, nodes: list[str] | None = None) -> tuple[str, ...]:
+    if nodes is not None:
+        return tuple(draw(st.sampled_from(nodes)) for _ in range(sig.arity[pred]))
+    group = draw(st.sampled_from(sig.groups))
+    return tuple(draw(st.sampled_from(group)) for _ in range(sig.arity[pred]))
+
+
+@st.composite
+def fact_lines(draw: st.DrawFn, sig: _Sig, steps: int) -> str:
+    pred = draw(st.sampled_from(sorted(sig.arity)))
+    args = draw(ground_args(sig, pred))
+    neg = "~" if _chance(draw, 10) else ""
+    b = draw(bounds(binding=True))
+    static = _chance(draw, 7)
+    kinds = ("none", "at", "window", "window") if not static else ("none", "at")
+    kind = draw(st.sampled_from(kinds))
+    window = ""
+    if kind == "at":
+        window = f" @{draw(st.integers(0, steps - 1))}"
+    elif kind == "window":
+        a = draw(st.sampled_from((0, 0, *range(steps))))
+        window = f" @{a}..{draw(st.sampled_from((steps, *range(a, steps + 1))))}"
+    return f"{neg}{pred}({','.join(args)}):{_bound_text(b)}{window}{' static' if static else ''}"
+
+
+@st.composite
+def rule_lines(draw: st.DrawFn, sig: _Sig, name: str, heads: list[tuple[str, bool, Bound]]) -> str:
+    """One safe rule. `heads` holds the (pred, negated, bound) of earlier rules' heads; the first clause
+    often tests one of them, so that rules chain within a step (passes 2, 3, ...). Appends its own head."""
+    preds = sorted(sig.arity)
+    n_body = draw(st.integers(1, 3))
+    clauses: list[tuple[str, list[str], bool, Bound]] = []  # pred, args (vars upper-case), negated, bound
+    used: list[str] = []
+    if heads and not _chance(draw, 3):
+        pred, negated, b = draw(st.sampled_from(heads))
+        args = list(VARIABLES[: sig.arity[pred]])
+        used += args
+        clauses.append((pred, args, negated, b if b != (0.0, 1.0) else (1.0, 1.0)))
+    for i in range(len(clauses), n_body):
+        pred = draw(st.sampled_from(preds))
+        args = []
+        for _ in range(sig.arity[pred]):
+            if _chance(draw, 8):
+                args.append(draw(st.sampled_from(sig.nodes)))
+            elif used and not _chance(draw, 3):  # mostly reuse a variable: joins, not cross products
+                args.append(draw(st.sampled_from(used)))
+            else:
+                args.append(draw(st.sampled_from(VARIABLES)))
+            if args[-1][0].isupper() and args[-1] not in used:
+                used.append(args[-1])
+        negated = _chance(draw, 7)
+        b = draw(bounds(binding=True if i == 0 else draw(st.sampled_from((True, True, True, False)))))
+        clauses.append((pred, args, negated, b))
+    # safety: a variable of a non-binding clause ([0,1]) or of the head must occur in a binding clause
+    bound_vars = sorted({a for p, args, n, b in clauses if b != (0.0, 1.0) for a in args if a[0].isupper()})
+    fixed = []
+    for pred, args, negated, b in clauses:
+        if b == (0.0, 1.0):
+            args = [a if not a[0].isupper() or a in bound_vars
+                    else (draw(st.sampled_from(bound_vars)) if bound_vars else draw(st.sampled_from(sig.nodes)))
+                    for a in args]
+        fixed.append((pred, args, negated, b))
+    # mostly a predicate the body does not test: rules then feed each other instead of themselves
+    others = [p for p in preds if p not in {c[0] for c in fixed}]
+    head_pred = draw(st.sampled_from(others if others and not _chance(draw, 4) else preds))
+    head_args = [draw(st.sampled_from(bound_vars)) if bound_vars and not _chance(draw, 6)
+                 else draw(st.sampled_from(sig.nodes)) for _ in range(sig.arity[head_pred])]
+    head_neg = "~" if _chance(draw, 8) else ""
+    head_bound = draw(bounds())
+    delay = draw(st.sampled_from((0, 0, 1, 2)))
+    arrow = "<-!" if delay == 0 and _chance(draw, 3) else f"<-{delay}"
+    option = draw(st.sampled_from(("", "", " {override}", " {intersection}")))
+    heads.append((head_pred, bool(head_neg), head_bound))
+    body = ", ".join(f"{'~' if n else ''}{p}({','.join(a)}):{_bound_text(b)}" for p, a, n, b in fixed)
+    return (f"{name}: {head_neg}{head_pred}({','.join(head_args)}):{_bound_text(head_bound)} {arrow} {body}"
+            f"{option}")
+
+
+@st.composite
+def ext_facts(draw: st.DrawFn, sig: _Sig, nodes: list[str], max_per_step: int = 3) -> list[ExtFact]:
+    out = []
+    for _ in range(draw(st.integers(0, max_per_step))):
+        pred = draw(st.sampled_from(sorted(sig.arity)))
+        args = draw(ground_args(sig, pred, nodes))
+        lo, up = draw(bounds(binding=True))
+        out.append(ExtFact(pred, args, lo, up, _chance(draw, 10)))
+    return out
+
+
+@st.composite
+def scenarios(draw: st.DrawFn, per_world: int = 0, with_graph: bool = True,
+              policies: tuple[str, ...] = POLICIES) -> Scenario:
+    """A parsed random program plus, per step, external facts for every world (or, with per_world=W,
+    separate external facts for each of W worlds). The policy is drawn from `policies`."""
+    sig = draw(signatures())
+    steps = draw(st.integers(2, 4))
+    lines = [f"%mode {draw(st.sampled_from(('intersection', 'override')))}",
+             f"%timesteps {draw(st.sampled_from(('persistent', 'reset')))}",
+             f"%inconsistency {draw(st.sampled_from(policies))}"]
+    # a base of facts that hold at every step, so that bodies (joins included) find matches
+    for pred in sorted(sig.arity):
+        for args in draw(st.lists(ground_args(sig, pred), max_size=3, unique=True)):
+            lines.append(f"{pred}({','.join(args)}):{_bound_text(draw(bounds(binding=True)))} @0..{steps}")
+    lines += draw(st.lists(fact_lines(sig, steps), min_size=1, max_size=8))
+    heads: list[tuple[str, bool, Bound]] = []
+    lines += [draw(rule_lines(sig, f"r{i}", heads)) for i in range(draw(st.integers(1, 6)))]
+    text = "\n".join(lines) + "\n"
+
+    # a graph: some nodes (possibly isolated) and a few static facts at t = 0 on them
+    graph = Graph()
+    if with_graph and draw(st.booleans()):
+        graph.nodes = draw(st.lists(st.sampled_from(sig.nodes), unique=True, max_size=3))
+        for i in range(draw(st.integers(0, 2))):
+            group = draw(st.sampled_from(sig.groups))
+            pred = draw(st.sampled_from(sorted(sig.arity)))
+            args = tuple(draw(st.sampled_from(group)) for _ in range(sig.arity[pred]))
+            lo, up = draw(bounds(binding=True))
+            graph.facts.append(Fact(f"graph{i}", Literal(pred, tuple(Term(a, False) for a in args), lo, up),
+                                    static=True))
+            if not _chance(draw, 4):  # sometimes a fact's node is missing from the node list
+                graph.nodes += [a for a in dict.fromkeys(args) if a not in graph.nodes]
+
+    program = parse_program(text, "<hypothesis>")
+    if per_world:
+        # only constants every world already knows: a new node would get different ids in different worlds
+        known = list(dict.fromkeys([*graph.nodes, *program.constants()]))
+        world_ext = [[draw(ext_facts(sig, known)) for _ in range(steps)] for _ in range(per_world)]
+        return Scenario(text, program, steps, graph, [[] for _ in range(steps)], world_ext)
+    nodes = [*sig.nodes, *FRESH_NODES]
+    return Scenario(text, program, steps, graph, [draw(ext_facts(sig, nodes)) for _ in range(steps)])
