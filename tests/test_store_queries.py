@@ -49,7 +49,7 @@ def test_generic_queries_on_the_walk_run(tmp_path: Path) -> None:
 class Vocab:
     def __init__(self) -> None:
         self.nodes: list[str] = []
-        self.labels = ["atLoc", "mountain", "shotDown", "unsafe", "invalid"]
+        self.labels = ["atLoc", "mountain", "gotShot", "unsafe", "invalid"]
         self.arity = [2, 1, 1, 1, 1]
         self.atoms: list[tuple[int, int, int]] = []
 
@@ -89,12 +89,12 @@ def game(tmp_path_factory: pytest.TempPathFactory):  # noqa: ANN201 - a duckdb c
     ep1 = rows(v, [
         (0, "mountain", ("19",), 1), (0, "atLoc", (red, "18"), 1), (0, "atLoc", (blue, "21"), 1),  # hidden
         (1, "atLoc", (blue, "21"), 0), (1, "atLoc", (blue, "29"), 1),          # blue leaves the row
-        (1, "shotDown", (red,), 1), (1, "invalid", (blue,), 1),
+        (1, "gotShot", (red,), 1), (1, "invalid", (blue,), 1),
         (2, "atLoc", (red, "18"), 0), (2, "atLoc", (red, "10"), 1),            # red steps down
         (2, "atLoc", (blue, "29"), 0), (2, "atLoc", (blue, "21"), 1),
-        (2, "shotDown", (red,), 0), (2, "unsafe", (red,), 1),
+        (2, "gotShot", (red,), 0), (2, "unsafe", (red,), 1),
         (3, "atLoc", (red, "10"), 0), (3, "atLoc", (red, "18"), 1),            # hidden again
-        (3, "shotDown", (red,), 1), (3, "unsafe", (red,), 0),
+        (3, "gotShot", (red,), 1), (3, "unsafe", (red,), 0),
         (4, "atLoc", (blue, "21"), 0), (4, "atLoc", (blue, "26"), 1),          # blue above red: seen
     ])
     ep2 = rows(v, [(0, "mountain", ("19",), 1), (0, "atLoc", (red, "2"), 1), (0, "atLoc", (blue, "21"), 1),
