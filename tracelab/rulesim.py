@@ -176,6 +176,7 @@ class RuleSim:
         cur = self._observe_both(self.state)
         obs = self._obs.copy()
         obs[sel] = self._with_history(cur, cur)[sel]
+        self._cur = self._cur.copy()  # the caller may hold the last step's observation (the same array)
         self._cur[sel] = cur[sel]
         self._obs = obs
         return obs.copy()

@@ -1,0 +1,140 @@
+"""`GridWarEnv`: the grid-world war game as a gymnasium Env for the learner team (red), with the scripted
+opponent (blue, tracelab/opponent.py) inside.
+
+- Observation: red's observation (docs/game.md, Observations): 4 (base) or 7 (advanced) float32 numbers per
+  agent, [current, previous] with `stack_previous` (the non-Markov setup).
+- Action: an index into `scenario.action_ids` (Discrete(n_actions)) for one agent per team, one index
+  per agent (MultiDiscrete([n_actions] * N)) for more.
+- Reward: red's team reward, `StepResult.reward[:, 0]` (terms from the scenario's Rewards).
+- `terminated` on a win, loss or draw; `truncated` at `scenario.max_steps`. Step again only after reset.
+- info: `action_mask` (int8, [n_actions] or [N, n_actions]; see env_common.ActionMasker: it mirrors the
+  rules t_fast/t_slow, u_*_edge, u_*_mtn, s_empty/s_unarmed), `t`, `winner` (refsim.WINNER_*: -1 none,
+  0 red, 1 blue, 2 draw), and red's per-agent `unsafe`, `invalid`, `hits_made`, `hits_taken`,
+  `agent_reward` for the last step (zeros after reset). For MultiDiscrete, sample with
+  `space.sample(mask=tuple(info["action_mask"]))`.
+- Seeding: `reset(seed=s)` reseeds the opponent's generator; the same seed and actions give the same
+  trajectory, with either backend.
+- `backend`: "rules" (RuleSim, the rule engine) or "reference" (RefSim, the hand-written simulator).
+- `trace_sink`: a TraceSink (tracelab/trace_sink.py) receiving the trace; None builds the engine with its
+  trace off.
+
+Importing this module registers `tracelab/GridWar-{base,advanced,nonmarkov}-v0` (the last with
+`stack_previous=True`; pass `stack_previous=False` for the Markov baseline), each with a vector entry
+point (`gymnasium.make_vec` builds tracelab.vector_env.GridWarVectorEnv).
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from tracelab.env_common import (ActionMasker, learner_action_space, make_sim, observation_space,
+                                 render_text, resolve_scenario)
+from tracelab.env_trace import EpisodeTracer
+from tracelab.refsim import WINNER_NONE, StepResult
+from tracelab.scenario import RED, Scenario
+from tracelab.trace_sink import TraceSink
+
+ENV_IDS = {name: f"tracelab/GridWar-{name}-v0" for name in ("base", "advanced", "nonmarkov")}
+
+
+def step_info(res: StepResult, masks: np.ndarray, one_agent: bool) -> dict[str, Any]:
+    """info of every world after a step, arrays [W, ...] (red's view); masks: [W, N, n_actions].
+    With one agent per team the agent axis is dropped (masks [W, n_actions], events [W])."""
+    info = {"action_mask": masks, "unsafe": res.unsafe[:, RED], "invalid": res.invalid[:, RED],
+            "hits_made": res.hits_made[:, RED].astype(np.int64),
+            "hits_taken": res.hits_taken[:, RED].astype(np.int64), "agent_reward": res.agent_reward[:, RED]}
+    if one_agent:
+        info = {k: v[:, 0] for k, v in info.items()}
+    return {"t": res.t.astype(np.int64), "winner": res.winner.astype(np.int64), **info}
+
+
+def reset_info(n_worlds: int, masks: np.ndarray, one_agent: bool) -> dict[str, Any]:
+    """info of worlds at the start of an episode: nothing has happened yet."""
+    shape = (n_worlds,) if one_agent else (n_worlds, masks.shape[1])
+    return {"t": np.zeros(n_worlds, np.int64), "winner": np.full(n_worlds, WINNER_NONE, np.int64),
+            "action_mask": masks[:, 0] if one_agent else masks, "unsafe": np.zeros(shape, bool),
+            "invalid": np.zeros(shape, bool), "hits_made": np.zeros(shape, np.int64),
+            "hits_taken": np.zeros(shape, np.int64), "agent_reward": np.zeros(shape)}
+
+
+class GridWarEnv(gym.Env[np.ndarray, Any]):
+    metadata = {"render_modes": ["ansi"], "render_fps": 4}
+
+    def __init__(self, scenario: Scenario | str = "advanced", *, backend: str = "rules",
+                 stack_previous: bool = False, trace_sink: TraceSink | None = None,
+                 render_mode: str | None = None) -> None:
+        if render_mode not in (None, "ansi"):
+            raise ValueError(f"render_mode must be None or 'ansi', got {render_mode!r}")
+        self.scenario = resolve_scenario(scenario)
+        self.backend = backend
+        self.render_mode = render_mode
+        self.sim = make_sim(self.scenario, backend, 1, stack_previous, trace=trace_sink is not None)
+        self.observation_space = observation_space(self.scenario, stack_previous)
+        self.action_space = learner_action_space(self.scenario)
+        self._n = self.scenario.agents_per_team
+        self._masker = ActionMasker(self.scenario)
+        self._single = self._n == 1
+        self._tracer = None if trace_sink is None else EpisodeTracer(trace_sink, self.scenario, self.sim)
+        self._running = False
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
+              ) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        obs = self.sim.reset(seed=seed)
+        self._running = True
+        if self._tracer is not None:
+            self._tracer.begin(np.zeros(1, np.int64), seed)
+        info = reset_info(1, self._masks(), self._single)
+        return obs[0, RED].copy(), self._first(info)
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        if not self._running:
+            raise RuntimeError("the episode is over (or never began): call reset() first")
+        idx = np.asarray(action, np.int64).reshape(1, self._n)
+        if ((idx < 0) | (idx >= self.scenario.n_actions)).any():
+            raise ValueError(f"action {action!r} is outside the action space {self.action_space}")
+        red = self._masker.ids[idx]
+        blue = self.sim.scripted_actions("blue")
+        res = self.sim.step(red, blue)
+        if self._tracer is not None:
+            self._tracer.stepped(res, np.stack([red, blue], axis=1))
+        terminated, truncated = bool(res.terminated[0]), bool(res.truncated[0])
+        self._running = not (terminated or truncated)
+        info = self._first(step_info(res, self._masks(), self._single))
+        return res.obs[0, RED].copy(), float(res.reward[0, RED]), terminated, truncated, info
+
+    def _masks(self) -> np.ndarray:
+        return self._masker(self.sim.state, RED)
+
+    @staticmethod
+    def _first(info: dict[str, Any]) -> dict[str, Any]:
+        """World 0's info: numpy scalars become Python scalars, arrays are copied out of the batch."""
+        return {k: v[0].item() if v.ndim == 1 else v[0].copy() for k, v in info.items()}
+
+    def render(self) -> str | None:
+        if self.render_mode == "ansi":
+            return render_text(self.scenario, self.sim.state)
+        return None
+
+    def close(self) -> None:
+        if self._tracer is not None:
+            self._tracer.close()
+            self._tracer = None
+        super().close()
+
+
+def register_envs() -> None:
+    """Register the built-in scenarios' env ids (idempotent)."""
+    for name, env_id in ENV_IDS.items():
+        if env_id in gym.registry:
+            continue
+        kwargs: dict[str, Any] = {"scenario": name}
+        if name == "nonmarkov":
+            kwargs["stack_previous"] = True
+        gym.register(id=env_id, entry_point="tracelab.env:GridWarEnv",
+                     vector_entry_point="tracelab.vector_env:GridWarVectorEnv", kwargs=kwargs)
+
+
+register_envs()

@@ -1,0 +1,106 @@
+"""What the gymnasium, vector and PettingZoo envs share: the simulator backend, the spaces, the action
+masks (the shield, read from the state) and a text rendering."""
+from __future__ import annotations
+
+import numpy as np
+from gymnasium import spaces
+
+from tracelab.refsim import GameState, RefSim
+from tracelab.rulesim import RuleSim
+from tracelab.scenario import DIRECTION_DELTAS, DOWN, LEFT, NOTHING, RIGHT, UP, Scenario, builtin_scenario
+
+BACKENDS = ("rules", "reference")
+Simulator = RuleSim | RefSim
+
+
+def resolve_scenario(scenario: Scenario | str) -> Scenario:
+    """A Scenario, or the name of a built-in one (base, advanced, nonmarkov)."""
+    return builtin_scenario(scenario) if isinstance(scenario, str) else scenario
+
+
+def make_sim(scenario: Scenario, backend: str, n_worlds: int, stack_previous: bool, trace: bool) -> Simulator:
+    """RuleSim ("rules", the engine; `trace` turns its change log on) or RefSim ("reference", no trace)."""
+    if backend == "rules":
+        return RuleSim(scenario, n_worlds, seed=None, stack_previous=stack_previous, trace=trace)
+    if backend == "reference":
+        return RefSim(scenario, n_worlds, seed=None, stack_previous=stack_previous)
+    raise ValueError(f"unknown backend {backend!r}; expected one of {BACKENDS}")
+
+
+def observation_space(scenario: Scenario, stack_previous: bool) -> spaces.Box:
+    """One team's observation (docs/game.md, Observations): x in [-1, W-1], y in [-1, H-1] (-1: dead or
+    no bullet), bullet counts in [0, N * ammo]."""
+    n, w, h = scenario.agents_per_team, scenario.width, scenario.height
+    low = [-1.0, -1.0] * (2 * n)
+    high = [w - 1.0, h - 1.0] * (2 * n)
+    if scenario.advanced:
+        low += [0.0, -1.0, -1.0] * n
+        high += [float(n * scenario.ammo), w - 1.0, h - 1.0] * n
+    if stack_previous:
+        low, high = low * 2, high * 2
+    return spaces.Box(np.array(low, np.float32), np.array(high, np.float32), dtype=np.float32)
+
+
+def learner_action_space(scenario: Scenario) -> spaces.Discrete | spaces.MultiDiscrete:
+    """Indices into scenario.action_ids: Discrete for one agent, MultiDiscrete for a team."""
+    n_act, n = scenario.n_actions, scenario.agents_per_team
+    return spaces.Discrete(n_act) if n == 1 else spaces.MultiDiscrete([n_act] * n)
+
+
+class ActionMasker:
+    """Which learner actions are safe and valid in the current state, per world, team and agent.
+
+    It mirrors the rules (rules/gridworld/game.rules): only an agent that may act gets a choice
+    (t_fast / t_slow: alive, and a slow agent on even steps only; others can only do nothing, since
+    the simulator ignores their actions); a move off the map (u_*_edge) or into a mountain (u_*_mtn) is
+    masked, a shot with no ammo (s_empty, s_unarmed) is masked; do nothing is always allowed. It reads
+    positions, ammo, alive and t from GameState (what RuleSim reads back from atoms) and the map. It cannot
+    foresee a bullet that kills the agent in phase 1 of the next step, before it acts.
+    """
+
+    def __init__(self, scenario: Scenario) -> None:
+        self.ids = np.asarray(scenario.action_ids, np.int64)
+        self.n_actions = len(self.ids)
+        # the layout both action sets share: moves at 0-3, shots at 4-7 (advanced), nothing last
+        assert tuple(self.ids[:4]) == (UP, DOWN, LEFT, RIGHT) and self.ids[-1] == NOTHING
+        self._shots = scenario.advanced
+        # move_ok[x, y, d]: the move in direction d from (x, y) stays on the map and off the mountains
+        w, h = scenario.width, scenario.height
+        free = np.zeros((w + 2, h + 2), bool)  # padded with a blocked border
+        free[1:-1, 1:-1] = ~scenario.mountain_grid
+        x, y = np.meshgrid(np.arange(w), np.arange(h), indexing="ij")
+        self._move_ok = np.stack([free[x + 1 + dx, y + 1 + dy] for dx, dy in DIRECTION_DELTAS], axis=-1)
+        self._slow = scenario.slow_mask if scenario.slow_mask.any() else None
+
+    def __call__(self, state: GameState, team: int | None = None) -> np.ndarray:
+        """int8 (gymnasium's mask dtype), 1 = allowed: [W, N, n_actions] for one team, or
+        [W, 2, N, n_actions] for both (team=None)."""
+        sel = slice(None) if team is None else team
+        pos, alive = state.pos[:, sel], state.alive[:, sel]
+        can_act = alive & ~state.moving[:, sel]
+        if self._slow is not None:
+            even = (state.t % 2 == 0).reshape((-1,) + (1,) * (alive.ndim - 1))
+            can_act &= ~self._slow[sel] | even
+        out = np.empty((*alive.shape, self.n_actions), bool)
+        out[..., :4] = self._move_ok[pos[..., 0], pos[..., 1]] & can_act[..., None]
+        if self._shots:
+            out[..., 4:8] = (can_act & (state.ammo[:, sel] > 0))[..., None]
+        out[..., -1] = True
+        return out.view(np.int8)
+
+
+def render_text(scenario: Scenario, state: GameState, world: int = 0) -> str:
+    """The map, top row first: # mountain, r/b base, R/B living agent, * bullet, . free."""
+    grid = np.full((scenario.height, scenario.width), ".", dtype="<U1")
+    for x, y in scenario.mountains:
+        grid[y, x] = "#"
+    for mark, (x, y) in zip("rb", scenario.bases):
+        grid[y, x] = mark
+    for (x, y), d in zip(state.bullet_pos[world], state.bullet_dir[world]):
+        if d >= 0:
+            grid[y, x] = "*"
+    for team, mark in enumerate("RB"):
+        for (x, y), alive in zip(state.pos[world, team], state.alive[world, team]):
+            if alive:
+                grid[y, x] = mark
+    return "\n".join("".join(row) for row in grid[::-1]) + f"\nt={int(state.t[world])}\n"

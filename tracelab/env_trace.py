@@ -1,0 +1,102 @@
+"""The env side of trace streaming: numbers episodes, labels the simulator's change rows with them, keeps
+returns, and calls a TraceSink (conventions in tracelab/trace_sink.py). Only built when an env has a sink.
+
+RuleSim.take_trace() already counts each row's `t` from its world's episode start and tags it with
+`world_episode` (the world's own episode count); here that is mapped to the env's episode id. Rows are
+taken after every step (so an episode's rows are all out before it ends) and at close, never at reset:
+a new episode's start rows are still queued then, and belong to whichever episode is current in that
+world when they are taken (RuleSim keeps them for a world reset again before it stepped).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from tracelab.game_facts import agent_name
+from tracelab.refsim import WINNER_BLUE, WINNER_DRAW, WINNER_RED, RefSim, StepResult
+from tracelab.rulesim import RuleSim
+from tracelab.scenario import TEAMS, Scenario
+from tracelab.trace_sink import TraceSink
+
+
+def outcome_name(winner: int, truncated: bool) -> str:
+    """Red's outcome of a finished episode."""
+    if truncated:
+        return "truncated"
+    return {WINNER_RED: "win", WINNER_BLUE: "loss", WINNER_DRAW: "draw"}.get(int(winner), "aborted")
+
+
+class EpisodeTracer:
+    def __init__(self, sink: TraceSink, scenario: Scenario, sim: RuleSim | RefSim) -> None:
+        self.sink = sink
+        self.scenario = scenario
+        self.sim = sim
+        self._rules = isinstance(sim, RuleSim) and bool(sim.engine.trace_on.any())
+        w, n = sim.n_worlds, scenario.agents_per_team
+        self.open = np.zeros(w, bool)
+        self.cur_ep = np.full(w, -1, np.int64)   # the env's id of each world's current episode
+        self.cur_wep = np.full(w, -1, np.int64)  # and the simulator's world_episode for it
+        self.steps = np.zeros(w, np.int64)
+        self.agent_return = np.zeros((w, 2, n))
+        self.team_return = np.zeros((w, 2))
+        self._next_episode = 0
+        self._names = [agent_name(t, j) for t in range(2) for j in range(n)]
+        sink.begin_run(sim.engine if isinstance(sim, RuleSim) else None, scenario)
+
+    def begin(self, worlds: np.ndarray, seed: int | None) -> None:
+        """Episodes start in `worlds` (indices), which the simulator has just reset."""
+        worlds = np.asarray(worlds, np.int64)
+        for w in worlds[self.open[worlds]].tolist():
+            self._end(w, "aborted")
+        ids = self._next_episode + np.arange(len(worlds), dtype=np.int64)
+        self._next_episode += len(worlds)
+        self.cur_ep[worlds] = ids
+        if self._rules:
+            self.cur_wep[worlds] = self.sim.world_episode[worlds]
+        self.open[worlds] = True
+        self.steps[worlds] = 0
+        self.agent_return[worlds] = 0.0
+        self.team_return[worlds] = 0.0
+        for w, e in zip(worlds.tolist(), ids.tolist()):
+            self.sink.begin_episode(w, e, seed, self.scenario)
+
+    def stepped(self, res: StepResult, actions: np.ndarray) -> None:
+        """After a step of every world (before any autoreset): its rows, its step records, episode ends."""
+        self._flush()
+        worlds = np.arange(len(self.open))
+        # copies: the simulator may reuse its arrays (RuleSim.reset writes into the last obs)
+        self.sink.step(worlds, self.cur_ep.copy(), res.t.astype(np.int64), np.array(res.obs, np.float32),
+                       np.array(actions, np.int64), res.agent_reward.copy())
+        self.steps[:] = res.t
+        self.agent_return += res.agent_reward
+        self.team_return += res.reward
+        for w in np.flatnonzero(res.terminated | res.truncated).tolist():
+            self._end(w, outcome_name(res.winner[w], bool(res.truncated[w])))
+
+    def close(self) -> None:
+        self._flush()
+        for w in np.flatnonzero(self.open).tolist():
+            self._end(w, "aborted")
+        self.sink.close()
+
+    def _flush(self) -> None:
+        if not self._rules:
+            return
+        rows = self.sim.take_trace()
+        if not len(rows["t"]):
+            return
+        w, k = rows["world"].astype(np.int64), rows["world_episode"]
+        if (k > self.cur_wep[w]).any():
+            raise RuntimeError("trace rows of a simulator episode the env never began")
+        keep = k == self.cur_wep[w]
+        if not keep.all():  # the simulator's own start, before the env's first episode in that world
+            rows = {name: col[keep] for name, col in rows.items()}
+            w = w[keep]
+        rows["episode"] = self.cur_ep[w]
+        if len(w):
+            self.sink.changes(rows, self.cur_ep.copy(), self.sim.episode_start.copy())
+
+    def _end(self, w: int, outcome: str) -> None:
+        rewards = {team: float(self.team_return[w, t]) for t, team in enumerate(TEAMS)}
+        rewards.update(zip(self._names, self.agent_return[w].ravel().tolist()))
+        self.sink.end_episode(w, int(self.cur_ep[w]), int(self.steps[w]), outcome, rewards)
+        self.open[w] = False

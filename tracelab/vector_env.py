@@ -1,0 +1,127 @@
+"""`GridWarVectorEnv`: `num_envs` games of the learner (red) against the scripted opponent, stepped by one
+simulator call per step (RuleSim / RefSim with n_worlds = num_envs). Spaces, rewards, infos and backends
+are those of tracelab.env.GridWarEnv, batched.
+
+Autoreset: SAME_STEP (`metadata["autoreset_mode"]`). A world whose episode ends in a step is reset
+within that step: the step returns its terminal reward and terminated/truncated flags, but the reset
+observation, so every transition (obs, action, reward, next obs) lies inside one episode once the
+replay buffer takes next obs from `final_obs` where `_final_obs` is set. As in gymnasium 1.x:
+- info["final_obs"]: float32 [num_envs, D], the terminal observations (rows valid where
+  info["_final_obs"] is True; a dense array rather than an object array, to stay vectorised);
+- info["final_info"]: the step's info at the end of the episode (same keys, each with its `_key`
+  mask = the worlds that ended); info["_final_info"] marks those worlds;
+- the top-level info describes the returned observation: for a reset world that is the reset info
+  (t = 0, zero events, the new episode's action_mask).
+Every info key has its gymnasium `_key` mask. (Gymnasium's observation wrappers accept only NEXT_STEP;
+RecordEpisodeStatistics supports SAME_STEP.)
+
+Seeding: one generator drives the opponent in every world; reset(seed=s) reseeds it, so a run is
+reproducible for a given seed and num_envs. A list of seeds is combined into one (SeedSequence).
+"""
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import numpy as np
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from tracelab.env import reset_info, step_info
+from tracelab.env_common import ActionMasker, learner_action_space, make_sim, observation_space, resolve_scenario
+from tracelab.env_trace import EpisodeTracer
+from tracelab.scenario import RED, Scenario
+from tracelab.trace_sink import TraceSink
+
+
+def _batch_seed(seed: int | Sequence[int] | None) -> int | None:
+    if seed is None or isinstance(seed, (int, np.integer)):
+        return None if seed is None else int(seed)
+    return int(np.random.SeedSequence([int(s) for s in seed]).generate_state(1, np.uint64)[0])
+
+
+class GridWarVectorEnv(VectorEnv):
+    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
+
+    def __init__(self, num_envs: int = 1, scenario: Scenario | str = "advanced", *, backend: str = "rules",
+                 stack_previous: bool = False, trace_sink: TraceSink | None = None,
+                 render_mode: str | None = None) -> None:
+        if render_mode is not None:
+            raise ValueError("GridWarVectorEnv does not render")
+        if num_envs < 1:
+            raise ValueError(f"num_envs must be at least 1, got {num_envs}")
+        self.num_envs = num_envs
+        self.scenario = resolve_scenario(scenario)
+        self.backend = backend
+        self.sim = make_sim(self.scenario, backend, num_envs, stack_previous, trace=trace_sink is not None)
+        self.single_observation_space = observation_space(self.scenario, stack_previous)
+        self.single_action_space = learner_action_space(self.scenario)
+        self.observation_space = batch_space(self.single_observation_space, num_envs)
+        self.action_space = batch_space(self.single_action_space, num_envs)
+        self._n = self.scenario.agents_per_team
+        self._masker = ActionMasker(self.scenario)
+        self._all = np.ones(num_envs, bool)
+        self._all.flags.writeable = False  # shared by every `_key` mask that covers all worlds
+        # every episode starts from the scenario's start state: one world's reset info serves all
+        self._start_info = reset_info(1, self._masks()[:1], self._n == 1)
+        self._tracer = None if trace_sink is None else EpisodeTracer(trace_sink, self.scenario, self.sim)
+        self._ready = False
+
+    def reset(self, *, seed: int | Sequence[int] | None = None, options: dict[str, Any] | None = None
+              ) -> tuple[np.ndarray, dict[str, Any]]:
+        seed = _batch_seed(seed)
+        super().reset(seed=seed)
+        obs = self.sim.reset(seed=seed)[:, RED].copy()
+        if self._tracer is not None:
+            self._tracer.begin(np.arange(self.num_envs), seed)
+        self._ready = True
+        return obs, self._with_masks(reset_info(self.num_envs, self._masks(), self._n == 1), self._all)
+
+    def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        if not self._ready:
+            raise RuntimeError("call reset() before step()")
+        idx = np.asarray(actions, np.int64).reshape(self.num_envs, self._n)
+        if ((idx < 0) | (idx >= self.scenario.n_actions)).any():
+            raise ValueError(f"actions outside the action space {self.single_action_space}")
+        red = self._masker.ids[idx]
+        blue = self.sim.scripted_actions("blue")
+        res = self.sim.step(red, blue)
+        if self._tracer is not None:
+            self._tracer.stepped(res, np.stack([red, blue], axis=1))
+        obs = res.obs[:, RED].copy()  # a copy: RuleSim.reset writes into the array res.obs shares
+        reward = res.reward[:, RED].copy()
+        terminated, truncated = res.terminated.copy(), res.truncated.copy()
+        done = terminated | truncated
+        info = step_info(res, self._masks(), self._n == 1)
+        if done.any():
+            info = self._autoreset(done, obs, info)
+        return obs, reward, terminated, truncated, self._with_masks(info, self._all)
+
+    def _autoreset(self, done: np.ndarray, obs: np.ndarray, info: dict[str, Any]) -> dict[str, Any]:
+        """Reset the finished worlds now; `obs` and `info` switch to their reset values there."""
+        final_info = self._with_masks({k: v.copy() for k, v in info.items()}, done)
+        final_obs = obs.copy()
+        reset_obs = self.sim.reset(worlds=done)[:, RED]
+        obs[done] = reset_obs[done]
+        for key, value in self._start_info.items():
+            info[key][done] = value[0]
+        if self._tracer is not None:
+            self._tracer.begin(np.flatnonzero(done), None)
+        info.update(final_obs=final_obs, _final_obs=done, final_info=final_info, _final_info=done)
+        return info
+
+    def _masks(self) -> np.ndarray:
+        return self._masker(self.sim.state, RED)
+
+    @staticmethod
+    def _with_masks(info: dict[str, Any], mask: np.ndarray) -> dict[str, Any]:
+        """gymnasium's vector info layout: each key with a `_key` bool mask of the worlds it covers."""
+        out = dict(info)
+        for key in info:
+            if not key.startswith("_"):
+                out.setdefault(f"_{key}", mask)
+        return out
+
+    def close_extras(self, **kwargs: Any) -> None:
+        if self._tracer is not None:
+            self._tracer.close()
+            self._tracer = None
