@@ -45,98 +45,57 @@ def run(args: argparse.Namespace) -> int:
         print("error: --episodes and --worlds must be at least 1", file=sys.stderr)
         return 2
     if args.no_trace:
-        stats = play(scenario, args, writer=None)
-        _summary(stats)
+        _summary(play(scenario, args, sink=None))
         return 0
     from tracelab.game_facts import GAME_RULES
     from tracelab.store import TraceWriter
+    from tracelab.store.sink import StoreSink
 
     run_dir = Path(args.run or f"runs/play-{scenario.name}-{time.strftime('%Y%m%d-%H%M%S')}")
     meta = {"command": " ".join(shlex.quote(a) for a in sys.argv), "scenario": scenario.name,
             "config": {"episodes": args.episodes, "worlds": args.worlds, "policy": args.policy,
                        "scenario": scenario.to_toml()},
             "rule_files": [str(GAME_RULES)], "seed": args.seed}
-    with TraceWriter.open(run_dir, meta) as writer:
-        stats = play(scenario, args, writer)
+    stats = play(scenario, args, sink=StoreSink(TraceWriter.open(run_dir, meta)))
     _summary(stats)
-    _what_to_open(run_dir, stats)
+    _what_to_open(run_dir)
     return 0
 
 
-def play(scenario, args: argparse.Namespace, writer) -> dict:
-    """Play args.episodes episodes; with a writer, record program, changes, steps and episodes."""
-    from tracelab.refsim import WINNER_NONE
-    from tracelab.rulesim import RuleSim
+def play(scenario, args: argparse.Namespace, sink) -> dict:
+    """Play until args.episodes episodes ended, in args.worlds worlds of the vector env (rules backend);
+    episodes still running then are closed as aborted."""
+    from tracelab.vector_env import GridWarVectorEnv
 
     n_worlds = min(args.worlds, args.episodes)
-    sim = RuleSim(scenario, n_worlds, seed=args.seed, trace=writer is not None)
+    env = GridWarVectorEnv(n_worlds, scenario, backend="rules", trace_sink=sink)
     rng = np.random.default_rng(args.seed)
-    ids = np.asarray(scenario.action_ids)
+    index_of = {a: i for i, a in enumerate(scenario.action_ids)}
+    to_index = np.array([index_of.get(a, 0) for a in range(9)])  # spec action id -> action index
     n = scenario.agents_per_team
-    red_agents = [f"red-agent-{j + 1}" for j in range(n)]
-    # the global episode id of each world's current episode, and per-episode bookkeeping
-    episode_of = np.arange(n_worlds)
-    started = n_worlds
-    returns = np.zeros(n_worlds)
+    env.reset(seed=args.seed)
     finished: list[dict] = []
-    if writer is not None:
-        writer.write_engine_program(sim.engine)
-        for w in range(n_worlds):
-            writer.begin_episode(int(episode_of[w]), world=w, t_start=0, seed=args.seed)
-    active = np.ones(n_worlds, bool)
-    obs = sim.reset()
-    t0 = time.perf_counter()
+    returns = np.zeros(n_worlds)
     steps = 0
-    while active.any():
-        blue = sim.scripted_actions("blue")
-        red = sim.scripted_actions("red") if args.policy == "scripted" else rng.choice(ids, size=(n_worlds, n))
-        result = sim.step(red, blue)
-        steps += int(active.sum())
-        returns[active] += result.reward[active, 0]
-        if writer is not None:
-            _record_step(writer, sim, result, red, obs, episode_of, active, red_agents)
-        obs = result.obs
-        done = active & (result.terminated | result.truncated)
-        for w in np.flatnonzero(done):
-            winner = int(result.winner[w])
-            outcome = "truncated" if winner == WINNER_NONE else OUTCOMES[winner]
-            finished.append({"episode": int(episode_of[w]), "steps": int(result.t[w]), "outcome": outcome,
+    t0 = time.perf_counter()
+    while len(finished) < args.episodes:
+        if args.policy == "scripted":
+            red = to_index[env.sim.scripted_actions("red")]
+        else:
+            red = rng.integers(0, scenario.n_actions, size=(n_worlds, n))
+        _, reward, terminated, truncated, info = env.step(red[:, 0] if n == 1 else red)
+        steps += n_worlds
+        returns += reward
+        for w in np.flatnonzero(terminated | truncated):
+            final = info["final_info"]
+            finished.append({"steps": int(final["t"][w]),
+                             "outcome": OUTCOMES.get(int(final["winner"][w]), "truncated"),
                              "return": float(returns[w])})
-            if writer is not None:
-                writer.end_episode(int(episode_of[w]), steps=int(result.t[w]), outcome=outcome,
-                                   reward=float(returns[w]),
-                                   rewards={a: float(x) for a, x in zip(red_agents, result.agent_reward[w, 0])})
-        if done.any():
-            again = done & (started < args.episodes)
-            active &= ~(done & ~again)
-            for w in np.flatnonzero(again):
-                episode_of[w] = started
-                started += 1
-                returns[w] = 0.0
-            if again.any():
-                obs = sim.reset(worlds=again)
-                if writer is not None:
-                    for w in np.flatnonzero(again):
-                        writer.begin_episode(int(episode_of[w]), world=int(w), t_start=0, seed=args.seed)
+            returns[w] = 0.0
     elapsed = time.perf_counter() - t0
-    return {"episodes": finished, "steps": steps, "seconds": elapsed, "scenario": scenario.name}
-
-
-def _record_step(writer, sim, result, red, obs, episode_of, active, red_agents) -> None:
-    rows = sim.take_trace()
-    episode = episode_of[rows["world"]]
-    keep = active[rows["world"]] | (rows["t"] == 0)
-    rows = {k: v[keep] for k, v in rows.items() if k != "world_episode"}
-    rows["episode"] = episode[keep]
-    writer.write_vocabulary(sim.engine.vocabulary(), sim.engine.groundings)
-    writer.write_changes(None, rows)
-    n = len(red_agents)
-    for w in np.flatnonzero(active):
-        writer.write_steps(int(episode_of[w]), {
-            "step": np.full(n, result.t[w]), "t": np.full(n, result.t[w]), "agent": red_agents,
-            "action": red[w], "reward": result.agent_reward[w, 0],
-            "terminated": np.full(n, result.terminated[w]), "truncated": np.full(n, result.truncated[w]),
-            "obs": np.repeat(obs[w, 0][None], n, axis=0)})
+    env.close()
+    return {"episodes": finished[:args.episodes], "steps": steps, "seconds": elapsed,
+            "scenario": scenario.name}
 
 
 def _summary(stats: dict) -> None:
@@ -148,11 +107,11 @@ def _summary(stats: dict) -> None:
     print("red: " + ", ".join(f"{v} {k}" for k, v in outcomes.items()) + f"; mean return {mean_return:.1f}")
 
 
-def _what_to_open(run_dir: Path, stats: dict) -> None:
+def _what_to_open(run_dir: Path) -> None:
     from tracelab.store import open_run
 
     con = open_run(run_dir)
-    ep = stats["episodes"][0]["episode"]
+    ep = 0
     row = con.execute(
         "SELECT atom, t FROM changes WHERE episode = ? AND label = 'atLoc' AND atom LIKE 'atLoc(red-agent-1,%' "
         "AND new_lower = 1 ORDER BY t DESC LIMIT 1", [ep]).fetchone()
