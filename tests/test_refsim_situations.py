@@ -1,7 +1,9 @@
-"""The reference simulator in the situations the spec lists (docs/game.md), plus the scripted policy.
+"""Both simulators in the situations the spec lists (docs/game.md), plus the scripted policy.
 
-Maps are 8x8 with red base (7,0) and blue base (0,7) unless a test says otherwise; agents start where
-the test puts them. Actions are the spec ids.
+Every test that takes `start` or `sim_class` runs once per simulator: RefSim (hand-written) and RuleSim
+(rules/gridworld/game.rules on the engine). The few that need more than one hit to kill stay RefSim-only
+(the rule program models one-hit kills). Maps are 8x8 with red base (7,0) and blue base (0,7) unless a
+test says otherwise; agents start where the test puts them. Actions are the spec ids.
 """
 from __future__ import annotations
 
@@ -12,6 +14,7 @@ from tracelab.opponent import ScriptedPolicy, scripted_actions
 from tracelab.refsim import (
     WINNER_BLUE, WINNER_DRAW, WINNER_NONE, WINNER_RED, RefSim, StepResult, obs_size, observe,
 )
+from tracelab.rulesim import RuleSim
 from tracelab.scenario import Scenario, SlowAgents, builtin_scenario, generate_scenario
 
 UP, DOWN, LEFT, RIGHT = 0, 1, 2, 3
@@ -26,13 +29,42 @@ def make(red, blue, *, mountains=(), advanced=True, **kw) -> Scenario:
                     advanced=advanced, **kw)
 
 
-def start(scenario: Scenario, **kw) -> RefSim:
-    sim = RefSim(scenario, **kw)
-    sim.reset()
-    return sim
+Sim = RefSim | RuleSim
+# Rows for tests parametrized over health: health 2 (two hits to kill) is RefSim-only, because the rule
+# program models one-hit kills (scenario_program refuses damage < health, see
+# test_rulesim_refuses_damage_below_health).
+HEALTH_ROWS = [pytest.param(RefSim, 1.0, id="refsim-h1"), pytest.param(RuleSim, 1.0, id="rulesim-h1"),
+               pytest.param(RefSim, 2.0, id="refsim-h2")]
 
 
-def step(sim: RefSim, red, blue) -> StepResult:
+@pytest.fixture(params=[RefSim, RuleSim], ids=["refsim", "rulesim"])
+def sim_class(request) -> type:
+    return request.param
+
+
+@pytest.fixture(scope="module")
+def sim_cache() -> dict:
+    """Simulators built in this module, by (class, scenario, n_worlds, stack_previous): RuleSim grounds an
+    engine per instance, so tests on the same scenario share one instance and only reset() it."""
+    return {}
+
+
+@pytest.fixture
+def start(sim_class, sim_cache):
+    """start(scenario, n_worlds=1, seed=None, stack_previous=False): a just-reset simulator of the class
+    under test (reset(seed) re-seeds the scripted policy's rng as a new instance would)."""
+    def _start(scenario: Scenario, n_worlds: int = 1, seed: int | None = None,
+               stack_previous: bool = False) -> Sim:
+        key = (sim_class, scenario, n_worlds, stack_previous)
+        if key not in sim_cache:
+            sim_cache[key] = sim_class(scenario, n_worlds, stack_previous=stack_previous)
+        sim = sim_cache[key]
+        sim.reset(seed=seed)
+        return sim
+    return _start
+
+
+def step(sim: Sim, red, blue) -> StepResult:
     return sim.step(np.array([red]), np.array([blue]))
 
 
@@ -49,7 +81,7 @@ def pos(r: StepResult, team: int, agent: int = 0, world: int = 0) -> tuple[int, 
 # ----------------------------------------------------------------------------------------------------
 # Situations named by the spec
 # ----------------------------------------------------------------------------------------------------
-def test_agents_crossing_paths_on_one_row():
+def test_agents_crossing_paths_on_one_row(start):
     sim = start(make(red=[(4, 2)], blue=[(2, 2)]))
     r = step(sim, [LEFT], [RIGHT])  # both land on (3,2): agents do not block each other
     assert pos(r, 0) == (3, 2) and pos(r, 1) == (3, 2)
@@ -64,7 +96,7 @@ def test_agents_crossing_paths_on_one_row():
 
 
 @pytest.mark.parametrize("blue_action", [NOP, LEFT])
-def test_agent_and_enemy_on_one_cell_one_shoots(blue_action):
+def test_agent_and_enemy_on_one_cell_one_shoots(start, blue_action):
     # Red shoots on its own cell, where blue stands: a point-blank hit, even if blue moves away in the
     # same step (it is hit where it stood before acting).
     sim = start(make(red=[(3, 1)], blue=[(3, 1)]))
@@ -80,7 +112,7 @@ def test_agent_and_enemy_on_one_cell_one_shoots(blue_action):
     assert r.reward[0, 1] == R.valid_action + R.got_shot + R.loss
 
 
-def test_bullet_speed_along_a_row():
+def test_bullet_speed_along_a_row(start):
     sim = start(make(red=[(1, 1)], blue=[(0, 7)]))
     r = step(sim, [S_RIGHT], [NOP])
     assert bullets(r, 0) == [(1, 1, 3)]  # created on the shooter's cell, not moved yet
@@ -92,7 +124,7 @@ def test_bullet_speed_along_a_row():
     assert r.t[0] == 8
 
 
-def test_bullet_into_mountain():
+def test_bullet_into_mountain(start):
     sim = start(make(red=[(1, 1)], blue=[(5, 1)], mountains=[(4, 1)]))
     step(sim, [S_RIGHT], [NOP])
     r = step(sim, [NOP], [NOP])
@@ -108,7 +140,7 @@ def test_bullet_into_mountain():
 
 @pytest.mark.parametrize("shooter, action", [((3, 7), S_UP), ((3, 0), S_DOWN), ((0, 3), S_LEFT),
                                              ((7, 3), S_RIGHT)])
-def test_bullet_leaves_map_each_direction(shooter, action):
+def test_bullet_leaves_map_each_direction(start, shooter, action):
     sim = start(make(red=[shooter], blue=[(0, 7)]))
     r = step(sim, [action], [NOP])
     assert bullets(r, 0) == [(shooter[0], shooter[1], action - 4)]
@@ -118,7 +150,7 @@ def test_bullet_leaves_map_each_direction(shooter, action):
 
 
 @pytest.mark.parametrize("blue_x", [5, 4])  # even gap: they share a cell; odd gap: they swap cells
-def test_two_bullets_pass_through_each_other(blue_x):
+def test_two_bullets_pass_through_each_other(start, blue_x):
     sim = start(make(red=[(1, 2)], blue=[(blue_x, 2)]))
     step(sim, [S_RIGHT], [S_LEFT])
     for k in range(1, blue_x - 1):
@@ -128,7 +160,7 @@ def test_two_bullets_pass_through_each_other(blue_x):
     assert r.alive.all() and r.hits_taken.sum() == 0
 
 
-def test_bullets_pass_a_teammate():
+def test_bullets_pass_a_teammate(start):
     sim = start(make(red=[(1, 2), (3, 2)], blue=[(6, 2), (0, 7)]))
     step(sim, [S_RIGHT, NOP], [NOP, NOP])
     step(sim, [NOP, NOP], [NOP, NOP])
@@ -142,7 +174,7 @@ def test_bullets_pass_a_teammate():
 
 
 @pytest.mark.parametrize("fresh", [False, True])
-def test_agent_walks_into_bullet(fresh):
+def test_agent_walks_into_bullet(start, fresh):
     sim = start(make(red=[(2, 1)], blue=[(3, 2) if not fresh else (3, 1)]))
     if not fresh:
         step(sim, [S_UP], [NOP])     # bullet at (2,1)
@@ -156,8 +188,8 @@ def test_agent_walks_into_bullet(fresh):
     assert r.reward[0, 1] == R.valid_action + R.got_shot + R.loss
 
 
-@pytest.mark.parametrize("health", [1.0, 2.0])
-def test_agent_and_bullet_swap_cells(health):
+@pytest.mark.parametrize("sim_class, health", HEALTH_ROWS)
+def test_agent_and_bullet_swap_cells(start, health):
     sim = start(make(red=[(1, 1)], blue=[(2, 1)], health=health))
     step(sim, [S_RIGHT], [NOP])  # bullet on (1,1), blue on (2,1)
     r = step(sim, [NOP], [LEFT])  # bullet -> (2,1), blue -> (1,1): no tunnelling
@@ -169,7 +201,7 @@ def test_agent_and_bullet_swap_cells(health):
         assert r.alive[0, 1, 0] and r.health[0, 1, 0] == 1.0 and pos(r, 1) == (1, 1)  # hit once only
 
 
-def test_mutual_kills_draw():
+def test_mutual_kills_draw(start):
     sim = start(make(red=[(1, 2)], blue=[(5, 2)]))
     step(sim, [S_RIGHT], [S_LEFT])
     for _ in range(3):
@@ -182,7 +214,7 @@ def test_mutual_kills_draw():
     assert r.reward[0].tolist() == [R.hit_opponent + R.got_shot] * 2
 
 
-def test_point_blank_mutual_shots():
+def test_point_blank_mutual_shots(start):
     sim = start(make(red=[(3, 1)], blue=[(3, 1)]))
     r = step(sim, [S_UP], [S_RIGHT])
     assert not r.alive.any()
@@ -192,7 +224,21 @@ def test_point_blank_mutual_shots():
     assert r.reward[0].tolist() == [R.valid_action + R.hit_opponent + R.got_shot] * 2
 
 
-def test_shooting_until_ammo_runs_out_then_invalid_shot():
+@pytest.mark.parametrize("sim_class, health", HEALTH_ROWS)
+def test_point_blank_hit_comes_before_a_walk_in(start, health):
+    # Blue leaves red 0's cell as red 0 shoots point blank, and walks onto (2,1), where red 1's bullet
+    # has just arrived. Point-blank damage lands first: killed, blue is not hit again by the walk-in
+    # (the bullet stays); with health left, the walk-in hits it too.
+    sim = start(make(red=[(3, 1), (1, 1)], blue=[(3, 1), (0, 7)], health=health))
+    step(sim, [NOP, S_RIGHT], [NOP, NOP])  # red 1's bullet on (1,1)
+    r = step(sim, [S_UP, NOP], [LEFT, NOP])  # bullet -> (2,1); point blank on (3,1); blue -> (2,1)
+    assert pos(r, 1) == (2, 1) and not r.alive[0, 1, 0]
+    assert r.hits_made[0, 0].tolist() == ([1, 0] if health == 1.0 else [1, 1])
+    assert r.hits_taken[0, 1, 0] == (1 if health == 1.0 else 2)
+    assert bullets(r, 0) == ([(2, 1, 3)] if health == 1.0 else [])
+
+
+def test_shooting_until_ammo_runs_out_then_invalid_shot(start):
     sim = start(make(red=[(4, 1)], blue=[(0, 7)]))
     slots = set()
     for k in range(3):
@@ -209,7 +255,7 @@ def test_shooting_until_ammo_runs_out_then_invalid_shot():
     assert r.invalid[0, 0, 0] and sorted(bullets(r, 0)) == [(6, 1, 3), (7, 1, 3)]
 
 
-def test_dead_agents_queued_actions_ignored():
+def test_dead_agents_queued_actions_ignored(start):
     sim = start(make(red=[(1, 4), (6, 6)], blue=[(3, 4), (0, 7)], mountains=[(3, 5)]))
     step(sim, [S_RIGHT, NOP], [NOP, NOP])
     step(sim, [NOP, NOP], [NOP, NOP])
@@ -228,7 +274,7 @@ def test_dead_agents_queued_actions_ignored():
     assert r.reward[0, 1] == R.valid_action  # only the living blue agent pays
 
 
-def test_base_capture_by_one_of_several_agents():
+def test_base_capture_by_one_of_several_agents(start):
     sim = start(make(red=[(7, 0), (4, 1), (1, 7)], blue=[(0, 7), (0, 6), (2, 2)]))
     r = step(sim, [NOP, UP, LEFT], [NOP, NOP, NOP])
     assert pos(r, 0, 2) == (0, 7)
@@ -238,7 +284,7 @@ def test_base_capture_by_one_of_several_agents():
     assert r.agent_reward[0, 0].tolist() == [R.valid_action + R.win] * 3
 
 
-def test_capture_and_elimination_in_same_step():
+def test_capture_and_elimination_in_same_step(start):
     # Red 0 walks onto the blue base while red 1's bullet kills both blue agents (sharing a cell):
     # red wins once, by both rules.
     sim = start(make(red=[(3, 7), (5, 3)], blue=[(5, 5), (5, 5)]))
@@ -252,14 +298,14 @@ def test_capture_and_elimination_in_same_step():
     assert r.reward[0, 1] == 2 * R.got_shot + R.loss
 
 
-def test_both_teams_capture_in_same_step_is_a_draw():
+def test_both_teams_capture_in_same_step_is_a_draw(start):
     sim = start(make(red=[(1, 7)], blue=[(6, 0)]))
     r = step(sim, [LEFT], [RIGHT])
     assert r.winner[0] == WINNER_DRAW and r.terminated[0]
     assert r.reward[0].tolist() == [R.valid_action, R.valid_action]
 
 
-def test_capture_attempt_killed_by_walk_in_hit_loses_by_elimination():
+def test_capture_attempt_killed_by_walk_in_hit_loses_by_elimination(start):
     sim = start(make(red=[(2, 7)], blue=[(0, 6)]))
     step(sim, [LEFT], [S_UP])  # blue's bullet on (0,6); red to (1,7)
     r = step(sim, [LEFT], [NOP])  # bullet -> (0,7), the blue base; red walks into it
@@ -267,7 +313,7 @@ def test_capture_attempt_killed_by_walk_in_hit_loses_by_elimination():
     assert r.winner[0] == WINNER_BLUE  # a dead agent captures nothing; red is eliminated
 
 
-def test_step_limit_truncation():
+def test_step_limit_truncation(start):
     sim = start(make(red=[(7, 0)], blue=[(0, 7)], max_steps=5))
     for k in range(4):
         r = step(sim, [NOP], [NOP])
@@ -283,7 +329,7 @@ def test_step_limit_truncation():
     assert obs[0, 0].tolist() == [7, 0, 0, 7, 0, -1, -1]
 
 
-def test_many_agents_on_one_cell():
+def test_many_agents_on_one_cell(start):
     sim = start(make(red=[(3, 1)] * 3, blue=[(3, 1)] * 3))
     r = step(sim, [UP] * 3, [UP] * 3)  # six agents share a cell, move together, no blocking
     assert all(pos(r, t, j) == (3, 2) for t in range(2) for j in range(3))
@@ -294,7 +340,7 @@ def test_many_agents_on_one_cell():
     assert r.agent_reward[0, 0, 0] == R.valid_action + 3 * R.hit_opponent + R.win
 
 
-def test_bullet_entering_a_crowded_cell_hits_every_enemy_there():
+def test_bullet_entering_a_crowded_cell_hits_every_enemy_there(start):
     sim = start(make(red=[(1, 1), (3, 1), (3, 1)], blue=[(0, 7), (3, 1), (6, 6)]))
     step(sim, [S_RIGHT, NOP, NOP], [NOP, NOP, NOP])
     step(sim, [NOP, NOP, NOP], [NOP, NOP, NOP])
@@ -307,8 +353,8 @@ def nonmarkov(red, blue, **kw) -> Scenario:
     return make(red=red, blue=blue, slow_agents=SlowAgents(red=[1], blue=[1]), **kw)
 
 
-@pytest.mark.parametrize("health", [1.0, 2.0])
-def test_slow_agent_two_step_move_interrupted_by_hit(health):
+@pytest.mark.parametrize("sim_class, health", HEALTH_ROWS)
+def test_slow_agent_two_step_move_interrupted_by_hit(start, health):
     # Blue 0 shoots right from (1,2); the bullet reaches (4,2) at step 3. Red's slow agent on (4,2)
     # starts moving up at step 2 and would arrive at step 3: the hit interrupts the move.
     sim = start(nonmarkov(red=[(7, 0), (4, 2)], blue=[(1, 2), (0, 7)], health=health))
@@ -328,7 +374,7 @@ def test_slow_agent_two_step_move_interrupted_by_hit(health):
         assert pos(r, 0, 1) == (4, 3) and not r.moving[0, 0, 1]
 
 
-def test_slow_agent_moves_take_two_steps_and_it_acts_on_even_steps_only():
+def test_slow_agent_moves_take_two_steps_and_it_acts_on_even_steps_only(start):
     sim = start(nonmarkov(red=[(7, 0), (5, 2)], blue=[(0, 7), (1, 5)]))
     r = step(sim, [LEFT, LEFT], [NOP, NOP])  # step 0: both set off
     assert pos(r, 0, 0) == (6, 0) and pos(r, 0, 1) == (5, 2) and r.moving[0, 0, 1]
@@ -349,7 +395,7 @@ def test_slow_agent_moves_take_two_steps_and_it_acts_on_even_steps_only():
     assert r.agent_reward[0, 0, 1] == R.unsafe
 
 
-def test_slow_agent_arriving_on_a_bullet_is_hit():
+def test_slow_agent_arriving_on_a_bullet_is_hit(start):
     # The arrival is a move: arriving on a cell that holds an enemy bullet is a walk-in hit.
     sim = start(nonmarkov(red=[(4, 4), (7, 0)], blue=[(0, 7), (3, 3)]))
     r = step(sim, [S_DOWN, NOP], [NOP, RIGHT])  # red bullet on (4,4), heading down; blue slow sets off
@@ -359,18 +405,21 @@ def test_slow_agent_arriving_on_a_bullet_is_hit():
     assert r.hits_made[0, 0, 0] == 1 and bullets(r, 0) == []
 
 
-def test_slow_agent_hit_as_it_sets_off_does_not_move():
-    sim = start(nonmarkov(red=[(7, 0), (4, 2)], blue=[(0, 7), (4, 2)], health=2.0))
+@pytest.mark.parametrize("sim_class, health", HEALTH_ROWS)
+def test_slow_agent_hit_as_it_sets_off_does_not_move(start, health):
+    # With health 2 it survives the hit and stays; with health 1 it dies where it stood.
+    sim = start(nonmarkov(red=[(7, 0), (4, 2)], blue=[(0, 7), (4, 2)], health=health))
     r = step(sim, [NOP, UP], [NOP, S_LEFT])  # point blank on its cell as it leaves
     assert r.hits_taken[0, 0, 1] == 1 and not r.moving[0, 0, 1]
+    assert (r.move_dest[0, 0, 1] == -1).all() and r.alive[0, 0, 1] == (health == 2.0)
     r = step(sim, [NOP, NOP], [NOP, NOP])
-    assert pos(r, 0, 1) == (4, 2)
+    assert pos(r, 0, 1) == (4, 2) and not r.moving[0, 0, 1]
 
 
 # ----------------------------------------------------------------------------------------------------
 # Other rules of the step
 # ----------------------------------------------------------------------------------------------------
-def test_unsafe_moves_are_shielded_and_penalised():
+def test_unsafe_moves_are_shielded_and_penalised(start):
     sim = start(make(red=[(7, 1)], blue=[(0, 6)], mountains=[(6, 1)]))
     r = step(sim, [LEFT], [LEFT])  # into a mountain; off the map
     assert pos(r, 0) == (7, 1) and pos(r, 1) == (0, 6)
@@ -380,7 +429,22 @@ def test_unsafe_moves_are_shielded_and_penalised():
     assert r.unsafe[0, 0, 0] and r.reward[0, 1] == R.valid_action
 
 
-def test_actions_outside_the_scenario_are_rejected():
+def test_rulesim_refuses_damage_below_health():
+    # The rule program models one-hit kills: a scenario needing several hits is refused up front.
+    for health, damage in ((2.0, 1.0), (1.0, 0.5)):
+        with pytest.raises(ValueError, match="one-hit kills"):
+            RuleSim(make(red=[(7, 0)], blue=[(0, 7)], health=health, damage=damage))
+
+
+def test_damage_above_health_kills_with_one_hit(start):
+    # damage > health is allowed in both simulators: health goes to exactly 0, not below.
+    sim = start(make(red=[(3, 1)], blue=[(3, 1)], health=2.0, damage=3.0))
+    r = step(sim, [S_UP], [NOP])
+    assert r.health[0].tolist() == [[2.0], [0.0]] and r.alive[0].tolist() == [[True], [False]]
+    assert r.winner[0] == WINNER_RED
+
+
+def test_actions_outside_the_scenario_are_rejected(start):
     sim = start(make(red=[(7, 0)], blue=[(0, 7)], advanced=False))
     with pytest.raises(ValueError, match="action 4 of red agent 0"):
         step(sim, [S_UP], [NOP])
@@ -389,9 +453,11 @@ def test_actions_outside_the_scenario_are_rejected():
     assert sim.state.t[0] == 0  # nothing happened
     with pytest.raises(ValueError, match="shape"):
         sim.step(np.zeros((1, 2), int), np.zeros((1, 1), int))
+    r = step(sim, [UP], [NOP])  # and the game goes on as if the bad calls never came
+    assert r.t[0] == 1 and pos(r, 0) == (7, 1) and pos(r, 1) == (0, 7) and not r.unsafe.any()
 
 
-def test_rewards_are_configurable():
+def test_rewards_are_configurable(start):
     from tracelab.scenario import Rewards
     sim = start(make(red=[(3, 1)], blue=[(3, 1)], rewards=Rewards(hit_opponent=1, got_shot=-3, valid_action=0,
                                                                    win=10, loss=-20)))
@@ -399,7 +465,7 @@ def test_rewards_are_configurable():
     assert r.reward[0].tolist() == [1 + 10, -3 - 20]
 
 
-def test_observations_layout_and_sentinels():
+def test_observations_layout_and_sentinels(start):
     sim = start(make(red=[(6, 1), (5, 5)], blue=[(1, 6), (6, 4)]))
     obs = observe(sim.state, "red", sim.scenario)
     assert obs.shape == (1, 14) == (1, obs_size(sim.scenario))
@@ -434,16 +500,15 @@ def test_nearest_bullet_ties_go_to_the_lowest_slot():
     assert observe(state, "red", sc, history=np.zeros((1, 7)))[0, 7:].tolist() == [0] * 7
 
 
-def test_base_observation_has_four_numbers_per_agent():
+def test_base_observation_has_four_numbers_per_agent(start):
     s = builtin_scenario("base")
-    sim = RefSim(s)
-    obs = sim.reset()
+    obs = start(s).reset()
     assert obs.shape == (1, 2, 4)
     assert obs[0, 0].tolist() == [7, 0, 0, 7] and obs[0, 1].tolist() == [0, 7, 7, 0]
 
 
-def test_non_markov_observation_appends_previous():
-    sim = RefSim(builtin_scenario("nonmarkov"), stack_previous=True)
+def test_non_markov_observation_appends_previous(start):
+    sim = start(builtin_scenario("nonmarkov"), stack_previous=True)
     obs0 = sim.reset()
     assert obs0.shape == (1, 2, 28) and sim.obs_size == 28
     assert np.array_equal(obs0[..., :14], obs0[..., 14:])  # at reset the previous is the current
@@ -471,30 +536,34 @@ def rollout_actions(scenario: Scenario, n_worlds: int, steps: int, seed: int) ->
     return out
 
 
-def test_batched_worlds_match_single_worlds():
+def test_batched_worlds_match_single_worlds(sim_class):
     scenario = generate_scenario(10, 10, 3, 0.15, seed=3, advanced=True)
-    n_worlds, steps = 12, 40
+    n_worlds = 12 if sim_class is RefSim else 4  # a RuleSim instance costs an engine build
+    steps = 40
     acts = rollout_actions(scenario, n_worlds, steps, seed=5)
-    batch = RefSim(scenario, n_worlds)
+    batch = sim_class(scenario, n_worlds)
     batch.reset()
-    singles = [RefSim(scenario) for _ in range(n_worlds)]
+    singles = [sim_class(scenario) for _ in range(n_worlds)]
     for s in singles:
         s.reset()
     for red, blue in acts:
         rb = batch.step(red, blue)
         for w, s in enumerate(singles):
             rs = s.step(red[w:w + 1], blue[w:w + 1])
-            for name in ("obs", "positions", "health", "ammo", "alive", "bullet_pos", "bullet_dir", "unsafe",
-                         "invalid", "hits_made", "hits_taken", "agent_reward", "reward", "terminated",
-                         "truncated", "winner", "t"):
+            for name in ("obs", "positions", "health", "ammo", "alive", "moving", "move_dest", "bullet_pos",
+                         "bullet_dir", "unsafe", "invalid", "hits_made", "hits_taken", "agent_reward", "reward",
+                         "terminated", "truncated", "winner", "t"):
                 assert np.array_equal(getattr(rb, name)[w], getattr(rs, name)[0]), (name, w)
     assert rb.hits_made.sum() >= 0 and batch.state.ammo.sum() < 2 * 3 * 3 * n_worlds  # shots happened
 
 
-def test_random_rollouts_keep_the_invariants():
-    scenario = generate_scenario(12, 12, 5, 0.2, seed=11, advanced=True)
+def test_random_rollouts_keep_the_invariants(sim_class):
+    # RuleSim on a smaller game: grounding 12x12 with 5 agents a team takes seconds.
+    big = sim_class is RefSim
+    scenario = generate_scenario(*((12, 12, 5) if big else (8, 8, 3)), 0.2, seed=11, advanced=True)
+    n_worlds = 64 if big else 16
     grid = scenario.mountain_grid
-    sim = RefSim(scenario, 64, seed=2)
+    sim = sim_class(scenario, n_worlds, seed=2)
     sim.reset()
     ends = 0
     for _ in range(300):
@@ -505,7 +574,7 @@ def test_random_rollouts_keep_the_invariants():
         live = r.bullet_live
         assert not grid[r.bullet_pos[live][:, 0], r.bullet_pos[live][:, 1]].any()
         # No living agent ever ends a step on a cell with an enemy bullet.
-        for w in range(64):
+        for w in range(n_worlds):
             for b in np.flatnonzero(live[w]):
                 enemy = 1 - r.bullet_owner[b, 0]
                 on_cell = (r.positions[w, enemy] == r.bullet_pos[w, b]).all(axis=1) & r.alive[w, enemy]
@@ -522,9 +591,8 @@ def test_random_rollouts_keep_the_invariants():
     assert ends > 20
 
 
-def test_reset_selected_worlds_only():
-    sim = RefSim(builtin_scenario("base"), 3)
-    sim.reset()
+def test_reset_selected_worlds_only(start):
+    sim = start(builtin_scenario("base"), 3)
     step_all = lambda a: sim.step(np.full((3, 1), a), np.full((3, 1), 8))  # noqa: E731
     step_all(UP)
     obs = sim.reset(worlds=np.array([False, True, False]))
@@ -637,9 +705,8 @@ def test_scripted_policy_is_reproducible_and_draws_a_fixed_amount():
     assert np.array_equal(a(*st1), b(*st1))
 
 
-def test_scripted_blue_beats_an_idle_red_in_the_base_game():
-    sim = RefSim(builtin_scenario("base"), 64, seed=0)
-    sim.reset()
+def test_scripted_blue_beats_an_idle_red_in_the_base_game(start):
+    sim = start(builtin_scenario("base"), 64, seed=0)
     for _ in range(200):
         r = sim.step(np.full((64, 1), NOP), sim.scripted_actions("blue"))
     assert (r.winner == WINNER_BLUE).mean() > 0.95

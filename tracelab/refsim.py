@@ -484,6 +484,7 @@ class RefSim:
         acts = np.stack([self._actions("red_actions", red_actions),
                          self._actions("blue_actions", blue_actions)], axis=1)
         s = self.state
+        finished_before = s.terminated | s.truncated
         n_worlds, n = self._shape
         unsafe = np.zeros((n_worlds, 2, n), dtype=bool)
         invalid = np.zeros((n_worlds, 2, n), dtype=bool)
@@ -502,6 +503,9 @@ class RefSim:
                              f"not offered by scenario {self.scenario.name!r} (ids {self.scenario.action_ids})")
         cur = self._current_obs()
         obs = self._with_history(cur, self._cur)
+        finished = finished_before  # a finished world's observation stays as it was, history included
+        cur[finished] = self._cur[finished]
+        obs[finished] = self._obs[finished]
         self._cur, self._obs = cur, obs
         return StepResult(
             obs=obs, positions=s.pos.copy(), health=s.health.copy(), ammo=s.ammo.copy(),
