@@ -25,11 +25,6 @@ from tracelab.scenario import (Rewards, Scenario, ScenarioError, SlowAgents, bui
 
 FIELDS = [f.name for f in dataclasses.fields(StepResult)]
 UP, LEFT, S_UP, S_RIGHT, NOP = 0, 2, 4, 7, 8
-# Known disagreement, reported and not fixed here: with stack_previous, a step sent to a finished world
-# (before its reset) changes the history half of RefSim's observation but not RuleSim's. While True,
-# the differential test compares only the current half there; test_history_of_a_finished_world_stepped_again
-# pins the disagreement (strict xfail) so that fixing either simulator shows up.
-KNOWN_HISTORY_OF_FINISHED_WORLDS = False
 # Integer rewards, all different, so that a term counted under the wrong event cannot go unseen (the
 # method's values have unsafe == got_shot) and sums are exact whatever their order.
 DISTINCT_REWARDS = Rewards(win=1000, loss=-3000, hit_opponent=70, got_shot=-11, valid_action=-2,
@@ -126,12 +121,6 @@ def assert_same_result(step_no: int, ref: StepResult, rule: StepResult, finished
     """All fields equal; `finished`: worlds that were already over before this step."""
     for name in FIELDS:
         a, b = getattr(ref, name), getattr(rule, name)
-        if name == "obs" and stack_previous and KNOWN_HISTORY_OF_FINISHED_WORLDS and finished.any():
-            # Known disagreement (test_history_of_a_finished_world_stepped_again): compare only the
-            # current half of a finished world's stacked observation.
-            half = a.shape[-1] // 2
-            a, b = a.copy(), b.copy()
-            a[finished, :, half:] = b[finished, :, half:] = 0
         assert_same_arrays(f"step {step_no}: {name}", a, b)
 
 
@@ -184,8 +173,6 @@ def run_side_by_side(plan: Plan) -> tuple[int, int]:
     # the observation each simulator hands out now (obs of the last step or reset)
     for team in ("red", "blue"):
         a, b = (s.observe(team) for s in sims)
-        if plan.stack_previous and KNOWN_HISTORY_OF_FINISHED_WORLDS:  # as in assert_same_result
-            a[stepped_when_over, a.shape[-1] // 2:] = b[stepped_when_over, b.shape[-1] // 2:] = 0
         assert_same_arrays(f"final observe({team})", a, b)
     return ended, hits
 
