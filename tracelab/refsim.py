@@ -19,8 +19,8 @@ from dataclasses import dataclass, fields
 import numpy as np
 from numba import njit
 
-from .opponent import scripted_actions
 from .scenario import Scenario, team_index
+from .sim_base import GameSim
 
 WINNER_NONE, WINNER_RED, WINNER_BLUE, WINNER_DRAW = -1, 0, 1, 2
 WINNER_NAMES = {WINNER_NONE: "none", WINNER_RED: "red", WINNER_BLUE: "blue", WINNER_DRAW: "draw"}
@@ -411,7 +411,7 @@ def observe(state: GameState, team: int | str, scenario: Scenario,
 # ----------------------------------------------------------------------------------------------------
 # The simulator
 # ----------------------------------------------------------------------------------------------------
-class RefSim:
+class RefSim(GameSim):
     """The game in `n_worlds` independent worlds, stepped together.
 
     The dynamics are deterministic; `seed` drives `rng`, used by `scripted_actions()` (the scripted
@@ -421,13 +421,7 @@ class RefSim:
 
     def __init__(self, scenario: Scenario, n_worlds: int = 1, seed: int | None = None,
                  stack_previous: bool = False):
-        if n_worlds < 1:
-            raise ValueError(f"n_worlds must be at least 1, got {n_worlds}")
-        self.scenario = scenario
-        self.n_worlds = n_worlds
-        self.stack_previous = stack_previous
-        self.rng = np.random.default_rng(seed)
-        self.obs_size = obs_size(scenario, stack_previous)
+        super().__init__(scenario, n_worlds, seed, stack_previous)
         n = scenario.agents_per_team
         self._allowed = np.zeros(9, dtype=bool)
         self._allowed[list(scenario.action_ids)] = True
@@ -461,14 +455,7 @@ class RefSim:
         return obs.copy()
 
     def _current_obs(self) -> np.ndarray:
-        return np.stack([observe(self.state, t, self.scenario) for t in (0, 1)], axis=1)
-
-    def _with_history(self, cur: np.ndarray, prev: np.ndarray) -> np.ndarray:
-        return np.concatenate([cur, prev], axis=2) if self.stack_previous else cur
-
-    def observe(self, team: int | str) -> np.ndarray:
-        """The last observation of one team (from reset or step), [W, D]."""
-        return self._obs[:, team_index(team)].copy()
+        return self._observe_both(self.state)
 
     def _actions(self, name: str, actions: np.ndarray) -> np.ndarray:
         a = np.asarray(actions, dtype=np.int64)
@@ -514,8 +501,3 @@ class RefSim:
             invalid=invalid, hits_made=hits_made, hits_taken=hits_taken, agent_reward=agent_reward,
             reward=reward, terminated=s.terminated.copy(), truncated=s.truncated.copy(),
             winner=s.winner.copy(), t=s.t.copy())
-
-    def scripted_actions(self, team: int | str = "blue") -> np.ndarray:
-        """The scripted policy's actions for `team` in the current state, drawn from `self.rng`."""
-        s = self.state
-        return scripted_actions(s.pos, s.alive, s.ammo, team, self.scenario, self.rng)

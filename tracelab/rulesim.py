@@ -10,26 +10,19 @@ import numpy as np
 
 from tracelab.engine import Engine
 from tracelab.game_facts import DIRECTIONS, agent_name, bullet_name, scenario_program
-from tracelab.opponent import scripted_actions
 from tracelab.rulesim_kernel import encode_actions, read_back, settle_step
-from tracelab.refsim import (WINNER_BLUE, WINNER_DRAW, WINNER_NONE, WINNER_RED, GameState, StepResult,
-                             obs_size, observe)
-from tracelab.scenario import NOTHING, TEAMS, Scenario, team_index
+from tracelab.refsim import WINNER_NONE, GameState, StepResult
+from tracelab.scenario import NOTHING, TEAMS, Scenario
+from tracelab.sim_base import GameSim
 
 
-class RuleSim:
+class RuleSim(GameSim):
     """`n_worlds` games stepped together by one engine call per step. `trace` turns the engine's change
     log on (for all worlds, or a bool per world); take it with `self.engine.take_trace()`."""
 
     def __init__(self, scenario: Scenario, n_worlds: int = 1, seed: int | None = None,
                  stack_previous: bool = False, trace: bool | np.ndarray = False) -> None:
-        if n_worlds < 1:
-            raise ValueError(f"n_worlds must be at least 1, got {n_worlds}")
-        self.scenario = scenario
-        self.n_worlds = n_worlds
-        self.stack_previous = stack_previous
-        self.rng = np.random.default_rng(seed)
-        self.obs_size = obs_size(scenario, stack_previous)
+        super().__init__(scenario, n_worlds, seed, stack_previous)
         self.engine = Engine(scenario_program(scenario), worlds=n_worlds, trace=trace)
         self._index_atoms()
         # t = 0 sets up the start; every action atom starts false, so the rules are grounded for them
@@ -141,16 +134,7 @@ class RuleSim:
             terminated=self.terminated.copy(), truncated=self.truncated.copy(), winner=self.winner.copy(),
             bullet_team=self._bullet_team.astype(np.int8), bullet_agent=self._bullet_agent.astype(np.int16))
 
-    def _observe_both(self, state: GameState) -> np.ndarray:
-        return np.stack([observe(state, t, self.scenario) for t in (0, 1)], axis=1)
-
-    def _with_history(self, cur: np.ndarray, prev: np.ndarray) -> np.ndarray:
-        return np.concatenate([cur, prev], axis=2) if self.stack_previous else cur
-
     # ---- the RefSim API ----
-
-    def observe(self, team: int | str) -> np.ndarray:
-        return self._obs[:, team_index(team)].copy()
 
     def reset(self, seed: int | None = None, worlds: np.ndarray | None = None) -> np.ndarray:
         """Start new episodes in all worlds (or those of a mask / index array); observations [W, 2, D]."""
@@ -269,7 +253,3 @@ class RuleSim:
             raise ValueError(f"action {a[w, j]} of {name[:-8]} agent {j} in world {w} is not offered by "
                              f"scenario {self.scenario.name!r} (ids {self.scenario.action_ids})")
         return a.copy()
-
-    def scripted_actions(self, team: int | str = "blue") -> np.ndarray:
-        s = self.state
-        return scripted_actions(s.pos, s.alive, s.ammo, team, self.scenario, self.rng)
