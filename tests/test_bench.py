@@ -1,0 +1,92 @@
+"""`tracelab bench` through `tracelab.cli.main`: the quick runs produce the documented JSON keys with
+positive measurements. Nothing here asserts a speed: figures come from the benchmarks themselves
+(docs/benchmarks.md)."""
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import pytest
+
+from tracelab.bench.common import format_table, median_of, summarize
+from tracelab.cli import main
+from tracelab.engine import STAT_NAMES
+
+
+def bench_json(capsys: pytest.CaptureFixture, *argv: str) -> dict[str, Any]:
+    assert main(["bench", *argv, "--quick", "--json"]) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def positive(summary: dict[str, Any]) -> None:
+    assert set(summary) == {"median", "min", "max", "spread", "runs"}
+    assert summary["runs"] and all(v > 0 for v in summary["runs"])
+    assert 0 < summary["min"] <= summary["median"] <= summary["max"]
+    assert summary["spread"] >= 0
+
+
+def machine(info: dict[str, Any]) -> None:
+    assert info["cores"] >= 1 and len(info["load_average"]) == 3
+    assert info["versions"]["numba"] and info["versions"]["numpy"]
+
+
+def test_bench_engine_quick(capsys: pytest.CaptureFixture) -> None:
+    r = bench_json(capsys, "engine")
+    machine(r["machine"])
+    assert r["quick"] is True and r["repeats"] == 5
+    assert "skipped" in r["first_compile"]  # --quick compiles cold only when asked to
+    warm = r["warm_start"]
+    for key in ("game_to_first_step_s", "game_build_and_first_step_s", "other_program_to_first_step_s",
+                "other_program_after_game_s", "rulesim_to_first_step_s"):
+        positive(warm[key])
+    assert warm["step_worlds_signatures"] == 1 and warm["one_signature"] is True  # no recompile
+    assert [(s["agents"], s["trace"]) for s in r["steps"]] == [(1, True), (1, False), (2, True), (2, False)]
+    for s in r["steps"]:
+        assert s["worlds"] == 1 and s["steps_per_repeat"] >= 3
+        assert s["atoms"] > 0 and s["groundings"] > 0 and s["build_s"] > 0
+        positive(s["steps_per_s"])
+        positive(s["engine_s_per_step"])
+        assert 0 < s["engine_share"]
+        assert set(s["stats_per_step"]) == set(STAT_NAMES)
+        assert s["stats_per_step"]["firings"] > 0 and s["stats_per_step"]["changes"] > 0
+    mem = r["memory"]
+    assert mem["steps"] == 5_000 and [x["step"] for x in mem["samples"]] == list(range(0, 5_001, 500))
+    assert all(x["rss_mb"] > 0 for x in mem["samples"]) and isinstance(mem["grew"], bool)
+    ref = r["reference"]
+    assert ref["reference_s_per_step"] == 0.8 and ref["goal_steps_per_s"] == 20_000
+    assert ref["speedup"] == pytest.approx(ref["steps_per_s"] * 0.8) and ref["speedup"] > 0
+    assert isinstance(ref["goal_met"], bool)
+
+
+def test_bench_env_quick(capsys: pytest.CaptureFixture) -> None:
+    r = bench_json(capsys, "env")
+    machine(r["machine"])
+    assert r["batched_worlds"] == 16
+    assert [(s["agents"], s["worlds"]) for s in r["sims"]] == [(1, 1), (1, 16), (2, 1), (2, 16)]
+    for s in r["sims"]:
+        for key in ("reference", "rules_trace_off", "rules_trace_on"):
+            positive(s[key]["steps_per_s"])
+            positive(s[key]["env_steps_per_s"])
+            assert s[key]["env_steps_per_s"]["median"] == pytest.approx(
+                s[key]["steps_per_s"]["median"] * s["worlds"])
+        assert s["rules_trace_on"]["trace"] and not s["rules_trace_off"]["trace"]
+        assert s["rules_over_reference"] > 0 and s["rules_traced_over_reference"] > 0
+    assert len(r["goals"]) == 3
+    for g in r["goals"]:
+        assert g["measured"] > 0 and isinstance(g["met"], bool) and g["target"]
+    gym = r["gym"]
+    if "skipped" not in gym:
+        assert [(x["backend"], x["kind"]) for x in gym["rows"]] == [
+            ("rules", "single"), ("rules", "vector"), ("reference", "single"), ("reference", "vector")]
+        for x in gym["rows"]:
+            positive(x["steps_per_s"])
+
+
+def test_bench_helpers() -> None:
+    s = summarize([3.0, 1.0, 2.0])
+    assert (s.median, s.min, s.max, s.spread) == (2.0, 1.0, 3.0, 1.0)
+    calls = []
+    t = median_of(lambda: calls.append(1), 4)
+    assert len(calls) == 4 and len(t.runs) == 4 and t.min >= 0
+    lines = format_table(["name", "n"], [["a", 1234567], ["bb", 0.5]]).splitlines()
+    assert lines[0].split() == ["name", "n"] and lines[2].endswith("1,234,567") and lines[3].endswith("0.5")

@@ -1,0 +1,154 @@
+"""What every benchmark shares: a median-of-repeats timer, summaries with their spread, calibrated step
+blocks, a record of the machine (cores, load, versions) and an aligned text table."""
+from __future__ import annotations
+
+import os
+import platform
+import statistics
+import subprocess
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+
+@dataclass(frozen=True)
+class Summary:
+    """Repeated measurements of one figure: the median, the extremes and the spread ((max-min)/median)."""
+    median: float
+    min: float
+    max: float
+    spread: float
+    runs: list[float]
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def summarize(values: Sequence[float]) -> Summary:
+    """The Summary of `values` (at least one)."""
+    if not values:
+        raise ValueError("summarize needs at least one value")
+    vals = [float(v) for v in values]
+    med = statistics.median(vals)
+    spread = (max(vals) - min(vals)) / med if med > 0 else 0.0
+    return Summary(med, min(vals), max(vals), spread, vals)
+
+
+def median_of(fn: Callable[[], object], repeats: int) -> Summary:
+    """Call `fn` `repeats` times; the Summary of its wall-clock durations in seconds."""
+    times = []
+    for _ in range(max(1, repeats)):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return summarize(times)
+
+
+def rates(durations: Summary, units: float) -> Summary:
+    """`units` per second for each duration of `durations` (e.g. steps/s from seconds per block)."""
+    return summarize([units / d for d in durations.runs])
+
+
+def calibrate(run: Callable[[int], object], target_s: float, min_units: int = 3,
+              max_units: int = 1_000_000) -> int:
+    """How many units (steps) make one timed block of about `target_s` seconds. Runs `run(k)` for growing
+    k until a block takes a tenth of the target; doubles as the warm-up of what is measured."""
+    k = 1
+    while True:
+        t0 = time.perf_counter()
+        run(k)
+        dt = time.perf_counter() - t0
+        if dt >= target_s / 10 or k >= max_units:
+            break
+        k *= 4
+    return int(min(max_units, max(min_units, k * target_s / max(dt, 1e-9))))
+
+
+def rss_bytes() -> int:
+    """This process's resident set size."""
+    import psutil
+    return int(psutil.Process().memory_info().rss)
+
+
+def _version(dist: str) -> str | None:
+    try:
+        return metadata.version(dist)
+    except metadata.PackageNotFoundError:
+        return None
+
+
+def _cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def _git_commit() -> str | None:
+    root = Path(__file__).resolve().parents[2]
+    try:
+        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True,
+                             text=True, timeout=5)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout.strip() or None
+
+
+def load_average() -> list[float]:
+    """The 1, 5 and 15 minute load averages (empty where the platform has none)."""
+    try:
+        return [round(x, 2) for x in os.getloadavg()]
+    except OSError:
+        return []
+
+
+def machine_info() -> dict[str, Any]:
+    """Where the figures were taken: cores, load, memory, CPU, versions, the commit."""
+    import psutil
+    affinity = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return {
+        "cores": os.cpu_count(), "usable_cores": affinity, "load_average": load_average(),
+        "memory_gb": round(psutil.virtual_memory().total / 2**30, 1), "cpu": _cpu_model(),
+        "platform": platform.platform(), "python": platform.python_version(),
+        "versions": {d: _version(d) for d in ("tracelab", "numpy", "numba", "duckdb", "gymnasium")},
+        "numba_cache_dir": os.environ.get("NUMBA_CACHE_DIR"), "commit": _git_commit(),
+        "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
+
+
+def fmt_num(v: float | int | None, digits: int = 3) -> str:
+    """A number for a table: thousands separators for large values, `digits` significant figures else."""
+    if v is None:
+        return "-"
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if isinstance(v, int) or abs(v) >= 1000:
+        return f"{v:,.0f}"
+    return f"{v:.{digits}g}"
+
+
+def format_table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
+    """An aligned text table: numbers right-aligned (formatted by fmt_num), text left-aligned."""
+    cells = [[c if isinstance(c, str) else fmt_num(c) for c in r] for r in rows]
+    numeric = [all(not isinstance(r[i], str) for r in rows) if rows else False for i in range(len(headers))]
+    widths = [max([len(h), *(len(r[i]) for r in cells)]) for i, h in enumerate(headers)]
+
+    def line(vals: Sequence[str]) -> str:
+        return "  ".join(v.rjust(w) if num else v.ljust(w)
+                         for v, w, num in zip(vals, widths, numeric)).rstrip()
+
+    return "\n".join([line(headers), "  ".join("-" * w for w in widths), *(line(r) for r in cells)])
+
+
+def block_rates(run: Callable[[int], object], repeats: int, target_s: float) -> dict[str, Any]:
+    """Units/s of `run(k)` (k units per call): a calibrated block size, then `repeats` timed blocks."""
+    block = calibrate(run, target_s)
+    run(block)  # warm-up at full size
+    return {"steps_per_repeat": block, "steps_per_s": rates(median_of(lambda: run(block), repeats),
+                                                             block).to_dict()}

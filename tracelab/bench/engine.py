@@ -1,0 +1,232 @@
+"""`tracelab bench engine`: what the engine costs before and while it runs.
+
+(a) first-ever compile: a fresh process with NUMBA_CACHE_DIR on an empty directory builds an Engine on
+    the game program and runs its first step; (b) warm start: fresh processes with the normal cache,
+    from process start to the first step, for the game program, for another rule file (no recompile:
+    one compiled signature serves both) and for a RuleSim; (c) RuleSim steps/s by team size, tracing on
+    and off, with the time inside engine.step() and the engine's work counters; (d) resident memory
+    over a long traced run. Figures: docs/benchmarks.md."""
+from __future__ import annotations
+
+import gc
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from typing import IO, Any
+
+from tracelab import RULES_DIR
+from tracelab.bench.common import format_table, fmt_num, machine_info, rss_bytes, summarize
+
+REFERENCE_S_PER_STEP = 0.8  # the method's reference system: ~0.8 s per step
+GOAL_STEPS_PER_S = 20_000  # single 1v1 world, tracing on
+OTHER_PROGRAM = str(RULES_DIR / "examples" / "reach.rules")
+MEMORY_TOLERANCE_MB = 2.0  # RSS growth after warm-up above this counts as growth
+
+
+class Probe:
+    """One run of `python -m tracelab.bench.probe TARGET...`, started at once; result() waits for it and
+    returns its JSON lines, each with `since_start_s`: seconds from spawning the process to the line."""
+
+    def __init__(self, targets: list[str], cache_dir: str | None = None, timeout_s: float = 1800) -> None:
+        env = dict(os.environ)
+        if cache_dir is not None:
+            env["NUMBA_CACHE_DIR"] = cache_dir
+        self.timeout_s = timeout_s
+        self._err: IO[str] = tempfile.TemporaryFile("w+")
+        self._t0 = time.perf_counter()
+        self.proc = subprocess.Popen([sys.executable, "-m", "tracelab.bench.probe", *targets], env=env,
+                                     stdout=subprocess.PIPE, stderr=self._err, text=True)
+
+    def result(self) -> list[dict[str, Any]]:
+        lines = []
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:  # timestamped as each line arrives
+            rec = json.loads(line)
+            rec["since_start_s"] = time.perf_counter() - self._t0
+            lines.append(rec)
+        code = self.proc.wait(timeout=self.timeout_s)
+        self._err.seek(0)
+        err = self._err.read()
+        self._err.close()
+        if code != 0:
+            raise RuntimeError(f"bench probe failed (exit {code}):\n{err[-2000:]}")
+        return lines
+
+
+class ColdCompile:
+    """(a) The first-ever compile, `repeats` times, each in a fresh process on an empty cache directory.
+    start() launches the first process, so it can overlap other work (--quick does this)."""
+
+    def __init__(self, repeats: int) -> None:
+        self.repeats = max(1, repeats)
+        self._tmp: tempfile.TemporaryDirectory[str] | None = None
+        self._probe: Probe | None = None
+
+    def start(self) -> "ColdCompile":
+        self._tmp = tempfile.TemporaryDirectory(prefix="tracelab-bench-numba-")
+        self._probe = Probe(["game"], cache_dir=self._tmp.name)
+        return self
+
+    def result(self) -> dict[str, Any]:
+        runs = []
+        for i in range(self.repeats):
+            if self._probe is None:
+                self.start()
+            assert self._probe is not None and self._tmp is not None
+            try:
+                runs.append(self._probe.result()[0])
+            finally:
+                self._tmp.cleanup()
+                self._probe = None
+        return {"program": "game rules + advanced scenario", "runs": len(runs),
+                "build_and_first_step_s": summarize([r["build_s"] + r["step_s"] for r in runs]).to_dict(),
+                "process_to_first_step_s": summarize([r["since_start_s"] for r in runs]).to_dict()}
+
+
+def warm_start(repeats: int) -> dict[str, Any]:
+    """(b) Fresh processes with the normal cache: process start to first step for the game program, for
+    another rule file alone, and for a RuleSim; the second program's build and step in a process that ran
+    the game first; the compiled signatures of step_worlds after both."""
+    Probe(["game", "rulesim"]).result()  # fill the cache if a source changed since it was written
+    game, second, other, rulesim, build, signatures = [], [], [], [], [], []
+    for _ in range(max(1, repeats)):
+        both = Probe(["game", OTHER_PROGRAM]).result()
+        game.append(both[0]["since_start_s"])
+        build.append(both[0]["build_s"] + both[0]["step_s"])
+        second.append(both[1]["build_s"] + both[1]["step_s"])
+        signatures.append(both[2]["signatures"])
+        other.append(Probe([OTHER_PROGRAM]).result()[0]["since_start_s"])
+        rulesim.append(Probe(["rulesim"]).result()[0]["since_start_s"])
+    return {"game_to_first_step_s": summarize(game).to_dict(),
+            "game_build_and_first_step_s": summarize(build).to_dict(),
+            "other_program": os.path.relpath(OTHER_PROGRAM, RULES_DIR.parent),
+            "other_program_to_first_step_s": summarize(other).to_dict(),
+            "other_program_after_game_s": summarize(second).to_dict(),
+            "rulesim_to_first_step_s": summarize(rulesim).to_dict(),
+            "step_worlds_signatures": max(signatures), "one_signature": max(signatures) == 1}
+
+
+def step_rates(agents: list[int], repeats: int, target_s: float) -> list[dict[str, Any]]:
+    """(c) RuleSim steps/s for each team size, one world, tracing on and off."""
+    from tracelab.bench.sims import get_sim, measure
+    rows = []
+    for n in agents:
+        sim, build_s = get_sim("rules", n, 1)
+        for trace in (True, False):
+            row = measure(sim, trace, repeats, target_s)
+            row["build_s"] = build_s
+            row["atoms"] = int(sim.engine.lower.shape[1])
+            row["groundings"] = len(sim.engine.groundings.rule)
+            rows.append(row)
+    return rows
+
+
+def memory(steps: int) -> dict[str, Any]:
+    """(d) RSS of this process every 10% of a `steps`-step traced 1v1 run (trace drained every step)."""
+    from tracelab.bench.sims import Loop, scenario_for
+    from tracelab.rulesim import RuleSim
+    loop = Loop(RuleSim(scenario_for(1), 1, seed=0, trace=True), trace=True)
+    gc.collect()
+    marks = [round(i * steps / 10) for i in range(11)]
+    samples = [{"step": 0, "rss_mb": rss_bytes() / 2**20}]
+    for a, b in zip(marks, marks[1:]):
+        loop.run(b - a)
+        samples.append({"step": b, "rss_mb": rss_bytes() / 2**20})
+    warm = samples[1]["rss_mb"]  # after the first 10%: buffers have reached their working size
+    growth = samples[-1]["rss_mb"] - warm
+    peak_growth = max(s["rss_mb"] for s in samples[1:]) - warm
+    return {"steps": steps, "samples": samples, "warmup_steps": marks[1], "growth_after_warmup_mb": growth,
+            "peak_growth_after_warmup_mb": peak_growth, "tolerance_mb": MEMORY_TOLERANCE_MB,
+            "grew": peak_growth > MEMORY_TOLERANCE_MB}
+
+
+def reference_figure(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """The 1v1 traced steps/s against the reference system's 0.8 s/step and the 20,000 steps/s goal."""
+    row = next(r for r in rows if r["agents"] == 1 and r["trace"])
+    rate = row["steps_per_s"]["median"]
+    return {"reference_s_per_step": REFERENCE_S_PER_STEP, "steps_per_s": rate,
+            "speedup": rate * REFERENCE_S_PER_STEP, "goal_steps_per_s": GOAL_STEPS_PER_S,
+            "goal_met": rate >= GOAL_STEPS_PER_S}
+
+
+def run(quick: bool = False, repeats: int = 5, compile_repeats: int | None = None,
+        agents: list[int] | None = None) -> dict[str, Any]:
+    """Every engine figure. --quick: small sizes, one process per start-up figure, and no first-ever
+    compile unless `compile_repeats` asks for it (it then overlaps the in-process work, so its figure is
+    only a smoke value)."""
+    info = machine_info()
+    n_compiles = (compile_repeats or 0) if quick else (compile_repeats or min(repeats, 3))
+    cold = ColdCompile(n_compiles) if n_compiles else None
+    compiled: dict[str, Any] = {"skipped": "--quick (a compile takes 30-70 s here); add --compile-repeats 1"}
+    if cold and quick:
+        cold.start()
+    elif cold:
+        compiled = cold.result()
+    mem = memory(5_000 if quick else 100_000)
+    rows = step_rates(agents or ([1, 2] if quick else [1, 5, 20]), repeats, 0.1 if quick else 1.0)
+    if cold and quick:
+        compiled = cold.result()
+    if cold:
+        compiled["overlapped"] = quick
+    warm = warm_start(1 if quick else repeats)
+    info["load_average_end"] = machine_info()["load_average"]
+    return {"machine": info, "quick": quick, "repeats": repeats, "first_compile": compiled,
+            "warm_start": warm, "steps": rows, "memory": mem, "reference": reference_figure(rows)}
+
+
+def report(r: dict[str, Any]) -> str:
+    """The human-readable tables of run()'s result."""
+    c, w, m, ref = r["first_compile"], r["warm_start"], r["memory"], r["reference"]
+    med = lambda d: d["median"]  # noqa: E731
+    sp = lambda d: f"{100 * d['spread']:.0f}%"  # noqa: E731
+    compile_rows = [] if "skipped" in c else [
+        ["first-ever compile: build + first step" + (" (overlapped)" if c["overlapped"] else ""),
+         med(c["build_and_first_step_s"]), sp(c["build_and_first_step_s"]), c["runs"]],
+        ["first-ever compile: process start to first step", med(c["process_to_first_step_s"]),
+         sp(c["process_to_first_step_s"]), c["runs"]]]
+    start = format_table(["start-up (s)", "median", "spread", "runs"], [
+        *compile_rows,
+        ["warm: process start to first step, game", med(w["game_to_first_step_s"]),
+         sp(w["game_to_first_step_s"]), len(w["game_to_first_step_s"]["runs"])],
+        ["warm: game build + first step", med(w["game_build_and_first_step_s"]),
+         sp(w["game_build_and_first_step_s"]), len(w["game_build_and_first_step_s"]["runs"])],
+        [f"warm: process start to first step, {w['other_program']}", med(w["other_program_to_first_step_s"]),
+         sp(w["other_program_to_first_step_s"]), len(w["other_program_to_first_step_s"]["runs"])],
+        [f"warm: {w['other_program']} after the game, same process", med(w["other_program_after_game_s"]),
+         sp(w["other_program_after_game_s"]), len(w["other_program_after_game_s"]["runs"])],
+        ["warm: process start to first RuleSim step (1v1)", med(w["rulesim_to_first_step_s"]),
+         sp(w["rulesim_to_first_step_s"]), len(w["rulesim_to_first_step_s"]["runs"])],
+    ])
+    if "skipped" in c:
+        start += f"\nfirst-ever compile: skipped ({c['skipped']})"
+    sig = f"step_worlds signatures after both programs: {w['step_worlds_signatures']} " \
+          f"({'ok' if w['one_signature'] else 'RECOMPILED'})"
+    steps = format_table(
+        ["agents", "trace", "steps/s", "spread", "engine µs/step", "engine share", "firings", "changes",
+         "watch visits", "candidates", "build s"],
+        [[s["agents"], "on" if s["trace"] else "off", med(s["steps_per_s"]), sp(s["steps_per_s"]),
+          1e6 * med(s["engine_s_per_step"]), f"{100 * s['engine_share']:.0f}%",
+          s["stats_per_step"]["firings"], s["stats_per_step"]["changes"],
+          s["stats_per_step"]["watch_visits"], s["stats_per_step"]["candidates"], s["build_s"]]
+         for s in r["steps"]])
+    mem = "  ".join(f"{s['step']:,}:{s['rss_mb']:.1f}" for s in m["samples"])
+    mem_line = (f"RSS MB by step over {m['steps']:,} traced 1v1 steps: {mem}\n"
+                f"growth after warm-up ({m['warmup_steps']:,} steps): {m['growth_after_warmup_mb']:+.2f} MB "
+                f"(peak {m['peak_growth_after_warmup_mb']:+.2f}; tolerance {m['tolerance_mb']} MB) -> "
+                f"{'GREW' if m['grew'] else 'no growth'}")
+    ref_line = (f"1v1 traced: {fmt_num(ref['steps_per_s'])} steps/s = {fmt_num(ref['speedup'])}x the "
+                f"reference system's {ref['reference_s_per_step']} s/step; goal >= "
+                f"{ref['goal_steps_per_s']:,} steps/s: {'met' if ref['goal_met'] else 'not met'}")
+    return "\n\n".join([machine_line(r["machine"], r["quick"], r["repeats"]), start + "\n" + sig,
+                        "RuleSim, one world (work counters per step)\n" + steps, mem_line, ref_line])
+
+
+def machine_line(info: dict[str, Any], quick: bool, repeats: int) -> str:
+    load = "/".join(str(x) for x in info["load_average"])
+    end = info.get("load_average_end")
+    return (f"{info['cores']} cores, load {load}" + (f" -> {'/'.join(map(str, end))}" if end else "")
+            + f", numba {info['versions']['numba']}, numpy {info['versions']['numpy']}, python "
+            f"{info['python']}; medians of {repeats} repeats{' (quick)' if quick else ''}")

@@ -1,0 +1,146 @@
+"""`tracelab bench env`: the rule-driven simulator (RuleSim) and the hand-written one (RefSim) side by
+side, by team size, one world and batched, RuleSim with tracing on and off; then the gymnasium envs
+(tracelab.env, tracelab.vector_env) on both backends when they import. Goals: docs/benchmarks.md."""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from tracelab.bench.common import block_rates, fmt_num, format_table, machine_info, summarize
+from tracelab.bench.engine import GOAL_STEPS_PER_S, machine_line
+
+GOAL_BATCHED_ENV_STEPS_PER_S = 1_000_000  # batched, tracing off
+GOAL_MAX_SLOWDOWN = 5.0  # rule-driven within 5x of the hand-written simulator
+ENV_ID = "tracelab/GridWar-advanced-v0"
+
+
+def sim_rates(agents: list[int], worlds: list[int], repeats: int, target_s: float) -> list[dict[str, Any]]:
+    """One row per (agents, worlds): RefSim, RuleSim traced and untraced, and the ratios."""
+    from tracelab.bench.sims import get_sim, measure, release
+    rows = []
+    for n in agents:
+        for w in worlds:
+            ref, _ = get_sim("reference", n, w)
+            rules, build_s = get_sim("rules", n, w)
+            row = {"agents": n, "worlds": w, "rules_build_s": build_s,
+                   "reference": measure(ref, False, repeats, target_s),
+                   "rules_trace_off": measure(rules, False, repeats, target_s, engine_time=False),
+                   "rules_trace_on": measure(rules, True, repeats, target_s, engine_time=False)}
+            ref_rate = row["reference"]["steps_per_s"]["median"]
+            row["rules_over_reference"] = row["rules_trace_off"]["steps_per_s"]["median"] / ref_rate
+            row["rules_traced_over_reference"] = row["rules_trace_on"]["steps_per_s"]["median"] / ref_rate
+            rows.append(row)
+            if w > 1:  # batched sims of big teams hold gigabytes
+                release("reference", n, w)
+                release("rules", n, w)
+    return rows
+
+
+def goals(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The three goals with the measured value and met / not met."""
+    single = next(r for r in rows if r["agents"] == 1 and r["worlds"] == 1)
+    batched = max((r for r in rows if r["agents"] == 1), key=lambda r: r["worlds"])
+    slow = max(rows, key=lambda r: 1 / r["rules_over_reference"])
+    traced = single["rules_trace_on"]["steps_per_s"]["median"]
+    env_steps = batched["rules_trace_off"]["env_steps_per_s"]["median"]
+    slowdown = 1 / slow["rules_over_reference"]
+    return [
+        {"goal": "rule-driven single 1v1, tracing on", "target": f">= {GOAL_STEPS_PER_S:,} steps/s",
+         "measured": traced, "unit": "steps/s", "met": traced >= GOAL_STEPS_PER_S},
+        {"goal": f"rule-driven batched 1v1 ({batched['worlds']} worlds), tracing off",
+         "target": f">= {GOAL_BATCHED_ENV_STEPS_PER_S:,} env-steps/s", "measured": env_steps,
+         "unit": "env-steps/s", "met": env_steps >= GOAL_BATCHED_ENV_STEPS_PER_S},
+        {"goal": f"rule-driven within {GOAL_MAX_SLOWDOWN:g}x of hand-written (worst: {slow['agents']} "
+                 f"agents, {slow['worlds']} worlds, tracing off)",
+         "target": f"<= {GOAL_MAX_SLOWDOWN:g}x slower", "measured": slowdown, "unit": "x slower",
+         "met": slowdown <= GOAL_MAX_SLOWDOWN},
+    ]
+
+
+def gym_rates(worlds: int, repeats: int, target_s: float) -> dict[str, Any]:
+    """Steps/s through gymnasium: the single env (gymnasium.make, 1v1) and the vector env (`worlds`
+    worlds, gymnasium.make_vec), both backends, tracing off (no trace sink); skipped if not importable."""
+    try:
+        import gymnasium as gym
+        import tracelab.env  # noqa: F401  (registers the ids)
+        import tracelab.vector_env  # noqa: F401
+    except Exception as e:  # another engineer may be mid-way through these modules
+        return {"skipped": f"tracelab.env / tracelab.vector_env not importable: {type(e).__name__}: {e}"}
+    out: dict[str, Any] = {"env_id": ENV_ID, "vector_worlds": worlds, "trace": False, "rows": []}
+    for backend in ("rules", "reference"):
+        env = gym.make(ENV_ID, backend=backend)
+        out["rows"].append({"backend": backend, "kind": "single", "worlds": 1,
+                            **block_rates(_single_runner(env), repeats, target_s)})
+        env.close()
+        venv = gym.make_vec(ENV_ID, num_envs=worlds, backend=backend)
+        row = block_rates(_vector_runner(venv), repeats, target_s)
+        row["env_steps_per_s"] = summarize([x * worlds for x in row["steps_per_s"]["runs"]]).to_dict()
+        out["rows"].append({"backend": backend, "kind": "vector", "worlds": worlds, **row})
+        venv.close()
+    return out
+
+
+def _single_runner(env: Any) -> Any:
+    rng = np.random.default_rng(0)
+    env.reset(seed=0)
+    n = int(env.action_space.n)
+
+    def run(k: int) -> None:
+        for a in rng.integers(0, n, k):
+            _, _, terminated, truncated, _ = env.step(int(a))
+            if terminated or truncated:
+                env.reset()
+    return run
+
+
+def _vector_runner(venv: Any) -> Any:
+    rng = np.random.default_rng(0)
+    venv.reset(seed=0)
+    shape = venv.action_space.shape
+    high = venv.single_action_space.n if hasattr(venv.single_action_space, "n") else \
+        venv.single_action_space.nvec
+
+    def run(k: int) -> None:
+        for a in rng.integers(0, high, (k, *shape)):
+            venv.step(a)  # same-step autoreset
+    return run
+
+
+def run(quick: bool = False, repeats: int = 5, agents: list[int] | None = None,
+        batch: int | None = None) -> dict[str, Any]:
+    """Every env figure: team sizes `agents` (default 1, 5, 20; quick 1, 2), one world and `batch`
+    worlds (default 256; quick 16)."""
+    info = machine_info()
+    batch = batch or (16 if quick else 256)
+    target_s = 0.1 if quick else 1.0
+    rows = sim_rates(agents or ([1, 2] if quick else [1, 5, 20]), sorted({1, batch}), repeats, target_s)
+    gym = gym_rates(batch, repeats, target_s)
+    info["load_average_end"] = machine_info()["load_average"]
+    return {"machine": info, "quick": quick, "repeats": repeats, "batched_worlds": batch, "sims": rows,
+            "goals": goals(rows), "gym": gym}
+
+
+def report(r: dict[str, Any]) -> str:
+    med = lambda d: d["steps_per_s"]["median"]  # noqa: E731
+    env = lambda d: d["env_steps_per_s"]["median"]  # noqa: E731
+    sp = lambda d: f"{100 * d['steps_per_s']['spread']:.0f}%"  # noqa: E731
+    sims = format_table(
+        ["agents", "worlds", "reference env-steps/s", "rules off", "rules on", "rules/ref off",
+         "rules/ref on", "spread ref/off/on"],
+        [[s["agents"], s["worlds"], env(s["reference"]), env(s["rules_trace_off"]), env(s["rules_trace_on"]),
+          s["rules_over_reference"], s["rules_traced_over_reference"],
+          "/".join(sp(s[k]) for k in ("reference", "rules_trace_off", "rules_trace_on"))] for s in r["sims"]])
+    goals_t = format_table(["goal", "target", "measured", "result"],
+                           [[g["goal"], g["target"], f"{fmt_num(g['measured'])} {g['unit']}",
+                             "met" if g["met"] else "not met"] for g in r["goals"]])
+    g = r["gym"]
+    if "skipped" in g:
+        gym_t = f"gymnasium: skipped ({g['skipped']})"
+    else:
+        gym_t = f"gymnasium ({g['env_id']}, tracing off)\n" + format_table(
+            ["backend", "env", "worlds", "steps/s", "env-steps/s", "spread"],
+            [[x["backend"], x["kind"], x["worlds"], med(x), env(x) if "env_steps_per_s" in x else med(x), sp(x)]
+             for x in g["rows"]])
+    return "\n\n".join([machine_line(r["machine"], r["quick"], r["repeats"]),
+                        "simulators (env-steps/s = steps/s x worlds)\n" + sims, goals_t, gym_t])

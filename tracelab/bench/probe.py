@@ -1,0 +1,51 @@
+"""The child process of `tracelab bench engine`'s start-up figures: `python -m tracelab.bench.probe
+TARGET...` imports the engine, then for each target builds it and runs its first step, printing one JSON
+line as soon as that step is done (the parent timestamps the lines: process start to first step).
+
+Targets: `game` (an Engine on the game rules with the advanced scenario's facts), `rulesim` (a 1v1
+RuleSim of the advanced scenario and its first step, with the scripted opponent), or the path of a rule
+file. The last line reports how many compiled signatures `kernel.step_worlds` holds (one serves every
+program: a new rule file must not recompile)."""
+from __future__ import annotations
+
+import json
+import sys
+import time
+
+
+def _first_step(target: str) -> tuple[float, float, float]:
+    """(import s, build s, first step s) of one target, in this process."""
+    t0 = time.perf_counter()
+    from tracelab.engine import Engine, load_program
+    from tracelab.scenario import builtin_scenario
+    if target == "rulesim":
+        import numpy as np
+        from tracelab.rulesim import RuleSim
+    else:
+        from tracelab.game_facts import scenario_program
+    t1 = time.perf_counter()
+    if target == "rulesim":
+        sim = RuleSim(builtin_scenario("advanced"), 1, seed=0, trace=True)
+        t2 = time.perf_counter()
+        sim.step(np.full((1, 1), 8), sim.scripted_actions("blue"))
+    else:
+        program = scenario_program(builtin_scenario("advanced")) if target == "game" else load_program(target)
+        engine = Engine(program, worlds=1, trace=True)
+        t2 = time.perf_counter()
+        engine.step()
+    t3 = time.perf_counter()
+    return t1 - t0, t2 - t1, t3 - t2
+
+
+def main(argv: list[str]) -> int:
+    for target in argv:
+        import_s, build_s, step_s = _first_step(target)
+        print(json.dumps({"target": target, "import_s": import_s, "build_s": build_s, "step_s": step_s}),
+              flush=True)
+    from tracelab.engine import kernel
+    print(json.dumps({"signatures": len(kernel.step_worlds.signatures)}), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -1,0 +1,143 @@
+"""Simulator workloads shared by `bench engine` and `bench env`: the scenarios by team size, a pool of
+built RuleSims (the 20-agent game takes a minute to ground, so `bench all` builds each size once), and
+the timed stepping loop (fixed-seed random red, scripted blue, finished worlds reset, trace drained)."""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from tracelab.bench.common import Summary, calibrate, rates, summarize
+from tracelab.refsim import RefSim
+from tracelab.rulesim import RuleSim
+from tracelab.scenario import Scenario, builtin_scenario, generate_scenario
+
+Sim = RuleSim | RefSim
+_POOL: dict[tuple[str, int, int], tuple[Sim, float]] = {}
+
+
+def scenario_for(agents: int) -> Scenario:
+    """The 8x8 map with `agents` per team: the built-in advanced scenario for 1, else a generated map."""
+    if agents == 1:
+        return builtin_scenario("advanced")
+    return generate_scenario(8, 8, agents, 0.1, seed=1, advanced=True)
+
+
+def get_sim(kind: str, agents: int, worlds: int) -> tuple[Sim, float]:
+    """A simulator ("rules" or "reference") and the seconds its construction took, built once per size.
+    RuleSims are built with trace=True; `set_trace` switches the engine's per-world trace flags, which is
+    all that RuleSim(trace=False) sets differently."""
+    key = (kind, agents, worlds)
+    if key not in _POOL:
+        t0 = time.perf_counter()
+        sc = scenario_for(agents)
+        sim = RuleSim(sc, worlds, seed=0, trace=True) if kind == "rules" else RefSim(sc, worlds, seed=0)
+        _POOL[key] = (sim, time.perf_counter() - t0)
+    return _POOL[key]
+
+
+def release(kind: str, agents: int, worlds: int) -> None:
+    """Forget a pooled simulator (the batched 20-agent ones hold gigabytes)."""
+    _POOL.pop((kind, agents, worlds), None)
+
+
+def set_trace(sim: Sim, on: bool) -> None:
+    if isinstance(sim, RuleSim):
+        sim.engine.trace_on[:] = on
+        sim.take_trace()  # start with an empty buffer
+
+
+class EngineTimer:
+    """Accumulates the seconds spent inside `sim.engine.step()` (an instance attribute shadows the
+    method while installed)."""
+
+    def __init__(self, sim: RuleSim) -> None:
+        self.engine = sim.engine
+        self.seconds = 0.0
+        inner = type(self.engine).step.__get__(self.engine)
+
+        def timed(*args: Any, **kwargs: Any) -> None:
+            t0 = time.perf_counter()
+            try:
+                inner(*args, **kwargs)
+            finally:
+                self.seconds += time.perf_counter() - t0
+
+        self.engine.step = timed  # type: ignore[method-assign]
+
+    def remove(self) -> None:
+        del self.engine.step
+
+
+@dataclass
+class Loop:
+    """Steps `sim` with a fixed-seed random red policy and the scripted blue policy, resetting finished
+    worlds and (with `trace`) draining the trace after every step."""
+    sim: Sim
+    trace: bool
+    seed: int = 0
+    rng: np.random.Generator = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.rng = np.random.default_rng(self.seed)
+        self.ids = np.asarray(self.sim.scenario.action_ids, np.int64)
+        self.shape = (self.sim.n_worlds, self.sim.scenario.agents_per_team)
+        set_trace(self.sim, self.trace)
+        self.sim.reset(seed=self.seed)
+
+    def run(self, steps: int) -> None:
+        sim = self.sim
+        red = self.rng.choice(self.ids, (steps, *self.shape))
+        drain = self.trace and isinstance(sim, RuleSim)
+        for i in range(steps):
+            res = sim.step(red[i], sim.scripted_actions("blue"))
+            if drain:
+                sim.take_trace()
+            done = res.terminated | res.truncated
+            if done.any():
+                sim.reset(worlds=done)
+
+
+def measure(sim: Sim, trace: bool, repeats: int, target_s: float, engine_time: bool = True) -> dict[str, Any]:
+    """Steps/s of `sim` (median over `repeats` blocks of a calibrated number of steps), env-steps/s
+    (times the worlds), and for a RuleSim the engine's share: seconds per step inside engine.step() and
+    its work counters (engine.stats) per world-step."""
+    loop = Loop(sim, trace)
+    block = calibrate(loop.run, target_s)
+    loop.run(block)  # warm-up at full size: first touches of big batched arrays, caches, allocator
+    rules = isinstance(sim, RuleSim)
+    timer = EngineTimer(sim) if rules and engine_time else None
+    before = sim.engine.stats if rules else {}
+    durations, engine_s = [], []
+    try:
+        for _ in range(max(1, repeats)):
+            if timer:
+                timer.seconds = 0.0
+            t0 = time.perf_counter()
+            loop.run(block)
+            durations.append(time.perf_counter() - t0)
+            if timer:
+                engine_s.append(timer.seconds / block)
+    finally:
+        if timer:
+            timer.remove()
+    steps_s = rates(summarize(durations), block)
+    out: dict[str, Any] = {
+        "worlds": sim.n_worlds, "agents": sim.scenario.agents_per_team, "trace": trace,
+        "steps_per_repeat": block, "steps_per_s": steps_s.to_dict(),
+        "env_steps_per_s": _scaled(steps_s, sim.n_worlds).to_dict()}
+    if rules and timer:
+        eng = summarize(engine_s)
+        out["engine_s_per_step"] = eng.to_dict()
+        out["engine_share"] = eng.median * steps_s.median
+    if rules:
+        after = sim.engine.stats
+        world_steps = block * len(durations) * sim.n_worlds
+        out["stats_per_step"] = {k: float((after[k] - before[k]).sum()) / world_steps for k in after}
+    return out
+
+
+def _scaled(s: Summary, factor: float) -> Summary:
+    return summarize([v * factor for v in s.runs])

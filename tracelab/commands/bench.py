@@ -1,0 +1,82 @@
+"""`tracelab bench`: speed and memory measured by benchmarks (docs/benchmarks.md), never by timed
+assertions in tests. `bench engine`, `bench env`, `bench store`, `bench all`; each takes --json,
+--quick (small sizes: the smoke test) and --repeats (medians and spread over that many repeats)."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Any
+
+SECTIONS = ("engine", "env", "store")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("bench", help="benchmarks: engine compile/start-up/steps/memory, simulators and "
+                                     "envs, trace store")
+    what = p.add_subparsers(dest="bench", required=True)
+    helps = {"engine": "compile and warm-start time, RuleSim steps/s and engine work, memory over a long run",
+             "env": "RuleSim vs RefSim steps/s (one world and batched), the gymnasium envs, the goals",
+             "store": "trace-store ingest rows/s, sealing, point queries",
+             "all": "engine, env and store"}
+    for name, text in helps.items():
+        q = what.add_parser(name, help=text)
+        q.add_argument("--json", action="store_true", help="machine-readable output")
+        q.add_argument("--quick", action="store_true", help="small sizes (a smoke run, not for figures)")
+        q.add_argument("--repeats", type=_positive, default=5, help="timed repeats per figure (default 5)")
+        if name in ("engine", "env", "all"):
+            q.add_argument("--agents", type=_sizes, default=None,
+                           help="team sizes, comma-separated (default 1,5,20; --quick: 1,2)")
+        if name in ("env", "all"):
+            q.add_argument("--batch", type=_positive, default=None,
+                           help="worlds of the batched runs (default 256; --quick: 16)")
+        if name in ("engine", "all"):
+            q.add_argument("--compile-repeats", type=_positive, default=None,
+                           help="first-ever compiles to time (default: min(repeats, 3); --quick: 1)")
+        q.set_defaults(func=run)
+
+
+def _positive(text: str) -> int:
+    v = int(text)
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {v}")
+    return v
+
+
+def _sizes(text: str) -> list[int]:
+    try:
+        sizes = [int(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated team sizes, got {text!r}") from None
+    if not sizes or min(sizes) < 1 or 1 not in sizes:
+        raise argparse.ArgumentTypeError("team sizes must be >= 1 and include 1 (the 1v1 figures)")
+    return sizes
+
+
+def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], str]:
+    if name == "engine":
+        from tracelab.bench import engine
+        r = engine.run(args.quick, args.repeats, args.compile_repeats, args.agents)
+        return r, engine.report(r)
+    if name == "env":
+        from tracelab.bench import env
+        r = env.run(args.quick, args.repeats, args.agents, args.batch)
+        return r, env.report(r)
+    from tracelab.bench import store
+    r = store.run(args.quick, args.repeats)
+    return r, store.report(r)
+
+
+def run(args: argparse.Namespace) -> int:
+    names = SECTIONS if args.bench == "all" else (args.bench,)
+    results = {}
+    for name in names:
+        print(f"bench {name}{' (quick)' if args.quick else ''}: measuring...", file=sys.stderr, flush=True)
+        result, text = _run_section(name, args)
+        results[name] = result
+        if not args.json:
+            print(f"== bench {name} ==\n{text}\n", flush=True)
+    if args.json:
+        json.dump(results if args.bench == "all" else results[args.bench], sys.stdout, indent=1)
+        print()
+    return 0
