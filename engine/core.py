@@ -95,6 +95,10 @@ class Engine:
             self._rule_i[i] = (UPDATE_MODES.index(mode), r.delay, int(r.immediate))
             self._rule_f[i] = rule_head_bound(r)
 
+    def sync(self) -> None:
+        """Grow the per-world arrays to every atom interned so far (step() does this itself)."""
+        self._sync()
+
     def _sync(self) -> None:
         """Ground any new settable atoms and grow the per-world arrays to the vocabulary and groundings."""
         self.grounder.close()
@@ -182,10 +186,9 @@ class Engine:
 
     def atom(self, pred: str, *args: str) -> int:
         """The id of pred(args), interned on demand."""
-        aid = self.vocab.atom_by_name(pred, tuple(args))
-        if aid >= self.lower.shape[1]:
-            self._sync()
-        return aid
+        # interning only: the per-world arrays grow at the next step (or sync()), so that interning
+        # thousands of atoms one by one stays linear
+        return self.vocab.atom_by_name(pred, tuple(args))
 
     def atom_text(self, aid: int) -> str:
         return self.vocab.atom_text(aid)
