@@ -588,35 +588,32 @@ def step_worlds(cfg, rule_i, rule_f, inst_i, w_ptr, w_inst, w_neg, w_bnd, ih_ptr
 
 
 @njit(cache=True)
+def _recount(w, g, lo, up, b_ptr, b_atom, b_neg, b_bnd, unsat, act, act_n, act_pos):
+    """Count grounding g's unsatisfied binding clauses in world w from scratch; activate it at zero."""
+    c = 0
+    for e in range(b_ptr[g], b_ptr[g + 1]):
+        a = b_atom[e]
+        if not _holds(lo[w, a], up[w, a], b_bnd[e, 0], b_bnd[e, 1], b_neg[e]):
+            c += 1
+    unsat[w, g] = c
+    act_pos[w, g] = -1
+    if c == 0:
+        _activate(w, g, act, act_n, act_pos)
+
+
+@njit(cache=True)
 def recount_groundings(first, lo, up, b_ptr, b_atom, b_neg, b_bnd, unsat, act, act_n, act_pos):
-    """Set the unsatisfied-clause counts of groundings first.. from the current interpretations (used
-    when the grounding table grows) and activate those whose bodies hold."""
+    """Counts for groundings first.. in every world (used when the grounding table grows)."""
     for w in range(lo.shape[0]):
         for g in range(first, b_ptr.shape[0] - 1):
-            c = 0
-            for e in range(b_ptr[g], b_ptr[g + 1]):
-                a = b_atom[e]
-                if not _holds(lo[w, a], up[w, a], b_bnd[e, 0], b_bnd[e, 1], b_neg[e]):
-                    c += 1
-            unsat[w, g] = c
-            act_pos[w, g] = -1
-            if c == 0:
-                _activate(w, g, act, act_n, act_pos)
+            _recount(w, g, lo, up, b_ptr, b_atom, b_neg, b_bnd, unsat, act, act_n, act_pos)
 
 
 @njit(cache=True)
 def recount_worlds(worlds, lo, up, b_ptr, b_atom, b_neg, b_bnd, unsat, act, act_n, act_pos):
-    """Rebuild the unsatisfied-clause counts and active lists of the given worlds from scratch."""
+    """Counts and active lists of the given worlds rebuilt from scratch (restore after growth)."""
     for i in range(worlds.shape[0]):
         w = worlds[i]
         act_n[w] = 0
         for g in range(b_ptr.shape[0] - 1):
-            c = 0
-            for e in range(b_ptr[g], b_ptr[g + 1]):
-                a = b_atom[e]
-                if not _holds(lo[w, a], up[w, a], b_bnd[e, 0], b_bnd[e, 1], b_neg[e]):
-                    c += 1
-            unsat[w, g] = c
-            act_pos[w, g] = -1
-            if c == 0:
-                _activate(w, g, act, act_n, act_pos)
+            _recount(w, g, lo, up, b_ptr, b_atom, b_neg, b_bnd, unsat, act, act_n, act_pos)
