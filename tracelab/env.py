@@ -106,7 +106,7 @@ class GridWarEnv(gym.Env[np.ndarray, Any]):
         return res.obs[0, RED].copy(), float(res.reward[0, RED]), terminated, truncated, info
 
     def _masks(self) -> np.ndarray:
-        return self._masker(self.sim.state, RED)
+        return self._masker.for_sim(self.sim, RED)
 
     @staticmethod
     def _first(info: dict[str, Any]) -> dict[str, Any]:

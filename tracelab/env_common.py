@@ -2,6 +2,8 @@
 masks (the shield, read from the state) and a text rendering."""
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from gymnasium import spaces
 
@@ -50,6 +52,8 @@ def learner_action_space(scenario: Scenario) -> spaces.Discrete | spaces.MultiDi
 class ActionMasker:
     """Which learner actions are safe and valid in the current state, per world, team and agent.
 
+    For the rules backend `for_sim` reads the mask from the shield rules' atoms (game.rules, section 7);
+    this Python version serves the reference backend, and tests check that the two agree.
     It mirrors the rules (rules/gridworld/game.rules): only an agent that may act gets a choice
     (t_fast / t_slow: alive, and a slow agent on even steps only; others can only do nothing, since
     the simulator ignores their actions); a move off the map (u_*_edge) or into a mountain (u_*_mtn) is
@@ -71,6 +75,15 @@ class ActionMasker:
         x, y = np.meshgrid(np.arange(w), np.arange(h), indexing="ij")
         self._move_ok = np.stack([free[x + 1 + dx, y + 1 + dy] for dx, dy in DIRECTION_DELTAS], axis=-1)
         self._slow = scenario.slow_mask if scenario.slow_mask.any() else None
+
+    def for_sim(self, sim: Any, team: int | None = None) -> np.ndarray:
+        """The mask for a simulator's current state: read from the shield rules' atoms when the
+        simulator runs on rules (RuleSim.allowed_actions), else computed from the state (RefSim)."""
+        allowed = getattr(sim, "allowed_actions", None)
+        if allowed is None:
+            return self(sim.state, team)
+        sel = slice(None) if team is None else team
+        return np.ascontiguousarray(allowed()[:, sel][..., self.ids]).view(np.int8)
 
     def __call__(self, state: GameState, team: int | None = None) -> np.ndarray:
         """int8 (gymnasium's mask dtype), 1 = allowed: [W, N, n_actions] for one team, or

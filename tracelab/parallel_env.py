@@ -97,7 +97,7 @@ class GridWarParallelEnv(ParallelEnv[str, np.ndarray, int]):
     def _infos(self, unsafe: np.ndarray, invalid: np.ndarray, hits_made: np.ndarray,
                hits_taken: np.ndarray) -> dict[str, dict[str, Any]]:
         state = self.sim.state
-        masks = self._masker(state)[0]
+        masks = self._masker.for_sim(self.sim)[0]
         alive = state.alive[0]
         return {a: {"action_mask": masks[t, j], "unsafe": bool(unsafe[t, j]), "invalid": bool(invalid[t, j]),
                     "hits_made": int(hits_made[t, j]), "hits_taken": int(hits_taken[t, j]),

@@ -75,6 +75,10 @@ class RuleSim(GameSim):
                                                                "canAct")], axis=1)
         self._dest = ids("dest", agents, cells) if s.slow_mask.any() else np.zeros((2 * n, 0), np.int64)
         self._win = np.stack([ids("captured", list(TEAMS)), ids("eliminated", list(TEAMS))], axis=1)
+        # the shield's view of the next step (game.rules, section 7)
+        self._blocked_move = ids("blockedMove", agents, list(DIRECTIONS))
+        self._no_ammo = ids("noAmmo", agents)
+        self._may_act = ids("mayAct", agents)
         n_b = len(bullets)
         if bullets:
             self._bullet_loc = ids("atLoc", bullets, cells)
@@ -133,6 +137,22 @@ class RuleSim(GameSim):
             moving=moving, dest=dest, bullet_pos=bpos, bullet_dir=bdir,
             terminated=self.terminated.copy(), truncated=self.truncated.copy(), winner=self.winner.copy(),
             bullet_team=self._bullet_team.astype(np.int8), bullet_agent=self._bullet_agent.astype(np.int16))
+
+    def allowed_actions(self) -> np.ndarray:
+        """Which spec actions (ids 0..8) each agent may take next step, as the shield rules see it after
+        this step (game.rules section 7): bool [W, 2, N, 9]. Moves must not be blocked (off the map,
+        into a mountain), shots need ammo, only an agent that may act has a choice; nothing is always
+        allowed. Actions the scenario does not offer are False."""
+        lo, up = self.engine.lower, self.engine.upper
+        w, n = self.n_worlds, self.scenario.agents_per_team
+        may = (lo[:, self._may_act] >= 1.0).reshape(w, 2, n)
+        out = np.zeros((w, 2, n, 9), bool)
+        free = (up[:, self._blocked_move] <= 0.0).reshape(w, 2, n, 4)
+        out[..., :4] = free & may[..., None]
+        if self.scenario.advanced:
+            out[..., 4:8] = (may & (lo[:, self._no_ammo] < 1.0).reshape(w, 2, n))[..., None]
+        out[..., 8] = True
+        return out
 
     # ---- the RefSim API ----
 

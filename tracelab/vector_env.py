@@ -110,7 +110,7 @@ class GridWarVectorEnv(VectorEnv):
         return info
 
     def _masks(self) -> np.ndarray:
-        return self._masker(self.sim.state, RED)
+        return self._masker.for_sim(self.sim, RED)
 
     @staticmethod
     def _with_masks(info: dict[str, Any], mask: np.ndarray) -> dict[str, Any]:
