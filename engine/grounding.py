@@ -60,6 +60,7 @@ class Grounder:
     g_head: list[int] = field(default_factory=list)
     g_values: list[tuple[int, ...]] = field(default_factory=list)
     g_body: list[list[int]] = field(default_factory=list)
+    _closed_once: bool = False
 
     def __post_init__(self) -> None:
         self._compiled = [self._compile(i, r) for i, r in enumerate(self.rules)]
@@ -96,6 +97,9 @@ class Grounder:
     def close(self) -> int:
         """Ground until no new settable atom appears. Returns the number of new groundings."""
         before = len(self.g_rule)
+        if not self._new and self._closed_once:  # the usual case at every step: nothing new to ground
+            return 0
+        self._closed_once = True
         for cr in self._compiled:  # rules without binding clauses have exactly one grounding
             if not cr.binding and (cr.index, ()) not in self._seen:
                 self._emit(cr, [])

@@ -98,6 +98,7 @@ class RuleSim(GameSim):
         slots = np.arange(n_b)
         self._bullet_team = (slots // max(n * ammo, 1)).astype(np.int64)
         self._bullet_agent = ((slots // max(ammo, 1)) % n).astype(np.int64)
+        self._bullet_owner = np.stack([self._bullet_team, self._bullet_agent], axis=1)
         # action atom per (agent, spec action id); -1 for "do nothing"
         acts = np.full((2 * n, 9), -1, np.int64)
         for i, a in enumerate(agents):
@@ -230,7 +231,9 @@ class RuleSim(GameSim):
         acts = np.stack([self._check(red_actions, "red_actions"), self._check(blue_actions, "blue_actions")],
                         axis=1)
         done = self.terminated | self.truncated
-        acts[done] = NOTHING
+        any_done = bool(done.any())
+        if any_done:
+            acts[done] = NOTHING
         self._fresh[:] = False
         before = self.state
         self.engine.step(external=self._action_rows(acts))
@@ -240,22 +243,23 @@ class RuleSim(GameSim):
         reward = np.empty((n_worlds, 2))
         settle_step(done, win, unsafe, invalid, acted, hits_made, hits_taken, self._weights, s.max_steps,
                     self.t, self.terminated, self.truncated, self.winner, agent_reward, reward)
-        # finished worlds keep their final state
-        for f in ("pos", "health", "ammo", "alive", "moving", "dest", "bullet_pos", "bullet_dir"):
-            getattr(state, f)[done] = getattr(before, f)[done]
+        if any_done:  # finished worlds keep their final state
+            for f in ("pos", "health", "ammo", "alive", "moving", "dest", "bullet_pos", "bullet_dir"):
+                getattr(state, f)[done] = getattr(before, f)[done]
         state.t, state.terminated, state.truncated = self.t.copy(), self.terminated.copy(), self.truncated.copy()
         state.winner = self.winner.copy()
         self.state = state
         cur = self._observe_both(state)
-        cur[done] = self._cur[done]
         obs = self._with_history(cur, self._cur)
-        obs[done] = self._obs[done]
+        if any_done:
+            cur[done] = self._cur[done]
+            obs[done] = self._obs[done]
         self._cur, self._obs = cur, obs
         return StepResult(
             obs=obs, positions=state.pos.copy(), health=state.health.copy(), ammo=state.ammo.copy(),
             alive=state.alive.copy(), moving=state.moving.copy(), move_dest=state.dest.copy(), bullet_pos=state.bullet_pos.copy(),
             bullet_dir=state.bullet_dir.copy(),
-            bullet_owner=np.stack([self._bullet_team, self._bullet_agent], axis=1),
+            bullet_owner=self._bullet_owner,
             unsafe=unsafe, invalid=invalid, hits_made=hits_made, hits_taken=hits_taken,
             agent_reward=agent_reward, reward=reward, terminated=self.terminated.copy(),
             truncated=self.truncated.copy(), winner=self.winner.copy(), t=self.t.copy())
@@ -267,9 +271,9 @@ class RuleSim(GameSim):
         shape = (self.n_worlds, self.scenario.agents_per_team)
         if a.shape != shape:
             raise ValueError(f"{name} must have shape {shape} (worlds, agents), got {a.shape}")
-        bad = (a < 0) | (a > 8) | ~self._allowed[np.clip(a, 0, 8)]
-        if bad.any():
+        if a.min() < 0 or a.max() > 8 or not self._allowed[a].all():
+            bad = (a < 0) | (a > 8) | ~self._allowed[np.clip(a, 0, 8)]
             w, j = np.argwhere(bad)[0]
             raise ValueError(f"action {a[w, j]} of {name[:-8]} agent {j} in world {w} is not offered by "
                              f"scenario {self.scenario.name!r} (ids {self.scenario.action_ids})")
-        return a.copy()
+        return a
