@@ -29,7 +29,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from tracelab.env_common import (ActionMasker, learner_action_space, make_sim, observation_space,
+from tracelab.env_common import (ActionMasker, step_learner, learner_action_space, make_sim, observation_space,
                                  render_text, resolve_scenario)
 from tracelab.env_trace import EpisodeTracer
 from tracelab.refsim import WINNER_NONE, StepResult
@@ -92,14 +92,7 @@ class GridWarEnv(gym.Env[np.ndarray, Any]):
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if not self._running:
             raise RuntimeError("the episode is over (or never began): call reset() first")
-        idx = np.asarray(action, np.int64).reshape(1, self._n)
-        if ((idx < 0) | (idx >= self.scenario.n_actions)).any():
-            raise ValueError(f"action {action!r} is outside the action space {self.action_space}")
-        red = self._masker.ids[idx]
-        blue = self.sim.scripted_actions("blue")
-        res = self.sim.step(red, blue)
-        if self._tracer is not None:
-            self._tracer.stepped(res, np.stack([red, blue], axis=1))
+        res = step_learner(self.sim, self._masker, self._tracer, action, 1, self.action_space)
         terminated, truncated = bool(res.terminated[0]), bool(res.truncated[0])
         self._running = not (terminated or truncated)
         info = self._first(step_info(res, self._masks(), self._single))

@@ -102,6 +102,22 @@ class ActionMasker:
         return out.view(np.int8)
 
 
+def step_learner(sim: Any, masker: ActionMasker, tracer: Any, action: Any, n_worlds: int,
+                 space: Any) -> Any:
+    """One step with red playing `action` (indices into the scenario's actions, [n_worlds, N] after
+    reshaping) and blue playing the scripted policy; the step is handed to the tracer, if any.
+    Returns the simulator's StepResult."""
+    idx = np.asarray(action, np.int64).reshape(n_worlds, -1)
+    if ((idx < 0) | (idx >= masker.n_actions)).any():
+        raise ValueError(f"action {action!r} is outside the action space {space}")
+    red = masker.ids[idx]
+    blue = sim.scripted_actions("blue")
+    res = sim.step(red, blue)
+    if tracer is not None:
+        tracer.stepped(res, np.stack([red, blue], axis=1))
+    return res
+
+
 def render_text(scenario: Scenario, state: GameState, world: int = 0) -> str:
     """The map, top row first: # mountain, r/b base, R/B living agent, * bullet, . free."""
     grid = np.full((scenario.height, scenario.width), ".", dtype="<U1")

@@ -11,6 +11,17 @@ from numba import njit
 
 
 @njit(cache=True)
+def _put_row(ext_i, ext_f, k, atom, value, first_id):
+    """Row k: atom set to [value, value], not static, external id first_id + k. Returns k + 1."""
+    ext_i[k, 0] = atom
+    ext_i[k, 1] = 0
+    ext_i[k, 2] = first_id + k
+    ext_f[k, 0] = value
+    ext_f[k, 1] = value
+    return k + 1
+
+
+@njit(cache=True)
 def encode_actions(acts, action_atoms, prev, first_id, ext_ptr, ext_i, ext_f):
     """Rows for the engine's external facts, grouped by world: each agent's chosen action atom becomes
     [1,1] and its previous one [0,0] when they differ. acts [W, M] spec ids; action_atoms [M, 9]
@@ -25,19 +36,9 @@ def encode_actions(acts, action_atoms, prev, first_id, ext_ptr, ext_i, ext_f):
             if new == old:
                 continue
             if old >= 0:
-                ext_i[k, 0] = old
-                ext_i[k, 1] = 0
-                ext_i[k, 2] = first_id + k
-                ext_f[k, 0] = 0.0
-                ext_f[k, 1] = 0.0
-                k += 1
+                k = _put_row(ext_i, ext_f, k, old, 0.0, first_id)
             if new >= 0:
-                ext_i[k, 0] = new
-                ext_i[k, 1] = 0
-                ext_i[k, 2] = first_id + k
-                ext_f[k, 0] = 1.0
-                ext_f[k, 1] = 1.0
-                k += 1
+                k = _put_row(ext_i, ext_f, k, new, 1.0, first_id)
             prev[w, j] = new
     ext_ptr[n_worlds] = k
     return k

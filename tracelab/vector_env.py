@@ -27,7 +27,8 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from tracelab.env import reset_info, step_info
-from tracelab.env_common import ActionMasker, learner_action_space, make_sim, observation_space, resolve_scenario
+from tracelab.env_common import (ActionMasker, learner_action_space, make_sim, observation_space,
+                                 resolve_scenario, step_learner)
 from tracelab.env_trace import EpisodeTracer
 from tracelab.scenario import RED, Scenario
 from tracelab.trace_sink import TraceSink
@@ -79,15 +80,9 @@ class GridWarVectorEnv(VectorEnv):
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         if not self._ready:
             raise RuntimeError("call reset() before step()")
-        idx = np.asarray(actions, np.int64).reshape(self.num_envs, self._n)
-        if ((idx < 0) | (idx >= self.scenario.n_actions)).any():
-            raise ValueError(f"actions outside the action space {self.single_action_space}")
-        red = self._masker.ids[idx]
-        blue = self.sim.scripted_actions("blue")
-        res = self.sim.step(red, blue)
-        if self._tracer is not None:
-            self._tracer.stepped(res, np.stack([red, blue], axis=1))
-        obs = res.obs[:, RED].copy()  # a copy: RuleSim.reset writes into the array res.obs shares
+        res = step_learner(self.sim, self._masker, self._tracer, actions, self.num_envs,
+                           self.single_action_space)
+        obs = res.obs[:, RED].copy()  # a copy: the caller owns what step returns
         reward = res.reward[:, RED].copy()
         terminated, truncated = res.terminated.copy(), res.truncated.copy()
         done = terminated | truncated
