@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-import duckdb
+from tracelab.store.reader import RunConnection
 
 _STATE_SQL = """
 WITH base AS (
@@ -65,7 +65,7 @@ class Divergence:
         return {**asdict(self), "identical": self.identical}
 
 
-def _rows(con: duckdb.DuckDBPyConnection, seqs: list[int]) -> list[dict[str, Any]]:
+def _rows(con: RunConnection, seqs: list[int]) -> list[dict[str, Any]]:
     if not seqs:
         return []
     cur = con.execute(f"SELECT {_ROW_COLUMNS} FROM changes WHERE seq IN (SELECT unnest(?::BIGINT[])) "
@@ -74,7 +74,7 @@ def _rows(con: duckdb.DuckDBPyConnection, seqs: list[int]) -> list[dict[str, Any
     return [dict(zip(names, r)) for r in cur.fetchall()]
 
 
-def first_divergence(con: duckdb.DuckDBPyConnection, a: int, b: int) -> Divergence:
+def first_divergence(con: RunConnection, a: int, b: int) -> Divergence:
     if a == b:
         raise ValueError(f"diff needs two different episodes, got {a} twice")
     present = {e for (e,) in con.execute(
@@ -100,7 +100,7 @@ def first_divergence(con: duckdb.DuckDBPyConnection, a: int, b: int) -> Divergen
     return d
 
 
-def _clock(con: duckdb.DuckDBPyConnection, episode: int, rel_t: int) -> int:
+def _clock(con: RunConnection, episode: int, rel_t: int) -> int:
     row = con.execute("SELECT coalesce((SELECT t_start FROM raw.episode_begin WHERE episode = $e), "
                       "(SELECT min(t) FROM raw.changes WHERE episode = $e))", {"e": episode}).fetchone()
     return int(row[0] or 0) + rel_t

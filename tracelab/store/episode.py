@@ -7,10 +7,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import duckdb
 import numpy as np
 
 from tracelab.store.model import DEFAULT_BOUND
+from tracelab.store.reader import RunConnection
 
 _COLUMNS = ("seq", "t", "pass_no", "atom", "old_lower", "old_upper", "new_lower", "new_upper",
             "cause_kind", "cause_id", "grounding")
@@ -31,7 +31,7 @@ class Row:
 
 
 class EpisodeTrace:
-    def __init__(self, con: duckdb.DuckDBPyConnection, episode: int, upto_t: int | None = None) -> None:
+    def __init__(self, con: RunConnection, episode: int, upto_t: int | None = None) -> None:
         self.episode = episode
         sql = f"SELECT {', '.join(_COLUMNS)} FROM raw.changes WHERE episode = ?"
         params: list[int] = [episode]

@@ -3,11 +3,10 @@
 A run directory holds:
   meta.json                 run metadata (written at open and at close, each time to a temp name + rename)
   writer.lock               flock-ed by the writing process (and by `seal`) while they work
-  parts/<table>/live -> gNNNNNN
-                            a symlink to the table's live generation of parts
-  parts/<table>/gNNNNNN/NNNNNNNN.parquet
+  parts/manifest.json       which parts make up each table now (replaced atomically at every flush)
+  parts/<table>/NNNNNNNN.parquet
                             immutable Parquet parts (written to a temp name, then renamed); see
-                            tracelab.store.parts for generations and compaction
+                            tracelab.store.parts for the manifest and compaction
   run.duckdb                the sealed form (everything in one DuckDB file); once it exists it is the run
 A sealed run may also be a lone .duckdb file anywhere."""
 from __future__ import annotations
@@ -19,7 +18,7 @@ META = "meta.json"
 LOCK = "writer.lock"
 PARTS = "parts"
 SEALED = "run.duckdb"
-LIVE = "live"
+MANIFEST = "manifest.json"
 PART_SUFFIX = ".parquet"
 TMP_MARK = ".tmp-"
 
@@ -44,13 +43,8 @@ def part_name(number: int) -> str:
     return f"{number:08d}{PART_SUFFIX}"
 
 
-def gen_name(gen: int) -> str:
-    return f"g{gen:06d}"
-
-
-def part_glob(run_dir: Path, table: str) -> str:
-    """The glob readers scan: the live generation's parts (temp files, `.NAME.tmp-PID`, never match)."""
-    return str(table_dir(run_dir, table) / LIVE / f"*{PART_SUFFIX}")
+def manifest_path(run_dir: Path) -> Path:
+    return run_dir / PARTS / MANIFEST
 
 
 def tmp_name(final: Path) -> Path:
@@ -62,7 +56,7 @@ def remove_stale_temps(run_dir: Path) -> int:
     n = 0
     parts = run_dir / PARTS
     if parts.is_dir():
-        for p in [*parts.glob(f"*/.*{TMP_MARK}*"), *parts.glob(f"*/g*/.*{TMP_MARK}*")]:
+        for p in [*parts.glob(f".*{TMP_MARK}*"), *parts.glob(f"*/.*{TMP_MARK}*")]:
             p.unlink(missing_ok=True)
             n += 1
     return n

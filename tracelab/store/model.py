@@ -4,8 +4,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import duckdb
 import numpy as np
+
+from tracelab.store.reader import RunConnection
 
 DEFAULT_BOUND = (0.0, 1.0)  # an atom never set
 
@@ -52,7 +53,7 @@ def satisfies(bound: tuple[float, float], clause: Clause) -> bool:
 
 
 class RunModel:
-    def __init__(self, con: duckdb.DuckDBPyConnection) -> None:
+    def __init__(self, con: RunConnection) -> None:
         self.con = con
         self.rules: list[RuleInfo] = []
         rules = con.execute("SELECT rule, name, delay, immediate, variables, text FROM raw.rules "

@@ -1,20 +1,22 @@
-"""One table's Parquet parts in a live run directory.
+"""A live run's Parquet parts and the manifest that says which of them make up the run.
 
-Files never change once they have their final name (DuckDB may open a file more than once per query, so
-a file replaced in place can be read torn). Layout of parts/<table>/:
-  g000003/00000042.parquet ...   a generation: the complete set of the table's parts
-  live -> g000003                the generation readers scan (their glob is parts/<table>/live/*.parquet)
-A flush writes a new part into the live generation (temp name, then rename). When the live generation
-holds `compact_files` small parts (< part_rows rows), they are merged into one new part in a new
-generation, which also hard-links every other part, and `live` is switched to it by renaming a symlink
-over it: one atomic step, so a reader's listing is always one complete generation, and every name means
-the same bytes in every generation. A reader that listed the old generation just before the switch and
-opens a merged-away part just after it gets "file not found": retry (tracelab.store.reader.retrying).
-Old generations are deleted after `grace_seconds`; a crash mid-compaction leaves the old one live."""
+Layout of parts/:
+  <table>/00000042.parquet ...   immutable parts (temp name, then rename; a file never changes once named)
+  manifest.json                  for every table, the parts that hold its rows now (replaced atomically)
+Readers query exactly the files the manifest lists, never a directory listing: DuckDB lists a glob's
+directory and then stats each entry, so a listing taken while parts were being merged could silently
+drop rows (seen: a reader got only the big parts of a table, without the part they had just been merged
+into). One manifest for all tables also gives a reader one consistent moment across tables.
+
+A publication writes one new part per table with rows; then the writer replaces the manifest. When a
+table holds `compact_files` small parts (< part_rows rows), they are merged into one new part and leave
+the table's list; their files are deleted `grace_seconds` later, so a reader still holding the previous
+manifest can finish its query. A crash before the manifest is replaced leaves parts nobody lists:
+invisible and harmless (seal ignores them and removes parts/)."""
 from __future__ import annotations
 
+import json
 import os
-import shutil
 import time
 from pathlib import Path
 
@@ -25,9 +27,12 @@ from tracelab.store import layout
 from tracelab.store.schema import SCHEMAS
 
 ROW_GROUP_ROWS = 131_072
+MANIFEST_FORMAT = "tracelab-parts/1"
 
 
 class TableParts:
+    """One table's parts: writes new ones, merges small ones, and knows which files hold the table."""
+
     def __init__(self, run_dir: Path, table: str, part_rows: int, compact_files: int = 64,
                  grace_seconds: float = 30.0, compression: str = "zstd") -> None:
         if compact_files < 2:
@@ -39,26 +44,26 @@ class TableParts:
         self.compact_files = compact_files
         self.grace_seconds = grace_seconds
         self.compression = compression
-        self.gen = 0
         self._next_file = 0
-        self._small: list[str] = []   # parts of the live generation with fewer than part_rows rows
+        self._small: list[str] = []   # listed parts with fewer than part_rows rows, oldest first
         self._big: list[str] = []
-        self._retired: list[tuple[float, Path]] = []
+        self._retired: list[tuple[float, list[str]]] = []
         self.rows_published = 0
         self.files_written = 0
         self.compactions = 0
-        self._gen_dir(0).mkdir(parents=True, exist_ok=True)
-        # An empty first part, so that readers' globs match from the start and carry the schema.
-        self._add(self._write(self._gen_dir(0), self.schema.empty_table()), 0)
-        self._point_live_at(0)
+        self.root.mkdir(parents=True, exist_ok=True)
+        # An empty first part, so that every table has a file that carries its schema.
+        self._add(self._write(self.schema.empty_table()), 0)
 
-    def _gen_dir(self, gen: int) -> Path:
-        return self.root / layout.gen_name(gen)
+    @property
+    def files(self) -> list[str]:
+        """The table's parts now, as paths relative to parts/ (the manifest's form)."""
+        return [f"{self.table}/{name}" for name in (*self._big, *self._small)]
 
-    def _write(self, directory: Path, table: pa.Table) -> str:
+    def _write(self, table: pa.Table) -> str:
         name = layout.part_name(self._next_file)
         self._next_file += 1
-        final = directory / name
+        final = self.root / name
         tmp = layout.tmp_name(final)
         pq.write_table(table, tmp, compression=self.compression, row_group_size=ROW_GROUP_ROWS)
         os.replace(tmp, final)
@@ -68,19 +73,14 @@ class TableParts:
     def _add(self, name: str, rows: int) -> None:
         (self._big if rows >= self.part_rows else self._small).append(name)
 
-    def _point_live_at(self, gen: int) -> None:
-        link = self.root / layout.LIVE
-        tmp = layout.tmp_name(link)
-        os.symlink(layout.gen_name(gen), tmp)
-        os.replace(tmp, link)
-
     def publish(self, tables: list[pa.Table]) -> int:
-        """Make these rows visible to readers (one new part); returns how many rows were published."""
+        """Write these rows as a new part (merging small parts when there are enough) and list it; readers
+        see it once the writer replaces the manifest. Returns how many rows were written."""
         n = sum(t.num_rows for t in tables)
         if n == 0:
             return 0
         table = pa.concat_tables(tables) if len(tables) > 1 else tables[0]
-        self._add(self._write(self._gen_dir(self.gen), table), n)
+        self._add(self._write(table), n)
         self.rows_published += n
         if len(self._small) >= self.compact_files:
             self._compact()
@@ -88,22 +88,37 @@ class TableParts:
         return n
 
     def _compact(self) -> None:
-        old, new = self._gen_dir(self.gen), self._gen_dir(self.gen + 1)
-        if new.exists():  # left by a crash of an earlier writer process: never live, safe to remove
-            shutil.rmtree(new)
-        new.mkdir()
-        merged = pa.concat_tables([pq.read_table(old / name, schema=self.schema) for name in self._small])
-        merged_name = self._write(new, merged)
-        for name in self._big:
-            os.link(old / name, new / name)
-        self._point_live_at(self.gen + 1)
-        self.gen += 1
+        merged = pa.concat_tables([pq.read_table(self.root / name, schema=self.schema)
+                                   for name in self._small])
+        merged_name = self._write(merged)
+        self._retired.append((time.monotonic(), self._small))
         self._small = []
         self._add(merged_name, merged.num_rows)
-        self._retired.append((time.monotonic(), old))
         self.compactions += 1
 
     def _drop_retired(self) -> None:
         now = time.monotonic()
         while self._retired and now - self._retired[0][0] >= self.grace_seconds:
-            shutil.rmtree(self._retired.pop(0)[1], ignore_errors=True)
+            for name in self._retired.pop(0)[1]:
+                (self.root / name).unlink(missing_ok=True)
+
+
+def write_manifest(run_dir: Path, parts: dict[str, TableParts], flushes: int) -> None:
+    """Replace parts/manifest.json with the tables' current parts: the moment readers see."""
+    doc = {"format": MANIFEST_FORMAT, "flushes": flushes,
+           "tables": {name: p.files for name, p in parts.items()}}
+    layout.replace_atomically(json.dumps(doc).encode(), layout.manifest_path(run_dir))
+
+
+def read_manifest(run_dir: Path) -> dict[str, list[Path]]:
+    """For every table, the absolute paths of the parts that hold its rows now."""
+    path = layout.manifest_path(run_dir)
+    try:
+        doc = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{str(run_dir)!r} has no {layout.PARTS}/{layout.MANIFEST}: not a "
+                                "tracelab run directory, or one whose writer died while creating it") from None
+    if doc.get("format") != MANIFEST_FORMAT:
+        raise ValueError(f"{str(path)!r}: unknown manifest format {doc.get('format')!r}")
+    base = path.parent.resolve()
+    return {name: [base / f for f in files] for name, files in doc["tables"].items()}

@@ -1,13 +1,16 @@
 """Open a run for reading, live or sealed, as an in-memory DuckDB connection with the store's views.
 
-Live run (a directory of Parquet parts): raw.<table> are views over `read_parquet('<dir>/parts/<table>/
-live/*.parquet')`. DuckDB expands the glob each time a query runs, so every query sees all parts published
-so far; nothing locks the writer out. A query that overlaps a compaction can fail with "file not found"
-(never return wrong rows, see tracelab.store.parts): run long-lived readers' queries through retrying().
+Live run (a directory of Parquet parts): raw.<table> are views over read_parquet() of the files the run's
+manifest lists (tracelab.store.parts), held in DuckDB variables that LiveRunConnection brings up to date
+before every statement; so one connection sees every flush as it lands, all tables at the same moment,
+and nothing locks the writer out. A query running longer than the writer's grace period (30 s) after a
+compaction can fail with "file not found" (never return wrong rows): long-lived readers run queries
+through retrying().
 Sealed run (run.duckdb, or any lone .duckdb file): the file is attached READ_ONLY and raw.<table> are
 views over its tables. Either way the user-facing views (tracelab.store.schema.VIEWS_SQL) are the same."""
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -19,6 +22,7 @@ import pyarrow as pa
 
 from tracelab.store import layout
 from tracelab.store.meta import effective_status, meta_table, read_meta
+from tracelab.store.parts import read_manifest
 from tracelab.store.schema import TABLES, VIEWS_SQL
 
 RUNS_DIR = Path("runs")
@@ -70,9 +74,49 @@ def run_info(run: str | Path) -> RunInfo:
     return RunInfo(p, sealed, meta, effective_status(meta))
 
 
-def open_run(run: str | Path) -> duckdb.DuckDBPyConnection:
+def _parts_variable(table: str) -> str:
+    return f"tracelab_parts_{table}"
+
+
+class LiveRunConnection:
+    """A DuckDB connection on a run being written. Before each statement it re-reads the run's manifest
+    and, if it changed, points every raw.<table> view at the parts it lists (DuckDB variables read by the
+    views); everything else is the DuckDB connection's own API."""
+
+    def __init__(self, con: duckdb.DuckDBPyConnection, run_dir: Path) -> None:
+        self._con = con
+        self._manifest = layout.manifest_path(run_dir)
+        self._seen = b""
+        self.refresh()
+
+    def refresh(self) -> None:
+        """Bring the views up to the manifest's latest flush (cheap when nothing changed)."""
+        raw = self._manifest.read_bytes()
+        if raw == self._seen:
+            return
+        for table, files in read_manifest(self._manifest.parent.parent).items():
+            self._con.execute(f"SET VARIABLE {_parts_variable(table)} = ?", [[str(f) for f in files]])
+        self._seen = raw
+
+    def execute(self, query: Any, parameters: Any = None) -> duckdb.DuckDBPyConnection:
+        self.refresh()
+        return self._con.execute(query, parameters)
+
+    def sql(self, query: str, **options: Any) -> duckdb.DuckDBPyRelation:
+        self.refresh()
+        return self._con.sql(query, **options)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._con, name)
+
+
+RunConnection = duckdb.DuckDBPyConnection | LiveRunConnection
+
+
+def open_run(run: str | Path) -> RunConnection:
     """A DuckDB connection on the run with the views changes, firings, episodes, steps, metrics, rules,
-    facts, atoms, groundings, run (and raw.* underneath). Works on a run being written."""
+    facts, atoms, groundings, run (and raw.* underneath). Works on a run being written: then every
+    statement sees the latest flush."""
     info = run_info(run)
     con = duckdb.connect(":memory:")
     try:
@@ -81,16 +125,18 @@ def open_run(run: str | Path) -> duckdb.DuckDBPyConnection:
             con.execute(f"ATTACH {_sql_str(info.sealed_file.resolve())} AS store (READ_ONLY)")
             for t in (*TABLES, "run"):
                 con.execute(f"CREATE VIEW raw.{t} AS SELECT * FROM store.raw.{t}")
-        else:
-            for t in TABLES:  # every table has a part from the start (its empty first part)
-                src = f"read_parquet({_sql_str(layout.part_glob(info.path.resolve(), t))})"
-                con.execute(f"CREATE VIEW raw.{t} AS SELECT * FROM {src}")
-            _create_table(con, "raw.run", meta_table(info.meta, info.status))
+            con.execute(VIEWS_SQL)
+            return con
+        live = LiveRunConnection(con, info.path.resolve())  # sets the variables the views read
+        for t in TABLES:
+            con.execute(f"CREATE VIEW raw.{t} AS SELECT * FROM read_parquet(getvariable("
+                        f"{_sql_str(_parts_variable(t))}))")
+        _create_table(con, "raw.run", meta_table(info.meta, info.status))
         con.execute(VIEWS_SQL)
     except BaseException:
         con.close()
         raise
-    return con
+    return live
 
 
 def _create_table(con: duckdb.DuckDBPyConnection, name: str, table: Any) -> None:
@@ -101,7 +147,7 @@ def _create_table(con: duckdb.DuckDBPyConnection, name: str, table: Any) -> None
         con.unregister("_tracelab_tmp")
 
 
-def query_readonly(con: duckdb.DuckDBPyConnection, sql: str,
+def query_readonly(con: RunConnection, sql: str,
                    params: dict[str, Any] | None = None) -> duckdb.DuckDBPyRelation:
     """One read-only statement (SELECT, including DESCRIBE/SHOW/SUMMARIZE, or EXPLAIN) as a lazy relation.
     Raises duckdb errors as they come (their text shows the position in the query) and ValueError for a
@@ -141,7 +187,7 @@ T = TypeVar("T")
 
 def retrying(fn: Callable[[], T], attempts: int = 4) -> T:
     """fn(), run again (up to `attempts` times) if it failed because a live run's compaction removed a
-    part between DuckDB listing and opening it."""
+    part a long query was still to open."""
     for i in range(attempts):
         try:
             return fn()

@@ -13,6 +13,7 @@ import duckdb
 
 from tracelab.store import layout
 from tracelab.store.meta import meta_table, now_iso, read_meta, write_meta
+from tracelab.store.parts import read_manifest
 from tracelab.store.reader import _create_table, _sql_str, resolve_run
 from tracelab.store.schema import SEAL_ORDER, TABLES, VIEWS_SQL
 
@@ -47,13 +48,14 @@ def _build(run_dir: Path, sealed: Path, doc: dict) -> None:
     tmp = sealed.with_name(f".{sealed.name}.tmp-{os.getpid()}")
     for leftover in (tmp, Path(f"{tmp}.wal")):
         leftover.unlink(missing_ok=True)
+    parts = read_manifest(run_dir)  # the last flush; parts it does not list were never published
     con = duckdb.connect(str(tmp))
     try:
         con.execute("CREATE SCHEMA raw")
         for t in TABLES:
             order = f" ORDER BY {SEAL_ORDER[t]}" if t in SEAL_ORDER else ""
-            src = _sql_str(layout.part_glob(run_dir, t))
-            con.execute(f"CREATE TABLE raw.{t} AS SELECT * FROM read_parquet({src}){order}")
+            con.execute(f"CREATE TABLE raw.{t} AS SELECT * FROM read_parquet(?){order}",
+                        [[str(f) for f in parts[t]]])
         _create_table(con, "raw.run", meta_table(doc, doc["status"]))
         con.execute(VIEWS_SQL)
         con.execute("CHECKPOINT")

@@ -14,10 +14,9 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-import duckdb
-
 from tracelab.store.episode import EpisodeTrace, Row
 from tracelab.store.model import Clause, RuleInfo, RunModel, satisfies
+from tracelab.store.reader import RunConnection
 from tracelab.store.schema import CAUSE_NAMES
 
 def _bound_text(b: tuple[float, float] | list[float] | None) -> str:
@@ -122,7 +121,7 @@ class _Explainer:
         return c
 
 
-def _check_episode(con: duckdb.DuckDBPyConnection, episode: int, trace: EpisodeTrace) -> None:
+def _check_episode(con: RunConnection, episode: int, trace: EpisodeTrace) -> None:
     if trace.n == 0:
         known = [e for (e,) in con.execute(
             "SELECT DISTINCT episode FROM raw.changes ORDER BY episode LIMIT 20").fetchall()]
@@ -130,7 +129,7 @@ def _check_episode(con: duckdb.DuckDBPyConnection, episode: int, trace: EpisodeT
                        f"(episodes with rows: {known if known else 'none'})")
 
 
-def explain(con: duckdb.DuckDBPyConnection, episode: int, atom: str | int, at: int,
+def explain(con: RunConnection, episode: int, atom: str | int, at: int,
             depth: int = 6) -> WhyNode:
     """Why `atom` (text or id) had its bound at the end of timestep `at` in `episode`."""
     model = RunModel(con)
@@ -208,7 +207,7 @@ class WhyNot:
         return asdict(self)
 
 
-def why_not(con: duckdb.DuckDBPyConnection, episode: int, rule_name: str, bindings: dict[str, str],
+def why_not(con: RunConnection, episode: int, rule_name: str, bindings: dict[str, str],
             at: int, max_candidates: int = 100_000) -> WhyNot:
     """Which body clause of `rule_name` under `bindings` failed for a head change at `at`."""
     model = RunModel(con)

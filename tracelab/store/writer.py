@@ -2,7 +2,8 @@
 Parquet parts that other processes can read while it writes.
 
 Callers only append to in-memory buffers (after checking and converting the data). One background thread
-publishes the buffers, table by table in dependency order (layout and atomicity: tracelab.store.parts):
+publishes the buffers: a new part per table, then a new manifest that lists them, so readers see every
+table at the same moment (layout and atomicity: tracelab.store.parts):
 - at most `flush_interval` (1 s) after a row arrives,
 - soon after an episode ends (at most one such flush per `min_flush_gap`),
 - when the buffers hold `part_rows` rows, and on flush() / close();
@@ -28,7 +29,7 @@ import pyarrow as pa
 
 from tracelab.store import convert, layout
 from tracelab.store.meta import RunMeta, initial_meta, now_iso, write_meta
-from tracelab.store.parts import TableParts
+from tracelab.store.parts import TableParts, write_manifest
 from tracelab.store.schema import SCHEMAS, TABLES
 
 _OPEN_WRITERS: "weakref.WeakSet[TraceWriter]" = weakref.WeakSet()
@@ -93,6 +94,7 @@ class TraceWriter:
         layout.remove_stale_temps(self.run_dir)
         self._parts = {t: TableParts(self.run_dir, t, part_rows, compact_files, compression=compression)
                        for t in TABLES}
+        write_manifest(self.run_dir, self._parts, 0)
         self._meta = initial_meta(self.run_dir, meta)
         write_meta(self.run_dir, self._meta)  # the run exists from here on
 
@@ -296,9 +298,11 @@ class TraceWriter:
                 self._pending_rows, self._pending_since, self._urgent = 0, None, False
                 request, closing = self._requested, self._closing
             try:
-                for name in TABLES:  # dependency order
-                    if take[name]:
-                        self._parts[name].publish(take[name])
+                if any(take.values()):
+                    for name in TABLES:
+                        if take[name]:
+                            self._parts[name].publish(take[name])
+                    write_manifest(self.run_dir, self._parts, self.flushes + 1)  # now readers see them
             except BaseException as e:  # noqa: BLE001 - reported to the caller by _check()
                 with self._cond:
                     self._error = e
