@@ -321,11 +321,13 @@ class Engine:
     def take_trace(self) -> dict[str, np.ndarray]:
         """The change rows since the last call, as columns (docs/engine-api.md); the buffer is cleared."""
         n = int(self._tr_n[0])
+        # one copy per block; the columns are its rows (a copy per column costs more than the rows)
+        ints, floats = self._tri[:, :n].copy(), self._trf[:, :n].copy()
         cols: dict[str, np.ndarray] = {}
         for i, dtype in enumerate(_TRACE_INT_DTYPES):
-            cols[TRACE_COLUMNS[i]] = self._tri[i, :n].astype(dtype)
+            cols[TRACE_COLUMNS[i]] = ints[i] if dtype == ints.dtype else ints[i].astype(dtype)
         for j in range(K.TRACE_FLOAT_COLUMNS):
-            cols[TRACE_COLUMNS[K.TRACE_INT_COLUMNS + j]] = self._trf[j, :n].copy()
+            cols[TRACE_COLUMNS[K.TRACE_INT_COLUMNS + j]] = floats[j]
         self._tr_n[0] = 0
         return cols
 

@@ -18,6 +18,8 @@ rule-driven one draw the same actions from the same seed. Decisions (docs/game.m
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 from numba import njit
 
@@ -35,8 +37,10 @@ _DY = np.array([1, -1, 0, 0], dtype=np.int64)
 
 
 @njit(cache=True)
-def _policy_kernel(pos, alive, ammo, team, u, r, k, action_ids, blocked, goal, advanced, p_toward, out):
-    """The policy for every agent of `team` in every world; u, r, k are the pre-drawn random numbers."""
+def _policy_kernel(pos, alive, ammo, team, draws, action_ids, blocked, goal, advanced, p_toward, out):
+    """The policy for every agent of `team` in every world; draws [3, W, N] are its pre-drawn uniform
+    numbers: toward-or-random, which closer move, which random action."""
+    u, r, k = draws[0], draws[1], draws[2]
     n_worlds, _, n = alive.shape
     width, height = blocked.shape
     enemy = 1 - team
@@ -87,7 +91,15 @@ def _policy_kernel(pos, alive, ammo, team, u, r, k, action_ids, blocked, goal, a
                             break
                         pick -= 1
             else:
-                out[w, j] = action_ids[k[w, j]]
+                out[w, j] = action_ids[min(int(k[w, j] * action_ids.shape[0]), action_ids.shape[0] - 1)]
+
+
+@lru_cache(maxsize=256)
+def _int_array(values: tuple[int, ...]) -> np.ndarray:
+    """A read-only int64 array of a small tuple, made once (per call it would cost a microsecond)."""
+    a = np.asarray(values, dtype=np.int64)
+    a.flags.writeable = False
+    return a
 
 
 def scripted_actions(positions: np.ndarray, alive: np.ndarray, ammo: np.ndarray, team: int | str,
@@ -97,9 +109,10 @@ def scripted_actions(positions: np.ndarray, alive: np.ndarray, ammo: np.ndarray,
     positions: int [W, 2, N, 2] (x, y) indexed [world, team, agent] (or [2, N, 2] for one world),
     alive: bool [W, 2, N], ammo: int [W, 2, N]. Returns int64 [W, N] (or [N]).
     """
-    pos = np.ascontiguousarray(positions, dtype=np.int64)
+    # no dtype conversion (a copy per call): the kernel compiles for the simulators' int32 state as is
+    pos = np.ascontiguousarray(positions)
     alive = np.ascontiguousarray(alive, dtype=np.bool_)
-    ammo = np.ascontiguousarray(ammo, dtype=np.int64)
+    ammo = np.ascontiguousarray(ammo)
     single = pos.ndim == 3
     if single:
         pos, alive, ammo = pos[None], alive[None], ammo[None]
@@ -108,14 +121,13 @@ def scripted_actions(positions: np.ndarray, alive: np.ndarray, ammo: np.ndarray,
                          f"{alive.shape}, {ammo.shape}")
     t = team_index(team)
     n_worlds, _, n = alive.shape
-    action_ids = np.asarray(scenario.action_ids, dtype=np.int64)
-    # Always the same draws, whatever the state, so the stream stays aligned between simulators.
-    u = rng.random((n_worlds, n))
-    r = rng.random((n_worlds, n))
-    k = rng.integers(0, len(action_ids), size=(n_worlds, n))
+    action_ids = _int_array(scenario.action_ids)
+    # Always the same draws, whatever the state, so the stream stays aligned between simulators
+    # (one call for all three: each generator call costs microseconds, a step's budget is ~50).
+    draws = rng.random((3, n_worlds, n))
     out = np.empty((n_worlds, n), dtype=np.int64)
-    _policy_kernel(pos, alive, ammo, t, u, r, k, action_ids, np.ascontiguousarray(scenario.mountain_grid),
-                   np.asarray(scenario.bases[1 - t], dtype=np.int64), scenario.advanced, float(p_toward), out)
+    _policy_kernel(pos, alive, ammo, t, draws, action_ids, np.ascontiguousarray(scenario.mountain_grid),
+                   _int_array(tuple(scenario.bases[1 - t])), scenario.advanced, float(p_toward), out)
     return out[0] if single else out
 
 

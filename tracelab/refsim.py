@@ -389,6 +389,21 @@ def _observe_kernel(team, pos, alive, bpos, bdir, bteam, advanced, out):
             out[w, col + 2] = by
 
 
+@njit(cache=True)
+def _observe_both_kernel(pos, alive, bpos, bdir, bteam, advanced, out):
+    """Fill out [W, 2, D] with both teams' observations."""
+    for team in range(2):
+        _observe_kernel(team, pos, alive, bpos, bdir, bteam, advanced, out[:, team])
+
+
+def observe_both(state: GameState, scenario: Scenario) -> np.ndarray:
+    """Both teams' observations without history, float32 [W, 2, D]."""
+    out = np.empty((state.alive.shape[0], 2, obs_size(scenario)), dtype=np.float32)
+    _observe_both_kernel(state.pos, state.alive, state.bullet_pos, state.bullet_dir, state.bullet_team,
+                         scenario.advanced, out)
+    return out
+
+
 def obs_size(scenario: Scenario, stack_previous: bool = False) -> int:
     """Observation length per team: 4 (base) or 7 (advanced) per agent, doubled with history."""
     size = (7 if scenario.advanced else 4) * scenario.agents_per_team

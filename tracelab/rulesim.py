@@ -10,7 +10,7 @@ import numpy as np
 
 from tracelab.engine import Engine
 from tracelab.game_facts import DIRECTIONS, agent_name, bullet_name, scenario_program
-from tracelab.rulesim_kernel import encode_actions, read_back, settle_step
+from tracelab.rulesim_kernel import check_actions, encode_actions, read_back, settle_step
 from tracelab.refsim import WINNER_NONE, GameState, StepResult
 from tracelab.scenario import NOTHING, TEAMS, Scenario
 from tracelab.sim_base import GameSim
@@ -48,6 +48,7 @@ class RuleSim(GameSim):
                                   r.invalid], np.float64)
         self._allowed = np.zeros(9, bool)
         self._allowed[list(scenario.action_ids)] = True
+        self._no_world_done = np.zeros(n_worlds, bool)
         self.state = self._read_state()
         self._cur = self._observe_both(self.state)
         self._obs = self._with_history(self._cur, self._cur)
@@ -99,6 +100,8 @@ class RuleSim(GameSim):
         self._bullet_team = (slots // max(n * ammo, 1)).astype(np.int64)
         self._bullet_agent = ((slots // max(ammo, 1)) % n).astype(np.int64)
         self._bullet_owner = np.stack([self._bullet_team, self._bullet_agent], axis=1)
+        self._state_bullet_team = self._bullet_team.astype(np.int8)  # GameState's dtypes (constant)
+        self._state_bullet_agent = self._bullet_agent.astype(np.int16)
         # action atom per (agent, spec action id); -1 for "do nothing"
         acts = np.full((2 * n, 9), -1, np.int64)
         for i, a in enumerate(agents):
@@ -110,13 +113,16 @@ class RuleSim(GameSim):
 
     # ---- reading the world back ----
 
-    def _read_state(self) -> GameState:
+    def _read_state(self, done: np.ndarray | None = None) -> GameState:
         """The game state of every world, read from atoms (and the events of the last step into
-        self._events: unsafe, invalid, acted [W, 2, N]; hits made / taken; which team won)."""
+        self._events: unsafe, invalid, acted [W, 2, N]; hits made / taken; which team won). Worlds in
+        `done` keep their state from self.state and have no events. t, terminated, truncated and winner
+        are copies of the simulator's as they stand now."""
         s = self.scenario
         w, n = self.n_worlds, s.agents_per_team
         n_b = len(self._bullet_team)
         pos = np.empty((w, 2, n, 2), np.int32)
+        health = np.empty((w, 2, n), np.float64)
         alive = np.empty((w, 2, n), bool)
         ammo = np.empty((w, 2, n), np.int32)
         moving = np.empty((w, 2, n), bool)
@@ -127,17 +133,22 @@ class RuleSim(GameSim):
         hits_made = np.empty((w, 2, n), np.int32)
         hits_taken = np.empty((w, 2, n), np.int32)
         win = np.empty((w, 2), bool)
+        if done is None:  # no world keeps its state: the new arrays stand in for the unread prev_* ones
+            done, prev = self._no_world_done, (pos, alive, ammo, moving, dest, bpos, bdir)
+        else:
+            st = self.state
+            prev = (st.pos, st.alive, st.ammo, st.moving, st.dest, st.bullet_pos, st.bullet_dir)
         read_back(self.engine.lower, self._agent_loc, self._cell_xy, self._agent_flags, self._dest,
                   self._bullet_loc, self._bullet_flags, self._dir, self._hits, self._bullet_team,
-                  self._bullet_agent, self._win, s.ammo, pos, alive, ammo, moving, dest, flags, bpos, bdir,
-                  hits_made, hits_taken, win)
+                  self._bullet_agent, self._win, s.ammo, float(s.health), done, *prev,
+                  pos, health, alive, ammo, moving, dest, flags, bpos, bdir, hits_made, hits_taken, win)
         flags = flags.reshape(w, 2, n, 3)
         self._events = (flags[..., 0], flags[..., 1], flags[..., 2], hits_made, hits_taken, win)
         return GameState(
-            t=self.t.copy(), pos=pos, health=np.where(alive, s.health, 0.0), ammo=ammo, alive=alive,
-            moving=moving, dest=dest, bullet_pos=bpos, bullet_dir=bdir,
-            terminated=self.terminated.copy(), truncated=self.truncated.copy(), winner=self.winner.copy(),
-            bullet_team=self._bullet_team.astype(np.int8), bullet_agent=self._bullet_agent.astype(np.int16))
+            t=self.t.copy(), pos=pos, health=health, ammo=ammo, alive=alive, moving=moving, dest=dest,
+            bullet_pos=bpos, bullet_dir=bdir, terminated=self.terminated.copy(),
+            truncated=self.truncated.copy(), winner=self.winner.copy(),
+            bullet_team=self._state_bullet_team, bullet_agent=self._state_bullet_agent)
 
     def allowed_actions(self) -> np.ndarray:
         """Which spec actions (ids 0..8) each agent may take next step, as the shield rules see it after
@@ -207,6 +218,10 @@ class RuleSim(GameSim):
 
     def _localize(self, rows: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         """Engine rows with t counted from their world's current episode start, and world_episode."""
+        if self.n_worlds == 1:  # the common single-world case without the per-row gathers
+            rows["t"] -= np.int32(self.episode_start[0])
+            rows["world_episode"] = np.full(len(rows["t"]), self.world_episode[0])
+            return rows
         world = rows["world"].astype(np.int64)
         rows["t"] = (rows["t"] - self.episode_start[world]).astype(np.int32)
         rows["world_episode"] = self.world_episode[world].copy()
@@ -228,24 +243,20 @@ class RuleSim(GameSim):
         (zero rewards, flags kept) until reset."""
         s = self.scenario
         n_worlds, n = self.n_worlds, s.agents_per_team
-        acts = np.stack([self._check(red_actions, "red_actions"), self._check(blue_actions, "blue_actions")],
-                        axis=1)
+        acts = self._actions(red_actions, blue_actions)
         done = self.terminated | self.truncated
         any_done = bool(done.any())
         if any_done:
             acts[done] = NOTHING
         self._fresh[:] = False
-        before = self.state
         self.engine.step(external=self._action_rows(acts))
-        state = self._read_state()
+        state = self._read_state(done if any_done else None)  # finished worlds keep their final state
         unsafe, invalid, acted, hits_made, hits_taken, win = self._events
         agent_reward = np.empty((n_worlds, 2, n))
         reward = np.empty((n_worlds, 2))
         settle_step(done, win, unsafe, invalid, acted, hits_made, hits_taken, self._weights, s.max_steps,
                     self.t, self.terminated, self.truncated, self.winner, agent_reward, reward)
-        if any_done:  # finished worlds keep their final state
-            for f in ("pos", "health", "ammo", "alive", "moving", "dest", "bullet_pos", "bullet_dir"):
-                getattr(state, f)[done] = getattr(before, f)[done]
+        # the clock and the end flags after settling: the state's own copies, and the result's
         state.t, state.terminated, state.truncated = self.t.copy(), self.terminated.copy(), self.truncated.copy()
         state.winner = self.winner.copy()
         self.state = state
@@ -257,23 +268,30 @@ class RuleSim(GameSim):
         self._cur, self._obs = cur, obs
         return StepResult(
             obs=obs, positions=state.pos.copy(), health=state.health.copy(), ammo=state.ammo.copy(),
-            alive=state.alive.copy(), moving=state.moving.copy(), move_dest=state.dest.copy(), bullet_pos=state.bullet_pos.copy(),
-            bullet_dir=state.bullet_dir.copy(),
+            alive=state.alive.copy(), moving=state.moving.copy(), move_dest=state.dest.copy(),
+            bullet_pos=state.bullet_pos.copy(), bullet_dir=state.bullet_dir.copy(),
             bullet_owner=self._bullet_owner,
             unsafe=unsafe, invalid=invalid, hits_made=hits_made, hits_taken=hits_taken,
-            agent_reward=agent_reward, reward=reward, terminated=self.terminated.copy(),
-            truncated=self.truncated.copy(), winner=self.winner.copy(), t=self.t.copy())
+            agent_reward=agent_reward, reward=reward, terminated=state.terminated.copy(),
+            truncated=state.truncated.copy(), winner=state.winner.copy(), t=state.t.copy())
 
-    def _check(self, actions: np.ndarray, name: str) -> np.ndarray:
+    def _actions(self, red_actions: np.ndarray, blue_actions: np.ndarray) -> np.ndarray:
+        """Both teams' actions as one int64 [W, 2, N] array, checked against what the scenario offers."""
+        red = self._team_actions(red_actions, "red_actions")
+        blue = self._team_actions(blue_actions, "blue_actions")
+        acts = np.empty((self.n_worlds, 2, self.scenario.agents_per_team), np.int64)
+        bad = check_actions(red, blue, self._allowed, acts)
+        if bad >= 0:
+            w, tm, j = np.unravel_index(bad, acts.shape)
+            raise ValueError(f"action {acts[w, tm, j]} of {TEAMS[tm]} agent {j} in world {w} is not offered "
+                             f"by scenario {self.scenario.name!r} (ids {self.scenario.action_ids})")
+        return acts
+
+    def _team_actions(self, actions: np.ndarray, name: str) -> np.ndarray:
         a = np.asarray(actions, np.int64)
         if a.ndim == 1 and self.n_worlds == 1:
             a = a[None]
         shape = (self.n_worlds, self.scenario.agents_per_team)
         if a.shape != shape:
             raise ValueError(f"{name} must have shape {shape} (worlds, agents), got {a.shape}")
-        if a.min() < 0 or a.max() > 8 or not self._allowed[a].all():
-            bad = (a < 0) | (a > 8) | ~self._allowed[np.clip(a, 0, 8)]
-            w, j = np.argwhere(bad)[0]
-            raise ValueError(f"action {a[w, j]} of {name[:-8]} agent {j} in world {w} is not offered by "
-                             f"scenario {self.scenario.name!r} (ids {self.scenario.action_ids})")
         return a

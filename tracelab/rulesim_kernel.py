@@ -54,61 +54,114 @@ def _first_true(lower, w, ids, row):
 
 @njit(cache=True)
 def read_back(lower, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc, bullet_flags, dir_ids,
-              hits, bullet_team, bullet_agent, win_ids, ammo0,
-              pos, alive, ammo, moving, dest, flags, bpos, bdir, hits_made, hits_taken, win):
+              hits, bullet_team, bullet_agent, win_ids, ammo0, health0, done, prev_pos, prev_alive,
+              prev_ammo, prev_moving, prev_dest, prev_bpos, prev_bdir,
+              pos, health, alive, ammo, moving, dest, flags, bpos, bdir, hits_made, hits_taken, win):
     """Gather the game state of every world from atoms into the given arrays.
     agent_flags [M, 5]: atom ids of alive, moving, unsafe, invalid, canAct per agent (M = 2N);
     flags [W, M, 3] receives unsafe, invalid, canAct. bullet_flags [B, 2]: flying, spent.
     hits [3, B, N]: struck / blanked / caught atoms of bullet b on enemy e. win_ids [2, 2]: captured,
-    eliminated per team; win [W, 2] receives 'team won' (captured, or the enemy eliminated)."""
+    eliminated per team; win [W, 2] receives 'team won' (captured, or the enemy eliminated).
+    A world with done[w] keeps its state (copied from the prev_* arrays) and has no events."""
     n_worlds = lower.shape[0]
-    m = agent_loc.shape[0]
-    n = m // 2
-    n_b = bullet_loc.shape[0]
     for w in range(n_worlds):
-        for j in range(m):
-            tm = j // n
-            i = j % n
-            c = _first_true(lower, w, agent_loc, j)
-            pos[w, tm, i, 0] = cell_xy[c, 0]
-            pos[w, tm, i, 1] = cell_xy[c, 1]
-            alive[w, tm, i] = lower[w, agent_flags[j, 0]] >= 1.0
-            moving[w, tm, i] = lower[w, agent_flags[j, 1]] >= 1.0
-            for f in range(3):
-                flags[w, j, f] = lower[w, agent_flags[j, 2 + f]] >= 1.0
-            dest[w, tm, i, 0] = -1
-            dest[w, tm, i, 1] = -1
-            if moving[w, tm, i] and dest_ids.shape[1] > 0:
-                d = _first_true(lower, w, dest_ids, j)
-                if d >= 0:
-                    dest[w, tm, i, 0] = cell_xy[d, 0]
-                    dest[w, tm, i, 1] = cell_xy[d, 1]
-            ammo[w, tm, i] = ammo0
+        if done[w]:
+            _keep_world(w, prev_pos, prev_alive, prev_ammo, prev_moving, prev_dest, prev_bpos, prev_bdir,
+                        health0, pos, health, alive, ammo, moving, dest, flags, bpos, bdir, hits_made,
+                        hits_taken, win)
+        else:
+            _read_world(w, lower, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc, bullet_flags,
+                        dir_ids, hits, bullet_team, bullet_agent, win_ids, ammo0, health0, pos, health,
+                        alive, ammo, moving, dest, flags, bpos, bdir, hits_made, hits_taken, win)
+
+
+@njit(cache=True)
+def _keep_world(w, prev_pos, prev_alive, prev_ammo, prev_moving, prev_dest, prev_bpos, prev_bdir, health0,
+                pos, health, alive, ammo, moving, dest, flags, bpos, bdir, hits_made, hits_taken, win):
+    pos[w] = prev_pos[w]
+    alive[w] = prev_alive[w]
+    ammo[w] = prev_ammo[w]
+    moving[w] = prev_moving[w]
+    dest[w] = prev_dest[w]
+    bpos[w] = prev_bpos[w]
+    bdir[w] = prev_bdir[w]
+    for tm in range(2):
+        win[w, tm] = False
+        for i in range(alive.shape[2]):
+            health[w, tm, i] = health0 if alive[w, tm, i] else 0.0
             hits_made[w, tm, i] = 0
             hits_taken[w, tm, i] = 0
-        for b in range(n_b):
-            tm = bullet_team[b]
-            i = bullet_agent[b]
-            if lower[w, bullet_flags[b, 1]] >= 1.0:
-                ammo[w, tm, i] -= 1
-            bpos[w, b, 0] = -1
-            bpos[w, b, 1] = -1
-            bdir[w, b] = -1
-            if lower[w, bullet_flags[b, 0]] >= 1.0:
-                c = _first_true(lower, w, bullet_loc, b)
-                if c >= 0:
-                    bpos[w, b, 0] = cell_xy[c, 0]
-                    bpos[w, b, 1] = cell_xy[c, 1]
-                for d in range(4):
-                    if lower[w, dir_ids[b, d]] >= 1.0:
-                        bdir[w, b] = d
-            for e in range(hits.shape[2]):
-                for kind in range(3):
-                    if lower[w, hits[kind, b, e]] >= 1.0:
-                        hits_made[w, tm, i] += 1
-                        hits_taken[w, 1 - tm, e] += 1
+    flags[w] = False
+
+
+@njit(cache=True)
+def _read_world(w, lower, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc, bullet_flags, dir_ids,
+                hits, bullet_team, bullet_agent, win_ids, ammo0, health0, pos, health, alive, ammo,
+                moving, dest, flags, bpos, bdir, hits_made, hits_taken, win):
+    m = agent_loc.shape[0]
+    n = m // 2
+    for j in range(m):
+        tm = j // n
+        i = j % n
+        c = _first_true(lower, w, agent_loc, j)
+        pos[w, tm, i, 0] = cell_xy[c, 0]
+        pos[w, tm, i, 1] = cell_xy[c, 1]
+        alive[w, tm, i] = lower[w, agent_flags[j, 0]] >= 1.0
+        health[w, tm, i] = health0 if alive[w, tm, i] else 0.0
+        moving[w, tm, i] = lower[w, agent_flags[j, 1]] >= 1.0
+        for f in range(3):
+            flags[w, j, f] = lower[w, agent_flags[j, 2 + f]] >= 1.0
+        dest[w, tm, i, 0] = -1
+        dest[w, tm, i, 1] = -1
+        if moving[w, tm, i] and dest_ids.shape[1] > 0:
+            d = _first_true(lower, w, dest_ids, j)
+            if d >= 0:
+                dest[w, tm, i, 0] = cell_xy[d, 0]
+                dest[w, tm, i, 1] = cell_xy[d, 1]
+        ammo[w, tm, i] = ammo0
+        hits_made[w, tm, i] = 0
+        hits_taken[w, tm, i] = 0
+    for b in range(bullet_loc.shape[0]):
+        tm = bullet_team[b]
+        i = bullet_agent[b]
+        if lower[w, bullet_flags[b, 1]] >= 1.0:
+            ammo[w, tm, i] -= 1
+        bpos[w, b, 0] = -1
+        bpos[w, b, 1] = -1
+        bdir[w, b] = -1
+        if lower[w, bullet_flags[b, 0]] >= 1.0:
+            c = _first_true(lower, w, bullet_loc, b)
+            if c >= 0:
+                bpos[w, b, 0] = cell_xy[c, 0]
+                bpos[w, b, 1] = cell_xy[c, 1]
+            for d in range(4):
+                if lower[w, dir_ids[b, d]] >= 1.0:
+                    bdir[w, b] = d
+        for e in range(hits.shape[2]):
+            for kind in range(3):
+                if lower[w, hits[kind, b, e]] >= 1.0:
+                    hits_made[w, tm, i] += 1
+                    hits_taken[w, 1 - tm, e] += 1
+    for tm in range(2):
+        win[w, tm] = lower[w, win_ids[tm, 0]] >= 1.0 or lower[w, win_ids[1 - tm, 1]] >= 1.0
+
+
+@njit(cache=True)
+def check_actions(red, blue, allowed, acts):
+    """Copy both teams' actions ([W, N] spec ids) into acts [W, 2, N]; returns the flat index into acts
+    of the first action `allowed` (bool [9]) does not offer, or -1."""
+    n_worlds, n = red.shape
+    for w in range(n_worlds):
+        for i in range(n):
+            acts[w, 0, i] = red[w, i]
+            acts[w, 1, i] = blue[w, i]
+    for w in range(n_worlds):
         for tm in range(2):
-            win[w, tm] = lower[w, win_ids[tm, 0]] >= 1.0 or lower[w, win_ids[1 - tm, 1]] >= 1.0
+            for i in range(n):
+                a = acts[w, tm, i]
+                if a < 0 or a > 8 or not allowed[a]:
+                    return (w * 2 + tm) * n + i
+    return -1
 
 
 @njit(cache=True)

@@ -25,9 +25,9 @@ class GameSim:
 
     def _observe_both(self, state) -> np.ndarray:
         """Both teams' observations of `state` without history, [W, 2, D]."""
-        from tracelab.refsim import observe
+        from tracelab.refsim import observe_both
 
-        return np.stack([observe(state, t, self.scenario) for t in (0, 1)], axis=1)
+        return observe_both(state, self.scenario)
 
     def _with_history(self, cur: np.ndarray, prev: np.ndarray) -> np.ndarray:
         return np.concatenate([cur, prev], axis=2) if self.stack_previous else cur
