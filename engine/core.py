@@ -20,7 +20,11 @@ from .vocabulary import Vocabulary
 
 TRACE_COLUMNS = ("world", "t", "pass_no", "atom", "cause_kind", "cause_id", "grounding", "n_sources",
                  "old_lower", "old_upper", "new_lower", "new_upper")
-_TRACE_INT_DTYPES = (np.int32, np.int32, np.int32, np.int32, np.int8, np.int32, np.int32, np.int16)
+_TRACE_INT_DTYPES = tuple(np.dtype(d) for d in (np.int32, np.int32, np.int32, np.int32, np.int8, np.int32,
+                                                 np.int32, np.int16))
+# (column name, dtype, taken as is from the int32 buffer) per int column of take_trace()
+_TRACE_INT_OUT = tuple((name, d, d == np.dtype(np.int32)) for name, d in zip(TRACE_COLUMNS, _TRACE_INT_DTYPES))
+_TRACE_FLOAT_NAMES = TRACE_COLUMNS[K.TRACE_INT_COLUMNS:]
 STAT_NAMES = ("firings", "rederivations", "static_ignored", "changes", "passes", "watch_visits",
               "candidates")
 
@@ -95,6 +99,15 @@ class Engine:
             self._rule_i[i] = (UPDATE_MODES.index(mode), r.delay, int(r.immediate))
             self._rule_f[i] = rule_head_bound(r)
 
+    def _inst_kind(self, inst_i: np.ndarray) -> np.ndarray:
+        """Per grounding, the kind bits of its rule (kernel.KIND_*): immediate, delayed, ordinary Δt = 0."""
+        ri = self._rule_i[inst_i[:, K.INST_RULE]]
+        immediate = ri[:, K.RULE_IMMEDIATE] == 1
+        delay = ri[:, K.RULE_DELAY]
+        kind = np.where(immediate, K.KIND_IMMEDIATE, 0) | np.where(delay > 0, K.KIND_DELAYED, 0) \
+            | np.where(~immediate & (delay == 0), K.KIND_ORDINARY, 0)
+        return kind.astype(np.uint8)
+
     def sync(self) -> None:
         """Grow the per-world arrays to every atom interned so far (step() does this itself)."""
         self._sync()
@@ -120,6 +133,7 @@ class Engine:
         if n_inst == self._n_grounded and n_atoms == old_atoms and hasattr(self, "_kt"):
             return
         self._kt = self.grounder.kernel_tables()
+        self._kt["inst_kind"] = self._inst_kind(self._kt["inst_i"])
         first = self._n_grounded
         if n_inst > first:
             grow = n_inst - first
@@ -157,10 +171,11 @@ class Engine:
         if worlds.size == 0:
             return
         n_atoms = snap["lower"].shape[1]
-        self.lower[worlds] = 0.0
-        self.upper[worlds] = 1.0
-        self.static[worlds] = False
-        self._last_cause[worlds] = -1
+        if n_atoms < self.lower.shape[1]:  # atoms interned since the snapshot start unset
+            self.lower[worlds] = 0.0
+            self.upper[worlds] = 1.0
+            self.static[worlds] = False
+            self._last_cause[worlds] = -1
         self.lower[worlds, :n_atoms] = snap["lower"][worlds]
         self.upper[worlds, :n_atoms] = snap["upper"][worlds]
         self.static[worlds, :n_atoms] = snap["static"][worlds]
@@ -270,18 +285,14 @@ class Engine:
         else:
             if self._ext:
                 raise RuntimeError("step(external=...) with facts queued by add_fact(s): use one or the other")
-            ext_ptr, ext_i, ext_f = external
+            ext_ptr, ext_i, ext_f = external  # the kernel refuses atoms nothing can set
             n = int(ext_ptr[-1])
-            if n and not self._settable[ext_i[:n, 0]].all():
-                raise ValueError("step(external=...) names atoms no fact or rule can set; give them to "
-                                 "add_facts once first")
-            self._ext_count += n
         self._cfg[K.CFG_T] = self.t
         kt = self._kt
         status, self._tri, self._trf, self._pend = K.step_worlds(
-            self._cfg, self._rule_i, self._rule_f, kt["inst_i"], kt["w_ptr"], kt["w_inst"], kt["w_neg"],
-            kt["w_bnd"], kt["ih_ptr"], kt["ih_inst"], self._fact_i, self._fact_f, self._fact_order,
-            ext_ptr, ext_i, ext_f,
+            self._cfg, self._rule_i, self._rule_f, kt["inst_i"], kt["inst_kind"], kt["w_ptr"], kt["w_inst"],
+            kt["w_neg"], kt["w_bnd"], kt["ih_ptr"], kt["ih_inst"], self._fact_i, self._fact_f, self._fact_order,
+            ext_ptr, ext_i, ext_f, self._settable,
             self.lower, self.upper, self.static, self._last_cause, self._unsat, self._act, self._act_n,
             self._act_pos, self._pend, self._pend_n, self.trace_on, self._tri, self._trf, self._tr_n,
             self._stats, self._err, self._si, self._sf, self._touched, self._heap, self._in_heap,
@@ -290,6 +301,8 @@ class Engine:
             self._in_heap[:] = False  # an error may leave candidates behind
             self._si[:] = 0
             self._raise(status)
+        if external is not None:
+            self._ext_count += n
         self.t += 1
 
     def next_external_id(self) -> int:
@@ -324,10 +337,10 @@ class Engine:
         # one copy per block; the columns are its rows (a copy per column costs more than the rows)
         ints, floats = self._tri[:, :n].copy(), self._trf[:, :n].copy()
         cols: dict[str, np.ndarray] = {}
-        for i, dtype in enumerate(_TRACE_INT_DTYPES):
-            cols[TRACE_COLUMNS[i]] = ints[i] if dtype == ints.dtype else ints[i].astype(dtype)
-        for j in range(K.TRACE_FLOAT_COLUMNS):
-            cols[TRACE_COLUMNS[K.TRACE_INT_COLUMNS + j]] = floats[j]
+        for (name, dtype, as_is), col in zip(_TRACE_INT_OUT, ints):
+            cols[name] = col if as_is else col.astype(dtype)
+        for name, col in zip(_TRACE_FLOAT_NAMES, floats):
+            cols[name] = col
         self._tr_n[0] = 0
         return cols
 
@@ -405,6 +418,9 @@ class Engine:
             raise InconsistencyError(
                 f"inconsistent bounds for {self.atom_text(a)} at t={t} (world {w}): its bound "
                 f"[{lo:g},{up:g}] came from {old}; the incoming bound from {first} is disjoint from it")
+        if status == K.STATUS_NOT_SETTABLE:
+            raise ValueError(f"step(external=...) names {self.atom_text(a)}, which no fact or rule can set; "
+                             "give such atoms to add_facts once first")
         if status == K.STATUS_IMMEDIATE_LIMIT:
             raise FixpointError(
                 f"immediate rules did not settle at t={t} (world {w}) after "

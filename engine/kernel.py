@@ -24,10 +24,14 @@ MODE_INTERSECTION, MODE_OVERRIDE = 0, 1
 POLICY_RESET_FREEZE, POLICY_KEEP_OLD, POLICY_TAKE_NEW, POLICY_HULL, POLICY_ABORT = 0, 1, 2, 3, 4
 # kernel status codes
 STATUS_OK, STATUS_INCONSISTENT, STATUS_NO_FIXPOINT, STATUS_IMMEDIATE_LIMIT = 0, 1, 2, 3
+STATUS_NOT_SETTABLE = 4  # an external fact names an atom no fact or rule can set (nothing was stepped)
 
 # column layout of the packed arrays
 RULE_MODE, RULE_DELAY, RULE_IMMEDIATE = 0, 1, 2
 INST_RULE, INST_HEAD, INST_RANK = 0, 1, 2
+# per-grounding kind bits (inst_kind, uint8[G]): its rule is immediate / delayed (Δt > 0) / ordinary Δt = 0.
+# A small dense array, so that the scans of the active list need not read inst_i and rule_i per grounding.
+KIND_IMMEDIATE, KIND_DELAYED, KIND_ORDINARY = 1, 2, 4
 CFG_MODE, CFG_RESET, CFG_POLICY, CFG_MAX_PASSES, CFG_MAX_IMMEDIATE, CFG_T = 0, 1, 2, 3, 4, 5
 # trace int columns: world, t, pass_no, atom, cause_kind, cause_id, grounding, n_sources
 TRACE_INT_COLUMNS = 8
@@ -438,8 +442,8 @@ def _grow_pending(pend, need):
 
 
 @njit(cache=True)
-def step_worlds(cfg, rule_i, rule_f, inst_i, w_ptr, w_inst, w_neg, w_bnd, ih_ptr, ih_inst,
-                fact_i, fact_f, fact_order, ext_ptr, ext_i, ext_f,
+def step_worlds(cfg, rule_i, rule_f, inst_i, inst_kind, w_ptr, w_inst, w_neg, w_bnd, ih_ptr, ih_inst,
+                fact_i, fact_f, fact_order, ext_ptr, ext_i, ext_f, settable,
                 lo, up, static, last_cause, unsat, act, act_n, act_pos, pend, pend_n,
                 trace_on, tri, trf, tr_n, stats, err, si, sf, touched, heap, in_heap, alog):
     """Compute timestep cfg[CFG_T] for every world. Returns (status, tri, trf, pend): the trace and
@@ -450,6 +454,10 @@ def step_worlds(cfg, rule_i, rule_f, inst_i, w_ptr, w_inst, w_neg, w_bnd, ih_ptr
     max_passes = cfg[CFG_MAX_PASSES]
     max_immediate = cfg[CFG_MAX_IMMEDIATE]
     n_worlds = lo.shape[0]
+    for e in range(ext_ptr[n_worlds]):  # checked before any world steps, so a refusal changes nothing
+        if not settable[ext_i[e, 0]]:
+            err[2] = ext_i[e, 0]
+            return STATUS_NOT_SETTABLE, tri, trf, pend
     n_touched = np.zeros(1, np.int64)
     out = np.empty(5)
     for w in range(n_worlds):
@@ -499,7 +507,7 @@ def step_worlds(cfg, rule_i, rule_f, inst_i, w_ptr, w_inst, w_neg, w_bnd, ih_ptr
             hn = 0
             for k in range(act_n[w]):
                 g = act[w, k]
-                if rule_i[inst_i[g, INST_RULE], RULE_IMMEDIATE] == 1 and not in_heap[g]:
+                if inst_kind[g] & KIND_IMMEDIATE and not in_heap[g]:
                     hn = _heap_push(heap, hn, inst_i[g, INST_RANK], g)
                     in_heap[g] = True
             while hn > 0:
@@ -534,13 +542,13 @@ def step_worlds(cfg, rule_i, rule_f, inst_i, w_ptr, w_inst, w_neg, w_bnd, ih_ptr
                 if alog[0] < 0:  # too many activations to log: take every active grounding again
                     for k in range(act_n[w]):
                         g2 = act[w, k]
-                        if rule_i[inst_i[g2, INST_RULE], RULE_IMMEDIATE] == 1 and not in_heap[g2]:
+                        if inst_kind[g2] & KIND_IMMEDIATE and not in_heap[g2]:
                             hn = _heap_push(heap, hn, inst_i[g2, INST_RANK], g2)
                             in_heap[g2] = True
                 else:
                     for k in range(1, alog[0] + 1):
                         g2 = alog[k]
-                        if rule_i[inst_i[g2, INST_RULE], RULE_IMMEDIATE] == 1 and not in_heap[g2]:
+                        if inst_kind[g2] & KIND_IMMEDIATE and not in_heap[g2]:
                             hn = _heap_push(heap, hn, inst_i[g2, INST_RANK], g2)
                             in_heap[g2] = True
                 # the atom changed: the immediate groundings that set it may now change it back
@@ -552,9 +560,9 @@ def step_worlds(cfg, rule_i, rule_f, inst_i, w_ptr, w_inst, w_neg, w_bnd, ih_ptr
             # ordinary pass: every active Δt = 0 grounding fires; heads applied together per atom
             for k in range(act_n[w]):
                 g = act[w, k]
-                r = inst_i[g, INST_RULE]
-                if rule_i[r, RULE_IMMEDIATE] == 1 or rule_i[r, RULE_DELAY] != 0:
+                if inst_kind[g] & KIND_ORDINARY == 0:
                     continue
+                r = inst_i[g, INST_RULE]
                 _add_source(inst_i[g, INST_HEAD], rule_f[r, 0], rule_f[r, 1],
                             rule_i[r, RULE_MODE] == MODE_OVERRIDE, 2 * KEY_STRIDE + inst_i[g, INST_RANK],
                             CAUSE_RULE, r, g, False, si, sf, touched, n_touched)
@@ -576,9 +584,8 @@ def step_worlds(cfg, rule_i, rule_f, inst_i, w_ptr, w_inst, w_neg, w_bnd, ih_ptr
         # 4. delayed rules read the final interpretation of t and schedule their heads
         for k in range(act_n[w]):
             g = act[w, k]
-            r = inst_i[g, INST_RULE]
-            d = rule_i[r, RULE_DELAY]
-            if d > 0:
+            if inst_kind[g] & KIND_DELAYED:
+                d = rule_i[inst_i[g, INST_RULE], RULE_DELAY]
                 n = pend_n[w]
                 pend = _grow_pending(pend, n + 1)
                 pend[w, n, 0] = t + d

@@ -176,6 +176,29 @@ def test_bad_external_bound_names_the_value():
         eng.add_fact(eng.atom("reach", "a"), 0.7, 0.2)
 
 
+def test_external_rows_step_worlds_and_unsettable_atoms_are_refused_before_any_change():
+    eng = Engine(parse_program(CHAIN), worlds=2)
+    reach_a, reach_b = eng.atom("reach", "a"), eng.atom("reach", "b")
+    eng.add_facts(np.array([reach_a]), 0.0, 1.0)  # made settable once, as a simulator does
+    eng.step()
+    eng.take_trace()
+    first = eng.next_external_id()
+    ptr = np.array([0, 1, 1], np.int64)  # one row, for world 0
+    eng.step(external=(ptr, np.array([[reach_a, 0, first]], np.int64), np.array([[1.0, 1.0]])))
+    assert eng.query("reach(a)", 0) == (1.0, 1.0) and eng.query("reach(a)", 1) == (0.0, 1.0)
+    assert eng.next_external_id() == first + 1
+    assert rows(eng) == [(0, 1, "reach(a)", "external"), (0, 1, "seen(a)", "mark")]
+    edge_da = eng.atom("edge", "d", "a")  # interned, but no fact or rule can ever set it
+    t, before = eng.t, (eng.lower.copy(), eng.upper.copy())
+    bad = np.array([[reach_b, 0, first + 1], [edge_da, 0, first + 2]], np.int64)
+    with pytest.raises(ValueError, match=r"edge\(d,a\).*no fact or rule can set"):
+        eng.step(external=(np.array([0, 1, 2], np.int64), bad, np.ones((2, 2))))
+    assert eng.t == t and eng.next_external_id() == first + 1  # refused whole: no world stepped
+    assert (eng.lower[:, :before[0].shape[1]] == before[0]).all()
+    assert (eng.upper[:, :before[1].shape[1]] == before[1]).all()
+    assert rows(eng) == []
+
+
 def test_a_new_program_does_not_recompile_the_kernel():
     Engine(parse_program(CHAIN)).run(2)
     other = parse_program("""

@@ -481,10 +481,11 @@ def test_observations_layout_and_sentinels(start):
     # Bullets now at (1,4) and (4,4): nearest to red 0 at (6,1) is (4,4) (distance 5 against 8).
     assert r.obs[0, 0, 8:11].tolist() == [2, 4, 4]
     # A dead agent reports (-1, -1), and so does its nearest-bullet entry.
-    sim.state.alive[0, 0, 1] = False
-    obs = observe(sim.state, "red", sim.scenario)
+    state = sim.state.copy()  # (a RuleSim's state is read-only: it shares its arrays with the results)
+    state.alive[0, 0, 1] = False
+    obs = observe(state, "red", sim.scenario)
     assert obs[0, 2:4].tolist() == [-1, -1] and obs[0, 11:14].tolist() == [2, -1, -1]
-    assert observe(sim.state, "blue", sim.scenario)[0, 4:8].tolist() == [6, 1, -1, -1]
+    assert observe(state, "blue", sim.scenario)[0, 4:8].tolist() == [6, 1, -1, -1]
 
 
 def test_nearest_bullet_ties_go_to_the_lowest_slot():

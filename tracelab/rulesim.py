@@ -39,6 +39,10 @@ class RuleSim(GameSim):
         self._pending_rows: list[dict[str, np.ndarray]] = [setup]
         n = scenario.agents_per_team
         self._prev_action = np.full((n_worlds, 2 * n), -1, np.int64)  # atom id of the last action set
+        cap = 2 * n_worlds * 2 * n  # at most two rows (old action off, new on) per agent
+        # the action rows' buffers, reused every step (the engine reads them within step())
+        self._rows_buf = (np.empty(n_worlds + 1, np.int64), np.empty((cap, 3), np.int64),
+                          np.empty((cap, 2), np.float64))
         self.t = np.zeros(n_worlds, np.int32)
         self.terminated = np.zeros(n_worlds, bool)
         self.truncated = np.zeros(n_worlds, bool)
@@ -48,7 +52,9 @@ class RuleSim(GameSim):
                                   r.invalid], np.float64)
         self._allowed = np.zeros(9, bool)
         self._allowed[list(scenario.action_ids)] = True
-        self._no_world_done = np.zeros(n_worlds, bool)
+        self._no_world_done = np.zeros(n_worlds, bool)  # read-only stand-in for "no world is done"
+        self._no_world_done.flags.writeable = False
+        self._n_done = 0  # worlds terminated or truncated and not yet reset
         self.state = self._read_state()
         self._cur = self._observe_both(self.state)
         self._obs = self._with_history(self._cur, self._cur)
@@ -127,7 +133,9 @@ class RuleSim(GameSim):
         ammo = np.empty((w, 2, n), np.int32)
         moving = np.empty((w, 2, n), bool)
         dest = np.empty((w, 2, n, 2), np.int32)
-        flags = np.empty((w, 2 * n, 3), bool)
+        unsafe = np.empty((w, 2, n), bool)
+        invalid = np.empty((w, 2, n), bool)
+        acted = np.empty((w, 2, n), bool)
         bpos = np.empty((w, n_b, 2), np.int32)
         bdir = np.empty((w, n_b), np.int8)
         hits_made = np.empty((w, 2, n), np.int32)
@@ -141,9 +149,9 @@ class RuleSim(GameSim):
         read_back(self.engine.lower, self._agent_loc, self._cell_xy, self._agent_flags, self._dest,
                   self._bullet_loc, self._bullet_flags, self._dir, self._hits, self._bullet_team,
                   self._bullet_agent, self._win, s.ammo, float(s.health), done, *prev,
-                  pos, health, alive, ammo, moving, dest, flags, bpos, bdir, hits_made, hits_taken, win)
-        flags = flags.reshape(w, 2, n, 3)
-        self._events = (flags[..., 0], flags[..., 1], flags[..., 2], hits_made, hits_taken, win)
+                  pos, health, alive, ammo, moving, dest, unsafe, invalid, acted, bpos, bdir, hits_made,
+                  hits_taken, win)
+        self._events = (unsafe, invalid, acted, hits_made, hits_taken, win)
         return GameState(
             t=self.t.copy(), pos=pos, health=health, ammo=ammo, alive=alive, moving=moving, dest=dest,
             bullet_pos=bpos, bullet_dir=bdir, terminated=self.terminated.copy(),
@@ -187,6 +195,7 @@ class RuleSim(GameSim):
         self.t[sel] = 0
         self.terminated[sel] = False
         self.truncated[sel] = False
+        self._n_done = int((self.terminated | self.truncated).sum())
         self.winner[sel] = WINNER_NONE
         self.state = self._read_state()
         cur = self._observe_both(self.state)
@@ -218,9 +227,13 @@ class RuleSim(GameSim):
 
     def _localize(self, rows: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         """Engine rows with t counted from their world's current episode start, and world_episode."""
-        if self.n_worlds == 1:  # the common single-world case without the per-row gathers
-            rows["t"] -= np.int32(self.episode_start[0])
-            rows["world_episode"] = np.full(len(rows["t"]), self.world_episode[0])
+        if self.n_worlds == 1:  # the common single-world case, without per-row gathers
+            start = int(self.episode_start[0])
+            if start:
+                rows["t"] -= start
+            episode = np.empty(len(rows["t"]), np.int64)
+            episode.fill(int(self.world_episode[0]))
+            rows["world_episode"] = episode
             return rows
         world = rows["world"].astype(np.int64)
         rows["t"] = (rows["t"] - self.episode_start[world]).astype(np.int32)
@@ -230,10 +243,7 @@ class RuleSim(GameSim):
     def _action_rows(self, acts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The engine's external-fact rows for the chosen actions (see encode_actions)."""
         n_worlds, m = self._prev_action.shape
-        cap = 2 * n_worlds * m
-        ptr = np.empty(n_worlds + 1, np.int64)
-        rows = np.empty((cap, 3), np.int64)
-        bounds = np.empty((cap, 2), np.float64)
+        ptr, rows, bounds = self._rows_buf
         k = encode_actions(acts.reshape(n_worlds, m), self._action_atoms, self._prev_action,
                            self.engine.next_external_id(), ptr, rows, bounds)
         return ptr, rows[:k], bounds[:k]
@@ -244,8 +254,8 @@ class RuleSim(GameSim):
         s = self.scenario
         n_worlds, n = self.n_worlds, s.agents_per_team
         acts = self._actions(red_actions, blue_actions)
-        done = self.terminated | self.truncated
-        any_done = bool(done.any())
+        any_done = self._n_done > 0
+        done = self.terminated | self.truncated if any_done else self._no_world_done
         if any_done:
             acts[done] = NOTHING
         self._fresh[:] = False
@@ -254,11 +264,15 @@ class RuleSim(GameSim):
         unsafe, invalid, acted, hits_made, hits_taken, win = self._events
         agent_reward = np.empty((n_worlds, 2, n))
         reward = np.empty((n_worlds, 2))
-        settle_step(done, win, unsafe, invalid, acted, hits_made, hits_taken, self._weights, s.max_steps,
-                    self.t, self.terminated, self.truncated, self.winner, agent_reward, reward)
-        # the clock and the end flags after settling: the state's own copies, and the result's
+        self._n_done = settle_step(done, win, unsafe, invalid, acted, hits_made, hits_taken, self._weights,
+                                   s.max_steps, self.t, self.terminated, self.truncated, self.winner,
+                                   agent_reward, reward)
+        # the clock and the end flags after settling
         state.t, state.terminated, state.truncated = self.t.copy(), self.terminated.copy(), self.truncated.copy()
         state.winner = self.winner.copy()
+        for a in (state.pos, state.health, state.ammo, state.alive, state.moving, state.dest, state.bullet_pos,
+                  state.bullet_dir, state.t, state.terminated, state.truncated, state.winner):
+            a.flags.writeable = False  # shared by the state and the result: nobody may change them
         self.state = state
         cur = self._observe_both(state)
         obs = self._with_history(cur, self._cur)
@@ -267,13 +281,12 @@ class RuleSim(GameSim):
             obs[done] = self._obs[done]
         self._cur, self._obs = cur, obs
         return StepResult(
-            obs=obs, positions=state.pos.copy(), health=state.health.copy(), ammo=state.ammo.copy(),
-            alive=state.alive.copy(), moving=state.moving.copy(), move_dest=state.dest.copy(),
-            bullet_pos=state.bullet_pos.copy(), bullet_dir=state.bullet_dir.copy(),
-            bullet_owner=self._bullet_owner,
+            obs=obs, positions=state.pos, health=state.health, ammo=state.ammo, alive=state.alive,
+            moving=state.moving, move_dest=state.dest, bullet_pos=state.bullet_pos,
+            bullet_dir=state.bullet_dir, bullet_owner=self._bullet_owner,
             unsafe=unsafe, invalid=invalid, hits_made=hits_made, hits_taken=hits_taken,
-            agent_reward=agent_reward, reward=reward, terminated=state.terminated.copy(),
-            truncated=state.truncated.copy(), winner=state.winner.copy(), t=state.t.copy())
+            agent_reward=agent_reward, reward=reward, terminated=state.terminated,
+            truncated=state.truncated, winner=state.winner, t=state.t)
 
     def _actions(self, red_actions: np.ndarray, blue_actions: np.ndarray) -> np.ndarray:
         """Both teams' actions as one int64 [W, 2, N] array, checked against what the scenario offers."""

@@ -56,10 +56,11 @@ def _first_true(lower, w, ids, row):
 def read_back(lower, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc, bullet_flags, dir_ids,
               hits, bullet_team, bullet_agent, win_ids, ammo0, health0, done, prev_pos, prev_alive,
               prev_ammo, prev_moving, prev_dest, prev_bpos, prev_bdir,
-              pos, health, alive, ammo, moving, dest, flags, bpos, bdir, hits_made, hits_taken, win):
+              pos, health, alive, ammo, moving, dest, unsafe, invalid, acted, bpos, bdir, hits_made,
+              hits_taken, win):
     """Gather the game state of every world from atoms into the given arrays.
-    agent_flags [M, 5]: atom ids of alive, moving, unsafe, invalid, canAct per agent (M = 2N);
-    flags [W, M, 3] receives unsafe, invalid, canAct. bullet_flags [B, 2]: flying, spent.
+    agent_flags [M, 5]: atom ids of alive, moving, unsafe, invalid, canAct per agent (M = 2N); unsafe,
+    invalid and acted [W, 2, N] receive the last three. bullet_flags [B, 2]: flying, spent.
     hits [3, B, N]: struck / blanked / caught atoms of bullet b on enemy e. win_ids [2, 2]: captured,
     eliminated per team; win [W, 2] receives 'team won' (captured, or the enemy eliminated).
     A world with done[w] keeps its state (copied from the prev_* arrays) and has no events."""
@@ -67,17 +68,19 @@ def read_back(lower, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc, bull
     for w in range(n_worlds):
         if done[w]:
             _keep_world(w, prev_pos, prev_alive, prev_ammo, prev_moving, prev_dest, prev_bpos, prev_bdir,
-                        health0, pos, health, alive, ammo, moving, dest, flags, bpos, bdir, hits_made,
-                        hits_taken, win)
+                        health0, pos, health, alive, ammo, moving, dest, unsafe, invalid, acted, bpos,
+                        bdir, hits_made, hits_taken, win)
         else:
             _read_world(w, lower, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc, bullet_flags,
                         dir_ids, hits, bullet_team, bullet_agent, win_ids, ammo0, health0, pos, health,
-                        alive, ammo, moving, dest, flags, bpos, bdir, hits_made, hits_taken, win)
+                        alive, ammo, moving, dest, unsafe, invalid, acted, bpos, bdir, hits_made,
+                        hits_taken, win)
 
 
 @njit(cache=True)
 def _keep_world(w, prev_pos, prev_alive, prev_ammo, prev_moving, prev_dest, prev_bpos, prev_bdir, health0,
-                pos, health, alive, ammo, moving, dest, flags, bpos, bdir, hits_made, hits_taken, win):
+                pos, health, alive, ammo, moving, dest, unsafe, invalid, acted, bpos, bdir, hits_made,
+                hits_taken, win):
     pos[w] = prev_pos[w]
     alive[w] = prev_alive[w]
     ammo[w] = prev_ammo[w]
@@ -91,13 +94,15 @@ def _keep_world(w, prev_pos, prev_alive, prev_ammo, prev_moving, prev_dest, prev
             health[w, tm, i] = health0 if alive[w, tm, i] else 0.0
             hits_made[w, tm, i] = 0
             hits_taken[w, tm, i] = 0
-    flags[w] = False
+            unsafe[w, tm, i] = False
+            invalid[w, tm, i] = False
+            acted[w, tm, i] = False
 
 
 @njit(cache=True)
 def _read_world(w, lower, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc, bullet_flags, dir_ids,
                 hits, bullet_team, bullet_agent, win_ids, ammo0, health0, pos, health, alive, ammo,
-                moving, dest, flags, bpos, bdir, hits_made, hits_taken, win):
+                moving, dest, unsafe, invalid, acted, bpos, bdir, hits_made, hits_taken, win):
     m = agent_loc.shape[0]
     n = m // 2
     for j in range(m):
@@ -109,8 +114,9 @@ def _read_world(w, lower, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc,
         alive[w, tm, i] = lower[w, agent_flags[j, 0]] >= 1.0
         health[w, tm, i] = health0 if alive[w, tm, i] else 0.0
         moving[w, tm, i] = lower[w, agent_flags[j, 1]] >= 1.0
-        for f in range(3):
-            flags[w, j, f] = lower[w, agent_flags[j, 2 + f]] >= 1.0
+        unsafe[w, tm, i] = lower[w, agent_flags[j, 2]] >= 1.0
+        invalid[w, tm, i] = lower[w, agent_flags[j, 3]] >= 1.0
+        acted[w, tm, i] = lower[w, agent_flags[j, 4]] >= 1.0
         dest[w, tm, i, 0] = -1
         dest[w, tm, i, 1] = -1
         if moving[w, tm, i] and dest_ids.shape[1] > 0:
@@ -169,7 +175,8 @@ def settle_step(done, win, unsafe, invalid, acted, hits_made, hits_taken, weight
                 t, terminated, truncated, winner, agent_reward, reward):
     """Rewards and the end of the game from the step's events (docs/game.md, Rewards / End of game).
     weights: win, loss, hit_opponent, got_shot, valid_action, unsafe, invalid. Worlds already done
-    earn nothing and keep their flags; t, terminated, truncated, winner are updated in place."""
+    earn nothing and keep their flags; t, terminated, truncated, winner are updated in place. Returns how
+    many worlds are done (terminated or truncated) afterwards."""
     r_win, r_loss, r_hit, r_shot, r_valid, r_unsafe, r_invalid = (
         weights[0], weights[1], weights[2], weights[3], weights[4], weights[5], weights[6])
     n_worlds = done.shape[0]
@@ -214,3 +221,8 @@ def settle_step(done, win, unsafe, invalid, acted, hits_made, hits_taken, weight
                 total += x
                 agent_reward[w, tm, i] = x + terminal
             reward[w, tm] = total
+    n_done = 0
+    for w in range(n_worlds):
+        if terminated[w] or truncated[w]:
+            n_done += 1
+    return n_done
