@@ -170,6 +170,9 @@ class Engine:
         worlds = np.flatnonzero(worlds) if np.asarray(worlds).dtype == np.bool_ else np.asarray(worlds)
         if worlds.size == 0:
             return
+        indices = worlds.astype(np.int64)
+        if worlds.size == 1:  # one world (the usual episode end): basic indexing, no fancy-index copies
+            worlds = slice(int(worlds[0]), int(worlds[0]) + 1)
         n_atoms = snap["lower"].shape[1]
         if n_atoms < self.lower.shape[1]:  # atoms interned since the snapshot start unset
             self.lower[worlds] = 0.0
@@ -186,7 +189,7 @@ class Engine:
                 arr[worlds] = snap[key][worlds]
         else:  # groundings grew since the snapshot: recount those worlds from their interpretation
             kt = self._kt
-            K.recount_worlds(worlds.astype(np.int64), self.lower, self.upper, kt["b_ptr"], kt["b_atom"],
+            K.recount_worlds(indices, self.lower, self.upper, kt["b_ptr"], kt["b_atom"],
                              kt["b_neg"], kt["b_bnd"], self._unsat, self._act, self._act_n, self._act_pos)
         pend, pend_n = snap["pend"], snap["pend_n"]
         if pend.shape[1] > self._pend.shape[1]:

@@ -36,6 +36,8 @@ class RuleSim(GameSim):
         setup = self._localize(self.engine.take_trace())
         first = setup["world"] == 0
         self._setup_rows = {k: v[first] for k, v in setup.items()}
+        for v in self._setup_rows.values():
+            v.flags.writeable = False  # replayed at every reset, shared by the queued rows
         self._pending_rows: list[dict[str, np.ndarray]] = [setup]
         n = scenario.agents_per_team
         self._prev_action = np.full((n_worlds, 2 * n), -1, np.int64)  # atom id of the last action set
@@ -209,8 +211,9 @@ class RuleSim(GameSim):
     def _replay_setup(self, worlds: np.ndarray) -> None:
         """A restored world starts from the set-up state without re-deriving it; its t = 0 rows are
         written again (at the episode's own t = 0) so each episode's trace explains itself."""
-        n = len(self._setup_rows["t"])
-        rows = {k: np.tile(v, len(worlds)) for k, v in self._setup_rows.items()}
+        n, k = len(self._setup_rows["t"]), len(worlds)
+        # one world: the (read-only) set-up columns as they are; take_trace() concatenates them anyway
+        rows = {c: v if k == 1 else np.broadcast_to(v, (k, n)).ravel() for c, v in self._setup_rows.items()}
         rows["world"] = np.repeat(worlds, n).astype(np.int32)
         rows["world_episode"] = np.repeat(self.world_episode[worlds], n)
         self._pending_rows.append(rows)
