@@ -34,7 +34,7 @@ _DY = np.array([1, -1, 0, 0], dtype=np.int64)
 # ----------------------------------------------------------------------------------------------------
 # State and results
 # ----------------------------------------------------------------------------------------------------
-@dataclass
+@dataclass(slots=True)
 class GameState:
     """Mutable state of W worlds (layout in the module docstring)."""
     t: np.ndarray

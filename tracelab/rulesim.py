@@ -10,9 +10,9 @@ import numpy as np
 
 from tracelab.engine import Engine
 from tracelab.game_facts import DIRECTIONS, agent_name, bullet_name, scenario_program
-from tracelab.rulesim_kernel import check_actions, encode_actions, read_back, settle_step
+from tracelab.rulesim_kernel import encode_actions, read_back, settle_step
 from tracelab.refsim import WINNER_NONE, GameState, StepResult
-from tracelab.scenario import NOTHING, TEAMS, Scenario
+from tracelab.scenario import TEAMS, Scenario
 from tracelab.sim_base import GameSim
 
 
@@ -243,26 +243,15 @@ class RuleSim(GameSim):
         rows["world_episode"] = self.world_episode[world].copy()
         return rows
 
-    def _action_rows(self, acts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The engine's external-fact rows for the chosen actions (see encode_actions)."""
-        n_worlds, m = self._prev_action.shape
-        ptr, rows, bounds = self._rows_buf
-        k = encode_actions(acts.reshape(n_worlds, m), self._action_atoms, self._prev_action,
-                           self.engine.next_external_id(), ptr, rows, bounds)
-        return ptr, rows[:k], bounds[:k]
-
     def step(self, red_actions: np.ndarray, blue_actions: np.ndarray) -> StepResult:
         """One step of every world (spec action ids, int [W, N] per team). Finished worlds do not change
         (zero rewards, flags kept) until reset."""
         s = self.scenario
         n_worlds, n = self.n_worlds, s.agents_per_team
-        acts = self._actions(red_actions, blue_actions)
         any_done = self._n_done > 0
         done = self.terminated | self.truncated if any_done else self._no_world_done
-        if any_done:
-            acts[done] = NOTHING
+        self.engine.step(external=self._action_rows(red_actions, blue_actions, done))
         self._fresh[:] = False
-        self.engine.step(external=self._action_rows(acts))
         state = self._read_state(done if any_done else None)  # finished worlds keep their final state
         unsafe, invalid, acted, hits_made, hits_taken, win = self._events
         agent_reward = np.empty((n_worlds, 2, n))
@@ -291,17 +280,20 @@ class RuleSim(GameSim):
             agent_reward=agent_reward, reward=reward, terminated=state.terminated,
             truncated=state.truncated, winner=state.winner, t=state.t)
 
-    def _actions(self, red_actions: np.ndarray, blue_actions: np.ndarray) -> np.ndarray:
-        """Both teams' actions as one int64 [W, 2, N] array, checked against what the scenario offers."""
+    def _action_rows(self, red_actions: np.ndarray, blue_actions: np.ndarray,
+                     done: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The engine's external-fact rows for both teams' actions (see encode_actions; done worlds do
+        nothing), after checking every action against what the scenario offers."""
         red = self._team_actions(red_actions, "red_actions")
         blue = self._team_actions(blue_actions, "blue_actions")
-        acts = np.empty((self.n_worlds, 2, self.scenario.agents_per_team), np.int64)
-        bad = check_actions(red, blue, self._allowed, acts)
-        if bad >= 0:
-            w, tm, j = np.unravel_index(bad, acts.shape)
-            raise ValueError(f"action {acts[w, tm, j]} of {TEAMS[tm]} agent {j} in world {w} is not offered "
-                             f"by scenario {self.scenario.name!r} (ids {self.scenario.action_ids})")
-        return acts
+        ptr, rows, bounds = self._rows_buf
+        k = encode_actions(red, blue, done, self._allowed, self._action_atoms, self._prev_action,
+                           self.engine.next_external_id(), ptr, rows, bounds)
+        if k < 0:
+            w, tm, j = np.unravel_index(-1 - k, (self.n_worlds, 2, self.scenario.agents_per_team))
+            raise ValueError(f"action {(red, blue)[tm][w, j]} of {TEAMS[tm]} agent {j} in world {w} is not "
+                             f"offered by scenario {self.scenario.name!r} (ids {self.scenario.action_ids})")
+        return ptr, rows[:k], bounds[:k]
 
     def _team_actions(self, actions: np.ndarray, name: str) -> np.ndarray:
         a = np.asarray(actions, np.int64)

@@ -22,16 +22,27 @@ def _put_row(ext_i, ext_f, k, atom, value, first_id):
 
 
 @njit(cache=True)
-def encode_actions(acts, action_atoms, prev, first_id, ext_ptr, ext_i, ext_f):
+def encode_actions(red, blue, done, allowed, action_atoms, prev, first_id, ext_ptr, ext_i, ext_f):
     """Rows for the engine's external facts, grouped by world: each agent's chosen action atom becomes
-    [1,1] and its previous one [0,0] when they differ. acts [W, M] spec ids; action_atoms [M, 9]
-    (-1: no atom); prev [W, M] atom ids, updated in place. Returns the number of rows."""
-    n_worlds, m = acts.shape
+    [1,1] and its previous one [0,0] when they differ. red, blue [W, N] spec ids (agent j of the M = 2N
+    in action_atoms [M, 9] is red j, then blue j - N; -1: no atom); a world with done[w] does nothing;
+    prev [W, M] atom ids, updated in place. Every action is checked against allowed (bool [9]) first:
+    returns -1 - (its flat index in [W, 2, N]) for the first one not offered, having changed nothing;
+    else the number of rows."""
+    n_worlds, n = red.shape
+    for w in range(n_worlds):
+        for tm in range(2):
+            for i in range(n):
+                a = red[w, i] if tm == 0 else blue[w, i]
+                if a < 0 or a > 8 or not allowed[a]:
+                    return -1 - ((w * 2 + tm) * n + i)
     k = 0
     for w in range(n_worlds):
         ext_ptr[w] = k
-        for j in range(m):
-            new = action_atoms[j, acts[w, j]]
+        for j in range(2 * n):
+            new = -1
+            if not done[w]:
+                new = action_atoms[j, red[w, j] if j < n else blue[w, j - n]]
             old = prev[w, j]
             if new == old:
                 continue
@@ -150,24 +161,6 @@ def _read_world(w, lower, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc,
                     hits_taken[w, 1 - tm, e] += 1
     for tm in range(2):
         win[w, tm] = lower[w, win_ids[tm, 0]] >= 1.0 or lower[w, win_ids[1 - tm, 1]] >= 1.0
-
-
-@njit(cache=True)
-def check_actions(red, blue, allowed, acts):
-    """Copy both teams' actions ([W, N] spec ids) into acts [W, 2, N]; returns the flat index into acts
-    of the first action `allowed` (bool [9]) does not offer, or -1."""
-    n_worlds, n = red.shape
-    for w in range(n_worlds):
-        for i in range(n):
-            acts[w, 0, i] = red[w, i]
-            acts[w, 1, i] = blue[w, i]
-    for w in range(n_worlds):
-        for tm in range(2):
-            for i in range(n):
-                a = acts[w, tm, i]
-                if a < 0 or a > 8 or not allowed[a]:
-                    return (w * 2 + tm) * n + i
-    return -1
 
 
 @njit(cache=True)
