@@ -114,6 +114,10 @@ class Engine:
 
     def _sync(self) -> None:
         """Ground any new settable atoms and grow the per-world arrays to the vocabulary and groundings."""
+        g = self.grounder
+        if not g._new and g._closed_once and self.vocab.n_atoms == self.lower.shape[1] \
+                and len(g.g_rule) == self._n_grounded and len(g.settable) == self._n_settable:
+            return  # the usual case at every step: nothing was interned or made settable since
         self.grounder.close()
         n_atoms = self.vocab.n_atoms
         if len(self._settable) != n_atoms or len(self.grounder.settable) != self._n_settable:

@@ -121,11 +121,12 @@ class RuleSim(GameSim):
 
     # ---- reading the world back ----
 
-    def _read_state(self, done: np.ndarray | None = None) -> GameState:
+    def _read_state(self, done: np.ndarray | None = None, settle: bool = False) -> GameState:
         """The game state of every world, read from atoms (and the events of the last step into
         self._events: unsafe, invalid, acted [W, 2, N]; hits made / taken; which team won). Worlds in
-        `done` keep their state from self.state and have no events. t, terminated, truncated and winner
-        are copies of the simulator's as they stand now."""
+        `done` keep their state from self.state and have no events. With `settle` (after a step) the
+        step's rewards and the end of the game are settled first (settle_step; rewards into
+        self._rewards). t, terminated, truncated and winner are copies of the simulator's after that."""
         s = self.scenario
         w, n = self.n_worlds, s.agents_per_team
         n_b = len(self._bullet_team)
@@ -154,6 +155,13 @@ class RuleSim(GameSim):
                   pos, health, alive, ammo, moving, dest, unsafe, invalid, acted, bpos, bdir, hits_made,
                   hits_taken, win)
         self._events = (unsafe, invalid, acted, hits_made, hits_taken, win)
+        if settle:
+            agent_reward = np.empty((w, 2, n))
+            reward = np.empty((w, 2))
+            self._n_done = settle_step(done, win, unsafe, invalid, acted, hits_made, hits_taken, self._weights,
+                                       s.max_steps, self.t, self.terminated, self.truncated, self.winner,
+                                       agent_reward, reward)
+            self._rewards = (agent_reward, reward)
         return GameState(
             t=self.t.copy(), pos=pos, health=health, ammo=ammo, alive=alive, moving=moving, dest=dest,
             bullet_pos=bpos, bullet_dir=bdir, terminated=self.terminated.copy(),
@@ -246,22 +254,14 @@ class RuleSim(GameSim):
     def step(self, red_actions: np.ndarray, blue_actions: np.ndarray) -> StepResult:
         """One step of every world (spec action ids, int [W, N] per team). Finished worlds do not change
         (zero rewards, flags kept) until reset."""
-        s = self.scenario
-        n_worlds, n = self.n_worlds, s.agents_per_team
         any_done = self._n_done > 0
         done = self.terminated | self.truncated if any_done else self._no_world_done
         self.engine.step(external=self._action_rows(red_actions, blue_actions, done))
         self._fresh[:] = False
-        state = self._read_state(done if any_done else None)  # finished worlds keep their final state
-        unsafe, invalid, acted, hits_made, hits_taken, win = self._events
-        agent_reward = np.empty((n_worlds, 2, n))
-        reward = np.empty((n_worlds, 2))
-        self._n_done = settle_step(done, win, unsafe, invalid, acted, hits_made, hits_taken, self._weights,
-                                   s.max_steps, self.t, self.terminated, self.truncated, self.winner,
-                                   agent_reward, reward)
-        # the clock and the end flags after settling
-        state.t, state.terminated, state.truncated = self.t.copy(), self.terminated.copy(), self.truncated.copy()
-        state.winner = self.winner.copy()
+        # finished worlds keep their final state; the clock and end flags are read after settling
+        state = self._read_state(done if any_done else None, settle=True)
+        unsafe, invalid, acted, hits_made, hits_taken, _ = self._events
+        agent_reward, reward = self._rewards
         for a in (state.pos, state.health, state.ammo, state.alive, state.moving, state.dest, state.bullet_pos,
                   state.bullet_dir, state.t, state.terminated, state.truncated, state.winner):
             a.flags.writeable = False  # shared by the state and the result: nobody may change them
