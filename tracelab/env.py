@@ -29,9 +29,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from tracelab.env_common import (ActionMasker, step_learner, learner_action_space, make_sim, observation_space,
-                                 render_text, resolve_scenario)
-from tracelab.env_trace import EpisodeTracer
+from tracelab.env_common import (ActionMasker, learner_action_space, observation_space, one_world_env,
+                                 render_text, step_learner)
 from tracelab.refsim import WINNER_NONE, StepResult
 from tracelab.scenario import RED, Scenario
 from tracelab.trace_sink import TraceSink
@@ -65,18 +64,15 @@ class GridWarEnv(gym.Env[np.ndarray, Any]):
     def __init__(self, scenario: Scenario | str = "advanced", *, backend: str = "rules",
                  stack_previous: bool = False, trace_sink: TraceSink | None = None,
                  render_mode: str | None = None) -> None:
-        if render_mode not in (None, "ansi"):
-            raise ValueError(f"render_mode must be None or 'ansi', got {render_mode!r}")
-        self.scenario = resolve_scenario(scenario)
+        self.scenario, self.sim, self._tracer = one_world_env(scenario, backend, stack_previous, trace_sink,
+                                                              render_mode)
         self.backend = backend
         self.render_mode = render_mode
-        self.sim = make_sim(self.scenario, backend, 1, stack_previous, trace=trace_sink is not None)
         self.observation_space = observation_space(self.scenario, stack_previous)
         self.action_space = learner_action_space(self.scenario)
         self._n = self.scenario.agents_per_team
         self._masker = ActionMasker(self.scenario)
         self._single = self._n == 1
-        self._tracer = None if trace_sink is None else EpisodeTracer(trace_sink, self.scenario, self.sim)
         self._running = False
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None

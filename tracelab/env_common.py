@@ -7,9 +7,11 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
+from tracelab.env_trace import EpisodeTracer
 from tracelab.refsim import GameState, RefSim
 from tracelab.rulesim import RuleSim
 from tracelab.scenario import DIRECTION_DELTAS, DOWN, LEFT, NOTHING, RIGHT, UP, Scenario, builtin_scenario
+from tracelab.trace_sink import TraceSink
 
 BACKENDS = ("rules", "reference")
 Simulator = RuleSim | RefSim
@@ -27,6 +29,17 @@ def make_sim(scenario: Scenario, backend: str, n_worlds: int, stack_previous: bo
     if backend == "reference":
         return RefSim(scenario, n_worlds, seed=None, stack_previous=stack_previous)
     raise ValueError(f"unknown backend {backend!r}; expected one of {BACKENDS}")
+
+
+def one_world_env(scenario: Scenario | str, backend: str, stack_previous: bool, trace_sink: TraceSink | None,
+                  render_mode: str | None) -> tuple[Scenario, Simulator, EpisodeTracer | None]:
+    """What a one-world env (gymnasium or PettingZoo) stands on: its scenario, its simulator, and the
+    tracer feeding `trace_sink` (None without a sink). Checks render_mode (None or "ansi")."""
+    if render_mode not in (None, "ansi"):
+        raise ValueError(f"render_mode must be None or 'ansi', got {render_mode!r}")
+    scenario = resolve_scenario(scenario)
+    sim = make_sim(scenario, backend, 1, stack_previous, trace=trace_sink is not None)
+    return scenario, sim, None if trace_sink is None else EpisodeTracer(trace_sink, scenario, sim)
 
 
 def observation_space(scenario: Scenario, stack_previous: bool) -> spaces.Box:

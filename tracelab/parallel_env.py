@@ -21,8 +21,7 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from tracelab.env_common import ActionMasker, make_sim, observation_space, render_text, resolve_scenario
-from tracelab.env_trace import EpisodeTracer
+from tracelab.env_common import ActionMasker, observation_space, one_world_env, render_text
 from tracelab.game_facts import agent_name
 from tracelab.scenario import NOTHING, Scenario
 from tracelab.trace_sink import TraceSink
@@ -34,12 +33,10 @@ class GridWarParallelEnv(ParallelEnv[str, np.ndarray, int]):
     def __init__(self, scenario: Scenario | str = "advanced", *, backend: str = "rules",
                  stack_previous: bool = False, trace_sink: TraceSink | None = None,
                  render_mode: str | None = None) -> None:
-        if render_mode not in (None, "ansi"):
-            raise ValueError(f"render_mode must be None or 'ansi', got {render_mode!r}")
-        self.scenario = resolve_scenario(scenario)
+        self.scenario, self.sim, self._tracer = one_world_env(scenario, backend, stack_previous, trace_sink,
+                                                              render_mode)
         self.backend = backend
         self.render_mode = render_mode
-        self.sim = make_sim(self.scenario, backend, 1, stack_previous, trace=trace_sink is not None)
         n = self.scenario.agents_per_team
         self.possible_agents = [agent_name(t, j) for t in range(2) for j in range(n)]
         self.agents: list[str] = []
@@ -52,7 +49,6 @@ class GridWarParallelEnv(ParallelEnv[str, np.ndarray, int]):
         self._masker = ActionMasker(self.scenario)
         self._nothing = int(np.flatnonzero(self._masker.ids == NOTHING)[0])
         self._index = {a: i for i, a in enumerate(self.possible_agents)}
-        self._tracer = None if trace_sink is None else EpisodeTracer(trace_sink, self.scenario, self.sim)
 
     def observation_space(self, agent: str) -> spaces.Box:
         return self._obs_space
