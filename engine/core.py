@@ -25,6 +25,7 @@ _TRACE_INT_DTYPES = tuple(np.dtype(d) for d in (np.int32, np.int32, np.int32, np
 # (column name, dtype, taken as is from the int32 buffer) per int column of take_trace()
 _TRACE_INT_OUT = tuple((name, d, d == np.dtype(np.int32)) for name, d in zip(TRACE_COLUMNS, _TRACE_INT_DTYPES))
 _TRACE_FLOAT_NAMES = TRACE_COLUMNS[K.TRACE_INT_COLUMNS:]
+MAX_BINDING_CLAUSES = 127
 STAT_NAMES = ("firings", "rederivations", "static_ignored", "changes", "passes", "watch_visits",
               "candidates")
 
@@ -34,7 +35,7 @@ class Engine:
 
     def __init__(self, program: Program, graph: Graph | None = None, *, worlds: int = 1,
                  trace: bool | Sequence[bool] | np.ndarray = True, max_passes: int = 1000,
-                 max_immediate: int = 100_000) -> None:
+                 max_immediate: int = 100_000, trace_rows_per_step: int = 65_536) -> None:
         if worlds < 1:
             raise ValueError(f"worlds must be >= 1, got {worlds}")
         self.program = program
@@ -44,29 +45,42 @@ class Engine:
         # graph facts come first in source order (docs/language.md)
         self.facts: list[Fact] = [*(graph.facts if graph else ()), *program.facts]
         self.rules = program.rules
+        for r in self.rules:  # the kernel counts a grounding's unsatisfied clauses in an int8
+            if sum(c.binds for c in r.body) > MAX_BINDING_CLAUSES:
+                where = f" ({r.loc})" if r.loc else ""
+                raise ValueError(f"rule {r.name}{where} has more than {MAX_BINDING_CLAUSES} binding body clauses")
         self.grounder = Grounder(self.rules, self.vocab)
         self._fact_tables()
         self._rule_tables()
-        self._cfg = np.array([UPDATE_MODES.index(program.mode), int(program.timesteps == "reset"),
-                              INCONSISTENCY_POLICIES.index(program.inconsistency), max_passes,
-                              max_immediate, 0], np.int64)
+        self._cfg = np.zeros(K.N_CFG, np.int64)
+        self._cfg[[K.CFG_MODE, K.CFG_RESET, K.CFG_POLICY, K.CFG_MAX_PASSES, K.CFG_MAX_IMMEDIATE]] = (
+            UPDATE_MODES.index(program.mode), int(program.timesteps == "reset"),
+            INCONSISTENCY_POLICIES.index(program.inconsistency), max_passes, max_immediate)
+        if trace_rows_per_step < 1:
+            raise ValueError(f"trace_rows_per_step must be >= 1, got {trace_rows_per_step}")
+        self._cfg[K.CFG_TRACE_ROOM] = trace_rows_per_step
         self.trace_on = np.broadcast_to(np.asarray(trace, np.bool_), (worlds,)).copy()
         # per-world state, sized by _sync()
         self.lower = np.zeros((worlds, 0))
         self.upper = np.ones((worlds, 0))
         self.static = np.zeros((worlds, 0), np.bool_)
         self._last_cause = np.full((worlds, 0, 2), -1, np.int32)
-        self._unsat = np.zeros((worlds, 0), np.int16)
+        self._unsat = np.zeros((worlds, 0), np.int8)
         self._act = np.zeros((worlds, 0), np.int32)
         self._act_pos = np.zeros((worlds, 0), np.int32)
-        self._act_n = np.zeros(worlds, np.int64)
+        self._act_n = np.zeros((worlds, K.N_KINDS), np.int64)
+        self._kind_base = np.zeros(K.N_KINDS, np.int64)
         self._pend = np.zeros((worlds, 16, 2), np.int32)
         self._pend_n = np.zeros(worlds, np.int64)
-        self._tri = np.zeros((K.TRACE_INT_COLUMNS, 1024), np.int32)
-        self._trf = np.zeros((K.TRACE_FLOAT_COLUMNS, 1024), np.float64)
+        # trace rows, row-major (a row is written at once); grown between worlds by step()
+        self._tri = np.zeros((0, K.TRACE_INT_COLUMNS), np.int32)
+        self._trf = np.zeros((0, K.TRACE_FLOAT_COLUMNS), np.float64)
         self._tr_n = np.zeros(1, np.int64)
         self._stats = np.zeros((worlds, K.N_STATS), np.int64)
-        self._err = np.zeros(12, np.int64)
+        self._err = np.zeros(K.N_ERR, np.int64)
+        self._n_touched = np.zeros(1, np.int64)
+        self._changed = np.zeros(1, np.int64)
+        self._out = np.zeros(5, np.float64)
         self._ext: list[tuple[np.ndarray, ...]] = []  # chunks of (atoms, lower, upper, world, static)
         self._settable = np.zeros(0, np.bool_)
         self._n_settable = 0
@@ -99,14 +113,11 @@ class Engine:
             self._rule_i[i] = (UPDATE_MODES.index(mode), r.delay, int(r.immediate))
             self._rule_f[i] = rule_head_bound(r)
 
-    def _inst_kind(self, inst_i: np.ndarray) -> np.ndarray:
-        """Per grounding, the kind bits of its rule (kernel.KIND_*): immediate, delayed, ordinary Δt = 0."""
-        ri = self._rule_i[inst_i[:, K.INST_RULE]]
-        immediate = ri[:, K.RULE_IMMEDIATE] == 1
-        delay = ri[:, K.RULE_DELAY]
-        kind = np.where(immediate, K.KIND_IMMEDIATE, 0) | np.where(delay > 0, K.KIND_DELAYED, 0) \
-            | np.where(~immediate & (delay == 0), K.KIND_ORDINARY, 0)
-        return kind.astype(np.uint8)
+    def _rule_kinds(self) -> np.ndarray:
+        """Per rule, the kernel's kind index: immediate, delayed (Δt > 0) or ordinary Δt = 0."""
+        ri = self._rule_i
+        return np.where(ri[:, K.RULE_IMMEDIATE] == 1, K.KIND_IMMEDIATE,
+                        np.where(ri[:, K.RULE_DELAY] > 0, K.KIND_DELAYED, K.KIND_ORDINARY)).astype(np.int32)
 
     def sync(self) -> None:
         """Grow the per-world arrays to every atom interned so far (step() does this itself)."""
@@ -136,27 +147,33 @@ class Engine:
         n_inst = len(self.grounder.g_rule)
         if n_inst == self._n_grounded and n_atoms == old_atoms and hasattr(self, "_kt"):
             return
-        self._kt = self.grounder.kernel_tables()
-        self._kt["inst_kind"] = self._inst_kind(self._kt["inst_i"])
+        self._kt = self.grounder.kernel_tables(self._rule_kinds())
         first = self._n_grounded
         if n_inst > first:
             grow = n_inst - first
             w = self.n_worlds
-            self._unsat = np.concatenate([self._unsat, np.zeros((w, grow), np.int16)], axis=1)
-            self._act = np.concatenate([self._act, np.zeros((w, grow), np.int32)], axis=1)
+            # each kind's active list has room for every grounding of that kind
+            counts = np.bincount(self._kt["inst"][:, K.INST_KIND], minlength=K.N_KINDS)
+            kind_base = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+            act = np.zeros((w, n_inst), np.int32)
+            K.relayout_active(self._act, self._kind_base, act, kind_base, self._act_n)
+            self._act, self._kind_base = act, kind_base
+            self._unsat = np.concatenate([self._unsat, np.zeros((w, grow), np.int8)], axis=1)
             self._act_pos = np.concatenate([self._act_pos, np.full((w, grow), -1, np.int32)], axis=1)
             kt = self._kt
             K.recount_groundings(first, self.lower, self.upper, kt["b_ptr"], kt["b_atom"], kt["b_neg"],
-                                 kt["b_bnd"], self._unsat, self._act, self._act_n, self._act_pos)
+                                 kt["b_bnd"], kt["inst"], self._kind_base, self._unsat, self._act, self._act_n,
+                                 self._act_pos)
         self._n_grounded = n_inst
         self._table = None
-        self._si = np.zeros((n_atoms, K.N_SCRATCH_INT), np.int64)
-        self._sf = np.zeros((n_atoms, K.N_SCRATCH_FLOAT), np.float64)
-        self._touched = np.zeros(max(n_atoms, 1), np.int64)
-        # immediate-phase scratch: a heap of (rank, grounding), membership flags, an activation log
-        self._heap = np.zeros((max(n_inst, 1), 2), np.int64)
+        # grouping scratch, one row per atom touched in a pass (slot_of maps atoms to rows, -1: none)
+        self._slot_of = np.full(max(n_atoms, 1), -1, np.int32)
+        self._touched = np.zeros(max(n_atoms, 1), np.int32)
+        self._si = np.zeros((max(n_atoms, 1), K.N_SCRATCH_INT), np.int64)
+        self._sf = np.zeros((max(n_atoms, 1), K.N_SCRATCH_FLOAT), np.float64)
+        # immediate-phase candidates: a heap of rank * 2^31 + grounding, and membership flags
+        self._heap = np.zeros(max(n_inst, 1), np.int64)
         self._in_heap = np.zeros(max(n_inst, 1), np.bool_)
-        self._alog = np.zeros(n_inst + 1, np.int64)
 
     # ---- per-world snapshots (episode resets in a batch) ----
 
@@ -193,8 +210,9 @@ class Engine:
                 arr[worlds] = snap[key][worlds]
         else:  # groundings grew since the snapshot: recount those worlds from their interpretation
             kt = self._kt
-            K.recount_worlds(indices, self.lower, self.upper, kt["b_ptr"], kt["b_atom"],
-                             kt["b_neg"], kt["b_bnd"], self._unsat, self._act, self._act_n, self._act_pos)
+            K.recount_worlds(indices, self.lower, self.upper, kt["b_ptr"], kt["b_atom"], kt["b_neg"],
+                             kt["b_bnd"], kt["inst"], self._kind_base, self._unsat, self._act, self._act_n,
+                             self._act_pos)
         pend, pend_n = snap["pend"], snap["pend_n"]
         if pend.shape[1] > self._pend.shape[1]:
             grown = np.zeros((self.n_worlds, pend.shape[1], 2), np.int32)
@@ -296,21 +314,47 @@ class Engine:
             n = int(ext_ptr[-1])
         self._cfg[K.CFG_T] = self.t
         kt = self._kt
-        status, self._tri, self._trf, self._pend = K.step_worlds(
-            self._cfg, self._rule_i, self._rule_f, kt["inst_i"], kt["inst_kind"], kt["w_ptr"], kt["w_inst"],
-            kt["w_neg"], kt["w_bnd"], kt["ih_ptr"], kt["ih_inst"], self._fact_i, self._fact_f, self._fact_order,
-            ext_ptr, ext_i, ext_f, self._settable,
-            self.lower, self.upper, self.static, self._last_cause, self._unsat, self._act, self._act_n,
-            self._act_pos, self._pend, self._pend_n, self.trace_on, self._tri, self._trf, self._tr_n,
-            self._stats, self._err, self._si, self._sf, self._touched, self._heap, self._in_heap,
-            self._alog)
+        w_first = 0
+        while True:
+            status, w_first = K.step_worlds(
+                self._cfg, w_first, self._rule_i, self._rule_f, kt["inst"], self._kind_base, kt["wc_ptr"],
+                kt["wc_bnd"], kt["wc_neg"], kt["wc_gptr"], kt["wg"], kt["ih_ptr"], kt["ih_inst"], self._fact_i,
+                self._fact_f, self._fact_order, ext_ptr, ext_i, ext_f, self._settable,
+                self.lower, self.upper, self.static, self._last_cause, self._unsat, self._act, self._act_n,
+                self._act_pos, self._pend, self._pend_n, self.trace_on, self._tri, self._trf, self._tr_n,
+                self._stats, self._err, self._slot_of, self._touched, self._n_touched, self._si, self._sf,
+                self._out, self._heap, self._in_heap, self._changed)
+            if status == K.STATUS_TRACE_ROOM:  # grow the trace buffer, go on from that world
+                self._grow_trace(int(self._tr_n[0]) + int(self._cfg[K.CFG_TRACE_ROOM]))
+            elif status == K.STATUS_PEND_ROOM:  # grow the schedule, then that world schedules its firings
+                self._grow_pending(int(self._pend_n[w_first]) + int(self._act_n[w_first, K.KIND_DELAYED]))
+                self._cfg[K.CFG_RESUME_SCHEDULE] = 1
+            else:
+                break
         if status != K.STATUS_OK:
-            self._in_heap[:] = False  # an error may leave candidates behind
-            self._si[:] = 0
+            self._in_heap[:] = False  # an error may leave candidates and scratch rows behind
+            self._slot_of[:] = -1
+            self._n_touched[0] = 0
+            self._cfg[K.CFG_RESUME_SCHEDULE] = 0
             self._raise(status)
         if external is not None:
             self._ext_count += n
         self.t += 1
+
+    def _grow_trace(self, need: int) -> None:
+        cap = max(need, 2 * self._tri.shape[0], 1024)
+        n = int(self._tr_n[0])
+        tri = np.empty((cap, K.TRACE_INT_COLUMNS), np.int32)
+        trf = np.empty((cap, K.TRACE_FLOAT_COLUMNS), np.float64)
+        tri[:n] = self._tri[:n]
+        trf[:n] = self._trf[:n]
+        self._tri, self._trf = tri, trf
+
+    def _grow_pending(self, need: int) -> None:
+        cap = max(need, 2 * self._pend.shape[1], 16)
+        pend = np.zeros((self.n_worlds, cap, 2), np.int32)
+        pend[:, :self._pend.shape[1]] = self._pend
+        self._pend = pend
 
     def next_external_id(self) -> int:
         """The id the next external fact will get (trace rows name external facts by this id)."""
@@ -341,8 +385,8 @@ class Engine:
     def take_trace(self) -> dict[str, np.ndarray]:
         """The change rows since the last call, as columns (docs/engine-api.md); the buffer is cleared."""
         n = int(self._tr_n[0])
-        # one copy per block; the columns are its rows (a copy per column costs more than the rows)
-        ints, floats = self._tri[:, :n].copy(), self._trf[:, :n].copy()
+        # one transposing copy per block; the columns are its rows
+        ints, floats = self._tri[:n].T.copy(), self._trf[:n].T.copy()
         cols: dict[str, np.ndarray] = {}
         for (name, dtype, as_is), col in zip(_TRACE_INT_OUT, ints):
             cols[name] = col if as_is else col.astype(dtype)
@@ -425,6 +469,11 @@ class Engine:
             raise InconsistencyError(
                 f"inconsistent bounds for {self.atom_text(a)} at t={t} (world {w}): its bound "
                 f"[{lo:g},{up:g}] came from {old}; the incoming bound from {first} is disjoint from it")
+        if status == K.STATUS_TRACE_LIMIT:
+            raise RuntimeError(
+                f"one step of world {w} at t={self.t} wrote more trace rows than the {self._tri.shape[0]} the "
+                "trace buffer holds; make Engine(trace_rows_per_step=...) larger (it is the free room kept "
+                "before each traced world steps)")
         if status == K.STATUS_NOT_SETTABLE:
             raise ValueError(f"step(external=...) names {self.atom_text(a)}, which no fact or rule can set; "
                              "give such atoms to add_facts once first")

@@ -206,13 +206,18 @@ class Grounder:
         rank[order] = np.arange(n)
         return rank
 
-    def kernel_tables(self) -> dict[str, np.ndarray]:
-        """inst_i [G,3], watches (CSR by atom over binding clauses) and per-grounding binding clauses."""
+    def kernel_tables(self, kinds: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """The kernel's tables (engine/kernel.py): `inst` [G,4] (rule, head, rank, kind index from
+        `kinds`, a per-rule array), watches grouped in classes (CSR by atom over distinct (bound, sign)
+        of the binding clauses that read it, then CSR by class over groundings), the immediate
+        groundings by the atom they set, and per-grounding binding clauses (for recounts)."""
         n = len(self.g_rule)
-        inst_i = np.empty((n, 3), np.int64)
-        inst_i[:, 0] = self.g_rule
-        inst_i[:, 1] = self.g_head
-        inst_i[:, 2] = self.ranks()
+        rules = np.asarray(self.g_rule, np.int64)
+        inst = np.empty((n, 4), np.int32)
+        inst[:, 0] = rules
+        inst[:, 1] = self.g_head
+        inst[:, 2] = self.ranks()
+        inst[:, 3] = kinds[rules] if kinds is not None and n else 0
         b_inst, b_atom, b_neg, b_lo, b_up = [], [], [], [], []
         b_ptr = np.zeros(n + 1, np.int64)
         for g in range(n):
@@ -227,30 +232,41 @@ class Grounder:
                 b_up.append(lit.upper)
             b_ptr[g + 1] = len(b_atom)
         b_atom_a = np.asarray(b_atom, np.int64)
-        b_bnd = np.column_stack([np.asarray(b_lo, np.float64), np.asarray(b_up, np.float64)]) \
-            if b_atom else np.zeros((0, 2), np.float64)
+        b_inst_a = np.asarray(b_inst, np.int64)
+        b_lo_a, b_up_a = np.asarray(b_lo, np.float64), np.asarray(b_up, np.float64)
         b_neg_a = np.asarray(b_neg, np.bool_)
-        order = np.argsort(b_atom_a, kind="stable")
+        b_bnd = np.column_stack([b_lo_a, b_up_a]) if b_atom else np.zeros((0, 2), np.float64)
         n_atoms = self.vocab.n_atoms
-        w_ptr = np.zeros(n_atoms + 1, np.int64)
-        np.add.at(w_ptr, b_atom_a + 1, 1)
-        np.cumsum(w_ptr, out=w_ptr)
+        # watch classes: entries sorted by (atom, sign, bound, grounding); a class is one (atom, sign, bound)
+        order = np.lexsort((b_inst_a, b_up_a, b_lo_a, b_neg_a, b_atom_a))
+        s_atom, s_neg, s_lo, s_up = b_atom_a[order], b_neg_a[order], b_lo_a[order], b_up_a[order]
+        new_class = np.ones(len(order), np.bool_)
+        if len(order) > 1:
+            new_class[1:] = (s_atom[1:] != s_atom[:-1]) | (s_neg[1:] != s_neg[:-1]) \
+                | (s_lo[1:] != s_lo[:-1]) | (s_up[1:] != s_up[:-1])
+        first = np.flatnonzero(new_class)
+        wc_gptr = np.append(first, len(order)).astype(np.int64)
+        wc_ptr = np.zeros(n_atoms + 1, np.int64)
+        np.add.at(wc_ptr, s_atom[first] + 1, 1)
+        np.cumsum(wc_ptr, out=wc_ptr)
         # immediate groundings by the atom they set: when that atom changes they may change it back
         heads = np.asarray(self.g_head, np.int64)
         immediate = np.array([self._compiled[r].rule.immediate for r in self.g_rule], np.bool_)
         imm = np.flatnonzero(immediate) if n else np.zeros(0, np.int64)
-        imm = imm[np.argsort(heads[imm], kind="stable")]
+        imm = imm[np.lexsort((imm, heads[imm]))]
         ih_ptr = np.zeros(n_atoms + 1, np.int64)
         np.add.at(ih_ptr, heads[imm] + 1, 1)
         np.cumsum(ih_ptr, out=ih_ptr)
         return {
+            "inst": inst,
+            "wc_ptr": wc_ptr,
+            "wc_bnd": np.ascontiguousarray(np.column_stack([s_lo[first], s_up[first]])
+                                           if len(first) else np.zeros((0, 2), np.float64)),
+            "wc_neg": np.ascontiguousarray(s_neg[first]),
+            "wc_gptr": wc_gptr,
+            "wg": b_inst_a[order].astype(np.int32),
             "ih_ptr": ih_ptr,
-            "ih_inst": imm.astype(np.int64),
-            "inst_i": inst_i,
-            "w_ptr": w_ptr,
-            "w_inst": np.asarray(b_inst, np.int64)[order],
-            "w_neg": b_neg_a[order],
-            "w_bnd": np.ascontiguousarray(b_bnd[order]),
+            "ih_inst": imm.astype(np.int32),
             "b_ptr": b_ptr,
             "b_atom": b_atom_a,
             "b_neg": b_neg_a,

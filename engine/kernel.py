@@ -7,8 +7,20 @@ module because numba's disk cache does not notice changes to callees in other mo
 How rules are evaluated: the grounder (grounding.py) enumerates, once, every rule grounding that could
 ever fire. Each grounding keeps a count of its body clauses that do not hold (`unsat`); a change of an
 atom's interval updates the counts of the groundings that watch that atom, and groundings whose count
-reaches zero sit in the world's `active` list. A timestep then costs work proportional to the changes
-and the active groundings, not to the size of the program.
+reaches zero sit in their world's active list (one list per kind of rule: immediate, delayed, ordinary).
+A timestep then costs work proportional to the changes and the active groundings, not to the size of
+the program.
+
+Why the code looks the way it does:
+- Every function is compiled without numba's reference counting (`_nrt=False`): with it, each call that
+  passes arrays paid two atomic operations per array, a quarter of the step time. So nothing here
+  allocates; the engine (core.py) owns every buffer. When the trace or the schedule of a world needs
+  more room, the kernel stops *between* worlds, says so in its status, and core.py grows the buffer and
+  calls again from that world (`w_first`).
+- Watches are grouped in classes: the groundings that read atom a with the same bound and sign share
+  one truth test, and the groundings of a class are listed together (contiguous counts in memory).
+- An immediate application has one source, so it is applied directly; only pass 0 and ordinary passes,
+  where several sources may meet on one atom, go through the grouping scratch.
 """
 from __future__ import annotations
 
@@ -25,37 +37,53 @@ POLICY_RESET_FREEZE, POLICY_KEEP_OLD, POLICY_TAKE_NEW, POLICY_HULL, POLICY_ABORT
 # kernel status codes
 STATUS_OK, STATUS_INCONSISTENT, STATUS_NO_FIXPOINT, STATUS_IMMEDIATE_LIMIT = 0, 1, 2, 3
 STATUS_NOT_SETTABLE = 4  # an external fact names an atom no fact or rule can set (nothing was stepped)
+STATUS_TRACE_ROOM = 5  # stopped before world err[0]: the trace buffer needs cfg[CFG_TRACE_ROOM] free rows
+STATUS_PEND_ROOM = 6  # stopped in world err[0] before scheduling its delayed firings: the schedule is full
+STATUS_TRACE_LIMIT = 7  # one world's step wrote more rows than the trace buffer holds
 
 # column layout of the packed arrays
 RULE_MODE, RULE_DELAY, RULE_IMMEDIATE = 0, 1, 2
-INST_RULE, INST_HEAD, INST_RANK = 0, 1, 2
-# per-grounding kind bits (inst_kind, uint8[G]): its rule is immediate / delayed (Δt > 0) / ordinary Δt = 0.
-# A small dense array, so that the scans of the active list need not read inst_i and rule_i per grounding.
-KIND_IMMEDIATE, KIND_DELAYED, KIND_ORDINARY = 1, 2, 4
+# per grounding (inst, int32[G, 4]): rule, head atom, rank (canonical order), kind index
+INST_RULE, INST_HEAD, INST_RANK, INST_KIND = 0, 1, 2, 3
+# kind indices: each grounding's rule is immediate, delayed (Δt > 0) or ordinary (Δt = 0); one active list each
+KIND_IMMEDIATE, KIND_DELAYED, KIND_ORDINARY = 0, 1, 2
+N_KINDS = 3
 CFG_MODE, CFG_RESET, CFG_POLICY, CFG_MAX_PASSES, CFG_MAX_IMMEDIATE, CFG_T = 0, 1, 2, 3, 4, 5
-# trace int columns: world, t, pass_no, atom, cause_kind, cause_id, grounding, n_sources
+CFG_TRACE_ROOM = 6  # free trace rows wanted before a traced world steps
+CFG_RESUME_SCHEDULE = 7  # 1: world w_first has stepped already and only schedules its delayed firings
+N_CFG = 8
+# trace rows: int32[cap, 8] (world, t, pass_no, atom, cause_kind, cause_id, grounding, n_sources)
+# and float64[cap, 4] (old_lower, old_upper, new_lower, new_upper)
 TRACE_INT_COLUMNS = 8
-# trace float columns: old_lower, old_upper, new_lower, new_upper
 TRACE_FLOAT_COLUMNS = 4
 # stats columns
 STAT_FIRINGS, STAT_REDERIVATIONS, STAT_STATIC_IGNORED, STAT_CHANGES, STAT_PASSES = 0, 1, 2, 3, 4
-STAT_WATCH_VISITS, STAT_CANDIDATES = 5, 6  # work counters: clause checks after changes, heap pops
+STAT_WATCH_VISITS, STAT_CANDIDATES = 5, 6  # work counters: count updates after changes, heap pops
 N_STATS = 7
 
-# grouping scratch: flags in S_FLAGS
-F_OVERRIDE, F_INTERSECT, F_EMPTY_O, F_EMPTY_I, F_STATIC, F_TOUCHED = 1, 2, 4, 8, 16, 32
+# grouping scratch (one row per touched atom, by slot): flags in S_FLAGS
+F_OVERRIDE, F_INTERSECT, F_EMPTY_O, F_EMPTY_I, F_STATIC = 1, 2, 4, 8, 16
 S_FLAGS, S_N, S_PRIM_KEY, S_PRIM_KIND, S_PRIM_ID, S_PRIM_INST, S_LAST_KEY = 0, 1, 2, 3, 4, 5, 6
 S_LAST_KIND, S_LAST_ID, S_LAST_INST = 7, 8, 9
 S_RULE_KEY, S_RULE_INST = 10, 11  # the first rule source (named by policy rows)
 N_SCRATCH_INT = 12
 SF_OL, SF_OU, SF_IL, SF_IU, SF_LAST_L, SF_LAST_U, SF_HULL_L, SF_HULL_U = 0, 1, 2, 3, 4, 5, 6, 7
 N_SCRATCH_FLOAT = 8
+# error record (err, int64[N_ERR])
+E_WORLD, E_T, E_ATOM, E_OLD_KIND, E_OLD_ID, E_KIND, E_ID, E_INST, E_LAST_KIND, E_LAST_ID = range(10)
+E_LAST_INST, E_DISAGREE = 10, 11
+N_ERR = 12
 
 # source keys order sources: facts, then external facts, then rule groundings by rank
 KEY_STRIDE = np.int64(1) << np.int64(40)
+# heap entries: rank * HEAP_SHIFT + grounding (both < 2^31)
+HEAP_SHIFT = np.int64(1) << np.int64(31)
+HEAP_MASK = HEAP_SHIFT - np.int64(1)
+
+kernel_jit = njit(cache=True, _nrt=False)
 
 
-@njit(cache=True)
+@kernel_jit
 def _holds(lo, up, cl, cu, neg):
     if neg:
         a = 1.0 - up
@@ -66,170 +94,216 @@ def _holds(lo, up, cl, cu, neg):
     return a >= cl - EPS and b <= cu + EPS
 
 
-@njit(cache=True)
-def _activate(w, g, act, act_n, act_pos):
-    n = act_n[w]
-    act[w, n] = g
-    act_pos[w, g] = n
-    act_n[w] = n + 1
+@kernel_jit
+def _heap_push(heap, n, key):
+    i = n
+    while i > 0:
+        parent = (i - 1) >> 1
+        pk = heap[parent]
+        if pk <= key:
+            break
+        heap[i] = pk
+        i = parent
+    heap[i] = key
+    return n + 1
 
 
-@njit(cache=True)
-def _deactivate(w, g, act, act_n, act_pos):
-    p = act_pos[w, g]
-    last = act[w, act_n[w] - 1]
-    act[w, p] = last
-    act_pos[w, last] = p
-    act_pos[w, g] = -1
-    act_n[w] -= 1
+@kernel_jit
+def _heap_pop(heap, n):
+    """Remove the smallest key; returns it (the caller shrinks n by one)."""
+    top = heap[0]
+    n -= 1
+    key = heap[n]
+    i = 0
+    while True:
+        c = 2 * i + 1
+        if c >= n:
+            break
+        if c + 1 < n and heap[c + 1] < heap[c]:
+            c += 1
+        if key <= heap[c]:
+            break
+        heap[i] = heap[c]
+        i = c
+    heap[i] = key
+    return top
 
 
-@njit(cache=True)
-def _watch(w, a, ol, ou, nl, nu, w_ptr, w_inst, w_neg, w_bnd, unsat, act, act_n, act_pos, alog, stats):
-    """Update the unsatisfied-clause counts of the groundings that read atom a. Groundings that become
-    active are appended to the activation log alog (alog[0] counts; on overflow it is set to -1)."""
-    stats[w, STAT_WATCH_VISITS] += w_ptr[a + 1] - w_ptr[a]
-    for e in range(w_ptr[a], w_ptr[a + 1]):
-        cl = w_bnd[e, 0]
-        cu = w_bnd[e, 1]
-        neg = w_neg[e]
-        was = _holds(ol, ou, cl, cu, neg)
-        now = _holds(nl, nu, cl, cu, neg)
+@kernel_jit
+def _push(g, inst, heap, hn, in_heap):
+    """Make immediate grounding g a candidate of the running immediate phase (once)."""
+    if in_heap[g]:
+        return hn
+    in_heap[g] = True
+    return _heap_push(heap, hn, np.int64(inst[g, INST_RANK]) * HEAP_SHIFT + g)
+
+
+@kernel_jit
+def _set_atom(w, t, pass_no, a, cl, cu, nl, nu, kind, cid, g_src, nsrc, skip, lo, up, last_cause,
+              trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, unsat, inst,
+              act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap):
+    """Change atom a of world w from [cl,cu] to [nl,nu]: log the row, update the counts of the
+    groundings that read a (activating and deactivating them), and make the immediate groundings
+    that became active, or that set a, candidates; except `skip`, an immediate grounding that just
+    set a consistently (applying it again would change nothing).
+    Returns the new heap size, or -1 when the trace buffer is full."""
+    if trace_on[w]:
+        n = tr_n[0]
+        if n >= tri.shape[0]:
+            return -1
+        tri[n, 0] = w
+        tri[n, 1] = t
+        tri[n, 2] = pass_no
+        tri[n, 3] = a
+        tri[n, 4] = kind
+        tri[n, 5] = cid
+        tri[n, 6] = g_src
+        tri[n, 7] = nsrc
+        trf[n, 0] = cl
+        trf[n, 1] = cu
+        trf[n, 2] = nl
+        trf[n, 3] = nu
+        tr_n[0] = n + 1
+    lo[w, a] = nl
+    up[w, a] = nu
+    last_cause[w, a, 0] = kind
+    last_cause[w, a, 1] = cid
+    stats[w, STAT_CHANGES] += 1
+    visits = 0
+    for c in range(wc_ptr[a], wc_ptr[a + 1]):
+        bl = wc_bnd[c, 0]
+        bu = wc_bnd[c, 1]
+        neg = wc_neg[c]
+        was = _holds(cl, cu, bl, bu, neg)
+        now = _holds(nl, nu, bl, bu, neg)
         if was == now:
             continue
-        g = w_inst[e]
-        if was:
-            unsat[w, g] += 1
-            if unsat[w, g] == 1:
-                _deactivate(w, g, act, act_n, act_pos)
+        e0 = wc_gptr[c]
+        e1 = wc_gptr[c + 1]
+        visits += e1 - e0
+        if was:  # the clause stopped holding: one more unsatisfied clause
+            for e in range(e0, e1):
+                g = wg[e]
+                u = unsat[w, g] + 1
+                unsat[w, g] = u
+                if u == 1:  # was active: leave its kind's list (swap with the last)
+                    k = inst[g, INST_KIND]
+                    base = kind_base[k]
+                    p = act_pos[w, g]
+                    last_i = act_n[w, k] - 1
+                    last = act[w, base + last_i]
+                    act[w, base + p] = last
+                    act_pos[w, last] = p
+                    act_pos[w, g] = -1
+                    act_n[w, k] = last_i
         else:
-            unsat[w, g] -= 1
-            if unsat[w, g] == 0:
-                _activate(w, g, act, act_n, act_pos)
-                n = alog[0]
-                if n >= 0:
-                    if n + 1 < alog.shape[0]:
-                        alog[n + 1] = g
-                        alog[0] = n + 1
-                    else:
-                        alog[0] = -1
+            for e in range(e0, e1):
+                g = wg[e]
+                u = unsat[w, g] - 1
+                unsat[w, g] = u
+                if u == 0:  # became active: join its kind's list
+                    k = inst[g, INST_KIND]
+                    p = act_n[w, k]
+                    act[w, kind_base[k] + p] = g
+                    act_pos[w, g] = p
+                    act_n[w, k] = p + 1
+                    if k == KIND_IMMEDIATE:
+                        hn = _push(g, inst, heap, hn, in_heap)
+    stats[w, STAT_WATCH_VISITS] += visits
+    # the immediate groundings that set a may now change it (back)
+    for k in range(ih_ptr[a], ih_ptr[a + 1]):
+        g = ih_inst[k]
+        if g != skip and unsat[w, g] == 0:
+            hn = _push(g, inst, heap, hn, in_heap)
+    return hn
 
 
-@njit(cache=True)
-def _grow_trace(tri, trf, need):
-    cap = tri.shape[1]
-    if need <= cap:
-        return tri, trf
-    new_cap = max(need, 2 * cap, 1024)
-    ntri = np.empty((TRACE_INT_COLUMNS, new_cap), np.int32)
-    ntrf = np.empty((TRACE_FLOAT_COLUMNS, new_cap), np.float64)
-    ntri[:, :cap] = tri
-    ntrf[:, :cap] = trf
-    return ntri, ntrf
-
-
-@njit(cache=True)
-def _log(tri, trf, tr_n, w, t, pass_no, a, ol, ou, nl, nu, kind, cid, inst, nsrc):
-    n = tr_n[0]
-    tri, trf = _grow_trace(tri, trf, n + 1)
-    tri[0, n] = w
-    tri[1, n] = t
-    tri[2, n] = pass_no
-    tri[3, n] = a
-    tri[4, n] = kind
-    tri[5, n] = cid
-    tri[6, n] = inst
-    tri[7, n] = nsrc
-    trf[0, n] = ol
-    trf[1, n] = ou
-    trf[2, n] = nl
-    trf[3, n] = nu
-    tr_n[0] = n + 1
-    return tri, trf
-
-
-@njit(cache=True)
-def _add_source(a, l, u, override, key, kind, cid, inst, static_src, si, sf, touched, n_touched):
-    """Add one source's bound for atom a to the pending group of this pass."""
-    flags = si[a, S_FLAGS]
-    if flags & F_TOUCHED == 0:
-        touched[n_touched[0]] = a
-        n_touched[0] += 1
-        flags = F_TOUCHED
-        si[a, S_N] = 0
-        si[a, S_PRIM_KEY] = key
-        si[a, S_PRIM_KIND] = kind
-        si[a, S_PRIM_ID] = cid
-        si[a, S_PRIM_INST] = inst
-        si[a, S_LAST_KEY] = key
-        si[a, S_LAST_KIND] = kind
-        si[a, S_LAST_ID] = cid
-        si[a, S_LAST_INST] = inst
-        si[a, S_RULE_KEY] = key if kind == CAUSE_RULE else -1
-        si[a, S_RULE_INST] = inst if kind == CAUSE_RULE else -1
-        sf[a, SF_LAST_L] = l
-        sf[a, SF_LAST_U] = u
-        sf[a, SF_HULL_L] = l
-        sf[a, SF_HULL_U] = u
+@kernel_jit
+def _add_source(a, l, u, override, key, kind, cid, g_src, static_src, slot_of, touched, n_touched, si, sf):
+    """Add one source's bound for atom a to the pending group of this pass (scratch row slot_of[a])."""
+    s = slot_of[a]
+    if s < 0:
+        s = n_touched[0]
+        n_touched[0] = s + 1
+        slot_of[a] = s
+        touched[s] = a
+        flags = 0
+        si[s, S_N] = 0
+        si[s, S_PRIM_KEY] = key
+        si[s, S_PRIM_KIND] = kind
+        si[s, S_PRIM_ID] = cid
+        si[s, S_PRIM_INST] = g_src
+        si[s, S_LAST_KEY] = key
+        si[s, S_LAST_KIND] = kind
+        si[s, S_LAST_ID] = cid
+        si[s, S_LAST_INST] = g_src
+        si[s, S_RULE_KEY] = key if kind == CAUSE_RULE else -1
+        si[s, S_RULE_INST] = g_src if kind == CAUSE_RULE else -1
+        sf[s, SF_LAST_L] = l
+        sf[s, SF_LAST_U] = u
+        sf[s, SF_HULL_L] = l
+        sf[s, SF_HULL_U] = u
     else:
-        if kind == CAUSE_RULE and (si[a, S_RULE_KEY] < 0 or key < si[a, S_RULE_KEY]):
-            si[a, S_RULE_KEY] = key
-            si[a, S_RULE_INST] = inst
-        if key < si[a, S_PRIM_KEY]:
-            si[a, S_PRIM_KEY] = key
-            si[a, S_PRIM_KIND] = kind
-            si[a, S_PRIM_ID] = cid
-            si[a, S_PRIM_INST] = inst
-        if key >= si[a, S_LAST_KEY]:
-            si[a, S_LAST_KEY] = key
-            si[a, S_LAST_KIND] = kind
-            si[a, S_LAST_ID] = cid
-            si[a, S_LAST_INST] = inst
-            sf[a, SF_LAST_L] = l
-            sf[a, SF_LAST_U] = u
-        sf[a, SF_HULL_L] = min(sf[a, SF_HULL_L], l)
-        sf[a, SF_HULL_U] = max(sf[a, SF_HULL_U], u)
-    si[a, S_N] += 1
+        flags = si[s, S_FLAGS]
+        if kind == CAUSE_RULE and (si[s, S_RULE_KEY] < 0 or key < si[s, S_RULE_KEY]):
+            si[s, S_RULE_KEY] = key
+            si[s, S_RULE_INST] = g_src
+        if key < si[s, S_PRIM_KEY]:
+            si[s, S_PRIM_KEY] = key
+            si[s, S_PRIM_KIND] = kind
+            si[s, S_PRIM_ID] = cid
+            si[s, S_PRIM_INST] = g_src
+        if key >= si[s, S_LAST_KEY]:
+            si[s, S_LAST_KEY] = key
+            si[s, S_LAST_KIND] = kind
+            si[s, S_LAST_ID] = cid
+            si[s, S_LAST_INST] = g_src
+            sf[s, SF_LAST_L] = l
+            sf[s, SF_LAST_U] = u
+        sf[s, SF_HULL_L] = min(sf[s, SF_HULL_L], l)
+        sf[s, SF_HULL_U] = max(sf[s, SF_HULL_U], u)
+    si[s, S_N] += 1
     if static_src:
         flags |= F_STATIC
     if override:
         if flags & F_OVERRIDE == 0:
             flags |= F_OVERRIDE
-            sf[a, SF_OL] = l
-            sf[a, SF_OU] = u
+            sf[s, SF_OL] = l
+            sf[s, SF_OU] = u
         else:
-            sf[a, SF_OL] = max(sf[a, SF_OL], l)
-            sf[a, SF_OU] = min(sf[a, SF_OU], u)
-        if sf[a, SF_OL] > sf[a, SF_OU] + EPS:
+            sf[s, SF_OL] = max(sf[s, SF_OL], l)
+            sf[s, SF_OU] = min(sf[s, SF_OU], u)
+        if sf[s, SF_OL] > sf[s, SF_OU] + EPS:
             flags |= F_EMPTY_O
     else:
         if flags & F_INTERSECT == 0:
             flags |= F_INTERSECT
-            sf[a, SF_IL] = l
-            sf[a, SF_IU] = u
+            sf[s, SF_IL] = l
+            sf[s, SF_IU] = u
         else:
-            sf[a, SF_IL] = max(sf[a, SF_IL], l)
-            sf[a, SF_IU] = min(sf[a, SF_IU], u)
-        if sf[a, SF_IL] > sf[a, SF_IU] + EPS:
+            sf[s, SF_IL] = max(sf[s, SF_IL], l)
+            sf[s, SF_IU] = min(sf[s, SF_IU], u)
+        if sf[s, SF_IL] > sf[s, SF_IU] + EPS:
             flags |= F_EMPTY_I
-    si[a, S_FLAGS] = flags
+    si[s, S_FLAGS] = flags
 
 
-@njit(cache=True)
-def _resolve(cl, cu, a, policy, si, sf, out):
-    """The new interval of atom a (current [cl,cu]) after its pending group: docs/language.md,
-    'Updating an atom'. Writes (lower, upper, inconsistent, freeze) into out."""
-    flags = si[a, S_FLAGS]
+@kernel_jit
+def _resolve(cl, cu, s, policy, si, sf, out):
+    """The new interval of an atom (current [cl,cu]) after its pending group in scratch row s:
+    docs/language.md, 'Updating an atom'. Writes (lower, upper, inconsistent, freeze, incoming
+    sources disagree) into out."""
+    flags = si[s, S_FLAGS]
     inconsistent = (flags & (F_EMPTY_O | F_EMPTY_I)) != 0
     if flags & F_OVERRIDE:
-        bl = sf[a, SF_OL]
-        bu = sf[a, SF_OU]
+        bl = sf[s, SF_OL]
+        bu = sf[s, SF_OU]
     else:
         bl = cl
         bu = cu
     if flags & F_INTERSECT:
-        rl = max(bl, sf[a, SF_IL])
-        ru = min(bu, sf[a, SF_IU])
+        rl = max(bl, sf[s, SF_IL])
+        ru = min(bu, sf[s, SF_IU])
     else:
         rl = bl
         ru = bu
@@ -246,19 +320,19 @@ def _resolve(cl, cu, a, policy, si, sf, out):
             nl, nu = 0.0, 1.0
             ok = (flags & (F_EMPTY_O | F_EMPTY_I)) == 0
             if flags & F_OVERRIDE:
-                nl, nu = sf[a, SF_OL], sf[a, SF_OU]
+                nl, nu = sf[s, SF_OL], sf[s, SF_OU]
             if flags & F_INTERSECT:
-                nl, nu = max(nl, sf[a, SF_IL]), min(nu, sf[a, SF_IU])
+                nl, nu = max(nl, sf[s, SF_IL]), min(nu, sf[s, SF_IU])
             if ok and nl <= nu + EPS:
                 rl, ru = nl, nu
             else:
-                rl, ru = sf[a, SF_LAST_L], sf[a, SF_LAST_U]
+                rl, ru = sf[s, SF_LAST_L], sf[s, SF_LAST_U]
         elif policy == POLICY_HULL:
-            rl = min(cl, sf[a, SF_HULL_L])
-            ru = max(cu, sf[a, SF_HULL_U])
+            rl = min(cl, sf[s, SF_HULL_L])
+            ru = max(cu, sf[s, SF_HULL_U])
     incoming_disagree = (flags & (F_EMPTY_O | F_EMPTY_I)) != 0
     if (flags & F_OVERRIDE) and (flags & F_INTERSECT):
-        if max(sf[a, SF_OL], sf[a, SF_IL]) > min(sf[a, SF_OU], sf[a, SF_IU]) + EPS:
+        if max(sf[s, SF_OL], sf[s, SF_IL]) > min(sf[s, SF_OU], sf[s, SF_IU]) + EPS:
             incoming_disagree = True
     out[0] = rl
     out[1] = ru
@@ -267,76 +341,119 @@ def _resolve(cl, cu, a, policy, si, sf, out):
     out[4] = 1.0 if incoming_disagree else 0.0
 
 
-@njit(cache=True)
-def _apply_touched(w, t, pass_no, touched, n_touched, si, sf, lo, up, static, last_cause, policy,
-                   w_ptr, w_inst, w_neg, w_bnd, unsat, act, act_n, act_pos,
-                   trace_on, tri, trf, tr_n, stats, err, sort_touched, alog, out):
-    """Apply every pending group (one per touched atom); `out` is float scratch of length 5.
-    Returns (n_changed, status, tri, trf)."""
+@kernel_jit
+def _sort_small(a, n):
+    """Sort a[:n] in place (insertion sort: a pass usually touches few atoms; shell gaps beyond)."""
+    gap = 1
+    while gap < n // 3:
+        gap = 3 * gap + 1
+    while gap >= 1:
+        for i in range(gap, n):
+            x = a[i]
+            j = i - gap
+            while j >= 0 and a[j] > x:
+                a[j + gap] = a[j]
+                j -= gap
+            a[j + gap] = x
+        gap //= 3
+
+
+@kernel_jit
+def _apply_groups(w, t, pass_no, policy, slot_of, touched, n_touched, si, sf, out, lo, up, static,
+                  last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg,
+                  unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap,
+                  changed):
+    """Apply every pending group of this pass (one per touched atom), in atom order.
+    changed[0] counts the atoms that changed. Returns (status, heap size)."""
     n = n_touched[0]
-    order = touched[:n]
-    if sort_touched:
-        _sort_small(order)
-    changed = 0
+    _sort_small(touched, n)
     status = STATUS_OK
     for k in range(n):
-        a = order[k]
-        nsrc = si[a, S_N]
-        kind = si[a, S_PRIM_KIND]
+        a = touched[k]
+        s = slot_of[a]
+        slot_of[a] = -1
+        if status != STATUS_OK:
+            continue  # keep clearing the slots
+        nsrc = si[s, S_N]
+        kind = si[s, S_PRIM_KIND]
         if kind == CAUSE_RULE:
             stats[w, STAT_FIRINGS] += nsrc
         if static[w, a]:
             stats[w, STAT_STATIC_IGNORED] += nsrc
-            si[a, S_FLAGS] = 0
             continue
         cl = lo[w, a]
         cu = up[w, a]
-        _resolve(cl, cu, a, policy, si, sf, out)
+        _resolve(cl, cu, s, policy, si, sf, out)
         nl = out[0]
         nu = out[1]
         inconsistent = out[2] > 0.5
         if inconsistent and policy == POLICY_ABORT:
-            err[0] = w
-            err[1] = t
-            err[2] = a
-            err[3] = last_cause[w, a, 0]
-            err[4] = last_cause[w, a, 1]
-            err[5] = kind
-            err[6] = si[a, S_PRIM_ID]
-            err[7] = si[a, S_PRIM_INST]
-            err[8] = si[a, S_LAST_KIND]
-            err[9] = si[a, S_LAST_ID]
-            err[10] = si[a, S_LAST_INST]
-            err[11] = 1 if out[4] > 0.5 else 0
-            si[a, S_FLAGS] = 0
+            err[E_WORLD] = w
+            err[E_T] = t
+            err[E_ATOM] = a
+            err[E_OLD_KIND] = last_cause[w, a, 0]
+            err[E_OLD_ID] = last_cause[w, a, 1]
+            err[E_KIND] = kind
+            err[E_ID] = si[s, S_PRIM_ID]
+            err[E_INST] = si[s, S_PRIM_INST]
+            err[E_LAST_KIND] = si[s, S_LAST_KIND]
+            err[E_LAST_ID] = si[s, S_LAST_ID]
+            err[E_LAST_INST] = si[s, S_LAST_INST]
+            err[E_DISAGREE] = 1 if out[4] > 0.5 else 0
             status = STATUS_INCONSISTENT
             continue
-        cause_kind = CAUSE_POLICY if inconsistent else kind
-        cause_id = policy if inconsistent else si[a, S_PRIM_ID]
-        grounding = si[a, S_RULE_INST] if inconsistent else si[a, S_PRIM_INST]
         if nl != cl or nu != cu:
-            changed += 1
-            stats[w, STAT_CHANGES] += 1
-            if trace_on[w]:
-                tri, trf = _log(tri, trf, tr_n, w, t, pass_no, a, cl, cu, nl, nu,
-                                cause_kind, cause_id, grounding, nsrc)
-            lo[w, a] = nl
-            up[w, a] = nu
-            last_cause[w, a, 0] = cause_kind
-            last_cause[w, a, 1] = cause_id
-            _watch(w, a, cl, cu, nl, nu, w_ptr, w_inst, w_neg, w_bnd, unsat, act, act_n, act_pos, alog, stats)
+            changed[0] += 1
+            if inconsistent:
+                hn = _set_atom(w, t, pass_no, a, cl, cu, nl, nu, CAUSE_POLICY, policy, si[s, S_RULE_INST], nsrc,
+                               -1, lo, up, last_cause, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_neg,
+                               wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst,
+                               heap, hn, in_heap)
+            else:
+                hn = _set_atom(w, t, pass_no, a, cl, cu, nl, nu, kind, si[s, S_PRIM_ID], si[s, S_PRIM_INST],
+                               nsrc, -1, lo, up, last_cause, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd,
+                               wc_neg, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
+                               ih_inst, heap, hn, in_heap)
+            if hn < 0:
+                status = STATUS_TRACE_LIMIT
+                err[E_WORLD] = w
+                continue
         elif kind == CAUSE_RULE:
             stats[w, STAT_REDERIVATIONS] += nsrc
-        if out[3] > 0.5 or si[a, S_FLAGS] & F_STATIC:
+        if out[3] > 0.5 or si[s, S_FLAGS] & F_STATIC:
             static[w, a] = True
-        si[a, S_FLAGS] = 0
     n_touched[0] = 0
-    return changed, status, tri, trf
+    return status, hn
 
 
-@njit(cache=True)
-def _reset_step(w, t, lo, up, static, last_cause, w_ptr, w_inst, w_neg, w_bnd, unsat, act, act_n,
-                act_pos, trace_on, tri, trf, tr_n, stats, alog):
+@kernel_jit
+def _one_source(cl, cu, l, u, override, policy, out):
+    """The result of one source [l,u] on an atom now [cl,cu] (an immediate application):
+    writes (lower, upper, inconsistent, freeze) into out."""
+    if override:
+        rl, ru = l, u
+    else:
+        rl, ru = max(cl, l), min(cu, u)
+    inconsistent = rl > ru + EPS
+    freeze = False
+    if inconsistent:
+        if policy == POLICY_RESET_FREEZE:
+            rl, ru, freeze = 0.0, 1.0, True
+        elif policy == POLICY_KEEP_OLD:
+            rl, ru = cl, cu
+        elif policy == POLICY_TAKE_NEW:
+            rl, ru = l, u
+        elif policy == POLICY_HULL:
+            rl, ru = min(cl, l), max(cu, u)
+    out[0] = rl
+    out[1] = ru
+    out[2] = 1.0 if inconsistent else 0.0
+    out[3] = 1.0 if freeze else 0.0
+
+
+@kernel_jit
+def _reset_world(w, t, lo, up, static, last_cause, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_neg,
+                 wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap):
     """`%timesteps reset`: every non-static atom goes back to [0,1] at the start of a step."""
     for a in range(lo.shape[1]):
         if static[w, a]:
@@ -345,258 +462,209 @@ def _reset_step(w, t, lo, up, static, last_cause, w_ptr, w_inst, w_neg, w_bnd, u
         cu = up[w, a]
         if cl == 0.0 and cu == 1.0:
             continue
-        if trace_on[w]:
-            tri, trf = _log(tri, trf, tr_n, w, t, 0, a, cl, cu, 0.0, 1.0, CAUSE_RESET, -1, -1, 0)
-        stats[w, STAT_CHANGES] += 1
-        lo[w, a] = 0.0
-        up[w, a] = 1.0
-        last_cause[w, a, 0] = CAUSE_RESET
-        last_cause[w, a, 1] = -1
-        _watch(w, a, cl, cu, 0.0, 1.0, w_ptr, w_inst, w_neg, w_bnd, unsat, act, act_n, act_pos, alog, stats)
-    return tri, trf
+        hn = _set_atom(w, t, 0, a, cl, cu, 0.0, 1.0, CAUSE_RESET, -1, -1, 0, -1, lo, up, last_cause, trace_on,
+                       tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, unsat, inst, act, act_n,
+                       act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap)
+        if hn < 0:
+            return hn
+    return hn
 
 
-@njit(cache=True)
-def _sort_small(a):
-    """Sort in place: insertion sort for the few atoms a pass usually touches, numpy's sort beyond."""
-    n = a.shape[0]
-    if n > 32:
-        a[:] = np.sort(a)
-        return
-    for i in range(1, n):
-        x = a[i]
-        j = i - 1
-        while j >= 0 and a[j] > x:
-            a[j + 1] = a[j]
-            j -= 1
-        a[j + 1] = x
-
-
-@njit(cache=True)
-def _heap_push(heap, n, key, g):
-    i = n
-    heap[i, 0] = key
-    heap[i, 1] = g
-    while i > 0:
-        parent = (i - 1) >> 1
-        if heap[parent, 0] <= heap[i, 0]:
-            break
-        k0, g0 = heap[parent, 0], heap[parent, 1]
-        heap[parent, 0], heap[parent, 1] = heap[i, 0], heap[i, 1]
-        heap[i, 0], heap[i, 1] = k0, g0
-        i = parent
-    return n + 1
-
-
-@njit(cache=True)
-def _heap_pop(heap, n):
-    g = heap[0, 1]
-    n -= 1
-    heap[0, 0], heap[0, 1] = heap[n, 0], heap[n, 1]
-    i = 0
-    while True:
-        left = 2 * i + 1
-        if left >= n:
-            break
-        c = left
-        if left + 1 < n and heap[left + 1, 0] < heap[left, 0]:
-            c = left + 1
-        if heap[i, 0] <= heap[c, 0]:
-            break
-        k0, g0 = heap[c, 0], heap[c, 1]
-        heap[c, 0], heap[c, 1] = heap[i, 0], heap[i, 1]
-        heap[i, 0], heap[i, 1] = k0, g0
-        i = c
-    return g, n
-
-
-@njit(cache=True)
-def _would_change(cl, cu, l, u, override, policy):
-    """Would one source with bound [l,u] change an atom now [cl,cu]? (docs/language.md, one source)"""
-    if override:
-        rl, ru = l, u
-    else:
-        rl, ru = max(cl, l), min(cu, u)
-    if rl > ru + EPS:  # inconsistent: the policy decides
-        if policy == POLICY_KEEP_OLD:
-            return False
-        if policy == POLICY_ABORT:
-            return True
-        if policy == POLICY_RESET_FREEZE:
-            rl, ru = 0.0, 1.0
-        elif policy == POLICY_TAKE_NEW:
-            rl, ru = l, u
-        else:
-            rl, ru = min(cl, l), max(cu, u)
-    return rl != cl or ru != cu
-
-
-@njit(cache=True)
-def _grow_pending(pend, need):
-    cap = pend.shape[1]
-    if need <= cap:
-        return pend
-    npend = np.empty((pend.shape[0], max(need, 2 * cap, 16), 2), np.int32)
-    npend[:, :cap] = pend
-    return npend
-
-
-@njit(cache=True)
-def step_worlds(cfg, rule_i, rule_f, inst_i, inst_kind, w_ptr, w_inst, w_neg, w_bnd, ih_ptr, ih_inst,
-                fact_i, fact_f, fact_order, ext_ptr, ext_i, ext_f, settable,
+@kernel_jit
+def step_worlds(cfg, w_first, rule_i, rule_f, inst, kind_base, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, ih_ptr,
+                ih_inst, fact_i, fact_f, fact_order, ext_ptr, ext_i, ext_f, settable,
                 lo, up, static, last_cause, unsat, act, act_n, act_pos, pend, pend_n,
-                trace_on, tri, trf, tr_n, stats, err, si, sf, touched, heap, in_heap, alog):
-    """Compute timestep cfg[CFG_T] for every world. Returns (status, tri, trf, pend): the trace and
-    pending arrays are returned because they may have been reallocated to grow."""
+                trace_on, tri, trf, tr_n, stats, err, slot_of, touched, n_touched, si, sf, out, heap, in_heap,
+                changed):
+    """Compute timestep cfg[CFG_T] for worlds w_first.. in order. Returns (status, world): STATUS_OK and
+    the number of worlds, or a status and the world it concerns (STATUS_TRACE_ROOM / STATUS_PEND_ROOM:
+    grow that buffer and call again from that world)."""
     t = cfg[CFG_T]
     prog_mode = cfg[CFG_MODE]
     policy = cfg[CFG_POLICY]
     max_passes = cfg[CFG_MAX_PASSES]
     max_immediate = cfg[CFG_MAX_IMMEDIATE]
+    room = cfg[CFG_TRACE_ROOM]
     n_worlds = lo.shape[0]
-    for e in range(ext_ptr[n_worlds]):  # checked before any world steps, so a refusal changes nothing
-        if not settable[ext_i[e, 0]]:
-            err[2] = ext_i[e, 0]
-            return STATUS_NOT_SETTABLE, tri, trf, pend
-    n_touched = np.zeros(1, np.int64)
-    out = np.empty(5)
-    for w in range(n_worlds):
-        # 1. start of the step
-        if cfg[CFG_RESET] == 1 and t > 0:
-            tri, trf = _reset_step(w, t, lo, up, static, last_cause, w_ptr, w_inst, w_neg, w_bnd,
-                                   unsat, act, act_n, act_pos, trace_on, tri, trf, tr_n, stats, alog)
-        # 2. pass 0: program facts in their window, external facts, firings scheduled for t
-        fact_override = prog_mode == MODE_OVERRIDE
-        for k in range(fact_order.shape[0]):
-            f = fact_order[k]
-            if fact_i[f, 2] < t:
-                break
-            if fact_i[f, 1] <= t:
-                _add_source(fact_i[f, 0], fact_f[f, 0], fact_f[f, 1], fact_override, np.int64(f),
-                            CAUSE_FACT, f, -1, fact_i[f, 3] == 1, si, sf, touched, n_touched)
-        for e in range(ext_ptr[w], ext_ptr[w + 1]):
-            _add_source(ext_i[e, 0], ext_f[e, 0], ext_f[e, 1], fact_override,
-                        KEY_STRIDE + ext_i[e, 2], CAUSE_EXTERNAL, ext_i[e, 2], -1, ext_i[e, 1] == 1,
-                        si, sf, touched, n_touched)
-        kept = 0
-        for p in range(pend_n[w]):
-            g = pend[w, p, 1]
-            if pend[w, p, 0] == t:
-                r = inst_i[g, INST_RULE]
-                _add_source(inst_i[g, INST_HEAD], rule_f[r, 0], rule_f[r, 1],
-                            rule_i[r, RULE_MODE] == MODE_OVERRIDE, 2 * KEY_STRIDE + inst_i[g, INST_RANK],
-                            CAUSE_RULE, r, g, False, si, sf, touched, n_touched)
-            else:
-                pend[w, kept, 0] = pend[w, p, 0]
-                pend[w, kept, 1] = g
-                kept += 1
-        pend_n[w] = kept
-        _, status, tri, trf = _apply_touched(w, t, 0, touched, n_touched, si, sf, lo, up, static,
-                                             last_cause, policy, w_ptr, w_inst, w_neg, w_bnd, unsat,
-                                             act, act_n, act_pos, trace_on, tri, trf, tr_n, stats,
-                                             err, True, alog, out)
-        if status != STATUS_OK:
-            return status, tri, trf, pend
-        # 3. fixpoint: immediate phase, then one simultaneous ordinary pass, until nothing changes
-        pass_no = 1
-        n_immediate = 0
-        while True:
-            # immediate phase: apply the first (lowest rank) active immediate grounding that would change
-            # its head, one at a time. Candidates wait in a min-heap by rank; a grounding enters it when
-            # the phase starts, when it becomes active, and when an atom it sets changes.
-            hn = 0
-            for k in range(act_n[w]):
-                g = act[w, k]
-                if inst_kind[g] & KIND_IMMEDIATE and not in_heap[g]:
-                    hn = _heap_push(heap, hn, inst_i[g, INST_RANK], g)
-                    in_heap[g] = True
-            while hn > 0:
-                g, hn = _heap_pop(heap, hn)
-                in_heap[g] = False
-                stats[w, STAT_CANDIDATES] += 1
-                if unsat[w, g] != 0:
-                    continue
-                r = inst_i[g, INST_RULE]
-                a = inst_i[g, INST_HEAD]
-                if static[w, a]:
-                    continue
-                if not _would_change(lo[w, a], up[w, a], rule_f[r, 0], rule_f[r, 1],
-                                     rule_i[r, RULE_MODE] == MODE_OVERRIDE, policy):
-                    continue
-                n_immediate += 1
-                if n_immediate > max_immediate:
-                    err[0] = w
-                    err[1] = t
-                    err[2] = a
-                    return STATUS_IMMEDIATE_LIMIT, tri, trf, pend
-                _add_source(a, rule_f[r, 0], rule_f[r, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
-                            2 * KEY_STRIDE + inst_i[g, INST_RANK], CAUSE_RULE, r, g, False, si, sf,
-                            touched, n_touched)
-                alog[0] = 0
-                _, status, tri, trf = _apply_touched(w, t, pass_no, touched, n_touched, si, sf, lo, up,
-                                                     static, last_cause, policy, w_ptr, w_inst, w_neg,
-                                                     w_bnd, unsat, act, act_n, act_pos, trace_on, tri,
-                                                     trf, tr_n, stats, err, False, alog, out)
-                if status != STATUS_OK:
-                    return status, tri, trf, pend
-                if alog[0] < 0:  # too many activations to log: take every active grounding again
-                    for k in range(act_n[w]):
-                        g2 = act[w, k]
-                        if inst_kind[g2] & KIND_IMMEDIATE and not in_heap[g2]:
-                            hn = _heap_push(heap, hn, inst_i[g2, INST_RANK], g2)
-                            in_heap[g2] = True
-                else:
-                    for k in range(1, alog[0] + 1):
-                        g2 = alog[k]
-                        if inst_kind[g2] & KIND_IMMEDIATE and not in_heap[g2]:
-                            hn = _heap_push(heap, hn, inst_i[g2, INST_RANK], g2)
-                            in_heap[g2] = True
-                # the atom changed: the immediate groundings that set it may now change it back
-                for k in range(ih_ptr[a], ih_ptr[a + 1]):
-                    g2 = ih_inst[k]
-                    if unsat[w, g2] == 0 and not in_heap[g2]:
-                        hn = _heap_push(heap, hn, inst_i[g2, INST_RANK], g2)
-                        in_heap[g2] = True
-            # ordinary pass: every active Δt = 0 grounding fires; heads applied together per atom
-            for k in range(act_n[w]):
-                g = act[w, k]
-                if inst_kind[g] & KIND_ORDINARY == 0:
-                    continue
-                r = inst_i[g, INST_RULE]
-                _add_source(inst_i[g, INST_HEAD], rule_f[r, 0], rule_f[r, 1],
-                            rule_i[r, RULE_MODE] == MODE_OVERRIDE, 2 * KEY_STRIDE + inst_i[g, INST_RANK],
-                            CAUSE_RULE, r, g, False, si, sf, touched, n_touched)
-            changed, status, tri, trf = _apply_touched(w, t, pass_no, touched, n_touched, si, sf, lo,
-                                                       up, static, last_cause, policy, w_ptr, w_inst,
-                                                       w_neg, w_bnd, unsat, act, act_n, act_pos,
-                                                       trace_on, tri, trf, tr_n, stats, err, True, alog, out)
+    fact_override = prog_mode == MODE_OVERRIDE
+    if w_first == 0 and cfg[CFG_RESUME_SCHEDULE] == 0:
+        for e in range(ext_ptr[n_worlds]):  # checked before any world steps: a refusal changes nothing
+            if not settable[ext_i[e, 0]]:
+                err[E_ATOM] = ext_i[e, 0]
+                return STATUS_NOT_SETTABLE, 0
+    for w in range(w_first, n_worlds):
+        if w == w_first and cfg[CFG_RESUME_SCHEDULE] == 1:
+            cfg[CFG_RESUME_SCHEDULE] = 0
+        else:
+            if trace_on[w] and tri.shape[0] - tr_n[0] < room:
+                err[E_WORLD] = w
+                return STATUS_TRACE_ROOM, w
+            status = _step_world(w, t, fact_override, policy, max_passes, max_immediate, rule_i, rule_f, inst,
+                                 kind_base, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, ih_ptr, ih_inst, fact_i, fact_f,
+                                 fact_order, ext_ptr, ext_i, ext_f, cfg[CFG_RESET] == 1, lo, up, static,
+                                 last_cause, unsat, act, act_n, act_pos, pend, pend_n, trace_on, tri, trf, tr_n,
+                                 stats, err, slot_of, touched, n_touched, si, sf, out, heap, in_heap, changed)
             if status != STATUS_OK:
-                return status, tri, trf, pend
-            stats[w, STAT_PASSES] += 1
-            if changed == 0:
-                break
-            pass_no += 1
-            if pass_no > max_passes:
-                err[0] = w
-                err[1] = t
-                err[2] = -1
-                return STATUS_NO_FIXPOINT, tri, trf, pend
-        # 4. delayed rules read the final interpretation of t and schedule their heads
-        for k in range(act_n[w]):
-            g = act[w, k]
-            if inst_kind[g] & KIND_DELAYED:
-                d = rule_i[inst_i[g, INST_RULE], RULE_DELAY]
-                n = pend_n[w]
-                pend = _grow_pending(pend, n + 1)
-                pend[w, n, 0] = t + d
-                pend[w, n, 1] = g
-                pend_n[w] = n + 1
-    return STATUS_OK, tri, trf, pend
+                return status, w
+        # delayed rules read the final interpretation of t and schedule their heads
+        n_del = act_n[w, KIND_DELAYED]
+        n = pend_n[w]
+        if n + n_del > pend.shape[1]:
+            err[E_WORLD] = w
+            return STATUS_PEND_ROOM, w
+        base = kind_base[KIND_DELAYED]
+        for k in range(n_del):
+            g = act[w, base + k]
+            pend[w, n, 0] = t + rule_i[inst[g, INST_RULE], RULE_DELAY]
+            pend[w, n, 1] = g
+            n += 1
+        pend_n[w] = n
+    return STATUS_OK, n_worlds
 
 
-@njit(cache=True)
-def _recount(w, g, lo, up, b_ptr, b_atom, b_neg, b_bnd, unsat, act, act_n, act_pos):
-    """Count grounding g's unsatisfied binding clauses in world w from scratch; activate it at zero."""
+@kernel_jit
+def _step_world(w, t, fact_override, policy, max_passes, max_immediate, rule_i, rule_f, inst, kind_base,
+                wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, ih_ptr, ih_inst, fact_i, fact_f, fact_order, ext_ptr,
+                ext_i, ext_f, reset, lo, up, static, last_cause, unsat, act, act_n, act_pos, pend, pend_n,
+                trace_on, tri, trf, tr_n, stats, err, slot_of, touched, n_touched, si, sf, out, heap, in_heap,
+                changed):
+    """One world's timestep t up to its fixpoint (docs/language.md, 'One timestep t'), without the
+    scheduling of delayed rules. Returns a status."""
+    hn = 0
+    # 1. start of the step
+    if reset and t > 0:
+        hn = _reset_world(w, t, lo, up, static, last_cause, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd,
+                          wc_neg, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst,
+                          heap, hn, in_heap)
+        if hn < 0:
+            err[E_WORLD] = w
+            return STATUS_TRACE_LIMIT
+    # 2. pass 0: program facts in their window, external facts, firings scheduled for t
+    for k in range(fact_order.shape[0]):
+        f = fact_order[k]
+        if fact_i[f, 2] < t:
+            break
+        if fact_i[f, 1] <= t:
+            _add_source(fact_i[f, 0], fact_f[f, 0], fact_f[f, 1], fact_override, np.int64(f), CAUSE_FACT, f, -1,
+                        fact_i[f, 3] == 1, slot_of, touched, n_touched, si, sf)
+    for e in range(ext_ptr[w], ext_ptr[w + 1]):
+        _add_source(ext_i[e, 0], ext_f[e, 0], ext_f[e, 1], fact_override, KEY_STRIDE + ext_i[e, 2],
+                    CAUSE_EXTERNAL, ext_i[e, 2], -1, ext_i[e, 1] == 1, slot_of, touched, n_touched, si, sf)
+    kept = 0
+    for p in range(pend_n[w]):
+        g = pend[w, p, 1]
+        if pend[w, p, 0] == t:
+            r = inst[g, INST_RULE]
+            _add_source(inst[g, INST_HEAD], rule_f[r, 0], rule_f[r, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
+                        2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, False, slot_of, touched,
+                        n_touched, si, sf)
+        else:
+            pend[w, kept, 0] = pend[w, p, 0]
+            pend[w, kept, 1] = g
+            kept += 1
+    pend_n[w] = kept
+    changed[0] = 0
+    status, hn = _apply_groups(w, t, 0, policy, slot_of, touched, n_touched, si, sf, out, lo, up, static,
+                               last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd, wc_neg, wc_gptr,
+                               wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap, hn,
+                               in_heap, changed)
+    if status != STATUS_OK:
+        return status
+    # every active immediate grounding is a candidate of the first immediate phase; after that, a
+    # grounding becomes a candidate when it becomes active or an atom it sets changes (_set_atom)
+    base = kind_base[KIND_IMMEDIATE]
+    for k in range(act_n[w, KIND_IMMEDIATE]):
+        hn = _push(act[w, base + k], inst, heap, hn, in_heap)
+    # 3. fixpoint: immediate phase, then one simultaneous ordinary pass, until nothing changes
+    pass_no = 1
+    n_immediate = 0
+    while True:
+        # immediate phase: apply the first (lowest rank) active immediate grounding that would change
+        # its head, one at a time
+        while hn > 0:
+            key = _heap_pop(heap, hn)
+            hn -= 1
+            g = key & HEAP_MASK
+            in_heap[g] = False
+            stats[w, STAT_CANDIDATES] += 1
+            if unsat[w, g] != 0:
+                continue
+            a = inst[g, INST_HEAD]
+            if static[w, a]:
+                continue
+            r = inst[g, INST_RULE]
+            cl = lo[w, a]
+            cu = up[w, a]
+            _one_source(cl, cu, rule_f[r, 0], rule_f[r, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE, policy, out)
+            inconsistent = out[2] > 0.5
+            abort = inconsistent and policy == POLICY_ABORT
+            if not abort and out[0] == cl and out[1] == cu:
+                continue  # would not change its head
+            n_immediate += 1
+            if n_immediate > max_immediate:
+                err[E_WORLD] = w
+                err[E_T] = t
+                err[E_ATOM] = a
+                return STATUS_IMMEDIATE_LIMIT
+            stats[w, STAT_FIRINGS] += 1
+            if abort:
+                err[E_WORLD] = w
+                err[E_T] = t
+                err[E_ATOM] = a
+                err[E_OLD_KIND] = last_cause[w, a, 0]
+                err[E_OLD_ID] = last_cause[w, a, 1]
+                err[E_KIND] = CAUSE_RULE
+                err[E_ID] = r
+                err[E_INST] = g
+                err[E_LAST_KIND] = CAUSE_RULE
+                err[E_LAST_ID] = r
+                err[E_LAST_INST] = g
+                err[E_DISAGREE] = 0
+                return STATUS_INCONSISTENT
+            freeze = out[3] > 0.5
+            if inconsistent:
+                hn = _set_atom(w, t, pass_no, a, cl, cu, out[0], out[1], CAUSE_POLICY, policy, g, 1, -1, lo, up,
+                               last_cause, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg,
+                               unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap)
+            else:
+                hn = _set_atom(w, t, pass_no, a, cl, cu, out[0], out[1], CAUSE_RULE, r, g, 1, g, lo, up, last_cause,
+                               trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, unsat, inst,
+                               act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap)
+            if hn < 0:
+                err[E_WORLD] = w
+                return STATUS_TRACE_LIMIT
+            if freeze:
+                static[w, a] = True
+        # ordinary pass: every active Δt = 0 grounding fires; heads applied together per atom
+        base = kind_base[KIND_ORDINARY]
+        for k in range(act_n[w, KIND_ORDINARY]):
+            g = act[w, base + k]
+            r = inst[g, INST_RULE]
+            _add_source(inst[g, INST_HEAD], rule_f[r, 0], rule_f[r, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
+                        2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, False, slot_of, touched,
+                        n_touched, si, sf)
+        changed[0] = 0
+        status, hn = _apply_groups(w, t, pass_no, policy, slot_of, touched, n_touched, si, sf, out, lo, up,
+                                   static, last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd,
+                                   wc_neg, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
+                                   ih_inst, heap, hn, in_heap, changed)
+        if status != STATUS_OK:
+            return status
+        stats[w, STAT_PASSES] += 1
+        if changed[0] == 0:
+            break
+        pass_no += 1
+        if pass_no > max_passes:
+            err[E_WORLD] = w
+            err[E_T] = t
+            err[E_ATOM] = -1
+            return STATUS_NO_FIXPOINT
+    return STATUS_OK
+
+
+@kernel_jit
+def _recount(w, g, lo, up, b_ptr, b_atom, b_neg, b_bnd, inst, kind_base, unsat, act, act_n, act_pos):
+    """Count grounding g's unsatisfied binding clauses in world w from scratch; list it if active."""
     c = 0
     for e in range(b_ptr[g], b_ptr[g + 1]):
         a = b_atom[e]
@@ -605,22 +673,36 @@ def _recount(w, g, lo, up, b_ptr, b_atom, b_neg, b_bnd, unsat, act, act_n, act_p
     unsat[w, g] = c
     act_pos[w, g] = -1
     if c == 0:
-        _activate(w, g, act, act_n, act_pos)
+        k = inst[g, INST_KIND]
+        p = act_n[w, k]
+        act[w, kind_base[k] + p] = g
+        act_pos[w, g] = p
+        act_n[w, k] = p + 1
 
 
-@njit(cache=True)
-def recount_groundings(first, lo, up, b_ptr, b_atom, b_neg, b_bnd, unsat, act, act_n, act_pos):
+@kernel_jit
+def recount_groundings(first, lo, up, b_ptr, b_atom, b_neg, b_bnd, inst, kind_base, unsat, act, act_n, act_pos):
     """Counts for groundings first.. in every world (used when the grounding table grows)."""
     for w in range(lo.shape[0]):
         for g in range(first, b_ptr.shape[0] - 1):
-            _recount(w, g, lo, up, b_ptr, b_atom, b_neg, b_bnd, unsat, act, act_n, act_pos)
+            _recount(w, g, lo, up, b_ptr, b_atom, b_neg, b_bnd, inst, kind_base, unsat, act, act_n, act_pos)
 
 
-@njit(cache=True)
-def recount_worlds(worlds, lo, up, b_ptr, b_atom, b_neg, b_bnd, unsat, act, act_n, act_pos):
+@kernel_jit
+def recount_worlds(worlds, lo, up, b_ptr, b_atom, b_neg, b_bnd, inst, kind_base, unsat, act, act_n, act_pos):
     """Counts and active lists of the given worlds rebuilt from scratch (restore after growth)."""
     for i in range(worlds.shape[0]):
         w = worlds[i]
-        act_n[w] = 0
+        for k in range(N_KINDS):
+            act_n[w, k] = 0
         for g in range(b_ptr.shape[0] - 1):
-            _recount(w, g, lo, up, b_ptr, b_atom, b_neg, b_bnd, unsat, act, act_n, act_pos)
+            _recount(w, g, lo, up, b_ptr, b_atom, b_neg, b_bnd, inst, kind_base, unsat, act, act_n, act_pos)
+
+
+@kernel_jit
+def relayout_active(old_act, old_base, act, kind_base, act_n):
+    """Copy every world's active lists into a table with new kind offsets (the grounding table grew)."""
+    for w in range(act_n.shape[0]):
+        for k in range(N_KINDS):
+            for p in range(act_n[w, k]):
+                act[w, kind_base[k] + p] = old_act[w, old_base[k] + p]

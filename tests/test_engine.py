@@ -258,3 +258,40 @@ def test_restore_after_groundings_grew_recounts():
     assert eng.query("reach(d)", 1) == (1.0, 1.0)
     assert eng.query("reach(e)", 1) == (0.0, 1.0)  # edge(d,e) was added after the snapshot
     assert eng.query("reach(e)", 0) == (1.0, 1.0)
+
+
+def test_a_rule_with_too_many_binding_clauses_is_refused_by_name():
+    body = ", ".join(f"p{i}(X)" for i in range(128))
+    with pytest.raises(ValueError, match="rule big .*more than 127 binding body clauses"):
+        Engine(parse_program(f"big: q(X) <-0 {body}\np0(a)"))
+
+
+def test_trace_buffer_grows_between_worlds_and_keeps_every_row():
+    # 40 worlds, each writing more rows per step than the smallest room; every world's rows arrive in order
+    prog = "\n".join(f"c{i}: n{i}(X) <-0 n{i - 1}(X)" for i in range(1, 30)) + "\nn0(a)"
+    eng = Engine(parse_program(prog), worlds=40, trace=True, trace_rows_per_step=8)
+    eng.step()
+    tr = eng.take_trace()
+    assert len(tr["t"]) == 40 * 30
+    assert np.all(np.diff(tr["world"]) >= 0)
+    assert eng.interpretation(39)["n29(a)"] == (1.0, 1.0)
+
+
+def test_a_step_that_overflows_the_trace_room_names_the_setting():
+    # the buffer holds at least 1024 rows: a chain of 1100 immediate rules overflows it in one step
+    prog = "\n".join(f"c{i}: n{i}(X) <-! n{i - 1}(X)" for i in range(1, 1100)) + "\nn0(a)"
+    eng = Engine(parse_program(prog), worlds=1, trace=True, trace_rows_per_step=8)
+    with pytest.raises(RuntimeError, match="trace_rows_per_step"):
+        eng.step()
+
+
+def test_schedule_grows_mid_batch_and_every_world_keeps_its_firings():
+    # each world schedules 60 delayed firings per step, more than the schedule's first room
+    prog = "\n".join(f"n{i}(a)" for i in range(60)) + "\nlater: m(X) <-1 n(X)\n" + \
+        "\n".join(f"d{i}: m{i}(X) <-1 n{i}(X)" for i in range(60))
+    eng = Engine(parse_program(prog), worlds=3, trace=True)
+    eng.run(2)
+    for w in range(3):
+        got = eng.interpretation(w)
+        assert all(got[f"m{i}(a)"] == (1.0, 1.0) for i in range(60)), w
+    assert {r[3] for r in rows(eng) if r[1] == 1} == {f"d{i}" for i in range(60)}
