@@ -10,6 +10,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from . import kernel as K
+from .backend_counting import CountingState
+from .backend_lanes import LaneState, crisp_codes
 from .errors import FixpointError, InconsistencyError
 from .graph import Graph
 from .grounding import Grounder, GroundingTable, rule_head_bound
@@ -26,6 +28,9 @@ _TRACE_INT_DTYPES = tuple(np.dtype(d) for d in (np.int32, np.int32, np.int32, np
 _TRACE_INT_OUT = tuple((name, d, d == np.dtype(np.int32)) for name, d in zip(TRACE_COLUMNS, _TRACE_INT_DTYPES))
 _TRACE_FLOAT_NAMES = TRACE_COLUMNS[K.TRACE_INT_COLUMNS:]
 MAX_BINDING_CLAUSES = 127
+KERNELS = ("auto", "counting", "lanes")
+# "auto" takes the lanes kernel for crisp programs from this many worlds on (a word holds 64 worlds)
+LANES_MIN_WORLDS = 64
 STAT_NAMES = ("firings", "rederivations", "static_ignored", "changes", "passes", "watch_visits",
               "candidates")
 
@@ -35,7 +40,8 @@ class Engine:
 
     def __init__(self, program: Program, graph: Graph | None = None, *, worlds: int = 1,
                  trace: bool | Sequence[bool] | np.ndarray = True, max_passes: int = 1000,
-                 max_immediate: int = 100_000, trace_rows_per_step: int = 65_536) -> None:
+                 max_immediate: int = 100_000, trace_rows_per_step: int = 65_536,
+                 kernel: str = "auto") -> None:
         if worlds < 1:
             raise ValueError(f"worlds must be >= 1, got {worlds}")
         self.program = program
@@ -60,33 +66,20 @@ class Engine:
             raise ValueError(f"trace_rows_per_step must be >= 1, got {trace_rows_per_step}")
         self._cfg[K.CFG_TRACE_ROOM] = trace_rows_per_step
         self.trace_on = np.broadcast_to(np.asarray(trace, np.bool_), (worlds,)).copy()
-        # per-world state, sized by _sync()
-        self.lower = np.zeros((worlds, 0))
-        self.upper = np.ones((worlds, 0))
-        self.static = np.zeros((worlds, 0), np.bool_)
-        self._last_cause = np.full((worlds, 0, 2), -1, np.int32)
-        self._unsat = np.zeros((worlds, 0), np.int8)
-        self._act = np.zeros((worlds, 0), np.int32)
-        self._act_pos = np.zeros((worlds, 0), np.int32)
-        self._act_n = np.zeros((worlds, K.N_KINDS), np.int64)
-        self._kind_base = np.zeros(K.N_KINDS, np.int64)
-        self._pend = np.zeros((worlds, 16, 2), np.int32)
-        self._pend_n = np.zeros(worlds, np.int64)
-        # trace rows, row-major (a row is written at once); grown between worlds by step()
+        # trace rows, row-major (a row is written at once); grown by the backends as they step
         self._tri = np.zeros((0, K.TRACE_INT_COLUMNS), np.int32)
         self._trf = np.zeros((0, K.TRACE_FLOAT_COLUMNS), np.float64)
         self._tr_n = np.zeros(1, np.int64)
         self._stats = np.zeros((worlds, K.N_STATS), np.int64)
         self._err = np.zeros(K.N_ERR, np.int64)
-        self._n_touched = np.zeros(1, np.int64)
-        self._changed = np.zeros(1, np.int64)
-        self._out = np.zeros(5, np.float64)
+        self._state: CountingState | LaneState = self._choose_backend(kernel)
         self._ext: list[tuple[np.ndarray, ...]] = []  # chunks of (atoms, lower, upper, world, static)
         self._settable = np.zeros(0, np.bool_)
         self._n_settable = 0
         self._ext_count = 0
         self._n_grounded = 0
         self._table: GroundingTable | None = None
+        self._kt: dict[str, np.ndarray] | None = None
         self._sync()
 
     # ---- building ----
@@ -101,6 +94,7 @@ class Engine:
             bounds.append(effective_bound(lit.lower, lit.upper, lit.negated))
         self._fact_i = np.asarray(rows, np.int64).reshape(-1, 4)
         self._fact_f = np.asarray(bounds, np.float64).reshape(-1, 2)
+        self._fact_v = crisp_codes(self._fact_f[:, 0], self._fact_f[:, 1])
         # latest-ending first, so that each step stops at the first fact whose window has passed
         self._fact_order = np.argsort(-self._fact_i[:, 2], kind="stable").astype(np.int64)
 
@@ -112,6 +106,50 @@ class Engine:
             mode = r.mode or self.program.mode
             self._rule_i[i] = (UPDATE_MODES.index(mode), r.delay, int(r.immediate))
             self._rule_f[i] = rule_head_bound(r)
+        self._rule_v = crisp_codes(self._rule_f[:, 0], self._rule_f[:, 1])
+
+    def _choose_backend(self, kernel: str) -> CountingState | LaneState:
+        """The counting kernel serves every program; the lanes kernel serves crisp ones (every rule head
+        and fact sets [0,0], [1,1] or [0,1]) and is faster for large batches."""
+        if kernel not in KERNELS:
+            raise ValueError(f"kernel must be one of {KERNELS}, got {kernel!r}")
+        crisp = self._not_crisp() is None
+        if kernel == "lanes" and not crisp:
+            raise ValueError(f"kernel='lanes' needs a crisp program (bounds [0,0], [1,1] or [0,1] only): "
+                             f"{self._not_crisp()}")
+        if kernel == "lanes" or (kernel == "auto" and crisp and self.n_worlds >= LANES_MIN_WORLDS):
+            return LaneState(self)
+        return CountingState(self)
+
+    def _not_crisp(self) -> str | None:
+        """What makes the program not crisp (a rule head or fact and its bound), or None."""
+        for i in np.flatnonzero(self._rule_v < 0):
+            r = self.rules[i]
+            lo, up = self._rule_f[i]
+            return f"rule {r.name}{f' ({r.loc})' if r.loc else ''} sets [{lo:g},{up:g}]"
+        for i in np.flatnonzero(self._fact_v < 0):
+            f = self.facts[i]
+            lo, up = self._fact_f[i]
+            return f"fact {f.name}{f' ({f.loc})' if f.loc else ''} sets [{lo:g},{up:g}]"
+        return None
+
+    @property
+    def kernel(self) -> str:
+        """The kernel stepping this engine: "counting" or "lanes"."""
+        return self._state.name
+
+    @property
+    def lower(self) -> np.ndarray:
+        """Lower bounds, float64 [worlds, atoms] (read-only use: step() writes them)."""
+        return self._state.lower
+
+    @property
+    def upper(self) -> np.ndarray:
+        return self._state.upper
+
+    @property
+    def static(self) -> np.ndarray:
+        return self._state.static
 
     def _rule_kinds(self) -> np.ndarray:
         """Per rule, the kernel's kind index: immediate, delayed (Δt > 0) or ordinary Δt = 0."""
@@ -124,9 +162,9 @@ class Engine:
         self._sync()
 
     def _sync(self) -> None:
-        """Ground any new settable atoms and grow the per-world arrays to the vocabulary and groundings."""
+        """Ground any new settable atoms and grow the per-world state to the vocabulary and groundings."""
         g = self.grounder
-        if not g._new and g._closed_once and self.vocab.n_atoms == self.lower.shape[1] \
+        if not g._new and g._closed_once and self.vocab.n_atoms == self._state.n_atoms \
                 and len(g.g_rule) == self._n_grounded and len(g.settable) == self._n_settable:
             return  # the usual case at every step: nothing was interned or made settable since
         self.grounder.close()
@@ -135,54 +173,35 @@ class Engine:
             self._settable = np.zeros(n_atoms, np.bool_)
             self._settable[list(self.grounder.settable)] = True
             self._n_settable = len(self.grounder.settable)
-        old_atoms = self.lower.shape[1]
-        if n_atoms > old_atoms:
-            grow = n_atoms - old_atoms
-            w = self.n_worlds
-            self.lower = np.concatenate([self.lower, np.zeros((w, grow))], axis=1)
-            self.upper = np.concatenate([self.upper, np.ones((w, grow))], axis=1)
-            self.static = np.concatenate([self.static, np.zeros((w, grow), np.bool_)], axis=1)
-            self._last_cause = np.concatenate(
-                [self._last_cause, np.full((w, grow, 2), -1, np.int32)], axis=1)
         n_inst = len(self.grounder.g_rule)
-        if n_inst == self._n_grounded and n_atoms == old_atoms and hasattr(self, "_kt"):
+        if n_inst == self._n_grounded and n_atoms == self._state.n_atoms and self._kt is not None:
             return
-        self._kt = self.grounder.kernel_tables(self._rule_kinds())
-        first = self._n_grounded
-        if n_inst > first:
-            grow = n_inst - first
-            w = self.n_worlds
-            # each kind's active list has room for every grounding of that kind
-            counts = np.bincount(self._kt["inst"][:, K.INST_KIND], minlength=K.N_KINDS)
-            kind_base = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
-            act = np.zeros((w, n_inst), np.int32)
-            K.relayout_active(self._act, self._kind_base, act, kind_base, self._act_n)
-            self._act, self._kind_base = act, kind_base
-            self._unsat = np.concatenate([self._unsat, np.zeros((w, grow), np.int8)], axis=1)
-            self._act_pos = np.concatenate([self._act_pos, np.full((w, grow), -1, np.int32)], axis=1)
-            kt = self._kt
-            K.recount_groundings(first, self.lower, self.upper, kt["b_ptr"], kt["b_atom"], kt["b_neg"],
-                                 kt["b_bnd"], kt["inst"], self._kind_base, self._unsat, self._act, self._act_n,
-                                 self._act_pos)
+        self._kt = self.grounder.kernel_tables(self._rule_kinds(), self._fact_i[:, 0])
+        self._state.grow(n_atoms, self._kt)
         self._n_grounded = n_inst
         self._table = None
-        # grouping scratch, one row per atom touched in a pass (slot_of maps atoms to rows, -1: none)
-        self._slot_of = np.full(max(n_atoms, 1), -1, np.int32)
-        self._touched = np.zeros(max(n_atoms, 1), np.int32)
-        self._si = np.zeros((max(n_atoms, 1), K.N_SCRATCH_INT), np.int64)
-        self._sf = np.zeros((max(n_atoms, 1), K.N_SCRATCH_FLOAT), np.float64)
-        # immediate-phase candidates: a heap of rank * 2^31 + grounding, and membership flags
-        self._heap = np.zeros(max(n_inst, 1), np.int64)
-        self._in_heap = np.zeros(max(n_inst, 1), np.bool_)
+
+    def _grow_trace(self, need: int) -> None:
+        cap = max(need, 2 * self._tri.shape[0], 1024)
+        n = int(self._tr_n[0])
+        tri = np.empty((cap, K.TRACE_INT_COLUMNS), np.int32)
+        trf = np.empty((cap, K.TRACE_FLOAT_COLUMNS), np.float64)
+        tri[:n] = self._tri[:n]
+        trf[:n] = self._trf[:n]
+        self._tri, self._trf = tri, trf
+
+    def _to_counting(self) -> None:
+        """Go on with the counting kernel (a bound the lanes kernel cannot hold arrived)."""
+        lower, upper, static, last_cause, pending = self._state.export()
+        state = CountingState(self)
+        state.adopt(lower, upper, static, last_cause, pending, self._kt)
+        self._state = state
 
     # ---- per-world snapshots (episode resets in a batch) ----
 
     def snapshot(self) -> dict[str, object]:
         """A copy of every world's state before step self.t, for restore()."""
-        return {"t": self.t, "lower": self.lower.copy(), "upper": self.upper.copy(),
-                "static": self.static.copy(), "last_cause": self._last_cause.copy(),
-                "unsat": self._unsat.copy(), "act": self._act.copy(), "act_pos": self._act_pos.copy(),
-                "act_n": self._act_n.copy(), "pend": self._pend.copy(), "pend_n": self._pend_n.copy()}
+        return {"t": self.t, "kernel": self.kernel, **self._state.snapshot()}
 
     def restore(self, snap: dict[str, object], worlds: np.ndarray) -> None:
         """Put `worlds` (indices or a bool mask) back into their state in `snap`. Their next step behaves
@@ -191,36 +210,11 @@ class Engine:
         worlds = np.flatnonzero(worlds) if np.asarray(worlds).dtype == np.bool_ else np.asarray(worlds)
         if worlds.size == 0:
             return
-        indices = worlds.astype(np.int64)
-        if worlds.size == 1:  # one world (the usual episode end): basic indexing, no fancy-index copies
-            worlds = slice(int(worlds[0]), int(worlds[0]) + 1)
-        n_atoms = snap["lower"].shape[1]
-        if n_atoms < self.lower.shape[1]:  # atoms interned since the snapshot start unset
-            self.lower[worlds] = 0.0
-            self.upper[worlds] = 1.0
-            self.static[worlds] = False
-            self._last_cause[worlds] = -1
-        self.lower[worlds, :n_atoms] = snap["lower"][worlds]
-        self.upper[worlds, :n_atoms] = snap["upper"][worlds]
-        self.static[worlds, :n_atoms] = snap["static"][worlds]
-        self._last_cause[worlds, :n_atoms] = snap["last_cause"][worlds]
-        if snap["unsat"].shape == self._unsat.shape and n_atoms == self.lower.shape[1]:
-            for key, arr in (("unsat", self._unsat), ("act", self._act), ("act_pos", self._act_pos),
-                             ("act_n", self._act_n)):
-                arr[worlds] = snap[key][worlds]
-        else:  # groundings grew since the snapshot: recount those worlds from their interpretation
-            kt = self._kt
-            K.recount_worlds(indices, self.lower, self.upper, kt["b_ptr"], kt["b_atom"], kt["b_neg"],
-                             kt["b_bnd"], kt["inst"], self._kind_base, self._unsat, self._act, self._act_n,
-                             self._act_pos)
-        pend, pend_n = snap["pend"], snap["pend_n"]
-        if pend.shape[1] > self._pend.shape[1]:
-            grown = np.zeros((self.n_worlds, pend.shape[1], 2), np.int32)
-            grown[:, :self._pend.shape[1]] = self._pend
-            self._pend = grown
-        self._pend[worlds, :pend.shape[1]] = pend[worlds]
-        self._pend[worlds, :, 0] += self.t - snap["t"]
-        self._pend_n[worlds] = pend_n[worlds]
+        if snap["kernel"] != self.kernel:
+            raise RuntimeError(f"this snapshot was taken by the {snap['kernel']} kernel, but the engine now "
+                               f"runs the {self.kernel} kernel (a non-crisp external fact arrived); take a "
+                               "new snapshot")
+        self._state.restore(snap, worlds.astype(np.int64), self.t - int(snap["t"]))
 
     # ---- atoms ----
 
@@ -312,49 +306,15 @@ class Engine:
                 raise RuntimeError("step(external=...) with facts queued by add_fact(s): use one or the other")
             ext_ptr, ext_i, ext_f = external  # the kernel refuses atoms nothing can set
             n = int(ext_ptr[-1])
+        if self.kernel == "lanes" and len(ext_f) and (crisp_codes(ext_f[:, 0], ext_f[:, 1]) < 0).any():
+            self._to_counting()
         self._cfg[K.CFG_T] = self.t
-        kt = self._kt
-        w_first = 0
-        while True:
-            status, w_first = K.step_worlds(
-                self._cfg, w_first, self._rule_i, self._rule_f, kt["inst"], self._kind_base, kt["wc_ptr"],
-                kt["wc_bnd"], kt["wc_neg"], kt["wc_gptr"], kt["wg"], kt["ih_ptr"], kt["ih_inst"], self._fact_i,
-                self._fact_f, self._fact_order, ext_ptr, ext_i, ext_f, self._settable,
-                self.lower, self.upper, self.static, self._last_cause, self._unsat, self._act, self._act_n,
-                self._act_pos, self._pend, self._pend_n, self.trace_on, self._tri, self._trf, self._tr_n,
-                self._stats, self._err, self._slot_of, self._touched, self._n_touched, self._si, self._sf,
-                self._out, self._heap, self._in_heap, self._changed)
-            if status == K.STATUS_TRACE_ROOM:  # grow the trace buffer, go on from that world
-                self._grow_trace(int(self._tr_n[0]) + int(self._cfg[K.CFG_TRACE_ROOM]))
-            elif status == K.STATUS_PEND_ROOM:  # grow the schedule, then that world schedules its firings
-                self._grow_pending(int(self._pend_n[w_first]) + int(self._act_n[w_first, K.KIND_DELAYED]))
-                self._cfg[K.CFG_RESUME_SCHEDULE] = 1
-            else:
-                break
+        status = self._state.step(ext_ptr, ext_i, ext_f)
         if status != K.STATUS_OK:
-            self._in_heap[:] = False  # an error may leave candidates and scratch rows behind
-            self._slot_of[:] = -1
-            self._n_touched[0] = 0
-            self._cfg[K.CFG_RESUME_SCHEDULE] = 0
             self._raise(status)
         if external is not None:
             self._ext_count += n
         self.t += 1
-
-    def _grow_trace(self, need: int) -> None:
-        cap = max(need, 2 * self._tri.shape[0], 1024)
-        n = int(self._tr_n[0])
-        tri = np.empty((cap, K.TRACE_INT_COLUMNS), np.int32)
-        trf = np.empty((cap, K.TRACE_FLOAT_COLUMNS), np.float64)
-        tri[:n] = self._tri[:n]
-        trf[:n] = self._trf[:n]
-        self._tri, self._trf = tri, trf
-
-    def _grow_pending(self, need: int) -> None:
-        cap = max(need, 2 * self._pend.shape[1], 16)
-        pend = np.zeros((self.n_worlds, cap, 2), np.int32)
-        pend[:, :self._pend.shape[1]] = self._pend
-        self._pend = pend
 
     def next_external_id(self) -> int:
         """The id the next external fact will get (trace rows name external facts by this id)."""
@@ -410,8 +370,7 @@ class Engine:
 
     def pending(self, world: int = 0) -> list[tuple[int, int]]:
         """Scheduled firings of delayed rules: (due time, grounding id)."""
-        n = int(self._pend_n[world])
-        return [(int(d), int(g)) for d, g in self._pend[world, :n]]
+        return self._state.pending(world)
 
     def cause_name(self, kind: int, cid: int) -> str:
         """A short name for a trace row's cause: the rule's name, fact:NAME, external, policy:NAME, reset."""

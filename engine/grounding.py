@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .program import Literal, Rule, effective_bound
+from .program import EPS, Literal, Rule, effective_bound
 from .vocabulary import Vocabulary
 
 
@@ -206,11 +206,15 @@ class Grounder:
         rank[order] = np.arange(n)
         return rank
 
-    def kernel_tables(self, kinds: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    def kernel_tables(self, kinds: np.ndarray | None = None,
+                      fact_atoms: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """The kernel's tables (engine/kernel.py): `inst` [G,4] (rule, head, rank, kind index from
         `kinds`, a per-rule array), watches grouped in classes (CSR by atom over distinct (bound, sign)
         of the binding clauses that read it, then CSR by class over groundings), the immediate
-        groundings by the atom they set, and per-grounding binding clauses (for recounts)."""
+        groundings by the atom they set, and per-grounding binding clauses (for recounts and the lanes
+        kernel's body tests). A grounding's clauses list first those on atoms that rules set or that are
+        not program facts (they change), then those on atoms only program facts set (`fact_atoms`, ids):
+        a body test that fails on a changing clause stops before reading the fixed ones."""
         n = len(self.g_rule)
         rules = np.asarray(self.g_rule, np.int64)
         inst = np.empty((n, 4), np.int32)
@@ -220,10 +224,15 @@ class Grounder:
         inst[:, 3] = kinds[rules] if kinds is not None and n else 0
         b_inst, b_atom, b_neg, b_lo, b_up = [], [], [], [], []
         b_ptr = np.zeros(n + 1, np.int64)
+        fixed = np.zeros(self.vocab.n_atoms, np.bool_)
+        if fact_atoms is not None and len(fact_atoms):
+            fixed[np.asarray(fact_atoms, np.int64)] = True
+        if n:
+            fixed[np.asarray(self.g_head, np.int64)] = False
         for g in range(n):
             cr = self._compiled[self.g_rule[g]]
             body = self.g_body[g]
-            for ci in cr.binding:
+            for ci in sorted(cr.binding, key=lambda ci: bool(fixed[body[ci]])):
                 lit = cr.rule.body[ci]
                 b_inst.append(g)
                 b_atom.append(body[ci])
@@ -257,7 +266,10 @@ class Grounder:
         ih_ptr = np.zeros(n_atoms + 1, np.int64)
         np.add.at(ih_ptr, heads[imm] + 1, 1)
         np.cumsum(ih_ptr, out=ih_ptr)
+        s_code = truth_codes(s_lo, s_up, s_neg)
         return {
+            "wc_code": np.ascontiguousarray(s_code[first]),
+            "b_code": truth_codes(b_lo_a, b_up_a, b_neg_a),
             "inst": inst,
             "wc_ptr": wc_ptr,
             "wc_bnd": np.ascontiguousarray(np.column_stack([s_lo[first], s_up[first]])
@@ -290,3 +302,19 @@ class Grounder:
 def rule_head_bound(rule: Rule) -> tuple[float, float]:
     """The interval a rule's head sets on its atom (a `~` head sets the complement)."""
     return effective_bound(rule.head.lower, rule.head.upper, rule.head.negated)
+
+
+# the crisp values [0,1], [1,1], [0,0] in the lanes kernel's order (engine/lanes.py: V_U, V_T, V_F)
+CRISP_VALUES = ((0.0, 1.0), (1.0, 1.0), (0.0, 0.0))
+
+
+def truth_codes(lower: np.ndarray, upper: np.ndarray, negated: np.ndarray) -> np.ndarray:
+    """Per clause, the crisp values it holds of, as bits (1 << value index): its truth table over
+    [0,1], [1,1] and [0,0] (docs/language.md, containment with ε and the complement for `~`)."""
+    code = np.zeros(len(lower), np.uint8)
+    for v, (a, b) in enumerate(CRISP_VALUES):
+        lo = np.where(negated, 1.0 - b, a)
+        up = np.where(negated, 1.0 - a, b)
+        holds = (lo >= lower - EPS) & (up <= upper + EPS)
+        code |= np.where(holds, np.uint8(1 << v), np.uint8(0))
+    return code

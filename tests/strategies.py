@@ -74,12 +74,17 @@ def _bound_text(b: Bound) -> str:
     return f"[{_fmt(b[0])},{_fmt(b[1])}]"
 
 
+CRISP = ((1.0, 1.0),) * 3 + ((0.0, 0.0),)  # what a crisp program sets (binding: not [0,1])
+
+
 @st.composite
-def bounds(draw: st.DrawFn, binding: bool | None = None) -> Bound:
+def bounds(draw: st.DrawFn, binding: bool | None = None, crisp: bool = False) -> Bound:
     """A bound from the grid, mostly [1,1], [0,0] or a half so that rules actually fire. binding=True
-    excludes [0,1]; binding=False gives [0,1]."""
+    excludes [0,1]; binding=False gives [0,1]. crisp: [1,1], [0,0] (or [0,1] unless binding)."""
     if binding is False:
         return (0.0, 1.0)
+    if crisp:
+        return draw(st.sampled_from(CRISP if binding else CRISP + ((0.0, 1.0),)))
     common = draw(st.sampled_from(((1.0, 1.0),) * 12 + ((0.0, 0.0),) * 3 + ((0.5, 1.0),) * 2
                                   + ((0.0, 0.5), None, None, None)))
     if common is not None:
@@ -123,11 +128,11 @@ def ground_args(draw: st.DrawFn, sig: _Sig, pred: str, nodes: list[str] | None =
 
 
 @st.composite
-def fact_lines(draw: st.DrawFn, sig: _Sig, steps: int) -> str:
+def fact_lines(draw: st.DrawFn, sig: _Sig, steps: int, crisp: bool = False) -> str:
     pred = draw(st.sampled_from(sorted(sig.arity)))
     args = draw(ground_args(sig, pred))
     neg = "~" if _chance(draw, 10) else ""
-    b = draw(bounds(binding=True))
+    b = draw(bounds(binding=True, crisp=crisp))
     static = _chance(draw, 7)
     kinds = ("none", "at", "window", "window") if not static else ("none", "at")
     kind = draw(st.sampled_from(kinds))
@@ -141,7 +146,8 @@ def fact_lines(draw: st.DrawFn, sig: _Sig, steps: int) -> str:
 
 
 @st.composite
-def rule_lines(draw: st.DrawFn, sig: _Sig, name: str, heads: list[tuple[str, bool, Bound]]) -> str:
+def rule_lines(draw: st.DrawFn, sig: _Sig, name: str, heads: list[tuple[str, bool, Bound]],
+               crisp: bool = False) -> str:
     """One safe rule. `heads` holds the (pred, negated, bound) of earlier rules' heads; the first clause
     often tests one of them, so that rules chain within a step (passes 2, 3, ...). Appends its own head."""
     preds = sorted(sig.arity)
@@ -183,7 +189,7 @@ def rule_lines(draw: st.DrawFn, sig: _Sig, name: str, heads: list[tuple[str, boo
     head_args = [draw(st.sampled_from(bound_vars)) if bound_vars and not _chance(draw, 6)
                  else draw(st.sampled_from(sig.nodes)) for _ in range(sig.arity[head_pred])]
     head_neg = "~" if _chance(draw, 8) else ""
-    head_bound = draw(bounds())
+    head_bound = draw(bounds(crisp=crisp))
     delay = draw(st.sampled_from((0, 0, 1, 2)))
     arrow = "<-!" if delay == 0 and _chance(draw, 3) else f"<-{delay}"
     option = draw(st.sampled_from(("", "", " {override}", " {intersection}")))
@@ -194,21 +200,23 @@ def rule_lines(draw: st.DrawFn, sig: _Sig, name: str, heads: list[tuple[str, boo
 
 
 @st.composite
-def ext_facts(draw: st.DrawFn, sig: _Sig, nodes: list[str], max_per_step: int = 3) -> list[ExtFact]:
+def ext_facts(draw: st.DrawFn, sig: _Sig, nodes: list[str], max_per_step: int = 3,
+              crisp: bool = False) -> list[ExtFact]:
     out = []
     for _ in range(draw(st.integers(0, max_per_step))):
         pred = draw(st.sampled_from(sorted(sig.arity)))
         args = draw(ground_args(sig, pred, nodes))
-        lo, up = draw(bounds(binding=True))
+        lo, up = draw(bounds(binding=True, crisp=crisp))
         out.append(ExtFact(pred, args, lo, up, _chance(draw, 10)))
     return out
 
 
 @st.composite
 def scenarios(draw: st.DrawFn, per_world: int = 0, with_graph: bool = True,
-              policies: tuple[str, ...] = POLICIES) -> Scenario:
+              policies: tuple[str, ...] = POLICIES, crisp: bool = False) -> Scenario:
     """A parsed random program plus, per step, external facts for every world (or, with per_world=W,
-    separate external facts for each of W worlds). The policy is drawn from `policies`."""
+    separate external facts for each of W worlds). The policy is drawn from `policies`. crisp: every
+    rule head, fact and external fact sets [0,0], [1,1] or [0,1] (body clauses still test any bound)."""
     sig = draw(signatures())
     steps = draw(st.integers(2, 4))
     lines = [f"%mode {draw(st.sampled_from(('intersection', 'override')))}",
@@ -217,10 +225,11 @@ def scenarios(draw: st.DrawFn, per_world: int = 0, with_graph: bool = True,
     # a base of facts that hold at every step, so that bodies (joins included) find matches
     for pred in sorted(sig.arity):
         for args in draw(st.lists(ground_args(sig, pred), max_size=3, unique=True)):
-            lines.append(f"{pred}({','.join(args)}):{_bound_text(draw(bounds(binding=True)))} @0..{steps}")
-    lines += draw(st.lists(fact_lines(sig, steps), min_size=1, max_size=8))
+            lines.append(f"{pred}({','.join(args)}):{_bound_text(draw(bounds(binding=True, crisp=crisp)))}"
+                         f" @0..{steps}")
+    lines += draw(st.lists(fact_lines(sig, steps, crisp), min_size=1, max_size=8))
     heads: list[tuple[str, bool, Bound]] = []
-    lines += [draw(rule_lines(sig, f"r{i}", heads)) for i in range(draw(st.integers(1, 6)))]
+    lines += [draw(rule_lines(sig, f"r{i}", heads, crisp)) for i in range(draw(st.integers(1, 6)))]
     text = "\n".join(lines) + "\n"
 
     # a graph: some nodes (possibly isolated) and a few static facts at t = 0 on them
@@ -231,7 +240,7 @@ def scenarios(draw: st.DrawFn, per_world: int = 0, with_graph: bool = True,
             group = draw(st.sampled_from(sig.groups))
             pred = draw(st.sampled_from(sorted(sig.arity)))
             args = tuple(draw(st.sampled_from(group)) for _ in range(sig.arity[pred]))
-            lo, up = draw(bounds(binding=True))
+            lo, up = draw(bounds(binding=True, crisp=crisp))
             graph.facts.append(Fact(f"graph{i}", Literal(pred, tuple(Term(a, False) for a in args), lo, up),
                                     static=True))
             if not _chance(draw, 4):  # sometimes a fact's node is missing from the node list
@@ -241,7 +250,7 @@ def scenarios(draw: st.DrawFn, per_world: int = 0, with_graph: bool = True,
     if per_world:
         # only constants every world already knows: a new node would get different ids in different worlds
         known = list(dict.fromkeys([*graph.nodes, *program.constants()]))
-        world_ext = [[draw(ext_facts(sig, known)) for _ in range(steps)] for _ in range(per_world)]
+        world_ext = [[draw(ext_facts(sig, known, crisp=crisp)) for _ in range(steps)] for _ in range(per_world)]
         return Scenario(text, program, steps, graph, [[] for _ in range(steps)], world_ext)
     nodes = [*sig.nodes, *FRESH_NODES]
-    return Scenario(text, program, steps, graph, [draw(ext_facts(sig, nodes)) for _ in range(steps)])
+    return Scenario(text, program, steps, graph, [draw(ext_facts(sig, nodes, crisp=crisp)) for _ in range(steps)])

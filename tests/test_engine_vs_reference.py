@@ -90,10 +90,11 @@ def add_external(eng: Engine, ref: ReferenceEvaluator, f: ExtFact, world: int | 
     ref.add_fact(f.pred, f.args, f.lower, f.upper, f.static)
 
 
-def run_and_compare(sc: Scenario) -> None:
+def run_and_compare(sc: Scenario, kernel: str = "counting") -> None:
     per_world = bool(sc.world_externals)
     eng = Engine(sc.program, sc.graph, worlds=WORLDS, trace=True, max_passes=MAX_PASSES,
-                 max_immediate=MAX_IMMEDIATE)
+                 max_immediate=MAX_IMMEDIATE, kernel=kernel)
+    assert eng.kernel == kernel
     # the same facts everywhere: one reference stands for every world
     refs = [ReferenceEvaluator(sc.program, sc.graph.nodes, sc.graph.facts, MAX_PASSES, MAX_IMMEDIATE)
             for _ in range(WORLDS if per_world else 1)]
@@ -149,8 +150,12 @@ def test_different_external_facts_per_world(sc: Scenario) -> None:
 @given(scenarios(policies=("abort",)))
 def test_abort_stops_both_at_the_same_step(sc: Scenario) -> None:
     """Under abort both raise InconsistencyError at the same step, and agree on every step before it."""
+    run_until_abort(sc, "counting")
+
+
+def run_until_abort(sc: Scenario, kernel: str) -> None:
     eng = Engine(sc.program, sc.graph, worlds=WORLDS, trace=True, max_passes=MAX_PASSES,
-                 max_immediate=MAX_IMMEDIATE)
+                 max_immediate=MAX_IMMEDIATE, kernel=kernel)
     ref = ReferenceEvaluator(sc.program, sc.graph.nodes, sc.graph.facts, MAX_PASSES, MAX_IMMEDIATE)
     for t in range(sc.steps):
         for f in sc.externals[t]:
@@ -168,3 +173,23 @@ def test_abort_stops_both_at_the_same_step(sc: Scenario) -> None:
         trace = eng.take_trace()
         for w in range(WORLDS):
             check_step(eng, trace, w, ref, start, None, sc)
+
+
+# ---- the lanes kernel (crisp programs: heads, facts and external facts set [0,0], [1,1] or [0,1]) ----
+@SETTINGS
+@given(scenarios(crisp=True))
+def test_lanes_kernel_same_external_facts_in_every_world(sc: Scenario) -> None:
+    run_and_compare(sc, kernel="lanes")
+
+
+@SETTINGS
+@given(scenarios(per_world=WORLDS, crisp=True))
+def test_lanes_kernel_different_external_facts_per_world(sc: Scenario) -> None:
+    run_and_compare(sc, kernel="lanes")
+
+
+@settings(max_examples=int(100 * SCALE), deadline=None, suppress_health_check=[HealthCheck.too_slow],
+          print_blob=True)
+@given(scenarios(policies=("abort",), crisp=True))
+def test_lanes_kernel_aborts_at_the_same_step(sc: Scenario) -> None:
+    run_until_abort(sc, "lanes")

@@ -82,12 +82,13 @@ class Plan:
     p_scripted: float  # per team and step: scripted policy, else uniform random actions
     p_reset: float     # per step with a finished world: reset the finished worlds now (else step on)
     steps: int
+    kernel: str = "counting"  # the engine kernel of RuleSim
 
     def __repr__(self) -> str:  # what hypothesis prints for a falsifying example
         s = self.scenario
         return (f"Plan(n_worlds={self.n_worlds}, stack_previous={self.stack_previous}, seed={self.seed}, "
                 f"action_seed={self.action_seed}, p_scripted={self.p_scripted}, p_reset={self.p_reset}, "
-                f"steps={self.steps}, scenario=\n{s.to_toml()})")
+                f"steps={self.steps}, kernel={self.kernel!r}, scenario=\n{s.to_toml()})")
 
 
 plans = st.builds(
@@ -100,6 +101,7 @@ plans = st.builds(
     p_scripted=st.sampled_from([0.0, 0.5, 0.8, 1.0]),
     p_reset=st.sampled_from([1.0, 0.5]),
     steps=st.integers(10, 80),
+    kernel=st.sampled_from(["counting", "lanes"]),
 )
 
 
@@ -127,7 +129,8 @@ def assert_same_result(step_no: int, ref: StepResult, rule: StepResult, finished
 def run_side_by_side(plan: Plan) -> tuple[int, int]:
     """Step both simulators with the plan's actions, comparing everything; returns (episodes ended, hits)."""
     sc, n_worlds = plan.scenario, plan.n_worlds
-    sims = [cls(sc, n_worlds, seed=plan.seed, stack_previous=plan.stack_previous) for cls in (RefSim, RuleSim)]
+    sims = [RefSim(sc, n_worlds, seed=plan.seed, stack_previous=plan.stack_previous),
+            RuleSim(sc, n_worlds, seed=plan.seed, stack_previous=plan.stack_previous, kernel=plan.kernel)]
     assert_same_arrays("reset obs", *(s.reset() for s in sims))
     rng = np.random.default_rng(plan.action_seed)
     ids = np.array(sc.action_ids)

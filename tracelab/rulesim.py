@@ -18,12 +18,14 @@ from tracelab.sim_base import GameSim
 
 class RuleSim(GameSim):
     """`n_worlds` games stepped together by one engine call per step. `trace` turns the engine's change
-    log on (for all worlds, or a bool per world); take it with `self.engine.take_trace()`."""
+    log on (for all worlds, or a bool per world); take it with `self.engine.take_trace()`. `kernel`
+    chooses the engine's kernel (tracelab.engine.Engine; "auto" takes the lanes kernel for 64 worlds
+    or more)."""
 
     def __init__(self, scenario: Scenario, n_worlds: int = 1, seed: int | None = None,
-                 stack_previous: bool = False, trace: bool | np.ndarray = False) -> None:
+                 stack_previous: bool = False, trace: bool | np.ndarray = False, kernel: str = "auto") -> None:
         super().__init__(scenario, n_worlds, seed, stack_previous)
-        self.engine = Engine(scenario_program(scenario), worlds=n_worlds, trace=trace)
+        self.engine = Engine(scenario_program(scenario), worlds=n_worlds, trace=trace, kernel=kernel)
         self._index_atoms()
         # t = 0 sets up the start; every action atom starts false, so the rules are grounded for them
         self.engine.add_facts(self._action_atoms[self._action_atoms >= 0], 0.0, 0.0)

@@ -1,0 +1,169 @@
+"""Per-world state of the counting kernel (kernel.py): the general backend, for any program and batch.
+
+Every world keeps its own intervals (float [world, atom]), its groundings' unsatisfied-clause counts and
+active lists, and its schedule of delayed firings. The Engine (core.py) owns the program tables, the trace
+buffer and the statistics; this class owns the state and runs the kernel over it.
+"""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from . import kernel as K
+
+if TYPE_CHECKING:
+    from .core import Engine
+
+
+class CountingState:
+    name = "counting"
+
+    def __init__(self, eng: Engine) -> None:
+        self.eng = eng
+        w = eng.n_worlds
+        self.lower = np.zeros((w, 0))
+        self.upper = np.ones((w, 0))
+        self.static = np.zeros((w, 0), np.bool_)
+        self.last_cause = np.full((w, 0, 2), -1, np.int32)
+        self._unsat = np.zeros((w, 0), np.int8)
+        self._act = np.zeros((w, 0), np.int32)
+        self._act_pos = np.zeros((w, 0), np.int32)
+        self._act_n = np.zeros((w, K.N_KINDS), np.int64)
+        self._kind_base = np.zeros(K.N_KINDS, np.int64)
+        self._pend = np.zeros((w, 16, 2), np.int32)
+        self._pend_n = np.zeros(w, np.int64)
+        self._n_touched = np.zeros(1, np.int64)
+        self._changed = np.zeros(1, np.int64)
+        self._out = np.zeros(5, np.float64)
+        self._n_grounded = 0
+        self._scratch(0, 0)
+
+    @property
+    def n_atoms(self) -> int:
+        return self.lower.shape[1]
+
+    def _scratch(self, n_atoms: int, n_inst: int) -> None:
+        # grouping scratch, one row per atom touched in a pass (slot_of maps atoms to rows, -1: none)
+        self._slot_of = np.full(max(n_atoms, 1), -1, np.int32)
+        self._touched = np.zeros(max(n_atoms, 1), np.int32)
+        self._si = np.zeros((max(n_atoms, 1), K.N_SCRATCH_INT), np.int64)
+        self._sf = np.zeros((max(n_atoms, 1), K.N_SCRATCH_FLOAT), np.float64)
+        # immediate-phase candidates: a heap of rank * 2^31 + grounding, and membership flags
+        self._heap = np.zeros(max(n_inst, 1), np.int64)
+        self._in_heap = np.zeros(max(n_inst, 1), np.bool_)
+
+    def grow(self, n_atoms: int, kt: dict[str, np.ndarray]) -> None:
+        """Room for n_atoms atoms and every grounding of kt (new atoms start at [0,1], new groundings
+        are counted from the current intervals)."""
+        w = self.eng.n_worlds
+        grow = n_atoms - self.n_atoms
+        if grow > 0:
+            self.lower = np.concatenate([self.lower, np.zeros((w, grow))], axis=1)
+            self.upper = np.concatenate([self.upper, np.ones((w, grow))], axis=1)
+            self.static = np.concatenate([self.static, np.zeros((w, grow), np.bool_)], axis=1)
+            self.last_cause = np.concatenate([self.last_cause, np.full((w, grow, 2), -1, np.int32)], axis=1)
+        self.kt = kt
+        n_inst = len(kt["inst"])
+        first = self._n_grounded
+        if n_inst > first:
+            # each kind's active list has room for every grounding of that kind
+            counts = np.bincount(kt["inst"][:, K.INST_KIND], minlength=K.N_KINDS)
+            kind_base = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+            act = np.zeros((w, n_inst), np.int32)
+            K.relayout_active(self._act, self._kind_base, act, kind_base, self._act_n)
+            self._act, self._kind_base = act, kind_base
+            self._unsat = np.concatenate([self._unsat, np.zeros((w, n_inst - first), np.int8)], axis=1)
+            self._act_pos = np.concatenate([self._act_pos, np.full((w, n_inst - first), -1, np.int32)], axis=1)
+            K.recount_groundings(first, self.lower, self.upper, kt["b_ptr"], kt["b_atom"], kt["b_neg"],
+                                 kt["b_bnd"], kt["inst"], self._kind_base, self._unsat, self._act, self._act_n,
+                                 self._act_pos)
+        self._n_grounded = n_inst
+        self._scratch(n_atoms, n_inst)
+
+    def step(self, ext_ptr: np.ndarray, ext_i: np.ndarray, ext_f: np.ndarray) -> int:
+        """One timestep of every world; returns the kernel's status (buffers grown as needed)."""
+        eng, kt = self.eng, self.kt
+        w_first = 0
+        while True:
+            status, w_first = K.step_worlds(
+                eng._cfg, w_first, eng._rule_i, eng._rule_f, kt["inst"], self._kind_base, kt["wc_ptr"],
+                kt["wc_bnd"], kt["wc_neg"], kt["wc_gptr"], kt["wg"], kt["ih_ptr"], kt["ih_inst"], eng._fact_i,
+                eng._fact_f, eng._fact_order, ext_ptr, ext_i, ext_f, eng._settable,
+                self.lower, self.upper, self.static, self.last_cause, self._unsat, self._act, self._act_n,
+                self._act_pos, self._pend, self._pend_n, eng.trace_on, eng._tri, eng._trf, eng._tr_n,
+                eng._stats, eng._err, self._slot_of, self._touched, self._n_touched, self._si, self._sf,
+                self._out, self._heap, self._in_heap, self._changed)
+            if status == K.STATUS_TRACE_ROOM:  # grow the trace buffer, go on from that world
+                eng._grow_trace(int(eng._tr_n[0]) + int(eng._cfg[K.CFG_TRACE_ROOM]))
+            elif status == K.STATUS_PEND_ROOM:  # grow the schedule, then that world schedules its firings
+                self._grow_pending(int(self._pend_n[w_first]) + int(self._act_n[w_first, K.KIND_DELAYED]))
+                eng._cfg[K.CFG_RESUME_SCHEDULE] = 1
+            else:
+                break
+        if status != K.STATUS_OK:  # an error may leave candidates and scratch rows behind
+            self._in_heap[:] = False
+            self._slot_of[:] = -1
+            self._n_touched[0] = 0
+            eng._cfg[K.CFG_RESUME_SCHEDULE] = 0
+        return status
+
+    def _grow_pending(self, need: int) -> None:
+        cap = max(need, 2 * self._pend.shape[1], 16)
+        pend = np.zeros((self.eng.n_worlds, cap, 2), np.int32)
+        pend[:, :self._pend.shape[1]] = self._pend
+        self._pend = pend
+
+    def snapshot(self) -> dict[str, Any]:
+        return {"lower": self.lower.copy(), "upper": self.upper.copy(), "static": self.static.copy(),
+                "last_cause": self.last_cause.copy(), "unsat": self._unsat.copy(), "act": self._act.copy(),
+                "act_pos": self._act_pos.copy(), "act_n": self._act_n.copy(), "pend": self._pend.copy(),
+                "pend_n": self._pend_n.copy()}
+
+    def restore(self, snap: dict[str, Any], indices: np.ndarray, shift: int) -> None:
+        """Worlds `indices` take their state from snap; their scheduled firings move `shift` steps later."""
+        worlds: slice | np.ndarray = indices
+        if indices.size == 1:  # one world (the usual episode end): basic indexing, no fancy-index copies
+            worlds = slice(int(indices[0]), int(indices[0]) + 1)
+        n_atoms = snap["lower"].shape[1]
+        if n_atoms < self.n_atoms:  # atoms interned since the snapshot start unset
+            self.lower[worlds] = 0.0
+            self.upper[worlds] = 1.0
+            self.static[worlds] = False
+            self.last_cause[worlds] = -1
+        self.lower[worlds, :n_atoms] = snap["lower"][worlds]
+        self.upper[worlds, :n_atoms] = snap["upper"][worlds]
+        self.static[worlds, :n_atoms] = snap["static"][worlds]
+        self.last_cause[worlds, :n_atoms] = snap["last_cause"][worlds]
+        if snap["unsat"].shape == self._unsat.shape and n_atoms == self.n_atoms:
+            for key, arr in (("unsat", self._unsat), ("act", self._act), ("act_pos", self._act_pos),
+                             ("act_n", self._act_n)):
+                arr[worlds] = snap[key][worlds]
+        else:  # groundings grew since the snapshot: recount those worlds from their interpretation
+            kt = self.kt
+            K.recount_worlds(indices, self.lower, self.upper, kt["b_ptr"], kt["b_atom"], kt["b_neg"],
+                             kt["b_bnd"], kt["inst"], self._kind_base, self._unsat, self._act, self._act_n,
+                             self._act_pos)
+        pend, pend_n = snap["pend"], snap["pend_n"]
+        if pend.shape[1] > self._pend.shape[1]:
+            self._grow_pending(pend.shape[1])
+        self._pend[worlds, :pend.shape[1]] = pend[worlds]
+        self._pend[worlds, :, 0] += shift
+        self._pend_n[worlds] = pend_n[worlds]
+
+    def pending(self, world: int) -> list[tuple[int, int]]:
+        n = int(self._pend_n[world])
+        return [(int(d), int(g)) for d, g in self._pend[world, :n]]
+
+    def adopt(self, lower: np.ndarray, upper: np.ndarray, static: np.ndarray, last_cause: np.ndarray,
+              pending: list[list[tuple[int, int]]], kt: dict[str, np.ndarray]) -> None:
+        """Take over a batch from another backend: intervals [world, atom], schedules per world."""
+        self.lower, self.upper = np.ascontiguousarray(lower), np.ascontiguousarray(upper)
+        self.static, self.last_cause = np.ascontiguousarray(static), np.ascontiguousarray(last_cause)
+        self.grow(self.n_atoms, kt)  # counts every grounding from these intervals
+        cap = max((len(p) for p in pending), default=0)
+        self._grow_pending(cap)
+        for w, entries in enumerate(pending):
+            for i, (due, g) in enumerate(entries):
+                self._pend[w, i] = (due, g)
+            self._pend_n[w] = len(entries)

@@ -1,0 +1,129 @@
+"""The lanes kernel (engine/lanes.py) against the counting kernel on batches wider than one machine word.
+
+tests/test_engine_vs_reference.py checks both kernels against the reference evaluator with two worlds;
+here random crisp programs run in 70 and 130 worlds (two and three words, the last one partly used) with
+different external facts per world and random per-world restores, and every step must give the same
+bounds, the same trace rows in the same order, the same pending firings and the same statistics.
+"""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from strategies import Scenario, scenarios
+from tracelab.engine import Engine, parse_program
+from tracelab.engine.errors import FixpointError, InconsistencyError
+
+SCALE = float(os.environ.get("TRACELAB_EXAMPLES", "1"))
+SEMANTIC_STATS = ("firings", "rederivations", "static_ignored", "changes", "passes")
+
+
+def assert_same(a: Engine, b: Engine, t: int) -> None:
+    np.testing.assert_array_equal(a.lower, b.lower, err_msg=f"lower at t={t}")
+    np.testing.assert_array_equal(a.upper, b.upper, err_msg=f"upper at t={t}")
+    np.testing.assert_array_equal(a.static, b.static, err_msg=f"static at t={t}")
+    ta, tb = a.take_trace(), b.take_trace()
+    for col in ta:
+        np.testing.assert_array_equal(ta[col], tb[col], err_msg=f"trace column {col} at t={t}")
+    sa, sb = a.stats, b.stats
+    for name in SEMANTIC_STATS:
+        np.testing.assert_array_equal(sa[name], sb[name], err_msg=f"stats {name} at t={t}")
+    for w in range(a.n_worlds):
+        assert sorted(a.pending(w)) == sorted(b.pending(w)), f"pending of world {w} at t={t}"
+
+
+def run_pair(sc: Scenario, worlds: int, seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    kw = dict(worlds=worlds, max_passes=40, max_immediate=200,
+              trace=rng.random(worlds) < 0.7)  # some worlds untraced
+    a = Engine(sc.program, sc.graph, kernel="counting", **kw)
+    b = Engine(sc.program, sc.graph, kernel="lanes", **kw)
+    facts = [f for step in sc.world_externals[0] for f in step] if sc.world_externals else []
+    snaps: list[tuple[dict, dict]] = []
+    for t in range(sc.steps + 3):
+        # external facts: each one in a random subset of worlds
+        for f in facts:
+            where = np.flatnonzero(rng.random(worlds) < 0.3)
+            for eng in (a, b):
+                eng.add_facts(np.full(len(where), eng.atom(f.pred, *f.args)), f.lower, f.upper, where,
+                              f.static)
+        errors = []
+        for eng in (a, b):
+            try:
+                eng.step()
+                errors.append(None)
+            except (InconsistencyError, FixpointError) as e:
+                errors.append(type(e))
+        assert errors[0] == errors[1], f"t={t}: counting raised {errors[0]}, lanes {errors[1]}"
+        if errors[0] is not None:
+            return
+        assert_same(a, b, t)
+        if rng.random() < 0.4:
+            snaps.append((a.snapshot(), b.snapshot()))
+        if snaps and rng.random() < 0.5:
+            sa, sb = snaps[rng.integers(len(snaps))]
+            worlds_back = np.flatnonzero(rng.random(worlds) < 0.4)
+            a.restore(sa, worlds_back)
+            b.restore(sb, worlds_back)
+            np.testing.assert_array_equal(a.lower, b.lower, err_msg=f"lower after restore at t={t}")
+
+
+@settings(max_examples=int(60 * SCALE), deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(sc=scenarios(per_world=1, crisp=True), worlds=st.sampled_from([70, 130]), seed=st.integers(0, 2**16))
+def test_lanes_match_counting_in_wide_batches_with_restores(sc: Scenario, worlds: int, seed: int) -> None:
+    run_pair(sc, worlds, seed)
+
+
+GAME_LIKE = """
+%mode override
+start: at(a, c0)
+step: at(A, Y) <-! at(A, X), next(X, Y), go(A)
+leave: at(A, X):[0,0] <-! at(A, X), next(X, Y), at(A, Y), go(A)
+seen: visited(A, X) <-1 at(A, X)
+next(c0, c1) static
+next(c1, c2) static
+next(c2, c3) static
+"""
+
+
+def test_auto_takes_lanes_for_crisp_batches_and_counting_otherwise() -> None:
+    prog = parse_program(GAME_LIKE)
+    assert Engine(prog, worlds=64).kernel == "lanes"
+    assert Engine(prog, worlds=8).kernel == "counting"
+    assert Engine(prog, worlds=8, kernel="lanes").kernel == "lanes"
+    half = parse_program(GAME_LIKE + "h: half(A):[0.5,1] <-0 at(A, c1)\n")
+    assert Engine(half, worlds=64).kernel == "counting"
+
+
+def test_lanes_refuses_a_program_that_is_not_crisp_by_name() -> None:
+    half = parse_program(GAME_LIKE + "h: half(A):[0.5,1] <-0 at(A, c1)\n", "game.rules")
+    with pytest.raises(ValueError, match=r"rule h \(game.rules:\d+(:\d+)?\) sets \[0.5,1\]"):
+        Engine(half, worlds=4, kernel="lanes")
+
+
+def test_a_bound_the_lanes_cannot_hold_moves_the_engine_to_counting_without_losing_state() -> None:
+    prog = parse_program(GAME_LIKE)
+    a = Engine(prog, worlds=66, kernel="counting")
+    b = Engine(prog, worlds=66, kernel="lanes")
+    for eng in (a, b):
+        eng.add_facts(np.full(33, eng.atom("go", "a")), 1.0, 1.0, np.arange(0, 66, 2))
+        eng.run(2)
+        eng.add_fact(eng.atom("go", "a"), 0.25, 0.75, world=5)  # not crisp
+        eng.add_facts(np.full(66, eng.atom("go", "a")), 1.0, 1.0, np.arange(66))
+        eng.step()
+    assert b.kernel == "counting"
+    assert_same(a, b, 3)
+    for eng in (a, b):
+        eng.run(2)
+    assert_same(a, b, 5)
+    assert a.interpretation(0)["visited(a,c3)"] == (1.0, 1.0)
+
+
+def test_the_two_kernel_modules_spell_their_shared_codes_alike() -> None:
+    from tracelab.engine import kernel, lanes
+    for name in lanes.SHARED_CODES:
+        assert getattr(lanes, name) == getattr(kernel, name), name
