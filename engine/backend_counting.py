@@ -151,6 +151,12 @@ class CountingState:
         self._pend[worlds, :, 0] += shift
         self._pend_n[worlds] = pend_n[worlds]
 
+    def truth(self, atoms: np.ndarray, value: float) -> np.ndarray:
+        """bool [atoms, worlds]: value 1.0, where each atom is [1,1]; value 0.0, where it is [0,0]."""
+        out = np.empty((len(atoms), self.eng.n_worlds), np.bool_)
+        K.gather_truth(self.lower if value == 1.0 else self.upper, atoms, value, out)
+        return out
+
     def pending(self, world: int) -> list[tuple[int, int]]:
         n = int(self._pend_n[world])
         return [(int(d), int(g)) for d, g in self._pend[world, :n]]

@@ -1,12 +1,18 @@
 """Batch state of the lanes kernel (lanes.py): crisp programs, worlds as bits of machine words.
 
-An atom's state in all worlds is three bit planes (T: [1,1], F: [0,0], S: static) of ceil(W/64) words; a
-grounding's is one mask of the worlds where its body holds. Besides the planes, the float bounds that
-Engine.lower/upper show are kept per [atom, world] (written only where an atom changes), and the cause of
-each atom's last change per world (for the messages of `%inconsistency abort`).
+An atom's state in all worlds is bit planes (T: [1,1], F: [0,0], S: static, D: changed since the world's
+last restore) of ceil(W/64) words; a grounding's is a mask of the worlds where it is active and its
+unsatisfied-clause counts, bit-sliced. Besides the planes, the float bounds that Engine.lower/upper show
+are kept per [atom, world] (written only where an atom changes), and the cause of each atom's last change
+per world (for the messages of `%inconsistency abort`).
+
+The batch is cut into shards of whole words, one per thread (Engine(threads=...)): each shard has its own
+planes, lists, schedule and scratch, and they step at once (the kernel releases the GIL). The float bounds,
+last causes and statistics are shared arrays, each shard writing its own worlds.
 """
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -28,50 +34,197 @@ def crisp_codes(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
     return code
 
 
+def world_mask(local: np.ndarray, n_words: int) -> np.ndarray:
+    """Words with the bits of the given (shard-local) worlds set."""
+    mask = np.zeros(n_words, np.uint64)
+    np.bitwise_or.at(mask, local >> 6, np.uint64(1) << (local & 63).astype(np.uint64))
+    return mask
+
+
+class _Shard:
+    """Worlds w0 .. w1-1 of the batch: their planes, grounding masks and counts, lists, schedule, scratch
+    and trace rows."""
+
+    def __init__(self, eng: Engine, w0: int, w1: int, count_bits: int) -> None:
+        self.eng, self.w0, self.w1 = eng, w0, w1
+        w = w1 - w0
+        nw = self.n_words = (w + 63) // 64
+        self.valid = world_mask(np.arange(w), nw)
+        self.st = np.zeros((0, L.N_PLANES, nw), np.uint64)
+        # per grounding and word: the mask of worlds where it is active, then its unsatisfied-clause
+        # counts bit-sliced (enough bits for the rule with the most binding clauses)
+        self.gs = np.zeros((0, nw, 1 + count_bits), np.uint64)
+        self.alist = np.zeros(0, np.int32)
+        self.alist_n = np.zeros(K.N_KINDS, np.int64)
+        self.apos = np.zeros(0, np.int32)
+        self.pend_due = np.zeros(16, np.int64)
+        self.pend_g = np.zeros(16, np.int32)
+        self.pend_m = np.zeros((16, nw), np.uint64)
+        self.pend_n = np.zeros(1, np.int64)
+        self.ctl = np.zeros(L.N_CTL, np.int64)
+        self.n_touched = np.zeros(1, np.int64)
+        self.src_n = np.zeros(1, np.int64)
+        self.hn = np.zeros(1, np.int64)
+        self.n_imm = np.zeros(w, np.int64)
+        self.pw = np.zeros((L.N_PW, w), np.int64)
+        self.ws = np.zeros((L.N_WSCRATCH, nw), np.uint64)
+        self.wl = np.zeros(nw, np.int64)
+        self.src_i = np.zeros((0, 6), np.int64)
+        self.src_m = np.zeros((0, nw), np.uint64)
+        self.err = np.zeros(K.N_ERR, np.int64)
+        # trace rows of this shard's step, appended to the engine's buffer afterwards
+        self.tri = np.zeros((1024, K.TRACE_INT_COLUMNS), np.int32)
+        self.trf = np.zeros((1024, K.TRACE_FLOAT_COLUMNS), np.float64)
+        self.tr_n = np.zeros(1, np.int64)
+        # per world: the id of its last restore, and of the snapshot that restore came from
+        self.epoch = np.full(w, -1, np.int64)
+        self.source = np.full(w, -1, np.int64)
+        self.scratch(0, 0)
+
+    def scratch(self, n_atoms: int, n_inst: int) -> None:
+        nw = self.n_words
+        self.slot_of = np.full(max(n_atoms, 1), -1, np.int32)
+        self.touched = np.zeros(max(n_atoms, 1), np.int32)
+        self.gm = np.zeros((max(n_atoms, 1), L.N_GPLANES, nw), np.uint64)
+        self.slot_src = np.full(max(n_atoms, 1), -1, np.int64)
+        self.heap = np.zeros(max(n_inst, 1), np.int64)
+        self.in_heap = np.zeros(max(n_inst, 1), np.bool_)
+
+    def grow(self, n_atoms: int, kt: dict[str, np.ndarray], kind_base: np.ndarray) -> None:
+        nw = self.n_words
+        if n_atoms > len(self.st):
+            self.st = np.concatenate([self.st, np.zeros((n_atoms - len(self.st), L.N_PLANES, nw), np.uint64)])
+        n_inst, first = len(kt["inst"]), len(self.gs)
+        if n_inst > first:
+            self.gs = np.concatenate([self.gs, np.zeros((n_inst - first, nw, self.gs.shape[2]), np.uint64)])
+            self.alist = np.zeros(n_inst, np.int32)
+            self.apos = np.full(n_inst, -1, np.int32)
+            L.fill_counts(first, self.valid, self.st, kt["b_ptr"], kt["b_atom"], kt["b_code"], self.gs,
+                          kt["inst"], self.alist, self.alist_n, self.apos, kind_base)
+        self.scratch(n_atoms, n_inst)
+
+    def step(self, batch: LaneState, ext_ptr: np.ndarray, ext_i: np.ndarray, ext_v: np.ndarray) -> int:
+        eng, kt, w0, w1 = self.eng, batch.kt, self.w0, self.w1
+        ext_ptr = ext_ptr[w0:w1 + 1]
+        tmask = np.packbits(np.append(eng.trace_on[w0:w1], np.zeros(self.n_words * 64 - (w1 - w0), np.bool_)),
+                            bitorder="little").view(np.uint64)
+        # sources of one pass: facts, external rows and due firings (pass 0), or ordinary groundings
+        need = len(eng._fact_i) + int(ext_ptr[-1] - ext_ptr[0]) + int(self.pend_n[0]) + batch.n_ordinary
+        if need > len(self.src_i):
+            self.src_i = np.zeros((max(need, 2 * len(self.src_i)), 6), np.int64)
+            self.src_m = np.zeros((len(self.src_i), self.n_words), np.uint64)
+        self.tr_n[0] = 0
+        self.ctl[L.C_PHASE] = L.PH_START
+        stats = eng._stats[w0:w1]
+        while True:
+            status = L.step_lanes(
+                eng._cfg, w0, self.ctl, eng._rule_i, eng._rule_v, kt["inst"], batch.kind_base, kt["wc_ptr"],
+                kt["wc_code"], kt["wc_gptr"], kt["wg"], kt["ih_ptr"], kt["ih_inst"], eng._fact_i, eng._fact_v,
+                eng._fact_order, ext_ptr, ext_i, ext_v, eng._settable, self.valid, tmask, self.st, batch.lo,
+                batch.up, batch.lc, self.gs, self.alist, self.alist_n, self.apos, self.pend_due, self.pend_g,
+                self.pend_m, self.pend_n, self.tri, self.trf, self.tr_n, stats, self.err, self.slot_of,
+                self.touched, self.n_touched, self.gm, self.slot_src, self.src_i, self.src_m, self.src_n,
+                self.heap, self.hn, self.in_heap, self.n_imm, self.pw, self.ws, self.wl)
+            if status == K.STATUS_TRACE_ROOM:  # a unit of work may write a row per world
+                self.grow_trace(int(self.tr_n[0]) + max(int(eng._cfg[K.CFG_TRACE_ROOM]), w1 - w0))
+            elif status == K.STATUS_PEND_ROOM:
+                self.grow_pending(int(self.pend_n[0]) + int(self.alist_n[K.KIND_DELAYED]))
+            else:
+                break
+        if status != K.STATUS_OK:  # an error may leave candidates and scratch rows behind
+            self.in_heap[:] = False
+            self.slot_of[:] = -1
+            self.n_touched[0] = 0
+            self.src_n[0] = 0
+            self.hn[0] = 0
+        return status
+
+    def grow_trace(self, need: int) -> None:
+        n = int(self.tr_n[0])
+        cap = max(need, 2 * len(self.tri))
+        tri, trf = np.empty((cap, K.TRACE_INT_COLUMNS), np.int32), np.empty((cap, K.TRACE_FLOAT_COLUMNS))
+        tri[:n], trf[:n] = self.tri[:n], self.trf[:n]
+        self.tri, self.trf = tri, trf
+
+    def grow_pending(self, need: int) -> None:
+        cap = max(need, 2 * len(self.pend_g), 16)
+        n = int(self.pend_n[0])
+        due, g, m = np.zeros(cap, np.int64), np.zeros(cap, np.int32), np.zeros((cap, self.n_words), np.uint64)
+        due[:n], g[:n], m[:n] = self.pend_due[:n], self.pend_g[:n], self.pend_m[:n]
+        self.pend_due, self.pend_g, self.pend_m = due, g, m
+
+    def snapshot(self) -> dict[str, Any]:
+        n = int(self.pend_n[0])
+        return {"epoch": self.epoch.copy(), "st": self.st.copy(), "gs": self.gs.copy(),
+                "pend_due": self.pend_due[:n].copy(), "pend_g": self.pend_g[:n].copy(),
+                "pend_m": self.pend_m[:n].copy()}
+
+    def restore(self, batch: LaneState, snap: dict[str, Any], part: dict[str, Any], local: np.ndarray,
+                shift: int) -> None:
+        kt = batch.kt
+        wmask = world_mask(local, self.n_words)
+        # a world's unchanged atoms (plane D) still hold the snapshot's bounds if it was last restored
+        # from this snapshot, or has not been restored since the snapshot was taken; other worlds copy
+        # every atom
+        shortcut = (self.source[local] == snap["id"]) | (self.epoch[local] == part["epoch"][local])
+        full = world_mask(local[~shortcut], self.n_words)
+        L.restore_lanes(wmask, part["st"], part["gs"], self.st, self.gs, kt["inst"], self.alist, self.alist_n,
+                        self.apos, batch.kind_base)
+        if len(part["gs"]) < len(self.gs):  # groundings grew: count them all again
+            L.fill_counts(0, self.valid, self.st, kt["b_ptr"], kt["b_atom"], kt["b_code"], self.gs, kt["inst"],
+                          self.alist, self.alist_n, self.apos, batch.kind_base)
+        L.restore_columns(self.w0, wmask, full, snap["lo"], snap["up"], snap["lc"], self.st, batch.lo, batch.up,
+                          batch.lc)
+        LaneState.events += 1
+        self.epoch[local] = LaneState.events
+        self.source[local] = snap["id"]
+        self.st[len(part["st"]):, :L.P_D] &= ~wmask  # atoms interned since the snapshot start unset
+        # the schedule: these worlds drop theirs and take the snapshot's, `shift` steps later
+        n = int(self.pend_n[0])
+        m = self.pend_m[:n] & ~wmask
+        keep = np.flatnonzero(m.any(axis=1))
+        theirs = part["pend_m"] & wmask
+        add = np.flatnonzero(theirs.any(axis=1))
+        total = len(keep) + len(add)
+        if total > len(self.pend_g):
+            self.grow_pending(total)
+        due = np.concatenate([self.pend_due[keep], part["pend_due"][add] + shift])
+        g = np.concatenate([self.pend_g[keep], part["pend_g"][add]])
+        mm = np.concatenate([m[keep], theirs[add]])
+        self.pend_due[:total], self.pend_g[:total], self.pend_m[:total] = due, g, mm
+        self.pend_n[0] = total
+
+    def pending(self, local: int) -> list[tuple[int, int]]:
+        n = int(self.pend_n[0])
+        bit = np.uint64(1) << np.uint64(local & 63)
+        sel = np.flatnonzero(self.pend_m[:n, local >> 6] & bit)
+        return [(int(self.pend_due[i]), int(self.pend_g[i])) for i in sel]
+
+
 class LaneState:
     name = "lanes"
-    _events = 0  # ids of snapshots and restores, unique in the process
+    events = 0  # ids of snapshots and restores, unique in the process
 
-    def __init__(self, eng: Engine) -> None:
+    def __init__(self, eng: Engine, threads: int = 1) -> None:
         self.eng = eng
         w = eng.n_worlds
-        self.n_words = (w + 63) // 64
-        self.valid = np.zeros(self.n_words, np.uint64)
-        for i in range(w):
-            self.valid[i >> 6] |= np.uint64(1) << np.uint64(i & 63)
-        self.st = np.zeros((0, L.N_PLANES, self.n_words), np.uint64)
         self.lo = np.zeros((0, w))
         self.up = np.ones((0, w))
         self.lc = np.full((0, w, 2), -1, np.int32)
-        self.active = np.zeros((0, self.n_words), np.uint64)
-        self._alist = np.zeros(0, np.int32)
-        self._alist_n = np.zeros(K.N_KINDS, np.int64)
-        self._apos = np.zeros(0, np.int32)
-        self._kind_base = np.zeros(K.N_KINDS, np.int64)
-        self._pend_due = np.zeros(16, np.int64)
-        self._pend_g = np.zeros(16, np.int32)
-        self._pend_m = np.zeros((16, self.n_words), np.uint64)
-        self._pend_n = np.zeros(1, np.int64)
-        self._ctl = np.zeros(L.N_CTL, np.int64)
-        # per world: the id of its last restore, and of the snapshot that restore came from
-        self._epoch = np.full(w, -1, np.int64)
-        self._source = np.full(w, -1, np.int64)
-        self._n_touched = np.zeros(1, np.int64)
-        self._src_n = np.zeros(1, np.int64)
-        self._hn = np.zeros(1, np.int64)
-        self._n_imm = np.zeros(w, np.int64)
-        self._pw = np.zeros((L.N_PW, w), np.int64)
-        self._ws = np.zeros((L.N_WSCRATCH, self.n_words), np.uint64)
-        self._wl = np.zeros(self.n_words, np.int64)
-        self._src_i = np.zeros((0, 6), np.int64)
-        self._src_m = np.zeros((0, self.n_words), np.uint64)
-        self._scratch(0, 0)
+        self.kind_base = np.zeros(K.N_KINDS, np.int64)
+        self.n_ordinary = 0
+        most = max((sum(c.binds for c in r.body) for r in eng.rules), default=0)
+        words = (w + 63) // 64
+        n_shards = max(1, min(threads, words))
+        cuts = [64 * (words * i // n_shards) for i in range(n_shards)] + [w]
+        self.shards = [_Shard(eng, cuts[i], cuts[i + 1], max(int(most).bit_length(), 1)) for i in range(n_shards)]
+        self._pool = ThreadPoolExecutor(n_shards) if n_shards > 1 else None
 
     # ---- the Engine's view ----
 
     @property
     def n_atoms(self) -> int:
-        return self.st.shape[0]
+        return self.lo.shape[0]
 
     @property
     def lower(self) -> np.ndarray:
@@ -83,151 +236,82 @@ class LaneState:
 
     @property
     def static(self) -> np.ndarray:
-        bits = np.unpackbits(self.st[:, L.P_S, :].view(np.uint8), axis=1, bitorder="little")
-        return bits[:, :self.eng.n_worlds].T.astype(np.bool_)
+        return self.truth_plane(np.arange(self.n_atoms), L.P_S).T
 
     @property
     def last_cause(self) -> np.ndarray:
         return self.lc.transpose(1, 0, 2)
 
+    def truth(self, atoms: np.ndarray, value: float) -> np.ndarray:
+        """bool [atoms, worlds]: value 1.0, where each atom is [1,1]; value 0.0, where it is [0,0]."""
+        return self.truth_plane(atoms, L.P_T if value == 1.0 else L.P_F)
+
+    def truth_plane(self, atoms: np.ndarray, plane: int) -> np.ndarray:
+        out = np.empty((len(atoms), self.eng.n_worlds), np.bool_)
+        for sh in self.shards:
+            L.plane_truth(sh.st, plane, atoms, sh.w0, sh.w1 - sh.w0, out)
+        return out
+
     # ---- building ----
 
-    def _scratch(self, n_atoms: int, n_inst: int) -> None:
-        nw = self.n_words
-        self._slot_of = np.full(max(n_atoms, 1), -1, np.int32)
-        self._touched = np.zeros(max(n_atoms, 1), np.int32)
-        self._gm = np.zeros((max(n_atoms, 1), L.N_GPLANES, nw), np.uint64)
-        self._slot_src = np.full(max(n_atoms, 1), -1, np.int64)
-        self._heap = np.zeros(max(n_inst, 1), np.int64)
-        self._in_heap = np.zeros(max(n_inst, 1), np.bool_)
-
     def grow(self, n_atoms: int, kt: dict[str, np.ndarray]) -> None:
-        w, nw = self.eng.n_worlds, self.n_words
+        w = self.eng.n_worlds
         grow = n_atoms - self.n_atoms
         if grow > 0:
-            self.st = np.concatenate([self.st, np.zeros((grow, L.N_PLANES, nw), np.uint64)])
             self.lo = np.concatenate([self.lo, np.zeros((grow, w))])
             self.up = np.concatenate([self.up, np.ones((grow, w))])
             self.lc = np.concatenate([self.lc, np.full((grow, w, 2), -1, np.int32)])
         self.kt = kt
-        n_inst = len(kt["inst"])
-        first = self.active.shape[0]
-        if n_inst > first:
-            self.active = np.concatenate([self.active, np.zeros((n_inst - first, nw), np.uint64)])
-            counts = np.bincount(kt["inst"][:, K.INST_KIND], minlength=K.N_KINDS)
-            self._kind_base = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
-            self._alist = np.zeros(n_inst, np.int32)
-            self._apos = np.full(n_inst, -1, np.int32)
-            L.fill_active(first, self.valid, self.st, kt["b_ptr"], kt["b_atom"], kt["b_code"], self.active,
-                          kt["inst"], self._alist, self._alist_n, self._apos, self._kind_base)
-        self._n_ordinary = int(np.count_nonzero(kt["inst"][:, K.INST_KIND] == K.KIND_ORDINARY)) if n_inst else 0
-        self._scratch(n_atoms, n_inst)
+        counts = np.bincount(kt["inst"][:, K.INST_KIND], minlength=K.N_KINDS)
+        self.kind_base = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+        self.n_ordinary = int(counts[K.KIND_ORDINARY])
+        for sh in self.shards:
+            sh.grow(n_atoms, kt, self.kind_base)
 
     # ---- stepping ----
 
     def step(self, ext_ptr: np.ndarray, ext_i: np.ndarray, ext_f: np.ndarray) -> int:
-        eng, kt = self.eng, self.kt
+        eng = self.eng
         ext_v = crisp_codes(ext_f[:, 0], ext_f[:, 1])  # the Engine checked that they are crisp
-        tmask = np.packbits(np.append(eng.trace_on, np.zeros(self.n_words * 64 - eng.n_worlds, np.bool_)),
-                            bitorder="little").view(np.uint64)
-        # sources of one pass: facts, external rows and due firings (pass 0), or ordinary groundings
-        need = len(eng._fact_i) + len(ext_i) + int(self._pend_n[0]) + self._n_ordinary
-        if need > len(self._src_i):
-            self._src_i = np.zeros((max(need, 2 * len(self._src_i)), 6), np.int64)
-            self._src_m = np.zeros((len(self._src_i), self.n_words), np.uint64)
-        first_row = int(eng._tr_n[0])
-        self._ctl[L.C_PHASE] = L.PH_START
-        while True:
-            status = L.step_lanes(
-                eng._cfg, self._ctl, eng._rule_i, eng._rule_v, kt["inst"], self._kind_base, kt["wc_ptr"],
-                kt["wc_code"], kt["wc_gptr"], kt["wg"], kt["b_ptr"], kt["b_atom"], kt["b_code"], kt["ih_ptr"],
-                kt["ih_inst"], eng._fact_i, eng._fact_v, eng._fact_order, ext_ptr, ext_i, ext_v, eng._settable,
-                self.valid, tmask, self.st, self.lo, self.up, self.lc, self.active, self._alist, self._alist_n,
-                self._apos, self._pend_due, self._pend_g, self._pend_m, self._pend_n, eng._tri, eng._trf,
-                eng._tr_n, eng._stats, eng._err, self._slot_of, self._touched, self._n_touched, self._gm,
-                self._slot_src, self._src_i, self._src_m, self._src_n, self._heap, self._hn, self._in_heap,
-                self._n_imm, self._pw, self._ws, self._wl)
-            if status == K.STATUS_TRACE_ROOM:  # a unit of work may write a row per world
-                eng._grow_trace(int(eng._tr_n[0]) + max(int(eng._cfg[K.CFG_TRACE_ROOM]), eng.n_worlds))
-            elif status == K.STATUS_PEND_ROOM:
-                self._grow_pending(int(self._pend_n[0]) + int(self._alist_n[K.KIND_DELAYED]))
-            else:
-                break
-        if status != K.STATUS_OK:  # an error may leave candidates and scratch rows behind
-            self._in_heap[:] = False
-            self._slot_of[:] = -1
-            self._n_touched[0] = 0
-            self._src_n[0] = 0
-            self._hn[0] = 0
-        elif eng.n_worlds > 1 and int(eng._tr_n[0]) > first_row:
-            # rows came world after world within each unit of work: order them by world (stable), as the
-            # counting kernel writes them
-            rows = slice(first_row, int(eng._tr_n[0]))
-            order = np.argsort(eng._tri[rows, 0], kind="stable")
-            eng._tri[rows] = eng._tri[rows][order]
-            eng._trf[rows] = eng._trf[rows][order]
-        return status
-
-    def _grow_pending(self, need: int) -> None:
-        cap = max(need, 2 * len(self._pend_g), 16)
-        n = int(self._pend_n[0])
-        due, g, m = np.zeros(cap, np.int64), np.zeros(cap, np.int32), np.zeros((cap, self.n_words), np.uint64)
-        due[:n], g[:n], m[:n] = self._pend_due[:n], self._pend_g[:n], self._pend_m[:n]
-        self._pend_due, self._pend_g, self._pend_m = due, g, m
+        if self._pool is None:
+            statuses = [self.shards[0].step(self, ext_ptr, ext_i, ext_v)]
+        else:
+            futures = [self._pool.submit(sh.step, self, ext_ptr, ext_i, ext_v) for sh in self.shards]
+            statuses = [f.result() for f in futures]
+        for sh, status in zip(self.shards, statuses):
+            if status != K.STATUS_OK:  # the first world's error, as one world after another would find it
+                eng._err[:] = sh.err
+                return status
+        for sh in self.shards:
+            n = int(sh.tr_n[0])
+            if n:
+                # rows came world after world within each unit of work: order them by world (stable), as
+                # the counting kernel writes them
+                order = np.argsort(sh.tri[:n, 0], kind="stable")
+                start = int(eng._tr_n[0])
+                if start + n > len(eng._tri):
+                    eng._grow_trace(start + n)
+                eng._tri[start:start + n] = sh.tri[:n][order]
+                eng._trf[start:start + n] = sh.trf[:n][order]
+                eng._tr_n[0] = start + n
+        return K.STATUS_OK
 
     # ---- snapshots ----
 
     def snapshot(self) -> dict[str, Any]:
-        n = int(self._pend_n[0])
-        LaneState._events += 1
-        return {"id": LaneState._events, "epoch": self._epoch.copy(), "st": self.st.copy(), "active": self.active.copy(), "lo": self.lo.copy(), "up": self.up.copy(),
-                "lc": self.lc.copy(), "pend_due": self._pend_due[:n].copy(), "pend_g": self._pend_g[:n].copy(),
-                "pend_m": self._pend_m[:n].copy()}
+        LaneState.events += 1
+        return {"id": LaneState.events, "lo": self.lo.copy(), "up": self.up.copy(), "lc": self.lc.copy(),
+                "shards": [sh.snapshot() for sh in self.shards]}
 
     def restore(self, snap: dict[str, Any], indices: np.ndarray, shift: int) -> None:
-        wmask = np.zeros(self.n_words, np.uint64)
-        for i in indices:
-            wmask[i >> 6] |= np.uint64(1) << np.uint64(i & 63)
-        n_atoms = snap["st"].shape[0]
-        # a world's unchanged atoms (plane D) still hold the snapshot's bounds if it was last restored
-        # from this snapshot, or has not been restored since the snapshot was taken; other worlds copy
-        # every atom
-        shortcut = (self._source[indices] == snap["id"]) | (self._epoch[indices] == snap["epoch"][indices])
-        full_worlds = indices[~shortcut]
-        full = np.zeros(self.n_words, np.uint64)
-        for i in full_worlds:
-            full[i >> 6] |= np.uint64(1) << np.uint64(i & 63)
-        L.restore_columns(wmask, full, snap["lo"], snap["up"], snap["lc"], self.st, self.lo, self.up, self.lc)
-        LaneState._events += 1
-        self._epoch[indices] = LaneState._events
-        self._source[indices] = snap["id"]
-        self.st[n_atoms:, :L.P_D] &= ~wmask  # atoms interned since the snapshot start unset
-        kt = self.kt
-        L.restore_lanes(wmask, snap["st"], snap["active"], self.st, self.active, kt["inst"], self._alist,
-                        self._alist_n, self._apos, self._kind_base)
-        if snap["active"].shape[0] < self.active.shape[0]:  # groundings grew: evaluate them all again
-            L.fill_active(0, self.valid, self.st, kt["b_ptr"], kt["b_atom"], kt["b_code"], self.active,
-                          kt["inst"], self._alist, self._alist_n, self._apos, self._kind_base)
-        # the schedule: these worlds drop theirs and take the snapshot's, `shift` steps later
-        n = int(self._pend_n[0])
-        m = self._pend_m[:n] & ~wmask
-        keep = np.flatnonzero(m.any(axis=1))
-        theirs = snap["pend_m"] & wmask
-        add = np.flatnonzero(theirs.any(axis=1))
-        total = len(keep) + len(add)
-        if total > len(self._pend_g):
-            self._grow_pending(total)
-        due = np.concatenate([self._pend_due[keep], snap["pend_due"][add] + shift])
-        g = np.concatenate([self._pend_g[keep], snap["pend_g"][add]])
-        mm = np.concatenate([m[keep], theirs[add]])
-        self._pend_due[:total], self._pend_g[:total], self._pend_m[:total] = due, g, mm
-        self._pend_n[0] = total
+        for sh, part in zip(self.shards, snap["shards"]):
+            local = indices[(indices >= sh.w0) & (indices < sh.w1)] - sh.w0
+            if len(local):
+                sh.restore(self, snap, part, local, shift)
 
     def pending(self, world: int) -> list[tuple[int, int]]:
-        n = int(self._pend_n[0])
-        bit = np.uint64(1) << np.uint64(world & 63)
-        sel = np.flatnonzero(self._pend_m[:n, world >> 6] & bit)
-        return [(int(self._pend_due[i]), int(self._pend_g[i])) for i in sel]
+        sh = next(s for s in self.shards if s.w0 <= world < s.w1)
+        return sh.pending(world - sh.w0)
 
     def export(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[list[tuple[int, int]]]]:
         """The batch as the counting backend holds it: lower, upper, static, last_cause [world, atom],

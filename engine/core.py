@@ -41,7 +41,7 @@ class Engine:
     def __init__(self, program: Program, graph: Graph | None = None, *, worlds: int = 1,
                  trace: bool | Sequence[bool] | np.ndarray = True, max_passes: int = 1000,
                  max_immediate: int = 100_000, trace_rows_per_step: int = 65_536,
-                 kernel: str = "auto") -> None:
+                 kernel: str = "auto", threads: int | None = None) -> None:
         if worlds < 1:
             raise ValueError(f"worlds must be >= 1, got {worlds}")
         self.program = program
@@ -72,6 +72,11 @@ class Engine:
         self._tr_n = np.zeros(1, np.int64)
         self._stats = np.zeros((worlds, K.N_STATS), np.int64)
         self._err = np.zeros(K.N_ERR, np.int64)
+        if threads is not None and threads < 1:
+            raise ValueError(f"threads must be >= 1, got {threads}")
+        # one thread unless asked: on this project's 2-core machines a second thread stepping half the
+        # batch measured slower, not faster (docs/benchmarks.md)
+        self.threads = threads or 1
         self._state: CountingState | LaneState = self._choose_backend(kernel)
         self._ext: list[tuple[np.ndarray, ...]] = []  # chunks of (atoms, lower, upper, world, static)
         self._settable = np.zeros(0, np.bool_)
@@ -118,7 +123,7 @@ class Engine:
             raise ValueError(f"kernel='lanes' needs a crisp program (bounds [0,0], [1,1] or [0,1] only): "
                              f"{self._not_crisp()}")
         if kernel == "lanes" or (kernel == "auto" and crisp and self.n_worlds >= LANES_MIN_WORLDS):
-            return LaneState(self)
+            return LaneState(self, self.threads)
         return CountingState(self)
 
     def _not_crisp(self) -> str | None:
@@ -328,6 +333,15 @@ class Engine:
         if atom >= self.lower.shape[1]:
             return (0.0, 1.0)
         return float(self.lower[world, atom]), float(self.upper[world, atom])
+
+    def is_true(self, atoms: np.ndarray) -> np.ndarray:
+        """bool [len(atoms), worlds]: where each atom is [1,1] (a simulator's read-back, fast for both
+        kernels; atoms must exist, see sync())."""
+        return self._state.truth(np.asarray(atoms, np.int64), 1.0)
+
+    def is_false(self, atoms: np.ndarray) -> np.ndarray:
+        """bool [len(atoms), worlds]: where each atom is [0,0]."""
+        return self._state.truth(np.asarray(atoms, np.int64), 0.0)
 
     def query(self, text: str, world: int = 0) -> tuple[float, float]:
         """The bound of an atom given as text, e.g. "atLoc(red-agent-1,16)"; [0,1] if never set."""

@@ -706,3 +706,13 @@ def relayout_active(old_act, old_base, act, kind_base, act_n):
         for k in range(N_KINDS):
             for p in range(act_n[w, k]):
                 act[w, kind_base[k] + p] = old_act[w, old_base[k] + p]
+
+
+@kernel_jit
+def gather_truth(bounds, atoms, value, out):
+    """out[j, w] = (bounds[w, atoms[j]] == value): which atoms are [1,1] (bounds = lower, value 1) or
+    [0,0] (bounds = upper, value 0) in each world."""
+    for j in range(atoms.shape[0]):
+        a = atoms[j]
+        for w in range(bounds.shape[0]):
+            out[j, w] = bounds[w, a] == value

@@ -84,7 +84,8 @@ ZERO = np.uint64(0)
 ONE = np.uint64(1)
 ALL = np.uint64(0xFFFFFFFFFFFFFFFF)
 
-lanes_jit = njit(cache=True, _nrt=False)
+# nogil: the shards of a batch step in threads (backend_lanes.py)
+lanes_jit = njit(cache=True, _nrt=False, nogil=True)
 
 
 @intrinsic
@@ -117,6 +118,40 @@ def _eval_body(g, k, b_ptr, b_atom, b_code, st):
         if m == ZERO:
             break
     return m
+
+
+@lanes_jit
+def _count_add(gs, g, k, m):
+    """Add one to the unsatisfied-clause count of grounding g in the worlds m of word k. Counts are
+    bit-sliced: gs[g, k, 1 + p] holds bit p of every world's count (gs[g, k, 0] is the active mask)."""
+    carry = m
+    for p in range(1, gs.shape[2]):
+        c = gs[g, k, p]
+        gs[g, k, p] = c ^ carry
+        carry &= c
+        if carry == ZERO:
+            break
+
+
+@lanes_jit
+def _count_sub(gs, g, k, m):
+    """Take one from the count of grounding g in the worlds m of word k (every count there is >= 1)."""
+    borrow = m
+    for p in range(1, gs.shape[2]):
+        c = gs[g, k, p]
+        gs[g, k, p] = c ^ borrow
+        borrow &= ~c
+        if borrow == ZERO:
+            break
+
+
+@lanes_jit
+def _count_zero(gs, g, k):
+    """The worlds of word k where grounding g has no unsatisfied clause."""
+    m = ZERO
+    for p in range(1, gs.shape[2]):
+        m |= gs[g, k, p]
+    return ~m
 
 
 @lanes_jit
@@ -200,10 +235,10 @@ def _pop(heap, hn):
 
 
 @lanes_jit
-def _watch(a, skip, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, b_ptr, b_atom, b_code, active, inst, alist,
+def _watch(a, skip, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs, inst, alist,
            alist_n, apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap, stats):
     """Atom a changed in the worlds ws[W_C] (its old planes in ws[W_OLDT], ws[W_OLDF]; st holds the new):
-    update the active masks of the groundings that read it, keep the active-anywhere lists, and make the
+    update the counts and active masks of the groundings that read it, keep the active-anywhere lists, and make the
     immediate groundings that became active somewhere, or that set a there (but `skip`), candidates.
     Only the words where a clause flipped are visited (wl lists them). Returns the heap size."""
     nw = valid.shape[0]
@@ -235,14 +270,17 @@ def _watch(a, skip, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, b_ptr, b_at
             new_bits = False
             for j in range(n_flip):
                 k = wl[j]
-                old = active[g, k]
-                new = old & ~ws[W_DOWN, k]
+                old = gs[g, k, 0]
+                d = ws[W_DOWN, k]
+                if d != ZERO:
+                    _count_add(gs, g, k, d)
                 u = ws[W_UP, k]
                 if u != ZERO:
-                    new |= u & _eval_body(g, k, b_ptr, b_atom, b_code, st)
+                    _count_sub(gs, g, k, u)
+                new = _count_zero(gs, g, k) & valid[k]
                 if new == old:
                     continue
-                active[g, k] = new
+                gs[g, k, 0] = new
                 if new & ~old:
                     new_bits = True
                 if old == ZERO:
@@ -253,7 +291,7 @@ def _watch(a, skip, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, b_ptr, b_at
                 listed = apos[g] >= 0
                 now_any = False
                 for k in range(nw):
-                    if active[g, k] != ZERO:
+                    if gs[g, k, 0] != ZERO:
                         now_any = True
                         break
                 if now_any and not listed:
@@ -268,18 +306,18 @@ def _watch(a, skip, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, b_ptr, b_at
         if g == skip or in_heap[g]:
             continue
         for k in range(nw):
-            if active[g, k] & ws[W_C, k]:
+            if gs[g, k, 0] & ws[W_C, k]:
                 hn = _push(g, inst, heap, hn, in_heap)
                 break
     return hn
 
 
 @lanes_jit
-def _row(w, t, pass_no, a, ov, nv, kind, cid, g_src, nsrc, tmask, tri, trf, tr_n):
+def _row(w0, w, t, pass_no, a, ov, nv, kind, cid, g_src, nsrc, tmask, tri, trf, tr_n):
     """One trace row, if world w is traced (room was made before)."""
     if tmask[w >> 6] & (ONE << np.uint64(w & 63)):
         n = tr_n[0]
-        tri[n, 0] = w
+        tri[n, 0] = w0 + w
         tri[n, 1] = t
         tri[n, 2] = pass_no
         tri[n, 3] = a
@@ -345,7 +383,7 @@ def _sort_small(a, n):
 
 
 @lanes_jit
-def _apply_group(s, a, t, pass_no, policy, valid, st, lo, up, lc, tmask, tri, trf, tr_n, stats, err, gm,
+def _apply_group(w0, s, a, t, pass_no, policy, valid, st, lo, up, lc, tmask, tri, trf, tr_n, stats, err, gm,
                  slot_src, src_i, src_m, pw, ws):
     """Resolve the group of atom a (scratch slot s) in every world it touches (docs/language.md,
     'Updating an atom') and write the per-world records. Leaves the changed worlds in ws[W_C] and the
@@ -415,11 +453,11 @@ def _apply_group(s, a, t, pass_no, policy, valid, st, lo, up, lc, tmask, tri, tr
                 w = k * 64 + np.int64(_cttz(inc))
                 p = pw[PW_PRIM, w]
                 q = pw[PW_LAST, w]
-                err[E_WORLD] = w
+                err[E_WORLD] = w0 + w
                 err[E_T] = t
                 err[E_ATOM] = a
-                err[E_OLD_KIND] = lc[a, w, 0]
-                err[E_OLD_ID] = lc[a, w, 1]
+                err[E_OLD_KIND] = lc[a, w0 + w, 0]
+                err[E_OLD_ID] = lc[a, w0 + w, 1]
                 err[E_KIND] = src_i[p, 1]
                 err[E_ID] = src_i[p, 2]
                 err[E_INST] = src_i[p, 3]
@@ -487,19 +525,19 @@ def _apply_group(s, a, t, pass_no, policy, valid, st, lo, up, lc, tmask, tri, tr
             if c & bit:
                 ov = V_T if t_k & bit else (V_F if f_k & bit else V_U)
                 nv = V_T if r_t & bit else (V_F if r_f & bit else V_U)
-                lo[a, w] = _lo(nv)
-                up[a, w] = _up(nv)
+                lo[a, w0 + w] = _lo(nv)
+                up[a, w0 + w] = _up(nv)
                 stats[w, STAT_CHANGES] += 1
                 if inc & bit:
                     r = pw[PW_RULE, w]
-                    lc[a, w, 0] = CAUSE_POLICY
-                    lc[a, w, 1] = policy
-                    _row(w, t, pass_no, a, ov, nv, CAUSE_POLICY, policy, src_i[r, 3] if r >= 0 else -1, nsrc,
+                    lc[a, w0 + w, 0] = CAUSE_POLICY
+                    lc[a, w0 + w, 1] = policy
+                    _row(w0, w, t, pass_no, a, ov, nv, CAUSE_POLICY, policy, src_i[r, 3] if r >= 0 else -1, nsrc,
                          tmask, tri, trf, tr_n)
                 else:
-                    lc[a, w, 0] = kind
-                    lc[a, w, 1] = src_i[p, 2]
-                    _row(w, t, pass_no, a, ov, nv, kind, src_i[p, 2], src_i[p, 3], nsrc, tmask, tri, trf, tr_n)
+                    lc[a, w0 + w, 0] = kind
+                    lc[a, w0 + w, 1] = src_i[p, 2]
+                    _row(w0, w, t, pass_no, a, ov, nv, kind, src_i[p, 2], src_i[p, 3], nsrc, tmask, tri, trf, tr_n)
             elif kind == CAUSE_RULE:
                 stats[w, STAT_REDERIVATIONS] += nsrc
         st[a, P_S, k] = s_k | freeze
@@ -507,9 +545,9 @@ def _apply_group(s, a, t, pass_no, policy, valid, st, lo, up, lc, tmask, tri, tr
 
 
 @lanes_jit
-def _apply_immediate(g, t, pass_no, policy, max_immediate, rule_i, rule_v, inst, valid, st, lo, up, lc, tmask,
-                     tri, trf, tr_n, stats, err, n_imm, ws, wl, wc_ptr, wc_code, wc_gptr, wg, b_ptr, b_atom, b_code,
-                     active, alist, alist_n, apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap):
+def _apply_immediate(w0, g, t, pass_no, policy, max_immediate, rule_i, rule_v, inst, valid, st, lo, up, lc, tmask,
+                     tri, trf, tr_n, stats, err, n_imm, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs,
+                      alist, alist_n, apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap):
     """Apply immediate grounding g in every world where it is active and would change its head.
     Returns (status, heap size)."""
     nw = valid.shape[0]
@@ -520,7 +558,7 @@ def _apply_immediate(g, t, pass_no, policy, max_immediate, rule_i, rule_v, inst,
     any_c = False
     any_inc = False
     for k in range(nw):
-        m = active[g, k] & ~st[a, P_S, k]
+        m = gs[g, k, 0] & ~st[a, P_S, k]
         t_k = st[a, P_T, k]
         f_k = st[a, P_F, k]
         if over:
@@ -570,16 +608,16 @@ def _apply_immediate(g, t, pass_no, policy, max_immediate, rule_i, rule_v, inst,
             n_imm[w] += 1
             stats[w, STAT_FIRINGS] += 1
             if n_imm[w] > max_immediate:
-                err[E_WORLD] = w
+                err[E_WORLD] = w0 + w
                 err[E_T] = t
                 err[E_ATOM] = a
                 return STATUS_IMMEDIATE_LIMIT, hn
             if policy == POLICY_ABORT and ws[W_TMP, k] & (ONE << b):
-                err[E_WORLD] = w
+                err[E_WORLD] = w0 + w
                 err[E_T] = t
                 err[E_ATOM] = a
-                err[E_OLD_KIND] = lc[a, w, 0]
-                err[E_OLD_ID] = lc[a, w, 1]
+                err[E_OLD_KIND] = lc[a, w0 + w, 0]
+                err[E_OLD_ID] = lc[a, w0 + w, 1]
                 err[E_KIND] = CAUSE_RULE
                 err[E_ID] = r
                 err[E_INST] = g
@@ -610,24 +648,24 @@ def _apply_immediate(g, t, pass_no, policy, max_immediate, rule_i, rule_v, inst,
             bit = ONE << b
             ov = V_T if t_k & bit else (V_F if f_k & bit else V_U)
             nv = V_T if r_t & bit else (V_F if r_f & bit else V_U)
-            lo[a, w] = _lo(nv)
-            up[a, w] = _up(nv)
+            lo[a, w0 + w] = _lo(nv)
+            up[a, w0 + w] = _up(nv)
             stats[w, STAT_CHANGES] += 1
             if inc & bit:
-                lc[a, w, 0] = CAUSE_POLICY
-                lc[a, w, 1] = policy
-                _row(w, t, pass_no, a, ov, nv, CAUSE_POLICY, policy, g, 1, tmask, tri, trf, tr_n)
+                lc[a, w0 + w, 0] = CAUSE_POLICY
+                lc[a, w0 + w, 1] = policy
+                _row(w0, w, t, pass_no, a, ov, nv, CAUSE_POLICY, policy, g, 1, tmask, tri, trf, tr_n)
             else:
-                lc[a, w, 0] = CAUSE_RULE
-                lc[a, w, 1] = r
-                _row(w, t, pass_no, a, ov, nv, CAUSE_RULE, r, g, 1, tmask, tri, trf, tr_n)
-    hn = _watch(a, -1 if any_inc else g, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, b_ptr, b_atom, b_code,
-                active, inst, alist, alist_n, apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap, stats)
+                lc[a, w0 + w, 0] = CAUSE_RULE
+                lc[a, w0 + w, 1] = r
+                _row(w0, w, t, pass_no, a, ov, nv, CAUSE_RULE, r, g, 1, tmask, tri, trf, tr_n)
+    hn = _watch(a, -1 if any_inc else g, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs,
+                inst, alist, alist_n, apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap, stats)
     return STATUS_OK, hn
 
 
 @lanes_jit
-def _reset_atom(a, t, valid, st, lo, up, lc, tmask, tri, trf, tr_n, stats, ws):
+def _reset_atom(w0, a, t, valid, st, lo, up, lc, tmask, tri, trf, tr_n, stats, ws):
     """`%timesteps reset` for one atom: back to [0,1] where it is set and not static. Leaves the changed
     worlds in ws[W_C]; returns whether there are any."""
     any_c = False
@@ -650,19 +688,19 @@ def _reset_atom(a, t, valid, st, lo, up, lc, tmask, tri, trf, tr_n, stats, ws):
             m &= m - ONE
             w = k * 64 + np.int64(b)
             ov = V_T if t_k & (ONE << b) else V_F
-            lo[a, w] = 0.0
-            up[a, w] = 1.0
-            lc[a, w, 0] = CAUSE_RESET
-            lc[a, w, 1] = -1
+            lo[a, w0 + w] = 0.0
+            up[a, w0 + w] = 1.0
+            lc[a, w0 + w, 0] = CAUSE_RESET
+            lc[a, w0 + w, 1] = -1
             stats[w, STAT_CHANGES] += 1
-            _row(w, t, 0, a, ov, V_U, CAUSE_RESET, -1, -1, 0, tmask, tri, trf, tr_n)
+            _row(w0, w, t, 0, a, ov, V_U, CAUSE_RESET, -1, -1, 0, tmask, tri, trf, tr_n)
     return any_c
 
 
 @lanes_jit
-def step_lanes(cfg, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, wc_gptr, wg, b_ptr, b_atom, b_code,
+def step_lanes(cfg, w0, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, wc_gptr, wg,
                ih_ptr, ih_inst, fact_i, fact_v, fact_order, ext_ptr, ext_i, ext_v, settable, valid, tmask,
-               st, lo, up, lc, active, alist, alist_n, apos, pend_due, pend_g, pend_m, pend_n,
+               st, lo, up, lc, gs, alist, alist_n, apos, pend_due, pend_g, pend_m, pend_n,
                tri, trf, tr_n, stats, err, slot_of, touched, n_touched, gm, slot_src, src_i, src_m, src_n,
                heap, hn_box, in_heap, n_imm, pw, ws, wl):
     """Go on with timestep cfg[CFG_T] of every world from where ctl says (PH_START: from the beginning).
@@ -673,14 +711,14 @@ def step_lanes(cfg, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, wc_gp
     policy = cfg[CFG_POLICY]
     max_passes = cfg[CFG_MAX_PASSES]
     max_immediate = cfg[CFG_MAX_IMMEDIATE]
-    n_worlds = lo.shape[1]
+    n_worlds = n_imm.shape[0]  # this call's worlds: w0 .. w0 + n_worlds - 1 of lo, up, lc and rows
     nw = valid.shape[0]
     n_atoms = st.shape[0]
     hn = hn_box[0]
     while True:
         phase = ctl[C_PHASE]
         if phase == PH_START:
-            for e in range(ext_ptr[n_worlds]):  # checked before anything changes
+            for e in range(ext_ptr[0], ext_ptr[n_worlds]):  # checked before anything changes
                 if not settable[ext_i[e, 0]]:
                     err[E_ATOM] = ext_i[e, 0]
                     return STATUS_NOT_SETTABLE
@@ -699,9 +737,9 @@ def step_lanes(cfg, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, wc_gp
                     ctl[C_POS] = a
                     hn_box[0] = hn
                     return STATUS_TRACE_ROOM
-                if _reset_atom(a, t, valid, st, lo, up, lc, tmask, tri, trf, tr_n, stats, ws):
-                    hn = _watch(a, -1, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, b_ptr, b_atom, b_code,
-                                active, inst, alist, alist_n, apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap,
+                if _reset_atom(w0, a, t, valid, st, lo, up, lc, tmask, tri, trf, tr_n, stats, ws):
+                    hn = _watch(a, -1, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs,
+                                inst, alist, alist_n, apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap,
                                 stats)
             ctl[C_PHASE] = PH_PASS0
         elif phase == PH_PASS0:
@@ -751,7 +789,7 @@ def step_lanes(cfg, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, wc_gp
                     hn_box[0] = hn
                     return STATUS_TRACE_ROOM
                 a = touched[i]
-                status = _apply_group(slot_of[a], a, t, pass_no, policy, valid, st, lo, up, lc, tmask, tri, trf,
+                status = _apply_group(w0, slot_of[a], a, t, pass_no, policy, valid, st, lo, up, lc, tmask, tri, trf,
                                       tr_n, stats, err, gm, slot_src, src_i, src_m, pw, ws)
                 if status != STATUS_OK:
                     return status
@@ -762,8 +800,8 @@ def step_lanes(cfg, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, wc_gp
                     if ws[W_C, k] != ZERO:
                         any_c = True
                 if any_c:
-                    hn = _watch(a, -1, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, b_ptr, b_atom, b_code,
-                                active, inst, alist, alist_n, apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap,
+                    hn = _watch(a, -1, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs,
+                                inst, alist, alist_n, apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap,
                                 stats)
             n_touched[0] = 0
             src_n[0] = 0
@@ -793,7 +831,7 @@ def step_lanes(cfg, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, wc_gp
                     if pass_no + 1 > max_passes:
                         for k in range(nw):
                             if ws[W_RUN, k] != ZERO:
-                                err[E_WORLD] = k * 64 + np.int64(_cttz(ws[W_RUN, k]))
+                                err[E_WORLD] = w0 + k * 64 + np.int64(_cttz(ws[W_RUN, k]))
                                 break
                         err[E_T] = t
                         err[E_ATOM] = -1
@@ -811,9 +849,9 @@ def step_lanes(cfg, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, wc_gp
                 hn -= 1
                 g = key & HEAP_MASK
                 in_heap[g] = False
-                status, hn = _apply_immediate(g, t, pass_no, policy, max_immediate, rule_i, rule_v, inst, valid,
+                status, hn = _apply_immediate(w0, g, t, pass_no, policy, max_immediate, rule_i, rule_v, inst, valid,
                                               st, lo, up, lc, tmask, tri, trf, tr_n, stats, err, n_imm, ws, wl, wc_ptr,
-                                              wc_code, wc_gptr, wg, b_ptr, b_atom, b_code, active, alist, alist_n,
+                                              wc_code, wc_gptr, wg, gs, alist, alist_n,
                                               apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap)
                 if status != STATUS_OK:
                     return status
@@ -825,7 +863,7 @@ def step_lanes(cfg, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, wc_gp
                 g = alist[base + i]
                 m_any = False
                 for k in range(nw):
-                    ws[W_ONE, k] = active[g, k] & ws[W_RUN, k]
+                    ws[W_ONE, k] = gs[g, k, 0] & ws[W_RUN, k]
                     if ws[W_ONE, k] != ZERO:
                         m_any = True
                 if m_any:
@@ -849,7 +887,7 @@ def step_lanes(cfg, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, wc_gp
                 pend_due[n] = t + rule_i[inst[g, INST_RULE], RULE_DELAY]
                 pend_g[n] = g
                 for k in range(nw):
-                    pend_m[n, k] = active[g, k]
+                    pend_m[n, k] = gs[g, k, 0]
                 n += 1
             pend_n[0] = n
             ctl[C_PHASE] = PH_DONE
@@ -860,46 +898,52 @@ def step_lanes(cfg, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, wc_gp
 
 
 @lanes_jit
-def fill_active(first, valid, st, b_ptr, b_atom, b_code, active, inst, alist, alist_n, apos, kind_base):
-    """Active masks of groundings first.. from the current state, and the active-anywhere lists rebuilt."""
+def fill_counts(first, valid, st, b_ptr, b_atom, b_code, gs, inst, alist, alist_n, apos, kind_base):
+    """Counts and active masks of groundings first.. from the current state; the active-anywhere lists
+    rebuilt."""
     nw = valid.shape[0]
-    for g in range(first, active.shape[0]):
+    for g in range(first, gs.shape[0]):
         for k in range(nw):
-            active[g, k] = _eval_body(g, k, b_ptr, b_atom, b_code, st) & valid[k]
-    rebuild_lists(active, inst, alist, alist_n, apos, kind_base)
+            for p in range(gs.shape[2]):
+                gs[g, k, p] = ZERO
+            for e in range(b_ptr[g], b_ptr[g + 1]):
+                a = b_atom[e]
+                _count_add(gs, g, k, ~_holds(b_code[e], st[a, P_T, k], st[a, P_F, k]) & valid[k])
+            gs[g, k, 0] = _count_zero(gs, g, k) & valid[k]
+    rebuild_lists(gs, inst, alist, alist_n, apos, kind_base)
 
 
 @lanes_jit
-def rebuild_lists(active, inst, alist, alist_n, apos, kind_base):
+def rebuild_lists(gs, inst, alist, alist_n, apos, kind_base):
     for k in range(alist_n.shape[0]):
         alist_n[k] = 0
-    for g in range(active.shape[0]):
+    for g in range(gs.shape[0]):
         apos[g] = -1
-        for k in range(active.shape[1]):
-            if active[g, k] != ZERO:
+        for k in range(gs.shape[1]):
+            if gs[g, k, 0] != ZERO:
                 _list_add(g, inst, alist, alist_n, apos, kind_base)
                 break
 
 
 @lanes_jit
-def restore_lanes(wmask, snap_st, snap_active, st, active, inst, alist, alist_n, apos, kind_base):
-    """The worlds of wmask take their planes and active masks from the snapshot (atoms and groundings
-    the snapshot has); the active-anywhere lists follow."""
+def restore_lanes(wmask, snap_st, snap_gs, st, gs, inst, alist, alist_n, apos, kind_base):
+    """The worlds of wmask take their planes, counts and active masks from the snapshot (atoms and
+    groundings the snapshot has); the active-anywhere lists follow."""
     nw = wmask.shape[0]
     for a in range(snap_st.shape[0]):
         for p in range(P_D):  # T, F, S (restore_columns clears D)
             for k in range(nw):
                 st[a, p, k] = (st[a, p, k] & ~wmask[k]) | (snap_st[a, p, k] & wmask[k])
-    for g in range(snap_active.shape[0]):
+    for g in range(snap_gs.shape[0]):
         was_any = False
         now_any = False
         for k in range(nw):
-            old = active[g, k]
-            new = (old & ~wmask[k]) | (snap_active[g, k] & wmask[k])
-            active[g, k] = new
+            old = gs[g, k, 0]
+            for p in range(gs.shape[2]):
+                gs[g, k, p] = (gs[g, k, p] & ~wmask[k]) | (snap_gs[g, k, p] & wmask[k])
             if old != ZERO:
                 was_any = True
-            if new != ZERO:
+            if gs[g, k, 0] != ZERO:
                 now_any = True
         if was_any != now_any:
             if now_any:
@@ -917,17 +961,17 @@ def world_values(st, atoms, worlds, out):
 
 
 @lanes_jit
-def restore_columns(wmask, full, snap_lo, snap_up, snap_lc, st, lo, up, lc):
-    """The worlds of wmask take their float bounds and last causes from the snapshot ([atom, world]):
-    every atom for the worlds of `full`, else only the atoms changed since the world's last restore
-    (plane D, cleared here). Atoms the snapshot does not have start unset."""
+def restore_columns(w0, wmask, full, snap_lo, snap_up, snap_lc, st, lo, up, lc):
+    """The worlds of wmask (worlds w0.. of lo, up, lc [atom, world]) take their float bounds and last
+    causes from the snapshot: every atom for the worlds of `full`, else only the atoms changed since
+    the world's last restore (plane D, cleared here). Atoms the snapshot does not have start unset."""
     n_snap = snap_lo.shape[0]
     for a in range(lo.shape[0]):
         for k in range(wmask.shape[0]):
             m = ((st[a, P_D, k] & wmask[k]) | full[k])
             st[a, P_D, k] &= ~wmask[k]
             while m != ZERO:
-                w = k * 64 + np.int64(_cttz(m))
+                w = w0 + k * 64 + np.int64(_cttz(m))
                 m &= m - ONE
                 if a < n_snap:
                     lo[a, w] = snap_lo[a, w]
@@ -939,3 +983,16 @@ def restore_columns(wmask, full, snap_lo, snap_up, snap_lc, st, lo, up, lc):
                     up[a, w] = 1.0
                     lc[a, w, 0] = -1
                     lc[a, w, 1] = -1
+
+
+@lanes_jit
+def plane_truth(st, plane, atoms, w0, n_worlds, out):
+    """out[j, w0 + w] = bit w of plane `plane` of atom atoms[j], for w < n_worlds ([1,1]: P_T,
+    [0,0]: P_F)."""
+    for j in range(atoms.shape[0]):
+        a = atoms[j]
+        for k in range(st.shape[2]):
+            m = st[a, plane, k]
+            base = k * 64
+            for b in range(min(64, n_worlds - base)):
+                out[j, w0 + base + b] = (m >> np.uint64(b)) & ONE != ZERO

@@ -36,12 +36,12 @@ def assert_same(a: Engine, b: Engine, t: int) -> None:
         assert sorted(a.pending(w)) == sorted(b.pending(w)), f"pending of world {w} at t={t}"
 
 
-def run_pair(sc: Scenario, worlds: int, seed: int) -> None:
+def run_pair(sc: Scenario, worlds: int, seed: int, threads: int) -> None:
     rng = np.random.default_rng(seed)
     kw = dict(worlds=worlds, max_passes=40, max_immediate=200,
               trace=rng.random(worlds) < 0.7)  # some worlds untraced
     a = Engine(sc.program, sc.graph, kernel="counting", **kw)
-    b = Engine(sc.program, sc.graph, kernel="lanes", **kw)
+    b = Engine(sc.program, sc.graph, kernel="lanes", threads=threads, **kw)
     facts = [f for step in sc.world_externals[0] for f in step] if sc.world_externals else []
     snaps: list[tuple[dict, dict]] = []
     for t in range(sc.steps + 3):
@@ -73,9 +73,12 @@ def run_pair(sc: Scenario, worlds: int, seed: int) -> None:
 
 
 @settings(max_examples=int(60 * SCALE), deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(sc=scenarios(per_world=1, crisp=True), worlds=st.sampled_from([70, 130]), seed=st.integers(0, 2**16))
-def test_lanes_match_counting_in_wide_batches_with_restores(sc: Scenario, worlds: int, seed: int) -> None:
-    run_pair(sc, worlds, seed)
+@given(sc=scenarios(per_world=1, crisp=True), worlds=st.sampled_from([70, 130]), seed=st.integers(0, 2**16),
+       threads=st.sampled_from([1, 2, 3]))
+def test_lanes_match_counting_in_wide_batches_with_restores(sc: Scenario, worlds: int, seed: int,
+                                                            threads: int) -> None:
+    """threads: the batch is cut into that many shards of whole words (at most one per word)."""
+    run_pair(sc, worlds, seed, threads)
 
 
 GAME_LIKE = """

@@ -120,6 +120,13 @@ class RuleSim(GameSim):
                 if s.advanced:
                     acts[i, 4 + d] = eng.atom("shoot", a, name)
         self._action_atoms = acts
+        # read-back: the atoms read after every step, once per step as a truth table (Engine.is_true); the
+        # id arrays above become row numbers of that table
+        tables = ("_agent_loc", "_agent_flags", "_dest", "_bullet_loc", "_bullet_flags", "_dir", "_hits", "_win")
+        self._read_atoms = np.unique(np.concatenate([getattr(self, name).ravel() for name in tables]))
+        self._rows = {name: np.searchsorted(self._read_atoms, getattr(self, name)).astype(np.int64)
+                      for name in tables}
+        self._shield_true = np.concatenate([self._may_act, self._no_ammo])  # allowed_actions reads them
 
     # ---- reading the world back ----
 
@@ -151,9 +158,10 @@ class RuleSim(GameSim):
         else:
             st = self.state
             prev = (st.pos, st.alive, st.ammo, st.moving, st.dest, st.bullet_pos, st.bullet_dir)
-        read_back(self.engine.lower, self._agent_loc, self._cell_xy, self._agent_flags, self._dest,
-                  self._bullet_loc, self._bullet_flags, self._dir, self._hits, self._bullet_team,
-                  self._bullet_agent, self._win, s.ammo, float(s.health), done, *prev,
+        rows = self._rows
+        read_back(self.engine.is_true(self._read_atoms), rows["_agent_loc"], self._cell_xy, rows["_agent_flags"],
+                  rows["_dest"], rows["_bullet_loc"], rows["_bullet_flags"], rows["_dir"], rows["_hits"],
+                  self._bullet_team, self._bullet_agent, rows["_win"], s.ammo, float(s.health), done, *prev,
                   pos, health, alive, ammo, moving, dest, unsafe, invalid, acted, bpos, bdir, hits_made,
                   hits_taken, win)
         self._events = (unsafe, invalid, acted, hits_made, hits_taken, win)
@@ -175,14 +183,14 @@ class RuleSim(GameSim):
         this step (game.rules section 7): bool [W, 2, N, 9]. Moves must not be blocked (off the map,
         into a mountain), shots need ammo, only an agent that may act has a choice; nothing is always
         allowed. Actions the scenario does not offer are False."""
-        lo, up = self.engine.lower, self.engine.upper
         w, n = self.n_worlds, self.scenario.agents_per_team
-        may = (lo[:, self._may_act] >= 1.0).reshape(w, 2, n)
+        true = self.engine.is_true(self._shield_true)  # [may_act..., no_ammo...] x worlds
+        may = true[:2 * n].T.reshape(w, 2, n)
         out = np.zeros((w, 2, n, 9), bool)
-        free = (up[:, self._blocked_move] <= 0.0).reshape(w, 2, n, 4)
+        free = self.engine.is_false(self._blocked_move.ravel()).T.reshape(w, 2, n, 4)
         out[..., :4] = free & may[..., None]
         if self.scenario.advanced:
-            out[..., 4:8] = (may & (lo[:, self._no_ammo] < 1.0).reshape(w, 2, n))[..., None]
+            out[..., 4:8] = (may & ~true[2 * n:].T.reshape(w, 2, n))[..., None]
         out[..., 8] = True
         return out
 

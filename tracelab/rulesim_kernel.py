@@ -56,33 +56,34 @@ def encode_actions(red, blue, done, allowed, action_atoms, prev, first_id, ext_p
 
 
 @njit(cache=True)
-def _first_true(lower, w, ids, row):
+def _first_true(truth, w, ids, row):
     for c in range(ids.shape[1]):
-        if lower[w, ids[row, c]] >= 1.0:
+        if truth[ids[row, c], w]:
             return c
     return -1
 
 
 @njit(cache=True)
-def read_back(lower, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc, bullet_flags, dir_ids,
+def read_back(truth, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc, bullet_flags, dir_ids,
               hits, bullet_team, bullet_agent, win_ids, ammo0, health0, done, prev_pos, prev_alive,
               prev_ammo, prev_moving, prev_dest, prev_bpos, prev_bdir,
               pos, health, alive, ammo, moving, dest, unsafe, invalid, acted, bpos, bdir, hits_made,
               hits_taken, win):
-    """Gather the game state of every world from atoms into the given arrays.
+    """Gather the game state of every world from atoms into the given arrays. truth [K, W] says which
+    atoms are [1,1] in which world (Engine.is_true); the id arrays index its rows.
     agent_flags [M, 5]: atom ids of alive, moving, unsafe, invalid, canAct per agent (M = 2N); unsafe,
     invalid and acted [W, 2, N] receive the last three. bullet_flags [B, 2]: flying, spent.
     hits [3, B, N]: struck / blanked / caught atoms of bullet b on enemy e. win_ids [2, 2]: captured,
     eliminated per team; win [W, 2] receives 'team won' (captured, or the enemy eliminated).
     A world with done[w] keeps its state (copied from the prev_* arrays) and has no events."""
-    n_worlds = lower.shape[0]
+    n_worlds = truth.shape[1]
     for w in range(n_worlds):
         if done[w]:
             _keep_world(w, prev_pos, prev_alive, prev_ammo, prev_moving, prev_dest, prev_bpos, prev_bdir,
                         health0, pos, health, alive, ammo, moving, dest, unsafe, invalid, acted, bpos,
                         bdir, hits_made, hits_taken, win)
         else:
-            _read_world(w, lower, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc, bullet_flags,
+            _read_world(w, truth, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc, bullet_flags,
                         dir_ids, hits, bullet_team, bullet_agent, win_ids, ammo0, health0, pos, health,
                         alive, ammo, moving, dest, unsafe, invalid, acted, bpos, bdir, hits_made,
                         hits_taken, win)
@@ -111,7 +112,7 @@ def _keep_world(w, prev_pos, prev_alive, prev_ammo, prev_moving, prev_dest, prev
 
 
 @njit(cache=True)
-def _read_world(w, lower, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc, bullet_flags, dir_ids,
+def _read_world(w, truth, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc, bullet_flags, dir_ids,
                 hits, bullet_team, bullet_agent, win_ids, ammo0, health0, pos, health, alive, ammo,
                 moving, dest, unsafe, invalid, acted, bpos, bdir, hits_made, hits_taken, win):
     m = agent_loc.shape[0]
@@ -119,19 +120,19 @@ def _read_world(w, lower, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc,
     for j in range(m):
         tm = j // n
         i = j % n
-        c = _first_true(lower, w, agent_loc, j)
+        c = _first_true(truth, w, agent_loc, j)
         pos[w, tm, i, 0] = cell_xy[c, 0]
         pos[w, tm, i, 1] = cell_xy[c, 1]
-        alive[w, tm, i] = lower[w, agent_flags[j, 0]] >= 1.0
+        alive[w, tm, i] = truth[agent_flags[j, 0], w]
         health[w, tm, i] = health0 if alive[w, tm, i] else 0.0
-        moving[w, tm, i] = lower[w, agent_flags[j, 1]] >= 1.0
-        unsafe[w, tm, i] = lower[w, agent_flags[j, 2]] >= 1.0
-        invalid[w, tm, i] = lower[w, agent_flags[j, 3]] >= 1.0
-        acted[w, tm, i] = lower[w, agent_flags[j, 4]] >= 1.0
+        moving[w, tm, i] = truth[agent_flags[j, 1], w]
+        unsafe[w, tm, i] = truth[agent_flags[j, 2], w]
+        invalid[w, tm, i] = truth[agent_flags[j, 3], w]
+        acted[w, tm, i] = truth[agent_flags[j, 4], w]
         dest[w, tm, i, 0] = -1
         dest[w, tm, i, 1] = -1
         if moving[w, tm, i] and dest_ids.shape[1] > 0:
-            d = _first_true(lower, w, dest_ids, j)
+            d = _first_true(truth, w, dest_ids, j)
             if d >= 0:
                 dest[w, tm, i, 0] = cell_xy[d, 0]
                 dest[w, tm, i, 1] = cell_xy[d, 1]
@@ -141,26 +142,26 @@ def _read_world(w, lower, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc,
     for b in range(bullet_loc.shape[0]):
         tm = bullet_team[b]
         i = bullet_agent[b]
-        if lower[w, bullet_flags[b, 1]] >= 1.0:
+        if truth[bullet_flags[b, 1], w]:
             ammo[w, tm, i] -= 1
         bpos[w, b, 0] = -1
         bpos[w, b, 1] = -1
         bdir[w, b] = -1
-        if lower[w, bullet_flags[b, 0]] >= 1.0:
-            c = _first_true(lower, w, bullet_loc, b)
+        if truth[bullet_flags[b, 0], w]:
+            c = _first_true(truth, w, bullet_loc, b)
             if c >= 0:
                 bpos[w, b, 0] = cell_xy[c, 0]
                 bpos[w, b, 1] = cell_xy[c, 1]
             for d in range(4):
-                if lower[w, dir_ids[b, d]] >= 1.0:
+                if truth[dir_ids[b, d], w]:
                     bdir[w, b] = d
         for e in range(hits.shape[2]):
             for kind in range(3):
-                if lower[w, hits[kind, b, e]] >= 1.0:
+                if truth[hits[kind, b, e], w]:
                     hits_made[w, tm, i] += 1
                     hits_taken[w, 1 - tm, e] += 1
     for tm in range(2):
-        win[w, tm] = lower[w, win_ids[tm, 0]] >= 1.0 or lower[w, win_ids[1 - tm, 1]] >= 1.0
+        win[w, tm] = truth[win_ids[tm, 0], w] or truth[win_ids[1 - tm, 1], w]
 
 
 @njit(cache=True)
