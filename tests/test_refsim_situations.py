@@ -1,9 +1,9 @@
 """Both simulators in the situations the spec lists (docs/game.md), plus the scripted policy.
 
 Every test that takes `start` or `sim_class` runs once per simulator: RefSim (hand-written) and RuleSim
-(rules/gridworld/game.rules on the engine). The few that need more than one hit to kill stay RefSim-only
-(the rule program models one-hit kills). Maps are 8x8 with red base (7,0) and blue base (0,7) unless a
-test says otherwise; agents start where the test puts them. Actions are the spec ids.
+(rules/gridworld/game.rules on the engine), some also with health 2 (two hits to kill). Maps are 8x8
+with red base (7,0) and blue base (0,7) unless a test says otherwise; agents start where the test puts
+them. Actions are the spec ids.
 """
 from __future__ import annotations
 
@@ -30,11 +30,10 @@ def make(red, blue, *, mountains=(), advanced=True, **kw) -> Scenario:
 
 
 Sim = RefSim | RuleSim
-# Rows for tests parametrized over health: health 2 (two hits to kill) is RefSim-only, because the rule
-# program models one-hit kills (scenario_program refuses damage < health, see
-# test_rulesim_refuses_damage_below_health).
+# Rows for tests parametrized over health: health 2 takes two hits to kill (game.rules section 2 counts
+# them)
 HEALTH_ROWS = [pytest.param(RefSim, 1.0, id="refsim-h1"), pytest.param(RuleSim, 1.0, id="rulesim-h1"),
-               pytest.param(RefSim, 2.0, id="refsim-h2")]
+               pytest.param(RefSim, 2.0, id="refsim-h2"), pytest.param(RuleSim, 2.0, id="rulesim-h2")]
 
 
 @pytest.fixture(params=[RefSim, RuleSim], ids=["refsim", "rulesim"])
@@ -429,11 +428,16 @@ def test_unsafe_moves_are_shielded_and_penalised(start):
     assert r.unsafe[0, 0, 0] and r.reward[0, 1] == R.valid_action
 
 
-def test_rulesim_refuses_damage_below_health():
-    # The rule program models one-hit kills: a scenario needing several hits is refused up front.
-    for health, damage in ((2.0, 1.0), (1.0, 0.5)):
-        with pytest.raises(ValueError, match="one-hit kills"):
-            RuleSim(make(red=[(7, 0)], blue=[(0, 7)], health=health, damage=damage))
+def test_several_hits_to_kill_count_across_steps_and_phases(start):
+    # health 1, damage 0.4: three hits kill. Blue stands on red's cell; red shoots point blank three
+    # times: health 0.6, then 0.2, then dead (and the trace of the rules counts each hit)
+    sim = start(make(red=[(3, 1)], blue=[(3, 1)], health=1.0, damage=0.4))
+    r = step(sim, [S_UP], [NOP])
+    assert r.alive[0, 1, 0] and r.health[0, 1, 0] == 1.0 - 0.4 and r.hits_taken[0, 1, 0] == 1
+    r = step(sim, [S_DOWN], [NOP])
+    assert r.alive[0, 1, 0] and r.health[0, 1, 0] == (1.0 - 0.4) - 0.4
+    r = step(sim, [S_LEFT], [NOP])
+    assert not r.alive[0, 1, 0] and r.health[0, 1, 0] == 0.0 and r.winner[0] == WINNER_RED
 
 
 def test_damage_above_health_kills_with_one_hit(start):

@@ -55,7 +55,8 @@ def generated_scenarios(draw) -> Scenario:
     changes["ammo"] = draw(st.sampled_from([3, 3, 0, 1, 2]))
     health = draw(st.sampled_from([1.0, 1.0, 0.5, 2.0]))
     changes["health"] = health
-    changes["damage"] = health * draw(st.sampled_from([1.0, 1.0, 1.5]))  # RuleSim: one-hit kills only
+    # one-hit kills, and 2, 3 or 4 hits to kill
+    changes["damage"] = health * draw(st.sampled_from([1.0, 1.0, 1.5, 0.5, 0.34, 0.25]))
     if draw(st.booleans()):
         changes["rewards"] = DISTINCT_REWARDS
     try:
@@ -242,7 +243,7 @@ def test_trace_explains_a_hit_and_the_death_it_causes(kind):
         sim.reset()
         trace_rows(sim)
         r = sim.step([S_UP], [NOP])
-        hit_atom, hit_rule, death_rule = f"blanked({bullet},{blue})", "w_blank", "d_blanked"
+        hit_atom, hit_rule, count_rule = f"blanked({bullet},{blue})", "w_blank", "hm_blanked"
     else:  # red's bullet flies right from (1,1) and reaches blue on (3,1) at the third step
         sim = RuleSim(situation([(1, 1)], [(3, 1)]), trace=True)
         sim.reset()
@@ -251,16 +252,21 @@ def test_trace_explains_a_hit_and_the_death_it_causes(kind):
         assert r.alive.all()
         trace_rows(sim)
         r = sim.step([NOP], [NOP])
-        hit_atom, hit_rule, death_rule = f"struck({bullet},{blue})", "b_hit", "d_struck"
+        hit_atom, hit_rule, count_rule = f"struck({bullet},{blue})", "b_hit", "hm_struck"
     assert not r.alive[0, 1, 0] and r.winner[0] == WINNER_RED  # the game saw the kill
     rows = trace_rows(sim)
     hit = [x for x in rows if x["atom"] == hit_atom]
     assert len(hit) == 1 and hit[0]["cause"] == hit_rule and hit[0]["new"] == (1.0, 1.0)
     assert f"A={blue}" in hit[0]["why"] and f"B={bullet}" in hit[0]["why"]  # which bullet, which agent
+    # the hit is counted against blue's health (hitMe names the bullet), that count kills, the kill is
+    # the death
+    counted = [x for x in rows if x["atom"] == f"hitMe({bullet},{blue})"]
+    assert len(counted) == 1 and counted[0]["cause"] == count_rule and f"B={bullet}" in counted[0]["why"]
+    killed = [x for x in rows if x["atom"] == f"killed({blue})"]
+    assert len(killed) == 1 and killed[0]["cause"] == "h_killed" and killed[0]["new"] == (1.0, 1.0)
     death = [x for x in rows if x["atom"] == f"alive({blue})"]
     assert len(death) == 1 and death[0]["old"] == (1.0, 1.0) and death[0]["new"] == (0.0, 0.0)
-    assert death[0]["cause"].startswith("d_") and death[0]["cause"] == death_rule
-    assert f"B={bullet}" in death[0]["why"]  # the death names the bullet that caused it
+    assert death[0]["cause"] == "d_killed" and f"A={blue}" in death[0]["why"]
     assert not any(x["atom"] == f"alive({red})" for x in rows)  # the shooter is untouched
 
 

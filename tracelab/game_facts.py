@@ -33,9 +33,6 @@ def game_program(path: str = str(GAME_RULES)) -> Program:
 
 def scenario_program(scenario: Scenario, rules: str = str(GAME_RULES)) -> Program:
     """The game rules plus the scenario's facts, as one program."""
-    if scenario.damage < scenario.health:
-        raise ValueError(f"scenario {scenario.name!r}: the rule program models one-hit kills; damage "
-                         f"{scenario.damage} must be at least health {scenario.health}")
     base = game_program(rules)
     program = replace(base, facts=[*base.facts, *scenario_facts(scenario)])
     check_program(program)  # again with the scenario's facts: predicates they set are no longer unknown
@@ -89,6 +86,7 @@ def scenario_facts(scenario: Scenario) -> list[Fact]:
             for k in range(ammo):
                 b = bullet_name(t, j, k)
                 fact("bullet", b)
+                fact("bulletPos", b, f"p{j * ammo + k + 1}")
                 fact("spent", b, lower=0.0, upper=0.0, static=False)
                 fact("owner", b, a)
                 for e in range(n):
@@ -102,9 +100,24 @@ def scenario_facts(scenario: Scenario) -> list[Fact]:
             fact("atLoc", a, cell(sx, sy), static=False)
             fact("alive", a, static=False)
             fact("exposed", a, cell(sx, sy), static=False)
-            fact("shotDown", a, lower=0.0, upper=0.0, static=False)
+            for event in ("hitNow", "blankHit", "deadOnArrival", "killed"):  # tested for [0,0] by rules
+                fact(event, a, lower=0.0, upper=0.0, static=False)
+            fact("tally", a, "q0_0")  # no hit yet (game.rules section 2)
             fact("shot", a, lower=0.0, upper=0.0, static=False)
             if ammo:
                 fact("ready", bullet_name(t, j, 0), static=False)
     fact("evenStep", "clock", lower=0.0, upper=0.0, static=False)
+    # phases within a step (game.rules sections 3 and 4) and the tally's counting chains
+    fact("clock", "clock")
+    fact("acting", "clock", lower=0.0, upper=0.0, static=False)
+    fact("walking", "clock", lower=0.0, upper=0.0, static=False)
+    # the tally's chain over pairs q<j>_<k>: j enemy bullet places looked at, k hits among them
+    kill = scenario.hits_to_kill
+    for j in range(n * ammo):
+        for k in range(kill):
+            fact("keepNext", f"q{j}_{k}", f"q{j + 1}_{k}")
+            fact("addNext", f"q{j}_{k}", f"q{j + 1}_{k + 1}")
+            fact("addPos", f"q{j + 1}_{k + 1}", f"p{j + 1}")
+    for j in range(n * ammo + 1):
+        fact("killAt", f"q{j}_{kill}")
     return facts

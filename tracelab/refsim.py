@@ -19,13 +19,12 @@ from dataclasses import dataclass, fields
 import numpy as np
 from numba import njit
 
-from .scenario import Scenario, team_index
+from .scenario import DEAD_EPS, Scenario, team_index
 from .sim_base import GameSim
 
 WINNER_NONE, WINNER_RED, WINNER_BLUE, WINNER_DRAW = -1, 0, 1, 2
 WINNER_NAMES = {WINNER_NONE: "none", WINNER_RED: "red", WINNER_BLUE: "blue", WINNER_DRAW: "draw"}
 SENTINEL = -1.0          # observed x, y of a dead agent / of a missing bullet
-DEAD_EPS = 1e-9          # health at or below this is 0 (float damage would otherwise leave 1e-16 alive)
 
 _DX = np.array([0, 0, -1, 1], dtype=np.int64)
 _DY = np.array([1, -1, 0, 0], dtype=np.int64)

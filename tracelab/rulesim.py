@@ -120,6 +120,7 @@ class RuleSim(GameSim):
                 if s.advanced:
                     acts[i, 4 + d] = eng.atom("shoot", a, name)
         self._action_atoms = acts
+        self._kind_hits = np.zeros((2, n, 3), np.int64)  # read_back's scratch
         # read-back: the atoms read after every step, once per step as a truth table (Engine.is_true); the
         # id arrays above become row numbers of that table
         tables = ("_agent_loc", "_agent_flags", "_dest", "_bullet_loc", "_bullet_flags", "_dir", "_hits", "_win")
@@ -130,12 +131,15 @@ class RuleSim(GameSim):
 
     # ---- reading the world back ----
 
-    def _read_state(self, done: np.ndarray | None = None, settle: bool = False) -> GameState:
+    def _read_state(self, done: np.ndarray | None = None, settle: bool = False,
+                    prev_health: np.ndarray | None = None) -> GameState:
         """The game state of every world, read from atoms (and the events of the last step into
         self._events: unsafe, invalid, acted [W, 2, N]; hits made / taken; which team won). Worlds in
         `done` keep their state from self.state and have no events. With `settle` (after a step) the
         step's rewards and the end of the game are settled first (settle_step; rewards into
-        self._rewards). t, terminated, truncated and winner are copies of the simulator's after that."""
+        self._rewards), and health takes the step's hits from self.state's; else health is `prev_health`
+        (default: the scenario's). t, terminated, truncated and winner are copies of the simulator's
+        after that."""
         s = self.scenario
         w, n = self.n_worlds, s.agents_per_team
         n_b = len(self._bullet_team)
@@ -159,9 +163,14 @@ class RuleSim(GameSim):
             st = self.state
             prev = (st.pos, st.alive, st.ammo, st.moving, st.dest, st.bullet_pos, st.bullet_dir)
         rows = self._rows
+        if settle:
+            prev_health = self.state.health
+        elif prev_health is None:
+            prev_health = np.full((w, 2, n), float(s.health))
         read_back(self.engine.is_true(self._read_atoms), rows["_agent_loc"], self._cell_xy, rows["_agent_flags"],
                   rows["_dest"], rows["_bullet_loc"], rows["_bullet_flags"], rows["_dir"], rows["_hits"],
-                  self._bullet_team, self._bullet_agent, rows["_win"], s.ammo, float(s.health), done, *prev,
+                  self._bullet_team, self._bullet_agent, rows["_win"], s.ammo, float(s.health), float(s.damage),
+                  settle, prev_health, self._kind_hits, done, *prev,
                   pos, health, alive, ammo, moving, dest, unsafe, invalid, acted, bpos, bdir, hits_made,
                   hits_taken, win)
         self._events = (unsafe, invalid, acted, hits_made, hits_taken, win)
@@ -217,7 +226,9 @@ class RuleSim(GameSim):
         self.truncated[sel] = False
         self._n_done = int((self.terminated | self.truncated).sum())
         self.winner[sel] = WINNER_NONE
-        self.state = self._read_state()
+        health = self.state.health.copy()
+        health[sel] = float(self.scenario.health)
+        self.state = self._read_state(prev_health=health)
         cur = self._observe_both(self.state)
         obs = self._obs.copy()
         obs[sel] = self._with_history(cur, cur)[sel]

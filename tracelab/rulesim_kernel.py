@@ -65,8 +65,8 @@ def _first_true(truth, w, ids, row):
 
 @njit(cache=True)
 def read_back(truth, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc, bullet_flags, dir_ids,
-              hits, bullet_team, bullet_agent, win_ids, ammo0, health0, done, prev_pos, prev_alive,
-              prev_ammo, prev_moving, prev_dest, prev_bpos, prev_bdir,
+              hits, bullet_team, bullet_agent, win_ids, ammo0, health0, damage, apply_hits, prev_health,
+              kind_hits, done, prev_pos, prev_alive, prev_ammo, prev_moving, prev_dest, prev_bpos, prev_bdir,
               pos, health, alive, ammo, moving, dest, unsafe, invalid, acted, bpos, bdir, hits_made,
               hits_taken, win):
     """Gather the game state of every world from atoms into the given arrays. truth [K, W] says which
@@ -75,24 +75,28 @@ def read_back(truth, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc, bull
     invalid and acted [W, 2, N] receive the last three. bullet_flags [B, 2]: flying, spent.
     hits [3, B, N]: struck / blanked / caught atoms of bullet b on enemy e. win_ids [2, 2]: captured,
     eliminated per team; win [W, 2] receives 'team won' (captured, or the enemy eliminated).
-    A world with done[w] keeps its state (copied from the prev_* arrays) and has no events."""
+    Health is prev_health less `damage` per hit, the hits of each phase (arrival, point blank, walk-in)
+    taken together and 0 at or below DEAD_EPS, as docs/game.md computes it (with apply_hits; else the
+    step's events are not new, e.g. at a reset, and health is prev_health); a dead agent's is 0.
+    kind_hits [2, N, 3] is scratch. A world with done[w] keeps its state (copied from the prev_*
+    arrays) and has no events."""
     n_worlds = truth.shape[1]
     for w in range(n_worlds):
         if done[w]:
             _keep_world(w, prev_pos, prev_alive, prev_ammo, prev_moving, prev_dest, prev_bpos, prev_bdir,
-                        health0, pos, health, alive, ammo, moving, dest, unsafe, invalid, acted, bpos,
+                        prev_health, pos, health, alive, ammo, moving, dest, unsafe, invalid, acted, bpos,
                         bdir, hits_made, hits_taken, win)
         else:
             _read_world(w, truth, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc, bullet_flags,
-                        dir_ids, hits, bullet_team, bullet_agent, win_ids, ammo0, health0, pos, health,
-                        alive, ammo, moving, dest, unsafe, invalid, acted, bpos, bdir, hits_made,
-                        hits_taken, win)
+                        dir_ids, hits, bullet_team, bullet_agent, win_ids, ammo0, pos, alive, ammo, moving,
+                        dest, unsafe, invalid, acted, bpos, bdir, hits_made, hits_taken, win, kind_hits)
+            _health(w, damage, apply_hits, prev_health, kind_hits, alive, health)
 
 
 @njit(cache=True)
-def _keep_world(w, prev_pos, prev_alive, prev_ammo, prev_moving, prev_dest, prev_bpos, prev_bdir, health0,
-                pos, health, alive, ammo, moving, dest, unsafe, invalid, acted, bpos, bdir, hits_made,
-                hits_taken, win):
+def _keep_world(w, prev_pos, prev_alive, prev_ammo, prev_moving, prev_dest, prev_bpos, prev_bdir,
+                prev_health, pos, health, alive, ammo, moving, dest, unsafe, invalid, acted, bpos, bdir,
+                hits_made, hits_taken, win):
     pos[w] = prev_pos[w]
     alive[w] = prev_alive[w]
     ammo[w] = prev_ammo[w]
@@ -103,7 +107,7 @@ def _keep_world(w, prev_pos, prev_alive, prev_ammo, prev_moving, prev_dest, prev
     for tm in range(2):
         win[w, tm] = False
         for i in range(alive.shape[2]):
-            health[w, tm, i] = health0 if alive[w, tm, i] else 0.0
+            health[w, tm, i] = prev_health[w, tm, i]
             hits_made[w, tm, i] = 0
             hits_taken[w, tm, i] = 0
             unsafe[w, tm, i] = False
@@ -113,8 +117,8 @@ def _keep_world(w, prev_pos, prev_alive, prev_ammo, prev_moving, prev_dest, prev
 
 @njit(cache=True)
 def _read_world(w, truth, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc, bullet_flags, dir_ids,
-                hits, bullet_team, bullet_agent, win_ids, ammo0, health0, pos, health, alive, ammo,
-                moving, dest, unsafe, invalid, acted, bpos, bdir, hits_made, hits_taken, win):
+                hits, bullet_team, bullet_agent, win_ids, ammo0, pos, alive, ammo, moving, dest, unsafe,
+                invalid, acted, bpos, bdir, hits_made, hits_taken, win, kind_hits):
     m = agent_loc.shape[0]
     n = m // 2
     for j in range(m):
@@ -124,7 +128,8 @@ def _read_world(w, truth, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc,
         pos[w, tm, i, 0] = cell_xy[c, 0]
         pos[w, tm, i, 1] = cell_xy[c, 1]
         alive[w, tm, i] = truth[agent_flags[j, 0], w]
-        health[w, tm, i] = health0 if alive[w, tm, i] else 0.0
+        for kind in range(3):
+            kind_hits[tm, i, kind] = 0
         moving[w, tm, i] = truth[agent_flags[j, 1], w]
         unsafe[w, tm, i] = truth[agent_flags[j, 2], w]
         invalid[w, tm, i] = truth[agent_flags[j, 3], w]
@@ -160,8 +165,24 @@ def _read_world(w, truth, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc,
                 if truth[hits[kind, b, e], w]:
                     hits_made[w, tm, i] += 1
                     hits_taken[w, 1 - tm, e] += 1
+                    kind_hits[1 - tm, e, kind] += 1
     for tm in range(2):
         win[w, tm] = truth[win_ids[tm, 0], w] or truth[win_ids[1 - tm, 1], w]
+
+
+@njit(cache=True)
+def _health(w, damage, apply_hits, prev_health, kind_hits, alive, health):
+    for tm in range(2):
+        for i in range(alive.shape[2]):
+            h = prev_health[w, tm, i]
+            if apply_hits:
+                for kind in range(3):  # arrival, point blank, walk-in: one subtraction each
+                    k = kind_hits[tm, i, kind]
+                    if k > 0:
+                        h -= damage * k
+                        if h <= 1e-9:  # DEAD_EPS (tracelab.scenario)
+                            h = 0.0
+            health[w, tm, i] = h if alive[w, tm, i] else 0.0
 
 
 @njit(cache=True)

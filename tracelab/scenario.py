@@ -48,6 +48,9 @@ def team_index(team: int | str) -> int:
     return int(team)
 
 
+DEAD_EPS = 1e-9  # health at or below this is 0 (float damage would otherwise leave 1e-16 alive)
+
+
 class ScenarioError(ValueError):
     """A scenario file or dict is invalid; the message names the source and the field."""
 
@@ -277,6 +280,15 @@ class Scenario:
 
     def cell_id(self, x: int, y: int) -> int:
         return y * self.width + x
+
+    @property
+    def hits_to_kill(self) -> int:
+        """How many hits take an agent's health to 0: the least k with health - k·damage <= DEAD_EPS
+        (docs/game.md, 'Hits resolve')."""
+        k = 1
+        while self.health - k * self.damage > DEAD_EPS:
+            k += 1
+        return k
 
     @cached_property
     def mountain_grid(self) -> np.ndarray:
