@@ -139,8 +139,39 @@ def _push(g, inst, heap, hn, in_heap):
 
 
 @kernel_jit
+def _applies(w, g, lo, up, static, rule_i, rule_f, policy, inst):
+    """Would active grounding g, applied now in world w, change its head (or meet an inconsistency
+    under abort)? Only such groundings become candidates: one that would not can only become one when
+    its head changes or it becomes active again, and both push it then."""
+    a = inst[g, INST_HEAD]
+    if static[w, a]:
+        return False
+    r = inst[g, INST_RULE]
+    l = rule_f[r, 0]
+    u = rule_f[r, 1]
+    cl = lo[w, a]
+    cu = up[w, a]
+    if rule_i[r, RULE_MODE] == MODE_OVERRIDE:
+        rl, ru = l, u
+    else:
+        rl, ru = max(cl, l), min(cu, u)
+    if rl > ru + EPS:
+        if policy == POLICY_KEEP_OLD:
+            return False
+        if policy == POLICY_ABORT:
+            return True
+        if policy == POLICY_RESET_FREEZE:
+            rl, ru = 0.0, 1.0
+        elif policy == POLICY_TAKE_NEW:
+            rl, ru = l, u
+        else:
+            rl, ru = min(cl, l), max(cu, u)
+    return rl != cl or ru != cu
+
+
+@kernel_jit
 def _set_atom(w, t, pass_no, a, cl, cu, nl, nu, kind, cid, g_src, nsrc, skip, lo, up, last_cause,
-              trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, unsat, inst,
+              static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, unsat, inst,
               act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap):
     """Change atom a of world w from [cl,cu] to [nl,nu]: log the row, update the counts of the
     groundings that read a (activating and deactivating them), and make the immediate groundings
@@ -207,13 +238,13 @@ def _set_atom(w, t, pass_no, a, cl, cu, nl, nu, kind, cid, g_src, nsrc, skip, lo
                     act[w, kind_base[k] + p] = g
                     act_pos[w, g] = p
                     act_n[w, k] = p + 1
-                    if k == KIND_IMMEDIATE:
+                    if k == KIND_IMMEDIATE and _applies(w, g, lo, up, static, rule_i, rule_f, policy, inst):
                         hn = _push(g, inst, heap, hn, in_heap)
     stats[w, STAT_WATCH_VISITS] += visits
     # the immediate groundings that set a may now change it (back)
     for k in range(ih_ptr[a], ih_ptr[a + 1]):
         g = ih_inst[k]
-        if g != skip and unsat[w, g] == 0:
+        if g != skip and unsat[w, g] == 0 and _applies(w, g, lo, up, static, rule_i, rule_f, policy, inst):
             hn = _push(g, inst, heap, hn, in_heap)
     return hn
 
@@ -359,8 +390,8 @@ def _sort_small(a, n):
 
 
 @kernel_jit
-def _apply_groups(w, t, pass_no, policy, slot_of, touched, n_touched, si, sf, out, lo, up, static,
-                  last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg,
+def _apply_groups(w, t, pass_no, policy, rule_i, rule_f, slot_of, touched, n_touched, si, sf, out, lo, up,
+                  static, last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg,
                   unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap,
                   changed):
     """Apply every pending group of this pass (one per touched atom), in atom order.
@@ -406,12 +437,12 @@ def _apply_groups(w, t, pass_no, policy, slot_of, touched, n_touched, si, sf, ou
             changed[0] += 1
             if inconsistent:
                 hn = _set_atom(w, t, pass_no, a, cl, cu, nl, nu, CAUSE_POLICY, policy, si[s, S_RULE_INST], nsrc,
-                               -1, lo, up, last_cause, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_neg,
+                               -1, lo, up, last_cause, static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_neg,
                                wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst,
                                heap, hn, in_heap)
             else:
                 hn = _set_atom(w, t, pass_no, a, cl, cu, nl, nu, kind, si[s, S_PRIM_ID], si[s, S_PRIM_INST],
-                               nsrc, -1, lo, up, last_cause, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd,
+                               nsrc, -1, lo, up, last_cause, static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd,
                                wc_neg, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
                                ih_inst, heap, hn, in_heap)
             if hn < 0:
@@ -452,7 +483,7 @@ def _one_source(cl, cu, l, u, override, policy, out):
 
 
 @kernel_jit
-def _reset_world(w, t, lo, up, static, last_cause, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_neg,
+def _reset_world(w, t, policy, rule_i, rule_f, lo, up, static, last_cause, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_neg,
                  wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap):
     """`%timesteps reset`: every non-static atom goes back to [0,1] at the start of a step."""
     for a in range(lo.shape[1]):
@@ -462,7 +493,7 @@ def _reset_world(w, t, lo, up, static, last_cause, trace_on, tri, trf, tr_n, sta
         cu = up[w, a]
         if cl == 0.0 and cu == 1.0:
             continue
-        hn = _set_atom(w, t, 0, a, cl, cu, 0.0, 1.0, CAUSE_RESET, -1, -1, 0, -1, lo, up, last_cause, trace_on,
+        hn = _set_atom(w, t, 0, a, cl, cu, 0.0, 1.0, CAUSE_RESET, -1, -1, 0, -1, lo, up, last_cause, static, rule_i, rule_f, policy, trace_on,
                        tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, unsat, inst, act, act_n,
                        act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap)
         if hn < 0:
@@ -533,7 +564,7 @@ def _step_world(w, t, fact_override, policy, max_passes, max_immediate, rule_i, 
     hn = 0
     # 1. start of the step
     if reset and t > 0:
-        hn = _reset_world(w, t, lo, up, static, last_cause, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd,
+        hn = _reset_world(w, t, policy, rule_i, rule_f, lo, up, static, last_cause, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd,
                           wc_neg, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst,
                           heap, hn, in_heap)
         if hn < 0:
@@ -564,7 +595,7 @@ def _step_world(w, t, fact_override, policy, max_passes, max_immediate, rule_i, 
             kept += 1
     pend_n[w] = kept
     changed[0] = 0
-    status, hn = _apply_groups(w, t, 0, policy, slot_of, touched, n_touched, si, sf, out, lo, up, static,
+    status, hn = _apply_groups(w, t, 0, policy, rule_i, rule_f, slot_of, touched, n_touched, si, sf, out, lo, up, static,
                                last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd, wc_neg, wc_gptr,
                                wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap, hn,
                                in_heap, changed)
@@ -574,7 +605,9 @@ def _step_world(w, t, fact_override, policy, max_passes, max_immediate, rule_i, 
     # grounding becomes a candidate when it becomes active or an atom it sets changes (_set_atom)
     base = kind_base[KIND_IMMEDIATE]
     for k in range(act_n[w, KIND_IMMEDIATE]):
-        hn = _push(act[w, base + k], inst, heap, hn, in_heap)
+        g = act[w, base + k]
+        if _applies(w, g, lo, up, static, rule_i, rule_f, policy, inst):
+            hn = _push(g, inst, heap, hn, in_heap)
     # 3. fixpoint: immediate phase, then one simultaneous ordinary pass, until nothing changes
     pass_no = 1
     n_immediate = 0
@@ -624,10 +657,10 @@ def _step_world(w, t, fact_override, policy, max_passes, max_immediate, rule_i, 
             freeze = out[3] > 0.5
             if inconsistent:
                 hn = _set_atom(w, t, pass_no, a, cl, cu, out[0], out[1], CAUSE_POLICY, policy, g, 1, -1, lo, up,
-                               last_cause, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg,
+                               last_cause, static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg,
                                unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap)
             else:
-                hn = _set_atom(w, t, pass_no, a, cl, cu, out[0], out[1], CAUSE_RULE, r, g, 1, g, lo, up, last_cause,
+                hn = _set_atom(w, t, pass_no, a, cl, cu, out[0], out[1], CAUSE_RULE, r, g, 1, g, lo, up, last_cause, static, rule_i, rule_f, policy,
                                trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, unsat, inst,
                                act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap)
             if hn < 0:
@@ -644,7 +677,7 @@ def _step_world(w, t, fact_override, policy, max_passes, max_immediate, rule_i, 
                         2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, False, slot_of, touched,
                         n_touched, si, sf)
         changed[0] = 0
-        status, hn = _apply_groups(w, t, pass_no, policy, slot_of, touched, n_touched, si, sf, out, lo, up,
+        status, hn = _apply_groups(w, t, pass_no, policy, rule_i, rule_f, slot_of, touched, n_touched, si, sf, out, lo, up,
                                    static, last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd,
                                    wc_neg, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
                                    ih_inst, heap, hn, in_heap, changed)
