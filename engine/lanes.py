@@ -235,7 +235,28 @@ def _pop(heap, hn):
 
 
 @lanes_jit
-def _watch(a, skip, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs, inst, alist,
+def _changes(g, k, st, inst, rule_i, rule_v):
+    """The worlds of word k where immediate grounding g, applied now, could change its head (a superset:
+    an inconsistency counts, whatever the policy). Only there is it made a candidate: elsewhere it can
+    become one only when its head changes or it becomes active again, and both push it then."""
+    a = inst[g, INST_HEAD]
+    r = inst[g, INST_RULE]
+    v = rule_v[r]
+    t = st[a, P_T, k]
+    f = st[a, P_F, k]
+    if v == V_T:
+        m = ~t
+    elif v == V_F:
+        m = ~f
+    elif rule_i[r, RULE_MODE] == MODE_OVERRIDE:
+        m = t | f
+    else:
+        m = ZERO
+    return m & ~st[a, P_S, k]
+
+
+@lanes_jit
+def _watch(a, skip, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs, inst, rule_i, rule_v, alist,
            alist_n, apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap, stats):
     """Atom a changed in the worlds ws[W_C] (its old planes in ws[W_OLDT], ws[W_OLDF]; st holds the new):
     update the counts and active masks of the groundings that read it, keep the active-anywhere lists, and make the
@@ -281,8 +302,9 @@ def _watch(a, skip, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs, inst, a
                 if new == old:
                     continue
                 gs[g, k, 0] = new
-                if new & ~old:
-                    new_bits = True
+                if new & ~old and inst[g, INST_KIND] == KIND_IMMEDIATE:
+                    if new & ~old & _changes(g, k, st, inst, rule_i, rule_v):
+                        new_bits = True
                 if old == ZERO:
                     filled = True
                 elif new == ZERO:
@@ -298,7 +320,7 @@ def _watch(a, skip, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs, inst, a
                     _list_add(g, inst, alist, alist_n, apos, kind_base)
                 elif listed and not now_any:
                     _list_remove(g, inst, alist, alist_n, apos, kind_base)
-            if new_bits and inst[g, INST_KIND] == KIND_IMMEDIATE:
+            if new_bits:
                 hn = _push(g, inst, heap, hn, in_heap)
     stats[0, STAT_WATCH_VISITS] += visits
     for i in range(ih_ptr[a], ih_ptr[a + 1]):
@@ -306,7 +328,7 @@ def _watch(a, skip, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs, inst, a
         if g == skip or in_heap[g]:
             continue
         for k in range(nw):
-            if gs[g, k, 0] & ws[W_C, k]:
+            if gs[g, k, 0] & ws[W_C, k] and gs[g, k, 0] & ws[W_C, k] & _changes(g, k, st, inst, rule_i, rule_v):
                 hn = _push(g, inst, heap, hn, in_heap)
                 break
     return hn
@@ -660,7 +682,7 @@ def _apply_immediate(w0, g, t, pass_no, policy, max_immediate, rule_i, rule_v, i
                 lc[a, w0 + w, 1] = r
                 _row(w0, w, t, pass_no, a, ov, nv, CAUSE_RULE, r, g, 1, tmask, tri, trf, tr_n)
     hn = _watch(a, -1 if any_inc else g, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs,
-                inst, alist, alist_n, apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap, stats)
+                inst, rule_i, rule_v, alist, alist_n, apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap, stats)
     return STATUS_OK, hn
 
 
@@ -739,7 +761,7 @@ def step_lanes(cfg, w0, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, w
                     return STATUS_TRACE_ROOM
                 if _reset_atom(w0, a, t, valid, st, lo, up, lc, tmask, tri, trf, tr_n, stats, ws):
                     hn = _watch(a, -1, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs,
-                                inst, alist, alist_n, apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap,
+                                inst, rule_i, rule_v, alist, alist_n, apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap,
                                 stats)
             ctl[C_PHASE] = PH_PASS0
         elif phase == PH_PASS0:
@@ -801,7 +823,7 @@ def step_lanes(cfg, w0, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, w
                         any_c = True
                 if any_c:
                     hn = _watch(a, -1, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs,
-                                inst, alist, alist_n, apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap,
+                                inst, rule_i, rule_v, alist, alist_n, apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap,
                                 stats)
             n_touched[0] = 0
             src_n[0] = 0
@@ -810,7 +832,11 @@ def step_lanes(cfg, w0, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, w
                 # after that, groundings become candidates when they become active or their head changes
                 base = kind_base[KIND_IMMEDIATE]
                 for i in range(alist_n[KIND_IMMEDIATE]):
-                    hn = _push(alist[base + i], inst, heap, hn, in_heap)
+                    g = alist[base + i]
+                    for k in range(nw):
+                        if gs[g, k, 0] & _changes(g, k, st, inst, rule_i, rule_v):
+                            hn = _push(g, inst, heap, hn, in_heap)
+                            break
                 ctl[C_PASS] = 1
                 ctl[C_PHASE] = PH_IMMEDIATE
             else:
