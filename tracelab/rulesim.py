@@ -228,7 +228,9 @@ class RuleSim(GameSim):
         self.winner[sel] = WINNER_NONE
         health = self.state.health.copy()
         health[sel] = float(self.scenario.health)
-        self.state = self._read_state(prev_health=health)
+        keep = np.ones(self.n_worlds, bool)  # the other worlds keep their state: only these are read
+        keep[sel] = False
+        self.state = self._read_state(keep if keep.any() else None, prev_health=health)
         cur = self._observe_both(self.state)
         obs = self._obs.copy()
         obs[sel] = self._with_history(cur, cur)[sel]

@@ -23,7 +23,7 @@ def sim_rates(agents: list[int], worlds: list[int], repeats: int, target_s: floa
         for w in worlds:
             ref, _ = get_sim("reference", n, w)
             rules, build_s = get_sim("rules", n, w)
-            row = {"agents": n, "worlds": w, "rules_build_s": build_s,
+            row = {"agents": n, "worlds": w, "rules_build_s": build_s, "rules_kernel": rules.engine.kernel,
                    "reference": measure(ref, False, repeats, target_s),
                    "rules_trace_off": measure(rules, False, repeats, target_s, engine_time=False),
                    "rules_trace_on": measure(rules, True, repeats, target_s, engine_time=False)}
