@@ -247,7 +247,7 @@ class LaneState:
         return self.truth_plane(atoms, L.P_T if value == 1.0 else L.P_F)
 
     def truth_plane(self, atoms: np.ndarray, plane: int) -> np.ndarray:
-        out = np.empty((len(atoms), self.eng.n_worlds), np.bool_)
+        out = np.zeros((len(atoms), self.eng.n_worlds), np.bool_)
         for sh in self.shards:
             L.plane_truth(sh.st, plane, atoms, sh.w0, sh.w1 - sh.w0, out)
         return out
@@ -272,7 +272,7 @@ class LaneState:
 
     def step(self, ext_ptr: np.ndarray, ext_i: np.ndarray, ext_f: np.ndarray) -> int:
         eng = self.eng
-        ext_v = crisp_codes(ext_f[:, 0], ext_f[:, 1])  # the Engine checked that they are crisp
+        ext_v = eng._ext_codes  # the Engine found them crisp
         if self._pool is None:
             statuses = [self.shards[0].step(self, ext_ptr, ext_i, ext_v)]
         else:

@@ -311,8 +311,10 @@ class Engine:
                 raise RuntimeError("step(external=...) with facts queued by add_fact(s): use one or the other")
             ext_ptr, ext_i, ext_f = external  # the kernel refuses atoms nothing can set
             n = int(ext_ptr[-1])
-        if self.kernel == "lanes" and len(ext_f) and (crisp_codes(ext_f[:, 0], ext_f[:, 1]) < 0).any():
-            self._to_counting()
+        if self.kernel == "lanes":
+            self._ext_codes = crisp_codes(ext_f[:, 0], ext_f[:, 1])
+            if (self._ext_codes < 0).any():
+                self._to_counting()
         self._cfg[K.CFG_T] = self.t
         status = self._state.step(ext_ptr, ext_i, ext_f)
         if status != K.STATUS_OK:

@@ -1013,12 +1013,14 @@ def restore_columns(w0, wmask, full, snap_lo, snap_up, snap_lc, st, lo, up, lc):
 
 @lanes_jit
 def plane_truth(st, plane, atoms, w0, n_worlds, out):
-    """out[j, w0 + w] = bit w of plane `plane` of atom atoms[j], for w < n_worlds ([1,1]: P_T,
-    [0,0]: P_F)."""
+    """Sets out[j, w0 + w] where bit w of plane `plane` of atom atoms[j] is set, for w < n_worlds ([1,1]:
+    P_T, [0,0]: P_F). `out` comes zeroed: only set bits are visited (most atoms hold in few worlds)."""
     for j in range(atoms.shape[0]):
         a = atoms[j]
         for k in range(st.shape[2]):
             m = st[a, plane, k]
-            base = k * 64
-            for b in range(min(64, n_worlds - base)):
-                out[j, w0 + base + b] = (m >> np.uint64(b)) & ONE != ZERO
+            while m != ZERO:
+                w = k * 64 + np.int64(_cttz(m))
+                m &= m - ONE
+                if w < n_worlds:
+                    out[j, w0 + w] = True
