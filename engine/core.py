@@ -77,6 +77,7 @@ class Engine:
         # one thread unless asked: on this project's 2-core machines a second thread stepping half the
         # batch measured slower, not faster (docs/benchmarks.md)
         self.threads = threads or 1
+        self._ext_codes = np.zeros(0, np.int8)  # crisp value codes of this step's external rows (lanes)
         self._state: CountingState | LaneState = self._choose_backend(kernel)
         self._ext: list[tuple[np.ndarray, ...]] = []  # chunks of (atoms, lower, upper, world, static)
         self._settable = np.zeros(0, np.bool_)
@@ -118,11 +119,11 @@ class Engine:
         and fact sets [0,0], [1,1] or [0,1]) and is faster for large batches."""
         if kernel not in KERNELS:
             raise ValueError(f"kernel must be one of {KERNELS}, got {kernel!r}")
-        crisp = self._not_crisp() is None
-        if kernel == "lanes" and not crisp:
+        not_crisp = self._not_crisp()
+        if kernel == "lanes" and not_crisp:
             raise ValueError(f"kernel='lanes' needs a crisp program (bounds [0,0], [1,1] or [0,1] only): "
-                             f"{self._not_crisp()}")
-        if kernel == "lanes" or (kernel == "auto" and crisp and self.n_worlds >= LANES_MIN_WORLDS):
+                             f"{not_crisp}")
+        if kernel == "lanes" or (kernel == "auto" and not not_crisp and self.n_worlds >= LANES_MIN_WORLDS):
             return LaneState(self, self.threads)
         return CountingState(self)
 

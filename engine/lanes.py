@@ -110,17 +110,6 @@ def _holds(code, t, f):
 
 
 @lanes_jit
-def _eval_body(g, k, b_ptr, b_atom, b_code, st):
-    m = ALL
-    for e in range(b_ptr[g], b_ptr[g + 1]):
-        a = b_atom[e]
-        m &= _holds(b_code[e], st[a, P_T, k], st[a, P_F, k])
-        if m == ZERO:
-            break
-    return m
-
-
-@lanes_jit
 def _count_add(gs, g, k, m):
     """Add one to the unsatisfied-clause count of grounding g in the worlds m of word k. Counts are
     bit-sliced: gs[g, k, 1 + p] holds bit p of every world's count (gs[g, k, 0] is the active mask)."""
@@ -162,17 +151,6 @@ def _lo(v):
 @lanes_jit
 def _up(v):
     return 0.0 if v == V_F else 1.0
-
-
-@lanes_jit
-def _value(st, a, w):
-    k = w >> 6
-    bit = ONE << np.uint64(w & 63)
-    if st[a, P_T, k] & bit:
-        return V_T
-    if st[a, P_F, k] & bit:
-        return V_F
-    return V_U
 
 
 @lanes_jit
@@ -328,7 +306,7 @@ def _watch(a, skip, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs, inst, r
         if g == skip or in_heap[g]:
             continue
         for k in range(nw):
-            if gs[g, k, 0] & ws[W_C, k] and gs[g, k, 0] & ws[W_C, k] & _changes(g, k, st, inst, rule_i, rule_v):
+            if gs[g, k, 0] & ws[W_C, k] & _changes(g, k, st, inst, rule_i, rule_v):
                 hn = _push(g, inst, heap, hn, in_heap)
                 break
     return hn
@@ -976,14 +954,6 @@ def restore_lanes(wmask, snap_st, snap_gs, st, gs, inst, alist, alist_n, apos, k
                 _list_add(g, inst, alist, alist_n, apos, kind_base)
             else:
                 _list_remove(g, inst, alist, alist_n, apos, kind_base)
-
-
-@lanes_jit
-def world_values(st, atoms, worlds, out):
-    """out[i, j] = crisp value code of atom atoms[j] in world worlds[i]."""
-    for i in range(worlds.shape[0]):
-        for j in range(atoms.shape[0]):
-            out[i, j] = _value(st, atoms[j], worlds[i])
 
 
 @lanes_jit
