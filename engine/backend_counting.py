@@ -151,6 +151,9 @@ class CountingState:
         self._pend[worlds, :, 0] += shift
         self._pend_n[worlds] = pend_n[worlds]
 
+    def bound(self, atom: int, world: int) -> tuple[float, float]:
+        return float(self.lower[world, atom]), float(self.upper[world, atom])
+
     def truth(self, atoms: np.ndarray, value: float) -> np.ndarray:
         """bool [atoms, worlds]: value 1.0, where each atom is [1,1]; value 0.0, where it is [0,0]."""
         out = np.empty((len(atoms), self.eng.n_worlds), np.bool_)

@@ -2,9 +2,10 @@
 
 An atom's state in all worlds is bit planes (T: [1,1], F: [0,0], S: static, D: changed since the world's
 last restore) of ceil(W/64) words; a grounding's is a mask of the worlds where it is active and its
-unsatisfied-clause counts, bit-sliced. Besides the planes, the float bounds that Engine.lower/upper show
-are kept per [atom, world] (written only where an atom changes), and the cause of each atom's last change
-per world (for the messages of `%inconsistency abort`).
+unsatisfied-clause counts, bit-sliced. Engine.lower/upper are read off the planes (a crisp bound is one
+of three values). Besides the planes, the cause of each atom's last change is kept per world (for the
+messages of `%inconsistency abort`), tagged with the world's restore count: a restore only counts up, and
+a cause older than the world's last restore is that snapshot's.
 
 The batch is cut into shards of whole words, one per thread (Engine(threads=...)): each shard has its own
 planes, lists, schedule and scratch, and they step at once (the kernel releases the GIL). The float bounds,
@@ -69,6 +70,7 @@ class _Shard:
         self.pw = np.zeros((L.N_PW, w), np.int64)
         self.ws = np.zeros((L.N_WSCRATCH, nw), np.uint64)
         self.wl = np.zeros(nw, np.int64)
+        self.wmask = np.zeros(nw, np.uint64)  # restore's scratch
         self.src_i = np.zeros((0, 6), np.int64)
         self.src_m = np.zeros((0, nw), np.uint64)
         self.err = np.zeros(K.N_ERR, np.int64)
@@ -76,9 +78,6 @@ class _Shard:
         self.tri = np.zeros((1024, K.TRACE_INT_COLUMNS), np.int32)
         self.trf = np.zeros((1024, K.TRACE_FLOAT_COLUMNS), np.float64)
         self.tr_n = np.zeros(1, np.int64)
-        # per world: the id of its last restore, and of the snapshot that restore came from
-        self.epoch = np.full(w, -1, np.int64)
-        self.source = np.full(w, -1, np.int64)
         self.scratch(0, 0)
 
     def scratch(self, n_atoms: int, n_inst: int) -> None:
@@ -120,8 +119,8 @@ class _Shard:
             status = L.step_lanes(
                 eng._cfg, w0, self.ctl, eng._rule_i, eng._rule_v, kt["inst"], batch.kind_base, kt["wc_ptr"],
                 kt["wc_code"], kt["wc_gptr"], kt["wg"], kt["ih_ptr"], kt["ih_inst"], eng._fact_i, eng._fact_v,
-                eng._fact_order, ext_ptr, ext_i, ext_v, eng._settable, self.valid, tmask, self.st, batch.lo,
-                batch.up, batch.lc, self.gs, self.alist, self.alist_n, self.apos, self.pend_due, self.pend_g,
+                eng._fact_order, ext_ptr, ext_i, ext_v, eng._settable, self.valid, tmask, self.st, batch.wep,
+                batch.lc, self.gs, self.alist, self.alist_n, self.apos, self.pend_due, self.pend_g,
                 self.pend_m, self.pend_n, self.tri, self.trf, self.tr_n, stats, self.err, self.slot_of,
                 self.touched, self.n_touched, self.gm, self.slot_src, self.src_i, self.src_m, self.src_n,
                 self.heap, self.hn, self.in_heap, self.n_imm, self.pw, self.ws, self.wl)
@@ -155,44 +154,21 @@ class _Shard:
 
     def snapshot(self) -> dict[str, Any]:
         n = int(self.pend_n[0])
-        return {"epoch": self.epoch.copy(), "st": self.st.copy(), "gs": self.gs.copy(),
+        return {"st": self.st.copy(), "gs": self.gs.copy(),
                 "pend_due": self.pend_due[:n].copy(), "pend_g": self.pend_g[:n].copy(),
                 "pend_m": self.pend_m[:n].copy()}
 
-    def restore(self, batch: LaneState, snap: dict[str, Any], part: dict[str, Any], local: np.ndarray,
-                shift: int) -> None:
+    def restore(self, batch: LaneState, part: dict[str, Any], local: np.ndarray, shift: int) -> None:
         kt = batch.kt
-        wmask = world_mask(local, self.n_words)
-        # a world's unchanged atoms (plane D) still hold the snapshot's bounds if it was last restored
-        # from this snapshot, or has not been restored since the snapshot was taken; other worlds copy
-        # every atom
-        shortcut = (self.source[local] == snap["id"]) | (self.epoch[local] == part["epoch"][local])
-        full = world_mask(local[~shortcut], self.n_words)
-        L.restore_lanes(wmask, part["st"], part["gs"], self.st, self.gs, kt["inst"], self.alist, self.alist_n,
-                        self.apos, batch.kind_base)
+        need = int(self.pend_n[0]) + len(part["pend_g"])
+        if need > len(self.pend_g):
+            self.grow_pending(need)
+        L.restore_worlds(local, shift, part["st"], part["gs"], part["pend_due"], part["pend_g"], part["pend_m"],
+                         self.st, self.gs, kt["inst"], self.alist, self.alist_n, self.apos, batch.kind_base,
+                         self.pend_due, self.pend_g, self.pend_m, self.pend_n, self.wmask)
         if len(part["gs"]) < len(self.gs):  # groundings grew: count them all again
             L.fill_counts(0, self.valid, self.st, kt["b_ptr"], kt["b_atom"], kt["b_code"], self.gs, kt["inst"],
                           self.alist, self.alist_n, self.apos, batch.kind_base)
-        L.restore_columns(self.w0, wmask, full, snap["lo"], snap["up"], snap["lc"], self.st, batch.lo, batch.up,
-                          batch.lc)
-        LaneState.events += 1
-        self.epoch[local] = LaneState.events
-        self.source[local] = snap["id"]
-        self.st[len(part["st"]):, :L.P_D] &= ~wmask  # atoms interned since the snapshot start unset
-        # the schedule: these worlds drop theirs and take the snapshot's, `shift` steps later
-        n = int(self.pend_n[0])
-        m = self.pend_m[:n] & ~wmask
-        keep = np.flatnonzero(m.any(axis=1))
-        theirs = part["pend_m"] & wmask
-        add = np.flatnonzero(theirs.any(axis=1))
-        total = len(keep) + len(add)
-        if total > len(self.pend_g):
-            self.grow_pending(total)
-        due = np.concatenate([self.pend_due[keep], part["pend_due"][add] + shift])
-        g = np.concatenate([self.pend_g[keep], part["pend_g"][add]])
-        mm = np.concatenate([m[keep], theirs[add]])
-        self.pend_due[:total], self.pend_g[:total], self.pend_m[:total] = due, g, mm
-        self.pend_n[0] = total
 
     def pending(self, local: int) -> list[tuple[int, int]]:
         n = int(self.pend_n[0])
@@ -203,14 +179,16 @@ class _Shard:
 
 class LaneState:
     name = "lanes"
-    events = 0  # ids of snapshots and restores, unique in the process
+    events = 0  # ids of snapshots, unique in the process
 
     def __init__(self, eng: Engine, threads: int = 1) -> None:
         self.eng = eng
         w = eng.n_worlds
-        self.lo = np.zeros((0, w))
-        self.up = np.ones((0, w))
-        self.lc = np.full((0, w, 2), -1, np.int32)
+        # last cause per [atom, world]: kind, id, and the world's restore count when it was written
+        self.lc = np.zeros((0, w, 3), np.int32)
+        self.wep = np.zeros(w, np.int32)  # restores per world
+        self.lc_snap = np.full(w, -1, np.int64)  # the snapshot each world was last restored from
+        self._snap_lc: dict[int, np.ndarray] = {}  # those snapshots' last causes [atom, world, 2]
         self.kind_base = np.zeros(K.N_KINDS, np.int64)
         self.n_ordinary = 0
         most = max((sum(c.binds for c in r.body) for r in eng.rules), default=0)
@@ -224,15 +202,17 @@ class LaneState:
 
     @property
     def n_atoms(self) -> int:
-        return self.lo.shape[0]
+        return self.lc.shape[0]
 
     @property
     def lower(self) -> np.ndarray:
-        return self.lo.T  # [world, atom], a view
+        """[world, atom]: 1.0 where [1,1], else 0.0 (a copy, read off plane T)."""
+        return self.truth_plane(np.arange(self.n_atoms), L.P_T).T.astype(np.float64)
 
     @property
     def upper(self) -> np.ndarray:
-        return self.up.T
+        """[world, atom]: 0.0 where [0,0], else 1.0 (a copy, read off plane F)."""
+        return 1.0 - self.truth_plane(np.arange(self.n_atoms), L.P_F).T
 
     @property
     def static(self) -> np.ndarray:
@@ -240,7 +220,16 @@ class LaneState:
 
     @property
     def last_cause(self) -> np.ndarray:
-        return self.lc.transpose(1, 0, 2)
+        """[world, atom, 2]: kind and id of each atom's last change (a copy)."""
+        return self._resolved_causes().transpose(1, 0, 2)
+
+    def bound(self, atom: int, world: int) -> tuple[float, float]:
+        sh = next(s for s in self.shards if s.w0 <= world < s.w1)
+        local = world - sh.w0
+        bit = np.uint64(1) << np.uint64(local & 63)
+        t = bool(sh.st[atom, L.P_T, local >> 6] & bit)
+        f = bool(sh.st[atom, L.P_F, local >> 6] & bit)
+        return (1.0 if t else 0.0), (0.0 if f else 1.0)
 
     def truth(self, atoms: np.ndarray, value: float) -> np.ndarray:
         """bool [atoms, worlds]: value 1.0, where each atom is [1,1]; value 0.0, where it is [0,0]."""
@@ -252,15 +241,34 @@ class LaneState:
             L.plane_truth(sh.st, plane, atoms, sh.w0, sh.w1 - sh.w0, out)
         return out
 
+    def _resolved_causes(self) -> np.ndarray:
+        """[atom, world, 2]: the last causes, those older than a world's last restore taken from the
+        snapshot it was restored from."""
+        out = self.lc[:, :, :2].copy()
+        stale = self.lc[:, :, 2] != self.wep[None, :]
+        for sid, src in self._snap_lc.items():
+            worlds = np.flatnonzero(self.lc_snap == sid)
+            theirs = np.full((len(out), len(worlds), 2), -1, np.int32)
+            n = min(len(src), len(out))
+            theirs[:n] = src[:n][:, worlds]
+            out[:, worlds] = np.where(stale[:, worlds, None], theirs, out[:, worlds])
+        return out
+
+    def _snapshot_cause(self, atom: int, world: int) -> tuple[int, int]:
+        src = self._snap_lc.get(int(self.lc_snap[world]))
+        if src is None or atom >= len(src):
+            return -1, -1
+        return int(src[atom, world, 0]), int(src[atom, world, 1])
+
     # ---- building ----
 
     def grow(self, n_atoms: int, kt: dict[str, np.ndarray]) -> None:
         w = self.eng.n_worlds
         grow = n_atoms - self.n_atoms
         if grow > 0:
-            self.lo = np.concatenate([self.lo, np.zeros((grow, w))])
-            self.up = np.concatenate([self.up, np.ones((grow, w))])
-            self.lc = np.concatenate([self.lc, np.full((grow, w, 2), -1, np.int32)])
+            new = np.full((grow, w, 3), -1, np.int32)
+            new[:, :, 2] = self.wep  # never set, in this episode as in any snapshot
+            self.lc = np.concatenate([self.lc, new])
         self.kt = kt
         counts = np.bincount(kt["inst"][:, K.INST_KIND], minlength=K.N_KINDS)
         self.kind_base = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
@@ -281,6 +289,9 @@ class LaneState:
         for sh, status in zip(self.shards, statuses):
             if status != K.STATUS_OK:  # the first world's error, as one world after another would find it
                 eng._err[:] = sh.err
+                if status == K.STATUS_INCONSISTENT and eng._err[K.E_OLD_KIND] == L.CAUSE_SNAPSHOT:
+                    eng._err[K.E_OLD_KIND], eng._err[K.E_OLD_ID] = self._snapshot_cause(
+                        int(eng._err[K.E_ATOM]), int(eng._err[K.E_WORLD]))
                 return status
         for sh in self.shards:
             n = int(sh.tr_n[0])
@@ -300,14 +311,21 @@ class LaneState:
 
     def snapshot(self) -> dict[str, Any]:
         LaneState.events += 1
-        return {"id": LaneState.events, "lo": self.lo.copy(), "up": self.up.copy(), "lc": self.lc.copy(),
+        return {"id": LaneState.events, "lc": self._resolved_causes(),
                 "shards": [sh.snapshot() for sh in self.shards]}
 
     def restore(self, snap: dict[str, Any], indices: np.ndarray, shift: int) -> None:
         for sh, part in zip(self.shards, snap["shards"]):
             local = indices[(indices >= sh.w0) & (indices < sh.w1)] - sh.w0
             if len(local):
-                sh.restore(self, snap, part, local, shift)
+                sh.restore(self, part, local, shift)
+        # their last causes are now the snapshot's: count their restores on, so every cause is older
+        self.wep[indices] += 1
+        if snap["id"] not in self._snap_lc:  # forget the snapshots no world refers to any more
+            live = set(np.unique(self.lc_snap).tolist())
+            self._snap_lc = {sid: lc for sid, lc in self._snap_lc.items() if sid in live}
+            self._snap_lc[snap["id"]] = snap["lc"]
+        self.lc_snap[indices] = snap["id"]
 
     def pending(self, world: int) -> list[tuple[int, int]]:
         sh = next(s for s in self.shards if s.w0 <= world < s.w1)
@@ -316,5 +334,5 @@ class LaneState:
     def export(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[list[tuple[int, int]]]]:
         """The batch as the counting backend holds it: lower, upper, static, last_cause [world, atom],
         and each world's schedule."""
-        return (self.lower.copy(), self.upper.copy(), self.static, self.last_cause.copy(),
+        return (self.lower, self.upper, self.static, self.last_cause,
                 [self.pending(w) for w in range(self.eng.n_worlds)])

@@ -146,7 +146,8 @@ class Engine:
 
     @property
     def lower(self) -> np.ndarray:
-        """Lower bounds, float64 [worlds, atoms] (read-only use: step() writes them)."""
+        """Lower bounds, float64 [worlds, atoms] (read-only use: the counting kernel's own array, which
+        step() writes; the lanes kernel gives a copy read off its planes)."""
         return self._state.lower
 
     @property
@@ -333,9 +334,9 @@ class Engine:
             self.step()
 
     def bound(self, atom: int, world: int = 0) -> tuple[float, float]:
-        if atom >= self.lower.shape[1]:
+        if atom >= self._state.n_atoms:
             return (0.0, 1.0)
-        return float(self.lower[world, atom]), float(self.upper[world, atom])
+        return self._state.bound(atom, world)
 
     def is_true(self, atoms: np.ndarray) -> np.ndarray:
         """bool [len(atoms), worlds]: where each atom is [1,1] (a simulator's read-back, fast for both

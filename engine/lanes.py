@@ -14,8 +14,9 @@ set. The worlds then step in lock-step:
   candidates are in the heap;
 - a world leaves the fixpoint loop when its ordinary pass changes nothing.
 
-Per-world work remains only where a world needs its own value: trace rows, the float bounds that
-`Engine.lower/upper` show ([atom, world] here), the cause of each atom's last change, and statistics.
+Per-world work remains only where a world needs its own value: trace rows, the cause of each atom's last
+change (lc [atom, world], tagged with the world's restore count wep[world], so that a restore need not
+touch it), and statistics. Float bounds are not kept: in a crisp program the planes determine them.
 The step is a small state machine (`ctl`): whenever the trace or the schedule may need more room than is
 free, the kernel returns at a point where it can go on, core.py grows the buffer and calls again.
 
@@ -61,10 +62,12 @@ SHARED_CODES = ("CAUSE_FACT", "CAUSE_EXTERNAL", "CAUSE_RULE", "CAUSE_POLICY", "C
 # the three crisp values, as codes
 V_U, V_T, V_F = 0, 1, 2  # [0,1], [1,1], [0,0]
 # a clause's truth table: bit (1 << value) is set when the clause holds of that value
-# planes of an atom's state, st[atom, plane, word]: [1,1], [0,0], static, and changed since the world's
-# last restore (so that a restore copies the float bounds of changed atoms only)
-P_T, P_F, P_S, P_D = 0, 1, 2, 3
-N_PLANES = 4
+# planes of an atom's state, st[atom, plane, word]: [1,1], [0,0], static (its float bounds follow from
+# the first two, so none are kept)
+P_T, P_F, P_S = 0, 1, 2
+N_PLANES = 3
+# a last cause older than its world's last restore: it is the snapshot's (backend_lanes.py looks it up)
+CAUSE_SNAPSHOT = -2
 # a pass's grouped sources per touched atom, gm[slot, plane, word]: override sources setting T, F, U,
 # intersection sources setting T, F, U, static sources
 G_OT, G_OF, G_OU, G_IT, G_IF, G_IU, G_STAT = 0, 1, 2, 3, 4, 5, 6
@@ -151,6 +154,26 @@ def _lo(v):
 @lanes_jit
 def _up(v):
     return 0.0 if v == V_F else 1.0
+
+
+@lanes_jit
+def _cause(lc, wep, a, w, kind, cid):
+    """Atom a changed in world w by (kind, cid): its last cause, tagged with the world's restore count."""
+    lc[a, w, 0] = kind
+    lc[a, w, 1] = cid
+    lc[a, w, 2] = wep[w]
+
+
+@lanes_jit
+def _old_cause(lc, wep, a, w, err):
+    """The last cause of atom a in world w into err (an inconsistency's message); CAUSE_SNAPSHOT when it
+    predates the world's last restore (backend_lanes.py then reads it from that snapshot)."""
+    if lc[a, w, 2] == wep[w]:
+        err[E_OLD_KIND] = lc[a, w, 0]
+        err[E_OLD_ID] = lc[a, w, 1]
+    else:
+        err[E_OLD_KIND] = CAUSE_SNAPSHOT
+        err[E_OLD_ID] = -1
 
 
 @lanes_jit
@@ -383,7 +406,7 @@ def _sort_small(a, n):
 
 
 @lanes_jit
-def _apply_group(w0, s, a, t, pass_no, policy, valid, st, lo, up, lc, tmask, tri, trf, tr_n, stats, err, gm,
+def _apply_group(w0, s, a, t, pass_no, policy, valid, st, wep, lc, tmask, tri, trf, tr_n, stats, err, gm,
                  slot_src, src_i, src_m, pw, ws):
     """Resolve the group of atom a (scratch slot s) in every world it touches (docs/language.md,
     'Updating an atom') and write the per-world records. Leaves the changed worlds in ws[W_C] and the
@@ -456,8 +479,7 @@ def _apply_group(w0, s, a, t, pass_no, policy, valid, st, lo, up, lc, tmask, tri
                 err[E_WORLD] = w0 + w
                 err[E_T] = t
                 err[E_ATOM] = a
-                err[E_OLD_KIND] = lc[a, w0 + w, 0]
-                err[E_OLD_ID] = lc[a, w0 + w, 1]
+                _old_cause(lc, wep, a, w0 + w, err)
                 err[E_KIND] = src_i[p, 1]
                 err[E_ID] = src_i[p, 2]
                 err[E_INST] = src_i[p, 3]
@@ -506,7 +528,6 @@ def _apply_group(w0, s, a, t, pass_no, policy, valid, st, lo, up, lc, tmask, tri
         ws[W_OLDF, k] = f_k
         st[a, P_T, k] = (t_k & ~c) | (r_t & c)
         st[a, P_F, k] = (f_k & ~c) | (r_f & c)
-        st[a, P_D, k] |= c
         # per world: statistics, and for the changed worlds the row, bounds and cause
         m = anyk
         while m != ZERO:
@@ -525,18 +546,14 @@ def _apply_group(w0, s, a, t, pass_no, policy, valid, st, lo, up, lc, tmask, tri
             if c & bit:
                 ov = V_T if t_k & bit else (V_F if f_k & bit else V_U)
                 nv = V_T if r_t & bit else (V_F if r_f & bit else V_U)
-                lo[a, w0 + w] = _lo(nv)
-                up[a, w0 + w] = _up(nv)
                 stats[w, STAT_CHANGES] += 1
                 if inc & bit:
                     r = pw[PW_RULE, w]
-                    lc[a, w0 + w, 0] = CAUSE_POLICY
-                    lc[a, w0 + w, 1] = policy
+                    _cause(lc, wep, a, w0 + w, CAUSE_POLICY, policy)
                     _row(w0, w, t, pass_no, a, ov, nv, CAUSE_POLICY, policy, src_i[r, 3] if r >= 0 else -1, nsrc,
                          tmask, tri, trf, tr_n)
                 else:
-                    lc[a, w0 + w, 0] = kind
-                    lc[a, w0 + w, 1] = src_i[p, 2]
+                    _cause(lc, wep, a, w0 + w, kind, src_i[p, 2])
                     _row(w0, w, t, pass_no, a, ov, nv, kind, src_i[p, 2], src_i[p, 3], nsrc, tmask, tri, trf, tr_n)
             elif kind == CAUSE_RULE:
                 stats[w, STAT_REDERIVATIONS] += nsrc
@@ -545,7 +562,7 @@ def _apply_group(w0, s, a, t, pass_no, policy, valid, st, lo, up, lc, tmask, tri
 
 
 @lanes_jit
-def _apply_immediate(w0, g, t, pass_no, policy, max_immediate, rule_i, rule_v, inst, valid, st, lo, up, lc, tmask,
+def _apply_immediate(w0, g, t, pass_no, policy, max_immediate, rule_i, rule_v, inst, valid, st, wep, lc, tmask,
                      tri, trf, tr_n, stats, err, n_imm, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs,
                       alist, alist_n, apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap):
     """Apply immediate grounding g in every world where it is active and would change its head.
@@ -616,8 +633,7 @@ def _apply_immediate(w0, g, t, pass_no, policy, max_immediate, rule_i, rule_v, i
                 err[E_WORLD] = w0 + w
                 err[E_T] = t
                 err[E_ATOM] = a
-                err[E_OLD_KIND] = lc[a, w0 + w, 0]
-                err[E_OLD_ID] = lc[a, w0 + w, 1]
+                _old_cause(lc, wep, a, w0 + w, err)
                 err[E_KIND] = CAUSE_RULE
                 err[E_ID] = r
                 err[E_INST] = g
@@ -637,7 +653,6 @@ def _apply_immediate(w0, g, t, pass_no, policy, max_immediate, rule_i, rule_v, i
         inc = ws[W_TMP, k]
         st[a, P_T, k] = (t_k & ~c) | (r_t & c)
         st[a, P_F, k] = (f_k & ~c) | (r_f & c)
-        st[a, P_D, k] |= c
         if policy == POLICY_RESET_FREEZE:
             st[a, P_S, k] |= inc & c
         m = c
@@ -648,16 +663,12 @@ def _apply_immediate(w0, g, t, pass_no, policy, max_immediate, rule_i, rule_v, i
             bit = ONE << b
             ov = V_T if t_k & bit else (V_F if f_k & bit else V_U)
             nv = V_T if r_t & bit else (V_F if r_f & bit else V_U)
-            lo[a, w0 + w] = _lo(nv)
-            up[a, w0 + w] = _up(nv)
             stats[w, STAT_CHANGES] += 1
             if inc & bit:
-                lc[a, w0 + w, 0] = CAUSE_POLICY
-                lc[a, w0 + w, 1] = policy
+                _cause(lc, wep, a, w0 + w, CAUSE_POLICY, policy)
                 _row(w0, w, t, pass_no, a, ov, nv, CAUSE_POLICY, policy, g, 1, tmask, tri, trf, tr_n)
             else:
-                lc[a, w0 + w, 0] = CAUSE_RULE
-                lc[a, w0 + w, 1] = r
+                _cause(lc, wep, a, w0 + w, CAUSE_RULE, r)
                 _row(w0, w, t, pass_no, a, ov, nv, CAUSE_RULE, r, g, 1, tmask, tri, trf, tr_n)
     hn = _watch(a, -1 if any_inc else g, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs,
                 inst, rule_i, rule_v, alist, alist_n, apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap, stats)
@@ -665,7 +676,7 @@ def _apply_immediate(w0, g, t, pass_no, policy, max_immediate, rule_i, rule_v, i
 
 
 @lanes_jit
-def _reset_atom(w0, a, t, valid, st, lo, up, lc, tmask, tri, trf, tr_n, stats, ws):
+def _reset_atom(w0, a, t, valid, st, wep, lc, tmask, tri, trf, tr_n, stats, ws):
     """`%timesteps reset` for one atom: back to [0,1] where it is set and not static. Leaves the changed
     worlds in ws[W_C]; returns whether there are any."""
     any_c = False
@@ -681,17 +692,13 @@ def _reset_atom(w0, a, t, valid, st, lo, up, lc, tmask, tri, trf, tr_n, stats, w
         any_c = True
         st[a, P_T, k] = t_k & ~c
         st[a, P_F, k] = f_k & ~c
-        st[a, P_D, k] |= c
         m = c
         while m != ZERO:
             b = _cttz(m)
             m &= m - ONE
             w = k * 64 + np.int64(b)
             ov = V_T if t_k & (ONE << b) else V_F
-            lo[a, w0 + w] = 0.0
-            up[a, w0 + w] = 1.0
-            lc[a, w0 + w, 0] = CAUSE_RESET
-            lc[a, w0 + w, 1] = -1
+            _cause(lc, wep, a, w0 + w, CAUSE_RESET, -1)
             stats[w, STAT_CHANGES] += 1
             _row(w0, w, t, 0, a, ov, V_U, CAUSE_RESET, -1, -1, 0, tmask, tri, trf, tr_n)
     return any_c
@@ -700,7 +707,7 @@ def _reset_atom(w0, a, t, valid, st, lo, up, lc, tmask, tri, trf, tr_n, stats, w
 @lanes_jit
 def step_lanes(cfg, w0, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, wc_gptr, wg,
                ih_ptr, ih_inst, fact_i, fact_v, fact_order, ext_ptr, ext_i, ext_v, settable, valid, tmask,
-               st, lo, up, lc, gs, alist, alist_n, apos, pend_due, pend_g, pend_m, pend_n,
+               st, wep, lc, gs, alist, alist_n, apos, pend_due, pend_g, pend_m, pend_n,
                tri, trf, tr_n, stats, err, slot_of, touched, n_touched, gm, slot_src, src_i, src_m, src_n,
                heap, hn_box, in_heap, n_imm, pw, ws, wl):
     """Go on with timestep cfg[CFG_T] of every world from where ctl says (PH_START: from the beginning).
@@ -711,7 +718,7 @@ def step_lanes(cfg, w0, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, w
     policy = cfg[CFG_POLICY]
     max_passes = cfg[CFG_MAX_PASSES]
     max_immediate = cfg[CFG_MAX_IMMEDIATE]
-    n_worlds = n_imm.shape[0]  # this call's worlds: w0 .. w0 + n_worlds - 1 of lo, up, lc and rows
+    n_worlds = n_imm.shape[0]  # this call's worlds: w0 .. w0 + n_worlds - 1 of wep, lc and rows
     nw = valid.shape[0]
     n_atoms = st.shape[0]
     hn = hn_box[0]
@@ -737,7 +744,7 @@ def step_lanes(cfg, w0, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, w
                     ctl[C_POS] = a
                     hn_box[0] = hn
                     return STATUS_TRACE_ROOM
-                if _reset_atom(w0, a, t, valid, st, lo, up, lc, tmask, tri, trf, tr_n, stats, ws):
+                if _reset_atom(w0, a, t, valid, st, wep, lc, tmask, tri, trf, tr_n, stats, ws):
                     hn = _watch(a, -1, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs,
                                 inst, rule_i, rule_v, alist, alist_n, apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap,
                                 stats)
@@ -789,7 +796,7 @@ def step_lanes(cfg, w0, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, w
                     hn_box[0] = hn
                     return STATUS_TRACE_ROOM
                 a = touched[i]
-                status = _apply_group(w0, slot_of[a], a, t, pass_no, policy, valid, st, lo, up, lc, tmask, tri, trf,
+                status = _apply_group(w0, slot_of[a], a, t, pass_no, policy, valid, st, wep, lc, tmask, tri, trf,
                                       tr_n, stats, err, gm, slot_src, src_i, src_m, pw, ws)
                 if status != STATUS_OK:
                     return status
@@ -854,7 +861,7 @@ def step_lanes(cfg, w0, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, w
                 g = key & HEAP_MASK
                 in_heap[g] = False
                 status, hn = _apply_immediate(w0, g, t, pass_no, policy, max_immediate, rule_i, rule_v, inst, valid,
-                                              st, lo, up, lc, tmask, tri, trf, tr_n, stats, err, n_imm, ws, wl, wc_ptr,
+                                              st, wep, lc, tmask, tri, trf, tr_n, stats, err, n_imm, ws, wl, wc_ptr,
                                               wc_code, wc_gptr, wg, gs, alist, alist_n,
                                               apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap)
                 if status != STATUS_OK:
@@ -932,53 +939,81 @@ def rebuild_lists(gs, inst, alist, alist_n, apos, kind_base):
 @lanes_jit
 def restore_lanes(wmask, snap_st, snap_gs, st, gs, inst, alist, alist_n, apos, kind_base):
     """The worlds of wmask take their planes, counts and active masks from the snapshot (atoms and
-    groundings the snapshot has); the active-anywhere lists follow."""
+    groundings the snapshot has); the active-anywhere lists follow. Words without such worlds are
+    not touched."""
     nw = wmask.shape[0]
     for a in range(snap_st.shape[0]):
-        for p in range(P_D):  # T, F, S (restore_columns clears D)
+        for p in range(N_PLANES):
             for k in range(nw):
-                st[a, p, k] = (st[a, p, k] & ~wmask[k]) | (snap_st[a, p, k] & wmask[k])
+                m = wmask[k]
+                if m != ZERO:
+                    st[a, p, k] = (st[a, p, k] & ~m) | (snap_st[a, p, k] & m)
     for g in range(snap_gs.shape[0]):
-        was_any = False
-        now_any = False
+        flipped = False  # some word's active mask went to or from zero
         for k in range(nw):
+            m = wmask[k]
+            if m == ZERO:
+                continue
             old = gs[g, k, 0]
             for p in range(gs.shape[2]):
-                gs[g, k, p] = (gs[g, k, p] & ~wmask[k]) | (snap_gs[g, k, p] & wmask[k])
-            if old != ZERO:
-                was_any = True
-            if gs[g, k, 0] != ZERO:
-                now_any = True
-        if was_any != now_any:
-            if now_any:
+                gs[g, k, p] = (gs[g, k, p] & ~m) | (snap_gs[g, k, p] & m)
+            if (old == ZERO) != (gs[g, k, 0] == ZERO):
+                flipped = True
+        if flipped:
+            now_any = False
+            for k in range(nw):
+                if gs[g, k, 0] != ZERO:
+                    now_any = True
+                    break
+            listed = apos[g] >= 0
+            if now_any and not listed:
                 _list_add(g, inst, alist, alist_n, apos, kind_base)
-            else:
+            elif listed and not now_any:
                 _list_remove(g, inst, alist, alist_n, apos, kind_base)
 
 
 @lanes_jit
-def restore_columns(w0, wmask, full, snap_lo, snap_up, snap_lc, st, lo, up, lc):
-    """The worlds of wmask (worlds w0.. of lo, up, lc [atom, world]) take their float bounds and last
-    causes from the snapshot: every atom for the worlds of `full`, else only the atoms changed since
-    the world's last restore (plane D, cleared here). Atoms the snapshot does not have start unset."""
-    n_snap = snap_lo.shape[0]
-    for a in range(lo.shape[0]):
-        for k in range(wmask.shape[0]):
-            m = ((st[a, P_D, k] & wmask[k]) | full[k])
-            st[a, P_D, k] &= ~wmask[k]
-            while m != ZERO:
-                w = w0 + k * 64 + np.int64(_cttz(m))
-                m &= m - ONE
-                if a < n_snap:
-                    lo[a, w] = snap_lo[a, w]
-                    up[a, w] = snap_up[a, w]
-                    lc[a, w, 0] = snap_lc[a, w, 0]
-                    lc[a, w, 1] = snap_lc[a, w, 1]
-                else:
-                    lo[a, w] = 0.0
-                    up[a, w] = 1.0
-                    lc[a, w, 0] = -1
-                    lc[a, w, 1] = -1
+def restore_worlds(local, shift, snap_st, snap_gs, snap_due, snap_g, snap_m, st, gs, inst, alist, alist_n, apos,
+                   kind_base, pend_due, pend_g, pend_m, pend_n, wmask):
+    """Worlds `local` (of this shard) go back to a snapshot: planes, counts and active masks; atoms
+    interned since unset; their scheduled firings dropped and the snapshot's taken, `shift` steps later.
+    The schedule must have room for its rows plus the snapshot's. wmask [words] is scratch (left holding
+    the worlds' mask)."""
+    nw = wmask.shape[0]
+    for k in range(nw):
+        wmask[k] = ZERO
+    for i in range(local.shape[0]):
+        wmask[local[i] >> 6] |= ONE << np.uint64(local[i] & 63)
+    restore_lanes(wmask, snap_st, snap_gs, st, gs, inst, alist, alist_n, apos, kind_base)
+    for a in range(snap_st.shape[0], st.shape[0]):
+        for p in range(N_PLANES):
+            for k in range(nw):
+                st[a, p, k] &= ~wmask[k]
+    j = 0
+    for i in range(pend_n[0]):  # keep the other worlds' firings, in order
+        left = False
+        for k in range(nw):
+            pend_m[i, k] &= ~wmask[k]
+            if pend_m[i, k] != ZERO:
+                left = True
+        if left:
+            pend_due[j] = pend_due[i]
+            pend_g[j] = pend_g[i]
+            for k in range(nw):
+                pend_m[j, k] = pend_m[i, k]
+            j += 1
+    for i in range(snap_g.shape[0]):
+        theirs = False
+        for k in range(nw):
+            m = snap_m[i, k] & wmask[k]
+            pend_m[j, k] = m
+            if m != ZERO:
+                theirs = True
+        if theirs:
+            pend_due[j] = snap_due[i] + shift
+            pend_g[j] = snap_g[i]
+            j += 1
+    pend_n[0] = j
 
 
 @lanes_jit

@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 from strategies import Scenario, scenarios
 from tracelab.engine import Engine, parse_program
 from tracelab.engine.errors import FixpointError, InconsistencyError
+from tracelab.engine.program import INCONSISTENCY_POLICIES
 
 SCALE = float(os.environ.get("TRACELAB_EXAMPLES", "1"))
 SEMANTIC_STATS = ("firings", "rederivations", "static_ignored", "changes", "passes")
@@ -26,6 +27,8 @@ def assert_same(a: Engine, b: Engine, t: int) -> None:
     np.testing.assert_array_equal(a.lower, b.lower, err_msg=f"lower at t={t}")
     np.testing.assert_array_equal(a.upper, b.upper, err_msg=f"upper at t={t}")
     np.testing.assert_array_equal(a.static, b.static, err_msg=f"static at t={t}")
+    # what `%inconsistency abort` names as an atom's old source (lanes: resolved through restores)
+    np.testing.assert_array_equal(a._state.last_cause, b._state.last_cause, err_msg=f"last causes at t={t}")
     ta, tb = a.take_trace(), b.take_trace()
     for col in ta:
         np.testing.assert_array_equal(ta[col], tb[col], err_msg=f"trace column {col} at t={t}")
@@ -34,6 +37,10 @@ def assert_same(a: Engine, b: Engine, t: int) -> None:
         np.testing.assert_array_equal(sa[name], sb[name], err_msg=f"stats {name} at t={t}")
     for w in range(a.n_worlds):
         assert sorted(a.pending(w)) == sorted(b.pending(w)), f"pending of world {w} at t={t}"
+
+
+def _world_of(message: str) -> str:
+    return message.split("(world ")[-1].split(")")[0]
 
 
 def run_pair(sc: Scenario, worlds: int, seed: int, threads: int) -> None:
@@ -57,8 +64,11 @@ def run_pair(sc: Scenario, worlds: int, seed: int, threads: int) -> None:
                 eng.step()
                 errors.append(None)
             except (InconsistencyError, FixpointError) as e:
-                errors.append(type(e))
-        assert errors[0] == errors[1], f"t={t}: counting raised {errors[0]}, lanes {errors[1]}"
+                errors.append(f"{type(e).__name__}: {e}")
+        if errors[0] is None or errors[1] is None or _world_of(errors[0]) == _world_of(errors[1]):
+            assert errors[0] == errors[1], f"t={t}: counting raised {errors[0]}, lanes {errors[1]}"
+        else:  # several worlds fail: lanes, in lock-step, may meet another world's failure first
+            assert errors[0].split(":")[0] == errors[1].split(":")[0], (errors, t)
         if errors[0] is not None:
             return
         assert_same(a, b, t)
@@ -73,11 +83,12 @@ def run_pair(sc: Scenario, worlds: int, seed: int, threads: int) -> None:
 
 
 @settings(max_examples=int(60 * SCALE), deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(sc=scenarios(per_world=1, crisp=True), worlds=st.sampled_from([70, 130]), seed=st.integers(0, 2**16),
+@given(sc=scenarios(per_world=1, crisp=True, policies=INCONSISTENCY_POLICIES), worlds=st.sampled_from([70, 130]), seed=st.integers(0, 2**16),
        threads=st.sampled_from([1, 2, 3]))
 def test_lanes_match_counting_in_wide_batches_with_restores(sc: Scenario, worlds: int, seed: int,
                                                             threads: int) -> None:
-    """threads: the batch is cut into that many shards of whole words (at most one per word)."""
+    """threads: the batch is cut into that many shards of whole words (at most one per word). Under
+    `%inconsistency abort` both must stop with the same message, whose old source may predate a restore."""
     run_pair(sc, worlds, seed, threads)
 
 

@@ -62,6 +62,8 @@ class RuleSim(GameSim):
         self.state = self._read_state()
         self._cur = self._observe_both(self.state)
         self._obs = self._with_history(self._cur, self._cur)
+        # every world starts alike: a reset copies these rows instead of reading atoms back
+        self._start_state, self._start_cur = self.state, self._cur
 
     # ---- atom ids, looked up once ----
 
@@ -131,14 +133,13 @@ class RuleSim(GameSim):
 
     # ---- reading the world back ----
 
-    def _read_state(self, done: np.ndarray | None = None, settle: bool = False,
-                    prev_health: np.ndarray | None = None) -> GameState:
+    def _read_state(self, done: np.ndarray | None = None, settle: bool = False) -> GameState:
         """The game state of every world, read from atoms (and the events of the last step into
         self._events: unsafe, invalid, acted [W, 2, N]; hits made / taken; which team won). Worlds in
         `done` keep their state from self.state and have no events. With `settle` (after a step) the
         step's rewards and the end of the game are settled first (settle_step; rewards into
-        self._rewards), and health takes the step's hits from self.state's; else health is `prev_health`
-        (default: the scenario's). t, terminated, truncated and winner are copies of the simulator's
+        self._rewards), and health takes the step's hits from self.state's; else health is the scenario's
+        (the start state). t, terminated, truncated and winner are copies of the simulator's
         after that."""
         s = self.scenario
         w, n = self.n_worlds, s.agents_per_team
@@ -163,10 +164,7 @@ class RuleSim(GameSim):
             st = self.state
             prev = (st.pos, st.alive, st.ammo, st.moving, st.dest, st.bullet_pos, st.bullet_dir)
         rows = self._rows
-        if settle:
-            prev_health = self.state.health
-        elif prev_health is None:
-            prev_health = np.full((w, 2, n), float(s.health))
+        prev_health = self.state.health if settle else np.full((w, 2, n), float(s.health))
         read_back(self.engine.is_true(self._read_atoms), rows["_agent_loc"], self._cell_xy, rows["_agent_flags"],
                   rows["_dest"], rows["_bullet_loc"], rows["_bullet_flags"], rows["_dir"], rows["_hits"],
                   self._bullet_team, self._bullet_agent, rows["_win"], s.ammo, float(s.health), float(s.damage),
@@ -226,18 +224,26 @@ class RuleSim(GameSim):
         self.truncated[sel] = False
         self._n_done = int((self.terminated | self.truncated).sum())
         self.winner[sel] = WINNER_NONE
-        health = self.state.health.copy()
-        health[sel] = float(self.scenario.health)
-        keep = np.ones(self.n_worlds, bool)  # the other worlds keep their state: only these are read
-        keep[sel] = False
-        self.state = self._read_state(keep if keep.any() else None, prev_health=health)
-        cur = self._observe_both(self.state)
+        self.state = self._restarted_state(sel)
+        # new arrays: the caller may hold the last step's observation (the same array)
+        cur = self._cur.copy()
+        cur[sel] = self._start_cur[sel]
         obs = self._obs.copy()
-        obs[sel] = self._with_history(cur, cur)[sel]
-        self._cur = self._cur.copy()  # the caller may hold the last step's observation (the same array)
-        self._cur[sel] = cur[sel]
-        self._obs = obs
+        obs[sel] = self._with_history(cur[sel], cur[sel])
+        self._cur, self._obs = cur, obs
         return obs.copy()
+
+    def _restarted_state(self, sel: np.ndarray) -> GameState:
+        """self.state with worlds `sel` back in the start state (as read when the simulator was built)."""
+        st, start = self.state, self._start_state
+        rows = {}
+        for name in ("pos", "health", "ammo", "alive", "moving", "dest", "bullet_pos", "bullet_dir"):
+            a = getattr(st, name).copy()
+            a[sel] = getattr(start, name)[sel]
+            rows[name] = a
+        return GameState(t=self.t.copy(), terminated=self.terminated.copy(), truncated=self.truncated.copy(),
+                         winner=self.winner.copy(), bullet_team=self._state_bullet_team,
+                         bullet_agent=self._state_bullet_agent, **rows)
 
     def _replay_setup(self, worlds: np.ndarray) -> None:
         """A restored world starts from the set-up state without re-deriving it; its t = 0 rows are
