@@ -155,8 +155,8 @@ class CountingState:
         return float(self.lower[world, atom]), float(self.upper[world, atom])
 
     def truth(self, atoms: np.ndarray, value: float) -> np.ndarray:
-        """bool [atoms, worlds]: value 1.0, where each atom is [1,1]; value 0.0, where it is [0,0]."""
-        out = np.empty((len(atoms), self.eng.n_worlds), np.bool_)
+        """bool [worlds, atoms]: value 1.0, where each atom is [1,1]; value 0.0, where it is [0,0]."""
+        out = np.empty((self.eng.n_worlds, len(atoms)), np.bool_)
         K.gather_truth(self.lower if value == 1.0 else self.upper, atoms, value, out)
         return out
 

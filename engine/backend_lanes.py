@@ -207,16 +207,16 @@ class LaneState:
     @property
     def lower(self) -> np.ndarray:
         """[world, atom]: 1.0 where [1,1], else 0.0 (a copy, read off plane T)."""
-        return self.truth_plane(np.arange(self.n_atoms), L.P_T).T.astype(np.float64)
+        return self.truth_plane(np.arange(self.n_atoms), L.P_T).astype(np.float64)
 
     @property
     def upper(self) -> np.ndarray:
         """[world, atom]: 0.0 where [0,0], else 1.0 (a copy, read off plane F)."""
-        return 1.0 - self.truth_plane(np.arange(self.n_atoms), L.P_F).T
+        return 1.0 - self.truth_plane(np.arange(self.n_atoms), L.P_F)
 
     @property
     def static(self) -> np.ndarray:
-        return self.truth_plane(np.arange(self.n_atoms), L.P_S).T
+        return self.truth_plane(np.arange(self.n_atoms), L.P_S)
 
     @property
     def last_cause(self) -> np.ndarray:
@@ -232,11 +232,11 @@ class LaneState:
         return (1.0 if t else 0.0), (0.0 if f else 1.0)
 
     def truth(self, atoms: np.ndarray, value: float) -> np.ndarray:
-        """bool [atoms, worlds]: value 1.0, where each atom is [1,1]; value 0.0, where it is [0,0]."""
+        """bool [worlds, atoms]: value 1.0, where each atom is [1,1]; value 0.0, where it is [0,0]."""
         return self.truth_plane(atoms, L.P_T if value == 1.0 else L.P_F)
 
     def truth_plane(self, atoms: np.ndarray, plane: int) -> np.ndarray:
-        out = np.zeros((len(atoms), self.eng.n_worlds), np.bool_)
+        out = np.zeros((self.eng.n_worlds, len(atoms)), np.bool_)
         for sh in self.shards:
             L.plane_truth(sh.st, plane, atoms, sh.w0, sh.w1 - sh.w0, out)
         return out

@@ -339,12 +339,12 @@ class Engine:
         return self._state.bound(atom, world)
 
     def is_true(self, atoms: np.ndarray) -> np.ndarray:
-        """bool [len(atoms), worlds]: where each atom is [1,1] (a simulator's read-back, fast for both
+        """bool [worlds, len(atoms)]: where each atom is [1,1] (a simulator's read-back, fast for both
         kernels; atoms must exist, see sync())."""
         return self._state.truth(np.asarray(atoms, np.int64), 1.0)
 
     def is_false(self, atoms: np.ndarray) -> np.ndarray:
-        """bool [len(atoms), worlds]: where each atom is [0,0]."""
+        """bool [worlds, len(atoms)]: where each atom is [0,0]."""
         return self._state.truth(np.asarray(atoms, np.int64), 0.0)
 
     def query(self, text: str, world: int = 0) -> tuple[float, float]:

@@ -743,9 +743,8 @@ def relayout_active(old_act, old_base, act, kind_base, act_n):
 
 @kernel_jit
 def gather_truth(bounds, atoms, value, out):
-    """out[j, w] = (bounds[w, atoms[j]] == value): which atoms are [1,1] (bounds = lower, value 1) or
+    """out[w, j] = (bounds[w, atoms[j]] == value): which atoms are [1,1] (bounds = lower, value 1) or
     [0,0] (bounds = upper, value 0) in each world."""
-    for j in range(atoms.shape[0]):
-        a = atoms[j]
-        for w in range(bounds.shape[0]):
-            out[j, w] = bounds[w, a] == value
+    for w in range(bounds.shape[0]):
+        for j in range(atoms.shape[0]):
+            out[w, j] = bounds[w, atoms[j]] == value

@@ -1018,7 +1018,7 @@ def restore_worlds(local, shift, snap_st, snap_gs, snap_due, snap_g, snap_m, st,
 
 @lanes_jit
 def plane_truth(st, plane, atoms, w0, n_worlds, out):
-    """Sets out[j, w0 + w] where bit w of plane `plane` of atom atoms[j] is set, for w < n_worlds ([1,1]:
+    """Sets out[w0 + w, j] where bit w of plane `plane` of atom atoms[j] is set, for w < n_worlds ([1,1]:
     P_T, [0,0]: P_F). `out` comes zeroed: only set bits are visited (most atoms hold in few worlds)."""
     for j in range(atoms.shape[0]):
         a = atoms[j]
@@ -1028,4 +1028,4 @@ def plane_truth(st, plane, atoms, w0, n_worlds, out):
                 w = k * 64 + np.int64(_cttz(m))
                 m &= m - ONE
                 if w < n_worlds:
-                    out[j, w0 + w] = True
+                    out[w0 + w, j] = True

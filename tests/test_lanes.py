@@ -27,6 +27,10 @@ def assert_same(a: Engine, b: Engine, t: int) -> None:
     np.testing.assert_array_equal(a.lower, b.lower, err_msg=f"lower at t={t}")
     np.testing.assert_array_equal(a.upper, b.upper, err_msg=f"upper at t={t}")
     np.testing.assert_array_equal(a.static, b.static, err_msg=f"static at t={t}")
+    atoms = np.arange(a.lower.shape[1])  # the truth tables of read-back, [worlds, atoms]
+    for eng in (a, b):
+        np.testing.assert_array_equal(eng.is_true(atoms), a.lower == 1.0, err_msg=f"is_true at t={t}")
+        np.testing.assert_array_equal(eng.is_false(atoms), a.upper == 0.0, err_msg=f"is_false at t={t}")
     # what `%inconsistency abort` names as an atom's old source (lanes: resolved through restores)
     np.testing.assert_array_equal(a._state.last_cause, b._state.last_cause, err_msg=f"last causes at t={t}")
     ta, tb = a.take_trace(), b.take_trace()

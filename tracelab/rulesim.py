@@ -191,13 +191,13 @@ class RuleSim(GameSim):
         into a mountain), shots need ammo, only an agent that may act has a choice; nothing is always
         allowed. Actions the scenario does not offer are False."""
         w, n = self.n_worlds, self.scenario.agents_per_team
-        true = self.engine.is_true(self._shield_true)  # [may_act..., no_ammo...] x worlds
-        may = true[:2 * n].T.reshape(w, 2, n)
+        true = self.engine.is_true(self._shield_true)  # worlds x [may_act..., no_ammo...]
+        may = true[:, :2 * n].reshape(w, 2, n)
         out = np.zeros((w, 2, n, 9), bool)
-        free = self.engine.is_false(self._blocked_move.ravel()).T.reshape(w, 2, n, 4)
+        free = self.engine.is_false(self._blocked_move.ravel()).reshape(w, 2, n, 4)
         out[..., :4] = free & may[..., None]
         if self.scenario.advanced:
-            out[..., 4:8] = (may & ~true[2 * n:].T.reshape(w, 2, n))[..., None]
+            out[..., 4:8] = (may & ~true[:, 2 * n:].reshape(w, 2, n))[..., None]
         out[..., 8] = True
         return out
 

@@ -58,7 +58,7 @@ def encode_actions(red, blue, done, allowed, action_atoms, prev, first_id, ext_p
 @njit(cache=True)
 def _first_true(truth, w, ids, row):
     for c in range(ids.shape[1]):
-        if truth[ids[row, c], w]:
+        if truth[w, ids[row, c]]:
             return c
     return -1
 
@@ -69,8 +69,8 @@ def read_back(truth, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc, bull
               kind_hits, done, prev_pos, prev_alive, prev_ammo, prev_moving, prev_dest, prev_bpos, prev_bdir,
               pos, health, alive, ammo, moving, dest, unsafe, invalid, acted, bpos, bdir, hits_made,
               hits_taken, win):
-    """Gather the game state of every world from atoms into the given arrays. truth [K, W] says which
-    atoms are [1,1] in which world (Engine.is_true); the id arrays index its rows.
+    """Gather the game state of every world from atoms into the given arrays. truth [W, K] says which
+    atoms are [1,1] in which world (Engine.is_true: [W, K]); the id arrays index its columns.
     agent_flags [M, 5]: atom ids of alive, moving, unsafe, invalid, canAct per agent (M = 2N); unsafe,
     invalid and acted [W, 2, N] receive the last three. bullet_flags [B, 2]: flying, spent.
     hits [3, B, N]: struck / blanked / caught atoms of bullet b on enemy e. win_ids [2, 2]: captured,
@@ -80,7 +80,7 @@ def read_back(truth, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc, bull
     step's events are not new, e.g. at a reset, and health is prev_health); a dead agent's is 0.
     kind_hits [2, N, 3] is scratch. A world with done[w] keeps its state (copied from the prev_*
     arrays) and has no events."""
-    n_worlds = truth.shape[1]
+    n_worlds = truth.shape[0]
     for w in range(n_worlds):
         if done[w]:
             _keep_world(w, prev_pos, prev_alive, prev_ammo, prev_moving, prev_dest, prev_bpos, prev_bdir,
@@ -127,13 +127,13 @@ def _read_world(w, truth, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc,
         c = _first_true(truth, w, agent_loc, j)
         pos[w, tm, i, 0] = cell_xy[c, 0]
         pos[w, tm, i, 1] = cell_xy[c, 1]
-        alive[w, tm, i] = truth[agent_flags[j, 0], w]
+        alive[w, tm, i] = truth[w, agent_flags[j, 0]]
         for kind in range(3):
             kind_hits[tm, i, kind] = 0
-        moving[w, tm, i] = truth[agent_flags[j, 1], w]
-        unsafe[w, tm, i] = truth[agent_flags[j, 2], w]
-        invalid[w, tm, i] = truth[agent_flags[j, 3], w]
-        acted[w, tm, i] = truth[agent_flags[j, 4], w]
+        moving[w, tm, i] = truth[w, agent_flags[j, 1]]
+        unsafe[w, tm, i] = truth[w, agent_flags[j, 2]]
+        invalid[w, tm, i] = truth[w, agent_flags[j, 3]]
+        acted[w, tm, i] = truth[w, agent_flags[j, 4]]
         dest[w, tm, i, 0] = -1
         dest[w, tm, i, 1] = -1
         if moving[w, tm, i] and dest_ids.shape[1] > 0:
@@ -147,27 +147,27 @@ def _read_world(w, truth, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc,
     for b in range(bullet_loc.shape[0]):
         tm = bullet_team[b]
         i = bullet_agent[b]
-        if truth[bullet_flags[b, 1], w]:
+        if truth[w, bullet_flags[b, 1]]:
             ammo[w, tm, i] -= 1
         bpos[w, b, 0] = -1
         bpos[w, b, 1] = -1
         bdir[w, b] = -1
-        if truth[bullet_flags[b, 0], w]:
+        if truth[w, bullet_flags[b, 0]]:
             c = _first_true(truth, w, bullet_loc, b)
             if c >= 0:
                 bpos[w, b, 0] = cell_xy[c, 0]
                 bpos[w, b, 1] = cell_xy[c, 1]
             for d in range(4):
-                if truth[dir_ids[b, d], w]:
+                if truth[w, dir_ids[b, d]]:
                     bdir[w, b] = d
         for e in range(hits.shape[2]):
             for kind in range(3):
-                if truth[hits[kind, b, e], w]:
+                if truth[w, hits[kind, b, e]]:
                     hits_made[w, tm, i] += 1
                     hits_taken[w, 1 - tm, e] += 1
                     kind_hits[1 - tm, e, kind] += 1
     for tm in range(2):
-        win[w, tm] = truth[win_ids[tm, 0], w] or truth[win_ids[1 - tm, 1], w]
+        win[w, tm] = truth[w, win_ids[tm, 0]] or truth[w, win_ids[1 - tm, 1]]
 
 
 @njit(cache=True)
