@@ -61,6 +61,7 @@ def scenario_facts(scenario: Scenario) -> list[Fact]:
                 nx, ny = x + dx, y + dy
                 if 0 <= nx < w and 0 <= ny < h:
                     fact(f"{DIRECTIONS[d]}Of", cell(nx, ny), c)
+                    fact("nextTo", cell(nx, ny), c)
                 else:
                     fact(edge_preds[d], c)
 
