@@ -299,7 +299,9 @@ def _watch(a, skip, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs, inst, r
                 u = ws[W_UP, k]
                 if u != ZERO:
                     _count_sub(gs, g, k, u)
-                new = _count_zero(gs, g, k) & valid[k]
+                    new = _count_zero(gs, g, k) & valid[k]
+                else:  # counts only went up: the worlds of d are inactive now, the others as they were
+                    new = old & ~d
                 if new == old:
                     continue
                 gs[g, k, 0] = new
