@@ -145,3 +145,28 @@ def test_the_two_kernel_modules_spell_their_shared_codes_alike() -> None:
     from tracelab.engine import kernel, lanes
     for name in lanes.SHARED_CODES:
         assert getattr(lanes, name) == getattr(kernel, name), name
+
+
+def test_abort_after_a_restore_names_the_snapshots_cause() -> None:
+    """A restore leaves the lanes kernel's last causes alone and counts the world's restores instead; a
+    cause older than the restore is then read from the snapshot. The message must be the counting
+    kernel's."""
+    prog = parse_program("""
+    %mode intersection
+    %inconsistency abort
+    start: p(a) @0..0
+    """, file="abort.rules")
+    messages = []
+    for kernel in ("counting", "lanes"):
+        eng = Engine(prog, worlds=3, kernel=kernel)
+        eng.add_facts(np.array([eng.atom("p", "a")]), 0.0, 1.0)  # settable from outside (no change)
+        eng.step()
+        snap = eng.snapshot()
+        eng.step()
+        eng.restore(snap, np.array([1]))
+        eng.add_facts(np.array([eng.atom("p", "a")]), 0.0, 0.0, np.array([1]))
+        with pytest.raises(InconsistencyError) as e:
+            eng.step()
+        messages.append(str(e.value))
+    assert messages[0] == messages[1]
+    assert "(world 1)" in messages[1] and "came from fact start (abort.rules:4" in messages[1], messages[1]
