@@ -1,15 +1,14 @@
 """Batch state of the lanes kernel (lanes.py): crisp programs, worlds as bits of machine words.
 
-An atom's state in all worlds is bit planes (T: [1,1], F: [0,0], S: static, D: changed since the world's
-last restore) of ceil(W/64) words; a grounding's is a mask of the worlds where it is active and its
-unsatisfied-clause counts, bit-sliced. Engine.lower/upper are read off the planes (a crisp bound is one
-of three values). Besides the planes, the cause of each atom's last change is kept per world (for the
+An atom's state in all worlds is bit planes (T: [1,1], F: [0,0], S: static) of ceil(W/64) words; a
+grounding's is a mask of the worlds where it is active and its unsatisfied-clause counts, bit-sliced.
+Engine.lower/upper are read off the planes (a crisp bound is one of three values). Besides the planes, the cause of each atom's last change is kept per world (for the
 messages of `%inconsistency abort`), tagged with the world's restore count: a restore only counts up, and
 a cause older than the world's last restore is that snapshot's.
 
 The batch is cut into shards of whole words, one per thread (Engine(threads=...)): each shard has its own
-planes, lists, schedule and scratch, and they step at once (the kernel releases the GIL). The float bounds,
-last causes and statistics are shared arrays, each shard writing its own worlds.
+planes, lists, schedule and scratch, and they step at once (the kernel releases the GIL). The last causes,
+restore counts and statistics are shared arrays, each shard writing its own worlds.
 """
 from __future__ import annotations
 

@@ -6,6 +6,8 @@ so the two simulators are interchangeable and can be compared step by step.
 """
 from __future__ import annotations
 
+from dataclasses import fields
+
 import numpy as np
 
 from tracelab.engine import Engine
@@ -63,7 +65,9 @@ class RuleSim(GameSim):
         self._cur = self._observe_both(self.state)
         self._obs = self._with_history(self._cur, self._cur)
         # every world starts alike: a reset copies these rows instead of reading atoms back
-        self._start_state, self._start_cur = self.state, self._cur
+        self._start_state, self._start_cur = self.state, self._cur.copy()
+        for a in (*(getattr(self.state, f.name) for f in fields(self.state)), self._start_cur):
+            a.flags.writeable = False  # self.state is the caller's to read until the first step
 
     # ---- atom ids, looked up once ----
 
