@@ -2,9 +2,10 @@
 
 An atom's state in all worlds is bit planes (T: [1,1], F: [0,0], S: static) of ceil(W/64) words; a
 grounding's is a mask of the worlds where it is active and its unsatisfied-clause counts, bit-sliced.
-Engine.lower/upper are read off the planes (a crisp bound is one of three values). Besides the planes, the cause of each atom's last change is kept per world (for the
-messages of `%inconsistency abort`), tagged with the world's restore count: a restore only counts up, and
-a cause older than the world's last restore is that snapshot's.
+Engine.lower/upper are read off the planes (a crisp bound is one of three values). Besides the planes,
+the cause of each atom's last change is kept per world (for the messages of `%inconsistency abort`),
+tagged with the world's restore count: a restore only counts up, and a cause older than the world's last
+restore is that snapshot's.
 
 The batch is cut into shards of whole words, one per thread (Engine(threads=...)): each shard has its own
 planes, lists, schedule and scratch, and they step at once (the kernel releases the GIL). The last causes,
@@ -222,8 +223,11 @@ class LaneState:
         """[world, atom, 2]: kind and id of each atom's last change (a copy)."""
         return self._resolved_causes().transpose(1, 0, 2)
 
+    def _shard_of(self, world: int) -> _Shard:
+        return next(s for s in self.shards if s.w0 <= world < s.w1)
+
     def bound(self, atom: int, world: int) -> tuple[float, float]:
-        sh = next(s for s in self.shards if s.w0 <= world < s.w1)
+        sh = self._shard_of(world)
         local = world - sh.w0
         bit = np.uint64(1) << np.uint64(local & 63)
         t = bool(sh.st[atom, L.P_T, local >> 6] & bit)
@@ -327,7 +331,7 @@ class LaneState:
         self.lc_snap[indices] = snap["id"]
 
     def pending(self, world: int) -> list[tuple[int, int]]:
-        sh = next(s for s in self.shards if s.w0 <= world < s.w1)
+        sh = self._shard_of(world)
         return sh.pending(world - sh.w0)
 
     def export(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[list[tuple[int, int]]]]:

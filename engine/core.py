@@ -75,7 +75,7 @@ class Engine:
         if threads is not None and threads < 1:
             raise ValueError(f"threads must be >= 1, got {threads}")
         # one thread unless asked: on this project's 2-core machines a second thread stepping half the
-        # batch measured slower, not faster (docs/benchmarks.md)
+        # batch gained nothing at 1v1 and 1.2x at 5v5 (docs/benchmarks.md)
         self.threads = threads or 1
         self._ext_codes = np.zeros(0, np.int8)  # crisp value codes of this step's external rows (lanes)
         self._state: CountingState | LaneState = self._choose_backend(kernel)

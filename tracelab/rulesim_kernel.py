@@ -9,6 +9,14 @@ from __future__ import annotations
 
 from numba import njit
 
+from . import scenario as _scenario
+
+# A literal, not an import: numba freezes globals into its disk cache, which only notices changes to this
+# file. The check below catches a change of the threshold in scenario.py.
+DEAD_EPS = 1e-9
+if DEAD_EPS != _scenario.DEAD_EPS:
+    raise ImportError("rulesim_kernel.py's DEAD_EPS disagrees with scenario.py")
+
 
 @njit(cache=True)
 def _put_row(ext_i, ext_f, k, atom, value, first_id):
@@ -180,7 +188,7 @@ def _health(w, damage, apply_hits, prev_health, kind_hits, alive, health):
                     k = kind_hits[tm, i, kind]
                     if k > 0:
                         h -= damage * k
-                        if h <= 1e-9:  # DEAD_EPS (tracelab.scenario)
+                        if h <= DEAD_EPS:
                             h = 0.0
             health[w, tm, i] = h if alive[w, tm, i] else 0.0
 
