@@ -71,9 +71,19 @@ def test_bench_env_quick(capsys: pytest.CaptureFixture) -> None:
                 s[key]["steps_per_s"]["median"] * s["worlds"])
         assert s["rules_trace_on"]["trace"] and not s["rules_trace_off"]["trace"]
         assert s["rules_over_reference"] > 0 and s["rules_traced_over_reference"] > 0
+        # the engine alone replays the loop's steps for the 1v1 rows (the goals' ceiling)
+        assert ("engine_only" in s) == (s["agents"] == 1)
+        if s["agents"] == 1:
+            for trace in ("off", "on"):
+                alone = s["engine_only"][f"trace_{trace}"]
+                assert alone["trace"] == (trace == "on") and alone["worlds"] == s["worlds"]
+                assert alone["steps_per_repeat"] >= 3 and alone["same_work"] is True
+                positive(alone["steps_per_s"])
+                positive(alone["env_steps_per_s"])
     assert len(r["goals"]) == 3
     for g in r["goals"]:
         assert g["measured"] > 0 and isinstance(g["met"], bool) and g["target"]
+    assert all(g["engine_alone"] > 0 for g in r["goals"][:2])
     gym = r["gym"]
     if "skipped" not in gym:
         assert [(x["backend"], x["kind"]) for x in gym["rows"]] == [

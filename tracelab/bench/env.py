@@ -27,6 +27,8 @@ def sim_rates(agents: list[int], worlds: list[int], repeats: int, target_s: floa
                    "reference": measure(ref, False, repeats, target_s),
                    "rules_trace_off": measure(rules, False, repeats, target_s, engine_time=False),
                    "rules_trace_on": measure(rules, True, repeats, target_s, engine_time=False)}
+            if n == 1:  # the engine alone on the same steps: the ceiling of the 1v1 goals on this machine
+                row["engine_only"] = engine_only_rates(n, w, repeats, target_s)
             ref_rate = row["reference"]["steps_per_s"]["median"]
             row["rules_over_reference"] = row["rules_trace_off"]["steps_per_s"]["median"] / ref_rate
             row["rules_traced_over_reference"] = row["rules_trace_on"]["steps_per_s"]["median"] / ref_rate
@@ -37,6 +39,16 @@ def sim_rates(agents: list[int], worlds: list[int], repeats: int, target_s: floa
     return rows
 
 
+def engine_only_rates(agents: int, worlds: int, repeats: int, target_s: float) -> dict[str, Any]:
+    """The engine of a RuleSim alone, tracing off and on, replaying the stepping loop's own steps
+    (sims.measure_engine_only), on a simulator built for it and dropped afterwards."""
+    from tracelab.bench.sims import measure_engine_only, scenario_for
+    from tracelab.rulesim import RuleSim
+    sim = RuleSim(scenario_for(agents), worlds, seed=0, trace=True)
+    return {"trace_off": measure_engine_only(sim, False, repeats, target_s),
+            "trace_on": measure_engine_only(sim, True, repeats, target_s)}
+
+
 def goals(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """The three goals with the measured value and met / not met."""
     single = next(r for r in rows if r["agents"] == 1 and r["worlds"] == 1)
@@ -45,12 +57,17 @@ def goals(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     traced = single["rules_trace_on"]["steps_per_s"]["median"]
     env_steps = batched["rules_trace_off"]["env_steps_per_s"]["median"]
     slowdown = 1 / slow["rules_over_reference"]
+    # what the engine alone reaches on the same steps: the most the goal's figure could become here
+    alone_traced = single["engine_only"]["trace_on"]["steps_per_s"]["median"]
+    alone_batched = batched["engine_only"]["trace_off"]["env_steps_per_s"]["median"]
     return [
         {"goal": "rule-driven single 1v1, tracing on", "target": f">= {GOAL_STEPS_PER_S:,} steps/s",
-         "measured": traced, "unit": "steps/s", "met": traced >= GOAL_STEPS_PER_S},
+         "measured": traced, "unit": "steps/s", "met": traced >= GOAL_STEPS_PER_S,
+         "engine_alone": alone_traced},
         {"goal": f"rule-driven batched 1v1 ({batched['worlds']} worlds), tracing off",
          "target": f">= {GOAL_BATCHED_ENV_STEPS_PER_S:,} env-steps/s", "measured": env_steps,
-         "unit": "env-steps/s", "met": env_steps >= GOAL_BATCHED_ENV_STEPS_PER_S},
+         "unit": "env-steps/s", "met": env_steps >= GOAL_BATCHED_ENV_STEPS_PER_S,
+         "engine_alone": alone_batched},
         {"goal": f"rule-driven within {GOAL_MAX_SLOWDOWN:g}x of hand-written (worst: {slow['agents']} "
                  f"agents, {slow['worlds']} worlds, tracing off)",
          "target": f"<= {GOAL_MAX_SLOWDOWN:g}x slower", "measured": slowdown, "unit": "x slower",
@@ -131,8 +148,14 @@ def report(r: dict[str, Any]) -> str:
         [[s["agents"], s["worlds"], env(s["reference"]), env(s["rules_trace_off"]), env(s["rules_trace_on"]),
           s["rules_over_reference"], s["rules_traced_over_reference"],
           "/".join(sp(s[k]) for k in ("reference", "rules_trace_off", "rules_trace_on"))] for s in r["sims"]])
-    goals_t = format_table(["goal", "target", "measured", "result"],
+    alone = format_table(
+        ["agents", "worlds", "trace", "loop env-steps/s", "engine alone env-steps/s", "engine share"],
+        [[s["agents"], s["worlds"], on, env(s[f"rules_trace_{on}"]), env(s["engine_only"][f"trace_{on}"]),
+          env(s[f"rules_trace_{on}"]) / env(s["engine_only"][f"trace_{on}"])]
+         for s in r["sims"] if "engine_only" in s for on in ("off", "on")])
+    goals_t = format_table(["goal", "target", "measured", "engine alone", "result"],
                            [[g["goal"], g["target"], f"{fmt_num(g['measured'])} {g['unit']}",
+                             f"{fmt_num(g['engine_alone'])} {g['unit']}" if "engine_alone" in g else "",
                              "met" if g["met"] else "not met"] for g in r["goals"]])
     g = r["gym"]
     if "skipped" in g:
@@ -143,4 +166,6 @@ def report(r: dict[str, Any]) -> str:
             [[x["backend"], x["kind"], x["worlds"], med(x), env(x) if "env_steps_per_s" in x else med(x), sp(x)]
              for x in g["rows"]])
     return "\n\n".join([machine_line(r["machine"], r["quick"], r["repeats"]),
-                        "simulators (env-steps/s = steps/s x worlds)\n" + sims, goals_t, gym_t])
+                        "simulators (env-steps/s = steps/s x worlds)\n" + sims,
+                        "the engine alone, replaying the loop's steps (share = loop / engine alone)\n" + alone,
+                        goals_t, gym_t])

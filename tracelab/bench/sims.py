@@ -1,6 +1,7 @@
 """Simulator workloads shared by `bench engine` and `bench env`: the scenarios by team size, a pool of
-built RuleSims (the 20-agent game takes a minute to ground, so `bench all` builds each size once), and
-the timed stepping loop (fixed-seed random red, scripted blue, finished worlds reset, trace drained)."""
+built RuleSims (the 20-agent game takes a minute to ground, so `bench all` builds each size once), the
+timed stepping loop (fixed-seed random red, scripted blue, finished worlds reset, trace drained), and the
+engine alone replaying that loop's steps (what the simulator around it costs)."""
 from __future__ import annotations
 
 import time
@@ -9,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from tracelab.bench.common import Summary, calibrate, rates, summarize
+from tracelab.bench.common import Summary, calibrate, median_of, rates, summarize
 from tracelab.refsim import RefSim
 from tracelab.rulesim import RuleSim
 from tracelab.scenario import Scenario, builtin_scenario, generate_scenario
@@ -141,3 +142,78 @@ def measure(sim: Sim, trace: bool, repeats: int, target_s: float, engine_time: b
 
 def _scaled(s: Summary, factor: float) -> Summary:
     return summarize([v * factor for v in s.runs])
+
+
+class _Recorder:
+    """Records what a RuleSim asks of its engine during a stepping loop: each step's external fact rows
+    (copies) and each restore, in order (instance attributes shadow the methods while installed)."""
+
+    def __init__(self, sim: RuleSim) -> None:
+        self.engine = sim.engine
+        self.calls: list[tuple[str, Any]] = []
+        step = type(self.engine).step.__get__(self.engine)
+        restore = type(self.engine).restore.__get__(self.engine)
+
+        def record_step(external: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
+            self.calls.append(("step", tuple(a.copy() for a in external)))
+            step(external=external)
+
+        def record_restore(snap: dict[str, object], worlds: np.ndarray) -> None:
+            self.calls.append(("restore", (snap, np.array(worlds))))
+            restore(snap, worlds)
+
+        self.engine.step = record_step  # type: ignore[method-assign]
+        self.engine.restore = record_restore  # type: ignore[method-assign]
+
+    def remove(self) -> None:
+        del self.engine.step
+        del self.engine.restore
+
+
+def measure_engine_only(sim: RuleSim, trace: bool, repeats: int, target_s: float) -> dict[str, Any]:
+    """Steps/s of the engine alone on the stepping loop's own work: a block of the loop (Loop) is
+    recorded once, then replayed `repeats` times from the same engine state: the same fact rows each step
+    (renumbered, as external ids only grow), the same restores at episode ends, the trace taken after
+    every step with `trace` (Engine.take_trace, without RuleSim's episode clock). What the loop costs on
+    top of this is the simulator around the engine: actions to rows, read-back, rewards, observations,
+    the opponent. `same_work`: the first replay made as many firings and changes as the recorded loop.
+    The replay moves the engine on without the RuleSim knowing: use a simulator of its own
+    (not a pooled one) and drop it afterwards."""
+    loop = Loop(sim, trace)
+    block = calibrate(loop.run, target_s)
+    eng = sim.engine
+    start = eng.snapshot()
+    rec = _Recorder(sim)
+    before = eng.stats
+    try:
+        loop.run(block)
+    finally:
+        rec.remove()
+    recorded = _work(before, eng.stats)
+    everywhere = np.arange(sim.n_worlds)
+    steps = sum(1 for kind, _ in rec.calls if kind == "step")
+
+    def replay() -> None:
+        eng.restore(start, everywhere)
+        for kind, args in rec.calls:
+            if kind == "step":
+                ptr, rows, bounds = args
+                rows[:, 2] = eng.next_external_id() + np.arange(len(rows))
+                eng.step(external=(ptr, rows, bounds))
+                if trace:
+                    eng.take_trace()
+            else:
+                eng.restore(*args)
+
+    before = eng.stats
+    replay()  # warm-up, and the check that the replay does the loop's work
+    same_work = _work(before, eng.stats) == recorded
+    steps_s = rates(median_of(replay, repeats), steps)
+    return {"worlds": sim.n_worlds, "agents": sim.scenario.agents_per_team, "trace": trace,
+            "steps_per_repeat": steps, "steps_per_s": steps_s.to_dict(),
+            "env_steps_per_s": _scaled(steps_s, sim.n_worlds).to_dict(), "same_work": same_work}
+
+
+def _work(before: dict[str, np.ndarray], after: dict[str, np.ndarray]) -> dict[str, int]:
+    """The engine's firings and changes between two readings of Engine.stats, summed over worlds."""
+    return {k: int((after[k] - before[k]).sum()) for k in ("firings", "changes")}
