@@ -12,7 +12,7 @@ import numpy as np
 
 from tracelab.engine import Engine
 from tracelab.game_facts import DIRECTIONS, agent_name, bullet_name, scenario_program
-from tracelab.rulesim_kernel import encode_actions, read_back, settle_step
+from tracelab.rulesim_kernel import encode_actions, read_and_settle, read_back
 from tracelab.refsim import WINNER_NONE, GameState, StepResult
 from tracelab.scenario import TEAMS, Scenario
 from tracelab.sim_base import GameSim
@@ -37,6 +37,7 @@ class RuleSim(GameSim):
         self.episode_start = np.zeros(n_worlds, np.int64)  # engine time of each world's episode t = 0
         self.world_episode = np.zeros(n_worlds, np.int64)  # episodes each world has started, minus one
         self._fresh = np.ones(n_worlds, bool)  # still in the start state, its set-up rows already queued
+        self._any_fresh = True
         setup = self._localize(self.engine.take_trace())
         first = setup["world"] == 0
         self._setup_rows = {k: v[first] for k, v in setup.items()}
@@ -134,6 +135,12 @@ class RuleSim(GameSim):
         self._rows = {name: np.searchsorted(self._read_atoms, getattr(self, name)).astype(np.int64)
                       for name in tables}
         self._shield_true = np.concatenate([self._may_act, self._no_ammo])  # allowed_actions reads them
+        # read_back's arguments that never change, agent_loc to damage: one tuple, not a lookup each step
+        rows, s = self._rows, self.scenario
+        self._read_tables = (rows["_agent_loc"], self._cell_xy, rows["_agent_flags"], rows["_dest"],
+                             rows["_bullet_loc"], rows["_bullet_flags"], rows["_dir"], rows["_hits"],
+                             self._bullet_team, self._bullet_agent, rows["_win"], s.ammo, float(s.health),
+                             float(s.damage))
 
     # ---- reading the world back ----
 
@@ -167,22 +174,20 @@ class RuleSim(GameSim):
         else:
             st = self.state
             prev = (st.pos, st.alive, st.ammo, st.moving, st.dest, st.bullet_pos, st.bullet_dir)
-        rows = self._rows
-        prev_health = self.state.health if settle else np.full((w, 2, n), float(s.health))
-        read_back(self.engine.is_true(self._read_atoms), rows["_agent_loc"], self._cell_xy, rows["_agent_flags"],
-                  rows["_dest"], rows["_bullet_loc"], rows["_bullet_flags"], rows["_dir"], rows["_hits"],
-                  self._bullet_team, self._bullet_agent, rows["_win"], s.ammo, float(s.health), float(s.damage),
-                  settle, prev_health, self._kind_hits, done, *prev,
-                  pos, health, alive, ammo, moving, dest, unsafe, invalid, acted, bpos, bdir, hits_made,
-                  hits_taken, win)
-        self._events = (unsafe, invalid, acted, hits_made, hits_taken, win)
+        truth = self.engine.is_true(self._read_atoms)
+        out = (pos, health, alive, ammo, moving, dest, unsafe, invalid, acted, bpos, bdir, hits_made, hits_taken,
+               win)
         if settle:
             agent_reward = np.empty((w, 2, n))
             reward = np.empty((w, 2))
-            self._n_done = settle_step(done, win, unsafe, invalid, acted, hits_made, hits_taken, self._weights,
-                                       s.max_steps, self.t, self.terminated, self.truncated, self.winner,
-                                       agent_reward, reward)
+            self._n_done = read_and_settle(truth, *self._read_tables, self.state.health, self._kind_hits, done,
+                                           *prev, *out, self._weights, s.max_steps, self.t, self.terminated,
+                                           self.truncated, self.winner, agent_reward, reward)
             self._rewards = (agent_reward, reward)
+        else:
+            read_back(truth, *self._read_tables, False, np.full((w, 2, n), float(s.health)), self._kind_hits,
+                      done, *prev, *out)
+        self._events = (unsafe, invalid, acted, hits_made, hits_taken, win)
         return GameState(
             t=self.t.copy(), pos=pos, health=health, ammo=ammo, alive=alive, moving=moving, dest=dest,
             bullet_pos=bpos, bullet_dir=bdir, terminated=self.terminated.copy(),
@@ -215,6 +220,7 @@ class RuleSim(GameSim):
             np.flatnonzero(worlds) if np.asarray(worlds).dtype == bool else np.asarray(worlds))
         sel = sel[~self._fresh[sel]]  # a world that has not stepped since its start needs nothing
         self._fresh[sel] = True
+        self._any_fresh = True
         if self.engine.trace_on.any():  # rows of the episodes that end here keep their own clock
             self._pending_rows.append(self._localize(self.engine.take_trace()))
         self.engine.restore(self._start, sel)  # action atoms are false again there
@@ -290,14 +296,16 @@ class RuleSim(GameSim):
         any_done = self._n_done > 0
         done = self.terminated | self.truncated if any_done else self._no_world_done
         self.engine.step(external=self._action_rows(red_actions, blue_actions, done))
-        self._fresh[:] = False
+        if self._any_fresh:
+            self._fresh[:] = False
+            self._any_fresh = False
         # finished worlds keep their final state; the clock and end flags are read after settling
         state = self._read_state(done if any_done else None, settle=True)
         unsafe, invalid, acted, hits_made, hits_taken, _ = self._events
         agent_reward, reward = self._rewards
         for a in (state.pos, state.health, state.ammo, state.alive, state.moving, state.dest, state.bullet_pos,
                   state.bullet_dir, state.t, state.terminated, state.truncated, state.winner):
-            a.flags.writeable = False  # shared by the state and the result: nobody may change them
+            a.setflags(write=False)  # shared by the state and the result: nobody may change them
         self.state = state
         cur = self._observe_both(state)
         obs = self._with_history(cur, self._cur)

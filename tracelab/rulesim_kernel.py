@@ -194,6 +194,22 @@ def _health(w, damage, apply_hits, prev_health, kind_hits, alive, health):
 
 
 @njit(cache=True)
+def read_and_settle(truth, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc, bullet_flags, dir_ids, hits,
+                    bullet_team, bullet_agent, win_ids, ammo0, health0, damage, prev_health, kind_hits, done,
+                    prev_pos, prev_alive, prev_ammo, prev_moving, prev_dest, prev_bpos, prev_bdir, pos, health,
+                    alive, ammo, moving, dest, unsafe, invalid, acted, bpos, bdir, hits_made, hits_taken, win,
+                    weights, max_steps, t, terminated, truncated, winner, agent_reward, reward):
+    """After a step: read_back with the step's hits applied, then settle_step, in one call from Python
+    (each call costs microseconds there). Returns settle_step's count of done worlds."""
+    read_back(truth, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc, bullet_flags, dir_ids, hits,
+              bullet_team, bullet_agent, win_ids, ammo0, health0, damage, True, prev_health, kind_hits, done,
+              prev_pos, prev_alive, prev_ammo, prev_moving, prev_dest, prev_bpos, prev_bdir, pos, health, alive,
+              ammo, moving, dest, unsafe, invalid, acted, bpos, bdir, hits_made, hits_taken, win)
+    return settle_step(done, win, unsafe, invalid, acted, hits_made, hits_taken, weights, max_steps, t,
+                       terminated, truncated, winner, agent_reward, reward)
+
+
+@njit(cache=True)
 def settle_step(done, win, unsafe, invalid, acted, hits_made, hits_taken, weights, max_steps,
                 t, terminated, truncated, winner, agent_reward, reward):
     """Rewards and the end of the game from the step's events (docs/game.md, Rewards / End of game).
