@@ -246,8 +246,13 @@ class RuleSim(GameSim):
     def _restarted_state(self, sel: np.ndarray) -> GameState:
         """self.state with worlds `sel` back in the start state (as read when the simulator was built)."""
         st, start = self.state, self._start_state
+        # every world in the start state (e.g. the one world of an env): the start rows as they are (read-only)
+        every = bool(self._fresh.all())
         rows = {}
         for name in ("pos", "health", "ammo", "alive", "moving", "dest", "bullet_pos", "bullet_dir"):
+            if every:
+                rows[name] = getattr(start, name)
+                continue
             a = getattr(st, name).copy()
             a[sel] = getattr(start, name)[sel]
             rows[name] = a
