@@ -939,7 +939,7 @@ def rebuild_lists(gs, inst, alist, alist_n, apos, kind_base):
 
 
 @lanes_jit
-def restore_lanes(wmask, snap_st, snap_gs, st, gs, inst, alist, alist_n, apos, kind_base):
+def _restore_lanes(wmask, snap_st, snap_gs, st, gs, inst, alist, alist_n, apos, kind_base):
     """The worlds of wmask take their planes, counts and active masks from the snapshot (atoms and
     groundings the snapshot has); the active-anywhere lists follow. Words without such worlds are
     not touched."""
@@ -986,7 +986,7 @@ def restore_worlds(local, shift, snap_st, snap_gs, snap_due, snap_g, snap_m, st,
         wmask[k] = ZERO
     for i in range(local.shape[0]):
         wmask[local[i] >> 6] |= ONE << np.uint64(local[i] & 63)
-    restore_lanes(wmask, snap_st, snap_gs, st, gs, inst, alist, alist_n, apos, kind_base)
+    _restore_lanes(wmask, snap_st, snap_gs, st, gs, inst, alist, alist_n, apos, kind_base)
     for a in range(snap_st.shape[0], st.shape[0]):
         for p in range(N_PLANES):
             for k in range(nw):

@@ -37,7 +37,6 @@ class RuleSim(GameSim):
         self.episode_start = np.zeros(n_worlds, np.int64)  # engine time of each world's episode t = 0
         self.world_episode = np.zeros(n_worlds, np.int64)  # episodes each world has started, minus one
         self._fresh = np.ones(n_worlds, bool)  # still in the start state, its set-up rows already queued
-        self._any_fresh = True
         setup = self._localize(self.engine.take_trace())
         first = setup["world"] == 0
         self._setup_rows = {k: v[first] for k, v in setup.items()}
@@ -129,14 +128,12 @@ class RuleSim(GameSim):
         self._action_atoms = acts
         self._kind_hits = np.zeros((2, n, 3), np.int64)  # read_back's scratch
         # read-back: the atoms read after every step, once per step as a truth table (Engine.is_true); the
-        # id arrays above become row numbers of that table
+        # id arrays above become column numbers of that table
         tables = ("_agent_loc", "_agent_flags", "_dest", "_bullet_loc", "_bullet_flags", "_dir", "_hits", "_win")
         self._read_atoms = np.unique(np.concatenate([getattr(self, name).ravel() for name in tables]))
-        self._rows = {name: np.searchsorted(self._read_atoms, getattr(self, name)).astype(np.int64)
-                      for name in tables}
+        rows = {name: np.searchsorted(self._read_atoms, getattr(self, name)).astype(np.int64) for name in tables}
         self._shield_true = np.concatenate([self._may_act, self._no_ammo])  # allowed_actions reads them
         # read_back's arguments that never change, agent_loc to damage: one tuple, not a lookup each step
-        rows, s = self._rows, self.scenario
         self._read_tables = (rows["_agent_loc"], self._cell_xy, rows["_agent_flags"], rows["_dest"],
                              rows["_bullet_loc"], rows["_bullet_flags"], rows["_dir"], rows["_hits"],
                              self._bullet_team, self._bullet_agent, rows["_win"], s.ammo, float(s.health),
@@ -220,7 +217,6 @@ class RuleSim(GameSim):
             np.flatnonzero(worlds) if np.asarray(worlds).dtype == bool else np.asarray(worlds))
         sel = sel[~self._fresh[sel]]  # a world that has not stepped since its start needs nothing
         self._fresh[sel] = True
-        self._any_fresh = True
         if self.engine.trace_on.any():  # rows of the episodes that end here keep their own clock
             self._pending_rows.append(self._localize(self.engine.take_trace()))
         self.engine.restore(self._start, sel)  # action atoms are false again there
@@ -301,9 +297,7 @@ class RuleSim(GameSim):
         any_done = self._n_done > 0
         done = self.terminated | self.truncated if any_done else self._no_world_done
         self.engine.step(external=self._action_rows(red_actions, blue_actions, done))
-        if self._any_fresh:
-            self._fresh[:] = False
-            self._any_fresh = False
+        self._fresh[:] = False
         # finished worlds keep their final state; the clock and end flags are read after settling
         state = self._read_state(done if any_done else None, settle=True)
         unsafe, invalid, acted, hits_made, hits_taken, _ = self._events
