@@ -1,12 +1,18 @@
 """tracelab.engine: a temporal annotated-logic engine (generalized annotated programs with delays and
 immediate rules), compiled with numba, batched over worlds, with a columnar trace of every change.
 The language and its semantics: docs/language.md."""
-from .errors import FixpointError, InconsistencyError, ProgramCheckError, ProgramError, RuleSyntaxError
+from .core import STAT_NAMES, TRACE_COLUMNS, Engine
+from .errors import (
+    FixpointError,
+    InconsistencyError,
+    ProgramCheckError,
+    ProgramError,
+    RuleSyntaxError,
+)
 from .graph import Graph, load_graphml
-from .parser import check_program, load_program, parse_literal, parse_program
-from .core import Engine, STAT_NAMES, TRACE_COLUMNS
 from .grounding import GroundingTable
 from .kernel import CAUSE_EXTERNAL, CAUSE_FACT, CAUSE_POLICY, CAUSE_RESET, CAUSE_RULE
+from .parser import check_program, load_program, parse_literal, parse_program
 
 __all__ = [
     "Engine", "GroundingTable", "TRACE_COLUMNS", "STAT_NAMES",

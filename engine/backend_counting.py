@@ -6,20 +6,18 @@ buffer and the statistics; this class owns the state and runs the kernel over it
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from . import kernel as K
-
-if TYPE_CHECKING:
-    from .core import Engine
+from .backend_api import EngineTables
 
 
 class CountingState:
     name = "counting"
 
-    def __init__(self, eng: Engine) -> None:
+    def __init__(self, eng: EngineTables) -> None:
         self.eng = eng
         w = eng.n_worlds
         self.lower = np.zeros((w, 0))

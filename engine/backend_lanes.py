@@ -14,15 +14,13 @@ restore counts and statistics are shared arrays, each shard writing its own worl
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from . import kernel as K
 from . import lanes as L
-
-if TYPE_CHECKING:
-    from .core import Engine
+from .backend_api import EngineTables
 
 
 def crisp_codes(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
@@ -46,7 +44,7 @@ class _Shard:
     """Worlds w0 .. w1-1 of the batch: their planes, grounding masks and counts, lists, schedule, scratch
     and trace rows."""
 
-    def __init__(self, eng: Engine, w0: int, w1: int, count_bits: int) -> None:
+    def __init__(self, eng: EngineTables, w0: int, w1: int, count_bits: int) -> None:
         self.eng, self.w0, self.w1 = eng, w0, w1
         w = w1 - w0
         nw = self.n_words = (w + 63) // 64
@@ -181,7 +179,7 @@ class LaneState:
     name = "lanes"
     events = 0  # ids of snapshots, unique in the process
 
-    def __init__(self, eng: Engine, threads: int = 1) -> None:
+    def __init__(self, eng: EngineTables, threads: int = 1) -> None:
         self.eng = eng
         w = eng.n_worlds
         # last cause per [atom, world]: kind, id, and the world's restore count when it was written

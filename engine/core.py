@@ -16,8 +16,14 @@ from .errors import FixpointError, InconsistencyError
 from .graph import Graph
 from .grounding import Grounder, GroundingTable, rule_head_bound
 from .parser import parse_literal
-from .program import (INCONSISTENCY_POLICIES, UPDATE_MODES, Fact, Program, effective_bound,
-                      ordered_nodes)
+from .program import (
+    INCONSISTENCY_POLICIES,
+    UPDATE_MODES,
+    Fact,
+    Program,
+    effective_bound,
+    ordered_nodes,
+)
 from .vocabulary import Vocabulary
 
 TRACE_COLUMNS = ("world", "t", "pass_no", "atom", "cause_kind", "cause_id", "grounding", "n_sources",

@@ -31,8 +31,9 @@ def load_graphml(path: str | os.PathLike[str]) -> Graph:
     """Read a GraphML file. Attribute values: a number v in [0,1] is [v,v]; a boolean is [1,1] / [0,0];
     a string "l,u" or "[l,u]" is [l,u]. Anything else raises ProgramCheckError naming the file, the node
     or edge and the attribute. GraphML key defaults apply to elements that lack the attribute."""
-    import networkx as nx  # imported here: keeps `import tracelab.engine` fast for programs without graphs
     from xml.etree.ElementTree import ParseError
+
+    import networkx as nx  # imported here: keeps `import tracelab.engine` fast for programs without graphs
 
     file = os.fspath(path)
     try:

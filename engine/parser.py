@@ -11,8 +11,17 @@ from itertools import groupby
 from pathlib import Path
 
 from .errors import ProgramCheckError, RuleSyntaxError
-from .program import (INCONSISTENCY_POLICIES, TIMESTEP_MODES, UPDATE_MODES, Fact, Literal, Program, Rule,
-                      SourceLoc, Term)
+from .program import (
+    INCONSISTENCY_POLICIES,
+    TIMESTEP_MODES,
+    UPDATE_MODES,
+    Fact,
+    Literal,
+    Program,
+    Rule,
+    SourceLoc,
+    Term,
+)
 
 __all__ = ["parse_program", "load_program", "parse_literal", "check_program"]
 

@@ -11,7 +11,15 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from .errors import FixpointError, InconsistencyError
-from .program import EPS, INCONSISTENCY_POLICIES, Fact, Literal, Program, Rule, ordered_nodes
+from .program import (
+    EPS,
+    INCONSISTENCY_POLICIES,
+    Fact,
+    Literal,
+    Program,
+    Rule,
+    ordered_nodes,
+)
 
 Atom = tuple[str, tuple[str, ...]]
 Interval = tuple[float, float]

@@ -12,8 +12,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-
 from tracelab.engine import Engine, load_program
+
 from tracelab.store.bench import synthetic_trace, synthetic_vocabulary  # noqa: F401 - re-exported for tests
 from tracelab.store.writer import TraceWriter
 

@@ -10,7 +10,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from hypothesis import strategies as st
-
 from tracelab.engine.graph import Graph
 from tracelab.engine.parser import parse_program
 from tracelab.engine.program import INCONSISTENCY_POLICIES, Fact, Literal, Program, Term

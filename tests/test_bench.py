@@ -7,10 +7,10 @@ import json
 from typing import Any
 
 import pytest
+from tracelab.engine import STAT_NAMES
 
 from tracelab.bench.common import format_table, median_of, summarize
 from tracelab.cli import main
-from tracelab.engine import STAT_NAMES
 
 
 def bench_json(capsys: pytest.CaptureFixture, *argv: str) -> dict[str, Any]:

@@ -5,11 +5,20 @@ import json
 
 import numpy as np
 import pytest
+from tracelab.engine import (
+    CAUSE_EXTERNAL,
+    CAUSE_FACT,
+    CAUSE_POLICY,
+    CAUSE_RULE,
+    TRACE_COLUMNS,
+    Engine,
+    FixpointError,
+    InconsistencyError,
+    kernel,
+    parse_program,
+)
 
 from tracelab.cli import main as cli_main
-from tracelab.engine import (CAUSE_EXTERNAL, CAUSE_FACT, CAUSE_POLICY, CAUSE_RULE, TRACE_COLUMNS, Engine,
-                             FixpointError, InconsistencyError, parse_program)
-from tracelab.engine import kernel
 
 CHAIN = """
 edge(a,b) static

@@ -14,7 +14,6 @@ from collections.abc import Sequence
 
 import numpy as np
 from hypothesis import HealthCheck, given, settings
-
 from strategies import ExtFact, Scenario, scenarios
 from tracelab.engine import CAUSE_EXTERNAL, CAUSE_POLICY, CAUSE_RULE, Engine
 from tracelab.engine.errors import FixpointError, InconsistencyError

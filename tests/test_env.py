@@ -1,4 +1,4 @@
-"""tracelab.env.GridWarEnv: the gymnasium checks, seeding, the two backends against each other, the action
+"""tracelab.envs.gym_env.GridWarEnv: the gymnasium checks, seeding, the two backends against each other, the action
 mask against what the simulator does, termination / truncation, and the trace streamed to a MemorySink."""
 from __future__ import annotations
 
@@ -9,12 +9,19 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
-
 from tracelab.engine import CAUSE_EXTERNAL
-from tracelab.env import ENV_IDS, GridWarEnv
-from tracelab.refsim import WINNER_RED
-from tracelab.scenario import LEFT, NOTHING, SHOOT_DOWN, SHOOT_UP, UP, builtin_scenario
-from tracelab.trace_sink import MemorySink, TraceSink
+
+from tracelab.envs.gym_env import ENV_IDS, GridWarEnv
+from tracelab.envs.sinks import MemorySink, TraceSink
+from tracelab.game.scenario import (
+    LEFT,
+    NOTHING,
+    SHOOT_DOWN,
+    SHOOT_UP,
+    UP,
+    builtin_scenario,
+)
+from tracelab.game.state import WINNER_RED
 
 SCENARIOS = ("base", "advanced", "nonmarkov")
 BACKENDS = ("rules", "reference")

@@ -5,8 +5,13 @@ from pathlib import Path
 
 import networkx as nx
 import pytest
-
-from tracelab.engine import Graph, ProgramCheckError, check_program, load_graphml, parse_program
+from tracelab.engine import (
+    Graph,
+    ProgramCheckError,
+    check_program,
+    load_graphml,
+    parse_program,
+)
 from tracelab.engine.program import Literal, Term
 
 

@@ -13,7 +13,6 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-
 from strategies import Scenario, scenarios
 from tracelab.engine import Engine, parse_program
 from tracelab.engine.errors import FixpointError, InconsistencyError

@@ -1,4 +1,4 @@
-"""tracelab.parallel_env.GridWarParallelEnv: PettingZoo's parallel API test, agent names, per-agent rewards,
+"""tracelab.envs.parallel_env.GridWarParallelEnv: PettingZoo's parallel API test, agent names, per-agent rewards,
 dead agents, the two backends against each other, and the trace of both teams' actions."""
 from __future__ import annotations
 
@@ -8,11 +8,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from pettingzoo.test import parallel_api_test
-
 from tracelab.engine import CAUSE_EXTERNAL
-from tracelab.parallel_env import GridWarParallelEnv
-from tracelab.scenario import NOTHING, RIGHT, SHOOT_UP, builtin_scenario
-from tracelab.trace_sink import MemorySink
+
+from tracelab.envs.parallel_env import GridWarParallelEnv
+from tracelab.envs.sinks import MemorySink
+from tracelab.game.scenario import NOTHING, RIGHT, SHOOT_UP, builtin_scenario
 
 BACKENDS = ("rules", "reference")
 

@@ -11,9 +11,14 @@ from pathlib import Path
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
-from tracelab.engine import (ProgramCheckError, ProgramError, RuleSyntaxError, load_program, parse_literal,
-                             parse_program)
+from tracelab.engine import (
+    ProgramCheckError,
+    ProgramError,
+    RuleSyntaxError,
+    load_program,
+    parse_literal,
+    parse_program,
+)
 from tracelab.engine.parser import CONSTANT_RE
 from tracelab.engine.program import Fact, Literal, Rule, SourceLoc, Term
 

@@ -5,8 +5,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-
-from tracelab.engine import ProgramCheckError, check_program, load_program, parse_program
+from tracelab.engine import (
+    ProgramCheckError,
+    check_program,
+    load_program,
+    parse_program,
+)
 from tracelab.engine.program import Fact, Literal, Program, Rule, SourceLoc, Term
 
 X, Y = Term("X", True), Term("Y", True)

@@ -9,13 +9,21 @@ import dataclasses
 
 import pytest
 from hypothesis import HealthCheck, given, settings
-
 from strategies import Scenario, scenarios
 from tracelab.engine.errors import FixpointError, InconsistencyError
 from tracelab.engine.parser import parse_program
 from tracelab.engine.program import Fact, Literal, Term
-from tracelab.engine.reference import (CAUSE_EXTERNAL, CAUSE_FACT, CAUSE_POLICY, CAUSE_RESET, CAUSE_RULE, FULL,
-                                       RefChange, ReferenceEvaluator, atom_text)
+from tracelab.engine.reference import (
+    CAUSE_EXTERNAL,
+    CAUSE_FACT,
+    CAUSE_POLICY,
+    CAUSE_RESET,
+    CAUSE_RULE,
+    FULL,
+    RefChange,
+    ReferenceEvaluator,
+    atom_text,
+)
 
 Interp = dict[str, tuple[float, float]]
 

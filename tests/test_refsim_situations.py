@@ -10,12 +10,23 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tracelab.opponent import ScriptedPolicy, scripted_actions
-from tracelab.refsim import (
-    WINNER_BLUE, WINNER_DRAW, WINNER_NONE, WINNER_RED, RefSim, StepResult, obs_size, observe,
+from tracelab.game.observe import obs_size, observe
+from tracelab.game.opponent import ScriptedPolicy, scripted_actions
+from tracelab.game.refsim import RefSim
+from tracelab.game.rulesim import RuleSim
+from tracelab.game.scenario import (
+    Scenario,
+    SlowAgents,
+    builtin_scenario,
+    generate_scenario,
 )
-from tracelab.rulesim import RuleSim
-from tracelab.scenario import Scenario, SlowAgents, builtin_scenario, generate_scenario
+from tracelab.game.state import (
+    WINNER_BLUE,
+    WINNER_DRAW,
+    WINNER_NONE,
+    WINNER_RED,
+    StepResult,
+)
 
 UP, DOWN, LEFT, RIGHT = 0, 1, 2, 3
 S_UP, S_DOWN, S_LEFT, S_RIGHT = 4, 5, 6, 7
@@ -462,7 +473,7 @@ def test_actions_outside_the_scenario_are_rejected(start):
 
 
 def test_rewards_are_configurable(start):
-    from tracelab.scenario import Rewards
+    from tracelab.game.scenario import Rewards
     sim = start(make(red=[(3, 1)], blue=[(3, 1)], rewards=Rewards(hit_opponent=1, got_shot=-3, valid_action=0,
                                                                    win=10, loss=-20)))
     r = step(sim, [S_UP], [NOP])
@@ -493,7 +504,7 @@ def test_observations_layout_and_sentinels(start):
 
 
 def test_nearest_bullet_ties_go_to_the_lowest_slot():
-    from tracelab.refsim import GameState
+    from tracelab.game.state import GameState
     sc = make(red=[(3, 3)], blue=[(0, 7)])
     state = GameState.initial(sc, 1)
     # Blue's slots are 3, 4, 5 (red's come first). Two bullets at distance 2 from red, one further.

@@ -17,11 +17,18 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from tracelab.game_facts import agent_name, bullet_name
-from tracelab.refsim import WINNER_RED, RefSim, StepResult
-from tracelab.rulesim import RuleSim
-from tracelab.scenario import (Rewards, Scenario, ScenarioError, SlowAgents, builtin_scenario,
-                               generate_scenario)
+from tracelab.game.facts import agent_name, bullet_name
+from tracelab.game.refsim import RefSim
+from tracelab.game.rulesim import RuleSim
+from tracelab.game.scenario import (
+    Rewards,
+    Scenario,
+    ScenarioError,
+    SlowAgents,
+    builtin_scenario,
+    generate_scenario,
+)
+from tracelab.game.state import WINNER_RED, StepResult
 
 FIELDS = [f.name for f in dataclasses.fields(StepResult)]
 UP, LEFT, S_UP, S_RIGHT, NOP = 0, 2, 4, 7, 8

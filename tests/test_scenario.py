@@ -7,9 +7,18 @@ from collections import deque
 import numpy as np
 import pytest
 
-from tracelab.scenario import (
-    ADVANCED_ACTION_IDS, BASE_ACTION_IDS, Rewards, Scenario, ScenarioError, SlowAgents, builtin_scenario,
-    builtin_scenario_names, generate_scenario, load_scenario, scenario_from_dict,
+from tracelab.game.scenario import (
+    ADVANCED_ACTION_IDS,
+    BASE_ACTION_IDS,
+    Rewards,
+    Scenario,
+    ScenarioError,
+    SlowAgents,
+    builtin_scenario,
+    builtin_scenario_names,
+    generate_scenario,
+    load_scenario,
+    scenario_from_dict,
 )
 
 DEFAULT_MOUNTAINS = ((2, 3), (3, 3), (2, 4), (3, 4), (4, 4), (4, 5))

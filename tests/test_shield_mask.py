@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tracelab.env_common import ActionMasker
-from tracelab.rulesim import RuleSim
-from tracelab.scenario import SlowAgents, builtin_scenario, generate_scenario
+from tracelab.envs.common import ActionMasker
+from tracelab.game.rulesim import RuleSim
+from tracelab.game.scenario import SlowAgents, builtin_scenario, generate_scenario
 
 
 def scenarios():

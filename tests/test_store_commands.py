@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
-
 from store_helpers import write_walk_run
+
 from tracelab.cli import main
 
 

@@ -10,8 +10,8 @@ import time
 from pathlib import Path
 
 import pytest
-
 from store_helpers import episode_rows
+
 from tracelab.store import layout
 from tracelab.store.parts import read_manifest
 from tracelab.store.reader import open_run, retrying, run_info

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from store_helpers import write_walk_run
+
 from tracelab.store.diff import first_divergence
 from tracelab.store.queries import list_queries
 from tracelab.store.reader import open_run, query_readonly

@@ -5,8 +5,8 @@ import json
 from pathlib import Path
 
 import pytest
-
 from store_helpers import write_walk_run
+
 from tracelab.store.reader import open_run
 from tracelab.store.why import WhyNode, explain, render_why, render_why_not, why_not
 

@@ -7,10 +7,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from store_helpers import (WALK_EPISODES, WALK_RULES, WALK_STEPS, synthetic_trace, synthetic_vocabulary,
-                           write_walk_run)
+from store_helpers import (
+    WALK_EPISODES,
+    WALK_RULES,
+    WALK_STEPS,
+    synthetic_trace,
+    synthetic_vocabulary,
+    write_walk_run,
+)
 from tracelab.engine import Engine, load_program
+
 from tracelab.store.parts import read_manifest
 from tracelab.store.reader import open_run, run_info
 from tracelab.store.seal import seal_run

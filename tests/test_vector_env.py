@@ -1,4 +1,4 @@
-"""tracelab.vector_env.GridWarVectorEnv: gymnasium's vector API, same-step autoreset (against gymnasium's own
+"""tracelab.envs.vector_env.GridWarVectorEnv: gymnasium's vector API, same-step autoreset (against gymnasium's own
 SyncVectorEnv of the single env), the two backends against each other, and the trace per episode."""
 from __future__ import annotations
 
@@ -12,10 +12,10 @@ from gymnasium.vector import AutoresetMode, SyncVectorEnv, VectorEnv
 from gymnasium.vector.utils import batch_space
 from gymnasium.wrappers.vector import RecordEpisodeStatistics
 
-from tracelab.env import ENV_IDS, GridWarEnv
-from tracelab.scenario import NOTHING, Scenario, builtin_scenario
-from tracelab.trace_sink import MemorySink
-from tracelab.vector_env import GridWarVectorEnv
+from tracelab.envs.gym_env import ENV_IDS, GridWarEnv
+from tracelab.envs.sinks import MemorySink
+from tracelab.envs.vector_env import GridWarVectorEnv
+from tracelab.game.scenario import NOTHING, Scenario, builtin_scenario
 
 BACKENDS = ("rules", "reference")
 

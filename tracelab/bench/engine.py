@@ -18,7 +18,13 @@ import time
 from typing import IO, Any
 
 from tracelab import RULES_DIR
-from tracelab.bench.common import format_table, fmt_num, machine_info, rss_bytes, summarize
+from tracelab.bench.common import (
+    fmt_num,
+    format_table,
+    machine_info,
+    rss_bytes,
+    summarize,
+)
 
 REFERENCE_S_PER_STEP = 0.8  # the method's reference system: ~0.8 s per step
 GOAL_STEPS_PER_S = 20_000  # single 1v1 world, tracing on
@@ -127,7 +133,7 @@ def step_rates(agents: list[int], repeats: int, target_s: float) -> list[dict[st
 def memory(steps: int) -> dict[str, Any]:
     """(d) RSS of this process every 10% of a `steps`-step traced 1v1 run (trace drained every step)."""
     from tracelab.bench.sims import Loop, scenario_for
-    from tracelab.rulesim import RuleSim
+    from tracelab.game.rulesim import RuleSim
     loop = Loop(RuleSim(scenario_for(1), 1, seed=0, trace=True), trace=True)
     gc.collect()
     marks = [round(i * steps / 10) for i in range(11)]

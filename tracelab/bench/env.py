@@ -1,13 +1,19 @@
 """`tracelab bench env`: the rule-driven simulator (RuleSim) and the hand-written one (RefSim) side by
 side, by team size, one world and batched, RuleSim with tracing on and off; then the gymnasium envs
-(tracelab.env, tracelab.vector_env) on both backends when they import. Goals: docs/benchmarks.md."""
+(tracelab.envs.gym_env, tracelab.envs.vector_env) on both backends when they import. Goals: docs/benchmarks.md."""
 from __future__ import annotations
 
 from typing import Any
 
 import numpy as np
 
-from tracelab.bench.common import block_rates, fmt_num, format_table, machine_info, summarize
+from tracelab.bench.common import (
+    block_rates,
+    fmt_num,
+    format_table,
+    machine_info,
+    summarize,
+)
 from tracelab.bench.engine import GOAL_STEPS_PER_S, machine_line
 
 GOAL_BATCHED_ENV_STEPS_PER_S = 1_000_000  # batched, tracing off
@@ -43,7 +49,7 @@ def engine_only_rates(agents: int, worlds: int, repeats: int, target_s: float) -
     """The engine of a RuleSim alone, tracing off and on, replaying the stepping loop's own steps
     (sims.measure_engine_only), on a simulator built for it and dropped afterwards."""
     from tracelab.bench.sims import measure_engine_only, scenario_for
-    from tracelab.rulesim import RuleSim
+    from tracelab.game.rulesim import RuleSim
     sim = RuleSim(scenario_for(agents), worlds, seed=0, trace=True)
     return {"trace_off": measure_engine_only(sim, False, repeats, target_s),
             "trace_on": measure_engine_only(sim, True, repeats, target_s)}
@@ -80,10 +86,11 @@ def gym_rates(worlds: int, repeats: int, target_s: float) -> dict[str, Any]:
     worlds, gymnasium.make_vec), both backends, tracing off (no trace sink); skipped if not importable."""
     try:
         import gymnasium as gym
-        import tracelab.env  # noqa: F401  (registers the ids)
-        import tracelab.vector_env  # noqa: F401
+
+        import tracelab.envs.gym_env  # noqa: F401  (registers the ids)
+        import tracelab.envs.vector_env  # noqa: F401
     except Exception as e:  # another engineer may be mid-way through these modules
-        return {"skipped": f"tracelab.env / tracelab.vector_env not importable: {type(e).__name__}: {e}"}
+        return {"skipped": f"tracelab.envs.gym_env / tracelab.envs.vector_env not importable: {type(e).__name__}: {e}"}
     out: dict[str, Any] = {"env_id": ENV_ID, "vector_worlds": worlds, "trace": False, "rows": []}
     for backend in ("rules", "reference"):
         env = gym.make(ENV_ID, backend=backend)

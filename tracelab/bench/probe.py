@@ -17,12 +17,13 @@ def _first_step(target: str) -> tuple[float, float, float]:
     """(import s, build s, first step s) of one target, in this process."""
     t0 = time.perf_counter()
     from tracelab.engine import Engine, load_program
-    from tracelab.scenario import builtin_scenario
+    from tracelab.game.scenario import builtin_scenario
     if target == "rulesim":
         import numpy as np
-        from tracelab.rulesim import RuleSim
+
+        from tracelab.game.rulesim import RuleSim
     else:
-        from tracelab.game_facts import scenario_program
+        from tracelab.game.facts import scenario_program
     t1 = time.perf_counter()
     if target == "rulesim":
         sim = RuleSim(builtin_scenario("advanced"), 1, seed=0, trace=True)

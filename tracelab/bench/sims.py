@@ -11,9 +11,9 @@ from typing import Any
 import numpy as np
 
 from tracelab.bench.common import Summary, calibrate, median_of, rates, summarize
-from tracelab.refsim import RefSim
-from tracelab.rulesim import RuleSim
-from tracelab.scenario import Scenario, builtin_scenario, generate_scenario
+from tracelab.game.refsim import RefSim
+from tracelab.game.rulesim import RuleSim
+from tracelab.game.scenario import Scenario, builtin_scenario, generate_scenario
 
 Sim = RuleSim | RefSim
 _POOL: dict[tuple[str, int, int], tuple[Sim, float]] = {}

@@ -33,7 +33,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tracelab.scenario import ScenarioError, builtin_scenario, builtin_scenario_names, load_scenario
+    from tracelab.game.scenario import (
+        ScenarioError,
+        builtin_scenario,
+        builtin_scenario_names,
+        load_scenario,
+    )
 
     try:
         scenario = builtin_scenario(args.scenario) if args.scenario in builtin_scenario_names() \
@@ -47,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
     if args.no_trace:
         _summary(play(scenario, args, sink=None))
         return 0
-    from tracelab.game_facts import GAME_RULES
+    from tracelab.game.facts import GAME_RULES
     from tracelab.store import TraceWriter
     from tracelab.store.sink import StoreSink
 
@@ -65,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
 def play(scenario, args: argparse.Namespace, sink) -> dict:
     """Play until args.episodes episodes ended, in args.worlds worlds of the vector env (rules backend);
     episodes still running then are closed as aborted."""
-    from tracelab.vector_env import GridWarVectorEnv
+    from tracelab.envs.vector_env import GridWarVectorEnv
 
     n_worlds = min(args.worlds, args.episodes)
     env = GridWarVectorEnv(n_worlds, scenario, backend="rules", trace_sink=sink)

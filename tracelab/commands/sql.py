@@ -3,8 +3,13 @@ from __future__ import annotations
 
 import argparse
 
-from tracelab.commands._output import (add_format_options, add_paging_options, fail, store_errors,
-                                       write_table)
+from tracelab.commands._output import (
+    add_format_options,
+    add_paging_options,
+    fail,
+    store_errors,
+    write_table,
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -5,8 +5,13 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING
 
-from tracelab.commands._output import (add_format_options, add_paging_options, fail, store_errors,
-                                       write_table)
+from tracelab.commands._output import (
+    add_format_options,
+    add_paging_options,
+    fail,
+    store_errors,
+    write_table,
+)
 
 if TYPE_CHECKING:
     import pyarrow as pa

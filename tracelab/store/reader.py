@@ -10,7 +10,6 @@ Sealed run (run.duckdb, or any lone .duckdb file): the file is attached READ_ONL
 views over its tables. Either way the user-facing views (tracelab.store.schema.VIEWS_SQL) are the same."""
 from __future__ import annotations
 
-import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass

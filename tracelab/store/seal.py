@@ -14,7 +14,7 @@ import duckdb
 from tracelab.store import layout
 from tracelab.store.meta import meta_table, now_iso, read_meta, write_meta
 from tracelab.store.parts import read_manifest
-from tracelab.store.reader import _create_table, _sql_str, resolve_run
+from tracelab.store.reader import _create_table, resolve_run
 from tracelab.store.schema import SEAL_ORDER, TABLES, VIEWS_SQL
 
 

@@ -1,4 +1,4 @@
-"""StoreSink: the TraceSink (tracelab/trace_sink.py) that streams an environment's trace into a run of
+"""StoreSink: the TraceSink (tracelab/envs/sinks.py) that streams an environment's trace into a run of
 the trace store, through TraceWriter."""
 from __future__ import annotations
 

@@ -19,6 +19,7 @@ from tracelab.store.model import Clause, RuleInfo, RunModel, satisfies
 from tracelab.store.reader import RunConnection
 from tracelab.store.schema import CAUSE_NAMES
 
+
 def _bound_text(b: tuple[float, float] | list[float] | None) -> str:
     return "?" if b is None else f"[{b[0]:g},{b[1]:g}]"
 

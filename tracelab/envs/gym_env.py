@@ -1,5 +1,5 @@
 """`GridWarEnv`: the grid-world war game as a gymnasium Env for the learner team (red), with the scripted
-opponent (blue, tracelab/opponent.py) inside.
+opponent (blue, tracelab/game/opponent.py) inside.
 
 - Observation: red's observation (docs/game.md, Observations): 4 (base) or 7 (advanced) float32 numbers per
   agent, [current, previous] with `stack_previous` (the non-Markov setup).
@@ -15,12 +15,12 @@ opponent (blue, tracelab/opponent.py) inside.
 - Seeding: `reset(seed=s)` reseeds the opponent's generator; the same seed and actions give the same
   trajectory, with either backend.
 - `backend`: "rules" (RuleSim, the rule engine) or "reference" (RefSim, the hand-written simulator).
-- `trace_sink`: a TraceSink (tracelab/trace_sink.py) receiving the trace; None builds the engine with its
+- `trace_sink`: a TraceSink (tracelab/envs/sinks.py) receiving the trace; None builds the engine with its
   trace off.
 
 Importing this module registers `tracelab/GridWar-{base,advanced,nonmarkov}-v0` (the last with
 `stack_previous=True`; pass `stack_previous=False` for the Markov baseline), each with a vector entry
-point (`gymnasium.make_vec` builds tracelab.vector_env.GridWarVectorEnv).
+point (`gymnasium.make_vec` builds tracelab.envs.vector_env.GridWarVectorEnv).
 """
 from __future__ import annotations
 
@@ -29,11 +29,17 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from tracelab.env_common import (ActionMasker, learner_action_space, observation_space, one_world_env,
-                                 render_text, step_learner)
-from tracelab.refsim import WINNER_NONE, StepResult
-from tracelab.scenario import RED, Scenario
-from tracelab.trace_sink import TraceSink
+from tracelab.envs.common import (
+    ActionMasker,
+    learner_action_space,
+    observation_space,
+    one_world_env,
+    render_text,
+    step_learner,
+)
+from tracelab.envs.sinks import TraceSink
+from tracelab.game.scenario import RED, Scenario
+from tracelab.game.state import WINNER_NONE, StepResult
 
 ENV_IDS = {name: f"tracelab/GridWar-{name}-v0" for name in ("base", "advanced", "nonmarkov")}
 
@@ -122,8 +128,8 @@ def register_envs() -> None:
         kwargs: dict[str, Any] = {"scenario": name}
         if name == "nonmarkov":
             kwargs["stack_previous"] = True
-        gym.register(id=env_id, entry_point="tracelab.env:GridWarEnv",
-                     vector_entry_point="tracelab.vector_env:GridWarVectorEnv", kwargs=kwargs)
+        gym.register(id=env_id, entry_point="tracelab.envs.gym_env:GridWarEnv",
+                     vector_entry_point="tracelab.envs.vector_env:GridWarVectorEnv", kwargs=kwargs)
 
 
 register_envs()

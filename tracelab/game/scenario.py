@@ -403,7 +403,7 @@ def builtin_scenario_names() -> list[str]:
 
 
 def builtin_scenario(name: str) -> Scenario:
-    """One of the scenarios shipped in tracelab/scenarios (base, advanced, nonmarkov)."""
+    """One of the scenarios shipped in tracelab/game/scenarios (base, advanced, nonmarkov)."""
     path = SCENARIO_DIR / f"{name}.toml"
     if not path.is_file():
         raise ValueError(f"no built-in scenario {name!r}; available: {', '.join(builtin_scenario_names())}")

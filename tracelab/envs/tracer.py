@@ -1,5 +1,5 @@
 """The env side of trace streaming: numbers episodes, labels the simulator's change rows with them, keeps
-returns, and calls a TraceSink (conventions in tracelab/trace_sink.py). Only built when an env has a sink.
+returns, and calls a TraceSink (conventions in tracelab/envs/sinks.py). Only built when an env has a sink.
 
 RuleSim.take_trace() already counts each row's `t` from its world's episode start and tags it with
 `world_episode` (the world's own episode count); here that is mapped to the env's episode id. Rows are
@@ -11,11 +11,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from tracelab.game_facts import agent_name
-from tracelab.refsim import WINNER_BLUE, WINNER_DRAW, WINNER_RED, RefSim, StepResult
-from tracelab.rulesim import RuleSim
-from tracelab.scenario import TEAMS, Scenario
-from tracelab.trace_sink import TraceSink
+from tracelab.envs.sinks import TraceSink
+from tracelab.game.facts import agent_name
+from tracelab.game.refsim import RefSim
+from tracelab.game.rulesim import RuleSim
+from tracelab.game.scenario import TEAMS, Scenario
+from tracelab.game.state import WINNER_BLUE, WINNER_DRAW, WINNER_RED, StepResult
 
 
 def outcome_name(winner: int, truncated: bool) -> str:

@@ -1,7 +1,7 @@
 """The rule-driven simulator: the game of rules/gridworld/game.rules on the logic engine.
 
 Python here turns actions into facts, steps the engine once for all worlds, and reads the state, the
-events and the end of the game back from atoms. Its API and StepResult are those of tracelab.refsim,
+events and the end of the game back from atoms. Its API and StepResult are those of tracelab.game.refsim,
 so the two simulators are interchangeable and can be compared step by step.
 """
 from __future__ import annotations
@@ -9,13 +9,13 @@ from __future__ import annotations
 from dataclasses import fields
 
 import numpy as np
-
 from tracelab.engine import Engine
-from tracelab.game_facts import DIRECTIONS, agent_name, bullet_name, scenario_program
-from tracelab.rulesim_kernel import encode_actions, read_and_settle, read_back
-from tracelab.refsim import WINNER_NONE, GameState, StepResult
-from tracelab.scenario import TEAMS, Scenario
-from tracelab.sim_base import GameSim
+
+from tracelab.game.facts import DIRECTIONS, agent_name, bullet_name, scenario_program
+from tracelab.game.rulesim_kernel import encode_actions, read_and_settle, read_back
+from tracelab.game.scenario import TEAMS, Scenario
+from tracelab.game.sim_base import GameSim
+from tracelab.game.state import WINNER_NONE, GameState, StepResult
 
 
 class RuleSim(GameSim):

@@ -8,10 +8,11 @@ from __future__ import annotations
 from dataclasses import replace
 from functools import lru_cache
 
-from tracelab import RULES_DIR
 from tracelab.engine import check_program, load_program
 from tracelab.engine.program import Fact, Literal, Program, SourceLoc, Term
-from tracelab.scenario import DIRECTION_DELTAS, TEAMS, Scenario
+
+from tracelab import RULES_DIR
+from tracelab.game.scenario import DIRECTION_DELTAS, TEAMS, Scenario
 
 GAME_RULES = RULES_DIR / "gridworld" / "game.rules"
 DIRECTIONS = ("up", "down", "left", "right")  # index = spec direction (action id % 4)

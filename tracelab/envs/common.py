@@ -7,11 +7,21 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from tracelab.env_trace import EpisodeTracer
-from tracelab.refsim import GameState, RefSim
-from tracelab.rulesim import RuleSim
-from tracelab.scenario import DIRECTION_DELTAS, DOWN, LEFT, NOTHING, RIGHT, UP, Scenario, builtin_scenario
-from tracelab.trace_sink import TraceSink
+from tracelab.envs.sinks import TraceSink
+from tracelab.envs.tracer import EpisodeTracer
+from tracelab.game.refsim import RefSim
+from tracelab.game.rulesim import RuleSim
+from tracelab.game.scenario import (
+    DIRECTION_DELTAS,
+    DOWN,
+    LEFT,
+    NOTHING,
+    RIGHT,
+    UP,
+    Scenario,
+    builtin_scenario,
+)
+from tracelab.game.state import GameState
 
 BACKENDS = ("rules", "reference")
 Simulator = RuleSim | RefSim

@@ -11,7 +11,7 @@
   (step limit), and `agents` becomes empty; step again only after reset.
 - infos[agent]: `action_mask` (int8 [n_actions], env_common.ActionMasker), `unsafe`, `invalid`,
   `hits_made`, `hits_taken` of the last step, and `alive`.
-- `backend` and `trace_sink` as in tracelab.env.GridWarEnv; the trace's step records carry both teams.
+- `backend` and `trace_sink` as in tracelab.envs.gym_env.GridWarEnv; the trace's step records carry both teams.
 """
 from __future__ import annotations
 
@@ -21,10 +21,15 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from tracelab.env_common import ActionMasker, observation_space, one_world_env, render_text
-from tracelab.game_facts import agent_name
-from tracelab.scenario import NOTHING, Scenario
-from tracelab.trace_sink import TraceSink
+from tracelab.envs.common import (
+    ActionMasker,
+    observation_space,
+    one_world_env,
+    render_text,
+)
+from tracelab.envs.sinks import TraceSink
+from tracelab.game.facts import agent_name
+from tracelab.game.scenario import NOTHING, Scenario
 
 
 class GridWarParallelEnv(ParallelEnv[str, np.ndarray, int]):

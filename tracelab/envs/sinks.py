@@ -35,7 +35,8 @@ import numpy as np
 
 if TYPE_CHECKING:
     from tracelab.engine import Engine
-    from tracelab.scenario import Scenario
+
+    from tracelab.game.scenario import Scenario
 
 
 @runtime_checkable

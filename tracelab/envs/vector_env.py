@@ -1,6 +1,6 @@
 """`GridWarVectorEnv`: `num_envs` games of the learner (red) against the scripted opponent, stepped by one
 simulator call per step (RuleSim / RefSim with n_worlds = num_envs). Spaces, rewards, infos and backends
-are those of tracelab.env.GridWarEnv, batched.
+are those of tracelab.envs.gym_env.GridWarEnv, batched.
 
 Autoreset: SAME_STEP (`metadata["autoreset_mode"]`). A world whose episode ends in a step is reset
 within that step: the step returns its terminal reward and terminated/truncated flags, but the reset
@@ -26,12 +26,18 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from tracelab.env import reset_info, step_info
-from tracelab.env_common import (ActionMasker, learner_action_space, make_sim, observation_space,
-                                 resolve_scenario, step_learner)
-from tracelab.env_trace import EpisodeTracer
-from tracelab.scenario import RED, Scenario
-from tracelab.trace_sink import TraceSink
+from tracelab.envs.common import (
+    ActionMasker,
+    learner_action_space,
+    make_sim,
+    observation_space,
+    resolve_scenario,
+    step_learner,
+)
+from tracelab.envs.gym_env import reset_info, step_info
+from tracelab.envs.sinks import TraceSink
+from tracelab.envs.tracer import EpisodeTracer
+from tracelab.game.scenario import RED, Scenario
 
 
 def _batch_seed(seed: int | Sequence[int] | None) -> int | None:

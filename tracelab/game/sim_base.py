@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from tracelab.opponent import scripted_actions
-from tracelab.scenario import Scenario, team_index
+from tracelab.game.observe import obs_size, observe_both
+from tracelab.game.opponent import scripted_actions
+from tracelab.game.scenario import Scenario, team_index
 
 
 class GameSim:
@@ -13,8 +14,6 @@ class GameSim:
     (the last observation handed out, [W, 2, D])."""
 
     def __init__(self, scenario: Scenario, n_worlds: int, seed: int | None, stack_previous: bool) -> None:
-        from tracelab.refsim import obs_size  # refsim imports this module
-
         if n_worlds < 1:
             raise ValueError(f"n_worlds must be at least 1, got {n_worlds}")
         self.scenario = scenario
@@ -25,8 +24,6 @@ class GameSim:
 
     def _observe_both(self, state) -> np.ndarray:
         """Both teams' observations of `state` without history, [W, 2, D]."""
-        from tracelab.refsim import observe_both
-
         return observe_both(state, self.scenario)
 
     def _with_history(self, cur: np.ndarray, prev: np.ndarray) -> np.ndarray:

@@ -14,125 +14,15 @@ bullet_dir [W,B] int8 (0 up, 1 down, 2 left, 3 right, -1 empty).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
-
 import numpy as np
 from numba import njit
 
-from .scenario import DEAD_EPS, Scenario, team_index
+from .scenario import DEAD_EPS, Scenario
 from .sim_base import GameSim
-
-WINNER_NONE, WINNER_RED, WINNER_BLUE, WINNER_DRAW = -1, 0, 1, 2
-WINNER_NAMES = {WINNER_NONE: "none", WINNER_RED: "red", WINNER_BLUE: "blue", WINNER_DRAW: "draw"}
-SENTINEL = -1.0          # observed x, y of a dead agent / of a missing bullet
+from .state import GameState, StepResult
 
 _DX = np.array([0, 0, -1, 1], dtype=np.int64)
 _DY = np.array([1, -1, 0, 0], dtype=np.int64)
-
-
-# ----------------------------------------------------------------------------------------------------
-# State and results
-# ----------------------------------------------------------------------------------------------------
-@dataclass(slots=True)
-class GameState:
-    """Mutable state of W worlds (layout in the module docstring)."""
-    t: np.ndarray
-    pos: np.ndarray
-    health: np.ndarray
-    ammo: np.ndarray
-    alive: np.ndarray
-    moving: np.ndarray
-    dest: np.ndarray
-    bullet_pos: np.ndarray
-    bullet_dir: np.ndarray
-    terminated: np.ndarray
-    truncated: np.ndarray
-    winner: np.ndarray
-    bullet_team: np.ndarray   # [B] owner team per slot (constant)
-    bullet_agent: np.ndarray  # [B] owner agent per slot (constant)
-
-    @classmethod
-    def initial(cls, scenario: Scenario, n_worlds: int) -> "GameState":
-        n, a = scenario.agents_per_team, scenario.ammo
-        n_b = 2 * n * a
-        pos = np.empty((n_worlds, 2, n, 2), dtype=np.int32)
-        pos[:, 0] = np.asarray(scenario.red_starts, dtype=np.int32)
-        pos[:, 1] = np.asarray(scenario.blue_starts, dtype=np.int32)
-        slots = np.arange(n_b)
-        return cls(
-            t=np.zeros(n_worlds, dtype=np.int32),
-            pos=pos,
-            health=np.full((n_worlds, 2, n), scenario.health, dtype=np.float64),
-            ammo=np.full((n_worlds, 2, n), a, dtype=np.int32),
-            alive=np.ones((n_worlds, 2, n), dtype=bool),
-            moving=np.zeros((n_worlds, 2, n), dtype=bool),
-            dest=np.full((n_worlds, 2, n, 2), -1, dtype=np.int32),
-            bullet_pos=np.full((n_worlds, n_b, 2), -1, dtype=np.int32),
-            bullet_dir=np.full((n_worlds, n_b), -1, dtype=np.int8),
-            terminated=np.zeros(n_worlds, dtype=bool),
-            truncated=np.zeros(n_worlds, dtype=bool),
-            winner=np.full(n_worlds, WINNER_NONE, dtype=np.int8),
-            bullet_team=(slots // max(n * a, 1)).astype(np.int8),
-            bullet_agent=((slots // max(a, 1)) % n).astype(np.int16),
-        )
-
-    @property
-    def done(self) -> np.ndarray:
-        return self.terminated | self.truncated
-
-    def copy(self) -> "GameState":
-        return GameState(**{f.name: getattr(self, f.name).copy() for f in fields(self)})
-
-    def assign(self, other: "GameState", worlds: np.ndarray) -> None:
-        """Copy the given worlds (mask or indices) from `other`, which has the same shapes."""
-        for f in fields(self):
-            if f.name not in ("bullet_team", "bullet_agent"):
-                getattr(self, f.name)[worlds] = getattr(other, f.name)[worlds]
-
-
-@dataclass(slots=True)  # not frozen: a frozen dataclass's __init__ costs ~1.3 µs more per step
-class StepResult:
-    """Everything one batched step produced; arrays are [W, ...]. The simulator never changes them after
-    the step (RuleSim shares its state's arrays with the result, read-only; RefSim hands out copies)."""
-    obs: np.ndarray           # float32 [W, 2, D]: observation of each team (docs/game.md)
-    positions: np.ndarray     # int32 [W, 2, N, 2] after the step (dead agents: where they died)
-    health: np.ndarray        # float64 [W, 2, N]
-    ammo: np.ndarray          # int32 [W, 2, N]
-    alive: np.ndarray         # bool [W, 2, N]
-    moving: np.ndarray        # bool [W, 2, N]: slow agent between the two steps of a move
-    move_dest: np.ndarray     # int32 [W, 2, N, 2]: where a moving slow agent arrives, else (-1,-1)
-    bullet_pos: np.ndarray    # int32 [W, B, 2], (-1,-1) in empty slots
-    bullet_dir: np.ndarray    # int8 [W, B], -1 in empty slots
-    bullet_owner: np.ndarray  # int [B, 2]: (team, agent) of each slot
-    unsafe: np.ndarray        # bool [W, 2, N]: move into a mountain / off the map (shielded)
-    invalid: np.ndarray       # bool [W, 2, N]: shot with no ammo
-    hits_made: np.ndarray     # int32 [W, 2, N]: enemies this agent's bullets hit this step
-    hits_taken: np.ndarray    # int32 [W, 2, N]: bullets that hit this agent this step
-    agent_reward: np.ndarray  # float64 [W, 2, N]: own per-step terms + the team's terminal term
-    reward: np.ndarray        # float64 [W, 2]: team reward (sum of per-step terms + terminal once)
-    terminated: np.ndarray    # bool [W]: game over by capture / elimination (stays True until reset)
-    truncated: np.ndarray     # bool [W]: step limit reached without a winner (stays True until reset)
-    winner: np.ndarray        # int8 [W]: WINNER_NONE / RED / BLUE / DRAW
-    t: np.ndarray             # int32 [W]: steps taken
-
-    @property
-    def bullet_live(self) -> np.ndarray:
-        return self.bullet_dir >= 0
-
-    @property
-    def hit_opponent(self) -> np.ndarray:
-        return self.hits_made > 0
-
-    @property
-    def got_shot(self) -> np.ndarray:
-        return self.hits_taken > 0
-
-    @property
-    def done(self) -> np.ndarray:
-        return self.terminated | self.truncated
-
-    def winner_name(self, world: int = 0) -> str:
-        return WINNER_NAMES[int(self.winner[world])]
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -338,89 +228,6 @@ def _step_kernel(actions, allowed, t, pos, health, ammo, alive, moving, dest, bp
         elif t[w] >= max_steps:
             truncated[w] = True
     return -1
-
-
-# ----------------------------------------------------------------------------------------------------
-# Observations
-# ----------------------------------------------------------------------------------------------------
-@njit(cache=True)
-def _observe_kernel(team, pos, alive, bpos, bdir, bteam, advanced, out):
-    """Fill out [W, D]: own then opponent (x, y) per agent; advanced: per own agent (opponent bullet
-    count, nearest opponent bullet x, y)."""
-    n_worlds = alive.shape[0]
-    n = alive.shape[2]
-    n_b = bdir.shape[1]
-    enemy = 1 - team
-    live = np.empty(n_b, dtype=np.int64)
-    for w in range(n_worlds):
-        for k in range(2):
-            tm = team if k == 0 else enemy
-            for j in range(n):
-                col = (k * n + j) * 2
-                if alive[w, tm, j]:
-                    out[w, col] = pos[w, tm, j, 0]
-                    out[w, col + 1] = pos[w, tm, j, 1]
-                else:
-                    out[w, col] = SENTINEL
-                    out[w, col + 1] = SENTINEL
-        if not advanced:
-            continue
-        # Gather the opponent's live bullets once; slot order breaks distance ties.
-        count = 0
-        for b in range(n_b):
-            if bdir[w, b] >= 0 and bteam[b] == enemy:
-                live[count] = b
-                count += 1
-        for j in range(n):
-            col = 4 * n + 3 * j
-            out[w, col] = count
-            bx = SENTINEL
-            by = SENTINEL
-            if alive[w, team, j]:
-                best = 1 << 40
-                for i in range(count):
-                    b = live[i]
-                    d = abs(bpos[w, b, 0] - pos[w, team, j, 0]) + abs(bpos[w, b, 1] - pos[w, team, j, 1])
-                    if d < best:
-                        best = d
-                        bx = bpos[w, b, 0]
-                        by = bpos[w, b, 1]
-            out[w, col + 1] = bx
-            out[w, col + 2] = by
-
-
-@njit(cache=True)
-def _observe_both_kernel(pos, alive, bpos, bdir, bteam, advanced, out):
-    """Fill out [W, 2, D] with both teams' observations."""
-    for team in range(2):
-        _observe_kernel(team, pos, alive, bpos, bdir, bteam, advanced, out[:, team])
-
-
-def observe_both(state: GameState, scenario: Scenario) -> np.ndarray:
-    """Both teams' observations without history, float32 [W, 2, D]."""
-    out = np.empty((state.alive.shape[0], 2, obs_size(scenario)), dtype=np.float32)
-    _observe_both_kernel(state.pos, state.alive, state.bullet_pos, state.bullet_dir, state.bullet_team,
-                         scenario.advanced, out)
-    return out
-
-
-def obs_size(scenario: Scenario, stack_previous: bool = False) -> int:
-    """Observation length per team: 4 (base) or 7 (advanced) per agent, doubled with history."""
-    size = (7 if scenario.advanced else 4) * scenario.agents_per_team
-    return 2 * size if stack_previous else size
-
-
-def observe(state: GameState, team: int | str, scenario: Scenario,
-            history: np.ndarray | None = None) -> np.ndarray:
-    """Observation of `team` in every world: float32 [W, D]. With `history` (the previous step's
-    observation without history, [W, D]) the result is [current, history], [W, 2D] (non-Markov setup)."""
-    n_worlds = state.alive.shape[0]
-    out = np.empty((n_worlds, obs_size(scenario)), dtype=np.float32)
-    _observe_kernel(team_index(team), state.pos, state.alive, state.bullet_pos, state.bullet_dir,
-                    state.bullet_team, scenario.advanced, out)
-    if history is None:
-        return out
-    return np.concatenate([out, np.asarray(history, dtype=np.float32)], axis=1)
 
 
 # ----------------------------------------------------------------------------------------------------

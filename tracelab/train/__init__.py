@@ -1,0 +1,1 @@
+"""Training: DQN against the scripted opponent, evaluation, and experiments (docs/training.md)."""
