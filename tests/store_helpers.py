@@ -66,3 +66,11 @@ def write_walk_run(run_dir: Path, **writer_options: object) -> Path:
 def episode_rows(episode: int) -> int:
     """How many rows the live/crash writer process writes for an episode (checked by the readers)."""
     return 300 + 7 * episode
+
+
+def live_and_sealed_walk_runs(base: Path) -> dict[str, Path]:
+    """The walk run twice under `base`: 'live' (Parquet parts) and 'sealed' (run.duckdb)."""
+    from tracelab.store.seal import seal_run
+    runs = {"live": write_walk_run(base / "live"), "sealed": write_walk_run(base / "sealed")}
+    seal_run(runs["sealed"])
+    return runs

@@ -70,7 +70,7 @@ def test_second_process_reads_a_run_while_it_is_written(tmp_path: Path) -> None:
     assert seen == sorted(seen), "a reader saw the row count go down"
     assert len([n for n in growing if 0 < n < total]) >= 3, f"too few intermediate states seen: {growing}"
     assert check_consistent(con, set(range(episodes))) == total
-    assert con.execute("SELECT status FROM run").fetchone()[0] == "running"  # as of opening
+    assert con.execute("SELECT status FROM run").fetchone()[0] == "finished"  # as of the query
     assert run_info(run_dir).status == "finished"
     listed = read_manifest(run_dir)["changes"]
     written = list((run_dir / "parts" / "changes").glob("*.parquet"))
@@ -159,7 +159,10 @@ def test_sealing_a_run_being_written_is_refused(tmp_path: Path) -> None:
         with pytest.raises(RuntimeError, match="still being written"):
             seal_run(run_dir)
         assert run_info(run_dir).status == "running"
+        con = open_run(run_dir)  # held open across the writer's death
+        assert con.execute("SELECT status FROM run").fetchone()[0] == "running"
     finally:
         proc.kill()
         proc.wait(10)
     assert run_info(run_dir).status == "crashed"
+    assert con.execute("SELECT status, ended_at FROM run").fetchone() == ("crashed", None)

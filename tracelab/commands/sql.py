@@ -46,7 +46,10 @@ def print_saved_queries() -> None:
 
 def run(args: argparse.Namespace) -> int:
     from tracelab.store.queries import get_query
+    import duckdb
+
     from tracelab.store.reader import fetch_arrow, open_run, query_readonly, retrying
+    from tracelab.store.sandbox import refusal
     if args.list:
         print_saved_queries()
         return 0
@@ -63,6 +66,8 @@ def run(args: argparse.Namespace) -> int:
         con = open_run(args.run)
         table = retrying(lambda: fetch_arrow(query_readonly(con, sql, params), args.limit, args.offset))
         write_table(table, args.format, args.output)
+    except duckdb.PermissionException as e:  # raised while the rows are read
+        return fail(refusal(e))
     except store_errors() as e:
         return fail(e)
     return 0

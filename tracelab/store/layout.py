@@ -52,13 +52,14 @@ def tmp_name(final: Path) -> Path:
 
 
 def remove_stale_temps(run_dir: Path) -> int:
-    """Delete temp files a killed writer left behind; returns how many."""
+    """Delete the temp files a killed writer or a failed seal left behind (only while holding the writer
+    lock: a live writer's temp files are in use); returns how many."""
     n = 0
-    parts = run_dir / PARTS
-    if parts.is_dir():
-        for p in [*parts.glob(f".*{TMP_MARK}*"), *parts.glob(f"*/.*{TMP_MARK}*")]:
-            p.unlink(missing_ok=True)
-            n += 1
+    for d in (run_dir, run_dir / PARTS, *(run_dir / PARTS).glob("*/")):
+        if d.is_dir() and not d.is_symlink():
+            for p in d.glob(f".*{TMP_MARK}*"):
+                p.unlink(missing_ok=True)
+                n += 1
     return n
 
 

@@ -5,6 +5,7 @@ the one-row table raw.run."""
 from __future__ import annotations
 
 import datetime as _dt
+import fcntl
 import hashlib
 import json
 import os
@@ -94,23 +95,33 @@ def read_meta(run_dir: Path) -> dict[str, Any]:
         raise ValueError(f"{str(path)!r} is not valid JSON: {e}") from None
 
 
-def _pid_alive(pid: int) -> bool:
+def writer_holds_lock(run_dir: Path) -> bool:
+    """Whether a process (a writer, or seal) holds the run's writer lock now. Probes with a shared lock
+    taken and released at once on a read-only descriptor; never creates the lock file."""
     try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
+        fd = os.open(layout.lock_path(run_dir), os.O_RDONLY)
+    except FileNotFoundError:
         return False
-    except PermissionError:
-        return True
-    return True
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return True
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        return False
+    finally:
+        os.close(fd)
 
 
-def effective_status(doc: dict[str, Any]) -> str:
-    """The recorded status, except that a 'running' run whose writer process is gone is 'crashed'."""
-    status = doc.get("status", "running")
-    if status == "running" and doc.get("host") == socket.gethostname() and doc.get("pid"):
-        if not _pid_alive(int(doc["pid"])):
-            return "crashed"
-    return status
+def current_meta(run_dir: Path) -> dict[str, Any]:
+    """meta.json with the run's status as of now: a run recorded as 'running' whose writer lock nobody
+    holds lost its writer ('crashed')."""
+    doc = read_meta(run_dir)
+    if doc.get("status", "running") == "running" and not writer_holds_lock(run_dir):
+        doc = read_meta(run_dir)  # the writer may have closed between the two looks
+        if doc.get("status", "running") == "running":
+            doc["status"] = "crashed"
+    return doc
 
 
 def _ts(value: str | None) -> _dt.datetime | None:

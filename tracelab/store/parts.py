@@ -18,7 +18,7 @@ from __future__ import annotations
 import json
 import os
 import time
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -111,7 +111,8 @@ def write_manifest(run_dir: Path, parts: dict[str, TableParts], flushes: int) ->
 
 
 def read_manifest(run_dir: Path) -> dict[str, list[Path]]:
-    """For every table, the absolute paths of the parts that hold its rows now."""
+    """For every table, the absolute paths of the parts that hold its rows now. Refuses a manifest that
+    names other tables or files outside parts/."""
     path = layout.manifest_path(run_dir)
     try:
         doc = json.loads(path.read_text())
@@ -121,4 +122,44 @@ def read_manifest(run_dir: Path) -> dict[str, list[Path]]:
     if doc.get("format") != MANIFEST_FORMAT:
         raise ValueError(f"{str(path)!r}: unknown manifest format {doc.get('format')!r}")
     base = path.parent.resolve()
-    return {name: [base / f for f in files] for name, files in doc["tables"].items()}
+    if base != run_dir.resolve() / layout.PARTS:
+        raise ValueError(f"{str(path.parent)!r} is a link to {str(base)!r}: a run's parts/ must be a "
+                         "directory inside the run")
+    tables = doc.get("tables")
+    if not isinstance(tables, dict) or set(tables) != set(SCHEMAS) \
+            or not all(isinstance(files, list) for files in tables.values()):
+        raise ValueError(f"{str(path)!r}: 'tables' must list the parts of exactly the tables "
+                         f"{', '.join(SCHEMAS)}")
+    return {name: [_part_path(path, base, f) for f in tables[name]] for name in SCHEMAS}
+
+
+def _part_path(manifest: Path, base: Path, entry: object) -> Path:
+    """A manifest entry as an absolute path, refused unless it names a file inside parts/: a relative
+    path without '..' that, symlinks resolved, stays there (a run from elsewhere must not make a reader
+    open other files)."""
+    if not isinstance(entry, str) or not entry or entry.startswith("/") or "\\" in entry \
+            or ".." in PurePosixPath(entry).parts:
+        raise ValueError(f"{str(manifest)!r} lists {entry!r}: parts must be relative paths inside the "
+                         "run's parts/ directory")
+    full = base / entry
+    if not full.resolve().is_relative_to(base):
+        raise ValueError(f"{str(manifest)!r} lists {entry!r}, a link to {str(full.resolve())!r} outside "
+                         "the run's parts/ directory")
+    return full
+
+
+def remove_unlisted(run_dir: Path) -> int:
+    """Delete the parts the manifest does not list: merged parts a killed writer had not yet removed and
+    parts written after its last manifest (only while holding the writer lock: a live writer's retired
+    parts are still being read). Returns how many bytes were freed."""
+    listed = {f.resolve() for files in read_manifest(run_dir).values() for f in files}
+    freed = 0
+    for table in SCHEMAS:
+        directory = layout.table_dir(run_dir, table)
+        if directory.is_symlink() or not directory.is_dir():
+            continue
+        for part in directory.glob(f"*{layout.PART_SUFFIX}"):
+            if part.resolve() not in listed and not part.is_symlink():
+                freed += part.stat().st_size
+                part.unlink()
+    return freed

@@ -81,8 +81,8 @@ def list_queries(directory: Path = QUERIES_DIR) -> list[SavedQuery]:
 
 
 def get_query(name: str, directory: Path = QUERIES_DIR) -> SavedQuery:
-    path = directory / f"{name}.sql"
-    if not path.is_file():
-        names = [p.stem for p in sorted(directory.glob("*.sql"))]
+    """The saved query called `name`: a name from the library, never a path."""
+    names = [p.stem for p in sorted(directory.glob("*.sql"))]
+    if name not in names:
         raise KeyError(f"no saved query {name!r}; saved queries: {', '.join(names)}")
-    return load_query(path)
+    return load_query(directory / f"{name}.sql")

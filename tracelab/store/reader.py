@@ -1,13 +1,21 @@
-"""Open a run for reading, live or sealed, as an in-memory DuckDB connection with the store's views.
+"""Open a run for reading, live or sealed, as a sandboxed in-memory DuckDB connection with the store's
+views: the one way anything in tracelab reads a run (commands, saved queries, the TUI).
+
+The connection can read the run's own files and nothing else, writes nothing, never reaches the network
+and never loads an extension (tracelab.store.sandbox; docs/store.md, "Security model"). Opening a run
+never runs SQL the run supplies: a sealed file's raw.* entries are read as stored tables only (a view
+there is refused), and a live run's manifest may only name files inside its parts/ directory.
 
 Live run (a directory of Parquet parts): raw.<table> are views over read_parquet() of the files the run's
 manifest lists (tracelab.store.parts), held in DuckDB variables that LiveRunConnection brings up to date
 before every statement; so one connection sees every flush as it lands, all tables at the same moment,
-and nothing locks the writer out. A query running longer than the writer's grace period (30 s) after a
+and nothing locks the writer out. raw.run is rebuilt when the run's status changes, which is read at
+query time from the writer's lock. A query running longer than the writer's grace period (30 s) after a
 compaction can fail with "file not found" (never return wrong rows): long-lived readers run queries
 through retrying().
 Sealed run (run.duckdb, or any lone .duckdb file): the file is attached READ_ONLY and raw.<table> are
-views over its tables. Either way the user-facing views (tracelab.store.schema.VIEWS_SQL) are the same."""
+views over its stored tables. Either way the user-facing views (tracelab.store.schema.VIEWS_SQL) are the
+same."""
 from __future__ import annotations
 
 import time
@@ -20,12 +28,21 @@ import duckdb
 import pyarrow as pa
 
 from tracelab.store import layout
-from tracelab.store.meta import effective_status, meta_table, read_meta
+from tracelab.store.meta import current_meta, meta_table
 from tracelab.store.parts import read_manifest
-from tracelab.store.schema import TABLES, VIEWS_SQL
+from tracelab.store.sandbox import (
+    check_readonly,
+    lock_configuration,
+    lock_down,
+    refusal,
+    sandbox_connection,
+)
+from tracelab.store.schema import SCHEMAS, TABLES, VIEWS_SQL
 
 RUNS_DIR = Path("runs")
-READONLY_STATEMENTS = {duckdb.StatementType.SELECT, duckdb.StatementType.EXPLAIN}
+# The columns tracelab reads from each stored table (raw.run: the run's metadata row).
+STORED_COLUMNS: dict[str, list[str]] = {
+    **{t: SCHEMAS[t].names for t in TABLES}, "run": meta_table({}, "").schema.names}
 
 
 @dataclass
@@ -51,26 +68,35 @@ def _sql_str(s: str | Path) -> str:
 
 
 def _sealed_file(p: Path) -> Path | None:
+    """The run's sealed DuckDB file, if it has one; refused if it is a link leaving the run."""
     if p.is_file():
         return p
     s = layout.sealed_path(p)
-    return s if s.exists() else None
+    if not s.is_symlink() and not s.exists():
+        return None
+    if not s.resolve().is_relative_to(p.resolve()):
+        raise ValueError(f"{str(s)!r} is a link to {str(s.resolve())!r}, outside the run")
+    return s
 
 
 def run_info(run: str | Path) -> RunInfo:
+    """The run's metadata and its status now."""
     p = resolve_run(run)
     sealed = _sealed_file(p)
     if sealed is not None and not p.is_dir():
-        con = duckdb.connect(str(sealed), read_only=True)
+        con = open_run(p)
         try:
-            row = con.execute("SELECT * FROM raw.run").fetchone()
-            cols = [d[0] for d in con.description]
+            rel = con.execute("SELECT * FROM raw.run")
+            cols = [d[0] for d in rel.description]
+            row = rel.fetchone()
         finally:
             con.close()
+        if row is None:
+            raise ValueError(f"{str(p)!r} has no row in raw.run: not a tracelab run")
         meta = dict(zip(cols, row))
         return RunInfo(p, sealed, meta, str(meta.get("status")))
-    meta = read_meta(p)
-    return RunInfo(p, sealed, meta, effective_status(meta))
+    meta = current_meta(p)
+    return RunInfo(p, sealed, meta, meta["status"])
 
 
 def _parts_variable(table: str) -> str:
@@ -80,22 +106,30 @@ def _parts_variable(table: str) -> str:
 class LiveRunConnection:
     """A DuckDB connection on a run being written. Before each statement it re-reads the run's manifest
     and, if it changed, points every raw.<table> view at the parts it lists (DuckDB variables read by the
-    views); everything else is the DuckDB connection's own API."""
+    views), and while the run is running it rebuilds raw.run when its status changed (a writer closing
+    or dying); everything else is the DuckDB connection's own API."""
 
     def __init__(self, con: duckdb.DuckDBPyConnection, run_dir: Path) -> None:
         self._con = con
+        self._run_dir = run_dir
         self._manifest = layout.manifest_path(run_dir)
         self._seen = b""
+        self._status: str | None = None
         self.refresh()
 
     def refresh(self) -> None:
-        """Bring the views up to the manifest's latest flush (cheap when nothing changed)."""
+        """Bring the views up to the manifest's latest flush and raw.run up to the run's status (cheap
+        when nothing changed)."""
         raw = self._manifest.read_bytes()
-        if raw == self._seen:
-            return
-        for table, files in read_manifest(self._manifest.parent.parent).items():
-            self._con.execute(f"SET VARIABLE {_parts_variable(table)} = ?", [[str(f) for f in files]])
-        self._seen = raw
+        if raw != self._seen:
+            for table, files in read_manifest(self._run_dir).items():
+                self._con.execute(f"SET VARIABLE {_parts_variable(table)} = ?", [[str(f) for f in files]])
+            self._seen = raw
+        if self._status in (None, "running"):
+            doc = current_meta(self._run_dir)
+            if doc["status"] != self._status:
+                _replace_run_table(self._con, meta_table(doc, doc["status"]))
+                self._status = doc["status"]
 
     def execute(self, query: Any, parameters: Any = None) -> duckdb.DuckDBPyConnection:
         self.refresh()
@@ -113,29 +147,62 @@ RunConnection = duckdb.DuckDBPyConnection | LiveRunConnection
 
 
 def open_run(run: str | Path) -> RunConnection:
-    """A DuckDB connection on the run with the views changes, firings, episodes, steps, metrics, rules,
-    facts, atoms, groundings, run (and raw.* underneath). Works on a run being written: then every
+    """A sandboxed DuckDB connection on the run with the views changes, firings, episodes, steps, metrics,
+    rules, facts, atoms, groundings, run (and raw.* underneath). Works on a run being written: then every
     statement sees the latest flush."""
-    info = run_info(run)
-    con = duckdb.connect(":memory:")
+    p = resolve_run(run)
+    sealed = _sealed_file(p)
+    if sealed is None and not p.is_dir():
+        raise ValueError(f"{str(p)!r} is neither a run directory nor a sealed .duckdb file")
+    con = sandbox_connection()
     try:
-        con.execute("CREATE SCHEMA raw")
-        if info.sealed_file is not None:
-            con.execute(f"ATTACH {_sql_str(info.sealed_file.resolve())} AS store (READ_ONLY)")
-            for t in (*TABLES, "run"):
-                con.execute(f"CREATE VIEW raw.{t} AS SELECT * FROM store.raw.{t}")
-            con.execute(VIEWS_SQL)
-            return con
-        live = LiveRunConnection(con, info.path.resolve())  # sets the variables the views read
-        for t in TABLES:
-            con.execute(f"CREATE VIEW raw.{t} AS SELECT * FROM read_parquet(getvariable("
-                        f"{_sql_str(_parts_variable(t))}))")
-        _create_table(con, "raw.run", meta_table(info.meta, info.status))
+        if sealed is not None:
+            _attach_sealed(con, sealed)
+            result: RunConnection = con
+        else:
+            current_meta(p)  # a directory without meta.json is not a run: say so first
+            lock_down(con, [str(p.resolve() / layout.PARTS) + "/"])
+            con.execute("CREATE SCHEMA raw")
+            result = LiveRunConnection(con, p.resolve())  # sets the variables the views read, and raw.run
+            for t in TABLES:
+                con.execute(f"CREATE VIEW raw.{t} AS SELECT * FROM read_parquet(getvariable("
+                            f"{_sql_str(_parts_variable(t))}))")
         con.execute(VIEWS_SQL)
+        lock_configuration(con)
     except BaseException:
         con.close()
         raise
-    return live
+    return result
+
+
+def _attach_sealed(con: duckdb.DuckDBPyConnection, sealed: Path) -> None:
+    """Attach the sealed file read-only (before external access is switched off: ATTACH needs the file),
+    then map raw.<table> onto its stored tables, refusing views and missing tables or columns."""
+    con.execute(f"ATTACH {_sql_str(sealed.resolve())} AS store (READ_ONLY)")
+    lock_down(con)
+    kinds = dict(con.execute(
+        "SELECT table_name, 'table' FROM duckdb_tables() WHERE database_name = 'store' "
+        "AND schema_name = 'raw' UNION ALL SELECT view_name, 'view' FROM duckdb_views() "
+        "WHERE database_name = 'store' AND schema_name = 'raw' AND NOT internal").fetchall())
+    views = sorted(t for t, kind in kinds.items() if kind == "view")
+    if views:
+        raise ValueError(f"{str(sealed)!r} holds raw.{views[0]} as a view, not a stored table: tracelab "
+                         "does not open runs whose stored data is computed by SQL they bring along")
+    missing = [t for t in STORED_COLUMNS if t not in kinds]
+    if missing:
+        raise ValueError(f"{str(sealed)!r} has no table raw.{missing[0]}: not a tracelab run")
+    columns: dict[str, set[str]] = {}
+    for table, column in con.execute("SELECT table_name, column_name FROM duckdb_columns() WHERE "
+                                     "database_name = 'store' AND schema_name = 'raw'").fetchall():
+        columns.setdefault(table, set()).add(column)
+    con.execute("CREATE SCHEMA raw")
+    for t, names in STORED_COLUMNS.items():
+        lacking = [c for c in names if c not in columns.get(t, set())]
+        if lacking:
+            raise ValueError(f"{str(sealed)!r}: raw.{t} has no column {lacking[0]!r}: not a tracelab "
+                             "run, or one from an incompatible version")
+        cols = ", ".join(f'"{c}"' for c in names)
+        con.execute(f"CREATE VIEW raw.{t} AS SELECT {cols} FROM store.raw.{t}")
 
 
 def _create_table(con: duckdb.DuckDBPyConnection, name: str, table: Any) -> None:
@@ -146,20 +213,28 @@ def _create_table(con: duckdb.DuckDBPyConnection, name: str, table: Any) -> None
         con.unregister("_tracelab_tmp")
 
 
+_DUCKDB_TYPES = {pa.string(): "VARCHAR", pa.int64(): "BIGINT", pa.timestamp("us"): "TIMESTAMP"}
+
+
+def _replace_run_table(con: duckdb.DuckDBPyConnection, row: pa.Table) -> None:
+    """(Re)create raw.run from meta_table()'s one row. By parameters, not register(): DuckDB refuses
+    register() while the caller still holds an unfinished result of this connection."""
+    values = row.to_pylist()[0]
+    select = ", ".join(f'CAST(? AS {_DUCKDB_TYPES[f.type]}) AS "{f.name}"' for f in row.schema)
+    con.execute(f"CREATE OR REPLACE TABLE raw.run AS SELECT {select}", list(values.values()))
+
+
 def query_readonly(con: RunConnection, sql: str,
                    params: dict[str, Any] | None = None) -> duckdb.DuckDBPyRelation:
-    """One read-only statement (SELECT, including DESCRIBE/SHOW/SUMMARIZE, or EXPLAIN) as a lazy relation.
-    Raises duckdb errors as they come (their text shows the position in the query) and ValueError for a
-    statement that could change something."""
-    statements = con.extract_statements(sql)
-    if len(statements) != 1:
-        raise ValueError(f"expected one SQL statement, got {len(statements)}")
-    kind = statements[0].type
-    if kind not in READONLY_STATEMENTS:
-        raise ValueError(f"only read-only queries are allowed (SELECT, EXPLAIN); this is a "
-                         f"{kind.name} statement")
+    """One read-only statement (SELECT, including DESCRIBE/SHOW/SUMMARIZE, or EXPLAIN of one) as a lazy
+    relation. Raises duckdb errors as they come (their text shows the position in the query) and
+    sandbox.QueryRefused (a ValueError) for a statement that is not a query or that reaches outside
+    the run."""
+    check_readonly(con, sql)
     try:
         return con.sql(sql, params=params or None)
+    except duckdb.PermissionException as e:
+        raise refusal(e) from None
     except duckdb.Error:
         # the relation API drops the "LINE 1: ... ^" pointer; binding again through execute() (it fails
         # at the same place, before running anything) raises the error with it

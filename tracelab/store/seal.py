@@ -1,21 +1,37 @@
 """Seal a finished (or crashed) run: compact its Parquet parts into one DuckDB file, run.duckdb.
 
 The file is built under a temp name and renamed into place, so a crash while sealing leaves the parts
-untouched and the run readable; once run.duckdb exists, readers use it and the parts are removed."""
+untouched and the run readable; once run.duckdb exists, readers use it and the parts are removed. Under
+the writer lock, seal first removes what a killed writer or an earlier failed seal left: temp files,
+and parts the manifest no longer lists."""
 from __future__ import annotations
 
 import fcntl
 import os
 import shutil
+import time
 from pathlib import Path
-
-import duckdb
+from typing import IO
 
 from tracelab.store import layout
 from tracelab.store.meta import meta_table, now_iso, read_meta, write_meta
-from tracelab.store.parts import read_manifest
+from tracelab.store.parts import read_manifest, remove_unlisted
 from tracelab.store.reader import _create_table, resolve_run
+from tracelab.store.sandbox import lock_configuration, lock_down, sandbox_connection
 from tracelab.store.schema import SEAL_ORDER, TABLES, VIEWS_SQL
+
+
+def take_writer_lock(run_dir: Path, lock: IO[str], doc: dict) -> None:
+    """Take the run's writer lock or raise RuntimeError naming the writer. Retried for a moment: readers
+    probe the lock (a shared lock held for microseconds) to tell a live run from a crashed one."""
+    for attempt in range(20):
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return
+        except BlockingIOError:
+            time.sleep(0.005 * (attempt + 1))
+    raise RuntimeError(f"run {str(run_dir)!r} is still being written (pid {doc.get('pid')}); "
+                       "close its writer before sealing")
 
 
 def seal_run(run: str | Path, *, keep_parts: bool = False) -> Path:
@@ -27,15 +43,12 @@ def seal_run(run: str | Path, *, keep_parts: bool = False) -> Path:
     sealed = layout.sealed_path(run_dir)
     doc = read_meta(run_dir)
     with open(layout.lock_path(run_dir), "a+") as lock:
-        try:
-            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise RuntimeError(f"run {str(run_dir)!r} is still being written (pid {doc.get('pid')}); "
-                               "close its writer before sealing") from None
+        take_writer_lock(run_dir, lock, doc)
         if not sealed.exists():
             # We hold the writer lock, so a run still marked 'running' lost its writer.
             status = "crashed" if doc.get("status") == "running" else doc.get("status", "finished")
             layout.remove_stale_temps(run_dir)
+            remove_unlisted(run_dir)
             _build(run_dir, sealed, {**doc, "status": status})
             doc.update(status=status, sealed_at=now_iso())
             write_meta(run_dir, doc)
@@ -45,12 +58,14 @@ def seal_run(run: str | Path, *, keep_parts: bool = False) -> Path:
 
 
 def _build(run_dir: Path, sealed: Path, doc: dict) -> None:
-    tmp = sealed.with_name(f".{sealed.name}.tmp-{os.getpid()}")
-    for leftover in (tmp, Path(f"{tmp}.wal")):
-        leftover.unlink(missing_ok=True)
+    tmp = layout.tmp_name(sealed)
     parts = read_manifest(run_dir)  # the last flush; parts it does not list were never published
-    con = duckdb.connect(str(tmp))
+    # The sandbox's settings: the parts come from the run, which may come from anyone; this connection
+    # reads them and writes only its own (already open) file.
+    con = sandbox_connection(str(tmp))
     try:
+        lock_down(con, [str(run_dir.resolve() / layout.PARTS) + "/"])
+        lock_configuration(con)
         con.execute("CREATE SCHEMA raw")
         for t in TABLES:
             order = f" ORDER BY {SEAL_ORDER[t]}" if t in SEAL_ORDER else ""

@@ -1,0 +1,142 @@
+"""Runs from strangers (docs/store.md, "Security model"): opening a run never runs SQL the run supplies,
+and a run cannot make a reader open files outside it. Each crafted run is refused with one line."""
+from __future__ import annotations
+
+import json
+import shutil
+import socket
+from pathlib import Path
+
+import duckdb
+import pytest
+from store_helpers import live_and_sealed_walk_runs
+
+from tracelab.cli import main
+from tracelab.store.reader import open_run, query_readonly
+from tracelab.store.sandbox import QueryRefused
+
+
+@pytest.fixture(scope="module")
+def made(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    return live_and_sealed_walk_runs(tmp_path_factory.mktemp("strangers"))
+
+
+def refused(capsys: pytest.CaptureFixture, run: Path, match: str, sql: str = "SELECT text FROM rules") -> str:
+    """`tracelab sql` on the run fails with one line containing `match`; returns it."""
+    code = main(["sql", str(run), sql])
+    out = capsys.readouterr()
+    assert code == 1 and out.out == "", out
+    lines = out.err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in out.err and match in lines[0], out.err
+    return lines[0]
+
+
+def tampered_sealed(made: dict[str, Path], tmp_path: Path, *statements: str) -> Path:
+    """A copy of the sealed run whose file was changed by `statements` (run with plain DuckDB: this is
+    what a stranger would do to the file before sharing it)."""
+    run = Path(shutil.copytree(made["sealed"], tmp_path / "tampered"))
+    con = duckdb.connect(str(run / "run.duckdb"))
+    for s in statements:
+        con.execute(s)
+    con.close()
+    return run
+
+
+def test_a_stored_table_swapped_for_a_view_is_refused(made: dict[str, Path], tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture) -> None:
+    run = tampered_sealed(made, tmp_path, "DROP TABLE raw.rules",
+                          "CREATE VIEW raw.rules AS SELECT 0::INT AS rule, 'x' AS name, "
+                          "(SELECT string_agg(content, '') FROM read_text('/etc/hostname')) AS text, "
+                          "'h' AS head, 0 AS delay, false AS immediate, 'm' AS mode, ['A'] AS variables, "
+                          "'f' AS file, 1 AS line")
+    line = refused(capsys, run, "holds raw.rules as a view, not a stored table")
+    assert socket.gethostname() not in line
+    with pytest.raises(ValueError, match="as a view"):
+        open_run(run / "run.duckdb")  # the lone file too
+
+
+def test_missing_tables_and_columns_are_named(made: dict[str, Path], tmp_path: Path,
+                                              capsys: pytest.CaptureFixture) -> None:
+    run = tampered_sealed(made, tmp_path, "DROP TABLE raw.steps")
+    refused(capsys, run, "has no table raw.steps: not a tracelab run")
+    shutil.rmtree(run)
+    run = tampered_sealed(made, tmp_path, "ALTER TABLE raw.run DROP COLUMN status")
+    refused(capsys, run, "raw.run has no column 'status'")
+
+
+def test_views_elsewhere_in_a_sealed_file_stay_inside_the_sandbox(made: dict[str, Path], tmp_path: Path,
+                                                                  capsys: pytest.CaptureFixture) -> None:
+    """tracelab's own views are rebuilt by the reader; a view the file brings along in another schema is
+    never used, and querying it by name still cannot read outside the run."""
+    run = tampered_sealed(made, tmp_path, "CREATE VIEW main.evil AS SELECT * FROM read_text('/etc/hostname')",
+                          "CREATE OR REPLACE VIEW main.changes AS SELECT * FROM read_text('/etc/hostname')")
+    con = open_run(run)
+    assert query_readonly(con, "SELECT count(*) FROM changes").fetchall() == [(40,)]
+    with pytest.raises(QueryRefused, match="only this run's own files"):
+        query_readonly(con, "SELECT * FROM store.main.evil")
+    refused(capsys, run, "only this run's own files", "SELECT * FROM store.main.changes")
+
+
+def live_copy(made: dict[str, Path], tmp_path: Path) -> Path:
+    return Path(shutil.copytree(made["live"], tmp_path / "copy"))
+
+
+def edit_manifest(run: Path, table: str, entry: str) -> None:
+    path = run / "parts" / "manifest.json"
+    doc = json.loads(path.read_text())
+    doc["tables"][table].append(entry)
+    path.write_text(json.dumps(doc))
+
+
+@pytest.mark.parametrize("entry", ["/etc/hostname", "../meta.json", "rules/../../meta.json",
+                                   "rules/../../../sealed/run.duckdb"])
+def test_manifest_entries_must_stay_inside_parts(made: dict[str, Path], tmp_path: Path, entry: str,
+                                                capsys: pytest.CaptureFixture) -> None:
+    run = live_copy(made, tmp_path)
+    edit_manifest(run, "rules", entry)
+    refused(capsys, run, "parts must be relative paths inside the run's parts/ directory")
+
+
+def test_a_part_that_links_outside_the_run_is_refused(made: dict[str, Path], tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture) -> None:
+    run = live_copy(made, tmp_path)
+    (run / "parts" / "rules" / "99999999.parquet").symlink_to("/etc/hostname")
+    edit_manifest(run, "rules", "rules/99999999.parquet")
+    refused(capsys, run, "outside the run's parts/ directory")
+
+
+def test_parts_and_sealed_file_must_not_be_links_leaving_the_run(made: dict[str, Path], tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture) -> None:
+    elsewhere = live_copy(made, tmp_path)
+    run = tmp_path / "linked"
+    run.mkdir()
+    shutil.copy(elsewhere / "meta.json", run / "meta.json")
+    (run / "parts").symlink_to(elsewhere / "parts")
+    refused(capsys, run, "a run's parts/ must be a directory inside the run")
+    sealed_link = tmp_path / "sealed-link"
+    sealed_link.mkdir()
+    shutil.copy(made["sealed"] / "meta.json", sealed_link / "meta.json")
+    (sealed_link / "run.duckdb").symlink_to(made["sealed"] / "run.duckdb")
+    refused(capsys, sealed_link, "outside the run")
+
+
+def test_a_manifest_cannot_name_other_tables(made: dict[str, Path], tmp_path: Path,
+                                             capsys: pytest.CaptureFixture) -> None:
+    """Table names end up in SQL (the views' variables): only the store's own tables are accepted."""
+    run = live_copy(made, tmp_path)
+    path = run / "parts" / "manifest.json"
+    doc = json.loads(path.read_text())
+    doc["tables"]["x = 1; ATTACH 'evil.duckdb' AS e; SET VARIABLE y"] = []
+    path.write_text(json.dumps(doc))
+    refused(capsys, run, "must list the parts of exactly the tables")
+    assert not (tmp_path / "evil.duckdb").exists() and not Path("evil.duckdb").exists()
+
+
+@pytest.mark.parametrize("name", ["../queries/episode_summary", "/etc/passwd", "episode_summary.sql",
+                                  "../../tests/data/x"])
+def test_saved_query_names_are_names_not_paths(made: dict[str, Path], name: str,
+                                               capsys: pytest.CaptureFixture) -> None:
+    code = main(["sql", str(made["live"]), "--query", name])
+    err = capsys.readouterr().err
+    assert code == 1 and f"no saved query {name!r}; saved queries: " in err
+    assert len(err.strip().splitlines()) == 1

@@ -1,0 +1,112 @@
+"""The query sandbox: a DuckDB connection that can read one run's own files and nothing else, and the
+statement check that gives friendly errors for statements that are not queries.
+
+Two layers (docs/store.md, "Security model"):
+1. DuckDB's own controls, set on every connection that reads a run (`sandbox_connection`, `lock_down`):
+   - external access off (`enable_external_access = false`): no file outside `allowed_directories`
+     (a live run's parts/ directory; a sealed run's file is attached before access is switched off),
+     no URL, no COPY/ATTACH/EXPORT to anywhere else;
+   - extensions are never installed nor loaded (autoinstall/autoload off, community extensions off);
+   - DuckDB's home, extension and secret directories point at a path under /dev/null, where nothing can
+     be created, and spilling to a temp directory is off: a query writes no file anywhere;
+   - `lock_configuration = true` once the views exist, so no statement can switch any of this back.
+   The order matters: DuckDB refuses to change `allowed_directories` once external access is off, and
+   an ATTACH needs access to the file (and its .wal name), so the sealed file is attached first.
+2. `check_readonly`: exactly one statement, a SELECT (DESCRIBE, SHOW, SUMMARIZE, PIVOT, FROM ... are
+   SELECTs) or an EXPLAIN [ANALYZE] of one; the statement inside EXPLAIN is checked too, since EXPLAIN
+   ANALYZE runs it. This layer names the problem in plain words; layer 1 holds even if it missed one."""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import duckdb
+
+# Not a directory, so nothing can ever be created under it (not even by root).
+NOWHERE = "/dev/null/tracelab"
+
+SANDBOX_CONFIG: dict[str, object] = {
+    "autoinstall_known_extensions": False,
+    "autoload_known_extensions": False,
+    "allow_community_extensions": False,
+    "temp_directory": "",            # no spilling to disk: a query writes nothing
+    "home_directory": NOWHERE,       # DuckDB would create ~/.duckdb for extensions and secrets
+    "extension_directory": NOWHERE,
+    "secret_directory": NOWHERE,
+}
+
+READONLY_STATEMENTS = {duckdb.StatementType.SELECT}
+
+
+class QueryRefused(ValueError):
+    """A statement the sandbox does not run (one line, names the statement kind or what it touched)."""
+
+
+def sandbox_connection(database: str = ":memory:") -> duckdb.DuckDBPyConnection:
+    """A DuckDB connection (in memory; `seal` passes the file it builds) with extensions, home and temp
+    directories already shut off; call lock_down() once anything it must attach is attached."""
+    return duckdb.connect(database, config=dict(SANDBOX_CONFIG))
+
+
+def _sql_list(items: Sequence[str]) -> str:
+    return "[" + ", ".join("'" + s.replace("'", "''") + "'" for s in items) + "]"
+
+
+def lock_down(con: duckdb.DuckDBPyConnection, allowed_directories: Sequence[str] = ()) -> None:
+    """Switch external access off, except for reading under `allowed_directories` (absolute paths ending
+    in '/')."""
+    if allowed_directories:
+        con.execute(f"SET allowed_directories = {_sql_list(allowed_directories)}")
+    con.execute("SET enable_external_access = false")
+
+
+def lock_configuration(con: duckdb.DuckDBPyConnection) -> None:
+    """From here on no SET, RESET or PRAGMA can change any setting of this connection."""
+    con.execute("SET lock_configuration = true")
+
+
+def _explained_statement(query: str) -> str:
+    """The statement an EXPLAIN statement explains: what follows EXPLAIN, ANALYZE and an option list."""
+    tokens = [(pos, kind) for pos, kind in duckdb.tokenize(query) if kind != duckdb.token_type.comment]
+
+    def word(i: int) -> str:
+        pos = tokens[i][0]
+        end = tokens[i + 1][0] if i + 1 < len(tokens) else len(query)
+        return query[pos:end].strip().upper()
+
+    i = 1  # tokens[0] is EXPLAIN
+    if i < len(tokens) and word(i) in ("ANALYZE", "ANALYSE"):
+        i += 1
+    if i < len(tokens) and word(i).startswith("("):
+        depth = 0
+        while i < len(tokens):
+            w = word(i)
+            depth += w.count("(") - w.count(")")
+            i += 1
+            if depth <= 0:
+                break
+    return query[tokens[i][0]:] if i < len(tokens) else ""
+
+
+def check_readonly(con: duckdb.DuckDBPyConnection, sql: str) -> None:
+    """Raise QueryRefused unless `sql` is one read-only query (see the module's doc)."""
+    statements = con.extract_statements(sql)
+    if len(statements) != 1:
+        raise QueryRefused(f"expected one SQL statement, got {len(statements)}")
+    statement = statements[0]
+    if statement.type == duckdb.StatementType.EXPLAIN:
+        inner = _explained_statement(statement.query)
+        try:
+            check_readonly(con, inner)
+        except QueryRefused as e:
+            raise QueryRefused(f"EXPLAIN runs or plans the statement it explains: {e}") from None
+        return
+    if statement.type not in READONLY_STATEMENTS:
+        raise QueryRefused(f"only read-only queries are allowed (SELECT, EXPLAIN SELECT); this is a "
+                           f"{statement.type.name} statement")
+
+
+def refusal(e: duckdb.PermissionException) -> QueryRefused:
+    """DuckDB's permission error (several lines, with the query) as one line that says why."""
+    first = str(e).splitlines()[0].removeprefix("Permission Error: ")
+    return QueryRefused(f"a query may read only this run's own files, with no network and no extensions "
+                        f"({first})")
