@@ -15,7 +15,7 @@ def test_play_records_episodes_changes_steps_and_explains_a_position(tmp_path, c
     con = open_run(run)
     ended = con.execute("SELECT count(*) FROM episodes WHERE outcome IN ('win','loss','draw','truncated')"
                         ).fetchone()[0]
-    assert ended >= 3
+    assert ended == 3 == con.execute("SELECT count(*) FROM episodes").fetchone()[0]
     # every episode starts from its own set-up rows, then the rules move the agents
     per_ep = con.execute("SELECT episode, min(t), count(*) FILTER (rule = 'm_go') FROM changes "
                          "GROUP BY episode ORDER BY episode").fetchall()

@@ -68,18 +68,23 @@ def run(args: argparse.Namespace) -> int:
 
 
 def play(scenario, args: argparse.Namespace, sink) -> dict:
-    """Play until args.episodes episodes ended, in args.worlds worlds of the vector env (rules backend);
-    episodes still running then are closed as aborted."""
+    """Play exactly args.episodes episodes in args.worlds worlds of the vector env (rules backend). The
+    env numbers episodes in the order they begin (its autoreset begins a new one in every world that
+    ended); episodes numbered past the last one asked for are played but neither counted nor recorded
+    (trace_episodes), so the run holds exactly the episodes asked for, none of them cut short."""
     from tracelab.envs.vector_env import GridWarVectorEnv
 
     n_worlds = min(args.worlds, args.episodes)
-    env = GridWarVectorEnv(n_worlds, scenario, backend="rules", trace_sink=sink)
+    env = GridWarVectorEnv(n_worlds, scenario, backend="rules", trace_sink=sink,
+                           trace_episodes=args.episodes)
     rng = np.random.default_rng(args.seed)
     index_of = {a: i for i, a in enumerate(scenario.action_ids)}
     to_index = np.array([index_of.get(a, 0) for a in range(9)])  # spec action id -> action index
     n = scenario.agents_per_team
     env.reset(seed=args.seed)
-    finished: list[dict] = []
+    episode_of_world = np.arange(n_worlds)
+    next_episode = n_worlds
+    finished: dict[int, dict] = {}
     returns = np.zeros(n_worlds)
     steps = 0
     t0 = time.perf_counter()
@@ -89,17 +94,22 @@ def play(scenario, args: argparse.Namespace, sink) -> dict:
         else:
             red = rng.integers(0, scenario.n_actions, size=(n_worlds, n))
         _, reward, terminated, truncated, info = env.step(red[:, 0] if n == 1 else red)
-        steps += n_worlds
+        playing = episode_of_world < args.episodes
+        steps += int(playing.sum())
         returns += reward
-        for w in np.flatnonzero(terminated | truncated):
-            final = info["final_info"]
-            finished.append({"steps": int(final["t"][w]),
-                             "outcome": OUTCOMES.get(int(final["winner"][w]), "truncated"),
-                             "return": float(returns[w])})
+        done = np.flatnonzero(terminated | truncated)
+        for w in done:
+            if episode_of_world[w] < args.episodes:
+                final = info["final_info"]
+                finished[int(episode_of_world[w])] = {
+                    "steps": int(final["t"][w]), "outcome": OUTCOMES.get(int(final["winner"][w]), "truncated"),
+                    "return": float(returns[w])}
             returns[w] = 0.0
+        episode_of_world[done] = next_episode + np.arange(len(done))  # as the env numbers them
+        next_episode += len(done)
     elapsed = time.perf_counter() - t0
     env.close()
-    return {"episodes": finished[:args.episodes], "steps": steps, "seconds": elapsed,
+    return {"episodes": [finished[e] for e in sorted(finished)], "steps": steps, "seconds": elapsed,
             "scenario": scenario.name}
 
 

@@ -23,7 +23,8 @@ Conventions:
   obs float32 [K, 2, D] (both teams' observations after the step); actions int64 [K, 2, N] (spec ids);
   rewards float64 [K, 2, N] (`StepResult.agent_reward`).
 - `outcome` is red's (the learner's): "win", "loss", "draw", "truncated", or "aborted" for an episode
-  cut short by a reset or close. `rewards` maps "red", "blue" (team returns) and every agent name
+  cut short by a reset or close (a vector env's `trace_episodes=N` records none of those past N).
+- `seed` is the seed of the env's last reset(seed=...) for every episode (see tracelab/envs/tracer.py). `rewards` maps "red", "blue" (team returns) and every agent name
   (`red-agent-1`, ...) to its return over the episode.
 """
 from __future__ import annotations

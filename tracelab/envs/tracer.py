@@ -6,6 +6,13 @@ RuleSim.take_trace() already counts each row's `t` from its world's episode star
 taken after every step (so an episode's rows are all out before it ends) and at close, never at reset:
 a new episode's start rows are still queued then, and belong to whichever episode is current in that
 world when they are taken (RuleSim keeps them for a world reset again before it stepped).
+
+With `limit` = N only the env's episodes 0..N-1 reach the sink: a world that begins episode N or later
+keeps playing (a vector env steps every world) but nothing of it is recorded, so a caller that steps
+until those N ended stores exactly N episodes and no "aborted" ones.
+Every episode records `seed`: the seed of the env's last reset(seed=...) (None if it had none). The
+first episode of each world starts from it; later ones continue the same random stream, so an episode
+is reproduced by replaying the run from that reset with the same number of worlds and actions.
 """
 from __future__ import annotations
 
@@ -27,25 +34,31 @@ def outcome_name(winner: int, truncated: bool) -> str:
 
 
 class EpisodeTracer:
-    def __init__(self, sink: TraceSink, scenario: Scenario, sim: RuleSim | RefSim) -> None:
+    def __init__(self, sink: TraceSink, scenario: Scenario, sim: RuleSim | RefSim,
+                 limit: int | None = None) -> None:
         self.sink = sink
+        self.limit = limit
         self.scenario = scenario
         self.sim = sim
         self._rules = isinstance(sim, RuleSim) and bool(sim.engine.trace_on.any())
         w, n = sim.n_worlds, scenario.agents_per_team
-        self.open = np.zeros(w, bool)
+        self.open = np.zeros(w, bool)             # the world's current episode is recorded and not ended
         self.cur_ep = np.full(w, -1, np.int64)   # the env's id of each world's current episode
         self.cur_wep = np.full(w, -1, np.int64)  # and the simulator's world_episode for it
         self.steps = np.zeros(w, np.int64)
         self.agent_return = np.zeros((w, 2, n))
         self.team_return = np.zeros((w, 2))
         self._next_episode = 0
+        self._seed: int | None = None
         self._names = [agent_name(t, j) for t in range(2) for j in range(n)]
         sink.begin_run(sim.engine if isinstance(sim, RuleSim) else None, scenario)
 
     def begin(self, worlds: np.ndarray, seed: int | None) -> None:
-        """Episodes start in `worlds` (indices), which the simulator has just reset."""
+        """Episodes start in `worlds` (indices), which the simulator has just reset; `seed` is the
+        reset's seed (None for an autoreset: the episode continues the last seeded stream)."""
         worlds = np.asarray(worlds, np.int64)
+        if seed is not None or self._next_episode == 0:
+            self._seed = seed
         for w in worlds[self.open[worlds]].tolist():
             self._end(w, "aborted")
         ids = self._next_episode + np.arange(len(worlds), dtype=np.int64)
@@ -53,24 +66,27 @@ class EpisodeTracer:
         self.cur_ep[worlds] = ids
         if self._rules:
             self.cur_wep[worlds] = self.sim.world_episode[worlds]
-        self.open[worlds] = True
+        recorded = ids < self.limit if self.limit is not None else np.ones(len(ids), bool)
+        self.open[worlds] = recorded
         self.steps[worlds] = 0
         self.agent_return[worlds] = 0.0
         self.team_return[worlds] = 0.0
-        for w, e in zip(worlds.tolist(), ids.tolist()):
-            self.sink.begin_episode(w, e, seed, self.scenario)
+        for w, e in zip(worlds[recorded].tolist(), ids[recorded].tolist()):
+            self.sink.begin_episode(w, e, self._seed, self.scenario)
 
     def stepped(self, res: StepResult, actions: np.ndarray) -> None:
         """After a step of every world (before any autoreset): its rows, its step records, episode ends."""
         self._flush()
-        worlds = np.arange(len(self.open))
-        # copies: the simulator may reuse its arrays (RuleSim.reset writes into the last obs)
-        self.sink.step(worlds, self.cur_ep.copy(), res.t.astype(np.int64), np.array(res.obs, np.float32),
-                       np.array(actions, np.int64), res.agent_reward.copy())
+        worlds = np.flatnonzero(self.open)
+        if len(worlds):
+            # copies: the simulator may reuse its arrays (RuleSim.reset writes into the last obs)
+            self.sink.step(worlds, self.cur_ep[worlds], res.t[worlds].astype(np.int64),
+                           np.array(res.obs[worlds], np.float32), np.array(actions, np.int64)[worlds],
+                           res.agent_reward[worlds].copy())
         self.steps[:] = res.t
         self.agent_return += res.agent_reward
         self.team_return += res.reward
-        for w in np.flatnonzero(res.terminated | res.truncated).tolist():
+        for w in np.flatnonzero((res.terminated | res.truncated) & self.open).tolist():
             self._end(w, outcome_name(res.winner[w], bool(res.truncated[w])))
 
     def close(self) -> None:
@@ -88,8 +104,9 @@ class EpisodeTracer:
         w, k = rows["world"].astype(np.int64), rows["world_episode"]
         if (k > self.cur_wep[w]).any():
             raise RuntimeError("trace rows of a simulator episode the env never began")
-        keep = k == self.cur_wep[w]
-        if not keep.all():  # the simulator's own start, before the env's first episode in that world
+        keep = (k == self.cur_wep[w]) & self.open[w]
+        if not keep.all():  # the simulator's own start (before the env's first episode in that world),
+            #                 or a world whose episode is not recorded (limit) or already ended
             rows = {name: col[keep] for name, col in rows.items()}
             w = w[keep]
         rows["episode"] = self.cur_ep[w]

@@ -17,6 +17,10 @@ RecordEpisodeStatistics supports SAME_STEP.)
 
 Seeding: one generator drives the opponent in every world; reset(seed=s) reseeds it, so a run is
 reproducible for a given seed and num_envs. A list of seeds is combined into one (SeedSequence).
+
+Tracing: with `trace_sink`, every episode goes to the sink; with `trace_episodes=N` too, only the
+episodes 0..N-1 (ids in the order episodes begin; see tracelab/envs/tracer.py), so stepping until those
+ended records exactly N episodes.
 """
 from __future__ import annotations
 
@@ -51,7 +55,7 @@ class GridWarVectorEnv(VectorEnv):
 
     def __init__(self, num_envs: int = 1, scenario: Scenario | str = "advanced", *, backend: str = "rules",
                  stack_previous: bool = False, trace_sink: TraceSink | None = None,
-                 render_mode: str | None = None) -> None:
+                 trace_episodes: int | None = None, render_mode: str | None = None) -> None:
         if render_mode is not None:
             raise ValueError("GridWarVectorEnv does not render")
         if num_envs < 1:
@@ -70,7 +74,8 @@ class GridWarVectorEnv(VectorEnv):
         self._all.flags.writeable = False  # shared by every `_key` mask that covers all worlds
         # every episode starts from the scenario's start state: one world's reset info serves all
         self._start_info = reset_info(1, self._masks()[:1], self._n == 1)
-        self._tracer = None if trace_sink is None else EpisodeTracer(trace_sink, self.scenario, self.sim)
+        self._tracer = None if trace_sink is None else EpisodeTracer(trace_sink, self.scenario, self.sim,
+                                                                     limit=trace_episodes)
         self._ready = False
 
     def reset(self, *, seed: int | Sequence[int] | None = None, options: dict[str, Any] | None = None

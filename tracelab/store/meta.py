@@ -12,9 +12,10 @@ import os
 import platform
 import socket
 import sys
+import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import pyarrow as pa
 
@@ -111,6 +112,19 @@ def writer_holds_lock(run_dir: Path) -> bool:
         return False
     finally:
         os.close(fd)
+
+
+def take_writer_lock(run_dir: Path, lock: IO[str], doc: dict[str, Any], doing: str) -> None:
+    """Take the run's writer lock or raise RuntimeError naming the writer. Retried for a moment: readers
+    probe the lock (a shared lock held for microseconds) to tell a live run from a crashed one."""
+    for attempt in range(10):
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return
+        except BlockingIOError:
+            time.sleep(0.005 * (attempt + 1))
+    raise RuntimeError(f"run {str(run_dir)!r} is still being written (pid {doc.get('pid')}); "
+                       f"close its writer before {doing}")
 
 
 def current_meta(run_dir: Path) -> dict[str, Any]:

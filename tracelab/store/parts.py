@@ -105,9 +105,30 @@ class TableParts:
 
 def write_manifest(run_dir: Path, parts: dict[str, TableParts], flushes: int) -> None:
     """Replace parts/manifest.json with the tables' current parts: the moment readers see."""
-    doc = {"format": MANIFEST_FORMAT, "flushes": flushes,
-           "tables": {name: p.files for name, p in parts.items()}}
+    write_manifest_lists(run_dir, {name: p.files for name, p in parts.items()}, flushes)
+
+
+def write_manifest_lists(run_dir: Path, files: dict[str, list[str]], flushes: int) -> None:
+    """Replace parts/manifest.json: for every table, its parts as paths relative to parts/."""
+    doc = {"format": MANIFEST_FORMAT, "flushes": flushes, "tables": files}
     layout.replace_atomically(json.dumps(doc).encode(), layout.manifest_path(run_dir))
+
+
+def manifest_flushes(run_dir: Path) -> int:
+    """How many flushes the manifest records (read_manifest has checked the rest)."""
+    return int(json.loads(layout.manifest_path(run_dir).read_text()).get("flushes", 0))
+
+
+def write_empty_part(run_dir: Path, table: str) -> str:
+    """A new part with no rows (it carries the table's schema), named after the table's highest part;
+    returns its manifest entry."""
+    directory = layout.table_dir(run_dir, table)
+    numbers = [int(p.stem) for p in directory.glob(f"*{layout.PART_SUFFIX}") if p.stem.isdigit()]
+    final = directory / layout.part_name(max(numbers, default=-1) + 1)
+    tmp = layout.tmp_name(final)
+    pq.write_table(SCHEMAS[table].empty_table(), tmp)
+    os.replace(tmp, final)
+    return f"{table}/{final.name}"
 
 
 def read_manifest(run_dir: Path) -> dict[str, list[Path]]:

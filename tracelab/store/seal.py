@@ -6,32 +6,16 @@ the writer lock, seal first removes what a killed writer or an earlier failed se
 and parts the manifest no longer lists."""
 from __future__ import annotations
 
-import fcntl
 import os
 import shutil
-import time
 from pathlib import Path
-from typing import IO
 
 from tracelab.store import layout
-from tracelab.store.meta import meta_table, now_iso, read_meta, write_meta
+from tracelab.store.meta import meta_table, now_iso, read_meta, take_writer_lock, write_meta
 from tracelab.store.parts import read_manifest, remove_unlisted
 from tracelab.store.reader import _create_table, resolve_run
 from tracelab.store.sandbox import lock_configuration, lock_down, sandbox_connection
 from tracelab.store.schema import SEAL_ORDER, TABLES, VIEWS_SQL
-
-
-def take_writer_lock(run_dir: Path, lock: IO[str], doc: dict) -> None:
-    """Take the run's writer lock or raise RuntimeError naming the writer. Retried for a moment: readers
-    probe the lock (a shared lock held for microseconds) to tell a live run from a crashed one."""
-    for attempt in range(20):
-        try:
-            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            return
-        except BlockingIOError:
-            time.sleep(0.005 * (attempt + 1))
-    raise RuntimeError(f"run {str(run_dir)!r} is still being written (pid {doc.get('pid')}); "
-                       "close its writer before sealing")
 
 
 def seal_run(run: str | Path, *, keep_parts: bool = False) -> Path:
@@ -43,7 +27,7 @@ def seal_run(run: str | Path, *, keep_parts: bool = False) -> Path:
     sealed = layout.sealed_path(run_dir)
     doc = read_meta(run_dir)
     with open(layout.lock_path(run_dir), "a+") as lock:
-        take_writer_lock(run_dir, lock, doc)
+        take_writer_lock(run_dir, lock, doc, "sealing")
         if not sealed.exists():
             # We hold the writer lock, so a run still marked 'running' lost its writer.
             status = "crashed" if doc.get("status") == "running" else doc.get("status", "finished")

@@ -45,7 +45,8 @@ class StoreSink:
 
     def end_episode(self, world: int, episode: int, steps: int, outcome: str,
                     rewards: Mapping[str, float]) -> None:
-        self.writer.end_episode(int(episode), steps=int(steps), outcome=outcome,
+        # episode-local time: the last step's t is the number of steps (t_start is 0)
+        self.writer.end_episode(int(episode), steps=int(steps), outcome=outcome, t_end=int(steps),
                                 reward=float(rewards.get("red", 0.0)), rewards=rewards)
 
     def close(self) -> None:

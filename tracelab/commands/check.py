@@ -1,0 +1,47 @@
+"""`tracelab check`: verify every part of a run; with --repair, quarantine damaged ones (saying which
+episodes they held) and clean up what a killed writer or a failed seal left behind."""
+from __future__ import annotations
+
+import argparse
+
+from tracelab.commands._output import fail, store_errors
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("check", help="verify a run's files; --repair quarantines damaged parts")
+    p.add_argument("run", help="run directory, .duckdb file, or run name under runs/")
+    p.add_argument("--repair", action="store_true",
+                   help="move damaged parts to <run>/quarantine/, take them out of the manifest, and "
+                        "remove temp files and parts the manifest no longer lists")
+    p.set_defaults(func=run)
+
+
+def _size(n: int) -> str:
+    return f"{n / 1e6:.1f} MB" if n >= 100_000 else f"{n / 1e3:.1f} kB"
+
+
+def run(args: argparse.Namespace) -> int:
+    from tracelab.store.check import check_run
+    try:
+        report = check_run(args.run, repair=args.repair)
+    except store_errors() as e:
+        return fail(e)
+    kind = "sealed file" if report.sealed else "parts"
+    print(f"{report.run}: {report.parts} {'tables' if report.sealed else 'parts'} checked "
+          f"({kind}), {report.rows:,} rows read")
+    if report.error:
+        print(f"damaged: the sealed file does not read: {report.error}")
+        return 1
+    for part in report.damaged:
+        print(f"damaged: {part.path} ({part.table}; it held {part.episodes}): {part.error}")
+    if report.quarantined:
+        print(f"quarantined {len(report.quarantined)} part(s) in {report.run}/quarantine/ and took them "
+              "out of the manifest; the rest of the run reads again")
+    elif report.damaged:
+        print(f"run `tracelab check {args.run} --repair` to quarantine them")
+    if args.repair:
+        print(f"removed {report.temps} temp file(s) and {_size(report.unlisted_bytes)} of parts the "
+              "manifest no longer lists")
+    if not report.damaged:
+        print("ok")
+    return 0 if report.ok else 1
