@@ -136,3 +136,58 @@ def test_seal_command(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     assert code == 0 and out.strip() == str(run / "run.duckdb")
     code, out, _ = cli(capsys, "sql", str(run / "run.duckdb"), "SELECT count(*) AS n FROM changes", "--format", "csv")
     assert out.split() == ["n", "40"]
+
+
+def test_show_prints_metadata_program_scenario_and_counts(run: str, capsys: pytest.CaptureFixture) -> None:
+    code, out, _ = cli(capsys, "show", run)
+    assert code == 0
+    lines = out.splitlines()
+    assert lines[0] == "run walk: finished" and "  command   pytest walk" in lines
+    assert "episodes  3 (1 loss, 1 truncated, 1 win)" in lines
+    assert "rows      40 changes, 18 steps, 12 metrics, 4 rules, 6 facts, 14 atoms, 10 groundings" in lines
+    assert "scenario  walk" in lines and "program   4 rules, 6 facts" in lines
+    assert "  alarm: alarm(A) <-! agent(A), at(A,X), danger(X)" in lines
+    code, out, _ = cli(capsys, "show", run, "--json")
+    doc = json.loads(out)
+    assert code == 0 and doc["run"]["seed"] == 7 and doc["run"]["config"] == {"worlds": 3}
+    assert doc["episodes"]["by_outcome"] == {"loss": 1, "truncated": 1, "win": 1}
+    assert [r["name"] for r in doc["rules"]] == ["go", "leave", "near", "alarm"]
+
+
+def test_sql_list_needs_no_run(capsys: pytest.CaptureFixture) -> None:
+    code, out, _ = cli(capsys, "sql", "--list")
+    assert code == 0 and "episode_summary:" in out
+    code, _, err = cli(capsys, "sql")
+    assert code == 1 and "give a run and a SQL query" in err
+
+
+def test_table_output_stops_at_the_default_limit_and_says_how_to_get_more(
+        run: str, capsys: pytest.CaptureFixture) -> None:
+    from tracelab.commands._output import DEFAULT_TABLE_ROWS
+    code, out, err = cli(capsys, "sql", run, f"SELECT * FROM range({DEFAULT_TABLE_ROWS + 5}) r(i)")
+    assert code == 0 and out.splitlines()[-1] == f"({DEFAULT_TABLE_ROWS} rows)"
+    assert err.startswith(f"note: showing the first {DEFAULT_TABLE_ROWS} rows; --limit N shows more")
+    code, out, err = cli(capsys, "sql", run, f"SELECT * FROM range({DEFAULT_TABLE_ROWS + 5}) r(i)",
+                         "--limit", str(DEFAULT_TABLE_ROWS + 3))
+    assert out.splitlines()[-1] == f"({DEFAULT_TABLE_ROWS + 3} rows)" and err == ""
+    code, out, err = cli(capsys, "sql", run, f"SELECT * FROM range({DEFAULT_TABLE_ROWS}) r(i)")
+    assert out.splitlines()[-1] == f"({DEFAULT_TABLE_ROWS} rows)" and err == ""
+
+
+def test_csv_json_and_parquet_stream_every_row_across_batches(run: str, capsys: pytest.CaptureFixture,
+                                                              tmp_path: Path) -> None:
+    from tracelab.store.reader import BATCH_ROWS
+    n = 2 * BATCH_ROWS + 10
+    query = f"SELECT i, [i, i + 1] AS pair FROM range({n}) r(i) ORDER BY i"
+    code, out, _ = cli(capsys, "sql", run, query, "--format", "csv")
+    rows = out.splitlines()
+    assert code == 0 and len(rows) == n + 1 and rows[1] == "0,\"[0,1]\"" and rows[-1].startswith(f"{n - 1},")
+    code, out, _ = cli(capsys, "sql", run, query, "--format", "json", "--offset", str(BATCH_ROWS - 2),
+                       "--limit", "5")
+    assert [r["i"] for r in json.loads(out)] == list(range(BATCH_ROWS - 2, BATCH_ROWS + 3))
+    target = tmp_path / "all.parquet"
+    assert cli(capsys, "sql", run, query, "--format", "parquet", "-o", str(target))[0] == 0
+    table = pq.read_table(target)
+    assert table.num_rows == n and table.column("pair").to_pylist()[-1] == [n - 1, n]
+    code, out, _ = cli(capsys, "sql", run, "SELECT 1 AS x WHERE false", "--format", "json")
+    assert json.loads(out) == []

@@ -8,6 +8,7 @@ import datetime as _dt
 import json
 import math
 import sys
+from collections.abc import Iterable, Iterator
 from typing import TYPE_CHECKING, Any, TextIO
 
 if TYPE_CHECKING:  # imported where used, so that `tracelab --help` stays fast
@@ -81,6 +82,50 @@ def write_table(table: "pa.Table", fmt: str, output: str | None = None, out: Tex
         out.write(f"({len(rows)} row{'s' if len(rows) != 1 else ''})\n")
     else:
         raise ValueError(f"unknown format {fmt!r}; choose one of {', '.join(FORMATS)}")
+
+
+DEFAULT_TABLE_ROWS = 1000  # rows a table-format result shows unless --limit says otherwise
+def _rows(batches: "Iterable[pa.RecordBatch]") -> "Iterator[dict[str, Any]]":
+    for batch in batches:
+        yield from batch.to_pylist()
+
+
+def write_stream(schema: "pa.Schema", batches: "Iterable[pa.RecordBatch]", fmt: str,
+                 output: str | None = None, out: TextIO | None = None) -> int:
+    """Write record batches as CSV, JSON or Parquet as they come (one batch in memory at a time); returns
+    the number of rows. Table format needs every row for its widths: use write_table."""
+    if fmt == "parquet":
+        if not output:
+            raise ValueError("--format parquet needs --output FILE")
+        import pyarrow.parquet as pq
+        n = 0
+        with pq.ParquetWriter(output, schema, compression="zstd") as writer:
+            for batch in batches:
+                writer.write_batch(batch)
+                n += batch.num_rows
+        return n
+    if fmt not in ("csv", "json"):
+        raise ValueError(f"format {fmt!r} does not stream; choose csv, json or parquet")
+    if output:
+        with open(output, "w", newline="") as f:
+            return write_stream(schema, batches, fmt, None, f)
+    out = out or sys.stdout
+    names, n = schema.names, 0
+    if fmt == "csv":
+        w = csv.writer(out)
+        w.writerow(names)
+        for r in _rows(batches):
+            w.writerow([_cell(r[k]) if isinstance(r[k], (list, tuple)) else r[k] for k in names])
+            n += 1
+        return n
+    out.write("[")
+    for r in _rows(batches):
+        # one object per line: readable, and several times faster than indenting every value
+        out.write(("\n" if n == 0 else ",\n") + json.dumps({k: _json_value(v) for k, v in r.items()},
+                                                           default=str))
+        n += 1
+    out.write("]\n" if n == 0 else "\n]\n")
+    return n
 
 
 def fail(e: BaseException) -> int:

@@ -1,13 +1,19 @@
-"""`tracelab sql`: a read-only SQL query on a run (live or sealed), or one of the saved queries."""
+"""`tracelab sql`: a read-only SQL query on a run (live or sealed), or one of the saved queries.
+
+Table output shows at most DEFAULT_TABLE_ROWS rows unless --limit says otherwise (a note on stderr says
+how to get everything); CSV, JSON and Parquet stream the whole result batch by batch."""
 from __future__ import annotations
 
 import argparse
+import sys
 
 from tracelab.commands._output import (
+    DEFAULT_TABLE_ROWS,
     add_format_options,
     add_paging_options,
     fail,
     store_errors,
+    write_stream,
     write_table,
 )
 
@@ -15,12 +21,13 @@ from tracelab.commands._output import (
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("sql", help="read-only SQL on a run: views changes, firings, episodes, steps, "
                                    "metrics, rules, facts, atoms, groundings, run")
-    p.add_argument("run", help="run directory, .duckdb file, or run name under runs/")
+    p.add_argument("run", nargs="?", help="run directory, .duckdb file, or run name under runs/")
     p.add_argument("query", nargs="?", help="one SELECT statement")
     p.add_argument("--query", "-q", dest="saved", metavar="NAME", help="run a saved query instead")
     p.add_argument("--param", "-p", action="append", default=[], metavar="NAME=VALUE",
                    help="a saved query's parameter (repeatable)")
-    p.add_argument("--list", action="store_true", help="list the saved queries and their parameters")
+    p.add_argument("--list", action="store_true", help="list the saved queries and their parameters "
+                                                       "(no RUN needed)")
     add_format_options(p)
     add_paging_options(p)
     p.set_defaults(func=run)
@@ -44,28 +51,43 @@ def print_saved_queries() -> None:
             print(f"    {p.name} ({p.type}, default {p.default!r}){': ' + p.help if p.help else ''}")
 
 
-def run(args: argparse.Namespace) -> int:
+def _statement(args: argparse.Namespace) -> tuple[str, dict | None]:
     from tracelab.store.queries import get_query
+    if args.run is None:
+        raise ValueError("give a run and a SQL query, or --query NAME (see --list)")
+    if (args.query is None) == (args.saved is None):
+        raise ValueError("give either a SQL query or --query NAME (see --list)")
+    if args.saved is not None:
+        saved = get_query(args.saved)
+        return saved.sql, saved.bind(_params(args.param))
+    if args.param:
+        raise ValueError("--param only applies to saved queries (--query NAME)")
+    return args.query, None
+
+
+def run(args: argparse.Namespace) -> int:
     import duckdb
 
-    from tracelab.store.reader import fetch_arrow, open_run, query_readonly, retrying
+    from tracelab.store.reader import arrow_stream, fetch_arrow, open_run, query_readonly, retrying
     from tracelab.store.sandbox import refusal
     if args.list:
         print_saved_queries()
         return 0
     try:
-        if (args.query is None) == (args.saved is None):
-            raise ValueError("give either a SQL query or --query NAME (see --list)")
-        if args.saved is not None:
-            saved = get_query(args.saved)
-            sql, params = saved.sql, saved.bind(_params(args.param))
-        else:
-            if args.param:
-                raise ValueError("--param only applies to saved queries (--query NAME)")
-            sql, params = args.query, None
+        sql, params = _statement(args)
         con = open_run(args.run)
-        table = retrying(lambda: fetch_arrow(query_readonly(con, sql, params), args.limit, args.offset))
-        write_table(table, args.format, args.output)
+        if args.format == "table":
+            limit = DEFAULT_TABLE_ROWS + 1 if args.limit is None else args.limit
+            table = retrying(lambda: fetch_arrow(query_readonly(con, sql, params), limit, args.offset))
+            cut = args.limit is None and table.num_rows > DEFAULT_TABLE_ROWS
+            write_table(table.slice(0, DEFAULT_TABLE_ROWS) if cut else table, "table", args.output)
+            if cut:
+                print(f"note: showing the first {DEFAULT_TABLE_ROWS} rows; --limit N shows more, and "
+                      "--format csv|json|parquet [-o FILE] writes every row", file=sys.stderr)
+        else:
+            schema, batches = retrying(lambda: arrow_stream(query_readonly(con, sql, params), args.limit,
+                                                            args.offset))
+            write_stream(schema, batches, args.format, args.output)
     except duckdb.PermissionException as e:  # raised while the rows are read
         return fail(refusal(e))
     except store_errors() as e:

@@ -10,6 +10,7 @@ from tracelab.commands._output import (
     add_paging_options,
     fail,
     store_errors,
+    write_stream,
     write_table,
 )
 
@@ -58,20 +59,22 @@ def trace_sql(args: argparse.Namespace) -> tuple[str, list[object]]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tracelab.store.reader import open_run, retrying
+    from tracelab.store.reader import arrow_stream, open_run, retrying
     try:
         con = open_run(args.run)
-        sql, params = trace_sql(args)
-        table = retrying(lambda: con.sql(sql, params=params).to_arrow_table())
-        if table.num_rows == 0 and con.execute("SELECT count(*) FROM raw.changes WHERE episode = ?",
-                                               [args.episode]).fetchone()[0] == 0:
+        if not con.execute("SELECT count(*) FROM (SELECT 1 FROM raw.changes WHERE episode = ? LIMIT 1)",
+                           [args.episode]).fetchall()[0][0]:
             known = [e for (e,) in con.execute("SELECT DISTINCT episode FROM raw.changes "
                                                "ORDER BY 1 LIMIT 20").fetchall()]
             raise KeyError(f"episode {args.episode} has no trace rows in {args.run} "
                            f"(episodes with rows: {known or 'none'})")
+        sql, params = trace_sql(args)
         if args.format == "table":
-            table = paper_table(table)
-        write_table(table, args.format, args.output)
+            table = retrying(lambda: con.sql(sql, params=params).to_arrow_table())
+            write_table(paper_table(table), args.format, args.output)
+        else:  # streamed, batch by batch
+            schema, batches = retrying(lambda: arrow_stream(con.sql(sql, params=params)))
+            write_stream(schema, batches, args.format, args.output)
     except store_errors() as e:
         return fail(e)
     return 0

@@ -19,7 +19,7 @@ same."""
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
@@ -242,18 +242,37 @@ def query_readonly(con: RunConnection, sql: str,
         raise
 
 
+BATCH_ROWS = 65_536
+
+
+def arrow_stream(rel: duckdb.DuckDBPyRelation, limit: int | None = None,
+                 offset: int = 0) -> tuple[pa.Schema, Iterator[pa.RecordBatch]]:
+    """The schema and the rows [offset, offset+limit) of a relation as Arrow record batches, read as
+    they are needed: nothing past the limit is computed beyond DuckDB's current batch."""
+    reader = rel.to_arrow_reader(BATCH_ROWS)
+    return reader.schema, _sliced(reader, limit, offset)
+
+
+def _sliced(batches: Iterator[pa.RecordBatch], limit: int | None, offset: int) -> Iterator[pa.RecordBatch]:
+    skip, left = offset, limit
+    for batch in batches:
+        if skip:
+            cut = min(skip, batch.num_rows)
+            batch, skip = batch.slice(cut), skip - cut
+        if left is not None:
+            batch = batch.slice(0, left)
+            left -= batch.num_rows
+        if batch.num_rows:
+            yield batch
+        if left == 0:
+            return
+
+
 def fetch_arrow(rel: duckdb.DuckDBPyRelation, limit: int | None = None, offset: int = 0) -> pa.Table:
-    """The rows [offset, offset+limit) of a relation as an Arrow table, streaming: rows past the limit
-    are never materialised."""
-    reader = rel.to_arrow_reader(65_536)
-    want = None if limit is None else offset + limit
-    batches, have = [], 0
-    for batch in reader:
-        batches.append(batch)
-        have += batch.num_rows
-        if want is not None and have >= want:
-            break
-    return pa.Table.from_batches(batches, schema=reader.schema).slice(offset, limit)
+    """The rows [offset, offset+limit) of a relation as an Arrow table; rows past the limit are never
+    materialised."""
+    schema, batches = arrow_stream(rel, limit, offset)
+    return pa.Table.from_batches(list(batches), schema=schema)
 
 
 T = TypeVar("T")

@@ -1,0 +1,94 @@
+"""`tracelab show`: what a run is: its metadata, program, scenario and counts, read through the sandboxed
+reader (tracelab.store.open_run)."""
+from __future__ import annotations
+
+import argparse
+import json
+from typing import Any
+
+from tracelab.commands._output import fail, store_errors
+
+RULES_SHOWN = 40  # the rest: `tracelab sql RUN "SELECT * FROM rules"`
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("show", help="a run's metadata, program, scenario and counts")
+    p.add_argument("run", help="run directory, .duckdb file, or run name under runs/")
+    p.add_argument("--all-rules", action="store_true", help=f"list every rule (default: the first {RULES_SHOWN})")
+    p.add_argument("--json", action="store_true", help="everything as one JSON document")
+    p.set_defaults(func=run)
+
+
+def _json_field(text: str | None, default: Any) -> Any:
+    try:
+        return json.loads(text) if text else default
+    except json.JSONDecodeError:
+        return text
+
+
+def describe_run(con: Any) -> dict[str, Any]:
+    """The run's metadata, program, scenario and counts as plain data."""
+    rel = con.execute("SELECT * FROM run")
+    names = [d[0] for d in rel.description]
+    meta = dict(zip(names, rel.fetchall()[0]))
+    for key, default in (("config", {}), ("rule_files", []), ("versions", {})):
+        meta[key] = _json_field(meta.get(key), default)
+    for key in ("started_at", "ended_at"):
+        meta[key] = None if meta[key] is None else meta[key].isoformat(sep=" ", timespec="seconds")
+    counts = dict(zip(
+        ("changes", "steps", "metrics", "rules", "facts", "atoms", "groundings"),
+        con.execute("SELECT (SELECT count(*) FROM raw.changes), (SELECT count(*) FROM raw.steps), "
+                    "(SELECT count(*) FROM raw.metrics), (SELECT count(*) FROM raw.rules), "
+                    "(SELECT count(*) FROM raw.facts), (SELECT count(*) FROM raw.atoms), "
+                    "(SELECT count(*) FROM raw.groundings)").fetchall()[0]))
+    outcomes = dict(con.execute("SELECT coalesce(outcome, 'not ended'), count(*) FROM episodes "
+                                "GROUP BY 1 ORDER BY 2 DESC, 1").fetchall())
+    rules = [dict(zip(("name", "text", "file", "line"), r)) for r in
+             con.execute("SELECT name, text, file, line FROM rules ORDER BY rule").fetchall()]
+    config = meta["config"] if isinstance(meta["config"], dict) else {}
+    scenario_text = config.get("scenario") if isinstance(config.get("scenario"), str) else None
+    return {"run": meta, "episodes": {"total": sum(outcomes.values()), "by_outcome": outcomes},
+            "counts": counts, "rules": rules, "scenario": {"name": meta.get("scenario"),
+                                                           "definition": scenario_text}}
+
+
+def render(doc: dict[str, Any], all_rules: bool = False) -> str:
+    meta, counts = doc["run"], doc["counts"]
+    lines = [f"run {meta['run_id']}: {meta['status']}",
+             f"  command   {meta['command']}",
+             f"  started   {meta['started_at']}   ended {meta['ended_at'] or '-'}",
+             f"  seed      {meta['seed']}   host {meta['host']}   pid {meta['pid']}",
+             "  versions  " + ", ".join(f"{k} {v}" for k, v in sorted(meta["versions"].items()))]
+    for f in meta["rule_files"]:
+        lines.append(f"  rules     {f.get('path')} (sha256 {str(f.get('sha256'))[:12]})")
+    config = {k: v for k, v in meta["config"].items() if k != "scenario"} \
+        if isinstance(meta["config"], dict) else meta["config"]
+    if config:
+        lines.append(f"  config    {json.dumps(config, sort_keys=True)}")
+    episodes = doc["episodes"]
+    lines += ["", f"episodes  {episodes['total']}" + (
+        " (" + ", ".join(f"{n} {o}" for o, n in episodes["by_outcome"].items()) + ")" if episodes["total"] else "")]
+    lines.append("rows      " + ", ".join(f"{n:,} {name}" for name, n in counts.items()))
+    scenario = doc["scenario"]
+    lines += ["", f"scenario  {scenario['name']}"]
+    if scenario["definition"]:
+        lines += ["  " + ln for ln in scenario["definition"].rstrip().splitlines()]
+    rules = doc["rules"]
+    shown = rules if all_rules else rules[:RULES_SHOWN]
+    lines += ["", f"program   {len(rules)} rules, {counts['facts']} facts"]
+    lines += [f"  {' '.join(r['text'].split())}" for r in shown]
+    if len(shown) < len(rules):
+        lines.append(f"  ... {len(rules) - len(shown)} more (--all-rules, or "
+                     "tracelab sql RUN \"SELECT * FROM rules\")")
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    from tracelab.store.reader import open_run, retrying
+    try:
+        con = open_run(args.run)
+        doc = retrying(lambda: describe_run(con))
+    except store_errors() as e:
+        return fail(e)
+    print(json.dumps(doc, indent=1, default=str) if args.json else render(doc, args.all_rules))
+    return 0
