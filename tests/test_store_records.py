@@ -146,3 +146,18 @@ def test_check_reads_a_sealed_run(tmp_path: Path, capsys: pytest.CaptureFixture)
     assert main(["check", str(run)]) == 0
     assert "sealed file" in capsys.readouterr().out
     assert layout.sealed_path(run).exists()
+
+
+def test_repair_is_refused_while_a_writer_holds_the_run(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    run = tmp_path / "busy"
+    proc = subprocess.Popen([sys.executable, str(PROC), "idle", str(run)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().strip() == "wrote"
+        assert main(["check", str(run), "--repair"]) == 1
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "still being written" in err[0] and "before repairing it" in err[0]
+        assert main(["check", str(run)]) == 0  # checking alone reads, and needs no lock
+    finally:
+        proc.kill()
+        proc.wait(10)

@@ -161,6 +161,7 @@ def open_run(run: str | Path) -> RunConnection:
             result: RunConnection = con
         else:
             current_meta(p)  # a directory without meta.json is not a run: say so first
+            _refuse_links(p / layout.PARTS)
             lock_down(con, [str(p.resolve() / layout.PARTS) + "/"])
             con.execute("CREATE SCHEMA raw")
             result = LiveRunConnection(con, p.resolve())  # sets the variables the views read, and raw.run
@@ -173,6 +174,18 @@ def open_run(run: str | Path) -> RunConnection:
         con.close()
         raise
     return result
+
+
+def _refuse_links(parts: Path) -> None:
+    """A live run's parts/ is readable by queries (DuckDB checks paths, not where links lead): refuse a
+    run that keeps a symbolic link anywhere in it."""
+    if parts.is_symlink():
+        raise ValueError(f"{str(parts)!r} is a link to {str(parts.resolve())!r}: a run's parts/ must be a "
+                         "directory inside the run")
+    for entry in parts.rglob("*"):
+        if entry.is_symlink():
+            raise ValueError(f"{str(entry)!r} is a symbolic link: tracelab does not open a run whose "
+                             "parts/ holds links (they could point anywhere)")
 
 
 def _attach_sealed(con: duckdb.DuckDBPyConnection, sealed: Path) -> None:
