@@ -34,7 +34,8 @@ def describe_run(con: Any) -> dict[str, Any]:
     for key, default in (("config", {}), ("rule_files", []), ("versions", {})):
         meta[key] = _json_field(meta.get(key), default)
     for key in ("started_at", "ended_at"):
-        meta[key] = None if meta[key] is None else meta[key].isoformat(sep=" ", timespec="seconds")
+        value = meta[key]
+        meta[key] = value.isoformat(sep=" ", timespec="seconds") if hasattr(value, "isoformat") else value
     counts = dict(zip(
         ("changes", "steps", "metrics", "rules", "facts", "atoms", "groundings"),
         con.execute("SELECT (SELECT count(*) FROM raw.changes), (SELECT count(*) FROM raw.steps), "
