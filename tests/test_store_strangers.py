@@ -15,6 +15,7 @@ from tracelab.cli import main
 from tracelab.store.parts import read_manifest
 from tracelab.store.reader import open_run, query_readonly
 from tracelab.store.sandbox import QueryRefused
+from tracelab.store.seal import seal_run
 
 
 @pytest.fixture(scope="module")
@@ -146,3 +147,25 @@ def test_saved_query_names_are_names_not_paths(made: dict[str, Path], name: str,
     err = capsys.readouterr().err
     assert code == 1 and f"no saved query {name!r}; saved queries: " in err
     assert len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("argv", [["trace", "-e", "10"], ["why", "alarm(r1)", "-e", "10"],
+                                  ["why-not", "-e", "10", "--rule", "go", "--at", "3"], ["diff", "10", "12"],
+                                  ["show"], ["sql", "SELECT 1"]])
+def test_every_command_refuses_a_crafted_run(made: dict[str, Path], tmp_path: Path, argv: list[str],
+                                             capsys: pytest.CaptureFixture) -> None:
+    """All commands open runs the one way: a sealed file with a view in raw.* is refused by each."""
+    run = tampered_sealed(made, tmp_path, "DROP TABLE raw.changes",
+                          "CREATE VIEW raw.changes AS SELECT * FROM read_text('/etc/hostname')")
+    code = main([argv[0], str(run), *argv[1:]])
+    out = capsys.readouterr()
+    assert code == 1 and out.out == "" and len(out.err.strip().splitlines()) == 1
+    assert "holds raw.changes as a view" in out.err
+
+
+def test_seal_refuses_a_manifest_that_leaves_the_run(made: dict[str, Path], tmp_path: Path) -> None:
+    run = live_copy(made, tmp_path)
+    edit_manifest(run, "changes", "/etc/hostname")
+    with pytest.raises(ValueError, match="parts must be relative paths"):
+        seal_run(run)
+    assert not (run / "run.duckdb").exists() and (run / "parts").is_dir()
