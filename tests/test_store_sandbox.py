@@ -128,6 +128,9 @@ def test_statement_check_looks_inside_explain(runs: dict[str, Path]) -> None:
             query_readonly(con, statement)
     with pytest.raises(QueryRefused, match="one SQL statement, got 2"):
         query_readonly(con, "SELECT 1; SELECT 2")
+    with pytest.raises(QueryRefused, match="name the values: PIVOT"):
+        query_readonly(con, "PIVOT episodes ON outcome USING count(*)")
+    assert query_readonly(con, "PIVOT episodes ON outcome IN ('win', 'loss') USING count(*)").fetchall()
 
 
 def test_reading_the_runs_own_parts_is_allowed_and_nothing_else(runs: dict[str, Path]) -> None:

@@ -100,6 +100,9 @@ def check_readonly(con: duckdb.DuckDBPyConnection, sql: str) -> None:
         except QueryRefused as e:
             raise QueryRefused(f"EXPLAIN runs or plans the statement it explains: {e}") from None
         return
+    if statement.type == duckdb.StatementType.MULTI:  # DuckDB's PIVOT first creates a type
+        raise QueryRefused("this statement runs several statements (a PIVOT without an IN list creates a "
+                           "type first); name the values: PIVOT ... ON col IN ('a', 'b') USING ...")
     if statement.type not in READONLY_STATEMENTS:
         raise QueryRefused(f"only read-only queries are allowed (SELECT, EXPLAIN SELECT); this is a "
                            f"{statement.type.name} statement")
