@@ -59,7 +59,7 @@ def test_trace_filters_formats_and_paging(run: str, capsys: pytest.CaptureFixtur
 
 def test_trace_of_a_missing_episode_names_the_known_ones(run: str, capsys: pytest.CaptureFixture) -> None:
     code, _, err = cli(capsys, "trace", run, "-e", "5")
-    assert code == 1 and err.strip() == f"error: episode 5 has no trace rows in {run} (episodes with rows: [10, 11, 12])"
+    assert code == 1 and err.strip() == f"tracelab: error: episode 5 has no trace rows in {run} (episodes with rows: [10, 11, 12])"
     code, _, err = cli(capsys, "trace", "no-such-run", "-e", "5")
     assert code == 1 and "no run 'no-such-run'" in err
 
@@ -78,7 +78,7 @@ def test_why_and_why_not_commands(run: str, capsys: pytest.CaptureFixture) -> No
     code, _, err = cli(capsys, "why-not", run, "-e", "10", "--rule", "go", "--grounding", "A", "--at", "4")
     assert code == 1 and "cannot read binding 'A'" in err
     code, _, err = cli(capsys, "why", run, "at(r1,zz)", "-e", "10")
-    assert code == 1 and err.strip() == "error: no node 'zz' in this run's vocabulary"
+    assert code == 1 and err.strip() == "tracelab: error: no node 'zz' in this run's vocabulary"
 
 
 def test_sql_is_read_only_and_shows_error_positions(run: str, capsys: pytest.CaptureFixture) -> None:
@@ -86,7 +86,7 @@ def test_sql_is_read_only_and_shows_error_positions(run: str, capsys: pytest.Cap
                        "--format", "csv")
     assert code == 0 and out.splitlines() == ["episode,n", "10,16", "11,7", "12,17"]
     code, _, err = cli(capsys, "sql", run, "SELECT nope FROM changes")
-    assert code == 1 and "LINE 1: SELECT nope FROM changes" in err and "^" in err
+    assert code == 1 and err.count("\n") == 1 and "nope" in err and "(at line 1, column 8 of the query)" in err
     for statement in ("DROP VIEW changes", "CREATE TABLE x AS SELECT 1", "COPY changes TO 'x.csv'",
                       f"ATTACH '{run}/x.duckdb' AS x", "SELECT 1; SELECT 2"):
         code, _, err = cli(capsys, "sql", run, statement)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from tracelab.commands._output import fail, store_errors
+from tracelab.errors import store_errors
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -15,9 +15,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from tracelab.store.seal import seal_run
-    try:
+    with store_errors():
         path = seal_run(args.run, keep_parts=args.keep_parts)
-    except store_errors() as e:
-        return fail(e)
     print(path)
     return 0

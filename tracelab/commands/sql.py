@@ -3,13 +3,8 @@ from __future__ import annotations
 
 import argparse
 
-from tracelab.commands._output import (
-    add_format_options,
-    add_paging_options,
-    fail,
-    store_errors,
-    write_table,
-)
+from tracelab.commands._output import add_format_options, add_paging_options, write_table
+from tracelab.errors import UserError, store_errors
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -31,9 +26,20 @@ def _params(items: list[str]) -> dict[str, str]:
     for item in items:
         name, eq, value = item.partition("=")
         if not eq:
-            raise ValueError(f"cannot read --param {item!r}; write NAME=VALUE")
+            raise UserError(f"cannot read --param {item!r}; write NAME=VALUE")
         out[name.strip()] = value.strip()
     return out
+
+
+def utf8_text(text: str, what: str) -> str:
+    """An argument as text DuckDB can take: bytes that are not UTF-8 reach Python as lone surrogates."""
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError as e:
+        raw = text.encode("utf-8", "surrogateescape")
+        offset = len(text[:e.start].encode("utf-8", "surrogateescape"))
+        raise UserError(f"{what} is not UTF-8 text: byte 0x{raw[offset]:02x} at offset {offset}") from None
+    return text
 
 
 def print_saved_queries() -> None:
@@ -50,19 +56,17 @@ def run(args: argparse.Namespace) -> int:
     if args.list:
         print_saved_queries()
         return 0
-    try:
+    with store_errors():
         if (args.query is None) == (args.saved is None):
-            raise ValueError("give either a SQL query or --query NAME (see --list)")
+            raise UserError("give either a SQL query or --query NAME (see --list)")
         if args.saved is not None:
             saved = get_query(args.saved)
             sql, params = saved.sql, saved.bind(_params(args.param))
         else:
             if args.param:
-                raise ValueError("--param only applies to saved queries (--query NAME)")
-            sql, params = args.query, None
+                raise UserError("--param only applies to saved queries (--query NAME)")
+            sql, params = utf8_text(args.query, "the SQL query"), None
         con = open_run(args.run)
         table = retrying(lambda: fetch_arrow(query_readonly(con, sql, params), args.limit, args.offset))
-        write_table(table, args.format, args.output)
-    except store_errors() as e:
-        return fail(e)
+    write_table(table, args.format, args.output)
     return 0
