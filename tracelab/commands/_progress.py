@@ -59,8 +59,9 @@ def _figures_text(figures: dict[str, Any]) -> str:
 
 
 @contextmanager
-def progress(description: str, total: int | None, unit: str = "steps") -> Iterator[Progress]:
-    """A progress bar with count, rate and ETA on a terminal; a counter that draws nothing elsewhere."""
+def progress(description: str, total: int | None, unit: str | None = "steps") -> Iterator[Progress]:
+    """A progress bar with count, rate (unless `unit` is None) and ETA on a terminal; a counter that
+    draws nothing elsewhere."""
     if not on_terminal():
         yield Progress()
         return
@@ -81,17 +82,18 @@ def progress(description: str, total: int | None, unit: str = "steps") -> Iterat
             rate = "…" if task.speed is None else f"{task.speed:,.1f}"
             return Text(f"{rate} {unit}/s", style="progress.data.speed")
 
-    columns = [TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), RateColumn(),
-               TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn(),
-               TextColumn("{task.fields[figures]}")]
+    columns = [TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+               *([RateColumn()] if unit else []), TimeElapsedColumn(), TextColumn("eta"),
+               TimeRemainingColumn(), TextColumn("{task.fields[figures]}")]
     with RichProgress(*columns, console=Console(file=sys.stderr), transient=True) as bar:
         task = bar.add_task(description, total=total, figures="")
         yield Progress(bar, task)
 
 
 @contextmanager
-def working(description: str) -> Iterator[None]:
-    """A spinner with the elapsed time for work whose length is not known beforehand."""
+def working(description: str, refresh_per_second: float = 10) -> Iterator[None]:
+    """A spinner with the elapsed time for work whose length is not known beforehand (refreshing less
+    often where its thread must not disturb a measurement)."""
     if not on_terminal():
         yield
         return
@@ -99,7 +101,8 @@ def working(description: str) -> Iterator[None]:
     from rich.progress import Progress as RichProgress
     from rich.progress import SpinnerColumn, TextColumn, TimeElapsedColumn
     with RichProgress(SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(),
-                      console=Console(file=sys.stderr), transient=True) as bar:
+                      console=Console(file=sys.stderr), transient=True,
+                      refresh_per_second=refresh_per_second) as bar:
         bar.add_task(description, total=None)
         yield
 

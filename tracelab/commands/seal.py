@@ -14,8 +14,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from tracelab.commands._progress import progress
+    from tracelab.store.schema import TABLES
     from tracelab.store.seal import seal_run
-    with store_errors():
-        path = seal_run(args.run, keep_parts=args.keep_parts)
+    with store_errors(), progress("sealing", total=len(TABLES), unit=None) as bar:
+        path = seal_run(args.run, keep_parts=args.keep_parts,
+                        on_table=lambda name: (bar.advance(1), bar.set_fields(copied=name)))
     print(path)
     return 0

@@ -208,6 +208,11 @@ class Scenario:
         set_("mountains", tuple(mountains))
 
         n = _check_int("agents_per_team", self.agents_per_team, 1)
+        free = w * h - len(mountains)
+        if 2 * n > free:  # both teams, one agent per free cell
+            raise ScenarioError(_DIRECT, "agents_per_team",
+                                f"{n} agents a team do not fit the {w}x{h} map: it has {free} free cells "
+                                f"(not mountains), room for at most {free // 2} agents a team")
         set_("agents_per_team", n)
         set_("ammo", _check_int("ammo", self.ammo, 0))
         set_("max_steps", _check_int("max_steps", self.max_steps, 1))

@@ -7,6 +7,7 @@ from __future__ import annotations
 import fcntl
 import os
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 
 import duckdb
@@ -18,9 +19,10 @@ from tracelab.store.reader import _create_table, resolve_run
 from tracelab.store.schema import SEAL_ORDER, TABLES, VIEWS_SQL
 
 
-def seal_run(run: str | Path, *, keep_parts: bool = False) -> Path:
+def seal_run(run: str | Path, *, keep_parts: bool = False,
+             on_table: Callable[[str], None] | None = None) -> Path:
     """Write <run>/run.duckdb from the parts and return its path (idempotent). Refuses while a writer
-    holds the run."""
+    holds the run. `on_table(name)` is called as each of the run's tables is copied (progress)."""
     run_dir = resolve_run(run)
     if not run_dir.is_dir():
         raise ValueError(f"{str(run_dir)!r} is not a run directory (a lone .duckdb file is already sealed)")
@@ -36,7 +38,7 @@ def seal_run(run: str | Path, *, keep_parts: bool = False) -> Path:
             # We hold the writer lock, so a run still marked 'running' lost its writer.
             status = "crashed" if doc.get("status") == "running" else doc.get("status", "finished")
             layout.remove_stale_temps(run_dir)
-            _build(run_dir, sealed, {**doc, "status": status})
+            _build(run_dir, sealed, {**doc, "status": status}, on_table)
             doc.update(status=status, sealed_at=now_iso())
             write_meta(run_dir, doc)
         if not keep_parts:
@@ -44,7 +46,7 @@ def seal_run(run: str | Path, *, keep_parts: bool = False) -> Path:
     return sealed
 
 
-def _build(run_dir: Path, sealed: Path, doc: dict) -> None:
+def _build(run_dir: Path, sealed: Path, doc: dict, on_table: Callable[[str], None] | None = None) -> None:
     tmp = sealed.with_name(f".{sealed.name}.tmp-{os.getpid()}")
     for leftover in (tmp, Path(f"{tmp}.wal")):
         leftover.unlink(missing_ok=True)
@@ -56,6 +58,8 @@ def _build(run_dir: Path, sealed: Path, doc: dict) -> None:
             order = f" ORDER BY {SEAL_ORDER[t]}" if t in SEAL_ORDER else ""
             con.execute(f"CREATE TABLE raw.{t} AS SELECT * FROM read_parquet(?){order}",
                         [[str(f) for f in parts[t]]])
+            if on_table is not None:
+                on_table(t)
         _create_table(con, "raw.run", meta_table(doc, doc["status"]))
         con.execute(VIEWS_SQL)
         con.execute("CHECKPOINT")
