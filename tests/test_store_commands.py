@@ -130,6 +130,25 @@ def test_diff_finds_the_first_divergence(run: str, capsys: pytest.CaptureFixture
     assert cli(capsys, "diff", run, "10", "10")[0] == 1
 
 
+def test_diff_across_runs_compares_by_name(run: str, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    # another run of the same walks, written again: the same episodes compare as identical across runs,
+    # and two different episodes diverge where they do within one run
+    other = str(write_walk_run(tmp_path / "again"))
+    code, out, _ = cli(capsys, "diff", f"{run}:12", f"{other}:12", "--json")
+    d = json.loads(out)
+    assert code == 0 and d["identical"] and (d["run_a"], d["run_b"]) == (run, other)
+    code, out, _ = cli(capsys, "diff", f"{run}:11", f"{other}:12", "--json")
+    across = json.loads(out)
+    code, out, _ = cli(capsys, "diff", run, "11", "12", "--json")
+    within = json.loads(out)
+    for key in ("rel_t", "t_a", "t_b", "first_action_difference", "outcome_a", "outcome_b"):
+        assert across[key] == within[key], key
+    assert [r["atom"] for r in across["only_in_b"]] == [r["atom"] for r in within["only_in_b"]] == ["move(r1)"]
+    code, out, _ = cli(capsys, "diff", f"{run}:11", f"{other}:12")
+    assert f"first divergence of the trace: 1 steps in (t=1 in episode {run}:11, t=1 in episode {other}:12)" in out
+    assert cli(capsys, "diff", f"{run}:11", f"{other}:99")[0] == 1
+
+
 def test_seal_command(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     run = write_walk_run(tmp_path / "walk")
     code, out, _ = cli(capsys, "seal", str(run))
