@@ -37,6 +37,7 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> Path:
     (d / "wide.rules").write_text("a(x)\nwide: p(X) <-0 " + ", ".join(f"a(X{i})" for i in range(200)) + "\n")
     (d / "crowd.toml").write_text('name = "crowd"\nwidth = 8\nheight = 8\nred_base = [7, 0]\n'
                                   'blue_base = [0, 7]\nagents_per_team = 200\n')
+    (d / "latin1.toml").write_bytes(b'name = "caf\xe9"\n')
     (d / "old-run").mkdir()
     (d / "old-run" / "meta.json").write_text("{}")
     (d / "a-file").write_text("not a directory")
@@ -53,7 +54,8 @@ USER_ERRORS = [
     (["play", "--run", "/proc/x/run"], "cannot create the run directory /proc/x/run"),
     (["play", "--run", "{d}/busy"], "holds other files (notes.txt)"),
     (["play", "--scenario", "{d}/crowd.toml"], "200 agents a team do not fit the 8x8 map"),
-    (["play", "--scenario", "{d}/none.toml"], "none.toml"),
+    (["play", "--scenario", "{d}/none.toml"], "none.toml: cannot read"),
+    (["play", "--scenario", "{d}/latin1.toml"], "latin1.toml: not UTF-8 text: byte 0xe9 at byte offset 11"),
     # reason
     (["reason", "{d}/latin1.rules", "--steps", "1"], "latin1.rules:2:12: the file is not UTF-8 text: byte 0xe9"),
     (["reason", "{d}/osc.rules", "--steps", "2"], "no fixpoint at t=0"),
@@ -70,6 +72,8 @@ USER_ERRORS = [
     (["sql", "{d}/no-such-run", "SELECT 1"], "no run"),
     (["why", RUN, "atLoc(red-agent-1,49)", "-e", "0", "--at", "9999"],
      "--at 9999 is past the end of episode 0: its last timestep is t=21"),
+    (["why-not", RUN, "-e", "0", "--rule", "m_up", "--at", "500"],
+     "--at 500 is past the end of episode 0: its last timestep is t=21"),
     (["why", RUN, "~alive(red-agent-1)", "-e", "0"], "not a complement: ask `why 'alive(red-agent-1)'`"),
     (["trace", RUN, "-e", "0", "--from", "10", "--to", "2"], "--from 10 is after --to 2"),
     (["trace", RUN, "-e", "0", "--label", "nosuch"], "no label 'nosuch' in this run; its labels: "),

@@ -35,6 +35,11 @@ def last_t(con: "duckdb.DuckDBPyConnection", episode: int) -> int:
     return int(row[0])
 
 
+def check_at(at: int | None, episode: int, end: int) -> None:
+    if at is not None and at > end:
+        raise UserError(f"--at {at} is past the end of episode {episode}: its last timestep is t={end}")
+
+
 def refuse_complement(atom: str) -> None:
     """`why` explains an atom's own bound. A complement `~p(a)` has the bound [1-u,1-l] of p(a)'s [l,u],
     so its explanation is p(a)'s: say so rather than silently dropping the `~`."""
@@ -51,9 +56,7 @@ def run(args: argparse.Namespace) -> int:
     with store_errors():
         con = open_run(args.run)
         end = last_t(con, args.episode)
-        if args.at is not None and args.at > end:
-            raise UserError(f"--at {args.at} is past the end of episode {args.episode}: its last "
-                            f"timestep is t={end}")
+        check_at(args.at, args.episode, end)
         at = end if args.at is None else args.at
         tree = retrying(lambda: explain(con, args.episode, args.atom, at, depth=args.depth))
     if args.json:

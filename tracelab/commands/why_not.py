@@ -32,10 +32,12 @@ def parse_bindings(text: str) -> dict[str, str]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from tracelab.commands.why import check_at, last_t
     from tracelab.store.reader import open_run, retrying
     from tracelab.store.why import render_why_not, why_not
     with store_errors():
         con, bindings = open_run(args.run), parse_bindings(args.grounding)
+        check_at(args.at, args.episode, last_t(con, args.episode))
         result = retrying(lambda: why_not(con, args.episode, args.rule, bindings, args.at))
     print(json.dumps(result.to_dict(), indent=1) if args.json else render_why_not(result))
     return 0

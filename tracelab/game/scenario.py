@@ -396,6 +396,9 @@ def load_scenario(path: str | Path) -> Scenario:
         text = Path(path).read_text(encoding="utf-8")
     except OSError as e:
         raise ScenarioError(source, None, f"cannot read: {e.strerror or e}") from None
+    except UnicodeDecodeError as e:
+        raise ScenarioError(source, None, f"not UTF-8 text: byte 0x{e.object[e.start]:02x} at byte offset "
+                                          f"{e.start}") from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
