@@ -25,7 +25,7 @@ def _cold_in_a_fresh_process(cache_dir: str | None) -> str:
     if cache_dir:
         env["NUMBA_CACHE_DIR"] = cache_dir
     code = "from tracelab.commands._progress import engine_cache_is_cold as c; print(c(), c(simulator=True))"
-    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=False,
                           timeout=300).stdout.strip()
 
 

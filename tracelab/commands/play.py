@@ -52,7 +52,11 @@ def check_run_dir(run_dir: Path) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tracelab.game.scenario import builtin_scenario, builtin_scenario_names, load_scenario
+    from tracelab.game.scenario import (
+        builtin_scenario,
+        builtin_scenario_names,
+        load_scenario,
+    )
 
     scenario = builtin_scenario(args.scenario) if args.scenario in builtin_scenario_names() \
         else load_scenario(args.scenario)

@@ -3,7 +3,11 @@ from __future__ import annotations
 
 import argparse
 
-from tracelab.commands._output import add_format_options, add_paging_options, write_table
+from tracelab.commands._output import (
+    add_format_options,
+    add_paging_options,
+    write_table,
+)
 from tracelab.errors import UserError, store_errors
 
 

@@ -6,7 +6,11 @@ import argparse
 from typing import TYPE_CHECKING
 
 from tracelab.commands._args import non_negative_int
-from tracelab.commands._output import add_format_options, add_paging_options, write_table
+from tracelab.commands._output import (
+    add_format_options,
+    add_paging_options,
+    write_table,
+)
 from tracelab.errors import UserError, store_errors
 
 if TYPE_CHECKING:
