@@ -17,8 +17,10 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
-# the numba kernels whose first call compiles the engine, and those the rule simulator adds
+# the numba kernels whose first call compiles the engine (the counting kernel serves every program, the
+# lanes kernel batches of 64 worlds or more), and those the rule simulator adds
 _ENGINE_KERNELS = (("tracelab.engine.kernel", "step_worlds"),)
+_LANES_KERNELS = (("tracelab.engine.lanes", "step_lanes"),)
 _SIMULATOR_KERNELS = (("tracelab.game.rulesim_kernel", "encode_actions"),
                       ("tracelab.game.rulesim_kernel", "read_and_settle"),
                       ("tracelab.game.rulesim_kernel", "settle_step"))
@@ -107,13 +109,15 @@ def working(description: str, refresh_per_second: float = 10) -> Iterator[None]:
         yield
 
 
-def engine_cache_is_cold(simulator: bool = False) -> bool | None:
-    """True when the engine's compiled kernels (and the rule simulator's, with `simulator`) are neither
-    loaded nor in numba's disk cache (the first run compiles them for 30-60 s), False when they are,
-    None when it cannot tell. Reads numba's cache index of each entry point (a few ms)."""
+def engine_cache_is_cold(simulator: bool = False, lanes: bool = False) -> bool | None:
+    """True when the engine's compiled kernels (with `lanes` the lanes kernel's too, with `simulator`
+    the rule simulator's) are neither loaded nor in numba's disk cache (the first run compiles them for
+    30-60 s), False when they are, None when it cannot tell. Reads numba's cache index of each entry
+    point (a few ms)."""
     import importlib
+    kernels = _ENGINE_KERNELS + (_LANES_KERNELS if lanes else ()) + (_SIMULATOR_KERNELS if simulator else ())
     try:
-        for module, name in _ENGINE_KERNELS + (_SIMULATOR_KERNELS if simulator else ()):
+        for module, name in kernels:
             fn = getattr(importlib.import_module(module), name)
             # numba's own staleness check: an index whose source stamp differs loads as empty
             if not fn.signatures and not fn._cache._cache_file._load_index():
@@ -124,13 +128,14 @@ def engine_cache_is_cold(simulator: bool = False) -> bool | None:
 
 
 @contextmanager
-def compiling_engine(simulator: bool = False, busy: str | None = None) -> Iterator[dict[str, Any]]:
-    """Around the engine's build and first step (and the rule simulator's, with `simulator`): when the
-    kernels must be compiled, say so while it happens (a spinner on a terminal, one line on stderr
-    otherwise); when they are cached, show `busy` (if given) as a spinner on a terminal. Yields a dict
-    filled on exit: "seconds" spent inside and "compiled" (True, False or None: unknown), so that rates
-    can leave the compile out and say so."""
-    cold = engine_cache_is_cold(simulator)
+def compiling_engine(simulator: bool = False, lanes: bool = False,
+                     busy: str | None = None) -> Iterator[dict[str, Any]]:
+    """Around the engine's build and first step (with `lanes`: a batch that takes the lanes kernel; with
+    `simulator`: the rule simulator's too): when the kernels must be compiled, say so while it happens
+    (a spinner on a terminal, one line on stderr otherwise); when they are cached, show `busy` (if
+    given) as a spinner on a terminal. Yields a dict filled on exit: "seconds" spent inside and
+    "compiled" (True, False or None: unknown), so that rates can leave the compile out and say so."""
+    cold = engine_cache_is_cold(simulator, lanes)
     spent: dict[str, Any] = {"seconds": 0.0, "compiled": cold}
     t0 = time.perf_counter()
     try:

@@ -122,7 +122,8 @@ def play(scenario, args: argparse.Namespace, sink) -> dict:
             returns[w] = 0.0
         return len(ended)
 
-    with compiling_engine(simulator=True, busy=f"building the game's rules ({n} agent{'s' if n != 1 else ''} "
+    from tracelab.engine.core import LANES_MIN_WORLDS
+    with compiling_engine(simulator=True, lanes=n_worlds >= LANES_MIN_WORLDS, busy=f"building the game's rules ({n} agent{'s' if n != 1 else ''} "
                                                "a team)…") as first:
         env = GridWarVectorEnv(n_worlds, scenario, backend="rules", trace_sink=sink)
         env.reset(seed=args.seed)

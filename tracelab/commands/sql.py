@@ -31,7 +31,7 @@ def _params(items: list[str]) -> dict[str, str]:
         name, eq, value = item.partition("=")
         if not eq:
             raise UserError(f"cannot read --param {item!r}; write NAME=VALUE")
-        out[name.strip()] = value.strip()
+        out[name.strip()] = utf8_text(value.strip(), f"--param {name.strip()}")
     return out
 
 
