@@ -62,3 +62,15 @@ def test_on_a_terminal_play_draws_a_bar_and_reports_rates_without_the_first_step
     assert p.returncode == 0, text
     assert "playing base" in text and "episodes/s" in text and "eta" in text
     assert "steps/s after the first step" in text
+
+
+def test_watch_grounding_reports_the_groundings_found_so_far() -> None:
+    from tracelab.engine import Engine, parse_program
+    from tracelab.engine.grounding import watch_grounding
+    seen: list[int] = []
+    with watch_grounding(seen.append):
+        eng = Engine(parse_program("edge(a,b)\nedge(b,c)\nedge(c,d)\nreach(a)\n"
+                                   "spread: reach(Y) <-1 reach(X), edge(X,Y)"))
+        eng.run(4)
+    eng.run(1)  # outside: nobody is told
+    assert seen and seen == sorted(seen) and seen[-1] == len(eng.groundings.rule)

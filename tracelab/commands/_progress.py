@@ -14,7 +14,7 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from typing import Any
 
 # the numba kernels whose first call compiles the engine (the counting kernel serves every program, the
@@ -93,20 +93,19 @@ def progress(description: str, total: int | None, unit: str | None = "steps") ->
 
 
 @contextmanager
-def working(description: str, refresh_per_second: float = 10) -> Iterator[None]:
-    """A spinner with the elapsed time for work whose length is not known beforehand (refreshing less
-    often where its thread must not disturb a measurement)."""
+def working(description: str, refresh_per_second: float = 10) -> Iterator[Progress]:
+    """A spinner with the elapsed time and live figures (set_fields) for work whose length is not known
+    beforehand (refreshing less often where its thread must not disturb a measurement)."""
     if not on_terminal():
-        yield
+        yield Progress()
         return
     from rich.console import Console
     from rich.progress import Progress as RichProgress
     from rich.progress import SpinnerColumn, TextColumn, TimeElapsedColumn
     with RichProgress(SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(),
-                      console=Console(file=sys.stderr), transient=True,
-                      refresh_per_second=refresh_per_second) as bar:
-        bar.add_task(description, total=None)
-        yield
+                      TextColumn("{task.fields[figures]}"), console=Console(file=sys.stderr),
+                      transient=True, refresh_per_second=refresh_per_second) as bar:
+        yield Progress(bar, bar.add_task(description, total=None, figures=""))
 
 
 def engine_cache_is_cold(simulator: bool = False, lanes: bool = False) -> bool | None:
@@ -127,28 +126,35 @@ def engine_cache_is_cold(simulator: bool = False, lanes: bool = False) -> bool |
         return None
 
 
+class Warmup(Progress):
+    """What `compiling_engine` yields: a spinner's figures, and afterwards the time spent and whether
+    the kernels were compiled (True, False, or None: unknown)."""
+    seconds: float = 0.0
+    compiled: bool | None = None
+
+
 @contextmanager
 def compiling_engine(simulator: bool = False, lanes: bool = False,
-                     busy: str | None = None) -> Iterator[dict[str, Any]]:
+                     busy: str | None = None) -> Iterator[Warmup]:
     """Around the engine's build and first step (with `lanes`: a batch that takes the lanes kernel; with
     `simulator`: the rule simulator's too): when the kernels must be compiled, say so while it happens
     (a spinner on a terminal, one line on stderr otherwise); when they are cached, show `busy` (if
-    given) as a spinner on a terminal. Yields a dict filled on exit: "seconds" spent inside and
-    "compiled" (True, False or None: unknown), so that rates can leave the compile out and say so."""
+    given) as a spinner on a terminal. The spinner counts the groundings found (a big build's work)."""
+    from tracelab.engine.grounding import watch_grounding
     cold = engine_cache_is_cold(simulator, lanes)
-    spent: dict[str, Any] = {"seconds": 0.0, "compiled": cold}
     t0 = time.perf_counter()
-    try:
-        if cold is not False and on_terminal():
-            with working("compiling the engine (first run only)…"):
-                yield spent
-        elif cold:
-            print("tracelab: compiling the engine (first run only, 30-60 s)...", file=sys.stderr, flush=True)
-            yield spent
-        elif busy:
-            with working(busy):
-                yield spent
-        else:
-            yield spent
-    finally:
-        spent["seconds"] = time.perf_counter() - t0
+    if cold and not on_terminal():
+        print("tracelab: compiling the engine (first run only, 30-60 s)...", file=sys.stderr, flush=True)
+    description = "compiling the engine (first run only)…" if cold is not False else busy
+    spinner = working(description) if description else nullcontext(Progress())
+    with spinner as shown:
+        warm = Warmup(shown._bar, shown._task)
+        warm.compiled = cold
+        try:
+            def grounded(n: int) -> None:
+                warm.set_fields(groundings=n, **{"groundings/s": n / max(time.perf_counter() - t0, 1e-9)})
+
+            with watch_grounding(grounded):
+                yield warm
+        finally:
+            warm.seconds = time.perf_counter() - t0

@@ -143,8 +143,8 @@ def play(scenario, args: argparse.Namespace, sink) -> dict:
     elapsed = time.perf_counter() - t0
     env.close()
     return {"episodes": finished[:args.episodes], "steps": steps + n_worlds, "timed_steps": steps,
-            "seconds": elapsed, "scenario": scenario.name, "first_step_s": first["seconds"],
-            "compiled": first["compiled"]}
+            "seconds": elapsed, "scenario": scenario.name, "first_step_s": first.seconds,
+            "compiled": first.compiled}
 
 
 def _summary(stats: dict) -> None:

@@ -31,7 +31,7 @@ def run(args: argparse.Namespace) -> int:
     graph = load_graphml(args.graph) if args.graph else None
     for w in program.warnings:
         print(w, file=sys.stderr)
-    with compiling_engine():
+    with compiling_engine(busy="grounding the program…"):
         engine = Engine(program, graph, trace=not args.no_trace)
         engine.step()
     engine.run(args.steps - 1)
