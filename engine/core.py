@@ -12,12 +12,13 @@ import numpy as np
 from . import kernel as K
 from .backend_counting import CountingState
 from .backend_lanes import LaneState, crisp_codes
-from .errors import FixpointError, InconsistencyError
+from .errors import FixpointError, InconsistencyError, ProgramCheckError
 from .graph import Graph
 from .grounding import Grounder, GroundingTable, rule_head_bound
 from .parser import parse_literal
 from .program import (
     INCONSISTENCY_POLICIES,
+    MAX_BINDING_CLAUSES,
     UPDATE_MODES,
     Fact,
     Program,
@@ -33,7 +34,6 @@ _TRACE_INT_DTYPES = tuple(np.dtype(d) for d in (np.int32, np.int32, np.int32, np
 # (column name, dtype, taken as is from the int32 buffer) per int column of take_trace()
 _TRACE_INT_OUT = tuple((name, d, d == np.dtype(np.int32)) for name, d in zip(TRACE_COLUMNS, _TRACE_INT_DTYPES))
 _TRACE_FLOAT_NAMES = TRACE_COLUMNS[K.TRACE_INT_COLUMNS:]
-MAX_BINDING_CLAUSES = 127
 KERNELS = ("auto", "counting", "lanes")
 # "auto" takes the lanes kernel for crisp programs from this many worlds on (a word holds 64 worlds)
 LANES_MIN_WORLDS = 64
@@ -57,10 +57,10 @@ class Engine:
         # graph facts come first in source order (docs/language.md)
         self.facts: list[Fact] = [*(graph.facts if graph else ()), *program.facts]
         self.rules = program.rules
-        for r in self.rules:  # the kernel counts a grounding's unsatisfied clauses in an int8
+        for r in self.rules:  # programs built in code may skip check_program; the kernel cannot take these
             if sum(c.binds for c in r.body) > MAX_BINDING_CLAUSES:
-                where = f" ({r.loc})" if r.loc else ""
-                raise ValueError(f"rule {r.name}{where} has more than {MAX_BINDING_CLAUSES} binding body clauses")
+                raise ProgramCheckError.at(r.loc, f"rule '{r.name}' has more than {MAX_BINDING_CLAUSES} "
+                                                  "binding body clauses")
         self.grounder = Grounder(self.rules, self.vocab)
         self._fact_tables()
         self._rule_tables()
@@ -443,15 +443,16 @@ class Engine:
         if status == K.STATUS_INCONSISTENT:
             first = self.describe_source(int(e[5]), int(e[6]), int(e[7]))
             lo, up = self.bound(a, w)
+            old = self.describe_source(int(e[3]), int(e[4]))
+            where = f"inconsistent bounds for {self.atom_text(a)} at t={t} (world {w})"
             if e[11]:  # the incoming sources disagree among themselves
                 last = self.describe_source(int(e[8]), int(e[9]), int(e[10]))
                 raise InconsistencyError(
-                    f"inconsistent bounds for {self.atom_text(a)} at t={t} (world {w}): {first} and "
-                    f"{last} set disjoint bounds in the same pass")
-            old = self.describe_source(int(e[3]), int(e[4]))
+                    f"{where}: {first} and {last} set disjoint bounds in the same pass; the bound before "
+                    f"was [{lo:g},{up:g}], from {old}")
             raise InconsistencyError(
-                f"inconsistent bounds for {self.atom_text(a)} at t={t} (world {w}): its bound "
-                f"[{lo:g},{up:g}] came from {old}; the incoming bound from {first} is disjoint from it")
+                f"{where}: its bound [{lo:g},{up:g}] came from {old}; the incoming bound from {first} is "
+                "disjoint from it")
         if status == K.STATUS_TRACE_LIMIT:
             raise RuntimeError(
                 f"one step of world {w} at t={self.t} wrote more trace rows than the {self._tri.shape[0]} the "
@@ -463,7 +464,39 @@ class Engine:
         if status == K.STATUS_IMMEDIATE_LIMIT:
             raise FixpointError(
                 f"immediate rules did not settle at t={t} (world {w}) after "
-                f"{int(self._cfg[K.CFG_MAX_IMMEDIATE])} applications; still changing: {self.atom_text(a)}")
+                f"{int(self._cfg[K.CFG_MAX_IMMEDIATE])} applications ({self.atom_text(a)} the last): "
+                f"{self._still_changing(w, t, immediate=True)}")
         raise FixpointError(
             f"no fixpoint at t={t} (world {w}) after {int(self._cfg[K.CFG_MAX_PASSES])} passes: "
-            "rules in override mode (or a policy) keep changing atoms; see the trace of that step")
+            f"{self._still_changing(w, t, immediate=False)}")
+
+    def _still_changing(self, w: int, t: int, immediate: bool) -> str:
+        """What kept a step from its fixpoint: the atoms changed in its last two passes and by what, read
+        from the trace buffer (not taken: take_trace() still returns them), else the rules that can."""
+        n = int(self._tr_n[0])
+        rows = self._tri[:n]
+        mine = rows[(rows[:, 0] == w) & (rows[:, 1] == t)]
+        if len(mine):
+            last_pass = int(mine[:, 2].max())
+            causes: dict[int, list[str]] = {}
+            for row in mine[mine[:, 2] >= last_pass - 1]:
+                atom, kind, cid, g = int(row[3]), int(row[4]), int(row[5]), int(row[6])
+                by = causes.setdefault(atom, [])
+                if (text := self.describe_source(kind, cid, g)) not in by:
+                    by.append(text)
+            shown = [f"{self.atom_text(a)} by {', then '.join(by)}" for a, by in causes.items()]
+            more = f" and {len(shown) - 5} more atoms" if len(shown) > 5 else ""
+            return (f"still changing in passes {last_pass - 1}-{last_pass}: " + "; ".join(shown[:5]) + more +
+                    " (rules, or a policy, that undo each other)")
+        if immediate:
+            candidates, kind = [i for i, r in enumerate(self.rules) if r.immediate], "immediate rules"
+        else:
+            candidates = [i for i, r in enumerate(self.rules)
+                          if not r.delay and not r.immediate and (r.mode or self.program.mode) == "override"]
+            kind = "Δt = 0 rules in override mode"
+        if candidates:
+            names = [self.describe_source(K.CAUSE_RULE, i) for i in candidates[:8]]
+            return (f"atoms keep changing; the {kind}: " + "; ".join(names) +
+                    (" ..." if len(candidates) > 8 else "") + " (trace the world to see the atoms)")
+        return (f"the policy {self.program.inconsistency} keeps changing atoms (trace the world to see "
+                "which)")

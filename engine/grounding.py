@@ -8,12 +8,29 @@ only joins that use at least one new atom are made.
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .program import EPS, Literal, Rule, effective_bound
 from .vocabulary import Vocabulary
+
+
+# Watchers of long groundings (a progress display): called with the groundings found so far after each join.
+_watchers: list[Callable[[int], None]] = []
+
+
+@contextmanager
+def watch_grounding(callback: Callable[[int], None]) -> Iterator[None]:
+    """Inside: `callback(groundings so far)` after each join of any Grounder, e.g. to show the progress
+    of a big build (grounding 20 agents a team takes a minute)."""
+    _watchers.append(callback)
+    try:
+        yield
+    finally:
+        _watchers.remove(callback)
 
 
 @dataclass
@@ -114,6 +131,8 @@ class Grounder:
                     atoms = delta_by_label.get(cr.clause_labels[ci])
                     if atoms:
                         self._join(cr, ci, atoms)
+                        for watch in _watchers:
+                            watch(len(self.g_rule))
         return len(self.g_rule) - before
 
     def _join(self, cr: _CompiledRule, start: int, start_atoms: list[int]) -> None:

@@ -13,6 +13,8 @@ from pathlib import Path
 from .errors import ProgramCheckError, RuleSyntaxError
 from .program import (
     INCONSISTENCY_POLICIES,
+    MAX_BINDING_CLAUSES,
+    MAX_TIME,
     TIMESTEP_MODES,
     UPDATE_MODES,
     Fact,
@@ -257,6 +259,8 @@ class _Parser:
         arrow = self.take()
         immediate = arrow.text == "<-!"
         delay = 0 if immediate else int(arrow.text[2:])
+        if delay > MAX_TIME:
+            raise self.check(arrow, f"the delay {delay} is too large: a delay is at most {MAX_TIME}")
         body = [self.literal(f" after '{arrow.text}'")]
         mode = None
         while True:
@@ -337,6 +341,8 @@ class _Parser:
         if t.kind != NAME or not t.text.isdigit():
             raise self.syntax(t, f"expected a time (an integer >= 0) {context}, found {t.describe()}")
         self.take()
+        if int(t.text) > MAX_TIME:
+            raise self.check(t, f"the time {t.text} is too large: a time is at most {MAX_TIME}")
         return int(t.text)
 
     # -- literals
@@ -437,8 +443,20 @@ def load_program(*paths: str | os.PathLike[str]) -> Program:
     units = []
     for p in paths:
         file = os.fspath(p)
-        units.append(_Parser(Path(file).read_text(encoding="utf-8"), file).parse_file())
+        units.append(_Parser(_read_source(file), file).parse_file())
     return _build(units)
+
+
+def _read_source(file: str) -> str:
+    """A rule file's text; bytes that are not UTF-8 are a located error."""
+    data = Path(file).read_bytes()
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        line = data.count(b"\n", 0, e.start) + 1
+        column = e.start - (data.rfind(b"\n", 0, e.start) + 1) + 1
+        raise RuleSyntaxError(f"the file is not UTF-8 text: byte 0x{data[e.start]:02x} at byte offset "
+                              f"{e.start} cannot be decoded (save the file as UTF-8)", file, line, column) from None
 
 
 def parse_literal(text: str) -> Literal:
@@ -586,6 +604,8 @@ class _Checker:
                                 "to use it as a constant)")
         if not (_is_int(f.start) and _is_int(f.end)) or f.start < 0:
             raise self.fail(f.loc, f"fact times are integers >= 0, found @{f.start}..{f.end}")
+        if f.end > MAX_TIME:
+            raise self.fail(f.loc, f"the time {f.end} is too large: a time is at most {MAX_TIME}")
         if f.start > f.end:
             raise self.fail(f.loc, f"empty window @{f.start}..{f.end}: the start must be <= the end")
         if f.static and f.start != f.end:
@@ -599,6 +619,13 @@ class _Checker:
             raise self.fail(r.loc, f"rule '{r.name}' has an empty body")
         if not _is_int(r.delay) or r.delay < 0:
             raise self.fail(r.loc, f"rule '{r.name}': the delay must be an integer >= 0, found {r.delay!r}")
+        if r.delay > MAX_TIME:
+            raise self.fail(r.loc, f"rule '{r.name}': the delay {r.delay} is too large: a delay is at most "
+                                   f"{MAX_TIME}")
+        n_binding = sum(c.binds for c in r.body)
+        if n_binding > MAX_BINDING_CLAUSES:
+            raise self.fail(r.loc, f"rule '{r.name}' has {n_binding} binding body clauses; the engine allows "
+                                   f"at most {MAX_BINDING_CLAUSES} (clauses whose bound contains [0,1] do not count)")
         if r.immediate and r.delay != 0:
             raise self.fail(r.loc, f"rule '{r.name}' is immediate ('<-!') so its delay is 0, not {r.delay}")
         if r.mode is not None and r.mode not in RULE_OPTIONS:

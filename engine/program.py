@@ -7,6 +7,11 @@ from dataclasses import dataclass, field
 UPDATE_MODES = ("intersection", "override")
 TIMESTEP_MODES = ("persistent", "reset")
 INCONSISTENCY_POLICIES = ("reset_freeze", "keep_old", "take_new", "hull", "abort")
+# Limits of the compiled engine, checked with the program (docs/language.md). Times are stored in int32
+# and a delayed firing is due at t + delay, so times and delays stay well inside it; the kernel counts a
+# grounding's unsatisfied binding clauses in an int8.
+MAX_TIME = 1_000_000_000
+MAX_BINDING_CLAUSES = 127
 
 
 @dataclass(frozen=True)

@@ -395,3 +395,12 @@ def test_printed_programs_parse_back_to_the_same_ast(case: tuple[str, list[Rule 
     for r in p.rules:
         again = parse_program(r.text).rules
         assert len(again) == 1 and again[0].head == r.head and again[0].body == r.body
+
+
+def test_a_file_that_is_not_utf8_is_a_located_error(tmp_path: Path) -> None:
+    f = tmp_path / "latin1.rules"
+    f.write_bytes("agent(a)\nname(b, ".encode() + "caf\xe9".encode("latin-1") + b")\n")
+    with pytest.raises(RuleSyntaxError) as e:
+        load_program(f)
+    assert (e.value.file, e.value.line, e.value.column) == (str(f), 2, 12)
+    assert "not UTF-8 text: byte 0xe9 at byte offset 20" in e.value.message

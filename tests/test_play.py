@@ -41,5 +41,6 @@ def test_play_names_a_bad_scenario_file(tmp_path, capsys):
     bad = tmp_path / "bad.toml"
     bad.write_text('name = "x"\nwidth = 8\nheight = 8\nred_base = [7, 0]\nblue_base = [0, 7]\n'
                    'mountains = [[9, 3]]\n')
-    assert main(["play", "--scenario", str(bad), "--episodes", "1", "--no-trace"]) == 2
-    assert "mountains[0]" in capsys.readouterr().err
+    assert main(["play", "--scenario", str(bad), "--episodes", "1", "--no-trace"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("tracelab: error: ") and "mountains[0]" in err and err.count("\n") == 1

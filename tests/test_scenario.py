@@ -176,6 +176,18 @@ def test_scenario_from_dict_names_its_source():
         scenario_from_dict(d, source="maps/a.toml")
 
 
+def test_team_sizes_must_fit_the_map():
+    d = tomllib.loads(GOOD)
+    free = d["width"] * d["height"] - len(d.get("mountains", []))
+    d["agents_per_team"] = free // 2
+    assert scenario_from_dict(d).agents_per_team == free // 2  # every agent on a cell of its own
+    d["agents_per_team"] = free // 2 + 1
+    with pytest.raises(ScenarioError, match=rf"^maps/a\.toml: field 'agents_per_team': {free // 2 + 1} agents a "
+                                            rf"team do not fit the .* map: it has {free} free cells .* at most "
+                                            rf"{free // 2} agents a team"):
+        scenario_from_dict(d, source="maps/a.toml")
+
+
 def test_direct_construction_is_checked_too():
     with pytest.raises(ScenarioError, match=r"<Scenario>: field 'mountains\[0\]': \(5,5\) is outside"):
         Scenario(name="x", width=4, height=4, red_base=(3, 0), blue_base=(0, 3), mountains=[(5, 5)])

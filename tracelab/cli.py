@@ -1,12 +1,20 @@
 """tracelab: a semantic simulation proxy for reinforcement learning that explains itself.
 
 The `tracelab` command. Each subcommand lives in its own module under tracelab/commands/ and exposes
-`register(subparsers)`; modules are imported lazily so that `tracelab --help` stays fast (no torch)."""
+`register(subparsers)`; modules are imported lazily so that `tracelab --help` stays fast (no torch).
+
+Errors: commands raise, main() reports. A user error (tracelab.errors.user_error_message) is one line
+`tracelab: error: ...` on stderr and exit status 1; a usage error is argparse's message and status 2; a
+closed pipe (`tracelab trace ... | head`) ends quietly; anything else is a bug and keeps its traceback."""
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
+
+from tracelab import __version__
+from tracelab.errors import user_error_message
 
 # One line per subcommand module; each module adds its own parsers and sets `func` on them.
 COMMAND_MODULES = [
@@ -15,24 +23,45 @@ COMMAND_MODULES = [
     "tracelab.commands.sql", "tracelab.commands.diff", "tracelab.commands.seal",
     "tracelab.commands.bench", "tracelab.commands.check", "tracelab.commands.show",
 ]
+EXIT_USER_ERROR = 1
+EXIT_BROKEN_PIPE = 141  # what a shell reports for a process ended by SIGPIPE
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="tracelab", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"tracelab {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(sub)
     return parser
 
 
+def _silence_stdout() -> None:
+    """After a closed pipe: point stdout at /dev/null so that the interpreter's final flush does not
+    raise again (the recipe of Python's `signal` docs)."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(argv)  # usage errors: argparse prints them and exits 2
     try:
-        return int(args.func(args) or 0)
+        status = int(args.func(args) or 0)
+        sys.stdout.flush()  # a closed pipe shows here for output still buffered
+        return status
     except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
+        print("tracelab: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        _silence_stdout()
+        return EXIT_BROKEN_PIPE
+    except Exception as e:
+        message = user_error_message(e)
+        if message is None:
+            raise
+        print(f"tracelab: error: {message}", file=sys.stderr)
+        return EXIT_USER_ERROR
 
 
 if __name__ == "__main__":

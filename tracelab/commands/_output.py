@@ -1,5 +1,5 @@
 """Shared by the commands that print query results: the --format/--output/--limit options, writing an
-Arrow table as an aligned text table, CSV, JSON or Parquet, and turning store errors into messages."""
+Arrow table as an aligned text table, CSV, JSON or Parquet."""
 from __future__ import annotations
 
 import argparse
@@ -10,6 +10,9 @@ import math
 import sys
 from collections.abc import Iterable, Iterator
 from typing import TYPE_CHECKING, Any, TextIO
+
+from tracelab.commands._args import non_negative_int
+from tracelab.errors import UserError
 
 if TYPE_CHECKING:  # imported where used, so that `tracelab --help` stays fast
     import pyarrow as pa
@@ -23,8 +26,8 @@ def add_format_options(p: argparse.ArgumentParser) -> None:
 
 
 def add_paging_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--limit", type=int, help="at most this many rows")
-    p.add_argument("--offset", type=int, default=0, help="skip this many rows first")
+    p.add_argument("--limit", type=non_negative_int, help="at most this many rows")
+    p.add_argument("--offset", type=non_negative_int, default=0, help="skip this many rows first")
 
 
 def _cell(v: Any) -> str:
@@ -49,7 +52,7 @@ def write_table(table: "pa.Table", fmt: str, output: str | None = None, out: Tex
     """Write `table` in `fmt` to `output` (a path) or to `out` (default stdout)."""
     if fmt == "parquet":
         if not output:
-            raise ValueError("--format parquet needs --output FILE")
+            raise UserError("--format parquet needs --output FILE")
         import pyarrow.parquet as pq
         pq.write_table(table, output, compression="zstd")
         return
@@ -81,10 +84,12 @@ def write_table(table: "pa.Table", fmt: str, output: str | None = None, out: Tex
             out.write(fmt_row(c) + "\n")
         out.write(f"({len(rows)} row{'s' if len(rows) != 1 else ''})\n")
     else:
-        raise ValueError(f"unknown format {fmt!r}; choose one of {', '.join(FORMATS)}")
+        raise UserError(f"unknown format {fmt!r}; choose one of {', '.join(FORMATS)}")
 
 
 DEFAULT_TABLE_ROWS = 1000  # rows a table-format result shows unless --limit says otherwise
+
+
 def _rows(batches: "Iterable[pa.RecordBatch]") -> "Iterator[dict[str, Any]]":
     for batch in batches:
         yield from batch.to_pylist()
@@ -96,7 +101,7 @@ def write_stream(schema: "pa.Schema", batches: "Iterable[pa.RecordBatch]", fmt: 
     the number of rows. Table format needs every row for its widths: use write_table."""
     if fmt == "parquet":
         if not output:
-            raise ValueError("--format parquet needs --output FILE")
+            raise UserError("--format parquet needs --output FILE")
         import pyarrow.parquet as pq
         n = 0
         with pq.ParquetWriter(output, schema, compression="zstd") as writer:
@@ -105,7 +110,7 @@ def write_stream(schema: "pa.Schema", batches: "Iterable[pa.RecordBatch]", fmt: 
                 n += batch.num_rows
         return n
     if fmt not in ("csv", "json"):
-        raise ValueError(f"format {fmt!r} does not stream; choose csv, json or parquet")
+        raise UserError(f"format {fmt!r} does not stream; choose csv, json or parquet")
     if output:
         with open(output, "w", newline="") as f:
             return write_stream(schema, batches, fmt, None, f)
@@ -131,14 +136,3 @@ def write_stream(schema: "pa.Schema", batches: "Iterable[pa.RecordBatch]", fmt: 
     out.write("]\n" if n == 0 else "\n]\n")
     return n
 
-
-def fail(e: BaseException) -> int:
-    """Print a store or query error as `error: ...` and return the exit status 1."""
-    msg = e.args[0] if isinstance(e, KeyError) and e.args else str(e)
-    print(f"error: {msg}", file=sys.stderr)
-    return 1
-
-
-def store_errors() -> tuple[type[BaseException], ...]:
-    import duckdb
-    return (KeyError, ValueError, FileNotFoundError, RuntimeError, duckdb.Error)

@@ -8,6 +8,8 @@ import json
 import sys
 from typing import Any
 
+from tracelab.commands._args import positive_int
+
 SECTIONS = ("engine", "env", "store")
 
 
@@ -23,24 +25,17 @@ def register(sub: argparse._SubParsersAction) -> None:
         q = what.add_parser(name, help=text)
         q.add_argument("--json", action="store_true", help="machine-readable output")
         q.add_argument("--quick", action="store_true", help="small sizes (a smoke run, not for figures)")
-        q.add_argument("--repeats", type=_positive, default=5, help="timed repeats per figure (default 5)")
+        q.add_argument("--repeats", type=positive_int, default=5, help="timed repeats per figure (default 5)")
         if name in ("engine", "env", "all"):
             q.add_argument("--agents", type=_sizes, default=None,
                            help="team sizes, comma-separated (default 1,5,20; --quick: 1,2)")
         if name in ("env", "all"):
-            q.add_argument("--batch", type=_positive, default=None,
+            q.add_argument("--batch", type=positive_int, default=None,
                            help="worlds of the batched runs (default 256; --quick: 16)")
         if name in ("engine", "all"):
-            q.add_argument("--compile-repeats", type=_positive, default=None,
+            q.add_argument("--compile-repeats", type=positive_int, default=None,
                            help="first-ever compiles to time (default: min(repeats, 3); --quick: 1)")
         q.set_defaults(func=run)
-
-
-def _positive(text: str) -> int:
-    v = int(text)
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {v}")
-    return v
 
 
 def _sizes(text: str) -> list[int]:
@@ -70,9 +65,13 @@ def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], s
 def run(args: argparse.Namespace) -> int:
     names = SECTIONS if args.bench == "all" else (args.bench,)
     results = {}
+    from tracelab.commands._progress import on_terminal, working
     for name in names:
-        print(f"bench {name}{' (quick)' if args.quick else ''}: measuring...", file=sys.stderr, flush=True)
-        result, text = _run_section(name, args)
+        what = f"bench {name}{' (quick)' if args.quick else ''}: measuring"
+        if not on_terminal():
+            print(f"{what}...", file=sys.stderr, flush=True)
+        with working(f"{what}…", refresh_per_second=1):  # a slow spinner: its thread shares the cores
+            result, text = _run_section(name, args)
         results[name] = result
         if not args.json:
             print(f"== bench {name} ==\n{text}\n", flush=True)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from tracelab.commands._output import fail, store_errors
+from tracelab.errors import store_errors
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -22,10 +22,8 @@ def _size(n: int) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from tracelab.store.check import check_run
-    try:
+    with store_errors():
         report = check_run(args.run, repair=args.repair)
-    except store_errors() as e:
-        return fail(e)
     kind = "sealed file" if report.sealed else "parts"
     print(f"{report.run}: {report.parts} {'tables' if report.sealed else 'parts'} checked "
           f"({kind}), {report.rows:,} rows read")

@@ -1,28 +1,65 @@
-"""`tracelab diff`: where two episodes of a run first diverge (trace and actions)."""
+"""`tracelab diff`: where two episodes first diverge (trace and actions), in one run or across runs.
+
+    tracelab diff RUN A B                 episodes A and B of RUN
+    tracelab diff RUN_A:EP RUN_B:EP       episode EP of RUN_A against episode EP of RUN_B
+"""
 from __future__ import annotations
 
 import argparse
 import json
 
-from tracelab.commands._output import fail, store_errors
+from tracelab.errors import UserError, store_errors
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("diff", help="the first divergence of two episodes of a run")
-    p.add_argument("run", help="run directory, .duckdb file, or run name under runs/")
-    p.add_argument("a", type=int, help="episode")
-    p.add_argument("b", type=int, help="the other episode")
-    p.add_argument("--json", action="store_true")
+    p = sub.add_parser("diff", help="the first divergence of two episodes, of one run (RUN A B) or of two "
+                                    "runs (RUN_A:EP RUN_B:EP)",
+                       description="Where two episodes first diverge: `diff RUN A B` compares episodes A "
+                                   "and B of one run, `diff RUN_A:EP RUN_B:EP` an episode of each of two "
+                                   "runs (atoms and causes are compared by name, so the runs' ids may differ).")
+    p.add_argument("sides", nargs="+", metavar="RUN[:EP]",
+                   help="RUN A B (one run, two episodes) or RUN_A:EP RUN_B:EP (two runs); a run is a run "
+                        "directory, .duckdb file, or run name under runs/")
+    p.add_argument("--json", action="store_true", help="the divergence as JSON")
     p.set_defaults(func=run)
+
+
+def _episode(text: str, what: str) -> int:
+    try:
+        e = int(text)
+    except ValueError:
+        raise UserError(f"{what}: expected an episode number, got {text!r}") from None
+    if e < 0:
+        raise UserError(f"{what}: an episode number is 0 or more, got {e}")
+    return e
+
+
+def _run_and_episode(text: str) -> tuple[str, int]:
+    run, colon, ep = text.rpartition(":")
+    if not colon or not run:
+        raise UserError(f"cannot read {text!r}: write RUN:EPISODE, e.g. runs/play-base:0")
+    return run, _episode(ep, text)
+
+
+def parse_sides(sides: list[str]) -> tuple[tuple[str, int], tuple[str, int]]:
+    """((run, episode), (run, episode)) from `RUN A B` or `RUN_A:EP RUN_B:EP`."""
+    if len(sides) == 3:
+        return (sides[0], _episode(sides[1], "A")), (sides[0], _episode(sides[2], "B"))
+    if len(sides) == 2:
+        return _run_and_episode(sides[0]), _run_and_episode(sides[1])
+    raise UserError(f"diff takes RUN A B or RUN_A:EP RUN_B:EP, got {len(sides)} argument(s)")
 
 
 def run(args: argparse.Namespace) -> int:
     from tracelab.store.diff import first_divergence, render_divergence
-    from tracelab.store.reader import open_run, retrying
-    try:
-        con = open_run(args.run)
-        d = retrying(lambda: first_divergence(con, args.a, args.b))
-    except store_errors() as e:
-        return fail(e)
+    from tracelab.store.reader import open_run, resolve_run, retrying
+    (run_a, a), (run_b, b) = parse_sides(args.sides)
+    with store_errors():
+        con_a = open_run(run_a)
+        if resolve_run(run_a).resolve() == resolve_run(run_b).resolve():
+            d = retrying(lambda: first_divergence(con_a, a, b))
+        else:
+            con_b = open_run(run_b)
+            d = retrying(lambda: first_divergence(con_a, a, b, con_b, run_names=(run_a, run_b)))
     print(json.dumps(d.to_dict(), indent=1, default=str) if args.json else render_divergence(d))
     return 0

@@ -14,6 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
+from tracelab.commands._args import non_negative_int, positive_int
+from tracelab.errors import UserError, store_errors
+
 OUTCOMES = {0: "win", 1: "loss", 2: "draw"}  # from red's side, by WINNER_RED / BLUE / DRAW
 
 
@@ -22,33 +25,41 @@ def register(sub: argparse._SubParsersAction) -> None:
                                     "opponent) into a trace-store run")
     p.add_argument("--scenario", default="advanced",
                    help="a built-in scenario name (base, advanced, nonmarkov) or a scenario .toml file")
-    p.add_argument("--episodes", type=int, default=5, help="episodes to play (default 5)")
-    p.add_argument("--worlds", type=int, default=1, help="worlds stepped together (default 1)")
+    p.add_argument("--episodes", type=positive_int, default=5, help="episodes to play (default 5)")
+    p.add_argument("--worlds", type=positive_int, default=1, help="worlds stepped together (default 1)")
     p.add_argument("--policy", choices=("random", "scripted"), default="scripted",
                    help="red's policy (default: the scripted base policy)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--run", help="run directory (default runs/play-<scenario>-<time>)")
+    p.add_argument("--seed", type=non_negative_int, default=0,
+                   help="seed of the episodes and of the random policy (default 0)")
+    p.add_argument("--run", help="a new (or empty) run directory (default runs/play-<scenario>-<time>)")
     p.add_argument("--no-trace", action="store_true", help="play without recording a run")
     p.set_defaults(func=run)
 
 
+def check_run_dir(run_dir: Path) -> None:
+    """A run goes into a new or empty directory: never into a file, an existing run, or a folder of
+    other things (they would be mixed with the run's files)."""
+    from tracelab.store import layout
+    if run_dir.exists() and not run_dir.is_dir():
+        raise UserError(f"--run {run_dir}: this is a file, not a directory; give a new run directory")
+    if layout.meta_path(run_dir).exists():
+        raise UserError(f"--run {run_dir} already holds a run; give a new run directory")
+    if run_dir.is_dir():
+        others = sorted(p.name for p in run_dir.iterdir())
+        if others:
+            shown = ", ".join(others[:5]) + (", ..." if len(others) > 5 else "")
+            raise UserError(f"--run {run_dir} holds other files ({shown}); give a new or empty directory")
+
+
 def run(args: argparse.Namespace) -> int:
     from tracelab.game.scenario import (
-        ScenarioError,
         builtin_scenario,
         builtin_scenario_names,
         load_scenario,
     )
 
-    try:
-        scenario = builtin_scenario(args.scenario) if args.scenario in builtin_scenario_names() \
-            else load_scenario(args.scenario)
-    except (ScenarioError, OSError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    if args.episodes < 1 or args.worlds < 1:
-        print("error: --episodes and --worlds must be at least 1", file=sys.stderr)
-        return 2
+    scenario = builtin_scenario(args.scenario) if args.scenario in builtin_scenario_names() \
+        else load_scenario(args.scenario)
     if args.no_trace:
         _summary(play(scenario, args, sink=None))
         return 0
@@ -57,11 +68,21 @@ def run(args: argparse.Namespace) -> int:
     from tracelab.store.sink import StoreSink
 
     run_dir = Path(args.run or f"runs/play-{scenario.name}-{time.strftime('%Y%m%d-%H%M%S')}")
+    check_run_dir(run_dir)
     meta = {"command": " ".join(shlex.quote(a) for a in sys.argv), "scenario": scenario.name,
             "config": {"episodes": args.episodes, "worlds": args.worlds, "policy": args.policy,
                        "scenario": scenario.to_toml()},
             "rule_files": [str(GAME_RULES)], "seed": args.seed}
-    stats = play(scenario, args, sink=StoreSink(TraceWriter.open(run_dir, meta)))
+    try:
+        with store_errors():  # another process took the directory since the check: a RuntimeError
+            writer = TraceWriter.open(run_dir, meta)
+    except OSError as e:
+        raise UserError(f"cannot create the run directory {run_dir}: {e.strerror or e}") from e
+    try:
+        stats = play(scenario, args, sink=StoreSink(writer))
+    except BaseException as e:  # the env did not close it: record how the run ended
+        writer.close(status="interrupted" if isinstance(e, KeyboardInterrupt) else "failed")
+        raise
     _summary(stats)
     _what_to_open(run_dir)
     return 0
@@ -71,54 +92,84 @@ def play(scenario, args: argparse.Namespace, sink) -> dict:
     """Play exactly args.episodes episodes in args.worlds worlds of the vector env (rules backend). The
     env numbers episodes in the order they begin (its autoreset begins a new one in every world that
     ended); episodes numbered past the last one asked for are played but neither counted nor recorded
-    (trace_episodes), so the run holds exactly the episodes asked for, none of them cut short."""
+    (trace_episodes), so the run holds exactly the episodes asked for, none of them cut short.
+    Shows the compile (first run) or the build while it happens and a progress bar over the episodes (on
+    a terminal); the steps/s leave out the first step, which includes any compiling."""
+    from tracelab.commands._progress import compiling_engine, progress
+    from tracelab.engine.core import LANES_MIN_WORLDS
     from tracelab.envs.vector_env import GridWarVectorEnv
 
     n_worlds = min(args.worlds, args.episodes)
-    env = GridWarVectorEnv(n_worlds, scenario, backend="rules", trace_sink=sink,
-                           trace_episodes=args.episodes)
     rng = np.random.default_rng(args.seed)
     index_of = {a: i for i, a in enumerate(scenario.action_ids)}
     to_index = np.array([index_of.get(a, 0) for a in range(9)])  # spec action id -> action index
     n = scenario.agents_per_team
-    env.reset(seed=args.seed)
     episode_of_world = np.arange(n_worlds)
     next_episode = n_worlds
     finished: dict[int, dict] = {}
     returns = np.zeros(n_worlds)
-    steps = 0
-    t0 = time.perf_counter()
-    while len(finished) < args.episodes:
+
+    def one_step(env: GridWarVectorEnv) -> tuple[int, int]:
+        """Step every world once; returns (steps of asked-for episodes, how many of them ended)."""
+        nonlocal next_episode
         if args.policy == "scripted":
             red = to_index[env.sim.scripted_actions("red")]
         else:
             red = rng.integers(0, scenario.n_actions, size=(n_worlds, n))
         _, reward, terminated, truncated, info = env.step(red[:, 0] if n == 1 else red)
-        playing = episode_of_world < args.episodes
-        steps += int(playing.sum())
-        returns += reward
+        played = int((episode_of_world < args.episodes).sum())
+        returns[:] += reward
         done = np.flatnonzero(terminated | truncated)
+        ended = 0
         for w in done:
             if episode_of_world[w] < args.episodes:
                 final = info["final_info"]
                 finished[int(episode_of_world[w])] = {
-                    "steps": int(final["t"][w]), "outcome": OUTCOMES.get(int(final["winner"][w]), "truncated"),
+                    "steps": int(final["t"][w]),
+                    "outcome": OUTCOMES.get(int(final["winner"][w]), "truncated"),
                     "return": float(returns[w])}
+                ended += 1
             returns[w] = 0.0
         episode_of_world[done] = next_episode + np.arange(len(done))  # as the env numbers them
         next_episode += len(done)
+        return played, ended
+
+    agents = f"{n} agent{'s' if n != 1 else ''} a team"
+    with compiling_engine(simulator=True, lanes=n_worlds >= LANES_MIN_WORLDS,
+                          busy=f"building the game's rules ({agents})…") as first:
+        env = GridWarVectorEnv(n_worlds, scenario, backend="rules", trace_sink=sink,
+                               trace_episodes=args.episodes)
+        env.reset(seed=args.seed)
+        first_steps, ended = one_step(env)
+    steps = 0
+    t0 = time.perf_counter()
+    with progress(f"playing {scenario.name}", total=args.episodes, unit="episodes") as bar:
+        bar.advance(ended)
+        while len(finished) < args.episodes:
+            played, ended = one_step(env)
+            steps += played
+            if ended:
+                bar.advance(ended)
+                elapsed = time.perf_counter() - t0
+                bar.set_fields(wins=sum(e["outcome"] == "win" for e in finished.values()),
+                               **{"steps/s": steps / max(elapsed, 1e-9)})
     elapsed = time.perf_counter() - t0
     env.close()
-    return {"episodes": [finished[e] for e in sorted(finished)], "steps": steps, "seconds": elapsed,
-            "scenario": scenario.name}
+    return {"episodes": [finished[e] for e in sorted(finished)], "steps": steps + first_steps,
+            "timed_steps": steps, "seconds": elapsed, "scenario": scenario.name,
+            "first_step_s": first.seconds, "compiled": first.compiled}
 
 
 def _summary(stats: dict) -> None:
     eps = stats["episodes"]
     outcomes = {k: sum(e["outcome"] == k for e in eps) for k in ("win", "loss", "draw", "truncated")}
     mean_return = np.mean([e["return"] for e in eps]) if eps else 0.0
-    print(f"played {len(eps)} episodes of {stats['scenario']} ({stats['steps']} steps, "
-          f"{stats['steps'] / max(stats['seconds'], 1e-9):,.0f} steps/s)")
+    rate = (f"{stats['timed_steps'] / stats['seconds']:,.0f} steps/s" if stats["timed_steps"]
+            else "too short to time")
+    first = (f"; compiling the engine and the first step took {stats['first_step_s']:.0f} s"
+             if stats["compiled"] else "")
+    print(f"played {len(eps)} episodes of {stats['scenario']} ({stats['steps']} steps, {rate} after the "
+          f"first step{first})")
     print("red: " + ", ".join(f"{v} {k}" for k, v in outcomes.items()) + f"; mean return {mean_return:.1f}")
 
 

@@ -7,31 +7,34 @@ import sys
 
 import numpy as np
 
+from tracelab.commands._args import positive_int
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("reason", help="run a rule program and print its trace and final interpretation")
     p.add_argument("program", nargs="+", help="rule files (merged into one program)")
     p.add_argument("--graph", help="a GraphML graph (node/edge attributes become static facts)")
     p.add_argument("--facts", action="append", default=[], help="a file of facts (rule syntax)")
-    p.add_argument("--steps", type=int, required=True, help="timesteps to run")
+    p.add_argument("--steps", type=positive_int, required=True, help="timesteps to run (at least 1)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.add_argument("--no-trace", action="store_true", help="print the final interpretation only")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from tracelab.engine import Engine, ProgramError, load_graphml, load_program
+    """Program errors (located), unreadable files, InconsistencyError and FixpointError (naming the atom,
+    the time and the rules and facts with their file:line) are raised for main() to report."""
+    from tracelab.commands._progress import compiling_engine
+    from tracelab.engine import Engine, load_graphml, load_program
 
-    try:
-        program = load_program(*args.program, *args.facts)
-        graph = load_graphml(args.graph) if args.graph else None
-    except (ProgramError, OSError) as e:
-        print(e, file=sys.stderr)
-        return 2
+    program = load_program(*args.program, *args.facts)
+    graph = load_graphml(args.graph) if args.graph else None
     for w in program.warnings:
         print(w, file=sys.stderr)
-    engine = Engine(program, graph, trace=not args.no_trace)
-    engine.run(args.steps)
+    with compiling_engine(busy="grounding the program…"):
+        engine = Engine(program, graph, trace=not args.no_trace)
+        engine.step()
+    engine.run(args.steps - 1)
     rows = engine.take_trace()
     changes = [
         {"t": int(rows["t"][i]), "pass": int(rows["pass_no"][i]),

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from tracelab.commands._output import fail, store_errors
+from tracelab.errors import store_errors
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -14,10 +14,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from tracelab.commands._progress import progress
+    from tracelab.store.schema import TABLES
     from tracelab.store.seal import seal_run
-    try:
-        path = seal_run(args.run, keep_parts=args.keep_parts)
-    except store_errors() as e:
-        return fail(e)
+    with store_errors(), progress("sealing", total=len(TABLES), unit=None) as bar:
+        path = seal_run(args.run, keep_parts=args.keep_parts,
+                        on_table=lambda name: (bar.advance(1), bar.set_fields(copied=name)))
     print(path)
     return 0

@@ -6,7 +6,7 @@ import argparse
 import json
 from typing import Any
 
-from tracelab.commands._output import fail, store_errors
+from tracelab.errors import store_errors
 
 RULES_SHOWN = 40  # the rest: `tracelab sql RUN "SELECT * FROM rules"`
 
@@ -86,10 +86,8 @@ def render(doc: dict[str, Any], all_rules: bool = False) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from tracelab.store.reader import open_run, retrying
-    try:
+    with store_errors():
         con = open_run(args.run)
         doc = retrying(lambda: describe_run(con))
-    except store_errors() as e:
-        return fail(e)
     print(json.dumps(doc, indent=1, default=str) if args.json else render(doc, args.all_rules))
     return 0

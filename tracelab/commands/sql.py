@@ -11,11 +11,10 @@ from tracelab.commands._output import (
     DEFAULT_TABLE_ROWS,
     add_format_options,
     add_paging_options,
-    fail,
-    store_errors,
     write_stream,
     write_table,
 )
+from tracelab.errors import UserError, store_errors
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -38,9 +37,20 @@ def _params(items: list[str]) -> dict[str, str]:
     for item in items:
         name, eq, value = item.partition("=")
         if not eq:
-            raise ValueError(f"cannot read --param {item!r}; write NAME=VALUE")
-        out[name.strip()] = value.strip()
+            raise UserError(f"cannot read --param {item!r}; write NAME=VALUE")
+        out[name.strip()] = utf8_text(value.strip(), f"--param {name.strip()}")
     return out
+
+
+def utf8_text(text: str, what: str) -> str:
+    """An argument as text DuckDB can take: bytes that are not UTF-8 reach Python as lone surrogates."""
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError as e:
+        raw = text.encode("utf-8", "surrogateescape")
+        offset = len(text[:e.start].encode("utf-8", "surrogateescape"))
+        raise UserError(f"{what} is not UTF-8 text: byte 0x{raw[offset]:02x} at offset {offset}") from None
+    return text
 
 
 def print_saved_queries() -> None:
@@ -54,15 +64,15 @@ def print_saved_queries() -> None:
 def _statement(args: argparse.Namespace) -> tuple[str, dict | None]:
     from tracelab.store.queries import get_query
     if args.run is None:
-        raise ValueError("give a run and a SQL query, or --query NAME (see --list)")
+        raise UserError("give a run and a SQL query, or --query NAME (see --list)")
     if (args.query is None) == (args.saved is None):
-        raise ValueError("give either a SQL query or --query NAME (see --list)")
+        raise UserError("give either a SQL query or --query NAME (see --list)")
     if args.saved is not None:
         saved = get_query(args.saved)
         return saved.sql, saved.bind(_params(args.param))
     if args.param:
-        raise ValueError("--param only applies to saved queries (--query NAME)")
-    return args.query, None
+        raise UserError("--param only applies to saved queries (--query NAME)")
+    return utf8_text(args.query, "the SQL query"), None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -74,22 +84,22 @@ def run(args: argparse.Namespace) -> int:
         print_saved_queries()
         return 0
     try:
-        sql, params = _statement(args)
-        con = open_run(args.run)
-        if args.format == "table":
-            limit = DEFAULT_TABLE_ROWS + 1 if args.limit is None else args.limit
-            table = retrying(lambda: fetch_arrow(query_readonly(con, sql, params), limit, args.offset))
-            cut = args.limit is None and table.num_rows > DEFAULT_TABLE_ROWS
-            write_table(table.slice(0, DEFAULT_TABLE_ROWS) if cut else table, "table", args.output)
-            if cut:
-                print(f"note: showing the first {DEFAULT_TABLE_ROWS} rows; --limit N shows more, and "
-                      "--format csv|json|parquet [-o FILE] writes every row", file=sys.stderr)
-        else:
-            schema, batches = retrying(lambda: arrow_stream(query_readonly(con, sql, params), args.limit,
-                                                            args.offset))
-            write_stream(schema, batches, args.format, args.output)
+        with store_errors():
+            sql, params = _statement(args)
+            con = open_run(args.run)
+            if args.format == "table":
+                limit = DEFAULT_TABLE_ROWS + 1 if args.limit is None else args.limit
+                table = retrying(lambda: fetch_arrow(query_readonly(con, sql, params), limit,
+                                                     args.offset))
+                cut = args.limit is None and table.num_rows > DEFAULT_TABLE_ROWS
+                write_table(table.slice(0, DEFAULT_TABLE_ROWS) if cut else table, "table", args.output)
+                if cut:
+                    print(f"note: showing the first {DEFAULT_TABLE_ROWS} rows; --limit N shows more, and "
+                          "--format csv|json|parquet [-o FILE] writes every row", file=sys.stderr)
+            else:
+                schema, batches = retrying(lambda: arrow_stream(query_readonly(con, sql, params),
+                                                                args.limit, args.offset))
+                write_stream(schema, batches, args.format, args.output)
     except duckdb.PermissionException as e:  # raised while the rows are read
-        return fail(refusal(e))
-    except store_errors() as e:
-        return fail(e)
+        raise refusal(e) from e
     return 0

@@ -5,16 +5,17 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING
 
+from tracelab.commands._args import non_negative_int
 from tracelab.commands._output import (
     add_format_options,
     add_paging_options,
-    fail,
-    store_errors,
     write_stream,
     write_table,
 )
+from tracelab.errors import UserError, store_errors
 
 if TYPE_CHECKING:
+    import duckdb
     import pyarrow as pa
 
 FULL_COLUMNS = ("t, pass_no, atom, node, label, old_lower, old_upper, new_lower, new_upper, rule, "
@@ -24,12 +25,12 @@ FULL_COLUMNS = ("t, pass_no, atom, node, label, old_lower, old_upper, new_lower,
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("trace", help="the trace table of an episode: every bound change and its rule")
     p.add_argument("run", help="run directory, .duckdb file, or run name under runs/")
-    p.add_argument("--episode", "-e", type=int, required=True)
-    p.add_argument("--from", dest="t_from", type=int, help="first timestep (default: the start)")
-    p.add_argument("--to", dest="t_to", type=int, help="last timestep (default: the end)")
+    p.add_argument("--episode", "-e", type=non_negative_int, required=True, help="the episode to show")
+    p.add_argument("--from", dest="t_from", type=non_negative_int, help="first timestep (default: the start)")
+    p.add_argument("--to", dest="t_to", type=non_negative_int, help="last timestep (default: the end)")
     p.add_argument("--atom", action="append", default=[],
                    help="atom text or glob, e.g. 'atLoc(red-agent-1,*)' (repeatable)")
-    p.add_argument("--label", action="append", default=[], help="predicate name (repeatable)")
+    p.add_argument("--label", action="append", default=[], help="predicate name or glob (repeatable)")
     p.add_argument("--rule", action="append", default=[],
                    help="rule name or glob, also fact:NAME, action, policy:NAME, reset (repeatable)")
     add_format_options(p)
@@ -58,16 +59,33 @@ def trace_sql(args: argparse.Namespace) -> tuple[str, list[object]]:
     return sql, params
 
 
+def check_range(args: argparse.Namespace) -> None:
+    if args.t_from is not None and args.t_to is not None and args.t_from > args.t_to:
+        raise UserError(f"--from {args.t_from} is after --to {args.t_to}: nothing can match")
+
+
+def check_labels(con: "duckdb.DuckDBPyConnection", patterns: list[str]) -> None:
+    """A --label that matches no label of the run is a typo: name the labels there are."""
+    import fnmatch
+    labels = [name for (name,) in con.execute("SELECT name FROM raw.labels ORDER BY name").fetchall()]
+    unknown = [p for p in patterns if not any(fnmatch.fnmatchcase(name, p) for name in labels)]
+    if unknown:
+        raise UserError(f"no label {', '.join(map(repr, unknown))} in this run; its labels: "
+                        f"{', '.join(labels) or 'none'}")
+
+
 def run(args: argparse.Namespace) -> int:
     from tracelab.store.reader import arrow_stream, open_run, retrying
-    try:
+    check_range(args)
+    with store_errors():
         con = open_run(args.run)
+        check_labels(con, args.label)
         if not con.execute("SELECT count(*) FROM (SELECT 1 FROM raw.changes WHERE episode = ? LIMIT 1)",
                            [args.episode]).fetchall()[0][0]:
             known = [e for (e,) in con.execute("SELECT DISTINCT episode FROM raw.changes "
                                                "ORDER BY 1 LIMIT 20").fetchall()]
-            raise KeyError(f"episode {args.episode} has no trace rows in {args.run} "
-                           f"(episodes with rows: {known or 'none'})")
+            raise UserError(f"episode {args.episode} has no trace rows in {args.run} "
+                            f"(episodes with rows: {known or 'none'})")
         sql, params = trace_sql(args)
         if args.format == "table":
             table = retrying(lambda: con.sql(sql, params=params).to_arrow_table())
@@ -75,8 +93,6 @@ def run(args: argparse.Namespace) -> int:
         else:  # streamed, batch by batch
             schema, batches = retrying(lambda: arrow_stream(con.sql(sql, params=params)))
             write_stream(schema, batches, args.format, args.output)
-    except store_errors() as e:
-        return fail(e)
     return 0
 
 

@@ -5,7 +5,8 @@ import argparse
 import json
 from typing import TYPE_CHECKING
 
-from tracelab.commands._output import fail, store_errors
+from tracelab.commands._args import non_negative_int, positive_int
+from tracelab.errors import UserError, store_errors
 
 if TYPE_CHECKING:
     import duckdb
@@ -14,10 +15,13 @@ if TYPE_CHECKING:
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("why", help="why an atom had its bound at a time: the rules, facts and actions behind it")
     p.add_argument("run", help="run directory, .duckdb file, or run name under runs/")
-    p.add_argument("atom", help="a ground atom, e.g. 'atLoc(red-agent-1,16)'")
-    p.add_argument("--episode", "-e", type=int, required=True)
-    p.add_argument("--at", type=int, help="timestep (default: the episode's last)")
-    p.add_argument("--depth", type=int, default=6, help="how many rule firings deep to explain (default 6)")
+    p.add_argument("atom", help="a ground atom, e.g. 'atLoc(red-agent-1,16)' (not a complement '~...': "
+                                "ask about the atom itself)")
+    p.add_argument("--episode", "-e", type=non_negative_int, required=True, help="the episode to explain")
+    p.add_argument("--at", type=non_negative_int,
+                   help="timestep, at most the episode's last (default: the episode's last)")
+    p.add_argument("--depth", type=positive_int, default=6,
+                   help="how many rule firings deep to explain (default 6)")
     p.add_argument("--json", action="store_true", help="the tree as JSON")
     p.set_defaults(func=run)
 
@@ -31,15 +35,30 @@ def last_t(con: "duckdb.DuckDBPyConnection", episode: int) -> int:
     return int(row[0])
 
 
+def check_at(at: int | None, episode: int, end: int) -> None:
+    if at is not None and at > end:
+        raise UserError(f"--at {at} is past the end of episode {episode}: its last timestep is t={end}")
+
+
+def refuse_complement(atom: str) -> None:
+    """`why` explains an atom's own bound. A complement `~p(a)` has the bound [1-u,1-l] of p(a)'s [l,u],
+    so its explanation is p(a)'s: say so rather than silently dropping the `~`."""
+    if atom.lstrip().startswith("~"):
+        plain = atom.lstrip()[1:].strip()
+        raise UserError(f"why explains an atom's own bound, not a complement: ask `why '{plain}'` "
+                        f"(the bound of {atom.strip()} is [1-u,1-l] where [l,u] is the bound of {plain})")
+
+
 def run(args: argparse.Namespace) -> int:
     from tracelab.store.reader import open_run, retrying
     from tracelab.store.why import explain, render_why
-    try:
+    refuse_complement(args.atom)
+    with store_errors():
         con = open_run(args.run)
-        at = last_t(con, args.episode) if args.at is None else args.at
+        end = last_t(con, args.episode)
+        check_at(args.at, args.episode, end)
+        at = end if args.at is None else args.at
         tree = retrying(lambda: explain(con, args.episode, args.atom, at, depth=args.depth))
-    except store_errors() as e:
-        return fail(e)
     if args.json:
         print(json.dumps({"episode": args.episode, "at": at, "tree": tree.to_dict()}, indent=1))
     else:

@@ -4,19 +4,20 @@ from __future__ import annotations
 import argparse
 import json
 
-from tracelab.commands._output import fail, store_errors
+from tracelab.commands._args import non_negative_int
+from tracelab.errors import UserError, store_errors
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("why-not", help="the first body clause of a rule that failed for a grounding at a time")
     p.add_argument("run", help="run directory, .duckdb file, or run name under runs/")
-    p.add_argument("--episode", "-e", type=int, required=True)
+    p.add_argument("--episode", "-e", type=non_negative_int, required=True, help="the episode to look in")
     p.add_argument("--rule", required=True, help="rule name")
     p.add_argument("--grounding", default="", help="variable values, e.g. A=red-agent-1,X=16 "
                                                    "(unbound variables are searched)")
-    p.add_argument("--at", type=int, required=True,
+    p.add_argument("--at", type=non_negative_int, required=True,
                    help="the timestep the head would have changed (a rule with delay k reads its body at at-k)")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--json", action="store_true", help="the result as JSON")
     p.set_defaults(func=run)
 
 
@@ -25,18 +26,18 @@ def parse_bindings(text: str) -> dict[str, str]:
     for part in filter(None, (p.strip() for p in text.split(","))):
         var, eq, value = part.partition("=")
         if not eq or not var.strip() or not value.strip():
-            raise ValueError(f"cannot read binding {part!r}; write VAR=value, e.g. A=red-agent-1")
+            raise UserError(f"cannot read binding {part!r}; write VAR=value, e.g. A=red-agent-1")
         out[var.strip()] = value.strip()
     return out
 
 
 def run(args: argparse.Namespace) -> int:
+    from tracelab.commands.why import check_at, last_t
     from tracelab.store.reader import open_run, retrying
     from tracelab.store.why import render_why_not, why_not
-    try:
+    with store_errors():
         con, bindings = open_run(args.run), parse_bindings(args.grounding)
+        check_at(args.at, args.episode, last_t(con, args.episode))
         result = retrying(lambda: why_not(con, args.episode, args.rule, bindings, args.at))
-    except store_errors() as e:
-        return fail(e)
     print(json.dumps(result.to_dict(), indent=1) if args.json else render_why_not(result))
     return 0

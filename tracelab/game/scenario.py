@@ -208,6 +208,11 @@ class Scenario:
         set_("mountains", tuple(mountains))
 
         n = _check_int("agents_per_team", self.agents_per_team, 1)
+        free = w * h - len(mountains)
+        if 2 * n > free:  # both teams, one agent per free cell
+            raise ScenarioError(_DIRECT, "agents_per_team",
+                                f"{n} agents a team do not fit the {w}x{h} map: it has {free} free cells "
+                                f"(not mountains), room for at most {free // 2} agents a team")
         set_("agents_per_team", n)
         set_("ammo", _check_int("ammo", self.ammo, 0))
         set_("max_steps", _check_int("max_steps", self.max_steps, 1))
@@ -391,6 +396,9 @@ def load_scenario(path: str | Path) -> Scenario:
         text = Path(path).read_text(encoding="utf-8")
     except OSError as e:
         raise ScenarioError(source, None, f"cannot read: {e.strerror or e}") from None
+    except UnicodeDecodeError as e:
+        raise ScenarioError(source, None, f"not UTF-8 text: byte 0x{e.object[e.start]:02x} at byte offset "
+                                          f"{e.start}") from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:

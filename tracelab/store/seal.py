@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 
 from tracelab.store import layout
@@ -18,9 +19,10 @@ from tracelab.store.sandbox import lock_configuration, lock_down, sandbox_connec
 from tracelab.store.schema import SEAL_ORDER, TABLES, VIEWS_SQL
 
 
-def seal_run(run: str | Path, *, keep_parts: bool = False) -> Path:
+def seal_run(run: str | Path, *, keep_parts: bool = False,
+             on_table: Callable[[str], None] | None = None) -> Path:
     """Write <run>/run.duckdb from the parts and return its path (idempotent). Refuses while a writer
-    holds the run."""
+    holds the run. `on_table(name)` is called as each of the run's tables is copied (progress)."""
     run_dir = resolve_run(run)
     if not run_dir.is_dir():
         raise ValueError(f"{str(run_dir)!r} is not a run directory (a lone .duckdb file is already sealed)")
@@ -33,7 +35,7 @@ def seal_run(run: str | Path, *, keep_parts: bool = False) -> Path:
             status = "crashed" if doc.get("status") == "running" else doc.get("status", "finished")
             layout.remove_stale_temps(run_dir)
             remove_unlisted(run_dir)
-            _build(run_dir, sealed, {**doc, "status": status})
+            _build(run_dir, sealed, {**doc, "status": status}, on_table)
             doc.update(status=status, sealed_at=now_iso())
             write_meta(run_dir, doc)
         if not keep_parts:
@@ -41,8 +43,10 @@ def seal_run(run: str | Path, *, keep_parts: bool = False) -> Path:
     return sealed
 
 
-def _build(run_dir: Path, sealed: Path, doc: dict) -> None:
+def _build(run_dir: Path, sealed: Path, doc: dict, on_table: Callable[[str], None] | None = None) -> None:
     tmp = layout.tmp_name(sealed)
+    for leftover in (tmp, Path(f"{tmp}.wal")):
+        leftover.unlink(missing_ok=True)
     parts = read_manifest(run_dir)  # the last flush; parts it does not list were never published
     # The sandbox's settings: the parts come from the run, which may come from anyone; this connection
     # reads them and writes only its own (already open) file.
@@ -55,6 +59,8 @@ def _build(run_dir: Path, sealed: Path, doc: dict) -> None:
             order = f" ORDER BY {SEAL_ORDER[t]}" if t in SEAL_ORDER else ""
             con.execute(f"CREATE TABLE raw.{t} AS SELECT * FROM read_parquet(?){order}",
                         [[str(f) for f in parts[t]]])
+            if on_table is not None:
+                on_table(t)
         _create_table(con, "raw.run", meta_table(doc, doc["status"]))
         con.execute(VIEWS_SQL)
         con.execute("CHECKPOINT")

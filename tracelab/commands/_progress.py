@@ -1,0 +1,160 @@
+"""Progress on long work, for any command: a bar with rate and ETA (`progress`), a spinner for work of
+unknown length (`working`), and the first-run compile notice (`compiling_engine`).
+
+They draw on stderr, and only when stdout and stderr are terminals: piped or redirected output stays
+clean. rich is imported only when something is drawn, so that `tracelab --help` stays fast.
+
+    with progress("playing", total=2000, unit="episodes") as bar:
+        for ...:
+            bar.advance(1)
+            bar.set_fields(wins=w, **{"steps/s": rate})
+"""
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager, nullcontext
+from typing import Any
+
+# the numba kernels whose first call compiles the engine (the counting kernel serves every program, the
+# lanes kernel batches of 64 worlds or more), and those the rule simulator adds
+_ENGINE_KERNELS = (("tracelab.engine.kernel", "step_worlds"),)
+_LANES_KERNELS = (("tracelab.engine.lanes", "step_lanes"),)
+_SIMULATOR_KERNELS = (("tracelab.game.rulesim_kernel", "encode_actions"),
+                      ("tracelab.game.rulesim_kernel", "read_and_settle"),
+                      ("tracelab.game.rulesim_kernel", "settle_step"))
+
+
+def on_terminal() -> bool:
+    """Draw progress only for a person watching: stdout and stderr both terminals."""
+    return sys.stdout.isatty() and sys.stderr.isatty()
+
+
+class Progress:
+    """What the body of `progress(...)` gets: advance the count, show live figures. Quiet when not on a
+    terminal (then it only counts)."""
+
+    def __init__(self, bar: Any = None, task: Any = None) -> None:
+        self._bar, self._task = bar, task
+        self.completed = 0
+        self.figures: dict[str, Any] = {}
+
+    def advance(self, n: int = 1) -> None:
+        self.completed += n
+        if self._bar is not None:
+            self._bar.advance(self._task, n)
+
+    def set_fields(self, **figures: Any) -> None:
+        """Live figures shown after the bar, e.g. set_fields(loss=0.31, win_rate=0.62)."""
+        self.figures.update(figures)
+        if self._bar is not None:
+            self._bar.update(self._task, figures=_figures_text(self.figures))
+
+
+def _figures_text(figures: dict[str, Any]) -> str:
+    def fmt(v: Any) -> str:
+        if isinstance(v, float):
+            return f"{v:,.0f}" if abs(v) >= 100 else f"{v:.3g}"
+        return f"{v:,}" if isinstance(v, int) else str(v)
+    return "  ".join(f"{k} {fmt(v)}" for k, v in figures.items())
+
+
+@contextmanager
+def progress(description: str, total: int | None, unit: str | None = "steps") -> Iterator[Progress]:
+    """A progress bar with count, rate (unless `unit` is None) and ETA on a terminal; a counter that
+    draws nothing elsewhere."""
+    if not on_terminal():
+        yield Progress()
+        return
+    from rich.console import Console
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        ProgressColumn,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+    from rich.progress import Progress as RichProgress
+    from rich.text import Text
+
+    class RateColumn(ProgressColumn):
+        def render(self, task: Any) -> Text:
+            rate = "…" if task.speed is None else f"{task.speed:,.1f}"
+            return Text(f"{rate} {unit}/s", style="progress.data.speed")
+
+    columns = [TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+               *([RateColumn()] if unit else []), TimeElapsedColumn(), TextColumn("eta"),
+               TimeRemainingColumn(), TextColumn("{task.fields[figures]}")]
+    with RichProgress(*columns, console=Console(file=sys.stderr), transient=True) as bar:
+        task = bar.add_task(description, total=total, figures="")
+        yield Progress(bar, task)
+
+
+@contextmanager
+def working(description: str, refresh_per_second: float = 10) -> Iterator[Progress]:
+    """A spinner with the elapsed time and live figures (set_fields) for work whose length is not known
+    beforehand (refreshing less often where its thread must not disturb a measurement)."""
+    if not on_terminal():
+        yield Progress()
+        return
+    from rich.console import Console
+    from rich.progress import Progress as RichProgress
+    from rich.progress import SpinnerColumn, TextColumn, TimeElapsedColumn
+    with RichProgress(SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(),
+                      TextColumn("{task.fields[figures]}"), console=Console(file=sys.stderr),
+                      transient=True, refresh_per_second=refresh_per_second) as bar:
+        yield Progress(bar, bar.add_task(description, total=None, figures=""))
+
+
+def engine_cache_is_cold(simulator: bool = False, lanes: bool = False) -> bool | None:
+    """True when the engine's compiled kernels (with `lanes` the lanes kernel's too, with `simulator`
+    the rule simulator's) are neither loaded nor in numba's disk cache (the first run compiles them for
+    30-60 s), False when they are, None when it cannot tell. Reads numba's cache index of each entry
+    point (a few ms)."""
+    import importlib
+    kernels = _ENGINE_KERNELS + (_LANES_KERNELS if lanes else ()) + (_SIMULATOR_KERNELS if simulator else ())
+    try:
+        for module, name in kernels:
+            fn = getattr(importlib.import_module(module), name)
+            # numba's own staleness check: an index whose source stamp differs loads as empty
+            if not fn.signatures and not fn._cache._cache_file._load_index():
+                return True
+        return False
+    except Exception:  # numba's cache layout is private: when it changes, say "don't know"
+        return None
+
+
+class Warmup(Progress):
+    """What `compiling_engine` yields: a spinner's figures, and afterwards the time spent and whether
+    the kernels were compiled (True, False, or None: unknown)."""
+    seconds: float = 0.0
+    compiled: bool | None = None
+
+
+@contextmanager
+def compiling_engine(simulator: bool = False, lanes: bool = False,
+                     busy: str | None = None) -> Iterator[Warmup]:
+    """Around the engine's build and first step (with `lanes`: a batch that takes the lanes kernel; with
+    `simulator`: the rule simulator's too): when the kernels must be compiled, say so while it happens
+    (a spinner on a terminal, one line on stderr otherwise); when they are cached, show `busy` (if
+    given) as a spinner on a terminal. The spinner counts the groundings found (a big build's work)."""
+    from tracelab.engine.grounding import watch_grounding
+    cold = engine_cache_is_cold(simulator, lanes)
+    t0 = time.perf_counter()
+    if cold and not on_terminal():
+        print("tracelab: compiling the engine (first run only, 30-60 s)...", file=sys.stderr, flush=True)
+    description = "compiling the engine (first run only)…" if cold is not False else busy
+    spinner = working(description) if description else nullcontext(Progress())
+    with spinner as shown:
+        warm = Warmup(shown._bar, shown._task)
+        warm.compiled = cold
+        try:
+            def grounded(n: int) -> None:
+                warm.set_fields(groundings=n, **{"groundings/s": n / max(time.perf_counter() - t0, 1e-9)})
+
+            with watch_grounding(grounded):
+                yield warm
+        finally:
+            warm.seconds = time.perf_counter() - t0
