@@ -4,6 +4,8 @@ nothing prints a traceback. The read commands use the sample runs (read only).""
 from __future__ import annotations
 
 import os
+import re
+import signal
 import subprocess
 import sys
 import time
@@ -130,7 +132,7 @@ def test_a_closed_pipe_ends_quietly(args: list[str]) -> None:
     assert p.wait(timeout=300) == 141 and err == ""
 
 
-def test_a_second_play_into_the_same_run_is_refused(tmp_path: Path) -> None:
+def test_a_second_play_into_the_same_run_is_refused_and_ctrl_c_says_what_was_kept(tmp_path: Path) -> None:
     run = tmp_path / "shared"
     first = subprocess.Popen([*CLI, "play", "--scenario", "base", "--episodes", "100000", "--run", str(run)],
                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
@@ -143,9 +145,16 @@ def test_a_second_play_into_the_same_run_is_refused(tmp_path: Path) -> None:
         err = second.stderr.decode()
         assert second.returncode == 1 and err.count("\n") == 1, err
         assert err.startswith(f"tracelab: error: --run {run} already holds a run"), err
+        first.send_signal(signal.SIGINT)
+        assert first.wait(timeout=120) == 130
+        last = first.stderr.read().decode().splitlines()[-1]
+        assert re.fullmatch(rf"tracelab: interrupted: {re.escape(str(run))} keeps \d+ finished episode\(s\) "
+                            r"and the trace so far", last), last
+        assert '"status": "interrupted"' in (run / "meta.json").read_text()
     finally:
-        first.terminate()
-        first.wait(timeout=120)
+        if first.poll() is None:
+            first.kill()
+            first.wait(timeout=120)
 
 
 def test_version_and_python_m() -> None:

@@ -50,8 +50,8 @@ def main(argv: list[str] | None = None) -> int:
         status = int(args.func(args) or 0)
         sys.stdout.flush()  # a closed pipe shows here for output still buffered
         return status
-    except KeyboardInterrupt:
-        print("tracelab: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as e:  # a command may say what was kept: KeyboardInterrupt("the run ... keeps ...")
+        print("tracelab: interrupted" + (f": {e.args[0]}" if e.args else ""), file=sys.stderr)
         return 130
     except BrokenPipeError:
         _silence_stdout()

@@ -80,8 +80,15 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"cannot create the run directory {run_dir}: {e.strerror or e}") from e
     try:
         stats = play(scenario, args, sink=StoreSink(writer))
-    except BaseException as e:  # the env did not close it: record how the run ended
-        writer.close(status="interrupted" if isinstance(e, KeyboardInterrupt) else "failed")
+    except (KeyboardInterrupt, SystemExit) as e:  # Ctrl-C, or SIGTERM (the writer's handler exits)
+        writer.close(status="interrupted")  # flushes what was played
+        kept = f"{run_dir} keeps {_ended_episodes(run_dir)} finished episode(s) and the trace so far"
+        if isinstance(e, SystemExit):
+            print(f"tracelab: terminated: {kept}", file=sys.stderr)
+            raise
+        raise KeyboardInterrupt(kept) from None
+    except BaseException:  # the env did not close it: record how the run ended
+        writer.close(status="failed")
         raise
     _summary(stats)
     _what_to_open(run_dir)
@@ -171,6 +178,15 @@ def _summary(stats: dict) -> None:
     print(f"played {len(eps)} episodes of {stats['scenario']} ({stats['steps']} steps, {rate} after the "
           f"first step{first})")
     print("red: " + ", ".join(f"{v} {k}" for k, v in outcomes.items()) + f"; mean return {mean_return:.1f}")
+
+
+def _ended_episodes(run_dir: Path) -> int:
+    from tracelab.store import open_run
+    con = open_run(run_dir)
+    try:
+        return int(con.execute("SELECT count(*) FROM episodes WHERE ended").fetchall()[0][0])
+    finally:
+        con.close()
 
 
 def _what_to_open(run_dir: Path) -> None:
