@@ -144,7 +144,8 @@ def compiling_engine(simulator: bool = False, lanes: bool = False,
     cold = engine_cache_is_cold(simulator, lanes)
     t0 = time.perf_counter()
     if cold and not on_terminal():
-        print("tracelab: compiling the engine (first run only, a minute or more)...", file=sys.stderr, flush=True)
+        print("tracelab: compiling the engine (first run only, a minute or more)...", file=sys.stderr,
+              flush=True)
     description = "compiling the engine (first run only)…" if cold is not False else busy
     spinner = working(description) if description else nullcontext(Progress())
     with spinner as shown:
