@@ -83,6 +83,14 @@ def write_table(table: "pa.Table", fmt: str, output: str | None = None, out: Tex
         raise ValueError(f"unknown format {fmt!r}; choose one of {', '.join(FORMATS)}")
 
 
+def positive_int(text: str) -> int:
+    """An argparse type: an integer >= 1."""
+    v = int(text)
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {v}")
+    return v
+
+
 def fail(e: BaseException) -> int:
     """Print a store or query error as `error: ...` and return the exit status 1."""
     msg = e.args[0] if isinstance(e, KeyError) and e.args else str(e)

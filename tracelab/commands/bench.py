@@ -8,6 +8,8 @@ import json
 import sys
 from typing import Any
 
+from tracelab.commands._output import positive_int
+
 SECTIONS = ("engine", "env", "store")
 
 
@@ -23,24 +25,17 @@ def register(sub: argparse._SubParsersAction) -> None:
         q = what.add_parser(name, help=text)
         q.add_argument("--json", action="store_true", help="machine-readable output")
         q.add_argument("--quick", action="store_true", help="small sizes (a smoke run, not for figures)")
-        q.add_argument("--repeats", type=_positive, default=5, help="timed repeats per figure (default 5)")
+        q.add_argument("--repeats", type=positive_int, default=5, help="timed repeats per figure (default 5)")
         if name in ("engine", "env", "all"):
             q.add_argument("--agents", type=_sizes, default=None,
                            help="team sizes, comma-separated (default 1,5,20; --quick: 1,2)")
         if name in ("env", "all"):
-            q.add_argument("--batch", type=_positive, default=None,
+            q.add_argument("--batch", type=positive_int, default=None,
                            help="worlds of the batched runs (default 256; --quick: 16)")
         if name in ("engine", "all"):
-            q.add_argument("--compile-repeats", type=_positive, default=None,
+            q.add_argument("--compile-repeats", type=positive_int, default=None,
                            help="first-ever compiles to time (default: min(repeats, 3); --quick: 1)")
         q.set_defaults(func=run)
-
-
-def _positive(text: str) -> int:
-    v = int(text)
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {v}")
-    return v
 
 
 def _sizes(text: str) -> list[int]:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from tracelab.commands._output import fail, store_errors
+from tracelab.commands._output import fail, positive_int, store_errors
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -15,7 +15,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     which.add_argument("--episode", "-e", type=int, help="one episode")
     which.add_argument("--episodes", help="episodes, e.g. 0-9 or 1,4,7-9")
     p.add_argument("--outcome", help="only episodes with this outcome for red (win, loss, draw, truncated)")
-    p.add_argument("--limit", type=_positive, help="at most this many episodes")
+    p.add_argument("--limit", type=positive_int, help="at most this many episodes")
     out = p.add_mutually_exclusive_group()
     out.add_argument("--save", metavar="FILE.rrd", help="write an .rrd file (the default: replay.rrd)")
     out.add_argument("--serve", action="store_true", help="serve the web viewer on localhost")
@@ -24,17 +24,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="follow a run being written: stream each game as it ends, until the run stops")
     p.add_argument("--port", type=int, default=9876, help="gRPC port for --serve / --spawn (default 9876)")
     p.add_argument("--web-port", type=int, default=9090, help="web viewer port for --serve (default 9090)")
-    p.add_argument("--why-depth", type=_positive, default=6, help="depth of the why-trees (default 6)")
+    p.add_argument("--why-depth", type=positive_int, default=6, help="depth of the why-trees (default 6)")
     p.add_argument("--open-at", choices=("start", "end"), default="start",
                    help="where the viewer's time cursor starts (default: the first step)")
     p.set_defaults(func=run)
-
-
-def _positive(text: str) -> int:
-    v = int(text)
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {v}")
-    return v
 
 
 def run(args: argparse.Namespace) -> int:
@@ -50,7 +43,6 @@ def run(args: argparse.Namespace) -> int:
         f = EpisodeFilter(ids, args.outcome, args.limit)
         name = resolve_run(args.run).name.removesuffix(".duckdb")
         con = open_run(args.run)
-        ctx = RunContext.of(con, name)
         options = ReplayOptions(why_depth=args.why_depth, open_at=args.open_at)
         if args.serve or args.spawn:
             out = GrpcOutput("serve" if args.serve else "spawn", args.port, args.web_port)
@@ -58,10 +50,10 @@ def run(args: argparse.Namespace) -> int:
             out = SaveOutput(args.save or "replay.rrd")
         if args.live:
             print(f"following {args.run}: each game is sent as it ends (Ctrl-C stops)", file=sys.stderr)
-            follow_run(ctx, args.run, f, out, options,
+            follow_run(con, name, args.run, f, out, options,
                        on_episode=lambda e: print(f"episode {e} sent", file=sys.stderr, flush=True))
         else:
-            replay_run(ctx, f, out, options)
+            replay_run(RunContext.of(con, name), f, out, options)
     except store_errors() + (OSError,) as e:
         return fail(e)
     print(out.describe())

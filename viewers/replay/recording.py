@@ -37,8 +37,10 @@ class RunContext:
     def of(cls, con: RunConnection, name: str) -> "RunContext":
         return cls(con, name, BoardLoader(con), RunModel(con), plots.training_metrics(con))
 
-    def refresh_metrics(self) -> None:
+    def refresh(self) -> None:
+        """Catch up with a run being written: its metrics so far, its grown vocabulary."""
         self.metrics = plots.training_metrics(self.con)
+        self.model = RunModel(self.con)
 
 
 def new_recording(run_name: str, episode: int) -> rr.RecordingStream:

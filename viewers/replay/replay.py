@@ -5,8 +5,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 
-from tracelab.store.model import RunModel
-from tracelab.store.reader import retrying, run_info
+from tracelab.store.reader import RunConnection, retrying, run_info
 from tracelab.viewers.replay.outputs import Output
 from tracelab.viewers.replay.recording import ReplayOptions, RunContext, record_episode
 from tracelab.viewers.replay.select import EpisodeFilter, select_episodes
@@ -32,32 +31,33 @@ def replay_run(ctx: RunContext, f: EpisodeFilter, out: Output, options: ReplayOp
     return n
 
 
-def follow_run(ctx: RunContext, run: str, f: EpisodeFilter, out: Output, options: ReplayOptions | None = None,
-               poll_s: float = 1.0, on_episode: Callable[[int], None] | None = None,
-               max_idle_s: float | None = None) -> int:
-    """Stream each episode the filter picks as soon as it has ended, until the run stops running (or
-    `max_idle_s` passed without a new episode). Returns how many were sent."""
+def follow_run(con: RunConnection, name: str, run: str, f: EpisodeFilter, out: Output,
+               options: ReplayOptions | None = None, poll_s: float = 0.5,
+               on_episode: Callable[[int], None] | None = None) -> int:
+    """Stream each episode the filter picks as soon as it has ended, until the run stops running.
+    Returns how many were sent. The run's program is read once its first episode has ended (a run
+    just started may not have published it yet)."""
     sent: set[int] = set()
-    idle_since = time.monotonic()
+    ctx: RunContext | None = None
     while True:
         running = run_info(run).status == "running"
-        new = retrying(lambda: select_episodes(ctx.con, EpisodeFilter(None, f.outcome), exclude=sent))
+        new = retrying(lambda: select_episodes(con, EpisodeFilter(None, f.outcome), exclude=sent))
         if f.episodes is not None:
             new = [e for e in new if e in f.episodes]
         if f.limit is not None:
             new = new[:max(f.limit - len(sent), 0)]
         if new:
-            ctx.refresh_metrics()
-            ctx.model = RunModel(ctx.con)     # the vocabulary grows while a run is written
+            if ctx is None:
+                ctx = retrying(lambda: RunContext.of(con, name))
+            else:
+                ctx.refresh()                   # new metrics; the vocabulary grows while a run is written
             for e in new:
                 replay_episodes(ctx, [e], out, options)
                 sent.add(e)
                 out.write()
                 if on_episode:
                     on_episode(e)
-            idle_since = time.monotonic()
-        done = f.limit is not None and len(sent) >= f.limit
-        if done or not running or (max_idle_s is not None and time.monotonic() - idle_since > max_idle_s):
+        if (f.limit is not None and len(sent) >= f.limit) or not running:
             break
         time.sleep(poll_s)
     out.close()
