@@ -79,7 +79,7 @@ def test_one_recording_per_played_episode_that_rerun_verifies(advanced, advanced
 
 def test_entity_paths_and_steps(advanced_data) -> None:  # noqa: ANN001
     ep0 = advanced_data["advanced/episode-0"]
-    for path in ("/board", "/board/terrain", "/board/grid", "/board/bases/red", "/board/agents/red-agent-1",
+    for path in ("/board", "/board/terrain", "/board/grid", "/board/bases", "/board/agents/red-agent-1",
                  "/board/agents/blue-agent-1", "/board/bullets/red", "/board/bullets/blue",
                  "/board/actions/red/move", "/board/actions/red/shot", "/board/fired", "/rules/log", "/why",
                  "/lanes/alive/red-agent-1", "/lanes/atLoc/blue-agent-1", "/plots/return/red",

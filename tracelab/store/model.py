@@ -74,6 +74,8 @@ class RunModel:
         self.labels = {name: (lid, arity) for lid, name, arity in
                        con.execute("SELECT label, name, arity FROM raw.labels").fetchall()}
         self._atom_text: dict[int, str] = {}
+        self._atom_label = self._atom_arg0 = self._atom_arg1 = np.zeros(0, np.int64)
+        self._label_names: dict[int, str] = {}
         self._groundings: dict[int, tuple[int, list[int], list[int]]] = {}
 
     # ---- rules -----------------------------------------------------------------------------------------
@@ -118,12 +120,34 @@ class RunModel:
 
     # ---- atoms -------------------------------------------------------------------------------------------
     def atom_texts(self, ids: list[int] | np.ndarray) -> dict[int, str]:
-        missing = sorted({int(a) for a in ids} - set(self._atom_text))
-        if missing:
-            for aid, text in self.con.execute("SELECT atom, text FROM atoms WHERE atom IN "
-                                              "(SELECT unnest(?::INTEGER[]))", [missing]).fetchall():
-                self._atom_text[aid] = text
-        return {int(a): self._atom_text.get(int(a), f"atom#{int(a)}") for a in ids}
+        """label(arg0[,arg1]) of atom ids, as the atoms view writes them; built from the atoms table read
+        once (again when an id is past it: a live run's vocabulary grows), not a query per call."""
+        out = {}
+        for a in (int(x) for x in ids):
+            text = self._atom_text.get(a)
+            if text is None:
+                if a >= len(self._atom_label):
+                    self._read_atoms()
+                if a < 0 or a >= len(self._atom_label) or self._atom_label[a] < 0:
+                    text = f"atom#{a}"
+                else:
+                    args = [self.nodes[n] for n in (self._atom_arg0[a], self._atom_arg1[a]) if n >= 0]
+                    text = f"{self._label_names.get(int(self._atom_label[a]), '?')}({','.join(args)})"
+                self._atom_text[a] = text
+            out[a] = text
+        return out
+
+    def _read_atoms(self) -> None:
+        cols = self.con.execute("SELECT atom, label, arg0, arg1 FROM raw.atoms").fetchnumpy()
+        n = int(cols["atom"].max()) + 1 if len(cols["atom"]) else 0
+        self._atom_label, self._atom_arg0, self._atom_arg1 = (np.full(n, -1, np.int64) for _ in range(3))
+        for arr, name in ((self._atom_label, "label"), (self._atom_arg0, "arg0"), (self._atom_arg1, "arg1")):
+            arr[np.asarray(cols["atom"])] = np.asarray(cols[name])
+        self.nodes = [n for (n,) in self.con.execute("SELECT name FROM raw.nodes ORDER BY node").fetchall()]
+        self.node_ids = {n: i for i, n in enumerate(self.nodes)}
+        self.labels = {name: (lid, arity) for lid, name, arity in
+                       self.con.execute("SELECT label, name, arity FROM raw.labels").fetchall()}
+        self._label_names = {lid: name for name, (lid, _) in self.labels.items()}
 
     def atom_text(self, aid: int) -> str:
         return self.atom_texts([aid])[aid]

@@ -2,10 +2,13 @@
 name, logged as columns (one `send_columns` per entity, rows only where something changed)."""
 from __future__ import annotations
 
+from functools import lru_cache
+from typing import Any
+
 import numpy as np
 import rerun as rr
 
-from tracelab.store.board import NO_ACTION, NOTHING, PHASES, TEAMS, EpisodeBoard
+from tracelab.store.board import NO_ACTION, NOTHING, PHASES, TEAMS, BoardMap, EpisodeBoard
 from tracelab.viewers.replay import style
 
 # phases whose firings mark the board (the snapshot and the shield's view change nothing on it)
@@ -31,22 +34,32 @@ def terrain(board: EpisodeBoard) -> np.ndarray:
     return image
 
 
+@lru_cache(maxsize=8)
+def _static_map(width: int, height: int, image: bytes, bases: tuple[int, int, int, int]
+                ) -> tuple[tuple[str, Any], ...]:
+    """The static entities of a map, built once per map (an archetype converts its data to Arrow when it
+    is made; logging it again into the next episode's recording is then cheap)."""
+    m = BoardMap(width, height, np.zeros((0, 2), np.int64), np.array(bases, np.int64).reshape(2, 2))
+    xs = np.arange(width + 1, dtype=np.float32)
+    ys = np.arange(height + 1, dtype=np.float32)
+    strips = [[(x, ys[0]), (x, ys[-1])] for x in xs] + [[(xs[0], y), (xs[-1], y)] for y in ys]
+    base_cells = m.bases[:, 1] * width + m.bases[:, 0]
+    terrain_image = np.frombuffer(image, dtype=np.uint8).reshape(height, width)
+    return ((style.BOARD, style.annotation_context()),
+            (style.TERRAIN, rr.SegmentationImage(terrain_image, draw_order=-10.0)),
+            (style.GRID, rr.LineStrips2D(strips, radii=0.015, colors=(110, 110, 110), draw_order=0.0)),
+            (style.BASES, rr.Boxes2D(centers=style.cell_centers(m, base_cells), half_sizes=(0.5, 0.5),
+                                     class_ids=[style.RED_BASE, style.BLUE_BASE], radii=0.05,
+                                     draw_order=1.0)))
+
+
 def log_map(rec: rr.RecordingStream, board: EpisodeBoard) -> None:
     """The terrain (a segmentation image: free, mountain, bases), grid lines and base outlines, static;
     the annotation context for the classes."""
     m = board.map
-    rec.log(style.BOARD, style.annotation_context(), static=True)
-    rec.log(style.TERRAIN, rr.SegmentationImage(terrain(board), draw_order=-10.0), static=True)
-    xs = np.arange(m.width + 1, dtype=np.float32)
-    ys = np.arange(m.height + 1, dtype=np.float32)
-    strips = [[(x, ys[0]), (x, ys[-1])] for x in xs] + [[(xs[0], y), (xs[-1], y)] for y in ys]
-    rec.log(style.GRID, rr.LineStrips2D(strips, radii=0.015, colors=(110, 110, 110), draw_order=0.0),
-            static=True)
-    for team, name in enumerate(("red", "blue")):
-        x, y = m.bases[team]
-        rec.log(f"{style.BASES}/{name}", rr.Boxes2D(
-            centers=style.cell_centers(m, np.array([y * m.width + x])), half_sizes=(0.5, 0.5),
-            class_ids=style.RED_BASE + team, radii=0.05, draw_order=1.0), static=True)
+    for path, archetype in _static_map(m.width, m.height, terrain(board).tobytes(),
+                                       tuple(m.bases.ravel().tolist())):
+        rec.log(path, archetype, static=True)
 
 
 def _slot_times(board: EpisodeBoard, slots: np.ndarray) -> list[rr.TimeColumn]:

@@ -40,6 +40,7 @@ class SaveOutput:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._tmp = tempfile.TemporaryDirectory(prefix="tracelab-replay-")
         self.files: list[Path] = []
+        self.blueprint_sent = False
 
     def recording(self, run_name: str, episode: int) -> rr.RecordingStream:
         rec = new_recording(run_name, episode)
@@ -82,6 +83,7 @@ class GrpcOutput:
     def __init__(self, mode: str, port: int = 9876, web_port: int = 9090) -> None:
         self.mode = mode
         self.count = 0
+        self.blueprint_sent = False
         if mode == "serve":
             self._hub = rr.RecordingStream(APPLICATION_ID, recording_id="tracelab-replay-server")
             self.url = self._hub.serve_grpc(grpc_port=port)

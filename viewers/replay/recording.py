@@ -30,17 +30,24 @@ class RunContext:
     con: RunConnection
     name: str
     loader: BoardLoader
-    model: RunModel
     metrics: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    _model: RunModel | None = None
 
     @classmethod
     def of(cls, con: RunConnection, name: str) -> "RunContext":
-        return cls(con, name, BoardLoader(con), RunModel(con), plots.training_metrics(con))
+        return cls(con, name, BoardLoader(con), plots.training_metrics(con))
+
+    @property
+    def model(self) -> RunModel:
+        """The run's program model, read when a why-tree is first wanted."""
+        if self._model is None:
+            self._model = RunModel(self.con)
+        return self._model
 
     def refresh(self) -> None:
-        """Catch up with a run being written: its metrics so far, its grown vocabulary."""
+        """Catch up with a run being written: its metrics so far (the model reads a grown vocabulary
+        by itself)."""
         self.metrics = plots.training_metrics(self.con)
-        self.model = RunModel(self.con)
 
 
 def new_recording(run_name: str, episode: int) -> rr.RecordingStream:
@@ -48,19 +55,21 @@ def new_recording(run_name: str, episode: int) -> rr.RecordingStream:
 
 
 def record_episode(ctx: RunContext, episode: int, rec: rr.RecordingStream,
-                   options: ReplayOptions | None = None) -> EpisodeBoard:
-    """Log one episode into `rec` (which already has its sink) and return its board."""
+                   options: ReplayOptions | None = None, blueprint: bool = True) -> EpisodeBoard:
+    """Log one episode into `rec` (which already has its sink) and return its board. The blueprint
+    belongs to the application, so one per output is enough (`blueprint`: send it with this one)."""
     options = options or ReplayOptions()
     board = ctx.loader.load(episode)
     rec.send_recording_name(f"{ctx.name} episode {episode} ({board.outcome or 'running'}, {board.steps} steps)")
-    rec.send_blueprint(replay_blueprint(board.map, bool(ctx.metrics), options.open_at))
+    if blueprint:
+        rec.send_blueprint(replay_blueprint(board.map, bool(ctx.metrics), options.open_at))
     board_layer.log_board(rec, board)
     rules_layer.log_rule_log(rec, board)
     rules_layer.log_lanes(rec, board, options.lanes)
     rewards = plots.team_rewards(ctx.con, board)
     if rewards is not None:
         plots.log_rewards(rec, rewards)
-    rules_layer.log_why(rec, ctx.con, board, rewards, options.why_depth, ctx.model)
+    rules_layer.log_why(rec, ctx.con, board, rewards, options.why_depth, lambda: ctx.model)
     if ctx.metrics:
         plots.log_training(rec, ctx.metrics)
     return board

@@ -16,7 +16,9 @@ def replay_episodes(ctx: RunContext, episodes: list[int], out: Output,
     """Each episode as its own recording into `out`; returns how many were sent."""
     for e in episodes:
         rec = out.recording(ctx.name, e)
-        retrying(lambda: record_episode(ctx, e, rec, options))
+        first = not out.blueprint_sent
+        retrying(lambda: record_episode(ctx, e, rec, options, blueprint=first))
+        out.blueprint_sent = True
         out.finished(rec)
     return len(episodes)
 

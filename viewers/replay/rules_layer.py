@@ -2,6 +2,8 @@
 filters by phase), state lanes of selected labels, and a markdown why-document per step."""
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import rerun as rr
 
@@ -105,13 +107,12 @@ def _step_header(board: EpisodeBoard, s: int, rewards: np.ndarray | None) -> lis
 
 
 def why_documents(con: RunConnection, board: EpisodeBoard, rewards: np.ndarray | None = None,
-                  depth: int = 6, model: RunModel | None = None) -> list[str]:
+                  depth: int = 6, model: Callable[[], RunModel] | None = None) -> list[str]:
     """A markdown document per step: what happened, and the why-trees (as `tracelab why` prints them)
-    of the step's deaths and of the game's end."""
+    of the step's deaths and of the game's end. `model` gives the run's model (read only if needed)."""
     wanted = explained_atoms(board)
-    trace = None
     if wanted:
-        model = model or RunModel(con)
+        run_model = model() if model else RunModel(con)
         trace = EpisodeTrace(con, board.episode)
     docs = []
     for s in range(board.steps + 1):
@@ -120,14 +121,15 @@ def why_documents(con: RunConnection, board: EpisodeBoard, rewards: np.ndarray |
         if not atoms:
             lines.append("\nNo death and no end of game in this step.")
         for atom in atoms:
-            tree = render_why(explain_in(model, trace, atom, s, depth), s)
+            tree = render_why(explain_in(run_model, trace, atom, s, depth), s)
             lines += [f"\n### Why {atom}", "```text", tree, "```"]
         docs.append("\n".join(lines))
     return docs
 
 
 def log_why(rec: rr.RecordingStream, con: RunConnection, board: EpisodeBoard,
-            rewards: np.ndarray | None = None, depth: int = 6, model: RunModel | None = None) -> None:
+            rewards: np.ndarray | None = None, depth: int = 6,
+            model: Callable[[], RunModel] | None = None) -> None:
     docs = why_documents(con, board, rewards, depth, model)
     steps = np.arange(board.steps + 1)
     rec.send_columns(style.WHY, indexes=[rr.TimeColumn(style.STEP, sequence=steps),
