@@ -288,6 +288,7 @@ class _Vocabulary:
         self.nodes: list[str] = []
         self.n_atoms = 0
         self._grounding_text: dict[int, str] = {}
+        self._grounding_names: dict[int, tuple[int, int]] = {}   # first agent, first bullet it names
         self._atom_text: dict[int, str] = {}
         self.read_atoms()
 
@@ -304,6 +305,17 @@ class _Vocabulary:
         self.label_names = labels
         self.n_atoms = n
         self.state = _state_atoms(self)
+        # what each node is on the board; one extra -1 at the end, so that node -1 (no argument) maps to -1
+        agent_index = {a: i for i, a in enumerate(self.cast.agents)}
+        bullet_index = {b: i for i, b in enumerate(self.cast.bullets)}
+        n_cells = self.cast.map.width * self.cast.map.height
+        self.node_agent = np.array([agent_index.get(x, -1) for x in self.nodes] + [-1], dtype=np.int64)
+        self.node_bullet = np.array([bullet_index.get(x, -1) for x in self.nodes] + [-1], dtype=np.int64)
+        self.node_cell = np.array([int(x) if x.isdigit() and int(x) < n_cells else -1 for x in self.nodes]
+                                  + [-1], dtype=np.int64)
+        # the cell an atom names (its first cell argument), -1 if none
+        self.atom_cell = np.where(self.node_cell[self.arg0] >= 0, self.node_cell[self.arg0],
+                                  self.node_cell[self.arg1])
 
     def cover(self, atoms: np.ndarray) -> None:
         if len(atoms) and int(atoms.max()) >= self.n_atoms:
@@ -324,9 +336,20 @@ class _Vocabulary:
             rows = self.con.execute("SELECT grounding, rule, var_values FROM raw.groundings "
                                     "WHERE grounding IN (SELECT unnest(?))", [missing]).fetchall()
             for g, rule, values in rows:
+                values = values or []
                 self._grounding_text[g] = ", ".join(
-                    f"{var}={self.nodes[v]}" for var, v in zip(self.rule_vars.get(rule, []), values or []))
+                    f"{var}={self.nodes[v]}" for var, v in zip(self.rule_vars.get(rule, []), values))
+                agents = [a for a in self.node_agent[values].tolist() if a >= 0]
+                bullets = [b for b in self.node_bullet[values].tolist() if b >= 0]
+                self._grounding_names[g] = (agents[0] if agents else -1, bullets[0] if bullets else -1)
         return [self._grounding_text.get(int(g), "") for g in groundings.tolist()]
+
+    def grounding_names(self, groundings: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The first agent and the first bullet (indices, -1 if none) each grounding's bindings name
+        (after grounding_texts read them)."""
+        pairs = [self._grounding_names.get(g, (-1, -1)) for g in groundings.tolist()]
+        both = np.array(pairs, dtype=np.int64).reshape(-1, 2)
+        return both[:, 0], both[:, 1]
 
 
 class BoardLoader:
@@ -502,27 +525,17 @@ def _firings(vocab: _Vocabulary, cast: _Cast, t: np.ndarray, phase: np.ndarray, 
              agent_cell: np.ndarray, bullet_cell: np.ndarray) -> Firings:
     rows = np.flatnonzero(col["cause_kind"] == 2)
     rule = [vocab.rule_name.get(r, f"rule#{r}") for r in col["cause_id"][rows].tolist()]
-    bindings = vocab.grounding_texts(col["grounding"][rows])
-    head = [vocab.atom_text(a) for a in col["atom"][rows].tolist()]
-    agent_index = {a: i for i, a in enumerate(cast.agents)}
-    bullet_index = {b: i for i, b in enumerate(cast.bullets)}
-    n_cells = cast.map.width * cast.map.height
+    groundings, atoms = col["grounding"][rows], col["atom"][rows]
+    bindings = vocab.grounding_texts(groundings)
+    head = [vocab.atom_text(a) for a in atoms.tolist()]
+    agent, bullet = vocab.grounding_names(groundings)
     step, ph = t[rows], phase[rows]
-    agent = np.full(len(rows), -1, dtype=np.int64)
-    cell = np.full(len(rows), -1, dtype=np.int64)
-    for i, (b, h) in enumerate(zip(bindings, head)):
-        named = [kv.partition("=")[2] for kv in b.split(", ")]
-        cells = [int(x) for x in h.partition("(")[2].rstrip(")").split(",") if x.isdigit() and int(x) < n_cells]
-        a = next((agent_index[x] for x in named if x in agent_index), -1)
-        agent[i] = a
-        if cells:
-            cell[i] = cells[0]
-        elif a >= 0:
-            cell[i] = agent_cell[step[i], ph[i], a]
-        else:
-            bi = next((bullet_index[x] for x in named if x in bullet_index), -1)
-            if bi >= 0:
-                cell[i] = bullet_cell[step[i], ph[i], bi]
+    # where on the board: the head's cell, else the named agent's cell, else the named bullet's
+    cell = vocab.atom_cell[atoms]
+    by_agent = (cell < 0) & (agent >= 0)
+    cell[by_agent] = agent_cell[step[by_agent], ph[by_agent], agent[by_agent]]
+    by_bullet = (cell < 0) & (agent < 0) & (bullet >= 0)
+    cell[by_bullet] = bullet_cell[step[by_bullet], ph[by_bullet], bullet[by_bullet]]
     return Firings(step, ph, col["seq"][rows], rule, bindings, head,
                    np.stack([col["old_lower"][rows], col["old_upper"][rows]], axis=1),
                    np.stack([col["new_lower"][rows], col["new_upper"][rows]], axis=1), agent, cell)
