@@ -166,20 +166,6 @@ def _label(rules: dict[str, int]) -> str:
     return "\n".join(names[:_MAX_RULES_PER_LABEL]) + (f"\n+{more}" if more > 0 else "")
 
 
-def fired_cells(board: EpisodeBoard, step: int, upto_phase: int = len(PHASES) - 1
-                ) -> tuple[list[int], list[str]]:
-    """The cells the firings of `step` up to `upto_phase` name (board phases only), each with a label
-    listing its rules (the later phases' first, at most _MAX_RULES_PER_LABEL, then '+n')."""
-    f = board.firings
-    rows = _marked(board)
-    rows = rows[(f.step[rows] == step) & (f.phase[rows] <= upto_phase)]
-    per_cell: dict[int, dict[str, int]] = {}
-    for i in rows.tolist():
-        per_cell.setdefault(int(f.cell[i]), {}).setdefault(f.rule[i], _LABEL_PRIORITY[PHASES[f.phase[i]]])
-    cells = sorted(per_cell)
-    return cells, [_label(per_cell[c]) for c in cells]
-
-
 def log_fired(rec: rr.RecordingStream, board: EpisodeBoard) -> None:
     """Per step and board phase, the cells the step's firings so far name, outlined and labelled with the
     rules (so the end of the step shows all of them)."""
