@@ -135,6 +135,7 @@ class EpisodeBoard:
     action: np.ndarray             # [S+1, A] int spec action id taken in the step (NO_ACTION at step 0)
     firings: Firings
     outcome: str | None            # win | loss | draw | truncated | aborted (red's side), None if running
+    changes: dict[str, np.ndarray]  # the episode's change rows as read (raw.changes columns, seq order)
 
     @property
     def steps(self) -> int:
@@ -393,7 +394,7 @@ class BoardLoader:
         return EpisodeBoard(episode, cast.map, cast.agents, cast.agent_team, cast.bullets, cast.bullet_team,
                             cast.bullet_owner, self.health0, state["agent_cell"], alive, health,
                             state["ammo"], state["bullet_cell"], state["bullet_dir"], state["action"],
-                            firings, ended[0][0] if ended else None)
+                            firings, ended[0][0] if ended else None, col)
 
 
 def load_episode(con: RunConnection, episode: int) -> EpisodeBoard:

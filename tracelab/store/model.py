@@ -76,6 +76,7 @@ class RunModel:
         self._atom_text: dict[int, str] = {}
         self._atom_label = self._atom_arg0 = self._atom_arg1 = np.zeros(0, np.int64)
         self._label_names: dict[int, str] = {}
+        self._atom_ids: dict[tuple[int, int, int], int] = {}
         self._groundings: dict[int, tuple[int, list[int], list[int]]] = {}
 
     # ---- rules -----------------------------------------------------------------------------------------
@@ -114,6 +115,15 @@ class RunModel:
             self._groundings[g] = (row[0], list(row[1]), list(row[2]))
         return self._groundings[g]
 
+    def prefetch_groundings(self, ids: list[int] | np.ndarray) -> None:
+        """Read these groundings in one query (callers about to explain many rows of an episode)."""
+        missing = sorted({int(g) for g in ids if g >= 0} - self._groundings.keys())
+        if missing:
+            for g, rule, body, values in self.con.execute(
+                    "SELECT grounding, rule, body_atoms, var_values FROM raw.groundings "
+                    "WHERE grounding IN (SELECT unnest(?::INTEGER[]))", [missing]).fetchall():
+                self._groundings[g] = (rule, list(body), list(values))
+
     def bindings(self, g: int) -> dict[str, str]:
         rule, _, values = self.grounding(g)
         return {v: self.nodes[x] for v, x in zip(self.rules[rule].variables, values)}
@@ -148,6 +158,8 @@ class RunModel:
         self.labels = {name: (lid, arity) for lid, name, arity in
                        self.con.execute("SELECT label, name, arity FROM raw.labels").fetchall()}
         self._label_names = {lid: name for name, (lid, _) in self.labels.items()}
+        self._atom_ids = {key: a for a, key in enumerate(zip(self._atom_label.tolist(), self._atom_arg0.tolist(),
+                                                            self._atom_arg1.tolist())) if key[0] >= 0}
 
     def atom_text(self, aid: int) -> str:
         return self.atom_texts([aid])[aid]
@@ -169,12 +181,16 @@ class RunModel:
         """The atom id of label(args), or None if it was never interned (then it is [0,1])."""
         if label not in self.labels or any(a not in self.node_ids for a in args):
             return None
-        lid = self.labels[label][0]
-        a0 = self.node_ids[args[0]]
-        a1 = self.node_ids[args[1]] if len(args) > 1 else -1
-        rows = self.con.execute("SELECT atom FROM raw.atoms WHERE label = ? AND arg0 = ? AND arg1 = ?",
-                                [lid, a0, a1]).fetchall()
-        return int(rows[0][0]) if rows else None
+        key = (self.labels[label][0], self.node_ids[args[0]], self.node_ids[args[1]] if len(args) > 1 else -1)
+        if key not in self._atom_ids and self._vocabulary_grew():
+            self._read_atoms()         # built once from the atoms table; again for a grown vocabulary
+        return self._atom_ids.get(key)
+
+    def _vocabulary_grew(self) -> bool:
+        if not len(self._atom_label):
+            return True
+        rows = self.con.execute("SELECT max(atom) FROM raw.atoms").fetchall()
+        return rows[0][0] is not None and rows[0][0] >= len(self._atom_label)
 
     def parse_atom(self, text: str) -> int:
         """The id of a ground atom written as text, e.g. atLoc(red-agent-1,16); errors name what is missing."""

@@ -113,7 +113,8 @@ def why_documents(con: RunConnection, board: EpisodeBoard, rewards: np.ndarray |
     wanted = explained_atoms(board)
     if wanted:
         run_model = model() if model else RunModel(con)
-        trace = EpisodeTrace(con, board.episode)
+        trace = EpisodeTrace(con, board.episode, columns=board.changes)
+        run_model.prefetch_groundings(np.unique(trace.c["grounding"]))
     docs = []
     for s in range(board.steps + 1):
         lines = _step_header(board, s, rewards)
