@@ -159,7 +159,11 @@ def test_episode_selection_and_user_errors(tmp_path: Path, capsys: pytest.Captur
     assert replay(SAMPLES / "advanced", "--outcome", "loss", "--limit", "1", "--save", out) == 0
     assert sorted(read_rrd(out)) == ["advanced/episode-0"]
     capsys.readouterr()
-    for bad in (["--episode", "9"], ["--episodes", "3-x"], ["--outcome", "tie"]):
+    assert replay(SAMPLES / "base", "--episode", "0", "--lanes", "alive,ammo", "--save", out) == 0
+    assert sorted(p for p in read_rrd(out)["base/episode-0"] if p.startswith("/lanes/")) == [
+        "/lanes/alive/blue-agent-1", "/lanes/alive/red-agent-1", "/lanes/ammo/blue-agent-1",
+        "/lanes/ammo/red-agent-1"]
+    for bad in (["--episode", "9"], ["--episodes", "3-x"], ["--outcome", "tie"], ["--lanes", "alive,mood"]):
         assert replay(SAMPLES / "advanced", *bad, "--save", tmp_path / "bad.rrd") == 1
         err = capsys.readouterr().err
         assert err.startswith("error: ") and err.count("\n") == 1, err

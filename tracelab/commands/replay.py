@@ -25,6 +25,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--port", type=int, default=9876, help="gRPC port for --serve / --spawn (default 9876)")
     p.add_argument("--web-port", type=int, default=9090, help="web viewer port for --serve (default 9090)")
     p.add_argument("--why-depth", type=positive_int, default=6, help="depth of the why-trees (default 6)")
+    p.add_argument("--lanes", default="alive,atLoc,health,ammo,action",
+                   help="state lanes to draw, comma-separated (default: alive,atLoc,health,ammo,action)")
     p.add_argument("--open-at", choices=("start", "end"), default="start",
                    help="where the viewer's time cursor starts (default: the first step)")
     p.set_defaults(func=run)
@@ -35,6 +37,7 @@ def run(args: argparse.Namespace) -> int:
     from tracelab.viewers.replay.outputs import GrpcOutput, SaveOutput
     from tracelab.viewers.replay.recording import ReplayOptions, RunContext
     from tracelab.viewers.replay.replay import follow_run, replay_run
+    from tracelab.viewers.replay.rules_layer import parse_lanes
     from tracelab.viewers.replay.select import EpisodeFilter, parse_episodes
 
     try:
@@ -43,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
         f = EpisodeFilter(ids, args.outcome, args.limit)
         name = resolve_run(args.run).name.removesuffix(".duckdb")
         con = open_run(args.run)
-        options = ReplayOptions(why_depth=args.why_depth, open_at=args.open_at)
+        options = ReplayOptions(why_depth=args.why_depth, lanes=parse_lanes(args.lanes), open_at=args.open_at)
         if args.serve or args.spawn:
             out = GrpcOutput("serve" if args.serve else "spawn", args.port, args.web_port)
         else:

@@ -42,6 +42,15 @@ def log_rule_log(rec: rr.RecordingStream, board: EpisodeBoard) -> None:
                                                 color=colours[f.phase]))
 
 
+def parse_lanes(text: str) -> tuple[str, ...]:
+    """'alive,ammo' -> ('alive', 'ammo'); an unknown lane is a ValueError naming the known ones."""
+    lanes = tuple(x.strip() for x in text.split(",") if x.strip())
+    unknown = [x for x in lanes if x not in LANE_LABELS]
+    if unknown:
+        raise ValueError(f"no lane {', '.join(unknown)}; lanes: {', '.join(LANE_LABELS)}")
+    return lanes
+
+
 def lane_values(board: EpisodeBoard, label: str) -> np.ndarray:
     """[steps + 1, agents] state text of one lane at the end of each step."""
     if label == "alive":
