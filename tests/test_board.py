@@ -19,19 +19,19 @@ SAMPLES = Path(__file__).resolve().parent.parent / "sample_runs"
 RUNS = ("base", "advanced", "nonmarkov")
 
 
-def _played(con) -> list[int]:  # noqa: ANN001
+def _played(con) -> list[int]:
     return [e for (e,) in con.execute("SELECT episode FROM episodes WHERE steps > 0 ORDER BY 1").fetchall()]
 
 
 @pytest.fixture(scope="module", params=RUNS)
-def run(request: pytest.FixtureRequest):  # noqa: ANN201
+def run(request: pytest.FixtureRequest):
     con = open_run(SAMPLES / request.param)
     config = json.loads(con.execute("SELECT config FROM run").fetchall()[0][0])
     scenario = scenario_from_dict(tomllib.loads(config["scenario"]), request.param)
     return con, scenario, {e: load_episode(con, e) for e in _played(con)}
 
 
-def test_the_map_comes_from_the_runs_facts(run) -> None:  # noqa: ANN001
+def test_the_map_comes_from_the_runs_facts(run) -> None:
     _, scenario, boards = run
     board = next(iter(boards.values()))
     assert (board.map.width, board.map.height) == (scenario.width, scenario.height)
@@ -42,7 +42,7 @@ def test_the_map_comes_from_the_runs_facts(run) -> None:  # noqa: ANN001
     assert len(board.bullets) == 2 * n * scenario.ammo
 
 
-def test_replaying_the_boards_actions_in_refsim_gives_the_same_board(run) -> None:  # noqa: ANN001
+def test_replaying_the_boards_actions_in_refsim_gives_the_same_board(run) -> None:
     """Every step's agents and bullets agree with RefSim fed the actions the board read from the trace."""
     _, scenario, boards = run
     n = scenario.agents_per_team
@@ -66,7 +66,7 @@ def test_replaying_the_boards_actions_in_refsim_gives_the_same_board(run) -> Non
         assert r.terminated[0] or r.truncated[0]
 
 
-def test_positions_and_actions_agree_with_the_runs_steps_rows(run) -> None:  # noqa: ANN001
+def test_positions_and_actions_agree_with_the_runs_steps_rows(run) -> None:
     con, scenario, boards = run
     n = scenario.agents_per_team
     for episode, board in boards.items():

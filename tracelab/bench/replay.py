@@ -106,9 +106,12 @@ def _cpu_seconds() -> float:
     return t.user + t.system + t.children_user + t.children_system
 
 
+def _model_of(ctx: Any) -> Callable[[], Any]:
+    return lambda: ctx.model
+
+
 def layer_times(run: Path, repeats: int) -> dict[str, float]:
     """Median seconds of each part of converting the run's first episode (recording kept in memory)."""
-    import rerun as rr
 
     from tracelab.store.reader import open_run
     from tracelab.viewers.replay import board_layer, plots, rules_layer
@@ -124,18 +127,15 @@ def layer_times(run: Path, repeats: int) -> dict[str, float]:
         t0 = time.perf_counter()
         board = ctx.loader.load(episode)
         rewards = plots.team_rewards(con, board)
-        parts: list[tuple[str, Any]] = [
-            ("board", lambda: board_layer.log_board(rec, board)),
-            ("rule log", lambda: rules_layer.log_rule_log(rec, board)),
-            ("state lanes", lambda: rules_layer.log_lanes(rec, board)),
-            ("plots", lambda: plots.log_rewards(rec, rewards)),
-            ("why documents", lambda: rules_layer.log_why(rec, con, board, rewards, 6, lambda: ctx.model)),
-            ("flush", lambda: rec.flush()),
-        ]
         times.setdefault("load (board from the run)", []).append(time.perf_counter() - t0)
-        for name, fn in parts:
+        for name, fn, args in (("board", board_layer.log_board, (rec, board)),
+                               ("rule log", rules_layer.log_rule_log, (rec, board)),
+                               ("state lanes", rules_layer.log_lanes, (rec, board)),
+                               ("plots", plots.log_rewards, (rec, rewards)),
+                               ("why documents", rules_layer.log_why, (rec, con, board, rewards, 6, _model_of(ctx))),
+                               ("flush", rec.flush, ())):
             t0 = time.perf_counter()
-            fn()
+            fn(*args)
             times.setdefault(name, []).append(time.perf_counter() - t0)
         memory.drain_as_bytes()
     con.close()

@@ -410,7 +410,7 @@ class _Atoms:
     value: np.ndarray              # cell id, direction, or -1
 
 
-def _state_atoms(vocab: "_Vocabulary") -> _Atoms:
+def _state_atoms(vocab: _Vocabulary) -> _Atoms:
     cast = vocab.cast
     n = vocab.n_atoms
     kind, entity, value = (np.full(n, -1, dtype=np.int64) for _ in range(3))
@@ -472,7 +472,7 @@ def _replay_state(cast: _Cast, atoms: _Atoms, col: dict[str, np.ndarray], t: np.
         out_spent[written:upto], out_dir[written:upto] = spent, direction
         written = upto
 
-    AT, ALIVE, HIT, SPENT, DIR, MOVE, SHOOT = range(len(_STATE_LABELS))
+    AT, ALIVE, HIT, SPENT, DIR, MOVE, _SHOOT = range(len(_STATE_LABELS))
     for s, k, e, v, on in zip(slot.tolist(), kinds.tolist(), ents.tolist(), vals.tolist(), true):
         if s >= written:
             if s // n_ph > action_step:     # the steps before this row's are over: their actions are final

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import rerun.blueprint as rrb
 from rerun.blueprint.encodings import TextLogColumn, TextLogColumnKind
+from tracelab.viewers.replay import style
 
 from tracelab.store.board import BoardMap
-from tracelab.viewers.replay import style
 
 
 def replay_blueprint(board_map: BoardMap, training: bool = False, open_at: str = "start") -> rrb.Blueprint:

@@ -7,9 +7,16 @@ from typing import Any
 
 import numpy as np
 import rerun as rr
-
-from tracelab.store.board import NO_ACTION, NOTHING, PHASES, TEAMS, BoardMap, EpisodeBoard
 from tracelab.viewers.replay import style
+
+from tracelab.store.board import (
+    NO_ACTION,
+    NOTHING,
+    PHASES,
+    TEAMS,
+    BoardMap,
+    EpisodeBoard,
+)
 
 # phases whose firings mark the board (the snapshot and the shield's view change nothing on it)
 _MARKED_PHASES = [i for i, name in enumerate(PHASES) if name not in ("start", "shield")]

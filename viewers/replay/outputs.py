@@ -10,7 +10,6 @@ import tempfile
 from pathlib import Path
 
 import rerun as rr
-
 from tracelab.viewers.replay.recording import APPLICATION_ID, new_recording
 
 
@@ -62,7 +61,7 @@ class SaveOutput:
             shutil.copyfile(self.files[0], tmp)
         else:
             done = subprocess.run([rerun_cli(), "rrd", "merge", "-o", str(tmp), *map(str, self.files)],
-                                  capture_output=True, text=True)
+                                  capture_output=True, text=True, check=False)
             if done.returncode != 0:
                 tmp.unlink(missing_ok=True)
                 raise RuntimeError(f"rerun rrd merge failed: {done.stderr.strip()[-500:]}")

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 import rerun as rr
+from tracelab.viewers.replay import style
 
 from tracelab.store.board import TEAMS, EpisodeBoard
 from tracelab.store.reader import RunConnection
-from tracelab.viewers.replay import style
 
 
 def team_rewards(con: RunConnection, board: EpisodeBoard) -> np.ndarray | None:

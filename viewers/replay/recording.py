@@ -6,12 +6,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import rerun as rr
+from tracelab.viewers.replay import board_layer, plots, rules_layer
+from tracelab.viewers.replay.blueprint import replay_blueprint
 
 from tracelab.store.board import BoardLoader, EpisodeBoard
 from tracelab.store.model import RunModel
 from tracelab.store.reader import RunConnection
-from tracelab.viewers.replay import board_layer, plots, rules_layer
-from tracelab.viewers.replay.blueprint import replay_blueprint
 
 APPLICATION_ID = "tracelab-replay"
 
@@ -34,7 +34,7 @@ class RunContext:
     _model: RunModel | None = None
 
     @classmethod
-    def of(cls, con: RunConnection, name: str) -> "RunContext":
+    def of(cls, con: RunConnection, name: str) -> RunContext:
         return cls(con, name, BoardLoader(con), plots.training_metrics(con))
 
     @property

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from functools import partial
 
-from tracelab.store.reader import RunConnection, retrying, run_info
 from tracelab.viewers.replay.outputs import Output
 from tracelab.viewers.replay.recording import ReplayOptions, RunContext, record_episode
 from tracelab.viewers.replay.select import EpisodeFilter, select_episodes
+
+from tracelab.store.reader import RunConnection, retrying, run_info
 
 
 def replay_episodes(ctx: RunContext, episodes: list[int], out: Output,
@@ -16,8 +18,7 @@ def replay_episodes(ctx: RunContext, episodes: list[int], out: Output,
     """Each episode as its own recording into `out`; returns how many were sent."""
     for e in episodes:
         rec = out.recording(ctx.name, e)
-        first = not out.blueprint_sent
-        retrying(lambda: record_episode(ctx, e, rec, options, blueprint=first))
+        retrying(partial(record_episode, ctx, e, rec, options, blueprint=not out.blueprint_sent))
         out.blueprint_sent = True
         out.finished(rec)
     return len(episodes)

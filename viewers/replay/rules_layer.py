@@ -6,13 +6,13 @@ from collections.abc import Callable
 
 import numpy as np
 import rerun as rr
+from tracelab.viewers.replay import style
 
 from tracelab.store.board import PHASES, TEAMS, EpisodeBoard
 from tracelab.store.episode import EpisodeTrace
 from tracelab.store.model import RunModel
 from tracelab.store.reader import RunConnection
 from tracelab.store.why import explain_in, render_why
-from tracelab.viewers.replay import style
 
 LANE_LABELS = ("alive", "atLoc", "health", "ammo", "action")
 END_LABELS = ("captured", "eliminated")
