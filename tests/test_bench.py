@@ -92,6 +92,16 @@ def test_bench_env_quick(capsys: pytest.CaptureFixture) -> None:
             positive(x["steps_per_s"])
 
 
+def test_bench_replay_quick(capsys: pytest.CaptureFixture) -> None:
+    r = bench_json(capsys, "replay")
+    machine(r["machine"])
+    assert (r["agents"], r["games"]) == (2, 10) and r["steps"] > 0 and r["trace_rows"] > 0
+    for key in ("one_game_s", "games_s", "one_game_cpu_s", "games_cpu_s"):
+        positive(r[key])
+    assert r["big_rrd_bytes"] > 0 and r["many_rrd_bytes"] > r["big_rrd_bytes"] / 10
+    assert set(r["layers_s"]) >= {"load (board from the run)", "board", "rule log", "why documents"}
+
+
 def test_bench_helpers() -> None:
     s = summarize([3.0, 1.0, 2.0])
     assert (s.median, s.min, s.max, s.spread) == (2.0, 1.0, 3.0, 1.0)

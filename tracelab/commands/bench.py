@@ -10,7 +10,7 @@ from typing import Any
 
 from tracelab.commands._args import positive_int
 
-SECTIONS = ("engine", "env", "store")
+SECTIONS = ("engine", "env", "store", "replay")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -20,7 +20,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     helps = {"engine": "compile and warm-start time, RuleSim steps/s and engine work, memory over a long run",
              "env": "RuleSim vs RefSim steps/s (one world and batched), the gymnasium envs, the goals",
              "store": "trace-store ingest rows/s, sealing, point queries",
-             "all": "engine, env and store"}
+             "replay": "tracelab replay: a 500-step 5v5 game and 100 games of 1v1 converted to .rrd",
+             "all": "engine, env, store and replay"}
     for name, text in helps.items():
         q = what.add_parser(name, help=text)
         q.add_argument("--json", action="store_true", help="machine-readable output")
@@ -57,6 +58,10 @@ def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], s
         from tracelab.bench import env
         r = env.run(args.quick, args.repeats, args.agents, args.batch)
         return r, env.report(r)
+    if name == "replay":
+        from tracelab.bench import replay
+        r = replay.run(args.quick, args.repeats)
+        return r, replay.report(r)
     from tracelab.bench import store
     r = store.run(args.quick, args.repeats)
     return r, store.report(r)

@@ -31,15 +31,22 @@ class Row:
 
 
 class EpisodeTrace:
-    def __init__(self, con: RunConnection, episode: int, upto_t: int | None = None) -> None:
+    def __init__(self, con: RunConnection, episode: int, upto_t: int | None = None,
+                 columns: dict[str, np.ndarray] | None = None) -> None:
+        """The episode's rows up to `upto_t`, read from the run; or `columns`, the episode's rows (the
+        _COLUMNS, in seq order) already read by the caller."""
         self.episode = episode
-        sql = f"SELECT {', '.join(_COLUMNS)} FROM raw.changes WHERE episode = ?"
-        params: list[int] = [episode]
-        if upto_t is not None:
-            sql += " AND t <= ?"
-            params.append(upto_t)
-        cols = con.execute(sql + " ORDER BY seq", params).fetchnumpy()
-        self.c = {k: np.asarray(v) for k, v in cols.items()}
+        if columns is not None:
+            keep = slice(None) if upto_t is None else columns["t"] <= upto_t
+            self.c = {k: np.asarray(columns[k])[keep] for k in _COLUMNS}
+        else:
+            sql = f"SELECT {', '.join(_COLUMNS)} FROM raw.changes WHERE episode = ?"
+            params: list[int] = [episode]
+            if upto_t is not None:
+                sql += " AND t <= ?"
+                params.append(upto_t)
+            cols = con.execute(sql + " ORDER BY seq", params).fetchnumpy()
+            self.c = {k: np.asarray(v) for k, v in cols.items()}
         n = len(self.c["seq"])
         self.n = n
         order = np.lexsort((self.c["seq"], self.c["atom"])) if n else np.zeros(0, np.int64)

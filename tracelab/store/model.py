@@ -74,6 +74,9 @@ class RunModel:
         self.labels = {name: (lid, arity) for lid, name, arity in
                        con.execute("SELECT label, name, arity FROM raw.labels").fetchall()}
         self._atom_text: dict[int, str] = {}
+        self._atom_label = self._atom_arg0 = self._atom_arg1 = np.zeros(0, np.int64)
+        self._label_names: dict[int, str] = {}
+        self._atom_ids: dict[tuple[int, int, int], int] = {}
         self._groundings: dict[int, tuple[int, list[int], list[int]]] = {}
 
     # ---- rules -----------------------------------------------------------------------------------------
@@ -102,12 +105,24 @@ class RunModel:
     def grounding(self, g: int) -> tuple[int, list[int], list[int]]:
         """(rule id, body atom ids in clause order, variable values as node ids)."""
         if g not in self._groundings:
-            row = self.con.execute("SELECT rule, body_atoms, var_values FROM raw.groundings "
-                                   "WHERE grounding = ?", [g]).fetchone()
+            # fetchall, not fetchone: DuckDB 2.0 refuses the connection's next statement while a result
+            # is not read to its end
+            rows = self.con.execute("SELECT rule, body_atoms, var_values FROM raw.groundings "
+                                    "WHERE grounding = ?", [g]).fetchall()
+            row = rows[0] if rows else None
             if row is None:
                 raise KeyError(f"grounding {g} is not in the run's grounding table")
             self._groundings[g] = (row[0], list(row[1]), list(row[2]))
         return self._groundings[g]
+
+    def prefetch_groundings(self, ids: list[int] | np.ndarray) -> None:
+        """Read these groundings in one query (callers about to explain many rows of an episode)."""
+        missing = sorted({int(g) for g in ids if g >= 0} - self._groundings.keys())
+        if missing:
+            for g, rule, body, values in self.con.execute(
+                    "SELECT grounding, rule, body_atoms, var_values FROM raw.groundings "
+                    "WHERE grounding IN (SELECT unnest(?::INTEGER[]))", [missing]).fetchall():
+                self._groundings[g] = (rule, list(body), list(values))
 
     def bindings(self, g: int) -> dict[str, str]:
         rule, _, values = self.grounding(g)
@@ -115,12 +130,36 @@ class RunModel:
 
     # ---- atoms -------------------------------------------------------------------------------------------
     def atom_texts(self, ids: list[int] | np.ndarray) -> dict[int, str]:
-        missing = sorted({int(a) for a in ids} - set(self._atom_text))
-        if missing:
-            for aid, text in self.con.execute("SELECT atom, text FROM atoms WHERE atom IN "
-                                              "(SELECT unnest(?::INTEGER[]))", [missing]).fetchall():
-                self._atom_text[aid] = text
-        return {int(a): self._atom_text.get(int(a), f"atom#{int(a)}") for a in ids}
+        """label(arg0[,arg1]) of atom ids, as the atoms view writes them; built from the atoms table read
+        once (again when an id is past it: a live run's vocabulary grows), not a query per call."""
+        out = {}
+        for a in (int(x) for x in ids):
+            text = self._atom_text.get(a)
+            if text is None:
+                if a >= len(self._atom_label):
+                    self._read_atoms()
+                if a < 0 or a >= len(self._atom_label) or self._atom_label[a] < 0:
+                    text = f"atom#{a}"
+                else:
+                    args = [self.nodes[n] for n in (self._atom_arg0[a], self._atom_arg1[a]) if n >= 0]
+                    text = f"{self._label_names.get(int(self._atom_label[a]), '?')}({','.join(args)})"
+                self._atom_text[a] = text
+            out[a] = text
+        return out
+
+    def _read_atoms(self) -> None:
+        cols = self.con.execute("SELECT atom, label, arg0, arg1 FROM raw.atoms").fetchnumpy()
+        n = int(cols["atom"].max()) + 1 if len(cols["atom"]) else 0
+        self._atom_label, self._atom_arg0, self._atom_arg1 = (np.full(n, -1, np.int64) for _ in range(3))
+        for arr, name in ((self._atom_label, "label"), (self._atom_arg0, "arg0"), (self._atom_arg1, "arg1")):
+            arr[np.asarray(cols["atom"])] = np.asarray(cols[name])
+        self.nodes = [n for (n,) in self.con.execute("SELECT name FROM raw.nodes ORDER BY node").fetchall()]
+        self.node_ids = {n: i for i, n in enumerate(self.nodes)}
+        self.labels = {name: (lid, arity) for lid, name, arity in
+                       self.con.execute("SELECT label, name, arity FROM raw.labels").fetchall()}
+        self._label_names = {lid: name for name, (lid, _) in self.labels.items()}
+        self._atom_ids = {key: a for a, key in enumerate(zip(self._atom_label.tolist(), self._atom_arg0.tolist(),
+                                                            self._atom_arg1.tolist())) if key[0] >= 0}
 
     def atom_text(self, aid: int) -> str:
         return self.atom_texts([aid])[aid]
@@ -142,12 +181,16 @@ class RunModel:
         """The atom id of label(args), or None if it was never interned (then it is [0,1])."""
         if label not in self.labels or any(a not in self.node_ids for a in args):
             return None
-        lid = self.labels[label][0]
-        a0 = self.node_ids[args[0]]
-        a1 = self.node_ids[args[1]] if len(args) > 1 else -1
-        row = self.con.execute("SELECT atom FROM raw.atoms WHERE label = ? AND arg0 = ? AND arg1 = ?",
-                               [lid, a0, a1]).fetchone()
-        return None if row is None else int(row[0])
+        key = (self.labels[label][0], self.node_ids[args[0]], self.node_ids[args[1]] if len(args) > 1 else -1)
+        if key not in self._atom_ids and self._vocabulary_grew():
+            self._read_atoms()         # built once from the atoms table; again for a grown vocabulary
+        return self._atom_ids.get(key)
+
+    def _vocabulary_grew(self) -> bool:
+        if not len(self._atom_label):
+            return True
+        rows = self.con.execute("SELECT max(atom) FROM raw.atoms").fetchall()
+        return rows[0][0] is not None and rows[0][0] >= len(self._atom_label)
 
     def parse_atom(self, text: str) -> int:
         """The id of a ground atom written as text, e.g. atLoc(red-agent-1,16); errors name what is missing."""

@@ -1,0 +1,44 @@
+#!/usr/bin/env bash
+# Regenerates the replay screenshots of README.md and docs/replay.md with rerun's own viewer, rendered
+# without a GPU: apt-get install -y mesa-vulkan-drivers xvfb imagemagick
+#   bash docs/images/regenerate.sh
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+tmp=$(mktemp -d)
+# A screen larger than the viewer's window: X puts the pointer at the screen's centre, off the window,
+# so no hover tooltip lands on the board.
+Xvfb :97 -screen 0 4000x2400x24 >/dev/null 2>&1 &
+xvfb=$!
+trap 'kill $xvfb; rm -rf "$tmp"' EXIT
+sleep 2
+
+shot() {  # shot RRD PNG: the viewer at 1800x1100 points (it renders at 2x), halved to 1800x1100 pixels
+  DISPLAY=:97 rerun "$(realpath "$1")" --screenshot-to "$tmp/shot.png" --window-size 1800x1100 >/dev/null 2>&1
+  convert "$tmp/shot.png" -resize 50% "$2"
+}
+
+# README and the top of docs/replay.md: a hit, a death, the end of the game and their why-trees
+tracelab replay sample_runs/advanced --episode 0 --open-at end --save "$tmp/kill.rrd"
+shot "$tmp/kill.rrd" docs/images/replay.png
+
+# the non-Markov sample: 2v2 with slow agents
+tracelab replay sample_runs/nonmarkov --episode 0 --open-at end --save "$tmp/2v2.rrd"
+shot "$tmp/2v2.rrd" docs/images/replay-2v2.png
+
+# a 3v3 game of the advanced rules
+cat > "$tmp/3v3.toml" <<'TOML'
+name = "advanced3v3"
+width = 9
+height = 9
+red_base = [8, 0]
+blue_base = [0, 8]
+mountains = [[3, 4], [4, 4], [5, 4], [4, 3], [4, 5]]
+agents_per_team = 3
+red_starts = [[8, 0], [7, 0], [8, 1]]
+blue_starts = [[0, 8], [1, 8], [0, 7]]
+advanced = true
+TOML
+tracelab play --scenario "$tmp/3v3.toml" --episodes 1 --seed 3 --run "$tmp/3v3" >/dev/null
+tracelab replay "$tmp/3v3" --episode 0 --open-at end --save "$tmp/3v3.rrd"
+shot "$tmp/3v3.rrd" docs/images/replay-3v3.png
+ls -la docs/images/*.png

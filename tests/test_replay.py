@@ -1,0 +1,237 @@
+"""`tracelab replay`, headless: .rrd files checked with rerun's own CLI and read back through rerun's chunk
+reader (entity paths, steps, fired-rule lines, agent positions against the run's steps rows), a training
+run per the training-run contract, --live on a run being written, and a golden file.
+
+The golden file: regenerate it (after an intended change) with
+    tracelab replay sample_runs/base --episode 2 --why-depth 2 --save tests/data/replay_golden.rrd
+"""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rerun.chunk import RrdReader
+from tracelab.viewers.replay.outputs import rerun_cli
+
+from tracelab.cli import main
+from tracelab.store.reader import open_run
+from tracelab.store.why import explain, render_why
+
+ROOT = Path(__file__).resolve().parent.parent
+SAMPLES = ROOT / "sample_runs"
+GOLDEN = ROOT / "tests" / "data" / "replay_golden.rrd"
+
+
+def read_rrd(path: Path) -> dict[str, dict[str, list[dict]]]:
+    """recording id -> entity path -> rows (column name -> value), timed rows in time order."""
+    reader = RrdReader(path)
+    out: dict[str, dict[str, list[dict]]] = {}
+    for store in reader.recordings():
+        entities: dict[str, list[dict]] = {}
+        for chunk in reader.stream(store=store):
+            batch = chunk.to_record_batch()
+            cols = {name: batch.column(name).to_pylist() for name in batch.schema.names}
+            rows = entities.setdefault(chunk.entity_path, [])
+            rows += [{k: v[i] for k, v in cols.items()} for i in range(batch.num_rows)]
+        for rows in entities.values():
+            rows.sort(key=lambda r: (r.get("step", -1), r.get("pass", -1)))
+        out[store.recording_id] = entities
+    return out
+
+
+def latest_at(rows: list[dict], step: int, column: str) -> object:
+    """The value of `column` in force at `step` on the step timeline (the last row at or before it)."""
+    value = None
+    for r in rows:
+        if r.get("step") is not None and r["step"] <= step and r.get(column) is not None:
+            value = r[column]
+    return value
+
+
+def replay(*args: str) -> int:
+    return main(["replay", *map(str, args)])
+
+
+@pytest.fixture(scope="module")
+def advanced(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("replay") / "advanced.rrd"
+    assert replay(SAMPLES / "advanced", "--save", path) == 0
+    return path
+
+
+@pytest.fixture(scope="module")
+def advanced_data(advanced: Path) -> dict[str, dict[str, list[dict]]]:
+    return read_rrd(advanced)
+
+
+def test_one_recording_per_played_episode_that_rerun_verifies(advanced, advanced_data) -> None:
+    assert sorted(advanced_data) == [f"advanced/episode-{e}" for e in range(3)]   # 3 played, 1 aborted
+    verify = subprocess.run([rerun_cli(), "rrd", "verify", str(advanced)], capture_output=True, text=True, check=False)
+    assert verify.returncode == 0, verify.stderr
+    stats = subprocess.run([rerun_cli(), "rrd", "stats", str(advanced)], capture_output=True, text=True, check=False)
+    assert stats.returncode == 0 and "/board/agents/red-agent-1" in stats.stdout
+
+
+def test_entity_paths_and_steps(advanced_data) -> None:
+    ep0 = advanced_data["advanced/episode-0"]
+    for path in ("/board", "/board/terrain", "/board/grid", "/board/bases", "/board/agents/red-agent-1",
+                 "/board/agents/blue-agent-1", "/board/bullets/red", "/board/bullets/blue",
+                 "/board/actions/red/move", "/board/actions/red/shot", "/board/fired", "/rules/log", "/why",
+                 "/lanes/alive/red-agent-1", "/lanes/atLoc/blue-agent-1", "/plots/return/red",
+                 "/plots/reward/blue"):
+        assert path in ep0, path
+    assert [r["step"] for r in ep0["/why"]] == list(range(16))                   # steps 0..15
+    assert max(r["pass"] for r in ep0["/rules/log"]) // 10 == 15
+    assert not any(p.startswith("/train") for p in ep0)                          # not a training run
+
+
+def test_the_fired_rule_log_of_a_known_step(advanced_data) -> None:
+    """Advanced episode 0, step 15: blue's bullet hits red on (4,3) and red dies."""
+    log = [r for r in advanced_data["advanced/episode-0"]["/rules/log"] if r["step"] == 15]
+    con = open_run(SAMPLES / "advanced")
+    n = con.execute("SELECT count(*) FROM firings WHERE episode = 0 AND t = 15").fetchall()[0][0]
+    assert len(log) == n
+    lines = {(r["TextLog:level"][0], r["TextLog:text"][0]) for r in log}
+    hit = "b_hit(B=blue-bullet-1-1, A=red-agent-1, Y=28): struck(blue-bullet-1-1,red-agent-1) [0,1] -> [1,1]"
+    assert ("bullets", hit) in lines
+    assert ("deaths", "d_killed(A=red-agent-1): alive(red-agent-1) [1,1] -> [0,0]") in lines
+    assert ("end", "g_eliminated(T=red, A=red-agent-1): eliminated(red) [0,1] -> [1,1]") in lines
+    passes = [r["pass"] for r in log]
+    assert passes == sorted(passes)                     # phases in engine order within the step
+
+
+def test_the_struck_cell_is_marked_with_the_rule(advanced_data) -> None:
+    fired = advanced_data["advanced/episode-0"]["/board/fired"]
+    bullets_phase = next(r for r in fired if r["pass"] == 151)                 # step 15, phase 1 (bullets)
+    assert bullets_phase["Boxes2D:centers"] == [[4.5, 4.5]]                      # cell (4,3), drawn y = 8-0.5-3
+    assert bullets_phase["Boxes2D:labels"] == ["b_hit"]
+    end = [r for r in fired if r["step"] == 15][-1]
+    assert "d_killed" in end["Boxes2D:labels"][0] and "g_eliminated" in end["Boxes2D:labels"][0]
+
+
+@pytest.mark.parametrize("run", ["advanced", "nonmarkov"])
+def test_agent_positions_agree_with_the_runs_steps_rows(run: str, tmp_path: Path) -> None:
+    path = tmp_path / f"{run}.rrd"
+    assert replay(SAMPLES / run, "--save", path) == 0
+    data = read_rrd(path)
+    con = open_run(SAMPLES / run)
+    config = json.loads(con.execute("SELECT config FROM run").fetchall()[0][0])
+    height = int(next(line for line in config["scenario"].splitlines() if line.startswith("height")).split("=")[1])
+    rows = con.execute("SELECT episode, step, obs FROM steps WHERE agent = 'red-agent-1' ORDER BY 1, 2").fetchall()
+    agents = sorted({a for (a,) in con.execute("SELECT DISTINCT agent FROM steps").fetchall()},
+                    key=lambda a: (not a.startswith("red"), a))
+    checked = 0
+    for episode, step, obs in rows:
+        entities = data[f"{run}/episode-{episode}"]
+        xy = np.asarray(obs[:2 * len(agents)]).reshape(-1, 2)
+        for agent, (x, y) in zip(agents, xy.tolist()):
+            agent_rows = entities[f"/board/agents/{agent}"]
+            label = latest_at(agent_rows, step, "Points2D:labels")[0]
+            if x < 0:                                   # dead: observed at (-1, -1)
+                assert label.endswith("dead")
+                continue
+            px, py = latest_at(agent_rows, step, "Points2D:positions")[0]
+            assert (px - 0.5, height - 0.5 - py) == (x, y), (episode, step, agent)
+            checked += 1
+    assert checked > 20
+
+
+def test_lanes_and_the_why_document_of_a_death(advanced_data) -> None:
+    ep0 = advanced_data["advanced/episode-0"]
+    alive = [(r["step"], r["StateChange:state"]) for r in ep0["/lanes/alive/red-agent-1"] if "step" in r]
+    assert alive == [(0, ["alive"]), (15, ["dead"])]
+    doc = ep0["/why"][15]["TextDocument:text"][0]
+    tree = render_why(explain(open_run(SAMPLES / "advanced"), 0, "alive(red-agent-1)", 15), 15)
+    assert "### Why alive(red-agent-1)" in doc and tree in doc       # as `tracelab why` prints it
+    assert "### Why eliminated(red)" in doc and "End of the game: loss" in doc
+    assert "No death" in ep0["/why"][3]["TextDocument:text"][0]
+
+
+def test_episode_selection_and_user_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "sel.rrd"
+    assert replay(SAMPLES / "base", "--episodes", "0-1", "--save", out) == 0
+    assert sorted(read_rrd(out)) == ["base/episode-0", "base/episode-1"]
+    assert replay(SAMPLES / "advanced", "--outcome", "loss", "--limit", "1", "--save", out) == 0
+    assert sorted(read_rrd(out)) == ["advanced/episode-0"]
+    capsys.readouterr()
+    assert replay(SAMPLES / "base", "--episode", "0", "--lanes", "alive,ammo", "--save", out) == 0
+    assert sorted(p for p in read_rrd(out)["base/episode-0"] if p.startswith("/lanes/")) == [
+        "/lanes/alive/blue-agent-1", "/lanes/alive/red-agent-1", "/lanes/ammo/blue-agent-1",
+        "/lanes/ammo/red-agent-1"]
+    for bad in (["--episode", "9"], ["--episodes", "3-x"], ["--outcome", "tie"], ["--lanes", "alive,mood"]):
+        assert replay(SAMPLES / "advanced", *bad, "--save", tmp_path / "bad.rrd") == 1
+        err = capsys.readouterr().err
+        assert err.startswith("tracelab: error: ") and err.count("\n") == 1, err
+    assert replay(tmp_path / "no-such-run", "--save", out) == 1
+
+
+def _write_training_run(run_dir: Path) -> None:
+    """A run following the training-run contract: traced eval games (begin info kind=eval), an untraced
+    training episode, and metrics."""
+    from tracelab.envs.vector_env import GridWarVectorEnv
+    from tracelab.store import TraceWriter
+    from tracelab.store.sink import StoreSink
+
+    class EvalSink(StoreSink):
+        def begin_episode(self, world: int, episode: int, seed: int | None, scenario: object) -> None:
+            self.writer.begin_episode(int(episode), world=int(world), t_start=0, seed=seed, info={
+                "kind": "eval", "train_step": 100 * (episode + 1), "eval_round": episode, "opponent_p": 0.3})
+
+    writer = TraceWriter.open(run_dir, {"command": "tracelab train --test", "scenario": "advanced",
+                                        "config": {"steps": 300}, "seed": 0})
+    env = GridWarVectorEnv(1, "advanced", trace_sink=EvalSink(writer))
+    env.reset(seed=4)
+    ended = 0
+    while ended < 2:
+        red = env.sim.scripted_actions("red")
+        _, _, term, trunc, _ = env.step(np.array([red[0, 0]]))
+        ended += int(term[0] or trunc[0])
+    writer.begin_episode(1000, info={"kind": "train", "train_step": 50})
+    writer.end_episode(1000, steps=12, outcome="loss", reward=-260.0)
+    for step in (100, 200, 300):
+        writer.write_metrics(step, {"loss": 1.0 / step, "epsilon": 1 - step / 400, "eval/win_rate@p0.3": step / 300})
+    env.close()
+
+
+def test_a_training_run_replays_its_eval_games_with_the_training_curves(tmp_path: Path) -> None:
+    _write_training_run(tmp_path / "train")
+    out = tmp_path / "train.rrd"
+    assert replay(tmp_path / "train", "--save", out) == 0
+    data = read_rrd(out)
+    assert sorted(data) == ["train/episode-0", "train/episode-1"]              # the eval games only
+    entities = data["train/episode-0"]
+    win = entities["/train/eval/win_rate/p0.3"]
+    assert [r["train_step"] for r in win] == [100, 200, 300]
+    assert [r["Scalars:scalars"][0] for r in win] == pytest.approx([1 / 3, 2 / 3, 1.0])
+    assert "/train/loss" in entities and "/train/epsilon" in entities
+
+
+def test_live_follows_a_run_being_written(tmp_path: Path) -> None:
+    run_dir, out = tmp_path / "live", tmp_path / "live.rrd"
+    play = subprocess.Popen([sys.executable, "-m", "tracelab.cli", "play", "--scenario", "advanced",
+                             "--episodes", "3", "--seed", "2", "--run", str(run_dir)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not (run_dir / "parts" / "manifest.json").exists():
+            assert play.poll() is None or (run_dir / "parts" / "manifest.json").exists(), play.stderr.read()
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
+        assert replay(run_dir, "--live", "--save", out) == 0
+    finally:
+        play.wait(timeout=120)
+    assert play.returncode == 0
+    assert sorted(read_rrd(out)) == [f"live/episode-{e}" for e in range(3)]
+
+
+def test_the_golden_recording_is_unchanged(tmp_path: Path) -> None:
+    out = tmp_path / "golden.rrd"
+    assert replay(SAMPLES / "base", "--episode", "2", "--why-depth", "2", "--save", out) == 0
+    compare = subprocess.run([rerun_cli(), "rrd", "compare", "--unordered", str(GOLDEN), str(out)],
+                             capture_output=True, text=True, check=False)
+    assert compare.returncode == 0, (compare.stdout + compare.stderr)[-2000:]

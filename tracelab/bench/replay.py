@@ -1,0 +1,184 @@
+"""`tracelab bench replay`: how fast `tracelab replay` turns traced games into a rerun .rrd file.
+
+Two runs are written first (not timed), sealed, then converted `repeats` times each:
+- one 5v5 game of 500 steps (advanced rules on a 16x16 map, health 10 so nobody dies, both teams mostly
+  idle so the game runs to its step limit), goal <= 0.5 s;
+- 100 games of 1v1 (the advanced scenario, scripted red against the scripted opponent), goal <= 5 s.
+A conversion is everything `tracelab replay RUN --save FILE` does after start-up: open the run, read
+what its episodes share, rebuild and log every episode, write the file (merging the recordings of
+several episodes with `rerun rrd merge`). Medians, with a breakdown of the 5v5 game by layer."""
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tracelab.bench.common import Summary, format_table, machine_info, summarize
+from tracelab.bench.engine import machine_line
+
+GOAL_5V5_S = 0.5
+GOAL_100_GAMES_S = 5.0
+
+
+def write_idle_game(run_dir: Path, agents: int = 5, steps: int = 500, seed: int = 0) -> None:
+    """One traced game that lasts `steps` steps: each agent does nothing 80% of the time, else a random
+    action (moves and shots); health 10 makes a kill take 10 hits, more than the bullets in play."""
+    from tracelab.envs.tracer import EpisodeTracer
+    from tracelab.game.facts import GAME_RULES
+    from tracelab.game.rulesim import RuleSim
+    from tracelab.game.scenario import Scenario
+    from tracelab.store import TraceWriter, seal_run
+    from tracelab.store.sink import StoreSink
+
+    scenario = Scenario(name=f"bench{agents}v{agents}", width=16, height=16, red_base=(15, 0),
+                        blue_base=(0, 15), mountains=((7, 7), (8, 7), (7, 8), (8, 8), (3, 12), (12, 3)),
+                        agents_per_team=agents, advanced=True, health=10.0, max_steps=steps)
+    meta = {"command": "tracelab bench replay", "scenario": scenario.name,
+            "config": {"scenario": scenario.to_toml()}, "rule_files": [str(GAME_RULES)], "seed": seed}
+    sim = RuleSim(scenario, 1, seed=seed, trace=True)
+    tracer = EpisodeTracer(StoreSink(TraceWriter.open(run_dir, meta)), scenario, sim)
+    rng = np.random.default_rng(seed)
+    sim.reset(seed=seed)
+    tracer.begin(np.arange(1), seed)
+    for _ in range(steps):
+        acts = np.where(rng.random((2, 1, agents)) < 0.8, 8, rng.integers(0, 8, (2, 1, agents)))
+        res = sim.step(acts[0], acts[1])
+        tracer.stepped(res, np.stack([acts[0], acts[1]], axis=1))
+        if res.terminated[0] or res.truncated[0]:
+            break
+    tracer.close()
+    seal_run(run_dir)
+
+
+def write_1v1_games(run_dir: Path, games: int = 100, seed: int = 0) -> None:
+    """`games` traced 1v1 games of the advanced scenario, as `tracelab play` plays them."""
+    from argparse import Namespace
+
+    from tracelab.commands.play import play
+    from tracelab.game.facts import GAME_RULES
+    from tracelab.game.scenario import builtin_scenario
+    from tracelab.store import TraceWriter, seal_run
+    from tracelab.store.sink import StoreSink
+
+    scenario = builtin_scenario("advanced")
+    meta = {"command": "tracelab bench replay", "scenario": scenario.name,
+            "config": {"scenario": scenario.to_toml()}, "rule_files": [str(GAME_RULES)], "seed": seed}
+    play(scenario, Namespace(episodes=games, worlds=1, policy="scripted", seed=seed),
+         sink=StoreSink(TraceWriter.open(run_dir, meta)))
+    seal_run(run_dir)
+
+
+def convert(run: Path, out: Path) -> int:
+    """`tracelab replay RUN --save OUT` without the process start-up; returns the recordings written."""
+    from tracelab.store.reader import open_run
+    from tracelab.viewers.replay.outputs import SaveOutput
+    from tracelab.viewers.replay.recording import RunContext
+    from tracelab.viewers.replay.replay import replay_run
+    from tracelab.viewers.replay.select import EpisodeFilter
+
+    con = open_run(run)
+    try:
+        return replay_run(RunContext.of(con, run.name), EpisodeFilter(), SaveOutput(out))
+    finally:
+        con.close()
+
+
+def wall_and_cpu(fn: Callable[[], object], repeats: int) -> tuple[Summary, Summary]:
+    """Wall-clock seconds and CPU seconds (this process and its children: `rerun rrd merge`) of
+    `repeats` calls. On a shared machine the CPU time is the steadier figure: the wall clock also counts
+    the time other processes held the cores."""
+    walls, cpus = [], []
+    for _ in range(max(1, repeats)):
+        t0, c0 = time.perf_counter(), _cpu_seconds()
+        fn()
+        walls.append(time.perf_counter() - t0)
+        cpus.append(_cpu_seconds() - c0)
+    return summarize(walls), summarize(cpus)
+
+
+def _cpu_seconds() -> float:
+    t = os.times()
+    return t.user + t.system + t.children_user + t.children_system
+
+
+def _model_of(ctx: Any) -> Callable[[], Any]:
+    return lambda: ctx.model
+
+
+def layer_times(run: Path, repeats: int) -> dict[str, float]:
+    """Median seconds of each part of converting the run's first episode (recording kept in memory)."""
+
+    from tracelab.store.reader import open_run
+    from tracelab.viewers.replay import board_layer, plots, rules_layer
+    from tracelab.viewers.replay.recording import RunContext, new_recording
+
+    con = open_run(run)
+    ctx = RunContext.of(con, run.name)
+    episode = con.execute("SELECT min(episode) FROM episodes WHERE steps > 0").fetchall()[0][0]
+    times: dict[str, list[float]] = {}
+    for _ in range(repeats):
+        rec = new_recording(run.name, episode)
+        memory = rec.memory_recording()
+        t0 = time.perf_counter()
+        board = ctx.loader.load(episode)
+        rewards = plots.team_rewards(con, board)
+        times.setdefault("load (board from the run)", []).append(time.perf_counter() - t0)
+        for name, fn, args in (("board", board_layer.log_board, (rec, board)),
+                               ("rule log", rules_layer.log_rule_log, (rec, board)),
+                               ("state lanes", rules_layer.log_lanes, (rec, board)),
+                               ("plots", plots.log_rewards, (rec, rewards)),
+                               ("why documents", rules_layer.log_why, (rec, con, board, rewards, 6, _model_of(ctx))),
+                               ("flush", rec.flush, ())):
+            t0 = time.perf_counter()
+            fn(*args)
+            times.setdefault(name, []).append(time.perf_counter() - t0)
+        memory.drain_as_bytes()
+    con.close()
+    return {k: summarize(v).median for k, v in times.items()}
+
+
+def run(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
+    """--quick: a 2v2 game of 100 steps and 10 games of 1v1 (a smoke run, not for figures)."""
+    info = machine_info()
+    agents, steps, games = (2, 100, 10) if quick else (5, 500, 100)
+    with tempfile.TemporaryDirectory(prefix="tracelab-bench-replay-") as tmp:
+        tmp_path = Path(tmp)
+        big, many = tmp_path / f"game{agents}v{agents}", tmp_path / f"games1v1x{games}"
+        write_idle_game(big, agents, steps)
+        write_1v1_games(many, games)
+        convert(big, tmp_path / "warm.rrd")                       # warm-up: imports, first queries
+        one, one_cpu = wall_and_cpu(lambda: convert(big, tmp_path / "big.rrd"), repeats)
+        hundred, hundred_cpu = wall_and_cpu(lambda: convert(many, tmp_path / "many.rrd"), repeats)
+        layers = layer_times(big, repeats)
+        from tracelab.store.reader import open_run
+        con = open_run(big)
+        played = con.execute("SELECT steps FROM episodes WHERE steps > 0").fetchall()[0][0]
+        rows = con.execute("SELECT count(*) FROM raw.changes").fetchall()[0][0]
+        con.close()
+        sizes = {"big_rrd_bytes": (tmp_path / "big.rrd").stat().st_size,
+                 "many_rrd_bytes": (tmp_path / "many.rrd").stat().st_size}
+    info["load_average_end"] = machine_info()["load_average"]
+    return {"machine": info, "quick": quick, "repeats": repeats, "agents": agents, "steps": played,
+            "trace_rows": rows, "games": games, "one_game_s": one.to_dict(), "games_s": hundred.to_dict(),
+            "one_game_cpu_s": one_cpu.to_dict(), "games_cpu_s": hundred_cpu.to_dict(),
+            "layers_s": layers, **sizes, "goals": {"one_game_s": GOAL_5V5_S, "games_s": GOAL_100_GAMES_S}}
+
+
+def report(r: dict[str, Any]) -> str:
+    one, many = r["one_game_s"], r["games_s"]
+    n = r["agents"]
+    table = format_table(["replay conversion (run -> .rrd)", "wall s", "spread", "CPU s", "goal s"], [
+        [f"one {n}v{n} game of {r['steps']} steps ({r['trace_rows']:,} trace rows)", one["median"],
+         f"{100 * one['spread']:.0f}%", r["one_game_cpu_s"]["median"], GOAL_5V5_S if not r["quick"] else ""],
+        [f"{r['games']} games of 1v1", many["median"], f"{100 * many['spread']:.0f}%",
+         r["games_cpu_s"]["median"], GOAL_100_GAMES_S if not r["quick"] else ""],
+    ])
+    layers = format_table([f"the {n}v{n} game by layer", "median s"], [[k, v] for k, v in r["layers_s"].items()])
+    return (machine_line(r["machine"], r["quick"], r["repeats"]) + "\n\n" + table + "\n\n" + layers +
+            f"\n\n.rrd sizes: {r['big_rrd_bytes'] / 1e6:.1f} MB (one game), {r['many_rrd_bytes'] / 1e6:.1f} MB "
+            f"({r['games']} games)")

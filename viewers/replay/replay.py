@@ -1,0 +1,67 @@
+"""Replaying a run: the chosen episodes, once (`replay_run`) or as they finish in a run being written
+(`follow_run`, --live)."""
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from functools import partial
+
+from tracelab.viewers.replay.outputs import Output
+from tracelab.viewers.replay.recording import ReplayOptions, RunContext, record_episode
+from tracelab.viewers.replay.select import EpisodeFilter, select_episodes
+
+from tracelab.store.reader import RunConnection, retrying, run_info
+
+
+def replay_episodes(ctx: RunContext, episodes: list[int], out: Output,
+                    options: ReplayOptions | None = None) -> int:
+    """Each episode as its own recording into `out`; returns how many were sent."""
+    for e in episodes:
+        rec = out.recording(ctx.name, e)
+        retrying(partial(record_episode, ctx, e, rec, options, blueprint=not out.blueprint_sent))
+        out.blueprint_sent = True
+        out.finished(rec)
+    return len(episodes)
+
+
+def replay_run(ctx: RunContext, f: EpisodeFilter, out: Output, options: ReplayOptions | None = None) -> int:
+    episodes = retrying(lambda: select_episodes(ctx.con, f))
+    if not episodes:
+        raise ValueError("no episode of this run matches (played episodes with steps > 0"
+                         + (f", outcome {f.outcome}" if f.outcome else "") + ")")
+    n = replay_episodes(ctx, episodes, out, options)
+    out.close()
+    return n
+
+
+def follow_run(con: RunConnection, name: str, run: str, f: EpisodeFilter, out: Output,
+               options: ReplayOptions | None = None, poll_s: float = 0.5,
+               on_episode: Callable[[int], None] | None = None) -> int:
+    """Stream each episode the filter picks as soon as it has ended, until the run stops running.
+    Returns how many were sent. The run's program is read once its first episode has ended (a run
+    just started may not have published it yet)."""
+    sent: set[int] = set()
+    ctx: RunContext | None = None
+    while True:
+        running = run_info(run).status == "running"
+        new = retrying(lambda: select_episodes(con, EpisodeFilter(None, f.outcome), exclude=sent))
+        if f.episodes is not None:
+            new = [e for e in new if e in f.episodes]
+        if f.limit is not None:
+            new = new[:max(f.limit - len(sent), 0)]
+        if new:
+            if ctx is None:
+                ctx = retrying(lambda: RunContext.of(con, name))
+            else:
+                ctx.refresh()                   # new metrics; the vocabulary grows while a run is written
+            for e in new:
+                replay_episodes(ctx, [e], out, options)
+                sent.add(e)
+                out.write()
+                if on_episode:
+                    on_episode(e)
+        if (f.limit is not None and len(sent) >= f.limit) or not running:
+            break
+        time.sleep(poll_s)
+    out.close()
+    return len(sent)
