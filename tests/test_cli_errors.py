@@ -149,6 +149,10 @@ def test_a_second_play_into_the_same_run_is_refused_and_ctrl_c_says_what_was_kep
         err = second.stderr.decode()
         assert second.returncode == 1 and err.count("\n") == 1, err
         assert err.startswith(f"tracelab: error: --run {run} already holds a run"), err
+        # Ctrl-C once games are being played: a cold numba cache compiles for a minute or more first
+        while not any((run / "parts" / "episode_end").glob("*.parquet")):
+            assert first.poll() is None and time.monotonic() < deadline + 300, first.stderr.read().decode()
+            time.sleep(0.2)
         first.send_signal(signal.SIGINT)
         assert first.wait(timeout=120) == 130
         last = first.stderr.read().decode().splitlines()[-1]
