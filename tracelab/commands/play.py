@@ -1,6 +1,7 @@
 """`tracelab play`: play games of the rule-driven simulator, traced into a run of the trace store.
 
-Red is played by a simple policy (random, or the scripted base policy), blue by the scripted opponent.
+Red is played by a simple policy (random, or the scripted base policy) or a trained one (`--policy PATH`,
+a policy directory written by `tracelab train`), blue by the scripted opponent.
 Every interpretation change of every episode goes to the run, with per-step actions and rewards, and
 the command ends by saying what to open.
 """
@@ -20,12 +21,16 @@ OUTCOMES = {0: "win", 1: "loss", 2: "draw"}  # from red's side, by WINNER_RED / 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("play", help="play traced games (red: a simple policy; blue: the scripted "
                                     "opponent) into a trace-store run")
-    p.add_argument("--scenario", default="advanced",
-                   help="a built-in scenario name (base, advanced, nonmarkov) or a scenario .toml file")
+    p.add_argument("--scenario", default=None,
+                   help="a built-in scenario name (base, advanced, nonmarkov) or a scenario .toml file "
+                        "(default: advanced, or the scenario a --policy PATH was trained on)")
     p.add_argument("--episodes", type=int, default=5, help="episodes to play (default 5)")
     p.add_argument("--worlds", type=int, default=1, help="worlds stepped together (default 1)")
-    p.add_argument("--policy", choices=("random", "scripted"), default="scripted",
-                   help="red's policy (default: the scripted base policy)")
+    p.add_argument("--policy", default="scripted",
+                   help="red's policy: random, scripted (the scripted base policy, default) or the path of "
+                        "a trained policy (e.g. RUN/policy)")
+    p.add_argument("--opponent-p", type=float, default=None,
+                   help="the opponent's probability of a move towards red's base (default 0.7)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--run", help="run directory (default runs/play-<scenario>-<time>)")
     p.add_argument("--no-trace", action="store_true", help="play without recording a run")
@@ -40,14 +45,22 @@ def run(args: argparse.Namespace) -> int:
         load_scenario,
     )
 
+    args.trained = None
     try:
-        scenario = builtin_scenario(args.scenario) if args.scenario in builtin_scenario_names() \
-            else load_scenario(args.scenario)
-    except (ScenarioError, OSError) as e:
-        print(f"error: {e}", file=sys.stderr)
+        if args.policy not in ("random", "scripted"):
+            from tracelab.train.policy import load_policy, policy_scenario, read_policy_spec
+            spec = read_policy_spec(args.policy)
+            scenario = policy_scenario(spec)
+        if args.scenario is not None or args.policy in ("random", "scripted"):
+            name = args.scenario or "advanced"
+            scenario = builtin_scenario(name) if name in builtin_scenario_names() else load_scenario(name)
+        if args.policy not in ("random", "scripted"):
+            args.trained = load_policy(args.policy, scenario)
+    except (ScenarioError, OSError, ValueError, KeyError) as e:
+        print(f"tracelab: error: {e}", file=sys.stderr)
         return 2
     if args.episodes < 1 or args.worlds < 1:
-        print("error: --episodes and --worlds must be at least 1", file=sys.stderr)
+        print("tracelab: error: --episodes and --worlds must be at least 1", file=sys.stderr)
         return 2
     if args.no_trace:
         _summary(play(scenario, args, sink=None))
@@ -59,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
     run_dir = Path(args.run or f"runs/play-{scenario.name}-{time.strftime('%Y%m%d-%H%M%S')}")
     meta = {"command": " ".join(shlex.quote(a) for a in sys.argv), "scenario": scenario.name,
             "config": {"episodes": args.episodes, "worlds": args.worlds, "policy": args.policy,
+                       "opponent_p": args.opponent_p,
                        "scenario": scenario.to_toml()},
             "rule_files": [str(GAME_RULES)], "seed": args.seed}
     stats = play(scenario, args, sink=StoreSink(TraceWriter.open(run_dir, meta)))
@@ -72,23 +86,32 @@ def play(scenario, args: argparse.Namespace, sink) -> dict:
     episodes still running then are closed as aborted."""
     from tracelab.envs.vector_env import GridWarVectorEnv
 
+    from tracelab.game.opponent import P_TOWARD
+    from tracelab.train.policy import may_act
+
     n_worlds = min(args.worlds, args.episodes)
-    env = GridWarVectorEnv(n_worlds, scenario, backend="rules", trace_sink=sink)
+    trained = args.trained
+    env = GridWarVectorEnv(n_worlds, scenario, backend="rules", trace_sink=sink,
+                           stack_previous=trained is not None and trained.stack_previous,
+                           opponent_p=P_TOWARD if args.opponent_p is None else args.opponent_p)
     rng = np.random.default_rng(args.seed)
     index_of = {a: i for i, a in enumerate(scenario.action_ids)}
     to_index = np.array([index_of.get(a, 0) for a in range(9)])  # spec action id -> action index
     n = scenario.agents_per_team
-    env.reset(seed=args.seed)
+    obs, info = env.reset(seed=args.seed)
     finished: list[dict] = []
     returns = np.zeros(n_worlds)
     steps = 0
     t0 = time.perf_counter()
     while len(finished) < args.episodes:
-        if args.policy == "scripted":
+        if trained is not None:
+            masks = info["action_mask"].reshape(n_worlds, n, -1) if trained.mask else None
+            red = trained.act(obs, may_act(scenario, env.sim.state), masks)
+        elif args.policy == "scripted":
             red = to_index[env.sim.scripted_actions("red")]
         else:
             red = rng.integers(0, scenario.n_actions, size=(n_worlds, n))
-        _, reward, terminated, truncated, info = env.step(red[:, 0] if n == 1 else red)
+        obs, reward, terminated, truncated, info = env.step(red[:, 0] if n == 1 else red)
         steps += n_worlds
         returns += reward
         for w in np.flatnonzero(terminated | truncated):

@@ -61,16 +61,17 @@ def run(args: argparse.Namespace) -> int:
     state = None
     try:
         if args.resume:
-            from tracelab.train.checkpoint import checkpoint_config, load_checkpoint
+            from tracelab.train.checkpoint import checkpoint_config, checkpoint_scenario, load_checkpoint
             extra = sorted(set(given) - RESUMABLE_FLAGS)
             if extra:
                 return _error(f"--resume continues the checkpoint's config; drop "
                               f"{', '.join('--' + k.replace('_', '-') for k in extra)}", 2)
             state = load_checkpoint(args.resume)
             cfg = dataclasses.replace(checkpoint_config(state), **given)
+            scenario = checkpoint_scenario(state)
         else:
             cfg = TrainConfig(**given)
-        scenario = load_scenario_arg(cfg.scenario, cfg.agents)
+            scenario = load_scenario_arg(cfg.scenario, cfg.agents)
     except (ScenarioError, OSError, ValueError) as e:
         return _error(str(e), 2 if isinstance(e, (ScenarioError, ValueError)) else 1)
     if cfg.non_markov and not scenario.is_non_markov:
@@ -87,7 +88,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None,
-               resumed_from: str | None = None) -> int:
+               resumed_from: str | None = None, stop_at: int | None = None) -> int:
+    """Train into a new run at `run_dir` (from a checkpoint `state` if given); returns the exit status.
+    `stop_at`: stop there as Ctrl-C would (tests)."""
     import torch
 
     from tracelab.game.facts import GAME_RULES
@@ -131,9 +134,9 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
             from tracelab.train.progress import TrainProgress
             with TrainProgress(cfg.steps, trainer.step) as bar:
                 trainer.progress = bar
-                status = trainer.train()
+                status = trainer.train(stop_at)
         else:
-            status = trainer.train()
+            status = trainer.train(stop_at)
     except KeyboardInterrupt:
         status = "interrupted"
     finally:

@@ -8,13 +8,14 @@ restore replays them into a fresh env: the game is deterministic given the actio
 back exactly (the observation they end in is checked against the saved one)."""
 from __future__ import annotations
 
+import tomllib
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 
-from tracelab.game.scenario import NOTHING, RED
+from tracelab.game.scenario import NOTHING, RED, Scenario, scenario_from_dict
 from tracelab.train.config import TrainConfig
 from tracelab.train.policy import may_act
 
@@ -39,7 +40,7 @@ def save_checkpoint(tr: Any, run_dir: Path) -> Path:
         "rng": tr.rng.bit_generator.state, "torch_rng": tr.torch_gen.get_state(),
         "env_rng": tr.env.sim.rng.bit_generator.state,
         "games": {"history": tr.history.copy(), "ep_len": tr.ep_len.copy(), "ep_return": tr.ep_return.copy(),
-                  "ep_id": tr.ep_id.copy(), "obs": tr.obs.copy()},
+                  "ep_id": tr.ep_id.copy(), "ep_start": tr.ep_start.copy(), "obs": tr.obs.copy()},
         "pending": tr.pending.state(),
     }
     tmp = path.with_suffix(".tmp")
@@ -65,6 +66,11 @@ def checkpoint_config(state: dict[str, Any]) -> TrainConfig:
     return TrainConfig.from_dict(state["config"])
 
 
+def checkpoint_scenario(state: dict[str, Any]) -> Scenario:
+    """The scenario the checkpointed run trained on (as it was then)."""
+    return scenario_from_dict(tomllib.loads(state["scenario_toml"]), source="checkpoint scenario")
+
+
 def restore(tr: Any, state: dict[str, Any]) -> None:
     """Put a freshly built Trainer (same config) into the checkpoint's state."""
     for name, lr in tr.learners.items():
@@ -81,6 +87,7 @@ def restore(tr: Any, state: dict[str, Any]) -> None:
     tr.ep_len[...] = g["ep_len"]
     tr.ep_return[...] = g["ep_return"]
     tr.ep_id[...] = g["ep_id"]
+    tr.ep_start[...] = g["ep_start"]
     _replay_games(tr.env.sim, tr.history, tr.ep_len)
     tr.env.sim.rng.bit_generator.state = state["env_rng"]
     obs = tr.env.sim.observe(RED)

@@ -74,6 +74,8 @@ class Trainer:
         self.ep_len = np.zeros(w, np.int64)
         self.ep_return = np.zeros(w)
         self.ep_id = np.zeros(w, np.int64)
+        self.ep_start = np.zeros(w, np.int64)  # training step at which each world's episode began
+        self._logging_episodes = False          # episode begins are written once train() starts
         self.next_episode = 0
         self.step = 0
         self.update_credit = 0.0
@@ -100,11 +102,29 @@ class Trainer:
     def _begin_episodes(self, worlds: np.ndarray) -> None:
         for w in worlds.tolist():
             self.ep_id[w] = self.new_episode_id()
-            if self.writer is not None:
-                self.writer.begin_episode(int(self.ep_id[w]), world=w, t_start=0,
-                                          info={"kind": "train", "train_step": self.step})
+        self.ep_start[worlds] = self.step
         self.ep_len[worlds] = 0
         self.ep_return[worlds] = 0.0
+        if self._logging_episodes:
+            self._write_begins(worlds)
+
+    def _write_begins(self, worlds: np.ndarray) -> None:
+        if self.writer is None:
+            return
+        for w in worlds.tolist():
+            info = {"kind": "train", "train_step": int(self.ep_start[w])}
+            if self.ep_len[w]:
+                info["resumed_at"] = self.step  # begun in the run this one resumes
+            self.writer.begin_episode(int(self.ep_id[w]), world=w, t_start=0, info=info)
+
+    def _end_open_episodes(self) -> None:
+        """The games still running when training stops end as 'aborted' (a resumed run begins them again)."""
+        if self.writer is None or not self._logging_episodes:
+            return
+        for w in range(self.worlds):
+            self.writer.end_episode(int(self.ep_id[w]), steps=int(self.ep_len[w]), outcome="aborted",
+                                    reward=float(self.ep_return[w]))
+        self._logging_episodes = False
 
     def _end_episodes(self, worlds: np.ndarray, final: dict[str, Any], truncated: np.ndarray) -> None:
         for w in worlds.tolist():
@@ -165,13 +185,18 @@ class Trainer:
             self._begin_episodes(ended)
 
     def _store(self, out: dict[str, np.ndarray], true_next: np.ndarray) -> None:
-        views = self._views(true_next)
+        """Closed transitions into their network's buffer, with next_obs in the agent's own view."""
+        if self.agents == 1:
+            self.learners["shared"].buffer.add(out["obs"], out["action"], out["reward"], true_next[out["world"]],
+                                               out["discount"])
+            return
+        next_obs = np.empty_like(out["obs"])
+        for j in range(self.agents):
+            rows = out["agent"] == j
+            next_obs[rows] = self.policy.agent_obs(true_next[out["world"][rows]], j)
         for name, agents in self.groups.items():
-            sel = np.isin(out["agent"], agents) if self.agents > 1 else slice(None)
-            world, agent = out["world"][sel], out["agent"][sel]
-            next_obs = np.stack([views[j][wi] for wi, j in zip(world.tolist(), agent.tolist())]) \
-                if self.agents > 1 else true_next[world]
-            self.learners[name].buffer.add(out["obs"][sel], out["action"][sel], out["reward"][sel], next_obs,
+            sel = np.isin(out["agent"], agents)
+            self.learners[name].buffer.add(out["obs"][sel], out["action"][sel], out["reward"][sel], next_obs[sel],
                                            out["discount"][sel])
 
     def learn(self) -> None:
@@ -251,12 +276,17 @@ class Trainer:
                             "config": self.cfg.to_dict()})
 
     # ---- the loop ----
-    def train(self) -> str:
-        """Train until cfg.steps or until stop_requested; returns "finished" or "interrupted"."""
+    def train(self, stop_at: int | None = None) -> str:
+        """Train until cfg.steps, or until stop_requested (Ctrl-C) or step `stop_at` (as an interruption
+        there would); returns "finished" or "interrupted"."""
         from tracelab.train.checkpoint import save_checkpoint
         cfg = self.cfg
         last_progress = 0.0
-        while self.step < cfg.steps and not self.stop_requested:
+        if not self._logging_episodes:
+            self._logging_episodes = True
+            self._write_begins(np.arange(self.worlds))
+        end = cfg.steps if stop_at is None else min(cfg.steps, stop_at)
+        while self.step < end and not self.stop_requested:
             before = self.step
             self.env_step()
             self.learn()
@@ -275,6 +305,7 @@ class Trainer:
                 self.log_metrics()
             if self.eval_step != self.step:
                 self.run_eval()
+        self._end_open_episodes()
         if self.run_dir is not None:
             save_checkpoint(self, self.run_dir)
             self.save_policy(self.run_dir / "policy")
