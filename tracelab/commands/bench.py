@@ -1,5 +1,5 @@
 """`tracelab bench`: speed and memory measured by benchmarks (docs/benchmarks.md), never by timed
-assertions in tests. `bench engine`, `bench env`, `bench store`, `bench all`; each takes --json,
+assertions in tests. `bench engine`, `bench env`, `bench store`, `bench train`, `bench all`; each takes --json,
 --quick (small sizes: the smoke test) and --repeats (medians and spread over that many repeats)."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import json
 import sys
 from typing import Any
 
-SECTIONS = ("engine", "env", "store")
+SECTIONS = ("engine", "env", "store", "train")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -18,7 +18,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     helps = {"engine": "compile and warm-start time, RuleSim steps/s and engine work, memory over a long run",
              "env": "RuleSim vs RefSim steps/s (one world and batched), the gymnasium envs, the goals",
              "store": "trace-store ingest rows/s, sealing, point queries",
-             "all": "engine, env and store"}
+             "train": "DQN training transitions/s end to end, the update alone, the env alone, the loop's share",
+             "all": "engine, env, store and train"}
     for name, text in helps.items():
         q = what.add_parser(name, help=text)
         q.add_argument("--json", action="store_true", help="machine-readable output")
@@ -30,6 +31,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         if name in ("env", "all"):
             q.add_argument("--batch", type=_positive, default=None,
                            help="worlds of the batched runs (default 256; --quick: 16)")
+        if name in ("train", "all"):
+            q.add_argument("--envs", type=_positive, default=16, help="worlds of the training env (default 16)")
+            q.add_argument("--threads", type=_positive, default=1, help="torch threads (default 1)")
         if name in ("engine", "all"):
             q.add_argument("--compile-repeats", type=_positive, default=None,
                            help="first-ever compiles to time (default: min(repeats, 3); --quick: 1)")
@@ -62,6 +66,10 @@ def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], s
         from tracelab.bench import env
         r = env.run(args.quick, args.repeats, args.agents, args.batch)
         return r, env.report(r)
+    if name == "train":
+        from tracelab.bench import train
+        r = train.run(args.quick, args.repeats, args.envs, args.threads)
+        return r, train.report(r)
     from tracelab.bench import store
     r = store.run(args.quick, args.repeats)
     return r, store.report(r)

@@ -3,7 +3,8 @@
 The update is written out by hand in torch ops (forward of both networks as batched matmuls, the Smooth L1
 gradient, backward through the two layers, Adam on one flat vector) instead of autograd plus
 torch.optim: for a 64-unit network the arithmetic is nothing and each torch call's overhead is
-everything, and this form needs about a third of the calls (docs/benchmarks.md, "Training"). It computes
+everything; this form makes 20 calls where autograd + Adam make several times more
+(docs/benchmarks.md, "Training"). It computes
 what `smooth_l1_loss(Q(s)[a], r + discount * max_a' Q_target(s'))` with autograd and Adam would;
 tests/test_train.py checks it against them."""
 from __future__ import annotations
@@ -13,11 +14,12 @@ from typing import Any
 import numpy as np
 import torch
 
-from tracelab.train.network import Shape, init_row, q_values, views
+from tracelab.train.network import Shape, init_row, views
 from tracelab.train.replay import ReplayBuffer
 
 ADAM_BETAS = (0.9, 0.999)
 ADAM_EPS = 1e-8
+LOSS_EVERY = 8  # the logged loss is the mean over every 8th update's minibatch
 
 
 class DQNLearner:
@@ -34,73 +36,84 @@ class DQNLearner:
         self.adam_step = 0
         self.updates = 0
         self.buffer = ReplayBuffer(buffer, shape.inputs, shape.actions, batch)
-        self._loss_sum = torch.zeros(())  # Smooth L1 summed over updates since the last take_loss()
+        self._loss_sum = torch.zeros(())  # Smooth L1 summed over the sampled updates since take_loss()
         self._loss_n = 0
-        self._last_q: torch.Tensor | None = None
+        self._have_q = False
         self._one = torch.ones(())
         self._bind()
 
     def _bind(self) -> None:
-        """Views the update and acting use; made once (params are only ever changed in place)."""
-        s = self.shape
-        o = s.offsets()
+        """The views and work tensors of the update, made once: parameters are only changed in place, and
+        every step of the update writes into a preallocated tensor (`out=`), so it is one torch call per
+        line and no allocation. A bias is the last row of its layer's weight block (network.py), so the
+        inputs carry a column of ones and one matmul gives a layer's weight and bias gradients."""
+        sh, b = self.shape, self.batch
+        o = sh.offsets()
         p = self.params
-        d, h, a = s.inputs, s.hidden, s.actions
-        self._w1s = p[:, o[0]:o[1]].view(2, d, h)
-        self._b1s = p[:, o[1]:o[2]].view(2, 1, h)
-        self._w2s = p[:, o[2]:o[3]].view(2, h, a)
-        self._b2s = p[:, o[3]:o[4]].view(2, 1, a)
-        self._gw1, self._gb1, self._gw2, self._gb2 = views(self.grad, s)
-        self.online_np = tuple(x.numpy() for x in views(p[0], s))  # shares memory with params
-        b = self.buffer
-        self._obs = torch.from_numpy(b.b_obs)
-        self._action = torch.from_numpy(b.b_action)
-        self._onehot = torch.from_numpy(b.b_onehot)
-        self._reward = torch.from_numpy(b.b_reward)
-        self._discount = torch.from_numpy(b.b_discount)
-
-    # ---- acting ----
-    def greedy(self, obs: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
-        """argmax_a Q(obs, a) for observations [K, D]; with a mask [K, A] (1 = allowed), among allowed."""
-        q = q_values(self.online_np, obs)
-        if mask is not None:
-            q = np.where(mask.astype(bool), q, -np.inf)
-        return q.argmax(axis=1)
+        d, h, a = sh.inputs, sh.hidden, sh.actions
+        self._online = p[0]
+        self._w1a = p[:, o[0]:o[2]].view(2, d + 1, h)        # [W1ᵀ; b1] of both networks
+        self._w2a = p[:, o[2]:o[4]].view(2, h + 1, a)        # [W2ᵀ; b2]
+        self._w2t_online = p[0, o[2]:o[3]].view(h, a).t()    # W2 [A, H] of the online network
+        self._g1 = self.grad[o[0]:o[2]].view(d + 1, h)
+        self._g2 = self.grad[o[2]:o[4]].view(h + 1, a)
+        self.online_np = tuple(x.numpy() for x in views(p[0], sh))  # acting reads these, shared memory
+        buf = self.buffer
+        self._obs = torch.from_numpy(buf.b_obs)              # [2, B, D+1]: s and s', a column of ones
+        self._s0t = self._obs[0].t()
+        self._action = torch.from_numpy(buf.b_action)
+        self._onehot = torch.from_numpy(buf.b_onehot)        # 1/B on the taken action
+        self._reward = torch.from_numpy(buf.b_reward)
+        self._discount = torch.from_numpy(buf.b_discount)
+        self._pre = torch.empty(2, b, h)
+        self._h = torch.ones(2, b, h + 1)                    # tanh outputs, then the column of ones
+        self._h_act = self._h[:, :, :h]
+        self._h0 = self._h[0, :, :h]
+        self._h0t = self._h[0].t()
+        self._q = torch.zeros(2, b, a)                       # online(s), target(s')
+        self._q0, self._q1 = self._q[0], self._q[1]
+        self._qmax, self._target, self._q_taken = torch.empty(b, 1), torch.empty(b, 1), torch.empty(b, 1)
+        self._diff = torch.empty(b, 1)
+        self._dq, self._dh, self._dtanh = torch.empty(b, a), torch.empty(b, h), torch.empty(b, h)
+        self._denom = torch.empty(sh.n_params)
 
     # ---- learning ----
     def update(self, rng: np.random.Generator) -> None:
         """One gradient step on a minibatch sampled from the buffer with `rng`."""
         self.buffer.sample(rng)
         with torch.no_grad():
-            s = self._obs                                                  # [2, B, D]: s and s'
-            h = torch.baddbmm(self._b1s, s, self._w1s).tanh_()            # [2, B, H]
-            q = torch.baddbmm(self._b2s, h, self._w2s)                    # [2, B, A]: online(s), target(s')
-            target = torch.addcmul(self._reward, self._discount, q[1].amax(1, keepdim=True))
-            q_taken = q[0].gather(1, self._action)                         # [B, 1]
-            self._loss_sum += torch.nn.functional.smooth_l1_loss(q_taken, target)
-            # d(mean Smooth L1)/dQ(s, a) = clamp(q - y, -1, 1) / B, on the taken action only
-            dq = self._onehot * (q_taken - target).clamp_(-1.0, 1.0).div_(self.batch)
-            h0 = h[0]
-            torch.mm(h0.t(), dq, out=self._gw2)
-            torch.sum(dq, 0, out=self._gb2)
-            dh = torch.mm(dq, self._w2s[0].t()).mul_(torch.addcmul(self._one, h0, h0, value=-1.0))
-            torch.mm(s[0].t(), dh, out=self._gw1)
-            torch.sum(dh, 0, out=self._gb1)
+            torch.bmm(self._obs, self._w1a, out=self._pre)                       # both networks' layer 1
+            torch.tanh(self._pre, out=self._h_act)
+            torch.bmm(self._h, self._w2a, out=self._q)                           # Q(s), Q_target(s')
+            torch.amax(self._q1, 1, keepdim=True, out=self._qmax)
+            torch.addcmul(self._reward, self._discount, self._qmax, out=self._target)
+            torch.gather(self._q0, 1, self._action, out=self._q_taken)
+            if self.updates % LOSS_EVERY == 0:  # the logged loss is sampled: it costs two calls
+                self._loss_sum += torch.nn.functional.smooth_l1_loss(self._q_taken, self._target)
+                self._loss_n += 1
+            # d(mean Smooth L1)/dQ(s, a) = clamp(q - y, -1, 1) / B on the taken action (onehot holds 1/B)
+            torch.sub(self._q_taken, self._target, out=self._diff).clamp_(-1.0, 1.0)
+            torch.mul(self._onehot, self._diff, out=self._dq)
+            torch.mm(self._h0t, self._dq, out=self._g2)                          # [gW2ᵀ; gb2]
+            torch.mm(self._dq, self._w2t_online, out=self._dh)
+            torch.addcmul(self._one, self._h0, self._h0, value=-1.0, out=self._dtanh)  # tanh' = 1 - h²
+            self._dh.mul_(self._dtanh)
+            torch.mm(self._s0t, self._dh, out=self._g1)                          # [gW1ᵀ; gb1]
             self._adam()
-        self._last_q = q
-        self._loss_n += 1
+        self._have_q = True
         self.updates += 1
 
     def _adam(self) -> None:
-        """torch.optim.Adam's update (no weight decay, no amsgrad) on the online row, in five calls."""
+        """torch.optim.Adam's update (no weight decay, no amsgrad) on the online row, in five calls:
+        lr/bc1 · m / (sqrt(v)/sqrt(bc2) + eps) = (lr·sqrt(bc2)/bc1) · m / (sqrt(v) + eps·sqrt(bc2))."""
         b1, b2 = ADAM_BETAS
         self.adam_step += 1
         t = self.adam_step
         self.adam_m.lerp_(self.grad, 1.0 - b1)
         self.adam_v.mul_(b2).addcmul_(self.grad, self.grad, value=1.0 - b2)
         bc1, bc2_sqrt = 1.0 - b1 ** t, (1.0 - b2 ** t) ** 0.5
-        denom = self.adam_v.sqrt().div_(bc2_sqrt).add_(ADAM_EPS)
-        self.params[0].addcdiv_(self.adam_m, denom, value=-self.lr / bc1)
+        torch.sqrt(self.adam_v, out=self._denom).add_(ADAM_EPS * bc2_sqrt)
+        self._online.addcdiv_(self.adam_m, self._denom, value=-self.lr * bc2_sqrt / bc1)
 
     def sync_target(self) -> None:
         self.params[1].copy_(self.params[0])
@@ -116,14 +129,14 @@ class DQNLearner:
 
     def q_max_mean(self) -> float | None:
         """Mean over the last minibatch's states of max_a Q(s, a) (online network)."""
-        return None if self._last_q is None else float(self._last_q[0].amax(1).mean())
+        return float(self._q0.amax(1).mean()) if self._have_q else None
 
     # ---- checkpoints ----
     def state(self) -> dict[str, Any]:
         return {"params": self.params.clone(), "adam_m": self.adam_m.clone(), "adam_v": self.adam_v.clone(),
                 "adam_step": self.adam_step, "updates": self.updates, "buffer": self.buffer.state(),
                 "loss_sum": float(self._loss_sum), "loss_n": self._loss_n,
-                "last_q": None if self._last_q is None else self._last_q.clone()}
+                "last_q": self._q.clone() if self._have_q else None}
 
     def load_state(self, st: dict[str, Any]) -> None:
         if tuple(st["params"].shape) != tuple(self.params.shape):
@@ -136,4 +149,6 @@ class DQNLearner:
         self.buffer.load_state(st["buffer"])
         self._loss_sum.fill_(st["loss_sum"])
         self._loss_n = int(st["loss_n"])
-        self._last_q = st["last_q"]
+        self._have_q = st["last_q"] is not None
+        if self._have_q:
+            self._q.copy_(st["last_q"])
