@@ -61,10 +61,11 @@ def test_fused_update_matches_autograd_smooth_l1_and_adam():
     for _ in range(30):
         learner.update(sample_rng)
         b = learner.buffer  # the minibatch the update just drew (observations with a column of ones)
-        s, s2 = torch.from_numpy(b.b_obs[0, :, :-1]), torch.from_numpy(b.b_obs[1, :, :-1])
-        q = net(s).gather(1, torch.from_numpy(b.b_action))
+        s, s2 = torch.from_numpy(b.b_obs[0, :, :-1].copy()), torch.from_numpy(b.b_obs[1, :, :-1].copy())
+        q = net(s).gather(1, torch.from_numpy(b.sampled_actions()))
         with torch.no_grad():
-            y = torch.from_numpy(b.b_reward) + torch.from_numpy(b.b_discount) * target(s2).max(1, keepdim=True).values
+            y = torch.from_numpy(b.b_reward.copy()) + torch.from_numpy(b.b_discount.copy()) * \
+                target(s2).max(1, keepdim=True).values
         loss = torch.nn.functional.smooth_l1_loss(q, y)
         opt.zero_grad()
         loss.backward()
@@ -198,8 +199,8 @@ def test_non_markov_trains_separate_networks_whose_slow_transitions_span_two_ste
     assert trainer.groups == {"fast": [0], "slow": [1]}
     assert fast.obs_size == slow.obs_size == 28  # 14 numbers, and the previous step's
     g = cfg.gamma
-    fast_d = np.unique(fast.discount[:fast.size]).astype(np.float64)
-    slow_d = np.unique(slow.discount[:slow.size]).astype(np.float64)
+    fast_d = np.unique(fast.state()["discount"]).astype(np.float64)
+    slow_d = np.unique(slow.state()["discount"]).astype(np.float64)
     # fast: one step per transition; slow: two (acts on even steps), unless the episode or its life ended
     assert np.isclose(fast_d[:, None], [0.0, g]).any(axis=1).all(), fast_d
     assert np.isclose(slow_d[:, None], [0.0, g, g * g]).any(axis=1).all(), slow_d

@@ -8,11 +8,11 @@ from __future__ import annotations
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
-from tracelab.bench.common import fmt_num, format_table, machine_info, median_of, rates
+from tracelab.bench.common import fmt_num, format_table, machine_info, summarize
 from tracelab.bench.engine import machine_line
 
 GOAL_TRANSITIONS_PER_S = 5_000
@@ -26,23 +26,25 @@ def _config(envs: int, threads: int) -> Any:
                        checkpoint_every=0)
 
 
-def end_to_end(envs: int, threads: int, block: int, repeats: int, run_dir: Path) -> dict[str, Any]:
-    """Transitions/s of Trainer.train over blocks of `block` steps after warm-up, logging into a run."""
-    from tracelab.game.scenario import builtin_scenario
-    from tracelab.store import TraceWriter
-    from tracelab.train.loop import Trainer
-    cfg = _config(envs, threads)
-    writer = TraceWriter.open(run_dir, {"command": "tracelab bench train", "config": cfg.to_dict()})
-    trainer = Trainer(cfg, builtin_scenario("base"), writer)
-    try:
-        trainer.train(stop_at=cfg.warmup + 2 * cfg.batch + block)  # past warm-up: updates run from here
-        durations = median_of(lambda: trainer.train(stop_at=trainer.step + block), repeats)
-        updates = sum(lr.updates for lr in trainer.learners.values())
-    finally:
-        trainer.close()
-        writer.close()
-    return {"envs": envs, "block_steps": block, "transitions_per_s": rates(durations, block).to_dict(),
-            "updates_done": updates}
+class EndToEnd:
+    """A Trainer with the method's defaults logging into a run, past its warm-up; `run(k)` trains k more
+    steps through Trainer.train (logging, ε, replay, updates: everything but evaluations)."""
+
+    def __init__(self, envs: int, threads: int, run_dir: Path) -> None:
+        from tracelab.game.scenario import builtin_scenario
+        from tracelab.store import TraceWriter
+        from tracelab.train.loop import Trainer
+        cfg = _config(envs, threads)
+        self.writer = TraceWriter.open(run_dir, {"command": "tracelab bench train", "config": cfg.to_dict()})
+        self.trainer = Trainer(cfg, builtin_scenario("base"), self.writer)
+        self.trainer.train(stop_at=cfg.warmup + 2 * cfg.batch)  # updates run from here on
+
+    def run(self, k: int) -> None:
+        self.trainer.train(stop_at=self.trainer.step + k)
+
+    def close(self) -> None:
+        self.trainer.close()
+        self.writer.close()
 
 
 def _filled_learner(threads: int) -> Any:
@@ -63,19 +65,18 @@ def _filled_learner(threads: int) -> Any:
     return learner
 
 
-def update_rate(threads: int, n: int, repeats: int) -> dict[str, Any]:
-    """tracelab's update (sampling included) on the method's network and batch."""
+def fused_updates(threads: int) -> Callable[[int], None]:
+    """tracelab's update (sampling included) on the method's network and batch: run(k) makes k."""
     learner = _filled_learner(threads)
     rng = np.random.default_rng(1)
 
-    def run() -> None:
-        for _ in range(n):
+    def run(k: int) -> None:
+        for _ in range(k):
             learner.update(rng)
-    run()
-    return rates(median_of(run, repeats), n).to_dict()
+    return run
 
 
-def textbook_update_rate(threads: int, n: int, repeats: int) -> dict[str, Any]:
+def textbook_updates(threads: int) -> Callable[[int], None]:
     """The same update as autograd + nn.Sequential + torch.optim.Adam (foreach) would run it."""
     import torch
     learner = _filled_learner(threads)
@@ -85,13 +86,14 @@ def textbook_update_rate(threads: int, n: int, repeats: int) -> dict[str, Any]:
     net, target = make(), make()
     opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
     b = learner.buffer
-    s, s2 = torch.from_numpy(b.b_obs[0, :, :-1]), torch.from_numpy(b.b_obs[1, :, :-1])
-    a, r, d = torch.from_numpy(b.b_action), torch.from_numpy(b.b_reward), torch.from_numpy(b.b_discount)
+    s, s2, r, d = (torch.from_numpy(x) for x in (b.b_obs[0, :, :-1], b.b_obs[1, :, :-1], b.b_reward,
+                                                  b.b_discount))  # read-only views of the batch
     rng = np.random.default_rng(1)
 
-    def run() -> None:
-        for _ in range(n):
+    def run(k: int) -> None:
+        for _ in range(k):
             b.sample(rng)
+            a = torch.from_numpy(b.sampled_actions())
             q = net(s).gather(1, a)
             with torch.no_grad():
                 y = r + d * target(s2).max(1, keepdim=True).values
@@ -99,71 +101,92 @@ def textbook_update_rate(threads: int, n: int, repeats: int) -> dict[str, Any]:
             opt.zero_grad()
             loss.backward()
             opt.step()
-    run()
-    return rates(median_of(run, repeats), n).to_dict()
+    return run
 
 
-def env_rate(envs: int, n: int, repeats: int) -> dict[str, Any]:
-    """World-steps/s of the batched env alone (random actions, rules backend, no trace)."""
+def env_steps(envs: int) -> tuple[Callable[[int], None], Any]:
+    """The batched env alone (random actions, rules backend, no trace): run(k) makes k passes."""
     from tracelab.envs.vector_env import GridWarVectorEnv
     env = GridWarVectorEnv(envs, "base", backend="rules")
     env.reset(seed=0)
-    acts = np.random.default_rng(0).integers(0, 5, (n, envs))
+    rng = np.random.default_rng(0)
 
-    def run() -> None:
-        for a in acts:
+    def run(k: int) -> None:
+        for a in rng.integers(0, 5, (k, envs)):
             env.step(a)
-    run()
-    out = rates(median_of(run, repeats), n * envs).to_dict()
-    env.close()
-    return out
+    return run, env
+
+
+def _timed(fn: Callable[[int], None], k: int) -> float:
+    t0 = time.perf_counter()
+    fn(k)
+    return time.perf_counter() - t0
 
 
 def run(quick: bool = False, repeats: int = 5, envs: int = 16, threads: int = 1) -> dict[str, Any]:
+    """The four figures, measured round by round (one block of each per round) so that each round's
+    ratios compare figures taken under the same machine load; medians over the rounds."""
     info = machine_info()
-    block = 512 if quick else 8_192
-    n_upd = 100 if quick else 2_000
+    block = 512 if quick else 4_096   # training steps per end-to-end block
+    n_upd = 100 if quick else 1_000   # updates per update block
     with tempfile.TemporaryDirectory(prefix="tracelab-bench-train-") as tmp:
-        e2e = end_to_end(envs, threads, block, repeats, Path(tmp) / "run")
-    upd = update_rate(threads, n_upd, repeats)
-    textbook = textbook_update_rate(threads, n_upd, repeats)
-    env = env_rate(envs, max(10, block // envs), repeats)
-    t_step = 1.0 / e2e["transitions_per_s"]["median"]
-    t_update = 1.0 / upd["median"]
-    t_env = 1.0 / env["median"]
-    loop_share = 1.0 - t_update / t_step
+        e2e = EndToEnd(envs, threads, Path(tmp) / "run")
+        fused, textbook = fused_updates(threads), textbook_updates(threads)
+        env_run, env = env_steps(envs)
+        passes = max(4, block // envs)
+        for fn, k in ((fused, 20), (textbook, 20), (env_run, 20)):
+            fn(k)  # warm-up
+        rounds: dict[str, list[float]] = {"e2e": [], "fused": [], "textbook": [], "env": []}
+        try:
+            for _ in range(repeats):
+                rounds["e2e"].append(block / _timed(e2e.run, block))
+                rounds["fused"].append(n_upd / _timed(fused, n_upd))
+                rounds["textbook"].append(n_upd / _timed(textbook, n_upd))
+                rounds["env"].append(passes * envs / _timed(env_run, passes))
+        finally:
+            e2e.close()
+            env.close()
+    loop_shares = [1.0 - f_e2e / f_upd for f_e2e, f_upd in zip(rounds["e2e"], rounds["fused"])]
+    rest_shares = [1.0 - f_e2e / f_upd - f_e2e / f_env
+                   for f_e2e, f_upd, f_env in zip(rounds["e2e"], rounds["fused"], rounds["env"])]
+    speedups = [f / t for f, t in zip(rounds["fused"], rounds["textbook"])]
+    e2e_s = summarize(rounds["e2e"])
+    loop_share = summarize(loop_shares).median
     info["load_average_end"] = machine_info()["load_average"]
     return {"machine": info, "quick": quick, "repeats": repeats, "envs": envs, "threads": threads,
-            "end_to_end": e2e, "update_per_s": upd, "textbook_update_per_s": textbook, "env_steps_per_s": env,
-            "step_us": 1e6 * t_step, "update_us": 1e6 * t_update, "env_us": 1e6 * t_env,
-            "loop_share": loop_share, "rest_share": 1.0 - (t_update + t_env) / t_step,
+            "block_steps": block, "updates_per_block": n_upd,
+            "transitions_per_s": e2e_s.to_dict(), "update_per_s": summarize(rounds["fused"]).to_dict(),
+            "textbook_update_per_s": summarize(rounds["textbook"]).to_dict(),
+            "env_steps_per_s": summarize(rounds["env"]).to_dict(),
+            "fused_over_textbook": summarize(speedups).to_dict(),
+            "loop_share": summarize(loop_shares).to_dict(), "rest_share": summarize(rest_shares).to_dict(),
             "goals": [{"goal": "loop around the update", "target": f"<= {100 * GOAL_LOOP_SHARE:.0f}% of a step",
                        "measured": f"{100 * loop_share:.0f}%", "met": loop_share <= GOAL_LOOP_SHARE},
-                      {"goal": "transitions/s, one update each",
-                       "target": f">= {GOAL_TRANSITIONS_PER_S:,}",
-                       "measured": fmt_num(e2e["transitions_per_s"]["median"]),
-                       "met": e2e["transitions_per_s"]["median"] >= GOAL_TRANSITIONS_PER_S}]}
+                      {"goal": "transitions/s, one update each", "target": f">= {GOAL_TRANSITIONS_PER_S:,}",
+                       "measured": fmt_num(e2e_s.median), "met": e2e_s.median >= GOAL_TRANSITIONS_PER_S}]}
 
 
 def report(r: dict[str, Any]) -> str:
     sp = lambda d: f"{100 * d['spread']:.0f}%"  # noqa: E731
-    e2e = r["end_to_end"]["transitions_per_s"]
-    rows = [["training end to end (transitions/s, 1 update each)", e2e["median"], sp(e2e), r["step_us"]],
+    us = lambda d: 1e6 / d["median"]  # noqa: E731
+    rows = [["training end to end (transitions/s, 1 update each)", r["transitions_per_s"]["median"],
+             sp(r["transitions_per_s"]), us(r["transitions_per_s"])],
             ["update alone, tracelab's fused (updates/s)", r["update_per_s"]["median"], sp(r["update_per_s"]),
-             r["update_us"]],
+             us(r["update_per_s"])],
             ["update alone, autograd + torch.optim.Adam (updates/s)", r["textbook_update_per_s"]["median"],
-             sp(r["textbook_update_per_s"]), 1e6 / r["textbook_update_per_s"]["median"]],
+             sp(r["textbook_update_per_s"]), us(r["textbook_update_per_s"])],
             [f"env alone, {r['envs']} worlds (world-steps/s)", r["env_steps_per_s"]["median"],
-             sp(r["env_steps_per_s"]), r["env_us"]]]
-    shares = (f"per transition: update {r['update_us']:.0f} µs, env {r['env_us']:.0f} µs, the rest (buffer, "
-              f"ε, transitions, logging) {r['step_us'] - r['update_us'] - r['env_us']:.0f} µs; loop around the "
-              f"update {100 * r['loop_share']:.0f}% of a step (env included), the rest alone "
-              f"{100 * r['rest_share']:.0f}%")
+             sp(r["env_steps_per_s"]), us(r["env_steps_per_s"])]]
+    shares = (f"medians of per-round ratios: fused update {r['fused_over_textbook']['median']:.2f}x the "
+              f"textbook one; the loop around the update {100 * r['loop_share']['median']:.0f}% of a training "
+              f"step (env included), the rest (buffer, ε, transitions, logging) "
+              f"{100 * r['rest_share']['median']:.0f}%")
     goals = format_table(["goal", "target", "measured", "result"],
                          [[g["goal"], g["target"], g["measured"], "met" if g["met"] else "not met"]
                           for g in r["goals"]])
     head = (f"1v1 base, rules backend, method's DQN defaults (64 tanh, batch 128, Adam 5e-4), "
-            f"{r['envs']} worlds, torch threads {r['threads']}, live logging into a run")
+            f"{r['envs']} worlds, torch threads {r['threads']}, live logging into a run; "
+            f"{r['repeats']} rounds of {r['block_steps']:,} training steps, {r['updates_per_block']:,} updates "
+            f"of each kind, and env steps")
     table = format_table(["figure", "median", "spread", "µs each"], rows)
     return "\n\n".join([machine_line(r["machine"], r["quick"], r["repeats"]), head, table, shares, goals])
-

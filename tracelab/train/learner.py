@@ -20,6 +20,7 @@ from tracelab.train.replay import ReplayBuffer
 ADAM_BETAS = (0.9, 0.999)
 ADAM_EPS = 1e-8
 LOSS_EVERY = 8  # the logged loss is the mean over every 8th update's minibatch
+_FUSED_ADAM = getattr(torch, "_fused_adam_", None)  # private, but torch is pinned (torch==2.13.0)
 
 
 class DQNLearner:
@@ -40,6 +41,8 @@ class DQNLearner:
         self._loss_n = 0
         self._have_q = False
         self._one = torch.ones(())
+        self._inv_b = 1.0 / batch
+        self._step_t = torch.zeros(())  # Adam's step count as the fused kernel keeps it
         self._bind()
 
     def _bind(self) -> None:
@@ -59,12 +62,14 @@ class DQNLearner:
         self._g2 = self.grad[o[2]:o[4]].view(h + 1, a)
         self.online_np = tuple(x.numpy() for x in views(p[0], sh))  # acting reads these, shared memory
         buf = self.buffer
-        self._obs = torch.from_numpy(buf.b_obs)              # [2, B, D+1]: s and s', a column of ones
+        batch = torch.from_numpy(buf.batch)                  # [B, row]: see replay.py's row layout
+        hot = 2 * (d + 1)
+        self._obs = torch.as_strided(batch, (2, b, d + 1), (d + 1, buf.row, 1))  # s and s', with the ones
         self._s0t = self._obs[0].t()
-        self._action = torch.from_numpy(buf.b_action)
-        self._onehot = torch.from_numpy(buf.b_onehot)        # 1/B on the taken action
-        self._reward = torch.from_numpy(buf.b_reward)
-        self._discount = torch.from_numpy(buf.b_discount)
+        self._onehot = batch[:, hot:hot + a]
+        self._onehot3 = self._onehot.unsqueeze(2)
+        self._reward = batch[:, -2:-1]
+        self._discount = batch[:, -1:]
         self._pre = torch.empty(2, b, h)
         self._h = torch.ones(2, b, h + 1)                    # tanh outputs, then the column of ones
         self._h_act = self._h[:, :, :h]
@@ -72,7 +77,10 @@ class DQNLearner:
         self._h0t = self._h[0].t()
         self._q = torch.zeros(2, b, a)                       # online(s), target(s')
         self._q0, self._q1 = self._q[0], self._q[1]
-        self._qmax, self._target, self._q_taken = torch.empty(b, 1), torch.empty(b, 1), torch.empty(b, 1)
+        self._q0_3 = self._q0.unsqueeze(1)
+        self._q_taken3 = torch.empty(b, 1, 1)
+        self._q_taken = self._q_taken3.view(b, 1)
+        self._qmax, self._target = torch.empty(b, 1), torch.empty(b, 1)
         self._diff = torch.empty(b, 1)
         self._dq, self._dh, self._dtanh = torch.empty(b, a), torch.empty(b, h), torch.empty(b, h)
         self._denom = torch.empty(sh.n_params)
@@ -87,27 +95,36 @@ class DQNLearner:
             torch.bmm(self._h, self._w2a, out=self._q)                           # Q(s), Q_target(s')
             torch.amax(self._q1, 1, keepdim=True, out=self._qmax)
             torch.addcmul(self._reward, self._discount, self._qmax, out=self._target)
-            torch.gather(self._q0, 1, self._action, out=self._q_taken)
+            torch.bmm(self._q0_3, self._onehot3, out=self._q_taken3)             # Q(s, a) of the taken a
             if self.updates % LOSS_EVERY == 0:  # the logged loss is sampled: it costs two calls
                 self._loss_sum += torch.nn.functional.smooth_l1_loss(self._q_taken, self._target)
                 self._loss_n += 1
-            # d(mean Smooth L1)/dQ(s, a) = clamp(q - y, -1, 1) / B on the taken action (onehot holds 1/B)
+            # d(mean Smooth L1)/dQ(s, a) = clamp(q - y, -1, 1) / B on the taken action; the 1/B goes
+            # into the two gradient matmuls (alpha)
             torch.sub(self._q_taken, self._target, out=self._diff).clamp_(-1.0, 1.0)
             torch.mul(self._onehot, self._diff, out=self._dq)
-            torch.mm(self._h0t, self._dq, out=self._g2)                          # [gW2ᵀ; gb2]
+            self._g2.addmm_(self._h0t, self._dq, beta=0.0, alpha=self._inv_b)      # [gW2ᵀ; gb2]
             torch.mm(self._dq, self._w2t_online, out=self._dh)
             torch.addcmul(self._one, self._h0, self._h0, value=-1.0, out=self._dtanh)  # tanh' = 1 - h²
             self._dh.mul_(self._dtanh)
-            torch.mm(self._s0t, self._dh, out=self._g1)                          # [gW1ᵀ; gb1]
+            self._g1.addmm_(self._s0t, self._dh, beta=0.0, alpha=self._inv_b)      # [gW1ᵀ; gb1]
             self._adam()
         self._have_q = True
         self.updates += 1
 
     def _adam(self) -> None:
-        """torch.optim.Adam's update (no weight decay, no amsgrad) on the online row, in five calls:
+        """torch.optim.Adam's update (no weight decay, no amsgrad) on the online row: torch's fused CPU
+        Adam kernel, the one `Adam(fused=True)` runs, called directly (two calls, where the optimizer
+        object costs ~30 times as much around it); without it, five calls:
         lr/bc1 · m / (sqrt(v)/sqrt(bc2) + eps) = (lr·sqrt(bc2)/bc1) · m / (sqrt(v) + eps·sqrt(bc2))."""
         b1, b2 = ADAM_BETAS
         self.adam_step += 1
+        if _FUSED_ADAM is not None:  # it reads the step count already advanced (as Adam's caller does)
+            self._step_t.fill_(self.adam_step)
+            _FUSED_ADAM([self._online], [self.grad], [self.adam_m], [self.adam_v], [], [self._step_t],
+                        amsgrad=False, lr=self.lr, beta1=b1, beta2=b2, weight_decay=0.0, eps=ADAM_EPS,
+                        maximize=False)
+            return
         t = self.adam_step
         self.adam_m.lerp_(self.grad, 1.0 - b1)
         self.adam_v.mul_(b2).addcmul_(self.grad, self.grad, value=1.0 - b2)
@@ -146,6 +163,7 @@ class DQNLearner:
         self.adam_m.copy_(st["adam_m"])
         self.adam_v.copy_(st["adam_v"])
         self.adam_step, self.updates = int(st["adam_step"]), int(st["updates"])
+        self._step_t.fill_(self.adam_step)
         self.buffer.load_state(st["buffer"])
         self._loss_sum.fill_(st["loss_sum"])
         self._loss_n = int(st["loss_n"])

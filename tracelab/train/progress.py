@@ -31,7 +31,7 @@ class TrainProgress:
     def __call__(self, fig: dict[str, Any]) -> None:
         task = self._bar.tasks[0]
         speed = task.speed
-        self._bar.update(self._task, completed=fig["step"], eps=f"{fig['epsilon']:.3f}",
+        self._bar.update(self._task, completed=min(fig["step"], fig["steps"]), eps=f"{fig['epsilon']:.3f}",
                          loss="-" if fig["loss"] is None else f"{fig['loss']:.3g}",
                          win="-" if fig["win_rate"] is None else f"{100 * fig['win_rate']:.1f}%",
                          rate="" if not speed else f"{speed:,.0f} steps/s")

@@ -1,8 +1,13 @@
-"""Experience replay in preallocated numpy arrays (a ring), sampled into preallocated batch arrays.
+"""Experience replay in one preallocated numpy array (a ring), sampled into one preallocated batch array.
 
 A transition is (obs, action, reward, next_obs, discount): `reward` is what was earned from the decision
 to the next one (one step for a fast agent, the slow agent's two steps summed with γ), and `discount` the
-factor on the bootstrap, γ^k, or 0 when the episode (or the agent) ended."""
+factor on the bootstrap, γ^k, or 0 when the episode (or the agent) ended.
+
+Each transition is one float32 row laid out as the learner reads it: [obs, 1, next_obs, 1, one-hot action,
+reward, discount] (the ones add the biases in the learner's matmuls; the one-hot picks the taken action's
+Q-value and carries its gradient). So a minibatch is one `np.take` and the learner's torch tensors are
+fixed views of the batch array: sampling costs two numpy calls."""
 from __future__ import annotations
 
 from typing import Any
@@ -13,24 +18,24 @@ import numpy as np
 class ReplayBuffer:
     def __init__(self, capacity: int, obs_size: int, n_actions: int, batch: int) -> None:
         self.capacity = capacity
+        self.obs_size = d = obs_size
         self.n_actions = n_actions
-        # observations carry a last column of ones: the learner's matmuls add the biases with it
-        self.obs_size = obs_size
-        self.obs = np.ones((capacity, obs_size + 1), np.float32)
-        self.next_obs = np.ones((capacity, obs_size + 1), np.float32)
-        self.action = np.zeros(capacity, np.int64)
-        self.reward = np.zeros(capacity, np.float32)
-        self.discount = np.zeros(capacity, np.float32)
+        self.row = 2 * (d + 1) + n_actions + 2
+        self._hot = 2 * (d + 1)  # first column of the one-hot action
+        self.rows = np.zeros((capacity, self.row), np.float32)
+        self.rows[:, d] = 1.0
+        self.rows[:, 2 * d + 1] = 1.0
+        self.action = np.zeros(capacity, np.int64)  # also kept as ids: checkpoints and tests read them
         self.size = 0
         self.pos = 0
-        # the batch the learner reads (torch views of these arrays are made once)
-        self.b_obs = np.ones((2, batch, obs_size + 1), np.float32)  # [obs; next_obs], with the ones
-        self.b_action = np.zeros((batch, 1), np.int64)
-        self.b_onehot = np.zeros((batch, n_actions), np.float32)  # 1/B on the taken action (the mean's weight)
-        self._weight = np.float32(1.0 / batch)
-        self.b_reward = np.zeros((batch, 1), np.float32)
-        self.b_discount = np.zeros((batch, 1), np.float32)
-        self._rows = np.arange(batch)
+        self.batch = np.zeros((batch, self.row), np.float32)
+        # numpy views of the batch by field (the learner makes the same views in torch)
+        b = self.batch
+        self.b_obs = np.lib.stride_tricks.as_strided(b, (2, batch, d + 1), (4 * (d + 1), 4 * self.row, 4),
+                                                     writeable=False)  # [obs; next_obs], with the ones
+        self.b_onehot = b[:, self._hot:self._hot + n_actions]
+        self.b_reward = b[:, -2:-1]
+        self.b_discount = b[:, -1:]
 
     def add(self, obs: np.ndarray, action: np.ndarray, reward: np.ndarray, next_obs: np.ndarray,
             discount: np.ndarray) -> None:
@@ -43,40 +48,38 @@ class ReplayBuffer:
                                                        (obs, action, reward, next_obs, discount))
             k = self.capacity
         idx = (self.pos + np.arange(k)) % self.capacity
-        self.obs[idx, :-1] = obs
-        self.next_obs[idx, :-1] = next_obs
+        d, hot = self.obs_size, self._hot
+        rows = self.rows
+        rows[idx, :d] = obs
+        rows[idx, d + 1:2 * d + 1] = next_obs
+        rows[idx, hot:hot + self.n_actions] = 0.0
+        rows[idx, hot + np.asarray(action, np.int64)] = 1.0
+        rows[idx, -2] = reward
+        rows[idx, -1] = discount
         self.action[idx] = action
-        self.reward[idx] = reward
-        self.discount[idx] = discount
         self.pos = (self.pos + k) % self.capacity
         self.size = min(self.size + k, self.capacity)
 
     def sample(self, rng: np.random.Generator) -> None:
-        """Fill the b_* arrays with a uniform sample (with replacement) of stored transitions."""
-        idx = rng.integers(0, self.size, len(self._rows))
-        np.take(self.obs, idx, axis=0, out=self.b_obs[0])
-        np.take(self.next_obs, idx, axis=0, out=self.b_obs[1])
-        a = self.action[idx]
-        self.b_action[:, 0] = a
-        self.b_onehot.fill(0.0)
-        self.b_onehot[self._rows, a] = self._weight
-        np.take(self.reward, idx, out=self.b_reward[:, 0])
-        np.take(self.discount, idx, out=self.b_discount[:, 0])
+        """Fill the batch with a uniform sample (with replacement) of stored transitions."""
+        np.take(self.rows, rng.integers(0, self.size, len(self.batch)), axis=0, out=self.batch)
+
+    def sampled_actions(self) -> np.ndarray:
+        """The action ids of the current batch, [B, 1]."""
+        return self.b_onehot.argmax(axis=1)[:, None]
 
     # ---- checkpoints ----
     def state(self) -> dict[str, Any]:
-        n = self.size
-        return {"size": n, "pos": self.pos, "obs": self.obs[:n, :-1].copy(), "next_obs": self.next_obs[:n, :-1].copy(),
-                "action": self.action[:n].copy(), "reward": self.reward[:n].copy(),
-                "discount": self.discount[:n].copy()}
+        n, d = self.size, self.obs_size
+        return {"size": n, "pos": self.pos, "obs": self.rows[:n, :d].copy(),
+                "next_obs": self.rows[:n, d + 1:2 * d + 1].copy(), "action": self.action[:n].copy(),
+                "reward": self.rows[:n, -2].copy(), "discount": self.rows[:n, -1].copy()}
 
     def load_state(self, st: dict[str, Any]) -> None:
         n = int(st["size"])
         if n > self.capacity or st["obs"].shape[1:] != (self.obs_size,):
             raise ValueError(f"checkpoint buffer ({n} x {st['obs'].shape[1:]}) does not fit this buffer "
                              f"({self.capacity} x {self.obs_size})")
-        self.obs[:n, :-1] = st["obs"]
-        self.next_obs[:n, :-1] = st["next_obs"]
-        for name in ("action", "reward", "discount"):
-            getattr(self, name)[:n] = st[name]
+        self.size, self.pos = 0, 0
+        self.add(st["obs"], st["action"], st["reward"], st["next_obs"], st["discount"])
         self.size, self.pos = n, int(st["pos"])
