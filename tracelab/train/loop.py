@@ -76,6 +76,8 @@ class Trainer:
         self.ep_id = np.zeros(w, np.int64)
         self.ep_start = np.zeros(w, np.int64)  # training step at which each world's episode began
         self._logging_episodes = False          # episode begins are written once train() starts
+        self._begun: list[dict[str, Any]] = []  # episode rows not yet handed to the writer
+        self._ended: list[dict[str, Any]] = []
         self.next_episode = 0
         self.step = 0
         self.update_credit = 0.0
@@ -115,24 +117,32 @@ class Trainer:
             info = {"kind": "train", "train_step": int(self.ep_start[w])}
             if self.ep_len[w]:
                 info["resumed_at"] = self.step  # begun in the run this one resumes
-            self.writer.begin_episode(int(self.ep_id[w]), world=w, t_start=0, info=info)
+            self._begun.append({"episode": int(self.ep_id[w]), "world": w, "t_start": 0, "info": info})
+
+    def _flush_episodes(self) -> None:
+        """Hand the episode rows gathered since the last call to the writer, one table each (per-episode
+        calls cost more than a pass of the loop)."""
+        if self.writer is not None and (self._begun or self._ended):
+            self.writer.begin_episodes(self._begun)
+            self.writer.end_episodes(self._ended)
+        self._begun, self._ended = [], []
 
     def _end_open_episodes(self) -> None:
         """The games still running when training stops end as 'aborted' (a resumed run begins them again)."""
         if self.writer is None or not self._logging_episodes:
             return
-        for w in range(self.worlds):
-            self.writer.end_episode(int(self.ep_id[w]), steps=int(self.ep_len[w]), outcome="aborted",
-                                    reward=float(self.ep_return[w]))
+        self._ended += [{"episode": int(self.ep_id[w]), "steps": int(self.ep_len[w]), "outcome": "aborted",
+                         "reward": float(self.ep_return[w])} for w in range(self.worlds)]
+        self._flush_episodes()
         self._logging_episodes = False
 
     def _end_episodes(self, worlds: np.ndarray, final: dict[str, Any], truncated: np.ndarray) -> None:
         for w in worlds.tolist():
             self.returns_since_log.append(float(self.ep_return[w]))
             if self.writer is not None:
-                self.writer.end_episode(int(self.ep_id[w]), steps=int(self.ep_len[w]),
-                                        outcome=outcome_name(final["winner"][w], bool(truncated[w])),
-                                        reward=float(self.ep_return[w]))
+                self._ended.append({"episode": int(self.ep_id[w]), "steps": int(self.ep_len[w]),
+                                    "outcome": outcome_name(final["winner"][w], bool(truncated[w])),
+                                    "reward": float(self.ep_return[w])})
 
     # ---- one pass: every world makes one step ----
     def epsilon(self) -> float:
@@ -244,6 +254,7 @@ class Trainer:
         m["updates_per_s"] = (updates - upd0) / dt
         self._rate_mark = (now, self.step, updates)
         self.logged_step = self.step
+        self._flush_episodes()
         if self.writer is not None:
             self.writer.write_metrics(self.step, m)
         return m

@@ -7,7 +7,7 @@ factor on the bootstrap, γ^k, or 0 when the episode (or the agent) ended.
 Each transition is one float32 row laid out as the learner reads it: [obs, 1, next_obs, 1, one-hot action,
 reward, discount] (the ones add the biases in the learner's matmuls; the one-hot picks the taken action's
 Q-value and carries its gradient). So a minibatch is one `np.take` and the learner's torch tensors are
-fixed views of the batch array: sampling costs two numpy calls."""
+fixed views of the batch array: sampling costs four numpy calls."""
 from __future__ import annotations
 
 from typing import Any
@@ -62,7 +62,9 @@ class ReplayBuffer:
 
     def sample(self, rng: np.random.Generator) -> None:
         """Fill the batch with a uniform sample (with replacement) of stored transitions."""
-        np.take(self.rows, rng.integers(0, self.size, len(self.batch)), axis=0, out=self.batch)
+        # floor(u * size) for u in [0, 1): uniform over the stored rows, at half the cost of rng.integers
+        idx = (rng.random(len(self.batch)) * self.size).astype(np.int64)
+        self.rows.take(idx, axis=0, out=self.batch)
 
     def sampled_actions(self) -> np.ndarray:
         """The action ids of the current batch, [B, 1]."""
