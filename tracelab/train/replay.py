@@ -31,8 +31,8 @@ class ReplayBuffer:
         self.batch = np.zeros((batch, self.row), np.float32)
         # numpy views of the batch by field (the learner makes the same views in torch)
         b = self.batch
-        self.b_obs = np.lib.stride_tricks.as_strided(b, (2, batch, d + 1), (4 * (d + 1), 4 * self.row, 4),
-                                                     writeable=False)  # [obs; next_obs], with the ones
+        # [obs; next_obs] with the ones (the two halves of a row do not overlap)
+        self.b_obs = np.lib.stride_tricks.as_strided(b, (2, batch, d + 1), (4 * (d + 1), 4 * self.row, 4))
         self.b_onehot = b[:, self._hot:self._hot + n_actions]
         self.b_reward = b[:, -2:-1]
         self.b_discount = b[:, -1:]
