@@ -125,7 +125,7 @@ def _timed(fn: Callable[[int], None], k: int) -> tuple[float, float]:
     return time.perf_counter() - t0, time.process_time() - c0
 
 
-def run(quick: bool = False, repeats: int = 5, envs: int = 16, threads: int = 1) -> dict[str, Any]:
+def run(quick: bool = False, repeats: int = 5, envs: int = 64, threads: int = 1) -> dict[str, Any]:
     """The four figures, measured round by round (one block of each per round) so that each round's
     ratios compare figures taken under the same machine load; medians over the rounds."""
     info = machine_info()

@@ -32,7 +32,8 @@ def register(sub: argparse._SubParsersAction) -> None:
             q.add_argument("--batch", type=_positive, default=None,
                            help="worlds of the batched runs (default 256; --quick: 16)")
         if name in ("train", "all"):
-            q.add_argument("--envs", type=_positive, default=16, help="worlds of the training env (default 16)")
+            q.add_argument("--envs", type=_positive, default=64, help="worlds of the training env (default 64, "
+                                                                      "as tracelab train)")
             q.add_argument("--threads", type=_positive, default=1, help="torch threads (default 1)")
         if name in ("engine", "all"):
             q.add_argument("--compile-repeats", type=_positive, default=None,

@@ -26,8 +26,8 @@ class TrainConfig:
     backend: str = _opt("simulator: rules (the rule engine) or reference (hand-written)", default="rules")
     steps: int = _opt("training steps (world-steps: env transitions)", default=200_000)
     seed: int = _opt("seed of everything (network init, exploration, replay sampling, envs)", default=0)
-    envs: int = _opt("worlds stepped together (the batched env); one update per world-step either way",
-                     default=16)
+    envs: int = _opt("worlds stepped together (the batched env; from 64 on the rule engine runs its lanes "
+                     "kernel, ~2x cheaper per world-step); one update per world-step either way", default=64)
     mask: bool = _opt("act only among the shield's allowed actions (off in the method)", default=False)
     opponent_p: float = _opt("the opponent's probability of a move towards red's base while training",
                              default=0.7)
@@ -52,7 +52,7 @@ class TrainConfig:
                          default=0.3)
     trace_eval_games: int = _opt("evaluation games traced in full (change rows) per evaluation",
                                  default=5)
-    eval_envs: int = _opt("worlds stepped together in evaluations", default=50)
+    eval_envs: int = _opt("worlds stepped together in evaluations", default=64)
     log_every: int = _opt("write training metrics every this many steps", default=1_000)
     checkpoint_every: int = _opt("write a checkpoint every this many steps (0: only at the end)",
                                  default=50_000)
