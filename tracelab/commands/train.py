@@ -22,13 +22,15 @@ def register(sub: argparse._SubParsersAction) -> None:
                                      "games into a run", argument_default=argparse.SUPPRESS)
     for name, typ, default, text in config_fields():
         flag = "--" + name.replace("_", "-")
-        shown = f"{text} (default: {default})"
+        shown = text if default is None or isinstance(default, bool) else f"{text} (default: {default})"
         if name == "non_markov":
             p.add_argument("--non-markov", dest="non_markov", action="store_true", help=shown)
             p.add_argument("--markov", dest="non_markov", action="store_false",
                            help="the Markov setup: current observation, one shared network (default)")
         elif typ in ("bool", bool):
             p.add_argument(flag, dest=name, action="store_true", help=shown)
+        elif name == "backend":
+            p.add_argument(flag, dest=name, choices=("rules", "reference"), help=shown)
         else:
             conv = {"int": int, "float": float, "str": str, "int | None": int}.get(str(typ), str)
             p.add_argument(flag, dest=name, type=conv, metavar=name.upper(), help=shown)

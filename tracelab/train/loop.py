@@ -306,6 +306,7 @@ class Trainer:
             if self._crossed(cfg.eval_every, before):
                 self.run_eval()
             if self.run_dir is not None and self._crossed(cfg.checkpoint_every, before):
+                self._flush_episodes()  # the run holds every episode the checkpoint has counted
                 save_checkpoint(self, self.run_dir)
             if self.progress is not None and time.monotonic() - last_progress > 0.2:
                 last_progress = time.monotonic()
