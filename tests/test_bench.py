@@ -102,6 +102,19 @@ def test_bench_replay_quick(capsys: pytest.CaptureFixture) -> None:
     assert set(r["layers_s"]) >= {"load (board from the run)", "board", "rule log", "why documents"}
 
 
+def test_bench_train_quick(capsys: pytest.CaptureFixture) -> None:
+    r = bench_json(capsys, "train", "--repeats", "2", "--envs", "4")
+    machine(r["machine"])
+    assert r["envs"] == 4 and r["threads"] == 1 and r["repeats"] == 2
+    for key in ("transitions_per_s", "update_per_s", "textbook_update_per_s", "env_steps_per_s",
+                "fused_over_textbook"):
+        positive(r[key])
+    for key in ("e2e", "fused", "textbook", "env"):
+        positive(r["per_cpu_second"][key])
+    assert len(r["loop_share"]["runs"]) == 2 and all(s < 1 for s in r["loop_share"]["runs"])
+    assert [g["goal"] for g in r["goals"]] == ["loop around the update", "transitions/s, one update each"]
+
+
 def test_bench_helpers() -> None:
     s = summarize([3.0, 1.0, 2.0])
     assert (s.median, s.min, s.max, s.spread) == (2.0, 1.0, 3.0, 1.0)

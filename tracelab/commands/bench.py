@@ -1,5 +1,5 @@
 """`tracelab bench`: speed and memory measured by benchmarks (docs/benchmarks.md), never by timed
-assertions in tests. `bench engine`, `bench env`, `bench store`, `bench all`; each takes --json,
+assertions in tests. `bench engine`, `bench env`, `bench store`, `bench replay`, `bench train`, `bench all`; each takes --json,
 --quick (small sizes: the smoke test) and --repeats (medians and spread over that many repeats)."""
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from typing import Any
 
 from tracelab.commands._args import positive_int
 
-SECTIONS = ("engine", "env", "store", "replay")
+SECTIONS = ("engine", "env", "store", "replay", "train")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -21,7 +21,8 @@ def register(sub: argparse._SubParsersAction) -> None:
              "env": "RuleSim vs RefSim steps/s (one world and batched), the gymnasium envs, the goals",
              "store": "trace-store ingest rows/s, sealing, point queries",
              "replay": "tracelab replay: a 500-step 5v5 game and 100 games of 1v1 converted to .rrd",
-             "all": "engine, env, store and replay"}
+             "train": "DQN training transitions/s end to end, the update alone, the env alone, the loop's share",
+             "all": "engine, env, store, replay and train"}
     for name, text in helps.items():
         q = what.add_parser(name, help=text)
         q.add_argument("--json", action="store_true", help="machine-readable output")
@@ -33,6 +34,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         if name in ("env", "all"):
             q.add_argument("--batch", type=positive_int, default=None,
                            help="worlds of the batched runs (default 256; --quick: 16)")
+        if name in ("train", "all"):
+            q.add_argument("--envs", type=positive_int, default=64,
+                           help="worlds of the training env (default 64, as tracelab train)")
+            q.add_argument("--threads", type=positive_int, default=1, help="torch threads (default 1)")
         if name in ("engine", "all"):
             q.add_argument("--compile-repeats", type=positive_int, default=None,
                            help="first-ever compiles to time (default: min(repeats, 3); --quick: 1)")
@@ -62,6 +67,10 @@ def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], s
         from tracelab.bench import replay
         r = replay.run(args.quick, args.repeats)
         return r, replay.report(r)
+    if name == "train":
+        from tracelab.bench import train
+        r = train.run(args.quick, args.repeats, args.envs, args.threads)
+        return r, train.report(r)
     from tracelab.bench import store
     r = store.run(args.quick, args.repeats)
     return r, store.report(r)

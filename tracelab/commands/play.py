@@ -23,12 +23,16 @@ OUTCOMES = {0: "win", 1: "loss", 2: "draw"}  # from red's side, by WINNER_RED / 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("play", help="play traced games (red: a simple policy; blue: the scripted "
                                     "opponent) into a trace-store run")
-    p.add_argument("--scenario", default="advanced",
-                   help="a built-in scenario name (base, advanced, nonmarkov) or a scenario .toml file")
+    p.add_argument("--scenario", default=None,
+                   help="a built-in scenario name (base, advanced, nonmarkov) or a scenario .toml file "
+                        "(default: advanced, or the scenario a --policy PATH was trained on)")
     p.add_argument("--episodes", type=positive_int, default=5, help="episodes to play (default 5)")
     p.add_argument("--worlds", type=positive_int, default=1, help="worlds stepped together (default 1)")
-    p.add_argument("--policy", choices=("random", "scripted"), default="scripted",
-                   help="red's policy (default: the scripted base policy)")
+    p.add_argument("--policy", default="scripted",
+                   help="red's policy: random, scripted (the scripted base policy, default) or the path of "
+                        "a trained policy (e.g. RUN/policy)")
+    p.add_argument("--opponent-p", type=float, default=None,
+                   help="the opponent's probability of a move towards red's base (default 0.7)")
     p.add_argument("--seed", type=non_negative_int, default=0,
                    help="seed of the episodes and of the random policy (default 0)")
     p.add_argument("--run", help="a new (or empty) run directory (default runs/play-<scenario>-<time>)")
@@ -58,8 +62,18 @@ def run(args: argparse.Namespace) -> int:
         load_scenario,
     )
 
-    scenario = builtin_scenario(args.scenario) if args.scenario in builtin_scenario_names() \
-        else load_scenario(args.scenario)
+    args.trained = None
+    builtin = args.policy in ("random", "scripted")
+    if not builtin:
+        from tracelab.train.policy import load_policy, policy_scenario, read_policy_spec
+        with store_errors():  # a policy that does not load is the user's to fix
+            scenario = policy_scenario(read_policy_spec(args.policy))
+    if args.scenario is not None or builtin:
+        name = args.scenario or "advanced"
+        scenario = builtin_scenario(name) if name in builtin_scenario_names() else load_scenario(name)
+    if not builtin:
+        with store_errors():
+            args.trained = load_policy(args.policy, scenario)
     if args.no_trace:
         _summary(play(scenario, args, sink=None))
         return 0
@@ -71,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     check_run_dir(run_dir)
     meta = {"command": " ".join(shlex.quote(a) for a in sys.argv), "scenario": scenario.name,
             "config": {"episodes": args.episodes, "worlds": args.worlds, "policy": args.policy,
-                       "scenario": scenario.to_toml()},
+                       "opponent_p": args.opponent_p, "scenario": scenario.to_toml()},
             "rule_files": [str(GAME_RULES)], "seed": args.seed}
     try:
         with store_errors():  # another process took the directory since the check: a RuntimeError
@@ -105,8 +119,10 @@ def play(scenario, args: argparse.Namespace, sink) -> dict:
     from tracelab.commands._progress import compiling_engine, progress
     from tracelab.engine.core import LANES_MIN_WORLDS
     from tracelab.envs.vector_env import GridWarVectorEnv
+    from tracelab.game.opponent import P_TOWARD
 
     n_worlds = min(args.worlds, args.episodes)
+    trained = args.trained
     rng = np.random.default_rng(args.seed)
     index_of = {a: i for i, a in enumerate(scenario.action_ids)}
     to_index = np.array([index_of.get(a, 0) for a in range(9)])  # spec action id -> action index
@@ -115,15 +131,21 @@ def play(scenario, args: argparse.Namespace, sink) -> dict:
     next_episode = n_worlds
     finished: dict[int, dict] = {}
     returns = np.zeros(n_worlds)
+    last: dict = {}  # the observation and info red acts on
 
     def one_step(env: GridWarVectorEnv) -> tuple[int, int]:
         """Step every world once; returns (steps of asked-for episodes, how many of them ended)."""
         nonlocal next_episode
-        if args.policy == "scripted":
+        if trained is not None:
+            from tracelab.train.policy import may_act
+            masks = last["info"]["action_mask"].reshape(n_worlds, n, -1) if trained.mask else None
+            red = trained.act(last["obs"], may_act(scenario, env.sim.state), masks)
+        elif args.policy == "scripted":
             red = to_index[env.sim.scripted_actions("red")]
         else:
             red = rng.integers(0, scenario.n_actions, size=(n_worlds, n))
-        _, reward, terminated, truncated, info = env.step(red[:, 0] if n == 1 else red)
+        last["obs"], reward, terminated, truncated, info = env.step(red[:, 0] if n == 1 else red)
+        last["info"] = info
         played = int((episode_of_world < args.episodes).sum())
         returns[:] += reward
         done = np.flatnonzero(terminated | truncated)
@@ -145,8 +167,10 @@ def play(scenario, args: argparse.Namespace, sink) -> dict:
     with compiling_engine(simulator=True, lanes=n_worlds >= LANES_MIN_WORLDS,
                           busy=f"building the game's rules ({agents})…") as first:
         env = GridWarVectorEnv(n_worlds, scenario, backend="rules", trace_sink=sink,
-                               trace_episodes=args.episodes)
-        env.reset(seed=args.seed)
+                               trace_episodes=args.episodes,
+                               stack_previous=trained is not None and trained.stack_previous,
+                               opponent_p=P_TOWARD if args.opponent_p is None else args.opponent_p)
+        last["obs"], last["info"] = env.reset(seed=args.seed)
         first_steps, ended = one_step(env)
     steps = 0
     t0 = time.perf_counter()

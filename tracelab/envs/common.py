@@ -126,10 +126,10 @@ class ActionMasker:
 
 
 def step_learner(sim: Any, masker: ActionMasker, tracer: Any, action: Any, n_worlds: int,
-                 space: Any) -> Any:
+                 space: Any) -> tuple[Any, np.ndarray]:
     """One step with red playing `action` (indices into the scenario's actions, [n_worlds, N] after
     reshaping) and blue playing the scripted policy; the step is handed to the tracer, if any.
-    Returns the simulator's StepResult."""
+    Returns the simulator's StepResult and blue's actions (spec ids, [n_worlds, N])."""
     idx = np.asarray(action, np.int64).reshape(n_worlds, -1)
     if ((idx < 0) | (idx >= masker.n_actions)).any():
         raise ValueError(f"action {action!r} is outside the action space {space}")
@@ -138,7 +138,7 @@ def step_learner(sim: Any, masker: ActionMasker, tracer: Any, action: Any, n_wor
     res = sim.step(red, blue)
     if tracer is not None:
         tracer.stepped(res, np.stack([red, blue], axis=1))
-    return res
+    return res, blue
 
 
 def render_text(scenario: Scenario, state: GameState, world: int = 0) -> str:

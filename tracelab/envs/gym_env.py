@@ -9,7 +9,7 @@ opponent (blue, tracelab/game/opponent.py) inside.
 - `terminated` on a win, loss or draw; `truncated` at `scenario.max_steps`. Step again only after reset.
 - info: `action_mask` (int8, [n_actions] or [N, n_actions]; see env_common.ActionMasker: it mirrors the
   rules t_fast/t_slow, u_*_edge, u_*_mtn, s_empty/s_unarmed), `t`, `winner` (refsim.WINNER_*: -1 none,
-  0 red, 1 blue, 2 draw), and red's per-agent `unsafe`, `invalid`, `hits_made`, `hits_taken`,
+  0 red, 1 blue, 2 draw), `opponent_actions` (blue's spec action ids in the step, -1 after reset), and red's per-agent `unsafe`, `invalid`, `hits_made`, `hits_taken`,
   `agent_reward` for the last step (zeros after reset). For MultiDiscrete, sample with
   `space.sample(mask=tuple(info["action_mask"]))`.
 - Seeding: `reset(seed=s)` reseeds the opponent's generator; the same seed and actions give the same
@@ -44,10 +44,12 @@ from tracelab.game.state import WINNER_NONE, StepResult
 ENV_IDS = {name: f"tracelab/GridWar-{name}-v0" for name in ("base", "advanced", "nonmarkov")}
 
 
-def step_info(res: StepResult, masks: np.ndarray, one_agent: bool) -> dict[str, Any]:
-    """info of every world after a step, arrays [W, ...] (red's view); masks: [W, N, n_actions].
-    With one agent per team the agent axis is dropped (masks [W, n_actions], events [W])."""
-    info = {"action_mask": masks, "unsafe": res.unsafe[:, RED], "invalid": res.invalid[:, RED],
+def step_info(res: StepResult, masks: np.ndarray, one_agent: bool, opponent: np.ndarray) -> dict[str, Any]:
+    """info of every world after a step, arrays [W, ...] (red's view); masks: [W, N, n_actions];
+    opponent: blue's actions (spec ids, [W, N]). With one agent per team the agent axis is dropped
+    (masks [W, n_actions], events [W])."""
+    info = {"action_mask": masks, "opponent_actions": np.asarray(opponent, np.int64),
+            "unsafe": res.unsafe[:, RED], "invalid": res.invalid[:, RED],
             "hits_made": res.hits_made[:, RED].astype(np.int64),
             "hits_taken": res.hits_taken[:, RED].astype(np.int64), "agent_reward": res.agent_reward[:, RED]}
     if one_agent:
@@ -59,7 +61,8 @@ def reset_info(n_worlds: int, masks: np.ndarray, one_agent: bool) -> dict[str, A
     """info of worlds at the start of an episode: nothing has happened yet."""
     shape = (n_worlds,) if one_agent else (n_worlds, masks.shape[1])
     return {"t": np.zeros(n_worlds, np.int64), "winner": np.full(n_worlds, WINNER_NONE, np.int64),
-            "action_mask": masks[:, 0] if one_agent else masks, "unsafe": np.zeros(shape, bool),
+            "action_mask": masks[:, 0] if one_agent else masks, "opponent_actions": np.full(shape, -1, np.int64),
+            "unsafe": np.zeros(shape, bool),
             "invalid": np.zeros(shape, bool), "hits_made": np.zeros(shape, np.int64),
             "hits_taken": np.zeros(shape, np.int64), "agent_reward": np.zeros(shape)}
 
@@ -94,10 +97,10 @@ class GridWarEnv(gym.Env[np.ndarray, Any]):
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if not self._running:
             raise RuntimeError("the episode is over (or never began): call reset() first")
-        res = step_learner(self.sim, self._masker, self._tracer, action, 1, self.action_space)
+        res, blue = step_learner(self.sim, self._masker, self._tracer, action, 1, self.action_space)
         terminated, truncated = bool(res.terminated[0]), bool(res.truncated[0])
         self._running = not (terminated or truncated)
-        info = self._first(step_info(res, self._masks(), self._single))
+        info = self._first(step_info(res, self._masks(), self._single, blue))
         return res.obs[0, RED].copy(), float(res.reward[0, RED]), terminated, truncated, info
 
     def _masks(self) -> np.ndarray:

@@ -21,6 +21,11 @@ reproducible for a given seed and num_envs. A list of seeds is combined into one
 Tracing: with `trace_sink`, every episode goes to the sink; with `trace_episodes=N` too, only the
 episodes 0..N-1 (ids in the order episodes begin; see tracelab/envs/tracer.py), so stepping until those
 ended records exactly N episodes.
+
+`opponent_p`: the scripted opponent's probability of a move towards red's base (0.7, the method's
+training setting). info["opponent_actions"] (int64, spec ids, as GridWarEnv's) holds what blue played in
+the step (in final_info for worlds that ended), so a step can be replayed on a simulator
+(`sim.step(red, blue)`), e.g. to restore a checkpoint.
 """
 from __future__ import annotations
 
@@ -41,6 +46,7 @@ from tracelab.envs.common import (
 from tracelab.envs.gym_env import reset_info, step_info
 from tracelab.envs.sinks import TraceSink
 from tracelab.envs.tracer import EpisodeTracer
+from tracelab.game.opponent import P_TOWARD
 from tracelab.game.scenario import RED, Scenario
 
 
@@ -55,7 +61,8 @@ class GridWarVectorEnv(VectorEnv):
 
     def __init__(self, num_envs: int = 1, scenario: Scenario | str = "advanced", *, backend: str = "rules",
                  stack_previous: bool = False, trace_sink: TraceSink | None = None,
-                 trace_episodes: int | None = None, render_mode: str | None = None) -> None:
+                 trace_episodes: int | None = None, render_mode: str | None = None,
+                 opponent_p: float = P_TOWARD) -> None:
         if render_mode is not None:
             raise ValueError("GridWarVectorEnv does not render")
         if num_envs < 1:
@@ -64,6 +71,7 @@ class GridWarVectorEnv(VectorEnv):
         self.scenario = resolve_scenario(scenario)
         self.backend = backend
         self.sim = make_sim(self.scenario, backend, num_envs, stack_previous, trace=trace_sink is not None)
+        self.sim.opponent_p = opponent_p
         self.single_observation_space = observation_space(self.scenario, stack_previous)
         self.single_action_space = learner_action_space(self.scenario)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
@@ -91,13 +99,13 @@ class GridWarVectorEnv(VectorEnv):
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         if not self._ready:
             raise RuntimeError("call reset() before step()")
-        res = step_learner(self.sim, self._masker, self._tracer, actions, self.num_envs,
-                           self.single_action_space)
+        res, blue = step_learner(self.sim, self._masker, self._tracer, actions, self.num_envs,
+                                 self.single_action_space)
         obs = res.obs[:, RED].copy()  # a copy: the caller owns what step returns
         reward = res.reward[:, RED].copy()
         terminated, truncated = res.terminated.copy(), res.truncated.copy()
         done = terminated | truncated
-        info = step_info(res, self._masks(), self._n == 1)
+        info = step_info(res, self._masks(), self._n == 1, blue)
         if done.any():
             info = self._autoreset(done, obs, info)
         return obs, reward, terminated, truncated, self._with_masks(info, self._all)

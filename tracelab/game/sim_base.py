@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from tracelab.game.observe import obs_size, observe_both
-from tracelab.game.opponent import scripted_actions
+from tracelab.game.opponent import P_TOWARD, scripted_actions
 from tracelab.game.scenario import Scenario, team_index
 
 
@@ -21,6 +21,7 @@ class GameSim:
         self.stack_previous = stack_previous
         self.rng = np.random.default_rng(seed)
         self.obs_size = obs_size(scenario, stack_previous)
+        self.opponent_p = P_TOWARD  # the scripted policy's probability of a move towards the enemy base
 
     def _observe_both(self, state) -> np.ndarray:
         """Both teams' observations of `state` without history, [W, 2, D]."""
@@ -36,4 +37,4 @@ class GameSim:
     def scripted_actions(self, team: int | str = "blue") -> np.ndarray:
         """The scripted policy's actions for `team` in the current state, drawn from `self.rng`."""
         s = self.state
-        return scripted_actions(s.pos, s.alive, s.ammo, team, self.scenario, self.rng)
+        return scripted_actions(s.pos, s.alive, s.ammo, team, self.scenario, self.rng, self.opponent_p)

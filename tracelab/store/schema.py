@@ -129,7 +129,10 @@ LEFT JOIN atoms a ON a.atom = c.atom,
 CREATE OR REPLACE VIEW episodes AS
 SELECT coalesce(b.episode, e.episode) AS episode, b.world, e.steps, e.outcome, e.reward,
        e.rewards, b.t_start, e.t_end, b.seed, b.started_at, e.ended_at,
-       e.episode IS NOT NULL AS ended, b.info AS begin_info, e.info AS end_info
+       e.episode IS NOT NULL AS ended, b.info AS begin_info, e.info AS end_info,
+       -- training runs (docs/training.md): 'train' or 'eval', and the training step it began at
+       json_extract_string(b.info, '$.kind') AS kind,
+       TRY_CAST(json_extract(b.info, '$.train_step') AS BIGINT) AS train_step
 FROM raw.episode_begin b FULL JOIN raw.episode_end e ON e.episode = b.episode;
 
 CREATE OR REPLACE VIEW steps AS SELECT * FROM raw.steps;

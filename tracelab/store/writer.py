@@ -180,30 +180,49 @@ class TraceWriter:
     # ---- episodes ------------------------------------------------------------------------------------
     def begin_episode(self, episode: int, *, world: int = 0, t_start: int | None = None,
                       seed: int | None = None, info: Any = None) -> None:
-        episode = int(episode)
-        if episode in self._open_episodes:
-            raise ValueError(f"episode {episode} was already begun and not yet ended")
-        self._open_episodes.add(episode)
-        row = {"episode": episode, "world": world, "t_start": t_start, "seed": seed,
-               "started_at": convert.utc_now(), "info": convert.json_text(info)}
-        self._append({"episode_begin": pa.Table.from_pylist([row], schema=SCHEMAS["episode_begin"])})
+        self.begin_episodes([{"episode": episode, "world": world, "t_start": t_start, "seed": seed,
+                              "info": info}])
+
+    def begin_episodes(self, episodes: Sequence[Mapping[str, Any]]) -> None:
+        """begin_episode for many episodes in one table (dicts with episode and optionally world,
+        t_start, seed, info): a training loop logs thousands of short episodes."""
+        rows, now = [], convert.utc_now()
+        for e in episodes:
+            episode = int(e["episode"])
+            if episode in self._open_episodes:
+                raise ValueError(f"episode {episode} was already begun and not yet ended")
+            self._open_episodes.add(episode)
+            rows.append({"episode": episode, "world": e.get("world", 0), "t_start": e.get("t_start"),
+                         "seed": e.get("seed"), "started_at": now, "info": convert.json_text(e.get("info"))})
+        if rows:
+            self._append({"episode_begin": pa.Table.from_pylist(rows, schema=SCHEMAS["episode_begin"])})
 
     def end_episode(self, episode: int, *, steps: int, outcome: str, reward: float | None = None,
                     rewards: Mapping[str, float] | None = None, t_end: int | None = None,
                     info: Any = None) -> None:
         """Close an episode. outcome: 'win', 'loss', 'draw' or 'truncated' (the saved queries use
         these); reward: the learner's return; rewards: per-agent returns. Triggers a flush."""
-        episode = int(episode)
-        if episode not in self._open_episodes:
-            raise ValueError(f"episode {episode} is not open (begin_episode it first; open: "
-                             f"{sorted(self._open_episodes)[:10]})")
-        self._open_episodes.discard(episode)
-        row = {"episode": episode, "steps": int(steps), "t_end": t_end, "outcome": str(outcome),
-               "reward": None if reward is None else float(reward),
-               "rewards": convert.json_text(dict(rewards) if rewards is not None else None),
-               "ended_at": convert.utc_now(), "info": convert.json_text(info)}
-        self._append({"episode_end": pa.Table.from_pylist([row], schema=SCHEMAS["episode_end"])},
-                     urgent=True)
+        self.end_episodes([{"episode": episode, "steps": steps, "outcome": outcome, "reward": reward,
+                            "rewards": rewards, "t_end": t_end, "info": info}])
+
+    def end_episodes(self, episodes: Sequence[Mapping[str, Any]]) -> None:
+        """end_episode for many episodes in one table (dicts with episode, steps, outcome and optionally
+        reward, rewards, t_end, info). Triggers a flush."""
+        rows, now = [], convert.utc_now()
+        for e in episodes:
+            episode = int(e["episode"])
+            if episode not in self._open_episodes:
+                raise ValueError(f"episode {episode} is not open (begin_episode it first; open: "
+                                 f"{sorted(self._open_episodes)[:10]})")
+            self._open_episodes.discard(episode)
+            reward, rewards = e.get("reward"), e.get("rewards")
+            rows.append({"episode": episode, "steps": int(e["steps"]), "t_end": e.get("t_end"),
+                         "outcome": str(e["outcome"]), "reward": None if reward is None else float(reward),
+                         "rewards": convert.json_text(dict(rewards) if rewards is not None else None),
+                         "ended_at": now, "info": convert.json_text(e.get("info"))})
+        if rows:
+            self._append({"episode_end": pa.Table.from_pylist(rows, schema=SCHEMAS["episode_end"])},
+                         urgent=True)
 
     # ---- rows ------------------------------------------------------------------------------------------
     def write_changes(self, episode: int | Sequence[int] | np.ndarray | None,

@@ -1,0 +1,246 @@
+"""`tracelab train`: the update equals autograd + Adam, a run logs what the contract says (docs/training.md),
+resume equals no interruption, the learner learns a tiny game, Ctrl-C leaves an interrupted run with a
+checkpoint."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from tracelab.cli import main
+from tracelab.commands.train import train_into
+from tracelab.game.scenario import Rewards, Scenario
+from tracelab.store import open_run, run_info
+from tracelab.store.why import explain, render_why
+from tracelab.train.checkpoint import checkpoint_path, load_checkpoint
+from tracelab.train.config import TrainConfig
+from tracelab.train.learner import DQNLearner
+from tracelab.train.loop import Trainer
+from tracelab.train.network import Shape, to_state_dict
+from tracelab.train.policy import load_policy, read_policy_spec
+
+# A 4x4 walk: red starts on its base (3,0) and wins by reaching blue's (0,3) in 6 moves; blue is a random
+# walker (opponent_p = 0), so the best policy almost always wins. Small rewards keep Q-values small.
+WALK = Scenario(name="walk4", width=4, height=4, red_base=(3, 0), blue_base=(0, 3), max_steps=30,
+                rewards=Rewards(win=10, loss=-10, valid_action=-0.1, unsafe=-1, invalid=-0.5, hit_opponent=0,
+                                got_shot=0))
+SMALL = dict(warmup=100, envs=4, batch=32, buffer=2000, target_every=100, log_every=100, eval_every=200,
+             eval_games=8, trace_eval_games=2, eval_envs=3, checkpoint_every=200, opponent_p=0.5, eval_p=0.3,
+             lr=3e-3)
+TRAINING_METRICS = {"loss", "epsilon", "q_max_mean", "env_steps_per_s", "updates_per_s", "train_return"}
+EVAL_METRICS = {f"eval/{k}" for k in ("games", "wins", "losses", "draws", "truncated", "win_rate", "mean_return",
+                                       "method_win_rate")}
+TIMING = ("env_steps_per_s", "updates_per_s")
+
+
+def test_fused_update_matches_autograd_smooth_l1_and_adam():
+    torch.set_num_threads(1)
+    shape = Shape(4, 16, 5)
+    learner = DQNLearner(shape, lr=1e-2, batch=32, buffer=100, generator=torch.Generator().manual_seed(0))
+    rng = np.random.default_rng(0)
+    k = 100
+    learner.buffer.add((rng.normal(size=(k, 4)) * 3).astype(np.float32), rng.integers(0, 5, k),
+                       (rng.normal(size=k) * 5).astype(np.float32), (rng.normal(size=(k, 4)) * 3).astype(np.float32),
+                       rng.choice([0.0, 0.99], k).astype(np.float32))
+    learner.params[1] += 0.1  # a target network that differs from the online one
+    make = lambda: torch.nn.Sequential(torch.nn.Linear(4, 16), torch.nn.Tanh(), torch.nn.Linear(16, 5))  # noqa: E731
+    net, target = make(), make()
+    net.load_state_dict(to_state_dict(learner.params[0], shape))
+    target.load_state_dict(to_state_dict(learner.params[1], shape))
+    opt = torch.optim.Adam(net.parameters(), lr=1e-2)
+    sample_rng = np.random.default_rng(5)
+    for _ in range(30):
+        learner.update(sample_rng)
+        b = learner.buffer  # the minibatch the update just drew (observations with a column of ones)
+        s, s2 = torch.from_numpy(b.b_obs[0, :, :-1].copy()), torch.from_numpy(b.b_obs[1, :, :-1].copy())
+        q = net(s).gather(1, torch.from_numpy(b.sampled_actions()))
+        with torch.no_grad():
+            y = torch.from_numpy(b.b_reward.copy()) + torch.from_numpy(b.b_discount.copy()) * \
+                target(s2).max(1, keepdim=True).values
+        loss = torch.nn.functional.smooth_l1_loss(q, y)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    ours = to_state_dict(learner.params[0], shape)
+    for key, value in net.state_dict().items():
+        torch.testing.assert_close(ours[key], value, rtol=1e-5, atol=1e-6)
+    assert learner.take_loss() > 0 and learner.q_max_mean() is not None
+
+
+def _metrics(run) -> dict[tuple[int, str], float]:
+    con = open_run(run)
+    rows = con.execute("SELECT step, name, value FROM metrics").fetchall()
+    con.close()
+    return {(s, n): v for s, n, v in rows if n not in TIMING}
+
+
+def _ended_training_episodes(run) -> list[tuple]:
+    con = open_run(run)
+    rows = con.execute("SELECT episode, outcome, steps, reward FROM episodes WHERE kind = 'train' "
+                       "AND ended AND outcome <> 'aborted' ORDER BY episode").fetchall()
+    con.close()
+    return rows
+
+
+def test_a_run_logs_metrics_episodes_evaluations_checkpoint_and_policy(tmp_path):
+    run = tmp_path / "run"
+    cfg = TrainConfig(scenario="walk4", steps=400, seed=3, **SMALL)
+    assert train_into(cfg, WALK, run) == 0
+    info = run_info(run)
+    assert info.status == "finished" and info.meta["command"].startswith("tracelab train")
+    assert info.meta["config"]["steps"] == 400 and info.meta["config"]["lr"] == 3e-3
+    con = open_run(run)
+    names = {n for (n,) in con.execute("SELECT DISTINCT name FROM metrics").fetchall()}
+    assert TRAINING_METRICS | EVAL_METRICS <= names
+    eps = con.execute("SELECT step, value FROM metrics WHERE name = 'epsilon' ORDER BY step").fetchall()
+    assert [s for s, _ in eps] == [100, 200, 300, 400] and eps[0][1] == 1.0 and eps[-1][1] == cfg.eps_end
+    evals = con.execute("SELECT step, value FROM metrics WHERE name = 'eval/games' ORDER BY step").fetchall()
+    assert evals == [(200, 8.0), (400, 8.0)]
+    counts = con.execute("SELECT name, value FROM metrics WHERE step = 400 AND name IN "
+                         "('eval/wins', 'eval/losses', 'eval/draws', 'eval/truncated')").fetchall()
+    assert sum(v for _, v in counts) == 8
+    # training episodes: one row each with outcome, return and length, begun with their training step
+    train = con.execute("SELECT outcome, steps, reward, train_step FROM episodes WHERE kind = 'train' "
+                        "AND outcome <> 'aborted'").fetchall()
+    assert train and all(o in ("win", "loss", "draw", "truncated") and 0 < n <= 30 and 0 <= s < 400
+                         for o, n, _, s in train)
+    assert con.execute("SELECT count(*) FROM episodes WHERE kind = 'train' AND NOT ended").fetchone()[0] == 0
+    # the first 2 evaluation games of each evaluation are traced in full, and why explains them
+    traced = con.execute("SELECT episode, train_step, begin_info FROM episodes WHERE kind = 'eval' "
+                         "ORDER BY episode").fetchall()
+    assert [s for _, s, _ in traced] == [200, 200, 400, 400]
+    assert json.loads(traced[2][2]) == {"kind": "eval", "train_step": 400, "eval_round": 1, "opponent_p": 0.3}
+    ep = traced[0][0]
+    atom, t = con.execute("SELECT atom, t FROM changes WHERE episode = ? AND label = 'atLoc' AND new_lower = 1 "
+                          "AND atom LIKE 'atLoc(red-agent-1,%' ORDER BY t DESC LIMIT 1", [ep]).fetchone()
+    assert t >= 1
+    text = render_why(explain(con, episode=ep, atom=atom, at=t, depth=2))
+    assert atom in text and "action" in text
+    assert con.execute("SELECT count(*) FROM steps WHERE episode = ?", [ep]).fetchone()[0] > 0
+    con.close()
+    state = load_checkpoint(run)
+    assert state["step"] == 400 and checkpoint_path(run).exists()
+    spec = read_policy_spec(run / "policy")
+    assert spec["network"] == {**spec["network"], "inputs": 4, "hidden": 64, "outputs": 5}
+    assert spec["actions"]["ids"] == [0, 1, 2, 3, 8] and spec["trained"]["step"] == 400
+
+
+def test_resume_gives_the_same_networks_metrics_and_episodes_as_no_interruption(tmp_path):
+    cfg = TrainConfig(scenario="walk4", steps=480, seed=11, **SMALL)
+    straight, first, resumed = tmp_path / "straight", tmp_path / "first", tmp_path / "resumed"
+    assert train_into(cfg, WALK, straight) == 0
+    assert train_into(cfg, WALK, first, stop_at=246) == 130  # stops after the pass that crosses 246
+    assert run_info(first).status == "interrupted"
+    assert load_checkpoint(first)["step"] == 248
+    # the checkpoint holds the scenario (built in code here) and the config
+    assert main(["train", "--resume", str(first), "--run", str(resumed)]) == 0
+    a, b = load_checkpoint(straight), load_checkpoint(resumed)
+    assert a["step"] == b["step"] == 480
+    assert torch.equal(a["learners"]["shared"]["params"], b["learners"]["shared"]["params"])
+    assert torch.equal(a["learners"]["shared"]["adam_v"], b["learners"]["shared"]["adam_v"])
+    np.testing.assert_array_equal(a["learners"]["shared"]["buffer"]["obs"], b["learners"]["shared"]["buffer"]["obs"])
+    assert _metrics(straight) == {**_metrics(first), **_metrics(resumed)}
+    assert _ended_training_episodes(straight) == sorted(_ended_training_episodes(first) +
+                                                        _ended_training_episodes(resumed))
+    assert run_info(resumed).meta["config"]["resumed_from"] == {"run": str(first), "step": 248}
+
+
+def test_the_learner_learns_to_walk_to_the_enemy_base():
+    """A real assertion that learning happens: >= 95% wins after 4,000 steps (a random policy wins ~10%)."""
+    cfg = TrainConfig(scenario="walk4", steps=4000, seed=0, warmup=200, envs=8, lr=3e-3, gamma=0.9,
+                      target_every=250, buffer=5000, batch=64, opponent_p=0.0, eval_p=0.0, eval_every=0,
+                      eval_games=200, eval_envs=50, log_every=1000, checkpoint_every=0)
+    trainer = Trainer(cfg, WALK)
+    before = trainer.run_eval().win_rate
+    assert trainer.train() == "finished"
+    result = trainer.last_eval
+    trainer.close()
+    assert before < 0.5
+    assert result.games == 200 and result.win_rate >= 0.95, result.to_dict()
+    assert result.actions_per_win <= 8  # the shortest walk is 6 moves
+
+
+def test_saved_policy_round_trips_and_plain_torch_loads_it(tmp_path):
+    cfg = TrainConfig(scenario="walk4", steps=200, seed=2, **{**SMALL, "eval_every": 0})
+    trainer = Trainer(cfg, WALK)
+    trainer.train()
+    path = trainer.save_policy(tmp_path / "policy")
+    loaded = load_policy(path)
+    obs = np.random.default_rng(0).integers(0, 4, (50, 4)).astype(np.float32)
+    acting = np.ones((50, 1), bool)
+    np.testing.assert_array_equal(loaded.act(obs, acting), trainer.policy.act(obs, acting))
+    net = torch.nn.Sequential(torch.nn.Linear(4, 64), torch.nn.Tanh(), torch.nn.Linear(64, 5))
+    net.load_state_dict(torch.load(path / "policy.pt", weights_only=True)["shared"])
+    with torch.no_grad():
+        assert (net(torch.from_numpy(obs)).argmax(1).numpy() == loaded.act(obs, acting)[:, 0]).all()
+    spec = read_policy_spec(path)
+    assert spec["observation"]["layout"] == ["self_x", "self_y", "opponent1_x", "opponent1_y"]
+    assert spec["networks"] == {"shared": [0]} and spec["scenario"]["name"] == "walk4"
+    trainer.close()
+
+
+def test_non_markov_trains_separate_networks_whose_slow_transitions_span_two_steps():
+    from tracelab.game.scenario import builtin_scenario
+    sc = replace(builtin_scenario("nonmarkov"), max_steps=40)
+    cfg = TrainConfig(scenario="nonmarkov", non_markov=True, steps=160, seed=1,
+                      **{**SMALL, "eval_every": 0, "warmup": 1000})
+    trainer = Trainer(cfg, sc)
+    trainer.train()
+    fast, slow = trainer.learners["fast"].buffer, trainer.learners["slow"].buffer
+    assert trainer.groups == {"fast": [0], "slow": [1]}
+    assert fast.obs_size == slow.obs_size == 28  # 14 numbers, and the previous step's
+    g = cfg.gamma
+    fast_d = np.unique(fast.state()["discount"]).astype(np.float64)
+    slow_d = np.unique(slow.state()["discount"]).astype(np.float64)
+    # fast: one step per transition; slow: two (acts on even steps), unless the episode or its life ended
+    assert np.isclose(fast_d[:, None], [0.0, g]).any(axis=1).all(), fast_d
+    assert np.isclose(slow_d[:, None], [0.0, g, g * g]).any(axis=1).all(), slow_d
+    assert np.isclose(slow_d, g * g).any()
+    assert fast.size > slow.size
+    trainer.close()
+
+
+def test_ctrl_c_leaves_an_interrupted_run_with_a_checkpoint(tmp_path):
+    run = tmp_path / "run"
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen([sys.executable, "-m", "tracelab.cli", "train", "--scenario", "base",
+                             "--steps", "10000000", "--log-every", "64", "--eval-every", "0", "--warmup", "64",
+                             "--run", str(run)], stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                            env=env)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:  # wait until training metrics are published
+            if run.exists() and (run / "meta.json").exists():
+                try:
+                    con = open_run(run)
+                    n = con.execute("SELECT count(*) FROM metrics WHERE name = 'loss'").fetchone()[0]
+                    con.close()
+                    if n:
+                        break
+                except Exception:  # noqa: BLE001 - the run may be between flushes
+                    pass
+            time.sleep(0.5)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err
+    assert "interrupted at step" in out and "--resume" in out
+    assert run_info(run).status == "interrupted"
+    state = load_checkpoint(run)
+    assert state["step"] > 0
+    con = open_run(run)
+    logged = con.execute("SELECT max(step) FROM metrics").fetchone()[0]
+    open_eps = con.execute("SELECT count(*) FROM episodes WHERE NOT ended").fetchone()[0]
+    con.close()
+    assert logged <= state["step"] and open_eps == 0

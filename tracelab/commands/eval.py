@@ -1,0 +1,103 @@
+"""`tracelab eval POLICY`: play a saved policy against the scripted opponent and count the outcomes both
+ways (tracelab's and the method's; tracelab/train/evaluate.py), side by side or as JSON. With --run,
+every game is traced into a new run."""
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import sys
+from pathlib import Path
+
+from tracelab.commands._args import non_negative_int, positive_int
+from tracelab.errors import UserError, store_errors
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("eval", help="evaluate a saved policy: wins, losses, draws, truncations, and the "
+                                    "method's counting side by side")
+    p.add_argument("policy", help="a policy directory (policy.json + policy.pt), e.g. RUN/policy")
+    p.add_argument("--games", type=positive_int, default=500, help="games to play (default 500)")
+    p.add_argument("--scenario", default=None,
+                   help="play on this scenario (built-in name or .toml; default: the policy's own)")
+    p.add_argument("--backend", choices=("rules", "reference"), default="rules",
+                   help="the rule-driven simulator or the hand-written one (default: rules)")
+    p.add_argument("--opponent-p", type=float, default=0.3,
+                   help="the opponent's probability of a move towards red's base (default 0.3, the "
+                        "method's evaluation)")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the games (default 0)")
+    p.add_argument("--envs", type=positive_int, default=50, help="worlds stepped together (default 50)")
+    p.add_argument("--run", default=None, help="trace every game into this new run directory")
+    p.add_argument("--json", action="store_true", help="print the figures as JSON")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from tracelab.commands.train import load_scenario_arg
+    from tracelab.train.policy import load_policy, policy_scenario, read_policy_spec
+
+    if not 0.0 <= args.opponent_p <= 1.0:
+        raise UserError(f"--opponent-p must be in [0, 1], got {args.opponent_p}")
+    with store_errors():  # a policy or scenario that does not load
+        spec = read_policy_spec(args.policy)
+        scenario = load_scenario_arg(args.scenario) if args.scenario else policy_scenario(spec)
+        policy = load_policy(args.policy, scenario)
+    result = _evaluate(args, policy, scenario, spec)
+    if args.json:
+        json.dump({"policy": str(args.policy), "scenario": scenario.name, "backend": args.backend,
+                   "opponent_p": args.opponent_p, "seed": args.seed, "run": args.run, **result.to_dict()},
+                  sys.stdout, indent=1)
+        print()
+    else:
+        _table(result, args, scenario.name)
+    return 0
+
+
+def _evaluate(args: argparse.Namespace, policy, scenario, spec):
+    from tracelab.train.evaluate import EvalTrace, evaluate
+    stack = policy.stack_previous
+    if args.run is None:
+        return evaluate(policy, scenario, games=args.games, backend=args.backend, seed=args.seed,
+                        opponent_p=args.opponent_p, stack_previous=stack, envs=args.envs)
+    from tracelab.game.facts import GAME_RULES
+    from tracelab.store import TraceWriter
+    meta = {"command": " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]),
+            "scenario": scenario.name, "seed": args.seed, "rule_files": [str(GAME_RULES)],
+            "config": {"policy": str(args.policy), "games": args.games, "backend": args.backend,
+                       "opponent_p": args.opponent_p, "scenario_toml": scenario.to_toml(),
+                       "policy_spec": spec}}
+    with store_errors():  # the run directory exists, or another writer holds it
+        writer = TraceWriter.open(Path(args.run), meta)
+    ids = iter(range(1 << 62))
+    status = "failed"
+    try:  # every game traced: the traced env has one world per game
+        trace = EvalTrace(writer, scenario, args.backend, stack, args.games, args.opponent_p, lambda: next(ids))
+        try:
+            result = evaluate(policy, scenario, games=args.games, backend=args.backend, seed=args.seed,
+                              opponent_p=args.opponent_p, stack_previous=stack, trace=trace,
+                              trace_info={"kind": "eval", "opponent_p": args.opponent_p})
+        finally:
+            trace.close()
+        status = "finished"
+    except KeyboardInterrupt:
+        status = "interrupted"
+        raise
+    finally:
+        writer.close(status=status)
+    return result
+
+
+def _table(result, args: argparse.Namespace, scenario: str) -> None:
+    from tracelab.bench.common import format_table
+    from tracelab.train.evaluate import METHOD_CUT, comparison_rows
+    print(f"{args.policy} on {scenario} ({args.backend} backend), {result.games} games against the scripted "
+          f"opponent (p={args.opponent_p}), seed {args.seed}")
+    rows = [[name, str(a), str(b)] for name, a, b in comparison_rows(result)]
+    print(format_table(["", "tracelab", f"method (cut at {METHOD_CUT} steps)"], rows))
+    print("method: a win is a capture within 200 steps; cut games count as losses; draws and wins by "
+          "elimination are non-wins")
+    if args.run:
+        run = shlex.quote(args.run)
+        print(f"\ngames traced into {args.run}/:")
+        print(f"  tracelab sql {run} \"SELECT episode, outcome, steps, reward FROM episodes ORDER BY episode\"")
+        print(f"  tracelab trace {run} --episode 0 --from 1 --to 4")

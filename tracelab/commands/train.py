@@ -1,0 +1,160 @@
+"""`tracelab train`: DQN against the scripted opponent, logged live into a trace-store run
+(docs/training.md). Ctrl-C stops cleanly (the run ends `interrupted`, with a checkpoint);
+`--resume RUN` continues a run's last checkpoint into a new run."""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import shlex
+import signal
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from tracelab.errors import UserError, store_errors
+
+RESUMABLE_FLAGS = {"threads"}  # what --resume may change: the rest is the checkpoint's
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    from tracelab.train.config import config_fields
+
+    p = sub.add_parser("train", help="train red with DQN, logging metrics, episodes and traced evaluation "
+                                     "games into a run", argument_default=argparse.SUPPRESS)
+    for name, typ, default, text in config_fields():
+        flag = "--" + name.replace("_", "-")
+        shown = text if default is None or isinstance(default, bool) else f"{text} (default: {default})"
+        if name == "non_markov":
+            p.add_argument("--non-markov", dest="non_markov", action="store_true", help=shown)
+            p.add_argument("--markov", dest="non_markov", action="store_false",
+                           help="the Markov setup: current observation, one shared network (default)")
+        elif typ in ("bool", bool):
+            p.add_argument(flag, dest=name, action="store_true", help=shown)
+        elif name == "backend":
+            p.add_argument(flag, dest=name, choices=("rules", "reference"), help=shown)
+        else:
+            conv = {"int": int, "float": float, "str": str, "int | None": int}.get(str(typ), str)
+            p.add_argument(flag, dest=name, type=conv, metavar=name.upper(), help=shown)
+    p.add_argument("--run", default=None, help="run directory (default runs/train-<scenario>-<time>)")
+    p.add_argument("--resume", default=None, metavar="RUN",
+                   help="continue RUN's last checkpoint (its config; the new run goes to --run, default "
+                        "RUN-from-<step>)")
+    p.set_defaults(func=run)
+
+
+def load_scenario_arg(text: str, agents: int | None = None) -> Any:
+    """A built-in scenario name or a .toml file, with `agents` per team if given."""
+    from tracelab.game.scenario import builtin_scenario, builtin_scenario_names, load_scenario
+    sc = builtin_scenario(text) if text in builtin_scenario_names() else load_scenario(text)
+    if agents is not None and agents != sc.agents_per_team:
+        sc = dataclasses.replace(sc, agents_per_team=agents, red_starts=None, blue_starts=None)
+    return sc
+
+
+def run(args: argparse.Namespace) -> int:
+    from tracelab.train.config import TrainConfig
+
+    given = {k: v for k, v in vars(args).items() if k not in ("func", "command", "run", "resume")}
+    state = None
+    with store_errors():  # a bad value in the config or a checkpoint that does not load
+        if args.resume:
+            from tracelab.train.checkpoint import checkpoint_config, checkpoint_scenario, load_checkpoint
+            extra = sorted(set(given) - RESUMABLE_FLAGS)
+            if extra:
+                raise UserError(f"--resume continues the checkpoint's config; drop "
+                                f"{', '.join('--' + k.replace('_', '-') for k in extra)}")
+            state = load_checkpoint(args.resume)
+            cfg = dataclasses.replace(checkpoint_config(state), **given)
+            scenario = checkpoint_scenario(state)
+        else:
+            cfg = TrainConfig(**given)
+            scenario = load_scenario_arg(cfg.scenario, cfg.agents)
+    if cfg.non_markov and not scenario.is_non_markov:
+        print(f"note: scenario {scenario.name!r} has no slow agent: --non-markov only stacks the previous "
+              f"observation", file=sys.stderr)
+    if cfg.trace_eval_games > cfg.eval_games:
+        raise UserError(f"--trace-eval-games ({cfg.trace_eval_games}) exceeds --eval-games "
+                        f"({cfg.eval_games})")
+    if state is not None:
+        default_run = f"{str(args.resume).rstrip('/')}-from-{state['step']}"
+    else:
+        default_run = f"runs/train-{scenario.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+    run_dir = Path(args.run or default_run)
+    return train_into(cfg, scenario, run_dir, state, resumed_from=args.resume)
+
+
+def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None,
+               resumed_from: str | None = None, stop_at: int | None = None) -> int:
+    """Train into a new run at `run_dir` (from a checkpoint `state` if given); returns the exit status.
+    `stop_at`: stop there as Ctrl-C would (tests)."""
+    import torch
+
+    from tracelab.game.facts import GAME_RULES
+    from tracelab.store import TraceWriter
+    from tracelab.train.checkpoint import restore
+    from tracelab.train.loop import Trainer
+
+    meta = {"command": " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]),
+            "scenario": scenario.name, "seed": cfg.seed, "rule_files": [str(GAME_RULES)],
+            "config": {**cfg.to_dict(), "scenario_toml": scenario.to_toml(),
+                       "resumed_from": None if state is None else {"run": resumed_from, "step": state["step"]}}}
+    if not meta["command"].startswith("tracelab train"):  # called from Python: say what it stands for
+        meta["command"] = "tracelab train (python: tracelab.commands.train.train_into)"
+    with store_errors():  # the run directory exists, or another writer holds it
+        writer = TraceWriter.open(run_dir, meta)
+    torch.set_num_threads(cfg.threads)
+    print(f"training {scenario.name} ({scenario.agents_per_team}v{scenario.agents_per_team}, "
+          f"{'non-Markov' if cfg.non_markov else 'Markov'}, {cfg.backend} backend, {cfg.envs} worlds) for "
+          f"{cfg.steps:,} steps; torch on {torch.get_num_threads()} CPU thread"
+          f"{'s' if torch.get_num_threads() != 1 else ''} (--threads); run: {run_dir}", file=sys.stderr)
+    trainer = None
+    status = "failed"
+    previous = signal.getsignal(signal.SIGINT)
+    try:
+        trainer = Trainer(cfg, scenario, writer, run_dir)
+        if state is not None:
+            restore(trainer, state)
+            print(f"resumed from {resumed_from} at step {trainer.step:,}", file=sys.stderr)
+
+        def stop(signum: int, frame: Any) -> None:
+            if trainer.stop_requested:  # a second Ctrl-C: stop now
+                raise KeyboardInterrupt
+            trainer.stop_requested = True
+            print("\nstopping: finishing the step, writing a checkpoint (Ctrl-C again to abort)",
+                  file=sys.stderr)
+
+        signal.signal(signal.SIGINT, stop)
+        if sys.stderr.isatty():
+            from tracelab.train.progress import TrainProgress
+            with TrainProgress(cfg.steps, trainer.step) as bar:
+                trainer.progress = bar
+                status = trainer.train(stop_at)
+        else:
+            status = trainer.train(stop_at)
+    except KeyboardInterrupt:
+        status = "interrupted"
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if trainer is not None:
+            trainer.close()
+        writer.close(status=status)
+    _report(trainer, run_dir, status)
+    return 0 if status == "finished" else 130
+
+
+def _report(trainer: Any, run_dir: Path, status: str) -> None:
+    if trainer is None:
+        return
+    ev = trainer.last_eval
+    run = shlex.quote(str(run_dir))
+    print(f"{status} at step {trainer.step:,}" + (f"; last evaluation: {ev.wins}/{ev.games} wins "
+          f"({100 * ev.win_rate:.1f}%), method's counting {100 * ev.method_win_rate:.1f}%" if ev else ""))
+    print(f"run: {run_dir}/  checkpoint: {run_dir}/checkpoint/  policy: {run_dir}/policy/"
+          if status == "finished" else f"run: {run_dir}/  checkpoint: {run_dir}/checkpoint/  "
+          f"(continue with: tracelab train --resume {run})")
+    print(f"  tracelab sql {run} \"SELECT step, value FROM metrics WHERE name = 'eval/win_rate' ORDER BY step\"")
+    print(f"  tracelab sql {run} \"SELECT episode, train_step, outcome, steps FROM episodes WHERE kind = 'eval'\"")
+    if status == "finished":
+        print(f"  tracelab eval {run}/policy --games 500")
+        print(f"  tracelab play --policy {run}/policy --episodes 3")

@@ -1,0 +1,112 @@
+"""Every setting of a training run in one dataclass, with the method's DQN defaults (docs/training.md).
+
+`TrainConfig` is what a run stores (meta `config`) and what a checkpoint restores; the CLI builds its
+flags from the fields' metadata, so a new hyperparameter is one field here and nothing else."""
+from __future__ import annotations
+
+import math
+from dataclasses import MISSING, asdict, dataclass, field, fields
+from typing import Any
+
+
+def _opt(help: str, **kw: Any) -> Any:
+    """A field with its CLI help; the default goes in `default=`."""
+    return field(metadata={"help": help}, **kw)
+
+
+@dataclass
+class TrainConfig:
+    # ---- what is trained ----
+    scenario: str = _opt("a built-in scenario (base, advanced, nonmarkov) or a scenario .toml file",
+                         default="base")
+    non_markov: bool = _opt("the non-Markov setup: previous observation appended, separate networks for "
+                            "slow and fast agents (default: Markov, one network shared by the red agents)",
+                            default=False)
+    agents: int | None = _opt("agents per team (default: the scenario's)", default=None)
+    backend: str = _opt("simulator: rules (the rule engine) or reference (hand-written)", default="rules")
+    steps: int = _opt("training steps (world-steps: env transitions)", default=200_000)
+    seed: int = _opt("seed of everything (network init, exploration, replay sampling, envs)", default=0)
+    envs: int = _opt("worlds stepped together (the batched env; from 64 on the rule engine runs its lanes "
+                     "kernel, ~2x cheaper per world-step); one update per world-step either way", default=64)
+    mask: bool = _opt("act only among the shield's allowed actions (off in the method)", default=False)
+    opponent_p: float = _opt("the opponent's probability of a move towards red's base while training",
+                             default=0.7)
+    # ---- the method's DQN ----
+    hidden: int = _opt("hidden units (one tanh layer)", default=64)
+    lr: float = _opt("Adam learning rate", default=5e-4)
+    gamma: float = _opt("discount", default=0.99)
+    batch: int = _opt("minibatch size", default=128)
+    buffer: int = _opt("replay buffer capacity (transitions)", default=50_000)
+    target_every: int = _opt("copy the online network to the target network every this many steps",
+                             default=2_000)
+    eps_start: float = _opt("epsilon until --eps-decay-start of training", default=1.0)
+    eps_end: float = _opt("epsilon from --eps-decay-end of training on", default=0.02)
+    eps_decay_start: float = _opt("fraction of training where epsilon starts to fall", default=0.25)
+    eps_decay_end: float = _opt("fraction of training where epsilon reaches --eps-end", default=0.875)
+    updates_per_step: float = _opt("gradient steps per world-step, per network", default=1.0)
+    warmup: int = _opt("random steps before the first update", default=1_000)
+    # ---- evaluation and logging ----
+    eval_every: int = _opt("evaluate every this many steps (0: only at the end)", default=20_000)
+    eval_games: int = _opt("games per evaluation", default=500)
+    eval_p: float = _opt("the opponent's probability of a move towards red's base in evaluations",
+                         default=0.3)
+    trace_eval_games: int = _opt("evaluation games traced in full (change rows) per evaluation",
+                                 default=5)
+    eval_envs: int = _opt("worlds stepped together in evaluations", default=64)
+    log_every: int = _opt("write training metrics every this many steps", default=1_000)
+    checkpoint_every: int = _opt("write a checkpoint every this many steps (0: only at the end)",
+                                 default=50_000)
+    threads: int = _opt("torch CPU threads (one is fastest for this network on 2 cores)", default=1)
+
+    def __post_init__(self) -> None:
+        problems = []
+        for name in ("steps", "envs", "hidden", "batch", "buffer", "target_every", "eval_games",
+                     "eval_envs", "log_every", "threads"):
+            if getattr(self, name) < 1:
+                problems.append(f"{name} must be at least 1, got {getattr(self, name)}")
+        for name in ("warmup", "eval_every", "trace_eval_games", "checkpoint_every"):
+            if getattr(self, name) < 0:
+                problems.append(f"{name} must be >= 0, got {getattr(self, name)}")
+        for name in ("opponent_p", "eval_p", "eps_start", "eps_end", "eps_decay_start", "eps_decay_end"):
+            v = getattr(self, name)
+            if not 0.0 <= v <= 1.0:
+                problems.append(f"{name} must be in [0, 1], got {v}")
+        if self.eps_decay_end < self.eps_decay_start:
+            problems.append("eps_decay_end must not come before eps_decay_start")
+        if not (0.0 < self.gamma <= 1.0) or not (self.lr > 0 and math.isfinite(self.lr)):
+            problems.append(f"gamma must be in (0, 1] and lr > 0, got {self.gamma}, {self.lr}")
+        if self.updates_per_step < 0:
+            problems.append(f"updates_per_step must be >= 0, got {self.updates_per_step}")
+        if self.backend not in ("rules", "reference"):
+            problems.append(f"backend must be rules or reference, got {self.backend!r}")
+        if self.agents is not None and self.agents < 1:
+            problems.append(f"agents must be at least 1, got {self.agents}")
+        if problems:
+            raise ValueError("; ".join(problems))
+
+    def epsilon(self, step: int) -> float:
+        """The method's schedule: eps_start until eps_decay_start of training, then linear down to eps_end
+        at eps_decay_end, then eps_end."""
+        a, b = self.eps_decay_start * self.steps, self.eps_decay_end * self.steps
+        if step <= a:
+            return self.eps_start
+        if step >= b:
+            return self.eps_end
+        return self.eps_start + (self.eps_end - self.eps_start) * (step - a) / (b - a)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "TrainConfig":
+        known = {f.name for f in fields(cls)}
+        return cls(**{k: v for k, v in d.items() if k in known})
+
+
+def config_fields() -> list[tuple[str, Any, Any, str]]:
+    """(name, type, default, help) of every field, for building CLI flags."""
+    out = []
+    for f in fields(TrainConfig):
+        default = f.default if f.default is not MISSING else None
+        out.append((f.name, f.type, default, f.metadata.get("help", "")))
+    return out

@@ -1,0 +1,255 @@
+"""Evaluation: a policy plays games against the scripted opponent; outcomes are counted two ways.
+
+- tracelab's: wins, losses, draws and truncations (step limit) as separate counts;
+- the method's: its evaluation cut games at 200 steps and counted a cut game as a loss, and counted draws
+  and wins by elimination as non-wins. So a method win is a win by capture within 200 steps.
+
+Every world plays a fixed share of the games (not "the first N games to finish", which would favour short
+games). A few games can be traced in full into a run (`EvalTrace`): their change rows, steps and
+episodes, with begin info `{"kind": "eval", ...}` so `tracelab why` can explain them."""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+from tracelab.envs.tracer import outcome_name
+from tracelab.envs.vector_env import GridWarVectorEnv
+from tracelab.game.scenario import Scenario
+from tracelab.store.sink import StoreSink
+from tracelab.store.writer import TraceWriter
+from tracelab.train.policy import Policy, may_act
+
+METHOD_CUT = 200  # the method's evaluation cut games at 200 steps
+
+
+@dataclass
+class GameRecord:
+    outcome: str       # win | loss | draw | truncated
+    steps: int
+    reward: float      # red's team return
+    actions: int       # decisions of red's agents (agent-steps where an agent could act)
+    capture: bool      # a living red agent stands on blue's base at the end
+
+
+@dataclass
+class EvalResult:
+    games: int = 0
+    wins: int = 0
+    losses: int = 0
+    draws: int = 0
+    truncated: int = 0
+    mean_return: float = 0.0
+    actions_per_win: float | None = None
+    method_wins: int = 0
+    method_losses: int = 0       # losses, plus games cut at 200 steps
+    method_non_wins: int = 0     # draws and wins by elimination
+    method_actions_per_win: float | None = None
+    records: list[GameRecord] = field(default_factory=list, repr=False)
+
+    @property
+    def win_rate(self) -> float:
+        return self.wins / self.games if self.games else 0.0
+
+    @property
+    def method_win_rate(self) -> float:
+        return self.method_wins / self.games if self.games else 0.0
+
+    @classmethod
+    def of(cls, records: list[GameRecord]) -> "EvalResult":
+        r = cls(games=len(records), records=records)
+        won, method_won = [], []
+        for g in records:
+            if g.outcome == "win":
+                r.wins += 1
+                won.append(g.actions)
+            elif g.outcome == "loss":
+                r.losses += 1
+            elif g.outcome == "draw":
+                r.draws += 1
+            else:
+                r.truncated += 1
+            cut = g.steps > METHOD_CUT
+            if g.outcome == "win" and g.capture and not cut:
+                r.method_wins += 1
+                method_won.append(g.actions)
+            elif g.outcome in ("loss", "truncated") or cut:
+                r.method_losses += 1
+            else:
+                r.method_non_wins += 1
+        r.mean_return = float(np.mean([g.reward for g in records])) if records else 0.0
+        r.actions_per_win = float(np.mean(won)) if won else None
+        r.method_actions_per_win = float(np.mean(method_won)) if method_won else None
+        return r
+
+    def to_dict(self) -> dict[str, Any]:
+        d = {k: v for k, v in asdict(self).items() if k != "records"}
+        d.update(win_rate=self.win_rate, method_win_rate=self.method_win_rate)
+        return d
+
+    def metrics(self, suffix: str = "") -> dict[str, float]:
+        """The run's `eval/...` metric rows (docs/training.md)."""
+        m = {"games": self.games, "wins": self.wins, "losses": self.losses, "draws": self.draws,
+             "truncated": self.truncated, "win_rate": self.win_rate, "mean_return": self.mean_return,
+             "method_win_rate": self.method_win_rate}
+        if self.actions_per_win is not None:
+            m["actions_per_win"] = self.actions_per_win
+        return {f"eval/{k}{suffix}": float(v) for k, v in m.items()}
+
+
+def shares(games: int, worlds: int) -> np.ndarray:
+    """Games per world: as even as possible, the first worlds take the remainder."""
+    out = np.full(worlds, games // worlds, np.int64)
+    out[: games % worlds] += 1
+    return out
+
+
+def play_games(env: GridWarVectorEnv, policy: Policy, quota: np.ndarray, seed: int | None) -> list[GameRecord]:
+    """Play `quota[w]` games in world w of `env` (from a reset with `seed`); the games in order of ending."""
+    sc: Scenario = env.scenario
+    n = sc.agents_per_team
+    blue_base = np.asarray(sc.blue_base, np.float32)
+    obs, info = env.reset(seed=seed)
+    left = quota.astype(np.int64).copy()
+    ret = np.zeros(env.num_envs)
+    decisions = np.zeros(env.num_envs, np.int64)
+    records: list[GameRecord] = []
+    while left.any():
+        acting = may_act(sc, env.sim.state)
+        masks = info["action_mask"].reshape(env.num_envs, n, -1) if policy.mask else None
+        actions = policy.act(obs, acting, masks)
+        decisions += acting.sum(axis=1)
+        obs, reward, terminated, truncated, info = env.step(actions[:, 0] if n == 1 else actions)
+        ret += reward
+        done = terminated | truncated
+        if not done.any():
+            continue
+        final, last = info["final_info"], info["final_obs"]
+        for w in np.flatnonzero(done & (left > 0)).tolist():
+            pos = last[w, : 2 * n].reshape(n, 2)
+            records.append(GameRecord(outcome_name(final["winner"][w], bool(truncated[w])), int(final["t"][w]),
+                                      float(ret[w]), int(decisions[w]), bool((pos == blue_base).all(1).any())))
+            left[w] -= 1
+        ret[done] = 0.0
+        decisions[done] = 0
+    return records
+
+
+class EvalSink(StoreSink):
+    """Streams chosen episodes of one env into a run it does not own (the env's program is written once,
+    at begin_run): `accept(info)` before a reset makes the episodes that reset begins traced ones, under fresh run-wide episode ids (`new_id`) with begin
+    `info`; later episodes of the env (autoresets) are dropped. close() leaves the writer open."""
+
+    def __init__(self, writer: TraceWriter, new_id: Callable[[], int]) -> None:
+        super().__init__(writer)
+        self._new_id = new_id
+        self._ids: dict[int, int] = {}     # env episode -> run episode, while traced
+        self._info: Mapping[str, Any] | None = None
+        self._budget = 0
+
+    def accept(self, info: Mapping[str, Any] | None, episodes: int = 0) -> None:
+        """Trace the next `episodes` episodes the env begins, with begin `info`."""
+        self._info, self._budget = info, episodes
+
+    def begin_episode(self, world: int, episode: int, seed: int | None, scenario: Any) -> None:
+        if self._info is None or self._budget <= 0:
+            return
+        self._budget -= 1
+        run_ep = self._new_id()
+        self._ids[int(episode)] = run_ep
+        self.writer.begin_episode(run_ep, world=int(world), t_start=0, seed=seed, info=dict(self._info))
+
+    def changes(self, rows: dict[str, np.ndarray], episode_of_world: np.ndarray,
+                t0_of_world: np.ndarray) -> None:
+        if not self._ids:
+            return
+        env_ids = np.fromiter(self._ids, np.int64)
+        keep = np.isin(rows["episode"], env_ids)
+        if not keep.any():
+            return
+        lookup = dict(self._ids)
+        kept = {k: v[keep] for k, v in rows.items()}
+        kept["episode"] = np.array([lookup[e] for e in kept["episode"].tolist()], np.int64)
+        super().changes(kept, episode_of_world, t0_of_world)
+
+    def step(self, world: np.ndarray, episode: np.ndarray, t: np.ndarray, obs: np.ndarray,
+             actions: np.ndarray, rewards: np.ndarray) -> None:
+        keep = [i for i, e in enumerate(episode.tolist()) if e in self._ids]
+        if keep:
+            run_eps = np.array([self._ids[int(episode[i])] for i in keep], np.int64)
+            super().step(world[keep], run_eps, t[keep], obs[keep], actions[keep], rewards[keep])
+
+    def end_episode(self, world: int, episode: int, steps: int, outcome: str,
+                    rewards: Mapping[str, float]) -> None:
+        run_ep = self._ids.pop(int(episode), None)
+        if run_ep is not None:
+            super().end_episode(world, run_ep, steps, outcome, rewards)
+
+    def close(self) -> None:
+        pass
+
+
+class EvalTrace:
+    """The env whose games are traced into a run: built once per run (one engine, so the run's
+    vocabulary and groundings stay one), `games` worlds, one traced game per world per evaluation."""
+
+    def __init__(self, writer: TraceWriter, scenario: Scenario, backend: str, stack_previous: bool,
+                 games: int, opponent_p: float, new_id: Callable[[], int]) -> None:
+        self.sink = EvalSink(writer, new_id)
+        self.games = games
+        self.env = GridWarVectorEnv(games, scenario, backend=backend, stack_previous=stack_previous,
+                                    trace_sink=self.sink, opponent_p=opponent_p)
+
+    def play(self, policy: Policy, seed: int, info: Mapping[str, Any]) -> list[GameRecord]:
+        self.sink.accept(info, self.games)  # the reset begins one episode per world
+        try:
+            return play_games(self.env, policy, np.ones(self.games, np.int64), seed)
+        finally:
+            self.sink.accept(None)
+
+    def close(self) -> None:
+        self.env.close()
+
+
+def evaluate(policy: Policy, scenario: Scenario, *, games: int, backend: str, seed: int, opponent_p: float,
+             stack_previous: bool, envs: int = 50, trace: EvalTrace | None = None,
+             trace_info: Mapping[str, Any] | None = None, env: GridWarVectorEnv | None = None) -> EvalResult:
+    """`games` games of `policy` (greedy) against the scripted opponent with `opponent_p`. The first
+    `trace.games` of them are played (and traced) in `trace`'s env, the rest in `env` (or a new one with
+    `envs` worlds)."""
+    records: list[GameRecord] = []
+    n_traced = min(trace.games, games) if trace is not None else 0
+    if n_traced:
+        if n_traced < trace.games:
+            raise ValueError(f"{games} games cannot fill the {trace.games} traced worlds")
+        records += trace.play(policy, seed + 1, trace_info or {"kind": "eval"})
+    rest = games - n_traced
+    if rest:
+        own = env is None
+        if own:
+            env = GridWarVectorEnv(min(envs, rest), scenario, backend=backend, stack_previous=stack_previous,
+                                   opponent_p=opponent_p)
+        try:
+            records += play_games(env, policy, shares(rest, env.num_envs), seed)
+        finally:
+            if own:
+                env.close()
+    return EvalResult.of(records)
+
+
+def comparison_rows(r: EvalResult) -> list[tuple[str, Any, Any]]:
+    """(figure, tracelab's counting, the method's counting) for a side-by-side table."""
+    def pct(x: float) -> str:
+        return f"{100 * x:.1f}%"
+    apw = lambda v: "-" if v is None else f"{v:.2f}"  # noqa: E731
+    return [("games", r.games, r.games),
+            ("wins", r.wins, r.method_wins),
+            ("losses", r.losses, r.method_losses),
+            ("draws", r.draws, "-"),
+            ("truncated (step limit)", r.truncated, "-"),
+            ("non-wins (draws, wins by elimination)", "-", r.method_non_wins),
+            ("win rate", pct(r.win_rate), pct(r.method_win_rate)),
+            ("mean return", f"{r.mean_return:.1f}", "-"),
+            ("actions per win", apw(r.actions_per_win), apw(r.method_actions_per_win))]
+

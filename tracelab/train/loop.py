@@ -1,0 +1,338 @@
+"""The training loop: ε-greedy red agents in the batched env, transitions into replay, one update per
+world-step, target copies, live logging into a trace-store run, evaluations, checkpoints.
+
+A training step is one world-step (one env transition of one world); with `envs` worlds one pass of the
+loop makes `envs` steps and `envs * updates_per_step` updates per network. Everything that decides what
+happens next (networks, Adam, buffers, the three generators, the worlds' games, the open transitions,
+the logging accumulators) is in the checkpoint, so a resumed run continues exactly as an uninterrupted
+one would (tests/test_train.py)."""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import torch
+
+from tracelab.envs.common import ActionMasker
+from tracelab.envs.tracer import outcome_name
+from tracelab.envs.vector_env import GridWarVectorEnv
+from tracelab.game.observe import obs_size
+from tracelab.game.scenario import NOTHING, RED, Scenario
+from tracelab.store.writer import TraceWriter
+from tracelab.train.config import TrainConfig
+from tracelab.train.evaluate import EvalResult, EvalTrace, evaluate
+from tracelab.train.learner import DQNLearner
+from tracelab.train.network import Shape
+from tracelab.train.policy import Policy, may_act, save_policy
+from tracelab.train.transitions import PendingTransitions
+
+Progress = Callable[[dict[str, Any]], None]
+
+
+def network_groups(scenario: Scenario, non_markov: bool) -> dict[str, list[int]]:
+    """Network name -> red agents it plays: one shared network (Markov), or one for the fast and one for
+    the slow agents (non-Markov)."""
+    n = scenario.agents_per_team
+    if not non_markov:
+        return {"shared": list(range(n))}
+    slow = scenario.slow_mask[RED]
+    groups = {"fast": [j for j in range(n) if not slow[j]], "slow": [j for j in range(n) if slow[j]]}
+    return {k: v for k, v in groups.items() if v}
+
+
+def eval_seed(seed: int, round_no: int) -> int:
+    return int(np.random.SeedSequence([seed, 1, round_no]).generate_state(1)[0])
+
+
+class Trainer:
+    def __init__(self, cfg: TrainConfig, scenario: Scenario, writer: TraceWriter | None = None,
+                 run_dir: Path | None = None, progress: Progress | None = None) -> None:
+        torch.set_num_threads(cfg.threads)
+        self.cfg, self.scenario, self.writer, self.run_dir, self.progress = cfg, scenario, writer, run_dir, progress
+        self.stack = cfg.non_markov
+        w, n = cfg.envs, scenario.agents_per_team
+        self.worlds, self.agents = w, n
+        self.rng = np.random.default_rng(np.random.SeedSequence([cfg.seed, 0]))  # exploration, sampling
+        self.torch_gen = torch.Generator().manual_seed(cfg.seed)                 # network initialisation
+        self.env = GridWarVectorEnv(w, scenario, backend=cfg.backend, stack_previous=self.stack,
+                                    opponent_p=cfg.opponent_p)
+        self.masker = ActionMasker(scenario)
+        self.shape = Shape(obs_size(scenario, self.stack), cfg.hidden, scenario.n_actions)
+        self.groups = network_groups(scenario, cfg.non_markov)
+        self.learners = {name: DQNLearner(self.shape, lr=cfg.lr, batch=cfg.batch, buffer=cfg.buffer,
+                                          generator=self.torch_gen) for name in self.groups}
+        owner = {j: i for i, agents in enumerate(self.groups.values()) for j in agents}
+        self.policy = Policy(scenario, [lr.online_np for lr in self.learners.values()],
+                             [owner[j] for j in range(n)], self.stack, cfg.mask)
+        self.pending = PendingTransitions(w, n, self.shape.inputs, cfg.gamma)
+        self.ids = np.asarray(scenario.action_ids, np.int64)
+        self.nothing = scenario.action_ids.index(NOTHING)
+        # the games in progress, for logging and for replaying them when a checkpoint is restored
+        self.history = np.zeros((w, scenario.max_steps, 2, n), np.int16)  # spec ids: red, blue per step
+        self.ep_len = np.zeros(w, np.int64)
+        self.ep_return = np.zeros(w)
+        self.ep_id = np.zeros(w, np.int64)
+        self.ep_start = np.zeros(w, np.int64)  # training step at which each world's episode began
+        self._logging_episodes = False          # episode begins are written once train() starts
+        self._begun: list[dict[str, Any]] = []  # episode rows not yet handed to the writer
+        self._ended: list[dict[str, Any]] = []
+        self.next_episode = 0
+        self.step = 0
+        self.update_credit = 0.0
+        self.synced_block = 0
+        self.eval_round = 0
+        self.returns_since_log: list[float] = []
+        self.last_eval: EvalResult | None = None
+        self.logged_step = self.eval_step = -1
+        self.last_loss: float | None = None
+        self.stop_requested = False
+        self._eval_env: GridWarVectorEnv | None = None
+        self._eval_trace: EvalTrace | None = None
+        self.obs, _ = self.env.reset(seed=int(np.random.SeedSequence([cfg.seed, 2]).generate_state(1)[0]))
+        self.acting = may_act(scenario, self.env.sim.state)
+        self._begin_episodes(np.arange(w))
+        self._rate_mark = (time.perf_counter(), 0, 0)
+
+    # ---- episodes ----
+    def new_episode_id(self) -> int:
+        ep = self.next_episode
+        self.next_episode += 1
+        return ep
+
+    def _begin_episodes(self, worlds: np.ndarray) -> None:
+        for w in worlds.tolist():
+            self.ep_id[w] = self.new_episode_id()
+        self.ep_start[worlds] = self.step
+        self.ep_len[worlds] = 0
+        self.ep_return[worlds] = 0.0
+        if self._logging_episodes:
+            self._write_begins(worlds)
+
+    def _write_begins(self, worlds: np.ndarray) -> None:
+        if self.writer is None:
+            return
+        for w in worlds.tolist():
+            info = {"kind": "train", "train_step": int(self.ep_start[w])}
+            if self.ep_len[w]:
+                info["resumed_at"] = self.step  # begun in the run this one resumes
+            self._begun.append({"episode": int(self.ep_id[w]), "world": w, "t_start": 0, "info": info})
+
+    def _flush_episodes(self) -> None:
+        """Hand the episode rows gathered since the last call to the writer, one table each (per-episode
+        calls cost more than a pass of the loop)."""
+        if self.writer is not None and (self._begun or self._ended):
+            self.writer.begin_episodes(self._begun)
+            self.writer.end_episodes(self._ended)
+        self._begun, self._ended = [], []
+
+    def _end_open_episodes(self) -> None:
+        """The games still running when training stops end as 'aborted' (a resumed run begins them again)."""
+        if self.writer is None or not self._logging_episodes:
+            return
+        self._ended += [{"episode": int(self.ep_id[w]), "steps": int(self.ep_len[w]), "outcome": "aborted",
+                         "reward": float(self.ep_return[w])} for w in range(self.worlds)]
+        self._flush_episodes()
+        self._logging_episodes = False
+
+    def _end_episodes(self, worlds: np.ndarray, final: dict[str, Any], truncated: np.ndarray) -> None:
+        for w in worlds.tolist():
+            self.returns_since_log.append(float(self.ep_return[w]))
+            if self.writer is not None:
+                self._ended.append({"episode": int(self.ep_id[w]), "steps": int(self.ep_len[w]),
+                                    "outcome": outcome_name(final["winner"][w], bool(truncated[w])),
+                                    "reward": float(self.ep_return[w])})
+
+    # ---- one pass: every world makes one step ----
+    def epsilon(self) -> float:
+        return 1.0 if self.step < self.cfg.warmup else self.cfg.epsilon(self.step)
+
+    def _choose(self, masks: np.ndarray | None) -> np.ndarray:
+        w, n, a = self.worlds, self.agents, self.shape.actions
+        explore = self.rng.random((w, n)) < self.epsilon()
+        if masks is None:
+            random = self.rng.integers(0, a, (w, n))
+        else:  # uniform among the allowed actions
+            random = np.argmax(self.rng.random((w, n, a)) * masks, axis=2)
+        greedy_rows = self.acting & ~explore
+        actions = random
+        if greedy_rows.any():
+            actions = np.where(greedy_rows, self.policy.act(self.obs, greedy_rows, masks), random)
+        return np.where(self.acting, actions, self.nothing)
+
+    def _views(self, team_obs: np.ndarray) -> list[np.ndarray]:
+        return [self.policy.agent_obs(team_obs, j) for j in range(self.agents)]
+
+    def env_step(self) -> None:
+        cfg, w, n = self.cfg, self.worlds, self.agents
+        masks = self.masker.for_sim(self.env.sim, RED) if cfg.mask else None
+        actions = self._choose(masks)
+        self.pending.start(self.acting, self._views(self.obs), actions)
+        obs, reward, terminated, truncated, info = self.env.step(actions[:, 0] if n == 1 else actions)
+        rows = np.arange(w)
+        self.history[rows, self.ep_len, 0] = self.ids[actions]
+        # (-1 in worlds that ended: their history is dropped with the episode anyway)
+        self.history[rows, self.ep_len, 1] = info["opponent_actions"].reshape(w, n)
+        self.ep_len += 1
+        self.ep_return += reward
+        self.pending.earn(reward[:, None] if n == 1 else info["agent_reward"])
+        done = terminated | truncated
+        true_next = obs
+        if done.any():
+            true_next = obs.copy()
+            true_next[done] = info["final_obs"][done]
+        acting_next = may_act(self.scenario, self.env.sim.state)
+        dead = true_next[:, 0:2 * n:2] < 0  # an agent's own x is -1 once it is dead
+        out = self.pending.close(done[:, None] | dead | acting_next, terminated[:, None] | dead)
+        if len(out["action"]):
+            self._store(out, true_next)
+        self.obs, self.acting = obs, acting_next
+        self.step += w
+        if done.any():
+            ended = np.flatnonzero(done)
+            self._end_episodes(ended, info["final_info"], truncated)
+            self._begin_episodes(ended)
+
+    def _store(self, out: dict[str, np.ndarray], true_next: np.ndarray) -> None:
+        """Closed transitions into their network's buffer, with next_obs in the agent's own view."""
+        if self.agents == 1:
+            self.learners["shared"].buffer.add(out["obs"], out["action"], out["reward"], true_next[out["world"]],
+                                               out["discount"])
+            return
+        next_obs = np.empty_like(out["obs"])
+        for j in range(self.agents):
+            rows = out["agent"] == j
+            next_obs[rows] = self.policy.agent_obs(true_next[out["world"][rows]], j)
+        for name, agents in self.groups.items():
+            sel = np.isin(out["agent"], agents)
+            self.learners[name].buffer.add(out["obs"][sel], out["action"][sel], out["reward"][sel], next_obs[sel],
+                                           out["discount"][sel])
+
+    def learn(self) -> None:
+        cfg = self.cfg
+        if self.step < cfg.warmup:
+            return
+        if any(lr.buffer.size < cfg.batch for lr in self.learners.values()):
+            return
+        self.update_credit += self.worlds * cfg.updates_per_step
+        k = int(self.update_credit)
+        self.update_credit -= k
+        for learner in self.learners.values():
+            for _ in range(k):
+                learner.update(self.rng)
+        block = self.step // cfg.target_every
+        if block > self.synced_block:
+            for learner in self.learners.values():
+                learner.sync_target()
+            self.synced_block = block
+
+    # ---- logging, evaluation, checkpoints ----
+    def _crossed(self, every: int, before: int) -> bool:
+        return every > 0 and self.step // every > before // every
+
+    def log_metrics(self) -> dict[str, float]:
+        now = time.perf_counter()
+        t0, step0, upd0 = self._rate_mark
+        updates = sum(lr.updates for lr in self.learners.values())
+        m: dict[str, float] = {"epsilon": self.epsilon()}
+        losses = {name: lr.take_loss() for name, lr in self.learners.items()}
+        known = [v for v in losses.values() if v is not None]
+        if known:
+            m["loss"] = float(np.mean(known))
+            self.last_loss = m["loss"]
+            if len(losses) > 1:
+                m.update({f"loss/{k}": v for k, v in losses.items() if v is not None})
+        qs = [q for q in (lr.q_max_mean() for lr in self.learners.values()) if q is not None]
+        if qs:
+            m["q_max_mean"] = float(np.mean(qs))
+        if self.returns_since_log:
+            m["train_return"] = float(np.mean(self.returns_since_log))
+            self.returns_since_log = []
+        dt = max(now - t0, 1e-9)
+        m["env_steps_per_s"] = (self.step - step0) / dt
+        m["updates_per_s"] = (updates - upd0) / dt
+        self._rate_mark = (now, self.step, updates)
+        self.logged_step = self.step
+        self._flush_episodes()
+        if self.writer is not None:
+            self.writer.write_metrics(self.step, m)
+        return m
+
+    def run_eval(self) -> EvalResult:
+        cfg = self.cfg
+        if self._eval_env is None:
+            self._eval_env = GridWarVectorEnv(min(cfg.eval_envs, cfg.eval_games), self.scenario,
+                                              backend=cfg.backend, stack_previous=self.stack,
+                                              opponent_p=cfg.eval_p)
+        traced = min(cfg.trace_eval_games, cfg.eval_games) if self.writer is not None else 0
+        if traced and self._eval_trace is None:
+            self._eval_trace = EvalTrace(self.writer, self.scenario, cfg.backend, self.stack, traced,
+                                         cfg.eval_p, self.new_episode_id)
+        info = {"kind": "eval", "train_step": self.step, "eval_round": self.eval_round, "opponent_p": cfg.eval_p}
+        result = evaluate(self.policy, self.scenario, games=cfg.eval_games, backend=cfg.backend,
+                          seed=eval_seed(cfg.seed, self.eval_round), opponent_p=cfg.eval_p,
+                          stack_previous=self.stack, trace=self._eval_trace if traced else None,
+                          trace_info=info, env=self._eval_env)
+        if self.writer is not None:
+            self.writer.write_metrics(self.step, result.metrics())
+        self.eval_round += 1
+        self.last_eval, self.eval_step = result, self.step
+        return result
+
+    def save_policy(self, path: Path) -> Path:
+        return save_policy(path, self.scenario, {k: lr.params[0] for k, lr in self.learners.items()},
+                           self.groups, self.shape, self.stack, self.cfg.mask,
+                           {"run": str(self.run_dir) if self.run_dir else None, "step": self.step,
+                            "config": self.cfg.to_dict()})
+
+    # ---- the loop ----
+    def train(self, stop_at: int | None = None) -> str:
+        """Train until cfg.steps, or until stop_requested (Ctrl-C) or step `stop_at` (as an interruption
+        there would); returns "finished" or "interrupted"."""
+        from tracelab.train.checkpoint import save_checkpoint
+        cfg = self.cfg
+        last_progress = 0.0
+        if not self._logging_episodes:
+            self._logging_episodes = True
+            self._write_begins(np.arange(self.worlds))
+        end = cfg.steps if stop_at is None else min(cfg.steps, stop_at)
+        while self.step < end and not self.stop_requested:
+            before = self.step
+            self.env_step()
+            self.learn()
+            if self._crossed(cfg.log_every, before):
+                self.log_metrics()
+            if self._crossed(cfg.eval_every, before):
+                self.run_eval()
+            if self.run_dir is not None and self._crossed(cfg.checkpoint_every, before):
+                self._flush_episodes()  # the run holds every episode the checkpoint has counted
+                save_checkpoint(self, self.run_dir)
+            if self.progress is not None and time.monotonic() - last_progress > 0.2:
+                last_progress = time.monotonic()
+                self.progress(self.figures())
+        status = "interrupted" if self.step < cfg.steps else "finished"
+        if status == "finished":  # the final figures, unless the last pass just wrote them
+            if self.logged_step != self.step:
+                self.log_metrics()
+            if self.eval_step != self.step:
+                self.run_eval()
+        self._end_open_episodes()
+        if self.run_dir is not None:
+            save_checkpoint(self, self.run_dir)
+            self.save_policy(self.run_dir / "policy")
+        if self.progress is not None:
+            self.progress(self.figures())
+        return status
+
+    def figures(self) -> dict[str, Any]:
+        """What the progress bar shows."""
+        return {"step": self.step, "steps": self.cfg.steps, "epsilon": self.epsilon(), "loss": self.last_loss,
+                "win_rate": None if self.last_eval is None else self.last_eval.win_rate}
+
+    def close(self) -> None:
+        self.env.close()
+        if self._eval_env is not None:
+            self._eval_env.close()
+        if self._eval_trace is not None:
+            self._eval_trace.close()

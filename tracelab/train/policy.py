@@ -1,0 +1,191 @@
+"""A trained policy: how red's agents choose actions from the team observation, and its file format.
+
+Each red agent sees the team observation reordered so that its own blocks come first (its position before
+its team mates', its bullet triple first in the advanced scenario; both halves of a stacked observation
+alike): with one network shared by several agents (the Markov setup) that is how the network knows which
+agent it acts for. With one agent per team the order is the env's.
+
+On disk (docs/training.md, "Policy format"): `policy.pt` holds `{network name: state dict}` in
+nn.Sequential(Linear(D, H), Tanh(), Linear(H, A))'s names, `policy.json` the scenario, the observation
+layout, the action ids, the network shape and which agents each network plays. `load_policy` needs
+neither the training code's objects nor the run."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tracelab.game.scenario import ACTION_NAMES, NOTHING, Scenario, scenario_from_dict
+from tracelab.train.network import STATE_DICT_KEYS, Shape, from_state_dict, q_values, views
+
+FORMAT = "tracelab-dqn-policy/1"
+POLICY_JSON, POLICY_PT = "policy.json", "policy.pt"
+
+
+def agent_view_order(scenario: Scenario, stack_previous: bool) -> np.ndarray:
+    """int [N, D]: agent j's observation is team_obs[..., order[j]] (its own blocks first)."""
+    n = scenario.agents_per_team
+    block = (7 if scenario.advanced else 4) * n
+    orders = []
+    for j in range(n):
+        mates = [j] + [k for k in range(n) if k != j]
+        half = [2 * k + c for k in mates for c in (0, 1)]             # own positions
+        half += [2 * n + c for c in range(2 * n)]                     # opponents, as they are
+        if scenario.advanced:
+            half += [4 * n + 3 * k + c for k in mates for c in range(3)]  # own bullet triples
+        if stack_previous:
+            half = half + [block + i for i in half]
+        orders.append(half)
+    return np.asarray(orders, np.int64)
+
+
+def observation_layout(scenario: Scenario, stack_previous: bool) -> list[str]:
+    """Names of an agent's observation entries, in the order its network reads them."""
+    n = scenario.agents_per_team
+    own = ["self"] + [f"mate{k}" for k in range(1, n)]
+    names = [f"{a}_{c}" for a in own for c in "xy"]
+    names += [f"opponent{k + 1}_{c}" for k in range(n) for c in "xy"]
+    if scenario.advanced:
+        names += [f"{a}_{c}" for a in own for c in ("opponent_bullets", "nearest_bullet_x", "nearest_bullet_y")]
+    if stack_previous:
+        names += [f"previous_{x}" for x in names]
+    return names
+
+
+def may_act(scenario: Scenario, state: Any) -> np.ndarray:
+    """bool [W, N]: which red agents choose an action this step (alive; a slow agent on even steps)."""
+    can = state.alive[:, 0] & ~state.moving[:, 0]
+    slow = scenario.slow_mask[0]
+    if slow.any():
+        can = can & (~slow | (state.t % 2 == 0)[:, None])
+    return can
+
+
+class Policy:
+    """Greedy action choice of red's agents. `nets`: per network, (W1ᵀ, b1, W2ᵀ, b2) numpy arrays (the
+    learner's live views while training, loaded copies otherwise); `network_of_agent[j]` which one plays
+    agent j."""
+
+    def __init__(self, scenario: Scenario, nets: list[tuple[np.ndarray, ...]], network_of_agent: list[int],
+                 stack_previous: bool, mask: bool = False) -> None:
+        self.scenario = scenario
+        self.nets = nets
+        self.network_of_agent = list(network_of_agent)
+        self.stack_previous = stack_previous
+        self.mask = mask
+        self.order = agent_view_order(scenario, stack_previous)
+        self.nothing = scenario.action_ids.index(NOTHING)
+        self._identity = scenario.agents_per_team == 1
+
+    def agent_obs(self, team_obs: np.ndarray, j: int) -> np.ndarray:
+        """Agent j's view [W, D] of the team observations [W, D]."""
+        return team_obs if self._identity else team_obs[:, self.order[j]]
+
+    def act(self, team_obs: np.ndarray, acting: np.ndarray, masks: np.ndarray | None = None) -> np.ndarray:
+        """Action indices [W, N]: greedy for acting agents (among allowed ones if the policy masks and
+        `masks` [W, N, A] is given), do-nothing for the others."""
+        w, n = acting.shape
+        out = np.full((w, n), self.nothing, np.int64)
+        for j in range(n):
+            rows = np.flatnonzero(acting[:, j])
+            if not len(rows):
+                continue
+            q = q_values(self.nets[self.network_of_agent[j]], self.agent_obs(team_obs[rows], j))
+            if self.mask and masks is not None:
+                q = np.where(masks[rows, j].astype(bool), q, -np.inf)
+            out[rows, j] = q.argmax(axis=1)
+        return out
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Files
+# ---------------------------------------------------------------------------------------------------------
+def save_policy(path: str | Path, scenario: Scenario, rows: dict[str, Any], agents: dict[str, list[int]],
+                shape: Shape, stack_previous: bool, mask: bool, trained: dict[str, Any]) -> Path:
+    """Write policy.pt and policy.json into directory `path`. rows: network name -> online parameter row
+    (tracelab.train.network layout); agents: network name -> red agent indices it plays."""
+    import torch
+
+    from tracelab.train.network import to_state_dict
+    out = Path(path)
+    out.mkdir(parents=True, exist_ok=True)
+    torch.save({name: to_state_dict(row, shape) for name, row in rows.items()}, out / (POLICY_PT + ".tmp"))
+    spec = {
+        "format": FORMAT,
+        "scenario": {"name": scenario.name, "toml": scenario.to_toml()},
+        "observation": {"size": shape.inputs, "stack_previous": stack_previous, "agent_first": True,
+                        "layout": observation_layout(scenario, stack_previous)},
+        "actions": {"ids": list(scenario.action_ids), "names": [ACTION_NAMES[a] for a in scenario.action_ids]},
+        "network": {"inputs": shape.inputs, "hidden": shape.hidden, "outputs": shape.actions,
+                    "activation": "tanh", "state_dict_keys": list(STATE_DICT_KEYS),
+                    "torch": f"nn.Sequential(nn.Linear({shape.inputs}, {shape.hidden}), nn.Tanh(), "
+                             f"nn.Linear({shape.hidden}, {shape.actions}))"},
+        "networks": {name: list(map(int, idx)) for name, idx in agents.items()},
+        "mask": mask,
+        "trained": trained,
+    }
+    (out / (POLICY_JSON + ".tmp")).write_text(json.dumps(spec, indent=1) + "\n")
+    (out / (POLICY_PT + ".tmp")).replace(out / POLICY_PT)  # the pair appears together enough for readers
+    (out / (POLICY_JSON + ".tmp")).replace(out / POLICY_JSON)
+    return out
+
+
+def _policy_dir(path: str | Path) -> Path:
+    p = Path(path)
+    if p.is_dir():
+        return p
+    if p.name in (POLICY_JSON, POLICY_PT) and p.parent.is_dir():
+        return p.parent
+    raise FileNotFoundError(f"no policy at {str(path)!r}: expected a directory holding {POLICY_JSON} and "
+                            f"{POLICY_PT} (or the path of one of them)")
+
+
+def read_policy_spec(path: str | Path) -> dict[str, Any]:
+    d = _policy_dir(path)
+    f = d / POLICY_JSON
+    if not f.exists():
+        raise FileNotFoundError(f"{str(d)!r} holds no {POLICY_JSON}")
+    spec = json.loads(f.read_text())
+    if spec.get("format") != FORMAT:
+        raise ValueError(f"{f}: format {spec.get('format')!r} is not {FORMAT!r}")
+    return spec
+
+
+def policy_scenario(spec: dict[str, Any]) -> Scenario:
+    import tomllib
+    return scenario_from_dict(tomllib.loads(spec["scenario"]["toml"]), source="policy.json scenario")
+
+
+def load_policy(path: str | Path, scenario: Scenario | None = None) -> Policy:
+    """A saved policy, ready to act. `scenario`: play it on another scenario of the same shape (same
+    agents, actions and observation size); default: the one it was trained on."""
+    import torch
+    spec = read_policy_spec(path)
+    trained_on = policy_scenario(spec)
+    scenario = scenario or trained_on
+    stack = bool(spec["observation"]["stack_previous"])
+    net = spec["network"]
+    shape = Shape(int(net["inputs"]), int(net["hidden"]), int(net["outputs"]))
+    from tracelab.game.observe import obs_size
+    if (obs_size(scenario, stack), scenario.n_actions, scenario.agents_per_team) != \
+            (shape.inputs, shape.actions, trained_on.agents_per_team):
+        raise ValueError(f"the policy was trained on {trained_on.name!r} ({trained_on.agents_per_team} agents, "
+                         f"{shape.inputs} observations, {shape.actions} actions); scenario {scenario.name!r} "
+                         f"does not match")
+    states = torch.load(_policy_dir(path) / POLICY_PT, map_location="cpu", weights_only=True)
+    names = list(spec["networks"])
+    nets, owner = [], {}
+    for i, name in enumerate(names):
+        if name not in states:
+            raise ValueError(f"{POLICY_PT} has no network {name!r} (has {sorted(states)})")
+        row = from_state_dict(states[name], shape)
+        nets.append(tuple(x.numpy() for x in views(row, shape)))
+        for j in spec["networks"][name]:
+            owner[int(j)] = i
+    if sorted(owner) != list(range(scenario.agents_per_team)):
+        raise ValueError(f"{POLICY_JSON}: networks {spec['networks']} do not cover agents "
+                         f"0..{scenario.agents_per_team - 1}")
+    return Policy(scenario, nets, [owner[j] for j in range(scenario.agents_per_team)], stack,
+                  bool(spec.get("mask", False)))

@@ -1,0 +1,87 @@
+"""Experience replay in one preallocated numpy array (a ring), sampled into one preallocated batch array.
+
+A transition is (obs, action, reward, next_obs, discount): `reward` is what was earned from the decision
+to the next one (one step for a fast agent, the slow agent's two steps summed with γ), and `discount` the
+factor on the bootstrap, γ^k, or 0 when the episode (or the agent) ended.
+
+Each transition is one float32 row laid out as the learner reads it: [obs, 1, next_obs, 1, one-hot action,
+reward, discount] (the ones add the biases in the learner's matmuls; the one-hot picks the taken action's
+Q-value and carries its gradient). So a minibatch is one `np.take` and the learner's torch tensors are
+fixed views of the batch array: sampling costs four numpy calls."""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+
+class ReplayBuffer:
+    def __init__(self, capacity: int, obs_size: int, n_actions: int, batch: int) -> None:
+        self.capacity = capacity
+        self.obs_size = d = obs_size
+        self.n_actions = n_actions
+        self.row = 2 * (d + 1) + n_actions + 2
+        self._hot = 2 * (d + 1)  # first column of the one-hot action
+        self.rows = np.zeros((capacity, self.row), np.float32)
+        self.rows[:, d] = 1.0
+        self.rows[:, 2 * d + 1] = 1.0
+        self.action = np.zeros(capacity, np.int64)  # also kept as ids: checkpoints and tests read them
+        self.size = 0
+        self.pos = 0
+        self.batch = np.zeros((batch, self.row), np.float32)
+        # numpy views of the batch by field (the learner makes the same views in torch)
+        b = self.batch
+        # [obs; next_obs] with the ones (the two halves of a row do not overlap)
+        self.b_obs = np.lib.stride_tricks.as_strided(b, (2, batch, d + 1), (4 * (d + 1), 4 * self.row, 4))
+        self.b_onehot = b[:, self._hot:self._hot + n_actions]
+        self.b_reward = b[:, -2:-1]
+        self.b_discount = b[:, -1:]
+
+    def add(self, obs: np.ndarray, action: np.ndarray, reward: np.ndarray, next_obs: np.ndarray,
+            discount: np.ndarray) -> None:
+        """Append K transitions (arrays with a leading axis K), overwriting the oldest when full."""
+        k = len(action)
+        if k == 0:
+            return
+        if k > self.capacity:  # only the newest fit
+            obs, action, reward, next_obs, discount = (a[-self.capacity:] for a in
+                                                       (obs, action, reward, next_obs, discount))
+            k = self.capacity
+        idx = (self.pos + np.arange(k)) % self.capacity
+        d, hot = self.obs_size, self._hot
+        rows = self.rows
+        rows[idx, :d] = obs
+        rows[idx, d + 1:2 * d + 1] = next_obs
+        rows[idx, hot:hot + self.n_actions] = 0.0
+        rows[idx, hot + np.asarray(action, np.int64)] = 1.0
+        rows[idx, -2] = reward
+        rows[idx, -1] = discount
+        self.action[idx] = action
+        self.pos = (self.pos + k) % self.capacity
+        self.size = min(self.size + k, self.capacity)
+
+    def sample(self, rng: np.random.Generator) -> None:
+        """Fill the batch with a uniform sample (with replacement) of stored transitions."""
+        # floor(u * size) for u in [0, 1): uniform over the stored rows, at half the cost of rng.integers
+        idx = (rng.random(len(self.batch)) * self.size).astype(np.int64)
+        self.rows.take(idx, axis=0, out=self.batch)
+
+    def sampled_actions(self) -> np.ndarray:
+        """The action ids of the current batch, [B, 1]."""
+        return self.b_onehot.argmax(axis=1)[:, None]
+
+    # ---- checkpoints ----
+    def state(self) -> dict[str, Any]:
+        n, d = self.size, self.obs_size
+        return {"size": n, "pos": self.pos, "obs": self.rows[:n, :d].copy(),
+                "next_obs": self.rows[:n, d + 1:2 * d + 1].copy(), "action": self.action[:n].copy(),
+                "reward": self.rows[:n, -2].copy(), "discount": self.rows[:n, -1].copy()}
+
+    def load_state(self, st: dict[str, Any]) -> None:
+        n = int(st["size"])
+        if n > self.capacity or st["obs"].shape[1:] != (self.obs_size,):
+            raise ValueError(f"checkpoint buffer ({n} x {st['obs'].shape[1:]}) does not fit this buffer "
+                             f"({self.capacity} x {self.obs_size})")
+        self.size, self.pos = 0, 0
+        self.add(st["obs"], st["action"], st["reward"], st["next_obs"], st["discount"])
+        self.size, self.pos = n, int(st["pos"])
