@@ -122,7 +122,8 @@ def play(scenario, args: argparse.Namespace, sink) -> dict:
     from tracelab.game.opponent import P_TOWARD
 
     n_worlds = min(args.worlds, args.episodes)
-    trained = args.trained
+    trained = getattr(args, "trained", None)  # a loaded policy (run() sets it); callers in code may omit it
+    opponent_p = getattr(args, "opponent_p", None)
     rng = np.random.default_rng(args.seed)
     index_of = {a: i for i, a in enumerate(scenario.action_ids)}
     to_index = np.array([index_of.get(a, 0) for a in range(9)])  # spec action id -> action index
@@ -169,7 +170,7 @@ def play(scenario, args: argparse.Namespace, sink) -> dict:
         env = GridWarVectorEnv(n_worlds, scenario, backend="rules", trace_sink=sink,
                                trace_episodes=args.episodes,
                                stack_previous=trained is not None and trained.stack_previous,
-                               opponent_p=P_TOWARD if args.opponent_p is None else args.opponent_p)
+                               opponent_p=P_TOWARD if opponent_p is None else opponent_p)
         last["obs"], last["info"] = env.reset(seed=args.seed)
         first_steps, ended = one_step(env)
     steps = 0
