@@ -13,7 +13,7 @@ COMMAND_MODULES = [
     "tracelab.commands.play", "tracelab.commands.reason",
     "tracelab.commands.trace", "tracelab.commands.why", "tracelab.commands.why_not",
     "tracelab.commands.sql", "tracelab.commands.diff", "tracelab.commands.seal",
-    "tracelab.commands.bench",
+    "tracelab.commands.bench", "tracelab.commands.runs", "tracelab.commands.tui",
 ]
 
 

@@ -1,0 +1,25 @@
+"""Messages the panes of a run send each other through the run screen."""
+from __future__ import annotations
+
+from textual.message import Message
+
+
+class OpenTrace(Message):
+    """Show an episode's trace, optionally filtered by rule and positioned at a timestep."""
+    def __init__(self, episode: int, rule: str = "", at_t: int | None = None) -> None:
+        super().__init__()
+        self.episode, self.rule, self.at_t = episode, rule, at_t
+
+
+class ExplainChange(Message):
+    """Open the why tree of an atom's bound at the end of timestep t of an episode."""
+    def __init__(self, episode: int, atom: str, t: int) -> None:
+        super().__init__()
+        self.episode, self.atom, self.t = episode, atom, t
+
+
+class StepSelected(Message):
+    """The trace cursor moved to a change at (episode, t, seq): the board follows."""
+    def __init__(self, episode: int, t: int, seq: int) -> None:
+        super().__init__()
+        self.episode, self.t, self.seq = episode, t, seq
