@@ -1,5 +1,5 @@
 """`tracelab bench`: speed and memory measured by benchmarks (docs/benchmarks.md), never by timed
-assertions in tests. `bench engine`, `bench env`, `bench store`, `bench all`; each takes --json,
+assertions in tests. `bench engine`, `bench env`, `bench store`, `bench tui`, `bench all` (the first three); each takes --json,
 --quick (small sizes: the smoke test) and --repeats (medians and spread over that many repeats)."""
 from __future__ import annotations
 
@@ -18,6 +18,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     helps = {"engine": "compile and warm-start time, RuleSim steps/s and engine work, memory over a long run",
              "env": "RuleSim vs RefSim steps/s (one world and batched), the gymnasium envs, the goals",
              "store": "trace-store ingest rows/s, sealing, point queries",
+             "tui": "the terminal UI on a 10M-row run: open, first page, scroll, jump, filter (headless)",
              "all": "engine, env and store"}
     for name, text in helps.items():
         q = what.add_parser(name, help=text)
@@ -27,6 +28,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         if name in ("engine", "env", "all"):
             q.add_argument("--agents", type=_sizes, default=None,
                            help="team sizes, comma-separated (default 1,5,20; --quick: 1,2)")
+        if name == "tui":
+            q.add_argument("--rows", type=_positive, default=None,
+                           help="change rows of the synthetic run (default 10,000,000; --quick: 200,000)")
         if name in ("env", "all"):
             q.add_argument("--batch", type=_positive, default=None,
                            help="worlds of the batched runs (default 256; --quick: 16)")
@@ -62,6 +66,10 @@ def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], s
         from tracelab.bench import env
         r = env.run(args.quick, args.repeats, args.agents, args.batch)
         return r, env.report(r)
+    if name == "tui":
+        from tracelab.bench import tui
+        r = tui.run(args.quick, args.repeats, args.rows)
+        return r, tui.report(r)
     from tracelab.bench import store
     r = store.run(args.quick, args.repeats)
     return r, store.report(r)

@@ -47,6 +47,11 @@ class TracelabApp(App[None]):
             return
         self.push_screen(screen)
 
+    async def _saved_queries(self, screen: RunScreen) -> None:
+        await screen.action_show("sql")
+        sql = await screen.pane("sql")
+        sql.action_saved()  # type: ignore[attr-defined]
+
     def action_help(self) -> None:
         if not isinstance(self.screen, HelpScreen):
             self.push_screen(HelpScreen())
@@ -60,5 +65,5 @@ class TracelabApp(App[None]):
                 yield SystemCommand(f"Show {name}", f"switch to the {name} view (key {title.split()[0]})",
                                     lambda tab=tab: screen.action_show(tab))
             yield SystemCommand("Saved queries", "pick a saved SQL query and its parameters",
-                                lambda: (screen.action_show("sql"), screen.query_one("SqlPane").action_saved()))
+                                lambda: self._saved_queries(screen))
             yield SystemCommand("Back to runs", "close this run", self.pop_screen)

@@ -112,6 +112,7 @@ class LazyTable(ScrollView, can_focus=True):
         self.sort_desc = False
         self._pages: OrderedDict[int, list[Row]] = OrderedDict()
         self._wanted: set[int] = set()
+        self._inflight: set[int] = set()     # pages being fetched now
         self._fetching = False
         self._generation = 0
         self._pending_cursor: int | None = None
@@ -126,10 +127,13 @@ class LazyTable(ScrollView, can_focus=True):
         if columns is not None:
             self.columns = list(columns)
         self._pages.clear()
-        self._wanted.clear()
+        with self._guard:
+            self._wanted.clear()
+            self._inflight.clear()
         self.count, self.ready, self.error = 0, False, None
         self._pending_cursor = cursor
         self.virtual_size = Size(self._total_width(), 1)
+        self.scroll_to(y=0, animate=False)
         self.refresh()
         if source is not None:
             self.run_worker(lambda: self._prepare(source, self._generation), thread=True,
@@ -169,13 +173,16 @@ class LazyTable(ScrollView, can_focus=True):
         """Nothing is being prepared or fetched, and every visible row is here."""
         if not self.ready or self._fetching or self._wanted:
             return False
-        first = int(self.scroll_offset.y)
-        last = min(self.count, first + max(1, self.size.height - 1))
-        return all(p in self._pages for p in range(first // PAGE, (max(first, last - 1)) // PAGE + 1)) \
-            if self.count else True
+        if not self.count:
+            return True
+        first = max(0, min(int(self.scroll_offset.y), self.count - 1))
+        last = min(self.count, first + max(1, self.size.height - 1)) - 1
+        return all(p in self._pages for p in range(first // PAGE, last // PAGE + 1))
 
     def _want(self, page: int) -> None:
         with self._guard:
+            if page in self._inflight:
+                return
             self._wanted.add(page)
             start = not self._fetching
             self._fetching = True
@@ -193,14 +200,21 @@ class LazyTable(ScrollView, can_focus=True):
                     return
                 if not self._wanted:
                     self._fetching = False
-                    return
+                    break
                 page = min(self._wanted)
                 self._wanted.discard(page)
+                self._inflight.add(page)
             try:
                 rows, error = source.fetch(page), None
             except Exception as e:  # noqa: BLE001
                 rows, error = [], str(e)
             self.app.call_from_thread(self._arrived, generation, page, rows, error)
+            with self._guard:
+                self._inflight.discard(page)
+        try:
+            source.warm()  # e.g. the trace's anchors, while the user looks at the first page
+        except Exception:  # noqa: BLE001 - a failing warm-up shows up again when a page needs it
+            pass
 
     def _restart(self) -> None:
         pages = set(self._wanted)
@@ -248,8 +262,11 @@ class LazyTable(ScrollView, can_focus=True):
     def _header(self) -> Text:
         text = Text(style="bold")
         for c in self.columns:
-            title = c.title + ((" ▼" if self.sort_desc else " ▲") if c.key == self.sort_key else "")
-            text.append(self._fit(Text(title), c.width or len(c.title) + 1, c.align))
+            width = c.width or len(c.title) + 1
+            title = c.title
+            if c.key == self.sort_key:  # the marker always shows; the title gives way
+                title = title[: max(1, width - 1)] + ("▼" if self.sort_desc else "▲")
+            text.append(self._fit(Text(title), width, c.align))
             text.append(" ")
         text.stylize(Style(underline=True))
         return text
@@ -313,6 +330,8 @@ class LazyTable(ScrollView, can_focus=True):
         elif new >= top + visible:
             self.scroll_to(y=new - visible + 1, animate=False, immediate=True)
         self.refresh()
+        if self.ready and new < self.count and new // PAGE not in self._pages:
+            self._want(new // PAGE)
         if self.ready:
             self.post_message(self.RowHighlighted(self, new, self.cursor_row))
 

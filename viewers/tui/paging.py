@@ -4,9 +4,11 @@ returns one page of PAGE rows as dicts. Nothing fetches more than the pages aske
 - ArrowSource: rows already in memory (the run catalog, SQL console results).
 - QuerySource: any read-only SELECT, paged with LIMIT/OFFSET under a total order (small tables: episodes,
   rules).
-- TraceSource: an episode's change rows under filters, paged by keyset on seq: prepare() takes every
-  PAGE-th seq of the filtered rows (the anchors), so page k is `seq >= anchors[k] AND seq < anchors[k+1]`,
-  which the sealed file's (episode, seq) order and Parquet row-group statistics answer without a scan."""
+- TraceSource: an episode's change rows under filters, paged by keyset on seq: prepare() counts them and
+  page 0 is a top-N query, so the first screen comes at once; warm() (run by the table when idle) takes
+  every PAGE-th seq of the filtered rows (the anchors), so page k is `seq >= anchors[k] AND seq <
+  anchors[k+1]`, which the sealed file's (episode, seq) order and Parquet row-group statistics answer
+  without a scan."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -15,6 +17,7 @@ from typing import Any, Protocol
 import numpy as np
 import pyarrow as pa
 
+from tracelab.store.reader import query_readonly
 from tracelab.viewers.tui.source import RunSource
 
 PAGE = 256
@@ -23,6 +26,7 @@ PAGE = 256
 class PageSource(Protocol):
     def prepare(self) -> int: ...
     def fetch(self, page: int) -> list[dict[str, Any]]: ...
+    def warm(self) -> None: ...        # optional work done when the table has fetched what it showed
 
 
 class ArrowSource:
@@ -31,6 +35,9 @@ class ArrowSource:
 
     def prepare(self) -> int:
         return self.table.num_rows
+
+    def warm(self) -> None:
+        pass
 
     def fetch(self, page: int) -> list[dict[str, Any]]:
         return self.table.slice(page * PAGE, PAGE).to_pylist()
@@ -45,6 +52,9 @@ class QuerySource:
 
     def prepare(self) -> int:
         return int(self.source.scalar(f"SELECT count(*) FROM ({self.sql})", self.params))
+
+    def warm(self) -> None:
+        pass
 
     def fetch(self, page: int) -> list[dict[str, Any]]:
         return self.source.rows(f"SELECT * FROM ({self.sql}) ORDER BY {self.order} "
@@ -100,17 +110,23 @@ class TraceQuery:
             where.append("t <= $t_to")
             params["t_to"] = f.t_to
         if f.atom:
-            where.append(f"{atom_col} IN (SELECT atom FROM atoms WHERE text GLOB $atom)")
-            params["atom"] = f.atom
+            where.append(cls._atom_clause(source, atom_col, "text", f.atom))
         if f.label:
-            where.append(f"{atom_col} IN (SELECT atom FROM atoms WHERE label GLOB $label)")
-            params["label"] = f.label
+            where.append(cls._atom_clause(source, atom_col, "label", f.label))
         if f.atom_id is not None:
             where.append(f"{atom_col} = $atom_id")
             params["atom_id"] = f.atom_id
         if f.rule:
             where.append(cls._cause_clause(source, f.rule))
         return cls(" AND ".join(where), params)
+
+    @staticmethod
+    def _atom_clause(source: RunSource, atom_col: str, column: str, pattern: str) -> str:
+        """`atom IN (ids)` for the atoms whose text (or label) matches the glob: resolved once against
+        the small atoms view, so the scans of millions of change rows test integers."""
+        ids = [r["atom"] for r in source.rows(f"SELECT atom FROM atoms WHERE {column} GLOB $p ORDER BY atom",
+                                              {"p": pattern})]
+        return f"{atom_col} IN ({', '.join(map(str, ids))})" if ids else "FALSE"
 
     @staticmethod
     def _cause_clause(source: RunSource, pattern: str) -> str:
@@ -132,61 +148,116 @@ TRACE_COLUMNS = ("t, pass_no, atom, node, label, old_lower, old_upper, new_lower
 
 
 class TraceSource:
-    """One episode's change rows under a TraceFilter, in seq order, paged by keyset (module doc)."""
+    """One episode's change rows under a TraceFilter, in seq order, paged by keyset (module doc).
+
+    A page is found from a *hint* when one is near: (row r, seq bound b) means "row r is the first filtered
+    row with seq >= b". Jumps leave one (row_of_t, row_of_seq, next_change), every fetched page leaves one
+    at each of its edges, and row 0 and row `count` are known; a page within reach of a hint costs two
+    top-N scans of the seq column (~10 ms at 10M rows). Anything else uses the anchors (warm())."""
 
     def __init__(self, source: RunSource, flt: TraceFilter) -> None:
         self.source, self.filter = source, flt
-        self.anchors = np.zeros(0, np.int64)
+        self.anchors: np.ndarray | None = None    # seq of every PAGE-th filtered row (warm() makes it)
         self.count = 0
+        self.hints: dict[int, int] = {}
         self._raw: TraceQuery | None = None
         self._view: TraceQuery | None = None
 
     def prepare(self) -> int:
+        """The filtered row count (the table shows pages near a hint before the anchors exist)."""
         self._raw = TraceQuery.build(self.source, self.filter)
         self._view = TraceQuery.build(self.source, self.filter, atom_col="atom_id")  # the view's names
-        table = self.source.arrow(
-            f"SELECT seq, count(*) OVER () AS n FROM (SELECT seq, row_number() OVER (ORDER BY seq) - 1 AS i "
-            f"FROM raw.changes WHERE {self._raw.where}) WHERE i % {PAGE} = 0 ORDER BY seq",
-            self._raw.params)
-        self.anchors = table.column("seq").to_numpy()
-        if len(self.anchors) == 0:
-            self.count = 0
-        else:
-            last_start = int(self.anchors[-1])
-            tail = self.source.scalar(f"SELECT count(*) FROM raw.changes WHERE {self._raw.where} "
-                                      f"AND seq >= $lo", {**self._raw.params, "lo": last_start})
-            self.count = (len(self.anchors) - 1) * PAGE + int(tail)
+        row = self.source.rows(f"SELECT count(*) AS n, min(seq) AS first, max(seq) AS last FROM raw.changes "
+                               f"WHERE {self._raw.where}", self._raw.params)[0]
+        self.count = int(row["n"])
+        if self.count:
+            self.hints = {0: int(row["first"]), self.count: int(row["last"]) + 1}
         return self.count
 
+    def warm(self) -> None:
+        """Compute the anchors: the filtered seqs in scan order (a sealed run stores them sorted; sorted
+        here only if not), every PAGE-th kept. ~0.3 s for 10M rows, against ~1.5 s for a window query."""
+        if self.anchors is not None or self._raw is None:
+            return
+        raw = self._raw
+        seqs = self.source.call(lambda con: query_readonly(
+            con, f"SELECT seq FROM raw.changes WHERE {raw.where}", raw.params).fetchnumpy()["seq"])
+        seqs = np.asarray(seqs, dtype=np.int64)
+        if len(seqs) > 1 and not bool(np.all(seqs[1:] > seqs[:-1])):
+            seqs = np.sort(seqs)
+        self.anchors = seqs[::PAGE].copy()
+
     def fetch(self, page: int) -> list[dict[str, Any]]:
-        assert self._view is not None, "prepare() first"
-        if page >= len(self.anchors):
+        assert self._raw is not None, "prepare() first"
+        if page * PAGE >= self.count:
             return []
-        params = {**self._view.params, "lo": int(self.anchors[page])}
+        if self.anchors is not None:
+            hi = int(self.anchors[page + 1]) if page + 1 < len(self.anchors) else None
+            rows = self._rows(int(self.anchors[page]), hi)
+        else:
+            near = [r for r in self.hints if page * PAGE <= r <= (page + 1) * PAGE]
+            if not near:
+                self.warm()
+                return self.fetch(page)
+            r = min(near, key=lambda r: abs(r - page * PAGE))
+            rows = self._rows(*self._range_around(page, r, self.hints[r]))
+        if rows:
+            self.hints.setdefault(page * PAGE, int(rows[0]["seq"]))
+            self.hints.setdefault(page * PAGE + len(rows), int(rows[-1]["seq"]) + 1)
+        return rows
+
+    def _range_around(self, page: int, row: int, bound: int) -> tuple[int, int]:
+        """[lo, hi) in seq of page `page`, given that `row` is the first filtered row with seq >= bound."""
+        assert self._raw is not None
+        where, params = self._raw.where, {**self._raw.params, "b": bound}
+        before = row - page * PAGE                # rows of the page before the hinted one
+        after = min(PAGE, self.count - page * PAGE) - before
+        lo = bound if before == 0 else self.source.scalar(
+            f"SELECT min(seq) FROM (SELECT seq FROM raw.changes WHERE {where} AND seq < $b "
+            f"ORDER BY seq DESC LIMIT {before})", params)
+        hi = bound if after <= 0 else int(self.source.scalar(
+            f"SELECT max(seq) FROM (SELECT seq FROM raw.changes WHERE {where} AND seq >= $b "
+            f"ORDER BY seq LIMIT {after})", params)) + 1
+        return int(lo), hi
+
+    def _rows(self, lo: int, hi: int | None) -> list[dict[str, Any]]:
+        """The filtered rows with lo <= seq < hi, read from the changes view (joins only these rows)."""
+        assert self._view is not None
+        params = {**self._view.params, "lo": lo}
         upper = ""
-        if page + 1 < len(self.anchors):
-            params["hi"] = int(self.anchors[page + 1])
+        if hi is not None:
+            params["hi"] = hi
             upper = " AND seq < $hi"
         return self.source.rows(f"SELECT {TRACE_COLUMNS} FROM changes WHERE {self._view.where} "
                                 f"AND seq >= $lo{upper} ORDER BY seq", params)
 
-    def row_of_seq(self, seq: int) -> int:
-        """The row index of the first filtered row with seq >= `seq`."""
+    def _locate(self, condition: str, params: dict[str, Any]) -> int | None:
+        """The row index of the first filtered row meeting `condition` (on raw.changes), noted as a hint;
+        None if no row meets it."""
         assert self._raw is not None
-        return int(self.source.scalar(f"SELECT count(*) FROM raw.changes WHERE {self._raw.where} "
-                                      f"AND seq < $s", {**self._raw.params, "s": seq}))
+        where, params = self._raw.where, {**self._raw.params, **params}
+        first = self.source.scalar(f"SELECT min(seq) FROM raw.changes WHERE {where} AND {condition}", params)
+        if first is None:
+            return None
+        row = int(self.source.scalar(f"SELECT count(*) FROM raw.changes WHERE {where} AND seq < $first",
+                                     {**self._raw.params, "first": first}))
+        self.hints[row] = int(first)
+        return row
+
+    def row_of_seq(self, seq: int) -> int:
+        """The row index of the first filtered row with seq >= `seq` (the last row if there is none)."""
+        found = self._locate("seq >= $s", {"s": seq})
+        return max(0, self.count - 1) if found is None else found
 
     def row_of_t(self, t: int) -> int:
-        """The row index of the first filtered row at or after timestep t."""
-        assert self._raw is not None
-        return int(self.source.scalar(f"SELECT count(*) FROM raw.changes WHERE {self._raw.where} "
-                                      f"AND t < $tt", {**self._raw.params, "tt": t}))
+        """The row index of the first filtered row at or after timestep t (the last row if none)."""
+        found = self._locate("t >= $tt", {"tt": t})
+        return max(0, self.count - 1) if found is None else found
 
     def next_change(self, atom_id: int, seq: int, forward: bool) -> int | None:
         """The row index of the atom's next (or previous) change after (before) `seq`, if any."""
         assert self._raw is not None
         agg, cmp = ("min", ">") if forward else ("max", "<")
         found = self.source.scalar(f"SELECT {agg}(seq) FROM raw.changes WHERE {self._raw.where} "
-                                   f"AND atom = $a AND seq {cmp} $s",
-                                   {**self._raw.params, "a": atom_id, "s": seq})
+                                   f"AND atom = $a AND seq {cmp} $s", {**self._raw.params, "a": atom_id, "s": seq})
         return None if found is None else self.row_of_seq(int(found))

@@ -7,9 +7,11 @@ from pathlib import Path
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.screen import Screen
-from textual.widgets import Footer, Static, TabbedContent, TabPane
+from textual.widget import Widget
+from textual.widgets import Static, TabbedContent, TabPane
 
 from tracelab.viewers.tui.episodes import EpisodesPane
+from tracelab.viewers.tui.keybar import KeyBar
 from tracelab.viewers.tui.messages import ExplainChange, OpenTrace
 from tracelab.viewers.tui.rules import RulesPane
 from tracelab.viewers.tui.source import RunSource
@@ -20,6 +22,8 @@ from tracelab.viewers.tui.why import WhyPane
 
 TABS = (("episodes", "1 Episodes"), ("trace", "2 Trace"), ("why", "3 Why"), ("rules", "4 Rules"),
         ("sql", "5 SQL"), ("training", "6 Training"))
+
+EAGER = ("episodes", "trace")   # built with the screen; the other views when first shown
 
 
 class RunScreen(Screen):
@@ -33,31 +37,40 @@ class RunScreen(Screen):
         self.path = path
         self.source = RunSource(path)
         self.episode: int | None = None
+        self.panes: dict[str, Widget] = {
+            "episodes": EpisodesPane(self.source), "trace": TracePane(self.source), "why": WhyPane(self.source),
+            "rules": RulesPane(self.source), "sql": SqlPane(self.source), "training": TrainingPane(self.source)}
 
     def compose(self) -> ComposeResult:
         kind = "live" if self.source.live else "sealed"
         yield Static(f" {self.path.name}  ({kind} · {self.path})", id="title", classes="title")
-        panes = {"episodes": EpisodesPane(self.source), "trace": TracePane(self.source),
-                 "why": WhyPane(self.source), "rules": RulesPane(self.source), "sql": SqlPane(self.source),
-                 "training": TrainingPane(self.source)}
         with TabbedContent(initial="episodes", id="tabs"):
             for tab, title in TABS:
                 with TabPane(title, id=tab):
-                    yield panes[tab]
-        yield Footer()
+                    if tab in EAGER:
+                        yield self.panes[tab]
+        yield KeyBar()
 
-    def action_show(self, tab: str) -> None:
+    async def pane(self, tab: str) -> Widget:
+        """The view of a tab, mounted on first use (so that opening a run builds only two views)."""
+        pane = self.panes[tab]
+        if not pane.is_attached:
+            await self.query_one(f"#{tab}", TabPane).mount(pane)
+        return pane
+
+    async def action_show(self, tab: str) -> None:
+        await self.pane(tab)
         self.query_one(TabbedContent).active = tab
         self.call_after_refresh(self._focus_pane, tab)
 
     def _focus_pane(self, tab: str) -> None:
-        pane = self.query_one(f"#{tab} > *")
-        focus = getattr(pane, "focus_default", None)
-        if focus is not None:
+        focus = getattr(self.panes[tab], "focus_default", None)
+        if focus is not None and self.panes[tab].is_attached:
             focus()
 
-    def on_tabbed_content_tab_activated(self, event: TabbedContent.TabActivated) -> None:
+    async def on_tabbed_content_tab_activated(self, event: TabbedContent.TabActivated) -> None:
         if event.pane.id:
+            await self.pane(event.pane.id)
             self.call_after_refresh(self._focus_pane, event.pane.id)
 
     def action_cancel_or_back(self) -> None:
@@ -70,11 +83,15 @@ class RunScreen(Screen):
         self.source.close()
 
     # ---- passing things between views ------------------------------------------------------------------
-    def on_open_trace(self, message: OpenTrace) -> None:
+    async def on_open_trace(self, message: OpenTrace) -> None:
         self.episode = message.episode
-        self.query_one(TracePane).show_episode(message.episode, rule=message.rule, at_t=message.at_t)
-        self.action_show("trace")
+        trace = await self.pane("trace")
+        assert isinstance(trace, TracePane)
+        trace.show_episode(message.episode, rule=message.rule, at_t=message.at_t)
+        await self.action_show("trace")
 
-    def on_explain_change(self, message: ExplainChange) -> None:
-        self.query_one(WhyPane).explain(message.episode, message.atom, message.t)
-        self.action_show("why")
+    async def on_explain_change(self, message: ExplainChange) -> None:
+        why = await self.pane("why")
+        assert isinstance(why, WhyPane)
+        why.explain(message.episode, message.atom, message.t)
+        await self.action_show("why")

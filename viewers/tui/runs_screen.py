@@ -9,10 +9,11 @@ from rich.text import Text
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.screen import Screen
-from textual.widgets import Footer, Static
+from textual.widgets import Static
 
 from tracelab.store.catalog import RunSummary, list_runs
 from tracelab.viewers.tui.colours import FALSE, PARTIAL, TRUE, UNKNOWN
+from tracelab.viewers.tui.keybar import KeyBar
 from tracelab.viewers.tui.lazy_table import Column, LazyTable
 from tracelab.viewers.tui.paging import ArrowSource
 
@@ -49,12 +50,16 @@ class RunsScreen(Screen):
         yield Static(f" tracelab runs in {', '.join(map(str, self.roots))}", id="title", classes="title")
         yield LazyTable(RUN_COLUMNS, id="runs-table")
         yield Static("", id="runs-status", classes="status")
-        yield Footer()
+        yield KeyBar()
 
     def on_mount(self) -> None:
         self.query_one(LazyTable).focus()
         self.action_refresh()
-        self.set_interval(REFRESH_S, self.action_refresh)
+        self.set_interval(REFRESH_S, self._tick)
+
+    def _tick(self) -> None:
+        if self.is_current:  # not while a run is open over it
+            self.action_refresh()
 
     def action_refresh(self) -> None:
         self.run_worker(self._load, thread=True, group="catalog", exclusive=True, exit_on_error=False)

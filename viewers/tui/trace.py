@@ -77,6 +77,7 @@ class TracePane(Vertical):
         self.trace: TraceSource | None = None
         self._goto_t: int | None = None
         self._goto_seq: int | None = None
+        self.jumps = 0            # jumps that landed (benchmarks and tests wait on it)
 
     def compose(self) -> ComposeResult:
         with Horizontal(id="tr-filters"):
@@ -190,12 +191,18 @@ class TracePane(Vertical):
             except Exception as e:  # noqa: BLE001
                 self.app.call_from_thread(self.notify, str(e), severity="error")
                 return
-            if index is not None and trace is self.trace:
-                self.app.call_from_thread(self.table.move_to, index)
-            elif index is None:
-                self.app.call_from_thread(self.notify, "no further change of this atom")
+            if trace is not self.trace:
+                return
+            self.app.call_from_thread(self._landed, index)
 
         self.run_worker(work, thread=True, group="trace-jump", exclusive=True, exit_on_error=False)
+
+    def _landed(self, index: int | None) -> None:
+        if index is None:
+            self.notify("no further change of this atom")
+        else:
+            self.table.move_to(index)
+        self.jumps += 1
 
     def action_focus(self, selector: str) -> None:
         self.query_one(selector, Input).focus()

@@ -9,7 +9,7 @@ from collections import defaultdict
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Grid, Vertical
-from textual.widgets import Static
+from textual.widgets import Static, TabbedContent
 
 from tracelab.viewers.tui.colours import BLUE_TEAM, PARTIAL, RED_TEAM, TRUE, UNKNOWN
 from tracelab.viewers.tui.plot import BraillePlot, Series
@@ -54,9 +54,15 @@ class TrainingPane(Vertical):
         self.set_interval(REFRESH_S, self.poll)
 
     def poll(self) -> None:
+        if not self.screen.is_current or not self.is_visible_tab:
+            return
         if self.source.busy:
             return  # another query holds the connection; try again on the next tick
         self.run_worker(self._read, thread=True, group="training", exclusive=True, exit_on_error=False)
+
+    @property
+    def is_visible_tab(self) -> bool:
+        return self.screen.query_one(TabbedContent).active == "training"
 
     def _read(self) -> None:
         r = self.source.rows("SELECT count(*) AS n, coalesce(max(step), -1) AS last FROM metrics")[0]
@@ -85,6 +91,5 @@ class TrainingPane(Vertical):
 
     def action_eval_games(self) -> None:
         from tracelab.viewers.tui.episodes import EpisodesPane
-        screen = self.screen
-        screen.action_show("episodes")  # type: ignore[attr-defined]
-        screen.query_one(EpisodesPane).action_eval_only()
+        self.run_worker(self.screen.action_show("episodes"))  # type: ignore[attr-defined]
+        self.screen.query_one(EpisodesPane).action_eval_only()
