@@ -1,0 +1,462 @@
+"""The game board of a traced episode, rebuilt from the run's change rows: the map, and per step and per
+phase the agents (position, alive, health, ammo, action), the bullets (position, direction) and the rule
+firings, as numpy columns.
+
+Reads only through a connection from `tracelab.store.open_run` (live or sealed run). Everything comes from
+the run itself: the map and the teams from its facts (rules/gridworld/game.rules' vocabulary:
+`mountain(C)`, `edgeDown(C)`, `enemyBase(A,C)`, `team(A,T)`, `owner(B,A)`, `killAt(Q)`), the dynamics
+from the changes of `atLoc`, `alive`, `hitMe`, `spent`, `dir`, `move` and `shoot`.
+
+Steps and phases. Step s is the episode's timestep t = s (each episode starts at t = 0 with the map
+facts; step 0 is the start state). The engine runs one step in two passes: pass 0 (the snapshot rules,
+Δt = 1, and the agents' actions) and pass 1, in which the immediate rules cascade through the phases of
+docs/game.md in the order of the rule file. A change's *phase* is the section of game.rules its rule
+belongs to (found from the line of each section's first rule, `PHASE_STARTS`), held monotone within a
+step: a hit counted (section 2) while agents act stays in the act phase. State arrays are
+[steps + 1, len(PHASES), n] and give the state at the end of each phase (a phase without changes
+repeats the previous one); `[:, -1]` is the state at the end of each step.
+
+    con = open_run("sample_runs/advanced")
+    board = load_episode(con, 0)
+    board.agent_x[:, 0]             # red-agent-1's x at the end of each step
+    board.frame(5).agents[0]        # an AgentState at the end of step 5
+"""
+from __future__ import annotations
+
+import json
+import tomllib
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from tracelab.store.reader import RunConnection
+
+PHASES = ("start", "bullets", "hits", "act", "walk-in", "deaths", "end", "shield")
+# The first rule of each section of rules/gridworld/game.rules after the snapshot (phase 0 = "start").
+PHASE_STARTS = ("b_up", "hm_struck", "p_act", "w_blank", "d_killed", "g_capture", "k_up_edge")
+DIRECTIONS = ("up", "down", "left", "right")   # spec direction ids 0..3 (tracelab.game.facts)
+TEAMS = ("red", "blue")
+NOTHING = 8                                    # the spec's "do nothing" action id
+NO_ACTION = -1                                 # no action recorded (step 0)
+
+_STATE_LABELS = ("atLoc", "alive", "hitMe", "spent", "dir", "move", "shoot")
+
+
+@dataclass(frozen=True)
+class BoardMap:
+    """The map: cells are (x, y), x right, y up; cell id = y·width + x."""
+    width: int
+    height: int
+    mountains: np.ndarray          # [M, 2] int (x, y)
+    bases: np.ndarray              # [2, 2] int: red's base, blue's base
+
+    def xy(self, cell: np.ndarray | int) -> tuple[np.ndarray, np.ndarray]:
+        """(x, y) of cell ids; -1 stays (-1, -1)."""
+        c = np.asarray(cell)
+        return np.where(c >= 0, c % self.width, -1), np.where(c >= 0, c // self.width, -1)
+
+
+@dataclass(frozen=True)
+class Firings:
+    """Rule firings of an episode (changes made by rules), one row each, in the order the engine made
+    them. `cell` is where the firing happened on the board: the cell its head names, else the cell of
+    the first agent (else bullet) its grounding names at that phase; -1 if none."""
+    step: np.ndarray               # [F] int
+    phase: np.ndarray              # [F] int, index into PHASES
+    seq: np.ndarray                # [F] int
+    rule: list[str]
+    bindings: list[str]            # "A=red-agent-1, X=16"
+    head: list[str]                # "atLoc(red-agent-1,16)"
+    old: np.ndarray                # [F, 2] float: bound before
+    new: np.ndarray                # [F, 2] float: bound after
+    agent: np.ndarray              # [F] int: first agent the grounding names (index into agents), -1
+    cell: np.ndarray               # [F] int cell id, -1
+
+    def __len__(self) -> int:
+        return len(self.step)
+
+    def at(self, step: int) -> np.ndarray:
+        """Row indices of the firings of one step."""
+        lo, hi = np.searchsorted(self.step, [step, step + 1])
+        return np.arange(lo, hi)
+
+
+@dataclass(frozen=True)
+class AgentState:
+    name: str
+    team: str
+    x: int
+    y: int
+    alive: bool
+    health: float
+    ammo: int
+    action: int                    # spec action id 0..8, or NO_ACTION
+
+
+@dataclass(frozen=True)
+class BulletState:
+    name: str
+    team: str
+    x: int
+    y: int
+    direction: int                 # 0..3 (DIRECTIONS)
+
+
+@dataclass(frozen=True)
+class BoardFrame:
+    """The board at the end of one phase of one step: living and dead agents, bullets in flight, and
+    the firings of that step."""
+    step: int
+    phase: int
+    agents: list[AgentState]
+    bullets: list[BulletState]
+    firings: list[dict[str, Any]]
+
+
+@dataclass
+class EpisodeBoard:
+    """An episode's board over time. State arrays are [steps + 1, len(PHASES), n] (see the module
+    docstring); the properties without `phase_` give the end of each step, [steps + 1, n]."""
+    episode: int
+    map: BoardMap
+    agents: list[str]
+    agent_team: np.ndarray         # [A] int (0 red, 1 blue)
+    bullets: list[str]
+    bullet_team: np.ndarray        # [B] int
+    bullet_owner: np.ndarray       # [B] int agent index
+    health_start: float
+    phase_agent_cell: np.ndarray   # [S+1, P, A] int cell id
+    phase_alive: np.ndarray        # [S+1, P, A] bool
+    phase_health: np.ndarray       # [S+1, P, A] float
+    phase_ammo: np.ndarray         # [S+1, P, A] int
+    phase_bullet_cell: np.ndarray  # [S+1, P, B] int cell id, -1 when not on the board
+    phase_bullet_dir: np.ndarray   # [S+1, P, B] int 0..3, -1 when not on the board
+    action: np.ndarray             # [S+1, A] int spec action id taken in the step (NO_ACTION at step 0)
+    firings: Firings
+    outcome: str | None            # win | loss | draw | truncated | aborted (red's side), None if running
+
+    @property
+    def steps(self) -> int:
+        """Steps played (the frames are 0..steps)."""
+        return self.phase_agent_cell.shape[0] - 1
+
+    @property
+    def agent_cell(self) -> np.ndarray:
+        return self.phase_agent_cell[:, -1]
+
+    @property
+    def agent_x(self) -> np.ndarray:
+        return self.map.xy(self.agent_cell)[0]
+
+    @property
+    def agent_y(self) -> np.ndarray:
+        return self.map.xy(self.agent_cell)[1]
+
+    @property
+    def alive(self) -> np.ndarray:
+        return self.phase_alive[:, -1]
+
+    @property
+    def health(self) -> np.ndarray:
+        return self.phase_health[:, -1]
+
+    @property
+    def ammo(self) -> np.ndarray:
+        return self.phase_ammo[:, -1]
+
+    @property
+    def bullet_cell(self) -> np.ndarray:
+        return self.phase_bullet_cell[:, -1]
+
+    @property
+    def bullet_dir(self) -> np.ndarray:
+        return self.phase_bullet_dir[:, -1]
+
+    def frame(self, step: int, phase: int = -1) -> BoardFrame:
+        """The board at the end of `phase` (default: the last) of `step`."""
+        if not 0 <= step <= self.steps:
+            raise IndexError(f"episode {self.episode} has steps 0..{self.steps}, not {step}")
+        p = phase % len(PHASES)
+        ax, ay = self.map.xy(self.phase_agent_cell[step, p])
+        agents = [AgentState(name, TEAMS[self.agent_team[i]], int(ax[i]), int(ay[i]),
+                             bool(self.phase_alive[step, p, i]), float(self.phase_health[step, p, i]),
+                             int(self.phase_ammo[step, p, i]), int(self.action[step, i]))
+                  for i, name in enumerate(self.agents)]
+        bx, by = self.map.xy(self.phase_bullet_cell[step, p])
+        bullets = [BulletState(name, TEAMS[self.bullet_team[i]], int(bx[i]), int(by[i]),
+                               int(self.phase_bullet_dir[step, p, i]))
+                   for i, name in enumerate(self.bullets) if self.phase_bullet_cell[step, p, i] >= 0]
+        f = self.firings
+        rows = [i for i in f.at(step) if f.phase[i] <= p]
+        firings = [{"rule": f.rule[i], "bindings": f.bindings[i], "head": f.head[i],
+                    "phase": PHASES[f.phase[i]], "old": f.old[i].tolist(), "new": f.new[i].tolist(),
+                    "cell": int(f.cell[i])} for i in rows]
+        return BoardFrame(step, p, agents, bullets, firings)
+
+
+# ---- loading -------------------------------------------------------------------------------------------
+
+def _parse_fact(name: str) -> tuple[str, list[str]]:
+    pred, _, rest = name.partition("(")
+    return pred, rest.rstrip(")").split(",") if rest else []
+
+
+@dataclass
+class _Cast:
+    """Who plays, read from the run's facts."""
+    map: BoardMap
+    agents: list[str]
+    agent_team: np.ndarray
+    bullets: list[str]
+    bullet_team: np.ndarray
+    bullet_owner: np.ndarray
+    hits_to_kill: int
+
+
+def read_cast(con: RunConnection) -> _Cast:
+    """The map, agents and bullets from the run's facts (tracelab/game/facts.py)."""
+    facts: dict[str, list[list[str]]] = {}
+    for (name,) in con.execute("SELECT name FROM raw.facts").fetchall():
+        pred, args = _parse_fact(name)
+        facts.setdefault(pred, []).append(args)
+    if not facts.get("edgeDown") or not facts.get("team"):
+        raise ValueError("this run has no grid-world facts (edgeDown, team): it is not a game of "
+                         "rules/gridworld/game.rules")
+    width, height = len(facts["edgeDown"]), len(facts["edgeLeft"])
+    team_of = {a: TEAMS.index(t) for a, t in facts["team"]}
+    agents = sorted(team_of, key=lambda a: (team_of[a], _ordinal(a)))
+    agent_index = {a: i for i, a in enumerate(agents)}
+    bases = np.zeros((2, 2), dtype=np.int64)
+    for a, cell in facts.get("enemyBase", []):
+        c = int(cell)
+        bases[1 - team_of[a]] = (c % width, c // width)
+    owner = dict(facts.get("owner", []))
+    bullets = sorted(owner, key=lambda b: (team_of[owner[b]], agent_index[owner[b]], _ordinal(b)))
+    mountains = np.array(sorted((int(c) % width, int(c) // width) for (c,) in facts.get("mountain", [])),
+                         dtype=np.int64).reshape(-1, 2)
+    kill_levels = [int(q.rsplit("_", 1)[1]) for (q,) in facts.get("killAt", [])]
+    return _Cast(BoardMap(width, height, mountains, bases), agents,
+                 np.array([team_of[a] for a in agents], dtype=np.int64), bullets,
+                 np.array([team_of[owner[b]] for b in bullets], dtype=np.int64),
+                 np.array([agent_index[owner[b]] for b in bullets], dtype=np.int64),
+                 min(kill_levels) if kill_levels else 1)
+
+
+def _ordinal(name: str) -> tuple[int, ...]:
+    """red-bullet-1-10 sorts after red-bullet-1-2."""
+    return tuple(int(p) for p in name.split("-") if p.isdigit())
+
+
+def _health_scale(con: RunConnection, hits_to_kill: int) -> tuple[float, float]:
+    """(start health, damage per hit): the scenario's, from the run's config if it holds the scenario's
+    TOML (as `tracelab play` writes it), else health 1 split evenly over the hits that kill."""
+    rows = con.execute("SELECT config FROM raw.run").fetchall()
+    try:
+        config = json.loads(rows[0][0]) if rows and rows[0][0] else {}
+        text = config.get("scenario") if isinstance(config, dict) else None
+        if isinstance(text, str) and "\n" in text:
+            s = tomllib.loads(text)
+            return float(s.get("health", 1.0)), float(s.get("damage", 1.0))
+    except (ValueError, TypeError, tomllib.TOMLDecodeError):
+        pass
+    return 1.0, 1.0 / hits_to_kill
+
+
+def rule_phases(con: RunConnection) -> np.ndarray:
+    """Phase index of each rule id (0 where the run's program lacks the game's sections)."""
+    rows = con.execute("SELECT rule, name, line FROM raw.rules ORDER BY rule").fetchall()
+    phases = np.zeros(max((r for r, _, _ in rows), default=-1) + 1, dtype=np.int64)
+    line_of = {name: line for _, name, line in rows}
+    starts = [line_of.get(name) for name in PHASE_STARTS]
+    if any(s is None for s in starts):
+        return phases
+    for rule, _, line in rows:
+        phases[rule] = sum(line >= s for s in starts)
+    return phases
+
+
+def load_episode(con: RunConnection, episode: int) -> EpisodeBoard:
+    """Rebuild one episode's board from the run (see the module docstring)."""
+    cast = read_cast(con)
+    health0, damage = _health_scale(con, cast.hits_to_kill)
+    ch = con.sql("SELECT t, pass_no, seq, atom, old_lower, old_upper, new_lower, new_upper, cause_kind, "
+                 "cause_id FROM raw.changes WHERE episode = $e ORDER BY seq",
+                 params={"e": episode}).to_arrow_table()
+    if ch.num_rows == 0:
+        raise KeyError(f"episode {episode} has no trace rows")
+    col = {name: ch.column(name).to_numpy() for name in ch.column_names}
+    t = col["t"].astype(np.int64)
+    t = t - t.min()
+    by_rule = rule_phases(con)
+    is_rule = (col["cause_kind"] == 2) & (col["pass_no"] > 0)
+    phase = np.where(is_rule, by_rule[np.where(is_rule, col["cause_id"], 0)], 0)
+    # hold the phase monotone within a step: running max of step·P + phase
+    n_ph = len(PHASES)
+    phase = np.maximum.accumulate(t * n_ph + phase) - t * n_ph
+    steps = int(t.max())
+
+    atoms = _state_atoms(con, cast)
+    state = _replay_state(cast, atoms, col, t, phase, steps)
+    hits, alive = state["hits"], state["alive"]
+    health = np.where(alive, np.maximum(health0 - hits * damage, 0.0), 0.0)
+    health = np.where(health <= 1e-9, 0.0, health)
+    firings = _firings(con, episode, cast, t, phase, col, state["agent_cell"], state["bullet_cell"])
+    ended = con.execute("SELECT outcome FROM raw.episode_end WHERE episode = $e",
+                        {"e": episode}).fetchall()
+    return EpisodeBoard(episode, cast.map, cast.agents, cast.agent_team, cast.bullets, cast.bullet_team,
+                        cast.bullet_owner, health0, state["agent_cell"], alive, health, state["ammo"],
+                        state["bullet_cell"], state["bullet_dir"], state["action"], firings,
+                        ended[0][0] if ended else None)
+
+
+@dataclass
+class _Atoms:
+    """The state atoms of the vocabulary, decoded: per atom id, which kind, which entity, which value."""
+    kind: np.ndarray               # [n_atoms] int: index into _STATE_LABELS, -1 for other atoms
+    entity: np.ndarray             # agent or bullet index (atLoc: agents then bullets)
+    value: np.ndarray              # cell id, direction, or -1
+
+
+def _state_atoms(con: RunConnection, cast: _Cast) -> _Atoms:
+    rows = con.execute(
+        "SELECT a.atom, l.name, n0.name, n1.name FROM raw.atoms a JOIN raw.labels l USING (label) "
+        "LEFT JOIN raw.nodes n0 ON n0.node = a.arg0 LEFT JOIN raw.nodes n1 ON n1.node = a.arg1 "
+        f"WHERE l.name IN ({', '.join(repr(x) for x in _STATE_LABELS)})").fetchall()
+    n = max((r[0] for r in rows), default=-1) + 1
+    kind, entity, value = (np.full(n, -1, dtype=np.int64) for _ in range(3))
+    agent_index = {a: i for i, a in enumerate(cast.agents)}
+    bullet_index = {b: i for i, b in enumerate(cast.bullets)}
+    n_agents = len(cast.agents)
+    for atom, label, a0, a1 in rows:
+        if label == "atLoc":
+            e = agent_index.get(a0, n_agents + bullet_index.get(a0, -n_agents - 1))
+            v = int(a1)
+        elif label == "hitMe":        # hitMe(B, A): the agent is the second argument
+            e, v = agent_index.get(a1, -1), -1
+        elif label in ("dir", "spent"):
+            e, v = bullet_index.get(a0, -1), DIRECTIONS.index(a1) if label == "dir" else -1
+        else:                         # alive(A), move(A,D), shoot(A,D)
+            e = agent_index.get(a0, -1)
+            v = DIRECTIONS.index(a1) if a1 in DIRECTIONS else -1
+        if e >= 0:
+            kind[atom], entity[atom], value[atom] = _STATE_LABELS.index(label), e, v
+    return _Atoms(kind, entity, value)
+
+
+def _replay_state(cast: _Cast, atoms: _Atoms, col: dict[str, np.ndarray], t: np.ndarray,
+                  phase: np.ndarray, steps: int) -> dict[str, np.ndarray]:
+    """Apply the state atoms' changes in engine order, recording the state at each phase's end."""
+    n_a, n_b, n_ph = len(cast.agents), len(cast.bullets), len(PHASES)
+    atom = col["atom"]
+    known = atom < len(atoms.kind)
+    kind = np.where(known, atoms.kind[np.where(known, atom, 0)], -1)
+    rows = np.flatnonzero(kind >= 0)
+    slot = (t * n_ph + phase)[rows]
+    kinds, ents, vals = kind[rows], atoms.entity[atom[rows]], atoms.value[atom[rows]]
+    true = (col["new_lower"][rows] >= 1.0).tolist()
+
+    cell = np.full(n_a + n_b, -1, dtype=np.int64)   # agents, then bullets
+    alive = np.zeros(n_a, dtype=bool)
+    hits = np.zeros(n_a, dtype=np.int64)
+    spent = np.zeros(n_b, dtype=bool)
+    direction = np.full(n_b, -1, dtype=np.int64)
+    move = np.full(n_a, -1, dtype=np.int64)         # direction of the move atom set true, -1 none
+    shoot = np.full(n_a, -1, dtype=np.int64)
+    n_slots = (steps + 1) * n_ph
+    out_cell = np.empty((n_slots, n_a + n_b), dtype=np.int64)
+    out_alive = np.empty((n_slots, n_a), dtype=bool)
+    out_hits = np.empty((n_slots, n_a), dtype=np.int64)
+    out_spent = np.empty((n_slots, n_b), dtype=bool)
+    out_dir = np.empty((n_slots, n_b), dtype=np.int64)
+    out_action = np.full((steps + 1, n_a), NO_ACTION, dtype=np.int64)
+    written = 0
+    action_step = 0                         # the first step whose action is not yet in out_action
+
+    def record(upto: int) -> None:          # the current state is the state of slots [written, upto)
+        nonlocal written
+        out_cell[written:upto], out_alive[written:upto], out_hits[written:upto] = cell, alive, hits
+        out_spent[written:upto], out_dir[written:upto] = spent, direction
+        written = upto
+
+    AT, ALIVE, HIT, SPENT, DIR, MOVE, SHOOT = range(len(_STATE_LABELS))
+    for s, k, e, v, on in zip(slot.tolist(), kinds.tolist(), ents.tolist(), vals.tolist(), true):
+        if s >= written:
+            if s // n_ph > action_step:     # the steps before this row's are over: their actions are final
+                _set_action(out_action[action_step:s // n_ph], move, shoot)
+                action_step = s // n_ph
+            record(s)
+        if k == AT:
+            if on:
+                cell[e] = v
+            elif cell[e] == v:
+                cell[e] = -1
+        elif k == ALIVE:
+            alive[e] = on
+        elif k == HIT:
+            hits[e] += 1 if on else -1
+        elif k == SPENT:
+            spent[e] = on
+        elif k == DIR:
+            if on:
+                direction[e] = v
+            elif direction[e] == v:
+                direction[e] = -1
+        else:
+            acts = move if k == MOVE else shoot
+            if on:
+                acts[e] = v
+            elif acts[e] == v:
+                acts[e] = -1
+    _set_action(out_action[action_step:], move, shoot)
+    record(n_slots)
+    out_action[0] = NO_ACTION
+
+    def shaped(a: np.ndarray) -> np.ndarray:
+        return a.reshape(steps + 1, n_ph, *a.shape[1:])
+
+    bullet_cell = shaped(out_cell[:, n_a:])
+    on_board = bullet_cell >= 0
+    own = cast.bullet_owner
+    ammo = np.zeros((n_slots, n_a), dtype=np.int64)
+    np.add.at(ammo.T, own, ~out_spent.T)
+    return {"agent_cell": shaped(out_cell[:, :n_a]), "alive": shaped(out_alive), "hits": shaped(out_hits),
+            "ammo": shaped(ammo), "bullet_cell": bullet_cell,
+            "bullet_dir": np.where(on_board, shaped(out_dir), -1), "action": out_action}
+
+
+def _set_action(out: np.ndarray, move: np.ndarray, shoot: np.ndarray) -> None:
+    out[:] = np.where(move >= 0, move, np.where(shoot >= 0, shoot + 4, NOTHING))
+
+
+def _firings(con: RunConnection, episode: int, cast: _Cast, t: np.ndarray, phase: np.ndarray,
+             col: dict[str, np.ndarray], agent_cell: np.ndarray, bullet_cell: np.ndarray) -> Firings:
+    rows = np.flatnonzero(col["cause_kind"] == 2)
+    f = con.sql("SELECT rule, bindings, head FROM firings WHERE episode = $e ORDER BY seq",
+                params={"e": episode}).to_arrow_table()
+    rule, bindings, head = (f.column(c).to_pylist() for c in ("rule", "bindings", "head"))
+    if len(rule) != len(rows):
+        raise RuntimeError(f"episode {episode}: {len(rule)} firings but {len(rows)} rule-made changes")
+    agent_index = {a: i for i, a in enumerate(cast.agents)}
+    bullet_index = {b: i for i, b in enumerate(cast.bullets)}
+    n_cells = cast.map.width * cast.map.height
+    step, ph = t[rows], phase[rows]
+    agent = np.full(len(rows), -1, dtype=np.int64)
+    cell = np.full(len(rows), -1, dtype=np.int64)
+    for i, (b, h) in enumerate(zip(bindings, head)):
+        named = [kv.partition("=")[2] for kv in (b or "").split(", ")]
+        head_args = (h or "").partition("(")[2].rstrip(")").split(",")
+        cells = [int(x) for x in head_args if x.isdigit() and int(x) < n_cells]
+        a = next((agent_index[x] for x in named if x in agent_index), -1)
+        agent[i] = a
+        if cells:
+            cell[i] = cells[0]
+        elif a >= 0:
+            cell[i] = agent_cell[step[i], ph[i], a]
+        else:
+            bi = next((bullet_index[x] for x in named if x in bullet_index), -1)
+            if bi >= 0:
+                cell[i] = bullet_cell[step[i], ph[i], bi]
+    return Firings(step, ph, col["seq"][rows], rule, [b or "" for b in bindings], [h or "" for h in head],
+                   np.stack([col["old_lower"][rows], col["old_upper"][rows]], axis=1),
+                   np.stack([col["new_lower"][rows], col["new_upper"][rows]], axis=1), agent, cell)
