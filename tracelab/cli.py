@@ -13,7 +13,8 @@ COMMAND_MODULES = [
     "tracelab.commands.play", "tracelab.commands.reason",
     "tracelab.commands.trace", "tracelab.commands.why", "tracelab.commands.why_not",
     "tracelab.commands.sql", "tracelab.commands.diff", "tracelab.commands.seal",
-    "tracelab.commands.bench", "tracelab.commands.runs", "tracelab.commands.tui",
+    "tracelab.commands.bench", "tracelab.commands.replay", "tracelab.commands.runs",
+    "tracelab.commands.tui",
 ]
 
 

@@ -276,38 +276,106 @@ def rule_phases(con: RunConnection) -> np.ndarray:
     return phases
 
 
-def load_episode(con: RunConnection, episode: int) -> EpisodeBoard:
-    """Rebuild one episode's board from the run (see the module docstring)."""
-    cast = read_cast(con)
-    health0, damage = _health_scale(con, cast.hits_to_kill)
-    ch = con.sql("SELECT t, pass_no, seq, atom, old_lower, old_upper, new_lower, new_upper, cause_kind, "
-                 "cause_id FROM raw.changes WHERE episode = $e ORDER BY seq",
-                 params={"e": episode}).to_arrow_table()
-    if ch.num_rows == 0:
-        raise KeyError(f"episode {episode} has no trace rows")
-    col = {name: ch.column(name).to_numpy() for name in ch.column_names}
-    t = col["t"].astype(np.int64)
-    t = t - t.min()
-    by_rule = rule_phases(con)
-    is_rule = (col["cause_kind"] == 2) & (col["pass_no"] > 0)
-    phase = np.where(is_rule, by_rule[np.where(is_rule, col["cause_id"], 0)], 0)
-    # hold the phase monotone within a step: running max of step·P + phase
-    n_ph = len(PHASES)
-    phase = np.maximum.accumulate(t * n_ph + phase) - t * n_ph
-    steps = int(t.max())
+class _Vocabulary:
+    """The run's atoms decoded for the board (read again when an episode names an atom not yet read: the
+    vocabulary of a live run grows), and the texts of atoms and groundings, cached."""
 
-    atoms = _state_atoms(con, cast)
-    state = _replay_state(cast, atoms, col, t, phase, steps)
-    hits, alive = state["hits"], state["alive"]
-    health = np.where(alive, np.maximum(health0 - hits * damage, 0.0), 0.0)
-    health = np.where(health <= 1e-9, 0.0, health)
-    firings = _firings(con, episode, cast, t, phase, col, state["agent_cell"], state["bullet_cell"])
-    ended = con.execute("SELECT outcome FROM raw.episode_end WHERE episode = $e",
-                        {"e": episode}).fetchall()
-    return EpisodeBoard(episode, cast.map, cast.agents, cast.agent_team, cast.bullets, cast.bullet_team,
-                        cast.bullet_owner, health0, state["agent_cell"], alive, health, state["ammo"],
-                        state["bullet_cell"], state["bullet_dir"], state["action"], firings,
-                        ended[0][0] if ended else None)
+    def __init__(self, con: RunConnection, cast: _Cast) -> None:
+        self.con, self.cast = con, cast
+        rules = con.execute("SELECT rule, name, variables FROM raw.rules ORDER BY rule").fetchall()
+        self.rule_name = {r: name for r, name, _ in rules}
+        self.rule_vars = {r: list(v or ()) for r, _, v in rules}
+        self.nodes: list[str] = []
+        self.n_atoms = 0
+        self._grounding_text: dict[int, str] = {}
+        self._atom_text: dict[int, str] = {}
+        self.read_atoms()
+
+    def read_atoms(self) -> None:
+        self.nodes = [n for (n,) in self.con.execute("SELECT name FROM raw.nodes ORDER BY node").fetchall()]
+        labels = dict(self.con.execute("SELECT label, name FROM raw.labels").fetchall())
+        cols = self.con.sql("SELECT atom, label, arg0, arg1 FROM raw.atoms ORDER BY atom").fetchnumpy()
+        n = int(cols["atom"].max()) + 1 if len(cols["atom"]) else 0
+        self.label = np.full(n, -1, dtype=np.int64)
+        self.arg0 = np.full(n, -1, dtype=np.int64)
+        self.arg1 = np.full(n, -1, dtype=np.int64)
+        self.label[cols["atom"]], self.arg0[cols["atom"]] = cols["label"], cols["arg0"]
+        self.arg1[cols["atom"]] = cols["arg1"]
+        self.label_names = labels
+        self.n_atoms = n
+        self.state = _state_atoms(self)
+
+    def cover(self, atoms: np.ndarray) -> None:
+        if len(atoms) and int(atoms.max()) >= self.n_atoms:
+            self.read_atoms()
+
+    def atom_text(self, atom: int) -> str:
+        text = self._atom_text.get(atom)
+        if text is None:
+            args = [self.nodes[a] for a in (self.arg0[atom], self.arg1[atom]) if a >= 0]
+            text = f"{self.label_names.get(int(self.label[atom]), '?')}({','.join(args)})"
+            self._atom_text[atom] = text
+        return text
+
+    def grounding_texts(self, groundings: np.ndarray) -> list[str]:
+        """'A=red-agent-1, X=16' for each grounding id (read from the run once each)."""
+        missing = sorted({int(g) for g in groundings.tolist()} - self._grounding_text.keys())
+        if missing:
+            rows = self.con.execute("SELECT grounding, rule, var_values FROM raw.groundings "
+                                    "WHERE grounding IN (SELECT unnest(?))", [missing]).fetchall()
+            for g, rule, values in rows:
+                self._grounding_text[g] = ", ".join(
+                    f"{var}={self.nodes[v]}" for var, v in zip(self.rule_vars.get(rule, []), values or []))
+        return [self._grounding_text.get(int(g), "") for g in groundings.tolist()]
+
+
+class BoardLoader:
+    """Loads episodes of one run; what the episodes share (cast, rules, vocabulary) is read once."""
+
+    def __init__(self, con: RunConnection) -> None:
+        self.con = con
+        self.cast = read_cast(con)
+        self.health0, self.damage = _health_scale(con, self.cast.hits_to_kill)
+        self.phase_of_rule = rule_phases(con)
+        self.vocab = _Vocabulary(con, self.cast)
+
+    def load(self, episode: int) -> EpisodeBoard:
+        """Rebuild one episode's board (see the module docstring)."""
+        con, cast = self.con, self.cast
+        ch = con.sql("SELECT t, pass_no, seq, atom, old_lower, old_upper, new_lower, new_upper, cause_kind, "
+                     "cause_id, grounding FROM raw.changes WHERE episode = $e ORDER BY seq",
+                     params={"e": episode}).fetchnumpy()
+        col = {name: np.asarray(v) for name, v in ch.items()}
+        if len(col["t"]) == 0:
+            raise KeyError(f"episode {episode} has no trace rows")
+        self.vocab.cover(col["atom"])
+        t = col["t"].astype(np.int64)
+        t = t - t.min()
+        is_rule = (col["cause_kind"] == 2) & (col["pass_no"] > 0)
+        rule_id = np.where(is_rule, col["cause_id"], 0)
+        if is_rule.any() and rule_id.max() >= len(self.phase_of_rule):
+            self.phase_of_rule = rule_phases(con)
+        phase = np.where(is_rule, self.phase_of_rule[rule_id], 0)
+        # hold the phase monotone within a step: running max of step·P + phase
+        n_ph = len(PHASES)
+        phase = np.maximum.accumulate(t * n_ph + phase) - t * n_ph
+        steps = int(t.max())
+        state = _replay_state(cast, self.vocab.state, col, t, phase, steps)
+        hits, alive = state["hits"], state["alive"]
+        health = np.where(alive, np.maximum(self.health0 - hits * self.damage, 0.0), 0.0)
+        health = np.where(health <= 1e-9, 0.0, health)
+        firings = _firings(self.vocab, cast, t, phase, col, state["agent_cell"], state["bullet_cell"])
+        ended = con.execute("SELECT outcome FROM raw.episode_end WHERE episode = $e",
+                            {"e": episode}).fetchall()
+        return EpisodeBoard(episode, cast.map, cast.agents, cast.agent_team, cast.bullets, cast.bullet_team,
+                            cast.bullet_owner, self.health0, state["agent_cell"], alive, health,
+                            state["ammo"], state["bullet_cell"], state["bullet_dir"], state["action"],
+                            firings, ended[0][0] if ended else None)
+
+
+def load_episode(con: RunConnection, episode: int) -> EpisodeBoard:
+    """One episode's board; to load several episodes of a run, keep a BoardLoader."""
+    return BoardLoader(con).load(episode)
 
 
 @dataclass
@@ -318,17 +386,18 @@ class _Atoms:
     value: np.ndarray              # cell id, direction, or -1
 
 
-def _state_atoms(con: RunConnection, cast: _Cast) -> _Atoms:
-    rows = con.execute(
-        "SELECT a.atom, l.name, n0.name, n1.name FROM raw.atoms a JOIN raw.labels l USING (label) "
-        "LEFT JOIN raw.nodes n0 ON n0.node = a.arg0 LEFT JOIN raw.nodes n1 ON n1.node = a.arg1 "
-        f"WHERE l.name IN ({', '.join(repr(x) for x in _STATE_LABELS)})").fetchall()
-    n = max((r[0] for r in rows), default=-1) + 1
+def _state_atoms(vocab: "_Vocabulary") -> _Atoms:
+    cast = vocab.cast
+    n = vocab.n_atoms
     kind, entity, value = (np.full(n, -1, dtype=np.int64) for _ in range(3))
+    wanted = {lid: name for lid, name in vocab.label_names.items() if name in _STATE_LABELS}
     agent_index = {a: i for i, a in enumerate(cast.agents)}
     bullet_index = {b: i for i, b in enumerate(cast.bullets)}
     n_agents = len(cast.agents)
-    for atom, label, a0, a1 in rows:
+    for atom in np.flatnonzero(np.isin(vocab.label, list(wanted))).tolist():
+        label = wanted[int(vocab.label[atom])]
+        a0 = vocab.nodes[vocab.arg0[atom]]
+        a1 = vocab.nodes[vocab.arg1[atom]] if vocab.arg1[atom] >= 0 else None
         if label == "atLoc":
             e = agent_index.get(a0, n_agents + bullet_index.get(a0, -n_agents - 1))
             v = int(a1)
@@ -429,14 +498,12 @@ def _set_action(out: np.ndarray, move: np.ndarray, shoot: np.ndarray) -> None:
     out[:] = np.where(move >= 0, move, np.where(shoot >= 0, shoot + 4, NOTHING))
 
 
-def _firings(con: RunConnection, episode: int, cast: _Cast, t: np.ndarray, phase: np.ndarray,
-             col: dict[str, np.ndarray], agent_cell: np.ndarray, bullet_cell: np.ndarray) -> Firings:
+def _firings(vocab: _Vocabulary, cast: _Cast, t: np.ndarray, phase: np.ndarray, col: dict[str, np.ndarray],
+             agent_cell: np.ndarray, bullet_cell: np.ndarray) -> Firings:
     rows = np.flatnonzero(col["cause_kind"] == 2)
-    f = con.sql("SELECT rule, bindings, head FROM firings WHERE episode = $e ORDER BY seq",
-                params={"e": episode}).to_arrow_table()
-    rule, bindings, head = (f.column(c).to_pylist() for c in ("rule", "bindings", "head"))
-    if len(rule) != len(rows):
-        raise RuntimeError(f"episode {episode}: {len(rule)} firings but {len(rows)} rule-made changes")
+    rule = [vocab.rule_name.get(r, f"rule#{r}") for r in col["cause_id"][rows].tolist()]
+    bindings = vocab.grounding_texts(col["grounding"][rows])
+    head = [vocab.atom_text(a) for a in col["atom"][rows].tolist()]
     agent_index = {a: i for i, a in enumerate(cast.agents)}
     bullet_index = {b: i for i, b in enumerate(cast.bullets)}
     n_cells = cast.map.width * cast.map.height
@@ -444,9 +511,8 @@ def _firings(con: RunConnection, episode: int, cast: _Cast, t: np.ndarray, phase
     agent = np.full(len(rows), -1, dtype=np.int64)
     cell = np.full(len(rows), -1, dtype=np.int64)
     for i, (b, h) in enumerate(zip(bindings, head)):
-        named = [kv.partition("=")[2] for kv in (b or "").split(", ")]
-        head_args = (h or "").partition("(")[2].rstrip(")").split(",")
-        cells = [int(x) for x in head_args if x.isdigit() and int(x) < n_cells]
+        named = [kv.partition("=")[2] for kv in b.split(", ")]
+        cells = [int(x) for x in h.partition("(")[2].rstrip(")").split(",") if x.isdigit() and int(x) < n_cells]
         a = next((agent_index[x] for x in named if x in agent_index), -1)
         agent[i] = a
         if cells:
@@ -457,6 +523,6 @@ def _firings(con: RunConnection, episode: int, cast: _Cast, t: np.ndarray, phase
             bi = next((bullet_index[x] for x in named if x in bullet_index), -1)
             if bi >= 0:
                 cell[i] = bullet_cell[step[i], ph[i], bi]
-    return Firings(step, ph, col["seq"][rows], rule, [b or "" for b in bindings], [h or "" for h in head],
+    return Firings(step, ph, col["seq"][rows], rule, bindings, head,
                    np.stack([col["old_lower"][rows], col["old_upper"][rows]], axis=1),
                    np.stack([col["new_lower"][rows], col["new_upper"][rows]], axis=1), agent, cell)

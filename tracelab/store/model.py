@@ -102,8 +102,11 @@ class RunModel:
     def grounding(self, g: int) -> tuple[int, list[int], list[int]]:
         """(rule id, body atom ids in clause order, variable values as node ids)."""
         if g not in self._groundings:
-            row = self.con.execute("SELECT rule, body_atoms, var_values FROM raw.groundings "
-                                   "WHERE grounding = ?", [g]).fetchone()
+            # fetchall, not fetchone: DuckDB 2.0 refuses the connection's next statement while a result
+            # is not read to its end
+            rows = self.con.execute("SELECT rule, body_atoms, var_values FROM raw.groundings "
+                                    "WHERE grounding = ?", [g]).fetchall()
+            row = rows[0] if rows else None
             if row is None:
                 raise KeyError(f"grounding {g} is not in the run's grounding table")
             self._groundings[g] = (row[0], list(row[1]), list(row[2]))
@@ -145,9 +148,9 @@ class RunModel:
         lid = self.labels[label][0]
         a0 = self.node_ids[args[0]]
         a1 = self.node_ids[args[1]] if len(args) > 1 else -1
-        row = self.con.execute("SELECT atom FROM raw.atoms WHERE label = ? AND arg0 = ? AND arg1 = ?",
-                               [lid, a0, a1]).fetchone()
-        return None if row is None else int(row[0])
+        rows = self.con.execute("SELECT atom FROM raw.atoms WHERE label = ? AND arg0 = ? AND arg1 = ?",
+                                [lid, a0, a1]).fetchall()
+        return int(rows[0][0]) if rows else None
 
     def parse_atom(self, text: str) -> int:
         """The id of a ground atom written as text, e.g. atLoc(red-agent-1,16); errors name what is missing."""

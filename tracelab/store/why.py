@@ -134,9 +134,15 @@ def explain(con: RunConnection, episode: int, atom: str | int, at: int,
             depth: int = 6) -> WhyNode:
     """Why `atom` (text or id) had its bound at the end of timestep `at` in `episode`."""
     model = RunModel(con)
-    aid = model.parse_atom(atom) if isinstance(atom, str) else int(atom)
     trace = EpisodeTrace(con, episode, upto_t=at)
     _check_episode(con, episode, trace)
+    return explain_in(model, trace, atom, at, depth)
+
+
+def explain_in(model: RunModel, trace: EpisodeTrace, atom: str | int, at: int, depth: int = 6) -> WhyNode:
+    """`explain` on a model and an episode trace already loaded (a trace holding at least the rows up to
+    `at`), for callers that explain many atoms of one episode (the replay viewer)."""
+    aid = model.parse_atom(atom) if isinstance(atom, str) else int(atom)
     return _Explainer(model, trace).node(aid, trace.last_at_end_of(aid, at), depth)
 
 

@@ -1,0 +1,80 @@
+"""`tracelab replay`: traced games of a run as rerun recordings, the rules that fired annotated
+(docs/replay.md)."""
+from __future__ import annotations
+
+import argparse
+import sys
+
+from tracelab.commands._output import fail, store_errors
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("replay", help="replay traced games in rerun's viewer, with the fired rules annotated")
+    p.add_argument("run", help="run directory, .duckdb file, or run name under runs/")
+    which = p.add_mutually_exclusive_group()
+    which.add_argument("--episode", "-e", type=int, help="one episode")
+    which.add_argument("--episodes", help="episodes, e.g. 0-9 or 1,4,7-9")
+    p.add_argument("--outcome", help="only episodes with this outcome for red (win, loss, draw, truncated)")
+    p.add_argument("--limit", type=_positive, help="at most this many episodes")
+    out = p.add_mutually_exclusive_group()
+    out.add_argument("--save", metavar="FILE.rrd", help="write an .rrd file (the default: replay.rrd)")
+    out.add_argument("--serve", action="store_true", help="serve the web viewer on localhost")
+    out.add_argument("--spawn", action="store_true", help="open rerun's native viewer")
+    p.add_argument("--live", action="store_true",
+                   help="follow a run being written: stream each game as it ends, until the run stops")
+    p.add_argument("--port", type=int, default=9876, help="gRPC port for --serve / --spawn (default 9876)")
+    p.add_argument("--web-port", type=int, default=9090, help="web viewer port for --serve (default 9090)")
+    p.add_argument("--why-depth", type=_positive, default=6, help="depth of the why-trees (default 6)")
+    p.add_argument("--open-at", choices=("start", "end"), default="start",
+                   help="where the viewer's time cursor starts (default: the first step)")
+    p.set_defaults(func=run)
+
+
+def _positive(text: str) -> int:
+    v = int(text)
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {v}")
+    return v
+
+
+def run(args: argparse.Namespace) -> int:
+    from tracelab.store.reader import open_run, resolve_run
+    from tracelab.viewers.replay.outputs import GrpcOutput, SaveOutput
+    from tracelab.viewers.replay.recording import ReplayOptions, RunContext
+    from tracelab.viewers.replay.replay import follow_run, replay_run
+    from tracelab.viewers.replay.select import EpisodeFilter, parse_episodes
+
+    try:
+        ids = (args.episode,) if args.episode is not None else \
+            parse_episodes(args.episodes) if args.episodes else None
+        f = EpisodeFilter(ids, args.outcome, args.limit)
+        name = resolve_run(args.run).name.removesuffix(".duckdb")
+        con = open_run(args.run)
+        ctx = RunContext.of(con, name)
+        options = ReplayOptions(why_depth=args.why_depth, open_at=args.open_at)
+        if args.serve or args.spawn:
+            out = GrpcOutput("serve" if args.serve else "spawn", args.port, args.web_port)
+        else:
+            out = SaveOutput(args.save or "replay.rrd")
+        if args.live:
+            print(f"following {args.run}: each game is sent as it ends (Ctrl-C stops)", file=sys.stderr)
+            follow_run(ctx, args.run, f, out, options,
+                       on_episode=lambda e: print(f"episode {e} sent", file=sys.stderr, flush=True))
+        else:
+            replay_run(ctx, f, out, options)
+    except store_errors() + (OSError,) as e:
+        return fail(e)
+    print(out.describe())
+    if args.serve:
+        print("serving; Ctrl-C stops", file=sys.stderr)
+        _wait_forever()
+    return 0
+
+
+def _wait_forever() -> None:
+    import time
+    try:
+        while True:
+            time.sleep(3600)
+    except KeyboardInterrupt:
+        pass

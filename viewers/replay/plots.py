@@ -1,0 +1,59 @@
+"""Plots: each team's reward and return per step of an episode (from the run's `steps` rows), and a
+training run's curves (its `metrics` rows, docs/store.md and the training-run contract) on their own
+`train_step` timeline."""
+from __future__ import annotations
+
+import numpy as np
+import rerun as rr
+
+from tracelab.store.board import TEAMS, EpisodeBoard
+from tracelab.store.reader import RunConnection
+from tracelab.viewers.replay import style
+
+
+def team_rewards(con: RunConnection, board: EpisodeBoard) -> np.ndarray | None:
+    """[steps + 1, 2] each team's reward per step (the sum of its agents'; step 0 is 0), or None when
+    the run has no steps rows for the episode."""
+    rows = con.execute("SELECT step, agent, reward FROM steps WHERE episode = ?", [board.episode]).fetchall()
+    if not rows:
+        return None
+    team_of = dict(zip(board.agents, board.agent_team.tolist()))
+    out = np.zeros((board.steps + 1, 2))
+    for step, agent, reward in rows:
+        if 0 <= step <= board.steps and agent in team_of:
+            out[step, team_of[agent]] += reward
+    return out
+
+
+def log_rewards(rec: rr.RecordingStream, rewards: np.ndarray) -> None:
+    steps = np.arange(len(rewards))
+    times = [rr.TimeColumn(style.STEP, sequence=steps),
+             rr.TimeColumn(style.PASS, sequence=style.pass_time(steps, 0))]
+    for t, team in enumerate(TEAMS):
+        colour = [int(c) for c in style.TEAM_COLOR[t]]
+        for kind, values in (("reward", rewards[:, t]), ("return", np.cumsum(rewards[:, t]))):
+            path = f"{style.PLOTS}/{kind}/{team}"
+            rec.log(path, rr.SeriesLines(colors=colour, names=f"{team} {kind}",
+                                         widths=2.0 if kind == "return" else 1.0), static=True)
+            rec.send_columns(path, indexes=times, columns=rr.Scalars.columns(scalars=values))
+
+
+def training_metrics(con: RunConnection) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """name -> (training steps, values) of a run's metrics (empty for a run that logged none)."""
+    rows = con.execute("SELECT name, step, value FROM metrics WHERE value IS NOT NULL "
+                       "ORDER BY name, step").fetchall()
+    out: dict[str, tuple[list[int], list[float]]] = {}
+    for name, step, value in rows:
+        s, v = out.setdefault(name, ([], []))
+        s.append(step)
+        v.append(value)
+    return {k: (np.asarray(s, np.int64), np.asarray(v, np.float64)) for k, (s, v) in out.items()}
+
+
+def log_training(rec: rr.RecordingStream, metrics: dict[str, tuple[np.ndarray, np.ndarray]]) -> None:
+    """Each metric as a series under /train (eval/win_rate -> /train/eval/win_rate; an opponent suffix
+    such as @p0.3 becomes a path part), on the train_step timeline."""
+    for name, (steps, values) in metrics.items():
+        path = f"{style.TRAIN}/{name.replace('@', '/')}"
+        rec.send_columns(path, indexes=[rr.TimeColumn(style.TRAIN_STEP, sequence=steps)],
+                         columns=rr.Scalars.columns(scalars=values))
