@@ -317,3 +317,50 @@ def test_training_curve_updates_while_another_process_appends_metrics(tmp_path: 
     finally:
         stop.touch()
         proc.wait(timeout=30)
+
+
+def test_escape_cancels_a_running_query() -> None:
+    async def body(app: Any, pilot: Any) -> None:
+        await wait_for(pilot, lambda: loaded(app.screen.query_one("#ep-table", LazyTable)))
+        await pilot.press("5")
+        await wait_for(pilot, lambda: app.screen.panes["sql"].is_attached)
+        sql: SqlPane = app.screen.panes["sql"]
+        sql.editor.text = "SELECT count(*) FROM changes a, changes b, changes c"   # ~10^11 rows
+        await pilot.press("ctrl+r")
+        await wait_for(pilot, lambda: app.screen.source.busy)
+        await pilot.press("escape")
+        await wait_for(pilot, lambda: sql.last_error is not None)
+        assert "interrupt" in sql.last_error.message.lower()
+        assert type(app.screen).__name__ == "RunScreen"          # Esc cancelled; it did not go back
+        sql.editor.text = "SELECT count(*) AS n FROM episodes"   # the connection still works
+        await pilot.press("ctrl+r")
+        results = sql.query_one(LazyTable)
+        await wait_for(pilot, lambda: loaded(results) and results.count == 1)
+        assert results.row(0)["n"] == 4
+    run_app([ADVANCED], body)
+
+
+def test_board_follows_the_trace_cursor() -> None:
+    async def body(app: Any, pilot: Any) -> None:
+        await wait_for(pilot, lambda: loaded(app.screen.query_one("#ep-table", LazyTable)))
+        await pilot.press("enter")
+        pane = app.screen.query_one(TracePane)
+        trace = pane.table
+        await wait_for(pilot, lambda: trace.count > 0 and loaded(trace))
+        board = pane.board
+        assert board is not None and board.display                  # 120 columns: room for it
+        jumps = pane.jumps
+        pane.query_one("#tr-goto").value = "15"
+        await pilot.press("g", "enter")
+        await wait_for(pilot, lambda: pane.jumps > jumps and loaded(trace))
+        await wait_for(pilot, lambda: board.board is not None and board.step == 15)
+        text = await shown(app, pilot)
+        assert "step 15" in text and "board" in text
+        death = next(i for i in range(trace.cursor, trace.count)
+                     if trace.row(i) is not None and trace.row(i)["atom"] == "alive(red-agent-1)")
+        trace.move_to(death)
+        await wait_for(pilot, lambda: board.phase >= 0)
+        assert "R1 dead" in await shown(app, pilot)
+        await pilot.press("b")                                         # hide it
+        assert not board.display
+    run_app([ADVANCED], body, size=(120, 34))

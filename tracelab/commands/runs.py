@@ -44,9 +44,5 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _short(command: str, width: int = 48) -> str:
-    """The command without the interpreter's path, cut to `width` characters."""
-    words = command.split()
-    if words and words[0].endswith("/tracelab"):
-        words[0] = "tracelab"
-    text = " ".join(words)
-    return text if len(text) <= width else text[: width - 1] + "…"
+    """The command cut to `width` characters."""
+    return command if len(command) <= width else command[: width - 1] + "…"

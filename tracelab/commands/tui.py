@@ -11,7 +11,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("paths", nargs="*", metavar="RUN|DIR",
                    help="a run to open, or directories of runs (default: runs/ and sample_runs/)")
     p.add_argument("--screenshots", metavar="DIR",
-                   help="write the README's screenshots (SVG and PNG) of the first run to DIR and exit")
+                   help="write the README's screenshots (PNG) to DIR and exit (needs rsvg-convert)")
     p.set_defaults(func=run)
 
 
@@ -23,7 +23,8 @@ def run(args: argparse.Namespace) -> int:
     if args.screenshots:
         from tracelab.viewers.tui.screenshots import write_screenshots
         try:
-            for path in write_screenshots(Path(args.screenshots)):
+            run = Path(args.paths[0]) if args.paths else None
+            for path in write_screenshots(Path(args.screenshots), run):
                 print(path)
         except (RuntimeError, FileNotFoundError, ValueError) as e:
             return fail(e)

@@ -36,6 +36,14 @@ class RunSummary:
                 "scenario": self.scenario, "command": self.command, "path": str(self.path)}
 
 
+def short_command(command: str) -> str:
+    """The command as typed: `tracelab ...` without the interpreter's path to the script."""
+    words = command.split()
+    if words and words[0].endswith("/tracelab"):
+        words[0] = "tracelab"
+    return " ".join(words)
+
+
 def human_size(n: int) -> str:
     size = float(n)
     for unit in ("B", "KB", "MB", "GB"):
@@ -119,7 +127,7 @@ def summarize_run(path: Path) -> RunSummary:
         return RunSummary(path, name, "unreadable", "", "", None, None, _disk_size(path), None,
                           error=str(e).splitlines()[0] if str(e) else type(e).__name__)
     meta = info.meta
-    return RunSummary(path, name, info.status, str(meta.get("command") or ""),
+    return RunSummary(path, name, info.status, short_command(str(meta.get("command") or "")),
                       str(meta.get("scenario") or ""), episodes, rows, _disk_size(path),
                       _parse_time(meta.get("started_at")))
 

@@ -46,6 +46,8 @@ class Column:
     render: Callable[[Row], Text | str] | None = None
     align: str = "left"
     max_width: int = 40
+    flex: int = 0                          # share of the room left over when the table is wider
+    min_width: int | None = None           # the width before any room was shared out
 
     def cell(self, row: Row) -> Text:
         value = self.render(row) if self.render else plain_cell(row.get(self.key))
@@ -126,6 +128,7 @@ class LazyTable(ScrollView, can_focus=True):
         self.source = source
         if columns is not None:
             self.columns = list(columns)
+            self._share_room()
         self._pages.clear()
         with self._guard:
             self._wanted.clear()
@@ -303,6 +306,24 @@ class LazyTable(ScrollView, can_focus=True):
         if align == "right":
             return Text(" " * pad) + cell
         return cell + Text(" " * pad)
+
+    def on_resize(self) -> None:
+        self._share_room()
+
+    def _share_room(self) -> None:
+        """Widen the flex columns to fill the widget (back to their own width when it shrinks)."""
+        flex = [c for c in self.columns if c.flex and c.width is not None]
+        if not flex:
+            return
+        for c in flex:
+            c.min_width = c.min_width or c.width
+            c.width = c.min_width
+        room = self.size.width - self._total_width() - 2   # the scrollbar
+        total = sum(c.flex for c in flex)
+        for c in flex:
+            c.width = min(c.max_width, c.width + max(0, room) * c.flex // total)  # type: ignore[operator]
+        self.virtual_size = Size(self._total_width(), self.virtual_size.height)
+        self.refresh()
 
     def on_focus(self) -> None:
         self.refresh()

@@ -17,9 +17,3 @@ class ExplainChange(Message):
         super().__init__()
         self.episode, self.atom, self.t = episode, atom, t
 
-
-class StepSelected(Message):
-    """The trace cursor moved to a change at (episode, t, seq): the board follows."""
-    def __init__(self, episode: int, t: int, seq: int) -> None:
-        super().__init__()
-        self.episode, self.t, self.seq = episode, t, seq

@@ -29,6 +29,15 @@ def _fmt(v: float) -> str:
     return f"{v:.3g}"
 
 
+def _fmt_step(v: float) -> str:
+    """A training step for the x axis: 500, 30k, 1.2M."""
+    if abs(v) >= 1e6:
+        return f"{v / 1e6:.3g}M"
+    if abs(v) >= 1e4:
+        return f"{v / 1e3:.3g}k"
+    return f"{v:.0f}" if v == int(v) else f"{v:.3g}"
+
+
 class BraillePlot(Widget):
     DEFAULT_CSS = "BraillePlot { height: 1fr; min-height: 5; border: round $primary-darken-2; }"
 
@@ -52,6 +61,7 @@ class BraillePlot(Widget):
         if not shown:
             return Text("no data yet", style="dim italic")
         legend = Text("  ").join(Text(f"━ {s.name}", style=s.colour) for s in shown)
+        legend.truncate(width, overflow="ellipsis")  # one line, whatever the names
         rows, cols = max(1, height - 2), max(1, width - AXIS_W)
         xs = [x for s in shown for x in s.xs]
         ys = [y for s in shown for y in s.ys if not math.isnan(y)]
@@ -86,7 +96,7 @@ class BraillePlot(Widget):
             for c in range(cols):
                 out.append(chr(0x2800 + cells[r][c]) if cells[r][c] else " ", style=colour[r][c])
             out.append("\n")
-        left, right = _fmt(x0), _fmt(x1)
+        left, right = _fmt_step(x0), _fmt_step(x1)
         out.append(" " * AXIS_W + left + right.rjust(max(1, cols - len(left))), style="dim")
         return out
 

@@ -43,7 +43,9 @@ class RunScreen(Screen):
 
     def compose(self) -> ComposeResult:
         kind = "live" if self.source.live else "sealed"
-        yield Static(f" {self.path.name}  ({kind} · {self.path})", id="title", classes="title")
+        status = self.source.status
+        yield Static(f" {self.path.name}  ·  {kind}{'' if status == 'finished' else ' · ' + status}  ·  "
+                     f"{self.source.command}", id="title", classes="title")
         with TabbedContent(initial="episodes", id="tabs"):
             for tab, title in TABS:
                 with TabPane(title, id=tab):

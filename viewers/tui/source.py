@@ -10,7 +10,8 @@ from typing import Any, TypeVar
 
 import pyarrow as pa
 
-from tracelab.store.reader import LiveRunConnection, RunConnection, open_run, query_readonly, retrying
+from tracelab.store.catalog import short_command
+from tracelab.store.reader import LiveRunConnection, RunConnection, open_run, query_readonly, retrying, run_info
 
 T = TypeVar("T")
 
@@ -18,6 +19,9 @@ T = TypeVar("T")
 class RunSource:
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
+        info = run_info(self.path)
+        self.status: str = info.status
+        self.command = short_command(str(info.meta.get("command") or ""))
         self.con: RunConnection = open_run(self.path)
         self.live = isinstance(self.con, LiveRunConnection)
         self._lock = threading.Lock()

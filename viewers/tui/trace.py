@@ -1,7 +1,8 @@
 """The Trace view: the method's trace table of one episode (t, node/edge, label, old -> new, rule), paged
 lazily by seq (TraceSource). Filters: a time range (`3..9`), atom, label and rule GLOBs; `g` jumps to a
 timestep; `n` / `p` move to the next / previous change of the selected atom; Enter or `w` opens the why
-tree of the selected change; `a` shows only the selected atom's changes."""
+tree of the selected change; `a` shows only the selected atom's changes; `b` shows or hides the board
+(shown by default when the terminal is at least 100 columns wide)."""
 from __future__ import annotations
 
 import re
@@ -15,7 +16,8 @@ from textual.widgets import Input, Static
 
 from tracelab.viewers.tui.colours import DIM, styled_bound, styled_name
 from tracelab.viewers.tui.lazy_table import Column, LazyTable
-from tracelab.viewers.tui.messages import ExplainChange, StepSelected
+from tracelab.viewers.tui.board import BoardView
+from tracelab.viewers.tui.messages import ExplainChange
 from tracelab.viewers.tui.paging import TraceFilter, TraceSource
 from tracelab.viewers.tui.source import RunSource
 
@@ -32,11 +34,13 @@ def _rule(row: dict[str, Any]) -> Text:
 
 TRACE_COLUMNS = [
     Column("t", "t", 5, align="right"),
-    Column("node", "node/edge", 18, render=lambda r: styled_name(r["node"])),
-    Column("label", "label", 12),
+    Column("node", "node/edge", 18, render=lambda r: styled_name(r["node"]), flex=2, max_width=34),
+    Column("label", "label", 12, flex=1, max_width=18),
     Column("change", "old → new", 15, render=_change),
-    Column("rule", "rule", 22, render=_rule),
+    Column("rule", "rule", 22, render=_rule, flex=2, max_width=40),
 ]
+
+BOARD_MIN_WIDTH = 100      # the table needs ~78 columns, the board ~22
 
 _RANGE = re.compile(r"^\s*(-?\d+)?\s*(?:\.\.\s*(-?\d+)?)?\s*$")
 
@@ -62,6 +66,7 @@ class TracePane(Vertical):
         Binding("w", "why", "why"),
         Binding("a", "only_atom", "only atom", show=False),
         Binding("x", "clear", "clear filters", show=False),
+        Binding("b", "toggle_board", "board"),
     ]
     DEFAULT_CSS = """
     TracePane #tr-filters { height: 1; }
@@ -78,6 +83,7 @@ class TracePane(Vertical):
         self._goto_t: int | None = None
         self._goto_seq: int | None = None
         self.jumps = 0            # jumps that landed (benchmarks and tests wait on it)
+        self._board_choice: bool | None = None   # the user's b, else by width
 
     def compose(self) -> ComposeResult:
         with Horizontal(id="tr-filters"):
@@ -88,17 +94,23 @@ class TracePane(Vertical):
             yield Input(placeholder="go to t", id="tr-goto", compact=True)
         with Horizontal(id="tr-body"):
             yield LazyTable(TRACE_COLUMNS, id="tr-table")
-            board = self._board()
-            if board is not None:
-                yield board
+            yield BoardView(self.source)
         yield Static(" choose an episode (1 Episodes, Enter)", id="tr-status", classes="status")
 
-    def _board(self) -> Any:
-        try:
-            from tracelab.viewers.tui.board import BoardView
-        except ImportError:  # the board needs tracelab.store.board (replay)
-            return None
-        return BoardView(self.source)
+    @property
+    def board(self) -> BoardView | None:
+        return self.query_one(BoardView) if self.is_mounted else None
+
+    def on_resize(self) -> None:
+        if self._board_choice is None:   # by default the board shows when there is room beside the table
+            self.query_one(BoardView).display = self.size.width >= BOARD_MIN_WIDTH
+
+    def action_toggle_board(self) -> None:
+        board = self.query_one(BoardView)
+        self._board_choice = board.display = not board.display
+        row = self.table.cursor_row
+        if board.display and row is not None and self.filter is not None:
+            board.show(self.filter.episode, int(row["t"]), int(row["seq"]))
 
     def focus_default(self) -> None:
         self.query_one(LazyTable).focus()
@@ -158,8 +170,9 @@ class TracePane(Vertical):
     def on_lazy_table_row_highlighted(self, event: LazyTable.RowHighlighted) -> None:
         event.stop()
         self._update_status()
-        if event.row is not None and self.filter is not None:
-            self.post_message(StepSelected(self.filter.episode, int(event.row["t"]), int(event.row["seq"])))
+        board = self.board
+        if event.row is not None and self.filter is not None and board is not None and board.display:
+            board.show(self.filter.episode, int(event.row["t"]), int(event.row["seq"]))
 
     def on_lazy_table_row_selected(self, event: LazyTable.RowSelected) -> None:
         event.stop()

@@ -64,8 +64,8 @@ class WhyPane(Vertical):
     BINDINGS = [Binding("o", "expand_all", "expand all"), Binding("c", "collapse", "collapse"),
                 Binding("slash", "focus_why_not", "why-not")]
     DEFAULT_CSS = """
-    WhyPane Tree { height: 2fr; }
-    WhyPane #why-not-out { height: 1fr; max-height: 10; }
+    WhyPane Tree { height: 1fr; }
+    WhyPane #why-not-out { height: auto; max-height: 10; }
     WhyPane #why-not { height: 1; }
     """
 
@@ -109,7 +109,7 @@ class WhyPane(Vertical):
         tree.clear()
         tree.root.set_label(node_label(root, t))
         tree.root.data = root
-        self._add_children(tree.root, root, expand_levels=1)
+        self._add_children(tree.root, root, expand_levels=2)
         tree.root.expand()
         rule = root.cause.name if root.cause else ""
         self.query_one("#why-head", Static).update(
