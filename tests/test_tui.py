@@ -104,6 +104,11 @@ def test_trace_pages_match_the_changes_view_in_every_order_of_access(flt: TraceF
     by_anchors.warm()
     for p in range(pages):
         assert got[p] == expected[p * PAGE:(p + 1) * PAGE] == [r["seq"] for r in by_anchors.fetch(p)]
+    middle = len(expected) // 2
+    opener = TraceSource(source, flt, ("seq", expected[middle]))  # opens on a given change
+    opener.prepare()
+    assert opener.start_row == middle
+    assert opener.fetch(middle // PAGE)[middle % PAGE]["seq"] == expected[middle]
     jumper = TraceSource(source, flt)
     jumper.prepare()
     t = by_anchors.fetch(pages - 1)[-1]["t"]

@@ -1,6 +1,7 @@
 """The Episodes view: outcome, return, length and seed of every episode; for a training run also its
 kind (train / eval) and training step. Sort by clicking a header or with s / S; filter by outcome, length
-(e.g. `10..50`, `>=20`) and kind. Enter opens the episode's trace."""
+(e.g. `10..50`, `>=20`) and kind. Enter opens the episode's trace. On a live run the list is re-read
+when episodes begin or end."""
 from __future__ import annotations
 
 import re
@@ -40,6 +41,7 @@ BASE_COLUMNS = [
 ]
 TRAINING_COLUMNS = [Column("kind", "kind", 6), Column("train_step", "train step", 10, align="right")]
 
+LIVE_REFRESH_S = 2.0
 _LENGTH = re.compile(r"^\s*(?:(\d+)?\s*\.\.\s*(\d+)?|([<>]=?|=)\s*(\d+)|(\d+))\s*$")
 
 
@@ -96,6 +98,23 @@ class EpisodesPane(Vertical):
 
     def on_mount(self) -> None:
         self.run_worker(self._inspect, thread=True, exit_on_error=False)
+        if self.source.live:  # a run being written: new episodes appear as they begin and end
+            self._seen = None
+            self.set_interval(LIVE_REFRESH_S, self._poll)
+
+    def _poll(self) -> None:
+        if not hasattr(self, "base") or self.source.busy or not self.screen.is_current:
+            return
+
+        def work() -> None:
+            mark = self.source.rows("SELECT count(*) AS n, count(ended_at) AS ended FROM episodes")[0]
+            if mark != self._seen:
+                first = self._seen is None
+                self._seen = mark
+                if not first:
+                    self.app.call_from_thread(self.reload, True)
+
+        self.run_worker(work, thread=True, group="episodes-poll", exclusive=True, exit_on_error=False)
 
     def _inspect(self) -> None:
         cols = self.source.arrow("SELECT * FROM episodes LIMIT 0").column_names

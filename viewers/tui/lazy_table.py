@@ -147,14 +147,15 @@ class LazyTable(ScrollView, can_focus=True):
             count, error = source.prepare(), None
         except Exception as e:  # noqa: BLE001 - shown in the table, the app goes on
             count, error = 0, str(e)
-        self.app.call_from_thread(self._prepared, generation, count, error)
+        start = getattr(source, "start_row", None)
+        self.app.call_from_thread(self._prepared, generation, count, error, start)
 
-    def _prepared(self, generation: int, count: int, error: str | None) -> None:
+    def _prepared(self, generation: int, count: int, error: str | None, start: int | None = None) -> None:
         if generation != self._generation:
             return
         self.count, self.ready, self.error = count, True, error
         self.virtual_size = Size(self._total_width(), count + 1)
-        target = self._pending_cursor or 0
+        target = start if start else (self._pending_cursor or 0)
         self._pending_cursor = None
         self.cursor = -1  # make the watcher fire even if the row number did not change
         self.move_to(target)

@@ -24,7 +24,7 @@ PAGE = 256
 
 
 class PageSource(Protocol):
-    def prepare(self) -> int: ...
+    def prepare(self) -> int: ...     # may set `start_row`: where the cursor opens
     def fetch(self, page: int) -> list[dict[str, Any]]: ...
     def warm(self) -> None: ...        # optional work done when the table has fetched what it showed
 
@@ -155,10 +155,14 @@ class TraceSource:
     at each of its edges, and row 0 and row `count` are known; a page within reach of a hint costs two
     top-N scans of the seq column (~10 ms at 10M rows). Anything else uses the anchors (warm())."""
 
-    def __init__(self, source: RunSource, flt: TraceFilter) -> None:
-        self.source, self.filter = source, flt
+    def __init__(self, source: RunSource, flt: TraceFilter, start: tuple[str, int] | None = None) -> None:
+        """start: ("seq", s) or ("t", t): open at the first filtered row with seq >= s (or t >= t)."""
+        if start is not None and start[0] not in ("seq", "t"):
+            raise ValueError(f"start must be on seq or t, not {start[0]!r}")
+        self.source, self.filter, self.start = source, flt, start
         self.anchors: np.ndarray | None = None    # seq of every PAGE-th filtered row (warm() makes it)
         self.count = 0
+        self.start_row = 0                         # where the table's cursor opens
         self.hints: dict[int, int] = {}
         self._raw: TraceQuery | None = None
         self._view: TraceQuery | None = None
@@ -167,11 +171,22 @@ class TraceSource:
         """The filtered row count (the table shows pages near a hint before the anchors exist)."""
         self._raw = TraceQuery.build(self.source, self.filter)
         self._view = TraceQuery.build(self.source, self.filter, atom_col="atom_id")  # the view's names
-        row = self.source.rows(f"SELECT count(*) AS n, min(seq) AS first, max(seq) AS last FROM raw.changes "
-                               f"WHERE {self._raw.where}", self._raw.params)[0]
+        params, before, at = dict(self._raw.params), "FALSE", "FALSE"
+        if self.start is not None:   # t never decreases with seq within an episode: one scan finds both
+            column, params["start"] = self.start
+            before, at = f"{column} < $start", f"{column} >= $start"
+        # one scan: the count, the ends, and where the start is (its row and its seq)
+        row = self.source.rows(f"SELECT count(*) AS n, min(seq) AS first, max(seq) AS last, "
+                               f"count(*) FILTER ({before}) AS at_row, min(seq) FILTER ({at}) AS at_seq "
+                               f"FROM raw.changes WHERE {self._raw.where}", params)[0]
         self.count = int(row["n"])
         if self.count:
             self.hints = {0: int(row["first"]), self.count: int(row["last"]) + 1}
+        if row["at_seq"] is not None:
+            self.start_row = int(row["at_row"])
+            self.hints[self.start_row] = int(row["at_seq"])
+        elif self.start is not None and self.count:
+            self.start_row = self.count - 1
         return self.count
 
     def warm(self) -> None:

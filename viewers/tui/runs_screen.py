@@ -54,8 +54,11 @@ class RunsScreen(Screen):
 
     def on_mount(self) -> None:
         self.query_one(LazyTable).focus()
-        self.action_refresh()
         self.set_interval(REFRESH_S, self._tick)
+
+    def on_screen_resume(self) -> None:
+        if self.is_current:  # shown (first, or back from a run): read the catalog now
+            self.action_refresh()
 
     def _tick(self) -> None:
         if self.is_current:  # not while a run is open over it

@@ -81,7 +81,6 @@ class TracePane(Vertical):
         self.filter: TraceFilter | None = None
         self.trace: TraceSource | None = None
         self._goto_t: int | None = None
-        self._goto_seq: int | None = None
         self.jumps = 0            # jumps that landed (benchmarks and tests wait on it)
         self._board_choice: bool | None = None   # the user's b, else by width
 
@@ -143,19 +142,16 @@ class TracePane(Vertical):
         value = lambda name: self.query_one(name, Input).value.strip()  # noqa: E731
         self.filter = TraceFilter(episode, t_from, t_to, value("#tr-atom"), value("#tr-label"),
                                   value("#tr-rule"), atom_id)
-        self.trace = TraceSource(self.source, self.filter)
-        self._goto_seq = keep_seq
+        start = ("seq", keep_seq) if keep_seq is not None else ("t", self._goto_t) if self._goto_t is not None \
+            else None
+        self._goto_t = None
+        self.trace = TraceSource(self.source, self.filter, start)
         status.update(f" {self.filter.describe()} · loading…")
         self.table.set_source(self.trace)
 
     def on_lazy_table_loaded(self, event: LazyTable.Loaded) -> None:
         event.stop()
-        if self._goto_t is not None:
-            t, self._goto_t = self._goto_t, None
-            self._jump(lambda tr: tr.row_of_t(t))
-        elif self._goto_seq is not None:
-            seq, self._goto_seq = self._goto_seq, None
-            self._jump(lambda tr: tr.row_of_seq(seq))
+        self.jumps += 1     # a new filter landed (where it opens: TraceSource's start)
         self._update_status()
 
     def _update_status(self) -> None:
