@@ -137,6 +137,37 @@ async def _session(run: Path, seed: int) -> dict[str, float]:
     return out
 
 
+def _queries(run: Path, seed: int) -> dict[str, float]:
+    """The same steps at the paging layer alone (TraceSource, no app): what DuckDB costs."""
+    from tracelab.viewers.tui.paging import PAGE, TraceFilter, TraceSource
+    from tracelab.viewers.tui.source import RunSource
+    rng = random.Random(seed)
+    source = RunSource(run)
+    out: dict[str, float] = {}
+
+    def timed(name: str, fn: Callable[[], Any]) -> Any:
+        t0 = time.perf_counter()
+        result = fn()
+        out[name] = time.perf_counter() - t0
+        return result
+
+    trace = TraceSource(source, TraceFilter(0))
+    count = timed("open trace (count, first page)", lambda: (trace.prepare(), trace.fetch(0))[0])
+    timed("page index (anchors)", trace.warm)
+    timed("scroll to an uncached page", lambda: trace.fetch(rng.randrange(count // 4, count) // PAGE))
+    row = timed("jump to a timestep", lambda: trace.row_of_t(rng.randrange(1, count // 10)))
+    trace.fetch(row // PAGE)
+    seq = int(trace.fetch(row // PAGE)[row % PAGE]["seq"])
+    timed("next change of the atom", lambda: trace.next_change(int(trace.fetch(row // PAGE)[row % PAGE]["atom_id"]),
+                                                               seq, True))
+    for name, flt in (("filter by rule (half the rows)", TraceFilter(0, rule="action")),
+                      ("filter by atom", TraceFilter(0, atom=str(trace.fetch(row // PAGE)[row % PAGE]["atom"])))):
+        filtered = TraceSource(source, flt, ("seq", seq))
+        timed(name, lambda f=filtered: (f.prepare(), f.fetch(f.start_row // PAGE)))
+    source.close()
+    return out
+
+
 def run(quick: bool = False, repeats: int = 5, rows: int | None = None) -> dict[str, Any]:
     os.environ.setdefault("TEXTUAL_ANIMATIONS", "none")
     rows = rows or (200_000 if quick else 10_000_000)
@@ -145,8 +176,10 @@ def run(quick: bool = False, repeats: int = 5, rows: int | None = None) -> dict[
     made_s = time.perf_counter() - t0
     sessions = [asyncio.run(_session(path, seed)) for seed in range(max(1, repeats))]
     figures = {k: summarize([s[k] for s in sessions]).to_dict() for k in sessions[0]}
+    alone = [_queries(path, seed) for seed in range(max(1, repeats))]
+    queries = {k: summarize([q[k] for q in alone]).to_dict() for k in alone[0]}
     return {"machine": machine_info(), "quick": quick, "repeats": repeats, "rows": rows,
-            "run": str(path), "run_ready_s": made_s, "figures": figures}
+            "run": str(path), "run_ready_s": made_s, "figures": figures, "queries_alone": queries}
 
 
 def report(r: dict[str, Any]) -> str:
@@ -157,5 +190,8 @@ def report(r: dict[str, Any]) -> str:
         rows.append([name, 1000 * s["median"], 1000 * s["min"], 1000 * s["max"], 1000 * goal,
                      "yes" if s["median"] <= goal else "NO"])
     table = format_table(["action (headless pilot)", "median ms", "min ms", "max ms", "goal ms", "met"], rows)
+    alone = format_table(["the same, queries alone (TraceSource)", "median ms", "min ms", "max ms"],
+                         [[k, 1000 * s["median"], 1000 * s["min"], 1000 * s["max"]]
+                          for k, s in r["queries_alone"].items()])
     return (machine_line(r["machine"], r["quick"], r["repeats"]) +
-            f"\n{r['rows']:,} change rows in one episode ({r['run']})\n\n" + table)
+            f"\n{r['rows']:,} change rows in one episode ({r['run']})\n\n" + table + "\n\n" + alone)
