@@ -37,9 +37,9 @@ class TracelabApp(App[None]):
     def on_mount(self) -> None:
         self.push_screen(RunsScreen(self.paths))
         if len(self.paths) == 1 and is_run(self.paths[0]):
-            self.open_run(self.paths[0])
+            self.show_run(self.paths[0])
 
-    def open_run(self, path: Path) -> None:
+    def show_run(self, path: Path) -> None:
         try:
             screen = RunScreen(path)
         except Exception as e:  # noqa: BLE001 - a run that cannot be opened is a message, not a crash

@@ -81,6 +81,7 @@ class EpisodesPane(Vertical):
         self.training = False
         self.sort_key, self.sort_desc = "episode", False
         self.columns = list(BASE_COLUMNS)
+        self._seen: dict | None = None     # episode counts last seen (live runs)
 
     def compose(self) -> ComposeResult:
         with Horizontal(id="ep-filters"):
@@ -99,7 +100,6 @@ class EpisodesPane(Vertical):
     def on_mount(self) -> None:
         self.run_worker(self._inspect, thread=True, exit_on_error=False)
         if self.source.live:  # a run being written: new episodes appear as they begin and end
-            self._seen = None
             self.set_interval(LIVE_REFRESH_S, self._poll)
 
     def _poll(self) -> None:

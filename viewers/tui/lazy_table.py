@@ -143,18 +143,28 @@ class LazyTable(ScrollView, can_focus=True):
                             group=f"prepare-{id(self)}", exclusive=True, exit_on_error=False)
 
     def _prepare(self, source: PageSource, generation: int) -> None:
+        """Count the rows and, in the same worker, fetch the page the cursor opens on (one round trip
+        to the UI thread instead of two)."""
+        start, rows, error = None, None, None
         try:
-            count, error = source.prepare(), None
+            count = source.prepare()
+            start = getattr(source, "start_row", None)
+            target = start if start else (self._pending_cursor or 0)
+            target = max(0, min(count - 1, target if target >= 0 else count + target))
+            if count:
+                rows = (target // PAGE, source.fetch(target // PAGE))
         except Exception as e:  # noqa: BLE001 - shown in the table, the app goes on
             count, error = 0, str(e)
-        start = getattr(source, "start_row", None)
-        self.app.call_from_thread(self._prepared, generation, count, error, start)
+        self.app.call_from_thread(self._prepared, generation, count, error, start, rows)
 
-    def _prepared(self, generation: int, count: int, error: str | None, start: int | None = None) -> None:
+    def _prepared(self, generation: int, count: int, error: str | None, start: int | None = None,
+                  first: tuple[int, list[Row]] | None = None) -> None:
         if generation != self._generation:
             return
         self.count, self.ready, self.error = count, True, error
         self.virtual_size = Size(self._total_width(), count + 1)
+        if first is not None:
+            self.put_page(*first)
         target = start if start else (self._pending_cursor or 0)
         self._pending_cursor = None
         self.cursor = -1  # make the watcher fire even if the row number did not change
@@ -231,6 +241,10 @@ class LazyTable(ScrollView, can_focus=True):
             return
         if error:
             self.error = error
+        self.put_page(page, rows)
+
+    def put_page(self, page: int, rows: list[Row]) -> None:
+        """Cache a page fetched elsewhere (by a worker that also found where to move the cursor)."""
         self._pages[page] = rows
         self._pages.move_to_end(page)
         while len(self._pages) > CACHED_PAGES:

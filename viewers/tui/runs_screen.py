@@ -86,7 +86,7 @@ class RunsScreen(Screen):
     def action_open(self) -> None:
         table = self.query_one(LazyTable)
         if 0 <= table.cursor < len(self.runs):
-            self.app.open_run(self.runs[table.cursor].path)
+            self.app.show_run(self.runs[table.cursor].path)  # type: ignore[attr-defined]
 
     def on_lazy_table_row_selected(self, event: LazyTable.RowSelected) -> None:
         event.stop()

@@ -18,7 +18,7 @@ from tracelab.viewers.tui.colours import DIM, styled_bound, styled_name
 from tracelab.viewers.tui.lazy_table import Column, LazyTable
 from tracelab.viewers.tui.board import BoardView
 from tracelab.viewers.tui.messages import ExplainChange
-from tracelab.viewers.tui.paging import TraceFilter, TraceSource
+from tracelab.viewers.tui.paging import PAGE, TraceFilter, TraceSource
 from tracelab.viewers.tui.source import RunSource
 
 
@@ -197,19 +197,22 @@ class TracePane(Vertical):
         def work() -> None:
             try:
                 index = where(trace)
+                page = None if index is None else (index // PAGE, trace.fetch(index // PAGE))
             except Exception as e:  # noqa: BLE001
                 self.app.call_from_thread(self.notify, str(e), severity="error")
                 return
             if trace is not self.trace:
                 return
-            self.app.call_from_thread(self._landed, index)
+            self.app.call_from_thread(self._landed, index, page)
 
         self.run_worker(work, thread=True, group="trace-jump", exclusive=True, exit_on_error=False)
 
-    def _landed(self, index: int | None) -> None:
+    def _landed(self, index: int | None, page: tuple[int, list[dict[str, Any]]] | None) -> None:
         if index is None:
             self.notify("no further change of this atom")
         else:
+            if page is not None:
+                self.table.put_page(*page)   # fetched with the jump: no second round trip
             self.table.move_to(index)
         self.jumps += 1
 
