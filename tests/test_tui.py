@@ -104,6 +104,9 @@ def test_trace_pages_match_the_changes_view_in_every_order_of_access(flt: TraceF
     by_anchors.warm()
     for p in range(pages):
         assert got[p] == expected[p * PAGE:(p + 1) * PAGE] == [r["seq"] for r in by_anchors.fetch(p)]
+    spanned = TraceSource(source, flt)         # all pages in one range query from the hint at row 0
+    spanned.prepare()
+    assert [r["seq"] for _, rows in spanned.fetch_pages(0, pages - 1) for r in rows] == expected
     middle = len(expected) // 2
     opener = TraceSource(source, flt, ("seq", expected[middle]))  # opens on a given change
     opener.prepare()

@@ -22,7 +22,7 @@ from textual.reactive import reactive
 from textual.scroll_view import ScrollView
 from textual.strip import Strip
 
-from tracelab.viewers.tui.paging import PAGE, PageSource
+from tracelab.viewers.tui.paging import PAGE, PageSource, fetch_span
 
 Row = dict[str, Any]
 CACHED_PAGES = 64
@@ -145,26 +145,36 @@ class LazyTable(ScrollView, can_focus=True):
     def _prepare(self, source: PageSource, generation: int) -> None:
         """Count the rows and, in the same worker, fetch the page the cursor opens on (one round trip
         to the UI thread instead of two)."""
-        start, rows, error = None, None, None
+        start, pages, error = None, [], None
         try:
             count = source.prepare()
             start = getattr(source, "start_row", None)
             target = start if start else (self._pending_cursor or 0)
             target = max(0, min(count - 1, target if target >= 0 else count + target))
-            if count:
-                rows = (target // PAGE, source.fetch(target // PAGE))
+            if count:  # the cursor's page, and the next or previous one if the screen reaches into it
+                reach = max(1, self.size.height)
+                pages = fetch_span(source, max(0, target - reach) // PAGE, min(count - 1, target + reach) // PAGE)
         except Exception as e:  # noqa: BLE001 - shown in the table, the app goes on
             count, error = 0, str(e)
-        self.app.call_from_thread(self._prepared, generation, count, error, start, rows)
+        self.app.call_from_thread(self._prepared, generation, count, error, start, pages)
+        if error is None and generation == self._generation:
+            self._warm(source)
+
+    @staticmethod
+    def _warm(source: PageSource) -> None:
+        try:
+            source.warm()  # e.g. the trace's anchors, while the user looks at the first page
+        except Exception:  # noqa: BLE001 - a failing warm-up shows up again when a page needs it
+            pass
 
     def _prepared(self, generation: int, count: int, error: str | None, start: int | None = None,
-                  first: tuple[int, list[Row]] | None = None) -> None:
+                  pages: list[tuple[int, list[Row]]] | None = None) -> None:
         if generation != self._generation:
             return
         self.count, self.ready, self.error = count, True, error
         self.virtual_size = Size(self._total_width(), count + 1)
-        if first is not None:
-            self.put_page(*first)
+        for page, rows in pages or []:
+            self.put_page(page, rows)
         target = start if start else (self._pending_cursor or 0)
         self._pending_cursor = None
         self.cursor = -1  # make the watcher fire even if the row number did not change
@@ -225,10 +235,7 @@ class LazyTable(ScrollView, can_focus=True):
             self.app.call_from_thread(self._arrived, generation, page, rows, error)
             with self._guard:
                 self._inflight.discard(page)
-        try:
-            source.warm()  # e.g. the trace's anchors, while the user looks at the first page
-        except Exception:  # noqa: BLE001 - a failing warm-up shows up again when a page needs it
-            pass
+        self._warm(source)
 
     def _restart(self) -> None:
         pages = set(self._wanted)

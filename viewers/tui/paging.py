@@ -29,6 +29,14 @@ class PageSource(Protocol):
     def warm(self) -> None: ...        # optional work done when the table has fetched what it showed
 
 
+def fetch_span(source: PageSource, first: int, last: int) -> list[tuple[int, list[dict[str, Any]]]]:
+    """Pages first..last of any source (in one query where the source can)."""
+    many = getattr(source, "fetch_pages", None)
+    if many is not None:
+        return many(first, last)
+    return [(p, source.fetch(p)) for p in range(first, last + 1)]
+
+
 class ArrowSource:
     def __init__(self, table: pa.Table) -> None:
         self.table = table
@@ -101,7 +109,9 @@ class TraceQuery:
     params: dict[str, Any] = field(default_factory=dict)
 
     @classmethod
-    def build(cls, source: RunSource, f: TraceFilter, atom_col: str = "atom") -> "TraceQuery":
+    def build(cls, source: RunSource, f: TraceFilter) -> "TraceQuery":
+        """The clause, with `{atom}` where the atom id column goes (on() puts it in)."""
+        atom_col = "{atom}"
         where, params = ["episode = $episode"], {"episode": f.episode}
         if f.t_from is not None:
             where.append("t >= $t_from")
@@ -119,6 +129,11 @@ class TraceQuery:
         if f.rule:
             where.append(cls._cause_clause(source, f.rule))
         return cls(" AND ".join(where), params)
+
+    def on(self, atom_col: str) -> "TraceQuery":
+        """The clause over a table whose atom id column is `atom_col` (raw.changes: atom; the changes
+        view: atom_id)."""
+        return TraceQuery(self.where.replace("{atom}", atom_col), self.params)
 
     @staticmethod
     def _atom_clause(source: RunSource, atom_col: str, column: str, pattern: str) -> str:
@@ -169,8 +184,8 @@ class TraceSource:
 
     def prepare(self) -> int:
         """The filtered row count (the table shows pages near a hint before the anchors exist)."""
-        self._raw = TraceQuery.build(self.source, self.filter)
-        self._view = TraceQuery.build(self.source, self.filter, atom_col="atom_id")  # the view's names
+        query = TraceQuery.build(self.source, self.filter)
+        self._raw, self._view = query.on("atom"), query.on("atom_id")
         params, before, at = dict(self._raw.params), "FALSE", "FALSE"
         if self.start is not None:   # t never decreases with seq within an episode: one scan finds both
             column, params["start"] = self.start
@@ -203,30 +218,38 @@ class TraceSource:
         self.anchors = seqs[::PAGE].copy()
 
     def fetch(self, page: int) -> list[dict[str, Any]]:
-        assert self._raw is not None, "prepare() first"
-        if page * PAGE >= self.count:
-            return []
-        if self.anchors is not None:
-            hi = int(self.anchors[page + 1]) if page + 1 < len(self.anchors) else None
-            rows = self._rows(int(self.anchors[page]), hi)
-        else:
-            near = [r for r in self.hints if page * PAGE <= r <= (page + 1) * PAGE]
-            if not near:
-                self.warm()
-                return self.fetch(page)
-            r = min(near, key=lambda r: abs(r - page * PAGE))
-            rows = self._rows(*self._range_around(page, r, self.hints[r]))
-        if rows:
-            self.hints.setdefault(page * PAGE, int(rows[0]["seq"]))
-            self.hints.setdefault(page * PAGE + len(rows), int(rows[-1]["seq"]) + 1)
-        return rows
+        return self.fetch_pages(page, page)[0][1]
 
-    def _range_around(self, page: int, row: int, bound: int) -> tuple[int, int]:
-        """[lo, hi) in seq of page `page`, given that `row` is the first filtered row with seq >= bound."""
+    def fetch_pages(self, first: int, last: int) -> list[tuple[int, list[dict[str, Any]]]]:
+        """Pages first..last; near a hint, all of them with one range query."""
+        assert self._raw is not None, "prepare() first"
+        last = min(last, max(0, (self.count - 1) // PAGE))
+        if self.anchors is not None:
+            spans = []
+            for page in range(first, last + 1):
+                hi = int(self.anchors[page + 1]) if page + 1 < len(self.anchors) else None
+                spans.append((page, self._rows(int(self.anchors[page]), hi) if page < len(self.anchors) else []))
+            return spans
+        near = [r for r in self.hints if first * PAGE <= r <= (last + 1) * PAGE]
+        if not near:
+            self.warm()
+            return self.fetch_pages(first, last)
+        r = min(near, key=lambda r: abs(r - first * PAGE))
+        rows = self._rows(*self._range_around(first, last, r, self.hints[r]))
+        spans = [(p, rows[(p - first) * PAGE:(p - first + 1) * PAGE]) for p in range(first, last + 1)]
+        for page, part in spans:
+            if part:
+                self.hints.setdefault(page * PAGE, int(part[0]["seq"]))
+                self.hints.setdefault(page * PAGE + len(part), int(part[-1]["seq"]) + 1)
+        return spans
+
+    def _range_around(self, first: int, last: int, row: int, bound: int) -> tuple[int, int]:
+        """[lo, hi) in seq of pages first..last, given that `row` is the first filtered row with
+        seq >= bound."""
         assert self._raw is not None
         where, params = self._raw.where, {**self._raw.params, "b": bound}
-        before = row - page * PAGE                # rows of the page before the hinted one
-        after = min(PAGE, self.count - page * PAGE) - before
+        before = row - first * PAGE                # rows of the span before the hinted one
+        after = min((last + 1) * PAGE, self.count) - row
         lo = bound if before == 0 else self.source.scalar(
             f"SELECT min(seq) FROM (SELECT seq FROM raw.changes WHERE {where} AND seq < $b "
             f"ORDER BY seq DESC LIMIT {before})", params)
