@@ -26,6 +26,7 @@ from tracelab.viewers.tui.paging import PAGE, PageSource, fetch_span
 
 Row = dict[str, Any]
 CACHED_PAGES = 64
+WARM_AFTER_S = 0.5
 CURSOR_FOCUSED = "#1f4e79"
 CURSOR_BLURRED = "#3a3a3a"
 
@@ -157,15 +158,21 @@ class LazyTable(ScrollView, can_focus=True):
         except Exception as e:  # noqa: BLE001 - shown in the table, the app goes on
             count, error = 0, str(e)
         self.app.call_from_thread(self._prepared, generation, count, error, start, pages)
-        if error is None and generation == self._generation:
-            self._warm(source)
 
-    @staticmethod
-    def _warm(source: PageSource) -> None:
-        try:
-            source.warm()  # e.g. the trace's anchors, while the user looks at the first page
-        except Exception:  # noqa: BLE001 - a failing warm-up shows up again when a page needs it
-            pass
+    def _start_warm(self, generation: int) -> None:
+        """Warm the source (e.g. the trace's anchors) once the user has looked at it for WARM_AFTER_S:
+        a filter typed and changed quickly never waits behind the warm-up of the one before."""
+        source = self.source
+        if generation != self._generation or source is None:
+            return
+
+        def warm() -> None:
+            try:
+                source.warm()
+            except Exception:  # noqa: BLE001 - a failing warm-up shows up again when a page needs it
+                pass
+
+        self.run_worker(warm, thread=True, group=f"warm-{id(self)}", exit_on_error=False)
 
     def _prepared(self, generation: int, count: int, error: str | None, start: int | None = None,
                   pages: list[tuple[int, list[Row]]] | None = None) -> None:
@@ -177,6 +184,8 @@ class LazyTable(ScrollView, can_focus=True):
             self.put_page(page, rows)
         target = start if start else (self._pending_cursor or 0)
         self._pending_cursor = None
+        if error is None:
+            self.set_timer(WARM_AFTER_S, lambda: self._start_warm(generation))
         self.cursor = -1  # make the watcher fire even if the row number did not change
         self.move_to(target)
         self.refresh()
@@ -235,7 +244,6 @@ class LazyTable(ScrollView, can_focus=True):
             self.app.call_from_thread(self._arrived, generation, page, rows, error)
             with self._guard:
                 self._inflight.discard(page)
-        self._warm(source)
 
     def _restart(self) -> None:
         pages = set(self._wanted)
