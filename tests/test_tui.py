@@ -372,3 +372,24 @@ def test_board_follows_the_trace_cursor() -> None:
         await pilot.press("b")                                         # hide it
         assert not board.display
     run_app([ADVANCED], body, size=(120, 34))
+
+
+def test_the_mouse_selects_rows_sorts_by_header_and_opens_on_double_click() -> None:
+    async def body(app: Any, pilot: Any) -> None:
+        table = app.screen.query_one("#ep-table", LazyTable)
+        await wait_for(pilot, lambda: loaded(table))
+        await pilot.click(table, offset=(3, 3))                      # line 0 is the header: row 2
+        assert table.cursor == 2 and table.cursor_row["episode"] == 2
+        x = sum(c.width + 1 for c in table.columns[:3]) + 1            # the "length" header
+        await pilot.click(table, offset=(x, 0))
+        await wait_for(pilot, lambda: table.sort_key == "steps" and loaded(table))
+        assert [table.row(i)["steps"] for i in range(table.count)] == [0, 15, 18, 25]
+        await pilot.click(table, offset=(3, 2))
+        await pilot.click(table, offset=(3, 2), times=2)               # double click: the trace
+        trace = app.screen.query_one("#tr-table", LazyTable)
+        await wait_for(pilot, lambda: app.screen.query_one(TracePane).filter is not None and loaded(trace))
+        assert app.screen.query_one(TracePane).filter.episode == 0
+        await pilot.click(app.screen.query_one("KeyBar"), offset=(app.size.width - 3, 0))  # ^p palette
+        await pilot.pause()
+        assert type(app.screen).__name__ == "CommandPalette"
+    run_app([ADVANCED], body)
