@@ -57,6 +57,12 @@ def loaded(table: LazyTable) -> bool:
     return table.ready and table.idle and (table.count == 0 or table.cursor_row is not None)
 
 
+def writer(mode: str, run: Path, stop: Path) -> subprocess.Popen[str]:
+    """Another process writing a live run (tests/tui_writer_proc.py) until `stop` exists."""
+    return subprocess.Popen([sys.executable, str(ROOT / "tests" / "tui_writer_proc.py"), mode, str(run),
+                             str(stop)], stdout=subprocess.PIPE, text=True)
+
+
 def run_app(paths: list[Path], body: Callable[[Any, Any], Any], size: tuple[int, int] = (80, 24)) -> None:
     async def go() -> None:
         app = TracelabApp(paths)
@@ -299,8 +305,7 @@ def test_runs_screen_help_and_palette_at_80x24() -> None:
 
 def test_training_curve_updates_while_another_process_appends_metrics(tmp_path: Path) -> None:
     run, stop = tmp_path / "train-live", tmp_path / "stop"
-    proc = subprocess.Popen([sys.executable, str(ROOT / "tests" / "tui_train_proc.py"), str(run), str(stop)],
-                            stdout=subprocess.PIPE, text=True)
+    proc = writer("train", run, stop)
     try:
         assert proc.stdout is not None and proc.stdout.readline().startswith("step")
 
@@ -393,3 +398,29 @@ def test_the_mouse_selects_rows_sorts_by_header_and_opens_on_double_click() -> N
         await pilot.pause()
         assert type(app.screen).__name__ == "CommandPalette"
     run_app([ADVANCED], body)
+
+
+def test_the_trace_of_a_live_episode_grows_and_keeps_its_cursor(tmp_path: Path) -> None:
+    run, stop = tmp_path / "trace-live", tmp_path / "stop"
+    proc = writer("trace", run, stop)
+    try:
+        assert proc.stdout is not None and proc.stdout.readline().startswith("rows")
+
+        async def body(app: Any, pilot: Any) -> None:
+            episodes = app.screen.query_one("#ep-table", LazyTable)
+            await wait_for(pilot, lambda: loaded(episodes) and episodes.count == 1)
+            await pilot.press("enter")
+            pane = app.screen.query_one(TracePane)
+            trace = pane.table
+            await wait_for(pilot, lambda: trace.count > 0 and loaded(trace))
+            first = trace.count
+            trace.move_to(first - 1)
+            await wait_for(pilot, lambda: loaded(trace))
+            seq = trace.cursor_row["seq"]
+            await wait_for(pilot, lambda: trace.count > first and loaded(trace))
+            assert trace.cursor_row["seq"] == seq          # still on the change it was on
+            assert trace.row(trace.count - 1) is None or trace.row(trace.count - 1)["seq"] > seq
+        run_app([run], body)
+    finally:
+        stop.touch()
+        proc.wait(timeout=30)

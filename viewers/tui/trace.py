@@ -2,7 +2,8 @@
 lazily by seq (TraceSource). Filters: a time range (`3..9`), atom, label and rule GLOBs; `g` jumps to a
 timestep; `n` / `p` move to the next / previous change of the selected atom; Enter or `w` opens the why
 tree of the selected change; `a` shows only the selected atom's changes; `b` shows or hides the board
-(shown by default when the terminal is at least 100 columns wide)."""
+(shown by default when the terminal is at least 100 columns wide). On a live run the trace is re-read
+when the episode grows."""
 from __future__ import annotations
 
 import re
@@ -40,6 +41,7 @@ TRACE_COLUMNS = [
     Column("rule", "rule", 22, render=_rule, flex=2, max_width=40),
 ]
 
+LIVE_REFRESH_S = 2.0
 BOARD_MIN_WIDTH = 100      # the table needs ~78 columns, the board ~22
 
 _RANGE = re.compile(r"^\s*(-?\d+)?\s*(?:\.\.\s*(-?\d+)?)?\s*$")
@@ -95,6 +97,28 @@ class TracePane(Vertical):
             yield LazyTable(TRACE_COLUMNS, id="tr-table")
             yield BoardView(self.source)
         yield Static(" choose an episode (1 Episodes, Enter)", id="tr-status", classes="status")
+
+    def on_mount(self) -> None:
+        if self.source.live:   # rows of the episode may still be arriving
+            self.set_interval(LIVE_REFRESH_S, self._follow)
+
+    def _follow(self) -> None:
+        """On a live run, re-read the trace when the episode has grown (the cursor stays on its change)."""
+        trace = self.trace
+        if trace is None or not self.table.ready or self.source.busy or not self.screen.is_current:
+            return
+
+        def work() -> None:
+            grown = trace.count_now() > trace.count
+            if grown and trace is self.trace:
+                self.app.call_from_thread(self._refollow)
+
+        self.run_worker(work, thread=True, group="trace-follow", exclusive=True, exit_on_error=False)
+
+    def _refollow(self) -> None:
+        row = self.table.cursor_row
+        self.apply_filters(keep_seq=None if row is None else int(row["seq"]),
+                           atom_id=None if self.filter is None else self.filter.atom_id)
 
     @property
     def board(self) -> BoardView | None:
