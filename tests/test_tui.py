@@ -11,7 +11,8 @@ import subprocess
 import sys
 import time
 from collections import defaultdict
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -57,10 +58,18 @@ def loaded(table: LazyTable) -> bool:
     return table.ready and table.idle and (table.count == 0 or table.cursor_row is not None)
 
 
-def writer(mode: str, run: Path, stop: Path) -> subprocess.Popen[str]:
-    """Another process writing a live run (tests/tui_writer_proc.py) until `stop` exists."""
-    return subprocess.Popen([sys.executable, str(ROOT / "tests" / "tui_writer_proc.py"), mode, str(run),
+@contextmanager
+def live_run(mode: str, tmp_path: Path) -> Iterator[Path]:
+    """A run another process is writing (tests/tui_writer_proc.py MODE), from its first flush on."""
+    run, stop = tmp_path / f"{mode}-live", tmp_path / "stop"
+    proc = subprocess.Popen([sys.executable, str(ROOT / "tests" / "tui_writer_proc.py"), mode, str(run),
                              str(stop)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None and proc.stdout.readline().strip()
+        yield run
+    finally:
+        stop.touch()
+        proc.wait(timeout=30)
 
 
 def run_app(paths: list[Path], body: Callable[[Any, Any], Any], size: tuple[int, int] = (80, 24)) -> None:
@@ -304,11 +313,7 @@ def test_runs_screen_help_and_palette_at_80x24() -> None:
 
 
 def test_training_curve_updates_while_another_process_appends_metrics(tmp_path: Path) -> None:
-    run, stop = tmp_path / "train-live", tmp_path / "stop"
-    proc = writer("train", run, stop)
-    try:
-        assert proc.stdout is not None and proc.stdout.readline().startswith("step")
-
+    with live_run("train", tmp_path) as run:
         async def body(app: Any, pilot: Any) -> None:
             await pilot.press("6")
             await wait_for(pilot, lambda: app.screen.panes["training"].is_attached)
@@ -327,9 +332,6 @@ def test_training_curve_updates_while_another_process_appends_metrics(tmp_path: 
             await wait_for(pilot, lambda: loaded(episodes) and "kind" in [c.key for c in episodes.columns])
             assert episodes.cursor_row["kind"] == "train" and episodes.cursor_row["train_step"] == 100
         run_app([run], body, size=(100, 30))
-    finally:
-        stop.touch()
-        proc.wait(timeout=30)
 
 
 def test_escape_cancels_a_running_query() -> None:
@@ -401,11 +403,7 @@ def test_the_mouse_selects_rows_sorts_by_header_and_opens_on_double_click() -> N
 
 
 def test_the_trace_of_a_live_episode_grows_and_keeps_its_cursor(tmp_path: Path) -> None:
-    run, stop = tmp_path / "trace-live", tmp_path / "stop"
-    proc = writer("trace", run, stop)
-    try:
-        assert proc.stdout is not None and proc.stdout.readline().startswith("rows")
-
+    with live_run("trace", tmp_path) as run:
         async def body(app: Any, pilot: Any) -> None:
             episodes = app.screen.query_one("#ep-table", LazyTable)
             await wait_for(pilot, lambda: loaded(episodes) and episodes.count == 1)
@@ -421,6 +419,3 @@ def test_the_trace_of_a_live_episode_grows_and_keeps_its_cursor(tmp_path: Path) 
             assert trace.cursor_row["seq"] == seq          # still on the change it was on
             assert trace.row(trace.count - 1) is None or trace.row(trace.count - 1)["seq"] > seq
         run_app([run], body)
-    finally:
-        stop.touch()
-        proc.wait(timeout=30)
