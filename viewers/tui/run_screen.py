@@ -29,7 +29,7 @@ EAGER = ("episodes", "trace")   # built with the screen; the other views when fi
 class RunScreen(Screen):
     BINDINGS = [
         *(Binding(str(i + 1), f"show('{tab}')", title.split()[1], show=False) for i, (tab, title) in enumerate(TABS)),
-        Binding("escape", "cancel_or_back", "cancel/back"),
+        Binding("escape", "cancel_or_back", "back"),
     ]
 
     def __init__(self, path: Path) -> None:

@@ -61,10 +61,10 @@ def parse_range(text: str) -> tuple[int | None, int | None]:
 
 class TracePane(Vertical):
     BINDINGS = [
-        Binding("g", "focus('#tr-goto')", "go to t"),
+        Binding("g", "focus('#tr-goto')", "goto t"),
         Binding("slash", "focus('#tr-atom')", "filter"),
-        Binding("n", "next_change(1)", "next of atom"),
-        Binding("p", "next_change(-1)", "prev of atom"),
+        Binding("n", "next_change(1)", "next"),
+        Binding("p", "next_change(-1)", "prev"),
         Binding("w", "why", "why"),
         Binding("a", "only_atom", "only atom", show=False),
         Binding("x", "clear", "clear filters", show=False),
