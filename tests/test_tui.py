@@ -419,3 +419,26 @@ def test_the_trace_of_a_live_episode_grows_and_keeps_its_cursor(tmp_path: Path) 
             assert trace.cursor_row["seq"] == seq          # still on the change it was on
             assert trace.row(trace.count - 1) is None or trace.row(trace.count - 1)["seq"] > seq
         run_app([run], body)
+
+
+def test_why_of_a_change_that_was_not_the_atoms_last_in_its_step_says_so() -> None:
+    async def body(app: Any, pilot: Any) -> None:
+        await wait_for(pilot, lambda: loaded(app.screen.query_one("#ep-table", LazyTable)))
+        await pilot.press("enter")
+        pane = app.screen.query_one(TracePane)
+        trace = pane.table
+        await wait_for(pilot, lambda: trace.count > 0 and loaded(trace))
+        pane.query_one("#tr-atom").value = "acting(clock)"
+        await pilot.press("slash", "enter")
+        await wait_for(pilot, lambda: pane.filter.atom == "acting(clock)" and loaded(trace))
+        rows = [trace.row(i) for i in range(trace.count)]
+        first_at_1 = next(i for i, r in enumerate(rows) if r["t"] == 1)
+        assert rows[first_at_1 + 1]["t"] == 1                 # acting(clock) changes twice at t=1
+        trace.move_to(first_at_1)
+        await pilot.pause()
+        await pilot.press("w")
+        why = app.screen.query_one(WhyPane)
+        await wait_for(pilot, lambda: why.query_one("Tree").root.data is not None)
+        assert why.query_one("Tree").root.data.seq == rows[first_at_1 + 1]["seq"]
+        assert "was not acting(clock)'s last at t=1" in await shown(app, pilot)
+    run_app([ADVANCED], body, size=(120, 30))

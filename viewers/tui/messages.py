@@ -12,8 +12,9 @@ class OpenTrace(Message):
 
 
 class ExplainChange(Message):
-    """Open the why tree of an atom's bound at the end of timestep t of an episode."""
-    def __init__(self, episode: int, atom: str, t: int) -> None:
+    """Open the why tree of an atom's bound at the end of timestep t of an episode (seq: the change
+    selected in the trace, if any)."""
+    def __init__(self, episode: int, atom: str, t: int, seq: int | None = None) -> None:
         super().__init__()
-        self.episode, self.atom, self.t = episode, atom, t
+        self.episode, self.atom, self.t, self.seq = episode, atom, t, seq
 

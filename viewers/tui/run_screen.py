@@ -95,5 +95,5 @@ class RunScreen(Screen):
     async def on_explain_change(self, message: ExplainChange) -> None:
         why = await self.pane("why")
         assert isinstance(why, WhyPane)
-        why.explain(message.episode, message.atom, message.t)
+        why.explain(message.episode, message.atom, message.t, message.seq)
         await self.action_show("why")

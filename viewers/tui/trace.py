@@ -253,7 +253,7 @@ class TracePane(Vertical):
     def action_why(self) -> None:
         row = self.table.cursor_row
         if row is not None and self.filter is not None:
-            self.post_message(ExplainChange(self.filter.episode, row["atom"], int(row["t"])))
+            self.post_message(ExplainChange(self.filter.episode, row["atom"], int(row["t"]), int(row["seq"])))
 
     def action_only_atom(self) -> None:
         if self.filter is None:

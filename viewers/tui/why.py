@@ -13,7 +13,7 @@ from textual.widgets import Input, Static, Tree
 from textual.widgets.tree import TreeNode
 
 from tracelab.store.why import WhyNode, WhyNot, explain, render_why_not, why_not
-from tracelab.viewers.tui.colours import DIM, FALSE, TRUE, bound_colour, bound_text, styled_name
+from tracelab.viewers.tui.colours import DIM, FALSE, PARTIAL, TRUE, bound_colour, bound_text, styled_name
 from tracelab.viewers.tui.source import RunSource
 
 DEPTH = 12
@@ -87,7 +87,9 @@ class WhyPane(Vertical):
     def focus_default(self) -> None:
         self.query_one(Tree).focus()
 
-    def explain(self, episode: int, atom: str, t: int) -> None:
+    def explain(self, episode: int, atom: str, t: int, seq: int | None = None) -> None:
+        """The why tree of the atom's bound at the end of t (tracelab.store.why explains bounds at the end
+        of a timestep; when the selected change `seq` was not the atom's last at t, the header says so)."""
         self.episode, self.at = episode, t
         self.query_one("#why-head", Static).update(f" why {atom} at the end of t={t}, episode {episode} · working…")
 
@@ -97,14 +99,14 @@ class WhyPane(Vertical):
             except Exception as e:  # noqa: BLE001
                 self.app.call_from_thread(self._failed, str(e))
                 return
-            self.app.call_from_thread(self._show, root, atom, t, episode)
+            self.app.call_from_thread(self._show, root, atom, t, episode, seq)
 
         self.run_worker(work, thread=True, group="why", exclusive=True, exit_on_error=False)
 
     def _failed(self, message: str) -> None:
         self.query_one("#why-head", Static).update(Text(f" {message}", style="bold red"))
 
-    def _show(self, root: WhyNode, atom: str, t: int, episode: int) -> None:
+    def _show(self, root: WhyNode, atom: str, t: int, episode: int, seq: int | None = None) -> None:
         tree = self.query_one(Tree)
         tree.clear()
         tree.root.set_label(node_label(root, t))
@@ -112,8 +114,11 @@ class WhyPane(Vertical):
         self._add_children(tree.root, root, expand_levels=2)
         tree.root.expand()
         rule = root.cause.name if root.cause else ""
-        self.query_one("#why-head", Static).update(
-            f" why {atom} at the end of t={t}, episode {episode} · {rule} · Enter/click expands, o all")
+        head = Text(f" why {atom} at the end of t={t}, episode {episode} · {rule} · Enter/click expands, o all")
+        if seq is not None and root.seq is not None and root.seq != seq:
+            head = Text(f" the selected change (seq {seq}) was not {atom}'s last at t={t}: this explains the "
+                        f"bound at the end of t (seq {root.seq}, by {rule})", style=f"bold {PARTIAL}")
+        self.query_one("#why-head", Static).update(head)
         if self.query_one("#why-not", Input).value == "" and root.cause and root.cause.kind == "rule":
             binds = ",".join(f"{k}={v}" for k, v in root.cause.bindings.items())
             self.query_one("#why-not", Input).placeholder = f"why-not: {rule} {binds} at {root.t}"
