@@ -72,6 +72,15 @@ def live_run(mode: str, tmp_path: Path) -> Iterator[Path]:
         proc.wait(timeout=30)
 
 
+async def open_first_trace(app: Any, pilot: Any) -> tuple[TracePane, LazyTable]:
+    """From the Episodes view, Enter on the first episode; its trace's first page on screen."""
+    await wait_for(pilot, lambda: loaded(app.screen.query_one("#ep-table", LazyTable)))
+    await pilot.press("enter")
+    pane = app.screen.query_one(TracePane)
+    await wait_for(pilot, lambda: pane.table.count > 0 and loaded(pane.table))
+    return pane, pane.table
+
+
 def run_app(paths: list[Path], body: Callable[[Any, Any], Any], size: tuple[int, int] = (80, 24)) -> None:
     async def go() -> None:
         app = TracelabApp(paths)
@@ -185,11 +194,7 @@ def test_open_a_run_go_to_an_episode_filter_by_rule_and_explain_a_death() -> Non
 
 def test_next_and_previous_change_of_the_selected_atom_and_jump_to_a_step() -> None:
     async def body(app: Any, pilot: Any) -> None:
-        await wait_for(pilot, lambda: loaded(app.screen.query_one("#ep-table", LazyTable)))
-        await pilot.press("enter")
-        trace = app.screen.query_one("#tr-table", LazyTable)
-        pane = app.screen.query_one(TracePane)
-        await wait_for(pilot, lambda: trace.count > 0 and loaded(trace))
+        pane, trace = await open_first_trace(app, pilot)
         jumps = pane.jumps
         pane.query_one("#tr-goto").value = "7"
         await pilot.press("g", "enter")
@@ -357,11 +362,7 @@ def test_escape_cancels_a_running_query() -> None:
 
 def test_board_follows_the_trace_cursor() -> None:
     async def body(app: Any, pilot: Any) -> None:
-        await wait_for(pilot, lambda: loaded(app.screen.query_one("#ep-table", LazyTable)))
-        await pilot.press("enter")
-        pane = app.screen.query_one(TracePane)
-        trace = pane.table
-        await wait_for(pilot, lambda: trace.count > 0 and loaded(trace))
+        pane, trace = await open_first_trace(app, pilot)
         board = pane.board
         assert board is not None and board.display                  # 120 columns: room for it
         jumps = pane.jumps
@@ -423,11 +424,7 @@ def test_the_trace_of_a_live_episode_grows_and_keeps_its_cursor(tmp_path: Path) 
 
 def test_why_of_a_change_that_was_not_the_atoms_last_in_its_step_says_so() -> None:
     async def body(app: Any, pilot: Any) -> None:
-        await wait_for(pilot, lambda: loaded(app.screen.query_one("#ep-table", LazyTable)))
-        await pilot.press("enter")
-        pane = app.screen.query_one(TracePane)
-        trace = pane.table
-        await wait_for(pilot, lambda: trace.count > 0 and loaded(trace))
+        pane, trace = await open_first_trace(app, pilot)
         pane.query_one("#tr-atom").value = "acting(clock)"
         await pilot.press("slash", "enter")
         await wait_for(pilot, lambda: pane.filter.atom == "acting(clock)" and loaded(trace))
