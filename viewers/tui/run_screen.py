@@ -66,6 +66,8 @@ class RunScreen(Screen):
         self.call_after_refresh(self._focus_pane, tab)
 
     def _focus_pane(self, tab: str) -> None:
+        if self.query_one(TabbedContent).active != tab:
+            return  # focusing into a hidden pane would make TabbedContent switch back to it
         focus = getattr(self.panes[tab], "focus_default", None)
         if focus is not None and self.panes[tab].is_attached:
             focus()
