@@ -235,6 +235,11 @@ def test_episodes_sort_and_filter_by_outcome_and_length() -> None:
         pane.reload()
         await wait_for(pilot, lambda: loaded(table) and table.count == 1)
         assert table.row(0)["episode"] == 0 and table.row(0)["outcome"] == "loss"
+        await pilot.press("f")                                       # into the length field
+        await wait_for(pilot, lambda: app.focused is not None and app.focused.id == "ep-length")
+        await pilot.press("escape")                                  # out of it, not out of the run
+        await wait_for(pilot, lambda: app.focused is table)
+        assert type(app.screen).__name__ == "RunScreen"
     run_app([ADVANCED], body)
 
 
@@ -311,7 +316,7 @@ def test_runs_screen_help_and_palette_at_80x24() -> None:
         assert "advanced" in text and "finished" in text and "Enter" in text and "palette" in text
         await pilot.press("question_mark")
         await pilot.pause()
-        assert "next / previous change" in await shown(app, pilot)
+        assert "command palette" in await shown(app, pilot)
         await pilot.press("escape")
         table.move_to([table.row(i)["name"] for i in range(3)].index("advanced"))
         await pilot.press("enter")

@@ -11,7 +11,8 @@ HELP = """\
 # tracelab tui — keys
 
 **Everywhere**: `?` this help · `Ctrl+P` command palette · `q` quit · `Esc` cancel the running query,
-else back · `1`–`6` switch view · the mouse selects rows, tabs and header columns (sort).
+else leave a text field, else back · `1`–`6` switch view (in a text field they are text: `Esc` or `Tab`
+first) · the mouse selects rows, tabs, keys in the bottom bar and header columns (sort).
 
 | view | keys |
 |---|---|

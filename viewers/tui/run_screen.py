@@ -8,7 +8,7 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.screen import Screen
 from textual.widget import Widget
-from textual.widgets import Static, TabbedContent, TabPane
+from textual.widgets import Input, Static, TabbedContent, TabPane, TextArea
 
 from tracelab.viewers.tui.episodes import EpisodesPane
 from tracelab.viewers.tui.keybar import KeyBar
@@ -78,8 +78,15 @@ class RunScreen(Screen):
             self.call_after_refresh(self._focus_pane, event.pane.id)
 
     def action_cancel_or_back(self) -> None:
+        """Esc: cancel the running query; else leave a text field (for its view's table); else go back."""
         if self.source.interrupt():
             self.notify("query cancelled")
+            return
+        if isinstance(self.focused, TextArea):   # the SQL editor: to its results (where 1-6 work again)
+            self.panes["sql"].action_focus_results()  # type: ignore[attr-defined]
+            return
+        if isinstance(self.focused, Input):
+            self._focus_pane(self.query_one(TabbedContent).active)
             return
         self.app.pop_screen()
 

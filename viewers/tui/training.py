@@ -28,7 +28,7 @@ def wanted(name: str, patterns: tuple[str, ...]) -> bool:
     return any(name.startswith(p) if p.endswith("@") else name == p for p in patterns)
 
 
-class TrainingPane(Vertical):
+class TrainingPane(Vertical, can_focus=True):
     BINDINGS = [Binding("v", "eval_games", "eval games")]
     DEFAULT_CSS = """
     TrainingPane Grid { grid-size: 2 2; grid-gutter: 0; height: 1fr; }
@@ -47,7 +47,7 @@ class TrainingPane(Vertical):
         yield Static(" reading metrics…", id="train-status", classes="status")
 
     def focus_default(self) -> None:
-        pass
+        self.focus()  # its keys (v) work while it has the focus
 
     def on_mount(self) -> None:
         self.poll()
@@ -89,7 +89,7 @@ class TrainingPane(Vertical):
             f" {mark[0]:,} metric rows up to step {mark[1]:,} · {live} · v: evaluation games"
             if mark[0] else " this run has no metrics (not a training run)")
 
-    def action_eval_games(self) -> None:
+    async def action_eval_games(self) -> None:
         from tracelab.viewers.tui.episodes import EpisodesPane
-        self.run_worker(self.screen.action_show("episodes"))  # type: ignore[attr-defined]
+        await self.screen.action_show("episodes")  # type: ignore[attr-defined]
         self.screen.query_one(EpisodesPane).action_eval_only()
