@@ -123,3 +123,16 @@ def test_bench_helpers() -> None:
     assert len(calls) == 4 and len(t.runs) == 4 and t.min >= 0
     lines = format_table(["name", "n"], [["a", 1234567], ["bb", 0.5]]).splitlines()
     assert lines[0].split() == ["name", "n"] and lines[2].endswith("1,234,567") and lines[3].endswith("0.5")
+
+
+def test_bench_tui_quick(capsys: pytest.CaptureFixture) -> None:
+    r = bench_json(capsys, "tui", "--rows", "20000", "--repeats", "1")
+    machine(r["machine"])
+    assert r["rows"] == 20_000
+    for name in ("open run (episodes shown)", "open trace (first page shown)", "page index ready (background)",
+                 "scroll to an uncached page", "jump to a timestep", "next change of the atom",
+                 "filter by rule (half the rows)", "filter by atom"):
+        positive(r["figures"][name])
+    for name in ("open trace (count, first page)", "page index (anchors)", "jump to a timestep",
+                 "filter by rule (half the rows)", "filter by atom"):
+        positive(r["queries_alone"][name])

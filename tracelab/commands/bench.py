@@ -1,5 +1,6 @@
 """`tracelab bench`: speed and memory measured by benchmarks (docs/benchmarks.md), never by timed
-assertions in tests. `bench engine`, `bench env`, `bench store`, `bench replay`, `bench train`, `bench all`; each takes --json,
+assertions in tests. `bench engine`, `bench env`, `bench store`, `bench replay`, `bench train`,
+`bench tui`, `bench all` (all but tui); each takes --json,
 --quick (small sizes: the smoke test) and --repeats (medians and spread over that many repeats)."""
 from __future__ import annotations
 
@@ -22,6 +23,7 @@ def register(sub: argparse._SubParsersAction) -> None:
              "store": "trace-store ingest rows/s, sealing, point queries",
              "replay": "tracelab replay: a 500-step 5v5 game and 100 games of 1v1 converted to .rrd",
              "train": "DQN training transitions/s end to end, the update alone, the env alone, the loop's share",
+             "tui": "the terminal UI on a 10M-row run: open, first page, scroll, jump, filter (headless)",
              "all": "engine, env, store, replay and train"}
     for name, text in helps.items():
         q = what.add_parser(name, help=text)
@@ -31,6 +33,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         if name in ("engine", "env", "all"):
             q.add_argument("--agents", type=_sizes, default=None,
                            help="team sizes, comma-separated (default 1,5,20; --quick: 1,2)")
+        if name == "tui":
+            q.add_argument("--rows", type=positive_int, default=None,
+                           help="change rows of the synthetic run (default 10,000,000; --quick: 200,000)")
         if name in ("env", "all"):
             q.add_argument("--batch", type=positive_int, default=None,
                            help="worlds of the batched runs (default 256; --quick: 16)")
@@ -71,6 +76,10 @@ def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], s
         from tracelab.bench import train
         r = train.run(args.quick, args.repeats, args.envs, args.threads)
         return r, train.report(r)
+    if name == "tui":
+        from tracelab.bench import tui
+        r = tui.run(args.quick, args.repeats, args.rows)
+        return r, tui.report(r)
     from tracelab.bench import store
     r = store.run(args.quick, args.repeats)
     return r, store.report(r)

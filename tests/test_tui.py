@@ -1,0 +1,450 @@
+"""The terminal UI, headless (textual's run_test + Pilot), on the real sample runs and on a live run written
+by another process. pytest-textual-snapshot would pin pytest < 9, so screens are checked through their
+rendered text (the SVG screenshot's text) and the widgets' state instead of snapshot files."""
+from __future__ import annotations
+
+import asyncio
+import html
+import os
+import re
+import subprocess
+import sys
+import time
+from collections import defaultdict
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+os.environ["TEXTUAL_ANIMATIONS"] = "none"
+
+from tracelab.cli import main as cli_main  # noqa: E402
+from tracelab.store.catalog import list_runs  # noqa: E402
+from tracelab.store.reader import open_run  # noqa: E402
+from tracelab.viewers.tui.app import TracelabApp  # noqa: E402
+from tracelab.viewers.tui.lazy_table import LazyTable  # noqa: E402
+from tracelab.viewers.tui.paging import PAGE, TraceFilter, TraceSource  # noqa: E402
+from tracelab.viewers.tui.plot import BraillePlot  # noqa: E402
+from tracelab.viewers.tui.source import RunSource  # noqa: E402
+from tracelab.viewers.tui.sql import SqlPane, locate_error  # noqa: E402
+from tracelab.viewers.tui.trace import TracePane, parse_range  # noqa: E402
+from tracelab.viewers.tui.why import WhyPane  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+ADVANCED = ROOT / "sample_runs" / "advanced"
+
+
+async def shown(app: Any, pilot: Any) -> str:
+    """What the screen shows once it has repainted, as plain text lines (from textual's SVG screenshot)."""
+    await pilot.pause()
+    svg = app.export_screenshot()
+    lines: dict[float, list[tuple[float, str]]] = defaultdict(list)
+    for x, y, text in re.findall(r'<text[^>]*x="([\d.]+)" y="([\d.]+)"[^>]*>([^<]*)</text>', svg):
+        lines[float(y)].append((float(x), html.unescape(text).replace("\xa0", " ")))
+    return "\n".join("".join(t for _, t in sorted(parts)) for _, parts in sorted(lines.items()))
+
+
+async def wait_for(pilot: Any, done: Callable[[], bool], timeout: float = 30.0) -> None:
+    t0 = time.monotonic()
+    while not done():
+        await pilot.pause(0.05)
+        if time.monotonic() - t0 > timeout:
+            raise AssertionError("the TUI did not get there in time")
+
+
+def loaded(table: LazyTable) -> bool:
+    return table.ready and table.idle and (table.count == 0 or table.cursor_row is not None)
+
+
+@contextmanager
+def live_run(mode: str, tmp_path: Path) -> Iterator[Path]:
+    """A run another process is writing (tests/tui_writer_proc.py MODE), from its first flush on."""
+    run, stop = tmp_path / f"{mode}-live", tmp_path / "stop"
+    proc = subprocess.Popen([sys.executable, str(ROOT / "tests" / "tui_writer_proc.py"), mode, str(run),
+                             str(stop)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None and proc.stdout.readline().strip()
+        yield run
+    finally:
+        stop.touch()
+        proc.wait(timeout=30)
+
+
+async def open_first_trace(app: Any, pilot: Any) -> tuple[TracePane, LazyTable]:
+    """From the Episodes view, Enter on the first episode; its trace's first page on screen."""
+    await wait_for(pilot, lambda: loaded(app.screen.query_one("#ep-table", LazyTable)))
+    await pilot.press("enter")
+    pane = app.screen.query_one(TracePane)
+    await wait_for(pilot, lambda: pane.table.count > 0 and loaded(pane.table))
+    return pane, pane.table
+
+
+def run_app(paths: list[Path], body: Callable[[Any, Any], Any], size: tuple[int, int] = (80, 24)) -> None:
+    async def go() -> None:
+        app = TracelabApp(paths)
+        async with app.run_test(size=size) as pilot:
+            await body(app, pilot)
+    asyncio.run(go())
+
+
+# ---- the catalog and `tracelab runs` ---------------------------------------------------------------------
+
+def test_catalog_lists_the_sample_runs_with_counts(capsys: pytest.CaptureFixture[str]) -> None:
+    runs = {r.name: r for r in list_runs([ROOT / "sample_runs"])}
+    assert set(runs) == {"base", "advanced", "nonmarkov"}
+    adv = runs["advanced"]
+    con = open_run(ADVANCED)
+    assert adv.rows == con.execute("SELECT count(*) FROM changes").fetchall()[0][0] > 0
+    assert adv.episodes == con.execute("SELECT count(*) FROM episodes").fetchall()[0][0]
+    assert adv.status == "finished" and adv.scenario == "advanced" and adv.size > 0
+    assert cli_main(["runs", str(ROOT / "sample_runs")]) == 0
+    out = capsys.readouterr().out
+    assert "advanced" in out and "finished" in out and f"{adv.rows}" in out
+    assert cli_main(["runs", str(ROOT / "no-such-dir")]) == 1
+    assert "no such directory" in capsys.readouterr().err
+
+
+# ---- paging ------------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("flt", [TraceFilter(0), TraceFilter(0, rule="snap_*"), TraceFilter(1, label="atLoc"),
+                                 TraceFilter(2, t_from=3, t_to=9, atom="*red-agent-1*")])
+def test_trace_pages_match_the_changes_view_in_every_order_of_access(flt: TraceFilter) -> None:
+    source = RunSource(ADVANCED)
+    expected = [r["seq"] for r in TraceSource(source, flt).source.rows(
+        "SELECT seq FROM changes WHERE episode = $e AND ($lo IS NULL OR t >= $lo) AND ($hi IS NULL OR t <= $hi) "
+        "AND atom GLOB $a AND label GLOB $l AND rule GLOB $r ORDER BY seq",
+        {"e": flt.episode, "lo": flt.t_from, "hi": flt.t_to, "a": flt.atom or "*", "l": flt.label or "*",
+         "r": flt.rule or "*"})]
+    assert expected
+    by_hints = TraceSource(source, flt)       # pages found from hints, last page first
+    assert by_hints.prepare() == len(expected)
+    pages = (len(expected) + PAGE - 1) // PAGE
+    got = {p: [r["seq"] for r in by_hints.fetch(p)] for p in reversed(range(pages))}
+    assert by_hints.anchors is None or pages > 2
+    by_anchors = TraceSource(source, flt)
+    by_anchors.prepare()
+    by_anchors.warm()
+    for p in range(pages):
+        assert got[p] == expected[p * PAGE:(p + 1) * PAGE] == [r["seq"] for r in by_anchors.fetch(p)]
+    spanned = TraceSource(source, flt)         # all pages in one range query from the hint at row 0
+    spanned.prepare()
+    assert [r["seq"] for _, rows in spanned.fetch_pages(0, pages - 1) for r in rows] == expected
+    middle = len(expected) // 2
+    opener = TraceSource(source, flt, ("seq", expected[middle]))  # opens on a given change
+    opener.prepare()
+    assert opener.start_row == middle
+    assert opener.fetch(middle // PAGE)[middle % PAGE]["seq"] == expected[middle]
+    jumper = TraceSource(source, flt)
+    jumper.prepare()
+    t = by_anchors.fetch(pages - 1)[-1]["t"]
+    row = jumper.row_of_t(t)
+    assert jumper.fetch(row // PAGE)[row % PAGE]["t"] == t and (row == 0 or expected[row - 1] < expected[row])
+
+
+def test_time_ranges_and_error_positions_are_read() -> None:
+    assert parse_range("3..9") == (3, 9) and parse_range("..9") == (None, 9) and parse_range("5") == (5, 5)
+    assert parse_range("") == (None, None)
+    with pytest.raises(ValueError):
+        parse_range("x..")
+    err = locate_error("SELECT *\nFORM changes", 'Parser Error: syntax error at or near "FORM"\n\n'
+                                                 "LINE 2: FORM changes\n        ^")
+    assert (err.line, err.column) == (1, 0) and "syntax error" in err.message
+
+
+# ---- the app -------------------------------------------------------------------------------------------------
+
+def test_open_a_run_go_to_an_episode_filter_by_rule_and_explain_a_death() -> None:
+    async def body(app: Any, pilot: Any) -> None:
+        episodes = app.screen.query_one("#ep-table", LazyTable)
+        await wait_for(pilot, lambda: loaded(episodes))
+        text = await shown(app, pilot)
+        assert "1 Episodes" in text and "loss" in text and "win" in text
+        assert episodes.count == 4 and episodes.cursor_row["episode"] == 0
+        await pilot.press("enter")                                  # episode 0's trace
+        trace = app.screen.query_one("#tr-table", LazyTable)
+        await wait_for(pilot, lambda: trace.count > 0 and loaded(trace))
+        all_rows = trace.count
+        pane = app.screen.query_one(TracePane)
+        pane.query_one("#tr-rule").value = "d_killed"
+        await pilot.press("slash", "enter")                         # apply the filters
+        await wait_for(pilot, lambda: pane.filter.rule == "d_killed" and loaded(trace))
+        assert 0 < trace.count < all_rows
+        assert {trace.row(i)["rule"] for i in range(trace.count)} == {"d_killed"}
+        death = next(i for i in range(trace.count) if trace.row(i)["atom"] == "alive(red-agent-1)")
+        assert trace.row(death)["t"] == 15 and trace.row(death)["new_upper"] == 0
+        trace.move_to(death)
+        await pilot.pause()
+        assert "d_killed" in await shown(app, pilot) and "alive(red-agent-1)" in await shown(app, pilot)
+        await pilot.press("w")                                      # why
+        why = app.screen.query_one(WhyPane)
+        tree = why.query_one("Tree")
+        await wait_for(pilot, lambda: tree.root.data is not None)
+        root = tree.root.data
+        assert root.atom == "alive(red-agent-1)" and root.value == [0, 0] and root.cause.name == "d_killed"
+        assert str(tree.root.label).startswith("alive(red-agent-1) = [0,0] at the end of t=15")
+        children = [str(c.label) for c in tree.root.children]
+        assert any("killed(red-agent-1)" in c and c.startswith("ok") for c in children)
+        assert "killed(red-agent-1)" in await shown(app, pilot)
+        killed = tree.root.children[0]
+        assert killed.data.cause.name == "h_killed" and killed.children      # expandable, one level deeper
+        await pilot.press("4")                                      # from the tree to another view
+        await wait_for(pilot, lambda: app.screen.query_one("TabbedContent").active == "rules")
+        await pilot.pause(0.3)
+        assert app.screen.query_one("TabbedContent").active == "rules"
+    run_app([ADVANCED], body)
+
+
+def test_next_and_previous_change_of_the_selected_atom_and_jump_to_a_step() -> None:
+    async def body(app: Any, pilot: Any) -> None:
+        pane, trace = await open_first_trace(app, pilot)
+        jumps = pane.jumps
+        pane.query_one("#tr-goto").value = "7"
+        await pilot.press("g", "enter")
+        await wait_for(pilot, lambda: pane.jumps > jumps and loaded(trace))
+        first7 = trace.cursor
+        assert trace.cursor_row["t"] == 7 and trace.row(first7 - 1)["t"] < 7
+        atom, seq = trace.cursor_row["atom"], trace.cursor_row["seq"]
+        await pilot.press("n")
+        await wait_for(pilot, lambda: pane.jumps > jumps + 1 and loaded(trace))
+        nxt = trace.cursor_row
+        if nxt["seq"] != seq:                                        # the atom changed again later
+            assert nxt["atom"] == atom and nxt["seq"] > seq
+            assert all(trace.row(i)["atom"] != atom for i in range(first7 + 1, trace.cursor))
+            await pilot.press("p")
+            await wait_for(pilot, lambda: pane.jumps > jumps + 2 and loaded(trace))
+            assert trace.cursor_row["seq"] == seq
+    run_app([ADVANCED], body, size=(100, 30))
+
+
+def test_episodes_sort_and_filter_by_outcome_and_length() -> None:
+    async def body(app: Any, pilot: Any) -> None:
+        table = app.screen.query_one("#ep-table", LazyTable)
+        await wait_for(pilot, lambda: loaded(table))
+        pane = app.screen.query_one("EpisodesPane")
+        pane.sort_key, pane.sort_desc = "steps", True
+        pane.reload()
+        await wait_for(pilot, lambda: loaded(table) and table.sort_key == "steps")
+        lengths = [table.row(i)["steps"] for i in range(table.count)]
+        assert lengths == sorted(lengths, reverse=True) and lengths[0] == 25
+        assert "length▼" in await shown(app, pilot)
+        app.screen.query_one("#ep-outcome").value = "loss"
+        await wait_for(pilot, lambda: loaded(table) and table.count == 2)
+        app.screen.query_one("#ep-length").value = "..20"
+        pane.reload()
+        await wait_for(pilot, lambda: loaded(table) and table.count == 1)
+        assert table.row(0)["episode"] == 0 and table.row(0)["outcome"] == "loss"
+        await pilot.press("f")                                       # into the length field
+        await wait_for(pilot, lambda: app.focused is not None and app.focused.id == "ep-length")
+        await pilot.press("escape")                                  # out of it, not out of the run
+        await wait_for(pilot, lambda: app.focused is table)
+        assert type(app.screen).__name__ == "RunScreen"
+    run_app([ADVANCED], body)
+
+
+def test_sql_console_saved_query_inline_error_and_write_refused() -> None:
+    before = ADVANCED.joinpath("run.duckdb").read_bytes()
+
+    async def body(app: Any, pilot: Any) -> None:
+        await wait_for(pilot, lambda: loaded(app.screen.query_one("#ep-table", LazyTable)))
+        await pilot.press("5")
+        await wait_for(pilot, lambda: app.screen.panes["sql"].is_attached)
+        sql: SqlPane = app.screen.panes["sql"]
+        results = sql.query_one(LazyTable)
+        await pilot.press("f2")                                     # the saved queries
+        await wait_for(pilot, lambda: type(app.screen).__name__ == "SavedQueryPicker")
+        picker = app.screen
+        names = [q.name for q in picker.queries]
+        picker.query_one("OptionList").highlighted = names.index("firings_per_episode")
+        await pilot.press("enter")
+        await wait_for(pilot, lambda: len(picker.query("Input")) == 1)
+        picker.query_one("Input").value = "1"                       # its parameter: episode 1
+        await pilot.press("enter")
+        await wait_for(pilot, lambda: results.ready and loaded(results) and results.count > 0)
+        assert {results.row(i)["episode"] for i in range(results.count)} == {1}
+        assert "firings_per_episode" in await shown(app, pilot)
+
+        sql.editor.text = "SELECT episode,\n  count(*) FORM changes"  # a typo on line 2
+        await pilot.press("ctrl+r")
+        await wait_for(pilot, lambda: sql.last_error is not None)
+        err = sql.last_error
+        assert err.line == 1 and "syntax error" in err.message
+        assert sql.editor.cursor_location[0] == 1 and sql.editor.selected_text.strip() != ""
+        text = await shown(app, pilot)
+        assert "syntax error" in text and "line 2" in text
+
+        for statement in ("DELETE FROM raw.changes", "CREATE TABLE x AS SELECT 1",
+                          "ATTACH 'x.duckdb' AS x"):
+            sql.editor.text = statement
+            sql.last_error = None
+            await pilot.press("ctrl+r")
+            await wait_for(pilot, lambda: sql.last_error is not None)
+            assert "only read-only queries" in sql.last_error.message
+        assert "only read-only" in await shown(app, pilot)
+    run_app([ADVANCED], body, size=(100, 30))
+    assert ADVANCED.joinpath("run.duckdb").read_bytes() == before
+
+
+def test_rules_view_counts_firings_and_lists_rules_that_never_fired() -> None:
+    async def body(app: Any, pilot: Any) -> None:
+        await wait_for(pilot, lambda: loaded(app.screen.query_one("#ep-table", LazyTable)))
+        await pilot.press("4")
+        await wait_for(pilot, lambda: app.screen.panes["rules"].is_attached)
+        table = app.screen.panes["rules"].query_one(LazyTable)
+        await wait_for(pilot, lambda: loaded(table) and table.count > 0)
+        rows = [table.row(i) for i in range(min(table.count, PAGE))]
+        con = open_run(ADVANCED)
+        fired = dict(con.execute("SELECT rule, count(*) FROM firings GROUP BY rule").fetchall())
+        assert {r["rule"]: r["firings"] for r in rows if r["firings"]} == fired
+        assert [r["firings"] for r in rows] == sorted((r["firings"] for r in rows), reverse=True)
+        never = [r["rule"] for r in rows if r["firings"] == 0]
+        assert never and not set(never) & set(fired)
+        await wait_for(pilot, lambda: "never fired" in app.screen.query_one("#rules-status").render().plain)
+        await pilot.press("enter")                                  # the top rule filters the trace
+        trace = app.screen.query_one("#tr-table", LazyTable)
+        await wait_for(pilot, lambda: app.screen.query_one(TracePane).filter is not None and loaded(trace))
+        assert trace.count > 0 and trace.cursor_row["rule"] == rows[0]["rule"]
+    run_app([ADVANCED], body)
+
+
+def test_runs_screen_help_and_palette_at_80x24() -> None:
+    async def body(app: Any, pilot: Any) -> None:
+        table = app.screen.query_one(LazyTable)
+        await wait_for(pilot, lambda: loaded(table) and table.count == 3)
+        text = await shown(app, pilot)
+        assert "advanced" in text and "finished" in text and "Enter" in text and "palette" in text
+        await pilot.press("question_mark")
+        await pilot.pause()
+        assert "command palette" in await shown(app, pilot)
+        await pilot.press("escape")
+        table.move_to([table.row(i)["name"] for i in range(3)].index("advanced"))
+        await pilot.press("enter")
+        await wait_for(pilot, lambda: type(app.screen).__name__ == "RunScreen")
+        commands = [c.title for c in app.get_system_commands(app.screen)]
+        assert "Show Trace" in commands and "Saved queries" in commands
+    run_app([ROOT / "sample_runs"], body)
+
+
+def test_training_curve_updates_while_another_process_appends_metrics(tmp_path: Path) -> None:
+    with live_run("train", tmp_path) as run:
+        async def body(app: Any, pilot: Any) -> None:
+            await pilot.press("6")
+            await wait_for(pilot, lambda: app.screen.panes["training"].is_attached)
+            loss = app.screen.query_one("#plot-loss", BraillePlot)
+            win = app.screen.query_one("#plot-win-rate", BraillePlot)
+            await wait_for(pilot, lambda: loss.points > 0)
+            first, first_text = loss.points, await shown(app, pilot)
+            assert "loss" in first_text and "epsilon" in first_text and "live" in first_text
+            await wait_for(pilot, lambda: loss.points >= first + 3 and win.points > 0)
+            assert await shown(app, pilot) != first_text
+            assert [s.name for s in win.series] == ["eval/win_rate"]
+            steps = loss.series[0].xs
+            assert steps == sorted(steps) and steps[-1] > steps[0]
+            await pilot.press("1")
+            episodes = app.screen.query_one("#ep-table", LazyTable)
+            await wait_for(pilot, lambda: loaded(episodes) and "kind" in [c.key for c in episodes.columns])
+            assert episodes.cursor_row["kind"] == "train" and episodes.cursor_row["train_step"] == 100
+        run_app([run], body, size=(100, 30))
+
+
+def test_escape_cancels_a_running_query() -> None:
+    async def body(app: Any, pilot: Any) -> None:
+        await wait_for(pilot, lambda: loaded(app.screen.query_one("#ep-table", LazyTable)))
+        await pilot.press("5")
+        await wait_for(pilot, lambda: app.screen.panes["sql"].is_attached)
+        sql: SqlPane = app.screen.panes["sql"]
+        sql.editor.text = "SELECT count(*) FROM changes a, changes b, changes c"   # ~10^11 rows
+        await pilot.press("ctrl+r")
+        await wait_for(pilot, lambda: app.screen.source.busy)
+        await pilot.press("escape")
+        await wait_for(pilot, lambda: sql.last_error is not None)
+        assert "interrupt" in sql.last_error.message.lower()
+        assert type(app.screen).__name__ == "RunScreen"          # Esc cancelled; it did not go back
+        sql.editor.text = "SELECT count(*) AS n FROM episodes"   # the connection still works
+        await pilot.press("ctrl+r")
+        results = sql.query_one(LazyTable)
+        await wait_for(pilot, lambda: loaded(results) and results.count == 1)
+        assert results.row(0)["n"] == 4
+    run_app([ADVANCED], body)
+
+
+def test_board_follows_the_trace_cursor() -> None:
+    async def body(app: Any, pilot: Any) -> None:
+        pane, trace = await open_first_trace(app, pilot)
+        board = pane.board
+        assert board is not None and board.display                  # 120 columns: room for it
+        jumps = pane.jumps
+        pane.query_one("#tr-goto").value = "15"
+        await pilot.press("g", "enter")
+        await wait_for(pilot, lambda: pane.jumps > jumps and loaded(trace))
+        await wait_for(pilot, lambda: board.board is not None and board.step == 15)
+        text = await shown(app, pilot)
+        assert "step 15" in text and "board" in text
+        death = next(i for i in range(trace.cursor, trace.count)
+                     if trace.row(i) is not None and trace.row(i)["atom"] == "alive(red-agent-1)")
+        trace.move_to(death)
+        await wait_for(pilot, lambda: board.phase >= 0)
+        assert "R1 dead" in await shown(app, pilot)
+        await pilot.press("b")                                         # hide it
+        assert not board.display
+    run_app([ADVANCED], body, size=(120, 34))
+
+
+def test_the_mouse_selects_rows_sorts_by_header_and_opens_on_double_click() -> None:
+    async def body(app: Any, pilot: Any) -> None:
+        table = app.screen.query_one("#ep-table", LazyTable)
+        await wait_for(pilot, lambda: loaded(table))
+        await pilot.click(table, offset=(3, 3))                      # line 0 is the header: row 2
+        assert table.cursor == 2 and table.cursor_row["episode"] == 2
+        x = sum(c.width + 1 for c in table.columns[:3]) + 1            # the "length" header
+        await pilot.click(table, offset=(x, 0))
+        await wait_for(pilot, lambda: table.sort_key == "steps" and loaded(table))
+        assert [table.row(i)["steps"] for i in range(table.count)] == [0, 15, 18, 25]
+        await pilot.click(table, offset=(3, 2))
+        await pilot.click(table, offset=(3, 2), times=2)               # double click: the trace
+        trace = app.screen.query_one("#tr-table", LazyTable)
+        await wait_for(pilot, lambda: app.screen.query_one(TracePane).filter is not None and loaded(trace))
+        assert app.screen.query_one(TracePane).filter.episode == 0
+        await pilot.click(app.screen.query_one("KeyBar"), offset=(app.size.width - 3, 0))  # ^p palette
+        await pilot.pause()
+        assert type(app.screen).__name__ == "CommandPalette"
+    run_app([ADVANCED], body)
+
+
+def test_the_trace_of_a_live_episode_grows_and_keeps_its_cursor(tmp_path: Path) -> None:
+    with live_run("trace", tmp_path) as run:
+        async def body(app: Any, pilot: Any) -> None:
+            episodes = app.screen.query_one("#ep-table", LazyTable)
+            await wait_for(pilot, lambda: loaded(episodes) and episodes.count == 1)
+            await pilot.press("enter")
+            pane = app.screen.query_one(TracePane)
+            trace = pane.table
+            await wait_for(pilot, lambda: trace.count > 0 and loaded(trace))
+            first = trace.count
+            trace.move_to(first - 1)
+            await wait_for(pilot, lambda: loaded(trace))
+            seq = trace.cursor_row["seq"]
+            await wait_for(pilot, lambda: trace.count > first and loaded(trace))
+            assert trace.cursor_row["seq"] == seq          # still on the change it was on
+            assert trace.row(trace.count - 1) is None or trace.row(trace.count - 1)["seq"] > seq
+        run_app([run], body)
+
+
+def test_why_of_a_change_that_was_not_the_atoms_last_in_its_step_says_so() -> None:
+    async def body(app: Any, pilot: Any) -> None:
+        pane, trace = await open_first_trace(app, pilot)
+        pane.query_one("#tr-atom").value = "acting(clock)"
+        await pilot.press("slash", "enter")
+        await wait_for(pilot, lambda: pane.filter.atom == "acting(clock)" and loaded(trace))
+        rows = [trace.row(i) for i in range(trace.count)]
+        first_at_1 = next(i for i, r in enumerate(rows) if r["t"] == 1)
+        assert rows[first_at_1 + 1]["t"] == 1                 # acting(clock) changes twice at t=1
+        trace.move_to(first_at_1)
+        await pilot.pause()
+        await pilot.press("w")
+        why = app.screen.query_one(WhyPane)
+        await wait_for(pilot, lambda: why.query_one("Tree").root.data is not None)
+        assert why.query_one("Tree").root.data.seq == rows[first_at_1 + 1]["seq"]
+        assert "was not acting(clock)'s last at t=1" in await shown(app, pilot)
+    run_app([ADVANCED], body, size=(120, 30))

@@ -1,0 +1,48 @@
+"""`tracelab runs`: the run catalog (status live from the writer's lock, command, scenario, episodes,
+change rows, size, start time) of the runs in some directories (default ./runs and sample_runs/)."""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from tracelab.commands._output import add_format_options, fail, store_errors, write_table
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("runs", help="list runs: status, command, scenario, episodes, rows, size, start")
+    p.add_argument("dirs", nargs="*", metavar="DIR",
+                   help="directories holding runs, or runs themselves (default: runs/ and sample_runs/)")
+    add_format_options(p)
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import pyarrow as pa
+
+    from tracelab.store.catalog import DEFAULT_ROOTS, list_runs
+    roots = args.dirs or list(DEFAULT_ROOTS)
+    try:
+        missing = [d for d in args.dirs if not Path(d).exists()]
+        if missing:
+            raise FileNotFoundError(f"no such directory or run: {missing[0]!r}")
+        runs = list_runs(roots)
+        rows = [r.as_row() for r in runs]
+        if args.format == "table":
+            for r in rows:
+                r["command"] = _short(r["command"])
+        schema = pa.schema([("name", pa.string()), ("status", pa.string()), ("episodes", pa.int64()),
+                            ("rows", pa.int64()), ("size", pa.string()), ("started", pa.string()),
+                            ("scenario", pa.string()), ("command", pa.string()), ("path", pa.string())])
+        write_table(pa.Table.from_pylist(rows, schema=schema), args.format, args.output)
+        for r in runs:
+            if r.error:
+                print(f"note: {r.path}: {r.error}", file=sys.stderr)
+    except store_errors() as e:
+        return fail(e)
+    return 0
+
+
+def _short(command: str, width: int = 48) -> str:
+    """The command cut to `width` characters."""
+    return command if len(command) <= width else command[: width - 1] + "…"

@@ -1,0 +1,34 @@
+"""`tracelab tui`: the terminal UI (tracelab.viewers.tui): runs, episodes, the trace with why-trees,
+rules, a read-only SQL console and live training curves (docs/tui.md)."""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("tui", help="terminal UI: browse runs, traces, why-trees, rules, SQL, training curves")
+    p.add_argument("paths", nargs="*", metavar="RUN|DIR",
+                   help="a run to open, or directories of runs (default: runs/ and sample_runs/)")
+    p.add_argument("--screenshots", metavar="DIR",
+                   help="write the README's screenshots (PNG) to DIR and exit (needs rsvg-convert)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from tracelab.commands._output import fail
+    missing = [p for p in args.paths if not Path(p).exists()]
+    if missing:
+        return fail(FileNotFoundError(f"no such run or directory: {missing[0]!r}"))
+    if args.screenshots:
+        from tracelab.viewers.tui.screenshots import write_screenshots
+        try:
+            run = Path(args.paths[0]) if args.paths else None
+            for path in write_screenshots(Path(args.screenshots), run):
+                print(path)
+        except (RuntimeError, FileNotFoundError, ValueError) as e:
+            return fail(e)
+        return 0
+    from tracelab.viewers.tui.app import TracelabApp
+    TracelabApp(args.paths).run()
+    return 0

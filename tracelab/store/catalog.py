@@ -1,0 +1,141 @@
+"""The run catalog: every run under some directories, with its status (live, from the writer's lock and
+pid, via run_info), command, scenario, episodes, change rows, size and start time.
+
+`tracelab runs` prints it; the TUI's Runs screen shows it and refreshes it while runs grow. Counts are read
+through the store's read-only query path (open_run + query_readonly), never by opening a run's files."""
+from __future__ import annotations
+
+import datetime as _dt
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from tracelab.store import layout
+from tracelab.store.reader import open_run, query_readonly, retrying, run_info
+
+DEFAULT_ROOTS = (Path("runs"), Path("sample_runs"))
+
+
+@dataclass
+class RunSummary:
+    path: Path
+    name: str
+    status: str                  # running | finished | failed | interrupted | crashed | unreadable
+    command: str
+    scenario: str
+    episodes: int | None
+    rows: int | None             # change rows
+    size: int                    # bytes on disk
+    started_at: _dt.datetime | None
+    error: str = ""              # why the run could not be read (status 'unreadable')
+
+    def as_row(self) -> dict[str, Any]:
+        return {"name": self.name, "status": self.status, "episodes": self.episodes, "rows": self.rows,
+                "size": human_size(self.size), "started": _time_text(self.started_at),
+                "scenario": self.scenario, "command": self.command, "path": str(self.path)}
+
+
+def short_command(command: str) -> str:
+    """The command as typed: `tracelab ...` without the interpreter's path to the script."""
+    words = command.split()
+    if words and words[0].endswith("/tracelab"):
+        words[0] = "tracelab"
+    return " ".join(words)
+
+
+def human_size(n: int) -> str:
+    size = float(n)
+    for unit in ("B", "KB", "MB", "GB"):
+        if size < 1024 or unit == "GB":
+            return f"{size:.0f} {unit}" if unit == "B" else f"{size:.1f} {unit}"
+        size /= 1024
+    return f"{n} B"
+
+
+def _time_text(t: _dt.datetime | None) -> str:
+    return "" if t is None else t.strftime("%Y-%m-%d %H:%M:%S")
+
+
+def _parse_time(value: Any) -> _dt.datetime | None:
+    if value is None or isinstance(value, _dt.datetime):
+        return value
+    try:
+        t = _dt.datetime.fromisoformat(str(value))
+    except ValueError:
+        return None
+    return t.astimezone(_dt.timezone.utc).replace(tzinfo=None) if t.tzinfo else t
+
+
+def is_run(path: Path) -> bool:
+    """A run directory (it has meta.json) or a lone .duckdb file."""
+    return (path.is_dir() and layout.meta_path(path).is_file()) or (
+        path.is_file() and path.suffix == ".duckdb")
+
+
+def find_runs(roots: Iterable[str | Path]) -> list[Path]:
+    """The runs given: each root that is a run itself, else the runs directly inside it; sorted by
+    path within each root, roots in the order given, no path twice."""
+    found: list[Path] = []
+    seen: set[Path] = set()
+    for root in map(Path, roots):
+        if is_run(root):
+            candidates = [root]
+        elif root.is_dir():
+            candidates = sorted(p for p in root.iterdir() if is_run(p))
+        else:
+            candidates = []
+        for p in candidates:
+            key = p.resolve()
+            if key not in seen:
+                seen.add(key)
+                found.append(p)
+    return found
+
+
+def _disk_size(path: Path) -> int:
+    if path.is_file():
+        return path.stat().st_size
+    total = 0
+    for p in path.rglob("*"):
+        try:
+            if p.is_file():
+                total += p.stat().st_size
+        except OSError:  # a part deleted by compaction while we walked
+            pass
+    return total
+
+
+def _counts(path: Path) -> tuple[int, int]:
+    con = open_run(path)
+    try:
+        sql = ("SELECT (SELECT count(*) FROM (SELECT episode FROM raw.episode_begin UNION "
+               "SELECT episode FROM raw.episode_end)), (SELECT count(*) FROM raw.changes)")
+        eps, rows = retrying(lambda: query_readonly(con, sql).fetchall())[0]
+        return int(eps), int(rows)
+    finally:
+        con.close()
+
+
+def summarize_run(path: Path) -> RunSummary:
+    """One run's summary; a run that cannot be read is listed as 'unreadable' with the reason."""
+    name = path.stem if path.is_file() else path.name
+    try:
+        info = run_info(path)
+        episodes, rows = _counts(path)
+    except Exception as e:  # noqa: BLE001 - one broken run must not hide the others
+        return RunSummary(path, name, "unreadable", "", "", None, None, _disk_size(path), None,
+                          error=str(e).splitlines()[0] if str(e) else type(e).__name__)
+    meta = info.meta
+    return RunSummary(path, name, info.status, short_command(str(meta.get("command") or "")),
+                      str(meta.get("scenario") or ""), episodes, rows, _disk_size(path),
+                      _parse_time(meta.get("started_at")))
+
+
+def list_runs(roots: Sequence[str | Path] = DEFAULT_ROOTS) -> list[RunSummary]:
+    """Every run under `roots` (directories of runs, or runs themselves), newest first; ties by path."""
+    runs = [summarize_run(p) for p in find_runs(roots)]
+    oldest = _dt.datetime.min
+    runs.sort(key=lambda r: str(r.path))
+    runs.sort(key=lambda r: r.started_at or oldest, reverse=True)
+    return runs

@@ -1,0 +1,69 @@
+"""The tracelab terminal UI: the Runs screen, and for an open run its views (run_screen.py).
+Start it with `tracelab tui [RUN | DIR ...]`."""
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+from textual.app import App, SystemCommand
+from textual.binding import Binding
+from textual.screen import Screen
+
+from tracelab.store.catalog import DEFAULT_ROOTS, is_run
+from tracelab.viewers.tui.help import HelpScreen
+from tracelab.viewers.tui.run_screen import TABS, RunScreen
+from tracelab.viewers.tui.runs_screen import RunsScreen
+
+CSS = """
+.title { background: $primary-background; color: $text; text-style: bold; height: 1; }
+.status { background: $boost; color: $text-muted; height: 1; }
+TabbedContent, TabPane { height: 1fr; }
+TabPane { padding: 0; }
+"""
+
+
+class TracelabApp(App[None]):
+    TITLE = "tracelab"
+    CSS = CSS
+    BINDINGS = [
+        Binding("question_mark", "help", "help"),
+        Binding("q", "quit", "quit"),
+    ]
+
+    def __init__(self, paths: Sequence[str | Path] = ()) -> None:
+        super().__init__()
+        self.paths = [Path(p) for p in paths] or list(DEFAULT_ROOTS)
+
+    def on_mount(self) -> None:
+        self.push_screen(RunsScreen(self.paths))
+        if len(self.paths) == 1 and is_run(self.paths[0]):
+            self.show_run(self.paths[0])
+
+    def show_run(self, path: Path) -> None:
+        try:
+            screen = RunScreen(path)
+        except Exception as e:  # noqa: BLE001 - a run that cannot be opened is a message, not a crash
+            self.notify(f"cannot open {path}: {e}", severity="error", timeout=8)
+            return
+        self.push_screen(screen)
+
+    async def _saved_queries(self, screen: RunScreen) -> None:
+        await screen.action_show("sql")
+        sql = await screen.pane("sql")
+        sql.action_saved()  # type: ignore[attr-defined]
+
+    def action_help(self) -> None:
+        if not isinstance(self.screen, HelpScreen):
+            self.push_screen(HelpScreen())
+
+    def get_system_commands(self, screen: Screen) -> Iterable[SystemCommand]:
+        yield from super().get_system_commands(screen)
+        yield SystemCommand("Help", "the keys of every view", self.action_help)
+        if isinstance(screen, RunScreen):
+            for tab, title in TABS:
+                name = title.split()[1]
+                yield SystemCommand(f"Show {name}", f"switch to the {name} view (key {title.split()[0]})",
+                                    lambda tab=tab: screen.action_show(tab))
+            yield SystemCommand("Saved queries", "pick a saved SQL query and its parameters",
+                                lambda: self._saved_queries(screen))
+            yield SystemCommand("Back to runs", "close this run", self.pop_screen)

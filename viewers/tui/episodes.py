@@ -1,0 +1,205 @@
+"""The Episodes view: outcome, return, length and seed of every episode; for a training run also its
+kind (train / eval) and training step. Sort by clicking a header or with s / S; filter by outcome, length
+(e.g. `10..50`, `>=20`) and kind. Enter opens the episode's trace. On a live run the list is re-read
+when episodes begin or end."""
+from __future__ import annotations
+
+import re
+from typing import Any
+
+from rich.text import Text
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal, Vertical
+from textual.widgets import Input, Select, Static
+
+from tracelab.viewers.tui.colours import FALSE, PARTIAL, TRUE, UNKNOWN
+from tracelab.viewers.tui.lazy_table import Column, LazyTable
+from tracelab.viewers.tui.messages import OpenTrace
+from tracelab.viewers.tui.paging import QuerySource
+from tracelab.viewers.tui.source import RunSource
+
+OUTCOME_COLOURS = {"win": TRUE, "loss": FALSE, "draw": PARTIAL, "truncated": UNKNOWN}
+
+
+def outcome_text(row: dict[str, Any]) -> Text:
+    o = row.get("outcome") or ("running" if not row.get("ended") else "")
+    return Text(o, style=OUTCOME_COLOURS.get(o, ""))
+
+
+def _reward(row: dict[str, Any]) -> str:
+    return "" if row.get("reward") is None else f"{row['reward']:g}"
+
+
+BASE_COLUMNS = [
+    Column("episode", "episode", 8, align="right"),
+    Column("outcome", "outcome", 9, render=outcome_text),
+    Column("reward", "return", 8, align="right", render=_reward),
+    Column("steps", "length", 7, align="right"),
+    Column("seed", "seed", 6, align="right"),
+    Column("world", "world", 5, align="right"),
+]
+TRAINING_COLUMNS = [Column("kind", "kind", 6), Column("train_step", "train step", 10, align="right")]
+
+LIVE_REFRESH_S = 2.0
+_LENGTH = re.compile(r"^\s*(?:(\d+)?\s*\.\.\s*(\d+)?|([<>]=?|=)\s*(\d+)|(\d+))\s*$")
+
+
+def length_clause(text: str) -> str:
+    """SQL for a length filter: `10..50`, `..30`, `>=20`, `<5`, `=15` or `15`; raises ValueError."""
+    if not text.strip():
+        return ""
+    m = _LENGTH.match(text)
+    if not m:
+        raise ValueError(f"cannot read length filter {text!r}: write 10..50, >=20, <5 or 15")
+    lo, hi, op, n, exact = m.groups()
+    if exact is not None:
+        return f"steps = {int(exact)}"
+    if op is not None:
+        return f"steps {op} {int(n)}"
+    parts = ([f"steps >= {int(lo)}"] if lo else []) + ([f"steps <= {int(hi)}"] if hi else [])
+    return " AND ".join(parts)
+
+
+class EpisodesPane(Vertical):
+    BINDINGS = [
+        Binding("s", "sort(1)", "sort"),
+        Binding("S", "sort(-1)", "reverse", show=False),
+        Binding("f", "focus_filter", "filter"),
+        Binding("e", "eval_only", "eval games", show=False),
+    ]
+    DEFAULT_CSS = """
+    EpisodesPane #ep-filters { height: 1; }
+    EpisodesPane #ep-filters Select { width: 18; }
+    EpisodesPane #ep-filters Input { width: 16; }
+    EpisodesPane .label { width: auto; padding: 0 1; }
+    """
+
+    def __init__(self, source: RunSource) -> None:
+        super().__init__()
+        self.source = source
+        self.training = False
+        self.sort_key, self.sort_desc = "episode", False
+        self.columns = list(BASE_COLUMNS)
+        self._seen: dict | None = None     # episode counts last seen (live runs)
+
+    def compose(self) -> ComposeResult:
+        with Horizontal(id="ep-filters"):
+            yield Static("outcome", classes="label")
+            yield Select([], prompt="all", id="ep-outcome", compact=True)
+            yield Static("length", classes="label")
+            yield Input(placeholder="10..50", id="ep-length", compact=True)
+            yield Static("kind", classes="label", id="ep-kind-label")
+            yield Select([("train", "train"), ("eval", "eval")], prompt="all", id="ep-kind", compact=True)
+        yield LazyTable(id="ep-table")
+        yield Static("", id="ep-status", classes="status")
+
+    def focus_default(self) -> None:
+        self.query_one(LazyTable).focus()
+
+    def on_mount(self) -> None:
+        self.run_worker(self._inspect, thread=True, exit_on_error=False)
+        if self.source.live:  # a run being written: new episodes appear as they begin and end
+            self.set_interval(LIVE_REFRESH_S, self._poll)
+
+    def _poll(self) -> None:
+        if not hasattr(self, "base") or self.source.busy or not self.screen.is_current:
+            return
+
+        def work() -> None:
+            mark = self.source.rows("SELECT count(*) AS n, count(ended_at) AS ended FROM episodes")[0]
+            if mark != self._seen:
+                first = self._seen is None
+                self._seen = mark
+                if not first:
+                    self.app.call_from_thread(self.reload, True)
+
+        self.run_worker(work, thread=True, group="episodes-poll", exclusive=True, exit_on_error=False)
+
+    def _inspect(self) -> None:
+        cols = self.source.arrow("SELECT * FROM episodes LIMIT 0").column_names
+        kind = "kind" if "kind" in cols else "json_extract_string(begin_info, '$.kind')"
+        step = ("train_step" if "train_step" in cols
+                else "TRY_CAST(json_extract(begin_info, '$.train_step') AS BIGINT)")
+        base = (f"SELECT episode, world, steps, outcome, reward, seed, ended, t_start, t_end, "
+                f"{kind} AS kind, {step} AS train_step FROM episodes")
+        outcomes = [r["outcome"] for r in self.source.rows(
+            "SELECT DISTINCT outcome FROM episodes WHERE outcome IS NOT NULL ORDER BY outcome")]
+        training = bool(self.source.scalar(f"SELECT count(*) FROM ({base}) WHERE kind IS NOT NULL"))
+        self.app.call_from_thread(self._inspected, base, outcomes, training)
+
+    def _inspected(self, base: str, outcomes: list[str], training: bool) -> None:
+        self.base, self.training = base, training
+        self.columns = list(BASE_COLUMNS) + (TRAINING_COLUMNS if training else [])
+        self.query_one("#ep-outcome", Select).set_options([(o, o) for o in outcomes])
+        self.query_one("#ep-kind", Select).display = training
+        self.query_one("#ep-kind-label").display = training
+        self.reload()
+
+    def reload(self, keep_cursor: bool = False) -> None:
+        if not hasattr(self, "base"):
+            return
+        where = []
+        outcome = self.query_one("#ep-outcome", Select).value
+        if outcome not in (Select.NULL, None):
+            where.append("outcome = $outcome")
+        kind = self.query_one("#ep-kind", Select).value
+        if self.training and kind not in (Select.NULL, None):
+            where.append("kind = $kind")
+        status = self.query_one("#ep-status", Static)
+        try:
+            length = length_clause(self.query_one("#ep-length", Input).value)
+        except ValueError as e:
+            status.update(Text(str(e), style="bold red"))
+            return
+        if length:
+            where.append(length)
+        params = {k: v for k, v in (("outcome", outcome), ("kind", kind)) if f"${k}" in " ".join(where)}
+        sql = f"SELECT * FROM ({self.base})" + (f" WHERE {' AND '.join(where)}" if where else "")
+        direction = " DESC" if self.sort_desc else ""
+        order = f"{self.sort_key}{direction} NULLS LAST, episode"
+        table = self.query_one(LazyTable)
+        table.sort_key, table.sort_desc = self.sort_key, self.sort_desc
+        table.set_source(QuerySource(self.source, sql, order, params or None), self.columns,
+                         cursor=table.cursor if keep_cursor else 0)
+
+    def on_lazy_table_loaded(self, event: LazyTable.Loaded) -> None:
+        sort = f"sorted by {self.sort_key}{' (desc)' if self.sort_desc else ''}"
+        self.query_one("#ep-status", Static).update(
+            f" {event.count} episode(s), {sort} · Enter: trace · s: sort · f: filter")
+
+    def on_lazy_table_row_selected(self, event: LazyTable.RowSelected) -> None:
+        event.stop()
+        if event.row is not None:
+            self.post_message(OpenTrace(int(event.row["episode"])))
+
+    def on_lazy_table_header_clicked(self, event: LazyTable.HeaderClicked) -> None:
+        event.stop()
+        if self.sort_key == event.column.key:
+            self.sort_desc = not self.sort_desc
+        else:
+            self.sort_key, self.sort_desc = event.column.key, False
+        self.reload()
+
+    def action_sort(self, step: int) -> None:
+        keys = [c.key for c in self.columns]
+        if step < 0:
+            self.sort_desc = not self.sort_desc
+        else:
+            self.sort_key = keys[(keys.index(self.sort_key) + 1) % len(keys)]
+            self.sort_desc = False
+        self.reload()
+
+    def action_focus_filter(self) -> None:
+        self.query_one("#ep-length", Input).focus()
+
+    def action_eval_only(self) -> None:
+        if self.training:
+            self.query_one("#ep-kind", Select).value = "eval"
+
+    def on_select_changed(self, event: Select.Changed) -> None:
+        self.reload()
+
+    def on_input_submitted(self, event: Input.Submitted) -> None:
+        self.reload()
+        self.focus_default()

@@ -1,0 +1,20 @@
+"""Messages the panes of a run send each other through the run screen."""
+from __future__ import annotations
+
+from textual.message import Message
+
+
+class OpenTrace(Message):
+    """Show an episode's trace, optionally filtered by rule and positioned at a timestep."""
+    def __init__(self, episode: int, rule: str = "", at_t: int | None = None) -> None:
+        super().__init__()
+        self.episode, self.rule, self.at_t = episode, rule, at_t
+
+
+class ExplainChange(Message):
+    """Open the why tree of an atom's bound at the end of timestep t of an episode (seq: the change
+    selected in the trace, if any)."""
+    def __init__(self, episode: int, atom: str, t: int, seq: int | None = None) -> None:
+        super().__init__()
+        self.episode, self.atom, self.t, self.seq = episode, atom, t, seq
+

@@ -1,0 +1,110 @@
+"""A line plot drawn with braille characters (2x4 dots per cell), several coloured series on shared axes:
+a title line, the y range on the left, the x range underneath. Small, dependency-free, redrawn whole."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from rich.text import Text
+from textual.widget import Widget
+
+# braille dot bits by (column, row) within a cell
+_DOTS = ((0x01, 0x02, 0x04, 0x40), (0x08, 0x10, 0x20, 0x80))
+AXIS_W = 7
+
+
+@dataclass
+class Series:
+    name: str
+    colour: str
+    xs: list[float] = field(default_factory=list)
+    ys: list[float] = field(default_factory=list)
+
+
+def _fmt(v: float) -> str:
+    if v == 0:
+        return "0"
+    if abs(v) >= 10_000 or abs(v) < 0.01:
+        return f"{v:.1e}"
+    return f"{v:.3g}"
+
+
+def _fmt_step(v: float) -> str:
+    """A training step for the x axis: 500, 30k, 1.2M."""
+    if abs(v) >= 1e6:
+        return f"{v / 1e6:.3g}M"
+    if abs(v) >= 1e4:
+        return f"{v / 1e3:.3g}k"
+    return f"{v:.0f}" if v == int(v) else f"{v:.3g}"
+
+
+class BraillePlot(Widget):
+    DEFAULT_CSS = "BraillePlot { height: 1fr; min-height: 5; border: round $primary-darken-2; }"
+
+    def __init__(self, title: str, *, id: str | None = None) -> None:
+        super().__init__(id=id)
+        self.title = title
+        self.series: list[Series] = []
+        self.border_title = title
+
+    def set_series(self, series: list[Series]) -> None:
+        self.series = series
+        self.refresh()
+
+    @property
+    def points(self) -> int:
+        return sum(len(s.xs) for s in self.series)
+
+    def render(self) -> Text:
+        width, height = self.content_size.width, self.content_size.height
+        shown = [s for s in self.series if s.xs]
+        if not shown:
+            return Text("no data yet", style="dim italic")
+        legend = Text("  ").join(Text(f"━ {s.name}", style=s.colour) for s in shown)
+        legend.truncate(width, overflow="ellipsis")  # one line, whatever the names
+        rows, cols = max(1, height - 2), max(1, width - AXIS_W)
+        xs = [x for s in shown for x in s.xs]
+        ys = [y for s in shown for y in s.ys if not math.isnan(y)]
+        if not ys:
+            return Text("no data yet", style="dim italic")
+        x0, x1, y0, y1 = min(xs), max(xs), min(ys), max(ys)
+        if y1 == y0:
+            y0, y1 = y0 - 0.5, y1 + 0.5
+        if x1 == x0:
+            x1 = x0 + 1
+        cells = [[0] * cols for _ in range(rows)]
+        colour = [[""] * cols for _ in range(rows)]
+        for s in shown:
+            last: tuple[int, int] | None = None
+            for x, y in zip(s.xs, s.ys):
+                if math.isnan(y):
+                    last = None
+                    continue
+                px = round((x - x0) / (x1 - x0) * (cols * 2 - 1))
+                py = round((y1 - y) / (y1 - y0) * (rows * 4 - 1))
+                for qx, qy in _segment(last, (px, py)):
+                    cx, cy = qx // 2, qy // 4
+                    cells[cy][cx] |= _DOTS[qx % 2][qy % 4]
+                    colour[cy][cx] = s.colour
+                last = (px, py)
+        out = Text()
+        out.append_text(legend)
+        out.append("\n")
+        for r in range(rows):
+            label = _fmt(y1) if r == 0 else _fmt(y0) if r == rows - 1 else ""
+            out.append(label.rjust(AXIS_W - 1)[: AXIS_W - 1] + "┤", style="dim")
+            for c in range(cols):
+                out.append(chr(0x2800 + cells[r][c]) if cells[r][c] else " ", style=colour[r][c])
+            out.append("\n")
+        left, right = _fmt_step(x0), _fmt_step(x1)
+        out.append(" " * AXIS_W + left + right.rjust(max(1, cols - len(left))), style="dim")
+        return out
+
+
+def _segment(a: tuple[int, int] | None, b: tuple[int, int]) -> list[tuple[int, int]]:
+    """The dots of a straight line from a to b (just b if there is no a)."""
+    if a is None:
+        return [b]
+    (x0, y0), (x1, y1) = a, b
+    n = max(abs(x1 - x0), abs(y1 - y0), 1)
+    return [(round(x0 + (x1 - x0) * i / n), round(y0 + (y1 - y0) * i / n)) for i in range(1, n + 1)]

@@ -1,0 +1,114 @@
+"""The Rules view: firings per rule (total, episodes it fired in, per outcome of those episodes) with the
+rules that never fired listed as such (coverage); `e` switches to firings per episode and rule. Enter on a
+rule filters the trace by it."""
+from __future__ import annotations
+
+from typing import Any
+
+from rich.text import Text
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Vertical
+from textual.widgets import Static
+
+from tracelab.viewers.tui.colours import FALSE
+from tracelab.viewers.tui.lazy_table import Column, LazyTable
+from tracelab.viewers.tui.messages import OpenTrace
+from tracelab.viewers.tui.paging import QuerySource
+from tracelab.viewers.tui.source import RunSource
+
+PER_RULE_SQL = """
+SELECT r.name AS rule, count(c.seq) AS firings, count(DISTINCT c.episode) AS episodes,
+       count(c.seq) FILTER (e.outcome = 'win') AS in_wins,
+       count(c.seq) FILTER (e.outcome = 'loss') AS in_losses,
+       count(c.seq) FILTER (e.outcome NOT IN ('win', 'loss')) AS in_other,
+       min(c.episode) AS first_episode, r.delay, r.immediate
+FROM raw.rules r
+LEFT JOIN raw.changes c ON c.cause_kind = 2 AND c.cause_id = r.rule
+LEFT JOIN raw.episode_end e ON e.episode = c.episode
+GROUP BY r.rule, r.name, r.delay, r.immediate
+"""
+PER_EPISODE_SQL = """
+SELECT episode, rule, count(*) AS firings, min(t) AS first_t, max(t) AS last_t
+FROM firings GROUP BY episode, rule
+"""
+
+
+def _firings(row: dict[str, Any]) -> Text:
+    n = row["firings"]
+    return Text("never", style=f"bold {FALSE}") if n == 0 else Text(f"{n:,}")
+
+
+PER_RULE_COLUMNS = [
+    Column("rule", "rule", 22), Column("firings", "firings", 9, align="right", render=_firings),
+    Column("episodes", "eps", 5, align="right"), Column("in_wins", "in wins", 8, align="right"),
+    Column("in_losses", "in losses", 9, align="right"), Column("in_other", "other", 7, align="right"),
+    Column("delay", "Δt", 3, align="right"),
+]
+PER_EPISODE_COLUMNS = [
+    Column("episode", "episode", 8, align="right"), Column("rule", "rule", 22),
+    Column("firings", "firings", 9, align="right"), Column("first_t", "first t", 7, align="right"),
+    Column("last_t", "last t", 7, align="right"),
+]
+
+
+class RulesPane(Vertical):
+    BINDINGS = [Binding("e", "toggle_view", "per episode/rule")]
+
+    def __init__(self, source: RunSource) -> None:
+        super().__init__()
+        self.source = source
+        self.per_episode = False
+        self.loaded = False
+
+    def compose(self) -> ComposeResult:
+        yield LazyTable(PER_RULE_COLUMNS, id="rules-table")
+        yield Static("", id="rules-status", classes="status")
+
+    def focus_default(self) -> None:
+        if not self.loaded:
+            self.loaded = True
+            self.reload()
+        self.query_one(LazyTable).focus()
+
+    def reload(self) -> None:
+        table = self.query_one(LazyTable)
+        if self.per_episode:
+            table.set_source(QuerySource(self.source, PER_EPISODE_SQL, "episode, firings DESC, rule"),
+                             PER_EPISODE_COLUMNS)
+        else:
+            table.set_source(QuerySource(self.source, PER_RULE_SQL, "firings DESC, rule"), PER_RULE_COLUMNS)
+        self.query_one("#rules-status", Static).update(" counting firings… (Esc cancels)")
+
+    def on_lazy_table_loaded(self, event: LazyTable.Loaded) -> None:
+        event.stop()
+        if self.per_episode:
+            text = f" {event.count} (episode, rule) pairs · e: per rule · Enter: trace of the rule"
+            self.query_one("#rules-status", Static).update(text)
+            return
+
+        def work() -> None:
+            never = self.source.scalar(f"SELECT count(*) FROM ({PER_RULE_SQL}) WHERE firings = 0")
+            self.app.call_from_thread(self.query_one("#rules-status", Static).update,
+                                      f" {event.count} rules, {never} never fired · e: per episode · "
+                                      f"Enter: trace filtered by the rule")
+
+        self.run_worker(work, thread=True, group="rules-never", exclusive=True, exit_on_error=False)
+
+    def action_toggle_view(self) -> None:
+        self.per_episode = not self.per_episode
+        self.reload()
+
+    def on_lazy_table_row_selected(self, event: LazyTable.RowSelected) -> None:
+        event.stop()
+        row = event.row
+        if row is None:
+            return
+        # per episode: that episode; per rule: the episode open in the trace, else the rule's first
+        episode = row["episode"] if "episode" in row else getattr(self.screen, "episode", None)
+        if episode is None:
+            episode = row.get("first_episode")
+        if episode is None:
+            self.notify(f"rule {row['rule']} never fired: no trace to show", severity="warning")
+            return
+        self.post_message(OpenTrace(int(episode), rule=row["rule"]))

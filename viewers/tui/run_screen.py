@@ -1,0 +1,108 @@
+"""The screen of one open run: a tab per view (Episodes, Trace, Why, Rules, SQL, Training), the keys
+1-6 to switch, and the messages that pass an episode, a rule or a change from one view to another."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.screen import Screen
+from textual.widget import Widget
+from textual.widgets import Input, Static, TabbedContent, TabPane, TextArea
+
+from tracelab.viewers.tui.episodes import EpisodesPane
+from tracelab.viewers.tui.keybar import KeyBar
+from tracelab.viewers.tui.messages import ExplainChange, OpenTrace
+from tracelab.viewers.tui.rules import RulesPane
+from tracelab.viewers.tui.source import RunSource
+from tracelab.viewers.tui.sql import SqlPane
+from tracelab.viewers.tui.trace import TracePane
+from tracelab.viewers.tui.training import TrainingPane
+from tracelab.viewers.tui.why import WhyPane
+
+TABS = (("episodes", "1 Episodes"), ("trace", "2 Trace"), ("why", "3 Why"), ("rules", "4 Rules"),
+        ("sql", "5 SQL"), ("training", "6 Training"))
+
+EAGER = ("episodes", "trace")   # built with the screen; the other views when first shown
+
+
+class RunScreen(Screen):
+    BINDINGS = [
+        *(Binding(str(i + 1), f"show('{tab}')", title.split()[1], show=False) for i, (tab, title) in enumerate(TABS)),
+        Binding("escape", "cancel_or_back", "back"),
+    ]
+
+    def __init__(self, path: Path) -> None:
+        super().__init__()
+        self.path = path
+        self.source = RunSource(path)
+        self.episode: int | None = None
+        self.panes: dict[str, Widget] = {
+            "episodes": EpisodesPane(self.source), "trace": TracePane(self.source), "why": WhyPane(self.source),
+            "rules": RulesPane(self.source), "sql": SqlPane(self.source), "training": TrainingPane(self.source)}
+
+    def compose(self) -> ComposeResult:
+        kind = "live" if self.source.live else "sealed"
+        status = self.source.status
+        yield Static(f" {self.path.name}  ·  {kind}{'' if status == 'finished' else ' · ' + status}  ·  "
+                     f"{self.source.command}", id="title", classes="title")
+        with TabbedContent(initial="episodes", id="tabs"):
+            for tab, title in TABS:
+                with TabPane(title, id=tab):
+                    if tab in EAGER:
+                        yield self.panes[tab]
+        yield KeyBar()
+
+    async def pane(self, tab: str) -> Widget:
+        """The view of a tab, mounted on first use (so that opening a run builds only two views)."""
+        pane = self.panes[tab]
+        if not pane.is_attached:
+            await self.query_one(f"#{tab}", TabPane).mount(pane)
+        return pane
+
+    async def action_show(self, tab: str) -> None:
+        await self.pane(tab)
+        self.query_one(TabbedContent).active = tab
+        self.call_after_refresh(self._focus_pane, tab)
+
+    def _focus_pane(self, tab: str) -> None:
+        if self.query_one(TabbedContent).active != tab:
+            return  # focusing into a hidden pane would make TabbedContent switch back to it
+        focus = getattr(self.panes[tab], "focus_default", None)
+        if focus is not None and self.panes[tab].is_attached:
+            focus()
+
+    async def on_tabbed_content_tab_activated(self, event: TabbedContent.TabActivated) -> None:
+        if event.pane.id:
+            await self.pane(event.pane.id)
+            self.call_after_refresh(self._focus_pane, event.pane.id)
+
+    def action_cancel_or_back(self) -> None:
+        """Esc: cancel the running query; else leave a text field (for its view's table); else go back."""
+        if self.source.interrupt():
+            self.notify("query cancelled")
+            return
+        if isinstance(self.focused, TextArea):   # the SQL editor: to its results (where 1-6 work again)
+            self.panes["sql"].action_focus_results()  # type: ignore[attr-defined]
+            return
+        if isinstance(self.focused, Input):
+            self._focus_pane(self.query_one(TabbedContent).active)
+            return
+        self.app.pop_screen()
+
+    def on_unmount(self) -> None:
+        self.source.close()
+
+    # ---- passing things between views ------------------------------------------------------------------
+    async def on_open_trace(self, message: OpenTrace) -> None:
+        self.episode = message.episode
+        trace = await self.pane("trace")
+        assert isinstance(trace, TracePane)
+        trace.show_episode(message.episode, rule=message.rule, at_t=message.at_t)
+        await self.action_show("trace")
+
+    async def on_explain_change(self, message: ExplainChange) -> None:
+        why = await self.pane("why")
+        assert isinstance(why, WhyPane)
+        why.explain(message.episode, message.atom, message.t, message.seq)
+        await self.action_show("why")

@@ -1,0 +1,93 @@
+"""The Runs screen: the run catalog (tracelab.store.catalog), refreshed every few seconds while runs grow.
+Enter opens a run."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pyarrow as pa
+from rich.text import Text
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.screen import Screen
+from textual.widgets import Static
+
+from tracelab.store.catalog import RunSummary, list_runs
+from tracelab.viewers.tui.colours import FALSE, PARTIAL, TRUE, UNKNOWN
+from tracelab.viewers.tui.keybar import KeyBar
+from tracelab.viewers.tui.lazy_table import Column, LazyTable
+from tracelab.viewers.tui.paging import ArrowSource
+
+REFRESH_S = 2.0
+STATUS_COLOURS = {"running": PARTIAL, "finished": TRUE, "failed": FALSE, "crashed": FALSE,
+                  "interrupted": UNKNOWN, "unreadable": FALSE}
+
+
+def _status(row: dict) -> Text:
+    return Text(row["status"], style=STATUS_COLOURS.get(row["status"], ""))
+
+
+RUN_COLUMNS = [
+    Column("name", "run", None, max_width=24),
+    Column("status", "status", 11, render=_status),
+    Column("episodes", "eps", 6, align="right"),
+    Column("rows", "rows", 10, align="right", render=lambda r: f"{r['rows']:,}" if r["rows"] is not None else ""),
+    Column("size", "size", 9, align="right"),
+    Column("started", "started", 19),
+    Column("scenario", "scenario", None, max_width=12),
+    Column("command", "command", None, max_width=60),
+]
+
+
+class RunsScreen(Screen):
+    BINDINGS = [Binding("enter", "open", "open run"), Binding("r", "refresh", "refresh")]
+
+    def __init__(self, roots: list[Path]) -> None:
+        super().__init__()
+        self.roots = roots
+        self.runs: list[RunSummary] = []
+
+    def compose(self) -> ComposeResult:
+        yield Static(f" tracelab runs in {', '.join(map(str, self.roots))}", id="title", classes="title")
+        yield LazyTable(RUN_COLUMNS, id="runs-table")
+        yield Static("", id="runs-status", classes="status")
+        yield KeyBar()
+
+    def on_mount(self) -> None:
+        self.query_one(LazyTable).focus()
+        self.set_interval(REFRESH_S, self._tick)
+
+    def on_screen_resume(self) -> None:
+        if self.is_current:  # shown (first, or back from a run): read the catalog now
+            self.action_refresh()
+
+    def _tick(self) -> None:
+        if self.is_current:  # not while a run is open over it
+            self.action_refresh()
+
+    def action_refresh(self) -> None:
+        self.run_worker(self._load, thread=True, group="catalog", exclusive=True, exit_on_error=False)
+
+    def _load(self) -> None:
+        runs = list_runs(self.roots)
+        self.app.call_from_thread(self._show, runs)
+
+    def _show(self, runs: list[RunSummary]) -> None:
+        changed = [r.as_row() for r in runs] != [r.as_row() for r in self.runs]
+        self.runs = runs
+        table = self.query_one(LazyTable)
+        if changed or not table.ready:
+            rows = [r.as_row() for r in runs]
+            table.set_source(ArrowSource(pa.Table.from_pylist(rows) if rows else pa.table({})),
+                             cursor=table.cursor)
+        live = sum(r.status == "running" for r in runs)
+        self.query_one("#runs-status", Static).update(
+            f" {len(runs)} run(s), {live} running · Enter opens · refreshes every {REFRESH_S:g} s")
+
+    def action_open(self) -> None:
+        table = self.query_one(LazyTable)
+        if 0 <= table.cursor < len(self.runs):
+            self.app.show_run(self.runs[table.cursor].path)  # type: ignore[attr-defined]
+
+    def on_lazy_table_row_selected(self, event: LazyTable.RowSelected) -> None:
+        event.stop()
+        self.action_open()

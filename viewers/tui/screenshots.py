@@ -1,0 +1,148 @@
+"""The README's pictures of the TUI, made by driving the app headless (`tracelab tui --screenshots DIR`):
+
+tui-trace-why.png   sample_runs/advanced, episode 0 filtered to the death of red-agent-1 (the trace with
+                    its board), above the why tree of that change
+tui-training.png    the Training view of a small training run written here with TraceWriter (the
+                    training-run contract: metrics and train/eval episodes)
+
+textual saves SVG; rsvg-convert (Debian: librsvg2-bin) turns it into PNG. textual's SVG names the web font
+Fira Code and spaces as &#160;, which rsvg draws narrow: both are replaced (DejaVu Sans Mono) first."""
+from __future__ import annotations
+
+import asyncio
+import math
+import os
+import re
+import shutil
+import subprocess
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+SIZE = (124, 34)
+ROOT = Path(__file__).resolve().parents[2]
+
+
+async def _until(pilot: Any, done: Callable[[], bool], timeout: float = 60.0) -> None:
+    loop = asyncio.get_running_loop()
+    t0 = loop.time()
+    while not done():
+        await pilot.pause(0.05)
+        if loop.time() - t0 > timeout:
+            raise RuntimeError("the TUI did not reach the screen to photograph")
+
+
+async def _trace_and_why(run: Path) -> tuple[str, str]:
+    from tracelab.viewers.tui.app import TracelabApp
+    from tracelab.viewers.tui.lazy_table import LazyTable
+    from tracelab.viewers.tui.trace import TracePane
+    from tracelab.viewers.tui.why import WhyPane
+    app = TracelabApp([run])
+    async with app.run_test(size=SIZE) as pilot:
+        episodes = app.screen.query_one("#ep-table", LazyTable)
+        await _until(pilot, lambda: episodes.idle and episodes.cursor_row is not None)
+        await pilot.press("enter")
+        pane = app.screen.query_one(TracePane)
+        await _until(pilot, lambda: pane.table.idle and pane.table.count > 0)
+        pane.query_one("#tr-range").value = "15"
+        await pilot.press("slash", "enter")
+        await _until(pilot, lambda: pane.filter is not None and pane.filter.t_from == 15 and pane.table.idle)
+        death = next(i for i in range(pane.table.count) if pane.table.row(i)["atom"] == "alive(red-agent-1)")
+        pane.table.move_to(death)
+        await pilot.pause(0.5)
+        trace_svg = app.export_screenshot(title="tracelab tui · trace")
+        await pilot.press("w")
+        why = app.screen.query_one(WhyPane)
+        await _until(pilot, lambda: why.query_one("Tree").root.data is not None)
+        await pilot.press("o")
+        await pilot.pause(0.3)
+        return trace_svg, app.export_screenshot(title="tracelab tui · why")
+
+
+def write_training_run(path: Path, steps: int = 60) -> Path:
+    """A small sealed training run following the training-run contract (curves that look like one)."""
+    import random
+
+    from tracelab.store.seal import seal_run
+    from tracelab.store.writer import TraceWriter
+    rng = random.Random(3)
+    with TraceWriter(path, {"command": "tracelab train --example", "config": {"example": True}}) as w:
+        episode = 0
+        for k in range(1, steps + 1):
+            step = k * 500
+            progress = 1 - math.exp(-k / 18)
+            w.begin_episode(episode, info={"kind": "train", "train_step": step})
+            won = rng.random() < progress * 0.8
+            w.end_episode(episode, steps=rng.randint(12, 60), outcome="win" if won else "loss",
+                          reward=(250 if won else -250) + rng.gauss(0, 60))
+            episode += 1
+            w.write_metrics(step, {"loss": 2.5 * math.exp(-k / 15) + abs(rng.gauss(0, 0.15)),
+                                   "epsilon": max(0.05, 1 - k / 40),
+                                   "train_return": -250 + 420 * progress + rng.gauss(0, 40)})
+            if k % 5 == 0:
+                for p, skill in (("0.3", 0.9), ("0.7", 0.7)):
+                    rate = min(1.0, max(0.0, skill * progress + rng.gauss(0, 0.05)))
+                    w.write_metrics(step, {f"eval/win_rate@p{p}": rate,
+                                           f"eval/mean_return@p{p}": -250 + 500 * rate})
+    seal_run(path)
+    return path
+
+
+async def _training(run: Path) -> str:
+    from tracelab.viewers.tui.app import TracelabApp
+    from tracelab.viewers.tui.plot import BraillePlot
+    app = TracelabApp([run])
+    async with app.run_test(size=SIZE) as pilot:
+        await pilot.press("6")
+        await _until(pilot, lambda: app.screen.panes["training"].is_attached)
+        plot = app.screen.query_one("#plot-loss", BraillePlot)
+        await _until(pilot, lambda: plot.points > 0)
+        await pilot.pause(0.3)
+        return app.export_screenshot(title="tracelab tui · training")
+
+
+def _fix_for_rsvg(svg: str) -> str:
+    svg = svg.replace("Fira Code", "DejaVu Sans Mono").replace("&#160;", " ")
+    return svg.replace("<svg ", '<svg xml:space="preserve" ', 1)
+
+
+def stack(svgs: list[str]) -> str:
+    """Several SVG screenshots one above the other, as one SVG."""
+    parts, y, width = [], 0.0, 0.0
+    for svg in svgs:
+        w = float(re.search(r'viewBox="0 0 ([\d.]+) ([\d.]+)"', svg)[1])  # type: ignore[index]
+        h = float(re.search(r'viewBox="0 0 ([\d.]+) ([\d.]+)"', svg)[2])  # type: ignore[index]
+        body = re.sub(r"^<\?xml[^>]*>\s*", "", svg.strip())
+        parts.append(body.replace("<svg ", f'<svg x="0" y="{y}" width="{w}" height="{h}" ', 1))
+        y, width = y + h, max(width, w)
+    return (f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{y}" '
+            f'viewBox="0 0 {width} {y}">' + "".join(parts) + "</svg>")
+
+
+def to_png(svg: str, png: Path) -> Path:
+    converter = shutil.which("rsvg-convert")
+    if converter is None:
+        raise RuntimeError("rsvg-convert not found: install it (Debian: apt-get install librsvg2-bin)")
+    fixed = png.with_suffix(".rsvg.svg")
+    fixed.write_text(_fix_for_rsvg(svg))
+    try:
+        subprocess.run([converter, str(fixed), "-o", str(png)], check=True, capture_output=True)
+    finally:
+        fixed.unlink(missing_ok=True)
+    return png
+
+
+def write_screenshots(directory: Path, run: Path | None = None) -> list[Path]:
+    """Write tui-trace-why.png and tui-training.png (and their SVGs) to `directory`."""
+    os.environ.setdefault("TEXTUAL_ANIMATIONS", "none")
+    directory.mkdir(parents=True, exist_ok=True)
+    run = run or ROOT / "sample_runs" / "advanced"
+    if not run.exists():
+        raise FileNotFoundError(f"no run {str(run)!r} to photograph")
+    trace_svg, why_svg = asyncio.run(_trace_and_why(run))
+    out = [to_png(stack([trace_svg, why_svg]), directory / "tui-trace-why.png")]
+    with tempfile.TemporaryDirectory() as tmp:
+        training = write_training_run(Path(tmp) / "train-example")
+        out.append(to_png(asyncio.run(_training(training)), directory / "tui-training.png"))
+    return out

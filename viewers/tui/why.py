@@ -1,0 +1,167 @@
+"""The Why view: the proof tree of a change (tracelab.store.why.explain, what `tracelab why` prints) as an
+expandable tree, and why-not for a rule and bindings (`tracelab why-not`): type
+`RULE A=red-agent-1,X=16 at T` in the why-not line."""
+from __future__ import annotations
+
+import re
+
+from rich.text import Text
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Vertical, VerticalScroll
+from textual.widgets import Input, Static, Tree
+from textual.widgets.tree import TreeNode
+
+from tracelab.store.why import WhyNode, WhyNot, explain, render_why_not, why_not
+from tracelab.viewers.tui.colours import DIM, FALSE, PARTIAL, TRUE, bound_colour, bound_text, styled_name
+from tracelab.viewers.tui.source import RunSource
+
+DEPTH = 12
+_WHY_NOT = re.compile(r"^\s*(\S+)\s*(.*?)\s*(?:\bat\s+|@\s*)(-?\d+)\s*$")
+
+
+def node_label(n: WhyNode, at: int | None = None) -> Text:
+    """One line of the tree: ok/NO, the clause or atom, its value, and what set it."""
+    text = Text()
+    if n.clause is None:
+        text.append_text(styled_name(n.atom))
+        text.append(" = ")
+    else:
+        text.append("ok " if n.holds else "NO ", style=f"bold {TRUE if n.holds else FALSE}")
+        text.append_text(styled_name(n.clause))
+        text.append(" = ")
+    lo, up = n.value
+    text.append(bound_text(lo, up), style=bound_colour(lo, up))
+    if n.clause is None and at is not None:
+        text.append(f" at the end of t={at}:")
+    c = n.cause
+    if c is None or c.kind == "default":
+        text.append("  never set", style=DIM)
+        return text
+    text.append(f"  t={n.t} by ", style=DIM)
+    text.append(c.name, style="bold" if c.kind == "rule" else "")
+    if c.kind in ("rule", "policy"):
+        delay = "!" if c.immediate else f"Δt={c.delay}"
+        binds = ", ".join(f"{k}={v}" for k, v in c.bindings.items())
+        text.append(f" ({delay}{'; ' + binds if binds else ''})", style=DIM)
+    if n.repeated:
+        text.append("  [explained above]", style="italic")
+    if n.truncated:
+        text.append("  [depth limit]", style="italic")
+    return text
+
+
+def parse_why_not(text: str) -> tuple[str, dict[str, str], int]:
+    """`RULE A=x,B=y at T` (bindings optional); raises ValueError."""
+    from tracelab.commands.why_not import parse_bindings
+    m = _WHY_NOT.match(text)
+    if not m:
+        raise ValueError(f"cannot read {text!r}: write RULE A=red-agent-1,X=16 at 12")
+    return m[1], parse_bindings(m[2].replace(" ", ",")), int(m[3])
+
+
+class WhyPane(Vertical):
+    BINDINGS = [Binding("o", "expand_all", "expand all"), Binding("c", "collapse", "collapse"),
+                Binding("slash", "focus_why_not", "why-not")]
+    DEFAULT_CSS = """
+    WhyPane Tree { height: 1fr; }
+    WhyPane #why-not-out { height: auto; max-height: 10; }
+    WhyPane #why-not { height: 1; }
+    """
+
+    def __init__(self, source: RunSource) -> None:
+        super().__init__()
+        self.source = source
+        self.episode: int | None = None
+        self.at: int | None = None
+
+    def compose(self) -> ComposeResult:
+        yield Static(" select a change in the trace and press Enter or w", id="why-head", classes="status")
+        tree: Tree[WhyNode] = Tree("(no explanation yet)", id="why-tree")
+        tree.show_root = True
+        yield tree
+        yield Input(placeholder="why-not: RULE A=red-agent-1,X=16 at T", id="why-not", compact=True)
+        with VerticalScroll(id="why-not-out"):
+            yield Static("", id="why-not-text")
+
+    def focus_default(self) -> None:
+        self.query_one(Tree).focus()
+
+    def explain(self, episode: int, atom: str, t: int, seq: int | None = None) -> None:
+        """The why tree of the atom's bound at the end of t (tracelab.store.why explains bounds at the end
+        of a timestep; when the selected change `seq` was not the atom's last at t, the header says so)."""
+        self.episode, self.at = episode, t
+        self.query_one("#why-head", Static).update(f" why {atom} at the end of t={t}, episode {episode} · working…")
+
+        def work() -> None:
+            try:
+                root = self.source.call(lambda con: explain(con, episode, atom, t, depth=DEPTH))
+            except Exception as e:  # noqa: BLE001
+                self.app.call_from_thread(self._failed, str(e))
+                return
+            self.app.call_from_thread(self._show, root, atom, t, episode, seq)
+
+        self.run_worker(work, thread=True, group="why", exclusive=True, exit_on_error=False)
+
+    def _failed(self, message: str) -> None:
+        self.query_one("#why-head", Static).update(Text(f" {message}", style="bold red"))
+
+    def _show(self, root: WhyNode, atom: str, t: int, episode: int, seq: int | None = None) -> None:
+        tree = self.query_one(Tree)
+        tree.clear()
+        tree.root.set_label(node_label(root, t))
+        tree.root.data = root
+        self._add_children(tree.root, root, expand_levels=2)
+        tree.root.expand()
+        rule = root.cause.name if root.cause else ""
+        head = Text(f" why {atom} at the end of t={t}, episode {episode} · {rule} · Enter/click expands, o all")
+        if seq is not None and root.seq is not None and root.seq != seq:
+            head = Text(f" the selected change (seq {seq}) was not {atom}'s last at t={t}: this explains the "
+                        f"bound at the end of t (seq {root.seq}, by {rule})", style=f"bold {PARTIAL}")
+        self.query_one("#why-head", Static).update(head)
+        if self.query_one("#why-not", Input).value == "" and root.cause and root.cause.kind == "rule":
+            binds = ",".join(f"{k}={v}" for k, v in root.cause.bindings.items())
+            self.query_one("#why-not", Input).placeholder = f"why-not: {rule} {binds} at {root.t}"
+
+    def _add_children(self, parent: TreeNode[WhyNode], node: WhyNode, expand_levels: int) -> None:
+        for child in node.children:
+            if child.children:
+                sub = parent.add(node_label(child), data=child, expand=expand_levels > 0)
+                self._add_children(sub, child, expand_levels - 1)
+            else:
+                parent.add_leaf(node_label(child), data=child)
+
+    def action_expand_all(self) -> None:
+        self.query_one(Tree).root.expand_all()
+
+    def action_collapse(self) -> None:
+        tree = self.query_one(Tree)
+        tree.root.collapse_all()
+        tree.root.expand()
+
+    def action_focus_why_not(self) -> None:
+        self.query_one("#why-not", Input).focus()
+
+    def on_input_submitted(self, event: Input.Submitted) -> None:
+        event.stop()
+        out = self.query_one("#why-not-text", Static)
+        text = event.value.strip() or event.input.placeholder.removeprefix("why-not:").strip()
+        if self.episode is None:
+            out.update(Text("open an explanation first (it gives the episode)", style="bold red"))
+            return
+        try:
+            rule, bindings, at = parse_why_not(text)
+        except ValueError as e:
+            out.update(Text(str(e), style="bold red"))
+            return
+        episode = self.episode
+
+        def work() -> None:
+            try:
+                result: WhyNot = self.source.call(lambda con: why_not(con, episode, rule, bindings, at))
+                shown = Text(render_why_not(result))
+            except Exception as e:  # noqa: BLE001
+                shown = Text(str(e).strip("'\""), style="bold red")
+            self.app.call_from_thread(out.update, shown)
+
+        self.run_worker(work, thread=True, group="why-not", exclusive=True, exit_on_error=False)
