@@ -6,7 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from tracelab.commands._output import add_format_options, fail, store_errors, write_table
+from tracelab.commands._output import add_format_options, write_table
+from tracelab.errors import store_errors
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -22,7 +23,7 @@ def run(args: argparse.Namespace) -> int:
 
     from tracelab.store.catalog import DEFAULT_ROOTS, list_runs
     roots = args.dirs or list(DEFAULT_ROOTS)
-    try:
+    with store_errors():
         missing = [d for d in args.dirs if not Path(d).exists()]
         if missing:
             raise FileNotFoundError(f"no such directory or run: {missing[0]!r}")
@@ -38,8 +39,6 @@ def run(args: argparse.Namespace) -> int:
         for r in runs:
             if r.error:
                 print(f"note: {r.path}: {r.error}", file=sys.stderr)
-    except store_errors() as e:
-        return fail(e)
     return 0
 
 

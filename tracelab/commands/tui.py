@@ -16,18 +16,16 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tracelab.commands._output import fail
+    from tracelab.errors import UserError, store_errors
     missing = [p for p in args.paths if not Path(p).exists()]
     if missing:
-        return fail(FileNotFoundError(f"no such run or directory: {missing[0]!r}"))
+        raise UserError(f"no such run or directory: {missing[0]!r}")
     if args.screenshots:
         from tracelab.viewers.tui.screenshots import write_screenshots
-        try:
+        with store_errors():  # no rsvg-convert, or a run that does not open
             run = Path(args.paths[0]) if args.paths else None
             for path in write_screenshots(Path(args.screenshots), run):
                 print(path)
-        except (RuntimeError, FileNotFoundError, ValueError) as e:
-            return fail(e)
         return 0
     from tracelab.viewers.tui.app import TracelabApp
     TracelabApp(args.paths).run()
