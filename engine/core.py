@@ -15,12 +15,13 @@ from .backend_lanes import LaneState, crisp_codes
 from .errors import FixpointError, InconsistencyError
 from .graph import Graph
 from .grounding import Grounder, GroundingTable, rule_head_bound
-from .parser import parse_literal
+from .parser import check_program, parse_literal
 from .program import (
     INCONSISTENCY_POLICIES,
     UPDATE_MODES,
     Fact,
     Program,
+    constant_text,
     effective_bound,
     ordered_nodes,
 )
@@ -51,11 +52,13 @@ class Engine:
         if worlds < 1:
             raise ValueError(f"worlds must be >= 1, got {worlds}")
         self.program = program
+        if graph is not None:  # a predicate with one arity in the program and another in the graph
+            check_program(program, graph.predicates())
         self.n_worlds = worlds
         self.t = 0
         self.vocab = Vocabulary(ordered_nodes(program, graph.nodes if graph else ()))
-        # graph facts come first in source order (docs/language.md)
-        self.facts: list[Fact] = [*(graph.facts if graph else ()), *program.facts]
+        # graph facts come first in source order (docs/language.md); they stay columns in the graph
+        self.graph = graph if graph is not None else Graph()
         self.rules = program.rules
         for r in self.rules:  # the kernel counts a grounding's unsatisfied clauses in an int8
             if sum(c.binds for c in r.body) > MAX_BINDING_CLAUSES:
@@ -96,16 +99,36 @@ class Engine:
 
     # ---- building ----
 
+    @property
+    def n_facts(self) -> int:
+        return self.graph.n_facts + len(self.program.facts)
+
+    def fact(self, i: int) -> Fact:
+        """Fact i in source order: graph facts 0..g-1, then program facts."""
+        g = self.graph.n_facts
+        return self.graph.fact(i) if i < g else self.program.facts[i - g]
+
+    @property
+    def facts(self) -> list[Fact]:
+        """Every fact as an object, in source order (one object per graph fact: small graphs only)."""
+        return [*self.graph.facts, *self.program.facts]
+
     def _fact_tables(self) -> None:
-        rows, bounds = [], []
-        for f in self.facts:
+        gr = self.graph
+        g = gr.n_facts
+        self._fact_i = np.zeros((g + len(self.program.facts), 4), np.int64)
+        self._fact_f = np.zeros((len(self._fact_i), 2), np.float64)
+        if g:  # graph nodes are the vocabulary's first nodes (ordered_nodes), so node ids carry over
+            labels = np.asarray([self.vocab.label(p, n) for p, n in zip(gr.labels, gr.label_arity)], np.int64)
+            self._fact_i[:g, 0] = self.vocab.atoms(labels[gr.fact_label], gr.fact_args[:, 0], gr.fact_args[:, 1])
+            self._fact_i[:g, 3] = 1  # static, at t = 0
+            self._fact_f[:g] = gr.fact_bounds
+        for i, f in enumerate(self.program.facts, start=g):
             lit = f.literal
             aid = self.vocab.atom_by_name(lit.pred, tuple(a.name for a in lit.args))
-            self.grounder.add_settable(aid)
-            rows.append((aid, f.start, f.end, int(f.static)))
-            bounds.append(effective_bound(lit.lower, lit.upper, lit.negated))
-        self._fact_i = np.asarray(rows, np.int64).reshape(-1, 4)
-        self._fact_f = np.asarray(bounds, np.float64).reshape(-1, 2)
+            self._fact_i[i] = (aid, f.start, f.end, int(f.static))
+            self._fact_f[i] = effective_bound(lit.lower, lit.upper, lit.negated)
+        self.grounder.add_settable_many(self._fact_i[:, 0])
         self._fact_v = crisp_codes(self._fact_f[:, 0], self._fact_f[:, 1])
         # latest-ending first, so that each step stops at the first fact whose window has passed
         self._fact_order = np.argsort(-self._fact_i[:, 2], kind="stable").astype(np.int64)
@@ -140,7 +163,7 @@ class Engine:
             lo, up = self._rule_f[i]
             return f"rule {r.name}{f' ({r.loc})' if r.loc else ''} sets [{lo:g},{up:g}]"
         for i in np.flatnonzero(self._fact_v < 0):
-            f = self.facts[i]
+            f = self.fact(int(i))
             lo, up = self._fact_f[i]
             return f"fact {f.name}{f' ({f.loc})' if f.loc else ''} sets [{lo:g},{up:g}]"
         return None
@@ -246,7 +269,7 @@ class Engine:
         nodes = [self.vocab.node_ids.get(a.name) for a in lit.args]
         if label is None or any(n is None for n in nodes):
             return None
-        return self.vocab.atom_ids.get(self.vocab.atom_key(label, tuple(nodes)))
+        return self.vocab.find(label, tuple(nodes))
 
     # ---- facts in, steps, values out ----
 
@@ -401,7 +424,7 @@ class Engine:
         if kind == K.CAUSE_RULE:
             return self.rules[cid].name
         if kind == K.CAUSE_FACT:
-            return f"fact:{self.facts[cid].name}"
+            return f"fact:{self.fact(cid).name}"
         if kind == K.CAUSE_EXTERNAL:
             return "external"
         if kind == K.CAUSE_POLICY:
@@ -414,13 +437,13 @@ class Engine:
             return ""
         table = self.groundings
         rule = self.rules[int(table.rule[g])]
-        return ", ".join(f"{v}={self.vocab.nodes[x]}" for v, x in zip(rule.variables, table.values(g)))
+        return ", ".join(f"{v}={constant_text(self.vocab.nodes[x])}" for v, x in zip(rule.variables, table.values(g)))
 
     # ---- errors ----
 
     def describe_source(self, kind: int, cid: int, grounding: int = -1) -> str:
         if kind == K.CAUSE_FACT:
-            f = self.facts[cid]
+            f = self.fact(cid)
             where = f" ({f.loc})" if f.loc else ""
             return f"fact {f.name}{where}"
         if kind == K.CAUSE_EXTERNAL:
@@ -453,10 +476,7 @@ class Engine:
                 f"inconsistent bounds for {self.atom_text(a)} at t={t} (world {w}): its bound "
                 f"[{lo:g},{up:g}] came from {old}; the incoming bound from {first} is disjoint from it")
         if status == K.STATUS_TRACE_LIMIT:
-            raise RuntimeError(
-                f"one step of world {w} at t={self.t} wrote more trace rows than the {self._tri.shape[0]} the "
-                "trace buffer holds; make Engine(trace_rows_per_step=...) larger (it is the free room kept "
-                "before each traced world steps)")
+            raise RuntimeError(f"internal error: a trace row of world {w} at t={self.t} found no room")
         if status == K.STATUS_NOT_SETTABLE:
             raise ValueError(f"step(external=...) names {self.atom_text(a)}, which no fact or rule can set; "
                              "give such atoms to add_facts once first")

@@ -88,11 +88,16 @@ class Grounder:
             return
         self.settable.add(aid)
         self._new.append(aid)
-        label = self.vocab._atom_label[aid]
+        cols = self.vocab._cols
+        label = int(cols[0, aid])
         self._by_label.setdefault(label, []).append(aid)
-        for pos, node in enumerate((self.vocab._atom_arg0[aid], self.vocab._atom_arg1[aid])):
+        for pos, node in enumerate((int(cols[1, aid]), int(cols[2, aid]))):
             if node >= 0:
                 self._by_label_arg.setdefault((label, pos, node), []).append(aid)
+
+    def add_settable_many(self, aids: np.ndarray) -> None:
+        for a in np.asarray(aids).tolist():
+            self.add_settable(a)
 
     def close(self) -> int:
         """Ground until no new settable atom appears. Returns the number of new groundings."""
@@ -108,7 +113,7 @@ class Grounder:
             self._new = []
             delta_by_label: dict[int, list[int]] = {}
             for aid in sorted(delta):
-                delta_by_label.setdefault(self.vocab._atom_label[aid], []).append(aid)
+                delta_by_label.setdefault(int(self.vocab._cols[0, aid]), []).append(aid)
             for cr in self._compiled:
                 for ci in cr.binding:
                     atoms = delta_by_label.get(cr.clause_labels[ci])
@@ -123,7 +128,7 @@ class Grounder:
 
         def match(ci: int, aid: int, trail: list[int]) -> bool:
             """Bind clause ci's variables to atom aid's arguments; False on a clash."""
-            nodes = (self.vocab._atom_arg0[aid], self.vocab._atom_arg1[aid])
+            nodes = (int(self.vocab._cols[1, aid]), int(self.vocab._cols[2, aid]))
             for pos, (is_var, x) in enumerate(cr.clause_args[ci]):
                 node = nodes[pos]
                 if not is_var:

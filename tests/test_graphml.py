@@ -5,14 +5,16 @@ from pathlib import Path
 
 import networkx as nx
 import pytest
+from tracelab.cli import main as cli_main
 from tracelab.engine import (
+    Engine,
     Graph,
     ProgramCheckError,
     check_program,
     load_graphml,
     parse_program,
 )
-from tracelab.engine.program import Literal, Term
+from tracelab.engine.program import Literal, Term, constant_text
 
 
 def facts_of(g: Graph) -> set[tuple[str, tuple[str, ...], float, float]]:
@@ -103,7 +105,7 @@ def test_bad_node_attributes(tmp_path: Path, node_attrs: dict, fragment: str) ->
         load_graphml(path)
     assert e.value.file == str(path)
     assert fragment in e.value.message
-    assert str(e.value).startswith(f"{path}: error: ")
+    assert e.value.line > 0 and str(e.value).startswith(f"{path}:{e.value.line}:{e.value.column}: error: ")
 
 
 def test_bad_edge_attribute_names_the_edge(tmp_path: Path) -> None:
@@ -148,3 +150,119 @@ def test_unreadable_file_is_a_located_error(tmp_path: Path) -> None:
     with pytest.raises(ProgramCheckError) as e:
         load_graphml(path)
     assert e.value.file == str(path) and "not a readable GraphML file" in e.value.message
+
+
+NODE_WITHOUT_ID = """<?xml version="1.0" encoding="UTF-8"?>
+<graphml xmlns="http://graphml.graphdrawing.org/xmlns">
+  <graph id="G" edgedefault="directed"><node id="a"/><node/></graph>
+</graphml>
+"""
+
+
+def test_node_without_id_is_an_error(tmp_path: Path) -> None:
+    path = tmp_path / "noid.graphml"
+    path.write_text(NODE_WITHOUT_ID)
+    with pytest.raises(ProgramCheckError, match="<node> has no id"):
+        load_graphml(path)
+
+
+@pytest.mark.parametrize("node", ["X", "a b(c)", "Cell 3", 'say "hi"', "#1", "_x"])
+def test_node_ids_that_are_not_plain_constants_print_quoted_and_parse_back(tmp_path: Path, node: str) -> None:
+    g = nx.DiGraph()
+    g.add_node(node, agent=True)
+    g.add_edge(node, "b", link=True)
+    graph = load_graphml(write(tmp_path, g))
+    eng = Engine(parse_program("seen(Y) <-0 agent(X), link(X,Y)\n"), graph)
+    eng.run(1)
+    final = eng.interpretation()
+    assert set(final) == {f"agent({constant_text(node)})", f"link({constant_text(node)},b)", "seen(b)"}
+    for text, bound in final.items():  # every printed atom parses back to the same atom
+        assert eng.query(text) == bound
+    assert eng.grounding_text(0) == f"Y=b, X={constant_text(node)}"  # head variables first
+    assert constant_text(node) != node
+
+
+def test_node_ids_the_language_cannot_write_are_errors(tmp_path: Path) -> None:
+    g = nx.DiGraph()
+    g.add_node("""both"'quotes""", agent=True)
+    with pytest.raises(ProgramCheckError, match="cannot be a constant of the rule language: it holds both"):
+        load_graphml(write(tmp_path, g))
+
+
+def test_engine_refuses_an_arity_clash_with_the_graph(tmp_path: Path) -> None:
+    g = nx.DiGraph()
+    g.add_edge("a", "b", link=True)
+    graph = load_graphml(write(tmp_path, g))
+    with pytest.raises(ProgramCheckError, match="predicate 'link' is used with 1 argument here but with 2 "
+                                                "arguments in the graph") as e:
+        Engine(parse_program("h(A) <-0 link(A)\n", "c.rules"), graph)
+    assert (e.value.file, e.value.line) == ("c.rules", 1)
+
+
+def test_reason_with_a_graph(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    g = nx.DiGraph()
+    g.add_node("a", infected=True)
+    g.add_edge("a", "b", link=True)
+    graph_file = write(tmp_path, g)
+    rules = tmp_path / "spread.rules"
+    rules.write_text("infected(X) <-1 infected(Y), link(Y,X)\n")
+    assert cli_main(["reason", str(rules), "--graph", str(graph_file), "--steps", "2", "--no-trace"]) == 0
+    out, err = capsys.readouterr()
+    assert "never set" not in err  # the graph sets infected and link
+    assert "infected(b): [1,1]" in out
+    clash = tmp_path / "clash.rules"
+    clash.write_text("h(X) <-0 infected(X)\nh(X) <-0 link(X)\n")
+    assert cli_main(["reason", str(clash), "--graph", str(graph_file), "--steps", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"{clash}:2:10: error: predicate 'link' is used with 1 argument here but with 2 "
+                          "arguments in the graph")
+
+
+BILLION_LAUGHS = """<?xml version="1.0"?>
+<!DOCTYPE graphml [
+  <!ENTITY lol "lol">
+  <!ENTITY lol2 "&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;">
+  <!ENTITY lol3 "&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;">
+]>
+<graphml><graph><node id="&lol3;"/></graph></graphml>
+"""
+
+EXTERNAL_ENTITY = """<?xml version="1.0"?>
+<!DOCTYPE graphml [<!ENTITY secret SYSTEM "file://{secret}">]>
+<graphml><graph><node id="a"><data key="d0">&secret;</data></node></graph></graphml>
+"""
+
+
+def test_entity_declarations_are_refused(tmp_path: Path) -> None:
+    path = tmp_path / "laughs.graphml"
+    path.write_text(BILLION_LAUGHS)
+    with pytest.raises(ProgramCheckError, match="declares the entity 'lol': entity declarations are refused") as e:
+        load_graphml(path)
+    assert e.value.line == 3
+
+
+def test_external_entities_are_never_read(tmp_path: Path) -> None:
+    secret = tmp_path / "secret.txt"
+    secret.write_text("0.5,0.5")
+    path = tmp_path / "xxe.graphml"
+    path.write_text(EXTERNAL_ENTITY.format(secret=secret))
+    with pytest.raises(ProgramCheckError, match="entity declarations are refused") as e:
+        load_graphml(path)
+    assert "0.5" not in str(e.value)
+
+
+def test_an_undeclared_entity_is_a_located_error(tmp_path: Path) -> None:
+    path = tmp_path / "undeclared.graphml"
+    path.write_text('<graphml><graph><node id="&x;"/></graph></graphml>')
+    with pytest.raises(ProgramCheckError, match="not a readable GraphML file: undefined entity") as e:
+        load_graphml(path)
+    assert (e.value.line, e.value.column) == (1, 17)  # the element that holds it
+
+
+def test_a_value_that_is_not_its_declared_type(tmp_path: Path) -> None:
+    path = tmp_path / "int.graphml"
+    path.write_text('<graphml><key id="d0" for="node" attr.name="hp" attr.type="int"/>\n<graph>'
+                    '<node id="a"><data key="d0">abc</data></node></graph></graphml>')
+    with pytest.raises(ProgramCheckError, match="node 'a', attribute 'hp': value 'abc' is not of type int") as e:
+        load_graphml(path)
+    assert e.value.line == 2

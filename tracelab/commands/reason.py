@@ -20,11 +20,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tracelab.engine import Engine, ProgramError, load_graphml, load_program
+    from tracelab.engine import Engine, ProgramError, check_program, load_graphml, load_program
 
     try:
         program = load_program(*args.program, *args.facts)
         graph = load_graphml(args.graph) if args.graph else None
+        if graph is not None:  # what the graph sets is set: no "never set" warnings, arities must agree
+            check_program(program, graph.predicates())
     except (ProgramError, OSError) as e:
         print(e, file=sys.stderr)
         return 2
