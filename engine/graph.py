@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import os
 import re
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -25,6 +24,8 @@ __all__ = ["Graph", "load_graphml"]
 
 _NUM = r"([0-9]+(?:\.[0-9]+)?|\.[0-9]+)"
 _BOUND_RE = re.compile(rf"\s*(?:\[\s*{_NUM}\s*,\s*{_NUM}\s*\]|{_NUM}\s*,\s*{_NUM})\s*")
+_ATTR_RE = re.compile(r"""([\w.:-]+)\s*=\s*(["'])(.*?)\2""", re.S)
+_DEFAULT_RE = re.compile(r"<(?:[\w.-]+:)?default\b[^>]*>(.*?)</(?:[\w.-]+:)?default\s*>", re.S)
 _ENCODING_RE = re.compile(rb"""^(?:\xef\xbb\xbf)?<\?xml[^>]*?encoding\s*=\s*["']([^"']*)["']""")
 
 
@@ -89,28 +90,35 @@ def _scan(file: str, data: bytes) -> RawGraph | None:
     if m is not None and m.group(1).lower() not in (b"utf-8", b"utf8", b"us-ascii", b"ascii"):
         return None
     b = np.frombuffer(data, np.uint8)
-    status, _, node_spans, edges, d, key_spans, key_elems, graph_tag = S.scan(b, *S.words())
+    status, scanned = S.scan_graphml(b)
     if status != S.SCAN_OK:
         return None
+    key_spans, key_elems = scanned["key_spans"], scanned["key_elems"]
+    graph_tag, d = scanned["graph_tag"], scanned["data"]
     try:
-        nodes = [data[s:e].decode("utf-8") for s, e in node_spans.tolist()]
+        pool, off = scanned["pool"].tobytes(), scanned["node_off"].tolist()
+        nodes = [pool[s:e].decode("utf-8") for s, e in zip(off, off[1:])]
         data_keys = [data[s:e].decode("utf-8") for s, e in key_spans.tolist()]
         keys: dict[str, GraphKey] = {}
         for s, e in key_elems.tolist():
-            el = ET.fromstring(data[s:e])
-            kid = el.get("id")
+            element = data[s:e].decode("utf-8")
+            if "&" in element:
+                return None
+            start_tag = element[:element.index(">")]
+            attrs = {m.group(1): m.group(3) for m in _ATTR_RE.finditer(start_tag)}
+            kid = attrs.get("id")
             if kid is None:
                 return None
-            keys[kid] = GraphKey.of(kid, el.attrib, lambda msg: ProgramCheckError(msg, file))
-            default = next((c for c in el if c.tag.rpartition(":")[2] == "default"), None)
+            keys[kid] = GraphKey.of(kid, attrs, lambda msg: ProgramCheckError(msg, file))
+            default = _DEFAULT_RE.search(element)
             if default is not None:
-                keys[kid].default = default.text or ""
+                keys[kid].default = default.group(1)
         undirected = False
         if graph_tag[0] >= 0:
             tag = data[graph_tag[0]:graph_tag[1]]
             m = re.search(rb"""\sedgedefault\s*=\s*["']([^"']*)["']""", tag)
             undirected = m is not None and m.group(1) == b"undirected"
-    except (UnicodeDecodeError, ET.ParseError):
+    except UnicodeDecodeError:
         return None
 
     def place(i: int) -> tuple[int, int]:
@@ -119,11 +127,10 @@ def _scan(file: str, data: bytes) -> RawGraph | None:
         return data.count(b"\n", 0, pos) + 1, pos - line_start + 1
 
     return RawGraph(
-        file=file, nodes=nodes, edges=edges, graph_undirected=undirected, keys=keys,
+        file=file, nodes=nodes, edges=scanned["edges"], graph_undirected=undirected, keys=keys,
         data=np.ascontiguousarray(d[:, [S.D_KIND, S.D_ELEM, S.D_KEY]]), data_keys=data_keys,
         text=lambda i: data[int(d[i, S.D_START]):int(d[i, S.D_END])].decode("utf-8"), place=place,
-        numbers=S.data_numbers(b, d), booleans=S.data_booleans(b, d, *(np.frombuffer(w, np.uint8) for w in (
-            b"true", b"false", b"1", b"0"))))
+        numbers=scanned["numbers"], booleans=scanned["booleans"])
 
 
 def _to_graph(raw: RawGraph) -> Graph:

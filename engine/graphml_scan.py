@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-SCAN_OK, SCAN_UNSUPPORTED = 0, 1
+SCAN_OK, SCAN_UNSUPPORTED, SCAN_GROW = 0, 1, 2  # SCAN_GROW: the node table is half full, scan again larger
 # elements the scanner knows
 _OTHER, _NODE, _EDGE, _DATA, _KEY, _GRAPH = 0, 1, 2, 3, 4, 5
 # per data value: (kind 0 node / 1 edge, element index, key index, text start, text end, tag offset)
@@ -21,9 +21,50 @@ D_KIND, D_ELEM, D_KEY, D_START, D_END, D_POS = 0, 1, 2, 3, 4, 5
 N_DCOLS = 6
 # per edge: (source, target, directed: -1 graph default / 0 undirected / 1 directed)
 E_SRC, E_DST, E_DIRECTED = 0, 1, 2
+# counts written by scan: nodes, edges, data values, key ids, key elements
+C_NODES, C_EDGES, C_DATA, C_KEYS, C_KEY_ELEMS = 0, 1, 2, 3, 4
+MAX_DEPTH = 256
 
-scan_jit = njit(cache=True)
+# no reference counting (`_nrt=False`): each array passed to a helper would cost atomic operations per
+# call, which made a tag cost a microsecond; every buffer is allocated by the caller (`scan_graphml`)
+scan_jit = njit(cache=True, _nrt=False)
 _POW10 = np.array([float(f"1e{k}") for k in range(23)])  # exact doubles
+
+
+def _packed(word: bytes) -> int:
+    """Up to 8 bytes as one integer, the way _pack reads a name."""
+    v = 0
+    for c in word:
+        v = (v << 8) | c
+    return v
+
+
+W_NODE, W_EDGE, W_DATA, W_KEY, W_GRAPH = (_packed(w) for w in (b"node", b"edge", b"data", b"key", b"graph"))
+W_ID, W_SOURCE, W_TARGET, W_DIRECTED = (_packed(w) for w in (b"id", b"source", b"target", b"directed"))
+W_TRUE, W_FALSE, W_ONE, W_ZERO = (_packed(w) for w in (b"true", b"false", b"1", b"0"))
+
+
+@scan_jit
+def _pack(b, s, e, lower):
+    """b[s:e] as one integer (-1 if longer than 8 bytes), lower-cased if `lower`."""
+    if e - s > 8 or e < s:
+        return -1
+    v = 0
+    for k in range(s, e):
+        c = b[k]
+        if lower and 65 <= c <= 90:
+            c += 32
+        v = (v << 8) | c
+    return v
+
+
+@scan_jit
+def _local_name(b, s, e):
+    """The packed name b[s:e] without a namespace prefix."""
+    for k in range(e - 1, s - 1, -1):
+        if b[k] == 58:  # ':'
+            return _pack(b, k + 1, e, False)
+    return _pack(b, s, e, False)
 
 
 @scan_jit
@@ -45,42 +86,56 @@ def _same(b, s1, e1, s2, e2):
 
 
 @scan_jit
-def _rehash(b, spans, n, size):
-    table = np.full(size, -1, np.int64)
-    mask = np.uint64(size - 1)
-    for i in range(n):
-        j = _hash(b, spans[i, 0], spans[i, 1]) & mask
-        while table[j] >= 0:
-            j = (j + np.uint64(1)) & mask
-        table[j] = i
-    return table
-
-
-@scan_jit
 def _intern(b, s, e, table, spans, n):
-    """Index of the byte string b[s:e] among spans[:n] (added when new). Returns (index, table, spans,
-    n): the arrays are replaced when they grow."""
-    size = table.shape[0]
-    if 2 * (n + 1) > size:
-        table = _rehash(b, spans, n, 2 * size)
-        size = 2 * size
-    mask = np.uint64(size - 1)
+    """Index of the byte string b[s:e] among spans[:n]; a new one is added as n (the caller counts).
+    The table (open addressing, -1 empty) is sized by the caller for every string there can be."""
+    mask = np.uint64(table.shape[0] - 1)
     j = _hash(b, s, e) & mask
     while True:
         k = table[j]
         if k < 0:
             break
         if _same(b, spans[k, 0], spans[k, 1], s, e):
-            return k, table, spans, n
+            return k
         j = (j + np.uint64(1)) & mask
-    if n == spans.shape[0]:
-        grown = np.empty((2 * n, 2), np.int64)
-        grown[:n] = spans[:n]
-        spans = grown
     spans[n, 0] = s
     spans[n, 1] = e
     table[j] = n
-    return n, table, spans, n + 1
+    return n
+
+
+@scan_jit
+def _intern_node(b, s, e, table, off, pool, n):
+    """Index of node id b[s:e] among the n interned so far; a new one is added as n. The table entries
+    are (hash fingerprint << 32 | index), the ids are copied into one byte pool: a lookup touches the
+    table and the pool, both small, never the (large, cold) file bytes of earlier ids."""
+    h = _hash(b, s, e)
+    mask = np.uint64(table.shape[0] - 1)
+    fp = np.int64(h >> np.uint64(33))
+    j = h & mask
+    m = e - s
+    while True:
+        v = table[j]
+        if v < 0:
+            break
+        if (v >> 32) == fp:
+            k = v & 0xFFFFFFFF
+            ps = off[k]
+            if off[k + 1] - ps == m:
+                same = True
+                for x in range(m):
+                    if pool[ps + x] != b[s + x]:
+                        same = False
+                        break
+                if same:
+                    return k
+        j = (j + np.uint64(1)) & mask
+    ps = off[n]
+    for x in range(m):
+        pool[ps + x] = b[s + x]
+    off[n + 1] = ps + m
+    table[j] = (fp << 32) | n
+    return n
 
 
 @scan_jit
@@ -89,39 +144,48 @@ def _is_space(c):
 
 
 @scan_jit
-def _find(b, i, pat):
-    """Offset of pattern bytes `pat` at or after i, or -1."""
-    n, m = b.shape[0], pat.shape[0]
-    while i + m <= n:
-        ok = True
-        for k in range(m):
-            if b[i + k] != pat[k]:
-                ok = False
-                break
-        if ok:
-            return i
+def _skip_past(b, i, c0, c1, c2):
+    """Offset just past the first c0 c1 c2 (c2 < 0: c0 c1) at or after i, or -1."""
+    n = b.shape[0]
+    while i + 1 < n:
+        if b[i] == c0 and b[i + 1] == c1:
+            if c2 < 0:
+                return i + 2
+            if i + 2 < n and b[i + 2] == c2:
+                return i + 3
         i += 1
     return -1
 
 
 @scan_jit
-def _name_is(b, s, e, word):
-    """Is b[s:e], without a namespace prefix, equal to `word`?"""
-    for k in range(e - 1, s - 1, -1):
-        if b[k] == 58:  # ':'
-            s = k + 1
-            break
-    return _same_bytes(b, s, e, word)
-
-
-@scan_jit
-def _same_bytes(b, s, e, word):
-    if e - s != word.shape[0]:
-        return False
-    for k in range(e - s):
-        if b[s + k] != word[k]:
-            return False
-    return True
+def count_starts(b):
+    """How many '<node', '<edge', '<data', '<key' (any prefix) there are: the buffer sizes of scan."""
+    n = b.shape[0]
+    c_node = 0
+    c_edge = 0
+    c_data = 0
+    c_key = 0
+    for i in range(n - 4):
+        if b[i] != 60:
+            continue
+        # skip a prefix: '<' name ':'
+        j = i + 1
+        k = j
+        while k < n and k < j + 64 and b[k] != 58 and b[k] != 62 and not _is_space(b[k]) and b[k] != 60:
+            k += 1
+        if k < n and b[k] == 58:
+            j = k + 1
+        if j + 3 < n:
+            w = _pack(b, j, j + 4, False)
+            if w == W_NODE:
+                c_node += 1
+            elif w == W_EDGE:
+                c_edge += 1
+            elif w == W_DATA:
+                c_data += 1
+            elif _pack(b, j, j + 3, False) == W_KEY:
+                c_key += 1
+    return c_node, c_edge, c_data, c_key
 
 
 @scan_jit
@@ -183,28 +247,20 @@ def parse_number(b, s, e):
 
 
 @scan_jit
-def scan(b, w_node, w_edge, w_data, w_key, w_graph, w_id, w_source, w_target, w_directed, w_false, w_true,
-         w_comment_end, w_pi_end):
-    """Scan GraphML bytes `b`. Returns (status, offset, node spans [N,2], edges [E,3], data [D,6],
-    key-id spans [K,2], key element spans [k,2], graph start tag span [2])."""
+def scan(b, node_tab, node_off, pool, edges, data, key_tab, key_spans, key_elems, stack, graph_tag, counts):
+    """Scan GraphML bytes `b` into the caller's buffers (sized by count_starts); counts[C_*] say how much
+    of each was filled. Returns (status, byte offset where the file left the subset)."""
     n = b.shape[0]
-    node_tab = np.full(1024, -1, np.int64)
-    node_spans = np.empty((512, 2), np.int64)
     n_nodes = 0
-    key_tab = np.full(64, -1, np.int64)
-    key_spans = np.empty((32, 2), np.int64)
     n_keys = 0
-    edges = np.empty((1024, 3), np.int64)
     n_edges = 0
-    data = np.empty((1024, N_DCOLS), np.int64)
     n_data = 0
-    key_elems = np.empty((16, 2), np.int64)
     n_key_elems = 0
-    graph_tag = np.full(2, -1, np.int64)
+    graph_tag[0] = -1
+    graph_tag[1] = -1
     cur_kind = -1  # the open node (0) or edge (1), -1 none
     cur_elem = -1
     in_key = -1  # start offset of an open <key> element
-    stack = np.empty((64, 2), np.int64)  # name spans of the open elements: every end tag must match
     depth = 0
     roots = 0
     i = 0
@@ -213,39 +269,37 @@ def scan(b, w_node, w_edge, w_data, w_key, w_graph, w_id, w_source, w_target, w_
             i += 1
             continue
         if i + 1 >= n:
-            return SCAN_UNSUPPORTED, i, node_spans[:0], edges[:0], data[:0], key_spans[:0], key_elems[:0], graph_tag
+            return SCAN_UNSUPPORTED, i
         c = b[i + 1]
         if c == 63:  # '<?' processing instruction / XML declaration
-            j = _find(b, i + 2, w_pi_end)
-            if j < 0:
-                return SCAN_UNSUPPORTED, i, node_spans[:0], edges[:0], data[:0], key_spans[:0], key_elems[:0], graph_tag
-            i = j + 2
+            i = _skip_past(b, i + 2, 63, 62, -1)
+            if i < 0:
+                return SCAN_UNSUPPORTED, n
             continue
-        if c == 33:  # '<!'
-            if i + 3 < n and b[i + 2] == 45 and b[i + 3] == 45:  # comment
-                j = _find(b, i + 4, w_comment_end)
-                if j < 0:
-                    return SCAN_UNSUPPORTED, i, node_spans[:0], edges[:0], data[:0], key_spans[:0], key_elems[:0], graph_tag
-                i = j + 3
+        if c == 33:  # '<!': a comment, else (DOCTYPE, CDATA) outside the subset
+            if i + 3 < n and b[i + 2] == 45 and b[i + 3] == 45:
+                i = _skip_past(b, i + 4, 45, 45, 62)
+                if i < 0:
+                    return SCAN_UNSUPPORTED, n
                 continue
-            return SCAN_UNSUPPORTED, i, node_spans[:0], edges[:0], data[:0], key_spans[:0], key_elems[:0], graph_tag
+            return SCAN_UNSUPPORTED, i
         closing = c == 47  # '</'
         s = i + 2 if closing else i + 1
         e = s
         while e < n and not _is_space(b[e]) and b[e] != 62 and b[e] != 47:
             e += 1
-        if _name_is(b, s, e, w_node):
+        name = _local_name(b, s, e)
+        kind = _OTHER
+        if name == W_NODE:
             kind = _NODE
-        elif _name_is(b, s, e, w_edge):
+        elif name == W_EDGE:
             kind = _EDGE
-        elif _name_is(b, s, e, w_data):
+        elif name == W_DATA:
             kind = _DATA
-        elif _name_is(b, s, e, w_key):
+        elif name == W_KEY:
             kind = _KEY
-        elif _name_is(b, s, e, w_graph):
+        elif name == W_GRAPH:
             kind = _GRAPH
-        else:
-            kind = _OTHER
         # attributes up to '>' (values may not hold '<', '>' or '&' in the subset)
         j = e
         a_id_s = -1
@@ -260,7 +314,7 @@ def scan(b, w_node, w_edge, w_data, w_key, w_graph, w_id, w_source, w_target, w_
             while j < n and _is_space(b[j]):
                 j += 1
             if j >= n:
-                return SCAN_UNSUPPORTED, i, node_spans[:0], edges[:0], data[:0], key_spans[:0], key_elems[:0], graph_tag
+                return SCAN_UNSUPPORTED, i
             if b[j] == 62 or b[j] == 47:
                 break
             ns = j
@@ -270,109 +324,110 @@ def scan(b, w_node, w_edge, w_data, w_key, w_graph, w_id, w_source, w_target, w_
             while j < n and _is_space(b[j]):
                 j += 1
             if j >= n or b[j] != 61:
-                return SCAN_UNSUPPORTED, i, node_spans[:0], edges[:0], data[:0], key_spans[:0], key_elems[:0], graph_tag
+                return SCAN_UNSUPPORTED, i
             j += 1
             while j < n and _is_space(b[j]):
                 j += 1
             if j >= n or (b[j] != 34 and b[j] != 39):
-                return SCAN_UNSUPPORTED, i, node_spans[:0], edges[:0], data[:0], key_spans[:0], key_elems[:0], graph_tag
+                return SCAN_UNSUPPORTED, i
             q = b[j]
             vs = j + 1
             j = vs
             while j < n and b[j] != q:
                 if b[j] == 60 or b[j] == 38 or b[j] == 62:  # '<', '&', '>'
-                    return SCAN_UNSUPPORTED, i, node_spans[:0], edges[:0], data[:0], key_spans[:0], key_elems[:0], graph_tag
+                    return SCAN_UNSUPPORTED, i
                 j += 1
             if j >= n:
-                return SCAN_UNSUPPORTED, i, node_spans[:0], edges[:0], data[:0], key_spans[:0], key_elems[:0], graph_tag
+                return SCAN_UNSUPPORTED, i
             ve = j
             j += 1
-            if kind == _NODE or kind == _DATA:
-                if _same_bytes(b, ns, ne, w_id if kind == _NODE else w_key):
+            if kind == _NODE or kind == _DATA or kind == _EDGE:
+                an = _pack(b, ns, ne, False)
+                if (kind == _NODE and an == W_ID) or (kind == _DATA and an == W_KEY):
                     a_id_s = vs
                     a_id_e = ve
-            elif kind == _EDGE:
-                if _same_bytes(b, ns, ne, w_source):
-                    a_src_s = vs
-                    a_src_e = ve
-                elif _same_bytes(b, ns, ne, w_target):
-                    a_dst_s = vs
-                    a_dst_e = ve
-                elif _same_bytes(b, ns, ne, w_directed):
-                    a_dir_s = vs
-                    a_dir_e = ve
+                elif kind == _EDGE:
+                    if an == W_SOURCE:
+                        a_src_s = vs
+                        a_src_e = ve
+                    elif an == W_TARGET:
+                        a_dst_s = vs
+                        a_dst_e = ve
+                    elif an == W_DIRECTED:
+                        a_dir_s = vs
+                        a_dir_e = ve
         empty = b[j] == 47
         if empty:
             j += 1
             if j >= n or b[j] != 62 or closing:
-                return SCAN_UNSUPPORTED, i, node_spans[:0], edges[:0], data[:0], key_spans[:0], key_elems[:0], graph_tag
+                return SCAN_UNSUPPORTED, i
         tag_end = j + 1
         if closing:
             if depth == 0 or not _same(b, stack[depth - 1, 0], stack[depth - 1, 1], s, e):
-                return SCAN_UNSUPPORTED, i, node_spans[:0], edges[:0], data[:0], key_spans[:0], key_elems[:0], graph_tag
+                return SCAN_UNSUPPORTED, i
             depth -= 1
-        else:
-            if depth == 0:
-                roots += 1
-                if roots > 1:
-                    return SCAN_UNSUPPORTED, i, node_spans[:0], edges[:0], data[:0], key_spans[:0], key_elems[:0], graph_tag
-            if not empty and kind != _DATA:  # <data> reads its own end tag below
-                if depth == stack.shape[0]:
-                    grown = np.empty((2 * depth, 2), np.int64)
-                    grown[:depth] = stack[:depth]
-                    stack = grown
-                stack[depth, 0] = s
-                stack[depth, 1] = e
-                depth += 1
-        if closing:
             if kind == _NODE or kind == _EDGE:
                 if cur_kind != kind - 1:
-                    return SCAN_UNSUPPORTED, i, node_spans[:0], edges[:0], data[:0], key_spans[:0], key_elems[:0], graph_tag
+                    return SCAN_UNSUPPORTED, i
                 cur_kind = -1
-            elif kind == _KEY:
-                if in_key < 0:
-                    return SCAN_UNSUPPORTED, i, node_spans[:0], edges[:0], data[:0], key_spans[:0], key_elems[:0], graph_tag
+            elif kind == _KEY and in_key >= 0 and depth == stack[MAX_DEPTH - 1, 0]:
                 if n_key_elems == key_elems.shape[0]:
-                    grown = np.empty((2 * n_key_elems, 2), np.int64)
-                    grown[:n_key_elems] = key_elems[:n_key_elems]
-                    key_elems = grown
+                    return SCAN_UNSUPPORTED, i
                 key_elems[n_key_elems, 0] = in_key
                 key_elems[n_key_elems, 1] = tag_end
                 n_key_elems += 1
                 in_key = -1
-            elif kind == _DATA:  # a </data> not closing the text we took: elements inside <data>
-                return SCAN_UNSUPPORTED, i, node_spans[:0], edges[:0], data[:0], key_spans[:0], key_elems[:0], graph_tag
             i = tag_end
             continue
+        if depth == 0:
+            roots += 1
+            if roots > 1:
+                return SCAN_UNSUPPORTED, i
+        if not empty and kind != _DATA:  # <data> reads its own end tag below
+            if depth == MAX_DEPTH - 1:
+                return SCAN_UNSUPPORTED, i
+            stack[depth, 0] = s
+            stack[depth, 1] = e
+            depth += 1
         if in_key >= 0:  # <default> and friends inside a <key>: the key element is read in Python
+            if kind == _DATA:
+                return SCAN_UNSUPPORTED, i
             i = tag_end
             continue
         if kind == _NODE:
-            if a_id_s < 0 or cur_kind >= 0:
-                return SCAN_UNSUPPORTED, i, node_spans[:0], edges[:0], data[:0], key_spans[:0], key_elems[:0], graph_tag
-            idx, node_tab, node_spans, n_nodes = _intern(b, a_id_s, a_id_e, node_tab, node_spans, n_nodes)
+            if a_id_s < 0 or cur_kind >= 0 or n_nodes + 1 >= node_off.shape[0]:
+                return SCAN_UNSUPPORTED, i
+            if 2 * (n_nodes + 1) > node_tab.shape[0]:
+                return SCAN_GROW, i
+            idx = _intern_node(b, a_id_s, a_id_e, node_tab, node_off, pool, n_nodes)
+            if idx == n_nodes:
+                n_nodes += 1
             if not empty:
                 cur_kind = 0
                 cur_elem = idx
         elif kind == _EDGE:
-            if a_src_s < 0 or a_dst_s < 0 or cur_kind >= 0:
-                return SCAN_UNSUPPORTED, i, node_spans[:0], edges[:0], data[:0], key_spans[:0], key_elems[:0], graph_tag
-            if n_edges == edges.shape[0]:
-                grown = np.empty((2 * n_edges, 3), np.int64)
-                grown[:n_edges] = edges[:n_edges]
-                edges = grown
-            src, node_tab, node_spans, n_nodes = _intern(b, a_src_s, a_src_e, node_tab, node_spans, n_nodes)
-            dst, node_tab, node_spans, n_nodes = _intern(b, a_dst_s, a_dst_e, node_tab, node_spans, n_nodes)
+            if a_src_s < 0 or a_dst_s < 0 or cur_kind >= 0 or n_edges == edges.shape[0] \
+                    or n_nodes + 3 > node_off.shape[0]:
+                return SCAN_UNSUPPORTED, i
+            if 2 * (n_nodes + 2) > node_tab.shape[0]:
+                return SCAN_GROW, i
+            src = _intern_node(b, a_src_s, a_src_e, node_tab, node_off, pool, n_nodes)
+            if src == n_nodes:
+                n_nodes += 1
+            dst = _intern_node(b, a_dst_s, a_dst_e, node_tab, node_off, pool, n_nodes)
+            if dst == n_nodes:
+                n_nodes += 1
             edges[n_edges, E_SRC] = src
             edges[n_edges, E_DST] = dst
             directed = -1
             if a_dir_s >= 0:
-                if _same_bytes(b, a_dir_s, a_dir_e, w_false):
+                dv = _pack(b, a_dir_s, a_dir_e, False)
+                if dv == W_FALSE:
                     directed = 0
-                elif _same_bytes(b, a_dir_s, a_dir_e, w_true):
+                elif dv == W_TRUE:
                     directed = 1
                 else:
-                    return SCAN_UNSUPPORTED, i, node_spans[:0], edges[:0], data[:0], key_spans[:0], key_elems[:0], graph_tag
+                    return SCAN_UNSUPPORTED, i
             edges[n_edges, E_DIRECTED] = directed
             if not empty:
                 cur_kind = 1
@@ -380,32 +435,31 @@ def scan(b, w_node, w_edge, w_data, w_key, w_graph, w_id, w_source, w_target, w_
             n_edges += 1
         elif kind == _DATA:
             if a_id_s < 0:
-                return SCAN_UNSUPPORTED, i, node_spans[:0], edges[:0], data[:0], key_spans[:0], key_elems[:0], graph_tag
+                return SCAN_UNSUPPORTED, i
             ts = tag_end
             te = tag_end
             if not empty:  # the text up to </data>, which must come next
-                te = ts
                 while te < n and b[te] != 60:
                     if b[te] == 38:  # '&'
-                        return SCAN_UNSUPPORTED, i, node_spans[:0], edges[:0], data[:0], key_spans[:0], key_elems[:0], graph_tag
+                        return SCAN_UNSUPPORTED, i
                     te += 1
                 if te + 1 >= n or b[te + 1] != 47:
-                    return SCAN_UNSUPPORTED, i, node_spans[:0], edges[:0], data[:0], key_spans[:0], key_elems[:0], graph_tag
+                    return SCAN_UNSUPPORTED, i
                 k = te + 2
                 e2 = k
                 while e2 < n and b[e2] != 62 and not _is_space(b[e2]):
                     e2 += 1
                 if not _same(b, k, e2, s, e):  # </data> with the same (prefixed) name
-                    return SCAN_UNSUPPORTED, i, node_spans[:0], edges[:0], data[:0], key_spans[:0], key_elems[:0], graph_tag
+                    return SCAN_UNSUPPORTED, i
                 while e2 < n and b[e2] != 62:
                     e2 += 1
                 tag_end = e2 + 1
             if cur_kind >= 0:  # data of the graph or the document itself is not a fact
-                if n_data == data.shape[0]:
-                    grown = np.empty((2 * n_data, N_DCOLS), np.int64)
-                    grown[:n_data] = data[:n_data]
-                    data = grown
-                kid, key_tab, key_spans, n_keys = _intern(b, a_id_s, a_id_e, key_tab, key_spans, n_keys)
+                if n_data == data.shape[0] or n_keys == key_spans.shape[0] or 2 * (n_keys + 1) > key_tab.shape[0]:
+                    return SCAN_UNSUPPORTED, i
+                kid = _intern(b, a_id_s, a_id_e, key_tab, key_spans, n_keys)
+                if kid == n_keys:
+                    n_keys += 1
                 data[n_data, D_KIND] = cur_kind
                 data[n_data, D_ELEM] = cur_elem
                 data[n_data, D_KEY] = kid
@@ -416,70 +470,80 @@ def scan(b, w_node, w_edge, w_data, w_key, w_graph, w_id, w_source, w_target, w_
         elif kind == _KEY:
             if empty:
                 if n_key_elems == key_elems.shape[0]:
-                    grown = np.empty((2 * n_key_elems, 2), np.int64)
-                    grown[:n_key_elems] = key_elems[:n_key_elems]
-                    key_elems = grown
+                    return SCAN_UNSUPPORTED, i
                 key_elems[n_key_elems, 0] = i
                 key_elems[n_key_elems, 1] = tag_end
                 n_key_elems += 1
             else:
                 in_key = i
+                stack[MAX_DEPTH - 1, 0] = depth - 1  # the depth its end tag brings back
         elif kind == _GRAPH:
             if graph_tag[0] >= 0:  # a second (or nested) graph
-                return SCAN_UNSUPPORTED, i, node_spans[:0], edges[:0], data[:0], key_spans[:0], key_elems[:0], graph_tag
+                return SCAN_UNSUPPORTED, i
             graph_tag[0] = i
             graph_tag[1] = tag_end
         i = tag_end
+    counts[C_NODES] = n_nodes
+    counts[C_EDGES] = n_edges
+    counts[C_DATA] = n_data
+    counts[C_KEYS] = n_keys
+    counts[C_KEY_ELEMS] = n_key_elems
     if cur_kind >= 0 or in_key >= 0 or depth != 0 or roots != 1:
-        return SCAN_UNSUPPORTED, n, node_spans[:0], edges[:0], data[:0], key_spans[:0], key_elems[:0], graph_tag
-    return (SCAN_OK, 0, node_spans[:n_nodes], edges[:n_edges], data[:n_data], key_spans[:n_keys],
-            key_elems[:n_key_elems], graph_tag)
+        return SCAN_UNSUPPORTED, n
+    return SCAN_OK, 0
 
 
 @scan_jit
-def data_numbers(b, data):
-    """Each data value parsed as a number (NaN if it is not one)."""
-    out = np.empty(data.shape[0], np.float64)
-    for k in range(data.shape[0]):
-        out[k] = parse_number(b, data[k, D_START], data[k, D_END])
-    return out
-
-
-@scan_jit
-def data_booleans(b, data, w_true, w_false, w_one, w_zero):
-    """Each data value as a boolean: 1 true, 0 false, -1 neither (case-insensitive, spaces around)."""
-    out = np.empty(data.shape[0], np.int8)
+def data_values(b, data, numbers, booleans):
+    """Each data value as a number (NaN if not one) and a boolean (1 true, 0 false, -1 neither;
+    case-insensitive, "1" / "0" too, spaces around)."""
     for k in range(data.shape[0]):
         s = data[k, D_START]
         e = data[k, D_END]
+        numbers[k] = parse_number(b, s, e)
         while s < e and _is_space(b[s]):
             s += 1
         while e > s and _is_space(b[e - 1]):
             e -= 1
-        v = -1
-        if _lower_is(b, s, e, w_true) or _same_bytes(b, s, e, w_one):
-            v = 1
-        elif _lower_is(b, s, e, w_false) or _same_bytes(b, s, e, w_zero):
-            v = 0
-        out[k] = v
-    return out
+        w = _pack(b, s, e, True)
+        booleans[k] = 1 if w == W_TRUE or w == W_ONE else 0 if w == W_FALSE or w == W_ZERO else -1
 
 
-@scan_jit
-def _lower_is(b, s, e, word):
-    if e - s != word.shape[0]:
-        return False
-    for k in range(e - s):
-        c = b[s + k]
-        if 65 <= c <= 90:
-            c += 32
-        if c != word[k]:
-            return False
-    return True
-
-
-def words() -> tuple[np.ndarray, ...]:
-    """The byte strings `scan` compares against, as uint8 arrays (its last 13 arguments)."""
-    return tuple(np.frombuffer(w, np.uint8) for w in (b"node", b"edge", b"data", b"key", b"graph", b"id",
-                                                        b"source", b"target", b"directed", b"false",
-                                                        b"true", b"-->", b"?>"))
+def scan_graphml(b: np.ndarray) -> tuple[int, dict[str, np.ndarray]]:
+    """Scan bytes `b` (uint8): (status, arrays: node_off and pool (node id i is pool[off[i]:off[i+1]]),
+    edges, data, key_spans, key_elems, graph_tag, numbers, booleans), buffers sized from a counting pass
+    (np.empty pages that are never written cost no memory)."""
+    c_node, c_edge, c_data, c_key = count_starts(b)
+    max_nodes = c_node + 2 * c_edge + 1
+    node_off = np.empty(max_nodes + 1, np.int64)
+    node_off[0] = 0
+    pool = np.empty(len(b), np.uint8)
+    edges = np.empty((c_edge, 3), np.int64)
+    data = np.empty((c_data, N_DCOLS), np.int64)
+    key_spans = np.empty((c_data + 1, 2), np.int64)
+    key_elems = np.empty((c_key + 1, 2), np.int64)
+    stack = np.empty((MAX_DEPTH, 2), np.int64)
+    graph_tag = np.empty(2, np.int64)
+    counts = np.zeros(5, np.int64)
+    # a table for 4x the declared nodes; edges to undeclared nodes may need a larger one (scan again)
+    size = 1 << int(4 * c_node + 64).bit_length()
+    while True:
+        node_tab = np.full(size, -1, np.int64)
+        key_tab = np.full(1 << int(2 * c_key + 64).bit_length(), -1, np.int64)
+        status, _ = scan(b, node_tab, node_off, pool, edges, data, key_tab, key_spans, key_elems, stack,
+                         graph_tag, counts)
+        if status != SCAN_GROW:
+            break
+        size *= 4
+    del node_tab, key_tab
+    if status != SCAN_OK:
+        return status, {}
+    data = data[:counts[C_DATA]]
+    numbers = np.empty(len(data), np.float64)
+    booleans = np.empty(len(data), np.int8)
+    data_values(b, data, numbers, booleans)
+    n_nodes = int(counts[C_NODES])
+    return status, {"node_off": node_off[:n_nodes + 1], "pool": pool[:node_off[n_nodes]].copy(),
+                    "edges": edges[:counts[C_EDGES]], "data": data, "key_spans": key_spans[:counts[C_KEYS]],
+                    "key_elems": key_elems[:counts[C_KEY_ELEMS]], "graph_tag": graph_tag, "numbers": numbers,
+                    "booleans": booleans}

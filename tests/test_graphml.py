@@ -4,6 +4,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import networkx as nx
+import numpy as np
 import pytest
 from tracelab.cli import main as cli_main
 from tracelab.engine import (
@@ -266,3 +267,68 @@ def test_a_value_that_is_not_its_declared_type(tmp_path: Path) -> None:
     with pytest.raises(ProgramCheckError, match="node 'a', attribute 'hp': value 'abc' is not of type int") as e:
         load_graphml(path)
     assert e.value.line == 2
+
+
+def _both_readers(path: Path) -> tuple[Graph, Graph]:
+    from tracelab.engine.graph import _scan, _to_graph
+    from tracelab.engine.graphml_expat import read_graphml_expat
+    raw = _scan(str(path), path.read_bytes())
+    assert raw is not None, "the compiled scanner should take this file"
+    return _to_graph(raw), _to_graph(read_graphml_expat(str(path)))
+
+
+def _same_graph(a: Graph, b: Graph) -> None:
+    assert a.nodes == b.nodes and a.labels == b.labels and a.label_arity == b.label_arity
+    assert np.array_equal(a.fact_label, b.fact_label) and np.array_equal(a.fact_args, b.fact_args)
+    assert np.array_equal(a.fact_bounds, b.fact_bounds)
+
+
+@pytest.mark.parametrize("directed", [True, False])
+def test_the_scanner_and_the_expat_reader_agree(tmp_path: Path, directed: bool) -> None:
+    rng = np.random.default_rng(3)
+    g = nx.DiGraph() if directed else nx.Graph()
+    for i in range(60):
+        g.add_node(f"n{i}" if i % 7 else f"N {i}", **({"hp": float(rng.random())} if i % 3 else {"cell": bool(i % 2)}))
+    for _ in range(200):
+        u, v = (int(x) for x in rng.integers(0, 70, 2))  # some ends are not declared nodes
+        g.add_edge(f"n{u}", f"n{v}", link=True, w=f"[{rng.random() / 2:.3f},{0.5 + rng.random() / 2:.3f}]")
+    path = write(tmp_path, g)
+    fast, full = _both_readers(path)
+    _same_graph(fast, full)
+    assert fast.n_facts > 400
+
+
+SCANNER_CORNERS = """<?xml version="1.0" encoding="UTF-8"?>
+<!-- a comment with <node id="fake"/> in it -->
+<g:graphml xmlns:g="http://graphml.graphdrawing.org/xmlns">
+  <g:key id="k" for="node" attr.name="hp" attr.type="double"><g:default>0.5</g:default></g:key>
+  <g:key id="e" for="edge" attr.name="near" attr.type="boolean"/>
+  <g:graph edgedefault="undirected">
+    <g:node id='a'><g:data key="k"> 1e-1 </g:data></g:node>
+    <g:node id="b"/>
+    <g:edge source="a" target="b" directed="true"><g:data key="e">TRUE</g:data></g:edge>
+    <g:edge target="a" source="b"><g:data key="e">0</g:data></g:edge>
+  </g:graph>
+</g:graphml>
+"""
+
+
+def test_scanner_corners_prefixes_comments_defaults_directions(tmp_path: Path) -> None:
+    path = tmp_path / "corners.graphml"
+    path.write_text(SCANNER_CORNERS)
+    fast, full = _both_readers(path)
+    _same_graph(fast, full)
+    assert fast.nodes == ["a", "b"]
+    assert facts_of(fast) == {("hp", ("a",), 0.1, 0.1), ("hp", ("b",), 0.5, 0.5), ("near", ("a", "b"), 1.0, 1.0),
+                              ("near", ("b", "a"), 0.0, 0.0), ("near", ("a", "b"), 0.0, 0.0)}
+
+
+@pytest.mark.parametrize("text", [
+    '<graphml><graph><node id="a"><data key="k">&lt;</data></node></graph></graphml>',  # a reference
+    '<graphml><graph><node id="a"/></graph></graphml><graphml/>',  # two roots
+    '<graphml><graph><node id="a"></graph></graphml>',  # mismatched end tag
+    '<graphml><graph><node id="a"><data key="k"><b/></data></node></graph></graphml>',  # element in data
+])
+def test_files_outside_the_scanner_subset_go_to_the_expat_reader(tmp_path: Path, text: str) -> None:
+    from tracelab.engine.graph import _scan
+    assert _scan("x", text.encode()) is None
