@@ -17,6 +17,7 @@ from .graph import Graph
 from .grounding import Grounder, GroundingTable, rule_head_bound
 from .parser import check_program, parse_literal
 from .program import (
+    EPS,
     INCONSISTENCY_POLICIES,
     UPDATE_MODES,
     Fact,
@@ -121,7 +122,8 @@ class Engine:
         if g:  # graph nodes are the vocabulary's first nodes (ordered_nodes), so node ids carry over
             labels = np.asarray([self.vocab.label(p, n) for p, n in zip(gr.labels, gr.label_arity)], np.int64)
             self._fact_i[:g, 0] = self.vocab.atoms(labels[gr.fact_label], gr.fact_args[:, 0], gr.fact_args[:, 1])
-            self._fact_i[:g, 3] = 1  # static, at t = 0
+            self._fact_i[:g, 1:3] = gr.windows  # a GraphML fact: static, at t = 0
+            self._fact_i[:g, 3] = gr.statics
             self._fact_f[:g] = gr.fact_bounds
         for i, f in enumerate(self.program.facts, start=g):
             lit = f.literal
@@ -200,19 +202,18 @@ class Engine:
     def _sync(self) -> None:
         """Ground any new settable atoms and grow the per-world state to the vocabulary and groundings."""
         g = self.grounder
-        if not g._new and g._closed_once and self.vocab.n_atoms == self._state.n_atoms \
-                and len(g.g_rule) == self._n_grounded and len(g.settable) == self._n_settable:
+        if not g.has_pending and self.vocab.n_atoms == self._state.n_atoms \
+                and g.n_groundings == self._n_grounded and g.n_settable == self._n_settable:
             return  # the usual case at every step: nothing was interned or made settable since
-        self.grounder.close()
+        g.close()
         n_atoms = self.vocab.n_atoms
-        if len(self._settable) != n_atoms or len(self.grounder.settable) != self._n_settable:
-            self._settable = np.zeros(n_atoms, np.bool_)
-            self._settable[list(self.grounder.settable)] = True
-            self._n_settable = len(self.grounder.settable)
-        n_inst = len(self.grounder.g_rule)
+        if len(self._settable) != n_atoms or g.n_settable != self._n_settable:
+            self._settable = g.settable_mask(n_atoms)
+            self._n_settable = g.n_settable
+        n_inst = g.n_groundings
         if n_inst == self._n_grounded and n_atoms == self._state.n_atoms and self._kt is not None:
             return
-        self._kt = self.grounder.kernel_tables(self._rule_kinds(), self._fact_i[:, 0])
+        self._kt = g.kernel_tables(self._rule_kinds(), self._fact_i[:, 0])
         self._state.grow(n_atoms, self._kt)
         self._n_grounded = n_inst
         self._table = None
@@ -299,8 +300,7 @@ class Engine:
             raise ValueError(f"world ids must lie in 0..{self.n_worlds - 1} (or -1 for every world)")
         known = self._settable[atoms[atoms < len(self._settable)]]
         if known.size < atoms.size or not known.all():
-            for a in np.unique(atoms):
-                self.grounder.add_settable(int(a))
+            self.grounder.add_settable_many(atoms)
         self._ext.append((atoms, lower, upper, worlds, np.full(atoms.shape, int(static), np.int64)))
 
     def _external_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -381,6 +381,37 @@ class Engine:
         aid = self._lookup(text)
         return (0.0, 1.0) if aid is None else self.bound(aid, world)
 
+    def match(self, pattern: str, world: int = 0) -> list[tuple[dict[str, str], tuple[float, float]]]:
+        """The atoms a literal with variables holds of, e.g. "infected(X)" or "link(a,Y):[0.5,1]"
+        (a missing annotation means [1,1], as in rules; `~` tests the complement): one (bindings,
+        bound) per atom, in atom order. Only atoms the engine knows are candidates."""
+        lit = parse_literal(pattern)
+        label = self.vocab.label_ids.get(lit.pred)
+        if label is None or self.vocab.label_arity[label] != len(lit.args):
+            return []
+        n = self._state.n_atoms
+        cand = np.flatnonzero(self.vocab.atom_label[:n] == label)
+        cols = (self.vocab.atom_arg0[:n], self.vocab.atom_arg1[:n])
+        first_pos: dict[str, int] = {}
+        for pos, term in enumerate(lit.args):
+            vals = cols[pos][cand]
+            if not term.is_var:
+                node = self.vocab.node_ids.get(term.name)
+                cand = cand[vals == node] if node is not None else cand[:0]
+            elif term.name in first_pos:  # p(X,X): both arguments equal
+                cand = cand[vals == cols[first_pos[term.name]][cand]]
+            else:
+                first_pos[term.name] = pos
+        lo, up = self.lower[world][cand], self.upper[world][cand]
+        if lit.negated:
+            lo, up = 1.0 - up, 1.0 - lo
+        hold = (lo >= lit.lower - EPS) & (up <= lit.upper + EPS)
+        out = []
+        for a in cand[hold].tolist():
+            binding = {v: self.vocab.nodes[int(cols[p][a])] for v, p in first_pos.items()}
+            out.append((binding, (float(self.lower[world][a]), float(self.upper[world][a]))))
+        return out
+
     def interpretation(self, world: int = 0) -> dict[str, tuple[float, float]]:
         """Every atom whose bound is not [0,1], by its text."""
         lo, up = self.lower[world], self.upper[world]
@@ -407,7 +438,7 @@ class Engine:
 
     @property
     def groundings(self) -> GroundingTable:
-        if self._table is None or len(self._table.rule) != len(self.grounder.g_rule):
+        if self._table is None or len(self._table.rule) != self.grounder.n_groundings:
             self._table = self.grounder.table()
         return self._table
 

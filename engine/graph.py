@@ -41,6 +41,48 @@ class Graph:
     fact_args: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int32))
     fact_bounds: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.float64))
     file: str = "<graph>"
+    # fact tables (facttable.py) also give windows and static flags; a GraphML fact is static at t = 0
+    fact_window: np.ndarray | None = None  # int64 [F, 2]: start, end
+    fact_static: np.ndarray | None = None  # bool [F]
+
+    @property
+    def windows(self) -> np.ndarray:
+        return self.fact_window if self.fact_window is not None else np.zeros((self.n_facts, 2), np.int64)
+
+    @property
+    def statics(self) -> np.ndarray:
+        return self.fact_static if self.fact_static is not None else np.ones(self.n_facts, np.bool_)
+
+    def concat(self, other: Graph) -> Graph:
+        """This graph's facts, then other's (its nodes and labels mapped onto this graph's)."""
+        node_ids = {n: i for i, n in enumerate(self.nodes)}
+        nodes = list(self.nodes)
+        for n in other.nodes:
+            if n not in node_ids:
+                node_ids[n] = len(nodes)
+                nodes.append(n)
+        node_map = np.array([node_ids[n] for n in other.nodes], np.int32)
+        labels, arity = list(self.labels), list(self.label_arity)
+        label_ids = {name: i for i, name in enumerate(labels)}
+        label_map = np.zeros(len(other.labels), np.int32)
+        for j, (name, ar) in enumerate(zip(other.labels, other.label_arity)):
+            i = label_ids.get(name)
+            if i is None:
+                i = label_ids[name] = len(labels)
+                labels.append(name)
+                arity.append(ar)
+            elif arity[i] != ar:
+                raise ProgramCheckError(f"predicate '{name}' has {ar} argument(s) here but {arity[i]} in "
+                                        f"{self.file}", other.file)
+            label_map[j] = i
+        args = other.fact_args.copy()
+        args[:, 0] = node_map[args[:, 0]] if len(args) else args[:, 0]
+        edge = args[:, 1] >= 0
+        args[edge, 1] = node_map[other.fact_args[edge, 1]]
+        return Graph(nodes, labels, arity, np.concatenate([self.fact_label, label_map[other.fact_label]]),
+                     np.concatenate([self.fact_args, args]), np.concatenate([self.fact_bounds, other.fact_bounds]),
+                     self.file, np.concatenate([self.windows, other.windows]),
+                     np.concatenate([self.statics, other.statics]))
 
     @property
     def n_facts(self) -> int:
@@ -59,7 +101,9 @@ class Graph:
         lo, up = (float(x) for x in self.fact_bounds[i])
         lit = Literal(pred, tuple(Term(a, is_var=False) for a in args), lo, up)
         text = f"{pred}({','.join(map(constant_text, args))})"
-        return Fact(text, lit, static=True, loc=SourceLoc(self.file, 0, 0), text=text)
+        start, end = (int(x) for x in self.windows[i])
+        return Fact(text, lit, start, end, static=bool(self.statics[i]), loc=SourceLoc(self.file, 0, 0),
+                    text=text)
 
     @property
     def facts(self) -> list[Fact]:

@@ -59,6 +59,12 @@ class Vocabulary:
 
     def add_nodes(self, names: list[str] | tuple[str, ...]) -> np.ndarray:
         """Node ids of names, interned in order."""
+        if not self.nodes and len(names) > 1000:  # a graph's node list: one dict build, not a call each
+            self.nodes = list(dict.fromkeys(names))
+            if len(self.nodes) > MAX_NODES:
+                raise ValueError(f"more than {MAX_NODES} nodes")
+            self.node_ids = {n: i for i, n in enumerate(self.nodes)}
+            return np.fromiter(map(self.node_ids.__getitem__, names), np.int32, len(names))
         return np.fromiter((self.node(n) for n in names), np.int32, len(names))
 
     def label(self, name: str, arity: int) -> int:
@@ -111,22 +117,26 @@ class Vocabulary:
         keys = self._keys(labels, a0, a1)
         if not len(keys):
             return np.zeros(0, np.int64)
-        pos = np.searchsorted(self._skeys, keys)
+        order = np.argsort(keys, kind="stable")  # sorted queries: distinct keys, cache-friendly lookups
+        sk = keys[order]
+        head = np.concatenate([[True], sk[1:] != sk[:-1]])
+        uniq, group = sk[head], np.cumsum(head) - 1
+        first = order[head]  # the first element of each distinct key
+        pos = np.searchsorted(self._skeys, uniq)
         pos_c = np.minimum(pos, max(len(self._skeys) - 1, 0))
-        found = (pos < len(self._skeys)) & (self._skeys[pos_c] == keys) if len(self._skeys) else \
-            np.zeros(len(keys), np.bool_)
-        out = np.empty(len(keys), np.int64)
-        out[found] = self._sids[pos_c[found]]
+        found = (pos < len(self._skeys)) & (self._skeys[pos_c] == uniq) if len(self._skeys) else \
+            np.zeros(len(uniq), np.bool_)
+        ids = np.empty(len(uniq), np.int64)
+        ids[found] = self._sids[pos_c[found]]
         missing = np.flatnonzero(~found)
         if len(missing):
-            uniq, first, inv = np.unique(keys[missing], return_index=True, return_inverse=True)
-            by_first = np.argsort(first, kind="stable")  # new ids in order of first appearance
-            new_id = np.empty(len(uniq), np.int64)
-            new_id[by_first] = self._n + np.arange(len(uniq))
-            m = missing[first[by_first]]
+            by_first = missing[np.argsort(first[missing], kind="stable")]  # new ids in order of appearance
+            ids[by_first] = self._n + np.arange(len(by_first))
+            m = first[by_first]
             self._append(np.asarray(labels)[m], np.asarray(a0)[m], np.asarray(a1)[m])
-            out[missing] = new_id[inv]
-            self._insert_sorted(uniq, new_id)
+            self._insert_sorted(uniq[missing], ids[missing])
+        out = np.empty(len(keys), np.int64)
+        out[order] = ids[group]
         return out
 
     def _append(self, labels: np.ndarray, a0: np.ndarray, a1: np.ndarray) -> int:

@@ -1,6 +1,8 @@
 """GraphML input: attributes written by networkx come back as static facts with the right bounds."""
 from __future__ import annotations
 
+import json
+import re
 from pathlib import Path
 
 import networkx as nx
@@ -12,7 +14,9 @@ from tracelab.engine import (
     Graph,
     ProgramCheckError,
     check_program,
+    load_fact_table,
     load_graphml,
+    load_program,
     parse_program,
 )
 from tracelab.engine.program import Literal, Term, constant_text
@@ -332,3 +336,83 @@ def test_scanner_corners_prefixes_comments_defaults_directions(tmp_path: Path) -
 def test_files_outside_the_scanner_subset_go_to_the_expat_reader(tmp_path: Path, text: str) -> None:
     from tracelab.engine.graph import _scan
     assert _scan("x", text.encode()) is None
+
+
+def test_fact_tables_csv_and_parquet(tmp_path: Path) -> None:
+    import duckdb
+    csv = tmp_path / "facts.csv"
+    csv.write_text('atom,lower,upper,start,end\n"link(a,b)",1,1,0,0\n"infected(""Cell 3"")",0.5,1,0,0\n'
+                   "~alarm(b),0.2,0.4,1,3\n")
+    g = load_fact_table(csv)
+    assert g.nodes == ["a", "b", "Cell 3"]
+    assert facts_of_with_windows(g) == [("link", ("a", "b"), 1.0, 1.0, 0, 0, False),
+                                        ("infected", ("Cell 3",), 0.5, 1.0, 0, 0, False),
+                                        ("alarm", ("b",), 0.6, 0.8, 1, 3, False)]
+    parquet = tmp_path / "facts.parquet"
+    con = duckdb.connect()
+    con.execute(f"COPY (SELECT 'link(b,c)' AS atom, true AS static) TO '{parquet}' (FORMAT parquet)")
+    con.close()
+    both = g.concat(load_fact_table(parquet))
+    assert both.nodes == ["a", "b", "Cell 3", "c"]
+    eng = Engine(parse_program("seen(Y) <-0 link(X,Y)\n"), both)
+    eng.run(2)
+    final = eng.interpretation()
+    assert final["seen(c)"] == (1.0, 1.0) and final['infected("Cell 3")'] == (0.5, 1.0)
+    assert final["alarm(b)"] == (0.6, 0.8)  # set at t = 1 (the window 1..3)
+    assert eng.fact(3).static and not eng.fact(0).static
+
+
+def facts_of_with_windows(g: Graph) -> list[tuple]:
+    return [(f.literal.pred, tuple(t.name for t in f.literal.args), round(f.literal.lower, 9),
+             round(f.literal.upper, 9), f.start, f.end, f.static) for f in g.facts]
+
+
+@pytest.mark.parametrize("body,fragment", [
+    ("atom\nlink(a\n", "row 1: atom 'link(a' is not a ground literal"),
+    ('atom\n"link(X,b)"\n', "row 1: atom 'link(X,b)' names a variable"),
+    ("atom,lower\np(a),0.5\np(b),1.5\n", "row 2: bound [1.5,1] of p(b) is not inside [0,1]"),
+    ("atom,start,end\np(a),3,1\n", "row 1: window 3..1 of p(a)"),
+    ('atom\np(a)\n"p(a,b)"\n', "predicate 'p' is used with one and with two arguments"),
+    ("name\np(a)\n", "a fact table needs an 'atom' column"),
+])
+def test_bad_fact_tables_name_the_row(tmp_path: Path, body: str, fragment: str) -> None:
+    path = tmp_path / "bad.csv"
+    path.write_text(body)
+    with pytest.raises(ProgramCheckError, match=re.escape(fragment)) as e:
+        load_fact_table(path)
+    assert e.value.file == str(path)
+
+
+def test_reason_with_a_fact_table(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    rules = tmp_path / "spread.rules"
+    rules.write_text("infected(X) <-1 infected(Y), link(Y,X)\n")
+    table = tmp_path / "facts.csv"
+    table.write_text('atom\ninfected(a)\n"link(a,b)"\n"link(b,c)"\n')
+    assert cli_main(["reason", str(rules), "--facts-table", str(table), "--steps", "3", "--no-trace"]) == 0
+    out, err = capsys.readouterr()
+    assert "never set" not in err and "infected(c): [1,1]" in out
+
+
+def test_queries_in_the_api_and_reason(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    rules = tmp_path / "spread.rules"
+    rules.write_text("infected(X) <-1 infected(Y), link(Y,X)\ninfected(a)\nlink(a,b)\nlink(b,\"C d\")\n"
+                     "link(b,b)\nrisk(b):[0.2,0.6]\n")
+    eng = Engine(load_program(rules))
+    eng.run(3)
+    assert eng.match("infected(X)") == [({"X": "a"}, (1.0, 1.0)), ({"X": "b"}, (1.0, 1.0)),
+                                        ({"X": "C d"}, (1.0, 1.0))]
+    assert eng.match("link(b,Y)") == [({"Y": "C d"}, (1.0, 1.0)), ({"Y": "b"}, (1.0, 1.0))]
+    assert eng.match("link(X,X)") == [({"X": "b"}, (1.0, 1.0))]
+    assert eng.match("risk(X)") == []  # [0.2,0.6] is not inside [1,1]
+    assert eng.match("risk(X):[0,0.7]") == [({"X": "b"}, (0.2, 0.6))]
+    assert eng.match("~risk(X):[0.4,0.8]") == [({"X": "b"}, (0.2, 0.6))]
+    assert eng.match("nosuch(X)") == [] and eng.match("link(X)") == []
+    assert cli_main(["reason", str(rules), "--steps", "3", "--query", "infected(X)", "--query-at", "each"]) == 0
+    out = capsys.readouterr().out
+    assert "t=0 infected(X): 1 answer\n  X=a  [1,1]\n" in out
+    assert 't=2 infected(X): 3 answers\n  X=a  [1,1]\n  X=b  [1,1]\n  X="C d"  [1,1]\n' in out
+    assert cli_main(["reason", str(rules), "--steps", "2", "--query", "infected(X)", "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)["queries"]
+    assert got == [{"t": 1, "query": "infected(X)", "bindings": {"X": x}, "bound": [1.0, 1.0]} for x in "ab"]
+    assert cli_main(["reason", str(rules), "--steps", "1", "--query", "infected(X"]) == 2
+    assert capsys.readouterr().err.startswith("tracelab: error: --query 'infected(X': ")

@@ -13,18 +13,35 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("program", nargs="+", help="rule files (merged into one program)")
     p.add_argument("--graph", help="a GraphML graph (node/edge attributes become static facts)")
     p.add_argument("--facts", action="append", default=[], help="a file of facts (rule syntax)")
+    p.add_argument("--facts-table", action="append", default=[], metavar="TABLE",
+                   help="a Parquet or CSV table of facts (columns atom, lower, upper, start, end, static)")
     p.add_argument("--steps", type=int, required=True, help="timesteps to run")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.add_argument("--no-trace", action="store_true", help="print the final interpretation only")
+    p.add_argument("--query", action="append", default=[], metavar="LITERAL",
+                   help='print the bindings and bounds where a literal holds, e.g. "infected(X)" or '
+                        '"link(a,Y):[0.5,1]" (repeatable; replaces the final interpretation)')
+    p.add_argument("--query-at", choices=("end", "each"), default="end",
+                   help="answer the queries after the last step (default) or after each step")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from tracelab.engine import Engine, ProgramError, check_program, load_graphml, load_program
+    from tracelab.engine import (
+        Engine,
+        ProgramError,
+        check_program,
+        load_fact_table,
+        load_graphml,
+        load_program,
+    )
 
     try:
         program = load_program(*args.program, *args.facts)
         graph = load_graphml(args.graph) if args.graph else None
+        for table in args.facts_table:
+            facts = load_fact_table(table)
+            graph = facts if graph is None else graph.concat(facts)
         if graph is not None:  # what the graph sets is set: no "never set" warnings, arities must agree
             check_program(program, graph.predicates())
     except (ProgramError, OSError) as e:
@@ -32,8 +49,22 @@ def run(args: argparse.Namespace) -> int:
         return 2
     for w in program.warnings:
         print(w, file=sys.stderr)
+    from tracelab.engine import parse_literal
+    from tracelab.engine.program import constant_text
+
+    for q in args.query:
+        try:
+            parse_literal(q)
+        except ProgramError as e:
+            print(f"tracelab: error: --query {q!r}: {e.message}", file=sys.stderr)
+            return 2
     engine = Engine(program, graph, trace=not args.no_trace)
-    engine.run(args.steps)
+    answers: list[dict[str, object]] = []
+    for t in range(args.steps):
+        engine.step()
+        if args.query and (args.query_at == "each" or t == args.steps - 1):
+            answers += [{"t": t, "query": q, "bindings": b, "bound": list(bound)}
+                        for q in args.query for b, bound in engine.match(q)]
     rows = engine.take_trace()
     changes = [
         {"t": int(rows["t"][i]), "pass": int(rows["pass_no"][i]),
@@ -47,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     final = engine.interpretation(0)
     if args.json:
         json.dump({"steps": args.steps, "changes": changes,
-                   "interpretation": {k: list(v) for k, v in final.items()},
+                   "interpretation": {k: list(v) for k, v in final.items()}, "queries": answers,
                    "stats": {k: int(np.sum(v)) for k, v in engine.stats.items()}}, sys.stdout, indent=1)
         print()
         return 0
@@ -57,6 +88,15 @@ def run(args: argparse.Namespace) -> int:
             print(f"{c['t']:>4} {c['pass']:>4}  {c['atom']:<32} {_fmt(c['old']):<11} {_fmt(c['new']):<11} "
                   f"{c['cause']}{'  ' + c['grounding'] if c['grounding'] else ''}")
         print()
+    if args.query:
+        for q in args.query:
+            for t in range(args.steps) if args.query_at == "each" else [args.steps - 1]:
+                hits = [a for a in answers if a["t"] == t and a["query"] == q]
+                print(f"t={t} {q}: {len(hits)} answer{'s' if len(hits) != 1 else ''}")
+                for a in hits:
+                    bind = ", ".join(f"{v}={constant_text(x)}" for v, x in a["bindings"].items()) or "(ground)"
+                    print(f"  {bind}  {_fmt(a['bound'])}")
+        return 0
     print(f"final interpretation at t={args.steps - 1}:")
     for atom, bound in sorted(final.items()):
         print(f"  {atom}: {_fmt(bound)}")
