@@ -325,8 +325,14 @@ class Grounder:
         total = int(b_ptr[-1])
         b_atom_a = np.empty(total, np.int64)
         b_inst_a = np.repeat(np.arange(n, dtype=np.int64), n_bind[rules])
-        b_lo_a, b_up_a = np.empty(total, np.float64), np.empty(total, np.float64)
-        b_neg_a = np.empty(total, np.bool_)
+        # a clause's test (sign, lower, upper) as a small id, numbered in that sort order
+        tests = sorted({(lit.negated, lit.lower, lit.upper) for cr in self._compiled
+                        for lit in (cr.rule.body[ci] for ci in cr.binding)})
+        test_id = {t: i for i, t in enumerate(tests)}
+        t_neg = np.array([t[0] for t in tests], np.bool_)
+        t_lo = np.array([t[1] for t in tests], np.float64)
+        t_up = np.array([t[2] for t in tests], np.float64)
+        b_test = np.empty(total, np.int64)
         for cr in self._compiled:  # one rule's groundings at once: its binding clauses, changing ones first
             if not cr.binding:
                 continue
@@ -338,17 +344,20 @@ class Grounder:
             pos = b_ptr[gs][:, None] + np.arange(len(cr.binding))
             b_atom_a[pos] = np.take_along_axis(atoms, order, axis=1)
             lits = [cr.rule.body[ci] for ci in cr.binding]
-            for attr, out in (("negated", b_neg_a), ("lower", b_lo_a), ("upper", b_up_a)):
-                out[pos] = np.array([getattr(lit, attr) for lit in lits])[order]
+            b_test[pos] = np.array([test_id[(lit.negated, lit.lower, lit.upper)] for lit in lits])[order]
+        b_neg_a, b_lo_a, b_up_a = t_neg[b_test], t_lo[b_test], t_up[b_test]
         b_bnd = np.column_stack([b_lo_a, b_up_a]) if total else np.zeros((0, 2), np.float64)
         n_atoms = self.vocab.n_atoms
-        # watch classes: entries sorted by (atom, sign, bound, grounding); a class is one (atom, sign, bound)
-        order = np.lexsort((b_inst_a, b_up_a, b_lo_a, b_neg_a, b_atom_a))
-        s_atom, s_neg, s_lo, s_up = b_atom_a[order], b_neg_a[order], b_lo_a[order], b_up_a[order]
+        # watch classes: entries sorted by (atom, test, grounding); a class is one (atom, test)
+        t_bits, g_bits = max(len(tests), 1).bit_length(), max(n, 1).bit_length()
+        if max(n_atoms, 1).bit_length() + t_bits + g_bits <= 63:  # one packed key: one argsort
+            order = np.argsort((((b_atom_a << t_bits) | b_test) << g_bits) | b_inst_a, kind="stable")
+        else:
+            order = np.lexsort((b_inst_a, b_test, b_atom_a))
+        s_atom, s_test = b_atom_a[order], b_test[order]
         new_class = np.ones(len(order), np.bool_)
         if len(order) > 1:
-            new_class[1:] = (s_atom[1:] != s_atom[:-1]) | (s_neg[1:] != s_neg[:-1]) \
-                | (s_lo[1:] != s_lo[:-1]) | (s_up[1:] != s_up[:-1])
+            new_class[1:] = (s_atom[1:] != s_atom[:-1]) | (s_test[1:] != s_test[:-1])
         first = np.flatnonzero(new_class)
         wc_gptr = np.append(first, len(order)).astype(np.int64)
         wc_ptr = np.zeros(n_atoms + 1, np.int64)
@@ -362,15 +371,16 @@ class Grounder:
         ih_ptr = np.zeros(n_atoms + 1, np.int64)
         np.add.at(ih_ptr, heads[imm] + 1, 1)
         np.cumsum(ih_ptr, out=ih_ptr)
-        s_code = truth_codes(s_lo, s_up, s_neg)
+        t_code = truth_codes(t_lo, t_up, t_neg)
+        w_test = s_test[first]
         return {
-            "wc_code": np.ascontiguousarray(s_code[first]),
-            "b_code": truth_codes(b_lo_a, b_up_a, b_neg_a),
+            "wc_code": t_code[w_test],
+            "b_code": t_code[b_test],
             "inst": inst,
             "wc_ptr": wc_ptr,
-            "wc_bnd": np.ascontiguousarray(np.column_stack([s_lo[first], s_up[first]])
+            "wc_bnd": np.ascontiguousarray(np.column_stack([t_lo[w_test], t_up[w_test]])
                                            if len(first) else np.zeros((0, 2), np.float64)),
-            "wc_neg": np.ascontiguousarray(s_neg[first]),
+            "wc_neg": t_neg[w_test],
             "wc_gptr": wc_gptr,
             "wg": b_inst_a[order].astype(np.int32),
             "ih_ptr": ih_ptr,

@@ -60,11 +60,13 @@ class Vocabulary:
     def add_nodes(self, names: list[str] | tuple[str, ...]) -> np.ndarray:
         """Node ids of names, interned in order."""
         if not self.nodes and len(names) > 1000:  # a graph's node list: one dict build, not a call each
-            self.nodes = list(dict.fromkeys(names))
-            if len(self.nodes) > MAX_NODES:
-                raise ValueError(f"more than {MAX_NODES} nodes")
-            self.node_ids = {n: i for i, n in enumerate(self.nodes)}
-            return np.fromiter(map(self.node_ids.__getitem__, names), np.int32, len(names))
+            self.node_ids = dict(zip(names, range(len(names))))
+            if len(self.node_ids) == len(names):  # distinct names (the usual case): ids are positions
+                if len(names) > MAX_NODES:
+                    raise ValueError(f"more than {MAX_NODES} nodes")
+                self.nodes = list(names)
+                return np.arange(len(names), dtype=np.int32)
+            self.node_ids = {}
         return np.fromiter((self.node(n) for n in names), np.int32, len(names))
 
     def label(self, name: str, arity: int) -> int:
