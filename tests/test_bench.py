@@ -62,7 +62,8 @@ def test_bench_engine_quick(capsys: pytest.CaptureFixture) -> None:
 def big_graph(rows: list[dict[str, Any]]) -> None:
     assert [b["nodes"] for b in rows] == [2_000, 20_000]
     for b in rows:
-        assert b["facts"] == 5 * b["nodes"] + 10 and b["groundings"] == 5 * b["nodes"]
+        # one grounding per edge whose source can ever be infected (a seed, or some edge points at it)
+        assert b["facts"] == 5 * b["nodes"] + 10 and 0.95 * 5 * b["nodes"] < b["groundings"] <= 5 * b["nodes"]
         assert b["infected"] > 10 and b["trace_rows"] >= b["facts"]  # t = 0 logs every graph fact
         for key in ("load_s", "build_s", "run_s", "peak_rss_bytes", "facts_per_s"):
             positive(b[key])
