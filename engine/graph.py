@@ -47,11 +47,15 @@ class Graph:
 
     @property
     def windows(self) -> np.ndarray:
-        return self.fact_window if self.fact_window is not None else np.zeros((self.n_facts, 2), np.int64)
+        if self.fact_window is None:
+            self.fact_window = np.zeros((self.n_facts, 2), np.int64)
+        return self.fact_window
 
     @property
     def statics(self) -> np.ndarray:
-        return self.fact_static if self.fact_static is not None else np.ones(self.n_facts, np.bool_)
+        if self.fact_static is None:
+            self.fact_static = np.ones(self.n_facts, np.bool_)
+        return self.fact_static
 
     def concat(self, other: Graph) -> Graph:
         """This graph's facts, then other's (its nodes and labels mapped onto this graph's)."""

@@ -4,6 +4,8 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 
@@ -60,21 +62,23 @@ def run(args: argparse.Namespace) -> int:
             return 2
     engine = Engine(program, graph, trace=not args.no_trace)
     answers: list[dict[str, object]] = []
+    changes: list[dict[str, object]] = []  # --json only: text output prints each step's rows as it goes
+    header = False
     for t in range(args.steps):
         engine.step()
         if args.query and (args.query_at == "each" or t == args.steps - 1):
             answers += [{"t": t, "query": q, "bindings": b, "bound": list(bound)}
                         for q in args.query for b, bound in engine.match(q)]
-    rows = engine.take_trace()
-    changes = [
-        {"t": int(rows["t"][i]), "pass": int(rows["pass_no"][i]),
-         "atom": engine.atom_text(int(rows["atom"][i])),
-         "old": [float(rows["old_lower"][i]), float(rows["old_upper"][i])],
-         "new": [float(rows["new_lower"][i]), float(rows["new_upper"][i])],
-         "cause": engine.cause_name(int(rows["cause_kind"][i]), int(rows["cause_id"][i])),
-         "grounding": engine.grounding_text(int(rows["grounding"][i]))}
-        for i in range(len(rows["t"]))
-    ]
+        step_changes = _changes(engine, engine.take_trace())
+        if args.json:
+            changes.extend(step_changes)
+            continue
+        for c in step_changes:
+            if not header:
+                print(f"{'t':>4} {'pass':>4}  {'atom':<32} {'old':<11} {'new':<11} cause")
+                header = True
+            print(f"{c['t']:>4} {c['pass']:>4}  {c['atom']:<32} {_fmt(c['old']):<11} {_fmt(c['new']):<11} "
+                  f"{c['cause']}{'  ' + c['grounding'] if c['grounding'] else ''}")
     final = engine.interpretation(0)
     if args.json:
         json.dump({"steps": args.steps, "changes": changes,
@@ -82,11 +86,7 @@ def run(args: argparse.Namespace) -> int:
                    "stats": {k: int(np.sum(v)) for k, v in engine.stats.items()}}, sys.stdout, indent=1)
         print()
         return 0
-    if changes:
-        print(f"{'t':>4} {'pass':>4}  {'atom':<32} {'old':<11} {'new':<11} cause")
-        for c in changes:
-            print(f"{c['t']:>4} {c['pass']:>4}  {c['atom']:<32} {_fmt(c['old']):<11} {_fmt(c['new']):<11} "
-                  f"{c['cause']}{'  ' + c['grounding'] if c['grounding'] else ''}")
+    if header:
         print()
     if args.query:
         for q in args.query:
@@ -101,6 +101,24 @@ def run(args: argparse.Namespace) -> int:
     for atom, bound in sorted(final.items()):
         print(f"  {atom}: {_fmt(bound)}")
     return 0
+
+
+def _changes(eng: Any, rows: dict[str, np.ndarray]) -> Iterator[dict[str, Any]]:
+    """One step's trace rows (of Engine `eng`) as dicts with names (atoms, causes, groundings), one at a
+    time (a million-fact graph writes a million rows at t = 0)."""
+    n = len(rows["t"])
+    for lo in range(0, n, 65_536):  # Python objects for one block of rows at a time
+        cols = {k: v[lo:lo + 65_536].tolist() for k, v in rows.items()}
+        yield from _named(eng, cols)
+
+
+def _named(eng: Any, cols: dict[str, list[Any]]) -> Iterator[dict[str, Any]]:
+    for i in range(len(cols["t"])):
+        yield {"t": cols["t"][i], "pass": cols["pass_no"][i], "atom": eng.atom_text(cols["atom"][i]),
+               "old": [cols["old_lower"][i], cols["old_upper"][i]],
+               "new": [cols["new_lower"][i], cols["new_upper"][i]],
+               "cause": eng.cause_name(cols["cause_kind"][i], cols["cause_id"][i]),
+               "grounding": eng.grounding_text(cols["grounding"][i])}
 
 
 def _fmt(b: list[float] | tuple[float, float]) -> str:
