@@ -9,6 +9,7 @@ from .errors import (
     ProgramError,
     RuleSyntaxError,
 )
+from .facttable import load_fact_table
 from .graph import Graph, load_graphml
 from .grounding import GroundingTable
 from .kernel import CAUSE_EXTERNAL, CAUSE_FACT, CAUSE_POLICY, CAUSE_RESET, CAUSE_RULE
@@ -17,6 +18,6 @@ from .parser import check_program, load_program, parse_literal, parse_program
 __all__ = [
     "Engine", "GroundingTable", "TRACE_COLUMNS", "STAT_NAMES",
     "CAUSE_FACT", "CAUSE_EXTERNAL", "CAUSE_RULE", "CAUSE_POLICY", "CAUSE_RESET",
-    "parse_program", "load_program", "parse_literal", "check_program", "load_graphml", "Graph",
+    "parse_program", "load_program", "parse_literal", "check_program", "load_graphml", "load_fact_table", "Graph",
     "ProgramError", "RuleSyntaxError", "ProgramCheckError", "InconsistencyError", "FixpointError",
 ]

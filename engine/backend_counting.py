@@ -92,8 +92,8 @@ class CountingState:
                 self._act_pos, self._pend, self._pend_n, eng.trace_on, eng._tri, eng._trf, eng._tr_n,
                 eng._stats, eng._err, self._slot_of, self._touched, self._n_touched, self._si, self._sf,
                 self._out, self._heap, self._in_heap, self._changed)
-            if status == K.STATUS_TRACE_ROOM:  # grow the trace buffer, go on from that world
-                eng._grow_trace(int(eng._tr_n[0]) + int(eng._cfg[K.CFG_TRACE_ROOM]))
+            if status == K.STATUS_TRACE_ROOM:  # grow the trace buffer, go on in that world
+                eng._grow_trace(int(eng._tr_n[0]) + int(eng._cfg[K.CFG_TRACE_NEED]))
             elif status == K.STATUS_PEND_ROOM:  # grow the schedule, then that world schedules its firings
                 self._grow_pending(int(self._pend_n[w_first]) + int(self._act_n[w_first, K.KIND_DELAYED]))
                 eng._cfg[K.CFG_RESUME_SCHEDULE] = 1
@@ -104,6 +104,7 @@ class CountingState:
             self._slot_of[:] = -1
             self._n_touched[0] = 0
             eng._cfg[K.CFG_RESUME_SCHEDULE] = 0
+            eng._cfg[K.CFG_RESUME_PHASE] = K.PHASE_FRESH
         return status
 
     def _grow_pending(self, need: int) -> None:

@@ -15,13 +15,15 @@ from .backend_lanes import LaneState, crisp_codes
 from .errors import FixpointError, InconsistencyError, ProgramCheckError
 from .graph import Graph
 from .grounding import Grounder, GroundingTable, rule_head_bound
-from .parser import parse_literal
+from .parser import check_program, parse_literal
 from .program import (
+    EPS,
     INCONSISTENCY_POLICIES,
     MAX_BINDING_CLAUSES,
     UPDATE_MODES,
     Fact,
     Program,
+    constant_text,
     effective_bound,
     ordered_nodes,
 )
@@ -51,11 +53,13 @@ class Engine:
         if worlds < 1:
             raise ValueError(f"worlds must be >= 1, got {worlds}")
         self.program = program
+        if graph is not None:  # a predicate with one arity in the program and another in the graph
+            check_program(program, graph.predicates())
         self.n_worlds = worlds
         self.t = 0
         self.vocab = Vocabulary(ordered_nodes(program, graph.nodes if graph else ()))
-        # graph facts come first in source order (docs/language.md)
-        self.facts: list[Fact] = [*(graph.facts if graph else ()), *program.facts]
+        # graph facts come first in source order (docs/language.md); they stay columns in the graph
+        self.graph = graph if graph is not None else Graph()
         self.rules = program.rules
         for r in self.rules:  # programs built in code may skip check_program; the kernel cannot take these
             if sum(c.binds for c in r.body) > MAX_BINDING_CLAUSES:
@@ -96,16 +100,37 @@ class Engine:
 
     # ---- building ----
 
+    @property
+    def n_facts(self) -> int:
+        return self.graph.n_facts + len(self.program.facts)
+
+    def fact(self, i: int) -> Fact:
+        """Fact i in source order: graph facts 0..g-1, then program facts."""
+        g = self.graph.n_facts
+        return self.graph.fact(i) if i < g else self.program.facts[i - g]
+
+    @property
+    def facts(self) -> list[Fact]:
+        """Every fact as an object, in source order (one object per graph fact: small graphs only)."""
+        return [*self.graph.facts, *self.program.facts]
+
     def _fact_tables(self) -> None:
-        rows, bounds = [], []
-        for f in self.facts:
+        gr = self.graph
+        g = gr.n_facts
+        self._fact_i = np.zeros((g + len(self.program.facts), 4), np.int64)
+        self._fact_f = np.zeros((len(self._fact_i), 2), np.float64)
+        if g:  # graph nodes are the vocabulary's first nodes (ordered_nodes), so node ids carry over
+            labels = np.asarray([self.vocab.label(p, n) for p, n in zip(gr.labels, gr.label_arity)], np.int64)
+            self._fact_i[:g, 0] = self.vocab.atoms(labels[gr.fact_label], gr.fact_args[:, 0], gr.fact_args[:, 1])
+            self._fact_i[:g, 1:3] = gr.windows  # a GraphML fact: static, at t = 0
+            self._fact_i[:g, 3] = gr.statics
+            self._fact_f[:g] = gr.fact_bounds
+        for i, f in enumerate(self.program.facts, start=g):
             lit = f.literal
             aid = self.vocab.atom_by_name(lit.pred, tuple(a.name for a in lit.args))
-            self.grounder.add_settable(aid)
-            rows.append((aid, f.start, f.end, int(f.static)))
-            bounds.append(effective_bound(lit.lower, lit.upper, lit.negated))
-        self._fact_i = np.asarray(rows, np.int64).reshape(-1, 4)
-        self._fact_f = np.asarray(bounds, np.float64).reshape(-1, 2)
+            self._fact_i[i] = (aid, f.start, f.end, int(f.static))
+            self._fact_f[i] = effective_bound(lit.lower, lit.upper, lit.negated)
+        self.grounder.add_settable_many(self._fact_i[:, 0])
         self._fact_v = crisp_codes(self._fact_f[:, 0], self._fact_f[:, 1])
         # latest-ending first, so that each step stops at the first fact whose window has passed
         self._fact_order = np.argsort(-self._fact_i[:, 2], kind="stable").astype(np.int64)
@@ -140,7 +165,7 @@ class Engine:
             lo, up = self._rule_f[i]
             return f"rule {r.name}{f' ({r.loc})' if r.loc else ''} sets [{lo:g},{up:g}]"
         for i in np.flatnonzero(self._fact_v < 0):
-            f = self.facts[i]
+            f = self.fact(int(i))
             lo, up = self._fact_f[i]
             return f"fact {f.name}{f' ({f.loc})' if f.loc else ''} sets [{lo:g},{up:g}]"
         return None
@@ -177,19 +202,18 @@ class Engine:
     def _sync(self) -> None:
         """Ground any new settable atoms and grow the per-world state to the vocabulary and groundings."""
         g = self.grounder
-        if not g._new and g._closed_once and self.vocab.n_atoms == self._state.n_atoms \
-                and len(g.g_rule) == self._n_grounded and len(g.settable) == self._n_settable:
+        if not g.has_pending and self.vocab.n_atoms == self._state.n_atoms \
+                and g.n_groundings == self._n_grounded and g.n_settable == self._n_settable:
             return  # the usual case at every step: nothing was interned or made settable since
-        self.grounder.close()
+        g.close()
         n_atoms = self.vocab.n_atoms
-        if len(self._settable) != n_atoms or len(self.grounder.settable) != self._n_settable:
-            self._settable = np.zeros(n_atoms, np.bool_)
-            self._settable[list(self.grounder.settable)] = True
-            self._n_settable = len(self.grounder.settable)
-        n_inst = len(self.grounder.g_rule)
+        if len(self._settable) != n_atoms or g.n_settable != self._n_settable:
+            self._settable = g.settable_mask(n_atoms)
+            self._n_settable = g.n_settable
+        n_inst = g.n_groundings
         if n_inst == self._n_grounded and n_atoms == self._state.n_atoms and self._kt is not None:
             return
-        self._kt = self.grounder.kernel_tables(self._rule_kinds(), self._fact_i[:, 0])
+        self._kt = g.kernel_tables(self._rule_kinds(), self._fact_i[:, 0])
         self._state.grow(n_atoms, self._kt)
         self._n_grounded = n_inst
         self._table = None
@@ -246,7 +270,7 @@ class Engine:
         nodes = [self.vocab.node_ids.get(a.name) for a in lit.args]
         if label is None or any(n is None for n in nodes):
             return None
-        return self.vocab.atom_ids.get(self.vocab.atom_key(label, tuple(nodes)))
+        return self.vocab.find(label, tuple(nodes))
 
     # ---- facts in, steps, values out ----
 
@@ -276,8 +300,7 @@ class Engine:
             raise ValueError(f"world ids must lie in 0..{self.n_worlds - 1} (or -1 for every world)")
         known = self._settable[atoms[atoms < len(self._settable)]]
         if known.size < atoms.size or not known.all():
-            for a in np.unique(atoms):
-                self.grounder.add_settable(int(a))
+            self.grounder.add_settable_many(atoms)
         self._ext.append((atoms, lower, upper, worlds, np.full(atoms.shape, int(static), np.int64)))
 
     def _external_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -358,6 +381,37 @@ class Engine:
         aid = self._lookup(text)
         return (0.0, 1.0) if aid is None else self.bound(aid, world)
 
+    def match(self, pattern: str, world: int = 0) -> list[tuple[dict[str, str], tuple[float, float]]]:
+        """The atoms a literal with variables holds of, e.g. "infected(X)" or "link(a,Y):[0.5,1]"
+        (a missing annotation means [1,1], as in rules; `~` tests the complement): one (bindings,
+        bound) per atom, in atom order. Only atoms the engine knows are candidates."""
+        lit = parse_literal(pattern)
+        label = self.vocab.label_ids.get(lit.pred)
+        if label is None or self.vocab.label_arity[label] != len(lit.args):
+            return []
+        n = self._state.n_atoms
+        cand = np.flatnonzero(self.vocab.atom_label[:n] == label)
+        cols = (self.vocab.atom_arg0[:n], self.vocab.atom_arg1[:n])
+        first_pos: dict[str, int] = {}
+        for pos, term in enumerate(lit.args):
+            vals = cols[pos][cand]
+            if not term.is_var:
+                node = self.vocab.node_ids.get(term.name)
+                cand = cand[vals == node] if node is not None else cand[:0]
+            elif term.name in first_pos:  # p(X,X): both arguments equal
+                cand = cand[vals == cols[first_pos[term.name]][cand]]
+            else:
+                first_pos[term.name] = pos
+        lo, up = self.lower[world][cand], self.upper[world][cand]
+        if lit.negated:
+            lo, up = 1.0 - up, 1.0 - lo
+        hold = (lo >= lit.lower - EPS) & (up <= lit.upper + EPS)
+        out = []
+        for a in cand[hold].tolist():
+            binding = {v: self.vocab.nodes[int(cols[p][a])] for v, p in first_pos.items()}
+            out.append((binding, (float(self.lower[world][a]), float(self.upper[world][a]))))
+        return out
+
     def interpretation(self, world: int = 0) -> dict[str, tuple[float, float]]:
         """Every atom whose bound is not [0,1], by its text."""
         lo, up = self.lower[world], self.upper[world]
@@ -384,7 +438,7 @@ class Engine:
 
     @property
     def groundings(self) -> GroundingTable:
-        if self._table is None or len(self._table.rule) != len(self.grounder.g_rule):
+        if self._table is None or len(self._table.rule) != self.grounder.n_groundings:
             self._table = self.grounder.table()
         return self._table
 
@@ -401,7 +455,7 @@ class Engine:
         if kind == K.CAUSE_RULE:
             return self.rules[cid].name
         if kind == K.CAUSE_FACT:
-            return f"fact:{self.facts[cid].name}"
+            return f"fact:{self.fact(cid).name}"
         if kind == K.CAUSE_EXTERNAL:
             return "external"
         if kind == K.CAUSE_POLICY:
@@ -414,13 +468,13 @@ class Engine:
             return ""
         table = self.groundings
         rule = self.rules[int(table.rule[g])]
-        return ", ".join(f"{v}={self.vocab.nodes[x]}" for v, x in zip(rule.variables, table.values(g)))
+        return ", ".join(f"{v}={constant_text(self.vocab.nodes[x])}" for v, x in zip(rule.variables, table.values(g)))
 
     # ---- errors ----
 
     def describe_source(self, kind: int, cid: int, grounding: int = -1) -> str:
         if kind == K.CAUSE_FACT:
-            f = self.facts[cid]
+            f = self.fact(cid)
             where = f" ({f.loc})" if f.loc else ""
             return f"fact {f.name}{where}"
         if kind == K.CAUSE_EXTERNAL:
@@ -454,10 +508,7 @@ class Engine:
                 f"{where}: its bound [{lo:g},{up:g}] came from {old}; the incoming bound from {first} is "
                 "disjoint from it")
         if status == K.STATUS_TRACE_LIMIT:
-            raise RuntimeError(
-                f"one step of world {w} at t={self.t} wrote more trace rows than the {self._tri.shape[0]} the "
-                "trace buffer holds; make Engine(trace_rows_per_step=...) larger (it is the free room kept "
-                "before each traced world steps)")
+            raise RuntimeError(f"internal error: a trace row of world {w} at t={self.t} found no room")
         if status == K.STATUS_NOT_SETTABLE:
             raise ValueError(f"step(external=...) names {self.atom_text(a)}, which no fact or rule can set; "
                              "give such atoms to add_facts once first")

@@ -1,96 +1,347 @@
 """GraphML input, the way PyReason users bring graphs: every node attribute becomes a static unary fact on
-the node, every edge attribute a static binary fact on the edge (both directions when undirected)."""
+the node, every edge attribute a static binary fact on the edge (both directions when undirected).
+
+A graph is columns (node list, fact arrays), not a Python object per fact: a million-edge graph is a few
+arrays. Files are read by a compiled scanner (graphml_scan.py) when they keep to the plain GraphML that
+graph tools write, else by the complete expat reader (graphml_expat.py); both refuse hostile XML.
+"""
 from __future__ import annotations
 
 import os
 import re
 from dataclasses import dataclass, field
-from typing import Any
 
+import numpy as np
+
+from . import graphml_scan as S
 from .errors import ProgramCheckError
+from .graphml_expat import read_graphml_expat
+from .graphml_raw import GraphKey, RawGraph
 from .parser import PREDICATE_RE
-from .program import Fact, Literal, SourceLoc, Term
+from .program import Fact, Literal, SourceLoc, Term, constant_text, unwritable_constant
 
 __all__ = ["Graph", "load_graphml"]
 
 _NUM = r"([0-9]+(?:\.[0-9]+)?|\.[0-9]+)"
 _BOUND_RE = re.compile(rf"\s*(?:\[\s*{_NUM}\s*,\s*{_NUM}\s*\]|{_NUM}\s*,\s*{_NUM})\s*")
+_ATTR_RE = re.compile(r"""([\w.:-]+)\s*=\s*(["'])(.*?)\2""", re.S)
+_DEFAULT_RE = re.compile(r"<(?:[\w.-]+:)?default\b[^>]*>(.*?)</(?:[\w.-]+:)?default\s*>", re.S)
+_ENCODING_RE = re.compile(rb"""^(?:\xef\xbb\xbf)?<\?xml[^>]*?encoding\s*=\s*["']([^"']*)["']""")
 
 
 @dataclass
 class Graph:
+    """Nodes and static facts at t = 0, as columns. Fact i sets labels[fact_label[i]] on node fact_args[i, 0]
+    (and fact_args[i, 1] for an edge label; -1 for a node label) to [fact_bounds[i, 0], fact_bounds[i, 1]].
+    Node ids index `nodes`. Facts come in the graph's order (docs/language.md, "Graphs")."""
     nodes: list[str] = field(default_factory=list)
-    facts: list[Fact] = field(default_factory=list)  # static, at t = 0
+    labels: list[str] = field(default_factory=list)
+    label_arity: list[int] = field(default_factory=list)
+    fact_label: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    fact_args: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int32))
+    fact_bounds: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.float64))
+    file: str = "<graph>"
+    # fact tables (facttable.py) also give windows and static flags; a GraphML fact is static at t = 0
+    fact_window: np.ndarray | None = None  # int64 [F, 2]: start, end
+    fact_static: np.ndarray | None = None  # bool [F]
+
+    @property
+    def windows(self) -> np.ndarray:
+        if self.fact_window is None:
+            self.fact_window = np.zeros((self.n_facts, 2), np.int64)
+        return self.fact_window
+
+    @property
+    def statics(self) -> np.ndarray:
+        if self.fact_static is None:
+            self.fact_static = np.ones(self.n_facts, np.bool_)
+        return self.fact_static
+
+    def concat(self, other: Graph) -> Graph:
+        """This graph's facts, then other's (its nodes and labels mapped onto this graph's)."""
+        node_ids = {n: i for i, n in enumerate(self.nodes)}
+        nodes = list(self.nodes)
+        for n in other.nodes:
+            if n not in node_ids:
+                node_ids[n] = len(nodes)
+                nodes.append(n)
+        node_map = np.array([node_ids[n] for n in other.nodes], np.int32)
+        labels, arity = list(self.labels), list(self.label_arity)
+        label_ids = {name: i for i, name in enumerate(labels)}
+        label_map = np.zeros(len(other.labels), np.int32)
+        for j, (name, ar) in enumerate(zip(other.labels, other.label_arity)):
+            i = label_ids.get(name)
+            if i is None:
+                i = label_ids[name] = len(labels)
+                labels.append(name)
+                arity.append(ar)
+            elif arity[i] != ar:
+                raise ProgramCheckError(f"predicate '{name}' has {ar} argument(s) here but {arity[i]} in "
+                                        f"{self.file}", other.file)
+            label_map[j] = i
+        args = other.fact_args.copy()
+        args[:, 0] = node_map[args[:, 0]] if len(args) else args[:, 0]
+        edge = args[:, 1] >= 0
+        args[edge, 1] = node_map[other.fact_args[edge, 1]]
+        return Graph(nodes, labels, arity, np.concatenate([self.fact_label, label_map[other.fact_label]]),
+                     np.concatenate([self.fact_args, args]), np.concatenate([self.fact_bounds, other.fact_bounds]),
+                     self.file, np.concatenate([self.windows, other.windows]),
+                     np.concatenate([self.statics, other.statics]))
+
+    @property
+    def n_facts(self) -> int:
+        return len(self.fact_label)
 
     def predicates(self) -> dict[str, int]:
-        """Predicate -> arity of every attribute: `known_predicates` for check_program."""
-        return {f.literal.pred: len(f.literal.args) for f in self.facts}
+        """Predicate -> arity of every attribute that sets a fact: `known_predicates` for check_program."""
+        used = np.unique(self.fact_label)
+        return {self.labels[i]: self.label_arity[i] for i in used.tolist()}
+
+    def fact(self, i: int) -> Fact:
+        """Fact i as a program fact (named by its text)."""
+        a0, a1 = (int(x) for x in self.fact_args[i])
+        args = (self.nodes[a0],) if a1 < 0 else (self.nodes[a0], self.nodes[a1])
+        pred = self.labels[int(self.fact_label[i])]
+        lo, up = (float(x) for x in self.fact_bounds[i])
+        lit = Literal(pred, tuple(Term(a, is_var=False) for a in args), lo, up)
+        text = f"{pred}({','.join(map(constant_text, args))})"
+        start, end = (int(x) for x in self.windows[i])
+        return Fact(text, lit, start, end, static=bool(self.statics[i]), loc=SourceLoc(self.file, 0, 0),
+                    text=text)
+
+    @property
+    def facts(self) -> list[Fact]:
+        """Every fact as a program fact (one object per fact: for small graphs and tests)."""
+        return [self.fact(i) for i in range(self.n_facts)]
 
 
 def load_graphml(path: str | os.PathLike[str]) -> Graph:
     """Read a GraphML file. Attribute values: a number v in [0,1] is [v,v]; a boolean is [1,1] / [0,0];
-    a string "l,u" or "[l,u]" is [l,u]. Anything else raises ProgramCheckError naming the file, the node
-    or edge and the attribute. GraphML key defaults apply to elements that lack the attribute."""
-    from xml.etree.ElementTree import ParseError
-
-    import networkx as nx  # imported here: keeps `import tracelab.engine` fast for programs without graphs
-
+    a string "l,u" or "[l,u]" is [l,u]. Anything else raises ProgramCheckError naming the file, the line,
+    the node or edge and the attribute. GraphML key defaults apply to elements that lack the attribute.
+    (docs/language.md, "Graphs".)"""
     file = os.fspath(path)
+    with open(file, "rb") as f:
+        data = f.read()
+    raw = _scan(file, data)
+    if raw is None:  # outside the scanner's subset: the complete reader
+        del data
+        raw = read_graphml_expat(file)
+    return _to_graph(raw)
+
+
+def _scan(file: str, data: bytes) -> RawGraph | None:
+    """The compiled scanner's reading of `data`, or None when the file leaves its subset."""
+    if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        return None
+    m = _ENCODING_RE.match(data[:200])
+    if m is not None and m.group(1).lower() not in (b"utf-8", b"utf8", b"us-ascii", b"ascii"):
+        return None
+    b = np.frombuffer(data, np.uint8)
+    status, scanned = S.scan_graphml(b)
+    if status != S.SCAN_OK:
+        return None
+    key_spans, key_elems = scanned["key_spans"], scanned["key_elems"]
+    graph_tag, d = scanned["graph_tag"], scanned["data"]
     try:
-        g = nx.read_graphml(file)
-    except (ParseError, nx.NetworkXError) as e:
-        raise ProgramCheckError(f"not a readable GraphML file: {e}", file) from e
-    conv = _Converter(file)
-    node_default = g.graph.get("node_default", {})
-    edge_default = g.graph.get("edge_default", {})
-    for n, attrs in g.nodes(data=True):
-        for key, value in {**node_default, **attrs}.items():
-            conv.fact(f"node '{n}'", key, value, (n,))
-    for u, v, attrs in g.edges(data=True):
-        # networkx copies the GraphML edge identifier into the edge data as "id": it is not a label
-        items = {k: x for k, x in {**edge_default, **attrs}.items() if k != "id"}
-        for key, value in items.items():
-            conv.fact(f"edge ('{u}', '{v}')", key, value, (u, v))
-            if not g.is_directed() and u != v:
-                conv.fact(f"edge ('{u}', '{v}')", key, value, (v, u))
-    return Graph(nodes=[str(n) for n in g.nodes], facts=conv.facts)
+        pool, off = scanned["pool"].tobytes(), scanned["node_off"].tolist()
+        nodes = [pool[s:e].decode("utf-8") for s, e in zip(off, off[1:])]
+        data_keys = [data[s:e].decode("utf-8") for s, e in key_spans.tolist()]
+        keys: dict[str, GraphKey] = {}
+        for s, e in key_elems.tolist():
+            element = data[s:e].decode("utf-8")
+            if "&" in element:
+                return None
+            start_tag = element[:element.index(">")]
+            attrs = {m.group(1): m.group(3) for m in _ATTR_RE.finditer(start_tag)}
+            kid = attrs.get("id")
+            if kid is None:
+                return None
+            keys[kid] = GraphKey.of(kid, attrs, lambda msg: ProgramCheckError(msg, file))
+            default = _DEFAULT_RE.search(element)
+            if default is not None:
+                keys[kid].default = default.group(1)
+        undirected = False
+        if graph_tag[0] >= 0:
+            tag = data[graph_tag[0]:graph_tag[1]]
+            m = re.search(rb"""\sedgedefault\s*=\s*["']([^"']*)["']""", tag)
+            undirected = m is not None and m.group(1) == b"undirected"
+    except UnicodeDecodeError:
+        return None
+
+    def place(i: int) -> tuple[int, int]:
+        pos = int(d[i, S.D_POS])
+        line_start = data.rfind(b"\n", 0, pos) + 1
+        return data.count(b"\n", 0, pos) + 1, pos - line_start + 1
+
+    return RawGraph(
+        file=file, nodes=nodes, edges=scanned["edges"], graph_undirected=undirected, keys=keys,
+        data=np.ascontiguousarray(d[:, [S.D_KIND, S.D_ELEM, S.D_KEY]]), data_keys=data_keys,
+        text=lambda i: data[int(d[i, S.D_START]):int(d[i, S.D_END])].decode("utf-8"), place=place,
+        numbers=scanned["numbers"], booleans=scanned["booleans"])
 
 
-class _Converter:
-    def __init__(self, file: str) -> None:
-        self.file = file
-        self.facts: list[Fact] = []
-        self.arity: dict[str, int] = {}
+def _to_graph(raw: RawGraph) -> Graph:
+    """Columns of facts in the graph's order (docs/language.md, "Graphs")."""
+    file = raw.file
+    for name in raw.nodes:
+        why = unwritable_constant(name)
+        if why is not None:
+            raise ProgramCheckError(f"node id {name!r} cannot be a constant of the rule language: {why}", file)
+    for k in raw.data_keys:
+        if k not in raw.keys:
+            i = int(np.argmax(raw.data[:, 2] == raw.data_keys.index(k)))
+            raise _fail_at(raw, i, f"<data key=\"{k}\"> names no <key>")
+    labels: list[str] = []
+    arity: list[int] = []
+    label_of: dict[str, int] = {}
+    parts: list[tuple[np.ndarray, ...]] = []  # (order key, label, a0, a1, lower, upper) per chunk
+    n_nodes, n_edges = len(raw.nodes), len(raw.edges)
+    src = raw.edges[:, 0].astype(np.int32)
+    dst = raw.edges[:, 1].astype(np.int32)
+    undirected = np.where(raw.edges[:, 2] < 0, raw.graph_undirected, raw.edges[:, 2] == 0)
+    d_kind, d_elem = raw.data[:, 0], raw.data[:, 1]
+    d_seq = np.arange(len(raw.data), dtype=np.int64)
+    key_index = {k: i for i, k in enumerate(raw.data_keys)}
+    # facts in the graph's order: node facts (node order), then edge facts (edge order); an element's
+    # attributes in document order, then key defaults it lacks in key order
+    for kpos, (kid, key) in enumerate(raw.keys.items()):
+        sel = np.flatnonzero(raw.data[:, 2] == key_index[kid]) if kid in key_index else np.zeros(0, np.int64)
+        for kind, count in ((0, n_nodes), (1, n_edges)):
+            rows = sel[d_kind[sel] == kind]
+            if key.domain not in ("all", ("node", "edge")[kind]):
+                if len(rows):
+                    raise _fail_at(raw, int(rows[0]), f"key '{kid}' is declared for {key.domain}, but used on "
+                                   f"{('nodes', 'edges')[kind]}")
+                continue
+            elem = d_elem[rows]
+            order = (elem << 32) + d_seq[rows]
+            lo, up = _bounds(raw, key, kind, rows, elem)
+            if key.default is not None:
+                lacking = np.ones(count, np.bool_)
+                lacking[elem] = False
+                extra = np.flatnonzero(lacking)
+                if len(extra):
+                    dl, du = _default_bound(raw, key, kind, int(extra[0]))
+                    elem = np.concatenate([elem, extra])
+                    order = np.concatenate([order, (extra << 32) + (1 << 31) + kpos])
+                    lo = np.concatenate([lo, np.full(len(extra), dl)])
+                    up = np.concatenate([up, np.full(len(extra), du)])
+            if not len(elem):
+                continue
+            if not PREDICATE_RE.fullmatch(key.name):
+                raise _fail_at(raw, int(rows[0]) if len(rows) else -1, f"{_where(raw, kind, int(elem[0]))}, "
+                               f"attribute '{key.name}': not a predicate name (a lower-case letter, then letters, "
+                               "digits and '_'), so no rule could use it")
+            lid = label_of.get(key.name)
+            if lid is None:
+                lid = label_of[key.name] = len(labels)
+                labels.append(key.name)
+                arity.append(kind + 1)
+            elif arity[lid] != kind + 1:
+                raise _fail_at(raw, int(rows[0]) if len(rows) else -1, f"{_where(raw, kind, int(elem[0]))}, "
+                               f"attribute '{key.name}': set on nodes and on edges, but a predicate has one arity")
+            lab = np.full(len(elem), lid, np.int32)
+            if kind == 0:
+                parts.append((order, lab, elem.astype(np.int32), np.full(len(elem), -1, np.int32), lo, up))
+                continue
+            # an undirected edge also sets the reverse direction, right after (a self-loop once)
+            parts.append(((1 << 62) + 2 * order, lab, src[elem], dst[elem], lo, up))
+            back = undirected[elem] & (src[elem] != dst[elem])
+            parts.append(((1 << 62) + 2 * order[back] + 1, lab[back], dst[elem[back]], src[elem[back]],
+                          lo[back], up[back]))
+    if parts:
+        order, lab, a0, a1, lo, up = (np.concatenate(c) for c in zip(*parts))
+        s = np.argsort(order, kind="stable")
+        fact_label, fact_args = lab[s], np.column_stack([a0[s], a1[s]])
+        fact_bounds = np.column_stack([lo[s], up[s]])
+    else:
+        fact_label = np.zeros(0, np.int32)
+        fact_args, fact_bounds = np.zeros((0, 2), np.int32), np.zeros((0, 2), np.float64)
+    return Graph(raw.nodes, labels, arity, fact_label, np.ascontiguousarray(fact_args, np.int32),
+                 np.ascontiguousarray(fact_bounds, np.float64), file)
 
-    def fail(self, msg: str) -> ProgramCheckError:
-        return ProgramCheckError(msg, self.file)
 
-    def fact(self, where: str, key: str, value: Any, args: tuple[str, ...]) -> None:
-        if not PREDICATE_RE.fullmatch(str(key)):
-            raise self.fail(f"{where}, attribute '{key}': not a predicate name (a lower-case letter, then "
-                            "letters, digits and '_'), so no rule could use it")
-        if self.arity.setdefault(key, len(args)) != len(args):
-            raise self.fail(f"{where}, attribute '{key}': set on nodes and on edges, but a predicate has "
-                            "one arity")
-        bound = _bound(value)
-        if bound is None:
-            raise self.fail(f"{where}, attribute '{key}': value {value!r} is not a bound (expected a number "
-                            "in [0,1], a boolean, or a string 'l,u' or '[l,u]' with 0 <= l <= u <= 1)")
-        lit = Literal(key, tuple(Term(str(a), is_var=False) for a in args), *bound)
-        text = f"{key}({','.join(str(a) for a in args)})"
-        self.facts.append(Fact(text, lit, static=True, loc=SourceLoc(self.file, 0, 0), text=text))
+def _where(raw: RawGraph, kind: int, elem: int) -> str:
+    if kind == 0:
+        return f"node {raw.nodes[elem]!r}"
+    return f"edge ({raw.nodes[int(raw.edges[elem, 0])]!r}, {raw.nodes[int(raw.edges[elem, 1])]!r})"
 
 
-def _bound(value: Any) -> tuple[float, float] | None:
-    if isinstance(value, bool):  # before numbers: bool is an int
-        return (1.0, 1.0) if value else (0.0, 0.0)
-    if isinstance(value, (int, float)):
-        v = float(value)
-        return (v, v) if 0.0 <= v <= 1.0 else None  # NaN fails the comparison too
-    if isinstance(value, str):
-        m = _BOUND_RE.fullmatch(value)
-        if m is None:
-            return None
-        lo, hi = (float(x) for x in m.groups() if x is not None)
-        return (lo, hi) if 0.0 <= lo <= hi <= 1.0 else None
-    return None
+def _fail_at(raw: RawGraph, row: int, msg: str) -> ProgramCheckError:
+    if row < 0:  # a key's default value: no place in the document for that element
+        return ProgramCheckError(msg, raw.file)
+    line, col = raw.place(row)
+    return ProgramCheckError(msg, raw.file, line, col)
+
+
+_HINT = "(a bound is a number in [0,1], a boolean, or a string 'l,u' or '[l,u]' with 0 <= l <= u <= 1)"
+
+
+def _bounds(raw: RawGraph, key: GraphKey, kind: int, rows: np.ndarray,
+            elem: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per value, its bound (vectorised for numbers and booleans); a bad value raises naming it."""
+    def bad(i: int, shown: str, what: str) -> ProgramCheckError:
+        return _fail_at(raw, int(rows[i]), f"{_where(raw, kind, int(elem[i]))}, attribute '{key.name}': "
+                        f"value {shown} is {what} {_HINT}")
+
+    if key.type in ("float", "double", "int", "long"):
+        v = raw.numbers[rows].copy()
+        for i in np.flatnonzero(np.isnan(v)).tolist():  # what the scanner left: long or odd numbers
+            try:
+                v[i] = float(raw.text(int(rows[i])))
+            except ValueError:
+                raise bad(i, repr(raw.text(int(rows[i])).strip()), f"not of type {key.type}") from None
+        if key.type in ("int", "long"):
+            whole = np.isfinite(v) & (v == np.floor(v))
+            if not whole.all():
+                i = int(np.argmin(whole))
+                raise bad(i, repr(raw.text(int(rows[i])).strip()), f"not of type {key.type}")
+        ok = (v >= 0.0) & (v <= 1.0)
+        if not ok.all():
+            i = int(np.argmin(ok))
+            shown = raw.text(int(rows[i])).strip() if key.type in ("int", "long") else repr(float(v[i]))
+            raise bad(i, shown, "not a bound")
+        return v, v.copy()
+    if key.type == "boolean":
+        t = raw.booleans[rows]
+        if (t < 0).any():
+            i = int(np.argmax(t < 0))
+            raise bad(i, repr(raw.text(int(rows[i]))), "not a boolean")
+        v = t.astype(np.float64)
+        return v, v.copy()
+    lo, up = np.empty(len(rows)), np.empty(len(rows))
+    for i, r in enumerate(rows.tolist()):
+        b = _string_bound(raw.text(r))
+        if b is None:
+            raise bad(i, repr(raw.text(r)), "not a bound")
+        lo[i], up[i] = b
+    return lo, up
+
+
+def _default_bound(raw: RawGraph, key: GraphKey, kind: int, elem: int) -> tuple[float, float]:
+    text = key.default or ""
+    b: tuple[float, float] | None
+    if key.type == "boolean":
+        t = text.strip().lower()
+        b = (1.0, 1.0) if t in ("true", "1") else (0.0, 0.0) if t in ("false", "0") else None
+    elif key.type == "string":
+        b = _string_bound(text)
+    else:
+        try:
+            v = float(text)
+        except ValueError:
+            v = float("nan")
+        b = (v, v) if 0.0 <= v <= 1.0 else None
+    if b is None:
+        raise ProgramCheckError(f"{_where(raw, kind, elem)}, attribute '{key.name}': the key's default value "
+                                f"{text!r} is not a bound {_HINT}", raw.file)
+    return b
+
+
+def _string_bound(value: str) -> tuple[float, float] | None:
+    m = _BOUND_RE.fullmatch(value)
+    if m is None:
+        return None
+    lo, hi = (float(x) for x in m.groups() if x is not None)
+    return (lo, hi) if 0.0 <= lo <= hi <= 1.0 else None

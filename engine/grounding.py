@@ -4,13 +4,18 @@ be set (by facts, external facts or rule heads), and kept as integer tables for 
 An atom that nothing can set stays [0,1] forever, and [0,1] satisfies no *binding* clause, so a grounding
 needs one settable atom per binding clause. Groundings are full joins: one value per variable across every
 clause. New settable atoms (rule heads, external facts on new atoms) are joined semi-naively: each round
-only joins that use at least one new atom are made.
+only joins that use at least one new atom are made (a clause before the new atom's clause reads the old
+atoms, one after it reads old and new, so no grounding is found twice).
+
+Joins are vectorised: a round joins whole relations (numpy arrays of the settable atoms of a label) by
+sorting and searchsorted, and the grounding tables are arrays, so a million groundings cost seconds,
+not a Python call each.
 """
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -53,45 +58,49 @@ class GroundingTable:
 class _CompiledRule:
     index: int
     rule: Rule
-    variables: tuple[str, ...]
+    n_vars: int
     head_label: int
-    # per clause: label id, args as ("var", index) / ("const", node id)
     clause_labels: list[int]
-    clause_args: list[list[tuple[bool, int]]]  # (is_var, var index or node id)
-    head_args: list[tuple[bool, int]]
+    # per clause and argument position: variable index (>= 0) or -(node id) - 1 for a constant
+    clause_args: list[list[int]]
+    head_args: list[int]
     binding: list[int]  # indices of binding clauses
 
 
-@dataclass
-class Grounder:
-    rules: list[Rule]
-    vocab: Vocabulary
-    # settable atoms, indexed for joins
-    settable: set[int] = field(default_factory=set)
-    _by_label: dict[int, list[int]] = field(default_factory=dict)
-    _by_label_arg: dict[tuple[int, int, int], list[int]] = field(default_factory=dict)
-    _new: list[int] = field(default_factory=list)
-    _seen: set[tuple[int, tuple[int, ...]]] = field(default_factory=set)
-    # growing grounding tables
-    g_rule: list[int] = field(default_factory=list)
-    g_head: list[int] = field(default_factory=list)
-    g_values: list[tuple[int, ...]] = field(default_factory=list)
-    g_body: list[list[int]] = field(default_factory=list)
-    _closed_once: bool = False
+def _growable(cap: int, width: int, dtype: type) -> np.ndarray:
+    return np.full((cap, width), -1, dtype) if width else np.zeros((cap, 0), dtype)
 
-    def __post_init__(self) -> None:
-        self._compiled = [self._compile(i, r) for i, r in enumerate(self.rules)]
+
+class Grounder:
+    """The groundings of `rules` over the settable atoms of `vocab`, grown by close()."""
+
+    def __init__(self, rules: list[Rule], vocab: Vocabulary) -> None:
+        self.rules = rules
+        self.vocab = vocab
+        self._compiled = [self._compile(i, r) for i, r in enumerate(rules)]
+        self.max_vars = max((cr.n_vars for cr in self._compiled), default=0)
+        self.max_body = max((len(r.body) for r in rules), default=0)
+        self._rule_nvars = np.array([cr.n_vars for cr in self._compiled], np.int64)
+        self._rule_nbody = np.array([len(r.body) for r in rules], np.int64)
+        self._n = 0
+        self._rule = np.zeros(1024, np.int32)
+        self._head = np.zeros(1024, np.int64)
+        self._vals = _growable(1024, self.max_vars, np.int32)
+        self._body = _growable(1024, self.max_body, np.int64)
+        self._settable = np.zeros(1024, np.bool_)  # by atom id: settable (joined, or pending in _pending)
+        self.n_settable = 0
+        self._pending: list[np.ndarray] = []
+        self._by_label: dict[int, list[np.ndarray]] = {}  # joined settable atoms per label, in chunks
+        self._closed_once = False
 
     def _compile(self, index: int, rule: Rule) -> _CompiledRule:
-        variables = rule.variables
-        var_index = {v: i for i, v in enumerate(variables)}
+        var_index = {v: i for i, v in enumerate(rule.variables)}
 
-        def args_of(lit: Literal) -> list[tuple[bool, int]]:
-            return [(True, var_index[t.name]) if t.is_var else (False, self.vocab.node(t.name))
-                    for t in lit.args]
+        def args_of(lit: Literal) -> list[int]:
+            return [var_index[t.name] if t.is_var else -self.vocab.node(t.name) - 1 for t in lit.args]
 
         return _CompiledRule(
-            index=index, rule=rule, variables=variables,
+            index=index, rule=rule, n_vars=len(var_index),
             head_label=self.vocab.label(rule.head.pred, len(rule.head.args)),
             clause_labels=[self.vocab.label(c.pred, len(c.args)) for c in rule.body],
             clause_args=[args_of(c) for c in rule.body],
@@ -99,128 +108,211 @@ class Grounder:
             binding=[i for i, c in enumerate(rule.body) if c.binds],
         )
 
+    # ---- sizes and state ----
+
+    @property
+    def n_groundings(self) -> int:
+        return self._n
+
+    @property
+    def g_rule(self) -> np.ndarray:
+        return self._rule[:self._n]
+
+    @property
+    def g_head(self) -> np.ndarray:
+        return self._head[:self._n]
+
+    @property
+    def has_pending(self) -> bool:
+        return bool(self._pending) or not self._closed_once
+
+    def settable_mask(self, n_atoms: int) -> np.ndarray:
+        """bool[n_atoms]: which atoms can be set (facts, external facts, rule heads)."""
+        out = np.zeros(n_atoms, np.bool_)
+        k = min(n_atoms, len(self._settable))
+        out[:k] = self._settable[:k]
+        return out
+
+    def _fit_atoms(self) -> None:
+        n = self.vocab.n_atoms
+        if n > len(self._settable):
+            grown = np.zeros(max(n, 2 * len(self._settable)), np.bool_)
+            grown[:len(self._settable)] = self._settable
+            self._settable = grown
+
+    # ---- settable atoms ----
+
     def add_settable(self, aid: int) -> None:
         """Declare that atom aid can be set (a fact, an external fact, a rule head)."""
-        if aid in self.settable:
+        self.add_settable_many(np.array([aid], np.int64))
+
+    def add_settable_many(self, aids: np.ndarray) -> None:
+        aids = np.asarray(aids, np.int64)
+        if not len(aids):
             return
-        self.settable.add(aid)
-        self._new.append(aid)
-        label = self.vocab._atom_label[aid]
-        self._by_label.setdefault(label, []).append(aid)
-        for pos, node in enumerate((self.vocab._atom_arg0[aid], self.vocab._atom_arg1[aid])):
-            if node >= 0:
-                self._by_label_arg.setdefault((label, pos, node), []).append(aid)
+        self._fit_atoms()
+        new = aids[~self._settable[aids]]
+        if len(new):
+            new = sorted_unique(new)
+            self._settable[new] = True
+            self.n_settable += len(new)
+            self._pending.append(new)
+
+    # ---- grounding ----
 
     def close(self) -> int:
         """Ground until no new settable atom appears. Returns the number of new groundings."""
-        before = len(self.g_rule)
-        if not self._new and self._closed_once:  # the usual case at every step: nothing new to ground
+        before = self._n
+        if not self._pending and self._closed_once:  # the usual case at every step: nothing new to ground
             return 0
-        self._closed_once = True
-        for cr in self._compiled:  # rules without binding clauses have exactly one grounding
-            if not cr.binding and (cr.index, ()) not in self._seen:
-                self._emit(cr, [])
-        while self._new:
-            delta = set(self._new)
-            self._new = []
-            delta_by_label: dict[int, list[int]] = {}
-            for aid in sorted(delta):
-                delta_by_label.setdefault(self.vocab._atom_label[aid], []).append(aid)
+        if not self._closed_once:
+            self._closed_once = True
+            for cr in self._compiled:  # rules without binding clauses have exactly one grounding
+                if not cr.binding:
+                    self._emit(cr, np.zeros((1, cr.n_vars), np.int64))
+        while self._pending:
+            delta = np.concatenate(self._pending)  # distinct: add_settable_many never repeats an atom
+            self._pending = []
+            self._fit_atoms()
+            delta_label = self.vocab.atom_label[delta]
+            delta_by_label = {int(lab): delta[delta_label == lab] for lab in sorted_unique(delta_label)}
+            # this round's relations: old (joined before) and all (old and delta), per label
+            old = {lab: self._relation(lab) for lab in {lab for cr in self._compiled for lab in cr.clause_labels}}
             for cr in self._compiled:
-                for ci in cr.binding:
-                    atoms = delta_by_label.get(cr.clause_labels[ci])
-                    if atoms:
-                        self._join(cr, ci, atoms)
-                        for watch in _watchers:
-                            watch(len(self.g_rule))
-        return len(self.g_rule) - before
+                for pos, ci in enumerate(cr.binding):
+                    start = delta_by_label.get(cr.clause_labels[ci])
+                    if start is None:
+                        continue
+                    rels = {}
+                    for pos2, cj in enumerate(cr.binding):
+                        lab = cr.clause_labels[cj]
+                        d = delta_by_label.get(lab)
+                        rels[cj] = old[lab] if pos2 < pos or d is None else np.concatenate([old[lab], d])
+                    self._join(cr, ci, start, rels)
+                    for watch in _watchers:
+                        watch(self._n)
+            for lab, atoms in delta_by_label.items():
+                self._by_label.setdefault(lab, []).append(atoms)
+        return self._n - before
 
-    def _join(self, cr: _CompiledRule, start: int, start_atoms: list[int]) -> None:
-        n_vars = len(cr.variables)
-        binding: list[int] = [-1] * n_vars
-        rest = [ci for ci in cr.binding if ci != start]
+    def _relation(self, label: int) -> np.ndarray:
+        chunks = self._by_label.get(label)
+        if not chunks:
+            return np.zeros(0, np.int64)
+        if len(chunks) > 1:
+            self._by_label[label] = chunks = [np.concatenate(chunks)]
+        return chunks[0]
 
-        def match(ci: int, aid: int, trail: list[int]) -> bool:
-            """Bind clause ci's variables to atom aid's arguments; False on a clash."""
-            nodes = (self.vocab._atom_arg0[aid], self.vocab._atom_arg1[aid])
-            for pos, (is_var, x) in enumerate(cr.clause_args[ci]):
-                node = nodes[pos]
-                if not is_var:
-                    if x != node:
-                        return False
-                elif binding[x] < 0:
-                    binding[x] = node
-                    trail.append(x)
-                elif binding[x] != node:
-                    return False
-            return True
+    def _join(self, cr: _CompiledRule, start: int, start_atoms: np.ndarray, rels: dict[int, np.ndarray]) -> None:
+        """Every binding of cr's variables with clause `start` on start_atoms and the other binding
+        clauses on their relations; emits the groundings."""
+        cols = self.vocab._cols
+        bound = np.zeros(cr.n_vars, np.bool_)
+        rows = np.full((0, cr.n_vars), -1, np.int64)
+        first = True
+        found: dict[int, np.ndarray] = {}  # binding clause -> its atom per row
+        remaining = [ci for ci in cr.binding if ci != start]
+        ci, atoms = start, start_atoms
+        while True:
+            args = cr.clause_args[ci]
+            a = [cols[1, atoms].astype(np.int64), cols[2, atoms].astype(np.int64)]
+            keep = np.ones(len(atoms), np.bool_)
+            new_vars: dict[int, int] = {}
+            for p, x in enumerate(args):  # constants, and a variable repeated inside the clause
+                if x < 0:
+                    keep &= a[p] == -x - 1
+                elif not bound[x]:
+                    if x in new_vars:
+                        keep &= a[p] == a[new_vars[x]]
+                    else:
+                        new_vars[x] = p
+            if not keep.all():
+                a = [a[0][keep], a[1][keep]]
+                atoms = atoms[keep]
+            key_vars = [(p, x) for p, x in enumerate(args) if x >= 0 and bound[x]]
+            if first:
+                rows = np.full((len(a[0]), cr.n_vars), -1, np.int64)
+                first = False
+                left = np.arange(len(a[0]))
+                right_idx = left
+            elif not key_vars:  # a clause sharing no variable: every pair
+                left = np.repeat(np.arange(len(rows)), len(a[0]))
+                right_idx = np.tile(np.arange(len(a[0])), len(rows))
+            else:
+                n_nodes = np.int64(max(len(self.vocab.nodes), 1))
+                rkey = np.zeros(len(a[0]), np.int64)
+                lkey = np.zeros(len(rows), np.int64)
+                for p, x in key_vars:
+                    rkey = rkey * n_nodes + a[p]
+                    lkey = lkey * n_nodes + rows[:, x]
+                order = np.argsort(rkey, kind="stable")
+                sk = rkey[order]
+                lo = np.searchsorted(sk, lkey, "left")
+                hi = np.searchsorted(sk, lkey, "right")
+                counts = hi - lo
+                left = np.repeat(np.arange(len(rows)), counts)
+                offs = np.arange(len(left)) - np.repeat(np.cumsum(counts) - counts, counts)
+                right_idx = order[np.repeat(lo, counts) + offs]
+            rows = rows[left]
+            found = {c: ids[left] for c, ids in found.items()}
+            found[ci] = atoms[right_idx]  # the clause's atom in each row: no lookup needed later
+            for x, p in new_vars.items():
+                rows[:, x] = a[p][right_idx]
+                bound[x] = True
+            if not remaining or not len(rows):
+                break
+            # next: the clause with the most bound arguments (the most selective lookup)
+            ci = max(remaining, key=lambda c: sum(1 for x in cr.clause_args[c] if x < 0 or bound[x]))
+            remaining.remove(ci)
+            atoms = rels[ci]
+        if len(rows):
+            self._emit(cr, rows, found)
 
-        def candidates(ci: int) -> list[int]:
-            label = cr.clause_labels[ci]
-            best: list[int] | None = None
-            for pos, (is_var, x) in enumerate(cr.clause_args[ci]):
-                node = binding[x] if is_var else x
-                if node >= 0:
-                    lst = self._by_label_arg.get((label, pos, node), [])
-                    if best is None or len(lst) < len(best):
-                        best = lst
-            return self._by_label.get(label, []) if best is None else best
+    def _ground_atoms(self, label: int, args: list[int], rows: np.ndarray) -> np.ndarray:
+        cols = [np.full(len(rows), -x - 1, np.int64) if x < 0 else rows[:, x] for x in args]
+        a1 = cols[1] if len(cols) > 1 else np.full(len(rows), -1, np.int64)
+        return self.vocab.atoms(np.full(len(rows), label, np.int64), cols[0], a1)
 
-        def bound_count(ci: int) -> int:
-            return sum(1 for is_var, x in cr.clause_args[ci] if not is_var or binding[x] >= 0)
-
-        def descend(remaining: list[int]) -> None:
-            if not remaining:
-                self._emit(cr, binding)
-                return
-            # the clause with the most bound arguments next: the most selective lookup
-            ci = max(remaining, key=bound_count)
-            others = [c for c in remaining if c != ci]
-            for aid in list(candidates(ci)):
-                trail: list[int] = []
-                if match(ci, aid, trail):
-                    descend(others)
-                for x in trail:
-                    binding[x] = -1
-
-        for aid in start_atoms:
-            trail: list[int] = []
-            if match(start, aid, trail):
-                descend(rest)
-            for x in trail:
-                binding[x] = -1
-
-    def _emit(self, cr: _CompiledRule, binding: list[int]) -> None:
-        values = tuple(binding)
-        key = (cr.index, values)
-        if key in self._seen:
-            return
-        self._seen.add(key)
-
-        def ground(args: list[tuple[bool, int]]) -> tuple[int, ...]:
-            return tuple(binding[x] if is_var else x for is_var, x in args)
-
-        head = self.vocab.atom(cr.head_label, ground(cr.head_args))
-        body = [self.vocab.atom(lab, ground(args)) for lab, args in zip(cr.clause_labels, cr.clause_args)]
-        self.g_rule.append(cr.index)
-        self.g_head.append(head)
-        self.g_values.append(values)
-        self.g_body.append(body)
-        self.add_settable(head)
+    def _emit(self, cr: _CompiledRule, rows: np.ndarray, found: dict[int, np.ndarray] | None = None) -> None:
+        """Append groundings (variable values per row); `found`: atoms of binding clauses known already."""
+        m = len(rows)
+        heads = self._ground_atoms(cr.head_label, cr.head_args, rows)
+        found = found or {}
+        body = [found[ci] if ci in found else self._ground_atoms(lab, args, rows)
+                for ci, (lab, args) in enumerate(zip(cr.clause_labels, cr.clause_args))]
+        n = self._n
+        if n + m > len(self._rule):
+            cap = max(n + m, 2 * len(self._rule))
+            self._rule = np.concatenate([self._rule, np.zeros(cap - len(self._rule), np.int32)])
+            self._head = np.concatenate([self._head, np.zeros(cap - len(self._head), np.int64)])
+            self._vals = np.concatenate([self._vals, _growable(cap - len(self._vals), self.max_vars, np.int32)])
+            self._body = np.concatenate([self._body, _growable(cap - len(self._body), self.max_body, np.int64)])
+        self._rule[n:n + m] = cr.index
+        self._head[n:n + m] = heads
+        self._vals[n:n + m, :cr.n_vars] = rows
+        for ci, atoms in enumerate(body):
+            self._body[n:n + m, ci] = atoms
+        self._n = n + m
+        self.add_settable_many(heads)
 
     # ---- integer tables for the kernel and the trace ----
 
     def ranks(self) -> np.ndarray:
         """Canonical order of groundings: rule index, then the tuple of variable node ids."""
-        n = len(self.g_rule)
+        n = self._n
         if n == 0:
             return np.zeros(0, np.int64)
-        width = max((len(v) for v in self.g_values), default=0)
-        keys = np.full((n, width + 1), -1, np.int64)
-        keys[:, 0] = self.g_rule
-        for g, vals in enumerate(self.g_values):
-            keys[g, 1:1 + len(vals)] = vals
-        order = np.lexsort(keys.T[::-1])
+        node_bits = (len(self.vocab.nodes) + 1).bit_length()
+        if len(self.rules).bit_length() + self.max_vars * node_bits <= 62:  # one packed key: one argsort
+            key = self.g_rule.astype(np.int64)
+            for v in range(self.max_vars):
+                key = (key << node_bits) | (self._vals[:n, v].astype(np.int64) + 1)
+            order = np.argsort(key, kind="stable")
+        else:
+            keys = np.empty((n, self.max_vars + 1), np.int64)
+            keys[:, 0] = self.g_rule
+            keys[:, 1:] = self._vals[:n]
+            order = np.lexsort(keys.T[::-1])
         rank = np.empty(n, np.int64)
         rank[order] = np.arange(n)
         return rank
@@ -234,66 +326,80 @@ class Grounder:
         kernel's body tests). A grounding's clauses list first those on atoms that rules set or that are
         not program facts (they change), then those on atoms only program facts set (`fact_atoms`, ids):
         a body test that fails on a changing clause stops before reading the fixed ones."""
-        n = len(self.g_rule)
-        rules = np.asarray(self.g_rule, np.int64)
+        n = self._n
+        rules = self.g_rule.astype(np.int64)
         inst = np.empty((n, 4), np.int32)
         inst[:, 0] = rules
         inst[:, 1] = self.g_head
         inst[:, 2] = self.ranks()
         inst[:, 3] = kinds[rules] if kinds is not None and n else 0
-        b_inst, b_atom, b_neg, b_lo, b_up = [], [], [], [], []
-        b_ptr = np.zeros(n + 1, np.int64)
         fixed = np.zeros(self.vocab.n_atoms, np.bool_)
         if fact_atoms is not None and len(fact_atoms):
             fixed[np.asarray(fact_atoms, np.int64)] = True
         if n:
-            fixed[np.asarray(self.g_head, np.int64)] = False
-        for g in range(n):
-            cr = self._compiled[self.g_rule[g]]
-            body = self.g_body[g]
-            for ci in sorted(cr.binding, key=lambda ci: bool(fixed[body[ci]])):
-                lit = cr.rule.body[ci]
-                b_inst.append(g)
-                b_atom.append(body[ci])
-                b_neg.append(lit.negated)
-                b_lo.append(lit.lower)
-                b_up.append(lit.upper)
-            b_ptr[g + 1] = len(b_atom)
-        b_atom_a = np.asarray(b_atom, np.int64)
-        b_inst_a = np.asarray(b_inst, np.int64)
-        b_lo_a, b_up_a = np.asarray(b_lo, np.float64), np.asarray(b_up, np.float64)
-        b_neg_a = np.asarray(b_neg, np.bool_)
-        b_bnd = np.column_stack([b_lo_a, b_up_a]) if b_atom else np.zeros((0, 2), np.float64)
+            fixed[self.g_head] = False
+        n_bind = np.array([len(cr.binding) for cr in self._compiled], np.int64)
+        b_ptr = np.zeros(n + 1, np.int64)
+        np.cumsum(n_bind[rules], out=b_ptr[1:])
+        total = int(b_ptr[-1])
+        b_atom_a = np.empty(total, np.int64)
+        b_inst_a = np.repeat(np.arange(n, dtype=np.int64), n_bind[rules])
+        # a clause's test (sign, lower, upper) as a small id, numbered in that sort order
+        tests = sorted({(lit.negated, lit.lower, lit.upper) for cr in self._compiled
+                        for lit in (cr.rule.body[ci] for ci in cr.binding)})
+        test_id = {t: i for i, t in enumerate(tests)}
+        t_neg = np.array([t[0] for t in tests], np.bool_)
+        t_lo = np.array([t[1] for t in tests], np.float64)
+        t_up = np.array([t[2] for t in tests], np.float64)
+        b_test = np.empty(total, np.int64)
+        for cr in self._compiled:  # one rule's groundings at once: its binding clauses, changing ones first
+            if not cr.binding:
+                continue
+            gs = np.flatnonzero(rules == cr.index)
+            if not len(gs):
+                continue
+            atoms = self._body[gs][:, cr.binding]
+            order = np.argsort(fixed[atoms], axis=1, kind="stable")
+            pos = b_ptr[gs][:, None] + np.arange(len(cr.binding))
+            b_atom_a[pos] = np.take_along_axis(atoms, order, axis=1)
+            lits = [cr.rule.body[ci] for ci in cr.binding]
+            b_test[pos] = np.array([test_id[(lit.negated, lit.lower, lit.upper)] for lit in lits])[order]
+        b_neg_a, b_lo_a, b_up_a = t_neg[b_test], t_lo[b_test], t_up[b_test]
+        b_bnd = np.column_stack([b_lo_a, b_up_a]) if total else np.zeros((0, 2), np.float64)
         n_atoms = self.vocab.n_atoms
-        # watch classes: entries sorted by (atom, sign, bound, grounding); a class is one (atom, sign, bound)
-        order = np.lexsort((b_inst_a, b_up_a, b_lo_a, b_neg_a, b_atom_a))
-        s_atom, s_neg, s_lo, s_up = b_atom_a[order], b_neg_a[order], b_lo_a[order], b_up_a[order]
+        # watch classes: entries sorted by (atom, test, grounding); a class is one (atom, test)
+        t_bits, g_bits = max(len(tests), 1).bit_length(), max(n, 1).bit_length()
+        if max(n_atoms, 1).bit_length() + t_bits + g_bits <= 63:  # one packed key: one argsort
+            order = np.argsort((((b_atom_a << t_bits) | b_test) << g_bits) | b_inst_a, kind="stable")
+        else:
+            order = np.lexsort((b_inst_a, b_test, b_atom_a))
+        s_atom, s_test = b_atom_a[order], b_test[order]
         new_class = np.ones(len(order), np.bool_)
         if len(order) > 1:
-            new_class[1:] = (s_atom[1:] != s_atom[:-1]) | (s_neg[1:] != s_neg[:-1]) \
-                | (s_lo[1:] != s_lo[:-1]) | (s_up[1:] != s_up[:-1])
+            new_class[1:] = (s_atom[1:] != s_atom[:-1]) | (s_test[1:] != s_test[:-1])
         first = np.flatnonzero(new_class)
         wc_gptr = np.append(first, len(order)).astype(np.int64)
         wc_ptr = np.zeros(n_atoms + 1, np.int64)
         np.add.at(wc_ptr, s_atom[first] + 1, 1)
         np.cumsum(wc_ptr, out=wc_ptr)
         # immediate groundings by the atom they set: when that atom changes they may change it back
-        heads = np.asarray(self.g_head, np.int64)
-        immediate = np.array([self._compiled[r].rule.immediate for r in self.g_rule], np.bool_)
+        heads = self.g_head
+        immediate = np.array([cr.rule.immediate for cr in self._compiled], np.bool_)[rules]
         imm = np.flatnonzero(immediate) if n else np.zeros(0, np.int64)
         imm = imm[np.lexsort((imm, heads[imm]))]
         ih_ptr = np.zeros(n_atoms + 1, np.int64)
         np.add.at(ih_ptr, heads[imm] + 1, 1)
         np.cumsum(ih_ptr, out=ih_ptr)
-        s_code = truth_codes(s_lo, s_up, s_neg)
+        t_code = truth_codes(t_lo, t_up, t_neg)
+        w_test = s_test[first]
         return {
-            "wc_code": np.ascontiguousarray(s_code[first]),
-            "b_code": truth_codes(b_lo_a, b_up_a, b_neg_a),
+            "wc_code": t_code[w_test],
+            "b_code": t_code[b_test],
             "inst": inst,
             "wc_ptr": wc_ptr,
-            "wc_bnd": np.ascontiguousarray(np.column_stack([s_lo[first], s_up[first]])
+            "wc_bnd": np.ascontiguousarray(np.column_stack([t_lo[w_test], t_up[w_test]])
                                            if len(first) else np.zeros((0, 2), np.float64)),
-            "wc_neg": np.ascontiguousarray(s_neg[first]),
+            "wc_neg": t_neg[w_test],
             "wc_gptr": wc_gptr,
             "wg": b_inst_a[order].astype(np.int32),
             "ih_ptr": ih_ptr,
@@ -305,17 +411,24 @@ class Grounder:
         }
 
     def table(self) -> GroundingTable:
-        n = len(self.g_rule)
+        n = self._n
+        rules = self.g_rule
+        n_body, n_vars = self._rule_nbody[rules], self._rule_nvars[rules]
         body_ptr = np.zeros(n + 1, np.int64)
         var_ptr = np.zeros(n + 1, np.int64)
-        body_ptr[1:] = np.cumsum([len(b) for b in self.g_body]) if n else []
-        var_ptr[1:] = np.cumsum([len(v) for v in self.g_values]) if n else []
-        flat_body = [a for b in self.g_body for a in b]
-        flat_vals = [x for v in self.g_values for x in v]
+        np.cumsum(n_body, out=body_ptr[1:])
+        np.cumsum(n_vars, out=var_ptr[1:])
+        body_mask = np.arange(self.max_body) < n_body[:, None]
+        var_mask = np.arange(self.max_vars) < n_vars[:, None]
         return GroundingTable(
-            rule=np.asarray(self.g_rule, np.int32), body_ptr=body_ptr,
-            body_atoms=np.asarray(flat_body, np.int32), var_ptr=var_ptr,
-            var_values=np.asarray(flat_vals, np.int32))
+            rule=rules.astype(np.int32), body_ptr=body_ptr, body_atoms=self._body[:n][body_mask].astype(np.int32),
+            var_ptr=var_ptr, var_values=self._vals[:n][var_mask].astype(np.int32))
+
+
+def sorted_unique(x: np.ndarray) -> np.ndarray:
+    """np.unique by sorting (numpy's hash-based unique was ~5x slower on a million ids here)."""
+    s = np.sort(x)
+    return s[np.concatenate([[True], s[1:] != s[:-1]])] if len(s) else s
 
 
 def rule_head_bound(rule: Rule) -> tuple[float, float]:

@@ -15,8 +15,11 @@ Why the code looks the way it does:
 - Every function is compiled without numba's reference counting (`_nrt=False`): with it, each call that
   passes arrays paid two atomic operations per array, a quarter of the step time. So nothing here
   allocates; the engine (core.py) owns every buffer. When the trace or the schedule of a world needs
-  more room, the kernel stops *between* worlds, says so in its status, and core.py grows the buffer and
-  calls again from that world (`w_first`).
+  more room, the kernel stops, says so in its status, and core.py grows the buffer and calls again from
+  that world (`w_first`). The trace is checked before each unit of work whose rows are bounded: the
+  reset (one row per atom), the application of a pass's groups (one per touched atom) and each
+  immediate application (one); a world stopped inside its step resumes where it stopped (CFG_RESUME_*),
+  so a step of any size fits.
 - Watches are grouped in classes: the groundings that read atom a with the same bound and sign share
   one truth test, and the groundings of a class are listed together (contiguous counts in memory).
 - An immediate application has one source, so it is applied directly; only pass 0 and ordinary passes,
@@ -37,9 +40,9 @@ POLICY_RESET_FREEZE, POLICY_KEEP_OLD, POLICY_TAKE_NEW, POLICY_HULL, POLICY_ABORT
 # kernel status codes
 STATUS_OK, STATUS_INCONSISTENT, STATUS_NO_FIXPOINT, STATUS_IMMEDIATE_LIMIT = 0, 1, 2, 3
 STATUS_NOT_SETTABLE = 4  # an external fact names an atom no fact or rule can set (nothing was stepped)
-STATUS_TRACE_ROOM = 5  # stopped before world err[0]: the trace buffer needs cfg[CFG_TRACE_ROOM] free rows
+STATUS_TRACE_ROOM = 5  # stopped in world err[0]: the trace buffer needs cfg[CFG_TRACE_NEED] free rows
 STATUS_PEND_ROOM = 6  # stopped in world err[0] before scheduling its delayed firings: the schedule is full
-STATUS_TRACE_LIMIT = 7  # one world's step wrote more rows than the trace buffer holds
+STATUS_TRACE_LIMIT = 7  # a row found no room although its unit of work checked for it (a bug)
 
 # column layout of the packed arrays
 RULE_MODE, RULE_DELAY, RULE_IMMEDIATE = 0, 1, 2
@@ -51,7 +54,11 @@ N_KINDS = 3
 CFG_MODE, CFG_RESET, CFG_POLICY, CFG_MAX_PASSES, CFG_MAX_IMMEDIATE, CFG_T = 0, 1, 2, 3, 4, 5
 CFG_TRACE_ROOM = 6  # free trace rows wanted before a traced world steps
 CFG_RESUME_SCHEDULE = 7  # 1: world w_first has stepped already and only schedules its delayed firings
-N_CFG = 8
+# a world stopped inside its step for trace room: where it resumes (phase), its pass, immediate count, heap
+CFG_RESUME_PHASE, CFG_RESUME_PASS, CFG_RESUME_NIMM, CFG_RESUME_HN = 8, 9, 10, 11
+CFG_TRACE_NEED = 12  # free trace rows the stopped unit of work needs
+N_CFG = 13
+PHASE_FRESH, PHASE_APPLY, PHASE_IMMEDIATE = 0, 1, 2  # resume: from the start, at a pass's groups, in the immediate phase
 # trace rows: int32[cap, 8] (world, t, pass_no, atom, cause_kind, cause_id, grounding, n_sources)
 # and float64[cap, 4] (old_lower, old_upper, new_lower, new_upper)
 TRACE_INT_COLUMNS = 8
@@ -527,10 +534,11 @@ def step_worlds(cfg, w_first, rule_i, rule_f, inst, kind_base, wc_ptr, wc_bnd, w
         if w == w_first and cfg[CFG_RESUME_SCHEDULE] == 1:
             cfg[CFG_RESUME_SCHEDULE] = 0
         else:
-            if trace_on[w] and tri.shape[0] - tr_n[0] < room:
+            if cfg[CFG_RESUME_PHASE] == PHASE_FRESH and trace_on[w] and tri.shape[0] - tr_n[0] < room:
                 err[E_WORLD] = w
+                cfg[CFG_TRACE_NEED] = room
                 return STATUS_TRACE_ROOM, w
-            status = _step_world(w, t, fact_override, policy, max_passes, max_immediate, rule_i, rule_f, inst,
+            status = _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rule_i, rule_f, inst,
                                  kind_base, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, ih_ptr, ih_inst, fact_i, fact_f,
                                  fact_order, ext_ptr, ext_i, ext_f, cfg[CFG_RESET] == 1, lo, up, static,
                                  last_cause, unsat, act, act_n, act_pos, pend, pend_n, trace_on, tri, trf, tr_n,
@@ -554,23 +562,162 @@ def step_worlds(cfg, w_first, rule_i, rule_f, inst, kind_base, wc_ptr, wc_bnd, w
 
 
 @kernel_jit
-def _step_world(w, t, fact_override, policy, max_passes, max_immediate, rule_i, rule_f, inst, kind_base,
+def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rule_i, rule_f, inst, kind_base,
                 wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, ih_ptr, ih_inst, fact_i, fact_f, fact_order, ext_ptr,
                 ext_i, ext_f, reset, lo, up, static, last_cause, unsat, act, act_n, act_pos, pend, pend_n,
                 trace_on, tri, trf, tr_n, stats, err, slot_of, touched, n_touched, si, sf, out, heap, in_heap,
                 changed):
     """One world's timestep t up to its fixpoint (docs/language.md, 'One timestep t'), without the
-    scheduling of delayed rules. Returns a status."""
-    hn = 0
-    # 1. start of the step
-    if reset and t > 0:
-        hn = _reset_world(w, t, policy, rule_i, rule_f, lo, up, static, last_cause, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd,
-                          wc_neg, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst,
-                          heap, hn, in_heap)
-        if hn < 0:
+    scheduling of delayed rules. Returns a status (STATUS_TRACE_ROOM: resume by calling again, cfg says
+    where)."""
+    phase = cfg[CFG_RESUME_PHASE]
+    cfg[CFG_RESUME_PHASE] = PHASE_FRESH
+    pass_no = cfg[CFG_RESUME_PASS] if phase != PHASE_FRESH else 0
+    n_immediate = cfg[CFG_RESUME_NIMM] if phase != PHASE_FRESH else 0
+    hn = cfg[CFG_RESUME_HN] if phase != PHASE_FRESH else 0
+    if phase == PHASE_FRESH:
+        # 1. start of the step
+        if reset and t > 0:
+            if trace_on[w] and tri.shape[0] - tr_n[0] < lo.shape[1]:
+                return _pause(cfg, err, w, PHASE_FRESH, 0, 0, 0, lo.shape[1])
+            hn = _reset_world(w, t, policy, rule_i, rule_f, lo, up, static, last_cause, trace_on, tri, trf, tr_n, stats,
+                              wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
+                              ih_inst, heap, hn, in_heap)
+            if hn < 0:
+                err[E_WORLD] = w
+                return STATUS_TRACE_LIMIT
+        _collect_pass0(w, t, fact_override, rule_i, rule_f, inst, fact_i, fact_f, fact_order, ext_ptr, ext_i,
+                       ext_f, pend, pend_n, slot_of, touched, n_touched, si, sf)
+        phase = PHASE_APPLY
+    if phase == PHASE_APPLY and pass_no == 0:
+        if trace_on[w] and tri.shape[0] - tr_n[0] < n_touched[0]:
+            return _pause(cfg, err, w, PHASE_APPLY, 0, 0, hn, n_touched[0])
+        changed[0] = 0
+        status, hn = _apply_groups(w, t, 0, policy, rule_i, rule_f, slot_of, touched, n_touched, si, sf, out, lo, up,
+                                   static, last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd, wc_neg,
+                                   wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap,
+                                   hn, in_heap, changed)
+        if status != STATUS_OK:
+            return status
+        # every active immediate grounding is a candidate of the first immediate phase; after that, a
+        # grounding becomes a candidate when it becomes active or an atom it sets changes (_set_atom)
+        base = kind_base[KIND_IMMEDIATE]
+        for k in range(act_n[w, KIND_IMMEDIATE]):
+            g = act[w, base + k]
+            if _applies(w, g, lo, up, static, rule_i, rule_f, policy, inst):
+                hn = _push(g, inst, heap, hn, in_heap)
+        pass_no = 1
+        phase = PHASE_FRESH
+    # 3. fixpoint: immediate phase, then one simultaneous ordinary pass, until nothing changes
+    while True:
+        if phase != PHASE_APPLY:
+            # immediate phase: apply the first (lowest rank) active immediate grounding that would change
+            # its head, one at a time
+            while hn > 0:
+                if trace_on[w] and tr_n[0] >= tri.shape[0]:
+                    return _pause(cfg, err, w, PHASE_IMMEDIATE, pass_no, n_immediate, hn, 1)
+                key = _heap_pop(heap, hn)
+                hn -= 1
+                g = key & HEAP_MASK
+                in_heap[g] = False
+                stats[w, STAT_CANDIDATES] += 1
+                if unsat[w, g] != 0:
+                    continue
+                a = inst[g, INST_HEAD]
+                if static[w, a]:
+                    continue
+                r = inst[g, INST_RULE]
+                cl = lo[w, a]
+                cu = up[w, a]
+                _one_source(cl, cu, rule_f[r, 0], rule_f[r, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE, policy, out)
+                inconsistent = out[2] > 0.5
+                abort = inconsistent and policy == POLICY_ABORT
+                if not abort and out[0] == cl and out[1] == cu:
+                    continue  # would not change its head
+                n_immediate += 1
+                if n_immediate > max_immediate:
+                    err[E_WORLD] = w
+                    err[E_T] = t
+                    err[E_ATOM] = a
+                    return STATUS_IMMEDIATE_LIMIT
+                stats[w, STAT_FIRINGS] += 1
+                if abort:
+                    err[E_WORLD] = w
+                    err[E_T] = t
+                    err[E_ATOM] = a
+                    err[E_OLD_KIND] = last_cause[w, a, 0]
+                    err[E_OLD_ID] = last_cause[w, a, 1]
+                    err[E_KIND] = CAUSE_RULE
+                    err[E_ID] = r
+                    err[E_INST] = g
+                    err[E_LAST_KIND] = CAUSE_RULE
+                    err[E_LAST_ID] = r
+                    err[E_LAST_INST] = g
+                    err[E_DISAGREE] = 0
+                    return STATUS_INCONSISTENT
+                freeze = out[3] > 0.5
+                if inconsistent:
+                    hn = _set_atom(w, t, pass_no, a, cl, cu, out[0], out[1], CAUSE_POLICY, policy, g, 1, -1, lo, up,
+                                   last_cause, static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr,
+                                   wc_bnd, wc_neg, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
+                                   ih_inst, heap, hn, in_heap)
+                else:
+                    hn = _set_atom(w, t, pass_no, a, cl, cu, out[0], out[1], CAUSE_RULE, r, g, 1, g, lo, up, last_cause,
+                                   static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd,
+                                   wc_neg, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst,
+                                   heap, hn, in_heap)
+                if hn < 0:
+                    err[E_WORLD] = w
+                    return STATUS_TRACE_LIMIT
+                if freeze:
+                    static[w, a] = True
+            # ordinary pass: every active Δt = 0 grounding fires; heads applied together per atom
+            base = kind_base[KIND_ORDINARY]
+            for k in range(act_n[w, KIND_ORDINARY]):
+                g = act[w, base + k]
+                r = inst[g, INST_RULE]
+                _add_source(inst[g, INST_HEAD], rule_f[r, 0], rule_f[r, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
+                            2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, False, slot_of, touched,
+                            n_touched, si, sf)
+            if trace_on[w] and tri.shape[0] - tr_n[0] < n_touched[0]:
+                return _pause(cfg, err, w, PHASE_APPLY, pass_no, n_immediate, hn, n_touched[0])
+        phase = PHASE_FRESH
+        changed[0] = 0
+        status, hn = _apply_groups(w, t, pass_no, policy, rule_i, rule_f, slot_of, touched, n_touched, si, sf, out, lo, up,
+                                   static, last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd,
+                                   wc_neg, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
+                                   ih_inst, heap, hn, in_heap, changed)
+        if status != STATUS_OK:
+            return status
+        stats[w, STAT_PASSES] += 1
+        if changed[0] == 0:
+            break
+        pass_no += 1
+        if pass_no > max_passes:
             err[E_WORLD] = w
-            return STATUS_TRACE_LIMIT
-    # 2. pass 0: program facts in their window, external facts, firings scheduled for t
+            err[E_T] = t
+            err[E_ATOM] = -1
+            return STATUS_NO_FIXPOINT
+    return STATUS_OK
+
+
+@kernel_jit
+def _pause(cfg, err, w, phase, pass_no, n_immediate, hn, need):
+    """Stop world w's step for trace room: remember where it resumes and how many rows it needs."""
+    cfg[CFG_RESUME_PHASE] = phase
+    cfg[CFG_RESUME_PASS] = pass_no
+    cfg[CFG_RESUME_NIMM] = n_immediate
+    cfg[CFG_RESUME_HN] = hn
+    cfg[CFG_TRACE_NEED] = need
+    err[E_WORLD] = w
+    return STATUS_TRACE_ROOM
+
+
+@kernel_jit
+def _collect_pass0(w, t, fact_override, rule_i, rule_f, inst, fact_i, fact_f, fact_order, ext_ptr, ext_i, ext_f,
+                   pend, pend_n, slot_of, touched, n_touched, si, sf):
+    """The sources of pass 0 into the grouping scratch: program facts in their window, external facts,
+    firings scheduled for t (taken off the schedule)."""
     for k in range(fact_order.shape[0]):
         f = fact_order[k]
         if fact_i[f, 2] < t:
@@ -594,105 +741,6 @@ def _step_world(w, t, fact_override, policy, max_passes, max_immediate, rule_i, 
             pend[w, kept, 1] = g
             kept += 1
     pend_n[w] = kept
-    changed[0] = 0
-    status, hn = _apply_groups(w, t, 0, policy, rule_i, rule_f, slot_of, touched, n_touched, si, sf, out, lo, up, static,
-                               last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd, wc_neg, wc_gptr,
-                               wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap, hn,
-                               in_heap, changed)
-    if status != STATUS_OK:
-        return status
-    # every active immediate grounding is a candidate of the first immediate phase; after that, a
-    # grounding becomes a candidate when it becomes active or an atom it sets changes (_set_atom)
-    base = kind_base[KIND_IMMEDIATE]
-    for k in range(act_n[w, KIND_IMMEDIATE]):
-        g = act[w, base + k]
-        if _applies(w, g, lo, up, static, rule_i, rule_f, policy, inst):
-            hn = _push(g, inst, heap, hn, in_heap)
-    # 3. fixpoint: immediate phase, then one simultaneous ordinary pass, until nothing changes
-    pass_no = 1
-    n_immediate = 0
-    while True:
-        # immediate phase: apply the first (lowest rank) active immediate grounding that would change
-        # its head, one at a time
-        while hn > 0:
-            key = _heap_pop(heap, hn)
-            hn -= 1
-            g = key & HEAP_MASK
-            in_heap[g] = False
-            stats[w, STAT_CANDIDATES] += 1
-            if unsat[w, g] != 0:
-                continue
-            a = inst[g, INST_HEAD]
-            if static[w, a]:
-                continue
-            r = inst[g, INST_RULE]
-            cl = lo[w, a]
-            cu = up[w, a]
-            _one_source(cl, cu, rule_f[r, 0], rule_f[r, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE, policy, out)
-            inconsistent = out[2] > 0.5
-            abort = inconsistent and policy == POLICY_ABORT
-            if not abort and out[0] == cl and out[1] == cu:
-                continue  # would not change its head
-            n_immediate += 1
-            if n_immediate > max_immediate:
-                err[E_WORLD] = w
-                err[E_T] = t
-                err[E_ATOM] = a
-                return STATUS_IMMEDIATE_LIMIT
-            stats[w, STAT_FIRINGS] += 1
-            if abort:
-                err[E_WORLD] = w
-                err[E_T] = t
-                err[E_ATOM] = a
-                err[E_OLD_KIND] = last_cause[w, a, 0]
-                err[E_OLD_ID] = last_cause[w, a, 1]
-                err[E_KIND] = CAUSE_RULE
-                err[E_ID] = r
-                err[E_INST] = g
-                err[E_LAST_KIND] = CAUSE_RULE
-                err[E_LAST_ID] = r
-                err[E_LAST_INST] = g
-                err[E_DISAGREE] = 0
-                return STATUS_INCONSISTENT
-            freeze = out[3] > 0.5
-            if inconsistent:
-                hn = _set_atom(w, t, pass_no, a, cl, cu, out[0], out[1], CAUSE_POLICY, policy, g, 1, -1, lo, up,
-                               last_cause, static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg,
-                               unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap)
-            else:
-                hn = _set_atom(w, t, pass_no, a, cl, cu, out[0], out[1], CAUSE_RULE, r, g, 1, g, lo, up, last_cause, static, rule_i, rule_f, policy,
-                               trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, unsat, inst,
-                               act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap)
-            if hn < 0:
-                err[E_WORLD] = w
-                return STATUS_TRACE_LIMIT
-            if freeze:
-                static[w, a] = True
-        # ordinary pass: every active Δt = 0 grounding fires; heads applied together per atom
-        base = kind_base[KIND_ORDINARY]
-        for k in range(act_n[w, KIND_ORDINARY]):
-            g = act[w, base + k]
-            r = inst[g, INST_RULE]
-            _add_source(inst[g, INST_HEAD], rule_f[r, 0], rule_f[r, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
-                        2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, False, slot_of, touched,
-                        n_touched, si, sf)
-        changed[0] = 0
-        status, hn = _apply_groups(w, t, pass_no, policy, rule_i, rule_f, slot_of, touched, n_touched, si, sf, out, lo, up,
-                                   static, last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd,
-                                   wc_neg, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
-                                   ih_inst, heap, hn, in_heap, changed)
-        if status != STATUS_OK:
-            return status
-        stats[w, STAT_PASSES] += 1
-        if changed[0] == 0:
-            break
-        pass_no += 1
-        if pass_no > max_passes:
-            err[E_WORLD] = w
-            err[E_T] = t
-            err[E_ATOM] = -1
-            return STATUS_NO_FIXPOINT
-    return STATUS_OK
 
 
 @kernel_jit

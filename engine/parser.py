@@ -12,6 +12,7 @@ from pathlib import Path
 
 from .errors import ProgramCheckError, RuleSyntaxError
 from .program import (
+    CONSTANT_RE,
     INCONSISTENCY_POLICIES,
     MAX_BINDING_CLAUSES,
     MAX_TIME,
@@ -29,7 +30,6 @@ __all__ = ["parse_program", "load_program", "parse_literal", "check_program"]
 
 PREDICATE_RE = re.compile(r"[a-z][A-Za-z0-9_]*")
 VARIABLE_RE = re.compile(r"[A-Z_][A-Za-z0-9_]*")
-CONSTANT_RE = re.compile(r"[a-z0-9][A-Za-z0-9_-]*")  # unquoted constants; anything else must be quoted
 STATEMENT_NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_-]*")
 
 DIRECTIVES = {"mode": UPDATE_MODES, "timesteps": TIMESTEP_MODES, "inconsistency": INCONSISTENCY_POLICIES}

@@ -2,6 +2,7 @@
 the compiled engine and the reference evaluator."""
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
 UPDATE_MODES = ("intersection", "override")
@@ -12,6 +13,28 @@ INCONSISTENCY_POLICIES = ("reset_freeze", "keep_old", "take_new", "hull", "abort
 # grounding's unsatisfied binding clauses in an int8.
 MAX_TIME = 1_000_000_000
 MAX_BINDING_CLAUSES = 127
+
+CONSTANT_RE = re.compile(r"[a-z0-9][A-Za-z0-9_-]*")  # unquoted constants; anything else must be quoted
+
+
+def constant_text(name: str) -> str:
+    """A constant as the rule language writes it: bare when it is a plain constant, else quoted ("X",
+    "a b(c)"; 'say "hi"' when it holds a double quote), so that printed atoms parse back."""
+    if CONSTANT_RE.fullmatch(name):
+        return name
+    return f"'{name}'" if '"' in name else f'"{name}"'
+
+
+def unwritable_constant(name: str) -> str | None:
+    """Why `name` cannot be written as a constant of the rule language (quotes have no escapes and end on
+    their line), or None."""
+    if not name:
+        return "it is empty"
+    if '"' in name and "'" in name:
+        return "it holds both quote characters"
+    if "\n" in name or "\r" in name:
+        return "it holds a line break"
+    return None
 
 
 @dataclass(frozen=True)

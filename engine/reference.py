@@ -18,6 +18,7 @@ from .program import (
     Literal,
     Program,
     Rule,
+    constant_text,
     ordered_nodes,
 )
 
@@ -67,7 +68,7 @@ class _External:
 
 def atom_text(atom: Atom) -> str:
     """`pred(a,b)`: the text the engine uses for an atom."""
-    return f"{atom[0]}({','.join(atom[1])})"
+    return f"{atom[0]}({','.join(map(constant_text, atom[1]))})"
 
 
 def _fmt(iv: Interval) -> str:

@@ -56,6 +56,25 @@ def test_bench_engine_quick(capsys: pytest.CaptureFixture) -> None:
     assert ref["reference_s_per_step"] == 0.8 and ref["goal_steps_per_s"] == 20_000
     assert ref["speedup"] == pytest.approx(ref["steps_per_s"] * 0.8) and ref["speedup"] > 0
     assert isinstance(ref["goal_met"], bool)
+    big_graph(r["big_graph"])
+
+
+def big_graph(rows: list[dict[str, Any]]) -> None:
+    assert [b["nodes"] for b in rows] == [2_000, 20_000]
+    for b in rows:
+        # one grounding per edge whose source can ever be infected (a seed, or some edge points at it)
+        assert b["facts"] == 5 * b["nodes"] + 10 and 0.95 * 5 * b["nodes"] < b["groundings"] <= 5 * b["nodes"]
+        assert b["infected"] > 10 and b["trace_rows"] >= b["facts"]  # t = 0 logs every graph fact
+        for key in ("load_s", "build_s", "run_s", "peak_rss_bytes", "facts_per_s"):
+            positive(b[key])
+        assert b["bytes_per_fact"] > 0
+    assert rows[0]["pyreason_s"] == 268.0
+
+
+def test_bench_engine_graph_only(capsys: pytest.CaptureFixture) -> None:
+    r = bench_json(capsys, "engine", "--graph-only")
+    assert set(r) == {"machine", "quick", "repeats", "big_graph"}
+    big_graph(r["big_graph"])
 
 
 def test_bench_env_quick(capsys: pytest.CaptureFixture) -> None:

@@ -288,12 +288,23 @@ def test_trace_buffer_grows_between_worlds_and_keeps_every_row():
     assert eng.interpretation(39)["n29(a)"] == (1.0, 1.0)
 
 
-def test_a_step_that_overflows_the_trace_room_names_the_setting():
-    # the buffer holds at least 1024 rows: a chain of 1100 immediate rules overflows it in one step
-    prog = "\n".join(f"c{i}: n{i}(X) <-! n{i - 1}(X)" for i in range(1, 1100)) + "\nn0(a)"
-    eng = Engine(parse_program(prog), worlds=1, trace=True, trace_rows_per_step=8)
-    with pytest.raises(RuntimeError, match="trace_rows_per_step"):
-        eng.step()
+@pytest.mark.parametrize("arrow", ["<-!", "<-0"])
+def test_the_trace_buffer_grows_inside_a_step(arrow):
+    # the buffer starts with 1024 rows: a chain of 1100 immediate (or ordinary) rules overflows it in one
+    # step of world 1, and 3000 facts overflow it in pass 0; the worlds resume where they stopped
+    prog = "\n".join(f"c{i}: n{i}(X) {arrow} n{i - 1}(X)" for i in range(1, 1100)) + "\nn0(a)\n" + \
+        "\n".join(f"f{i}(a)" for i in range(3000))
+    eng = Engine(parse_program(prog), worlds=2, trace=[False, True], trace_rows_per_step=8, kernel="counting",
+                 max_passes=2000)
+    eng.step()
+    tr = eng.take_trace()
+    assert len(tr["t"]) == 1100 + 3000 and set(tr["world"].tolist()) == {1}
+    names = [eng.atom_text(int(a)) for a in tr["atom"]]
+    assert names[:3001] == sorted(names[:3001], key=lambda x: eng.atom(x.split("(")[0], "a"))
+    assert names[3001:] == [f"n{i}(a)" for i in range(1, 1100)]  # the chain, in order, after pass 0
+    assert tr["pass_no"][-1] == (1 if arrow == "<-!" else 1099)
+    assert eng.interpretation(0) == eng.interpretation(1)
+    assert eng.stats["changes"].tolist() == [4100, 4100]
 
 
 def test_schedule_grows_mid_batch_and_every_world_keeps_its_firings():

@@ -5,7 +5,8 @@
     from process start to the first step, for the game program, for another rule file (no recompile:
     one compiled signature serves both) and for a RuleSim; (c) RuleSim steps/s by team size, tracing on
     and off, with the time inside engine.step() and the engine's work counters; (d) resident memory
-    over a long traced run. Figures: docs/benchmarks.md."""
+    over a long traced run; (e) the big graph: load, build and run of the spread rule on random graphs
+    of 2k / 20k / 200k nodes (tracelab/bench/biggraph.py). Figures: docs/benchmarks.md."""
 from __future__ import annotations
 
 import gc
@@ -18,6 +19,7 @@ import time
 from typing import IO, Any
 
 from tracelab import RULES_DIR
+from tracelab.bench import biggraph
 from tracelab.bench.common import (
     fmt_num,
     format_table,
@@ -159,11 +161,15 @@ def reference_figure(rows: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def run(quick: bool = False, repeats: int = 5, compile_repeats: int | None = None,
-        agents: list[int] | None = None) -> dict[str, Any]:
+        agents: list[int] | None = None, graph_only: bool = False) -> dict[str, Any]:
     """Every engine figure. --quick: small sizes, one process per start-up figure, and no first-ever
     compile unless `compile_repeats` asks for it (it then overlaps the in-process work, so its figure is
-    only a smoke value)."""
+    only a smoke value). `graph_only`: the big-graph section alone."""
     info = machine_info()
+    big = biggraph.run(quick, 1 if quick else min(repeats, 3))
+    if graph_only:
+        info["load_average_end"] = machine_info()["load_average"]
+        return {"machine": info, "quick": quick, "repeats": repeats, "big_graph": big}
     n_compiles = (compile_repeats or 0) if quick else (compile_repeats or min(repeats, 3))
     cold = ColdCompile(n_compiles) if n_compiles else None
     compiled: dict[str, Any] = {"skipped": "--quick (a compile takes 30-70 s here); add --compile-repeats 1"}
@@ -180,11 +186,14 @@ def run(quick: bool = False, repeats: int = 5, compile_repeats: int | None = Non
     warm = warm_start(1 if quick else repeats)
     info["load_average_end"] = machine_info()["load_average"]
     return {"machine": info, "quick": quick, "repeats": repeats, "first_compile": compiled,
-            "warm_start": warm, "steps": rows, "memory": mem, "reference": reference_figure(rows)}
+            "warm_start": warm, "steps": rows, "memory": mem, "reference": reference_figure(rows),
+            "big_graph": big}
 
 
 def report(r: dict[str, Any]) -> str:
     """The human-readable tables of run()'s result."""
+    if "first_compile" not in r:  # the big-graph section alone
+        return "\n\n".join([machine_line(r["machine"], r["quick"], r["repeats"]), biggraph.report(r["big_graph"])])
     c, w, m, ref = r["first_compile"], r["warm_start"], r["memory"], r["reference"]
     med = lambda d: d["median"]  # noqa: E731
     sp = lambda d: f"{100 * d['spread']:.0f}%"  # noqa: E731
@@ -227,7 +236,8 @@ def report(r: dict[str, Any]) -> str:
                 f"reference system's {ref['reference_s_per_step']} s/step; goal >= "
                 f"{ref['goal_steps_per_s']:,} steps/s: {'met' if ref['goal_met'] else 'not met'}")
     return "\n\n".join([machine_line(r["machine"], r["quick"], r["repeats"]), start + "\n" + sig,
-                        "RuleSim, one world (work counters per step)\n" + steps, mem_line, ref_line])
+                        "RuleSim, one world (work counters per step)\n" + steps, mem_line, ref_line,
+                        biggraph.report(r["big_graph"])])
 
 
 def machine_line(info: dict[str, Any], quick: bool, repeats: int) -> str:

@@ -46,6 +46,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         if name in ("engine", "all"):
             q.add_argument("--compile-repeats", type=positive_int, default=None,
                            help="first-ever compiles to time (default: min(repeats, 3); --quick: 1)")
+        if name == "engine":
+            q.add_argument("--graph-only", action="store_true",
+                           help="only the big-graph section (GraphML load, build, run on 2k/20k/200k nodes)")
         q.set_defaults(func=run)
 
 
@@ -62,7 +65,8 @@ def _sizes(text: str) -> list[int]:
 def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], str]:
     if name == "engine":
         from tracelab.bench import engine
-        r = engine.run(args.quick, args.repeats, args.compile_repeats, args.agents)
+        r = engine.run(args.quick, args.repeats, args.compile_repeats, args.agents,
+                       getattr(args, "graph_only", False))
         return r, engine.report(r)
     if name == "env":
         from tracelab.bench import env

@@ -1,0 +1,549 @@
+"""A compiled scanner for the plain GraphML that graph tools write: one pass over the bytes finds nodes,
+edges and their <data> values, interns node ids and key ids in hash tables and parses numbers and
+booleans, so that a million-edge file costs well under a second, not a Python call per element.
+
+It reads a subset of XML and says when a file leaves it (status SCAN_UNSUPPORTED and the byte offset):
+a DOCTYPE or CDATA section, an entity or character reference (`&`) inside a tag or a value, elements
+inside <data>, a <node> without an id, an <edge> without source or target, mismatched tags. The caller
+then reads the file with the complete (slower) expat reader, which also gives the located errors and
+refuses entity declarations. Within the subset there is nothing to expand, so nothing hostile to do.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+SCAN_OK, SCAN_UNSUPPORTED, SCAN_GROW = 0, 1, 2  # SCAN_GROW: the node table is half full, scan again larger
+# elements the scanner knows
+_OTHER, _NODE, _EDGE, _DATA, _KEY, _GRAPH = 0, 1, 2, 3, 4, 5
+# per data value: (kind 0 node / 1 edge, element index, key index, text start, text end, tag offset)
+D_KIND, D_ELEM, D_KEY, D_START, D_END, D_POS = 0, 1, 2, 3, 4, 5
+N_DCOLS = 6
+# per edge: (source, target, directed: -1 graph default / 0 undirected / 1 directed)
+E_SRC, E_DST, E_DIRECTED = 0, 1, 2
+# counts written by scan: nodes, edges, data values, key ids, key elements
+C_NODES, C_EDGES, C_DATA, C_KEYS, C_KEY_ELEMS = 0, 1, 2, 3, 4
+MAX_DEPTH = 256
+
+# no reference counting (`_nrt=False`): each array passed to a helper would cost atomic operations per
+# call, which made a tag cost a microsecond; every buffer is allocated by the caller (`scan_graphml`)
+scan_jit = njit(cache=True, _nrt=False)
+_POW10 = np.array([float(f"1e{k}") for k in range(23)])  # exact doubles
+
+
+def _packed(word: bytes) -> int:
+    """Up to 8 bytes as one integer, the way _pack reads a name."""
+    v = 0
+    for c in word:
+        v = (v << 8) | c
+    return v
+
+
+W_NODE, W_EDGE, W_DATA, W_KEY, W_GRAPH = (_packed(w) for w in (b"node", b"edge", b"data", b"key", b"graph"))
+W_ID, W_SOURCE, W_TARGET, W_DIRECTED = (_packed(w) for w in (b"id", b"source", b"target", b"directed"))
+W_TRUE, W_FALSE, W_ONE, W_ZERO = (_packed(w) for w in (b"true", b"false", b"1", b"0"))
+
+
+@scan_jit
+def _pack(b, s, e, lower):
+    """b[s:e] as one integer (-1 if longer than 8 bytes), lower-cased if `lower`."""
+    if e - s > 8 or e < s:
+        return -1
+    v = 0
+    for k in range(s, e):
+        c = b[k]
+        if lower and 65 <= c <= 90:
+            c += 32
+        v = (v << 8) | c
+    return v
+
+
+@scan_jit
+def _local_name(b, s, e):
+    """The packed name b[s:e] without a namespace prefix."""
+    for k in range(e - 1, s - 1, -1):
+        if b[k] == 58:  # ':'
+            return _pack(b, k + 1, e, False)
+    return _pack(b, s, e, False)
+
+
+@scan_jit
+def _hash(b, s, e):
+    h = np.uint64(14695981039346656037)
+    for i in range(s, e):
+        h = (h ^ np.uint64(b[i])) * np.uint64(1099511628211)
+    return h
+
+
+@scan_jit
+def _same(b, s1, e1, s2, e2):
+    if e1 - s1 != e2 - s2:
+        return False
+    for k in range(e1 - s1):
+        if b[s1 + k] != b[s2 + k]:
+            return False
+    return True
+
+
+@scan_jit
+def _intern(b, s, e, table, spans, n):
+    """Index of the byte string b[s:e] among spans[:n]; a new one is added as n (the caller counts).
+    The table (open addressing, -1 empty) is sized by the caller for every string there can be."""
+    mask = np.uint64(table.shape[0] - 1)
+    j = _hash(b, s, e) & mask
+    while True:
+        k = table[j]
+        if k < 0:
+            break
+        if _same(b, spans[k, 0], spans[k, 1], s, e):
+            return k
+        j = (j + np.uint64(1)) & mask
+    spans[n, 0] = s
+    spans[n, 1] = e
+    table[j] = n
+    return n
+
+
+@scan_jit
+def _intern_node(b, s, e, table, off, pool, n):
+    """Index of node id b[s:e] among the n interned so far; a new one is added as n. The table entries
+    are (hash fingerprint << 32 | index), the ids are copied into one byte pool: a lookup touches the
+    table and the pool, both small, never the (large, cold) file bytes of earlier ids."""
+    h = _hash(b, s, e)
+    mask = np.uint64(table.shape[0] - 1)
+    fp = np.int64(h >> np.uint64(33))
+    j = h & mask
+    m = e - s
+    while True:
+        v = table[j]
+        if v < 0:
+            break
+        if (v >> 32) == fp:
+            k = v & 0xFFFFFFFF
+            ps = off[k]
+            if off[k + 1] - ps == m:
+                same = True
+                for x in range(m):
+                    if pool[ps + x] != b[s + x]:
+                        same = False
+                        break
+                if same:
+                    return k
+        j = (j + np.uint64(1)) & mask
+    ps = off[n]
+    for x in range(m):
+        pool[ps + x] = b[s + x]
+    off[n + 1] = ps + m
+    table[j] = (fp << 32) | n
+    return n
+
+
+@scan_jit
+def _is_space(c):
+    return c == 32 or c == 9 or c == 10 or c == 13
+
+
+@scan_jit
+def _skip_past(b, i, c0, c1, c2):
+    """Offset just past the first c0 c1 c2 (c2 < 0: c0 c1) at or after i, or -1."""
+    n = b.shape[0]
+    while i + 1 < n:
+        if b[i] == c0 and b[i + 1] == c1:
+            if c2 < 0:
+                return i + 2
+            if i + 2 < n and b[i + 2] == c2:
+                return i + 3
+        i += 1
+    return -1
+
+
+@scan_jit
+def count_starts(b):
+    """How many '<node', '<edge', '<data', '<key' (any prefix) there are: the buffer sizes of scan."""
+    n = b.shape[0]
+    c_node = 0
+    c_edge = 0
+    c_data = 0
+    c_key = 0
+    for i in range(n - 4):
+        if b[i] != 60:
+            continue
+        # skip a prefix: '<' name ':'
+        j = i + 1
+        k = j
+        while k < n and k < j + 64 and b[k] != 58 and b[k] != 62 and not _is_space(b[k]) and b[k] != 60:
+            k += 1
+        if k < n and b[k] == 58:
+            j = k + 1
+        if j + 3 < n:
+            w = _pack(b, j, j + 4, False)
+            if w == W_NODE:
+                c_node += 1
+            elif w == W_EDGE:
+                c_edge += 1
+            elif w == W_DATA:
+                c_data += 1
+            elif _pack(b, j, j + 3, False) == W_KEY:
+                c_key += 1
+    return c_node, c_edge, c_data, c_key
+
+
+@scan_jit
+def parse_number(b, s, e):
+    """A decimal number in b[s:e] ([+-]digits[.digits][e[+-]digits], spaces around) as float() reads it,
+    or NaN when it is not one or is beyond exact conversion (more than 15 digits or a large exponent:
+    the caller converts those in Python)."""
+    while s < e and _is_space(b[s]):
+        s += 1
+    while e > s and _is_space(b[e - 1]):
+        e -= 1
+    if s == e:
+        return np.nan
+    sign = 1.0
+    if b[s] == 45 or b[s] == 43:
+        sign = -1.0 if b[s] == 45 else 1.0
+        s += 1
+    mant = 0
+    digits = 0
+    frac = 0
+    i = s
+    while i < e and 48 <= b[i] <= 57:
+        mant = mant * 10 + (b[i] - 48)
+        i += 1
+        digits += 1
+    if i < e and b[i] == 46:
+        i += 1
+        while i < e and 48 <= b[i] <= 57:
+            mant = mant * 10 + (b[i] - 48)
+            i += 1
+            digits += 1
+            frac += 1
+    if digits == 0 or digits > 15:
+        return np.nan
+    ex = 0
+    if i < e and (b[i] == 101 or b[i] == 69):
+        i += 1
+        esign = 1
+        if i < e and (b[i] == 45 or b[i] == 43):
+            esign = -1 if b[i] == 45 else 1
+            i += 1
+        ed = 0
+        while i < e and 48 <= b[i] <= 57 and ed < 4:
+            ex = ex * 10 + (b[i] - 48)
+            i += 1
+            ed += 1
+        if ed == 0:
+            return np.nan
+        ex *= esign
+    if i != e:
+        return np.nan
+    p = ex - frac
+    if p > 22 or p < -22:
+        return np.nan
+    # an integer below 2^53 times or over an exact power of ten: one correctly rounded operation
+    if p >= 0:
+        return sign * (float(mant) * _POW10[p])
+    return sign * (float(mant) / _POW10[-p])
+
+
+@scan_jit
+def scan(b, node_tab, node_off, pool, edges, data, key_tab, key_spans, key_elems, stack, graph_tag, counts):
+    """Scan GraphML bytes `b` into the caller's buffers (sized by count_starts); counts[C_*] say how much
+    of each was filled. Returns (status, byte offset where the file left the subset)."""
+    n = b.shape[0]
+    n_nodes = 0
+    n_keys = 0
+    n_edges = 0
+    n_data = 0
+    n_key_elems = 0
+    graph_tag[0] = -1
+    graph_tag[1] = -1
+    cur_kind = -1  # the open node (0) or edge (1), -1 none
+    cur_elem = -1
+    in_key = -1  # start offset of an open <key> element
+    depth = 0
+    roots = 0
+    i = 0
+    while i < n:
+        if b[i] != 60:  # '<'
+            i += 1
+            continue
+        if i + 1 >= n:
+            return SCAN_UNSUPPORTED, i
+        c = b[i + 1]
+        if c == 63:  # '<?' processing instruction / XML declaration
+            i = _skip_past(b, i + 2, 63, 62, -1)
+            if i < 0:
+                return SCAN_UNSUPPORTED, n
+            continue
+        if c == 33:  # '<!': a comment, else (DOCTYPE, CDATA) outside the subset
+            if i + 3 < n and b[i + 2] == 45 and b[i + 3] == 45:
+                i = _skip_past(b, i + 4, 45, 45, 62)
+                if i < 0:
+                    return SCAN_UNSUPPORTED, n
+                continue
+            return SCAN_UNSUPPORTED, i
+        closing = c == 47  # '</'
+        s = i + 2 if closing else i + 1
+        e = s
+        while e < n and not _is_space(b[e]) and b[e] != 62 and b[e] != 47:
+            e += 1
+        name = _local_name(b, s, e)
+        kind = _OTHER
+        if name == W_NODE:
+            kind = _NODE
+        elif name == W_EDGE:
+            kind = _EDGE
+        elif name == W_DATA:
+            kind = _DATA
+        elif name == W_KEY:
+            kind = _KEY
+        elif name == W_GRAPH:
+            kind = _GRAPH
+        # attributes up to '>' (values may not hold '<', '>' or '&' in the subset)
+        j = e
+        a_id_s = -1
+        a_id_e = -1
+        a_src_s = -1
+        a_src_e = -1
+        a_dst_s = -1
+        a_dst_e = -1
+        a_dir_s = -1
+        a_dir_e = -1
+        while True:
+            while j < n and _is_space(b[j]):
+                j += 1
+            if j >= n:
+                return SCAN_UNSUPPORTED, i
+            if b[j] == 62 or b[j] == 47:
+                break
+            ns = j
+            while j < n and b[j] != 61 and not _is_space(b[j]) and b[j] != 62:  # '='
+                j += 1
+            ne = j
+            while j < n and _is_space(b[j]):
+                j += 1
+            if j >= n or b[j] != 61:
+                return SCAN_UNSUPPORTED, i
+            j += 1
+            while j < n and _is_space(b[j]):
+                j += 1
+            if j >= n or (b[j] != 34 and b[j] != 39):
+                return SCAN_UNSUPPORTED, i
+            q = b[j]
+            vs = j + 1
+            j = vs
+            while j < n and b[j] != q:
+                if b[j] == 60 or b[j] == 38 or b[j] == 62:  # '<', '&', '>'
+                    return SCAN_UNSUPPORTED, i
+                j += 1
+            if j >= n:
+                return SCAN_UNSUPPORTED, i
+            ve = j
+            j += 1
+            if kind == _NODE or kind == _DATA or kind == _EDGE:
+                an = _pack(b, ns, ne, False)
+                if (kind == _NODE and an == W_ID) or (kind == _DATA and an == W_KEY):
+                    a_id_s = vs
+                    a_id_e = ve
+                elif kind == _EDGE:
+                    if an == W_SOURCE:
+                        a_src_s = vs
+                        a_src_e = ve
+                    elif an == W_TARGET:
+                        a_dst_s = vs
+                        a_dst_e = ve
+                    elif an == W_DIRECTED:
+                        a_dir_s = vs
+                        a_dir_e = ve
+        empty = b[j] == 47
+        if empty:
+            j += 1
+            if j >= n or b[j] != 62 or closing:
+                return SCAN_UNSUPPORTED, i
+        tag_end = j + 1
+        if closing:
+            if depth == 0 or not _same(b, stack[depth - 1, 0], stack[depth - 1, 1], s, e):
+                return SCAN_UNSUPPORTED, i
+            depth -= 1
+            if kind == _NODE or kind == _EDGE:
+                if cur_kind != kind - 1:
+                    return SCAN_UNSUPPORTED, i
+                cur_kind = -1
+            elif kind == _KEY and in_key >= 0 and depth == stack[MAX_DEPTH - 1, 0]:
+                if n_key_elems == key_elems.shape[0]:
+                    return SCAN_UNSUPPORTED, i
+                key_elems[n_key_elems, 0] = in_key
+                key_elems[n_key_elems, 1] = tag_end
+                n_key_elems += 1
+                in_key = -1
+            i = tag_end
+            continue
+        if depth == 0:
+            roots += 1
+            if roots > 1:
+                return SCAN_UNSUPPORTED, i
+        if not empty and kind != _DATA:  # <data> reads its own end tag below
+            if depth == MAX_DEPTH - 1:
+                return SCAN_UNSUPPORTED, i
+            stack[depth, 0] = s
+            stack[depth, 1] = e
+            depth += 1
+        if in_key >= 0:  # <default> and friends inside a <key>: the key element is read in Python
+            if kind == _DATA:
+                return SCAN_UNSUPPORTED, i
+            i = tag_end
+            continue
+        if kind == _NODE:
+            if a_id_s < 0 or cur_kind >= 0 or n_nodes + 1 >= node_off.shape[0]:
+                return SCAN_UNSUPPORTED, i
+            if 2 * (n_nodes + 1) > node_tab.shape[0]:
+                return SCAN_GROW, i
+            idx = _intern_node(b, a_id_s, a_id_e, node_tab, node_off, pool, n_nodes)
+            if idx == n_nodes:
+                n_nodes += 1
+            if not empty:
+                cur_kind = 0
+                cur_elem = idx
+        elif kind == _EDGE:
+            if a_src_s < 0 or a_dst_s < 0 or cur_kind >= 0 or n_edges == edges.shape[0] \
+                    or n_nodes + 3 > node_off.shape[0]:
+                return SCAN_UNSUPPORTED, i
+            if 2 * (n_nodes + 2) > node_tab.shape[0]:
+                return SCAN_GROW, i
+            src = _intern_node(b, a_src_s, a_src_e, node_tab, node_off, pool, n_nodes)
+            if src == n_nodes:
+                n_nodes += 1
+            dst = _intern_node(b, a_dst_s, a_dst_e, node_tab, node_off, pool, n_nodes)
+            if dst == n_nodes:
+                n_nodes += 1
+            edges[n_edges, E_SRC] = src
+            edges[n_edges, E_DST] = dst
+            directed = -1
+            if a_dir_s >= 0:
+                dv = _pack(b, a_dir_s, a_dir_e, False)
+                if dv == W_FALSE:
+                    directed = 0
+                elif dv == W_TRUE:
+                    directed = 1
+                else:
+                    return SCAN_UNSUPPORTED, i
+            edges[n_edges, E_DIRECTED] = directed
+            if not empty:
+                cur_kind = 1
+                cur_elem = n_edges
+            n_edges += 1
+        elif kind == _DATA:
+            if a_id_s < 0:
+                return SCAN_UNSUPPORTED, i
+            ts = tag_end
+            te = tag_end
+            if not empty:  # the text up to </data>, which must come next
+                while te < n and b[te] != 60:
+                    if b[te] == 38:  # '&'
+                        return SCAN_UNSUPPORTED, i
+                    te += 1
+                if te + 1 >= n or b[te + 1] != 47:
+                    return SCAN_UNSUPPORTED, i
+                k = te + 2
+                e2 = k
+                while e2 < n and b[e2] != 62 and not _is_space(b[e2]):
+                    e2 += 1
+                if not _same(b, k, e2, s, e):  # </data> with the same (prefixed) name
+                    return SCAN_UNSUPPORTED, i
+                while e2 < n and b[e2] != 62:
+                    e2 += 1
+                tag_end = e2 + 1
+            if cur_kind >= 0:  # data of the graph or the document itself is not a fact
+                if n_data == data.shape[0] or n_keys == key_spans.shape[0] or 2 * (n_keys + 1) > key_tab.shape[0]:
+                    return SCAN_UNSUPPORTED, i
+                kid = _intern(b, a_id_s, a_id_e, key_tab, key_spans, n_keys)
+                if kid == n_keys:
+                    n_keys += 1
+                data[n_data, D_KIND] = cur_kind
+                data[n_data, D_ELEM] = cur_elem
+                data[n_data, D_KEY] = kid
+                data[n_data, D_START] = ts
+                data[n_data, D_END] = te
+                data[n_data, D_POS] = i
+                n_data += 1
+        elif kind == _KEY:
+            if empty:
+                if n_key_elems == key_elems.shape[0]:
+                    return SCAN_UNSUPPORTED, i
+                key_elems[n_key_elems, 0] = i
+                key_elems[n_key_elems, 1] = tag_end
+                n_key_elems += 1
+            else:
+                in_key = i
+                stack[MAX_DEPTH - 1, 0] = depth - 1  # the depth its end tag brings back
+        elif kind == _GRAPH:
+            if graph_tag[0] >= 0:  # a second (or nested) graph
+                return SCAN_UNSUPPORTED, i
+            graph_tag[0] = i
+            graph_tag[1] = tag_end
+        i = tag_end
+    counts[C_NODES] = n_nodes
+    counts[C_EDGES] = n_edges
+    counts[C_DATA] = n_data
+    counts[C_KEYS] = n_keys
+    counts[C_KEY_ELEMS] = n_key_elems
+    if cur_kind >= 0 or in_key >= 0 or depth != 0 or roots != 1:
+        return SCAN_UNSUPPORTED, n
+    return SCAN_OK, 0
+
+
+@scan_jit
+def data_values(b, data, numbers, booleans):
+    """Each data value as a number (NaN if not one) and a boolean (1 true, 0 false, -1 neither;
+    case-insensitive, "1" / "0" too, spaces around)."""
+    for k in range(data.shape[0]):
+        s = data[k, D_START]
+        e = data[k, D_END]
+        numbers[k] = parse_number(b, s, e)
+        while s < e and _is_space(b[s]):
+            s += 1
+        while e > s and _is_space(b[e - 1]):
+            e -= 1
+        w = _pack(b, s, e, True)
+        booleans[k] = 1 if w == W_TRUE or w == W_ONE else 0 if w == W_FALSE or w == W_ZERO else -1
+
+
+def scan_graphml(b: np.ndarray) -> tuple[int, dict[str, np.ndarray]]:
+    """Scan bytes `b` (uint8): (status, arrays: node_off and pool (node id i is pool[off[i]:off[i+1]]),
+    edges, data, key_spans, key_elems, graph_tag, numbers, booleans), buffers sized from a counting pass
+    (np.empty pages that are never written cost no memory)."""
+    c_node, c_edge, c_data, c_key = count_starts(b)
+    max_nodes = c_node + 2 * c_edge + 1
+    node_off = np.empty(max_nodes + 1, np.int64)
+    node_off[0] = 0
+    pool = np.empty(len(b), np.uint8)
+    edges = np.empty((c_edge, 3), np.int64)
+    data = np.empty((c_data, N_DCOLS), np.int64)
+    key_spans = np.empty((c_data + 1, 2), np.int64)
+    key_elems = np.empty((c_key + 1, 2), np.int64)
+    stack = np.empty((MAX_DEPTH, 2), np.int64)
+    graph_tag = np.empty(2, np.int64)
+    counts = np.zeros(5, np.int64)
+    # a table for 4x the declared nodes; edges to undeclared nodes may need a larger one (scan again)
+    size = 1 << int(4 * c_node + 64).bit_length()
+    while True:
+        node_tab = np.full(size, -1, np.int64)
+        key_tab = np.full(1 << int(2 * c_key + 64).bit_length(), -1, np.int64)
+        status, _ = scan(b, node_tab, node_off, pool, edges, data, key_tab, key_spans, key_elems, stack,
+                         graph_tag, counts)
+        if status != SCAN_GROW:
+            break
+        size *= 4
+    del node_tab, key_tab
+    if status != SCAN_OK:
+        return status, {}
+    data = data[:counts[C_DATA]]
+    numbers = np.empty(len(data), np.float64)
+    booleans = np.empty(len(data), np.int8)
+    data_values(b, data, numbers, booleans)
+    n_nodes = int(counts[C_NODES])
+    return status, {"node_off": node_off[:n_nodes + 1], "pool": pool[:node_off[n_nodes]].copy(),
+                    "edges": edges[:counts[C_EDGES]], "data": data, "key_spans": key_spans[:counts[C_KEYS]],
+                    "key_elems": key_elems[:counts[C_KEY_ELEMS]], "graph_tag": graph_tag, "numbers": numbers,
+                    "booleans": booleans}
