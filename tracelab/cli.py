@@ -14,6 +14,7 @@ COMMAND_MODULES = [
     "tracelab.commands.trace", "tracelab.commands.why", "tracelab.commands.why_not",
     "tracelab.commands.sql", "tracelab.commands.diff", "tracelab.commands.seal",
     "tracelab.commands.bench", "tracelab.commands.train", "tracelab.commands.eval",
+    "tracelab.commands.experiment",
 ]
 
 
