@@ -26,6 +26,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", default=None, help="directory of the runs (default runs/experiments/NAME)")
     p.add_argument("--report-dir", default=None,
                    help="where NAME.md and NAME/*.png go (default docs/experiments; with --quick: --out)")
+    p.add_argument("--report-only", action="store_true",
+                   help="write the report and plots again from the finished experiment in --out (no training)")
     p.set_defaults(func=run)
 
 
@@ -46,6 +48,8 @@ def run(args: argparse.Namespace) -> int:
     budget = scaled(exp.quick if args.quick else exp.full, args.seeds, args.steps, args.eval_games)
     out = Path(args.out or f"runs/experiments/{args.name}")
     report_dir = Path(args.report_dir or (out if args.quick else "docs/experiments"))
+    if args.report_only:
+        return _report_again(exp, out, report_dir)
     taken = [out / f"{a.slug}-seed{s}" for a in exp.arms for s in range(budget.seeds)
              if (out / f"{a.slug}-seed{s}").exists()]
     if taken:
@@ -65,7 +69,18 @@ def run(args: argparse.Namespace) -> int:
         result = run_experiment(exp, budget, out, command, args.quick, say, jobs=args.jobs)
     except KeyboardInterrupt:
         return _error("interrupted: no report written (the runs so far are in " + str(out) + ")", 130)
-    path = write_report(result, report_dir, command)
+    path = write_report(result, report_dir)
     print(f"report: {path}  (plots in {report_dir / exp.name}/, runs in {out}/, wall time "
           f"{result.wall_s / 60:.1f} min)")
+    return 0
+
+
+def _report_again(exp, out: Path, report_dir: Path) -> int:
+    from tracelab.train.experiments.report import write_report
+    from tracelab.train.experiments.run import load_result
+    try:
+        result = load_result(exp, out)
+    except (ValueError, KeyError, OSError) as e:
+        return _error(str(e))
+    print(f"report: {write_report(result, report_dir)}")
     return 0

@@ -30,7 +30,8 @@ class Arm:
 
     @property
     def slug(self) -> str:
-        return "".join(c if c.isalnum() else "-" for c in self.label.lower()).strip("-")
+        words = "".join(c if c.isalnum() else " " for c in self.label.lower()).split()
+        return "-".join(words)
 
 
 @dataclass(frozen=True)
@@ -73,7 +74,7 @@ EXPERIMENTS: dict[str, Experiment] = {e.name: e for e in (
         "portability", "Portability: the same policies in the rule-driven and the hand-written simulator",
         (Arm("1v1 base", "base", published=0.976, published_note="97.6% proxy, 100% other simulators"),),
         full=Budget(seeds=3, steps=150_000, eval_games=500, evals=5),
-        quick=Budget(seeds=1, steps=2_000, eval_games=40, evals=1),
+        quick=Budget(seeds=1, steps=1_500, eval_games=30, evals=1),
         goal="win rates within 3 points and rewards within 10% between the simulators; "
              "the gap no larger than sampling noise"),
     Experiment(
@@ -89,6 +90,6 @@ EXPERIMENTS: dict[str, Experiment] = {e.name: e for e in (
         (Arm("shot -400", "advanced", rewards=SHOT_BEFORE),
          Arm("shot -200, no ammo -10", "advanced", rewards=SHOT_AFTER)),
         full=Budget(seeds=3, steps=200_000, eval_games=500, evals=5),
-        quick=Budget(seeds=1, steps=1_500, eval_games=20, evals=1),
+        quick=Budget(seeds=1, steps=1_000, eval_games=16, evals=1),
         goal="the traces' figures move as the method describes: less hiding, shooting kept"),
 )}

@@ -25,9 +25,9 @@ def learning_curves(path: Path, arms: Sequence[dict], *, metric: str, ylabel: st
     """One line per seed per arm of `metric` against training steps, the arm's published figure as a
     dashed line. `arms`: [{"label", "published" (or None), "seeds": [(seed, steps, values)]}]."""
     plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(4.8, 3.0) if small else (8.0, 4.6), dpi=100)
+    fig, ax = plt.subplots(figsize=(6.4, 3.4) if small else (10.0, 5.0), dpi=100)
     scale = 100.0 if percent else 1.0
-    legend_bits = []
+    legend_bits, last_step = [], 0.0
     for i, arm in enumerate(arms):
         colour = ARM_COLOURS[i % len(ARM_COLOURS)]
         finals = []
@@ -37,21 +37,23 @@ def learning_curves(path: Path, arms: Sequence[dict], *, metric: str, ylabel: st
             ax.plot(steps, values * scale, color=colour, alpha=0.85, lw=1.4, marker="o", ms=3,
                     ls=("-", "--", ":", "-.")[k % 4], label=f"{arm['label']}, seed {seed}")
             finals.append(values[-1] * scale)
+            last_step = max(last_step, float(steps[-1]))
         if finals:
             unit = "%" if percent else ""
-            legend_bits.append(f"{arm['label']}: final {min(finals):.1f}{unit}-{max(finals):.1f}{unit} "
-                               f"(min-max, {len(finals)} seed{'s' if len(finals) != 1 else ''})")
+            legend_bits.append(f"{arm['label']}: final value min {min(finals):.1f}{unit}, max {max(finals):.1f}{unit} "
+                               f"over {len(finals)} seed{'s' if len(finals) != 1 else ''}")
         if arm.get("published") is not None:
             ax.axhline(arm["published"] * scale, color=colour, ls=(0, (6, 3)), lw=1.2, alpha=0.6,
                        label=f"the method: {arm['published'] * scale:.1f}{'%' if percent else ''}")
+    ax.set_xlim(0, max(last_step, 1.0) * 1.03)
     ax.set_xlabel("training steps")
     ax.set_ylabel(ylabel)
     if percent:
         ax.set_ylim(-2, 102)
     ax.xaxis.set_major_formatter(_thousands())
     ax.grid(alpha=0.3)
-    ax.set_title(title + "\n" + "; ".join(legend_bits), fontsize=8 if small else 10)
-    ax.legend(fontsize=6 if small else 8, loc="best", framealpha=0.85)
+    _title(ax, [title, "; ".join(legend_bits)], small)
+    ax.legend(fontsize=6 if small else 8, loc="upper left", bbox_to_anchor=(1.01, 1.0), framealpha=0.85)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
@@ -62,7 +64,7 @@ def paired_bars(path: Path, groups: Sequence[str], series: dict[str, Sequence[tu
                 *, ylabel: str, title: str, reference: float | None = None, small: bool = False) -> Path:
     """Grouped bars with error bars: series name -> per group (value, low, high), in percent."""
     plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(4.8, 3.0) if small else (8.0, 4.6), dpi=100)
+    fig, ax = plt.subplots(figsize=(6.4, 3.4) if small else (10.0, 5.0), dpi=100)
     x = np.arange(len(groups))
     width = 0.8 / max(1, len(series))
     for i, (name, vals) in enumerate(series.items()):
@@ -77,12 +79,18 @@ def paired_bars(path: Path, groups: Sequence[str], series: dict[str, Sequence[tu
     ax.set_ylabel(ylabel)
     ax.set_ylim(0, 105)
     ax.grid(alpha=0.3, axis="y")
-    ax.set_title(title, fontsize=8 if small else 10)
-    ax.legend(fontsize=6 if small else 8, loc="lower right", framealpha=0.85)
+    _title(ax, [title], small)
+    ax.legend(fontsize=6 if small else 8, loc="upper left", bbox_to_anchor=(1.01, 1.0), framealpha=0.85)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
     return path
+
+
+def _title(ax, lines: Sequence[str], small: bool) -> None:
+    import textwrap
+    width = 80 if small else 110
+    ax.set_title("\n".join(textwrap.fill(t, width) for t in lines if t), fontsize=7 if small else 10)
 
 
 def _thousands():

@@ -63,7 +63,8 @@ def spread_text(values: list[float], percent: bool = True) -> str:
     return text + f" ({s['n']} seed{'s' if s['n'] != 1 else ''})"
 
 
-def write_report(result: ExperimentResult, report_dir: Path, command: str) -> Path:
+def write_report(result: ExperimentResult, report_dir: Path) -> Path:
+    command = result.command
     exp, budget = result.experiment, result.budget
     fig_dir = report_dir / exp.name
     fig_dir.mkdir(parents=True, exist_ok=True)
@@ -181,6 +182,23 @@ def experiment_sections(result: ExperimentResult) -> list[str]:
                              f"[{lo:+.1f}, {hi:+.1f}] | {num(100 * d['return_gap_relative'], '.1f')}% |")
         L += [""]
     if exp.name == "reward-shaping":
+        first = next((ar.extra.get(s.seed, {}).get("trace_run") for ar in result.arms for s in ar.seeds), None)
+        L += ["## The case", "",
+              "The method's point about explainability: its traces showed agents hiding behind mountains when "
+              "the penalty for being shot was 400; halving it to 200 balanced the policy, and a penalty of 10 "
+              "(not more) for shooting with no ammo kept agents shooting. Here, as one command:", "",
+              "1. train on the advanced scenario with `got_shot = -400` (the rest of the rewards the method's);",
+              "2. play 100 traced evaluation games of each seed's policy and run the saved queries on them:", "",
+              "   ```",
+              f"   tracelab sql {first or 'TRACES'} --query hid_behind_mountain",
+              f"   tracelab sql {first or 'TRACES'} --query learner_events",
+              f"   tracelab sql {first or 'TRACES'} --query actions_per_win --param learner=red-agent-%",
+              f"   tracelab sql {first or 'TRACES'} --query steps_before_loss --param learner=red-agent-%",
+              "   ```", "",
+              "3. change the rewards the queries point to: `hid_behind_mountain` and `learner_events`' `shot` "
+              "point to the shot penalty (-400 -> -200), `learner_events`' `invalid` and the shoot share to the "
+              "no-ammo penalty (kept at -10, the method's value), and retrain with the same seeds;",
+              "4. the same queries and the win rates, before and after (below).", ""]
         L += ["## The saved queries, before and after", "",
               "Each seed's final policy plays traced evaluation games (against p = 0.3) into its own run; the "
               "saved queries (`tracelab sql RUN --query NAME`) read them: `hid_behind_mountain` (timesteps red "
@@ -249,7 +267,7 @@ def make_plots(result: ExperimentResult, fig_dir: Path) -> list[tuple[str, Path]
         for ar in result.arms:
             for s in ar.seeds:
                 for key, d in (ar.extra.get(s.seed) or {}).items():
-                    groups.append(f"seed {s.seed}\n{key[1:]}")
+                    groups.append(f"seed {s.seed}\np = {key[2:]}")
                     for name, k in (("rules backend", "rules"), ("reference, same seeds", "reference_same_seeds"),
                                     ("reference, other seeds", "reference_other_seeds")):
                         r = d[k]

@@ -10,6 +10,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from tracelab.game.scenario import ACTION_NAMES
 from tracelab.train.config import TrainConfig
 from tracelab.train.evaluate import EvalResult, evaluate
 from tracelab.train.experiments.definitions import Arm, Budget, Experiment
@@ -37,6 +38,7 @@ class ExperimentResult:
     out_dir: Path
     arms: list[ArmResult]
     wall_s: float = 0.0
+    command: str = ""
 
 
 def train_config(exp: Experiment, arm: Arm, budget: Budget, seed: int) -> TrainConfig:
@@ -55,7 +57,7 @@ def run_experiment(exp: Experiment, budget: Budget, out_dir: Path, command: str,
     experiment's own measurements on the saved policies."""
     t0 = time.perf_counter()
     out_dir.mkdir(parents=True, exist_ok=True)
-    result = ExperimentResult(exp, budget, quick, out_dir, [ArmResult(a) for a in exp.arms])
+    result = ExperimentResult(exp, budget, quick, out_dir, [ArmResult(a) for a in exp.arms], command=command)
     tasks = [(ar, seed) for ar in result.arms for seed in range(budget.seeds)]
 
     def task_args(ar: ArmResult, seed: int) -> tuple:
@@ -81,7 +83,7 @@ def run_experiment(exp: Experiment, budget: Budget, out_dir: Path, command: str,
         if exp.name == "portability":
             ar.extra[seed] = portability(sr, scenario, budget.eval_games, say)
         elif exp.name == "reward-shaping":
-            ar.extra[seed] = shaping_traces(sr, scenario, out_dir, 10 if quick else 100, command, say)
+            ar.extra[seed] = shaping_traces(sr, scenario, out_dir, 6 if quick else 100, command, say)
     result.wall_s = time.perf_counter() - t0
     (out_dir / f"{exp.name}.json").write_text(json.dumps(summary_json(result), indent=1))
     return result
@@ -146,11 +148,13 @@ def query_figures(run: Path) -> dict[str, Any]:
     apw = run_query(run, "actions_per_win", learner="red-agent-%")
     before_loss = run_query(run, "steps_before_loss", learner="red-agent-%")
     games = max(1, len(ev))
-    shots = run_sql(run, "SELECT count(*) FILTER (action LIKE 'shoot%') AS shots, count(*) AS actions "
+    shoot_ids = ", ".join(str(i) for i, name in enumerate(ACTION_NAMES) if name.startswith("shoot"))
+    shots = run_sql(run, f"SELECT count(*) FILTER (action IN ({shoot_ids})) AS shots, count(*) AS actions "
                          "FROM steps WHERE agent LIKE 'red-agent-%'")[0]
     last_actions: dict[str, int] = {}
-    for r in before_loss:
-        last_actions[str(r["action"])] = last_actions.get(str(r["action"]), 0) + 1
+    for r in before_loss:  # steps.action is the spec's action id
+        name = ACTION_NAMES[r["action"]] if 0 <= r["action"] < len(ACTION_NAMES) else str(r["action"])
+        last_actions[name] = last_actions.get(name, 0) + 1
     return {
         "games": len(ev),
         "hidden_steps_per_game": float(np.mean([r["hidden_steps"] for r in hid])) if hid else 0.0,
@@ -167,14 +171,40 @@ def query_figures(run: Path) -> dict[str, Any]:
 
 
 def summary_json(result: ExperimentResult) -> dict[str, Any]:
-    return {"experiment": result.experiment.name, "quick": result.quick, "budget": vars(result.budget),
-            "wall_s": result.wall_s,
+    return {"experiment": result.experiment.name, "command": result.command, "quick": result.quick,
+            "budget": vars(result.budget), "wall_s": result.wall_s,
             "arms": [{"label": ar.arm.label, "published": ar.arm.published,
                       "seeds": [{"seed": s.seed, "run": str(s.run_dir), "steps": s.steps, "status": s.status,
                                  "wall_s": s.wall_s,
                                  "final": {p_suffix(p): r.to_dict() for p, r in s.final.items()},
                                  "extra": ar.extra.get(s.seed)} for s in ar.seeds]}
                      for ar in result.arms]}
+
+
+def load_result(exp: Experiment, out_dir: Path) -> ExperimentResult:
+    """An experiment's result as run_experiment left it in `out_dir` (its NAME.json), to write the report
+    again without training."""
+    path = out_dir / f"{exp.name}.json"
+    try:
+        d = json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        raise ValueError(f"{path}: no result of a finished experiment here ({e})") from None
+    fields_ = set(EvalResult.__dataclass_fields__) - {"records"}
+    result = ExperimentResult(exp, Budget(**d["budget"]), d["quick"], out_dir, [ArmResult(a) for a in exp.arms],
+                              wall_s=d["wall_s"], command=d.get("command", ""))
+    for ar, saved in zip(result.arms, d["arms"]):
+        for s in saved["seeds"]:
+            final = {float(k[2:]): EvalResult(**{f: v for f, v in r.items() if f in fields_})
+                     for k, r in s["final"].items()}
+            run_dir = Path(s["run"])
+            ar.seeds.append(SeedRun(s["seed"], run_dir, s["steps"], s["status"], final, run_dir / "policy",
+                                    s.get("wall_s", 0.0)))
+            if s.get("extra") is not None:
+                ar.extra[s["seed"]] = s["extra"]
+    if not result.command:  # written before the command was kept: the runs' meta holds it
+        meta = json.loads((result.arms[0].seeds[0].run_dir / "meta.json").read_text())
+        result.command = meta["command"].removeprefix("tracelab train (from: ").removesuffix(")")
+    return result
 
 
 def scaled(budget: Budget, seeds: int | None, steps: int | None, eval_games: int | None) -> Budget:
