@@ -40,7 +40,7 @@ def learning_curves(path: Path, arms: Sequence[dict], *, metric: str, ylabel: st
             last_step = max(last_step, float(steps[-1]))
         if finals:
             unit = "%" if percent else ""
-            legend_bits.append(f"{arm['label']}: final value min {min(finals):.1f}{unit}, max {max(finals):.1f}{unit} "
+            legend_bits.append(f"{arm['label']}: last point min {min(finals):.1f}{unit}, max {max(finals):.1f}{unit} "
                                f"over {len(finals)} seed{'s' if len(finals) != 1 else ''}")
         if arm.get("published") is not None:
             ax.axhline(arm["published"] * scale, color=colour, ls=(0, (6, 3)), lw=1.2, alpha=0.6,
@@ -70,8 +70,9 @@ def paired_bars(path: Path, groups: Sequence[str], series: dict[str, Sequence[tu
     for i, (name, vals) in enumerate(series.items()):
         v = np.array([a for a, _, _ in vals]) * 100
         err = np.array([[a - lo, hi - a] for a, lo, hi in vals]).T * 100
-        ax.bar(x + (i - (len(series) - 1) / 2) * width, v, width, yerr=err, capsize=3,
-               color=ARM_COLOURS[i % len(ARM_COLOURS)], alpha=0.85, label=name)
+        bars = ax.bar(x + (i - (len(series) - 1) / 2) * width, v, width, yerr=err, capsize=3,
+                      color=ARM_COLOURS[i % len(ARM_COLOURS)], alpha=0.85, label=name)
+        ax.bar_label(bars, fmt="%.1f", fontsize=6 if small else 8, padding=2)  # readable at 0% too
     if reference is not None:
         ax.axhline(reference * 100, color="k", ls=(0, (6, 3)), lw=1, alpha=0.6,
                    label=f"the method: {reference * 100:.1f}%")

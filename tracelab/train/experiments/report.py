@@ -40,7 +40,7 @@ def machine() -> str:
     except OSError:
         pass
     try:
-        load = " , load average %.1f at the end" % os.getloadavg()[0]
+        load = ", load average %.1f at the end" % os.getloadavg()[0]
     except OSError:
         load = ""
     return f"{os.cpu_count()} cores, {model}, {platform.system()} {platform.release()}{load}"
@@ -59,7 +59,8 @@ def spread_text(values: list[float], percent: bool = True) -> str:
     f = (lambda v: f"{100 * v:.1f}%") if percent else (lambda v: f"{v:.2f}")
     text = f"mean {f(s['mean'])}, min-max {f(s['min'])}-{f(s['max'])}"
     if s["n"] > 1:
-        text += f", 95% CI of the mean {f(s['ci_low'])}-{f(s['ci_high'])}"
+        lo, hi = (max(0.0, s["ci_low"]), min(1.0, s["ci_high"])) if percent else (s["ci_low"], s["ci_high"])
+        text += f", 95% CI of the mean {f(lo)}-{f(hi)}"
     return text + f" ({s['n']} seed{'s' if s['n'] != 1 else ''})"
 
 
@@ -75,7 +76,7 @@ def write_report(result: ExperimentResult, report_dir: Path) -> Path:
               "its figures say nothing about the method.", ""]
     L += ["| | |", "|---|---|",
           f"| command | `{command}` |",
-          f"| commit | `{commit()}` |",
+          f"| commit | `{result.commit or commit()}` |",
           f"| machine | {machine()} |",
           f"| wall time | {result.wall_s / 60:.1f} min ({result.wall_s:.0f} s), date {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} |",
           f"| budget | {budget.seeds} seed{'s' if budget.seeds != 1 else ''} x {budget.steps:,} training steps per "
@@ -109,6 +110,7 @@ def write_report(result: ExperimentResult, report_dir: Path) -> Path:
                          + (f"; the method: {ar.arm.published_note}" if ar.arm.published_note and p == 0.3 else ""))
     L += [""]
     L += experiment_sections(result)
+    L += action_section(result)
     L += ["## Plots", ""]
     for caption, path in figures:
         L += [f"**{caption}**", "", f"![{caption}]({path.relative_to(report_dir).as_posix()})", ""]
@@ -123,6 +125,33 @@ def write_report(result: ExperimentResult, report_dir: Path) -> Path:
     path = report_dir / f"{exp.name}.md"
     path.write_text("\n".join(L))
     return path
+
+
+def action_section(result: ExperimentResult) -> list[str]:
+    """Red's actions in each seed's last traced evaluation games: what the final greedy policy does."""
+    from tracelab.game.scenario import ACTION_NAMES
+    from tracelab.train.experiments.runner import run_sql
+    ids = sorted({int(i) for ar in result.arms for i in ar.arm.build_scenario().action_ids})
+    names = [ACTION_NAMES[i] for i in ids]
+    L = ["## What the final policies do", "",
+         "Red's actions in the traced games of each seed's last evaluation during training (the run's "
+         "`episodes` with `kind = 'eval'` at the last `train_step`, joined with `steps`), and how those games "
+         "ended:", "", "| setting | seed | games | " + " | ".join(names) + " | outcomes |",
+         "|---|---|---|" + "---|" * len(names) + "---|"]
+    for ar in result.arms:
+        for s in ar.seeds:
+            acts = run_sql(s.run_dir, "SELECT s.action, count(*) AS n FROM steps s JOIN episodes e USING (episode) "
+                                      "WHERE e.kind = 'eval' AND s.agent LIKE 'red-agent-%' AND e.train_step = "
+                                      "(SELECT max(train_step) FROM episodes WHERE kind = 'eval') GROUP BY ALL")
+            ends = run_sql(s.run_dir, "SELECT outcome, count(*) AS n, avg(steps) AS steps FROM episodes WHERE "
+                                      "kind = 'eval' AND train_step = (SELECT max(train_step) FROM episodes WHERE "
+                                      "kind = 'eval') GROUP BY ALL ORDER BY n DESC")
+            total = sum(r["n"] for r in acts) or 1
+            share = {r["action"]: r["n"] / total for r in acts}
+            L.append(f"| {ar.arm.label} | {s.seed} | {sum(r['n'] for r in ends)} | "
+                     + " | ".join(pct(share.get(i, 0.0)) for i in ids) + " | "
+                     + ", ".join(f"{r['n']} {r['outcome']} ({r['steps']:.0f} steps)" for r in ends) + " |")
+    return L + [""]
 
 
 def goal_lines(result: ExperimentResult) -> list[str]:

@@ -39,6 +39,7 @@ class ExperimentResult:
     arms: list[ArmResult]
     wall_s: float = 0.0
     command: str = ""
+    commit: str = ""   # the code that trained (git HEAD when the experiment started)
 
 
 def train_config(exp: Experiment, arm: Arm, budget: Budget, seed: int) -> TrainConfig:
@@ -57,7 +58,9 @@ def run_experiment(exp: Experiment, budget: Budget, out_dir: Path, command: str,
     experiment's own measurements on the saved policies."""
     t0 = time.perf_counter()
     out_dir.mkdir(parents=True, exist_ok=True)
-    result = ExperimentResult(exp, budget, quick, out_dir, [ArmResult(a) for a in exp.arms], command=command)
+    from tracelab.train.experiments.report import commit
+    result = ExperimentResult(exp, budget, quick, out_dir, [ArmResult(a) for a in exp.arms], command=command,
+                              commit=commit())
     tasks = [(ar, seed) for ar in result.arms for seed in range(budget.seeds)]
 
     def task_args(ar: ArmResult, seed: int) -> tuple:
@@ -171,7 +174,8 @@ def query_figures(run: Path) -> dict[str, Any]:
 
 
 def summary_json(result: ExperimentResult) -> dict[str, Any]:
-    return {"experiment": result.experiment.name, "command": result.command, "quick": result.quick,
+    return {"experiment": result.experiment.name, "command": result.command, "commit": result.commit,
+            "quick": result.quick,
             "budget": vars(result.budget), "wall_s": result.wall_s,
             "arms": [{"label": ar.arm.label, "published": ar.arm.published,
                       "seeds": [{"seed": s.seed, "run": str(s.run_dir), "steps": s.steps, "status": s.status,
@@ -191,7 +195,7 @@ def load_result(exp: Experiment, out_dir: Path) -> ExperimentResult:
         raise ValueError(f"{path}: no result of a finished experiment here ({e})") from None
     fields_ = set(EvalResult.__dataclass_fields__) - {"records"}
     result = ExperimentResult(exp, Budget(**d["budget"]), d["quick"], out_dir, [ArmResult(a) for a in exp.arms],
-                              wall_s=d["wall_s"], command=d.get("command", ""))
+                              wall_s=d["wall_s"], command=d.get("command", ""), commit=d.get("commit", ""))
     for ar, saved in zip(result.arms, d["arms"]):
         for s in saved["seeds"]:
             final = {float(k[2:]): EvalResult(**{f: v for f, v in r.items() if f in fields_})
