@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import platform
 import subprocess
+import textwrap
 import time
 from pathlib import Path
 from typing import Any
@@ -180,8 +181,19 @@ def goal_lines(result: ExperimentResult) -> list[str]:
                                f"game by game with the same seeds; independent seeds: win-rate gap "
                                f"{d['win_gap_points']:+.1f} points (two-proportion p = {d['p_value']:.2f}), "
                                f"return gap {d['return_gap']:+.1f} ({num(100 * d['return_gap_relative'], '.1f')}%).")
-    if exp.name == "reward-shaping":
-        out.append("- the queries' figures before and after are in the table below.")
+    if exp.name == "reward-shaping" and len(result.arms) == 2:
+        before, after = result.arms
+        for sb, sa in zip(before.seeds, after.seeds):
+            fb, fa = ({k: v for k, v in (ar.extra.get(s.seed) or {}).items() if k != "trace_run"}
+                      for ar, s in ((before, sb), (after, sa)))
+            same = "the same figures (the change did not move the greedy policy's games)" if fb == fa else \
+                "hidden steps/game {:.2f} -> {:.2f}, red shot/game {:.2f} -> {:.2f}, shoot share {} -> {}, " \
+                "method's win rate {} -> {}".format(
+                    fb.get("hidden_steps_per_game", 0), fa.get("hidden_steps_per_game", 0),
+                    fb.get("shot_per_game", 0), fa.get("shot_per_game", 0), pct(fb.get("shoot_share")),
+                    pct(fa.get("shoot_share")), pct(sb.final[0.3].method_win_rate), pct(sa.final[0.3].method_win_rate))
+            out.append(f"- seed {sb.seed}, {before.arm.label} -> {after.arm.label}: {same}.")
+        out.append("- the queries' figures per seed are in the table below.")
     return out
 
 
@@ -280,7 +292,8 @@ def make_plots(result: ExperimentResult, fig_dir: Path) -> list[tuple[str, Path]
     groups, by_p = [], {f"p = {p:g}": [] for p in EVAL_PS}
     for ar in result.arms:
         for s in ar.seeds:
-            groups.append(f"{ar.arm.label}\nseed {s.seed}" if len(result.arms) > 1 else f"seed {s.seed}")
+            groups.append(f"{textwrap.fill(ar.arm.label, 12)}\nseed {s.seed}" if len(result.arms) > 1
+                          else f"seed {s.seed}")
             for p in EVAL_PS:
                 r: EvalResult = s.final[p]
                 lo, hi = wilson(r.method_wins, r.games)
