@@ -79,7 +79,7 @@ def write_report(result: ExperimentResult, report_dir: Path) -> Path:
           f"| command | `{command}` |",
           f"| commit | `{result.commit or commit()}` |",
           f"| machine | {machine()} |",
-          f"| wall time | {result.wall_s / 60:.1f} min ({result.wall_s:.0f} s), date {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} |",
+          f"| wall time | {result.wall_s / 60:.1f} min ({result.wall_s:.0f} s); report written {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} |",
           f"| budget | {budget.seeds} seed{'s' if budget.seeds != 1 else ''} x {budget.steps:,} training steps per "
           f"setting; {budget.eval_games} games per evaluation, {budget.evals} evaluation(s) over training |",
           f"| opponent | scripted blue: with probability p a move towards red's base, else a random action "
