@@ -48,16 +48,16 @@ def run(args: argparse.Namespace) -> int:
     budget = scaled(exp.quick if args.quick else exp.full, args.seeds, args.steps, args.eval_games)
     out = Path(args.out or f"runs/experiments/{args.name}")
     report_dir = Path(args.report_dir or (out if args.quick else "docs/experiments"))
-    if args.report_only:
-        return _report_again(exp, out, report_dir)
-    taken = [out / f"{a.slug}-seed{s}" for a in exp.arms for s in range(budget.seeds)
-             if (out / f"{a.slug}-seed{s}").exists()]
-    if taken:
-        return _error(f"{taken[0]} already exists: give another --out or remove it")
     try:
         import matplotlib  # noqa: F401  (fail before training, not after)
     except ImportError:
         return _error("the experiment plots need matplotlib: pip install 'tracelab[experiments]'")
+    if args.report_only:
+        return _report_again(exp, out, report_dir)
+    taken = [out / f"{a.slug}-seed{s}{tail}" for a in exp.arms for s in range(budget.seeds)
+             for tail in ("", "-traces") if (out / f"{a.slug}-seed{s}{tail}").exists()]
+    if taken:
+        return _error(f"{taken[0]} already exists: give another --out or remove it")
     from tracelab.train.experiments.report import write_report
     from tracelab.train.experiments.run import run_experiment
 
