@@ -78,7 +78,7 @@ def write_report(result: ExperimentResult, report_dir: Path) -> Path:
     L += ["| | |", "|---|---|",
           f"| command | `{command}` |",
           f"| commit | `{result.commit or commit()}` |",
-          f"| machine | {machine()} |",
+          f"| machine | {result.machine or machine()} |",
           f"| wall time | {result.wall_s / 60:.1f} min ({result.wall_s:.0f} s); report written {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} |",
           f"| budget | {budget.seeds} seed{'s' if budget.seeds != 1 else ''} x {budget.steps:,} training steps per "
           f"setting; {budget.eval_games} games per evaluation, {budget.evals} evaluation(s) over training |",

@@ -40,6 +40,7 @@ class ExperimentResult:
     wall_s: float = 0.0
     command: str = ""
     commit: str = ""   # the code that trained (git HEAD when the experiment started)
+    machine: str = ""  # cores, CPU, the load when it ended
 
 
 def train_config(exp: Experiment, arm: Arm, budget: Budget, seed: int) -> TrainConfig:
@@ -88,6 +89,8 @@ def run_experiment(exp: Experiment, budget: Budget, out_dir: Path, command: str,
         elif exp.name == "reward-shaping":
             ar.extra[seed] = shaping_traces(sr, scenario, out_dir, 6 if quick else 100, command, say)
     result.wall_s = time.perf_counter() - t0
+    from tracelab.train.experiments.report import machine
+    result.machine = machine()
     (out_dir / f"{exp.name}.json").write_text(json.dumps(summary_json(result), indent=1))
     return result
 
@@ -175,6 +178,7 @@ def query_figures(run: Path) -> dict[str, Any]:
 
 def summary_json(result: ExperimentResult) -> dict[str, Any]:
     return {"experiment": result.experiment.name, "command": result.command, "commit": result.commit,
+            "machine": result.machine,
             "quick": result.quick,
             "budget": vars(result.budget), "wall_s": result.wall_s,
             "arms": [{"label": ar.arm.label, "published": ar.arm.published,
@@ -195,7 +199,8 @@ def load_result(exp: Experiment, out_dir: Path) -> ExperimentResult:
         raise ValueError(f"{path}: no result of a finished experiment here ({e})") from None
     fields_ = set(EvalResult.__dataclass_fields__) - {"records"}
     result = ExperimentResult(exp, Budget(**d["budget"]), d["quick"], out_dir, [ArmResult(a) for a in exp.arms],
-                              wall_s=d["wall_s"], command=d.get("command", ""), commit=d.get("commit", ""))
+                              wall_s=d["wall_s"], command=d.get("command", ""), commit=d.get("commit", ""),
+                              machine=d.get("machine", ""))
     for ar, saved in zip(result.arms, d["arms"]):
         for s in saved["seeds"]:
             final = {float(k[2:]): EvalResult(**{f: v for f, v in r.items() if f in fields_})
