@@ -1,0 +1,118 @@
+"""`tracelab experiment NAME --quick`: the command trains, evaluates against both opponent settings, writes
+the figures into its runs and a report with plots (docs/experiments/). Real training, real plots: the
+quick budgets are small, so the figures themselves are not asserted, only that they are there and
+consistent."""
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("matplotlib")
+from PIL import Image  # noqa: E402
+
+from tracelab.cli import main  # noqa: E402
+from tracelab.store import open_run  # noqa: E402
+from tracelab.train.experiments.stats import spread, two_proportion_test, wilson  # noqa: E402
+
+
+def run_quick(name: str, out: Path, capsys) -> str:
+    assert main(["experiment", name, "--quick", "--out", str(out)]) == 0
+    return capsys.readouterr().out
+
+
+def check_png(path: Path) -> None:
+    assert path.exists(), path
+    with Image.open(path) as im:
+        assert im.format == "PNG"
+        w, h = im.size
+        assert w >= 400 and h >= 250
+        low, high = im.convert("L").getextrema()
+        assert high - low > 100  # something was drawn, not a blank canvas
+
+
+def final_metrics(run: Path) -> dict[str, float]:
+    con = open_run(run)
+    try:
+        rows = con.execute("SELECT name, value FROM metrics WHERE name LIKE 'eval/%@p%'").fetchall()
+    finally:
+        con.close()
+    return dict(rows)
+
+
+def test_1v1_base_quick(tmp_path, capsys):
+    out = tmp_path / "exp"
+    printed = run_quick("1v1-base", out, capsys)
+    report = out / "1v1-base.md"
+    assert f"report: {report}" in printed
+    text = report.read_text()
+    for section in ("# 1v1 base scenario", "| command | `tracelab experiment 1v1-base --quick", "| commit |",
+                    "| machine | ", "cores", "| wall time |", "| opponent |", "training p = 0.7",
+                    "evaluation p = 0.3 and 0.7", "## Result", "## Final evaluations, per seed", "## Plots"):
+        assert section in text, section
+    assert re.search(r"\| commit \| `[0-9a-f]{40}", text)
+    assert "the method: 97.6% after 760K steps" in text
+    # one row per opponent setting, counts that add up to the games
+    rows = [r for r in text.splitlines() if r.startswith(("| 1v1 base | 0 | 0.3 |", "| 1v1 base | 0 | 0.7 |"))]
+    assert len(rows) == 2
+    for r in rows:
+        cells = [c.strip() for c in r.strip("|").split("|")]
+        games, wins, losses, draws, truncated = map(int, cells[3:8])
+        assert games == 40 and wins + losses + draws + truncated == games
+    for png in ("win_rate.png", "mean_return.png", "final_win_rate.png"):
+        check_png(out / "1v1-base" / png)
+        assert f"(1v1-base/{png})" in text
+    # the run holds the final evaluations against both settings, and they match the report's JSON
+    m = final_metrics(out / "1v1-base-seed0")
+    summary = json.loads((out / "1v1-base.json").read_text())
+    final = summary["arms"][0]["seeds"][0]["final"]
+    for p in ("0.3", "0.7"):
+        assert m[f"eval/games@p{p}"] == 40
+        assert m[f"eval/method_win_rate@p{p}"] == pytest.approx(final[f"@p{p}"]["method_win_rate"])
+    # the report can be written again from the runs alone
+    again = tmp_path / "again"
+    assert main(["experiment", "1v1-base", "--report-only", "--out", str(out), "--report-dir", str(again)]) == 0
+    assert (again / "1v1-base.md").read_text().split("## Result")[1] == text.split("## Result")[1]
+    # an existing run is not overwritten
+    assert main(["experiment", "1v1-base", "--quick", "--out", str(out)]) == 1
+    assert "already exists" in capsys.readouterr().err
+
+
+def test_portability_quick(tmp_path, capsys):
+    out = tmp_path / "exp"
+    run_quick("portability", out, capsys)
+    text = (out / "portability.md").read_text()
+    assert "## Portability: the same policy in both simulators" in text
+    summary = json.loads((out / "portability.json").read_text())
+    extra = summary["arms"][0]["seeds"][0]["extra"]
+    for key in ("@p0.3", "@p0.7"):
+        d = extra[key]
+        # the simulators agree step by step: the same seeds give the same games, game by game
+        assert d["identical_games"] == d["games"] == 30
+        assert d["reference_same_seeds"]["method_wins"] == d["rules"]["method_wins"]
+        assert 0.0 <= d["p_value"] <= 1.0
+        assert f"| 0 | {key[2:]} |" in text
+    for png in ("win_rate.png", "mean_return.png", "final_win_rate.png", "portability.png"):
+        check_png(out / "portability" / png)
+
+
+def test_statistics():
+    lo, hi = wilson(488, 500)
+    assert lo < 0.976 < hi and 0.95 < lo and hi < 0.99
+    assert wilson(0, 40)[0] == 0.0
+    z, p = two_proportion_test(488, 500, 440, 500)
+    assert z > 0 and p < 1e-6
+    assert two_proportion_test(250, 500, 250, 500)[1] == pytest.approx(1.0)
+    s = spread([0.9, 0.95, 1.0])
+    assert s["min"] == 0.9 and s["max"] == 1.0 and s["ci_low"] < 0.95 < s["ci_high"]
+
+
+def test_bad_arguments(capsys):
+    with pytest.raises(SystemExit) as exit_:  # a usage error: argparse's message, exit 2
+        main(["experiment", "1v1-base", "--seeds", "0"])
+    assert exit_.value.code == 2
+    assert "argument --seeds: must be at least 1, got 0" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["experiment", "no-such"])

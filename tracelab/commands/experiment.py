@@ -1,0 +1,78 @@
+"""`tracelab experiment NAME`: one of the method's experiments (docs/experiments/): train every setting
+once per seed, evaluate against both opponent settings, write the figures into the runs and a markdown
+report with PNG plots."""
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from pathlib import Path
+
+from tracelab.commands._args import positive_int
+from tracelab.errors import UserError, store_errors
+
+NAMES = ("1v1-base", "5v5-base", "portability", "markov-vs-nonmarkov", "reward-shaping")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("experiment", help="run one of the method's experiments: train (one run per seed), "
+                                          "evaluate, write a report with plots under docs/experiments/")
+    p.add_argument("name", choices=NAMES, help="the experiment")
+    p.add_argument("--seeds", type=positive_int, default=None, help="seeds per setting (default: the experiment's, >= 3)")
+    p.add_argument("--steps", type=positive_int, default=None, help="training steps per run (default: the experiment's)")
+    p.add_argument("--eval-games", type=positive_int, default=None,
+                   help="games per evaluation and per final evaluation (default 500)")
+    p.add_argument("--quick", action="store_true",
+                   help="a smoke run: few steps, one seed, a small evaluation, small plots (under 2 minutes)")
+    p.add_argument("--jobs", type=positive_int, default=1,
+                   help="trainings run at a time, each in its own process (default 1)")
+    p.add_argument("--out", default=None, help="directory of the runs (default runs/experiments/NAME)")
+    p.add_argument("--report-dir", default=None,
+                   help="where NAME.md and NAME/*.png go (default docs/experiments; with --quick: --out)")
+    p.add_argument("--report-only", action="store_true",
+                   help="write the report and plots again from the finished experiment in --out (no training)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from tracelab.train.experiments.definitions import EXPERIMENTS
+    from tracelab.train.experiments.run import scaled
+
+    exp = EXPERIMENTS[args.name]
+    budget = scaled(exp.quick if args.quick else exp.full, args.seeds, args.steps, args.eval_games)
+    out = Path(args.out or f"runs/experiments/{args.name}")
+    report_dir = Path(args.report_dir or (out if args.quick else "docs/experiments"))
+    try:
+        import matplotlib  # noqa: F401  (fail before training, not after)
+    except ImportError:
+        raise UserError("the experiment plots need matplotlib: pip install 'tracelab[experiments]'") from None
+    if args.report_only:
+        return _report_again(exp, out, report_dir)
+    taken = [out / f"{a.slug}-seed{s}{tail}" for a in exp.arms for s in range(budget.seeds)
+             for tail in ("", "-traces") if (out / f"{a.slug}-seed{s}{tail}").exists()]
+    if taken:
+        raise UserError(f"{taken[0]} already exists: give another --out or remove it")
+    from tracelab.train.experiments.report import write_report
+    from tracelab.train.experiments.run import run_experiment
+
+    command = " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]])
+    if not command.startswith("tracelab experiment"):
+        command = f"tracelab experiment {args.name}" + (" --quick" if args.quick else "")
+    say = lambda s: print(s, file=sys.stderr, flush=True)  # noqa: E731
+    try:
+        result = run_experiment(exp, budget, out, command, args.quick, say, jobs=args.jobs)
+    except KeyboardInterrupt:  # main() prints this and exits 130
+        raise KeyboardInterrupt(f"no report written (the runs so far are in {out})") from None
+    path = write_report(result, report_dir)
+    print(f"report: {path}  (plots in {report_dir / exp.name}/, runs in {out}/, wall time "
+          f"{result.wall_s / 60:.1f} min)")
+    return 0
+
+
+def _report_again(exp, out: Path, report_dir: Path) -> int:
+    from tracelab.train.experiments.report import write_report
+    from tracelab.train.experiments.run import load_result
+    with store_errors():  # no finished experiment in --out
+        result = load_result(exp, out)
+    print(f"report: {write_report(result, report_dir)}")
+    return 0

@@ -1,0 +1,95 @@
+"""The method's experiments (docs/experiments/): what each trains, the published figure it compares
+with, and its full and `--quick` budgets."""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+from tracelab.game.scenario import Rewards, Scenario, builtin_scenario
+
+
+@dataclass(frozen=True)
+class Arm:
+    """One training setting of an experiment (trained once per seed)."""
+    label: str
+    scenario: str
+    agents: int | None = None
+    non_markov: bool = False
+    rewards: dict[str, float] = field(default_factory=dict)  # overrides of the scenario's [rewards]
+    published: float | None = None                           # the method's win rate for this setting
+    published_note: str = ""
+
+    def build_scenario(self) -> Scenario:
+        sc = builtin_scenario(self.scenario)
+        if self.agents is not None and self.agents != sc.agents_per_team:
+            sc = dataclasses.replace(sc, agents_per_team=self.agents, red_starts=None, blue_starts=None)
+        if self.rewards:
+            sc = dataclasses.replace(sc, rewards=dataclasses.replace(sc.rewards, **self.rewards))
+        return sc
+
+    @property
+    def slug(self) -> str:
+        words = "".join(c if c.isalnum() else " " for c in self.label.lower()).split()
+        return "-".join(words)
+
+
+@dataclass(frozen=True)
+class Budget:
+    seeds: int
+    steps: int
+    eval_games: int     # games per evaluation during training and per final evaluation
+    evals: int          # evaluations over training (a learning curve's points)
+
+
+@dataclass(frozen=True)
+class Experiment:
+    name: str
+    title: str
+    arms: tuple[Arm, ...]
+    full: Budget
+    quick: Budget
+    goal: str
+    train: dict[str, Any] = field(default_factory=dict)  # TrainConfig overrides shared by the arms
+
+
+SHOT_BEFORE = {"got_shot": -400.0}                          # the setting whose traces showed hiding
+SHOT_AFTER = {"got_shot": -200.0, "invalid": -10.0}         # the method's fix
+assert Rewards().got_shot == -200.0 and Rewards().invalid == -10.0  # the defaults are the method's fix
+
+EXPERIMENTS: dict[str, Experiment] = {e.name: e for e in (
+    Experiment(
+        "1v1-base", "1v1 base scenario: win rate over training",
+        (Arm("1v1 base", "base", published=0.976, published_note="97.6% after 760K steps (A100)"),),
+        full=Budget(seeds=3, steps=150_000, eval_games=500, evals=10),
+        quick=Budget(seeds=1, steps=3_000, eval_games=40, evals=2),
+        goal="method's win rate >= 97.6% against p = 0.3 with fewer than 760K steps"),
+    Experiment(
+        "5v5-base", "5v5 base scenario: win rate over training",
+        (Arm("5v5 base", "base", agents=5, published=0.794, published_note="79.4% after 1.536M steps"),),
+        full=Budget(seeds=3, steps=300_000, eval_games=500, evals=10),
+        quick=Budget(seeds=1, steps=2_000, eval_games=20, evals=2),
+        goal="method's win rate >= 79.4% against p = 0.3"),
+    Experiment(
+        "portability", "Portability: the same policies in the rule-driven and the hand-written simulator",
+        (Arm("1v1 base", "base", published=0.976, published_note="97.6% proxy, 100% other simulators"),),
+        full=Budget(seeds=3, steps=150_000, eval_games=500, evals=5),
+        quick=Budget(seeds=1, steps=1_500, eval_games=30, evals=1),
+        goal="win rates within 3 points and rewards within 10% between the simulators; "
+             "the gap no larger than sampling noise"),
+    Experiment(
+        "markov-vs-nonmarkov", "Markov vs non-Markov policies in the nonmarkov scenario",
+        (Arm("Markov", "nonmarkov", published=0.59, published_note="best Markov 59%, 15.51 actions per win"),
+         Arm("non-Markov", "nonmarkov", non_markov=True, published=0.85,
+             published_note="best non-Markov 85%, 18.01 actions per win")),
+        full=Budget(seeds=3, steps=400_000, eval_games=500, evals=10),
+        quick=Budget(seeds=1, steps=1_500, eval_games=20, evals=1),
+        goal="non-Markov above Markov by a margin outside the seed spread"),
+    Experiment(
+        "reward-shaping", "Reward shaping from traces: penalty for being shot 400, then 200",
+        (Arm("shot -400", "advanced", rewards=SHOT_BEFORE),
+         Arm("shot -200, no ammo -10", "advanced", rewards=SHOT_AFTER)),
+        full=Budget(seeds=3, steps=200_000, eval_games=500, evals=5),
+        quick=Budget(seeds=1, steps=1_000, eval_games=16, evals=1),
+        goal="the traces' figures move as the method describes: less hiding, shooting kept"),
+)}

@@ -1,0 +1,224 @@
+"""Running one experiment: train every arm once per seed (tracelab/train/experiments/runner.py), the
+experiment's own measurements (portability, reward shaping), then the report and its plots."""
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from tracelab.game.scenario import ACTION_NAMES
+from tracelab.train.config import TrainConfig
+from tracelab.train.evaluate import EvalResult, evaluate
+from tracelab.train.experiments.definitions import Arm, Budget, Experiment
+from tracelab.train.experiments.runner import SeedRun, p_suffix, run_query, run_sql, traced_games, train_seed
+from tracelab.train.experiments.stats import bootstrap_diff_ci, two_proportion_test
+
+TRAIN_P, EVAL_PS = 0.7, (0.3, 0.7)  # the method's code: trained against p = 0.7, evaluated against 0.3
+SAVED_QUERIES = ("hid_behind_mountain", "learner_events", "actions_per_win", "steps_before_loss")
+
+Say = Callable[[str], None]
+
+
+@dataclass
+class ArmResult:
+    arm: Arm
+    seeds: list[SeedRun] = field(default_factory=list)
+    extra: dict[int, dict[str, Any]] = field(default_factory=dict)  # seed -> experiment-specific figures
+
+
+@dataclass
+class ExperimentResult:
+    experiment: Experiment
+    budget: Budget
+    quick: bool
+    out_dir: Path
+    arms: list[ArmResult]
+    wall_s: float = 0.0
+    command: str = ""
+    commit: str = ""   # the code that trained (git HEAD when the experiment started)
+    machine: str = ""  # cores, CPU, the load when it ended
+
+
+def train_config(exp: Experiment, arm: Arm, budget: Budget, seed: int) -> TrainConfig:
+    evals = max(1, budget.evals)
+    return TrainConfig(scenario=arm.scenario, agents=arm.agents, non_markov=arm.non_markov, steps=budget.steps,
+                       seed=seed, opponent_p=TRAIN_P, eval_p=EVAL_PS[0], eval_games=budget.eval_games,
+                       eval_every=budget.steps // evals if evals > 1 else 0,
+                       trace_eval_games=min(5, budget.eval_games), eval_envs=min(50, budget.eval_games),
+                       checkpoint_every=0, log_every=min(1_000, max(100, budget.steps // 20)),
+                       warmup=min(1_000, budget.steps // 4), **exp.train)
+
+
+def run_experiment(exp: Experiment, budget: Budget, out_dir: Path, command: str, quick: bool,
+                   say: Say = print, jobs: int = 1) -> ExperimentResult:
+    """Train every arm once per seed (`jobs` trainings at a time, each in its own process), then the
+    experiment's own measurements on the saved policies."""
+    t0 = time.perf_counter()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    from tracelab.train.experiments.report import commit
+    result = ExperimentResult(exp, budget, quick, out_dir, [ArmResult(a) for a in exp.arms], command=command,
+                              commit=commit())
+    tasks = [(ar, seed) for ar in result.arms for seed in range(budget.seeds)]
+
+    def task_args(ar: ArmResult, seed: int) -> tuple:
+        return (train_config(exp, ar.arm, budget, seed), ar.arm.build_scenario(),
+                out_dir / f"{ar.arm.slug}-seed{seed}", command, EVAL_PS, budget.eval_games)
+
+    for ar, seed in tasks:
+        say(f"[{exp.name}] {ar.arm.label}, seed {seed}: training {budget.steps:,} steps into "
+            f"{out_dir / f'{ar.arm.slug}-seed{seed}'}")
+    if jobs > 1 and len(tasks) > 1:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+        with ProcessPoolExecutor(min(jobs, len(tasks)), mp_context=multiprocessing.get_context("spawn")) as pool:
+            done = [pool.submit(train_seed, *task_args(ar, seed)) for ar, seed in tasks]
+            runs = [f.result() for f in done]
+    else:
+        runs = [train_seed(*task_args(ar, seed)) for ar, seed in tasks]
+    for (ar, seed), sr in zip(tasks, runs):
+        ar.seeds.append(sr)
+        say(f"[{exp.name}] {ar.arm.label}, seed {seed}: {sr.status} after {sr.wall_s:.0f} s; "
+            + ", ".join(f"method's win rate vs p={p:g}: {100 * r.method_win_rate:.1f}%" for p, r in sr.final.items()))
+        scenario = ar.arm.build_scenario()
+        if exp.name == "portability":
+            ar.extra[seed] = portability(sr, scenario, budget.eval_games, say)
+        elif exp.name == "reward-shaping":
+            ar.extra[seed] = shaping_traces(sr, scenario, out_dir, 6 if quick else 100, command, say)
+    result.wall_s = time.perf_counter() - t0
+    from tracelab.train.experiments.report import machine
+    result.machine = machine()
+    (out_dir / f"{exp.name}.json").write_text(json.dumps(summary_json(result), indent=1))
+    return result
+
+
+# ---- portability: the same policy in both simulators ----
+def portability(sr: SeedRun, scenario: Any, games: int, say: Say) -> dict[str, Any]:
+    """Per opponent p: the policy's games in the reference simulator with the rules run's seeds (game by
+    game identical if the simulators agree) and with other seeds (an independent sample: the gap and a
+    test of it)."""
+    from tracelab.train.policy import load_policy
+    from tracelab.train.experiments.runner import final_eval_seed
+
+    policy = load_policy(sr.policy_dir, scenario)
+    out: dict[str, Any] = {}
+    for p in EVAL_PS:
+        rules = sr.final[p]
+        same = evaluate(policy, scenario, games=games, backend="reference", seed=final_eval_seed(sr.seed, p),
+                        opponent_p=p, stack_previous=policy.stack_previous)
+        other = evaluate(policy, scenario, games=games, backend="reference",
+                         seed=final_eval_seed(sr.seed, p) + 1, opponent_p=p, stack_previous=policy.stack_previous)
+        identical = sum(a == b for a, b in zip(rules.records, same.records))
+        z, pval = two_proportion_test(rules.method_wins, rules.games, other.method_wins, other.games)
+        lo, hi = bootstrap_diff_ci([g.reward for g in rules.records], [g.reward for g in other.records])
+        rel = (abs(rules.mean_return - other.mean_return) / abs(other.mean_return)
+               if other.mean_return else float("nan"))
+        out[p_suffix(p)] = {
+            "rules": rules.to_dict(), "reference_same_seeds": same.to_dict(), "reference_other_seeds": other.to_dict(),
+            "identical_games": identical, "games": games,
+            "win_gap_points": 100 * (rules.method_win_rate - other.method_win_rate), "z": z, "p_value": pval,
+            "return_gap": rules.mean_return - other.mean_return, "return_gap_ci": [lo, hi],
+            "return_gap_relative": rel}
+        say(f"  p={p:g}: {identical}/{games} games identical with the same seeds; other seeds: "
+            f"{100 * rules.method_win_rate:.1f}% vs {100 * other.method_win_rate:.1f}% (p-value {pval:.2f})")
+    return out
+
+
+# ---- reward shaping: the saved queries on traced evaluation games ----
+def shaping_traces(sr: SeedRun, scenario: Any, out_dir: Path, games: int, command: str,
+                   say: Say) -> dict[str, Any]:
+    """Trace `games` evaluation games of the final policy (against p = 0.3) into their own run and read
+    the saved queries' figures off it."""
+    from tracelab.train.policy import load_policy
+    from tracelab.train.experiments.runner import final_eval_seed
+
+    policy = load_policy(sr.policy_dir, scenario)
+    trace_dir = out_dir / f"{sr.run_dir.name}-traces"
+    traced_games(policy, scenario, trace_dir, games=games, backend="rules", seed=final_eval_seed(sr.seed, 0.3) + 2,
+                 opponent_p=EVAL_PS[0], command=f"tracelab eval (from: {command})",
+                 about={"policy": str(sr.policy_dir)})
+    figures = query_figures(trace_dir)
+    figures["trace_run"] = str(trace_dir)
+    say(f"  traced {games} games into {trace_dir}: " + ", ".join(
+        f"{k} {v:.2f}" for k, v in figures.items() if isinstance(v, float)))
+    return figures
+
+
+def query_figures(run: Path) -> dict[str, Any]:
+    """Per-game figures of the four saved queries on a run of traced evaluation games."""
+    hid = run_query(run, "hid_behind_mountain")
+    ev = run_query(run, "learner_events")
+    apw = run_query(run, "actions_per_win", learner="red-agent-%")
+    before_loss = run_query(run, "steps_before_loss", learner="red-agent-%")
+    games = max(1, len(ev))
+    shoot_ids = ", ".join(str(i) for i, name in enumerate(ACTION_NAMES) if name.startswith("shoot"))
+    shots = run_sql(run, f"SELECT count(*) FILTER (action IN ({shoot_ids})) AS shots, count(*) AS actions "
+                         "FROM steps WHERE agent LIKE 'red-agent-%'")[0]
+    last_actions: dict[str, int] = {}
+    for r in before_loss:  # steps.action is the spec's action id
+        name = ACTION_NAMES[r["action"]] if 0 <= r["action"] < len(ACTION_NAMES) else str(r["action"])
+        last_actions[name] = last_actions.get(name, 0) + 1
+    return {
+        "games": len(ev),
+        "hidden_steps_per_game": float(np.mean([r["hidden_steps"] for r in hid])) if hid else 0.0,
+        "games_with_hiding": float(sum(r["hidden_steps"] > 0 for r in hid) / games),
+        "shot_per_game": float(sum(r["shot"] for r in ev) / games),
+        "unsafe_per_game": float(sum(r["unsafe"] for r in ev) / games),
+        "invalid_per_game": float(sum(r["invalid"] for r in ev) / games),
+        "shoot_share": float(shots["shots"] / shots["actions"]) if shots["actions"] else 0.0,
+        "wins": int(apw[0]["wins"]) if apw else 0,
+        "actions_per_win": float(apw[0]["actions_per_win"]) if apw and apw[0]["wins"] else float("nan"),
+        "losses": len({r["episode"] for r in before_loss}),
+        "actions_before_loss": dict(sorted(last_actions.items(), key=lambda kv: -kv[1])),
+    }
+
+
+def summary_json(result: ExperimentResult) -> dict[str, Any]:
+    return {"experiment": result.experiment.name, "command": result.command, "commit": result.commit,
+            "machine": result.machine,
+            "quick": result.quick,
+            "budget": vars(result.budget), "wall_s": result.wall_s,
+            "arms": [{"label": ar.arm.label, "published": ar.arm.published,
+                      "seeds": [{"seed": s.seed, "run": str(s.run_dir), "steps": s.steps, "status": s.status,
+                                 "wall_s": s.wall_s,
+                                 "final": {p_suffix(p): r.to_dict() for p, r in s.final.items()},
+                                 "extra": ar.extra.get(s.seed)} for s in ar.seeds]}
+                     for ar in result.arms]}
+
+
+def load_result(exp: Experiment, out_dir: Path) -> ExperimentResult:
+    """An experiment's result as run_experiment left it in `out_dir` (its NAME.json), to write the report
+    again without training."""
+    path = out_dir / f"{exp.name}.json"
+    try:
+        d = json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        raise ValueError(f"{path}: no result of a finished experiment here ({e})") from None
+    fields_ = set(EvalResult.__dataclass_fields__) - {"records"}
+    result = ExperimentResult(exp, Budget(**d["budget"]), d["quick"], out_dir, [ArmResult(a) for a in exp.arms],
+                              wall_s=d["wall_s"], command=d.get("command", ""), commit=d.get("commit", ""),
+                              machine=d.get("machine", ""))
+    for ar, saved in zip(result.arms, d["arms"]):
+        for s in saved["seeds"]:
+            final = {float(k[2:]): EvalResult(**{f: v for f, v in r.items() if f in fields_})
+                     for k, r in s["final"].items()}
+            run_dir = Path(s["run"])
+            ar.seeds.append(SeedRun(s["seed"], run_dir, s["steps"], s["status"], final, run_dir / "policy",
+                                    s.get("wall_s", 0.0)))
+            if s.get("extra") is not None:
+                ar.extra[s["seed"]] = s["extra"]
+    if not result.command:  # written before the command was kept: the runs' meta holds it
+        meta = json.loads((result.arms[0].seeds[0].run_dir / "meta.json").read_text())
+        result.command = meta["command"].removeprefix("tracelab train (from: ").removesuffix(")")
+    return result
+
+
+def scaled(budget: Budget, seeds: int | None, steps: int | None, eval_games: int | None) -> Budget:
+    return replace(budget, **{k: v for k, v in (("seeds", seeds), ("steps", steps), ("eval_games", eval_games))
+                              if v is not None})
+
+
+__all__ = ["run_experiment", "scaled", "ExperimentResult", "EvalResult"]

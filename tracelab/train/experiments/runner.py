@@ -1,0 +1,142 @@
+"""Training and evaluating for the experiments, on the training API (Trainer, evaluate): one run per
+seed, with the final policy evaluated against each opponent setting and those figures written into the
+run's own `metrics` (suffix `@p0.3`, `@p0.7`, docs/training.md), so `tracelab sql` sees them."""
+from __future__ import annotations
+
+import shlex
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tracelab.game.scenario import Scenario
+from tracelab.train.config import TrainConfig
+from tracelab.train.evaluate import EvalResult, EvalTrace, evaluate
+from tracelab.train.policy import Policy
+
+FINAL_EVAL_ROUND = 1_000_000  # seeds of the final evaluations: apart from the training's rounds
+
+
+@dataclass
+class SeedRun:
+    """One trained seed: its run, its final evaluations per opponent p, its policy."""
+    seed: int
+    run_dir: Path
+    steps: int
+    status: str
+    final: dict[float, EvalResult] = field(default_factory=dict)
+    policy_dir: Path | None = None
+    wall_s: float = 0.0
+
+
+def p_suffix(p: float) -> str:
+    return f"@p{p:g}"
+
+
+def final_eval_seed(seed: int, p: float) -> int:
+    return int(np.random.SeedSequence([seed, 3, FINAL_EVAL_ROUND, int(round(p * 1000))]).generate_state(1)[0])
+
+
+def train_seed(cfg: TrainConfig, scenario: Scenario, run_dir: Path, command: str,
+               eval_ps: tuple[float, ...], eval_games: int) -> SeedRun:
+    """Train `cfg` into a new run at `run_dir`, then evaluate the final policy `eval_games` games
+    against each opponent p in `eval_ps`, writing `eval/...@pP` metrics at the last step."""
+    import torch
+
+    from tracelab.game.facts import GAME_RULES
+    from tracelab.store import TraceWriter
+    from tracelab.train.loop import Trainer
+
+    meta = {"command": f"tracelab train (from: {command})", "scenario": scenario.name, "seed": cfg.seed,
+            "rule_files": [str(GAME_RULES)],
+            "config": {**cfg.to_dict(), "scenario_toml": scenario.to_toml(), "resumed_from": None}}
+    writer = TraceWriter.open(run_dir, meta)
+    torch.set_num_threads(cfg.threads)
+    trainer, status = None, "failed"
+    t0 = time.perf_counter()
+    try:
+        trainer = Trainer(cfg, scenario, writer, run_dir)
+        status = trainer.train()
+        out = SeedRun(cfg.seed, run_dir, trainer.step, status, policy_dir=run_dir / "policy")
+        for p in eval_ps:
+            result = evaluate(trainer.policy, scenario, games=eval_games, backend=cfg.backend,
+                              seed=final_eval_seed(cfg.seed, p), opponent_p=p, stack_previous=trainer.stack,
+                              envs=cfg.eval_envs)
+            writer.write_metrics(trainer.step, result.metrics(p_suffix(p)))
+            out.final[p] = result
+        out.wall_s = time.perf_counter() - t0
+        return out
+    finally:
+        if trainer is not None:
+            trainer.close()
+        writer.close(status=status)
+
+
+def traced_games(policy: Policy, scenario: Scenario, run_dir: Path, *, games: int, backend: str, seed: int,
+                 opponent_p: float, command: str, about: dict[str, Any]) -> EvalResult:
+    """`games` evaluation games of `policy`, every one traced in full into a new run (as `tracelab eval
+    --run` does): the saved queries then read only evaluation games."""
+    from tracelab.game.facts import GAME_RULES
+    from tracelab.store import TraceWriter
+
+    meta = {"command": command, "scenario": scenario.name, "seed": seed, "rule_files": [str(GAME_RULES)],
+            "config": {**about, "games": games, "backend": backend, "opponent_p": opponent_p,
+                       "scenario_toml": scenario.to_toml()}}
+    writer = TraceWriter.open(run_dir, meta)
+    ids = iter(range(1 << 62))
+    status = "failed"
+    try:
+        trace = EvalTrace(writer, scenario, backend, policy.stack_previous, games, opponent_p, lambda: next(ids))
+        try:
+            result = evaluate(policy, scenario, games=games, backend=backend, seed=seed, opponent_p=opponent_p,
+                              stack_previous=policy.stack_previous, trace=trace,
+                              trace_info={"kind": "eval", "opponent_p": opponent_p})
+        finally:
+            trace.close()
+        writer.write_metrics(0, result.metrics(p_suffix(opponent_p)))
+        status = "finished"
+    finally:
+        writer.close(status=status)
+    return result
+
+
+def run_query(run_dir: Path, name: str, **params: str) -> list[dict[str, Any]]:
+    """A saved query (tracelab/queries/NAME.sql) on a run, through the sandboxed read path."""
+    from tracelab.store.queries import get_query
+    from tracelab.store.reader import fetch_arrow, open_run, query_readonly, retrying
+
+    saved = get_query(name)
+    con = open_run(run_dir)
+    try:
+        table = retrying(lambda: fetch_arrow(query_readonly(con, saved.sql, saved.bind(dict(params)))))
+    finally:
+        con.close()
+    return table.to_pylist()
+
+
+def run_sql(run_dir: Path, sql: str) -> list[dict[str, Any]]:
+    """A read-only query on a run, through the sandboxed read path."""
+    from tracelab.store.reader import fetch_arrow, open_run, query_readonly, retrying
+
+    con = open_run(run_dir)
+    try:
+        return retrying(lambda: fetch_arrow(query_readonly(con, sql))).to_pylist()
+    finally:
+        con.close()
+
+
+def curves(run_dir: Path, names: tuple[str, ...]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """metric name -> (steps, values) of a run, in step order."""
+    listed = ", ".join("'" + n.replace("'", "''") + "'" for n in names)
+    rows = run_sql(run_dir, f"SELECT name, step, value FROM metrics WHERE name IN ({listed}) ORDER BY step")
+    out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    for n in names:
+        pts = [(r["step"], r["value"]) for r in rows if r["name"] == n]
+        out[n] = (np.array([s for s, _ in pts], float), np.array([v for _, v in pts], float))
+    return out
+
+
+def quoted(argv: list[str]) -> str:
+    return " ".join(shlex.quote(a) for a in argv)
