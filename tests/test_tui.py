@@ -93,7 +93,7 @@ def run_app(paths: list[Path], body: Callable[[Any, Any], Any], size: tuple[int,
 
 def test_catalog_lists_the_sample_runs_with_counts(capsys: pytest.CaptureFixture[str]) -> None:
     runs = {r.name: r for r in list_runs([ROOT / "sample_runs"])}
-    assert set(runs) == {"base", "advanced", "nonmarkov"}
+    assert set(runs) == {"base", "advanced", "nonmarkov", "base-train"}
     adv = runs["advanced"]
     con = open_run(ADVANCED)
     assert adv.rows == con.execute("SELECT count(*) FROM changes").fetchall()[0][0] > 0
@@ -161,7 +161,7 @@ def test_open_a_run_go_to_an_episode_filter_by_rule_and_explain_a_death() -> Non
         await wait_for(pilot, lambda: loaded(episodes))
         text = await shown(app, pilot)
         assert "1 Episodes" in text and "loss" in text and "win" in text
-        assert episodes.count == 4 and episodes.cursor_row["episode"] == 0
+        assert episodes.count == 3 and episodes.cursor_row["episode"] == 0
         await pilot.press("enter")                                  # episode 0's trace
         trace = app.screen.query_one("#tr-table", LazyTable)
         await wait_for(pilot, lambda: trace.count > 0 and loaded(trace))
@@ -311,14 +311,14 @@ def test_rules_view_counts_firings_and_lists_rules_that_never_fired() -> None:
 def test_runs_screen_help_and_palette_at_80x24() -> None:
     async def body(app: Any, pilot: Any) -> None:
         table = app.screen.query_one(LazyTable)
-        await wait_for(pilot, lambda: loaded(table) and table.count == 3)
+        await wait_for(pilot, lambda: loaded(table) and table.count == 4)  # base, advanced, nonmarkov, base-train
         text = await shown(app, pilot)
         assert "advanced" in text and "finished" in text and "Enter" in text and "palette" in text
         await pilot.press("question_mark")
         await pilot.pause()
         assert "command palette" in await shown(app, pilot)
         await pilot.press("escape")
-        table.move_to([table.row(i)["name"] for i in range(3)].index("advanced"))
+        table.move_to([table.row(i)["name"] for i in range(table.count)].index("advanced"))
         await pilot.press("enter")
         await wait_for(pilot, lambda: type(app.screen).__name__ == "RunScreen")
         commands = [c.title for c in app.get_system_commands(app.screen)]
@@ -365,7 +365,7 @@ def test_escape_cancels_a_running_query() -> None:
         await pilot.press("ctrl+r")
         results = sql.query_one(LazyTable)
         await wait_for(pilot, lambda: loaded(results) and results.count == 1)
-        assert results.row(0)["n"] == 4
+        assert results.row(0)["n"] == 3
     run_app([ADVANCED], body)
 
 
@@ -400,9 +400,9 @@ def test_the_mouse_selects_rows_sorts_by_header_and_opens_on_double_click() -> N
         x = sum(c.width + 1 for c in table.columns[:3]) + 1            # the "length" header
         await pilot.click(table, offset=(x, 0))
         await wait_for(pilot, lambda: table.sort_key == "steps" and loaded(table))
-        assert [table.row(i)["steps"] for i in range(table.count)] == [0, 15, 18, 25]
-        await pilot.click(table, offset=(3, 2))
-        await pilot.click(table, offset=(3, 2), times=2)               # double click: the trace
+        assert [table.row(i)["steps"] for i in range(table.count)] == [15, 18, 25]
+        await pilot.click(table, offset=(3, 1))                      # the shortest game: episode 0
+        await pilot.click(table, offset=(3, 1), times=2)               # double click: the trace
         trace = app.screen.query_one("#tr-table", LazyTable)
         await wait_for(pilot, lambda: app.screen.query_one(TracePane).filter is not None and loaded(trace))
         assert app.screen.query_one(TracePane).filter.episode == 0
