@@ -12,6 +12,7 @@ def test_play_records_episodes_changes_steps_and_explains_a_position(tmp_path, c
                  "--run", str(run)]) == 0
     out = capsys.readouterr().out
     assert "played 3 episodes" in out and f"tracelab why {run}" in out
+    assert f"tracelab tui {run}" in out and f"tracelab replay {run} --episode 0" in out
     con = open_run(run)
     ended = con.execute("SELECT count(*) FROM episodes WHERE outcome IN ('win','loss','draw','truncated')"
                         ).fetchone()[0]

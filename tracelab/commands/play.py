@@ -230,4 +230,6 @@ def _what_to_open(run_dir: Path) -> None:
         print(f"  tracelab why {run} {shlex.quote(row[0])} --episode {ep} --at {row[1]}   # why is it true?")
     print(f"  tracelab sql {run} \"SELECT rule, count(*) AS n FROM firings GROUP BY rule ORDER BY n DESC\"")
     print(f"  tracelab sql {run} --query episode_summary")
+    print(f"  tracelab tui {run}                                           # browse it in the terminal")
+    print(f"  tracelab replay {run} --episode {ep} --save replay.rrd            # a rerun recording of a game")
     print(f"  tracelab seal {run}                                          # one .duckdb file")
