@@ -54,11 +54,11 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _evaluate(args: argparse.Namespace, policy, scenario, spec):
-    from tracelab.train.evaluate import EvalTrace, evaluate
-    stack = policy.stack_previous
+    from tracelab.train.evaluate import evaluate, evaluate_into
     if args.run is None:
         return evaluate(policy, scenario, games=args.games, backend=args.backend, seed=args.seed,
-                        opponent_p=args.opponent_p, stack_previous=stack, envs=args.envs)
+                        opponent_p=args.opponent_p, stack_previous=policy.stack_previous,
+                        envs=args.envs)
     from tracelab.game.facts import GAME_RULES
     from tracelab.store import TraceWriter
     meta = {"command": " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]),
@@ -68,23 +68,8 @@ def _evaluate(args: argparse.Namespace, policy, scenario, spec):
                        "policy_spec": spec}}
     with store_errors():  # the run directory exists, or another writer holds it
         writer = TraceWriter.open(Path(args.run), meta)
-    ids = iter(range(1 << 62))
-    status = "failed"
-    try:  # every game traced: the traced env has one world per game
-        trace = EvalTrace(writer, scenario, args.backend, stack, args.games, args.opponent_p, lambda: next(ids))
-        try:
-            result = evaluate(policy, scenario, games=args.games, backend=args.backend, seed=args.seed,
-                              opponent_p=args.opponent_p, stack_previous=stack, trace=trace,
-                              trace_info={"kind": "eval", "opponent_p": args.opponent_p})
-        finally:
-            trace.close()
-        status = "finished"
-    except KeyboardInterrupt:
-        status = "interrupted"
-        raise
-    finally:
-        writer.close(status=status)
-    return result
+    return evaluate_into(writer, policy, scenario, games=args.games, backend=args.backend, seed=args.seed,
+                         opponent_p=args.opponent_p)
 
 
 def _table(result, args: argparse.Namespace, scenario: str) -> None:

@@ -123,6 +123,8 @@ def play(scenario, args: argparse.Namespace, sink) -> dict:
 
     n_worlds = min(args.worlds, args.episodes)
     trained = getattr(args, "trained", None)  # a loaded policy (run() sets it); callers in code may omit it
+    if trained is not None:
+        from tracelab.train.policy import may_act
     opponent_p = getattr(args, "opponent_p", None)
     rng = np.random.default_rng(args.seed)
     index_of = {a: i for i, a in enumerate(scenario.action_ids)}
@@ -138,7 +140,6 @@ def play(scenario, args: argparse.Namespace, sink) -> dict:
         """Step every world once; returns (steps of asked-for episodes, how many of them ended)."""
         nonlocal next_episode
         if trained is not None:
-            from tracelab.train.policy import may_act
             masks = last["info"]["action_mask"].reshape(n_worlds, n, -1) if trained.mask else None
             red = trained.act(last["obs"], may_act(scenario, env.sim.state), masks)
         elif args.policy == "scripted":

@@ -125,12 +125,16 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
                   file=sys.stderr)
 
         signal.signal(signal.SIGINT, stop)
-        if sys.stderr.isatty():
-            from tracelab.train.progress import TrainProgress
-            with TrainProgress(cfg.steps, trainer.step) as bar:
-                trainer.progress = bar
-                status = trainer.train(stop_at)
-        else:
+        from tracelab.commands._progress import progress
+        with progress("train", total=cfg.steps) as bar:  # draws on a terminal only
+            bar.advance(trainer.step)
+
+            def show(fig: dict[str, Any]) -> None:
+                bar.advance(min(fig["step"], fig["steps"]) - bar.completed)
+                bar.set_fields(ε=fig["epsilon"], loss="-" if fig["loss"] is None else fig["loss"],
+                               win="-" if fig["win_rate"] is None else f"{100 * fig['win_rate']:.1f}%")
+
+            trainer.progress = show
             status = trainer.train(stop_at)
     except KeyboardInterrupt:
         status = "interrupted"

@@ -238,6 +238,32 @@ def evaluate(policy: Policy, scenario: Scenario, *, games: int, backend: str, se
     return EvalResult.of(records)
 
 
+def evaluate_into(writer: TraceWriter, policy: Policy, scenario: Scenario, *, games: int, backend: str,
+                  seed: int, opponent_p: float, metrics_suffix: str | None = None) -> EvalResult:
+    """`games` games of `policy`, every one traced in full into the run `writer` writes (one world per
+    game), which it closes: finished, interrupted (Ctrl-C) or failed. With `metrics_suffix` the figures
+    also go into the run's metrics (`eval/...<suffix>`, at step 0)."""
+    ids = iter(range(1 << 62))
+    status = "failed"
+    try:
+        trace = EvalTrace(writer, scenario, backend, policy.stack_previous, games, opponent_p, lambda: next(ids))
+        try:
+            result = evaluate(policy, scenario, games=games, backend=backend, seed=seed, opponent_p=opponent_p,
+                              stack_previous=policy.stack_previous, trace=trace,
+                              trace_info={"kind": "eval", "opponent_p": opponent_p})
+        finally:
+            trace.close()
+        if metrics_suffix is not None:
+            writer.write_metrics(0, result.metrics(metrics_suffix))
+        status = "finished"
+    except KeyboardInterrupt:
+        status = "interrupted"
+        raise
+    finally:
+        writer.close(status=status)
+    return result
+
+
 def comparison_rows(r: EvalResult) -> list[tuple[str, Any, Any]]:
     """(figure, tracelab's counting, the method's counting) for a side-by-side table."""
     def pct(x: float) -> str:

@@ -13,7 +13,7 @@ import numpy as np
 
 from tracelab.game.scenario import Scenario
 from tracelab.train.config import TrainConfig
-from tracelab.train.evaluate import EvalResult, EvalTrace, evaluate
+from tracelab.train.evaluate import EvalResult, evaluate, evaluate_into
 from tracelab.train.policy import Policy
 
 FINAL_EVAL_ROUND = 1_000_000  # seeds of the final evaluations: apart from the training's rounds
@@ -84,22 +84,8 @@ def traced_games(policy: Policy, scenario: Scenario, run_dir: Path, *, games: in
     meta = {"command": command, "scenario": scenario.name, "seed": seed, "rule_files": [str(GAME_RULES)],
             "config": {**about, "games": games, "backend": backend, "opponent_p": opponent_p,
                        "scenario_toml": scenario.to_toml()}}
-    writer = TraceWriter.open(run_dir, meta)
-    ids = iter(range(1 << 62))
-    status = "failed"
-    try:
-        trace = EvalTrace(writer, scenario, backend, policy.stack_previous, games, opponent_p, lambda: next(ids))
-        try:
-            result = evaluate(policy, scenario, games=games, backend=backend, seed=seed, opponent_p=opponent_p,
-                              stack_previous=policy.stack_previous, trace=trace,
-                              trace_info={"kind": "eval", "opponent_p": opponent_p})
-        finally:
-            trace.close()
-        writer.write_metrics(0, result.metrics(p_suffix(opponent_p)))
-        status = "finished"
-    finally:
-        writer.close(status=status)
-    return result
+    return evaluate_into(TraceWriter.open(run_dir, meta), policy, scenario, games=games, backend=backend,
+                         seed=seed, opponent_p=opponent_p, metrics_suffix=p_suffix(opponent_p))
 
 
 def run_query(run_dir: Path, name: str, **params: str) -> list[dict[str, Any]]:
