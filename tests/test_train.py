@@ -167,6 +167,25 @@ def test_the_learner_learns_to_walk_to_the_enemy_base():
     assert result.actions_per_win <= 8  # the shortest walk is 6 moves
 
 
+def test_reward_scale_scales_what_the_learner_sees_and_nothing_that_is_logged():
+    """--reward-scale multiplies the replay rewards only: the same seed plays the same games (warm-up, so
+    no update changes the actions) and logs the same returns."""
+    def buffered(scale):
+        cfg = TrainConfig(scenario="walk4", steps=400, seed=5, reward_scale=scale,
+                          **{**SMALL, "warmup": 1000, "eval_every": 0})
+        trainer = Trainer(cfg, WALK)
+        trainer.train()
+        st = trainer.learners["shared"].buffer.state()
+        returns = trainer.ep_return.copy()
+        trainer.close()
+        return st, returns
+    (one, ret_one), (small, ret_small) = buffered(1.0), buffered(0.01)
+    np.testing.assert_array_equal(one["action"], small["action"])
+    np.testing.assert_allclose(small["reward"], one["reward"] * 0.01, rtol=1e-6)
+    assert np.abs(one["reward"]).max() >= 1  # the walk's unsafe (-1) and win (10) rewards happened
+    np.testing.assert_array_equal(ret_one, ret_small)
+
+
 def test_saved_policy_round_trips_and_plain_torch_loads_it(tmp_path):
     cfg = TrainConfig(scenario="walk4", steps=200, seed=2, **{**SMALL, "eval_every": 0})
     trainer = Trainer(cfg, WALK)

@@ -176,7 +176,7 @@ class Trainer:
         self.history[rows, self.ep_len, 1] = info["opponent_actions"].reshape(w, n)
         self.ep_len += 1
         self.ep_return += reward
-        self.pending.earn(reward[:, None] if n == 1 else info["agent_reward"])
+        self.pending.earn((reward[:, None] if n == 1 else info["agent_reward"]) * cfg.reward_scale)
         done = terminated | truncated
         true_next = obs
         if done.any():
@@ -245,7 +245,7 @@ class Trainer:
                 m.update({f"loss/{k}": v for k, v in losses.items() if v is not None})
         qs = [q for q in (lr.q_max_mean() for lr in self.learners.values()) if q is not None]
         if qs:
-            m["q_max_mean"] = float(np.mean(qs))
+            m["q_max_mean"] = float(np.mean(qs)) / self.cfg.reward_scale  # in the game's reward units
         if self.returns_since_log:
             m["train_return"] = float(np.mean(self.returns_since_log))
             self.returns_since_log = []

@@ -14,7 +14,8 @@ import numpy as np
 
 from tracelab.train.evaluate import METHOD_CUT, EvalResult
 from tracelab.train.experiments import plots
-from tracelab.train.experiments.run import EVAL_PS, TRAIN_P, ExperimentResult
+from tracelab.train.config import TrainConfig
+from tracelab.train.experiments.run import EVAL_PS, TRAIN_P, ExperimentResult, train_config
 from tracelab.train.experiments.runner import curves, p_suffix
 from tracelab.train.experiments.stats import spread, wilson
 
@@ -45,6 +46,23 @@ def machine() -> str:
     except OSError:
         load = ""
     return f"{os.cpu_count()} cores, {model}, {platform.system()} {platform.release()}{load}"
+
+
+# the settings of the method's DQN (shared/paper-notes.md); a report names those an arm changes
+DQN_FIELDS = ("hidden", "lr", "gamma", "batch", "buffer", "target_every", "eps_start", "eps_end",
+              "eps_decay_start", "eps_decay_end", "updates_per_step", "reward_scale", "mask")
+
+
+def learner_text(result: ExperimentResult) -> str:
+    """Each arm's departures from the method's DQN settings."""
+    defaults = TrainConfig()
+    parts = []
+    for ar in result.arms:
+        cfg = train_config(result.experiment, ar.arm, result.budget, 0)
+        changed = [f"{name.replace('_', ' ')} {getattr(cfg, name):g}" if not isinstance(getattr(cfg, name), bool)
+                   else name for name in DQN_FIELDS if getattr(cfg, name) != getattr(defaults, name)]
+        parts.append(f"{ar.arm.label}: {', '.join(changed) if changed else 'as the method'}")
+    return "the method's DQN (docs/training.md), except: " + "; ".join(parts)
 
 
 def pct(x: float | None) -> str:
@@ -82,6 +100,7 @@ def write_report(result: ExperimentResult, report_dir: Path) -> Path:
           f"| wall time | {result.wall_s / 60:.1f} min ({result.wall_s:.0f} s); report written {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} |",
           f"| budget | {budget.seeds} seed{'s' if budget.seeds != 1 else ''} x {budget.steps:,} training steps per "
           f"setting; {budget.eval_games} games per evaluation, {budget.evals} evaluation(s) over training |",
+          f"| learner | {learner_text(result)} |",
           f"| opponent | scripted blue: with probability p a move towards red's base, else a random action "
           f"(advanced: shoots first until out of ammo); training p = {TRAIN_P}, evaluation p = "
           f"{' and '.join(f'{p:g}' for p in EVAL_PS)} (the method's code: trained 0.7, evaluated 0.3) |",

@@ -50,7 +50,7 @@ def train_config(exp: Experiment, arm: Arm, budget: Budget, seed: int) -> TrainC
                        eval_every=budget.steps // evals if evals > 1 else 0,
                        trace_eval_games=min(5, budget.eval_games), eval_envs=min(50, budget.eval_games),
                        checkpoint_every=0, log_every=min(1_000, max(100, budget.steps // 20)),
-                       warmup=min(1_000, budget.steps // 4), **exp.train)
+                       warmup=min(1_000, budget.steps // 4), **{**exp.train, **arm.train})
 
 
 def run_experiment(exp: Experiment, budget: Budget, out_dir: Path, command: str, quick: bool,
