@@ -102,6 +102,8 @@ def test_statistics():
     lo, hi = wilson(488, 500)
     assert lo < 0.976 < hi and 0.95 < lo and hi < 0.99
     assert wilson(0, 40)[0] == 0.0
+    for n in (40, 200, 500, 1000):  # the interval holds the proportion at its ends too (error bars >= 0)
+        assert wilson(n, n)[1] == 1.0 and wilson(0, n)[0] == 0.0
     z, p = two_proportion_test(488, 500, 440, 500)
     assert z > 0 and p < 1e-6
     assert two_proportion_test(250, 500, 250, 500)[1] == pytest.approx(1.0)

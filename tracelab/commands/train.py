@@ -108,6 +108,11 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
           f"{'non-Markov' if cfg.non_markov else 'Markov'}, {cfg.backend} backend, {cfg.envs} worlds) for "
           f"{cfg.steps:,} steps; torch on {torch.get_num_threads()} CPU thread"
           f"{'s' if torch.get_num_threads() != 1 else ''} (--threads); run: {run_dir}", file=sys.stderr)
+    largest = max(abs(v) for v in dataclasses.asdict(scenario.rewards).values()) * cfg.reward_scale
+    if largest > 10:  # far outside Smooth L1's quadratic zone: the learner crawls (docs/training.md)
+        print(f"note: the learner sees rewards up to {largest:g}, where Smooth L1 caps the gradient; "
+              f"--reward-scale {10 ** -(len(str(int(largest))) - 1):g} learns several times faster "
+              f"(docs/training.md, \"Reward scale\")", file=sys.stderr)
     trainer = None
     status = "failed"
     previous = signal.getsignal(signal.SIGINT)

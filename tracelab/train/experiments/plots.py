@@ -42,9 +42,12 @@ def learning_curves(path: Path, arms: Sequence[dict], *, metric: str, ylabel: st
             unit = "%" if percent else ""
             legend_bits.append(f"{arm['label']}: last point min {min(finals):.1f}{unit}, max {max(finals):.1f}{unit} "
                                f"over {len(finals)} seed{'s' if len(finals) != 1 else ''}")
-        if arm.get("published") is not None:
-            ax.axhline(arm["published"] * scale, color=colour, ls=(0, (6, 3)), lw=1.2, alpha=0.6,
-                       label=f"the method: {arm['published'] * scale:.1f}{'%' if percent else ''}")
+    published = [(a["published"], i) for i, a in enumerate(arms) if a.get("published") is not None]
+    for value in sorted({v for v, _ in published}):  # one line per figure: arms may share the method's
+        owners = [i for v, i in published if v == value]
+        colour = ARM_COLOURS[owners[0] % len(ARM_COLOURS)] if len(owners) == 1 else "k"
+        ax.axhline(value * scale, color=colour, ls=(0, (6, 3)), lw=1.2, alpha=0.6,
+                   label=f"the method: {value * scale:.1f}{'%' if percent else ''}")
     ax.set_xlim(0, max(last_step, 1.0) * 1.03)
     ax.set_xlabel("training steps")
     ax.set_ylabel(ylabel)
@@ -52,7 +55,7 @@ def learning_curves(path: Path, arms: Sequence[dict], *, metric: str, ylabel: st
         ax.set_ylim(-2, 102)
     ax.xaxis.set_major_formatter(_thousands())
     ax.grid(alpha=0.3)
-    _title(ax, [title, "; ".join(legend_bits)], small)
+    _title(ax, [title, *legend_bits], small)
     ax.legend(fontsize=6 if small else 8, loc="upper left", bbox_to_anchor=(1.01, 1.0), framealpha=0.85)
     fig.tight_layout()
     fig.savefig(path)
@@ -90,7 +93,7 @@ def paired_bars(path: Path, groups: Sequence[str], series: dict[str, Sequence[tu
 
 def _title(ax, lines: Sequence[str], small: bool) -> None:
     import textwrap
-    width = 80 if small else 110
+    width = 65 if small else 85  # characters that fit over the axes (the legend takes the right)
     ax.set_title("\n".join(textwrap.fill(t, width) for t in lines if t), fontsize=7 if small else 10)
 
 

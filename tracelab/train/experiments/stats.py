@@ -16,7 +16,8 @@ def wilson(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
     den = 1 + z * z / n
     mid = (p + z * z / (2 * n)) / den
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / den
-    return max(0.0, mid - half), min(1.0, mid + half)
+    # it holds p; rounding can put an end a hair inside p at 0 or n (a negative error bar in plots)
+    return max(0.0, min(p, mid - half)), min(1.0, max(p, mid + half))
 
 
 def two_proportion_test(k1: int, n1: int, k2: int, n2: int) -> tuple[float, float]:
