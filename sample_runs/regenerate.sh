@@ -10,11 +10,12 @@ tracelab play --scenario nonmarkov --episodes 2 --seed 3 --run nonmarkov
 for r in base advanced nonmarkov; do tracelab seal "$r"; done
 du -sh base advanced nonmarkov
 
-# a small trained run (1v1 base): its learning curve (metrics), training episodes and a few traced
-# evaluation games, for the TUI and the replay; the checkpoint (the replay buffer) is dropped, the policy kept
+# a trained run (1v1 base, it learns to win from ~140K steps on): its learning curve (metrics), training
+# episodes and a few traced evaluation games, for the TUI and the replay; the checkpoint (the replay
+# buffer) is dropped, the policy kept
 rm -rf base-train
-tracelab train --scenario base --steps 30000 --seed 0 --eval-every 5000 --eval-games 100 --trace-eval-games 3 \
-    --log-every 1000 --checkpoint-every 0 --run base-train
+tracelab train --scenario base --steps 200000 --reward-scale 0.01 --seed 0 --eval-every 20000 --eval-games 100 \
+    --trace-eval-games 3 --log-every 2000 --checkpoint-every 0 --run base-train
 rm -rf base-train/checkpoint
 tracelab seal base-train
 du -sh base-train

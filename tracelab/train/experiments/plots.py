@@ -75,13 +75,14 @@ def paired_bars(path: Path, groups: Sequence[str], series: dict[str, Sequence[tu
         err = np.array([[a - lo, hi - a] for a, lo, hi in vals]).T * 100
         bars = ax.bar(x + (i - (len(series) - 1) / 2) * width, v, width, yerr=err, capsize=3,
                       color=ARM_COLOURS[i % len(ARM_COLOURS)], alpha=0.85, label=name)
-        ax.bar_label(bars, fmt="%.1f", fontsize=6 if small else 8, padding=2)  # readable at 0% too
+        # readable at 0% too; upright when three or more bars stand side by side (they would overlap)
+        ax.bar_label(bars, fmt="%.1f", fontsize=6 if small else 8, padding=2, rotation=90 if len(series) > 2 else 0)
     if reference is not None:
         ax.axhline(reference * 100, color="k", ls=(0, (6, 3)), lw=1, alpha=0.6,
                    label=f"the method: {reference * 100:.1f}%")
     ax.set_xticks(x, groups, fontsize=8)
     ax.set_ylabel(ylabel)
-    ax.set_ylim(0, 105)
+    ax.set_ylim(0, 112 if len(series) > 2 else 105)  # room for the upright labels above 100%
     ax.grid(alpha=0.3, axis="y")
     _title(ax, [title], small)
     ax.legend(fontsize=6 if small else 8, loc="upper left", bbox_to_anchor=(1.01, 1.0), framealpha=0.85)
