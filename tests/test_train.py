@@ -186,6 +186,17 @@ def test_reward_scale_scales_what_the_learner_sees_and_nothing_that_is_logged():
     np.testing.assert_array_equal(ret_one, ret_small)
 
 
+def test_train_says_when_the_learner_sees_rewards_beyond_smooth_l1s_quadratic_zone(tmp_path, capsys):
+    big = replace(WALK, rewards=replace(WALK.rewards, win=250.0, loss=-250.0))
+    small_steps = {**SMALL, "eval_every": 0, "checkpoint_every": 0}
+    assert train_into(TrainConfig(scenario="walk4", steps=40, **small_steps), big, tmp_path / "a") == 0
+    assert "note: the learner sees rewards up to 250, where Smooth L1 caps the gradient; --reward-scale 0.01" \
+        in capsys.readouterr().err
+    cfg = TrainConfig(scenario="walk4", steps=40, reward_scale=0.01, **small_steps)
+    assert train_into(cfg, big, tmp_path / "b") == 0
+    assert "note:" not in capsys.readouterr().err
+
+
 def test_saved_policy_round_trips_and_plain_torch_loads_it(tmp_path):
     cfg = TrainConfig(scenario="walk4", steps=200, seed=2, **{**SMALL, "eval_every": 0})
     trainer = Trainer(cfg, WALK)
