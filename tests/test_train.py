@@ -12,6 +12,7 @@ import time
 from dataclasses import replace
 
 import numpy as np
+import pytest
 import torch
 
 from tracelab.cli import main
@@ -40,15 +41,23 @@ EVAL_METRICS = {f"eval/{k}" for k in ("games", "wins", "losses", "draws", "trunc
 TIMING = ("env_steps_per_s", "updates_per_s")
 
 
-def test_fused_update_matches_autograd_smooth_l1_and_adam():
+@pytest.mark.parametrize("masked", [False, True])
+def test_fused_update_matches_autograd_smooth_l1_and_adam(masked):
+    """The hand-written update is autograd + Adam on Smooth L1 to r + discount * max_a' Q_target(s', a');
+    masked (--mask): the max runs over the actions allowed in s' only."""
     torch.set_num_threads(1)
     shape = Shape(4, 16, 5)
-    learner = DQNLearner(shape, lr=1e-2, batch=32, buffer=100, generator=torch.Generator().manual_seed(0))
+    learner = DQNLearner(shape, lr=1e-2, batch=32, buffer=100, generator=torch.Generator().manual_seed(0),
+                         masked=masked)
     rng = np.random.default_rng(0)
     k = 100
+    allowed = rng.random((k, 5)) < 0.5
+    allowed[:, 4] = True  # do nothing is always allowed
     learner.buffer.add((rng.normal(size=(k, 4)) * 3).astype(np.float32), rng.integers(0, 5, k),
                        (rng.normal(size=k) * 5).astype(np.float32), (rng.normal(size=(k, 4)) * 3).astype(np.float32),
-                       rng.choice([0.0, 0.99], k).astype(np.float32))
+                       rng.choice([0.0, 0.99], k).astype(np.float32), allowed if masked else None)
+    if masked:
+        np.testing.assert_array_equal(learner.buffer.state()["next_allowed"], allowed)
     learner.params[1] += 0.1  # a target network that differs from the online one
     make = lambda: torch.nn.Sequential(torch.nn.Linear(4, 16), torch.nn.Tanh(), torch.nn.Linear(16, 5))  # noqa: E731
     net, target = make(), make()
@@ -62,8 +71,13 @@ def test_fused_update_matches_autograd_smooth_l1_and_adam():
         s, s2 = torch.from_numpy(b.b_obs[0, :, :-1].copy()), torch.from_numpy(b.b_obs[1, :, :-1].copy())
         q = net(s).gather(1, torch.from_numpy(b.sampled_actions()))
         with torch.no_grad():
+            q2 = target(s2)
+            if masked:  # the sampled rows' allowed actions, read back from the buffer's own record
+                ok = torch.from_numpy(b.b_next_penalty == 0.0)
+                assert not ok.all() and ok[:, 4].all()
+                q2 = q2.masked_fill(~ok, -torch.inf)
             y = torch.from_numpy(b.b_reward.copy()) + torch.from_numpy(b.b_discount.copy()) * \
-                target(s2).max(1, keepdim=True).values
+                q2.max(1, keepdim=True).values
         loss = torch.nn.functional.smooth_l1_loss(q, y)
         opt.zero_grad()
         loss.backward()
@@ -195,6 +209,21 @@ def test_train_says_when_the_learner_sees_rewards_beyond_smooth_l1s_quadratic_zo
     cfg = TrainConfig(scenario="walk4", steps=40, reward_scale=0.01, **small_steps)
     assert train_into(cfg, big, tmp_path / "b") == 0
     assert "note:" not in capsys.readouterr().err
+
+
+def test_masked_training_records_the_moves_the_shield_allows_in_the_next_state():
+    """--mask: each stored transition carries the actions allowed where it lands (up, down, left, right,
+    nothing on the 4x4 walk: a move off the map is forbidden), which bound the target's max."""
+    cfg = TrainConfig(scenario="walk4", steps=400, seed=4, mask=True, **{**SMALL, "eval_every": 0})
+    trainer = Trainer(cfg, WALK)
+    trainer.train()
+    st = trainer.learners["shared"].buffer.state()
+    trainer.close()
+    boot = st["discount"] > 0  # bootstrapped transitions: their next state is the one the mask describes
+    x, y = st["next_obs"][boot, 0], st["next_obs"][boot, 1]
+    expect = np.stack([y < 3, y > 0, x > 0, x < 3, np.ones_like(x, bool)], axis=1)
+    assert boot.sum() > 100 and not expect.all()
+    np.testing.assert_array_equal(st["next_allowed"][boot], expect)
 
 
 def test_saved_policy_round_trips_and_plain_torch_loads_it(tmp_path):

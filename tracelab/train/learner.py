@@ -24,7 +24,8 @@ _FUSED_ADAM = getattr(torch, "_fused_adam_", None)  # private, but torch is pinn
 
 
 class DQNLearner:
-    def __init__(self, shape: Shape, *, lr: float, batch: int, buffer: int, generator: torch.Generator) -> None:
+    def __init__(self, shape: Shape, *, lr: float, batch: int, buffer: int, generator: torch.Generator,
+                 masked: bool = False) -> None:
         self.shape = shape
         self.lr = lr
         self.batch = batch
@@ -36,7 +37,7 @@ class DQNLearner:
         self.adam_v = torch.zeros(shape.n_params)
         self.adam_step = 0
         self.updates = 0
-        self.buffer = ReplayBuffer(buffer, shape.inputs, shape.actions, batch)
+        self.buffer = ReplayBuffer(buffer, shape.inputs, shape.actions, batch, masked)
         self._loss_sum = torch.zeros(())  # Smooth L1 summed over the sampled updates since take_loss()
         self._loss_n = 0
         self._have_q = False
@@ -68,6 +69,8 @@ class DQNLearner:
         self._s0t = self._obs[0].t()
         self._onehot = batch[:, hot:hot + a]
         self._onehot3 = self._onehot.unsqueeze(2)
+        # masked policies: max_a' over the actions the shield allows in s' (penalty 0, else MASKED_Q)
+        self._next_penalty = batch[:, buf._pen:buf._pen + a] if buf.masked else None
         self._reward = batch[:, -2:-1]
         self._discount = batch[:, -1:]
         self._pre = torch.empty(2, b, h)
@@ -94,6 +97,8 @@ class DQNLearner:
         torch.baddbmm(self._pre, self._obs, self._w1a, beta=0.0, alpha=2.0, out=self._pre)
         torch.sigmoid(self._pre, out=self._h_act).mul_(2.0).sub_(1.0)
         torch.bmm(self._h, self._w2a, out=self._q)                           # Q(s), Q_target(s')
+        if self._next_penalty is not None:
+            self._q1.add_(self._next_penalty)
         torch.amax(self._q1, 1, keepdim=True, out=self._qmax)
         torch.addcmul(self._reward, self._discount, self._qmax, out=self._target)
         torch.bmm(self._q0_3, self._onehot3, out=self._q_taken3)             # Q(s, a) of the taken a

@@ -62,7 +62,7 @@ class Trainer:
         self.shape = Shape(obs_size(scenario, self.stack), cfg.hidden, scenario.n_actions)
         self.groups = network_groups(scenario, cfg.non_markov)
         self.learners = {name: DQNLearner(self.shape, lr=cfg.lr, batch=cfg.batch, buffer=cfg.buffer,
-                                          generator=self.torch_gen) for name in self.groups}
+                                          generator=self.torch_gen, masked=cfg.mask) for name in self.groups}
         owner = {j: i for i, agents in enumerate(self.groups.values()) for j in agents}
         self.policy = Policy(scenario, [lr.online_np for lr in self.learners.values()],
                              [owner[j] for j in range(n)], self.stack, cfg.mask)
@@ -186,6 +186,12 @@ class Trainer:
         dead = true_next[:, 0:2 * n:2] < 0  # an agent's own x is -1 once it is dead
         out = self.pending.close(done[:, None] | dead | acting_next, terminated[:, None] | dead)
         if len(out["action"]):
+            if cfg.mask:  # what the shield allows in s' bounds the target's max (replay.py)
+                allowed = self.masker.for_sim(self.env.sim, RED)[out["world"], out["agent"]].astype(bool)
+                # a world that ended has been reset: its next state's mask is gone; a terminated
+                # transition has no bootstrap, a truncated one takes the max over all actions
+                allowed[done[out["world"]]] = True
+                out["next_allowed"] = allowed
             self._store(out, true_next)
         self.obs, self.acting = obs, acting_next
         self.step += w
@@ -196,9 +202,10 @@ class Trainer:
 
     def _store(self, out: dict[str, np.ndarray], true_next: np.ndarray) -> None:
         """Closed transitions into their network's buffer, with next_obs in the agent's own view."""
+        allowed = out.get("next_allowed")
         if self.agents == 1:
             self.learners["shared"].buffer.add(out["obs"], out["action"], out["reward"], true_next[out["world"]],
-                                               out["discount"])
+                                               out["discount"], allowed)
             return
         next_obs = np.empty_like(out["obs"])
         for j in range(self.agents):
@@ -207,7 +214,7 @@ class Trainer:
         for name, agents in self.groups.items():
             sel = np.isin(out["agent"], agents)
             self.learners[name].buffer.add(out["obs"][sel], out["action"][sel], out["reward"][sel], next_obs[sel],
-                                           out["discount"][sel])
+                                           out["discount"][sel], None if allowed is None else allowed[sel])
 
     def learn(self) -> None:
         cfg = self.cfg

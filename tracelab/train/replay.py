@@ -5,8 +5,10 @@ to the next one (one step for a fast agent, the slow agent's two steps summed wi
 factor on the bootstrap, γ^k, or 0 when the episode (or the agent) ended.
 
 Each transition is one float32 row laid out as the learner reads it: [obs, 1, next_obs, 1, one-hot action,
-reward, discount] (the ones add the biases in the learner's matmuls; the one-hot picks the taken action's
-Q-value and carries its gradient). So a minibatch is one `np.take` and the learner's torch tensors are
+(next penalty,) reward, discount] (the ones add the biases in the learner's matmuls; the one-hot picks the
+taken action's Q-value and carries its gradient). A buffer for a masked policy (`--mask`) also keeps, per
+action, a penalty added to the target network's Q(s') before its max: 0 where the action is allowed in s',
+MASKED_Q where the shield forbids it, so the bootstrap is the best action the policy could take there. So a minibatch is one `np.take` and the learner's torch tensors are
 fixed views of the batch array: sampling costs four numpy calls."""
 from __future__ import annotations
 
@@ -14,14 +16,18 @@ from typing import Any
 
 import numpy as np
 
+MASKED_Q = -1e6  # finite: a terminal transition's discount 0 times it must stay 0 (0 * -inf is nan)
+
 
 class ReplayBuffer:
-    def __init__(self, capacity: int, obs_size: int, n_actions: int, batch: int) -> None:
+    def __init__(self, capacity: int, obs_size: int, n_actions: int, batch: int, masked: bool = False) -> None:
         self.capacity = capacity
         self.obs_size = d = obs_size
         self.n_actions = n_actions
-        self.row = 2 * (d + 1) + n_actions + 2
+        self.masked = masked
+        self.row = 2 * (d + 1) + n_actions * (2 if masked else 1) + 2
         self._hot = 2 * (d + 1)  # first column of the one-hot action
+        self._pen = self._hot + n_actions  # first column of the next-state penalty (masked buffers)
         self.rows = np.zeros((capacity, self.row), np.float32)
         self.rows[:, d] = 1.0
         self.rows[:, 2 * d + 1] = 1.0
@@ -34,18 +40,21 @@ class ReplayBuffer:
         # [obs; next_obs] with the ones (the two halves of a row do not overlap)
         self.b_obs = np.lib.stride_tricks.as_strided(b, (2, batch, d + 1), (4 * (d + 1), 4 * self.row, 4))
         self.b_onehot = b[:, self._hot:self._hot + n_actions]
+        self.b_next_penalty = b[:, self._pen:self._pen + n_actions] if masked else None
         self.b_reward = b[:, -2:-1]
         self.b_discount = b[:, -1:]
 
     def add(self, obs: np.ndarray, action: np.ndarray, reward: np.ndarray, next_obs: np.ndarray,
-            discount: np.ndarray) -> None:
-        """Append K transitions (arrays with a leading axis K), overwriting the oldest when full."""
+            discount: np.ndarray, next_allowed: np.ndarray | None = None) -> None:
+        """Append K transitions (arrays with a leading axis K), overwriting the oldest when full.
+        `next_allowed` [K, A] (masked buffers): the actions the shield allows in next_obs (None: all)."""
         k = len(action)
         if k == 0:
             return
         if k > self.capacity:  # only the newest fit
             obs, action, reward, next_obs, discount = (a[-self.capacity:] for a in
                                                        (obs, action, reward, next_obs, discount))
+            next_allowed = None if next_allowed is None else next_allowed[-self.capacity:]
             k = self.capacity
         idx = (self.pos + np.arange(k)) % self.capacity
         d, hot = self.obs_size, self._hot
@@ -54,6 +63,9 @@ class ReplayBuffer:
         rows[idx, d + 1:2 * d + 1] = next_obs
         rows[idx, hot:hot + self.n_actions] = 0.0
         rows[idx, hot + np.asarray(action, np.int64)] = 1.0
+        if self.masked:
+            pen = rows[:, self._pen:self._pen + self.n_actions]
+            pen[idx] = 0.0 if next_allowed is None else np.where(np.asarray(next_allowed, bool), 0.0, MASKED_Q)
         rows[idx, -2] = reward
         rows[idx, -1] = discount
         self.action[idx] = action
@@ -73,9 +85,12 @@ class ReplayBuffer:
     # ---- checkpoints ----
     def state(self) -> dict[str, Any]:
         n, d = self.size, self.obs_size
-        return {"size": n, "pos": self.pos, "obs": self.rows[:n, :d].copy(),
-                "next_obs": self.rows[:n, d + 1:2 * d + 1].copy(), "action": self.action[:n].copy(),
-                "reward": self.rows[:n, -2].copy(), "discount": self.rows[:n, -1].copy()}
+        st = {"size": n, "pos": self.pos, "obs": self.rows[:n, :d].copy(),
+              "next_obs": self.rows[:n, d + 1:2 * d + 1].copy(), "action": self.action[:n].copy(),
+              "reward": self.rows[:n, -2].copy(), "discount": self.rows[:n, -1].copy()}
+        if self.masked:
+            st["next_allowed"] = self.rows[:n, self._pen:self._pen + self.n_actions] == 0.0
+        return st
 
     def load_state(self, st: dict[str, Any]) -> None:
         n = int(st["size"])
@@ -83,5 +98,5 @@ class ReplayBuffer:
             raise ValueError(f"checkpoint buffer ({n} x {st['obs'].shape[1:]}) does not fit this buffer "
                              f"({self.capacity} x {self.obs_size})")
         self.size, self.pos = 0, 0
-        self.add(st["obs"], st["action"], st["reward"], st["next_obs"], st["discount"])
+        self.add(st["obs"], st["action"], st["reward"], st["next_obs"], st["discount"], st.get("next_allowed"))
         self.size, self.pos = n, int(st["pos"])
