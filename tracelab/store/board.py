@@ -40,6 +40,8 @@ TEAMS = ("red", "blue")
 NOTHING = 8                                    # the spec's "do nothing" action id
 NO_ACTION = -1                                 # no action recorded (step 0)
 
+_CHANGE_COLUMNS = ("t, pass_no, seq, atom, old_lower, old_upper, new_lower, new_upper, cause_kind, cause_id, "
+                   "grounding")
 _STATE_LABELS = ("atLoc", "alive", "hitMe", "spent", "dir", "move", "shoot")
 
 
@@ -362,17 +364,38 @@ class BoardLoader:
         self.health0, self.damage = _health_scale(con, self.cast.hits_to_kill)
         self.phase_of_rule = rule_phases(con)
         self.vocab = _Vocabulary(con, self.cast)
+        self._read: dict[int, tuple[dict[str, np.ndarray], str | None]] = {}   # prefetched, not yet loaded
+
+    def prefetch(self, episodes: list[int]) -> np.ndarray:
+        """Read the change rows, outcomes and grounding texts of these episodes in one query each (a
+        replay of many short games otherwise pays a few DuckDB round-trips per game); `load` then takes
+        each episode from memory, once. Returns the grounding ids their rows name (for a why-tree
+        reader to prefetch too)."""
+        if not episodes:
+            return np.zeros(0, np.int64)
+        ch = self.con.sql(f"SELECT episode, {_CHANGE_COLUMNS} FROM raw.changes "
+                          "WHERE episode IN (SELECT unnest($e::BIGINT[])) ORDER BY episode, seq",
+                          params={"e": list(episodes)}).fetchnumpy()
+        col = {name: np.asarray(v) for name, v in ch.items()}
+        outcomes = dict(self.con.execute("SELECT episode, outcome FROM raw.episode_end "
+                                         "WHERE episode IN (SELECT unnest(?::BIGINT[]))",
+                                         [list(episodes)]).fetchall())
+        self.vocab.cover(col["atom"])
+        self.vocab.grounding_texts(col["grounding"][col["cause_kind"] == 2])
+        ep = col.pop("episode")
+        bounds = np.flatnonzero(np.r_[True, ep[1:] != ep[:-1], True]) if len(ep) else np.zeros(1, np.int64)
+        for lo, hi in zip(bounds[:-1].tolist(), bounds[1:].tolist()):
+            self._read[int(ep[lo])] = ({k: v[lo:hi] for k, v in col.items()}, outcomes.get(int(ep[lo])))
+        return np.unique(col["grounding"])
 
     def load(self, episode: int) -> EpisodeBoard:
-        """Rebuild one episode's board (see the module docstring)."""
+        """Rebuild one episode's board (see the module docstring); prefetched episodes come from memory."""
         con, cast = self.con, self.cast
-        ch = con.sql("SELECT t, pass_no, seq, atom, old_lower, old_upper, new_lower, new_upper, cause_kind, "
-                     "cause_id, grounding FROM raw.changes WHERE episode = $e ORDER BY seq",
-                     params={"e": episode}).fetchnumpy()
-        col = {name: np.asarray(v) for name, v in ch.items()}
-        if len(col["t"]) == 0:
+        if episode not in self._read:
+            self.prefetch([episode])
+        if episode not in self._read:
             raise KeyError(f"episode {episode} has no trace rows")
-        self.vocab.cover(col["atom"])
+        col, outcome = self._read.pop(episode)
         t = col["t"].astype(np.int64)
         t = t - t.min()
         is_rule = (col["cause_kind"] == 2) & (col["pass_no"] > 0)
@@ -389,12 +412,10 @@ class BoardLoader:
         health = np.where(alive, np.maximum(self.health0 - hits * self.damage, 0.0), 0.0)
         health = np.where(health <= 1e-9, 0.0, health)
         firings = _firings(self.vocab, cast, t, phase, col, state["agent_cell"], state["bullet_cell"])
-        ended = con.execute("SELECT outcome FROM raw.episode_end WHERE episode = $e",
-                            {"e": episode}).fetchall()
         return EpisodeBoard(episode, cast.map, cast.agents, cast.agent_team, cast.bullets, cast.bullet_team,
                             cast.bullet_owner, self.health0, state["agent_cell"], alive, health,
                             state["ammo"], state["bullet_cell"], state["bullet_dir"], state["action"],
-                            firings, ended[0][0] if ended else None, col)
+                            firings, outcome, col)
 
 
 def load_episode(con: RunConnection, episode: int) -> EpisodeBoard:

@@ -11,10 +11,19 @@ from tracelab.store.board import TEAMS, EpisodeBoard
 from tracelab.store.reader import RunConnection
 
 
-def team_rewards(con: RunConnection, board: EpisodeBoard) -> np.ndarray | None:
-    """[steps + 1, 2] each team's reward per step (the sum of its agents'; step 0 is 0), or None when
-    the run has no steps rows for the episode."""
-    rows = con.execute("SELECT step, agent, reward FROM steps WHERE episode = ?", [board.episode]).fetchall()
+def step_rewards(con: RunConnection, episodes: list[int]) -> dict[int, list[tuple[int, str, float]]]:
+    """episode -> its `steps` rows (step, agent, reward), for all these episodes in one query."""
+    out: dict[int, list[tuple[int, str, float]]] = {}
+    for episode, step, agent, reward in con.execute(
+            "SELECT episode, step, agent, reward FROM steps WHERE episode IN (SELECT unnest(?::BIGINT[]))",
+            [list(episodes)]).fetchall():
+        out.setdefault(episode, []).append((step, agent, reward))
+    return out
+
+
+def team_rewards(board: EpisodeBoard, rows: list[tuple[int, str, float]]) -> np.ndarray | None:
+    """[steps + 1, 2] each team's reward per step (the sum of its agents'; step 0 is 0) from the
+    episode's `steps` rows, or None when the run has none for it."""
     if not rows:
         return None
     team_of = dict(zip(board.agents, board.agent_team.tolist()))
