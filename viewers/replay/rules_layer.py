@@ -21,7 +21,10 @@ END_LABELS = ("captured", "eliminated")
 
 
 def _bound(lo: np.ndarray, hi: np.ndarray) -> list[str]:
-    return [f"[{a:g},{b:g}]" for a, b in zip(lo.tolist(), hi.tolist())]
+    """'[lo,hi]' of each pair; a game has a handful of distinct bounds, each formatted once."""
+    pairs, which = np.unique(np.stack([lo, hi], axis=1), axis=0, return_inverse=True)
+    texts = [f"[{a:g},{b:g}]" for a, b in pairs.tolist()]
+    return [texts[i] for i in which.ravel().tolist()]
 
 
 def firing_lines(board: EpisodeBoard) -> list[str]:
