@@ -150,7 +150,8 @@ def log_actions(rec: rr.RecordingStream, board: EpisodeBoard) -> None:
     /board/actions/red/shot a line along each shot."""
     steps = np.arange(1, board.steps + 1)
     both = np.concatenate([steps, steps])                   # red's rows, then blue's
-    times = [rr.TimeColumn(style.STEP, sequence=both), rr.TimeColumn(style.PASS, sequence=style.pass_time(both, 0))]
+    times = [rr.TimeColumn(style.STEP, sequence=both),
+             rr.TimeColumn(style.PASS, sequence=style.pass_time(both, 0))]
     acted = board.alive[:-1] & (board.action[1:] != NO_ACTION) & (board.action[1:] != NOTHING)
     act = board.action[1:]
     origin = style.cell_centers(board.map, board.agent_cell[:-1])     # where each agent began step s
