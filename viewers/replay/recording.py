@@ -41,6 +41,8 @@ class RunContext:
         return cls(con, name, BoardLoader(con), plots.training_metrics(con))
 
     def prefetch(self, episodes: list[int]) -> None:
+        """Read these episodes' change rows, outcomes, grounding texts and `steps` rewards, one query each;
+        their groundings go to the model when a why-tree is first wanted."""
         self._groundings = self.loader.prefetch(episodes)
         rewards = plots.step_rewards(self.con, episodes)
         self._rewards.update({e: rewards.get(e, []) for e in episodes})
