@@ -12,7 +12,7 @@ import pytest
 
 from tracelab.game.refsim import RefSim
 from tracelab.game.scenario import scenario_from_dict
-from tracelab.store.board import PHASES, EpisodeBoard, load_episode
+from tracelab.store.board import PHASES, BoardLoader, EpisodeBoard, load_episode
 from tracelab.store.reader import open_run
 
 SAMPLES = Path(__file__).resolve().parent.parent / "sample_runs"
@@ -122,3 +122,24 @@ def test_frame_and_firings_of_one_step() -> None:
 def test_an_episode_without_rows_is_a_key_error() -> None:
     with pytest.raises(KeyError, match="episode 99"):
         load_episode(open_run(SAMPLES / "advanced"), 99)
+
+
+def test_prefetched_episodes_load_the_same_boards_as_one_at_a_time(run) -> None:
+    """BoardLoader.prefetch reads several episodes in one query each; the boards must not change."""
+    con, _, boards = run
+    loader = BoardLoader(con)
+    groundings = loader.prefetch(list(boards) + [99])             # 99: no rows, nothing to hand out
+    named = np.concatenate([b.changes["grounding"] for b in boards.values()])
+    assert set(groundings.tolist()) == set(named.tolist())
+    for e, alone in boards.items():
+        batched = loader.load(e)
+        assert batched.outcome == alone.outcome
+        for name in ("phase_agent_cell", "phase_alive", "phase_health", "phase_ammo", "phase_bullet_cell",
+                     "phase_bullet_dir", "action"):
+            np.testing.assert_array_equal(getattr(batched, name), getattr(alone, name), err_msg=name)
+        f, g = batched.firings, alone.firings
+        assert (f.rule, f.bindings, f.head) == (g.rule, g.bindings, g.head)
+        np.testing.assert_array_equal(f.cell, g.cell)
+        np.testing.assert_array_equal(loader.load(e).action, alone.action)   # handed out once, then read again
+    with pytest.raises(KeyError, match="episode 99"):
+        loader.load(99)

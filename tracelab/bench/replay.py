@@ -126,7 +126,7 @@ def layer_times(run: Path, repeats: int) -> dict[str, float]:
         memory = rec.memory_recording()
         t0 = time.perf_counter()
         board = ctx.loader.load(episode)
-        rewards = plots.team_rewards(con, board)
+        rewards = plots.team_rewards(board, ctx.step_rewards(episode))
         times.setdefault("load (board from the run)", []).append(time.perf_counter() - t0)
         for name, fn, args in (("board", board_layer.log_board, (rec, board)),
                                ("rule log", rules_layer.log_rule_log, (rec, board)),

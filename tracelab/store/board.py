@@ -40,6 +40,8 @@ TEAMS = ("red", "blue")
 NOTHING = 8                                    # the spec's "do nothing" action id
 NO_ACTION = -1                                 # no action recorded (step 0)
 
+_CHANGE_COLUMNS = ("t, pass_no, seq, atom, old_lower, old_upper, new_lower, new_upper, cause_kind, cause_id, "
+                   "grounding")
 _STATE_LABELS = ("atLoc", "alive", "hitMe", "spent", "dir", "move", "shoot")
 
 
@@ -305,7 +307,6 @@ class _Vocabulary:
         self.arg1[cols["atom"]] = cols["arg1"]
         self.label_names = labels
         self.n_atoms = n
-        self.state = _state_atoms(self)
         # what each node is on the board; one extra -1 at the end, so that node -1 (no argument) maps to -1
         agent_index = {a: i for i, a in enumerate(self.cast.agents)}
         bullet_index = {b: i for i, b in enumerate(self.cast.bullets)}
@@ -317,6 +318,7 @@ class _Vocabulary:
         # the cell an atom names (its first cell argument), -1 if none
         self.atom_cell = np.where(self.node_cell[self.arg0] >= 0, self.node_cell[self.arg0],
                                   self.node_cell[self.arg1])
+        self.state = _state_atoms(self)
 
     def cover(self, atoms: np.ndarray) -> None:
         if len(atoms) and int(atoms.max()) >= self.n_atoms:
@@ -362,17 +364,38 @@ class BoardLoader:
         self.health0, self.damage = _health_scale(con, self.cast.hits_to_kill)
         self.phase_of_rule = rule_phases(con)
         self.vocab = _Vocabulary(con, self.cast)
+        self._read: dict[int, tuple[dict[str, np.ndarray], str | None]] = {}   # prefetched, not yet loaded
+
+    def prefetch(self, episodes: list[int]) -> np.ndarray:
+        """Read the change rows, outcomes and grounding texts of these episodes in one query each (a
+        replay of many short games otherwise pays a few DuckDB round-trips per game); `load` then takes
+        each episode from memory, once. Returns the grounding ids their rows name (for a why-tree
+        reader to prefetch too)."""
+        if not episodes:
+            return np.zeros(0, np.int64)
+        ch = self.con.sql(f"SELECT episode, {_CHANGE_COLUMNS} FROM raw.changes "
+                          "WHERE episode IN (SELECT unnest($e::BIGINT[])) ORDER BY episode, seq",
+                          params={"e": list(episodes)}).fetchnumpy()
+        col = {name: np.asarray(v) for name, v in ch.items()}
+        outcomes = dict(self.con.execute("SELECT episode, outcome FROM raw.episode_end "
+                                         "WHERE episode IN (SELECT unnest(?::BIGINT[]))",
+                                         [list(episodes)]).fetchall())
+        self.vocab.cover(col["atom"])
+        self.vocab.grounding_texts(col["grounding"][col["cause_kind"] == 2])
+        ep = col.pop("episode")
+        bounds = np.flatnonzero(np.r_[True, ep[1:] != ep[:-1], True]) if len(ep) else np.zeros(1, np.int64)
+        for lo, hi in zip(bounds[:-1].tolist(), bounds[1:].tolist()):
+            self._read[int(ep[lo])] = ({k: v[lo:hi] for k, v in col.items()}, outcomes.get(int(ep[lo])))
+        return np.unique(col["grounding"])
 
     def load(self, episode: int) -> EpisodeBoard:
-        """Rebuild one episode's board (see the module docstring)."""
+        """Rebuild one episode's board (see the module docstring); prefetched episodes come from memory."""
         con, cast = self.con, self.cast
-        ch = con.sql("SELECT t, pass_no, seq, atom, old_lower, old_upper, new_lower, new_upper, cause_kind, "
-                     "cause_id, grounding FROM raw.changes WHERE episode = $e ORDER BY seq",
-                     params={"e": episode}).fetchnumpy()
-        col = {name: np.asarray(v) for name, v in ch.items()}
-        if len(col["t"]) == 0:
+        if episode not in self._read:
+            self.prefetch([episode])
+        if episode not in self._read:
             raise KeyError(f"episode {episode} has no trace rows")
-        self.vocab.cover(col["atom"])
+        col, outcome = self._read.pop(episode)
         t = col["t"].astype(np.int64)
         t = t - t.min()
         is_rule = (col["cause_kind"] == 2) & (col["pass_no"] > 0)
@@ -389,12 +412,10 @@ class BoardLoader:
         health = np.where(alive, np.maximum(self.health0 - hits * self.damage, 0.0), 0.0)
         health = np.where(health <= 1e-9, 0.0, health)
         firings = _firings(self.vocab, cast, t, phase, col, state["agent_cell"], state["bullet_cell"])
-        ended = con.execute("SELECT outcome FROM raw.episode_end WHERE episode = $e",
-                            {"e": episode}).fetchall()
         return EpisodeBoard(episode, cast.map, cast.agents, cast.agent_team, cast.bullets, cast.bullet_team,
                             cast.bullet_owner, self.health0, state["agent_cell"], alive, health,
                             state["ammo"], state["bullet_cell"], state["bullet_dir"], state["action"],
-                            firings, ended[0][0] if ended else None, col)
+                            firings, outcome, col)
 
 
 def load_episode(con: RunConnection, episode: int) -> EpisodeBoard:
@@ -411,30 +432,29 @@ class _Atoms:
 
 
 def _state_atoms(vocab: _Vocabulary) -> _Atoms:
-    cast = vocab.cast
-    n = vocab.n_atoms
-    kind, entity, value = (np.full(n, -1, dtype=np.int64) for _ in range(3))
-    wanted = {lid: name for lid, name in vocab.label_names.items() if name in _STATE_LABELS}
-    agent_index = {a: i for i, a in enumerate(cast.agents)}
-    bullet_index = {b: i for i, b in enumerate(cast.bullets)}
-    n_agents = len(cast.agents)
-    for atom in np.flatnonzero(np.isin(vocab.label, list(wanted))).tolist():
-        label = wanted[int(vocab.label[atom])]
-        a0 = vocab.nodes[vocab.arg0[atom]]
-        a1 = vocab.nodes[vocab.arg1[atom]] if vocab.arg1[atom] >= 0 else None
-        if label == "atLoc":
-            e = agent_index.get(a0, n_agents + bullet_index.get(a0, -n_agents - 1))
-            v = int(a1)
-        elif label == "hitMe":        # hitMe(B, A): the agent is the second argument
-            e, v = agent_index.get(a1, -1), -1
-        elif label in ("dir", "spent"):
-            e, v = bullet_index.get(a0, -1), DIRECTIONS.index(a1) if label == "dir" else -1
-        else:                         # alive(A), move(A,D), shoot(A,D)
-            e = agent_index.get(a0, -1)
-            v = DIRECTIONS.index(a1) if a1 in DIRECTIONS else -1
-        if e >= 0:
-            kind[atom], entity[atom], value[atom] = _STATE_LABELS.index(label), e, v
-    return _Atoms(kind, entity, value)
+    """Decoded by node tables, not atom by atom (a 5v5 game on 16x16 has ~10^4 atLoc atoms)."""
+    n_agents = len(vocab.cast.agents)
+    agent, bullet = vocab.node_agent, vocab.node_bullet          # index -1 (no argument) gives -1
+    number = np.array([int(x) if x.isdigit() else -1 for x in vocab.nodes] + [-1], dtype=np.int64)
+    direction = np.array([DIRECTIONS.index(x) if x in DIRECTIONS else -1 for x in vocab.nodes] + [-1],
+                         dtype=np.int64)
+    name_of = {lid: name for lid, name in vocab.label_names.items() if name in _STATE_LABELS}
+    label_kind = np.full(max(vocab.label_names, default=-1) + 2, -1, dtype=np.int64)
+    for lid, name in name_of.items():
+        label_kind[lid] = _STATE_LABELS.index(name)
+    kind = label_kind[vocab.label]                                 # label -1 (no atom) maps to -1
+    a0, a1 = vocab.arg0, vocab.arg1
+    at, hit = _STATE_LABELS.index("atLoc"), _STATE_LABELS.index("hitMe")
+    on_bullet = (kind == _STATE_LABELS.index("dir")) | (kind == _STATE_LABELS.index("spent"))
+    # atLoc(E, C): agents, then bullets; hitMe(B, A): the agent is the second argument; dir(B, D) and
+    # spent(B): a bullet; alive(A), move(A, D), shoot(A, D): an agent
+    entity = np.select([kind == at, kind == hit, on_bullet],
+                       [np.where(agent[a0] >= 0, agent[a0], np.where(bullet[a0] >= 0, n_agents + bullet[a0], -1)),
+                        agent[a1], bullet[a0]], agent[a0])
+    value = np.select([kind == at, kind == hit, kind == _STATE_LABELS.index("spent")],
+                      [number[a1], -1, -1], direction[a1])
+    keep = (kind >= 0) & (entity >= 0)
+    return _Atoms(np.where(keep, kind, -1), np.where(keep, entity, -1), np.where(keep, value, -1))
 
 
 def _replay_state(cast: _Cast, atoms: _Atoms, col: dict[str, np.ndarray], t: np.ndarray,

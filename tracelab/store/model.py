@@ -117,7 +117,8 @@ class RunModel:
 
     def prefetch_groundings(self, ids: list[int] | np.ndarray) -> None:
         """Read these groundings in one query (callers about to explain many rows of an episode)."""
-        missing = sorted({int(g) for g in ids if g >= 0} - self._groundings.keys())
+        wanted = {g for g in np.asarray(ids, dtype=np.int64).tolist() if g >= 0}
+        missing = sorted(wanted - self._groundings.keys())
         if missing:
             for g, rule, body, values in self.con.execute(
                     "SELECT grounding, rule, body_atoms, var_values FROM raw.groundings "

@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 import rerun as rr
 from tracelab.viewers.replay import style
+from tracelab.viewers.replay.columns import send_per_entity
 
 from tracelab.store.board import (
     NO_ACTION,
@@ -69,7 +70,7 @@ def log_map(rec: rr.RecordingStream, board: EpisodeBoard) -> None:
         rec.log(path, archetype, static=True)
 
 
-def _slot_times(board: EpisodeBoard, slots: np.ndarray) -> list[rr.TimeColumn]:
+def _slot_times(slots: np.ndarray) -> list[rr.TimeColumn]:
     n_ph = len(PHASES)
     step = slots // n_ph
     return [rr.TimeColumn(style.STEP, sequence=step),
@@ -93,19 +94,21 @@ def log_agents(rec: rr.RecordingStream, board: EpisodeBoard) -> None:
     alive = board.phase_alive.reshape(n_slots, -1)
     health = board.phase_health.reshape(n_slots, -1)
     ammo = board.phase_ammo.reshape(n_slots, -1)
-    for i, agent in enumerate(board.agents):
-        rows = _changed(cell[:, i], alive[:, i], health[:, i], ammo[:, i])
-        on = alive[rows, i]
-        name = style.short_name(agent)
-        labels = [f"{name} ♥{h:g} ⁍{a}" if live else f"{name} dead"
-                  for live, h, a in zip(on.tolist(), health[rows, i].round(2).tolist(), ammo[rows, i].tolist())]
-        rec.send_columns(
-            f"{style.AGENTS}/{agent}", indexes=_slot_times(board, rows),
-            columns=rr.Points2D.columns(
-                positions=style.cell_centers(board.map, cell[rows, i]),
-                radii=np.where(on, 0.32, 0.18).astype(np.float32),
-                class_ids=np.where(on, style.TEAM_AGENT_CLASS[board.agent_team[i]], style.DEAD_AGENT),
-                labels=labels, draw_order=np.full(len(rows), 10.0, dtype=np.float32)))
+    per_agent = [_changed(cell[:, i], alive[:, i], health[:, i], ammo[:, i]) for i in range(len(board.agents))]
+    rows = np.concatenate(per_agent)
+    agent = np.repeat(np.arange(len(board.agents)), [len(r) for r in per_agent])
+    on = alive[rows, agent]
+    names = [style.short_name(a) for a in board.agents]
+    labels = [f"{names[i]} ♥{h:g} ⁍{a}" if live else f"{names[i]} dead"
+              for i, live, h, a in zip(agent.tolist(), on.tolist(), health[rows, agent].round(2).tolist(),
+                                       ammo[rows, agent].tolist())]
+    send_per_entity(
+        rec, [f"{style.AGENTS}/{a}" for a in board.agents], [len(r) for r in per_agent], _slot_times(rows),
+        rr.Points2D.columns(
+            positions=style.cell_centers(board.map, cell[rows, agent]),
+            radii=np.where(on, 0.32, 0.18).astype(np.float32),
+            class_ids=np.where(on, style.TEAM_AGENT_CLASS[board.agent_team[agent]], style.DEAD_AGENT),
+            labels=labels, draw_order=np.full(len(rows), 10.0, dtype=np.float32)))
 
 
 def log_bullets(rec: rr.RecordingStream, board: EpisodeBoard) -> None:
@@ -114,6 +117,7 @@ def log_bullets(rec: rr.RecordingStream, board: EpisodeBoard) -> None:
     n_slots = (board.steps + 1) * len(PHASES)
     cell = board.phase_bullet_cell.reshape(n_slots, -1)
     direction = board.phase_bullet_dir.reshape(n_slots, -1)
+    paths, slots, per_row, cells, dirs, team_ids = [], [], [], [], [], []
     for team, name in enumerate(TEAMS):
         mine = board.bullet_team == team
         if not mine.any():
@@ -122,15 +126,22 @@ def log_bullets(rec: rr.RecordingStream, board: EpisodeBoard) -> None:
         rows = _changed(c, d)
         c, d = c[rows], d[rows]
         flying = c >= 0
-        vec = style.DIRECTION_VECTORS[d[flying]] * 0.6
-        rec.send_columns(
-            f"{style.BULLETS}/{name}", indexes=_slot_times(board, rows),
-            columns=rr.Arrows2D.columns(
-                origins=style.cell_centers(board.map, c[flying]) - vec / 2, vectors=vec,
-                radii=np.full(len(vec), 0.07, dtype=np.float32),
-                class_ids=np.full(len(vec), style.TEAM_BULLET_CLASS[team]),
-                show_labels=np.zeros(len(vec), dtype=bool),
-                draw_order=np.full(len(vec), 12.0, dtype=np.float32)).partition(flying.sum(axis=1)))
+        paths.append(f"{style.BULLETS}/{name}")
+        slots.append(rows)
+        per_row.append(flying.sum(axis=1))            # bullets in flight at each of the team's rows
+        cells.append(c[flying])
+        dirs.append(d[flying])
+        team_ids.append(np.full(len(cells[-1]), team))
+    if not paths:
+        return
+    c, d, team = np.concatenate(cells), np.concatenate(dirs), np.concatenate(team_ids)
+    vec = style.DIRECTION_VECTORS[d] * 0.6
+    columns = rr.Arrows2D.columns(
+        origins=style.cell_centers(board.map, c) - vec / 2, vectors=vec,
+        radii=np.full(len(vec), 0.07, dtype=np.float32), class_ids=style.TEAM_BULLET_CLASS[team],
+        show_labels=np.zeros(len(vec), dtype=bool),
+        draw_order=np.full(len(vec), 12.0, dtype=np.float32)).partition(np.concatenate(per_row))
+    send_per_entity(rec, paths, [len(r) for r in slots], _slot_times(np.concatenate(slots)), columns)
 
 
 def log_actions(rec: rr.RecordingStream, board: EpisodeBoard) -> None:
@@ -138,26 +149,35 @@ def log_actions(rec: rr.RecordingStream, board: EpisodeBoard) -> None:
     /board/actions/red/move holds an arrow from the cell each moving agent started on,
     /board/actions/red/shot a line along each shot."""
     steps = np.arange(1, board.steps + 1)
-    times = [rr.TimeColumn(style.STEP, sequence=steps),
-             rr.TimeColumn(style.PASS, sequence=style.pass_time(steps, 0))]
+    both = np.concatenate([steps, steps])                   # red's rows, then blue's
+    times = [rr.TimeColumn(style.STEP, sequence=both),
+             rr.TimeColumn(style.PASS, sequence=style.pass_time(both, 0))]
     acted = board.alive[:-1] & (board.action[1:] != NO_ACTION) & (board.action[1:] != NOTHING)
     act = board.action[1:]
     origin = style.cell_centers(board.map, board.agent_cell[:-1])     # where each agent began step s
-    for team, name in enumerate(TEAMS):
+    moves, shots = [], []
+    for team in range(len(TEAMS)):
         mine = board.agent_team == team
-        colour = style.TEAM_COLOR[team]
         a, o = act[:, mine], origin[:, mine]
         move, shot = acted[:, mine] & (a < 4), acted[:, mine] & (a >= 4)
-        vec = style.DIRECTION_VECTORS[a[move] % 4] * 0.9
-        rec.send_columns(f"{style.ACTIONS}/{name}/move", indexes=times, columns=rr.Arrows2D.columns(
-            origins=o[move], vectors=vec, radii=np.full(len(vec), 0.05, dtype=np.float32),
-            colors=np.repeat(colour[None], len(vec), 0), draw_order=np.full(len(vec), 11.0, np.float32),
-            ).partition(move.sum(axis=1)))
-        strips = np.stack([o[shot], o[shot] + style.DIRECTION_VECTORS[a[shot] % 4] * 2.5], axis=1)
-        rec.send_columns(f"{style.ACTIONS}/{name}/shot", indexes=times, columns=rr.LineStrips2D.columns(
-            strips=list(strips), radii=np.full(len(strips), 0.035, dtype=np.float32),
-            colors=np.repeat(colour[None], len(strips), 0),
-            draw_order=np.full(len(strips), 11.0, np.float32)).partition(shot.sum(axis=1)))
+        moves.append((o[move], style.DIRECTION_VECTORS[a[move] % 4] * 0.9, move.sum(axis=1), team))
+        shots.append((o[shot], style.DIRECTION_VECTORS[a[shot] % 4] * 2.5, shot.sum(axis=1), team))
+    colour = np.concatenate([np.repeat(style.TEAM_COLOR[t][None], len(o), 0) for o, _, _, t in moves])
+    vec = np.concatenate([v for _, v, _, _ in moves])
+    send_per_entity(rec, [f"{style.ACTIONS}/{name}/move" for name in TEAMS], [len(steps)] * 2, times,
+                    rr.Arrows2D.columns(
+                        origins=np.concatenate([o for o, _, _, _ in moves]), vectors=vec,
+                        radii=np.full(len(vec), 0.05, dtype=np.float32), colors=colour,
+                        draw_order=np.full(len(vec), 11.0, np.float32),
+                    ).partition(np.concatenate([n for _, _, n, _ in moves])))
+    origins = np.concatenate([o for o, _, _, _ in shots])
+    strips = np.stack([origins, origins + np.concatenate([v for _, v, _, _ in shots])], axis=1)
+    colour = np.concatenate([np.repeat(style.TEAM_COLOR[t][None], len(o), 0) for o, _, _, t in shots])
+    send_per_entity(rec, [f"{style.ACTIONS}/{name}/shot" for name in TEAMS], [len(steps)] * 2, times,
+                    rr.LineStrips2D.columns(
+                        strips=strips, radii=np.full(len(strips), 0.035, dtype=np.float32),
+                        colors=colour, draw_order=np.full(len(strips), 11.0, np.float32),
+                    ).partition(np.concatenate([n for _, _, n, _ in shots])))
 
 
 def _marked(board: EpisodeBoard) -> np.ndarray:
@@ -179,20 +199,22 @@ def log_fired(rec: rr.RecordingStream, board: EpisodeBoard) -> None:
     f = board.firings
     rows = _marked(board)
     by_step = np.searchsorted(f.step[rows], np.arange(board.steps + 2))
-    steps, passes, counts, cells, labels = [], [], [], [], []
-    for s in range(board.steps + 1):
+    n_ph = len(_MARKED_PHASES)
+    steps = np.repeat(np.arange(board.steps + 1), n_ph)               # a row per step and board phase
+    passes = steps * style.PASS_PER_STEP + np.tile(_MARKED_PHASES, board.steps + 1)
+    counts = np.zeros(len(steps), dtype=np.int64)
+    cells, labels = [], []
+    for s in np.unique(f.step[rows]).tolist():                          # the steps that mark a cell
         step_rows = rows[by_step[s]:by_step[s + 1]].tolist()
         per_cell: dict[int, dict[str, int]] = {}
         k = 0
-        for ph in _MARKED_PHASES:
+        for j, ph in enumerate(_MARKED_PHASES):
             while k < len(step_rows) and f.phase[step_rows[k]] <= ph:
                 i = step_rows[k]
                 per_cell.setdefault(int(f.cell[i]), {}).setdefault(
                     f.rule[i], _LABEL_PRIORITY[PHASES[f.phase[i]]])
                 k += 1
-            steps.append(s)
-            passes.append(s * style.PASS_PER_STEP + ph)
-            counts.append(len(per_cell))
+            counts[s * n_ph + j] = len(per_cell)
             for c in sorted(per_cell):
                 cells.append(c)
                 labels.append(_label(per_cell[c]))

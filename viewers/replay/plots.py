@@ -3,18 +3,30 @@ training run's curves (its `metrics` rows, docs/store.md and the training-run co
 `train_step` timeline."""
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 import rerun as rr
 from tracelab.viewers.replay import style
+from tracelab.viewers.replay.columns import send_per_entity
 
 from tracelab.store.board import TEAMS, EpisodeBoard
 from tracelab.store.reader import RunConnection
 
 
-def team_rewards(con: RunConnection, board: EpisodeBoard) -> np.ndarray | None:
-    """[steps + 1, 2] each team's reward per step (the sum of its agents'; step 0 is 0), or None when
-    the run has no steps rows for the episode."""
-    rows = con.execute("SELECT step, agent, reward FROM steps WHERE episode = ?", [board.episode]).fetchall()
+def step_rewards(con: RunConnection, episodes: list[int]) -> dict[int, list[tuple[int, str, float]]]:
+    """episode -> its `steps` rows (step, agent, reward), for all these episodes in one query."""
+    out: dict[int, list[tuple[int, str, float]]] = {}
+    for episode, step, agent, reward in con.execute(
+            "SELECT episode, step, agent, reward FROM steps WHERE episode IN (SELECT unnest(?::BIGINT[]))",
+            [list(episodes)]).fetchall():
+        out.setdefault(episode, []).append((step, agent, reward))
+    return out
+
+
+def team_rewards(board: EpisodeBoard, rows: list[tuple[int, str, float]]) -> np.ndarray | None:
+    """[steps + 1, 2] each team's reward per step (the sum of its agents'; step 0 is 0) from the
+    episode's `steps` rows, or None when the run has none for it."""
     if not rows:
         return None
     team_of = dict(zip(board.agents, board.agent_team.tolist()))
@@ -25,17 +37,24 @@ def team_rewards(con: RunConnection, board: EpisodeBoard) -> np.ndarray | None:
     return out
 
 
+@lru_cache(maxsize=None)
+def _series_style(team: str, kind: str) -> rr.SeriesLines:
+    """A series' line style, built once (an archetype converts its data to Arrow when it is made)."""
+    colour = [int(c) for c in style.TEAM_COLOR[TEAMS.index(team)]]
+    return rr.SeriesLines(colors=colour, names=f"{team} {kind}", widths=2.0 if kind == "return" else 1.0)
+
+
 def log_rewards(rec: rr.RecordingStream, rewards: np.ndarray) -> None:
     steps = np.arange(len(rewards))
-    times = [rr.TimeColumn(style.STEP, sequence=steps),
-             rr.TimeColumn(style.PASS, sequence=style.pass_time(steps, 0))]
-    for t, team in enumerate(TEAMS):
-        colour = [int(c) for c in style.TEAM_COLOR[t]]
-        for kind, values in (("reward", rewards[:, t]), ("return", np.cumsum(rewards[:, t]))):
-            path = f"{style.PLOTS}/{kind}/{team}"
-            rec.log(path, rr.SeriesLines(colors=colour, names=f"{team} {kind}",
-                                         widths=2.0 if kind == "return" else 1.0), static=True)
-            rec.send_columns(path, indexes=times, columns=rr.Scalars.columns(scalars=values))
+    series = [(team, kind, values) for t, team in enumerate(TEAMS)
+              for kind, values in (("reward", rewards[:, t]), ("return", np.cumsum(rewards[:, t])))]
+    for team, kind, _ in series:
+        rec.log(f"{style.PLOTS}/{kind}/{team}", _series_style(team, kind), static=True)
+    every = np.tile(steps, len(series))
+    send_per_entity(rec, [f"{style.PLOTS}/{kind}/{team}" for team, kind, _ in series], [len(steps)] * len(series),
+                    [rr.TimeColumn(style.STEP, sequence=every),
+                     rr.TimeColumn(style.PASS, sequence=style.pass_time(every, 0))],
+                    rr.Scalars.columns(scalars=np.concatenate([v for _, _, v in series])))
 
 
 def training_metrics(con: RunConnection) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -53,7 +72,9 @@ def training_metrics(con: RunConnection) -> dict[str, tuple[np.ndarray, np.ndarr
 def log_training(rec: rr.RecordingStream, metrics: dict[str, tuple[np.ndarray, np.ndarray]]) -> None:
     """Each metric as a series under /train (eval/win_rate -> /train/eval/win_rate; an opponent suffix
     such as @p0.3 becomes a path part), on the train_step timeline."""
-    for name, (steps, values) in metrics.items():
-        path = f"{style.TRAIN}/{name.replace('@', '/')}"
-        rec.send_columns(path, indexes=[rr.TimeColumn(style.TRAIN_STEP, sequence=steps)],
-                         columns=rr.Scalars.columns(scalars=values))
+    if not metrics:
+        return
+    send_per_entity(rec, [f"{style.TRAIN}/{name.replace('@', '/')}" for name in metrics],
+                    [len(steps) for steps, _ in metrics.values()],
+                    [rr.TimeColumn(style.TRAIN_STEP, sequence=np.concatenate([s for s, _ in metrics.values()]))],
+                    rr.Scalars.columns(scalars=np.concatenate([v for _, v in metrics.values()])))

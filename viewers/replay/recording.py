@@ -26,22 +26,42 @@ class ReplayOptions:
 @dataclass
 class RunContext:
     """What every episode of a run shares: its board loader (cast, vocabulary), its program model (for
-    the why-trees) and, for a training run, its metrics."""
+    the why-trees) and, for a training run, its metrics. `prefetch` reads what a batch of episodes needs
+    in a few queries instead of a few per episode."""
     con: RunConnection
     name: str
     loader: BoardLoader
     metrics: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     _model: RunModel | None = None
+    _rewards: dict[int, list[tuple[int, str, float]]] = field(default_factory=dict)
+    _groundings: np.ndarray | None = None     # the prefetched episodes' groundings, for the model
 
     @classmethod
     def of(cls, con: RunConnection, name: str) -> RunContext:
         return cls(con, name, BoardLoader(con), plots.training_metrics(con))
 
+    def prefetch(self, episodes: list[int]) -> None:
+        """Read these episodes' change rows, outcomes, grounding texts and `steps` rewards, one query each;
+        their groundings go to the model when a why-tree is first wanted."""
+        self._groundings = self.loader.prefetch(episodes)
+        rewards = plots.step_rewards(self.con, episodes)
+        self._rewards.update({e: rewards.get(e, []) for e in episodes})
+
+    def step_rewards(self, episode: int) -> list[tuple[int, str, float]]:
+        """The episode's `steps` rows (prefetched ones from memory, once)."""
+        if episode not in self._rewards:
+            return plots.step_rewards(self.con, [episode]).get(episode, [])
+        return self._rewards.pop(episode)
+
     @property
     def model(self) -> RunModel:
-        """The run's program model, read when a why-tree is first wanted."""
+        """The run's program model, read when a why-tree is first wanted; with the groundings of the
+        prefetched episodes."""
         if self._model is None:
             self._model = RunModel(self.con)
+        if self._groundings is not None:
+            self._model.prefetch_groundings(self._groundings)
+            self._groundings = None
         return self._model
 
     def refresh(self) -> None:
@@ -66,7 +86,7 @@ def record_episode(ctx: RunContext, episode: int, rec: rr.RecordingStream,
     board_layer.log_board(rec, board)
     rules_layer.log_rule_log(rec, board)
     rules_layer.log_lanes(rec, board, options.lanes)
-    rewards = plots.team_rewards(ctx.con, board)
+    rewards = plots.team_rewards(board, ctx.step_rewards(episode))
     if rewards is not None:
         plots.log_rewards(rec, rewards)
     rules_layer.log_why(rec, ctx.con, board, rewards, options.why_depth, lambda: ctx.model)

@@ -12,11 +12,16 @@ from tracelab.viewers.replay.select import EpisodeFilter, select_episodes
 
 from tracelab.store.reader import RunConnection, retrying, run_info
 
+PREFETCH_EPISODES = 50      # episodes read from the run per batch (their change rows are held in memory)
+
 
 def replay_episodes(ctx: RunContext, episodes: list[int], out: Output,
                     options: ReplayOptions | None = None) -> int:
-    """Each episode as its own recording into `out`; returns how many were sent."""
-    for e in episodes:
+    """Each episode as its own recording into `out`; returns how many were sent. What the episodes need
+    from the run is read a batch at a time."""
+    for i, e in enumerate(episodes):
+        if i % PREFETCH_EPISODES == 0:
+            retrying(partial(ctx.prefetch, episodes[i:i + PREFETCH_EPISODES]))
         rec = out.recording(ctx.name, e)
         retrying(partial(record_episode, ctx, e, rec, options, blueprint=not out.blueprint_sent))
         out.blueprint_sent = True

@@ -3,10 +3,12 @@ filters by phase), state lanes of selected labels, and a markdown why-document p
 from __future__ import annotations
 
 from collections.abc import Callable
+from functools import lru_cache
 
 import numpy as np
 import rerun as rr
 from tracelab.viewers.replay import style
+from tracelab.viewers.replay.columns import send_per_entity
 
 from tracelab.store.board import PHASES, TEAMS, EpisodeBoard
 from tracelab.store.episode import EpisodeTrace
@@ -19,7 +21,10 @@ END_LABELS = ("captured", "eliminated")
 
 
 def _bound(lo: np.ndarray, hi: np.ndarray) -> list[str]:
-    return [f"[{a:g},{b:g}]" for a, b in zip(lo.tolist(), hi.tolist())]
+    """'[lo,hi]' of each pair; a game has a handful of distinct bounds, each formatted once."""
+    pairs, which = np.unique(np.stack([lo, hi], axis=1), axis=0, return_inverse=True)
+    texts = [f"[{a:g},{b:g}]" for a, b in pairs.tolist()]
+    return [texts[i] for i in which.ravel().tolist()]
 
 
 def firing_lines(board: EpisodeBoard) -> list[str]:
@@ -68,22 +73,33 @@ def lane_values(board: EpisodeBoard, label: str) -> np.ndarray:
     raise ValueError(f"no lane {label!r}; lanes: {', '.join(LANE_LABELS)}")
 
 
+@lru_cache(maxsize=1)
+def _alive_states() -> rr.StateConfiguration:
+    """The alive lane's colours, built once."""
+    return rr.StateConfiguration(values=["alive", "dead"], colors=[0x4CAF50FF, 0x808080FF])
+
+
 def log_lanes(rec: rr.RecordingStream, board: EpisodeBoard, labels: tuple[str, ...] = LANE_LABELS) -> None:
     """rerun state lanes (StateChange), one per label and agent, a row where the value changes."""
     last_pass = len(PHASES) - 1
+    paths, counts, steps, states = [], [], [], []
     for label in labels:
         values = lane_values(board, label)
         for i, agent in enumerate(board.agents):
             v = values[:, i]
             rows = np.flatnonzero(np.r_[True, v[1:] != v[:-1]])
-            rec.send_columns(f"{style.LANES}/{label}/{agent}",
-                             indexes=[rr.TimeColumn(style.STEP, sequence=rows),
-                                      rr.TimeColumn(style.PASS, sequence=style.pass_time(rows, last_pass))],
-                             columns=rr.StateChange.columns(state=v[rows].tolist()))
+            paths.append(f"{style.LANES}/{label}/{agent}")
+            counts.append(len(rows))
+            steps.append(rows)
+            states += v[rows].tolist()
+    step = np.concatenate(steps) if steps else np.zeros(0, np.int64)
+    send_per_entity(rec, paths, counts,
+                    [rr.TimeColumn(style.STEP, sequence=step),
+                     rr.TimeColumn(style.PASS, sequence=style.pass_time(step, last_pass))],
+                    rr.StateChange.columns(state=states))
     if "alive" in labels:
         for agent in board.agents:
-            rec.log(f"{style.LANES}/alive/{agent}", rr.StateConfiguration(
-                values=["alive", "dead"], colors=[0x4CAF50FF, 0x808080FF]), static=True)
+            rec.log(f"{style.LANES}/alive/{agent}", _alive_states(), static=True)
 
 
 def explained_atoms(board: EpisodeBoard) -> dict[int, list[str]]:
