@@ -84,7 +84,6 @@ class DQNLearner:
         self._q_taken3 = torch.empty(b, 1, 1)
         self._q_taken = self._q_taken3.view(b, 1)
         self._qmax, self._target = torch.empty(b, 1), torch.empty(b, 1)
-        self._diff = torch.empty(b, 1)
         self._dq, self._dh, self._dtanh = torch.empty(b, a), torch.empty(b, h), torch.empty(b, h)
         self._denom = torch.empty(sh.n_params)
 
@@ -101,14 +100,14 @@ class DQNLearner:
             self._q1.add_(self._next_penalty)
         torch.amax(self._q1, 1, keepdim=True, out=self._qmax)
         torch.addcmul(self._reward, self._discount, self._qmax, out=self._target)
-        torch.bmm(self._q0_3, self._onehot3, out=self._q_taken3)             # Q(s, a) of the taken a
-        if self.updates % LOSS_EVERY == 0:  # the logged loss is sampled: it costs two calls
+        if self.updates % LOSS_EVERY == 0:  # the logged loss is sampled: it costs three calls
+            torch.bmm(self._q0_3, self._onehot3, out=self._q_taken3)         # Q(s, a) of the taken a
             self._loss_sum += torch.nn.functional.smooth_l1_loss(self._q_taken, self._target)
             self._loss_n += 1
-        # d(mean Smooth L1)/dQ(s, a) = clamp(q - y, -1, 1) / B on the taken action; the 1/B goes
-        # into the two gradient matmuls (alpha)
-        torch.sub(self._q_taken, self._target, out=self._diff).clamp_(-1.0, 1.0)
-        torch.mul(self._onehot, self._diff, out=self._dq)
+        # d(mean Smooth L1)/dQ(s, a) = clamp(q - y, -1, 1) / B on the taken action, 0 on the others:
+        # one-hot * clamp(Q(s) - y) = clamp(one-hot * (Q(s) - y)), without picking Q(s, a) out first;
+        # the 1/B goes into the two gradient matmuls (alpha)
+        torch.sub(self._q0, self._target, out=self._dq).mul_(self._onehot).clamp_(-1.0, 1.0)
         self._g2.addmm_(self._h0t, self._dq, beta=0.0, alpha=self._inv_b)      # [gW2ᵀ; gb2]
         torch.mm(self._dq, self._w2t_online, out=self._dh)
         torch.addcmul(self._one, self._h0, self._h0, value=-1.0, out=self._dtanh)  # tanh' = 1 - h²
