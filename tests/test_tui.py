@@ -189,6 +189,8 @@ def test_open_a_run_go_to_an_episode_filter_by_rule_and_explain_a_death() -> Non
         assert "killed(red-agent-1)" in await shown(app, pilot)
         killed = tree.root.children[0]
         assert killed.data.cause.name == "h_killed" and killed.children      # expandable, one level deeper
+        await wait_for(pilot, lambda: app.focused is tree)
+        await pilot.pause(0.3)   # the tree's focus tells TabbedContent by a message: let it land first
         await pilot.press("4")                                      # from the tree to another view
         await wait_for(pilot, lambda: app.screen.query_one("TabbedContent").active == "rules")
         await pilot.pause(0.3)
