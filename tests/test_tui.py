@@ -189,8 +189,6 @@ def test_open_a_run_go_to_an_episode_filter_by_rule_and_explain_a_death() -> Non
         assert "killed(red-agent-1)" in await shown(app, pilot)
         killed = tree.root.children[0]
         assert killed.data.cause.name == "h_killed" and killed.children      # expandable, one level deeper
-        await wait_for(pilot, lambda: app.focused is tree)
-        await pilot.pause(0.3)   # the tree's focus tells TabbedContent by a message: let it land first
         await pilot.press("4")                                      # from the tree to another view
         await wait_for(pilot, lambda: app.screen.query_one("TabbedContent").active == "rules")
         await pilot.pause(0.3)
@@ -456,8 +454,6 @@ def test_why_of_a_change_its_atom_undid_later_in_the_step_is_that_changes_own() 
             await wait_for(pilot, lambda: why.is_attached and why.query_one("Tree").root.data is not None
                            and why.query_one("Tree").root.data.seq == row["seq"])
             tree = why.query_one("Tree")
-            await wait_for(pilot, lambda: app.focused is tree)
-            await pilot.pause(0.3)   # the tree's focus tells TabbedContent by a message: let it land first
             root = tree.root.data
             assert root.cause.name == row["rule"] and root.pass_no == row["pass_no"]
             assert root.value == [row["new_lower"], row["new_upper"]]

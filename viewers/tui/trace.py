@@ -284,27 +284,23 @@ class TracePane(Vertical):
 
     def action_eval_game(self, direction: int) -> None:
         """Move to the next (previous) evaluation game, keeping the filters and the cursor's timestep."""
-        current = None if self.filter is None else self.filter.episode
-
         def work() -> None:
             try:
                 games = eval_games(self.source)
             except Exception as e:  # noqa: BLE001
                 self.app.call_from_thread(self.notify, str(e), severity="error")
                 return
-            game = neighbour(games, current, direction > 0)
-            if not games:
-                note = "not a training run: it has no evaluation games (episodes of kind 'eval')"
-            elif game is None:
-                note = f"no {'later' if direction > 0 else 'earlier'} evaluation game"
-            else:
-                self.app.call_from_thread(self._to_game, game)
-                return
-            self.app.call_from_thread(self.notify, note, severity="warning")
+            self.app.call_from_thread(self._step_game, games, direction)
 
-        self.run_worker(work, thread=True, group="eval-game", exclusive=True, exit_on_error=False)
+        # not exclusive: each press is one step, taken from where the previous one landed (_step_game)
+        self.run_worker(work, thread=True, group="eval-game", exit_on_error=False)
 
-    def _to_game(self, game: EvalGame) -> None:
+    def _step_game(self, games: list[EvalGame], direction: int) -> None:
+        game = neighbour(games, None if self.filter is None else self.filter.episode, direction > 0)
+        if game is None:
+            self.notify("not a training run: it has no evaluation games (episodes of kind 'eval')" if not games
+                        else f"no {'later' if direction > 0 else 'earlier'} evaluation game", severity="warning")
+            return
         row = self.table.cursor_row
         self._goto_t = None if row is None else int(row["t"])
         self._show_game(game.episode, game, True)

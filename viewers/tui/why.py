@@ -1,6 +1,7 @@
 """The Why view: the proof tree of the change selected in the trace (tracelab.store.why.explain_change: that
-row's own rule and grounding, even when its atom changed again later in the step) as an expandable tree, and why-not for a rule and bindings (`tracelab why-not`): type
-`RULE A=red-agent-1,X=16 at T` in the why-not line."""
+row's own rule and grounding, even when its atom changed again later in the step) as an expandable tree,
+and why-not for a rule and bindings (`tracelab why-not`): type `RULE A=red-agent-1,X=16 at T` in the
+why-not line."""
 from __future__ import annotations
 
 import re
@@ -121,8 +122,8 @@ class WhyPane(Vertical):
         tree.root.expand()
         rule = root.cause.name if root.cause else ""
         if of_change:
-            what = (f"the change {root.atom} {bound_text(*root.old or (0.0, 1.0))} → {bound_text(*root.value)} "
-                    f"at t={root.t} pass {root.pass_no}")
+            old = "" if root.old is None else f"{bound_text(*root.old)} → "
+            what = f"the change {root.atom} {old}{bound_text(*root.value)} at t={root.t} pass {root.pass_no}"
         else:
             what = f"{root.atom} at the end of t={t}"
         self.query_one("#why-head", Static).update(
