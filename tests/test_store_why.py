@@ -8,12 +8,15 @@ import pytest
 from store_helpers import write_walk_run
 
 from tracelab.store.reader import open_run
-from tracelab.store.why import WhyNode, explain, render_why, render_why_not, why_not
+from tracelab.store.why import WhyNode, explain, explain_change, render_why, render_why_not, why_not
 
 
 @pytest.fixture(scope="module")
 def con(tmp_path_factory: pytest.TempPathFactory):  # noqa: ANN201 - a duckdb connection
     return open_run(write_walk_run(tmp_path_factory.mktemp("why") / "walk"))
+
+
+ADVANCED = Path(__file__).resolve().parent.parent / "sample_runs" / "advanced"
 
 
 def child(node: WhyNode, atom: str) -> WhyNode:
@@ -73,6 +76,35 @@ def test_every_rule_row_of_the_run_has_a_body_that_held_when_read(con) -> None: 
         tree = explain(con, episode, atom, at=t, depth=1)
         assert tree.seq == seq and tree.children
         assert all(c.holds for c in tree.children), render_why(tree, t)
+
+
+def test_why_of_a_change_is_that_rows_derivation(con) -> None:  # noqa: ANN001
+    """explain_change roots the tree at the given row: its own rule, grounding and bound."""
+    rows = con.execute("SELECT episode, seq, rule, new_lower, new_upper, grounding FROM changes "
+                       "WHERE cause_kind = 2 ORDER BY episode, seq").fetchall()
+    for episode, seq, rule, lo, up, grounding in rows:
+        tree = explain_change(con, episode, seq, depth=1)
+        assert (tree.seq, tree.cause.name, tree.value, tree.cause.grounding) == (seq, rule, [lo, up], grounding)
+        assert tree.children and all(c.holds for c in tree.children), render_why(tree)
+    with pytest.raises(KeyError, match="episode 10 has no change row with seq 999999"):
+        explain_change(con, 10, 999999)
+
+
+def test_why_of_a_change_its_atom_undid_later_in_the_step() -> None:
+    """In the game, immediate rules cascade in passes: acting(clock) is cleared by clr_acting in pass 0
+    and set again by p_act in pass 1 of the same step. Each row's tree is its own rule's, not the bound
+    at the end of the step."""
+    con = open_run(ADVANCED)
+    twice = con.execute("SELECT c.seq, c.rule, c.new_lower, c.new_upper FROM changes c WHERE c.episode = 0 "
+                        "AND c.cause_kind = 2 AND c.seq < (SELECT max(seq) FROM raw.changes d WHERE "
+                        "d.episode = 0 AND d.atom = c.atom_id AND d.t = c.t) ORDER BY c.seq LIMIT 12").fetchall()
+    assert twice, "the sample run has atoms changed twice within a step"
+    for seq, rule, lo, up in twice:
+        tree = explain_change(con, 0, seq, depth=2)
+        assert (tree.seq, tree.cause.name, tree.value) == (seq, rule, [lo, up])
+        end = explain(con, 0, tree.atom, at=tree.t, depth=1)      # the bound at the end of the step
+        assert end.seq != seq and end.seq > seq
+        assert all(c.holds for c in tree.children), render_why(tree)
 
 
 def test_atom_never_set_depth_limit_json_and_text(con) -> None:  # noqa: ANN001

@@ -183,7 +183,7 @@ def test_open_a_run_go_to_an_episode_filter_by_rule_and_explain_a_death() -> Non
         await wait_for(pilot, lambda: tree.root.data is not None)
         root = tree.root.data
         assert root.atom == "alive(red-agent-1)" and root.value == [0, 0] and root.cause.name == "d_killed"
-        assert str(tree.root.label).startswith("alive(red-agent-1) = [0,0] at the end of t=15")
+        assert str(tree.root.label).startswith("alive(red-agent-1) = [1,1] → [0,0]  t=15 by d_killed")
         children = [str(c.label) for c in tree.root.children]
         assert any("killed(red-agent-1)" in c and c.startswith("ok") for c in children)
         assert "killed(red-agent-1)" in await shown(app, pilot)
@@ -431,7 +431,9 @@ def test_the_trace_of_a_live_episode_grows_and_keeps_its_cursor(tmp_path: Path) 
         run_app([run], body)
 
 
-def test_why_of_a_change_that_was_not_the_atoms_last_in_its_step_says_so() -> None:
+def test_why_of_a_change_its_atom_undid_later_in_the_step_is_that_changes_own() -> None:
+    """acting(clock) changes twice at t=1 (clr_acting in pass 0, p_act in pass 1): the why tree of each
+    row is rooted at that row, its rule and its bound, not at the bound at the end of t=1."""
     async def body(app: Any, pilot: Any) -> None:
         pane, trace = await open_first_trace(app, pilot)
         pane.query_one("#tr-atom").value = "acting(clock)"
@@ -439,12 +441,100 @@ def test_why_of_a_change_that_was_not_the_atoms_last_in_its_step_says_so() -> No
         await wait_for(pilot, lambda: pane.filter.atom == "acting(clock)" and loaded(trace))
         rows = [trace.row(i) for i in range(trace.count)]
         first_at_1 = next(i for i, r in enumerate(rows) if r["t"] == 1)
-        assert rows[first_at_1 + 1]["t"] == 1                 # acting(clock) changes twice at t=1
-        trace.move_to(first_at_1)
-        await pilot.pause()
-        await pilot.press("w")
-        why = app.screen.query_one(WhyPane)
-        await wait_for(pilot, lambda: why.query_one("Tree").root.data is not None)
-        assert why.query_one("Tree").root.data.seq == rows[first_at_1 + 1]["seq"]
-        assert "was not acting(clock)'s last at t=1" in await shown(app, pilot)
+        first, second = rows[first_at_1], rows[first_at_1 + 1]
+        assert second["t"] == 1 and first["rule"] != second["rule"]      # changed twice at t=1
+        why: WhyPane = app.screen.panes["why"]
+        for index, row in ((first_at_1, first), (first_at_1 + 1, second)):
+            if index != first_at_1:
+                await pilot.press("2")                                   # back from the why tree
+            await wait_for(pilot, lambda: app.focused is trace)
+            trace.move_to(index)
+            await pilot.pause()
+            await pilot.press("w")
+            await wait_for(pilot, lambda: why.is_attached and why.query_one("Tree").root.data is not None
+                           and why.query_one("Tree").root.data.seq == row["seq"])
+            tree = why.query_one("Tree")
+            root = tree.root.data
+            assert root.cause.name == row["rule"] and root.pass_no == row["pass_no"]
+            assert root.value == [row["new_lower"], row["new_upper"]]
+            assert root.old == [row["old_lower"], row["old_upper"]]
+            new = f"[{row['new_lower']:g},{row['new_upper']:g}]"
+            assert str(tree.root.label).startswith(f"acting(clock) = [{row['old_lower']:g},{row['old_upper']:g}] → {new}")
+            assert f"by {row['rule']}" in str(tree.root.label)
+            assert f"at t=1 pass {row['pass_no']}" in await shown(app, pilot)
     run_app([ADVANCED], body, size=(120, 30))
+
+
+BASE_TRAIN = ROOT / "sample_runs" / "base-train"
+
+
+def test_next_and_previous_evaluation_game_from_the_trace_of_a_training_run() -> None:
+    """sample_runs/base-train traces 3 evaluation games per evaluation round (episodes 192-194 at train
+    step 5,008, 375-377 at 10,000, ...): `]` / `[` step through them, keeping the trace's filters, and the
+    header says which game is shown."""
+    con = open_run(BASE_TRAIN)
+    evals = [e for (e,) in con.execute("SELECT episode FROM episodes WHERE kind = 'eval' ORDER BY episode")
+             .fetchall()]
+    assert len(evals) >= 4
+
+    async def body(app: Any, pilot: Any) -> None:
+        await wait_for(pilot, lambda: loaded(app.screen.query_one("#ep-table", LazyTable)))
+        await pilot.press("enter")                                   # episode 0: a training episode,
+        pane = app.screen.query_one(TracePane)                       # not traced
+        trace = pane.table
+        await wait_for(pilot, lambda: pane.filter is not None and loaded(trace) and pane.query_one("#tr-game").display)
+        assert trace.count == 0 and "episode 0: a training episode, not an evaluation game" in header_text(pane)
+        await pilot.press("right_square_bracket")
+        await wait_for(pilot, lambda: pane.filter.episode == evals[0] and trace.count > 0 and loaded(trace))
+        first = trace.cursor_row
+        text = await shown(app, pilot)
+        assert "eval game 1/3 · round 0 · train step 5,008 · opponent p=0.3 · loss, 57 steps" in text
+        assert "]/[ eval games" in text                                # in the key bar
+        pane.query_one("#tr-label").value = "atLoc"                    # a filter the next game keeps
+        await pilot.press("slash", "enter")
+        await wait_for(pilot, lambda: pane.filter.label == "atLoc" and loaded(trace))
+        await wait_for(pilot, lambda: app.focused is trace)
+        at_20 = next(i for i in range(trace.count) if trace.row(i)["t"] >= 20)
+        trace.move_to(at_20)                                           # the cursor at t=20 ...
+        await wait_for(pilot, lambda: loaded(trace) and trace.cursor_row["t"] == 20)
+        jumps = pane.jumps
+        await pilot.press("right_square_bracket")
+        await wait_for(pilot, lambda: pane.filter.episode == evals[1] and pane.jumps > jumps and loaded(trace))
+        assert pane.filter.label == "atLoc" and trace.count > 0
+        assert trace.cursor_row["t"] == 20 and trace.row(trace.cursor - 1)["t"] < 20   # ... stays at t=20
+        assert {trace.row(i)["label"] for i in range(trace.cursor - 5, trace.cursor + 5)} == {"atLoc"}
+        assert "eval game 2/3 · round 0 · train step 5,008" in header_text(pane)
+        assert len(header_text(pane).split(" · ]/[")[0]) <= 80         # the game fits an 80-column line
+        await wait_for(pilot, lambda: pane.board.board is not None and pane.board.board.episode == evals[1])
+        await pilot.press("right_square_bracket")
+        await wait_for(pilot, lambda: pane.filter.episode == evals[2] and loaded(trace))
+        await pilot.press("right_square_bracket")
+        await wait_for(pilot, lambda: pane.filter.episode == evals[3] and loaded(trace))
+        assert "eval game 1/3 · round 1 · train step 10,000" in header_text(pane)
+        await pilot.press("left_square_bracket")
+        await wait_for(pilot, lambda: pane.filter.episode == evals[2] and loaded(trace))
+        assert "eval game 3/3 · round 0" in header_text(pane)
+        commands = {c.title: c for c in app.get_system_commands(app.screen)}
+        assert "Next evaluation game" in commands
+        await pilot.press("1")                                         # the palette's command, from Episodes
+        await commands["Previous evaluation game"].callback()
+        await wait_for(pilot, lambda: pane.filter.episode == evals[1] and loaded(trace))
+        assert app.screen.query_one("TabbedContent").active == "trace"
+        assert first is not None and first["t"] == 0
+    run_app([BASE_TRAIN], body, size=(120, 34))
+
+
+def header_text(pane: TracePane) -> str:
+    return str(pane.query_one("#tr-game").render())
+
+
+def test_evaluation_game_keys_on_a_run_that_is_not_a_training_run_say_so() -> None:
+    async def body(app: Any, pilot: Any) -> None:
+        pane, trace = await open_first_trace(app, pilot)
+        await pilot.press("right_square_bracket")
+        await wait_for(pilot, lambda: any(n.message.startswith("not a training run: it has no evaluation games")
+                                          for n in app._notifications))
+        assert pane.filter.episode == 0 and not pane.query_one("#tr-game").display
+        # run_test draws no toasts (notifications=False): the notification itself is the check
+        assert "]/[ eval games" in await shown(app, pilot)             # 80 columns: the key fits
+    run_app([ADVANCED], body)

@@ -60,6 +60,11 @@ class EpisodeTrace:
                    (float(c["new_lower"][i]), float(c["new_upper"][i])),
                    int(c["cause_kind"][i]), int(c["cause_id"][i]), int(c["grounding"][i]))
 
+    def index_of_seq(self, seq: int) -> int | None:
+        """The position of the change row `seq` among the episode's rows (None if it is not one)."""
+        i = int(np.searchsorted(self.c["seq"], seq, "left"))
+        return i if i < self.n and int(self.c["seq"][i]) == seq else None
+
     def _rows_of(self, atom: int) -> np.ndarray:
         lo = np.searchsorted(self._atom_sorted, atom, "left")
         hi = np.searchsorted(self._atom_sorted, atom, "right")

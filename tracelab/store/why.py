@@ -4,7 +4,8 @@ why(atom, t): the change row that set the atom's bound in force at the end of t;
 agent action, policy, reset); for a rule, the ground body atoms its grounding used and, recursively, why
 each held when the rule read it: just before the row for an immediate rule, before the ordinary pass for
 other Δt=0 rules, at the end of t−Δt for delayed rules. Leaves: facts, actions (external facts), resets,
-atoms never set ([0,1]), and the depth limit.
+atoms never set ([0,1]), and the depth limit. why of a change (explain_change): the same tree rooted at
+one given change row, for an atom that changed more than once within t.
 
 why-not(rule, bindings, t): the rule's body clauses checked in order at the time the rule would have read
 them (the end of t−Δt; the end of t for Δt=0) under the given bindings, extending them through the
@@ -144,6 +145,22 @@ def explain_in(model: RunModel, trace: EpisodeTrace, atom: str | int, at: int, d
     `at`), for callers that explain many atoms of one episode (the replay viewer)."""
     aid = model.parse_atom(atom) if isinstance(atom, str) else int(atom)
     return _Explainer(model, trace).node(aid, trace.last_at_end_of(aid, at), depth)
+
+
+def explain_change(con: RunConnection, episode: int, seq: int, depth: int = 6) -> WhyNode:
+    """Why the change row `seq` of `episode` happened: that row's own cause and grounding, its body read
+    where that rule read it. When an atom changes more than once in a step (immediate rules cascade in
+    passes), this is the selected change's derivation, not the bound at the end of the step (`explain`)."""
+    found = con.execute("SELECT t FROM raw.changes WHERE episode = $e AND seq = $s",
+                        {"e": episode, "s": seq}).fetchone()
+    if found is None:
+        raise KeyError(f"episode {episode} has no change row with seq {seq}")
+    model = RunModel(con)
+    trace = EpisodeTrace(con, episode, upto_t=int(found[0]))
+    index = trace.index_of_seq(seq)
+    assert index is not None, "the row read above is in the episode's rows up to its t"
+    row = trace.row(index)
+    return _Explainer(model, trace).node(row.atom, row, depth)
 
 
 def render_why(node: WhyNode, at: int | None = None) -> str:

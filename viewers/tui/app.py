@@ -52,6 +52,11 @@ class TracelabApp(App[None]):
         sql = await screen.pane("sql")
         sql.action_saved()  # type: ignore[attr-defined]
 
+    async def _eval_game(self, screen: RunScreen, direction: int) -> None:
+        await screen.action_show("trace")
+        trace = await screen.pane("trace")
+        trace.action_eval_game(direction)  # type: ignore[attr-defined]
+
     def action_help(self) -> None:
         if not isinstance(self.screen, HelpScreen):
             self.push_screen(HelpScreen())
@@ -66,4 +71,8 @@ class TracelabApp(App[None]):
                                     lambda tab=tab: screen.action_show(tab))
             yield SystemCommand("Saved queries", "pick a saved SQL query and its parameters",
                                 lambda: self._saved_queries(screen))
+            for direction, which in ((1, "Next"), (-1, "Previous")):
+                yield SystemCommand(f"{which} evaluation game", f"a training run's {which.lower()} evaluation game "
+                                    f"in the trace (key {']' if direction > 0 else '['})",
+                                    lambda d=direction: self._eval_game(screen, d))
             yield SystemCommand("Back to runs", "close this run", self.pop_screen)

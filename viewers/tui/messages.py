@@ -12,8 +12,8 @@ class OpenTrace(Message):
 
 
 class ExplainChange(Message):
-    """Open the why tree of an atom's bound at the end of timestep t of an episode (seq: the change
-    selected in the trace, if any)."""
+    """Open the why tree of the change `seq` of an episode (the one selected in the trace); without a seq,
+    of the atom's bound at the end of timestep t."""
     def __init__(self, episode: int, atom: str, t: int, seq: int | None = None) -> None:
         super().__init__()
         self.episode, self.atom, self.t, self.seq = episode, atom, t, seq

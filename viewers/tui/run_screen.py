@@ -8,7 +8,7 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.screen import Screen
 from textual.widget import Widget
-from textual.widgets import Input, Static, TabbedContent, TabPane, TextArea
+from textual.widgets import Input, Static, TabbedContent, TabPane, Tabs, TextArea
 
 from tracelab.viewers.tui.episodes import EpisodesPane
 from tracelab.viewers.tui.keybar import KeyBar
@@ -24,6 +24,24 @@ TABS = (("episodes", "1 Episodes"), ("trace", "2 Trace"), ("why", "3 Why"), ("ru
         ("sql", "5 SQL"), ("training", "6 Training"))
 
 EAGER = ("episodes", "trace")   # built with the screen; the other views when first shown
+
+
+class RunTabs(TabbedContent):
+    """TabbedContent that a stale message does not switch back. textual tells TabbedContent of a focus
+    inside a pane, and of a tab becoming active, by messages; one still queued when a key (1-6, `w`, ...)
+    switches views undid the switch (seen with fast keys on a loaded machine). Views switch by keys, tab
+    clicks and the messages between views, so a focus reported from a hidden view, or the activation of a
+    tab that is no longer the active one, is ignored."""
+
+    def _on_tab_pane_focused(self, event: TabPane.Focused) -> None:
+        if event.tab_pane.id != self.active:
+            event.stop()
+            event.prevent_default()   # textual runs every class's handler in the MRO unless this is set
+
+    def _on_tabs_tab_activated(self, event: Tabs.TabActivated) -> None:
+        if event.tab is not event.tabs.active_tab:
+            event.stop()
+            event.prevent_default()
 
 
 class RunScreen(Screen):
@@ -46,7 +64,7 @@ class RunScreen(Screen):
         status = self.source.status
         yield Static(f" {self.path.name}  ·  {kind}{'' if status == 'finished' else ' · ' + status}  ·  "
                      f"{self.source.command}", id="title", classes="title")
-        with TabbedContent(initial="episodes", id="tabs"):
+        with RunTabs(initial="episodes", id="tabs"):
             for tab, title in TABS:
                 with TabPane(title, id=tab):
                     if tab in EAGER:

@@ -2,8 +2,9 @@
 lazily by seq (TraceSource). Filters: a time range (`3..9`), atom, label and rule GLOBs; `g` jumps to a
 timestep; `n` / `p` move to the next / previous change of the selected atom; Enter or `w` opens the why
 tree of the selected change; `a` shows only the selected atom's changes; `b` shows or hides the board
-(shown by default when the terminal is at least 100 columns wide). On a live run the trace is re-read
-when the episode grows."""
+(shown by default when the terminal is at least 100 columns wide). In a training run `]` / `[` move to the
+next / previous evaluation game (the filters and the cursor's timestep kept), and a header line says which
+game is shown. On a live run the trace is re-read when the episode grows."""
 from __future__ import annotations
 
 import re
@@ -18,6 +19,7 @@ from textual.widgets import Input, Static
 from tracelab.viewers.tui.colours import DIM, styled_bound, styled_name
 from tracelab.viewers.tui.lazy_table import Column, LazyTable
 from tracelab.viewers.tui.board import BoardView
+from tracelab.viewers.tui.eval_games import EvalGame, eval_games, neighbour
 from tracelab.viewers.tui.messages import ExplainChange
 from tracelab.viewers.tui.paging import PAGE, TraceFilter, TraceSource
 from tracelab.viewers.tui.source import RunSource
@@ -69,6 +71,9 @@ class TracePane(Vertical):
         Binding("a", "only_atom", "only atom", show=False),
         Binding("x", "clear", "clear filters", show=False),
         Binding("b", "toggle_board", "board"),
+        # one entry in the key bar for both, so that it fits in 80 columns
+        Binding("right_square_bracket", "eval_game(1)", "eval games", key_display="]/["),
+        Binding("left_square_bracket", "eval_game(-1)", "previous eval game", show=False),
     ]
     DEFAULT_CSS = """
     TracePane #tr-filters { height: 1; }
@@ -87,6 +92,9 @@ class TracePane(Vertical):
         self._board_choice: bool | None = None   # the user's b, else by width
 
     def compose(self) -> ComposeResult:
+        game = Static("", id="tr-game", classes="title")
+        game.display = False           # shown for the episodes of a training run
+        yield game
         with Horizontal(id="tr-filters"):
             yield Input(placeholder="t 3..9", id="tr-range", compact=True)
             yield Input(placeholder="atom glob", id="tr-atom", compact=True)
@@ -150,6 +158,8 @@ class TracePane(Vertical):
                 self.query_one(name, Input).value = ""
         self._goto_t = at_t
         self.apply_filters(episode)
+        self.run_worker(lambda: self._read_game(episode), thread=True, group="trace-game", exclusive=True,
+                        exit_on_error=False)
 
     def apply_filters(self, episode: int | None = None, keep_seq: int | None = None,
                       atom_id: int | None = None) -> None:
@@ -254,6 +264,47 @@ class TracePane(Vertical):
         row = self.table.cursor_row
         if row is not None and self.filter is not None:
             self.post_message(ExplainChange(self.filter.episode, row["atom"], int(row["t"]), int(row["seq"])))
+
+    # ---- the evaluation games of a training run -----------------------------------------------------------
+    def _read_game(self, episode: int) -> None:
+        """The header line of `episode` (in a worker): which evaluation game it is, if the run has any."""
+        try:
+            games = eval_games(self.source)
+        except Exception:  # noqa: BLE001 - no header line is the answer; the trace itself still shows
+            games = []
+        game = next((g for g in games if g.episode == episode), None)
+        self.app.call_from_thread(self._show_game, episode, game, bool(games))
+
+    def _show_game(self, episode: int, game: EvalGame | None, training: bool) -> None:
+        header = self.query_one("#tr-game", Static)
+        header.display = training
+        what = game.describe() if game is not None else \
+            f"episode {episode}: a training episode, not an evaluation game"
+        header.update(f" {what} · ]/[ next/previous")
+
+    def action_eval_game(self, direction: int) -> None:
+        """Move to the next (previous) evaluation game, keeping the filters and the cursor's timestep."""
+        def work() -> None:
+            try:
+                games = eval_games(self.source)
+            except Exception as e:  # noqa: BLE001
+                self.app.call_from_thread(self.notify, str(e), severity="error")
+                return
+            self.app.call_from_thread(self._step_game, games, direction)
+
+        # not exclusive: each press is one step, taken from where the previous one landed (_step_game)
+        self.run_worker(work, thread=True, group="eval-game", exit_on_error=False)
+
+    def _step_game(self, games: list[EvalGame], direction: int) -> None:
+        game = neighbour(games, None if self.filter is None else self.filter.episode, direction > 0)
+        if game is None:
+            self.notify("not a training run: it has no evaluation games (episodes of kind 'eval')" if not games
+                        else f"no {'later' if direction > 0 else 'earlier'} evaluation game", severity="warning")
+            return
+        row = self.table.cursor_row
+        self._goto_t = None if row is None else int(row["t"])
+        self._show_game(game.episode, game, True)
+        self.apply_filters(game.episode, atom_id=None if self.filter is None else self.filter.atom_id)
 
     def action_only_atom(self) -> None:
         if self.filter is None:

@@ -1,6 +1,7 @@
-"""The Why view: the proof tree of a change (tracelab.store.why.explain, what `tracelab why` prints) as an
-expandable tree, and why-not for a rule and bindings (`tracelab why-not`): type
-`RULE A=red-agent-1,X=16 at T` in the why-not line."""
+"""The Why view: the proof tree of the change selected in the trace (tracelab.store.why.explain_change: that
+row's own rule and grounding, even when its atom changed again later in the step) as an expandable tree,
+and why-not for a rule and bindings (`tracelab why-not`): type `RULE A=red-agent-1,X=16 at T` in the
+why-not line."""
 from __future__ import annotations
 
 import re
@@ -12,8 +13,8 @@ from textual.containers import Vertical, VerticalScroll
 from textual.widgets import Input, Static, Tree
 from textual.widgets.tree import TreeNode
 
-from tracelab.store.why import WhyNode, WhyNot, explain, render_why_not, why_not
-from tracelab.viewers.tui.colours import DIM, FALSE, PARTIAL, TRUE, bound_colour, bound_text, styled_name
+from tracelab.store.why import WhyNode, WhyNot, explain, explain_change, render_why_not, why_not
+from tracelab.viewers.tui.colours import DIM, FALSE, TRUE, bound_colour, bound_text, styled_name
 from tracelab.viewers.tui.source import RunSource
 
 DEPTH = 12
@@ -30,6 +31,9 @@ def node_label(n: WhyNode, at: int | None = None) -> Text:
         text.append("ok " if n.holds else "NO ", style=f"bold {TRUE if n.holds else FALSE}")
         text.append_text(styled_name(n.clause))
         text.append(" = ")
+    if n.clause is None and at is None and n.old is not None:   # the root of a change's tree: old -> new
+        text.append(bound_text(*n.old), style=bound_colour(*n.old))
+        text.append(" → ", style=DIM)
     lo, up = n.value
     text.append(bound_text(lo, up), style=bound_colour(lo, up))
     if n.clause is None and at is not None:
@@ -88,37 +92,42 @@ class WhyPane(Vertical):
         self.query_one(Tree).focus()
 
     def explain(self, episode: int, atom: str, t: int, seq: int | None = None) -> None:
-        """The why tree of the atom's bound at the end of t (tracelab.store.why explains bounds at the end
-        of a timestep; when the selected change `seq` was not the atom's last at t, the header says so)."""
+        """The why tree of the selected change `seq` (its own rule and grounding, tracelab.store.why.
+        explain_change: right even when the atom changed again later in t); without a seq, of the atom's
+        bound at the end of t (what `tracelab why --at t` prints)."""
         self.episode, self.at = episode, t
-        self.query_one("#why-head", Static).update(f" why {atom} at the end of t={t}, episode {episode} · working…")
+        what = f"the change of {atom} (seq {seq})" if seq is not None else f"{atom} at the end of t={t}"
+        self.query_one("#why-head", Static).update(f" why {what}, episode {episode} · working…")
 
         def work() -> None:
             try:
-                root = self.source.call(lambda con: explain(con, episode, atom, t, depth=DEPTH))
+                root = self.source.call(lambda con: explain(con, episode, atom, t, depth=DEPTH) if seq is None
+                                        else explain_change(con, episode, seq, depth=DEPTH))
             except Exception as e:  # noqa: BLE001
                 self.app.call_from_thread(self._failed, str(e))
                 return
-            self.app.call_from_thread(self._show, root, atom, t, episode, seq)
+            self.app.call_from_thread(self._show, root, t, episode, seq is not None)
 
         self.run_worker(work, thread=True, group="why", exclusive=True, exit_on_error=False)
 
     def _failed(self, message: str) -> None:
         self.query_one("#why-head", Static).update(Text(f" {message}", style="bold red"))
 
-    def _show(self, root: WhyNode, atom: str, t: int, episode: int, seq: int | None = None) -> None:
+    def _show(self, root: WhyNode, t: int, episode: int, of_change: bool) -> None:
         tree = self.query_one(Tree)
         tree.clear()
-        tree.root.set_label(node_label(root, t))
+        tree.root.set_label(node_label(root, None if of_change else t))
         tree.root.data = root
         self._add_children(tree.root, root, expand_levels=2)
         tree.root.expand()
         rule = root.cause.name if root.cause else ""
-        head = Text(f" why {atom} at the end of t={t}, episode {episode} · {rule} · Enter/click expands, o all")
-        if seq is not None and root.seq is not None and root.seq != seq:
-            head = Text(f" the selected change (seq {seq}) was not {atom}'s last at t={t}: this explains the "
-                        f"bound at the end of t (seq {root.seq}, by {rule})", style=f"bold {PARTIAL}")
-        self.query_one("#why-head", Static).update(head)
+        if of_change:
+            old = "" if root.old is None else f"{bound_text(*root.old)} → "
+            what = f"the change {root.atom} {old}{bound_text(*root.value)} at t={root.t} pass {root.pass_no}"
+        else:
+            what = f"{root.atom} at the end of t={t}"
+        self.query_one("#why-head", Static).update(
+            f" why {what}, episode {episode} · {rule} · Enter/click expands, o all")
         if self.query_one("#why-not", Input).value == "" and root.cause and root.cause.kind == "rule":
             binds = ",".join(f"{k}={v}" for k, v in root.cause.bindings.items())
             self.query_one("#why-not", Input).placeholder = f"why-not: {rule} {binds} at {root.t}"

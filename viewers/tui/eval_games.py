@@ -1,0 +1,65 @@
+"""The traced evaluation games of a training run, for the trace's `]` / `[` keys and its header line.
+
+A training run (HELPER_GUIDE's contract, docs/training.md) begins each evaluation game with the info
+`{"kind": "eval", "train_step": N, "eval_round": K, "opponent_p": P}` and stores its full trace; a run
+that is not a training run has none. Read from the begin info itself, so a run sealed before the
+episodes view had its `kind` column reads the same."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from tracelab.viewers.tui.source import RunSource
+
+# every evaluation game in episode order; nth / of: its place among the games of its evaluation round
+EVAL_GAMES_SQL = """
+SELECT episode, train_step, eval_round, opponent_p, outcome, steps,
+       row_number() OVER (PARTITION BY train_step, eval_round ORDER BY episode) AS nth,
+       count(*) OVER (PARTITION BY train_step, eval_round) AS of_round
+FROM (SELECT episode, outcome, steps,
+             TRY_CAST(json_extract(begin_info, '$.train_step') AS BIGINT) AS train_step,
+             TRY_CAST(json_extract(begin_info, '$.eval_round') AS BIGINT) AS eval_round,
+             TRY_CAST(json_extract(begin_info, '$.opponent_p') AS DOUBLE) AS opponent_p
+      FROM episodes WHERE json_extract_string(begin_info, '$.kind') = 'eval')
+ORDER BY episode
+"""
+
+
+@dataclass(frozen=True)
+class EvalGame:
+    episode: int
+    train_step: int | None
+    eval_round: int | None
+    opponent_p: float | None
+    outcome: str | None        # None while the game is still being played (a live run)
+    steps: int | None
+    nth: int                   # 1-based place among the games of its evaluation round
+    of_round: int
+
+    def describe(self) -> str:
+        """One line for the trace's header (fits 80 columns; the episode number is in the status line)."""
+        parts = [f"eval game {self.nth}/{self.of_round}"]
+        if self.eval_round is not None:
+            parts.append(f"round {self.eval_round}")
+        if self.train_step is not None:
+            parts.append(f"train step {self.train_step:,}")
+        if self.opponent_p is not None:
+            parts.append(f"opponent p={self.opponent_p:g}")
+        ended = "playing" if self.outcome is None else \
+            f"{self.outcome}, {self.steps} steps" if self.steps is not None else self.outcome
+        return " · ".join(parts + [ended])
+
+
+def eval_games(source: RunSource) -> list[EvalGame]:
+    """The run's evaluation games in episode order (empty: not a training run). A few per evaluation,
+    so reading them all on each key press is cheap, and a live run's new games appear."""
+    return [EvalGame(**row) for row in source.rows(EVAL_GAMES_SQL)]
+
+
+def neighbour(games: list[EvalGame], episode: int | None, forward: bool) -> EvalGame | None:
+    """The first game after `episode` (forward) or the last before it; from no episode, the first or
+    the last game."""
+    if episode is None:
+        return (games[0] if forward else games[-1]) if games else None
+    if forward:
+        return next((g for g in games if g.episode > episode), None)
+    return next((g for g in reversed(games) if g.episode < episode), None)
