@@ -81,6 +81,27 @@ def test_why_and_why_not_commands(run: str, capsys: pytest.CaptureFixture) -> No
     assert code == 1 and err.strip() == "tracelab: error: no node 'zz' in this run's vocabulary"
 
 
+ADVANCED = str(Path(__file__).resolve().parents[1] / "sample_runs" / "advanced")
+
+
+def test_why_pass_explains_one_of_several_changes_in_a_step(capsys: pytest.CaptureFixture) -> None:
+    """acting(clock) changes twice at t=1 of the advanced sample run: cleared by clr_acting in pass 0, set
+    again by p_act in pass 1 (immediate). Without --pass why explains the end of the step and says so."""
+    code, out, err = cli(capsys, "why", ADVANCED, "acting(clock)", "-e", "0", "--at", "1", "--depth", "1")
+    assert code == 0 and out.startswith("acting(clock) = [1,1] at the end of t=1: set at t=1 pass 1 [0,0]->[1,1] by p_act")
+    assert "changed 2 times at t=1 (passes 0, 1)" in err and "--pass 0" in err
+    code, out, err = cli(capsys, "why", ADVANCED, "acting(clock)", "-e", "0", "--at", "1", "--pass", "0", "--json")
+    doc = json.loads(out)
+    assert code == 0 and doc["pass"] == 0 and doc["tree"]["cause"]["name"] == "clr_acting" and not err
+    code, out, _ = cli(capsys, "why", ADVANCED, "acting(clock)", "-e", "0", "--at", "1", "--pass", "0")
+    assert out.startswith("acting(clock) = [0,0]: set at t=1 pass 0 [1,1]->[0,0] by clr_acting")
+    code, _, err = cli(capsys, "why", ADVANCED, "acting(clock)", "-e", "0", "--at", "1", "--pass", "3")
+    assert code == 1 and err.strip() == ("tracelab: error: acting(clock) did not change in pass 3 of t=1; it "
+                                         "changed then in passes 0, 1")
+    code, _, err = cli(capsys, "why", ADVANCED, "alive(red-agent-1)", "-e", "0", "--at", "1", "--pass", "0")
+    assert code == 1 and "alive(red-agent-1) did not change at t=1" in err
+
+
 def test_sql_is_read_only_and_shows_error_positions(run: str, capsys: pytest.CaptureFixture) -> None:
     code, out, _ = cli(capsys, "sql", run, "SELECT episode, count(*) AS n FROM changes GROUP BY 1 ORDER BY 1",
                        "--format", "csv")

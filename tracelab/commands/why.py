@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from typing import TYPE_CHECKING
 
 from tracelab.commands._args import non_negative_int, positive_int
@@ -20,6 +21,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--episode", "-e", type=non_negative_int, required=True, help="the episode to explain")
     p.add_argument("--at", type=non_negative_int,
                    help="timestep, at most the episode's last (default: the episode's last)")
+    p.add_argument("--pass", dest="pass_no", type=non_negative_int,
+                   help="explain the atom's change in this pass of step --at (immediate rules cascade in "
+                        "passes, so an atom may change more than once in a step; default: its bound at the "
+                        "end of the step)")
     p.add_argument("--depth", type=positive_int, default=6,
                    help="how many rule firings deep to explain (default 6)")
     p.add_argument("--json", action="store_true", help="the tree as JSON")
@@ -49,18 +54,51 @@ def refuse_complement(atom: str) -> None:
                         f"(the bound of {atom.strip()} is [1-u,1-l] where [l,u] is the bound of {plain})")
 
 
+def passes_changed(con: "duckdb.DuckDBPyConnection", episode: int, atom: str, t: int) -> list[tuple[int, int]]:
+    """(pass, seq) of each change of `atom` at step t, in order."""
+    rows = con.execute("SELECT pass_no, seq FROM changes WHERE episode = $e AND t = $t AND atom = $a ORDER BY seq",
+                       {"e": episode, "t": t, "a": atom}).fetchall()
+    return [(int(p), int(q)) for p, q in rows]
+
+
+def change_in_pass(changes: list[tuple[int, int]], atom: str, t: int, pass_no: int) -> int:
+    """The seq of the atom's last change in `pass_no` of step t, or a UserError naming the passes it has."""
+    seqs = [seq for p, seq in changes if p == pass_no]
+    if seqs:
+        return seqs[-1]
+    if not changes:
+        raise UserError(f"{atom} did not change at t={t}: without --pass, why explains its bound then")
+    passes = sorted({p for p, _ in changes})
+    raise UserError(f"{atom} did not change in pass {pass_no} of t={t}; it changed then in pass"
+                    f"{'es' if len(passes) > 1 else ''} {', '.join(map(str, passes))}")
+
+
 def run(args: argparse.Namespace) -> int:
     from tracelab.store.reader import open_run, retrying
-    from tracelab.store.why import explain, render_why
+    from tracelab.store.why import explain, explain_change, render_why
     refuse_complement(args.atom)
     with store_errors():
         con = open_run(args.run)
         end = last_t(con, args.episode)
         check_at(args.at, args.episode, end)
         at = end if args.at is None else args.at
-        tree = retrying(lambda: explain(con, args.episode, args.atom, at, depth=args.depth))
+        atom = args.atom.replace(" ", "")
+        changes = retrying(lambda: passes_changed(con, args.episode, atom, at))
+        if args.pass_no is not None:
+            if not changes:  # an atom outside the run's vocabulary gets explain's own error first
+                retrying(lambda: explain(con, args.episode, args.atom, at, depth=1))
+            seq = change_in_pass(changes, args.atom, at, args.pass_no)
+            tree = retrying(lambda: explain_change(con, args.episode, seq, depth=args.depth))
+        else:
+            tree = retrying(lambda: explain(con, args.episode, args.atom, at, depth=args.depth))
+            if len(changes) > 1:  # the end-of-step bound hides the earlier changes: say how to see them
+                earlier = sorted({p for p, _ in changes[:-1]})
+                print(f"note: {args.atom} changed {len(changes)} times at t={at} (passes "
+                      f"{', '.join(str(p) for p, _ in changes)}); this is its bound at the end of the step; "
+                      f"--pass {earlier[0]} explains an earlier change", file=sys.stderr)
     if args.json:
-        print(json.dumps({"episode": args.episode, "at": at, "tree": tree.to_dict()}, indent=1))
+        print(json.dumps({"episode": args.episode, "at": at, "pass": args.pass_no, "tree": tree.to_dict()},
+                         indent=1))
     else:
-        print(render_why(tree, at))
+        print(render_why(tree, None if args.pass_no is not None else at))
     return 0
