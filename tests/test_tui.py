@@ -46,6 +46,17 @@ async def shown(app: Any, pilot: Any) -> str:
     return "\n".join("".join(t for _, t in sorted(parts)) for _, parts in sorted(lines.items()))
 
 
+async def shown_once(app: Any, pilot: Any, ready: Callable[[str], bool], timeout: float = 30.0) -> str:
+    """The screen's text once `ready` holds for it (a table's rows are painted a frame after they load),
+    or the last text seen after `timeout` seconds (the caller's assertion then says what is missing)."""
+    t0 = time.monotonic()
+    text = await shown(app, pilot)
+    while not ready(text) and time.monotonic() - t0 < timeout:
+        await pilot.pause(0.05)
+        text = await shown(app, pilot)
+    return text
+
+
 async def wait_for(pilot: Any, done: Callable[[], bool], timeout: float = 30.0) -> None:
     t0 = time.monotonic()
     while not done():
@@ -159,7 +170,7 @@ def test_open_a_run_go_to_an_episode_filter_by_rule_and_explain_a_death() -> Non
     async def body(app: Any, pilot: Any) -> None:
         episodes = app.screen.query_one("#ep-table", LazyTable)
         await wait_for(pilot, lambda: loaded(episodes))
-        text = await shown(app, pilot)
+        text = await shown_once(app, pilot, lambda t: "loss" in t and "win" in t)  # rows drawn after loading
         assert "1 Episodes" in text and "loss" in text and "win" in text
         assert episodes.count == 3 and episodes.cursor_row["episode"] == 0
         await pilot.press("enter")                                  # episode 0's trace
