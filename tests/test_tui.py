@@ -1,6 +1,6 @@
 """The terminal UI, headless (textual's run_test + Pilot), on the real sample runs and on a live run written
-by another process. pytest-textual-snapshot would pin pytest < 9, so screens are checked through their
-rendered text (the SVG screenshot's text) and the widgets' state instead of snapshot files."""
+by another process, checked through the rendered text (the SVG screenshot's text) and the widgets' state.
+Golden-file snapshots of the main screens: test_tui_snapshots.py."""
 from __future__ import annotations
 
 import html
