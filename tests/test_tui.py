@@ -1,17 +1,15 @@
 """The terminal UI, headless (textual's run_test + Pilot), on the real sample runs and on a live run written
-by another process. pytest-textual-snapshot would pin pytest < 9, so screens are checked through their
-rendered text (the SVG screenshot's text) and the widgets' state instead of snapshot files."""
+by another process, checked through the rendered text (the SVG screenshot's text) and the widgets' state.
+Golden-file snapshots of the main screens: test_tui_snapshots.py."""
 from __future__ import annotations
 
-import asyncio
 import html
 import os
 import re
 import subprocess
 import sys
-import time
 from collections import defaultdict
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -23,7 +21,6 @@ os.environ["TEXTUAL_ANIMATIONS"] = "none"
 from tracelab.cli import main as cli_main  # noqa: E402
 from tracelab.store.catalog import list_runs  # noqa: E402
 from tracelab.store.reader import open_run  # noqa: E402
-from tracelab.viewers.tui.app import TracelabApp  # noqa: E402
 from tracelab.viewers.tui.lazy_table import LazyTable  # noqa: E402
 from tracelab.viewers.tui.paging import PAGE, TraceFilter, TraceSource  # noqa: E402
 from tracelab.viewers.tui.plot import BraillePlot  # noqa: E402
@@ -31,6 +28,7 @@ from tracelab.viewers.tui.source import RunSource  # noqa: E402
 from tracelab.viewers.tui.sql import SqlPane, locate_error  # noqa: E402
 from tracelab.viewers.tui.trace import TracePane, parse_range  # noqa: E402
 from tracelab.viewers.tui.why import WhyPane  # noqa: E402
+from tui_helpers import loaded, pick_saved_query, run_app, wait_for  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 ADVANCED = ROOT / "sample_runs" / "advanced"
@@ -57,18 +55,6 @@ async def shown_once(app: Any, pilot: Any, ready: Callable[[str], bool], timeout
     return text
 
 
-async def wait_for(pilot: Any, done: Callable[[], bool], timeout: float = 30.0) -> None:
-    t0 = time.monotonic()
-    while not done():
-        await pilot.pause(0.05)
-        if time.monotonic() - t0 > timeout:
-            raise AssertionError("the TUI did not get there in time")
-
-
-def loaded(table: LazyTable) -> bool:
-    return table.ready and table.idle and (table.count == 0 or table.cursor_row is not None)
-
-
 @contextmanager
 def live_run(mode: str, tmp_path: Path) -> Iterator[Path]:
     """A run another process is writing (tests/tui_writer_proc.py MODE), from its first flush on."""
@@ -90,14 +76,6 @@ async def open_first_trace(app: Any, pilot: Any) -> tuple[TracePane, LazyTable]:
     pane = app.screen.query_one(TracePane)
     await wait_for(pilot, lambda: pane.table.count > 0 and loaded(pane.table))
     return pane, pane.table
-
-
-def run_app(paths: list[Path], body: Callable[[Any, Any], Any], size: tuple[int, int] = (80, 24)) -> None:
-    async def go() -> None:
-        app = TracelabApp(paths)
-        async with app.run_test(size=size) as pilot:
-            await body(app, pilot)
-    asyncio.run(go())
 
 
 # ---- the catalog and `tracelab runs` ---------------------------------------------------------------------
@@ -263,15 +241,7 @@ def test_sql_console_saved_query_inline_error_and_write_refused() -> None:
         await wait_for(pilot, lambda: app.screen.panes["sql"].is_attached)
         sql: SqlPane = app.screen.panes["sql"]
         results = sql.query_one(LazyTable)
-        await pilot.press("f2")                                     # the saved queries
-        await wait_for(pilot, lambda: type(app.screen).__name__ == "SavedQueryPicker")
-        picker = app.screen
-        names = [q.name for q in picker.queries]
-        picker.query_one("OptionList").highlighted = names.index("firings_per_episode")
-        await pilot.press("enter")
-        await wait_for(pilot, lambda: len(picker.query("Input")) == 1)
-        picker.query_one("Input").value = "1"                       # its parameter: episode 1
-        await pilot.press("enter")
+        await pick_saved_query(app, pilot, "firings_per_episode", "1")   # its parameter: episode 1
         await wait_for(pilot, lambda: results.ready and loaded(results) and results.count > 0)
         assert {results.row(i)["episode"] for i in range(results.count)} == {1}
         assert "firings_per_episode" in await shown(app, pilot)

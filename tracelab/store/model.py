@@ -213,7 +213,7 @@ class RunModel:
 
     def atoms_matching(self, label: str, pattern: tuple[str | None, ...]) -> list[tuple[int, tuple[str, ...]]]:
         """Atoms of `label` whose arguments equal the non-None entries of `pattern`, with their args,
-        ordered by node ids."""
+        ordered by node ids (then atom id: a total order)."""
         if label not in self.labels:
             return []
         lid = self.labels[label][0]
@@ -225,6 +225,6 @@ class RunModel:
                     return []
                 sql += f" AND arg{pos} = ?"
                 params.append(self.node_ids[value])
-        rows = self.con.execute(sql + " ORDER BY arg0, arg1", params).fetchall()
+        rows = self.con.execute(sql + " ORDER BY arg0, arg1, atom", params).fetchall()
         return [(aid, (self.nodes[a0],) if a1 < 0 else (self.nodes[a0], self.nodes[a1]))
                 for aid, a0, a1 in rows]

@@ -22,7 +22,7 @@ SELECT r.name AS rule, count(c.seq) AS firings, count(DISTINCT c.episode) AS epi
        count(c.seq) FILTER (e.outcome = 'win') AS in_wins,
        count(c.seq) FILTER (e.outcome = 'loss') AS in_losses,
        count(c.seq) FILTER (e.outcome NOT IN ('win', 'loss')) AS in_other,
-       min(c.episode) AS first_episode, r.delay, r.immediate
+       min(c.episode) AS first_episode, r.delay, r.immediate, r.rule AS rule_id
 FROM raw.rules r
 LEFT JOIN raw.changes c ON c.cause_kind = 2 AND c.cause_id = r.rule
 LEFT JOIN raw.episode_end e ON e.episode = c.episode
@@ -77,7 +77,7 @@ class RulesPane(Vertical):
             table.set_source(QuerySource(self.source, PER_EPISODE_SQL, "episode, firings DESC, rule"),
                              PER_EPISODE_COLUMNS)
         else:
-            table.set_source(QuerySource(self.source, PER_RULE_SQL, "firings DESC, rule"), PER_RULE_COLUMNS)
+            table.set_source(QuerySource(self.source, PER_RULE_SQL, "firings DESC, rule, rule_id"), PER_RULE_COLUMNS)
         self.query_one("#rules-status", Static).update(" counting firings… (Esc cancels)")
 
     def on_lazy_table_loaded(self, event: LazyTable.Loaded) -> None:

@@ -69,7 +69,7 @@ class TrainingPane(Vertical, can_focus=True):
         mark = (int(r["n"]), int(r["last"]))
         if mark == self._seen:
             return
-        rows = self.source.rows("SELECT name, step, value FROM metrics ORDER BY name, step, time")
+        rows = self.source.rows("SELECT name, step, value FROM metrics ORDER BY name, step, time, value")
         self.app.call_from_thread(self._draw, rows, mark)
 
     def _draw(self, rows: list[dict], mark: tuple[int, int]) -> None:

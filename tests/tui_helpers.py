@@ -1,0 +1,48 @@
+"""Driving the TUI headless in tests (textual's run_test + Pilot): waiting for a state, a loaded lazy table,
+an app run around a test body. Shared by test_tui.py and test_tui_snapshots.py."""
+from __future__ import annotations
+
+import asyncio
+import os
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+os.environ["TEXTUAL_ANIMATIONS"] = "none"
+
+from tracelab.viewers.tui.app import TracelabApp  # noqa: E402
+from tracelab.viewers.tui.lazy_table import LazyTable  # noqa: E402
+
+
+async def wait_for(pilot: Any, done: Callable[[], bool], timeout: float = 30.0) -> None:
+    t0 = time.monotonic()
+    while not done():
+        await pilot.pause(0.05)
+        if time.monotonic() - t0 > timeout:
+            raise AssertionError("the TUI did not get there in time")
+
+
+def loaded(table: LazyTable) -> bool:
+    return table.ready and table.idle and (table.count == 0 or table.cursor_row is not None)
+
+
+def run_app(paths: list[Path], body: Callable[[Any, Any], Any], size: tuple[int, int] = (80, 24)) -> None:
+    async def go() -> None:
+        app = TracelabApp(paths)
+        async with app.run_test(size=size) as pilot:
+            await body(app, pilot)
+    asyncio.run(go())
+
+
+async def pick_saved_query(app: Any, pilot: Any, name: str, value: str) -> None:
+    """In the SQL console: F2, the saved query NAME, VALUE for its one parameter, Enter (it runs)."""
+    await pilot.press("f2")
+    await wait_for(pilot, lambda: type(app.screen).__name__ == "SavedQueryPicker")
+    picker = app.screen
+    names = [q.name for q in picker.queries]
+    picker.query_one("OptionList").highlighted = names.index(name)
+    await pilot.press("enter")
+    await wait_for(pilot, lambda: len(picker.query("Input")) == 1)
+    picker.query_one("Input").value = value
+    await pilot.press("enter")
