@@ -8,8 +8,9 @@ import os
 import re
 import subprocess
 import sys
+import time
 from collections import defaultdict
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -522,3 +523,15 @@ def test_evaluation_game_keys_on_a_run_that_is_not_a_training_run_say_so() -> No
         # run_test draws no toasts (notifications=False): the notification itself is the check
         assert "]/[ eval games" in await shown(app, pilot)             # 80 columns: the key fits
     run_app([ADVANCED], body)
+
+
+def test_a_table_measures_its_own_copy_of_the_column_definitions() -> None:
+    """Widths measured on one table's first page never leak into the (module-level) column definitions,
+    so a second table, or the same screen in a second app of the process, measures its own rows."""
+    from tracelab.viewers.tui.lazy_table import Column
+    definitions = [Column("name", "run", None, max_width=24)]
+    wide, narrow = LazyTable(definitions), LazyTable(definitions)
+    wide._measure([{"name": "a-very-long-run-name"}])
+    narrow._measure([{"name": "base"}])
+    assert definitions[0].width is None
+    assert wide.columns[0].width == len("a-very-long-run-name") and narrow.columns[0].width == len("base")

@@ -9,7 +9,7 @@ from __future__ import annotations
 import threading
 from collections import OrderedDict
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from rich.style import Style
@@ -106,7 +106,8 @@ class LazyTable(ScrollView, can_focus=True):
     def __init__(self, columns: list[Column] | None = None, *, name: str | None = None,
                  id: str | None = None, classes: str | None = None) -> None:
         super().__init__(name=name, id=id, classes=classes)
-        self.columns: list[Column] = list(columns or [])
+        # copies: widths are measured per table, never into the (often module-level) definitions
+        self.columns: list[Column] = [replace(c) for c in columns or []]
         self.source: PageSource | None = None
         self.count = 0
         self.ready = False                # the count is known
@@ -128,7 +129,7 @@ class LazyTable(ScrollView, can_focus=True):
         self._generation += 1
         self.source = source
         if columns is not None:
-            self.columns = list(columns)
+            self.columns = [replace(c) for c in columns]
             self._share_room()
         self._pages.clear()
         with self._guard:
