@@ -535,3 +535,13 @@ def test_a_table_measures_its_own_copy_of_the_column_definitions() -> None:
     narrow._measure([{"name": "base"}])
     assert definitions[0].width is None
     assert wide.columns[0].width == len("a-very-long-run-name") and narrow.columns[0].width == len("base")
+
+
+def test_plot_axis_labels_fit_the_axis() -> None:
+    """Every y label fits the axis column (a return of -1,440 was cut to '-1.44e' in the Training view)."""
+    from tracelab.viewers.tui.plot import AXIS_W, _fmt
+    values = [-1440.0, -14_400.5, 250.0, 0.93, 3.2e-4, -3.1e-3, 2.5e6, -2.5e7, 999.7, -212.3, 1.0, -0.05]
+    labels = {v: _fmt(v) for v in values}
+    assert all(len(t) <= AXIS_W - 1 for t in labels.values()), labels
+    assert labels[-1440.0] == "-1.44k" and labels[250.0] == "250" and labels[-3.1e-3] == "-3e-3"
+    assert all(abs(float(t.replace("k", "e3").replace("M", "e6")) - v) <= 0.06 * abs(v) for v, t in labels.items())

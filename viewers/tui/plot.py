@@ -22,10 +22,17 @@ class Series:
 
 
 def _fmt(v: float) -> str:
-    if v == 0:
+    """A y-axis label that fits AXIS_W - 1 characters: -1.44k, 250, 0.93, 3.2e-04."""
+    a = abs(v)
+    if a == 0:
         return "0"
-    if abs(v) >= 10_000 or abs(v) < 0.01:
-        return f"{v:.1e}"
+    if a >= 1e6:
+        return f"{v / 1e6:.3g}M"
+    if a >= 999.5:  # :.3g would print 1e+03 and up in exponent form, cut by the axis
+        return f"{v / 1e3:.3g}k"
+    if a < 0.01:
+        short = f"{v:.1e}".replace("e-0", "e-")
+        return short if len(short) < AXIS_W else f"{v:.0e}".replace("e-0", "e-")
     return f"{v:.3g}"
 
 
