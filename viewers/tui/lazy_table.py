@@ -376,10 +376,12 @@ class LazyTable(ScrollView, can_focus=True):
             return
         visible = max(1, self.size.height - 1)
         top = int(self.scroll_offset.y)
+        # force: right after a new source the scrollbar is not laid out yet and textual would refuse to
+        # scroll, leaving rows 0.. on screen (and fetching page 0) instead of the cursor's page
         if new < top:
-            self.scroll_to(y=new, animate=False, immediate=True)
+            self.scroll_to(y=new, animate=False, immediate=True, force=True)
         elif new >= top + visible:
-            self.scroll_to(y=new - visible + 1, animate=False, immediate=True)
+            self.scroll_to(y=new - visible + 1, animate=False, immediate=True, force=True)
         self.refresh()
         if self.ready and new < self.count and new // PAGE not in self._pages:
             self._want(new // PAGE)
