@@ -192,7 +192,7 @@ class TraceSource:
         self._raw: TraceQuery | None = None
         self._view: TraceQuery | None = None
         self._index: EpisodeIndex | None = None          # the episode's index, once attached
-        self._positions: np.ndarray | None = None        # the filtered rows' positions in it (None: all)
+        self._positions: np.ndarray | range | None = None   # the filtered rows' positions in it
 
     def prepare(self) -> int:
         """The filtered row count (the table shows pages near a hint before the anchors exist). With the
@@ -229,19 +229,25 @@ class TraceSource:
         assert self._raw is not None and self._raw.selection is not None
         positions = index.positions(self._raw.selection)
         self._positions, self._index = positions, index
-        self.anchors = (index.seq[::PAGE] if positions is None else index.seq[positions[::PAGE]]).copy()
+        self.anchors = index.seq[np.asarray(positions[::PAGE], dtype=np.int64)]
 
     def _indexed_seq(self, row: int) -> int:
         assert self._index is not None
-        return int(self._index.seq[row if self._positions is None else self._positions[row]])
+        assert self._positions is not None
+        return int(self._index.seq[self._positions[row]])
 
     def _indexed_row(self, position: int) -> int:
         """The row index of the first filtered row at or after `position` in the episode."""
-        return position if self._positions is None else int(np.searchsorted(self._positions, position))
+        positions = self._positions
+        if isinstance(positions, range):
+            return min(max(0, position - positions.start), len(positions))
+        assert positions is not None
+        return int(np.searchsorted(positions, position))
 
     def _prepare_indexed(self, index: EpisodeIndex) -> int:
         self._attach(index)
-        self.count = len(index) if self._positions is None else len(self._positions)
+        assert self._positions is not None
+        self.count = len(self._positions)
         if self.count:
             self.hints = {0: self._indexed_seq(0), self.count: self._indexed_seq(self.count - 1) + 1}
         if self.start is not None and self.count:
