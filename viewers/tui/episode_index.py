@@ -147,9 +147,12 @@ def episode_index(source: RunSource, episode: int) -> EpisodeIndex | None:
     with lock:
         index = cached_index(source, episode)
         if index is None:
-            columns = source.call(lambda con: query_readonly(
+            table = source.call(lambda con: query_readonly(
                 con, f"SELECT {_COLUMNS} FROM raw.changes WHERE episode = $e",
-                {"e": episode}).fetchnumpy())
+                {"e": episode}).to_arrow_table())
+            # through Arrow: about half the time of fetchnumpy() (no column here has NULLs)
+            columns = {name: table.column(name).to_numpy() for name in table.column_names}
+            del table
             try:
                 index = EpisodeIndex(episode, columns)
             except ValueError:      # the SQL path serves it
