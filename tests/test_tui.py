@@ -179,6 +179,9 @@ def test_filters_answered_from_the_episode_index_equal_plain_sql(flt: TraceFilte
         t = by_sql.fetch(i // PAGE)[i % PAGE]["t"]
         assert indexed.row_of_t(t) == by_sql.row_of_t(t)
         assert indexed.row_of_seq(expected[i]) == by_sql.row_of_seq(expected[i]) == i
+        atom = int(by_sql.fetch(i // PAGE)[i % PAGE]["atom_id"])
+        for forward in (True, False):
+            assert indexed.next_change(atom, expected[i], forward) == by_sql.next_change(atom, expected[i], forward)
 
 
 def _sql_start_row(flt: TraceFilter, start: tuple[str, int]) -> int:

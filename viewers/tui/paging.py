@@ -388,7 +388,35 @@ class TraceSource:
     def next_change(self, atom_id: int, seq: int, forward: bool) -> int | None:
         """The row index of the atom's next (or previous) change after (before) `seq`, if any."""
         assert self._raw is not None
+        if self._index is not None:
+            return self._next_change_indexed(atom_id, seq, forward)
         agg, cmp = ("min", ">") if forward else ("max", "<")
         found = self.source.scalar(f"SELECT {agg}(seq) FROM raw.changes WHERE {self._raw.where} "
                                    f"AND atom = $a AND seq {cmp} $s", {**self._raw.params, "a": atom_id, "s": seq})
         return None if found is None else self.row_of_seq(int(found))
+
+    def _next_change_indexed(self, atom_id: int, seq: int, forward: bool) -> int | None:
+        """next_change through the episode's index: the atom's rows after (before) `seq`, searched a block
+        at a time from `seq` outwards, the first one the filter keeps."""
+        index, positions = self._index, self._positions
+        assert index is not None and positions is not None
+        if not 0 <= atom_id <= index.atom_top:
+            return None
+        atom = index.atom.dtype.type(atom_id)   # compared at the column's width, not widened to int64
+        start = int(np.searchsorted(index.seq, seq, side="right" if forward else "left"))
+        step = 1 << 16
+        bounds = range(start, len(index), step) if forward else range(start, 0, -step)
+        for edge in bounds:
+            lo, hi = (edge, min(edge + step, len(index))) if forward else (max(0, edge - step), edge)
+            found = np.flatnonzero(index.atom[lo:hi] == atom) + lo
+            if isinstance(positions, range):      # the filter's other conditions
+                kept = found[(found >= positions.start) & (found < positions.stop)]
+            else:
+                rows = np.searchsorted(positions, found)
+                kept = found[(rows < self.count) & (positions[np.minimum(rows, self.count - 1)] == found)] \
+                    if self.count else found[:0]
+            if len(kept):
+                row = self._indexed_row(int(kept[0] if forward else kept[-1]))
+                self.hints[row] = self._indexed_seq(row)
+                return row
+        return None
