@@ -8,7 +8,8 @@ returns one page of PAGE rows as dicts. Nothing fetches more than the pages aske
   page 0 is a top-N query, so the first screen comes at once; warm() (run by the table when idle) takes
   every PAGE-th seq of the filtered rows (the anchors), so page k is `seq >= anchors[k] AND seq <
   anchors[k+1]`, which the sealed file's (episode, seq) order and Parquet row-group statistics answer
-  without a scan."""
+  without a scan. On a sealed run warm() reads the episode's index (episode_index.py) instead, and every
+  later filter, jump and next change of that episode is answered from it without scanning the rows."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
