@@ -22,6 +22,7 @@ os.environ["TEXTUAL_ANIMATIONS"] = "none"
 from tracelab.cli import main as cli_main  # noqa: E402
 from tracelab.store.catalog import list_runs  # noqa: E402
 from tracelab.store.reader import open_run  # noqa: E402
+from tracelab.viewers.tui.episode_index import cached_index, episode_index  # noqa: E402
 from tracelab.viewers.tui.lazy_table import LazyTable  # noqa: E402
 from tracelab.viewers.tui.paging import PAGE, TraceFilter, TraceSource  # noqa: E402
 from tracelab.viewers.tui.plot import BraillePlot  # noqa: E402
@@ -98,15 +99,20 @@ def test_catalog_lists_the_sample_runs_with_counts(capsys: pytest.CaptureFixture
 
 # ---- paging ------------------------------------------------------------------------------------------------
 
+def plain_seqs(source: RunSource, flt: TraceFilter) -> list[int]:
+    """The seqs of the rows `flt` keeps, by a plain query over the changes view (no paging, no index)."""
+    return [r["seq"] for r in source.rows(
+        "SELECT seq FROM changes WHERE episode = $e AND ($lo IS NULL OR t >= $lo) AND ($hi IS NULL OR t <= $hi) "
+        "AND atom GLOB $a AND label GLOB $l AND rule GLOB $r AND ($id IS NULL OR atom_id = $id) ORDER BY seq",
+        {"e": flt.episode, "lo": flt.t_from, "hi": flt.t_to, "a": flt.atom or "*", "l": flt.label or "*",
+         "r": flt.rule or "*", "id": flt.atom_id})]
+
+
 @pytest.mark.parametrize("flt", [TraceFilter(0), TraceFilter(0, rule="snap_*"), TraceFilter(1, label="atLoc"),
                                  TraceFilter(2, t_from=3, t_to=9, atom="*red-agent-1*")])
 def test_trace_pages_match_the_changes_view_in_every_order_of_access(flt: TraceFilter) -> None:
     source = RunSource(ADVANCED)
-    expected = [r["seq"] for r in TraceSource(source, flt).source.rows(
-        "SELECT seq FROM changes WHERE episode = $e AND ($lo IS NULL OR t >= $lo) AND ($hi IS NULL OR t <= $hi) "
-        "AND atom GLOB $a AND label GLOB $l AND rule GLOB $r ORDER BY seq",
-        {"e": flt.episode, "lo": flt.t_from, "hi": flt.t_to, "a": flt.atom or "*", "l": flt.label or "*",
-         "r": flt.rule or "*"})]
+    expected = plain_seqs(source, flt)
     assert expected
     by_hints = TraceSource(source, flt)       # pages found from hints, last page first
     assert by_hints.prepare() == len(expected)
@@ -131,6 +137,48 @@ def test_trace_pages_match_the_changes_view_in_every_order_of_access(flt: TraceF
     t = by_anchors.fetch(pages - 1)[-1]["t"]
     row = jumper.row_of_t(t)
     assert jumper.fetch(row // PAGE)[row % PAGE]["t"] == t and (row == 0 or expected[row - 1] < expected[row])
+
+
+@pytest.mark.parametrize("flt", [
+    TraceFilter(0), TraceFilter(0, rule="action"), TraceFilter(1, rule="fact:*"), TraceFilter(0, rule="snap_*"),
+    TraceFilter(1, label="atLoc", rule="action"), TraceFilter(2, atom="*red-agent-1*"),
+    TraceFilter(2, t_from=3, t_to=9), TraceFilter(0, t_from=5, label="alive"),
+    TraceFilter(1, atom_id=0, t_to=40), TraceFilter(0, rule="no-such-rule")])
+def test_filters_answered_from_the_episode_index_equal_plain_sql(flt: TraceFilter) -> None:
+    """Counts, pages, start rows and jumps through the in-memory episode index are those of the SQL path
+    and of a plain query over the changes view."""
+    source = RunSource(ADVANCED)
+    expected = plain_seqs(source, flt)
+    if flt.atom_id is not None:           # atom 0 changes in that episode: the filter keeps something
+        assert expected
+    by_sql = TraceSource(source, flt)
+    assert by_sql.prepare() == len(expected) and cached_index(source, flt.episode) is None
+    assert episode_index(source, flt.episode) is not None
+    indexed = TraceSource(source, flt)
+    assert indexed.prepare() == len(expected)
+    assert indexed.anchors is not None     # answered from the index: no warm-up needed
+    pages = (len(expected) + PAGE - 1) // PAGE
+    assert [r["seq"] for p in range(pages) for r in indexed.fetch(p)] == expected
+    for i in sorted({0, len(expected) // 3, len(expected) - 1} if expected else set()):
+        for start in (("seq", expected[i]), ("seq", expected[i] - 1), ("t", by_sql.fetch(i // PAGE)[i % PAGE]["t"])):
+            opened = TraceSource(source, flt, start)
+            assert opened.prepare() == len(expected) and opened.anchors is not None
+            row = _sql_start_row(flt, start)
+            assert opened.start_row == row
+            assert opened.fetch(row // PAGE)[row % PAGE]["seq"] == expected[row]
+        t = by_sql.fetch(i // PAGE)[i % PAGE]["t"]
+        assert indexed.row_of_t(t) == by_sql.row_of_t(t)
+        assert indexed.row_of_seq(expected[i]) == by_sql.row_of_seq(expected[i]) == i
+        atom = int(by_sql.fetch(i // PAGE)[i % PAGE]["atom_id"])
+        for forward in (True, False):
+            assert indexed.next_change(atom, expected[i], forward) == by_sql.next_change(atom, expected[i], forward)
+
+
+def _sql_start_row(flt: TraceFilter, start: tuple[str, int]) -> int:
+    """Where a TraceSource opening at `start` puts the cursor, by SQL alone (a fresh run, no index)."""
+    fresh = TraceSource(RunSource(ADVANCED), flt, start)
+    fresh.prepare()
+    return fresh.start_row
 
 
 def test_time_ranges_and_error_positions_are_read() -> None:

@@ -121,12 +121,17 @@ class LazyTable(ScrollView, can_focus=True):
         self._generation = 0
         self._pending_cursor: int | None = None
         self._guard = threading.Lock()
+        # drawn rows by (index, cursor on it, focus, scroll x, width, style, version): textual asks for
+        # every line on each refresh (~1 ms a row here), and a new filter repaints the same rows 2-3 times
+        self._lines: dict[tuple[Any, ...], Strip] = {}
+        self._version = 0          # bumped whenever a row's drawing may change (rows, widths, source)
 
     # ---- the data ------------------------------------------------------------------------------------
     def set_source(self, source: PageSource | None, columns: list[Column] | None = None,
                    cursor: int = 0) -> None:
         """Show `source` (prepared in a worker); the cursor goes to row `cursor` once it is known."""
         self._generation += 1
+        self._redraw()
         self.source = source
         if columns is not None:
             self.columns = [replace(c) for c in columns]
@@ -263,6 +268,7 @@ class LazyTable(ScrollView, can_focus=True):
         """Cache a page fetched elsewhere (by a worker that also found where to move the cursor)."""
         self._pages[page] = rows
         self._pages.move_to_end(page)
+        self._redraw()
         while len(self._pages) > CACHED_PAGES:
             self._pages.popitem(last=False)
         if any(c.width is None for c in self.columns) and rows:
@@ -271,7 +277,13 @@ class LazyTable(ScrollView, can_focus=True):
         if page == self.cursor // PAGE:
             self.post_message(self.RowHighlighted(self, self.cursor, self.cursor_row))
 
+    def _redraw(self) -> None:
+        """Forget the drawn rows (new rows, source or column widths)."""
+        self._version += 1
+        self._lines.clear()
+
     def _measure(self, rows: list[Row]) -> None:
+        self._redraw()
         for c in self.columns:
             if c.width is None:
                 c.width = min(c.max_width, max([len(c.title) + 1, *(c.cell(r).cell_len for r in rows)]))
@@ -287,11 +299,18 @@ class LazyTable(ScrollView, can_focus=True):
         base = self.rich_style
         if y == 0:
             text = self._header()
-        else:
-            index = scroll_y + y - 1
+            return Strip(text.render(self.app.console), text.cell_len).crop_extend(scroll_x, scroll_x + width, base)
+        index = scroll_y + y - 1
+        key = (index, index == self.cursor, self.has_focus, scroll_x, width, base, self._version)
+        strip = self._lines.get(key)
+        if strip is None:
             text = self._line(index)
-        strip = Strip(text.render(self.app.console), text.cell_len)
-        return strip.crop_extend(scroll_x, scroll_x + width, base)
+            strip = Strip(text.render(self.app.console), text.cell_len).crop_extend(scroll_x, scroll_x + width, base)
+            if self.row(index) is not None:     # placeholders ("…", loading) are not kept
+                if len(self._lines) > 4096:
+                    self._lines.clear()
+                self._lines[key] = strip
+        return strip
 
     def _header(self) -> Text:
         text = Text(style="bold")
@@ -343,6 +362,7 @@ class LazyTable(ScrollView, can_focus=True):
 
     def _share_room(self) -> None:
         """Widen the flex columns to fill the widget (back to their own width when it shrinks)."""
+        self._redraw()
         flex = [c for c in self.columns if c.flex and c.width is not None]
         if not flex:
             return
@@ -377,10 +397,12 @@ class LazyTable(ScrollView, can_focus=True):
             return
         visible = max(1, self.size.height - 1)
         top = int(self.scroll_offset.y)
+        # force: right after a new source the scrollbar is not laid out yet and textual would refuse to
+        # scroll, leaving rows 0.. on screen (and fetching page 0) instead of the cursor's page
         if new < top:
-            self.scroll_to(y=new, animate=False, immediate=True)
+            self.scroll_to(y=new, animate=False, immediate=True, force=True)
         elif new >= top + visible:
-            self.scroll_to(y=new - visible + 1, animate=False, immediate=True)
+            self.scroll_to(y=new - visible + 1, animate=False, immediate=True, force=True)
         self.refresh()
         if self.ready and new < self.count and new // PAGE not in self._pages:
             self._want(new // PAGE)
