@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import shlex
 import signal
 import sys
@@ -111,7 +112,7 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
     largest = max(abs(v) for v in dataclasses.asdict(scenario.rewards).values()) * cfg.reward_scale
     if largest > 10:  # far outside Smooth L1's quadratic zone: the learner crawls (docs/training.md)
         print(f"note: the learner sees rewards up to {largest:g}, where Smooth L1 caps the gradient; "
-              f"--reward-scale {10 ** -(len(str(int(largest))) - 1):g} learns several times faster "
+              f"--reward-scale {10 ** -math.floor(math.log10(largest)):g} learns several times faster "
               f"(docs/training.md, \"Reward scale\")", file=sys.stderr)
     trainer = None
     status = "failed"

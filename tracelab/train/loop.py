@@ -89,6 +89,7 @@ class Trainer:
         self.last_loss: float | None = None
         self.stop_requested = False
         self._eval_env: GridWarVectorEnv | None = None
+        self._masks: np.ndarray | None = None  # the shield's mask of the current state (--mask), once read
         self._eval_trace: EvalTrace | None = None
         self.obs, _ = self.env.reset(seed=int(np.random.SeedSequence([cfg.seed, 2]).generate_state(1)[0]))
         self.acting = may_act(scenario, self.env.sim.state)
@@ -166,7 +167,9 @@ class Trainer:
 
     def env_step(self) -> None:
         cfg, w, n = self.cfg, self.worlds, self.agents
-        masks = self.masker.for_sim(self.env.sim, RED) if cfg.mask else None
+        masks = None
+        if cfg.mask:  # the shield's mask of this state: read after the previous step, or now
+            masks = self._masks if self._masks is not None else self.masker.for_sim(self.env.sim, RED)
         actions = self._choose(masks)
         self.pending.start(self.acting, self._views(self.obs), actions)
         obs, reward, terminated, truncated, info = self.env.step(actions[:, 0] if n == 1 else actions)
@@ -185,9 +188,10 @@ class Trainer:
         acting_next = may_act(self.scenario, self.env.sim.state)
         dead = true_next[:, 0:2 * n:2] < 0  # an agent's own x is -1 once it is dead
         out = self.pending.close(done[:, None] | dead | acting_next, terminated[:, None] | dead)
+        self._masks = self.masker.for_sim(self.env.sim, RED) if cfg.mask else None  # s', and the next act
         if len(out["action"]):
             if cfg.mask:  # what the shield allows in s' bounds the target's max (replay.py)
-                allowed = self.masker.for_sim(self.env.sim, RED)[out["world"], out["agent"]].astype(bool)
+                allowed = self._masks[out["world"], out["agent"]].astype(bool)
                 # a world that ended has been reset: its next state's mask is gone; a terminated
                 # transition has no bootstrap, a truncated one takes the max over all actions
                 allowed[done[out["world"]]] = True

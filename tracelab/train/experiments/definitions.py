@@ -58,6 +58,7 @@ class Experiment:
 # scale"): at the game's scale Smooth L1's gradient is capped and the method's settings barely learn.
 LEARNER_REWARD_SCALE = {"reward_scale": 0.01}
 METHODS_SETTINGS = {"reward_scale": 1.0}
+METHOD_1V1 = {"published": 0.976, "published_note": "97.6% after 760K steps (A100)"}  # the 1v1 figure
 
 SHOT_BEFORE = {"got_shot": -400.0}                          # the setting whose traces showed hiding
 SHOT_AFTER = {"got_shot": -200.0, "invalid": -10.0}         # the method's fix
@@ -66,9 +67,8 @@ assert Rewards().got_shot == -200.0 and Rewards().invalid == -10.0  # the defaul
 EXPERIMENTS: dict[str, Experiment] = {e.name: e for e in (
     Experiment(
         "1v1-base", "1v1 base scenario: win rate over training",
-        (Arm("1v1 base", "base", published=0.976, published_note="97.6% after 760K steps (A100)"),
-         Arm("1v1 base, the method's reward scale", "base", train=METHODS_SETTINGS, published=0.976,
-             published_note="97.6% after 760K steps (A100)")),
+        (Arm("1v1 base", "base", **METHOD_1V1),
+         Arm("1v1 base, the method's reward scale", "base", train=METHODS_SETTINGS, **METHOD_1V1)),
         full=Budget(seeds=3, steps=200_000, eval_games=500, evals=10),
         quick=Budget(seeds=1, steps=3_000, eval_games=40, evals=2),
         goal="method's win rate >= 97.6% against p = 0.3 with fewer than 760K steps"),
