@@ -20,7 +20,7 @@ from .graphml_raw import GraphKey, RawGraph
 from .parser import PREDICATE_RE
 from .program import Fact, Literal, SourceLoc, Term, constant_text, unwritable_constant
 
-__all__ = ["Graph", "load_graphml"]
+__all__ = ["Graph", "load_graphml", "read_raw_graphml"]
 
 _NUM = r"([0-9]+(?:\.[0-9]+)?|\.[0-9]+)"
 _BOUND_RE = re.compile(rf"\s*(?:\[\s*{_NUM}\s*,\s*{_NUM}\s*\]|{_NUM}\s*,\s*{_NUM})\s*")
@@ -120,6 +120,12 @@ def load_graphml(path: str | os.PathLike[str]) -> Graph:
     a string "l,u" or "[l,u]" is [l,u]. Anything else raises ProgramCheckError naming the file, the line,
     the node or edge and the attribute. GraphML key defaults apply to elements that lack the attribute.
     (docs/language.md, "Graphs".)"""
+    return _to_graph(read_raw_graphml(path))
+
+
+def read_raw_graphml(path: str | os.PathLike[str]) -> RawGraph:
+    """A GraphML file's nodes, edges and <data> values before any value becomes a bound (for readers with
+    another attribute mapping, such as PyReason's: tracelab/pyreason/graphml.py)."""
     file = os.fspath(path)
     with open(file, "rb") as f:
         data = f.read()
@@ -127,7 +133,7 @@ def load_graphml(path: str | os.PathLike[str]) -> Graph:
     if raw is None:  # outside the scanner's subset: the complete reader
         del data
         raw = read_graphml_expat(file)
-    return _to_graph(raw)
+    return raw
 
 
 def _scan(file: str, data: bytes) -> RawGraph | None:

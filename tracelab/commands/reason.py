@@ -16,8 +16,12 @@ from tracelab.errors import UserError
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("reason", help="run a rule program and print its trace and final interpretation")
     p.add_argument("program", nargs="+", help="rule files (merged into one program)")
+    p.add_argument("--dialect", choices=("tracelab", "pyreason"), default="tracelab",
+                   help="the language of the rule, fact and graph files: tracelab's (default) or PyReason's "
+                        "(rules .txt/.csv/.json, facts .csv/.json, its GraphML mapping; docs/pyreason.md)")
     p.add_argument("--graph", help="a GraphML graph (node/edge attributes become static facts)")
-    p.add_argument("--facts", action="append", default=[], help="a file of facts (rule syntax)")
+    p.add_argument("--facts", action="append", default=[], help="a file of facts (rule syntax, or PyReason's "
+                                                                "fact files with --dialect pyreason)")
     p.add_argument("--facts-table", action="append", default=[], metavar="TABLE",
                    help="a Parquet or CSV table of facts (columns atom, lower, upper, start, end, static)")
     p.add_argument("--steps", type=positive_int, required=True, help="timesteps to run (at least 1)")
@@ -28,6 +32,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                         '"link(a,Y):[0.5,1]" (repeatable; replaces the final interpretation)')
     p.add_argument("--query-at", choices=("end", "each"), default="end",
                    help="answer the queries after the last step (default) or after each step")
+    p.add_argument("--persistent", action="store_true",
+                   help="--dialect pyreason: PyReason's persistent=True (atoms keep their bounds between steps)")
+    p.add_argument("--pyreason-trace", metavar="DIR",
+                   help="also write the rule trace in PyReason's CSV layout (rule_trace_nodes_*.csv, "
+                        "rule_trace_edges_*.csv) into DIR")
     p.set_defaults(func=run)
 
 
@@ -46,8 +55,17 @@ def run(args: argparse.Namespace) -> int:
     )
     from tracelab.engine.program import constant_text
 
-    program = load_program(*args.program, *args.facts)
-    graph = load_graphml(args.graph) if args.graph else None
+    names = None
+    if args.dialect == "pyreason":
+        from tracelab.pyreason import load_pyreason
+        translated = load_pyreason(args.program, args.facts, args.graph, persistent=args.persistent)
+        program, graph, names = translated.program, translated.graph, translated.names
+    else:
+        if args.persistent:
+            raise UserError("--persistent belongs to --dialect pyreason (tracelab programs say %timesteps)")
+        program = load_program(*args.program, *args.facts)
+        graph = load_graphml(args.graph) if args.graph else None
+    graph_facts = graph.n_facts if graph is not None else 0
     for table in args.facts_table:
         facts = load_fact_table(table)
         graph = facts if graph is None else graph.concat(facts)
@@ -61,7 +79,12 @@ def run(args: argparse.Namespace) -> int:
         except ProgramError as e:
             raise UserError(f"--query {q!r}: {e.message}") from e
     with compiling_engine(busy="grounding the program…"):  # the first step compiles (cold cache) and grounds
-        engine = Engine(program, graph, trace=not args.no_trace)
+        engine = Engine(program, graph, trace=not args.no_trace or args.pyreason_trace is not None)
+        pr_trace = None
+        if args.pyreason_trace is not None:
+            from tracelab.pyreason.trace_csv import PyReasonTrace
+            pr_trace = PyReasonTrace(engine, names, graph_facts)
+        passes = 0
         engine.step()
     answers: list[dict[str, object]] = []
     changes: list[dict[str, object]] = []  # --json only: text output prints each step's rows as it goes
@@ -72,7 +95,13 @@ def run(args: argparse.Namespace) -> int:
         if args.query and (args.query_at == "each" or t == args.steps - 1):
             answers += [{"t": t, "query": q, "bindings": b, "bound": list(bound)}
                         for q in args.query for b, bound in engine.match(q)]
-        step_changes = _changes(engine, engine.take_trace())
+        rows = engine.take_trace()
+        if pr_trace is not None:
+            pr_trace.add(rows, passes)
+            passes = int(engine.stats["passes"][0])
+        if args.no_trace:
+            continue
+        step_changes = _changes(engine, rows)
         if args.json:
             changes.extend(step_changes)
             continue
@@ -82,6 +111,9 @@ def run(args: argparse.Namespace) -> int:
                 header = True
             print(f"{c['t']:>4} {c['pass']:>4}  {c['atom']:<32} {_fmt(c['old']):<11} {_fmt(c['new']):<11} "
                   f"{c['cause']}{'  ' + c['grounding'] if c['grounding'] else ''}")
+    if pr_trace is not None:
+        for path in pr_trace.write(args.pyreason_trace):
+            print(f"wrote {path}", file=sys.stderr)
     final = engine.interpretation(0)
     if args.json:
         json.dump({"steps": args.steps, "changes": changes,

@@ -1,0 +1,120 @@
+"""A GraphML file read the way PyReason reads it (networkx's read_graphml, made a DiGraph, then
+PyReason's GraphmlParser.parse_graph_attributes), as static facts at t = 0:
+- a value that is a number in [0,1] (an int, long, float or double, a boolean (true is 1, false is 0), or
+  a string of digits and dots) gives the attribute `key` the bound [v,1];
+- a string "l,u" of two integers in {0,1} gives `key` the bound [l,u];
+- any other value v gives the predicate `key-v` the bound [1,1] (`color="red"` is `color-red`);
+- an undirected edge sets both directions; parallel edges merge their attributes, later ones winning;
+- a key's <default> is not applied (networkx keeps it aside).
+Hostile XML is refused by the engine's readers (engine/graph.py). Names become tracelab names (names.py)."""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from tracelab.engine.errors import ProgramCheckError
+from tracelab.engine.graph import Graph, read_raw_graphml
+from tracelab.engine.program import unwritable_constant
+
+from .names import NameMap
+
+_BOOL = {"true": True, "false": False, "1": True, "0": False}
+
+
+def _value(text: str, ktype: str) -> object:
+    """The Python value networkx gives a <data> text of this attr.type (ValueError if it cannot)."""
+    if ktype == "boolean":
+        return _BOOL[text.strip().lower()]
+    if ktype in ("int", "long"):
+        return int(text)
+    if ktype in ("float", "double"):
+        return float(text)
+    return text
+
+
+def attribute_fact(key: str, value: object) -> tuple[str, float, float]:
+    """PyReason's mapping of one attribute: (label, lower, upper)."""
+    if isinstance(value, (int, float)) and 0 <= value <= 1:
+        return key, float(value), 1.0
+    if isinstance(value, str) and value.replace(".", "").isdigit() and 0 <= float(value) <= 1:
+        return key, float(value), 1.0
+    if isinstance(value, str):
+        parts = value.split(",")
+        if len(parts) == 2:
+            try:
+                lo, up = int(parts[0]), int(parts[1])
+            except ValueError:
+                pass
+            else:
+                if 0 <= lo <= 1 and 0 <= up <= 1:
+                    return key, float(lo), float(up)
+    return f"{key}-{value}", 1.0, 1.0
+
+
+def load_pyreason_graphml(path: str | os.PathLike[str], names: NameMap) -> Graph:
+    """The graph's facts (static, at t = 0) with PyReason's mapping, predicates named through `names`."""
+    raw = read_raw_graphml(path)
+    file = raw.file
+    for n in raw.nodes:
+        why = unwritable_constant(n)
+        if why is not None:
+            raise ProgramCheckError(f"node id {n!r} cannot be a constant of the rule language: {why}", file)
+    node_attrs: list[dict[str, object]] = [{} for _ in raw.nodes]
+    adj: list[dict[int, dict[str, object]]] = [{} for _ in raw.nodes]  # DiGraph adjacency, insertion order
+    edge_data: list[list[tuple[str, object]]] = [[] for _ in range(len(raw.edges))]
+    for i, (kind, elem, kidx) in enumerate(raw.data.tolist()):
+        kid = raw.data_keys[kidx]
+        key = raw.keys.get(kid)
+        if key is None:
+            line, col = raw.place(i)
+            raise ProgramCheckError(f"<data key=\"{kid}\"> names no <key>", file, line, col)
+        text = raw.text(i)
+        try:
+            value = _value(text, key.type)
+        except (KeyError, ValueError):
+            line, col = raw.place(i)
+            raise ProgramCheckError(f"attribute '{key.name}': '{text}' is not a {key.type}", file, line, col) from None
+        if kind == 0:
+            node_attrs[elem][key.name] = value
+        else:
+            edge_data[elem].append((key.name, value))
+    for e, (src, dst, directed) in enumerate(raw.edges.tolist()):
+        undirected = raw.graph_undirected if directed < 0 else directed == 0
+        attrs = adj[src].setdefault(dst, {})
+        attrs.update(edge_data[e])
+        if undirected and src != dst:
+            adj[dst][src] = attrs  # networkx shares one dict between both directions
+    labels: list[str] = []
+    arity: list[int] = []
+    label_of: dict[str, int] = {}
+    f_label: list[int] = []
+    f_args: list[tuple[int, int]] = []
+    f_bounds: list[tuple[float, float]] = []
+
+    def add(label: str, ar: int, a0: int, a1: int, lo: float, up: float) -> None:
+        name = names.predicate(label)
+        lid = label_of.get(name)
+        if lid is None:
+            lid = label_of[name] = len(labels)
+            labels.append(name)
+            arity.append(ar)
+        elif arity[lid] != ar:
+            raise ProgramCheckError(f"attribute '{label}' is set on nodes and on edges, but a predicate has one "
+                                    "arity", file)
+        f_label.append(lid)
+        f_args.append((a0, a1))
+        f_bounds.append((lo, up))
+
+    for n, attrs in enumerate(node_attrs):
+        for k, v in attrs.items():
+            label, lo, up = attribute_fact(k, v)
+            add(label, 1, n, -1, lo, up)
+    for src, targets in enumerate(adj):
+        for dst, attrs in targets.items():
+            for k, v in attrs.items():
+                label, lo, up = attribute_fact(k, v)
+                add(label, 2, src, dst, lo, up)
+    return Graph(list(raw.nodes), labels, arity, np.array(f_label, np.int32),
+                 np.array(f_args, np.int32).reshape(-1, 2), np.array(f_bounds, np.float64).reshape(-1, 2), file)
+

@@ -1,0 +1,99 @@
+"""The engine's trace rows in PyReason's rule-trace CSV layout (its Output class with atom_trace on):
+rule_trace_nodes_<timestamp>.csv and rule_trace_edges_<timestamp>.csv with the columns
+
+    Time, Fixed-Point-Operation, Node | Edge, Label, Old Bound, New Bound, Occurred Due To,
+    Consistent, Triggered By, Inconsistency Message, Clause-1, Clause-2, ...
+
+Bounds print as Python floats (`[1.0,1.0]`), an edge as a Python tuple (`('Justin', 'Mary')`), a clause
+as the list of its atoms' nodes or edges in the grounding that caused the row. As in PyReason (default
+settings) the graph's own facts and the resets of non-persistent timesteps are not rows.
+Fixed-Point-Operation counts ordinary passes over the whole run: a row of pass p at step t has the number
+of passes of steps 0..t-1 plus p (PyReason's fp_cnt)."""
+from __future__ import annotations
+
+import csv
+import os
+import time
+from typing import Any
+
+import numpy as np
+
+from tracelab.engine import CAUSE_FACT, CAUSE_POLICY, CAUSE_RESET, CAUSE_RULE
+
+from .names import NameMap
+
+NODE_HEADER = ["Time", "Fixed-Point-Operation", "Node", "Label", "Old Bound", "New Bound", "Occurred Due To",
+               "Consistent", "Triggered By", "Inconsistency Message"]
+EDGE_HEADER = ["Edge" if h == "Node" else h for h in NODE_HEADER]
+
+
+def _bound(lo: float, up: float) -> str:
+    return f"[{float(lo)!r},{float(up)!r}]"
+
+
+class PyReasonTrace:
+    """Collects the rows of each step (`add`) and writes the two CSV files (`write`)."""
+
+    def __init__(self, engine: Any, names: NameMap | None = None, graph_facts: int = 0) -> None:
+        self.engine = engine
+        self.names = names or NameMap()
+        self.graph_facts = graph_facts
+        self.node_rows: list[list[object]] = []
+        self.edge_rows: list[list[object]] = []
+        self.clauses = {"node": 0, "edge": 0}
+
+    def _pred(self, tl: str) -> str:
+        return self.names.original_predicate(tl)
+
+    @staticmethod
+    def _component(args: tuple[str, ...]) -> str | tuple[str, ...]:
+        """A node as its id, an edge as a tuple (written as Python writes it: `('a', 'b')`)."""
+        return args[0] if len(args) == 1 else tuple(args)
+
+    def add(self, rows: dict[str, np.ndarray], passes_before: int) -> None:
+        """One step's rows (Engine.take_trace()); `passes_before`: ordinary passes of the earlier steps."""
+        eng = self.engine
+        cols = {k: v.tolist() for k, v in rows.items()}
+        for i in range(len(cols["t"])):
+            if int(cols["world"][i]) != 0:
+                continue
+            kind, cid, g = int(cols["cause_kind"][i]), int(cols["cause_id"][i]), int(cols["grounding"][i])
+            if kind == CAUSE_RESET or (kind == CAUSE_FACT and cid < self.graph_facts):
+                continue
+            pred, args = eng.vocab.atom_parts(int(cols["atom"][i]))
+            old = _bound(cols["old_lower"][i], cols["old_upper"][i])
+            consistent = kind != CAUSE_POLICY
+            if kind == CAUSE_RULE or (kind == CAUSE_POLICY and g >= 0):
+                rule = eng.rules[int(eng.groundings.rule[g])] if g >= 0 else eng.rules[cid]
+                due, by = self.names.original_statement(rule.name), "Rule"
+            elif kind == CAUSE_FACT:
+                due, by = self.names.original_statement(eng.fact(cid).name), "Fact"
+            else:
+                due, by = "-", "Fact"
+            message = "" if consistent else (
+                f"Inconsistency occurred. Conflicting bounds for {self._pred(pred)}({','.join(args)}). "
+                f"Update from {old} is not allowed. Setting bounds to [0,1] and static=True for this timestep.")
+            row: list[object] = [int(cols["t"][i]), passes_before + int(cols["pass_no"][i]),
+                                 str(self._component(args)), self._pred(pred), old,
+                                 _bound(cols["new_lower"][i], cols["new_upper"][i]), due, consistent, by, message]
+            if g >= 0:
+                row += [str([self._component(eng.vocab.atom_parts(int(a))[1])]) for a in eng.groundings.body(g)]
+            which = "node" if len(args) == 1 else "edge"
+            self.clauses[which] = max(self.clauses[which], len(row) - len(NODE_HEADER))
+            (self.node_rows if which == "node" else self.edge_rows).append(row)
+
+    def write(self, folder: str | os.PathLike[str], timestamp: str | None = None) -> tuple[str, str]:
+        """rule_trace_nodes_<timestamp>.csv and rule_trace_edges_<timestamp>.csv in `folder` (created)."""
+        os.makedirs(folder, exist_ok=True)
+        stamp = timestamp or time.strftime("%Y%m%d-%H%M%S")
+        paths = []
+        for which, header, rows in (("nodes", NODE_HEADER, self.node_rows), ("edges", EDGE_HEADER, self.edge_rows)):
+            n = self.clauses["node" if which == "nodes" else "edge"]
+            path = os.path.join(os.fspath(folder), f"rule_trace_{which}_{stamp}.csv")
+            with open(path, "w", newline="", encoding="utf-8") as f:
+                w = csv.writer(f, lineterminator="\n")
+                w.writerow(header + [f"Clause-{k}" for k in range(1, n + 1)])
+                for r in rows:
+                    w.writerow(r + [""] * (len(header) + n - len(r)))
+            paths.append(path)
+        return paths[0], paths[1]

@@ -1,0 +1,172 @@
+"""PyReason's rules, facts and graph as one tracelab program: the program text (what `tracelab
+convert-pyreason` writes), the engine's Program parsed from it with every location pointing back at the
+PyReason files, and the graph with PyReason's attribute mapping. docs/pyreason.md lists the mapping."""
+from __future__ import annotations
+
+import dataclasses
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+from tracelab.engine import Graph, ProgramError, check_program, parse_program
+from tracelab.engine.program import Program, SourceLoc, constant_text
+
+from .facts import PFact, read_facts
+from .graphml import load_pyreason_graphml
+from .names import NameMap, variable_names
+from .rules import PRule, Threshold, read_rules
+from .text import PLiteral
+
+GENERATED = "<pyreason translation>"
+_OPS = {"greater_equal": ">=", "greater": ">", "less_equal": "<=", "less": "<", "equal": "=="}
+# PyReason's built-in annotation functions by tracelab's names (the shared syntax of issue 14)
+_FUNCTIONS = {"maximum": "max", "minimum": "min", "average": "average", "average_lower": "average_lower"}
+
+
+@dataclass
+class PyReasonProgram:
+    """A translated PyReason program. `text` parses back to `program` (with `graph`, if any, given to
+    the engine as its graph); `names` maps names both ways."""
+    text: str
+    program: Program
+    graph: Graph | None
+    names: NameMap
+    origins: list[tuple[SourceLoc, str] | None] = field(default_factory=list)  # per line of text
+
+
+def number(v: float) -> str:
+    """A bound as the rule language writes it: no sign, no exponent."""
+    if v == int(v):
+        return str(int(v))
+    text = repr(v)
+    if "e" in text:
+        text = f"{v:.17f}".rstrip("0")
+    return text[1:] if text.startswith("0.") else text
+
+
+def bound_text(lower: float, upper: float) -> str:
+    return "" if (lower, upper) == (1.0, 1.0) else f":[{number(lower)},{number(upper)}]"
+
+
+def threshold_text(t: Threshold, forall: bool) -> str:
+    """`[>= 50%] `, `[< 3 available] `, `[forall] ` or "" (PyReason's default: at least one)."""
+    if forall and t.quantifier == "greater_equal" and t.kind == "percent" and t.over == "total" and t.value == 100:
+        return "[forall] "
+    if t.is_default:
+        return ""
+    count = number(float(t.value)) + ("%" if t.kind == "percent" else "")
+    return f"[{_OPS[t.quantifier]} {count}{' available' if t.over == 'available' else ''}] "
+
+
+def _literal(lit: PLiteral, names: NameMap, args: Sequence[str]) -> str:
+    return f"{names.predicate(lit.pred)}({','.join(args)})"
+
+
+def rule_text(r: PRule, names: NameMap) -> str:
+    """One PyReason rule as one tracelab rule statement."""
+    var = variable_names([a for lit in (r.head, *r.body) for a in lit.args])
+    head = _literal(r.head, names, [var[a] for a in r.head.args])
+    options: list[str] = []
+    if r.head.function:
+        fn = _FUNCTIONS.get(r.head.function, r.head.function)
+        weights = r.weights or [1.0] * len(r.body)
+        if fn == "average" and len(set(weights)) > 1:
+            fn = "weighted_average"
+        if fn == "weighted_average":
+            options.append("weights=" + ",".join(number(w) for w in weights))
+        head += f":{fn}"
+    else:
+        head += bound_text(r.head.lower, r.head.upper)
+    body = [threshold_text(t, c.forall) + _literal(c, names, [var[a] for a in c.args]) + bound_text(c.lower, c.upper)
+            for c, t in zip(r.body, r.thresholds)]
+    if r.set_static:
+        options.append("set_static")
+    if r.infer_edges and len(r.head.args) == 2:  # PyReason ignores it on node rules
+        options.append("infer_edges")
+    opts = f" {{{', '.join(options)}}}" if options else ""
+    return f"{names.statement(r.name)}: {head} <-{r.delay} {', '.join(body)}{opts}"
+
+
+def fact_text(f: PFact, names: NameMap) -> str:
+    lit = f.literal
+    atom = f"{names.predicate(lit.pred)}({','.join(constant_text(a) for a in lit.args)})"
+    when = " static" if f.static else (f" @{f.start}" if f.start == f.end else f" @{f.start}..{f.end}")
+    return f"{names.statement(f.name)}: {atom}{bound_text(lit.lower, lit.upper)}{when}"
+
+
+def graph_fact_lines(graph: Graph) -> list[str]:
+    """The graph's facts as static program facts (convert-pyreason --graph)."""
+    out = []
+    for i in range(graph.n_facts):
+        f = graph.fact(i)
+        out.append(f"{f.text}{bound_text(f.literal.lower, f.literal.upper)} static")
+    return out
+
+
+def load_pyreason(rule_files: Sequence[str | os.PathLike[str]], fact_files: Sequence[str | os.PathLike[str]] = (),
+                  graph_file: str | os.PathLike[str] | None = None, *, persistent: bool = False,
+                  embed_graph: bool = False) -> PyReasonProgram:
+    """Read PyReason files and translate them. PyReason's defaults become directives: non-persistent
+    timesteps (`%timesteps reset`) unless `persistent`; intersection updates and reset-and-freeze on
+    inconsistency are tracelab's defaults too. With `embed_graph` the graph's facts are written into the
+    text (a self-contained program) instead of being handed over as a Graph."""
+    names = NameMap()
+    graph = load_pyreason_graphml(graph_file, names) if graph_file is not None else None
+    lines: list[str] = ["# translated from PyReason by tracelab (docs/pyreason.md)"]
+    origins: list[tuple[SourceLoc, str] | None] = [None]
+    if not persistent:
+        lines.append("%timesteps reset  # PyReason's default: atoms go back to [0,1] at each timestep")
+        origins.append(None)
+    for path in rule_files:
+        for r in read_rules(path):
+            lines.append(rule_text(r, names))
+            origins.append((r.loc, r.text))
+    for path in fact_files:
+        for f in read_facts(path):
+            lines.append(fact_text(f, names))
+            origins.append((f.loc, ""))
+    if graph is not None and embed_graph:
+        lines += graph_fact_lines(graph)
+        origins += [(SourceLoc(graph.file, 0, 0), "")] * graph.n_facts
+        graph = None
+    text = "\n".join(lines) + "\n"
+    try:
+        program = parse_program(text, GENERATED)
+        program = _relocated(program, origins)
+        check_program(program, graph.predicates() if graph is not None else None)
+    except ProgramError as e:
+        raise _located(e, origins, lines) from None
+    program.files = sorted({str(o[0].file) for o in origins if o is not None})
+    return PyReasonProgram(text, program, graph, names, origins)
+
+
+def _relocated(program: Program, origins: list[tuple[SourceLoc, str] | None]) -> Program:
+    """Rules and facts located in the PyReason files they came from, not in the generated text."""
+    def moved(item):
+        o = origins[item.loc.line - 1] if item.loc and item.loc.file == GENERATED else None
+        return dataclasses.replace(item, loc=o[0]) if o is not None else item
+    program.rules = [moved(r) for r in program.rules]
+    program.facts = [moved(f) for f in program.facts]
+    return program
+
+
+def _located(e: ProgramError, origins: list[tuple[SourceLoc, str] | None], lines: list[str]) -> ProgramError:
+    """An error found in the translation, located at the PyReason statement it came from."""
+    if e.file == GENERATED and 0 < e.line <= len(origins) and origins[e.line - 1] is not None:
+        loc, _ = origins[e.line - 1]
+        msg = f"{e.message} (in its translation: {lines[e.line - 1]})"
+        return type(e)(msg, loc.file, loc.line, loc.column, _source_line(loc))
+    if e.file != GENERATED and e.line > 0 and e.source_line is None:
+        return type(e)(e.message, e.file, e.line, e.column, _source_line(SourceLoc(e.file, e.line, e.column)))
+    return e
+
+
+def _source_line(loc: SourceLoc) -> str | None:
+    try:
+        with open(loc.file, encoding="utf-8") as f:
+            for n, line in enumerate(f, 1):
+                if n == loc.line:
+                    return line
+    except OSError:
+        return None
+    return None
