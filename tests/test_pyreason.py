@@ -337,6 +337,18 @@ def test_pyreason_trace_csv_layout(tmp_path: Path, capsys: pytest.CaptureFixture
     assert edges.read_text().splitlines() == [",".join(rows[0][:10]).replace("Node", "Edge")]
 
 
+def test_pyreason_trace_marks_an_inconsistency(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    (tmp_path / "r.txt").write_text("q(x) <-0 p(x)\n")
+    (tmp_path / "f.csv").write_text('"p(a):[0,0.2]",lo,0,1\n"p(a):[0.8,1]",hi,1,1\n')
+    assert main(["reason", "--dialect", "pyreason", str(tmp_path / "r.txt"), "--facts", str(tmp_path / "f.csv"),
+                 "--steps", "2", "--persistent", "--no-trace", "--pyreason-trace", str(tmp_path / "out")]) == 0
+    nodes, = (tmp_path / "out").glob("rule_trace_nodes_*.csv")
+    rows = list(csv.reader(nodes.open()))[1:]
+    assert [r[:8] for r in rows] == [["0", "0", "a", "p", "[0.0,1.0]", "[0.0,0.2]", "lo", "True"],
+                                     ["1", "1", "a", "p", "[0.0,0.2]", "[0.0,1.0]", "-", "False"]]
+    assert rows[1][9].startswith("Inconsistency occurred. Conflicting bounds for p(a).")
+
+
 def test_a_pyreason_error_on_the_command_line_is_one_line(tmp_path: Path) -> None:
     f = tmp_path / "bad.txt"
     f.write_text("p(x) <-1 q(x\n")

@@ -5,10 +5,17 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from tracelab.engine import Graph, ProgramError, check_program, parse_program
+from tracelab.engine import (
+    Graph,
+    ProgramError,
+    RuleSyntaxError,
+    check_program,
+    parse_program,
+)
 from tracelab.engine.program import Program, SourceLoc, constant_text
 
 from .facts import PFact, read_facts
@@ -18,6 +25,8 @@ from .rules import PRule, Threshold, read_rules
 from .text import PLiteral
 
 GENERATED = "<pyreason translation>"
+# what a translated line may hold of the shared issue-14 syntax: `[>= 50%] p(Y)`, `p(X):average`, `{set_static}`
+_SHARED_SYNTAX = re.compile(r"\[(?:forall|[<>=]=?)|\):[a-z_]+\s*<-|\{[^}]*(?:set_static|infer_edges|weights)")
 _OPS = {"greater_equal": ">=", "greater": ">", "less_equal": "<=", "less": "<", "equal": "=="}
 # PyReason's built-in annotation functions by tracelab's names (the shared syntax of issue 14)
 _FUNCTIONS = {"maximum": "max", "minimum": "min", "average": "average", "average_lower": "average_lower"}
@@ -155,6 +164,9 @@ def _located(e: ProgramError, origins: list[tuple[SourceLoc, str] | None], lines
     if e.file == GENERATED and 0 < e.line <= len(origins) and origins[e.line - 1] is not None:
         loc, _ = origins[e.line - 1]
         msg = f"{e.message} (in its translation: {lines[e.line - 1]})"
+        if isinstance(e, RuleSyntaxError) and _SHARED_SYNTAX.search(lines[e.line - 1]):
+            msg += ("; the translation uses the quantifiers, annotation functions or rule options of issue 14, "
+                    "which this tracelab's rule parser may not read yet")
         return type(e)(msg, loc.file, loc.line, loc.column, _source_line(loc))
     if e.file != GENERATED and e.line > 0 and e.source_line is None:
         return type(e)(e.message, e.file, e.line, e.column, _source_line(SourceLoc(e.file, e.line, e.column)))
