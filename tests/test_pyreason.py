@@ -349,6 +349,22 @@ def test_pyreason_trace_marks_an_inconsistency(tmp_path: Path, capsys: pytest.Ca
     assert rows[1][9].startswith("Inconsistency occurred. Conflicting bounds for p(a).")
 
 
+def test_pyreason_trace_writes_edges_as_tuples(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    (tmp_path / "r.txt").write_text("Knows(x,y) <-1 Friends(x,y), popular(y)\n")
+    (tmp_path / "f.csv").write_text("popular(Mary),pop,0,0\n")
+    assert main(["reason", "--dialect", "pyreason", str(tmp_path / "r.txt"), "--facts", str(tmp_path / "f.csv"),
+                 "--graph", str(DATA / "friends_graph.graphml"), "--steps", "2", "--no-trace",
+                 "--pyreason-trace", str(tmp_path / "out")]) == 0
+    edges, = (tmp_path / "out").glob("rule_trace_edges_*.csv")
+    rows = list(csv.reader(edges.open()))
+    assert rows[0][2] == "Edge" and rows[0][10:] == ["Clause-1", "Clause-2"]
+    # in grounding order (John is node 0 of the graph, Justin node 2)
+    assert rows[1:] == [["1", "1", "('John', 'Mary')", "Knows", "[0.0,1.0]", "[1.0,1.0]", "rule_0", "True", "Rule",
+                         "", "[('John', 'Mary')]", "['Mary']"],
+                        ["1", "1", "('Justin', 'Mary')", "Knows", "[0.0,1.0]", "[1.0,1.0]", "rule_0", "True", "Rule",
+                         "", "[('Justin', 'Mary')]", "['Mary']"]]
+
+
 def test_a_pyreason_error_on_the_command_line_is_one_line(tmp_path: Path) -> None:
     f = tmp_path / "bad.txt"
     f.write_text("p(x) <-1 q(x\n")
