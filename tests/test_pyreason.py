@@ -10,17 +10,20 @@ from __future__ import annotations
 
 import csv
 import json
+import random
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 from tracelab.engine import Engine, ProgramError, parse_program
+from tracelab.engine.graph import read_raw_graphml
 from tracelab.engine.program import SourceLoc
 
 from tracelab.cli import main
-from tracelab.pyreason import load_pyreason
+from tracelab.pyreason import graphml, load_pyreason
 from tracelab.pyreason.graphml import attribute_fact
+from tracelab.pyreason.graphml_columns import numeric_facts
 from tracelab.pyreason.names import NameMap
 from tracelab.pyreason.rules import Threshold, parse_rule, read_rules
 from tracelab.pyreason.translate import rule_text, threshold_text
@@ -131,6 +134,7 @@ def test_rule_options_translate_to_the_shared_syntax() -> None:
     assert _rule("s(x):average <-0 p(x), q(x)", weights=[1.0, 2.0]) == \
         "r: s(X):weighted_average <-0 p(X), q(X) {weights=1,2}"
     assert _rule("s(x):average <-0 p(x), q(x)", weights=[2.0, 2.0]) == "r: s(X):average <-0 p(X), q(X)"
+    assert _rule("s(x):mine <-0 p(x), q(x)", weights=[2.0, 2.0]) == "r: s(X):mine <-0 p(X), q(X) {weights=2,2}"
 
 
 @pytest.mark.parametrize("threshold, text", [
@@ -210,6 +214,54 @@ def test_graphml_reads_with_pyreasons_mapping(tmp_path: Path) -> None:
     engine = Engine(translated.program, translated.graph)
     engine.step()
     assert labelled(engine, "ok") == {"a": (1.0, 1.0)}
+
+
+def _random_graphml(path: Path, seed: int, undirected: bool) -> None:
+    """Numeric and boolean attributes in [0,1], parallel edges, self-loops, a key repeated on an element,
+    edges without data and edge ends that are no <node>."""
+    rng = random.Random(seed)
+    keys = [("a", "node", "double"), ("b", "node", "boolean"), ("W", "edge", "long"), ("c", "edge", "float"),
+            ("on", "edge", "boolean")]
+    out = ['<?xml version="1.0"?>', '<graphml xmlns="http://graphml.graphdrawing.org/xmlns">']
+    out += [f'<key id="k{i}" for="{f}" attr.name="{n}" attr.type="{t}"/>' for i, (n, f, t) in enumerate(keys)]
+    out.append(f'<graph edgedefault="{"undirected" if undirected else "directed"}">')
+
+    def data(domain: str) -> str:
+        picks = [i for i, k in enumerate(keys) if k[1] == domain]
+        parts = []
+        for _ in range(rng.randrange(4)):
+            i = rng.choice(picks)
+            value = rng.choice(["true", "false", "1", "0"]) if keys[i][2] == "boolean" else \
+                rng.choice(["0", "1"]) if keys[i][2] == "long" else f"{rng.random():.3f}"
+            parts.append(f'<data key="k{i}">{value}</data>')
+        return "".join(parts)
+    out += [f'<node id="n{i}">{data("node")}</node>' for i in range(12)]
+    out += [f'<edge source="n{rng.randrange(14)}" target="n{rng.randrange(14)}">{data("edge")}</edge>'
+            for _ in range(60)]
+    out.append("</graph></graphml>")
+    path.write_text("\n".join(out))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_array_mapping_equals_networkx_reading(tmp_path: Path, seed: int) -> None:
+    g = tmp_path / "g.graphml"
+    _random_graphml(g, seed, undirected=seed % 2 == 1)
+    raw = read_raw_graphml(g)
+    fast, slow = numeric_facts(raw), graphml._python_facts(raw)
+    assert fast is not None
+
+    def facts(f) -> list[tuple]:
+        return [(f.labels[lab], *args, *bounds) for lab, args, bounds in
+                zip(f.label_array().tolist(), f.args_array().tolist(), f.bounds_array().tolist())]
+    assert facts(fast) == facts(slow)
+    assert len(facts(fast)) > 20
+
+
+def test_other_values_take_the_value_by_value_reading(tmp_path: Path) -> None:
+    g = tmp_path / "g.graphml"
+    _random_graphml(g, 0, undirected=False)
+    g.write_text(g.read_text().replace('attr.type="long"', 'attr.type="string"'))
+    assert numeric_facts(read_raw_graphml(g)) is None
 
 
 # ---------------------------------------------------------------------- features of the shared syntax

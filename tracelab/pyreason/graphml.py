@@ -15,8 +15,10 @@ import numpy as np
 
 from tracelab.engine.errors import ProgramCheckError
 from tracelab.engine.graph import Graph, read_raw_graphml
+from tracelab.engine.graphml_raw import RawGraph
 from tracelab.engine.program import unwritable_constant
 
+from .graphml_columns import GraphFacts, numeric_facts
 from .names import NameMap
 
 _BOOL = {"true": True, "false": False, "1": True, "0": False}
@@ -53,13 +55,23 @@ def attribute_fact(key: str, value: object) -> tuple[str, float, float]:
 
 
 def load_pyreason_graphml(path: str | os.PathLike[str], names: NameMap) -> Graph:
-    """The graph's facts (static, at t = 0) with PyReason's mapping, predicates named through `names`."""
+    """The graph's facts (static, at t = 0) with PyReason's mapping, predicates named through `names`.
+    A graph whose values are all numbers or booleans in [0,1] is mapped with array operations
+    (graphml_columns.py); any other goes through networkx's reading value by value (the definition)."""
     raw = read_raw_graphml(path)
-    file = raw.file
     for n in raw.nodes:
         why = unwritable_constant(n)
         if why is not None:
-            raise ProgramCheckError(f"node id {n!r} cannot be a constant of the rule language: {why}", file)
+            raise ProgramCheckError(f"node id {n!r} cannot be a constant of the rule language: {why}", raw.file)
+    facts = numeric_facts(raw)
+    if facts is None:
+        facts = _python_facts(raw)
+    return _graph(raw, facts, names)
+
+
+def _python_facts(raw: RawGraph) -> GraphFacts:
+    """networkx's read_graphml and DiGraph(), then PyReason's mapping, one value at a time."""
+    file = raw.file
     node_attrs: list[dict[str, object]] = [{} for _ in raw.nodes]
     adj: list[dict[int, dict[str, object]]] = [{} for _ in raw.nodes]  # DiGraph adjacency, insertion order
     edge_data: list[list[tuple[str, object]]] = [[] for _ in range(len(raw.edges))]
@@ -85,36 +97,38 @@ def load_pyreason_graphml(path: str | os.PathLike[str], names: NameMap) -> Graph
         attrs.update(edge_data[e])
         if undirected and src != dst:
             adj[dst][src] = attrs  # networkx shares one dict between both directions
+    out = GraphFacts()
+    for n, attrs in enumerate(node_attrs):
+        for k, v in attrs.items():
+            out.add(*attribute_fact(k, v), n, -1)
+    for src, targets in enumerate(adj):
+        for dst, attrs in targets.items():
+            for k, v in attrs.items():
+                out.add(*attribute_fact(k, v), src, dst)
+    return out
+
+
+def _graph(raw: RawGraph, facts: GraphFacts, names: NameMap) -> Graph:
+    """The facts as the engine's Graph columns, PyReason labels named as tracelab predicates."""
     labels: list[str] = []
     arity: list[int] = []
     label_of: dict[str, int] = {}
-    f_label: list[int] = []
-    f_args: list[tuple[int, int]] = []
-    f_bounds: list[tuple[float, float]] = []
-
-    def add(label: str, ar: int, a0: int, a1: int, lo: float, up: float) -> None:
+    lab_map = np.zeros(len(facts.labels), np.int32)
+    fact_label, args = facts.label_array(), facts.args_array()
+    on_nodes = np.bincount(fact_label[args[:, 1] < 0], minlength=len(facts.labels)) > 0
+    on_edges = np.bincount(fact_label[args[:, 1] >= 0], minlength=len(facts.labels)) > 0
+    for j, label in enumerate(facts.labels):
+        if not (on_nodes[j] or on_edges[j]):
+            continue
         name = names.predicate(label)
+        ar = 2 if on_edges[j] else 1
         lid = label_of.get(name)
+        if (on_nodes[j] and on_edges[j]) or (lid is not None and arity[lid] != ar):
+            raise ProgramCheckError(f"attribute '{label}' is set on nodes and on edges, but a predicate has one "
+                                    "arity", raw.file)
         if lid is None:
             lid = label_of[name] = len(labels)
             labels.append(name)
             arity.append(ar)
-        elif arity[lid] != ar:
-            raise ProgramCheckError(f"attribute '{label}' is set on nodes and on edges, but a predicate has one "
-                                    "arity", file)
-        f_label.append(lid)
-        f_args.append((a0, a1))
-        f_bounds.append((lo, up))
-
-    for n, attrs in enumerate(node_attrs):
-        for k, v in attrs.items():
-            label, lo, up = attribute_fact(k, v)
-            add(label, 1, n, -1, lo, up)
-    for src, targets in enumerate(adj):
-        for dst, attrs in targets.items():
-            for k, v in attrs.items():
-                label, lo, up = attribute_fact(k, v)
-                add(label, 2, src, dst, lo, up)
-    return Graph(list(raw.nodes), labels, arity, np.array(f_label, np.int32),
-                 np.array(f_args, np.int32).reshape(-1, 2), np.array(f_bounds, np.float64).reshape(-1, 2), file)
-
+        lab_map[j] = lid
+    return Graph(list(raw.nodes), labels, arity, lab_map[fact_label], args, facts.bounds_array(), raw.file)

@@ -81,7 +81,8 @@ def rule_text(r: PRule, names: NameMap) -> str:
         weights = r.weights or [1.0] * len(r.body)
         if fn == "average" and len(set(weights)) > 1:
             fn = "weighted_average"
-        if fn == "weighted_average":
+        user_fn = r.head.function not in _FUNCTIONS
+        if fn == "weighted_average" or (user_fn and r.weights is not None):  # PyReason hands weights to any function
             options.append("weights=" + ",".join(number(w) for w in weights))
         head += f":{fn}"
     else:
