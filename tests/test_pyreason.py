@@ -349,21 +349,27 @@ def test_bad_json_threshold_is_located(tmp_path: Path) -> None:
 
 # ------------------------------------------------------------------------------- the command line
 
-def test_convert_round_trip_gives_the_same_result(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    out = tmp_path / "hello.rules"
-    assert main(["convert-pyreason", str(DATA / "hello_rules.txt"), "--facts", str(DATA / "hello_facts.csv"),
-                 "--graph", str(DATA / "friends_graph.graphml"), "-o", str(out)]) == 0
+@pytest.mark.parametrize("example, query, expected", [
+    pytest.param(HELLO, "popular(X)", HELLO_EXPECTED, id="hello-world"),
+    pytest.param(VIEWED, "viewedByAll(X)", VIEWED_EXPECTED, id="threshold", marks=pytest.mark.skipif(
+        not QUANTIFIERS, reason="needs quantifiers ([>= 100%] clauses) in the rule parser")),
+])
+def test_convert_round_trip_gives_the_same_result(tmp_path: Path, capsys: pytest.CaptureFixture, example: dict,
+                                                  query: str, expected: list) -> None:
+    out = tmp_path / "converted.rules"
+    files = [*map(str, example["rule_files"]), *(a for f in example["fact_files"] for a in ("--facts", str(f))),
+             "--graph", str(example["graph_file"])]
+    assert main(["convert-pyreason", *files, "-o", str(out)]) == 0
     capsys.readouterr()
     runs = []
-    for argv in (["reason", str(out)],
-                 ["reason", "--dialect", "pyreason", str(DATA / "hello_rules.txt"), "--facts",
-                  str(DATA / "hello_facts.csv"), "--graph", str(DATA / "friends_graph.graphml")]):
-        assert main([*argv, "--steps", "3", "--json", "--query", "popular(X)", "--query-at", "each"]) == 0
+    steps = str(len(expected))
+    for argv in (["reason", str(out)], ["reason", "--dialect", "pyreason", *files]):
+        assert main([*argv, "--steps", steps, "--json", "--query", query, "--query-at", "each"]) == 0
         runs.append(json.loads(capsys.readouterr().out))
     assert runs[0]["queries"] == runs[1]["queries"]
     assert runs[0]["interpretation"] == runs[1]["interpretation"]
-    per_step = [sorted(q["bindings"]["X"] for q in runs[0]["queries"] if q["t"] == t) for t in range(3)]
-    assert per_step == [sorted(e) for e in HELLO_EXPECTED]
+    per_step = [sorted(q["bindings"]["X"] for q in runs[0]["queries"] if q["t"] == t) for t in range(len(expected))]
+    assert per_step == [sorted(e) for e in expected]
 
 
 def test_pyreason_trace_csv_layout(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
