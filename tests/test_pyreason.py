@@ -257,6 +257,16 @@ def test_array_mapping_equals_networkx_reading(tmp_path: Path, seed: int) -> Non
     assert len(facts(fast)) > 20
 
 
+def test_a_bad_graph_value_is_located(tmp_path: Path) -> None:
+    g = tmp_path / "g.graphml"
+    g.write_text('<?xml version="1.0"?>\n<graphml xmlns="http://graphml.graphdrawing.org/xmlns">\n'
+                 '<key id="b" for="node" attr.name="ok" attr.type="boolean"/>\n<graph edgedefault="directed">\n'
+                 '<node id="a"><data key="b">maybe</data></node>\n</graph></graphml>\n')
+    with pytest.raises(ProgramError) as e:
+        load_pyreason([DATA / "hello_rules.txt"], [], g)
+    assert (e.value.file, e.value.line) == (str(g), 5) and "'maybe' is not a boolean" in e.value.message
+
+
 def test_other_values_take_the_value_by_value_reading(tmp_path: Path) -> None:
     g = tmp_path / "g.graphml"
     _random_graphml(g, 0, undirected=False)
