@@ -262,9 +262,7 @@ class RuleSim(GameSim):
             start = int(self.episode_start[0])
             if start:
                 rows["t"] -= start
-            episode = np.empty(len(rows["t"]), np.int64)
-            episode.fill(int(self.world_episode[0]))
-            rows["world_episode"] = episode
+            rows["world_episode"] = np.full(len(rows["t"]), self.world_episode[0])
             return rows
         world = rows["world"].astype(np.int64)
         rows["t"] = (rows["t"] - self.episode_start[world]).astype(np.int32)
