@@ -233,6 +233,7 @@ class RuleSim(GameSim):
         return self._handed_obs()
 
     def _start_state_into(self, sel: np.ndarray) -> None:
+        """Worlds `sel` of the state buffers back to the start state, in place."""
         for name, buf in self._state_buffers.items():
             buf[sel] = self._start_state[name][sel]
 
