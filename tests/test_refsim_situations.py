@@ -525,10 +525,10 @@ def test_base_observation_has_four_numbers_per_agent(start):
 
 def test_non_markov_observation_appends_previous(start):
     sim = start(builtin_scenario("nonmarkov"), stack_previous=True)
-    obs0 = sim.reset()
+    obs0 = sim.reset().copy()  # kept past the next step, which overwrites the simulator's buffers
     assert obs0.shape == (1, 2, 28) and sim.obs_size == 28
     assert np.array_equal(obs0[..., :14], obs0[..., 14:])  # at reset the previous is the current
-    r = step(sim, [UP, UP], [DOWN, RIGHT])
+    r = step(sim, [UP, UP], [DOWN, RIGHT]).copy()
     assert np.array_equal(r.obs[..., 14:], obs0[..., :14])
     assert r.obs[0, 0, :4].tolist() == [7, 1, 7, 0]  # fast agent moved; slow one still in transit
     r2 = step(sim, [UP, NOP], [DOWN, NOP])

@@ -201,7 +201,7 @@ def test_history_of_a_finished_world_stepped_again():
     sims = [cls(sc, stack_previous=True) for cls in (RefSim, RuleSim)]
     for s in sims:
         s.reset()
-    first = [s.step([UP], [NOP]) for s in sims]
+    first = [s.step([UP], [NOP]).copy() for s in sims]  # kept past the next step
     assert first[0].truncated[0] and first[1].truncated[0]
     assert_same_result(0, *first, finished=np.zeros(1, bool), stack_previous=False)
     again = [s.step([UP], [NOP]) for s in sims]  # ignored by the finished world

@@ -47,11 +47,11 @@ ENV_IDS = {name: f"tracelab/GridWar-{name}-v0" for name in ("base", "advanced", 
 def step_info(res: StepResult, masks: np.ndarray, one_agent: bool, opponent: np.ndarray) -> dict[str, Any]:
     """info of every world after a step, arrays [W, ...] (red's view); masks: [W, N, n_actions];
     opponent: blue's actions (spec ids, [W, N]). With one agent per team the agent axis is dropped
-    (masks [W, n_actions], events [W])."""
+    (masks [W, n_actions], events [W]). Every array is new: the StepResult's are the simulator's buffers."""
     info = {"action_mask": masks, "opponent_actions": np.asarray(opponent, np.int64),
-            "unsafe": res.unsafe[:, RED], "invalid": res.invalid[:, RED],
+            "unsafe": res.unsafe[:, RED].copy(), "invalid": res.invalid[:, RED].copy(),
             "hits_made": res.hits_made[:, RED].astype(np.int64),
-            "hits_taken": res.hits_taken[:, RED].astype(np.int64), "agent_reward": res.agent_reward[:, RED]}
+            "hits_taken": res.hits_taken[:, RED].astype(np.int64), "agent_reward": res.agent_reward[:, RED].copy()}
     if one_agent:
         info = {k: v[:, 0] for k, v in info.items()}
     return {"t": res.t.astype(np.int64), "winner": res.winner.astype(np.int64), **info}

@@ -15,6 +15,10 @@ replay buffer takes next obs from `final_obs` where `_final_obs` is set. As in g
 Every info key has its gymnasium `_key` mask. (Gymnasium's observation wrappers accept only NEXT_STEP;
 RecordEpisodeStatistics supports SAME_STEP.)
 
+`copy` (gymnasium's SyncVectorEnv switch, default True): with True, reset() and step() return a new
+observation array each time; with False, the observation is a buffer of the env's that its next step or
+reset overwrites (rewards, flags and infos are new arrays either way, as in gymnasium).
+
 Seeding: one generator drives the opponent in every world; reset(seed=s) reseeds it, so a run is
 reproducible for a given seed and num_envs. A list of seeds is combined into one (SeedSequence).
 
@@ -62,7 +66,7 @@ class GridWarVectorEnv(VectorEnv):
     def __init__(self, num_envs: int = 1, scenario: Scenario | str = "advanced", *, backend: str = "rules",
                  stack_previous: bool = False, trace_sink: TraceSink | None = None,
                  trace_episodes: int | None = None, render_mode: str | None = None,
-                 opponent_p: float = P_TOWARD) -> None:
+                 opponent_p: float = P_TOWARD, copy: bool = True) -> None:
         if render_mode is not None:
             raise ValueError("GridWarVectorEnv does not render")
         if num_envs < 1:
@@ -77,6 +81,8 @@ class GridWarVectorEnv(VectorEnv):
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
         self._n = self.scenario.agents_per_team
+        self.copy = copy
+        self._obs = np.zeros((num_envs, self.single_observation_space.shape[0]), np.float32)  # with copy=False
         self._masker = ActionMasker(self.scenario)
         self._all = np.ones(num_envs, bool)
         self._all.flags.writeable = False  # shared by every `_key` mask that covers all worlds
@@ -90,7 +96,7 @@ class GridWarVectorEnv(VectorEnv):
               ) -> tuple[np.ndarray, dict[str, Any]]:
         seed = _batch_seed(seed)
         super().reset(seed=seed)
-        obs = self.sim.reset(seed=seed)[:, RED].copy()
+        obs = self._observation(self.sim.reset(seed=seed))
         if self._tracer is not None:
             self._tracer.begin(np.arange(self.num_envs), seed)
         self._ready = True
@@ -101,8 +107,8 @@ class GridWarVectorEnv(VectorEnv):
             raise RuntimeError("call reset() before step()")
         res, blue = step_learner(self.sim, self._masker, self._tracer, actions, self.num_envs,
                                  self.single_action_space)
-        obs = res.obs[:, RED].copy()  # a copy: the caller owns what step returns
-        reward = res.reward[:, RED].copy()
+        obs = self._observation(res.obs)
+        reward = res.reward[:, RED].copy()  # new arrays: the StepResult's are the simulator's buffers
         terminated, truncated = res.terminated.copy(), res.truncated.copy()
         done = terminated | truncated
         info = step_info(res, self._masks(), self._n == 1, blue)
@@ -122,6 +128,13 @@ class GridWarVectorEnv(VectorEnv):
             self._tracer.begin(np.flatnonzero(done), None)
         info.update(final_obs=final_obs, _final_obs=done, final_info=final_info, _final_info=done)
         return info
+
+    def _observation(self, both: np.ndarray) -> np.ndarray:
+        """Red's observation of the simulator's [W, 2, D]: a new array, or with copy=False the env's buffer."""
+        if self.copy:
+            return both[:, RED].copy()
+        np.copyto(self._obs, both[:, RED])
+        return self._obs
 
     def _masks(self) -> np.ndarray:
         return self._masker.for_sim(self.sim, RED)

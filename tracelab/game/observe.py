@@ -16,49 +16,54 @@ SENTINEL = -1.0          # observed x, y of a dead agent / of a missing bullet
 # Observations
 # ----------------------------------------------------------------------------------------------------
 @njit(cache=True)
-def _observe_kernel(team, pos, alive, bpos, bdir, bteam, advanced, out):
-    """Fill out [W, D]: own then opponent (x, y) per agent; advanced: per own agent (opponent bullet
-    count, nearest opponent bullet x, y)."""
-    n_worlds = alive.shape[0]
+def _observe_world(w, team, pos, alive, bpos, bdir, bteam, advanced, live, out):
+    """Fill out [D] with world w's observation of `team`: own then opponent (x, y) per agent; advanced:
+    per own agent (opponent bullet count, nearest opponent bullet x, y). live [B] is scratch."""
     n = alive.shape[2]
     n_b = bdir.shape[1]
     enemy = 1 - team
-    live = np.empty(n_b, dtype=np.int64)
-    for w in range(n_worlds):
-        for k in range(2):
-            tm = team if k == 0 else enemy
-            for j in range(n):
-                col = (k * n + j) * 2
-                if alive[w, tm, j]:
-                    out[w, col] = pos[w, tm, j, 0]
-                    out[w, col + 1] = pos[w, tm, j, 1]
-                else:
-                    out[w, col] = SENTINEL
-                    out[w, col + 1] = SENTINEL
-        if not advanced:
-            continue
-        # Gather the opponent's live bullets once; slot order breaks distance ties.
-        count = 0
-        for b in range(n_b):
-            if bdir[w, b] >= 0 and bteam[b] == enemy:
-                live[count] = b
-                count += 1
+    for k in range(2):
+        tm = team if k == 0 else enemy
         for j in range(n):
-            col = 4 * n + 3 * j
-            out[w, col] = count
-            bx = SENTINEL
-            by = SENTINEL
-            if alive[w, team, j]:
-                best = 1 << 40
-                for i in range(count):
-                    b = live[i]
-                    d = abs(bpos[w, b, 0] - pos[w, team, j, 0]) + abs(bpos[w, b, 1] - pos[w, team, j, 1])
-                    if d < best:
-                        best = d
-                        bx = bpos[w, b, 0]
-                        by = bpos[w, b, 1]
-            out[w, col + 1] = bx
-            out[w, col + 2] = by
+            col = (k * n + j) * 2
+            if alive[w, tm, j]:
+                out[col] = pos[w, tm, j, 0]
+                out[col + 1] = pos[w, tm, j, 1]
+            else:
+                out[col] = SENTINEL
+                out[col + 1] = SENTINEL
+    if not advanced:
+        return
+    # Gather the opponent's live bullets once; slot order breaks distance ties.
+    count = 0
+    for b in range(n_b):
+        if bdir[w, b] >= 0 and bteam[b] == enemy:
+            live[count] = b
+            count += 1
+    for j in range(n):
+        col = 4 * n + 3 * j
+        out[col] = count
+        bx = SENTINEL
+        by = SENTINEL
+        if alive[w, team, j]:
+            best = 1 << 40
+            for i in range(count):
+                b = live[i]
+                d = abs(bpos[w, b, 0] - pos[w, team, j, 0]) + abs(bpos[w, b, 1] - pos[w, team, j, 1])
+                if d < best:
+                    best = d
+                    bx = bpos[w, b, 0]
+                    by = bpos[w, b, 1]
+        out[col + 1] = bx
+        out[col + 2] = by
+
+
+@njit(cache=True)
+def _observe_kernel(team, pos, alive, bpos, bdir, bteam, advanced, out):
+    """Fill out [W, D] with every world's observation of `team`."""
+    live = np.empty(bdir.shape[1], dtype=np.int64)
+    for w in range(alive.shape[0]):
+        _observe_world(w, team, pos, alive, bpos, bdir, bteam, advanced, live, out[w])
 
 
 @njit(cache=True)
@@ -66,6 +71,24 @@ def _observe_both_kernel(pos, alive, bpos, bdir, bteam, advanced, out):
     """Fill out [W, 2, D] with both teams' observations."""
     for team in range(2):
         _observe_kernel(team, pos, alive, bpos, bdir, bteam, advanced, out[:, team])
+
+
+@njit(cache=True)
+def observe_step(pos, alive, bpos, bdir, bteam, advanced, history, keep, obs):
+    """After a step, in place: obs [W, 2, D] (2D with `history`) becomes both teams' observation of the
+    new state, with `history` the previous observation's current half moved to the history half first.
+    Worlds with keep[w] (finished before the step) keep their observation, history included."""
+    d = obs.shape[2]
+    size = d // 2 if history else d
+    live = np.empty(bdir.shape[1], dtype=np.int64)
+    for w in range(alive.shape[0]):
+        if keep[w]:
+            continue
+        for team in range(2):
+            if size != d:
+                for c in range(size):
+                    obs[w, team, size + c] = obs[w, team, c]
+            _observe_world(w, team, pos, alive, bpos, bdir, bteam, advanced, live, obs[w, team, :size])
 
 
 def observe_both(state: GameState, scenario: Scenario) -> np.ndarray:

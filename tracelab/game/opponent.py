@@ -131,6 +131,30 @@ def scripted_actions(positions: np.ndarray, alive: np.ndarray, ammo: np.ndarray,
     return out[0] if single else out
 
 
+class TeamPolicy:
+    """scripted_actions for one simulator's batch, lean: the scenario's tables and the draws' buffer made
+    once, the state arrays passed as the simulator keeps them (writable, so the kernel's one compiled
+    signature serves). Draws the same numbers from the generator as scripted_actions."""
+
+    def __init__(self, scenario: Scenario, n_worlds: int) -> None:
+        n = scenario.agents_per_team
+        self._action_ids = _int_array(scenario.action_ids)
+        self._blocked = np.ascontiguousarray(scenario.mountain_grid)
+        self._goals = tuple(_int_array(tuple(scenario.bases[1 - t])) for t in range(2))
+        self._advanced = bool(scenario.advanced)
+        self._draws = np.empty((3, n_worlds, n))
+        self._shape = (n_worlds, n)
+
+    def __call__(self, pos: np.ndarray, alive: np.ndarray, ammo: np.ndarray, team: int,
+                 rng: np.random.Generator, p_toward: float) -> np.ndarray:
+        """Actions (spec ids, a new int64 [W, N]) of team index `team` for state arrays [W, 2, N(, 2)]."""
+        rng.random(out=self._draws)  # the same stream as rng.random((3, W, N))
+        out = np.empty(self._shape, dtype=np.int64)
+        _policy_kernel(pos, alive, ammo, team, self._draws, self._action_ids, self._blocked, self._goals[team],
+                       self._advanced, p_toward, out)
+        return out
+
+
 class ScriptedPolicy:
     """The scripted policy bound to a scenario, a team and its own seeded generator."""
 

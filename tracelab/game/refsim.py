@@ -17,8 +17,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .observe import observe_step
 from .scenario import DEAD_EPS, Scenario
-from .sim_base import GameSim
+from .sim_base import GameSim, read_only
 from .state import GameState, StepResult
 
 _DX = np.array([0, 0, -1, 1], dtype=np.int64)
@@ -69,11 +70,13 @@ def _resolve_hits(w, pending, hit_now, health, alive, hits_taken, damage):
 
 
 @njit(cache=True)
-def _step_kernel(actions, allowed, t, pos, health, ammo, alive, moving, dest, bpos, bdir,
+def _step_kernel(red, blue, allowed, t, pos, health, ammo, alive, moving, dest, bpos, bdir,
                  terminated, truncated, winner, bteam, bagent, blocked, slow, bases, params,
-                 max_steps, ammo0, unsafe, invalid, hits_made, hits_taken, agent_reward, reward):
-    """One step of every unfinished world. Returns -1, or the flat index of the first action id the
-    scenario does not offer (then nothing was changed)."""
+                 max_steps, ammo0, unsafe, invalid, hits_made, hits_taken, agent_reward, reward, was_done):
+    """One step of every unfinished world, in place; actions red, blue [W, N]. The step's events and
+    rewards (unsafe .. reward) are written for every world (zero in finished ones); was_done[w]: the
+    world was finished before the step. Returns -1, or the flat index in [W, 2, N] of the first action
+    id the scenario does not offer (then nothing was changed)."""
     n_worlds = alive.shape[0]
     n = alive.shape[2]
     width, height = blocked.shape
@@ -84,7 +87,7 @@ def _step_kernel(actions, allowed, t, pos, health, ammo, alive, moving, dest, bp
     for w in range(n_worlds):
         for tm in range(2):
             for j in range(n):
-                a = actions[w, tm, j]
+                a = red[w, j] if tm == 0 else blue[w, j]
                 if a < 0 or a >= allowed.shape[0] or not allowed[a]:
                     return (w * 2 + tm) * n + j
 
@@ -98,7 +101,16 @@ def _step_kernel(actions, allowed, t, pos, health, ammo, alive, moving, dest, bp
     win = np.zeros(2, dtype=np.bool_)
 
     for w in range(n_worlds):
-        if terminated[w] or truncated[w]:
+        for tm in range(2):
+            reward[w, tm] = 0.0
+            for j in range(n):
+                unsafe[w, tm, j] = False
+                invalid[w, tm, j] = False
+                hits_made[w, tm, j] = 0
+                hits_taken[w, tm, j] = 0
+                agent_reward[w, tm, j] = 0.0
+        was_done[w] = terminated[w] or truncated[w]
+        if was_done[w]:
             continue  # a finished world waits for reset
         step_no = t[w]
 
@@ -142,7 +154,7 @@ def _step_kernel(actions, allowed, t, pos, health, ammo, alive, moving, dest, bp
                     continue  # dead agents' actions are ignored
                 if slow[tm, j] and step_no % 2 == 1:
                     continue  # slow agents act on even steps only
-                a = actions[w, tm, j]
+                a = red[w, j] if tm == 0 else blue[w, j]
                 if a <= 3:
                     x = p0[tm, j, 0] + _DX[a]
                     y = p0[tm, j, 1] + _DY[a]
@@ -238,12 +250,14 @@ class RefSim(GameSim):
 
     The dynamics are deterministic; `seed` drives `rng`, used by `scripted_actions()` (the scripted
     policy for either team). With `stack_previous`, observations are [current, previous] (at reset the
-    previous observation is the current one).
+    previous observation is the current one). `copy`: the step contract (GameSim): by default a
+    StepResult's arrays are read-only views of the state and event buffers, valid until the next step
+    or reset; `copy=True` returns new arrays every time.
     """
 
     def __init__(self, scenario: Scenario, n_worlds: int = 1, seed: int | None = None,
-                 stack_previous: bool = False):
-        super().__init__(scenario, n_worlds, seed, stack_previous)
+                 stack_previous: bool = False, copy: bool = False):
+        super().__init__(scenario, n_worlds, seed, stack_previous, copy)
         n = scenario.agents_per_team
         self._allowed = np.zeros(9, dtype=bool)
         self._allowed[list(scenario.action_ids)] = True
@@ -254,33 +268,43 @@ class RefSim(GameSim):
         self._params = np.array([scenario.damage, r.win, r.loss, r.hit_opponent, r.got_shot,
                                  r.valid_action, r.unsafe, r.invalid], dtype=np.float64)
         self._initial = GameState.initial(scenario, n_worlds)
-        self.state = self._initial.copy()
-        self._bullet_owner = np.stack([self.state.bullet_team, self.state.bullet_agent], axis=1).astype(np.int64)
-        self._cur = self._current_obs()  # [W, 2, D] without history: the next step's "previous"
-        self._obs = self._with_history(self._cur, self._cur)  # last observation handed out
+        self.state = s = self._initial.copy()  # stepped and reset in place: the buffers handed out
+        self._policy_state = (s.pos, s.alive, s.ammo)
+        self._bullet_owner = np.stack([s.bullet_team, s.bullet_agent], axis=1).astype(np.int64)
+        shape = (n_worlds, 2, n)
+        # the step's events, rewritten by every step: unsafe, invalid, hits made / taken, rewards
+        self._events = (np.zeros(shape, bool), np.zeros(shape, bool), np.zeros(shape, np.int32),
+                        np.zeros(shape, np.int32), np.zeros(shape), np.zeros((n_worlds, 2)))
+        self._was_done = np.zeros(n_worlds, bool)
+        cur = self._current_obs()
+        self._obs = self._with_history(cur, cur)  # [W, 2, D]: the observation buffer
+        self._obs_view = read_only(self._obs)
         self._shape = (n_worlds, n)
+        unsafe, invalid, hits_made, hits_taken, agent_reward, reward = (read_only(a) for a in self._events)
+        self._result = StepResult(
+            obs=self._obs_view, positions=read_only(s.pos), health=read_only(s.health), ammo=read_only(s.ammo),
+            alive=read_only(s.alive), moving=read_only(s.moving), move_dest=read_only(s.dest),
+            bullet_pos=read_only(s.bullet_pos), bullet_dir=read_only(s.bullet_dir),
+            bullet_owner=read_only(self._bullet_owner), unsafe=unsafe, invalid=invalid, hits_made=hits_made,
+            hits_taken=hits_taken, agent_reward=agent_reward, reward=reward, terminated=read_only(s.terminated),
+            truncated=read_only(s.truncated), winner=read_only(s.winner), t=read_only(s.t))
 
     def reset(self, seed: int | None = None, worlds: np.ndarray | None = None) -> np.ndarray:
         """Start new episodes (in all worlds, or in the worlds of a mask / index array) and return the
-        observations of every world, float32 [W, 2, D]."""
+        observations of every world, float32 [W, 2, D] (a buffer, unless copy=True)."""
         if seed is not None:
             self.rng = np.random.default_rng(seed)
-        if worlds is None:
-            self.state = self._initial.copy()
-            worlds = slice(None)
-        else:
-            self.state.assign(self._initial, worlds)
-        cur = self._current_obs()
-        obs = self._obs.copy()  # never mutate an array a StepResult may hold
-        obs[worlds] = self._with_history(cur, cur)[worlds]  # history at reset: the current obs
-        self._cur, self._obs = cur, obs
-        return obs.copy()
+        # indices taken first: the mask may be a view of this simulator's own flags, reset below
+        sel = slice(None) if worlds is None else (
+            np.flatnonzero(worlds) if np.asarray(worlds).dtype == bool else np.array(worlds))
+        self.state.assign(self._initial, sel)
+        return self._reset_obs(sel)
 
     def _current_obs(self) -> np.ndarray:
         return self._observe_both(self.state)
 
     def _actions(self, name: str, actions: np.ndarray) -> np.ndarray:
-        a = np.asarray(actions, dtype=np.int64)
+        a = actions if type(actions) is np.ndarray and actions.dtype == np.int64 else np.asarray(actions, np.int64)
         if a.ndim == 1 and self.n_worlds == 1:
             a = a[None]
         if a.shape != self._shape:
@@ -290,36 +314,19 @@ class RefSim(GameSim):
     def step(self, red_actions: np.ndarray, blue_actions: np.ndarray) -> StepResult:
         """Advance every unfinished world by one step. Actions are spec ids, int [W, N] per team.
         Finished worlds do not change (zero rewards, flags kept) until reset."""
-        acts = np.stack([self._actions("red_actions", red_actions),
-                         self._actions("blue_actions", blue_actions)], axis=1)
+        red, blue = self._actions("red_actions", red_actions), self._actions("blue_actions", blue_actions)
         s = self.state
-        finished_before = s.terminated | s.truncated
-        n_worlds, n = self._shape
-        unsafe = np.zeros((n_worlds, 2, n), dtype=bool)
-        invalid = np.zeros((n_worlds, 2, n), dtype=bool)
-        hits_made = np.zeros((n_worlds, 2, n), dtype=np.int32)
-        hits_taken = np.zeros((n_worlds, 2, n), dtype=np.int32)
-        agent_reward = np.zeros((n_worlds, 2, n), dtype=np.float64)
-        reward = np.zeros((n_worlds, 2), dtype=np.float64)
-        bad = _step_kernel(acts, self._allowed, s.t, s.pos, s.health, s.ammo, s.alive, s.moving, s.dest,
+        unsafe, invalid, hits_made, hits_taken, agent_reward, reward = self._events
+        bad = _step_kernel(red, blue, self._allowed, s.t, s.pos, s.health, s.ammo, s.alive, s.moving, s.dest,
                            s.bullet_pos, s.bullet_dir, s.terminated, s.truncated, s.winner,
                            s.bullet_team, s.bullet_agent, self._blocked, self._slow, self._bases,
                            self._params, self.scenario.max_steps, self.scenario.ammo,
-                           unsafe, invalid, hits_made, hits_taken, agent_reward, reward)
+                           unsafe, invalid, hits_made, hits_taken, agent_reward, reward, self._was_done)
         if bad >= 0:
-            w, tm, j = np.unravel_index(bad, acts.shape)
-            raise ValueError(f"action {acts[w, tm, j]} of {('red', 'blue')[tm]} agent {j} in world {w} is "
-                             f"not offered by scenario {self.scenario.name!r} (ids {self.scenario.action_ids})")
-        cur = self._current_obs()
-        obs = self._with_history(cur, self._cur)
-        finished = finished_before  # a finished world's observation stays as it was, history included
-        cur[finished] = self._cur[finished]
-        obs[finished] = self._obs[finished]
-        self._cur, self._obs = cur, obs
-        return StepResult(
-            obs=obs, positions=s.pos.copy(), health=s.health.copy(), ammo=s.ammo.copy(),
-            alive=s.alive.copy(), moving=s.moving.copy(), move_dest=s.dest.copy(), bullet_pos=s.bullet_pos.copy(),
-            bullet_dir=s.bullet_dir.copy(), bullet_owner=self._bullet_owner, unsafe=unsafe,
-            invalid=invalid, hits_made=hits_made, hits_taken=hits_taken, agent_reward=agent_reward,
-            reward=reward, terminated=s.terminated.copy(), truncated=s.truncated.copy(),
-            winner=s.winner.copy(), t=s.t.copy())
+            w, tm, j = np.unravel_index(bad, (self.n_worlds, 2, self._shape[1]))
+            raise ValueError(f"action {(red, blue)[tm][w, j]} of {('red', 'blue')[tm]} agent {j} in world {w} "
+                             f"is not offered by scenario {self.scenario.name!r} (ids {self.scenario.action_ids})")
+        # a finished world's observation stays as it was, history included
+        observe_step(s.pos, s.alive, s.bullet_pos, s.bullet_dir, s.bullet_team, self.scenario.advanced,
+                     self.stack_previous, self._was_done, self._obs)
+        return self._handed_out()

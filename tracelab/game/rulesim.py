@@ -6,15 +6,14 @@ so the two simulators are interchangeable and can be compared step by step.
 """
 from __future__ import annotations
 
-from dataclasses import fields
-
 import numpy as np
 from tracelab.engine import Engine
 
 from tracelab.game.facts import DIRECTIONS, agent_name, bullet_name, scenario_program
+from tracelab.game.observe import observe_step
 from tracelab.game.rulesim_kernel import encode_actions, read_and_settle, read_back
 from tracelab.game.scenario import TEAMS, Scenario
-from tracelab.game.sim_base import GameSim
+from tracelab.game.sim_base import GameSim, read_only
 from tracelab.game.state import WINNER_NONE, GameState, StepResult
 
 
@@ -22,11 +21,17 @@ class RuleSim(GameSim):
     """`n_worlds` games stepped together by one engine call per step. `trace` turns the engine's change
     log on (for all worlds, or a bool per world); take it with `self.engine.take_trace()`. `kernel`
     chooses the engine's kernel (tracelab.engine.Engine; "auto" takes the lanes kernel for 64 worlds
-    or more)."""
+    or more). `copy`: the step contract (GameSim): by default a StepResult's arrays are read-only views
+    of buffers the next step or reset overwrites; `copy=True` returns new arrays every time.
+
+    A step is four compiled calls and the engine's: encode_actions (actions to fact rows), the engine
+    step, read_and_settle (atoms back into the state buffers, rewards, the end of the game) and
+    observe_step (observations, in place)."""
 
     def __init__(self, scenario: Scenario, n_worlds: int = 1, seed: int | None = None,
-                 stack_previous: bool = False, trace: bool | np.ndarray = False, kernel: str = "auto") -> None:
-        super().__init__(scenario, n_worlds, seed, stack_previous)
+                 stack_previous: bool = False, trace: bool | np.ndarray = False, kernel: str = "auto",
+                 copy: bool = False) -> None:
+        super().__init__(scenario, n_worlds, seed, stack_previous, copy)
         self.engine = Engine(scenario_program(scenario), worlds=n_worlds, trace=trace, kernel=kernel)
         self._index_atoms()
         # t = 0 sets up the start; every action atom starts false, so the rules are grounded for them
@@ -49,25 +54,71 @@ class RuleSim(GameSim):
         # the action rows' buffers, reused every step (the engine reads them within step())
         self._rows_buf = (np.empty(n_worlds + 1, np.int64), np.empty((cap, 3), np.int64),
                           np.empty((cap, 2), np.float64))
-        self.t = np.zeros(n_worlds, np.int32)
-        self.terminated = np.zeros(n_worlds, bool)
-        self.truncated = np.zeros(n_worlds, bool)
-        self.winner = np.full(n_worlds, WINNER_NONE, np.int8)
         r = scenario.rewards
         self._weights = np.array([r.win, r.loss, r.hit_opponent, r.got_shot, r.valid_action, r.unsafe,
                                   r.invalid], np.float64)
         self._allowed = np.zeros(9, bool)
         self._allowed[list(scenario.action_ids)] = True
-        self._no_world_done = np.zeros(n_worlds, bool)  # read-only stand-in for "no world is done"
-        self._no_world_done.flags.writeable = False
-        self._n_done = 0  # worlds terminated or truncated and not yet reset
-        self.state = self._read_state()
-        self._cur = self._observe_both(self.state)
-        self._obs = self._with_history(self._cur, self._cur)
+        self._make_buffers()
         # every world starts alike: a reset copies these rows instead of reading atoms back
-        self._start_state, self._start_cur = self.state, self._cur.copy()
-        for a in (*(getattr(self.state, f.name) for f in fields(self.state)), self._start_cur):
-            a.flags.writeable = False  # self.state is the caller's to read until the first step
+        self._start_state = {name: buf.copy() for name, buf in self._state_buffers.items()}
+        self._start_obs = self._obs.copy()
+
+    def _make_buffers(self) -> None:
+        """The state, events, rewards and observations of every world: buffers rewritten in place by every
+        step (read back from the engine's start state here), the state and result handed out as
+        read-only views of them, and the compiled calls' argument lists."""
+        s, w, n = self.scenario, self.n_worlds, self.scenario.agents_per_team
+        n_b = len(self._bullet_team)
+        shape = (w, 2, n)
+        self.t = np.zeros(w, np.int32)
+        self.terminated = np.zeros(w, bool)
+        self.truncated = np.zeros(w, bool)
+        self.winner = np.full(w, WINNER_NONE, np.int8)
+        pos, dest = np.empty((*shape, 2), np.int32), np.empty((*shape, 2), np.int32)
+        health = np.full(shape, float(s.health))
+        alive, moving = np.empty(shape, bool), np.empty(shape, bool)
+        ammo = np.empty(shape, np.int32)
+        bpos, bdir = np.empty((w, n_b, 2), np.int32), np.empty((w, n_b), np.int8)
+        unsafe, invalid, acted = np.zeros(shape, bool), np.zeros(shape, bool), np.zeros(shape, bool)
+        hits_made, hits_taken = np.zeros(shape, np.int32), np.zeros(shape, np.int32)
+        win = np.zeros((w, 2), bool)
+        agent_reward, reward = np.zeros(shape), np.zeros((w, 2))
+        self._was_done = np.zeros(w, bool)  # per world: finished before the last step
+        # read_back's and read_and_settle's arguments after the tables, in their order
+        buffers = (pos, health, alive, ammo, moving, dest, unsafe, invalid, acted, bpos, bdir, hits_made,
+                   hits_taken, win, self._was_done)
+        read_back(self.engine.is_true(self._read_atoms), *self._read_tables, False, self._kind_hits,
+                  self.terminated, self.truncated, *buffers)
+        self._settle_args = (*self._read_tables, self._kind_hits, *buffers, self._weights, s.max_steps, self.t,
+                             self.terminated, self.truncated, self.winner, agent_reward, reward)
+        cur = np.zeros((w, 2, self.obs_size // 2 if self.stack_previous else self.obs_size), np.float32)
+        self._obs = self._with_history(cur, cur)
+        self._observe_args = (pos, alive, bpos, bdir, self._state_bullet_team, bool(s.advanced),
+                              self.stack_previous, self._was_done, self._obs)
+        observe_step(*self._observe_args)  # no world is done yet: every observation is written
+        if self.stack_previous:
+            self._obs[..., self.obs_size // 2:] = self._obs[..., :self.obs_size // 2]
+        self._obs_view = read_only(self._obs)
+        self._policy_state = (pos, alive, ammo)
+        # the state's writable buffers by GameState field: what a reset restores
+        self._state_buffers = {"t": self.t, "pos": pos, "health": health, "ammo": ammo, "alive": alive,
+                               "moving": moving, "dest": dest, "bullet_pos": bpos, "bullet_dir": bdir,
+                               "terminated": self.terminated, "truncated": self.truncated, "winner": self.winner}
+        self.state = GameState(
+            t=read_only(self.t), pos=read_only(pos), health=read_only(health), ammo=read_only(ammo),
+            alive=read_only(alive), moving=read_only(moving), dest=read_only(dest), bullet_pos=read_only(bpos),
+            bullet_dir=read_only(bdir), terminated=read_only(self.terminated), truncated=read_only(self.truncated),
+            winner=read_only(self.winner), bullet_team=self._state_bullet_team,
+            bullet_agent=self._state_bullet_agent)
+        st = self.state
+        self._result = StepResult(
+            obs=self._obs_view, positions=st.pos, health=st.health, ammo=st.ammo, alive=st.alive,
+            moving=st.moving, move_dest=st.dest, bullet_pos=st.bullet_pos, bullet_dir=st.bullet_dir,
+            bullet_owner=read_only(self._bullet_owner), unsafe=read_only(unsafe), invalid=read_only(invalid),
+            hits_made=read_only(hits_made), hits_taken=read_only(hits_taken),
+            agent_reward=read_only(agent_reward), reward=read_only(reward), terminated=st.terminated,
+            truncated=st.truncated, winner=st.winner, t=st.t)
 
     # ---- atom ids, looked up once ----
 
@@ -136,60 +187,9 @@ class RuleSim(GameSim):
         # read_back's arguments that never change, agent_loc to damage: one tuple, not a lookup each step
         self._read_tables = (rows["_agent_loc"], self._cell_xy, rows["_agent_flags"], rows["_dest"],
                              rows["_bullet_loc"], rows["_bullet_flags"], rows["_dir"], rows["_hits"],
-                             self._bullet_team, self._bullet_agent, rows["_win"], s.ammo, float(s.health),
-                             float(s.damage))
+                             self._bullet_team, self._bullet_agent, rows["_win"], s.ammo, float(s.damage))
 
-    # ---- reading the world back ----
-
-    def _read_state(self, done: np.ndarray | None = None, settle: bool = False) -> GameState:
-        """The game state of every world, read from atoms (and the events of the last step into
-        self._events: unsafe, invalid, acted [W, 2, N]; hits made / taken; which team won). Worlds in
-        `done` keep their state from self.state and have no events. With `settle` (after a step) the
-        step's rewards and the end of the game are settled first (settle_step; rewards into
-        self._rewards), and health takes the step's hits from self.state's; else health is the scenario's
-        (the start state). t, terminated, truncated and winner are copies of the simulator's
-        after that."""
-        s = self.scenario
-        w, n = self.n_worlds, s.agents_per_team
-        n_b = len(self._bullet_team)
-        pos = np.empty((w, 2, n, 2), np.int32)
-        health = np.empty((w, 2, n), np.float64)
-        alive = np.empty((w, 2, n), bool)
-        ammo = np.empty((w, 2, n), np.int32)
-        moving = np.empty((w, 2, n), bool)
-        dest = np.empty((w, 2, n, 2), np.int32)
-        unsafe = np.empty((w, 2, n), bool)
-        invalid = np.empty((w, 2, n), bool)
-        acted = np.empty((w, 2, n), bool)
-        bpos = np.empty((w, n_b, 2), np.int32)
-        bdir = np.empty((w, n_b), np.int8)
-        hits_made = np.empty((w, 2, n), np.int32)
-        hits_taken = np.empty((w, 2, n), np.int32)
-        win = np.empty((w, 2), bool)
-        if done is None:  # no world keeps its state: the new arrays stand in for the unread prev_* ones
-            done, prev = self._no_world_done, (pos, alive, ammo, moving, dest, bpos, bdir)
-        else:
-            st = self.state
-            prev = (st.pos, st.alive, st.ammo, st.moving, st.dest, st.bullet_pos, st.bullet_dir)
-        truth = self.engine.is_true(self._read_atoms)
-        out = (pos, health, alive, ammo, moving, dest, unsafe, invalid, acted, bpos, bdir, hits_made, hits_taken,
-               win)
-        if settle:
-            agent_reward = np.empty((w, 2, n))
-            reward = np.empty((w, 2))
-            self._n_done = read_and_settle(truth, *self._read_tables, self.state.health, self._kind_hits, done,
-                                           *prev, *out, self._weights, s.max_steps, self.t, self.terminated,
-                                           self.truncated, self.winner, agent_reward, reward)
-            self._rewards = (agent_reward, reward)
-        else:
-            read_back(truth, *self._read_tables, False, np.full((w, 2, n), float(s.health)), self._kind_hits,
-                      done, *prev, *out)
-        self._events = (unsafe, invalid, acted, hits_made, hits_taken, win)
-        return GameState(
-            t=self.t.copy(), pos=pos, health=health, ammo=ammo, alive=alive, moving=moving, dest=dest,
-            bullet_pos=bpos, bullet_dir=bdir, terminated=self.terminated.copy(),
-            truncated=self.truncated.copy(), winner=self.winner.copy(),
-            bullet_team=self._state_bullet_team, bullet_agent=self._state_bullet_agent)
+    # ---- the shield ----
 
     def allowed_actions(self) -> np.ndarray:
         """Which spec actions (ids 0..8) each agent may take next step, as the shield rules see it after
@@ -210,11 +210,13 @@ class RuleSim(GameSim):
     # ---- the RefSim API ----
 
     def reset(self, seed: int | None = None, worlds: np.ndarray | None = None) -> np.ndarray:
-        """Start new episodes in all worlds (or those of a mask / index array); observations [W, 2, D]."""
+        """Start new episodes in all worlds (or those of a mask / index array); observations [W, 2, D] (a
+        buffer, unless copy=True)."""
         if seed is not None:
             self.rng = np.random.default_rng(seed)
+        # indices taken first: the mask may be a view of this simulator's own flags, reset below
         sel = np.arange(self.n_worlds) if worlds is None else (
-            np.flatnonzero(worlds) if np.asarray(worlds).dtype == bool else np.asarray(worlds))
+            np.flatnonzero(worlds) if np.asarray(worlds).dtype == bool else np.array(worlds))
         sel = sel[~self._fresh[sel]]  # a world that has not stepped since its start needs nothing
         self._fresh[sel] = True
         if self.engine.trace_on.any():  # rows of the episodes that end here keep their own clock
@@ -225,36 +227,15 @@ class RuleSim(GameSim):
         self.world_episode[sel] += 1
         if self.engine.trace_on[sel].any():
             self._replay_setup(sel[self.engine.trace_on[sel]])
-        self.t[sel] = 0
-        self.terminated[sel] = False
-        self.truncated[sel] = False
-        self._n_done = int((self.terminated | self.truncated).sum())
-        self.winner[sel] = WINNER_NONE
-        self.state = self._restarted_state(sel)
-        # new arrays: the caller may hold the last step's observation (the same array)
-        cur = self._cur.copy()
-        cur[sel] = self._start_cur[sel]
-        obs = self._obs.copy()
-        obs[sel] = self._with_history(cur[sel], cur[sel])
-        self._cur, self._obs = cur, obs
-        return obs.copy()
+        if len(sel):  # the start state, as read when the simulator was built (all worlds start alike)
+            self._start_state_into(sel)
+            self._obs[sel] = self._start_obs[sel]
+        return self._handed_obs()
 
-    def _restarted_state(self, sel: np.ndarray) -> GameState:
-        """self.state with worlds `sel` back in the start state (as read when the simulator was built)."""
-        st, start = self.state, self._start_state
-        # every world in the start state (e.g. the one world of an env): the start rows as they are (read-only)
-        every = bool(self._fresh.all())
-        rows = {}
-        for name in ("pos", "health", "ammo", "alive", "moving", "dest", "bullet_pos", "bullet_dir"):
-            if every:
-                rows[name] = getattr(start, name)
-                continue
-            a = getattr(st, name).copy()
-            a[sel] = getattr(start, name)[sel]
-            rows[name] = a
-        return GameState(t=self.t.copy(), terminated=self.terminated.copy(), truncated=self.truncated.copy(),
-                         winner=self.winner.copy(), bullet_team=self._state_bullet_team,
-                         bullet_agent=self._state_bullet_agent, **rows)
+    def _start_state_into(self, sel: np.ndarray) -> None:
+        """Worlds `sel` of the state buffers back to the start state, in place."""
+        for name, buf in self._state_buffers.items():
+            buf[sel] = self._start_state[name][sel]
 
     def _replay_setup(self, worlds: np.ndarray) -> None:
         """A restored world starts from the set-up state without re-deriving it; its t = 0 rows are
@@ -282,9 +263,7 @@ class RuleSim(GameSim):
             start = int(self.episode_start[0])
             if start:
                 rows["t"] -= start
-            episode = np.empty(len(rows["t"]), np.int64)
-            episode.fill(int(self.world_episode[0]))
-            rows["world_episode"] = episode
+            rows["world_episode"] = np.full(len(rows["t"]), self.world_episode[0])
             return rows
         world = rows["world"].astype(np.int64)
         rows["t"] = (rows["t"] - self.episode_start[world]).astype(np.int32)
@@ -294,41 +273,22 @@ class RuleSim(GameSim):
     def step(self, red_actions: np.ndarray, blue_actions: np.ndarray) -> StepResult:
         """One step of every world (spec action ids, int [W, N] per team). Finished worlds do not change
         (zero rewards, flags kept) until reset."""
-        any_done = self._n_done > 0
-        done = self.terminated | self.truncated if any_done else self._no_world_done
-        self.engine.step(external=self._action_rows(red_actions, blue_actions, done))
-        self._fresh[:] = False
-        # finished worlds keep their final state; the clock and end flags are read after settling
-        state = self._read_state(done if any_done else None, settle=True)
-        unsafe, invalid, acted, hits_made, hits_taken, _ = self._events
-        agent_reward, reward = self._rewards
-        for a in (state.pos, state.health, state.ammo, state.alive, state.moving, state.dest, state.bullet_pos,
-                  state.bullet_dir, state.t, state.terminated, state.truncated, state.winner):
-            a.setflags(write=False)  # shared by the state and the result: nobody may change them
-        self.state = state
-        cur = self._observe_both(state)
-        obs = self._with_history(cur, self._cur)
-        if any_done:
-            cur[done] = self._cur[done]
-            obs[done] = self._obs[done]
-        self._cur, self._obs = cur, obs
-        return StepResult(
-            obs=obs, positions=state.pos, health=state.health, ammo=state.ammo, alive=state.alive,
-            moving=state.moving, move_dest=state.dest, bullet_pos=state.bullet_pos,
-            bullet_dir=state.bullet_dir, bullet_owner=self._bullet_owner,
-            unsafe=unsafe, invalid=invalid, hits_made=hits_made, hits_taken=hits_taken,
-            agent_reward=agent_reward, reward=reward, terminated=state.terminated,
-            truncated=state.truncated, winner=state.winner, t=state.t)
+        self.engine.step(external=self._action_rows(red_actions, blue_actions))
+        self._fresh.fill(False)
+        # finished worlds keep their final state; the clock, end flags and rewards are settled in place
+        read_and_settle(self.engine.is_true(self._read_atoms), *self._settle_args)
+        observe_step(*self._observe_args)
+        return self._handed_out()
 
-    def _action_rows(self, red_actions: np.ndarray, blue_actions: np.ndarray,
-                     done: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The engine's external-fact rows for both teams' actions (see encode_actions; done worlds do
-        nothing), after checking every action against what the scenario offers."""
+    def _action_rows(self, red_actions: np.ndarray,
+                     blue_actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The engine's external-fact rows for both teams' actions (see encode_actions; finished worlds
+        do nothing), after checking every action against what the scenario offers."""
         red = self._team_actions(red_actions, "red_actions")
         blue = self._team_actions(blue_actions, "blue_actions")
         ptr, rows, bounds = self._rows_buf
-        k = encode_actions(red, blue, done, self._allowed, self._action_atoms, self._prev_action,
-                           self.engine.next_external_id(), ptr, rows, bounds)
+        k = encode_actions(red, blue, self.terminated, self.truncated, self._allowed, self._action_atoms,
+                           self._prev_action, self.engine.next_external_id(), ptr, rows, bounds)
         if k < 0:
             w, tm, j = np.unravel_index(-1 - k, (self.n_worlds, 2, self.scenario.agents_per_team))
             raise ValueError(f"action {(red, blue)[tm][w, j]} of {TEAMS[tm]} agent {j} in world {w} is not "
@@ -336,7 +296,7 @@ class RuleSim(GameSim):
         return ptr, rows[:k], bounds[:k]
 
     def _team_actions(self, actions: np.ndarray, name: str) -> np.ndarray:
-        a = np.asarray(actions, np.int64)
+        a = actions if type(actions) is np.ndarray and actions.dtype == np.int64 else np.asarray(actions, np.int64)
         if a.ndim == 1 and self.n_worlds == 1:
             a = a[None]
         shape = (self.n_worlds, self.scenario.agents_per_team)

@@ -74,8 +74,10 @@ class GameState:
 
 @dataclass(slots=True)  # not frozen: a frozen dataclass's __init__ costs ~1.3 µs more per step
 class StepResult:
-    """Everything one batched step produced; arrays are [W, ...]. The simulator never changes them after
-    the step (RuleSim shares its state's arrays with the result, read-only; RefSim hands out copies)."""
+    """Everything one batched step produced; arrays are [W, ...]. By default (a simulator built with
+    copy=False) they are read-only views of the simulator's buffers, valid until its next step or reset:
+    keep what you need with `copy()` (or build the simulator with copy=True, then every step returns new
+    arrays)."""
     obs: np.ndarray           # float32 [W, 2, D]: observation of each team (docs/game.md)
     positions: np.ndarray     # int32 [W, 2, N, 2] after the step (dead agents: where they died)
     health: np.ndarray        # float64 [W, 2, N]
@@ -96,6 +98,10 @@ class StepResult:
     truncated: np.ndarray     # bool [W]: step limit reached without a winner (stays True until reset)
     winner: np.ndarray        # int8 [W]: WINNER_NONE / RED / BLUE / DRAW
     t: np.ndarray             # int32 [W]: steps taken
+
+    def copy(self) -> "StepResult":
+        """The same result in new, writable arrays that no later step changes."""
+        return StepResult(**{f.name: getattr(self, f.name).copy() for f in fields(self)})
 
     @property
     def bullet_live(self) -> np.ndarray:

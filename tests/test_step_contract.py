@@ -1,0 +1,163 @@
+"""The step contract (docs/envs.md): a simulator's StepResult arrays are read-only views of buffers that
+its next step or reset overwrites, unless it is built with copy=True; the gymnasium, vector and
+PettingZoo envs keep gymnasium's semantics on top of it."""
+from __future__ import annotations
+
+import dataclasses
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import tracelab.envs.gym_env  # noqa: F401  (registers the ids)
+from tracelab.envs.gym_env import GridWarEnv
+from tracelab.envs.parallel_env import GridWarParallelEnv
+from tracelab.envs.vector_env import GridWarVectorEnv
+from tracelab.game.opponent import TeamPolicy, scripted_actions
+from tracelab.game.refsim import RefSim
+from tracelab.game.rulesim import RuleSim
+from tracelab.game.scenario import builtin_scenario
+from tracelab.game.state import WINNER_NONE, StepResult
+
+UP, DOWN, NOP = 0, 1, 8
+FIELDS = [f.name for f in dataclasses.fields(StepResult)]
+SIMS = [RefSim, RuleSim]
+
+
+def short_base(max_steps: int = 50):
+    return dataclasses.replace(builtin_scenario("base"), max_steps=max_steps)
+
+
+def snapshot(r: StepResult) -> dict[str, np.ndarray]:
+    return {name: getattr(r, name).copy() for name in FIELDS}
+
+
+@pytest.mark.parametrize("sim_class", SIMS)
+def test_a_step_result_is_overwritten_by_the_next_step(sim_class) -> None:
+    sim = sim_class(short_base(), 2, stack_previous=True)
+    sim.reset(seed=0)
+    first = sim.step(np.full((2, 1), UP), np.full((2, 1), NOP))
+    before = snapshot(first)
+    second = sim.step(np.full((2, 1), UP), np.full((2, 1), NOP))
+    # the same buffers, now holding the second step
+    assert np.shares_memory(first.positions, second.positions) and np.shares_memory(first.obs, second.obs)
+    assert not np.array_equal(first.positions, before["positions"])  # red moved again
+    assert not np.array_equal(first.obs, before["obs"])
+    np.testing.assert_array_equal(first.t, before["t"] + 1)
+    for name in FIELDS:
+        np.testing.assert_array_equal(getattr(first, name), getattr(second, name), err_msg=name)
+
+
+@pytest.mark.parametrize("sim_class", SIMS)
+def test_step_buffers_are_read_only(sim_class) -> None:
+    sim = sim_class(short_base())
+    obs = sim.reset(seed=0)
+    r = sim.step([UP], [NOP])
+    for a in (obs, r.obs, r.positions, r.reward, r.terminated, r.unsafe):
+        with pytest.raises(ValueError):
+            a[...] = 0
+    # a result's copy is the caller's to change
+    mine = r.copy()
+    mine.positions[...] = -5
+    assert (r.positions != -5).all()
+
+
+@pytest.mark.parametrize("sim_class", SIMS)
+def test_copy_true_gives_independent_arrays(sim_class) -> None:
+    sim = sim_class(short_base(3), 2, copy=True)
+    obs0 = sim.reset(seed=0)
+    kept = [(sim.step(np.full((2, 1), UP), np.full((2, 1), NOP)), None)]
+    kept[0] = (kept[0][0], snapshot(kept[0][0]))
+    for _ in range(4):  # past the step limit and a reset of the finished worlds
+        r = sim.step(np.full((2, 1), UP), np.full((2, 1), NOP))
+        kept.append((r, snapshot(r)))
+        if r.done.any():
+            sim.reset(worlds=r.done)
+    assert obs0.flags.writeable and not np.shares_memory(obs0, sim.reset())
+    for r, values in kept:
+        for name in FIELDS:
+            np.testing.assert_array_equal(getattr(r, name), values[name], err_msg=name)
+    assert not np.shares_memory(kept[0][0].obs, kept[1][0].obs)
+    assert not np.shares_memory(kept[0][0].positions, kept[1][0].positions)
+
+
+@pytest.mark.parametrize("sim_class", SIMS)
+def test_reset_with_a_mask_that_is_the_simulators_own_flag(sim_class) -> None:
+    # the mask passed to reset is the buffer reset clears: every reset world must be reset entirely
+    sim = sim_class(short_base(2), 3)
+    sim.reset(seed=0)
+    sim.step(np.full((3, 1), UP), np.full((3, 1), NOP))
+    r = sim.step(np.full((3, 1), UP), np.full((3, 1), NOP))
+    assert r.truncated.all()
+    sim.reset(worlds=r.truncated)
+    assert (sim.state.t == 0).all() and not sim.state.truncated.any()
+    assert (sim.state.winner == WINNER_NONE).all()
+    start = sim_class(short_base(2), 3).reset()
+    np.testing.assert_array_equal(r.obs, start)
+
+
+def test_team_policy_draws_what_scripted_actions_draws() -> None:
+    sc = builtin_scenario("advanced")
+    sim = RefSim(sc, 5, seed=3)
+    sim.reset()
+    s = sim.state
+    policy = TeamPolicy(sc, 5)
+    a, b = np.random.default_rng(11), np.random.default_rng(11)
+    for team in (0, 1, 1, 0):
+        lean = policy(s.pos, s.alive, s.ammo, team, a, 0.6)
+        np.testing.assert_array_equal(lean, scripted_actions(s.pos, s.alive, s.ammo, team, sc, b, 0.6))
+    assert a.random() == b.random()  # the streams stayed aligned
+
+
+@pytest.mark.parametrize("backend", ["rules", "reference"])
+def test_single_env_hands_out_nothing_a_later_step_changes(backend: str) -> None:
+    env = GridWarEnv(short_base(6), backend=backend)
+    obs, info = env.reset(seed=0)
+    kept = [obs, *[v for v in info.values() if isinstance(v, np.ndarray)]]
+    for k in range(12):
+        obs, _, term, trunc, info = env.step(k % 2)
+        kept += [obs, *[v for v in info.values() if isinstance(v, np.ndarray)]]
+        if term or trunc:
+            kept.append(env.reset()[0])
+    copies = [k.copy() for k in kept]
+    for k in range(12):
+        _, _, term, trunc, _ = env.step((k + 1) % 4)
+        if term or trunc:
+            env.reset()
+    assert all(np.array_equal(a, b) for a, b in zip(kept, copies))
+
+
+def test_parallel_env_hands_out_nothing_a_later_step_changes() -> None:
+    env = GridWarParallelEnv(short_base(6), backend="rules")
+    obs, infos = env.reset(seed=0)
+    kept = list(obs.values()) + [i["action_mask"] for i in infos.values()]
+    for _ in range(3):
+        obs, _, _, _, infos = env.step({a: UP for a in env.agents})
+        kept += list(obs.values()) + [i["action_mask"] for i in infos.values()]
+    copies = [k.copy() for k in kept]
+    for _ in range(2):
+        env.step({a: DOWN for a in env.agents})
+    assert all(np.array_equal(a, b) for a, b in zip(kept, copies))
+
+
+@pytest.mark.parametrize("backend", ["rules", "reference"])
+def test_vector_env_infos_are_new_and_copy_false_returns_its_buffer(backend: str) -> None:
+    env = GridWarVectorEnv(4, short_base(5), backend=backend)
+    env.reset(seed=0)
+    kept = []
+    for k in range(8):
+        _, _, _, _, info = env.step(np.full(4, k % 2))
+        kept += [info[key] for key in ("unsafe", "invalid", "hits_made", "agent_reward", "action_mask")]
+    copies = [k.copy() for k in kept]
+    for k in range(8):
+        env.step(np.full(4, (k + 1) % 4))
+    assert all(np.array_equal(a, b) for a, b in zip(kept, copies))
+
+    lean = gym.make_vec("tracelab/GridWar-base-v0", num_envs=4, backend=backend, copy=False)
+    ref = GridWarVectorEnv(4, "base", backend=backend)
+    first, _ = lean.reset(seed=1)
+    np.testing.assert_array_equal(first, ref.reset(seed=1)[0])
+    for k in range(6):
+        obs = lean.step(np.full(4, k % 4))[0]
+        assert obs is first  # the env's buffer, overwritten in place
+        np.testing.assert_array_equal(obs, ref.step(np.full(4, k % 4))[0])
