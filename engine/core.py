@@ -71,6 +71,9 @@ class Engine:
         # user annotation functions, bound now: registering another one later changes nothing here
         self._user_functions: list[tuple[str, object]] = []
         for r in self.rules:
+            if r.annotation is not None and not annotations.is_known(r.annotation):
+                raise ProgramCheckError.at(r.loc, f"rule '{r.name}': unknown annotation function "
+                                                  f"'{r.annotation}' (register it with register_annotation)")
             if r.annotation is not None and r.annotation not in annotations.BUILTINS \
                     and r.annotation not in (n for n, _ in self._user_functions):
                 self._user_functions.append((r.annotation, annotations.lookup(r.annotation)))

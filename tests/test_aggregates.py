@@ -262,3 +262,11 @@ def test_bad_quantifiers_and_functions_are_located_errors(line: str, col: int, m
         parse_program("a(b)\n" + line + "\n", "f.rules")
     assert message in info.value.message
     assert (info.value.file, info.value.line, info.value.column) == ("f.rules", 2, col)
+
+
+def test_an_engine_refuses_a_function_unregistered_since_parsing() -> None:
+    register_annotation("gone", spread)
+    program = parse_program(RISK + "r(X):gone <-0 exposed(X,Y)\n")
+    unregister_annotation("gone")
+    with pytest.raises(ProgramError, match="unknown annotation function 'gone'"):
+        Engine(program)
