@@ -66,7 +66,8 @@ def aggregate_tables(grounder: Grounder, rules: list[Rule], inst: np.ndarray,
     je_body = np.full((len(gs), max_body), -1, np.int64)
     je_body[:, :body.shape[1]] = body
     sizes = np.diff(hg_ptr) * ag_rule[hg_i[:, 0], K.AR_NBODY] if len(starts) else np.zeros(0, np.int64)
-    n_user = int((ag_rule[hg_i[:, 0], K.AR_FN] == K.FN_USER).sum()) if len(starts) else 0
+    user = ag_rule[hg_i[:, 0], K.AR_FN] == K.FN_USER if len(starts) else np.zeros(0, np.bool_)
+    n_user = int(user.sum())
     return {
         "ag_rule": ag_rule, "ag_cf": ag_cf, "ag_cn": ag_cn,
         "ag_q": np.array(q_rows, np.int64).reshape(-1, 4), "ag_qv": np.array(q_vals, np.float64),
@@ -74,6 +75,7 @@ def aggregate_tables(grounder: Grounder, rules: list[Rule], inst: np.ndarray,
         # scratch sizes: the atoms one group can feed a function, the user-function requests of a pass
         "gather_cap": np.array([max(int(sizes.max()) if len(sizes) else 0, 1)], np.int64),
         "request_cap": np.array([max(n_user, 1)], np.int64),
+        "user_gather_cap": np.array([max(int(sizes[user].sum()) if n_user else 0, 1)], np.int64),
     }
 
 

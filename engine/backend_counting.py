@@ -62,6 +62,8 @@ class CountingState:
         req = int(self.kt["request_cap"][0]) if n_inst or n_atoms else 1
         self._req_i = np.zeros((req, 2), np.int64)
         self._req_f = np.zeros((req, 2), np.float64)
+        self._req_ptr = np.zeros(req + 1, np.int64)
+        self._req_atoms = np.zeros((3, int(self.kt["user_gather_cap"][0]) if n_inst or n_atoms else 1))
 
     def grow(self, n_atoms: int, kt: dict[str, np.ndarray]) -> None:
         """Room for n_atoms atoms and every grounding of kt (new atoms start at [0,1], new groundings
@@ -99,13 +101,15 @@ class CountingState:
     def _user_functions(self, w: int) -> None:
         """The kernel waits on queued head groups with user annotation functions: compute their bounds."""
         kt, eng = self.kt, self.eng
+        K.agg_gather_requests(w, self.lower, self.upper, self._unsat, *self._agg_args(), self._req_i,
+                              self._req_n, self._req_atoms, self._req_ptr)
+        ptr, atoms = self._req_ptr, self._req_atoms
         for i in range(int(self._req_n[0])):
-            h = int(self._req_i[i, 0])
-            ai = int(kt["hg_i"][h, 0])
+            ai = int(kt["hg_i"][self._req_i[i, 0], 0])
             rule = eng.rules[int(kt["ag_rule"][ai, K.AR_RULE])]
-            _, k = K.agg_gather(w, h, self.lower, self.upper, self._unsat, *self._agg_args())
             name, fn = eng._user_functions[int(kt["ag_rule"][ai, K.AR_USER])]
-            lo, up = annotations.call_user(name, fn, rule.name, self._g[0, :k], self._g[1, :k], self._g[2, :k])
+            a, b = ptr[i], ptr[i + 1]
+            lo, up = annotations.call_user(name, fn, rule.name, atoms[0, a:b], atoms[1, a:b], atoms[2, a:b])
             self._req_f[i] = effective_bound(lo, up, rule.head.negated)
 
     def step(self, ext_ptr: np.ndarray, ext_i: np.ndarray, ext_f: np.ndarray) -> int:

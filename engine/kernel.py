@@ -893,11 +893,21 @@ def _agg_eval(w, h, lo, up, unsat, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, 
 
 
 @kernel_jit
-def agg_gather(w, h, lo, up, unsat, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn, ag_q, ag_qv, mark,
-               stamp, g_l, g_u, g_w):
-    """_agg_eval for Python (the inputs of a user annotation function while the kernel waits)."""
-    return _agg_eval(w, h, lo, up, unsat, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn, ag_q, ag_qv,
-                     mark, stamp, g_l, g_u, g_w)
+def agg_gather_requests(w, lo, up, unsat, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn, ag_q, ag_qv, mark,
+                        stamp, g_l, g_u, g_w, req_i, req_n, flat, ptr):
+    """The inputs of the queued user annotation functions, for Python while the kernel waits: request i's
+    atoms are flat[0..2, ptr[i]:ptr[i+1]] (lower, upper, weight)."""
+    n = 0
+    ptr[0] = 0
+    for i in range(req_n[0]):
+        rep, k = _agg_eval(w, req_i[i, 0], lo, up, unsat, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn,
+                           ag_q, ag_qv, mark, stamp, g_l, g_u, g_w)
+        for j in range(k):
+            flat[0, n + j] = g_l[j]
+            flat[1, n + j] = g_u[j]
+            flat[2, n + j] = g_w[j]
+        n += k
+        ptr[i + 1] = n
 
 
 @kernel_jit

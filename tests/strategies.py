@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from hypothesis import strategies as st
+from tracelab.engine import register_annotation
 from tracelab.engine.graph import Graph
 from tracelab.engine.parser import parse_program
 from tracelab.engine.program import INCONSISTENCY_POLICIES, Fact, Literal, Program, Term
@@ -144,7 +145,14 @@ def fact_lines(draw: st.DrawFn, sig: _Sig, steps: int, crisp: bool = False) -> s
     return f"{neg}{pred}({','.join(args)}):{_bound_text(b)}{window}{' static' if static else ''}"
 
 
-ANNOTATION_FUNCTIONS = ("average", "weighted_average", "min", "max", "average_lower")
+def _span(lower, upper, weights) -> tuple[float, float]:
+    """A user annotation function for random programs: the hull of the weighted atoms' bounds."""
+    keep = weights > 0
+    return (float(lower[keep].min()), float(upper[keep].max())) if keep.any() else (0.0, 1.0)
+
+
+register_annotation("test_span", _span)  # random programs run user functions too (the kernel's pauses)
+ANNOTATION_FUNCTIONS = ("average", "weighted_average", "min", "max", "average_lower", "test_span")
 
 
 @st.composite
