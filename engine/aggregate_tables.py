@@ -14,7 +14,7 @@ import numpy as np
 from . import annotations
 from . import kernel as K
 from .grounding import Grounder
-from .program import COMPARISONS, Rule, effective_bound
+from .program import COMPARISONS, Rule
 
 
 def aggregated_rules(rules: list[Rule]) -> list[int]:
@@ -78,7 +78,3 @@ def aggregate_tables(grounder: Grounder, rules: list[Rule], inst: np.ndarray,
         "user_gather_cap": np.array([max(int(sizes[user].sum()) if n_user else 0, 1)], np.int64),
     }
 
-
-def head_bound(rule: Rule, lower: float, upper: float) -> tuple[float, float]:
-    """The bound a firing sets on the head atom: the function's result, complemented for a `~` head."""
-    return effective_bound(lower, upper, rule.head.negated)

@@ -9,10 +9,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from . import kernel as K
-from .backend_counting import CountingState
 from . import annotations
+from . import kernel as K
 from .aggregate_tables import aggregate_tables, aggregated_rules
+from .backend_counting import CountingState
 from .backend_lanes import LaneState, crisp_codes
 from .errors import FixpointError, InconsistencyError, ProgramCheckError
 from .graph import Graph

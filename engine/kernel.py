@@ -900,7 +900,7 @@ def agg_gather_requests(w, lo, up, unsat, hg_i, hg_ptr, je_g, je_body, ag_rule, 
     n = 0
     ptr[0] = 0
     for i in range(req_n[0]):
-        rep, k = _agg_eval(w, req_i[i, 0], lo, up, unsat, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn,
+        _, k = _agg_eval(w, req_i[i, 0], lo, up, unsat, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn,
                            ag_q, ag_qv, mark, stamp, g_l, g_u, g_w)
         for j in range(k):
             flat[0, n + j] = g_l[j]

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from strategies import Scenario, scenarios
-from test_engine_vs_reference import SCALE, run_and_compare
+from test_engine_vs_reference import SCALE, run_and_compare, run_until_abort
 from tracelab.engine import Engine, ProgramError, parse_program, register_annotation
 from tracelab.engine import kernel as K
 from tracelab.engine.annotations import unregister_annotation
@@ -29,6 +29,13 @@ def test_random_aggregated_programs_agree_with_the_reference(sc: Scenario) -> No
 @given(scenarios(per_world=2, aggregates=True))
 def test_random_aggregated_programs_per_world_facts(sc: Scenario) -> None:
     run_and_compare(sc)
+
+
+@settings(max_examples=int(60 * SCALE), deadline=None, suppress_health_check=[HealthCheck.too_slow],
+          print_blob=True)
+@given(scenarios(policies=("abort",), aggregates=True))
+def test_random_aggregated_programs_abort_at_the_same_step(sc: Scenario) -> None:
+    run_until_abort(sc, "counting")
 
 
 # ---- hand-written semantics -------------------------------------------------------------------------
@@ -248,8 +255,8 @@ def test_the_lanes_kernel_refuses_aggregated_rules_and_auto_takes_counting() -> 
     ("h(X) <-0 a(X,Y), [>= 150%] b(Y)", 22, "a percentage is at most 100%"),
     ("h(X) <-0 a(X,Y), [most] b(Y)", 19, "expected a quantifier after '['"),
     ("h(X) <-0 a(X,Y), [>= 1 some] b(Y)", 24, "expected ']' to close the quantifier"),
-    ("h(X) <-0 a(X), [>= 1] b(Y)", 25, "a variable of a quantified clause must occur in the head or in an "
-                                       "unquantified binding clause"),
+    ("h(X) <-0 a(X), [>= 1] b(Y)", 25, ("a variable of a quantified clause must occur in the head or in an "
+                                        "unquantified binding clause")),
     ("h(X):median <-0 a(X)", 6, "unknown annotation function 'median'"),
     ("h(a):average", 6, "an annotation function names how a rule head's bound is computed"),
     ("h(X):average <-0 a(X) {weights=1,2}", 1, "gives 2 weights for 1 body clauses"),

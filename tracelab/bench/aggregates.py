@@ -111,10 +111,10 @@ def report(r: dict[str, Any]) -> str:
     reg = r["registration"]
     lines = [
         "registering a user annotation function (seconds; median [min-max]):",
-        f"  plain Python: {_med(reg['python_s'])}   numba @njit: first in the process {reg['njit_first_s']:.3f}, "
-        f"later {_med(reg['njit_later_s'])}",
-        f"  step_worlds compiled signatures: {reg['kernel_signatures_before']} before, "
-        f"{reg['kernel_signatures_after']} after registering and running user functions (same: no recompile)",
+        (f"  plain Python: {_med(reg['python_s'])}   numba @njit: first in the process "
+         f"{reg['njit_first_s']:.3f}, later {_med(reg['njit_later_s'])}"),
+        (f"  step_worlds compiled signatures: {reg['kernel_signatures_before']} before, "
+         f"{reg['kernel_signatures_after']} after registering and running user functions (same: no recompile)"),
         "",
         f"rules on the big-graph graphs ({biggraph.STEPS} steps, tracing on, median of {r['repeats']}):",
     ]
