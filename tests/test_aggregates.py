@@ -277,3 +277,17 @@ def test_an_engine_refuses_a_function_unregistered_since_parsing() -> None:
     unregister_annotation("gone")
     with pytest.raises(ProgramError, match="unknown annotation function 'gone'"):
         Engine(program)
+
+
+def test_the_example_program() -> None:
+    from tracelab import RULES_DIR
+    from tracelab.engine import load_program
+    program = load_program(RULES_DIR / "examples" / "popular.rules")
+    eng, ref = Engine(program), ReferenceEvaluator(program)
+    for _ in range(3):
+        eng.step()
+        ref.step()
+    want = {atom_text(a): iv for a, iv in ref.interpretation().items()}
+    assert eng.interpretation(0) == want
+    assert want["popular(ann)"] == want["popular(dan)"] == want["star(ann)"] == (1.0, 1.0)
+    assert want["influence(dan)"] == ((0.8 + 0.6) / 4, (1 + 0.6 + 1 + 1) / 4)
