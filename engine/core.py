@@ -71,6 +71,9 @@ class Engine:
         # user annotation functions, bound now: registering another one later changes nothing here
         self._user_functions: list[tuple[str, object]] = []
         for r in self.rules:
+            if r.aggregated and r.immediate:  # check_program says so too; programs built in code may skip it
+                raise ProgramCheckError.at(r.loc, f"rule '{r.name}' is immediate: quantifiers and annotation "
+                                                  "functions need '<-0' or a delay")
             if r.annotation is not None and not annotations.is_known(r.annotation):
                 raise ProgramCheckError.at(r.loc, f"rule '{r.name}': unknown annotation function "
                                                   f"'{r.annotation}' (register it with register_annotation)")

@@ -291,3 +291,11 @@ def test_the_example_program() -> None:
     assert eng.interpretation(0) == want
     assert want["popular(ann)"] == want["popular(dan)"] == want["star(ann)"] == (1.0, 1.0)
     assert want["influence(dan)"] == ((0.8 + 0.6) / 4, (1 + 0.6 + 1 + 1) / 4)
+
+
+def test_an_engine_refuses_an_immediate_aggregated_rule_built_in_code() -> None:
+    import dataclasses
+    program = parse_program(RISK + "r(X):average <-0 exposed(X,Y)\n")
+    program.rules[0] = dataclasses.replace(program.rules[0], immediate=True)
+    with pytest.raises(ProgramError, match="is immediate"):
+        Engine(program)
