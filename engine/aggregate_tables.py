@@ -11,10 +11,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import annotations
 from . import kernel as K
 from .grounding import Grounder
 from .program import COMPARISONS, Rule
+
+# the kernel's code of each built-in annotation function (engine/annotations.py has them in Python)
+BUILTIN_CODES = {"average": K.FN_AVERAGE, "weighted_average": K.FN_WEIGHTED_AVERAGE, "min": K.FN_MIN,
+                 "max": K.FN_MAX, "average_lower": K.FN_AVERAGE_LOWER}
 
 
 def aggregated_rules(rules: list[Rule]) -> list[int]:
@@ -34,7 +37,7 @@ def aggregate_tables(grounder: Grounder, rules: list[Rule], inst: np.ndarray,
     q_vals: list[float] = []
     for a, ri in enumerate(agg):
         r = rules[ri]
-        fn = K.FN_FIXED if r.annotation is None else annotations.BUILTINS.get(r.annotation, (K.FN_USER,))[0]
+        fn = K.FN_FIXED if r.annotation is None else BUILTIN_CODES.get(r.annotation, K.FN_USER)
         q0 = len(q_rows)
         for ci, q in enumerate(r.quantifiers):
             if q is not None:

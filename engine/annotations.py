@@ -15,9 +15,6 @@ from collections.abc import Callable
 
 import numpy as np
 
-# kernel codes of the built-ins (FN_FIXED: the head's own bound; FN_USER: a registered function)
-from .kernel import FN_AVERAGE, FN_AVERAGE_LOWER, FN_MAX, FN_MIN, FN_WEIGHTED_AVERAGE
-
 AnnotationFunction = Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[float, float]]
 
 
@@ -59,12 +56,13 @@ def _sum(xs) -> float:
     return acc
 
 
-BUILTINS: dict[str, tuple[int, Callable[..., tuple[float, float] | None]]] = {
-    "average": (FN_AVERAGE, average),
-    "weighted_average": (FN_WEIGHTED_AVERAGE, weighted_average),
-    "min": (FN_MIN, minimum),
-    "max": (FN_MAX, maximum),
-    "average_lower": (FN_AVERAGE_LOWER, average_lower),
+# the built-ins by name (their kernel codes: engine/aggregate_tables.py, BUILTIN_CODES)
+BUILTINS: dict[str, Callable[..., tuple[float, float] | None]] = {
+    "average": average,
+    "weighted_average": weighted_average,
+    "min": minimum,
+    "max": maximum,
+    "average_lower": average_lower,
 }
 
 _user: dict[str, AnnotationFunction] = {}
@@ -106,7 +104,7 @@ def known_names() -> list[str]:
 def lookup(name: str) -> Callable[..., tuple[float, float] | None]:
     """The Python function of a built-in or registered name (KeyError if neither)."""
     if name in BUILTINS:
-        return BUILTINS[name][1]
+        return BUILTINS[name]
     return _user[name]
 
 

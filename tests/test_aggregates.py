@@ -299,3 +299,10 @@ def test_an_engine_refuses_an_immediate_aggregated_rule_built_in_code() -> None:
     program.rules[0] = dataclasses.replace(program.rules[0], immediate=True)
     with pytest.raises(ProgramError, match="is immediate"):
         Engine(program)
+
+
+def test_every_builtin_has_a_kernel_code() -> None:
+    from tracelab.engine.aggregate_tables import BUILTIN_CODES
+    from tracelab.engine.annotations import BUILTINS
+    assert set(BUILTIN_CODES) == set(BUILTINS)
+    assert len(set(BUILTIN_CODES.values()) | {K.FN_FIXED, K.FN_USER}) == len(BUILTINS) + 2
