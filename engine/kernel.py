@@ -851,8 +851,9 @@ def _candidates(w, ci, e0, e1, unsat, je_g, je_body, mark, stamp):
 @kernel_jit
 def _agg_eval(w, h, lo, up, unsat, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn, ag_q, ag_qv, mark,
               stamp, g_l, g_u, g_w):
-    """Head group h in world w (docs/language.md, "Quantifiers"): returns (grounding, k) with the first
-    active join (the firing's grounding) or -1 when the group does not fire, and the k atoms that feed
+    """Head group h in world w (docs/language.md, "Quantifiers"): returns (grounding, k) with the firing's
+    grounding (the first active join whose quantified atoms hold, else the first active join) or -1 when
+    the group does not fire, and the k atoms that feed
     its annotation function in g_l, g_u, g_w (each clause's distinct atoms that hold, clause by clause,
     joins in rank order)."""
     e0 = hg_ptr[h]
@@ -879,6 +880,20 @@ def _agg_eval(w, h, lo, up, unsat, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, 
                 n += 1
         if not _compare(ag_q[qi, 1], n, d, ag_q[qi, 2] == 1, ag_qv[qi]):
             return -1, 0
+    if ag_rule[ai, AR_Q1] > ag_rule[ai, AR_Q0]:  # name the first join whose quantified atoms hold, if any
+        for e in range(e0, e1):
+            if unsat[w, je_g[e]] != 0:
+                continue
+            whole = True
+            for qi in range(ag_rule[ai, AR_Q0], ag_rule[ai, AR_Q1]):
+                ci = ag_q[qi, 0]
+                a = je_body[e, ci]
+                if not _holds(lo[w, a], up[w, a], ag_cf[ai, ci, 0], ag_cf[ai, ci, 1], ag_cn[ai, ci]):
+                    whole = False
+                    break
+            if whole:
+                rep = je_g[e]
+                break
     k = 0
     if ag_rule[ai, AR_FN] != FN_FIXED:
         for ci in range(ag_rule[ai, AR_NBODY]):

@@ -179,7 +179,8 @@ class ReferenceEvaluator:
     def _aggregated_firings(self, ri: int) -> list[tuple[Atom, _Source]]:
         """docs/language.md "Quantifiers" and "Annotation functions": the joins of the unquantified clauses
         grouped by head grounding; a group fires when every quantifier holds over its candidates, named by
-        its first join, with the head's bound or the function's result."""
+        its first join whose quantified clauses hold (else its first join), with the head's bound or the
+        function's result."""
         rule = self.rules[ri]
         variables = rule.variables
         unquantified = [lit for i, lit in enumerate(rule.body) if rule.quantifier(i) is None]
@@ -196,7 +197,9 @@ class ReferenceEvaluator:
             mu = self._head_bound(rule, [b for _, b in joins])
             if mu is None:
                 continue
-            ids, binding = joins[0]
+            # the firing is named by the first join whose quantified clauses hold too, else the first join
+            quantified = [lit for i, lit in enumerate(rule.body) if rule.quantifier(i) is not None]
+            ids, binding = next((j for j in joins if all(self._holds(lit, j[1]) for lit in quantified)), joins[0])
             out.append((head, _Source(mu, self._rule_override(rule), CAUSE_RULE, ri,
                                       tuple(binding[v] for v in variables), ids)))
         return out

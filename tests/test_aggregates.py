@@ -306,3 +306,12 @@ def test_every_builtin_has_a_kernel_code() -> None:
     from tracelab.engine.annotations import BUILTINS
     assert set(BUILTIN_CODES) == set(BUILTINS)
     assert len(set(BUILTIN_CODES.values()) | {K.FN_FIXED, K.FN_USER}) == len(BUILTINS) + 2
+
+
+def test_the_firing_prefers_a_join_whose_quantified_clause_holds() -> None:
+    # k's first join (Y=u1, the smaller node id) has popular(u1) unset; the firing is named by Y=u2
+    _, eng = run_both("friend(k,u1)\nfriend(k,u2)\npopular(u2)\n"
+                      "liked(X) <-1 friend(X,Y), [>= 50%] popular(Y)\n", steps=2)
+    trace = eng.take_trace()
+    rows = [i for i in range(len(trace["atom"])) if eng.atom_text(int(trace["atom"][i])) == "liked(k)"]
+    assert [eng.grounding_text(int(trace["grounding"][i])) for i in rows] == ["X=k, Y=u2"]
