@@ -280,8 +280,9 @@ def test_an_engine_refuses_a_function_unregistered_since_parsing() -> None:
 
 
 def test_the_example_program() -> None:
-    from tracelab import RULES_DIR
     from tracelab.engine import load_program
+
+    from tracelab import RULES_DIR
     program = load_program(RULES_DIR / "examples" / "popular.rules")
     eng, ref = Engine(program), ReferenceEvaluator(program)
     for _ in range(3):
