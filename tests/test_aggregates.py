@@ -316,3 +316,24 @@ def test_the_firing_prefers_a_join_whose_quantified_clause_holds() -> None:
     trace = eng.take_trace()
     rows = [i for i in range(len(trace["atom"])) if eng.atom_text(int(trace["atom"][i])) == "liked(k)"]
     assert [eng.grounding_text(int(trace["grounding"][i])) for i in rows] == ["X=k, Y=u2"]
+
+
+def test_why_explains_a_quantified_firing_from_the_store(tmp_path) -> None:  # noqa: ANN001
+    from tracelab import RULES_DIR
+    from tracelab.engine import load_program
+    from tracelab.store.reader import open_run
+    from tracelab.store.why import explain
+    from tracelab.store.writer import TraceWriter
+    eng = Engine(load_program(RULES_DIR / "examples" / "popular.rules"))
+    meta = {"command": "pytest aggregates", "scenario": "popular", "rule_files": [], "seed": 0, "config": {}}
+    with TraceWriter(tmp_path / "run", meta) as w:
+        w.write_engine_program(eng)
+        w.begin_episode(0, world=0, t_start=0, seed=0)
+        for _ in range(3):
+            eng.step()
+            w.write_engine(np.array([0]), eng)
+        w.end_episode(0, steps=3, outcome="draw", reward=0.0, rewards={}, t_end=2)
+    tree = explain(open_run(tmp_path / "run"), 0, "popular(dan)", at=2)
+    assert (tree.cause.kind, tree.cause.name, tree.cause.bindings) == ("rule", "popular", {"X": "dan", "Y": "bob"})
+    assert [c.atom for c in tree.children] == ["friend(dan,bob)", "popular(bob)"]
+    assert all(c.holds for c in tree.children)
