@@ -318,9 +318,10 @@ def test_the_firing_prefers_a_join_whose_quantified_clause_holds() -> None:
     assert [eng.grounding_text(int(trace["grounding"][i])) for i in rows] == ["X=k, Y=u2"]
 
 
-def test_why_explains_a_quantified_firing_from_the_store(tmp_path) -> None:  # noqa: ANN001
-    from tracelab import RULES_DIR
+def test_why_explains_a_quantified_firing_from_the_store(tmp_path) -> None:
     from tracelab.engine import load_program
+
+    from tracelab import RULES_DIR
     from tracelab.store.reader import open_run
     from tracelab.store.why import explain
     from tracelab.store.writer import TraceWriter
