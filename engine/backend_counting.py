@@ -10,8 +10,10 @@ from typing import Any
 
 import numpy as np
 
+from . import annotations
 from . import kernel as K
 from .backend_api import EngineTables
+from .program import effective_bound
 
 
 class CountingState:
@@ -30,11 +32,14 @@ class CountingState:
         self._act_n = np.zeros((w, K.N_KINDS), np.int64)
         self._kind_base = np.zeros(K.N_KINDS, np.int64)
         self._pend = np.zeros((w, 16, 2), np.int32)
+        self._pend_f = np.zeros((w, 16, 2), np.float64)  # the bound each scheduled firing sets
         self._pend_n = np.zeros(w, np.int64)
         self._n_touched = np.zeros(1, np.int64)
         self._changed = np.zeros(1, np.int64)
         self._out = np.zeros(5, np.float64)
         self._n_grounded = 0
+        self._stamp = np.zeros(1, np.int64)  # aggregated rules: distinct-atom marks are stamps
+        self._req_n = np.zeros(1, np.int64)
         self._scratch(0, 0)
 
     @property
@@ -50,6 +55,15 @@ class CountingState:
         # immediate-phase candidates: a heap of rank * 2^31 + grounding, and membership flags
         self._heap = np.zeros(max(n_inst, 1), np.int64)
         self._in_heap = np.zeros(max(n_inst, 1), np.bool_)
+        # aggregated rules: atom marks, the atoms one head group feeds its function, user-function requests
+        cap = int(self.kt["gather_cap"][0]) if n_inst or n_atoms else 1
+        self._mark = np.zeros((2, max(n_atoms, cap, 1)), np.int64)  # stamps by atom; a clause's candidates
+        self._g = np.zeros((3, cap), np.float64)
+        req = int(self.kt["request_cap"][0]) if n_inst or n_atoms else 1
+        self._req_i = np.zeros((req, 2), np.int64)
+        self._req_f = np.zeros((req, 2), np.float64)
+        self._req_ptr = np.zeros(req + 1, np.int64)
+        self._req_atoms = np.zeros((3, int(self.kt["user_gather_cap"][0]) if n_inst or n_atoms else 1))
 
     def grow(self, n_atoms: int, kt: dict[str, np.ndarray]) -> None:
         """Room for n_atoms atoms and every grounding of kt (new atoms start at [0,1], new groundings
@@ -79,6 +93,25 @@ class CountingState:
         self._n_grounded = n_inst
         self._scratch(n_atoms, n_inst)
 
+    def _agg_args(self) -> tuple[np.ndarray, ...]:
+        kt = self.kt
+        return (kt["hg_i"], kt["hg_ptr"], kt["je_g"], kt["je_body"], kt["ag_rule"], kt["ag_cf"], kt["ag_cn"],
+                kt["ag_q"], kt["ag_qv"], self._mark, self._stamp, self._g[0], self._g[1], self._g[2])
+
+    def _user_functions(self, w: int) -> None:
+        """The kernel waits on queued head groups with user annotation functions: compute their bounds."""
+        kt, eng = self.kt, self.eng
+        K.agg_gather_requests(w, self.lower, self.upper, self._unsat, *self._agg_args(), self._req_i,
+                              self._req_n, self._req_atoms, self._req_ptr)
+        ptr, atoms = self._req_ptr, self._req_atoms
+        for i in range(int(self._req_n[0])):
+            ai = int(kt["hg_i"][self._req_i[i, 0], 0])
+            rule = eng.rules[int(kt["ag_rule"][ai, K.AR_RULE])]
+            name, fn = eng._user_functions[int(kt["ag_rule"][ai, K.AR_USER])]
+            a, b = ptr[i], ptr[i + 1]
+            lo, up = annotations.call_user(name, fn, rule.name, atoms[0, a:b], atoms[1, a:b], atoms[2, a:b])
+            self._req_f[i] = effective_bound(lo, up, rule.head.negated)
+
     def step(self, ext_ptr: np.ndarray, ext_i: np.ndarray, ext_f: np.ndarray) -> int:
         """One timestep of every world; returns the kernel's status (buffers grown as needed)."""
         eng, kt = self.eng, self.kt
@@ -91,33 +124,48 @@ class CountingState:
                 self.lower, self.upper, self.static, self.last_cause, self._unsat, self._act, self._act_n,
                 self._act_pos, self._pend, self._pend_n, eng.trace_on, eng._tri, eng._trf, eng._tr_n,
                 eng._stats, eng._err, self._slot_of, self._touched, self._n_touched, self._si, self._sf,
-                self._out, self._heap, self._in_heap, self._changed)
+                self._out, self._heap, self._in_heap, self._changed, *self._agg_args(), self._req_i, self._req_f,
+                self._req_n, self._pend_f)
             if status == K.STATUS_TRACE_ROOM:  # grow the trace buffer, go on in that world
                 eng._grow_trace(int(eng._tr_n[0]) + int(eng._cfg[K.CFG_TRACE_NEED]))
             elif status == K.STATUS_PEND_ROOM:  # grow the schedule, then that world schedules its firings
-                self._grow_pending(int(self._pend_n[w_first]) + int(self._act_n[w_first, K.KIND_DELAYED]))
-                eng._cfg[K.CFG_RESUME_SCHEDULE] = 1
+                self._grow_pending(int(self._pend_n[w_first]) + int(self._act_n[w_first, K.KIND_DELAYED])
+                                   + len(kt["hg_i"]))
+                eng._cfg[K.CFG_RESUME_SCHEDULE] = K.RESUME_PEND_ROOM
+            elif status == K.STATUS_USER_FN:  # Python computes the user functions, the kernel goes on
+                try:
+                    self._user_functions(w_first)
+                except Exception:
+                    self._reset_after_error()
+                    raise
             else:
                 break
-        if status != K.STATUS_OK:  # an error may leave candidates and scratch rows behind
-            self._in_heap[:] = False
-            self._slot_of[:] = -1
-            self._n_touched[0] = 0
-            eng._cfg[K.CFG_RESUME_SCHEDULE] = 0
-            eng._cfg[K.CFG_RESUME_PHASE] = K.PHASE_FRESH
+        if status != K.STATUS_OK:
+            self._reset_after_error()
         return status
+
+    def _reset_after_error(self) -> None:
+        """An error may leave candidates, scratch rows and requests behind."""
+        self._in_heap[:] = False
+        self._slot_of[:] = -1
+        self._n_touched[0] = 0
+        self._req_n[0] = 0
+        self.eng._cfg[K.CFG_RESUME_SCHEDULE] = 0
+        self.eng._cfg[K.CFG_RESUME_PHASE] = K.PHASE_FRESH
 
     def _grow_pending(self, need: int) -> None:
         cap = max(need, 2 * self._pend.shape[1], 16)
         pend = np.zeros((self.eng.n_worlds, cap, 2), np.int32)
         pend[:, :self._pend.shape[1]] = self._pend
-        self._pend = pend
+        pend_f = np.zeros((self.eng.n_worlds, cap, 2), np.float64)
+        pend_f[:, :self._pend_f.shape[1]] = self._pend_f
+        self._pend, self._pend_f = pend, pend_f
 
     def snapshot(self) -> dict[str, Any]:
         return {"lower": self.lower.copy(), "upper": self.upper.copy(), "static": self.static.copy(),
                 "last_cause": self.last_cause.copy(), "unsat": self._unsat.copy(), "act": self._act.copy(),
                 "act_pos": self._act_pos.copy(), "act_n": self._act_n.copy(), "pend": self._pend.copy(),
-                "pend_n": self._pend_n.copy()}
+                "pend_f": self._pend_f.copy(), "pend_n": self._pend_n.copy()}
 
     def restore(self, snap: dict[str, Any], indices: np.ndarray, shift: int) -> None:
         """Worlds `indices` take their state from snap; their scheduled firings move `shift` steps later."""
@@ -147,6 +195,7 @@ class CountingState:
         if pend.shape[1] > self._pend.shape[1]:
             self._grow_pending(pend.shape[1])
         self._pend[worlds, :pend.shape[1]] = pend[worlds]
+        self._pend_f[worlds, :pend.shape[1]] = snap["pend_f"][worlds]
         self._pend[worlds, :, 0] += shift
         self._pend_n[worlds] = pend_n[worlds]
 
@@ -172,6 +221,7 @@ class CountingState:
         cap = max((len(p) for p in pending), default=0)
         self._grow_pending(cap)
         for w, entries in enumerate(pending):
-            for i, (due, g) in enumerate(entries):
+            for i, (due, g) in enumerate(entries):  # the lanes kernel serves no aggregated rule
                 self._pend[w, i] = (due, g)
+                self._pend_f[w, i] = self.eng._rule_f[kt["inst"][g, K.INST_RULE]]
             self._pend_n[w] = len(entries)

@@ -9,7 +9,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from . import annotations
 from . import kernel as K
+from .aggregate_tables import aggregate_tables, aggregated_rules
 from .backend_counting import CountingState
 from .backend_lanes import LaneState, crisp_codes
 from .errors import FixpointError, InconsistencyError, ProgramCheckError
@@ -66,6 +68,18 @@ class Engine:
                 raise ProgramCheckError.at(r.loc, f"rule '{r.name}' has more than {MAX_BINDING_CLAUSES} "
                                                   "binding body clauses")
         self.grounder = Grounder(self.rules, self.vocab)
+        # user annotation functions, bound now: registering another one later changes nothing here
+        self._user_functions: list[tuple[str, object]] = []
+        for r in self.rules:
+            if r.aggregated and r.immediate:  # check_program says so too; programs built in code may skip it
+                raise ProgramCheckError.at(r.loc, f"rule '{r.name}' is immediate: quantifiers and annotation "
+                                                  "functions need '<-0' or a delay")
+            if r.annotation is not None and not annotations.is_known(r.annotation):
+                raise ProgramCheckError.at(r.loc, f"rule '{r.name}': unknown annotation function "
+                                                  f"'{r.annotation}' (register it with register_annotation)")
+            if r.annotation is not None and r.annotation not in annotations.BUILTINS \
+                    and r.annotation not in (n for n, _ in self._user_functions):
+                self._user_functions.append((r.annotation, annotations.lookup(r.annotation)))
         self._fact_tables()
         self._rule_tables()
         self._cfg = np.zeros(K.N_CFG, np.int64)
@@ -151,6 +165,13 @@ class Engine:
         if kernel not in KERNELS:
             raise ValueError(f"kernel must be one of {KERNELS}, got {kernel!r}")
         not_crisp = self._not_crisp()
+        aggregated = next((r for r in self.rules if r.aggregated), None)
+        if aggregated is not None:  # evaluated per head grounding: the counting kernel only
+            if kernel == "lanes":
+                raise ValueError(f"kernel='lanes' cannot run rule {aggregated.name}"
+                                 f"{f' ({aggregated.loc})' if aggregated.loc else ''}: quantifiers and annotation "
+                                 "functions need the counting kernel (kernel='counting' or 'auto')")
+            return CountingState(self)
         if kernel == "lanes" and not_crisp:
             raise ValueError(f"kernel='lanes' needs a crisp program (bounds [0,0], [1,1] or [0,1] only): "
                              f"{not_crisp}")
@@ -192,8 +213,10 @@ class Engine:
     def _rule_kinds(self) -> np.ndarray:
         """Per rule, the kernel's kind index: immediate, delayed (Δt > 0) or ordinary Δt = 0."""
         ri = self._rule_i
-        return np.where(ri[:, K.RULE_IMMEDIATE] == 1, K.KIND_IMMEDIATE,
-                        np.where(ri[:, K.RULE_DELAY] > 0, K.KIND_DELAYED, K.KIND_ORDINARY)).astype(np.int32)
+        kinds = np.where(ri[:, K.RULE_IMMEDIATE] == 1, K.KIND_IMMEDIATE,
+                         np.where(ri[:, K.RULE_DELAY] > 0, K.KIND_DELAYED, K.KIND_ORDINARY)).astype(np.int32)
+        kinds[aggregated_rules(self.rules)] = K.KIND_AGGREGATE  # fired per head group, not per grounding
+        return kinds
 
     def sync(self) -> None:
         """Grow the per-world arrays to every atom interned so far (step() does this itself)."""
@@ -213,7 +236,9 @@ class Engine:
         n_inst = g.n_groundings
         if n_inst == self._n_grounded and n_atoms == self._state.n_atoms and self._kt is not None:
             return
-        self._kt = g.kernel_tables(self._rule_kinds(), self._fact_i[:, 0])
+        kt = g.kernel_tables(self._rule_kinds(), self._fact_i[:, 0])
+        slots = {name: i for i, (name, _) in enumerate(self._user_functions)}
+        self._kt = {**kt, **aggregate_tables(g, self.rules, kt["inst"], slots)}
         self._state.grow(n_atoms, self._kt)
         self._n_grounded = n_inst
         self._table = None

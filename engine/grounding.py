@@ -105,7 +105,7 @@ class Grounder:
             clause_labels=[self.vocab.label(c.pred, len(c.args)) for c in rule.body],
             clause_args=[args_of(c) for c in rule.body],
             head_args=args_of(rule.head),
-            binding=[i for i, c in enumerate(rule.body) if c.binds],
+            binding=rule.binding_clauses(),  # quantified clauses never bind (docs/language.md)
         )
 
     # ---- sizes and state ----
@@ -409,6 +409,10 @@ class Grounder:
             "b_neg": b_neg_a,
             "b_bnd": np.ascontiguousarray(b_bnd),
         }
+
+    def body_atoms(self, groundings: np.ndarray) -> np.ndarray:
+        """int64[len(groundings), max_body]: every clause's atom per grounding (-1 past a rule's body)."""
+        return self._body[np.asarray(groundings, np.int64)]
 
     def table(self) -> GroundingTable:
         n = self._n

@@ -43,6 +43,7 @@ STATUS_NOT_SETTABLE = 4  # an external fact names an atom no fact or rule can se
 STATUS_TRACE_ROOM = 5  # stopped in world err[0]: the trace buffer needs cfg[CFG_TRACE_NEED] free rows
 STATUS_PEND_ROOM = 6  # stopped in world err[0] before scheduling its delayed firings: the schedule is full
 STATUS_TRACE_LIMIT = 7  # a row found no room although its unit of work checked for it (a bug)
+STATUS_USER_FN = 8  # stopped in world err[0]: Python computes the user annotation functions of req_i, then resumes
 
 # column layout of the packed arrays
 RULE_MODE, RULE_DELAY, RULE_IMMEDIATE = 0, 1, 2
@@ -50,7 +51,9 @@ RULE_MODE, RULE_DELAY, RULE_IMMEDIATE = 0, 1, 2
 INST_RULE, INST_HEAD, INST_RANK, INST_KIND = 0, 1, 2, 3
 # kind indices: each grounding's rule is immediate, delayed (Δt > 0) or ordinary (Δt = 0); one active list each
 KIND_IMMEDIATE, KIND_DELAYED, KIND_ORDINARY = 0, 1, 2
-N_KINDS = 3
+# groundings (joins) of rules evaluated per head grounding: listed, but fired through their head groups
+KIND_AGGREGATE = 3
+N_KINDS = 4
 CFG_MODE, CFG_RESET, CFG_POLICY, CFG_MAX_PASSES, CFG_MAX_IMMEDIATE, CFG_T = 0, 1, 2, 3, 4, 5
 CFG_TRACE_ROOM = 6  # free trace rows wanted before a traced world steps
 CFG_RESUME_SCHEDULE = 7  # 1: world w_first has stepped already and only schedules its delayed firings
@@ -59,6 +62,9 @@ CFG_RESUME_PHASE, CFG_RESUME_PASS, CFG_RESUME_NIMM, CFG_RESUME_HN = 8, 9, 10, 11
 CFG_TRACE_NEED = 12  # free trace rows the stopped unit of work needs
 N_CFG = 13
 PHASE_FRESH, PHASE_APPLY, PHASE_IMMEDIATE = 0, 1, 2  # resume: from the start, at a pass's groups, in the immediate phase
+PHASE_USER = 3  # resume an ordinary pass with the user annotation functions' results (req_f)
+# CFG_RESUME_SCHEDULE values: 1 the schedule had no room, 2 the delayed firings await req_f
+RESUME_PEND_ROOM, RESUME_USER = 1, 2
 # trace rows: int32[cap, 8] (world, t, pass_no, atom, cause_kind, cause_id, grounding, n_sources)
 # and float64[cap, 4] (old_lower, old_upper, new_lower, new_upper)
 TRACE_INT_COLUMNS = 8
@@ -86,6 +92,12 @@ KEY_STRIDE = np.int64(1) << np.int64(40)
 # heap entries: rank * HEAP_SHIFT + grounding (both < 2^31)
 HEAP_SHIFT = np.int64(1) << np.int64(31)
 HEAP_MASK = HEAP_SHIFT - np.int64(1)
+
+# aggregated rules (engine/aggregate_tables.py): ag_rule columns, annotation function codes, comparisons
+AR_RULE, AR_KIND, AR_FN, AR_USER, AR_Q0, AR_Q1, AR_NBODY, AR_HNEG = range(8)
+N_AR = 8
+FN_FIXED, FN_AVERAGE, FN_WEIGHTED_AVERAGE, FN_MIN, FN_MAX, FN_AVERAGE_LOWER, FN_USER = range(7)
+CMP_GE, CMP_GT, CMP_LE, CMP_LT, CMP_EQ = range(5)  # the order of program.COMPARISONS
 
 kernel_jit = njit(cache=True, _nrt=False)
 
@@ -513,7 +525,8 @@ def step_worlds(cfg, w_first, rule_i, rule_f, inst, kind_base, wc_ptr, wc_bnd, w
                 ih_inst, fact_i, fact_f, fact_order, ext_ptr, ext_i, ext_f, settable,
                 lo, up, static, last_cause, unsat, act, act_n, act_pos, pend, pend_n,
                 trace_on, tri, trf, tr_n, stats, err, slot_of, touched, n_touched, si, sf, out, heap, in_heap,
-                changed):
+                changed, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn, ag_q, ag_qv, mark, stamp, g_l, g_u,
+                g_w, req_i, req_f, req_n, pend_f):
     """Compute timestep cfg[CFG_T] for worlds w_first.. in order. Returns (status, world): STATUS_OK and
     the number of worlds, or a status and the world it concerns (STATUS_TRACE_ROOM / STATUS_PEND_ROOM:
     grow that buffer and call again from that world)."""
@@ -531,9 +544,21 @@ def step_worlds(cfg, w_first, rule_i, rule_f, inst, kind_base, wc_ptr, wc_bnd, w
                 err[E_ATOM] = ext_i[e, 0]
                 return STATUS_NOT_SETTABLE, 0
     for w in range(w_first, n_worlds):
-        if w == w_first and cfg[CFG_RESUME_SCHEDULE] == 1:
-            cfg[CFG_RESUME_SCHEDULE] = 0
-        else:
+        resume = cfg[CFG_RESUME_SCHEDULE] if w == w_first else 0
+        cfg[CFG_RESUME_SCHEDULE] = 0
+        if resume == RESUME_USER:  # the delayed firings of user functions, computed by Python
+            n = pend_n[w]
+            for i in range(req_n[0]):
+                h = req_i[i, 0]
+                pend[w, n, 0] = t + rule_i[ag_rule[hg_i[h, 0], AR_RULE], RULE_DELAY]
+                pend[w, n, 1] = req_i[i, 1]
+                pend_f[w, n, 0] = req_f[i, 0]
+                pend_f[w, n, 1] = req_f[i, 1]
+                n += 1
+            pend_n[w] = n
+            req_n[0] = 0
+            continue
+        if resume == 0:
             if cfg[CFG_RESUME_PHASE] == PHASE_FRESH and trace_on[w] and tri.shape[0] - tr_n[0] < room:
                 err[E_WORLD] = w
                 cfg[CFG_TRACE_NEED] = room
@@ -542,22 +567,44 @@ def step_worlds(cfg, w_first, rule_i, rule_f, inst, kind_base, wc_ptr, wc_bnd, w
                                  kind_base, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, ih_ptr, ih_inst, fact_i, fact_f,
                                  fact_order, ext_ptr, ext_i, ext_f, cfg[CFG_RESET] == 1, lo, up, static,
                                  last_cause, unsat, act, act_n, act_pos, pend, pend_n, trace_on, tri, trf, tr_n,
-                                 stats, err, slot_of, touched, n_touched, si, sf, out, heap, in_heap, changed)
+                                 stats, err, slot_of, touched, n_touched, si, sf, out, heap, in_heap, changed,
+                                 hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn, ag_q, ag_qv, mark, stamp, g_l,
+                                 g_u, g_w, req_i, req_f, req_n, pend_f)
             if status != STATUS_OK:
                 return status, w
-        # delayed rules read the final interpretation of t and schedule their heads
+        # delayed rules read the final interpretation of t and schedule their heads (room for every
+        # active grounding and every head group)
         n_del = act_n[w, KIND_DELAYED]
         n = pend_n[w]
-        if n + n_del > pend.shape[1]:
+        if n + n_del + hg_i.shape[0] > pend.shape[1]:
             err[E_WORLD] = w
             return STATUS_PEND_ROOM, w
         base = kind_base[KIND_DELAYED]
         for k in range(n_del):
             g = act[w, base + k]
-            pend[w, n, 0] = t + rule_i[inst[g, INST_RULE], RULE_DELAY]
+            r = inst[g, INST_RULE]
+            pend[w, n, 0] = t + rule_i[r, RULE_DELAY]
             pend[w, n, 1] = g
+            pend_f[w, n, 0] = rule_f[r, 0]
+            pend_f[w, n, 1] = rule_f[r, 1]
             n += 1
+        for h in range(hg_i.shape[0]):
+            ai = hg_i[h, 0]
+            if ag_rule[ai, AR_KIND] != KIND_DELAYED:
+                continue
+            g = _agg_fire(w, rule_f, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn, ag_q, ag_qv, lo, up,
+                          unsat, mark, stamp, g_l, g_u, g_w, req_i, req_n, out, h)
+            if g >= 0:
+                pend[w, n, 0] = t + rule_i[ag_rule[ai, AR_RULE], RULE_DELAY]
+                pend[w, n, 1] = g
+                pend_f[w, n, 0] = out[0]
+                pend_f[w, n, 1] = out[1]
+                n += 1
         pend_n[w] = n
+        if req_n[0] > 0:  # Python computes the user functions, then this world schedules them
+            cfg[CFG_RESUME_SCHEDULE] = RESUME_USER
+            err[E_WORLD] = w
+            return STATUS_USER_FN, w
     return STATUS_OK, n_worlds
 
 
@@ -566,7 +613,8 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
                 wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, ih_ptr, ih_inst, fact_i, fact_f, fact_order, ext_ptr,
                 ext_i, ext_f, reset, lo, up, static, last_cause, unsat, act, act_n, act_pos, pend, pend_n,
                 trace_on, tri, trf, tr_n, stats, err, slot_of, touched, n_touched, si, sf, out, heap, in_heap,
-                changed):
+                changed, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn, ag_q, ag_qv, mark, stamp, g_l, g_u,
+                g_w, req_i, req_f, req_n, pend_f):
     """One world's timestep t up to its fixpoint (docs/language.md, 'One timestep t'), without the
     scheduling of delayed rules. Returns a status (STATUS_TRACE_ROOM: resume by calling again, cfg says
     where)."""
@@ -586,8 +634,8 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
             if hn < 0:
                 err[E_WORLD] = w
                 return STATUS_TRACE_LIMIT
-        _collect_pass0(w, t, fact_override, rule_i, rule_f, inst, fact_i, fact_f, fact_order, ext_ptr, ext_i,
-                       ext_f, pend, pend_n, slot_of, touched, n_touched, si, sf)
+        _collect_pass0(w, t, fact_override, rule_i, inst, fact_i, fact_f, fact_order, ext_ptr, ext_i,
+                       ext_f, pend, pend_f, pend_n, slot_of, touched, n_touched, si, sf)
         phase = PHASE_APPLY
     if phase == PHASE_APPLY and pass_no == 0:
         if trace_on[w] and tri.shape[0] - tr_n[0] < n_touched[0]:
@@ -610,7 +658,12 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
         phase = PHASE_FRESH
     # 3. fixpoint: immediate phase, then one simultaneous ordinary pass, until nothing changes
     while True:
-        if phase != PHASE_APPLY:
+        if phase == PHASE_USER:  # an ordinary pass resumed with its user functions' bounds
+            _agg_user_sources(rule_i, inst, hg_i, ag_rule, req_i, req_f, req_n, slot_of, touched, n_touched, si, sf)
+            phase = PHASE_FRESH
+            if trace_on[w] and tri.shape[0] - tr_n[0] < n_touched[0]:
+                return _pause(cfg, err, w, PHASE_APPLY, pass_no, n_immediate, hn, n_touched[0])
+        elif phase != PHASE_APPLY:
             # immediate phase: apply the first (lowest rank) active immediate grounding that would change
             # its head, one at a time
             while hn > 0:
@@ -679,6 +732,12 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
                 _add_source(inst[g, INST_HEAD], rule_f[r, 0], rule_f[r, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
                             2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, False, slot_of, touched,
                             n_touched, si, sf)
+            if hg_i.shape[0] > 0:
+                _agg_pass(w, rule_i, rule_f, inst, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn, ag_q, ag_qv, lo,
+                          up, unsat, mark, stamp, g_l, g_u, g_w, req_i, req_n, out, slot_of, touched, n_touched, si, sf)
+                if req_n[0] > 0:  # Python computes the user annotation functions, then the pass goes on
+                    _pause(cfg, err, w, PHASE_USER, pass_no, n_immediate, hn, 0)
+                    return STATUS_USER_FN
             if trace_on[w] and tri.shape[0] - tr_n[0] < n_touched[0]:
                 return _pause(cfg, err, w, PHASE_APPLY, pass_no, n_immediate, hn, n_touched[0])
         phase = PHASE_FRESH
@@ -714,8 +773,8 @@ def _pause(cfg, err, w, phase, pass_no, n_immediate, hn, need):
 
 
 @kernel_jit
-def _collect_pass0(w, t, fact_override, rule_i, rule_f, inst, fact_i, fact_f, fact_order, ext_ptr, ext_i, ext_f,
-                   pend, pend_n, slot_of, touched, n_touched, si, sf):
+def _collect_pass0(w, t, fact_override, rule_i, inst, fact_i, fact_f, fact_order, ext_ptr, ext_i, ext_f,
+                   pend, pend_f, pend_n, slot_of, touched, n_touched, si, sf):
     """The sources of pass 0 into the grouping scratch: program facts in their window, external facts,
     firings scheduled for t (taken off the schedule)."""
     for k in range(fact_order.shape[0]):
@@ -733,14 +792,249 @@ def _collect_pass0(w, t, fact_override, rule_i, rule_f, inst, fact_i, fact_f, fa
         g = pend[w, p, 1]
         if pend[w, p, 0] == t:
             r = inst[g, INST_RULE]
-            _add_source(inst[g, INST_HEAD], rule_f[r, 0], rule_f[r, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
+            _add_source(inst[g, INST_HEAD], pend_f[w, p, 0], pend_f[w, p, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
                         2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, False, slot_of, touched,
                         n_touched, si, sf)
         else:
             pend[w, kept, 0] = pend[w, p, 0]
             pend[w, kept, 1] = g
+            pend_f[w, kept, 0] = pend_f[w, p, 0]
+            pend_f[w, kept, 1] = pend_f[w, p, 1]
             kept += 1
     pend_n[w] = kept
+
+
+# ------------------------------------------------------------------ rules evaluated per head grounding
+
+@kernel_jit
+def _compare(op, n, d, percent, value):
+    """A quantifier's test: n of d candidates against a count, or n/d against a percentage (no
+    candidates: a percentage fails)."""
+    if percent:
+        if d == 0:
+            return False
+        lhs = n * 100.0
+        rhs = value * d
+    else:
+        lhs = float(n)
+        rhs = value
+    if op == CMP_GE:
+        return lhs >= rhs
+    if op == CMP_GT:
+        return lhs > rhs
+    if op == CMP_LE:
+        return lhs <= rhs
+    if op == CMP_LT:
+        return lhs < rhs
+    return lhs == rhs
+
+
+@kernel_jit
+def _candidates(w, ci, e0, e1, unsat, je_g, je_body, mark, stamp):
+    """The distinct atoms of clause ci over the active joins e0..e1 of a head group, in join order, into
+    mark[1] (mark[0] holds stamps by atom); returns how many."""
+    stamp[0] += 1
+    st = stamp[0]
+    n = 0
+    for e in range(e0, e1):
+        if unsat[w, je_g[e]] != 0:
+            continue
+        a = je_body[e, ci]
+        if mark[0, a] == st:
+            continue
+        mark[0, a] = st
+        mark[1, n] = a
+        n += 1
+    return n
+
+
+@kernel_jit
+def _agg_eval(w, h, lo, up, unsat, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn, ag_q, ag_qv, mark,
+              stamp, g_l, g_u, g_w):
+    """Head group h in world w (docs/language.md, "Quantifiers"): returns (grounding, k) with the firing's
+    grounding (the first active join whose quantified atoms hold, else the first active join) or -1 when
+    the group does not fire, and the k atoms that feed
+    its annotation function in g_l, g_u, g_w (each clause's distinct atoms that hold, clause by clause,
+    joins in rank order)."""
+    e0 = hg_ptr[h]
+    e1 = hg_ptr[h + 1]
+    rep = -1
+    for e in range(e0, e1):
+        if unsat[w, je_g[e]] == 0:
+            rep = je_g[e]
+            break
+    if rep < 0:
+        return -1, 0
+    ai = hg_i[h, 0]
+    for qi in range(ag_rule[ai, AR_Q0], ag_rule[ai, AR_Q1]):
+        ci = ag_q[qi, 0]
+        available_only = ag_q[qi, 3] == 1
+        d = 0
+        n = 0
+        for i in range(_candidates(w, ci, e0, e1, unsat, je_g, je_body, mark, stamp)):
+            a = mark[1, i]
+            if available_only and lo[w, a] == 0.0 and up[w, a] == 1.0:
+                continue  # never set (or back at [0,1]): not available
+            d += 1
+            if _holds(lo[w, a], up[w, a], ag_cf[ai, ci, 0], ag_cf[ai, ci, 1], ag_cn[ai, ci]):
+                n += 1
+        if not _compare(ag_q[qi, 1], n, d, ag_q[qi, 2] == 1, ag_qv[qi]):
+            return -1, 0
+    if ag_rule[ai, AR_Q1] > ag_rule[ai, AR_Q0]:  # name the first join whose quantified atoms hold, if any
+        for e in range(e0, e1):
+            if unsat[w, je_g[e]] != 0:
+                continue
+            whole = True
+            for qi in range(ag_rule[ai, AR_Q0], ag_rule[ai, AR_Q1]):
+                ci = ag_q[qi, 0]
+                a = je_body[e, ci]
+                if not _holds(lo[w, a], up[w, a], ag_cf[ai, ci, 0], ag_cf[ai, ci, 1], ag_cn[ai, ci]):
+                    whole = False
+                    break
+            if whole:
+                rep = je_g[e]
+                break
+    k = 0
+    if ag_rule[ai, AR_FN] != FN_FIXED:
+        for ci in range(ag_rule[ai, AR_NBODY]):
+            for i in range(_candidates(w, ci, e0, e1, unsat, je_g, je_body, mark, stamp)):
+                a = mark[1, i]
+                if _holds(lo[w, a], up[w, a], ag_cf[ai, ci, 0], ag_cf[ai, ci, 1], ag_cn[ai, ci]):
+                    g_l[k] = lo[w, a]
+                    g_u[k] = up[w, a]
+                    g_w[k] = ag_cf[ai, ci, 2]
+                    k += 1
+    return rep, k
+
+
+@kernel_jit
+def agg_gather_requests(w, lo, up, unsat, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn, ag_q, ag_qv, mark,
+                        stamp, g_l, g_u, g_w, req_i, req_n, flat, ptr):
+    """The inputs of the queued user annotation functions, for Python while the kernel waits: request i's
+    atoms are flat[0..2, ptr[i]:ptr[i+1]] (lower, upper, weight)."""
+    n = 0
+    ptr[0] = 0
+    for i in range(req_n[0]):
+        _, k = _agg_eval(w, req_i[i, 0], lo, up, unsat, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn,
+                           ag_q, ag_qv, mark, stamp, g_l, g_u, g_w)
+        for j in range(k):
+            flat[0, n + j] = g_l[j]
+            flat[1, n + j] = g_u[j]
+            flat[2, n + j] = g_w[j]
+        n += k
+        ptr[i + 1] = n
+
+
+@kernel_jit
+def _agg_builtin(fn, g_l, g_u, g_w, k, out):
+    """A built-in annotation function of k atoms into out[0], out[1] (engine/annotations.py has the same
+    in Python, summing in the same order). False: no bound (no atoms, or weights summing to 0)."""
+    if k == 0:
+        return False
+    if fn == FN_WEIGHTED_AVERAGE:
+        sw = 0.0
+        for i in range(k):
+            sw += g_w[i]
+        if sw == 0.0:
+            return False
+        sl = 0.0
+        su = 0.0
+        for i in range(k):
+            sl += g_w[i] * g_l[i]
+        for i in range(k):
+            su += g_w[i] * g_u[i]
+        out[0] = sl / sw
+        out[1] = su / sw
+        return True
+    sl = 0.0
+    su = 0.0
+    mnl = g_l[0]
+    mnu = g_u[0]
+    mxl = g_l[0]
+    mxu = g_u[0]
+    for i in range(k):
+        sl += g_l[i]
+        su += g_u[i]
+        mnl = min(mnl, g_l[i])
+        mnu = min(mnu, g_u[i])
+        mxl = max(mxl, g_l[i])
+        mxu = max(mxu, g_u[i])
+    if fn == FN_AVERAGE:
+        out[0] = sl / k
+        out[1] = su / k
+    elif fn == FN_MIN:
+        out[0] = mnl
+        out[1] = mnu
+    elif fn == FN_MAX:
+        out[0] = mxl
+        out[1] = mxu
+    else:  # FN_AVERAGE_LOWER
+        out[0] = sl / k
+        out[1] = mxu
+    return True
+
+
+@kernel_jit
+def _agg_fire(w, rule_f, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn, ag_q, ag_qv, lo, up, unsat,
+              mark, stamp, g_l, g_u, g_w, req_i, req_n, out, h):
+    """Evaluate head group h for a firing: returns its grounding (-1: no firing) with its bound in out[0],
+    out[1]; a group with a user function is queued in req_i instead (grounding -2)."""
+    rep, k = _agg_eval(w, h, lo, up, unsat, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn, ag_q, ag_qv,
+                       mark, stamp, g_l, g_u, g_w)
+    if rep < 0:
+        return -1
+    ai = hg_i[h, 0]
+    fn = ag_rule[ai, AR_FN]
+    if fn == FN_FIXED:
+        out[0] = rule_f[ag_rule[ai, AR_RULE], 0]
+        out[1] = rule_f[ag_rule[ai, AR_RULE], 1]
+        return rep
+    if k == 0:
+        return -1
+    if fn == FN_USER:
+        n = req_n[0]
+        req_i[n, 0] = h
+        req_i[n, 1] = rep
+        req_n[0] = n + 1
+        return -2
+    if not _agg_builtin(fn, g_l, g_u, g_w, k, out):
+        return -1
+    if ag_rule[ai, AR_HNEG] == 1:
+        l = out[0]
+        out[0] = 1.0 - out[1]
+        out[1] = 1.0 - l
+    return rep
+
+
+@kernel_jit
+def _agg_pass(w, rule_i, rule_f, inst, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn, ag_q, ag_qv, lo, up,
+              unsat, mark, stamp, g_l, g_u, g_w, req_i, req_n, out, slot_of, touched, n_touched, si, sf):
+    """The firings of the aggregated Δt = 0 rules in this ordinary pass, as sources of the pass (every head
+    group re-evaluated: exact, not incremental). User-function groups are queued in req_i."""
+    for h in range(hg_i.shape[0]):
+        ai = hg_i[h, 0]
+        if ag_rule[ai, AR_KIND] != KIND_ORDINARY:
+            continue
+        g = _agg_fire(w, rule_f, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn, ag_q, ag_qv,
+                      lo, up, unsat, mark, stamp, g_l, g_u, g_w, req_i, req_n, out, h)
+        if g >= 0:
+            r = ag_rule[ai, AR_RULE]
+            _add_source(hg_i[h, 1], out[0], out[1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
+                        2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, False, slot_of, touched,
+                        n_touched, si, sf)
+
+
+@kernel_jit
+def _agg_user_sources(rule_i, inst, hg_i, ag_rule, req_i, req_f, req_n, slot_of, touched, n_touched, si, sf):
+    """The queued user-function groups, with the bounds Python computed (req_f), as sources of the pass."""
+    for i in range(req_n[0]):
+        h = req_i[i, 0]
+        g = req_i[i, 1]
+        r = ag_rule[hg_i[h, 0], AR_RULE]
+        _add_source(hg_i[h, 1], req_f[i, 0], req_f[i, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
+                    2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, False, slot_of, touched, n_touched,
+                    si, sf)
+    req_n[0] = 0
 
 
 @kernel_jit

@@ -10,8 +10,10 @@ from dataclasses import dataclass, field
 from itertools import groupby
 from pathlib import Path
 
+from . import annotations
 from .errors import ProgramCheckError, RuleSyntaxError
 from .program import (
+    COMPARISONS,
     CONSTANT_RE,
     INCONSISTENCY_POLICIES,
     MAX_BINDING_CLAUSES,
@@ -21,6 +23,7 @@ from .program import (
     Fact,
     Literal,
     Program,
+    Quantifier,
     Rule,
     SourceLoc,
     Term,
@@ -34,10 +37,12 @@ STATEMENT_NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_-]*")
 
 DIRECTIVES = {"mode": UPDATE_MODES, "timesteps": TIMESTEP_MODES, "inconsistency": INCONSISTENCY_POLICIES}
 RULE_OPTIONS = UPDATE_MODES  # `{override}` / `{intersection}`
+WEIGHTS_OPTION = "weights"  # `{weights=1,2,0.5}`: per-clause weights of the annotation function
 
 # ---------------------------------------------------------------------------------------------- tokens
 
 NAME, NUMBER, QUOTED, ARROW, PUNCT, NL, EOF = "name", "number", "quoted", "arrow", "punct", "nl", "eof"
+CMP = "cmp"
 
 _TOKEN_RE = re.compile(r"""
     (?P<ws>[ \t\f\r\v]+)
@@ -46,10 +51,11 @@ _TOKEN_RE = re.compile(r"""
   | (?P<number>[0-9]+\.[0-9]+|\.[0-9]+)  # decimals only; plain digits are names (`16` is also a constant)
   | (?P<arrow><-(?:[0-9]+|!))
   | (?P<badarrow><-)
+  | (?P<cmp>>=|<=|==|>|<)                # quantifiers: `[>= 50%] p(Y)`
   | (?P<name>[A-Za-z0-9_][A-Za-z0-9_-]*)
   | (?P<quoted>"[^"]*"|'[^']*')
   | (?P<badquote>["'])
-  | (?P<punct>[()\[\],:~@{}%\\-])
+  | (?P<punct>[()\[\],:~@{}%=\\-])
 """, re.VERBOSE)
 
 
@@ -165,6 +171,7 @@ class _Parser:
         self.unit = _Unit(file, _split_lines(text))
         self.toks = _tokenize(self.unit.lines, file)
         self.i = 0
+        self.head_function: Token | None = None  # set by literal() when a head names an annotation function
 
     # -- token helpers
     def peek(self, k: int = 0) -> Token:
@@ -250,26 +257,33 @@ class _Parser:
             self.i += 2
         elif first.kind != NAME and not first.is_punct("~"):
             raise self.syntax(first, f"expected a rule, a fact or a directive, found {first.describe()}")
-        head = self.literal("")
+        head = self.literal("", allow_function=True)
+        function, self.head_function = self.head_function, None
         if self.peek().kind == ARROW:
-            return self.rule_rest(name, head, first, first_i)
+            return self.rule_rest(name, head, first, first_i, function)
+        if function is not None:
+            raise self.syntax(function, "an annotation function names how a rule head's bound is computed: "
+                                        "it needs a rule ('<-k' or '<-!' after the head), a fact takes ':[l,u]'")
         return self.fact_rest(name, head, first, first_i)
 
-    def rule_rest(self, name: str, head: Literal, first: Token, first_i: int) -> Rule:
+    def rule_rest(self, name: str, head: Literal, first: Token, first_i: int, function: Token | None) -> Rule:
         arrow = self.take()
         immediate = arrow.text == "<-!"
         delay = 0 if immediate else int(arrow.text[2:])
         if delay > MAX_TIME:
             raise self.check(arrow, f"the delay {delay} is too large: a delay is at most {MAX_TIME}")
+        quants = [self.quantifier()]
         body = [self.literal(f" after '{arrow.text}'")]
         mode = None
+        weights: tuple[float, ...] = ()
         while True:
             t = self.peek()
             if t.is_punct(","):
                 self.take()
+                quants.append(self.quantifier())
                 body.append(self.literal(" after ','"))
             elif t.is_punct("{"):
-                mode = self.options()
+                mode, weights = self.options()
                 if not self.at_end():
                     raise self.syntax(self.peek(), "expected end of rule after the options, "
                                                    f"found {self.peek().describe()}")
@@ -278,27 +292,95 @@ class _Parser:
                 break
             else:
                 raise self.syntax(t, f"expected ',', '{{' or end of rule after body literal, found {t.describe()}")
+        if function is not None and not annotations.is_known(function.text):
+            raise self.check(function, f"unknown annotation function '{function.text}' (built in: "
+                                       f"{', '.join(annotations.BUILTINS)}; register others with "
+                                       "tracelab.engine.register_annotation before parsing)")
         return Rule(name, head, tuple(body), delay=delay, immediate=immediate, mode=mode,
-                    loc=self.loc(first), text=self.text_of(first_i, self.i))
+                    loc=self.loc(first), text=self.text_of(first_i, self.i),
+                    quantifiers=tuple(quants) if any(q is not None for q in quants) else (),
+                    annotation=function.text if function is not None else None, weights=weights)
 
-    def options(self) -> str:
+    def quantifier(self) -> Quantifier | None:
+        """An optional `[op count[%] [available|total]]` or `[forall [available|total]]` before a clause."""
+        if not self.peek().is_punct("["):
+            return None
+        bracket = self.take()
+        t = self.peek()
+        if t.kind == NAME and t.text == "forall":
+            self.take()
+            op, value, percent = "==", 100.0, True
+        elif t.kind == CMP:
+            op = self.take().text
+            n = self.peek()
+            if n.kind != NUMBER and not (n.kind == NAME and n.text.isdigit()):
+                raise self.syntax(n, f"expected a count (an integer) or a percentage ('50%') after '{op}', "
+                                     f"found {n.describe()}")
+            self.take()
+            percent = self.peek().is_punct("%")
+            if percent:
+                self.take()
+            elif n.kind == NUMBER:
+                raise self.check(n, f"a count is an integer, found {n.text} (write '{n.text}%' for a percentage)")
+            value = float(n.text)
+            if percent and value > 100.0:
+                raise self.check(n, f"a percentage is at most 100%, found {n.text}%")
+        else:
+            raise self.syntax(t, "expected a quantifier after '[': a comparison (>=, >, <=, <, ==) with a count "
+                                 f"or a percentage, or 'forall'; found {t.describe()}")
+        available = False
+        w = self.peek()
+        if w.kind == NAME and w.text in ("available", "total"):
+            available = w.text == "available"
+            self.take()
+        self.expect_punct("]", "to close the quantifier (after the count, 'available' or 'total')")
+        return Quantifier(op, value, percent, available, loc=self.loc(bracket))
+
+    def options(self) -> tuple[str | None, tuple[float, ...]]:
         self.take()  # '{'
         mode: str | None = None
+        weights: tuple[float, ...] | None = None
+        expected = " | ".join([*RULE_OPTIONS, f"{WEIGHTS_OPTION}=w1,w2,..."])
         while True:
             t = self.peek()
             if t.kind != NAME:
-                raise self.syntax(t, f"expected a rule option ({' | '.join(RULE_OPTIONS)}), found {t.describe()}")
-            if t.text not in RULE_OPTIONS:
-                raise self.check(t, f"unknown rule option '{t.text}' (expected {' | '.join(RULE_OPTIONS)})")
-            if mode is not None and mode != t.text:
-                raise self.check(t, f"conflicting rule options '{mode}' and '{t.text}'")
-            mode = t.text
-            self.take()
+                raise self.syntax(t, f"expected a rule option ({expected}), found {t.describe()}")
+            if t.text == WEIGHTS_OPTION:
+                if weights is not None:
+                    raise self.check(t, "the option 'weights' is given twice")
+                self.take()
+                self.expect_punct("=", "after 'weights' (weights=w1,w2,...: one number per body clause)")
+                weights = self.weight_list()
+            elif t.text not in RULE_OPTIONS:
+                raise self.check(t, f"unknown rule option '{t.text}' (expected {expected})")
+            else:
+                if mode is not None and mode != t.text:
+                    raise self.check(t, f"conflicting rule options '{mode}' and '{t.text}'")
+                mode = t.text
+                self.take()
             if self.peek().is_punct(","):
                 self.take()
                 continue
             self.expect_punct("}", "or ',' after a rule option")
-            return mode
+            return mode, weights or ()
+
+    def weight_list(self) -> tuple[float, ...]:
+        """`1,2,0.5` after `weights=`: numbers >= 0, up to the first ',' not followed by a number."""
+        out = []
+        while True:
+            n = self.peek()
+            if n.is_punct("-"):
+                raise self.check(n, "a weight is a number >= 0")
+            if n.kind != NUMBER and not (n.kind == NAME and n.text.isdigit()):
+                raise self.syntax(n, f"expected a weight (a number >= 0), found {n.describe()}")
+            self.take()
+            out.append(float(n.text))
+            nxt = self.peek(1)
+            if self.peek().is_punct(",") and (nxt.kind == NUMBER or (nxt.kind == NAME and nxt.text.isdigit())
+                                              or nxt.is_punct("-")):
+                self.take()
+                continue
+            return tuple(out)
 
     def fact_rest(self, name: str, lit: Literal, first: Token, first_i: int) -> Fact:
         start = end = 0
@@ -346,7 +428,7 @@ class _Parser:
         return int(t.text)
 
     # -- literals
-    def literal(self, context: str) -> Literal:
+    def literal(self, context: str, allow_function: bool = False) -> Literal:
         first = self.peek()
         negated = first.is_punct("~")
         if negated:
@@ -378,7 +460,11 @@ class _Parser:
         lower = upper = 1.0
         if self.peek().is_punct(":"):
             self.take()
-            lower, upper = self.bound()
+            fn = self.peek()
+            if allow_function and fn.kind == NAME and PREDICATE_RE.fullmatch(fn.text):  # `p(X):average`
+                self.head_function = self.take()
+            else:
+                lower, upper = self.bound()
         lit = Literal(p.text, tuple(args), lower, upper, negated, loc=self.loc(first))
         self.unit.arg_locs[id(lit)] = (lit, tuple(locs))
         return lit
@@ -622,7 +708,7 @@ class _Checker:
         if r.delay > MAX_TIME:
             raise self.fail(r.loc, f"rule '{r.name}': the delay {r.delay} is too large: a delay is at most "
                                    f"{MAX_TIME}")
-        n_binding = sum(c.binds for c in r.body)
+        n_binding = len(r.binding_clauses())
         if n_binding > MAX_BINDING_CLAUSES:
             raise self.fail(r.loc, f"rule '{r.name}' has {n_binding} binding body clauses; the engine allows "
                                    f"at most {MAX_BINDING_CLAUSES} (clauses whose bound contains [0,1] do not count)")
@@ -631,16 +717,56 @@ class _Checker:
         if r.mode is not None and r.mode not in RULE_OPTIONS:
             raise self.fail(r.loc, f"rule '{r.name}': unknown rule option '{r.mode}' "
                                    f"(expected {' | '.join(RULE_OPTIONS)})")
-        binding = {v for lit in r.body if lit.binds for v in lit.variables}
+        self.aggregation(r)
+        binding = {v for ci in r.binding_clauses() for v in r.body[ci].variables}
         for var in r.variables:
             if var in binding:
                 continue
             lit, i = next((lit, i) for lit in (r.head, *r.body) for i, t in enumerate(lit.args)
                           if t.is_var and t.name == var)
-            why = ("it occurs only in body clauses whose bound contains [0,1], which every atom satisfies"
-                   if any(var in b.variables for b in r.body) else "it occurs in no body clause")
+            in_body = [ci for ci, b in enumerate(r.body) if var in b.variables]
+            if any(r.quantifier(ci) is not None for ci in in_body):
+                lit, i = next((r.body[ci], i) for ci in in_body if r.quantifier(ci) is not None
+                              for i, t in enumerate(r.body[ci].args) if t.is_var and t.name == var)
+                why = ("a variable of a quantified clause must occur in the head or in an unquantified "
+                       "binding clause, which give the clause its candidates")
+            elif in_body:
+                why = "it occurs only in body clauses whose bound contains [0,1], which every atom satisfies"
+            else:
+                why = "it occurs in no body clause"
             raise self.fail(self.arg_loc(lit, i), f"unsafe variable '{var}' in rule '{r.name}': {why}; "
                                                   "it must occur in a body clause whose bound excludes [0,1]")
+
+    def aggregation(self, r: Rule) -> None:
+        """Quantifiers, annotation function and weights of a rule (docs/language.md)."""
+        if r.quantifiers and len(r.quantifiers) != len(r.body):
+            raise self.fail(r.loc, f"rule '{r.name}' has {len(r.quantifiers)} quantifier slots for "
+                                   f"{len(r.body)} body clauses")
+        for q in r.quantifiers:
+            if q is None:
+                continue
+            where = q.loc or r.loc
+            if q.op not in COMPARISONS:
+                raise self.fail(where, f"unknown comparison '{q.op}' (expected {', '.join(COMPARISONS)})")
+            if not q.value >= 0 or (q.percent and q.value > 100) or (not q.percent and q.value != int(q.value)):
+                raise self.fail(where, f"bad quantifier {q}: a count is an integer >= 0, a percentage lies in "
+                                       "0..100%")
+        if r.annotation is not None and not annotations.is_known(r.annotation):
+            raise self.fail(r.loc, f"rule '{r.name}': unknown annotation function '{r.annotation}' (built in: "
+                                   f"{', '.join(annotations.BUILTINS)}; register others with "
+                                   "tracelab.engine.register_annotation)")
+        if r.weights:
+            if r.annotation is None:
+                raise self.fail(r.loc, f"rule '{r.name}' gives weights but its head names no annotation "
+                                       "function ('head(X):weighted_average <-...')")
+            if len(r.weights) != len(r.body):
+                raise self.fail(r.loc, f"rule '{r.name}' gives {len(r.weights)} weights for {len(r.body)} body "
+                                       "clauses (one weight per clause)")
+            if any(not w >= 0 for w in r.weights):
+                raise self.fail(r.loc, f"rule '{r.name}': weights are numbers >= 0")
+        if r.aggregated and r.immediate:
+            raise self.fail(r.loc, f"rule '{r.name}' is immediate ('<-!'): quantifiers and annotation functions "
+                                   "are evaluated per pass over all head groundings, so use '<-0' or a delay")
 
     def warnings(self) -> Iterable[str]:
         p = self.program

@@ -77,6 +77,27 @@ class Literal:
         return f"{neg}{self.pred}({args}):[{self.lower:g},{self.upper:g}]"
 
 
+COMPARISONS = (">=", ">", "<=", "<", "==")
+
+
+@dataclass(frozen=True)
+class Quantifier:
+    """`[>= 50% available]` before a body clause: how many of the clause's candidates (per head grounding)
+    must satisfy it (docs/language.md, "Quantifiers"). `value` is a count, or a percentage when `percent`."""
+    op: str  # one of COMPARISONS
+    value: float
+    percent: bool = False
+    available: bool = False  # count only candidates whose atom is not [0,1]
+    loc: SourceLoc | None = field(default=None, compare=False)
+
+    def __str__(self) -> str:
+        if self.op == "==" and self.percent and self.value == 100.0:
+            count = "forall"
+        else:
+            count = f"{self.op} {self.value:g}{'%' if self.percent else ''}"
+        return f"[{count}{' available' if self.available else ''}]"
+
+
 @dataclass(frozen=True)
 class Rule:
     name: str
@@ -87,6 +108,22 @@ class Rule:
     mode: str | None = None  # None: the program's mode
     loc: SourceLoc | None = field(default=None, compare=False)
     text: str = field(default="", compare=False)
+    # per body clause its quantifier or None; () when no clause has one
+    quantifiers: tuple[Quantifier | None, ...] = ()
+    annotation: str | None = None  # an annotation function computes the head's bound (`p(X):average`)
+    weights: tuple[float, ...] = ()  # per body clause, for the annotation function (`{weights=1,2}`)
+
+    def quantifier(self, i: int) -> Quantifier | None:
+        return self.quantifiers[i] if i < len(self.quantifiers) else None
+
+    @property
+    def aggregated(self) -> bool:
+        """Evaluated per head grounding (a quantified clause or an annotation function)."""
+        return self.annotation is not None or any(q is not None for q in self.quantifiers)
+
+    def binding_clauses(self) -> list[int]:
+        """Indices of the clauses that bind variables: not [0,1]-containing, not quantified."""
+        return [i for i, c in enumerate(self.body) if c.binds and self.quantifier(i) is None]
 
     @property
     def variables(self) -> tuple[str, ...]:

@@ -10,6 +10,9 @@ import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
+
+from . import annotations
 from .errors import FixpointError, InconsistencyError
 from .program import (
     EPS,
@@ -17,6 +20,7 @@ from .program import (
     Fact,
     Literal,
     Program,
+    Quantifier,
     Rule,
     constant_text,
     ordered_nodes,
@@ -164,6 +168,87 @@ class ReferenceEvaluator:
             if all(self._holds(lit, binding) for lit in rule.body):
                 out.append((ids, values, self._ground(rule.head, binding)))
         return out
+
+    def _rule_firings(self, ri: int) -> list[tuple[Atom, _Source]]:
+        """The firings of rule ri on the current interpretation, in source order: one per active grounding,
+        or one per head grounding for a rule with quantifiers or an annotation function."""
+        if self.rules[ri].aggregated:
+            return self._aggregated_firings(ri)
+        return [(head, self._firing(ri, ids, values)) for ids, values, head in self._active_groundings(self.rules[ri])]
+
+    def _aggregated_firings(self, ri: int) -> list[tuple[Atom, _Source]]:
+        """docs/language.md "Quantifiers" and "Annotation functions": the joins of the unquantified clauses
+        grouped by head grounding; a group fires when every quantifier holds over its candidates, named by
+        its first join whose quantified clauses hold (else its first join), with the head's bound or the
+        function's result."""
+        rule = self.rules[ri]
+        variables = rule.variables
+        unquantified = [lit for i, lit in enumerate(rule.body) if rule.quantifier(i) is None]
+        groups: dict[Atom, list[tuple[tuple[int, ...], dict[str, str]]]] = {}
+        for ids in itertools.product(range(len(self.nodes)), repeat=len(variables)):
+            binding = dict(zip(variables, (self.nodes[i] for i in ids)))
+            if all(self._holds(lit, binding) for lit in unquantified):
+                groups.setdefault(self._ground(rule.head, binding), []).append((ids, binding))
+        out = []
+        for head, joins in groups.items():
+            if not all(self._quantifier_holds(q, rule.body[ci], [b for _, b in joins])
+                       for ci, q in enumerate(rule.quantifiers) if q is not None):
+                continue
+            mu = self._head_bound(rule, [b for _, b in joins])
+            if mu is None:
+                continue
+            # the firing is named by the first join whose quantified clauses hold too, else the first join
+            quantified = [lit for i, lit in enumerate(rule.body) if rule.quantifier(i) is not None]
+            ids, binding = next((j for j in joins if all(self._holds(lit, j[1]) for lit in quantified)), joins[0])
+            out.append((head, _Source(mu, self._rule_override(rule), CAUSE_RULE, ri,
+                                      tuple(binding[v] for v in variables), ids)))
+        return out
+
+    def _candidates(self, lit: Literal, joins: list[dict[str, str]]) -> list[Atom]:
+        """The distinct atoms of a clause over the joins, in join order."""
+        return list(dict.fromkeys(self._ground(lit, b) for b in joins))
+
+    def _atom_holds(self, atom: Atom, lit: Literal) -> bool:
+        a, b = _effective(*self.bound(atom), lit.negated)
+        return a >= lit.lower - EPS and b <= lit.upper + EPS
+
+    def _quantifier_holds(self, q: Quantifier, lit: Literal, joins: list[dict[str, str]]) -> bool:
+        cands = self._candidates(lit, joins)
+        if q.available:  # only atoms that carry a bound other than [0,1]
+            cands = [a for a in cands if self.bound(a) != FULL]
+        n, d = sum(self._atom_holds(a, lit) for a in cands), len(cands)
+        if q.percent:
+            if d == 0:
+                return False
+            lhs, rhs = n * 100.0, q.value * d
+        else:
+            lhs, rhs = float(n), q.value
+        return {">=": lhs >= rhs, ">": lhs > rhs, "<=": lhs <= rhs, "<": lhs < rhs, "==": lhs == rhs}[q.op]
+
+    def _head_bound(self, rule: Rule, joins: list[dict[str, str]]) -> Interval | None:
+        """The head's bound, or the annotation function of the atoms that counted: per clause, in clause
+        order, its distinct atoms that hold (None: the function gives no bound)."""
+        head = rule.head
+        if rule.annotation is None:
+            return _effective(head.lower, head.upper, head.negated)
+        lower, upper, weights = [], [], []
+        for ci, lit in enumerate(rule.body):
+            for atom in self._candidates(lit, joins):
+                if self._atom_holds(atom, lit):
+                    lo, up = self.bound(atom)
+                    lower.append(lo)
+                    upper.append(up)
+                    weights.append(rule.weights[ci] if rule.weights else 1.0)
+        if not lower:
+            return None
+        args = (np.array(lower), np.array(upper), np.array(weights))
+        if rule.annotation in annotations.BUILTINS:
+            res = annotations.lookup(rule.annotation)(*args)
+        else:
+            res = annotations.call_user(rule.annotation, annotations.lookup(rule.annotation), rule.name, *args)
+        if res is None:
+            return None
+        return _effective(res[0], res[1], head.negated)
 
     def _rule_override(self, rule: Rule) -> bool:
         return (rule.mode or self.program.mode) == "override"
@@ -344,8 +429,8 @@ class ReferenceEvaluator:
             # b. ordinary pass: all active groundings read the same interpretation, then apply together
             groups: dict[Atom, list[_Source]] = {}
             for ri in ordinary:  # rule index order, then node ids: source order
-                for ids, values, head in self._active_groundings(self.rules[ri]):
-                    groups.setdefault(head, []).append(self._firing(ri, ids, values))
+                for head, src in self._rule_firings(ri):
+                    groups.setdefault(head, []).append(src)
             changed = False
             for atom, sources in groups.items():
                 if self._apply(atom, sources, t, k):
@@ -357,8 +442,8 @@ class ReferenceEvaluator:
         # 4. delayed rules read the final interpretation of t and fire at t + delay
         for ri, rule in enumerate(self.rules):
             if rule.delay > 0:
-                for ids, values, _head in self._active_groundings(rule):
-                    self._scheduled.setdefault(t + rule.delay, []).append(self._firing(ri, ids, values))
+                for _head, src in self._rule_firings(ri):
+                    self._scheduled.setdefault(t + rule.delay, []).append(src)
         self.t += 1
 
     def run(self, steps: int) -> None:

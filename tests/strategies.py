@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from hypothesis import strategies as st
+from tracelab.engine import register_annotation
 from tracelab.engine.graph import Graph
 from tracelab.engine.parser import parse_program
 from tracelab.engine.program import INCONSISTENCY_POLICIES, Fact, Literal, Program, Term
@@ -144,11 +145,35 @@ def fact_lines(draw: st.DrawFn, sig: _Sig, steps: int, crisp: bool = False) -> s
     return f"{neg}{pred}({','.join(args)}):{_bound_text(b)}{window}{' static' if static else ''}"
 
 
+def _span(lower, upper, weights) -> tuple[float, float]:
+    """A user annotation function for random programs: the hull of the weighted atoms' bounds."""
+    keep = weights > 0
+    return (float(lower[keep].min()), float(upper[keep].max())) if keep.any() else (0.0, 1.0)
+
+
+register_annotation("test_span", _span)  # random programs run user functions too (the kernel's pauses)
+ANNOTATION_FUNCTIONS = ("average", "weighted_average", "min", "max", "average_lower", "test_span")
+
+
+@st.composite
+def quantifiers(draw: st.DrawFn) -> str:
+    """A quantifier prefix: a comparison with a count or a percentage, or forall; total or available."""
+    if _chance(draw, 5):
+        count = "forall"
+    else:
+        op = draw(st.sampled_from((">=", ">", "<=", "<", "==")))
+        n = draw(st.sampled_from(("0", "1", "2", "3", "0%", "25%", "50%", "50%", "100%", "33.3%")))
+        count = f"{op} {n}"
+    word = draw(st.sampled_from(("", "", " total", " available")))
+    return f"[{count}{word}] "
+
+
 @st.composite
 def rule_lines(draw: st.DrawFn, sig: _Sig, name: str, heads: list[tuple[str, bool, Bound]],
-               crisp: bool = False) -> str:
+               crisp: bool = False, aggregates: bool = False) -> str:
     """One safe rule. `heads` holds the (pred, negated, bound) of earlier rules' heads; the first clause
-    often tests one of them, so that rules chain within a step (passes 2, 3, ...). Appends its own head."""
+    often tests one of them, so that rules chain within a step (passes 2, 3, ...). Appends its own head.
+    aggregates: some rules get quantified clauses and annotation functions (never immediate ones)."""
     preds = sorted(sig.arity)
     n_body = draw(st.integers(1, 3))
     clauses: list[tuple[str, list[str], bool, Bound]] = []  # pred, args (vars upper-case), negated, bound
@@ -190,11 +215,38 @@ def rule_lines(draw: st.DrawFn, sig: _Sig, name: str, heads: list[tuple[str, boo
     head_neg = "~" if _chance(draw, 8) else ""
     head_bound = draw(bounds(crisp=crisp))
     delay = draw(st.sampled_from((0, 0, 1, 2)))
-    arrow = "<-!" if delay == 0 and _chance(draw, 3) else f"<-{delay}"
-    option = draw(st.sampled_from(("", "", " {override}", " {intersection}")))
+    # quantified clauses: ones whose variables other binding clauses bind (their candidates come from them)
+    prefixes = [""] * len(fixed)
+    annotation = ""
+    if aggregates and not _chance(draw, 3):
+        for i in range(1, len(fixed)):
+            others = {a for j, (p, args, n, b) in enumerate(fixed) if j != i and prefixes[j] == "" and
+                      b != (0.0, 1.0) for a in args if a[0].isupper()}
+            if all(a in others for a in fixed[i][1] if a[0].isupper()) and not _chance(draw, 3):
+                prefixes[i] = draw(quantifiers())
+        while any(prefixes):  # safe: head, [0,1] and quantified clauses' variables bound by the others
+            unq = {a for j, (p, args, n, b) in enumerate(fixed) if not prefixes[j] and b != (0.0, 1.0)
+                   for a in args if a[0].isupper()}
+            needed = {a for a in head_args if a[0].isupper()} | {
+                a for j, (p, args, n, b) in enumerate(fixed) if prefixes[j] or b == (0.0, 1.0)
+                for a in args if a[0].isupper()}
+            if needed <= unq:
+                break
+            prefixes[max(j for j, q in enumerate(prefixes) if q)] = ""
+        if _chance(draw, 2):
+            annotation = draw(st.sampled_from(ANNOTATION_FUNCTIONS))
+    aggregated = annotation != "" or any(prefixes)
+    arrow = "<-!" if delay == 0 and not aggregated and _chance(draw, 3) else f"<-{delay}"
+    options = [draw(st.sampled_from(("", "", "override", "intersection")))]
+    if annotation and _chance(draw, 2):
+        options.append("weights=" + ",".join(draw(st.sampled_from(("0", "1", "2", "0.5")))
+                                            for _ in fixed))
+    option = f" {{{', '.join(o for o in options if o)}}}" if any(options) else ""
     heads.append((head_pred, bool(head_neg), head_bound))
-    body = ", ".join(f"{'~' if n else ''}{p}({','.join(a)}):{_bound_text(b)}" for p, a, n, b in fixed)
-    return (f"{name}: {head_neg}{head_pred}({','.join(head_args)}):{_bound_text(head_bound)} {arrow} {body}"
+    body = ", ".join(f"{q}{'~' if n else ''}{p}({','.join(a)}):{_bound_text(b)}"
+                     for q, (p, a, n, b) in zip(prefixes, fixed))
+    head_annotation = annotation or _bound_text(head_bound)
+    return (f"{name}: {head_neg}{head_pred}({','.join(head_args)}):{head_annotation} {arrow} {body}"
             f"{option}")
 
 
@@ -212,7 +264,7 @@ def ext_facts(draw: st.DrawFn, sig: _Sig, nodes: list[str], max_per_step: int = 
 
 @st.composite
 def scenarios(draw: st.DrawFn, per_world: int = 0, with_graph: bool = True,
-              policies: tuple[str, ...] = POLICIES, crisp: bool = False) -> Scenario:
+              policies: tuple[str, ...] = POLICIES, crisp: bool = False, aggregates: bool = False) -> Scenario:
     """A parsed random program plus, per step, external facts for every world (or, with per_world=W,
     separate external facts for each of W worlds). The policy is drawn from `policies`. crisp: every
     rule head, fact and external fact sets [0,0], [1,1] or [0,1] (body clauses still test any bound)."""
@@ -228,7 +280,7 @@ def scenarios(draw: st.DrawFn, per_world: int = 0, with_graph: bool = True,
                          f" @0..{steps}")
     lines += draw(st.lists(fact_lines(sig, steps, crisp), min_size=1, max_size=8))
     heads: list[tuple[str, bool, Bound]] = []
-    lines += [draw(rule_lines(sig, f"r{i}", heads, crisp)) for i in range(draw(st.integers(1, 6)))]
+    lines += [draw(rule_lines(sig, f"r{i}", heads, crisp, aggregates)) for i in range(draw(st.integers(1, 6)))]
     text = "\n".join(lines) + "\n"
 
     # a graph: some nodes (possibly isolated) and a few static facts at t = 0 on them

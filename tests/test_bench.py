@@ -155,3 +155,20 @@ def test_bench_tui_quick(capsys: pytest.CaptureFixture) -> None:
     for name in ("open trace (count, first page)", "page index (anchors)", "jump to a timestep",
                  "filter by rule (half the rows)", "filter by atom"):
         positive(r["queries_alone"][name])
+
+
+def test_bench_aggregates_quick(capsys: pytest.CaptureFixture) -> None:
+    from tracelab.bench.aggregates import QUICK_SIZES, RULES
+    r = bench_json(capsys, "aggregates")
+    reg = r["registration"]
+    positive(reg["python_s"])
+    positive(reg["njit_later_s"])
+    assert reg["njit_first_s"] > 0
+    assert reg["kernel_signatures_before"] == reg["kernel_signatures_after"] >= 1  # no kernel recompile
+    assert [(x["nodes"], x["rule"]) for x in r["rules"]] == [(n, name) for n in QUICK_SIZES for name in RULES]
+    for x in r["rules"]:
+        positive(x["build_s"])
+        positive(x["run_s"])
+        assert x["set_atoms"] > 0 and x["passes"] >= 11
+    by_rule = {x["rule"]: x["set_atoms"] for x in r["rules"]}
+    assert by_rule["spread Δt=1"] == by_rule["[>= 1] Δt=1"]  # the same meaning, the same atoms

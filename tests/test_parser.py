@@ -236,7 +236,7 @@ SYNTAX_ERRORS = [
     ("h(X) <- a(X)", 1, 8, "expected a delay right after '<-'"),
     ("h(X) <-0 a(X),\n\n# nothing follows\n", 1, 15, "expected a literal after ',', found end of file"),
     ("h(X) <-0", 1, 9, "expected a literal after '<-0', found end of file"),
-    ("h(X) <-0 a(X) {", 1, 16, "expected a rule option (intersection | override), found end of line"),
+    ("h(X) <-0 a(X) {", 1, 16, "expected a rule option (intersection | override | weights=w1,w2,...), found end of line"),
     ("h(X) <-0 a(X) {override", 1, 24, "expected '}' or ',' after a rule option, found end of line"),
     ("h(X) <-0 a(X) {override} b(X)", 1, 26, "expected end of rule after the options, found 'b'"),
     ("p(a,b,c)", 1, 6, "expected ')' after the second argument"),

@@ -1,6 +1,6 @@
 """`tracelab bench`: speed and memory measured by benchmarks (docs/benchmarks.md), never by timed
 assertions in tests. `bench engine`, `bench env`, `bench store`, `bench replay`, `bench train`,
-`bench tui`, `bench all` (all but tui); each takes --json,
+`bench tui`, `bench aggregates`, `bench all` (all but tui); each takes --json,
 --quick (small sizes: the smoke test) and --repeats (medians and spread over that many repeats)."""
 from __future__ import annotations
 
@@ -23,6 +23,7 @@ def register(sub: argparse._SubParsersAction) -> None:
              "store": "trace-store ingest rows/s, sealing, point queries",
              "replay": "tracelab replay: a 500-step 5v5 game and 100 games of 1v1 converted to .rrd",
              "train": "DQN training transitions/s end to end, the update alone, the env alone, the loop's share",
+             "aggregates": "quantifiers and annotation functions: registration time, cost against plain rules",
              "tui": "the terminal UI on a 10M-row run: open, first page, scroll, jump, filter (headless)",
              "all": "engine, env, store, replay and train"}
     for name, text in helps.items():
@@ -80,6 +81,10 @@ def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], s
         from tracelab.bench import train
         r = train.run(args.quick, args.repeats, args.envs, args.threads)
         return r, train.report(r)
+    if name == "aggregates":
+        from tracelab.bench import aggregates
+        r = aggregates.run(args.quick, args.repeats)
+        return r, aggregates.report(r)
     if name == "tui":
         from tracelab.bench import tui
         r = tui.run(args.quick, args.repeats, args.rows)
