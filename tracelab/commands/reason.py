@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from tracelab.commands._args import positive_int
+from tracelab.commands._args import ENGINE_KERNELS, positive_int
 from tracelab.errors import UserError
 
 
@@ -28,6 +28,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         '"link(a,Y):[0.5,1]" (repeatable; replaces the final interpretation)')
     p.add_argument("--query-at", choices=("end", "each"), default="end",
                    help="answer the queries after the last step (default) or after each step")
+    p.add_argument("--kernel", choices=ENGINE_KERNELS, default="auto",
+                   help="the engine's kernel (default auto; compiled: the program's own, docs/engine-api.md)")
     p.set_defaults(func=run)
 
 
@@ -61,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
         except ProgramError as e:
             raise UserError(f"--query {q!r}: {e.message}") from e
     with compiling_engine(busy="grounding the program…"):  # the first step compiles (cold cache) and grounds
-        engine = Engine(program, graph, trace=not args.no_trace)
+        engine = Engine(program, graph, trace=not args.no_trace, kernel=args.kernel)
         engine.step()
     answers: list[dict[str, object]] = []
     changes: list[dict[str, object]] = []  # --json only: text output prints each step's rows as it goes
