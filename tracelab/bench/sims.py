@@ -170,6 +170,20 @@ class _Recorder:
         del self.engine.restore
 
 
+def replay_calls(eng: Any, calls: list[tuple[str, Any]], trace: bool) -> None:
+    """Do again what a _Recorder recorded: each step with its fact rows (renumbered, as external ids only
+    grow), each restore; the trace taken after every step with `trace`."""
+    for kind, args in calls:
+        if kind == "step":
+            ptr, rows, bounds = args
+            rows[:, 2] = eng.next_external_id() + np.arange(len(rows))
+            eng.step(external=(ptr, rows, bounds))
+            if trace:
+                eng.take_trace()
+        else:
+            eng.restore(*args)
+
+
 def measure_engine_only(sim: RuleSim, trace: bool, repeats: int, target_s: float) -> dict[str, Any]:
     """Steps/s of the engine alone on the stepping loop's own work: a block of the loop (Loop) is
     recorded once, then replayed `repeats` times from the same engine state: the same fact rows each step
@@ -195,15 +209,7 @@ def measure_engine_only(sim: RuleSim, trace: bool, repeats: int, target_s: float
 
     def replay() -> None:
         eng.restore(start, everywhere)
-        for kind, args in rec.calls:
-            if kind == "step":
-                ptr, rows, bounds = args
-                rows[:, 2] = eng.next_external_id() + np.arange(len(rows))
-                eng.step(external=(ptr, rows, bounds))
-                if trace:
-                    eng.take_trace()
-            else:
-                eng.restore(*args)
+        replay_calls(eng, rec.calls, trace)
 
     before = eng.stats
     replay()  # warm-up, and the check that the replay does the loop's work
