@@ -15,7 +15,7 @@ import numpy as np
 
 from .backend_api import EngineTables
 from .backend_counting import CountingState
-from .codegen import GenerationError, Specialisation, generate
+from .codegen import GenerationError, Specialisation
 from .compile_cache import CacheEntry
 from .program import Fact, Literal, Program, Rule
 
@@ -54,9 +54,8 @@ def unsupported(program: Program) -> str | None:
 
 
 def cache_entry(eng: EngineTables) -> CacheEntry:
-    """The cache entry of the kernel specialised to eng's program (generating its source is cheap).
-    Raises GenerationError when kernel.py no longer fits the generator."""
-    return CacheEntry(generate(Specialisation.of(eng._cfg, eng._rule_i, eng._rule_f)))
+    """The cache entry of the kernel specialised to eng's program."""
+    return CacheEntry(Specialisation.of(eng._cfg, eng._rule_i, eng._rule_f))
 
 
 def compiled_backend(eng: EngineTables, program: Program, cached_only: bool
@@ -66,21 +65,19 @@ def compiled_backend(eng: EngineTables, program: Program, cached_only: bool
     program the backend cannot take gets a one-line notice on stderr and None (the caller runs the
     counting kernel); a program not yet cached is compiled by its first step."""
     why = unsupported(program)
-    entry = None
     if why is None:
+        entry = cache_entry(eng)
+        if cached_only and not entry.ready:
+            return None, None
         try:
-            entry = cache_entry(eng)
+            return CompiledState(eng, entry), None
         except GenerationError as e:
             why = str(e)
-    if entry is None:
-        if cached_only:
-            return None, None
-        notice = f"kernel 'compiled' not used: {why}; running on the counting kernel"
-        print(f"tracelab: notice: {notice}", file=sys.stderr)
-        return None, notice
-    if cached_only and not entry.ready:
+    if cached_only:
         return None, None
-    return CompiledState(eng, entry), None
+    notice = f"kernel 'compiled' not used: {why}; running on the counting kernel"
+    print(f"tracelab: notice: {notice}", file=sys.stderr)
+    return None, notice
 
 
 class CompiledState(CountingState):

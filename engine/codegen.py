@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import ast
 import functools
+import hashlib
 import inspect
 from dataclasses import dataclass
 
@@ -128,10 +129,24 @@ class _Specialise(ast.NodeTransformer):
         return node
 
 
-@functools.lru_cache(maxsize=32)  # Engine(kernel="auto") asks for every program it builds
+@functools.lru_cache(maxsize=1)
+def _sources() -> tuple[str, str]:
+    """kernel.py's source (the template) and this module's (the rewriting)."""
+    return inspect.getsource(K), inspect.getsource(inspect.getmodule(Specialisation))  # type: ignore[arg-type]
+
+
+def fingerprint(spec: Specialisation) -> str:
+    """A text that determines generate(spec): the template, the generator and the program's values. The
+    cache key hashes it, so that Engine(kernel="auto") can look a program up without generating it."""
+    kernel_src, codegen_src = _sources()
+    digest = hashlib.sha256(kernel_src.encode() + b"\0" + codegen_src.encode()).hexdigest()
+    return f"{GENERATOR_VERSION}\n{digest}\n{spec!r}"
+
+
+@functools.lru_cache(maxsize=8)
 def generate(spec: Specialisation) -> str:
     """The Python source of the specialised kernel module (deterministic: equal programs, equal text)."""
-    tree = ast.parse(inspect.getsource(K))
+    tree = ast.parse(_sources()[0])
     if tree.body and isinstance(tree.body[0], ast.Expr):  # kernel.py's docstring: the header replaces it
         del tree.body[0]
     tx = _Specialise(spec)

@@ -2,10 +2,10 @@
 
 One directory per key under the cache root: the generated module (`kernel.py`), numba's cache files
 beside it (`__pycache__/`, written by `cache=True` on the first call) and `ready.json`, written once a
-process has compiled and run the kernel. The key is a hash of the generated source (which holds the
-program's folded tables and the whole of engine/kernel.py) and of the versions of tracelab, numba,
-llvmlite, numpy, Python and the CPU architecture: an upgrade of any of them makes a new key, never a
-stale kernel. Old keys are never read again; deleting the root is always safe.
+process has compiled and run the kernel. The key is a hash of what determines the generated source
+(the program's folded values, the whole of engine/kernel.py and of codegen.py) and of the versions of
+tracelab, numba, llvmlite, numpy, Python and the CPU architecture: an upgrade or an edit of any of them
+makes a new key, never a stale kernel. Old keys are never read again; deleting the root is always safe.
 """
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ from importlib import metadata
 from pathlib import Path
 from types import ModuleType
 
-from .codegen import GENERATOR_VERSION
+from .codegen import GENERATOR_VERSION, Specialisation, fingerprint, generate
 
 CACHE_ENV = "TRACELAB_CACHE_DIR"
 _LOADED: dict[str, ModuleType] = {}  # one module object per key and process
@@ -49,18 +49,19 @@ def versions() -> dict[str, str]:
             "machine": platform.machine()}
 
 
-def cache_key(source: str) -> str:
-    h = hashlib.sha256(source.encode())
+def cache_key(fingerprint: str) -> str:
+    """The key of a kernel: its fingerprint (codegen.fingerprint) and the library versions."""
+    h = hashlib.sha256(fingerprint.encode())
     h.update(json.dumps(versions(), sort_keys=True).encode())
     return h.hexdigest()[:24]
 
 
 class CacheEntry:
-    """The cache directory of one generated kernel."""
+    """The cache directory of one program's kernel (its source is generated only when loaded)."""
 
-    def __init__(self, source: str, root: Path | None = None) -> None:
-        self.source = source
-        self.key = cache_key(source)
+    def __init__(self, spec: Specialisation, root: Path | None = None) -> None:
+        self.spec = spec
+        self.key = cache_key(fingerprint(spec))
         self.dir = (root or cache_root()) / self.key
         self.module_path = self.dir / "kernel.py"
         self.ready_path = self.dir / "ready.json"
@@ -76,11 +77,11 @@ class CacheEntry:
         if self.key in _LOADED:
             return _LOADED[self.key]
         self.dir.mkdir(parents=True, exist_ok=True)
-        if not self.module_path.exists() or self.module_path.read_text() != self.source:
+        if not self.module_path.exists():
             # write-then-rename: another process never imports a half-written file, and numba's cache
             # (keyed on the file's time stamp) is not invalidated by rewriting equal text
             tmp = self.dir / f"kernel.{os.getpid()}.tmp"
-            tmp.write_text(self.source)
+            tmp.write_text(generate(self.spec))
             os.replace(tmp, self.module_path)
         name = f"tracelab_compiled_{self.key}"
         spec = importlib.util.spec_from_file_location(name, self.module_path)

@@ -55,16 +55,19 @@ def test_generated_source_folds_the_programs_tables() -> None:
     assert "rule_i[r, RULE_MODE]" not in src and "cfg[CFG_POLICY]" not in src
     assert "_RULE_UPPER = np.array([1.0, 0.9, 1.0]" in src  # bounds differ: a constant array
     assert "_RULE_DELAY = np.array([0, 1, 0]" in src
-    other = generate(_tables("%inconsistency keep_old\n" + SMALL))
-    assert other != src and cc.cache_key(other) != cc.cache_key(src)
+    spec, other_spec = _tables(SMALL), _tables("%inconsistency keep_old\n" + SMALL)
+    assert generate(other_spec) != src
+    assert cc.CacheEntry(other_spec).key != cc.CacheEntry(spec).key
+    renamed = _tables(SMALL.replace("r1:", "first:") + "a(n2)\n")  # names and facts are not compiled in
+    assert cc.CacheEntry(renamed).key == cc.CacheEntry(spec).key
 
 
 def test_the_cache_key_follows_library_versions(monkeypatch: pytest.MonkeyPatch) -> None:
-    src = generate(_tables(SMALL))
-    key = cc.cache_key(src)
+    spec = _tables(SMALL)
+    key = cc.CacheEntry(spec).key
     real = cc.versions()
     monkeypatch.setattr(cc, "versions", lambda: {**real, "numba": real["numba"] + ".post1"})
-    assert cc.cache_key(src) != key
+    assert cc.CacheEntry(spec).key != key
 
 
 def test_auto_takes_the_compiled_kernel_only_when_cached(tmp_path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -30,11 +30,12 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"cannot compile {names}: {why} (such programs run on the counting kernel)")
     t0 = time.perf_counter()
     probe = Engine(program, kernel="counting", trace=True)  # the program's tables, no compile
+    entry = cache_entry(probe)
+    cached = entry.ready
     try:
-        entry = cache_entry(probe)
+        entry.load()  # writes the generated module (cheap); numba compiles at the first step
     except GenerationError as e:
         raise UserError(f"cannot compile {names}: {e}") from e
-    cached = entry.ready
     _say(f"{names}: {len(program.rules)} rules, kernel {entry.key} in {entry.dir.parent}")
     what = "loading the cached kernel" if cached else "generating and compiling the kernel with numba " \
                                                      "(a minute or so; once per program and library version)"
