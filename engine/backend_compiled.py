@@ -29,7 +29,7 @@ _KNOWN_FIELDS = {Program: {"rules", "facts", "mode", "timesteps", "inconsistency
 
 def _unknown_fields(obj: object) -> list[str]:
     """Fields of a program object this backend does not know, set to something other than their default."""
-    known = _KNOWN_FIELDS.get(type(obj), set())
+    known = next((v for cls, v in _KNOWN_FIELDS.items() if isinstance(obj, cls)), set())
     out = []
     for f in dataclasses.fields(obj):  # type: ignore[arg-type]
         if f.name in known:
@@ -50,6 +50,10 @@ def unsupported(program: Program) -> str | None:
         for obj in (r, r.head, *r.body):
             if bad := _unknown_fields(obj):
                 return f"rule {r.name}{where} uses {', '.join(bad)}"
+    for f in program.facts:
+        for obj in (f, f.literal):
+            if bad := _unknown_fields(obj):
+                return f"fact {f.name}{f' ({f.loc})' if f.loc else ''} uses {', '.join(bad)}"
     return None
 
 

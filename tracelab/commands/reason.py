@@ -62,7 +62,9 @@ def run(args: argparse.Namespace) -> int:
             parse_literal(q)
         except ProgramError as e:
             raise UserError(f"--query {q!r}: {e.message}") from e
-    with compiling_engine(busy="grounding the program…"):  # the first step compiles (cold cache) and grounds
+    busy = "grounding the program…" if args.kernel != "compiled" else \
+        "grounding; compiling the program's own kernel unless cached (about a minute the first time)…"
+    with compiling_engine(busy=busy):  # the first step compiles (cold cache) and grounds
         engine = Engine(program, graph, trace=not args.no_trace, kernel=args.kernel)
         engine.step()
     answers: list[dict[str, object]] = []
