@@ -149,8 +149,10 @@ def test_random_programs(sc: Scenario) -> None:
     run_and_compare(sc, kernel="compiled")
 
 
-@pytest.mark.parametrize(("agents", "worlds"), [(1, 1), (1, 4), (5, 3)])
-def test_the_game_batched_with_restores(agents: int, worlds: int) -> None:
+@pytest.mark.parametrize(("agents", "worlds", "steps"), [(1, 1, 300), (1, 4, 300), (5, 3, 300), (20, 1, 30)])
+def test_the_game_batched_with_restores(agents: int, worlds: int, steps: int) -> None:
+    """The game's one kernel (team size and map are facts, not compiled in) at 1, 5 and 20 agents a team;
+    300 steps see episodes end and worlds restored, 20v20 (slow to step) is checked for its first 30."""
     scenario = scenario_for(agents)
     restores = []
 
@@ -166,8 +168,9 @@ def test_the_game_batched_with_restores(agents: int, worlds: int) -> None:
         # both teams scripted: the simulators' own generators are seeded alike and see the same state
         sim.step(sim.scripted_actions("red"), sim.scripted_actions("blue"))
 
-    _lockstep(make, drive, 300)
-    assert restores  # the run did restore worlds (otherwise this test would not cover restores)
+    _lockstep(make, drive, steps)
+    if steps >= 300:  # the run did restore worlds (otherwise this test would not cover restores)
+        assert restores
 
 
 def test_compile_command_then_cached_load(tmp_path) -> None:
