@@ -18,6 +18,7 @@ from .program import effective_bound
 
 class CountingState:
     name = "counting"
+    step_kernel = staticmethod(K.step_worlds)  # the compiled backend steps the same state with its own
 
     def __init__(self, eng: EngineTables) -> None:
         self.eng = eng
@@ -117,7 +118,7 @@ class CountingState:
         eng, kt = self.eng, self.kt
         w_first = 0
         while True:
-            status, w_first = K.step_worlds(
+            status, w_first = self.step_kernel(
                 eng._cfg, w_first, eng._rule_i, eng._rule_f, kt["inst"], self._kind_base, kt["wc_ptr"],
                 kt["wc_bnd"], kt["wc_neg"], kt["wc_gptr"], kt["wg"], kt["ih_ptr"], kt["ih_inst"], eng._fact_i,
                 eng._fact_f, eng._fact_order, ext_ptr, ext_i, ext_f, eng._settable,

@@ -7,11 +7,14 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import sys
+
 import numpy as np
 
 from . import annotations
 from . import kernel as K
 from .aggregate_tables import aggregate_tables, aggregated_rules
+from .backend_compiled import compiled_backend
 from .backend_counting import CountingState
 from .backend_lanes import LaneState, crisp_codes
 from .errors import FixpointError, InconsistencyError, ProgramCheckError
@@ -38,7 +41,7 @@ _TRACE_INT_DTYPES = tuple(np.dtype(d) for d in (np.int32, np.int32, np.int32, np
 # (column name, dtype, taken as is from the int32 buffer) per int column of take_trace()
 _TRACE_INT_OUT = tuple((name, d, d == np.dtype(np.int32)) for name, d in zip(TRACE_COLUMNS, _TRACE_INT_DTYPES))
 _TRACE_FLOAT_NAMES = TRACE_COLUMNS[K.TRACE_INT_COLUMNS:]
-KERNELS = ("auto", "counting", "lanes")
+KERNELS = ("auto", "counting", "lanes", "compiled")
 # "auto" takes the lanes kernel for crisp programs from this many worlds on (a word holds 64 worlds)
 LANES_MIN_WORLDS = 64
 STAT_NAMES = ("firings", "rederivations", "static_ignored", "changes", "passes", "watch_visits",
@@ -102,6 +105,7 @@ class Engine:
         # batch gained nothing at 1v1 and 1.2x at 5v5 (docs/benchmarks.md)
         self.threads = threads or 1
         self._ext_codes = np.zeros(0, np.int8)  # crisp value codes of this step's external rows (lanes)
+        self.kernel_notice: str | None = None  # why a requested compiled kernel is not used
         self._state: CountingState | LaneState = self._choose_backend(kernel)
         self._ext: list[tuple[np.ndarray, ...]] = []  # chunks of (atoms, lower, upper, world, static)
         self._settable = np.zeros(0, np.bool_)
@@ -171,12 +175,21 @@ class Engine:
                 raise ValueError(f"kernel='lanes' cannot run rule {aggregated.name}"
                                  f"{f' ({aggregated.loc})' if aggregated.loc else ''}: quantifiers and annotation "
                                  "functions need the counting kernel (kernel='counting' or 'auto')")
+            if kernel == "compiled":
+                self.kernel_notice = (f"kernel 'compiled' not used: rule {aggregated.name}"
+                                      f"{f' ({aggregated.loc})' if aggregated.loc else ''} has a quantifier or an "
+                                      "annotation function; running on the counting kernel")
+                print(f"tracelab: notice: {self.kernel_notice}", file=sys.stderr)
             return CountingState(self)
         if kernel == "lanes" and not_crisp:
             raise ValueError(f"kernel='lanes' needs a crisp program (bounds [0,0], [1,1] or [0,1] only): "
                              f"{not_crisp}")
         if kernel == "lanes" or (kernel == "auto" and not not_crisp and self.n_worlds >= LANES_MIN_WORLDS):
             return LaneState(self, self.threads)
+        if kernel in ("compiled", "auto"):  # auto: only a program the compile cache already holds
+            state, self.kernel_notice = compiled_backend(self, self.program, cached_only=kernel == "auto")
+            if state is not None:
+                return state
         return CountingState(self)
 
     def _not_crisp(self) -> str | None:
@@ -193,7 +206,7 @@ class Engine:
 
     @property
     def kernel(self) -> str:
-        """The kernel stepping this engine: "counting" or "lanes"."""
+        """The kernel stepping this engine: "counting", "lanes" or "compiled"."""
         return self._state.name
 
     @property

@@ -120,7 +120,8 @@ next(c2, c3) static
 def test_auto_takes_lanes_for_crisp_batches_and_counting_otherwise() -> None:
     prog = parse_program(GAME_LIKE)
     assert Engine(prog, worlds=64).kernel == "lanes"
-    assert Engine(prog, worlds=8).kernel == "counting"
+    # below 64 worlds: the counting kernel, or the compiled one once the compile cache holds this program
+    assert Engine(prog, worlds=8).kernel in ("counting", "compiled")
     assert Engine(prog, worlds=8, kernel="lanes").kernel == "lanes"
     half = parse_program(GAME_LIKE + "h: half(A):[0.5,1] <-0 at(A, c1)\n")
     assert Engine(half, worlds=64).kernel == "counting"

@@ -24,7 +24,7 @@ COMMAND_MODULES = [
     "tracelab.commands.bench", "tracelab.commands.check", "tracelab.commands.show",
     "tracelab.commands.replay", "tracelab.commands.train", "tracelab.commands.eval",
     "tracelab.commands.runs", "tracelab.commands.tui",
-    "tracelab.commands.experiment",
+    "tracelab.commands.experiment", "tracelab.commands.compile",
 ]
 EXIT_USER_ERROR = 1
 EXIT_BROKEN_PIPE = 141  # what a shell reports for a process ended by SIGPIPE

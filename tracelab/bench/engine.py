@@ -117,12 +117,12 @@ def warm_start(repeats: int) -> dict[str, Any]:
             "step_worlds_signatures": max(signatures), "one_signature": max(signatures) == 1}
 
 
-def step_rates(agents: list[int], repeats: int, target_s: float) -> list[dict[str, Any]]:
-    """(c) RuleSim steps/s for each team size, one world, tracing on and off."""
+def step_rates(agents: list[int], repeats: int, target_s: float, kernel: str = "auto") -> list[dict[str, Any]]:
+    """(c) RuleSim steps/s for each team size, one world, tracing on and off (engine kernel `kernel`)."""
     from tracelab.bench.sims import get_sim, measure
     rows = []
     for n in agents:
-        sim, build_s = get_sim("rules", n, 1)
+        sim, build_s = get_sim("rules", n, 1, kernel)
         for trace in (True, False):
             row = measure(sim, trace, repeats, target_s)
             row["build_s"] = build_s
@@ -161,7 +161,7 @@ def reference_figure(rows: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def run(quick: bool = False, repeats: int = 5, compile_repeats: int | None = None,
-        agents: list[int] | None = None, graph_only: bool = False) -> dict[str, Any]:
+        agents: list[int] | None = None, graph_only: bool = False, kernel: str = "auto") -> dict[str, Any]:
     """Every engine figure. --quick: small sizes, one process per start-up figure, and no first-ever
     compile unless `compile_repeats` asks for it (it then overlaps the in-process work, so its figure is
     only a smoke value). `graph_only`: the big-graph section alone."""
@@ -178,14 +178,14 @@ def run(quick: bool = False, repeats: int = 5, compile_repeats: int | None = Non
     elif cold:
         compiled = cold.result()
     mem = memory(5_000 if quick else 100_000)
-    rows = step_rates(agents or ([1, 2] if quick else [1, 5, 20]), repeats, 0.1 if quick else 1.0)
+    rows = step_rates(agents or ([1, 2] if quick else [1, 5, 20]), repeats, 0.1 if quick else 1.0, kernel)
     if cold and quick:
         compiled = cold.result()
     if cold:
         compiled["overlapped"] = quick
     warm = warm_start(1 if quick else repeats)
     info["load_average_end"] = machine_info()["load_average"]
-    return {"machine": info, "quick": quick, "repeats": repeats, "first_compile": compiled,
+    return {"machine": info, "quick": quick, "repeats": repeats, "kernel": kernel, "first_compile": compiled,
             "warm_start": warm, "steps": rows, "memory": mem, "reference": reference_figure(rows),
             "big_graph": big}
 

@@ -21,36 +21,39 @@ GOAL_MAX_SLOWDOWN = 5.0  # rule-driven within 5x of the hand-written simulator
 ENV_ID = "tracelab/GridWar-advanced-v0"
 
 
-def sim_rates(agents: list[int], worlds: list[int], repeats: int, target_s: float) -> list[dict[str, Any]]:
-    """One row per (agents, worlds): RefSim, RuleSim traced and untraced, and the ratios."""
+def sim_rates(agents: list[int], worlds: list[int], repeats: int, target_s: float,
+              kernel: str = "auto") -> list[dict[str, Any]]:
+    """One row per (agents, worlds): RefSim, RuleSim (engine kernel `kernel`) traced and untraced, and the
+    ratios."""
     from tracelab.bench.sims import get_sim, measure, release
     rows = []
     for n in agents:
         for w in worlds:
             ref, _ = get_sim("reference", n, w)
-            rules, build_s = get_sim("rules", n, w)
+            rules, build_s = get_sim("rules", n, w, kernel)
             row = {"agents": n, "worlds": w, "rules_build_s": build_s, "rules_kernel": rules.engine.kernel,
                    "reference": measure(ref, False, repeats, target_s),
                    "rules_trace_off": measure(rules, False, repeats, target_s, engine_time=False),
                    "rules_trace_on": measure(rules, True, repeats, target_s, engine_time=False)}
             if n == 1:  # the engine alone on the same steps: the ceiling of the 1v1 goals on this machine
-                row["engine_only"] = engine_only_rates(n, w, repeats, target_s)
+                row["engine_only"] = engine_only_rates(n, w, repeats, target_s, kernel)
             ref_rate = row["reference"]["steps_per_s"]["median"]
             row["rules_over_reference"] = row["rules_trace_off"]["steps_per_s"]["median"] / ref_rate
             row["rules_traced_over_reference"] = row["rules_trace_on"]["steps_per_s"]["median"] / ref_rate
             rows.append(row)
             if w > 1:  # batched sims of big teams hold gigabytes
                 release("reference", n, w)
-                release("rules", n, w)
+                release("rules", n, w, kernel)
     return rows
 
 
-def engine_only_rates(agents: int, worlds: int, repeats: int, target_s: float) -> dict[str, Any]:
+def engine_only_rates(agents: int, worlds: int, repeats: int, target_s: float,
+                      kernel: str = "auto") -> dict[str, Any]:
     """The engine of a RuleSim alone, tracing off and on, replaying the stepping loop's own steps
     (sims.measure_engine_only), on a simulator built for it and dropped afterwards."""
     from tracelab.bench.sims import measure_engine_only, scenario_for
     from tracelab.game.rulesim import RuleSim
-    sim = RuleSim(scenario_for(agents), worlds, seed=0, trace=True)
+    sim = RuleSim(scenario_for(agents), worlds, seed=0, trace=True, kernel=kernel)
     return {"trace_off": measure_engine_only(sim, False, repeats, target_s),
             "trace_on": measure_engine_only(sim, True, repeats, target_s)}
 
@@ -132,13 +135,13 @@ def _vector_runner(venv: Any) -> Any:
 
 
 def run(quick: bool = False, repeats: int = 5, agents: list[int] | None = None,
-        batch: int | None = None) -> dict[str, Any]:
+        batch: int | None = None, kernel: str = "auto") -> dict[str, Any]:
     """Every env figure: team sizes `agents` (default 1, 5, 20; quick 1, 2), one world and `batch`
     worlds (default 256; quick 16)."""
     info = machine_info()
     batch = batch or (16 if quick else 256)
     target_s = 0.1 if quick else 1.0
-    rows = sim_rates(agents or ([1, 2] if quick else [1, 5, 20]), sorted({1, batch}), repeats, target_s)
+    rows = sim_rates(agents or ([1, 2] if quick else [1, 5, 20]), sorted({1, batch}), repeats, target_s, kernel)
     gym = gym_rates(batch, repeats, target_s)
     info["load_average_end"] = machine_info()["load_average"]
     return {"machine": info, "quick": quick, "repeats": repeats, "batched_worlds": batch, "sims": rows,
@@ -150,9 +153,9 @@ def report(r: dict[str, Any]) -> str:
     env = lambda d: d["env_steps_per_s"]["median"]  # noqa: E731
     sp = lambda d: f"{100 * d['steps_per_s']['spread']:.0f}%"  # noqa: E731
     sims = format_table(
-        ["agents", "worlds", "reference env-steps/s", "rules off", "rules on", "rules/ref off",
+        ["agents", "worlds", "kernel", "reference env-steps/s", "rules off", "rules on", "rules/ref off",
          "rules/ref on", "spread ref/off/on"],
-        [[s["agents"], s["worlds"], env(s["reference"]), env(s["rules_trace_off"]), env(s["rules_trace_on"]),
+        [[s["agents"], s["worlds"], s["rules_kernel"], env(s["reference"]), env(s["rules_trace_off"]), env(s["rules_trace_on"]),
           s["rules_over_reference"], s["rules_traced_over_reference"],
           "/".join(sp(s[k]) for k in ("reference", "rules_trace_off", "rules_trace_on"))] for s in r["sims"]])
     alone = format_table(

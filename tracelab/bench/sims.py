@@ -16,7 +16,7 @@ from tracelab.game.rulesim import RuleSim
 from tracelab.game.scenario import Scenario, builtin_scenario, generate_scenario
 
 Sim = RuleSim | RefSim
-_POOL: dict[tuple[str, int, int], tuple[Sim, float]] = {}
+_POOL: dict[tuple[str, int, int, str], tuple[Sim, float]] = {}
 
 
 def scenario_for(agents: int) -> Scenario:
@@ -26,22 +26,22 @@ def scenario_for(agents: int) -> Scenario:
     return generate_scenario(8, 8, agents, 0.1, seed=1, advanced=True)
 
 
-def get_sim(kind: str, agents: int, worlds: int) -> tuple[Sim, float]:
+def get_sim(kind: str, agents: int, worlds: int, kernel: str = "auto") -> tuple[Sim, float]:
     """A simulator ("rules" or "reference") and the seconds its construction took, built once per size.
     RuleSims are built with trace=True; `set_trace` switches the engine's per-world trace flags, which is
-    all that RuleSim(trace=False) sets differently."""
-    key = (kind, agents, worlds)
+    all that RuleSim(trace=False) sets differently. `kernel`: the RuleSim engine's (Engine(kernel=...))."""
+    key = (kind, agents, worlds, kernel)
     if key not in _POOL:
         t0 = time.perf_counter()
         sc = scenario_for(agents)
-        sim = RuleSim(sc, worlds, seed=0, trace=True) if kind == "rules" else RefSim(sc, worlds, seed=0)
+        sim = RuleSim(sc, worlds, seed=0, trace=True, kernel=kernel) if kind == "rules" else RefSim(sc, worlds, seed=0)
         _POOL[key] = (sim, time.perf_counter() - t0)
     return _POOL[key]
 
 
-def release(kind: str, agents: int, worlds: int) -> None:
+def release(kind: str, agents: int, worlds: int, kernel: str = "auto") -> None:
     """Forget a pooled simulator (the batched 20-agent ones hold gigabytes)."""
-    _POOL.pop((kind, agents, worlds), None)
+    _POOL.pop((kind, agents, worlds, kernel), None)
 
 
 def set_trace(sim: Sim, on: bool) -> None:
@@ -170,6 +170,20 @@ class _Recorder:
         del self.engine.restore
 
 
+def replay_calls(eng: Any, calls: list[tuple[str, Any]], trace: bool) -> None:
+    """Do again what a _Recorder recorded: each step with its fact rows (renumbered, as external ids only
+    grow), each restore; the trace taken after every step with `trace`."""
+    for kind, args in calls:
+        if kind == "step":
+            ptr, rows, bounds = args
+            rows[:, 2] = eng.next_external_id() + np.arange(len(rows))
+            eng.step(external=(ptr, rows, bounds))
+            if trace:
+                eng.take_trace()
+        else:
+            eng.restore(*args)
+
+
 def measure_engine_only(sim: RuleSim, trace: bool, repeats: int, target_s: float) -> dict[str, Any]:
     """Steps/s of the engine alone on the stepping loop's own work: a block of the loop (Loop) is
     recorded once, then replayed `repeats` times from the same engine state: the same fact rows each step
@@ -195,15 +209,7 @@ def measure_engine_only(sim: RuleSim, trace: bool, repeats: int, target_s: float
 
     def replay() -> None:
         eng.restore(start, everywhere)
-        for kind, args in rec.calls:
-            if kind == "step":
-                ptr, rows, bounds = args
-                rows[:, 2] = eng.next_external_id() + np.arange(len(rows))
-                eng.step(external=(ptr, rows, bounds))
-                if trace:
-                    eng.take_trace()
-            else:
-                eng.restore(*args)
+        replay_calls(eng, rec.calls, trace)
 
     before = eng.stats
     replay()  # warm-up, and the check that the replay does the loop's work

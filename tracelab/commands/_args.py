@@ -23,3 +23,8 @@ def positive_int(text: str) -> int:
     if v < 1:
         raise argparse.ArgumentTypeError(f"must be at least 1, got {v}")
     return v
+
+
+# Engine(kernel=...) choices, spelled out here so that parsers need not import the engine (numba) to list
+# them; tests/test_compiled_kernel.py checks them against tracelab.engine.core.KERNELS
+ENGINE_KERNELS = ("auto", "counting", "lanes", "compiled")

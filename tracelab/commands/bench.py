@@ -9,7 +9,7 @@ import json
 import sys
 from typing import Any
 
-from tracelab.commands._args import positive_int
+from tracelab.commands._args import ENGINE_KERNELS, positive_int
 
 SECTIONS = ("engine", "env", "store", "replay", "train")
 
@@ -34,6 +34,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         if name in ("engine", "env", "all"):
             q.add_argument("--agents", type=_sizes, default=None,
                            help="team sizes, comma-separated (default 1,5,20; --quick: 1,2)")
+        if name in ("engine", "env", "all"):
+            q.add_argument("--kernel", choices=ENGINE_KERNELS, default="auto",
+                           help="the RuleSim engine's kernel (default auto; compiled: `tracelab compile` first)")
         if name == "tui":
             q.add_argument("--rows", type=positive_int, default=None,
                            help="change rows of the synthetic run (default 10,000,000; --quick: 200,000)")
@@ -67,11 +70,11 @@ def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], s
     if name == "engine":
         from tracelab.bench import engine
         r = engine.run(args.quick, args.repeats, args.compile_repeats, args.agents,
-                       getattr(args, "graph_only", False))
+                       getattr(args, "graph_only", False), args.kernel)
         return r, engine.report(r)
     if name == "env":
         from tracelab.bench import env
-        r = env.run(args.quick, args.repeats, args.agents, args.batch)
+        r = env.run(args.quick, args.repeats, args.agents, args.batch, args.kernel)
         return r, env.report(r)
     if name == "replay":
         from tracelab.bench import replay

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from tracelab.commands._args import positive_int
+from tracelab.commands._args import ENGINE_KERNELS, positive_int
 from tracelab.errors import UserError
 
 
@@ -37,6 +37,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--pyreason-trace", metavar="DIR",
                    help="also write the rule trace in PyReason's CSV layout (rule_trace_nodes_*.csv, "
                         "rule_trace_edges_*.csv) into DIR")
+    p.add_argument("--kernel", choices=ENGINE_KERNELS, default="auto",
+                   help="the engine's kernel (default auto; compiled: the program's own, docs/engine-api.md)")
     p.set_defaults(func=run)
 
 
@@ -78,8 +80,11 @@ def run(args: argparse.Namespace) -> int:
             parse_literal(q)
         except ProgramError as e:
             raise UserError(f"--query {q!r}: {e.message}") from e
-    with compiling_engine(busy="grounding the program…"):  # the first step compiles (cold cache) and grounds
-        engine = Engine(program, graph, trace=not args.no_trace or args.pyreason_trace is not None)
+    busy = "grounding the program…" if args.kernel != "compiled" else \
+        "grounding; compiling the program's own kernel unless cached (about a minute the first time)…"
+    with compiling_engine(busy=busy):  # the first step compiles (cold cache) and grounds
+        engine = Engine(program, graph, trace=not args.no_trace or args.pyreason_trace is not None,
+                        kernel=args.kernel)
         pr_trace = None
         if args.pyreason_trace is not None:
             from tracelab.pyreason.trace_csv import PyReasonTrace

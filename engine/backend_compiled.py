@@ -1,0 +1,104 @@
+"""The compiled backend: the counting kernel's state and semantics, stepped by a kernel generated for
+this one program (codegen.py) and cached on disk (compile_cache.py).
+
+The state layout is the counting backend's, so everything but the step (growing, snapshots, restores,
+recounts) is inherited and runs kernel.py's functions; only `step_worlds` comes from the generated module.
+"""
+from __future__ import annotations
+
+import dataclasses
+import sys
+import time
+from types import ModuleType
+
+import numpy as np
+
+from .backend_api import EngineTables
+from .backend_counting import CountingState
+from .codegen import GenerationError, Specialisation
+from .compile_cache import CacheEntry
+from .program import Fact, Literal, Program, Rule
+
+# the fields of the program objects this backend knows; a program that sets any other field (a language
+# feature newer than the generator) runs on the interpreter
+_KNOWN_FIELDS = {Program: {"rules", "facts", "mode", "timesteps", "inconsistency", "files", "warnings"},
+                 Rule: {"name", "head", "body", "delay", "immediate", "mode", "loc", "text"},
+                 Literal: {"pred", "args", "lower", "upper", "negated", "loc"},
+                 Fact: {"name", "literal", "start", "end", "static", "loc", "text"}}
+
+
+def _unknown_fields(obj: object) -> list[str]:
+    """Fields of a program object this backend does not know, set to something other than their default."""
+    known = next((v for cls, v in _KNOWN_FIELDS.items() if isinstance(obj, cls)), set())
+    out = []
+    for f in dataclasses.fields(obj):  # type: ignore[arg-type]
+        if f.name in known:
+            continue
+        default = f.default if f.default is not dataclasses.MISSING else (
+            f.default_factory() if f.default_factory is not dataclasses.MISSING else dataclasses.MISSING)
+        if getattr(obj, f.name) != default:
+            out.append(f.name)
+    return out
+
+
+def unsupported(program: Program) -> str | None:
+    """Why the compiled backend cannot take `program` (a language feature it does not know), or None."""
+    if bad := _unknown_fields(program):
+        return f"the program uses {', '.join(bad)}"
+    for r in program.rules:
+        where = f" ({r.loc})" if r.loc else ""
+        for obj in (r, r.head, *r.body):
+            if bad := _unknown_fields(obj):
+                return f"rule {r.name}{where} uses {', '.join(bad)}"
+    for f in program.facts:
+        for obj in (f, f.literal):
+            if bad := _unknown_fields(obj):
+                return f"fact {f.name}{f' ({f.loc})' if f.loc else ''} uses {', '.join(bad)}"
+    return None
+
+
+def cache_entry(eng: EngineTables) -> CacheEntry:
+    """The cache entry of the kernel specialised to eng's program."""
+    return CacheEntry(Specialisation.of(eng._cfg, eng._rule_i, eng._rule_f))
+
+
+def compiled_backend(eng: EngineTables, program: Program, cached_only: bool
+                     ) -> tuple["CompiledState | None", str | None]:
+    """The compiled backend for eng, or None and why not. With `cached_only` (kernel="auto"): only when
+    the cache already holds this program's kernel, silently otherwise. Without it (kernel="compiled"): a
+    program the backend cannot take gets a one-line notice on stderr and None (the caller runs the
+    counting kernel); a program not yet cached is compiled by its first step."""
+    why = unsupported(program)
+    if why is None:
+        entry = cache_entry(eng)
+        if cached_only and not entry.ready:
+            return None, None
+        try:
+            return CompiledState(eng, entry), None
+        except GenerationError as e:
+            why = str(e)
+    if cached_only:
+        return None, None
+    notice = f"kernel 'compiled' not used: {why}; running on the counting kernel"
+    print(f"tracelab: notice: {notice}", file=sys.stderr)
+    return None, notice
+
+
+class CompiledState(CountingState):
+    name = "compiled"
+
+    def __init__(self, eng: EngineTables, entry: CacheEntry) -> None:
+        super().__init__(eng)
+        self.entry = entry
+        self.module: ModuleType = entry.load()
+        self.step_kernel = self.module.step_worlds
+        self._ready = entry.ready
+
+    def step(self, ext_ptr: np.ndarray, ext_i: np.ndarray, ext_f: np.ndarray) -> int:
+        if self._ready:
+            return super().step(ext_ptr, ext_i, ext_f)
+        t0 = time.perf_counter()  # the first call compiles (or loads numba's cache) and runs one step
+        status = super().step(ext_ptr, ext_i, ext_f)
+        self.entry.mark_ready(round(time.perf_counter() - t0, 3))
+        self._ready = True
+        return status
