@@ -5,9 +5,8 @@ of the compiled kernel (kernel.step_worlds) for all worlds together.
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 import sys
+from collections.abc import Sequence
 
 import numpy as np
 
