@@ -45,7 +45,10 @@ STATUS_PEND_ROOM = 6  # stopped in world err[0] before scheduling its delayed fi
 STATUS_TRACE_LIMIT = 7  # a row found no room although its unit of work checked for it (a bug)
 
 # column layout of the packed arrays
-RULE_MODE, RULE_DELAY, RULE_IMMEDIATE = 0, 1, 2
+RULE_MODE, RULE_DELAY, RULE_IMMEDIATE, RULE_SET_STATIC = 0, 1, 2, 3  # RULE_SET_STATIC: `{set_static}` (1)
+N_RULE_COLUMNS = 4
+# a watched clause's flags (wc_neg, b_neg): the complement `~`, a closed predicate (`%closed`)
+CLAUSE_NEGATED, CLAUSE_CLOSED = 1, 2
 # per grounding (inst, int32[G, 4]): rule, head atom, rank (canonical order), kind index
 INST_RULE, INST_HEAD, INST_RANK, INST_KIND = 0, 1, 2, 3
 # kind indices: each grounding's rule is immediate, delayed (Δt > 0) or ordinary (Δt = 0); one active list each
@@ -91,8 +94,12 @@ kernel_jit = njit(cache=True, _nrt=False)
 
 
 @kernel_jit
-def _holds(lo, up, cl, cu, neg):
-    if neg:
+def _holds(lo, up, cl, cu, flags):
+    """Whether an atom [lo,up] satisfies a clause [cl,cu] with `flags` (CLAUSE_NEGATED, CLAUSE_CLOSED:
+    then [0,1] reads as [0,0])."""
+    if flags & CLAUSE_CLOSED and lo == 0.0 and up == 1.0:
+        up = 0.0
+    if flags & CLAUSE_NEGATED:
         a = 1.0 - up
         b = 1.0 - lo
     else:
@@ -154,6 +161,8 @@ def _applies(w, g, lo, up, static, rule_i, rule_f, policy, inst):
     if static[w, a]:
         return False
     r = inst[g, INST_RULE]
+    if rule_i[r, RULE_SET_STATIC] == 1:
+        return True  # applying it freezes the head, a change of its own
     l = rule_f[r, 0]
     u = rule_f[r, 1]
     cl = lo[w, a]
@@ -632,7 +641,8 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
                 _one_source(cl, cu, rule_f[r, 0], rule_f[r, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE, policy, out)
                 inconsistent = out[2] > 0.5
                 abort = inconsistent and policy == POLICY_ABORT
-                if not abort and out[0] == cl and out[1] == cu:
+                set_static = rule_i[r, RULE_SET_STATIC] == 1
+                if not abort and out[0] == cl and out[1] == cu and not set_static:
                     continue  # would not change its head
                 n_immediate += 1
                 if n_immediate > max_immediate:
@@ -655,8 +665,10 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
                     err[E_LAST_INST] = g
                     err[E_DISAGREE] = 0
                     return STATUS_INCONSISTENT
-                freeze = out[3] > 0.5
-                if inconsistent:
+                freeze = out[3] > 0.5 or set_static
+                if out[0] == cl and out[1] == cu:  # a {set_static} firing that only freezes the head
+                    stats[w, STAT_REDERIVATIONS] += 1
+                elif inconsistent:
                     hn = _set_atom(w, t, pass_no, a, cl, cu, out[0], out[1], CAUSE_POLICY, policy, g, 1, -1, lo, up,
                                    last_cause, static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr,
                                    wc_bnd, wc_neg, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
@@ -677,8 +689,8 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
                 g = act[w, base + k]
                 r = inst[g, INST_RULE]
                 _add_source(inst[g, INST_HEAD], rule_f[r, 0], rule_f[r, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
-                            2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, False, slot_of, touched,
-                            n_touched, si, sf)
+                            2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, rule_i[r, RULE_SET_STATIC] == 1,
+                            slot_of, touched, n_touched, si, sf)
             if trace_on[w] and tri.shape[0] - tr_n[0] < n_touched[0]:
                 return _pause(cfg, err, w, PHASE_APPLY, pass_no, n_immediate, hn, n_touched[0])
         phase = PHASE_FRESH
@@ -734,8 +746,8 @@ def _collect_pass0(w, t, fact_override, rule_i, rule_f, inst, fact_i, fact_f, fa
         if pend[w, p, 0] == t:
             r = inst[g, INST_RULE]
             _add_source(inst[g, INST_HEAD], rule_f[r, 0], rule_f[r, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
-                        2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, False, slot_of, touched,
-                        n_touched, si, sf)
+                        2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, rule_i[r, RULE_SET_STATIC] == 1,
+                        slot_of, touched, n_touched, si, sf)
         else:
             pend[w, kept, 0] = pend[w, p, 0]
             pend[w, kept, 1] = g

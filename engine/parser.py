@@ -13,6 +13,7 @@ from pathlib import Path
 from .errors import ProgramCheckError, RuleSyntaxError
 from .program import (
     CONSTANT_RE,
+    EDGE_HEAD_MODES,
     INCONSISTENCY_POLICIES,
     MAX_BINDING_CLAUSES,
     MAX_TIME,
@@ -32,8 +33,11 @@ PREDICATE_RE = re.compile(r"[a-z][A-Za-z0-9_]*")
 VARIABLE_RE = re.compile(r"[A-Z_][A-Za-z0-9_]*")
 STATEMENT_NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_-]*")
 
-DIRECTIVES = {"mode": UPDATE_MODES, "timesteps": TIMESTEP_MODES, "inconsistency": INCONSISTENCY_POLICIES}
-RULE_OPTIONS = UPDATE_MODES  # `{override}` / `{intersection}`
+DIRECTIVES = {"mode": UPDATE_MODES, "timesteps": TIMESTEP_MODES, "inconsistency": INCONSISTENCY_POLICIES,
+              "edge_heads": EDGE_HEAD_MODES}
+LIST_DIRECTIVES = ("closed",)  # `%closed p, q`: a list of predicates, repeatable
+RULE_FLAGS = ("set_static", "infer_edges")  # rule options that switch a behaviour on
+RULE_OPTIONS = (*UPDATE_MODES, *RULE_FLAGS)  # `{override}` / `{intersection}`, `{set_static}`, `{infer_edges}`
 
 # ---------------------------------------------------------------------------------------------- tokens
 
@@ -157,6 +161,7 @@ class _Unit:
     lines: list[str]
     items: list[Rule | Fact] = field(default_factory=list)  # in file order; name "" = unnamed
     directives: list[tuple[str, str, SourceLoc]] = field(default_factory=list)
+    closed: list[tuple[str, SourceLoc]] = field(default_factory=list)  # `%closed` predicates, in order
     arg_locs: dict[int, tuple[Literal, tuple[SourceLoc, ...]]] = field(default_factory=dict)
 
 
@@ -218,8 +223,11 @@ class _Parser:
     def directive(self) -> None:
         pct = self.take()
         name = self.peek()
+        if name.kind == NAME and name.text in LIST_DIRECTIVES:
+            self.closed_directive(pct)
+            return
         if name.kind != NAME or name.text not in DIRECTIVES:
-            known = ", ".join(f"%{d}" for d in DIRECTIVES)
+            known = ", ".join(f"%{d}" for d in (*DIRECTIVES, *LIST_DIRECTIVES))
             what = f"unknown directive '%{name.text}'" if name.kind == NAME else \
                 f"expected a directive name after '%', found {name.describe()}"
             raise self.syntax(name, f"{what} (expected one of {known})")
@@ -237,6 +245,23 @@ class _Parser:
             raise self.syntax(self.peek(), f"expected end of line after '%{name.text} {value.text}', "
                                            f"found {self.peek().describe()}")
         self.unit.directives.append((name.text, value.text, self.loc(pct)))
+
+    def closed_directive(self, pct: Token) -> None:
+        """`%closed p` or `%closed p, q, ...`: predicates whose unset atoms read as [0,0] in bodies."""
+        self.take()  # 'closed'
+        while True:
+            t = self.peek()
+            if t.kind != NAME or not PREDICATE_RE.fullmatch(t.text):
+                what = f"invalid predicate name '{t.text}'" if t.kind == NAME else f"found {t.describe()}"
+                raise self.syntax(t, f"expected a predicate name after '%closed' or ',' ({what})")
+            self.take()
+            self.unit.closed.append((t.text, self.loc(t)))
+            if self.at_end():
+                return
+            if not self.peek().is_punct(","):
+                raise self.syntax(self.peek(), f"expected ',' or end of line after a predicate of %closed, "
+                                               f"found {self.peek().describe()}")
+            self.take()
 
     def statement(self) -> Rule | Fact:
         first_i = self.i
@@ -262,14 +287,14 @@ class _Parser:
         if delay > MAX_TIME:
             raise self.check(arrow, f"the delay {delay} is too large: a delay is at most {MAX_TIME}")
         body = [self.literal(f" after '{arrow.text}'")]
-        mode = None
+        options: dict[str, object] = {}
         while True:
             t = self.peek()
             if t.is_punct(","):
                 self.take()
                 body.append(self.literal(" after ','"))
             elif t.is_punct("{"):
-                mode = self.options()
+                options = self.options()
                 if not self.at_end():
                     raise self.syntax(self.peek(), "expected end of rule after the options, "
                                                    f"found {self.peek().describe()}")
@@ -278,27 +303,31 @@ class _Parser:
                 break
             else:
                 raise self.syntax(t, f"expected ',', '{{' or end of rule after body literal, found {t.describe()}")
-        return Rule(name, head, tuple(body), delay=delay, immediate=immediate, mode=mode,
-                    loc=self.loc(first), text=self.text_of(first_i, self.i))
+        return Rule(name, head, tuple(body), delay=delay, immediate=immediate, loc=self.loc(first),
+                    text=self.text_of(first_i, self.i), **options)
 
-    def options(self) -> str:
+    def options(self) -> dict[str, object]:
+        """`{opt, opt, ...}`: the Rule fields they set (mode, set_static, infer_edges)."""
         self.take()  # '{'
-        mode: str | None = None
+        out: dict[str, object] = {}
         while True:
             t = self.peek()
             if t.kind != NAME:
                 raise self.syntax(t, f"expected a rule option ({' | '.join(RULE_OPTIONS)}), found {t.describe()}")
             if t.text not in RULE_OPTIONS:
                 raise self.check(t, f"unknown rule option '{t.text}' (expected {' | '.join(RULE_OPTIONS)})")
-            if mode is not None and mode != t.text:
-                raise self.check(t, f"conflicting rule options '{mode}' and '{t.text}'")
-            mode = t.text
+            if t.text in RULE_FLAGS:
+                out[t.text] = True
+            else:
+                if out.get("mode", t.text) != t.text:
+                    raise self.check(t, f"conflicting rule options '{out['mode']}' and '{t.text}'")
+                out["mode"] = t.text
             self.take()
             if self.peek().is_punct(","):
                 self.take()
                 continue
             self.expect_punct("}", "or ',' after a rule option")
-            return mode
+            return out
 
     def fact_rest(self, name: str, lit: Literal, first: Token, first_i: int) -> Fact:
         start = end = 0
@@ -494,6 +523,7 @@ def _build(units: list[_Unit]) -> Program:
                 raise fail(loc, f"conflicting %{key}: '{value}' here but '{seen[key][0]}' at {seen[key][1]}")
             seen.setdefault(key, (value, loc))
             setattr(program, key, value)
+    program.closed = tuple(dict.fromkeys(pred for u in units for pred, _loc in u.closed))
 
     items = _named([it for u in units for it in u.items], fail)
     program.rules = [it for it in items if isinstance(it, Rule)]
@@ -551,7 +581,7 @@ class _Checker:
     def run(self) -> None:
         p = self.program
         for attr, allowed in (("mode", UPDATE_MODES), ("timesteps", TIMESTEP_MODES),
-                              ("inconsistency", INCONSISTENCY_POLICIES)):
+                              ("inconsistency", INCONSISTENCY_POLICIES), ("edge_heads", EDGE_HEAD_MODES)):
             if getattr(p, attr) not in allowed:
                 raise self.fail(None, f"unknown %{attr} '{getattr(p, attr)}' (expected {' | '.join(allowed)})")
         names: dict[str, SourceLoc | None] = {}
@@ -628,19 +658,17 @@ class _Checker:
                                    f"at most {MAX_BINDING_CLAUSES} (clauses whose bound contains [0,1] do not count)")
         if r.immediate and r.delay != 0:
             raise self.fail(r.loc, f"rule '{r.name}' is immediate ('<-!') so its delay is 0, not {r.delay}")
-        if r.mode is not None and r.mode not in RULE_OPTIONS:
+        if r.mode is not None and r.mode not in UPDATE_MODES:
             raise self.fail(r.loc, f"rule '{r.name}': unknown rule option '{r.mode}' "
                                    f"(expected {' | '.join(RULE_OPTIONS)})")
-        binding = {v for lit in r.body if lit.binds for v in lit.variables}
+        binding = {v for lit in r.body if self.program.enumerates(lit) for v in lit.variables}
         for var in r.variables:
             if var in binding:
                 continue
             lit, i = next((lit, i) for lit in (r.head, *r.body) for i, t in enumerate(lit.args)
                           if t.is_var and t.name == var)
-            why = ("it occurs only in body clauses whose bound contains [0,1], which every atom satisfies"
-                   if any(var in b.variables for b in r.body) else "it occurs in no body clause")
-            raise self.fail(self.arg_loc(lit, i), f"unsafe variable '{var}' in rule '{r.name}': {why}; "
-                                                  "it must occur in a body clause whose bound excludes [0,1]")
+            raise self.fail(self.arg_loc(lit, i), f"unsafe variable '{var}' in rule '{r.name}': "
+                                                  f"{_unsafe_why(self.program, r, var)}")
 
     def warnings(self) -> Iterable[str]:
         p = self.program
@@ -655,6 +683,20 @@ class _Checker:
                     where = str(lit.loc) if lit.loc is not None else "<program>"
                     yield (f"{where}: warning: predicate '{lit.pred}' is never set by a fact, a rule head or "
                            "the graph; its atoms stay [0,1]")
+
+
+def _unsafe_why(program: Program, r: Rule, var: str) -> str:
+    """Why no body clause of r enumerates var, and what would."""
+    uses = [b for b in r.body if var in b.variables]
+    if not uses:
+        return "it occurs in no body clause; it must occur in a body clause whose bound excludes [0,1]"
+    closed = [b for b in uses if b.binds and b.pred in program.closed]
+    if closed:
+        return (f"it occurs only in body clauses that atoms never set satisfy ('{closed[0].pred}' is %closed, "
+                "so its unset atoms read as [0,0]); it must occur in a clause that [0,1] (or [0,0] on a closed "
+                "predicate) does not satisfy")
+    return ("it occurs only in body clauses whose bound contains [0,1], which every atom satisfies; "
+            "it must occur in a body clause whose bound excludes [0,1]")
 
 
 def _alternatives(xs: list[str]) -> str:

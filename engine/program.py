@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 UPDATE_MODES = ("intersection", "override")
 TIMESTEP_MODES = ("persistent", "reset")
 INCONSISTENCY_POLICIES = ("reset_freeze", "keep_old", "take_new", "hull", "abort")
+EDGE_HEAD_MODES = ("any", "graph")  # `%edge_heads`: where a binary rule head may set atoms
 # Limits of the compiled engine, checked with the program (docs/language.md). Times are stored in int32
 # and a delayed firing is due at t + delay, so times and delays stay well inside it; the kernel counts a
 # grounding's unsatisfied binding clauses in an int8.
@@ -87,6 +88,8 @@ class Rule:
     mode: str | None = None  # None: the program's mode
     loc: SourceLoc | None = field(default=None, compare=False)
     text: str = field(default="", compare=False)
+    set_static: bool = False  # `{set_static}`: the head atom is frozen once the rule fires
+    infer_edges: bool = False  # `{infer_edges}`: under `%edge_heads graph`, an edge head may leave the graph's edges
 
     @property
     def variables(self) -> tuple[str, ...]:
@@ -116,8 +119,14 @@ class Program:
     mode: str = "intersection"
     timesteps: str = "persistent"
     inconsistency: str = "reset_freeze"
+    edge_heads: str = "any"  # `%edge_heads graph`: edge heads without {infer_edges} stay on the graph's edges
+    closed: tuple[str, ...] = ()  # `%closed p`: predicates whose [0,1] atoms read as [0,0] in bodies
     files: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+
+    def enumerates(self, lit: Literal) -> bool:
+        """Whether body clause `lit` enumerates its variables in this program (`clause_binds`)."""
+        return clause_binds(lit, lit.pred in self.closed)
 
     def rule_index(self, name: str) -> int:
         for i, r in enumerate(self.rules):
@@ -160,7 +169,18 @@ def effective_bound(lower: float, upper: float, negated: bool) -> tuple[float, f
     return (1.0 - upper, 1.0 - lower) if negated else (lower, upper)
 
 
-def satisfies(atom_lower: float, atom_upper: float, lit: Literal) -> bool:
-    """I ⊨ lit iff the atom's interval (complemented for `~`) is contained in the literal's bound."""
+def satisfies(atom_lower: float, atom_upper: float, lit: Literal, closed: bool = False) -> bool:
+    """I ⊨ lit iff the atom's interval (complemented for `~`) is contained in the literal's bound. On a
+    closed predicate (`%closed`) an atom that is [0,1] is read as [0,0]."""
+    if closed and atom_lower == 0.0 and atom_upper == 1.0:
+        atom_upper = 0.0
     a, b = effective_bound(atom_lower, atom_upper, lit.negated)
     return a >= lit.lower - EPS and b <= lit.upper + EPS
+
+
+def clause_binds(lit: Literal, closed: bool) -> bool:
+    """Whether a body clause enumerates its variables: it does not hold of an atom nothing ever set
+    ([0,1], read as [0,0] on a closed predicate), so each of its groundings needs a settable atom. A
+    clause that holds of unset atoms cannot enumerate: it is only tested (if it is not trivially true,
+    `Literal.binds` false, it is still watched)."""
+    return lit.binds and not (closed and satisfies(0.0, 0.0, lit))

@@ -56,6 +56,7 @@ class _Source:
     cid: int  # fact index, external fact index or rule index
     grounding: tuple[str, ...] | None = None
     grounding_ids: tuple[int, ...] = ()  # node ids of the grounding: the source-order key among firings
+    freeze: bool = False  # a firing of a `{set_static}` rule: the atom is static after this update
 
 
 @dataclass(frozen=True)
@@ -100,8 +101,13 @@ class ReferenceEvaluator:
     """One world of `program` over `graph_nodes` (plus the program's constants), stepped like Engine."""
 
     def __init__(self, program: Program, graph_nodes: Sequence[str] = (), graph_facts: Sequence[Fact] = (),
-                 max_passes: int = 1000, max_immediate: int = 100000) -> None:
+                 max_passes: int = 1000, max_immediate: int = 100000,
+                 graph_edges: Sequence[tuple[str, str]] = ()) -> None:
         self.program = program
+        self.closed = frozenset(program.closed)
+        # the graph's edges (source, target): where `%edge_heads graph` lets edge heads of rules without
+        # {infer_edges} land
+        self.edges = frozenset((a, b) for a, b in graph_edges)
         self.rules: list[Rule] = list(program.rules)
         # graph facts come first: fact ids 0..g-1, program facts g.. (docs/language.md "Source order")
         self.facts: list[Fact] = [*graph_facts, *program.facts]
@@ -146,6 +152,8 @@ class ReferenceEvaluator:
         """I ⊨ lit: the atom's interval (complemented for `~`) is contained in the literal's bound.
         EPS is the shared tolerance of engine/program.py (1 - x is not exact in binary)."""
         lo, up = self.bound(self._ground(lit, binding))
+        if lit.pred in self.closed and (lo, up) == FULL:
+            lo, up = 0.0, 0.0  # %closed: an atom nothing set reads as false
         a, b = _effective(lo, up, lit.negated)
         return a >= lit.lower - EPS and b <= lit.upper + EPS
 
@@ -157,13 +165,21 @@ class ReferenceEvaluator:
         """Every assignment of rule.variables over all nodes whose body holds, smallest node ids first
         (itertools.product enumerates in lexicographic order): (node ids, values, head atom)."""
         variables = rule.variables
+        on_edges = self._on_graph_edges(rule)
         out = []
         for ids in itertools.product(range(len(self.nodes)), repeat=len(variables)):
             values = tuple(self.nodes[i] for i in ids)
             binding = dict(zip(variables, values))
             if all(self._holds(lit, binding) for lit in rule.body):
-                out.append((ids, values, self._ground(rule.head, binding)))
+                head = self._ground(rule.head, binding)
+                if on_edges and head[1] not in self.edges:
+                    continue  # %edge_heads graph: this rule's head stays on the graph's edges
+                out.append((ids, values, head))
         return out
+
+    def _on_graph_edges(self, rule: Rule) -> bool:
+        """Whether the rule's groundings are limited to heads on the graph's edges (docs/language.md)."""
+        return (self.program.edge_heads == "graph" and len(rule.head.args) == 2 and not rule.infer_edges)
 
     def _rule_override(self, rule: Rule) -> bool:
         return (rule.mode or self.program.mode) == "override"
@@ -172,7 +188,7 @@ class ReferenceEvaluator:
         rule = self.rules[ri]
         head = rule.head
         return _Source(_effective(head.lower, head.upper, head.negated), self._rule_override(rule),
-                       CAUSE_RULE, ri, values, ids)
+                       CAUSE_RULE, ri, values, ids, freeze=rule.set_static)
 
     # ---- updating an atom (docs/language.md "Updating an atom") ----
 
@@ -206,6 +222,8 @@ class ReferenceEvaluator:
         """Whether applying the single source would change the atom (an abort counts: applying raises)."""
         if atom in self._static:
             return False
+        if source.freeze:
+            return True  # a {set_static} firing changes the atom's static flag
         new, inconsistent = self._resolve(atom, [source])
         if inconsistent and self.program.inconsistency == "abort":
             return True
@@ -221,7 +239,7 @@ class ReferenceEvaluator:
         policy = self.program.inconsistency
         if inconsistent and policy == "abort":
             raise InconsistencyError(self._abort_message(atom, t, sources[0]))
-        if inconsistent and policy == "reset_freeze":
+        if (inconsistent and policy == "reset_freeze") or any(s.freeze for s in sources):
             self._static.add(atom)  # frozen even when its interval does not change
         if new == old:
             return False
