@@ -681,8 +681,9 @@ class _Checker:
                 if lit.pred not in set_by and lit.pred not in warned:
                     warned.add(lit.pred)
                     where = str(lit.loc) if lit.loc is not None else "<program>"
+                    stays = "[0,1] (read as [0,0]: it is %closed)" if lit.pred in p.closed else "[0,1]"
                     yield (f"{where}: warning: predicate '{lit.pred}' is never set by a fact, a rule head or "
-                           "the graph; its atoms stay [0,1]")
+                           f"the graph; its atoms stay {stays}")
 
 
 def _unsafe_why(program: Program, r: Rule, var: str) -> str:

@@ -233,9 +233,7 @@ def graph_of(nodes: list[str], facts: list[tuple[str, tuple[str, ...], Bound]],
              edges: list[tuple[str, str]]) -> Graph:
     """A Graph (columns, as load_graphml makes them) with these nodes (fact nodes appended), static facts
     at t = 0 and edges."""
-    nodes = list(nodes)
-    for _, args, _ in facts:
-        nodes += [a for a in args if a not in nodes]
+    nodes = list(dict.fromkeys([*nodes, *(a for _, args, _ in facts for a in args)]))
     ids = {n: i for i, n in enumerate(nodes)}
     labels = list(dict.fromkeys(p for p, _, _ in facts))
     arity = [next(len(a) for p, a, _ in facts if p == lab) for lab in labels]
@@ -284,8 +282,7 @@ def scenarios(draw: st.DrawFn, per_world: int = 0, with_graph: bool = True,
             if not _chance(draw, 4):  # sometimes a fact's node is missing from the node list
                 nodes += [a for a in dict.fromkeys(args) if a not in nodes]
         edges = draw(st.lists(st.tuples(st.sampled_from(sig.nodes), st.sampled_from(sig.nodes)), max_size=4))
-        nodes += [a for e in edges for a in e if a not in nodes]
-        graph = graph_of(nodes, facts, edges)
+        graph = graph_of([*nodes, *(a for e in edges for a in e)], facts, edges)
     program = parse_program(text, "<hypothesis>")
     if per_world:
         # only constants every world already knows: a new node would get different ids in different worlds
