@@ -388,7 +388,7 @@ class Grounder:
             b_atom_a[pos] = np.take_along_axis(atoms, order, axis=1)
             lits = [cr.rule.body[ci] for ci in cr.watched]
             b_test[pos] = np.array([test_id[self._test(lit)] for lit in lits])[order]
-        b_neg_a, b_lo_a, b_up_a = t_flags[b_test], t_lo[b_test], t_up[b_test]
+        b_flags_a, b_lo_a, b_up_a = t_flags[b_test], t_lo[b_test], t_up[b_test]
         b_bnd = np.column_stack([b_lo_a, b_up_a]) if total else np.zeros((0, 2), np.float64)
         n_atoms = self.vocab.n_atoms
         # watch classes: entries sorted by (atom, test, grounding); a class is one (atom, test)
@@ -423,14 +423,14 @@ class Grounder:
             "wc_ptr": wc_ptr,
             "wc_bnd": np.ascontiguousarray(np.column_stack([t_lo[w_test], t_up[w_test]])
                                            if len(first) else np.zeros((0, 2), np.float64)),
-            "wc_neg": t_flags[w_test],
+            "wc_flags": t_flags[w_test],
             "wc_gptr": wc_gptr,
             "wg": b_inst_a[order].astype(np.int32),
             "ih_ptr": ih_ptr,
             "ih_inst": imm.astype(np.int32),
             "b_ptr": b_ptr,
             "b_atom": b_atom_a,
-            "b_neg": b_neg_a,
+            "b_flags": b_flags_a,
             "b_bnd": np.ascontiguousarray(b_bnd),
         }
 

@@ -47,7 +47,7 @@ STATUS_TRACE_LIMIT = 7  # a row found no room although its unit of work checked 
 # column layout of the packed arrays
 RULE_MODE, RULE_DELAY, RULE_IMMEDIATE, RULE_SET_STATIC = 0, 1, 2, 3  # RULE_SET_STATIC: `{set_static}` (1)
 N_RULE_COLUMNS = 4
-# a watched clause's flags (wc_neg, b_neg): the complement `~`, a closed predicate (`%closed`)
+# a watched clause's flags (wc_flags, b_flags): the complement `~`, a closed predicate (`%closed`)
 CLAUSE_NEGATED, CLAUSE_CLOSED = 1, 2
 # per grounding (inst, int32[G, 4]): rule, head atom, rank (canonical order), kind index
 INST_RULE, INST_HEAD, INST_RANK, INST_KIND = 0, 1, 2, 3
@@ -187,7 +187,7 @@ def _applies(w, g, lo, up, static, rule_i, rule_f, policy, inst):
 
 @kernel_jit
 def _set_atom(w, t, pass_no, a, cl, cu, nl, nu, kind, cid, g_src, nsrc, skip, lo, up, last_cause,
-              static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, unsat, inst,
+              static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_flags, wc_gptr, wg, unsat, inst,
               act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap):
     """Change atom a of world w from [cl,cu] to [nl,nu]: log the row, update the counts of the
     groundings that read a (activating and deactivating them), and make the immediate groundings
@@ -220,9 +220,9 @@ def _set_atom(w, t, pass_no, a, cl, cu, nl, nu, kind, cid, g_src, nsrc, skip, lo
     for c in range(wc_ptr[a], wc_ptr[a + 1]):
         bl = wc_bnd[c, 0]
         bu = wc_bnd[c, 1]
-        neg = wc_neg[c]
-        was = _holds(cl, cu, bl, bu, neg)
-        now = _holds(nl, nu, bl, bu, neg)
+        flags = wc_flags[c]
+        was = _holds(cl, cu, bl, bu, flags)
+        now = _holds(nl, nu, bl, bu, flags)
         if was == now:
             continue
         e0 = wc_gptr[c]
@@ -407,7 +407,7 @@ def _sort_small(a, n):
 
 @kernel_jit
 def _apply_groups(w, t, pass_no, policy, rule_i, rule_f, slot_of, touched, n_touched, si, sf, out, lo, up,
-                  static, last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg,
+                  static, last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd, wc_flags, wc_gptr, wg,
                   unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap,
                   changed):
     """Apply every pending group of this pass (one per touched atom), in atom order.
@@ -453,13 +453,13 @@ def _apply_groups(w, t, pass_no, policy, rule_i, rule_f, slot_of, touched, n_tou
             changed[0] += 1
             if inconsistent:
                 hn = _set_atom(w, t, pass_no, a, cl, cu, nl, nu, CAUSE_POLICY, policy, si[s, S_RULE_INST], nsrc,
-                               -1, lo, up, last_cause, static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_neg,
+                               -1, lo, up, last_cause, static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_flags,
                                wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst,
                                heap, hn, in_heap)
             else:
                 hn = _set_atom(w, t, pass_no, a, cl, cu, nl, nu, kind, si[s, S_PRIM_ID], si[s, S_PRIM_INST],
                                nsrc, -1, lo, up, last_cause, static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd,
-                               wc_neg, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
+                               wc_flags, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
                                ih_inst, heap, hn, in_heap)
             if hn < 0:
                 status = STATUS_TRACE_LIMIT
@@ -499,7 +499,7 @@ def _one_source(cl, cu, l, u, override, policy, out):
 
 
 @kernel_jit
-def _reset_world(w, t, policy, rule_i, rule_f, lo, up, static, last_cause, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_neg,
+def _reset_world(w, t, policy, rule_i, rule_f, lo, up, static, last_cause, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_flags,
                  wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap):
     """`%timesteps reset`: every non-static atom goes back to [0,1] at the start of a step."""
     for a in range(lo.shape[1]):
@@ -510,7 +510,7 @@ def _reset_world(w, t, policy, rule_i, rule_f, lo, up, static, last_cause, trace
         if cl == 0.0 and cu == 1.0:
             continue
         hn = _set_atom(w, t, 0, a, cl, cu, 0.0, 1.0, CAUSE_RESET, -1, -1, 0, -1, lo, up, last_cause, static, rule_i, rule_f, policy, trace_on,
-                       tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, unsat, inst, act, act_n,
+                       tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_flags, wc_gptr, wg, unsat, inst, act, act_n,
                        act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap)
         if hn < 0:
             return hn
@@ -518,7 +518,7 @@ def _reset_world(w, t, policy, rule_i, rule_f, lo, up, static, last_cause, trace
 
 
 @kernel_jit
-def step_worlds(cfg, w_first, rule_i, rule_f, inst, kind_base, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, ih_ptr,
+def step_worlds(cfg, w_first, rule_i, rule_f, inst, kind_base, wc_ptr, wc_bnd, wc_flags, wc_gptr, wg, ih_ptr,
                 ih_inst, fact_i, fact_f, fact_order, ext_ptr, ext_i, ext_f, settable,
                 lo, up, static, last_cause, unsat, act, act_n, act_pos, pend, pend_n,
                 trace_on, tri, trf, tr_n, stats, err, slot_of, touched, n_touched, si, sf, out, heap, in_heap,
@@ -548,7 +548,7 @@ def step_worlds(cfg, w_first, rule_i, rule_f, inst, kind_base, wc_ptr, wc_bnd, w
                 cfg[CFG_TRACE_NEED] = room
                 return STATUS_TRACE_ROOM, w
             status = _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rule_i, rule_f, inst,
-                                 kind_base, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, ih_ptr, ih_inst, fact_i, fact_f,
+                                 kind_base, wc_ptr, wc_bnd, wc_flags, wc_gptr, wg, ih_ptr, ih_inst, fact_i, fact_f,
                                  fact_order, ext_ptr, ext_i, ext_f, cfg[CFG_RESET] == 1, lo, up, static,
                                  last_cause, unsat, act, act_n, act_pos, pend, pend_n, trace_on, tri, trf, tr_n,
                                  stats, err, slot_of, touched, n_touched, si, sf, out, heap, in_heap, changed)
@@ -572,7 +572,7 @@ def step_worlds(cfg, w_first, rule_i, rule_f, inst, kind_base, wc_ptr, wc_bnd, w
 
 @kernel_jit
 def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rule_i, rule_f, inst, kind_base,
-                wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, ih_ptr, ih_inst, fact_i, fact_f, fact_order, ext_ptr,
+                wc_ptr, wc_bnd, wc_flags, wc_gptr, wg, ih_ptr, ih_inst, fact_i, fact_f, fact_order, ext_ptr,
                 ext_i, ext_f, reset, lo, up, static, last_cause, unsat, act, act_n, act_pos, pend, pend_n,
                 trace_on, tri, trf, tr_n, stats, err, slot_of, touched, n_touched, si, sf, out, heap, in_heap,
                 changed):
@@ -590,7 +590,7 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
             if trace_on[w] and tri.shape[0] - tr_n[0] < lo.shape[1]:
                 return _pause(cfg, err, w, PHASE_FRESH, 0, 0, 0, lo.shape[1])
             hn = _reset_world(w, t, policy, rule_i, rule_f, lo, up, static, last_cause, trace_on, tri, trf, tr_n, stats,
-                              wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
+                              wc_ptr, wc_bnd, wc_flags, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
                               ih_inst, heap, hn, in_heap)
             if hn < 0:
                 err[E_WORLD] = w
@@ -603,7 +603,7 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
             return _pause(cfg, err, w, PHASE_APPLY, 0, 0, hn, n_touched[0])
         changed[0] = 0
         status, hn = _apply_groups(w, t, 0, policy, rule_i, rule_f, slot_of, touched, n_touched, si, sf, out, lo, up,
-                                   static, last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd, wc_neg,
+                                   static, last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd, wc_flags,
                                    wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap,
                                    hn, in_heap, changed)
         if status != STATUS_OK:
@@ -671,12 +671,12 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
                 elif inconsistent:
                     hn = _set_atom(w, t, pass_no, a, cl, cu, out[0], out[1], CAUSE_POLICY, policy, g, 1, -1, lo, up,
                                    last_cause, static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr,
-                                   wc_bnd, wc_neg, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
+                                   wc_bnd, wc_flags, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
                                    ih_inst, heap, hn, in_heap)
                 else:
                     hn = _set_atom(w, t, pass_no, a, cl, cu, out[0], out[1], CAUSE_RULE, r, g, 1, g, lo, up, last_cause,
                                    static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd,
-                                   wc_neg, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst,
+                                   wc_flags, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst,
                                    heap, hn, in_heap)
                 if hn < 0:
                     err[E_WORLD] = w
@@ -697,7 +697,7 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
         changed[0] = 0
         status, hn = _apply_groups(w, t, pass_no, policy, rule_i, rule_f, slot_of, touched, n_touched, si, sf, out, lo, up,
                                    static, last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd,
-                                   wc_neg, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
+                                   wc_flags, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
                                    ih_inst, heap, hn, in_heap, changed)
         if status != STATUS_OK:
             return status
@@ -756,12 +756,12 @@ def _collect_pass0(w, t, fact_override, rule_i, rule_f, inst, fact_i, fact_f, fa
 
 
 @kernel_jit
-def _recount(w, g, lo, up, b_ptr, b_atom, b_neg, b_bnd, inst, kind_base, unsat, act, act_n, act_pos):
+def _recount(w, g, lo, up, b_ptr, b_atom, b_flags, b_bnd, inst, kind_base, unsat, act, act_n, act_pos):
     """Count grounding g's unsatisfied binding clauses in world w from scratch; list it if active."""
     c = 0
     for e in range(b_ptr[g], b_ptr[g + 1]):
         a = b_atom[e]
-        if not _holds(lo[w, a], up[w, a], b_bnd[e, 0], b_bnd[e, 1], b_neg[e]):
+        if not _holds(lo[w, a], up[w, a], b_bnd[e, 0], b_bnd[e, 1], b_flags[e]):
             c += 1
     unsat[w, g] = c
     act_pos[w, g] = -1
@@ -774,22 +774,22 @@ def _recount(w, g, lo, up, b_ptr, b_atom, b_neg, b_bnd, inst, kind_base, unsat, 
 
 
 @kernel_jit
-def recount_groundings(first, lo, up, b_ptr, b_atom, b_neg, b_bnd, inst, kind_base, unsat, act, act_n, act_pos):
+def recount_groundings(first, lo, up, b_ptr, b_atom, b_flags, b_bnd, inst, kind_base, unsat, act, act_n, act_pos):
     """Counts for groundings first.. in every world (used when the grounding table grows)."""
     for w in range(lo.shape[0]):
         for g in range(first, b_ptr.shape[0] - 1):
-            _recount(w, g, lo, up, b_ptr, b_atom, b_neg, b_bnd, inst, kind_base, unsat, act, act_n, act_pos)
+            _recount(w, g, lo, up, b_ptr, b_atom, b_flags, b_bnd, inst, kind_base, unsat, act, act_n, act_pos)
 
 
 @kernel_jit
-def recount_worlds(worlds, lo, up, b_ptr, b_atom, b_neg, b_bnd, inst, kind_base, unsat, act, act_n, act_pos):
+def recount_worlds(worlds, lo, up, b_ptr, b_atom, b_flags, b_bnd, inst, kind_base, unsat, act, act_n, act_pos):
     """Counts and active lists of the given worlds rebuilt from scratch (restore after growth)."""
     for i in range(worlds.shape[0]):
         w = worlds[i]
         for k in range(N_KINDS):
             act_n[w, k] = 0
         for g in range(b_ptr.shape[0] - 1):
-            _recount(w, g, lo, up, b_ptr, b_atom, b_neg, b_bnd, inst, kind_base, unsat, act, act_n, act_pos)
+            _recount(w, g, lo, up, b_ptr, b_atom, b_flags, b_bnd, inst, kind_base, unsat, act, act_n, act_pos)
 
 
 @kernel_jit
