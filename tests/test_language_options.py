@@ -3,6 +3,9 @@
 worked out here by hand, and the parser's errors are located."""
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -220,3 +223,25 @@ def test_inferred_edges_on_new_nodes_reach_the_store(tmp_path: Path) -> None:
     assert rows == [(2, "linked(h,newcomer)", "rule3")]
     atoms = query_readonly(con, "SELECT text FROM atoms WHERE arg1 = 'newcomer'").fetchall()
     assert atoms == [("linked(h,newcomer)",)]
+
+
+def test_reason_cli_keeps_edge_heads_on_the_graph(graph, tmp_path: Path) -> None:
+    rules = tmp_path / "edges.rules"
+    rules.write_text("%edge_heads graph\n" + EDGE_RULES)
+    (tmp_path / "g.graphml").write_text(GRAPHML)
+    out = subprocess.run([sys.executable, "-m", "tracelab", "reason", str(rules), "--graph",
+                          str(tmp_path / "g.graphml"), "--steps", "1", "--json"],
+                         capture_output=True, text=True, check=True, timeout=600)
+    final = json.loads(out.stdout)["interpretation"]
+    assert sorted(a for a in final if a.startswith("knows")) == ["knows(a,b)", "knows(c,b)"]
+    assert sorted(a for a in final if a.startswith("met")) == ["met(a,b)", "met(a,c)", "met(c,b)"]
+
+
+def test_reason_cli_bad_closed_directive_is_one_line(tmp_path: Path) -> None:
+    rules = tmp_path / "bad.rules"
+    rules.write_text("q(a)\n%closed p q\n")
+    out = subprocess.run([sys.executable, "-m", "tracelab", "reason", str(rules), "--steps", "1"],
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 1
+    first = out.stderr.splitlines()[0]
+    assert first.startswith("tracelab: error: ") and f"{rules}:2:11" in first and "Traceback" not in out.stderr
