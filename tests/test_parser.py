@@ -56,6 +56,9 @@ def test_docs_statements_parse_to_the_expected_ast() -> None:
              (L("bullet", V("B")), L("atLoc", V("B"), V("X")), L("agent", V("A")), L("atLoc", V("A"), V("X"))),
              immediate=True),
         Rule("clear", L("moveDown", V("A"), lo=0.0, hi=0.0), (L("moveDown", V("A")),), delay=1, mode="override"),
+        Rule("lock", L("locked", V("D")), (L("door", V("D")), L("key", V("D"))), delay=1, set_static=True),
+        Rule("link", L("linked", V("X"), V("Y")), (L("hub", V("X")), L("joins", V("Y"))), mode="override",
+             infer_edges=True),
     ]
     names = [f.name for f in p.facts]
     assert all(re.fullmatch(r"fact\d+", n) for n in names)
@@ -66,6 +69,7 @@ def test_docs_statements_parse_to_the_expected_ast() -> None:
         (L("blocked", C("c12"), lo=0.0, hi=0.0), 0, 0, True),
     ]
     assert (p.mode, p.timesteps, p.inconsistency) == ("override", "reset", "hull")
+    assert (p.closed, p.edge_heads) == (("alarm", "hacked"), "graph")
     assert p.files == ["language.md"]
 
 
