@@ -32,7 +32,8 @@ def aggregate_tables(grounder: Grounder, rules: list[Rule], inst: np.ndarray,
     max_body = max((len(rules[i].body) for i in agg), default=1)
     ag_rule = np.zeros((len(agg), K.N_AR), np.int64)
     ag_cf = np.zeros((len(agg), max_body, 3), np.float64)
-    ag_cn = np.zeros((len(agg), max_body), np.bool_)
+    # per clause its test flags (kernel CLAUSE_NEGATED, CLAUSE_CLOSED): `~`, and a %closed predicate
+    ag_cn = np.zeros((len(agg), max_body), np.uint8)
     q_rows: list[tuple[int, int, int, int]] = []
     q_vals: list[float] = []
     for a, ri in enumerate(agg):
@@ -48,7 +49,8 @@ def aggregate_tables(grounder: Grounder, rules: list[Rule], inst: np.ndarray,
                       int(r.head.negated))
         for ci, lit in enumerate(r.body):
             ag_cf[a, ci] = (lit.lower, lit.upper, r.weights[ci] if r.weights else 1.0)
-            ag_cn[a, ci] = lit.negated
+            closed = K.CLAUSE_CLOSED if lit.pred in grounder.closed else 0
+            ag_cn[a, ci] = (K.CLAUSE_NEGATED if lit.negated else 0) | closed
     agg_of_rule = np.full(len(rules), -1, np.int64)
     agg_of_rule[agg] = np.arange(len(agg))
     # the aggregated rules' groundings in rank order, cut into head groups (rule, head atom)

@@ -20,9 +20,13 @@ from .compile_cache import CacheEntry
 from .program import Fact, Literal, Program, Rule
 
 # the fields of the program objects this backend knows; a program that sets any other field (a language
-# feature newer than the generator) runs on the interpreter
-_KNOWN_FIELDS = {Program: {"rules", "facts", "mode", "timesteps", "inconsistency", "files", "warnings"},
-                 Rule: {"name", "head", "body", "delay", "immediate", "mode", "loc", "text"},
+# feature newer than the generator) runs on the interpreter. %closed, %edge_heads, {set_static} and
+# {infer_edges} live in tables the generated kernel reads as kernel.py does (clause flags, the groundings,
+# rule_i's RULE_SET_STATIC column), so they need no rewriting.
+_KNOWN_FIELDS = {Program: {"rules", "facts", "mode", "timesteps", "inconsistency", "edge_heads", "closed", "files",
+                           "warnings"},
+                 Rule: {"name", "head", "body", "delay", "immediate", "mode", "loc", "text", "set_static",
+                        "infer_edges"},
                  Literal: {"pred", "args", "lower", "upper", "negated", "loc"},
                  Fact: {"name", "literal", "start", "end", "static", "loc", "text"}}
 

@@ -88,7 +88,7 @@ class CountingState:
             self._act, self._kind_base = act, kind_base
             self._unsat = np.concatenate([self._unsat, np.zeros((w, n_inst - first), np.int8)], axis=1)
             self._act_pos = np.concatenate([self._act_pos, np.full((w, n_inst - first), -1, np.int32)], axis=1)
-            K.recount_groundings(first, self.lower, self.upper, kt["b_ptr"], kt["b_atom"], kt["b_neg"],
+            K.recount_groundings(first, self.lower, self.upper, kt["b_ptr"], kt["b_atom"], kt["b_flags"],
                                  kt["b_bnd"], kt["inst"], self._kind_base, self._unsat, self._act, self._act_n,
                                  self._act_pos)
         self._n_grounded = n_inst
@@ -120,7 +120,7 @@ class CountingState:
         while True:
             status, w_first = self.step_kernel(
                 eng._cfg, w_first, eng._rule_i, eng._rule_f, kt["inst"], self._kind_base, kt["wc_ptr"],
-                kt["wc_bnd"], kt["wc_neg"], kt["wc_gptr"], kt["wg"], kt["ih_ptr"], kt["ih_inst"], eng._fact_i,
+                kt["wc_bnd"], kt["wc_flags"], kt["wc_gptr"], kt["wg"], kt["ih_ptr"], kt["ih_inst"], eng._fact_i,
                 eng._fact_f, eng._fact_order, ext_ptr, ext_i, ext_f, eng._settable,
                 self.lower, self.upper, self.static, self.last_cause, self._unsat, self._act, self._act_n,
                 self._act_pos, self._pend, self._pend_n, eng.trace_on, eng._tri, eng._trf, eng._tr_n,
@@ -189,7 +189,7 @@ class CountingState:
                 arr[worlds] = snap[key][worlds]
         else:  # groundings grew since the snapshot: recount those worlds from their interpretation
             kt = self.kt
-            K.recount_worlds(indices, self.lower, self.upper, kt["b_ptr"], kt["b_atom"], kt["b_neg"],
+            K.recount_worlds(indices, self.lower, self.upper, kt["b_ptr"], kt["b_atom"], kt["b_flags"],
                              kt["b_bnd"], kt["inst"], self._kind_base, self._unsat, self._act, self._act_n,
                              self._act_pos)
         pend, pend_n = snap["pend"], snap["pend_n"]

@@ -69,7 +69,7 @@ class Engine:
             if sum(c.binds for c in r.body) > MAX_BINDING_CLAUSES:
                 raise ProgramCheckError.at(r.loc, f"rule '{r.name}' has more than {MAX_BINDING_CLAUSES} "
                                                   "binding body clauses")
-        self.grounder = Grounder(self.rules, self.vocab)
+        self.grounder = Grounder(self.rules, self.vocab, program.closed, program.edge_heads, self.graph.edges)
         # user annotation functions, bound now: registering another one later changes nothing here
         self._user_functions: list[tuple[str, object]] = []
         for r in self.rules:
@@ -154,11 +154,11 @@ class Engine:
 
     def _rule_tables(self) -> None:
         n = len(self.rules)
-        self._rule_i = np.zeros((n, 3), np.int64)
+        self._rule_i = np.zeros((n, K.N_RULE_COLUMNS), np.int64)
         self._rule_f = np.zeros((n, 2), np.float64)
         for i, r in enumerate(self.rules):
             mode = r.mode or self.program.mode
-            self._rule_i[i] = (UPDATE_MODES.index(mode), r.delay, int(r.immediate))
+            self._rule_i[i] = (UPDATE_MODES.index(mode), r.delay, int(r.immediate), int(r.set_static))
             self._rule_f[i] = rule_head_bound(r)
         self._rule_v = crisp_codes(self._rule_f[:, 0], self._rule_f[:, 1])
 

@@ -44,6 +44,9 @@ class Graph:
     # fact tables (facttable.py) also give windows and static flags; a GraphML fact is static at t = 0
     fact_window: np.ndarray | None = None  # int64 [F, 2]: start, end
     fact_static: np.ndarray | None = None  # bool [F]
+    # the graph's edges as node-id pairs (source, target), an undirected edge both ways: where the edge
+    # heads of rules without {infer_edges} may land under `%edge_heads graph` (attributes or not)
+    edges: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int32))
 
     @property
     def windows(self) -> np.ndarray:
@@ -83,10 +86,11 @@ class Graph:
         args[:, 0] = node_map[args[:, 0]] if len(args) else args[:, 0]
         edge = args[:, 1] >= 0
         args[edge, 1] = node_map[other.fact_args[edge, 1]]
+        edges = np.concatenate([self.edges, node_map[other.edges]]) if len(other.edges) else self.edges
         return Graph(nodes, labels, arity, np.concatenate([self.fact_label, label_map[other.fact_label]]),
                      np.concatenate([self.fact_args, args]), np.concatenate([self.fact_bounds, other.fact_bounds]),
                      self.file, np.concatenate([self.windows, other.windows]),
-                     np.concatenate([self.statics, other.statics]))
+                     np.concatenate([self.statics, other.statics]), edges)
 
     @property
     def n_facts(self) -> int:
@@ -264,8 +268,10 @@ def _to_graph(raw: RawGraph) -> Graph:
     else:
         fact_label = np.zeros(0, np.int32)
         fact_args, fact_bounds = np.zeros((0, 2), np.int32), np.zeros((0, 2), np.float64)
+    back = undirected & (src != dst)
+    edges = np.concatenate([np.column_stack([src, dst]), np.column_stack([dst[back], src[back]])]).astype(np.int32)
     return Graph(raw.nodes, labels, arity, fact_label, np.ascontiguousarray(fact_args, np.int32),
-                 np.ascontiguousarray(fact_bounds, np.float64), file)
+                 np.ascontiguousarray(fact_bounds, np.float64), file, edges=edges)
 
 
 def _where(raw: RawGraph, kind: int, elem: int) -> str:

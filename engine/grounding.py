@@ -64,7 +64,9 @@ class _CompiledRule:
     # per clause and argument position: variable index (>= 0) or -(node id) - 1 for a constant
     clause_args: list[list[int]]
     head_args: list[int]
-    binding: list[int]  # indices of binding clauses
+    binding: list[int]  # indices of enumerating clauses (joins find the groundings through them)
+    watched: list[int]  # indices of the clauses a grounding must test: not true of every interval
+    on_edges: bool  # `%edge_heads graph` and no {infer_edges}: heads only on the graph's edges
 
 
 def _growable(cap: int, width: int, dtype: type) -> np.ndarray:
@@ -74,9 +76,16 @@ def _growable(cap: int, width: int, dtype: type) -> np.ndarray:
 class Grounder:
     """The groundings of `rules` over the settable atoms of `vocab`, grown by close()."""
 
-    def __init__(self, rules: list[Rule], vocab: Vocabulary) -> None:
+    def __init__(self, rules: list[Rule], vocab: Vocabulary, closed: tuple[str, ...] = (),
+                 edge_heads: str = "any", edges: np.ndarray | None = None) -> None:
+        """`closed`: the %closed predicates; `edges`: node-id pairs [E, 2] of the graph's edges, where the
+        edge heads of rules without {infer_edges} land under `%edge_heads graph`."""
         self.rules = rules
         self.vocab = vocab
+        self.closed = frozenset(closed)
+        self.edge_heads = edge_heads
+        pairs = np.zeros((0, 2), np.int64) if edges is None else np.asarray(edges, np.int64).reshape(-1, 2)
+        self._edge_keys = sorted_unique((pairs[:, 0] << 24) | pairs[:, 1])
         self._compiled = [self._compile(i, r) for i, r in enumerate(rules)]
         self.max_vars = max((cr.n_vars for cr in self._compiled), default=0)
         self.max_body = max((len(r.body) for r in rules), default=0)
@@ -105,7 +114,10 @@ class Grounder:
             clause_labels=[self.vocab.label(c.pred, len(c.args)) for c in rule.body],
             clause_args=[args_of(c) for c in rule.body],
             head_args=args_of(rule.head),
-            binding=rule.binding_clauses(),  # quantified clauses never bind (docs/language.md)
+            # quantified clauses are neither enumerated nor watched: the kernel counts them per head group
+            binding=rule.binding_clauses(self.closed),
+            watched=rule.watched_clauses(),
+            on_edges=self.edge_heads == "graph" and len(rule.head.args) == 2 and not rule.infer_edges,
         )
 
     # ---- sizes and state ----
@@ -268,6 +280,15 @@ class Grounder:
         if len(rows):
             self._emit(cr, rows, found)
 
+    def _on_edges(self, cr: _CompiledRule, rows: np.ndarray, found: dict[int, np.ndarray] | None
+                  ) -> tuple[np.ndarray, dict[int, np.ndarray] | None]:
+        """The rows whose head (source, target) is an edge of the graph."""
+        src, dst = (np.full(len(rows), -x - 1, np.int64) if x < 0 else rows[:, x] for x in cr.head_args)
+        keys = (src << 24) | dst
+        pos = np.minimum(np.searchsorted(self._edge_keys, keys), max(len(self._edge_keys) - 1, 0))
+        keep = self._edge_keys[pos] == keys if len(self._edge_keys) else np.zeros(len(rows), np.bool_)
+        return rows[keep], None if found is None else {c: a[keep] for c, a in found.items()}
+
     def _ground_atoms(self, label: int, args: list[int], rows: np.ndarray) -> np.ndarray:
         cols = [np.full(len(rows), -x - 1, np.int64) if x < 0 else rows[:, x] for x in args]
         a1 = cols[1] if len(cols) > 1 else np.full(len(rows), -1, np.int64)
@@ -275,6 +296,8 @@ class Grounder:
 
     def _emit(self, cr: _CompiledRule, rows: np.ndarray, found: dict[int, np.ndarray] | None = None) -> None:
         """Append groundings (variable values per row); `found`: atoms of binding clauses known already."""
+        if cr.on_edges:
+            rows, found = self._on_edges(cr, rows, found)
         m = len(rows)
         heads = self._ground_atoms(cr.head_label, cr.head_args, rows)
         found = found or {}
@@ -338,33 +361,35 @@ class Grounder:
             fixed[np.asarray(fact_atoms, np.int64)] = True
         if n:
             fixed[self.g_head] = False
-        n_bind = np.array([len(cr.binding) for cr in self._compiled], np.int64)
+        n_bind = np.array([len(cr.watched) for cr in self._compiled], np.int64)
         b_ptr = np.zeros(n + 1, np.int64)
         np.cumsum(n_bind[rules], out=b_ptr[1:])
         total = int(b_ptr[-1])
         b_atom_a = np.empty(total, np.int64)
         b_inst_a = np.repeat(np.arange(n, dtype=np.int64), n_bind[rules])
-        # a clause's test (sign, lower, upper) as a small id, numbered in that sort order
-        tests = sorted({(lit.negated, lit.lower, lit.upper) for cr in self._compiled
-                        for lit in (cr.rule.body[ci] for ci in cr.binding)})
+        # a clause's test (sign, lower, upper, closed) as a small id, numbered in that sort order
+        tests = sorted({self._test(lit) for cr in self._compiled for lit in (cr.rule.body[ci] for ci in cr.watched)})
         test_id = {t: i for i, t in enumerate(tests)}
         t_neg = np.array([t[0] for t in tests], np.bool_)
         t_lo = np.array([t[1] for t in tests], np.float64)
         t_up = np.array([t[2] for t in tests], np.float64)
+        t_closed = np.array([t[3] for t in tests], np.bool_)
+        # the kernel's clause flags: 1 the complement (`~`), 2 a closed predicate (docs/language.md)
+        t_flags = (t_neg.astype(np.uint8) | (t_closed.astype(np.uint8) << np.uint8(1))).astype(np.uint8)
         b_test = np.empty(total, np.int64)
-        for cr in self._compiled:  # one rule's groundings at once: its binding clauses, changing ones first
-            if not cr.binding:
+        for cr in self._compiled:  # one rule's groundings at once: its watched clauses, changing ones first
+            if not cr.watched:
                 continue
             gs = np.flatnonzero(rules == cr.index)
             if not len(gs):
                 continue
-            atoms = self._body[gs][:, cr.binding]
+            atoms = self._body[gs][:, cr.watched]
             order = np.argsort(fixed[atoms], axis=1, kind="stable")
-            pos = b_ptr[gs][:, None] + np.arange(len(cr.binding))
+            pos = b_ptr[gs][:, None] + np.arange(len(cr.watched))
             b_atom_a[pos] = np.take_along_axis(atoms, order, axis=1)
-            lits = [cr.rule.body[ci] for ci in cr.binding]
-            b_test[pos] = np.array([test_id[(lit.negated, lit.lower, lit.upper)] for lit in lits])[order]
-        b_neg_a, b_lo_a, b_up_a = t_neg[b_test], t_lo[b_test], t_up[b_test]
+            lits = [cr.rule.body[ci] for ci in cr.watched]
+            b_test[pos] = np.array([test_id[self._test(lit)] for lit in lits])[order]
+        b_flags_a, b_lo_a, b_up_a = t_flags[b_test], t_lo[b_test], t_up[b_test]
         b_bnd = np.column_stack([b_lo_a, b_up_a]) if total else np.zeros((0, 2), np.float64)
         n_atoms = self.vocab.n_atoms
         # watch classes: entries sorted by (atom, test, grounding); a class is one (atom, test)
@@ -390,7 +415,7 @@ class Grounder:
         ih_ptr = np.zeros(n_atoms + 1, np.int64)
         np.add.at(ih_ptr, heads[imm] + 1, 1)
         np.cumsum(ih_ptr, out=ih_ptr)
-        t_code = truth_codes(t_lo, t_up, t_neg)
+        t_code = truth_codes(t_lo, t_up, t_neg, t_closed)
         w_test = s_test[first]
         return {
             "wc_code": t_code[w_test],
@@ -399,20 +424,24 @@ class Grounder:
             "wc_ptr": wc_ptr,
             "wc_bnd": np.ascontiguousarray(np.column_stack([t_lo[w_test], t_up[w_test]])
                                            if len(first) else np.zeros((0, 2), np.float64)),
-            "wc_neg": t_neg[w_test],
+            "wc_flags": t_flags[w_test],
             "wc_gptr": wc_gptr,
             "wg": b_inst_a[order].astype(np.int32),
             "ih_ptr": ih_ptr,
             "ih_inst": imm.astype(np.int32),
             "b_ptr": b_ptr,
             "b_atom": b_atom_a,
-            "b_neg": b_neg_a,
+            "b_flags": b_flags_a,
             "b_bnd": np.ascontiguousarray(b_bnd),
         }
 
     def body_atoms(self, groundings: np.ndarray) -> np.ndarray:
         """int64[len(groundings), max_body]: every clause's atom per grounding (-1 past a rule's body)."""
         return self._body[np.asarray(groundings, np.int64)]
+
+    def _test(self, lit: Literal) -> tuple[bool, float, float, bool]:
+        """A watched clause's test: sign, bound, and whether its predicate is closed."""
+        return (lit.negated, lit.lower, lit.upper, lit.pred in self.closed)
 
     def table(self) -> GroundingTable:
         n = self._n
@@ -444,13 +473,18 @@ def rule_head_bound(rule: Rule) -> tuple[float, float]:
 CRISP_VALUES = ((0.0, 1.0), (1.0, 1.0), (0.0, 0.0))
 
 
-def truth_codes(lower: np.ndarray, upper: np.ndarray, negated: np.ndarray) -> np.ndarray:
+def truth_codes(lower: np.ndarray, upper: np.ndarray, negated: np.ndarray,
+                closed: np.ndarray | None = None) -> np.ndarray:
     """Per clause, the crisp values it holds of, as bits (1 << value index): its truth table over
-    [0,1], [1,1] and [0,0] (docs/language.md, containment with ε and the complement for `~`)."""
+    [0,1], [1,1] and [0,0] (docs/language.md, containment with ε and the complement for `~`). On a
+    closed predicate [0,1] reads as [0,0], so its bit is the [0,0] bit."""
     code = np.zeros(len(lower), np.uint8)
     for v, (a, b) in enumerate(CRISP_VALUES):
         lo = np.where(negated, 1.0 - b, a)
         up = np.where(negated, 1.0 - a, b)
         holds = (lo >= lower - EPS) & (up <= upper + EPS)
         code |= np.where(holds, np.uint8(1 << v), np.uint8(0))
+    if closed is not None:
+        unset_bit = (code >> np.uint8(2)) & np.uint8(1)  # the [0,0] bit (CRISP_VALUES index 2)
+        code = np.where(closed, (code & np.uint8(6)) | unset_bit, code).astype(np.uint8)
     return code

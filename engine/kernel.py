@@ -46,7 +46,10 @@ STATUS_TRACE_LIMIT = 7  # a row found no room although its unit of work checked 
 STATUS_USER_FN = 8  # stopped in world err[0]: Python computes the user annotation functions of req_i, then resumes
 
 # column layout of the packed arrays
-RULE_MODE, RULE_DELAY, RULE_IMMEDIATE = 0, 1, 2
+RULE_MODE, RULE_DELAY, RULE_IMMEDIATE, RULE_SET_STATIC = 0, 1, 2, 3  # RULE_SET_STATIC: `{set_static}` (1)
+N_RULE_COLUMNS = 4
+# a watched clause's flags (wc_flags, b_flags): the complement `~`, a closed predicate (`%closed`)
+CLAUSE_NEGATED, CLAUSE_CLOSED = 1, 2
 # per grounding (inst, int32[G, 4]): rule, head atom, rank (canonical order), kind index
 INST_RULE, INST_HEAD, INST_RANK, INST_KIND = 0, 1, 2, 3
 # kind indices: each grounding's rule is immediate, delayed (Δt > 0) or ordinary (Δt = 0); one active list each
@@ -103,8 +106,12 @@ kernel_jit = njit(cache=True, _nrt=False)
 
 
 @kernel_jit
-def _holds(lo, up, cl, cu, neg):
-    if neg:
+def _holds(lo, up, cl, cu, flags):
+    """Whether an atom [lo,up] satisfies a clause [cl,cu] with `flags` (CLAUSE_NEGATED, CLAUSE_CLOSED:
+    then [0,1] reads as [0,0])."""
+    if flags & CLAUSE_CLOSED and lo == 0.0 and up == 1.0:
+        up = 0.0
+    if flags & CLAUSE_NEGATED:
         a = 1.0 - up
         b = 1.0 - lo
     else:
@@ -166,6 +173,8 @@ def _applies(w, g, lo, up, static, rule_i, rule_f, policy, inst):
     if static[w, a]:
         return False
     r = inst[g, INST_RULE]
+    if rule_i[r, RULE_SET_STATIC] == 1:
+        return True  # applying it freezes the head, a change of its own
     l = rule_f[r, 0]
     u = rule_f[r, 1]
     cl = lo[w, a]
@@ -190,7 +199,7 @@ def _applies(w, g, lo, up, static, rule_i, rule_f, policy, inst):
 
 @kernel_jit
 def _set_atom(w, t, pass_no, a, cl, cu, nl, nu, kind, cid, g_src, nsrc, skip, lo, up, last_cause,
-              static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, unsat, inst,
+              static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_flags, wc_gptr, wg, unsat, inst,
               act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap):
     """Change atom a of world w from [cl,cu] to [nl,nu]: log the row, update the counts of the
     groundings that read a (activating and deactivating them), and make the immediate groundings
@@ -223,9 +232,9 @@ def _set_atom(w, t, pass_no, a, cl, cu, nl, nu, kind, cid, g_src, nsrc, skip, lo
     for c in range(wc_ptr[a], wc_ptr[a + 1]):
         bl = wc_bnd[c, 0]
         bu = wc_bnd[c, 1]
-        neg = wc_neg[c]
-        was = _holds(cl, cu, bl, bu, neg)
-        now = _holds(nl, nu, bl, bu, neg)
+        flags = wc_flags[c]
+        was = _holds(cl, cu, bl, bu, flags)
+        now = _holds(nl, nu, bl, bu, flags)
         if was == now:
             continue
         e0 = wc_gptr[c]
@@ -410,7 +419,7 @@ def _sort_small(a, n):
 
 @kernel_jit
 def _apply_groups(w, t, pass_no, policy, rule_i, rule_f, slot_of, touched, n_touched, si, sf, out, lo, up,
-                  static, last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg,
+                  static, last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd, wc_flags, wc_gptr, wg,
                   unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap,
                   changed):
     """Apply every pending group of this pass (one per touched atom), in atom order.
@@ -456,13 +465,13 @@ def _apply_groups(w, t, pass_no, policy, rule_i, rule_f, slot_of, touched, n_tou
             changed[0] += 1
             if inconsistent:
                 hn = _set_atom(w, t, pass_no, a, cl, cu, nl, nu, CAUSE_POLICY, policy, si[s, S_RULE_INST], nsrc,
-                               -1, lo, up, last_cause, static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_neg,
+                               -1, lo, up, last_cause, static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_flags,
                                wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst,
                                heap, hn, in_heap)
             else:
                 hn = _set_atom(w, t, pass_no, a, cl, cu, nl, nu, kind, si[s, S_PRIM_ID], si[s, S_PRIM_INST],
                                nsrc, -1, lo, up, last_cause, static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd,
-                               wc_neg, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
+                               wc_flags, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
                                ih_inst, heap, hn, in_heap)
             if hn < 0:
                 status = STATUS_TRACE_LIMIT
@@ -502,7 +511,7 @@ def _one_source(cl, cu, l, u, override, policy, out):
 
 
 @kernel_jit
-def _reset_world(w, t, policy, rule_i, rule_f, lo, up, static, last_cause, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_neg,
+def _reset_world(w, t, policy, rule_i, rule_f, lo, up, static, last_cause, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_flags,
                  wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap):
     """`%timesteps reset`: every non-static atom goes back to [0,1] at the start of a step."""
     for a in range(lo.shape[1]):
@@ -513,7 +522,7 @@ def _reset_world(w, t, policy, rule_i, rule_f, lo, up, static, last_cause, trace
         if cl == 0.0 and cu == 1.0:
             continue
         hn = _set_atom(w, t, 0, a, cl, cu, 0.0, 1.0, CAUSE_RESET, -1, -1, 0, -1, lo, up, last_cause, static, rule_i, rule_f, policy, trace_on,
-                       tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, unsat, inst, act, act_n,
+                       tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_flags, wc_gptr, wg, unsat, inst, act, act_n,
                        act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap)
         if hn < 0:
             return hn
@@ -521,7 +530,7 @@ def _reset_world(w, t, policy, rule_i, rule_f, lo, up, static, last_cause, trace
 
 
 @kernel_jit
-def step_worlds(cfg, w_first, rule_i, rule_f, inst, kind_base, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, ih_ptr,
+def step_worlds(cfg, w_first, rule_i, rule_f, inst, kind_base, wc_ptr, wc_bnd, wc_flags, wc_gptr, wg, ih_ptr,
                 ih_inst, fact_i, fact_f, fact_order, ext_ptr, ext_i, ext_f, settable,
                 lo, up, static, last_cause, unsat, act, act_n, act_pos, pend, pend_n,
                 trace_on, tri, trf, tr_n, stats, err, slot_of, touched, n_touched, si, sf, out, heap, in_heap,
@@ -564,7 +573,7 @@ def step_worlds(cfg, w_first, rule_i, rule_f, inst, kind_base, wc_ptr, wc_bnd, w
                 cfg[CFG_TRACE_NEED] = room
                 return STATUS_TRACE_ROOM, w
             status = _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rule_i, rule_f, inst,
-                                 kind_base, wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, ih_ptr, ih_inst, fact_i, fact_f,
+                                 kind_base, wc_ptr, wc_bnd, wc_flags, wc_gptr, wg, ih_ptr, ih_inst, fact_i, fact_f,
                                  fact_order, ext_ptr, ext_i, ext_f, cfg[CFG_RESET] == 1, lo, up, static,
                                  last_cause, unsat, act, act_n, act_pos, pend, pend_n, trace_on, tri, trf, tr_n,
                                  stats, err, slot_of, touched, n_touched, si, sf, out, heap, in_heap, changed,
@@ -610,7 +619,7 @@ def step_worlds(cfg, w_first, rule_i, rule_f, inst, kind_base, wc_ptr, wc_bnd, w
 
 @kernel_jit
 def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rule_i, rule_f, inst, kind_base,
-                wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, ih_ptr, ih_inst, fact_i, fact_f, fact_order, ext_ptr,
+                wc_ptr, wc_bnd, wc_flags, wc_gptr, wg, ih_ptr, ih_inst, fact_i, fact_f, fact_order, ext_ptr,
                 ext_i, ext_f, reset, lo, up, static, last_cause, unsat, act, act_n, act_pos, pend, pend_n,
                 trace_on, tri, trf, tr_n, stats, err, slot_of, touched, n_touched, si, sf, out, heap, in_heap,
                 changed, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn, ag_q, ag_qv, mark, stamp, g_l, g_u,
@@ -629,7 +638,7 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
             if trace_on[w] and tri.shape[0] - tr_n[0] < lo.shape[1]:
                 return _pause(cfg, err, w, PHASE_FRESH, 0, 0, 0, lo.shape[1])
             hn = _reset_world(w, t, policy, rule_i, rule_f, lo, up, static, last_cause, trace_on, tri, trf, tr_n, stats,
-                              wc_ptr, wc_bnd, wc_neg, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
+                              wc_ptr, wc_bnd, wc_flags, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
                               ih_inst, heap, hn, in_heap)
             if hn < 0:
                 err[E_WORLD] = w
@@ -642,7 +651,7 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
             return _pause(cfg, err, w, PHASE_APPLY, 0, 0, hn, n_touched[0])
         changed[0] = 0
         status, hn = _apply_groups(w, t, 0, policy, rule_i, rule_f, slot_of, touched, n_touched, si, sf, out, lo, up,
-                                   static, last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd, wc_neg,
+                                   static, last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd, wc_flags,
                                    wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap,
                                    hn, in_heap, changed)
         if status != STATUS_OK:
@@ -685,7 +694,8 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
                 _one_source(cl, cu, rule_f[r, 0], rule_f[r, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE, policy, out)
                 inconsistent = out[2] > 0.5
                 abort = inconsistent and policy == POLICY_ABORT
-                if not abort and out[0] == cl and out[1] == cu:
+                set_static = rule_i[r, RULE_SET_STATIC] == 1
+                if not abort and out[0] == cl and out[1] == cu and not set_static:
                     continue  # would not change its head
                 n_immediate += 1
                 if n_immediate > max_immediate:
@@ -708,16 +718,18 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
                     err[E_LAST_INST] = g
                     err[E_DISAGREE] = 0
                     return STATUS_INCONSISTENT
-                freeze = out[3] > 0.5
-                if inconsistent:
+                freeze = out[3] > 0.5 or set_static
+                if out[0] == cl and out[1] == cu:  # a {set_static} firing that only freezes the head
+                    stats[w, STAT_REDERIVATIONS] += 1
+                elif inconsistent:
                     hn = _set_atom(w, t, pass_no, a, cl, cu, out[0], out[1], CAUSE_POLICY, policy, g, 1, -1, lo, up,
                                    last_cause, static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr,
-                                   wc_bnd, wc_neg, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
+                                   wc_bnd, wc_flags, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
                                    ih_inst, heap, hn, in_heap)
                 else:
                     hn = _set_atom(w, t, pass_no, a, cl, cu, out[0], out[1], CAUSE_RULE, r, g, 1, g, lo, up, last_cause,
                                    static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd,
-                                   wc_neg, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst,
+                                   wc_flags, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst,
                                    heap, hn, in_heap)
                 if hn < 0:
                     err[E_WORLD] = w
@@ -730,8 +742,8 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
                 g = act[w, base + k]
                 r = inst[g, INST_RULE]
                 _add_source(inst[g, INST_HEAD], rule_f[r, 0], rule_f[r, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
-                            2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, False, slot_of, touched,
-                            n_touched, si, sf)
+                            2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, rule_i[r, RULE_SET_STATIC] == 1,
+                            slot_of, touched, n_touched, si, sf)
             if hg_i.shape[0] > 0:
                 _agg_pass(w, rule_i, rule_f, inst, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn, ag_q, ag_qv, lo,
                           up, unsat, mark, stamp, g_l, g_u, g_w, req_i, req_n, out, slot_of, touched, n_touched, si, sf)
@@ -744,7 +756,7 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
         changed[0] = 0
         status, hn = _apply_groups(w, t, pass_no, policy, rule_i, rule_f, slot_of, touched, n_touched, si, sf, out, lo, up,
                                    static, last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd,
-                                   wc_neg, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
+                                   wc_flags, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
                                    ih_inst, heap, hn, in_heap, changed)
         if status != STATUS_OK:
             return status
@@ -793,8 +805,8 @@ def _collect_pass0(w, t, fact_override, rule_i, inst, fact_i, fact_f, fact_order
         if pend[w, p, 0] == t:
             r = inst[g, INST_RULE]
             _add_source(inst[g, INST_HEAD], pend_f[w, p, 0], pend_f[w, p, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
-                        2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, False, slot_of, touched,
-                        n_touched, si, sf)
+                        2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, rule_i[r, RULE_SET_STATIC] == 1,
+                        slot_of, touched, n_touched, si, sf)
         else:
             pend[w, kept, 0] = pend[w, p, 0]
             pend[w, kept, 1] = g
@@ -902,6 +914,8 @@ def _agg_eval(w, h, lo, up, unsat, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, 
                 if _holds(lo[w, a], up[w, a], ag_cf[ai, ci, 0], ag_cf[ai, ci, 1], ag_cn[ai, ci]):
                     g_l[k] = lo[w, a]
                     g_u[k] = up[w, a]
+                    if ag_cn[ai, ci] & CLAUSE_CLOSED and lo[w, a] == 0.0 and up[w, a] == 1.0:
+                        g_u[k] = 0.0  # a closed predicate's unset atom is read as [0,0]
                     g_w[k] = ag_cf[ai, ci, 2]
                     k += 1
     return rep, k
@@ -1020,8 +1034,8 @@ def _agg_pass(w, rule_i, rule_f, inst, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_
         if g >= 0:
             r = ag_rule[ai, AR_RULE]
             _add_source(hg_i[h, 1], out[0], out[1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
-                        2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, False, slot_of, touched,
-                        n_touched, si, sf)
+                        2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, rule_i[r, RULE_SET_STATIC] == 1,
+                        slot_of, touched, n_touched, si, sf)
 
 
 @kernel_jit
@@ -1032,18 +1046,18 @@ def _agg_user_sources(rule_i, inst, hg_i, ag_rule, req_i, req_f, req_n, slot_of,
         g = req_i[i, 1]
         r = ag_rule[hg_i[h, 0], AR_RULE]
         _add_source(hg_i[h, 1], req_f[i, 0], req_f[i, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
-                    2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, False, slot_of, touched, n_touched,
-                    si, sf)
+                    2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, rule_i[r, RULE_SET_STATIC] == 1,
+                    slot_of, touched, n_touched, si, sf)
     req_n[0] = 0
 
 
 @kernel_jit
-def _recount(w, g, lo, up, b_ptr, b_atom, b_neg, b_bnd, inst, kind_base, unsat, act, act_n, act_pos):
+def _recount(w, g, lo, up, b_ptr, b_atom, b_flags, b_bnd, inst, kind_base, unsat, act, act_n, act_pos):
     """Count grounding g's unsatisfied binding clauses in world w from scratch; list it if active."""
     c = 0
     for e in range(b_ptr[g], b_ptr[g + 1]):
         a = b_atom[e]
-        if not _holds(lo[w, a], up[w, a], b_bnd[e, 0], b_bnd[e, 1], b_neg[e]):
+        if not _holds(lo[w, a], up[w, a], b_bnd[e, 0], b_bnd[e, 1], b_flags[e]):
             c += 1
     unsat[w, g] = c
     act_pos[w, g] = -1
@@ -1056,22 +1070,22 @@ def _recount(w, g, lo, up, b_ptr, b_atom, b_neg, b_bnd, inst, kind_base, unsat, 
 
 
 @kernel_jit
-def recount_groundings(first, lo, up, b_ptr, b_atom, b_neg, b_bnd, inst, kind_base, unsat, act, act_n, act_pos):
+def recount_groundings(first, lo, up, b_ptr, b_atom, b_flags, b_bnd, inst, kind_base, unsat, act, act_n, act_pos):
     """Counts for groundings first.. in every world (used when the grounding table grows)."""
     for w in range(lo.shape[0]):
         for g in range(first, b_ptr.shape[0] - 1):
-            _recount(w, g, lo, up, b_ptr, b_atom, b_neg, b_bnd, inst, kind_base, unsat, act, act_n, act_pos)
+            _recount(w, g, lo, up, b_ptr, b_atom, b_flags, b_bnd, inst, kind_base, unsat, act, act_n, act_pos)
 
 
 @kernel_jit
-def recount_worlds(worlds, lo, up, b_ptr, b_atom, b_neg, b_bnd, inst, kind_base, unsat, act, act_n, act_pos):
+def recount_worlds(worlds, lo, up, b_ptr, b_atom, b_flags, b_bnd, inst, kind_base, unsat, act, act_n, act_pos):
     """Counts and active lists of the given worlds rebuilt from scratch (restore after growth)."""
     for i in range(worlds.shape[0]):
         w = worlds[i]
         for k in range(N_KINDS):
             act_n[w, k] = 0
         for g in range(b_ptr.shape[0] - 1):
-            _recount(w, g, lo, up, b_ptr, b_atom, b_neg, b_bnd, inst, kind_base, unsat, act, act_n, act_pos)
+            _recount(w, g, lo, up, b_ptr, b_atom, b_flags, b_bnd, inst, kind_base, unsat, act, act_n, act_pos)
 
 
 @kernel_jit

@@ -37,7 +37,7 @@ MODE_OVERRIDE = 1
 POLICY_RESET_FREEZE, POLICY_KEEP_OLD, POLICY_TAKE_NEW, POLICY_HULL, POLICY_ABORT = 0, 1, 2, 3, 4
 STATUS_OK, STATUS_INCONSISTENT, STATUS_NO_FIXPOINT, STATUS_IMMEDIATE_LIMIT = 0, 1, 2, 3
 STATUS_NOT_SETTABLE, STATUS_TRACE_ROOM, STATUS_PEND_ROOM = 4, 5, 6
-RULE_MODE, RULE_DELAY = 0, 1
+RULE_MODE, RULE_DELAY, RULE_SET_STATIC = 0, 1, 3
 INST_RULE, INST_HEAD, INST_RANK, INST_KIND = 0, 1, 2, 3
 KIND_IMMEDIATE, KIND_DELAYED, KIND_ORDINARY = 0, 1, 2
 CFG_MODE, CFG_RESET, CFG_POLICY, CFG_MAX_PASSES, CFG_MAX_IMMEDIATE, CFG_T = 0, 1, 2, 3, 4, 5
@@ -52,6 +52,7 @@ SHARED_CODES = ("CAUSE_FACT", "CAUSE_EXTERNAL", "CAUSE_RULE", "CAUSE_POLICY", "C
                 "POLICY_RESET_FREEZE", "POLICY_KEEP_OLD", "POLICY_TAKE_NEW", "POLICY_HULL", "POLICY_ABORT",
                 "STATUS_OK", "STATUS_INCONSISTENT", "STATUS_NO_FIXPOINT", "STATUS_IMMEDIATE_LIMIT",
                 "STATUS_NOT_SETTABLE", "STATUS_TRACE_ROOM", "STATUS_PEND_ROOM", "RULE_MODE", "RULE_DELAY",
+                "RULE_SET_STATIC",
                 "INST_RULE", "INST_HEAD", "INST_RANK", "INST_KIND", "KIND_IMMEDIATE", "KIND_DELAYED",
                 "KIND_ORDINARY", "CFG_MODE", "CFG_RESET", "CFG_POLICY", "CFG_MAX_PASSES", "CFG_MAX_IMMEDIATE",
                 "CFG_T", "STAT_FIRINGS", "STAT_REDERIVATIONS", "STAT_STATIC_IGNORED", "STAT_CHANGES",
@@ -245,7 +246,9 @@ def _changes(g, k, st, inst, rule_i, rule_v):
     v = rule_v[r]
     t = st[a, P_T, k]
     f = st[a, P_F, k]
-    if v == V_T:
+    if rule_i[r, RULE_SET_STATIC] == 1:
+        m = ALL  # applying it freezes the head, a change of its own
+    elif v == V_T:
         m = ~t
     elif v == V_F:
         m = ~f
@@ -574,10 +577,16 @@ def _apply_immediate(w0, g, t, pass_no, policy, max_immediate, rule_i, rule_v, i
     r = inst[g, INST_RULE]
     v = rule_v[r]
     over = rule_i[r, RULE_MODE] == MODE_OVERRIDE
+    set_static = rule_i[r, RULE_SET_STATIC] == 1
     any_c = False
     any_inc = False
+    any_fz = False
     for k in range(nw):
         m = gs[g, k, 0] & ~st[a, P_S, k]
+        # {set_static}: it applies wherever it is active and the head is not static yet
+        ws[W_ONE, k] = m if set_static else ZERO
+        if set_static and m != ZERO:
+            any_fz = True
         t_k = st[a, P_T, k]
         f_k = st[a, P_F, k]
         if over:
@@ -615,11 +624,11 @@ def _apply_immediate(w0, g, t, pass_no, policy, max_immediate, rule_i, rule_v, i
         if inc & c:
             any_inc = True
     stats[0, STAT_CANDIDATES] += 1
-    if not any_c:
+    if not any_c and not any_fz:
         return STATUS_OK, hn
     # per world, in world order: the immediate limit, then an inconsistency under abort
     for k in range(nw):
-        m = ws[W_C, k]
+        m = ws[W_C, k] | ws[W_ONE, k]
         while m != ZERO:
             b = _cttz(m)
             m &= m - ONE
@@ -644,8 +653,11 @@ def _apply_immediate(w0, g, t, pass_no, policy, max_immediate, rule_i, rule_v, i
                 err[E_LAST_INST] = g
                 err[E_DISAGREE] = 0
                 return STATUS_INCONSISTENT, hn
+            if not ws[W_C, k] & (ONE << b):  # a {set_static} firing that only freezes the head
+                stats[w, STAT_REDERIVATIONS] += 1
     for k in range(nw):
         c = ws[W_C, k]
+        st[a, P_S, k] |= ws[W_ONE, k]  # {set_static}: frozen after the update (the new planes are set below)
         if c == ZERO:
             continue
         t_k = ws[W_OLDT, k]
@@ -777,7 +789,7 @@ def step_lanes(cfg, w0, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, w
                 if pend_due[p] == t:
                     r = inst[g, INST_RULE]
                     _add_src(inst[g, INST_HEAD], rule_v[r], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
-                             2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, False, pend_m[p], slot_of,
+                             2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, rule_i[r, RULE_SET_STATIC] == 1, pend_m[p], slot_of,
                              touched, n_touched, gm, slot_src, src_i, src_m, src_n)
                 else:
                     pend_due[kept] = pend_due[p]
@@ -882,7 +894,7 @@ def step_lanes(cfg, w0, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, w
                 if m_any:
                     r = inst[g, INST_RULE]
                     _add_src(inst[g, INST_HEAD], rule_v[r], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
-                             2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, False, ws[W_ONE], slot_of,
+                             2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, rule_i[r, RULE_SET_STATIC] == 1, ws[W_ONE], slot_of,
                              touched, n_touched, gm, slot_src, src_i, src_m, src_n)
             _sort_small(touched, n_touched[0])
             ctl[C_POS] = 0

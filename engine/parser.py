@@ -15,6 +15,7 @@ from .errors import ProgramCheckError, RuleSyntaxError
 from .program import (
     COMPARISONS,
     CONSTANT_RE,
+    EDGE_HEAD_MODES,
     INCONSISTENCY_POLICIES,
     MAX_BINDING_CLAUSES,
     MAX_TIME,
@@ -35,8 +36,11 @@ PREDICATE_RE = re.compile(r"[a-z][A-Za-z0-9_]*")
 VARIABLE_RE = re.compile(r"[A-Z_][A-Za-z0-9_]*")
 STATEMENT_NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_-]*")
 
-DIRECTIVES = {"mode": UPDATE_MODES, "timesteps": TIMESTEP_MODES, "inconsistency": INCONSISTENCY_POLICIES}
-RULE_OPTIONS = UPDATE_MODES  # `{override}` / `{intersection}`
+DIRECTIVES = {"mode": UPDATE_MODES, "timesteps": TIMESTEP_MODES, "inconsistency": INCONSISTENCY_POLICIES,
+              "edge_heads": EDGE_HEAD_MODES}
+LIST_DIRECTIVES = ("closed",)  # `%closed p, q`: a list of predicates, repeatable
+RULE_FLAGS = ("set_static", "infer_edges")  # rule options that switch a behaviour on
+RULE_OPTIONS = (*UPDATE_MODES, *RULE_FLAGS)  # `{override}` / `{intersection}`, `{set_static}`, `{infer_edges}`
 WEIGHTS_OPTION = "weights"  # `{weights=1,2,0.5}`: per-clause weights of the annotation function
 
 # ---------------------------------------------------------------------------------------------- tokens
@@ -163,6 +167,7 @@ class _Unit:
     lines: list[str]
     items: list[Rule | Fact] = field(default_factory=list)  # in file order; name "" = unnamed
     directives: list[tuple[str, str, SourceLoc]] = field(default_factory=list)
+    closed: list[tuple[str, SourceLoc]] = field(default_factory=list)  # `%closed` predicates, in order
     arg_locs: dict[int, tuple[Literal, tuple[SourceLoc, ...]]] = field(default_factory=dict)
 
 
@@ -225,8 +230,11 @@ class _Parser:
     def directive(self) -> None:
         pct = self.take()
         name = self.peek()
+        if name.kind == NAME and name.text in LIST_DIRECTIVES:
+            self.closed_directive(pct)
+            return
         if name.kind != NAME or name.text not in DIRECTIVES:
-            known = ", ".join(f"%{d}" for d in DIRECTIVES)
+            known = ", ".join(f"%{d}" for d in (*DIRECTIVES, *LIST_DIRECTIVES))
             what = f"unknown directive '%{name.text}'" if name.kind == NAME else \
                 f"expected a directive name after '%', found {name.describe()}"
             raise self.syntax(name, f"{what} (expected one of {known})")
@@ -244,6 +252,23 @@ class _Parser:
             raise self.syntax(self.peek(), f"expected end of line after '%{name.text} {value.text}', "
                                            f"found {self.peek().describe()}")
         self.unit.directives.append((name.text, value.text, self.loc(pct)))
+
+    def closed_directive(self, pct: Token) -> None:
+        """`%closed p` or `%closed p, q, ...`: predicates whose unset atoms read as [0,0] in bodies."""
+        self.take()  # 'closed'
+        while True:
+            t = self.peek()
+            if t.kind != NAME or not PREDICATE_RE.fullmatch(t.text):
+                what = f"invalid predicate name '{t.text}'" if t.kind == NAME else f"found {t.describe()}"
+                raise self.syntax(t, f"expected a predicate name after '%closed' or ',' ({what})")
+            self.take()
+            self.unit.closed.append((t.text, self.loc(t)))
+            if self.at_end():
+                return
+            if not self.peek().is_punct(","):
+                raise self.syntax(self.peek(), f"expected ',' or end of line after a predicate of %closed, "
+                                               f"found {self.peek().describe()}")
+            self.take()
 
     def statement(self) -> Rule | Fact:
         first_i = self.i
@@ -274,8 +299,7 @@ class _Parser:
             raise self.check(arrow, f"the delay {delay} is too large: a delay is at most {MAX_TIME}")
         quants = [self.quantifier()]
         body = [self.literal(f" after '{arrow.text}'")]
-        mode = None
-        weights: tuple[float, ...] = ()
+        options: dict[str, object] = {}
         while True:
             t = self.peek()
             if t.is_punct(","):
@@ -283,7 +307,7 @@ class _Parser:
                 quants.append(self.quantifier())
                 body.append(self.literal(" after ','"))
             elif t.is_punct("{"):
-                mode, weights = self.options()
+                options = self.options()
                 if not self.at_end():
                     raise self.syntax(self.peek(), "expected end of rule after the options, "
                                                    f"found {self.peek().describe()}")
@@ -296,10 +320,10 @@ class _Parser:
             raise self.check(function, f"unknown annotation function '{function.text}' (built in: "
                                        f"{', '.join(annotations.BUILTINS)}; register others with "
                                        "tracelab.engine.register_annotation before parsing)")
-        return Rule(name, head, tuple(body), delay=delay, immediate=immediate, mode=mode,
+        return Rule(name, head, tuple(body), delay=delay, immediate=immediate,
                     loc=self.loc(first), text=self.text_of(first_i, self.i),
                     quantifiers=tuple(quants) if any(q is not None for q in quants) else (),
-                    annotation=function.text if function is not None else None, weights=weights)
+                    annotation=function.text if function is not None else None, **options)
 
     def quantifier(self) -> Quantifier | None:
         """An optional `[op count[%] [available|total]]` or `[forall [available|total]]` before a clause."""
@@ -336,33 +360,36 @@ class _Parser:
         self.expect_punct("]", "to close the quantifier (after the count, 'available' or 'total')")
         return Quantifier(op, value, percent, available, loc=self.loc(bracket))
 
-    def options(self) -> tuple[str | None, tuple[float, ...]]:
+    def options(self) -> dict[str, object]:
+        """`{opt, opt, ...}`: the Rule fields they set (mode, set_static, infer_edges, weights)."""
         self.take()  # '{'
-        mode: str | None = None
-        weights: tuple[float, ...] | None = None
+        out: dict[str, object] = {}
         expected = " | ".join([*RULE_OPTIONS, f"{WEIGHTS_OPTION}=w1,w2,..."])
         while True:
             t = self.peek()
             if t.kind != NAME:
                 raise self.syntax(t, f"expected a rule option ({expected}), found {t.describe()}")
             if t.text == WEIGHTS_OPTION:
-                if weights is not None:
+                if "weights" in out:
                     raise self.check(t, "the option 'weights' is given twice")
                 self.take()
                 self.expect_punct("=", "after 'weights' (weights=w1,w2,...: one number per body clause)")
-                weights = self.weight_list()
+                out["weights"] = self.weight_list()
             elif t.text not in RULE_OPTIONS:
                 raise self.check(t, f"unknown rule option '{t.text}' (expected {expected})")
             else:
-                if mode is not None and mode != t.text:
-                    raise self.check(t, f"conflicting rule options '{mode}' and '{t.text}'")
-                mode = t.text
+                if t.text in RULE_FLAGS:
+                    out[t.text] = True
+                else:
+                    if out.get("mode", t.text) != t.text:
+                        raise self.check(t, f"conflicting rule options '{out['mode']}' and '{t.text}'")
+                    out["mode"] = t.text
                 self.take()
             if self.peek().is_punct(","):
                 self.take()
                 continue
             self.expect_punct("}", "or ',' after a rule option")
-            return mode, weights or ()
+            return out
 
     def weight_list(self) -> tuple[float, ...]:
         """`1,2,0.5` after `weights=`: numbers >= 0, up to the first ',' not followed by a number."""
@@ -580,6 +607,7 @@ def _build(units: list[_Unit]) -> Program:
                 raise fail(loc, f"conflicting %{key}: '{value}' here but '{seen[key][0]}' at {seen[key][1]}")
             seen.setdefault(key, (value, loc))
             setattr(program, key, value)
+    program.closed = tuple(dict.fromkeys(pred for u in units for pred, _loc in u.closed))
 
     items = _named([it for u in units for it in u.items], fail)
     program.rules = [it for it in items if isinstance(it, Rule)]
@@ -637,7 +665,7 @@ class _Checker:
     def run(self) -> None:
         p = self.program
         for attr, allowed in (("mode", UPDATE_MODES), ("timesteps", TIMESTEP_MODES),
-                              ("inconsistency", INCONSISTENCY_POLICIES)):
+                              ("inconsistency", INCONSISTENCY_POLICIES), ("edge_heads", EDGE_HEAD_MODES)):
             if getattr(p, attr) not in allowed:
                 raise self.fail(None, f"unknown %{attr} '{getattr(p, attr)}' (expected {' | '.join(allowed)})")
         names: dict[str, SourceLoc | None] = {}
@@ -708,34 +736,32 @@ class _Checker:
         if r.delay > MAX_TIME:
             raise self.fail(r.loc, f"rule '{r.name}': the delay {r.delay} is too large: a delay is at most "
                                    f"{MAX_TIME}")
-        n_binding = len(r.binding_clauses())
+        n_binding = len(r.watched_clauses())
         if n_binding > MAX_BINDING_CLAUSES:
             raise self.fail(r.loc, f"rule '{r.name}' has {n_binding} binding body clauses; the engine allows "
                                    f"at most {MAX_BINDING_CLAUSES} (clauses whose bound contains [0,1] do not count)")
         if r.immediate and r.delay != 0:
             raise self.fail(r.loc, f"rule '{r.name}' is immediate ('<-!') so its delay is 0, not {r.delay}")
-        if r.mode is not None and r.mode not in RULE_OPTIONS:
+        if r.mode is not None and r.mode not in UPDATE_MODES:
             raise self.fail(r.loc, f"rule '{r.name}': unknown rule option '{r.mode}' "
                                    f"(expected {' | '.join(RULE_OPTIONS)})")
         self.aggregation(r)
-        binding = {v for ci in r.binding_clauses() for v in r.body[ci].variables}
+        binding = {v for ci in r.binding_clauses(self.program.closed) for v in r.body[ci].variables}
         for var in r.variables:
             if var in binding:
                 continue
             lit, i = next((lit, i) for lit in (r.head, *r.body) for i, t in enumerate(lit.args)
                           if t.is_var and t.name == var)
-            in_body = [ci for ci, b in enumerate(r.body) if var in b.variables]
-            if any(r.quantifier(ci) is not None for ci in in_body):
-                lit, i = next((r.body[ci], i) for ci in in_body if r.quantifier(ci) is not None
+            quantified = [ci for ci, b in enumerate(r.body) if var in b.variables and r.quantifier(ci) is not None]
+            if quantified:
+                lit, i = next((r.body[ci], i) for ci in quantified
                               for i, t in enumerate(r.body[ci].args) if t.is_var and t.name == var)
                 why = ("a variable of a quantified clause must occur in the head or in an unquantified "
-                       "binding clause, which give the clause its candidates")
-            elif in_body:
-                why = "it occurs only in body clauses whose bound contains [0,1], which every atom satisfies"
+                       "binding clause, which give the clause its candidates; it must occur in a body clause "
+                       "whose bound excludes [0,1]")
             else:
-                why = "it occurs in no body clause"
-            raise self.fail(self.arg_loc(lit, i), f"unsafe variable '{var}' in rule '{r.name}': {why}; "
-                                                  "it must occur in a body clause whose bound excludes [0,1]")
+                why = _unsafe_why(self.program, r, var)
+            raise self.fail(self.arg_loc(lit, i), f"unsafe variable '{var}' in rule '{r.name}': {why}")
 
     def aggregation(self, r: Rule) -> None:
         """Quantifiers, annotation function and weights of a rule (docs/language.md)."""
@@ -779,8 +805,23 @@ class _Checker:
                 if lit.pred not in set_by and lit.pred not in warned:
                     warned.add(lit.pred)
                     where = str(lit.loc) if lit.loc is not None else "<program>"
+                    stays = "[0,1] (read as [0,0]: it is %closed)" if lit.pred in p.closed else "[0,1]"
                     yield (f"{where}: warning: predicate '{lit.pred}' is never set by a fact, a rule head or "
-                           "the graph; its atoms stay [0,1]")
+                           f"the graph; its atoms stay {stays}")
+
+
+def _unsafe_why(program: Program, r: Rule, var: str) -> str:
+    """Why no body clause of r enumerates var, and what would."""
+    uses = [b for b in r.body if var in b.variables]
+    if not uses:
+        return "it occurs in no body clause; it must occur in a body clause whose bound excludes [0,1]"
+    closed = [b for b in uses if b.binds and b.pred in program.closed]
+    if closed:
+        return (f"it occurs only in body clauses that atoms never set satisfy ('{closed[0].pred}' is %closed, "
+                "so its unset atoms read as [0,0]); it must occur in a clause that [0,1] (or [0,0] on a closed "
+                "predicate) does not satisfy")
+    return ("it occurs only in body clauses whose bound contains [0,1], which every atom satisfies; "
+            "it must occur in a body clause whose bound excludes [0,1]")
 
 
 def _alternatives(xs: list[str]) -> str:

@@ -3,11 +3,13 @@ the compiled engine and the reference evaluator."""
 from __future__ import annotations
 
 import re
+from collections.abc import Collection
 from dataclasses import dataclass, field
 
 UPDATE_MODES = ("intersection", "override")
 TIMESTEP_MODES = ("persistent", "reset")
 INCONSISTENCY_POLICIES = ("reset_freeze", "keep_old", "take_new", "hull", "abort")
+EDGE_HEAD_MODES = ("any", "graph")  # `%edge_heads`: where a binary rule head may set atoms
 # Limits of the compiled engine, checked with the program (docs/language.md). Times are stored in int32
 # and a delayed firing is due at t + delay, so times and delays stay well inside it; the kernel counts a
 # grounding's unsatisfied binding clauses in an int8.
@@ -108,6 +110,8 @@ class Rule:
     mode: str | None = None  # None: the program's mode
     loc: SourceLoc | None = field(default=None, compare=False)
     text: str = field(default="", compare=False)
+    set_static: bool = False  # `{set_static}`: the head atom is frozen once the rule fires
+    infer_edges: bool = False  # `{infer_edges}`: under `%edge_heads graph`, an edge head may leave the graph's edges
     # per body clause its quantifier or None; () when no clause has one
     quantifiers: tuple[Quantifier | None, ...] = ()
     annotation: str | None = None  # an annotation function computes the head's bound (`p(X):average`)
@@ -121,9 +125,15 @@ class Rule:
         """Evaluated per head grounding (a quantified clause or an annotation function)."""
         return self.annotation is not None or any(q is not None for q in self.quantifiers)
 
-    def binding_clauses(self) -> list[int]:
-        """Indices of the clauses that bind variables: not [0,1]-containing, not quantified."""
-        return [i for i, c in enumerate(self.body) if c.binds and self.quantifier(i) is None]
+    def binding_clauses(self, closed: Collection[str] = ()) -> list[int]:
+        """Indices of the clauses that enumerate (bind) variables: not quantified, and not true of an atom
+        nothing set (`clause_binds`; `closed`: the program's %closed predicates)."""
+        return [i for i, c in enumerate(self.body) if self.quantifier(i) is None and clause_binds(c, c.pred in closed)]
+
+    def watched_clauses(self) -> list[int]:
+        """Indices of the clauses each grounding tests (the counting kernel watches their atoms): not
+        quantified (a quantified clause is counted per head group) and not true of every interval."""
+        return [i for i, c in enumerate(self.body) if self.quantifier(i) is None and c.binds]
 
     @property
     def variables(self) -> tuple[str, ...]:
@@ -153,8 +163,14 @@ class Program:
     mode: str = "intersection"
     timesteps: str = "persistent"
     inconsistency: str = "reset_freeze"
+    edge_heads: str = "any"  # `%edge_heads graph`: edge heads without {infer_edges} stay on the graph's edges
+    closed: tuple[str, ...] = ()  # `%closed p`: predicates whose [0,1] atoms read as [0,0] in bodies
     files: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+
+    def enumerates(self, lit: Literal) -> bool:
+        """Whether body clause `lit` enumerates its variables in this program (`clause_binds`)."""
+        return clause_binds(lit, lit.pred in self.closed)
 
     def rule_index(self, name: str) -> int:
         for i, r in enumerate(self.rules):
@@ -197,7 +213,18 @@ def effective_bound(lower: float, upper: float, negated: bool) -> tuple[float, f
     return (1.0 - upper, 1.0 - lower) if negated else (lower, upper)
 
 
-def satisfies(atom_lower: float, atom_upper: float, lit: Literal) -> bool:
-    """I ⊨ lit iff the atom's interval (complemented for `~`) is contained in the literal's bound."""
+def satisfies(atom_lower: float, atom_upper: float, lit: Literal, closed: bool = False) -> bool:
+    """I ⊨ lit iff the atom's interval (complemented for `~`) is contained in the literal's bound. On a
+    closed predicate (`%closed`) an atom that is [0,1] is read as [0,0]."""
+    if closed and atom_lower == 0.0 and atom_upper == 1.0:
+        atom_upper = 0.0
     a, b = effective_bound(atom_lower, atom_upper, lit.negated)
     return a >= lit.lower - EPS and b <= lit.upper + EPS
+
+
+def clause_binds(lit: Literal, closed: bool) -> bool:
+    """Whether a body clause enumerates its variables: it does not hold of an atom nothing ever set
+    ([0,1], read as [0,0] on a closed predicate), so each of its groundings needs a settable atom. A
+    clause that holds of unset atoms cannot enumerate: it is only tested (if it is not trivially true,
+    `Literal.binds` false, it is still watched)."""
+    return lit.binds and not (closed and satisfies(0.0, 0.0, lit))

@@ -60,6 +60,7 @@ class _Source:
     cid: int  # fact index, external fact index or rule index
     grounding: tuple[str, ...] | None = None
     grounding_ids: tuple[int, ...] = ()  # node ids of the grounding: the source-order key among firings
+    freeze: bool = False  # a firing of a `{set_static}` rule: the atom is static after this update
 
 
 @dataclass(frozen=True)
@@ -104,8 +105,13 @@ class ReferenceEvaluator:
     """One world of `program` over `graph_nodes` (plus the program's constants), stepped like Engine."""
 
     def __init__(self, program: Program, graph_nodes: Sequence[str] = (), graph_facts: Sequence[Fact] = (),
-                 max_passes: int = 1000, max_immediate: int = 100000) -> None:
+                 max_passes: int = 1000, max_immediate: int = 100000,
+                 graph_edges: Sequence[tuple[str, str]] = ()) -> None:
         self.program = program
+        self.closed = frozenset(program.closed)
+        # the graph's edges (source, target): where `%edge_heads graph` lets edge heads of rules without
+        # {infer_edges} land
+        self.edges = frozenset((a, b) for a, b in graph_edges)
         self.rules: list[Rule] = list(program.rules)
         # graph facts come first: fact ids 0..g-1, program facts g.. (docs/language.md "Source order")
         self.facts: list[Fact] = [*graph_facts, *program.facts]
@@ -149,8 +155,16 @@ class ReferenceEvaluator:
     def _holds(self, lit: Literal, binding: dict[str, str]) -> bool:
         """I ⊨ lit: the atom's interval (complemented for `~`) is contained in the literal's bound.
         EPS is the shared tolerance of engine/program.py (1 - x is not exact in binary)."""
-        lo, up = self.bound(self._ground(lit, binding))
-        a, b = _effective(lo, up, lit.negated)
+        return self._atom_holds(self._ground(lit, binding), lit)
+
+    def _read(self, atom: Atom) -> Interval:
+        """The atom's interval as body clauses read it: on a %closed predicate, an atom nothing set
+        ([0,1]) reads as [0,0]."""
+        iv = self.bound(atom)
+        return (0.0, 0.0) if atom[0] in self.closed and iv == FULL else iv
+
+    def _atom_holds(self, atom: Atom, lit: Literal) -> bool:
+        a, b = _effective(*self._read(atom), lit.negated)
         return a >= lit.lower - EPS and b <= lit.upper + EPS
 
     @staticmethod
@@ -161,12 +175,16 @@ class ReferenceEvaluator:
         """Every assignment of rule.variables over all nodes whose body holds, smallest node ids first
         (itertools.product enumerates in lexicographic order): (node ids, values, head atom)."""
         variables = rule.variables
+        on_edges = self._on_graph_edges(rule)
         out = []
         for ids in itertools.product(range(len(self.nodes)), repeat=len(variables)):
             values = tuple(self.nodes[i] for i in ids)
             binding = dict(zip(variables, values))
             if all(self._holds(lit, binding) for lit in rule.body):
-                out.append((ids, values, self._ground(rule.head, binding)))
+                head = self._ground(rule.head, binding)
+                if on_edges and head[1] not in self.edges:
+                    continue  # %edge_heads graph: this rule's head stays on the graph's edges
+                out.append((ids, values, head))
         return out
 
     def _rule_firings(self, ri: int) -> list[tuple[Atom, _Source]]:
@@ -183,12 +201,16 @@ class ReferenceEvaluator:
         function's result."""
         rule = self.rules[ri]
         variables = rule.variables
+        on_edges = self._on_graph_edges(rule)
         unquantified = [lit for i, lit in enumerate(rule.body) if rule.quantifier(i) is None]
         groups: dict[Atom, list[tuple[tuple[int, ...], dict[str, str]]]] = {}
         for ids in itertools.product(range(len(self.nodes)), repeat=len(variables)):
             binding = dict(zip(variables, (self.nodes[i] for i in ids)))
             if all(self._holds(lit, binding) for lit in unquantified):
-                groups.setdefault(self._ground(rule.head, binding), []).append((ids, binding))
+                head = self._ground(rule.head, binding)
+                if on_edges and head[1] not in self.edges:
+                    continue  # %edge_heads graph: this rule's head stays on the graph's edges
+                groups.setdefault(head, []).append((ids, binding))
         out = []
         for head, joins in groups.items():
             if not all(self._quantifier_holds(q, rule.body[ci], [b for _, b in joins])
@@ -201,20 +223,16 @@ class ReferenceEvaluator:
             quantified = [lit for i, lit in enumerate(rule.body) if rule.quantifier(i) is not None]
             ids, binding = next((j for j in joins if all(self._holds(lit, j[1]) for lit in quantified)), joins[0])
             out.append((head, _Source(mu, self._rule_override(rule), CAUSE_RULE, ri,
-                                      tuple(binding[v] for v in variables), ids)))
+                                      tuple(binding[v] for v in variables), ids, freeze=rule.set_static)))
         return out
 
     def _candidates(self, lit: Literal, joins: list[dict[str, str]]) -> list[Atom]:
         """The distinct atoms of a clause over the joins, in join order."""
         return list(dict.fromkeys(self._ground(lit, b) for b in joins))
 
-    def _atom_holds(self, atom: Atom, lit: Literal) -> bool:
-        a, b = _effective(*self.bound(atom), lit.negated)
-        return a >= lit.lower - EPS and b <= lit.upper + EPS
-
     def _quantifier_holds(self, q: Quantifier, lit: Literal, joins: list[dict[str, str]]) -> bool:
         cands = self._candidates(lit, joins)
-        if q.available:  # only atoms that carry a bound other than [0,1]
+        if q.available:  # only atoms that carry a bound other than [0,1] (also on a %closed predicate)
             cands = [a for a in cands if self.bound(a) != FULL]
         n, d = sum(self._atom_holds(a, lit) for a in cands), len(cands)
         if q.percent:
@@ -235,7 +253,7 @@ class ReferenceEvaluator:
         for ci, lit in enumerate(rule.body):
             for atom in self._candidates(lit, joins):
                 if self._atom_holds(atom, lit):
-                    lo, up = self.bound(atom)
+                    lo, up = self._read(atom)
                     lower.append(lo)
                     upper.append(up)
                     weights.append(rule.weights[ci] if rule.weights else 1.0)
@@ -250,6 +268,10 @@ class ReferenceEvaluator:
             return None
         return _effective(res[0], res[1], head.negated)
 
+    def _on_graph_edges(self, rule: Rule) -> bool:
+        """Whether the rule's groundings are limited to heads on the graph's edges (docs/language.md)."""
+        return (self.program.edge_heads == "graph" and len(rule.head.args) == 2 and not rule.infer_edges)
+
     def _rule_override(self, rule: Rule) -> bool:
         return (rule.mode or self.program.mode) == "override"
 
@@ -257,7 +279,7 @@ class ReferenceEvaluator:
         rule = self.rules[ri]
         head = rule.head
         return _Source(_effective(head.lower, head.upper, head.negated), self._rule_override(rule),
-                       CAUSE_RULE, ri, values, ids)
+                       CAUSE_RULE, ri, values, ids, freeze=rule.set_static)
 
     # ---- updating an atom (docs/language.md "Updating an atom") ----
 
@@ -291,6 +313,8 @@ class ReferenceEvaluator:
         """Whether applying the single source would change the atom (an abort counts: applying raises)."""
         if atom in self._static:
             return False
+        if source.freeze:
+            return True  # a {set_static} firing changes the atom's static flag
         new, inconsistent = self._resolve(atom, [source])
         if inconsistent and self.program.inconsistency == "abort":
             return True
@@ -306,7 +330,7 @@ class ReferenceEvaluator:
         policy = self.program.inconsistency
         if inconsistent and policy == "abort":
             raise InconsistencyError(self._abort_message(atom, t, sources[0]))
-        if inconsistent and policy == "reset_freeze":
+        if (inconsistent and policy == "reset_freeze") or any(s.freeze for s in sources):
             self._static.add(atom)  # frozen even when its interval does not change
         if new == old:
             return False

@@ -9,11 +9,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
 from hypothesis import strategies as st
 from tracelab.engine import register_annotation
 from tracelab.engine.graph import Graph
 from tracelab.engine.parser import parse_program
-from tracelab.engine.program import INCONSISTENCY_POLICIES, Fact, Literal, Program, Term
+from tracelab.engine.program import INCONSISTENCY_POLICIES, Literal, Program, clause_binds
 
 GRID = (0.0, 0.25, 0.5, 0.75, 1.0)
 VARIABLES = ("X", "Y", "Z")
@@ -46,9 +47,15 @@ class Scenario:
     externals: list[list[ExtFact]]  # per step, the same in every world
     world_externals: list[list[list[ExtFact]]] = field(default_factory=list)  # [world][step]
 
+    @property
+    def graph_edges(self) -> list[tuple[str, str]]:
+        """The graph's edges as node names (the reference evaluator's `graph_edges`)."""
+        return [(self.graph.nodes[a], self.graph.nodes[b]) for a, b in self.graph.edges.tolist()]
+
     def __str__(self) -> str:  # what hypothesis prints for a falsifying example
         lines = [self.text.rstrip(), f"# graph nodes {self.graph.nodes}",
                  *(f"# graph fact {f.literal} @{f.start}" for f in self.graph.facts),
+                 *(f"# graph edge {a} -> {b}" for a, b in self.graph_edges),
                  *(f"# before step {t}: {', '.join(map(str, fs))}" for t, fs in enumerate(self.externals) if fs)]
         for w, per_step in enumerate(self.world_externals):
             lines += [f"# world {w} before step {t}: {', '.join(map(str, fs))}"
@@ -168,12 +175,22 @@ def quantifiers(draw: st.DrawFn) -> str:
     return f"[{count}{word}] "
 
 
+def _enumerates(pred: str, negated: bool, b: Bound, closed: tuple[str, ...]) -> bool:
+    """Whether a clause binds its variables (engine/program.py clause_binds; %closed changes it)."""
+    return clause_binds(Literal(pred, (), b[0], b[1], negated), pred in closed)
+
+
+RULE_OPTIONS = ((), (), (), ("override",), ("intersection",), ("set_static",), ("override", "set_static"),
+                ("infer_edges",), ("set_static", "infer_edges"))
+
+
 @st.composite
 def rule_lines(draw: st.DrawFn, sig: _Sig, name: str, heads: list[tuple[str, bool, Bound]],
-               crisp: bool = False, aggregates: bool = False) -> str:
+               crisp: bool = False, aggregates: bool = False, closed: tuple[str, ...] = ()) -> str:
     """One safe rule. `heads` holds the (pred, negated, bound) of earlier rules' heads; the first clause
     often tests one of them, so that rules chain within a step (passes 2, 3, ...). Appends its own head.
-    aggregates: some rules get quantified clauses and annotation functions (never immediate ones)."""
+    aggregates: some rules get quantified clauses and annotation functions (never immediate ones).
+    `closed`: the %closed predicates (their clauses that [0,0] satisfies do not bind)."""
     preds = sorted(sig.arity)
     n_body = draw(st.integers(1, 3))
     clauses: list[tuple[str, list[str], bool, Bound]] = []  # pred, args (vars upper-case), negated, bound
@@ -198,11 +215,13 @@ def rule_lines(draw: st.DrawFn, sig: _Sig, name: str, heads: list[tuple[str, boo
         negated = _chance(draw, 7)
         b = draw(bounds(binding=True if i == 0 else draw(st.sampled_from((True, True, True, False)))))
         clauses.append((pred, args, negated, b))
-    # safety: a variable of a non-binding clause ([0,1]) or of the head must occur in a binding clause
-    bound_vars = sorted({a for p, args, n, b in clauses if b != (0.0, 1.0) for a in args if a[0].isupper()})
+    # safety: a variable of a non-binding clause ([0,1], or one [0,0] satisfies on a closed predicate) or
+    # of the head must occur in a binding clause
+    bound_vars = sorted({a for p, args, n, b in clauses if _enumerates(p, n, b, closed)
+                         for a in args if a[0].isupper()})
     fixed = []
     for pred, args, negated, b in clauses:
-        if b == (0.0, 1.0):
+        if not _enumerates(pred, negated, b, closed):
             args = [a if not a[0].isupper() or a in bound_vars
                     else (draw(st.sampled_from(bound_vars)) if bound_vars else draw(st.sampled_from(sig.nodes)))
                     for a in args]
@@ -221,14 +240,14 @@ def rule_lines(draw: st.DrawFn, sig: _Sig, name: str, heads: list[tuple[str, boo
     if aggregates and not _chance(draw, 3):
         for i in range(1, len(fixed)):
             others = {a for j, (p, args, n, b) in enumerate(fixed) if j != i and prefixes[j] == "" and
-                      b != (0.0, 1.0) for a in args if a[0].isupper()}
+                      _enumerates(p, n, b, closed) for a in args if a[0].isupper()}
             if all(a in others for a in fixed[i][1] if a[0].isupper()) and not _chance(draw, 3):
                 prefixes[i] = draw(quantifiers())
         while any(prefixes):  # safe: head, [0,1] and quantified clauses' variables bound by the others
-            unq = {a for j, (p, args, n, b) in enumerate(fixed) if not prefixes[j] and b != (0.0, 1.0)
+            unq = {a for j, (p, args, n, b) in enumerate(fixed) if not prefixes[j] and _enumerates(p, n, b, closed)
                    for a in args if a[0].isupper()}
             needed = {a for a in head_args if a[0].isupper()} | {
-                a for j, (p, args, n, b) in enumerate(fixed) if prefixes[j] or b == (0.0, 1.0)
+                a for j, (p, args, n, b) in enumerate(fixed) if prefixes[j] or not _enumerates(p, n, b, closed)
                 for a in args if a[0].isupper()}
             if needed <= unq:
                 break
@@ -237,11 +256,11 @@ def rule_lines(draw: st.DrawFn, sig: _Sig, name: str, heads: list[tuple[str, boo
             annotation = draw(st.sampled_from(ANNOTATION_FUNCTIONS))
     aggregated = annotation != "" or any(prefixes)
     arrow = "<-!" if delay == 0 and not aggregated and _chance(draw, 3) else f"<-{delay}"
-    options = [draw(st.sampled_from(("", "", "override", "intersection")))]
+    options = list(draw(st.sampled_from(RULE_OPTIONS)))
     if annotation and _chance(draw, 2):
         options.append("weights=" + ",".join(draw(st.sampled_from(("0", "1", "2", "0.5")))
                                             for _ in fixed))
-    option = f" {{{', '.join(o for o in options if o)}}}" if any(options) else ""
+    option = f" {{{', '.join(options)}}}" if options else ""
     heads.append((head_pred, bool(head_neg), head_bound))
     body = ", ".join(f"{q}{'~' if n else ''}{p}({','.join(a)}):{_bound_text(b)}"
                      for q, (p, a, n, b) in zip(prefixes, fixed))
@@ -262,6 +281,21 @@ def ext_facts(draw: st.DrawFn, sig: _Sig, nodes: list[str], max_per_step: int = 
     return out
 
 
+def graph_of(nodes: list[str], facts: list[tuple[str, tuple[str, ...], Bound]],
+             edges: list[tuple[str, str]]) -> Graph:
+    """A Graph (columns, as load_graphml makes them) with these nodes (fact nodes appended), static facts
+    at t = 0 and edges."""
+    nodes = list(dict.fromkeys([*nodes, *(a for _, args, _ in facts for a in args)]))
+    ids = {n: i for i, n in enumerate(nodes)}
+    labels = list(dict.fromkeys(p for p, _, _ in facts))
+    arity = [next(len(a) for p, a, _ in facts if p == lab) for lab in labels]
+    return Graph(nodes, labels, arity,
+                 np.array([labels.index(p) for p, _, _ in facts], np.int32),
+                 np.array([(ids[a[0]], ids[a[1]] if len(a) > 1 else -1) for _, a, _ in facts], np.int32).reshape(-1, 2),
+                 np.array([b for _, _, b in facts], np.float64).reshape(-1, 2),
+                 edges=np.array([(ids[a], ids[b]) for a, b in edges], np.int32).reshape(-1, 2))
+
+
 @st.composite
 def scenarios(draw: st.DrawFn, per_world: int = 0, with_graph: bool = True,
               policies: tuple[str, ...] = POLICIES, crisp: bool = False, aggregates: bool = False) -> Scenario:
@@ -272,7 +306,11 @@ def scenarios(draw: st.DrawFn, per_world: int = 0, with_graph: bool = True,
     steps = draw(st.integers(2, 4))
     lines = [f"%mode {draw(st.sampled_from(('intersection', 'override')))}",
              f"%timesteps {draw(st.sampled_from(('persistent', 'reset')))}",
-             f"%inconsistency {draw(st.sampled_from(policies))}"]
+             f"%inconsistency {draw(st.sampled_from(policies))}",
+             f"%edge_heads {draw(st.sampled_from(('any', 'any', 'graph')))}"]
+    closed = tuple(p for p in sorted(sig.arity) if _chance(draw, 3))
+    if closed:
+        lines.append(f"%closed {', '.join(closed)}")
     # a base of facts that hold at every step, so that bodies (joins included) find matches
     for pred in sorted(sig.arity):
         for args in draw(st.lists(ground_args(sig, pred), max_size=3, unique=True)):
@@ -280,23 +318,24 @@ def scenarios(draw: st.DrawFn, per_world: int = 0, with_graph: bool = True,
                          f" @0..{steps}")
     lines += draw(st.lists(fact_lines(sig, steps, crisp), min_size=1, max_size=8))
     heads: list[tuple[str, bool, Bound]] = []
-    lines += [draw(rule_lines(sig, f"r{i}", heads, crisp, aggregates)) for i in range(draw(st.integers(1, 6)))]
+    lines += [draw(rule_lines(sig, f"r{i}", heads, crisp, aggregates, closed))
+              for i in range(draw(st.integers(1, 6)))]
     text = "\n".join(lines) + "\n"
 
-    # a graph: some nodes (possibly isolated) and a few static facts at t = 0 on them
+    # a graph: some nodes (possibly isolated), a few static facts at t = 0 on them, a few edges
     graph = Graph()
     if with_graph and draw(st.booleans()):
-        graph.nodes = draw(st.lists(st.sampled_from(sig.nodes), unique=True, max_size=3))
-        for i in range(draw(st.integers(0, 2))):
+        nodes = draw(st.lists(st.sampled_from(sig.nodes), unique=True, max_size=3))
+        facts: list[tuple[str, tuple[str, ...], Bound]] = []
+        for _ in range(draw(st.integers(0, 2))):
             group = draw(st.sampled_from(sig.groups))
             pred = draw(st.sampled_from(sorted(sig.arity)))
             args = tuple(draw(st.sampled_from(group)) for _ in range(sig.arity[pred]))
-            lo, up = draw(bounds(binding=True, crisp=crisp))
-            graph.facts.append(Fact(f"graph{i}", Literal(pred, tuple(Term(a, False) for a in args), lo, up),
-                                    static=True))
+            facts.append((pred, args, draw(bounds(binding=True, crisp=crisp))))
             if not _chance(draw, 4):  # sometimes a fact's node is missing from the node list
-                graph.nodes += [a for a in dict.fromkeys(args) if a not in graph.nodes]
-
+                nodes += [a for a in dict.fromkeys(args) if a not in nodes]
+        edges = draw(st.lists(st.tuples(st.sampled_from(sig.nodes), st.sampled_from(sig.nodes)), max_size=4))
+        graph = graph_of([*nodes, *(a for e in edges for a in e)], facts, edges)
     program = parse_program(text, "<hypothesis>")
     if per_world:
         # only constants every world already knows: a new node would get different ids in different worlds

@@ -80,18 +80,18 @@ def test_auto_takes_the_compiled_kernel_only_when_cached(tmp_path, monkeypatch: 
 @dataclasses.dataclass(frozen=True)
 class _FutureRule(Rule):
     """A rule with a language feature the compiled backend does not know (as issue 14 adds them)."""
-    quantifier: str | None = None
+    threshold: str | None = None  # not `quantifier`: that name is Rule's method
 
 
 def test_a_program_with_an_unknown_feature_falls_back_with_a_notice(capsys: pytest.CaptureFixture[str]) -> None:
     program = parse_program(SMALL)
     program.rules[1] = _FutureRule(**{f.name: getattr(program.rules[1], f.name)
-                                      for f in dataclasses.fields(Rule)}, quantifier=">= 50%")
-    assert unsupported(program) == "rule r2 (<string>:3:1) uses quantifier"
+                                      for f in dataclasses.fields(Rule)}, threshold=">= 50%")
+    assert unsupported(program) == "rule r2 (<string>:3:1) uses threshold"
     eng = Engine(program, kernel="compiled")
     assert eng.kernel == "counting"
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "rule r2" in err and "quantifier" in err and "counting kernel" in err
+    assert err.count("\n") == 1 and "rule r2" in err and "threshold" in err and "counting kernel" in err
 
 
 # ---- differential: compiled against counting ----

@@ -95,7 +95,8 @@ def run_and_compare(sc: Scenario, kernel: str = "counting") -> None:
                  max_immediate=MAX_IMMEDIATE, kernel=kernel)
     assert eng.kernel == kernel
     # the same facts everywhere: one reference stands for every world
-    refs = [ReferenceEvaluator(sc.program, sc.graph.nodes, sc.graph.facts, MAX_PASSES, MAX_IMMEDIATE)
+    refs = [ReferenceEvaluator(sc.program, sc.graph.nodes, sc.graph.facts, MAX_PASSES, MAX_IMMEDIATE,
+                                  graph_edges=sc.graph_edges)
             for _ in range(WORLDS if per_world else 1)]
     # engine external facts are numbered over all worlds, each reference numbers its own world's
     ext_ids: dict[int, int] = {}  # engine number -> that world's reference number
@@ -155,7 +156,8 @@ def test_abort_stops_both_at_the_same_step(sc: Scenario) -> None:
 def run_until_abort(sc: Scenario, kernel: str) -> None:
     eng = Engine(sc.program, sc.graph, worlds=WORLDS, trace=True, max_passes=MAX_PASSES,
                  max_immediate=MAX_IMMEDIATE, kernel=kernel)
-    ref = ReferenceEvaluator(sc.program, sc.graph.nodes, sc.graph.facts, MAX_PASSES, MAX_IMMEDIATE)
+    ref = ReferenceEvaluator(sc.program, sc.graph.nodes, sc.graph.facts, MAX_PASSES, MAX_IMMEDIATE,
+                                  graph_edges=sc.graph_edges)
     for t in range(sc.steps):
         for f in sc.externals[t]:
             add_external(eng, ref, f, None)

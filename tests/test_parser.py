@@ -56,6 +56,9 @@ def test_docs_statements_parse_to_the_expected_ast() -> None:
              (L("bullet", V("B")), L("atLoc", V("B"), V("X")), L("agent", V("A")), L("atLoc", V("A"), V("X"))),
              immediate=True),
         Rule("clear", L("moveDown", V("A"), lo=0.0, hi=0.0), (L("moveDown", V("A")),), delay=1, mode="override"),
+        Rule("lock", L("locked", V("D")), (L("door", V("D")), L("key", V("D"))), delay=1, set_static=True),
+        Rule("link", L("linked", V("X"), V("Y")), (L("hub", V("X")), L("joins", V("Y"))), mode="override",
+             infer_edges=True),
     ]
     names = [f.name for f in p.facts]
     assert all(re.fullmatch(r"fact\d+", n) for n in names)
@@ -66,6 +69,7 @@ def test_docs_statements_parse_to_the_expected_ast() -> None:
         (L("blocked", C("c12"), lo=0.0, hi=0.0), 0, 0, True),
     ]
     assert (p.mode, p.timesteps, p.inconsistency) == ("override", "reset", "hull")
+    assert (p.closed, p.edge_heads) == (("alarm", "hacked"), "graph")
     assert p.files == ["language.md"]
 
 
@@ -236,7 +240,7 @@ SYNTAX_ERRORS = [
     ("h(X) <- a(X)", 1, 8, "expected a delay right after '<-'"),
     ("h(X) <-0 a(X),\n\n# nothing follows\n", 1, 15, "expected a literal after ',', found end of file"),
     ("h(X) <-0", 1, 9, "expected a literal after '<-0', found end of file"),
-    ("h(X) <-0 a(X) {", 1, 16, "expected a rule option (intersection | override | weights=w1,w2,...), found end of line"),
+    ("h(X) <-0 a(X) {", 1, 16, "expected a rule option (intersection | override | set_static | infer_edges | weights=w1,w2,...), found end of line"),
     ("h(X) <-0 a(X) {override", 1, 24, "expected '}' or ',' after a rule option, found end of line"),
     ("h(X) <-0 a(X) {override} b(X)", 1, 26, "expected end of rule after the options, found 'b'"),
     ("p(a,b,c)", 1, 6, "expected ')' after the second argument"),
@@ -262,7 +266,7 @@ SYNTAX_ERRORS = [
     ("p(a) \\ q(a)", 1, 6, "'\\' continues a statement on the next line and must end its line"),
     ("16: p(a)", 1, 1, "invalid name '16'"),
     (": p(a)", 1, 1, "expected a rule, a fact or a directive, found ':'"),
-    ("%foo bar", 1, 2, "unknown directive '%foo' (expected one of %mode, %timesteps, %inconsistency)"),
+    ("%foo bar", 1, 2, "unknown directive '%foo' (expected one of %mode, %timesteps, %inconsistency, %edge_heads, %closed)"),
     ("%", 1, 2, "expected a directive name after '%', found end of line"),
     ("%mode", 1, 6, "expected a value for %mode (intersection | override), found end of line"),
     ("%mode override extra", 1, 16, "expected end of line after '%mode override', found 'extra'"),

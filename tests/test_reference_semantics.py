@@ -581,7 +581,8 @@ def test_external_facts_are_numbered_in_order_and_add_nodes() -> None:
 # ---- properties over random programs ---------------------------------------------------------------
 
 def _run_scenario(sc: Scenario) -> ReferenceEvaluator:
-    ev = ReferenceEvaluator(sc.program, sc.graph.nodes, sc.graph.facts, max_passes=40, max_immediate=200)
+    ev = ReferenceEvaluator(sc.program, sc.graph.nodes, sc.graph.facts, max_passes=40, max_immediate=200,
+                            graph_edges=sc.graph_edges)
     for t in range(sc.steps):
         for f in sc.externals[t]:
             ev.add_fact(f.pred, f.args, f.lower, f.upper, f.static)
