@@ -46,6 +46,15 @@ def eval_seed(seed: int, round_no: int) -> int:
     return int(np.random.SeedSequence([seed, 1, round_no]).generate_state(1)[0])
 
 
+def _agent_rewards(info: dict, done: np.ndarray) -> np.ndarray:
+    """Each red agent's reward of the step, [W, N]. Worlds that ended were reset within the step (SAME_STEP
+    autoreset), so their top-level info is the new episode's (zeros): their terminal step's rewards, the
+    win or loss term included, are in final_info."""
+    if not done.any():
+        return info["agent_reward"]
+    return np.where(done[:, None], info["final_info"]["agent_reward"], info["agent_reward"])
+
+
 class Trainer:
     def __init__(self, cfg: TrainConfig, scenario: Scenario, writer: TraceWriter | None = None,
                  run_dir: Path | None = None, progress: Progress | None = None) -> None:
@@ -179,8 +188,8 @@ class Trainer:
         self.history[rows, self.ep_len, 1] = info["opponent_actions"].reshape(w, n)
         self.ep_len += 1
         self.ep_return += reward
-        self.pending.earn((reward[:, None] if n == 1 else info["agent_reward"]) * cfg.reward_scale)
         done = terminated | truncated
+        self.pending.earn((reward[:, None] if n == 1 else _agent_rewards(info, done)) * cfg.reward_scale)
         true_next = obs
         if done.any():
             true_next = obs.copy()
