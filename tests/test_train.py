@@ -245,6 +245,23 @@ def test_a_team_s_closing_transitions_carry_the_win_or_loss_term():
     assert (np.abs(st["reward"][~closing]) <= 1.0).all()  # step terms only: -0.1, or -1 when unsafe
 
 
+@pytest.mark.parametrize("share", [1.0, 0.0])
+def test_explore_scripted_takes_exploring_actions_from_the_scripted_policy(share):
+    """--explore-scripted 1: every exploring move is the scripted policy's, a step towards blue's base at
+    (0, 3) (one always exists on the open walk); 0: uniform, so other actions appear too."""
+    cfg = TrainConfig(scenario="walk4", steps=400, seed=6, explore_scripted=share,
+                      **{**SMALL, "warmup": 5000, "eval_every": 0})
+    trainer = Trainer(cfg, WALK)
+    trainer.train()
+    st = trainer.learners["shared"].buffer.state()
+    trainer.close()
+    steps = st["discount"] > 0  # the closing transitions' next obs is the terminal one: keep the rest
+    dist = lambda o: o[:, 0] + (3 - o[:, 1])  # noqa: E731  Manhattan distance of red to (0, 3)
+    closer = dist(st["next_obs"][steps]) == dist(st["obs"][steps]) - 1
+    assert steps.sum() > 100
+    assert closer.all() if share == 1.0 else closer.mean() < 0.7
+
+
 def test_saved_policy_round_trips_and_plain_torch_loads_it(tmp_path):
     cfg = TrainConfig(scenario="walk4", steps=200, seed=2, **{**SMALL, "eval_every": 0})
     trainer = Trainer(cfg, WALK)

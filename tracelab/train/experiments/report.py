@@ -50,7 +50,7 @@ def machine() -> str:
 
 # the settings of the method's DQN (shared/paper-notes.md); a report names those an arm changes
 DQN_FIELDS = ("hidden", "lr", "gamma", "batch", "buffer", "target_every", "eps_start", "eps_end",
-              "eps_decay_start", "eps_decay_end", "updates_per_step", "reward_scale", "mask")
+              "eps_decay_start", "eps_decay_end", "updates_per_step", "reward_scale", "mask", "explore_scripted")
 
 
 def learner_text(result: ExperimentResult) -> str:
