@@ -183,7 +183,7 @@ def goal_lines(result: ExperimentResult) -> list[str]:
         vals = [s.final[0.3].method_win_rate for s in ar.seeds if 0.3 in s.final]
         reached = sum(v >= ar.arm.published for v in vals)
         verdict = "**reached**" if vals and reached == len(vals) else "**not reached**"
-        out.append(f"- {ar.arm.label}: {verdict} in {reached} of {len(vals)} seeds with {result.budget.steps:,} "
+        out.append(f"- {ar.arm.label}: {verdict}, {reached} of {len(vals)} seeds reach it with {result.budget.steps:,} "
                    f"steps: method's win rate against p = 0.3 {spread_text(vals)}; the method: "
                    f"{ar.arm.published_note}.")
     if exp.name == "markov-vs-nonmarkov" and len(result.arms) == 2:
