@@ -226,6 +226,42 @@ def test_masked_training_records_the_moves_the_shield_allows_in_the_next_state()
     np.testing.assert_array_equal(st["next_allowed"][boot], expect)
 
 
+def test_a_team_s_closing_transitions_carry_the_win_or_loss_term():
+    """With several agents each learns from its own reward; the step that ends a game resets the world
+    within the step (SAME_STEP), so the terminal rewards must come from final_info. Every transition cut
+    by a capture (discount 0: nobody dies on the walk) carries +-10 plus its small step term; a draw
+    has no terminal term."""
+    team = replace(WALK, agents_per_team=2, red_starts=None, blue_starts=None)
+    cfg = TrainConfig(scenario="walk4", steps=1200, seed=3, **{**SMALL, "warmup": 5000, "eval_every": 0})
+    trainer = Trainer(cfg, team)
+    trainer.train()
+    st = trainer.learners["shared"].buffer.state()
+    trainer.close()
+    closing = st["discount"] == 0
+    assert closing.sum() >= 20
+    won_or_lost = np.abs(st["reward"][closing]) > 8.5  # the rest are draws: no terminal term
+    assert won_or_lost.mean() > 0.9, st["reward"][closing]
+    assert (st["reward"][closing] > 8.5).any() and (st["reward"][closing] < -8.5).any()
+    assert (np.abs(st["reward"][~closing]) <= 1.0).all()  # step terms only: -0.1, or -1 when unsafe
+
+
+@pytest.mark.parametrize("share", [1.0, 0.0])
+def test_explore_scripted_takes_exploring_actions_from_the_scripted_policy(share):
+    """--explore-scripted 1: every exploring move is the scripted policy's, a step towards blue's base at
+    (0, 3) (one always exists on the open walk); 0: uniform, so other actions appear too."""
+    cfg = TrainConfig(scenario="walk4", steps=400, seed=6, explore_scripted=share,
+                      **{**SMALL, "warmup": 5000, "eval_every": 0})
+    trainer = Trainer(cfg, WALK)
+    trainer.train()
+    st = trainer.learners["shared"].buffer.state()
+    trainer.close()
+    steps = st["discount"] > 0  # the closing transitions' next obs is the terminal one: keep the rest
+    dist = lambda o: o[:, 0] + (3 - o[:, 1])  # noqa: E731  Manhattan distance of red to (0, 3)
+    closer = dist(st["next_obs"][steps]) == dist(st["obs"][steps]) - 1
+    assert steps.sum() > 100
+    assert closer.all() if share == 1.0 else closer.mean() < 0.7
+
+
 def test_saved_policy_round_trips_and_plain_torch_loads_it(tmp_path):
     cfg = TrainConfig(scenario="walk4", steps=200, seed=2, **{**SMALL, "eval_every": 0})
     trainer = Trainer(cfg, WALK)

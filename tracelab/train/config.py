@@ -43,6 +43,12 @@ class TrainConfig:
     eps_end: float = _opt("epsilon from --eps-decay-end of training on", default=0.02)
     eps_decay_start: float = _opt("fraction of training where epsilon starts to fall", default=0.25)
     eps_decay_end: float = _opt("fraction of training where epsilon reaches --eps-end", default=0.875)
+    explore_scripted: float = _opt("fraction of the exploring (epsilon) actions taken from the scripted base "
+                                   "policy played for red (a move towards blue's base when one exists; in "
+                                   "the advanced scenario it shoots first) instead of uniformly at random. "
+                                   "Q-learning is off-policy, so the rewards and the target are unchanged; "
+                                   "only what the buffer sees is. 0 in the method; 0.5 lets 5v5 find a win "
+                                   "(docs/training.md)", default=0.0)
     updates_per_step: float = _opt("gradient steps per world-step, per network", default=1.0)
     warmup: int = _opt("random steps before the first update", default=1_000)
     reward_scale: float = _opt("the learner's rewards are the game's times this (returns and Q-values are "
@@ -72,7 +78,8 @@ class TrainConfig:
         for name in ("warmup", "eval_every", "trace_eval_games", "checkpoint_every"):
             if getattr(self, name) < 0:
                 problems.append(f"{name} must be >= 0, got {getattr(self, name)}")
-        for name in ("opponent_p", "eval_p", "eps_start", "eps_end", "eps_decay_start", "eps_decay_end"):
+        for name in ("opponent_p", "eval_p", "eps_start", "eps_end", "eps_decay_start", "eps_decay_end",
+                     "explore_scripted"):
             v = getattr(self, name)
             if not 0.0 <= v <= 1.0:
                 problems.append(f"{name} must be in [0, 1], got {v}")

@@ -19,6 +19,7 @@ from tracelab.envs.common import ActionMasker
 from tracelab.envs.tracer import outcome_name
 from tracelab.envs.vector_env import GridWarVectorEnv
 from tracelab.game.observe import obs_size
+from tracelab.game.opponent import scripted_actions
 from tracelab.game.scenario import NOTHING, RED, Scenario
 from tracelab.store.writer import TraceWriter
 from tracelab.train.config import TrainConfig
@@ -46,6 +47,15 @@ def eval_seed(seed: int, round_no: int) -> int:
     return int(np.random.SeedSequence([seed, 1, round_no]).generate_state(1)[0])
 
 
+def _agent_rewards(info: dict, done: np.ndarray) -> np.ndarray:
+    """Each red agent's reward of the step, [W, N]. Worlds that ended were reset within the step (SAME_STEP
+    autoreset), so their top-level info is the new episode's (zeros): their terminal step's rewards, the
+    win or loss term included, are in final_info."""
+    if not done.any():
+        return info["agent_reward"]
+    return np.where(done[:, None], info["final_info"]["agent_reward"], info["agent_reward"])
+
+
 class Trainer:
     def __init__(self, cfg: TrainConfig, scenario: Scenario, writer: TraceWriter | None = None,
                  run_dir: Path | None = None, progress: Progress | None = None) -> None:
@@ -69,6 +79,8 @@ class Trainer:
         self.pending = PendingTransitions(w, n, self.shape.inputs, cfg.gamma)
         self.ids = np.asarray(scenario.action_ids, np.int64)
         self.nothing = scenario.action_ids.index(NOTHING)
+        self.action_index = np.zeros(NOTHING + 1, np.int64)  # spec action id -> index into action_ids
+        self.action_index[self.ids] = np.arange(len(self.ids))
         # the games in progress, for logging and for replaying them when a checkpoint is restored
         self.history = np.zeros((w, scenario.max_steps, 2, n), np.int16)  # spec ids: red, blue per step
         self.ep_len = np.zeros(w, np.int64)
@@ -156,11 +168,26 @@ class Trainer:
             random = self.rng.integers(0, a, (w, n))
         else:  # uniform among the allowed actions
             random = np.argmax(self.rng.random((w, n, a)) * masks, axis=2)
+        if self.cfg.explore_scripted > 0:
+            random = self._scripted_exploration(random, masks)
         greedy_rows = self.acting & ~explore
         actions = random
         if greedy_rows.any():
             actions = np.where(greedy_rows, self.policy.act(self.obs, greedy_rows, masks), random)
         return np.where(self.acting, actions, self.nothing)
+
+    def _scripted_exploration(self, random: np.ndarray, masks: np.ndarray | None) -> np.ndarray:
+        """--explore-scripted: a share of the exploring actions comes from the scripted base policy played for
+        red, always towards blue's base where it can (the opponent's policy with p = 1, drawn from the
+        exploration generator, so a resumed run draws the same). With --mask a forbidden scripted action
+        (its random fallback) keeps the uniform allowed one."""
+        s = self.env.sim.state
+        spec = scripted_actions(s.pos, s.alive, s.ammo, "red", self.scenario, self.rng, 1.0)
+        scripted = self.action_index[spec]
+        take = self.rng.random(random.shape) < self.cfg.explore_scripted
+        if masks is not None:
+            take &= np.take_along_axis(masks, scripted[..., None], axis=2)[..., 0].astype(bool)
+        return np.where(take, scripted, random)
 
     def _views(self, team_obs: np.ndarray) -> list[np.ndarray]:
         return [self.policy.agent_obs(team_obs, j) for j in range(self.agents)]
@@ -179,8 +206,8 @@ class Trainer:
         self.history[rows, self.ep_len, 1] = info["opponent_actions"].reshape(w, n)
         self.ep_len += 1
         self.ep_return += reward
-        self.pending.earn((reward[:, None] if n == 1 else info["agent_reward"]) * cfg.reward_scale)
         done = terminated | truncated
+        self.pending.earn((reward[:, None] if n == 1 else _agent_rewards(info, done)) * cfg.reward_scale)
         true_next = obs
         if done.any():
             true_next = obs.copy()

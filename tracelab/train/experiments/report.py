@@ -50,7 +50,7 @@ def machine() -> str:
 
 # the settings of the method's DQN (shared/paper-notes.md); a report names those an arm changes
 DQN_FIELDS = ("hidden", "lr", "gamma", "batch", "buffer", "target_every", "eps_start", "eps_end",
-              "eps_decay_start", "eps_decay_end", "updates_per_step", "reward_scale", "mask")
+              "eps_decay_start", "eps_decay_end", "updates_per_step", "reward_scale", "mask", "explore_scripted")
 
 
 def learner_text(result: ExperimentResult) -> str:
@@ -183,7 +183,7 @@ def goal_lines(result: ExperimentResult) -> list[str]:
         vals = [s.final[0.3].method_win_rate for s in ar.seeds if 0.3 in s.final]
         reached = sum(v >= ar.arm.published for v in vals)
         verdict = "**reached**" if vals and reached == len(vals) else "**not reached**"
-        out.append(f"- {ar.arm.label}: {verdict} in {reached} of {len(vals)} seeds with {result.budget.steps:,} "
+        out.append(f"- {ar.arm.label}: {verdict}, {reached} of {len(vals)} seeds reach it with {result.budget.steps:,} "
                    f"steps: method's win rate against p = 0.3 {spread_text(vals)}; the method: "
                    f"{ar.arm.published_note}.")
     if exp.name == "markov-vs-nonmarkov" and len(result.arms) == 2:
