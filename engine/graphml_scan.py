@@ -106,20 +106,30 @@ def _intern(b, s, e, table, spans, n):
 
 @scan_jit
 def _intern_node(b, s, e, table, off, pool, n):
-    """Index of node id b[s:e] among the n interned so far; a new one is added as n. The table entries
-    are (hash fingerprint << 32 | index), the ids are copied into one byte pool: a lookup touches the
-    table and the pool, both small, never the (large, cold) file bytes of earlier ids."""
-    h = _hash(b, s, e)
-    mask = np.uint64(table.shape[0] - 1)
-    fp = np.int64(h >> np.uint64(33))
-    j = h & mask
+    """Index of node id b[s:e] among the n interned so far; a new one is added as n (its bytes copied into
+    the pool). A table slot is (tag, index), 0 empty. An id of up to 7 bytes is its own tag (the bytes
+    and the length packed), so a lookup reads one slot and nothing else: on random edge ends, each extra
+    read of the pool was a cache miss. A longer id's tag is its hash, confirmed against the pool."""
     m = e - s
+    if m <= 7:
+        tag = np.int64(m + 1) << 56
+        for x in range(s, e):
+            tag |= np.int64(b[x]) << (8 * (e - 1 - x))
+        h = np.uint64(tag) * np.uint64(0x9E3779B97F4A7C15)
+        h ^= h >> np.uint64(29)
+    else:
+        h = _hash(b, s, e)
+        tag = (np.int64(64) << 56) | np.int64(h >> np.uint64(8))
+    mask = np.uint64(table.shape[0] - 1)
+    j = h & mask
     while True:
-        v = table[j]
-        if v < 0:
+        v = table[j, 0]
+        if v == 0:
             break
-        if (v >> 32) == fp:
-            k = v & 0xFFFFFFFF
+        if v == tag:
+            k = table[j, 1]
+            if m <= 7:
+                return k
             ps = off[k]
             if off[k + 1] - ps == m:
                 same = True
@@ -134,7 +144,8 @@ def _intern_node(b, s, e, table, off, pool, n):
     for x in range(m):
         pool[ps + x] = b[s + x]
     off[n + 1] = ps + m
-    table[j] = (fp << 32) | n
+    table[j, 0] = tag
+    table[j, 1] = n
     return n
 
 
@@ -528,7 +539,7 @@ def scan_graphml(b: np.ndarray) -> tuple[int, dict[str, np.ndarray]]:
     # a table for 4x the declared nodes; edges to undeclared nodes may need a larger one (scan again)
     size = 1 << int(4 * c_node + 64).bit_length()
     while True:
-        node_tab = np.full(size, -1, np.int64)
+        node_tab = np.zeros((size, 2), np.int64)
         key_tab = np.full(1 << int(2 * c_key + 64).bit_length(), -1, np.int64)
         status, _ = scan(b, node_tab, node_off, pool, edges, data, key_tab, key_spans, key_elems, stack,
                          graph_tag, counts)

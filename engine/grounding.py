@@ -84,9 +84,10 @@ class Grounder:
         self._rule_nbody = np.array([len(r.body) for r in rules], np.int64)
         self._n = 0
         self._rule = np.zeros(1024, np.int32)
-        self._head = np.zeros(1024, np.int64)
+        # atom and node ids fit int32 (vocabulary.py): a million groundings' tables stay small
+        self._head = np.zeros(1024, np.int32)
         self._vals = _growable(1024, self.max_vars, np.int32)
-        self._body = _growable(1024, self.max_body, np.int64)
+        self._body = _growable(1024, self.max_body, np.int32)
         self._settable = np.zeros(1024, np.bool_)  # by atom id: settable (joined, or pending in _pending)
         self.n_settable = 0
         self._pending: list[np.ndarray] = []
@@ -284,9 +285,9 @@ class Grounder:
         if n + m > len(self._rule):
             cap = max(n + m, 2 * len(self._rule))
             self._rule = np.concatenate([self._rule, np.zeros(cap - len(self._rule), np.int32)])
-            self._head = np.concatenate([self._head, np.zeros(cap - len(self._head), np.int64)])
+            self._head = np.concatenate([self._head, np.zeros(cap - len(self._head), np.int32)])
             self._vals = np.concatenate([self._vals, _growable(cap - len(self._vals), self.max_vars, np.int32)])
-            self._body = np.concatenate([self._body, _growable(cap - len(self._body), self.max_body, np.int64)])
+            self._body = np.concatenate([self._body, _growable(cap - len(self._body), self.max_body, np.int32)])
         self._rule[n:n + m] = cr.index
         self._head[n:n + m] = heads
         self._vals[n:n + m, :cr.n_vars] = rows
