@@ -15,6 +15,7 @@ from .backend_lanes import LaneState, crisp_codes
 from .errors import FixpointError, InconsistencyError, ProgramCheckError
 from .graph import Graph
 from .grounding import Grounder, GroundingTable, rule_head_bound
+from .memory import release_freed_memory
 from .parser import check_program, parse_literal
 from .program import (
     EPS,
@@ -109,6 +110,7 @@ class Engine:
         self._table: GroundingTable | None = None
         self._kt: dict[str, np.ndarray] | None = None
         self._sync()
+        release_freed_memory(self.vocab.n_atoms)  # a big build's temporaries: back to the OS
 
     # ---- building ----
 

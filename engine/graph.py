@@ -17,6 +17,7 @@ from . import graphml_scan as S
 from .errors import ProgramCheckError
 from .graphml_expat import read_graphml_expat
 from .graphml_raw import GraphKey, RawGraph
+from .memory import release_freed_memory
 from .parser import PREDICATE_RE
 from .program import Fact, Literal, SourceLoc, Term, constant_text, unwritable_constant
 
@@ -123,9 +124,12 @@ def load_graphml(path: str | os.PathLike[str]) -> Graph:
         data = f.read()
     raw = _scan(file, data)
     if raw is None:  # outside the scanner's subset: the complete reader
-        del data
+        data = b""
         raw = read_graphml_expat(file)
-    return _to_graph(raw)
+    graph = _to_graph(raw)
+    del raw, data  # the file's bytes and the scanner's columns: freed, and given back if they were big
+    release_freed_memory(graph.n_facts)
+    return graph
 
 
 def _scan(file: str, data: bytes) -> RawGraph | None:

@@ -169,33 +169,44 @@ def _skip_past(b, i, c0, c1, c2):
 
 
 @scan_jit
-def count_starts(b):
-    """How many '<node', '<edge', '<data', '<key' (any prefix) there are: the buffer sizes of scan."""
+def _count_name(w, counts):
+    if w == W_NODE:
+        counts[0] += 1
+    elif w == W_EDGE:
+        counts[1] += 1
+    elif w == W_DATA:
+        counts[2] += 1
+    elif (w >> 8) == W_KEY:
+        counts[3] += 1
+
+
+@scan_jit
+def _count_starts(b, counts):
     n = b.shape[0]
-    c_node = 0
-    c_edge = 0
-    c_data = 0
-    c_key = 0
     for i in range(n - 4):
         if b[i] != 60:
             continue
-        # skip a prefix: '<' name ':'
-        j = i + 1
-        k = j
-        while k < n and k < j + 64 and b[k] != 58 and b[k] != 62 and not _is_space(b[k]) and b[k] != 60:
+        c = b[i + 1]
+        if c == 47 or c == 33 or c == 63:  # '</', '<!', '<?': no element starts here
+            continue
+        w = _pack(b, i + 1, i + 5, False)
+        if w == W_NODE or w == W_EDGE or w == W_DATA or (w >> 8) == W_KEY:
+            _count_name(w, counts)
+            continue
+        # a prefix: '<' name ':' (the bytes after ':' as above)
+        k = i + 1
+        while k < n and k < i + 65 and b[k] != 58 and b[k] != 62 and not _is_space(b[k]) and b[k] != 60:
             k += 1
-        if k < n and b[k] == 58:
-            j = k + 1
-        if j + 3 < n:
-            w = _pack(b, j, j + 4, False)
-            if w == W_NODE:
-                c_node += 1
-            elif w == W_EDGE:
-                c_edge += 1
-            elif w == W_DATA:
-                c_data += 1
-            elif _pack(b, j, j + 3, False) == W_KEY:
-                c_key += 1
+        if k + 4 < n and b[k] == 58:
+            _count_name(_pack(b, k + 1, k + 5, False), counts)
+
+
+def count_starts(b: np.ndarray) -> tuple[int, int, int, int]:
+    """How many '<node', '<edge', '<data', '<key' (any prefix) there are: the buffer sizes of scan.
+    Closing tags, comments and declarations are passed over at their second byte."""
+    counts = np.zeros(4, np.int64)
+    _count_starts(b, counts)
+    c_node, c_edge, c_data, c_key = (int(x) for x in counts)
     return c_node, c_edge, c_data, c_key
 
 
