@@ -131,7 +131,8 @@ class Engine:
     def _fact_tables(self) -> None:
         gr = self.graph
         g = gr.n_facts
-        self._fact_i = np.zeros((g + len(self.program.facts), 4), np.int64)
+        # (atom, start, end, static) per fact: int32 (atom ids and times up to MAX_TIME fit), 16 B a fact
+        self._fact_i = np.zeros((g + len(self.program.facts), 4), np.int32)
         if self.program.facts:
             self._fact_f = np.zeros((len(self._fact_i), 2), np.float64)
             self._fact_f[:g] = gr.fact_bounds
@@ -154,9 +155,9 @@ class Engine:
         # latest-ending first, so that each step stops at the first fact whose window has passed
         ends = self._fact_i[:, 2]
         if len(ends) and (ends == ends[0]).all():  # one window end (every GraphML fact): source order
-            self._fact_order = np.arange(len(ends), dtype=np.int64)
+            self._fact_order = np.arange(len(ends), dtype=np.int32)
         else:
-            self._fact_order = np.argsort(-ends, kind="stable").astype(np.int64)
+            self._fact_order = np.argsort(-ends, kind="stable").astype(np.int32)
 
     def _rule_tables(self) -> None:
         n = len(self.rules)

@@ -372,6 +372,7 @@ def facts_of_with_windows(g: Graph) -> list[tuple]:
     ('atom\n"link(X,b)"\n', "row 1: atom 'link(X,b)' names a variable"),
     ("atom,lower\np(a),0.5\np(b),1.5\n", "row 2: bound [1.5,1] of p(b) is not inside [0,1]"),
     ("atom,start,end\np(a),3,1\n", "row 1: window 3..1 of p(a)"),
+    ("atom,start,end\np(a),0,1\np(b),0,2000000000\n", "row 2: window 0..2000000000 of p(b): times are at most"),
     ('atom\np(a)\n"p(a,b)"\n', "predicate 'p' is used with one and with two arguments"),
     ("name\np(a)\n", "a fact table needs an 'atom' column"),
 ])
