@@ -19,6 +19,7 @@ from .backend_lanes import LaneState, crisp_codes
 from .errors import FixpointError, InconsistencyError, ProgramCheckError
 from .graph import Graph
 from .grounding import Grounder, GroundingTable, rule_head_bound
+from .memory import release_freed_memory
 from .parser import check_program, parse_literal
 from .program import (
     EPS,
@@ -40,11 +41,24 @@ _TRACE_INT_DTYPES = tuple(np.dtype(d) for d in (np.int32, np.int32, np.int32, np
 # (column name, dtype, taken as is from the int32 buffer) per int column of take_trace()
 _TRACE_INT_OUT = tuple((name, d, d == np.dtype(np.int32)) for name, d in zip(TRACE_COLUMNS, _TRACE_INT_DTYPES))
 _TRACE_FLOAT_NAMES = TRACE_COLUMNS[K.TRACE_INT_COLUMNS:]
+# trace buffers: a step that wrote this many rows hands its buffers to take_trace() instead of a copy
+# (at t = 0 a million-fact graph writes a million rows: a copy would double the trace's 64 bytes a row)
+TRACE_HANDOVER_ROWS = 65_536
+TRACE_MIN_ROWS = 1024
 KERNELS = ("auto", "counting", "lanes", "compiled")
 # "auto" takes the lanes kernel for crisp programs from this many worlds on (a word holds 64 worlds)
 LANES_MIN_WORLDS = 64
 STAT_NAMES = ("firings", "rederivations", "static_ignored", "changes", "passes", "watch_visits",
               "candidates")
+
+
+def _trace_buffers(rows: int) -> tuple[np.ndarray, np.ndarray]:
+    """Empty trace buffers of `rows` rows (int32 [rows, 8], float64 [rows, 4]) stored column by column:
+    the kernel writes a row across the columns, take_trace() reads each column as one block. Always
+    Fortran-ordered (rows >= 2), so the kernel is compiled for one layout."""
+    rows = max(rows, 2)
+    return (np.empty((K.TRACE_INT_COLUMNS, rows), np.int32).T,
+            np.empty((K.TRACE_FLOAT_COLUMNS, rows), np.float64).T)
 
 
 class Engine:
@@ -93,8 +107,7 @@ class Engine:
         self._cfg[K.CFG_TRACE_ROOM] = trace_rows_per_step
         self.trace_on = np.broadcast_to(np.asarray(trace, np.bool_), (worlds,)).copy()
         # trace rows, row-major (a row is written at once); grown by the backends as they step
-        self._tri = np.zeros((0, K.TRACE_INT_COLUMNS), np.int32)
-        self._trf = np.zeros((0, K.TRACE_FLOAT_COLUMNS), np.float64)
+        self._tri, self._trf = _trace_buffers(TRACE_MIN_ROWS)
         self._tr_n = np.zeros(1, np.int64)
         self._stats = np.zeros((worlds, K.N_STATS), np.int64)
         self._err = np.zeros(K.N_ERR, np.int64)
@@ -114,6 +127,7 @@ class Engine:
         self._table: GroundingTable | None = None
         self._kt: dict[str, np.ndarray] | None = None
         self._sync()
+        release_freed_memory(self.vocab.n_atoms)  # a big build's temporaries: back to the OS
 
     # ---- building ----
 
@@ -134,14 +148,20 @@ class Engine:
     def _fact_tables(self) -> None:
         gr = self.graph
         g = gr.n_facts
-        self._fact_i = np.zeros((g + len(self.program.facts), 4), np.int64)
-        self._fact_f = np.zeros((len(self._fact_i), 2), np.float64)
+        # (atom, start, end, static) per fact: int32 (atom ids and times up to MAX_TIME fit), 16 B a fact
+        self._fact_i = np.zeros((g + len(self.program.facts), 4), np.int32)
+        if self.program.facts:
+            self._fact_f = np.zeros((len(self._fact_i), 2), np.float64)
+            self._fact_f[:g] = gr.fact_bounds
+        else:  # graph facts only: the graph's bound column is the kernel's (no copy of a million rows)
+            self._fact_f = np.ascontiguousarray(gr.fact_bounds, np.float64)
         if g:  # graph nodes are the vocabulary's first nodes (ordered_nodes), so node ids carry over
             labels = np.asarray([self.vocab.label(p, n) for p, n in zip(gr.labels, gr.label_arity)], np.int64)
             self._fact_i[:g, 0] = self.vocab.atoms(labels[gr.fact_label], gr.fact_args[:, 0], gr.fact_args[:, 1])
-            self._fact_i[:g, 1:3] = gr.windows  # a GraphML fact: static, at t = 0
-            self._fact_i[:g, 3] = gr.statics
-            self._fact_f[:g] = gr.fact_bounds
+            # a GraphML fact is static at t = 0 (window 0..0, left zero); only fact tables carry columns
+            if gr.fact_window is not None:
+                self._fact_i[:g, 1:3] = gr.fact_window
+            self._fact_i[:g, 3] = gr.statics if gr.fact_static is not None else 1
         for i, f in enumerate(self.program.facts, start=g):
             lit = f.literal
             aid = self.vocab.atom_by_name(lit.pred, tuple(a.name for a in lit.args))
@@ -150,7 +170,11 @@ class Engine:
         self.grounder.add_settable_many(self._fact_i[:, 0])
         self._fact_v = crisp_codes(self._fact_f[:, 0], self._fact_f[:, 1])
         # latest-ending first, so that each step stops at the first fact whose window has passed
-        self._fact_order = np.argsort(-self._fact_i[:, 2], kind="stable").astype(np.int64)
+        ends = self._fact_i[:, 2]
+        if len(ends) and (ends == ends[0]).all():  # one window end (every GraphML fact): source order
+            self._fact_order = np.arange(len(ends), dtype=np.int32)
+        else:
+            self._fact_order = np.argsort(-ends, kind="stable").astype(np.int32)
 
     def _rule_tables(self) -> None:
         n = len(self.rules)
@@ -256,10 +280,9 @@ class Engine:
         self._table = None
 
     def _grow_trace(self, need: int) -> None:
-        cap = max(need, 2 * self._tri.shape[0], 1024)
+        cap = max(need, 2 * self._tri.shape[0], TRACE_MIN_ROWS)
         n = int(self._tr_n[0])
-        tri = np.empty((cap, K.TRACE_INT_COLUMNS), np.int32)
-        trf = np.empty((cap, K.TRACE_FLOAT_COLUMNS), np.float64)
+        tri, trf = _trace_buffers(cap)
         tri[:n] = self._tri[:n]
         trf[:n] = self._trf[:n]
         self._tri, self._trf = tri, trf
@@ -460,8 +483,11 @@ class Engine:
     def take_trace(self) -> dict[str, np.ndarray]:
         """The change rows since the last call, as columns (docs/engine-api.md); the buffer is cleared."""
         n = int(self._tr_n[0])
-        # one transposing copy per block; the columns are its rows
-        ints, floats = self._tri[:n].T.copy(), self._trf[:n].T.copy()
+        ints, floats = self._tri.T[:, :n], self._trf.T[:, :n]  # the buffers' columns, contiguous blocks
+        if n >= TRACE_HANDOVER_ROWS:  # a big step: its columns are handed over, the engine starts anew
+            self._tri, self._trf = _trace_buffers(TRACE_MIN_ROWS)
+        else:  # one copy per block (the buffers are reused); the columns are its rows
+            ints, floats = ints.copy(), floats.copy()
         cols: dict[str, np.ndarray] = {}
         for (name, dtype, as_is), col in zip(_TRACE_INT_OUT, ints):
             cols[name] = col if as_is else col.astype(dtype)

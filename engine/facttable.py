@@ -15,7 +15,7 @@ import numpy as np
 
 from .errors import ProgramCheckError
 from .graph import Graph
-from .program import unwritable_constant
+from .program import MAX_TIME, unwritable_constant
 
 _CONST = r"""("[^"]*"|'[^']*'|[A-Za-z0-9_-]+)"""
 _ATOM_RE = rf"^\s*(~?)\s*([a-z][A-Za-z0-9_]*)\s*\(\s*{_CONST}\s*(?:,\s*{_CONST}\s*)?\)\s*$"
@@ -111,6 +111,8 @@ _ROW_CHECKS = [
      "letter or '_')"),
     ("NOT (lower >= 0 AND lower <= upper AND upper <= 1)",
      "bound [{lower:g},{upper:g}] of {atom} is not inside [0,1] with lower <= upper"),
+    (f'"end" > {MAX_TIME}',
+     f"window {{start}}..{{end}} of {{atom}}: times are at most {MAX_TIME:,}, as in programs"),
     ('NOT (start >= 0 AND start <= "end" AND (NOT static OR start = "end"))',
      "window {start}..{end} of {atom}: times are integers >= 0 with start <= end, and a static fact takes "
      "one time"),

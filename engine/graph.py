@@ -17,6 +17,7 @@ from . import graphml_scan as S
 from .errors import ProgramCheckError
 from .graphml_expat import read_graphml_expat
 from .graphml_raw import GraphKey, RawGraph
+from .memory import release_freed_memory
 from .parser import PREDICATE_RE
 from .program import Fact, Literal, SourceLoc, Term, constant_text, unwritable_constant
 
@@ -48,17 +49,14 @@ class Graph:
     # heads of rules without {infer_edges} may land under `%edge_heads graph` (attributes or not)
     edges: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int32))
 
+    # built on demand, not kept: a million GraphML facts would hold 17 MB of zeros and ones
     @property
     def windows(self) -> np.ndarray:
-        if self.fact_window is None:
-            self.fact_window = np.zeros((self.n_facts, 2), np.int64)
-        return self.fact_window
+        return self.fact_window if self.fact_window is not None else np.zeros((self.n_facts, 2), np.int64)
 
     @property
     def statics(self) -> np.ndarray:
-        if self.fact_static is None:
-            self.fact_static = np.ones(self.n_facts, np.bool_)
-        return self.fact_static
+        return self.fact_static if self.fact_static is not None else np.ones(self.n_facts, np.bool_)
 
     def concat(self, other: Graph) -> Graph:
         """This graph's facts, then other's (its nodes and labels mapped onto this graph's)."""
@@ -109,8 +107,9 @@ class Graph:
         lo, up = (float(x) for x in self.fact_bounds[i])
         lit = Literal(pred, tuple(Term(a, is_var=False) for a in args), lo, up)
         text = f"{pred}({','.join(map(constant_text, args))})"
-        start, end = (int(x) for x in self.windows[i])
-        return Fact(text, lit, start, end, static=bool(self.statics[i]), loc=SourceLoc(self.file, 0, 0),
+        start, end = (0, 0) if self.fact_window is None else (int(x) for x in self.fact_window[i])
+        static = self.fact_static is None or bool(self.fact_static[i])
+        return Fact(text, lit, start, end, static=static, loc=SourceLoc(self.file, 0, 0),
                     text=text)
 
     @property
@@ -124,7 +123,9 @@ def load_graphml(path: str | os.PathLike[str]) -> Graph:
     a string "l,u" or "[l,u]" is [l,u]. Anything else raises ProgramCheckError naming the file, the line,
     the node or edge and the attribute. GraphML key defaults apply to elements that lack the attribute.
     (docs/language.md, "Graphs".)"""
-    return _to_graph(read_raw_graphml(path))
+    graph = _to_graph(read_raw_graphml(path))  # the file's bytes and the scanner's columns are freed here,
+    release_freed_memory(graph.n_facts)         # and given back to the system if they were big
+    return graph
 
 
 def read_raw_graphml(path: str | os.PathLike[str]) -> RawGraph:
@@ -135,7 +136,7 @@ def read_raw_graphml(path: str | os.PathLike[str]) -> RawGraph:
         data = f.read()
     raw = _scan(file, data)
     if raw is None:  # outside the scanner's subset: the complete reader
-        del data
+        data = b""
         raw = read_graphml_expat(file)
     return raw
 
@@ -154,8 +155,7 @@ def _scan(file: str, data: bytes) -> RawGraph | None:
     key_spans, key_elems = scanned["key_spans"], scanned["key_elems"]
     graph_tag, d = scanned["graph_tag"], scanned["data"]
     try:
-        pool, off = scanned["pool"].tobytes(), scanned["node_off"].tolist()
-        nodes = [pool[s:e].decode("utf-8") for s, e in zip(off, off[1:])]
+        nodes = _node_ids(scanned["pool"], scanned["node_off"])
         data_keys = [data[s:e].decode("utf-8") for s, e in key_spans.tolist()]
         keys: dict[str, GraphKey] = {}
         for s, e in key_elems.tolist():
@@ -186,18 +186,40 @@ def _scan(file: str, data: bytes) -> RawGraph | None:
 
     return RawGraph(
         file=file, nodes=nodes, edges=scanned["edges"], graph_undirected=undirected, keys=keys,
-        data=np.ascontiguousarray(d[:, [S.D_KIND, S.D_ELEM, S.D_KEY]]), data_keys=data_keys,
+        data=d[:, S.D_KIND:S.D_KEY + 1], data_keys=data_keys,
         text=lambda i: data[int(d[i, S.D_START]):int(d[i, S.D_END])].decode("utf-8"), place=place,
         numbers=scanned["numbers"], booleans=scanned["booleans"])
+
+
+def _node_ids(pool: np.ndarray, off: np.ndarray) -> list[str]:
+    """Node id i is pool[off[i]:off[i+1]] (UTF-8): decoded at once, split at inserted line breaks (an id
+    holding a line break is cut apart per id, so that the check of node ids names it whole)."""
+    n = len(off) - 1
+    if n <= 0:
+        return []
+    if (pool == 10).any():
+        raw, starts = pool.tobytes(), off.tolist()
+        return [raw[s:e].decode("utf-8") for s, e in zip(starts, starts[1:])]
+    out = np.empty(len(pool) + n - 1, np.uint8)
+    breaks = off[1:-1] + np.arange(n - 1)  # where the line breaks go, between ids
+    keep = np.ones(len(out), np.bool_)
+    keep[breaks] = False
+    out[keep] = pool
+    out[breaks] = 10
+    return out.tobytes().decode("utf-8").split("\n")
 
 
 def _to_graph(raw: RawGraph) -> Graph:
     """Columns of facts in the graph's order (docs/language.md, "Graphs")."""
     file = raw.file
-    for name in raw.nodes:
-        why = unwritable_constant(name)
-        if why is not None:
-            raise ProgramCheckError(f"node id {name!r} cannot be a constant of the rule language: {why}", file)
+    joined = "\0".join(raw.nodes)  # one scan for what unwritable_constant refuses, a loop only if found
+    if "\n" in joined or "\r" in joined or ('"' in joined and "'" in joined) or not all(raw.nodes):
+        for name in raw.nodes:
+            why = unwritable_constant(name)
+            if why is not None:
+                raise ProgramCheckError(f"node id {name!r} cannot be a constant of the rule language: {why}",
+                                        file)
+    del joined
     for k in raw.data_keys:
         if k not in raw.keys:
             i = int(np.argmax(raw.data[:, 2] == raw.data_keys.index(k)))
@@ -262,9 +284,12 @@ def _to_graph(raw: RawGraph) -> Graph:
                           lo[back], up[back]))
     if parts:
         order, lab, a0, a1, lo, up = (np.concatenate(c) for c in zip(*parts))
-        s = np.argsort(order, kind="stable")
-        fact_label, fact_args = lab[s], np.column_stack([a0[s], a1[s]])
-        fact_bounds = np.column_stack([lo[s], up[s]])
+        if len(order) < 2 or (order[1:] > order[:-1]).all():  # one attribute per element: in order already
+            fact_label, fact_args, fact_bounds = lab, np.column_stack([a0, a1]), np.column_stack([lo, up])
+        else:
+            s = np.argsort(order, kind="stable")
+            fact_label, fact_args = lab[s], np.column_stack([a0[s], a1[s]])
+            fact_bounds = np.column_stack([lo[s], up[s]])
     else:
         fact_label = np.zeros(0, np.int32)
         fact_args, fact_bounds = np.zeros((0, 2), np.int32), np.zeros((0, 2), np.float64)

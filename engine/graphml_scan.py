@@ -106,20 +106,30 @@ def _intern(b, s, e, table, spans, n):
 
 @scan_jit
 def _intern_node(b, s, e, table, off, pool, n):
-    """Index of node id b[s:e] among the n interned so far; a new one is added as n. The table entries
-    are (hash fingerprint << 32 | index), the ids are copied into one byte pool: a lookup touches the
-    table and the pool, both small, never the (large, cold) file bytes of earlier ids."""
-    h = _hash(b, s, e)
-    mask = np.uint64(table.shape[0] - 1)
-    fp = np.int64(h >> np.uint64(33))
-    j = h & mask
+    """Index of node id b[s:e] among the n interned so far; a new one is added as n (its bytes copied into
+    the pool). A table slot is (tag, index), 0 empty. An id of up to 7 bytes is its own tag (the bytes
+    and the length packed), so a lookup reads one slot and nothing else: on random edge ends, each extra
+    read of the pool was a cache miss. A longer id's tag is its hash, confirmed against the pool."""
     m = e - s
+    if m <= 7:
+        tag = np.int64(m + 1) << 56
+        for x in range(s, e):
+            tag |= np.int64(b[x]) << (8 * (e - 1 - x))
+        h = np.uint64(tag) * np.uint64(0x9E3779B97F4A7C15)
+        h ^= h >> np.uint64(29)
+    else:
+        h = _hash(b, s, e)
+        tag = (np.int64(64) << 56) | np.int64(h >> np.uint64(8))
+    mask = np.uint64(table.shape[0] - 1)
+    j = h & mask
     while True:
-        v = table[j]
-        if v < 0:
+        v = table[j, 0]
+        if v == 0:
             break
-        if (v >> 32) == fp:
-            k = v & 0xFFFFFFFF
+        if v == tag:
+            k = table[j, 1]
+            if m <= 7:
+                return k
             ps = off[k]
             if off[k + 1] - ps == m:
                 same = True
@@ -134,7 +144,8 @@ def _intern_node(b, s, e, table, off, pool, n):
     for x in range(m):
         pool[ps + x] = b[s + x]
     off[n + 1] = ps + m
-    table[j] = (fp << 32) | n
+    table[j, 0] = tag
+    table[j, 1] = n
     return n
 
 
@@ -158,33 +169,44 @@ def _skip_past(b, i, c0, c1, c2):
 
 
 @scan_jit
-def count_starts(b):
-    """How many '<node', '<edge', '<data', '<key' (any prefix) there are: the buffer sizes of scan."""
+def _count_name(w, counts):
+    if w == W_NODE:
+        counts[0] += 1
+    elif w == W_EDGE:
+        counts[1] += 1
+    elif w == W_DATA:
+        counts[2] += 1
+    elif (w >> 8) == W_KEY:
+        counts[3] += 1
+
+
+@scan_jit
+def _count_starts(b, counts):
     n = b.shape[0]
-    c_node = 0
-    c_edge = 0
-    c_data = 0
-    c_key = 0
     for i in range(n - 4):
         if b[i] != 60:
             continue
-        # skip a prefix: '<' name ':'
-        j = i + 1
-        k = j
-        while k < n and k < j + 64 and b[k] != 58 and b[k] != 62 and not _is_space(b[k]) and b[k] != 60:
+        c = b[i + 1]
+        if c == 47 or c == 33 or c == 63:  # '</', '<!', '<?': no element starts here
+            continue
+        w = _pack(b, i + 1, i + 5, False)
+        if w == W_NODE or w == W_EDGE or w == W_DATA or (w >> 8) == W_KEY:
+            _count_name(w, counts)
+            continue
+        # a prefix: '<' name ':' (the bytes after ':' as above)
+        k = i + 1
+        while k < n and k < i + 65 and b[k] != 58 and b[k] != 62 and not _is_space(b[k]) and b[k] != 60:
             k += 1
-        if k < n and b[k] == 58:
-            j = k + 1
-        if j + 3 < n:
-            w = _pack(b, j, j + 4, False)
-            if w == W_NODE:
-                c_node += 1
-            elif w == W_EDGE:
-                c_edge += 1
-            elif w == W_DATA:
-                c_data += 1
-            elif _pack(b, j, j + 3, False) == W_KEY:
-                c_key += 1
+        if k + 4 < n and b[k] == 58:
+            _count_name(_pack(b, k + 1, k + 5, False), counts)
+
+
+def count_starts(b: np.ndarray) -> tuple[int, int, int, int]:
+    """How many '<node', '<edge', '<data', '<key' (any prefix) there are: the buffer sizes of scan.
+    Closing tags, comments and declarations are passed over at their second byte."""
+    counts = np.zeros(4, np.int64)
+    _count_starts(b, counts)
+    c_node, c_edge, c_data, c_key = (int(x) for x in counts)
     return c_node, c_edge, c_data, c_key
 
 
@@ -528,7 +550,7 @@ def scan_graphml(b: np.ndarray) -> tuple[int, dict[str, np.ndarray]]:
     # a table for 4x the declared nodes; edges to undeclared nodes may need a larger one (scan again)
     size = 1 << int(4 * c_node + 64).bit_length()
     while True:
-        node_tab = np.full(size, -1, np.int64)
+        node_tab = np.zeros((size, 2), np.int64)
         key_tab = np.full(1 << int(2 * c_key + 64).bit_length(), -1, np.int64)
         status, _ = scan(b, node_tab, node_off, pool, edges, data, key_tab, key_spans, key_elems, stack,
                          graph_tag, counts)

@@ -93,9 +93,10 @@ class Grounder:
         self._rule_nbody = np.array([len(r.body) for r in rules], np.int64)
         self._n = 0
         self._rule = np.zeros(1024, np.int32)
-        self._head = np.zeros(1024, np.int64)
+        # atom and node ids fit int32 (vocabulary.py): a million groundings' tables stay small
+        self._head = np.zeros(1024, np.int32)
         self._vals = _growable(1024, self.max_vars, np.int32)
-        self._body = _growable(1024, self.max_body, np.int64)
+        self._body = _growable(1024, self.max_body, np.int32)
         self._settable = np.zeros(1024, np.bool_)  # by atom id: settable (joined, or pending in _pending)
         self.n_settable = 0
         self._pending: list[np.ndarray] = []
@@ -307,9 +308,9 @@ class Grounder:
         if n + m > len(self._rule):
             cap = max(n + m, 2 * len(self._rule))
             self._rule = np.concatenate([self._rule, np.zeros(cap - len(self._rule), np.int32)])
-            self._head = np.concatenate([self._head, np.zeros(cap - len(self._head), np.int64)])
+            self._head = np.concatenate([self._head, np.zeros(cap - len(self._head), np.int32)])
             self._vals = np.concatenate([self._vals, _growable(cap - len(self._vals), self.max_vars, np.int32)])
-            self._body = np.concatenate([self._body, _growable(cap - len(self._body), self.max_body, np.int64)])
+            self._body = np.concatenate([self._body, _growable(cap - len(self._body), self.max_body, np.int32)])
         self._rule[n:n + m] = cr.index
         self._head[n:n + m] = heads
         self._vals[n:n + m, :cr.n_vars] = rows
@@ -417,20 +418,22 @@ class Grounder:
         np.cumsum(ih_ptr, out=ih_ptr)
         t_code = truth_codes(t_lo, t_up, t_neg, t_closed)
         w_test = s_test[first]
+        # offsets and atom ids as int32 (tables of over 2^31 entries would not fit in memory here anyway):
+        # per atom and per binding clause, int64 cost a million-edge graph 25 MB more
         return {
             "wc_code": t_code[w_test],
             "b_code": t_code[b_test],
             "inst": inst,
-            "wc_ptr": wc_ptr,
+            "wc_ptr": wc_ptr.astype(np.int32),
             "wc_bnd": np.ascontiguousarray(np.column_stack([t_lo[w_test], t_up[w_test]])
                                            if len(first) else np.zeros((0, 2), np.float64)),
             "wc_flags": t_flags[w_test],
-            "wc_gptr": wc_gptr,
+            "wc_gptr": wc_gptr.astype(np.int32),
             "wg": b_inst_a[order].astype(np.int32),
-            "ih_ptr": ih_ptr,
+            "ih_ptr": ih_ptr.astype(np.int32),
             "ih_inst": imm.astype(np.int32),
-            "b_ptr": b_ptr,
-            "b_atom": b_atom_a,
+            "b_ptr": b_ptr.astype(np.int32),
+            "b_atom": b_atom_a.astype(np.int32),
             "b_flags": b_flags_a,
             "b_bnd": np.ascontiguousarray(b_bnd),
         }

@@ -317,3 +317,33 @@ def test_schedule_grows_mid_batch_and_every_world_keeps_its_firings():
         got = eng.interpretation(w)
         assert all(got[f"m{i}(a)"] == (1.0, 1.0) for i in range(60)), w
     assert {r[3] for r in rows(eng) if r[1] == 1} == {f"d{i}" for i in range(60)}
+
+
+def _spread_traces(handover_rows: int, monkeypatch: pytest.MonkeyPatch) -> list[dict[str, np.ndarray]]:
+    """Trace columns of 3 steps of the spread rule over a 70k-edge graph (t = 0 writes 70k rows)."""
+    import tracelab.engine.core as core
+    from tracelab.engine import Graph
+    monkeypatch.setattr(core, "TRACE_HANDOVER_ROWS", handover_rows)
+    rng = np.random.default_rng(1)
+    n, m = 14_000, 70_000
+    args = np.column_stack([rng.integers(0, n, m), rng.integers(0, n, m)]).astype(np.int32)
+    args = np.concatenate([[[0, -1], [1, -1]], args]).astype(np.int32)  # two infected seeds, then links
+    labels = np.array([0, 0] + [1] * m, np.int32)
+    bounds = np.ones((m + 2, 2))
+    graph = Graph([f"n{i}" for i in range(n)], ["infected", "link"], [1, 2], labels, args, bounds)
+    eng = Engine(parse_program("spread: infected(X) <-1 infected(Y), link(Y,X)\n"), graph, trace=True)
+    out = []
+    for _ in range(3):
+        eng.step()
+        out.append(eng.take_trace())
+    return out
+
+
+def test_a_big_step_hands_its_trace_buffer_over_unchanged(monkeypatch: pytest.MonkeyPatch) -> None:
+    handed = _spread_traces(65_536, monkeypatch)  # t = 0's rows are handed over, later steps copied
+    copied = _spread_traces(10**9, monkeypatch)  # every step copied out of the buffer
+    assert len(handed[0]["t"]) > 65_536 and len(handed[1]["t"]) > 0
+    for a, b in zip(handed, copied):  # later steps did not write into the columns handed over before
+        assert a.keys() == b.keys()
+        for name in a:
+            assert a[name].dtype == b[name].dtype and np.array_equal(a[name], b[name]), name

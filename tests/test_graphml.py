@@ -372,6 +372,7 @@ def facts_of_with_windows(g: Graph) -> list[tuple]:
     ('atom\n"link(X,b)"\n', "row 1: atom 'link(X,b)' names a variable"),
     ("atom,lower\np(a),0.5\np(b),1.5\n", "row 2: bound [1.5,1] of p(b) is not inside [0,1]"),
     ("atom,start,end\np(a),3,1\n", "row 1: window 3..1 of p(a)"),
+    ("atom,start,end\np(a),0,1\np(b),0,2000000000\n", "row 2: window 0..2000000000 of p(b): times are at most"),
     ('atom\np(a)\n"p(a,b)"\n', "predicate 'p' is used with one and with two arguments"),
     ("name\np(a)\n", "a fact table needs an 'atom' column"),
 ])
@@ -416,3 +417,28 @@ def test_queries_in_the_api_and_reason(tmp_path: Path, capsys: pytest.CaptureFix
     assert got == [{"t": 1, "query": "infected(X)", "bindings": {"X": x}, "bound": [1.0, 1.0]} for x in "ab"]
     assert cli_main(["reason", str(rules), "--steps", "1", "--query", "infected(X"]) == 1
     assert capsys.readouterr().err.startswith("tracelab: error: --query 'infected(X': ")
+
+
+def test_scanner_node_ids_short_long_and_unicode(tmp_path: Path) -> None:
+    # the scanner's table keeps ids of up to 7 bytes in the slot itself and checks longer ones against
+    # its byte pool: ids around that length, sharing prefixes, and multi-byte UTF-8 must all stay apart
+    ids = ["a", "ab", "abcdefg", "abcdefgh", "abcdefgi", "abcdefg1", "x" * 40, "x" * 41, "zelle-ü", "zelle-üb",
+           "n1", "n10", "n100", "1", "01"]
+    rng = np.random.default_rng(5)
+    g = nx.DiGraph()
+    for i, n in enumerate(ids):
+        g.add_node(n, hp=i / 20)
+    for _ in range(300):
+        u, v = (ids[int(k)] for k in rng.integers(0, len(ids), 2))
+        g.add_edge(u, v, link=True)
+    fast, full = _both_readers(write(tmp_path, g))
+    _same_graph(fast, full)
+    assert fast.nodes[:len(ids)] == ids
+
+
+def test_a_node_id_with_a_line_break_is_still_named(tmp_path: Path) -> None:
+    path = tmp_path / "nl.graphml"
+    path.write_text('<graphml><key id="k" for="node" attr.name="hp" attr.type="double"/><graph>'
+                    '<node id="ok"/><node id="two\nlines"><data key="k">0.5</data></node></graph></graphml>')
+    with pytest.raises(ProgramCheckError, match="node id 'two\\\\nlines' cannot be a constant.*line break"):
+        load_graphml(path)
