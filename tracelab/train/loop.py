@@ -101,7 +101,7 @@ class Trainer:
         self.last_loss: float | None = None
         self.stop_requested = False
         self._eval_env: GridWarVectorEnv | None = None
-        self._masks: np.ndarray | None = None  # the shield's mask of the current state (--mask), once read
+        self._masks: np.ndarray | None = None  # the shield's mask of the current state (--mask), from the step
         self._eval_trace: EvalTrace | None = None
         self.obs, _ = self.env.reset(seed=int(np.random.SeedSequence([cfg.seed, 2]).generate_state(1)[0]))
         self.acting = may_act(scenario, self.env.sim.state)
@@ -215,7 +215,8 @@ class Trainer:
         acting_next = may_act(self.scenario, self.env.sim.state)
         dead = true_next[:, 0:2 * n:2] < 0  # an agent's own x is -1 once it is dead
         out = self.pending.close(done[:, None] | dead | acting_next, terminated[:, None] | dead)
-        self._masks = self.masker.for_sim(self.env.sim, RED) if cfg.mask else None  # s', and the next act
+        # s' mask, and the next act's: the env computed it for its info (a reset world's is its new start's)
+        self._masks = info["action_mask"].reshape(w, n, -1) if cfg.mask else None
         if len(out["action"]):
             if cfg.mask:  # what the shield allows in s' bounds the target's max (replay.py)
                 allowed = self._masks[out["world"], out["agent"]].astype(bool)
