@@ -9,6 +9,7 @@ makes a new key, never a stale kernel. Old keys are never read again; deleting t
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import importlib.util
 import json
@@ -42,8 +43,10 @@ def _version(dist: str) -> str:
         return "none"
 
 
+@functools.cache
 def versions() -> dict[str, str]:
-    """Everything besides the source that decides whether a compiled kernel can be reused."""
+    """Everything besides the source that decides whether a compiled kernel can be reused (looked up
+    once per process: each metadata.version reads the installed packages' metadata)."""
     return {"generator": str(GENERATOR_VERSION), "tracelab": _version("tracelab"), "numba": _version("numba"),
             "llvmlite": _version("llvmlite"), "numpy": _version("numpy"), "python": sys.version.split()[0],
             "machine": platform.machine()}
