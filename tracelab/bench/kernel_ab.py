@@ -4,7 +4,7 @@
 
 On a shared, loaded machine the wall-clock figures of two separate `bench env` runs move by more than
 the difference between kernels; a paired ratio of CPU times, alternating A and B, does not. For each
-(agents, worlds, trace) the RuleSim's stepping loop is recorded once (sims._Recorder: each step's
+(agents, worlds, trace) the RuleSim's stepping loop is recorded once (sims.record_replay: each step's
 external rows and each restore) and replayed on one engine per kernel, from the same start state.
 Prints one JSON line per case: the median CPU µs per world-step of each kernel and the median of the
 paired ratios B/A (below 1: B is faster)."""
@@ -13,29 +13,24 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-from tracelab.bench.sims import Loop, _Recorder, replay_calls, scenario_for
+from tracelab.bench.sims import Loop, record_replay, scenario_for
 from tracelab.game.rulesim import RuleSim
 
 
-def _replayer(sim: RuleSim, trace: bool, steps: int) -> Any:
-    eng = sim.engine
-    start = eng.snapshot()
-    rec = _Recorder(sim)
-    try:
-        Loop(sim, trace).run(steps)
-    finally:
-        rec.remove()
+def _replayer(sim: RuleSim, trace: bool, steps: int) -> Callable[[], float]:
+    """The CPU seconds of one replay of `steps` recorded steps of the stepping loop."""
+    replay, _ = record_replay(Loop(sim, trace), steps)
 
-    def replay() -> float:
+    def timed() -> float:
         c0 = time.process_time()
-        eng.restore(start, np.arange(sim.n_worlds))
-        replay_calls(eng, rec.calls, trace)
+        replay()
         return time.process_time() - c0
-    return replay
+    return timed
 
 
 def compare(agents: int, worlds: int, trace: bool, steps: int, rounds: int, kernels: list[str]) -> dict[str, Any]:

@@ -5,6 +5,7 @@ engine alone replaying that loop's steps (what the simulator around it costs).""
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -184,6 +185,25 @@ def replay_calls(eng: Any, calls: list[tuple[str, Any]], trace: bool) -> None:
             eng.restore(*args)
 
 
+def record_replay(loop: Loop, steps: int) -> tuple[Callable[[], None], int]:
+    """Run `steps` steps of `loop` (a RuleSim's) with its engine's calls recorded (_Recorder); returns a
+    replay of that work from the engine state before it (restored each time, then replay_calls) and the
+    number of engine steps it makes. The replay moves the engine on without the RuleSim knowing."""
+    eng = loop.sim.engine
+    start = eng.snapshot()
+    rec = _Recorder(loop.sim)
+    try:
+        loop.run(steps)
+    finally:
+        rec.remove()
+    everywhere = np.arange(loop.sim.n_worlds)
+
+    def replay() -> None:
+        eng.restore(start, everywhere)
+        replay_calls(eng, rec.calls, loop.trace)
+    return replay, sum(1 for kind, _ in rec.calls if kind == "step")
+
+
 def measure_engine_only(sim: RuleSim, trace: bool, repeats: int, target_s: float) -> dict[str, Any]:
     """Steps/s of the engine alone on the stepping loop's own work: a block of the loop (Loop) is
     recorded once, then replayed `repeats` times from the same engine state: the same fact rows each step
@@ -196,21 +216,9 @@ def measure_engine_only(sim: RuleSim, trace: bool, repeats: int, target_s: float
     loop = Loop(sim, trace)
     block = calibrate(loop.run, target_s)
     eng = sim.engine
-    start = eng.snapshot()
-    rec = _Recorder(sim)
     before = eng.stats
-    try:
-        loop.run(block)
-    finally:
-        rec.remove()
+    replay, steps = record_replay(loop, block)
     recorded = _work(before, eng.stats)
-    everywhere = np.arange(sim.n_worlds)
-    steps = sum(1 for kind, _ in rec.calls if kind == "step")
-
-    def replay() -> None:
-        eng.restore(start, everywhere)
-        replay_calls(eng, rec.calls, trace)
-
     before = eng.stats
     replay()  # warm-up, and the check that the replay does the loop's work
     same_work = _work(before, eng.stats) == recorded
