@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from tracelab.bench.common import format_table, summarize
+from tracelab.bench.common import format_table, rss_bytes, summarize
 
 OUT_DEGREE = 5
 SEEDS = 10
@@ -64,7 +64,7 @@ def measure(graph_file: str) -> dict[str, Any]:
     write_graph(warm, 20)
     Engine(program, load_graphml(warm), trace=True).run(2)
     warm_s = time.perf_counter() - tw
-    base = _rss_bytes()
+    base = rss_bytes()
     t0 = time.perf_counter()
     graph = load_graphml(graph_file)
     t1 = time.perf_counter()
@@ -80,11 +80,6 @@ def measure(graph_file: str) -> dict[str, Any]:
             "groundings": int(engine._n_grounded), "load_s": t1 - t0, "build_s": t2 - t1, "run_s": t3 - t2,
             "trace_rows": rows, "infected": infected, "warm_up_s": warm_s, "base_rss_bytes": base,
             "peak_rss_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024}
-
-
-def _rss_bytes() -> int:
-    with open("/proc/self/statm") as f:
-        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
 
 
 def run(quick: bool, repeats: int) -> list[dict[str, Any]]:
