@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from located import assert_located
 from tracelab.engine import Engine, load_graphml, parse_program
 from tracelab.engine.errors import ProgramCheckError, RuleSyntaxError
 from tracelab.engine.reference import ReferenceEvaluator, atom_text
@@ -110,8 +111,7 @@ def test_closed_clause_alone_cannot_bind_a_variable() -> None:
 def test_located_errors(text: str, line: int, col: int, fragment: str) -> None:
     with pytest.raises((RuleSyntaxError, ProgramCheckError)) as e:
         parse_program(text, "x.rules")
-    assert (e.value.line, e.value.column) == (line, col), str(e.value)
-    assert fragment in e.value.message
+    assert_located(e.value, "x.rules", line, col, fragment)
 
 
 def test_closed_directive_repeats_and_lists() -> None:

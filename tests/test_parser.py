@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from located import assert_located
 from tracelab.engine import (
     ProgramCheckError,
     ProgramError,
@@ -228,8 +229,7 @@ def test_parse_literal() -> None:
 def test_parse_literal_errors(text: str, col: int, fragment: str) -> None:
     with pytest.raises(ProgramError) as e:
         parse_literal(text)
-    assert (e.value.file, e.value.line, e.value.column) == ("<literal>", 1, col)
-    assert fragment in e.value.message
+    assert_located(e.value, "<literal>", 1, col, fragment)
 
 
 # ------------------------------------------------------------------------------------------ syntax errors
@@ -277,8 +277,7 @@ SYNTAX_ERRORS = [
 def test_syntax_errors_say_what_was_expected_and_where(text: str, line: int, col: int, fragment: str) -> None:
     with pytest.raises(RuleSyntaxError) as e:
         parse_program(text, "rules/x.rules")
-    assert (e.value.file, e.value.line, e.value.column) == ("rules/x.rules", line, col), str(e.value)
-    assert fragment in e.value.message
+    assert_located(e.value, "rules/x.rules", line, col, fragment)
     assert str(e.value).startswith(f"rules/x.rules:{line}:{col}: error: ")
 
 

@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from located import assert_located
 from tracelab.engine import Engine, ProgramError, parse_program
 from tracelab.engine.graph import read_raw_graphml
 from tracelab.engine.program import SourceLoc
@@ -323,8 +324,7 @@ def test_bad_rules_name_file_line_and_column(tmp_path: Path, line: str, col: int
     f.write_text("# a comment\n\n" + line + "\n")
     with pytest.raises(ProgramError) as e:
         load_pyreason([f])
-    assert (e.value.file, e.value.line, e.value.column) == (str(f), 3, col), str(e.value)
-    assert needle in e.value.message
+    assert_located(e.value, str(f), 3, col, needle)
 
 
 def test_engine_checks_point_back_at_the_pyreason_file(tmp_path: Path) -> None:
