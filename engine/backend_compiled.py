@@ -50,14 +50,13 @@ def unsupported(program: Program) -> str | None:
     if bad := _unknown_fields(program):
         return f"the program uses {', '.join(bad)}"
     for r in program.rules:
-        where = f" ({r.loc})" if r.loc else ""
         for obj in (r, r.head, *r.body):
             if bad := _unknown_fields(obj):
-                return f"rule {r.name}{where} uses {', '.join(bad)}"
+                return f"{r.described} uses {', '.join(bad)}"
     for f in program.facts:
         for obj in (f, f.literal):
             if bad := _unknown_fields(obj):
-                return f"fact {f.name}{f' ({f.loc})' if f.loc else ''} uses {', '.join(bad)}"
+                return f"{f.described} uses {', '.join(bad)}"
     return None
 
 

@@ -195,13 +195,11 @@ class Engine:
         aggregated = next((r for r in self.rules if r.aggregated), None)
         if aggregated is not None:  # evaluated per head grounding: the counting kernel only
             if kernel == "lanes":
-                raise ValueError(f"kernel='lanes' cannot run rule {aggregated.name}"
-                                 f"{f' ({aggregated.loc})' if aggregated.loc else ''}: quantifiers and annotation "
+                raise ValueError(f"kernel='lanes' cannot run {aggregated.described}: quantifiers and annotation "
                                  "functions need the counting kernel (kernel='counting' or 'auto')")
             if kernel == "compiled":
-                self.kernel_notice = (f"kernel 'compiled' not used: rule {aggregated.name}"
-                                      f"{f' ({aggregated.loc})' if aggregated.loc else ''} has a quantifier or an "
-                                      "annotation function; running on the counting kernel")
+                self.kernel_notice = (f"kernel 'compiled' not used: {aggregated.described} has a quantifier or "
+                                      "an annotation function; running on the counting kernel")
                 print(f"tracelab: notice: {self.kernel_notice}", file=sys.stderr)
             return CountingState(self)
         if kernel == "lanes" and not_crisp:
@@ -220,11 +218,11 @@ class Engine:
         for i in np.flatnonzero(self._rule_v < 0):
             r = self.rules[i]
             lo, up = self._rule_f[i]
-            return f"rule {r.name}{f' ({r.loc})' if r.loc else ''} sets [{lo:g},{up:g}]"
+            return f"{r.described} sets [{lo:g},{up:g}]"
         for i in np.flatnonzero(self._fact_v < 0):
             f = self.fact(int(i))
             lo, up = self._fact_f[i]
-            return f"fact {f.name}{f' ({f.loc})' if f.loc else ''} sets [{lo:g},{up:g}]"
+            return f"{f.described} sets [{lo:g},{up:g}]"
         return None
 
     @property
@@ -537,17 +535,14 @@ class Engine:
 
     def describe_source(self, kind: int, cid: int, grounding: int = -1) -> str:
         if kind == K.CAUSE_FACT:
-            f = self.fact(cid)
-            where = f" ({f.loc})" if f.loc else ""
-            return f"fact {f.name}{where}"
+            return self.fact(cid).described
         if kind == K.CAUSE_EXTERNAL:
             return f"external fact #{cid}"
         if kind == K.CAUSE_RULE:
             r = self.rules[cid]
-            where = f" ({r.loc})" if r.loc else ""
             if grounding >= 0:
-                return f"rule {r.name}{where} with {self.grounding_text(grounding) or 'no variables'}"
-            return f"rule {r.name}{where}"
+                return f"{r.described} with {self.grounding_text(grounding) or 'no variables'}"
+            return r.described
         if kind == K.CAUSE_POLICY:
             return f"inconsistency policy {INCONSISTENCY_POLICIES[cid]}"
         if kind == K.CAUSE_RESET:

@@ -117,6 +117,11 @@ class Rule:
     annotation: str | None = None  # an annotation function computes the head's bound (`p(X):average`)
     weights: tuple[float, ...] = ()  # per body clause, for the annotation function (`{weights=1,2}`)
 
+    @property
+    def described(self) -> str:
+        """'rule NAME (FILE:LINE:COL)', as messages name it (without a place when it has none)."""
+        return _described("rule", self.name, self.loc)
+
     def quantifier(self, i: int) -> Quantifier | None:
         return self.quantifiers[i] if i < len(self.quantifiers) else None
 
@@ -154,6 +159,15 @@ class Fact:
     static: bool = False
     loc: SourceLoc | None = field(default=None, compare=False)
     text: str = field(default="", compare=False)
+
+    @property
+    def described(self) -> str:
+        """'fact NAME (FILE:LINE:COL)', as messages name it (without a place when it has none)."""
+        return _described("fact", self.name, self.loc)
+
+
+def _described(kind: str, name: str, loc: SourceLoc | None) -> str:
+    return f"{kind} {name} ({loc})" if loc else f"{kind} {name}"
 
 
 @dataclass
