@@ -209,21 +209,27 @@ def _node_ids(pool: np.ndarray, off: np.ndarray) -> list[str]:
     return out.tobytes().decode("utf-8").split("\n")
 
 
-def _to_graph(raw: RawGraph) -> Graph:
-    """Columns of facts in the graph's order (docs/language.md, "Graphs")."""
-    file = raw.file
+def check_names(raw: RawGraph) -> None:
+    """What every reading of a GraphML file refuses (ProgramCheckError): a node id that cannot be a
+    constant of the rule language, and a <data key> that names no <key> (located at its first use)."""
     joined = "\0".join(raw.nodes)  # one scan for what unwritable_constant refuses, a loop only if found
     if "\n" in joined or "\r" in joined or ('"' in joined and "'" in joined) or not all(raw.nodes):
         for name in raw.nodes:
             why = unwritable_constant(name)
             if why is not None:
                 raise ProgramCheckError(f"node id {name!r} cannot be a constant of the rule language: {why}",
-                                        file)
+                                        raw.file)
     del joined
     for k in raw.data_keys:
         if k not in raw.keys:
             i = int(np.argmax(raw.data[:, 2] == raw.data_keys.index(k)))
             raise _fail_at(raw, i, f"<data key=\"{k}\"> names no <key>")
+
+
+def _to_graph(raw: RawGraph) -> Graph:
+    """Columns of facts in the graph's order (docs/language.md, "Graphs")."""
+    file = raw.file
+    check_names(raw)
     labels: list[str] = []
     arity: list[int] = []
     label_of: dict[str, int] = {}

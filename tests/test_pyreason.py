@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 from located import assert_located
-from tracelab.engine import Engine, ProgramError, parse_program
+from tracelab.engine import Engine, ProgramError, load_graphml, parse_program
 from tracelab.engine.graph import read_raw_graphml
 from tracelab.engine.program import SourceLoc
 
@@ -266,6 +266,18 @@ def test_a_bad_graph_value_is_located(tmp_path: Path) -> None:
     with pytest.raises(ProgramError) as e:
         load_pyreason([DATA / "hello_rules.txt"], [], g)
     assert (e.value.file, e.value.line) == (str(g), 5) and "'maybe' is not a boolean" in e.value.message
+
+
+def test_an_undeclared_data_key_is_refused_at_its_first_use_by_both_readings(tmp_path: Path) -> None:
+    g = tmp_path / "g.graphml"
+    g.write_text('<?xml version="1.0"?>\n<graphml xmlns="http://graphml.graphdrawing.org/xmlns">\n'
+                 '<key id="b" for="node" attr.name="ok" attr.type="boolean"/>\n<graph edgedefault="directed">\n'
+                 '<node id="a"><data key="b">true</data></node>\n'
+                 '<node id="c"><data key="zz">true</data></node>\n</graph></graphml>\n')
+    for read in (lambda: graphml.load_pyreason_graphml(g, NameMap()), lambda: load_graphml(g)):
+        with pytest.raises(ProgramError) as e:
+            read()
+        assert_located(e.value, str(g), 6, 14, '<data key="zz"> names no <key>')
 
 
 def test_other_values_take_the_value_by_value_reading(tmp_path: Path) -> None:

@@ -14,9 +14,8 @@ import os
 import numpy as np
 
 from tracelab.engine.errors import ProgramCheckError
-from tracelab.engine.graph import Graph, read_raw_graphml
+from tracelab.engine.graph import Graph, check_names, read_raw_graphml
 from tracelab.engine.graphml_raw import RawGraph
-from tracelab.engine.program import unwritable_constant
 
 from .graphml_columns import GraphFacts, numeric_facts
 from .names import NameMap
@@ -59,10 +58,7 @@ def load_pyreason_graphml(path: str | os.PathLike[str], names: NameMap) -> Graph
     A graph whose values are all numbers or booleans in [0,1] is mapped with array operations
     (graphml_columns.py); any other goes through networkx's reading value by value (the definition)."""
     raw = read_raw_graphml(path)
-    for n in raw.nodes:
-        why = unwritable_constant(n)
-        if why is not None:
-            raise ProgramCheckError(f"node id {n!r} cannot be a constant of the rule language: {why}", raw.file)
+    check_names(raw)
     facts = numeric_facts(raw)
     if facts is None:
         facts = _python_facts(raw)
@@ -76,11 +72,7 @@ def _python_facts(raw: RawGraph) -> GraphFacts:
     adj: list[dict[int, dict[str, object]]] = [{} for _ in raw.nodes]  # DiGraph adjacency, insertion order
     edge_data: list[list[tuple[str, object]]] = [[] for _ in range(len(raw.edges))]
     for i, (kind, elem, kidx) in enumerate(raw.data.tolist()):
-        kid = raw.data_keys[kidx]
-        key = raw.keys.get(kid)
-        if key is None:
-            line, col = raw.place(i)
-            raise ProgramCheckError(f"<data key=\"{kid}\"> names no <key>", file, line, col)
+        key = raw.keys[raw.data_keys[kidx]]  # every key is declared (check_names)
         text = raw.text(i)
         try:
             value = _value(text, key.type)
