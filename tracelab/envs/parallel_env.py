@@ -9,7 +9,7 @@
 - Dead agents stay in `agents` until the game ends (the terminal term is theirs too); their action mask
   allows only "do nothing". When the game ends every agent is terminated (win, loss, draw) or truncated
   (step limit), and `agents` becomes empty; step again only after reset.
-- infos[agent]: `action_mask` (int8 [n_actions], env_common.ActionMasker), `unsafe`, `invalid`,
+- infos[agent]: `action_mask` (int8 [n_actions], tracelab.envs.common.ActionMasker), `unsafe`, `invalid`,
   `hits_made`, `hits_taken` of the last step, and `alive`.
 - `backend` and `trace_sink` as in tracelab.envs.gym_env.GridWarEnv; the trace's step records carry both teams.
 """
