@@ -142,7 +142,7 @@ class RuleSim(GameSim):
         self._agent_flags = np.stack([ids(p, agents) for p in ("alive", "moving", "unsafe", "invalid",
                                                                "canAct")], axis=1)
         self._dest = ids("dest", agents, cells) if s.slow_mask.any() else np.zeros((2 * n, 0), np.int64)
-        self._win = np.stack([ids("captured", list(TEAMS)), ids("eliminated", list(TEAMS))], axis=1)
+        self._win = ids("won", list(TEAMS))
         # the shield's view of the next step (game.rules, section 7)
         self._blocked_move = ids("blockedMove", agents, list(DIRECTIONS))
         self._no_ammo = ids("noAmmo", agents)

@@ -81,8 +81,8 @@ def read_back(truth, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc, bull
     says which atoms are [1,1] in which world (Engine.is_true: [W, K]); the id arrays index its columns.
     agent_flags [M, 5]: atom ids of alive, moving, unsafe, invalid, canAct per agent (M = 2N); unsafe,
     invalid and acted [W, 2, N] receive the last three. bullet_flags [B, 2]: flying, spent.
-    hits [3, B, N]: struck / blanked / caught atoms of bullet b on enemy e. win_ids [2, 2]: captured,
-    eliminated per team; win [W, 2] receives 'team won' (captured, or the enemy eliminated).
+    hits [3, B, N]: struck / blanked / caught atoms of bullet b on enemy e. win_ids [2]: won(T) per
+    team (game.rules, section 6); win [W, 2] receives them.
     Health is the held health less `damage` per hit, the hits of each phase (arrival, point blank,
     walk-in) taken together and 0 at or below DEAD_EPS, as docs/game.md computes it (with apply_hits;
     else the step's events are not new, e.g. at the start, and health stays); a dead agent's is 0.
@@ -164,7 +164,7 @@ def _read_world(w, truth, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc,
                     hits_taken[w, 1 - tm, e] += 1
                     kind_hits[1 - tm, e, kind] += 1
     for tm in range(2):
-        win[w, tm] = truth[w, win_ids[tm, 0]] or truth[w, win_ids[1 - tm, 1]]
+        win[w, tm] = truth[w, win_ids[tm]]
 
 
 @njit(cache=True)
