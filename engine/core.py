@@ -230,7 +230,13 @@ class Engine:
         return CountingState(self)
 
     def _start_background_compile(self, entry: CacheEntry) -> None:
-        self.background, new = compile_job.start(self.program, entry)
+        try:
+            self.background, new = compile_job.start(self.program, entry)
+        except OSError as e:  # an unwritable cache, no process to spare: the run goes on regardless
+            self.kernel_notice = (f"kernel 'compiled' not used: cannot start its background compile "
+                                  f"({e.strerror or e}: {e.filename or entry.dir}); running on the counting kernel")
+            print(f"tracelab: notice: {self.kernel_notice}", file=sys.stderr, flush=True)
+            return
         if new:  # engines of one process share a compile of one kernel: said once
             print(f"tracelab: the compiled kernel is being built in the background (pid {self.background.pid}, "
                   f"a minute or more); the run starts on the counting kernel and switches when it is "

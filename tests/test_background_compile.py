@@ -111,3 +111,16 @@ def test_a_failed_background_compile_leaves_the_run_on_the_counting_kernel(
     err = capfd.readouterr().err
     notices = [ln for ln in err.splitlines() if "notice" in ln]
     assert len(notices) == 1 and "going on with the counting kernel" in notices[0]
+
+
+def test_an_unwritable_cache_leaves_the_run_on_the_counting_kernel(tmp_path, monkeypatch: pytest.MonkeyPatch,
+                                                                   capfd: pytest.CaptureFixture[str]) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("")  # the cache root is under a file: nothing can be created there
+    monkeypatch.setenv(cc.CACHE_ENV, str(blocker))
+    eng = Engine(parse_program(SMALL), kernel="compiled", background_compile=True)
+    eng.step()
+    assert eng.kernel == "counting" and eng.background is None
+    assert "cannot start its background compile" in eng.kernel_notice
+    err = capfd.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("tracelab: notice: kernel 'compiled' not used")
