@@ -5,12 +5,14 @@ Both take the same path, `compile_program`: build the Engine with kernel="compil
 first step compiles the generated module with numba, whose `cache=True` writes the machine code beside it).
 A compile holds an exclusive lock on its cache directory, so two runs asking for the same kernel at once
 compile it once: the second waits, then finds it cached. Every file of an entry is written to a temporary
-name and renamed (kernel.py, numba's index and data, ready.json), so a reader never loads half of one.
+name and then linked (kernel.py, never replaced) or renamed (numba's index and data, ready.json), so a
+reader never loads half of one.
 
 The background process is `python -m tracelab.engine.compile_job PROGRAM.pickle KEY`: it reads the
 program pickled by `start`, compiles it, and prints one JSON line (the times) as the last line of its
-log, `<entry>/compile.<pid>.log`. It runs in its own session, so a Ctrl-C of the run does not stop it:
-a run that ends first leaves it to finish, and the next run finds the kernel via kernel="auto".
+log, `<entry>/compile.<pid>.<ns>.log` (removed once the kernel is ready; kept when it fails). It runs in
+its own session, so a Ctrl-C of the run does not stop it: a run that ends first leaves it to finish, and
+the next run finds the kernel via kernel="auto".
 """
 from __future__ import annotations
 
