@@ -132,13 +132,13 @@ class BackgroundCompile:
         return f"compiled in the background in {took}" + (f" ({cpu:.1f} s of CPU)" if cpu is not None else "")
 
 
-_JOBS: dict[str, BackgroundCompile] = {}  # one background compile per cache key and process
+_JOBS: dict[Path, BackgroundCompile] = {}  # one background compile per cache entry and process
 
 
 def start(program: Program, entry: CacheEntry) -> tuple[BackgroundCompile, bool]:
     """The background compile of `entry` (from `program`): this process's running or finished one for the
-    key, else a new child process. Returns it and whether it is new."""
-    job = _JOBS.get(entry.key)
+    entry, else a new child process. Returns it and whether it is new."""
+    job = _JOBS.get(entry.dir)
     if job is not None and job.poll() != "failed":
         return job, False
     entry.dir.mkdir(parents=True, exist_ok=True)
@@ -150,7 +150,7 @@ def start(program: Program, entry: CacheEntry) -> tuple[BackgroundCompile, bool]
         proc = subprocess.Popen([sys.executable, "-m", "tracelab.engine.compile_job", str(pickled), entry.key],
                                 stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT,
                                 start_new_session=True)
-    job = _JOBS[entry.key] = BackgroundCompile(entry, proc, log)
+    job = _JOBS[entry.dir] = BackgroundCompile(entry, proc, log)
     return job, True
 
 

@@ -80,7 +80,7 @@ def test_a_run_switches_to_the_compiled_kernel_exactly(tmp_path, monkeypatch: py
     assert len(step.signatures) == 1 and not step.stats.cache_misses and step.stats.cache_hits
     out, err = other.communicate(timeout=1200)
     assert other.returncode == 0, err
-    job = compile_job._JOBS[entry.key]
+    job = compile_job._JOBS[entry.dir]
     compiled_here = [not job.result["cached"], "compiled and cached" in err]
     assert sorted(compiled_here) == [False, True], (job.result, err)  # exactly one of the two compiled
     assert "loaded (already cached)" in err or job.result["cached"]
