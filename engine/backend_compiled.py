@@ -65,26 +65,27 @@ def cache_entry(eng: EngineTables) -> CacheEntry:
     return CacheEntry(Specialisation.of(eng._cfg, eng._rule_i, eng._rule_f))
 
 
-def compiled_backend(eng: EngineTables, program: Program, cached_only: bool
-                     ) -> tuple["CompiledState | None", str | None]:
-    """The compiled backend for eng, or None and why not. With `cached_only` (kernel="auto"): only when
-    the cache already holds this program's kernel, silently otherwise. Without it (kernel="compiled"): a
-    program the backend cannot take gets a one-line notice on stderr and None (the caller runs the
-    counting kernel); a program not yet cached is compiled by its first step."""
+def compiled_backend(eng: EngineTables, program: Program, uncached: str
+                     ) -> tuple["CompiledState | None", str | None, CacheEntry | None]:
+    """The compiled backend for eng, or None and why not (a notice), and the cache entry still to build.
+    `uncached` says what to do when the cache lacks this program's kernel: "skip" (kernel="auto": None,
+    silently), "compile" (the backend, whose first step compiles) or "build" (None and the entry, for a
+    background compile). A program the backend cannot take gets a one-line notice on stderr and None
+    (the caller runs the counting kernel), unless `uncached` is "skip"."""
     why = unsupported(program)
     if why is None:
         entry = cache_entry(eng)
-        if cached_only and not entry.ready:
-            return None, None
+        if not entry.ready and uncached != "compile":
+            return None, None, entry if uncached == "build" else None
         try:
-            return CompiledState(eng, entry), None
+            return CompiledState(eng, entry), None, None
         except GenerationError as e:
             why = str(e)
-    if cached_only:
-        return None, None
+    if uncached == "skip":
+        return None, None, None
     notice = f"kernel 'compiled' not used: {why}; running on the counting kernel"
     print(f"tracelab: notice: {notice}", file=sys.stderr)
-    return None, notice
+    return None, notice, None
 
 
 class CompiledState(CountingState):
@@ -96,6 +97,19 @@ class CompiledState(CountingState):
         self.module: ModuleType = entry.load()
         self.step_kernel = self.module.step_worlds
         self._ready = entry.ready
+
+    @classmethod
+    def taking_over(cls, state: CountingState, entry: CacheEntry) -> "CompiledState":
+        """The compiled backend going on from a counting backend's state between two steps: the same
+        arrays (no copy), stepped from now on by the kernel generated from the counting kernel's own
+        source, so the run goes on exactly as it would have on the counting kernel."""
+        new = cls.__new__(cls)
+        new.__dict__.update(state.__dict__)
+        new.entry = entry
+        new.module = entry.load()
+        new.step_kernel = new.module.step_worlds
+        new._ready = entry.ready
+        return new
 
     def step(self, ext_ptr: np.ndarray, ext_i: np.ndarray, ext_f: np.ndarray) -> int:
         if self._ready:

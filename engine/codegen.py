@@ -135,12 +135,18 @@ def _sources() -> tuple[str, str]:
     return inspect.getsource(K), inspect.getsource(inspect.getmodule(Specialisation))  # type: ignore[arg-type]
 
 
+@functools.lru_cache(maxsize=1)
+def _sources_digest() -> str:
+    """A hash of the template and the generator, computed once per process (every engine built with
+    kernel="auto" or "compiled" looks its key up)."""
+    kernel_src, codegen_src = _sources()
+    return hashlib.sha256(kernel_src.encode() + b"\0" + codegen_src.encode()).hexdigest()
+
+
 def fingerprint(spec: Specialisation) -> str:
     """A text that determines generate(spec): the template, the generator and the program's values. The
     cache key hashes it, so that Engine(kernel="auto") can look a program up without generating it."""
-    kernel_src, codegen_src = _sources()
-    digest = hashlib.sha256(kernel_src.encode() + b"\0" + codegen_src.encode()).hexdigest()
-    return f"{GENERATOR_VERSION}\n{digest}\n{spec!r}"
+    return f"{GENERATOR_VERSION}\n{_sources_digest()}\n{spec!r}"
 
 
 @functools.lru_cache(maxsize=8)

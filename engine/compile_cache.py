@@ -81,11 +81,17 @@ class CacheEntry:
             return _LOADED[self.key]
         self.dir.mkdir(parents=True, exist_ok=True)
         if not self.module_path.exists():
-            # write-then-rename: another process never imports a half-written file, and numba's cache
-            # (keyed on the file's time stamp) is not invalidated by rewriting equal text
-            tmp = self.dir / f"kernel.{os.getpid()}.tmp"
+            # write, then link to the final name unless another process got there first: a reader never
+            # imports a half-written file, and an existing one is never replaced (numba's cache is keyed
+            # on the file's time stamp: replacing it by equal text would make the cache stale)
+            tmp = self.dir / f"kernel.{os.getpid()}.{time.monotonic_ns()}.tmp"
             tmp.write_text(generate(self.spec))
-            os.replace(tmp, self.module_path)
+            try:
+                os.link(tmp, self.module_path)
+            except FileExistsError:
+                pass
+            finally:
+                tmp.unlink()
         name = f"tracelab_compiled_{self.key}"
         spec = importlib.util.spec_from_file_location(name, self.module_path)
         assert spec is not None and spec.loader is not None

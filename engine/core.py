@@ -6,16 +6,19 @@ of the compiled kernel (kernel.step_worlds) for all worlds together.
 from __future__ import annotations
 
 import sys
+import time
 from collections.abc import Sequence
 
 import numpy as np
 
 from . import annotations
+from . import compile_job
 from . import kernel as K
 from .aggregate_tables import aggregate_tables, aggregated_rules
-from .backend_compiled import compiled_backend
+from .backend_compiled import CompiledState, compiled_backend
 from .backend_counting import CountingState
 from .backend_lanes import LaneState, crisp_codes
+from .compile_cache import CacheEntry
 from .errors import FixpointError, InconsistencyError, ProgramCheckError
 from .graph import Graph
 from .grounding import Grounder, GroundingTable, rule_head_bound
@@ -48,6 +51,8 @@ TRACE_MIN_ROWS = 1024
 KERNELS = ("auto", "counting", "lanes", "compiled")
 # "auto" takes the lanes kernel for crisp programs from this many worlds on (a word holds 64 worlds)
 LANES_MIN_WORLDS = 64
+# a running engine checks on its background compile at most this often (one waitpid per check)
+BACKGROUND_POLL_S = 0.5
 STAT_NAMES = ("firings", "rederivations", "static_ignored", "changes", "passes", "watch_visits",
               "candidates")
 
@@ -67,7 +72,7 @@ class Engine:
     def __init__(self, program: Program, graph: Graph | None = None, *, worlds: int = 1,
                  trace: bool | Sequence[bool] | np.ndarray = True, max_passes: int = 1000,
                  max_immediate: int = 100_000, trace_rows_per_step: int = 65_536,
-                 kernel: str = "auto", threads: int | None = None) -> None:
+                 kernel: str = "auto", threads: int | None = None, background_compile: bool = False) -> None:
         if worlds < 1:
             raise ValueError(f"worlds must be >= 1, got {worlds}")
         self.program = program
@@ -118,7 +123,11 @@ class Engine:
         self.threads = threads or 1
         self._ext_codes = np.zeros(0, np.int8)  # crisp value codes of this step's external rows (lanes)
         self.kernel_notice: str | None = None  # why a requested compiled kernel is not used
-        self._state: CountingState | LaneState = self._choose_backend(kernel)
+        # kernel="compiled" with background_compile: the compile of a kernel not yet cached, running in a
+        # child process while this engine steps on the counting kernel (step() takes it over when ready)
+        self.background: compile_job.BackgroundCompile | None = None
+        self._next_poll = 0.0
+        self._state: CountingState | LaneState = self._choose_backend(kernel, background_compile)
         self._ext: list[tuple[np.ndarray, ...]] = []  # chunks of (atoms, lower, upper, world, static)
         self._settable = np.zeros(0, np.bool_)
         self._n_settable = 0
@@ -186,9 +195,11 @@ class Engine:
             self._rule_f[i] = rule_head_bound(r)
         self._rule_v = crisp_codes(self._rule_f[:, 0], self._rule_f[:, 1])
 
-    def _choose_backend(self, kernel: str) -> CountingState | LaneState:
+    def _choose_backend(self, kernel: str, background_compile: bool) -> CountingState | LaneState:
         """The counting kernel serves every program; the lanes kernel serves crisp ones (every rule head
-        and fact sets [0,0], [1,1] or [0,1]) and is faster for large batches."""
+        and fact sets [0,0], [1,1] or [0,1]) and is faster for large batches. kernel="compiled" on a
+        program not yet cached compiles at the first step, or with `background_compile` in a child
+        process while the engine starts on the counting kernel."""
         if kernel not in KERNELS:
             raise ValueError(f"kernel must be one of {KERNELS}, got {kernel!r}")
         not_crisp = self._not_crisp()
@@ -208,10 +219,56 @@ class Engine:
         if kernel == "lanes" or (kernel == "auto" and not not_crisp and self.n_worlds >= LANES_MIN_WORLDS):
             return LaneState(self, self.threads)
         if kernel in ("compiled", "auto"):  # auto: only a program the compile cache already holds
-            state, self.kernel_notice = compiled_backend(self, self.program, cached_only=kernel == "auto")
+            uncached = "skip" if kernel == "auto" else "build" if background_compile else "compile"
+            state, self.kernel_notice, to_build = compiled_backend(self, self.program, uncached)
             if state is not None:
                 return state
+            if to_build is not None:
+                self._start_background_compile(to_build)
         return CountingState(self)
+
+    def _start_background_compile(self, entry: CacheEntry) -> None:
+        try:
+            self.background, new = compile_job.start(self.program, entry)
+        except OSError as e:  # an unwritable cache, no process to spare: the run goes on regardless
+            self.kernel_notice = (f"kernel 'compiled' not used: cannot start its background compile "
+                                  f"({e.strerror or e}: {e.filename or entry.dir}); running on the counting kernel")
+            print(f"tracelab: notice: {self.kernel_notice}", file=sys.stderr, flush=True)
+            return
+        if new:  # engines of one process share a compile of one kernel: said once
+            print(f"tracelab: the compiled kernel is being built in the background (pid {self.background.pid}, "
+                  f"a minute or more); the run starts on the counting kernel and switches when it is "
+                  f"ready", file=sys.stderr, flush=True)
+
+    def _poll_background(self) -> None:
+        """Between two steps: once the background compile has finished, go on with the compiled kernel
+        (the counting kernel's state, stepped by the kernel generated from it: the run is the same)."""
+        now = time.monotonic()
+        if now < self._next_poll:
+            return
+        self._next_poll = now + BACKGROUND_POLL_S
+        job = self.background
+        assert job is not None
+        status = job.poll()
+        if status == "running":
+            return
+        self.background = None
+        if status == "ready" and self.kernel == "counting":
+            self._state = CompiledState.taking_over(self._state, job.entry)
+            print(f"tracelab: the compiled kernel is ready ({job.describe()}); switched to it at t={self.t}",
+                  file=sys.stderr, flush=True)
+        elif status == "failed":
+            self.kernel_notice = (f"kernel 'compiled' not used: the background compile failed ({job.why}); "
+                                  "going on with the counting kernel")
+            print(f"tracelab: notice: {self.kernel_notice}", file=sys.stderr, flush=True)
+
+    def wait_for_compile(self, timeout: float | None = None) -> str | None:
+        """Block until the background compile ends (tests, benchmarks); the next step takes it over.
+        Its status, or None when there is none."""
+        if self.background is None:
+            return None
+        self._next_poll = 0.0
+        return self.background.wait(timeout)
 
     def _not_crisp(self) -> str | None:
         """What makes the program not crisp (a rule head or fact and its bound), or None."""
@@ -296,7 +353,12 @@ class Engine:
 
     def snapshot(self) -> dict[str, object]:
         """A copy of every world's state before step self.t, for restore()."""
-        return {"t": self.t, "kernel": self.kernel, **self._state.snapshot()}
+        return {"t": self.t, "kernel": self.kernel, "layout": self._layout(), **self._state.snapshot()}
+
+    def _layout(self) -> str:
+        """The state's layout: the compiled backend keeps the counting backend's (a snapshot of one
+        restores into the other, as after a switch to the compiled kernel)."""
+        return "lanes" if self.kernel == "lanes" else "counting"
 
     def restore(self, snap: dict[str, object], worlds: np.ndarray) -> None:
         """Put `worlds` (indices or a bool mask) back into their state in `snap`. Their next step behaves
@@ -305,7 +367,7 @@ class Engine:
         worlds = np.flatnonzero(worlds) if np.asarray(worlds).dtype == np.bool_ else np.asarray(worlds)
         if worlds.size == 0:
             return
-        if snap["kernel"] != self.kernel:
+        if snap["layout"] != self._layout():
             raise RuntimeError(f"this snapshot was taken by the {snap['kernel']} kernel, but the engine now "
                                f"runs the {self.kernel} kernel (a non-crisp external fact arrived); take a "
                                "new snapshot")
@@ -392,6 +454,8 @@ class Engine:
         `external` is a fast path for simulators that build their fact rows themselves: (ptr int64[W+1],
         rows int64[R,3] (atom, static, id), bounds float64[R,2]), rows grouped by world, atoms settable
         (given once to add_facts) and ids from `next_external_id()` on. It replaces add_fact(s)."""
+        if self.background is not None:
+            self._poll_background()
         self._sync()
         if external is None:
             ext_ptr, ext_i, ext_f = self._external_arrays()

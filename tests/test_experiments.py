@@ -14,12 +14,12 @@ pytest.importorskip("matplotlib")
 from PIL import Image  # noqa: E402
 
 from tracelab.cli import main  # noqa: E402
-from tracelab.store import open_run  # noqa: E402
+from tracelab.store import open_run, run_info  # noqa: E402
 from tracelab.train.experiments.stats import spread, two_proportion_test, wilson  # noqa: E402
 
 
-def run_quick(name: str, out: Path, capsys) -> str:
-    assert main(["experiment", name, "--quick", "--out", str(out)]) == 0
+def run_quick(name: str, out: Path, capsys, *flags: str) -> str:
+    assert main(["experiment", name, "--quick", "--out", str(out), *flags]) == 0
     return capsys.readouterr().out
 
 
@@ -44,7 +44,8 @@ def final_metrics(run: Path) -> dict[str, float]:
 
 def test_1v1_base_quick(tmp_path, capsys):
     out = tmp_path / "exp"
-    printed = run_quick("1v1-base", out, capsys)
+    printed = run_quick("1v1-base", out, capsys, "--kernel", "counting")
+    assert run_info(out / "1v1-base-seed0").meta["config"]["kernel"] == "counting"
     report = out / "1v1-base.md"
     assert f"report: {report}" in printed
     text = report.read_text()

@@ -1,10 +1,10 @@
 """`tracelab compile RULES...`: compile a rule program's own kernel ahead (kernel="compiled",
-docs/engine-api.md), so that `--kernel compiled` and `auto` find it in the cache."""
+docs/engine-api.md), so that `--kernel compiled` and `auto` find it in the cache. A run that asks for
+`--kernel compiled` before this compiles it the same way (tracelab.engine.compile_job) in the background."""
 from __future__ import annotations
 
 import argparse
 import sys
-import time
 
 from tracelab.errors import UserError
 
@@ -20,35 +20,30 @@ def _say(text: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from contextlib import ExitStack
+
     from tracelab.commands._progress import working
-    from tracelab.engine import Engine, FixpointError, InconsistencyError, load_program
-    from tracelab.engine.backend_compiled import GenerationError, cache_entry, unsupported
+    from tracelab.engine import load_program
+    from tracelab.engine.backend_compiled import unsupported
+    from tracelab.engine.compile_job import CompileRefused, compile_program
 
     program = load_program(*args.program)
     names = " ".join(args.program)
     if why := unsupported(program):
         raise UserError(f"cannot compile {names}: {why} (such programs run on the counting kernel)")
-    t0 = time.perf_counter()
-    probe = Engine(program, kernel="counting", trace=True)  # the program's tables, no compile
-    entry = cache_entry(probe)
-    cached = entry.ready
-    try:
-        entry.load()  # writes the generated module (cheap); numba compiles at the first step
-    except GenerationError as e:
-        raise UserError(f"cannot compile {names}: {e}") from e
-    _say(f"{names}: {len(program.rules)} rules, kernel {entry.key} in {entry.dir.parent}")
-    what = "loading the cached kernel" if cached else "generating and compiling the kernel with numba " \
-                                                     "(a minute or so; once per program and library version)"
-    _say(f"{what}...")
-    with working(f"{what}…"):
-        engine = Engine(program, kernel="compiled", trace=True)
+    with ExitStack() as spinning:
+        def announce(entry, cached: bool) -> None:  # noqa: ANN001
+            _say(f"{names}: {len(program.rules)} rules, kernel {entry.key} in {entry.dir.parent}")
+            what = "loading the cached kernel" if cached else \
+                "generating and compiling the kernel with numba (a minute or so; once per program and library version)"
+            _say(f"{what}...")
+            spinning.enter_context(working(f"{what}…"))
+
         try:
-            engine.step()  # the first step compiles the kernel (or loads it) and caches it
-        except (InconsistencyError, FixpointError):
-            pass  # the program's own facts: compiling does not depend on how its first step ends
-    took = time.perf_counter() - t0
-    if engine.kernel != "compiled" or not entry.ready:
-        raise UserError(f"cannot compile {names}: {engine.kernel_notice or 'the kernel was not cached'}")
-    _say(f"{'loaded (already cached)' if cached else 'compiled and cached'} in {took:.1f} s: {entry.dir}")
-    print(entry.dir)
+            outcome = compile_program(program, announce)
+        except CompileRefused as e:
+            raise UserError(f"cannot compile {names}: {e}") from e
+    _say(f"{'loaded (already cached)' if outcome.cached else 'compiled and cached'} in {outcome.wall_s:.1f} s "
+         f"({outcome.cpu_s:.1f} s of CPU): {outcome.entry.dir}")
+    print(outcome.entry.dir)
     return 0

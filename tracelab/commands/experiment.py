@@ -8,7 +8,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from tracelab.commands._args import positive_int
+from tracelab.commands._args import ENGINE_KERNELS, positive_int
 from tracelab.errors import UserError, store_errors
 
 NAMES = ("1v1-base", "5v5-base", "portability", "markov-vs-nonmarkov", "reward-shaping")
@@ -26,6 +26,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="a smoke run: few steps, one seed, a small evaluation, small plots (under 2 minutes)")
     p.add_argument("--jobs", type=positive_int, default=1,
                    help="trainings run at a time, each in its own process (default 1)")
+    p.add_argument("--kernel", choices=ENGINE_KERNELS, default="auto",
+                   help="the rule engine's kernel of the trainings (train --kernel; default auto)")
     p.add_argument("--out", default=None, help="directory of the runs (default runs/experiments/NAME)")
     p.add_argument("--report-dir", default=None,
                    help="where NAME.md and NAME/*.png go (default docs/experiments; with --quick: --out)")
@@ -60,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
         command = f"tracelab experiment {args.name}" + (" --quick" if args.quick else "")
     say = lambda s: print(s, file=sys.stderr, flush=True)  # noqa: E731
     try:
-        result = run_experiment(exp, budget, out, command, args.quick, say, jobs=args.jobs)
+        result = run_experiment(exp, budget, out, command, args.quick, say, jobs=args.jobs, kernel=args.kernel)
     except KeyboardInterrupt:  # main() prints this and exits 130
         raise KeyboardInterrupt(f"no report written (the runs so far are in {out})") from None
     path = write_report(result, report_dir)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tracelab.commands._args import non_negative_int, positive_int
+from tracelab.commands._args import ENGINE_KERNELS, non_negative_int, positive_int
 from tracelab.errors import UserError, store_errors
 
 OUTCOMES = {0: "win", 1: "loss", 2: "draw"}  # from red's side, by WINNER_RED / BLUE / DRAW
@@ -35,6 +35,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="the opponent's probability of a move towards red's base (default 0.7)")
     p.add_argument("--seed", type=non_negative_int, default=0,
                    help="seed of the episodes and of the random policy (default 0)")
+    p.add_argument("--kernel", choices=ENGINE_KERNELS, default="auto",
+                   help="the rule engine's kernel: auto (default: lanes from 64 worlds, else the compiled kernel "
+                        "once cached, else counting), counting, lanes, or compiled (built in the background "
+                        "while the games start on the counting kernel, unless `tracelab compile` built it ahead)")
     p.add_argument("--run", help="a new (or empty) run directory (default runs/play-<scenario>-<time>)")
     p.add_argument("--no-trace", action="store_true", help="play without recording a run")
     p.set_defaults(func=run)
@@ -84,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
     run_dir = Path(args.run or f"runs/play-{scenario.name}-{time.strftime('%Y%m%d-%H%M%S')}")
     check_run_dir(run_dir)
     meta = {"command": " ".join(shlex.quote(a) for a in sys.argv), "scenario": scenario.name,
-            "config": {"episodes": args.episodes, "worlds": args.worlds, "policy": args.policy,
+            "config": {"episodes": args.episodes, "worlds": args.worlds, "policy": args.policy, "kernel": args.kernel,
                        "opponent_p": args.opponent_p, "scenario": scenario.to_toml()},
             "rule_files": [str(GAME_RULES)], "seed": args.seed}
     try:
@@ -117,6 +121,7 @@ def play(scenario, args: argparse.Namespace, sink) -> dict:
     Shows the compile (first run) or the build while it happens and a progress bar over the episodes (on
     a terminal); the steps/s leave out the first step, which includes any compiling."""
     from tracelab.commands._progress import compiling_engine, progress
+    from tracelab.engine.compile_job import say_running_compiles
     from tracelab.engine.core import LANES_MIN_WORLDS
     from tracelab.envs.vector_env import GridWarVectorEnv
     from tracelab.game.opponent import P_TOWARD
@@ -166,12 +171,14 @@ def play(scenario, args: argparse.Namespace, sink) -> dict:
         return played, ended
 
     agents = f"{n} agent{'s' if n != 1 else ''} a team"
-    with compiling_engine(simulator=True, lanes=n_worlds >= LANES_MIN_WORLDS,
+    kernel = getattr(args, "kernel", "auto")
+    lanes = kernel == "lanes" or (kernel == "auto" and n_worlds >= LANES_MIN_WORLDS)
+    with compiling_engine(simulator=True, lanes=lanes,
                           busy=f"building the game's rules ({agents})…") as first:
         env = GridWarVectorEnv(n_worlds, scenario, backend="rules", trace_sink=sink,
                                trace_episodes=args.episodes,
                                stack_previous=trained is not None and trained.stack_previous,
-                               opponent_p=P_TOWARD if opponent_p is None else opponent_p)
+                               opponent_p=P_TOWARD if opponent_p is None else opponent_p, kernel=kernel)
         last["obs"], last["info"] = env.reset(seed=args.seed)
         first_steps, ended = one_step(env)
     steps = 0
@@ -188,6 +195,7 @@ def play(scenario, args: argparse.Namespace, sink) -> dict:
                                **{"steps/s": steps / max(elapsed, 1e-9)})
     elapsed = time.perf_counter() - t0
     env.close()
+    say_running_compiles()
     return {"episodes": [finished[e] for e in sorted(finished)], "steps": steps + first_steps,
             "timed_steps": steps, "seconds": elapsed, "scenario": scenario.name,
             "first_step_s": first.seconds, "compiled": first.compiled}

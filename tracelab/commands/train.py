@@ -15,10 +15,11 @@ from typing import Any
 
 from tracelab.errors import UserError, store_errors
 
-RESUMABLE_FLAGS = {"threads"}  # what --resume may change: the rest is the checkpoint's
+RESUMABLE_FLAGS = {"threads", "kernel"}  # what --resume may change (the rest is the checkpoint's): not results
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    from tracelab.commands._args import ENGINE_KERNELS
     from tracelab.train.config import config_fields
 
     p = sub.add_parser("train", help="train red with DQN, logging metrics, episodes and traced evaluation "
@@ -34,6 +35,8 @@ def register(sub: argparse._SubParsersAction) -> None:
             p.add_argument(flag, dest=name, action="store_true", help=shown)
         elif name == "backend":
             p.add_argument(flag, dest=name, choices=("rules", "reference"), help=shown)
+        elif name == "kernel":
+            p.add_argument(flag, dest=name, choices=ENGINE_KERNELS, help=shown)
         else:
             conv = {"int": int, "float": float, "str": str, "int | None": int}.get(str(typ), str)
             p.add_argument(flag, dest=name, type=conv, metavar=name.upper(), help=shown)
@@ -94,6 +97,7 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
     from tracelab.game.facts import GAME_RULES
     from tracelab.store import TraceWriter
     from tracelab.train.checkpoint import restore
+    from tracelab.engine.compile_job import say_running_compiles
     from tracelab.train.loop import Trainer
 
     meta = {"command": " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]),
@@ -106,7 +110,7 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
         writer = TraceWriter.open(run_dir, meta)
     torch.set_num_threads(cfg.threads)
     print(f"training {scenario.name} ({scenario.agents_per_team}v{scenario.agents_per_team}, "
-          f"{'non-Markov' if cfg.non_markov else 'Markov'}, {cfg.backend} backend, {cfg.envs} worlds) for "
+          f"{'non-Markov' if cfg.non_markov else 'Markov'}, {cfg.backend} backend{'' if cfg.kernel == 'auto' else f', {cfg.kernel} kernel'}, {cfg.envs} worlds) for "
           f"{cfg.steps:,} steps; torch on {torch.get_num_threads()} CPU thread"
           f"{'s' if torch.get_num_threads() != 1 else ''} (--threads); run: {run_dir}", file=sys.stderr)
     largest = max(abs(v) for v in dataclasses.asdict(scenario.rewards).values()) * cfg.reward_scale
@@ -150,6 +154,7 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
             trainer.close()
         writer.close(status=status)
     _report(trainer, run_dir, status)
+    say_running_compiles()
     return 0 if status == "finished" else 130
 
 

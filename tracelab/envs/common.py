@@ -32,10 +32,16 @@ def resolve_scenario(scenario: Scenario | str) -> Scenario:
     return builtin_scenario(scenario) if isinstance(scenario, str) else scenario
 
 
-def make_sim(scenario: Scenario, backend: str, n_worlds: int, stack_previous: bool, trace: bool) -> Simulator:
-    """RuleSim ("rules", the engine; `trace` turns its change log on) or RefSim ("reference", no trace)."""
+def make_sim(scenario: Scenario, backend: str, n_worlds: int, stack_previous: bool, trace: bool,
+             kernel: str = "auto") -> Simulator:
+    """RuleSim ("rules", the engine; `trace` turns its change log on) or RefSim ("reference", no trace).
+    `kernel`: the engine's (tracelab.engine.Engine); an env never waits for a compile, so "compiled" not
+    yet cached is built in the background while the engine starts on the counting kernel."""
     if backend == "rules":
-        return RuleSim(scenario, n_worlds, seed=None, stack_previous=stack_previous, trace=trace)
+        return RuleSim(scenario, n_worlds, seed=None, stack_previous=stack_previous, trace=trace, kernel=kernel,
+                       background_compile=True)
+    if kernel != "auto":
+        raise ValueError(f"kernel {kernel!r} is the rule engine's: it needs backend 'rules', not {backend!r}")
     if backend == "reference":
         return RefSim(scenario, n_worlds, seed=None, stack_previous=stack_previous)
     raise ValueError(f"unknown backend {backend!r}; expected one of {BACKENDS}")

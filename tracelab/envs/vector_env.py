@@ -26,6 +26,9 @@ Tracing: with `trace_sink`, every episode goes to the sink; with `trace_episodes
 episodes 0..N-1 (ids in the order episodes begin; see tracelab/envs/tracer.py), so stepping until those
 ended records exactly N episodes.
 
+`kernel`: the rule engine's kernel (backend "rules"; tracelab.envs.common.make_sim): auto, counting,
+lanes or compiled (built in the background while the env steps on the counting kernel if not cached).
+
 `opponent_p`: the scripted opponent's probability of a move towards red's base (0.7, the method's
 training setting). info["opponent_actions"] (int64, spec ids, as GridWarEnv's) holds what blue played in
 the step (in final_info for worlds that ended), so a step can be replayed on a simulator
@@ -66,7 +69,7 @@ class GridWarVectorEnv(VectorEnv):
     def __init__(self, num_envs: int = 1, scenario: Scenario | str = "advanced", *, backend: str = "rules",
                  stack_previous: bool = False, trace_sink: TraceSink | None = None,
                  trace_episodes: int | None = None, render_mode: str | None = None,
-                 opponent_p: float = P_TOWARD, copy: bool = True) -> None:
+                 opponent_p: float = P_TOWARD, copy: bool = True, kernel: str = "auto") -> None:
         if render_mode is not None:
             raise ValueError("GridWarVectorEnv does not render")
         if num_envs < 1:
@@ -74,7 +77,8 @@ class GridWarVectorEnv(VectorEnv):
         self.num_envs = num_envs
         self.scenario = resolve_scenario(scenario)
         self.backend = backend
-        self.sim = make_sim(self.scenario, backend, num_envs, stack_previous, trace=trace_sink is not None)
+        self.sim = make_sim(self.scenario, backend, num_envs, stack_previous, trace=trace_sink is not None,
+                            kernel=kernel)
         self.sim.opponent_p = opponent_p
         self.single_observation_space = observation_space(self.scenario, stack_previous)
         self.single_action_space = learner_action_space(self.scenario)

@@ -21,7 +21,8 @@ class RuleSim(GameSim):
     """`n_worlds` games stepped together by one engine call per step. `trace` turns the engine's change
     log on (for all worlds, or a bool per world); take it with `self.engine.take_trace()`. `kernel`
     chooses the engine's kernel (tracelab.engine.Engine; "auto" takes the lanes kernel for 64 worlds
-    or more). `copy`: the step contract (GameSim): by default a StepResult's arrays are read-only views
+    or more); with `background_compile`, kernel="compiled" not yet cached is compiled in a background
+    process while the engine steps on the counting kernel (Engine). `copy`: the step contract (GameSim): by default a StepResult's arrays are read-only views
     of buffers the next step or reset overwrites; `copy=True` returns new arrays every time.
 
     A step is four compiled calls and the engine's: encode_actions (actions to fact rows), the engine
@@ -30,9 +31,10 @@ class RuleSim(GameSim):
 
     def __init__(self, scenario: Scenario, n_worlds: int = 1, seed: int | None = None,
                  stack_previous: bool = False, trace: bool | np.ndarray = False, kernel: str = "auto",
-                 copy: bool = False) -> None:
+                 copy: bool = False, background_compile: bool = False) -> None:
         super().__init__(scenario, n_worlds, seed, stack_previous, copy)
-        self.engine = Engine(scenario_program(scenario), worlds=n_worlds, trace=trace, kernel=kernel)
+        self.engine = Engine(scenario_program(scenario), worlds=n_worlds, trace=trace, kernel=kernel,
+                             background_compile=background_compile)
         self._index_atoms()
         # t = 0 sets up the start; every action atom starts false, so the rules are grounded for them
         self.engine.add_facts(self._action_atoms[self._action_atoms >= 0], 0.0, 0.0)

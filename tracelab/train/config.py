@@ -8,6 +8,8 @@ import math
 from dataclasses import MISSING, asdict, dataclass, field, fields
 from typing import Any
 
+from tracelab.commands._args import ENGINE_KERNELS
+
 
 def _opt(help: str, **kw: Any) -> Any:
     """A field with its CLI help; the default goes in `default=`."""
@@ -24,6 +26,11 @@ class TrainConfig:
                             default=False)
     agents: int | None = _opt("agents per team (default: the scenario's)", default=None)
     backend: str = _opt("simulator: rules (the rule engine) or reference (hand-written)", default="rules")
+    kernel: str = _opt("the rule engine's kernel (--backend rules): auto (lanes from 64 worlds, else the "
+                       "compiled kernel once cached, else counting), counting, lanes, or compiled (built in the "
+                       "background while training starts on the counting kernel, unless `tracelab compile` "
+                       "built it ahead; docs/engine-api.md). Results are the same with every kernel",
+                       default="auto")
     steps: int = _opt("training steps (world-steps: env transitions)", default=200_000)
     seed: int = _opt("seed of everything (network init, exploration, replay sampling, envs)", default=0)
     envs: int = _opt("worlds stepped together (the batched env; from 64 on the rule engine runs its lanes "
@@ -93,6 +100,11 @@ class TrainConfig:
             problems.append(f"updates_per_step must be >= 0, got {self.updates_per_step}")
         if self.backend not in ("rules", "reference"):
             problems.append(f"backend must be rules or reference, got {self.backend!r}")
+        if self.kernel not in ENGINE_KERNELS:
+            problems.append(f"kernel must be one of {', '.join(ENGINE_KERNELS)}, got {self.kernel!r}")
+        elif self.kernel != "auto" and self.backend != "rules":
+            problems.append(f"kernel {self.kernel} is the rule engine's: it needs --backend rules, not "
+                            f"{self.backend}")
         if self.agents is not None and self.agents < 1:
             problems.append(f"agents must be at least 1, got {self.agents}")
         if problems:

@@ -106,7 +106,8 @@ def shares(games: int, worlds: int) -> np.ndarray:
 
 
 def play_games(env: GridWarVectorEnv, policy: Policy, quota: np.ndarray, seed: int | None) -> list[GameRecord]:
-    """Play `quota[w]` games in world w of `env` (from a reset with `seed`); the games in order of ending."""
+    """Play `quota[w]` games in world w of `env` (from a reset with `seed`); the games in order of ending.
+    Nothing of a step's observation is kept past the next step: `env` may be a copy=False env."""
     sc: Scenario = env.scenario
     n = sc.agents_per_team
     blue_base = np.asarray(sc.blue_base, np.float32)
@@ -195,11 +196,11 @@ class EvalTrace:
     vocabulary and groundings stay one), `games` worlds, one traced game per world per evaluation."""
 
     def __init__(self, writer: TraceWriter, scenario: Scenario, backend: str, stack_previous: bool,
-                 games: int, opponent_p: float, new_id: Callable[[], int]) -> None:
+                 games: int, opponent_p: float, new_id: Callable[[], int], kernel: str = "auto") -> None:
         self.sink = EvalSink(writer, new_id)
         self.games = games
         self.env = GridWarVectorEnv(games, scenario, backend=backend, stack_previous=stack_previous,
-                                    trace_sink=self.sink, opponent_p=opponent_p)
+                                    trace_sink=self.sink, opponent_p=opponent_p, kernel=kernel, copy=False)
 
     def play(self, policy: Policy, seed: int, info: Mapping[str, Any]) -> list[GameRecord]:
         self.sink.accept(info, self.games)  # the reset begins one episode per world

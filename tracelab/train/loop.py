@@ -66,8 +66,12 @@ class Trainer:
         self.worlds, self.agents = w, n
         self.rng = np.random.default_rng(np.random.SeedSequence([cfg.seed, 0]))  # exploration, sampling
         self.torch_gen = torch.Generator().manual_seed(cfg.seed)                 # network initialisation
+        # copy=False: the observation a step returns is the env's buffer, rewritten by the next step. What
+        # outlives a step is copied where it is kept: the open transitions copy the agents' views
+        # (PendingTransitions.start), the replay buffer copies obs and next obs into its rows, a checkpoint
+        # copies self.obs; self.obs itself is only read before the next step (acting, choosing)
         self.env = GridWarVectorEnv(w, scenario, backend=cfg.backend, stack_previous=self.stack,
-                                    opponent_p=cfg.opponent_p)
+                                    opponent_p=cfg.opponent_p, kernel=cfg.kernel, copy=False)
         self.masker = ActionMasker(scenario)
         self.shape = Shape(obs_size(scenario, self.stack), cfg.hidden, scenario.n_actions)
         self.groups = network_groups(scenario, cfg.non_markov)
@@ -303,11 +307,11 @@ class Trainer:
         if self._eval_env is None:
             self._eval_env = GridWarVectorEnv(min(cfg.eval_envs, cfg.eval_games), self.scenario,
                                               backend=cfg.backend, stack_previous=self.stack,
-                                              opponent_p=cfg.eval_p)
+                                              opponent_p=cfg.eval_p, kernel=cfg.kernel, copy=False)
         traced = min(cfg.trace_eval_games, cfg.eval_games) if self.writer is not None else 0
         if traced and self._eval_trace is None:
             self._eval_trace = EvalTrace(self.writer, self.scenario, cfg.backend, self.stack, traced,
-                                         cfg.eval_p, self.new_episode_id)
+                                         cfg.eval_p, self.new_episode_id, cfg.kernel)
         info = {"kind": "eval", "train_step": self.step, "eval_round": self.eval_round, "opponent_p": cfg.eval_p}
         result = evaluate(self.policy, self.scenario, games=cfg.eval_games, backend=cfg.backend,
                           seed=eval_seed(cfg.seed, self.eval_round), opponent_p=cfg.eval_p,

@@ -54,9 +54,10 @@ def train_config(exp: Experiment, arm: Arm, budget: Budget, seed: int) -> TrainC
 
 
 def run_experiment(exp: Experiment, budget: Budget, out_dir: Path, command: str, quick: bool,
-                   say: Say = print, jobs: int = 1) -> ExperimentResult:
+                   say: Say = print, jobs: int = 1, kernel: str = "auto") -> ExperimentResult:
     """Train every arm once per seed (`jobs` trainings at a time, each in its own process), then the
-    experiment's own measurements on the saved policies."""
+    experiment's own measurements on the saved policies. `kernel`: the trainings' (TrainConfig.kernel;
+    the results do not depend on it)."""
     t0 = time.perf_counter()
     out_dir.mkdir(parents=True, exist_ok=True)
     from tracelab.train.experiments.report import commit
@@ -65,7 +66,7 @@ def run_experiment(exp: Experiment, budget: Budget, out_dir: Path, command: str,
     tasks = [(ar, seed) for ar in result.arms for seed in range(budget.seeds)]
 
     def task_args(ar: ArmResult, seed: int) -> tuple:
-        return (train_config(exp, ar.arm, budget, seed), ar.arm.build_scenario(),
+        return (replace(train_config(exp, ar.arm, budget, seed), kernel=kernel), ar.arm.build_scenario(),
                 out_dir / f"{ar.arm.slug}-seed{seed}", command, EVAL_PS, budget.eval_games)
 
     for ar, seed in tasks:
