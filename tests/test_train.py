@@ -281,10 +281,10 @@ def test_saved_policy_round_trips_and_plain_torch_loads_it(tmp_path):
     trainer.close()
 
 
-def test_non_markov_trains_separate_networks_whose_slow_transitions_span_two_steps():
+def test_split_networks_train_separately_and_slow_transitions_span_two_steps():
     from tracelab.game.scenario import builtin_scenario
     sc = replace(builtin_scenario("nonmarkov"), max_steps=40)
-    cfg = TrainConfig(scenario="nonmarkov", non_markov=True, steps=160, seed=1,
+    cfg = TrainConfig(scenario="nonmarkov", non_markov=True, split_networks=True, steps=160, seed=1,
                       **{**SMALL, "eval_every": 0, "warmup": 1000})
     trainer = Trainer(cfg, sc)
     trainer.train()
@@ -300,6 +300,28 @@ def test_non_markov_trains_separate_networks_whose_slow_transitions_span_two_ste
     assert np.isclose(slow_d, g * g).any()
     assert fast.size > slow.size
     trainer.close()
+
+
+def test_non_markov_alone_stacks_the_observation_for_one_shared_network():
+    from tracelab.game.scenario import builtin_scenario
+    sc = replace(builtin_scenario("nonmarkov"), max_steps=40)
+    cfg = TrainConfig(scenario="nonmarkov", non_markov=True, steps=120, seed=1,
+                      **{**SMALL, "eval_every": 0, "warmup": 1000})
+    trainer = Trainer(cfg, sc)
+    trainer.train()
+    assert trainer.groups == {"shared": [0, 1]}
+    shared = trainer.learners["shared"].buffer
+    assert shared.obs_size == 28
+    # both agents' transitions in one buffer: the slow agent's two-step ones among them
+    assert np.isclose(np.unique(shared.state()["discount"]).astype(np.float64), cfg.gamma ** 2).any()
+    trainer.close()
+
+
+def test_configs_written_before_split_networks_keep_their_networks():
+    assert TrainConfig.from_dict({"scenario": "nonmarkov", "non_markov": True}).split_networks
+    assert not TrainConfig.from_dict({"scenario": "nonmarkov", "non_markov": False}).split_networks
+    assert not TrainConfig.from_dict({"scenario": "nonmarkov", "non_markov": True,
+                                      "split_networks": False}).split_networks
 
 
 def test_ctrl_c_leaves_an_interrupted_run_with_a_checkpoint(tmp_path):

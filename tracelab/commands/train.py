@@ -29,7 +29,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         if name == "non_markov":
             p.add_argument("--non-markov", dest="non_markov", action="store_true", help=shown)
             p.add_argument("--markov", dest="non_markov", action="store_false",
-                           help="the Markov setup: current observation, one shared network (default)")
+                           help="the Markov setup: the current observation only (default)")
         elif typ in ("bool", bool):
             p.add_argument(flag, dest=name, action="store_true", help=shown)
         elif name == "backend":

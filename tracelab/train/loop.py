@@ -32,11 +32,11 @@ from tracelab.train.transitions import PendingTransitions
 Progress = Callable[[dict[str, Any]], None]
 
 
-def network_groups(scenario: Scenario, non_markov: bool) -> dict[str, list[int]]:
-    """Network name -> red agents it plays: one shared network (Markov), or one for the fast and one for
-    the slow agents (non-Markov)."""
+def network_groups(scenario: Scenario, split: bool) -> dict[str, list[int]]:
+    """Network name -> red agents it plays: one shared network, or (split) one for the fast and one for
+    the slow agents."""
     n = scenario.agents_per_team
-    if not non_markov:
+    if not split:
         return {"shared": list(range(n))}
     slow = scenario.slow_mask[RED]
     groups = {"fast": [j for j in range(n) if not slow[j]], "slow": [j for j in range(n) if slow[j]]}
@@ -70,7 +70,7 @@ class Trainer:
                                     opponent_p=cfg.opponent_p)
         self.masker = ActionMasker(scenario)
         self.shape = Shape(obs_size(scenario, self.stack), cfg.hidden, scenario.n_actions)
-        self.groups = network_groups(scenario, cfg.non_markov)
+        self.groups = network_groups(scenario, cfg.split_networks)
         self.learners = {name: DQNLearner(self.shape, lr=cfg.lr, batch=cfg.batch, buffer=cfg.buffer,
                                           generator=self.torch_gen, masked=cfg.mask) for name in self.groups}
         owner = {j: i for i, agents in enumerate(self.groups.values()) for j in agents}
