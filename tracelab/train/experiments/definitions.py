@@ -99,7 +99,7 @@ EXPERIMENTS: dict[str, Experiment] = {e.name: e for e in (
              published_note="best non-Markov 85%, 18.01 actions per win"),
          Arm("non-Markov, split networks", "nonmarkov", non_markov=True, train={"split_networks": True},
              published=0.85, published_note="best non-Markov 85%, 18.01 actions per win")),
-        full=Budget(seeds=3, steps=200_000, eval_games=500, evals=10),
+        full=Budget(seeds=3, steps=300_000, eval_games=500, evals=10),
         quick=Budget(seeds=1, steps=1_500, eval_games=20, evals=1),
         goal="non-Markov above Markov by a margin outside the seed spread",
         train={**LEARNER_REWARD_SCALE, **SCRIPTED_EXPLORATION}),  # both arms: random red wins 0% here too
