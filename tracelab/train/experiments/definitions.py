@@ -66,6 +66,7 @@ METHOD_1V1 = {"published": 0.976, "published_note": "97.6% after 760K steps (A10
 
 SHOT_BEFORE = {"got_shot": -400.0}                          # the setting whose traces showed hiding
 SHOT_AFTER = {"got_shot": -200.0, "invalid": -10.0}         # the method's fix
+NO_AMMO_HIGH = {"got_shot": -200.0, "invalid": -200.0}      # "a penalty of 10 (not more)": what more does
 assert Rewards().got_shot == -200.0 and Rewards().invalid == -10.0  # the defaults are the method's fix
 
 EXPERIMENTS: dict[str, Experiment] = {e.name: e for e in (
@@ -106,9 +107,11 @@ EXPERIMENTS: dict[str, Experiment] = {e.name: e for e in (
     Experiment(
         "reward-shaping", "Reward shaping from traces: penalty for being shot 400, then 200",
         (Arm("shot -400", "advanced", rewards=SHOT_BEFORE),
-         Arm("shot -200, no ammo -10", "advanced", rewards=SHOT_AFTER)),
+         Arm("shot -200, no ammo -10", "advanced", rewards=SHOT_AFTER),
+         Arm("shot -200, no ammo -200", "advanced", rewards=NO_AMMO_HIGH)),
         full=Budget(seeds=3, steps=200_000, eval_games=500, evals=5),
         quick=Budget(seeds=1, steps=1_000, eval_games=16, evals=1),
-        goal="the traces' figures move as the method describes: less hiding, shooting kept",
+        goal="the traces' figures move as the method describes: less hiding at -200 than at -400, shooting "
+             "kept with a no-ammo penalty of 10 and not with a larger one",
         train={**LEARNER_REWARD_SCALE, **SCRIPTED_EXPLORATION}),  # uniform exploration did not learn 200K
 )}

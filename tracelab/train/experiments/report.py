@@ -197,18 +197,23 @@ def goal_lines(result: ExperimentResult) -> list[str]:
                                f"game by game with the same seeds; independent seeds: win-rate gap "
                                f"{d['win_gap_points']:+.1f} points (two-proportion p = {d['p_value']:.2f}), "
                                f"return gap {d['return_gap']:+.1f} ({num(100 * d['return_gap_relative'], '.1f')}%).")
-    if exp.name == "reward-shaping" and len(result.arms) == 2:
-        before, after = result.arms
-        for sb, sa in zip(before.seeds, after.seeds):
-            fb, fa = ({k: v for k, v in (ar.extra.get(s.seed) or {}).items() if k != "trace_run"}
-                      for ar, s in ((before, sb), (after, sa)))
-            same = "the same figures (the change did not move the greedy policy's games)" if fb == fa else \
-                "hidden steps/game {:.2f} -> {:.2f}, red shot/game {:.2f} -> {:.2f}, shoot share {} -> {}, " \
-                "method's win rate {} -> {}".format(
-                    fb.get("hidden_steps_per_game", 0), fa.get("hidden_steps_per_game", 0),
-                    fb.get("shot_per_game", 0), fa.get("shot_per_game", 0), pct(fb.get("shoot_share")),
-                    pct(fa.get("shoot_share")), pct(sb.final[0.3].method_win_rate), pct(sa.final[0.3].method_win_rate))
-            out.append(f"- seed {sb.seed}, {before.arm.label} -> {after.arm.label}: {same}.")
+    if exp.name == "reward-shaping":
+        for before, after in zip(result.arms, result.arms[1:]):  # each change of the rewards, in order
+            for sb, sa in zip(before.seeds, after.seeds):
+                fb, fa = ({k: v for k, v in (ar.extra.get(s.seed) or {}).items() if k != "trace_run"}
+                          for ar, s in ((before, sb), (after, sa)))
+                same = "the same figures (the change did not move the greedy policy's games)" if fb == fa else \
+                    "hidden steps/game {:.2f} -> {:.2f}, red shot/game {:.2f} -> {:.2f}, shoot share {} -> {}, " \
+                    "method's win rate {} -> {}".format(
+                        fb.get("hidden_steps_per_game", 0), fa.get("hidden_steps_per_game", 0),
+                        fb.get("shot_per_game", 0), fa.get("shot_per_game", 0), pct(fb.get("shoot_share")),
+                        pct(fa.get("shoot_share")), pct(sb.final[0.3].method_win_rate),
+                        pct(sa.final[0.3].method_win_rate))
+                out.append(f"- seed {sb.seed}, {before.arm.label} -> {after.arm.label}: {same}.")
+            shares = [[(ar.extra.get(s.seed) or {}).get("shoot_share") for s in ar.seeds] for ar in (before, after)]
+            if all(v is not None for v in shares[0] + shares[1]) and shares[0] and shares[1]:
+                out.append(f"- {before.arm.label} -> {after.arm.label}, shoot share over seeds: "
+                           f"{spread_text(shares[0])} -> {spread_text(shares[1])}.")
         out.append("- the queries' figures per seed are in the table below.")
     return out
 
@@ -286,7 +291,11 @@ def experiment_sections(result: ExperimentResult) -> list[str]:
               "3. change the rewards the queries point to: `hid_behind_mountain` and `learner_events`' `shot` "
               "point to the shot penalty (-400 -> -200), `learner_events`' `invalid` and the shoot share to the "
               "no-ammo penalty (kept at -10, the method's value), and retrain with the same seeds;",
-              "4. the same queries and the win rates, before and after (below).", ""]
+              "4. the same queries and the win rates, before and after (below);",
+              "5. the other half of the method's remark, \"a penalty of 10 (not more) for shooting with no ammo\": "
+              "the same shot penalty (-200) with the no-ammo penalty raised to -200, the unsafe-move penalty's "
+              "size. The observation does not include red's own ammo (the method's observation), so a policy "
+              "cannot tell a shot that hits from a shot with an empty gun before it fires.", ""]
         L += ["## The saved queries, before and after", "",
               "Each seed's final policy plays traced evaluation games (against p = 0.3) into its own run; the "
               "saved queries (`tracelab sql RUN --query NAME`) read them: `hid_behind_mountain` (timesteps red "
