@@ -144,6 +144,14 @@ def test_a_run_logs_metrics_episodes_evaluations_checkpoint_and_policy(tmp_path)
     spec = read_policy_spec(run / "policy")
     assert spec["network"] == {**spec["network"], "inputs": 4, "hidden": 64, "outputs": 5}
     assert spec["actions"]["ids"] == [0, 1, 2, 3, 8] and spec["trained"]["step"] == 400
+    # the policy of the best evaluation (the earliest of equals) is kept beside the final one
+    con = open_run(run)
+    rates = con.execute("SELECT step, value FROM metrics WHERE name = 'eval/method_win_rate' ORDER BY step").fetchall()
+    con.close()
+    best_step, best = max(rates, key=lambda sv: (sv[1], -sv[0]))
+    kept = read_policy_spec(run / "policy-best")["trained"]
+    assert kept["step"] == best_step and kept["selected_by"]["value"] == pytest.approx(best)
+    assert state["best_eval"] == (pytest.approx(best), best_step)
 
 
 def test_resume_gives_the_same_networks_metrics_and_episodes_as_no_interruption(tmp_path):
@@ -164,6 +172,11 @@ def test_resume_gives_the_same_networks_metrics_and_episodes_as_no_interruption(
     assert _ended_training_episodes(straight) == sorted(_ended_training_episodes(first) +
                                                         _ended_training_episodes(resumed))
     assert run_info(resumed).meta["config"]["resumed_from"] == {"run": str(first), "step": 248}
+    # the kept best policy carries over into the resumed run
+    assert a["best_eval"] == b["best_eval"]
+    assert read_policy_spec(resumed / "policy-best")["trained"]["step"] == a["best_eval"][1]
+    for name, row in a["best_rows"].items():
+        assert torch.equal(row, b["best_rows"][name])
 
 
 def test_the_learner_learns_to_walk_to_the_enemy_base():

@@ -165,6 +165,10 @@ def _report(trainer: Any, run_dir: Path, status: str) -> None:
           f"(continue with: tracelab train --resume {run})")
     print(f"  tracelab sql {run} \"SELECT step, value FROM metrics WHERE name = 'eval/win_rate' ORDER BY step\"")
     print(f"  tracelab sql {run} \"SELECT episode, train_step, outcome, steps FROM episodes WHERE kind = 'eval'\"")
+    if trainer.best_eval is not None and trainer.best_eval[1] != trainer.step:
+        value, step = trainer.best_eval
+        print(f"best evaluation at step {step:,} (method's counting {100 * value:.1f}%): its policy is kept in "
+              f"{run_dir}/policy-best/")
     if status == "finished":
         print(f"  tracelab eval {run}/policy --games 500")
         print(f"  tracelab play --policy {run}/policy --episodes 3")

@@ -26,7 +26,7 @@ from tracelab.train.config import TrainConfig
 from tracelab.train.evaluate import EvalResult, EvalTrace, evaluate
 from tracelab.train.learner import DQNLearner
 from tracelab.train.network import Shape
-from tracelab.train.policy import Policy, may_act, save_policy
+from tracelab.train.policy import BEST_POLICY_DIR, Policy, may_act, save_policy
 from tracelab.train.transitions import PendingTransitions
 
 Progress = Callable[[dict[str, Any]], None]
@@ -98,6 +98,8 @@ class Trainer:
         self.returns_since_log: list[float] = []
         self.last_eval: EvalResult | None = None
         self.logged_step = self.eval_step = -1
+        self.best_eval: tuple[float, int] | None = None  # (method's win rate, step) of the best evaluation
+        self.best_rows: dict[str, torch.Tensor] = {}      # its online parameters, network name -> row
         self.last_loss: float | None = None
         self.stop_requested = False
         self._eval_env: GridWarVectorEnv | None = None
@@ -317,13 +319,35 @@ class Trainer:
             self.writer.write_metrics(self.step, result.metrics())
         self.eval_round += 1
         self.last_eval, self.eval_step = result, self.step
+        self._keep_if_best(result)
         return result
+
+    def _keep_if_best(self, result: EvalResult) -> None:
+        """DQN's greedy policy can get worse late in training (the last, low-ε stretch forgets losing
+        games); the run keeps the policy of its best evaluation (the method's win rate against --eval-p,
+        the earliest of equals) in RUN/policy-best/, beside the final one in RUN/policy/."""
+        if self.best_eval is not None and result.method_win_rate <= self.best_eval[0]:
+            return
+        self.best_eval = (result.method_win_rate, self.step)
+        self.best_rows = {k: lr.params[0].clone() for k, lr in self.learners.items()}
+        self.write_best_policy()
+
+    def write_best_policy(self) -> None:
+        """RUN/policy-best/ from the kept parameters (also after --resume into a new run)."""
+        if self.run_dir is None or self.best_eval is None:
+            return
+        value, step = self.best_eval
+        save_policy(self.run_dir / BEST_POLICY_DIR, self.scenario, self.best_rows, self.groups, self.shape,
+                    self.stack, self.cfg.mask, self._trained(step, {
+                        "metric": "eval/method_win_rate", "value": value, "opponent_p": self.cfg.eval_p}))
+
+    def _trained(self, step: int, selected_by: dict[str, Any] | None = None) -> dict[str, Any]:
+        out = {"run": str(self.run_dir) if self.run_dir else None, "step": step, "config": self.cfg.to_dict()}
+        return out if selected_by is None else {**out, "selected_by": selected_by}
 
     def save_policy(self, path: Path) -> Path:
         return save_policy(path, self.scenario, {k: lr.params[0] for k, lr in self.learners.items()},
-                           self.groups, self.shape, self.stack, self.cfg.mask,
-                           {"run": str(self.run_dir) if self.run_dir else None, "step": self.step,
-                            "config": self.cfg.to_dict()})
+                           self.groups, self.shape, self.stack, self.cfg.mask, self._trained(self.step))
 
     # ---- the loop ----
     def train(self, stop_at: int | None = None) -> str:

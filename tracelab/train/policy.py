@@ -22,6 +22,7 @@ from tracelab.train.network import STATE_DICT_KEYS, Shape, from_state_dict, q_va
 
 FORMAT = "tracelab-dqn-policy/1"
 POLICY_JSON, POLICY_PT = "policy.json", "policy.pt"
+BEST_POLICY_DIR = "policy-best"  # a training run's policy of its best evaluation, beside RUN/policy/
 
 
 def agent_view_order(scenario: Scenario, stack_previous: bool) -> np.ndarray:

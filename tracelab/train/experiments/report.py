@@ -130,6 +130,7 @@ def write_report(result: ExperimentResult, report_dir: Path) -> Path:
                 L.append(f"- {ar.arm.label}, p = {p:g}: {spread_text(vals)}"
                          + (f"; the method: {ar.arm.published_note}" if ar.arm.published_note and p == 0.3 else ""))
     L += [""]
+    L += best_policy_section(result)
     L += experiment_sections(result)
     L += action_section(result)
     L += ["## Plots", ""]
@@ -187,6 +188,10 @@ def goal_lines(result: ExperimentResult) -> list[str]:
         out.append(f"- {ar.arm.label}: {verdict}, {reached} of {len(vals)} seeds reach it with {result.budget.steps:,} "
                    f"steps: method's win rate against p = 0.3 {spread_text(vals)}; the method: "
                    f"{ar.arm.published_note}.")
+        kept = [kept_or_final(s, 0.3) for s in ar.seeds]
+        if any(s.best for s in ar.seeds) and None not in kept:
+            n_kept = sum(v >= ar.arm.published for v in kept)
+            out.append(f"  The kept best policies (below): {n_kept} of {len(kept)} seeds reach it, {spread_text(kept)}.")
     if exp.name == "markov-vs-nonmarkov":
         out += markov_lines(result)
     if exp.name == "portability":
@@ -216,6 +221,40 @@ def goal_lines(result: ExperimentResult) -> list[str]:
                            f"{spread_text(shares[0])} -> {spread_text(shares[1])}.")
         out.append("- the queries' figures per seed are in the table below.")
     return out
+
+
+def best_policy_section(result: ExperimentResult) -> list[str]:
+    """The policies each run kept at its best evaluation during training (RUN/policy-best), played on the
+    same final-evaluation games as the final policies: fresh games, not the ones that selected them."""
+    rows = [(ar, s) for ar in result.arms for s in ar.seeds if s.best]
+    if not rows:
+        return []
+    L = ["## The kept best policies", "",
+         "A run also keeps the policy of its best evaluation during training (`RUN/policy-best/`, chosen by "
+         "the method's win rate against p = 0.3 over that evaluation's games; docs/training.md, \"The best "
+         "policy\"). Here it plays the final evaluation's games (other games than those that chose it, the "
+         "same ones the final policy played). Seeds whose final policy was their best have no row.", "",
+         "| setting | seed | kept at step | opponent p | method win rate [95% CI] | final policy's | mean return |",
+         "|---|---|---|---|---|---|---|"]
+    for ar, s in rows:
+        for p, r in s.best.items():
+            lo, hi = wilson(r.method_wins, r.games)
+            fin = s.final.get(p)
+            L.append(f"| {ar.arm.label} | {s.seed} | {s.best_step:,} | {p:g} | {pct(r.method_win_rate)} "
+                     f"[{pct(lo)}-{pct(hi)}] | {pct(fin.method_win_rate) if fin else '-'} | {r.mean_return:.1f} |")
+    L += ["", "Over seeds, each seed's kept policy (its final one where that was its best), method's counting:", ""]
+    for ar in result.arms:
+        for p in EVAL_PS:
+            vals = [kept_or_final(s, p) for s in ar.seeds]
+            if vals and None not in vals:
+                L.append(f"- {ar.arm.label}, p = {p:g}: {spread_text(vals)}")
+    return L + [""]
+
+
+def kept_or_final(s: Any, p: float) -> float | None:
+    """A seed's kept best policy's method win rate against p, or its final policy's when that was the best."""
+    r = s.best.get(p) or s.final.get(p)
+    return None if r is None else r.method_win_rate
 
 
 def best_during_training(run_dir: Path) -> float | None:
