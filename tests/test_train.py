@@ -330,6 +330,21 @@ def test_non_markov_alone_stacks_the_observation_for_one_shared_network():
     trainer.close()
 
 
+def test_slow_every_step_makes_every_slow_transition_one_step_long():
+    from tracelab.game.scenario import builtin_scenario
+    sc = replace(builtin_scenario("nonmarkov"), max_steps=40)
+    cfg = TrainConfig(scenario="nonmarkov", split_networks=True, slow_every_step=True, steps=160, seed=1,
+                      **{**SMALL, "eval_every": 0, "warmup": 1000})
+    trainer = Trainer(cfg, sc)
+    trainer.train()
+    fast, slow = trainer.learners["fast"].buffer, trainer.learners["slow"].buffer
+    slow_d = np.unique(slow.state()["discount"]).astype(np.float64)
+    assert np.isclose(slow_d[:, None], [0.0, cfg.gamma]).any(axis=1).all(), slow_d  # never two steps
+    # it decides whenever it is alive, as the fast agent does (deaths differ between the two)
+    assert slow.size > 0.6 * fast.size
+    trainer.close()
+
+
 def test_configs_written_before_split_networks_keep_their_networks():
     assert TrainConfig.from_dict({"scenario": "nonmarkov", "non_markov": True}).split_networks
     assert not TrainConfig.from_dict({"scenario": "nonmarkov", "non_markov": False}).split_networks

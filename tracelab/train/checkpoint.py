@@ -17,7 +17,6 @@ import torch
 
 from tracelab.game.scenario import NOTHING, RED, Scenario, scenario_from_dict
 from tracelab.train.config import TrainConfig
-from tracelab.train.policy import may_act
 
 CHECKPOINT_DIR, CHECKPOINT_FILE = "checkpoint", "checkpoint.pt"
 FORMAT = "tracelab-dqn-checkpoint/1"
@@ -100,7 +99,7 @@ def restore(tr: Any, state: dict[str, Any]) -> None:
         raise RuntimeError("restoring the checkpoint's games did not reproduce their observations: the "
                            "simulator is not the one the checkpoint was written with")
     tr.obs = obs
-    tr.acting = may_act(tr.scenario, tr.env.sim.state)
+    tr.acting = tr.may_act()
     tr.pending.load_state(state["pending"])
 
 

@@ -23,6 +23,10 @@ class TrainConfig:
                             "(default: Markov, the current observation only)", default=False)
     split_networks: bool = _opt("one network for the fast and one for the slow agents (the nonmarkov "
                                 "scenario) instead of one shared by all red agents", default=False)
+    slow_every_step: bool = _opt("the slow agent decides on every step, each transition one step long; the "
+                                 "game ignores its choices on steps where it may not act, and nothing in a "
+                                 "Markov observation says which steps those are (default: it decides only "
+                                 "where it may act, one transition spanning its two-step move)", default=False)
     agents: int | None = _opt("agents per team (default: the scenario's)", default=None)
     backend: str = _opt("simulator: rules (the rule engine) or reference (hand-written)", default="rules")
     steps: int = _opt("training steps (world-steps: env transitions)", default=200_000)

@@ -106,7 +106,7 @@ class Trainer:
         self._masks: np.ndarray | None = None  # the shield's mask of the current state (--mask), from the step
         self._eval_trace: EvalTrace | None = None
         self.obs, _ = self.env.reset(seed=int(np.random.SeedSequence([cfg.seed, 2]).generate_state(1)[0]))
-        self.acting = may_act(scenario, self.env.sim.state)
+        self.acting = self.may_act()
         self._begin_episodes(np.arange(w))
         self._rate_mark = (time.perf_counter(), 0, 0)
 
@@ -214,7 +214,7 @@ class Trainer:
         if done.any():
             true_next = obs.copy()
             true_next[done] = info["final_obs"][done]
-        acting_next = may_act(self.scenario, self.env.sim.state)
+        acting_next = self.may_act()
         dead = true_next[:, 0:2 * n:2] < 0  # an agent's own x is -1 once it is dead
         out = self.pending.close(done[:, None] | dead | acting_next, terminated[:, None] | dead)
         # s' mask, and the next act's: the env computed it for its info (a reset world's is its new start's)
@@ -321,6 +321,10 @@ class Trainer:
         self.last_eval, self.eval_step = result, self.step
         self._keep_if_best(result)
         return result
+
+    def may_act(self) -> np.ndarray:
+        """Which red agents decide this step (see policy.may_act and --slow-every-step)."""
+        return may_act(self.scenario, self.env.sim.state, self.cfg.slow_every_step)
 
     def _keep_if_best(self, result: EvalResult) -> None:
         """DQN's greedy policy can get worse late in training (the last, low-ε stretch forgets losing

@@ -105,6 +105,20 @@ EXPERIMENTS: dict[str, Experiment] = {e.name: e for e in (
         goal="non-Markov above Markov by a margin outside the seed spread",
         train={**LEARNER_REWARD_SCALE, **SCRIPTED_EXPLORATION}),  # both arms: random red wins 0% here too
     Experiment(
+        "markov-vs-nonmarkov-every-step",
+        "Markov vs non-Markov policies in the nonmarkov scenario, the slow agent deciding every step",
+        # markov-vs-nonmarkov asks the slow agent only where it may act (even steps, not in transit), one
+        # transition spanning its two-step move: that makes its decisions Markov. Here it decides every step
+        # and the game ignores what it chooses on odd steps, which nothing in the current observation tells.
+        (Arm("Markov", "nonmarkov", train={"slow_every_step": True}, published=0.59,
+             published_note="best Markov 59%, 15.51 actions per win"),
+         Arm("non-Markov", "nonmarkov", non_markov=True, train={"slow_every_step": True}, published=0.85,
+             published_note="best non-Markov 85%, 18.01 actions per win")),
+        full=Budget(seeds=3, steps=300_000, eval_games=500, evals=10),
+        quick=Budget(seeds=1, steps=1_500, eval_games=20, evals=1),
+        goal="non-Markov above Markov by a margin outside the seed spread",
+        train={**LEARNER_REWARD_SCALE, **SCRIPTED_EXPLORATION}),
+    Experiment(
         "reward-shaping", "Reward shaping from traces: penalty for being shot 400, then 200",
         (Arm("shot -400", "advanced", rewards=SHOT_BEFORE),
          Arm("shot -200, no ammo -10", "advanced", rewards=SHOT_AFTER),

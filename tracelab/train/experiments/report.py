@@ -51,7 +51,7 @@ def machine() -> str:
 # the settings of the method's DQN (shared/paper-notes.md); a report names those an arm changes
 DQN_FIELDS = ("hidden", "lr", "gamma", "batch", "buffer", "target_every", "eps_start", "eps_end",
               "eps_decay_start", "eps_decay_end", "updates_per_step", "reward_scale", "mask", "explore_scripted",
-              "split_networks")
+              "split_networks", "slow_every_step")
 
 
 def learner_text(result: ExperimentResult) -> str:
@@ -180,7 +180,7 @@ def goal_lines(result: ExperimentResult) -> list[str]:
     exp = result.experiment
     out = [f"Goal: {exp.goal}.", ""]
     for ar in result.arms:
-        if ar.arm.published is None or exp.name in ("portability", "markov-vs-nonmarkov"):
+        if ar.arm.published is None or exp.name == "portability" or is_markov(exp):
             continue
         vals = [s.final[0.3].method_win_rate for s in ar.seeds if 0.3 in s.final]
         reached = sum(v >= ar.arm.published for v in vals)
@@ -192,7 +192,7 @@ def goal_lines(result: ExperimentResult) -> list[str]:
         if any(s.best for s in ar.seeds) and None not in kept:
             n_kept = sum(v >= ar.arm.published for v in kept)
             out.append(f"  The kept best policies (below): {n_kept} of {len(kept)} seeds reach it, {spread_text(kept)}.")
-    if exp.name == "markov-vs-nonmarkov":
+    if is_markov(exp):
         out += markov_lines(result)
     if exp.name == "portability":
         for ar in result.arms:
@@ -221,6 +221,11 @@ def goal_lines(result: ExperimentResult) -> list[str]:
                            f"{spread_text(shares[0])} -> {spread_text(shares[1])}.")
         out.append("- the queries' figures per seed are in the table below.")
     return out
+
+
+def is_markov(exp: Any) -> bool:
+    """The Markov vs non-Markov experiments (their arms are compared with the first, Markov, one)."""
+    return exp.name.startswith("markov-vs-nonmarkov")
 
 
 def best_policy_section(result: ExperimentResult) -> list[str]:
