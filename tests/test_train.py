@@ -294,13 +294,19 @@ def test_saved_policy_round_trips_and_plain_torch_loads_it(tmp_path):
     trainer.close()
 
 
-def test_split_networks_train_separately_and_slow_transitions_span_two_steps():
+def trained_on_nonmarkov(steps: int, **options) -> Trainer:
+    """A trainer after `steps` steps of the nonmarkov scenario (40-step games), no updates (warmup)."""
     from tracelab.game.scenario import builtin_scenario
-    sc = replace(builtin_scenario("nonmarkov"), max_steps=40)
-    cfg = TrainConfig(scenario="nonmarkov", non_markov=True, split_networks=True, steps=160, seed=1,
+    cfg = TrainConfig(scenario="nonmarkov", steps=steps, seed=1, **options,
                       **{**SMALL, "eval_every": 0, "warmup": 1000})
-    trainer = Trainer(cfg, sc)
+    trainer = Trainer(cfg, replace(builtin_scenario("nonmarkov"), max_steps=40))
     trainer.train()
+    return trainer
+
+
+def test_split_networks_train_separately_and_slow_transitions_span_two_steps():
+    trainer = trained_on_nonmarkov(160, non_markov=True, split_networks=True)
+    cfg = trainer.cfg
     fast, slow = trainer.learners["fast"].buffer, trainer.learners["slow"].buffer
     assert trainer.groups == {"fast": [0], "slow": [1]}
     assert fast.obs_size == slow.obs_size == 28  # 14 numbers, and the previous step's
@@ -316,12 +322,8 @@ def test_split_networks_train_separately_and_slow_transitions_span_two_steps():
 
 
 def test_non_markov_alone_stacks_the_observation_for_one_shared_network():
-    from tracelab.game.scenario import builtin_scenario
-    sc = replace(builtin_scenario("nonmarkov"), max_steps=40)
-    cfg = TrainConfig(scenario="nonmarkov", non_markov=True, steps=120, seed=1,
-                      **{**SMALL, "eval_every": 0, "warmup": 1000})
-    trainer = Trainer(cfg, sc)
-    trainer.train()
+    trainer = trained_on_nonmarkov(120, non_markov=True)
+    cfg = trainer.cfg
     assert trainer.groups == {"shared": [0, 1]}
     shared = trainer.learners["shared"].buffer
     assert shared.obs_size == 28
@@ -331,12 +333,8 @@ def test_non_markov_alone_stacks_the_observation_for_one_shared_network():
 
 
 def test_slow_every_step_makes_every_slow_transition_one_step_long():
-    from tracelab.game.scenario import builtin_scenario
-    sc = replace(builtin_scenario("nonmarkov"), max_steps=40)
-    cfg = TrainConfig(scenario="nonmarkov", split_networks=True, slow_every_step=True, steps=160, seed=1,
-                      **{**SMALL, "eval_every": 0, "warmup": 1000})
-    trainer = Trainer(cfg, sc)
-    trainer.train()
+    trainer = trained_on_nonmarkov(160, split_networks=True, slow_every_step=True)
+    cfg = trainer.cfg
     fast, slow = trainer.learners["fast"].buffer, trainer.learners["slow"].buffer
     slow_d = np.unique(slow.state()["discount"]).astype(np.float64)
     assert np.isclose(slow_d[:, None], [0.0, cfg.gamma]).any(axis=1).all(), slow_d  # never two steps
