@@ -99,6 +99,22 @@ def test_portability_quick(tmp_path, capsys):
         check_png(out / "portability" / png)
 
 
+def test_markov_vs_nonmarkov_quick_compares_observations_with_one_shared_network(tmp_path, capsys):
+    out = tmp_path / "exp"
+    run_quick("markov-vs-nonmarkov", out, capsys)
+    text = (out / "markov-vs-nonmarkov.md").read_text()
+    networks = {}
+    for run in ("markov-seed0", "non-markov-seed0", "non-markov-split-networks-seed0"):
+        networks[run] = json.loads((out / run / "policy" / "policy.json").read_text())["networks"]
+    # the first two arms differ only in the observation; the third splits the networks
+    assert networks["markov-seed0"] == networks["non-markov-seed0"] == {"shared": [0, 1]}
+    assert networks["non-markov-split-networks-seed0"] == {"fast": [0], "slow": [1]}
+    assert "non-Markov, split networks: reward scale 0.01, explore scripted 0.5, split networks" in text
+    for arm in ("non-Markov", "non-Markov, split networks"):
+        for what in ("final", "best during training"):
+            assert re.search(rf"- {what}: {re.escape(arm)} mean [0-9.]+%.* vs Markov mean", text), (arm, what)
+
+
 def test_statistics():
     lo, hi = wilson(488, 500)
     assert lo < 0.976 < hi and 0.95 < lo and hi < 0.99

@@ -144,6 +144,14 @@ def test_a_run_logs_metrics_episodes_evaluations_checkpoint_and_policy(tmp_path)
     spec = read_policy_spec(run / "policy")
     assert spec["network"] == {**spec["network"], "inputs": 4, "hidden": 64, "outputs": 5}
     assert spec["actions"]["ids"] == [0, 1, 2, 3, 8] and spec["trained"]["step"] == 400
+    # the policy of the best evaluation (the earliest of equals) is kept beside the final one
+    con = open_run(run)
+    rates = con.execute("SELECT step, value FROM metrics WHERE name = 'eval/method_win_rate' ORDER BY step").fetchall()
+    con.close()
+    best_step, best = max(rates, key=lambda sv: (sv[1], -sv[0]))
+    kept = read_policy_spec(run / "policy-best")["trained"]
+    assert kept["step"] == best_step and kept["selected_by"]["value"] == pytest.approx(best)
+    assert state["best_eval"] == (pytest.approx(best), best_step)
 
 
 def test_resume_gives_the_same_networks_metrics_and_episodes_as_no_interruption(tmp_path):
@@ -164,6 +172,11 @@ def test_resume_gives_the_same_networks_metrics_and_episodes_as_no_interruption(
     assert _ended_training_episodes(straight) == sorted(_ended_training_episodes(first) +
                                                         _ended_training_episodes(resumed))
     assert run_info(resumed).meta["config"]["resumed_from"] == {"run": str(first), "step": 248}
+    # the kept best policy carries over into the resumed run
+    assert a["best_eval"] == b["best_eval"]
+    assert read_policy_spec(resumed / "policy-best")["trained"]["step"] == a["best_eval"][1]
+    for name, row in a["best_rows"].items():
+        assert torch.equal(row, b["best_rows"][name])
 
 
 def test_the_learner_learns_to_walk_to_the_enemy_base():
@@ -281,13 +294,19 @@ def test_saved_policy_round_trips_and_plain_torch_loads_it(tmp_path):
     trainer.close()
 
 
-def test_non_markov_trains_separate_networks_whose_slow_transitions_span_two_steps():
+def trained_on_nonmarkov(steps: int, **options) -> Trainer:
+    """A trainer after `steps` steps of the nonmarkov scenario (40-step games), no updates (warmup)."""
     from tracelab.game.scenario import builtin_scenario
-    sc = replace(builtin_scenario("nonmarkov"), max_steps=40)
-    cfg = TrainConfig(scenario="nonmarkov", non_markov=True, steps=160, seed=1,
+    cfg = TrainConfig(scenario="nonmarkov", steps=steps, seed=1, **options,
                       **{**SMALL, "eval_every": 0, "warmup": 1000})
-    trainer = Trainer(cfg, sc)
+    trainer = Trainer(cfg, replace(builtin_scenario("nonmarkov"), max_steps=40))
     trainer.train()
+    return trainer
+
+
+def test_split_networks_train_separately_and_slow_transitions_span_two_steps():
+    trainer = trained_on_nonmarkov(160, non_markov=True, split_networks=True)
+    cfg = trainer.cfg
     fast, slow = trainer.learners["fast"].buffer, trainer.learners["slow"].buffer
     assert trainer.groups == {"fast": [0], "slow": [1]}
     assert fast.obs_size == slow.obs_size == 28  # 14 numbers, and the previous step's
@@ -300,6 +319,35 @@ def test_non_markov_trains_separate_networks_whose_slow_transitions_span_two_ste
     assert np.isclose(slow_d, g * g).any()
     assert fast.size > slow.size
     trainer.close()
+
+
+def test_non_markov_alone_stacks_the_observation_for_one_shared_network():
+    trainer = trained_on_nonmarkov(120, non_markov=True)
+    cfg = trainer.cfg
+    assert trainer.groups == {"shared": [0, 1]}
+    shared = trainer.learners["shared"].buffer
+    assert shared.obs_size == 28
+    # both agents' transitions in one buffer: the slow agent's two-step ones among them
+    assert np.isclose(np.unique(shared.state()["discount"]).astype(np.float64), cfg.gamma ** 2).any()
+    trainer.close()
+
+
+def test_slow_every_step_makes_every_slow_transition_one_step_long():
+    trainer = trained_on_nonmarkov(160, split_networks=True, slow_every_step=True)
+    cfg = trainer.cfg
+    fast, slow = trainer.learners["fast"].buffer, trainer.learners["slow"].buffer
+    slow_d = np.unique(slow.state()["discount"]).astype(np.float64)
+    assert np.isclose(slow_d[:, None], [0.0, cfg.gamma]).any(axis=1).all(), slow_d  # never two steps
+    # it decides whenever it is alive, as the fast agent does (deaths differ between the two)
+    assert slow.size > 0.6 * fast.size
+    trainer.close()
+
+
+def test_configs_written_before_split_networks_keep_their_networks():
+    assert TrainConfig.from_dict({"scenario": "nonmarkov", "non_markov": True}).split_networks
+    assert not TrainConfig.from_dict({"scenario": "nonmarkov", "non_markov": False}).split_networks
+    assert not TrainConfig.from_dict({"scenario": "nonmarkov", "non_markov": True,
+                                      "split_networks": False}).split_networks
 
 
 def test_ctrl_c_leaves_an_interrupted_run_with_a_checkpoint(tmp_path):

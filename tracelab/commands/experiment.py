@@ -11,7 +11,8 @@ from pathlib import Path
 from tracelab.commands._args import ENGINE_KERNELS, positive_int
 from tracelab.errors import UserError, store_errors
 
-NAMES = ("1v1-base", "5v5-base", "portability", "markov-vs-nonmarkov", "reward-shaping")
+NAMES = ("1v1-base", "5v5-base", "portability", "markov-vs-nonmarkov", "markov-vs-nonmarkov-every-step",
+         "reward-shaping")
 
 
 def register(sub: argparse._SubParsersAction) -> None:

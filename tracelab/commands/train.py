@@ -30,7 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         if name == "non_markov":
             p.add_argument("--non-markov", dest="non_markov", action="store_true", help=shown)
             p.add_argument("--markov", dest="non_markov", action="store_false",
-                           help="the Markov setup: current observation, one shared network (default)")
+                           help="the Markov setup: the current observation only (default)")
         elif typ in ("bool", bool):
             p.add_argument(flag, dest=name, action="store_true", help=shown)
         elif name == "backend":
@@ -170,6 +170,10 @@ def _report(trainer: Any, run_dir: Path, status: str) -> None:
           f"(continue with: tracelab train --resume {run})")
     print(f"  tracelab sql {run} \"SELECT step, value FROM metrics WHERE name = 'eval/win_rate' ORDER BY step\"")
     print(f"  tracelab sql {run} \"SELECT episode, train_step, outcome, steps FROM episodes WHERE kind = 'eval'\"")
+    if trainer.best_eval is not None and trainer.best_eval[1] != trainer.step:
+        value, step = trainer.best_eval
+        print(f"best evaluation at step {step:,} (method's counting {100 * value:.1f}%): its policy is kept in "
+              f"{run_dir}/policy-best/")
     if status == "finished":
         print(f"  tracelab eval {run}/policy --games 500")
         print(f"  tracelab play --policy {run}/policy --episodes 3")

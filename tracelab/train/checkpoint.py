@@ -17,7 +17,6 @@ import torch
 
 from tracelab.game.scenario import NOTHING, RED, Scenario, scenario_from_dict
 from tracelab.train.config import TrainConfig
-from tracelab.train.policy import may_act
 
 CHECKPOINT_DIR, CHECKPOINT_FILE = "checkpoint", "checkpoint.pt"
 FORMAT = "tracelab-dqn-checkpoint/1"
@@ -36,6 +35,7 @@ def save_checkpoint(tr: Any, run_dir: Path) -> Path:
         "run": str(run_dir), "step": tr.step, "next_episode": tr.next_episode, "update_credit": tr.update_credit,
         "synced_block": tr.synced_block, "eval_round": tr.eval_round, "returns_since_log": list(tr.returns_since_log),
         "last_loss": tr.last_loss, "logged_step": tr.logged_step, "eval_step": tr.eval_step,
+        "best_eval": tr.best_eval, "best_rows": tr.best_rows,
         "learners": {name: lr.state() for name, lr in tr.learners.items()},
         "rng": tr.rng.bit_generator.state, "torch_rng": tr.torch_gen.get_state(),
         "env_rng": tr.env.sim.rng.bit_generator.state,
@@ -80,6 +80,10 @@ def restore(tr: Any, state: dict[str, Any]) -> None:
     tr.eval_round, tr.last_loss = int(state["eval_round"]), state["last_loss"]
     tr.logged_step, tr.eval_step = int(state["logged_step"]), int(state["eval_step"])
     tr.returns_since_log = list(state["returns_since_log"])
+    best = state.get("best_eval")  # absent in checkpoints written before the best policy was kept
+    tr.best_eval = None if best is None else (float(best[0]), int(best[1]))
+    tr.best_rows = state.get("best_rows", {})
+    tr.write_best_policy()  # a resumed run into a new directory keeps it too
     tr.rng.bit_generator.state = state["rng"]
     tr.torch_gen.set_state(state["torch_rng"])
     g = state["games"]
@@ -95,7 +99,7 @@ def restore(tr: Any, state: dict[str, Any]) -> None:
         raise RuntimeError("restoring the checkpoint's games did not reproduce their observations: the "
                            "simulator is not the one the checkpoint was written with")
     tr.obs = obs
-    tr.acting = may_act(tr.scenario, tr.env.sim.state)
+    tr.acting = tr.may_act()
     tr.pending.load_state(state["pending"])
 
 

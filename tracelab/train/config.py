@@ -21,9 +21,14 @@ class TrainConfig:
     # ---- what is trained ----
     scenario: str = _opt("a built-in scenario (base, advanced, nonmarkov) or a scenario .toml file",
                          default="base")
-    non_markov: bool = _opt("the non-Markov setup: previous observation appended, separate networks for "
-                            "slow and fast agents (default: Markov, one network shared by the red agents)",
-                            default=False)
+    non_markov: bool = _opt("the non-Markov setup: the previous observation appended to the current one "
+                            "(default: Markov, the current observation only)", default=False)
+    split_networks: bool = _opt("one network for the fast and one for the slow agents (the nonmarkov "
+                                "scenario) instead of one shared by all red agents", default=False)
+    slow_every_step: bool = _opt("the slow agent decides on every step, each transition one step long; the "
+                                 "game ignores its choices on steps where it may not act, and nothing in a "
+                                 "Markov observation says which steps those are (default: it decides only "
+                                 "where it may act, one transition spanning its two-step move)", default=False)
     agents: int | None = _opt("agents per team (default: the scenario's)", default=None)
     backend: str = _opt("simulator: rules (the rule engine) or reference (hand-written)", default="rules")
     kernel: str = _opt("the rule engine's kernel (--backend rules): auto (lanes from 64 worlds, else the "
@@ -126,7 +131,10 @@ class TrainConfig:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "TrainConfig":
         known = {f.name for f in fields(cls)}
-        return cls(**{k: v for k, v in d.items() if k in known})
+        d = {k: v for k, v in d.items() if k in known}
+        if "split_networks" not in d:  # written before the two were separate: non-Markov implied split
+            d["split_networks"] = bool(d.get("non_markov", False))
+        return cls(**d)
 
 
 def config_fields() -> list[tuple[str, Any, Any, str]]:

@@ -88,14 +88,14 @@ class EvalResult:
         d.update(win_rate=self.win_rate, method_win_rate=self.method_win_rate)
         return d
 
-    def metrics(self, suffix: str = "") -> dict[str, float]:
-        """The run's `eval/...` metric rows (docs/training.md)."""
+    def metrics(self, suffix: str = "", prefix: str = "eval/") -> dict[str, float]:
+        """The run's `eval/...` metric rows (docs/training.md); `eval_best/` for the kept best policy."""
         m = {"games": self.games, "wins": self.wins, "losses": self.losses, "draws": self.draws,
              "truncated": self.truncated, "win_rate": self.win_rate, "mean_return": self.mean_return,
              "method_win_rate": self.method_win_rate}
         if self.actions_per_win is not None:
             m["actions_per_win"] = self.actions_per_win
-        return {f"eval/{k}{suffix}": float(v) for k, v in m.items()}
+        return {f"{prefix}{k}{suffix}": float(v) for k, v in m.items()}
 
 
 def shares(games: int, worlds: int) -> np.ndarray:

@@ -26,17 +26,17 @@ from tracelab.train.config import TrainConfig
 from tracelab.train.evaluate import EvalResult, EvalTrace, evaluate
 from tracelab.train.learner import DQNLearner
 from tracelab.train.network import Shape
-from tracelab.train.policy import Policy, may_act, save_policy
+from tracelab.train.policy import BEST_POLICY_DIR, Policy, may_act, save_policy
 from tracelab.train.transitions import PendingTransitions
 
 Progress = Callable[[dict[str, Any]], None]
 
 
-def network_groups(scenario: Scenario, non_markov: bool) -> dict[str, list[int]]:
-    """Network name -> red agents it plays: one shared network (Markov), or one for the fast and one for
-    the slow agents (non-Markov)."""
+def network_groups(scenario: Scenario, split: bool) -> dict[str, list[int]]:
+    """Network name -> red agents it plays: one shared network, or (split) one for the fast and one for
+    the slow agents."""
     n = scenario.agents_per_team
-    if not non_markov:
+    if not split:
         return {"shared": list(range(n))}
     slow = scenario.slow_mask[RED]
     groups = {"fast": [j for j in range(n) if not slow[j]], "slow": [j for j in range(n) if slow[j]]}
@@ -74,7 +74,7 @@ class Trainer:
                                     opponent_p=cfg.opponent_p, kernel=cfg.kernel, copy=False)
         self.masker = ActionMasker(scenario)
         self.shape = Shape(obs_size(scenario, self.stack), cfg.hidden, scenario.n_actions)
-        self.groups = network_groups(scenario, cfg.non_markov)
+        self.groups = network_groups(scenario, cfg.split_networks)
         self.learners = {name: DQNLearner(self.shape, lr=cfg.lr, batch=cfg.batch, buffer=cfg.buffer,
                                           generator=self.torch_gen, masked=cfg.mask) for name in self.groups}
         owner = {j: i for i, agents in enumerate(self.groups.values()) for j in agents}
@@ -102,13 +102,15 @@ class Trainer:
         self.returns_since_log: list[float] = []
         self.last_eval: EvalResult | None = None
         self.logged_step = self.eval_step = -1
+        self.best_eval: tuple[float, int] | None = None  # (method's win rate, step) of the best evaluation
+        self.best_rows: dict[str, torch.Tensor] = {}      # its online parameters, network name -> row
         self.last_loss: float | None = None
         self.stop_requested = False
         self._eval_env: GridWarVectorEnv | None = None
         self._masks: np.ndarray | None = None  # the shield's mask of the current state (--mask), from the step
         self._eval_trace: EvalTrace | None = None
         self.obs, _ = self.env.reset(seed=int(np.random.SeedSequence([cfg.seed, 2]).generate_state(1)[0]))
-        self.acting = may_act(scenario, self.env.sim.state)
+        self.acting = self.may_act()
         self._begin_episodes(np.arange(w))
         self._rate_mark = (time.perf_counter(), 0, 0)
 
@@ -216,7 +218,7 @@ class Trainer:
         if done.any():
             true_next = obs.copy()
             true_next[done] = info["final_obs"][done]
-        acting_next = may_act(self.scenario, self.env.sim.state)
+        acting_next = self.may_act()
         dead = true_next[:, 0:2 * n:2] < 0  # an agent's own x is -1 once it is dead
         out = self.pending.close(done[:, None] | dead | acting_next, terminated[:, None] | dead)
         # s' mask, and the next act's: the env computed it for its info (a reset world's is its new start's)
@@ -321,13 +323,39 @@ class Trainer:
             self.writer.write_metrics(self.step, result.metrics())
         self.eval_round += 1
         self.last_eval, self.eval_step = result, self.step
+        self._keep_if_best(result)
         return result
+
+    def may_act(self) -> np.ndarray:
+        """Which red agents decide this step (see policy.may_act and --slow-every-step)."""
+        return may_act(self.scenario, self.env.sim.state, self.cfg.slow_every_step)
+
+    def _keep_if_best(self, result: EvalResult) -> None:
+        """DQN's greedy policy can get worse late in training (the last, low-ε stretch forgets losing
+        games); the run keeps the policy of its best evaluation (the method's win rate against --eval-p,
+        the earliest of equals) in RUN/policy-best/, beside the final one in RUN/policy/."""
+        if self.best_eval is not None and result.method_win_rate <= self.best_eval[0]:
+            return
+        self.best_eval = (result.method_win_rate, self.step)
+        self.best_rows = {k: lr.params[0].clone() for k, lr in self.learners.items()}
+        self.write_best_policy()
+
+    def write_best_policy(self) -> None:
+        """RUN/policy-best/ from the kept parameters (also after --resume into a new run)."""
+        if self.run_dir is None or self.best_eval is None:
+            return
+        value, step = self.best_eval
+        save_policy(self.run_dir / BEST_POLICY_DIR, self.scenario, self.best_rows, self.groups, self.shape,
+                    self.stack, self.cfg.mask, self._trained(step, {
+                        "metric": "eval/method_win_rate", "value": value, "opponent_p": self.cfg.eval_p}))
+
+    def _trained(self, step: int, selected_by: dict[str, Any] | None = None) -> dict[str, Any]:
+        out = {"run": str(self.run_dir) if self.run_dir else None, "step": step, "config": self.cfg.to_dict()}
+        return out if selected_by is None else {**out, "selected_by": selected_by}
 
     def save_policy(self, path: Path) -> Path:
         return save_policy(path, self.scenario, {k: lr.params[0] for k, lr in self.learners.items()},
-                           self.groups, self.shape, self.stack, self.cfg.mask,
-                           {"run": str(self.run_dir) if self.run_dir else None, "step": self.step,
-                            "config": self.cfg.to_dict()})
+                           self.groups, self.shape, self.stack, self.cfg.mask, self._trained(self.step))
 
     # ---- the loop ----
     def train(self, stop_at: int | None = None) -> str:

@@ -22,6 +22,7 @@ from tracelab.train.network import STATE_DICT_KEYS, Shape, from_state_dict, q_va
 
 FORMAT = "tracelab-dqn-policy/1"
 POLICY_JSON, POLICY_PT = "policy.json", "policy.pt"
+BEST_POLICY_DIR = "policy-best"  # a training run's policy of its best evaluation, beside RUN/policy/
 
 
 def agent_view_order(scenario: Scenario, stack_previous: bool) -> np.ndarray:
@@ -54,8 +55,11 @@ def observation_layout(scenario: Scenario, stack_previous: bool) -> list[str]:
     return names
 
 
-def may_act(scenario: Scenario, state: Any) -> np.ndarray:
-    """bool [W, N]: which red agents choose an action this step (alive; a slow agent on even steps)."""
+def may_act(scenario: Scenario, state: Any, slow_every_step: bool = False) -> np.ndarray:
+    """bool [W, N]: which red agents choose an action this step (alive; a slow agent on even steps, or on
+    every step with `slow_every_step`: the game ignores its choices where it may not act)."""
+    if slow_every_step:
+        return state.alive[:, 0].copy()
     can = state.alive[:, 0] & ~state.moving[:, 0]
     slow = scenario.slow_mask[0]
     if slow.any():

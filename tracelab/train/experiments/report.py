@@ -50,7 +50,8 @@ def machine() -> str:
 
 # the settings of the method's DQN (shared/paper-notes.md); a report names those an arm changes
 DQN_FIELDS = ("hidden", "lr", "gamma", "batch", "buffer", "target_every", "eps_start", "eps_end",
-              "eps_decay_start", "eps_decay_end", "updates_per_step", "reward_scale", "mask", "explore_scripted")
+              "eps_decay_start", "eps_decay_end", "updates_per_step", "reward_scale", "mask", "explore_scripted",
+              "split_networks", "slow_every_step")
 
 
 def learner_text(result: ExperimentResult) -> str:
@@ -60,7 +61,7 @@ def learner_text(result: ExperimentResult) -> str:
     for ar in result.arms:
         cfg = train_config(result.experiment, ar.arm, result.budget, 0)
         changed = [f"{name.replace('_', ' ')} {getattr(cfg, name):g}" if not isinstance(getattr(cfg, name), bool)
-                   else name for name in DQN_FIELDS if getattr(cfg, name) != getattr(defaults, name)]
+                   else name.replace('_', ' ') for name in DQN_FIELDS if getattr(cfg, name) != getattr(defaults, name)]
         parts.append(f"{ar.arm.label}: {', '.join(changed) if changed else 'as the method'}")
     return "the method's DQN (docs/training.md), except: " + "; ".join(parts)
 
@@ -129,6 +130,7 @@ def write_report(result: ExperimentResult, report_dir: Path) -> Path:
                 L.append(f"- {ar.arm.label}, p = {p:g}: {spread_text(vals)}"
                          + (f"; the method: {ar.arm.published_note}" if ar.arm.published_note and p == 0.3 else ""))
     L += [""]
+    L += best_policy_section(result)
     L += experiment_sections(result)
     L += action_section(result)
     L += ["## Plots", ""]
@@ -178,7 +180,7 @@ def goal_lines(result: ExperimentResult) -> list[str]:
     exp = result.experiment
     out = [f"Goal: {exp.goal}.", ""]
     for ar in result.arms:
-        if ar.arm.published is None or exp.name in ("portability", "markov-vs-nonmarkov"):
+        if ar.arm.published is None or exp.name == "portability" or is_markov(exp):
             continue
         vals = [s.final[0.3].method_win_rate for s in ar.seeds if 0.3 in s.final]
         reached = sum(v >= ar.arm.published for v in vals)
@@ -186,12 +188,12 @@ def goal_lines(result: ExperimentResult) -> list[str]:
         out.append(f"- {ar.arm.label}: {verdict}, {reached} of {len(vals)} seeds reach it with {result.budget.steps:,} "
                    f"steps: method's win rate against p = 0.3 {spread_text(vals)}; the method: "
                    f"{ar.arm.published_note}.")
-    if exp.name == "markov-vs-nonmarkov" and len(result.arms) == 2:
-        m, n = ([s.final[0.3].method_win_rate for s in ar.seeds] for ar in result.arms)
-        if m and n:
-            margin = "outside" if min(n) > max(m) else "not outside"
-            out.append(f"- non-Markov {spread_text(n)} vs Markov {spread_text(m)}: the margin is {margin} the "
-                       f"seed spread (min of one vs max of the other). The method: best 59% vs 85%.")
+        kept = [kept_or_final(s, 0.3) for s in ar.seeds]
+        if any(s.best for s in ar.seeds) and None not in kept:
+            n_kept = sum(v >= ar.arm.published for v in kept)
+            out.append(f"  The kept best policies (below): {n_kept} of {len(kept)} seeds reach it, {spread_text(kept)}.")
+    if is_markov(exp):
+        out += markov_lines(result)
     if exp.name == "portability":
         for ar in result.arms:
             for s in ar.seeds:
@@ -200,19 +202,94 @@ def goal_lines(result: ExperimentResult) -> list[str]:
                                f"game by game with the same seeds; independent seeds: win-rate gap "
                                f"{d['win_gap_points']:+.1f} points (two-proportion p = {d['p_value']:.2f}), "
                                f"return gap {d['return_gap']:+.1f} ({num(100 * d['return_gap_relative'], '.1f')}%).")
-    if exp.name == "reward-shaping" and len(result.arms) == 2:
-        before, after = result.arms
-        for sb, sa in zip(before.seeds, after.seeds):
-            fb, fa = ({k: v for k, v in (ar.extra.get(s.seed) or {}).items() if k != "trace_run"}
-                      for ar, s in ((before, sb), (after, sa)))
-            same = "the same figures (the change did not move the greedy policy's games)" if fb == fa else \
-                "hidden steps/game {:.2f} -> {:.2f}, red shot/game {:.2f} -> {:.2f}, shoot share {} -> {}, " \
-                "method's win rate {} -> {}".format(
-                    fb.get("hidden_steps_per_game", 0), fa.get("hidden_steps_per_game", 0),
-                    fb.get("shot_per_game", 0), fa.get("shot_per_game", 0), pct(fb.get("shoot_share")),
-                    pct(fa.get("shoot_share")), pct(sb.final[0.3].method_win_rate), pct(sa.final[0.3].method_win_rate))
-            out.append(f"- seed {sb.seed}, {before.arm.label} -> {after.arm.label}: {same}.")
+    if exp.name == "reward-shaping":
+        for before, after in zip(result.arms, result.arms[1:]):  # each change of the rewards, in order
+            for sb, sa in zip(before.seeds, after.seeds):
+                fb, fa = ({k: v for k, v in (ar.extra.get(s.seed) or {}).items() if k != "trace_run"}
+                          for ar, s in ((before, sb), (after, sa)))
+                same = "the same figures (the change did not move the greedy policy's games)" if fb == fa else \
+                    "hidden steps/game {:.2f} -> {:.2f}, red shot/game {:.2f} -> {:.2f}, shoot share {} -> {}, " \
+                    "method's win rate {} -> {}".format(
+                        fb.get("hidden_steps_per_game", 0), fa.get("hidden_steps_per_game", 0),
+                        fb.get("shot_per_game", 0), fa.get("shot_per_game", 0), pct(fb.get("shoot_share")),
+                        pct(fa.get("shoot_share")), pct(sb.final[0.3].method_win_rate),
+                        pct(sa.final[0.3].method_win_rate))
+                out.append(f"- seed {sb.seed}, {before.arm.label} -> {after.arm.label}: {same}.")
+            shares = [[(ar.extra.get(s.seed) or {}).get("shoot_share") for s in ar.seeds] for ar in (before, after)]
+            if all(v is not None for v in shares[0] + shares[1]) and shares[0] and shares[1]:
+                out.append(f"- {before.arm.label} -> {after.arm.label}, shoot share over seeds: "
+                           f"{spread_text(shares[0])} -> {spread_text(shares[1])}.")
         out.append("- the queries' figures per seed are in the table below.")
+    return out
+
+
+def is_markov(exp: Any) -> bool:
+    """The Markov vs non-Markov experiments (their arms are compared with the first, Markov, one)."""
+    return exp.name.startswith("markov-vs-nonmarkov")
+
+
+def best_policy_section(result: ExperimentResult) -> list[str]:
+    """The policies each run kept at its best evaluation during training (RUN/policy-best), played on the
+    same final-evaluation games as the final policies: fresh games, not the ones that selected them."""
+    rows = [(ar, s) for ar in result.arms for s in ar.seeds if s.best]
+    if not rows:
+        return []
+    L = ["## The kept best policies", "",
+         "A run also keeps the policy of its best evaluation during training (`RUN/policy-best/`, chosen by "
+         "the method's win rate against p = 0.3 over that evaluation's games; docs/training.md, \"The best "
+         "policy\"). Here it plays the final evaluation's games (other games than those that chose it, the "
+         "same ones the final policy played). Seeds whose final policy was their best have no row.", "",
+         "| setting | seed | kept at step | opponent p | method win rate [95% CI] | final policy's | mean return |",
+         "|---|---|---|---|---|---|---|"]
+    for ar, s in rows:
+        for p, r in s.best.items():
+            lo, hi = wilson(r.method_wins, r.games)
+            fin = s.final.get(p)
+            L.append(f"| {ar.arm.label} | {s.seed} | {s.best_step:,} | {p:g} | {pct(r.method_win_rate)} "
+                     f"[{pct(lo)}-{pct(hi)}] | {pct(fin.method_win_rate) if fin else '-'} | {r.mean_return:.1f} |")
+    L += ["", "Over seeds, each seed's kept policy (its final one where that was its best), method's counting:", ""]
+    for ar in result.arms:
+        for p in EVAL_PS:
+            vals = [kept_or_final(s, p) for s in ar.seeds]
+            if vals and None not in vals:
+                L.append(f"- {ar.arm.label}, p = {p:g}: {spread_text(vals)}")
+    return L + [""]
+
+
+def kept_or_final(s: Any, p: float) -> float | None:
+    """A seed's kept best policy's method win rate against p, or its final policy's when that was the best."""
+    r = s.best.get(p) or s.final.get(p)
+    return None if r is None else r.method_win_rate
+
+
+def best_during_training(run_dir: Path) -> float | None:
+    """The best evaluation of a seed's learning curve (the method's "best": the highest of its evaluations
+    over training), method's counting against the evaluation opponent."""
+    steps, vals = curves(run_dir, ("eval/method_win_rate",))["eval/method_win_rate"]
+    return float(np.max(vals)) if len(vals) else None
+
+
+def markov_lines(result: ExperimentResult) -> list[str]:
+    """Each non-Markov arm against the Markov arm (the first), final policies and, the method's way, the best
+    evaluation during training."""
+    base, others = result.arms[0], result.arms[1:]
+    out = []
+    for ar in others:
+        for what, pick in (("final", lambda s: s.final[0.3].method_win_rate),
+                           ("best during training", lambda s: best_during_training(s.run_dir))):
+            m = [v for v in map(pick, base.seeds) if v is not None]
+            n = [v for v in map(pick, ar.seeds) if v is not None]
+            if not (m and n):
+                continue
+            if min(n) > max(m):
+                margin = "above Markov, outside"
+            elif max(n) < min(m):
+                margin = "below Markov, outside"
+            else:
+                margin = "not outside"
+            out.append(f"- {what}: {ar.arm.label} {spread_text(n)} vs {base.arm.label} {spread_text(m)}: the "
+                       f"margin is {margin} the seed spread (min of one vs max of the other). The method: best "
+                       f"59% vs 85%.")
     return out
 
 
@@ -258,7 +335,11 @@ def experiment_sections(result: ExperimentResult) -> list[str]:
               "3. change the rewards the queries point to: `hid_behind_mountain` and `learner_events`' `shot` "
               "point to the shot penalty (-400 -> -200), `learner_events`' `invalid` and the shoot share to the "
               "no-ammo penalty (kept at -10, the method's value), and retrain with the same seeds;",
-              "4. the same queries and the win rates, before and after (below).", ""]
+              "4. the same queries and the win rates, before and after (below);",
+              "5. the other half of the method's remark, \"a penalty of 10 (not more) for shooting with no ammo\": "
+              "the same shot penalty (-200) with the no-ammo penalty raised to -200, the unsafe-move penalty's "
+              "size. The observation does not include red's own ammo (the method's observation), so a policy "
+              "cannot tell a shot that hits from a shot with an empty gun before it fires.", ""]
         L += ["## The saved queries, before and after", "",
               "Each seed's final policy plays traced evaluation games (against p = 0.3) into its own run; the "
               "saved queries (`tracelab sql RUN --query NAME`) read them: `hid_behind_mountain` (timesteps red "

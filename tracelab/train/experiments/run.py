@@ -186,6 +186,8 @@ def summary_json(result: ExperimentResult) -> dict[str, Any]:
                       "seeds": [{"seed": s.seed, "run": str(s.run_dir), "steps": s.steps, "status": s.status,
                                  "wall_s": s.wall_s,
                                  "final": {p_suffix(p): r.to_dict() for p, r in s.final.items()},
+                                 "best_step": s.best_step,
+                                 "best": {p_suffix(p): r.to_dict() for p, r in s.best.items()},
                                  "extra": ar.extra.get(s.seed)} for s in ar.seeds]}
                      for ar in result.arms]}
 
@@ -202,12 +204,14 @@ def load_result(exp: Experiment, out_dir: Path) -> ExperimentResult:
     result = ExperimentResult(exp, Budget(**d["budget"]), d["quick"], out_dir, [ArmResult(a) for a in exp.arms],
                               wall_s=d["wall_s"], command=d.get("command", ""), commit=d.get("commit", ""),
                               machine=d.get("machine", ""))
+    def evals(saved: dict[str, Any]) -> dict[float, EvalResult]:
+        return {float(k[2:]): EvalResult(**{f: v for f, v in r.items() if f in fields_}) for k, r in saved.items()}
+
     for ar, saved in zip(result.arms, d["arms"]):
         for s in saved["seeds"]:
-            final = {float(k[2:]): EvalResult(**{f: v for f, v in r.items() if f in fields_})
-                     for k, r in s["final"].items()}
             run_dir = Path(s["run"])
-            ar.seeds.append(SeedRun(s["seed"], run_dir, s["steps"], s["status"], final, run_dir / "policy",
+            ar.seeds.append(SeedRun(s["seed"], run_dir, s["steps"], s["status"], evals(s["final"]),
+                                    run_dir / "policy", evals(s.get("best", {})), s.get("best_step"),
                                     s.get("wall_s", 0.0)))
             if s.get("extra") is not None:
                 ar.extra[s["seed"]] = s["extra"]

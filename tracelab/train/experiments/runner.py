@@ -14,7 +14,7 @@ import numpy as np
 from tracelab.game.scenario import Scenario
 from tracelab.train.config import TrainConfig
 from tracelab.train.evaluate import EvalResult, evaluate, evaluate_into
-from tracelab.train.policy import Policy
+from tracelab.train.policy import BEST_POLICY_DIR, Policy, load_policy
 
 FINAL_EVAL_ROUND = 1_000_000  # seeds of the final evaluations: apart from the training's rounds
 
@@ -28,6 +28,8 @@ class SeedRun:
     status: str
     final: dict[float, EvalResult] = field(default_factory=dict)
     policy_dir: Path | None = None
+    best: dict[float, EvalResult] = field(default_factory=dict)  # the kept best policy's (RUN/policy-best)
+    best_step: int | None = None                                 # the step it was saved at
     wall_s: float = 0.0
 
 
@@ -60,12 +62,17 @@ def train_seed(cfg: TrainConfig, scenario: Scenario, run_dir: Path, command: str
         trainer = Trainer(cfg, scenario, writer, run_dir)
         status = trainer.train()
         out = SeedRun(cfg.seed, run_dir, trainer.step, status, policy_dir=run_dir / "policy")
-        for p in eval_ps:
-            result = evaluate(trainer.policy, scenario, games=eval_games, backend=cfg.backend,
-                              seed=final_eval_seed(cfg.seed, p), opponent_p=p, stack_previous=trainer.stack,
-                              envs=cfg.eval_envs)
-            writer.write_metrics(trainer.step, result.metrics(p_suffix(p)))
-            out.final[p] = result
+        policies = [("eval/", trainer.policy, out.final)]
+        if trainer.best_eval is not None and trainer.best_eval[1] != trainer.step:  # else the final one
+            out.best_step = trainer.best_eval[1]
+            policies.append(("eval_best/", load_policy(run_dir / BEST_POLICY_DIR, scenario), out.best))
+        for prefix, policy, into in policies:
+            for p in eval_ps:  # the same games for both policies: a paired comparison
+                result = evaluate(policy, scenario, games=eval_games, backend=cfg.backend,
+                                  seed=final_eval_seed(cfg.seed, p), opponent_p=p, stack_previous=trainer.stack,
+                                  envs=cfg.eval_envs)
+                writer.write_metrics(trainer.step, result.metrics(p_suffix(p), prefix))
+                into[p] = result
         out.wall_s = time.perf_counter() - t0
         return out
     finally:
