@@ -118,6 +118,9 @@ class Engine:
         self.threads = threads or 1
         self._ext_codes = np.zeros(0, np.int8)  # crisp value codes of this step's external rows (lanes)
         self.kernel_notice: str | None = None  # why a requested compiled kernel is not used
+        # bumped whenever an array the kernel steps is replaced (grown, handed over, another backend):
+        # a caller holding fused_binding()'s arrays binds them again when it changes
+        self.layout_version = 0
         self._state: CountingState | LaneState = self._choose_backend(kernel)
         self._ext: list[tuple[np.ndarray, ...]] = []  # chunks of (atoms, lower, upper, world, static)
         self._settable = np.zeros(0, np.bool_)
@@ -269,6 +272,7 @@ class Engine:
         if len(self._settable) != n_atoms or g.n_settable != self._n_settable:
             self._settable = g.settable_mask(n_atoms)
             self._n_settable = g.n_settable
+            self.layout_version += 1
         n_inst = g.n_groundings
         if n_inst == self._n_grounded and n_atoms == self._state.n_atoms and self._kt is not None:
             return
@@ -286,6 +290,7 @@ class Engine:
         tri[:n] = self._tri[:n]
         trf[:n] = self._trf[:n]
         self._tri, self._trf = tri, trf
+        self.layout_version += 1
 
     def _to_counting(self) -> None:
         """Go on with the counting kernel (a bound the lanes kernel cannot hold arrived)."""
@@ -293,6 +298,7 @@ class Engine:
         state = CountingState(self)
         state.adopt(lower, upper, static, last_cause, pending, self._kt)
         self._state = state
+        self.layout_version += 1
 
     # ---- per-world snapshots (episode resets in a batch) ----
 
@@ -414,6 +420,35 @@ class Engine:
             self._ext_count += n
         self.t += 1
 
+    # ---- a caller's own compiled step (tracelab/game/rulesim_fused.py) ----
+
+    def fused_binding(self) -> tuple[np.ndarray, tuple[np.ndarray, ...], tuple[np.ndarray, ...]] | None:
+        """For a caller that runs the counting kernel (kernel.step_worlds) inside its own compiled call:
+        after sync(), (cfg, arrays before the external rows, arrays after them), see
+        CountingState.kernel_args; None on another kernel. Valid while layout_version stays the same;
+        such a step is begun with prepare_fused_step() and ended with finish_fused_step()."""
+        self._sync()
+        if self._state.name != "counting":
+            return None
+        return (self._cfg, *self._state.kernel_args())
+
+    def prepare_fused_step(self) -> int:
+        """Before a fused step: ground what is new (as step() does); returns layout_version, which the
+        caller compares with its binding's."""
+        self._sync()
+        return self.layout_version
+
+    def finish_fused_step(self, status: int, w_first: int,
+                          external: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
+        """After a fused step's kernel call returned (status, w_first) for `external` (as in step()):
+        go on as step() would (grow a buffer, user functions; raise on an error), then advance t."""
+        if status != K.STATUS_OK:
+            status = self._state.finish(status, w_first, *external)
+            if status != K.STATUS_OK:
+                self._raise(status)
+        self._ext_count += int(external[0][-1])
+        self.t += 1
+
     def next_external_id(self) -> int:
         """The id the next external fact will get (trace rows name external facts by this id)."""
         return self._ext_count
@@ -486,6 +521,7 @@ class Engine:
         ints, floats = self._tri.T[:, :n], self._trf.T[:, :n]  # the buffers' columns, contiguous blocks
         if n >= TRACE_HANDOVER_ROWS:  # a big step: its columns are handed over, the engine starts anew
             self._tri, self._trf = _trace_buffers(TRACE_MIN_ROWS)
+            self.layout_version += 1
         else:  # one copy per block (the buffers are reused); the columns are its rows
             ints, floats = ints.copy(), floats.copy()
         cols: dict[str, np.ndarray] = {}

@@ -8,9 +8,11 @@ from __future__ import annotations
 
 import numpy as np
 from tracelab.engine import Engine
+from tracelab.engine.core import LANES_MIN_WORLDS
 
 from tracelab.game.facts import DIRECTIONS, agent_name, bullet_name, scenario_program
 from tracelab.game.observe import observe_step
+from tracelab.game.rulesim_fused import STATUS_BAD_ACTION, STATUS_OK, bind, fused_step
 from tracelab.game.rulesim_kernel import encode_actions, read_and_settle, read_back
 from tracelab.game.scenario import TEAMS, Scenario
 from tracelab.game.sim_base import GameSim, read_only
@@ -24,14 +26,20 @@ class RuleSim(GameSim):
     or more). `copy`: the step contract (GameSim): by default a StepResult's arrays are read-only views
     of buffers the next step or reset overwrites; `copy=True` returns new arrays every time.
 
-    A step is four compiled calls and the engine's: encode_actions (actions to fact rows), the engine
-    step, read_and_settle (atoms back into the state buffers, rewards, the end of the game) and
-    observe_step (observations, in place)."""
+    A step is encode_actions (actions to fact rows), the engine step, read_and_settle (atoms back into
+    the state buffers, rewards, the end of the game) and observe_step (observations, in place). On the
+    counting kernel they run as one compiled call (rulesim_fused.fused_step, `fused=True`; with it,
+    `kernel="auto"` takes the counting kernel below the lanes kernel's batch size, not a cached compiled
+    one, which measured no faster); when the kernel pauses (buffer room, user functions) or fails, the
+    rest runs as separate calls. `fused=False` always takes separate calls (the same results; kept to
+    compare)."""
 
     def __init__(self, scenario: Scenario, n_worlds: int = 1, seed: int | None = None,
                  stack_previous: bool = False, trace: bool | np.ndarray = False, kernel: str = "auto",
-                 copy: bool = False) -> None:
+                 copy: bool = False, fused: bool = True) -> None:
         super().__init__(scenario, n_worlds, seed, stack_previous, copy)
+        if fused and kernel == "auto" and n_worlds < LANES_MIN_WORLDS:
+            kernel = "counting"  # what the fused step runs ("auto" would take a cached compiled kernel)
         self.engine = Engine(scenario_program(scenario), worlds=n_worlds, trace=trace, kernel=kernel)
         self._index_atoms()
         # t = 0 sets up the start; every action atom starts false, so the rules are grounded for them
@@ -63,6 +71,10 @@ class RuleSim(GameSim):
         # every world starts alike: a reset copies these rows instead of reading atoms back
         self._start_state = {name: buf.copy() for name, buf in self._state_buffers.items()}
         self._start_obs = self._obs.copy()
+        self.fused = fused
+        self._bound: object | None = None  # rulesim_fused.StepBuffers of the engine's current arrays
+        self._bound_version = -1  # the engine's layout_version they were bound at
+        self._bound_res = np.zeros(2, np.int64)  # fused_step's report: [world the kernel paused at, rows]
 
     def _make_buffers(self) -> None:
         """The state, events, rewards and observations of every world: buffers rewritten in place by every
@@ -273,12 +285,47 @@ class RuleSim(GameSim):
     def step(self, red_actions: np.ndarray, blue_actions: np.ndarray) -> StepResult:
         """One step of every world (spec action ids, int [W, N] per team). Finished worlds do not change
         (zero rewards, flags kept) until reset."""
+        if self.fused:
+            return self._fused_step(red_actions, blue_actions)
         self.engine.step(external=self._action_rows(red_actions, blue_actions))
         self._fresh.fill(False)
         # finished worlds keep their final state; the clock, end flags and rewards are settled in place
         read_and_settle(self.engine.is_true(self._read_atoms), *self._settle_args)
         observe_step(*self._observe_args)
         return self._handed_out()
+
+    def _fused_step(self, red_actions: np.ndarray, blue_actions: np.ndarray) -> StepResult:
+        """step() as one compiled call (rulesim_fused.fused_step); what the kernel leaves to Python (a
+        pause or an error) and the rest of the step run as the separate calls would."""
+        eng = self.engine
+        red = self._team_actions(red_actions, "red_actions")
+        blue = self._team_actions(blue_actions, "blue_actions")
+        if eng.prepare_fused_step() != self._bound_version and not self._bind():
+            self.fused = False  # another kernel: separate calls from now on
+            return self.step(red, blue)
+        status = fused_step(self._bound, red, blue, eng.t, eng.next_external_id())
+        if status == STATUS_BAD_ACTION:
+            self._action_rows(red, blue)  # raises the action's error; nothing was changed
+        ptr, rows, bounds = self._rows_buf
+        eng.finish_fused_step(status, int(self._bound_res[0]), (ptr, rows[:int(ptr[-1])], bounds[:int(ptr[-1])]))
+        self._fresh.fill(False)
+        if status != STATUS_OK:  # the kernel paused or failed: the rest of the step as separate calls
+            read_and_settle(eng.is_true(self._read_atoms), *self._settle_args)
+            observe_step(*self._observe_args)
+        return self._handed_out()
+
+    def _bind(self) -> bool:
+        """Bind the fused step's arrays to the engine's current ones; False on a kernel it cannot run."""
+        binding = self.engine.fused_binding()
+        if binding is None:
+            self._bound = None
+            return False
+        encode = (self.terminated, self.truncated, self._allowed, self._action_atoms, self._prev_action,
+                  *self._rows_buf)
+        self._bound, self._bound_res = bind(encode, binding, self._read_atoms, self._settle_args,
+                                            self._observe_args)
+        self._bound_version = self.engine.layout_version
+        return True
 
     def _action_rows(self, red_actions: np.ndarray,
                      blue_actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
