@@ -32,6 +32,7 @@ from .program import (
     effective_bound,
     ordered_nodes,
 )
+from .trace_take import take_local_columns
 from .vocabulary import Vocabulary
 
 TRACE_COLUMNS = ("world", "t", "pass_no", "atom", "cause_kind", "cause_id", "grounding", "n_sources",
@@ -41,6 +42,7 @@ _TRACE_INT_DTYPES = tuple(np.dtype(d) for d in (np.int32, np.int32, np.int32, np
 # (column name, dtype, taken as is from the int32 buffer) per int column of take_trace()
 _TRACE_INT_OUT = tuple((name, d, d == np.dtype(np.int32)) for name, d in zip(TRACE_COLUMNS, _TRACE_INT_DTYPES))
 _TRACE_FLOAT_NAMES = TRACE_COLUMNS[K.TRACE_INT_COLUMNS:]
+TRACE_LOCAL_COLUMNS = (*TRACE_COLUMNS, "world_episode")  # take_trace(t_start, episode)
 # trace buffers: a step that wrote this many rows hands its buffers to take_trace() instead of a copy
 # (at t = 0 a million-fact graph writes a million rows: a copy would double the trace's 64 bytes a row)
 TRACE_HANDOVER_ROWS = 65_536
@@ -515,9 +517,22 @@ class Engine:
 
     # ---- trace, vocabulary, groundings, stats ----
 
-    def take_trace(self) -> dict[str, np.ndarray]:
-        """The change rows since the last call, as columns (docs/engine-api.md); the buffer is cleared."""
+    def take_trace(self, t_start: np.ndarray | None = None,
+                   episode: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """The change rows since the last call, as columns (docs/engine-api.md); the buffer is cleared.
+        With `t_start` and `episode` (int64 [worlds] each; a simulator's episode clock) a row's `t` is
+        counted from t_start[its world] and a last column `world_episode` holds episode[its world]."""
         n = int(self._tr_n[0])
+        local = t_start is not None
+        if local and n < TRACE_HANDOVER_ROWS:  # the usual step: new columns, localised, in one call
+            self._tr_n[0] = 0
+            ints, kind, nsrc, floats, ep = take_local_columns(self._tri, self._trf, n, t_start, episode)
+            world, t, pass_no, atom, cause_id, grounding = ints
+            old_lower, old_upper, new_lower, new_upper = floats
+            return {"world": world, "t": t, "pass_no": pass_no, "atom": atom, "cause_kind": kind,
+                    "cause_id": cause_id, "grounding": grounding, "n_sources": nsrc, "old_lower": old_lower,
+                    "old_upper": old_upper, "new_lower": new_lower, "new_upper": new_upper,
+                    "world_episode": ep}
         ints, floats = self._tri.T[:, :n], self._trf.T[:, :n]  # the buffers' columns, contiguous blocks
         if n >= TRACE_HANDOVER_ROWS:  # a big step: its columns are handed over, the engine starts anew
             self._tri, self._trf = _trace_buffers(TRACE_MIN_ROWS)
@@ -530,6 +545,10 @@ class Engine:
         for name, col in zip(_TRACE_FLOAT_NAMES, floats):
             cols[name] = col
         self._tr_n[0] = 0
+        if local:
+            world = cols["world"].astype(np.int64)
+            cols["t"] = (cols["t"] - t_start[world]).astype(np.int32)
+            cols["world_episode"] = episode[world].astype(np.int64)
         return cols
 
     def vocabulary(self) -> dict[str, object]:

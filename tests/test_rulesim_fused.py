@@ -114,3 +114,24 @@ def test_cache_stamp_covers_the_callees_sources() -> None:
         digest.update(inspect.getsource(m).encode() + b"\0")
     assert rulesim_fused.SOURCE_STAMP == digest.digest()
     assert rulesim_fused.fused_step._cache._cache_file._source_stamp == digest.digest()  # noqa: SLF001
+
+
+def test_local_trace_columns_equal_the_python_path() -> None:
+    """Engine.take_trace(t_start, episode) in one compiled call: the columns the plain take_trace() and
+    the episode clock in Python give (the store's rows)."""
+    from tracelab.engine import Engine
+    from tracelab.engine.core import TRACE_LOCAL_COLUMNS
+    from tracelab.game.facts import scenario_program
+    sc = scenario_for(1)
+    engines = [Engine(scenario_program(sc), worlds=3, trace=True, kernel="counting") for _ in range(2)]
+    t_start = np.array([0, 2, 5], np.int64)
+    episode = np.array([0, 4, 7], np.int64)
+    for step in range(4):
+        for e in engines:
+            e.step()
+        plain, local = engines[0].take_trace(), engines[1].take_trace(t_start, episode)
+        world = plain["world"].astype(np.int64)
+        plain["t"] = (plain["t"] - t_start[world]).astype(np.int32)
+        plain["world_episode"] = episode[world]
+        assert tuple(local) == TRACE_LOCAL_COLUMNS and len(plain["t"]) > 0
+        _same_rows(local, plain, step)

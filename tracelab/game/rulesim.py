@@ -50,7 +50,7 @@ class RuleSim(GameSim):
         self.episode_start = np.zeros(n_worlds, np.int64)  # engine time of each world's episode t = 0
         self.world_episode = np.zeros(n_worlds, np.int64)  # episodes each world has started, minus one
         self._fresh = np.ones(n_worlds, bool)  # still in the start state, its set-up rows already queued
-        setup = self._localize(self.engine.take_trace())
+        setup = self._take_local()
         first = setup["world"] == 0
         self._setup_rows = {k: v[first] for k, v in setup.items()}
         for v in self._setup_rows.values():
@@ -232,7 +232,7 @@ class RuleSim(GameSim):
         sel = sel[~self._fresh[sel]]  # a world that has not stepped since its start needs nothing
         self._fresh[sel] = True
         if self.engine.trace_on.any():  # rows of the episodes that end here keep their own clock
-            self._pending_rows.append(self._localize(self.engine.take_trace()))
+            self._pending_rows.append(self._take_local())
         self.engine.restore(self._start, sel)  # action atoms are false again there
         self._prev_action[sel] = -1
         self.episode_start[sel] = self.engine.t - 1
@@ -262,25 +262,16 @@ class RuleSim(GameSim):
     def take_trace(self) -> dict[str, np.ndarray]:
         """The engine's change rows since the last call, with `t` counted from each world's episode start
         (0 = set-up) and `world_episode`, the number of that world's episode (0 = its first)."""
-        rows = self._localize(self.engine.take_trace())
+        rows = self._take_local()
         if self._pending_rows:
             self._pending_rows.append(rows)
             rows = {k: np.concatenate([r[k] for r in self._pending_rows]) for k in rows}
             self._pending_rows = []
         return rows
 
-    def _localize(self, rows: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """Engine rows with t counted from their world's current episode start, and world_episode."""
-        if self.n_worlds == 1:  # the common single-world case, without per-row gathers
-            start = int(self.episode_start[0])
-            if start:
-                rows["t"] -= start
-            rows["world_episode"] = np.full(len(rows["t"]), self.world_episode[0])
-            return rows
-        world = rows["world"].astype(np.int64)
-        rows["t"] = (rows["t"] - self.episode_start[world]).astype(np.int32)
-        rows["world_episode"] = self.world_episode[world].copy()
-        return rows
+    def _take_local(self) -> dict[str, np.ndarray]:
+        """The engine's rows with t counted from their world's current episode start, and world_episode."""
+        return self.engine.take_trace(self.episode_start, self.world_episode)
 
     def step(self, red_actions: np.ndarray, blue_actions: np.ndarray) -> StepResult:
         """One step of every world (spec action ids, int [W, N] per team). Finished worlds do not change
