@@ -440,15 +440,17 @@ class Engine:
         self._sync()
         return self.layout_version
 
-    def finish_fused_step(self, status: int, w_first: int,
-                          external: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
-        """After a fused step's kernel call returned (status, w_first) for `external` (as in step()):
-        go on as step() would (grow a buffer, user functions; raise on an error), then advance t."""
+    def finish_fused_step(self, status: int, w_first: int, ext_ptr: np.ndarray, ext_i: np.ndarray,
+                          ext_f: np.ndarray) -> None:
+        """After a fused step's kernel call returned (status, w_first) for the external rows (ext_ptr and
+        the row buffers, rows ext_ptr[-1] of them used, as in step()): go on as step() would (grow a
+        buffer, user functions; raise on an error), then advance t."""
+        n = int(ext_ptr[-1])
         if status != K.STATUS_OK:
-            status = self._state.finish(status, w_first, *external)
+            status = self._state.finish(status, w_first, ext_ptr, ext_i[:n], ext_f[:n])
             if status != K.STATUS_OK:
                 self._raise(status)
-        self._ext_count += int(external[0][-1])
+        self._ext_count += n
         self.t += 1
 
     def next_external_id(self) -> int:

@@ -297,8 +297,7 @@ class RuleSim(GameSim):
         status = fused_step(self._bound, red, blue, eng.t, eng.next_external_id())
         if status == STATUS_BAD_ACTION:
             self._action_rows(red, blue)  # raises the action's error; nothing was changed
-        ptr, rows, bounds = self._rows_buf
-        eng.finish_fused_step(status, int(self._bound_res[0]), (ptr, rows[:int(ptr[-1])], bounds[:int(ptr[-1])]))
+        eng.finish_fused_step(status, int(self._bound_res[0]), *self._rows_buf)
         self._fresh.fill(False)
         if status != STATUS_OK:  # the kernel paused or failed: the rest of the step as separate calls
             read_and_settle(eng.is_true(self._read_atoms), *self._settle_args)
