@@ -72,6 +72,7 @@ class RuleSim(GameSim):
         self._start_state = {name: buf.copy() for name, buf in self._state_buffers.items()}
         self._start_obs = self._obs.copy()
         self.fused = fused
+        self._fused_call = fused_step  # an attribute, so that a bench can time it (bench.sims.EngineTimer)
         self._bound: object | None = None  # rulesim_fused.StepBuffers of the engine's current arrays
         self._bound_version = -1  # the engine's layout_version they were bound at
         self._bound_res = np.zeros(2, np.int64)  # fused_step's report: [world the kernel paused at, rows]
@@ -240,11 +241,13 @@ class RuleSim(GameSim):
         if self.engine.trace_on[sel].any():
             self._replay_setup(sel[self.engine.trace_on[sel]])
         if len(sel):  # the start state, as read when the simulator was built (all worlds start alike)
-            self._start_state_into(sel)
-            self._obs[sel] = self._start_obs[sel]
+            # one world (the usual episode end): basic indexing, no fancy-index copies
+            where = slice(int(sel[0]), int(sel[0]) + 1) if len(sel) == 1 else sel
+            self._start_state_into(where)
+            self._obs[where] = self._start_obs[where]
         return self._handed_obs()
 
-    def _start_state_into(self, sel: np.ndarray) -> None:
+    def _start_state_into(self, sel: np.ndarray | slice) -> None:
         """Worlds `sel` of the state buffers back to the start state, in place."""
         for name, buf in self._state_buffers.items():
             buf[sel] = self._start_state[name][sel]
@@ -294,7 +297,7 @@ class RuleSim(GameSim):
         if eng.prepare_fused_step() != self._bound_version and not self._bind():
             self.fused = False  # another kernel: separate calls from now on
             return self.step(red, blue)
-        status = fused_step(self._bound, red, blue, eng.t, eng.next_external_id())
+        status = self._fused_call(self._bound, red, blue, eng.t, eng.next_external_id())
         if status == STATUS_BAD_ACTION:
             self._action_rows(red, blue)  # raises the action's error; nothing was changed
         eng.finish_fused_step(status, int(self._bound_res[0]), *self._rows_buf)
