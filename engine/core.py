@@ -437,6 +437,8 @@ class Engine:
     def prepare_fused_step(self) -> int:
         """Before a fused step: ground what is new (as step() does); returns layout_version, which the
         caller compares with its binding's."""
+        if self._ext:  # as step(external=...)
+            raise RuntimeError("step(external=...) with facts queued by add_fact(s): use one or the other")
         self._sync()
         return self.layout_version
 

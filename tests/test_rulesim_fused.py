@@ -135,3 +135,11 @@ def test_local_trace_columns_equal_the_python_path() -> None:
         plain["world_episode"] = episode[world]
         assert tuple(local) == TRACE_LOCAL_COLUMNS and len(plain["t"]) > 0
         _same_rows(local, plain, step)
+
+
+def test_facts_queued_on_the_engine_are_refused_as_by_separate_calls() -> None:
+    a, b = _pair(1, 1)
+    for sim in (a, b):
+        sim.engine.add_facts(sim._action_atoms[:1, :1].ravel(), 1.0, 1.0)  # noqa: SLF001
+        with pytest.raises(RuntimeError, match="queued by add_fact"):
+            sim.step(np.array([[0]]), np.array([[0]]))
