@@ -143,3 +143,15 @@ def test_facts_queued_on_the_engine_are_refused_as_by_separate_calls() -> None:
         sim.engine.add_facts(sim._action_atoms[:1, :1].ravel(), 1.0, 1.0)  # noqa: SLF001
         with pytest.raises(RuntimeError, match="queued by add_fact"):
             sim.step(np.array([[0]]), np.array([[0]]))
+
+
+def test_strided_or_read_only_actions_take_the_compiled_signature() -> None:
+    """Actions as a column of a bigger array or a read-only view: copied to the one signature the
+    compiled step has (another layout would compile it again), with the same result."""
+    a, b = _pair(1, 2)
+    before = len(rulesim_fused.fused_step.signatures)
+    wide = np.array([[1, 9], [3, 9]], np.int64)[:, :1]  # not C-contiguous
+    ro = np.array([[2], [0]], np.int64)
+    ro.flags.writeable = False
+    _same_result(a.step(wide, ro), b.step(wide.copy(), ro.copy()), 0)
+    assert len(rulesim_fused.fused_step.signatures) == max(before, 1)

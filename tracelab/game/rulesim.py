@@ -342,4 +342,7 @@ class RuleSim(GameSim):
         shape = (self.n_worlds, self.scenario.agents_per_team)
         if a.shape != shape:
             raise ValueError(f"{name} must have shape {shape} (worlds, agents), got {a.shape}")
+        flags = a.flags
+        if not (flags.c_contiguous and flags.writeable):  # the compiled calls' one signature (no recompile)
+            a = np.array(a, np.int64, order="C")
         return a
