@@ -116,10 +116,14 @@ def test_cache_stamp_covers_the_callees_sources() -> None:
     assert rulesim_fused.fused_step._cache._cache_file._source_stamp == digest.digest()  # noqa: SLF001
 
 
-def test_local_trace_columns_equal_the_python_path() -> None:
-    """Engine.take_trace(t_start, episode) in one compiled call: the columns the plain take_trace() and
-    the episode clock in Python give (the store's rows)."""
-    from tracelab.engine import Engine
+@pytest.mark.parametrize("handover", [False, True])
+def test_local_trace_columns_equal_the_python_path(handover: bool, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Engine.take_trace(t_start, episode) in one compiled call (or, for a step of TRACE_HANDOVER_ROWS
+    rows, the handed-over buffers localised in numpy): the columns the plain take_trace() and the episode
+    clock in Python give (the store's rows)."""
+    from tracelab.engine import Engine, core
+    if handover:
+        monkeypatch.setattr(core, "TRACE_HANDOVER_ROWS", 1)
     from tracelab.engine.core import TRACE_LOCAL_COLUMNS
     from tracelab.game.facts import scenario_program
     sc = scenario_for(1)
@@ -129,7 +133,9 @@ def test_local_trace_columns_equal_the_python_path() -> None:
     for step in range(4):
         for e in engines:
             e.step()
+        version = engines[1].layout_version
         plain, local = engines[0].take_trace(), engines[1].take_trace(t_start, episode)
+        assert (engines[1].layout_version != version) == handover  # handed-over buffers are replaced
         world = plain["world"].astype(np.int64)
         plain["t"] = (plain["t"] - t_start[world]).astype(np.int32)
         plain["world_episode"] = episode[world]
