@@ -93,6 +93,7 @@ class CountingState:
                                  self._act_pos)
         self._n_grounded = n_inst
         self._scratch(n_atoms, n_inst)
+        self.eng.layout_version += 1  # kernel_args() changed
 
     def _agg_args(self) -> tuple[np.ndarray, ...]:
         kt = self.kt
@@ -113,11 +114,35 @@ class CountingState:
             lo, up = annotations.call_user(name, fn, rule.name, atoms[0, a:b], atoms[1, a:b], atoms[2, a:b])
             self._req_f[i] = effective_bound(lo, up, rule.head.negated)
 
+    def kernel_args(self) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
+        """step_kernel's arguments around the external rows, for a caller that runs the counting kernel
+        inside its own compiled call (tracelab/game/rulesim_fused.py): (rule_i .. fact_order, settable ..
+        pend_f); the call is step_kernel(cfg, w_first, *before, ext_ptr, ext_i, ext_f, *after). Valid
+        until eng.layout_version changes (a buffer replaced)."""
+        eng, kt = self.eng, self.kt
+        before = (eng._rule_i, eng._rule_f, kt["inst"], self._kind_base, kt["wc_ptr"], kt["wc_bnd"],
+                  kt["wc_flags"], kt["wc_gptr"], kt["wg"], kt["ih_ptr"], kt["ih_inst"], eng._fact_i, eng._fact_f,
+                  eng._fact_order)
+        after = (eng._settable, self.lower, self.upper, self.static, self.last_cause, self._unsat, self._act,
+                 self._act_n, self._act_pos, self._pend, self._pend_n, eng.trace_on, eng._tri, eng._trf,
+                 eng._tr_n, eng._stats, eng._err, self._slot_of, self._touched, self._n_touched, self._si,
+                 self._sf, self._out, self._heap, self._in_heap, self._changed, *self._agg_args(), self._req_i,
+                 self._req_f, self._req_n, self._pend_f)
+        return before, after
+
     def step(self, ext_ptr: np.ndarray, ext_i: np.ndarray, ext_f: np.ndarray) -> int:
         """One timestep of every world; returns the kernel's status (buffers grown as needed)."""
+        return self.finish(None, 0, ext_ptr, ext_i, ext_f)
+
+    def finish(self, status: int | None, w_first: int, ext_ptr: np.ndarray, ext_i: np.ndarray,
+               ext_f: np.ndarray) -> int:
+        """Go on with a step whose kernel call returned (status, w_first) (None: not called yet) until it
+        is done or fails, as step() does: grow a buffer or compute user functions and call the kernel
+        again from world w_first. Returns the final status."""
         eng, kt = self.eng, self.kt
-        w_first = 0
         while True:
+            if status is not None and not self._serve(status, w_first):
+                break
             status, w_first = self.step_kernel(
                 eng._cfg, w_first, eng._rule_i, eng._rule_f, kt["inst"], self._kind_base, kt["wc_ptr"],
                 kt["wc_bnd"], kt["wc_flags"], kt["wc_gptr"], kt["wg"], kt["ih_ptr"], kt["ih_inst"], eng._fact_i,
@@ -127,23 +152,29 @@ class CountingState:
                 eng._stats, eng._err, self._slot_of, self._touched, self._n_touched, self._si, self._sf,
                 self._out, self._heap, self._in_heap, self._changed, *self._agg_args(), self._req_i, self._req_f,
                 self._req_n, self._pend_f)
-            if status == K.STATUS_TRACE_ROOM:  # grow the trace buffer, go on in that world
-                eng._grow_trace(int(eng._tr_n[0]) + int(eng._cfg[K.CFG_TRACE_NEED]))
-            elif status == K.STATUS_PEND_ROOM:  # grow the schedule, then that world schedules its firings
-                self._grow_pending(int(self._pend_n[w_first]) + int(self._act_n[w_first, K.KIND_DELAYED])
-                                   + len(kt["hg_i"]))
-                eng._cfg[K.CFG_RESUME_SCHEDULE] = K.RESUME_PEND_ROOM
-            elif status == K.STATUS_USER_FN:  # Python computes the user functions, the kernel goes on
-                try:
-                    self._user_functions(w_first)
-                except Exception:
-                    self._reset_after_error()
-                    raise
-            else:
-                break
         if status != K.STATUS_OK:
             self._reset_after_error()
         return status
+
+    def _serve(self, status: int, w_first: int) -> bool:
+        """What a kernel call that paused with `status` at world w_first needs before it goes on; False
+        when it does not go on (done, or an error)."""
+        eng, kt = self.eng, self.kt
+        if status == K.STATUS_TRACE_ROOM:  # grow the trace buffer, go on in that world
+            eng._grow_trace(int(eng._tr_n[0]) + int(eng._cfg[K.CFG_TRACE_NEED]))
+        elif status == K.STATUS_PEND_ROOM:  # grow the schedule, then that world schedules its firings
+            self._grow_pending(int(self._pend_n[w_first]) + int(self._act_n[w_first, K.KIND_DELAYED])
+                               + len(kt["hg_i"]))
+            eng._cfg[K.CFG_RESUME_SCHEDULE] = K.RESUME_PEND_ROOM
+        elif status == K.STATUS_USER_FN:  # Python computes the user functions, the kernel goes on
+            try:
+                self._user_functions(w_first)
+            except Exception:
+                self._reset_after_error()
+                raise
+        else:
+            return False
+        return True
 
     def _reset_after_error(self) -> None:
         """An error may leave candidates, scratch rows and requests behind."""
@@ -161,6 +192,7 @@ class CountingState:
         pend_f = np.zeros((self.eng.n_worlds, cap, 2), np.float64)
         pend_f[:, :self._pend_f.shape[1]] = self._pend_f
         self._pend, self._pend_f = pend, pend_f
+        self.eng.layout_version += 1
 
     def snapshot(self) -> dict[str, Any]:
         return {"lower": self.lower.copy(), "upper": self.upper.copy(), "static": self.static.copy(),

@@ -35,6 +35,7 @@ from .program import (
     effective_bound,
     ordered_nodes,
 )
+from .trace_take import take_local_columns
 from .vocabulary import Vocabulary
 
 TRACE_COLUMNS = ("world", "t", "pass_no", "atom", "cause_kind", "cause_id", "grounding", "n_sources",
@@ -44,6 +45,7 @@ _TRACE_INT_DTYPES = tuple(np.dtype(d) for d in (np.int32, np.int32, np.int32, np
 # (column name, dtype, taken as is from the int32 buffer) per int column of take_trace()
 _TRACE_INT_OUT = tuple((name, d, d == np.dtype(np.int32)) for name, d in zip(TRACE_COLUMNS, _TRACE_INT_DTYPES))
 _TRACE_FLOAT_NAMES = TRACE_COLUMNS[K.TRACE_INT_COLUMNS:]
+TRACE_LOCAL_COLUMNS = (*TRACE_COLUMNS, "world_episode")  # take_trace(t_start, episode)
 # trace buffers: a step that wrote this many rows hands its buffers to take_trace() instead of a copy
 # (at t = 0 a million-fact graph writes a million rows: a copy would double the trace's 64 bytes a row)
 TRACE_HANDOVER_ROWS = 65_536
@@ -127,6 +129,9 @@ class Engine:
         # child process while this engine steps on the counting kernel (step() takes it over when ready)
         self.background: compile_job.BackgroundCompile | None = None
         self._next_poll = 0.0
+        # bumped whenever an array the kernel steps is replaced (grown, handed over, another backend):
+        # a caller holding fused_binding()'s arrays binds them again when it changes
+        self.layout_version = 0
         self._state: CountingState | LaneState = self._choose_backend(kernel, background_compile)
         self._ext: list[tuple[np.ndarray, ...]] = []  # chunks of (atoms, lower, upper, world, static)
         self._settable = np.zeros(0, np.bool_)
@@ -255,6 +260,7 @@ class Engine:
         self.background = None
         if status == "ready" and self.kernel == "counting":
             self._state = CompiledState.taking_over(self._state, job.entry)
+            self.layout_version += 1  # a fused caller (RuleSim) sees another kernel and steps it apart
             print(f"tracelab: the compiled kernel is ready ({job.describe()}); switched to it at t={self.t}",
                   file=sys.stderr, flush=True)
         elif status == "failed":
@@ -324,6 +330,7 @@ class Engine:
         if len(self._settable) != n_atoms or g.n_settable != self._n_settable:
             self._settable = g.settable_mask(n_atoms)
             self._n_settable = g.n_settable
+            self.layout_version += 1
         n_inst = g.n_groundings
         if n_inst == self._n_grounded and n_atoms == self._state.n_atoms and self._kt is not None:
             return
@@ -341,6 +348,7 @@ class Engine:
         tri[:n] = self._tri[:n]
         trf[:n] = self._trf[:n]
         self._tri, self._trf = tri, trf
+        self.layout_version += 1
 
     def _to_counting(self) -> None:
         """Go on with the counting kernel (a bound the lanes kernel cannot hold arrived)."""
@@ -348,6 +356,7 @@ class Engine:
         state = CountingState(self)
         state.adopt(lower, upper, static, last_cause, pending, self._kt)
         self._state = state
+        self.layout_version += 1
 
     # ---- per-world snapshots (episode resets in a batch) ----
 
@@ -476,6 +485,41 @@ class Engine:
             self._ext_count += n
         self.t += 1
 
+    # ---- a caller's own compiled step (tracelab/game/rulesim_fused.py) ----
+
+    def fused_binding(self) -> tuple[np.ndarray, tuple[np.ndarray, ...], tuple[np.ndarray, ...]] | None:
+        """For a caller that runs the counting kernel (kernel.step_worlds) inside its own compiled call:
+        after sync(), (cfg, arrays before the external rows, arrays after them), see
+        CountingState.kernel_args; None on another kernel. Valid while layout_version stays the same;
+        such a step is begun with prepare_fused_step() and ended with finish_fused_step()."""
+        self._sync()
+        if self._state.name != "counting":
+            return None
+        return (self._cfg, *self._state.kernel_args())
+
+    def prepare_fused_step(self) -> int:
+        """Before a fused step: ground what is new (as step() does); returns layout_version, which the
+        caller compares with its binding's."""
+        if self._ext:  # as step(external=...)
+            raise RuntimeError("step(external=...) with facts queued by add_fact(s): use one or the other")
+        if self.background is not None:  # as step(): take over a finished background compile
+            self._poll_background()
+        self._sync()
+        return self.layout_version
+
+    def finish_fused_step(self, status: int, w_first: int, ext_ptr: np.ndarray, ext_i: np.ndarray,
+                          ext_f: np.ndarray) -> None:
+        """After a fused step's kernel call returned (status, w_first) for the external rows (ext_ptr and
+        the row buffers, rows ext_ptr[-1] of them used, as in step()): go on as step() would (grow a
+        buffer, user functions; raise on an error), then advance t."""
+        n = int(ext_ptr[-1])
+        if status != K.STATUS_OK:
+            status = self._state.finish(status, w_first, ext_ptr, ext_i[:n], ext_f[:n])
+            if status != K.STATUS_OK:
+                self._raise(status)
+        self._ext_count += n
+        self.t += 1
+
     def next_external_id(self) -> int:
         """The id the next external fact will get (trace rows name external facts by this id)."""
         return self._ext_count
@@ -542,12 +586,26 @@ class Engine:
 
     # ---- trace, vocabulary, groundings, stats ----
 
-    def take_trace(self) -> dict[str, np.ndarray]:
-        """The change rows since the last call, as columns (docs/engine-api.md); the buffer is cleared."""
+    def take_trace(self, t_start: np.ndarray | None = None,
+                   episode: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """The change rows since the last call, as columns (docs/engine-api.md); the buffer is cleared.
+        With `t_start` and `episode` (int64 [worlds] each; a simulator's episode clock) a row's `t` is
+        counted from t_start[its world] and a last column `world_episode` holds episode[its world]."""
         n = int(self._tr_n[0])
+        local = t_start is not None
+        if local and n < TRACE_HANDOVER_ROWS:  # the usual step: new columns, localised, in one call
+            self._tr_n[0] = 0
+            ints, kind, nsrc, floats, ep = take_local_columns(self._tri, self._trf, n, t_start, episode)
+            world, t, pass_no, atom, cause_id, grounding = ints
+            old_lower, old_upper, new_lower, new_upper = floats
+            return {"world": world, "t": t, "pass_no": pass_no, "atom": atom, "cause_kind": kind,
+                    "cause_id": cause_id, "grounding": grounding, "n_sources": nsrc, "old_lower": old_lower,
+                    "old_upper": old_upper, "new_lower": new_lower, "new_upper": new_upper,
+                    "world_episode": ep}
         ints, floats = self._tri.T[:, :n], self._trf.T[:, :n]  # the buffers' columns, contiguous blocks
         if n >= TRACE_HANDOVER_ROWS:  # a big step: its columns are handed over, the engine starts anew
             self._tri, self._trf = _trace_buffers(TRACE_MIN_ROWS)
+            self.layout_version += 1
         else:  # one copy per block (the buffers are reused); the columns are its rows
             ints, floats = ints.copy(), floats.copy()
         cols: dict[str, np.ndarray] = {}
@@ -556,6 +614,10 @@ class Engine:
         for name, col in zip(_TRACE_FLOAT_NAMES, floats):
             cols[name] = col
         self._tr_n[0] = 0
+        if local:
+            world = cols["world"].astype(np.int64)
+            cols["t"] = (cols["t"] - t_start[world]).astype(np.int32)
+            cols["world_episode"] = episode[world].astype(np.int64)
         return cols
 
     def vocabulary(self) -> dict[str, object]:

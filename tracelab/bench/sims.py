@@ -53,24 +53,29 @@ def set_trace(sim: Sim, on: bool) -> None:
 
 class EngineTimer:
     """Accumulates the seconds spent inside `sim.engine.step()` (an instance attribute shadows the
-    method while installed)."""
+    method while installed); for a RuleSim stepping in one compiled call (fused), inside that call too,
+    which holds the engine's step and also the actions' rows, the read-back and the observations."""
 
     def __init__(self, sim: RuleSim) -> None:
+        self.sim = sim
         self.engine = sim.engine
         self.seconds = 0.0
-        inner = type(self.engine).step.__get__(self.engine)
+        self._fused = sim._fused_call  # noqa: SLF001 (RuleSim's hook for this timer)
+        self.engine.step = self._timed(type(self.engine).step.__get__(self.engine))  # type: ignore[method-assign]
+        sim._fused_call = self._timed(self._fused)  # noqa: SLF001
 
-        def timed(*args: Any, **kwargs: Any) -> None:
+    def _timed(self, inner: Any) -> Any:
+        def timed(*args: Any, **kwargs: Any) -> Any:
             t0 = time.perf_counter()
             try:
-                inner(*args, **kwargs)
+                return inner(*args, **kwargs)
             finally:
                 self.seconds += time.perf_counter() - t0
-
-        self.engine.step = timed  # type: ignore[method-assign]
+        return timed
 
     def remove(self) -> None:
         del self.engine.step
+        self.sim._fused_call = self._fused  # noqa: SLF001
 
 
 @dataclass
@@ -147,9 +152,12 @@ def _scaled(s: Summary, factor: float) -> Summary:
 
 class _Recorder:
     """Records what a RuleSim asks of its engine during a stepping loop: each step's external fact rows
-    (copies) and each restore, in order (instance attributes shadow the methods while installed)."""
+    (copies) and each restore, in order (instance attributes shadow the methods while installed). The
+    simulator takes its separate calls meanwhile (fused=False), which ask the engine for the same work."""
 
     def __init__(self, sim: RuleSim) -> None:
+        self.sim, self._fused = sim, sim.fused
+        sim.fused = False
         self.engine = sim.engine
         self.calls: list[tuple[str, Any]] = []
         step = type(self.engine).step.__get__(self.engine)
@@ -169,6 +177,7 @@ class _Recorder:
     def remove(self) -> None:
         del self.engine.step
         del self.engine.restore
+        self.sim.fused = self._fused
 
 
 def replay_calls(eng: Any, calls: list[tuple[str, Any]], trace: bool) -> None:

@@ -8,9 +8,11 @@ from __future__ import annotations
 
 import numpy as np
 from tracelab.engine import Engine
+from tracelab.engine.core import LANES_MIN_WORLDS
 
 from tracelab.game.facts import DIRECTIONS, agent_name, bullet_name, scenario_program
 from tracelab.game.observe import observe_step
+from tracelab.game.rulesim_fused import STATUS_BAD_ACTION, STATUS_OK, bind, fused_step
 from tracelab.game.rulesim_kernel import encode_actions, read_and_settle, read_back
 from tracelab.game.scenario import TEAMS, Scenario
 from tracelab.game.sim_base import GameSim, read_only
@@ -25,14 +27,20 @@ class RuleSim(GameSim):
     process while the engine steps on the counting kernel (Engine). `copy`: the step contract (GameSim): by default a StepResult's arrays are read-only views
     of buffers the next step or reset overwrites; `copy=True` returns new arrays every time.
 
-    A step is four compiled calls and the engine's: encode_actions (actions to fact rows), the engine
-    step, read_and_settle (atoms back into the state buffers, rewards, the end of the game) and
-    observe_step (observations, in place)."""
+    A step is encode_actions (actions to fact rows), the engine step, read_and_settle (atoms back into
+    the state buffers, rewards, the end of the game) and observe_step (observations, in place). On the
+    counting kernel they run as one compiled call (rulesim_fused.fused_step, `fused=True`; with it,
+    `kernel="auto"` takes the counting kernel below the lanes kernel's batch size, not a cached compiled
+    one, which measured no faster); when the kernel pauses (buffer room, user functions) or fails, the
+    rest runs as separate calls. `fused=False` always takes separate calls (the same results; kept to
+    compare)."""
 
     def __init__(self, scenario: Scenario, n_worlds: int = 1, seed: int | None = None,
                  stack_previous: bool = False, trace: bool | np.ndarray = False, kernel: str = "auto",
-                 copy: bool = False, background_compile: bool = False) -> None:
+                 copy: bool = False, background_compile: bool = False, fused: bool = True) -> None:
         super().__init__(scenario, n_worlds, seed, stack_previous, copy)
+        if fused and kernel == "auto" and n_worlds < LANES_MIN_WORLDS:
+            kernel = "counting"  # what the fused step runs ("auto" would take a cached compiled kernel)
         self.engine = Engine(scenario_program(scenario), worlds=n_worlds, trace=trace, kernel=kernel,
                              background_compile=background_compile)
         self._index_atoms()
@@ -44,7 +52,7 @@ class RuleSim(GameSim):
         self.episode_start = np.zeros(n_worlds, np.int64)  # engine time of each world's episode t = 0
         self.world_episode = np.zeros(n_worlds, np.int64)  # episodes each world has started, minus one
         self._fresh = np.ones(n_worlds, bool)  # still in the start state, its set-up rows already queued
-        setup = self._localize(self.engine.take_trace())
+        setup = self._take_local()
         first = setup["world"] == 0
         self._setup_rows = {k: v[first] for k, v in setup.items()}
         for v in self._setup_rows.values():
@@ -65,6 +73,11 @@ class RuleSim(GameSim):
         # every world starts alike: a reset copies these rows instead of reading atoms back
         self._start_state = {name: buf.copy() for name, buf in self._state_buffers.items()}
         self._start_obs = self._obs.copy()
+        self.fused = fused
+        self._fused_call = fused_step  # an attribute, so that a bench can time it (bench.sims.EngineTimer)
+        self._bound: object | None = None  # rulesim_fused.StepBuffers of the engine's current arrays
+        self._bound_version = -1  # the engine's layout_version they were bound at
+        self._bound_res = np.zeros(2, np.int64)  # fused_step's report: [world the kernel paused at, rows]
 
     def _make_buffers(self) -> None:
         """The state, events, rewards and observations of every world: buffers rewritten in place by every
@@ -222,7 +235,7 @@ class RuleSim(GameSim):
         sel = sel[~self._fresh[sel]]  # a world that has not stepped since its start needs nothing
         self._fresh[sel] = True
         if self.engine.trace_on.any():  # rows of the episodes that end here keep their own clock
-            self._pending_rows.append(self._localize(self.engine.take_trace()))
+            self._pending_rows.append(self._take_local())
         self.engine.restore(self._start, sel)  # action atoms are false again there
         self._prev_action[sel] = -1
         self.episode_start[sel] = self.engine.t - 1
@@ -230,11 +243,13 @@ class RuleSim(GameSim):
         if self.engine.trace_on[sel].any():
             self._replay_setup(sel[self.engine.trace_on[sel]])
         if len(sel):  # the start state, as read when the simulator was built (all worlds start alike)
-            self._start_state_into(sel)
-            self._obs[sel] = self._start_obs[sel]
+            # one world (the usual episode end): basic indexing, no fancy-index copies
+            where = slice(int(sel[0]), int(sel[0]) + 1) if len(sel) == 1 else sel
+            self._start_state_into(where)
+            self._obs[where] = self._start_obs[where]
         return self._handed_obs()
 
-    def _start_state_into(self, sel: np.ndarray) -> None:
+    def _start_state_into(self, sel: np.ndarray | slice) -> None:
         """Worlds `sel` of the state buffers back to the start state, in place."""
         for name, buf in self._state_buffers.items():
             buf[sel] = self._start_state[name][sel]
@@ -252,35 +267,60 @@ class RuleSim(GameSim):
     def take_trace(self) -> dict[str, np.ndarray]:
         """The engine's change rows since the last call, with `t` counted from each world's episode start
         (0 = set-up) and `world_episode`, the number of that world's episode (0 = its first)."""
-        rows = self._localize(self.engine.take_trace())
+        rows = self._take_local()
         if self._pending_rows:
             self._pending_rows.append(rows)
             rows = {k: np.concatenate([r[k] for r in self._pending_rows]) for k in rows}
             self._pending_rows = []
         return rows
 
-    def _localize(self, rows: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """Engine rows with t counted from their world's current episode start, and world_episode."""
-        if self.n_worlds == 1:  # the common single-world case, without per-row gathers
-            start = int(self.episode_start[0])
-            if start:
-                rows["t"] -= start
-            rows["world_episode"] = np.full(len(rows["t"]), self.world_episode[0])
-            return rows
-        world = rows["world"].astype(np.int64)
-        rows["t"] = (rows["t"] - self.episode_start[world]).astype(np.int32)
-        rows["world_episode"] = self.world_episode[world].copy()
-        return rows
+    def _take_local(self) -> dict[str, np.ndarray]:
+        """The engine's rows with t counted from their world's current episode start, and world_episode."""
+        return self.engine.take_trace(self.episode_start, self.world_episode)
 
     def step(self, red_actions: np.ndarray, blue_actions: np.ndarray) -> StepResult:
         """One step of every world (spec action ids, int [W, N] per team). Finished worlds do not change
         (zero rewards, flags kept) until reset."""
+        if self.fused:
+            return self._fused_step(red_actions, blue_actions)
         self.engine.step(external=self._action_rows(red_actions, blue_actions))
         self._fresh.fill(False)
         # finished worlds keep their final state; the clock, end flags and rewards are settled in place
         read_and_settle(self.engine.is_true(self._read_atoms), *self._settle_args)
         observe_step(*self._observe_args)
         return self._handed_out()
+
+    def _fused_step(self, red_actions: np.ndarray, blue_actions: np.ndarray) -> StepResult:
+        """step() as one compiled call (rulesim_fused.fused_step); what the kernel leaves to Python (a
+        pause or an error) and the rest of the step run as the separate calls would."""
+        eng = self.engine
+        red = self._team_actions(red_actions, "red_actions")
+        blue = self._team_actions(blue_actions, "blue_actions")
+        if eng.prepare_fused_step() != self._bound_version and not self._bind():
+            self.fused = False  # another kernel: separate calls from now on
+            return self.step(red, blue)
+        status = self._fused_call(self._bound, red, blue, eng.t, eng.next_external_id())
+        if status == STATUS_BAD_ACTION:
+            self._action_rows(red, blue)  # raises the action's error; nothing was changed
+        eng.finish_fused_step(status, int(self._bound_res[0]), *self._rows_buf)
+        self._fresh.fill(False)
+        if status != STATUS_OK:  # the kernel paused or failed: the rest of the step as separate calls
+            read_and_settle(eng.is_true(self._read_atoms), *self._settle_args)
+            observe_step(*self._observe_args)
+        return self._handed_out()
+
+    def _bind(self) -> bool:
+        """Bind the fused step's arrays to the engine's current ones; False on a kernel it cannot run."""
+        binding = self.engine.fused_binding()
+        if binding is None:
+            self._bound = None
+            return False
+        encode = (self.terminated, self.truncated, self._allowed, self._action_atoms, self._prev_action,
+                  *self._rows_buf)
+        self._bound, self._bound_res = bind(encode, binding, self._read_atoms, self._settle_args,
+                                            self._observe_args)
+        self._bound_version = self.engine.layout_version
+        return True
 
     def _action_rows(self, red_actions: np.ndarray,
                      blue_actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -304,4 +344,7 @@ class RuleSim(GameSim):
         shape = (self.n_worlds, self.scenario.agents_per_team)
         if a.shape != shape:
             raise ValueError(f"{name} must have shape {shape} (worlds, agents), got {a.shape}")
+        flags = a.flags
+        if not (flags.c_contiguous and flags.writeable):  # the compiled calls' one signature (no recompile)
+            a = np.array(a, np.int64, order="C")
         return a

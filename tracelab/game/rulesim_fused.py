@@ -1,0 +1,137 @@
+"""RuleSim's step as ONE compiled call: actions to fact rows, the counting kernel's step, the read-back's
+truth table, read_and_settle and observe_step (docs/benchmarks.md, "One call per step").
+
+Each numba call from Python pays for unboxing every array it is given (~0.1-0.2 µs an array; a step
+passes ~120). Here the arrays are bound once into a structref (`StepBuffers`, one object to unbox) and
+bound again only when the engine replaces one of its arrays (Engine.layout_version). The call does what
+RuleSim.step's separate calls do, in the same order, on the same buffers; when the kernel pauses (trace
+or schedule room, user functions) or fails, it returns the kernel's status and Python goes on exactly as
+before (Engine.finish_fused_step, then the read-back and observations as separate calls).
+
+numba's disk cache checks only the source of the module defining a function, not the callees it
+compiles in from other modules (engine/kernel.py, rulesim_kernel.py, observe.py). So the cache stamp
+of fused_step is a hash of all four sources: a change in any of them compiles it again.
+"""
+from __future__ import annotations
+
+import hashlib
+import inspect
+
+import numpy as np
+from numba import njit
+from numba.core import types
+from numba.experimental import structref
+from numba.extending import overload
+
+from tracelab.engine import kernel as K
+from tracelab.game import observe as _observe
+from tracelab.game import rulesim_kernel as _rk
+from tracelab.game.observe import observe_step
+from tracelab.game.rulesim_kernel import encode_actions, read_and_settle
+
+STATUS_OK = K.STATUS_OK
+STATUS_BAD_ACTION = -1  # an action the scenario does not offer: nothing was changed
+_CFG_T = K.CFG_T
+# the bound arrays, by field; each is a tuple of arrays (or one array) whose order the call fixes
+FIELDS = ("encode", "cfg", "before", "after", "lower", "read_atoms", "truth", "settle", "observe", "res")
+
+
+@structref.register
+class StepBuffersType(types.StructRef):
+    def preprocess_fields(self, fields):  # noqa: ANN001, ANN201 (numba's hook)
+        return tuple((name, types.unliteral(t)) for name, t in fields)
+
+
+class StepBuffers(structref.StructRefProxy):
+    """The arrays of one RuleSim's fused step, bound once (make it with `bind`)."""
+
+
+structref.define_boxing(StepBuffersType, StepBuffers)
+
+
+def _new_buffers(encode, cfg, before, after, lower, read_atoms, truth, settle, observe, res):  # noqa: ANN001
+    raise NotImplementedError("compiled code only")
+
+
+@overload(_new_buffers)
+def _new_buffers_impl(encode, cfg, before, after, lower, read_atoms, truth, settle, observe, res):  # noqa: ANN001
+    # the struct's type from its fields' types (numba's own define_proxy constructor is not cached)
+    typ = StepBuffersType(list(zip(FIELDS, (encode, cfg, before, after, lower, read_atoms, truth, settle,
+                                            observe, res))))
+
+    def impl(encode, cfg, before, after, lower, read_atoms, truth, settle, observe, res):  # noqa: ANN001
+        b = structref.new(typ)
+        b.encode = encode
+        b.cfg = cfg
+        b.before = before
+        b.after = after
+        b.lower = lower
+        b.read_atoms = read_atoms
+        b.truth = truth
+        b.settle = settle
+        b.observe = observe
+        b.res = res
+        return b
+    return impl
+
+
+@njit(cache=True)
+def _make_buffers(encode, cfg, before, after, lower, read_atoms, truth, settle, observe, res):  # noqa: ANN001
+    return _new_buffers(encode, cfg, before, after, lower, read_atoms, truth, settle, observe, res)
+
+
+def bind(encode: tuple, binding: tuple, read_atoms: np.ndarray, settle: tuple,
+         observe: tuple) -> tuple[StepBuffers, np.ndarray]:
+    """The buffers of a fused step. encode: encode_actions' arrays after red and blue, without first_id
+    (terminated, truncated, allowed, action_atoms, prev, ext_ptr, ext_i, ext_f: the row buffers, whole);
+    binding: Engine.fused_binding(); read_atoms: the read-back's atom ids; settle / observe: the
+    arguments of read_and_settle after the truth table / of observe_step. Returns the buffers and
+    their `res` array (what fused_step reports besides its status)."""
+    cfg, before, after = binding
+    lower = after[1]
+    truth = np.empty((lower.shape[0], len(read_atoms)), np.bool_)
+    res = np.zeros(2, np.int64)
+    return _make_buffers(encode, cfg, before, after, lower, read_atoms, truth, settle, observe, res), res
+
+
+@njit(cache=True)
+def fused_step(b, red, blue, t, first_id):  # noqa: ANN001, ANN201
+    """One RuleSim step of every world: STATUS_OK when all of it ran; STATUS_BAD_ACTION (nothing done)
+    when an action is not offered; else the kernel's status after the fact rows were made and the kernel
+    called (b.res: [world the kernel paused at, rows]): the caller goes on as RuleSim's separate calls do."""
+    enc = b.encode
+    ext_ptr, ext_i, ext_f = enc[5], enc[6], enc[7]
+    k = encode_actions(red, blue, enc[0], enc[1], enc[2], enc[3], enc[4], first_id, ext_ptr, ext_i, ext_f)
+    b.res[1] = k
+    if k < 0:
+        return STATUS_BAD_ACTION
+    cfg = b.cfg
+    cfg[_CFG_T] = t
+    # the kernel reads rows ext_ptr[w]..ext_ptr[w + 1] only: the whole row buffers stand for rows[:k]
+    status, w_first = K.step_worlds(*((cfg, 0) + b.before + (ext_ptr, ext_i, ext_f) + b.after))
+    b.res[0] = w_first
+    if status != STATUS_OK:
+        return status
+    K.gather_truth(b.lower, b.read_atoms, 1.0, b.truth)
+    read_and_settle(b.truth, *b.settle)
+    observe_step(*b.observe)
+    return status
+
+
+def _stamp_with_sources(dispatcher, modules) -> bytes:  # noqa: ANN001
+    """Make `dispatcher`'s disk cache stale when any of `modules` changes (numba stamps only the file
+    defining the function). Uses numba's cache file object (numba 0.68: Cache._cache_file._source_stamp,
+    compared on every load)."""
+    digest = hashlib.sha256()
+    for m in modules:
+        digest.update(inspect.getsource(m).encode())
+        digest.update(b"\0")
+    stamp = digest.digest()
+    cache_file = dispatcher._cache._cache_file
+    if not hasattr(cache_file, "_source_stamp"):
+        raise ImportError("numba's cache no longer has _source_stamp: rulesim_fused cannot key its cache")
+    cache_file._source_stamp = stamp
+    return stamp
+
+
+SOURCE_STAMP = _stamp_with_sources(fused_step, (inspect.getmodule(bind), K, _rk, _observe))
