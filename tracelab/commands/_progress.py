@@ -19,11 +19,12 @@ from typing import Any
 
 # the numba kernels whose first call compiles the engine (the counting kernel serves every program, the
 # lanes kernel batches of 64 worlds or more), and those the rule simulator adds
-_ENGINE_KERNELS = (("tracelab.engine.kernel", "step_worlds"),)
+_ENGINE_KERNELS = (("tracelab.engine.kernel", "step_worlds"), ("tracelab.engine.trace_take", "take_local_columns"))
 _LANES_KERNELS = (("tracelab.engine.lanes", "step_lanes"),)
 _SIMULATOR_KERNELS = (("tracelab.game.rulesim_kernel", "encode_actions"),
                       ("tracelab.game.rulesim_kernel", "read_and_settle"),
-                      ("tracelab.game.rulesim_kernel", "settle_step"))
+                      ("tracelab.game.rulesim_kernel", "settle_step"),
+                      ("tracelab.game.rulesim_fused", "fused_step"))  # one call per step (~17 s of CPU)
 
 
 def on_terminal() -> bool:
