@@ -35,7 +35,7 @@ from .program import (
     effective_bound,
     ordered_nodes,
 )
-from .trace_take import take_local_columns
+from .trace_take import INT32_COLUMNS, take_local_columns
 from .vocabulary import Vocabulary
 
 TRACE_COLUMNS = ("world", "t", "pass_no", "atom", "cause_kind", "cause_id", "grounding", "n_sources",
@@ -596,12 +596,9 @@ class Engine:
         if local and n < TRACE_HANDOVER_ROWS:  # the usual step: new columns, localised, in one call
             self._tr_n[0] = 0
             ints, kind, nsrc, floats, ep = take_local_columns(self._tri, self._trf, n, t_start, episode)
-            world, t, pass_no, atom, cause_id, grounding = ints
-            old_lower, old_upper, new_lower, new_upper = floats
-            return {"world": world, "t": t, "pass_no": pass_no, "atom": atom, "cause_kind": kind,
-                    "cause_id": cause_id, "grounding": grounding, "n_sources": nsrc, "old_lower": old_lower,
-                    "old_upper": old_upper, "new_lower": new_lower, "new_upper": new_upper,
-                    "world_episode": ep}
+            got = {**dict(zip(INT32_COLUMNS, ints)), **dict(zip(_TRACE_FLOAT_NAMES, floats)),
+                   "cause_kind": kind, "n_sources": nsrc, "world_episode": ep}
+            return {name: got[name] for name in TRACE_LOCAL_COLUMNS}
         ints, floats = self._tri.T[:, :n], self._trf.T[:, :n]  # the buffers' columns, contiguous blocks
         if n >= TRACE_HANDOVER_ROWS:  # a big step: its columns are handed over, the engine starts anew
             self._tri, self._trf = _trace_buffers(TRACE_MIN_ROWS)

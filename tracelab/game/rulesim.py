@@ -24,8 +24,9 @@ class RuleSim(GameSim):
     log on (for all worlds, or a bool per world); take it with `self.engine.take_trace()`. `kernel`
     chooses the engine's kernel (tracelab.engine.Engine; "auto" takes the lanes kernel for 64 worlds
     or more); with `background_compile`, kernel="compiled" not yet cached is compiled in a background
-    process while the engine steps on the counting kernel (Engine). `copy`: the step contract (GameSim): by default a StepResult's arrays are read-only views
-    of buffers the next step or reset overwrites; `copy=True` returns new arrays every time.
+    process while the engine steps on the counting kernel (Engine). `copy`: the step contract (GameSim):
+    by default a StepResult's arrays are read-only views of buffers the next step or reset overwrites;
+    `copy=True` returns new arrays every time.
 
     A step is encode_actions (actions to fact rows), the engine step, read_and_settle (atoms back into
     the state buffers, rewards, the end of the game) and observe_step (observations, in place). On the
