@@ -36,9 +36,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=non_negative_int, default=0,
                    help="seed of the episodes and of the random policy (default 0)")
     p.add_argument("--kernel", choices=ENGINE_KERNELS, default="auto",
-                   help="the rule engine's kernel: auto (default: lanes from 64 worlds, else "
-                        "counting, stepped with the game as one compiled call), counting, lanes, or compiled (built in the background "
-                        "while the games start on the counting kernel, unless `tracelab compile` built it ahead)")
+                   help="the rule engine's kernel: auto (default: lanes from 64 worlds, else counting, stepped "
+                        "with the game as one compiled call), counting, lanes, or compiled (built in the "
+                        "background while the games start on the counting kernel, unless `tracelab compile` "
+                        "built it ahead)")
     p.add_argument("--run", help="a new (or empty) run directory (default runs/play-<scenario>-<time>)")
     p.add_argument("--no-trace", action="store_true", help="play without recording a run")
     p.set_defaults(func=run)

@@ -165,15 +165,15 @@ def _report(trainer: Any, run_dir: Path, status: str) -> None:
     run = shlex.quote(str(run_dir))
     print(f"{status} at step {trainer.step:,}" + (f"; last evaluation: {ev.wins}/{ev.games} wins "
           f"({100 * ev.win_rate:.1f}%), method's counting {100 * ev.method_win_rate:.1f}%" if ev else ""))
+    best = trainer.best_eval
+    if best is not None and ev is not None and best[0] > ev.method_win_rate:  # training got worse after it
+        print(f"best evaluation at step {best[1]:,} (method's counting {100 * best[0]:.1f}%): its policy is "
+              f"kept in {run_dir}/policy-best/")
     print(f"run: {run_dir}/  checkpoint: {run_dir}/checkpoint/  policy: {run_dir}/policy/"
           if status == "finished" else f"run: {run_dir}/  checkpoint: {run_dir}/checkpoint/  "
           f"(continue with: tracelab train --resume {run})")
     print(f"  tracelab sql {run} \"SELECT step, value FROM metrics WHERE name = 'eval/win_rate' ORDER BY step\"")
     print(f"  tracelab sql {run} \"SELECT episode, train_step, outcome, steps FROM episodes WHERE kind = 'eval'\"")
-    if trainer.best_eval is not None and trainer.best_eval[1] != trainer.step:
-        value, step = trainer.best_eval
-        print(f"best evaluation at step {step:,} (method's counting {100 * value:.1f}%): its policy is kept in "
-              f"{run_dir}/policy-best/")
     if status == "finished":
         print(f"  tracelab eval {run}/policy --games 500")
         print(f"  tracelab play --policy {run}/policy --episodes 3")
