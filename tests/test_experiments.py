@@ -5,7 +5,12 @@ consistent."""
 from __future__ import annotations
 
 import json
+import os
 import re
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -135,3 +140,55 @@ def test_bad_arguments(capsys):
     assert "argument --seeds: must be at least 1, got 0" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["experiment", "no-such"])
+
+
+def _children(pid: int) -> set[int]:
+    try:
+        return {int(c) for c in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()}
+    except FileNotFoundError:
+        return set()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="reads child processes from /proc")
+def test_sigterm_to_a_parallel_experiment_stops_its_workers(tmp_path):
+    """A scheduler's SIGTERM to `tracelab experiment --jobs 2` ends the workers' trainings too (they used to
+    train on as orphans), and each run it began is closed as interrupted."""
+    out = tmp_path / "exp"
+    proc = subprocess.Popen([sys.executable, "-m", "tracelab", "experiment", "1v1-base", "--quick", "--seeds", "1",
+                             "--steps", "50000000", "--jobs", "2", "--kernel", "counting", "--out", str(out)],
+                            stderr=subprocess.PIPE, text=True)
+    runs = [out / "1v1-base-seed0", out / "1v1-base-the-method-s-reward-scale-seed0"]  # its two arms
+    workers: set[int] = set()
+    try:
+        _terminate_when_training(proc, runs, workers)
+    finally:  # a failing check leaves nothing running
+        for pid in [proc.pid, *workers]:
+            if _alive(pid):
+                os.kill(pid, signal.SIGKILL)
+        proc.wait()
+    assert [run_info(r).status for r in runs] == ["interrupted", "interrupted"]
+
+
+def _terminate_when_training(proc, runs: list[Path], workers: set[int]) -> None:
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and not all((r / "meta.json").exists() for r in runs):
+        workers |= _children(proc.pid)
+        assert proc.poll() is None, proc.stderr.read()
+        time.sleep(0.5)
+    workers |= _children(proc.pid)
+    assert all((r / "meta.json").exists() for r in runs), sorted(p.name for p in runs[0].parent.iterdir())
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "no report written" in err.strip().splitlines()[-1]
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and any(_alive(p) for p in workers):
+        time.sleep(0.2)
+    assert workers and not any(_alive(p) for p in workers)

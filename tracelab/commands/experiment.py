@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import shlex
+import signal
 import sys
 from pathlib import Path
 
@@ -62,10 +63,16 @@ def run(args: argparse.Namespace) -> int:
     if not command.startswith("tracelab experiment"):
         command = f"tracelab experiment {args.name}" + (" --quick" if args.quick else "")
     say = lambda s: print(s, file=sys.stderr, flush=True)  # noqa: E731
+    def terminated(signum: int, frame: object) -> None:  # SIGTERM (a scheduler, kill): stop like Ctrl-C
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, terminated)
     try:
         result = run_experiment(exp, budget, out, command, args.quick, say, jobs=args.jobs, kernel=args.kernel)
     except KeyboardInterrupt:  # main() prints this and exits 130
         raise KeyboardInterrupt(f"no report written (the runs so far are in {out})") from None
+    finally:
+        signal.signal(signal.SIGTERM, previous)
     path = write_report(result, report_dir)
     print(f"report: {path}  (plots in {report_dir / exp.name}/, runs in {out}/, wall time "
           f"{result.wall_s / 60:.1f} min)")

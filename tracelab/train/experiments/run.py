@@ -73,11 +73,7 @@ def run_experiment(exp: Experiment, budget: Budget, out_dir: Path, command: str,
         say(f"[{exp.name}] {ar.arm.label}, seed {seed}: training {budget.steps:,} steps into "
             f"{out_dir / f'{ar.arm.slug}-seed{seed}'}")
     if jobs > 1 and len(tasks) > 1:
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
-        with ProcessPoolExecutor(min(jobs, len(tasks)), mp_context=multiprocessing.get_context("spawn")) as pool:
-            done = [pool.submit(train_seed, *task_args(ar, seed)) for ar, seed in tasks]
-            runs = [f.result() for f in done]
+        runs = _in_workers(min(jobs, len(tasks)), [task_args(ar, seed) for ar, seed in tasks])
     else:
         runs = [train_seed(*task_args(ar, seed)) for ar, seed in tasks]
     for (ar, seed), sr in zip(tasks, runs):
@@ -94,6 +90,25 @@ def run_experiment(exp: Experiment, budget: Budget, out_dir: Path, command: str,
     result.machine = machine()
     (out_dir / f"{exp.name}.json").write_text(json.dumps(summary_json(result), indent=1))
     return result
+
+
+def _in_workers(jobs: int, args: list[tuple]) -> list[SeedRun]:
+    """train_seed on each of `args` in `jobs` spawned processes. Any way out before all are done (Ctrl-C,
+    SIGTERM, a failed training) terminates the workers: a killed experiment leaves no orphans training on
+    (each worker's SIGTERM closes its run as 'interrupted', docs/store.md)."""
+    import multiprocessing
+
+    pool = multiprocessing.get_context("spawn").Pool(jobs)
+    try:
+        pending = [pool.apply_async(train_seed, a) for a in args]
+        runs = [p.get() for p in pending]
+    except BaseException:
+        pool.terminate()
+        raise
+    finally:
+        pool.close()
+        pool.join()
+    return runs
 
 
 # ---- portability: the same policy in both simulators ----

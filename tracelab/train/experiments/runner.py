@@ -75,6 +75,9 @@ def train_seed(cfg: TrainConfig, scenario: Scenario, run_dir: Path, command: str
                 into[p] = result
         out.wall_s = time.perf_counter() - t0
         return out
+    except (KeyboardInterrupt, SystemExit):  # Ctrl-C, or SIGTERM from a killed experiment
+        status = "interrupted"
+        raise
     finally:
         if trainer is not None:
             trainer.close()
