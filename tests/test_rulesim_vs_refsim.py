@@ -300,3 +300,17 @@ def test_trace_explains_an_unsafe_move_and_the_shield(red_start, mountains, rule
     assert moved == {f"atLoc({red},{cell})": ((0.0, 0.0), "m_leave"),
                      f"atLoc({red},{cell + 8})": ((1.0, 1.0), "m_go")}
     assert not r.unsafe.any()
+
+
+def test_an_agent_on_no_cell_reads_back_as_minus_one_not_the_last_cell():
+    """A broken rule that leaves an agent on no cell shows as position (-1, -1), not as the map's last
+    cell (what indexing the cell table with 'not found' would read)."""
+    from tracelab.game.rulesim_kernel import read_and_settle
+
+    sim = RuleSim(builtin_scenario("base"), 1, seed=0, fused=False)
+    truth = sim.engine.is_true(sim._read_atoms)
+    truth[:, sim._read_tables[0][0]] = False  # red agent 0 on no cell
+    read_and_settle(truth, *sim._settle_args)
+    pos = sim._state_buffers["pos"]
+    assert pos[0, 0, 0].tolist() == [-1, -1]
+    assert (pos[0, 1, 0] >= 0).all()

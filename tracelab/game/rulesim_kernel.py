@@ -122,8 +122,9 @@ def _read_world(w, truth, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc,
         tm = j // n
         i = j % n
         c = _first_true(truth, w, agent_loc, j)
-        pos[w, tm, i, 0] = cell_xy[c, 0]
-        pos[w, tm, i, 1] = cell_xy[c, 1]
+        # no cell at all would be a broken rule: (-1, -1) shows it instead of reading cell_xy[-1]
+        pos[w, tm, i, 0] = cell_xy[c, 0] if c >= 0 else -1
+        pos[w, tm, i, 1] = cell_xy[c, 1] if c >= 0 else -1
         alive[w, tm, i] = truth[w, agent_flags[j, 0]]
         for kind in range(3):
             kind_hits[tm, i, kind] = 0
