@@ -47,15 +47,32 @@ def make_sim(scenario: Scenario, backend: str, n_worlds: int, stack_previous: bo
     raise ValueError(f"unknown backend {backend!r}; expected one of {BACKENDS}")
 
 
-def one_world_env(scenario: Scenario | str, backend: str, stack_previous: bool, trace_sink: TraceSink | None,
-                  render_mode: str | None) -> tuple[Scenario, Simulator, EpisodeTracer | None]:
-    """What a one-world env (gymnasium or PettingZoo) stands on: its scenario, its simulator, and the
-    tracer feeding `trace_sink` (None without a sink). Checks render_mode (None or "ansi")."""
-    if render_mode not in (None, "ansi"):
-        raise ValueError(f"render_mode must be None or 'ansi', got {render_mode!r}")
-    scenario = resolve_scenario(scenario)
-    sim = make_sim(scenario, backend, 1, stack_previous, trace=trace_sink is not None)
-    return scenario, sim, None if trace_sink is None else EpisodeTracer(trace_sink, scenario, sim)
+class OneWorldEnv:
+    """What the one-world envs (gymnasium's GridWarEnv, PettingZoo's GridWarParallelEnv) share: the
+    scenario, the simulator, the tracer feeding a sink, the action masker, ansi rendering and closing.
+    Put it first among the bases: close() goes on to the framework's own."""
+
+    def _set_up(self, scenario: Scenario | str, backend: str, stack_previous: bool, trace_sink: TraceSink | None,
+                render_mode: str | None) -> None:
+        if render_mode not in (None, "ansi"):
+            raise ValueError(f"render_mode must be None or 'ansi', got {render_mode!r}")
+        self.scenario = resolve_scenario(scenario)
+        self.sim = make_sim(self.scenario, backend, 1, stack_previous, trace=trace_sink is not None)
+        self._tracer = None if trace_sink is None else EpisodeTracer(trace_sink, self.scenario, self.sim)
+        self.backend = backend
+        self.render_mode = render_mode
+        self._masker = ActionMasker(self.scenario)
+
+    def render(self) -> str | None:
+        if self.render_mode == "ansi":
+            return render_text(self.scenario, self.sim.state)
+        return None
+
+    def close(self) -> None:
+        if self._tracer is not None:
+            self._tracer.close()
+            self._tracer = None
+        super().close()  # type: ignore[misc]
 
 
 def observation_space(scenario: Scenario, stack_previous: bool) -> spaces.Box:

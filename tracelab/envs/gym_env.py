@@ -30,11 +30,9 @@ import gymnasium as gym
 import numpy as np
 
 from tracelab.envs.common import (
-    ActionMasker,
+    OneWorldEnv,
     learner_action_space,
     observation_space,
-    one_world_env,
-    render_text,
     step_learner,
 )
 from tracelab.envs.sinks import TraceSink
@@ -67,20 +65,16 @@ def reset_info(n_worlds: int, masks: np.ndarray, one_agent: bool) -> dict[str, A
             "hits_taken": np.zeros(shape, np.int64), "agent_reward": np.zeros(shape)}
 
 
-class GridWarEnv(gym.Env[np.ndarray, Any]):
+class GridWarEnv(OneWorldEnv, gym.Env[np.ndarray, Any]):
     metadata = {"render_modes": ["ansi"], "render_fps": 4}
 
     def __init__(self, scenario: Scenario | str = "advanced", *, backend: str = "rules",
                  stack_previous: bool = False, trace_sink: TraceSink | None = None,
                  render_mode: str | None = None) -> None:
-        self.scenario, self.sim, self._tracer = one_world_env(scenario, backend, stack_previous, trace_sink,
-                                                              render_mode)
-        self.backend = backend
-        self.render_mode = render_mode
+        self._set_up(scenario, backend, stack_previous, trace_sink, render_mode)
         self.observation_space = observation_space(self.scenario, stack_previous)
         self.action_space = learner_action_space(self.scenario)
         self._n = self.scenario.agents_per_team
-        self._masker = ActionMasker(self.scenario)
         self._single = self._n == 1
         self._running = False
 
@@ -110,17 +104,6 @@ class GridWarEnv(gym.Env[np.ndarray, Any]):
     def _first(info: dict[str, Any]) -> dict[str, Any]:
         """World 0's info: numpy scalars become Python scalars, arrays are copied out of the batch."""
         return {k: v[0].item() if v.ndim == 1 else v[0].copy() for k, v in info.items()}
-
-    def render(self) -> str | None:
-        if self.render_mode == "ansi":
-            return render_text(self.scenario, self.sim.state)
-        return None
-
-    def close(self) -> None:
-        if self._tracer is not None:
-            self._tracer.close()
-            self._tracer = None
-        super().close()
 
 
 def register_envs() -> None:

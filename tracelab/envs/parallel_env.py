@@ -22,26 +22,21 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from tracelab.envs.common import (
-    ActionMasker,
+    OneWorldEnv,
     observation_space,
-    one_world_env,
-    render_text,
 )
 from tracelab.envs.sinks import TraceSink
 from tracelab.game.facts import agent_name
 from tracelab.game.scenario import NOTHING, Scenario
 
 
-class GridWarParallelEnv(ParallelEnv[str, np.ndarray, int]):
+class GridWarParallelEnv(OneWorldEnv, ParallelEnv[str, np.ndarray, int]):
     metadata = {"name": "tracelab_gridwar_v0", "render_modes": ["ansi"], "is_parallelizable": True}
 
     def __init__(self, scenario: Scenario | str = "advanced", *, backend: str = "rules",
                  stack_previous: bool = False, trace_sink: TraceSink | None = None,
                  render_mode: str | None = None) -> None:
-        self.scenario, self.sim, self._tracer = one_world_env(scenario, backend, stack_previous, trace_sink,
-                                                              render_mode)
-        self.backend = backend
-        self.render_mode = render_mode
+        self._set_up(scenario, backend, stack_previous, trace_sink, render_mode)
         n = self.scenario.agents_per_team
         self.possible_agents = [agent_name(t, j) for t in range(2) for j in range(n)]
         self.agents: list[str] = []
@@ -51,7 +46,6 @@ class GridWarParallelEnv(ParallelEnv[str, np.ndarray, int]):
         low, high = (np.concatenate([b, b]) for b in (self._obs_space.low, self._obs_space.high))
         self.state_space = spaces.Box(low, high, dtype=np.float32)  # both teams' observations
         self._act_space = {a: spaces.Discrete(self.scenario.n_actions) for a in self.possible_agents}
-        self._masker = ActionMasker(self.scenario)
         self._nothing = int(np.flatnonzero(self._masker.ids == NOTHING)[0])
         self._index = {a: i for i, a in enumerate(self.possible_agents)}
 
@@ -108,13 +102,3 @@ class GridWarParallelEnv(ParallelEnv[str, np.ndarray, int]):
     def state(self) -> np.ndarray:
         """Both teams' current observations, concatenated (red's, then blue's)."""
         return np.concatenate([self.sim.observe("red")[0], self.sim.observe("blue")[0]])
-
-    def render(self) -> str | None:
-        if self.render_mode == "ansi":
-            return render_text(self.scenario, self.sim.state)
-        return None
-
-    def close(self) -> None:
-        if self._tracer is not None:
-            self._tracer.close()
-            self._tracer = None
