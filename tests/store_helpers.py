@@ -32,11 +32,12 @@ def walk_action(world: int, t: int) -> int:
     return 0
 
 
-def write_walk_run(run_dir: Path, **writer_options: object) -> Path:
-    program = load_program(str(WALK_RULES))
+def write_walk_run(run_dir: Path, rules: Path = WALK_RULES, **writer_options: object) -> Path:
+    """The walk (see above) on `rules`: store_walk.rules or a variant with the same `move(r1)` action."""
+    program = load_program(str(rules))
     eng = Engine(program, worlds=len(WALK_EPISODES))
     episodes = np.array(WALK_EPISODES)
-    meta = {"command": "pytest walk", "scenario": "walk", "rule_files": [str(WALK_RULES)], "seed": 7,
+    meta = {"command": "pytest walk", "scenario": "walk", "rule_files": [str(rules)], "seed": 7,
             "config": {"worlds": 3}}
     with TraceWriter(run_dir, meta, **writer_options) as w:
         w.write_engine_program(eng)

@@ -165,3 +165,60 @@ def test_why_reads_the_sealed_form_the_same_way(tmp_path: Path) -> None:
     run = write_walk_run(tmp_path / "walk")
     live = explain(open_run(run), 10, "alarm(r1)", at=4).to_dict()
     assert explain(open_run(seal_run(run)), 10, "alarm(r1)", at=4).to_dict() == live
+
+
+CLOSED_RULES = Path(__file__).resolve().parent / "data" / "store_closed.rules"
+
+
+@pytest.fixture(scope="module")
+def closed_con(tmp_path_factory: pytest.TempPathFactory):  # noqa: ANN201 - a duckdb connection
+    return open_run(write_walk_run(tmp_path_factory.mktemp("why") / "closed", rules=CLOSED_RULES))
+
+
+def test_why_reads_a_closed_predicates_unset_atom_as_false(closed_con) -> None:  # noqa: ANN001
+    # shielded(a) was never set; %closed reads it as [0,0], so ~shielded(a) held when `exposed` fired
+    tree = explain(closed_con, 10, "exposed(r1,a)", at=0)
+    assert (tree.value, tree.cause.name) == ([1.0, 1.0], "exposed")
+    shield = child(tree, "shielded(a)")
+    assert shield.value == [0.0, 1.0] and shield.holds and shield.clause_closed and shield.t is None
+    assert "ok ~shielded(a):[1,1] = [0,1]: never set (the default [0,1], read as [0,0]: %closed)" in render_why(tree, 0)
+    # a non-closed clause of the same rule keeps its usual reading
+    assert not child(tree, "agent(r1)").clause_closed
+
+
+def test_every_rule_row_of_a_closed_program_has_a_body_that_held(closed_con) -> None:  # noqa: ANN001
+    rows = closed_con.execute("SELECT episode, atom, t FROM changes WHERE cause_kind = 2").fetchall()
+    assert {a for _, a, _ in rows} >= {"exposed(r1,a)", "exposed(r1,c)"}
+    for episode, atom, t in rows:
+        tree = explain(closed_con, episode, atom, at=t, depth=1)
+        assert tree.children and all(c.holds for c in tree.children), render_why(tree, t)
+
+
+def test_why_not_on_a_closed_predicate(closed_con) -> None:  # noqa: ANN001
+    # r1 stood on the shielded cell b at t=2: exposed(r1,b) never held, and why-not says which clause
+    w = why_not(closed_con, 10, "exposed", {"A": "r1", "X": "b"}, at=2)
+    assert w.checks[w.failed].atom == "shielded(b)" and w.checks[w.failed].value == [1.0, 1.0]
+    # on cell a the unset shielded(a) holds its negation, read the closed way
+    ok = why_not(closed_con, 10, "exposed", {"A": "r1", "X": "a"}, at=0)
+    assert ok.failed is None and ok.checks[-1].closed
+    assert "shielded(a) = [0,1] (never set, read as [0,0]: %closed)" in render_why_not(ok)
+    # with X open, the search enumerates at(r1,X) and tests ~shielded(X) without enumerating it
+    open_x = why_not(closed_con, 10, "exposed", {"A": "r1"}, at=3)
+    assert open_x.failed is None and open_x.bindings["X"] == "c"
+
+
+def test_a_run_written_before_the_closed_column_reads_as_not_closed(tmp_path: Path) -> None:
+    import pyarrow.parquet as pq
+
+    from tracelab.store.model import RunModel
+    run = write_walk_run(tmp_path / "old", rules=CLOSED_RULES)
+    parts = sorted((run / "parts").rglob("*.parquet"))
+    clause_parts = [p for p in parts if "clauses" in p.parts]
+    assert clause_parts
+    for part in clause_parts:  # the table as the earlier release wrote it
+        table = pq.read_table(part)
+        pq.write_table(table.drop_columns(["closed"]), part)
+    model = RunModel(open_run(run))
+    assert [c.closed for c in model.rule("exposed").body] == [False, False, False]
+    fresh = RunModel(open_run(write_walk_run(tmp_path / "new", rules=CLOSED_RULES)))
+    assert [c.closed for c in fresh.rule("exposed").body] == [False, False, True]

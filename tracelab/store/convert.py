@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -162,10 +162,11 @@ def _loc(item: Any) -> tuple[str | None, int | None]:
     return (loc.file, loc.line) if loc else (None, None)
 
 
-def _clause_row(rule_id: int, pos: int, lit: Any) -> dict[str, Any]:
+def _clause_row(rule_id: int, pos: int, lit: Any, closed: Collection[str]) -> dict[str, Any]:
     return {"rule": rule_id, "pos": pos, "label": lit.pred, "args": [t.name for t in lit.args],
             "is_var": [bool(t.is_var) for t in lit.args], "negated": bool(lit.negated),
-            "lower": float(lit.lower), "upper": float(lit.upper), "text": str(lit)}
+            "lower": float(lit.lower), "upper": float(lit.upper), "text": str(lit),
+            "closed": lit.pred in closed}
 
 
 def program_tables(program: Any, facts: Sequence[Any] | None = None) -> dict[str, pa.Table]:
@@ -179,8 +180,8 @@ def program_tables(program: Any, facts: Sequence[Any] | None = None) -> dict[str
                       "delay": int(r.delay), "immediate": bool(r.immediate),
                       "mode": r.mode or program.mode, "variables": list(r.variables),
                       "file": file, "line": line})
-        clauses.append(_clause_row(i, -1, r.head))
-        clauses.extend(_clause_row(i, k, lit) for k, lit in enumerate(r.body))
+        clauses.append(_clause_row(i, -1, r.head, program.closed))
+        clauses.extend(_clause_row(i, k, lit, program.closed) for k, lit in enumerate(r.body))
     for i, f in enumerate(program.facts if facts is None else facts):
         file, line = _loc(f)
         fact_rows.append({"fact": i, "name": f.name, "text": f.text or "", "literal": str(f.literal),

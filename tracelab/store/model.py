@@ -20,11 +20,15 @@ class Clause:
     lower: float
     upper: float
     text: str
+    closed: bool = False  # `%closed` predicate: an atom never set ([0,1]) reads as [0,0]
 
     @property
     def binds(self) -> bool:
-        """False for a clause whose bound contains [0,1]: it holds for every atom."""
-        return not (self.lower <= 0.0 and self.upper >= 1.0)
+        """Whether the clause can enumerate its variables: false when it holds of an atom never set
+        (its bound contains [0,1], or, closed, it holds of [0,0])."""
+        if self.lower <= 0.0 and self.upper >= 1.0:
+            return False
+        return not (self.closed and satisfies((0.0, 0.0), self))
 
     def variables(self) -> tuple[str, ...]:
         return tuple(a for a, v in zip(self.args, self.is_var) if v)
@@ -47,9 +51,10 @@ class RuleInfo:
 
 
 def satisfies(bound: tuple[float, float], clause: Clause) -> bool:
-    """I ⊨ clause (the engine's own test, tracelab.engine.program.satisfies, on a stored clause)."""
+    """I ⊨ clause (the engine's own test, tracelab.engine.program.satisfies, on a stored clause; a
+    closed clause reads [0,1] as [0,0], as the engine does)."""
     from tracelab.engine.program import satisfies as engine_satisfies
-    return engine_satisfies(bound[0], bound[1], clause)
+    return engine_satisfies(bound[0], bound[1], clause, clause.closed)  # type: ignore[arg-type]
 
 
 class RunModel:
@@ -59,11 +64,12 @@ class RunModel:
         rules = con.execute("SELECT rule, name, delay, immediate, variables, text FROM raw.rules "
                             "ORDER BY rule").fetchall()
         clauses: dict[int, list[tuple]] = {}
-        for row in con.execute("SELECT rule, pos, label, args, is_var, negated, lower, upper, text "
+        for row in con.execute("SELECT rule, pos, label, args, is_var, negated, lower, upper, text, closed "
                                "FROM raw.clauses ORDER BY rule, pos").fetchall():
             clauses.setdefault(row[0], []).append(row)
         for rid, name, delay, immediate, variables, text in rules:
-            cl = [Clause(r[2], tuple(r[3]), tuple(r[4]), r[5], r[6], r[7], r[8]) for r in clauses.get(rid, [])]
+            cl = [Clause(r[2], tuple(r[3]), tuple(r[4]), r[5], r[6], r[7], r[8], bool(r[9]))
+                  for r in clauses.get(rid, [])]
             self.rules.append(RuleInfo(rid, name, delay, immediate, tuple(variables or ()), text,
                                        head=cl[0], body=cl[1:]))
         self.rule_by_name = {r.name: r for r in self.rules}

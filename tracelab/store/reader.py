@@ -37,7 +37,7 @@ from tracelab.store.sandbox import (
     refusal,
     sandbox_connection,
 )
-from tracelab.store.schema import SCHEMAS, TABLES, VIEWS_SQL
+from tracelab.store.schema import ADDED_COLUMNS, SCHEMAS, TABLES, VIEWS_SQL
 
 RUNS_DIR = Path("runs")
 # The columns tracelab reads from each stored table (raw.run: the run's metadata row).
@@ -166,8 +166,12 @@ def open_run(run: str | Path) -> RunConnection:
             con.execute("CREATE SCHEMA raw")
             result = LiveRunConnection(con, p.resolve())  # sets the variables the views read, and raw.run
             for t in TABLES:
-                con.execute(f"CREATE VIEW raw.{t} AS SELECT * FROM read_parquet(getvariable("
-                            f"{_sql_str(_parts_variable(t))}))")
+                parts = f"read_parquet(getvariable({_sql_str(_parts_variable(t))}))"
+                con.execute(f"CREATE VIEW raw.{t} AS SELECT * FROM {parts}")
+                have = {c for (c, *_) in con.execute(f"DESCRIBE raw.{t}").fetchall()}
+                extra = _defaults_for_missing(t, have)
+                if extra:  # parts written before a column was added
+                    con.execute(f"CREATE OR REPLACE VIEW raw.{t} AS SELECT *, {extra} FROM {parts}")
         con.execute(VIEWS_SQL)
         lock_configuration(con)
     except BaseException:
@@ -210,12 +214,19 @@ def _attach_sealed(con: duckdb.DuckDBPyConnection, sealed: Path) -> None:
         columns.setdefault(table, set()).add(column)
     con.execute("CREATE SCHEMA raw")
     for t, names in STORED_COLUMNS.items():
-        lacking = [c for c in names if c not in columns.get(t, set())]
+        have = columns.get(t, set())
+        lacking = [c for c in names if c not in have and c not in ADDED_COLUMNS.get(t, {})]
         if lacking:
             raise ValueError(f"{str(sealed)!r}: raw.{t} has no column {lacking[0]!r}: not a tracelab "
                              "run, or one from an incompatible version")
-        cols = ", ".join(f'"{c}"' for c in names)
+        extra = _defaults_for_missing(t, have)
+        cols = ", ".join([f'"{c}"' for c in names if c in have] + ([extra] if extra else []))
         con.execute(f"CREATE VIEW raw.{t} AS SELECT {cols} FROM store.raw.{t}")
+
+
+def _defaults_for_missing(table: str, have: set[str]) -> str:
+    """`value AS "column"` for the added columns (schema.ADDED_COLUMNS) a run written earlier lacks."""
+    return ", ".join(f'{value} AS "{c}"' for c, value in ADDED_COLUMNS.get(table, {}).items() if c not in have)
 
 
 def _create_table(con: duckdb.DuckDBPyConnection, name: str, table: Any) -> None:

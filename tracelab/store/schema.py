@@ -32,7 +32,7 @@ SCHEMAS: dict[str, pa.Schema] = {
     "clauses": pa.schema([("rule", pa.int32()), ("pos", pa.int32()), ("label", pa.string()),
                           ("args", _STR_LIST), ("is_var", pa.list_(pa.bool_())),
                           ("negated", pa.bool_()), ("lower", pa.float64()), ("upper", pa.float64()),
-                          ("text", pa.string())]),
+                          ("text", pa.string()), ("closed", pa.bool_())]),
     "facts": pa.schema([("fact", pa.int32()), ("name", pa.string()), ("text", pa.string()),
                         ("literal", pa.string()), ("start", pa.int32()), ("end", pa.int32()),
                         ("static", pa.bool_()), ("file", pa.string()), ("line", pa.int32())]),
@@ -58,6 +58,9 @@ SCHEMAS: dict[str, pa.Schema] = {
                               ("ended_at", _TS), ("info", pa.string())]),
 }
 TABLES: tuple[str, ...] = tuple(SCHEMAS)
+# Columns added after a table's first release, with the SQL value they read as in runs written before
+# (the readers add it): clauses.closed, the clause's predicate is `%closed` (an unset atom reads [0,0]).
+ADDED_COLUMNS: dict[str, dict[str, str]] = {"clauses": {"closed": "false"}}
 
 # The engine's trace columns (docs/engine-api.md) and the dtype each is stored as.
 TRACE_COLUMNS: dict[str, str] = {

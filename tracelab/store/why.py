@@ -43,6 +43,7 @@ class WhyNode:
     value: list[float]             # the bound in force at the point read
     clause: str | None = None      # the ground body clause this node supports (None at the root)
     holds: bool | None = None      # does `value` satisfy `clause`
+    clause_closed: bool = False    # `clause` is on a %closed predicate: [0,1] reads as [0,0]
     t: int | None = None           # the change that set the value (None: never set)
     pass_no: int | None = None
     seq: int | None = None
@@ -68,7 +69,8 @@ class _Explainer:
         value = EpisodeTrace.bound(row)
         n = WhyNode(atom=self.m.atom_text(atom), value=list(value),
                     clause=None if clause is None else clause.ground_text(binding or {}),
-                    holds=None if clause is None else satisfies(value, clause))
+                    holds=None if clause is None else satisfies(value, clause),
+                    clause_closed=clause is not None and clause.closed)
         if row is None:
             n.cause = Cause("default", "", reads="never set: [0,1]")
             return n
@@ -170,7 +172,7 @@ def render_why(node: WhyNode, at: int | None = None) -> str:
     def describe(n: WhyNode) -> str:
         c = n.cause
         if c is None or c.kind == "default":
-            return "never set (the default [0,1])"
+            return "never set (the default [0,1]" + (", read as [0,0]: %closed)" if n.clause_closed else ")")
         s = f"set at t={n.t} pass {n.pass_no} {_bound_text(n.old)}->{_bound_text(n.value)} by {c.name}"
         if c.kind in ("rule", "policy"):
             delay = "!" if c.immediate else f"Δt={c.delay}"
@@ -213,6 +215,7 @@ class ClauseCheck:
     set_at: int | None = None      # t of the change that gave `value` (None: never set)
     set_by: str | None = None
     note: str = ""
+    closed: bool = False           # the clause is on a %closed predicate: [0,1] reads as [0,0]
 
 
 @dataclass
@@ -274,7 +277,8 @@ class _Search:
         value = EpisodeTrace.bound(row)
         return ClauseCheck(pos, clause.ground_text(binding), atom, list(value), satisfies(value, clause),
                            set_at=None if row is None else row.t,
-                           set_by=None if row is None else self.m.cause_name(row.cause_kind, row.cause_id))
+                           set_by=None if row is None else self.m.cause_name(row.cause_kind, row.cause_id),
+                           closed=clause.closed)
 
     def run(self, binding: dict[str, str]) -> tuple[list[ClauseCheck], bool, dict[str, str]]:
         found = self._dfs(list(range(len(self.rule.body))), binding, [])
@@ -347,7 +351,8 @@ def render_why_not(w: WhyNot) -> str:
         if c.atom is None:
             lines.append(f"  {mark}{c.clause}: {c.note}")
             continue
-        src = "never set" if c.set_at is None else f"set at t={c.set_at} by {c.set_by}"
+        src = f"set at t={c.set_at} by {c.set_by}" if c.set_at is not None else (
+            "never set, read as [0,0]: %closed" if c.closed else "never set")
         lines.append(f"  {mark}{c.clause}: {c.atom} = {_bound_text(c.value)} ({src})")
     if w.failed is None:
         lines.append("every body clause holds: the rule was active"

@@ -40,7 +40,7 @@ def node_label(n: WhyNode, at: int | None = None) -> Text:
         text.append(f" at the end of t={at}:")
     c = n.cause
     if c is None or c.kind == "default":
-        text.append("  never set", style=DIM)
+        text.append("  never set" + (", read as [0,0]: %closed" if n.clause_closed else ""), style=DIM)
         return text
     text.append(f"  t={n.t} by ", style=DIM)
     text.append(c.name, style="bold" if c.kind == "rule" else "")
