@@ -299,10 +299,17 @@ def _to_graph(raw: RawGraph) -> Graph:
     else:
         fact_label = np.zeros(0, np.int32)
         fact_args, fact_bounds = np.zeros((0, 2), np.int32), np.zeros((0, 2), np.float64)
-    back = undirected & (src != dst)
-    edges = np.concatenate([np.column_stack([src, dst]), np.column_stack([dst[back], src[back]])]).astype(np.int32)
     return Graph(raw.nodes, labels, arity, fact_label, np.ascontiguousarray(fact_args, np.int32),
-                 np.ascontiguousarray(fact_bounds, np.float64), file, edges=edges)
+                 np.ascontiguousarray(fact_bounds, np.float64), file, edges=edge_pairs(raw))
+
+
+def edge_pairs(raw: RawGraph) -> np.ndarray:
+    """The graph's edges as (source, target) node-id pairs, an undirected edge both ways (Graph.edges)."""
+    src = raw.edges[:, 0].astype(np.int32)
+    dst = raw.edges[:, 1].astype(np.int32)
+    undirected = np.where(raw.edges[:, 2] < 0, raw.graph_undirected, raw.edges[:, 2] == 0)
+    back = undirected & (src != dst)
+    return np.concatenate([np.column_stack([src, dst]), np.column_stack([dst[back], src[back]])]).astype(np.int32)
 
 
 def _where(raw: RawGraph, kind: int, elem: int) -> str:

@@ -209,7 +209,7 @@ def test_graphml_reads_with_pyreasons_mapping(tmp_path: Path) -> None:
     t = load_pyreason([tmp_path / "r.txt"], [], g, embed_graph=True).text
     lines = t.splitlines()
     assert lines[2] == "rule_0: ok(X) <-0 health(X):[.5,1], color_red(X), near(X,Y)"
-    assert lines[3:] == ["health(a):[.75,1] static", "color_red(a) static", 'near(a,"B") static',
+    assert lines[3].startswith("# the graph's facts") and lines[4:] == ["health(a):[.75,1] static", "color_red(a) static", 'near(a,"B") static',
                          'near("B",a) static']
     translated = load_pyreason([tmp_path / "r.txt"], [], g)
     engine = Engine(translated.program, translated.graph)
@@ -305,6 +305,40 @@ def test_infer_edges_creates_the_edge(tmp_path: Path) -> None:
     engine = Engine(translated.program, translated.graph)
     engine.step()
     assert [(b, tuple(v)) for b, v in engine.match("link(X,Y)")] == [({"X": "a", "Y": "b"}, (1.0, 1.0))]
+
+
+LINE_GRAPH = """<?xml version="1.0" encoding="UTF-8"?>
+<graphml xmlns="http://graphml.graphdrawing.org/xmlns">
+  <key id="f" for="edge" attr.name="Friends" attr.type="long"/>
+  <graph edgedefault="directed">
+    <node id="a"/><node id="b"/><node id="c"/>
+    <edge source="a" target="b"><data key="f">1</data></edge>
+    <edge source="b" target="c"><data key="f">1</data></edge>
+  </graph>
+</graphml>
+"""
+
+
+@pytest.mark.skipif(not INFER_EDGES, reason="needs the {infer_edges} rule option in the rule parser")
+def test_edge_rules_set_only_the_graphs_edges_unless_they_infer_edges(tmp_path: Path) -> None:
+    # PyReason grounds an edge rule's head on the graph's edges; only infer_edges=True adds new ones
+    (tmp_path / "g.graphml").write_text(LINE_GRAPH)
+    (tmp_path / "r.csv").write_text('"near(x,z) <-0 Friends(x,y), Friends(y,z)",near,False,False\n'
+                                    '"far(x,z) <-0 Friends(x,y), Friends(y,z)",far,True,False\n'
+                                    '"fof(x,y) <-0 Friends(x,y)",fof,False,False\n')
+    translated = load_pyreason([tmp_path / "r.csv"], graph_file=tmp_path / "g.graphml")
+    assert "%edge_heads graph" in translated.text
+    engine = Engine(translated.program, translated.graph)
+    engine.step()
+
+    def pairs(pred: str) -> set[tuple[str, str]]:
+        return {(b["X"], b["Y"]) for b, v in engine.match(f"{pred}(X,Y)")}
+    assert pairs("near") == set()                  # a->c is no edge of the graph
+    assert pairs("far") == {("a", "c")}            # infer_edges: the rule makes the edge
+    assert pairs("fof") == {("a", "b"), ("b", "c")}
+    # embedded in the text (convert-pyreason --graph), the graph's edges are lost, and the text says so
+    embedded = load_pyreason([tmp_path / "r.csv"], graph_file=tmp_path / "g.graphml", embed_graph=True)
+    assert "%edge_heads graph" not in embedded.text and "not restricted" in embedded.text
 
 
 @pytest.mark.skipif(not ANNOTATION_FUNCTIONS, reason="needs annotation functions (p(X):average) in the parser")

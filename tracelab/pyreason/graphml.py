@@ -14,7 +14,7 @@ import os
 import numpy as np
 
 from tracelab.engine.errors import ProgramCheckError
-from tracelab.engine.graph import Graph, check_names, read_raw_graphml
+from tracelab.engine.graph import Graph, check_names, edge_pairs, read_raw_graphml
 from tracelab.engine.graphml_raw import RawGraph
 
 from .graphml_columns import GraphFacts, numeric_facts
@@ -123,4 +123,5 @@ def _graph(raw: RawGraph, facts: GraphFacts, names: NameMap) -> Graph:
             labels.append(name)
             arity.append(ar)
         lab_map[j] = lid
-    return Graph(list(raw.nodes), labels, arity, lab_map[fact_label], args, facts.bounds_array(), raw.file)
+    return Graph(list(raw.nodes), labels, arity, lab_map[fact_label], args, facts.bounds_array(), raw.file,
+                 edges=edge_pairs(raw))

@@ -127,6 +127,9 @@ def load_pyreason(rule_files: Sequence[str | os.PathLike[str]], fact_files: Sequ
     if not persistent:
         lines.append("%timesteps reset  # PyReason's default: atoms go back to [0,1] at each timestep")
         origins.append(None)
+    if graph is not None and not embed_graph:
+        lines.append("%edge_heads graph  # PyReason's: an edge rule sets only the graph's edges unless {infer_edges}")
+        origins.append(None)
     for path in rule_files:
         for r in read_rules(path):
             lines.append(rule_text(r, names))
@@ -136,8 +139,10 @@ def load_pyreason(rule_files: Sequence[str | os.PathLike[str]], fact_files: Sequ
             lines.append(fact_text(f, names))
             origins.append((f.loc, ""))
     if graph is not None and embed_graph:
+        lines.append("# the graph's facts; facts carry no edge set, so edge rules are not restricted to the graph's "
+                     "edges as in PyReason (`tracelab reason --dialect pyreason` with the graph keeps that)")
         lines += graph_fact_lines(graph)
-        origins += [(SourceLoc(graph.file, 0, 0), "")] * graph.n_facts
+        origins += [None] + [(SourceLoc(graph.file, 0, 0), "")] * graph.n_facts
         graph = None
     text = "\n".join(lines) + "\n"
     try:
