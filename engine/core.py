@@ -586,6 +586,11 @@ class Engine:
 
     # ---- trace, vocabulary, groundings, stats ----
 
+    @property
+    def trace_rows_waiting(self) -> int:
+        """Change rows in the trace buffer that take_trace() has not handed out yet."""
+        return int(self._tr_n[0])
+
     def take_trace(self, t_start: np.ndarray | None = None,
                    episode: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """The change rows since the last call, as columns (docs/engine-api.md); the buffer is cleared.

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from tracelab.bench.common import Summary, calibrate, median_of, rates, summarize
+from tracelab.envs.tracer import handover_due
 from tracelab.game.refsim import RefSim
 from tracelab.game.rulesim import RuleSim
 from tracelab.game.scenario import Scenario, builtin_scenario, generate_scenario
@@ -81,7 +82,8 @@ class EngineTimer:
 @dataclass
 class Loop:
     """Steps `sim` with a fixed-seed random red policy and the scripted blue policy, resetting finished
-    worlds and (with `trace`) draining the trace after every step."""
+    worlds and (with `trace`) taking the trace when the envs' tracer would (tracer.handover_due: when an
+    episode ended, else every HANDOVER_STEPS steps), so that a traced figure is what a traced run pays."""
     sim: Sim
     trace: bool
     seed: int = 0
@@ -89,6 +91,7 @@ class Loop:
 
     def __post_init__(self) -> None:
         self.rng = np.random.default_rng(self.seed)
+        self._steps_waiting = 0
         self.ids = np.asarray(self.sim.scenario.action_ids, np.int64)
         self.shape = (self.sim.n_worlds, self.sim.scenario.agents_per_team)
         set_trace(self.sim, self.trace)
@@ -100,11 +103,19 @@ class Loop:
         drain = self.trace and isinstance(sim, RuleSim)
         for i in range(steps):
             res = sim.step(red[i], sim.scripted_actions("blue"))
-            if drain:
-                sim.take_trace()
             done = res.terminated | res.truncated
-            if done.any():
+            ended = bool(done.any())
+            if drain and self._handover_due(ended):
+                sim.take_trace()
+            if ended:
                 sim.reset(worlds=done)
+
+    def _handover_due(self, episode_ended: bool) -> bool:
+        self._steps_waiting += 1
+        if handover_due(self.sim, self._steps_waiting, episode_ended):  # type: ignore[arg-type]
+            self._steps_waiting = 0
+            return True
+        return False
 
 
 def measure(sim: Sim, trace: bool, repeats: int, target_s: float, engine_time: bool = True) -> dict[str, Any]:

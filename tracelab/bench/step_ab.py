@@ -1,14 +1,13 @@
-"""RefSim and RuleSim's stepping loop, RuleSim as before this branch (separate calls per step, the
-episode clock in Python) and as now (one compiled call per step, the clock compiled), in one process,
-in alternating blocks (CPU time):
-`python -m tracelab.bench.step_ab [--cases 1x1t,1x256,5x256,20x256,20x1t] [--steps 2000] [--rounds 7]`.
+"""RefSim and RuleSim's stepping loop, RuleSim's trace taken as before this branch (after every step) and
+as now (when the envs' tracer takes it: tracer.handover_due), in one process, in alternating blocks (CPU
+time): `python -m tracelab.bench.step_ab [--cases 1x1t,1x256,5x256,20x256,20x1t] [--steps 2000] [--rounds 7]`.
 
-A case is AGENTSxWORLDS, with `t` for tracing on (RuleSim's trace taken after every step). Every
-simulator runs bench env's loop (sims.Loop: fixed-seed random red, scripted blue, finished worlds reset)
-for `steps` world-steps a block; blocks alternate A, B, C / C, B, A. `time.process_time` counts only this
-process's CPU, so the other processes on a shared machine do not count. Prints one JSON line per case:
-median CPU µs per world-step of each, the median paired ratio now / before, and RuleSim / RefSim in
-steps per CPU-second (the goals' measure, docs/benchmarks.md), before and now."""
+A case is AGENTSxWORLDS, with `t` for tracing on. Every simulator runs bench env's loop (sims.Loop:
+fixed-seed random red, scripted blue, finished worlds reset) for `steps` world-steps a block; blocks
+alternate A, B, C / C, B, A. `time.process_time` counts only this process's CPU, so the other processes
+on a shared machine do not count. Prints one JSON line per case: median CPU µs per world-step of each,
+the median paired ratio now / before, and RuleSim / RefSim in steps per CPU-second (the goals' measure,
+docs/benchmarks.md), before and now. Untraced, before and now are the same loop (a check of the noise)."""
 from __future__ import annotations
 
 import argparse
@@ -22,29 +21,14 @@ from tracelab.bench.sims import Loop, scenario_for
 from tracelab.game.refsim import RefSim
 from tracelab.game.rulesim import RuleSim
 
-VARIANTS = ("refsim", "rulesim_before", "rulesim_fused")
+VARIANTS = ("refsim", "rulesim_before", "rulesim_now")
 
 
-class RuleSimBefore(RuleSim):
-    """RuleSim's step as it was before the fused step (fused=False: separate calls; with kernel="auto"
-    a cached compiled kernel at one world) and its episode clock in Python (the code before
-    Engine.take_trace(t_start, episode)): the "before" of the A/B."""
+class EveryStepLoop(Loop):
+    """Loop with the trace taken after every step (the tracer before this branch)."""
 
-    def __init__(self, *args: Any, **kw: Any) -> None:
-        super().__init__(*args, fused=False, **kw)
-
-    def _take_local(self) -> dict[str, np.ndarray]:
-        rows = self.engine.take_trace()
-        if self.n_worlds == 1:
-            start = int(self.episode_start[0])
-            if start:
-                rows["t"] -= start
-            rows["world_episode"] = np.full(len(rows["t"]), self.world_episode[0])
-            return rows
-        world = rows["world"].astype(np.int64)
-        rows["t"] = (rows["t"] - self.episode_start[world]).astype(np.int32)
-        rows["world_episode"] = self.world_episode[world].copy()
-        return rows
+    def _handover_due(self, episode_ended: bool) -> bool:
+        return True
 
 
 def _block(loop: Loop, steps: int) -> float:
@@ -56,9 +40,9 @@ def _block(loop: Loop, steps: int) -> float:
 def compare(agents: int, worlds: int, trace: bool, steps: int, rounds: int, kernel: str) -> dict[str, Any]:
     sc = scenario_for(agents)
     sims = [RefSim(sc, worlds, seed=0),
-            RuleSimBefore(sc, worlds, seed=0, trace=True, kernel=kernel),
-            RuleSim(sc, worlds, seed=0, trace=True, kernel=kernel, fused=True)]
-    loops = [Loop(s, trace) for s in sims]
+            RuleSim(sc, worlds, seed=0, trace=True, kernel=kernel),
+            RuleSim(sc, worlds, seed=0, trace=True, kernel=kernel)]
+    loops = [Loop(sims[0], trace), EveryStepLoop(sims[1], trace), Loop(sims[2], trace)]
     block = max(1, steps // worlds)
     for loop in loops:
         loop.run(block)  # warm-up (first calls, caches)
@@ -69,8 +53,7 @@ def compare(agents: int, worlds: int, trace: bool, steps: int, rounds: int, kern
             times[j].append(_block(loops[j], block))
     t = [np.asarray(x) for x in times]
     per = block * worlds
-    return {"agents": agents, "worlds": worlds, "trace": trace, "kernel_before": sims[1].engine.kernel,
-            "kernel": sims[2].engine.kernel,
+    return {"agents": agents, "worlds": worlds, "trace": trace, "kernel": sims[2].engine.kernel,
             "fused_used": sims[2].fused, "world_steps_per_block": per, "rounds": rounds,
             **{f"{v}_cpu_us": round(1e6 * float(np.median(x)) / per, 2) for v, x in zip(VARIANTS, t)},
             "now_over_before": round(float(np.median(t[2] / t[1])), 3),

@@ -148,6 +148,17 @@ class ActionMasker:
         return out.view(np.int8)
 
 
+def reset_sim(sim: Any, tracer: EpisodeTracer | None, seed: int | None) -> np.ndarray:
+    """An env's reset of every world: the simulator's observations [W, 2, D]; the tracer hands over the
+    rows of the episodes cut short before, and begins the new episodes after."""
+    if tracer is not None:
+        tracer.before_reset()
+    obs = sim.reset(seed=seed)
+    if tracer is not None:
+        tracer.begin(np.arange(sim.n_worlds), seed)
+    return obs
+
+
 def step_learner(sim: Any, masker: ActionMasker, tracer: Any, action: Any, n_worlds: int,
                  space: Any) -> tuple[Any, np.ndarray]:
     """One step with red playing `action` (indices into the scenario's actions, [n_worlds, N] after

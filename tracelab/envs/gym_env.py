@@ -33,6 +33,7 @@ from tracelab.envs.common import (
     OneWorldEnv,
     learner_action_space,
     observation_space,
+    reset_sim,
     step_learner,
 )
 from tracelab.envs.sinks import TraceSink
@@ -81,10 +82,8 @@ class GridWarEnv(OneWorldEnv, gym.Env[np.ndarray, Any]):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
               ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
-        obs = self.sim.reset(seed=seed)
+        obs = reset_sim(self.sim, self._tracer, seed)
         self._running = True
-        if self._tracer is not None:
-            self._tracer.begin(np.zeros(1, np.int64), seed)
         info = reset_info(1, self._masks(), self._single)
         return obs[0, RED].copy(), self._first(info)
 

@@ -24,6 +24,7 @@ from pettingzoo import ParallelEnv
 from tracelab.envs.common import (
     OneWorldEnv,
     observation_space,
+    reset_sim,
 )
 from tracelab.envs.sinks import TraceSink
 from tracelab.game.facts import agent_name
@@ -57,10 +58,8 @@ class GridWarParallelEnv(OneWorldEnv, ParallelEnv[str, np.ndarray, int]):
 
     def reset(self, seed: int | None = None, options: dict[str, Any] | None = None
               ) -> tuple[dict[str, np.ndarray], dict[str, dict[str, Any]]]:
-        obs = self.sim.reset(seed=seed)[0]
+        obs = reset_sim(self.sim, self._tracer, seed)[0]
         self.agents = list(self.possible_agents)
-        if self._tracer is not None:
-            self._tracer.begin(np.zeros(1, np.int64), seed)
         zeros = np.zeros((2, self.scenario.agents_per_team), np.int64)
         return self._per_agent(obs), self._infos(zeros.astype(bool), zeros.astype(bool), zeros, zeros)
 

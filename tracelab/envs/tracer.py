@@ -3,9 +3,14 @@ returns, and calls a TraceSink (conventions in tracelab/envs/sinks.py). Only bui
 
 RuleSim.take_trace() already counts each row's `t` from its world's episode start and tags it with
 `world_episode` (the world's own episode count); here that is mapped to the env's episode id. Rows are
-taken after every step (so an episode's rows are all out before it ends) and at close, never at reset:
-a new episode's start rows are still queued then, and belong to whichever episode is current in that
-world when they are taken (RuleSim keeps them for a world reset again before it stepped).
+taken in chunks (`handover_due`): after a step in which a recorded episode ended (so an episode's rows
+are all out before its end is written), after every HANDOVER_STEPS steps (a live reader of the store sees
+rows at most that many steps late, plus the writer's own flush delay), when HANDOVER_ROWS rows wait in the
+engine (its buffer stays bounded), before an env reset cuts recorded episodes short (`before_reset`),
+and at close. Taking
+them after every step cost more than the engine's step at one world (docs/benchmarks.md). Never at the
+reset itself: a new episode's start rows are still queued then, and belong to whichever episode is
+current in that world when they are taken (RuleSim keeps them for a world reset again before it stepped).
 
 With `limit` = N only the env's episodes 0..N-1 reach the sink: a world that begins episode N or later
 keeps playing (a vector env steps every world) but nothing of it is recorded, so a caller that steps
@@ -24,6 +29,16 @@ from tracelab.game.refsim import RefSim
 from tracelab.game.rulesim import RuleSim
 from tracelab.game.scenario import TEAMS, Scenario
 from tracelab.game.state import WINNER_BLUE, WINNER_DRAW, WINNER_RED, StepResult
+
+
+HANDOVER_STEPS = 64
+HANDOVER_ROWS = 65_536
+
+
+def handover_due(sim: RuleSim, steps_waiting: int, episode_ended: bool) -> bool:
+    """Whether the simulator's trace rows are to be taken now (the tracer's cadence, module docstring):
+    an episode ended in the last step, or HANDOVER_STEPS steps or HANDOVER_ROWS rows wait."""
+    return episode_ended or steps_waiting >= HANDOVER_STEPS or sim.engine.trace_rows_waiting >= HANDOVER_ROWS
 
 
 def outcome_name(winner: int, truncated: bool) -> str:
@@ -49,6 +64,7 @@ class EpisodeTracer:
         self.agent_return = np.zeros((w, 2, n))
         self.team_return = np.zeros((w, 2))
         self._next_episode = 0
+        self._steps_waiting = 0                  # steps whose rows the simulator still holds
         self._seed: int | None = None
         self._names = [agent_name(t, j) for t in range(2) for j in range(n)]
         sink.begin_run(sim.engine if isinstance(sim, RuleSim) else None, scenario)
@@ -74,9 +90,20 @@ class EpisodeTracer:
         for w, e in zip(worlds[recorded].tolist(), ids[recorded].tolist()):
             self.sink.begin_episode(w, e, self._seed, self.scenario)
 
+    def before_reset(self) -> None:
+        """Before an env reset (not an autoreset): the rows of steps not handed over yet, so that the
+        episodes it cuts short have all their rows out before their end is written. A world that has not
+        stepped since its start holds only start rows, which stay for the episode that begins."""
+        if self._steps_waiting:
+            self._flush()
+
     def stepped(self, res: StepResult, actions: np.ndarray) -> None:
-        """After a step of every world (before any autoreset): its rows, its step records, episode ends."""
-        self._flush()
+        """After a step of every world (before any autoreset): its rows (when a handover is due), its step
+        records, episode ends."""
+        self._steps_waiting += 1
+        ended = (res.terminated | res.truncated) & self.open
+        if self._rules and handover_due(self.sim, self._steps_waiting, bool(ended.any())):
+            self._flush()
         worlds = np.flatnonzero(self.open)
         if len(worlds):
             # copies: the simulator may reuse its arrays (RuleSim.reset writes into the last obs)
@@ -86,7 +113,7 @@ class EpisodeTracer:
         self.steps[:] = res.t
         self.agent_return += res.agent_reward
         self.team_return += res.reward
-        for w in np.flatnonzero((res.terminated | res.truncated) & self.open).tolist():
+        for w in np.flatnonzero(ended).tolist():
             self._end(w, outcome_name(res.winner[w], bool(res.truncated[w])))
 
     def close(self) -> None:
@@ -98,6 +125,7 @@ class EpisodeTracer:
     def _flush(self) -> None:
         if not self._rules:
             return
+        self._steps_waiting = 0
         rows = self.sim.take_trace()
         if not len(rows["t"]):
             return

@@ -47,6 +47,7 @@ from tracelab.envs.common import (
     learner_action_space,
     make_sim,
     observation_space,
+    reset_sim,
     resolve_scenario,
     step_learner,
 )
@@ -100,9 +101,7 @@ class GridWarVectorEnv(VectorEnv):
               ) -> tuple[np.ndarray, dict[str, Any]]:
         seed = _batch_seed(seed)
         super().reset(seed=seed)
-        obs = self._observation(self.sim.reset(seed=seed))
-        if self._tracer is not None:
-            self._tracer.begin(np.arange(self.num_envs), seed)
+        obs = self._observation(reset_sim(self.sim, self._tracer, seed))
         self._ready = True
         return obs, self._with_masks(reset_info(self.num_envs, self._masks(), self._n == 1), self._all)
 
