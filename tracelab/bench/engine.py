@@ -133,7 +133,7 @@ def step_rates(agents: list[int], repeats: int, target_s: float, kernel: str = "
 
 
 def memory(steps: int) -> dict[str, Any]:
-    """(d) RSS of this process every 10% of a `steps`-step traced 1v1 run (trace drained every step)."""
+    """(d) RSS of this process every 10% of a `steps`-step traced 1v1 run (trace taken as the envs take it)."""
     from tracelab.bench.sims import Loop, scenario_for
     from tracelab.game.rulesim import RuleSim
     loop = Loop(RuleSim(scenario_for(1), 1, seed=0, trace=True), trace=True)
