@@ -14,6 +14,7 @@ from . import annotations
 from . import kernel as K
 from .backend_api import EngineTables
 from .program import effective_bound
+from .restore_kernel import restore_groundings
 
 
 class CountingState:
@@ -216,9 +217,8 @@ class CountingState:
         self.static[worlds, :n_atoms] = snap["static"][worlds]
         self.last_cause[worlds, :n_atoms] = snap["last_cause"][worlds]
         if snap["unsat"].shape == self._unsat.shape and n_atoms == self.n_atoms:
-            for key, arr in (("unsat", self._unsat), ("act", self._act), ("act_pos", self._act_pos),
-                             ("act_n", self._act_n)):
-                arr[worlds] = snap[key][worlds]
+            restore_groundings(indices, snap["unsat"], snap["act"], snap["act_n"], self._unsat, self._act,
+                               self._act_n, self._act_pos, self._kind_base)
         else:  # groundings grew since the snapshot: recount those worlds from their interpretation
             kt = self.kt
             K.recount_worlds(indices, self.lower, self.upper, kt["b_ptr"], kt["b_atom"], kt["b_flags"],
