@@ -120,7 +120,7 @@ class ActionMasker:
         free[1:-1, 1:-1] = ~scenario.mountain_grid
         x, y = np.meshgrid(np.arange(w), np.arange(h), indexing="ij")
         self._move_ok = np.stack([free[x + 1 + dx, y + 1 + dy] for dx, dy in DIRECTION_DELTAS], axis=-1)
-        self._slow = scenario.slow_mask if scenario.slow_mask.any() else None
+        self._slow = scenario.slow_mask
 
     def for_sim(self, sim: Any, team: int | None = None) -> np.ndarray:
         """The mask for a simulator's current state: read from the shield rules' atoms when the
@@ -135,12 +135,8 @@ class ActionMasker:
         """int8 (gymnasium's mask dtype), 1 = allowed: [W, N, n_actions] for one team, or
         [W, 2, N, n_actions] for both (team=None)."""
         sel = slice(None) if team is None else team
-        pos, alive = state.pos[:, sel], state.alive[:, sel]
-        can_act = alive & ~state.moving[:, sel]
-        if self._slow is not None:
-            even = (state.t % 2 == 0).reshape((-1,) + (1,) * (alive.ndim - 1))
-            can_act &= ~self._slow[sel] | even
-        out = np.empty((*alive.shape, self.n_actions), bool)
+        pos, can_act = state.pos[:, sel], state.choosing(self._slow)[:, sel]
+        out = np.empty((*can_act.shape, self.n_actions), bool)
         out[..., :4] = self._move_ok[pos[..., 0], pos[..., 1]] & can_act[..., None]
         if self._shots:
             out[..., 4:8] = (can_act & (state.ammo[:, sel] > 0))[..., None]

@@ -62,6 +62,15 @@ class GameState:
     def done(self) -> np.ndarray:
         return self.terminated | self.truncated
 
+    def choosing(self, slow_mask: np.ndarray) -> np.ndarray:
+        """bool [W, 2, N]: the agents whose action choice the game takes this step (game.rules t_fast /
+        t_slow): alive, not in transit, and a slow agent (`slow_mask` [2, N], Scenario.slow_mask) on even
+        steps only; the simulators ignore the others' actions."""
+        can = self.alive & ~self.moving
+        if slow_mask.any():
+            can &= ~slow_mask | (self.t % 2 == 0)[:, None, None]
+        return can
+
     def copy(self) -> "GameState":
         return GameState(**{f.name: getattr(self, f.name).copy() for f in fields(self)})
 

@@ -60,11 +60,7 @@ def may_act(scenario: Scenario, state: Any, slow_every_step: bool = False) -> np
     every step with `slow_every_step`: the game ignores its choices where it may not act)."""
     if slow_every_step:
         return state.alive[:, 0].copy()
-    can = state.alive[:, 0] & ~state.moving[:, 0]
-    slow = scenario.slow_mask[0]
-    if slow.any():
-        can = can & (~slow | (state.t % 2 == 0)[:, None])
-    return can
+    return state.choosing(scenario.slow_mask)[:, 0]
 
 
 class Policy:
