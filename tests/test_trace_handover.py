@@ -83,3 +83,31 @@ def test_rows_wait_at_most_handover_steps_within_an_episode(monkeypatch: pytest.
         handed_up_to = 6 * (k // 6)  # the last handover's step (none before step 6)
         assert t == (set(range(handed_up_to + 1)) if handed_up_to else set()), k
     env.close()
+
+
+def test_the_store_gets_every_step_record_in_chunks(tmp_path) -> None:  # noqa: ANN001
+    """StoreSink writes step records in chunks (STEPS_PER_WRITE steps, episode ends, close): the steps
+    table holds, per world-step, one row per agent with its team's observation, action and reward, as the
+    env handed them over (MemorySink keeps the same calls)."""
+    from tracelab.store.reader import open_run
+    from tracelab.store.sink import StoreSink
+    from tracelab.store.writer import TraceWriter
+
+    memory = MemorySink()
+    play_vector(memory, 150)
+    writer = TraceWriter(tmp_path / "run", {"command": "pytest", "scenario": "advanced"})
+    play_vector(StoreSink(writer), 150)  # the env closes the sink and the writer
+    got = open_run(tmp_path / "run").execute(
+        "SELECT episode, step, t, agent, action, reward, obs FROM steps ORDER BY episode, step, agent").fetchall()
+    want = []
+    agents = ["blue-agent-1", "red-agent-1"]  # sorted, as the query orders them
+    for chunk in memory.step_chunks:
+        for i in range(len(chunk["world"])):
+            for team, name in ((1, agents[0]), (0, agents[1])):
+                want.append((int(chunk["episode"][i]), int(chunk["t"][i]), int(chunk["t"][i]), name,
+                             int(chunk["actions"][i, team, 0]), float(chunk["rewards"][i, team, 0]),
+                             chunk["obs"][i, team].tolist()))
+    want.sort(key=lambda r: (r[0], r[1], r[3]))
+    assert len(got) == len(want) > 300
+    for g, w in zip(got, want):
+        assert g[:6] == w[:6] and np.allclose(g[6], w[6]), (g[:6], w[:6])

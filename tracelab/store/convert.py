@@ -208,9 +208,10 @@ def json_text(value: Any) -> str | None:
     return None if value is None else json.dumps(value, sort_keys=True, default=str)
 
 
-def steps_table(episode: int, arrays: Mapping[str, Any]) -> pa.Table:
+def steps_table(episode: int | np.ndarray, arrays: Mapping[str, Any]) -> pa.Table:
     """Per-step rows: `step`, `action`, `reward` (arrays of one length, or scalars) and optionally
-    `agent` (str or array of str), `t`, `terminated`, `truncated`, `obs` (2-D: one row per step row)."""
+    `agent` (str or array of str), `t`, `terminated`, `truncated`, `obs` (2-D: one row per step row).
+    `episode`: the rows' episode, or an array with each row's."""
     for req in ("step", "action", "reward"):
         if req not in arrays:
             raise KeyError(f"steps need a {req!r} column (got {sorted(arrays)})")
@@ -243,8 +244,11 @@ def steps_table(episode: int, arrays: Mapping[str, Any]) -> pa.Table:
     agents = [str(agent)] * n if agent.ndim == 0 else [str(a) for a in agent]
     if len(agents) != n:
         raise ValueError(f"step column 'agent' has {len(agents)} rows, expected {n}")
+    episodes = np.asarray(episode, dtype=np.int64)
+    if episodes.ndim and len(episodes) != n:
+        raise ValueError(f"steps' episode array has {len(episodes)} rows, expected {n}")
     return pa.Table.from_arrays([
-        pa.array(np.full(n, episode, dtype=np.int64)), pa.array(col("step", np.int32, 0)),
+        pa.array(np.full(n, episodes) if episodes.ndim == 0 else episodes), pa.array(col("step", np.int32, 0)),
         pa.array(col("t", np.int32, -1)), pa.array(agents, type=pa.string()),
         pa.array(col("action", np.int32, 0)), pa.array(col("reward", np.float64, 0.0)),
         pa.array(col("terminated", np.bool_, False)), pa.array(col("truncated", np.bool_, False)),

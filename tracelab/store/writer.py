@@ -245,10 +245,10 @@ class TraceWriter:
         self.write_vocabulary(engine.vocabulary() if grown else None, engine.groundings)
         return self.write_changes(episode, engine.take_trace())
 
-    def write_steps(self, episode: int, arrays: Mapping[str, Any]) -> int:
+    def write_steps(self, episode: int | np.ndarray, arrays: Mapping[str, Any]) -> int:
         """Per-step rows (see convert.steps_table): step, action, reward [, agent, t, terminated,
-        truncated, obs]. Returns the number of rows."""
-        table = convert.steps_table(int(episode), arrays)
+        truncated, obs], of one episode or (an int array) each row's own. Returns the number of rows."""
+        table = convert.steps_table(episode, arrays)
         self._append({"steps": table})
         return table.num_rows
 

@@ -188,7 +188,7 @@ class EvalSink(StoreSink):
             super().end_episode(world, run_ep, steps, outcome, rewards)
 
     def close(self) -> None:
-        pass
+        self.write_steps()  # the writer stays open: it is the run's
 
 
 class EvalTrace:
