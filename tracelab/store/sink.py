@@ -9,21 +9,25 @@ import numpy as np
 from tracelab.store.writer import TraceWriter
 
 
-# Step records are written in chunks of this many env steps (and at every episode end and at close):
-# an Arrow table per step cost more than the simulator's step (docs/benchmarks.md).
+# What the env streams is written in chunks: every this many env steps, and at close (an Arrow table per
+# step, or per episode at one world, cost more than the simulator's step: docs/benchmarks.md).
 STEPS_PER_WRITE = 64
 
 
 class StoreSink:
     """Writes everything an env streams (program, vocabulary, change rows, steps, episodes) to `writer`.
-    The env owns the sink: env.close() closes the writer. Step records are kept until STEPS_PER_WRITE
-    steps wait, an episode ends (its steps are written before its end) or the sink closes."""
+    The env owns the sink: env.close() closes the writer. Change rows, step records and episode ends are
+    kept until STEPS_PER_WRITE steps wait or the sink closes (`write_pending`), then written in that
+    order, so a reader of the run never sees an ended episode without its rows; episode begins are
+    written at once."""
 
     def __init__(self, writer: TraceWriter) -> None:
         self.writer = writer
         self._engine: Any = None
         self._agents: list[str] = []
+        self._changes: list[dict[str, np.ndarray]] = []
         self._steps: list[tuple[np.ndarray, ...]] = []  # (episode, t, obs, actions, rewards) per env step
+        self._ends: list[tuple[int, int, str, Mapping[str, float]]] = []
 
     def begin_run(self, engine: Any, scenario: Any) -> None:
         self._engine = engine
@@ -37,36 +41,41 @@ class StoreSink:
 
     def changes(self, rows: dict[str, np.ndarray], episode_of_world: np.ndarray,
                 t0_of_world: np.ndarray) -> None:
-        if self._engine is not None:  # atoms and groundings the rows name must be written first
-            self.writer.write_vocabulary(self._engine.vocabulary(), self._engine.groundings)
-        self.writer.write_changes(None, {k: v for k, v in rows.items() if k != "world_episode"})
+        self._changes.append({k: v for k, v in rows.items() if k != "world_episode"})
 
     def step(self, world: np.ndarray, episode: np.ndarray, t: np.ndarray, obs: np.ndarray,
              actions: np.ndarray, rewards: np.ndarray) -> None:
         # the env hands over new arrays (sinks.py), so they are kept as they are
         self._steps.append((episode, t, obs, actions, rewards))
         if len(self._steps) >= STEPS_PER_WRITE:
-            self.write_steps()
-
-    def write_steps(self) -> None:
-        """The step records kept so far, as one table: a row per agent, with its team's observation."""
-        if not self._steps:
-            return
-        episode, t, obs, actions, rewards = (np.concatenate(c) for c in zip(*self._steps))
-        self._steps = []
-        m = len(self._agents)  # both teams' agents, red first
-        self.writer.write_steps(np.repeat(episode, m), {
-            "step": np.repeat(t, m), "t": np.repeat(t, m), "agent": np.tile(self._agents, len(t)),
-            "action": actions.reshape(-1), "reward": rewards.reshape(-1),
-            "obs": np.repeat(obs, m // 2, axis=1).reshape(len(t) * m, -1)})
+            self.write_pending()
 
     def end_episode(self, world: int, episode: int, steps: int, outcome: str,
                     rewards: Mapping[str, float]) -> None:
-        self.write_steps()  # an ended episode has all its steps
-        # episode-local time: the last step's t is the number of steps (t_start is 0)
-        self.writer.end_episode(int(episode), steps=int(steps), outcome=outcome, t_end=int(steps),
-                                reward=float(rewards.get("red", 0.0)), rewards=rewards)
+        self._ends.append((int(episode), int(steps), outcome, dict(rewards)))
+
+    def write_pending(self) -> None:
+        """Write what is kept: the vocabulary the rows name, the change rows, the step records (a row per
+        agent, with its team's observation), then the episode ends."""
+        if self._changes:
+            if self._engine is not None:  # atoms and groundings the rows name must be written first
+                self.writer.write_vocabulary(self._engine.vocabulary(), self._engine.groundings)
+            chunks, self._changes = self._changes, []
+            self.writer.write_changes(None, {k: np.concatenate([c[k] for c in chunks]) for k in chunks[0]})
+        if self._steps:
+            episode, t, obs, actions, rewards = (np.concatenate(c) for c in zip(*self._steps))
+            self._steps = []
+            m = len(self._agents)  # both teams' agents, red first
+            self.writer.write_steps(np.repeat(episode, m), {
+                "step": np.repeat(t, m), "t": np.repeat(t, m), "agent": np.tile(self._agents, len(t)),
+                "action": actions.reshape(-1), "reward": rewards.reshape(-1),
+                "obs": np.repeat(obs, m // 2, axis=1).reshape(len(t) * m, -1)})
+        ends, self._ends = self._ends, []
+        for episode, steps, outcome, rewards in ends:
+            # episode-local time: the last step's t is the number of steps (t_start is 0)
+            self.writer.end_episode(episode, steps=steps, outcome=outcome, t_end=steps,
+                                    reward=float(rewards.get("red", 0.0)), rewards=rewards)
 
     def close(self) -> None:
-        self.write_steps()
+        self.write_pending()
         self.writer.close()

@@ -188,7 +188,7 @@ class EvalSink(StoreSink):
             super().end_episode(world, run_ep, steps, outcome, rewards)
 
     def close(self) -> None:
-        self.write_steps()  # the writer stays open: it is the run's
+        self.write_pending()  # the writer stays open: it is the run's
 
 
 class EvalTrace:
@@ -208,6 +208,7 @@ class EvalTrace:
             return play_games(self.env, policy, np.ones(self.games, np.int64), seed)
         finally:
             self.sink.accept(None)
+            self.sink.write_pending()  # this evaluation's games reach the run now, not with the next
 
     def close(self) -> None:
         self.env.close()
