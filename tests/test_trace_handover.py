@@ -111,3 +111,11 @@ def test_the_store_gets_every_step_record_in_chunks(tmp_path) -> None:  # noqa: 
     assert len(got) == len(want) > 300
     for g, w in zip(got, want):
         assert g[:6] == w[:6] and np.allclose(g[6], w[6]), (g[:6], w[:6])
+    # ends are written in chunks, but each keeps the time its episode ended: before the next one began
+    times = open_run(tmp_path / "run").execute(
+        "SELECT world, started_at, ended_at FROM episodes ORDER BY world, episode").fetchall()
+    assert len(times) > 6
+    for (w0, s0, e0), (w1, s1, _) in zip(times, times[1:]):
+        assert s0 <= e0
+        if w0 == w1:
+            assert e0 <= s1, (w0, s0, e0, s1)

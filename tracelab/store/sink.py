@@ -6,6 +6,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from tracelab.store.convert import utc_now
 from tracelab.store.writer import TraceWriter
 
 
@@ -27,7 +28,7 @@ class StoreSink:
         self._agents: list[str] = []
         self._changes: list[dict[str, np.ndarray]] = []
         self._steps: list[tuple[np.ndarray, ...]] = []  # (episode, t, obs, actions, rewards) per env step
-        self._ends: list[tuple[int, int, str, Mapping[str, float]]] = []
+        self._ends: list[dict[str, Any]] = []  # writer.end_episodes' rows, ended_at when they ended
 
     def begin_run(self, engine: Any, scenario: Any) -> None:
         self._engine = engine
@@ -52,7 +53,10 @@ class StoreSink:
 
     def end_episode(self, world: int, episode: int, steps: int, outcome: str,
                     rewards: Mapping[str, float]) -> None:
-        self._ends.append((int(episode), int(steps), outcome, dict(rewards)))
+        # episode-local time: the last step's t is the number of steps (t_start is 0)
+        self._ends.append({"episode": int(episode), "steps": int(steps), "outcome": outcome, "t_end": int(steps),
+                           "reward": float(rewards.get("red", 0.0)), "rewards": dict(rewards),
+                           "ended_at": utc_now()})
 
     def write_pending(self) -> None:
         """Write what is kept: the vocabulary the rows name, the change rows, the step records (a row per
@@ -70,11 +74,9 @@ class StoreSink:
                 "step": np.repeat(t, m), "t": np.repeat(t, m), "agent": np.tile(self._agents, len(t)),
                 "action": actions.reshape(-1), "reward": rewards.reshape(-1),
                 "obs": np.repeat(obs, m // 2, axis=1).reshape(len(t) * m, -1)})
-        ends, self._ends = self._ends, []
-        for episode, steps, outcome, rewards in ends:
-            # episode-local time: the last step's t is the number of steps (t_start is 0)
-            self.writer.end_episode(episode, steps=steps, outcome=outcome, t_end=steps,
-                                    reward=float(rewards.get("red", 0.0)), rewards=rewards)
+        if self._ends:
+            ends, self._ends = self._ends, []
+            self.writer.end_episodes(ends)
 
     def close(self) -> None:
         self.write_pending()

@@ -207,7 +207,8 @@ class TraceWriter:
 
     def end_episodes(self, episodes: Sequence[Mapping[str, Any]]) -> None:
         """end_episode for many episodes in one table (dicts with episode, steps, outcome and optionally
-        reward, rewards, t_end, info). Triggers a flush."""
+        reward, rewards, t_end, info, and ended_at: when the episode ended, if not now; a UTC datetime
+        without tzinfo, convert.utc_now()). Triggers a flush."""
         rows, now = [], convert.utc_now()
         for e in episodes:
             episode = int(e["episode"])
@@ -219,7 +220,7 @@ class TraceWriter:
             rows.append({"episode": episode, "steps": int(e["steps"]), "t_end": e.get("t_end"),
                          "outcome": str(e["outcome"]), "reward": None if reward is None else float(reward),
                          "rewards": convert.json_text(dict(rewards) if rewards is not None else None),
-                         "ended_at": now, "info": convert.json_text(e.get("info"))})
+                         "ended_at": e.get("ended_at") or now, "info": convert.json_text(e.get("info"))})
         if rows:
             self._append({"episode_end": pa.Table.from_pylist(rows, schema=SCHEMAS["episode_end"])},
                          urgent=True)
