@@ -30,7 +30,7 @@ from tracelab.viewers.tui.source import RunSource  # noqa: E402
 from tracelab.viewers.tui.sql import SqlPane, locate_error  # noqa: E402
 from tracelab.viewers.tui.trace import TracePane, parse_range  # noqa: E402
 from tracelab.viewers.tui.why import WhyPane  # noqa: E402
-from tui_helpers import loaded, pick_saved_query, run_app, wait_for  # noqa: E402
+from tui_helpers import episodes_ready, loaded, pick_saved_query, run_app, wait_for  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 ADVANCED = ROOT / "sample_runs" / "advanced"
@@ -73,7 +73,7 @@ def live_run(mode: str, tmp_path: Path) -> Iterator[Path]:
 
 async def open_first_trace(app: Any, pilot: Any) -> tuple[TracePane, LazyTable]:
     """From the Episodes view, Enter on the first episode; its trace's first page on screen."""
-    await wait_for(pilot, lambda: loaded(app.screen.query_one("#ep-table", LazyTable)))
+    await episodes_ready(app, pilot)
     await pilot.press("enter")
     pane = app.screen.query_one(TracePane)
     await wait_for(pilot, lambda: pane.table.count > 0 and loaded(pane.table))
@@ -195,8 +195,7 @@ def test_time_ranges_and_error_positions_are_read() -> None:
 
 def test_open_a_run_go_to_an_episode_filter_by_rule_and_explain_a_death() -> None:
     async def body(app: Any, pilot: Any) -> None:
-        episodes = app.screen.query_one("#ep-table", LazyTable)
-        await wait_for(pilot, lambda: loaded(episodes))
+        episodes = await episodes_ready(app, pilot)
         text = await shown_once(app, pilot, lambda t: "loss" in t and "win" in t)  # rows drawn after loading
         assert "1 Episodes" in text and "loss" in text and "win" in text
         assert episodes.count == 3 and episodes.cursor_row["episode"] == 0
@@ -258,8 +257,7 @@ def test_next_and_previous_change_of_the_selected_atom_and_jump_to_a_step() -> N
 
 def test_episodes_sort_and_filter_by_outcome_and_length() -> None:
     async def body(app: Any, pilot: Any) -> None:
-        table = app.screen.query_one("#ep-table", LazyTable)
-        await wait_for(pilot, lambda: loaded(table))
+        table = await episodes_ready(app, pilot)
         pane = app.screen.query_one("EpisodesPane")
         pane.sort_key, pane.sort_desc = "steps", True
         pane.reload()
@@ -285,7 +283,7 @@ def test_sql_console_saved_query_inline_error_and_write_refused() -> None:
     before = ADVANCED.joinpath("run.duckdb").read_bytes()
 
     async def body(app: Any, pilot: Any) -> None:
-        await wait_for(pilot, lambda: loaded(app.screen.query_one("#ep-table", LazyTable)))
+        await episodes_ready(app, pilot)
         await pilot.press("5")
         await wait_for(pilot, lambda: app.screen.panes["sql"].is_attached)
         sql: SqlPane = app.screen.panes["sql"]
@@ -318,7 +316,7 @@ def test_sql_console_saved_query_inline_error_and_write_refused() -> None:
 
 def test_rules_view_counts_firings_and_lists_rules_that_never_fired() -> None:
     async def body(app: Any, pilot: Any) -> None:
-        await wait_for(pilot, lambda: loaded(app.screen.query_one("#ep-table", LazyTable)))
+        await episodes_ready(app, pilot)
         await pilot.press("4")
         await wait_for(pilot, lambda: app.screen.panes["rules"].is_attached)
         table = app.screen.panes["rules"].query_one(LazyTable)
@@ -380,7 +378,7 @@ def test_training_curve_updates_while_another_process_appends_metrics(tmp_path: 
 
 def test_escape_cancels_a_running_query() -> None:
     async def body(app: Any, pilot: Any) -> None:
-        await wait_for(pilot, lambda: loaded(app.screen.query_one("#ep-table", LazyTable)))
+        await episodes_ready(app, pilot)
         await pilot.press("5")
         await wait_for(pilot, lambda: app.screen.panes["sql"].is_attached)
         sql: SqlPane = app.screen.panes["sql"]
@@ -446,7 +444,7 @@ def test_the_trace_of_a_live_episode_grows_and_keeps_its_cursor(tmp_path: Path) 
     with live_run("trace", tmp_path) as run:
         async def body(app: Any, pilot: Any) -> None:
             episodes = app.screen.query_one("#ep-table", LazyTable)
-            await wait_for(pilot, lambda: loaded(episodes) and episodes.count == 1)
+            await wait_for(pilot, lambda: loaded(episodes) and episodes.count == 1 and app.focused is episodes)
             await pilot.press("enter")
             pane = app.screen.query_one(TracePane)
             trace = pane.table
@@ -511,7 +509,7 @@ def test_next_and_previous_evaluation_game_from_the_trace_of_a_training_run() ->
     first_game = f"eval game 1/3 · round 0 · train step {first_step} · opponent p=0.3 · {rows[0][2]}, {rows[0][3]} steps"
 
     async def body(app: Any, pilot: Any) -> None:
-        await wait_for(pilot, lambda: loaded(app.screen.query_one("#ep-table", LazyTable)))
+        await episodes_ready(app, pilot)
         await pilot.press("enter")                                   # episode 0: a training episode,
         pane = app.screen.query_one(TracePane)                       # not traced
         trace = pane.table

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from tui_helpers import loaded, pick_saved_query, run_app, wait_for
+from tui_helpers import episodes_ready, loaded, pick_saved_query, run_app, wait_for
 
 from tracelab.viewers.tui.lazy_table import LazyTable
 from tracelab.viewers.tui.trace import TracePane
@@ -72,7 +72,7 @@ def test_run_screens_snapshots(run: str) -> None:
 
     async def body(app: Any, pilot: Any) -> None:
         shots = Snapshots(app, pilot, run)
-        await wait_for(pilot, lambda: loaded(app.screen.query_one("#ep-table", LazyTable)))
+        await episodes_ready(app, pilot)
         await shots.take("episodes")
 
         await pilot.press("enter")                                   # the first episode's trace

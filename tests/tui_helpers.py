@@ -27,6 +27,14 @@ def loaded(table: LazyTable) -> bool:
     return table.ready and table.idle and (table.count == 0 or table.cursor_row is not None)
 
 
+async def episodes_ready(app: Any, pilot: Any) -> LazyTable:
+    """The run's Episodes table loaded and focused: keys pressed before the focus lands (the app sets it
+    after a refresh, late on a loaded machine) would go nowhere."""
+    table = app.screen.query_one("#ep-table", LazyTable)
+    await wait_for(pilot, lambda: loaded(table) and app.focused is table)
+    return table
+
+
 def run_app(paths: list[Path], body: Callable[[Any, Any], Any], size: tuple[int, int] = (80, 24)) -> None:
     async def go() -> None:
         app = TracelabApp(paths)
