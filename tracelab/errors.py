@@ -19,6 +19,7 @@ class UserError(ValueError):
 # (module, class names): user errors of other parts of tracelab and of DuckDB
 _FOREIGN = (
     ("tracelab.engine.errors", ("ProgramError", "InconsistencyError", "FixpointError")),
+    ("tracelab.engine.safe_files", ("FileRefused",)),
     ("tracelab.game.scenario", ("ScenarioError",)),
     ("duckdb", ("Error",)),
 )

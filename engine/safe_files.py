@@ -1,0 +1,106 @@
+"""Reading files that may come from a stranger (a run, a policy, a checkpoint, a rule file, a graph, a
+cache entry): only regular files, never through a symbolic link where the caller says so, never more
+bytes than a cap, and never a hang.
+
+Why each guard:
+- A FIFO, a socket or a device opened for reading blocks (a FIFO waits for a writer forever) or never
+  ends (/dev/zero). Files are opened with O_NONBLOCK, so that opening a FIFO returns at once, and the
+  open descriptor is checked with fstat: the check and the read are of the same file, whatever is
+  renamed in between.
+- A symbolic link can point anywhere; the store refuses them inside a run (`follow_symlinks=False`,
+  O_NOFOLLOW), while a path the user typed may be a link they made.
+- A size cap is checked while reading, not from stat, so a file that grows as it is read is bounded too.
+
+This module sits in the lowest layer (the engine reads rule files and graphs) and imports nothing of
+tracelab's; `tracelab.errors` reports its error as a one-line user error."""
+from __future__ import annotations
+
+import errno
+import json
+import os
+import stat
+from pathlib import Path
+from typing import IO, Any
+
+MIB = 1 << 20
+JSON_CAP = 8 * MIB  # run metadata, manifests, policy descriptions: a few KB to a few hundred KB in practice
+
+
+class FileRefused(ValueError):
+    """A file that tracelab will not read (not a regular file, a symbolic link, too big, malformed JSON).
+    The message is one line and starts with the file's path."""
+
+
+def _kind(mode: int) -> str:
+    for test, name in ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a named pipe (FIFO)"),
+                       (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a character device"),
+                       (stat.S_ISBLK, "a block device"), (stat.S_ISLNK, "a symbolic link")):
+        if test(mode):
+            return name
+    return "not a regular file"
+
+
+def human_bytes(n: int) -> str:
+    for unit, size in (("GiB", 1 << 30), ("MiB", MIB), ("KiB", 1 << 10)):
+        if n >= size:
+            return f"{n / size:.3g} {unit}"
+    return f"{n} bytes"
+
+
+def open_regular(path: str | os.PathLike[str], *, follow_symlinks: bool = True) -> IO[bytes]:
+    """Open a regular file for reading in binary mode; FileRefused for anything else (FileNotFoundError
+    and PermissionError pass through as they are)."""
+    flags = os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC | (0 if follow_symlinks else os.O_NOFOLLOW)
+    try:
+        fd = os.open(path, flags)
+    except OSError as e:
+        if e.errno == errno.ELOOP and not follow_symlinks:
+            raise FileRefused(f"{path}: is a symbolic link; refused") from None
+        raise
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            raise FileRefused(f"{path}: is {_kind(mode)}, not a regular file; refused")
+        os.set_blocking(fd, True)
+        return os.fdopen(fd, "rb")
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+def check_regular(path: str | os.PathLike[str], *, follow_symlinks: bool = True) -> Path:
+    """Refuse a path that is not a regular file before handing it to a library that opens it itself
+    (DuckDB, pyarrow, torch); returns it as a Path."""
+    open_regular(path, follow_symlinks=follow_symlinks).close()
+    return Path(path)
+
+
+def read_bytes(path: str | os.PathLike[str], max_bytes: int, *, what: str = "file",
+               follow_symlinks: bool = True) -> bytes:
+    """The whole file, refused past `max_bytes` (`what` names the kind of file in the message)."""
+    with open_regular(path, follow_symlinks=follow_symlinks) as f:
+        data = f.read(max_bytes + 1)
+    if len(data) > max_bytes:
+        raise FileRefused(f"{path}: larger than {human_bytes(max_bytes)}, the limit for a {what}; refused")
+    return data
+
+
+def read_text(path: str | os.PathLike[str], max_bytes: int, *, what: str = "file",
+              follow_symlinks: bool = True) -> str:
+    data = read_bytes(path, max_bytes, what=what, follow_symlinks=follow_symlinks)
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise FileRefused(f"{path}: not UTF-8 text (byte 0x{data[e.start]:02x} at offset {e.start})") from None
+
+
+def read_json(path: str | os.PathLike[str], max_bytes: int = JSON_CAP, *, what: str = "JSON file",
+              follow_symlinks: bool = True) -> Any:
+    """A JSON document, bounded in size; malformed or too deeply nested JSON is one located line."""
+    text = read_text(path, max_bytes, what=what, follow_symlinks=follow_symlinks)
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as e:
+        raise FileRefused(f"{path}:{e.lineno}:{e.colno}: not valid JSON: {e.msg}") from None
+    except RecursionError:
+        raise FileRefused(f"{path}: JSON nested too deeply; refused") from None
