@@ -1,24 +1,49 @@
 """tracelab.engine: a temporal annotated-logic engine (generalized annotated programs with delays and
 immediate rules), compiled with numba, batched over worlds, with a columnar trace of every change.
-The language and its semantics: docs/language.md."""
-from .annotations import register_annotation
-from .core import STAT_NAMES, TRACE_COLUMNS, Engine
-from .errors import (
-    FixpointError,
-    InconsistencyError,
-    ProgramCheckError,
-    ProgramError,
-    RuleSyntaxError,
-)
-from .facttable import load_fact_table
-from .graph import Graph, load_graphml
-from .grounding import GroundingTable
-from .kernel import CAUSE_EXTERNAL, CAUSE_FACT, CAUSE_POLICY, CAUSE_RESET, CAUSE_RULE
-from .parser import check_program, load_program, parse_literal, parse_program
+The language and its semantics: docs/language.md.
 
-__all__ = [
-    "Engine", "register_annotation", "GroundingTable", "TRACE_COLUMNS", "STAT_NAMES",
-    "CAUSE_FACT", "CAUSE_EXTERNAL", "CAUSE_RULE", "CAUSE_POLICY", "CAUSE_RESET",
-    "parse_program", "load_program", "parse_literal", "check_program", "load_graphml", "load_fact_table", "Graph",
-    "ProgramError", "RuleSyntaxError", "ProgramCheckError", "InconsistencyError", "FixpointError",
-]
+The names below are imported on first use (PEP 562): importing a light submodule such as
+`tracelab.engine.safe_files` (which the store and the CLI use) must not import numba and the kernels."""
+
+import importlib  # no `from __future__ import annotations` here: it would bind the name `annotations`,
+                  # which `from . import annotations` (the submodule) would then find instead
+from typing import TYPE_CHECKING, Any
+
+# public name -> the submodule that defines it
+_EXPORTS = {
+    "register_annotation": "annotations",
+    "Engine": "core", "STAT_NAMES": "core", "TRACE_COLUMNS": "core",
+    "FixpointError": "errors", "InconsistencyError": "errors", "ProgramCheckError": "errors",
+    "ProgramError": "errors", "RuleSyntaxError": "errors",
+    "load_fact_table": "facttable",
+    "Graph": "graph", "load_graphml": "graph",
+    "GroundingTable": "grounding",
+    "CAUSE_EXTERNAL": "kernel", "CAUSE_FACT": "kernel", "CAUSE_POLICY": "kernel", "CAUSE_RESET": "kernel",
+    "CAUSE_RULE": "kernel",
+    "check_program": "parser", "load_program": "parser", "parse_literal": "parser", "parse_program": "parser",
+}
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value  # later look-ups skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))
+
+
+if TYPE_CHECKING:  # for type checkers and editors: the same names, imported eagerly
+    from .annotations import register_annotation
+    from .core import STAT_NAMES, TRACE_COLUMNS, Engine
+    from .errors import FixpointError, InconsistencyError, ProgramCheckError, ProgramError, RuleSyntaxError
+    from .facttable import load_fact_table
+    from .graph import Graph, load_graphml
+    from .grounding import GroundingTable
+    from .kernel import CAUSE_EXTERNAL, CAUSE_FACT, CAUSE_POLICY, CAUSE_RESET, CAUSE_RULE
+    from .parser import check_program, load_program, parse_literal, parse_program
