@@ -3,9 +3,10 @@
 One folder per key under the cache root: the generated module (`kernel.py`), numba's cache files for it
 (`__pycache__/`, written by `cache=True` on the first call) and `ready.json`, written once a process has
 compiled and run the kernel. The key is a hash of what determines the generated source (the program's
-folded values, the whole of engine/kernel.py and of codegen.py) and of the versions of tracelab, numba,
-llvmlite, numpy, Python and the CPU architecture: an upgrade or an edit of any of them makes a new key,
-never a stale kernel. Old keys are never read again; deleting the root is always safe.
+folded values, the whole of engine/kernel.py and of codegen.py) and of the cache's format and the
+versions of tracelab, numba, llvmlite, numpy, Python and the CPU architecture: an upgrade or an edit of
+any of them makes a new key, never a stale kernel. Old keys are never read again; deleting the root is
+always safe.
 
 Threat model. Whoever can write into this user's own private folders can run code as the user anyway, so
 the protection against other people is the folders: the root is created 0700 (made 0700 when found looser)
@@ -46,6 +47,9 @@ from .codegen import GENERATOR_VERSION, Specialisation, fingerprint, generate
 from .safe_files import MIB, FileRefused, open_regular, read_json
 
 CACHE_ENV = "TRACELAB_CACHE_DIR"
+# part of every key: bump when what an entry holds or how it is checked changes, so that a tracelab of
+# another format never reads (or writes a bytecode file into) this one's entries. 2: ready.json digests
+CACHE_FORMAT = 2
 READY_CAP = MIB  # ready.json: versions and one digest per numba file, a few KB
 _LOADED: dict[Path, ModuleType] = {}  # one module object per entry folder and process
 _HELD: dict[Path, int] = {}           # entry locks this process holds: how deep (the lock is re-entrant)
@@ -81,7 +85,7 @@ def _version(dist: str) -> str:
 def versions() -> dict[str, str]:
     """Everything besides the source that decides whether a compiled kernel can be reused (looked up
     once per process: each metadata.version reads the installed packages' metadata)."""
-    return {"generator": str(GENERATOR_VERSION), "tracelab": _version("tracelab"), "numba": _version("numba"),
+    return {"generator": str(GENERATOR_VERSION), "cache_format": str(CACHE_FORMAT), "tracelab": _version("tracelab"), "numba": _version("numba"),
             "llvmlite": _version("llvmlite"), "numpy": _version("numpy"), "python": sys.version.split()[0],
             "machine": platform.machine()}
 
