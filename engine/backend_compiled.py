@@ -16,7 +16,7 @@ import numpy as np
 from .backend_api import EngineTables
 from .backend_counting import CountingState
 from .codegen import GenerationError, Specialisation
-from .compile_cache import CacheEntry
+from .compile_cache import CacheEntry, CacheRefused, EntryRejected
 from .program import Fact, Literal, Program, Rule
 
 # the fields of the program objects this backend knows; a program that sets any other field (a language
@@ -65,26 +65,55 @@ def cache_entry(eng: EngineTables) -> CacheEntry:
     return CacheEntry(Specialisation.of(eng._cfg, eng._rule_i, eng._rule_f))
 
 
+_AFTER_REMOVAL = {"compile": "it is compiled again now (about a minute)",
+                  "build": "it is compiled again in the background",
+                  "skip": "this run uses the counting kernel (`tracelab compile` builds it again)"}
+_SAID: set[str] = set()  # notices said once per process
+
+
+def _notice(text: str) -> None:
+    print(f"tracelab: notice: {text}", file=sys.stderr)
+
+
 def compiled_backend(eng: EngineTables, program: Program, uncached: str
                      ) -> tuple["CompiledState | None", str | None, CacheEntry | None]:
     """The compiled backend for eng, or None and why not (a notice), and the cache entry still to build.
     `uncached` says what to do when the cache lacks this program's kernel: "skip" (kernel="auto": None,
     silently), "compile" (the backend, whose first step compiles) or "build" (None and the entry, for a
-    background compile). A program the backend cannot take gets a one-line notice on stderr and None
-    (the caller runs the counting kernel), unless `uncached` is "skip"."""
+    background compile). A program the backend cannot take, or a cache that cannot be used, gets a
+    one-line notice on stderr and None (the caller runs the counting kernel), unless `uncached` is "skip".
+    A cache entry that fails its checks (compile_cache.py) is removed with a one-line notice, then
+    treated as not cached."""
     why = unsupported(program)
     if why is None:
-        entry = cache_entry(eng)
-        if not entry.ready and uncached != "compile":
-            return None, None, entry if uncached == "build" else None
         try:
-            return CompiledState(eng, entry), None, None
-        except GenerationError as e:
+            return _from_cache(eng, cache_entry(eng), uncached)
+        except (GenerationError, CacheRefused, EntryRejected) as e:
             why = str(e)
     if uncached == "skip":
         return None, None, None
     notice = f"kernel 'compiled' not used: {why}; running on the counting kernel"
-    print(f"tracelab: notice: {notice}", file=sys.stderr)
+    _notice(notice)
+    return None, notice, None
+
+
+def _from_cache(eng: EngineTables, entry: CacheEntry, uncached: str
+                ) -> tuple["CompiledState | None", str | None, CacheEntry | None]:
+    if entry.ignored and entry.ignored not in _SAID:  # another user's entry: said once, not used
+        _SAID.add(entry.ignored)
+        _notice(f"kernel cache: {entry.ignored}")
+    notice = None
+    if entry.ready or uncached == "compile":
+        try:
+            return CompiledState(eng, entry), None, None
+        except EntryRejected as e:  # its files are removed: the entry is now simply not cached
+            notice = (f"kernel 'compiled': the cached kernel failed its check: {e}; removed it, "
+                      f"{_AFTER_REMOVAL[uncached]}")
+            _notice(notice)
+        if uncached == "compile":
+            return CompiledState(eng, entry), None, None
+    if uncached == "build":
+        return None, None, entry
     return None, notice, None
 
 
@@ -114,8 +143,9 @@ class CompiledState(CountingState):
     def step(self, ext_ptr: np.ndarray, ext_i: np.ndarray, ext_f: np.ndarray) -> int:
         if self._ready:
             return super().step(ext_ptr, ext_i, ext_f)
-        t0 = time.perf_counter()  # the first call compiles (or loads numba's cache) and runs one step
-        status = super().step(ext_ptr, ext_i, ext_f)
-        self.entry.mark_ready(round(time.perf_counter() - t0, 3))
+        with self.entry.compiling():  # numba's files checked (or none) before its first call reads them
+            t0 = time.perf_counter()  # the first call compiles (or loads numba's cache) and runs one step
+            status = super().step(ext_ptr, ext_i, ext_f)
+            self.entry.mark_ready(round(time.perf_counter() - t0, 3))
         self._ready = True
         return status

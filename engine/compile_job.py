@@ -3,13 +3,14 @@ or in a background process while a run goes on on the counting kernel.
 
 Both take the same path, `compile_program`: build the Engine with kernel="compiled" and step it once (its
 first step compiles the generated module with numba, whose `cache=True` writes the machine code beside it).
-A compile holds an exclusive lock on its cache directory, so two runs asking for the same kernel at once
-compile it once: the second waits, then finds it cached. Every file of an entry is written to a temporary
-name and then linked (kernel.py, never replaced) or renamed (numba's index and data, ready.json), so a
-reader never loads half of one.
+A compile holds an exclusive lock on its cache entry (CacheEntry.locked), so two runs asking for the same
+kernel at once compile it once: the second waits, then finds it cached. Every file of an entry is written to
+a temporary name and then linked (kernel.py, never replaced) or renamed (numba's index and data,
+ready.json), so a reader never loads half of one; compile_cache.py checks an entry before it is used.
 
-The background process is `python -m tracelab.engine.compile_job PROGRAM.pickle KEY`: it reads the
-program pickled by `start`, compiles it, and prints one JSON line (the times) as the last line of its
+The background process is `python -m tracelab.engine.compile_job KEY`: it reads the program pickled by
+`start` from its stdin (a pipe from the parent, so no pickle file sits anywhere another process could
+replace: unpickling runs code), compiles it, and prints one JSON line (the times) as the last line of its
 log, `<entry>/compile.<pid>.<ns>.log` (removed once the kernel is ready; kept when it fails). It runs in
 its own session, so a Ctrl-C of the run does not stop it: a run that ends first leaves it to finish, and
 the next run finds the kernel via kernel="auto".
@@ -17,18 +18,18 @@ the next run finds the kernel via kernel="auto".
 from __future__ import annotations
 
 import dataclasses
-import fcntl
 import json
 import os
 import pickle
 import subprocess
 import sys
+import threading
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from pathlib import Path
+from typing import IO
 
-from .compile_cache import CacheEntry
+from .compile_cache import CacheEntry, CacheRefused, EntryRejected, create_private
 from .program import Program
 
 
@@ -42,14 +43,6 @@ class CompileOutcome:
 
 class CompileRefused(Exception):
     """The compiled backend does not take this program (the message says why)."""
-
-
-@contextmanager
-def _locked(entry: CacheEntry) -> Iterator[None]:
-    entry.dir.mkdir(parents=True, exist_ok=True)
-    with open(entry.dir / "compile.lock", "a") as f:
-        fcntl.flock(f, fcntl.LOCK_EX)  # released when the file closes (or the process dies)
-        yield
 
 
 def compile_program(program: Program, announce: Callable[[CacheEntry, bool], None] | None = None,
@@ -66,7 +59,7 @@ def compile_program(program: Program, announce: Callable[[CacheEntry, bool], Non
     entry = engine._state.entry
     if expect_key is not None and entry.key != expect_key:  # another interpreter or library version
         raise CompileRefused(f"this process computes kernel {entry.key}, the run asked for {expect_key}")
-    with _locked(entry):
+    with entry.locked():
         cached = entry.ready  # after waiting for another compile of the same kernel, it usually is
         if announce is not None:
             announce(entry, cached)
@@ -117,6 +110,11 @@ class BackgroundCompile:
         except ValueError:
             self.result = {}
         if self.proc.returncode == 0 and self.entry.ready:
+            try:
+                self.entry.load()  # checked here: an entry that fails is a failed compile, not an error mid-run
+            except (EntryRejected, CacheRefused) as e:
+                self.status, self.why = "failed", str(e)
+                return
             self.status = "ready"
             self.log.unlink(missing_ok=True)
         else:
@@ -141,17 +139,26 @@ def start(program: Program, entry: CacheEntry) -> tuple[BackgroundCompile, bool]
     job = _JOBS.get(entry.dir)
     if job is not None and job.poll() != "failed":
         return job, False
-    entry.dir.mkdir(parents=True, exist_ok=True)
-    tag = f"{os.getpid()}.{time.monotonic_ns()}"
-    pickled = entry.dir / f"program.{tag}.pickle"
-    pickled.write_bytes(pickle.dumps(program))
-    log = entry.dir / f"compile.{tag}.log"
-    with open(log, "w") as out:
-        proc = subprocess.Popen([sys.executable, "-m", "tracelab.engine.compile_job", str(pickled), entry.key],
-                                stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT,
+    entry.prepare()
+    log = entry.dir / f"compile.{os.getpid()}.{time.monotonic_ns()}.log"
+    with os.fdopen(create_private(log), "w") as out:
+        proc = subprocess.Popen([sys.executable, "-m", "tracelab.engine.compile_job", entry.key],
+                                stdin=subprocess.PIPE, stdout=out, stderr=subprocess.STDOUT,
                                 start_new_session=True)
+    assert proc.stdin is not None
+    # written by a thread: a program bigger than the pipe's buffer would block this run until the child
+    # has imported the engine and reads it
+    threading.Thread(target=_hand_over, args=(proc.stdin, pickle.dumps(program)), daemon=True).start()
     job = _JOBS[entry.dir] = BackgroundCompile(entry, proc, log)
     return job, True
+
+
+def _hand_over(pipe: IO[bytes], data: bytes) -> None:
+    try:
+        pipe.write(data)
+        pipe.close()
+    except OSError:  # the child died first: its exit status and log say why
+        pass
 
 
 def running() -> list[BackgroundCompile]:
@@ -167,12 +174,10 @@ def say_running_compiles() -> None:
 
 
 def main(argv: list[str]) -> int:
-    """The child: compile the pickled program; the last line of output is the outcome as JSON."""
-    pickled, key = Path(argv[0]), argv[1]
-    try:
-        program = pickle.loads(pickled.read_bytes())
-    finally:
-        pickled.unlink(missing_ok=True)
+    """The child: compile the program pickled on stdin by `start` (its parent); the last line of output
+    is the outcome as JSON."""
+    key = argv[0]
+    program = pickle.loads(sys.stdin.buffer.read())
     print(f"compiling {len(program.rules)} rules (kernel {key})", flush=True)
     try:
         outcome = compile_program(program, expect_key=key)
