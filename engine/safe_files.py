@@ -47,12 +47,15 @@ def human_bytes(n: int) -> str:
     return f"{n} bytes"
 
 
-def open_regular(path: str | os.PathLike[str], *, follow_symlinks: bool = True) -> IO[bytes]:
-    """Open a regular file for reading in binary mode; FileRefused for anything else (FileNotFoundError
-    and PermissionError pass through as they are)."""
-    flags = os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC | (0 if follow_symlinks else os.O_NOFOLLOW)
+def open_regular(path: str | os.PathLike[str], *, follow_symlinks: bool = True,
+                 create: bool = False) -> IO[bytes]:
+    """Open a regular file for reading in binary mode (`create`: for reading and writing, created if
+    missing, as a lock file is); FileRefused for anything else (FileNotFoundError and PermissionError
+    pass through as they are)."""
+    flags = (os.O_RDWR | os.O_CREAT if create else os.O_RDONLY) | os.O_NONBLOCK | os.O_CLOEXEC \
+        | (0 if follow_symlinks else os.O_NOFOLLOW)
     try:
-        fd = os.open(path, flags)
+        fd = os.open(path, flags, 0o644)
     except OSError as e:
         if e.errno == errno.ELOOP and not follow_symlinks:
             raise FileRefused(f"{path}: is a symbolic link; refused") from None
@@ -62,7 +65,7 @@ def open_regular(path: str | os.PathLike[str], *, follow_symlinks: bool = True) 
         if not stat.S_ISREG(mode):
             raise FileRefused(f"{path}: is {_kind(mode)}, not a regular file; refused")
         os.set_blocking(fd, True)
-        return os.fdopen(fd, "rb")
+        return os.fdopen(fd, "r+b" if create else "rb")
     except BaseException:
         os.close(fd)
         raise

@@ -39,10 +39,10 @@ def run(args: argparse.Namespace) -> int:
     from tracelab.viewers.replay.recording import ReplayOptions, RunContext
     from tracelab.viewers.replay.replay import follow_run, replay_run
     from tracelab.viewers.replay.rules_layer import parse_lanes
-    from tracelab.viewers.replay.select import EpisodeFilter, parse_episodes
+    from tracelab.viewers.replay.select import EpisodeFilter, EpisodeIds, parse_episodes
 
     with store_errors():
-        ids = (args.episode,) if args.episode is not None else \
+        ids = EpisodeIds.of(args.episode) if args.episode is not None else \
             parse_episodes(args.episodes) if args.episodes else None
         f = EpisodeFilter(ids, args.outcome, args.limit)
         name = resolve_run(args.run).name.removesuffix(".duckdb")

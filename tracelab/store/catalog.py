@@ -6,6 +6,7 @@ through the store's read-only query path (open_run + query_readonly), never by o
 from __future__ import annotations
 
 import datetime as _dt
+import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -68,8 +69,9 @@ def _parse_time(value: Any) -> _dt.datetime | None:
 
 
 def is_run(path: Path) -> bool:
-    """A run directory (it has meta.json) or a lone .duckdb file."""
-    return (path.is_dir() and layout.meta_path(path).is_file()) or (
+    """A run directory (it has a meta.json: whatever it is, a broken one is listed as unreadable) or a
+    lone .duckdb file."""
+    return (path.is_dir() and os.path.lexists(path / layout.META)) or (
         path.is_file() and path.suffix == ".duckdb")
 
 
@@ -97,12 +99,12 @@ def _disk_size(path: Path) -> int:
     if path.is_file():
         return path.stat().st_size
     total = 0
-    for p in path.rglob("*"):
-        try:
-            if p.is_file():
-                total += p.stat().st_size
-        except OSError:  # a part deleted by compaction while we walked
-            pass
+    for folder, _, files in os.walk(path):  # links are not followed: the run's own bytes
+        for name in files:
+            try:
+                total += os.lstat(os.path.join(folder, name)).st_size
+            except OSError:  # a part deleted by compaction while we walked
+                pass
     return total
 
 

@@ -15,7 +15,7 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from tracelab.store import layout
-from tracelab.store.meta import read_meta, take_writer_lock
+from tracelab.store.meta import open_writer_lock, read_meta, take_writer_lock
 from tracelab.store.parts import (
     manifest_flushes,
     read_manifest,
@@ -25,8 +25,6 @@ from tracelab.store.parts import (
 )
 from tracelab.store.reader import STORED_COLUMNS, _sealed_file, open_run, resolve_run
 from tracelab.store.schema import SCHEMAS
-
-QUARANTINE = "quarantine"
 
 
 @dataclass
@@ -102,7 +100,7 @@ def verify_part(path: Path, table: str) -> tuple[int, str | None]:
 def _check_parts(run_dir: Path, report: CheckReport) -> dict[str, list[str]]:
     """Fill report.parts/rows/damaged; return the manifest's entries without the damaged parts."""
     keep: dict[str, list[str]] = {}
-    parts_dir = (run_dir / layout.PARTS).resolve()
+    parts_dir = run_dir.resolve() / layout.PARTS
     for table, files in read_manifest(run_dir).items():
         keep[table] = []
         for path in files:
@@ -149,13 +147,15 @@ def check_run(run: str | Path, *, repair: bool = False) -> CheckReport:
     if not repair:
         _check_parts(run_dir, report)
         return report
-    with open(layout.lock_path(run_dir), "a+") as lock:
+    with open_writer_lock(run_dir) as lock:
         take_writer_lock(run_dir, lock, doc, "repairing it")
         keep = _check_parts(run_dir, report)
-        for part in report.damaged:
-            target = run_dir / QUARANTINE / part.path.relative_to(layout.PARTS)
-            target.parent.mkdir(parents=True, exist_ok=True)
-            if (run_dir / part.path).exists():
+        # every target checked (no link on the way out of the run) before anything moves
+        targets = [layout.run_path(run_dir, layout.QUARANTINE, part.table, part.path.name)
+                   for part in report.damaged]
+        for part, target in zip(report.damaged, targets):
+            layout.make_run_dirs(run_dir, layout.QUARANTINE, part.table)
+            if os.path.lexists(run_dir / part.path):
                 os.replace(run_dir / part.path, target)
             report.quarantined.append(target.relative_to(run_dir))
         if report.damaged:

@@ -13,12 +13,14 @@ import platform
 import socket
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
 import pyarrow as pa
 
+from tracelab.engine.safe_files import FileRefused, open_regular, read_json
 from tracelab.store import layout
 
 FORMAT = "tracelab-run/1"
@@ -86,35 +88,108 @@ def write_meta(run_dir: Path, doc: dict[str, Any]) -> None:
     layout.replace_atomically(data, layout.meta_path(run_dir))
 
 
+def _int64(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool) and -(1 << 63) <= v < (1 << 63)
+
+
+def _time(v: Any) -> bool:
+    if not isinstance(v, str) or not v:
+        return False
+    try:
+        _ts(v)
+    except (ValueError, OverflowError):
+        return False
+    return True
+
+
+def _text(v: Any) -> bool:
+    return isinstance(v, str)
+
+
+def _texts(v: Any) -> bool:
+    return isinstance(v, list) and all(isinstance(x, str) for x in v)
+
+
+def _rule_files(v: Any) -> bool:
+    return isinstance(v, list) and all(
+        isinstance(f, dict) and isinstance(f.get("path"), str) and isinstance(f.get("sha256"), str) for f in v)
+
+
+def _nullable(check: Callable[[Any], bool]) -> Callable[[Any], bool]:
+    return lambda v: v is None or check(v)
+
+
+# What each field of meta.json must hold (a field may be absent: runs of earlier versions lack some).
+# Checked when the file is read: a run from elsewhere is refused with one line naming the key, instead
+# of failing later in whatever code uses the value.
+META_FIELDS: dict[str, tuple[Callable[[Any], bool], str]] = {
+    "format": (lambda v: v == FORMAT, repr(FORMAT)),
+    "run_id": (_text, "a string"),
+    "command": (_text, "a string"),
+    "config": (lambda v: isinstance(v, dict), "an object"),
+    "scenario": (_nullable(_text), "a string or null"),
+    "rule_files": (_rule_files, 'a list of {"path": string, "sha256": string} objects'),
+    "seed": (_nullable(_int64), "a 64-bit integer or null"),
+    "versions": (lambda v: isinstance(v, dict) and all(isinstance(x, str) for x in v.values()),
+                 "an object of strings"),
+    "started_at": (_time, "an ISO 8601 time"),
+    "ended_at": (_nullable(_time), "an ISO 8601 time or null"),
+    "status": (lambda v: v in STATUSES, "one of " + ", ".join(STATUSES)),
+    "pid": (_nullable(_int64), "a 64-bit integer or null"),
+    "host": (_nullable(_text), "a string or null"),
+    "argv": (_texts, "a list of strings"),
+    "sealed_at": (_nullable(_time), "an ISO 8601 time or null"),
+}
+
+
+def shown(value: Any, width: int = 40) -> str:
+    """A JSON value for an error message, cut to `width` characters."""
+    text = json.dumps(value, default=str)
+    return text if len(text) <= width else text[: width - 3] + "..."
+
+
+def check_meta(doc: Any, path: Path) -> dict[str, Any]:
+    """meta.json's document, checked against META_FIELDS (FileRefused naming the file and key)."""
+    if not isinstance(doc, dict):
+        raise FileRefused(f"{path}: expected a JSON object, got {shown(doc)}")
+    for key, (ok, expected) in META_FIELDS.items():
+        if key in doc and not ok(doc[key]):
+            raise FileRefused(f"{path}: key {key!r}: expected {expected}, got {shown(doc[key])}")
+    return doc
+
+
 def read_meta(run_dir: Path) -> dict[str, Any]:
     path = layout.meta_path(run_dir)
     try:
-        return json.loads(path.read_text())
+        doc = read_json(path, what="run's meta.json", follow_symlinks=False)
     except FileNotFoundError:
         raise FileNotFoundError(f"{str(run_dir)!r} is not a tracelab run: it has no {layout.META}") from None
-    except json.JSONDecodeError as e:
-        raise ValueError(f"{str(path)!r} is not valid JSON: {e}") from None
+    return check_meta(doc, path)
+
+
+def open_writer_lock(run_dir: Path) -> IO[bytes]:
+    """The run's writer.lock, created if missing, to take the lock on: a regular file of the run, never
+    through a link (which would create a file wherever it points), never a FIFO."""
+    return open_regular(layout.lock_path(run_dir), follow_symlinks=False, create=True)
 
 
 def writer_holds_lock(run_dir: Path) -> bool:
     """Whether a process (a writer, or seal) holds the run's writer lock now. Probes with a shared lock
     taken and released at once on a read-only descriptor; never creates the lock file."""
     try:
-        fd = os.open(layout.lock_path(run_dir), os.O_RDONLY)
+        lock = open_regular(layout.lock_path(run_dir), follow_symlinks=False)
     except FileNotFoundError:
         return False
-    try:
+    with lock:
         try:
-            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+            fcntl.flock(lock, fcntl.LOCK_SH | fcntl.LOCK_NB)
         except BlockingIOError:
             return True
-        fcntl.flock(fd, fcntl.LOCK_UN)
+        fcntl.flock(lock, fcntl.LOCK_UN)
         return False
-    finally:
-        os.close(fd)
 
 
-def take_writer_lock(run_dir: Path, lock: IO[str], doc: dict[str, Any], doing: str) -> None:
+def take_writer_lock(run_dir: Path, lock: IO[bytes], doc: dict[str, Any], doing: str) -> None:
     """Take the run's writer lock or raise RuntimeError naming the writer. Retried for a moment: readers
     probe the lock (a shared lock held for microseconds) to tell a live run from a crashed one."""
     for attempt in range(10):

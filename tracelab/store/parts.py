@@ -3,7 +3,8 @@
 Layout of parts/:
   <table>/00000042.parquet ...   immutable parts (temp name, then rename; a file never changes once named)
   manifest.json                  for every table, the parts that hold its rows now (replaced atomically)
-Readers query exactly the files the manifest lists, never a directory listing: DuckDB lists a glob's
+Readers query exactly the files the manifest lists (each a plain file name of its table's folder, listed
+once, a regular file: read_manifest checks them), never a directory listing: DuckDB lists a glob's
 directory and then stats each entry, so a listing taken while parts were being merged could silently
 drop rows (seen: a reader got only the big parts of a table, without the part they had just been merged
 into). One manifest for all tables also gives a reader one consistent moment across tables.
@@ -17,13 +18,17 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import time
-from pathlib import Path, PurePosixPath
+from pathlib import Path
+from typing import Any
 
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from tracelab.engine.safe_files import FileRefused, check_regular, read_json
 from tracelab.store import layout
+from tracelab.store.meta import shown
 from tracelab.store.schema import SCHEMAS
 
 ROW_GROUP_ROWS = 131_072
@@ -39,7 +44,7 @@ class TableParts:
             raise ValueError(f"compact_files must be >= 2, got {compact_files}")
         self.table = table
         self.schema = SCHEMAS[table]
-        self.root = layout.table_dir(run_dir, table)
+        self.root = layout.make_run_dirs(run_dir, layout.PARTS, table)
         self.part_rows = part_rows
         self.compact_files = compact_files
         self.grace_seconds = grace_seconds
@@ -51,7 +56,6 @@ class TableParts:
         self.rows_published = 0
         self.files_written = 0
         self.compactions = 0
-        self.root.mkdir(parents=True, exist_ok=True)
         # An empty first part, so that every table has a file that carries its schema.
         self._add(self._write(self.schema.empty_table()), 0)
 
@@ -63,10 +67,8 @@ class TableParts:
     def _write(self, table: pa.Table) -> str:
         name = layout.part_name(self._next_file)
         self._next_file += 1
-        final = self.root / name
-        tmp = layout.tmp_name(final)
-        pq.write_table(table, tmp, compression=self.compression, row_group_size=ROW_GROUP_ROWS)
-        os.replace(tmp, final)
+        with layout.new_file(self.root / name) as f:
+            pq.write_table(table, f, compression=self.compression, row_group_size=ROW_GROUP_ROWS)
         self.files_written += 1
         return name
 
@@ -115,72 +117,94 @@ def write_manifest_lists(run_dir: Path, files: dict[str, list[str]], flushes: in
 
 
 def manifest_flushes(run_dir: Path) -> int:
-    """How many flushes the manifest records (read_manifest has checked the rest)."""
-    return int(json.loads(layout.manifest_path(run_dir).read_text()).get("flushes", 0))
+    """How many flushes the manifest records."""
+    return read_manifest_doc(run_dir)["flushes"]
 
 
 def write_empty_part(run_dir: Path, table: str) -> str:
     """A new part with no rows (it carries the table's schema), named after the table's highest part;
     returns its manifest entry."""
-    directory = layout.table_dir(run_dir, table)
-    numbers = [int(p.stem) for p in directory.glob(f"*{layout.PART_SUFFIX}") if p.stem.isdigit()]
-    final = directory / layout.part_name(max(numbers, default=-1) + 1)
-    tmp = layout.tmp_name(final)
-    pq.write_table(SCHEMAS[table].empty_table(), tmp)
-    os.replace(tmp, final)
+    directory = layout.make_run_dirs(run_dir, layout.PARTS, table)
+    stems = [name[: -len(layout.PART_SUFFIX)] for name in os.listdir(directory)
+             if name.endswith(layout.PART_SUFFIX)]
+    final = directory / layout.part_name(max((int(s) for s in stems if s.isdigit()), default=-1) + 1)
+    with layout.new_file(final) as f:
+        pq.write_table(SCHEMAS[table].empty_table(), f)
     return f"{table}/{final.name}"
 
 
-def read_manifest(run_dir: Path) -> dict[str, list[Path]]:
-    """For every table, the absolute paths of the parts that hold its rows now. Refuses a manifest that
-    names other tables or files outside parts/."""
+# A manifest entry: `<table>/<file name>` (how parts are written: `rules/00000003.parquet`). A plain name,
+# so DuckDB reads that one file: no folder, no glob character (DuckDB expands globs in a file list), no '..'.
+_PART_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*" + re.escape(layout.PART_SUFFIX))
+
+
+def read_manifest_doc(run_dir: Path) -> dict[str, Any]:
+    """parts/manifest.json, checked: its format, `flushes` a count, and for exactly the store's tables a
+    list of plain part names of the table's folder, each listed once (FileRefused naming the key)."""
     path = layout.manifest_path(run_dir)
     try:
-        doc = json.loads(path.read_text())
+        doc = read_json(path, what="parts manifest", follow_symlinks=False)
     except FileNotFoundError:
         raise FileNotFoundError(f"{str(run_dir)!r} has no {layout.PARTS}/{layout.MANIFEST}: not a "
                                 "tracelab run directory, or one whose writer died while creating it") from None
+    if not isinstance(doc, dict):
+        raise FileRefused(f"{path}: expected a JSON object, got {type(doc).__name__}")
     if doc.get("format") != MANIFEST_FORMAT:
-        raise ValueError(f"{str(path)!r}: unknown manifest format {doc.get('format')!r}")
-    base = path.parent.resolve()
-    if base != run_dir.resolve() / layout.PARTS:
-        raise ValueError(f"{str(path.parent)!r} is a link to {str(base)!r}: a run's parts/ must be a "
-                         "directory inside the run")
+        raise FileRefused(f"{path}: key 'format': unknown manifest format {shown(doc.get('format'))}")
+    flushes = doc.setdefault("flushes", 0)
+    if not isinstance(flushes, int) or isinstance(flushes, bool) or not 0 <= flushes < 1 << 63:
+        raise FileRefused(f"{path}: key 'flushes': expected a count, got {shown(flushes)}")
     tables = doc.get("tables")
     if not isinstance(tables, dict) or set(tables) != set(SCHEMAS) \
             or not all(isinstance(files, list) for files in tables.values()):
-        raise ValueError(f"{str(path)!r}: 'tables' must list the parts of exactly the tables "
-                         f"{', '.join(SCHEMAS)}")
-    return {name: [_part_path(path, base, f) for f in tables[name]] for name in SCHEMAS}
+        raise FileRefused(f"{path}: key 'tables' must list the parts of exactly the tables "
+                          f"{', '.join(SCHEMAS)}")
+    for table, entries in tables.items():
+        seen: set[str] = set()
+        for i, entry in enumerate(entries):
+            where = f"{path}: key 'tables.{table}[{i}]'"
+            table_of, _, name = entry.partition("/") if isinstance(entry, str) else ("", "", "")
+            if table_of != table or not _PART_NAME.fullmatch(name):
+                raise FileRefused(f"{where} is {shown(entry)}: a part must be a plain file name in the run's "
+                                  f"parts/{table}/ directory, like '{table}/{layout.part_name(3)}' (no "
+                                  "folders, globs or '..')")
+            if entry in seen:
+                raise FileRefused(f"{where}: {entry!r} is listed twice")
+            seen.add(entry)
+    return doc
 
 
-def _part_path(manifest: Path, base: Path, entry: object) -> Path:
-    """A manifest entry as an absolute path, refused unless it names a file inside parts/: a relative
-    path without '..' that, symlinks resolved, stays there (a run from elsewhere must not make a reader
-    open other files)."""
-    if not isinstance(entry, str) or not entry or entry.startswith("/") or "\\" in entry \
-            or ".." in PurePosixPath(entry).parts:
-        raise ValueError(f"{str(manifest)!r} lists {entry!r}: parts must be relative paths inside the "
-                         "run's parts/ directory")
-    full = base / entry
-    if not full.resolve().is_relative_to(base):
-        raise ValueError(f"{str(manifest)!r} lists {entry!r}, a link to {str(full.resolve())!r} outside "
-                         "the run's parts/ directory")
-    return full
+def read_manifest(run_dir: Path) -> dict[str, list[Path]]:
+    """For every table, the absolute paths of the parts that hold its rows now (read_manifest_doc's
+    checks; each part, if it exists, a regular file reached through no link: a FIFO would hang DuckDB)."""
+    doc = read_manifest_doc(run_dir)
+    root = Path(run_dir).resolve()
+    out: dict[str, list[Path]] = {}
+    for table in SCHEMAS:
+        out[table] = []
+        for entry in doc["tables"][table]:
+            part = layout.run_path(root, layout.PARTS, table, entry.partition("/")[2])
+            try:
+                check_regular(part, follow_symlinks=False)
+            except FileNotFoundError:
+                pass  # `check` reports a missing part as damaged; a query says which file it lacks
+            out[table].append(part)
+    return out
 
 
 def remove_unlisted(run_dir: Path) -> int:
     """Delete the parts the manifest does not list: merged parts a killed writer had not yet removed and
     parts written after its last manifest (only while holding the writer lock: a live writer's retired
     parts are still being read). Returns how many bytes were freed."""
-    listed = {f.resolve() for files in read_manifest(run_dir).values() for f in files}
+    listed = {table: {p.name for p in files} for table, files in read_manifest(run_dir).items()}
     freed = 0
     for table in SCHEMAS:
         directory = layout.table_dir(run_dir, table)
-        if directory.is_symlink() or not directory.is_dir():
+        if not directory.is_dir():
             continue
-        for part in directory.glob(f"*{layout.PART_SUFFIX}"):
-            if part.resolve() not in listed and not part.is_symlink():
-                freed += part.stat().st_size
-                part.unlink()
+        for entry in os.scandir(directory):
+            if entry.name.endswith(layout.PART_SUFFIX) and entry.name not in listed[table] \
+                    and entry.is_file(follow_symlinks=False):
+                freed += entry.stat(follow_symlinks=False).st_size
+                os.unlink(entry.path)
     return freed

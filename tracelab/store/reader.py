@@ -18,6 +18,7 @@ views over its stored tables. Either way the user-facing views (tracelab.store.s
 same."""
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -27,6 +28,7 @@ from typing import Any, TypeVar
 import duckdb
 import pyarrow as pa
 
+from tracelab.engine.safe_files import JSON_CAP, check_regular, read_bytes
 from tracelab.store import layout
 from tracelab.store.meta import current_meta, meta_table
 from tracelab.store.parts import read_manifest
@@ -68,15 +70,15 @@ def _sql_str(s: str | Path) -> str:
 
 
 def _sealed_file(p: Path) -> Path | None:
-    """The run's sealed DuckDB file, if it has one; refused if it is a link leaving the run."""
-    if p.is_file():
-        return p
+    """The run's sealed DuckDB file, if it has one: the lone file the user named, or the run's
+    run.duckdb (a regular file of the run, not a link: layout.run_path). Anything else is refused
+    before DuckDB opens it: a FIFO would hang it."""
+    if not p.is_dir():
+        return check_regular(p)
     s = layout.sealed_path(p)
-    if not s.is_symlink() and not s.exists():
+    if not os.path.lexists(s):
         return None
-    if not s.resolve().is_relative_to(p.resolve()):
-        raise ValueError(f"{str(s)!r} is a link to {str(s.resolve())!r}, outside the run")
-    return s
+    return check_regular(s, follow_symlinks=False)
 
 
 def run_info(run: str | Path) -> RunInfo:
@@ -112,7 +114,6 @@ class LiveRunConnection:
     def __init__(self, con: duckdb.DuckDBPyConnection, run_dir: Path) -> None:
         self._con = con
         self._run_dir = run_dir
-        self._manifest = layout.manifest_path(run_dir)
         self._seen = b""
         self._status: str | None = None
         self.refresh()
@@ -120,7 +121,8 @@ class LiveRunConnection:
     def refresh(self) -> None:
         """Bring the views up to the manifest's latest flush and raw.run up to the run's status (cheap
         when nothing changed)."""
-        raw = self._manifest.read_bytes()
+        raw = read_bytes(layout.manifest_path(self._run_dir), JSON_CAP, what="parts manifest",
+                         follow_symlinks=False)
         if raw != self._seen:
             for table, files in read_manifest(self._run_dir).items():
                 self._con.execute(f"SET VARIABLE {_parts_variable(table)} = ?", [[str(f) for f in files]])
@@ -158,10 +160,11 @@ def open_run(run: str | Path) -> RunConnection:
     try:
         if sealed is not None:
             _attach_sealed(con, sealed)
+            _check_run_row(con, sealed)
             result: RunConnection = con
         else:
             current_meta(p)  # a directory without meta.json is not a run: say so first
-            _refuse_links(p / layout.PARTS)
+            _refuse_links(layout.parts_dir(p))
             lock_down(con, [str(p.resolve() / layout.PARTS) + "/"])
             con.execute("CREATE SCHEMA raw")
             result = LiveRunConnection(con, p.resolve())  # sets the variables the views read, and raw.run
@@ -181,15 +184,22 @@ def open_run(run: str | Path) -> RunConnection:
 
 
 def _refuse_links(parts: Path) -> None:
-    """A live run's parts/ is readable by queries (DuckDB checks paths, not where links lead): refuse a
-    run that keeps a symbolic link anywhere in it."""
-    if parts.is_symlink():
-        raise ValueError(f"{str(parts)!r} is a link to {str(parts.resolve())!r}: a run's parts/ must be a "
-                         "directory inside the run")
+    """A live run's parts/ is readable by queries (DuckDB checks paths, not where links lead, and a FIFO
+    would hang the query that names it): refuse a run that keeps anything in it but folders and
+    regular files."""
     for entry in parts.rglob("*"):
         if entry.is_symlink():
-            raise ValueError(f"{str(entry)!r} is a symbolic link: tracelab does not open a run whose "
-                             "parts/ holds links (they could point anywhere)")
+            raise layout.refused_link(entry)
+        if not (entry.is_dir() or entry.is_file()):
+            check_regular(entry, follow_symlinks=False)  # FileRefused naming what it is
+
+
+def _check_run_row(con: duckdb.DuckDBPyConnection, sealed: Path) -> None:
+    """raw.run is the run's one metadata row: every reader of the run takes it for granted."""
+    (rows,) = con.execute("SELECT count(*) FROM raw.run").fetchone()
+    if rows != 1:
+        raise ValueError(f"{sealed}: raw.run holds {rows} rows, not the run's one metadata row: not a "
+                         "tracelab run, or a damaged one")
 
 
 def _attach_sealed(con: duckdb.DuckDBPyConnection, sealed: Path) -> None:

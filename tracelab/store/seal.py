@@ -11,8 +11,9 @@ import shutil
 from collections.abc import Callable
 from pathlib import Path
 
+from tracelab.engine.safe_files import check_regular
 from tracelab.store import layout
-from tracelab.store.meta import meta_table, now_iso, read_meta, take_writer_lock, write_meta
+from tracelab.store.meta import meta_table, now_iso, open_writer_lock, read_meta, take_writer_lock, write_meta
 from tracelab.store.parts import read_manifest, remove_unlisted
 from tracelab.store.reader import _create_table, resolve_run
 from tracelab.store.sandbox import lock_configuration, lock_down, sandbox_connection
@@ -28,42 +29,52 @@ def seal_run(run: str | Path, *, keep_parts: bool = False,
         raise ValueError(f"{str(run_dir)!r} is not a run directory (a lone .duckdb file is already sealed)")
     sealed = layout.sealed_path(run_dir)
     doc = read_meta(run_dir)
-    with open(layout.lock_path(run_dir), "a+") as lock:
+    with open_writer_lock(run_dir) as lock:
         take_writer_lock(run_dir, lock, doc, "sealing")
-        if not sealed.exists():
+        if os.path.lexists(sealed):
+            check_regular(sealed, follow_symlinks=False)  # the parts go only once the sealed file is one
+        else:
             # We hold the writer lock, so a run still marked 'running' lost its writer.
             status = "crashed" if doc.get("status") == "running" else doc.get("status", "finished")
+            parts = read_manifest(run_dir)  # checked before anything is deleted
             layout.remove_stale_temps(run_dir)
             remove_unlisted(run_dir)
-            _build(run_dir, sealed, {**doc, "status": status}, on_table)
+            _build(run_dir, sealed, parts, {**doc, "status": status}, on_table)
             doc.update(status=status, sealed_at=now_iso())
             write_meta(run_dir, doc)
         if not keep_parts:
-            shutil.rmtree(run_dir / layout.PARTS, ignore_errors=True)
+            shutil.rmtree(layout.parts_dir(run_dir), ignore_errors=True)
     return sealed
 
 
-def _build(run_dir: Path, sealed: Path, doc: dict, on_table: Callable[[str], None] | None = None) -> None:
-    tmp = layout.tmp_name(sealed)
-    for leftover in (tmp, Path(f"{tmp}.wal")):
-        leftover.unlink(missing_ok=True)
-    parts = read_manifest(run_dir)  # the last flush; parts it does not list were never published
-    # The sandbox's settings: the parts come from the run, which may come from anyone; this connection
-    # reads them and writes only its own (already open) file.
-    con = sandbox_connection(str(tmp))
+def _build(run_dir: Path, sealed: Path, parts: dict[str, list[Path]], doc: dict,
+           on_table: Callable[[str], None] | None = None) -> None:
+    """Build the sealed file from `parts` (the last flush; parts it does not list were never
+    published). DuckDB creates the file and its .wal itself, so it builds them in a folder made new
+    for it (mkdir fails if the name exists), where no file or link can be waiting, then the file is
+    renamed into place."""
+    work = layout.tmp_name(sealed)
+    os.mkdir(work, 0o700)
     try:
-        lock_down(con, [str(run_dir.resolve() / layout.PARTS) + "/"])
-        lock_configuration(con)
-        con.execute("CREATE SCHEMA raw")
-        for t in TABLES:
-            order = f" ORDER BY {SEAL_ORDER[t]}" if t in SEAL_ORDER else ""
-            con.execute(f"CREATE TABLE raw.{t} AS SELECT * FROM read_parquet(?){order}",
-                        [[str(f) for f in parts[t]]])
-            if on_table is not None:
-                on_table(t)
-        _create_table(con, "raw.run", meta_table(doc, doc["status"]))
-        con.execute(VIEWS_SQL)
-        con.execute("CHECKPOINT")
+        tmp = work / layout.SEALED
+        # The sandbox's settings: the parts come from the run, which may come from anyone; this
+        # connection reads them and writes only its own (already open) file.
+        con = sandbox_connection(str(tmp))
+        try:
+            lock_down(con, [str(run_dir.resolve() / layout.PARTS) + "/"])
+            lock_configuration(con)
+            con.execute("CREATE SCHEMA raw")
+            for t in TABLES:
+                order = f" ORDER BY {SEAL_ORDER[t]}" if t in SEAL_ORDER else ""
+                con.execute(f"CREATE TABLE raw.{t} AS SELECT * FROM read_parquet(?){order}",
+                            [[str(f) for f in parts[t]]])
+                if on_table is not None:
+                    on_table(t)
+            _create_table(con, "raw.run", meta_table(doc, doc["status"]))
+            con.execute(VIEWS_SQL)
+            con.execute("CHECKPOINT")
+        finally:
+            con.close()
+        os.replace(tmp, sealed)
     finally:
-        con.close()
-    os.replace(tmp, sealed)
+        shutil.rmtree(work, ignore_errors=True)

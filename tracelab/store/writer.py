@@ -28,7 +28,7 @@ import numpy as np
 import pyarrow as pa
 
 from tracelab.store import convert, layout
-from tracelab.store.meta import RunMeta, initial_meta, now_iso, write_meta
+from tracelab.store.meta import RunMeta, initial_meta, now_iso, open_writer_lock, write_meta
 from tracelab.store.parts import TableParts, write_manifest
 from tracelab.store.schema import SCHEMAS, TABLES
 
@@ -72,19 +72,19 @@ class TraceWriter:
                  compression: str = "zstd") -> None:
         self.run_dir = Path(run_dir)
         self._pid = os.getpid()
-        if layout.meta_path(self.run_dir).exists():
+        if os.path.lexists(layout.meta_path(self.run_dir)):
             raise FileExistsError(f"{str(self.run_dir)!r} already holds a run; choose a new run directory")
         if flush_interval <= 0 or part_rows <= 0:
             raise ValueError(f"flush_interval ({flush_interval}) and part_rows ({part_rows}) must be > 0")
         self.run_dir.mkdir(parents=True, exist_ok=True)
-        self._lock_file = open(layout.lock_path(self.run_dir), "a+")
+        self._lock_file = open_writer_lock(self.run_dir)
         try:
             fcntl.flock(self._lock_file, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             self._lock_file.close()
             raise RuntimeError(f"another process is writing {str(self.run_dir)!r}") from None
         self._lock_file.truncate(0)
-        self._lock_file.write(f"{os.getpid()}\n")
+        self._lock_file.write(f"{os.getpid()}\n".encode())
         self._lock_file.flush()
 
         self.flush_interval = flush_interval

@@ -13,26 +13,75 @@ _KIND = "json_extract_string(begin_info, '$.kind')"
 
 
 @dataclass(frozen=True)
+class EpisodeIds:
+    """Episode ids as inclusive ranges, never expanded: `--episodes 0-99999999999` is two numbers, and
+    what it names is checked against the run's own episodes (select_episodes)."""
+    ranges: tuple[tuple[int, int], ...]
+
+    @classmethod
+    def of(cls, *ids: int) -> "EpisodeIds":
+        return cls(tuple((i, i) for i in ids))
+
+    def __contains__(self, episode: object) -> bool:
+        return isinstance(episode, int) and any(lo <= episode <= hi for lo, hi in self.ranges)
+
+    def missing(self, found: list[int], shown: int = 5) -> list[str]:
+        """The first `shown` runs of ids these ranges name that are not in `found` (sorted ids of the
+        run inside the ranges), as '7' or '13-99999999999'; bounded by the run, not by the ranges."""
+        gaps: list[str] = []
+        for lo, hi in _merged(self.ranges):
+            at = lo
+            for e in (e for e in found if lo <= e <= hi):
+                if e > at:
+                    gaps.append(_span(at, e - 1))
+                at = e + 1
+            if at <= hi:
+                gaps.append(_span(at, hi))
+            if len(gaps) >= shown:
+                break
+        return gaps[:shown]
+
+
+@dataclass(frozen=True)
 class EpisodeFilter:
-    episodes: tuple[int, ...] | None = None   # explicit ids (--episode, --episodes)
+    episodes: EpisodeIds | None = None   # explicit ids (--episode, --episodes)
     outcome: str | None = None
     limit: int | None = None
 
 
-def parse_episodes(text: str) -> tuple[int, ...]:
-    """'3', '0-9', '1,4,7-9' -> episode ids, in order, without repeats."""
-    out: list[int] = []
+_MAX_ID = (1 << 63) - 1  # episode ids are BIGINT in the store
+
+
+def parse_episodes(text: str) -> EpisodeIds:
+    """'3', '0-9', '1,4,7-9' -> the ranges they name."""
+    ranges: list[tuple[int, int]] = []
     for part in text.split(","):
         part = part.strip()
         lo, dash, hi = part.partition("-")
         try:
-            ids = range(int(lo), int(hi) + 1) if dash else [int(part)]
+            first, last = int(lo), int(hi if dash else lo)
         except ValueError:
             raise ValueError(f"bad episode list {text!r}: expected ids and ranges like 0-9,12") from None
-        if dash and int(hi) < int(lo):
+        if not 0 <= first <= _MAX_ID or not 0 <= last <= _MAX_ID:
+            raise ValueError(f"bad episode id in {part!r}: ids are from 0 to {_MAX_ID}")
+        if last < first:
             raise ValueError(f"bad episode range {part!r}: the end is before the start")
-        out += [i for i in ids if i not in out]
-    return tuple(out)
+        ranges.append((first, last))
+    return EpisodeIds(tuple(ranges))
+
+
+def _merged(ranges: tuple[tuple[int, int], ...]) -> list[tuple[int, int]]:
+    out: list[tuple[int, int]] = []
+    for lo, hi in sorted(ranges):
+        if out and lo <= out[-1][1] + 1:
+            out[-1] = (out[-1][0], max(out[-1][1], hi))
+        else:
+            out.append((lo, hi))
+    return out
+
+
+def _span(lo: int, hi: int) -> str:
+    return str(lo) if lo == hi else f"{lo}-{hi}"
 
 
 def is_training_run(con: RunConnection) -> bool:
@@ -48,8 +97,9 @@ def select_episodes(con: RunConnection, f: EpisodeFilter, exclude: set[int] | No
     where = ["TRUE"]
     params: list[object] = []
     if f.episodes is not None:
-        where.append("episode IN (SELECT unnest(?))")
-        params.append(list(f.episodes))
+        where.append("EXISTS (SELECT 1 FROM (SELECT unnest(?) AS lo, unnest(?) AS hi) "
+                     "WHERE episode BETWEEN lo AND hi)")
+        params += [[lo for lo, _ in f.episodes.ranges], [hi for _, hi in f.episodes.ranges]]
     else:
         where.append("ended AND steps > 0")
         if is_training_run(con):
@@ -61,9 +111,9 @@ def select_episodes(con: RunConnection, f: EpisodeFilter, exclude: set[int] | No
                        params).fetchall()
     found = [e for (e,) in rows if not exclude or e not in exclude]
     if f.episodes is not None and f.outcome is None:
-        missing = sorted(set(f.episodes) - {e for (e,) in rows})
+        missing = f.episodes.missing([e for (e,) in rows])
         if missing:
             known = [e for (e,) in con.execute("SELECT episode FROM episodes ORDER BY 1 LIMIT 20").fetchall()]
-            raise ValueError(f"no episode {', '.join(map(str, missing))} in this run (episodes: "
+            raise ValueError(f"no episode {', '.join(missing)} in this run (episodes: "
                              f"{', '.join(map(str, known)) or 'none'}{' ...' if len(known) == 20 else ''})")
     return found[:f.limit] if f.limit is not None else found
