@@ -73,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
             if extra:
                 raise UserError(f"--resume continues the checkpoint's config; drop "
                                 f"{', '.join('--' + k.replace('_', '-') for k in extra)}")
-            state = load_checkpoint(args.resume)
+            state = load_checkpoint(args.resume, limit.bytes)
             cfg = dataclasses.replace(checkpoint_config(state), **given)
             scenario = checkpoint_scenario(state)
         else:
@@ -130,7 +130,8 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
     try:
         trainer = Trainer(cfg, scenario, writer, run_dir)
         if state is not None:
-            restore(trainer, state)
+            with store_errors():  # games that do not replay to their observations: another simulator
+                restore(trainer, state)
             print(f"resumed from {resumed_from} at step {trainer.step:,}", file=sys.stderr)
 
         def stop(signum: int, frame: Any) -> None:
