@@ -89,16 +89,16 @@ def _checkpoint_file(run: Path) -> Path:
     return f
 
 
-def _old_format_refusal(run: Path, f: Path) -> FileRefused:
-    """What to do with a checkpoint written before format 2: train anew, or use the run's policy."""
+def _refusal_with_a_way_on(run: Path, said: str) -> FileRefused:
+    """A checkpoint refused for what it would run: say so, and what the user can do instead (use the
+    run's policy, start a new run from its settings)."""
     policy = run / "policy"
     if (policy / "policy.json").is_file():
         instead = f"its policy still plays: tracelab eval {policy}, tracelab play --policy {policy}; to " \
                   f"train on, start a new run with tracelab train (its settings: tracelab show {run})"
     else:
         instead = f"start a new run with tracelab train (its settings: tracelab show {run})"
-    return FileRefused(f"{f}: a checkpoint of an older tracelab (format 1, holding numpy objects that only a "
-                       f"loader that runs code could read); refused: {instead}")
+    return FileRefused(f"{said}: {instead}")
 
 
 def load_checkpoint(run: str | Path, max_bytes: int | None = None) -> dict[str, Any]:
@@ -111,9 +111,9 @@ def load_checkpoint(run: str | Path, max_bytes: int | None = None) -> dict[str, 
     try:
         state = load_tensors(f, memory_limit().bytes if max_bytes is None else max_bytes)
     except CodeInFile as e:
-        if any(mark in e.pickled for mark in OLD_FORMATS):
-            raise _old_format_refusal(run, f) from None
-        raise
+        said = f"{f}: a checkpoint of an older tracelab (format 1, holding numpy objects that only a loader " \
+               f"that runs code could read); refused" if any(mark in e.pickled for mark in OLD_FORMATS) else str(e)
+        raise _refusal_with_a_way_on(run, said) from None
     try:
         check(state, {"format": Const(FORMAT), "config": config_schema(), "scenario_toml": str})
     except Mismatch as e:
