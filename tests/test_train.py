@@ -17,7 +17,6 @@ import torch
 
 from tracelab.cli import main
 from tracelab.commands.train import train_into
-from tracelab.game.scenario import Rewards, Scenario
 from tracelab.store import open_run, run_info
 from tracelab.store.why import explain, render_why
 from tracelab.train.checkpoint import checkpoint_path, load_checkpoint
@@ -26,15 +25,8 @@ from tracelab.train.learner import DQNLearner
 from tracelab.train.loop import Trainer
 from tracelab.train.network import Shape, to_state_dict
 from tracelab.train.policy import load_policy, read_policy_spec
+from train_helpers import SMALL, WALK
 
-# A 4x4 walk: red starts on its base (3,0) and wins by reaching blue's (0,3) in 6 moves; blue is a random
-# walker (opponent_p = 0), so the best policy almost always wins. Small rewards keep Q-values small.
-WALK = Scenario(name="walk4", width=4, height=4, red_base=(3, 0), blue_base=(0, 3), max_steps=30,
-                rewards=Rewards(win=10, loss=-10, valid_action=-0.1, unsafe=-1, invalid=-0.5, hit_opponent=0,
-                                got_shot=0))
-SMALL = dict(warmup=100, envs=4, batch=32, buffer=2000, target_every=100, log_every=100, eval_every=200,
-             eval_games=8, trace_eval_games=2, eval_envs=3, checkpoint_every=200, opponent_p=0.5, eval_p=0.3,
-             lr=3e-3)
 TRAINING_METRICS = {"loss", "epsilon", "q_max_mean", "env_steps_per_s", "updates_per_s", "train_return"}
 EVAL_METRICS = {f"eval/{k}" for k in ("games", "wins", "losses", "draws", "truncated", "win_rate", "mean_return",
                                        "method_win_rate")}

@@ -28,3 +28,19 @@ def positive_int(text: str) -> int:
 # Engine(kernel=...) choices, spelled out here so that parsers need not import the engine (numba) to list
 # them; tests/test_compiled_kernel.py checks them against tracelab.engine.core.KERNELS
 ENGINE_KERNELS = ("auto", "counting", "lanes", "compiled")
+
+
+_BYTE_UNITS = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
+
+
+def byte_size(text: str) -> int:
+    """A number of bytes: 2000000000, 500M, 8G, 1.5T (binary units; a trailing B or iB is allowed)."""
+    s = text.strip().upper().removesuffix("IB").removesuffix("B")
+    unit = s[-1:] if s[-1:] in _BYTE_UNITS else ""
+    try:
+        value = float(s[:len(s) - len(unit)]) * _BYTE_UNITS[unit]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a size such as 8G or 500M, got {text!r}") from None
+    if not value >= 1 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be at least 1 byte, got {text!r}")
+    return int(value)

@@ -19,7 +19,7 @@ RESUMABLE_FLAGS = {"threads", "kernel"}  # what --resume may change (the rest is
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from tracelab.commands._args import ENGINE_KERNELS
+    from tracelab.commands._args import ENGINE_KERNELS, byte_size
     from tracelab.train.config import config_fields
 
     p = sub.add_parser("train", help="train red with DQN, logging metrics, episodes and traced evaluation "
@@ -44,6 +44,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--resume", default=None, metavar="RUN",
                    help="continue RUN's last checkpoint (its config; the new run goes to --run, default "
                         "RUN-from-<step>)")
+    p.add_argument("--max-memory", type=byte_size, default=None, metavar="SIZE",
+                   help="refuse a run whose networks, replay buffers and worlds are estimated to need more "
+                        "(e.g. 12G; default: half of this machine's memory)")
     p.set_defaults(func=run)
 
 
@@ -58,8 +61,10 @@ def load_scenario_arg(text: str, agents: int | None = None) -> Any:
 
 def run(args: argparse.Namespace) -> int:
     from tracelab.train.config import TrainConfig
+    from tracelab.train.memory import check_training_memory, memory_limit
 
-    given = {k: v for k, v in vars(args).items() if k not in ("func", "command", "run", "resume")}
+    given = {k: v for k, v in vars(args).items() if k not in ("func", "command", "run", "resume", "max_memory")}
+    limit = memory_limit(args.max_memory, "--max-memory")
     state = None
     with store_errors():  # a bad value in the config or a checkpoint that does not load
         if args.resume:
@@ -68,12 +73,13 @@ def run(args: argparse.Namespace) -> int:
             if extra:
                 raise UserError(f"--resume continues the checkpoint's config; drop "
                                 f"{', '.join('--' + k.replace('_', '-') for k in extra)}")
-            state = load_checkpoint(args.resume)
+            state = load_checkpoint(args.resume, limit.bytes)
             cfg = dataclasses.replace(checkpoint_config(state), **given)
             scenario = checkpoint_scenario(state)
         else:
             cfg = TrainConfig(**given)
             scenario = load_scenario_arg(cfg.scenario, cfg.agents)
+        check_training_memory(cfg, scenario, limit)  # before anything is built
     if cfg.non_markov and not scenario.is_non_markov:
         print(f"note: scenario {scenario.name!r} has no slow agent: --non-markov only stacks the previous "
               f"observation", file=sys.stderr)
@@ -124,7 +130,8 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
     try:
         trainer = Trainer(cfg, scenario, writer, run_dir)
         if state is not None:
-            restore(trainer, state)
+            with store_errors():  # games that do not replay to their observations: another simulator
+                restore(trainer, state)
             print(f"resumed from {resumed_from} at step {trainer.step:,}", file=sys.stderr)
 
         def stop(signum: int, frame: Any) -> None:

@@ -5,7 +5,13 @@ three generators (exploration and sampling, torch, the opponent's), the step, an
 The simulators' worlds are not pickled: a rule engine's state is not meant to move between processes.
 Instead the checkpoint keeps, per world, the actions both teams played since its episode began, and a
 restore replays them into a fresh env: the game is deterministic given the actions, so the worlds come
-back exactly (the observation they end in is checked against the saved one)."""
+back exactly (the observation they end in is checked against the saved one).
+
+A checkpoint may come from a stranger (a run attached to a bug report), so it holds nothing but tensors
+and plain values (format 2: numpy arrays are saved as tensors), loads with torch's weights_only
+unpickler, and is checked against the shapes its own config implies before anything uses it. Format 1
+held numpy arrays, which only a full unpickler (one that runs whatever the file names) loads: it is
+refused, with what the user can do instead."""
 from __future__ import annotations
 
 import tomllib
@@ -15,15 +21,34 @@ from typing import Any
 import numpy as np
 import torch
 
+from tracelab.engine.safe_files import FileRefused
 from tracelab.game.scenario import NOTHING, RED, Scenario, scenario_from_dict
-from tracelab.train.config import TrainConfig
+from tracelab.schema import Const, IntRange, ListOf, MapOf, Mismatch, Nullable, Tuple, check
+from tracelab.train.config import TrainConfig, config_schema
+from tracelab.train.torch_files import CodeInFile, Tensor, load_tensors
 
 CHECKPOINT_DIR, CHECKPOINT_FILE = "checkpoint", "checkpoint.pt"
-FORMAT = "tracelab-dqn-checkpoint/1"
+FORMAT = "tracelab-dqn-checkpoint/2"
+OLD_FORMATS = (b"tracelab-dqn-checkpoint/1",)  # held numpy arrays: loadable only by running the pickle
+NUMPY_SECTIONS = ("games", "pending")  # saved from numpy arrays, given back as numpy (and each "buffer")
 
 
 def checkpoint_path(run_dir: Path) -> Path:
     return Path(run_dir) / CHECKPOINT_DIR / CHECKPOINT_FILE
+
+
+def _as_tensors(value: Any) -> Any:
+    """Our own state with numpy arrays as tensors and numpy scalars as Python numbers: what weights_only
+    loads."""
+    if isinstance(value, dict):
+        return {k: _as_tensors(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return type(value)(_as_tensors(v) for v in value)
+    if isinstance(value, np.ndarray):
+        return torch.from_numpy(np.array(value))  # a copy: the trainer's arrays go on changing
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
 
 
 def save_checkpoint(tr: Any, run_dir: Path) -> Path:
@@ -39,27 +64,152 @@ def save_checkpoint(tr: Any, run_dir: Path) -> Path:
         "learners": {name: lr.state() for name, lr in tr.learners.items()},
         "rng": tr.rng.bit_generator.state, "torch_rng": tr.torch_gen.get_state(),
         "env_rng": tr.env.sim.rng.bit_generator.state,
-        "games": {"history": tr.history.copy(), "ep_len": tr.ep_len.copy(), "ep_return": tr.ep_return.copy(),
-                  "ep_id": tr.ep_id.copy(), "ep_start": tr.ep_start.copy(), "obs": tr.obs.copy()},
+        "games": {"history": tr.history, "ep_len": tr.ep_len, "ep_return": tr.ep_return,
+                  "ep_id": tr.ep_id, "ep_start": tr.ep_start, "obs": tr.obs},
         "pending": tr.pending.state(),
     }
     tmp = path.with_suffix(".tmp")
-    torch.save(state, tmp)
+    torch.save(_as_tensors(state), tmp)
     tmp.replace(path)
     return path
 
 
-def load_checkpoint(run: str | Path) -> dict[str, Any]:
-    """The checkpoint of a run directory (or a checkpoint file)."""
-    p = Path(run)
-    f = p if p.is_file() else checkpoint_path(p)
-    if not f.exists():
+def _checkpoint_file(run: Path) -> Path:
+    """RUN/checkpoint/checkpoint.pt of a run directory, refusing anything else before it is opened."""
+    if not run.is_dir():
+        raise FileRefused(f"{run}: not a training run's directory (one holding {CHECKPOINT_DIR}/"
+                          f"{CHECKPOINT_FILE}); refused")
+    folder = run / CHECKPOINT_DIR
+    if folder.is_symlink():
+        raise FileRefused(f"{folder}: is a symbolic link; refused")
+    f = folder / CHECKPOINT_FILE
+    if not folder.is_dir() or not (f.exists() or f.is_symlink()):
         raise FileNotFoundError(f"no checkpoint at {str(f)!r} (a training run writes {CHECKPOINT_DIR}/"
                                 f"{CHECKPOINT_FILE} into its run directory)")
-    state = torch.load(f, map_location="cpu", weights_only=False)  # our own file: numpy arrays inside
-    if state.get("format") != FORMAT:
-        raise ValueError(f"{f}: not a tracelab training checkpoint (format {state.get('format')!r})")
+    return f
+
+
+def _refusal_with_a_way_on(run: Path, said: str) -> FileRefused:
+    """A checkpoint refused for what it would run: say so, and what the user can do instead (use the
+    run's policy, start a new run from its settings)."""
+    policy = run / "policy"
+    if (policy / "policy.json").is_file():
+        instead = f"its policy still plays: tracelab eval {policy}, tracelab play --policy {policy}; to " \
+                  f"train on, start a new run with tracelab train (its settings: tracelab show {run})"
+    else:
+        instead = f"start a new run with tracelab train (its settings: tracelab show {run})"
+    return FileRefused(f"{said}: {instead}")
+
+
+def load_checkpoint(run: str | Path, max_bytes: int | None = None) -> dict[str, Any]:
+    """The checkpoint of a training run directory, checked: its config and scenario are valid and every
+    array has the shape and type they imply. `max_bytes`: the largest file read (default: the memory
+    limit, tracelab.train.memory)."""
+    from tracelab.train.memory import memory_limit
+    run = Path(run)
+    f = _checkpoint_file(run)
+    try:
+        state = load_tensors(f, memory_limit().bytes if max_bytes is None else max_bytes)
+    except CodeInFile as e:
+        said = f"{f}: a checkpoint of an older tracelab (format 1, holding numpy objects that only a loader " \
+               f"that runs code could read); refused" if any(mark in e.pickled for mark in OLD_FORMATS) else str(e)
+        raise _refusal_with_a_way_on(run, said) from None
+    try:
+        check(state, {"format": Const(FORMAT), "config": config_schema(), "scenario_toml": str})
+    except Mismatch as e:
+        raise FileRefused(f"{f}: not a tracelab training checkpoint of format 2 ({e})") from None
+    try:
+        cfg = checkpoint_config(state)
+    except ValueError as e:  # a value out of range
+        raise FileRefused(f"{f}: config: {e}") from None
+    try:
+        scenario = checkpoint_scenario(state)
+    except tomllib.TOMLDecodeError as e:
+        raise FileRefused(f"{f}: scenario_toml: not valid TOML: {e}") from None
+    except ValueError as e:  # ScenarioError: names the field
+        raise FileRefused(f"{f}: {e}") from None
+    try:
+        check(state, _state_schema(cfg, scenario))
+        _check_consistency(state, cfg, scenario)
+    except Mismatch as e:
+        raise FileRefused(f"{f}: {e}") from None
+    for section in NUMPY_SECTIONS:
+        state[section] = {k: v.numpy() for k, v in state[section].items()}
+    for learner in state["learners"].values():
+        learner["buffer"] = {k: v.numpy() if isinstance(v, torch.Tensor) else v
+                             for k, v in learner["buffer"].items()}
     return state
+
+
+def _rng_state() -> dict[str, Any]:
+    return {"bit_generator": Const("PCG64"), "state": {"state": IntRange(0), "inc": IntRange(0)},
+            "has_uint32": IntRange(0, 1), "uinteger": IntRange(0)}
+
+
+def _state_schema(cfg: TrainConfig, scenario: Scenario) -> dict[str, Any]:
+    """Every key of a format-2 checkpoint of this config and scenario, with its type and shape."""
+    from tracelab.train.loop import network_groups, training_shape
+    shape = training_shape(cfg, scenario)
+    w, n, d, a, p = cfg.envs, scenario.agents_per_team, shape.inputs, shape.actions, shape.n_params
+    buffer = {"size": IntRange(0, cfg.buffer), "pos": IntRange(0, cfg.buffer - 1),
+              "obs": Tensor(torch.float32, (None, d)), "next_obs": Tensor(torch.float32, (None, d)),
+              "action": Tensor(torch.int64, (None,)), "reward": Tensor(torch.float32, (None,)),
+              "discount": Tensor(torch.float32, (None,))}
+    if cfg.mask:
+        buffer["next_allowed"] = Tensor(torch.bool, (None, a))
+    learner = {"params": Tensor(torch.float32, (2, p)), "adam_m": Tensor(torch.float32, (p,)),
+               "adam_v": Tensor(torch.float32, (p,)), "adam_step": IntRange(0), "updates": IntRange(0),
+               "buffer": buffer, "loss_sum": float, "loss_n": IntRange(0),
+               "last_q": Nullable(Tensor(torch.float32, (2, cfg.batch, a)))}
+    generator_bytes = torch.Generator().get_state().numel()
+    return {
+        "run": str, "step": IntRange(0), "next_episode": IntRange(0), "update_credit": float,
+        "synced_block": IntRange(0), "eval_round": IntRange(0), "returns_since_log": ListOf(float),
+        "last_loss": Nullable(float), "logged_step": IntRange(-1), "eval_step": IntRange(-1),
+        "best_eval": Nullable(Tuple(float, IntRange(0))), "best_rows": MapOf(Tensor(torch.float32, (p,))),
+        "learners": {name: learner for name in network_groups(scenario, cfg.split_networks)},
+        "rng": _rng_state(), "env_rng": _rng_state(), "torch_rng": Tensor(torch.uint8, (generator_bytes,)),
+        "games": {"history": Tensor(torch.int16, (w, scenario.max_steps, 2, n)),
+                  "ep_len": Tensor(torch.int64, (w,)), "ep_return": Tensor(torch.float64, (w,)),
+                  "ep_id": Tensor(torch.int64, (w,)), "ep_start": Tensor(torch.int64, (w,)),
+                  "obs": Tensor(torch.float32, (w, d))},
+        "pending": {"obs": Tensor(torch.float32, (w, n, d)), "action": Tensor(torch.int64, (w, n)),
+                    "reward": Tensor(torch.float64, (w, n)), "discount": Tensor(torch.float64, (w, n)),
+                    "open": Tensor(torch.bool, (w, n))},
+    }
+
+
+def _check_consistency(state: dict[str, Any], cfg: TrainConfig, scenario: Scenario) -> None:
+    """What a schema cannot say: lengths that follow other keys, and the values the code indexes with (the
+    replayed actions reach compiled kernels, which do not check bounds)."""
+    n_actions = scenario.n_actions
+    for name, learner in state["learners"].items():
+        buf, where = learner["buffer"], f"learners.{name}.buffer"
+        for key in ("obs", "next_obs", "action", "reward", "discount", "next_allowed"):
+            if key in buf and len(buf[key]) != buf["size"]:
+                raise Mismatch(f"{where}.{key}", f"{buf['size']} rows (its size)", buf[key])
+        _in_range(buf["action"], 0, n_actions - 1, f"{where}.action")
+    _in_range(state["pending"]["action"], 0, n_actions - 1, "pending.action")
+    games = state["games"]
+    _in_range(games["ep_len"], 0, scenario.max_steps, "games.ep_len")
+    history = games["history"]
+    played = torch.arange(history.shape[1])[None, :] < games["ep_len"][:, None]  # [W, steps]
+    _in_range(history[played], 0, NOTHING, "games.history")
+    groups = set(state["learners"])
+    if (state["best_eval"] is None) != (not state["best_rows"]) or \
+            (state["best_rows"] and set(state["best_rows"]) != groups):
+        raise Mismatch("best_rows", f"one row per network ({', '.join(sorted(groups))}) with best_eval, "
+                                    f"none without", state["best_rows"])
+    for key in ("rng", "env_rng"):
+        try:
+            np.random.PCG64().state = state[key]
+        except (ValueError, TypeError, OverflowError) as e:
+            raise Mismatch(key, f"a numpy PCG64 generator state (numpy: {e})", state[key]) from None
+
+
+def _in_range(values: torch.Tensor, lo: int, hi: int, where: str) -> None:
+    if values.numel() and (int(values.min()) < lo or int(values.max()) > hi):
+        raise Mismatch(where, f"values from {lo} to {hi}", values)
 
 
 def checkpoint_config(state: dict[str, Any]) -> TrainConfig:
@@ -80,9 +230,9 @@ def restore(tr: Any, state: dict[str, Any]) -> None:
     tr.eval_round, tr.last_loss = int(state["eval_round"]), state["last_loss"]
     tr.logged_step, tr.eval_step = int(state["logged_step"]), int(state["eval_step"])
     tr.returns_since_log = list(state["returns_since_log"])
-    best = state.get("best_eval")  # absent in checkpoints written before the best policy was kept
+    best = state["best_eval"]
     tr.best_eval = None if best is None else (float(best[0]), int(best[1]))
-    tr.best_rows = state.get("best_rows", {})
+    tr.best_rows = dict(state["best_rows"])
     tr.write_best_policy()  # a resumed run into a new directory keeps it too
     tr.rng.bit_generator.state = state["rng"]
     tr.torch_gen.set_state(state["torch_rng"])
@@ -96,8 +246,8 @@ def restore(tr: Any, state: dict[str, Any]) -> None:
     tr.env.sim.rng.bit_generator.state = state["env_rng"]
     obs = tr.env.sim.observe(RED)
     if not np.array_equal(obs, g["obs"]):
-        raise RuntimeError("restoring the checkpoint's games did not reproduce their observations: the "
-                           "simulator is not the one the checkpoint was written with")
+        raise RuntimeError("restoring the checkpoint's games did not reproduce their observations: it was written "
+                           "with another simulator, or edited")
     tr.obs = obs
     tr.acting = tr.may_act()
     tr.pending.load_state(state["pending"])

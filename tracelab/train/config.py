@@ -9,6 +9,7 @@ from dataclasses import MISSING, asdict, dataclass, field, fields
 from typing import Any
 
 from tracelab.commands._args import ENGINE_KERNELS
+from tracelab.schema import Nullable, OptionalKey
 
 
 def _opt(help: str, **kw: Any) -> Any:
@@ -135,6 +136,15 @@ class TrainConfig:
         if "split_networks" not in d:  # written before the two were separate: non-Markov implied split
             d["split_networks"] = bool(d.get("non_markov", False))
         return cls(**d)
+
+
+_FIELD_SCHEMAS = {"int": int, "float": float, "bool": bool, "str": str, "int | None": Nullable(int)}
+
+
+def config_schema() -> dict[str, Any]:
+    """The type of every field, to check a config read from a file (a checkpoint) before building it:
+    absent fields take their defaults (written before they existed)."""
+    return {f.name: OptionalKey(_FIELD_SCHEMAS[str(f.type)]) for f in fields(TrainConfig)}
 
 
 def config_fields() -> list[tuple[str, Any, Any, str]]:

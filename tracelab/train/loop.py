@@ -43,6 +43,11 @@ def network_groups(scenario: Scenario, split: bool) -> dict[str, list[int]]:
     return {k: v for k, v in groups.items() if v}
 
 
+def training_shape(cfg: TrainConfig, scenario: Scenario) -> Shape:
+    """The networks' shape: the observation (stacked in the non-Markov setup), hidden units, actions."""
+    return Shape(obs_size(scenario, cfg.non_markov), cfg.hidden, scenario.n_actions)
+
+
 def eval_seed(seed: int, round_no: int) -> int:
     return int(np.random.SeedSequence([seed, 1, round_no]).generate_state(1)[0])
 
@@ -73,7 +78,7 @@ class Trainer:
         self.env = GridWarVectorEnv(w, scenario, backend=cfg.backend, stack_previous=self.stack,
                                     opponent_p=cfg.opponent_p, kernel=cfg.kernel, copy=False)
         self.masker = ActionMasker(scenario)
-        self.shape = Shape(obs_size(scenario, self.stack), cfg.hidden, scenario.n_actions)
+        self.shape = training_shape(cfg, scenario)
         self.groups = network_groups(scenario, cfg.split_networks)
         self.learners = {name: DQNLearner(self.shape, lr=cfg.lr, batch=cfg.batch, buffer=cfg.buffer,
                                           generator=self.torch_gen, masked=cfg.mask) for name in self.groups}

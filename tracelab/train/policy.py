@@ -17,7 +17,9 @@ from typing import Any
 
 import numpy as np
 
+from tracelab.engine.safe_files import FileRefused, read_json
 from tracelab.game.scenario import ACTION_NAMES, NOTHING, Scenario, scenario_from_dict
+from tracelab.schema import Const, IntRange, ListOf, MapOf, Mismatch, OptionalKey, check
 from tracelab.train.network import STATE_DICT_KEYS, Shape, from_state_dict, q_values, views
 
 FORMAT = "tracelab-dqn-policy/1"
@@ -142,14 +144,29 @@ def _policy_dir(path: str | Path) -> Path:
                             f"{POLICY_PT} (or the path of one of them)")
 
 
+# what load_policy reads of policy.json (the rest describes the policy for people and other tools)
+SPEC_SCHEMA = {
+    "format": Const(FORMAT),
+    "scenario": {"name": str, "toml": str},
+    "observation": {"stack_previous": bool},
+    "network": {"inputs": IntRange(1), "hidden": IntRange(1), "outputs": IntRange(1)},
+    "networks": MapOf(ListOf(IntRange(0), min_len=1), min_len=1),
+    "mask": OptionalKey(bool),
+}
+
+
 def read_policy_spec(path: str | Path) -> dict[str, Any]:
+    """policy.json of a policy directory, read with a size cap and checked against SPEC_SCHEMA (a policy
+    may come from a stranger: each failure is one line naming the key)."""
     d = _policy_dir(path)
     f = d / POLICY_JSON
-    if not f.exists():
+    if not (f.exists() or f.is_symlink()):
         raise FileNotFoundError(f"{str(d)!r} holds no {POLICY_JSON}")
-    spec = json.loads(f.read_text())
-    if spec.get("format") != FORMAT:
-        raise ValueError(f"{f}: format {spec.get('format')!r} is not {FORMAT!r}")
+    spec = read_json(f, what="policy description", follow_symlinks=False)
+    try:
+        check(spec, SPEC_SCHEMA)
+    except Mismatch as e:
+        raise FileRefused(f"{f}: {e}") from None
     return spec
 
 
@@ -158,34 +175,63 @@ def policy_scenario(spec: dict[str, Any]) -> Scenario:
     return scenario_from_dict(tomllib.loads(spec["scenario"]["toml"]), source="policy.json scenario")
 
 
+def spec_shape(spec: dict[str, Any]) -> Shape:
+    net = spec["network"]
+    return Shape(net["inputs"], net["hidden"], net["outputs"])
+
+
+def _state_dict_schema(names: list[str], shape: Shape) -> dict[str, Any]:
+    """policy.pt: per network, nn.Sequential(Linear(D, H), Tanh(), Linear(H, A))'s state dict."""
+    from tracelab.train.torch_files import Tensor
+    d, h, a = shape.inputs, shape.hidden, shape.actions
+    layers = {"0.weight": Tensor(None, (h, d)), "0.bias": Tensor(None, (h,)),
+              "2.weight": Tensor(None, (a, h)), "2.bias": Tensor(None, (a,))}
+    return {name: layers for name in names}
+
+
+def read_policy_networks(path: str | Path, spec: dict[str, Any]) -> dict[str, Any]:
+    """policy.pt of a policy directory, whose policy.json is `spec`: loaded without running code (torch's
+    weights_only), no bigger than the networks it declares, each network's state dict of their shape."""
+    from tracelab.train.memory import check_policy_memory, memory_limit
+    from tracelab.train.torch_files import load_tensors
+    d = _policy_dir(path)
+    shape, names = spec_shape(spec), list(spec["networks"])
+    check_policy_memory(shape, len(names), memory_limit(), str(d / POLICY_JSON))
+    f = d / POLICY_PT
+    if not (f.exists() or f.is_symlink()):
+        raise FileNotFoundError(f"{str(d)!r} holds no {POLICY_PT}")
+    # the tensors it declares (float64 at most), with room for the pickle and the alignment torch.save adds
+    states = load_tensors(f, len(names) * shape.n_params * 8 + (1 << 20))
+    try:
+        check(states, _state_dict_schema(names, shape))
+    except Mismatch as e:
+        raise FileRefused(f"{f}: {e}") from None
+    return states
+
+
 def load_policy(path: str | Path, scenario: Scenario | None = None) -> Policy:
     """A saved policy, ready to act. `scenario`: play it on another scenario of the same shape (same
     agents, actions and observation size); default: the one it was trained on."""
-    import torch
     spec = read_policy_spec(path)
     trained_on = policy_scenario(spec)
     scenario = scenario or trained_on
-    stack = bool(spec["observation"]["stack_previous"])
-    net = spec["network"]
-    shape = Shape(int(net["inputs"]), int(net["hidden"]), int(net["outputs"]))
+    stack = spec["observation"]["stack_previous"]
+    shape = spec_shape(spec)
     from tracelab.game.observe import obs_size
     if (obs_size(scenario, stack), scenario.n_actions, scenario.agents_per_team) != \
             (shape.inputs, shape.actions, trained_on.agents_per_team):
         raise ValueError(f"the policy was trained on {trained_on.name!r} ({trained_on.agents_per_team} agents, "
                          f"{shape.inputs} observations, {shape.actions} actions); scenario {scenario.name!r} "
                          f"does not match")
-    states = torch.load(_policy_dir(path) / POLICY_PT, map_location="cpu", weights_only=True)
-    names = list(spec["networks"])
+    states = read_policy_networks(path, spec)
     nets, owner = [], {}
-    for i, name in enumerate(names):
-        if name not in states:
-            raise ValueError(f"{POLICY_PT} has no network {name!r} (has {sorted(states)})")
+    for i, name in enumerate(spec["networks"]):
         row = from_state_dict(states[name], shape)
         nets.append(tuple(x.numpy() for x in views(row, shape)))
         for j in spec["networks"][name]:
-            owner[int(j)] = i
+            owner[j] = i
     if sorted(owner) != list(range(scenario.agents_per_team)):
         raise ValueError(f"{POLICY_JSON}: networks {spec['networks']} do not cover agents "
                          f"0..{scenario.agents_per_team - 1}")
     return Policy(scenario, nets, [owner[j] for j in range(scenario.agents_per_team)], stack,
-                  bool(spec.get("mask", False)))
+                  spec.get("mask", False))

@@ -19,13 +19,18 @@ import numpy as np
 MASKED_Q = -1e6  # finite: a terminal transition's discount 0 times it must stay 0 (0 * -inf is nan)
 
 
+def row_length(obs_size: int, n_actions: int, masked: bool) -> int:
+    """Floats per transition: [obs, 1, next_obs, 1, one-hot action, (next penalty,) reward, discount]."""
+    return 2 * (obs_size + 1) + n_actions * (2 if masked else 1) + 2
+
+
 class ReplayBuffer:
     def __init__(self, capacity: int, obs_size: int, n_actions: int, batch: int, masked: bool = False) -> None:
         self.capacity = capacity
         self.obs_size = d = obs_size
         self.n_actions = n_actions
         self.masked = masked
-        self.row = 2 * (d + 1) + n_actions * (2 if masked else 1) + 2
+        self.row = row_length(d, n_actions, masked)
         self._hot = 2 * (d + 1)  # first column of the one-hot action
         self._pen = self._hot + n_actions  # first column of the next-state penalty (masked buffers)
         self.rows = np.zeros((capacity, self.row), np.float32)

@@ -1,0 +1,24 @@
+"""The tiny game and settings the training tests run on (tests/test_train.py, tests/test_strangers_train.py)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from tracelab.game.scenario import Rewards, Scenario
+
+# A 4x4 walk: red starts on its base (3,0) and wins by reaching blue's (0,3) in 6 moves; blue is a random
+# walker (opponent_p = 0), so the best policy almost always wins. Small rewards keep Q-values small.
+WALK = Scenario(name="walk4", width=4, height=4, red_base=(3, 0), blue_base=(0, 3), max_steps=30,
+                rewards=Rewards(win=10, loss=-10, valid_action=-0.1, unsafe=-1, invalid=-0.5, hit_opponent=0,
+                                got_shot=0))
+SMALL = dict(warmup=100, envs=4, batch=32, buffer=2000, target_every=100, log_every=100, eval_every=200,
+             eval_games=8, trace_eval_games=2, eval_envs=3, checkpoint_every=200, opponent_p=0.5, eval_p=0.3,
+             lr=3e-3)
+
+
+def tiny_training_run(run: Path, steps: int = 200, seed: int = 1, **options: object) -> Path:
+    """A finished training run of WALK into `run` (a few seconds): checkpoint, policy, policy-best."""
+    from tracelab.commands.train import train_into
+    from tracelab.train.config import TrainConfig
+    cfg = TrainConfig(scenario="walk4", steps=steps, seed=seed, **{**SMALL, **options})
+    assert train_into(cfg, WALK, run) == 0
+    return run

@@ -1,0 +1,126 @@
+"""How much memory a training run or a loaded policy will take, estimated from its sizes before anything is
+built, and the limit it must fit (half the machine's memory unless the user says otherwise): a --hidden,
+--buffer or --envs, or a policy file's network, too big for the machine is refused at once with the flag
+and the estimate, not after minutes of swapping or an out-of-memory kill.
+
+The estimates are of the arrays that grow with each size (measured figures where the engine's state is
+concerned), rounded up; they are meant to tell a run that fits from one off by orders of magnitude."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from tracelab.train.network import Shape
+from tracelab.train.replay import row_length
+
+MACHINE_SHARE = 0.5  # the default limit: this share of the machine's physical memory
+FLOAT = 4            # bytes of a float32
+# the rule engine's state per world and per map cell and agent: measured 0.7-4 KiB on 8x8 maps (counting
+# and lanes kernels, base and advanced scenarios; 256 to 8,192 worlds), rounded up
+WORLD_BYTES_PER_CELL_AGENT = 4096
+# per network parameter: online and target rows, the gradient, Adam's two moments and its work row, the
+# copies of a checkpoint, the best policy and a saved policy
+PARAM_COPIES = 12
+# per minibatch row and hidden unit: the update's activations and their gradients, both networks
+ACTIVATION_COPIES = 8
+
+
+class MemoryLimitExceeded(ValueError):
+    """A size whose estimated memory is over the limit; the message names it and the estimate."""
+
+
+@dataclass(frozen=True)
+class Limit:
+    bytes: int
+    source: str  # how the limit was set, for the message
+
+    def __str__(self) -> str:
+        return f"{self.bytes:,} bytes ({_gib(self.bytes)}, {self.source})"
+
+
+def memory_limit(max_bytes: int | None = None, flag: str | None = None) -> Limit:
+    """The limit a run or a policy must fit: `max_bytes`, given with `flag`, or by default half the
+    machine's memory (`flag`, if any, is named as the way to raise it)."""
+    if max_bytes is not None:
+        return Limit(max_bytes, f"set by {flag}" if flag else "given")
+    import psutil
+    total = psutil.virtual_memory().total
+    raise_it = f"; {flag} raises it" if flag else ""
+    return Limit(int(total * MACHINE_SHARE), f"half of this machine's {_gib(total)}{raise_it}")
+
+
+def network_bytes(shape: Shape) -> int:
+    """A network's parameters with every copy training keeps or writes."""
+    return PARAM_COPIES * shape.n_params * FLOAT
+
+
+def replay_bytes(capacity: int, shape: Shape, masked: bool) -> int:
+    """A replay buffer (its float32 rows and action ids), twice: a checkpoint copies what it holds."""
+    return 2 * capacity * (row_length(shape.inputs, shape.actions, masked) * FLOAT + 8)
+
+
+def minibatch_bytes(batch: int, shape: Shape, masked: bool) -> int:
+    return batch * row_length(shape.inputs, shape.actions, masked) * FLOAT
+
+
+def activation_bytes(batch: int, shape: Shape) -> int:
+    """The update's activations and their gradients (both networks' forward passes, learner.py)."""
+    return batch * (ACTIVATION_COPIES * (shape.hidden + 1) + 4 * shape.actions) * FLOAT
+
+
+def world_bytes(scenario: Any, shape: Shape) -> int:
+    """One world: the engine's state, the game's action history, the open transitions, acting's
+    activations."""
+    n = scenario.agents_per_team
+    engine = WORLD_BYTES_PER_CELL_AGENT * scenario.width * scenario.height * n
+    history = scenario.max_steps * 2 * n * 2  # int16 per step, team and agent
+    return engine + history + 4 * n * shape.inputs * FLOAT + 2 * shape.hidden * FLOAT
+
+
+def training_estimate(cfg: Any, scenario: Any) -> list[tuple[str, str, int]]:
+    """(flags with their values, what they size, estimated bytes) of each part of a training run that
+    grows with a setting."""
+    from tracelab.train.loop import network_groups, training_shape
+    shape, k = training_shape(cfg, scenario), len(network_groups(scenario, cfg.split_networks))
+    nets = f"{k} network{'s' * (k > 1)}"
+    eval_worlds = min(cfg.eval_envs, cfg.eval_games)
+    return [
+        (f"--hidden {cfg.hidden}", f"{nets} of {shape.inputs:,} inputs x {shape.hidden:,} hidden units x "
+                                   f"{shape.actions} actions", k * network_bytes(shape)),
+        (f"--hidden {cfg.hidden} and --batch {cfg.batch}", f"the update's activations ({cfg.batch:,} "
+         f"transitions x {cfg.hidden:,} hidden units, {nets})", k * activation_bytes(cfg.batch, shape)),
+        (f"--batch {cfg.batch}", f"minibatches of {cfg.batch:,} transitions ({nets})",
+         k * minibatch_bytes(cfg.batch, shape, cfg.mask)),
+        (f"--buffer {cfg.buffer}", f"replay buffers of {cfg.buffer:,} transitions ({nets})",
+         k * replay_bytes(cfg.buffer, shape, cfg.mask)),
+        (f"--envs {cfg.envs}", f"{cfg.envs:,} training worlds", cfg.envs * world_bytes(scenario, shape)),
+        (f"--eval-envs {cfg.eval_envs}", f"{eval_worlds:,} evaluation worlds",
+         eval_worlds * world_bytes(scenario, shape)),
+    ]
+
+
+def _gib(n: int) -> str:
+    return f"{n / (1 << 30):,.1f} GiB" if n >= 1 << 30 else f"{n / (1 << 20):,.1f} MiB"
+
+
+def check_training_memory(cfg: Any, scenario: Any, limit: Limit) -> int:
+    """Refuse a training run whose estimate is over `limit`, naming the setting that takes the most;
+    returns the estimate."""
+    parts = training_estimate(cfg, scenario)
+    total = sum(b for _, _, b in parts)
+    if total > limit.bytes:
+        flags, what, most = max(parts, key=lambda p: p[2])
+        whole = "" if most > limit.bytes else f"; the run {total:,} bytes in all"
+        raise MemoryLimitExceeded(f"{flags}: {what} would take an estimated {most:,} bytes ({_gib(most)}"
+                                  f"{whole}), over the limit of {limit}")
+    return total
+
+
+def check_policy_memory(shape: Shape, networks: int, limit: Limit, where: str) -> None:
+    """Refuse a policy whose networks would not fit (a policy.json from a stranger can say any size)."""
+    need = networks * 3 * shape.n_params * FLOAT  # the loaded tensors, the row, acting's views
+    if need > limit.bytes:
+        raise MemoryLimitExceeded(
+            f"{where}: network: {networks} network{'s' * (networks > 1)} of {shape.inputs:,} inputs x "
+            f"{shape.hidden:,} hidden units x {shape.actions:,} outputs would take an estimated {need:,} "
+            f"bytes ({_gib(need)}), over the limit of {limit}; refused")
