@@ -19,7 +19,7 @@ RESUMABLE_FLAGS = {"threads", "kernel"}  # what --resume may change (the rest is
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from tracelab.commands._args import ENGINE_KERNELS
+    from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings
     from tracelab.train.config import config_fields
 
     p = sub.add_parser("train", help="train red with DQN, logging metrics, episodes and traced evaluation "
@@ -44,6 +44,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--resume", default=None, metavar="RUN",
                    help="continue RUN's last checkpoint (its config; the new run goes to --run, default "
                         "RUN-from-<step>)")
+    add_max_groundings(p)
     p.set_defaults(func=run)
 
 
@@ -59,7 +60,8 @@ def load_scenario_arg(text: str, agents: int | None = None) -> Any:
 def run(args: argparse.Namespace) -> int:
     from tracelab.train.config import TrainConfig
 
-    given = {k: v for k, v in vars(args).items() if k not in ("func", "command", "run", "resume")}
+    # --max-groundings is no training setting (cli.main applies it): not in the config, free with --resume
+    given = {k: v for k, v in vars(args).items() if k not in ("func", "command", "run", "resume", "max_groundings")}
     state = None
     with store_errors():  # a bad value in the config or a checkpoint that does not load
         if args.resume:
