@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any, Iterable, Mapping
 
 import numpy as np
+from tracelab.engine.safe_files import FileRefused, read_bytes
 
 # Action ids of the spec's table. Moves use the first four ids, shots the next four in the same
 # direction order, so `shot direction = action - 4`.
@@ -431,9 +432,6 @@ def scenario_from_dict(d: Mapping[str, Any], source: str = "<dict>") -> Scenario
 
 def load_scenario(path: str | Path) -> Scenario:
     """Read and check a scenario TOML file."""
-    # here, not at the top: importing tracelab.engine loads numba, which a Scenario does not need
-    from tracelab.engine.safe_files import FileRefused, read_bytes
-
     source = str(path)
     try:
         text = read_bytes(path, SCENARIO_FILE_CAP, what="scenario file").decode("utf-8")
