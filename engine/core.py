@@ -74,7 +74,10 @@ class Engine:
     def __init__(self, program: Program, graph: Graph | None = None, *, worlds: int = 1,
                  trace: bool | Sequence[bool] | np.ndarray = True, max_passes: int = 1000,
                  max_immediate: int = 100_000, trace_rows_per_step: int = 65_536,
-                 kernel: str = "auto", threads: int | None = None, background_compile: bool = False) -> None:
+                 kernel: str = "auto", threads: int | None = None, background_compile: bool = False,
+                 max_groundings: int | None = None) -> None:
+        """`max_groundings`: refuse (ProgramError at the rule) a program whose groundings could pass it,
+        before they are built; None: the limit of engine/grounding_limit.py (from the machine's memory)."""
         if worlds < 1:
             raise ValueError(f"worlds must be >= 1, got {worlds}")
         self.program = program
@@ -90,7 +93,8 @@ class Engine:
             if sum(c.binds for c in r.body) > MAX_BINDING_CLAUSES:
                 raise ProgramCheckError.at(r.loc, f"rule '{r.name}' has more than {MAX_BINDING_CLAUSES} "
                                                   "binding body clauses")
-        self.grounder = Grounder(self.rules, self.vocab, program.closed, program.edge_heads, self.graph.edges)
+        self.grounder = Grounder(self.rules, self.vocab, program.closed, program.edge_heads, self.graph.edges,
+                                 max_groundings)
         # user annotation functions, bound now: registering another one later changes nothing here
         self._user_functions: list[tuple[str, object]] = []
         for r in self.rules:

@@ -16,6 +16,7 @@ import numpy as np
 from .errors import ProgramCheckError
 from .graph import Graph
 from .program import MAX_TIME, unwritable_constant
+from .safe_files import check_regular
 
 _CONST = r"""("[^"]*"|'[^']*'|[A-Za-z0-9_-]+)"""
 _ATOM_RE = rf"^\s*(~?)\s*([a-z][A-Za-z0-9_]*)\s*\(\s*{_CONST}\s*(?:,\s*{_CONST}\s*)?\)\s*$"
@@ -31,8 +32,9 @@ def load_fact_table(path: str | os.PathLike[str]) -> Graph:
     import duckdb
 
     file = os.fspath(path)
-    if not os.path.isfile(file):
+    if not os.path.exists(file):
         raise ProgramCheckError("no such fact table", file)
+    check_regular(file)  # DuckDB would wait on a FIFO forever
     full = os.path.abspath(file)
     # this connection may read that one file and nothing else, and never installs or loads extensions
     con = duckdb.connect(":memory:", config={"autoinstall_known_extensions": False,

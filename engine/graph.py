@@ -20,6 +20,7 @@ from .graphml_raw import GraphKey, RawGraph
 from .memory import release_freed_memory
 from .parser import PREDICATE_RE
 from .program import Fact, Literal, SourceLoc, Term, constant_text, unwritable_constant
+from .safe_files import read_bytes
 
 __all__ = ["Graph", "load_graphml", "read_raw_graphml"]
 
@@ -28,6 +29,9 @@ _BOUND_RE = re.compile(rf"\s*(?:\[\s*{_NUM}\s*,\s*{_NUM}\s*\]|{_NUM}\s*,\s*{_NUM
 _ATTR_RE = re.compile(r"""([\w.:-]+)\s*=\s*(["'])(.*?)\2""", re.S)
 _DEFAULT_RE = re.compile(r"<(?:[\w.-]+:)?default\b[^>]*>(.*?)</(?:[\w.-]+:)?default\s*>", re.S)
 _ENCODING_RE = re.compile(rb"""^(?:\xef\xbb\xbf)?<\?xml[^>]*?encoding\s*=\s*["']([^"']*)["']""")
+# a GraphML file is read whole into memory: refused past this (the million-edge graph of `tracelab bench
+# engine` is ~75 MB), and never waited on (a FIFO is refused)
+GRAPH_FILE_CAP = 4 << 30
 
 
 @dataclass
@@ -132,8 +136,7 @@ def read_raw_graphml(path: str | os.PathLike[str]) -> RawGraph:
     """A GraphML file's nodes, edges and <data> values before any value becomes a bound (for readers with
     another attribute mapping, such as PyReason's: tracelab/pyreason/graphml.py)."""
     file = os.fspath(path)
-    with open(file, "rb") as f:
-        data = f.read()
+    data = read_bytes(file, GRAPH_FILE_CAP, what="GraphML file")
     raw = _scan(file, data)
     if raw is None:  # outside the scanner's subset: the complete reader
         data = b""

@@ -19,6 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .errors import ProgramError
+from .grounding_limit import limit_in_force
 from .program import EPS, Literal, Rule, effective_bound
 from .vocabulary import Vocabulary
 
@@ -69,6 +71,10 @@ class _CompiledRule:
     on_edges: bool  # `%edge_heads graph` and no {infer_edges}: heads only on the graph's edges
 
 
+# a planned join: the rule, its start clause, the start atoms, each binding clause's relation, its bound
+_Join = tuple[_CompiledRule, int, np.ndarray, dict[int, np.ndarray], int]
+
+
 def _growable(cap: int, width: int, dtype: type) -> np.ndarray:
     return np.full((cap, width), -1, dtype) if width else np.zeros((cap, 0), dtype)
 
@@ -77,9 +83,13 @@ class Grounder:
     """The groundings of `rules` over the settable atoms of `vocab`, grown by close()."""
 
     def __init__(self, rules: list[Rule], vocab: Vocabulary, closed: tuple[str, ...] = (),
-                 edge_heads: str = "any", edges: np.ndarray | None = None) -> None:
+                 edge_heads: str = "any", edges: np.ndarray | None = None, max_groundings: int | None = None
+                 ) -> None:
         """`closed`: the %closed predicates; `edges`: node-id pairs [E, 2] of the graph's edges, where the
-        edge heads of rules without {infer_edges} land under `%edge_heads graph`."""
+        edge heads of rules without {infer_edges} land under `%edge_heads graph`. `max_groundings`: close()
+        refuses (ProgramError at the rule) to ground past it; None: engine/grounding_limit.py's limit."""
+        self.max_groundings, self.limit_source = limit_in_force(max_groundings)
+        self.estimated = 0  # the sum of the bounds of the joins made: >= n_groundings
         self.rules = rules
         self.vocab = vocab
         self.closed = frozenset(closed)
@@ -101,6 +111,8 @@ class Grounder:
         self.n_settable = 0
         self._pending: list[np.ndarray] = []
         self._by_label: dict[int, list[np.ndarray]] = {}  # joined settable atoms per label, in chunks
+        # (label, clause shape) -> (relation size, figure) of _clause_figure: a bound's figures, kept
+        self._figures: dict[tuple[int, tuple], tuple[int, int]] = {}
         self._closed_once = False
 
     def _compile(self, index: int, rule: Rule) -> _CompiledRule:
@@ -183,30 +195,70 @@ class Grounder:
             for cr in self._compiled:  # rules without binding clauses have exactly one grounding
                 if not cr.binding:
                     self._emit(cr, np.zeros((1, cr.n_vars), np.int64))
+                    self.estimated += 1
         while self._pending:
             delta = np.concatenate(self._pending)  # distinct: add_settable_many never repeats an atom
             self._pending = []
             self._fit_atoms()
             delta_label = self.vocab.atom_label[delta]
             delta_by_label = {int(lab): delta[delta_label == lab] for lab in sorted_unique(delta_label)}
-            # this round's relations: old (joined before) and all (old and delta), per label
-            old = {lab: self._relation(lab) for lab in {lab for cr in self._compiled for lab in cr.clause_labels}}
-            for cr in self._compiled:
-                for pos, ci in enumerate(cr.binding):
-                    start = delta_by_label.get(cr.clause_labels[ci])
-                    if start is None:
-                        continue
-                    rels = {}
-                    for pos2, cj in enumerate(cr.binding):
-                        lab = cr.clause_labels[cj]
-                        d = delta_by_label.get(lab)
-                        rels[cj] = old[lab] if pos2 < pos or d is None else np.concatenate([old[lab], d])
-                    self._join(cr, ci, start, rels)
-                    for watch in _watchers:
-                        watch(self._n)
+            joins = self._round(delta_by_label)
+            self._check_limit(joins)
+            for cr, ci, start, rels, _ in joins:
+                self._join(cr, ci, start, rels)
+                for watch in _watchers:
+                    watch(self._n)
             for lab, atoms in delta_by_label.items():
                 self._by_label.setdefault(lab, []).append(atoms)
         return self._n - before
+
+    def _round(self, delta_by_label: dict[int, np.ndarray]) -> list[_Join]:
+        """The joins of one semi-naive round, each with its bound (_join_bound). Relations are fixed for
+        the round (heads it emits are joined in the next one), so all are planned before any is made."""
+        labels = {lab for cr in self._compiled for lab in cr.clause_labels}
+        # this round's relations: old (joined before) and all (old and delta), per label
+        old = {lab: self._relation(lab) for lab in labels}
+        every = {lab: np.concatenate([old[lab], d]) for lab, d in delta_by_label.items() if lab in labels}
+        joins = []
+        memo: dict[tuple, np.ndarray] = {}
+        for cr in self._compiled:
+            for pos, ci in enumerate(cr.binding):
+                start = delta_by_label.get(cr.clause_labels[ci])
+                if start is None:
+                    continue
+                rels = {cj: old[cr.clause_labels[cj]] if pos2 < pos else every.get(cr.clause_labels[cj],
+                                                                                      old[cr.clause_labels[cj]])
+                        for pos2, cj in enumerate(cr.binding)}
+                joins.append((cr, ci, start, rels, self._join_bound(cr, ci, start, rels, memo)))
+        return joins
+
+    def _check_limit(self, joins: list[_Join]) -> None:
+        """Refuse a round whose joins could take the groundings past the limit, before any of them is
+        made, naming the rule that would have the most (those it has, and its bounds in this round)."""
+        bound = sum(j[4] for j in joins)
+        self.estimated += bound
+        if self._n + bound <= self.max_groundings:
+            return
+        per_rule = np.bincount(self.g_rule, minlength=len(self.rules)).tolist()
+        for cr, _, _, _, b in joins:
+            per_rule[cr.index] += b
+        worst = max(range(len(per_rule)), key=per_rule.__getitem__)
+        rule, total = self.rules[worst], self._n + bound
+        program = "" if per_rule[worst] == total else f"; the program's up to {total:,}"
+        raise self._refused(rule, f"rule '{rule.name}' would make up to {per_rule[worst]:,} groundings "
+                                  f"(estimated before grounding{program})")
+
+    def _check_rows(self, cr: _CompiledRule, rows: int) -> None:
+        """Refuse a join whose next stage would hold more rows than the limit, before allocating them
+        (the bound is of a join's result; _join's clause order may pass through more rows than that)."""
+        if rows > self.max_groundings:
+            raise self._refused(cr.rule, f"grounding rule '{cr.rule.name}' takes {rows:,} rows at once (its "
+                                         "clauses joined in the grounder's order)")
+
+    def _refused(self, rule: Rule, what: str) -> ProgramError:
+        return ProgramError.at(rule.loc, (
+            f"{what}, more than the limit of {self.max_groundings:,} groundings ({self.limit_source}); raise "
+            "it with --max-groundings N (Engine(max_groundings=N)) if the machine has the memory"))
 
     def _relation(self, label: int) -> np.ndarray:
         chunks = self._by_label.get(label)
@@ -216,10 +268,102 @@ class Grounder:
             self._by_label[label] = chunks = [np.concatenate(chunks)]
         return chunks[0]
 
+    def _filtered(self, args: list[int], atoms: np.ndarray, bound: np.ndarray
+                  ) -> tuple[list[np.ndarray], np.ndarray, dict[int, int]]:
+        """A clause's atoms that match its constants and a variable repeated inside it (not yet bound):
+        their argument columns, the atoms, and the clause's new variables (variable -> position)."""
+        cols = self.vocab._cols
+        a = [cols[1, atoms].astype(np.int64), cols[2, atoms].astype(np.int64)]
+        keep = np.ones(len(atoms), np.bool_)
+        new_vars: dict[int, int] = {}
+        for p, x in enumerate(args):
+            if x < 0:
+                keep &= a[p] == -x - 1
+            elif not bound[x]:
+                if x in new_vars:
+                    keep &= a[p] == a[new_vars[x]]
+                else:
+                    new_vars[x] = p
+        if not keep.all():
+            a = [a[0][keep], a[1][keep]]
+            atoms = atoms[keep]
+        return a, atoms, new_vars
+
+    @staticmethod
+    def _next_clause(cr: _CompiledRule, remaining: list[int], bound: np.ndarray) -> int:
+        """The next clause to join: the one with the most bound arguments (the most selective lookup)."""
+        ci = max(remaining, key=lambda c: sum(1 for x in cr.clause_args[c] if x < 0 or bound[x]))
+        remaining.remove(ci)
+        return ci
+
+    def _packed_key(self, columns: list[np.ndarray]) -> np.ndarray:
+        """The node ids of some bound variables (a column each, one row per row) packed into one int64."""
+        n_nodes = np.int64(max(len(self.vocab.nodes), 1))
+        key = np.zeros(len(columns[0]), np.int64)
+        for c in columns:
+            key = key * n_nodes + c
+        return key
+
+    def _join_bound(self, cr: _CompiledRule, start: int, start_atoms: np.ndarray, rels: dict[int, np.ndarray],
+                    memo: dict[tuple, np.ndarray]) -> int:
+        """An upper bound on the groundings _join(cr, start, ...) finds, without enumerating them. The
+        clauses are taken in the order that multiplies the rows least (not _join's order: the bound is
+        of the result, which no order changes): the start clause's matching atoms; exactly the rows of
+        their join with the next clause (a count per key); then per further clause the most of its atoms
+        that share one value of the variables bound so far (all of them if it shares none). `memo`:
+        sorted keys of clauses' relations, shared by the joins of one round (most of them read the same
+        relations the same way)."""
+        bound = np.zeros(cr.n_vars, np.bool_)
+        remaining = [ci for ci in cr.binding if ci != start]
+        a, _, new_vars = self._filtered(cr.clause_args[start], start_atoms, bound)
+        first = np.full((len(a[0]), cr.n_vars), -1, np.int64)  # the start rows' values, for the exact stage
+        for x, p in new_vars.items():
+            first[:, x] = a[p]
+            bound[x] = True
+        rows = len(a[0])
+        while remaining and rows:
+            factor, ci = min((self._clause_figure(cr.clause_labels[c], cr.clause_args[c], rels[c], bound, False,
+                                                  memo), c) for c in remaining)
+            remaining.remove(ci)
+            args = cr.clause_args[ci]
+            keyed = any(x >= 0 and bound[x] for x in args)
+            if first is not None and keyed:  # the second clause: how many of its atoms each start row meets
+                sk = self._clause_figure(cr.clause_labels[ci], args, rels[ci], bound, True, memo)
+                lkey = self._packed_key([first[:, x] for x in args if x >= 0 and bound[x]])
+                rows = int((np.searchsorted(sk, lkey, "right") - np.searchsorted(sk, lkey, "left")).sum())
+            else:
+                rows *= int(factor)
+            first = None
+            for x in args:
+                if x >= 0:
+                    bound[x] = True
+        return rows
+
+    def _clause_figure(self, label: int, args: list[int], rel: np.ndarray, bound: np.ndarray, exact: bool,
+                       memo: dict[tuple, np.ndarray]) -> int | np.ndarray:
+        """How a clause joined next multiplies the rows: its matching atoms if it shares no bound
+        variable, else the most atoms sharing one key; with `exact`, the sorted keys instead (to count
+        the atoms each row meets; kept in `memo`, for one round). A label's relation only grows (its
+        first n atoms are always the same), so its figures are kept by length from round to round."""
+        shape = tuple(("=", -x - 1) if x < 0 else "key" if bound[x] else ("var", args.index(x)) for x in args)
+        has_key = "key" in shape
+        if exact and has_key:
+            entry = (label, len(rel), shape)
+            if entry not in memo:
+                a, _, _ = self._filtered(args, rel, bound)
+                memo[entry] = np.sort(self._packed_key([a[p] for p, k in enumerate(shape) if k == "key"]))
+            return memo[entry]
+        size, figure = self._figures.get((label, shape), (-1, 0))
+        if size != len(rel):
+            a, _, _ = self._filtered(args, rel, bound)
+            figure = _most_per_key(self._packed_key([a[p] for p, k in enumerate(shape) if k == "key"])) \
+                if has_key else len(a[0])
+            self._figures[(label, shape)] = (len(rel), figure)
+        return figure
+
     def _join(self, cr: _CompiledRule, start: int, start_atoms: np.ndarray, rels: dict[int, np.ndarray]) -> None:
         """Every binding of cr's variables with clause `start` on start_atoms and the other binding
         clauses on their relations; emits the groundings."""
-        cols = self.vocab._cols
         bound = np.zeros(cr.n_vars, np.bool_)
         rows = np.full((0, cr.n_vars), -1, np.int64)
         first = True
@@ -228,20 +372,7 @@ class Grounder:
         ci, atoms = start, start_atoms
         while True:
             args = cr.clause_args[ci]
-            a = [cols[1, atoms].astype(np.int64), cols[2, atoms].astype(np.int64)]
-            keep = np.ones(len(atoms), np.bool_)
-            new_vars: dict[int, int] = {}
-            for p, x in enumerate(args):  # constants, and a variable repeated inside the clause
-                if x < 0:
-                    keep &= a[p] == -x - 1
-                elif not bound[x]:
-                    if x in new_vars:
-                        keep &= a[p] == a[new_vars[x]]
-                    else:
-                        new_vars[x] = p
-            if not keep.all():
-                a = [a[0][keep], a[1][keep]]
-                atoms = atoms[keep]
+            a, atoms, new_vars = self._filtered(args, atoms, bound)
             key_vars = [(p, x) for p, x in enumerate(args) if x >= 0 and bound[x]]
             if first:
                 rows = np.full((len(a[0]), cr.n_vars), -1, np.int64)
@@ -249,20 +380,18 @@ class Grounder:
                 left = np.arange(len(a[0]))
                 right_idx = left
             elif not key_vars:  # a clause sharing no variable: every pair
+                self._check_rows(cr, len(rows) * len(a[0]))
                 left = np.repeat(np.arange(len(rows)), len(a[0]))
                 right_idx = np.tile(np.arange(len(a[0])), len(rows))
             else:
-                n_nodes = np.int64(max(len(self.vocab.nodes), 1))
-                rkey = np.zeros(len(a[0]), np.int64)
-                lkey = np.zeros(len(rows), np.int64)
-                for p, x in key_vars:
-                    rkey = rkey * n_nodes + a[p]
-                    lkey = lkey * n_nodes + rows[:, x]
+                rkey = self._packed_key([a[p] for p, _ in key_vars])
+                lkey = self._packed_key([rows[:, x] for _, x in key_vars])
                 order = np.argsort(rkey, kind="stable")
                 sk = rkey[order]
                 lo = np.searchsorted(sk, lkey, "left")
                 hi = np.searchsorted(sk, lkey, "right")
                 counts = hi - lo
+                self._check_rows(cr, int(counts.sum()))
                 left = np.repeat(np.arange(len(rows)), counts)
                 offs = np.arange(len(left)) - np.repeat(np.cumsum(counts) - counts, counts)
                 right_idx = order[np.repeat(lo, counts) + offs]
@@ -274,9 +403,7 @@ class Grounder:
                 bound[x] = True
             if not remaining or not len(rows):
                 break
-            # next: the clause with the most bound arguments (the most selective lookup)
-            ci = max(remaining, key=lambda c: sum(1 for x in cr.clause_args[c] if x < 0 or bound[x]))
-            remaining.remove(ci)
+            ci = self._next_clause(cr, remaining, bound)
             atoms = rels[ci]
         if len(rows):
             self._emit(cr, rows, found)
@@ -459,6 +586,15 @@ class Grounder:
         return GroundingTable(
             rule=rules.astype(np.int32), body_ptr=body_ptr, body_atoms=self._body[:n][body_mask].astype(np.int32),
             var_ptr=var_ptr, var_values=self._vals[:n][var_mask].astype(np.int32))
+
+
+def _most_per_key(keys: np.ndarray) -> int:
+    """How often the most frequent value of `keys` occurs (0 if empty)."""
+    if not len(keys):
+        return 0
+    s = np.sort(keys)
+    starts = np.flatnonzero(np.concatenate([[True], s[1:] != s[:-1], [True]]))
+    return int(np.diff(starts).max())
 
 
 def sorted_unique(x: np.ndarray) -> np.ndarray:

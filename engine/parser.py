@@ -12,6 +12,8 @@ from pathlib import Path
 
 from . import annotations
 from .errors import ProgramCheckError, RuleSyntaxError
+from .safe_files import MIB, read_bytes
+from .vocabulary import MAX_LABELS
 from .program import (
     COMPARISONS,
     CONSTANT_RE,
@@ -41,6 +43,9 @@ DIRECTIVES = {"mode": UPDATE_MODES, "timesteps": TIMESTEP_MODES, "inconsistency"
 LIST_DIRECTIVES = ("closed",)  # `%closed p, q`: a list of predicates, repeatable
 RULE_FLAGS = ("set_static", "infer_edges")  # rule options that switch a behaviour on
 RULE_OPTIONS = (*UPDATE_MODES, *RULE_FLAGS)  # `{override}` / `{intersection}`, `{set_static}`, `{infer_edges}`
+# the largest rule or fact file read (a whole file is parsed in memory, ~1 KB of objects per statement): the
+# rule files here are a few KB; big fact sets go in fact tables (load_fact_table), which have no such cap
+RULE_FILE_CAP = 64 * MIB
 WEIGHTS_OPTION = "weights"  # `{weights=1,2,0.5}`: per-clause weights of the annotation function
 
 # ---------------------------------------------------------------------------------------------- tokens
@@ -146,11 +151,12 @@ def _line_of(lines: list[str], line: int) -> str | None:
     return lines[line - 1] if 0 < line <= len(lines) else None
 
 
-def _line_from_file(file: str, line: int) -> str | None:
+def line_from_file(file: str, line: int) -> str | None:
+    """Line `line` of a rule file read again for a message, or None if it cannot be read as one."""
     try:
-        return _line_of(_split_lines(Path(file).read_text(encoding="utf-8")), line)
-    except (OSError, UnicodeDecodeError):
-        return None  # "<string>", or a file gone since: the message still names the position
+        return _line_of(_split_lines(read_rule_file(file)), line)
+    except (OSError, ValueError):  # "<string>", a file gone or changed since: the message still names the position
+        return None
 
 
 def _split_lines(text: str) -> list[str]:
@@ -556,13 +562,14 @@ def load_program(*paths: str | os.PathLike[str]) -> Program:
     units = []
     for p in paths:
         file = os.fspath(p)
-        units.append(_Parser(_read_source(file), file).parse_file())
+        units.append(_Parser(read_rule_file(file), file).parse_file())
     return _build(units)
 
 
-def _read_source(file: str) -> str:
-    """A rule file's text; bytes that are not UTF-8 are a located error."""
-    data = Path(file).read_bytes()
+def read_rule_file(file: str) -> str:
+    """A rule or fact file's text (tracelab's or PyReason's): a regular file, refused past RULE_FILE_CAP
+    (FileRefused: a FIFO is refused at once, not waited on); bytes that are not UTF-8 are a located error."""
+    data = read_bytes(file, RULE_FILE_CAP, what="rule or fact file")
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as e:
@@ -655,7 +662,7 @@ class _Checker:
         if self.sources is not None:
             src = _line_of(self.sources.get(loc.file, []), loc.line)
         else:  # a program checked after parsing: read the line back from its file if there is one
-            src = _line_from_file(loc.file, loc.line)
+            src = line_from_file(loc.file, loc.line)
         return ProgramCheckError(msg, loc.file, loc.line, loc.column, src)
 
     def arg_loc(self, lit: Literal, i: int) -> SourceLoc | None:
@@ -677,6 +684,10 @@ class _Checker:
                 self.fact(item)
             else:
                 self.rule(item)
+            if len(self.arity) > MAX_LABELS:  # the vocabulary's limit: a label id has 15 bits
+                kind = "fact" if isinstance(item, Fact) else "rule"
+                raise self.fail(item.loc, f"{kind} '{item.name}' brings the predicates of the program (and its "
+                                          f"graph) to {len(self.arity):,}: the engine takes at most {MAX_LABELS:,}")
         p.warnings = list(self.warnings())
 
     def in_order(self) -> list[Rule | Fact]:

@@ -81,10 +81,13 @@ def check_regular(path: str | os.PathLike[str], *, follow_symlinks: bool = True)
 def read_bytes(path: str | os.PathLike[str], max_bytes: int, *, what: str = "file",
                follow_symlinks: bool = True) -> bytes:
     """The whole file, refused past `max_bytes` (`what` names the kind of file in the message)."""
+    too_big = FileRefused(f"{path}: larger than {human_bytes(max_bytes)}, the limit for a {what}; refused")
     with open_regular(path, follow_symlinks=follow_symlinks) as f:
+        if os.fstat(f.fileno()).st_size > max_bytes:  # refused before reading a (sparse) giant into memory
+            raise too_big
         data = f.read(max_bytes + 1)
     if len(data) > max_bytes:
-        raise FileRefused(f"{path}: larger than {human_bytes(max_bytes)}, the limit for a {what}; refused")
+        raise too_big
     return data
 
 

@@ -14,6 +14,7 @@ import os
 import sys
 
 from tracelab import __version__
+from tracelab.commands._args import grounding_limit_of
 from tracelab.errors import user_error_message
 
 # One line per subcommand module; each module adds its own parsers and sets `func` on them.
@@ -50,7 +51,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)  # usage errors: argparse prints them and exits 2
     try:
-        status = int(args.func(args) or 0)
+        with grounding_limit_of(args):
+            status = int(args.func(args) or 0)
         sys.stdout.flush()  # a closed pipe shows here for output still buffered
         return status
     except KeyboardInterrupt as e:  # a command may say what was kept: KeyboardInterrupt("the run ... keeps ...")

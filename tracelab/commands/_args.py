@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import argparse
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 
 def _int(text: str) -> int:
@@ -44,3 +46,24 @@ def byte_size(text: str) -> int:
     if not value >= 1 or value == float("inf"):
         raise argparse.ArgumentTypeError(f"must be at least 1 byte, got {text!r}")
     return int(value)
+
+
+def add_max_groundings(parser: argparse.ArgumentParser) -> None:
+    """--max-groundings, for the commands that ground a rule program (applied by `grounding_limit_of`)."""
+    parser.add_argument("--max-groundings", dest="max_groundings", type=positive_int, metavar="N",
+                        default=argparse.SUPPRESS,
+                        help="refuse a rule program that could make more than N groundings, before grounding "
+                             "it (default: from this machine's memory; docs/language.md)")
+
+
+@contextmanager
+def grounding_limit_of(args: argparse.Namespace) -> Iterator[None]:
+    """Inside: the engines a command builds (directly, or in its envs, trainers and benches) allow
+    `--max-groundings` groundings, when the command has the flag and it was given."""
+    n = getattr(args, "max_groundings", None)
+    if n is None:
+        yield
+        return
+    from tracelab.engine.grounding_limit import grounding_limit
+    with grounding_limit(n):
+        yield

@@ -9,7 +9,7 @@ import json
 import sys
 from typing import Any
 
-from tracelab.commands._args import ENGINE_KERNELS, positive_int
+from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, positive_int
 
 SECTIONS = ("engine", "env", "store", "replay", "train")
 
@@ -50,6 +50,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         if name in ("engine", "all"):
             q.add_argument("--compile-repeats", type=positive_int, default=None,
                            help="first-ever compiles to time (default: min(repeats, 3); --quick: 1)")
+        if name not in ("store", "tui"):  # the sections that build engines
+            add_max_groundings(q)
         if name == "engine":
             q.add_argument("--graph-only", action="store_true",
                            help="only the big-graph section (GraphML load, build, run on 2k/20k/200k nodes)")

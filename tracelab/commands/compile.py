@@ -6,12 +6,14 @@ from __future__ import annotations
 import argparse
 import sys
 
+from tracelab.commands._args import add_max_groundings
 from tracelab.errors import UserError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("compile", help="compile a rule program to its own kernel and cache it on disk")
     p.add_argument("program", nargs="+", help="rule files (merged into one program, as `reason` merges them)")
+    add_max_groundings(p)
     p.set_defaults(func=run)
 
 

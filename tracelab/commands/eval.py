@@ -9,7 +9,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from tracelab.commands._args import non_negative_int, positive_int
+from tracelab.commands._args import add_max_groundings, non_negative_int, positive_int
 from tracelab.errors import UserError, store_errors
 
 
@@ -29,6 +29,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--envs", type=positive_int, default=50, help="worlds stepped together (default 50)")
     p.add_argument("--run", default=None, help="trace every game into this new run directory")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
+    add_max_groundings(p)
     p.set_defaults(func=run)
 
 

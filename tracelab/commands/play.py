@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tracelab.commands._args import ENGINE_KERNELS, non_negative_int, positive_int
+from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, non_negative_int, positive_int
 from tracelab.errors import UserError, store_errors
 
 OUTCOMES = {0: "win", 1: "loss", 2: "draw"}  # from red's side, by WINNER_RED / BLUE / DRAW
@@ -42,6 +42,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "built it ahead)")
     p.add_argument("--run", help="a new (or empty) run directory (default runs/play-<scenario>-<time>)")
     p.add_argument("--no-trace", action="store_true", help="play without recording a run")
+    add_max_groundings(p)
     p.set_defaults(func=run)
 
 

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from tracelab.commands._args import ENGINE_KERNELS, positive_int
+from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, positive_int
 from tracelab.errors import UserError
 
 
@@ -39,6 +39,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "rule_trace_edges_*.csv) into DIR")
     p.add_argument("--kernel", choices=ENGINE_KERNELS, default="auto",
                    help="the engine's kernel (default auto; compiled: the program's own, docs/engine-api.md)")
+    add_max_groundings(p)
     p.set_defaults(func=run)
 
 

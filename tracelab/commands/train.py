@@ -19,7 +19,7 @@ RESUMABLE_FLAGS = {"threads", "kernel"}  # what --resume may change (the rest is
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from tracelab.commands._args import ENGINE_KERNELS, byte_size
+    from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, byte_size
     from tracelab.train.config import config_fields
 
     p = sub.add_parser("train", help="train red with DQN, logging metrics, episodes and traced evaluation "
@@ -47,6 +47,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--max-memory", type=byte_size, default=None, metavar="SIZE",
                    help="refuse a run whose networks, replay buffers and worlds are estimated to need more "
                         "(e.g. 12G; default: half of this machine's memory)")
+    add_max_groundings(p)
     p.set_defaults(func=run)
 
 
@@ -63,7 +64,10 @@ def run(args: argparse.Namespace) -> int:
     from tracelab.train.config import TrainConfig
     from tracelab.train.memory import check_training_memory, memory_limit
 
-    given = {k: v for k, v in vars(args).items() if k not in ("func", "command", "run", "resume", "max_memory")}
+    # --max-memory and --max-groundings are no training settings (cli.main applies the second): not in the
+    # config, free with --resume
+    given = {k: v for k, v in vars(args).items()
+             if k not in ("func", "command", "run", "resume", "max_memory", "max_groundings")}
     limit = memory_limit(args.max_memory, "--max-memory")
     state = None
     with store_errors():  # a bad value in the config or a checkpoint that does not load

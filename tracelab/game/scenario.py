@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any, Iterable, Mapping
 
 import numpy as np
+from tracelab.engine.safe_files import FileRefused, read_bytes
 
 # Action ids of the spec's table. Moves use the first four ids, shots the next four in the same
 # direction order, so `shot direction = action - 4`.
@@ -33,6 +34,14 @@ TEAMS = ("red", "blue")
 
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 _MAX_SIDE = 4096  # cell ids must fit comfortably in int32
+# Sizes read from a scenario file are checked before anything is built from them. A scenario becomes
+# facts of the game (tracelab/game/facts.py: ~850 bytes each as Python objects, ~1,900 once a program;
+# a 200x200 map's 359,285 took 40 s), then atoms and groundings: at most this many facts (a 330x330 map
+# at 1 agent a team; the built-in scenarios make 600-1,600, a 8x8 map at 20 a team 4,400).
+MAX_GAME_FACTS = 1_000_000
+MAX_HITS_TO_KILL = 1000  # health / damage: each hit an agent can take is a step of the game's tally chain
+MAX_EPISODE_STEPS = 100_000  # max_steps: training keeps a [worlds, max_steps, 2, agents] action history
+SCENARIO_FILE_CAP = 8 << 20  # a scenario file is a few hundred bytes; a big map's mountains a few MB
 
 Cell = tuple[int, int]
 
@@ -160,6 +169,33 @@ def _reachable(width: int, height: int, blocked: np.ndarray, start: Cell) -> np.
     return seen
 
 
+def game_fact_counts(width: int, height: int, agents: int, ammo: int, hits_to_kill: int) -> dict[str, int]:
+    """How many facts tracelab.game.facts.scenario_facts makes of a scenario, by the field that drives
+    them (tests/test_strangers_sizes.py checks the sum against it): per cell its kind and, per direction,
+    a neighbour and nextTo or an edge; per agent 15 and per team 1; per bullet 5 and one per enemy
+    target; per bullet place of a team 1, and 3 per hit to kill; 5 more."""
+    cells = width * height + 4 * ((width - 1) * height + width * (height - 1)) + 2 * (width + height)
+    bullets = agents * ammo
+    return {"width": cells,
+            "agents_per_team": 2 * (15 * agents + 1) + 2 * bullets * agents + 5,
+            "ammo": 2 * bullets * 5 + bullets,
+            "health": 3 * bullets * hits_to_kill}
+
+
+def _check_game_size(width: int, height: int, agents: int, ammo: int, hits_to_kill: int) -> None:
+    """Refuse a scenario that would make more than MAX_GAME_FACTS facts, naming the field that makes most."""
+    counts = game_fact_counts(width, height, agents, ammo, hits_to_kill)
+    total = sum(counts.values())
+    if total <= MAX_GAME_FACTS:
+        return
+    key = max(counts, key=counts.__getitem__)
+    what = {"width": f"a {width}x{height} map", "agents_per_team": f"{agents} agents a team",
+            "ammo": f"ammo {ammo} ({agents * ammo:,} bullets a team)",
+            "health": f"{hits_to_kill} hits to kill (health / damage) for {agents * ammo:,} bullets a team"}[key]
+    raise ScenarioError(_DIRECT, key, f"{what}: {counts[key]:,} facts of the game ({total:,} in all); a "
+                                      f"scenario may make at most {MAX_GAME_FACTS:,}")
+
+
 @dataclass(frozen=True)
 class Scenario:
     """One game's settings. Cells are (x, y); x grows right, y grows up; cell id = y * width + x."""
@@ -215,12 +251,17 @@ class Scenario:
                                 f"(not mountains), room for at most {free // 2} agents a team")
         set_("agents_per_team", n)
         set_("ammo", _check_int("ammo", self.ammo, 0))
-        set_("max_steps", _check_int("max_steps", self.max_steps, 1))
+        set_("max_steps", _check_int("max_steps", self.max_steps, 1, MAX_EPISODE_STEPS))
         for name in ("health", "damage"):
             value = _check_number(name, getattr(self, name))
             if value <= 0:
                 raise ScenarioError(_DIRECT, name, f"must be positive, got {value}")
             set_(name, value)
+        if not self.health / self.damage <= MAX_HITS_TO_KILL:  # also refuses inf
+            raise ScenarioError(_DIRECT, "health", f"health {self.health:g} / damage {self.damage:g} is "
+                                                   f"{self.health / self.damage:.3g} hits to kill; at most "
+                                                   f"{MAX_HITS_TO_KILL} are played")
+        _check_game_size(w, h, n, self.ammo, self.hits_to_kill)
         if not isinstance(self.advanced, (bool, np.bool_)):
             raise ScenarioError(_DIRECT, "advanced", f"expected true or false, got {self.advanced!r}")
         set_("advanced", bool(self.advanced))
@@ -393,7 +434,9 @@ def load_scenario(path: str | Path) -> Scenario:
     """Read and check a scenario TOML file."""
     source = str(path)
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = read_bytes(path, SCENARIO_FILE_CAP, what="scenario file").decode("utf-8")
+    except FileRefused as e:  # a FIFO, a device, too big: its message names the file
+        raise ScenarioError(source, None, str(e).removeprefix(f"{source}: ")) from None
     except OSError as e:
         raise ScenarioError(source, None, f"cannot read: {e.strerror or e}") from None
     except UnicodeDecodeError as e:

@@ -8,9 +8,10 @@ import os
 from dataclasses import dataclass
 
 from tracelab.engine.errors import RuleSyntaxError
+from tracelab.engine.parser import read_rule_file
 from tracelab.engine.program import SourceLoc
 
-from .files import csv_rows, json_items, parse_bool, read_text
+from .files import csv_rows, json_items, parse_bool
 from .text import PLiteral, Squeezed, parse_literal
 
 
@@ -33,7 +34,7 @@ def parse_fact(text: str, loc: SourceLoc, source_line: str | None = None) -> PLi
 
 def read_facts(path: str | os.PathLike[str]) -> list[PFact]:
     file = os.fspath(path)
-    text = read_text(file)
+    text = read_rule_file(file)
     if os.path.splitext(file)[1].lower() == ".json":
         return _facts_json(text, file)
     return _facts_csv(text, file)

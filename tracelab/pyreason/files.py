@@ -12,17 +12,6 @@ from tracelab.engine.errors import RuleSyntaxError
 from tracelab.engine.program import SourceLoc
 
 
-def read_text(file: str) -> str:
-    with open(file, "rb") as fh:
-        data = fh.read()
-    try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError as e:
-        line = data.count(b"\n", 0, e.start) + 1
-        col = e.start - (data.rfind(b"\n", 0, e.start) + 1) + 1
-        raise RuleSyntaxError(f"the file is not UTF-8 text (byte offset {e.start})", file, line, col) from None
-
-
 def parse_bool(value: str, what: str, loc: SourceLoc, line: str) -> bool:
     """PyReason's booleans in its CSV files: true/1/yes/t/y, false/0/no/f/n, or empty (false)."""
     v = value.strip().lower()
@@ -112,6 +101,8 @@ def json_items(text: str, file: str, text_key: str, what: str) -> Iterator[tuple
         data = json.loads(text)
     except json.JSONDecodeError as e:
         raise RuleSyntaxError(f"not a JSON file: {e.msg}", file, e.lineno, e.colno) from None
+    except RecursionError:  # json recurses per level: 100,000 nested lists exhaust the stack
+        raise RuleSyntaxError(f"JSON nested too deeply for a PyReason {what} file", file, 1, 1) from None
     if not isinstance(data, list):
         raise RuleSyntaxError(f"a PyReason {what} file in JSON is a list of {what} objects", file, 1, 1)
     finder = JsonFinder(text, file)

@@ -8,9 +8,10 @@ import json
 import os
 from dataclasses import dataclass, field
 
+from tracelab.engine.parser import read_rule_file
 from tracelab.engine.program import SourceLoc
 
-from .files import JsonFinder, csv_rows, json_items, parse_bool, read_text
+from .files import JsonFinder, csv_rows, json_items, parse_bool
 from .text import PLiteral, Squeezed, parse_literal, split_top
 
 QUANTIFIERS = ("greater_equal", "greater", "less_equal", "less", "equal")
@@ -91,7 +92,7 @@ def _forall(lit: PLiteral) -> PLiteral:
 def read_rules(path: str | os.PathLike[str]) -> list[PRule]:
     """A PyReason rule file by its extension: .csv, .json, else the text format."""
     file = os.fspath(path)
-    text = read_text(file)
+    text = read_rule_file(file)
     ext = os.path.splitext(file)[1].lower()
     if ext == ".csv":
         return _rules_csv(text, file)

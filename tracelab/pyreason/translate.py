@@ -16,6 +16,7 @@ from tracelab.engine import (
     check_program,
     parse_program,
 )
+from tracelab.engine.parser import line_from_file
 from tracelab.engine.program import Program, SourceLoc, constant_text
 
 from .facts import PFact, read_facts
@@ -173,18 +174,7 @@ def _located(e: ProgramError, origins: list[tuple[SourceLoc, str] | None], lines
         if isinstance(e, RuleSyntaxError) and _SHARED_SYNTAX.search(lines[e.line - 1]):
             msg += ("; the translation uses the quantifiers, annotation functions or rule options of issue 14, "
                     "which this tracelab's rule parser may not read yet")
-        return type(e)(msg, loc.file, loc.line, loc.column, _source_line(loc))
+        return type(e)(msg, loc.file, loc.line, loc.column, line_from_file(loc.file, loc.line))
     if e.file != GENERATED and e.line > 0 and e.source_line is None:
-        return type(e)(e.message, e.file, e.line, e.column, _source_line(SourceLoc(e.file, e.line, e.column)))
+        return type(e)(e.message, e.file, e.line, e.column, line_from_file(e.file, e.line))
     return e
-
-
-def _source_line(loc: SourceLoc) -> str | None:
-    try:
-        with open(loc.file, encoding="utf-8") as f:
-            for n, line in enumerate(f, 1):
-                if n == loc.line:
-                    return line
-    except OSError:
-        return None
-    return None

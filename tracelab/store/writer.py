@@ -13,6 +13,7 @@ run still opens. SIGTERM and interpreter exit close open writers (status 'interr
 from __future__ import annotations
 
 import atexit
+import errno
 import fcntl
 import os
 import signal
@@ -260,8 +261,7 @@ class TraceWriter:
     # ---- flushing --------------------------------------------------------------------------------------
     def _check(self) -> None:
         if self._error is not None:
-            raise RuntimeError(f"the trace writer of {str(self.run_dir)!r} failed: {self._error!r}") \
-                from self._error
+            raise self._failure(self._error) from self._error
         if self._closing:
             raise RuntimeError(f"the trace writer of {str(self.run_dir)!r} is closed")
 
@@ -348,12 +348,24 @@ class TraceWriter:
         self._thread.join()
         error = self._error
         self._meta.update(ended_at=now_iso(), status="failed" if error else status)
-        write_meta(self.run_dir, self._meta)
-        fcntl.flock(self._lock_file, fcntl.LOCK_UN)
-        self._lock_file.close()
-        _OPEN_WRITERS.discard(self)
+        try:
+            write_meta(self.run_dir, self._meta)
+        except OSError as e:  # a full disk: the run stays as its last flush left it, readable
+            error = error or e
+        finally:
+            fcntl.flock(self._lock_file, fcntl.LOCK_UN)
+            self._lock_file.close()
+            _OPEN_WRITERS.discard(self)
         if error is not None:
-            raise RuntimeError(f"the trace writer of {str(self.run_dir)!r} failed: {error!r}") from error
+            raise self._failure(error) from error
+
+    def _failure(self, error: BaseException) -> Exception:
+        """The error to raise for a failed write: a full disk is the user's to fix, an OSError (one line,
+        naming the run); anything else stays a RuntimeError (a bug, with its traceback)."""
+        if isinstance(error, OSError) and error.errno in (errno.ENOSPC, errno.EDQUOT):
+            return OSError(error.errno, "the disk is full: the run keeps what was written before, "
+                                        f"readable ({os.strerror(error.errno)})", str(self.run_dir))
+        return RuntimeError(f"the trace writer of {str(self.run_dir)!r} failed: {error!r}")
 
     @property
     def closed(self) -> bool:

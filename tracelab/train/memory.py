@@ -43,8 +43,8 @@ def memory_limit(max_bytes: int | None = None, flag: str | None = None) -> Limit
     machine's memory (`flag`, if any, is named as the way to raise it)."""
     if max_bytes is not None:
         return Limit(max_bytes, f"set by {flag}" if flag else "given")
-    import psutil
-    total = psutil.virtual_memory().total
+    from tracelab.engine.grounding_limit import usable_memory  # the machine's, or its container's limit
+    total = usable_memory()
     raise_it = f"; {flag} raises it" if flag else ""
     return Limit(int(total * MACHINE_SHARE), f"half of this machine's {_gib(total)}{raise_it}")
 
