@@ -1,0 +1,115 @@
+"""SQL from strangers (issue 24, sections 3-5): a sealed run's catalog is checked before anything in it
+is read, so SQL the file brings along never runs; Ctrl-C stops a long `tracelab sql` query (exit 130)
+and Esc cancels one in the TUI's console; every sandbox refusal is one line."""
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from store_helpers import live_and_sealed_walk_runs, tampered_copy
+
+from tracelab.cli import main
+from tracelab.store.reader import open_run
+from tracelab.store.sealed_catalog import expected_columns
+
+ROOT = Path(__file__).resolve().parent.parent
+SAMPLE_RUNS = sorted(p for p in (ROOT / "sample_runs").iterdir() if (p / "run.duckdb").is_file())
+TRACELAB = [sys.executable, "-c", "import sys; from tracelab.cli import main; sys.exit(main())"]
+
+
+@pytest.fixture(scope="module")
+def sealed(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return live_and_sealed_walk_runs(tmp_path_factory.mktemp("strangers-sql"))["sealed"]
+
+
+def one_line_error(argv: list[str], capsys: pytest.CaptureFixture) -> str:
+    """`tracelab ARGV` fails with exit 1 and one line on stderr, no traceback; returns the line."""
+    code = main(argv)
+    out = capsys.readouterr()
+    lines = out.err.strip().splitlines()
+    assert code == 1 and len(lines) == 1 and "Traceback" not in out.err, out.err
+    assert lines[0].startswith("tracelab: error: ")
+    return lines[0]
+
+
+def run_table_sql(columns: dict[str, str], changed: dict[str, str]) -> str:
+    """CREATE TABLE raw.run with the expected columns, some of them declared otherwise."""
+    return "CREATE TABLE raw.run (" + ", ".join(
+        f'"{c}" {changed.get(c, t)}' for c, t in columns.items()) + ")"
+
+
+# ---- section 3: the sealed file's catalog ---------------------------------------------------------------
+
+def test_a_generated_column_is_refused_before_its_expression_runs(sealed: Path, tmp_path: Path) -> None:
+    """raw.run.command computed on read: it succeeds where the file was made (external access on) and
+    fails with 'payload ran' inside tracelab's sandbox, so any read of it would show that text."""
+    payload = ("VARCHAR GENERATED ALWAYS AS (CASE WHEN current_setting('enable_external_access') "
+               "THEN 'made' ELSE error('payload ran') END) VIRTUAL")
+    columns = expected_columns()["run"]
+    run = tampered_copy(sealed, tmp_path / "generated",
+                        "CREATE TABLE saved AS SELECT * EXCLUDE (command) FROM raw.run", "DROP TABLE raw.run",
+                        run_table_sql(columns, {"command": payload}),
+                        "INSERT INTO raw.run BY NAME SELECT * FROM saved", "DROP TABLE saved")
+    for command in (["show", str(run)], ["sql", str(run), "SELECT command FROM run"]):
+        done = subprocess.run([*TRACELAB, *command], capture_output=True, text=True, timeout=120)
+        lines = done.stderr.strip().splitlines()
+        assert done.returncode == 1 and len(lines) == 1, done.stderr
+        assert "payload ran" not in done.stderr + done.stdout
+        assert "raw.run.command is a generated column" in lines[0] and str(run / "run.duckdb") in lines[0]
+
+
+@pytest.mark.parametrize("statements, named", [
+    (["ALTER TABLE raw.steps ALTER COLUMN reward SET DEFAULT random()"], "raw.steps.reward has a default"),
+    (["CREATE MACRO main.evil(x) AS x || (SELECT content FROM read_text('/etc/hostname'))"],
+     "holds a macro main.evil"),
+    (["CREATE MACRO raw.every_change() AS TABLE SELECT * FROM raw.changes"], "holds a macro raw.every_change"),
+    (["CREATE VIEW main.evil AS SELECT repeat('A', 2000000000) AS a"], "holds a view main.evil"),
+    (["CREATE TABLE main.extra AS SELECT 1 AS x"], "holds a table main.extra"),
+    (["CREATE TABLE raw.extra AS SELECT 1 AS x"], "holds a table raw.extra"),
+    (["CREATE SCHEMA evil"], "holds a schema evil"),
+    (["CREATE SCHEMA s", "CREATE SCHEMA s.raw"], "holds a schema s.raw"),  # a second raw, nested
+    (["CREATE SEQUENCE main.counter"], "holds a sequence main.counter"),
+    (["CREATE INDEX by_reward ON raw.steps ((reward + 1))"], "holds an index raw.by_reward"),
+    (["CREATE TRIGGER wipe AFTER INSERT ON raw.nodes FOR EACH STATEMENT DELETE FROM raw.steps"],
+     "holds a trigger raw.wipe"),
+    (["ALTER TABLE raw.steps ALTER COLUMN reward SET NOT NULL"], "holds a constraint raw.steps NOT NULL"),
+    (["CREATE TYPE main.mood AS ENUM ('happy')"], "holds a type main.mood"),
+])
+def test_anything_seal_does_not_write_is_refused_by_name(sealed: Path, tmp_path: Path, statements: list[str],
+                                                         named: str, capsys: pytest.CaptureFixture) -> None:
+    run = tampered_copy(sealed, tmp_path / "tampered", *statements)
+    line = one_line_error(["sql", str(run), "SELECT count(*) FROM changes"], capsys)
+    assert named in line and str(run / "run.duckdb") in line, line
+
+
+def test_columns_are_the_expected_ones_and_older_runs_still_open(sealed: Path, tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture) -> None:
+    for i, (statement, named) in enumerate([
+            ("ALTER TABLE raw.steps ALTER COLUMN reward TYPE VARCHAR", "raw.steps.reward is VARCHAR, not DOUBLE"),
+            ("ALTER TABLE raw.run ADD COLUMN extra INTEGER", "raw.run has a column extra"),
+            ("ALTER TABLE raw.steps DROP COLUMN obs", "raw.steps has no column 'obs'")]):
+        run = tampered_copy(sealed, tmp_path / str(i), statement)
+        assert named in one_line_error(["sql", str(run), "SELECT count(*) FROM steps"], capsys)
+    # a run sealed before clauses.closed existed reads it as false
+    older = tampered_copy(sealed, tmp_path / "older", "ALTER TABLE raw.clauses DROP COLUMN closed")
+    assert open_run(older).execute("SELECT DISTINCT closed FROM raw.clauses").fetchall() == [(False,)]
+    for run in SAMPLE_RUNS:  # sealed before clauses.closed too; they open, and stay as they are
+        before = (run / "run.duckdb").read_bytes()
+        con = open_run(run)
+        assert con.execute("SELECT count(*) FROM changes").fetchone()[0] > 0
+        assert con.execute("SELECT status FROM run").fetchone()[0] == "finished"
+        con.close()
+        assert (run / "run.duckdb").read_bytes() == before
+
+
+def test_a_write_ahead_log_beside_the_sealed_file_is_not_replayed(sealed: Path, tmp_path: Path,
+                                                                  capsys: pytest.CaptureFixture) -> None:
+    """DuckDB replays a .wal on ATTACH, running the SQL in it (here an ALTER ... USING expression)."""
+    run = tampered_copy(sealed, tmp_path / "wal", "PRAGMA disable_checkpoint_on_shutdown",
+                        "SET wal_autocheckpoint = '1TB'",
+                        "ALTER TABLE raw.run ALTER COLUMN command TYPE VARCHAR USING 'the log ran this'")
+    assert (run / "run.duckdb.wal").is_file()
+    line = one_line_error(["sql", str(run), "SELECT command FROM run"], capsys)
+    assert "run.duckdb.wal" in line and "write-ahead log" in line and "the log ran" not in line
