@@ -113,3 +113,41 @@ def test_a_write_ahead_log_beside_the_sealed_file_is_not_replayed(sealed: Path, 
     assert (run / "run.duckdb.wal").is_file()
     line = one_line_error(["sql", str(run), "SELECT command FROM run"], capsys)
     assert "run.duckdb.wal" in line and "write-ahead log" in line and "the log ran" not in line
+
+
+# ---- section 5: every refusal is one line ---------------------------------------------------------------
+
+OUTSIDE = ["SELECT * FROM sniff_csv('/etc/passwd')", "SELECT * FROM duckdb_secrets()",
+           "SELECT * FROM duckdb_extensions()", "SELECT * FROM which_secret('s3://bucket/key', 's3')",
+           "SELECT * FROM read_text('/etc/passwd')", "SELECT * FROM read_blob('/etc/passwd')",
+           "SELECT * FROM glob('/etc/*')", "SELECT * FROM read_csv_auto('/etc/passwd')",
+           "SELECT * FROM parquet_scan('/etc/passwd')", "SELECT * FROM parquet_metadata('/etc/passwd')",
+           "SELECT * FROM read_json_auto('/etc/passwd')", "SELECT * FROM 'http://example.com/x.csv'"]
+
+
+@pytest.mark.parametrize("fmt", ["table", "json"])
+def test_queries_reaching_outside_the_run_are_refused_in_one_line(fmt: str, capsys: pytest.CaptureFixture) -> None:
+    """Before: sniff_csv, duckdb_secrets, duckdb_extensions and which_secret ended in a traceback
+    (QueryRefused was raised outside the command's error handling)."""
+    for query in OUTSIDE:
+        line = one_line_error(["sql", str(SAMPLE_RUNS[0]), query, "--format", fmt], capsys)
+        assert "a query may read only this run's own files" in line, (query, line)
+        assert "root:" not in line  # nothing of /etc/passwd
+
+
+HARMLESS = ["SELECT * FROM duckdb_settings()", "SELECT * FROM pragma_database_size()",
+            "SELECT * FROM pragma_table_info('raw.run')", "SELECT * FROM checkpoint()",
+            "SELECT * FROM force_checkpoint()", "SELECT * FROM query('COPY (SELECT 1) TO ''x.csv''')",
+            "SELECT * FROM test_all_types()", "SELECT 'infinity'::TIMESTAMP AS t"]
+
+
+def test_system_functions_are_harmless_and_never_a_traceback(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                             capsys: pytest.CaptureFixture) -> None:
+    """Before: values Python's datetime cannot hold (test_all_types(), 'infinity') ended in a traceback."""
+    monkeypatch.chdir(tmp_path)
+    for query in HARMLESS:
+        for fmt in ("table", "csv"):
+            code = main(["sql", str(SAMPLE_RUNS[0]), query, "--format", fmt])
+            err = capsys.readouterr().err
+            assert code in (0, 1) and "Traceback" not in err and len(err.strip().splitlines()) <= 1, (query, err)
+    assert list(tmp_path.iterdir()) == []  # wrote nothing

@@ -76,30 +76,23 @@ def _statement(args: argparse.Namespace) -> tuple[str, dict | None]:
 
 
 def run(args: argparse.Namespace) -> int:
-    import duckdb
-
     from tracelab.store.reader import arrow_stream, fetch_arrow, open_run, query_readonly, retrying
-    from tracelab.store.sandbox import refusal
     if args.list:
         print_saved_queries()
         return 0
-    try:
-        with store_errors():
-            sql, params = _statement(args)
-            con = open_run(args.run)
-            if args.format == "table":
-                limit = DEFAULT_TABLE_ROWS + 1 if args.limit is None else args.limit
-                table = retrying(lambda: fetch_arrow(query_readonly(con, sql, params), limit,
-                                                     args.offset))
-                cut = args.limit is None and table.num_rows > DEFAULT_TABLE_ROWS
-                write_table(table.slice(0, DEFAULT_TABLE_ROWS) if cut else table, "table", args.output)
-                if cut:
-                    print(f"note: showing the first {DEFAULT_TABLE_ROWS} rows; --limit N shows more, and "
-                          "--format csv|json|parquet [-o FILE] writes every row", file=sys.stderr)
-            else:
-                schema, batches = retrying(lambda: arrow_stream(query_readonly(con, sql, params),
-                                                                args.limit, args.offset))
-                write_stream(schema, batches, args.format, args.output)
-    except duckdb.PermissionException as e:  # raised while the rows are read
-        raise refusal(e) from e
+    with store_errors():
+        sql, params = _statement(args)
+        con = open_run(args.run)
+        if args.format == "table":
+            limit = DEFAULT_TABLE_ROWS + 1 if args.limit is None else args.limit
+            table = retrying(lambda: fetch_arrow(query_readonly(con, sql, params), limit, args.offset))
+            cut = args.limit is None and table.num_rows > DEFAULT_TABLE_ROWS
+            write_table(table.slice(0, DEFAULT_TABLE_ROWS) if cut else table, "table", args.output)
+            if cut:
+                print(f"note: showing the first {DEFAULT_TABLE_ROWS} rows; --limit N shows more, and "
+                      "--format csv|json|parquet [-o FILE] writes every row", file=sys.stderr)
+        else:
+            schema, batches = retrying(lambda: arrow_stream(query_readonly(con, sql, params),
+                                                            args.limit, args.offset))
+            write_stream(schema, batches, args.format, args.output)
     return 0

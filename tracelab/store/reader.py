@@ -260,14 +260,25 @@ BATCH_ROWS = 65_536
 def arrow_stream(rel: duckdb.DuckDBPyRelation, limit: int | None = None,
                  offset: int = 0) -> tuple[pa.Schema, Iterator[pa.RecordBatch]]:
     """The schema and the rows [offset, offset+limit) of a relation as Arrow record batches, read as
-    they are needed: nothing past the limit is computed beyond DuckDB's current batch."""
-    reader = rel.to_arrow_reader(BATCH_ROWS)
+    they are needed: nothing past the limit is computed beyond DuckDB's current batch. A query reaching
+    outside the run (refused only as its rows are read) raises sandbox.QueryRefused."""
+    try:
+        reader = rel.to_arrow_reader(BATCH_ROWS)
+    except duckdb.PermissionException as e:
+        raise refusal(e) from None
     return reader.schema, _sliced(reader, limit, offset)
+
+
+def _refusing(batches: Iterator[pa.RecordBatch]) -> Iterator[pa.RecordBatch]:
+    try:
+        yield from batches
+    except duckdb.PermissionException as e:
+        raise refusal(e) from None
 
 
 def _sliced(batches: Iterator[pa.RecordBatch], limit: int | None, offset: int) -> Iterator[pa.RecordBatch]:
     skip, left = offset, limit
-    for batch in batches:
+    for batch in _refusing(batches):
         if skip:
             cut = min(skip, batch.num_rows)
             batch, skip = batch.slice(cut), skip - cut
