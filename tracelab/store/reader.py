@@ -247,6 +247,8 @@ def query_readonly(con: RunConnection, sql: str,
         return con.sql(sql, params=params or None)
     except duckdb.PermissionException as e:
         raise refusal(e) from None
+    except duckdb.InterruptException:  # cancelled (EXPLAIN ANALYZE runs here): never run it again
+        raise
     except duckdb.Error:
         # the relation API drops the "LINE 1: ... ^" pointer; binding again through execute() (it fails
         # at the same place, before running anything) raises the error with it
