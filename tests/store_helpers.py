@@ -75,3 +75,19 @@ def live_and_sealed_walk_runs(base: Path) -> dict[str, Path]:
     runs = {"live": write_walk_run(base / "live"), "sealed": write_walk_run(base / "sealed")}
     seal_run(runs["sealed"])
     return runs
+
+
+def tampered_copy(run: Path, dest: Path, *statements: str) -> Path:
+    """A copy (at `dest`) of a sealed run whose file was changed by `statements`, run with plain DuckDB:
+    what a stranger would do to the file before sharing it."""
+    import shutil
+
+    import duckdb
+    copy = Path(shutil.copytree(run, dest))
+    con = duckdb.connect(str(copy / "run.duckdb"))
+    try:
+        for s in statements:
+            con.execute(s)
+    finally:
+        con.close()
+    return copy

@@ -68,14 +68,14 @@ def test_missing_tables_and_columns_are_named(made: dict[str, Path], tmp_path: P
 
 def test_views_elsewhere_in_a_sealed_file_stay_inside_the_sandbox(made: dict[str, Path], tmp_path: Path,
                                                                   capsys: pytest.CaptureFixture) -> None:
-    """tracelab's own views are rebuilt by the reader; a view the file brings along in another schema is
-    never used, and querying it by name still cannot read outside the run."""
-    run = tampered_sealed(made, tmp_path, "CREATE VIEW main.evil AS SELECT * FROM read_text('/etc/hostname')",
+    """tracelab's own views are rebuilt by the reader; the file's copies of them are never used, and
+    querying one by name still cannot read outside the run (any other view: test_strangers_sql.py)."""
+    run = tampered_sealed(made, tmp_path,
                           "CREATE OR REPLACE VIEW main.changes AS SELECT * FROM read_text('/etc/hostname')")
     con = open_run(run)
     assert query_readonly(con, "SELECT count(*) FROM changes").fetchall() == [(40,)]
     with pytest.raises(QueryRefused, match="only this run's own files"):
-        query_readonly(con, "SELECT * FROM store.main.evil")
+        query_readonly(con, "SELECT * FROM store.main.changes")
     refused(capsys, run, "only this run's own files", "SELECT * FROM store.main.changes")
 
 

@@ -376,27 +376,6 @@ def test_training_curve_updates_while_another_process_appends_metrics(tmp_path: 
         run_app([run], body, size=(100, 30))
 
 
-def test_escape_cancels_a_running_query() -> None:
-    async def body(app: Any, pilot: Any) -> None:
-        await episodes_ready(app, pilot)
-        await pilot.press("5")
-        await wait_for(pilot, lambda: app.screen.panes["sql"].is_attached)
-        sql: SqlPane = app.screen.panes["sql"]
-        sql.editor.text = "SELECT count(*) FROM changes a, changes b, changes c"   # ~10^11 rows
-        await pilot.press("ctrl+r")
-        await wait_for(pilot, lambda: app.screen.source.busy)
-        await pilot.press("escape")
-        await wait_for(pilot, lambda: sql.last_error is not None)
-        assert "interrupt" in sql.last_error.message.lower()
-        assert type(app.screen).__name__ == "RunScreen"          # Esc cancelled; it did not go back
-        sql.editor.text = "SELECT count(*) AS n FROM episodes"   # the connection still works
-        await pilot.press("ctrl+r")
-        results = sql.query_one(LazyTable)
-        await wait_for(pilot, lambda: loaded(results) and results.count == 1)
-        assert results.row(0)["n"] == 3
-    run_app([ADVANCED], body)
-
-
 def test_board_follows_the_trace_cursor() -> None:
     async def body(app: Any, pilot: Any) -> None:
         pane, trace = await open_first_trace(app, pilot)

@@ -21,6 +21,7 @@ _FOREIGN = (
     ("tracelab.engine.errors", ("ProgramError", "InconsistencyError", "FixpointError")),
     ("tracelab.engine.safe_files", ("FileRefused",)),
     ("tracelab.game.scenario", ("ScenarioError",)),
+    ("tracelab.store.sandbox", ("QueryRefused",)),  # raised wherever a query's rows are read
     ("duckdb", ("Error",)),
 )
 

@@ -48,6 +48,25 @@ def _json_value(v: Any) -> Any:
     return v
 
 
+def _values(column: "pa.Array | pa.ChunkedArray", name: str) -> list[Any]:
+    """A column's values as Python objects. Dates and times Python cannot hold (DuckDB's 'infinity',
+    the year 290000, nanoseconds) come as Arrow's text for them."""
+    try:
+        return column.to_pylist()
+    except (OverflowError, ValueError):
+        import pyarrow as pa
+        try:
+            return column.cast(pa.string()).to_pylist()
+        except pa.ArrowException:
+            raise UserError(f"column {name!r} holds a date or time outside what Python can show; "
+                            "cast it to VARCHAR in the query") from None
+
+
+def _pyrows(table: "pa.Table | pa.RecordBatch") -> list[dict[str, Any]]:
+    columns = [_values(table.column(i), name) for i, name in enumerate(table.schema.names)]
+    return [dict(zip(table.schema.names, row)) for row in zip(*columns)] if columns else []
+
+
 def write_table(table: "pa.Table", fmt: str, output: str | None = None, out: TextIO | None = None) -> None:
     """Write `table` in `fmt` to `output` (a path) or to `out` (default stdout)."""
     if fmt == "parquet":
@@ -62,7 +81,7 @@ def write_table(table: "pa.Table", fmt: str, output: str | None = None, out: Tex
         return
     out = out or sys.stdout
     names = table.column_names
-    rows = table.to_pylist()
+    rows = _pyrows(table)
     if fmt == "csv":
         w = csv.writer(out)
         w.writerow(names)
@@ -92,7 +111,7 @@ DEFAULT_TABLE_ROWS = 1000  # rows a table-format result shows unless --limit say
 
 def _rows(batches: "Iterable[pa.RecordBatch]") -> "Iterator[dict[str, Any]]":
     for batch in batches:
-        yield from batch.to_pylist()
+        yield from _pyrows(batch)
 
 
 def write_stream(schema: "pa.Schema", batches: "Iterable[pa.RecordBatch]", fmt: str,
@@ -122,8 +141,8 @@ def write_stream(schema: "pa.Schema", batches: "Iterable[pa.RecordBatch]", fmt: 
         w.writerow(names)
         nested = [pa.types.is_nested(t) for t in schema.types]
         for batch in batches:  # column by column: far fewer Python objects than a dict per row
-            columns = [[_cell(v) for v in col.to_pylist()] if is_nested else col.to_pylist()
-                       for col, is_nested in zip(batch.columns, nested)]
+            columns = [[_cell(v) for v in _values(col, name)] if is_nested else _values(col, name)
+                       for col, name, is_nested in zip(batch.columns, names, nested)]
             w.writerows(zip(*columns))
             n += batch.num_rows
         return n

@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from tracelab.commands._interrupt import CtrlCStops
 from tracelab.commands._output import (
     DEFAULT_TABLE_ROWS,
     add_format_options,
@@ -76,21 +77,17 @@ def _statement(args: argparse.Namespace) -> tuple[str, dict | None]:
 
 
 def run(args: argparse.Namespace) -> int:
-    import duckdb
-
     from tracelab.store.reader import arrow_stream, fetch_arrow, open_run, query_readonly, retrying
-    from tracelab.store.sandbox import refusal
     if args.list:
         print_saved_queries()
         return 0
-    try:
-        with store_errors():
-            sql, params = _statement(args)
-            con = open_run(args.run)
+    with store_errors():
+        sql, params = _statement(args)
+        con = open_run(args.run)
+        with CtrlCStops(con.interrupt):
             if args.format == "table":
                 limit = DEFAULT_TABLE_ROWS + 1 if args.limit is None else args.limit
-                table = retrying(lambda: fetch_arrow(query_readonly(con, sql, params), limit,
-                                                     args.offset))
+                table = retrying(lambda: fetch_arrow(query_readonly(con, sql, params), limit, args.offset))
                 cut = args.limit is None and table.num_rows > DEFAULT_TABLE_ROWS
                 write_table(table.slice(0, DEFAULT_TABLE_ROWS) if cut else table, "table", args.output)
                 if cut:
@@ -100,6 +97,4 @@ def run(args: argparse.Namespace) -> int:
                 schema, batches = retrying(lambda: arrow_stream(query_readonly(con, sql, params),
                                                                 args.limit, args.offset))
                 write_stream(schema, batches, args.format, args.output)
-    except duckdb.PermissionException as e:  # raised while the rows are read
-        raise refusal(e) from e
     return 0

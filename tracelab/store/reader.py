@@ -3,8 +3,9 @@ views: the one way anything in tracelab reads a run (commands, saved queries, th
 
 The connection can read the run's own files and nothing else, writes nothing, never reaches the network
 and never loads an extension (tracelab.store.sandbox; docs/store.md, "Security model"). Opening a run
-never runs SQL the run supplies: a sealed file's raw.* entries are read as stored tables only (a view
-there is refused), and a live run's manifest may only name files inside its parts/ directory.
+never runs SQL the run supplies: a sealed file's catalog must be what `seal` writes, checked before
+anything is read (tracelab.store.sealed_catalog), and a live run's manifest may only name files inside
+its parts/ directory.
 
 Live run (a directory of Parquet parts): raw.<table> are views over read_parquet() of the files the run's
 manifest lists (tracelab.store.parts), held in DuckDB variables that LiveRunConnection brings up to date
@@ -39,12 +40,12 @@ from tracelab.store.sandbox import (
     refusal,
     sandbox_connection,
 )
-from tracelab.store.schema import ADDED_COLUMNS, SCHEMAS, TABLES, VIEWS_SQL
+from tracelab.store.schema import ADDED_COLUMNS, TABLES, VIEWS_SQL
+from tracelab.store.sealed_catalog import STORED_SCHEMAS, SealedFileRefused, check_sealed_catalog
 
 RUNS_DIR = Path("runs")
 # The columns tracelab reads from each stored table (raw.run: the run's metadata row).
-STORED_COLUMNS: dict[str, list[str]] = {
-    **{t: SCHEMAS[t].names for t in TABLES}, "run": meta_table({}, "").schema.names}
+STORED_COLUMNS: dict[str, list[str]] = {t: s.names for t, s in STORED_SCHEMAS.items()}
 
 
 @dataclass
@@ -204,33 +205,19 @@ def _check_run_row(con: duckdb.DuckDBPyConnection, sealed: Path) -> None:
 
 def _attach_sealed(con: duckdb.DuckDBPyConnection, sealed: Path) -> None:
     """Attach the sealed file read-only (before external access is switched off: ATTACH needs the file),
-    then map raw.<table> onto its stored tables, refusing views and missing tables or columns."""
+    check its catalog before reading anything (tracelab.store.sealed_catalog), then map raw.<table> onto
+    its stored tables."""
+    wal = Path(f"{sealed.resolve()}.wal")
+    if os.path.lexists(wal):  # ATTACH replays a write-ahead log, running the SQL in it (ALTER ... USING)
+        raise SealedFileRefused(f"{str(wal)!r}: a sealed run has no write-ahead log, and tracelab does not "
+                                "replay one it brings along (it holds SQL that would run on opening)")
     con.execute(f"ATTACH {_sql_str(sealed.resolve())} AS store (READ_ONLY)")
     lock_down(con)
-    kinds = dict(con.execute(
-        "SELECT table_name, 'table' FROM duckdb_tables() WHERE database_name = 'store' "
-        "AND schema_name = 'raw' UNION ALL SELECT view_name, 'view' FROM duckdb_views() "
-        "WHERE database_name = 'store' AND schema_name = 'raw' AND NOT internal").fetchall())
-    views = sorted(t for t, kind in kinds.items() if kind == "view")
-    if views:
-        raise ValueError(f"{str(sealed)!r} holds raw.{views[0]} as a view, not a stored table: tracelab "
-                         "does not open runs whose stored data is computed by SQL they bring along")
-    missing = [t for t in STORED_COLUMNS if t not in kinds]
-    if missing:
-        raise ValueError(f"{str(sealed)!r} has no table raw.{missing[0]}: not a tracelab run")
-    columns: dict[str, set[str]] = {}
-    for table, column in con.execute("SELECT table_name, column_name FROM duckdb_columns() WHERE "
-                                     "database_name = 'store' AND schema_name = 'raw'").fetchall():
-        columns.setdefault(table, set()).add(column)
+    columns = check_sealed_catalog(con, "store", sealed)
     con.execute("CREATE SCHEMA raw")
     for t, names in STORED_COLUMNS.items():
-        have = columns.get(t, set())
-        lacking = [c for c in names if c not in have and c not in ADDED_COLUMNS.get(t, {})]
-        if lacking:
-            raise ValueError(f"{str(sealed)!r}: raw.{t} has no column {lacking[0]!r}: not a tracelab "
-                             "run, or one from an incompatible version")
-        extra = _defaults_for_missing(t, have)
-        cols = ", ".join([f'"{c}"' for c in names if c in have] + ([extra] if extra else []))
+        extra = _defaults_for_missing(t, columns[t])
+        cols = ", ".join([f'"{c}"' for c in names if c in columns[t]] + ([extra] if extra else []))
         con.execute(f"CREATE VIEW raw.{t} AS SELECT {cols} FROM store.raw.{t}")
 
 
@@ -269,6 +256,8 @@ def query_readonly(con: RunConnection, sql: str,
         return con.sql(sql, params=params or None)
     except duckdb.PermissionException as e:
         raise refusal(e) from None
+    except duckdb.InterruptException:  # cancelled (EXPLAIN ANALYZE runs here): never run it again
+        raise
     except duckdb.Error:
         # the relation API drops the "LINE 1: ... ^" pointer; binding again through execute() (it fails
         # at the same place, before running anything) raises the error with it
@@ -282,14 +271,25 @@ BATCH_ROWS = 65_536
 def arrow_stream(rel: duckdb.DuckDBPyRelation, limit: int | None = None,
                  offset: int = 0) -> tuple[pa.Schema, Iterator[pa.RecordBatch]]:
     """The schema and the rows [offset, offset+limit) of a relation as Arrow record batches, read as
-    they are needed: nothing past the limit is computed beyond DuckDB's current batch."""
-    reader = rel.to_arrow_reader(BATCH_ROWS)
+    they are needed: nothing past the limit is computed beyond DuckDB's current batch. A query reaching
+    outside the run (refused only as its rows are read) raises sandbox.QueryRefused."""
+    try:
+        reader = rel.to_arrow_reader(BATCH_ROWS)
+    except duckdb.PermissionException as e:
+        raise refusal(e) from None
     return reader.schema, _sliced(reader, limit, offset)
+
+
+def _refusing(batches: Iterator[pa.RecordBatch]) -> Iterator[pa.RecordBatch]:
+    try:
+        yield from batches
+    except duckdb.PermissionException as e:
+        raise refusal(e) from None
 
 
 def _sliced(batches: Iterator[pa.RecordBatch], limit: int | None, offset: int) -> Iterator[pa.RecordBatch]:
     skip, left = offset, limit
-    for batch in batches:
+    for batch in _refusing(batches):
         if skip:
             cut = min(skip, batch.num_rows)
             batch, skip = batch.slice(cut), skip - cut

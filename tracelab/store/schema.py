@@ -7,6 +7,8 @@ so the same view text serves a live run (raw.* are views over Parquet parts) and
 tables)."""
 from __future__ import annotations
 
+import re
+
 import pyarrow as pa
 
 # The engine's cause kinds (tracelab.engine.CAUSE_*), as the store names them: external facts are the
@@ -142,3 +144,5 @@ CREATE OR REPLACE VIEW steps AS SELECT * FROM raw.steps;
 CREATE OR REPLACE VIEW metrics AS SELECT * FROM raw.metrics;
 CREATE OR REPLACE VIEW run AS SELECT * FROM raw.run;
 """
+# The views above, by name (a sealed file holds a copy of each in its schema `main`).
+VIEW_NAMES: tuple[str, ...] = tuple(re.findall(r"^CREATE OR REPLACE VIEW (\w+) AS", VIEWS_SQL, re.M))

@@ -7,6 +7,7 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
+import duckdb
 from rich.text import Text
 from textual.app import ComposeResult
 from textual.binding import Binding
@@ -172,6 +173,9 @@ class SqlPane(Vertical):
         def work() -> None:
             try:
                 table = self.source.call(lambda con: fetch_arrow(query_readonly(con, sql, params), MAX_ROWS))
+            except duckdb.InterruptException:  # Esc (RunScreen: the source's interrupt()); not an error
+                self.app.call_from_thread(self._cancelled, label)
+                return
             except Exception as e:  # noqa: BLE001 - every error is shown inline
                 self.app.call_from_thread(self._failed, sql, str(e))
                 return
@@ -185,6 +189,10 @@ class SqlPane(Vertical):
         capped = " (first rows only)" if table.num_rows >= MAX_ROWS else ""
         self.query_one("#sql-status", Static).update(
             f" {label + ': ' if label else ''}{table.num_rows:,} row(s){capped} · Ctrl+R runs · F2 saved · F3 history")
+
+    def _cancelled(self, label: str) -> None:
+        self.query_one("#sql-status", Static).update(
+            f" {label + ': ' if label else ''}cancelled · Ctrl+R runs · F2 saved · F3 history")
 
     def _failed(self, sql: str, message: str) -> None:
         err = locate_error(sql, message)

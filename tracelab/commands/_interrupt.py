@@ -1,0 +1,64 @@
+"""Ctrl-C during a DuckDB query: stop the query at once, end the command with one line and status 130.
+
+Python runs its SIGINT handler only between bytecodes of the main thread, and a DuckDB query holds the
+main thread for as long as it runs (a long `tracelab sql` ignored Ctrl-C for 30 s and more). The C-level
+handler does write the signal's number to a wakeup file descriptor at once; a thread waiting on it calls
+the connection's interrupt(), so the query stops within DuckDB's next check (milliseconds)."""
+from __future__ import annotations
+
+import os
+import signal
+import threading
+from collections.abc import Callable
+from types import FrameType, TracebackType
+
+
+class CtrlCStops:
+    """`with CtrlCStops(con.interrupt):` Ctrl-C calls interrupt() from a watcher thread, and whatever the
+    block then ends with (DuckDB's interrupt error, its own 'Query interrupted', or KeyboardInterrupt)
+    becomes KeyboardInterrupt(what), which tracelab.cli.main prints as one line and exits 130. Off the
+    main thread (where signals never arrive) the block runs as it is."""
+
+    def __init__(self, interrupt: Callable[[], None], what: str = "the query was stopped") -> None:
+        self.interrupt = interrupt
+        self.what = what
+        self.pressed = threading.Event()
+        self.active = threading.current_thread() is threading.main_thread()
+
+    def __enter__(self) -> CtrlCStops:
+        if not self.active:
+            return self
+        self.finished = threading.Event()
+        self.read_end, self.write_end = os.pipe()
+        os.set_blocking(self.write_end, False)  # the C-level handler must never block on it
+        self.previous_fd = signal.set_wakeup_fd(self.write_end, warn_on_full_buffer=False)
+        self.previous_handler = signal.signal(signal.SIGINT, self._on_sigint)
+        self.watcher = threading.Thread(target=self._watch, name="ctrl-c-watcher", daemon=True)
+        self.watcher.start()
+        return self
+
+    def _watch(self) -> None:
+        while not self.finished.is_set():
+            if signal.SIGINT in os.read(self.read_end, 64) and not self.finished.is_set():
+                self.pressed.set()
+                self.interrupt()
+
+    def _on_sigint(self, signum: int, frame: FrameType | None) -> None:
+        # Python's own handler, run between bytecodes: DuckDB runs it too (it checks for signals at
+        # times) and turns the KeyboardInterrupt into an error of its own, so note the press first
+        self.pressed.set()
+        raise KeyboardInterrupt(self.what)
+
+    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        if not self.active:
+            return
+        signal.signal(signal.SIGINT, self.previous_handler)
+        signal.set_wakeup_fd(self.previous_fd)
+        self.finished.set()
+        os.write(self.write_end, b"\0")  # wakes the watcher, which sees `finished`
+        self.watcher.join()
+        os.close(self.read_end)
+        os.close(self.write_end)
+        if error is not None and (self.pressed.is_set() or isinstance(error, KeyboardInterrupt)):
+            raise KeyboardInterrupt(self.what) from None
