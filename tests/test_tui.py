@@ -3,15 +3,7 @@ by another process, checked through the rendered text (the SVG screenshot's text
 Golden-file snapshots of the main screens: test_tui_snapshots.py."""
 from __future__ import annotations
 
-import html
 import os
-import re
-import subprocess
-import sys
-import time
-from collections import defaultdict
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -30,45 +22,19 @@ from tracelab.viewers.tui.source import RunSource  # noqa: E402
 from tracelab.viewers.tui.sql import SqlPane, locate_error  # noqa: E402
 from tracelab.viewers.tui.trace import TracePane, parse_range  # noqa: E402
 from tracelab.viewers.tui.why import WhyPane  # noqa: E402
-from tui_helpers import episodes_ready, loaded, pick_saved_query, run_app, wait_for  # noqa: E402
+from tui_helpers import (  # noqa: E402
+    episodes_ready,
+    live_run,
+    loaded,
+    pick_saved_query,
+    run_app,
+    shown,
+    shown_once,
+    wait_for,
+)
 
 ROOT = Path(__file__).resolve().parent.parent
 ADVANCED = ROOT / "sample_runs" / "advanced"
-
-
-async def shown(app: Any, pilot: Any) -> str:
-    """What the screen shows once it has repainted, as plain text lines (from textual's SVG screenshot)."""
-    await pilot.pause()
-    svg = app.export_screenshot()
-    lines: dict[float, list[tuple[float, str]]] = defaultdict(list)
-    for x, y, text in re.findall(r'<text[^>]*x="([\d.]+)" y="([\d.]+)"[^>]*>([^<]*)</text>', svg):
-        lines[float(y)].append((float(x), html.unescape(text).replace("\xa0", " ")))
-    return "\n".join("".join(t for _, t in sorted(parts)) for _, parts in sorted(lines.items()))
-
-
-async def shown_once(app: Any, pilot: Any, ready: Callable[[str], bool], timeout: float = 30.0) -> str:
-    """The screen's text once `ready` holds for it (a table's rows are painted a frame after they load),
-    or the last text seen after `timeout` seconds (the caller's assertion then says what is missing)."""
-    t0 = time.monotonic()
-    text = await shown(app, pilot)
-    while not ready(text) and time.monotonic() - t0 < timeout:
-        await pilot.pause(0.05)
-        text = await shown(app, pilot)
-    return text
-
-
-@contextmanager
-def live_run(mode: str, tmp_path: Path) -> Iterator[Path]:
-    """A run another process is writing (tests/tui_writer_proc.py MODE), from its first flush on."""
-    run, stop = tmp_path / f"{mode}-live", tmp_path / "stop"
-    proc = subprocess.Popen([sys.executable, str(ROOT / "tests" / "tui_writer_proc.py"), mode, str(run),
-                             str(stop)], stdout=subprocess.PIPE, text=True)
-    try:
-        assert proc.stdout is not None and proc.stdout.readline().strip()
-        yield run
-    finally:
-        stop.touch()
-        proc.wait(timeout=30)
 
 
 async def open_first_trace(app: Any, pilot: Any) -> tuple[TracePane, LazyTable]:

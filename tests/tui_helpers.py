@@ -3,9 +3,15 @@ an app run around a test body. Shared by test_tui.py and test_tui_snapshots.py."
 from __future__ import annotations
 
 import asyncio
+import html
 import os
+import re
+import subprocess
+import sys
 import time
-from collections.abc import Callable
+from collections import defaultdict
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -13,6 +19,8 @@ os.environ["TEXTUAL_ANIMATIONS"] = "none"
 
 from tracelab.viewers.tui.app import TracelabApp  # noqa: E402
 from tracelab.viewers.tui.lazy_table import LazyTable  # noqa: E402
+
+TESTS = Path(__file__).resolve().parent
 
 
 async def wait_for(pilot: Any, done: Callable[[], bool], timeout: float = 30.0) -> None:
@@ -54,3 +62,46 @@ async def pick_saved_query(app: Any, pilot: Any, name: str, value: str) -> None:
     await wait_for(pilot, lambda: len(picker.query("Input")) == 1)
     picker.query_one("Input").value = value
     await pilot.press("enter")
+
+
+async def shown(app: Any, pilot: Any) -> str:
+    """What the screen shows once it has repainted, as plain text lines (from textual's SVG screenshot)."""
+    await pilot.pause()
+    svg = app.export_screenshot()
+    lines: dict[float, list[tuple[float, str]]] = defaultdict(list)
+    for x, y, text in re.findall(r'<text[^>]*x="([\d.]+)" y="([\d.]+)"[^>]*>([^<]*)</text>', svg):
+        lines[float(y)].append((float(x), html.unescape(text).replace("\xa0", " ")))
+    return "\n".join("".join(t for _, t in sorted(parts)) for _, parts in sorted(lines.items()))
+
+
+async def shown_once(app: Any, pilot: Any, ready: Callable[[str], bool], timeout: float = 30.0) -> str:
+    """The screen's text once `ready` holds for it (a table's rows are painted a frame after they load),
+    or the last text seen after `timeout` seconds (the caller's assertion then says what is missing)."""
+    t0 = time.monotonic()
+    text = await shown(app, pilot)
+    while not ready(text) and time.monotonic() - t0 < timeout:
+        await pilot.pause(0.05)
+        text = await shown(app, pilot)
+    return text
+
+
+@contextmanager
+def live_writer(mode: str, tmp_path: Path) -> Iterator[tuple[Path, subprocess.Popen]]:
+    """A run another process is writing (tests/tui_writer_proc.py MODE), from its first flush on, and
+    that process (to stop it as a user would)."""
+    run, stop = tmp_path / f"{mode}-live", tmp_path / "stop"
+    proc = subprocess.Popen([sys.executable, str(TESTS / "tui_writer_proc.py"), mode, str(run),
+                             str(stop)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None and proc.stdout.readline().strip()
+        yield run, proc
+    finally:
+        stop.touch()
+        proc.wait(timeout=30)
+
+
+@contextmanager
+def live_run(mode: str, tmp_path: Path) -> Iterator[Path]:
+    """A run another process is writing (tests/tui_writer_proc.py MODE), from its first flush on."""
+    with live_writer(mode, tmp_path) as (run, _):
+        yield run

@@ -12,8 +12,9 @@ manifest lists (tracelab.store.parts), held in DuckDB variables that LiveRunConn
 before every statement; so one connection sees every flush as it lands, all tables at the same moment,
 and nothing locks the writer out. raw.run is rebuilt when the run's status changes, which is read at
 query time from the writer's lock. A query running longer than the writer's grace period (30 s) after a
-compaction can fail with "file not found" (never return wrong rows): long-lived readers run queries
-through retrying().
+compaction, or a `seal` that removes the parts, can fail with "file not found" (never return wrong
+rows): long-lived readers run queries through retrying(), and a live connection moves to the sealed file
+once the run is sealed.
 Sealed run (run.duckdb, or any lone .duckdb file): the file is attached READ_ONLY and raw.<table> are
 views over its stored tables. Either way the user-facing views (tracelab.store.schema.VIEWS_SQL) are the
 same."""
@@ -110,20 +111,38 @@ class LiveRunConnection:
     """A DuckDB connection on a run being written. Before each statement it re-reads the run's manifest
     and, if it changed, points every raw.<table> view at the parts it lists (DuckDB variables read by the
     views), and while the run is running it rebuilds raw.run when its status changed (a writer closing
-    or dying); everything else is the DuckDB connection's own API."""
+    or dying); everything else is the DuckDB connection's own API.
+
+    Once the run is sealed (`tracelab seal`, from any process) it moves over to the sealed file: seal
+    writes run.duckdb before it removes the parts, so a statement that finds the sealed file, or finds
+    the parts gone, reopens the run on run.duckdb; a statement already reading parts that vanish fails
+    with "No such file" and succeeds when run again (retrying())."""
 
     def __init__(self, con: duckdb.DuckDBPyConnection, run_dir: Path) -> None:
         self._con = con
         self._run_dir = run_dir
         self._seen = b""
         self._status: str | None = None
+        self._ready = False   # the views exist (open_run done): only then can it move to the sealed file
+        self.sealed = False   # reading run.duckdb now
         self.refresh()
 
     def refresh(self) -> None:
         """Bring the views up to the manifest's latest flush and raw.run up to the run's status (cheap
-        when nothing changed)."""
-        raw = read_bytes(layout.manifest_path(self._run_dir), JSON_CAP, what="parts manifest",
-                         follow_symlinks=False)
+        when nothing changed), or move to the sealed file once there is one."""
+        if self.sealed:
+            return
+        if self._ready and _sealed_file(self._run_dir) is not None:
+            self._move_to_sealed()
+            return
+        try:
+            raw = read_bytes(layout.manifest_path(self._run_dir), JSON_CAP, what="parts manifest",
+                             follow_symlinks=False)
+        except FileNotFoundError:
+            if not self._ready or _sealed_file(self._run_dir) is None:
+                raise
+            self._move_to_sealed()   # sealed between the two looks
+            return
         if raw != self._seen:
             for table, files in read_manifest(self._run_dir).items():
                 self._con.execute(f"SET VARIABLE {_parts_variable(table)} = ?", [[str(f) for f in files]])
@@ -133,6 +152,16 @@ class LiveRunConnection:
             if doc["status"] != self._status:
                 _replace_run_table(self._con, meta_table(doc, doc["status"]))
                 self._status = doc["status"]
+
+    def views_ready(self) -> None:
+        """open_run has built the views: from now on a seal moves the connection to the sealed file."""
+        self._ready = True
+
+    def _move_to_sealed(self) -> None:
+        sealed = open_run(self._run_dir)
+        old, self._con = self._con, sealed
+        self.sealed = True
+        old.close()
 
     def execute(self, query: Any, parameters: Any = None) -> duckdb.DuckDBPyConnection:
         self.refresh()
@@ -178,8 +207,12 @@ def open_run(run: str | Path) -> RunConnection:
                     con.execute(f"CREATE OR REPLACE VIEW raw.{t} AS SELECT *, {extra} FROM {parts}")
         con.execute(VIEWS_SQL)
         lock_configuration(con)
-    except BaseException:
+        if isinstance(result, LiveRunConnection):
+            result.views_ready()
+    except BaseException as e:
         con.close()
+        if isinstance(e, (OSError, duckdb.IOException)) and sealed is None and _sealed_file(p) is not None:
+            return open_run(p)  # sealed (its parts removed) while it was being opened: read the sealed file
         raise
     return result
 
@@ -312,14 +345,20 @@ def fetch_arrow(rel: duckdb.DuckDBPyRelation, limit: int | None = None, offset: 
 T = TypeVar("T")
 
 
+# How DuckDB says a part a statement was bound to is gone: when it opens the file, or when it expands the
+# file list at the start of the statement.
+_PART_GONE = ("No such file", "No files found that match the pattern")
+
+
 def retrying(fn: Callable[[], T], attempts: int = 4) -> T:
-    """fn(), run again (up to `attempts` times) if it failed because a live run's compaction removed a
-    part a long query was still to open."""
+    """fn(), run again (up to `attempts` times) if it failed because a part a query was still to open
+    went away: removed by a live run's compaction, or by `seal` (the next attempt reads the sealed
+    file, LiveRunConnection.refresh)."""
     for i in range(attempts):
         try:
             return fn()
         except duckdb.IOException as e:
-            if "No such file" not in str(e) or i == attempts - 1:
+            if not any(m in str(e) for m in _PART_GONE) or i == attempts - 1:
                 raise
             time.sleep(0.01 * (i + 1))
     raise AssertionError("unreachable")

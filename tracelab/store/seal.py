@@ -1,9 +1,11 @@
 """Seal a finished (or crashed) run: compact its Parquet parts into one DuckDB file, run.duckdb.
 
 The file is built under a temp name and renamed into place, so a crash while sealing leaves the parts
-untouched and the run readable; once run.duckdb exists, readers use it and the parts are removed. Under
-the writer lock, seal first removes what a killed writer or an earlier failed seal left: temp files,
-and parts the manifest no longer lists."""
+untouched and the run readable; once run.duckdb exists, readers use it and the parts are removed.
+Readers open on the parts meanwhile move to run.duckdb by themselves (reader.LiveRunConnection); a
+query that was still to open a removed part fails once and reads the sealed file when run again
+(reader.retrying). Under the writer lock, seal first removes what a killed writer or an earlier failed
+seal left: temp files, and parts the manifest no longer lists."""
 from __future__ import annotations
 
 import os

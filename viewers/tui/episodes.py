@@ -1,7 +1,7 @@
 """The Episodes view: outcome, return, length and seed of every episode; for a training run also its
 kind (train / eval) and training step. Sort by clicking a header or with s / S; filter by outcome, length
 (e.g. `10..50`, `>=20`) and kind. Enter opens the episode's trace. On a live run the list is re-read
-when episodes begin or end."""
+when episodes begin or end, and once more after the run closes."""
 from __future__ import annotations
 
 import re
@@ -17,7 +17,7 @@ from tracelab.viewers.tui.colours import FALSE, PARTIAL, TRUE, UNKNOWN
 from tracelab.viewers.tui.lazy_table import Column, LazyTable
 from tracelab.viewers.tui.messages import OpenTrace
 from tracelab.viewers.tui.paging import QuerySource
-from tracelab.viewers.tui.source import RunSource
+from tracelab.viewers.tui.source import LiveReads, RunSource
 
 OUTCOME_COLOURS = {"win": TRUE, "loss": FALSE, "draw": PARTIAL, "truncated": UNKNOWN}
 
@@ -82,6 +82,7 @@ class EpisodesPane(Vertical):
         self.sort_key, self.sort_desc = "episode", False
         self.columns = list(BASE_COLUMNS)
         self._seen: dict | None = None     # episode counts last seen (live runs)
+        self.live_reads = LiveReads(source)
 
     def compose(self) -> ComposeResult:
         with Horizontal(id="ep-filters"):
@@ -103,16 +104,18 @@ class EpisodesPane(Vertical):
             self.set_interval(LIVE_REFRESH_S, self._poll)
 
     def _poll(self) -> None:
-        if not hasattr(self, "base") or self.source.busy or not self.screen.is_current:
+        if (not self.live_reads.due or not hasattr(self, "base") or self.source.busy
+                or not self.screen.is_current):
             return
 
         def work() -> None:
-            mark = self.source.rows("SELECT count(*) AS n, count(ended_at) AS ended FROM episodes")[0]
-            if mark != self._seen:
-                first = self._seen is None
-                self._seen = mark
-                if not first:
-                    self.app.call_from_thread(self.reload, True)
+            with self.live_reads.read():
+                mark = self.source.rows("SELECT count(*) AS n, count(ended_at) AS ended FROM episodes")[0]
+                if mark != self._seen:
+                    first = self._seen is None
+                    self._seen = mark
+                    if not first:
+                        self.app.call_from_thread(self.reload, True)
 
         self.run_worker(work, thread=True, group="episodes-poll", exclusive=True, exit_on_error=False)
 

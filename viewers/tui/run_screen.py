@@ -1,5 +1,6 @@
 """The screen of one open run: a tab per view (Episodes, Trace, Why, Rules, SQL, Training), the keys
-1-6 to switch, and the messages that pass an episode, a rule or a change from one view to another."""
+1-6 to switch, and the messages that pass an episode, a rule or a change from one view to another. Its
+header follows the run's life: live while written, then how it ended, then sealed."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -24,6 +25,7 @@ TABS = (("episodes", "1 Episodes"), ("trace", "2 Trace"), ("why", "3 Why"), ("ru
         ("sql", "5 SQL"), ("training", "6 Training"))
 
 EAGER = ("episodes", "trace")   # built with the screen; the other views when first shown
+STATUS_REFRESH_S = 1.0          # how often the run's status is read while it can change
 
 
 class RunTabs(TabbedContent):
@@ -60,16 +62,34 @@ class RunScreen(Screen):
             "rules": RulesPane(self.source), "sql": SqlPane(self.source), "training": TrainingPane(self.source)}
 
     def compose(self) -> ComposeResult:
-        kind = "live" if self.source.live else "sealed"
-        status = self.source.status
-        yield Static(f" {self.path.name}  ·  {kind}{'' if status == 'finished' else ' · ' + status}  ·  "
-                     f"{self.source.command}", id="title", classes="title")
+        yield Static(self._title(), id="title", classes="title")
         with RunTabs(initial="episodes", id="tabs"):
             for tab, title in TABS:
                 with TabPane(title, id=tab):
                     if tab in EAGER:
                         yield self.panes[tab]
         yield KeyBar()
+
+    def _title(self) -> str:
+        return f" {self.path.name}  ·  {self.source.state}  ·  {self.source.command}"
+
+    def on_mount(self) -> None:
+        if self.source.can_change:  # its writer may close or die, `tracelab seal` may seal it
+            self._status_timer = self.set_interval(STATUS_REFRESH_S, self._check_status)
+
+    def _check_status(self) -> None:
+        if self.is_current:
+            self.run_worker(self._read_status, thread=True, group="run-status", exclusive=True,
+                            exit_on_error=False)
+
+    def _read_status(self) -> None:
+        if self.source.follow():
+            self.app.call_from_thread(self._status_changed)
+
+    def _status_changed(self) -> None:
+        self.query_one("#title", Static).update(self._title())
+        if not self.source.can_change:
+            self._status_timer.stop()
 
     async def pane(self, tab: str) -> Widget:
         """The view of a tab, mounted on first use (so that opening a run builds only two views)."""

@@ -1,17 +1,20 @@
 """One open run for the TUI: its connection (tracelab.store.open_run) behind a lock, so that queries from
 worker threads never overlap on it, and every statement through the store's read-only path
-(query_readonly inside retrying). `interrupt()` cancels the running query (Esc)."""
+(query_readonly inside retrying). `interrupt()` cancels the running query (Esc). The run's life as
+other processes change it (its writer closing or dying, `tracelab seal`) is read by `follow()`; the
+views re-read a run while it is `live` and once more after it closes (LiveReads)."""
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, TypeVar
 
 import pyarrow as pa
 
 from tracelab.store.catalog import short_command
-from tracelab.store.reader import LiveRunConnection, RunConnection, open_run, query_readonly, retrying, run_info
+from tracelab.store.reader import RunConnection, open_run, query_readonly, retrying, run_info
 
 T = TypeVar("T")
 
@@ -21,11 +24,39 @@ class RunSource:
         self.path = Path(path)
         info = run_info(self.path)
         self.status: str = info.status
+        self.sealed = info.sealed_file is not None
         self.command = short_command(str(info.meta.get("command") or ""))
         self.con: RunConnection = open_run(self.path)
-        self.live = isinstance(self.con, LiveRunConnection)
         self._lock = threading.Lock()
         self._busy = 0
+
+    @property
+    def live(self) -> bool:
+        """Being written now: its rows may still grow."""
+        return self.status == "running"
+
+    @property
+    def state(self) -> str:
+        """The run's state in a few words, as the views' headers show it."""
+        if self.live:
+            return "live · running"
+        if self.sealed:
+            return "sealed" if self.status == "finished" else f"sealed · {self.status}"
+        return self.status
+
+    @property
+    def can_change(self) -> bool:
+        """Whether another process may still change the run: its writer, or `seal` (not yet sealed)."""
+        return not self.sealed
+
+    def follow(self) -> bool:
+        """Read the run's status, and whether it is sealed, as of now (a file read, without the
+        connection's lock); True if either changed since the last look."""
+        info = run_info(self.path)
+        now = (info.status, info.sealed_file is not None)
+        changed = now != (self.status, self.sealed)
+        self.status, self.sealed = now
+        return changed
 
     @property
     def busy(self) -> bool:
@@ -60,3 +91,25 @@ class RunSource:
     def close(self) -> None:
         with self._lock:
             self.con.close()
+
+
+class LiveReads:
+    """When a view re-reads a run on a timer: on every tick while the run is written, then once more
+    after it closed (a read that begins after the close sees the writer's last flush: the writer flushes
+    before it records its status), then never."""
+
+    def __init__(self, source: RunSource) -> None:
+        self.source = source
+        self.done = False
+
+    @property
+    def due(self) -> bool:
+        return not self.done
+
+    @contextmanager
+    def read(self) -> Iterator[bool]:
+        """Around one re-read; yields whether it is the last one (the run had closed as it began)."""
+        last = not self.source.live
+        yield last
+        if last:
+            self.done = True

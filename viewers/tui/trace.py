@@ -22,7 +22,7 @@ from tracelab.viewers.tui.board import BoardView
 from tracelab.viewers.tui.eval_games import EvalGame, eval_games, neighbour
 from tracelab.viewers.tui.messages import ExplainChange
 from tracelab.viewers.tui.paging import PAGE, TraceFilter, TraceSource
-from tracelab.viewers.tui.source import RunSource
+from tracelab.viewers.tui.source import LiveReads, RunSource
 
 
 def _change(row: dict[str, Any]) -> Text:
@@ -90,6 +90,7 @@ class TracePane(Vertical):
         self._goto_t: int | None = None
         self.jumps = 0            # jumps that landed (benchmarks and tests wait on it)
         self._board_choice: bool | None = None   # the user's b, else by width
+        self.live_reads = LiveReads(source)
 
     def compose(self) -> ComposeResult:
         game = Static("", id="tr-game", classes="title")
@@ -113,11 +114,13 @@ class TracePane(Vertical):
     def _follow(self) -> None:
         """On a live run, re-read the trace when the episode has grown (the cursor stays on its change)."""
         trace = self.trace
-        if trace is None or not self.table.ready or self.source.busy or not self.screen.is_current:
+        if (not self.live_reads.due or trace is None or not self.table.ready or self.source.busy
+                or not self.screen.is_current):
             return
 
         def work() -> None:
-            grown = trace.count_now() > trace.count
+            with self.live_reads.read():
+                grown = trace.count_now() > trace.count
             if grown and trace is self.trace:
                 self.app.call_from_thread(self._refollow)
 

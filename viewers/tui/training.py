@@ -1,7 +1,7 @@
 """The Training view: live curves from the run's `metrics` (docs: HELPER_GUIDE's training-run contract):
 win rate (eval/win_rate, per opponent setting), return (train_return, eval/mean_return), loss and epsilon.
 It re-reads the metrics every second while the run is live, so the curves grow while `tracelab train`
-writes. `v` shows the evaluation games in the Episodes view."""
+writes, and once more when it closes. `v` shows the evaluation games in the Episodes view."""
 from __future__ import annotations
 
 from collections import defaultdict
@@ -13,7 +13,7 @@ from textual.widgets import Static, TabbedContent
 
 from tracelab.viewers.tui.colours import BLUE_TEAM, PARTIAL, RED_TEAM, TRUE, UNKNOWN
 from tracelab.viewers.tui.plot import BraillePlot, Series
-from tracelab.viewers.tui.source import RunSource
+from tracelab.viewers.tui.source import LiveReads, RunSource
 
 REFRESH_S = 1.0
 PALETTE = (TRUE, BLUE_TEAM, PARTIAL, RED_TEAM, UNKNOWN)
@@ -39,6 +39,7 @@ class TrainingPane(Vertical, can_focus=True):
         self.source = source
         self.updates = 0          # how many times new metrics were drawn (tests watch it)
         self._seen: tuple[int, int] | None = None
+        self.live_reads = LiveReads(source)
 
     def compose(self) -> ComposeResult:
         with Grid():
@@ -54,7 +55,7 @@ class TrainingPane(Vertical, can_focus=True):
         self.set_interval(REFRESH_S, self.poll)
 
     def poll(self) -> None:
-        if not self.screen.is_current or not self.is_visible_tab:
+        if not self.live_reads.due or not self.screen.is_current or not self.is_visible_tab:
             return
         if self.source.busy:
             return  # another query holds the connection; try again on the next tick
@@ -65,12 +66,13 @@ class TrainingPane(Vertical, can_focus=True):
         return self.screen.query_one(TabbedContent).active == "training"
 
     def _read(self) -> None:
-        r = self.source.rows("SELECT count(*) AS n, coalesce(max(step), -1) AS last FROM metrics")[0]
-        mark = (int(r["n"]), int(r["last"]))
-        if mark == self._seen:
-            return
-        rows = self.source.rows("SELECT name, step, value FROM metrics ORDER BY name, step, time, value")
-        self.app.call_from_thread(self._draw, rows, mark)
+        with self.live_reads.read() as last:
+            r = self.source.rows("SELECT count(*) AS n, coalesce(max(step), -1) AS last FROM metrics")[0]
+            mark = (int(r["n"]), int(r["last"]))
+            if mark == self._seen and not last:
+                return
+            rows = self.source.rows("SELECT name, step, value FROM metrics ORDER BY name, step, time, value")
+            self.app.call_from_thread(self._draw, rows, mark)
 
     def _draw(self, rows: list[dict], mark: tuple[int, int]) -> None:
         self._seen = mark
@@ -84,7 +86,7 @@ class TrainingPane(Vertical, can_focus=True):
             series = [Series(n, PALETTE[i % len(PALETTE)], *by_name[n]) for i, n in enumerate(names)]
             self.query_one(f"#plot-{plot_id}", BraillePlot).set_series(series)
         self.updates += 1
-        live = "live, re-read every second" if self.source.live else "sealed"
+        live = "live, re-read every second" if self.source.live else self.source.state
         self.query_one("#train-status", Static).update(
             f" {mark[0]:,} metric rows up to step {mark[1]:,} · {live} · v: evaluation games"
             if mark[0] else " this run has no metrics (not a training run)")
