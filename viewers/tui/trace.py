@@ -192,6 +192,9 @@ class TracePane(Vertical):
         if self.filter is None:
             return
         table = self.table
+        if table.error:      # e.g. a filter that matches nothing in the run: the message says how to write one
+            self.query_one("#tr-status", Static).update(Text(f" {table.error}", style="bold red"))
+            return
         where = f"row {table.cursor + 1:,} of {table.count:,}" if table.count else "no rows"
         row = table.cursor_row
         atom = f" · {row['atom']}" if row else ""
