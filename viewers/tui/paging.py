@@ -18,7 +18,6 @@ from typing import Any, Protocol
 import numpy as np
 import pyarrow as pa
 
-from tracelab.store.names import check_name
 from tracelab.store.reader import query_readonly
 from tracelab.viewers.tui.episode_index import EpisodeIndex, RowSelection, cached_index, episode_index
 from tracelab.viewers.tui.source import RunSource
@@ -125,11 +124,9 @@ class TraceQuery:
         if f.t_to is not None:
             where.append("t <= $t_to")
             params["t_to"] = f.t_to
-        for column, kind, pattern in (("text", "atom", f.atom), ("label", "label", f.label)):
+        for column, pattern in (("text", f.atom), ("label", f.label)):
             if pattern:
                 sel.atom_sets.append(cls._atom_ids(source, column, pattern))
-                if not sel.atom_sets[-1]:  # a typo, not an empty trace: say what the run has
-                    source.call(lambda con: check_name(con, kind, pattern))  # noqa: B023 - called here
                 where.append(cls._in(atom_col, sel.atom_sets[-1]))
         if f.atom_id is not None:
             sel.atom_sets.append([f.atom_id])
@@ -137,8 +134,6 @@ class TraceQuery:
             params["atom_id"] = f.atom_id
         if f.rule:
             sel.causes = cls._causes(source, f.rule)
-            if not sel.causes:
-                source.call(lambda con: check_name(con, "cause", f.rule))
             where.append(cls._cause_clause(sel.causes))
         return cls(" AND ".join(where), params, sel)
 
