@@ -78,7 +78,7 @@ def test_why_and_why_not_commands(run: str, capsys: pytest.CaptureFixture) -> No
     code, _, err = cli(capsys, "why-not", run, "-e", "10", "--rule", "go", "--grounding", "A", "--at", "4")
     assert code == 1 and "cannot read binding 'A'" in err
     code, _, err = cli(capsys, "why", run, "at(r1,zz)", "-e", "10")
-    assert code == 1 and err.strip() == "tracelab: error: no node 'zz' in this run's vocabulary"
+    assert code == 1 and err.strip() == "tracelab: error: no node 'zz' in this run; its nodes: a, b, c, d, r1"
 
 
 ADVANCED = str(Path(__file__).resolve().parents[1] / "sample_runs" / "advanced")

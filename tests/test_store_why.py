@@ -154,7 +154,7 @@ def test_why_not_with_an_open_pattern_and_bad_input(con) -> None:  # noqa: ANN00
     assert "no atom matching at(A,d):[1,1] holds at the end of t=4" in w.checks[0].note
     with pytest.raises(KeyError, match="no variable\\(s\\) \\['Z'\\].*A, Y, X"):
         why_not(con, 10, "go", {"Z": "a"}, at=3)
-    with pytest.raises(KeyError, match="no rule named 'gone' in this run; did you mean go"):
+    with pytest.raises(KeyError, match="no rule 'gone' in this run; did you mean go"):
         why_not(con, 10, "gone", {}, at=3)
     with pytest.raises(KeyError, match="no node 'q'"):
         why_not(con, 10, "go", {"A": "q"}, at=3)

@@ -28,6 +28,7 @@ COMMAND_MODULES = [
     "tracelab.commands.experiment", "tracelab.commands.compile",
 ]
 EXIT_USER_ERROR = 1
+EXIT_USAGE = 2  # argparse's status for a usage error
 EXIT_BROKEN_PIPE = 141  # what a shell reports for a process ended by SIGPIPE
 
 
@@ -40,6 +41,22 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _unknown_arguments(parser: argparse.ArgumentParser, command: str, unknown: list[str]) -> int:
+    """An unknown flag is a usage error of its subcommand: one line naming it, with the closest flags,
+    not the usage of every subcommand (what the top-level parser would print)."""
+    import difflib
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices[command]
+    flags = [s for a in sub._actions for s in a.option_strings if s.startswith("--")]
+    flag = next((u.partition("=")[0] for u in unknown if u.startswith("-")), None)
+    if flag is None:
+        message = f"unexpected argument{'s' if len(unknown) > 1 else ''}: {' '.join(unknown)}"
+    else:
+        near = difflib.get_close_matches(flag, flags, n=3)
+        message = f"unknown flag {flag}" + (f"; did you mean {', '.join(near)}?" if near else "")
+    print(f"tracelab {command}: error: {message} (tracelab {command} --help lists them)", file=sys.stderr)
+    return EXIT_USAGE
+
+
 def _silence_stdout() -> None:
     """After a closed pipe: point stdout at /dev/null so that the interpreter's final flush does not
     raise again (the recipe of Python's `signal` docs)."""
@@ -49,7 +66,9 @@ def _silence_stdout() -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)  # usage errors: argparse prints them and exits 2
+    args, unknown = parser.parse_known_args(argv)  # usage errors: argparse prints them and exits 2
+    if unknown:
+        return _unknown_arguments(parser, args.command, unknown)
     try:
         with grounding_limit_of(args):
             status = int(args.func(args) or 0)

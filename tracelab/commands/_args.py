@@ -6,22 +6,44 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 
 
-def _int(text: str) -> int:
+def integer(text: str) -> int:
+    """An integer, also written as the field writes budgets: 100000, 100_000, 1e5, 1.5e3. The value must be a
+    whole number: 1.5 is refused, not rounded."""
+    from decimal import Decimal, InvalidOperation
     try:
         return int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        pass
+    try:
+        value = Decimal(text.strip().replace("_", ""))
+    except InvalidOperation:
+        value = None
+    if value is None or not value.is_finite() or value != value.to_integral_value() or abs(value) > 10 ** 18:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r} (e.g. 100000 or 1e5)")
+    return int(value)
+
+
+
+
+_TRUE, _FALSE = ("true", "yes", "on", "1"), ("false", "no", "off", "0")
+
+
+def boolean(text: str) -> bool:
+    """true/false, yes/no, on/off, 1/0 (CleanRL's `--torch-deterministic False`)."""
+    if text.strip().lower() in _TRUE + _FALSE:
+        return text.strip().lower() in _TRUE
+    raise argparse.ArgumentTypeError(f"expected true or false, got {text!r}")
 
 
 def non_negative_int(text: str) -> int:
-    v = _int(text)
+    v = integer(text)
     if v < 0:
         raise argparse.ArgumentTypeError(f"must be 0 or more, got {v}")
     return v
 
 
 def positive_int(text: str) -> int:
-    v = _int(text)
+    v = integer(text)
     if v < 1:
         raise argparse.ArgumentTypeError(f"must be at least 1, got {v}")
     return v

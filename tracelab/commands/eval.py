@@ -26,7 +26,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="the opponent's probability of a move towards red's base (default 0.3, the "
                         "method's evaluation)")
     p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the games (default 0)")
-    p.add_argument("--envs", type=positive_int, default=50, help="worlds stepped together (default 50)")
+    p.add_argument("--num-envs", dest="envs", type=positive_int, default=64,
+                   help="worlds stepped together (default 64, as train's --eval-envs)")
+    p.add_argument("--envs", dest="envs", type=positive_int, help=argparse.SUPPRESS)  # the earlier name
     p.add_argument("--run", default=None, help="trace every game into this new run directory")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     add_max_groundings(p)

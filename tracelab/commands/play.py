@@ -17,6 +17,7 @@ import numpy as np
 from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, non_negative_int, positive_int
 from tracelab.errors import UserError, store_errors
 
+DEFAULT_SCENARIO = "base"  # the one train defaults to (TrainConfig.scenario)
 OUTCOMES = {0: "win", 1: "loss", 2: "draw"}  # from red's side, by WINNER_RED / BLUE / DRAW
 
 
@@ -25,9 +26,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                                     "opponent) into a trace-store run")
     p.add_argument("--scenario", default=None,
                    help="a built-in scenario name (base, advanced, nonmarkov) or a scenario .toml file "
-                        "(default: advanced, or the scenario a --policy PATH was trained on)")
+                        "(default: base, as train and eval, or the scenario a --policy PATH was trained on)")
     p.add_argument("--episodes", type=positive_int, default=5, help="episodes to play (default 5)")
-    p.add_argument("--worlds", type=positive_int, default=1, help="worlds stepped together (default 1)")
+    p.add_argument("--num-envs", dest="worlds", type=positive_int, default=1,
+                   help="worlds stepped together (default 1)")
+    for alias in ("--worlds", "--envs"):  # earlier spellings: accepted, not listed
+        p.add_argument(alias, dest="worlds", type=positive_int, help=argparse.SUPPRESS)
     p.add_argument("--policy", default="scripted",
                    help="red's policy: random, scripted (the scripted base policy, default) or the path of "
                         "a trained policy (e.g. RUN/policy)")
@@ -75,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
         with store_errors():  # a policy that does not load is the user's to fix
             scenario = policy_scenario(read_policy_spec(args.policy))
     if args.scenario is not None or builtin:
-        name = args.scenario or "advanced"
+        name = args.scenario or DEFAULT_SCENARIO
         scenario = builtin_scenario(name) if name in builtin_scenario_names() else load_scenario(name)
     if not builtin:
         with store_errors():

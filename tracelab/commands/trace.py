@@ -64,14 +64,12 @@ def check_range(args: argparse.Namespace) -> None:
         raise UserError(f"--from {args.t_from} is after --to {args.t_to}: nothing can match")
 
 
-def check_labels(con: "duckdb.DuckDBPyConnection", patterns: list[str]) -> None:
-    """A --label that matches no label of the run is a typo: name the labels there are."""
-    import fnmatch
-    labels = [name for (name,) in con.execute("SELECT name FROM raw.labels ORDER BY name").fetchall()]
-    unknown = [p for p in patterns if not any(fnmatch.fnmatchcase(name, p) for name in labels)]
-    if unknown:
-        raise UserError(f"no label {', '.join(map(repr, unknown))} in this run; its labels: "
-                        f"{', '.join(labels) or 'none'}")
+def check_filters(con: "duckdb.DuckDBPyConnection", args: argparse.Namespace) -> None:
+    """A filter that matches nothing in the run is a typo: say so, with the close names, not "(0 rows)"."""
+    from tracelab.store.names import check_name
+    for kind, patterns in (("atom", args.atom), ("label", args.label), ("cause", args.rule)):
+        for pattern in patterns:
+            check_name(con, kind, pattern)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -79,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
     check_range(args)
     with store_errors():
         con = open_run(args.run)
-        check_labels(con, args.label)
+        check_filters(con, args)
         if not con.execute("SELECT count(*) FROM (SELECT 1 FROM raw.changes WHERE episode = ? LIMIT 1)",
                            [args.episode]).fetchall()[0][0]:
             known = [e for (e,) in con.execute("SELECT DISTINCT episode FROM raw.changes "

@@ -19,27 +19,38 @@ RESUMABLE_FLAGS = {"threads", "kernel"}  # what --resume may change (the rest is
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, byte_size
+    from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, boolean, byte_size, integer
     from tracelab.train.config import config_fields
 
     p = sub.add_parser("train", help="train red with DQN, logging metrics, episodes and traced evaluation "
                                      "games into a run", argument_default=argparse.SUPPRESS)
-    for name, typ, default, text in config_fields():
-        flag = "--" + name.replace("_", "-")
-        shown = text if default is None or isinstance(default, bool) else f"{text} (default: {default})"
+    for f in config_fields():
+        flag, name = "--" + f.flag, f.name
+        shown = f.help if f.default is None or isinstance(f.default, bool) else f"{f.help} (default: {f.default})"
         if name == "non_markov":
             p.add_argument("--non-markov", dest="non_markov", action="store_true", help=shown)
             p.add_argument("--markov", dest="non_markov", action="store_false",
                            help="the Markov setup: the current observation only (default)")
-        elif typ in ("bool", bool):
-            p.add_argument(flag, dest=name, action="store_true", help=shown)
+            continue
+        if name == "torch_deterministic":  # CleanRL's spelling: --torch-deterministic [true|false]
+            p.add_argument(flag, dest=name, type=boolean, nargs="?", const=True, metavar="BOOL",
+                           help=f"{shown} (default: on)")
+            p.add_argument("--no-" + f.flag, dest=name, action="store_false", help=argparse.SUPPRESS)
+            continue
+        if f.type in ("bool", bool):
+            kw: dict[str, Any] = {"action": "store_true"}
         elif name == "backend":
-            p.add_argument(flag, dest=name, choices=("rules", "reference"), help=shown)
+            kw = {"choices": ("rules", "reference")}
         elif name == "kernel":
-            p.add_argument(flag, dest=name, choices=ENGINE_KERNELS, help=shown)
+            kw = {"choices": ENGINE_KERNELS}
         else:
-            conv = {"int": int, "float": float, "str": str, "int | None": int}.get(str(typ), str)
-            p.add_argument(flag, dest=name, type=conv, metavar=name.upper(), help=shown)
+            conv = {"int": integer, "float": float, "str": str, "int | None": integer}.get(str(f.type), str)
+            kw = {"type": conv, "metavar": f.flag.upper().replace("-", "_")}
+        p.add_argument(flag, dest=name, help=shown, **kw)
+        if f.alias:  # the field's own name, as earlier versions and docs wrote it: accepted, not listed
+            p.add_argument("--" + f.alias, dest=name, help=argparse.SUPPRESS, **kw)
+    p.add_argument("--exp-name", default=None, type=run_name, metavar="NAME",
+                   help="name the run runs/NAME-<scenario>-<time> (default NAME: train)")
     p.add_argument("--run", default=None, help="run directory (default runs/train-<scenario>-<time>)")
     p.add_argument("--resume", default=None, metavar="RUN",
                    help="continue RUN's last checkpoint (its config; the new run goes to --run, default "
@@ -49,6 +60,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "(e.g. 12G; default: half of this machine's memory)")
     add_max_groundings(p)
     p.set_defaults(func=run)
+
+
+def run_name(text: str) -> str:
+    """--exp-name: a name, not a path (the run goes under runs/)."""
+    if not text or "/" in text or "\\" in text or text in (".", ".."):
+        raise argparse.ArgumentTypeError(f"expected a name without '/', got {text!r} (--run takes a path)")
+    return text
 
 
 def load_scenario_arg(text: str, agents: int | None = None) -> Any:
@@ -61,13 +79,13 @@ def load_scenario_arg(text: str, agents: int | None = None) -> Any:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tracelab.train.config import TrainConfig
+    from tracelab.train.config import TrainConfig, flag_of
     from tracelab.train.memory import check_training_memory, memory_limit
 
     # --max-memory and --max-groundings are no training settings (cli.main applies the second): not in the
     # config, free with --resume
     given = {k: v for k, v in vars(args).items()
-             if k not in ("func", "command", "run", "resume", "max_memory", "max_groundings")}
+             if k not in ("func", "command", "run", "resume", "max_memory", "max_groundings", "exp_name")}
     limit = memory_limit(args.max_memory, "--max-memory")
     state = None
     with store_errors():  # a bad value in the config or a checkpoint that does not load
@@ -76,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
             extra = sorted(set(given) - RESUMABLE_FLAGS)
             if extra:
                 raise UserError(f"--resume continues the checkpoint's config; drop "
-                                f"{', '.join('--' + k.replace('_', '-') for k in extra)}")
+                                f"{', '.join(flag_of(k) for k in extra)}")
             state = load_checkpoint(args.resume, limit.bytes)
             cfg = dataclasses.replace(checkpoint_config(state), **given)
             scenario = checkpoint_scenario(state)
@@ -93,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
     if state is not None:
         default_run = f"{str(args.resume).rstrip('/')}-from-{state['step']}"
     else:
-        default_run = f"runs/train-{scenario.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+        default_run = f"runs/{args.exp_name or 'train'}-{scenario.name}-{time.strftime('%Y%m%d-%H%M%S')}"
     run_dir = Path(args.run or default_run)
     return train_into(cfg, scenario, run_dir, state, resumed_from=args.resume)
 
@@ -119,6 +137,8 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
     with store_errors():  # the run directory exists, or another writer holds it
         writer = TraceWriter.open(run_dir, meta)
     torch.set_num_threads(cfg.threads)
+    was_deterministic = torch.are_deterministic_algorithms_enabled()
+    torch.use_deterministic_algorithms(cfg.torch_deterministic)
     print(f"training {scenario.name} ({scenario.agents_per_team}v{scenario.agents_per_team}, "
           f"{'non-Markov' if cfg.non_markov else 'Markov'}, {cfg.backend} backend{'' if cfg.kernel == 'auto' else f', {cfg.kernel} kernel'}, {cfg.envs} worlds) for "
           f"{cfg.steps:,} steps; torch on {torch.get_num_threads()} CPU thread"
@@ -161,10 +181,16 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
         status = "interrupted"
     finally:
         signal.signal(signal.SIGINT, previous)
+        torch.use_deterministic_algorithms(was_deterministic)
         if trainer is not None:
             trainer.close()
         writer.close(status=status)
     _report(trainer, run_dir, status)
+    if trainer is not None and trainer.last_eval is not None:
+        from tracelab.train.budget import too_short_hint
+        hint = too_short_hint(trainer.step, trainer.last_eval.wins, scenario.agents_per_team)
+        if hint:
+            print(f"hint: {hint}", file=sys.stderr)
     say_running_compiles()
     return 0 if status == "finished" else 130
 

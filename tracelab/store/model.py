@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from tracelab.store.names import UnknownName, unknown_name_message
 from tracelab.store.reader import RunConnection
 
 DEFAULT_BOUND = (0.0, 1.0)  # an atom never set
@@ -89,10 +90,7 @@ class RunModel:
     def rule(self, name: str) -> RuleInfo:
         r = self.rule_by_name.get(name)
         if r is None:
-            import difflib
-            near = difflib.get_close_matches(name, list(self.rule_by_name), n=5)
-            hint = f"; did you mean {', '.join(near)}?" if near else ""
-            raise KeyError(f"no rule named {name!r} in this run{hint}")
+            raise UnknownName(unknown_name_message("rule", name, list(self.rule_by_name)))
         return r
 
     def cause_name(self, kind: int, cid: int) -> str:
@@ -173,7 +171,7 @@ class RunModel:
 
     def label_id(self, label: str, arity: int) -> int:
         if label not in self.labels:
-            raise KeyError(f"no label {label!r} in this run's vocabulary")
+            raise UnknownName(unknown_name_message("label", label, list(self.labels)))
         lid, have = self.labels[label]
         if have != arity:
             raise KeyError(f"label {label!r} has arity {have}, not {arity}")
@@ -181,7 +179,7 @@ class RunModel:
 
     def node_id(self, name: str) -> int:
         if name not in self.node_ids:
-            raise KeyError(f"no node {name!r} in this run's vocabulary")
+            raise UnknownName(unknown_name_message("node", name, self.nodes))
         return self.node_ids[name]
 
     def find_atom(self, label: str, args: tuple[str, ...]) -> int | None:

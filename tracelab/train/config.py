@@ -12,9 +12,11 @@ from tracelab.commands._args import ENGINE_KERNELS
 from tracelab.schema import Nullable, OptionalKey
 
 
-def _opt(help: str, **kw: Any) -> Any:
-    """A field with its CLI help; the default goes in `default=`."""
-    return field(metadata={"help": help}, **kw)
+def _opt(help: str, flag: str | None = None, **kw: Any) -> Any:
+    """A field with its CLI help; the default goes in `default=`. `flag`: the documented flag when it is not
+    the field's name (CleanRL's names, the field's conventions; the field's own name stays a hidden alias,
+    and checkpoints keep storing the field name)."""
+    return field(metadata={"help": help, "flag": flag}, **kw)
 
 
 @dataclass
@@ -37,21 +39,25 @@ class TrainConfig:
                        "background while training starts on the counting kernel, unless `tracelab compile` "
                        "built it ahead; docs/engine-api.md). Results are the same with every kernel",
                        default="auto")
-    steps: int = _opt("training steps (world-steps: env transitions)", default=200_000)
+    steps: int = _opt("training steps (world-steps: env transitions)", flag="total-timesteps", default=200_000)
     seed: int = _opt("seed of everything (network init, exploration, replay sampling, envs)", default=0)
+    torch_deterministic: bool = _opt("torch uses deterministic algorithms only "
+                                     "(torch.use_deterministic_algorithms; --no-torch-deterministic lifts it)",
+                                     default=True)
     envs: int = _opt("worlds stepped together (the batched env; from 64 on the rule engine runs its lanes "
-                     "kernel, ~2x cheaper per world-step); one update per world-step either way", default=64)
+                     "kernel, ~2x cheaper per world-step); one update per world-step either way",
+                 flag="num-envs", default=64)
     mask: bool = _opt("act only among the shield's allowed actions (off in the method)", default=False)
     opponent_p: float = _opt("the opponent's probability of a move towards red's base while training",
                              default=0.7)
     # ---- the method's DQN ----
     hidden: int = _opt("hidden units (one tanh layer)", default=64)
-    lr: float = _opt("Adam learning rate", default=5e-4)
+    lr: float = _opt("Adam learning rate", flag="learning-rate", default=5e-4)
     gamma: float = _opt("discount", default=0.99)
-    batch: int = _opt("minibatch size", default=128)
-    buffer: int = _opt("replay buffer capacity (transitions)", default=50_000)
+    batch: int = _opt("minibatch size", flag="batch-size", default=128)
+    buffer: int = _opt("replay buffer capacity (transitions)", flag="buffer-size", default=50_000)
     target_every: int = _opt("copy the online network to the target network every this many steps",
-                             default=2_000)
+                             flag="target-network-frequency", default=2_000)
     eps_start: float = _opt("epsilon until --eps-decay-start of training", default=1.0)
     eps_end: float = _opt("epsilon from --eps-decay-end of training on", default=0.02)
     eps_decay_start: float = _opt("fraction of training where epsilon starts to fall", default=0.25)
@@ -63,7 +69,7 @@ class TrainConfig:
                                    "only what the buffer sees is. 0 in the method; 0.5 lets 5v5 find a win "
                                    "(docs/training.md)", default=0.0)
     updates_per_step: float = _opt("gradient steps per world-step, per network", default=1.0)
-    warmup: int = _opt("random steps before the first update", default=1_000)
+    warmup: int = _opt("random steps before the first update", flag="learning-starts", default=1_000)
     reward_scale: float = _opt("the learner's rewards are the game's times this (returns and Q-values are "
                                "logged in the game's units); 1 in the method. The game's rewards (250, 400) "
                                "lie far outside Smooth L1's quadratic zone (|error| < 1), where its gradient "
@@ -147,10 +153,30 @@ def config_schema() -> dict[str, Any]:
     return {f.name: OptionalKey(_FIELD_SCHEMAS[str(f.type)]) for f in fields(TrainConfig)}
 
 
-def config_fields() -> list[tuple[str, Any, Any, str]]:
-    """(name, type, default, help) of every field, for building CLI flags."""
+@dataclass(frozen=True)
+class ConfigField:
+    """One field as the CLI shows it: `flag` the documented flag (without --), `alias` the field's own
+    name as a flag when that differs (accepted, not listed)."""
+    name: str
+    type: Any
+    default: Any
+    help: str
+    flag: str
+    alias: str | None
+
+
+def config_fields() -> list[ConfigField]:
+    """Every field, for building CLI flags."""
     out = []
     for f in fields(TrainConfig):
         default = f.default if f.default is not MISSING else None
-        out.append((f.name, f.type, default, f.metadata.get("help", "")))
+        own = f.name.replace("_", "-")
+        flag = f.metadata.get("flag") or own
+        out.append(ConfigField(f.name, f.type, default, f.metadata.get("help", ""), flag,
+                               own if flag != own else None))
     return out
+
+
+def flag_of(name: str) -> str:
+    """The documented flag of a field, e.g. steps -> --total-timesteps (messages name what the user types)."""
+    return "--" + next((c.flag for c in config_fields() if c.name == name), name.replace("_", "-"))

@@ -13,6 +13,7 @@ from tracelab.viewers.replay.columns import send_per_entity
 from tracelab.store.board import PHASES, TEAMS, EpisodeBoard
 from tracelab.store.episode import EpisodeTrace
 from tracelab.store.model import RunModel
+from tracelab.store.names import unknown_name_message
 from tracelab.store.reader import RunConnection
 from tracelab.store.why import explain_in, render_why
 
@@ -50,9 +51,9 @@ def log_rule_log(rec: rr.RecordingStream, board: EpisodeBoard) -> None:
 def parse_lanes(text: str) -> tuple[str, ...]:
     """'alive,ammo' -> ('alive', 'ammo'); an unknown lane is a ValueError naming the known ones."""
     lanes = tuple(x.strip() for x in text.split(",") if x.strip())
-    unknown = [x for x in lanes if x not in LANE_LABELS]
-    if unknown:
-        raise ValueError(f"no lane {', '.join(unknown)}; lanes: {', '.join(LANE_LABELS)}")
+    for lane in lanes:
+        if lane not in LANE_LABELS:
+            raise ValueError(unknown_name_message("lane", lane, LANE_LABELS, where=""))
     return lanes
 
 

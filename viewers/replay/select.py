@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from tracelab.store.names import unknown_name_message
 from tracelab.store.reader import RunConnection
 
 OUTCOMES = ("win", "loss", "draw", "truncated", "aborted")
@@ -93,7 +94,7 @@ def select_episodes(con: RunConnection, f: EpisodeFilter, exclude: set[int] | No
     """The ended or running episodes the filter picks (ended ones only when no id is given), in id order.
     Raises ValueError naming what is missing when explicit ids are not in the run."""
     if f.outcome is not None and f.outcome not in OUTCOMES:
-        raise ValueError(f"unknown outcome {f.outcome!r}; expected one of {', '.join(OUTCOMES)}")
+        raise ValueError(unknown_name_message("outcome", f.outcome, OUTCOMES, where=""))
     where = ["TRUE"]
     params: list[object] = []
     if f.episodes is not None:

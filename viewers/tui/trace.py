@@ -16,6 +16,7 @@ from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
 from textual.widgets import Input, Static
 
+from tracelab.store.names import UnknownName, check_name
 from tracelab.viewers.tui.colours import DIM, styled_bound, styled_name
 from tracelab.viewers.tui.lazy_table import Column, LazyTable
 from tracelab.viewers.tui.board import BoardView
@@ -188,13 +189,44 @@ class TracePane(Vertical):
 
     def on_lazy_table_loaded(self, event: LazyTable.Loaded) -> None:
         event.stop()
+        if not self.table.count and self.filter is not None and (self.filter.atom or self.filter.label
+                                                                  or self.filter.rule):
+            self._explain_no_rows(self.filter)  # counts as landed once it has said why
+            return
         self.jumps += 1     # a new filter landed (where it opens: TraceSource's start)
+        self._update_status()
+
+    def _explain_no_rows(self, flt: TraceFilter) -> None:
+        """No rows under a filter naming an atom, label or rule: if a name matches nothing in the run, say
+        so (did you mean, how to write an atom) in the table and the status line, instead of "no rows"."""
+        def work() -> None:
+            message = None
+            try:
+                for kind, pattern in (("atom", flt.atom), ("label", flt.label), ("cause", flt.rule)):
+                    if pattern:
+                        self.source.call(lambda con: check_name(con, kind, pattern))  # noqa: B023
+            except UnknownName as e:
+                message = str(e)
+            self.app.call_from_thread(self._no_rows_explained, flt, message)
+
+        self.run_worker(work, thread=True, group="trace-names", exclusive=True, exit_on_error=False)
+
+    def _no_rows_explained(self, flt: TraceFilter, message: str | None) -> None:
+        if flt is not self.filter:
+            return
+        if message is not None:
+            self.table.error = message
+            self.table.refresh()
+        self.jumps += 1
         self._update_status()
 
     def _update_status(self) -> None:
         if self.filter is None:
             return
         table = self.table
+        if table.error:      # e.g. a filter that matches nothing in the run: the message says how to write one
+            self.query_one("#tr-status", Static).update(Text(f" {table.error}", style="bold red"))
+            return
         where = f"row {table.cursor + 1:,} of {table.count:,}" if table.count else "no rows"
         row = table.cursor_row
         atom = f" · {row['atom']}" if row else ""
