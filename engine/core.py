@@ -22,6 +22,7 @@ from .compile_cache import CacheEntry
 from .errors import FixpointError, InconsistencyError, ProgramCheckError
 from .graph import Graph
 from .grounding import Grounder, GroundingTable, rule_head_bound
+from .kernel_names import KERNELS
 from .memory import release_freed_memory
 from .parser import check_program, parse_literal
 from .program import (
@@ -50,7 +51,6 @@ TRACE_LOCAL_COLUMNS = (*TRACE_COLUMNS, "world_episode")  # take_trace(t_start, e
 # (at t = 0 a million-fact graph writes a million rows: a copy would double the trace's 64 bytes a row)
 TRACE_HANDOVER_ROWS = 65_536
 TRACE_MIN_ROWS = 1024
-KERNELS = ("auto", "counting", "lanes", "compiled")
 # "auto" takes the lanes kernel for crisp programs from this many worlds on (a word holds 64 worlds)
 LANES_MIN_WORLDS = 64
 # a running engine checks on its background compile at most this often (one waitpid per check)

@@ -5,6 +5,8 @@ import argparse
 from collections.abc import Iterator
 from contextlib import contextmanager
 
+from tracelab.engine.kernel_names import KERNELS as ENGINE_KERNELS  # --kernel's choices (no numba import)
+
 
 def integer(text: str) -> int:
     """An integer, also written as the field writes budgets: 100000, 100_000, 1e5, 1.5e3. The value must be a
@@ -49,9 +51,6 @@ def positive_int(text: str) -> int:
     return v
 
 
-# Engine(kernel=...) choices, spelled out here so that parsers need not import the engine (numba) to list
-# them; tests/test_compiled_kernel.py checks them against tracelab.engine.core.KERNELS
-ENGINE_KERNELS = ("auto", "counting", "lanes", "compiled")
 
 
 _BYTE_UNITS = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}

@@ -5,7 +5,7 @@ import argparse
 import json
 
 from tracelab.commands._args import non_negative_int
-from tracelab.errors import UserError, store_errors
+from tracelab.errors import store_errors
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -21,20 +21,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def parse_bindings(text: str) -> dict[str, str]:
-    out: dict[str, str] = {}
-    for part in filter(None, (p.strip() for p in text.split(","))):
-        var, eq, value = part.partition("=")
-        if not eq or not var.strip() or not value.strip():
-            raise UserError(f"cannot read binding {part!r}; write VAR=value, e.g. A=red-agent-1")
-        out[var.strip()] = value.strip()
-    return out
-
-
 def run(args: argparse.Namespace) -> int:
     from tracelab.commands.why import check_at, last_t
     from tracelab.store.reader import open_run, retrying
-    from tracelab.store.why import render_why_not, why_not
+    from tracelab.store.why import parse_bindings, render_why_not, why_not
     with store_errors():
         con, bindings = open_run(args.run), parse_bindings(args.grounding)
         check_at(args.at, args.episode, last_t(con, args.episode))

@@ -21,6 +21,18 @@ from tracelab.store.reader import RunConnection
 from tracelab.store.schema import CAUSE_NAMES
 
 
+def parse_bindings(text: str) -> dict[str, str]:
+    """`A=red-agent-1,X=16` as {variable: value} (why-not's --grounding, the TUI's why-not line); raises
+    ValueError naming the part it cannot read."""
+    out: dict[str, str] = {}
+    for part in filter(None, (p.strip() for p in text.split(","))):
+        var, eq, value = part.partition("=")
+        if not eq or not var.strip() or not value.strip():
+            raise ValueError(f"cannot read binding {part!r}; write VAR=value, e.g. A=red-agent-1")
+        out[var.strip()] = value.strip()
+    return out
+
+
 def _bound_text(b: tuple[float, float] | list[float] | None) -> str:
     return "?" if b is None else f"[{b[0]:g},{b[1]:g}]"
 

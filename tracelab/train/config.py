@@ -8,7 +8,7 @@ import math
 from dataclasses import MISSING, asdict, dataclass, field, fields
 from typing import Any
 
-from tracelab.commands._args import ENGINE_KERNELS
+from tracelab.engine.kernel_names import KERNELS as ENGINE_KERNELS
 from tracelab.schema import Nullable, OptionalKey
 
 

@@ -13,7 +13,15 @@ from textual.containers import Vertical, VerticalScroll
 from textual.widgets import Input, Static, Tree
 from textual.widgets.tree import TreeNode
 
-from tracelab.store.why import WhyNode, WhyNot, explain, explain_change, render_why_not, why_not
+from tracelab.store.why import (
+    WhyNode,
+    WhyNot,
+    explain,
+    explain_change,
+    parse_bindings,
+    render_why_not,
+    why_not,
+)
 from tracelab.viewers.tui.colours import DIM, FALSE, TRUE, bound_colour, bound_text, styled_name
 from tracelab.viewers.tui.source import RunSource
 
@@ -57,7 +65,6 @@ def node_label(n: WhyNode, at: int | None = None) -> Text:
 
 def parse_why_not(text: str) -> tuple[str, dict[str, str], int]:
     """`RULE A=x,B=y at T` (bindings optional); raises ValueError."""
-    from tracelab.commands.why_not import parse_bindings
     m = _WHY_NOT.match(text)
     if not m:
         raise ValueError(f"cannot read {text!r}: write RULE A=red-agent-1,X=16 at 12")
