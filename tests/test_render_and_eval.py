@@ -67,6 +67,13 @@ def test_a_frame_draws_mountains_and_agents_in_their_cells():
     assert centre(1, 0) == tuple(AGENT[0]) and centre(0, 3) == tuple(AGENT[1])
 
 
+def test_agents_sharing_a_cell_are_all_drawn():
+    sc = Scenario(name="two", width=4, height=4, red_base=(3, 0), blue_base=(0, 3), agents_per_team=2)
+    frame = BoardPainter(sc)(GameState.initial(sc, 1))  # both red agents start on red's base
+    row, col, q = (sc.height - 1) * CELL, 3 * CELL, CELL // 4
+    assert tuple(frame[row + q, col + q]) == tuple(AGENT[0]) == tuple(frame[row + q, col + 3 * q])
+
+
 def test_frames_make_a_gif_and_record_video_when_moviepy_is_there(tmp_path):
     from PIL import Image
     env = RenderCollection(gym.make("tracelab/GridWar-base-v0", render_mode="rgb_array", backend="reference"))

@@ -3,8 +3,8 @@ RecordVideo, `utils.save_video` and GIF writers work without a new dependency.
 
 Each cell is `CELL` pixels square, the game's top row (highest y) first, as `render_text` prints it:
 free cells dark grey with a thin grid, mountains brown, each base tinted in its team's colour, living
-agents as discs in their team's colour (a health bar under the disc when it takes more than one hit to
-kill), dead agents as a small grey cross, bullets as small squares in their team's lighter colour. The
+agents as discs in their team's colour (smaller, one per quarter, when agents share a cell; a health bar
+under the disc when it takes more than one hit to kill), dead agents as a small grey cross, bullets as small squares in their team's lighter colour. The
 colours are the replay's (viewers/replay/style.py), so a video and a replay read the same. The image
 depends on the state alone: the same state gives the same bytes."""
 from __future__ import annotations
@@ -47,6 +47,7 @@ class BoardPainter:
         self.scenario = scenario
         self.cell = cell
         self._disc = _disc(cell, cell * 0.36)
+        self._small_disc = _disc(cell // 2, cell * 0.2)  # agents sharing a cell: one per quarter
         self._cross = _cross(cell, cell * 0.06 + 0.5, cell // 4)
         self._bullet = _disc(cell, cell * 0.14)
         self._multi_hit = scenario.hits_to_kill > 1
@@ -87,18 +88,29 @@ class BoardPainter:
             for (x, y), living in zip(state.pos[world, team], alive[team]):
                 if not living:
                     self._block(img, x, y)[self._cross] = DEAD
-        for team in range(2):
-            for (x, y), living, health in zip(state.pos[world, team], alive[team], state.health[world, team]):
-                if living:
-                    block = self._block(img, x, y)
-                    block[self._disc] = AGENT[team]
-                    if self._multi_hit:
-                        self._health_bar(block, health / self.scenario.health)
+        living = [(team, (int(x), int(y)), h) for team in range(2)
+                  for (x, y), a, h in zip(state.pos[world, team], alive[team], state.health[world, team]) if a]
+        sharing: dict[tuple[int, int], int] = {}
+        for _, xy, _ in living:
+            sharing[xy] = sharing.get(xy, 0) + 1
+        seen: dict[tuple[int, int], int] = {}
+        half = self.cell // 2
+        for team, xy, health in living:
+            block = self._block(img, *xy)
+            if sharing[xy] > 1:  # a smaller disc in the next quarter (top left, top right, ...)
+                k = seen.get(xy, 0) % 4
+                seen[xy] = k + 1
+                block = block[(k // 2) * half: (k // 2 + 1) * half, (k % 2) * half: (k % 2 + 1) * half]
+                block[self._small_disc] = AGENT[team]
+            else:
+                block[self._disc] = AGENT[team]
+            if self._multi_hit:
+                self._health_bar(block, health / self.scenario.health)
         return img
 
     def _health_bar(self, block: np.ndarray, share: float) -> None:
         """A bar along the cell's bottom: green for the health left, black for the health lost."""
-        c = self.cell
+        c = block.shape[0]
         left, right = c // 6, c - c // 6
         filled = left + int(round(float(np.clip(share, 0.0, 1.0)) * (right - left)))
         rows = slice(c - max(2, c // 8) - 1, c - 1)
