@@ -38,11 +38,11 @@ def test_the_cold_cache_check_reads_numbas_index(tmp_path: Path) -> None:
     assert engine_cache_is_cold() is False
 
 
-def test_on_a_terminal_play_draws_a_bar_and_reports_rates_without_the_first_step() -> None:
+def run_on_a_terminal(args: list[str], columns: int = 150) -> tuple[int, str]:
+    """`python -m tracelab ARGS` with stdout and stderr on a pseudo-terminal: (exit status, what it drew)."""
     master, slave = pty.openpty()
-    p = subprocess.Popen([sys.executable, "-m", "tracelab", "play", "--scenario", "base", "--episodes", "4",
-                          "--no-trace"], stdin=slave, stdout=slave, stderr=slave,
-                         env={**os.environ, "COLUMNS": "150"})
+    p = subprocess.Popen([sys.executable, "-m", "tracelab", *args], stdin=slave, stdout=slave, stderr=slave,
+                         env={**os.environ, "COLUMNS": str(columns)})
     os.close(slave)
     chunks = []
     while True:
@@ -58,8 +58,12 @@ def test_on_a_terminal_play_draws_a_bar_and_reports_rates_without_the_first_step
         chunks.append(data)
     p.wait(timeout=300)
     os.close(master)
-    text = b"".join(chunks).decode(errors="replace")
-    assert p.returncode == 0, text
+    return p.returncode, b"".join(chunks).decode(errors="replace")
+
+
+def test_on_a_terminal_play_draws_a_bar_and_reports_rates_without_the_first_step() -> None:
+    code, text = run_on_a_terminal(["play", "--scenario", "base", "--episodes", "4", "--no-trace"])
+    assert code == 0, text
     assert "playing base" in text and "episodes/s" in text and "eta" in text
     assert "steps/s after the first step" in text
 

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 from tracelab.commands._args import add_max_groundings, non_negative_int, positive_int
+from tracelab.commands._progress import Progress, progress
 from tracelab.errors import UserError, store_errors
 
 
@@ -45,7 +46,8 @@ def run(args: argparse.Namespace) -> int:
         spec = read_policy_spec(args.policy)
         scenario = load_scenario_arg(args.scenario) if args.scenario else policy_scenario(spec)
         policy = load_policy(args.policy, scenario)
-    result = _evaluate(args, policy, scenario, spec)
+    with progress(f"evaluating on {scenario.name}", total=args.games, unit="games") as bar:
+        result = _evaluate(args, policy, scenario, spec, _counting(bar))
     if args.json:
         json.dump({"policy": str(args.policy), "scenario": scenario.name, "backend": args.backend,
                    "opponent_p": args.opponent_p, "seed": args.seed, "run": args.run, **result.to_dict()},
@@ -56,12 +58,24 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _evaluate(args: argparse.Namespace, policy, scenario, spec):
+def _counting(bar: Progress):
+    """A per-game callback that advances the bar and shows the win rate so far."""
+    wins = 0
+
+    def ended(game) -> None:
+        nonlocal wins
+        wins += game.outcome == "win"
+        bar.advance(1)
+        bar.set_fields(**{"win rate": f"{100 * wins / bar.completed:.1f}%"})
+    return ended
+
+
+def _evaluate(args: argparse.Namespace, policy, scenario, spec, on_game):
     from tracelab.train.evaluate import evaluate, evaluate_into
     if args.run is None:
         return evaluate(policy, scenario, games=args.games, backend=args.backend, seed=args.seed,
                         opponent_p=args.opponent_p, stack_previous=policy.stack_previous,
-                        envs=args.envs)
+                        envs=args.envs, on_game=on_game)
     from tracelab.game.facts import GAME_RULES
     from tracelab.store import TraceWriter
     meta = {"command": " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]),
@@ -72,7 +86,7 @@ def _evaluate(args: argparse.Namespace, policy, scenario, spec):
     with store_errors():  # the run directory exists, or another writer holds it
         writer = TraceWriter.open(Path(args.run), meta)
     return evaluate_into(writer, policy, scenario, games=args.games, backend=args.backend, seed=args.seed,
-                         opponent_p=args.opponent_p)
+                         opponent_p=args.opponent_p, on_game=on_game)
 
 
 def _table(result, args: argparse.Namespace, scenario: str) -> None:
@@ -84,6 +98,7 @@ def _table(result, args: argparse.Namespace, scenario: str) -> None:
     print(format_table(["", "tracelab", f"method (cut at {METHOD_CUT} steps)"], rows))
     print("method: a win is a capture within 200 steps; cut games count as losses; draws and wins by "
           "elimination are non-wins")
+    print("95% CI: Wilson intervals for the win rates, a t-interval over the games for the mean return")
     if args.run:
         run = shlex.quote(args.run)
         print(f"\ngames traced into {args.run}/:")

@@ -1,5 +1,5 @@
 """What the gymnasium, vector and PettingZoo envs share: the simulator backend, the spaces, the action
-masks (the shield, read from the state) and a text rendering."""
+masks (the shield, read from the state) and the renderings (text here, images in render_rgb)."""
 from __future__ import annotations
 
 from typing import Any
@@ -7,6 +7,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
+from tracelab.envs.render_rgb import BoardPainter
 from tracelab.envs.sinks import TraceSink
 from tracelab.envs.tracer import EpisodeTracer
 from tracelab.game.refsim import RefSim
@@ -24,6 +25,8 @@ from tracelab.game.scenario import (
 from tracelab.game.state import GameState
 
 BACKENDS = ("rules", "reference")
+RENDER_MODES = ["ansi", "rgb_array"]
+RENDER_FPS = 4
 Simulator = RuleSim | RefSim
 
 
@@ -49,23 +52,28 @@ def make_sim(scenario: Scenario, backend: str, n_worlds: int, stack_previous: bo
 
 class OneWorldEnv:
     """What the one-world envs (gymnasium's GridWarEnv, PettingZoo's GridWarParallelEnv) share: the
-    scenario, the simulator, the tracer feeding a sink, the action masker, ansi rendering and closing.
+    scenario, the simulator, the tracer feeding a sink, the action masker, rendering (text or an RGB image)
+    and closing.
     Put it first among the bases: close() goes on to the framework's own."""
 
     def _set_up(self, scenario: Scenario | str, backend: str, stack_previous: bool, trace_sink: TraceSink | None,
                 render_mode: str | None) -> None:
-        if render_mode not in (None, "ansi"):
-            raise ValueError(f"render_mode must be None or 'ansi', got {render_mode!r}")
+        if render_mode is not None and render_mode not in RENDER_MODES:
+            raise ValueError(f"render_mode must be None or one of {RENDER_MODES}, got {render_mode!r}")
         self.scenario = resolve_scenario(scenario)
         self.sim = make_sim(self.scenario, backend, 1, stack_previous, trace=trace_sink is not None)
         self._tracer = None if trace_sink is None else EpisodeTracer(trace_sink, self.scenario, self.sim)
         self.backend = backend
         self.render_mode = render_mode
         self._masker = ActionMasker(self.scenario)
+        self._painter = BoardPainter(self.scenario) if render_mode == "rgb_array" else None
 
-    def render(self) -> str | None:
+    def render(self) -> str | np.ndarray | None:
+        """The board now: text ("ansi") or uint8 [H, W, 3] ("rgb_array", tracelab.envs.render_rgb)."""
         if self.render_mode == "ansi":
             return render_text(self.scenario, self.sim.state)
+        if self._painter is not None:
+            return self._painter(self.sim.state)
         return None
 
     def close(self) -> None:

@@ -30,6 +30,8 @@ import gymnasium as gym
 import numpy as np
 
 from tracelab.envs.common import (
+    RENDER_FPS,
+    RENDER_MODES,
     OneWorldEnv,
     learner_action_space,
     observation_space,
@@ -67,7 +69,7 @@ def reset_info(n_worlds: int, masks: np.ndarray, one_agent: bool) -> dict[str, A
 
 
 class GridWarEnv(OneWorldEnv, gym.Env[np.ndarray, Any]):
-    metadata = {"render_modes": ["ansi"], "render_fps": 4}
+    metadata = {"render_modes": RENDER_MODES, "render_fps": RENDER_FPS}
 
     def __init__(self, scenario: Scenario | str = "advanced", *, backend: str = "rules",
                  stack_previous: bool = False, trace_sink: TraceSink | None = None,

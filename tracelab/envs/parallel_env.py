@@ -22,6 +22,8 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from tracelab.envs.common import (
+    RENDER_FPS,
+    RENDER_MODES,
     OneWorldEnv,
     observation_space,
     reset_sim,
@@ -32,7 +34,8 @@ from tracelab.game.scenario import NOTHING, Scenario
 
 
 class GridWarParallelEnv(OneWorldEnv, ParallelEnv[str, np.ndarray, int]):
-    metadata = {"name": "tracelab_gridwar_v0", "render_modes": ["ansi"], "is_parallelizable": True}
+    metadata = {"name": "tracelab_gridwar_v0", "render_modes": RENDER_MODES, "render_fps": RENDER_FPS,
+                "is_parallelizable": True}
 
     def __init__(self, scenario: Scenario | str = "advanced", *, backend: str = "rules",
                  stack_previous: bool = False, trace_sink: TraceSink | None = None,

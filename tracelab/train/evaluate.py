@@ -19,6 +19,7 @@ from tracelab.envs.vector_env import GridWarVectorEnv
 from tracelab.game.scenario import Scenario
 from tracelab.store.sink import StoreSink
 from tracelab.store.writer import TraceWriter
+from tracelab.train.experiments.stats import spread, wilson
 from tracelab.train.policy import Policy, may_act
 
 METHOD_CUT = 200  # the method's evaluation cut games at 200 steps
@@ -83,9 +84,19 @@ class EvalResult:
         r.method_actions_per_win = float(np.mean(method_won)) if method_won else None
         return r
 
+    def intervals(self) -> dict[str, tuple[float, float]]:
+        """95% intervals, as the experiment reports give them: Wilson for the win rates (both countings),
+        a t-interval for the mean return (over the games' returns; absent with fewer than two games)."""
+        out = {"win_rate": wilson(self.wins, self.games), "method_win_rate": wilson(self.method_wins, self.games)}
+        if len(self.records) > 1:
+            s = spread([g.reward for g in self.records])
+            out["mean_return"] = (s["ci_low"], s["ci_high"])
+        return out
+
     def to_dict(self) -> dict[str, Any]:
         d = {k: v for k, v in asdict(self).items() if k != "records"}
         d.update(win_rate=self.win_rate, method_win_rate=self.method_win_rate)
+        d.update({f"{k}_ci95": list(v) for k, v in self.intervals().items()})
         return d
 
     def metrics(self, suffix: str = "", prefix: str = "eval/") -> dict[str, float]:
@@ -105,8 +116,13 @@ def shares(games: int, worlds: int) -> np.ndarray:
     return out
 
 
-def play_games(env: GridWarVectorEnv, policy: Policy, quota: np.ndarray, seed: int | None) -> list[GameRecord]:
-    """Play `quota[w]` games in world w of `env` (from a reset with `seed`); the games in order of ending.
+GameCallback = Callable[[GameRecord], None]
+
+
+def play_games(env: GridWarVectorEnv, policy: Policy, quota: np.ndarray, seed: int | None,
+               on_game: GameCallback | None = None) -> list[GameRecord]:
+    """Play `quota[w]` games in world w of `env` (from a reset with `seed`); the games in order of ending,
+    each also handed to `on_game` as it ends (a caller's progress).
     Nothing of a step's observation is kept past the next step: `env` may be a copy=False env."""
     sc: Scenario = env.scenario
     n = sc.agents_per_team
@@ -132,6 +148,8 @@ def play_games(env: GridWarVectorEnv, policy: Policy, quota: np.ndarray, seed: i
             records.append(GameRecord(outcome_name(final["winner"][w], bool(truncated[w])), int(final["t"][w]),
                                       float(ret[w]), int(decisions[w]), bool((pos == blue_base).all(1).any())))
             left[w] -= 1
+            if on_game is not None:
+                on_game(records[-1])
         ret[done] = 0.0
         decisions[done] = 0
     return records
@@ -202,10 +220,11 @@ class EvalTrace:
         self.env = GridWarVectorEnv(games, scenario, backend=backend, stack_previous=stack_previous,
                                     trace_sink=self.sink, opponent_p=opponent_p, kernel=kernel, copy=False)
 
-    def play(self, policy: Policy, seed: int, info: Mapping[str, Any]) -> list[GameRecord]:
+    def play(self, policy: Policy, seed: int, info: Mapping[str, Any],
+             on_game: GameCallback | None = None) -> list[GameRecord]:
         self.sink.accept(info, self.games)  # the reset begins one episode per world
         try:
-            return play_games(self.env, policy, np.ones(self.games, np.int64), seed)
+            return play_games(self.env, policy, np.ones(self.games, np.int64), seed, on_game)
         finally:
             self.sink.accept(None)
             self.sink.write_pending()  # this evaluation's games reach the run now, not with the next
@@ -216,16 +235,17 @@ class EvalTrace:
 
 def evaluate(policy: Policy, scenario: Scenario, *, games: int, backend: str, seed: int, opponent_p: float,
              stack_previous: bool, envs: int = 50, trace: EvalTrace | None = None,
-             trace_info: Mapping[str, Any] | None = None, env: GridWarVectorEnv | None = None) -> EvalResult:
+             trace_info: Mapping[str, Any] | None = None, env: GridWarVectorEnv | None = None,
+             on_game: GameCallback | None = None) -> EvalResult:
     """`games` games of `policy` (greedy) against the scripted opponent with `opponent_p`. The first
     `trace.games` of them are played (and traced) in `trace`'s env, the rest in `env` (or a new one with
-    `envs` worlds)."""
+    `envs` worlds). `on_game` is called with each game as it ends."""
     records: list[GameRecord] = []
     n_traced = min(trace.games, games) if trace is not None else 0
     if n_traced:
         if n_traced < trace.games:
             raise ValueError(f"{games} games cannot fill the {trace.games} traced worlds")
-        records += trace.play(policy, seed + 1, trace_info or {"kind": "eval"})
+        records += trace.play(policy, seed + 1, trace_info or {"kind": "eval"}, on_game)
     rest = games - n_traced
     if rest:
         own = env is None
@@ -233,7 +253,7 @@ def evaluate(policy: Policy, scenario: Scenario, *, games: int, backend: str, se
             env = GridWarVectorEnv(min(envs, rest), scenario, backend=backend, stack_previous=stack_previous,
                                    opponent_p=opponent_p)
         try:
-            records += play_games(env, policy, shares(rest, env.num_envs), seed)
+            records += play_games(env, policy, shares(rest, env.num_envs), seed, on_game)
         finally:
             if own:
                 env.close()
@@ -241,7 +261,8 @@ def evaluate(policy: Policy, scenario: Scenario, *, games: int, backend: str, se
 
 
 def evaluate_into(writer: TraceWriter, policy: Policy, scenario: Scenario, *, games: int, backend: str,
-                  seed: int, opponent_p: float, metrics_suffix: str | None = None) -> EvalResult:
+                  seed: int, opponent_p: float, metrics_suffix: str | None = None,
+                  on_game: GameCallback | None = None) -> EvalResult:
     """`games` games of `policy`, every one traced in full into the run `writer` writes (one world per
     game), which it closes: finished, interrupted (Ctrl-C) or failed. With `metrics_suffix` the figures
     also go into the run's metrics (`eval/...<suffix>`, at step 0)."""
@@ -252,7 +273,7 @@ def evaluate_into(writer: TraceWriter, policy: Policy, scenario: Scenario, *, ga
         try:
             result = evaluate(policy, scenario, games=games, backend=backend, seed=seed, opponent_p=opponent_p,
                               stack_previous=policy.stack_previous, trace=trace,
-                              trace_info={"kind": "eval", "opponent_p": opponent_p})
+                              trace_info={"kind": "eval", "opponent_p": opponent_p}, on_game=on_game)
         finally:
             trace.close()
         if metrics_suffix is not None:
@@ -270,14 +291,20 @@ def comparison_rows(r: EvalResult) -> list[tuple[str, Any, Any]]:
     """(figure, tracelab's counting, the method's counting) for a side-by-side table."""
     def pct(x: float) -> str:
         return f"{100 * x:.1f}%"
+
+    def with_ci(text: str, ci: tuple[float, float] | None, fmt: Callable[[float], str]) -> str:
+        return text if ci is None else f"{text} [{fmt(ci[0])}, {fmt(ci[1])}]"
     apw = lambda v: "-" if v is None else f"{v:.2f}"  # noqa: E731
+    ci = r.intervals()
     return [("games", r.games, r.games),
             ("wins", r.wins, r.method_wins),
             ("losses", r.losses, r.method_losses),
             ("draws", r.draws, "-"),
             ("truncated (step limit)", r.truncated, "-"),
             ("non-wins (draws, wins by elimination)", "-", r.method_non_wins),
-            ("win rate", pct(r.win_rate), pct(r.method_win_rate)),
-            ("mean return", f"{r.mean_return:.1f}", "-"),
+            ("win rate [95% CI]", with_ci(pct(r.win_rate), ci["win_rate"], pct),
+             with_ci(pct(r.method_win_rate), ci["method_win_rate"], pct)),
+            ("mean return [95% CI]", with_ci(f"{r.mean_return:.1f}", ci.get("mean_return"), lambda v: f"{v:.1f}"),
+             "-"),
             ("actions per win", apw(r.actions_per_win), apw(r.method_actions_per_win))]
 

@@ -7,6 +7,8 @@ from typing import Sequence
 
 import numpy as np
 
+from tracelab.train.experiments.stats import spread
+
 ARM_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd")
 
 
@@ -20,12 +22,42 @@ def _pyplot():
     return plt
 
 
+def seed_mean_band(seeds: Sequence[tuple[int, np.ndarray, np.ndarray]]
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """(steps, mean, low, high) over the seeds at the steps every seed evaluated: the mean and its 95%
+    t-interval over seeds (stats.spread, as the reports' text gives it). None with fewer than two seeds
+    or no step in common."""
+    curves = [(np.asarray(st), np.asarray(v, float)) for _, st, v in seeds if len(st)]
+    if len(curves) < 2:
+        return None
+    common = curves[0][0]
+    for st, _ in curves[1:]:
+        common = np.intersect1d(common, st)
+    if len(common) == 0:
+        return None
+    at = np.array([v[np.searchsorted(st, common)] for st, v in curves])  # [seeds, steps]
+    stats = [spread(at[:, j]) for j in range(len(common))]
+    return (common, np.array([s["mean"] for s in stats]), np.array([s["ci_low"] for s in stats]),
+            np.array([s["ci_high"] for s in stats]))
+
+
 def learning_curves(path: Path, arms: Sequence[dict], *, metric: str, ylabel: str, title: str,
                     percent: bool, small: bool = False) -> Path:
-    """One line per seed per arm of `metric` against training steps, the arm's published figure as a
-    dashed line. `arms`: [{"label", "published" (or None), "seeds": [(seed, steps, values)]}]."""
+    """One thin line per seed per arm of `metric` against training steps, with the seeds' mean as a
+    thick line and its 95% interval over seeds as a band; the arm's published figure as a dashed line.
+    `arms`: [{"label", "published" (or None), "seeds": [(seed, steps, values)]}]."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(6.4, 3.4) if small else (10.0, 5.0), dpi=100)
+    draw_learning_curves(ax, arms, ylabel=ylabel, title=title, percent=percent, small=small)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def draw_learning_curves(ax, arms: Sequence[dict], *, ylabel: str, title: str, percent: bool,
+                         small: bool = False) -> None:
+    """learning_curves' drawing onto the matplotlib axes `ax`."""
     scale = 100.0 if percent else 1.0
     legend_bits, last_step = [], 0.0
     for i, arm in enumerate(arms):
@@ -34,10 +66,17 @@ def learning_curves(path: Path, arms: Sequence[dict], *, metric: str, ylabel: st
         for k, (seed, steps, values) in enumerate(arm["seeds"]):
             if len(steps) == 0:
                 continue
-            ax.plot(steps, values * scale, color=colour, alpha=0.85, lw=1.4, marker="o", ms=3,
+            ax.plot(steps, values * scale, color=colour, alpha=0.45, lw=0.9, marker="o", ms=2,
                     ls=("-", "--", ":", "-.")[k % 4], label=f"{arm['label']}, seed {seed}")
             finals.append(values[-1] * scale)
             last_step = max(last_step, float(steps[-1]))
+        band = seed_mean_band(arm["seeds"])
+        if band is not None:
+            at, mean, low, high = band
+            lo_clip, hi_clip = (0.0, 100.0) if percent else (-np.inf, np.inf)  # a rate's interval stays a rate
+            ax.fill_between(at, np.clip(low * scale, lo_clip, hi_clip), np.clip(high * scale, lo_clip, hi_clip),
+                            color=colour, alpha=0.18, lw=0, label=f"{arm['label']}, 95% CI of the mean")
+            ax.plot(at, mean * scale, color=colour, lw=2.6, label=f"{arm['label']}, mean of {len(finals)} seeds")
         if finals:
             unit = "%" if percent else ""
             legend_bits.append(f"{arm['label']}: last point min {min(finals):.1f}{unit}, max {max(finals):.1f}{unit} "
@@ -57,10 +96,6 @@ def learning_curves(path: Path, arms: Sequence[dict], *, metric: str, ylabel: st
     ax.grid(alpha=0.3)
     _title(ax, [title, *legend_bits], small)
     ax.legend(fontsize=6 if small else 8, loc="upper left", bbox_to_anchor=(1.01, 1.0), framealpha=0.85)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return path
 
 
 def paired_bars(path: Path, groups: Sequence[str], series: dict[str, Sequence[tuple[float, float, float]]],
