@@ -1,6 +1,6 @@
 """`tracelab train`: DQN against the scripted opponent, logged live into a trace-store run
 (docs/training.md). Ctrl-C stops cleanly (the run ends `interrupted`, with a checkpoint);
-`--resume RUN` continues a run's last checkpoint into a new run."""
+`--resume RUN` continues a run's last checkpoint in the same run (`--run NEW`: into a new one)."""
 from __future__ import annotations
 
 import argparse
@@ -15,7 +15,9 @@ from typing import Any
 
 from tracelab.errors import UserError, store_errors
 
-RESUMABLE_FLAGS = {"threads", "kernel"}  # what --resume may change (the rest is the checkpoint's): not results
+# what --resume may change (the rest is the checkpoint's): the threads and the kernel change no result; the
+# budget (steps) may be raised, which moves the ε schedule's fractions with it
+RESUMABLE_FLAGS = {"threads", "kernel", "steps"}
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -53,8 +55,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="name the run runs/NAME-<scenario>-<time> (default NAME: train)")
     p.add_argument("--run", default=None, help="run directory (default runs/train-<scenario>-<time>)")
     p.add_argument("--resume", default=None, metavar="RUN",
-                   help="continue RUN's last checkpoint (its config; the new run goes to --run, default "
-                        "RUN-from-<step>)")
+                   help="continue RUN's last checkpoint in RUN itself (its config; --total-timesteps may "
+                        "raise the budget); with --run NEW, into a new run NEW instead")
     p.add_argument("--max-memory", type=byte_size, default=None, metavar="SIZE",
                    help="refuse a run whose networks, replay buffers and worlds are estimated to need more "
                         "(e.g. 12G; default: half of this machine's memory)")
@@ -97,6 +99,7 @@ def run(args: argparse.Namespace) -> int:
                                 f"{', '.join(flag_of(k) for k in extra)}")
             state = load_checkpoint(args.resume, limit.bytes)
             cfg = dataclasses.replace(checkpoint_config(state), **given)
+            check_budget(args.resume, state["step"], cfg.steps, "steps" in given)
             scenario = checkpoint_scenario(state)
         else:
             cfg = TrainConfig(**given)
@@ -108,18 +111,37 @@ def run(args: argparse.Namespace) -> int:
     if cfg.trace_eval_games > cfg.eval_games:
         raise UserError(f"--trace-eval-games ({cfg.trace_eval_games}) exceeds --eval-games "
                         f"({cfg.eval_games})")
-    if state is not None:
-        default_run = f"{str(args.resume).rstrip('/')}-from-{state['step']}"
+    if state is not None:  # the same run unless --run names another
+        default_run = str(args.resume)
     else:
         default_run = f"runs/{args.exp_name or 'train'}-{scenario.name}-{time.strftime('%Y%m%d-%H%M%S')}"
     run_dir = Path(args.run or default_run)
-    return train_into(cfg, scenario, run_dir, state, resumed_from=args.resume)
+    same_run = state is not None and _same_directory(run_dir, Path(args.resume))
+    return train_into(cfg, scenario, run_dir, state, resumed_from=args.resume, same_run=same_run)
+
+
+def check_budget(run: str, step: int, steps: int, given: bool) -> None:
+    """--resume: the budget must lie past the checkpoint (a UserError naming how to go on otherwise)."""
+    if given and steps < step:
+        raise UserError(f"--total-timesteps {steps:,} is below the checkpoint's step {step:,} of {run}: give "
+                        f"a budget above it")
+    if step >= steps:
+        raise UserError(f"nothing to resume: {run}'s checkpoint is at step {step:,} of its {steps:,}; to train "
+                        f"on, raise the budget: tracelab train --resume {shlex.quote(run)} --total-timesteps N "
+                        f"(N > {step})")
+
+
+def _same_directory(a: Path, b: Path) -> bool:
+    try:
+        return a.resolve() == b.resolve()
+    except OSError:
+        return False
 
 
 def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None,
-               resumed_from: str | None = None, stop_at: int | None = None) -> int:
-    """Train into a new run at `run_dir` (from a checkpoint `state` if given); returns the exit status.
-    `stop_at`: stop there as Ctrl-C would (tests)."""
+               resumed_from: str | None = None, stop_at: int | None = None, same_run: bool = False) -> int:
+    """Train into a new run at `run_dir` (from a checkpoint `state` if given; `same_run`: the checkpoint's
+    own run, `run_dir`, continues); returns the exit status. `stop_at`: stop there as Ctrl-C would (tests)."""
     import torch
 
     from tracelab.game.facts import GAME_RULES
@@ -135,7 +157,8 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
     if not meta["command"].startswith("tracelab train"):  # called from Python: say what it stands for
         meta["command"] = "tracelab train (python: tracelab.commands.train.train_into)"
     with store_errors():  # the run directory exists, or another writer holds it
-        writer = TraceWriter.open(run_dir, meta)
+        writer = _reopen(run_dir, cfg, state["step"], meta["command"]) if same_run else \
+            TraceWriter.open(run_dir, meta)
     torch.set_num_threads(cfg.threads)
     was_deterministic = torch.are_deterministic_algorithms_enabled()
     torch.use_deterministic_algorithms(cfg.torch_deterministic)
@@ -156,7 +179,14 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
         if state is not None:
             with store_errors():  # games that do not replay to their observations: another simulator
                 restore(trainer, state)
-            print(f"resumed from {resumed_from} at step {trainer.step:,}", file=sys.stderr)
+            if same_run:
+                trainer.renumber_games(writer.next_free_episode)
+                resumes = len(writer.meta["resumes"])
+                writer.write_metrics(trainer.step, {"resumed": float(resumes)})  # the event, in the curves
+                print(f"resumed {run_dir} at step {trainer.step:,} in the same run (resume {resumes}; "
+                      f"--run NEW would branch into a new run)", file=sys.stderr)
+            else:
+                print(f"resumed from {resumed_from} at step {trainer.step:,}", file=sys.stderr)
 
         def stop(signum: int, frame: Any) -> None:
             if trainer.stop_requested:  # a second Ctrl-C: stop now
@@ -193,6 +223,24 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
             print(f"hint: {hint}", file=sys.stderr)
     say_running_compiles()
     return 0 if status == "finished" else 130
+
+
+def _reopen(run_dir: Path, cfg: Any, step: int, command: str) -> Any:
+    """The checkpoint's own run, reopened for appending: its config takes the (maybe raised) budget and
+    meta.json's `resumes` records this resume (when, at which step, after which status)."""
+    from tracelab.store import TraceWriter
+    from tracelab.store.meta import current_meta, now_iso
+    from tracelab.store.writer import RunSealed
+    before = current_meta(run_dir)
+    resume = {"at": now_iso(), "step": step, "after": before.get("status"), "steps": cfg.steps,
+              "command": command}
+    changes = {"config": {**before.get("config", {}), **cfg.to_dict()},
+               "resumes": [*before.get("resumes", []), resume]}
+    try:
+        return TraceWriter.reopen(run_dir, changes)
+    except RunSealed as e:
+        raise UserError(f"{e}; resume into a new run: tracelab train --resume {shlex.quote(str(run_dir))} "
+                        f"--run NEW") from None
 
 
 def _report(trainer: Any, run_dir: Path, status: str) -> None:

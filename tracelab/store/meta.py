@@ -83,6 +83,14 @@ def initial_meta(run_dir: Path, meta: RunMeta | dict[str, Any] | None) -> dict[s
     return doc
 
 
+def reopened_meta(doc: dict[str, Any], changes: dict[str, Any]) -> dict[str, Any]:
+    """meta.json of a closed run reopened now by this process for appending (TraceWriter.reopen): running
+    again, with `changes` applied (checked as a read meta.json is)."""
+    doc = {**doc, **changes, "status": "running", "ended_at": None, "pid": os.getpid(),
+           "host": socket.gethostname(), "argv": list(sys.argv)}
+    return check_meta(doc, Path(layout.META))
+
+
 def write_meta(run_dir: Path, doc: dict[str, Any]) -> None:
     data = json.dumps(doc, indent=2, sort_keys=True, default=str).encode()
     layout.replace_atomically(data, layout.meta_path(run_dir))
@@ -139,6 +147,8 @@ META_FIELDS: dict[str, tuple[Callable[[Any], bool], str]] = {
     "host": (_nullable(_text), "a string or null"),
     "argv": (_texts, "a list of strings"),
     "sealed_at": (_nullable(_time), "an ISO 8601 time or null"),
+    # a resumed training's resumes into the same run (tracelab train --resume), oldest first
+    "resumes": (lambda v: isinstance(v, list) and all(isinstance(r, dict) for r in v), "a list of objects"),
 }
 
 

@@ -39,7 +39,9 @@ class TableParts:
     """One table's parts: writes new ones, merges small ones, and knows which files hold the table."""
 
     def __init__(self, run_dir: Path, table: str, part_rows: int, compact_files: int = 64,
-                 grace_seconds: float = 30.0, compression: str = "zstd") -> None:
+                 grace_seconds: float = 30.0, compression: str = "zstd",
+                 existing: list[tuple[str, int]] | None = None) -> None:
+        """`existing`: the parts (file name, rows) a reopened run's manifest lists, to continue from."""
         if compact_files < 2:
             raise ValueError(f"compact_files must be >= 2, got {compact_files}")
         self.table = table
@@ -56,6 +58,12 @@ class TableParts:
         self.rows_published = 0
         self.files_written = 0
         self.compactions = 0
+        if existing is not None:  # a reopened run: new parts are numbered after every file of the folder
+            self._next_file = next_part_number(self.root)
+            for name, rows in existing:
+                self._add(name, rows)
+                self.rows_published += rows
+            return
         # An empty first part, so that every table has a file that carries its schema.
         self._add(self._write(self.schema.empty_table()), 0)
 
@@ -121,13 +129,18 @@ def manifest_flushes(run_dir: Path) -> int:
     return read_manifest_doc(run_dir)["flushes"]
 
 
+def next_part_number(directory: Path) -> int:
+    """One past the highest numbered part in a table's folder (listed or not: never reuse a name)."""
+    stems = [name[: -len(layout.PART_SUFFIX)] for name in os.listdir(directory)
+             if name.endswith(layout.PART_SUFFIX)]
+    return max((int(s) for s in stems if s.isdigit()), default=-1) + 1
+
+
 def write_empty_part(run_dir: Path, table: str) -> str:
     """A new part with no rows (it carries the table's schema), named after the table's highest part;
     returns its manifest entry."""
     directory = layout.make_run_dirs(run_dir, layout.PARTS, table)
-    stems = [name[: -len(layout.PART_SUFFIX)] for name in os.listdir(directory)
-             if name.endswith(layout.PART_SUFFIX)]
-    final = directory / layout.part_name(max((int(s) for s in stems if s.isdigit()), default=-1) + 1)
+    final = directory / layout.part_name(next_part_number(directory))
     with layout.new_file(final) as f:
         pq.write_table(SCHEMAS[table].empty_table(), f)
     return f"{table}/{final.name}"

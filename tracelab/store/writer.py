@@ -29,9 +29,15 @@ import numpy as np
 import pyarrow as pa
 
 from tracelab.store import convert, layout
-from tracelab.store.meta import RunMeta, initial_meta, now_iso, open_writer_lock, write_meta
-from tracelab.store.parts import TableParts, write_manifest
+from tracelab.store.meta import (RunMeta, initial_meta, now_iso, open_writer_lock, read_meta, reopened_meta,
+                                 write_meta)
+from tracelab.store.parts import TableParts, remove_unlisted, write_manifest
+from tracelab.store.stored import PROGRAM_TABLES, VOCABULARY_TABLES, StoredRun, stored_run
 from tracelab.store.schema import SCHEMAS, TABLES
+
+class RunSealed(ValueError):
+    """Reopening a sealed run: its rows live in run.duckdb now, which takes no more."""
+
 
 _OPEN_WRITERS: "weakref.WeakSet[TraceWriter]" = weakref.WeakSet()
 
@@ -70,11 +76,14 @@ class TraceWriter:
     def __init__(self, run_dir: str | Path, meta: RunMeta | dict[str, Any] | None = None, *,
                  flush_interval: float = 1.0, min_flush_gap: float = 0.05, part_rows: int = 250_000,
                  compact_files: int = 64, max_pending_rows: int = 2_000_000,
-                 compression: str = "zstd") -> None:
+                 compression: str = "zstd", _reopen: Mapping[str, Any] | None = None) -> None:
         self.run_dir = Path(run_dir)
         self._pid = os.getpid()
-        if os.path.lexists(layout.meta_path(self.run_dir)):
+        exists = os.path.lexists(layout.meta_path(self.run_dir))
+        if _reopen is None and exists:
             raise FileExistsError(f"{str(self.run_dir)!r} already holds a run; choose a new run directory")
+        if _reopen is not None and not exists:
+            raise FileNotFoundError(f"{str(self.run_dir)!r} is not a tracelab run: it has no {layout.META}")
         if flush_interval <= 0 or part_rows <= 0:
             raise ValueError(f"flush_interval ({flush_interval}) and part_rows ({part_rows}) must be > 0")
         self.run_dir.mkdir(parents=True, exist_ok=True)
@@ -84,6 +93,11 @@ class TraceWriter:
         except BlockingIOError:
             self._lock_file.close()
             raise RuntimeError(f"another process is writing {str(self.run_dir)!r}") from None
+        try:
+            stored = None if _reopen is None else self._stored_unsealed()
+        except BaseException:
+            self._lock_file.close()  # releases the lock
+            raise
         self._lock_file.truncate(0)
         self._lock_file.write(f"{os.getpid()}\n".encode())
         self._lock_file.flush()
@@ -93,18 +107,26 @@ class TraceWriter:
         self.part_rows = part_rows
         self.max_pending_rows = max_pending_rows
         layout.remove_stale_temps(self.run_dir)
-        self._parts = {t: TableParts(self.run_dir, t, part_rows, compact_files, compression=compression)
+        self._parts = {t: TableParts(self.run_dir, t, part_rows, compact_files, compression=compression,
+                                     existing=None if stored is None else stored.parts[t])
                        for t in TABLES}
-        write_manifest(self.run_dir, self._parts, 0)
-        self._meta = initial_meta(self.run_dir, meta)
-        write_meta(self.run_dir, self._meta)  # the run exists from here on
-
         # Counts of what has been accepted (buffered or published): ids are checked against them.
         self._vocab_have = {"nodes": 0, "labels": 0, "atoms": 0}
         self._groundings_have = 0
         self._seq = 0
         self._program_written = False
         self._open_episodes: set[int] = set()
+        self.flushes = 0
+        # A reopened run's program and vocabulary, to check a new engine's against (first call only)
+        self._stored_tables: dict[str, pa.Table] | None = None
+        self.next_free_episode = 0  # one past the highest episode id the run held when opened
+        if stored is None:
+            write_manifest(self.run_dir, self._parts, 0)
+            self._meta = initial_meta(self.run_dir, meta)
+        else:
+            self._continue_counts(stored)
+            self._meta = reopened_meta(read_meta(self.run_dir), _reopen)
+        write_meta(self.run_dir, self._meta)  # the run exists (or runs again) from here on
 
         self._cond = threading.Condition()
         self._pending: dict[str, list[pa.Table]] = {t: [] for t in TABLES}
@@ -117,7 +139,6 @@ class TraceWriter:
         self._closing = False
         self._closed = False
         self._error: BaseException | None = None
-        self.flushes = 0
         self._thread = threading.Thread(target=self._flusher, name=f"TraceWriter:{self.run_dir.name}",
                                         daemon=True)
         self._thread.start()
@@ -128,6 +149,35 @@ class TraceWriter:
     def open(cls, run_dir: str | Path, meta: RunMeta | dict[str, Any] | None = None,
              **options: Any) -> "TraceWriter":
         return cls(run_dir, meta, **options)
+
+    @classmethod
+    def reopen(cls, run_dir: str | Path, meta_changes: Mapping[str, Any] | None = None,
+               **options: Any) -> "TraceWriter":
+        """Append to a closed run that is not sealed (a resumed training): its parts, ids, episode
+        numbering and flush count continue; meta.json reads `running` again (with `meta_changes`
+        applied) until close() records the new status. Refuses a sealed run (RunSealed) and one another
+        process writes. A program or vocabulary written later must be the run's own (ValueError if not)."""
+        return cls(run_dir, None, _reopen=dict(meta_changes or {}), **options)
+
+    def _stored_unsealed(self) -> StoredRun:
+        """What the run holds, once we hold its lock: refused if it is sealed; leftovers of a killed
+        writer (temp files, parts no manifest lists) are removed first."""
+        if os.path.lexists(layout.sealed_path(self.run_dir)) or read_meta(self.run_dir).get("sealed_at"):
+            raise RunSealed(f"run {str(self.run_dir)!r} is sealed ({layout.SEALED}): a sealed run takes "
+                            f"no more rows")
+        layout.remove_stale_temps(self.run_dir)
+        remove_unlisted(self.run_dir)
+        return stored_run(self.run_dir)
+
+    def _continue_counts(self, stored: StoredRun) -> None:
+        self._vocab_have = {t: stored.rows(t) for t in ("nodes", "labels", "atoms")}
+        self._groundings_have = stored.groundings
+        self._seq = stored.changes
+        self._program_written = stored.rows("policies") > 0  # every program writes the policy names
+        self._open_episodes = set(stored.open_episodes)
+        self.flushes = stored.flushes  # the manifest's count keeps growing: readers watch it
+        self._stored_tables = stored.small_tables
+        self.next_free_episode = stored.next_free_episode
 
     # ---- context manager ---------------------------------------------------------------------------
     def __enter__(self) -> "TraceWriter":
@@ -150,9 +200,14 @@ class TraceWriter:
         grounding table as they stand now; later growth goes through write_vocabulary().
         facts: what the trace's fact ids index, Engine.facts (graph facts first); default program.facts.
         With an engine at hand, write_engine_program(engine) passes all four."""
-        if self._program_written:
-            raise RuntimeError(f"the program of run {self.run_dir.name!r} was already written")
         tables = convert.program_tables(program, facts)
+        if self._program_written and self._stored_tables is not None:  # a reopened run: the same program
+            self._check_stored(tables, PROGRAM_TABLES, "program")
+            for name in PROGRAM_TABLES:
+                del self._stored_tables[name]
+            tables = {}
+        elif self._program_written:
+            raise RuntimeError(f"the program of run {self.run_dir.name!r} was already written")
         self._append(tables)
         self._program_written = True
         if vocabulary is not None or groundings is not None:
@@ -167,6 +222,11 @@ class TraceWriter:
         """Append the nodes, labels, atoms (Engine.vocabulary()) and groundings (Engine.groundings) that
         are new since the last call; cheap when nothing is new."""
         tables: dict[str, pa.Table] = {}
+        if vocabulary is not None and self._stored_tables and "atoms" in self._stored_tables:
+            self._check_stored(convert.vocabulary_tables(vocabulary, dict.fromkeys(VOCABULARY_TABLES, 0)),
+                               tuple(VOCABULARY_TABLES), "vocabulary")
+            for name in VOCABULARY_TABLES:
+                del self._stored_tables[name]
         if vocabulary is not None:
             tables.update(convert.vocabulary_tables(vocabulary, self._vocab_have))
         if groundings is not None and convert.grounding_count(groundings) != self._groundings_have:
@@ -177,6 +237,16 @@ class TraceWriter:
                 self._vocab_have[name] += tables[name].num_rows
         if "groundings" in tables:
             self._groundings_have += tables["groundings"].num_rows
+
+    def _check_stored(self, tables: Mapping[str, pa.Table], names: Sequence[str], what: str) -> None:
+        """A reopened run: the stored rows of `names` must begin `tables` (the new engine's)."""
+        assert self._stored_tables is not None
+        for name in names:
+            have = self._stored_tables[name]
+            new = tables[name]
+            if new.num_rows < have.num_rows or not new.slice(0, have.num_rows).equals(have):
+                raise ValueError(f"run {str(self.run_dir)!r}: this engine's {what} ({name}) differs from "
+                                 f"the one the run holds; write into a new run")
 
     # ---- episodes ------------------------------------------------------------------------------------
     def begin_episode(self, episode: int, *, world: int = 0, t_start: int | None = None,
@@ -366,6 +436,11 @@ class TraceWriter:
             return OSError(error.errno, "the disk is full: the run keeps what was written before, "
                                         f"readable ({os.strerror(error.errno)})", str(self.run_dir))
         return RuntimeError(f"the trace writer of {str(self.run_dir)!r} failed: {error!r}")
+
+    @property
+    def meta(self) -> dict[str, Any]:
+        """meta.json as this writer last wrote it (a copy)."""
+        return dict(self._meta)
 
     @property
     def closed(self) -> bool:

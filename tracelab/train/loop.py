@@ -99,6 +99,7 @@ class Trainer:
         self._logging_episodes = False          # episode begins are written once train() starts
         self._begun: list[dict[str, Any]] = []  # episode rows not yet handed to the writer
         self._ended: list[dict[str, Any]] = []
+        self._continues: dict[int, int] = {}    # a game's new episode id -> the one it had (same-run resume)
         self.next_episode = 0
         self.step = 0
         self.update_credit = 0.0
@@ -141,7 +142,20 @@ class Trainer:
             info = {"kind": "train", "train_step": int(self.ep_start[w])}
             if self.ep_len[w]:
                 info["resumed_at"] = self.step  # begun in the run this one resumes
+                if int(self.ep_id[w]) in self._continues:
+                    info["continues"] = self._continues[int(self.ep_id[w])]
             self._begun.append({"episode": int(self.ep_id[w]), "world": w, "t_start": 0, "info": info})
+
+    def renumber_games(self, first_free: int) -> None:
+        """After a restore into the run the checkpoint came from: that run already holds the games in
+        progress (ended 'aborted' at the stop) and, after a crash, episodes begun past the checkpoint. The
+        games go on under new ids from `first_free` on; the begin info of one already under way names the
+        id it continues."""
+        self.next_episode = max(self.next_episode, first_free)
+        for w in range(self.worlds):
+            old = int(self.ep_id[w])
+            self.ep_id[w] = self.new_episode_id()
+            self._continues[int(self.ep_id[w])] = old
 
     def _flush_episodes(self) -> None:
         """Hand the episode rows gathered since the last call to the writer, one table each (per-episode
