@@ -58,7 +58,10 @@ def interrupt_queries() -> None:
     """Stop the query each sandbox connection is running (within DuckDB's next check: milliseconds); a
     connection running none is not affected. Safe from any thread: Ctrl-C's watcher calls it."""
     for con in list(_CONNECTIONS):
-        con.interrupt()
+        try:
+            con.interrupt()
+        except duckdb.ConnectionException:
+            pass  # closed, and not yet collected: it runs nothing
 
 
 def _sql_list(items: Sequence[str]) -> str:
