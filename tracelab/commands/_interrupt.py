@@ -14,7 +14,7 @@ from types import FrameType, TracebackType
 
 
 class CtrlCStops:
-    """`with CtrlCStops(con.interrupt):` Ctrl-C calls interrupt() from a watcher thread, and whatever the
+    """`with CtrlCStops(interrupt):` Ctrl-C calls interrupt() from a watcher thread, and whatever the
     block then ends with (DuckDB's interrupt error, its own 'Query interrupted', or KeyboardInterrupt)
     becomes KeyboardInterrupt(what), which tracelab.cli.main prints as one line and exits 130. Off the
     main thread (where signals never arrive) the block runs as it is."""
@@ -60,5 +60,13 @@ class CtrlCStops:
         self.watcher.join()
         os.close(self.read_end)
         os.close(self.write_end)
-        if error is not None and (self.pressed.is_set() or isinstance(error, KeyboardInterrupt)):
+        # a press the block swallowed (`runs` notes a run it could not read and goes on) still stops
+        if self.pressed.is_set() or isinstance(error, KeyboardInterrupt):
             raise KeyboardInterrupt(self.what) from None
+
+
+def ctrl_c_stops_queries(what: str = "the query was stopped") -> CtrlCStops:
+    """`with ctrl_c_stops_queries():` around a reading command: Ctrl-C stops whatever query any of the
+    store's connections is running (tracelab.store.sandbox.interrupt_queries), exit 130, one line."""
+    from tracelab.store.sandbox import interrupt_queries  # DuckDB: imported only by the command that runs
+    return CtrlCStops(interrupt_queries, what)

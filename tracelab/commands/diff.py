@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import json
 
+from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.errors import UserError, store_errors
 
 
@@ -54,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
     from tracelab.store.diff import first_divergence, render_divergence
     from tracelab.store.reader import open_run, resolve_run, retrying
     (run_a, a), (run_b, b) = parse_sides(args.sides)
-    with store_errors():
+    with store_errors(), ctrl_c_stops_queries():
         con_a = open_run(run_a)
         if resolve_run(run_a).resolve() == resolve_run(run_b).resolve():
             d = retrying(lambda: first_divergence(con_a, a, b))

@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.commands._output import add_format_options, write_table
 from tracelab.errors import store_errors
 
@@ -23,7 +24,7 @@ def run(args: argparse.Namespace) -> int:
 
     from tracelab.store.catalog import DEFAULT_ROOTS, list_runs
     roots = args.dirs or list(DEFAULT_ROOTS)
-    with store_errors():
+    with store_errors(), ctrl_c_stops_queries():
         missing = [d for d in args.dirs if not Path(d).exists()]
         if missing:
             raise FileNotFoundError(f"no such directory or run: {missing[0]!r}")

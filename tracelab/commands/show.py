@@ -6,6 +6,7 @@ import argparse
 import json
 from typing import Any
 
+from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.errors import store_errors
 
 RULES_SHOWN = 40  # the rest: `tracelab sql RUN "SELECT * FROM rules"`
@@ -86,7 +87,7 @@ def render(doc: dict[str, Any], all_rules: bool = False) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from tracelab.store.reader import open_run, retrying
-    with store_errors():
+    with store_errors(), ctrl_c_stops_queries():
         con = open_run(args.run)
         doc = retrying(lambda: describe_run(con))
     print(json.dumps(doc, indent=1, default=str) if args.json else render(doc, args.all_rules))

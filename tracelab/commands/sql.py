@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from tracelab.commands._interrupt import CtrlCStops
+from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.commands._output import (
     DEFAULT_TABLE_ROWS,
     add_format_options,
@@ -81,20 +81,19 @@ def run(args: argparse.Namespace) -> int:
     if args.list:
         print_saved_queries()
         return 0
-    with store_errors():
+    with store_errors(), ctrl_c_stops_queries():
         sql, params = _statement(args)
         con = open_run(args.run)
-        with CtrlCStops(con.interrupt):
-            if args.format == "table":
-                limit = DEFAULT_TABLE_ROWS + 1 if args.limit is None else args.limit
-                table = retrying(lambda: fetch_arrow(query_readonly(con, sql, params), limit, args.offset))
-                cut = args.limit is None and table.num_rows > DEFAULT_TABLE_ROWS
-                write_table(table.slice(0, DEFAULT_TABLE_ROWS) if cut else table, "table", args.output)
-                if cut:
-                    print(f"note: showing the first {DEFAULT_TABLE_ROWS} rows; --limit N shows more, and "
-                          "--format csv|json|parquet [-o FILE] writes every row", file=sys.stderr)
-            else:
-                schema, batches = retrying(lambda: arrow_stream(query_readonly(con, sql, params),
-                                                                args.limit, args.offset))
-                write_stream(schema, batches, args.format, args.output)
+        if args.format == "table":
+            limit = DEFAULT_TABLE_ROWS + 1 if args.limit is None else args.limit
+            table = retrying(lambda: fetch_arrow(query_readonly(con, sql, params), limit, args.offset))
+            cut = args.limit is None and table.num_rows > DEFAULT_TABLE_ROWS
+            write_table(table.slice(0, DEFAULT_TABLE_ROWS) if cut else table, "table", args.output)
+            if cut:
+                print(f"note: showing the first {DEFAULT_TABLE_ROWS} rows; --limit N shows more, and "
+                      "--format csv|json|parquet [-o FILE] writes every row", file=sys.stderr)
+        else:
+            schema, batches = retrying(lambda: arrow_stream(query_readonly(con, sql, params),
+                                                            args.limit, args.offset))
+            write_stream(schema, batches, args.format, args.output)
     return 0

@@ -6,6 +6,7 @@ import argparse
 from typing import TYPE_CHECKING
 
 from tracelab.commands._args import non_negative_int
+from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.commands._output import (
     add_format_options,
     add_paging_options,
@@ -75,7 +76,7 @@ def check_filters(con: "duckdb.DuckDBPyConnection", args: argparse.Namespace) ->
 def run(args: argparse.Namespace) -> int:
     from tracelab.store.reader import arrow_stream, open_run, retrying
     check_range(args)
-    with store_errors():
+    with store_errors(), ctrl_c_stops_queries():
         con = open_run(args.run)
         check_filters(con, args)
         if not con.execute("SELECT count(*) FROM (SELECT 1 FROM raw.changes WHERE episode = ? LIMIT 1)",

@@ -7,6 +7,7 @@ import sys
 from typing import TYPE_CHECKING
 
 from tracelab.commands._args import non_negative_int, positive_int
+from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.errors import UserError, store_errors
 
 if TYPE_CHECKING:
@@ -77,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     from tracelab.store.reader import open_run, retrying
     from tracelab.store.why import explain, explain_change, render_why
     refuse_complement(args.atom)
-    with store_errors():
+    with store_errors(), ctrl_c_stops_queries():
         con = open_run(args.run)
         end = last_t(con, args.episode)
         check_at(args.at, args.episode, end)

@@ -5,6 +5,7 @@ import argparse
 import json
 
 from tracelab.commands._args import non_negative_int
+from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.errors import store_errors
 
 
@@ -25,7 +26,7 @@ def run(args: argparse.Namespace) -> int:
     from tracelab.commands.why import check_at, last_t
     from tracelab.store.reader import open_run, retrying
     from tracelab.store.why import parse_bindings, render_why_not, why_not
-    with store_errors():
+    with store_errors(), ctrl_c_stops_queries():
         con, bindings = open_run(args.run), parse_bindings(args.grounding)
         check_at(args.at, args.episode, last_t(con, args.episode))
         result = retrying(lambda: why_not(con, args.episode, args.rule, bindings, args.at))

@@ -12,6 +12,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import duckdb
+
 from tracelab.store import layout
 from tracelab.store.reader import open_run, query_readonly, retrying, run_info
 
@@ -125,6 +127,8 @@ def summarize_run(path: Path) -> RunSummary:
     try:
         info = run_info(path)
         episodes, rows = _counts(path)
+    except duckdb.InterruptException:
+        raise  # stopped by the user (Ctrl-C): not a broken run
     except Exception as e:  # noqa: BLE001 - one broken run must not hide the others
         return RunSummary(path, name, "unreadable", "", "", None, None, _disk_size(path), None,
                           error=str(e).splitlines()[0] if str(e) else type(e).__name__)

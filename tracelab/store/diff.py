@@ -16,6 +16,7 @@ from typing import Any
 import duckdb
 
 from tracelab.store.reader import RunConnection
+from tracelab.store.sandbox import lock_down, sandbox_connection
 
 # One episode's changes as comparable keys: names and texts, not ids, so that two runs compare too.
 _CHANGES_SQL = """
@@ -101,9 +102,9 @@ def _arrow(con: RunConnection, sql: str, episode: int) -> Any:
 
 def _scratch() -> duckdb.DuckDBPyConnection:
     """An in-memory database for comparing the two sides: no files, no extensions, no network."""
-    return duckdb.connect(":memory:", config={"enable_external_access": False,
-                                              "autoinstall_known_extensions": False,
-                                              "autoload_known_extensions": False})
+    con = sandbox_connection()
+    lock_down(con)
+    return con
 
 
 def first_divergence(con: RunConnection, a: int, b: int, con_b: RunConnection | None = None,

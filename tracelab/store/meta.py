@@ -13,15 +13,16 @@ import platform
 import socket
 import sys
 import time
-from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
 import pyarrow as pa
 
-from tracelab.engine.safe_files import FileRefused, open_regular, read_json
+from tracelab.engine.safe_files import open_regular, read_json
 from tracelab.store import layout
+from tracelab.validation import (INT64, Const, IsoTime, ListOf, MapOf, Nullable, OneOf, OptionalKey, check_file,
+                                 utc_time)
 
 FORMAT = "tracelab-run/1"
 STATUSES = ("running", "finished", "failed", "interrupted", "crashed")
@@ -96,76 +97,28 @@ def write_meta(run_dir: Path, doc: dict[str, Any]) -> None:
     layout.replace_atomically(data, layout.meta_path(run_dir))
 
 
-def _int64(v: Any) -> bool:
-    return isinstance(v, int) and not isinstance(v, bool) and -(1 << 63) <= v < (1 << 63)
-
-
-def _time(v: Any) -> bool:
-    if not isinstance(v, str) or not v:
-        return False
-    try:
-        _ts(v)
-    except (ValueError, OverflowError):
-        return False
-    return True
-
-
-def _text(v: Any) -> bool:
-    return isinstance(v, str)
-
-
-def _texts(v: Any) -> bool:
-    return isinstance(v, list) and all(isinstance(x, str) for x in v)
-
-
-def _rule_files(v: Any) -> bool:
-    return isinstance(v, list) and all(
-        isinstance(f, dict) and isinstance(f.get("path"), str) and isinstance(f.get("sha256"), str) for f in v)
-
-
-def _nullable(check: Callable[[Any], bool]) -> Callable[[Any], bool]:
-    return lambda v: v is None or check(v)
-
-
-# What each field of meta.json must hold (a field may be absent: runs of earlier versions lack some).
-# Checked when the file is read: a run from elsewhere is refused with one line naming the key, instead
-# of failing later in whatever code uses the value.
-META_FIELDS: dict[str, tuple[Callable[[Any], bool], str]] = {
-    "format": (lambda v: v == FORMAT, repr(FORMAT)),
-    "run_id": (_text, "a string"),
-    "command": (_text, "a string"),
-    "config": (lambda v: isinstance(v, dict), "an object"),
-    "scenario": (_nullable(_text), "a string or null"),
-    "rule_files": (_rule_files, 'a list of {"path": string, "sha256": string} objects'),
-    "seed": (_nullable(_int64), "a 64-bit integer or null"),
-    "versions": (lambda v: isinstance(v, dict) and all(isinstance(x, str) for x in v.values()),
-                 "an object of strings"),
-    "started_at": (_time, "an ISO 8601 time"),
-    "ended_at": (_nullable(_time), "an ISO 8601 time or null"),
-    "status": (lambda v: v in STATUSES, "one of " + ", ".join(STATUSES)),
-    "pid": (_nullable(_int64), "a 64-bit integer or null"),
-    "host": (_nullable(_text), "a string or null"),
-    "argv": (_texts, "a list of strings"),
-    "sealed_at": (_nullable(_time), "an ISO 8601 time or null"),
+# What each key of meta.json must hold (every key optional: runs of earlier versions lack some). Checked
+# when the file is read: a run from elsewhere is refused with one line naming the key, instead of failing
+# later in whatever code uses the value.
+META_SCHEMA: dict[str, Any] = {key: OptionalKey(spec) for key, spec in {
+    "format": Const(FORMAT),
+    "run_id": str,
+    "command": str,
+    "config": {},
+    "scenario": Nullable(str),
+    "rule_files": ListOf({"path": str, "sha256": str}),
+    "seed": Nullable(INT64),
+    "versions": MapOf(str),
+    "started_at": IsoTime(),
+    "ended_at": Nullable(IsoTime()),
+    "status": OneOf(*STATUSES),
+    "pid": Nullable(INT64),
+    "host": Nullable(str),
+    "argv": ListOf(str),
+    "sealed_at": Nullable(IsoTime()),
     # a resumed training's resumes into the same run (tracelab train --resume), oldest first
-    "resumes": (lambda v: isinstance(v, list) and all(isinstance(r, dict) for r in v), "a list of objects"),
-}
-
-
-def shown(value: Any, width: int = 40) -> str:
-    """A JSON value for an error message, cut to `width` characters."""
-    text = json.dumps(value, default=str)
-    return text if len(text) <= width else text[: width - 3] + "..."
-
-
-def check_meta(doc: Any, path: Path) -> dict[str, Any]:
-    """meta.json's document, checked against META_FIELDS (FileRefused naming the file and key)."""
-    if not isinstance(doc, dict):
-        raise FileRefused(f"{path}: expected a JSON object, got {shown(doc)}")
-    for key, (ok, expected) in META_FIELDS.items():
-        if key in doc and not ok(doc[key]):
-            raise FileRefused(f"{path}: key {key!r}: expected {expected}, got {shown(doc[key])}")
-    return doc
+    "resumes": ListOf({}),
+}.items()}
 
 
 def read_meta(run_dir: Path) -> dict[str, Any]:
@@ -174,7 +127,7 @@ def read_meta(run_dir: Path) -> dict[str, Any]:
         doc = read_json(path, what="run's meta.json", follow_symlinks=False)
     except FileNotFoundError:
         raise FileNotFoundError(f"{str(run_dir)!r} is not a tracelab run: it has no {layout.META}") from None
-    return check_meta(doc, path)
+    return check_file(doc, META_SCHEMA, path)
 
 
 def open_writer_lock(run_dir: Path) -> IO[bytes]:
@@ -224,9 +177,7 @@ def current_meta(run_dir: Path) -> dict[str, Any]:
 
 
 def _ts(value: str | None) -> _dt.datetime | None:
-    if not value:
-        return None
-    return _dt.datetime.fromisoformat(value).astimezone(_dt.timezone.utc).replace(tzinfo=None)
+    return utc_time(value) if value else None
 
 
 def meta_table(doc: dict[str, Any], status: str) -> pa.Table:

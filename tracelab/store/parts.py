@@ -26,10 +26,10 @@ from typing import Any
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from tracelab.engine.safe_files import FileRefused, check_regular, read_json
+from tracelab.engine.safe_files import check_regular, read_json
 from tracelab.store import layout
-from tracelab.store.meta import shown
 from tracelab.store.schema import SCHEMAS
+from tracelab.validation import Const, ExactKeys, IntRange, ListOf, Matches, OptionalKey, check_file
 
 ROW_GROUP_ROWS = 131_072
 MANIFEST_FORMAT = "tracelab-parts/1"
@@ -146,44 +146,34 @@ def write_empty_part(run_dir: Path, table: str) -> str:
     return f"{table}/{final.name}"
 
 
-# A manifest entry: `<table>/<file name>` (how parts are written: `rules/00000003.parquet`). A plain name,
-# so DuckDB reads that one file: no folder, no glob character (DuckDB expands globs in a file list), no '..'.
-_PART_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*" + re.escape(layout.PART_SUFFIX))
+def _part_entry(table: str) -> Matches:
+    """A manifest entry of `table`: `<table>/<file name>` (how parts are written: `rules/00000003.parquet`).
+    A plain name, so DuckDB reads that one file: no folder, no glob character (DuckDB expands globs in a
+    file list), no '..'."""
+    return Matches(re.escape(table) + "/[A-Za-z0-9_][A-Za-z0-9_.-]*" + re.escape(layout.PART_SUFFIX),
+                   f"a plain file name in the run's parts/{table}/ directory, like "
+                   f"'{table}/{layout.part_name(3)}' (no folders, globs or '..')")
+
+
+# parts/manifest.json: its format, `flushes` a count, and for exactly the store's tables a list of plain
+# part names of the table's folder, each listed once.
+MANIFEST_SCHEMA: dict[str, Any] = {
+    "format": Const(MANIFEST_FORMAT),
+    "flushes": OptionalKey(IntRange(0, (1 << 63) - 1, "a count (an integer >= 0)")),
+    "tables": ExactKeys({table: ListOf(_part_entry(table), unique=True) for table in SCHEMAS}),
+}
 
 
 def read_manifest_doc(run_dir: Path) -> dict[str, Any]:
-    """parts/manifest.json, checked: its format, `flushes` a count, and for exactly the store's tables a
-    list of plain part names of the table's folder, each listed once (FileRefused naming the key)."""
+    """parts/manifest.json, checked against MANIFEST_SCHEMA (FileRefused naming the key)."""
     path = layout.manifest_path(run_dir)
     try:
         doc = read_json(path, what="parts manifest", follow_symlinks=False)
     except FileNotFoundError:
         raise FileNotFoundError(f"{str(run_dir)!r} has no {layout.PARTS}/{layout.MANIFEST}: not a "
                                 "tracelab run directory, or one whose writer died while creating it") from None
-    if not isinstance(doc, dict):
-        raise FileRefused(f"{path}: expected a JSON object, got {type(doc).__name__}")
-    if doc.get("format") != MANIFEST_FORMAT:
-        raise FileRefused(f"{path}: key 'format': unknown manifest format {shown(doc.get('format'))}")
-    flushes = doc.setdefault("flushes", 0)
-    if not isinstance(flushes, int) or isinstance(flushes, bool) or not 0 <= flushes < 1 << 63:
-        raise FileRefused(f"{path}: key 'flushes': expected a count, got {shown(flushes)}")
-    tables = doc.get("tables")
-    if not isinstance(tables, dict) or set(tables) != set(SCHEMAS) \
-            or not all(isinstance(files, list) for files in tables.values()):
-        raise FileRefused(f"{path}: key 'tables' must list the parts of exactly the tables "
-                          f"{', '.join(SCHEMAS)}")
-    for table, entries in tables.items():
-        seen: set[str] = set()
-        for i, entry in enumerate(entries):
-            where = f"{path}: key 'tables.{table}[{i}]'"
-            table_of, _, name = entry.partition("/") if isinstance(entry, str) else ("", "", "")
-            if table_of != table or not _PART_NAME.fullmatch(name):
-                raise FileRefused(f"{where} is {shown(entry)}: a part must be a plain file name in the run's "
-                                  f"parts/{table}/ directory, like '{table}/{layout.part_name(3)}' (no "
-                                  "folders, globs or '..')")
-            if entry in seen:
-                raise FileRefused(f"{where}: {entry!r} is listed twice")
-            seen.add(entry)
+    check_file(doc, MANIFEST_SCHEMA, path)
+    doc.setdefault("flushes", 0)
     return doc
 
 

@@ -17,6 +17,7 @@ Two layers (docs/store.md, "Security model"):
    ANALYZE runs it. This layer names the problem in plain words; layer 1 holds even if it missed one."""
 from __future__ import annotations
 
+import weakref
 from collections.abc import Sequence
 
 import duckdb
@@ -41,10 +42,26 @@ class QueryRefused(ValueError):
     """A statement the sandbox does not run (one line, names the statement kind or what it touched)."""
 
 
+# Every connection sandbox_connection made that is still open somewhere: what interrupt_queries stops.
+_CONNECTIONS: weakref.WeakSet[duckdb.DuckDBPyConnection] = weakref.WeakSet()
+
+
 def sandbox_connection(database: str = ":memory:") -> duckdb.DuckDBPyConnection:
     """A DuckDB connection (in memory; `seal` passes the file it builds) with extensions, home and temp
     directories already shut off; call lock_down() once anything it must attach is attached."""
-    return duckdb.connect(database, config=dict(SANDBOX_CONFIG))
+    con = duckdb.connect(database, config=dict(SANDBOX_CONFIG))
+    _CONNECTIONS.add(con)
+    return con
+
+
+def interrupt_queries() -> None:
+    """Stop the query each sandbox connection is running (within DuckDB's next check: milliseconds); a
+    connection running none is not affected. Safe from any thread: Ctrl-C's watcher calls it."""
+    for con in list(_CONNECTIONS):
+        try:
+            con.interrupt()
+        except duckdb.ConnectionException:
+            pass  # closed, and not yet collected: it runs nothing
 
 
 def _sql_list(items: Sequence[str]) -> str:

@@ -23,7 +23,7 @@ import torch
 
 from tracelab.engine.safe_files import FileRefused
 from tracelab.game.scenario import NOTHING, RED, Scenario, scenario_from_dict
-from tracelab.schema import Const, IntRange, ListOf, MapOf, Mismatch, Nullable, Tuple, check
+from tracelab.validation import Const, IntRange, ListOf, MapOf, Mismatch, Nullable, Tuple, check
 from tracelab.train.config import TrainConfig, config_schema
 from tracelab.train.torch_files import CodeInFile, Tensor, load_tensors
 

@@ -9,7 +9,7 @@ from dataclasses import MISSING, asdict, dataclass, field, fields
 from typing import Any
 
 from tracelab.engine.kernel_names import KERNELS as ENGINE_KERNELS
-from tracelab.schema import Nullable, OptionalKey
+from tracelab.validation import Nullable, OptionalKey
 
 
 def _opt(help: str, flag: str | None = None, **kw: Any) -> Any:

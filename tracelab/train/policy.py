@@ -17,9 +17,9 @@ from typing import Any
 
 import numpy as np
 
-from tracelab.engine.safe_files import FileRefused, read_json
+from tracelab.engine.safe_files import read_json
 from tracelab.game.scenario import ACTION_NAMES, NOTHING, Scenario, scenario_from_dict
-from tracelab.schema import Const, IntRange, ListOf, MapOf, Mismatch, OptionalKey, check
+from tracelab.validation import Const, IntRange, ListOf, MapOf, OptionalKey, check_file
 from tracelab.train.network import STATE_DICT_KEYS, Shape, from_state_dict, q_values, views
 
 FORMAT = "tracelab-dqn-policy/1"
@@ -163,11 +163,7 @@ def read_policy_spec(path: str | Path) -> dict[str, Any]:
     if not (f.exists() or f.is_symlink()):
         raise FileNotFoundError(f"{str(d)!r} holds no {POLICY_JSON}")
     spec = read_json(f, what="policy description", follow_symlinks=False)
-    try:
-        check(spec, SPEC_SCHEMA)
-    except Mismatch as e:
-        raise FileRefused(f"{f}: {e}") from None
-    return spec
+    return check_file(spec, SPEC_SCHEMA, f)
 
 
 def policy_scenario(spec: dict[str, Any]) -> Scenario:
@@ -202,11 +198,7 @@ def read_policy_networks(path: str | Path, spec: dict[str, Any]) -> dict[str, An
         raise FileNotFoundError(f"{str(d)!r} holds no {POLICY_PT}")
     # the tensors it declares (float64 at most), with room for the pickle and the alignment torch.save adds
     states = load_tensors(f, len(names) * shape.n_params * 8 + (1 << 20))
-    try:
-        check(states, _state_dict_schema(names, shape))
-    except Mismatch as e:
-        raise FileRefused(f"{f}: {e}") from None
-    return states
+    return check_file(states, _state_dict_schema(names, shape), f)
 
 
 def load_policy(path: str | Path, scenario: Scenario | None = None) -> Policy:

@@ -20,7 +20,7 @@ import torch
 
 from tracelab.engine.safe_files import FileRefused, human_bytes, open_regular
 from tracelab.errors import one_line
-from tracelab.schema import Mismatch, Spec, with_article
+from tracelab.validation import Mismatch, Spec, with_article
 
 _GLOBAL = re.compile(r"GLOBAL ([\w.]+)")  # torch names the callable in several phrasings
 _WEIGHTS_ERROR = re.compile(r"WeightsUnpickler error: ([^\n]+)")
