@@ -89,7 +89,7 @@ def reopened_meta(doc: dict[str, Any], changes: dict[str, Any]) -> dict[str, Any
     again, with `changes` applied (checked as a read meta.json is)."""
     doc = {**doc, **changes, "status": "running", "ended_at": None, "pid": os.getpid(),
            "host": socket.gethostname(), "argv": list(sys.argv)}
-    return check_meta(doc, Path(layout.META))
+    return check_file(doc, META_SCHEMA, Path(layout.META))
 
 
 def write_meta(run_dir: Path, doc: dict[str, Any]) -> None:
