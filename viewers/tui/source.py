@@ -89,6 +89,7 @@ class RunSource:
         return True
 
     def close(self) -> None:
+        self.interrupt()   # a long query would otherwise hold the lock, and closing the app, for minutes
         with self._lock:
             self.con.close()
 
