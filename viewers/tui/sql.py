@@ -73,9 +73,10 @@ class SavedQueryPicker(ModalScreen[tuple[SavedQuery, dict[str, str]] | None]):
     SavedQueryPicker > Vertical { width: 90%; max-width: 100; height: auto; max-height: 90%;
                                   border: round $accent; background: $panel; padding: 0 1; }
     SavedQueryPicker OptionList { height: auto; max-height: 12; }
-    SavedQueryPicker Input { margin: 0; height: 1; border: none; padding: 0 1; }
+    SavedQueryPicker Input, SavedQueryPicker Input:focus { margin: 0; height: 1; border: none; padding: 0 1; }
     SavedQueryPicker Input:focus { background: $boost; }
     SavedQueryPicker #params { height: auto; max-height: 20; overflow-y: auto; }
+    SavedQueryPicker #params Label { width: 100%; }
     """
 
     def __init__(self) -> None:
@@ -97,7 +98,9 @@ class SavedQueryPicker(ModalScreen[tuple[SavedQuery, dict[str, str]] | None]):
         if not self.chosen.params:
             self.dismiss((self.chosen, {}))
             return
-        box.mount(Label(f"{self.chosen.name}: parameters (Enter in the last one runs it)"))
+        self.query_one(OptionList).display = False   # room for the parameters, at 80x24 too
+        box.mount(Label(Text.assemble((self.chosen.name, "bold"), f"  {self.chosen.description}")))
+        box.mount(Label("parameters (Enter: next box; in the last one it runs) · Esc closes", classes="dim"))
         for p in self.chosen.params:
             box.mount(Label(Text.assemble((p.name, "bold"), f"  {p.type}, default {_literal(p.default)}",
                                           (f" · {p.help}" if p.help else "", "dim")),
