@@ -5,6 +5,7 @@ export of a result to CSV or Parquet (F4)."""
 from __future__ import annotations
 
 import re
+import time
 from pathlib import Path
 from dataclasses import dataclass
 from typing import Any
@@ -213,6 +214,8 @@ class SqlPane(Vertical):
         self._set_status(("previous query cancelled · " if superseded else "") + doing)
 
         def on_connection(con: Any) -> Any:
+            if run_id != self._run_id:
+                return None                 # superseded before it began: never run it
             self._executing = run_id        # now ours is the statement an interrupt() stops
             try:
                 return fetch_arrow(query_readonly(con, sql, params), MAX_ROWS)
@@ -220,6 +223,11 @@ class SqlPane(Vertical):
                 self._executing = None
 
         def work() -> None:
+            # an older query of ours that had the connection but had not begun when it was interrupted
+            # missed that interrupt: interrupt it until it gives the connection up
+            while run_id == self._run_id and (self._executing or run_id) < run_id:
+                self.source.con.interrupt()
+                time.sleep(0.05)
             try:
                 table = self.source.call(on_connection)
             except duckdb.InterruptException:  # Esc, or a newer query: a cancel, never an error to fix
@@ -252,7 +260,7 @@ class SqlPane(Vertical):
         self.query_one("#sql-status", Static).update(f" {text} · {KEYS}")
 
     def _show(self, run_id: int, table: Any, label: str) -> None:
-        if run_id != self._run_id:
+        if run_id != self._run_id or table is None:
             return  # superseded by a newer query
         self.result = table
         columns = [Column(name, name, None) for name in table.column_names]
