@@ -3,11 +3,14 @@ an app run around a test body. Shared by test_tui.py and test_tui_snapshots.py."
 from __future__ import annotations
 
 import asyncio
+import atexit
 import html
 import os
 import re
+import shutil
 import subprocess
 import sys
+import tempfile
 import time
 from collections import defaultdict
 from collections.abc import Callable, Iterator
@@ -16,6 +19,10 @@ from pathlib import Path
 from typing import Any
 
 os.environ["TEXTUAL_ANIMATIONS"] = "none"
+# the SQL console keeps its history in the user's state folder: never the real one in tests
+_STATE = tempfile.mkdtemp(prefix="tracelab-test-state-")
+os.environ["XDG_STATE_HOME"] = _STATE
+atexit.register(shutil.rmtree, _STATE, ignore_errors=True)
 
 from tracelab.viewers.tui.app import TracelabApp  # noqa: E402
 from tracelab.viewers.tui.lazy_table import LazyTable  # noqa: E402

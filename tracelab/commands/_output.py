@@ -3,7 +3,6 @@ Arrow table as an aligned text table, CSV, JSON or Parquet."""
 from __future__ import annotations
 
 import argparse
-import csv
 import datetime as _dt
 import json
 import math
@@ -13,6 +12,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 from tracelab.commands._args import non_negative_int
 from tracelab.errors import UserError
+from tracelab.store.table_files import cell_text, python_rows, write_csv, write_parquet
 
 if TYPE_CHECKING:  # imported where used, so that `tracelab --help` stays fast
     import pyarrow as pa
@@ -30,16 +30,6 @@ def add_paging_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--offset", type=non_negative_int, default=0, help="skip this many rows first")
 
 
-def _cell(v: Any) -> str:
-    if v is None:
-        return ""
-    if isinstance(v, float):
-        return "nan" if math.isnan(v) else f"{v:g}"
-    if isinstance(v, (list, tuple)):
-        return "[" + ",".join(_cell(x) for x in v) + "]"
-    return str(v)
-
-
 def _json_value(v: Any) -> Any:
     if isinstance(v, (_dt.datetime, _dt.date)):
         return v.isoformat()
@@ -48,51 +38,29 @@ def _json_value(v: Any) -> Any:
     return v
 
 
-def _values(column: "pa.Array | pa.ChunkedArray", name: str) -> list[Any]:
-    """A column's values as Python objects. Dates and times Python cannot hold (DuckDB's 'infinity',
-    the year 290000, nanoseconds) come as Arrow's text for them."""
-    try:
-        return column.to_pylist()
-    except (OverflowError, ValueError):
-        import pyarrow as pa
-        try:
-            return column.cast(pa.string()).to_pylist()
-        except pa.ArrowException:
-            raise UserError(f"column {name!r} holds a date or time outside what Python can show; "
-                            "cast it to VARCHAR in the query") from None
-
-
-def _pyrows(table: "pa.Table | pa.RecordBatch") -> list[dict[str, Any]]:
-    columns = [_values(table.column(i), name) for i, name in enumerate(table.schema.names)]
-    return [dict(zip(table.schema.names, row)) for row in zip(*columns)] if columns else []
-
-
 def write_table(table: "pa.Table", fmt: str, output: str | None = None, out: TextIO | None = None) -> None:
     """Write `table` in `fmt` to `output` (a path) or to `out` (default stdout)."""
     if fmt == "parquet":
         if not output:
             raise UserError("--format parquet needs --output FILE")
-        import pyarrow.parquet as pq
-        pq.write_table(table, output, compression="zstd")
+        write_parquet(table.schema, table.to_batches(), output)
         return
     if output:
         with open(output, "w", newline="") as f:
             write_table(table, fmt, None, f)
         return
     out = out or sys.stdout
-    names = table.column_names
-    rows = _pyrows(table)
     if fmt == "csv":
-        w = csv.writer(out)
-        w.writerow(names)
-        for r in rows:
-            w.writerow([_cell(r[n]) if isinstance(r[n], (list, tuple)) else r[n] for n in names])
-    elif fmt == "json":
+        write_csv(table.schema, table.to_batches(), out)
+        return
+    names = table.column_names
+    rows = python_rows(table)
+    if fmt == "json":
         json.dump([{k: _json_value(v) for k, v in r.items()} for r in rows], out, indent=1, default=str)
         out.write("\n")
     elif fmt == "table":
         import pyarrow as pa
-        cells = [[_cell(r[n]) for n in names] for r in rows]
+        cells = [[cell_text(r[n]) for n in names] for r in rows]
         widths = [max([len(n), *(len(c[i]) for c in cells)]) for i, n in enumerate(names)]
         numeric = [pa.types.is_integer(t) or pa.types.is_floating(t) for t in table.schema.types]
         fmt_row = lambda vals: "  ".join(  # noqa: E731
@@ -111,7 +79,7 @@ DEFAULT_TABLE_ROWS = 1000  # rows a table-format result shows unless --limit say
 
 def _rows(batches: "Iterable[pa.RecordBatch]") -> "Iterator[dict[str, Any]]":
     for batch in batches:
-        yield from _pyrows(batch)
+        yield from python_rows(batch)
 
 
 def write_stream(schema: "pa.Schema", batches: "Iterable[pa.RecordBatch]", fmt: str,
@@ -121,31 +89,16 @@ def write_stream(schema: "pa.Schema", batches: "Iterable[pa.RecordBatch]", fmt: 
     if fmt == "parquet":
         if not output:
             raise UserError("--format parquet needs --output FILE")
-        import pyarrow.parquet as pq
-        n = 0
-        with pq.ParquetWriter(output, schema, compression="zstd") as writer:
-            for batch in batches:
-                writer.write_batch(batch)
-                n += batch.num_rows
-        return n
+        return write_parquet(schema, batches, output)
     if fmt not in ("csv", "json"):
         raise UserError(f"format {fmt!r} does not stream; choose csv, json or parquet")
     if output:
         with open(output, "w", newline="") as f:
             return write_stream(schema, batches, fmt, None, f)
     out = out or sys.stdout
-    names, n = schema.names, 0
+    n = 0
     if fmt == "csv":
-        import pyarrow as pa
-        w = csv.writer(out)
-        w.writerow(names)
-        nested = [pa.types.is_nested(t) for t in schema.types]
-        for batch in batches:  # column by column: far fewer Python objects than a dict per row
-            columns = [[_cell(v) for v in _values(col, name)] if is_nested else _values(col, name)
-                       for col, name, is_nested in zip(batch.columns, names, nested)]
-            w.writerows(zip(*columns))
-            n += batch.num_rows
-        return n
+        return write_csv(schema, batches, out)
     out.write("[")
     for r in _rows(batches):
         # one object per line: readable, and several times faster than indenting every value

@@ -21,7 +21,7 @@ first) · the mouse selects rows, tabs, keys in the bottom bar and header column
 | 2 Trace | `Enter`/`w` why · `n` / `p` next / previous change of the atom · `g` go to timestep · `/` atom filter (also t range, label, rule; Enter applies) · `a` only this atom · `x` clear filters · `b` board · `]` / `[` next / previous evaluation game (training runs) |
 | 3 Why | `Enter`/click expand a node · `o` expand all · `c` collapse · `/` why-not (`RULE A=x,B=y at T`) |
 | 4 Rules | `Enter` trace filtered by the rule · `e` per rule / per episode |
-| 5 SQL | `Ctrl+R` run (read-only) · `F2` saved queries with parameters · `F3` history · `Ctrl+T` results |
+| 5 SQL | `Ctrl+R` run (read-only; cancels a running one) · `F2` saved queries with parameters · `F3` history (kept between sessions) · `F4` export the result (CSV, Parquet) · `Ctrl+T` results |
 | 6 Training | curves re-read every second while a run is written · `v` evaluation games |
 
 Truth values: green `[1,1]`, orange `[0,0]`, grey `[0,1]`, yellow anything else. Team colours: red and blue.

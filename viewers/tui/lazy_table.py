@@ -114,6 +114,9 @@ class LazyTable(ScrollView, can_focus=True):
         self.error: str | None = None
         self.sort_key: str | None = None
         self.sort_desc = False
+        # what row 0 says while there is no source (nothing asked for yet): not "loading…", which is
+        # true only while a source is being prepared
+        self.placeholder = ""
         self._pages: OrderedDict[int, list[Row]] = OrderedDict()
         self._wanted: set[int] = set()
         self._inflight: set[int] = set()     # pages being fetched now
@@ -325,6 +328,8 @@ class LazyTable(ScrollView, can_focus=True):
         return text
 
     def _line(self, index: int) -> Text:
+        if index == 0 and self.source is None:
+            return Text(self.placeholder, style="italic")
         if index == 0 and not self.ready:
             return Text("  loading…  (Esc cancels)", style="italic")
         if index == 0 and self.error:

@@ -89,8 +89,14 @@ class RunSource:
         return True
 
     def close(self) -> None:
-        with self._lock:
+        # a long query would otherwise hold the lock, and closing the app, for minutes; interrupted again
+        # until the lock is ours: a query that had the lock but had not started yet missed the first one
+        while not self._lock.acquire(timeout=0.05):
+            self.interrupt()
+        try:
             self.con.close()
+        finally:
+            self._lock.release()
 
 
 class LiveReads:

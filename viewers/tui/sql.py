@@ -1,13 +1,17 @@
 """The SQL console: one read-only statement at a time (query_readonly refuses anything that writes),
 results in a lazy table, errors shown under the editor with the cursor put at their position, a history
-(F3) and the saved queries with their parameters (F2)."""
+(F3, kept between sessions: sql_history.py), the saved queries with their parameters (F2) and the
+export of a result to CSV or Parquet (F4)."""
 from __future__ import annotations
 
 import re
+import time
+from pathlib import Path
 from dataclasses import dataclass
 from typing import Any
 
 import duckdb
+import pyarrow as pa
 from rich.text import Text
 from textual.app import ComposeResult
 from textual.binding import Binding
@@ -18,10 +22,13 @@ from textual.widgets.option_list import Option
 
 from tracelab.store.queries import SavedQuery, list_queries
 from tracelab.store.reader import fetch_arrow, query_readonly
+from tracelab.viewers.tui.export import ExportDialog, free_name
 from tracelab.viewers.tui.lazy_table import Column, LazyTable
 from tracelab.viewers.tui.paging import ArrowSource
 from tracelab.viewers.tui.source import RunSource
+from tracelab.viewers.tui.sql_history import add_to_history, history_path, load_history, save_history
 
+KEYS = "Ctrl+R runs · F2 saved · F3 history · F4 export"
 MAX_ROWS = 1_000_000   # results kept in memory (streamed; the rest is never read)
 _LINE = re.compile(r"^LINE (\d+): (.*)$")
 
@@ -54,6 +61,11 @@ def locate_error(sql: str, message: str) -> SqlError:
     return SqlError(message.strip())
 
 
+def _literal(value: Any) -> str:
+    """A parameter's value as typed in its box (None is `null`, as in the query file)."""
+    return "null" if value is None else str(value)
+
+
 class SavedQueryPicker(ModalScreen[tuple[SavedQuery, dict[str, str]] | None]):
     """Choose a saved query, then fill in its parameters (defaults shown); Enter runs it."""
     BINDINGS = [Binding("escape", "dismiss(None)", "close")]
@@ -62,7 +74,10 @@ class SavedQueryPicker(ModalScreen[tuple[SavedQuery, dict[str, str]] | None]):
     SavedQueryPicker > Vertical { width: 90%; max-width: 100; height: auto; max-height: 90%;
                                   border: round $accent; background: $panel; padding: 0 1; }
     SavedQueryPicker OptionList { height: auto; max-height: 12; }
-    SavedQueryPicker Input { margin: 0; }
+    SavedQueryPicker Input, SavedQueryPicker Input:focus { margin: 0; height: 1; border: none; padding: 0 1; }
+    SavedQueryPicker Input:focus { background: $boost; }
+    SavedQueryPicker #params { height: auto; max-height: 20; overflow-y: auto; }
+    SavedQueryPicker #params Label { width: 100%; }
     """
 
     def __init__(self) -> None:
@@ -84,10 +99,14 @@ class SavedQueryPicker(ModalScreen[tuple[SavedQuery, dict[str, str]] | None]):
         if not self.chosen.params:
             self.dismiss((self.chosen, {}))
             return
-        box.mount(Label(f"{self.chosen.name}: parameters (Enter in the last one runs it)"))
+        self.query_one(OptionList).display = False   # room for the parameters, at 80x24 too
+        box.mount(Label(Text.assemble((self.chosen.name, "bold"), f"  {self.chosen.description}")))
+        box.mount(Label("parameters (Enter: next box; in the last one it runs) · Esc closes", classes="dim"))
         for p in self.chosen.params:
-            default = "null" if p.default is None else str(p.default)
-            box.mount(Input(value=default, placeholder=p.help, id=f"param-{p.name}",
+            box.mount(Label(Text.assemble((p.name, "bold"), f"  {p.type}, default {_literal(p.default)}",
+                                          (f" · {p.help}" if p.help else "", "dim")),
+                            id=f"label-{p.name}", classes="param-label"))
+            box.mount(Input(value=_literal(p.default), placeholder=p.help, id=f"param-{p.name}",
                             tooltip=f"{p.name} ({p.type}): {p.help}"))
         self.call_after_refresh(lambda: box.query(Input).first().focus())
 
@@ -125,6 +144,7 @@ class SqlPane(Vertical):
         Binding("f5", "run", "run", show=False),
         Binding("f2", "saved", "saved queries"),
         Binding("f3", "history", "history"),
+        Binding("f4", "export", "export"),
         Binding("ctrl+t", "focus_results", "results", show=False),
     ]
     DEFAULT_CSS = """
@@ -135,18 +155,36 @@ class SqlPane(Vertical):
     def __init__(self, source: RunSource) -> None:
         super().__init__()
         self.source = source
-        self.history: list[str] = []
+        self.history_file = history_path()
+        self.history: list[str] = load_history(self.history_file)
+        self._history_warned = False
         self.params: dict[str, Any] | None = None
         self.params_for: str | None = None
         self.last_error: SqlError | None = None
+        self.result: pa.Table | None = None      # the result on screen (what export writes)
+        self._run_id = 0                          # the latest query; older ones' results are dropped
+        self._executing: int | None = None        # the query of ours on the connection now, if any
 
     def compose(self) -> ComposeResult:
         yield TextArea("SELECT rule, count(*) AS n FROM firings GROUP BY rule ORDER BY n DESC, rule",
                        language=None, id="sql-editor", soft_wrap=True)
         yield Static("", id="sql-error")
-        yield LazyTable(id="sql-results")
+        table = LazyTable(id="sql-results")
+        table.placeholder = "  no query run yet: Ctrl+R runs the statement above"
+        yield table
         with Horizontal(classes="status"):
-            yield Static(" Ctrl+R runs · F2 saved queries · F3 history · read-only", id="sql-status")
+            yield Static(f" ready · {KEYS} · read-only", id="sql-status")
+
+    def _remember(self, sql: str) -> None:
+        """Add `sql` to the history and save it at once (the file as it is now: other consoles, open
+        meanwhile, keep theirs too)."""
+        self.history = add_to_history(load_history(self.history_file) or self.history, sql)
+        try:
+            save_history(self.history_file, self.history)
+        except OSError as e:
+            if not self._history_warned:     # once: the console works on without a saved history
+                self._history_warned = True
+                self.notify(f"SQL history not saved: {e}", severity="warning")
 
     def focus_default(self) -> None:
         self.query_one(TextArea).focus()
@@ -163,43 +201,88 @@ class SqlPane(Vertical):
         self.run_sql(sql, params)
 
     def run_sql(self, sql: str, params: dict[str, Any] | None = None, label: str = "") -> None:
-        if not self.history or self.history[-1] != sql:
-            self.history.append(sql)
-        self.query_one("#sql-error", Static).update("")
+        self._remember(sql)
+        # A query of ours still running is cancelled: the new one would otherwise wait behind it for
+        # the connection (minutes, for a big join), and its late result would replace the new one's.
+        superseded = self._interrupt_own()
+        self._run_id += 1
+        run_id = self._run_id
         self.last_error = None
-        status = self.query_one("#sql-status", Static)
-        status.update(f" running {label or 'query'}… (Esc cancels)")
+        self.query_one("#sql-error", Static).update("")
+        doing = f"running {label or 'query'}… (Esc cancels)"
+        self._clear_result(doing)
+        self._set_status(("previous query cancelled · " if superseded else "") + doing)
+
+        def on_connection(con: Any) -> Any:
+            if run_id != self._run_id:
+                return None                 # superseded before it began: never run it
+            self._executing = run_id        # now ours is the statement an interrupt() stops
+            try:
+                return fetch_arrow(query_readonly(con, sql, params), MAX_ROWS)
+            finally:
+                self._executing = None
 
         def work() -> None:
+            # an older query of ours that had the connection but had not begun when it was interrupted
+            # missed that interrupt: interrupt it until it gives the connection up
+            while run_id == self._run_id and (self._executing or run_id) < run_id:
+                self.source.con.interrupt()
+                time.sleep(0.05)
             try:
-                table = self.source.call(lambda con: fetch_arrow(query_readonly(con, sql, params), MAX_ROWS))
-            except duckdb.InterruptException:  # Esc (RunScreen: the source's interrupt()); not an error
-                self.app.call_from_thread(self._cancelled, label)
+                table = self.source.call(on_connection)
+            except duckdb.InterruptException:  # Esc, or a newer query: a cancel, never an error to fix
+                self.app.call_from_thread(self._cancelled, run_id, label)
                 return
             except Exception as e:  # noqa: BLE001 - every error is shown inline
-                self.app.call_from_thread(self._failed, sql, str(e))
+                self.app.call_from_thread(self._failed, run_id, sql, str(e))
                 return
-            self.app.call_from_thread(self._show, table, label)
+            self.app.call_from_thread(self._show, run_id, table, label)
 
-        self.run_worker(work, thread=True, group="sql", exclusive=True, exit_on_error=False)
+        self.run_worker(work, thread=True, group="sql", exit_on_error=False)
 
-    def _show(self, table: Any, label: str) -> None:
+    def _interrupt_own(self) -> bool:
+        """Interrupt this console's statement if it is the one on the connection now (never another
+        view's query); True if one was interrupted."""
+        if self._executing is None:
+            return False
+        self.source.con.interrupt()
+        return True
+
+    def _clear_result(self, placeholder: str) -> None:
+        """Empty the results table (a failed or cancelled query has no result: the previous one must not
+        stay under its message), saying why in its first row."""
+        self.result = None
+        table = self.query_one(LazyTable)
+        table.placeholder = f"  {placeholder}"
+        table.set_source(None)
+
+    def _set_status(self, text: str) -> None:
+        self.query_one("#sql-status", Static).update(f" {text} · {KEYS}")
+
+    def _show(self, run_id: int, table: Any, label: str) -> None:
+        if run_id != self._run_id or table is None:
+            return  # superseded by a newer query
+        self.result = table
         columns = [Column(name, name, None) for name in table.column_names]
         self.query_one(LazyTable).set_source(ArrowSource(table), columns)
         capped = " (first rows only)" if table.num_rows >= MAX_ROWS else ""
-        self.query_one("#sql-status", Static).update(
-            f" {label + ': ' if label else ''}{table.num_rows:,} row(s){capped} · Ctrl+R runs · F2 saved · F3 history")
+        self._set_status(f"{label + ': ' if label else ''}{table.num_rows:,} row(s){capped}")
 
-    def _cancelled(self, label: str) -> None:
-        self.query_one("#sql-status", Static).update(
-            f" {label + ': ' if label else ''}cancelled · Ctrl+R runs · F2 saved · F3 history")
+    def _cancelled(self, run_id: int, label: str) -> None:
+        if run_id != self._run_id:
+            return
+        self._clear_result("cancelled: no result")
+        self._set_status(f"{label + ': ' if label else ''}cancelled")
 
-    def _failed(self, sql: str, message: str) -> None:
+    def _failed(self, run_id: int, sql: str, message: str) -> None:
+        if run_id != self._run_id:
+            return
         err = locate_error(sql, message)
         self.last_error = err
         where = f" (line {err.line + 1}, column {err.column + 1})" if err.line is not None else ""
         self.query_one("#sql-error", Static).update(Text(err.message + where, style="bold"))
-        self.query_one("#sql-status", Static).update(" error · fix the query and Ctrl+R")
+        self._clear_result("no result: the query failed (the error is above)")
+        self._set_status("error · fix the query and Ctrl+R")
         if err.line is not None and self.editor.text.strip() == sql:
             self.editor.move_cursor((err.line, err.column))
             self.editor.move_cursor((err.line, err.column + 1), select=True)
@@ -232,6 +315,18 @@ class SqlPane(Vertical):
                 self.editor.focus()
 
         self.app.push_screen(HistoryPicker(self.history), chosen)
+
+    def action_export(self) -> None:
+        if self.result is None:
+            self.notify("no result to export: run a query first (Ctrl+R)")
+            return
+        dialog = ExportDialog(self.result, free_name(f"{self.source.path.name}-sql"), "SQL result")
+
+        def written(path: Path | None) -> None:
+            if path is not None:
+                self.notify(f"exported {dialog.rows_written:,} row(s) to {path}")
+
+        self.app.push_screen(dialog, written)
 
     def action_focus_results(self) -> None:
         self.query_one(LazyTable).focus()
