@@ -60,9 +60,14 @@ SCHEMAS: dict[str, pa.Schema] = {
                               ("ended_at", _TS), ("info", pa.string())]),
 }
 TABLES: tuple[str, ...] = tuple(SCHEMAS)
+# What a run written before runs declared their board (RunMeta.board) reads as: every command that
+# wrote runs then played the grid game.
+BOARD_BEFORE_DECLARED = "gridworld"
 # Columns added after a table's first release, with the SQL value they read as in runs written before
-# (the readers add it): clauses.closed, the clause's predicate is `%closed` (an unset atom reads [0,0]).
-ADDED_COLUMNS: dict[str, dict[str, str]] = {"clauses": {"closed": "false"}}
+# (the readers add it): clauses.closed, the clause's predicate is `%closed` (an unset atom reads [0,0]);
+# run.board, the run's declared board.
+ADDED_COLUMNS: dict[str, dict[str, str]] = {"clauses": {"closed": "false"},
+                                            "run": {"board": f"'{BOARD_BEFORE_DECLARED}'"}}
 
 # The engine's trace columns (docs/engine-api.md) and the dtype each is stored as.
 TRACE_COLUMNS: dict[str, str] = {
