@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
+from tracelab.store.graph_tables import graph_fact_table
 from tracelab.store.schema import SCHEMAS, TRACE_COLUMNS
 
 
@@ -169,10 +170,12 @@ def _clause_row(rule_id: int, pos: int, lit: Any, closed: Collection[str]) -> di
             "closed": lit.pred in closed}
 
 
-def program_tables(program: Any, facts: Sequence[Any] | None = None) -> dict[str, pa.Table]:
+def program_tables(program: Any, facts: Sequence[Any] | None = None,
+                   graph: Any = None) -> dict[str, pa.Table]:
     """raw.rules, raw.clauses, raw.facts and raw.policies of a parsed Program (tracelab.engine.program).
     facts: the fact list the trace's fact ids index (Engine.facts: graph facts, then the program's);
-    defaults to program.facts."""
+    defaults to program.facts. graph: a Graph whose facts come first (Engine.facts' order), written as
+    columns (tracelab.store.graph_tables); then `facts` are the program's and are numbered after them."""
     rules, clauses, fact_rows = [], [], []
     for i, r in enumerate(program.rules):
         file, line = _loc(r)
@@ -182,7 +185,8 @@ def program_tables(program: Any, facts: Sequence[Any] | None = None) -> dict[str
                       "file": file, "line": line})
         clauses.append(_clause_row(i, -1, r.head, program.closed))
         clauses.extend(_clause_row(i, k, lit, program.closed) for k, lit in enumerate(r.body))
-    for i, f in enumerate(program.facts if facts is None else facts):
+    first = graph.n_facts if graph is not None else 0
+    for i, f in enumerate(program.facts if facts is None else facts, start=first):
         file, line = _loc(f)
         fact_rows.append({"fact": i, "name": f.name, "text": f.text or "", "literal": str(f.literal),
                           "start": int(f.start), "end": int(f.end), "static": bool(f.static),
@@ -192,7 +196,8 @@ def program_tables(program: Any, facts: Sequence[Any] | None = None) -> dict[str
     return {
         "rules": pa.Table.from_pylist(rules, schema=SCHEMAS["rules"]),
         "clauses": pa.Table.from_pylist(clauses, schema=SCHEMAS["clauses"]),
-        "facts": pa.Table.from_pylist(fact_rows, schema=SCHEMAS["facts"]),
+        "facts": pa.concat_tables([*([graph_fact_table(graph)] if graph is not None else []),
+                                   pa.Table.from_pylist(fact_rows, schema=SCHEMAS["facts"])]),
         "policies": pa.Table.from_pylist(policies, schema=SCHEMAS["policies"]),
     }
 
