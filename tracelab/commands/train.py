@@ -85,9 +85,9 @@ def run(args: argparse.Namespace) -> int:
     from tracelab.train.memory import check_training_memory, memory_limit
 
     # --max-memory and --max-groundings are no training settings (cli.main applies the second): not in the
-    # config, free with --resume
+    # config, free with --resume; argv is the command line cli.main keeps
     given = {k: v for k, v in vars(args).items()
-             if k not in ("func", "command", "run", "resume", "max_memory", "max_groundings", "exp_name")}
+             if k not in ("func", "command", "argv", "run", "resume", "max_memory", "max_groundings", "exp_name")}
     limit = memory_limit(args.max_memory, "--max-memory")
     state = None
     with store_errors():  # a bad value in the config or a checkpoint that does not load
