@@ -16,7 +16,8 @@ from tracelab.store.graph_tables import graph_fact_table
 from tracelab.store.schema import SCHEMAS, TRACE_COLUMNS
 
 
-def _col(arrays: Mapping[str, Any], name: str, dtype: str, n: int | None, what: str) -> np.ndarray:
+def _col(arrays: Mapping[str, Any], name: str, dtype: str, n: int | None, what: str,
+         copy: bool = True) -> np.ndarray:
     if name not in arrays:
         raise KeyError(f"{what} has no column {name!r} (columns: {sorted(arrays)})")
     a = np.asarray(arrays[name])
@@ -26,9 +27,9 @@ def _col(arrays: Mapping[str, Any], name: str, dtype: str, n: int | None, what: 
         raise ValueError(f"{what} column {name!r} has {len(a)} rows, expected {n}")
     if a.dtype.kind == "f" and np.dtype(dtype).kind == "i":
         raise TypeError(f"{what} column {name!r} is {a.dtype}; expected integers ({dtype})")
-    # Always a copy: the rows wait in a buffer until the flusher writes them, and the caller (the
-    # engine's trace buffers, an RL loop's arrays) may reuse its memory meanwhile.
-    return np.array(a, dtype=dtype)
+    # A copy unless the caller hands the arrays over: the rows wait in a buffer until the flusher writes
+    # them, and a caller (an RL loop's arrays) may reuse its memory meanwhile.
+    return np.array(a, dtype=dtype) if copy else np.asarray(a, dtype=dtype)
 
 
 def _list_array(offsets: np.ndarray, values: np.ndarray, value_type: pa.DataType) -> pa.ListArray:
@@ -38,14 +39,16 @@ def _list_array(offsets: np.ndarray, values: np.ndarray, value_type: pa.DataType
 
 
 def trace_table(arrays: Mapping[str, Any], episode: int | Sequence[int] | np.ndarray | None,
-                seq_start: int, n_atoms: int, n_groundings: int) -> pa.Table:
+                seq_start: int, n_atoms: int, n_groundings: int, owned: bool = False) -> pa.Table:
     """Trace rows (the dict `Engine.take_trace()` returns) as raw.changes rows numbered from seq_start.
 
     episode: one id for every row; or a sequence indexed by world (the episode each world is playing);
-    or None when `arrays` carries an `episode` column of its own."""
+    or None when `arrays` carries an `episode` column of its own. owned: the caller hands the arrays over
+    (as take_trace's, which the engine never touches again): they are not copied."""
     if "pass_no" not in arrays and "pass" in arrays:
         arrays = {**arrays, "pass_no": arrays["pass"]}
-    cols = {name: _col(arrays, name, dtype, None, "trace") for name, dtype in TRACE_COLUMNS.items()}
+    cols = {name: _col(arrays, name, dtype, None, "trace", copy=not owned)
+            for name, dtype in TRACE_COLUMNS.items()}
     lengths = {name: len(a) for name, a in cols.items()}
     n = lengths["t"]
     if len(set(lengths.values())) > 1:

@@ -311,12 +311,13 @@ class TraceWriter:
 
     # ---- rows ------------------------------------------------------------------------------------------
     def write_changes(self, episode: int | Sequence[int] | np.ndarray | None,
-                      arrays: Mapping[str, Any]) -> int:
+                      arrays: Mapping[str, Any], owned: bool = False) -> int:
         """Trace rows as Engine.take_trace() returns them. episode: the id of every row, or an array
         giving the episode each world is playing (indexed by the `world` column), or None if `arrays`
-        has its own `episode` column. Returns the number of rows accepted."""
+        has its own `episode` column. owned: the caller will not touch the arrays again (take_trace's
+        own), so they are kept without a copy. Returns the number of rows accepted."""
         table = convert.trace_table(arrays, episode, self._seq, self._vocab_have["atoms"],
-                                    self._groundings_have)
+                                    self._groundings_have, owned)
         self._seq += table.num_rows
         self._append({"changes": table})
         return table.num_rows
@@ -324,13 +325,14 @@ class TraceWriter:
     def write_engine(self, episode: int | Sequence[int] | np.ndarray | None, engine: Any,
                      rows: Mapping[str, Any] | None = None) -> int:
         """write_vocabulary(engine's vocabulary and groundings) then write_changes(engine.take_trace(), or
-        `rows`: trace rows the caller already took from it). Cheap per step: the vocabulary is only
-        rebuilt when the engine's counts moved."""
+        `rows`: trace rows the caller already took from it and leaves alone). Cheap per step: the
+        vocabulary is only rebuilt when the engine's counts moved. take_trace's arrays are new at every
+        call (the engine hands its buffers over or copies them out), so they are kept without a copy."""
         vocab = getattr(engine, "vocab", None)
         grown = vocab is None or (len(vocab.nodes), len(vocab.labels), vocab.n_atoms) != (
             self._vocab_have["nodes"], self._vocab_have["labels"], self._vocab_have["atoms"])
         self.write_vocabulary(engine.vocabulary() if grown else None, engine.groundings)
-        return self.write_changes(episode, engine.take_trace() if rows is None else rows)
+        return self.write_changes(episode, engine.take_trace() if rows is None else rows, owned=True)
 
     def write_steps(self, episode: int | np.ndarray, arrays: Mapping[str, Any]) -> int:
         """Per-step rows (see convert.steps_table): step, action, reward [, agent, t, terminated,
