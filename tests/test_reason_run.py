@@ -333,6 +333,17 @@ def test_a_run_declares_its_board_and_the_decoder_reads_only_those(run: Path) ->
     assert importlib.util.find_spec("tracelab.store.board") is None  # one decoder, in viewers/
 
 
+def test_a_board_that_is_not_a_name_is_refused_in_one_line(run: Path, tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture) -> None:
+    bad = tmp_path / "bad"
+    shutil.copytree(run, bad)
+    meta = json.loads((bad / "meta.json").read_text())
+    (bad / "meta.json").write_text(json.dumps({**meta, "board": 5}))
+    code, out, err = cli(capsys, "show", bad)
+    assert code == 1 and out == "" and err.count("\n") == 1
+    assert err.startswith(f"tracelab: error: {bad / 'meta.json'}: key 'board': expected a string") and "5" in err
+
+
 def test_a_played_game_declares_its_board(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     code, _, err = cli(capsys, "play", "--scenario", "base", "--episodes", "1", "--run", tmp_path / "g")
     assert code == 0, err

@@ -122,6 +122,7 @@ META_SCHEMA: dict[str, Any] = {key: OptionalKey(spec) for key, spec in {
     "sealed_at": Nullable(IsoTime()),
     # a resumed training's resumes into the same run (tracelab train --resume), oldest first
     "resumes": ListOf({}),
+    "board": Nullable(str),  # the run's declared board (RunMeta.board)
 }.items()}
 
 
