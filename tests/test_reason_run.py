@@ -409,7 +409,8 @@ def test_the_sample_reasoning_run_opens_from_a_fresh_clone(capsys: pytest.Captur
     run = SAMPLES / "supply-chain"
     assert (run / "run.duckdb").is_file()
     assert rows(run, "SELECT board, status FROM run") == [(None, "finished")]
-    assert rows(run, "SELECT count(*) FROM edges") == [(6667,)] and rows(run, "SELECT count(*) FROM raw.nodes") == [(2430,)]
+    assert rows(run, "SELECT count(*) FROM edges") == [(6667,)]
+    assert rows(run, "SELECT count(*) FROM raw.nodes") == [(2430,)]
     assert rows(run, "SELECT episode, outcome FROM episodes") == [(0, "converged")]
     code, out, _ = cli(capsys, "why", run, "alert(sam-gray)", "--episode", "0", "--depth", "2")
     assert code == 0 and out.startswith("alert(sam-gray) = [1,1] at the end of t=7: set at t=5")

@@ -9,10 +9,10 @@ rows) and close it. Figures (medians): the wall time of each and their ratio; th
 fast the store took them (rows / the writer thread's time writing the `changes` parts, and every
 table's rows / its time); the CPU time of all threads (steadier than wall time on a shared machine:
 the writer's thread runs beside the reasoning); the main thread's time inside the recorder and at close
-(what the reasoning waited for the store); the run's size on disk. Peak resident memory: of each mode in a fresh process of
-its own (`python -m tracelab.bench.reason_store`, VmHWM), since in one process a run starts from
-what the runs before it left in the allocator's heap; and in this process, sampled every 10 ms, what
-each run added to the resident memory it started from."""
+(what the reasoning waited for the store); the run's size on disk. Peak resident memory: of each mode
+in a fresh process of its own (`python -m tracelab.bench.reason_store`, VmHWM), since in one process a
+run starts from what the runs before it left in the allocator's heap; and in this process, sampled
+every 10 ms, what each run added to the resident memory it started from."""
 from __future__ import annotations
 
 import gc
@@ -86,7 +86,8 @@ def reason_once(rules: Path, graph: Path, run_dir: Path | None) -> dict[str, Any
         if writer is not None:
             writer.close()
         t1, cpu1 = time.perf_counter(), time.process_time()
-    out.update(seconds=t1 - t0, cpu_s=cpu1 - cpu0, peak_rss_bytes=rss.peak, added_rss_bytes=rss.peak - out["base_rss_bytes"])
+    out.update(seconds=t1 - t0, cpu_s=cpu1 - cpu0, peak_rss_bytes=rss.peak,
+               added_rss_bytes=rss.peak - out["base_rss_bytes"])
     if writer is not None:
         stats = writer.stats()
         out.update(change_rows=stats["rows"]["changes"], close_wait_s=t1 - t_closing,
