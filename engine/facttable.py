@@ -3,8 +3,10 @@ object each (docs/language.md, "Fact tables").
 
 Columns: `atom` (required: a ground literal in rule syntax, `link(a,b)`, `infected("Cell 3")`,
 `~alarm(base)`), `lower` and `upper` (default 1), `start` and `end` (the window, default 0 and `start`),
-`static` (default false). The atom text is split by DuckDB (a regular expression, vectorised); bad rows are
-errors naming the file, the row and the value.
+`static` (default false), `episode` (optional: the one episode of a recorded reasoning the fact belongs
+to, empty for every episode; Graph.fact_episode, which the engine itself does not read). The atom text is
+split by DuckDB (a regular expression, vectorised); bad rows are errors naming the file, the row and the
+value.
 """
 from __future__ import annotations
 
@@ -20,7 +22,7 @@ from .safe_files import check_regular
 
 _CONST = r"""("[^"]*"|'[^']*'|[A-Za-z0-9_-]+)"""
 _ATOM_RE = rf"^\s*(~?)\s*([a-z][A-Za-z0-9_]*)\s*\(\s*{_CONST}\s*(?:,\s*{_CONST}\s*)?\)\s*$"
-_OPTIONAL = {"lower": "1.0", "upper": "1.0", "start": "0", "end": None, "static": "false"}
+_OPTIONAL = {"lower": "1.0", "upper": "1.0", "start": "0", "end": None, "static": "false", "episode": "NULL"}
 
 # a constant without its quotes: "x" and x are one node
 _UNQUOTE = "CASE WHEN left({q}, 1) IN ('\"', chr(39)) THEN substr({q}, 2, length({q}) - 2) ELSE {q} END"
@@ -55,11 +57,11 @@ def load_fact_table(path: str | os.PathLike[str]) -> Graph:
         atom = f'CAST("{columns["atom"]}" AS VARCHAR)'
         con.execute(f"""
             CREATE TEMP TABLE f AS SELECT row_number() OVER () - 1 AS row, atom, p['neg'] = '~' AS neg,
-                   p['pred'] AS pred, p['a0'] AS q0, p['a1'] AS q1, lower, upper, start, "end", static
+                   p['pred'] AS pred, p['a0'] AS q0, p['a1'] AS q1, lower, upper, start, "end", static, episode
             FROM (SELECT {atom} AS atom, regexp_extract({atom}, ?, ['neg', 'pred', 'a0', 'a1']) AS p,
                          CAST({cols['lower']} AS DOUBLE) AS lower, CAST({cols['upper']} AS DOUBLE) AS upper,
                          CAST({cols['start']} AS BIGINT) AS start, CAST({cols['end']} AS BIGINT) AS "end",
-                         CAST({cols['static']} AS BOOLEAN) AS static
+                         CAST({cols['static']} AS BOOLEAN) AS static, CAST({cols['episode']} AS BIGINT) AS episode
                   FROM {source})""", [_ATOM_RE, full])
         _check_rows(con, file)
         con.execute(f"""
@@ -79,7 +81,7 @@ def load_fact_table(path: str | os.PathLike[str]) -> Graph:
         labels = con.execute("SELECT pred, lo_arity FROM labels ORDER BY id").fetchall()
         r = con.execute(f"""
             SELECT l.id AS label, i0.id AS n0, coalesce(i1.id, -1) AS n1, f.neg, f.lower, f.upper, f.start,
-                   f."end", f.static
+                   f."end", f.static, coalesce(f.episode, -1) AS episode
             FROM f JOIN labels l USING (pred)
             JOIN ids i0 ON i0.name = {_UNQUOTE.format(q='q0')}
             LEFT JOIN ids i1 ON q1 <> '' AND i1.name = {_UNQUOTE.format(q='q1')}
@@ -100,7 +102,8 @@ def load_fact_table(path: str | os.PathLike[str]) -> Graph:
                  fact_args=np.column_stack([r["n0"], r["n1"]]).astype(np.int32),
                  fact_bounds=np.column_stack([lower, upper]), file=file,
                  fact_window=np.column_stack([r["start"], r["end"]]).astype(np.int64),
-                 fact_static=np.asarray(r["static"], np.bool_))
+                 fact_static=np.asarray(r["static"], np.bool_),
+                 fact_episode=np.asarray(r["episode"], np.int64) if "episode" in columns else None)
 
 
 _ROW_CHECKS = [
@@ -115,6 +118,7 @@ _ROW_CHECKS = [
      "bound [{lower:g},{upper:g}] of {atom} is not inside [0,1] with lower <= upper"),
     (f'"end" > {MAX_TIME}',
      f"window {{start}}..{{end}} of {{atom}}: times are at most {MAX_TIME:,}, as in programs"),
+    ("episode < 0", "episode {episode} of {atom}: an episode is an integer >= 0 (empty: every episode)"),
     ('NOT (start >= 0 AND start <= "end" AND (NOT static OR start = "end"))',
      "window {start}..{end} of {atom}: times are integers >= 0 with start <= end, and a static fact takes "
      "one time"),
@@ -124,9 +128,9 @@ _ROW_CHECKS = [
 def _check_rows(con: Any, file: str) -> None:
     """The first bad row, if any, as an error naming it (rows count from 1, after the header)."""
     for where, msg in _ROW_CHECKS:
-        row = con.execute(f'SELECT row, atom, lower, upper, start, "end" FROM f WHERE {where} '
+        row = con.execute(f'SELECT row, atom, lower, upper, start, "end", episode FROM f WHERE {where} '
                           "ORDER BY row LIMIT 1").fetchone()
         if row is not None:
-            i, atom, lower, upper, start, end = row
-            raise ProgramCheckError(f"row {i + 1}: " + msg.format(atom=atom, lower=lower or 0.0,
-                                                                   upper=upper or 0.0, start=start, end=end), file)
+            i, atom, lower, upper, start, end, episode = row
+            raise ProgramCheckError(f"row {i + 1}: " + msg.format(atom=atom, lower=lower or 0.0, upper=upper or 0.0,
+                                                                   start=start, end=end, episode=episode), file)

@@ -52,6 +52,9 @@ class Graph:
     # the graph's edges as node-id pairs (source, target), an undirected edge both ways: where the edge
     # heads of rules without {infer_edges} may land under `%edge_heads graph` (attributes or not)
     edges: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int32))
+    # a fact table's `episode` column: int64 [F], the one episode of a recorded reasoning a fact belongs to,
+    # -1 for every episode (the engine runs every fact it is given: tracelab.reasoning picks them)
+    fact_episode: np.ndarray | None = None
 
     # built on demand, not kept: a million GraphML facts would hold 17 MB of zeros and ones
     @property
@@ -61,6 +64,10 @@ class Graph:
     @property
     def statics(self) -> np.ndarray:
         return self.fact_static if self.fact_static is not None else np.ones(self.n_facts, np.bool_)
+
+    @property
+    def episodes(self) -> np.ndarray:
+        return self.fact_episode if self.fact_episode is not None else np.full(self.n_facts, -1, np.int64)
 
     def concat(self, other: Graph) -> Graph:
         """This graph's facts, then other's (its nodes and labels mapped onto this graph's)."""
@@ -89,10 +96,12 @@ class Graph:
         edge = args[:, 1] >= 0
         args[edge, 1] = node_map[other.fact_args[edge, 1]]
         edges = np.concatenate([self.edges, node_map[other.edges]]) if len(other.edges) else self.edges
+        episodes = None if self.fact_episode is None and other.fact_episode is None else \
+            np.concatenate([self.episodes, other.episodes])
         return Graph(nodes, labels, arity, np.concatenate([self.fact_label, label_map[other.fact_label]]),
                      np.concatenate([self.fact_args, args]), np.concatenate([self.fact_bounds, other.fact_bounds]),
                      self.file, np.concatenate([self.windows, other.windows]),
-                     np.concatenate([self.statics, other.statics]), edges)
+                     np.concatenate([self.statics, other.statics]), edges, episodes)
 
     @property
     def n_facts(self) -> int:

@@ -3,12 +3,15 @@
 #   bash sample_runs/regenerate.sh
 set -euo pipefail
 cd "$(dirname "$0")"
-rm -rf base advanced nonmarkov
+rm -rf base advanced nonmarkov supply-chain
 tracelab play --scenario base --episodes 3 --seed 1 --run base
 tracelab play --scenario advanced --episodes 3 --seed 2 --run advanced
 tracelab play --scenario nonmarkov --episodes 2 --seed 3 --run nonmarkov
-for r in base advanced nonmarkov; do tracelab seal "$r"; done
-du -sh base advanced nonmarkov
+# a reasoning run (no board): the supply chain of rules/examples, recorded (docs/store.md, "Reasoning runs")
+tracelab reason ../rules/examples/supply_chain.rules --graph ../rules/examples/supply_chain.graphml --steps 8 \
+    --run supply-chain
+for r in base advanced nonmarkov supply-chain; do tracelab seal "$r"; done
+du -sh base advanced nonmarkov supply-chain
 
 # a trained run (1v1 base, it learns to win from ~140K steps on): its learning curve (metrics), training
 # episodes and a few traced evaluation games, for the TUI and the replay; the checkpoint (the replay

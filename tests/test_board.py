@@ -1,4 +1,4 @@
-"""The board rebuilt from a run's trace (tracelab/store/board.py) against the hand-written simulator and
+"""The board rebuilt from a run's trace (viewers/board.py) against the hand-written simulator and
 the run's own `steps` rows, on the sample runs (base 1v1, advanced 1v1 with shooting, nonmarkov 2v2
 with slow agents)."""
 from __future__ import annotations
@@ -12,7 +12,7 @@ import pytest
 
 from tracelab.game.refsim import RefSim
 from tracelab.game.scenario import scenario_from_dict
-from tracelab.store.board import PHASES, BoardLoader, EpisodeBoard, load_episode
+from tracelab.viewers.board import PHASES, BoardLoader, EpisodeBoard, load_episode
 from tracelab.store.reader import open_run
 
 SAMPLES = Path(__file__).resolve().parent.parent / "sample_runs"

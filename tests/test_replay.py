@@ -183,7 +183,7 @@ def _write_training_run(run_dir: Path) -> None:
                 "kind": "eval", "train_step": 100 * (episode + 1), "eval_round": episode, "opponent_p": 0.3})
 
     writer = TraceWriter.open(run_dir, {"command": "tracelab train --test", "scenario": "advanced",
-                                        "config": {"steps": 300}, "seed": 0})
+                                        "config": {"steps": 300}, "seed": 0, "board": "gridworld"})
     env = GridWarVectorEnv(1, "advanced", trace_sink=EvalSink(writer))
     env.reset(seed=4)
     ended = 0

@@ -343,7 +343,7 @@ def test_replay_checks_an_episode_range_against_the_run(tmp_path: Path, home: Pa
 
 # ---- §5: malformed meta.json, manifest and raw.run: one located line ------------------------------------
 
-# Wrong values for every field of meta.json (39 in all; the issue counted 38 variants).
+# Wrong values for every field of meta.json (41 in all; the issue counted 38 variants).
 WRONG_META: dict[str, list[object]] = {
     "format": [1, "tracelab-run/99"],
     "run_id": [5, ["walk"]],
@@ -360,6 +360,7 @@ WRONG_META: dict[str, list[object]] = {
     "host": [5, ["a", "b"]],
     "argv": ["tracelab play", [1]],
     "sealed_at": [5, "0001-01-01T00:00:00+14:00"],
+    "board": [5, ["gridworld"]],
 }
 META_VARIANTS = [(k, v) for k, values in WRONG_META.items() for v in values]
 

@@ -50,7 +50,7 @@ async def open_first_trace(app: Any, pilot: Any) -> tuple[TracePane, LazyTable]:
 
 def test_catalog_lists_the_sample_runs_with_counts(capsys: pytest.CaptureFixture[str]) -> None:
     runs = {r.name: r for r in list_runs([ROOT / "sample_runs"])}
-    assert set(runs) == {"base", "advanced", "nonmarkov", "base-train"}
+    assert set(runs) == {"base", "advanced", "nonmarkov", "base-train", "supply-chain"}
     adv = runs["advanced"]
     con = open_run(ADVANCED)
     assert adv.rows == con.execute("SELECT count(*) FROM changes").fetchall()[0][0] > 0
@@ -305,7 +305,8 @@ def test_rules_view_counts_firings_and_lists_rules_that_never_fired() -> None:
 def test_runs_screen_help_and_palette_at_80x24() -> None:
     async def body(app: Any, pilot: Any) -> None:
         table = app.screen.query_one(LazyTable)
-        await wait_for(pilot, lambda: loaded(table) and table.count == 4)  # base, advanced, nonmarkov, base-train
+        # base, advanced, nonmarkov, base-train, supply-chain
+        await wait_for(pilot, lambda: loaded(table) and table.count == 5)
         text = await shown(app, pilot)
         assert "advanced" in text and "finished" in text and "Enter" in text and "palette" in text
         await pilot.press("question_mark")

@@ -56,7 +56,7 @@ def test_runs_screen_snapshot() -> None:
 
     async def body(app: Any, pilot: Any) -> None:
         table = app.screen.query_one(LazyTable)
-        await wait_for(pilot, lambda: loaded(table) and table.count == 4)
+        await wait_for(pilot, lambda: loaded(table) and table.count == 5)
         shots = Snapshots(app, pilot, "runs")
         await shots.take("catalog")
         failures.extend(shots.failures)

@@ -69,6 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     args, unknown = parser.parse_known_args(argv)  # usage errors: argparse prints them and exits 2
     if unknown:
         return _unknown_arguments(parser, args.command, unknown)
+    args.argv = list(sys.argv[1:] if argv is None else argv)  # the command line, for runs that record it
     try:
         with grounding_limit_of(args):
             status = int(args.func(args) or 0)

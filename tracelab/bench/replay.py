@@ -31,7 +31,7 @@ def write_idle_game(run_dir: Path, agents: int = 5, steps: int = 500, seed: int 
     from tracelab.envs.tracer import EpisodeTracer
     from tracelab.game.facts import GAME_RULES
     from tracelab.game.rulesim import RuleSim
-    from tracelab.game.scenario import Scenario
+    from tracelab.game.scenario import BOARD, Scenario
     from tracelab.store import TraceWriter, seal_run
     from tracelab.store.sink import StoreSink
 
@@ -39,7 +39,8 @@ def write_idle_game(run_dir: Path, agents: int = 5, steps: int = 500, seed: int 
                         blue_base=(0, 15), mountains=((7, 7), (8, 7), (7, 8), (8, 8), (3, 12), (12, 3)),
                         agents_per_team=agents, advanced=True, health=10.0, max_steps=steps)
     meta = {"command": "tracelab bench replay", "scenario": scenario.name,
-            "config": {"scenario": scenario.to_toml()}, "rule_files": [str(GAME_RULES)], "seed": seed}
+            "config": {"scenario": scenario.to_toml()}, "rule_files": [str(GAME_RULES)], "seed": seed,
+            "board": BOARD}
     sim = RuleSim(scenario, 1, seed=seed, trace=True)
     tracer = EpisodeTracer(StoreSink(TraceWriter.open(run_dir, meta)), scenario, sim)
     rng = np.random.default_rng(seed)
@@ -61,13 +62,14 @@ def write_1v1_games(run_dir: Path, games: int = 100, seed: int = 0) -> None:
 
     from tracelab.commands.play import play
     from tracelab.game.facts import GAME_RULES
-    from tracelab.game.scenario import builtin_scenario
+    from tracelab.game.scenario import BOARD, builtin_scenario
     from tracelab.store import TraceWriter, seal_run
     from tracelab.store.sink import StoreSink
 
     scenario = builtin_scenario("advanced")
     meta = {"command": "tracelab bench replay", "scenario": scenario.name,
-            "config": {"scenario": scenario.to_toml()}, "rule_files": [str(GAME_RULES)], "seed": seed}
+            "config": {"scenario": scenario.to_toml()}, "rule_files": [str(GAME_RULES)], "seed": seed,
+            "board": BOARD}
     play(scenario, Namespace(episodes=games, worlds=1, policy="scripted", seed=seed),
          sink=StoreSink(TraceWriter.open(run_dir, meta)))
     seal_run(run_dir)

@@ -1,7 +1,8 @@
 """`tracelab bench`: speed and memory measured by benchmarks (docs/benchmarks.md), never by timed
 assertions in tests. `bench engine`, `bench env`, `bench store`, `bench replay`, `bench train`,
-`bench tui`, `bench aggregates`, `bench all` (all but tui); each takes --json,
---quick (small sizes: the smoke test) and --repeats (medians and spread over that many repeats)."""
+`bench tui`, `bench aggregates`, `bench reason-store`, `bench all` (engine, env, store, replay, train);
+each takes --json, --quick (small sizes: the smoke test) and --repeats (medians and spread over that
+many repeats)."""
 from __future__ import annotations
 
 import argparse
@@ -25,6 +26,8 @@ def register(sub: argparse._SubParsersAction) -> None:
              "train": "DQN training transitions/s end to end, the update alone, the env alone, the loop's share",
              "aggregates": "quantifiers and annotation functions: registration time, cost against plain rules",
              "tui": "the terminal UI on a 10M-row run: open, first page, scroll, jump, filter (headless)",
+             "reason-store": "reason --run against reason --no-trace on a 1M-edge graph: the ratio, change "
+                             "rows/s into the store, peak memory",
              "all": "engine, env, store, replay and train"}
     for name, text in helps.items():
         q = what.add_parser(name, help=text)
@@ -90,6 +93,10 @@ def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], s
         from tracelab.bench import aggregates
         r = aggregates.run(args.quick, args.repeats)
         return r, aggregates.report(r)
+    if name == "reason-store":
+        from tracelab.bench import reason_store
+        r = reason_store.run(args.quick, args.repeats)
+        return r, reason_store.report(r)
     if name == "tui":
         from tracelab.bench import tui
         r = tui.run(args.quick, args.repeats, args.rows)

@@ -1,7 +1,9 @@
-"""`tracelab diff`: where two episodes first diverge (trace and actions), in one run or across runs.
+"""`tracelab diff`: what two episodes were given (rules, facts), where they ended (final bounds) and where
+they first diverge (trace and actions), in one run or across runs.
 
     tracelab diff RUN A B                 episodes A and B of RUN
     tracelab diff RUN_A:EP RUN_B:EP       episode EP of RUN_A against episode EP of RUN_B
+    tracelab diff RUN_A RUN_B             two runs of one episode each (two reasonings, say)
 """
 from __future__ import annotations
 
@@ -13,14 +15,17 @@ from tracelab.errors import UserError, store_errors
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("diff", help="the first divergence of two episodes, of one run (RUN A B) or of two "
-                                    "runs (RUN_A:EP RUN_B:EP)",
-                       description="Where two episodes first diverge: `diff RUN A B` compares episodes A "
-                                   "and B of one run, `diff RUN_A:EP RUN_B:EP` an episode of each of two "
-                                   "runs (atoms and causes are compared by name, so the runs' ids may differ).")
+    p = sub.add_parser("diff", help="what two episodes were given, where they ended and where they first "
+                                    "diverge, of one run (RUN A B) or of two runs (RUN_A[:EP] RUN_B[:EP])",
+                       description="What two episodes were given (rules and facts of one side only), where "
+                                   "they ended (atoms with other bounds at the end) and where they first "
+                                   "diverge: `diff RUN A B` compares episodes A and B of one run, `diff "
+                                   "RUN_A:EP RUN_B:EP` an episode of each of two runs, `diff RUN_A RUN_B` two "
+                                   "runs of one episode each (atoms, rules, facts and causes are compared by "
+                                   "their text, so the runs' ids may differ).")
     p.add_argument("sides", nargs="+", metavar="RUN[:EP]",
-                   help="RUN A B (one run, two episodes) or RUN_A:EP RUN_B:EP (two runs); a run is a run "
-                        "directory, .duckdb file, or run name under runs/")
+                   help="RUN A B (one run, two episodes) or RUN_A[:EP] RUN_B[:EP] (two runs; without :EP, "
+                        "the run's only episode); a run is a run directory, .duckdb file, or run name under runs/")
     p.add_argument("--json", action="store_true", help="the divergence as JSON")
     p.set_defaults(func=run)
 
@@ -42,13 +47,40 @@ def _run_and_episode(text: str) -> tuple[str, int]:
     return run, _episode(ep, text)
 
 
-def parse_sides(sides: list[str]) -> tuple[tuple[str, int], tuple[str, int]]:
-    """((run, episode), (run, episode)) from `RUN A B` or `RUN_A:EP RUN_B:EP`."""
+def _side(text: str) -> tuple[str, int | None]:
+    """RUN:EP, or a RUN alone (episode None: its only one)."""
+    from tracelab.store.reader import resolve_run
+    try:
+        return _run_and_episode(text)
+    except UserError:
+        try:
+            resolve_run(text)
+        except FileNotFoundError:
+            raise UserError(f"cannot read {text!r}: write RUN:EPISODE, e.g. runs/play-base:0, or name a "
+                            "run of one episode") from None
+        return text, None
+
+
+def parse_sides(sides: list[str]) -> tuple[tuple[str, int | None], tuple[str, int | None]]:
+    """((run, episode), (run, episode)) from `RUN A B` or `RUN_A[:EP] RUN_B[:EP]` (None: the run's only
+    episode)."""
     if len(sides) == 3:
         return (sides[0], _episode(sides[1], "A")), (sides[0], _episode(sides[2], "B"))
     if len(sides) == 2:
-        return _run_and_episode(sides[0]), _run_and_episode(sides[1])
-    raise UserError(f"diff takes RUN A B or RUN_A:EP RUN_B:EP, got {len(sides)} argument(s)")
+        return _side(sides[0]), _side(sides[1])
+    raise UserError(f"diff takes RUN A B or RUN_A[:EP] RUN_B[:EP], got {len(sides)} argument(s)")
+
+
+def only_episode(con: object, run: str) -> int:
+    """The episode of a run of one episode; else a UserError listing its episodes."""
+    episodes = [e for (e,) in con.execute(  # type: ignore[attr-defined]
+        "SELECT episode FROM (SELECT episode FROM raw.episode_begin UNION SELECT DISTINCT episode "
+        "FROM raw.changes) ORDER BY 1 LIMIT 21").fetchall()]
+    if len(episodes) != 1:
+        shown = ", ".join(map(str, episodes[:20])) + (", ..." if len(episodes) > 20 else "")
+        raise UserError(f"{run} has {'no episodes' if not episodes else 'episodes ' + shown}: name one, "
+                        f"{run}:EPISODE")
+    return int(episodes[0])
 
 
 def run(args: argparse.Namespace) -> int:
@@ -57,10 +89,13 @@ def run(args: argparse.Namespace) -> int:
     (run_a, a), (run_b, b) = parse_sides(args.sides)
     with store_errors(), ctrl_c_stops_queries():
         con_a = open_run(run_a)
+        a = only_episode(con_a, run_a) if a is None else a
         if resolve_run(run_a).resolve() == resolve_run(run_b).resolve():
+            b = only_episode(con_a, run_b) if b is None else b
             d = retrying(lambda: first_divergence(con_a, a, b))
         else:
             con_b = open_run(run_b)
+            b = only_episode(con_b, run_b) if b is None else b
             d = retrying(lambda: first_divergence(con_a, a, b, con_b, run_names=(run_a, run_b)))
     print(json.dumps(d.to_dict(), indent=1, default=str) if args.json else render_divergence(d))
     return 0

@@ -77,9 +77,10 @@ def _evaluate(args: argparse.Namespace, policy, scenario, spec, on_game):
                         opponent_p=args.opponent_p, stack_previous=policy.stack_previous,
                         envs=args.envs, on_game=on_game)
     from tracelab.game.facts import GAME_RULES
+    from tracelab.game.scenario import BOARD
     from tracelab.store import TraceWriter
     meta = {"command": " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]),
-            "scenario": scenario.name, "seed": args.seed, "rule_files": [str(GAME_RULES)],
+            "scenario": scenario.name, "seed": args.seed, "rule_files": [str(GAME_RULES)], "board": BOARD,
             "config": {"policy": str(args.policy), "games": args.games, "backend": args.backend,
                        "opponent_p": args.opponent_p, "scenario_toml": scenario.to_toml(),
                        "policy_spec": spec}}

@@ -88,6 +88,7 @@ def run(args: argparse.Namespace) -> int:
         _summary(play(scenario, args, sink=None))
         return 0
     from tracelab.game.facts import GAME_RULES
+    from tracelab.game.scenario import BOARD
     from tracelab.store import TraceWriter
     from tracelab.store.sink import StoreSink
 
@@ -96,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
     meta = {"command": " ".join(shlex.quote(a) for a in sys.argv), "scenario": scenario.name,
             "config": {"episodes": args.episodes, "worlds": args.worlds, "policy": args.policy, "kernel": args.kernel,
                        "opponent_p": args.opponent_p, "scenario": scenario.to_toml()},
-            "rule_files": [str(GAME_RULES)], "seed": args.seed}
+            "rule_files": [str(GAME_RULES)], "seed": args.seed, "board": BOARD}
     try:
         with store_errors():  # another process took the directory since the check: a RuntimeError
             writer = TraceWriter.open(run_dir, meta)

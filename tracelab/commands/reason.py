@@ -1,16 +1,21 @@
-"""`tracelab reason`: run any rule program on a graph and print its trace and final interpretation."""
+"""`tracelab reason`: run any rule program on a graph and print its trace and final interpretation, or
+record it into a run of the trace store (`--run DIR`) for the reading commands and the viewers."""
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
+import os
+import shlex
 import sys
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, positive_int
-from tracelab.errors import UserError
+from tracelab.errors import UserError, store_errors
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -40,72 +45,122 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--kernel", choices=ENGINE_KERNELS, default="auto",
                    help="the engine's kernel (default auto; compiled: the program's own, docs/engine-api.md)")
     add_max_groundings(p)
+    p.add_argument("--run", metavar="DIR",
+                   help="record the reasoning into a new (or empty) run directory of the trace store instead of "
+                        "printing its trace: every change with its cause, the program, facts, atoms, groundings and "
+                        "the graph's edges, for trace, why, why-not, sql, diff, show and the TUI (docs/store.md)")
+    p.add_argument("--repeat", type=positive_int, default=1,
+                   help="reason N times, one episode each (default 1); a --facts-table with an `episode` column "
+                        "gives one episode per value instead")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Program errors (located), unreadable files, InconsistencyError and FixpointError (naming the atom,
-    the time and the rules and facts with their file:line) are raised for main() to report."""
-    from tracelab.commands._progress import compiling_engine
-    from tracelab.engine import (
-        Engine,
-        ProgramError,
-        check_program,
-        load_fact_table,
-        load_graphml,
-        load_program,
-        parse_literal,
-    )
-    from tracelab.engine.program import constant_text
+    the time and the rules and facts with their file:line) are raised for main() to report; with --run
+    the run keeps what was reasoned until then (status failed)."""
+    from tracelab.engine import ProgramError, parse_literal
+    from tracelab.reasoning import load_inputs, plan_episodes
 
-    names = None
-    if args.dialect == "pyreason":
-        from tracelab.pyreason import load_pyreason
-        translated = load_pyreason(args.program, args.facts, args.graph, persistent=args.persistent)
-        program, graph, names = translated.program, translated.graph, translated.names
-    else:
-        if args.persistent:
-            raise UserError("--persistent belongs to --dialect pyreason (tracelab programs say %timesteps)")
-        program = load_program(*args.program, *args.facts)
-        graph = load_graphml(args.graph) if args.graph else None
-    graph_facts = graph.n_facts if graph is not None else 0
-    for table in args.facts_table:
-        facts = load_fact_table(table)
-        graph = facts if graph is None else graph.concat(facts)
-    if graph is not None:  # what the graph sets is set: no "never set" warnings, arities must agree
-        check_program(program, graph.predicates())
-    for w in program.warnings:
+    if args.persistent and args.dialect != "pyreason":
+        raise UserError("--persistent belongs to --dialect pyreason (tracelab programs say %timesteps)")
+    if args.run is not None and args.no_trace:
+        raise UserError("--run records the trace and --no-trace drops it: give one of them")
+    if args.run is not None:
+        from tracelab.commands.play import check_run_dir
+        check_run_dir(Path(args.run))
+    inputs = load_inputs(args.program, dialect=args.dialect, graph_file=args.graph, fact_files=args.facts,
+                         fact_tables=args.facts_table, persistent=args.persistent)
+    for w in inputs.program.warnings:
         print(w, file=sys.stderr)
     for q in args.query:
         try:
             parse_literal(q)
         except ProgramError as e:
             raise UserError(f"--query {q!r}: {e.message}") from e
+    try:
+        plans = plan_episodes(inputs, args.repeat)
+    except ValueError as e:
+        raise UserError(str(e)) from e
+    if args.run is None:
+        docs = [_reason(args, inputs, plan, None, several=len(plans) > 1) for plan in plans]
+        if args.json:
+            json.dump(docs[0] if len(docs) == 1 else {"episodes": docs}, sys.stdout, indent=1)
+            print()
+        return 0
+    return _record(args, inputs, plans)
+
+
+def _record(args: argparse.Namespace, inputs: Any, plans: list[Any]) -> int:
+    """The reasoning into a new run of the store (tracelab.store.reasoning): the trace goes there."""
+    from tracelab.reasoning import run_meta
+    from tracelab.store import TraceWriter
+    from tracelab.store.reasoning import ReasoningRecorder
+
+    run_dir = Path(args.run)
+    settings = {"steps": args.steps, "repeat": args.repeat, "kernel": args.kernel, "persistent": args.persistent}
+    meta = run_meta(inputs, " ".join(shlex.quote(a) for a in ["tracelab", *args.argv]), settings)
+    try:
+        with store_errors():  # another process took the directory since the check: a RuntimeError
+            writer = TraceWriter.open(run_dir, meta)
+    except OSError as e:
+        raise UserError(f"cannot create the run directory {run_dir}: {e.strerror or e}") from e
+    recorder = ReasoningRecorder(writer, episodes=len(plans))
+    try:
+        docs = [_reason(args, inputs, plan, recorder, several=len(plans) > 1) for plan in plans]
+    except (KeyboardInterrupt, SystemExit):
+        writer.close(status="interrupted")  # flushes what was reasoned
+        raise
+    except BaseException:
+        writer.close(status="failed")
+        raise
+    writer.close()
+    if args.json:
+        json.dump({"run": str(run_dir), "episodes": docs}, sys.stdout, indent=1)
+        print()
+        return 0
+    print(f"recorded {len(docs)} episode{'s' if len(docs) != 1 else ''} ({recorder.rows:,} changes) into "
+          f"{run_dir}/: " + ", ".join(f"episode {d['episode']} {d['outcome']} after {d['steps']} steps"
+                                      for d in docs[:3]) + (", ..." if len(docs) > 3 else ""))
+    _what_to_open(run_dir, docs[0]["episode"])
+    return 0
+
+
+def _reason(args: argparse.Namespace, inputs: Any, plan: Any, recorder: Any, several: bool) -> dict[str, Any]:
+    """One episode: build, step, print (or record) its trace and answer the queries; returns what --json
+    prints of it."""
+    from tracelab.commands._progress import compiling_engine
+    from tracelab.reasoning import EpisodeRun
+
+    if several and not args.json and recorder is None:
+        print(f"episode {plan.episode}:")
+    printing = recorder is None and not args.no_trace
+    pr_trace = None
     busy = "grounding the program…" if args.kernel != "compiled" else \
         "grounding; compiling the program's own kernel unless cached (about a minute the first time)…"
     with compiling_engine(busy=busy):  # the first step compiles (cold cache) and grounds
-        engine = Engine(program, graph, trace=not args.no_trace or args.pyreason_trace is not None,
-                        kernel=args.kernel)
-        pr_trace = None
+        episode = EpisodeRun(inputs, plan, trace=printing or args.pyreason_trace is not None, kernel=args.kernel,
+                             recorder=recorder)
+        engine = episode.engine
         if args.pyreason_trace is not None:
             from tracelab.pyreason.trace_csv import PyReasonTrace
-            pr_trace = PyReasonTrace(engine, names, graph_facts)
-        passes = 0
-        engine.step()
+            pr_trace = PyReasonTrace(engine, inputs.names, inputs.graph_facts)
+        stepper = episode.steps(args.steps, rows_each_step=printing or pr_trace is not None)
+        first = next(stepper)
+    passes = 0
     answers: list[dict[str, object]] = []
     changes: list[dict[str, object]] = []  # --json only: text output prints each step's rows as it goes
     header = False
-    for t in range(args.steps):
-        if t:
-            engine.step()
+    for t, rows in itertools.chain([first], stepper):
         if args.query and (args.query_at == "each" or t == args.steps - 1):
             answers += [{"t": t, "query": q, "bindings": b, "bound": list(bound)}
                         for q in args.query for b, bound in engine.match(q)]
-        rows = engine.take_trace()
+        if rows is None:
+            continue
         if pr_trace is not None:
             pr_trace.add(rows, passes)
             passes = int(engine.stats["passes"][0])
-        if args.no_trace:
+        if not printing:
             continue
         step_changes = _changes(engine, rows)
         if args.json:
@@ -117,31 +172,69 @@ def run(args: argparse.Namespace) -> int:
                 header = True
             print(f"{c['t']:>4} {c['pass']:>4}  {c['atom']:<32} {_fmt(c['old']):<11} {_fmt(c['new']):<11} "
                   f"{c['cause']}{'  ' + c['grounding'] if c['grounding'] else ''}")
+    outcome = episode.finish()
     if pr_trace is not None:
-        for path in pr_trace.write(args.pyreason_trace):
+        target = args.pyreason_trace if not several else os.path.join(args.pyreason_trace, f"episode-{plan.episode}")
+        for path in pr_trace.write(target):
             print(f"wrote {path}", file=sys.stderr)
+    stats = {k: int(np.sum(v)) for k, v in engine.stats.items()}
+    if recorder is not None:
+        _print_answers(args, answers)
+        return {"episode": plan.episode, "steps": args.steps, "outcome": outcome, "queries": answers,
+                "stats": stats}
     final = engine.interpretation(0)
     if args.json:
-        json.dump({"steps": args.steps, "changes": changes,
-                   "interpretation": {k: list(v) for k, v in final.items()}, "queries": answers,
-                   "stats": {k: int(np.sum(v)) for k, v in engine.stats.items()}}, sys.stdout, indent=1)
-        print()
-        return 0
+        doc = {"steps": args.steps, "changes": changes,
+               "interpretation": {k: list(v) for k, v in final.items()}, "queries": answers, "stats": stats}
+        return {"episode": plan.episode, **doc, "outcome": outcome} if several else doc
     if header:
         print()
     if args.query:
-        for q in args.query:
-            for t in range(args.steps) if args.query_at == "each" else [args.steps - 1]:
-                hits = [a for a in answers if a["t"] == t and a["query"] == q]
-                print(f"t={t} {q}: {len(hits)} answer{'s' if len(hits) != 1 else ''}")
-                for a in hits:
-                    bind = ", ".join(f"{v}={constant_text(x)}" for v, x in a["bindings"].items()) or "(ground)"
-                    print(f"  {bind}  {_fmt(a['bound'])}")
-        return 0
+        _print_answers(args, answers)
+        return {}
     print(f"final interpretation at t={args.steps - 1}:")
     for atom, bound in sorted(final.items()):
         print(f"  {atom}: {_fmt(bound)}")
-    return 0
+    return {}
+
+
+def _print_answers(args: argparse.Namespace, answers: list[dict[str, Any]]) -> None:
+    from tracelab.engine.program import constant_text
+    if args.json:
+        return
+    for q in args.query:
+        for t in range(args.steps) if args.query_at == "each" else [args.steps - 1]:
+            hits = [a for a in answers if a["t"] == t and a["query"] == q]
+            print(f"t={t} {q}: {len(hits)} answer{'s' if len(hits) != 1 else ''}")
+            for a in hits:
+                bind = ", ".join(f"{v}={constant_text(x)}" for v, x in a["bindings"].items()) or "(ground)"
+                print(f"  {bind}  {_fmt(a['bound'])}")
+
+
+def _what_to_open(run_dir: Path, episode: int) -> None:
+    """Commands to read the run, with an atom the reasoning set true last as the example."""
+    from tracelab.engine.program import constant_text
+    from tracelab.store import open_run
+
+    con = open_run(run_dir)
+    try:
+        row = con.execute("SELECT a.label, a.arg0, a.arg1, c.t FROM changes c JOIN atoms a ON a.atom = c.atom_id "
+                          "WHERE c.episode = ? AND c.cause_kind = 2 AND c.new_lower = 1 ORDER BY c.seq DESC LIMIT 1",
+                          [episode]).fetchall()
+    finally:
+        con.close()
+    run = shlex.quote(str(run_dir))
+    hints = [(f"tracelab trace {run} --episode {episode} --limit 20", "the trace table")]
+    if row:
+        label, *args, t = row[0]
+        atom = f"{label}({','.join(constant_text(a) for a in args if a is not None)})"
+        hints.append((f"tracelab why {run} {shlex.quote(atom)} --episode {episode} --at {t}", "why is it true?"))
+    hints += [(f"tracelab sql {run} --query rule_coverage", "which rules fired"),
+              (f"tracelab show {run}", "the run, its program and counts")]
+    width = max(len(command) for command, _ in hints)
+    print("what to open:")
+    for command, what in hints:
+        print(f"  {command:<{width}}   # {what}")
 
 
 def _changes(eng: Any, rows: dict[str, np.ndarray]) -> Iterator[dict[str, Any]]:

@@ -49,9 +49,16 @@ def describe_run(con: Any) -> dict[str, Any]:
              con.execute("SELECT name, text, file, line FROM rules ORDER BY rule").fetchall()]
     config = meta["config"] if isinstance(meta["config"], dict) else {}
     scenario_text = config.get("scenario") if isinstance(config.get("scenario"), str) else None
+    graph = dict(zip(("nodes", "edges"), con.execute(
+        "SELECT (SELECT count(*) FROM raw.nodes), (SELECT count(*) FROM raw.edges)").fetchall()[0]))
     return {"run": meta, "episodes": {"total": sum(outcomes.values()), "by_outcome": outcomes},
             "counts": counts, "rules": rules, "scenario": {"name": meta.get("scenario"),
-                                                           "definition": scenario_text}}
+                                                           "definition": scenario_text},
+            "board": meta.get("board"), "graph": graph}
+
+
+# config entries shown in sections of their own, not on the config line
+_OWN_SECTIONS = ("scenario", "sources", "translation", "graph")
 
 
 def render(doc: dict[str, Any], all_rules: bool = False) -> str:
@@ -61,18 +68,28 @@ def render(doc: dict[str, Any], all_rules: bool = False) -> str:
              f"  started   {meta['started_at']}   ended {meta['ended_at'] or '-'}",
              f"  seed      {meta['seed']}   host {meta['host']}   pid {meta['pid']}",
              "  versions  " + ", ".join(f"{k} {v}" for k, v in sorted(meta["versions"].items()))]
+    lines.append(f"  board     {doc['board']}" if doc["board"] else
+                 "  board     none: a reasoning run (its episodes are reasonings, not games)")
     for f in meta["rule_files"]:
         lines.append(f"  rules     {f.get('path')} (sha256 {str(f.get('sha256'))[:12]})")
-    config = {k: v for k, v in meta["config"].items() if k != "scenario"} \
+    config = meta["config"] if isinstance(meta["config"], dict) else {}
+    for source in config.get("sources") or []:
+        if isinstance(source, dict) and source.get("role") in ("graph", "facts-table"):
+            size = f" ({source['bytes']:,} bytes)" if isinstance(source.get("bytes"), int) else ""
+            lines.append(f"  {source['role']:<9} {source.get('path')}{size}")
+    shown = {k: v for k, v in config.items() if k not in _OWN_SECTIONS} \
         if isinstance(meta["config"], dict) else meta["config"]
-    if config:
-        lines.append(f"  config    {json.dumps(config, sort_keys=True)}")
+    if shown:
+        lines.append(f"  config    {json.dumps(shown, sort_keys=True)}")
     episodes = doc["episodes"]
     lines += ["", f"episodes  {episodes['total']}" + (
         " (" + ", ".join(f"{n} {o}" for o, n in episodes["by_outcome"].items()) + ")" if episodes["total"] else "")]
     lines.append("rows      " + ", ".join(f"{n:,} {name}" for name, n in counts.items()))
+    if doc["graph"]["edges"]:
+        lines.append(f"graph     {doc['graph']['nodes']:,} nodes, {doc['graph']['edges']:,} edges")
     scenario = doc["scenario"]
-    lines += ["", f"scenario  {scenario['name']}"]
+    if scenario["name"] or scenario["definition"]:
+        lines += ["", f"scenario  {scenario['name']}"]
     if scenario["definition"]:
         lines += ["  " + ln for ln in scenario["definition"].rstrip().splitlines()]
     rules = doc["rules"]

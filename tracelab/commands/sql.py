@@ -57,12 +57,13 @@ def utf8_text(text: str, what: str) -> str:
 def print_saved_queries() -> None:
     from tracelab.store.queries import list_queries
     for q in list_queries():
-        print(f"{q.name}: {q.description}")
+        print(f"{q.name}: {q.description}{' (game runs only)' if q.needs_board else ''}")
         for p in q.params:
             print(f"    {p.name} ({p.type}, default {p.default!r}){': ' + p.help if p.help else ''}")
 
 
-def _statement(args: argparse.Namespace) -> tuple[str, dict | None]:
+def _statement(args: argparse.Namespace) -> tuple[str, dict | None, str | None]:
+    """The SQL, its parameters, and why it needs a game run (a saved query about games), if it does."""
     from tracelab.store.queries import get_query
     if args.run is None:
         raise UserError("give a run and a SQL query, or --query NAME (see --list)")
@@ -70,20 +71,26 @@ def _statement(args: argparse.Namespace) -> tuple[str, dict | None]:
         raise UserError("give either a SQL query or --query NAME (see --list)")
     if args.saved is not None:
         saved = get_query(args.saved)
-        return saved.sql, saved.bind(_params(args.param))
+        return saved.sql, saved.bind(_params(args.param)), saved.needs_board
     if args.param:
         raise UserError("--param only applies to saved queries (--query NAME)")
-    return utf8_text(args.query, "the SQL query"), None
+    return utf8_text(args.query, "the SQL query"), None, None
 
 
 def run(args: argparse.Namespace) -> int:
+    from tracelab.store.kind import run_board
     from tracelab.store.reader import arrow_stream, fetch_arrow, open_run, query_readonly, retrying
     if args.list:
         print_saved_queries()
         return 0
     with store_errors(), ctrl_c_stops_queries():
-        sql, params = _statement(args)
+        sql, params, needs_board = _statement(args)
         con = open_run(args.run)
+        if needs_board is not None and run_board(con) is None:
+            from tracelab.store.queries import list_queries
+            any_run = ", ".join(q.name for q in list_queries() if not q.needs_board)
+            raise UserError(f"saved query {args.saved} reads games ({needs_board}), and {args.run} has no "
+                            f"board (a reasoning run); these read any run: {any_run}")
         if args.format == "table":
             limit = DEFAULT_TABLE_ROWS + 1 if args.limit is None else args.limit
             table = retrying(lambda: fetch_arrow(query_readonly(con, sql, params), limit, args.offset))

@@ -85,9 +85,9 @@ def run(args: argparse.Namespace) -> int:
     from tracelab.train.memory import check_training_memory, memory_limit
 
     # --max-memory and --max-groundings are no training settings (cli.main applies the second): not in the
-    # config, free with --resume
+    # config, free with --resume; argv is the command line cli.main keeps
     given = {k: v for k, v in vars(args).items()
-             if k not in ("func", "command", "run", "resume", "max_memory", "max_groundings", "exp_name")}
+             if k not in ("func", "command", "argv", "run", "resume", "max_memory", "max_groundings", "exp_name")}
     limit = memory_limit(args.max_memory, "--max-memory")
     state = None
     with store_errors():  # a bad value in the config or a checkpoint that does not load
@@ -145,13 +145,14 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
     import torch
 
     from tracelab.game.facts import GAME_RULES
+    from tracelab.game.scenario import BOARD
     from tracelab.store import TraceWriter
     from tracelab.train.checkpoint import restore
     from tracelab.engine.compile_job import say_running_compiles
     from tracelab.train.loop import Trainer
 
     meta = {"command": " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]),
-            "scenario": scenario.name, "seed": cfg.seed, "rule_files": [str(GAME_RULES)],
+            "scenario": scenario.name, "seed": cfg.seed, "rule_files": [str(GAME_RULES)], "board": BOARD,
             "config": {**cfg.to_dict(), "scenario_toml": scenario.to_toml(),
                        "resumed_from": None if state is None else {"run": resumed_from, "step": state["step"]}}}
     if not meta["command"].startswith("tracelab train"):  # called from Python: say what it stands for

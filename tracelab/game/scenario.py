@@ -17,6 +17,9 @@ from typing import Any, Iterable, Mapping
 import numpy as np
 from tracelab.engine.safe_files import FileRefused, read_bytes
 
+# The board a run of this game declares in its metadata (RunMeta.board); tracelab.viewers.board draws it.
+BOARD = "gridworld"
+
 # Action ids of the spec's table. Moves use the first four ids, shots the next four in the same
 # direction order, so `shot direction = action - 4`.
 UP, DOWN, LEFT, RIGHT = 0, 1, 2, 3

@@ -1,4 +1,5 @@
 -- Hiding behind a mountain: per episode, the timesteps a learner agent ended next to a mountain that stood between it and an enemy agent on the same row or column (cells are nodes numbered y*width+x).
+-- needs board : agents, cells and mountains of the grid game
 -- param learner str = 'red-agent-%' : learner agents (SQL LIKE)
 -- param enemy str = 'blue-agent-%' : enemy agents (SQL LIKE)
 -- param loc_label str = 'atLoc' : the location label, loc(agent, cell)

@@ -1,5 +1,6 @@
 -- Learner events per episode: how often the learner was shot, tried an unsafe move and made an invalid action
 -- (each a label set to [1,1] on a learner agent; the default label names are those of rules/gridworld/game.rules).
+-- needs board : the events of the grid game's agents
 -- param learner str = 'red-agent-%' : learner agents (SQL LIKE on the node)
 -- param shot_label str = 'gotShot' : the label set when an agent is hit
 -- param unsafe_label str = 'unsafe' : the label set for an unsafe or illegal move

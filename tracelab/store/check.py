@@ -24,7 +24,7 @@ from tracelab.store.parts import (
     write_manifest_lists,
 )
 from tracelab.store.reader import STORED_COLUMNS, _sealed_file, open_run, resolve_run
-from tracelab.store.schema import SCHEMAS
+from tracelab.store.schema import ADDED_COLUMNS, SCHEMAS
 
 
 @dataclass
@@ -92,7 +92,10 @@ def verify_part(path: Path, table: str) -> tuple[int, str | None]:
         data = pq.read_table(path)
     except Exception as e:  # noqa: BLE001 - any failure to read is damage
         return 0, _one_line(e)
-    if data.schema.names != SCHEMAS[table].names:
+    # a part written before a column was added (schema.ADDED_COLUMNS) lacks it, and reads without it
+    expected = [c for c in SCHEMAS[table].names
+                if c in data.schema.names or c not in ADDED_COLUMNS.get(table, {})]
+    if data.schema.names != expected:
         return 0, f"its columns {data.schema.names} are not {SCHEMAS[table].names}"
     return data.num_rows, None
 

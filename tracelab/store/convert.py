@@ -12,10 +12,12 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
+from tracelab.store.graph_tables import graph_fact_table
 from tracelab.store.schema import SCHEMAS, TRACE_COLUMNS
 
 
-def _col(arrays: Mapping[str, Any], name: str, dtype: str, n: int | None, what: str) -> np.ndarray:
+def _col(arrays: Mapping[str, Any], name: str, dtype: str, n: int | None, what: str,
+         copy: bool = True) -> np.ndarray:
     if name not in arrays:
         raise KeyError(f"{what} has no column {name!r} (columns: {sorted(arrays)})")
     a = np.asarray(arrays[name])
@@ -25,9 +27,9 @@ def _col(arrays: Mapping[str, Any], name: str, dtype: str, n: int | None, what: 
         raise ValueError(f"{what} column {name!r} has {len(a)} rows, expected {n}")
     if a.dtype.kind == "f" and np.dtype(dtype).kind == "i":
         raise TypeError(f"{what} column {name!r} is {a.dtype}; expected integers ({dtype})")
-    # Always a copy: the rows wait in a buffer until the flusher writes them, and the caller (the
-    # engine's trace buffers, an RL loop's arrays) may reuse its memory meanwhile.
-    return np.array(a, dtype=dtype)
+    # A copy unless the caller hands the arrays over: the rows wait in a buffer until the flusher writes
+    # them, and a caller (an RL loop's arrays) may reuse its memory meanwhile.
+    return np.array(a, dtype=dtype) if copy else np.asarray(a, dtype=dtype)
 
 
 def _list_array(offsets: np.ndarray, values: np.ndarray, value_type: pa.DataType) -> pa.ListArray:
@@ -37,14 +39,16 @@ def _list_array(offsets: np.ndarray, values: np.ndarray, value_type: pa.DataType
 
 
 def trace_table(arrays: Mapping[str, Any], episode: int | Sequence[int] | np.ndarray | None,
-                seq_start: int, n_atoms: int, n_groundings: int) -> pa.Table:
+                seq_start: int, n_atoms: int, n_groundings: int, owned: bool = False) -> pa.Table:
     """Trace rows (the dict `Engine.take_trace()` returns) as raw.changes rows numbered from seq_start.
 
     episode: one id for every row; or a sequence indexed by world (the episode each world is playing);
-    or None when `arrays` carries an `episode` column of its own."""
+    or None when `arrays` carries an `episode` column of its own. owned: the caller hands the arrays over
+    (as take_trace's, which the engine never touches again): they are not copied."""
     if "pass_no" not in arrays and "pass" in arrays:
         arrays = {**arrays, "pass_no": arrays["pass"]}
-    cols = {name: _col(arrays, name, dtype, None, "trace") for name, dtype in TRACE_COLUMNS.items()}
+    cols = {name: _col(arrays, name, dtype, None, "trace", copy=not owned)
+            for name, dtype in TRACE_COLUMNS.items()}
     lengths = {name: len(a) for name, a in cols.items()}
     n = lengths["t"]
     if len(set(lengths.values())) > 1:
@@ -169,10 +173,12 @@ def _clause_row(rule_id: int, pos: int, lit: Any, closed: Collection[str]) -> di
             "closed": lit.pred in closed}
 
 
-def program_tables(program: Any, facts: Sequence[Any] | None = None) -> dict[str, pa.Table]:
+def program_tables(program: Any, facts: Sequence[Any] | None = None,
+                   graph: Any = None) -> dict[str, pa.Table]:
     """raw.rules, raw.clauses, raw.facts and raw.policies of a parsed Program (tracelab.engine.program).
     facts: the fact list the trace's fact ids index (Engine.facts: graph facts, then the program's);
-    defaults to program.facts."""
+    defaults to program.facts. graph: a Graph whose facts come first (Engine.facts' order), written as
+    columns (tracelab.store.graph_tables); then `facts` are the program's and are numbered after them."""
     rules, clauses, fact_rows = [], [], []
     for i, r in enumerate(program.rules):
         file, line = _loc(r)
@@ -182,7 +188,8 @@ def program_tables(program: Any, facts: Sequence[Any] | None = None) -> dict[str
                       "file": file, "line": line})
         clauses.append(_clause_row(i, -1, r.head, program.closed))
         clauses.extend(_clause_row(i, k, lit, program.closed) for k, lit in enumerate(r.body))
-    for i, f in enumerate(program.facts if facts is None else facts):
+    first = graph.n_facts if graph is not None else 0
+    for i, f in enumerate(program.facts if facts is None else facts, start=first):
         file, line = _loc(f)
         fact_rows.append({"fact": i, "name": f.name, "text": f.text or "", "literal": str(f.literal),
                           "start": int(f.start), "end": int(f.end), "static": bool(f.static),
@@ -192,7 +199,8 @@ def program_tables(program: Any, facts: Sequence[Any] | None = None) -> dict[str
     return {
         "rules": pa.Table.from_pylist(rules, schema=SCHEMAS["rules"]),
         "clauses": pa.Table.from_pylist(clauses, schema=SCHEMAS["clauses"]),
-        "facts": pa.Table.from_pylist(fact_rows, schema=SCHEMAS["facts"]),
+        "facts": pa.concat_tables([*([graph_fact_table(graph)] if graph is not None else []),
+                                   pa.Table.from_pylist(fact_rows, schema=SCHEMAS["facts"])]),
         "policies": pa.Table.from_pylist(policies, schema=SCHEMAS["policies"]),
     }
 

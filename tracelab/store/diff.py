@@ -1,4 +1,6 @@
-"""The first divergence of two episodes, of one run or of two runs.
+"""The first divergence of two episodes, of one run or of two runs, with what they were given and where
+they ended (tracelab.store.diff_state: the rules and facts that differ, the atoms whose final bounds
+differ).
 
 Episodes are aligned on time relative to their start (episode_begin.t_start, else their first trace
 row). At each relative time a change is the same in both when it sets the same atom (by its text) to the
@@ -15,6 +17,14 @@ from typing import Any
 
 import duckdb
 
+from tracelab.store.diff_state import (
+    EndDifference,
+    GivenDifference,
+    end_difference,
+    given_difference,
+    render_end,
+    render_given,
+)
 from tracelab.store.reader import RunConnection
 from tracelab.store.sandbox import lock_down, sandbox_connection
 
@@ -66,10 +76,12 @@ class Divergence:
     outcome_b: str | None = None
     run_a: str | None = None               # the runs' names when two runs are compared
     run_b: str | None = None
+    given: GivenDifference = field(default_factory=GivenDifference)   # rules and facts of one side only
+    end: EndDifference = field(default_factory=EndDifference)         # atoms with other bounds at the end
 
     @property
     def identical(self) -> bool:
-        return self.rel_t is None and self.first_action_difference is None
+        return self.rel_t is None and self.first_action_difference is None and self.given.same
 
     def to_dict(self) -> dict[str, Any]:
         return {**asdict(self), "identical": self.identical}
@@ -125,10 +137,13 @@ def first_divergence(con: RunConnection, a: int, b: int, con_b: RunConnection | 
         scratch.register("steps_a", _arrow(con, _STEPS_SQL, a))
         scratch.register("steps_b", _arrow(con_b, _STEPS_SQL, b))
         rows = scratch.execute(_STATE_SQL).fetchall()
-        act = scratch.execute(_ACTION_SQL).fetchone()
+        # fetchall: DuckDB 2.0 holds the connection until a result is read to its end
+        act = next(iter(scratch.execute(_ACTION_SQL).fetchall()), None)
+        given = given_difference(scratch, con, a, con_b, b)
+        end = end_difference(scratch, con, a, con_b, b)
     finally:
         scratch.close()
-    d = Divergence(a, b, rel_t=None)
+    d = Divergence(a, b, rel_t=None, given=given, end=end)
     if run_names is not None and not same_run:
         d.run_a, d.run_b = run_names
     if rows:
@@ -160,8 +175,11 @@ def render_divergence(d: Divergence) -> str:
     ea, eb = d.name("a"), d.name("b")
     lines = [f"episodes {ea} ({d.outcome_a or 'unfinished'}) and {eb} ({d.outcome_b or 'unfinished'})"]
     if d.identical:
-        lines.append("no divergence: the same changes by the same causes at the same times, the same actions")
+        lines.append("no divergence: the same rules and facts, the same changes by the same causes at the "
+                     "same times, the same actions")
         return "\n".join(lines)
+    lines += render_given(d.given, ea, eb)
+    lines += render_end(d.end, ea, eb)
     if d.first_action_difference:
         f = d.first_action_difference
         lines.append(f"first different action: step {f['step']} agent {f['agent'] or '-'}: "

@@ -21,6 +21,7 @@ import pyarrow as pa
 
 from tracelab.engine.safe_files import open_regular, read_json
 from tracelab.store import layout
+from tracelab.store.schema import BOARD_BEFORE_DECLARED
 from tracelab.validation import (INT64, Const, IsoTime, ListOf, MapOf, Nullable, OneOf, OptionalKey, check_file,
                                  utc_time)
 
@@ -37,6 +38,9 @@ class RunMeta:
     rule_files: list[str] = field(default_factory=list)
     seed: int | None = None
     versions: dict[str, str] = field(default_factory=dict)
+    # the board a viewer draws the run's episodes on (a game declares its own, e.g. "gridworld"); None
+    # for a run without one, such as a reasoning run (`tracelab reason --run`)
+    board: str | None = None
 
 
 def now_iso() -> str:
@@ -118,6 +122,7 @@ META_SCHEMA: dict[str, Any] = {key: OptionalKey(spec) for key, spec in {
     "sealed_at": Nullable(IsoTime()),
     # a resumed training's resumes into the same run (tracelab train --resume), oldest first
     "resumes": ListOf({}),
+    "board": Nullable(str),  # the run's declared board (RunMeta.board)
 }.items()}
 
 
@@ -189,11 +194,12 @@ def meta_table(doc: dict[str, Any], status: str) -> pa.Table:
         "config": json.dumps(doc.get("config", {}), sort_keys=True),
         "rule_files": json.dumps(doc.get("rule_files", [])),
         "versions": json.dumps(doc.get("versions", {}), sort_keys=True),
-        "pid": doc.get("pid"), "host": doc.get("host"),
+        "pid": doc.get("pid"), "host": doc.get("host"), "board": doc.get("board", BOARD_BEFORE_DECLARED),
     }
     ts = pa.timestamp("us")  # UTC
     schema = pa.schema([("run_id", pa.string()), ("command", pa.string()), ("scenario", pa.string()),
                         ("seed", pa.int64()), ("status", pa.string()), ("started_at", ts),
                         ("ended_at", ts), ("config", pa.string()), ("rule_files", pa.string()),
-                        ("versions", pa.string()), ("pid", pa.int64()), ("host", pa.string())])
+                        ("versions", pa.string()), ("pid", pa.int64()), ("host", pa.string()),
+                        ("board", pa.string())])
     return pa.Table.from_pylist([row], schema=schema)

@@ -28,7 +28,7 @@ import pyarrow.parquet as pq
 
 from tracelab.engine.safe_files import check_regular, read_json
 from tracelab.store import layout
-from tracelab.store.schema import SCHEMAS
+from tracelab.store.schema import ADDED_TABLES, DICTIONARY_COLUMNS, SCHEMAS
 from tracelab.validation import Const, ExactKeys, IntRange, ListOf, Matches, OptionalKey, check_file
 
 ROW_GROUP_ROWS = 131_072
@@ -58,6 +58,7 @@ class TableParts:
         self.rows_published = 0
         self.files_written = 0
         self.compactions = 0
+        self.seconds = 0.0  # spent writing this table's parts (tracelab bench reason-store reads it)
         if existing is not None:  # a reopened run: new parts are numbered after every file of the folder
             self._next_file = next_part_number(self.root)
             for name, rows in existing:
@@ -76,7 +77,8 @@ class TableParts:
         name = layout.part_name(self._next_file)
         self._next_file += 1
         with layout.new_file(self.root / name) as f:
-            pq.write_table(table, f, compression=self.compression, row_group_size=ROW_GROUP_ROWS)
+            pq.write_table(table, f, compression=self.compression, row_group_size=ROW_GROUP_ROWS,
+                           use_dictionary=DICTIONARY_COLUMNS.get(self.table, True))
         self.files_written += 1
         return name
 
@@ -89,12 +91,14 @@ class TableParts:
         n = sum(t.num_rows for t in tables)
         if n == 0:
             return 0
+        t0 = time.perf_counter()
         table = pa.concat_tables(tables) if len(tables) > 1 else tables[0]
         self._add(self._write(table), n)
         self.rows_published += n
         if len(self._small) >= self.compact_files:
             self._compact()
         self._drop_retired()
+        self.seconds += time.perf_counter() - t0
         return n
 
     def _compact(self) -> None:
@@ -156,11 +160,13 @@ def _part_entry(table: str) -> Matches:
 
 
 # parts/manifest.json: its format, `flushes` a count, and for exactly the store's tables a list of plain
-# part names of the table's folder, each listed once.
+# part names of the table's folder, each listed once (a run written before a table was added,
+# schema.ADDED_TABLES, lists none for it).
 MANIFEST_SCHEMA: dict[str, Any] = {
     "format": Const(MANIFEST_FORMAT),
     "flushes": OptionalKey(IntRange(0, (1 << 63) - 1, "a count (an integer >= 0)")),
-    "tables": ExactKeys({table: ListOf(_part_entry(table), unique=True) for table in SCHEMAS}),
+    "tables": ExactKeys({table: OptionalKey(ListOf(_part_entry(table), unique=True)) if table in ADDED_TABLES
+                         else ListOf(_part_entry(table), unique=True) for table in SCHEMAS}),
 }
 
 
@@ -185,7 +191,7 @@ def read_manifest(run_dir: Path) -> dict[str, list[Path]]:
     out: dict[str, list[Path]] = {}
     for table in SCHEMAS:
         out[table] = []
-        for entry in doc["tables"][table]:
+        for entry in doc["tables"].get(table, []):  # none: a table added after the run was written
             part = layout.run_path(root, layout.PARTS, table, entry.partition("/")[2])
             try:
                 check_regular(part, follow_symlinks=False)

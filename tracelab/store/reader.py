@@ -41,7 +41,7 @@ from tracelab.store.sandbox import (
     refusal,
     sandbox_connection,
 )
-from tracelab.store.schema import ADDED_COLUMNS, TABLES, VIEWS_SQL
+from tracelab.store.schema import ADDED_COLUMNS, ADDED_TABLES, TABLES, VIEWS_SQL, empty_sql
 from tracelab.store.sealed_catalog import STORED_SCHEMAS, SealedFileRefused, check_sealed_catalog
 
 RUNS_DIR = Path("runs")
@@ -198,7 +198,11 @@ def open_run(run: str | Path) -> RunConnection:
             lock_down(con, [str(p.resolve() / layout.PARTS) + "/"])
             con.execute("CREATE SCHEMA raw")
             result = LiveRunConnection(con, p.resolve())  # sets the variables the views read, and raw.run
+            listed = read_manifest(p.resolve())
             for t in TABLES:
+                if not listed[t]:  # a table added after the run was written (schema.ADDED_TABLES)
+                    con.execute(f"CREATE VIEW raw.{t} AS {empty_sql(t)}")
+                    continue
                 parts = f"read_parquet(getvariable({_sql_str(_parts_variable(t))}))"
                 con.execute(f"CREATE VIEW raw.{t} AS SELECT * FROM {parts}")
                 have = {c for (c, *_) in con.execute(f"DESCRIBE raw.{t}").fetchall()}
@@ -249,6 +253,9 @@ def _attach_sealed(con: duckdb.DuckDBPyConnection, sealed: Path) -> None:
     columns = check_sealed_catalog(con, "store", sealed)
     con.execute("CREATE SCHEMA raw")
     for t, names in STORED_COLUMNS.items():
+        if t in ADDED_TABLES and not columns[t]:  # a table added after the run was sealed
+            con.execute(f"CREATE VIEW raw.{t} AS {empty_sql(t)}")
+            continue
         extra = _defaults_for_missing(t, columns[t])
         cols = ", ".join([f'"{c}"' for c in names if c in columns[t]] + ([extra] if extra else []))
         con.execute(f"CREATE VIEW raw.{t} AS SELECT {cols} FROM store.raw.{t}")

@@ -2,7 +2,7 @@
 and the readable SQL views built on them.
 
 Storage tables live in the DuckDB schema `raw`; the views users query (`changes`, `firings`, `episodes`,
-`steps`, `metrics`, `rules`, `facts`, `atoms`, `groundings`, `run`) live in `main` and only read `raw.*`,
+`steps`, `metrics`, `rules`, `facts`, `atoms`, `groundings`, `edges`, `run`) live in `main` and only read `raw.*`,
 so the same view text serves a live run (raw.* are views over Parquet parts) and a sealed one (raw.* are
 tables)."""
 from __future__ import annotations
@@ -26,6 +26,9 @@ SCHEMAS: dict[str, pa.Schema] = {
     "labels": pa.schema([("label", pa.int32()), ("name", pa.string()), ("arity", pa.int8())]),
     "atoms": pa.schema([("atom", pa.int32()), ("label", pa.int32()), ("arg0", pa.int32()),
                         ("arg1", pa.int32())]),
+    # The graph's edges (a reasoning run's GraphML, tracelab.store.graph_tables), node ids of `nodes`; an
+    # undirected edge both ways. Its labels are the binary facts on the pair.
+    "edges": pa.schema([("source", pa.int32()), ("target", pa.int32())]),
     "rules": pa.schema([("rule", pa.int32()), ("name", pa.string()), ("text", pa.string()),
                         ("head", pa.string()), ("delay", pa.int32()), ("immediate", pa.bool_()),
                         ("mode", pa.string()), ("variables", _STR_LIST), ("file", pa.string()),
@@ -37,7 +40,8 @@ SCHEMAS: dict[str, pa.Schema] = {
                           ("text", pa.string()), ("closed", pa.bool_())]),
     "facts": pa.schema([("fact", pa.int32()), ("name", pa.string()), ("text", pa.string()),
                         ("literal", pa.string()), ("start", pa.int32()), ("end", pa.int32()),
-                        ("static", pa.bool_()), ("file", pa.string()), ("line", pa.int32())]),
+                        ("static", pa.bool_()), ("file", pa.string()), ("line", pa.int32()),
+                        ("episode", pa.int64())]),  # the one episode the fact belongs to, NULL: every one
     "policies": pa.schema([("code", pa.int32()), ("name", pa.string())]),
     "groundings": pa.schema([("grounding", pa.int32()), ("rule", pa.int32()),
                              ("body_atoms", _INT_LIST), ("var_values", _INT_LIST)]),
@@ -60,9 +64,25 @@ SCHEMAS: dict[str, pa.Schema] = {
                               ("ended_at", _TS), ("info", pa.string())]),
 }
 TABLES: tuple[str, ...] = tuple(SCHEMAS)
+# What a run written before runs declared their board (RunMeta.board) reads as: every command that
+# wrote runs then played the grid game.
+BOARD_BEFORE_DECLARED = "gridworld"
 # Columns added after a table's first release, with the SQL value they read as in runs written before
-# (the readers add it): clauses.closed, the clause's predicate is `%closed` (an unset atom reads [0,0]).
-ADDED_COLUMNS: dict[str, dict[str, str]] = {"clauses": {"closed": "false"}}
+# (the readers add it): clauses.closed, the clause's predicate is `%closed` (an unset atom reads [0,0]);
+# run.board, the run's declared board; facts.episode, a fact given for one episode only.
+ADDED_COLUMNS: dict[str, dict[str, str]] = {"clauses": {"closed": "false"},
+                                            "run": {"board": f"'{BOARD_BEFORE_DECLARED}'"},
+                                            "facts": {"episode": "CAST(NULL AS BIGINT)"}}
+# Tables added after the first release: a run written before has none and reads it as empty (EMPTY_SQL).
+ADDED_TABLES: tuple[str, ...] = ("edges",)
+_DUCKDB_TYPES = {pa.int32(): "INTEGER", pa.int64(): "BIGINT", pa.string(): "VARCHAR"}
+
+
+def empty_sql(table: str) -> str:
+    """A SELECT of no rows with an added table's columns and types (what a run written before reads)."""
+    return "SELECT " + ", ".join(f'CAST(NULL AS {_DUCKDB_TYPES[f.type]}) AS "{f.name}"'
+                                 for f in SCHEMAS[table]) + " LIMIT 0"
+
 
 # The engine's trace columns (docs/engine-api.md) and the dtype each is stored as.
 TRACE_COLUMNS: dict[str, str] = {
@@ -71,10 +91,20 @@ TRACE_COLUMNS: dict[str, str] = {
     "cause_kind": "int8", "cause_id": "int32", "grounding": "int32", "n_sources": "int16",
 }
 
+# The columns of few distinct values, dictionary-encoded in Parquet parts (the others are not: trying a
+# dictionary on ids and texts that are all different costs write time and space; the 1M-edge reasoning's
+# changes wrote 1.6x faster and 30% smaller). Tables not listed encode every column so.
+DICTIONARY_COLUMNS: dict[str, list[str]] = {
+    "changes": ["episode", "world", "t", "pass_no", "old_lower", "old_upper", "new_lower", "new_upper",
+                "cause_kind", "cause_id", "n_sources"],
+    "facts": ["start", "end", "static", "file", "line", "episode"],
+    "atoms": ["label"], "groundings": ["rule"], "edges": [], "nodes": [],
+}
+
 # Sort order of each table in a sealed file (point queries by episode and time).
 SEAL_ORDER: dict[str, str] = {
     "changes": "episode, seq", "steps": "episode, step, agent", "metrics": "step, name",
-    "groundings": "grounding", "atoms": "atom", "nodes": "node", "labels": "label",
+    "groundings": "grounding", "atoms": "atom", "nodes": "node", "labels": "label", "edges": "source, target",
     "episode_begin": "episode", "episode_end": "episode",
 }
 
@@ -94,6 +124,10 @@ SELECT r.rule, r.name, r.delay, r.immediate, r.mode, r.head,
 FROM raw.rules r;
 
 CREATE OR REPLACE VIEW facts AS SELECT * FROM raw.facts;
+
+CREATE OR REPLACE VIEW edges AS
+SELECT s.name AS source, d.name AS target, e.source AS source_id, e.target AS target_id
+FROM raw.edges e LEFT JOIN raw.nodes s ON s.node = e.source LEFT JOIN raw.nodes d ON d.node = e.target;
 
 CREATE OR REPLACE VIEW changes AS
 SELECT c.episode, c.t, a.text AS atom, a.node, a.label,

@@ -19,7 +19,7 @@ from tracelab.store.meta import meta_table, now_iso, open_writer_lock, read_meta
 from tracelab.store.parts import read_manifest, remove_unlisted
 from tracelab.store.reader import _create_table, resolve_run
 from tracelab.store.sandbox import lock_configuration, lock_down, sandbox_connection
-from tracelab.store.schema import SEAL_ORDER, TABLES, VIEWS_SQL
+from tracelab.store.schema import SEAL_ORDER, TABLES, VIEWS_SQL, empty_sql
 
 
 def seal_run(run: str | Path, *, keep_parts: bool = False,
@@ -68,8 +68,11 @@ def _build(run_dir: Path, sealed: Path, parts: dict[str, list[Path]], doc: dict,
             con.execute("CREATE SCHEMA raw")
             for t in TABLES:
                 order = f" ORDER BY {SEAL_ORDER[t]}" if t in SEAL_ORDER else ""
-                con.execute(f"CREATE TABLE raw.{t} AS SELECT * FROM read_parquet(?){order}",
-                            [[str(f) for f in parts[t]]])
+                if not parts[t]:  # a table added after the run was written (schema.ADDED_TABLES)
+                    con.execute(f"CREATE TABLE raw.{t} AS {empty_sql(t)}")
+                else:
+                    con.execute(f"CREATE TABLE raw.{t} AS SELECT * FROM read_parquet(?){order}",
+                                [[str(f) for f in parts[t]]])
                 if on_table is not None:
                     on_table(t)
             _create_table(con, "raw.run", meta_table(doc, doc["status"]))

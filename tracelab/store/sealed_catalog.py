@@ -5,7 +5,8 @@ column's expression runs on every read of its table (`repeat('A', 2e9)` took 4 G
 whenever it is named, a macro when it is called; defaults, CHECK constraints, index expressions,
 triggers and sequences hold expressions too. A file `seal` writes holds none of these: the schemas
 `main` and `raw`, the stored tables raw.<table> with the columns and types of tracelab.store.schema
-(columns of schema.ADDED_COLUMNS may be missing: runs sealed before they existed), and tracelab's views
+(columns of schema.ADDED_COLUMNS and tables of schema.ADDED_TABLES may be missing: runs sealed before they
+existed), and tracelab's views
 in `main` (which the reader never uses: it builds its own). `check_sealed_catalog` reads the catalog
 through DuckDB's metadata functions, which report stored definitions as text and evaluate nothing, and
 refuses anything else with one line naming the entry."""
@@ -20,7 +21,7 @@ import pyarrow as pa
 
 from tracelab.store.meta import meta_table
 from tracelab.store.sandbox import lock_down, sandbox_connection
-from tracelab.store.schema import ADDED_COLUMNS, SCHEMAS, VIEW_NAMES
+from tracelab.store.schema import ADDED_COLUMNS, ADDED_TABLES, SCHEMAS, VIEW_NAMES
 
 SCHEMA_NAMES = ("main", "raw")
 # The stored tables of a sealed run (raw.run: the run's metadata row).
@@ -61,7 +62,8 @@ def expected_columns() -> dict[str, dict[str, str]]:
 
 def check_sealed_catalog(con: duckdb.DuckDBPyConnection, database: str, path: Path) -> dict[str, set[str]]:
     """Refuse (SealedFileRefused) the attached `database` unless it holds what a sealed run holds and
-    nothing else; return the columns each raw table has (an older run lacks some ADDED_COLUMNS)."""
+    nothing else; return the columns each raw table has (an older run lacks some ADDED_COLUMNS, and has
+    no columns of an ADDED_TABLES table it lacks)."""
     catalog = _Catalog(con, database)
     try:
         catalog.check_entries()
@@ -102,7 +104,7 @@ class _Catalog:
         for schema, table in tables:
             if schema != "raw" or table not in expected:
                 raise SealedFileRefused(f"holds a table {_name(schema, table)}, {_NOT_A_RUN}")
-        missing = [t for t in expected if ("raw", t) not in tables]
+        missing = [t for t in expected if ("raw", t) not in tables and t not in ADDED_TABLES]
         if missing:
             raise SealedFileRefused(f"has no table raw.{missing[0]}: not a tracelab run")
         for kind, sql in _NEVER_HELD.items():
@@ -130,6 +132,8 @@ class _Catalog:
                                         "one from an incompatible version")
             have[table].add(column)
         for table, columns in expected.items():
+            if table in ADDED_TABLES and not have[table]:  # sealed before the table existed: no columns
+                continue
             lacking = [c for c in columns if c not in have[table] and c not in ADDED_COLUMNS.get(table, {})]
             if lacking:
                 raise SealedFileRefused(f"raw.{table} has no column {lacking[0]!r}: not a tracelab run, or one "

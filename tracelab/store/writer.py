@@ -29,6 +29,7 @@ import numpy as np
 import pyarrow as pa
 
 from tracelab.store import convert, layout
+from tracelab.store.graph_tables import edges_table
 from tracelab.store.meta import (RunMeta, initial_meta, now_iso, open_writer_lock, read_meta, reopened_meta,
                                  write_meta)
 from tracelab.store.parts import TableParts, remove_unlisted, write_manifest
@@ -195,12 +196,15 @@ class TraceWriter:
 
     # ---- the program and the world ----------------------------------------------------------------
     def write_program(self, program: Any, vocabulary: Mapping[str, Any] | None = None,
-                      groundings: Any = None, *, facts: Sequence[Any] | None = None) -> None:
+                      groundings: Any = None, *, facts: Sequence[Any] | None = None, graph: Any = None) -> None:
         """The rules and facts (tracelab.engine.program.Program) and, optionally, the vocabulary and
         grounding table as they stand now; later growth goes through write_vocabulary().
         facts: what the trace's fact ids index, Engine.facts (graph facts first); default program.facts.
-        With an engine at hand, write_engine_program(engine) passes all four."""
-        tables = convert.program_tables(program, facts)
+        graph: the Engine's Graph, whose facts come first, written as columns (then `facts` are the
+        program's; its edges go through write_edges, once the nodes they name are written).
+        With an engine at hand, write_engine_program(engine) passes the program, graph, vocabulary and
+        groundings, and the graph's edges."""
+        tables = convert.program_tables(program, facts, graph)
         if self._program_written and self._stored_tables is not None:  # a reopened run: the same program
             self._check_stored(tables, PROGRAM_TABLES, "program")
             for name in PROGRAM_TABLES:
@@ -213,9 +217,18 @@ class TraceWriter:
         if vocabulary is not None or groundings is not None:
             self.write_vocabulary(vocabulary, groundings)
 
+    def write_edges(self, pairs: Any) -> None:
+        """A graph's edges, (source, target) node ids of the vocabulary (Graph.edges)."""
+        if len(pairs):
+            self._append({"edges": edges_table(pairs)})
+
     def write_engine_program(self, engine: Any) -> None:
-        """write_program() with an Engine's program, fact list, vocabulary and groundings."""
-        self.write_program(engine.program, engine.vocabulary(), engine.groundings, facts=engine.facts)
+        """write_program() with an Engine's program, graph (its facts first), vocabulary and groundings,
+        then the graph's edges (a reopened run holds them already)."""
+        reopened = self._program_written and self._stored_tables is not None
+        self.write_program(engine.program, engine.vocabulary(), engine.groundings, graph=engine.graph)
+        if not reopened:
+            self.write_edges(engine.graph.edges)
 
     def write_vocabulary(self, vocabulary: Mapping[str, Any] | None,
                          groundings: Any = None) -> None:
@@ -298,24 +311,28 @@ class TraceWriter:
 
     # ---- rows ------------------------------------------------------------------------------------------
     def write_changes(self, episode: int | Sequence[int] | np.ndarray | None,
-                      arrays: Mapping[str, Any]) -> int:
+                      arrays: Mapping[str, Any], owned: bool = False) -> int:
         """Trace rows as Engine.take_trace() returns them. episode: the id of every row, or an array
         giving the episode each world is playing (indexed by the `world` column), or None if `arrays`
-        has its own `episode` column. Returns the number of rows accepted."""
+        has its own `episode` column. owned: the caller will not touch the arrays again (take_trace's
+        own), so they are kept without a copy. Returns the number of rows accepted."""
         table = convert.trace_table(arrays, episode, self._seq, self._vocab_have["atoms"],
-                                    self._groundings_have)
+                                    self._groundings_have, owned)
         self._seq += table.num_rows
         self._append({"changes": table})
         return table.num_rows
 
-    def write_engine(self, episode: int | Sequence[int] | np.ndarray | None, engine: Any) -> int:
-        """write_vocabulary(engine's vocabulary and groundings) then write_changes(engine.take_trace()).
-        Cheap per step: the vocabulary is only rebuilt when the engine's counts moved."""
+    def write_engine(self, episode: int | Sequence[int] | np.ndarray | None, engine: Any,
+                     rows: Mapping[str, Any] | None = None) -> int:
+        """write_vocabulary(engine's vocabulary and groundings) then write_changes(engine.take_trace(), or
+        `rows`: trace rows the caller already took from it and leaves alone). Cheap per step: the
+        vocabulary is only rebuilt when the engine's counts moved. take_trace's arrays are new at every
+        call (the engine hands its buffers over or copies them out), so they are kept without a copy."""
         vocab = getattr(engine, "vocab", None)
         grown = vocab is None or (len(vocab.nodes), len(vocab.labels), vocab.n_atoms) != (
             self._vocab_have["nodes"], self._vocab_have["labels"], self._vocab_have["atoms"])
         self.write_vocabulary(engine.vocabulary() if grown else None, engine.groundings)
-        return self.write_changes(episode, engine.take_trace())
+        return self.write_changes(episode, engine.take_trace() if rows is None else rows, owned=True)
 
     def write_steps(self, episode: int | np.ndarray, arrays: Mapping[str, Any]) -> int:
         """Per-step rows (see convert.steps_table): step, action, reward [, agent, t, terminated,
@@ -447,7 +464,9 @@ class TraceWriter:
         return self._closed
 
     def stats(self) -> dict[str, Any]:
-        """Rows published per table, part files written, compactions and flushes so far."""
+        """Rows published per table, the seconds spent writing each table's parts, part files written,
+        compactions and flushes so far."""
         return {"rows": {t: p.rows_published for t, p in self._parts.items()},
+                "seconds": {t: p.seconds for t, p in self._parts.items()},
                 "files": sum(p.files_written for p in self._parts.values()),
                 "compactions": sum(p.compactions for p in self._parts.values()), "flushes": self.flushes}

@@ -6,7 +6,7 @@ import rerun.blueprint as rrb
 from rerun.blueprint.encodings import TextLogColumn, TextLogColumnKind
 from tracelab.viewers.replay import style
 
-from tracelab.store.board import BoardMap
+from tracelab.viewers.board import BoardMap
 
 
 def replay_blueprint(board_map: BoardMap, training: bool = False, open_at: str = "start") -> rrb.Blueprint:

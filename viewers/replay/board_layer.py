@@ -10,7 +10,7 @@ import rerun as rr
 from tracelab.viewers.replay import style
 from tracelab.viewers.replay.columns import send_per_entity
 
-from tracelab.store.board import (
+from tracelab.viewers.board import (
     NO_ACTION,
     NOTHING,
     PHASES,

@@ -9,7 +9,7 @@ import rerun as rr
 from tracelab.viewers.replay import board_layer, plots, rules_layer
 from tracelab.viewers.replay.blueprint import replay_blueprint
 
-from tracelab.store.board import BoardLoader, EpisodeBoard
+from tracelab.viewers.board import BoardLoader, EpisodeBoard
 from tracelab.store.model import RunModel
 from tracelab.store.reader import RunConnection
 

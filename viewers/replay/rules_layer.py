@@ -10,7 +10,7 @@ import rerun as rr
 from tracelab.viewers.replay import style
 from tracelab.viewers.replay.columns import send_per_entity
 
-from tracelab.store.board import PHASES, TEAMS, EpisodeBoard
+from tracelab.viewers.board import PHASES, TEAMS, EpisodeBoard
 from tracelab.store.episode import EpisodeTrace
 from tracelab.store.model import RunModel
 from tracelab.store.names import unknown_name_message

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import rerun as rr
 
-from tracelab.store.board import PHASES, BoardMap
+from tracelab.viewers.board import PHASES, BoardMap
 
 # ---- timelines: `step` is the game step; `pass` orders the phases within steps: step·10 + phase ----
 STEP = "step"

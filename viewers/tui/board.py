@@ -1,4 +1,4 @@
-"""BoardView: the grid world at the trace's cursor, beside the trace (tracelab.store.board rebuilds it from
+"""BoardView: the grid world at the trace's cursor, beside the trace (tracelab.viewers.board rebuilds it from
 the run's change rows). Team-coloured agents (R1, B1; ✕ when dead), bullets as arrows, mountains, bases,
 and under the grid each agent's health, ammo and action. It follows the cursor to the phase of the
 selected change within its step. A run that is not a grid-world game shows a note instead."""
@@ -9,7 +9,7 @@ from typing import Any
 from rich.text import Text
 from textual.widget import Widget
 
-from tracelab.store.board import DIRECTIONS, NO_ACTION, PHASES, BoardLoader, EpisodeBoard
+from tracelab.viewers.board import DIRECTIONS, NO_ACTION, PHASES, BoardLoader, EpisodeBoard
 from tracelab.viewers.tui.colours import BLUE_TEAM, DIM, MOUNTAIN, RED_TEAM
 from tracelab.viewers.tui.source import RunSource
 

@@ -48,11 +48,12 @@ def train_seed(cfg: TrainConfig, scenario: Scenario, run_dir: Path, command: str
     import torch
 
     from tracelab.game.facts import GAME_RULES
+    from tracelab.game.scenario import BOARD
     from tracelab.store import TraceWriter
     from tracelab.train.loop import Trainer
 
     meta = {"command": f"tracelab train (from: {command})", "scenario": scenario.name, "seed": cfg.seed,
-            "rule_files": [str(GAME_RULES)],
+            "rule_files": [str(GAME_RULES)], "board": BOARD,
             "config": {**cfg.to_dict(), "scenario_toml": scenario.to_toml(), "resumed_from": None}}
     writer = TraceWriter.open(run_dir, meta)
     torch.set_num_threads(cfg.threads)
@@ -89,9 +90,11 @@ def traced_games(policy: Policy, scenario: Scenario, run_dir: Path, *, games: in
     """`games` evaluation games of `policy`, every one traced in full into a new run (as `tracelab eval
     --run` does): the saved queries then read only evaluation games."""
     from tracelab.game.facts import GAME_RULES
+    from tracelab.game.scenario import BOARD
     from tracelab.store import TraceWriter
 
     meta = {"command": command, "scenario": scenario.name, "seed": seed, "rule_files": [str(GAME_RULES)],
+            "board": BOARD,
             "config": {**about, "games": games, "backend": backend, "opponent_p": opponent_p,
                        "scenario_toml": scenario.to_toml()}}
     return evaluate_into(TraceWriter.open(run_dir, meta), policy, scenario, games=games, backend=backend,

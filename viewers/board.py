@@ -1,11 +1,14 @@
-"""The game board of a traced episode, rebuilt from the run's change rows: the map, and per step and per
+"""The grid game's board of a traced episode, rebuilt from the run's change rows: the map, and per step and per
 phase the agents (position, alive, health, ammo, action), the bullets (position, direction) and the rule
 firings, as numpy columns.
 
-Reads only through a connection from `tracelab.store.open_run` (live or sealed run). Everything comes from
-the run itself: the map and the teams from its facts (rules/gridworld/game.rules' vocabulary:
-`mountain(C)`, `edgeDown(C)`, `enemyBase(A,C)`, `team(A,T)`, `owner(B,A)`, `killAt(Q)`), the dynamics
-from the changes of `atLoc`, `alive`, `hitMe`, `spent`, `dir`, `move` and `shoot`.
+Lives beside its users (the TUI's board view, the replay), not in the store, which knows no game: it reads
+only through a connection from `tracelab.store.open_run` (live or sealed run), and only runs that declare
+this board in their metadata (`BOARD`; tracelab.store.kind): a run without a board (a reasoning run) is
+refused. Everything comes from the run itself: the map and the teams from its facts
+(rules/gridworld/game.rules' vocabulary: `mountain(C)`, `edgeDown(C)`, `enemyBase(A,C)`, `team(A,T)`,
+`owner(B,A)`, `killAt(Q)`), the dynamics from the changes of `atLoc`, `alive`, `hitMe`, `spent`, `dir`,
+`move` and `shoot`.
 
 Steps and phases. Step s is the episode's timestep t = s (each episode starts at t = 0 with the map
 facts; step 0 is the start state). The engine runs one step in two passes: pass 0 (the snapshot rules,
@@ -30,6 +33,8 @@ from typing import Any
 
 import numpy as np
 
+from tracelab.game.scenario import BOARD
+from tracelab.store.kind import run_board
 from tracelab.store.reader import RunConnection
 
 PHASES = ("start", "bullets", "hits", "act", "walk-in", "deaths", "end", "shield")
@@ -355,10 +360,21 @@ class _Vocabulary:
         return both[:, 0], both[:, 1]
 
 
+def check_board(con: RunConnection) -> None:
+    """Refuse a run that does not declare this decoder's board (ValueError saying what it declares)."""
+    board = run_board(con)
+    if board is None:
+        raise ValueError("this run has no board (a reasoning run, or a run whose writer declared none): "
+                         "its episodes are a trace, not games")
+    if board != BOARD:
+        raise ValueError(f"this run declares the board {board!r}; tracelab draws only {BOARD!r}")
+
+
 class BoardLoader:
     """Loads episodes of one run; what the episodes share (cast, rules, vocabulary) is read once."""
 
     def __init__(self, con: RunConnection) -> None:
+        check_board(con)
         self.con = con
         self.cast = read_cast(con)
         self.health0, self.damage = _health_scale(con, self.cast.hits_to_kill)
