@@ -129,3 +129,26 @@ def test_the_tui_trace_hides_static_facts_until_s_and_shows_coordinates() -> Non
         await pilot.press("s")                                        # and hide them again
         await wait_for(pilot, lambda: pane.jumps > jumps and table.count == dynamics and loaded(table))
     run_app([Path(BASE)], body, size=(130, 30))
+
+
+def test_the_episode_index_hides_static_facts_as_sql_does() -> None:
+    """Hiding static facts answered from the in-memory episode index: the same rows and count as SQL."""
+    from dataclasses import replace
+
+    from tracelab.viewers.tui.episode_index import episode_index
+    from tracelab.viewers.tui.paging import PAGE, TraceFilter, TraceSource
+    from tracelab.viewers.tui.source import RunSource
+    source = RunSource(BASE)
+    static = static_rows(BASE, 0)
+    for flt, hidden in ((TraceFilter(0, hide_static=True), static),
+                        (TraceFilter(0, label="leftOf", hide_static=True), 56),      # 8x8: 7 pairs a row
+                        (TraceFilter(0, rule="fact:*", t_to=0, hide_static=True), static)):
+        by_sql = TraceSource(source, flt)
+        count = by_sql.prepare()
+        assert by_sql.hidden == hidden and count == TraceSource(source, replace(flt, hide_static=False)).prepare() - hidden
+        assert episode_index(source, 0) is not None
+        indexed = TraceSource(source, flt)
+        assert indexed.prepare() == count and indexed.anchors is not None and indexed.hidden == hidden
+        pages = (count + PAGE - 1) // PAGE
+        assert [r["seq"] for p in range(pages) for r in indexed.fetch(p)] == \
+               [r["seq"] for p in range(pages) for r in by_sql.fetch(p)]

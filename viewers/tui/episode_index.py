@@ -25,11 +25,13 @@ _COLUMNS = "seq, t, atom, cause_kind, greatest(coalesce(cause_id, -1), -1) AS ca
 @dataclass
 class RowSelection:
     """What a filter keeps, as resolved ids: every atom set must hold the row's atom; `causes` is None
-    (any cause) or (cause_kind, cause ids or None for any id) pairs of which one must match."""
+    (any cause) or (cause_kind, cause ids or None for any id) pairs of which one must match; the rows set
+    by one of `hidden_facts` (fact ids: the static facts, when hidden) are left out."""
     atom_sets: list[list[int]]
     causes: list[tuple[int, list[int] | None]] | None
     t_from: int | None = None
     t_to: int | None = None
+    hidden_facts: list[int] | None = None
 
 
 class EpisodeIndex:
