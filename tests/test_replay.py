@@ -20,6 +20,7 @@ from tracelab.viewers.replay.outputs import rerun_cli
 
 from tracelab.cli import main
 from tracelab.store.reader import open_run
+from tracelab.store.coordinates import run_grid
 from tracelab.store.why import explain, render_why
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -146,7 +147,8 @@ def test_lanes_and_the_why_document_of_a_death(advanced_data) -> None:
     alive = [(r["step"], r["StateChange:state"]) for r in ep0["/lanes/alive/red-agent-1"] if "step" in r]
     assert alive == [(0, ["alive"]), (15, ["dead"])]
     doc = ep0["/why"][15]["TextDocument:text"][0]
-    tree = render_why(explain(open_run(SAMPLES / "advanced"), 0, "alive(red-agent-1)", 15), 15)
+    con = open_run(SAMPLES / "advanced")
+    tree = render_why(explain(con, 0, "alive(red-agent-1)", 15), 15, run_grid(con))   # cells with (x, y)
     assert "### Why alive(red-agent-1)" in doc and tree in doc       # as `tracelab why` prints it
     assert "### Why eliminated(red)" in doc and "End of the game: loss" in doc
     assert "No death" in ep0["/why"][3]["TextDocument:text"][0]

@@ -1,8 +1,14 @@
 """`tracelab trace`: the method's trace table for one episode (t, node/edge, label, old bound, new bound,
-rule fired), filtered by time, atom, label and rule."""
+rule fired), filtered by time, atom, label and rule.
+
+The table shows the episode's dynamics: the rows of static facts (tracelab.store.static_facts) are hidden,
+with a note on stderr saying how many and that --static shows them; the exports (csv, json, parquet) keep
+every row unless --hide-static. Where the run declares a grid (tracelab.store.coordinates), the table's
+cells read `30@(6,3)`; exports keep the ids."""
 from __future__ import annotations
 
 import argparse
+import sys
 from typing import TYPE_CHECKING
 
 from tracelab.commands._args import non_negative_int
@@ -19,6 +25,8 @@ if TYPE_CHECKING:
     import duckdb
     import pyarrow as pa
 
+    from tracelab.store.coordinates import Grid
+
 FULL_COLUMNS = ("t, pass_no, atom, node, label, old_lower, old_upper, new_lower, new_upper, rule, "
                 "grounding, seq")
 
@@ -34,12 +42,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--label", action="append", default=[], help="predicate name or glob (repeatable)")
     p.add_argument("--rule", action="append", default=[],
                    help="rule name or glob, also fact:NAME, action, policy:NAME, reset (repeatable)")
+    static = p.add_mutually_exclusive_group()
+    static.add_argument("--static", dest="static", action="store_true", default=None,
+                        help="show the rows of static facts (e.g. the map at t=0; the table hides them)")
+    static.add_argument("--hide-static", dest="static", action="store_false",
+                        help="hide the rows of static facts (the exports keep them otherwise)")
     add_format_options(p)
     add_paging_options(p)
     p.set_defaults(func=run)
 
 
-def trace_sql(args: argparse.Namespace) -> tuple[str, list[object]]:
+def hides_static(args: argparse.Namespace) -> bool:
+    """The table hides static facts unless --static; exports keep them unless --hide-static."""
+    return args.static is False or (args.static is None and args.format == "table")
+
+
+def trace_where(args: argparse.Namespace) -> tuple[list[str], list[object]]:
+    """The conditions of the user's filters (episode, time, atom, label, rule) and their parameters."""
     where: list[str] = ["episode = ?"]
     params: list[object] = [args.episode]
     if args.t_from is not None:
@@ -52,6 +71,14 @@ def trace_sql(args: argparse.Namespace) -> tuple[str, list[object]]:
         if values:
             where.append("(" + " OR ".join(f"{column} GLOB ?" for _ in values) + ")")
             params.extend(values)
+    return where, params
+
+
+def trace_sql(args: argparse.Namespace) -> tuple[str, list[object]]:
+    from tracelab.store.static_facts import STATIC_ROW_SQL
+    where, params = trace_where(args)
+    if hides_static(args):
+        where.append(f"NOT {STATIC_ROW_SQL}")
     sql = f"SELECT {FULL_COLUMNS} FROM changes WHERE {' AND '.join(where)} ORDER BY seq"
     if args.limit is not None:
         sql += f" LIMIT {int(args.limit)}"
@@ -74,6 +101,7 @@ def check_filters(con: "duckdb.DuckDBPyConnection", args: argparse.Namespace) ->
 
 
 def run(args: argparse.Namespace) -> int:
+    from tracelab.store.coordinates import run_grid
     from tracelab.store.reader import arrow_stream, open_run, retrying
     check_range(args)
     with store_errors(), ctrl_c_stops_queries():
@@ -86,25 +114,38 @@ def run(args: argparse.Namespace) -> int:
             raise UserError(f"episode {args.episode} has no trace rows in {args.run} "
                             f"(episodes with rows: {known or 'none'})")
         sql, params = trace_sql(args)
+        hidden = retrying(lambda: hidden_static_rows(con, args)) if hides_static(args) else 0
         if args.format == "table":
             table = retrying(lambda: con.sql(sql, params=params).to_arrow_table())
-            write_table(paper_table(table), args.format, args.output)
+            write_table(paper_table(table, run_grid(con)), args.format, args.output)
         else:  # streamed, batch by batch
             schema, batches = retrying(lambda: arrow_stream(con.sql(sql, params=params)))
             write_stream(schema, batches, args.format, args.output)
+    if hidden:
+        print(f"note: {hidden:,} rows of static facts hidden (atoms set by facts declared static, e.g. the "
+              f"map at t=0, which never change); --static shows them", file=sys.stderr)
     return 0
+
+
+def hidden_static_rows(con: "duckdb.DuckDBPyConnection", args: argparse.Namespace) -> int:
+    """How many rows under the user's filters are static facts' (the ones hiding them leaves out)."""
+    from tracelab.store.static_facts import STATIC_ROW_SQL
+    where, params = trace_where(args)
+    sql = f"SELECT count(*) FROM changes WHERE {' AND '.join(where)} AND {STATIC_ROW_SQL}"
+    return int(con.execute(sql, params).fetchall()[0][0])
 
 
 def _b(lo: float, up: float) -> str:
     return f"[{lo:g},{up:g}]"
 
 
-def paper_table(table: "pa.Table") -> "pa.Table":
-    """The method's columns: t, node/edge, label, old, new, rule."""
+def paper_table(table: "pa.Table", grid: "Grid | None" = None) -> "pa.Table":
+    """The method's columns: t, node/edge, label, old, new, rule; with a grid, cells as `30@(6,3)`."""
     import pyarrow as pa
     c = table.to_pydict()
+    nodes = c["node"] if grid is None else [grid.with_coordinates(n) for n in c["node"]]
     return pa.table({
-        "t": c["t"], "node/edge": c["node"], "label": c["label"],
+        "t": c["t"], "node/edge": nodes, "label": c["label"],
         "old": [_b(a, b) for a, b in zip(c["old_lower"], c["old_upper"])],
         "new": [_b(a, b) for a, b in zip(c["new_lower"], c["new_upper"])],
         "rule": c["rule"],

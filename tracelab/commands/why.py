@@ -75,11 +75,13 @@ def change_in_pass(changes: list[tuple[int, int]], atom: str, t: int, pass_no: i
 
 
 def run(args: argparse.Namespace) -> int:
+    from tracelab.store.coordinates import run_grid
     from tracelab.store.reader import open_run, retrying
     from tracelab.store.why import explain, explain_change, render_why
     refuse_complement(args.atom)
     with store_errors(), ctrl_c_stops_queries():
         con = open_run(args.run)
+        grid = retrying(lambda: run_grid(con))
         end = last_t(con, args.episode)
         check_at(args.at, args.episode, end)
         at = end if args.at is None else args.at
@@ -101,5 +103,5 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps({"episode": args.episode, "at": at, "pass": args.pass_no, "tree": tree.to_dict()},
                          indent=1))
     else:
-        print(render_why(tree, None if args.pass_no is not None else at))
+        print(render_why(tree, None if args.pass_no is not None else at, grid))
     return 0

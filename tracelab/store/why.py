@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from tracelab.store.coordinates import Grid
 from tracelab.store.episode import EpisodeTrace, Row
 from tracelab.store.model import Clause, RuleInfo, RunModel, satisfies
 from tracelab.store.reader import RunConnection
@@ -177,9 +178,10 @@ def explain_change(con: RunConnection, episode: int, seq: int, depth: int = 6) -
     return _Explainer(model, trace).node(row.atom, row, depth)
 
 
-def render_why(node: WhyNode, at: int | None = None) -> str:
-    """The proof tree as indented text."""
+def render_why(node: WhyNode, at: int | None = None, grid: Grid | None = None) -> str:
+    """The proof tree as indented text; with the run's grid (coordinates.run_grid), cells as `30@(6,3)`."""
     lines: list[str] = []
+    place = (lambda text: text) if grid is None else grid.with_coordinates
 
     def describe(n: WhyNode) -> str:
         c = n.cause
@@ -188,7 +190,7 @@ def render_why(node: WhyNode, at: int | None = None) -> str:
         s = f"set at t={n.t} pass {n.pass_no} {_bound_text(n.old)}->{_bound_text(n.value)} by {c.name}"
         if c.kind in ("rule", "policy"):
             delay = "!" if c.immediate else f"Δt={c.delay}"
-            binds = ", ".join(f"{k}={v}" for k, v in c.bindings.items())
+            binds = ", ".join(f"{k}={place(v)}" for k, v in c.bindings.items())
             s += f" ({delay}{'; ' + binds if binds else ''}; {c.reads})"
         elif c.kind == "fact" and c.text:
             s += f" ({c.text})"
@@ -201,11 +203,11 @@ def render_why(node: WhyNode, at: int | None = None) -> str:
     def walk(n: WhyNode, prefix: str, last: bool, root: bool) -> None:
         if root:
             when = f" at the end of t={at}" if at is not None else ""
-            lines.append(f"{n.atom} = {_bound_text(n.value)}{when}: {describe(n)}")
+            lines.append(f"{place(n.atom)} = {_bound_text(n.value)}{when}: {describe(n)}")
             child_prefix = ""
         else:
             mark = "ok " if n.holds else "NO "
-            lines.append(f"{prefix}{'└─ ' if last else '├─ '}{mark}{n.clause} = "
+            lines.append(f"{prefix}{'└─ ' if last else '├─ '}{mark}{place(n.clause)} = "
                          f"{_bound_text(n.value)}: {describe(n)}")
             child_prefix = prefix + ("   " if last else "│  ")
         for i, ch in enumerate(n.children):

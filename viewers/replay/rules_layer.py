@@ -15,6 +15,7 @@ from tracelab.store.episode import EpisodeTrace
 from tracelab.store.model import RunModel
 from tracelab.store.names import unknown_name_message
 from tracelab.store.reader import RunConnection
+from tracelab.store.coordinates import run_grid
 from tracelab.store.why import explain_in, render_why
 
 LANE_LABELS = ("alive", "atLoc", "health", "ammo", "action")
@@ -141,6 +142,7 @@ def why_documents(con: RunConnection, board: EpisodeBoard, rewards: np.ndarray |
         run_model = model() if model else RunModel(con)
         trace = EpisodeTrace(con, board.episode, columns=board.changes)
         run_model.prefetch_groundings(np.unique(trace.c["grounding"]))
+    grid = run_grid(con)     # the cells' (x, y) beside their ids, as `tracelab why` shows them
     docs = []
     for s in range(board.steps + 1):
         lines = _step_header(board, s, rewards)
@@ -148,7 +150,7 @@ def why_documents(con: RunConnection, board: EpisodeBoard, rewards: np.ndarray |
         if not atoms:
             lines.append("\nNo death and no end of game in this step.")
         for atom in atoms:
-            tree = render_why(explain_in(run_model, trace, atom, s, depth), s)
+            tree = render_why(explain_in(run_model, trace, atom, s, depth), s, grid)
             lines += [f"\n### Why {atom}", "```text", tree, "```"]
         docs.append("\n".join(lines))
     return docs

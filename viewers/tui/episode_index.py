@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tracelab.store.reader import query_readonly
+from tracelab.store.static_facts import FACT_CAUSE
 from tracelab.viewers.tui.source import RunSource
 
 # (NULL or negative cause ids, if any, as -1: never a resolved id, as in SQL)
@@ -24,11 +25,13 @@ _COLUMNS = "seq, t, atom, cause_kind, greatest(coalesce(cause_id, -1), -1) AS ca
 @dataclass
 class RowSelection:
     """What a filter keeps, as resolved ids: every atom set must hold the row's atom; `causes` is None
-    (any cause) or (cause_kind, cause ids or None for any id) pairs of which one must match."""
+    (any cause) or (cause_kind, cause ids or None for any id) pairs of which one must match; the rows set
+    by one of `hidden_facts` (fact ids: the static facts, when hidden) are left out."""
     atom_sets: list[list[int]]
     causes: list[tuple[int, list[int] | None]] | None
     t_from: int | None = None
     t_to: int | None = None
+    hidden_facts: list[int] | None = None
 
 
 class EpisodeIndex:
@@ -73,7 +76,7 @@ class EpisodeIndex:
                 hi = max(lo, self._t_position(sel.t_to, "right"))
         else:
             t_tested = sel.t_from is not None or sel.t_to is not None
-        if not sel.atom_sets and sel.causes is None and not t_tested:
+        if not sel.atom_sets and sel.causes is None and not sel.hidden_facts and not t_tested:
             return range(lo, hi)
         part = slice(lo, hi)
         mask: np.ndarray | None = None
@@ -93,6 +96,10 @@ class EpisodeIndex:
                     term &= _lookup(self.cause_slot[part], ids, self.cause_top, 1)
                 anyof = term if anyof is None else np.logical_or(anyof, term, out=anyof)
             keep(np.zeros(hi - lo, dtype=bool) if anyof is None else anyof)
+        if sel.hidden_facts:
+            set_by_fact = self.cause_kind[part] == FACT_CAUSE
+            set_by_fact &= _lookup(self.cause_slot[part], sel.hidden_facts, self.cause_top, 1)
+            keep(~set_by_fact)
         if t_tested:
             if sel.t_from is not None:
                 keep(self.t[part] >= sel.t_from)

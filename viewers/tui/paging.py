@@ -12,13 +12,16 @@ returns one page of PAGE rows as dicts. Nothing fetches more than the pages aske
   later filter, jump and next change of that episode is answered from it without scanning the rows."""
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
 import pyarrow as pa
 
+from tracelab.store.coordinates import Grid, run_grid
 from tracelab.store.reader import query_readonly
+from tracelab.store.static_facts import FACT_CAUSE
 from tracelab.viewers.tui.episode_index import EpisodeIndex, RowSelection, cached_index, episode_index
 from tracelab.viewers.tui.source import RunSource
 
@@ -82,6 +85,7 @@ class TraceFilter:
     label: str = ""
     rule: str = ""
     atom_id: int | None = None          # one atom (by id), e.g. from the board or the why tree
+    hide_static: bool = False           # leave out the rows of static facts (the trace pane does by default)
 
     def describe(self) -> str:
         parts = [f"episode {self.episode}"]
@@ -111,6 +115,7 @@ class TraceQuery:
     where: str
     params: dict[str, Any] = field(default_factory=dict)
     selection: RowSelection | None = None
+    hidden_where: str | None = None     # the rows the filter keeps but for hiding static facts' (counted)
 
     @classmethod
     def build(cls, source: RunSource, f: TraceFilter) -> "TraceQuery":
@@ -135,12 +140,22 @@ class TraceQuery:
         if f.rule:
             sel.causes = cls._causes(source, f.rule)
             where.append(cls._cause_clause(sel.causes))
-        return cls(" AND ".join(where), params, sel)
+        hidden_where = None
+        if f.hide_static:
+            static = [int(r["fact"]) for r in source.rows(
+                "SELECT fact FROM raw.facts WHERE static ORDER BY fact")]
+            if static:
+                sel.hidden_facts = static
+                set_by_static = f"(cause_kind = {FACT_CAUSE} AND {cls._in('cause_id', static)})"
+                hidden_where = " AND ".join([*where, set_by_static])
+                where.append(f"NOT {set_by_static}")
+        return cls(" AND ".join(where), params, sel, hidden_where)
 
     def on(self, atom_col: str) -> "TraceQuery":
         """The clause over a table whose atom id column is `atom_col` (raw.changes: atom; the changes
         view: atom_id)."""
-        return TraceQuery(self.where.replace("{atom}", atom_col), self.params, self.selection)
+        hidden = None if self.hidden_where is None else self.hidden_where.replace("{atom}", atom_col)
+        return TraceQuery(self.where.replace("{atom}", atom_col), self.params, self.selection, hidden)
 
     @staticmethod
     def _in(column: str, ids: list[int]) -> str:
@@ -188,6 +203,8 @@ class TraceSource:
         self.source, self.filter, self.start = source, flt, start
         self.anchors: np.ndarray | None = None    # seq of every PAGE-th filtered row (warm() makes it)
         self.count = 0
+        self.hidden = 0                            # rows of static facts the filter leaves out
+        self.grid: Grid | None = None              # the run's grid: rows get `place`, e.g. 30@(6,3)
         self.start_row = 0                         # where the table's cursor opens
         self.hints: dict[int, int] = {}
         self._raw: TraceQuery | None = None
@@ -199,11 +216,15 @@ class TraceSource:
         """The filtered row count (the table shows pages near a hint before the anchors exist). With the
         episode's index in memory (episode_index; read by warm()), no scan: count, start and anchors
         come from it."""
+        self.grid = self.source.call(run_grid)
         query = TraceQuery.build(self.source, self.filter)
         self._raw, self._view = query.on("atom"), query.on("atom_id")
         index = cached_index(self.source, self.filter.episode)
         if index is not None and self._can_index(index):
-            return self._prepare_indexed(index)
+            self._prepare_indexed(index)
+            self.hidden = self._count_hidden(index)
+            return self.count
+        self.hidden = self._count_hidden(None)
         params, where_start = dict(self._raw.params), ""
         if self.start is not None:   # t never decreases with seq within an episode: one scan finds both
             column, params["start"] = self.start
@@ -224,6 +245,16 @@ class TraceSource:
         elif self.start is not None and self.count:
             self.start_row = self.count - 1
         return self.count
+
+    def _count_hidden(self, index: EpisodeIndex | None) -> int:
+        """How many rows hiding static facts leaves out (from the episode's index when there is one)."""
+        raw = self._raw
+        if raw is None or raw.hidden_where is None:
+            return 0
+        if index is not None and raw.selection is not None:
+            shown_all = index.positions(dataclasses.replace(raw.selection, hidden_facts=None))
+            return len(shown_all) - self.count
+        return int(self.source.scalar(f"SELECT count(*) FROM raw.changes WHERE {raw.hidden_where}", raw.params))
 
     def _can_index(self, index: EpisodeIndex) -> bool:
         return self.start is None or self.start[0] == "seq" or index.t_sorted
@@ -351,8 +382,12 @@ class TraceSource:
         if hi is not None:
             params["hi"] = hi
             upper = " AND seq < $hi"
-        return self.source.rows(f"SELECT {TRACE_COLUMNS} FROM changes WHERE {self._view.where} "
+        rows = self.source.rows(f"SELECT {TRACE_COLUMNS} FROM changes WHERE {self._view.where} "
                                 f"AND seq >= $lo{upper} ORDER BY seq", params)
+        grid = self.grid
+        for row in rows:    # the node as shown: with its cells' (x, y) where the run declares a grid
+            row["place"] = row["node"] if grid is None else grid.with_coordinates(row["node"])
+        return rows
 
     def _locate(self, condition: str, params: dict[str, Any]) -> int | None:
         """The row index of the first filtered row meeting `condition` (on raw.changes), noted as a hint;

@@ -2,7 +2,9 @@
 lazily by seq (TraceSource). Filters: a time range (`3..9`), atom, label and rule GLOBs; `g` jumps to a
 timestep; `n` / `p` move to the next / previous change of the selected atom; Enter or `w` opens the why
 tree of the selected change; `a` shows only the selected atom's changes; `b` shows or hides the board
-(shown by default when the terminal is at least 100 columns wide). In a training run `]` / `[` move to the
+(shown by default when the terminal is at least 100 columns wide); `s` shows or hides the rows of static
+facts (hidden by default: the status line says how many). Cells read `30@(6,3)` where the run declares a
+grid. In a training run `]` / `[` move to the
 next / previous evaluation game (the filters and the cursor's timestep kept), and a header line says which
 game is shown. On a live run the trace is re-read when the episode grows."""
 from __future__ import annotations
@@ -38,7 +40,7 @@ def _rule(row: dict[str, Any]) -> Text:
 
 TRACE_COLUMNS = [
     Column("t", "t", 5, align="right"),
-    Column("node", "node/edge", 18, render=lambda r: styled_name(r["node"]), flex=2, max_width=34),
+    Column("node", "node/edge", 18, render=lambda r: styled_name(r.get("place", r["node"])), flex=2, max_width=34),
     Column("label", "label", 12, flex=1, max_width=18),
     Column("change", "old → new", 15, render=_change),
     Column("rule", "rule", 22, render=_rule, flex=2, max_width=40),
@@ -72,6 +74,7 @@ class TracePane(Vertical):
         Binding("a", "only_atom", "only atom", show=False),
         Binding("x", "clear", "clear filters", show=False),
         Binding("b", "toggle_board", "board"),
+        Binding("s", "toggle_static", "static facts", show=False),
         # one entry in the key bar for both, so that it fits in 80 columns
         Binding("right_square_bracket", "eval_game(1)", "eval games", key_display="]/["),
         Binding("left_square_bracket", "eval_game(-1)", "previous eval game", show=False),
@@ -91,6 +94,7 @@ class TracePane(Vertical):
         self._goto_t: int | None = None
         self.jumps = 0            # jumps that landed (benchmarks and tests wait on it)
         self._board_choice: bool | None = None   # the user's b, else by width
+        self.hide_static = True                    # the user's s
         self.live_reads = LiveReads(source)
 
     def compose(self) -> ComposeResult:
@@ -179,7 +183,7 @@ class TracePane(Vertical):
             return
         value = lambda name: self.query_one(name, Input).value.strip()  # noqa: E731
         self.filter = TraceFilter(episode, t_from, t_to, value("#tr-atom"), value("#tr-label"),
-                                  value("#tr-rule"), atom_id)
+                                  value("#tr-rule"), atom_id, self.hide_static)
         start = ("seq", keep_seq) if keep_seq is not None else ("t", self._goto_t) if self._goto_t is not None \
             else None
         self._goto_t = None
@@ -229,8 +233,21 @@ class TracePane(Vertical):
             return
         where = f"row {table.cursor + 1:,} of {table.count:,}" if table.count else "no rows"
         row = table.cursor_row
-        atom = f" · {row['atom']}" if row else ""
-        self.query_one("#tr-status", Static).update(f" {self.filter.describe()} · {where}{atom}")
+        atom = f" · {self._place(row['atom'])}" if row else ""
+        hidden = self.trace.hidden if self.trace is not None else 0
+        static = f" · {hidden:,} static hidden (s shows)" if hidden else ""
+        self.query_one("#tr-status", Static).update(f" {self.filter.describe()} · {where}{static}{atom}")
+
+    def _place(self, text: str) -> str:
+        grid = self.trace.grid if self.trace is not None else None
+        return text if grid is None else grid.with_coordinates(text) or text
+
+    def action_toggle_static(self) -> None:
+        """Show or hide the rows of static facts, the cursor kept on its change (or the next one shown)."""
+        self.hide_static = not self.hide_static
+        row = self.table.cursor_row
+        self.apply_filters(keep_seq=None if row is None else int(row["seq"]),
+                           atom_id=None if self.filter is None else self.filter.atom_id)
 
     def on_lazy_table_row_highlighted(self, event: LazyTable.RowHighlighted) -> None:
         event.stop()

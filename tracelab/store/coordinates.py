@@ -1,0 +1,86 @@
+"""Where a run's nodes are: the (x, y) of the cells a run declares, shown beside their ids in traces and
+why trees (`free(30)` reads `free(30@(6,3))`, `leftOf(29,30)` reads `leftOf(29@(5,3),30@(6,3))`).
+
+A run declares a grid in its metadata's config: `"grid": {"width": W, "height": H}` says that the nodes
+named by the whole numbers 0 .. W·H-1 are the cells of a W x H grid, cell id = y·W + x (x right, y up).
+The game's commands (play, train, eval, experiment) write it from the scenario (grid_declaration). Game
+runs written before the declaration existed carry the scenario's TOML in their config instead; its width
+and height are read as the same declaration. A run with neither (a reasoning run) has no coordinates:
+its nodes read as their ids, as before."""
+from __future__ import annotations
+
+import json
+import re
+import tomllib
+from dataclasses import dataclass
+from typing import Any
+
+GRID_KEY = "grid"
+_MAX_CELLS = 2**31 - 1            # cell ids are int32 node names
+_SCENARIO_KEYS = ("scenario", "scenario_toml")   # where play / train, eval recorded the scenario's TOML
+_CELL_ARG = re.compile(r"(?<=[(,])(\d+)(?=[,)])")  # a whole-number argument of an atom or an edge
+
+
+@dataclass(frozen=True)
+class Grid:
+    width: int
+    height: int
+
+    def xy(self, node: str) -> tuple[int, int] | None:
+        """(x, y) of a node named by a cell id of this grid, else None."""
+        if not node.isdigit():
+            return None
+        cell = int(node)
+        if cell >= self.width * self.height:
+            return None
+        return cell % self.width, cell // self.width
+
+    def node_text(self, node: str) -> str:
+        """`30` -> `30@(6,3)`; other names unchanged."""
+        xy = self.xy(node)
+        return node if xy is None else f"{node}@({xy[0]},{xy[1]})"
+
+    def with_coordinates(self, text: str | None) -> str | None:
+        """An atom (`free(30)`), an edge (`(29,30)`) or a node (`30`) with each cell's (x, y) after its id."""
+        if text is None:
+            return None
+        if "(" not in text:
+            return self.node_text(text)
+        return _CELL_ARG.sub(lambda m: self.node_text(m.group(1)), text)
+
+
+def grid_declaration(width: int, height: int) -> dict[str, dict[str, int]]:
+    """The config entry by which a run declares its grid (merge it into the run's config)."""
+    return {GRID_KEY: {"width": int(width), "height": int(height)}}
+
+
+def _checked(width: Any, height: Any) -> Grid | None:
+    ok = all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in (width, height))
+    return Grid(width, height) if ok and width * height <= _MAX_CELLS else None
+
+
+def grid_from_config(config: dict[str, Any]) -> Grid | None:
+    """The grid a run's config declares, or None (nothing declared, or a declaration that does not hold
+    two positive sizes: then the run reads as ids, never as wrong places)."""
+    declared = config.get(GRID_KEY)
+    if isinstance(declared, dict):
+        return _checked(declared.get("width"), declared.get("height"))
+    for key in _SCENARIO_KEYS:   # game runs written before the declaration
+        text = config.get(key)
+        if isinstance(text, str):
+            try:
+                scenario = tomllib.loads(text)
+            except tomllib.TOMLDecodeError:
+                return None
+            return _checked(scenario.get("width"), scenario.get("height"))
+    return None
+
+
+def run_grid(con: Any) -> Grid | None:
+    """The grid the run open on `con` (tracelab.store.open_run) declares, or None."""
+    rows = con.execute("SELECT config FROM raw.run").fetchall()
+    try:
+        config = json.loads(rows[0][0]) if rows and rows[0][0] else {}
+    except (TypeError, ValueError):
+        return None
+    return grid_from_config(config) if isinstance(config, dict) else None
