@@ -12,7 +12,9 @@ resolves what the scanner does not and gives the located error for what XML refu
   a comment, `]]>` in text, text outside the root element, end tags that do not match, an end tag with
   attributes;
 - anything expat would turn into other characters: a reference (`&`), a tab or line break in an
-  attribute value (XML makes each a space), a carriage return in a <data> value (XML makes line ends LF);
+  attribute value of a node, edge, data or graph element (XML makes each a space; in other elements,
+  such as the root's multi-line xsi:schemaLocation, nothing reads it), a carriage return in a <data>
+  value (XML makes line ends LF);
 - a DOCTYPE or CDATA section, a processing instruction named xml... (the XML declaration is checked by
   the caller, graph.py), elements inside <data>, a <node> without an id, an <edge> without source or
   target, elements inside a <key> that the graph reads (nodes, edges, data, keys, graphs).
@@ -59,24 +61,24 @@ W_TRUE, W_FALSE, W_ONE, W_ZERO = (_packed(w) for w in (b"true", b"false", b"1", 
 _EDGEDEFAULT = np.frombuffer(b"edgedefault", np.uint8).copy()
 
 
-def _byte_table(**classes: bytes) -> np.ndarray:
-    """A 256-entry class table: each keyword's value lists the bytes of class int(keyword[1:])."""
+def _byte_table(classes: dict[int, bytes]) -> np.ndarray:
+    """A 256-entry table of byte classes: the bytes listed under a class have it, all others 0."""
     table = np.zeros(256, np.uint8)
-    for name, members in classes.items():
-        table[np.frombuffer(members, np.uint8)] = int(name[1:])
+    for cls, members in classes.items():
+        table[np.frombuffer(members, np.uint8)] = cls
     return table
 
 
 _LETTERS = bytes(range(65, 91)) + bytes(range(97, 123))
 # XML names in ASCII: 1 may start a name, 2 may continue one; any other byte (non-ASCII too) ends it
-_NAME_CLASS = _byte_table(c1=_LETTERS + b"_:", c2=b"0123456789.-")
+_NAME_CLASS = _byte_table({1: _LETTERS + b"_:", 2: b"0123456789.-"})
 # in an attribute value: 1 a quote (the closing one, or the other kind), 2 leave it to expat ('<' is an
-# error, '&' a reference, tab / LF / CR become spaces)
-_VALUE_CLASS = _byte_table(c1=b"\"'", c2=b"<&\t\n\r")
+# error, '&' a reference), 3 tab / LF / CR (XML makes each a space: left to expat where the graph reads it)
+_VALUE_CLASS = _byte_table({1: b"\"'", 2: b"<&", 3: b"\t\n\r"})
 # in text: 1 '<' ends it, 2 leave it to expat ('&' a reference, CR a line end made LF), 3 ']' (']]>')
-_TEXT_CLASS = _byte_table(c1=b"<", c2=b"&\r", c3=b"]")
+_TEXT_CLASS = _byte_table({1: b"<", 2: b"&\r", 3: b"]"})
 # bytes that need a closer look in the character check: control characters but tab / LF / CR, non-ASCII
-_CHAR_CHECK = _byte_table(c1=bytes(range(0, 9)) + b"\x0b\x0c" + bytes(range(14, 32)) + bytes(range(128, 256)))
+_CHAR_CHECK = _byte_table({1: bytes(range(0, 9)) + b"\x0b\x0c" + bytes(range(14, 32)) + bytes(range(128, 256))})
 
 
 @scan_jit
@@ -514,8 +516,8 @@ def scan(b, start, node_tab, node_off, pool, edges, data, key_tab, key_spans, ke
         # attributes up to '>' or '/>', each after white space, each name once, values in quotes
         j = e
         n_attrs = 0
-        a_id_s = -1
-        a_id_e = -1
+        a_val_s = -1  # the value the element is read by: a node's id, a data's key, a graph's edgedefault
+        a_val_e = -1
         a_src_s = -1
         a_src_e = -1
         a_dst_s = -1
@@ -553,6 +555,7 @@ def scan(b, start, node_tab, node_off, pool, edges, data, key_tab, key_spans, ke
             q = b[j]
             vs = j + 1
             j = vs
+            spaced = False  # a tab or line break: the value XML gives differs from the bytes
             while j < n:
                 v = _VALUE_CLASS[b[j]]
                 if v != 0:
@@ -560,16 +563,17 @@ def scan(b, start, node_tab, node_off, pool, edges, data, key_tab, key_spans, ke
                         break
                     if v == 2:
                         return SCAN_UNSUPPORTED, i
+                    spaced |= v == 3
                 j += 1
-            if j >= n:
+            if j >= n or (spaced and kind != _OTHER and kind != _KEY):  # (keys are read by expat)
                 return SCAN_UNSUPPORTED, i
             ve = j
             j += 1
             if kind == _NODE or kind == _DATA or kind == _EDGE:
                 an = _pack(b, ns, ne, False)
                 if (kind == _NODE and an == W_ID) or (kind == _DATA and an == W_KEY):
-                    a_id_s = vs
-                    a_id_e = ve
+                    a_val_s = vs
+                    a_val_e = ve
                 elif kind == _EDGE:
                     if an == W_SOURCE:
                         a_src_s = vs
@@ -581,8 +585,8 @@ def scan(b, start, node_tab, node_off, pool, edges, data, key_tab, key_spans, ke
                         a_dir_s = vs
                         a_dir_e = ve
             elif kind == _GRAPH and _is_word(b, ns, ne, _EDGEDEFAULT):
-                a_id_s = vs
-                a_id_e = ve
+                a_val_s = vs
+                a_val_e = ve
         empty = b[j] == 47
         if empty:
             j += 1
@@ -605,11 +609,11 @@ def scan(b, start, node_tab, node_off, pool, edges, data, key_tab, key_spans, ke
             i = tag_end
             continue
         if kind == _NODE:
-            if a_id_s < 0 or cur_kind >= 0 or n_nodes + 1 >= node_off.shape[0]:
+            if a_val_s < 0 or cur_kind >= 0 or n_nodes + 1 >= node_off.shape[0]:
                 return SCAN_UNSUPPORTED, i
             if 2 * (n_nodes + 1) > node_tab.shape[0]:
                 return SCAN_GROW, i
-            idx = _intern_node(b, a_id_s, a_id_e, node_tab, node_off, pool, n_nodes)
+            idx = _intern_node(b, a_val_s, a_val_e, node_tab, node_off, pool, n_nodes)
             if idx == n_nodes:
                 n_nodes += 1
             if not empty:
@@ -644,7 +648,7 @@ def scan(b, start, node_tab, node_off, pool, edges, data, key_tab, key_spans, ke
                 cur_elem = n_edges
             n_edges += 1
         elif kind == _DATA:
-            if a_id_s < 0:
+            if a_val_s < 0:
                 return SCAN_UNSUPPORTED, i
             ts = tag_end
             te = tag_end
@@ -668,7 +672,7 @@ def scan(b, start, node_tab, node_off, pool, edges, data, key_tab, key_spans, ke
             if cur_kind >= 0:  # data of the graph or the document itself is not a fact
                 if n_data == data.shape[0] or n_keys == key_spans.shape[0] or 2 * (n_keys + 1) > key_tab.shape[0]:
                     return SCAN_UNSUPPORTED, i
-                kid = _intern(b, a_id_s, a_id_e, key_tab, key_spans, n_keys)
+                kid = _intern(b, a_val_s, a_val_e, key_tab, key_spans, n_keys)
                 if kid == n_keys:
                     n_keys += 1
                 data[n_data, D_KIND] = cur_kind
@@ -692,8 +696,8 @@ def scan(b, start, node_tab, node_off, pool, edges, data, key_tab, key_spans, ke
             if graph_tag[G_TAG] >= 0:  # a second (or nested) graph
                 return SCAN_UNSUPPORTED, i
             graph_tag[G_TAG] = i
-            graph_tag[G_EDGEDEFAULT_S] = a_id_s
-            graph_tag[G_EDGEDEFAULT_E] = a_id_e
+            graph_tag[G_EDGEDEFAULT_S] = a_val_s
+            graph_tag[G_EDGEDEFAULT_E] = a_val_e
         i = tag_end
     counts[C_NODES] = n_nodes
     counts[C_EDGES] = n_edges

@@ -56,6 +56,9 @@ PROLOG_MISC = _plain(b"", b"\n", b"<!-- written by hand -->\n", b"<?tool run?>\n
     b'<!DOCTYPE graphml [<!ATTLIST node id CDATA "dflt">]>', b'<!DOCTYPE graphml [<!ELEMENT graphml ANY>]>',
     b'<!DOCTYPE graphml [<!ENTITY % p "x">]>', b"junk", b"\x0c")
 PREFIXES = ("", "", "g:")
+ROOT_ATTRIBUTES = _plain(b"", b"", b'\n  xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance"\n'
+                         b'  xsi:schemaLocation="http://graphml.graphdrawing.org/xmlns\n\t graphml.xsd"') + _other(
+    b' xmlns="a" xmlns="b"', b' x="&#10;"')
 KEY_TYPES = _plain(b"double", b"boolean", b"string", b"int") + _other(b"bogus")
 KEY_DEFAULTS = _plain(b"", b"", b"<default>0.5</default>", b"<default>true</default>", b"<default/>",
                       b"<default>[0.2,0.4]</default>", b"<desc>hp</desc><default> 1 </default>",
@@ -107,7 +110,9 @@ def graphml_documents(draw: st.DrawFn) -> Doc:
     plain = all([_pick(draw, BOMS, parts), _pick(draw, DECLARATIONS, parts), _pick(draw, PROLOG_MISC, parts)])
     p = draw(st.sampled_from(PREFIXES)).encode()
     xmlns = b' xmlns:g="http://graphml.graphdrawing.org/xmlns"' if p else b' xmlns="http://graphml.graphdrawing.org/xmlns"'
-    parts.append(b"<" + p + b"graphml" + xmlns + b">\n")
+    parts.append(b"<" + p + b"graphml" + xmlns)
+    plain &= _pick(draw, ROOT_ATTRIBUTES, parts)
+    parts.append(b">\n")
     key_ids = [b"k0", b"k1", b"k2"]
     for kid in key_ids[:draw(st.integers(0, 3))]:
         domain = draw(st.sampled_from([b"node", b"edge", b"all"]))
@@ -315,6 +320,9 @@ READ = [  # (case, document, node ids, values, whether the scanner reads it itse
     ("an external DTD (never read)", doc(node("a"), '<!DOCTYPE graphml SYSTEM "http://x/graphml.dtd">'), ["a"],
      [], False),
     ("names with prefixes, dots and dashes", doc('<x:node id="a"><x.y-z/></x:node>'), ["a"], [], True),
+    ("line breaks in attributes nothing reads", doc('<node id="a"><port name="p\n\tq"/></node>').replace(
+        b"<graphml>", b'<graphml xsi:schemaLocation="http://graphml.graphdrawing.org/xmlns\n  graphml.xsd">'),
+     ["a"], [], True),
     ("C1 controls, U+FFFD, astral characters", doc(node("\x85\ufffd\U0010ffff", "\x80")), ["\x85\ufffd\U0010ffff"],
      ["\x80"], True),
 ]
