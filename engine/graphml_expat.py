@@ -5,8 +5,9 @@ names line and column in its errors, and refuses hostile XML:
   (the external DTD subset included) are never read;
 - a DTD may not give attributes default values: one default, copied into every element that lacks the
   attribute, would make a small file cost as much as a huge one;
-- a reference to an entity that is not declared is an error, also where expat would pass over it (a
-  document whose external DTD it does not read).
+- a reference to an entity that is not declared is an error, also in the text of a document whose
+  external DTD expat does not read (expat would pass over it; inside an attribute value it still does,
+  as empty text, and pyexpat has no handler that hears of it).
 It is also the definition of what the scanner reads: the scanner hands its <key> elements here."""
 from __future__ import annotations
 
