@@ -15,8 +15,8 @@ import numpy as np
 
 from . import graphml_scan as S
 from .errors import ProgramCheckError
-from .graphml_expat import read_graphml_expat
-from .graphml_raw import GraphKey, RawGraph
+from .graphml_expat import read_graphml_expat, read_key_element
+from .graphml_raw import GraphKey, RawGraph, boolean_of_text
 from .memory import release_freed_memory
 from .parser import PREDICATE_RE
 from .program import Fact, Literal, SourceLoc, Term, constant_text, unwritable_constant
@@ -26,12 +26,19 @@ __all__ = ["Graph", "load_graphml", "read_raw_graphml"]
 
 _NUM = r"([0-9]+(?:\.[0-9]+)?|\.[0-9]+)"
 _BOUND_RE = re.compile(rf"\s*(?:\[\s*{_NUM}\s*,\s*{_NUM}\s*\]|{_NUM}\s*,\s*{_NUM})\s*")
-_ATTR_RE = re.compile(r"""([\w.:-]+)\s*=\s*(["'])(.*?)\2""", re.S)
-_DEFAULT_RE = re.compile(r"<(?:[\w.-]+:)?default\b[^>]*>(.*?)</(?:[\w.-]+:)?default\s*>", re.S)
-_ENCODING_RE = re.compile(rb"""^(?:\xef\xbb\xbf)?<\?xml[^>]*?encoding\s*=\s*["']([^"']*)["']""")
 # a GraphML file is read whole into memory: refused past this (the million-edge graph of `tracelab bench
 # engine` is ~75 MB), and never waited on (a FIFO is refused)
 GRAPH_FILE_CAP = 4 << 30
+_UTF8_BOM = b"\xef\xbb\xbf"
+_UTF16_BOMS = (b"\xff\xfe", b"\xfe\xff")
+_S, _EQ = rb"[ \t\r\n]", rb"[ \t\r\n]*=[ \t\r\n]*"
+# the XML declaration as XML 1.0 writes it (expat takes more, and decides on those files itself)
+_XML_DECL_RE = re.compile(
+    rb"<\?xml" + _S + rb"+version" + _EQ + rb"""(["'])1\.[0-9]+\1"""
+    rb"(?:" + _S + rb"+encoding" + _EQ + rb"""(["'])([A-Za-z][A-Za-z0-9._-]*)\2)?"""
+    rb"(?:" + _S + rb"+standalone" + _EQ + rb"""(["'])(?:yes|no)\4)?""" + _S + rb"*\?>")
+# declared encodings in which expat reads ASCII bytes as ASCII (only "utf-8" reads UTF-8 as UTF-8)
+_ASCII_ENCODINGS = frozenset((b"us-ascii", b"ascii", b"utf8", b"utf_8", b"iso-8859-1", b"latin-1", b"latin1"))
 
 
 @dataclass
@@ -154,64 +161,68 @@ def read_raw_graphml(path: str | os.PathLike[str]) -> RawGraph:
 
 
 def _scan(file: str, data: bytes) -> RawGraph | None:
-    """The compiled scanner's reading of `data`, or None when the file leaves its subset."""
-    if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
+    """The compiled scanner's reading of `data`, or None when the file leaves its subset (graphml_scan.py)."""
+    start = _scan_start(data)
+    if start is None:
         return None
-    m = _ENCODING_RE.match(data[:200])
-    if m is not None and m.group(1).lower() not in (b"utf-8", b"utf8", b"us-ascii", b"ascii"):
-        return None
+    if b"\r" in data and data.count(b"\r") != data.count(b"\r\n"):
+        return None  # a lone CR ends a line for expat: lines are counted one way, at LF
     b = np.frombuffer(data, np.uint8)
-    status, scanned = S.scan_graphml(b)
+    status, scanned = S.scan_graphml(b, start)
     if status != S.SCAN_OK:
         return None
-    key_spans, key_elems = scanned["key_spans"], scanned["key_elems"]
-    graph_tag, d = scanned["graph_tag"], scanned["data"]
-    try:
-        nodes = _node_ids(scanned["pool"], scanned["node_off"])
-        data_keys = [data[s:e].decode("utf-8") for s, e in key_spans.tolist()]
-        keys: dict[str, GraphKey] = {}
-        for s, e in key_elems.tolist():
-            element = data[s:e].decode("utf-8")
-            if "&" in element:
-                return None
-            start_tag = element[:element.index(">")]
-            attrs = {m.group(1): m.group(3) for m in _ATTR_RE.finditer(start_tag)}
-            kid = attrs.get("id")
-            if kid is None:
-                return None
-            keys[kid] = GraphKey.of(kid, attrs, lambda msg: ProgramCheckError(msg, file))
-            default = _DEFAULT_RE.search(element)
-            if default is not None:
-                keys[kid].default = default.group(1)
-        undirected = False
-        if graph_tag[0] >= 0:
-            tag = data[graph_tag[0]:graph_tag[1]]
-            m = re.search(rb"""\sedgedefault\s*=\s*["']([^"']*)["']""", tag)
-            undirected = m is not None and m.group(1) == b"undirected"
-    except UnicodeDecodeError:
-        return None
+    keys: dict[str, GraphKey] = {}
+    for s, e in scanned["key_elems"].tolist():  # few: each read by expat, as the whole file would be
+        key = read_key_element(data[s:e], file)
+        if key is None:
+            return None
+        keys[key.id] = key
+    nodes = _node_ids(scanned["pool"], scanned["node_off"])
+    data_keys = [data[s:e].decode("utf-8") for s, e in scanned["key_spans"].tolist()]
+    s, e = scanned["graph_tag"][S.G_EDGEDEFAULT_S:].tolist()
+    undirected = s >= 0 and data[s:e] == b"undirected"
+    d = scanned["data"]
 
-    def place(i: int) -> tuple[int, int]:
+    def text(i: int) -> str:
+        return data[int(d[i, S.D_START]):int(d[i, S.D_END])].decode("utf-8")
+
+    def place(i: int) -> tuple[int, int]:  # as expat counts: lines at LF, columns in characters
         pos = int(d[i, S.D_POS])
         line_start = data.rfind(b"\n", 0, pos) + 1
-        return data.count(b"\n", 0, pos) + 1, pos - line_start + 1
+        return data.count(b"\n", 0, pos) + 1, len(data[line_start:pos].decode("utf-8")) + 1
 
+    booleans = scanned["booleans"]
+    for i in np.flatnonzero(booleans == S.BOOLEAN_UNKNOWN).tolist():
+        booleans[i] = boolean_of_text(text(i))
     return RawGraph(
         file=file, nodes=nodes, edges=scanned["edges"], graph_undirected=undirected, keys=keys,
-        data=d[:, S.D_KIND:S.D_KEY + 1], data_keys=data_keys,
-        text=lambda i: data[int(d[i, S.D_START]):int(d[i, S.D_END])].decode("utf-8"), place=place,
-        numbers=scanned["numbers"], booleans=scanned["booleans"])
+        data=d[:, S.D_KIND:S.D_KEY + 1], data_keys=data_keys, text=text, place=place,
+        numbers=scanned["numbers"], booleans=booleans)
+
+
+def _scan_start(data: bytes) -> int | None:
+    """Where the scanner starts: past a UTF-8 byte order mark and the XML declaration. None when the
+    file is in an encoding the scanner does not read, or declares itself in a way it does not know."""
+    if data[:2] in _UTF16_BOMS:
+        return None
+    start = len(_UTF8_BOM) if data.startswith(_UTF8_BOM) else 0
+    if not data.startswith(b"<?xml", start) or data[start + 5:start + 6] not in (b" ", b"\t", b"\r", b"\n"):
+        return start  # no declaration (a PI named xml... is left to expat by the scanner)
+    m = _XML_DECL_RE.match(data, start)
+    if m is None:
+        return None
+    encoding = (m.group(3) or b"utf-8").lower()
+    if encoding != b"utf-8" and not (encoding in _ASCII_ENCODINGS and data.isascii()):
+        return None
+    return m.end()
 
 
 def _node_ids(pool: np.ndarray, off: np.ndarray) -> list[str]:
-    """Node id i is pool[off[i]:off[i+1]] (UTF-8): decoded at once, split at inserted line breaks (an id
-    holding a line break is cut apart per id, so that the check of node ids names it whole)."""
+    """Node id i is pool[off[i]:off[i+1]] (UTF-8): decoded at once, split at inserted line breaks (the
+    scanner takes no attribute value holding one: XML makes a line break there a space)."""
     n = len(off) - 1
     if n <= 0:
         return []
-    if (pool == 10).any():
-        raw, starts = pool.tobytes(), off.tolist()
-        return [raw[s:e].decode("utf-8") for s, e in zip(starts, starts[1:])]
     out = np.empty(len(pool) + n - 1, np.uint8)
     breaks = off[1:-1] + np.arange(n - 1)  # where the line breaks go, between ids
     keep = np.ones(len(out), np.bool_)

@@ -1,7 +1,14 @@
 """The complete GraphML reader: expat with Python handlers, for every file the compiled scanner
 (graphml_scan.py) does not take. Slower (a Python call per element) but it reads any well-formed XML,
-names line and column in its errors, and refuses hostile XML: a DTD may not declare entities (no
-"billion laughs", no external entities) and external entity references are never resolved."""
+names line and column in its errors, and refuses hostile XML:
+- a DTD may not declare entities (no "billion laughs", no external entities), and external entities
+  (the external DTD subset included) are never read;
+- a DTD may not give attributes default values: one default, copied into every element that lacks the
+  attribute, would make a small file cost as much as a huge one;
+- a reference to an entity that is not declared is an error, also in the text of a document whose
+  external DTD expat does not read (expat would pass over it; inside an attribute value it still does,
+  as empty text, and pyexpat has no handler that hears of it).
+It is also the definition of what the scanner reads: the scanner hands its <key> elements here."""
 from __future__ import annotations
 
 from typing import Any
@@ -10,22 +17,38 @@ from xml.parsers import expat
 import numpy as np
 
 from .errors import ProgramCheckError
-from .graphml_raw import GraphKey, RawGraph
+from .graphml_raw import GraphKey, RawGraph, boolean_of_text
 
 _CHUNK = 1 << 20
 
 
 def read_graphml_expat(file: str) -> RawGraph:
     reader = _Reader(file)
+    p = reader.parser
     try:
         with open(file, "rb") as f:
             while chunk := f.read(_CHUNK):
-                reader.parser.Parse(chunk, False)
-            reader.parser.Parse(b"", True)
+                p.Parse(chunk, False)
+            p.Parse(b"", True)
     except expat.ExpatError as e:
         raise ProgramCheckError(f"not a readable GraphML file: {expat.ErrorString(e.code)}", file,
                                 e.lineno, e.offset + 1) from None
+    except (LookupError, ValueError) as e:  # a declared encoding that Python's codecs cannot give expat
+        raise ProgramCheckError(f"not a readable GraphML file: the encoding it declares cannot be read ({e})",
+                                file, p.CurrentLineNumber, p.CurrentColumnNumber + 1) from None
     return reader.raw()
+
+
+def read_key_element(element: bytes, file: str) -> GraphKey | None:
+    """The GraphML <key> element `element` (UTF-8, nothing in it that declares or names nodes, edges,
+    data or keys) read as a whole document reads it, or None when it is not one key that reads without
+    error (the caller then reads the whole file here, which locates the error)."""
+    reader = _Reader(file)
+    try:
+        reader.parser.Parse(element, True)
+    except (expat.ExpatError, ProgramCheckError):
+        return None
+    return next(iter(reader.keys.values())) if len(reader.keys) == 1 else None
 
 
 class _Reader:
@@ -42,6 +65,8 @@ class _Reader:
         p.CharacterDataHandler = self.text
         p.EntityDeclHandler = self.refuse_entity
         p.ExternalEntityRefHandler = self.refuse_external
+        p.AttlistDeclHandler = self.refuse_attribute_default
+        p.SkippedEntityHandler = self.refuse_skipped_entity
         self.parser = p
         self.keys: dict[str, GraphKey] = {}
         self.node_ids: dict[str, int] = {}
@@ -69,6 +94,17 @@ class _Reader:
 
     def refuse_external(self, *_: Any) -> int:
         raise self.fail("the document refers to an external entity: refused")
+
+    def refuse_attribute_default(self, element: str, attribute: str, _type: str, default: str | None,
+                                 _required: bool) -> None:
+        if default is not None:
+            raise self.fail(f"the document's DTD gives attribute '{attribute}' of <{element}> a default value: "
+                            "attribute defaults are refused (one default copied into every element can make "
+                            "a small file as costly to read as a huge one)")
+
+    def refuse_skipped_entity(self, name: str, _is_parameter_entity: bool) -> None:
+        raise self.fail(f"the document refers to the entity '{name}', which it does not declare (an "
+                        "external DTD is never read): refused")
 
     def node(self, name: str) -> int:
         nid = self.node_ids.get(name)
@@ -145,7 +181,7 @@ class _Reader:
             graph_undirected=self.graph_undirected, keys=self.keys, data=data, data_keys=key_ids,
             text=texts.__getitem__, place=self.places.__getitem__,
             numbers=np.array([_number(x) for x in texts], np.float64),
-            booleans=np.array([_boolean(x) for x in texts], np.int8))
+            booleans=np.array([boolean_of_text(x) for x in texts], np.int8))
 
 
 def _number(text: str) -> float:
@@ -153,8 +189,3 @@ def _number(text: str) -> float:
         return float(text)
     except ValueError:
         return float("nan")
-
-
-def _boolean(text: str) -> int:
-    t = text.strip().lower()
-    return 1 if t in ("true", "1") else 0 if t in ("false", "0") else -1

@@ -41,3 +41,10 @@ class RawGraph:
     place: Callable[[int], tuple[int, int]]  # (line, column) of data value i
     numbers: np.ndarray  # float64 [D]: each value as a number, NaN if it is not one
     booleans: np.ndarray  # int8 [D]: 1 true / 0 false (also "1" / "0"), -1 neither
+
+
+def boolean_of_text(text: str) -> int:
+    """A <data> value as a boolean: 1 true / 0 false (case-insensitive, "1" / "0" too, spaces around), -1
+    neither. Both readers read booleans this way (the compiled scanner for ASCII values, in bulk)."""
+    t = text.strip().lower()
+    return 1 if t in ("true", "1") else 0 if t in ("false", "0") else -1

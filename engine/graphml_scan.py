@@ -2,11 +2,23 @@
 edges and their <data> values, interns node ids and key ids in hash tables and parses numbers and
 booleans, so that a million-edge file costs well under a second, not a Python call per element.
 
-It reads a subset of XML and says when a file leaves it (status SCAN_UNSUPPORTED and the byte offset):
-a DOCTYPE or CDATA section, an entity or character reference (`&`) inside a tag or a value, elements
-inside <data>, a <node> without an id, an <edge> without source or target, mismatched tags. The caller
-then reads the file with the complete (slower) expat reader, which also gives the located errors and
-refuses entity declarations. Within the subset there is nothing to expand, so nothing hostile to do.
+It reads a subset of XML 1.0, and within it reads exactly what expat reads (the expat reader,
+graphml_expat.py, is the definition; tests/test_graphml_differential.py compares the two). Whatever leaves
+the subset makes it stop with status SCAN_UNSUPPORTED, and the caller reads the file with expat, which
+resolves what the scanner does not and gives the located error for what XML refuses. Left to expat:
+- anything expat would refuse: a character XML does not allow (a control character, invalid UTF-8,
+  U+FFFE / U+FFFF), a duplicate attribute, a name that is not an XML name (non-ASCII names included),
+  an attribute without quotes or without white space before it, `<` in an attribute value, `--` inside
+  a comment, `]]>` in text, text outside the root element, end tags that do not match, an end tag with
+  attributes;
+- anything expat would turn into other characters: a reference (`&`), a tab or line break in an
+  attribute value of a node, edge, data or graph element (XML makes each a space; in other elements,
+  such as the root's multi-line xsi:schemaLocation, nothing reads it), a carriage return in a <data>
+  value (XML makes line ends LF);
+- a DOCTYPE or CDATA section, a processing instruction named xml... (the XML declaration is checked by
+  the caller, graph.py), elements inside <data>, a <node> without an id, an <edge> without source or
+  target, elements inside a <key> that the graph reads (nodes, edges, data, keys, graphs).
+Within the subset there is nothing to expand, so nothing hostile to do.
 """
 from __future__ import annotations
 
@@ -24,10 +36,17 @@ E_SRC, E_DST, E_DIRECTED = 0, 1, 2
 # counts written by scan: nodes, edges, data values, key ids, key elements
 C_NODES, C_EDGES, C_DATA, C_KEYS, C_KEY_ELEMS = 0, 1, 2, 3, 4
 MAX_DEPTH = 256
+MAX_ATTRS = 64  # attributes of one tag the duplicate check holds; a tag with more is left to expat
+# graph_tag: offset of the <graph> tag (-1 none), then its edgedefault value (start, end; -1 none)
+G_TAG, G_EDGEDEFAULT_S, G_EDGEDEFAULT_E = 0, 1, 2
+BOOLEAN_UNKNOWN = -2  # a value with non-ASCII bytes: its boolean is decided in Python (str.strip's spaces)
 
 # no reference counting (`_nrt=False`): each array passed to a helper would cost atomic operations per
 # call, which made a tag cost a microsecond; every buffer is allocated by the caller (`scan_graphml`)
 scan_jit = njit(cache=True, _nrt=False)
+# small helpers called per tag or per byte, inlined in numba's IR: LLVM left some as calls (the checks
+# XML needs made `scan` 15-20% slower until they were inlined; inlined, it is ~5% faster than before them)
+scan_inline = njit(cache=True, _nrt=False, inline="always")
 _POW10 = np.array([float(f"1e{k}") for k in range(23)])  # exact doubles
 
 
@@ -42,9 +61,30 @@ def _packed(word: bytes) -> int:
 W_NODE, W_EDGE, W_DATA, W_KEY, W_GRAPH = (_packed(w) for w in (b"node", b"edge", b"data", b"key", b"graph"))
 W_ID, W_SOURCE, W_TARGET, W_DIRECTED = (_packed(w) for w in (b"id", b"source", b"target", b"directed"))
 W_TRUE, W_FALSE, W_ONE, W_ZERO = (_packed(w) for w in (b"true", b"false", b"1", b"0"))
+_EDGEDEFAULT = np.frombuffer(b"edgedefault", np.uint8).copy()
 
 
-@scan_jit
+def _byte_table(classes: dict[int, bytes]) -> np.ndarray:
+    """A 256-entry table of byte classes: the bytes listed under a class have it, all others 0."""
+    table = np.zeros(256, np.uint8)
+    for cls, members in classes.items():
+        table[np.frombuffer(members, np.uint8)] = cls
+    return table
+
+
+_LETTERS = bytes(range(65, 91)) + bytes(range(97, 123))
+# XML names in ASCII: 1 may start a name, 2 may continue one; any other byte (non-ASCII too) ends it
+_NAME_CLASS = _byte_table({1: _LETTERS + b"_:", 2: b"0123456789.-"})
+# in an attribute value: 1 a quote (the closing one, or the other kind), 2 leave it to expat ('<' is an
+# error, '&' a reference), 3 tab / LF / CR (XML makes each a space: left to expat where the graph reads it)
+_VALUE_CLASS = _byte_table({1: b"\"'", 2: b"<&", 3: b"\t\n\r"})
+# in text: 1 '<' ends it, 2 leave it to expat ('&' a reference, CR a line end made LF), 3 ']' (']]>')
+_TEXT_CLASS = _byte_table({1: b"<", 2: b"&\r", 3: b"]"})
+# bytes that need a closer look in the character check: control characters but tab / LF / CR, non-ASCII
+_CHAR_CHECK = _byte_table({1: bytes(range(0, 9)) + b"\x0b\x0c" + bytes(range(14, 32)) + bytes(range(128, 256))})
+
+
+@scan_inline
 def _pack(b, s, e, lower):
     """b[s:e] as one integer (-1 if longer than 8 bytes), lower-cased if `lower`."""
     if e - s > 8 or e < s:
@@ -58,7 +98,7 @@ def _pack(b, s, e, lower):
     return v
 
 
-@scan_jit
+@scan_inline
 def _local_name(b, s, e):
     """The packed name b[s:e] without a namespace prefix."""
     for k in range(e - 1, s - 1, -1):
@@ -75,7 +115,7 @@ def _hash(b, s, e):
     return h
 
 
-@scan_jit
+@scan_inline
 def _same(b, s1, e1, s2, e2):
     if e1 - s1 != e2 - s2:
         return False
@@ -149,7 +189,7 @@ def _intern_node(b, s, e, table, off, pool, n):
     return n
 
 
-@scan_jit
+@scan_inline
 def _is_space(c):
     return c == 32 or c == 9 or c == 10 or c == 13
 
@@ -166,6 +206,75 @@ def _skip_past(b, i, c0, c1, c2):
                 return i + 3
         i += 1
     return -1
+
+
+@scan_jit
+def _utf8_char_length(b, i, n):
+    """Length of the UTF-8 sequence starting at b[i] (a byte >= 0x80) when it encodes a character XML 1.0
+    allows, else 0 (a stray or overlong byte, a surrogate, past U+10FFFF, U+FFFE, U+FFFF)."""
+    c = b[i]
+    if c < 0xC2 or c > 0xF4:
+        return 0
+    if c < 0xE0:
+        return 2 if i + 1 < n and 0x80 <= b[i + 1] <= 0xBF else 0
+    if c < 0xF0:
+        if i + 2 >= n:
+            return 0
+        c1, c2 = b[i + 1], b[i + 2]
+        lo = 0xA0 if c == 0xE0 else 0x80
+        hi = 0x9F if c == 0xED else 0xBF
+        if not (lo <= c1 <= hi and 0x80 <= c2 <= 0xBF):
+            return 0
+        if c == 0xEF and c1 == 0xBF and c2 >= 0xBE:
+            return 0
+        return 3
+    if i + 3 >= n:
+        return 0
+    lo = 0x90 if c == 0xF0 else 0x80
+    hi = 0x8F if c == 0xF4 else 0xBF
+    if not (lo <= b[i + 1] <= hi and 0x80 <= b[i + 2] <= 0xBF and 0x80 <= b[i + 3] <= 0xBF):
+        return 0
+    return 4
+
+
+@scan_jit
+def _check_chars(b, i, end):
+    """The characters from b[i] up to `end` (the last may run past it): (the offset after them, -1), or
+    (i, the offset of the first one XML does not allow)."""
+    n = b.shape[0]
+    while i < end:
+        c = b[i]
+        if _CHAR_CHECK[c] == 0:
+            i += 1
+        elif c < 128:
+            return i, i
+        else:
+            m = _utf8_char_length(b, i, n)
+            if m == 0:
+                return i, i
+            i += m
+    return i, -1
+
+
+@scan_jit
+def first_bad_char(b):
+    """Offset of the first byte that does not start a character XML 1.0 allows in UTF-8, or -1. A block
+    of 256 bytes is passed over in one vectorised test when it holds only ASCII and tab / LF / CR (blocks
+    aligned to the start and the test as comparisons: 2 ms on 77 MB, where a table lookup per byte, or
+    blocks at any offset, took 15-30 ms)."""
+    n = b.shape[0]
+    whole = n - n % 256
+    i = 0  # checked up to here (a multi-byte character may end past a block)
+    for start in range(0, whole, 256):
+        odd = False
+        for k in range(start, start + 256):
+            c = b[k]
+            odd |= (c >= 128) | ((c < 32) & (c != 9) & (c != 10) & (c != 13))
+        if odd:
+            i, bad = _check_chars(b, max(i, start), start + 256)
+            if bad >= 0:
+                return bad
+    return _check_chars(b, max(i, whole), n)[1]
 
 
 @scan_jit
@@ -268,48 +377,115 @@ def parse_number(b, s, e):
     return sign * (float(mant) / _POW10[-p])
 
 
+@scan_inline
+def _name_end(b, s, n):
+    """End of the XML name starting at b[s] (ASCII letters, digits, '_', ':', '.', '-'; not starting with a
+    digit, '.' or '-'), or s when none starts there. A name holding any other byte ends before it, and the
+    caller then finds a byte it does not expect there."""
+    if s >= n or _NAME_CLASS[b[s]] != 1:
+        return s
+    e = s + 1
+    while e < n and _NAME_CLASS[b[e]] != 0:
+        e += 1
+    return e
+
+
 @scan_jit
-def scan(b, node_tab, node_off, pool, edges, data, key_tab, key_spans, key_elems, stack, graph_tag, counts):
-    """Scan GraphML bytes `b` into the caller's buffers (sized by count_starts); counts[C_*] say how much
-    of each was filled. Returns (status, byte offset where the file left the subset)."""
+def _is_word(b, s, e, word):
+    if e - s != word.shape[0]:
+        return False
+    for k in range(e - s):
+        if b[s + k] != word[k]:
+            return False
+    return True
+
+
+@scan_jit
+def _skip_pi(b, i, n):
+    """Offset past the processing instruction at b[i] ('<?'), or -1 when it is one to leave to expat: a
+    target that is no name or is named xml... (the XML declaration, which the caller passed over, and
+    the names XML reserves)."""
+    s = i + 2
+    e = _name_end(b, s, n)
+    if e == s or (e - s >= 3 and (b[s] | 32) == 120 and (b[s + 1] | 32) == 109 and (b[s + 2] | 32) == 108):
+        return -1
+    if e + 1 < n and b[e] == 63 and b[e + 1] == 62:  # '?>'
+        return e + 2
+    if e < n and _is_space(b[e]):
+        return _skip_past(b, e, 63, 62, -1)
+    return -1
+
+
+@scan_jit
+def _skip_comment(b, i, n):
+    """Offset past the comment at b[i] ('<!--'), or -1: a comment ends at its first '--', which must be
+    followed by '>'."""
+    k = _skip_past(b, i + 4, 45, 45, -1)
+    if k < 0 or k >= n or b[k] != 62:
+        return -1
+    return k + 1
+
+
+@scan_inline
+def _end_tag_end(b, j, n):
+    """Offset past the end tag whose name ends at b[j] (white space, then '>'), or -1."""
+    while j < n and _is_space(b[j]):
+        j += 1
+    if j >= n or b[j] != 62:
+        return -1
+    return j + 1
+
+
+@scan_jit
+def scan(b, start, node_tab, node_off, pool, edges, data, key_tab, key_spans, key_elems, stack, attrs,
+         graph_tag, counts):
+    """Scan GraphML bytes `b` from offset `start` (past a byte order mark and an XML declaration) into the
+    caller's buffers (sized by count_starts); counts[C_*] say how much of each was filled. Returns
+    (status, byte offset where the file left the subset)."""
     n = b.shape[0]
     n_nodes = 0
     n_keys = 0
     n_edges = 0
     n_data = 0
     n_key_elems = 0
-    graph_tag[0] = -1
-    graph_tag[1] = -1
+    graph_tag[G_TAG] = -1
+    graph_tag[G_EDGEDEFAULT_S] = -1
+    graph_tag[G_EDGEDEFAULT_E] = -1
     cur_kind = -1  # the open node (0) or edge (1), -1 none
     cur_elem = -1
     in_key = -1  # start offset of an open <key> element
     depth = 0
     roots = 0
-    i = 0
+    i = start
     while i < n:
-        if b[i] != 60:  # '<'
+        c = b[i]
+        if c != 60:  # text between tags (no graph reads it: <data> values are read below)
+            if c == 38 or (depth == 0 and not _is_space(c)):  # a reference; text outside the root element
+                return SCAN_UNSUPPORTED, i
+            if c == 93 and i + 2 < n and b[i + 1] == 93 and b[i + 2] == 62:  # ']]>'
+                return SCAN_UNSUPPORTED, i
             i += 1
             continue
         if i + 1 >= n:
             return SCAN_UNSUPPORTED, i
         c = b[i + 1]
-        if c == 63:  # '<?' processing instruction / XML declaration
-            i = _skip_past(b, i + 2, 63, 62, -1)
+        if c == 63:  # '<?' a processing instruction
+            i = _skip_pi(b, i, n)
             if i < 0:
                 return SCAN_UNSUPPORTED, n
             continue
         if c == 33:  # '<!': a comment, else (DOCTYPE, CDATA) outside the subset
             if i + 3 < n and b[i + 2] == 45 and b[i + 3] == 45:
-                i = _skip_past(b, i + 4, 45, 45, 62)
+                i = _skip_comment(b, i, n)
                 if i < 0:
                     return SCAN_UNSUPPORTED, n
                 continue
             return SCAN_UNSUPPORTED, i
         closing = c == 47  # '</'
         s = i + 2 if closing else i + 1
-        e = s
-        while e < n and not _is_space(b[e]) and b[e] != 62 and b[e] != 47:
-            e += 1
+        e = _name_end(b, s, n)
+        if e == s:
+            return SCAN_UNSUPPORTED, i
         name = _local_name(b, s, e)
         kind = _OTHER
         if name == W_NODE:
@@ -322,70 +498,9 @@ def scan(b, node_tab, node_off, pool, edges, data, key_tab, key_spans, key_elems
             kind = _KEY
         elif name == W_GRAPH:
             kind = _GRAPH
-        # attributes up to '>' (values may not hold '<', '>' or '&' in the subset)
-        j = e
-        a_id_s = -1
-        a_id_e = -1
-        a_src_s = -1
-        a_src_e = -1
-        a_dst_s = -1
-        a_dst_e = -1
-        a_dir_s = -1
-        a_dir_e = -1
-        while True:
-            while j < n and _is_space(b[j]):
-                j += 1
-            if j >= n:
-                return SCAN_UNSUPPORTED, i
-            if b[j] == 62 or b[j] == 47:
-                break
-            ns = j
-            while j < n and b[j] != 61 and not _is_space(b[j]) and b[j] != 62:  # '='
-                j += 1
-            ne = j
-            while j < n and _is_space(b[j]):
-                j += 1
-            if j >= n or b[j] != 61:
-                return SCAN_UNSUPPORTED, i
-            j += 1
-            while j < n and _is_space(b[j]):
-                j += 1
-            if j >= n or (b[j] != 34 and b[j] != 39):
-                return SCAN_UNSUPPORTED, i
-            q = b[j]
-            vs = j + 1
-            j = vs
-            while j < n and b[j] != q:
-                if b[j] == 60 or b[j] == 38 or b[j] == 62:  # '<', '&', '>'
-                    return SCAN_UNSUPPORTED, i
-                j += 1
-            if j >= n:
-                return SCAN_UNSUPPORTED, i
-            ve = j
-            j += 1
-            if kind == _NODE or kind == _DATA or kind == _EDGE:
-                an = _pack(b, ns, ne, False)
-                if (kind == _NODE and an == W_ID) or (kind == _DATA and an == W_KEY):
-                    a_id_s = vs
-                    a_id_e = ve
-                elif kind == _EDGE:
-                    if an == W_SOURCE:
-                        a_src_s = vs
-                        a_src_e = ve
-                    elif an == W_TARGET:
-                        a_dst_s = vs
-                        a_dst_e = ve
-                    elif an == W_DIRECTED:
-                        a_dir_s = vs
-                        a_dir_e = ve
-        empty = b[j] == 47
-        if empty:
-            j += 1
-            if j >= n or b[j] != 62 or closing:
-                return SCAN_UNSUPPORTED, i
-        tag_end = j + 1
         if closing:
-            if depth == 0 or not _same(b, stack[depth - 1, 0], stack[depth - 1, 1], s, e):
+            tag_end = _end_tag_end(b, e, n)
+            if tag_end < 0 or depth == 0 or not _same(b, stack[depth - 1, 0], stack[depth - 1, 1], s, e):
                 return SCAN_UNSUPPORTED, i
             depth -= 1
             if kind == _NODE or kind == _EDGE:
@@ -401,6 +516,86 @@ def scan(b, node_tab, node_off, pool, edges, data, key_tab, key_spans, key_elems
                 in_key = -1
             i = tag_end
             continue
+        # attributes up to '>' or '/>', each after white space, each name once, values in quotes
+        j = e
+        n_attrs = 0
+        a_val_s = -1  # the value the element is read by: a node's id, a data's key, a graph's edgedefault
+        a_val_e = -1
+        a_src_s = -1
+        a_src_e = -1
+        a_dst_s = -1
+        a_dst_e = -1
+        a_dir_s = -1
+        a_dir_e = -1
+        while True:
+            before = j
+            while j < n and _is_space(b[j]):
+                j += 1
+            if j >= n:
+                return SCAN_UNSUPPORTED, i
+            if b[j] == 62 or b[j] == 47:  # '>', '/'
+                break
+            ns = j
+            ne = _name_end(b, ns, n)
+            if ne == ns or ns == before or n_attrs == MAX_ATTRS:
+                return SCAN_UNSUPPORTED, i
+            for k in range(n_attrs):
+                if _same(b, attrs[k, 0], attrs[k, 1], ns, ne):  # a duplicate attribute
+                    return SCAN_UNSUPPORTED, i
+            attrs[n_attrs, 0] = ns
+            attrs[n_attrs, 1] = ne
+            n_attrs += 1
+            j = ne
+            while j < n and _is_space(b[j]):
+                j += 1
+            if j >= n or b[j] != 61:  # '='
+                return SCAN_UNSUPPORTED, i
+            j += 1
+            while j < n and _is_space(b[j]):
+                j += 1
+            if j >= n or (b[j] != 34 and b[j] != 39):
+                return SCAN_UNSUPPORTED, i
+            q = b[j]
+            vs = j + 1
+            j = vs
+            spaced = False  # a tab or line break: the value XML gives differs from the bytes
+            while j < n:
+                v = _VALUE_CLASS[b[j]]
+                if v != 0:
+                    if b[j] == q:
+                        break
+                    if v == 2:
+                        return SCAN_UNSUPPORTED, i
+                    spaced |= v == 3
+                j += 1
+            if j >= n or (spaced and kind != _OTHER and kind != _KEY):  # (keys are read by expat)
+                return SCAN_UNSUPPORTED, i
+            ve = j
+            j += 1
+            if kind == _NODE or kind == _DATA or kind == _EDGE:
+                an = _pack(b, ns, ne, False)
+                if (kind == _NODE and an == W_ID) or (kind == _DATA and an == W_KEY):
+                    a_val_s = vs
+                    a_val_e = ve
+                elif kind == _EDGE:
+                    if an == W_SOURCE:
+                        a_src_s = vs
+                        a_src_e = ve
+                    elif an == W_TARGET:
+                        a_dst_s = vs
+                        a_dst_e = ve
+                    elif an == W_DIRECTED:
+                        a_dir_s = vs
+                        a_dir_e = ve
+            elif kind == _GRAPH and _is_word(b, ns, ne, _EDGEDEFAULT):
+                a_val_s = vs
+                a_val_e = ve
+        empty = b[j] == 47
+        if empty:
+            j += 1
+            if j >= n or b[j] != 62:
+                return SCAN_UNSUPPORTED, i
+        tag_end = j + 1
         if depth == 0:
             roots += 1
             if roots > 1:
@@ -412,16 +607,16 @@ def scan(b, node_tab, node_off, pool, edges, data, key_tab, key_spans, key_elems
             stack[depth, 1] = e
             depth += 1
         if in_key >= 0:  # <default> and friends inside a <key>: the key element is read in Python
-            if kind == _DATA:
+            if kind != _OTHER:
                 return SCAN_UNSUPPORTED, i
             i = tag_end
             continue
         if kind == _NODE:
-            if a_id_s < 0 or cur_kind >= 0 or n_nodes + 1 >= node_off.shape[0]:
+            if a_val_s < 0 or cur_kind >= 0 or n_nodes + 1 >= node_off.shape[0]:
                 return SCAN_UNSUPPORTED, i
             if 2 * (n_nodes + 1) > node_tab.shape[0]:
                 return SCAN_GROW, i
-            idx = _intern_node(b, a_id_s, a_id_e, node_tab, node_off, pool, n_nodes)
+            idx = _intern_node(b, a_val_s, a_val_e, node_tab, node_off, pool, n_nodes)
             if idx == n_nodes:
                 n_nodes += 1
             if not empty:
@@ -456,30 +651,31 @@ def scan(b, node_tab, node_off, pool, edges, data, key_tab, key_spans, key_elems
                 cur_elem = n_edges
             n_edges += 1
         elif kind == _DATA:
-            if a_id_s < 0:
+            if a_val_s < 0:
                 return SCAN_UNSUPPORTED, i
             ts = tag_end
             te = tag_end
             if not empty:  # the text up to </data>, which must come next
-                while te < n and b[te] != 60:
-                    if b[te] == 38:  # '&'
-                        return SCAN_UNSUPPORTED, i
+                while te < n:
+                    t = _TEXT_CLASS[b[te]]
+                    if t != 0:
+                        if t == 1:
+                            break
+                        if t == 2 or (te + 2 < n and b[te + 1] == 93 and b[te + 2] == 62):
+                            return SCAN_UNSUPPORTED, i
                     te += 1
                 if te + 1 >= n or b[te + 1] != 47:
                     return SCAN_UNSUPPORTED, i
-                k = te + 2
-                e2 = k
-                while e2 < n and b[e2] != 62 and not _is_space(b[e2]):
-                    e2 += 1
-                if not _same(b, k, e2, s, e):  # </data> with the same (prefixed) name
+                e2 = _name_end(b, te + 2, n)
+                if not _same(b, te + 2, e2, s, e):  # </data> with the same (prefixed) name
                     return SCAN_UNSUPPORTED, i
-                while e2 < n and b[e2] != 62:
-                    e2 += 1
-                tag_end = e2 + 1
+                tag_end = _end_tag_end(b, e2, n)
+                if tag_end < 0:
+                    return SCAN_UNSUPPORTED, i
             if cur_kind >= 0:  # data of the graph or the document itself is not a fact
                 if n_data == data.shape[0] or n_keys == key_spans.shape[0] or 2 * (n_keys + 1) > key_tab.shape[0]:
                     return SCAN_UNSUPPORTED, i
-                kid = _intern(b, a_id_s, a_id_e, key_tab, key_spans, n_keys)
+                kid = _intern(b, a_val_s, a_val_e, key_tab, key_spans, n_keys)
                 if kid == n_keys:
                     n_keys += 1
                 data[n_data, D_KIND] = cur_kind
@@ -500,10 +696,11 @@ def scan(b, node_tab, node_off, pool, edges, data, key_tab, key_spans, key_elems
                 in_key = i
                 stack[MAX_DEPTH - 1, 0] = depth - 1  # the depth its end tag brings back
         elif kind == _GRAPH:
-            if graph_tag[0] >= 0:  # a second (or nested) graph
+            if graph_tag[G_TAG] >= 0:  # a second (or nested) graph
                 return SCAN_UNSUPPORTED, i
-            graph_tag[0] = i
-            graph_tag[1] = tag_end
+            graph_tag[G_TAG] = i
+            graph_tag[G_EDGEDEFAULT_S] = a_val_s
+            graph_tag[G_EDGEDEFAULT_E] = a_val_e
         i = tag_end
     counts[C_NODES] = n_nodes
     counts[C_EDGES] = n_edges
@@ -518,7 +715,8 @@ def scan(b, node_tab, node_off, pool, edges, data, key_tab, key_spans, key_elems
 @scan_jit
 def data_values(b, data, numbers, booleans):
     """Each data value as a number (NaN if not one) and a boolean (1 true, 0 false, -1 neither;
-    case-insensitive, "1" / "0" too, spaces around)."""
+    case-insensitive, "1" / "0" too, spaces around; BOOLEAN_UNKNOWN for a value with non-ASCII bytes,
+    where str.strip() finds other spaces than XML's)."""
     for k in range(data.shape[0]):
         s = data[k, D_START]
         e = data[k, D_END]
@@ -529,12 +727,19 @@ def data_values(b, data, numbers, booleans):
             e -= 1
         w = _pack(b, s, e, True)
         booleans[k] = 1 if w == W_TRUE or w == W_ONE else 0 if w == W_FALSE or w == W_ZERO else -1
+        if booleans[k] < 0:
+            for x in range(s, e):
+                if b[x] >= 128:
+                    booleans[k] = BOOLEAN_UNKNOWN
+                    break
 
 
-def scan_graphml(b: np.ndarray) -> tuple[int, dict[str, np.ndarray]]:
-    """Scan bytes `b` (uint8): (status, arrays: node_off and pool (node id i is pool[off[i]:off[i+1]]),
-    edges, data, key_spans, key_elems, graph_tag, numbers, booleans), buffers sized from a counting pass
-    (np.empty pages that are never written cost no memory)."""
+def scan_graphml(b: np.ndarray, start: int = 0) -> tuple[int, dict[str, np.ndarray]]:
+    """Scan bytes `b` (uint8) from offset `start`: (status, arrays: node_off and pool (node id i is
+    pool[off[i]:off[i+1]]), edges, data, key_spans, key_elems, graph_tag, numbers, booleans), buffers sized
+    from a counting pass (np.empty pages that are never written cost no memory)."""
+    if first_bad_char(b) >= 0:
+        return SCAN_UNSUPPORTED, {}
     c_node, c_edge, c_data, c_key = count_starts(b)
     max_nodes = c_node + 2 * c_edge + 1
     node_off = np.empty(max_nodes + 1, np.int64)
@@ -545,15 +750,16 @@ def scan_graphml(b: np.ndarray) -> tuple[int, dict[str, np.ndarray]]:
     key_spans = np.empty((c_data + 1, 2), np.int64)
     key_elems = np.empty((c_key + 1, 2), np.int64)
     stack = np.empty((MAX_DEPTH, 2), np.int64)
-    graph_tag = np.empty(2, np.int64)
+    attrs = np.empty((MAX_ATTRS, 2), np.int64)
+    graph_tag = np.empty(3, np.int64)
     counts = np.zeros(5, np.int64)
     # a table for 4x the declared nodes; edges to undeclared nodes may need a larger one (scan again)
     size = 1 << int(4 * c_node + 64).bit_length()
     while True:
         node_tab = np.zeros((size, 2), np.int64)
         key_tab = np.full(1 << int(2 * c_key + 64).bit_length(), -1, np.int64)
-        status, _ = scan(b, node_tab, node_off, pool, edges, data, key_tab, key_spans, key_elems, stack,
-                         graph_tag, counts)
+        status, _ = scan(b, start, node_tab, node_off, pool, edges, data, key_tab, key_spans, key_elems, stack,
+                         attrs, graph_tag, counts)
         if status != SCAN_GROW:
             break
         size *= 4

@@ -437,8 +437,8 @@ def test_scanner_node_ids_short_long_and_unicode(tmp_path: Path) -> None:
 
 
 def test_a_node_id_with_a_line_break_is_still_named(tmp_path: Path) -> None:
-    path = tmp_path / "nl.graphml"
+    path = tmp_path / "nl.graphml"  # &#10; is a line break in an attribute value (a written one is a space)
     path.write_text('<graphml><key id="k" for="node" attr.name="hp" attr.type="double"/><graph>'
-                    '<node id="ok"/><node id="two\nlines"><data key="k">0.5</data></node></graph></graphml>')
+                    '<node id="ok"/><node id="two&#10;lines"><data key="k">0.5</data></node></graph></graphml>')
     with pytest.raises(ProgramCheckError, match="node id 'two\\\\nlines' cannot be a constant.*line break"):
         load_graphml(path)
