@@ -52,13 +52,24 @@ def _side(text: str) -> tuple[str, int | None]:
     from tracelab.store.reader import resolve_run
     try:
         return _run_and_episode(text)
-    except UserError:
+    except UserError as bad_episode:
         try:
             resolve_run(text)
         except FileNotFoundError:
+            if _is_run(text.rpartition(":")[0]):
+                raise bad_episode from None  # RUN:x of a real run: say what is wrong with x
             raise UserError(f"cannot read {text!r}: write RUN:EPISODE, e.g. runs/play-base:0, or name a "
                             "run of one episode") from None
         return text, None
+
+
+def _is_run(text: str) -> bool:
+    from tracelab.store.reader import resolve_run
+    try:
+        resolve_run(text)
+    except FileNotFoundError:
+        return False
+    return bool(text)
 
 
 def parse_sides(sides: list[str]) -> tuple[tuple[str, int | None], tuple[str, int | None]]:
