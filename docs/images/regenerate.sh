@@ -1,20 +1,24 @@
 #!/usr/bin/env bash
 # Regenerates the replay screenshots of README.md and docs/replay.md with rerun's own viewer, rendered
-# without a GPU: apt-get install -y mesa-vulkan-drivers xvfb imagemagick
+# without a GPU (Vulkan on llvmpipe, about 20 s a picture on 2 cores):
+#   apt-get install -y mesa-vulkan-drivers xvfb
 #   bash docs/images/regenerate.sh
+# Every picture is of a real run: the sample runs (sample_runs/regenerate.sh) and a 3v3 game played here.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 tmp=$(mktemp -d)
-# A screen larger than the viewer's window: X puts the pointer at the screen's centre, off the window,
-# so no hover tooltip lands on the board.
-Xvfb :97 -screen 0 4000x2400x24 >/dev/null 2>&1 &
+# X puts the pointer at the screen's centre: the screen is more than twice the window's 3600x2200 pixels
+# (1800x1100 points at 2x, placed at the top left) so the pointer is off the window and no hover tooltip
+# lands on a view (at 4000x2400 one sat over the rule log).
+Xvfb :97 -screen 0 7400x4600x24 >/dev/null 2>&1 &
 xvfb=$!
 trap 'kill $xvfb; rm -rf "$tmp"' EXIT
 sleep 2
 
 shot() {  # shot RRD PNG: the viewer at 1800x1100 points (it renders at 2x), halved to 1800x1100 pixels
   DISPLAY=:97 rerun "$(realpath "$1")" --screenshot-to "$tmp/shot.png" --window-size 1800x1100 >/dev/null 2>&1
-  convert "$tmp/shot.png" -resize 50% "$2"
+  python -c 'import sys; from PIL import Image; im = Image.open(sys.argv[1])
+im.resize((im.width // 2, im.height // 2), Image.LANCZOS).save(sys.argv[2])' "$tmp/shot.png" "$2"
 }
 
 # README and the top of docs/replay.md: a hit, a death, the end of the game and their why-trees

@@ -11,7 +11,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("paths", nargs="*", metavar="RUN|DIR",
                    help="a run to open, or directories of runs (default: runs/ and sample_runs/)")
     p.add_argument("--screenshots", metavar="DIR",
-                   help="write the README's screenshots (PNG) to DIR and exit (needs rsvg-convert)")
+                   help="write the README's screenshots (PNG) to DIR and exit: tui-trace-why.png from the "
+                        "first RUN (default sample_runs/advanced), tui-training.png from the second, a "
+                        "training run (default sample_runs/base-train) (needs rsvg-convert)")
     p.set_defaults(func=run)
 
 
@@ -23,8 +25,8 @@ def run(args: argparse.Namespace) -> int:
     if args.screenshots:
         from tracelab.viewers.tui.screenshots import write_screenshots
         with store_errors():  # no rsvg-convert, or a run that does not open
-            run = Path(args.paths[0]) if args.paths else None
-            for path in write_screenshots(Path(args.screenshots), run):
+            trace_run, training_run = (Path(p) if p else None for p in (args.paths + [None, None])[:2])
+            for path in write_screenshots(Path(args.screenshots), trace_run, training_run):
                 print(path)
         return 0
     from tracelab.viewers.tui.app import TracelabApp

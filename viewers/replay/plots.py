@@ -13,6 +13,8 @@ from tracelab.viewers.replay.columns import send_per_entity
 from tracelab.viewers.board import TEAMS, EpisodeBoard
 from tracelab.store.reader import RunConnection
 
+REWARD_PALER = 0.5      # a reward line's team colour, this far towards white
+
 
 def step_rewards(con: RunConnection, episodes: list[int]) -> dict[int, list[tuple[int, str, float]]]:
     """episode -> its `steps` rows (step, agent, reward), for all these episodes in one query."""
@@ -40,8 +42,11 @@ def team_rewards(board: EpisodeBoard, rows: list[tuple[int, str, float]]) -> np.
 @lru_cache(maxsize=None)
 def _series_style(team: str, kind: str) -> rr.SeriesLines:
     """A series' line style, built once (an archetype converts its data to Arrow when it is made)."""
-    colour = [int(c) for c in style.TEAM_COLOR[TEAMS.index(team)]]
-    return rr.SeriesLines(colors=colour, names=f"{team} {kind}", widths=2.0 if kind == "return" else 1.0)
+    colour = style.TEAM_COLOR[TEAMS.index(team)].astype(float)
+    if kind == "reward":  # paler than the return: the legend's dots tell the two apart
+        colour += (255 - colour) * REWARD_PALER
+    return rr.SeriesLines(colors=[int(c) for c in colour], names=f"{team} {kind}",
+                          widths=2.0 if kind == "return" else 1.0)
 
 
 def log_rewards(rec: rr.RecordingStream, rewards: np.ndarray) -> None:

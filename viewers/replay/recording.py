@@ -75,14 +75,17 @@ def new_recording(run_name: str, episode: int) -> rr.RecordingStream:
 
 
 def record_episode(ctx: RunContext, episode: int, rec: rr.RecordingStream,
-                   options: ReplayOptions | None = None, blueprint: bool = True) -> EpisodeBoard:
+                   options: ReplayOptions | None = None, blueprint: bool = True,
+                   last_step: int = 0) -> EpisodeBoard:
     """Log one episode into `rec` (which already has its sink) and return its board. The blueprint
-    belongs to the application, so one per output is enough (`blueprint`: send it with this one)."""
+    belongs to the application, so one per output is enough (`blueprint`: send it with this one; its
+    step axes end at `last_step`, or at this episode's end if later)."""
     options = options or ReplayOptions()
     board = ctx.loader.load(episode)
     rec.send_recording_name(f"{ctx.name} episode {episode} ({board.outcome or 'running'}, {board.steps} steps)")
     if blueprint:
-        rec.send_blueprint(replay_blueprint(board.map, bool(ctx.metrics), options.open_at))
+        rec.send_blueprint(replay_blueprint(board.map, bool(ctx.metrics), options.open_at,
+                                            max(last_step, board.steps)))
     board_layer.log_board(rec, board)
     rules_layer.log_rule_log(rec, board)
     rules_layer.log_lanes(rec, board, options.lanes)

@@ -8,7 +8,7 @@ from functools import partial
 
 from tracelab.viewers.replay.outputs import Output
 from tracelab.viewers.replay.recording import ReplayOptions, RunContext, record_episode
-from tracelab.viewers.replay.select import EpisodeFilter, select_episodes
+from tracelab.viewers.replay.select import EpisodeFilter, longest_episode, select_episodes
 
 from tracelab.store.reader import RunConnection, retrying, run_info
 
@@ -18,12 +18,15 @@ PREFETCH_EPISODES = 50      # episodes read from the run per batch (their change
 def replay_episodes(ctx: RunContext, episodes: list[int], out: Output,
                     options: ReplayOptions | None = None) -> int:
     """Each episode as its own recording into `out`; returns how many were sent. What the episodes need
-    from the run is read a batch at a time."""
+    from the run is read a batch at a time. The blueprint, sent once per output, gets step axes as long
+    as the longest of these episodes (in --live, of the first game sent)."""
+    last_step = 0 if out.blueprint_sent else retrying(lambda: longest_episode(ctx.con, episodes))
     for i, e in enumerate(episodes):
         if i % PREFETCH_EPISODES == 0:
             retrying(partial(ctx.prefetch, episodes[i:i + PREFETCH_EPISODES]))
         rec = out.recording(ctx.name, e)
-        retrying(partial(record_episode, ctx, e, rec, options, blueprint=not out.blueprint_sent))
+        retrying(partial(record_episode, ctx, e, rec, options, blueprint=not out.blueprint_sent,
+                         last_step=last_step))
         out.blueprint_sent = True
         out.finished(rec)
     return len(episodes)

@@ -70,7 +70,7 @@ def lane_values(board: EpisodeBoard, label: str) -> np.ndarray:
     if label == "ammo":
         return board.ammo.astype(str)
     if label == "action":
-        names = np.array(("-",) + style.ACTION_NAMES, dtype=object)
+        names = np.array(("-",) + style.ACTION_LANE_TEXT, dtype=object)
         return names[board.action + 1].astype(str)
     raise ValueError(f"no lane {label!r}; lanes: {', '.join(LANE_LABELS)}")
 

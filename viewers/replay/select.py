@@ -118,3 +118,10 @@ def select_episodes(con: RunConnection, f: EpisodeFilter, exclude: set[int] | No
             raise ValueError(f"no episode {', '.join(missing)} in this run (episodes: "
                              f"{', '.join(map(str, known)) or 'none'}{' ...' if len(known) == 20 else ''})")
     return found[:f.limit] if f.limit is not None else found
+
+
+def longest_episode(con: RunConnection, episodes: list[int]) -> int:
+    """The most steps among these episodes (0 when none has any): where the replay's step axes end."""
+    rows = con.execute("SELECT coalesce(max(steps), 0) FROM episodes WHERE list_contains(?, episode)",
+                       [episodes]).fetchall()
+    return int(rows[0][0])

@@ -61,6 +61,10 @@ LOG_COLOR = {"start": (150, 150, 150), "shield": (150, 150, 150), "bullets": (25
 DIRECTION_VECTORS = np.array([(0, -1), (0, 1), (-1, 0), (1, 0)], dtype=np.float32)  # up down left right, drawn
 ACTION_NAMES = ("up", "down", "left", "right", "shoot up", "shoot down", "shoot left", "shoot right",
                 "nothing")
+# the action lane's text: a one-step segment is a few characters wide, where "shoot right" was cut to
+# "shoo"; a move is its arrow, a shot the bullet (⁍, as in the agents' labels) and its arrow
+ACTION_LANE_TEXT = ("↑", "↓", "←", "→", "⁍↑", "⁍↓", "⁍←", "⁍→", "idle")
+assert len(ACTION_LANE_TEXT) == len(ACTION_NAMES)
 
 
 def annotation_context() -> rr.AnnotationContext:

@@ -2,20 +2,19 @@
 
 tui-trace-why.png   sample_runs/advanced, episode 0 filtered to the death of red-agent-1 (the trace with
                     its board), above the why tree of that change
-tui-training.png    the Training view of a small training run written here with TraceWriter (the
-                    training-run contract: metrics and train/eval episodes)
+tui-training.png    the Training view of a real training run: sample_runs/base-train, made by
+                    `tracelab train` in sample_runs/regenerate.sh (its command is in the picture's header).
+                    Nothing here writes metrics: a picture of curves shows a run on disk or none.
 
 textual saves SVG; rsvg-convert (Debian: librsvg2-bin) turns it into PNG. textual's SVG names the web font
 Fira Code and spaces as &#160;, which rsvg draws narrow: both are replaced (DejaVu Sans Mono) first."""
 from __future__ import annotations
 
 import asyncio
-import math
 import os
 import re
 import shutil
 import subprocess
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -58,35 +57,6 @@ async def _trace_and_why(run: Path) -> tuple[str, str]:
         await pilot.press("o")
         await pilot.pause(0.3)
         return trace_svg, app.export_screenshot(title="tracelab tui · why")
-
-
-def write_training_run(path: Path, steps: int = 60) -> Path:
-    """A small sealed training run following the training-run contract (curves that look like one)."""
-    import random
-
-    from tracelab.store.seal import seal_run
-    from tracelab.store.writer import TraceWriter
-    rng = random.Random(3)
-    with TraceWriter(path, {"command": "tracelab train --example", "config": {"example": True}}) as w:
-        episode = 0
-        for k in range(1, steps + 1):
-            step = k * 500
-            progress = 1 - math.exp(-k / 18)
-            w.begin_episode(episode, info={"kind": "train", "train_step": step})
-            won = rng.random() < progress * 0.8
-            w.end_episode(episode, steps=rng.randint(12, 60), outcome="win" if won else "loss",
-                          reward=(250 if won else -250) + rng.gauss(0, 60))
-            episode += 1
-            w.write_metrics(step, {"loss": 2.5 * math.exp(-k / 15) + abs(rng.gauss(0, 0.15)),
-                                   "epsilon": max(0.05, 1 - k / 40),
-                                   "train_return": -250 + 420 * progress + rng.gauss(0, 40)})
-            if k % 5 == 0:
-                for p, skill in (("0.3", 0.9), ("0.7", 0.7)):
-                    rate = min(1.0, max(0.0, skill * progress + rng.gauss(0, 0.05)))
-                    w.write_metrics(step, {f"eval/win_rate@p{p}": rate,
-                                           f"eval/mean_return@p{p}": -250 + 500 * rate})
-    seal_run(path)
-    return path
 
 
 async def _training(run: Path) -> str:
@@ -133,16 +103,34 @@ def to_png(svg: str, png: Path) -> Path:
     return png
 
 
-def write_screenshots(directory: Path, run: Path | None = None) -> list[Path]:
-    """Write tui-trace-why.png and tui-training.png (and their SVGs) to `directory`."""
+def training_run_problem(run: Path) -> str | None:
+    """Why `run` cannot be the training picture's run (no metrics: not a training run), or None."""
+    from tracelab.store.reader import open_run
+    con = open_run(run)
+    try:
+        (metrics,) = con.execute("SELECT count(*) FROM metrics").fetchone()
+    finally:
+        con.close()
+    if not metrics:
+        return f"{str(run)!r} has no training metrics: photograph a run made by `tracelab train`"
+    return None
+
+
+def write_screenshots(directory: Path, trace_run: Path | None = None,
+                      training_run: Path | None = None) -> list[Path]:
+    """Write tui-trace-why.png (from `trace_run`, default sample_runs/advanced) and tui-training.png (from
+    `training_run`, default sample_runs/base-train: a real training run) to `directory`."""
     os.environ.setdefault("TEXTUAL_ANIMATIONS", "none")
+    trace_run = trace_run or ROOT / "sample_runs" / "advanced"
+    training_run = training_run or ROOT / "sample_runs" / "base-train"
+    for run in (trace_run, training_run):
+        if not run.exists():
+            raise ValueError(f"no run {str(run)!r} to photograph")
+    problem = training_run_problem(training_run)
+    if problem:
+        raise ValueError(problem)
     directory.mkdir(parents=True, exist_ok=True)
-    run = run or ROOT / "sample_runs" / "advanced"
-    if not run.exists():
-        raise FileNotFoundError(f"no run {str(run)!r} to photograph")
-    trace_svg, why_svg = asyncio.run(_trace_and_why(run))
+    trace_svg, why_svg = asyncio.run(_trace_and_why(trace_run))
     out = [to_png(stack([trace_svg, why_svg]), directory / "tui-trace-why.png")]
-    with tempfile.TemporaryDirectory() as tmp:
-        training = write_training_run(Path(tmp) / "train-example")
-        out.append(to_png(asyncio.run(_training(training)), directory / "tui-training.png"))
+    out.append(to_png(asyncio.run(_training(training_run)), directory / "tui-training.png"))
     return out

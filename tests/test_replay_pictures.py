@@ -1,0 +1,76 @@
+"""What the replay's pictures showed wrong, read back from the saved .rrd (its blueprint and its lanes):
+the plots and the lanes ended on the last step (the final jump cut off at the right edge), the action lane's
+text did not fit a one-step segment ("shoo", "dow"), a base in the bottom row had its label cut off."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from rerun.chunk import RrdReader
+from test_replay import read_rrd
+
+from tracelab.cli import main
+from tracelab.store.reader import open_run
+
+SAMPLES = Path(__file__).resolve().parent.parent / "sample_runs"
+SKIP = {"rerun.controls.RowId", "blueprint", "log_time"}
+
+
+def blueprint_views(path: Path) -> dict[str, dict[str, object]]:
+    """View name -> its blueprint components (component column -> first value), from the .rrd's blueprint."""
+    reader = RrdReader(path)
+    by_entity: dict[str, dict[str, object]] = {}
+    for store in reader.blueprints():
+        for chunk in reader.stream(store=store):
+            batch = chunk.to_record_batch()
+            row = by_entity.setdefault(chunk.entity_path, {})
+            for name in batch.schema.names:
+                if name not in SKIP:
+                    row[name] = batch.column(name).to_pylist()[0][0]
+    views = {}
+    for entity, row in by_entity.items():
+        if "ViewBlueprint:display_name" in row:
+            parts = {k: v for e, r in by_entity.items() if e.startswith(entity + "/") for k, v in r.items()}
+            views[str(row["ViewBlueprint:display_name"])] = row | parts
+    return views
+
+
+def steps_of(run: Path, episodes: str) -> list[int]:
+    con = open_run(run)
+    try:
+        lo, _, hi = episodes.partition("-")
+        return [s for (s,) in con.execute("SELECT steps FROM episodes WHERE episode BETWEEN ? AND ?",
+                                          [int(lo), int(hi or lo)]).fetchall()]
+    finally:
+        con.close()
+
+
+@pytest.fixture(scope="module")
+def saved(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("replay-pictures") / "advanced.rrd"
+    assert main(["replay", str(SAMPLES / "advanced"), "--episodes", "0-2", "--open-at", "end",
+                 "--save", str(path)]) == 0
+    return path
+
+
+def test_the_plots_and_the_lanes_reach_past_the_longest_games_last_step(saved: Path) -> None:
+    longest = max(steps_of(SAMPLES / "advanced", "0-2"))
+    views = blueprint_views(saved)
+    for name in ("Reward and return", "State lanes"):
+        axis = views[name].get("TimeAxis:view_range")
+        assert axis is not None, f"{name}: no step axis in the blueprint (fitted to the data)"
+        assert axis["start"] == 0 and axis["end"] > longest, (name, axis, longest)
+
+
+def test_the_board_leaves_room_under_the_bottom_row_for_a_base_label(saved: Path) -> None:
+    bounds = blueprint_views(saved)["Board"]["VisualBounds2D:range"]
+    assert bounds["y_range"][1] >= 8 + 0.5  # the advanced board is 8 rows; the red base is in the bottom one
+
+
+def test_the_action_lane_fits_a_one_step_segment(saved: Path) -> None:
+    data = read_rrd(saved)
+    texts = {r["StateChange:state"][0] for rec in data.values()
+             for path, rows in rec.items() if path.startswith("/lanes/action/")
+             for r in rows if r.get("StateChange:state")}
+    assert "→" in texts and any(t.startswith("⁍") for t in texts), texts   # moves and shots both happen
+    assert max(map(len, texts)) <= 4, texts
