@@ -53,7 +53,9 @@ def test_train_kernel_reaches_the_training_and_evaluation_engines(tmp_path, caps
     assert main(["train", *flags, "--kernel", "counting", "--run", str(run)]) == 0
     assert run_info(run).meta["config"]["kernel"] == "counting"
     assert "counting kernel" in capsys.readouterr().err
-    assert main(["train", "--resume", str(run), "--kernel", "lanes", "--run", str(resumed)]) == 0
+    # the run finished its 64 steps: a resume raises the budget (nothing to resume otherwise)
+    assert main(["train", "--resume", str(run), "--kernel", "lanes", "--total-timesteps", "96",
+                 "--run", str(resumed)]) == 0
     assert run_info(resumed).meta["config"]["kernel"] == "lanes"
 
 

@@ -48,8 +48,8 @@ def walk(tmp_path_factory: pytest.TempPathFactory) -> str:
 def test_the_table_hides_static_facts_says_how_many_and_static_shows_them(capsys: pytest.CaptureFixture) -> None:
     hidden = static_rows(BASE, 0)
     code, out, err = cli(capsys, "trace", BASE, "-e", "0")
-    assert code == 0 and err == (f"note: {hidden:,} {NOTE} (atoms set by facts declared static, e.g. the map at "
-                                 "t=0, which never change); --static shows them\n")
+    assert code == 0 and err == (f"note: {hidden:,} {NOTE} (atoms set by facts declared static, such as a game's "
+                                 "map or a graph's attributes, which never change); --static shows them\n")
     dynamics = table_rows(out)
     code, out, err = cli(capsys, "trace", BASE, "-e", "0", "--static")
     assert code == 0 and not err

@@ -214,7 +214,10 @@ def test_repeat_gives_identical_episodes(inputs: dict[str, Path], tmp_path: Path
 # ---- the reading commands ----------------------------------------------------------------------------
 
 def test_trace(run: Path, capsys: pytest.CaptureFixture) -> None:
-    code, out, _ = cli(capsys, "trace", run, "--episode", "0", "--label", "infected")
+    # the graph's attributes are static facts: hidden by default, with a note, and shown by --static
+    code, out, err = cli(capsys, "trace", run, "--episode", "0", "--label", "infected")
+    assert code == 0 and "fact:infected(ann)" not in out and "1 row of static facts hidden" in err
+    code, out, _ = cli(capsys, "trace", run, "--episode", "0", "--label", "infected", "--static")
     assert code == 0
     assert [ln.split() for ln in out.splitlines()[2:-1]] == [
         ["0", "ann", "infected", "[0,1]", "[1,1]", "fact:infected(ann)"],

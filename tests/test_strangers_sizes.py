@@ -22,7 +22,7 @@ from test_cli_errors import COMPILE_NOTICE
 
 from tracelab import RULES_DIR
 from tracelab.cli import build_parser
-from tracelab.engine import Engine, ProgramError, load_program, parse_program
+from tracelab.engine import Engine, ProgramError, load_graphml, load_program, parse_program
 from tracelab.engine.grounding_limit import default_max_groundings, grounding_limit
 from tracelab.engine.parser import RULE_FILE_CAP
 from tracelab.engine.vocabulary import MAX_LABELS
@@ -137,9 +137,14 @@ def test_the_estimate_of_the_game_is_close_and_far_below_the_limit(agents: int) 
     assert 10 * g.estimated < default_max_groundings()
 
 
-@pytest.mark.parametrize("example", sorted(p.name for p in (RULES_DIR / "examples").glob("*.rules")))
+# the example programs (supply_chain_fix.rules holds facts only: it is given to supply_chain.rules by --facts)
+@pytest.mark.parametrize("example", sorted(p.name for p in (RULES_DIR / "examples").glob("*.rules")
+                                           if "<-" in p.read_text()))
 def test_the_estimate_of_the_examples_is_close(example: str) -> None:
-    eng = Engine(load_program(RULES_DIR / "examples" / example))
+    # the supply-chain programs run over their graph (docs/store.md): with no graph they ground nothing
+    graphml = RULES_DIR / "examples" / "supply_chain.graphml"
+    graph = load_graphml(graphml) if example.startswith("supply_chain") else None
+    eng = Engine(load_program(RULES_DIR / "examples" / example), graph)
     eng.run(5)
     g = eng.grounder
     assert 0 < g.n_groundings <= g.estimated <= 2 * g.n_groundings

@@ -122,8 +122,9 @@ def run(args: argparse.Namespace) -> int:
             schema, batches = retrying(lambda: arrow_stream(con.sql(sql, params=params)))
             write_stream(schema, batches, args.format, args.output)
     if hidden:
-        print(f"note: {hidden:,} rows of static facts hidden (atoms set by facts declared static, e.g. the "
-              f"map at t=0, which never change); --static shows them", file=sys.stderr)
+        rows = "row" if hidden == 1 else "rows"
+        print(f"note: {hidden:,} {rows} of static facts hidden (atoms set by facts declared static, such as a "
+              f"game's map or a graph's attributes, which never change); --static shows them", file=sys.stderr)
     return 0
 
 
