@@ -164,7 +164,8 @@ def test_a_second_play_into_the_same_run_is_refused_and_ctrl_c_says_what_was_kep
             assert first.poll() is None and time.monotonic() < deadline + 300, first.stderr.read().decode()
             time.sleep(0.2)
         first.send_signal(signal.SIGINT)
-        assert first.wait(timeout=120) == 130
+        code = first.wait(timeout=120)
+        assert code == 130, first.stderr.read().decode()
         last = first.stderr.read().decode().splitlines()[-1]
         assert re.fullmatch(rf"tracelab: interrupted: {re.escape(str(run))} keeps \d+ finished episode\(s\) "
                             r"and the trace so far", last), last
