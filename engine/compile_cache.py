@@ -44,7 +44,7 @@ from pathlib import Path
 from types import ModuleType
 
 from .codegen import GENERATOR_VERSION, Specialisation, fingerprint, generate
-from .safe_files import MIB, FileRefused, open_regular, read_json
+from .safe_files import MIB, FileRefused, create_new, open_regular, read_json
 
 CACHE_ENV = "TRACELAB_CACHE_DIR"
 # part of every key: bump when what an entry holds or how it is checked changes, so that a tracelab of
@@ -97,14 +97,8 @@ def cache_key(fingerprint: str) -> str:
     return h.hexdigest()[:24]
 
 
-def create_private(path: Path) -> int:
-    """A new file only this user can read (0600), opened for writing; never through a symbolic link and
-    never an existing file (O_EXCL), whatever sits at `path`."""
-    return os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, 0o600)
-
-
 def _write_new(path: Path, data: bytes) -> None:
-    with os.fdopen(create_private(path), "wb") as f:
+    with os.fdopen(create_new(path), "wb") as f:
         f.write(data)
 
 

@@ -29,7 +29,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import IO
 
-from .compile_cache import CacheEntry, CacheRefused, EntryRejected, create_private
+from .compile_cache import CacheEntry, CacheRefused, EntryRejected
+from .safe_files import create_new
 from .program import Program
 
 
@@ -141,7 +142,7 @@ def start(program: Program, entry: CacheEntry) -> tuple[BackgroundCompile, bool]
         return job, False
     entry.prepare()
     log = entry.dir / f"compile.{os.getpid()}.{time.monotonic_ns()}.log"
-    with os.fdopen(create_private(log), "w") as out:
+    with os.fdopen(create_new(log), "w") as out:
         proc = subprocess.Popen([sys.executable, "-m", "tracelab.engine.compile_job", entry.key],
                                 stdin=subprocess.PIPE, stdout=out, stderr=subprocess.STDOUT,
                                 start_new_session=True)

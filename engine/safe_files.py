@@ -19,6 +19,8 @@ import errno
 import json
 import os
 import stat
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any
 
@@ -110,3 +112,30 @@ def read_json(path: str | os.PathLike[str], max_bytes: int = JSON_CAP, *, what: 
         raise FileRefused(f"{path}:{e.lineno}:{e.colno}: not valid JSON: {e.msg}") from None
     except RecursionError:
         raise FileRefused(f"{path}: JSON nested too deeply; refused") from None
+
+
+def create_new(path: str | os.PathLike[str], mode: int = 0o600) -> int:
+    """A file descriptor, open for writing, of a file created now: never an existing file (O_EXCL) and
+    never through a symbolic link (O_NOFOLLOW), whatever sits at `path`."""
+    return os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, mode)
+
+
+@contextmanager
+def replacing(final: str | os.PathLike[str], mode: int = 0o644,
+              tmp: str | os.PathLike[str] | None = None) -> Iterator[IO[bytes]]:
+    """A file to write that replaces `final` when the block ends: written under a temp name beside it
+    (default `.NAME.PID.tmp`; created new, so nothing planted at that name is written through), then
+    renamed over `final` (a rename replaces the name, never writes through a link put there); removed if
+    the block fails. A stale temp of a dead process with this pid is removed first (unlink removes a
+    link, not its target)."""
+    final = Path(final)
+    tmp = Path(tmp) if tmp is not None else final.with_name(f".{final.name}.{os.getpid()}.tmp")
+    tmp.unlink(missing_ok=True)
+    fd = create_new(tmp, mode)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            yield f
+        os.replace(tmp, final)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise

@@ -25,12 +25,10 @@ from __future__ import annotations
 import os
 import shutil
 import stat
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
-from typing import IO
+from typing import IO, ContextManager
 
-from tracelab.engine.safe_files import FileRefused
+from tracelab.engine.safe_files import FileRefused, replacing
 
 META = "meta.json"
 LOCK = "writer.lock"
@@ -138,27 +136,10 @@ def remove_stale_temps(run_dir: Path) -> int:
     return n
 
 
-@contextmanager
-def new_file(final: Path) -> Iterator[IO[bytes]]:
-    """A file to write that becomes `final` when the block ends (temp name, then rename; `final` comes
-    from run_path). The temp file is created new (O_EXCL|O_NOFOLLOW); a stale one of a dead process with
-    this pid is removed first (unlink removes a link, not its target)."""
-    tmp = tmp_name(final)
-    try:
-        os.unlink(tmp)
-    except FileNotFoundError:
-        pass
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            yield f
-        os.replace(tmp, final)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
+def new_file(final: Path) -> ContextManager[IO[bytes]]:
+    """A file to write that becomes `final` when the block ends (`final` comes from run_path): created new
+    under the store's temp name beside it, then renamed (engine.safe_files.replacing)."""
+    return replacing(final, 0o644, tmp_name(final))
 
 
 def replace_atomically(data: bytes, final: Path) -> None:

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import csv
+import io
 import math
 import os
 from collections.abc import Iterable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TextIO
+from typing import IO, TYPE_CHECKING, Any, TextIO
 
+from tracelab.engine.safe_files import replacing
 from tracelab.errors import UserError
 
 if TYPE_CHECKING:  # imported where used, so that `tracelab --help` stays fast
@@ -60,8 +62,9 @@ def write_csv(schema: "pa.Schema", batches: "Iterable[pa.RecordBatch]", out: Tex
     return n
 
 
-def write_parquet(schema: "pa.Schema", batches: "Iterable[pa.RecordBatch]", path: str) -> int:
-    """Batches into a Parquet file (zstd) as they come; returns the number of rows."""
+def write_parquet(schema: "pa.Schema", batches: "Iterable[pa.RecordBatch]", path: str | IO[bytes]) -> int:
+    """Batches into a Parquet file (zstd; a path, or a binary file left open) as they come; returns the
+    number of rows."""
     import pyarrow.parquet as pq
     n = 0
     with pq.ParquetWriter(path, schema, compression="zstd") as writer:
@@ -82,15 +85,12 @@ def write_table_file(table: "pa.Table", path: str | os.PathLike[str]) -> int:
     fmt = EXPORT_FORMATS.get(path.suffix.lower())
     if fmt is None:
         raise UserError(f"{path}: the name must end in .csv or .parquet (it says which format to write)")
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
+    with replacing(path) as f:
         if fmt == "csv":
-            with open(tmp, "x", newline="", encoding="utf-8") as f:
-                n = write_csv(table.schema, table.to_batches(), f)
+            text = io.TextIOWrapper(f, newline="", encoding="utf-8")
+            n = write_csv(table.schema, table.to_batches(), text)
+            text.flush()
+            text.detach()  # `replacing` closes the file itself
         else:
-            n = write_parquet(table.schema, table.to_batches(), str(tmp))
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+            n = write_parquet(table.schema, table.to_batches(), f)
     return n

@@ -14,7 +14,7 @@ import os
 import stat
 from pathlib import Path
 
-from tracelab.engine.safe_files import FileRefused, read_json
+from tracelab.engine.safe_files import FileRefused, read_json, replacing
 
 HISTORY_CAP = 500              # statements kept
 MAX_STATEMENT_CHARS = 16_384   # a longer statement (a pasted dump) is not kept
@@ -53,12 +53,5 @@ def save_history(path: Path, history: list[str]) -> None:
             raise OSError(f"{path}: not a regular file; the history is not saved there")
     except FileNotFoundError:
         pass
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW | os.O_CLOEXEC, 0o600)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            json.dump(history[-HISTORY_CAP:], f, indent=0)
-        os.replace(tmp, path)     # replaces the name: never writes through a link put there meanwhile
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    with replacing(path, 0o600) as f:
+        f.write(json.dumps(history[-HISTORY_CAP:], indent=0).encode())
