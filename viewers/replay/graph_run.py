@@ -47,8 +47,8 @@ class RunGraph:
         episode, the graph's attributes set at t = 0 not counted (else counted); None without any."""
         if wanted is not None:
             if wanted not in self.unary:
-                raise UnknownName(unknown_name_message("predicate over nodes", wanted, list(self.unary))
-                                  + " (--color-by)")
+                raise UnknownName(unknown_name_message("predicate", wanted, list(self.unary),
+                                                       where=" over nodes in this run (--color-by)"))
             return wanted
         for derived in (_DERIVED, "TRUE"):
             rows = con.execute(

@@ -75,8 +75,8 @@ class RunContext:
         """The options of a run without a board have no meaning on a game's (one-line errors)."""
         if options.color_by is not None or options.why_atoms:
             raise ValueError(f"--{'color-by' if options.color_by is not None else 'why'} is for a run "
-                             "without a board (a reasoning run); a game's replay explains each step's deaths "
-                             "and the game's end (--why-depth)")
+                             "without a board (a reasoning run); this run's episodes are games on its board, "
+                             "whose replay explains each step's deaths and the game's end (--why-depth)")
 
     def record(self, episode: int, rec: rr.RecordingStream, options: ReplayOptions, blueprint: bool = True,
                last_step: int = 0) -> EpisodeBoard:
