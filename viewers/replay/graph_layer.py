@@ -7,9 +7,9 @@ batch is one array).
 Edge labels: rerun 0.41's GraphEdges has no label and no colour, and a graph view draws each entity's
 graph in a frame of its own and joins edges only to their own entity's nodes, so the edges cannot be
 split into one entity per predicate without frames and copies of the nodes. A small graph (at most
-SHOWN_NODE_LABELS nodes, where names are drawn) gets each edge's predicate as a label node placed on the
-edge, 40% of the way from its source (so a pair's two directions do not overlap), shown while the edge
-exists; a bigger graph's edge labels would be unreadable, and the step document counts its edges per
+SHOWN_NODE_LABELS nodes, where names are drawn) gets a label node on each pair of nodes with edges, 40%
+of the way from the source (so a pair's two directions do not overlap), naming the predicates of the
+edges it has at that step; a bigger graph's edge labels would be unreadable, and the step document counts its edges per
 predicate instead."""
 from __future__ import annotations
 
@@ -103,8 +103,17 @@ def graph_steps(episode: GraphEpisode, graph: RunGraph) -> GraphSteps:
     return GraphSteps(steps, pairs.astype(np.int64), labels, edges_on)
 
 
-def _label_positions(positions: np.ndarray, pairs: np.ndarray) -> np.ndarray:
-    return positions[pairs[:, 0]] + (positions[pairs[:, 1]] - positions[pairs[:, 0]]) * LABEL_AT
+def edge_labels(names: np.ndarray, positions: np.ndarray, pairs: np.ndarray, labels: list[str]
+                ) -> tuple[list[str], list[str], np.ndarray]:
+    """One label node per directed pair of nodes with edges: its id `a->b`, its text the pair's
+    predicates (`link, near`: several on one spot would hide each other), placed LABEL_AT along it."""
+    texts: dict[tuple[int, int], list[str]] = {}
+    for (a, b), label in zip(pairs.tolist(), labels):
+        texts.setdefault((a, b), []).append(label)
+    ends = np.array(list(texts), np.int64).reshape(-1, 2)
+    where = positions[ends[:, 0]] + (positions[ends[:, 1]] - positions[ends[:, 0]]) * LABEL_AT
+    return ([f"{names[a]}->{names[b]}" for a, b in texts], [", ".join(sorted(t)) for t in texts.values()],
+            where)
 
 
 def log_graph(rec: rr.RecordingStream, graph: RunGraph, positions: np.ndarray, episode: GraphEpisode) -> GraphSteps:
@@ -116,28 +125,32 @@ def log_graph(rec: rr.RecordingStream, graph: RunGraph, positions: np.ndarray, e
     small = len(names) <= style.SHOWN_NODE_LABELS
     colours = node_colors(episode, len(names), g.steps)
     times = [rr.TimeColumn(style.STEP, sequence=g.steps)]
+    # a node without an atom of the colour predicate can never be coloured: drawn small
+    radii = np.full(len(names), style.UNCOLOURED_RADIUS, np.float32)
+    radii[episode.color_nodes[episode.color_nodes < len(names)]] = style.NODE_RADIUS
     rec.log(style.GRAPH, rr.GraphEdges.from_fields(graph_type="directed"), static=True)
     if small:
-        ids, labels, where, sizes = [], [], [], []
+        ids, labels, where, sizes, sized = [], [], [], [], []
         on = np.zeros(len(g.pairs), dtype=bool)
         for s in g.steps.tolist():
             on = g.edges_on.get(s, on)
-            shown = g.pairs[on]
-            ids += names.tolist() + [f"{label}({names[a]},{names[b]})" for label, (a, b)
-                                     in zip(np.array(g.pair_label, dtype=object)[on], shown.tolist())]
-            labels += names.tolist() + np.array(g.pair_label, dtype=object)[on].tolist()
-            where.append(np.concatenate([positions, _label_positions(positions, shown)]))
-            sizes.append(len(names) + len(shown))
+            pair_ids, texts, spots = edge_labels(names, positions, g.pairs[on],
+                                                 np.array(g.pair_label, dtype=object)[on].tolist())
+            ids += names.tolist() + pair_ids
+            labels += names.tolist() + texts
+            where.append(np.concatenate([positions, spots]))
+            sizes.append(len(names) + len(pair_ids))
+            sized.append(np.r_[radii, np.full(len(pair_ids), style.UNCOLOURED_RADIUS, np.float32)])
         label_colour = np.array(style.EDGE_LABEL_COLOR, np.uint8)
         colours = [np.concatenate([c, np.repeat(label_colour[None], size - len(c), axis=0)])
                    for c, size in zip(colours, sizes)]
-        rec.log(style.GRAPH, rr.GraphNodes.from_fields(show_labels=True, radii=style.NODE_RADIUS), static=True)
+        rec.log(style.GRAPH, rr.GraphNodes.from_fields(show_labels=True), static=True)
         rec.send_columns(style.GRAPH, indexes=times, columns=rr.GraphNodes.columns(
             node_ids=ids, labels=labels, positions=np.concatenate(where).astype(np.float32),
-            colors=np.concatenate(colours)).partition(sizes))
+            colors=np.concatenate(colours), radii=np.concatenate(sized)).partition(sizes))
     else:
         rec.log(style.GRAPH, rr.GraphNodes(node_ids=names.tolist(), positions=positions, labels=names.tolist(),
-                                           show_labels=False, radii=style.NODE_RADIUS), static=True)
+                                           show_labels=False, radii=radii), static=True)
         rec.send_columns(style.GRAPH, indexes=times, columns=rr.GraphNodes.columns(
             colors=np.concatenate(colours)).partition([len(c) for c in colours]))
     edge_steps = sorted(g.edges_on)

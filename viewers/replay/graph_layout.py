@@ -19,7 +19,10 @@ ITERATIONS = 80
 # of the picture)
 GRAVITY = 4.0
 MAX_FORCE_NODES = 20_000
-SPACING = 40.0             # drawing units between neighbouring nodes (the viewer's node radius is ~5)
+SPACING = 40.0             # drawing units between neighbouring nodes (the replay's node radius is 14)
+# the drawing's least size: the graph view zooms out to fit a graph but never in past 1:1 (a drawing unit is
+# a point on screen), so a small graph drawn SPACING apart was a clump in the middle of the view
+MIN_EXTENT = 700.0
 
 
 def spiral_layout(n: int) -> np.ndarray:
@@ -64,15 +67,20 @@ def force_layout(n: int, edges: np.ndarray, seed: int = 0, iterations: int = ITE
     return pos
 
 
+def _scale(n: int) -> float:
+    """Drawing units per unit of a layout about one unit across: neighbours SPACING apart, at least
+    MIN_EXTENT across."""
+    return max(SPACING * np.sqrt(max(n, 1)), MIN_EXTENT)
+
+
 def layout(n: int, edges: np.ndarray, seed: int = 0) -> np.ndarray:
     """[n, 2] drawing positions: a force layout (a spiral past MAX_FORCE_NODES), scaled so that
     neighbouring nodes are about SPACING apart, y down as the viewer draws it."""
     if n > MAX_FORCE_NODES:
         return spiral_layout(n) * SPACING
-    return force_layout(n, edges, seed) * SPACING * np.sqrt(max(n, 1))
+    return force_layout(n, edges, seed) * _scale(n)
 
 
 def fit_given(positions: np.ndarray) -> np.ndarray:
     """Positions the graph gives (in [0, 1] each, as GraphML numbers are) scaled like `layout`'s."""
-    n = len(positions)
-    return positions * SPACING * np.sqrt(max(n, 1))
+    return positions * _scale(len(positions))

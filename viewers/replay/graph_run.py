@@ -94,6 +94,7 @@ class GraphEpisode:
     steps: int                     # t = 0 .. steps - 1
     outcome: str | None
     color_label: str | None
+    color_nodes: np.ndarray               # node ids that have an atom of the colour predicate (may be coloured)
     color_rows: dict[str, np.ndarray]     # the colour predicate's changes: t, node, lower, upper (seq order)
     edge_rows: dict[str, np.ndarray]      # binary atoms' changes: t, label, source, target, lower (seq order)
     firings: Firings
@@ -126,7 +127,10 @@ def read_episode(con: RunConnection, graph: RunGraph, episode: int, label: str |
     outcome = ends[0][1] if ends else None
     color_rows: dict[str, np.ndarray] = {"t": np.zeros(0, np.int64), "node": np.zeros(0, np.int64),
                                          "lower": np.zeros(0), "upper": np.zeros(0)}
+    color_nodes = np.zeros(0, np.int64)
     if label is not None:
+        color_nodes = np.asarray(con.execute("SELECT DISTINCT arg0 FROM raw.atoms WHERE label = ? AND arg0 >= 0",
+                                             [graph.unary[label]]).fetchnumpy()["arg0"], np.int64)
         cols = con.execute("SELECT c.t, a.arg0 AS node, c.new_lower AS lower, c.new_upper AS upper "
                            "FROM raw.changes c JOIN raw.atoms a ON a.atom = c.atom "
                            "WHERE c.episode = ? AND a.label = ? ORDER BY c.seq",
@@ -142,5 +146,5 @@ def read_episode(con: RunConnection, graph: RunGraph, episode: int, label: str |
             f"JOIN raw.labels l ON l.label = a.label WHERE c.episode = ? AND {_DERIVED} "
             f"GROUP BY c.t, l.name ORDER BY c.t, 3 DESC, l.name", [episode]).fetchall():
         changed.setdefault(int(t), {})[str(name)] = int(n)
-    return GraphEpisode(episode, steps, outcome, label, color_rows, edge_rows, read_firings(con, episode),
+    return GraphEpisode(episode, steps, outcome, label, color_nodes, color_rows, edge_rows, read_firings(con, episode),
                         changed)

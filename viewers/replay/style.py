@@ -91,6 +91,7 @@ def short_name(agent: str) -> str:
 GRAPH = "/graph"
 CHANGED = "/plots/changed"          # /plots/changed/exposed: atoms of the predicate changed per step
 NODE_RADIUS = 14.0
+UNCOLOURED_RADIUS = 6.0             # a node the colour predicate has no atom on (it stays grey)
 SHOWN_NODE_LABELS = 60              # up to this many nodes, their names (and the edges' labels) are drawn
 EDGE_LABEL_COLOR = (150, 150, 160)
 SERIES_COLORS = [(80, 170, 255), (255, 214, 10), (160, 220, 160), (200, 140, 255), (255, 150, 200),
