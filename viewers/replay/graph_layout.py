@@ -82,5 +82,11 @@ def layout(n: int, edges: np.ndarray, seed: int = 0) -> np.ndarray:
 
 
 def fit_given(positions: np.ndarray) -> np.ndarray:
-    """Positions the graph gives (in [0, 1] each, as GraphML numbers are) scaled like `layout`'s."""
-    return positions * _scale(len(positions))
+    """Positions the graph gives, scaled like `layout`'s: their bounding box's longer side one unit (a
+    tracelab GraphML number is in [0, 1]; PyReason's dialect takes any)."""
+    positions = np.asarray(positions, np.float64)
+    if not len(positions):
+        return positions
+    lo = positions.min(axis=0)
+    extent = float((positions.max(axis=0) - lo).max()) or 1.0
+    return (positions - lo) / extent * _scale(len(positions))

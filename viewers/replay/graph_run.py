@@ -18,9 +18,10 @@ from tracelab.store.reader import RunConnection
 MAX_LOGGED_FIRINGS = 2000   # firings of one step in the rule log; the rest are counted in one line
 POSITION_LABELS = ("x", "y")  # node attributes that place a node (GraphML <data key="x">)
 
-# a change that counts for the default colour predicate: made after t = 0, or by a rule (the graph's
-# own attributes, set by facts at t = 0, colour nothing: they never change)
-_DERIVED = "(c.t > 0 OR c.cause_kind <> 0)"
+# a change that counts (for the default colour predicate, and in each step's "changed"): any but a static
+# fact's (the graph's own attributes, which never change); `c` is raw.changes, `sf` its static facts
+_STATIC_FACTS = "LEFT JOIN raw.facts sf ON c.cause_kind = 0 AND sf.fact = c.cause_id AND sf.static"
+_DERIVED = "sf.fact IS NULL"
 
 
 @dataclass(frozen=True)
@@ -44,7 +45,7 @@ class RunGraph:
     def color_label(self, con: RunConnection, wanted: str | None, episode: int) -> str | None:
         """The predicate whose bound colours the nodes: `wanted` (an unknown name is an UnknownName
         naming the run's unary predicates), else the one with the most changes over nodes in the
-        episode, the graph's attributes set at t = 0 not counted (else counted); None without any."""
+        episode, static facts' not counted (unless there are no others); None without any."""
         if wanted is not None:
             if wanted not in self.unary:
                 raise UnknownName(unknown_name_message("predicate", wanted, list(self.unary),
@@ -53,7 +54,8 @@ class RunGraph:
         for derived in (_DERIVED, "TRUE"):
             rows = con.execute(
                 f"SELECT l.name, count(*) AS n FROM raw.changes c JOIN raw.atoms a ON a.atom = c.atom "
-                f"JOIN raw.labels l ON l.label = a.label WHERE c.episode = ? AND l.arity = 1 AND {derived} "
+                f"JOIN raw.labels l ON l.label = a.label {_STATIC_FACTS} "
+                f"WHERE c.episode = ? AND l.arity = 1 AND {derived} "
                 f"GROUP BY l.name ORDER BY n DESC, l.name LIMIT 1", [episode]).fetchall()
             if rows:
                 return str(rows[0][0])
@@ -143,7 +145,7 @@ def read_episode(con: RunConnection, graph: RunGraph, episode: int, label: str |
     changed: dict[int, dict[str, int]] = {}
     for t, name, n in con.execute(
             f"SELECT c.t, l.name, count(DISTINCT c.atom) FROM raw.changes c JOIN raw.atoms a ON a.atom = c.atom "
-            f"JOIN raw.labels l ON l.label = a.label WHERE c.episode = ? AND {_DERIVED} "
+            f"JOIN raw.labels l ON l.label = a.label {_STATIC_FACTS} WHERE c.episode = ? AND {_DERIVED} "
             f"GROUP BY c.t, l.name ORDER BY c.t, 3 DESC, l.name", [episode]).fetchall():
         changed.setdefault(int(t), {})[str(name)] = int(n)
     return GraphEpisode(episode, steps, outcome, label, color_nodes, color_rows, edge_rows, read_firings(con, episode),
