@@ -50,11 +50,14 @@ def force_layout(n: int, edges: np.ndarray, seed: int = 0, iterations: int = ITE
         cid = cell[:, 0] * GRID + cell[:, 1]
         mass = np.bincount(cid, minlength=GRID * GRID).astype(np.float64)
         used = np.flatnonzero(mass)
-        centres = np.stack([np.bincount(cid, pos[:, 0], GRID * GRID)[used],
-                            np.bincount(cid, pos[:, 1], GRID * GRID)[used]], axis=1) / mass[used, None]
-        d = pos[:, None, :] - centres[None, :, :]
-        dist2 = (d * d).sum(axis=-1) + (size * 0.25) ** 2      # softened: a node's own cell is near zero
-        disp = (d * (k * k * mass[used] / dist2)[..., None]).sum(axis=1)
+        cx = np.bincount(cid, pos[:, 0], GRID * GRID)[used] / mass[used]
+        cy = np.bincount(cid, pos[:, 1], GRID * GRID)[used] / mass[used]
+        dx, dy = pos[:, 0, None] - cx, pos[:, 1, None] - cy
+        # push / distance of each node from each cell (softened: a node's own cell is near zero); the
+        # push along x is sum_c w (x - cx) = x sum_c w - w @ cx, two matrix-vector products
+        w = (k * k) * mass[used] / (dx * dx + dy * dy + (size * 0.25) ** 2)
+        total = w.sum(axis=1)
+        disp = np.stack([pos[:, 0] * total - w @ cx, pos[:, 1] * total - w @ cy], axis=1)
         if len(src):
             pull = pos[src] - pos[dst]
             pull *= np.sqrt((pull * pull).sum(axis=1))[:, None] / k
