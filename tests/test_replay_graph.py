@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -238,3 +239,29 @@ def test_the_supply_chain_sample_replays_its_thousands_of_nodes(tmp_path: Path) 
     assert sum(r["step"] == 5 for r in read_rrd(out)["supply-chain/episode-0"]["/rules/log"]) == \
         con.execute("SELECT count(*) FROM firings WHERE t = 5").fetchall()[0][0]
     assert out.stat().st_size < 4 << 20                # the graph once, the colours 6 times: not per node
+
+
+def test_live_follows_a_reasoning_run_being_written(tmp_path: Path) -> None:
+    """Three reasonings (--repeat 3) recorded by another process; --live sends each as it ends, until the
+    run stops (if the run ends first, it sends the three at once)."""
+    run_dir, out = tmp_path / "live", tmp_path / "live.rrd"
+    examples = Path(__file__).resolve().parent.parent / "rules" / "examples"
+    reason = subprocess.Popen([sys.executable, "-m", "tracelab.cli", "reason", str(examples / "supply_chain.rules"),
+                               "--graph", str(examples / "supply_chain.graphml"), "--steps", "8", "--repeat", "3",
+                               "--run", str(run_dir)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not (run_dir / "parts" / "manifest.json").exists():
+            assert reason.poll() is None or (run_dir / "parts" / "manifest.json").exists(), reason.stderr.read()
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
+        done = subprocess.run([sys.executable, "-m", "tracelab.cli", "replay", str(run_dir), "--live", "--save",
+                               str(out)], capture_output=True, text=True, timeout=300, check=False)
+        assert done.returncode == 0, done.stderr
+        assert "each episode is sent as it ends" in done.stderr
+    finally:
+        reason.wait(timeout=120)
+    assert reason.returncode == 0
+    recordings = read_rrd(out)
+    assert sorted(recordings) == [f"live/episode-{e}" for e in range(3)]
+    assert all(len(at(r["/graph"], 0, "GraphNodes:node_ids")) == 2430 for r in recordings.values())

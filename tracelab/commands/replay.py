@@ -24,7 +24,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     out.add_argument("--serve", action="store_true", help="serve the web viewer on localhost")
     out.add_argument("--spawn", action="store_true", help="open rerun's native viewer")
     p.add_argument("--live", action="store_true",
-                   help="follow a run being written: stream each game as it ends, until the run stops")
+                   help="follow a run being written: stream each episode (a game, a reasoning) as it ends, "
+                        "until the run stops")
     p.add_argument("--port", type=int, default=9876, help="gRPC port for --serve / --spawn (default 9876)")
     p.add_argument("--web-port", type=int, default=9090, help="web viewer port for --serve (default 9090)")
     p.add_argument("--why-depth", type=positive_int, default=6, help="depth of the why-trees (default 6)")
@@ -62,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
         else:
             out = SaveOutput(args.save or "replay.rrd")
         if args.live:
-            print(f"following {args.run}: each game is sent as it ends (Ctrl-C stops)", file=sys.stderr)
+            print(f"following {args.run}: each episode is sent as it ends (Ctrl-C stops)", file=sys.stderr)
             follow_run(con, name, args.run, f, out, options,
                        on_episode=lambda e: print(f"episode {e} sent", file=sys.stderr, flush=True))
         else:

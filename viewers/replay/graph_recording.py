@@ -111,7 +111,7 @@ def graph_blueprint(positions: np.ndarray, color_label: str | None, open_at: str
                         rrb.TimeSeriesView(origin=style.CHANGED, name="Atoms changed per step",
                                            axis_x=step_axis(last_step),
                                            plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop)),
-                        row_shares=[3, 3, 2])
+                        row_shares=[2, 4, 2])     # the why-trees are the longest text
     return rrb.Blueprint(rrb.Horizontal(graph, side, column_shares=[3, 2]),
                          rrb.TimePanel(timeline=style.STEP, state="collapsed",
                                        play_state="following" if open_at == "end" else "paused"),
