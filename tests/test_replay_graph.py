@@ -265,3 +265,25 @@ def test_live_follows_a_reasoning_run_being_written(tmp_path: Path) -> None:
     recordings = read_rrd(out)
     assert sorted(recordings) == [f"live/episode-{e}" for e in range(3)]
     assert all(len(at(r["/graph"], 0, "GraphNodes:node_ids")) == 2430 for r in recordings.values())
+
+
+def test_the_rule_log_keeps_at_most_its_limit_of_firings_a_step_and_counts_the_rest(tmp_path: Path) -> None:
+    """2,100 nodes fire one rule each at t=1: the log keeps the first MAX_LOGGED_FIRINGS (in the engine's
+    order) and one line saying how many more and how to list them."""
+    from tracelab.viewers.replay.graph_run import MAX_LOGGED_FIRINGS
+    n = MAX_LOGGED_FIRINGS + 100
+    nodes = "".join(f'<node id="n{i}"><data key="p">true</data></node>\n' for i in range(n))
+    (tmp_path / "g.graphml").write_text(f"""<?xml version="1.0" encoding="UTF-8"?>
+<graphml xmlns="http://graphml.graphdrawing.org/xmlns">
+<key id="p" for="node" attr.name="p" attr.type="boolean"/>
+<graph edgedefault="directed">
+{nodes}</graph></graphml>
+""")
+    (tmp_path / "p.rules").write_text("q: q(X) <-1 p(X)\n")
+    assert main(["reason", str(tmp_path / "p.rules"), "--graph", str(tmp_path / "g.graphml"), "--steps", "3",
+                 "--run", str(tmp_path / "run")]) == 0
+    log = replayed(tmp_path / "run", tmp_path / "r.rrd")["/rules/log"]
+    at1 = [(r["TextLog:level"][0], r["TextLog:text"][0]) for r in log if r["step"] == 1]
+    assert len(at1) == MAX_LOGGED_FIRINGS + 1
+    assert at1[0] == ("q", "q(X=n0): q(n0) [0,1] -> [1,1]")
+    assert at1[-1] == ("more", "... and 100 more firings at t=1 (tracelab trace RUN --episode 0 --from 1 --to 1)")
