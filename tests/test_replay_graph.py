@@ -287,3 +287,15 @@ def test_the_rule_log_keeps_at_most_its_limit_of_firings_a_step_and_counts_the_r
     assert len(at1) == MAX_LOGGED_FIRINGS + 1
     assert at1[0] == ("q", "q(X=n0): q(n0) [0,1] -> [1,1]")
     assert at1[-1] == ("more", "... and 100 more firings at t=1 (tracelab trace RUN --episode 0 --from 1 --to 1)")
+
+
+def test_a_graph_too_big_to_draw_is_refused_in_one_line_before_it_is_read(
+        run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """The limits are counted in SQL first (a stranger's run of ten million nodes is not read to find out);
+    here lowered to this 5-node graph's size, as a graph past 100,000 nodes takes minutes to record."""
+    from tracelab.viewers.replay import graph_run
+    monkeypatch.setattr(graph_run, "MAX_NODES", 4)
+    assert main(["replay", str(run), "--save", str(tmp_path / "x.rrd")]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "this run's graph has 5 nodes and up to 10 edges; the replay draws at most 4 " \
+                                   "nodes" in err, err

@@ -9,8 +9,8 @@ graph in a frame of its own and joins edges only to their own entity's nodes, so
 split into one entity per predicate without frames and copies of the nodes. A small graph (at most
 SHOWN_NODE_LABELS nodes, where names are drawn) gets a label node on each pair of nodes with edges, 40%
 of the way from the source (so a pair's two directions do not overlap), naming the predicates of the
-edges it has at that step; a bigger graph's edge labels would be unreadable, and the step document counts its edges per
-predicate instead."""
+edges it has at that step; a bigger graph's edge labels would be unreadable, and the step document
+counts its edges per predicate instead."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -67,6 +67,7 @@ def node_colors(episode: GraphEpisode, n: int, steps: np.ndarray) -> list[np.nda
         colours[changed] = style.bound_colors(lower[changed], upper[changed])
         out.append(colours.copy())
     return out
+
 
 def graph_steps(episode: GraphEpisode, graph: RunGraph) -> GraphSteps:
     """The graph's changes over the episode (see GraphSteps): the graph's own edges that no binary

@@ -40,8 +40,10 @@ class GraphRunContext:
         """[nodes, 2] float32 drawing positions, decided at the first episode replayed."""
         if self._positions is None:
             given = self.graph.given_positions(self.con, episode)
-            edges = np.concatenate([self.graph.edges, self._binary_pairs()])
-            drawn = fit_given(given) if given is not None else layout(len(self.graph.nodes), edges)
+            if given is not None:
+                drawn = fit_given(given)
+            else:
+                drawn = layout(len(self.graph.nodes), np.concatenate([self.graph.edges, self._binary_pairs()]))
             self._positions = drawn.astype(np.float32)
         return self._positions
 

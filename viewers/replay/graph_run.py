@@ -16,6 +16,10 @@ from tracelab.store.names import UnknownName, unknown_name_message
 from tracelab.store.reader import RunConnection
 
 MAX_LOGGED_FIRINGS = 2000   # firings of one step in the rule log; the rest are counted in one line
+# the biggest graph the replay draws: past these, rerun's graph view is no longer usable and the recording
+# (a colour per node at each step that changes one, every edge's two names) grows to gigabytes
+MAX_NODES = 100_000
+MAX_EDGES = 1_000_000
 POSITION_LABELS = ("x", "y")  # node attributes that place a node (GraphML <data key="x">)
 
 # a change that counts (for the default colour predicate, and in each step's "changed"): any but a static
@@ -35,6 +39,14 @@ class RunGraph:
 
     @classmethod
     def read(cls, con: RunConnection) -> RunGraph:
+        """The run's graph; a ValueError (one line) for one too big to draw, counted before it is read."""
+        n_nodes, n_edges = con.execute(
+            "SELECT (SELECT count(*) FROM raw.nodes), (SELECT count(*) FROM raw.edges) + (SELECT count(*) FROM "
+            "raw.atoms a JOIN raw.labels l ON l.label = a.label WHERE l.arity = 2)").fetchall()[0]
+        if n_nodes > MAX_NODES or n_edges > MAX_EDGES:
+            raise ValueError(f"this run's graph has {n_nodes:,} nodes and up to {n_edges:,} edges; the replay "
+                             f"draws at most {MAX_NODES:,} nodes and {MAX_EDGES:,} edges (read the run with "
+                             f"tracelab trace, why, sql or the TUI)")
         nodes = [n for (n,) in con.execute("SELECT name FROM raw.nodes ORDER BY node").fetchall()]
         labels = con.execute("SELECT name, label, arity FROM raw.labels ORDER BY name").fetchall()
         e = con.execute("SELECT source, target FROM raw.edges").fetchnumpy()
