@@ -3,8 +3,8 @@ force-directed layout (Fruchterman-Reingold), computed once per replay, the same
 (a fixed seed).
 
 Not networkx's spring_layout, although it is installed (torch needs it): on the supply-chain sample
-(2,430 nodes, 6,667 edges) it took 25-30 s here (both its `force` and `energy` methods), this one
-~1-2 s. The repulsion between nodes is approximated on a grid: each node is pushed by the centre of
+(2,430 nodes, 6,667 edges) it took 14-17 s of CPU (its `force` and `energy` methods alike), this one
+1.7 s. The repulsion between nodes is approximated on a grid: each node is pushed by the centre of
 mass of every occupied cell (GRID x GRID cells) instead of by every other node, so an iteration costs
 nodes x cells, not nodes². Past MAX_FORCE_NODES nodes, even that is too slow for a replay: the nodes
 go on a sunflower spiral (in node order), which costs nothing and overlaps nothing."""
