@@ -3,7 +3,8 @@
 # without a GPU (Vulkan on llvmpipe, about 20 s a picture on 2 cores):
 #   apt-get install -y mesa-vulkan-drivers xvfb
 #   bash docs/images/regenerate.sh
-# Every picture is of a real run: the sample runs (sample_runs/regenerate.sh) and a 3v3 game played here.
+# Every picture is of a real run: the sample runs (sample_runs/regenerate.sh, the supply-chain reasoning
+# included) and a 3v3 game played here.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 tmp=$(mktemp -d)
@@ -45,4 +46,8 @@ TOML
 tracelab play --scenario "$tmp/3v3.toml" --episodes 1 --seed 3 --run "$tmp/3v3" >/dev/null
 tracelab replay "$tmp/3v3" --episode 0 --open-at end --save "$tmp/3v3.rrd"
 shot "$tmp/3v3.rrd" docs/images/replay-3v3.png
+# a run without a board: the supply-chain sample's reasoning over its 2,430-node graph at its last step,
+# coloured by `exposed` (the default), with the why-tree of an alert
+tracelab replay sample_runs/supply-chain --open-at end --why 'alert(sam-gray)' --save "$tmp/graph.rrd"
+shot "$tmp/graph.rrd" docs/images/replay-graph.png
 ls -la docs/images/*.png

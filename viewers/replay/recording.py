@@ -21,6 +21,8 @@ class ReplayOptions:
     why_depth: int = 6
     lanes: tuple[str, ...] = rules_layer.LANE_LABELS
     open_at: str = "start"          # where the viewer's time cursor starts: start | end
+    color_by: str | None = None     # a run without a board: the predicate colouring the nodes (None: default)
+    why_atoms: tuple[str, ...] = () # a run without a board: the atoms whose why-trees the documents show
 
 
 @dataclass
@@ -68,6 +70,17 @@ class RunContext:
         """Catch up with a run being written: its metrics so far (the model reads a grown vocabulary
         by itself)."""
         self.metrics = plots.training_metrics(self.con)
+
+    def check(self, options: ReplayOptions, episode: int) -> None:
+        """The options of a run without a board have no meaning on a game's (one-line errors)."""
+        if options.color_by is not None or options.why_atoms:
+            raise ValueError(f"--{'color-by' if options.color_by is not None else 'why'} is for a run "
+                             "without a board (a reasoning run); this run's episodes are games on its board, "
+                             "whose replay explains each step's deaths and the game's end (--why-depth)")
+
+    def record(self, episode: int, rec: rr.RecordingStream, options: ReplayOptions, blueprint: bool = True,
+               last_step: int = 0) -> EpisodeBoard:
+        return record_episode(self, episode, rec, options, blueprint, last_step)
 
 
 def new_recording(run_name: str, episode: int) -> rr.RecordingStream:

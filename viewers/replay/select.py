@@ -8,7 +8,8 @@ from dataclasses import dataclass
 from tracelab.store.names import unknown_name_message
 from tracelab.store.reader import RunConnection
 
-OUTCOMES = ("win", "loss", "draw", "truncated", "aborted")
+OUTCOMES = ("win", "loss", "draw", "truncated", "aborted",          # a game's, for red
+            "converged", "stopped", "failed", "interrupted")            # a reasoning's (docs/store.md)
 # kind from the episode's begin info (NULL for runs that are not training runs)
 _KIND = "json_extract_string(begin_info, '$.kind')"
 

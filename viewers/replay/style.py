@@ -85,3 +85,28 @@ def short_name(agent: str) -> str:
     """red-agent-3 -> R3 (board labels stay small)."""
     team, _, number = agent.partition("-agent-")
     return f"{team[:1].upper()}{number}"
+
+
+# ---- the replay of a run without a board (a reasoning run): its graph ----------------------------------
+GRAPH = "/graph"
+CHANGED = "/plots/changed"          # /plots/changed/exposed: atoms of the predicate changed per step
+NODE_RADIUS = 14.0
+UNCOLOURED_RADIUS = 6.0             # a node the colour predicate has no atom on (it stays grey)
+SHOWN_NODE_LABELS = 60              # up to this many nodes, their names (and the edges' labels) are drawn
+EDGE_LABEL_COLOR = (150, 150, 160)
+SERIES_COLORS = [(80, 170, 255), (255, 214, 10), (160, 220, 160), (200, 140, 255), (255, 150, 200),
+                 (120, 220, 220)]     # the other predicates' lines of "atoms changed per step"
+# a node's colour from its bound [l, u] of the colour predicate: blue [0,0] .. red [1,1] by the middle
+# (l + u) / 2, towards grey by the width u - l, so a never-set [0,1] atom (or none) is grey
+BOUND_FALSE = np.array((70, 120, 210), np.float64)
+BOUND_TRUE = np.array((255, 90, 60), np.float64)
+BOUND_UNKNOWN = np.array((85, 85, 95), np.float64)
+GRAPH_BACKGROUND = (24, 24, 28)
+
+
+def bound_colors(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """[n, 3] uint8 colours of bounds (see BOUND_FALSE)."""
+    lower, upper = np.asarray(lower, np.float64), np.asarray(upper, np.float64)
+    c = BOUND_FALSE + (BOUND_TRUE - BOUND_FALSE) * ((lower + upper) / 2)[:, None]
+    c += (BOUND_UNKNOWN - c) * (upper - lower)[:, None]
+    return np.clip(np.rint(c), 0, 255).astype(np.uint8)

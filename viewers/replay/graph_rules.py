@@ -1,0 +1,121 @@
+"""The rules' side of the replay of a run without a board: every firing as a TextLog line (its level is
+the rule, so the log view filters by rule), a markdown document per step (what changed, what fired, and
+the why-tree of each atom `--why` names, as `tracelab why` prints it), and per predicate how many of its
+atoms changed in each step."""
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Callable
+
+import numpy as np
+import rerun as rr
+from tracelab.viewers.replay import style
+from tracelab.viewers.replay.columns import send_per_entity
+from tracelab.viewers.replay.graph_run import GraphEpisode
+
+from tracelab.store.episode import EpisodeTrace
+from tracelab.store.model import RunModel
+from tracelab.store.reader import RunConnection
+from tracelab.store.why import WhyNode, explain_in, render_why
+
+MORE = "more"   # the level of the line that counts a step's firings past the log's limit
+
+
+def log_rule_log(rec: rr.RecordingStream, episode: GraphEpisode) -> None:
+    f = episode.firings
+    steps, levels, lines = f.t.tolist(), list(f.rule), list(f.line)
+    for s, n in sorted(f.per_step.items()):
+        logged = int((f.t == s).sum())
+        if n > logged:
+            steps.append(s)
+            levels.append(MORE)
+            lines.append(f"... and {n - logged:,} more firings at t={s} "
+                         f"(tracelab trace RUN --episode {episode.episode} --from {s} --to {s})")
+    if not lines:
+        return
+    order = np.argsort(np.asarray(steps), kind="stable")
+    rec.send_columns(style.RULE_LOG, indexes=[rr.TimeColumn(style.STEP, sequence=np.asarray(steps)[order])],
+                     columns=rr.TextLog.columns(text=[lines[i] for i in order], level=[levels[i] for i in order]))
+
+
+def log_changed(rec: rr.RecordingStream, episode: GraphEpisode) -> None:
+    """Per predicate that changed in the episode, how many of its atoms changed at each step; the colour
+    predicate's line in the nodes' red, the others in the palette's colours."""
+    labels = sorted({name for per in episode.changed.values() for name in per})
+    if not labels:
+        return
+    others = iter(style.SERIES_COLORS * (len(labels) // len(style.SERIES_COLORS) + 1))
+    for name in labels:
+        colour = tuple(style.BOUND_TRUE.astype(int)) if name == episode.color_label else next(others)
+        rec.log(f"{style.CHANGED}/{name}", rr.SeriesLines(colors=[colour], names=name, widths=2.0), static=True)
+    steps = np.arange(episode.steps)
+    counts = [np.array([episode.changed.get(s, {}).get(name, 0) for s in steps.tolist()]) for name in labels]
+    every = np.tile(steps, len(labels))
+    send_per_entity(rec, [f"{style.CHANGED}/{name}" for name in labels], [len(steps)] * len(labels),
+                    [rr.TimeColumn(style.STEP, sequence=every)],
+                    rr.Scalars.columns(scalars=np.concatenate(counts).astype(np.float64)))
+
+
+def check_atoms(model: RunModel, atoms: tuple[str, ...]) -> None:
+    """Each atom `--why` names must be a ground atom of the run (the store's own errors, one line)."""
+    for atom in atoms:
+        try:
+            model.parse_atom(atom)
+        except (KeyError, ValueError) as e:
+            msg = e.args[0] if isinstance(e, KeyError) and e.args else str(e)
+            raise ValueError(f"--why {atom}: {msg}") from None
+
+
+def _step_header(episode: GraphEpisode, s: int, edges: dict[str, int]) -> list[str]:
+    last = episode.steps - 1
+    lines = [f"## Episode {episode.episode}, step {s} of {last}"]
+    if s == last and episode.outcome:
+        lines.append(f"**The reasoning ended: {episode.outcome}.**\n")
+    changed = episode.changed.get(s, {})
+    if edges:
+        lines.append("- edges: " + ", ".join(f"{name} {n:,}" for name, n in edges.items()))
+    lines.append("- changed: " + (", ".join(f"{name} {n:,}" for name, n in changed.items()) or "nothing"))
+    fired = Counter(r for r, t in zip(episode.firings.rule, episode.firings.t.tolist()) if t == s)
+    total = episode.firings.per_step.get(s, 0)
+    if total:
+        lines.append(f"- fired: {total:,} (" + ", ".join(f"{r} {n:,}" for r, n in fired.most_common()) + ")")
+    return lines
+
+
+def why_documents(con: RunConnection, episode: GraphEpisode, atoms: tuple[str, ...], depth: int = 6,
+                  model: Callable[[], RunModel] | None = None,
+                  edges: Callable[[int], dict[str, int]] = lambda s: {}) -> list[str]:
+    """A markdown document per step 0 .. steps-1: the edges per predicate (`edges(step)`), what changed
+    and fired, and the why-tree of each of `atoms` at the end of the step (a tree is explained again only
+    when its atom changed)."""
+    trace = None
+    if atoms:
+        run_model = model() if model else RunModel(con)
+        trace = EpisodeTrace(con, episode.episode)
+        run_model.prefetch_groundings(np.unique(trace.c["grounding"]))
+        ids = {a: run_model.parse_atom(a) for a in atoms}
+    trees: dict[tuple[str, int], WhyNode] = {}
+    docs = []
+    for s in range(episode.steps):
+        lines = _step_header(episode, s, edges(s))
+        if trace is None:
+            example = next((head for head, t in zip(episode.firings.head, episode.firings.t.tolist())
+                            if t == s), None)
+            if example:
+                lines.append(f"\nAsk why an atom has its bound: `tracelab replay RUN --why '{example}'`.")
+        for atom in atoms:
+            last = trace.last_at_end_of(ids[atom], s)
+            key = (atom, -1 if last is None else last.index)
+            if key not in trees:
+                trees[key] = explain_in(run_model, trace, atom, s, depth)
+            lines += [f"\n### Why {atom}", "```text", render_why(trees[key], s), "```"]
+        docs.append("\n".join(lines))
+    return docs
+
+
+def log_why(rec: rr.RecordingStream, con: RunConnection, episode: GraphEpisode, atoms: tuple[str, ...],
+            depth: int = 6, model: Callable[[], RunModel] | None = None,
+            edges: Callable[[int], dict[str, int]] = lambda s: {}) -> None:
+    docs = why_documents(con, episode, atoms, depth, model, edges)
+    rec.send_columns(style.WHY, indexes=[rr.TimeColumn(style.STEP, sequence=np.arange(len(docs)))],
+                     columns=rr.TextDocument.columns(text=docs, media_type=["text/markdown"] * len(docs)))
