@@ -159,7 +159,8 @@ def _edit(key: str, value: Any) -> Callable[[dict[str, Any]], None]:
 
 
 @pytest.mark.parametrize("edit, fragment", [
-    (_edit("config.hidden", "64"), "key 'config.hidden': expected an integer, got the string '64'"),
+    (_edit("config.hidden", [64]), "key 'config.hidden': expected layer widths as a string (64,64) or one width"),
+    (_edit("config.hidden", "6x4"), "config: hidden must be layer widths >= 1 separated by commas"),
     (_edit("config.steps", -5), "config: steps must be at least 1, got -5"),
     (_edit("games.history", lambda h: h.fill_(100)), "key 'games.history': expected values from 0 to 8"),
     (_edit("games.obs", torch.zeros(1)), "key 'games.obs': expected a float32 tensor of shape 4 x 4"),
