@@ -206,3 +206,34 @@ def test_any_torch_module_trains_through_the_python_api(tmp_path):
     for k, v in again.learners["shared"].online_weights().items():
         assert torch.equal(v, state["learners"]["shared"]["online"][k])
     again.close()
+
+
+class ConservativeDQN(DQN):
+    """docs/training.md's worked example of a new loss, as written there: a conservative (CQL) term."""
+    alpha = 0.5
+
+    def loss(self, q, actions, td_target):
+        conservative = (torch.logsumexp(q, dim=1, keepdim=True) - q.gather(1, actions)).mean()
+        return super().loss(q, actions, td_target) + self.alpha * conservative
+
+
+def test_a_new_loss_is_a_subclass_and_trains_through_the_trainer(tmp_path):
+    """The worked example: its loss is the method's plus the conservative term, it trains through
+    Trainer(learner_class=...) into a run whose checkpoint resumes."""
+    learner = ConservativeDQN(make_q_network(4, (8,), 5, generator=torch.Generator().manual_seed(1)),
+                              ReplayBuffer(50, 4, 5, 50), lr=1e-3)
+    _filled(learner.buffer, False)
+    data = learner.buffer.sample_batch(np.random.default_rng(3))
+    obs, actions, rewards, next_obs, discounts = (torch.from_numpy(x.copy()) for x in data[:5])
+    with torch.no_grad():
+        q = learner.q_network(obs)
+        y = rewards + discounts * learner.target_network(next_obs).max(1, keepdim=True).values
+        taken = q.gather(1, actions)
+        want = torch.nn.functional.smooth_l1_loss(taken, y) + 0.5 * (torch.logsumexp(q, 1, keepdim=True) - taken).mean()
+    learner.update(np.random.default_rng(3))
+    assert learner.take_loss() == pytest.approx(want.item(), rel=1e-6)
+    cfg = TrainConfig(scenario="walk4", steps=400, seed=1, **SMALL)
+    trainer = Trainer(cfg, WALK, run_dir=tmp_path / "run", learner_class=ConservativeDQN)
+    assert isinstance(trainer.learners["shared"], ConservativeDQN) and trainer.train() == "finished"
+    trainer.close()
+    assert load_checkpoint(tmp_path / "run")["learner"] == "readable"

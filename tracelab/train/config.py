@@ -128,6 +128,8 @@ class TrainConfig:
         elif self.kernel != "auto" and self.backend != "rules":
             problems.append(f"kernel {self.kernel} is the rule engine's: it needs --backend rules, not "
                             f"{self.backend}")
+        if isinstance(self.hidden, int) and not isinstance(self.hidden, bool):  # one width, as configs had it
+            self.hidden = str(self.hidden)
         try:
             parse_hidden(self.hidden)
         except ValueError as e:
@@ -179,8 +181,6 @@ class TrainConfig:
     def from_dict(cls, d: dict[str, Any]) -> "TrainConfig":
         known = {f.name for f in fields(cls)}
         d = {k: v for k, v in d.items() if k in known}
-        if isinstance(d.get("hidden"), int):  # written when --hidden was one layer's width
-            d["hidden"] = str(d["hidden"])
         if "split_networks" not in d:  # written before the two were separate: non-Markov implied split
             d["split_networks"] = bool(d.get("non_markov", False))
         return cls(**d)

@@ -1,10 +1,8 @@
 """The DQN update as a reader expects it (CleanRL's dqn.py): a torch.nn.Module Q-network and its target copy,
-autograd, torch.optim.Adam, and the TD target and the loss in plain sight. This is the learner to read and
-change (docs/training.md, "Change the learner"); tracelab/train/learner.py computes the same update for the
-method's one-layer network by hand, several times faster (tests/test_learners.py holds the two equal).
-
-A transition's `discount` is γ^k of the steps it spans, or 0 where the episode or the agent ended
-(tracelab/train/transitions.py), so the target is r + discount * max_a' Q_target(s', a')."""
+autograd, torch.optim.Adam, the TD target and the loss in plain sight: the learner to read and change
+(docs/training.md, "The learner"). tracelab/train/learner.py computes the same update for the method's
+one-layer network by hand, several times faster (tests/test_learners.py holds the two equal). A
+transition's `discount` is γ^k of the steps it spans, 0 where the episode or the agent ended."""
 from __future__ import annotations
 
 import copy
@@ -61,7 +59,7 @@ class DQN:
         self.optimizer = torch.optim.Adam(q_network.parameters(), lr=lr)
         self.updates = 0
         self.losses = RunningLoss()  # the mean since the last take_loss()
-        self._last_q: torch.Tensor | None = None           # Q(s) of the last minibatch
+        self._last_q: torch.Tensor | None = None  # Q(s) of the last minibatch
 
     def update(self, rng: np.random.Generator) -> None:
         data = self.buffer.sample_batch(rng)
@@ -77,13 +75,18 @@ class DQN:
                 next_value = next_q.max(dim=1, keepdim=True).values
             td_target = rewards + discounts * next_value
         q = self.q_network(obs)
-        loss = F.smooth_l1_loss(q.gather(1, actions), td_target)
+        loss = self.loss(q, actions, td_target)
         self.optimizer.zero_grad()
         loss.backward()
         self.optimizer.step()
         self.losses.add(loss)
         self._last_q = q.detach()
         self.updates += 1
+
+    def loss(self, q: torch.Tensor, actions: torch.Tensor, td_target: torch.Tensor) -> torch.Tensor:
+        """The method's loss: Smooth L1 between Q(s, a) of the taken actions and the TD target. `q` is
+        Q(s, ·) [B, A], so a subclass can add terms over every action (docs/training.md, "A new loss")."""
+        return F.smooth_l1_loss(q.gather(1, actions), td_target)
 
     def sync_target(self) -> None:
         self.target_network.load_state_dict(self.q_network.state_dict())
@@ -102,8 +105,8 @@ class DQN:
         adam = {name: {"step": float(s["step"]), "exp_avg": s["exp_avg"].clone(), "exp_avg_sq": s["exp_avg_sq"].clone()}
                 for name, p in self.q_network.named_parameters() if (s := self.optimizer.state.get(p))}
         return {"online": _cloned(self.q_network), "target": _cloned(self.target_network), "adam": adam,
-                "updates": self.updates, "buffer": self.buffer.state(), "loss_sum": float(self.losses.total),
-                "loss_n": self.losses.count, "last_q": None if self._last_q is None else self._last_q.clone()}
+                "updates": self.updates, "buffer": self.buffer.state(), **self.losses.state(),
+                "last_q": None if self._last_q is None else self._last_q.clone()}
 
     def load_state(self, st: dict[str, Any]) -> None:
         self.q_network.load_state_dict(st["online"])
@@ -115,8 +118,7 @@ class DQN:
         self.optimizer.load_state_dict(opt)
         self.updates = int(st["updates"])
         self.buffer.load_state(st["buffer"])
-        self.losses.total.fill_(st["loss_sum"])
-        self.losses.count = int(st["loss_n"])
+        self.losses.load_state(st)
         self._last_q = st["last_q"]
 
 

@@ -156,7 +156,7 @@ class DQNLearner:
     def state(self) -> dict[str, Any]:
         return {"params": self.params.clone(), "adam_m": self.adam_m.clone(), "adam_v": self.adam_v.clone(),
                 "adam_step": self.adam_step, "updates": self.updates, "buffer": self.buffer.state(),
-                "loss_sum": float(self.losses.total), "loss_n": self.losses.count,
+                **self.losses.state(),
                 "last_q": self._q.clone() if self._have_q else None}
 
     def load_state(self, st: dict[str, Any]) -> None:
@@ -169,8 +169,7 @@ class DQNLearner:
         self.adam_step, self.updates = int(st["adam_step"]), int(st["updates"])
         self._step_t.fill_(self.adam_step)
         self.buffer.load_state(st["buffer"])
-        self.losses.total.fill_(st["loss_sum"])
-        self.losses.count = int(st["loss_n"])
+        self.losses.load_state(st)
         self._have_q = st["last_q"] is not None
         if self._have_q:
             self._q.copy_(st["last_q"])

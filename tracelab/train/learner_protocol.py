@@ -59,3 +59,10 @@ class RunningLoss:
         self.total.zero_()
         self.count = 0
         return value
+
+    def state(self) -> dict[str, Any]:
+        return {"loss_sum": float(self.total), "loss_n": self.count}
+
+    def load_state(self, st: dict[str, Any]) -> None:
+        self.total.fill_(st["loss_sum"])
+        self.count = int(st["loss_n"])

@@ -54,16 +54,16 @@ def training_net(cfg: TrainConfig, scenario: Scenario) -> NetSpec:
 
 
 def make_learner(kind: str, net: NetSpec, cfg: TrainConfig, generator: torch.Generator,
-                 network: NetworkFactory | None = None) -> Learner:
-    """The fused learner for `net` (one tanh layer), or the readable one on `network`'s module (default:
-    the module `net` describes, drawn from `generator`)."""
+                 network: NetworkFactory | None = None, learner_class: type[DQN] = DQN) -> Learner:
+    """The fused learner for `net` (one tanh layer), or the readable one (`learner_class`: DQN or a
+    subclass) on `network`'s module (default: the module `net` describes, drawn from `generator`)."""
     if kind == "fused":
         return DQNLearner(Shape(net.inputs, net.hidden[0], net.actions), lr=cfg.lr, batch=cfg.batch,
                           buffer=cfg.buffer, generator=generator, masked=cfg.mask)
     module = network(net.inputs, net.actions) if network is not None else \
         make_q_network(net.inputs, net.hidden, net.actions, net.dueling, generator)
-    return DQN(module, ReplayBuffer(cfg.buffer, net.inputs, net.actions, cfg.batch, cfg.mask), lr=cfg.lr,
-               double_dqn=cfg.double_dqn)
+    return learner_class(module, ReplayBuffer(cfg.buffer, net.inputs, net.actions, cfg.batch, cfg.mask),
+                         lr=cfg.lr, double_dqn=cfg.double_dqn)
 
 
 def acting_q(learner: Learner, net: NetSpec | None) -> QFunction:
@@ -90,9 +90,10 @@ def _agent_rewards(info: dict, done: np.ndarray) -> np.ndarray:
 class Trainer:
     def __init__(self, cfg: TrainConfig, scenario: Scenario, writer: TraceWriter | None = None,
                  run_dir: Path | None = None, progress: Progress | None = None,
-                 network: NetworkFactory | None = None) -> None:
-        """`network`: train the readable learner on this module instead of the MLP cfg.hidden describes
-        (Python API; its policy files say `custom`, docs/training.md)."""
+                 network: NetworkFactory | None = None, learner_class: type[DQN] | None = None) -> None:
+        """Python API (docs/training.md, "The learner"): `network` trains the readable learner on this
+        module instead of the MLP cfg.hidden describes (its policy files say `custom`); `learner_class` is
+        the readable learner's class (a subclass of DQN with another loss, say)."""
         torch.set_num_threads(cfg.threads)
         self.cfg, self.scenario, self.writer, self.run_dir, self.progress = cfg, scenario, writer, run_dir, progress
         self.stack = cfg.non_markov
@@ -110,14 +111,15 @@ class Trainer:
         self.net = training_net(cfg, scenario)
         self.custom_network = network is not None
         self.learner_kind, self.learner_note = cfg.learner_choice()
-        if network is not None:
+        if network is not None or learner_class is not None:
             if cfg.learner == "fused":
-                raise ValueError("a network module trains with the readable learner: learner fused takes the "
-                                 "network --hidden describes")
+                raise ValueError("a network module or a learner class trains with the readable learner, not "
+                                 "learner fused")
             self.learner_kind, self.learner_note = "readable", None
         self.groups = network_groups(scenario, cfg.split_networks)
         self.learners: dict[str, Learner] = {
-            name: make_learner(self.learner_kind, self.net, cfg, self.torch_gen, network) for name in self.groups}
+            name: make_learner(self.learner_kind, self.net, cfg, self.torch_gen, network, learner_class or DQN)
+            for name in self.groups}
         owner = {j: i for i, agents in enumerate(self.groups.values()) for j in agents}
         described = None if self.custom_network else self.net
         self.policy = Policy(scenario, [acting_q(lr, described) for lr in self.learners.values()],
