@@ -19,13 +19,15 @@ import numpy as np
 from tracelab.validation import Mismatch, Spec
 
 QFunction = Callable[[np.ndarray], np.ndarray]  # observations [K, D] -> Q-values [K, A]
+MAX_LAYERS = 32  # hidden layers a config or a policy file may declare (a stranger's file could say millions)
 
 
 def parse_hidden(text: str | int) -> tuple[int, ...]:
     """'64,64' (or 64) -> (64, 64); ValueError naming the value otherwise."""
-    parts = [p.strip() for p in str(text).split(",")]
-    if not all(p.isdigit() and int(p) >= 1 for p in parts):
-        raise ValueError(f"hidden must be layer widths >= 1 separated by commas (64 or 64,64), got {text!r}")
+    parts = [p.strip() for p in str(text).split(",", MAX_LAYERS)]
+    if len(parts) > MAX_LAYERS or not all(p.isdigit() and int(p) >= 1 for p in parts):
+        raise ValueError(f"hidden must be up to {MAX_LAYERS} layer widths >= 1 separated by commas (64 or "
+                         f"64,64), got {str(text)[:80]!r}")
     return tuple(int(p) for p in parts)
 
 
@@ -86,11 +88,11 @@ class NetSpec:
 
 class HiddenWidths(Spec):
     """policy.json's network.hidden: a width, or a non-empty list of widths (each an integer >= 1)."""
-    expected = "an integer >= 1 (or a list of them)"
+    expected = f"an integer >= 1 (or a list of up to {MAX_LAYERS} of them)"
 
     def check(self, value: Any, where: str) -> None:
         items = value if isinstance(value, list) and value else [value]
-        if not all(isinstance(v, int) and not isinstance(v, bool) and v >= 1 for v in items):
+        if len(items) > MAX_LAYERS or not all(isinstance(v, int) and not isinstance(v, bool) and v >= 1 for v in items):
             raise Mismatch(where, self.expected, value)
 
 
