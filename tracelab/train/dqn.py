@@ -104,7 +104,8 @@ class DQN:
     def state(self) -> dict[str, Any]:
         adam = {name: {"step": float(s["step"]), "exp_avg": s["exp_avg"].clone(), "exp_avg_sq": s["exp_avg_sq"].clone()}
                 for name, p in self.q_network.named_parameters() if (s := self.optimizer.state.get(p))}
-        return {"online": _cloned(self.q_network), "target": _cloned(self.target_network), "adam": adam,
+        return {"online": copy.deepcopy(self.q_network.state_dict()), "adam": adam,
+                "target": copy.deepcopy(self.target_network.state_dict()),
                 "updates": self.updates, "buffer": self.buffer.state(), **self.losses.state(),
                 "last_q": None if self._last_q is None else self._last_q.clone()}
 
@@ -120,7 +121,3 @@ class DQN:
         self.buffer.load_state(st["buffer"])
         self.losses.load_state(st)
         self._last_q = st["last_q"]
-
-
-def _cloned(module: nn.Module) -> dict[str, torch.Tensor]:
-    return {k: v.clone() for k, v in module.state_dict().items()}
