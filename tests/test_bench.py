@@ -126,12 +126,14 @@ def test_bench_train_quick(capsys: pytest.CaptureFixture) -> None:
     machine(r["machine"])
     assert r["envs"] == 4 and r["threads"] == 1 and r["repeats"] == 2
     for key in ("transitions_per_s", "update_per_s", "textbook_update_per_s", "env_steps_per_s",
-                "fused_over_textbook"):
+                "fused_over_textbook", "readable_update_per_s", "readable_transitions_per_s",
+                "fused_over_readable", "e2e_fused_over_readable"):
         positive(r[key])
-    for key in ("e2e", "fused", "textbook", "env"):
+    for key in ("e2e", "e2e_readable", "fused", "readable", "textbook", "env"):
         positive(r["per_cpu_second"][key])
     assert len(r["loop_share"]["runs"]) == 2 and all(s < 1 for s in r["loop_share"]["runs"])
-    assert [g["goal"] for g in r["goals"]] == ["loop around the update", "transitions/s, one update each"]
+    assert [g["goal"] for g in r["goals"]] == ["loop around the update", "transitions/s, one update each",
+                                               "fused update over the textbook one"]
 
 
 def test_bench_helpers() -> None:

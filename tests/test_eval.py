@@ -11,8 +11,8 @@ from tracelab.cli import main
 from tracelab.game.scenario import Scenario
 from tracelab.store import open_run
 from tracelab.train.evaluate import EvalResult, GameRecord, evaluate
-from tracelab.train.network import Shape
 from tracelab.train.policy import Policy, save_policy
+from tracelab.train.qnet import NetSpec, NumpyQ
 
 # red starts one step below blue's base; blue needs 6 moves to red's base
 NEAR = Scenario(name="near", width=4, height=4, red_base=(3, 0), blue_base=(0, 3), red_starts=((0, 2),))
@@ -23,14 +23,16 @@ DUEL = Scenario(name="duel", width=8, height=8, red_base=(7, 0), blue_base=(0, 7
                 red_starts=((3, 3),), blue_starts=((3, 3),))
 
 
-def constant_policy(scenario: Scenario, action_id: int) -> Policy:
+def constant_weights(scenario: Scenario, action_id: int) -> tuple[NetSpec, dict[str, np.ndarray]]:
     """A network that always prefers one action: zero weights, a bias of 1 on it."""
-    shape = Shape(4 if not scenario.advanced else 7, 8, scenario.n_actions)
-    b2 = np.zeros(shape.actions, np.float32)
-    b2[scenario.action_ids.index(action_id)] = 1.0
-    net = (np.zeros((shape.inputs, shape.hidden), np.float32), np.zeros(shape.hidden, np.float32),
-           np.zeros((shape.hidden, shape.actions), np.float32), b2)
-    return Policy(scenario, [net], [0], stack_previous=False)
+    net = NetSpec(4 if not scenario.advanced else 7, (8,), scenario.n_actions)
+    weights = {k: np.zeros(shape, np.float32) for k, shape in net.state_dict_shapes().items()}
+    weights["2.bias"][scenario.action_ids.index(action_id)] = 1.0
+    return net, weights
+
+
+def constant_policy(scenario: Scenario, action_id: int) -> Policy:
+    return Policy(scenario, [NumpyQ(*constant_weights(scenario, action_id))], [0], stack_previous=False)
 
 
 def test_capture_wins_are_wins_both_ways():
@@ -72,12 +74,10 @@ def test_the_methods_counting_of_elimination_wins_and_long_games():
 
 
 def _saved(tmp_path, scenario: Scenario, action_id: int):
-    pol = constant_policy(scenario, action_id)
     import torch
-    rows = {"shared": torch.cat([torch.from_numpy(np.ascontiguousarray(x)).reshape(-1) for x in pol.nets[0]])}
-    shape = Shape(4, 8, scenario.n_actions)
-    return save_policy(tmp_path / "policy", scenario, rows, {"shared": [0]}, shape, False, False,
-                       {"run": None, "step": 0})
+    net, weights = constant_weights(scenario, action_id)
+    return save_policy(tmp_path / "policy", scenario, {"shared": {k: torch.from_numpy(v) for k, v in weights.items()}},
+                       {"shared": [0]}, net.to_json(), False, False, {"run": None, "step": 0})
 
 
 def test_eval_command_table_json_and_traced_run(tmp_path, capsys):

@@ -159,8 +159,12 @@ def _edit(key: str, value: Any) -> Callable[[dict[str, Any]], None]:
 
 
 @pytest.mark.parametrize("edit, fragment", [
-    (_edit("config.hidden", "64"), "key 'config.hidden': expected an integer, got the string '64'"),
+    (_edit("config.hidden", [64]), "key 'config.hidden': expected layer widths as a string (64,64) or one width"),
+    (_edit("config.hidden", "6x4"), "config: hidden must be up to 32 layer widths >= 1 separated by commas"),
     (_edit("config.steps", -5), "config: steps must be at least 1, got -5"),
+    (_edit("learner", "readable"), "key 'learners.shared.online': expected an object with exactly the keys "
+                                   "0.weight, 0.bias, 2.weight, 2.bias, got nothing"),
+    (_edit("learner", "torch.load"), "key 'learner': expected one of 'fused', 'readable'"),
     (_edit("games.history", lambda h: h.fill_(100)), "key 'games.history': expected values from 0 to 8"),
     (_edit("games.obs", torch.zeros(1)), "key 'games.obs': expected a float32 tensor of shape 4 x 4"),
     (_edit("learners.shared.buffer.size", 3), "key 'learners.shared.buffer.obs': expected 3 rows (its size)"),
@@ -208,6 +212,10 @@ def _json_links_to_dev_zero(policy: Path) -> None:
     (_spec_edit("network", None), "policy.json: key 'network': expected an object, got null"),
     (_spec_edit("scenario", "base"), "policy.json: key 'scenario': expected an object, got the string 'base'"),
     (_spec_edit("network.hidden", "64"), "policy.json: key 'network.hidden': expected an integer >= 1"),
+    (_spec_edit("network.hidden", [1] * 33), "policy.json: key 'network.hidden': expected an integer >= 1 (or a "
+                                             "list of up to 32 of them)"),
+    (_spec_edit("network.dueling", True), "policy.pt: key 'shared.trunk.0.weight': expected a floating tensor of "
+                                          "shape 64 x 4, got nothing (the key is missing)"),
     (_spec_edit("networks", {"shared": "0"}), "policy.json: key 'networks.shared': expected a list"),
     (_json_links_to_dev_zero, "policy.json: is a symbolic link; refused"),
     (_spec_edit("network.hidden", 10 ** 9), "policy.json: network: 1 network of 4 inputs x 1,000,000,000 "

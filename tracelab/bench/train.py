@@ -1,8 +1,10 @@
 """`tracelab bench train`: training transitions/s end to end with the method's defaults (1v1 base, rules
-backend, one update per transition, live logging into a run), and beside it, in the same process: the
-update alone (tracelab's fused update, and the textbook autograd + torch.optim.Adam update of the same
-network and batch) and the env alone. The loop's share = 1 - (update time / training-step time).
-Goals (docs/benchmarks.md, "Training"): loop around the update <= 15% of a step; >= 5,000 transitions/s."""
+backend, one update per transition, live logging into a run) with the fused learner and with the readable
+one (tracelab/train/dqn.py), and beside them, in the same process: the update alone (the fused learner's,
+the readable learner's, and the textbook autograd + torch.optim.Adam update of the same network and batch
+written inline) and the env alone. The loop's share = 1 - (update time / training-step time).
+Goals (docs/benchmarks.md, "Training"): loop around the update <= 15% of a step; >= 5,000 transitions/s;
+the fused update >= 4x the textbook one."""
 from __future__ import annotations
 
 import tempfile
@@ -17,24 +19,25 @@ from tracelab.bench.engine import machine_line
 
 GOAL_TRANSITIONS_PER_S = 5_000
 GOAL_LOOP_SHARE = 0.15
+GOAL_FUSED_OVER_TEXTBOOK = 4.0
 
 
-def _config(envs: int, threads: int) -> Any:
+def _config(envs: int, threads: int, learner: str = "fused") -> Any:
     from tracelab.train.config import TrainConfig
     # the method's defaults; no evaluations or checkpoints inside the timed blocks
     return TrainConfig(scenario="base", steps=10_000_000, envs=envs, threads=threads, eval_every=0,
-                       checkpoint_every=0)
+                       checkpoint_every=0, learner=learner)
 
 
 class EndToEnd:
     """A Trainer with the method's defaults logging into a run, past its warm-up; `run(k)` trains k more
     steps through Trainer.train (logging, ε, replay, updates: everything but evaluations)."""
 
-    def __init__(self, envs: int, threads: int, run_dir: Path) -> None:
+    def __init__(self, envs: int, threads: int, run_dir: Path, learner: str) -> None:
         from tracelab.game.scenario import builtin_scenario
         from tracelab.store import TraceWriter
         from tracelab.train.loop import Trainer
-        cfg = _config(envs, threads)
+        cfg = _config(envs, threads, learner)
         self.writer = TraceWriter.open(run_dir, {"command": "tracelab bench train", "config": cfg.to_dict()})
         self.trainer = Trainer(cfg, builtin_scenario("base"), self.writer)
         self.trainer.train(stop_at=cfg.warmup + 2 * cfg.batch)  # updates run from here on
@@ -47,16 +50,14 @@ class EndToEnd:
         self.writer.close()
 
 
-def _filled_learner(threads: int) -> Any:
+def _filled_learner(threads: int, learner: str = "fused") -> Any:
     import torch
 
-    from tracelab.train.learner import DQNLearner
-    from tracelab.train.network import Shape
+    from tracelab.train.loop import make_learner
+    from tracelab.train.qnet import NetSpec
     torch.set_num_threads(threads)
-    cfg = _config(1, threads)
-    shape = Shape(4, cfg.hidden, 5)
-    learner = DQNLearner(shape, lr=cfg.lr, batch=cfg.batch, buffer=cfg.buffer,
-                         generator=torch.Generator().manual_seed(0))
+    cfg = _config(1, threads, learner)
+    learner = make_learner(learner, NetSpec(4, cfg.hidden_sizes, 5), cfg, torch.Generator().manual_seed(0))
     rng = np.random.default_rng(0)
     k = 10_000
     learner.buffer.add(rng.integers(0, 8, (k, 4)).astype(np.float32), rng.integers(0, 5, k),
@@ -65,9 +66,9 @@ def _filled_learner(threads: int) -> Any:
     return learner
 
 
-def fused_updates(threads: int) -> Callable[[int], None]:
-    """tracelab's update (sampling included) on the method's network and batch: run(k) makes k."""
-    learner = _filled_learner(threads)
+def learner_updates(threads: int, learner: str) -> Callable[[int], None]:
+    """A learner's update (sampling included) on the method's network and batch: run(k) makes k."""
+    learner = _filled_learner(threads, learner)
     rng = np.random.default_rng(1)
 
     def run(k: int) -> None:
@@ -81,8 +82,8 @@ def textbook_updates(threads: int) -> Callable[[int], None]:
     import torch
     learner = _filled_learner(threads)
     cfg = _config(1, threads)
-    make = lambda: torch.nn.Sequential(torch.nn.Linear(4, cfg.hidden), torch.nn.Tanh(),  # noqa: E731
-                                       torch.nn.Linear(cfg.hidden, 5))
+    h = cfg.hidden_sizes[0]
+    make = lambda: torch.nn.Sequential(torch.nn.Linear(4, h), torch.nn.Tanh(), torch.nn.Linear(h, 5))  # noqa: E731
     net, target = make(), make()
     opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
     b = learner.buffer
@@ -132,17 +133,22 @@ def run(quick: bool = False, repeats: int = 5, envs: int = 64, threads: int = 1)
     block = 512 if quick else 4_096   # training steps per end-to-end block
     n_upd = 100 if quick else 1_000   # updates per update block
     with tempfile.TemporaryDirectory(prefix="tracelab-bench-train-") as tmp:
-        e2e = EndToEnd(envs, threads, Path(tmp) / "run")
-        fused, textbook = fused_updates(threads), textbook_updates(threads)
+        e2e = EndToEnd(envs, threads, Path(tmp) / "run", "fused")
+        e2e_readable = EndToEnd(envs, threads, Path(tmp) / "run-readable", "readable")
+        fused, readable = learner_updates(threads, "fused"), learner_updates(threads, "readable")
+        textbook = textbook_updates(threads)
         env_run, env = env_steps(envs)
         passes = max(4, block // envs)
-        for fn, k in ((fused, 20), (textbook, 20), (env_run, 20)):
+        for fn, k in ((fused, 20), (readable, 20), (textbook, 20), (env_run, 20)):
             fn(k)  # warm-up
-        rounds: dict[str, list[float]] = {"e2e": [], "fused": [], "textbook": [], "env": []}
+        rounds: dict[str, list[float]] = {"e2e": [], "e2e_readable": [], "fused": [], "readable": [],
+                                          "textbook": [], "env": []}
         cpu: dict[str, list[float]] = {k: [] for k in rounds}
         try:
             for _ in range(repeats):
-                for key, fn, k, units in (("e2e", e2e.run, block, block), ("fused", fused, n_upd, n_upd),
+                for key, fn, k, units in (("e2e", e2e.run, block, block),
+                                          ("e2e_readable", e2e_readable.run, block, block),
+                                          ("fused", fused, n_upd, n_upd), ("readable", readable, n_upd, n_upd),
                                           ("textbook", textbook, n_upd, n_upd),
                                           ("env", env_run, passes, passes * envs)):
                     wall, used = _timed(fn, k)
@@ -150,18 +156,26 @@ def run(quick: bool = False, repeats: int = 5, envs: int = 64, threads: int = 1)
                     cpu[key].append(units / max(used, 1e-9))
         finally:
             e2e.close()
+            e2e_readable.close()
             env.close()
     loop_shares = [1.0 - f_e2e / f_upd for f_e2e, f_upd in zip(rounds["e2e"], rounds["fused"])]
     rest_shares = [1.0 - f_e2e / f_upd - f_e2e / f_env
                    for f_e2e, f_upd, f_env in zip(rounds["e2e"], rounds["fused"], rounds["env"])]
     speedups = [f / t for f, t in zip(rounds["fused"], rounds["textbook"])]
+    over_readable = [f / t for f, t in zip(rounds["fused"], rounds["readable"])]
+    e2e_over_readable = [f / t for f, t in zip(rounds["e2e"], rounds["e2e_readable"])]
     e2e_s = summarize(rounds["e2e"])
     loop_share = summarize(loop_shares).median
+    speedup = summarize(speedups).median
     info["load_average_end"] = machine_info()["load_average"]
     return {"machine": info, "quick": quick, "repeats": repeats, "envs": envs, "threads": threads,
             "block_steps": block, "updates_per_block": n_upd,
             "transitions_per_s": e2e_s.to_dict(), "update_per_s": summarize(rounds["fused"]).to_dict(),
             "textbook_update_per_s": summarize(rounds["textbook"]).to_dict(),
+            "readable_update_per_s": summarize(rounds["readable"]).to_dict(),
+            "readable_transitions_per_s": summarize(rounds["e2e_readable"]).to_dict(),
+            "fused_over_readable": summarize(over_readable).to_dict(),
+            "e2e_fused_over_readable": summarize(e2e_over_readable).to_dict(),
             "env_steps_per_s": summarize(rounds["env"]).to_dict(),
             "fused_over_textbook": summarize(speedups).to_dict(),
             "loop_share": summarize(loop_shares).to_dict(), "rest_share": summarize(rest_shares).to_dict(),
@@ -169,23 +183,30 @@ def run(quick: bool = False, repeats: int = 5, envs: int = 64, threads: int = 1)
             "goals": [{"goal": "loop around the update", "target": f"<= {100 * GOAL_LOOP_SHARE:.0f}% of a step",
                        "measured": f"{100 * loop_share:.0f}%", "met": loop_share <= GOAL_LOOP_SHARE},
                       {"goal": "transitions/s, one update each", "target": f">= {GOAL_TRANSITIONS_PER_S:,}",
-                       "measured": fmt_num(e2e_s.median), "met": e2e_s.median >= GOAL_TRANSITIONS_PER_S}]}
+                       "measured": fmt_num(e2e_s.median), "met": e2e_s.median >= GOAL_TRANSITIONS_PER_S},
+                      {"goal": "fused update over the textbook one", "target": f">= {GOAL_FUSED_OVER_TEXTBOOK:g}x",
+                       "measured": f"{speedup:.2f}x", "met": speedup >= GOAL_FUSED_OVER_TEXTBOOK}]}
 
 
 def report(r: dict[str, Any]) -> str:
     sp = lambda d: f"{100 * d['spread']:.0f}%"  # noqa: E731
     us = lambda d: 1e6 / d["median"]  # noqa: E731
-    rows = [["training end to end (transitions/s, 1 update each)", r["transitions_per_s"]["median"],
+    rows = [["training end to end, fused learner (transitions/s, 1 update each)", r["transitions_per_s"]["median"],
              sp(r["transitions_per_s"]), us(r["transitions_per_s"])],
-            ["update alone, tracelab's fused (updates/s)", r["update_per_s"]["median"], sp(r["update_per_s"]),
+            ["training end to end, readable learner (transitions/s)", r["readable_transitions_per_s"]["median"],
+             sp(r["readable_transitions_per_s"]), us(r["readable_transitions_per_s"])],
+            ["update alone, fused learner (updates/s)", r["update_per_s"]["median"], sp(r["update_per_s"]),
              us(r["update_per_s"])],
+            ["update alone, readable learner, dqn.py (updates/s)", r["readable_update_per_s"]["median"],
+             sp(r["readable_update_per_s"]), us(r["readable_update_per_s"])],
             ["update alone, autograd + torch.optim.Adam (updates/s)", r["textbook_update_per_s"]["median"],
              sp(r["textbook_update_per_s"]), us(r["textbook_update_per_s"])],
             [f"env alone, {r['envs']} worlds (world-steps/s)", r["env_steps_per_s"]["median"],
              sp(r["env_steps_per_s"]), us(r["env_steps_per_s"])]]
     shares = (f"medians of per-round ratios: fused update {r['fused_over_textbook']['median']:.2f}x the "
-              f"textbook one; the loop around the update {100 * r['loop_share']['median']:.0f}% of a training "
-              f"step (env included), the rest (buffer, ε, transitions, logging) "
+              f"textbook one, {r['fused_over_readable']['median']:.2f}x the readable learner's; end to end, "
+              f"fused {r['e2e_fused_over_readable']['median']:.2f}x readable; the loop around the update "
+              f"{100 * r['loop_share']['median']:.0f}% of a training step (env included), the rest (buffer, ε, transitions, logging) "
               f"{100 * r['rest_share']['median']:.0f}%")
     goals = format_table(["goal", "target", "measured", "result"],
                          [[g["goal"], g["target"], g["measured"], "met" if g["met"] else "not met"]
@@ -195,7 +216,7 @@ def report(r: dict[str, Any]) -> str:
             f"{r['repeats']} rounds of {r['block_steps']:,} training steps, {r['updates_per_block']:,} updates "
             f"of each kind, and env steps")
     pc = r["per_cpu_second"]
-    for row, key in zip(rows, ("e2e", "fused", "textbook", "env")):
+    for row, key in zip(rows, ("e2e", "e2e_readable", "fused", "readable", "textbook", "env")):
         row.append(pc[key]["median"])
     table = format_table(["figure", "median", "spread", "µs each", "per CPU-second"], rows)
     cpu_note = ("per CPU-second: the same work per second of this process's CPU time (all its threads), "

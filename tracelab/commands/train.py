@@ -22,7 +22,7 @@ RESUMABLE_FLAGS = {"threads", "kernel", "steps"}
 
 def register(sub: argparse._SubParsersAction) -> None:
     from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, boolean, byte_size, integer
-    from tracelab.train.config import config_fields
+    from tracelab.train.config import LEARNERS, config_fields
 
     p = sub.add_parser("train", help="train red with DQN, logging metrics, episodes and traced evaluation "
                                      "games into a run", argument_default=argparse.SUPPRESS)
@@ -45,6 +45,8 @@ def register(sub: argparse._SubParsersAction) -> None:
             kw = {"choices": ("rules", "reference")}
         elif name == "kernel":
             kw = {"choices": ENGINE_KERNELS}
+        elif name == "learner":
+            kw = {"choices": LEARNERS}
         else:
             conv = {"int": integer, "float": float, "str": str, "int | None": integer}.get(str(f.type), str)
             kw = {"type": conv, "metavar": f.flag.upper().replace("-", "_")}
@@ -177,6 +179,8 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
     previous = signal.getsignal(signal.SIGINT)
     try:
         trainer = Trainer(cfg, scenario, writer, run_dir)
+        if trainer.learner_note:  # auto fell back from the fused learner
+            print(f"note: {trainer.learner_note}", file=sys.stderr)
         if state is not None:
             with store_errors():  # games that do not replay to their observations: another simulator
                 restore(trainer, state)

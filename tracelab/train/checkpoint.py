@@ -1,6 +1,8 @@
 """Checkpoints of a training run: `RUN/checkpoint/checkpoint.pt` (the latest; written to a temporary name,
 then renamed) holds the config, the scenario, the networks, Adam, the replay buffers, the states of the
 three generators (exploration and sampling, torch, the opponent's), the step, and the games in progress.
+`learner` says which learner wrote the networks' state (fused or readable; absent: fused, written before
+there were two), and a resume takes that one whatever `--learner auto` would pick today.
 
 The simulators' worlds are not pickled: a rule engine's state is not meant to move between processes.
 Instead the checkpoint keeps, per world, the actions both teams played since its episode began, and a
@@ -23,7 +25,8 @@ import torch
 
 from tracelab.engine.safe_files import FileRefused
 from tracelab.game.scenario import NOTHING, RED, Scenario, scenario_from_dict
-from tracelab.validation import Const, IntRange, ListOf, MapOf, Mismatch, Nullable, Tuple, check
+from tracelab.validation import (Const, ExactKeys, IntRange, ListOf, MapOf, Mismatch, Nullable, OneOf,
+                                 OptionalKey, Tuple, check)
 from tracelab.train.config import TrainConfig, config_schema
 from tracelab.train.torch_files import CodeInFile, Tensor, load_tensors
 
@@ -60,7 +63,8 @@ def save_checkpoint(tr: Any, run_dir: Path) -> Path:
         "run": str(run_dir), "step": tr.step, "next_episode": tr.next_episode, "update_credit": tr.update_credit,
         "synced_block": tr.synced_block, "eval_round": tr.eval_round, "returns_since_log": list(tr.returns_since_log),
         "last_loss": tr.last_loss, "logged_step": tr.logged_step, "eval_step": tr.eval_step,
-        "best_eval": tr.best_eval, "best_rows": tr.best_rows,
+        "best_eval": tr.best_eval, "best_weights": tr.best_weights,
+        "learner": tr.learner_kind, "custom_network": tr.custom_network,
         "learners": {name: lr.state() for name, lr in tr.learners.items()},
         "rng": tr.rng.bit_generator.state, "torch_rng": tr.torch_gen.get_state(),
         "env_rng": tr.env.sim.rng.bit_generator.state,
@@ -101,10 +105,11 @@ def _refusal_with_a_way_on(run: Path, said: str) -> FileRefused:
     return FileRefused(f"{said}: {instead}")
 
 
-def load_checkpoint(run: str | Path, max_bytes: int | None = None) -> dict[str, Any]:
+def load_checkpoint(run: str | Path, max_bytes: int | None = None, network: Any = None) -> dict[str, Any]:
     """The checkpoint of a training run directory, checked: its config and scenario are valid and every
     array has the shape and type they imply. `max_bytes`: the largest file read (default: the memory
-    limit, tracelab.train.memory)."""
+    limit, tracelab.train.memory). `network`: the factory of the custom module a run trained (Python API,
+    Trainer's `network`), whose state dict says what the checkpoint's networks must hold."""
     from tracelab.train.memory import memory_limit
     run = Path(run)
     f = _checkpoint_file(run)
@@ -115,7 +120,8 @@ def load_checkpoint(run: str | Path, max_bytes: int | None = None) -> dict[str, 
                f"that runs code could read); refused" if any(mark in e.pickled for mark in OLD_FORMATS) else str(e)
         raise _refusal_with_a_way_on(run, said) from None
     try:
-        check(state, {"format": Const(FORMAT), "config": config_schema(), "scenario_toml": str})
+        check(state, {"format": Const(FORMAT), "config": config_schema(), "scenario_toml": str,
+                      "learner": OptionalKey(OneOf("fused", "readable")), "custom_network": OptionalKey(bool)})
     except Mismatch as e:
         raise FileRefused(f"{f}: not a tracelab training checkpoint of format 2 ({e})") from None
     try:
@@ -128,11 +134,20 @@ def load_checkpoint(run: str | Path, max_bytes: int | None = None) -> dict[str, 
         raise FileRefused(f"{f}: scenario_toml: not valid TOML: {e}") from None
     except ValueError as e:  # ScenarioError: names the field
         raise FileRefused(f"{f}: {e}") from None
+    if state.get("custom_network") and network is None:
+        raise FileRefused(f"{f}: the run trained a custom torch module (Python API): resume it in Python, "
+                          f"load_checkpoint(run, network=...) and Trainer(..., network=...) with the same module")
     try:
-        check(state, _state_schema(cfg, scenario))
+        check(state, _state_schema(cfg, scenario, network))
         _check_consistency(state, cfg, scenario)
     except Mismatch as e:
         raise FileRefused(f"{f}: {e}") from None
+    if "best_rows" in state:  # written before the readable learner: the fused layout's rows
+        from tracelab.train.loop import training_net
+        from tracelab.train.network import Shape, to_state_dict
+        net = training_net(cfg, scenario)
+        shape = Shape(net.inputs, net.hidden[0], net.actions)
+        state["best_weights"] = {name: to_state_dict(row, shape) for name, row in state.pop("best_rows").items()}
     for section in NUMPY_SECTIONS:
         state[section] = {k: v.numpy() for k, v in state[section].items()}
     for learner in state["learners"].values():
@@ -146,27 +161,57 @@ def _rng_state() -> dict[str, Any]:
             "has_uint32": IntRange(0, 1), "uinteger": IntRange(0)}
 
 
-def _state_schema(cfg: TrainConfig, scenario: Scenario) -> dict[str, Any]:
-    """Every key of a format-2 checkpoint of this config and scenario, with its type and shape."""
-    from tracelab.train.loop import network_groups, training_shape
-    shape = training_shape(cfg, scenario)
-    w, n, d, a, p = cfg.envs, scenario.agents_per_team, shape.inputs, shape.actions, shape.n_params
+def _network_tensors(cfg: TrainConfig, scenario: Scenario, network: Any) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(the online network's state dict, Adam's moments by parameter name) as schemas: from the
+    architecture cfg describes, computed (a stranger's config builds nothing before it is checked), or from
+    a custom module's own state dict."""
+    from tracelab.train.loop import training_net
+    net = training_net(cfg, scenario)
+    if network is None:
+        shapes = {k: (torch.float32, s) for k, s in net.state_dict_shapes().items()}
+        params = set(shapes)
+    else:
+        module = network(net.inputs, net.actions)
+        shapes = {k: (v.dtype, tuple(v.shape)) for k, v in module.state_dict().items()}
+        params = {k for k, _ in module.named_parameters()}
+    weights = ExactKeys({k: Tensor(dtype, s) for k, (dtype, s) in shapes.items()})
+    adam = ExactKeys({k: OptionalKey({"step": float, "exp_avg": Tensor(dtype, s), "exp_avg_sq": Tensor(dtype, s)})
+                      for k, (dtype, s) in shapes.items() if k in params})
+    return weights, adam
+
+
+def _state_schema(cfg: TrainConfig, scenario: Scenario, network: Any = None) -> dict[str, Any]:
+    """Every key of a format-2 checkpoint of this config and scenario, with its type and shape (cfg.learner:
+    the learner the checkpoint names)."""
+    from tracelab.train.loop import network_groups, training_net
+    net = training_net(cfg, scenario)
+    w, n, d, a = cfg.envs, scenario.agents_per_team, net.inputs, net.actions
     buffer = {"size": IntRange(0, cfg.buffer), "pos": IntRange(0, cfg.buffer - 1),
               "obs": Tensor(torch.float32, (None, d)), "next_obs": Tensor(torch.float32, (None, d)),
               "action": Tensor(torch.int64, (None,)), "reward": Tensor(torch.float32, (None,)),
               "discount": Tensor(torch.float32, (None,))}
     if cfg.mask:
         buffer["next_allowed"] = Tensor(torch.bool, (None, a))
-    learner = {"params": Tensor(torch.float32, (2, p)), "adam_m": Tensor(torch.float32, (p,)),
-               "adam_v": Tensor(torch.float32, (p,)), "adam_step": IntRange(0), "updates": IntRange(0),
-               "buffer": buffer, "loss_sum": float, "loss_n": IntRange(0),
-               "last_q": Nullable(Tensor(torch.float32, (2, cfg.batch, a)))}
+    weights, adam = _network_tensors(cfg, scenario, network)
+    if cfg.learner == "fused":
+        p = net.n_params
+        learner = {"params": Tensor(torch.float32, (2, p)), "adam_m": Tensor(torch.float32, (p,)),
+                   "adam_v": Tensor(torch.float32, (p,)), "adam_step": IntRange(0), "updates": IntRange(0),
+                   "buffer": buffer, "loss_sum": float, "loss_n": IntRange(0),
+                   "last_q": Nullable(Tensor(torch.float32, (2, cfg.batch, a)))}
+        # the best evaluation's networks as state dicts, or (written before) as the fused layout's rows
+        best = {"best_weights": OptionalKey(MapOf(weights)),
+                "best_rows": OptionalKey(MapOf(Tensor(torch.float32, (p,))))}
+    else:
+        learner = {"online": weights, "target": weights, "adam": adam, "updates": IntRange(0), "buffer": buffer,
+                   "loss_sum": float, "loss_n": IntRange(0), "last_q": Nullable(Tensor(torch.float32, (cfg.batch, a)))}
+        best = {"best_weights": MapOf(weights)}
     generator_bytes = torch.Generator().get_state().numel()
     return {
         "run": str, "step": IntRange(0), "next_episode": IntRange(0), "update_credit": float,
         "synced_block": IntRange(0), "eval_round": IntRange(0), "returns_since_log": ListOf(float),
         "last_loss": Nullable(float), "logged_step": IntRange(-1), "eval_step": IntRange(-1),
-        "best_eval": Nullable(Tuple(float, IntRange(0))), "best_rows": MapOf(Tensor(torch.float32, (p,))),
+        "best_eval": Nullable(Tuple(float, IntRange(0))), **best,
         "learners": {name: learner for name in network_groups(scenario, cfg.split_networks)},
         "rng": _rng_state(), "env_rng": _rng_state(), "torch_rng": Tensor(torch.uint8, (generator_bytes,)),
         "games": {"history": Tensor(torch.int16, (w, scenario.max_steps, 2, n)),
@@ -196,10 +241,13 @@ def _check_consistency(state: dict[str, Any], cfg: TrainConfig, scenario: Scenar
     played = torch.arange(history.shape[1])[None, :] < games["ep_len"][:, None]  # [W, steps]
     _in_range(history[played], 0, NOTHING, "games.history")
     groups = set(state["learners"])
-    if (state["best_eval"] is None) != (not state["best_rows"]) or \
-            (state["best_rows"] and set(state["best_rows"]) != groups):
-        raise Mismatch("best_rows", f"one row per network ({', '.join(sorted(groups))}) with best_eval, "
-                                    f"none without", state["best_rows"])
+    key = "best_weights" if "best_weights" in state else "best_rows"
+    if key not in state:
+        raise Mismatch("best_weights", "the best evaluation's networks", missing=True)
+    best = state[key]
+    if (state["best_eval"] is None) != (not best) or (best and set(best) != groups):
+        raise Mismatch(key, f"one network per network name ({', '.join(sorted(groups))}) with best_eval, "
+                            f"none without", best)
     for key in ("rng", "env_rng"):
         try:
             np.random.PCG64().state = state[key]
@@ -213,7 +261,8 @@ def _in_range(values: torch.Tensor, lo: int, hi: int, where: str) -> None:
 
 
 def checkpoint_config(state: dict[str, Any]) -> TrainConfig:
-    return TrainConfig.from_dict(state["config"])
+    """The run's config, with the learner that wrote the checkpoint (fused when it does not say)."""
+    return TrainConfig.from_dict({**state["config"], "learner": state.get("learner", "fused")})
 
 
 def checkpoint_scenario(state: dict[str, Any]) -> Scenario:
@@ -223,6 +272,10 @@ def checkpoint_scenario(state: dict[str, Any]) -> Scenario:
 
 def restore(tr: Any, state: dict[str, Any]) -> None:
     """Put a freshly built Trainer (same config) into the checkpoint's state."""
+    kind = state.get("learner", "fused")
+    if tr.learner_kind != kind:
+        raise ValueError(f"the checkpoint holds the {kind} learner's state; this trainer runs the "
+                         f"{tr.learner_kind} one")
     for name, lr in tr.learners.items():
         lr.load_state(state["learners"][name])
     tr.step, tr.next_episode = int(state["step"]), int(state["next_episode"])
@@ -232,7 +285,7 @@ def restore(tr: Any, state: dict[str, Any]) -> None:
     tr.returns_since_log = list(state["returns_since_log"])
     best = state["best_eval"]
     tr.best_eval = None if best is None else (float(best[0]), int(best[1]))
-    tr.best_rows = dict(state["best_rows"])
+    tr.best_weights = dict(state["best_weights"])
     tr.write_best_policy()  # a resumed run into a new directory keeps it too
     tr.rng.bit_generator.state = state["rng"]
     tr.torch_gen.set_state(state["torch_rng"])

@@ -9,7 +9,11 @@ from dataclasses import MISSING, asdict, dataclass, field, fields
 from typing import Any
 
 from tracelab.engine.kernel_names import KERNELS as ENGINE_KERNELS
-from tracelab.validation import Nullable, OptionalKey
+from tracelab.train.qnet import parse_hidden
+from tracelab.validation import Mismatch, Nullable, OptionalKey, Spec
+
+
+LEARNERS = ("auto", "fused", "readable")
 
 
 def _opt(help: str, flag: str | None = None, **kw: Any) -> Any:
@@ -51,7 +55,14 @@ class TrainConfig:
     opponent_p: float = _opt("the opponent's probability of a move towards red's base while training",
                              default=0.7)
     # ---- the method's DQN ----
-    hidden: int = _opt("hidden units (one tanh layer)", default=64)
+    hidden: str = _opt("hidden layer widths, tanh layers, comma-separated: 64 (the method's), 64,64 (two layers)",
+                       default="64")
+    learner: str = _opt("the update: fused (hand-written, several times faster; one hidden layer, no "
+                        "--double-dqn or --dueling), readable (autograd + torch.optim.Adam, tracelab/train/dqn.py; "
+                        "any network), or auto (fused where it applies, else readable)", default="auto")
+    double_dqn: bool = _opt("Double DQN: the online network picks the next action, the target network values it "
+                            "(the readable learner)", default=False)
+    dueling: bool = _opt("a dueling head: Q = V(s) + A(s, a) - mean A (the readable learner)", default=False)
     lr: float = _opt("Adam learning rate", flag="learning-rate", default=5e-4)
     gamma: float = _opt("discount", default=0.99)
     batch: int = _opt("minibatch size", flag="batch-size", default=128)
@@ -90,7 +101,7 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         problems = []
-        for name in ("steps", "envs", "hidden", "batch", "buffer", "target_every", "eval_games",
+        for name in ("steps", "envs", "batch", "buffer", "target_every", "eval_games",
                      "eval_envs", "log_every", "threads"):
             if getattr(self, name) < 1:
                 problems.append(f"{name} must be at least 1, got {getattr(self, name)}")
@@ -117,10 +128,41 @@ class TrainConfig:
         elif self.kernel != "auto" and self.backend != "rules":
             problems.append(f"kernel {self.kernel} is the rule engine's: it needs --backend rules, not "
                             f"{self.backend}")
+        if isinstance(self.hidden, int) and not isinstance(self.hidden, bool):  # one width, as configs had it
+            self.hidden = str(self.hidden)
+        try:
+            parse_hidden(self.hidden)
+        except ValueError as e:
+            problems.append(str(e))
+        if self.learner not in LEARNERS:
+            problems.append(f"learner must be one of {', '.join(LEARNERS)}, got {self.learner!r}")
+        elif self.learner == "fused" and not problems and self.fused_refusal():
+            problems.append(f"learner fused {self.fused_refusal()}; use --learner readable (or auto)")
         if self.agents is not None and self.agents < 1:
             problems.append(f"agents must be at least 1, got {self.agents}")
         if problems:
             raise ValueError("; ".join(problems))
+
+    @property
+    def hidden_sizes(self) -> tuple[int, ...]:
+        return parse_hidden(self.hidden)
+
+    def fused_refusal(self) -> str | None:
+        """Why the fused learner cannot run this config (None: it can): it is written for one tanh hidden
+        layer and the plain max target."""
+        given = [flag for flag, on in (("--double-dqn", self.double_dqn), ("--dueling", self.dueling),
+                                       (f"--hidden {self.hidden}", len(self.hidden_sizes) > 1)) if on]
+        if not given:
+            return None
+        return f"supports one hidden layer without --double-dqn or --dueling (given: {', '.join(given)})"
+
+    def learner_choice(self) -> tuple[str, str | None]:
+        """(the learner a run uses, fused or readable; why auto fell back to the readable one, or None)."""
+        if self.learner != "auto":
+            return self.learner, None
+        why = self.fused_refusal()
+        return ("readable", f"--learner auto takes the readable learner (autograd, tracelab/train/dqn.py): the "
+                            f"fused one {why}") if why else ("fused", None)
 
     def epsilon(self, step: int) -> float:
         """The method's schedule: eps_start until eps_decay_start of training, then linear down to eps_end
@@ -150,7 +192,17 @@ _FIELD_SCHEMAS = {"int": int, "float": float, "bool": bool, "str": str, "int | N
 def config_schema() -> dict[str, Any]:
     """The type of every field, to check a config read from a file (a checkpoint) before building it:
     absent fields take their defaults (written before they existed)."""
-    return {f.name: OptionalKey(_FIELD_SCHEMAS[str(f.type)]) for f in fields(TrainConfig)}
+    schema = {f.name: OptionalKey(_FIELD_SCHEMAS[str(f.type)]) for f in fields(TrainConfig)}
+    schema["hidden"] = OptionalKey(HiddenField())  # one width, as a number, before --hidden took layers
+    return schema
+
+
+class HiddenField(Spec):
+    expected = "layer widths as a string (64,64) or one width as an integer"
+
+    def check(self, value: Any, where: str) -> None:
+        if isinstance(value, bool) or not isinstance(value, (int, str)):
+            raise Mismatch(where, self.expected, value)
 
 
 @dataclass(frozen=True)

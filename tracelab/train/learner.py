@@ -1,4 +1,6 @@
-"""One DQN learner: online and target network, Adam, its replay buffer, and the update.
+"""The fused DQN learner, the fast path: the method's network (one tanh hidden layer, tracelab/train/network.py),
+Adam, its replay buffer, and the update, keeping the Learner protocol (learner_protocol.py). To read or change
+the update, read tracelab/train/dqn.py: the same update with autograd and torch.optim.Adam, for any network.
 
 The update is written out by hand in torch ops (forward of both networks as batched matmuls, the Smooth L1
 gradient, backward through the two layers, Adam on one flat vector) instead of autograd plus
@@ -6,7 +8,8 @@ torch.optim: for a 64-unit network the arithmetic is nothing and each torch call
 everything; this form makes 20 calls where autograd + Adam make several times more
 (docs/benchmarks.md, "Training"). It computes
 what `smooth_l1_loss(Q(s)[a], r + discount * max_a' Q_target(s'))` with autograd and Adam would;
-tests/test_train.py checks it against them."""
+tests/test_learners.py holds it equal to dqn.py's, for every option this learner supports (masked or not).
+Double DQN, a dueling head or more hidden layers are dqn.py's alone (`--learner auto` picks it then)."""
 from __future__ import annotations
 
 from typing import Any
@@ -14,7 +17,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from tracelab.train.network import Shape, init_row, views
+from tracelab.train.learner_protocol import RunningLoss
+from tracelab.train.network import Shape, init_row, state_dict_views
 from tracelab.train.replay import ReplayBuffer
 
 ADAM_BETAS = (0.9, 0.999)
@@ -38,8 +42,7 @@ class DQNLearner:
         self.adam_step = 0
         self.updates = 0
         self.buffer = ReplayBuffer(buffer, shape.inputs, shape.actions, batch, masked)
-        self._loss_sum = torch.zeros(())  # Smooth L1 summed over the sampled updates since take_loss()
-        self._loss_n = 0
+        self.losses = RunningLoss()  # Smooth L1 of the sampled updates since take_loss()
         self._have_q = False
         self._one = torch.ones(())
         self._inv_b = 1.0 / batch
@@ -61,7 +64,6 @@ class DQNLearner:
         self._w2t_online = p[0, o[2]:o[3]].view(h, a).t()    # W2 [A, H] of the online network
         self._g1 = self.grad[o[0]:o[2]].view(d + 1, h)
         self._g2 = self.grad[o[2]:o[4]].view(h + 1, a)
-        self.online_np = tuple(x.numpy() for x in views(p[0], sh))  # acting reads these, shared memory
         buf = self.buffer
         batch = torch.from_numpy(buf.batch)                  # [B, row]: see replay.py's row layout
         hot = 2 * (d + 1)
@@ -102,8 +104,7 @@ class DQNLearner:
         torch.addcmul(self._reward, self._discount, self._qmax, out=self._target)
         if self.updates % LOSS_EVERY == 0:  # the logged loss is sampled: it costs three calls
             torch.bmm(self._q0_3, self._onehot3, out=self._q_taken3)         # Q(s, a) of the taken a
-            self._loss_sum += torch.nn.functional.smooth_l1_loss(self._q_taken, self._target)
-            self._loss_n += 1
+            self.losses.add(torch.nn.functional.smooth_l1_loss(self._q_taken, self._target))
         # d(mean Smooth L1)/dQ(s, a) = clamp(q - y, -1, 1) / B on the taken action, 0 on the others:
         # one-hot * clamp(Q(s) - y) = clamp(one-hot * (Q(s) - y)), without picking Q(s, a) out first;
         # the 1/B goes into the two gradient matmuls (alpha)
@@ -140,14 +141,12 @@ class DQNLearner:
     def sync_target(self) -> None:
         self.params[1].copy_(self.params[0])
 
+    def online_weights(self) -> dict[str, torch.Tensor]:
+        return state_dict_views(self._online, self.shape)
+
     def take_loss(self) -> float | None:
-        """Mean loss of the updates since the last call (None if there were none)."""
-        if not self._loss_n:
-            return None
-        value = float(self._loss_sum) / self._loss_n
-        self._loss_sum.zero_()
-        self._loss_n = 0
-        return value
+        """Mean loss of the sampled updates since the last call (None if there were none)."""
+        return self.losses.take()
 
     def q_max_mean(self) -> float | None:
         """Mean over the last minibatch's states of max_a Q(s, a) (online network)."""
@@ -157,7 +156,7 @@ class DQNLearner:
     def state(self) -> dict[str, Any]:
         return {"params": self.params.clone(), "adam_m": self.adam_m.clone(), "adam_v": self.adam_v.clone(),
                 "adam_step": self.adam_step, "updates": self.updates, "buffer": self.buffer.state(),
-                "loss_sum": float(self._loss_sum), "loss_n": self._loss_n,
+                **self.losses.state(),
                 "last_q": self._q.clone() if self._have_q else None}
 
     def load_state(self, st: dict[str, Any]) -> None:
@@ -170,8 +169,7 @@ class DQNLearner:
         self.adam_step, self.updates = int(st["adam_step"]), int(st["updates"])
         self._step_t.fill_(self.adam_step)
         self.buffer.load_state(st["buffer"])
-        self._loss_sum.fill_(st["loss_sum"])
-        self._loss_n = int(st["loss_n"])
+        self.losses.load_state(st)
         self._have_q = st["last_q"] is not None
         if self._have_q:
             self._q.copy_(st["last_q"])

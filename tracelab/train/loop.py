@@ -24,12 +24,17 @@ from tracelab.game.scenario import NOTHING, RED, Scenario
 from tracelab.store.writer import TraceWriter
 from tracelab.train.config import TrainConfig
 from tracelab.train.evaluate import EvalResult, EvalTrace, evaluate
+from tracelab.train.dqn import DQN, make_q_network
 from tracelab.train.learner import DQNLearner
+from tracelab.train.learner_protocol import Learner
 from tracelab.train.network import Shape
 from tracelab.train.policy import BEST_POLICY_DIR, Policy, may_act, save_policy
+from tracelab.train.qnet import NetSpec, NumpyQ, QFunction, TorchQ
+from tracelab.train.replay import ReplayBuffer
 from tracelab.train.transitions import PendingTransitions
 
 Progress = Callable[[dict[str, Any]], None]
+NetworkFactory = Callable[[int, int], torch.nn.Module]  # (observation size, actions) -> a Q-network
 
 
 def network_groups(scenario: Scenario, split: bool) -> dict[str, list[int]]:
@@ -43,9 +48,30 @@ def network_groups(scenario: Scenario, split: bool) -> dict[str, list[int]]:
     return {k: v for k, v in groups.items() if v}
 
 
-def training_shape(cfg: TrainConfig, scenario: Scenario) -> Shape:
-    """The networks' shape: the observation (stacked in the non-Markov setup), hidden units, actions."""
-    return Shape(obs_size(scenario, cfg.non_markov), cfg.hidden, scenario.n_actions)
+def training_net(cfg: TrainConfig, scenario: Scenario) -> NetSpec:
+    """The networks' architecture: the observation (stacked in the non-Markov setup), hidden layers, actions."""
+    return NetSpec(obs_size(scenario, cfg.non_markov), cfg.hidden_sizes, scenario.n_actions, cfg.dueling)
+
+
+def make_learner(kind: str, net: NetSpec, cfg: TrainConfig, generator: torch.Generator,
+                 network: NetworkFactory | None = None, learner_class: type[DQN] = DQN) -> Learner:
+    """The fused learner for `net` (one tanh layer), or the readable one (`learner_class`: DQN or a
+    subclass) on `network`'s module (default: the module `net` describes, drawn from `generator`)."""
+    if kind == "fused":
+        return DQNLearner(Shape(net.inputs, net.hidden[0], net.actions), lr=cfg.lr, batch=cfg.batch,
+                          buffer=cfg.buffer, generator=generator, masked=cfg.mask)
+    module = network(net.inputs, net.actions) if network is not None else \
+        make_q_network(net.inputs, net.hidden, net.actions, net.dueling, generator)
+    return learner_class(module, ReplayBuffer(cfg.buffer, net.inputs, net.actions, cfg.batch, cfg.mask),
+                         lr=cfg.lr, double_dqn=cfg.double_dqn)
+
+
+def acting_q(learner: Learner, net: NetSpec | None) -> QFunction:
+    """Greedy acting's Q-values from the learner's live online weights: in numpy for a described network,
+    through torch for a custom module (net None)."""
+    if net is None:
+        return TorchQ(learner.q_network)  # type: ignore[attr-defined]  # only the readable learner takes one
+    return NumpyQ(net, {k: v.numpy() for k, v in learner.online_weights().items()})
 
 
 def eval_seed(seed: int, round_no: int) -> int:
@@ -63,7 +89,11 @@ def _agent_rewards(info: dict, done: np.ndarray) -> np.ndarray:
 
 class Trainer:
     def __init__(self, cfg: TrainConfig, scenario: Scenario, writer: TraceWriter | None = None,
-                 run_dir: Path | None = None, progress: Progress | None = None) -> None:
+                 run_dir: Path | None = None, progress: Progress | None = None,
+                 network: NetworkFactory | None = None, learner_class: type[DQN] | None = None) -> None:
+        """Python API (docs/training.md, "The learner"): `network` trains the readable learner on this
+        module instead of the MLP cfg.hidden describes (its policy files say `custom`); `learner_class` is
+        the readable learner's class (a subclass of DQN with another loss, say)."""
         torch.set_num_threads(cfg.threads)
         self.cfg, self.scenario, self.writer, self.run_dir, self.progress = cfg, scenario, writer, run_dir, progress
         self.stack = cfg.non_markov
@@ -78,14 +108,23 @@ class Trainer:
         self.env = GridWarVectorEnv(w, scenario, backend=cfg.backend, stack_previous=self.stack,
                                     opponent_p=cfg.opponent_p, kernel=cfg.kernel, copy=False)
         self.masker = ActionMasker(scenario)
-        self.shape = training_shape(cfg, scenario)
+        self.net = training_net(cfg, scenario)
+        self.custom_network = network is not None
+        self.learner_kind, self.learner_note = cfg.learner_choice()
+        if network is not None or learner_class is not None:
+            if cfg.learner == "fused":
+                raise ValueError("a network module or a learner class trains with the readable learner, not "
+                                 "learner fused")
+            self.learner_kind, self.learner_note = "readable", None
         self.groups = network_groups(scenario, cfg.split_networks)
-        self.learners = {name: DQNLearner(self.shape, lr=cfg.lr, batch=cfg.batch, buffer=cfg.buffer,
-                                          generator=self.torch_gen, masked=cfg.mask) for name in self.groups}
+        self.learners: dict[str, Learner] = {
+            name: make_learner(self.learner_kind, self.net, cfg, self.torch_gen, network, learner_class or DQN)
+            for name in self.groups}
         owner = {j: i for i, agents in enumerate(self.groups.values()) for j in agents}
-        self.policy = Policy(scenario, [lr.online_np for lr in self.learners.values()],
+        described = None if self.custom_network else self.net
+        self.policy = Policy(scenario, [acting_q(lr, described) for lr in self.learners.values()],
                              [owner[j] for j in range(n)], self.stack, cfg.mask)
-        self.pending = PendingTransitions(w, n, self.shape.inputs, cfg.gamma)
+        self.pending = PendingTransitions(w, n, self.net.inputs, cfg.gamma)
         self.ids = np.asarray(scenario.action_ids, np.int64)
         self.nothing = scenario.action_ids.index(NOTHING)
         self.action_index = np.zeros(NOTHING + 1, np.int64)  # spec action id -> index into action_ids
@@ -109,7 +148,7 @@ class Trainer:
         self.last_eval: EvalResult | None = None
         self.logged_step = self.eval_step = -1
         self.best_eval: tuple[float, int] | None = None  # (method's win rate, step) of the best evaluation
-        self.best_rows: dict[str, torch.Tensor] = {}      # its online parameters, network name -> row
+        self.best_weights: dict[str, dict[str, torch.Tensor]] = {}  # its online networks' state dicts
         self.last_loss: float | None = None
         self.stop_requested = False
         self._eval_env: GridWarVectorEnv | None = None
@@ -187,7 +226,7 @@ class Trainer:
         return 1.0 if self.step < self.cfg.warmup else self.cfg.epsilon(self.step)
 
     def _choose(self, masks: np.ndarray | None) -> np.ndarray:
-        w, n, a = self.worlds, self.agents, self.shape.actions
+        w, n, a = self.worlds, self.agents, self.net.actions
         explore = self.rng.random((w, n)) < self.epsilon()
         if masks is None:
             random = self.rng.integers(0, a, (w, n))
@@ -356,7 +395,8 @@ class Trainer:
         if self.best_eval is not None and result.method_win_rate <= self.best_eval[0]:
             return
         self.best_eval = (result.method_win_rate, self.step)
-        self.best_rows = {k: lr.params[0].clone() for k, lr in self.learners.items()}
+        self.best_weights = {name: {k: v.clone() for k, v in lr.online_weights().items()}
+                             for name, lr in self.learners.items()}
         self.write_best_policy()
 
     def write_best_policy(self) -> None:
@@ -364,17 +404,25 @@ class Trainer:
         if self.run_dir is None or self.best_eval is None:
             return
         value, step = self.best_eval
-        save_policy(self.run_dir / BEST_POLICY_DIR, self.scenario, self.best_rows, self.groups, self.shape,
-                    self.stack, self.cfg.mask, self._trained(step, {
+        save_policy(self.run_dir / BEST_POLICY_DIR, self.scenario, self.best_weights, self.groups,
+                    self.network_json(), self.stack, self.cfg.mask, self._trained(step, {
                         "metric": "eval/method_win_rate", "value": value, "opponent_p": self.cfg.eval_p}))
+
+    def network_json(self) -> dict[str, Any]:
+        """policy.json's `network`: the architecture, or what a custom module is (it cannot be rebuilt from
+        a file)."""
+        if not self.custom_network:
+            return self.net.to_json()
+        module = next(iter(self.learners.values())).q_network  # type: ignore[attr-defined]
+        return {"inputs": self.net.inputs, "outputs": self.net.actions, "custom": repr(module)[:4000]}
 
     def _trained(self, step: int, selected_by: dict[str, Any] | None = None) -> dict[str, Any]:
         out = {"run": str(self.run_dir) if self.run_dir else None, "step": step, "config": self.cfg.to_dict()}
         return out if selected_by is None else {**out, "selected_by": selected_by}
 
     def save_policy(self, path: Path) -> Path:
-        return save_policy(path, self.scenario, {k: lr.params[0] for k, lr in self.learners.items()},
-                           self.groups, self.shape, self.stack, self.cfg.mask, self._trained(self.step))
+        return save_policy(path, self.scenario, {k: lr.online_weights() for k, lr in self.learners.items()},
+                           self.groups, self.network_json(), self.stack, self.cfg.mask, self._trained(self.step))
 
     # ---- the loop ----
     def train(self, stop_at: int | None = None) -> str:

@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from tracelab.train.network import Shape
+from tracelab.train.qnet import NetSpec
 from tracelab.train.replay import row_length
 
 MACHINE_SHARE = 0.5  # the default limit: this share of the machine's physical memory
@@ -49,46 +49,46 @@ def memory_limit(max_bytes: int | None = None, flag: str | None = None) -> Limit
     return Limit(int(total * MACHINE_SHARE), f"half of this machine's {_gib(total)}{raise_it}")
 
 
-def network_bytes(shape: Shape) -> int:
+def network_bytes(shape: NetSpec) -> int:
     """A network's parameters with every copy training keeps or writes."""
     return PARAM_COPIES * shape.n_params * FLOAT
 
 
-def replay_bytes(capacity: int, shape: Shape, masked: bool) -> int:
+def replay_bytes(capacity: int, shape: NetSpec, masked: bool) -> int:
     """A replay buffer (its float32 rows and action ids), twice: a checkpoint copies what it holds."""
     return 2 * capacity * (row_length(shape.inputs, shape.actions, masked) * FLOAT + 8)
 
 
-def minibatch_bytes(batch: int, shape: Shape, masked: bool) -> int:
+def minibatch_bytes(batch: int, shape: NetSpec, masked: bool) -> int:
     return batch * row_length(shape.inputs, shape.actions, masked) * FLOAT
 
 
-def activation_bytes(batch: int, shape: Shape) -> int:
-    """The update's activations and their gradients (both networks' forward passes, learner.py)."""
-    return batch * (ACTIVATION_COPIES * (shape.hidden + 1) + 4 * shape.actions) * FLOAT
+def activation_bytes(batch: int, shape: NetSpec) -> int:
+    """The update's activations and their gradients (both networks' forward passes, every layer)."""
+    return batch * (ACTIVATION_COPIES * sum(h + 1 for h in shape.hidden) + 4 * shape.actions) * FLOAT
 
 
-def world_bytes(scenario: Any, shape: Shape) -> int:
+def world_bytes(scenario: Any, shape: NetSpec) -> int:
     """One world: the engine's state, the game's action history, the open transitions, acting's
     activations."""
     n = scenario.agents_per_team
     engine = WORLD_BYTES_PER_CELL_AGENT * scenario.width * scenario.height * n
     history = scenario.max_steps * 2 * n * 2  # int16 per step, team and agent
-    return engine + history + 4 * n * shape.inputs * FLOAT + 2 * shape.hidden * FLOAT
+    return engine + history + 4 * n * shape.inputs * FLOAT + 2 * shape.widest * FLOAT
 
 
 def training_estimate(cfg: Any, scenario: Any) -> list[tuple[str, str, int]]:
     """(flags with their values, what they size, estimated bytes) of each part of a training run that
     grows with a setting."""
-    from tracelab.train.loop import network_groups, training_shape
-    shape, k = training_shape(cfg, scenario), len(network_groups(scenario, cfg.split_networks))
+    from tracelab.train.loop import network_groups, training_net
+    shape, k = training_net(cfg, scenario), len(network_groups(scenario, cfg.split_networks))
     nets = f"{k} network{'s' * (k > 1)}"
     eval_worlds = min(cfg.eval_envs, cfg.eval_games)
     return [
-        (f"--hidden {cfg.hidden}", f"{nets} of {shape.inputs:,} inputs x {shape.hidden:,} hidden units x "
+        (f"--hidden {cfg.hidden}", f"{nets} of {shape.inputs:,} inputs x {shape.hidden_text()} hidden units x "
                                    f"{shape.actions} actions", k * network_bytes(shape)),
         (f"--hidden {cfg.hidden} and --batch {cfg.batch}", f"the update's activations ({cfg.batch:,} "
-         f"transitions x {cfg.hidden:,} hidden units, {nets})", k * activation_bytes(cfg.batch, shape)),
+         f"transitions x {shape.hidden_text()} hidden units, {nets})", k * activation_bytes(cfg.batch, shape)),
         (f"--batch {cfg.batch}", f"minibatches of {cfg.batch:,} transitions ({nets})",
          k * minibatch_bytes(cfg.batch, shape, cfg.mask)),
         (f"--buffer {cfg.buffer}", f"replay buffers of {cfg.buffer:,} transitions ({nets})",
@@ -116,11 +116,11 @@ def check_training_memory(cfg: Any, scenario: Any, limit: Limit) -> int:
     return total
 
 
-def check_policy_memory(shape: Shape, networks: int, limit: Limit, where: str) -> None:
+def check_policy_memory(shape: NetSpec, networks: int, limit: Limit, where: str) -> None:
     """Refuse a policy whose networks would not fit (a policy.json from a stranger can say any size)."""
     need = networks * 3 * shape.n_params * FLOAT  # the loaded tensors, the row, acting's views
     if need > limit.bytes:
         raise MemoryLimitExceeded(
             f"{where}: network: {networks} network{'s' * (networks > 1)} of {shape.inputs:,} inputs x "
-            f"{shape.hidden:,} hidden units x {shape.actions:,} outputs would take an estimated {need:,} "
+            f"{shape.hidden_text()} hidden units x {shape.actions:,} outputs would take an estimated {need:,} "
             f"bytes ({_gib(need)}), over the limit of {limit}; refused")

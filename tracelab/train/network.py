@@ -1,6 +1,7 @@
-"""The method's Q-network: one tanh hidden layer, then a linear layer to one Q-value per action.
+"""The fused learner's parameter layout for the method's Q-network: one tanh hidden layer, then a linear layer
+to one Q-value per action (any other network is the readable learner's, tracelab/train/dqn.py).
 
-The learner keeps the online and the target network in one tensor `[2, n]` (row 0 online, row 1 target),
+The fused learner keeps the online and the target network in one tensor `[2, n]` (row 0 online, row 1 target),
 each row holding W1ᵀ [D, H], b1 [H], W2ᵀ [H, A], b2 [A] back to back. Stacked that way, both networks'
 forward passes are one batched matmul per layer, the target copy is one copy, and the optimizer works on
 one flat vector: the per-operation overhead of torch, not arithmetic, is what costs here
@@ -10,10 +11,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-
-import numpy as np
-
-STATE_DICT_KEYS = ("0.weight", "0.bias", "2.weight", "2.bias")
 
 
 @dataclass(frozen=True)
@@ -52,35 +49,12 @@ def init_row(shape: Shape, generator) -> "torch.Tensor":  # noqa: F821
     return row
 
 
-def q_values(params: tuple[np.ndarray, ...], obs: np.ndarray) -> np.ndarray:
-    """Q-values [K, A] of observations [K, D] with numpy views (W1ᵀ, b1, W2ᵀ, b2): acting reads the
-    learner's live parameters without a copy and without torch's per-call overhead."""
-    w1, b1, w2, b2 = params
-    return np.tanh(obs @ w1 + b1) @ w2 + b2
+def state_dict_views(row, shape: Shape) -> dict:
+    """A parameter row as nn.Sequential(Linear(D, H), Tanh(), Linear(H, A))'s state dict, of views (live)."""
+    w1, b1, w2, b2 = views(row, shape)
+    return {"0.weight": w1.t(), "0.bias": b1, "2.weight": w2.t(), "2.bias": b2}
 
 
 def to_state_dict(row, shape: Shape) -> dict:
-    """A parameter row as nn.Sequential(Linear(D, H), Tanh(), Linear(H, A))'s state dict (copies)."""
-    w1, b1, w2, b2 = views(row, shape)
-    return {"0.weight": w1.t().contiguous().clone(), "0.bias": b1.clone(),
-            "2.weight": w2.t().contiguous().clone(), "2.bias": b2.clone()}
-
-
-def from_state_dict(state: dict, shape: Shape) -> "torch.Tensor":  # noqa: F821
-    """The parameter row of a state dict written by to_state_dict (or by nn.Sequential)."""
-    import torch
-    missing = [k for k in STATE_DICT_KEYS if k not in state]
-    if missing:
-        raise ValueError(f"state dict lacks {missing}; expected the keys {list(STATE_DICT_KEYS)}")
-    expect = {"0.weight": (shape.hidden, shape.inputs), "0.bias": (shape.hidden,),
-              "2.weight": (shape.actions, shape.hidden), "2.bias": (shape.actions,)}
-    for k, want in expect.items():
-        if tuple(state[k].shape) != want:
-            raise ValueError(f"state dict entry {k} has shape {tuple(state[k].shape)}, expected {want}")
-    row = torch.empty(shape.n_params)
-    w1, b1, w2, b2 = views(row, shape)
-    w1.copy_(state["0.weight"].t())
-    b1.copy_(state["0.bias"])
-    w2.copy_(state["2.weight"].t())
-    b2.copy_(state["2.bias"])
-    return row
+    """The same, copied."""
+    return {k: v.contiguous().clone() for k, v in state_dict_views(row, shape).items()}

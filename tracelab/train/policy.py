@@ -5,10 +5,10 @@ its team mates', its bullet triple first in the advanced scenario; both halves o
 alike): with one network shared by several agents (the Markov setup) that is how the network knows which
 agent it acts for. With one agent per team the order is the env's.
 
-On disk (docs/training.md, "Policy format"): `policy.pt` holds `{network name: state dict}` in
-nn.Sequential(Linear(D, H), Tanh(), Linear(H, A))'s names, `policy.json` the scenario, the observation
-layout, the action ids, the network shape and which agents each network plays. `load_policy` needs
-neither the training code's objects nor the run."""
+On disk (docs/training.md, "Policy format"): `policy.pt` holds `{network name: state dict}` (the method's
+network in nn.Sequential(Linear(D, H), Tanh(), Linear(H, A))'s names), `policy.json` the scenario, the
+observation layout, the action ids, the network's architecture (tracelab/train/qnet.py) and which agents
+each network plays. `load_policy` needs neither the training code's objects nor the run."""
 from __future__ import annotations
 
 import json
@@ -20,7 +20,7 @@ import numpy as np
 from tracelab.engine.safe_files import read_json
 from tracelab.game.scenario import ACTION_NAMES, NOTHING, Scenario, scenario_from_dict
 from tracelab.validation import Const, IntRange, ListOf, MapOf, OptionalKey, check_file
-from tracelab.train.network import STATE_DICT_KEYS, Shape, from_state_dict, q_values, views
+from tracelab.train.qnet import HiddenWidths, NetSpec, NumpyQ, QFunction
 
 FORMAT = "tracelab-dqn-policy/1"
 POLICY_JSON, POLICY_PT = "policy.json", "policy.pt"
@@ -66,11 +66,11 @@ def may_act(scenario: Scenario, state: Any, slow_every_step: bool = False) -> np
 
 
 class Policy:
-    """Greedy action choice of red's agents. `nets`: per network, (W1ᵀ, b1, W2ᵀ, b2) numpy arrays (the
-    learner's live views while training, loaded copies otherwise); `network_of_agent[j]` which one plays
-    agent j."""
+    """Greedy action choice of red's agents. `nets`: per network, its Q-values of observations [K, D] (from
+    the learner's live weights while training, loaded ones otherwise); `network_of_agent[j]` which one
+    plays agent j."""
 
-    def __init__(self, scenario: Scenario, nets: list[tuple[np.ndarray, ...]], network_of_agent: list[int],
+    def __init__(self, scenario: Scenario, nets: list[QFunction], network_of_agent: list[int],
                  stack_previous: bool, mask: bool = False) -> None:
         self.scenario = scenario
         self.nets = nets
@@ -94,7 +94,7 @@ class Policy:
             rows = np.flatnonzero(acting[:, j])
             if not len(rows):
                 continue
-            q = q_values(self.nets[self.network_of_agent[j]], self.agent_obs(team_obs[rows], j))
+            q = self.nets[self.network_of_agent[j]](self.agent_obs(team_obs[rows], j))
             if self.mask and masks is not None:
                 q = np.where(masks[rows, j].astype(bool), q, -np.inf)
             out[rows, j] = q.argmax(axis=1)
@@ -104,26 +104,24 @@ class Policy:
 # ---------------------------------------------------------------------------------------------------------
 # Files
 # ---------------------------------------------------------------------------------------------------------
-def save_policy(path: str | Path, scenario: Scenario, rows: dict[str, Any], agents: dict[str, list[int]],
-                shape: Shape, stack_previous: bool, mask: bool, trained: dict[str, Any]) -> Path:
-    """Write policy.pt and policy.json into directory `path`. rows: network name -> online parameter row
-    (tracelab.train.network layout); agents: network name -> red agent indices it plays."""
+def save_policy(path: str | Path, scenario: Scenario, weights: dict[str, dict[str, Any]],
+                agents: dict[str, list[int]], network: dict[str, Any], stack_previous: bool, mask: bool,
+                trained: dict[str, Any]) -> Path:
+    """Write policy.pt and policy.json into directory `path`. weights: network name -> its state dict;
+    agents: network name -> red agent indices it plays; network: policy.json's description of the
+    architecture (NetSpec.to_json, or a custom module's)."""
     import torch
-
-    from tracelab.train.network import to_state_dict
     out = Path(path)
     out.mkdir(parents=True, exist_ok=True)
-    torch.save({name: to_state_dict(row, shape) for name, row in rows.items()}, out / (POLICY_PT + ".tmp"))
+    torch.save({name: {k: v.contiguous().clone() for k, v in sd.items()} for name, sd in weights.items()},
+               out / (POLICY_PT + ".tmp"))
     spec = {
         "format": FORMAT,
         "scenario": {"name": scenario.name, "toml": scenario.to_toml()},
-        "observation": {"size": shape.inputs, "stack_previous": stack_previous, "agent_first": True,
+        "observation": {"size": network["inputs"], "stack_previous": stack_previous, "agent_first": True,
                         "layout": observation_layout(scenario, stack_previous)},
         "actions": {"ids": list(scenario.action_ids), "names": [ACTION_NAMES[a] for a in scenario.action_ids]},
-        "network": {"inputs": shape.inputs, "hidden": shape.hidden, "outputs": shape.actions,
-                    "activation": "tanh", "state_dict_keys": list(STATE_DICT_KEYS),
-                    "torch": f"nn.Sequential(nn.Linear({shape.inputs}, {shape.hidden}), nn.Tanh(), "
-                             f"nn.Linear({shape.hidden}, {shape.actions}))"},
+        "network": network,
         "networks": {name: list(map(int, idx)) for name, idx in agents.items()},
         "mask": mask,
         "trained": trained,
@@ -149,7 +147,8 @@ SPEC_SCHEMA = {
     "format": Const(FORMAT),
     "scenario": {"name": str, "toml": str},
     "observation": {"stack_previous": bool},
-    "network": {"inputs": IntRange(1), "hidden": IntRange(1), "outputs": IntRange(1)},
+    "network": {"inputs": IntRange(1), "hidden": OptionalKey(HiddenWidths()), "outputs": IntRange(1),
+                "dueling": OptionalKey(bool), "custom": OptionalKey(str)},
     "networks": MapOf(ListOf(IntRange(0), min_len=1), min_len=1),
     "mask": OptionalKey(bool),
 }
@@ -171,17 +170,20 @@ def policy_scenario(spec: dict[str, Any]) -> Scenario:
     return scenario_from_dict(tomllib.loads(spec["scenario"]["toml"]), source="policy.json scenario")
 
 
-def spec_shape(spec: dict[str, Any]) -> Shape:
+def spec_net(spec: dict[str, Any]) -> NetSpec:
+    """The architecture policy.json describes (ValueError for a custom module's: no file rebuilds one)."""
     net = spec["network"]
-    return Shape(net["inputs"], net["hidden"], net["outputs"])
+    if "custom" in net or "hidden" not in net:
+        raise ValueError(f"{POLICY_JSON}: network: a custom torch module ({net.get('custom', '?')[:80]}), "
+                         f"written through the Python API: tracelab rebuilds only the networks --hidden and "
+                         f"--dueling describe; load its policy.pt with torch into that module")
+    return NetSpec.from_json(net)
 
 
-def _state_dict_schema(names: list[str], shape: Shape) -> dict[str, Any]:
-    """policy.pt: per network, nn.Sequential(Linear(D, H), Tanh(), Linear(H, A))'s state dict."""
+def _state_dict_schema(names: list[str], net: NetSpec) -> dict[str, Any]:
+    """policy.pt: per network, the state dict of the module `net` describes."""
     from tracelab.train.torch_files import Tensor
-    d, h, a = shape.inputs, shape.hidden, shape.actions
-    layers = {"0.weight": Tensor(None, (h, d)), "0.bias": Tensor(None, (h,)),
-              "2.weight": Tensor(None, (a, h)), "2.bias": Tensor(None, (a,))}
+    layers = {k: Tensor(None, shape) for k, shape in net.state_dict_shapes().items()}
     return {name: layers for name in names}
 
 
@@ -191,14 +193,14 @@ def read_policy_networks(path: str | Path, spec: dict[str, Any]) -> dict[str, An
     from tracelab.train.memory import check_policy_memory, memory_limit
     from tracelab.train.torch_files import load_tensors
     d = _policy_dir(path)
-    shape, names = spec_shape(spec), list(spec["networks"])
-    check_policy_memory(shape, len(names), memory_limit(), str(d / POLICY_JSON))
+    net, names = spec_net(spec), list(spec["networks"])
+    check_policy_memory(net, len(names), memory_limit(), str(d / POLICY_JSON))
     f = d / POLICY_PT
     if not (f.exists() or f.is_symlink()):
         raise FileNotFoundError(f"{str(d)!r} holds no {POLICY_PT}")
     # the tensors it declares (float64 at most), with room for the pickle and the alignment torch.save adds
-    states = load_tensors(f, len(names) * shape.n_params * 8 + (1 << 20))
-    return check_file(states, _state_dict_schema(names, shape), f)
+    states = load_tensors(f, len(names) * net.n_params * 8 + (1 << 20))
+    return check_file(states, _state_dict_schema(names, net), f)
 
 
 def load_policy(path: str | Path, scenario: Scenario | None = None) -> Policy:
@@ -208,18 +210,18 @@ def load_policy(path: str | Path, scenario: Scenario | None = None) -> Policy:
     trained_on = policy_scenario(spec)
     scenario = scenario or trained_on
     stack = spec["observation"]["stack_previous"]
-    shape = spec_shape(spec)
+    net = spec_net(spec)
     from tracelab.game.observe import obs_size
     if (obs_size(scenario, stack), scenario.n_actions, scenario.agents_per_team) != \
-            (shape.inputs, shape.actions, trained_on.agents_per_team):
+            (net.inputs, net.actions, trained_on.agents_per_team):
         raise ValueError(f"the policy was trained on {trained_on.name!r} ({trained_on.agents_per_team} agents, "
-                         f"{shape.inputs} observations, {shape.actions} actions); scenario {scenario.name!r} "
+                         f"{net.inputs} observations, {net.actions} actions); scenario {scenario.name!r} "
                          f"does not match")
     states = read_policy_networks(path, spec)
-    nets, owner = [], {}
+    nets: list[QFunction] = []
+    owner = {}
     for i, name in enumerate(spec["networks"]):
-        row = from_state_dict(states[name], shape)
-        nets.append(tuple(x.numpy() for x in views(row, shape)))
+        nets.append(NumpyQ(net, {k: v.float().numpy() for k, v in states[name].items()}))
         for j in spec["networks"][name]:
             owner[j] = i
     if sorted(owner) != list(range(scenario.agents_per_team)):

@@ -12,7 +12,7 @@ MASKED_Q where the shield forbids it, so the bootstrap is the best action the po
 fixed views of the batch array: sampling costs four numpy calls."""
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -22,6 +22,16 @@ MASKED_Q = -1e6  # finite: a terminal transition's discount 0 times it must stay
 def row_length(obs_size: int, n_actions: int, masked: bool) -> int:
     """Floats per transition: [obs, 1, next_obs, 1, one-hot action, (next penalty,) reward, discount]."""
     return 2 * (obs_size + 1) + n_actions * (2 if masked else 1) + 2
+
+
+class Minibatch(NamedTuple):
+    """A sampled minibatch by field: numpy views of the buffer's batch array, rewritten by the next sample."""
+    obs: np.ndarray           # [B, D]
+    actions: np.ndarray       # [B, 1] action indices
+    rewards: np.ndarray       # [B, 1]
+    next_obs: np.ndarray      # [B, D]
+    discounts: np.ndarray     # [B, 1]: γ^k, 0 where the episode or the agent ended
+    next_penalty: np.ndarray | None  # [B, A] (masked buffers): 0 where allowed in next_obs, MASKED_Q where not
 
 
 class ReplayBuffer:
@@ -82,6 +92,12 @@ class ReplayBuffer:
         # floor(u * size) for u in [0, 1): uniform over the stored rows, at half the cost of rng.integers
         idx = (rng.random(len(self.batch)) * self.size).astype(np.int64)
         self.rows.take(idx, axis=0, out=self.batch)
+
+    def sample_batch(self, rng: np.random.Generator) -> Minibatch:
+        """Sample (as `sample`) and return the minibatch by field."""
+        self.sample(rng)
+        return Minibatch(self.b_obs[0, :, :-1], self.sampled_actions(), self.b_reward, self.b_obs[1, :, :-1],
+                         self.b_discount, self.b_next_penalty)
 
     def sampled_actions(self) -> np.ndarray:
         """The action ids of the current batch, [B, 1]."""

@@ -51,7 +51,15 @@ def machine() -> str:
 # the settings of the method's DQN (shared/paper-notes.md); a report names those an arm changes
 DQN_FIELDS = ("hidden", "lr", "gamma", "batch", "buffer", "target_every", "eps_start", "eps_end",
               "eps_decay_start", "eps_decay_end", "updates_per_step", "reward_scale", "mask", "explore_scripted",
-              "split_networks", "slow_every_step")
+              "split_networks", "slow_every_step", "double_dqn", "dueling")
+
+
+def _setting(name: str, value: Any) -> str:
+    """'lr 0.001', 'hidden 64,64', 'mask' (a flag that is on)."""
+    label = name.replace("_", " ")
+    if isinstance(value, bool):
+        return label
+    return f"{label} {value}" if isinstance(value, str) else f"{label} {value:g}"
 
 
 def learner_text(result: ExperimentResult) -> str:
@@ -60,8 +68,8 @@ def learner_text(result: ExperimentResult) -> str:
     parts = []
     for ar in result.arms:
         cfg = train_config(result.experiment, ar.arm, result.budget, 0)
-        changed = [f"{name.replace('_', ' ')} {getattr(cfg, name):g}" if not isinstance(getattr(cfg, name), bool)
-                   else name.replace('_', ' ') for name in DQN_FIELDS if getattr(cfg, name) != getattr(defaults, name)]
+        changed = [_setting(name, getattr(cfg, name)) for name in DQN_FIELDS
+                   if getattr(cfg, name) != getattr(defaults, name)]
         parts.append(f"{ar.arm.label}: {', '.join(changed) if changed else 'as the method'}")
     return "the method's DQN (docs/training.md), except: " + "; ".join(parts)
 

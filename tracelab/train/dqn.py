@@ -1,0 +1,123 @@
+"""The DQN update as a reader expects it (CleanRL's dqn.py): a torch.nn.Module Q-network and its target copy,
+autograd, torch.optim.Adam, the TD target and the loss in plain sight: the learner to read and change
+(docs/training.md, "The learner"). tracelab/train/learner.py computes the same update for the method's
+one-layer network by hand, several times faster (tests/test_learners.py holds the two equal). A
+transition's `discount` is γ^k of the steps it spans, 0 where the episode or the agent ended."""
+from __future__ import annotations
+
+import copy
+import math
+from typing import Any, Sequence
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from tracelab.train.learner_protocol import RunningLoss
+from tracelab.train.replay import ReplayBuffer
+
+
+class DuelingQ(nn.Module):
+    """Q(s, a) = V(s) + A(s, a) - mean_a A(s, a) on a shared trunk (Wang et al., 2016)."""
+
+    def __init__(self, trunk: nn.Module, width: int, actions: int) -> None:
+        super().__init__()
+        self.trunk, self.value, self.advantage = trunk, nn.Linear(width, 1), nn.Linear(width, actions)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        h = self.trunk(x)
+        advantage = self.advantage(h)
+        return self.value(h) + advantage - advantage.mean(dim=1, keepdim=True)
+
+
+def make_q_network(inputs: int, hidden: Sequence[int], actions: int, dueling: bool = False,
+                   generator: torch.Generator | None = None) -> nn.Module:
+    """tanh layers of widths `hidden`, then one Q-value per action (or a dueling head). The weights are
+    drawn as nn.Linear draws them, from `generator`, in the fused learner's order: same seed, same network."""
+    layers: list[nn.Module] = []
+    for fan_in, width in zip((inputs, *hidden), hidden):
+        layers += [nn.Linear(fan_in, width), nn.Tanh()]
+    net = DuelingQ(nn.Sequential(*layers), hidden[-1], actions) if dueling else \
+        nn.Sequential(*layers, nn.Linear(hidden[-1], actions))
+    with torch.no_grad():
+        for layer in (m for m in net.modules() if isinstance(m, nn.Linear)):
+            bound = 1 / math.sqrt(layer.in_features)
+            w_t = torch.empty(layer.in_features, layer.out_features).uniform_(-bound, bound, generator=generator)
+            layer.weight.copy_(w_t.t())
+            layer.bias.uniform_(-bound, bound, generator=generator)
+    return net
+
+
+class DQN:
+    """Online and target Q-networks, Adam, the replay buffer, and the update (any nn.Module mapping
+    observations [B, D] to Q-values [B, A] will do)."""
+
+    def __init__(self, q_network: nn.Module, buffer: ReplayBuffer, *, lr: float, double_dqn: bool = False) -> None:
+        self.q_network, self.buffer, self.double_dqn = q_network, buffer, double_dqn
+        self.target_network = copy.deepcopy(q_network).requires_grad_(False)
+        self.optimizer = torch.optim.Adam(q_network.parameters(), lr=lr)
+        self.updates = 0
+        self.losses = RunningLoss()  # the mean since the last take_loss()
+        self._last_q: torch.Tensor | None = None  # Q(s) of the last minibatch
+
+    def update(self, rng: np.random.Generator) -> None:
+        data = self.buffer.sample_batch(rng)
+        obs, actions, rewards, next_obs, discounts = (torch.from_numpy(x) for x in data[:5])
+        # --mask: 0 on the actions the shield allows in s', a large negative number on the others
+        penalty = 0.0 if data.next_penalty is None else torch.from_numpy(data.next_penalty)
+        with torch.no_grad():
+            next_q = self.target_network(next_obs) + penalty
+            if self.double_dqn:  # the online network picks a', the target network values it
+                best_next = (self.q_network(next_obs) + penalty).argmax(dim=1, keepdim=True)
+                next_value = next_q.gather(1, best_next)
+            else:
+                next_value = next_q.max(dim=1, keepdim=True).values
+            td_target = rewards + discounts * next_value
+        q = self.q_network(obs)
+        loss = self.loss(q, actions, td_target)
+        self.optimizer.zero_grad()
+        loss.backward()
+        self.optimizer.step()
+        self.losses.add(loss)
+        self._last_q = q.detach()
+        self.updates += 1
+
+    def loss(self, q: torch.Tensor, actions: torch.Tensor, td_target: torch.Tensor) -> torch.Tensor:
+        """The method's loss: Smooth L1 between Q(s, a) of the taken actions and the TD target. `q` is
+        Q(s, ·) [B, A], so a subclass can add terms over every action (docs/training.md, "A new loss")."""
+        return F.smooth_l1_loss(q.gather(1, actions), td_target)
+
+    def sync_target(self) -> None:
+        self.target_network.load_state_dict(self.q_network.state_dict())
+
+    def take_loss(self) -> float | None:
+        return self.losses.take()
+
+    def q_max_mean(self) -> float | None:
+        return None if self._last_q is None else float(self._last_q.amax(dim=1).mean())
+
+    def online_weights(self) -> dict[str, torch.Tensor]:
+        return dict(self.q_network.state_dict())  # detached, sharing the parameters' memory
+
+    # ---- checkpoints: Adam's moments by parameter name, so a checkpoint can be checked before it is used
+    def state(self) -> dict[str, Any]:
+        adam = {name: {"step": float(s["step"]), "exp_avg": s["exp_avg"].clone(), "exp_avg_sq": s["exp_avg_sq"].clone()}
+                for name, p in self.q_network.named_parameters() if (s := self.optimizer.state.get(p))}
+        return {"online": copy.deepcopy(self.q_network.state_dict()), "adam": adam,
+                "target": copy.deepcopy(self.target_network.state_dict()),
+                "updates": self.updates, "buffer": self.buffer.state(), **self.losses.state(),
+                "last_q": None if self._last_q is None else self._last_q.clone()}
+
+    def load_state(self, st: dict[str, Any]) -> None:
+        self.q_network.load_state_dict(st["online"])
+        self.target_network.load_state_dict(st["target"])
+        names = [name for name, _ in self.q_network.named_parameters()]
+        opt = self.optimizer.state_dict()
+        opt["state"] = {names.index(name): {"step": torch.tensor(float(s["step"])), "exp_avg": s["exp_avg"],
+                                            "exp_avg_sq": s["exp_avg_sq"]} for name, s in st["adam"].items()}
+        self.optimizer.load_state_dict(opt)
+        self.updates = int(st["updates"])
+        self.buffer.load_state(st["buffer"])
+        self.losses.load_state(st)
+        self._last_q = st["last_q"]

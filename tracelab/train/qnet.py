@@ -1,0 +1,129 @@
+"""A Q-network's architecture as data (`NetSpec`), and acting with its weights in numpy.
+
+The architecture travels in files a stranger may hand us (policy.json, a checkpoint's config), so it is
+described, not pickled: tanh hidden layers of the given widths, then one Q-value per action, or a dueling
+head (V(s) + A(s, a) - mean_a A(s, a)). From that description alone tracelab knows every parameter's name
+and shape (to check a file before using it, and to bound its memory) and computes Q-values in numpy (acting
+reads the learner's live weights without torch's per-call overhead). The torch module itself is built in
+tracelab/train/dqn.py (`make_q_network`); a test holds the two descriptions equal.
+
+A network written through the Python API as any `torch.nn.Module` has no such description: it acts
+through torch (`TorchQ`), and its policy files say `custom` (docs/training.md)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+from tracelab.validation import Mismatch, Spec
+
+QFunction = Callable[[np.ndarray], np.ndarray]  # observations [K, D] -> Q-values [K, A]
+MAX_LAYERS = 32  # hidden layers a config or a policy file may declare (a stranger's file could say millions)
+
+
+def parse_hidden(text: str | int) -> tuple[int, ...]:
+    """'64,64' (or 64) -> (64, 64); ValueError naming the value otherwise."""
+    parts = [p.strip() for p in str(text).split(",", MAX_LAYERS)]
+    if len(parts) > MAX_LAYERS or not all(p.isdigit() and int(p) >= 1 for p in parts):
+        raise ValueError(f"hidden must be up to {MAX_LAYERS} layer widths >= 1 separated by commas (64 or "
+                         f"64,64), got {str(text)[:80]!r}")
+    return tuple(int(p) for p in parts)
+
+
+@dataclass(frozen=True)
+class NetSpec:
+    inputs: int
+    hidden: tuple[int, ...]
+    actions: int
+    dueling: bool = False
+
+    def linears(self) -> list[tuple[str, int, int]]:
+        """(state dict prefix, fan in, fan out) of each linear layer, in the order the module holds them:
+        nn.Sequential's indices (a Tanh between two Linears), the dueling head's named parts."""
+        widths = (self.inputs, *self.hidden)
+        trunk = [(str(2 * i), a, b) for i, (a, b) in enumerate(zip(widths, widths[1:]))]
+        last = widths[-1]
+        if not self.dueling:
+            return [*trunk, (str(2 * len(self.hidden)), last, self.actions)]
+        return [(f"trunk.{k}", a, b) for k, a, b in trunk] + [("value", last, 1), ("advantage", last, self.actions)]
+
+    def state_dict_shapes(self) -> dict[str, tuple[int, ...]]:
+        out: dict[str, tuple[int, ...]] = {}
+        for name, fan_in, fan_out in self.linears():
+            out[f"{name}.weight"], out[f"{name}.bias"] = (fan_out, fan_in), (fan_out,)
+        return out
+
+    @property
+    def n_params(self) -> int:
+        return sum((fan_in + 1) * fan_out for _, fan_in, fan_out in self.linears())
+
+    @property
+    def widest(self) -> int:
+        return max(self.hidden)
+
+    def hidden_text(self) -> str:
+        return ",".join(f"{h:,}" if len(self.hidden) == 1 else str(h) for h in self.hidden)
+
+    def torch_text(self) -> str:
+        """The module as torch code, for people reading policy.json."""
+        widths = (self.inputs, *self.hidden)
+        trunk = ", ".join(f"nn.Linear({a}, {b}), nn.Tanh()" for a, b in zip(widths, widths[1:]))
+        if not self.dueling:
+            return f"nn.Sequential({trunk}, nn.Linear({widths[-1]}, {self.actions}))"
+        return (f"dueling: trunk = nn.Sequential({trunk}), value = nn.Linear({widths[-1]}, 1), advantage = "
+                f"nn.Linear({widths[-1]}, {self.actions}); Q = value + advantage - advantage.mean(1)")
+
+    def to_json(self) -> dict[str, Any]:
+        """policy.json's `network` (a one-layer network keeps `hidden` a number, as before dueling)."""
+        return {"inputs": self.inputs, "hidden": self.hidden[0] if len(self.hidden) == 1 else list(self.hidden),
+                "outputs": self.actions, "dueling": self.dueling, "activation": "tanh",
+                "state_dict_keys": list(self.state_dict_shapes()), "torch": self.torch_text()}
+
+    @classmethod
+    def from_json(cls, net: dict[str, Any]) -> "NetSpec":
+        h = net["hidden"]
+        return cls(net["inputs"], (h,) if isinstance(h, int) else tuple(h), net["outputs"], net.get("dueling", False))
+
+
+class HiddenWidths(Spec):
+    """policy.json's network.hidden: a width, or a non-empty list of widths (each an integer >= 1)."""
+    expected = f"an integer >= 1 (or a list of up to {MAX_LAYERS} of them)"
+
+    def check(self, value: Any, where: str) -> None:
+        items = value if isinstance(value, list) and value else [value]
+        if len(items) > MAX_LAYERS or not all(isinstance(v, int) and not isinstance(v, bool) and v >= 1 for v in items):
+            raise Mismatch(where, self.expected, value)
+
+
+class NumpyQ:
+    """Q-values of a NetSpec network from its weights as numpy arrays named as in its state dict (views of
+    the learner's live parameters while training, loaded copies otherwise)."""
+
+    def __init__(self, spec: NetSpec, weights: Mapping[str, np.ndarray]) -> None:
+        self.dueling = spec.dueling
+        self.layers = [(weights[f"{name}.weight"].T, weights[f"{name}.bias"]) for name, _, _ in spec.linears()]
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        x = obs
+        heads = 2 if self.dueling else 1
+        for w, b in self.layers[:-heads]:
+            x = np.tanh(x @ w + b)
+        if not self.dueling:
+            w, b = self.layers[-1]
+            return x @ w + b
+        (wv, bv), (wa, ba) = self.layers[-2:]
+        adv = x @ wa + ba
+        return x @ wv + bv + adv - adv.mean(axis=1, keepdims=True)
+
+
+class TorchQ:
+    """Q-values of any torch module (a custom network), without gradients."""
+
+    def __init__(self, module: Any) -> None:
+        self.module = module
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        import torch
+        with torch.no_grad():
+            return self.module(torch.from_numpy(np.ascontiguousarray(obs, np.float32))).numpy()
