@@ -1,0 +1,260 @@
+"""GraphSide: what stands beside the trace where a game run has its board, for a run without one (a
+reasoning run). Above: the atoms true at the end of the cursor's timestep, or the atoms changed in it
+(`c`), filtered by a predicate name or an atom pattern (`exposed`, `exposed(*)`; `/`), each with its bound,
+at most graph_state.ATOMS_LIMIT of them with the count of all. Below: the neighbourhood in the graph of
+the selected atom (the trace's cursor, or the list's when it has the focus): its node's labels, edges
+and their labels with their bounds at that time. Enter on an atom shows only its changes in the trace.
+Everything is read per timestep by bounded queries in workers (graph_state.py)."""
+from __future__ import annotations
+
+from typing import Any
+
+import pyarrow as pa
+from rich.text import Text
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Vertical, VerticalScroll
+from textual.message import Message
+from textual.widgets import Input, Static
+
+from tracelab.viewers.tui.colours import DIM, bound_colour, styled_bound
+from tracelab.viewers.tui.graph_state import AtomsAt, Neighbourhood, atoms_at, neighbourhood, unknown_pattern
+from tracelab.viewers.tui.lazy_table import Column, LazyTable
+from tracelab.viewers.tui.paging import ArrowSource
+from tracelab.viewers.tui.source import RunSource
+
+ARROWS = {"out": "→", "in": "←", "both": "↔"}
+
+
+def _bound(row: dict[str, Any]) -> Text:
+    return styled_bound(row["lower"], row["upper"])
+
+
+def _change(row: dict[str, Any]) -> Text:
+    return styled_bound(row["old_lower"], row["old_upper"]) + Text("→", style=DIM) + \
+        styled_bound(row["lower"], row["upper"])
+
+
+# atom, its bound at the end of t and the t it was last set (true); its bound before t and after (changed)
+TRUE_COLUMNS = [Column("atom", "atom", 14, flex=1, max_width=60),
+                Column("bound", "bound", None, render=_bound, max_width=11),
+                Column("last_t", "t", 3, align="right")]
+CHANGED_COLUMNS = [Column("atom", "atom", 14, flex=1, max_width=60),
+                   Column("change", "old→new", None, render=_change, max_width=23)]
+
+
+def _labels(labels: list[tuple[str, float, float]]) -> Text:
+    text = Text()
+    for i, (label, lower, upper) in enumerate(labels):
+        text.append(("" if i == 0 else " ") + label, style=bound_colour(lower, upper))
+    return text
+
+
+def draw_neighbourhood(hood: Neighbourhood) -> Text:
+    """The node(s) of an atom: their labels, then a line per neighbour (→ out, ← in, ↔ both ways) with
+    the labels on the pair, coloured by their bound at t."""
+    text = Text()
+    for node in hood.nodes:
+        text.append(node.node, style="bold")
+        if node.labels:
+            text.append(" ")
+            text.append_text(_labels(node.labels))
+        text.append("\n")
+        for n in node.neighbours:
+            text.append(f" {ARROWS[n.direction]} ", style=DIM)
+            text.append(n.other)
+            text.append(" ")
+            text.append_text(_labels(n.labels) if n.labels else Text("edge", style=DIM))
+            text.append("\n")
+        shown = len(node.neighbours)
+        more = f"first {shown} of {node.degree:,} neighbours" if node.degree > shown else \
+            "no edges" if not shown else f"{shown} neighbour{'s' if shown != 1 else ''}"
+        text.append(f" {more}\n", style=f"italic {DIM}")
+    if not hood.nodes:
+        text.append(f"{hood.atom}: not an atom of this run", style=f"italic {DIM}")
+    return text
+
+
+class GraphSide(Vertical):
+    BINDINGS = [
+        Binding("slash", "focus_filter", "filter atoms"),
+        Binding("c", "toggle_mode", "true/changed"),
+    ]
+    DEFAULT_CSS = """
+    GraphSide { width: 33%; min-width: 32; max-width: 64; height: 1fr; }
+    GraphSide #gs-atoms { height: 3fr; border: round $primary-darken-2; }
+    GraphSide #gs-filter { height: 1; }
+    GraphSide #gs-table { height: 1fr; }
+    GraphSide #gs-status { height: auto; max-height: 2; color: $text-muted; }
+    GraphSide #gs-hood { height: 2fr; border: round $primary-darken-2; }
+    """
+
+    class OnlyAtom(Message):
+        """Show only this atom's changes in the trace (Enter on an atom of the list)."""
+        def __init__(self, atom_id: int) -> None:
+            super().__init__()
+            self.atom_id = atom_id
+
+    def __init__(self, source: RunSource) -> None:
+        super().__init__()
+        self.source = source
+        self.mode = "true"
+        self.hide_static = True
+        self.atoms: AtomsAt | None = None         # the list shown (tests wait on it)
+        self.hood: Neighbourhood | None = None
+        self._episode: int | None = None
+        self._t: int | None = None
+        self._trace_atom: int | None = None        # the trace cursor's atom
+        self._asked: tuple[Any, ...] | None = None  # the list last asked for
+        self._hood_asked: tuple[int, int, int] | None = None
+
+    def compose(self) -> ComposeResult:
+        with Vertical(id="gs-atoms"):
+            yield Input(placeholder="atoms: exposed or exposed(*)", id="gs-filter", compact=True)
+            yield LazyTable(TRUE_COLUMNS, id="gs-table")
+            yield Static("", id="gs-status")
+        with VerticalScroll(id="gs-hood"):
+            yield Static(Text("select a change or an atom: its node's edges show here", style=f"italic {DIM}"),
+                         id="gs-hood-text")
+
+    def on_mount(self) -> None:
+        self.query_one("#gs-atoms").border_title = "atoms"
+        self.query_one("#gs-hood").border_title = "graph"
+        self.query_one("#gs-table", LazyTable).placeholder = "select a change in the trace"
+
+    @property
+    def table(self) -> LazyTable:
+        return self.query_one("#gs-table", LazyTable)
+
+    # ---- following the trace -----------------------------------------------------------------------------
+    def show(self, episode: int, t: int, atom_id: int | None) -> None:
+        """Follow the trace's cursor: the atoms at timestep t of `episode`, and the neighbourhood of
+        `atom_id` (unless the list has the focus: then its atom's)."""
+        self._episode, self._t, self._trace_atom = episode, t, atom_id
+        self.reload()
+        if not self.table.has_focus and atom_id is not None:
+            self._show_hood(atom_id)
+
+    def reload(self, force: bool = False) -> None:
+        """Ask for the list at the current time, mode, filter and static choice, if that changed."""
+        if self._episode is None or self._t is None:
+            return
+        pattern = self.query_one("#gs-filter", Input).value.strip()
+        asked = (self._episode, self._t, self.mode, pattern, self.hide_static)
+        if asked == self._asked and not force:
+            self._place_cursor()
+            return
+        self._asked = asked
+        self.query_one("#gs-atoms").border_title = f"atoms {self.mode} at t={self._t}"
+        self.query_one("#gs-status", Static).update(Text("reading…", style=DIM))
+        self.run_worker(lambda: self._read_atoms(asked), thread=True, group="graph-atoms", exclusive=True,
+                        exit_on_error=False)
+
+    def _read_atoms(self, asked: tuple[Any, ...]) -> None:
+        episode, t, mode, pattern, hide_static = asked
+        problem = None
+        try:
+            found = atoms_at(self.source, episode, t, mode, pattern, hide_static)
+            if not found.rows and pattern:
+                problem = unknown_pattern(self.source, pattern)
+        except Exception as e:  # noqa: BLE001 - a bad pattern or a cancelled query: a message, not a crash
+            found, problem = None, str(e).splitlines()[0] if str(e) else type(e).__name__
+        self.app.call_from_thread(self._atoms_read, asked, found, problem)
+
+    def _atoms_read(self, asked: tuple[Any, ...], found: AtomsAt | None, problem: str | None) -> None:
+        if asked != self._asked:
+            return
+        self.atoms = found
+        table, status = self.table, self.query_one("#gs-status", Static)
+        rows = found.rows if found is not None else []
+        columns = TRUE_COLUMNS if self.mode == "true" else CHANGED_COLUMNS
+        table.set_source(ArrowSource(pa.Table.from_pylist(rows)) if rows else None, columns,
+                         cursor=self._row_of(self._trace_atom))
+        if problem is not None or found is None:
+            table.placeholder = ""
+            status.update(Text(problem or "cannot read the atoms", style="bold red"))
+            return
+        table.placeholder = f"no atom {found.mode} at t={found.t}"
+        status.update(self._describe(found, asked[3]))
+
+    def _describe(self, found: AtomsAt, pattern: str) -> Text:
+        what = f"{found.total:,} {found.mode}" + (f" matching {pattern}" if pattern else "")
+        if found.truncated:   # the list holds the first ATOMS_LIMIT: a filter (/) finds the others
+            what = f"first {len(found.rows):,} of {what}"
+        if found.static_hidden:
+            what += f" · {found.static_hidden:,} static hidden (s)"
+        return Text(what)
+
+    def _row_of(self, atom_id: int | None) -> int:
+        rows = self.atoms.rows if self.atoms is not None else []
+        return next((i for i, r in enumerate(rows) if r["atom_id"] == atom_id), 0)
+
+    def _place_cursor(self) -> None:
+        """Put the list's cursor on the trace's atom when the list shows it (and does not have the focus)."""
+        if not self.table.has_focus and self.atoms is not None and self.table.ready:
+            self.table.move_to(self._row_of(self._trace_atom))
+
+    # ---- the neighbourhood ------------------------------------------------------------------------------
+    def _show_hood(self, atom_id: int) -> None:
+        if self._episode is None or self._t is None:
+            return
+        asked = (self._episode, self._t, atom_id)
+        if asked == self._hood_asked:
+            return
+        self._hood_asked = asked
+        self.run_worker(lambda: self._read_hood(asked), thread=True, group="graph-hood", exclusive=True,
+                        exit_on_error=False)
+
+    def _read_hood(self, asked: tuple[int, int, int]) -> None:
+        try:
+            hood: Neighbourhood | str = neighbourhood(self.source, *asked)
+        except Exception as e:  # noqa: BLE001
+            hood = str(e).splitlines()[0] if str(e) else type(e).__name__
+        self.app.call_from_thread(self._hood_read, asked, hood)
+
+    def _hood_read(self, asked: tuple[int, int, int], hood: Neighbourhood | str) -> None:
+        if asked != self._hood_asked:
+            return
+        box, text = self.query_one("#gs-hood"), self.query_one("#gs-hood-text", Static)
+        if isinstance(hood, str):
+            self.hood = None
+            text.update(Text(hood, style="bold red"))
+            return
+        self.hood = hood
+        box.border_title = f"{hood.atom} at t={hood.t}"
+        text.update(draw_neighbourhood(hood))
+
+    # ---- the list's own events and keys -------------------------------------------------------------------
+    def on_lazy_table_loaded(self, event: LazyTable.Loaded) -> None:
+        event.stop()
+
+    def on_lazy_table_row_highlighted(self, event: LazyTable.RowHighlighted) -> None:
+        event.stop()
+        if event.row is not None and self.table.has_focus:
+            self._show_hood(int(event.row["atom_id"]))
+
+    def on_lazy_table_row_selected(self, event: LazyTable.RowSelected) -> None:
+        event.stop()
+        if event.row is not None:
+            self.post_message(self.OnlyAtom(int(event.row["atom_id"])))
+
+    def on_descendant_focus(self) -> None:
+        row = self.table.cursor_row if self.table.has_focus else None
+        if row is not None:
+            self._show_hood(int(row["atom_id"]))
+
+    def on_input_submitted(self, event: Input.Submitted) -> None:
+        event.stop()
+        self.reload()
+        self.table.focus()
+
+    def action_focus_filter(self) -> None:
+        self.query_one("#gs-filter", Input).focus()
+
+    def action_toggle_mode(self) -> None:
+        self.mode = "changed" if self.mode == "true" else "true"
+        self.reload()
+
+    def set_hide_static(self, hide: bool) -> None:
+        self.hide_static = hide
+        self.reload()
