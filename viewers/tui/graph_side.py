@@ -15,6 +15,7 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Vertical, VerticalScroll
 from textual.message import Message
+from textual.timer import Timer
 from textual.widgets import Input, Static
 
 from tracelab.viewers.tui.colours import DIM, bound_colour, styled_bound
@@ -24,6 +25,9 @@ from tracelab.viewers.tui.paging import ArrowSource
 from tracelab.viewers.tui.source import RunSource
 
 ARROWS = {"out": "→", "in": "←", "both": "↔"}
+# the atoms are read once the trace's cursor rests on a timestep this long: on a run of millions of
+# changes a read takes up to a second, and the trace's own pages wait behind it on the run's connection
+SETTLE_S = 0.15
 
 
 def _bound(row: dict[str, Any]) -> Text:
@@ -107,6 +111,7 @@ class GraphSide(Vertical):
         self._trace_atom: int | None = None        # the trace cursor's atom
         self._asked: tuple[Any, ...] | None = None  # the list last asked for
         self._hood_asked: tuple[int, int, int] | None = None
+        self._settle: Timer | None = None
 
     def compose(self) -> ComposeResult:
         with Vertical(id="gs-atoms"):
@@ -131,9 +136,14 @@ class GraphSide(Vertical):
         """Follow the trace's cursor: the atoms at timestep t of `episode`, and the neighbourhood of
         `atom_id` (unless the list has the focus: then its atom's)."""
         self._episode, self._t, self._trace_atom = episode, t, atom_id
+        if self._settle is not None:
+            self._settle.stop()
+        self._settle = self.set_timer(SETTLE_S, self._follow)
+
+    def _follow(self) -> None:
         self.reload()
-        if not self.table.has_focus and atom_id is not None:
-            self._show_hood(atom_id)
+        if not self.table.has_focus and self._trace_atom is not None:
+            self._show_hood(self._trace_atom)
 
     def reload(self, force: bool = False) -> None:
         """Ask for the list at the current time, mode, filter and static choice, if that changed."""
