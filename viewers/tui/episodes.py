@@ -158,7 +158,7 @@ class EpisodesPane(Vertical):
 
     def _inspected(self, base: str, outcomes: list[str], training: bool, about: bool = False) -> None:
         self.base, self.training = base, training
-        if self.source.board:
+        if self.source.board or training:     # a training run's episodes are games, board or not
             self.columns = list(BASE_COLUMNS) + (TRAINING_COLUMNS if training else [])
         else:
             self.columns = list(BOARDLESS_COLUMNS) + ([ABOUT_COLUMN] if about else [])

@@ -16,6 +16,7 @@ from textual.binding import Binding
 from textual.containers import Vertical, VerticalScroll
 from textual.message import Message
 from textual.timer import Timer
+from textual.widget import Widget
 from textual.widgets import Input, Static
 
 from tracelab.viewers.tui.colours import DIM, bound_colour, styled_bound
@@ -47,36 +48,64 @@ CHANGED_COLUMNS = [Column("atom", "atom", 14, flex=1, max_width=60),
                    Column("change", "old→new", None, render=_change, max_width=23)]
 
 
-def _labels(labels: list[tuple[str, float, float]]) -> Text:
-    text = Text()
-    for i, (label, lower, upper) in enumerate(labels):
-        text.append(("" if i == 0 else " ") + label, style=bound_colour(lower, upper))
+def _labels(labels: list[tuple[str, float, float]]) -> list[Text]:
+    return [Text(label, style=bound_colour(lower, upper)) for label, lower, upper in labels]
+
+
+def _flow(prefix: Text, words: list[Text], width: int, indent: int) -> Text:
+    """prefix and words separated by spaces, wrapped at `width` between words, continuation lines
+    indented by `indent` (so a neighbour's labels stay under it)."""
+    text = prefix.copy()
+    x = text.cell_len
+    for word in words:
+        if x > indent and x + 1 + word.cell_len > width:
+            text.append("\n" + " " * indent)
+            x = indent
+        elif x > 0:
+            text.append(" ")
+            x += 1
+        text.append_text(word)
+        x += word.cell_len
     return text
 
 
-def draw_neighbourhood(hood: Neighbourhood) -> Text:
+def draw_neighbourhood(hood: Neighbourhood, width: int = 80) -> Text:
     """The node(s) of an atom: their labels, then a line per neighbour (→ out, ← in, ↔ both ways) with
-    the labels on the pair, coloured by their bound at t."""
-    text = Text()
+    the labels on the pair and after `·` the neighbour's own, coloured by their bound at t; wrapped at
+    `width` under the neighbour's name."""
+    lines: list[Text] = []
     for node in hood.nodes:
-        text.append(node.node, style="bold")
-        if node.labels:
-            text.append(" ")
-            text.append_text(_labels(node.labels))
-        text.append("\n")
+        lines.append(_flow(Text.assemble((node.node, "bold")), _labels(node.labels), width, 2))
         for n in node.neighbours:
-            text.append(f" {ARROWS[n.direction]} ", style=DIM)
-            text.append(n.other)
-            text.append(" ")
-            text.append_text(_labels(n.labels) if n.labels else Text("edge", style=DIM))
-            text.append("\n")
+            words = _labels(n.labels) if n.labels else [Text("edge", style=DIM)]
+            own = _labels(n.other_labels)     # what the neighbour itself is at t, after a `·`
+            if own:
+                words += [Text("· ", style=DIM) + own[0], *own[1:]]
+            lines.append(_flow(Text.assemble((f" {ARROWS[n.direction]} ", DIM), n.other), words, width, 5))
         shown = len(node.neighbours)
         more = f"first {shown} of {node.degree:,} neighbours" if node.degree > shown else \
             "no edges" if not shown else f"{shown} neighbour{'s' if shown != 1 else ''}"
-        text.append(f" {more}\n", style=f"italic {DIM}")
+        lines.append(Text(f" {more}", style=f"italic {DIM}"))
     if not hood.nodes:
-        text.append(f"{hood.atom}: not an atom of this run", style=f"italic {DIM}")
-    return text
+        lines.append(Text(f"{hood.atom}: not an atom of this run", style=f"italic {DIM}"))
+    return Text("\n").join(lines)
+
+
+class HoodText(Widget):
+    """The neighbourhood, drawn at the pane's width (its lines wrap under each neighbour's name)."""
+    DEFAULT_CSS = "HoodText { height: auto; }"
+
+    def __init__(self) -> None:
+        super().__init__(id="gs-hood-text")
+        self.hood: Neighbourhood | None = None
+        self.note = Text("select a change or an atom: its node's edges show here", style=f"italic {DIM}")
+
+    def show(self, hood: Neighbourhood | None, note: Text | None = None) -> None:
+        self.hood, self.note = hood, note or self.note
+        self.refresh(layout=True)
+
+    def render(self) -> Text:
+        return self.note if self.hood is None else draw_neighbourhood(self.hood, max(20, self.size.width))
 
 
 class GraphSide(Vertical):
@@ -119,8 +148,7 @@ class GraphSide(Vertical):
             yield LazyTable(TRUE_COLUMNS, id="gs-table")
             yield Static("", id="gs-status")
         with VerticalScroll(id="gs-hood"):
-            yield Static(Text("select a change or an atom: its node's edges show here", style=f"italic {DIM}"),
-                         id="gs-hood-text")
+            yield HoodText()
 
     def on_mount(self) -> None:
         self.query_one("#gs-atoms").border_title = "atoms"
@@ -225,14 +253,14 @@ class GraphSide(Vertical):
     def _hood_read(self, asked: tuple[int, int, int], hood: Neighbourhood | str) -> None:
         if asked != self._hood_asked:
             return
-        box, text = self.query_one("#gs-hood"), self.query_one("#gs-hood-text", Static)
+        box, text = self.query_one("#gs-hood"), self.query_one(HoodText)
         if isinstance(hood, str):
             self.hood = None
-            text.update(Text(hood, style="bold red"))
+            text.show(None, Text(hood, style="bold red"))
             return
         self.hood = hood
         box.border_title = f"{hood.atom} at t={hood.t}"
-        text.update(draw_neighbourhood(hood))
+        text.show(hood)
 
     # ---- the list's own events and keys -------------------------------------------------------------------
     def on_lazy_table_loaded(self, event: LazyTable.Loaded) -> None:

@@ -90,11 +90,13 @@ def atoms_at(source: RunSource, episode: int, t: int, mode: str = "true", patter
 @dataclass
 class Neighbour:
     """One node next to the node: the direction of the pair (`out` node→other, `in` other→node, `both`),
-    whether the graph has an edge there, and the labels on the pair with their bounds at t."""
+    whether the graph has an edge there, the labels on the pair with their bounds at t, and the other
+    node's own labels set at t (not [0,1])."""
     other: str
     direction: str
     edge: bool
     labels: list[tuple[str, float, float]]
+    other_labels: list[tuple[str, float, float]] = field(default_factory=list)
 
 
 @dataclass
@@ -140,7 +142,8 @@ ORDER BY n.name, p.other LIMIT $limit
 def neighbourhood(source: RunSource, episode: int, t: int, atom_id: int,
                   limit: int = EDGES_LIMIT) -> Neighbourhood:
     """The node(s) atom `atom_id` is about, each with its labels set at the end of t and its neighbours
-    (sorted by name, at most `limit`), each pair's label atoms with their bounds at t."""
+    (sorted by name, at most `limit`), each pair's label atoms and the neighbour's own labels with their
+    bounds at t."""
     head = source.rows("SELECT a.arg0, a.arg1, t.text FROM raw.atoms a JOIN atoms t USING (atom) "
                        "WHERE a.atom = $atom", {"atom": atom_id})
     if not head:
@@ -150,12 +153,16 @@ def neighbourhood(source: RunSource, episode: int, t: int, atom_id: int,
     wanted: set[int] = set()
     for node in dict.fromkeys(node_ids):
         name = source.scalar("SELECT name FROM raw.nodes WHERE node = $node", {"node": node})
-        unary = source.rows("SELECT a.atom, l.name AS label FROM raw.atoms a JOIN raw.labels l USING (label) "
-                            "WHERE a.arg0 = $node AND a.arg1 < 0 ORDER BY l.name, a.atom", {"node": node})
         pairs = source.rows(_PAIRS_SQL, {"node": node, "limit": limit})
-        wanted.update(int(r["atom"]) for r in unary)
         wanted.update(int(a) for r in pairs for a in r["atoms"] or [])
-        found.append((node, str(name), unary, pairs))
+        found.append((node, str(name), pairs))
+    # the unary atoms of the node(s) and of their listed neighbours, by node
+    around = sorted({n for n, _, _ in found} | {int(r["other_id"]) for _, _, pairs in found for r in pairs})
+    unary: dict[int, list[int]] = {}
+    for r in source.rows("SELECT atom, arg0 FROM raw.atoms WHERE arg1 < 0 AND arg0 IN (SELECT unnest($nodes)) "
+                         "ORDER BY arg0, atom", {"nodes": around}):
+        unary.setdefault(int(r["arg0"]), []).append(int(r["atom"]))
+        wanted.add(int(r["atom"]))
     bounds = {int(r["atom"]): (r["lower"], r["upper"]) for r in source.rows(
         _BOUNDS_SQL, {"episode": episode, "t": t, "atoms": sorted(wanted)})} if wanted else {}
     labels_of = {int(r["atom"]): r["label"] for r in source.rows(
@@ -166,11 +173,14 @@ def neighbourhood(source: RunSource, episode: int, t: int, atom_id: int,
         out = [(labels_of[a], *bounds.get(a, (0.0, 1.0))) for a in atoms]
         return sorted(out)
 
+    def own(node: int) -> list[tuple[str, float, float]]:
+        return [lab for lab in labelled(unary.get(node, [])) if (lab[1], lab[2]) != (0.0, 1.0)]
+
     nodes = []
-    for node, name, unary, pairs in found:
-        own = [lab for lab in labelled([int(r["atom"]) for r in unary]) if (lab[1], lab[2]) != (0.0, 1.0)]
+    for node, name, pairs in found:
         neighbours = [Neighbour(str(r["other"]), "both" if r["has_out"] and r["has_in"] else
                                 "out" if r["has_out"] else "in", bool(r["edge"]),
-                                labelled([int(a) for a in r["atoms"] or []])) for r in pairs]
-        nodes.append(NodeView(name, own, neighbours, int(pairs[0]["degree"]) if pairs else 0))
+                                labelled([int(a) for a in r["atoms"] or []]), own(int(r["other_id"])))
+                      for r in pairs]
+        nodes.append(NodeView(name, own(node), neighbours, int(pairs[0]["degree"]) if pairs else 0))
     return Neighbourhood(str(head[0]["text"]), t, nodes)
