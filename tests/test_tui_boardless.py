@@ -203,9 +203,12 @@ def test_beside_the_trace_the_atoms_at_the_cursors_time_and_its_atoms_graph() ->
     assert "Training" not in seen["episodes"].splitlines()[1]
 
 
-def test_saved_queries_about_games_are_not_offered_on_a_run_without_a_board() -> None:
+def test_saved_queries_and_palette_commands_about_games_are_not_offered_on_a_run_without_a_board() -> None:
     async def body(app: Any, pilot: Any) -> None:
         await episodes_ready(app, pilot)
+        commands = {c.title for c in app.get_system_commands(app.screen)}
+        assert {"Show Trace", "Show Rules", "Saved queries"} <= commands
+        assert not {"Show Training", "Next evaluation game", "Previous evaluation game"} & commands
         await pilot.press("5")
         sql = app.screen.panes["sql"]
         await wait_for(pilot, lambda: sql.is_attached and app.focused is sql.editor)

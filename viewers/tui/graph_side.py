@@ -173,6 +173,15 @@ class GraphSide(Vertical):
         if not self.table.has_focus and self._trace_atom is not None:
             self._show_hood(self._trace_atom)
 
+    def reread(self) -> None:
+        """Read the list and the neighbourhood again (a live run's episode grew under the cursor)."""
+        self._hood_asked = None
+        self.reload(force=True)
+        atom = self._trace_atom if not self.table.has_focus else \
+            (self.table.cursor_row or {}).get("atom_id", self._trace_atom)
+        if atom is not None:
+            self._show_hood(int(atom))
+
     def reload(self, force: bool = False) -> None:
         """Ask for the list at the current time, mode, filter and static choice, if that changed."""
         if self._episode is None or self._t is None:

@@ -135,6 +135,9 @@ class TracePane(Vertical):
         self.run_worker(work, thread=True, group="trace-follow", exclusive=True, exit_on_error=False)
 
     def _refollow(self) -> None:
+        side = self.side
+        if isinstance(side, GraphSide) and side.display:   # the grown episode may change the atoms at t
+            side.reread()
         row = self.table.cursor_row
         self.apply_filters(keep_seq=None if row is None else int(row["seq"]),
                            atom_id=None if self.filter is None else self.filter.atom_id)
