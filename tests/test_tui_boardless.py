@@ -178,6 +178,8 @@ def test_beside_the_trace_the_atoms_at_the_cursors_time_and_its_atoms_graph() ->
                        and loaded(pane.table))
         assert {pane.table.row(i)["atom"] for i in range(pane.table.count)} == {atom["atom"]}
         assert app.focused is pane.table
+        await pilot.press("c")                                   # c from the trace too: back to true at t
+        await wait_for(pilot, lambda: side.atoms is not None and side.atoms.mode == "true" and loaded(side.table))
 
         # s shows the static facts in both: the graph's attributes at t=0 appear beside the trace
         await pilot.press("s")

@@ -111,7 +111,7 @@ class HoodText(Widget):
 class GraphSide(Vertical):
     BINDINGS = [
         Binding("slash", "focus_filter", "filter atoms"),
-        Binding("c", "toggle_mode", "true/changed"),
+        Binding("c", "toggle_mode", "true/changed"),    # also from the trace (TracePane)
     ]
     DEFAULT_CSS = """
     GraphSide { width: 33%; min-width: 32; max-width: 64; height: 1fr; }

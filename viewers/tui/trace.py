@@ -77,6 +77,7 @@ class TracePane(Vertical):
         Binding("x", "clear", "clear filters", show=False),
         Binding("b", "toggle_board", "board"),
         Binding("b", "toggle_side", "atoms"),           # a run without a board (check_action)
+        Binding("c", "atoms_mode", "true/changed"),     # the atoms beside it: true at t or changed in t
         Binding("s", "toggle_static", "static facts", show=False),
         # one entry in the key bar for both, so that it fits in 80 columns
         Binding("right_square_bracket", "eval_game(1)", "eval games", key_display="]/["),
@@ -157,20 +158,29 @@ class TracePane(Vertical):
             return self.source.board is not None
         if action == "toggle_side":
             return self.source.board is None
+        if action == "atoms_mode":
+            return self.source.board is None and self.is_mounted and self.side.display
         return True
 
     def on_resize(self) -> None:
         if self._board_choice is None:   # by default the board shows when there is room beside the table
             self.side.display = self.size.width >= BOARD_MIN_WIDTH
+            self.refresh_bindings()
 
     def action_toggle_board(self) -> None:
         side = self.side
         self._board_choice = side.display = not side.display
+        self.refresh_bindings()     # `c` is offered while the atoms show
         row = self.table.cursor_row
         if side.display and row is not None:
             self._follow_cursor(row)
 
     action_toggle_side = action_toggle_board
+
+    def action_atoms_mode(self) -> None:
+        side = self.side
+        if isinstance(side, GraphSide):
+            side.action_toggle_mode()
 
     def _follow_cursor(self, row: dict[str, Any]) -> None:
         """The board, or the atoms and the graph, at the change the cursor is on."""
