@@ -4,9 +4,13 @@ reasoning run). Above: the atoms true at the end of the cursor's timestep, or th
 at most graph_state.ATOMS_LIMIT of them with the count of all. Below: the neighbourhood in the graph of
 the selected atom (the trace's cursor, or the list's when it has the focus): its node's labels, edges
 and their labels with their bounds at that time. Enter on an atom shows only its changes in the trace.
-Everything is read per timestep by bounded queries in workers (graph_state.py)."""
+Everything is read per timestep by bounded queries in workers (graph_state.py), each kind on its own
+connection to the run: on a run of millions of changes a read of the atoms takes seconds, and neither
+the trace's pages nor the neighbourhood wait behind it; a read for a timestep the cursor has left is
+interrupted."""
 from __future__ import annotations
 
+import threading
 from typing import Any
 
 import pyarrow as pa
@@ -26,8 +30,7 @@ from tracelab.viewers.tui.paging import ArrowSource
 from tracelab.viewers.tui.source import RunSource
 
 ARROWS = {"out": "→", "in": "←", "both": "↔"}
-# the atoms are read once the trace's cursor rests on a timestep this long: on a run of millions of
-# changes a read takes up to a second, and the trace's own pages wait behind it on the run's connection
+# the atoms are read once the trace's cursor rests on a timestep this long, not for every row passed
 SETTLE_S = 0.15
 
 
@@ -141,6 +144,8 @@ class GraphSide(Vertical):
         self._asked: tuple[Any, ...] | None = None  # the list last asked for
         self._hood_asked: tuple[int, int, int] | None = None
         self._settle: Timer | None = None
+        self._readers: dict[str, RunSource] = {}     # "atoms", "hood": connections of their own
+        self._readers_lock = threading.Lock()
 
     def compose(self) -> ComposeResult:
         with Vertical(id="gs-atoms"):
@@ -158,6 +163,26 @@ class GraphSide(Vertical):
     @property
     def table(self) -> LazyTable:
         return self.query_one("#gs-table", LazyTable)
+
+    def _reader(self, kind: str) -> RunSource:
+        """The run opened again for one kind of read (in the worker that first needs it)."""
+        with self._readers_lock:
+            if kind not in self._readers:
+                self._readers[kind] = RunSource(self.source.path)
+            return self._readers[kind]
+
+    def _interrupt(self, kind: str) -> None:
+        """Cancel a read of `kind` that is no longer wanted (its worker's answer is dropped as stale)."""
+        with self._readers_lock:
+            reader = self._readers.get(kind)
+        if reader is not None:
+            reader.interrupt()
+
+    def on_unmount(self) -> None:
+        with self._readers_lock:
+            readers, self._readers = list(self._readers.values()), {}
+        for reader in readers:
+            reader.close()
 
     # ---- following the trace -----------------------------------------------------------------------------
     def show(self, episode: int, t: int, atom_id: int | None) -> None:
@@ -194,6 +219,7 @@ class GraphSide(Vertical):
         self._asked = asked
         self.query_one("#gs-atoms").border_title = f"atoms {self.mode} at t={self._t}"
         self.query_one("#gs-status", Static).update(Text("reading…", style=DIM))
+        self._interrupt("atoms")
         self.run_worker(lambda: self._read_atoms(asked), thread=True, group="graph-atoms", exclusive=True,
                         exit_on_error=False)
 
@@ -201,9 +227,12 @@ class GraphSide(Vertical):
         episode, t, mode, pattern, hide_static = asked
         problem = None
         try:
-            found = atoms_at(self.source, episode, t, mode, pattern, hide_static)
+            reader = self._reader("atoms")
+            if asked != self._asked:     # the cursor moved on while this worker waited
+                return
+            found = atoms_at(reader, episode, t, mode, pattern, hide_static)
             if not found.rows and pattern:
-                problem = unknown_pattern(self.source, pattern)
+                problem = unknown_pattern(reader, pattern)
         except Exception as e:  # noqa: BLE001 - a bad pattern or a cancelled query: a message, not a crash
             found, problem = None, str(e).splitlines()[0] if str(e) else type(e).__name__
         self.app.call_from_thread(self._atoms_read, asked, found, problem)
@@ -249,12 +278,16 @@ class GraphSide(Vertical):
         if asked == self._hood_asked:
             return
         self._hood_asked = asked
+        self._interrupt("hood")
         self.run_worker(lambda: self._read_hood(asked), thread=True, group="graph-hood", exclusive=True,
                         exit_on_error=False)
 
     def _read_hood(self, asked: tuple[int, int, int]) -> None:
         try:
-            hood: Neighbourhood | str = neighbourhood(self.source, *asked)
+            reader = self._reader("hood")
+            if asked != self._hood_asked:
+                return
+            hood: Neighbourhood | str = neighbourhood(reader, *asked)
         except Exception as e:  # noqa: BLE001
             hood = str(e).splitlines()[0] if str(e) else type(e).__name__
         self.app.call_from_thread(self._hood_read, asked, hood)
