@@ -1,8 +1,9 @@
 """The Episodes view: outcome, return, length and seed of every episode; for a training run also its
 kind (train / eval) and training step; for a run without a board (a reasoning run) its steps, last t
-and what the reasoning was (which repeat, which episode of a fact table) instead of return and seed. Sort by clicking a header or with s / S; filter by outcome, length
-(e.g. `10..50`, `>=20`) and kind. Enter opens the episode's trace. On a live run the list is re-read
-when episodes begin or end, and once more after the run closes."""
+and what the reasoning was (which repeat, which episode of a fact table) instead of return and seed.
+Sort by clicking a header or with s / S; filter by outcome, length (e.g. `10..50`, `>=20`) and kind.
+Enter opens the episode's trace. On a live run the list is re-read when episodes begin or end, and once
+more after the run closes."""
 from __future__ import annotations
 
 import json

@@ -1,6 +1,7 @@
 """The screen of one open run: a tab per view (Episodes, Trace, Why, Rules, SQL, Training; a run without
-a board, a reasoning run, has no training curves and no Training tab), the keys 1-6 to switch, and the messages that pass an episode, a rule or a change from one view to another. Its
-header follows the run's life: live while written, then how it ended, then sealed."""
+a board, a reasoning run, has no training curves and no Training tab), the keys 1-6 to switch, and the
+messages that pass an episode, a rule or a change from one view to another. Its header follows the
+run's life: live while written, then how it ended, then sealed."""
 from __future__ import annotations
 
 from pathlib import Path

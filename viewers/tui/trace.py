@@ -3,9 +3,9 @@ lazily by seq (TraceSource). Filters: a time range (`3..9`), atom, label and rul
 timestep; `n` / `p` move to the next / previous change of the selected atom; Enter or `w` opens the why
 tree of the selected change; `a` shows only the selected atom's changes; `b` shows or hides the board
 (shown by default when the terminal is at least 100 columns wide), or on a run without a board the
-atoms at the cursor's time and the selected atom's graph neighbourhood (graph_side.py); `s` shows or hides the rows of static
-facts (hidden by default: the status line says how many). Cells read `30@(6,3)` where the run declares a
-grid. In a training run `]` / `[` move to the
+atoms at the cursor's time and the selected atom's graph neighbourhood (graph_side.py; `c` true or
+changed); `s` shows or hides the rows of static facts (hidden by default: the status line says how
+many). Cells read `30@(6,3)` where the run declares a grid. In a training run `]` / `[` move to the
 next / previous evaluation game (the filters and the cursor's timestep kept), and a header line says which
 game is shown. On a live run the trace is re-read when the episode grows."""
 from __future__ import annotations
