@@ -146,6 +146,7 @@ class GraphSide(Vertical):
         self._settle: Timer | None = None
         self._readers: dict[str, RunSource] = {}     # "atoms", "hood": connections of their own
         self._readers_lock = threading.Lock()
+        self._closed = False
 
     def compose(self) -> ComposeResult:
         with Vertical(id="gs-atoms"):
@@ -167,6 +168,8 @@ class GraphSide(Vertical):
     def _reader(self, kind: str) -> RunSource:
         """The run opened again for one kind of read (in the worker that first needs it)."""
         with self._readers_lock:
+            if self._closed:        # unmounted while this worker waited: open nothing that stays open
+                raise RuntimeError("the run was closed")
             if kind not in self._readers:
                 self._readers[kind] = RunSource(self.source.path)
             return self._readers[kind]
@@ -180,7 +183,7 @@ class GraphSide(Vertical):
 
     def on_unmount(self) -> None:
         with self._readers_lock:
-            readers, self._readers = list(self._readers.values()), {}
+            readers, self._readers, self._closed = list(self._readers.values()), {}, True
         for reader in readers:
             reader.close()
 
