@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from tui_helpers import episodes_ready, loaded, run_app, shown, shown_once, wait_for
+from tui_helpers import episodes_ready, loaded, run_app, shown, shown_once, svg_text, wait_for
 
 from tracelab.store.reader import open_run
 from tracelab.viewers.tui.graph_side import GraphSide
@@ -289,3 +289,15 @@ def test_the_atoms_beside_the_trace_of_a_million_changes(big_run: Path) -> None:
         assert re.search(r"first 500 of [\d,]+ true", text)
         assert side.table.count == 500
     run_app([big_run], body, (120, 34))
+
+
+def test_the_reasoning_picture_shows_what_docs_tui_md_says() -> None:
+    """docs/images/tui-reasoning.png (`tracelab tui --screenshots`): the alerts at t=3 beside the trace,
+    the graph around the alerted maintainer, and the why tree of that alert."""
+    import asyncio
+
+    from tracelab.viewers.tui.screenshots import _reasoning
+    trace_text, why_text = (svg_text(svg) for svg in asyncio.run(_reasoning(SUPPLY)))
+    assert "atoms true at t=3" in trace_text and "true matching alert" in trace_text
+    assert "alert(ben-lund) at t=3" in trace_text and "maintains" in trace_text
+    assert "alert(ben-lund)" in why_text and "by alert" in why_text and "critical(fast-client-plus)" in why_text
