@@ -120,3 +120,55 @@ def test_run_screens_snapshots(run: str) -> None:
     run_app([Path("sample_runs") / run], body, SIZE)
     if failures:
         pytest.fail("\n".join(failures), pytrace=False)
+
+
+@pytest.mark.parametrize("size", [(80, 24), SIZE])
+def test_run_without_a_board_snapshots(size: tuple[int, int]) -> None:
+    """sample_runs/supply-chain (a reasoning run): Episodes, Trace at t=3 with the atoms true then and the
+    graph around the cursor's atom beside it (at 80x24 shown by `b`), Why, Rules and the SQL console."""
+    failures: list[str] = []
+
+    async def body(app: Any, pilot: Any) -> None:
+        shots = Snapshots(app, pilot, "supply-chain" if size == SIZE else f"supply-chain-{size[0]}x{size[1]}")
+        await episodes_ready(app, pilot)
+        await shots.take("episodes")
+
+        await pilot.press("enter")
+        pane = app.screen.query_one(TracePane)
+        await wait_for(pilot, lambda: pane.filter is not None and loaded(pane.table) and pane.table.count > 0)
+        jumps = pane.jumps
+        pane.query_one("#tr-goto").value = "3"
+        await pilot.press("g", "enter")
+        await wait_for(pilot, lambda: pane.jumps > jumps and loaded(pane.table))
+        side = pane.side
+        if not side.display:
+            await pilot.press("b")
+        await wait_for(pilot, lambda: side.display and side.atoms is not None and side.atoms.t == 3
+                       and side.hood is not None and side.hood.t == 3 and loaded(side.table))
+        await shots.take("trace")
+
+        await pilot.press("w")
+        why = app.screen.panes["why"]
+        await wait_for(pilot, lambda: why.is_attached and why.query_one("Tree").root.data is not None)
+        await shots.take("why")
+
+        await pilot.press("4")
+        rules = app.screen.panes["rules"]
+        await wait_for(pilot, lambda: rules.is_attached and loaded(rules.query_one(LazyTable)))
+        await wait_for(pilot, lambda: "never fired" in app.screen.query_one("#rules-status").render().plain)
+        await shots.take("rules")
+
+        await pilot.press("5")
+        sql = app.screen.panes["sql"]
+        await wait_for(pilot, lambda: sql.is_attached and app.focused is sql.editor)
+        await pick_saved_query(app, pilot, "firings_per_episode", "0")
+        results = sql.query_one(LazyTable)
+        await wait_for(pilot, lambda: results.ready and loaded(results) and results.count > 0
+                       and app.focused is sql.editor)
+        await pilot.press("escape")
+        await wait_for(pilot, lambda: app.focused is results)
+        await shots.take("sql")
+        failures.extend(shots.failures)
+    run_app([Path("sample_runs") / "supply-chain"], body, size)
+    if failures:
+        pytest.fail("\n".join(failures), pytrace=False)

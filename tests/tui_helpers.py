@@ -74,7 +74,11 @@ async def pick_saved_query(app: Any, pilot: Any, name: str, value: str) -> None:
 async def shown(app: Any, pilot: Any) -> str:
     """What the screen shows once it has repainted, as plain text lines (from textual's SVG screenshot)."""
     await pilot.pause()
-    svg = app.export_screenshot()
+    return svg_text(app.export_screenshot())
+
+
+def svg_text(svg: str) -> str:
+    """A textual SVG screenshot's text, line by line."""
     lines: dict[float, list[tuple[float, str]]] = defaultdict(list)
     for x, y, text in re.findall(r'<text[^>]*x="([\d.]+)" y="([\d.]+)"[^>]*>([^<]*)</text>', svg):
         lines[float(y)].append((float(x), html.unescape(text).replace("\xa0", " ")))

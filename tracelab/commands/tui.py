@@ -13,7 +13,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--screenshots", metavar="DIR",
                    help="write the README's screenshots (PNG) to DIR and exit: tui-trace-why.png from the "
                         "first RUN (default sample_runs/advanced), tui-training.png from the second, a "
-                        "training run (default sample_runs/base-train) (needs rsvg-convert)")
+                        "training run (default sample_runs/base-train), tui-reasoning.png from the third, a "
+                        "run without a board (default sample_runs/supply-chain) (needs rsvg-convert)")
     p.set_defaults(func=run)
 
 
@@ -25,8 +26,8 @@ def run(args: argparse.Namespace) -> int:
     if args.screenshots:
         from tracelab.viewers.tui.screenshots import write_screenshots
         with store_errors():  # no rsvg-convert, or a run that does not open
-            trace_run, training_run = (Path(p) if p else None for p in (args.paths + [None, None])[:2])
-            for path in write_screenshots(Path(args.screenshots), trace_run, training_run):
+            trace_run, training_run, reasoning_run = (Path(p) if p else None for p in (args.paths + [None] * 3)[:3])
+            for path in write_screenshots(Path(args.screenshots), trace_run, training_run, reasoning_run):
                 print(path)
         return 0
     from tracelab.viewers.tui.app import TracelabApp

@@ -66,12 +66,14 @@ class TracelabApp(App[None]):
         yield SystemCommand("Help", "the keys of every view", self.action_help)
         if isinstance(screen, RunScreen):
             for tab, title in TABS:
+                if not screen.has_view(tab):
+                    continue
                 name = title.split()[1]
                 yield SystemCommand(f"Show {name}", f"switch to the {name} view (key {title.split()[0]})",
                                     lambda tab=tab: screen.action_show(tab))
             yield SystemCommand("Saved queries", "pick a saved SQL query and its parameters",
                                 lambda: self._saved_queries(screen))
-            for direction, which in ((1, "Next"), (-1, "Previous")):
+            for direction, which in ((1, "Next"), (-1, "Previous")) if screen.source.board else ():
                 yield SystemCommand(f"{which} evaluation game", f"a training run's {which.lower()} evaluation game "
                                     f"in the trace (key {']' if direction > 0 else '['})",
                                     lambda d=direction: self._eval_game(screen, d))

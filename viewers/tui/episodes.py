@@ -1,9 +1,12 @@
 """The Episodes view: outcome, return, length and seed of every episode; for a training run also its
-kind (train / eval) and training step. Sort by clicking a header or with s / S; filter by outcome, length
-(e.g. `10..50`, `>=20`) and kind. Enter opens the episode's trace. On a live run the list is re-read
-when episodes begin or end, and once more after the run closes."""
+kind (train / eval) and training step; for a run without a board (a reasoning run) its steps, last t
+and what the reasoning was (which repeat, which episode of a fact table) instead of return and seed.
+Sort by clicking a header or with s / S; filter by outcome, length (e.g. `10..50`, `>=20`) and kind.
+Enter opens the episode's trace. On a live run the list is re-read when episodes begin or end, and once
+more after the run closes."""
 from __future__ import annotations
 
+import json
 import re
 from typing import Any
 
@@ -19,7 +22,9 @@ from tracelab.viewers.tui.messages import OpenTrace
 from tracelab.viewers.tui.paging import QuerySource
 from tracelab.viewers.tui.source import LiveReads, RunSource
 
-OUTCOME_COLOURS = {"win": TRUE, "loss": FALSE, "draw": PARTIAL, "truncated": UNKNOWN}
+OUTCOME_COLOURS = {"win": TRUE, "loss": FALSE, "draw": PARTIAL, "truncated": UNKNOWN,
+                   # a reasoning's: more steps would change nothing / it ran its steps / a step raised
+                   "converged": TRUE, "stopped": PARTIAL, "failed": FALSE, "interrupted": FALSE}
 
 
 def outcome_text(row: dict[str, Any]) -> Text:
@@ -39,6 +44,26 @@ BASE_COLUMNS = [
     Column("seed", "seed", 6, align="right"),
     Column("world", "world", 5, align="right"),
 ]
+
+
+def _about(row: dict[str, Any]) -> str:
+    """A reasoning episode's begin info, `repeat 1` or `episode a` (a fact table's), as short text."""
+    try:
+        info = json.loads(row.get("begin_info") or "{}")
+    except ValueError:
+        return str(row.get("begin_info"))
+    return ", ".join(f"{k} {v}" for k, v in info.items()) if isinstance(info, dict) else str(info)
+
+
+# a run without a board: no return, seed or world, but its last t and what each reasoning was (when the
+# run says: `--repeat` and fact tables with episodes do)
+BOARDLESS_COLUMNS = [
+    Column("episode", "episode", 8, align="right"),
+    Column("outcome", "outcome", 11, render=outcome_text),
+    Column("steps", "steps", 7, align="right"),
+    Column("t_end", "last t", 7, align="right"),
+]
+ABOUT_COLUMN = Column("begin_info", "reasoning", 24, render=_about, max_width=60)
 TRAINING_COLUMNS = [Column("kind", "kind", 6), Column("train_step", "train step", 10, align="right")]
 
 LIVE_REFRESH_S = 2.0
@@ -80,7 +105,7 @@ class EpisodesPane(Vertical):
         self.source = source
         self.training = False
         self.sort_key, self.sort_desc = "episode", False
-        self.columns = list(BASE_COLUMNS)
+        self.columns = list(BASE_COLUMNS if source.board else BOARDLESS_COLUMNS)
         self._seen: dict | None = None     # episode counts last seen (live runs)
         self.live_reads = LiveReads(source)
 
@@ -125,15 +150,19 @@ class EpisodesPane(Vertical):
         step = ("train_step" if "train_step" in cols
                 else "TRY_CAST(json_extract(begin_info, '$.train_step') AS BIGINT)")
         base = (f"SELECT episode, world, steps, outcome, reward, seed, ended, t_start, t_end, "
-                f"{kind} AS kind, {step} AS train_step FROM episodes")
+                f"{kind} AS kind, {step} AS train_step, begin_info FROM episodes")
         outcomes = [r["outcome"] for r in self.source.rows(
             "SELECT DISTINCT outcome FROM episodes WHERE outcome IS NOT NULL ORDER BY outcome")]
         training = bool(self.source.scalar(f"SELECT count(*) FROM ({base}) WHERE kind IS NOT NULL"))
-        self.app.call_from_thread(self._inspected, base, outcomes, training)
+        about = bool(self.source.scalar(f"SELECT count(begin_info) FROM ({base})"))
+        self.app.call_from_thread(self._inspected, base, outcomes, training, about)
 
-    def _inspected(self, base: str, outcomes: list[str], training: bool) -> None:
+    def _inspected(self, base: str, outcomes: list[str], training: bool, about: bool = False) -> None:
         self.base, self.training = base, training
-        self.columns = list(BASE_COLUMNS) + (TRAINING_COLUMNS if training else [])
+        if self.source.board or training:     # a training run's episodes are games, board or not
+            self.columns = list(BASE_COLUMNS) + (TRAINING_COLUMNS if training else [])
+        else:
+            self.columns = list(BOARDLESS_COLUMNS) + ([ABOUT_COLUMN] if about else [])
         self.query_one("#ep-outcome", Select).set_options([(o, o) for o in outcomes])
         self.query_one("#ep-kind", Select).display = training
         self.query_one("#ep-kind-label").display = training

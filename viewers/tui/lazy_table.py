@@ -218,7 +218,7 @@ class LazyTable(ScrollView, can_focus=True):
         if not self.count:
             return True
         first = max(0, min(int(self.scroll_offset.y), self.count - 1))
-        last = min(self.count, first + max(1, self.size.height - 1)) - 1
+        last = min(self.count, first + self._visible_rows) - 1
         return all(p in self._pages for p in range(first // PAGE, last // PAGE + 1))
 
     def _want(self, page: int) -> None:
@@ -364,6 +364,8 @@ class LazyTable(ScrollView, can_focus=True):
 
     def on_resize(self) -> None:
         self._share_room()
+        # narrower (a pane shown beside it) the table may gain a horizontal scrollbar over its last line
+        self.call_after_refresh(self._scroll_to_cursor)
 
     def _share_room(self) -> None:
         """Widen the flex columns to fill the widget (back to their own width when it shrinks)."""
@@ -388,6 +390,11 @@ class LazyTable(ScrollView, can_focus=True):
         self.refresh()
 
     # ---- the cursor ------------------------------------------------------------------------------------
+    @property
+    def _visible_rows(self) -> int:
+        """Rows on screen under the header: a horizontal scrollbar (a narrow table) takes the last line."""
+        return max(1, self.scrollable_content_region.height - 1)
+
     def move_to(self, index: int) -> None:
         if not self.ready:
             self._pending_cursor = index
@@ -400,25 +407,27 @@ class LazyTable(ScrollView, can_focus=True):
     def watch_cursor(self, old: int, new: int) -> None:
         if new < 0:
             return
-        visible = max(1, self.size.height - 1)
-        top = int(self.scroll_offset.y)
-        # force: right after a new source the scrollbar is not laid out yet and textual would refuse to
-        # scroll, leaving rows 0.. on screen (and fetching page 0) instead of the cursor's page
-        if new < top:
-            self.scroll_to(y=new, animate=False, immediate=True, force=True)
-        elif new >= top + visible:
-            self.scroll_to(y=new - visible + 1, animate=False, immediate=True, force=True)
+        self._scroll_to_cursor()
         self.refresh()
         if self.ready and new < self.count and new // PAGE not in self._pages:
             self._want(new // PAGE)
         if self.ready:
             self.post_message(self.RowHighlighted(self, new, self.cursor_row))
 
+    def _scroll_to_cursor(self) -> None:
+        new, visible, top = self.cursor, self._visible_rows, int(self.scroll_offset.y)
+        # force: right after a new source the scrollbar is not laid out yet and textual would refuse to
+        # scroll, leaving rows 0.. on screen (and fetching page 0) instead of the cursor's page
+        if new < top:
+            self.scroll_to(y=new, animate=False, immediate=True, force=True)
+        elif new >= top + visible:
+            self.scroll_to(y=new - visible + 1, animate=False, immediate=True, force=True)
+
     def action_cursor(self, delta: int) -> None:
         self.move_to(self.cursor + delta)
 
     def action_page(self, direction: int) -> None:
-        self.move_to(self.cursor + direction * max(1, self.size.height - 2))
+        self.move_to(self.cursor + direction * max(1, self._visible_rows - 1))
 
     def action_jump_to(self, index: int) -> None:
         self.move_to(index)

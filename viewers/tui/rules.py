@@ -1,5 +1,6 @@
-"""The Rules view: firings per rule (total, episodes it fired in, per outcome of those episodes) with the
-rules that never fired listed as such (coverage); `e` switches to firings per episode and rule. Enter on a
+"""The Rules view: firings per rule (total, episodes it fired in, per outcome of those episodes; on a run
+without a board, whose outcomes are not games, the first and last t it fired at) with the rules that never
+fired listed as such (coverage); `e` switches to firings per episode and rule. Enter on a
 rule filters the trace by it."""
 from __future__ import annotations
 
@@ -22,6 +23,7 @@ SELECT r.name AS rule, count(c.seq) AS firings, count(DISTINCT c.episode) AS epi
        count(c.seq) FILTER (e.outcome = 'win') AS in_wins,
        count(c.seq) FILTER (e.outcome = 'loss') AS in_losses,
        count(c.seq) FILTER (e.outcome NOT IN ('win', 'loss')) AS in_other,
+       min(c.t) AS first_t, max(c.t) AS last_t,
        min(c.episode) AS first_episode, r.delay, r.immediate, r.rule AS rule_id
 FROM raw.rules r
 LEFT JOIN raw.changes c ON c.cause_kind = 2 AND c.cause_id = r.rule
@@ -45,6 +47,11 @@ PER_RULE_COLUMNS = [
     Column("in_losses", "in losses", 9, align="right"), Column("in_other", "other", 7, align="right"),
     Column("delay", "Δt", 3, align="right"),
 ]
+BOARDLESS_PER_RULE_COLUMNS = [
+    Column("rule", "rule", 22), Column("firings", "firings", 9, align="right", render=_firings),
+    Column("episodes", "eps", 5, align="right"), Column("first_t", "first t", 7, align="right"),
+    Column("last_t", "last t", 7, align="right"), Column("delay", "Δt", 3, align="right"),
+]
 PER_EPISODE_COLUMNS = [
     Column("episode", "episode", 8, align="right"), Column("rule", "rule", 22),
     Column("firings", "firings", 9, align="right"), Column("first_t", "first t", 7, align="right"),
@@ -61,8 +68,12 @@ class RulesPane(Vertical):
         self.per_episode = False
         self.loaded = False
 
+    @property
+    def per_rule_columns(self) -> list[Column]:
+        return PER_RULE_COLUMNS if self.source.board else BOARDLESS_PER_RULE_COLUMNS
+
     def compose(self) -> ComposeResult:
-        yield LazyTable(PER_RULE_COLUMNS, id="rules-table")
+        yield LazyTable(self.per_rule_columns, id="rules-table")
         yield Static("", id="rules-status", classes="status")
 
     def focus_default(self) -> None:
@@ -77,7 +88,8 @@ class RulesPane(Vertical):
             table.set_source(QuerySource(self.source, PER_EPISODE_SQL, "episode, firings DESC, rule"),
                              PER_EPISODE_COLUMNS)
         else:
-            table.set_source(QuerySource(self.source, PER_RULE_SQL, "firings DESC, rule, rule_id"), PER_RULE_COLUMNS)
+            table.set_source(QuerySource(self.source, PER_RULE_SQL, "firings DESC, rule, rule_id"),
+                             self.per_rule_columns)
         self.query_one("#rules-status", Static).update(" counting firings… (Esc cancels)")
 
     def on_lazy_table_loaded(self, event: LazyTable.Loaded) -> None:

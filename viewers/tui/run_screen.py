@@ -1,6 +1,7 @@
-"""The screen of one open run: a tab per view (Episodes, Trace, Why, Rules, SQL, Training), the keys
-1-6 to switch, and the messages that pass an episode, a rule or a change from one view to another. Its
-header follows the run's life: live while written, then how it ended, then sealed."""
+"""The screen of one open run: a tab per view (Episodes, Trace, Why, Rules, SQL, Training; a run without
+a board, a reasoning run, has no training curves and no Training tab), the keys 1-6 to switch, and the
+messages that pass an episode, a rule or a change from one view to another. Its header follows the
+run's life: live while written, then how it ended, then sealed."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -57,6 +58,7 @@ class RunScreen(Screen):
         self.path = path
         self.source = RunSource(path)
         self.episode: int | None = None
+        self._has_metrics: bool | None = None     # read once the run is no longer written
         self.panes: dict[str, Widget] = {
             "episodes": EpisodesPane(self.source), "trace": TracePane(self.source), "why": WhyPane(self.source),
             "rules": RulesPane(self.source), "sql": SqlPane(self.source), "training": TrainingPane(self.source)}
@@ -73,7 +75,22 @@ class RunScreen(Screen):
     def _title(self) -> str:
         return f" {self.path.name}  ·  {self.source.state}  ·  {self.source.command}"
 
+    def has_view(self, tab: str) -> bool:
+        """Whether the run has this view: a closed run without a board (a reasoning) and without metrics
+        has no training curves to show."""
+        if tab != "training" or self.source.board is not None or self.source.live:
+            return True
+        if self._has_metrics is None:
+            self._has_metrics = bool(self.source.scalar("SELECT count(*) FROM (SELECT 1 FROM metrics LIMIT 1)"))
+        return self._has_metrics
+
+    def _hide_missing_views(self) -> None:
+        for tab, _ in TABS:
+            if not self.has_view(tab):
+                self.query_one(TabbedContent).hide_tab(tab)
+
     def on_mount(self) -> None:
+        self._hide_missing_views()
         if self.source.can_change:  # its writer may close or die, `tracelab seal` may seal it
             self._status_timer = self.set_interval(STATUS_REFRESH_S, self._check_status)
 
@@ -88,6 +105,8 @@ class RunScreen(Screen):
 
     def _status_changed(self) -> None:
         self.query_one("#title", Static).update(self._title())
+        if not self.source.live and self.query_one(TabbedContent).active != "training":
+            self._hide_missing_views()
         if not self.source.can_change:
             self._status_timer.stop()
 
@@ -99,6 +118,10 @@ class RunScreen(Screen):
         return pane
 
     async def action_show(self, tab: str) -> None:
+        if not self.has_view(tab):
+            self.notify("this run has no training metrics: it is a reasoning (tracelab reason --run)",
+                        severity="warning")
+            return
         await self.pane(tab)
         self.query_one(TabbedContent).active = tab
         self.call_after_refresh(self._focus_pane, tab)

@@ -2,6 +2,9 @@
 
 tui-trace-why.png   sample_runs/advanced, episode 0 filtered to the death of red-agent-1 (the trace with
                     its board), above the why tree of that change
+tui-reasoning.png   sample_runs/supply-chain, a reasoning run (no board): the trace filtered by the rule
+                    alert at t=3 with the alerts true then beside it and the graph around the alerted
+                    maintainer (their packages, exposed or not), above the why tree of that alert
 tui-training.png    the Training view of a real training run: sample_runs/base-train, made by
                     `tracelab train` in sample_runs/regenerate.sh (its command is in the picture's header).
                     Nothing here writes metrics: a picture of curves shows a run on disk or none.
@@ -51,6 +54,40 @@ async def _trace_and_why(run: Path) -> tuple[str, str]:
         pane.table.move_to(death)
         await pilot.pause(0.5)
         trace_svg = app.export_screenshot(title="tracelab tui · trace")
+        await pilot.press("w")
+        why = app.screen.query_one(WhyPane)
+        await _until(pilot, lambda: why.query_one("Tree").root.data is not None)
+        await pilot.press("o")
+        await pilot.pause(0.3)
+        return trace_svg, app.export_screenshot(title="tracelab tui · why")
+
+
+async def _reasoning(run: Path) -> tuple[str, str]:
+    from tracelab.viewers.tui.app import TracelabApp
+    from tracelab.viewers.tui.graph_side import GraphSide
+    from tracelab.viewers.tui.lazy_table import LazyTable
+    from tracelab.viewers.tui.trace import TracePane
+    from tracelab.viewers.tui.why import WhyPane
+    app = TracelabApp([run])
+    async with app.run_test(size=SIZE) as pilot:
+        episodes = app.screen.query_one("#ep-table", LazyTable)
+        await _until(pilot, lambda: episodes.idle and episodes.cursor_row is not None)
+        await pilot.press("enter")
+        pane = app.screen.query_one(TracePane)
+        await _until(pilot, lambda: pane.table.idle and pane.table.count > 0)
+        pane.query_one("#tr-rule").value = "alert"
+        pane.query_one("#tr-range").value = "3"
+        await pilot.press("slash", "enter")
+        await _until(pilot, lambda: pane.filter is not None and pane.filter.rule == "alert" and pane.table.idle
+                     and pane.table.count > 0)
+        side = pane.query_one(GraphSide)
+        side.query_one("#gs-filter").value = "alert"
+        side.reload()
+        await _until(pilot, lambda: side.atoms is not None and side.atoms.t == 3 and side.hood is not None
+                     and side.table.idle and "alert" in side.query_one("#gs-filter").value)
+        pane.table.focus()
+        await pilot.pause(0.5)
+        trace_svg = app.export_screenshot(title="tracelab tui · a reasoning run: atoms and graph")
         await pilot.press("w")
         why = app.screen.query_one(WhyPane)
         await _until(pilot, lambda: why.query_one("Tree").root.data is not None)
@@ -117,13 +154,15 @@ def training_run_problem(run: Path) -> str | None:
 
 
 def write_screenshots(directory: Path, trace_run: Path | None = None,
-                      training_run: Path | None = None) -> list[Path]:
-    """Write tui-trace-why.png (from `trace_run`, default sample_runs/advanced) and tui-training.png (from
-    `training_run`, default sample_runs/base-train: a real training run) to `directory`."""
+                      training_run: Path | None = None, reasoning_run: Path | None = None) -> list[Path]:
+    """Write tui-trace-why.png (from `trace_run`, default sample_runs/advanced), tui-training.png (from
+    `training_run`, default sample_runs/base-train: a real training run) and tui-reasoning.png (from
+    `reasoning_run`, default sample_runs/supply-chain: a run without a board) to `directory`."""
     os.environ.setdefault("TEXTUAL_ANIMATIONS", "none")
     trace_run = trace_run or ROOT / "sample_runs" / "advanced"
     training_run = training_run or ROOT / "sample_runs" / "base-train"
-    for run in (trace_run, training_run):
+    reasoning_run = reasoning_run or ROOT / "sample_runs" / "supply-chain"
+    for run in (trace_run, training_run, reasoning_run):
         if not run.exists():
             raise ValueError(f"no run {str(run)!r} to photograph")
     problem = training_run_problem(training_run)
@@ -133,4 +172,5 @@ def write_screenshots(directory: Path, trace_run: Path | None = None,
     trace_svg, why_svg = asyncio.run(_trace_and_why(trace_run))
     out = [to_png(stack([trace_svg, why_svg]), directory / "tui-trace-why.png")]
     out.append(to_png(asyncio.run(_training(training_run)), directory / "tui-training.png"))
+    out.append(to_png(stack(list(asyncio.run(_reasoning(reasoning_run)))), directory / "tui-reasoning.png"))
     return out

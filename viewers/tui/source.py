@@ -14,6 +14,7 @@ from typing import Any, TypeVar
 import pyarrow as pa
 
 from tracelab.store.catalog import short_command
+from tracelab.store.kind import run_board
 from tracelab.store.reader import RunConnection, open_run, query_readonly, retrying, run_info
 
 T = TypeVar("T")
@@ -29,6 +30,9 @@ class RunSource:
         self.con: RunConnection = open_run(self.path)
         self._lock = threading.Lock()
         self._busy = 0
+        # the board the run declares (a game's), None for a run without one (a reasoning run): the views
+        # show the atoms and the graph instead, and no game columns
+        self.board: str | None = self.call(run_board)
 
     @property
     def live(self) -> bool:

@@ -2,9 +2,10 @@
 lazily by seq (TraceSource). Filters: a time range (`3..9`), atom, label and rule GLOBs; `g` jumps to a
 timestep; `n` / `p` move to the next / previous change of the selected atom; Enter or `w` opens the why
 tree of the selected change; `a` shows only the selected atom's changes; `b` shows or hides the board
-(shown by default when the terminal is at least 100 columns wide); `s` shows or hides the rows of static
-facts (hidden by default: the status line says how many). Cells read `30@(6,3)` where the run declares a
-grid. In a training run `]` / `[` move to the
+(shown by default when the terminal is at least 100 columns wide), or on a run without a board the
+atoms at the cursor's time and the selected atom's graph neighbourhood (graph_side.py; `c` true or
+changed); `s` shows or hides the rows of static facts (hidden by default: the status line says how
+many). Cells read `30@(6,3)` where the run declares a grid. In a training run `]` / `[` move to the
 next / previous evaluation game (the filters and the cursor's timestep kept), and a header line says which
 game is shown. On a live run the trace is re-read when the episode grows."""
 from __future__ import annotations
@@ -23,6 +24,7 @@ from tracelab.viewers.tui.colours import DIM, styled_bound, styled_name
 from tracelab.viewers.tui.lazy_table import Column, LazyTable
 from tracelab.viewers.tui.board import BoardView
 from tracelab.viewers.tui.eval_games import EvalGame, eval_games, neighbour
+from tracelab.viewers.tui.graph_side import GraphSide
 from tracelab.viewers.tui.messages import ExplainChange
 from tracelab.viewers.tui.paging import PAGE, TraceFilter, TraceSource
 from tracelab.viewers.tui.source import LiveReads, RunSource
@@ -47,7 +49,7 @@ TRACE_COLUMNS = [
 ]
 
 LIVE_REFRESH_S = 2.0
-BOARD_MIN_WIDTH = 100      # the table needs ~78 columns, the board ~22
+BOARD_MIN_WIDTH = 100      # the table needs ~78 columns, the board ~22 (the atoms beside it 36%)
 
 _RANGE = re.compile(r"^\s*(-?\d+)?\s*(?:\.\.\s*(-?\d+)?)?\s*$")
 
@@ -74,6 +76,8 @@ class TracePane(Vertical):
         Binding("a", "only_atom", "only atom", show=False),
         Binding("x", "clear", "clear filters", show=False),
         Binding("b", "toggle_board", "board"),
+        Binding("b", "toggle_side", "atoms"),           # a run without a board (check_action)
+        Binding("c", "atoms_mode", "true/changed"),     # the atoms beside it: true at t or changed in t
         Binding("s", "toggle_static", "static facts", show=False),
         # one entry in the key bar for both, so that it fits in 80 columns
         Binding("right_square_bracket", "eval_game(1)", "eval games", key_display="]/["),
@@ -109,7 +113,7 @@ class TracePane(Vertical):
             yield Input(placeholder="go to t", id="tr-goto", compact=True)
         with Horizontal(id="tr-body"):
             yield LazyTable(TRACE_COLUMNS, id="tr-table")
-            yield BoardView(self.source)
+            yield BoardView(self.source) if self.source.board else GraphSide(self.source)
         yield Static(" choose an episode (1 Episodes, Enter)", id="tr-status", classes="status")
 
     def on_mount(self) -> None:
@@ -132,31 +136,68 @@ class TracePane(Vertical):
         self.run_worker(work, thread=True, group="trace-follow", exclusive=True, exit_on_error=False)
 
     def _refollow(self) -> None:
+        side = self.side
+        if isinstance(side, GraphSide) and side.display:   # the grown episode may change the atoms at t
+            side.reread()
         row = self.table.cursor_row
         self.apply_filters(keep_seq=None if row is None else int(row["seq"]),
                            atom_id=None if self.filter is None else self.filter.atom_id)
 
     @property
     def board(self) -> BoardView | None:
-        return self.query_one(BoardView) if self.is_mounted else None
+        return next(iter(self.query(BoardView)), None) if self.is_mounted else None
+
+    @property
+    def side(self) -> BoardView | GraphSide:
+        """What stands beside the table: the board of a game run, else the atoms and the graph."""
+        return self.query_one("#tr-body > BoardView, #tr-body > GraphSide")  # type: ignore[return-value]
+
+    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
+        # a run without a board has its atoms beside the trace (key b: "atoms"), and no evaluation games
+        if action in ("toggle_board", "eval_game"):
+            return self.source.board is not None
+        if action == "toggle_side":
+            return self.source.board is None
+        if action == "atoms_mode":
+            return self.source.board is None and self.is_mounted and self.side.display
+        return True
 
     def on_resize(self) -> None:
         if self._board_choice is None:   # by default the board shows when there is room beside the table
-            self.query_one(BoardView).display = self.size.width >= BOARD_MIN_WIDTH
+            self.side.display = self.size.width >= BOARD_MIN_WIDTH
+            self.refresh_bindings()
 
     def action_toggle_board(self) -> None:
-        board = self.query_one(BoardView)
-        self._board_choice = board.display = not board.display
+        side = self.side
+        self._board_choice = side.display = not side.display
+        self.refresh_bindings()     # `c` is offered while the atoms show
         row = self.table.cursor_row
-        if board.display and row is not None and self.filter is not None:
-            board.show(self.filter.episode, int(row["t"]), int(row["seq"]))
+        if side.display and row is not None:
+            self._follow_cursor(row)
+
+    action_toggle_side = action_toggle_board
+
+    def action_atoms_mode(self) -> None:
+        side = self.side
+        if isinstance(side, GraphSide):
+            side.action_toggle_mode()
+
+    def _follow_cursor(self, row: dict[str, Any]) -> None:
+        """The board, or the atoms and the graph, at the change the cursor is on."""
+        if self.filter is None:
+            return
+        side = self.side
+        if isinstance(side, BoardView):
+            side.show(self.filter.episode, int(row["t"]), int(row["seq"]))
+        else:
+            side.show(self.filter.episode, int(row["t"]), int(row["atom_id"]))
 
     def focus_default(self) -> None:
-        self.query_one(LazyTable).focus()
+        self.table.focus()
 
     @property
     def table(self) -> LazyTable:
-        return self.query_one(LazyTable)
+        return self.query_one("#tr-table", LazyTable)
 
     # ---- what is shown -------------------------------------------------------------------------------
     def show_episode(self, episode: int, rule: str = "", at_t: int | None = None) -> None:
@@ -245,6 +286,9 @@ class TracePane(Vertical):
     def action_toggle_static(self) -> None:
         """Show or hide the rows of static facts, the cursor kept on its change (or the next one shown)."""
         self.hide_static = not self.hide_static
+        side = self.side
+        if isinstance(side, GraphSide):
+            side.set_hide_static(self.hide_static)
         row = self.table.cursor_row
         self.apply_filters(keep_seq=None if row is None else int(row["seq"]),
                            atom_id=None if self.filter is None else self.filter.atom_id)
@@ -252,9 +296,14 @@ class TracePane(Vertical):
     def on_lazy_table_row_highlighted(self, event: LazyTable.RowHighlighted) -> None:
         event.stop()
         self._update_status()
-        board = self.board
-        if event.row is not None and self.filter is not None and board is not None and board.display:
-            board.show(self.filter.episode, int(event.row["t"]), int(event.row["seq"]))
+        if event.row is not None and self.side.display:
+            self._follow_cursor(event.row)
+
+    def on_graph_side_only_atom(self, event: GraphSide.OnlyAtom) -> None:
+        """Enter on an atom beside the trace: only its changes, the cursor on its first."""
+        event.stop()
+        self.apply_filters(atom_id=event.atom_id)
+        self.focus_default()
 
     def on_lazy_table_row_selected(self, event: LazyTable.RowSelected) -> None:
         event.stop()
