@@ -74,7 +74,8 @@ def read_training_run(path: str) -> TrainingRun:
         status, config_text, board, command = rows("SELECT status, config, board, command FROM run")[0]
         (names,) = rows("SELECT count(DISTINCT name) FROM metrics")[0]
         if not names:
-            raise UserError(_not_training(path, board, str(command or "")))
+            raise UserError(f"{without_metrics(path, board, command)}: compare puts training runs side by side; "
+                            f"`tracelab diff RUN_A RUN_B` compares the episodes of two runs")
         last = rows(f"""
             SELECT name, step, value FROM (SELECT DISTINCT name FROM metrics ORDER BY name LIMIT {MAX_METRIC_NAMES})
             JOIN metrics USING (name)
@@ -91,15 +92,15 @@ def read_training_run(path: str) -> TrainingRun:
                        max(step for step, _, _ in metrics.values()), metrics, max(0, names - MAX_METRIC_NAMES))
 
 
-def _not_training(path: str, board: str | None, command: str) -> str:
+def without_metrics(path: str, board: str | None, command: str | None) -> str:
+    """What a run without metrics is, for a one-line error: "'PATH' is a play run (...)"."""
     if board is None:
         what = "a reasoning run (a trace, no training metrics)"
-    elif command.startswith("tracelab train"):
+    elif str(command or "").startswith("tracelab train"):
         what = "a training run without metrics yet (stopped before its first log)"
     else:
         what = "a play run (games, no training metrics)"
-    return (f"{path!r} is {what}: compare puts training runs side by side; `tracelab diff RUN_A RUN_B` "
-            f"compares the episodes of two runs")
+    return f"{path!r} is {what}"
 
 
 def _sql_text(s: str) -> str:
