@@ -1,14 +1,22 @@
-"""Several training runs side by side (issue 27 §3): `tracelab compare RUN...`, read through the store's
-sandboxed reader, on two real tiny trainings (seconds each) that differ in their seed and learning rate."""
+"""Several training runs side by side (issue 27 §3), on three real tiny trainings (seconds each) that
+differ in their seed and learning rate: `tracelab compare RUN...`, read through the store's sandboxed
+reader, and the TUI's Training view overlaying runs (`tracelab tui RUN RUN ...`) with their mean and
+min–max band, driven by textual's pilot, with a snapshot (tests/data/tui_snapshots/overlay-training.txt)."""
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
+from typing import Any
 
 import pytest
+from tui_helpers import run_app, wait_for
+from tui_snapshot import check_snapshot
 
 from tracelab.cli import main
 from tracelab.store import open_run
+from tracelab.viewers.tui.plot import BraillePlot
+from tracelab.viewers.tui.run_overlay import mean_band
 from train_helpers import tiny_training_run
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -17,11 +25,16 @@ REASONING_RUN = ROOT / "sample_runs" / "supply-chain"
 
 
 @pytest.fixture(scope="module")
-def two_runs(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
-    """Two finished trainings of the tiny walk (400 steps: evaluations at 200 and 400)."""
+def three_runs(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
+    """Three finished trainings of the tiny walk (400 steps: logs every 100, evaluations at 200 and 400)."""
     root = tmp_path_factory.mktemp("compare")
-    return [tiny_training_run(root / "seed1", steps=400, seed=1, trace_eval_games=0),
-            tiny_training_run(root / "seed2", steps=400, seed=2, lr=1e-3, trace_eval_games=0)]
+    return [tiny_training_run(root / f"seed{seed}", steps=400, seed=seed, lr=lr, trace_eval_games=0)
+            for seed, lr in ((1, 3e-3), (2, 1e-3), (3, 3e-3))]
+
+
+@pytest.fixture()
+def two_runs(three_runs: list[Path]) -> list[Path]:
+    return three_runs[:2]
 
 
 def last_values(run: Path) -> dict[str, float]:
@@ -87,3 +100,76 @@ def test_compare_names_an_unknown_or_broken_run_in_one_line(two_runs, tmp_path, 
         assert err.startswith("tracelab: error: ") and says in err and str(bad.name) in err and "\n" not in err
     assert main(["compare", str(two_runs[0]), str(two_runs[0])]) == 1
     assert "is given twice" in capsys.readouterr().err
+
+
+def curve(run: Path, name: str) -> tuple[list[int], list[float]]:
+    con = open_run(run)
+    try:
+        rows = con.execute("SELECT step, value FROM metrics WHERE name = ? ORDER BY step", [name]).fetchall()
+    finally:
+        con.close()
+    return [s for s, _ in rows], [v for _, v in rows]
+
+
+def test_mean_band_matches_runs_at_each_step_by_their_latest_value():
+    a = ([100, 200, 300], [1.0, 2.0, 3.0])
+    b = ([150, 250, 350], [10.0, 20.0, 30.0])        # logs at other steps
+    steps, mean, low, high = mean_band([a, b])
+    assert steps == [150, 200, 250, 300]             # from the last first step to the first last step
+    assert low == [1.0, 2.0, 2.0, 3.0] and high == [10.0, 10.0, 20.0, 20.0]
+    assert mean == [5.5, 6.0, 11.0, 11.5]
+    c = ([100, 200], [float("nan"), 4.0])
+    steps, mean, low, high = mean_band([a, c])
+    assert mean[0] == 1.0 and low[1] == 2.0 and high[1] == 4.0  # a NaN value is left out
+    assert mean_band([a]) is None and mean_band([a, ([500], [1.0])]) is None
+
+
+def test_tui_overlays_runs_in_the_training_view_with_their_mean_and_band(three_runs, monkeypatch):
+    monkeypatch.chdir(three_runs[0].parent)   # runs named by relative paths: the snapshot shows no tmp dir
+    failures: list[str] = []
+
+    async def body(app: Any, pilot: Any) -> None:
+        await wait_for(pilot, lambda: type(app.screen).__name__ == "RunScreen")
+        pane = app.screen.panes["training"]
+        await wait_for(pilot, lambda: pane.is_attached and pane.updates > 0
+                       and not any(w.is_running for w in app.workers))
+        title = app.screen.query_one("#title").render().plain
+        assert title.startswith(" seed1 + 2 overlaid in Training")
+        loss = app.screen.query_one("#plot-loss", BraillePlot)
+        assert [s.name for s in loss.series] == ["loss mean"] and len(loss.bands) == 1
+        curves = [curve(run, "loss") for run in three_runs]
+        assert all(steps == [100, 200, 300, 400] for steps, _ in curves)   # the runs log at the same steps
+        band, mean = loss.bands[0], loss.series[0]
+        assert band.xs == mean.xs == [100, 200, 300, 400]
+        for i in range(4):
+            at = [values[i] for _, values in curves]
+            assert mean.ys[i] == pytest.approx(sum(at) / 3)
+            assert (band.lows[i], band.highs[i]) == (min(at), max(at))
+        status = app.screen.query_one("#train-status").render().plain
+        assert status.strip() == "3 runs: seed1, seed2, seed3 · line: their mean, shade: min–max · m: each run"
+        await pilot.pause(0.2)
+        diff = check_snapshot("overlay-training", app)
+        if diff:
+            failures.append(diff)
+        await pilot.press("m")                                         # one curve per run
+        assert [s.name for s in loss.series] == ["seed1: loss", "seed2: loss", "seed3: loss"]
+        assert loss.bands == [] and [s.ys for s in loss.series] == [values for _, values in curves]
+        assert "one curve per run" in app.screen.query_one("#train-status").render().plain
+        await pilot.press("escape")                                    # back: the Runs screen lists the three
+        await wait_for(pilot, lambda: type(app.screen).__name__ == "RunsScreen")
+
+    run_app([Path(r.name) for r in three_runs], body, size=(100, 30))
+    if failures:
+        pytest.fail("\n".join(failures), pytrace=False)
+
+
+def test_one_run_has_no_overlay_key(three_runs):
+    async def body(app: Any, pilot: Any) -> None:
+        await wait_for(pilot, lambda: type(app.screen).__name__ == "RunScreen")
+        await pilot.press("6")
+        pane = app.screen.panes["training"]
+        await wait_for(pilot, lambda: pane.is_attached and pane.updates > 0)
+        loss = app.screen.query_one("#plot-loss", BraillePlot)
+        assert [s.name for s in loss.series] == ["loss"] and loss.bands == []
+        assert "each run" not in app.screen.query_one("KeyBar").render().plain
+    run_app([three_runs[0]], body, size=(100, 30))

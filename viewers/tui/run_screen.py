@@ -3,6 +3,7 @@
 header follows the run's life: live while written, then how it ended, then sealed."""
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 from textual.app import ComposeResult
@@ -52,26 +53,37 @@ class RunScreen(Screen):
         Binding("escape", "cancel_or_back", "back"),
     ]
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, overlaid: Sequence[Path] = ()) -> None:
+        """`overlaid`: other runs whose curves the Training view draws with this one's (it opens first)."""
         super().__init__()
         self.path = path
         self.source = RunSource(path)
+        self.overlaid: list[RunSource] = []
+        try:
+            for p in overlaid:
+                self.overlaid.append(RunSource(p))
+        except BaseException:  # a run that does not open: close the ones opened, the screen is not shown
+            self.on_unmount()
+            raise
+        self.initial = "training" if overlaid else "episodes"
         self.episode: int | None = None
         self.panes: dict[str, Widget] = {
             "episodes": EpisodesPane(self.source), "trace": TracePane(self.source), "why": WhyPane(self.source),
-            "rules": RulesPane(self.source), "sql": SqlPane(self.source), "training": TrainingPane(self.source)}
+            "rules": RulesPane(self.source), "sql": SqlPane(self.source),
+            "training": TrainingPane(self.source, self.overlaid)}
 
     def compose(self) -> ComposeResult:
         yield Static(self._title(), id="title", classes="title")
-        with RunTabs(initial="episodes", id="tabs"):
+        with RunTabs(initial=self.initial, id="tabs"):
             for tab, title in TABS:
                 with TabPane(title, id=tab):
-                    if tab in EAGER:
+                    if tab in EAGER or tab == self.initial:
                         yield self.panes[tab]
         yield KeyBar()
 
     def _title(self) -> str:
-        return f" {self.path.name}  ·  {self.source.state}  ·  {self.source.command}"
+        overlaid = f" + {len(self.overlaid)} overlaid in Training" if self.overlaid else ""
+        return f" {self.path.name}{overlaid}  ·  {self.source.state}  ·  {self.source.command}"
 
     def on_mount(self) -> None:
         if self.source.can_change:  # its writer may close or die, `tracelab seal` may seal it
@@ -129,7 +141,8 @@ class RunScreen(Screen):
         self.app.pop_screen()
 
     def on_unmount(self) -> None:
-        self.source.close()
+        for source in (self.source, *self.overlaid):
+            source.close()
 
     # ---- passing things between views ------------------------------------------------------------------
     async def on_open_trace(self, message: OpenTrace) -> None:
