@@ -5,7 +5,6 @@ min–max band, driven by textual's pilot, with a snapshot (tests/data/tui_snaps
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 from typing import Any
 
@@ -173,3 +172,34 @@ def test_one_run_has_no_overlay_key(three_runs):
         assert [s.name for s in loss.series] == ["loss"] and loss.bands == []
         assert "each run" not in app.screen.query_one("KeyBar").render().plain
     run_app([three_runs[0]], body, size=(100, 30))
+
+
+def test_experiment_win_rate_plot_draws_the_seeds_mean_and_band_from_real_runs(three_runs, tmp_path):
+    """The plot `tracelab experiment` makes, drawn from three real runs' curves as its report reads them."""
+    pytest.importorskip("matplotlib")
+    from PIL import Image
+
+    from tracelab.train.experiments.plots import draw_learning_curves, learning_curves
+    from tracelab.train.experiments.runner import curves
+    seeds = [(k + 1, *curves(run, ("eval/method_win_rate",))["eval/method_win_rate"])
+             for k, run in enumerate(three_runs)]
+    arms = [{"label": "walk4", "published": None, "seeds": seeds}]
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots()
+    draw_learning_curves(ax, arms, ylabel="win rate (%)", title="walk4", percent=True, small=True)
+    lines = {line.get_label(): line for line in ax.get_lines()}
+    mean = lines["walk4, mean of 3 seeds"]
+    assert list(mean.get_xdata()) == [200, 400]
+    for j, step in enumerate((200, 400)):
+        at = [curve(run, "eval/method_win_rate")[1][j] for run in three_runs]
+        assert mean.get_ydata()[j] == pytest.approx(100 * sum(at) / 3)
+    band = ax.collections[0].get_paths()[0].vertices            # the 95% interval, around the mean
+    for j, step in enumerate((200, 400)):
+        ys = band[band[:, 0] == step][:, 1]
+        assert ys.min() <= mean.get_ydata()[j] <= ys.max() and ys.min() >= 0 and ys.max() <= 100
+    assert [f"walk4, seed {k}" in lines for k in (1, 2, 3)] == [True] * 3   # each seed's line too
+    plt.close(fig)
+    png = learning_curves(tmp_path / "win_rate.png", arms, metric="eval/method_win_rate",
+                          ylabel="win rate (%)", title="walk4", percent=True, small=True)
+    with Image.open(png) as im:
+        assert im.format == "PNG" and im.size == (640, 340)
