@@ -15,7 +15,6 @@ from tui_snapshot import check_snapshot
 from tracelab.cli import main
 from tracelab.store import open_run
 from tracelab.viewers.tui.plot import BraillePlot
-from tracelab.viewers.tui.run_overlay import mean_band
 from train_helpers import tiny_training_run
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -111,6 +110,7 @@ def curve(run: Path, name: str) -> tuple[list[int], list[float]]:
 
 
 def test_mean_band_matches_runs_at_each_step_by_their_latest_value():
+    from tracelab.viewers.tui.run_overlay import mean_band
     a = ([100, 200, 300], [1.0, 2.0, 3.0])
     b = ([150, 250, 350], [10.0, 20.0, 30.0])        # logs at other steps
     steps, mean, low, high = mean_band([a, b])
