@@ -52,8 +52,9 @@ def run(args: argparse.Namespace) -> int:
         runs = [read_training_run(r) for r in args.runs]
     import pyarrow as pa
     rows = comparison_rows(runs, precise=args.format != "table")
-    columns = {"key": [r[0] for r in rows], **{run.label: [r[1 + i] for r in rows] for i, run in enumerate(runs)}}
-    write_table(pa.table(columns), args.format, args.output)
+    names = ["key", *("./key" if r.label == "key" else r.label for r in runs)]   # column names are unique
+    columns = [pa.array([r[i] for r in rows], pa.string()) for i in range(len(names))]
+    write_table(pa.Table.from_arrays(columns, names=names), args.format, args.output)
     if len(runs) > 1 and not any(key.startswith("config ") for key, *_ in rows):
         print("note: the runs' configs are the same", file=sys.stderr)
     for r in runs:
@@ -141,7 +142,7 @@ def differing_keys(configs: list[dict[str, Any]]) -> list[str]:
 
 def _config_text(value: Any) -> str:
     if isinstance(value, str):
-        return value
+        return json.dumps(value) if "\n" in value else value   # one line per key
     try:
         return json.dumps(value, sort_keys=True)
     except (TypeError, ValueError, RecursionError):

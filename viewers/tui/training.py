@@ -17,7 +17,7 @@ from textual.widgets import Static, TabbedContent
 from tracelab.viewers.tui.colours import BLUE_TEAM, PARTIAL, RED_TEAM, TRUE, UNKNOWN
 from tracelab.viewers.tui.plot import Band, BraillePlot, Series
 from tracelab.viewers.tui.run_overlay import RunCurves, mean_band, run_labels
-from tracelab.viewers.tui.source import RunSource
+from tracelab.viewers.tui.source import LiveReads, RunSource
 
 REFRESH_S = 1.0
 PALETTE = (TRUE, BLUE_TEAM, PARTIAL, RED_TEAM, UNKNOWN)
@@ -45,6 +45,11 @@ class TrainingPane(Vertical, can_focus=True):
         self.runs = [RunCurves(s, label) for s, label in zip([source, *overlaid], labels)]
         self.each_run = False     # several runs: one curve per run instead of their mean and band
         self.updates = 0          # how many times new metrics were drawn (tests watch it)
+
+    @property
+    def live_reads(self) -> LiveReads:
+        """When the view's own run is re-read (its overlaid runs have theirs: self.runs)."""
+        return self.runs[0].live_reads
 
     def compose(self) -> ComposeResult:
         with Grid():
