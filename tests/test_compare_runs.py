@@ -203,3 +203,27 @@ def test_experiment_win_rate_plot_draws_the_seeds_mean_and_band_from_real_runs(t
                           ylabel="win rate (%)", title="walk4", percent=True, small=True)
     with Image.open(png) as im:
         assert im.format == "PNG" and im.size == (640, 340)
+
+
+def test_runs_screen_marks_runs_and_opens_them_overlaid(three_runs):
+    async def body(app: Any, pilot: Any) -> None:
+        from tui_helpers import loaded
+        screen = app.screen
+        table = screen.query_one("#runs-table")
+        await wait_for(pilot, lambda: loaded(table) and table.count == 3)
+        await pilot.press("c")                                          # nothing marked: says how
+        await wait_for(pilot, lambda: any("mark two runs or more" in n.message for n in app._notifications))
+        table.move_to([table.row(i)["name"] for i in range(3)].index("seed2"))
+        await pilot.press("space")                                      # marks seed2, moves down
+        table.move_to([table.row(i)["name"] for i in range(3)].index("seed1"))
+        await pilot.press("space")
+        assert screen.marked == [str(three_runs[1]), str(three_runs[0])]
+        assert "2 marked, c compares them" in screen.query_one("#runs-status").render().plain
+        await pilot.press("c")
+        await wait_for(pilot, lambda: type(app.screen).__name__ == "RunScreen")
+        assert app.screen.query_one("#title").render().plain.startswith(" seed2 + 1 overlaid in Training")
+        pane = app.screen.panes["training"]
+        await wait_for(pilot, lambda: pane.is_attached and pane.updates > 0)
+        assert [r.label for r in pane.runs] == ["seed2", "seed1"]
+        assert [s.name for s in app.screen.query_one("#plot-loss", BraillePlot).series] == ["loss mean"]
+    run_app([three_runs[0].parent], body, size=(120, 30))
