@@ -227,3 +227,20 @@ def test_runs_screen_marks_runs_and_opens_them_overlaid(three_runs):
         assert [r.label for r in pane.runs] == ["seed2", "seed1"]
         assert [s.name for s in app.screen.query_one("#plot-loss", BraillePlot).series] == ["loss mean"]
     run_app([three_runs[0].parent], body, size=(120, 30))
+
+
+def test_overlaid_live_runs_grow_together(tmp_path):
+    """Two runs written by other processes while the overlay is shown: the mean and band follow both."""
+    from tui_helpers import live_writer
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    with live_writer("train", tmp_path / "a") as (run_a, _), live_writer("train", tmp_path / "b") as (run_b, _):
+        async def body(app: Any, pilot: Any) -> None:
+            await wait_for(pilot, lambda: type(app.screen).__name__ == "RunScreen")
+            loss = app.screen.query_one("#plot-loss", BraillePlot)
+            await wait_for(pilot, lambda: len(loss.bands) == 1 and len(loss.bands[0].xs) > 0)
+            first = loss.bands[0].xs[-1]
+            await wait_for(pilot, lambda: loss.bands[0].xs[-1] >= first + 300)   # both runs went on
+            assert loss.series[0].name == "loss mean" and loss.series[0].xs == loss.bands[0].xs
+            assert "2 runs: " in app.screen.query_one("#train-status").render().plain
+        run_app([run_a, run_b], body, size=(100, 30))
