@@ -5,6 +5,7 @@ dependency-free, redrawn whole."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from rich.text import Text
@@ -153,7 +154,7 @@ def _segment(a: tuple[int, int] | None, b: tuple[int, int]) -> list[tuple[int, i
     return [(round(x0 + (x1 - x0) * i / n), round(y0 + (y1 - y0) * i / n)) for i in range(1, n + 1)]
 
 
-def _band_columns(band: Band, dot_x) -> list[tuple[int, float, float]]:
+def _band_columns(band: Band, dot_x: Callable[[float], int]) -> list[tuple[int, float, float]]:
     """(dot column, low, high) for every dot column the band spans, low and high interpolated linearly
     between its points (a NaN point leaves a gap)."""
     out: list[tuple[int, float, float]] = []
