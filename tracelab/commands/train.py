@@ -62,6 +62,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--max-memory", type=byte_size, default=None, metavar="SIZE",
                    help="refuse a run whose networks, replay buffers and worlds are estimated to need more "
                         "(e.g. 12G; default: half of this machine's memory)")
+    p.add_argument("--tensorboard", default=None, metavar="DIR",
+                   help="also write the metrics as TensorBoard event files into DIR/<run name>/ while training "
+                        "(needs the tensorboard package: pip install 'tracelab[tensorboard]')")
     add_max_groundings(p)
     p.set_defaults(func=run)
 
@@ -89,7 +92,8 @@ def run(args: argparse.Namespace) -> int:
     # --max-memory and --max-groundings are no training settings (cli.main applies the second): not in the
     # config, free with --resume; argv is the command line cli.main keeps
     given = {k: v for k, v in vars(args).items()
-             if k not in ("func", "command", "argv", "run", "resume", "max_memory", "max_groundings", "exp_name")}
+             if k not in ("func", "command", "argv", "run", "resume", "max_memory", "max_groundings", "exp_name",
+                          "tensorboard")}
     limit = memory_limit(args.max_memory, "--max-memory")
     state = None
     with store_errors():  # a bad value in the config or a checkpoint that does not load
@@ -119,7 +123,12 @@ def run(args: argparse.Namespace) -> int:
         default_run = f"runs/{args.exp_name or 'train'}-{scenario.name}-{time.strftime('%Y%m%d-%H%M%S')}"
     run_dir = Path(args.run or default_run)
     same_run = state is not None and _same_directory(run_dir, Path(args.resume))
-    return train_into(cfg, scenario, run_dir, state, resumed_from=args.resume, same_run=same_run)
+    tensorboard = None
+    if args.tensorboard:  # checked before training: the install hint, a log directory already used
+        from tracelab.train.tensorboard import run_log_dir
+        tensorboard = run_log_dir(Path(args.tensorboard), run_dir.resolve().name, appending=same_run)
+    return train_into(cfg, scenario, run_dir, state, resumed_from=args.resume, same_run=same_run,
+                      tensorboard=tensorboard)
 
 
 def check_budget(run: str, step: int, steps: int, given: bool) -> None:
@@ -141,9 +150,11 @@ def _same_directory(a: Path, b: Path) -> bool:
 
 
 def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None,
-               resumed_from: str | None = None, stop_at: int | None = None, same_run: bool = False) -> int:
+               resumed_from: str | None = None, stop_at: int | None = None, same_run: bool = False,
+               tensorboard: Path | None = None) -> int:
     """Train into a new run at `run_dir` (from a checkpoint `state` if given; `same_run`: the checkpoint's
-    own run, `run_dir`, continues); returns the exit status. `stop_at`: stop there as Ctrl-C would (tests)."""
+    own run, `run_dir`, continues); returns the exit status. `stop_at`: stop there as Ctrl-C would (tests).
+    `tensorboard`: a log directory that also receives the metrics (tracelab.train.tensorboard)."""
     import torch
 
     from tracelab.game.facts import GAME_RULES
@@ -174,11 +185,14 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
         print(f"note: the learner sees rewards up to {largest:g}, where Smooth L1 caps the gradient; "
               f"--reward-scale {10 ** -math.floor(math.log10(largest)):g} learns several times faster "
               f"(docs/training.md, \"Reward scale\")", file=sys.stderr)
-    trainer = None
+    trainer = sink = None
     status = "failed"
     previous = signal.getsignal(signal.SIGINT)
     try:
-        trainer = Trainer(cfg, scenario, writer, run_dir)
+        if tensorboard is not None:
+            from tracelab.train.tensorboard import TensorBoardSink
+            sink = TensorBoardSink(tensorboard, purge_step=state["step"] if same_run else None)
+        trainer = Trainer(cfg, scenario, writer, run_dir, metric_sinks=[sink] if sink else [])
         if trainer.learner_note:  # auto fell back from the fused learner
             print(f"note: {trainer.learner_note}", file=sys.stderr)
         if state is not None:
@@ -187,7 +201,7 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
             if same_run:
                 trainer.renumber_games(writer.next_free_episode)
                 resumes = len(writer.meta["resumes"])
-                writer.write_metrics(trainer.step, {"resumed": float(resumes)})  # the event, in the curves
+                trainer.write_metrics({"resumed": float(resumes)})  # the event, in the curves
                 print(f"resumed {run_dir} at step {trainer.step:,} in the same run (resume {resumes}; "
                       f"--run NEW would branch into a new run)", file=sys.stderr)
             else:
@@ -219,8 +233,13 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
         torch.use_deterministic_algorithms(was_deterministic)
         if trainer is not None:
             trainer.close()
+        if sink is not None:
+            sink.close()
         writer.close(status=status)
     _report(trainer, run_dir, status)
+    if sink is not None:
+        print(f"  tensorboard --logdir {shlex.quote(str(tensorboard.parent))}   # {sink.scalars:,} scalars in "
+              f"{tensorboard}/")
     if trainer is not None and trainer.last_eval is not None:
         from tracelab.train.budget import too_short_hint
         hint = too_short_hint(trainer.step, trainer.last_eval.wins, scenario.agents_per_team)

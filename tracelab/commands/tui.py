@@ -9,7 +9,8 @@ from pathlib import Path
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("tui", help="terminal UI: browse runs, traces, why-trees, rules, SQL, training curves")
     p.add_argument("paths", nargs="*", metavar="RUN|DIR",
-                   help="a run to open, or directories of runs (default: runs/ and sample_runs/)")
+                   help="a run to open (several runs: the first, with the others' curves overlaid in its Training "
+                        "view), or directories of runs (default: runs/ and sample_runs/)")
     p.add_argument("--screenshots", metavar="DIR",
                    help="write the README's screenshots (PNG) to DIR and exit: tui-trace-why.png from the "
                         "first RUN (default sample_runs/advanced), tui-training.png from the second, a "

@@ -9,6 +9,7 @@ one would (tests/test_train.py)."""
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Callable
 
@@ -31,6 +32,7 @@ from tracelab.train.network import Shape
 from tracelab.train.policy import BEST_POLICY_DIR, Policy, may_act, save_policy
 from tracelab.train.qnet import NetSpec, NumpyQ, QFunction, TorchQ
 from tracelab.train.replay import ReplayBuffer
+from tracelab.train.tensorboard import MetricSink
 from tracelab.train.transitions import PendingTransitions
 
 Progress = Callable[[dict[str, Any]], None]
@@ -90,12 +92,15 @@ def _agent_rewards(info: dict, done: np.ndarray) -> np.ndarray:
 class Trainer:
     def __init__(self, cfg: TrainConfig, scenario: Scenario, writer: TraceWriter | None = None,
                  run_dir: Path | None = None, progress: Progress | None = None,
-                 network: NetworkFactory | None = None, learner_class: type[DQN] | None = None) -> None:
+                 network: NetworkFactory | None = None, learner_class: type[DQN] | None = None,
+                 metric_sinks: Sequence[MetricSink] = ()) -> None:
         """Python API (docs/training.md, "The learner"): `network` trains the readable learner on this
         module instead of the MLP cfg.hidden describes (its policy files say `custom`); `learner_class` is
-        the readable learner's class (a subclass of DQN with another loss, say)."""
+        the readable learner's class (a subclass of DQN with another loss, say); `metric_sinks` receive
+        the metrics besides the run (e.g. TensorBoard, train --tensorboard)."""
         torch.set_num_threads(cfg.threads)
         self.cfg, self.scenario, self.writer, self.run_dir, self.progress = cfg, scenario, writer, run_dir, progress
+        self.metric_sinks = list(metric_sinks)  # besides the run: e.g. TensorBoard (train --tensorboard)
         self.stack = cfg.non_markov
         w, n = cfg.envs, scenario.agents_per_team
         self.worlds, self.agents = w, n
@@ -358,9 +363,16 @@ class Trainer:
         self._rate_mark = (now, self.step, updates)
         self.logged_step = self.step
         self._flush_episodes()
-        if self.writer is not None:
-            self.writer.write_metrics(self.step, m)
+        self.write_metrics(m)
         return m
+
+    def write_metrics(self, values: dict[str, float]) -> None:
+        """Metric rows at the current step: into the run, and into every other sink."""
+        if self.writer is not None:
+            self.writer.write_metrics(self.step, values)
+        for sink in self.metric_sinks:
+            sink.write(self.step, values)
+            sink.flush()
 
     def run_eval(self) -> EvalResult:
         cfg = self.cfg
@@ -377,8 +389,7 @@ class Trainer:
                           seed=eval_seed(cfg.seed, self.eval_round), opponent_p=cfg.eval_p,
                           stack_previous=self.stack, trace=self._eval_trace if traced else None,
                           trace_info=info, env=self._eval_env)
-        if self.writer is not None:
-            self.writer.write_metrics(self.step, result.metrics())
+        self.write_metrics(result.metrics())
         self.eval_round += 1
         self.last_eval, self.eval_step = result, self.step
         self._keep_if_best(result)

@@ -36,14 +36,14 @@ class TracelabApp(App[None]):
 
     def on_mount(self) -> None:
         self.push_screen(RunsScreen(self.paths))
-        if len(self.paths) == 1 and is_run(self.paths[0]):
-            self.show_run(self.paths[0])
+        if all(is_run(p) for p in self.paths):  # several runs: the first, the others overlaid in Training
+            self.show_run(self.paths[0], self.paths[1:])
 
-    def show_run(self, path: Path) -> None:
+    def show_run(self, path: Path, overlaid: Sequence[Path] = ()) -> None:
         try:
-            screen = RunScreen(path)
+            screen = RunScreen(path, overlaid)
         except Exception as e:  # noqa: BLE001 - a run that cannot be opened is a message, not a crash
-            self.notify(f"cannot open {path}: {e}", severity="error", timeout=8)
+            self.notify(f"cannot open {', '.join(map(str, [path, *overlaid]))}: {e}", severity="error", timeout=8)
             return
         self.push_screen(screen)
 

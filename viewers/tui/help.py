@@ -16,14 +16,14 @@ first) · the mouse selects rows, tabs, keys in the bottom bar and header column
 
 | view | keys |
 |---|---|
-| Runs | `Enter` open · `r` refresh (also every 2 s) |
+| Runs | `Enter` open · `space` mark · `c` open the marked runs, curves overlaid in Training · `r` refresh (also every 2 s) |
 | 1 Episodes | `Enter` trace · `s` / `S` sort column / direction (or click a header) · `f` length filter (`10..50`, `>=20`) · `e` evaluation games |
 | 2 Trace | `Enter`/`w` why · `n` / `p` next / previous change of the atom · `g` go to timestep · `/` atom filter (also t range, label, rule; Enter applies) · `a` only this atom · `x` clear filters · `b` board · `]` / `[` next / previous evaluation game (training runs) |
 | 2 Trace, a run without a board (a reasoning) | `b` the atoms true at the cursor's t and the graph around its atom, beside the trace · `c` true / changed at t · in the atoms (`Tab`): `/` filter (`exposed`, `exposed(*)`) · `Enter` only that atom's changes · its cursor picks the atom whose edges show · `s` static facts |
 | 3 Why | `Enter`/click expand a node · `o` expand all · `c` collapse · `/` why-not (`RULE A=x,B=y at T`) |
 | 4 Rules | `Enter` trace filtered by the rule · `e` per rule / per episode |
 | 5 SQL | `Ctrl+R` run (read-only; cancels a running one) · `F2` saved queries with parameters · `F3` history (kept between sessions) · `F4` export the result (CSV, Parquet) · `Ctrl+T` results |
-| 6 Training | curves re-read every second while a run is written · `v` evaluation games |
+| 6 Training | curves re-read every second while a run is written · `v` evaluation games · `m` several runs: each run / their mean over a min–max band |
 
 Truth values: green `[1,1]`, orange `[0,0]`, grey `[0,1]`, yellow anything else. Team colours: red and blue.
 """

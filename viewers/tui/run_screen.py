@@ -4,6 +4,7 @@ messages that pass an episode, a rule or a change from one view to another. Its 
 run's life: live while written, then how it ended, then sealed."""
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 from textual.app import ComposeResult
@@ -53,27 +54,38 @@ class RunScreen(Screen):
         Binding("escape", "cancel_or_back", "back"),
     ]
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, overlaid: Sequence[Path] = ()) -> None:
+        """`overlaid`: other runs whose curves the Training view draws with this one's (it opens first)."""
         super().__init__()
         self.path = path
         self.source = RunSource(path)
+        self.overlaid: list[RunSource] = []
+        try:
+            for p in overlaid:
+                self.overlaid.append(RunSource(p))
+        except BaseException:  # a run that does not open: close the ones opened, the screen is not shown
+            self.on_unmount()
+            raise
+        self.initial = "training" if overlaid else "episodes"
         self.episode: int | None = None
         self._has_metrics: bool | None = None     # read once the run is no longer written
         self.panes: dict[str, Widget] = {
             "episodes": EpisodesPane(self.source), "trace": TracePane(self.source), "why": WhyPane(self.source),
-            "rules": RulesPane(self.source), "sql": SqlPane(self.source), "training": TrainingPane(self.source)}
+            "rules": RulesPane(self.source), "sql": SqlPane(self.source),
+            "training": TrainingPane(self.source, self.overlaid)}
 
     def compose(self) -> ComposeResult:
         yield Static(self._title(), id="title", classes="title")
-        with RunTabs(initial="episodes", id="tabs"):
+        with RunTabs(initial=self.initial, id="tabs"):
             for tab, title in TABS:
                 with TabPane(title, id=tab):
-                    if tab in EAGER:
+                    if tab in EAGER or tab == self.initial:
                         yield self.panes[tab]
         yield KeyBar()
 
     def _title(self) -> str:
-        return f" {self.path.name}  ·  {self.source.state}  ·  {self.source.command}"
+        overlaid = f" + {len(self.overlaid)} overlaid in Training" if self.overlaid else ""
+        return f" {self.path.name}{overlaid}  ·  {self.source.state}  ·  {self.source.command}"
 
     def has_view(self, tab: str) -> bool:
         """Whether the run has this view: a closed run without a board (a reasoning) and without metrics
@@ -152,7 +164,8 @@ class RunScreen(Screen):
         self.app.pop_screen()
 
     def on_unmount(self) -> None:
-        self.source.close()
+        for source in (self.source, *self.overlaid):
+            source.close()
 
     # ---- passing things between views ------------------------------------------------------------------
     async def on_open_trace(self, message: OpenTrace) -> None:

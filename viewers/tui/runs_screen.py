@@ -1,7 +1,9 @@
 """The Runs screen: the run catalog (tracelab.store.catalog), refreshed every few seconds while runs grow.
-Enter opens a run."""
+Enter opens a run; space marks runs and `c` opens the marked ones together, the first with the others'
+curves overlaid in its Training view (as `tracelab tui RUN RUN ...` does)."""
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import pyarrow as pa
@@ -39,16 +41,19 @@ RUN_COLUMNS = [
 
 
 class RunsScreen(Screen):
-    BINDINGS = [Binding("enter", "open", "open run"), Binding("r", "refresh", "refresh")]
+    BINDINGS = [Binding("enter", "open", "open run"), Binding("space", "mark", "mark"),
+                Binding("c", "compare", "compare marked"), Binding("r", "refresh", "refresh")]
 
     def __init__(self, roots: list[Path]) -> None:
         super().__init__()
         self.roots = roots
         self.runs: list[RunSummary] = []
+        self.marked: list[str] = []   # paths of the marked runs, in the order they were marked
 
     def compose(self) -> ComposeResult:
         yield Static(f" tracelab runs in {', '.join(map(str, self.roots))}", id="title", classes="title")
-        yield LazyTable(RUN_COLUMNS, id="runs-table")
+        mark = Column("path", "", 1, render=lambda r: Text("✓", style=TRUE) if r["path"] in self.marked else "")
+        yield LazyTable([mark, *(replace(c) for c in RUN_COLUMNS)], id="runs-table")
         yield Static("", id="runs-status", classes="status")
         yield KeyBar()
 
@@ -71,17 +76,40 @@ class RunsScreen(Screen):
         runs = list_runs(self.roots)
         self.app.call_from_thread(self._show, runs)
 
-    def _show(self, runs: list[RunSummary]) -> None:
+    def _show(self, runs: list[RunSummary], redraw: bool = False) -> None:
         changed = [r.as_row() for r in runs] != [r.as_row() for r in self.runs]
         self.runs = runs
+        self.marked = [p for p in self.marked if p in {str(r.path) for r in runs}]   # runs that went away
         table = self.query_one(LazyTable)
-        if changed or not table.ready:
+        if changed or redraw or not table.ready:
             rows = [r.as_row() for r in runs]
             table.set_source(ArrowSource(pa.Table.from_pylist(rows) if rows else pa.table({})),
                              cursor=table.cursor)
         live = sum(r.status == "running" for r in runs)
+        marked = (f"{len(self.marked)} marked, c compares them" if self.marked else "space marks runs to compare")
         self.query_one("#runs-status", Static).update(
-            f" {len(runs)} run(s), {live} running · Enter opens · refreshes every {REFRESH_S:g} s")
+            f" {len(runs)} run(s), {live} running · Enter opens · {marked} · refreshes every {REFRESH_S:g} s")
+
+    def action_mark(self) -> None:
+        table = self.query_one(LazyTable)
+        if not 0 <= table.cursor < len(self.runs):
+            return
+        path = str(self.runs[table.cursor].path)
+        if path in self.marked:
+            self.marked.remove(path)
+        else:
+            self.marked.append(path)
+        self._show(self.runs, redraw=True)
+        if table.cursor + 1 < len(self.runs):
+            table.move_to(table.cursor + 1)   # mark the next one with the next space
+
+    def action_compare(self) -> None:
+        if len(self.marked) < 2:
+            self.notify("mark two runs or more with space, then c: the first opens with the others' curves "
+                        "overlaid in its Training view")
+            return
+        first, *others = map(Path, self.marked)
+        self.app.show_run(first, others)  # type: ignore[attr-defined]
 
     def action_open(self) -> None:
         table = self.query_one(LazyTable)

@@ -1,0 +1,181 @@
+"""`tracelab compare RUN...`: training runs side by side, one column per run (named by its path as
+given): how each ended, the config keys whose values differ between them, and each run's final metrics
+(the value at its last step; win rates also at their best). Runs are read through the store's sandboxed
+reader (tracelab.store.open_run), so a run from a stranger is only ever read as data."""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import tomllib
+from dataclasses import dataclass, field
+from typing import Any
+
+from tracelab.commands._interrupt import ctrl_c_stops_queries
+from tracelab.commands._output import add_format_options, write_table
+from tracelab.errors import UserError, store_errors
+
+MAX_METRIC_NAMES = 200     # metric names read per run (a training writes about 15); the rest are named as a count
+MAX_CONFIG_DEPTH = 4       # nested config deeper than this is shown as one value
+BEST_OF = ("eval/win_rate", "eval/method_win_rate")  # metrics whose best value is shown beside the last
+MISSING = "-"
+
+
+@dataclass
+class TrainingRun:
+    label: str                                     # the run as the user named it (a column of the table)
+    status: str
+    config: dict[str, Any]                         # flattened: "lr", "scenario_toml.rewards.win", ...
+    last_step: int
+    # name -> (step of its last value, last value, (best value, its step) or None)
+    metrics: dict[str, tuple[int, float | None, tuple[float, int] | None]] = field(default_factory=dict)
+    more_metrics: int = 0                          # names beyond MAX_METRIC_NAMES, not read
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("compare", help="training runs side by side: final metrics and the config keys that differ",
+                       description="Training runs (from `tracelab train`) side by side, one column per run: "
+                                   "their status and last step, the config keys whose values differ, and "
+                                   "each metric's value at the run's end (win rates also at their best, "
+                                   "'VALUE @STEP'). For a run's episodes see `tracelab diff`.")
+    p.add_argument("runs", nargs="+", metavar="RUN", help="training runs: directories, .duckdb files or names under runs/")
+    add_format_options(p)
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    repeated = next((r for i, r in enumerate(args.runs) if r in args.runs[:i]), None)
+    if repeated is not None:
+        raise UserError(f"run {repeated!r} is given twice")
+    with store_errors(), ctrl_c_stops_queries():
+        runs = [read_training_run(r) for r in args.runs]
+    import pyarrow as pa
+    rows = comparison_rows(runs, precise=args.format != "table")
+    names = ["key", *("./key" if r.label == "key" else r.label for r in runs)]   # column names are unique
+    columns = [pa.array([r[i] for r in rows], pa.string()) for i in range(len(names))]
+    write_table(pa.Table.from_arrays(columns, names=names), args.format, args.output)
+    if len(runs) > 1 and not any(key.startswith("config ") for key, *_ in rows):
+        print("note: the runs' configs are the same", file=sys.stderr)
+    for r in runs:
+        if r.more_metrics:
+            print(f"note: {r.label}: {r.more_metrics} more metric names not shown (tracelab sql {r.label} "
+                  f"\"SELECT DISTINCT name FROM metrics\")", file=sys.stderr)
+    return 0
+
+
+def read_training_run(path: str) -> TrainingRun:
+    """A training run's status, config and final metrics; a UserError (one line) for a run that is not one."""
+    from tracelab.store.reader import open_run, query_readonly, retrying
+    con = open_run(path)
+    try:
+        def rows(sql: str) -> list[tuple]:
+            return retrying(lambda: query_readonly(con, sql).fetchall())
+
+        status, config_text, board, command = rows("SELECT status, config, board, command FROM run")[0]
+        (names,) = rows("SELECT count(DISTINCT name) FROM metrics")[0]
+        if not names:
+            raise UserError(f"{without_metrics(path, board, command)}: compare puts training runs side by side; "
+                            f"`tracelab diff RUN_A RUN_B` compares the episodes of two runs")
+        last = rows(f"""
+            SELECT name, step, value FROM (SELECT DISTINCT name FROM metrics ORDER BY name LIMIT {MAX_METRIC_NAMES})
+            JOIN metrics USING (name)
+            QUALIFY row_number() OVER (PARTITION BY name ORDER BY step DESC, time DESC) = 1 ORDER BY name""")
+        best = rows(f"""
+            SELECT name, step, value FROM metrics
+            WHERE name IN ({", ".join(_sql_text(n) for n in BEST_OF)}) AND NOT isnan(value)
+            QUALIFY row_number() OVER (PARTITION BY name ORDER BY value DESC, step) = 1""")
+    finally:
+        con.close()
+    best_of = {name: (value, step) for name, step, value in best}
+    metrics = {name: (step, value, best_of.get(name) if name in BEST_OF else None) for name, step, value in last}
+    return TrainingRun(path, str(status), flat_config(_json_object(config_text)),
+                       max(step for step, _, _ in metrics.values()), metrics, max(0, names - MAX_METRIC_NAMES))
+
+
+def without_metrics(path: str, board: str | None, command: str | None) -> str:
+    """What a run without metrics is, for a one-line error: "'PATH' is a play run (...)"."""
+    if board is None:
+        what = "a reasoning run (a trace, no training metrics)"
+    elif str(command or "").startswith("tracelab train"):
+        what = "a training run without metrics yet (stopped before its first log)"
+    else:
+        what = "a play run (games, no training metrics)"
+    return f"{path!r} is {what}"
+
+
+def _sql_text(s: str) -> str:
+    return "'" + s.replace("'", "''") + "'"
+
+
+def _json_object(text: Any) -> dict[str, Any]:
+    try:
+        value = json.loads(text) if isinstance(text, str) else text
+    except (ValueError, RecursionError):
+        return {}
+    return value if isinstance(value, dict) else {}
+
+
+def flat_config(config: dict[str, Any], prefix: str = "", depth: int = 0) -> dict[str, Any]:
+    """Nested config as dotted keys; the scenario's TOML (scenario_toml) as its fields, so that a
+    difference in one reward shows as that reward."""
+    out: dict[str, Any] = {}
+    for key, value in config.items():
+        name = f"{prefix}{key}"
+        if key == "scenario_toml" and isinstance(value, str) and not prefix:
+            try:
+                value = tomllib.loads(value)
+            except (tomllib.TOMLDecodeError, RecursionError):
+                pass
+        if isinstance(value, dict) and value and depth < MAX_CONFIG_DEPTH:
+            out.update(flat_config(value, name + ".", depth + 1))
+        else:
+            out[name] = value
+    return out
+
+
+def differing_keys(configs: list[dict[str, Any]]) -> list[str]:
+    """The keys whose value is not the same in every config (missing counts as a value)."""
+    keys = sorted({k for c in configs for k in c})
+    return [k for k in keys if len({_config_text(c.get(k, MISSING)) for c in configs}) > 1]
+
+
+def _config_text(value: Any) -> str:
+    if isinstance(value, str):
+        return json.dumps(value) if "\n" in value else value   # one line per key
+    try:
+        return json.dumps(value, sort_keys=True)
+    except (TypeError, ValueError, RecursionError):
+        return str(value)
+
+
+def _number(v: float | None, precise: bool) -> str:
+    if v is None or math.isnan(v):
+        return "nan" if v is not None else MISSING
+    if precise:
+        return repr(v)
+    return f"{v:.4g}"
+
+
+def comparison_rows(runs: list[TrainingRun], precise: bool = False) -> list[list[str]]:
+    """The table: [key, one cell per run]. `precise`: numbers in full (CSV, JSON), else 4 digits."""
+    rows = [["status", *(r.status for r in runs)], ["last step", *(str(r.last_step) for r in runs)]]
+    configs = [r.config for r in runs]
+    for key in differing_keys(configs) if len(runs) > 1 else []:
+        rows.append([f"config {key}", *(_config_text(c.get(key, MISSING)) for c in configs)])
+    names = sorted({n for r in runs for n in r.metrics}, key=lambda n: (not n.startswith("eval/"), n))
+    for name in names:
+        cells = []
+        for r in runs:
+            if name not in r.metrics:
+                cells.append(MISSING)
+                continue
+            step, value, _ = r.metrics[name]
+            at = "" if step == r.last_step else f" @{step}"   # a metric that stopped before the run did
+            cells.append(_number(value, precise) + at)
+        rows.append([name, *cells])
+        if name in BEST_OF:
+            rows.append([f"{name} (best)", *(
+                MISSING if r.metrics.get(name, (0, None, None))[2] is None else
+                f"{_number(r.metrics[name][2][0], precise)} @{r.metrics[name][2][1]}" for r in runs)])
+    return rows
