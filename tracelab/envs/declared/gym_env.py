@@ -1,0 +1,104 @@
+"""`DeclaredEnv`: a world declared by a spec (docs/worlds.md) as a gymnasium Env.
+
+The spaces come from the spec: actions Discrete(number of actions); the observation Discrete (one index,
+or several as one number, first part most significant: numpy's ravel_multi_index), MultiDiscrete (the
+parts' indices), Box (the parts' numbers, float32, in order) or Dict (a space per part). `info` holds
+`action_mask` (int8, 1 = allowed) when the spec declares a mask, and `t` (steps into the episode)."""
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from tracelab.envs.declared.spec import WorldSpec, load_spec
+from tracelab.envs.declared.world import DeclaredWorld
+
+RENDER_MODES = ["ansi"]
+
+
+class DeclaredEnv(gym.Env[Any, np.int64]):
+    metadata = {"render_modes": RENDER_MODES, "render_fps": 4}
+
+    def __init__(self, spec: WorldSpec | str | os.PathLike[str], *, render_mode: str | None = None,
+                 kernel: str = "auto", **params: Any) -> None:
+        if render_mode is not None and render_mode not in RENDER_MODES:
+            raise ValueError(f"render_mode must be None or one of {RENDER_MODES}, got {render_mode!r}")
+        self.world_spec = spec if isinstance(spec, WorldSpec) else load_spec(spec, **params)
+        self.world = DeclaredWorld(self.world_spec, kernel=kernel)
+        self.render_mode = render_mode
+        self.metadata = {**self.metadata, "render_fps": self.world_spec.render_fps}
+        self.action_space = spaces.Discrete(len(self.world_spec.action_names))
+        self.observation_space = observation_space(self.world_spec)
+        self._running = False
+        self._last_action: int | None = None
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        super().reset(seed=seed)
+        self.world.reset(self.np_random)
+        self._running = True
+        self._last_action = None
+        return self._observe(), self._info()
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        if not self._running:
+            raise RuntimeError("the episode is over (or never began): call reset() first")
+        a = int(action)
+        if not 0 <= a < self.action_space.n or a != action:
+            raise ValueError(f"action {action!r} is outside the action space {self.action_space}")
+        w = self.world
+        w.step(a, self.np_random)
+        self._last_action = a
+        terminated, truncated = w.terminated(), w.truncated()
+        self._running = not (terminated or truncated)
+        return self._observe(), w.reward(), terminated, truncated, self._info()
+
+    def _observe(self) -> Any:
+        spec, w = self.world_spec, self.world
+        values = [w.part_values(i) for i in range(len(spec.parts))]
+        if spec.space == "Discrete":
+            dims = [len(p.atoms) for p in spec.parts]
+            return int(np.ravel_multi_index([int(v[0]) for v in values], dims))
+        if spec.space == "MultiDiscrete":
+            return np.concatenate(values).astype(np.int64)
+        if spec.space == "Box":
+            return np.concatenate([v.astype(np.float32) for v in values])
+        return {p.name: (int(v[0]) if p.read == "index" else v) for p, v in zip(spec.parts, values)}
+
+    def _info(self) -> dict[str, Any]:
+        info: dict[str, Any] = {"t": self.world.steps}
+        mask = self.world.action_mask()
+        if mask is not None:
+            info["action_mask"] = mask
+        return info
+
+    def render(self) -> str | None:
+        if self.render_mode != "ansi":
+            return None
+        board = self.world_spec.board
+        names = self.world_spec.action_names
+        head = f"  ({names[self._last_action]})\n" if self._last_action is not None else "\n"
+        if board is None:
+            return head + "\n".join(f"{k}: {v}" for k, v in self.world.engine.interpretation(0).items()) + "\n"
+        return head + board.text(self.world.marked_cells())
+
+
+def observation_space(spec: WorldSpec) -> spaces.Space[Any]:
+    parts = spec.parts
+    if spec.space == "Discrete":
+        return spaces.Discrete(int(np.prod([len(p.atoms) for p in parts])))
+    if spec.space == "MultiDiscrete":
+        return spaces.MultiDiscrete([len(p.atoms) for p in parts])
+    if spec.space == "Box":
+        high = np.concatenate([np.full(p.width, len(p.atoms) - 1 if p.read == "index" else 1.0, np.float32)
+                               for p in parts])
+        return spaces.Box(np.zeros_like(high), high, dtype=np.float32)
+    return spaces.Dict({p.name: spaces.Discrete(len(p.atoms)) if p.read == "index" else
+                        spaces.Box(0.0, 1.0, (p.width,), np.float32) for p in parts})
+
+
+def make_env(spec: str | os.PathLike[str], **kwargs: Any) -> DeclaredEnv:
+    """The gymnasium Env a spec declares; kwargs: the spec's [params], `render_mode`, `kernel`."""
+    return DeclaredEnv(spec, **kwargs)

@@ -1,0 +1,469 @@
+"""An environment spec (a TOML file beside a rule program, docs/worlds.md) read into a `WorldSpec`.
+
+`load_spec(path, **params)` reads the file (spec_file), computes every expression with the params
+(expressions), builds the board's facts (board), loads the rule files, and checks every atom the spec
+names against the program: a predicate it lacks or uses with another arity, or a constant that is neither
+the program's, a board cell nor an agent, is a located error (`SpecError`: file:line: key: what was
+expected). Nothing here steps an engine; world.py does."""
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from tracelab.engine.errors import ProgramError
+from tracelab.engine.parser import check_program, load_program, parse_literal
+from tracelab.engine.program import CONSTANT_RE, Fact, Literal, Program, SourceLoc, Term
+from tracelab.envs.declared.board import MAX_BOARD_CELLS, Board
+from tracelab.envs.declared.expressions import ExpressionError, evaluate
+from tracelab.envs.declared.spec_file import KeyPath, SpecError, SpecSource, read_spec_file
+
+READS = ("index", "lower", "bounds", "onehot")
+SPACES = ("Discrete", "MultiDiscrete", "Box", "Dict")
+SECTIONS = ("env", "params", "data", "board", "agents", "actions", "observation", "reward", "end", "start",
+            "random")
+AGENT_VAR, ACTION_VAR = "Agent", "Action"
+MAX_DOMAIN = 1_000_000  # values of one `over`, atoms of one observation part
+
+
+@dataclass(frozen=True)
+class Atom:
+    """A ground atom the spec names, with the bound a fact sets (reads ignore it)."""
+    pred: str
+    args: tuple[str, ...]
+    lower: float = 1.0
+    upper: float = 1.0
+
+    def __str__(self) -> str:
+        return f"{self.pred}({','.join(self.args)})"
+
+
+@dataclass(frozen=True)
+class ObservationPart:
+    name: str
+    read: str  # one of READS
+    atoms: tuple[Atom, ...]  # in the part's order
+
+    @property
+    def width(self) -> int:
+        """Numbers this part puts in a Box (an index is one number)."""
+        return {"index": 1, "lower": len(self.atoms), "bounds": 2 * len(self.atoms),
+                "onehot": len(self.atoms)}[self.read]
+
+
+@dataclass(frozen=True)
+class Draw:
+    """One categorical draw from the env's np_random: value i's atom is set. `probabilities` fixed, or
+    `weights`: the values whose weight atom is true, equally likely (read when the episode starts)."""
+    key: KeyPath
+    atoms: tuple[Atom, ...]
+    probabilities: np.ndarray | None
+    weights: tuple[Atom, ...] | None = None
+
+
+@dataclass
+class WorldSpec:
+    path: str
+    params: dict[str, Any]
+    program: Program  # the rule files' program with the board's facts
+    agents: tuple[str, ...]
+    action_names: tuple[str, ...]
+    action_facts: tuple[tuple[tuple[Atom, ...], ...], ...]  # [agent][action] -> facts for the step
+    mask: tuple[tuple[Atom, ...], ...] | None  # [agent][action] -> the atom that allows it
+    space: str
+    parts: tuple[ObservationPart, ...]
+    reward_table: tuple[tuple[Atom, float], ...]
+    reward_scaled: tuple[tuple[Atom, float], ...]
+    terminated: tuple[Atom, ...]
+    truncated: tuple[Atom, ...]
+    max_steps: int | None
+    start_facts: tuple[Atom, ...]
+    start_choices: tuple[Draw, ...]
+    random_facts: tuple[Draw, ...]
+    board: Board | None
+    render_fps: int
+    source: SpecSource = field(repr=False)
+
+
+# ---- reading typed values, located ----
+
+class _Reader:
+    """Typed access to the spec's values: each mistake a SpecError at the key's line."""
+
+    def __init__(self, src: SpecSource, names: dict[str, Any]) -> None:
+        self.src = src
+        self.names = names  # params and data, for expressions
+
+    def err(self, path: KeyPath, msg: str) -> SpecError:
+        return self.src.error(path, msg)
+
+    def raw(self, path: KeyPath, default: Any = ...) -> Any:
+        node: Any = self.src.data
+        for p in path:
+            if isinstance(node, dict) and isinstance(p, str) and p in node:
+                node = node[p]
+            elif isinstance(node, list) and isinstance(p, int) and p < len(node):
+                node = node[p]
+            else:
+                if default is ...:
+                    raise self.err(path, "missing (required)")
+                return default
+        return node
+
+    def value(self, path: KeyPath, default: Any = ..., *, expr: bool = True) -> Any:
+        """The value at path; a string where a number, boolean or list is expected is an expression."""
+        v = self.raw(path, default)
+        if expr and isinstance(v, str) and v is not default:
+            try:
+                return evaluate(v, self.names)
+            except ExpressionError as e:
+                raise self.err(path, str(e)) from None
+        return v
+
+    def table(self, path: KeyPath, allowed: tuple[str, ...] | None = None, default: Any = ...) -> dict[str, Any]:
+        v = self.raw(path, default)
+        if not isinstance(v, dict):
+            raise self.err(path, f"expected a table, got {_kind(v)}")
+        if allowed is not None:
+            for k in v:
+                if k not in allowed:
+                    raise self.err((*path, k), f"unknown key (expected one of: {', '.join(allowed)})")
+        return v
+
+    def string(self, path: KeyPath, default: Any = ..., choices: tuple[str, ...] | None = None) -> str:
+        v = self.raw(path, default)
+        if not isinstance(v, str):
+            raise self.err(path, f"expected a string, got {_kind(v)}")
+        if choices is not None and v not in choices:
+            raise self.err(path, f"expected one of {', '.join(choices)}, got {v!r}")
+        return v
+
+    def number(self, path: KeyPath, default: Any = ...) -> float:
+        v = self.value(path, default)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise self.err(path, f"expected a finite number, got {_kind(v)}")
+        return float(v)
+
+    def integer(self, path: KeyPath, default: Any = ..., minimum: int = 0) -> int:
+        v = self.value(path, default)
+        if v is None and default is None:
+            return None  # type: ignore[return-value]
+        if isinstance(v, bool) or not isinstance(v, int) or v < minimum:
+            raise self.err(path, f"expected an integer >= {minimum}, got {_kind(v)}")
+        return v
+
+    def strings(self, path: KeyPath, default: Any = ...) -> list[str]:
+        v = self.value(path, default)
+        if not isinstance(v, list) or not all(isinstance(s, str) for s in v):
+            raise self.err(path, f"expected a list of strings, got {_kind(v)}")
+        return v
+
+    def numbers(self, path: KeyPath, n: int) -> np.ndarray:
+        v = self.value(path)
+        if not isinstance(v, list) or len(v) != n or not all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+            raise self.err(path, f"expected a list of {n} numbers, got {_kind(v)}")
+        p = np.asarray(v, np.float64)
+        if not np.isfinite(p).all() or (p < 0).any() or p.sum() <= 0:
+            raise self.err(path, "expected probabilities >= 0 with a positive sum")
+        return p
+
+
+def _kind(v: Any) -> str:
+    if isinstance(v, str):
+        return f"the string {v[:40]!r}"
+    if isinstance(v, bool):
+        return f"the boolean {str(v).lower()}"
+    if isinstance(v, (int, float)):
+        return f"the number {v}"
+    if isinstance(v, list):
+        return f"a list of {len(v)}"
+    if isinstance(v, dict):
+        return "a table"
+    return "nothing" if v is None else type(v).__name__
+
+
+# ---- atoms, checked against the program ----
+
+class _Names:
+    """The program's predicates (with arity) and constants, the board's cells and the agents: what an
+    atom in the spec may name."""
+
+    def __init__(self, reader: _Reader, program: Program, extra_constants: list[str]) -> None:
+        self.r = reader
+        self.arity: dict[str, int] = {}
+        for item in [*program.rules, *program.facts]:
+            lits = (item.literal,) if isinstance(item, Fact) else (item.head, *item.body)
+            for lit in lits:
+                self.arity.setdefault(lit.pred, len(lit.args))
+        self.constants = set(program.constants()) | set(extra_constants)
+
+    def pattern(self, path: KeyPath, text: Any, variables: tuple[str, ...], *, bounds: bool = False) -> Literal:
+        """A literal whose variables are among `variables`, naming the program's predicates."""
+        if not isinstance(text, str):
+            raise self.r.err(path, f"expected an atom such as \"p(a)\", got {_kind(text)}")
+        try:
+            lit = parse_literal(text)
+        except ProgramError as e:
+            raise self.r.err(path, f"{text!r} is not an atom: {e.message}") from None
+        if lit.negated:
+            raise self.r.err(path, f"{text!r}: '~' is not allowed here")
+        if not bounds and (lit.lower, lit.upper) != (1.0, 1.0):
+            raise self.r.err(path, f"{text!r}: a bound is not allowed here (an atom is read, not set)")
+        if lit.pred not in self.arity:
+            raise self.r.err(path, f"{text!r}: the program has no predicate {lit.pred!r}")
+        if self.arity[lit.pred] != len(lit.args):
+            raise self.r.err(path, f"{text!r}: {lit.pred} takes {self.arity[lit.pred]} argument(s) in the "
+                                   f"program, not {len(lit.args)}")
+        for a in lit.args:
+            if a.is_var and a.name not in variables:
+                allowed = f"only {', '.join(variables)}" if variables else "none: the atom must be ground"
+                raise self.r.err(path, f"{text!r}: variable {a.name} is not allowed here ({allowed})")
+            if not a.is_var and a.name not in self.constants:
+                raise self.r.err(path, f"{text!r}: the program, the board and the agents have no constant "
+                                       f"{a.name!r}")
+        return lit
+
+    def ground(self, lit: Literal, values: Mapping[str, str]) -> Atom:
+        return Atom(lit.pred, tuple(values[a.name] if a.is_var else a.name for a in lit.args), lit.lower, lit.upper)
+
+    def atoms(self, path: KeyPath, texts: list[Any], values: Mapping[str, str], *, bounds: bool = False
+              ) -> tuple[Atom, ...]:
+        return tuple(self.ground(self.pattern((*path, i), t, tuple(values), bounds=bounds), values)
+                     for i, t in enumerate(texts))
+
+    def over(self, path: KeyPath, pattern: Any, domain: list[str]) -> tuple[Atom, ...]:
+        """A pattern with (at most) one variable, grounded over the domain in order."""
+        lit = self.pattern(path, pattern, tuple(a.name for a in _vars(pattern)))
+        names = {a.name for a in lit.args if a.is_var}
+        if len(names) != 1:
+            raise self.r.err(path, f"{pattern!r}: expected exactly one variable (it ranges over `over`)")
+        var = names.pop()
+        return tuple(self.ground(lit, {var: v}) for v in domain)
+
+
+def _vars(text: str) -> list[Term]:
+    try:
+        return [a for a in parse_literal(text).args if a.is_var]
+    except ProgramError:
+        return []
+
+
+# ---- the sections ----
+
+def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
+    """Read and check the spec at `path` with `params` overriding its [params] defaults."""
+    src = read_spec_file(path)
+    for k in src.data:
+        if k not in SECTIONS:
+            raise src.error((k,), f"unknown section (expected one of: {', '.join(SECTIONS)})")
+    base = _Reader(src, {})
+    defaults = base.table(("params",), default={})
+    for k in params:
+        if k not in defaults:
+            known = ", ".join(defaults) or "none"
+            raise SpecError(f"{src.path}: unknown keyword argument {k!r} (the spec's [params]: {known})")
+    data = base.table(("data",), default={})
+    clash = set(data) & set(defaults)
+    if clash:
+        raise src.error(("data", sorted(clash)[0]), "a name in both [data] and [params]")
+    names = {**data, **defaults, **params}
+    r = _Reader(src, names)
+
+    env = r.table(("env",), ("rules", "render_fps"))
+    rule_files = [_inside(r, ("env", "rules", i), f) for i, f in enumerate(r.strings(("env", "rules")))]
+    if not rule_files:
+        raise r.err(("env", "rules"), "expected at least one rule file")
+    board = _board(r) if "board" in src.data else None
+    program = _program(r, rule_files, board)
+
+    agents_t = r.table(("agents",), ("names", "mask"))
+    agents = r.strings(("agents", "names"))
+    if len(agents) != 1:
+        raise r.err(("agents", "names"), f"expected one agent (several agents are not supported yet), got {len(agents)}")
+    for i, a in enumerate(agents):
+        if not CONSTANT_RE.fullmatch(a):
+            raise r.err(("agents", "names", i), f"{a!r} is not a plain constant (lower-case letter or digit first)")
+    check = _Names(r, program, [*(board.cells if board else []), *agents])
+
+    actions_t = r.table(("actions",))
+    if not actions_t:
+        raise r.err(("actions",), "expected at least one action")
+    action_names = tuple(actions_t)
+    for name in action_names:
+        if not CONSTANT_RE.fullmatch(name):
+            raise r.err(("actions", name), "an action's name must be a plain constant (lower-case letter or "
+                                           "digit first; letters, digits, _ and -)")
+        r.strings(("actions", name))
+    action_facts = tuple(tuple(check.atoms(("actions", n), actions_t[n], {AGENT_VAR: a}, bounds=True)
+                               for n in action_names) for a in agents)
+    mask = None
+    if "mask" in agents_t:
+        check.constants |= set(action_names)
+        lit = check.pattern(("agents", "mask"), agents_t["mask"], (AGENT_VAR, ACTION_VAR))
+        mask = tuple(tuple(check.ground(lit, {AGENT_VAR: a, ACTION_VAR: n}) for n in action_names) for a in agents)
+
+    domains = {"cells": board.cells} if board else {}
+    space, parts = _observation(r, check, domains)
+    reward_table, reward_scaled = _reward(r, check, agents[0])
+    end = r.table(("end",), ("terminated", "truncated", "max_steps"), default={})
+    terminated = check.atoms(("end", "terminated"), r.strings(("end", "terminated"), []), {AGENT_VAR: agents[0]})
+    truncated = check.atoms(("end", "truncated"), r.strings(("end", "truncated"), []), {AGENT_VAR: agents[0]})
+    max_steps = r.integer(("end", "max_steps"), None, minimum=1) if "max_steps" in end else None
+    if not terminated and max_steps is None and not truncated:
+        pass  # an endless world is allowed (gymnasium's TimeLimit may cut it)
+    r.table(("start",), ("facts", "choose"), default={})
+    start_facts = check.atoms(("start", "facts"), r.strings(("start", "facts"), []), {AGENT_VAR: agents[0]},
+                              bounds=True)
+    choices = tuple(_draw(r, check, ("start", "choose", i), domains, weighted=True)
+                    for i in range(len(_list(r, ("start", "choose")))))
+    randoms = tuple(_draw(r, check, ("random", i), domains, weighted=False)
+                    for i in range(len(_list(r, ("random",)))))
+    fps = r.integer(("env", "render_fps"), 4, minimum=1)
+    del env
+    return WorldSpec(src.path, names, program, tuple(agents), action_names, action_facts, mask, space, parts,
+                     reward_table, reward_scaled, terminated, truncated, max_steps, start_facts, choices,
+                     randoms, board, fps, src)
+
+
+def _list(r: _Reader, path: KeyPath) -> list[Any]:
+    v = r.raw(path, [])
+    if not isinstance(v, list) or not all(isinstance(x, dict) for x in v):
+        raise r.err(path, f"expected an array of tables ([[{'.'.join(map(str, path))}]]), got {_kind(v)}")
+    return v
+
+
+def _inside(r: _Reader, path: KeyPath, name: str) -> str:
+    """A file named by the spec: relative, inside the spec's folder (a spec never makes tracelab read
+    elsewhere)."""
+    parts = name.replace("\\", "/").split("/")
+    if os.path.isabs(name) or ".." in parts or not name:
+        raise r.err(path, f"{name!r}: expected a path relative to the spec's folder, inside it")
+    return os.path.join(r.src.folder, name)
+
+
+def _program(r: _Reader, files: list[str], board: Board | None) -> Program:
+    try:
+        program = load_program(*files)
+    except FileNotFoundError as e:
+        raise r.err(("env", "rules"), f"{e.filename}: no such file") from None
+    if board is None:
+        return program
+    loc = SourceLoc(r.src.path, r.src.key_lines.line(("board", "rows")), 1)
+    facts = [Fact(f"board{i}", Literal(p, tuple(Term(a, False) for a in args), loc=loc), static=True, loc=loc)
+             for i, (p, args) in enumerate(board.facts())]
+    out = dataclasses.replace(program, facts=[*program.facts, *facts], warnings=[])
+    try:
+        check_program(out)
+    except ProgramError as e:
+        raise r.err(("board",), f"the board's facts do not fit the program: {e.message}") from None
+    return out
+
+
+def _board(r: _Reader) -> Board:
+    r.table(("board",), ("rows", "cell", "legend", "neighbours", "edge", "marks"))
+    rows = r.strings(("board", "rows"))
+    if not rows or any(len(x) != len(rows[0]) for x in rows) or not rows[0]:
+        raise r.err(("board", "rows"), "expected rows of one length, at least one cell")
+    if len(rows) * len(rows[0]) > MAX_BOARD_CELLS:
+        raise r.err(("board", "rows"), f"more than {MAX_BOARD_CELLS} cells")
+    fmt = r.string(("board", "cell"), "c{row}_{col}")
+    try:
+        names = {fmt.format(row=0, col=0), fmt.format(row=len(rows) - 1, col=len(rows[0]) - 1)}
+    except (KeyError, IndexError, ValueError, AttributeError):
+        raise r.err(("board", "cell"), "expected a name with {row} and {col}, such as \"c{row}_{col}\"") from None
+    if not all(CONSTANT_RE.fullmatch(n) for n in names) or "{row}" not in fmt or "{col}" not in fmt:
+        raise r.err(("board", "cell"), f"{fmt!r} must make plain constants from {{row}} and {{col}}")
+    legend: dict[str, tuple[str, ...]] = {}
+    for ch, preds in r.table(("board", "legend"), default={}).items():
+        if len(ch) != 1:
+            raise r.err(("board", "legend", ch), "expected a single character as the key")
+        legend[ch] = tuple(r.strings(("board", "legend", ch)))
+    neighbours: dict[str, tuple[int, int]] = {}
+    for name, d in r.table(("board", "neighbours"), default={}).items():
+        if not (isinstance(d, list) and len(d) == 2 and all(isinstance(x, int) and not isinstance(x, bool) for x in d)):
+            raise r.err(("board", "neighbours", name), f"expected [row step, column step], got {_kind(d)}")
+        neighbours[name] = (d[0], d[1])
+    edge = r.string(("board", "edge"), "stay", choices=("stay", "none"))
+    marks = {}
+    for pred, ch in r.table(("board", "marks"), default={}).items():
+        if not isinstance(ch, str) or len(ch) != 1:
+            raise r.err(("board", "marks", pred), "expected one character")
+        marks[pred] = ch
+    return Board(tuple(rows), fmt, legend, neighbours, edge, marks)
+
+
+def _domain(r: _Reader, path: KeyPath, domains: dict[str, list[str]]) -> list[str]:
+    v = r.value(path) if not (isinstance(r.raw(path), str) and r.raw(path) in domains) else r.raw(path)
+    if isinstance(v, str) and v in domains:
+        return domains[v]
+    if not isinstance(v, list) or not v or not all(isinstance(x, str) for x in v):
+        raise r.err(path, f"expected \"cells\" or a list of constants, got {_kind(v)}")
+    if len(v) > MAX_DOMAIN:
+        raise r.err(path, f"more than {MAX_DOMAIN} values")
+    return v
+
+
+def _observation(r: _Reader, check: _Names, domains: dict[str, list[str]]) -> tuple[str, tuple[ObservationPart, ...]]:
+    r.table(("observation",), ("space", "parts"))
+    space = r.string(("observation", "space"), choices=SPACES)
+    parts = []
+    raw_parts = _list(r, ("observation", "parts"))
+    if not raw_parts:
+        raise r.err(("observation", "parts"), "expected at least one [[observation.parts]]")
+    for i, p in enumerate(raw_parts):
+        path = ("observation", "parts", i)
+        r.table(path, ("name", "read", "atom", "over", "atoms"))
+        name = r.string((*path, "name"), f"part{i}")
+        read = r.string((*path, "read"), choices=READS)
+        if ("atoms" in p) == ("atom" in p):
+            raise r.err(path, "expected either `atom` (with `over`) or `atoms` (a list of ground atoms)")
+        if "atoms" in p:
+            atoms = check.atoms((*path, "atoms"), r.strings((*path, "atoms")), {})
+        else:
+            atoms = check.over((*path, "atom"), p["atom"], _domain(r, (*path, "over"), domains))
+        if not atoms:
+            raise r.err(path, "no atoms to read")
+        parts.append(ObservationPart(name, read, atoms))
+    if space in ("Discrete", "MultiDiscrete"):
+        for i, p in enumerate(parts):
+            if p.read != "index":
+                raise r.err(("observation", "parts", i, "read"), f"a {space} observation reads indices: "
+                                                                  f"expected \"index\", got {p.read!r}")
+    if len({p.name for p in parts}) != len(parts):
+        raise r.err(("observation", "parts"), "two parts with one name")
+    return space, tuple(parts)
+
+
+def _reward(r: _Reader, check: _Names, agent: str) -> tuple[tuple[tuple[Atom, float], ...], tuple[tuple[Atom, float], ...]]:
+    r.table(("reward",), ("table", "atom", "scale"), default={})
+    table = []
+    for text in r.table(("reward", "table"), default={}):
+        path = ("reward", "table", text)
+        table.append((check.ground(check.pattern(path, text, (AGENT_VAR,)), {AGENT_VAR: agent}), r.number(path)))
+    scaled = []
+    if "atom" in r.raw(("reward",), {}):
+        lit = check.pattern(("reward", "atom"), r.string(("reward", "atom")), (AGENT_VAR,))
+        scaled.append((check.ground(lit, {AGENT_VAR: agent}), r.number(("reward", "scale"), 1.0)))
+    return tuple(table), tuple(scaled)
+
+
+def _draw(r: _Reader, check: _Names, path: KeyPath, domains: dict[str, list[str]], *, weighted: bool) -> Draw:
+    keys = ("atom", "over", "probabilities", "weights") if weighted else ("atom", "over", "probabilities")
+    t = r.table(path, keys)
+    domain = _domain(r, (*path, "over"), domains)
+    atoms = check.over((*path, "atom"), r.string((*path, "atom")), domain)
+    if "weights" in t:
+        if "probabilities" in t:
+            raise r.err(path, "expected `probabilities` or `weights`, not both")
+        var = _vars(t["atom"])[0].name
+        wlit = check.pattern((*path, "weights"), r.string((*path, "weights")), (var,))
+        return Draw(path, atoms, None, tuple(check.ground(wlit, {var: v}) for v in domain))
+    if "probabilities" in t:
+        return Draw(path, atoms, r.numbers((*path, "probabilities"), len(atoms)))
+    return Draw(path, atoms, np.full(len(atoms), 1.0 / len(atoms)))
