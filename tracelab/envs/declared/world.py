@@ -21,9 +21,15 @@ from tracelab.engine import Engine
 from tracelab.envs.declared.spec import Atom, Draw, WorldSpec
 
 
-def categorical(p: np.ndarray, rng: np.random.Generator) -> int:
-    """gymnasium.envs.toy_text.utils.categorical_sample, draw for draw (one rng.random())."""
-    return int(np.argmax(np.cumsum(p) > rng.random()))
+def categorical(cumulative: list[float], rng: np.random.Generator) -> int:
+    """gymnasium.envs.toy_text.utils.categorical_sample, draw for draw: one rng.random() u, and the first
+    value whose cumulative probability (np.cumsum of the probabilities, the same float64 sums) exceeds u,
+    or value 0 when none does (argmax of all-false)."""
+    u = rng.random()
+    for i, c in enumerate(cumulative):
+        if c > u:
+            return i
+    return 0
 
 
 class DeclaredWorld:
@@ -36,6 +42,7 @@ class DeclaredWorld:
         self._action_ids = [ids(facts) for facts in spec.action_facts[0]]
         self._action_bounds = [_bounds(f) for f in spec.action_facts[0]]
         self._random_ids = [ids(d.atoms) for d in spec.random_facts]
+        self._random_cumulative = [np.cumsum(d.probabilities).tolist() for d in spec.random_facts]
         self._choice_ids = [ids(d.atoms) for d in spec.start_choices]
         self._start_ids, self._start_bounds = ids(spec.start_facts), _bounds(spec.start_facts)
         env_set = np.unique(np.concatenate([np.zeros(0, np.int64), *(a for a in self._action_ids),
@@ -69,7 +76,7 @@ class DeclaredWorld:
         eng.restore(self._snapshot, np.array([0]))
         atoms, bounds = [self._start_ids], [self._start_bounds]
         for draw, ids, wids in zip(self.spec.start_choices, self._choice_ids, self._weight_ids):
-            i = categorical(self._probabilities(draw, wids), rng)
+            i = categorical(np.cumsum(self._probabilities(draw, wids)).tolist(), rng)
             atoms.append(ids[i:i + 1])
             bounds.append(np.array([[draw.atoms[i].lower, draw.atoms[i].upper]]))
         self._step_engine(np.concatenate(atoms), np.concatenate(bounds))
@@ -90,12 +97,13 @@ class DeclaredWorld:
         """Set the action's facts and this step's random facts, and step the engine."""
         new = [self._action_ids[action]]
         bounds = [self._action_bounds[action]]
-        for draw, ids in zip(self.spec.random_facts, self._random_ids):
-            i = categorical(draw.probabilities, rng)  # type: ignore[arg-type]
+        for draw, ids, cumulative in zip(self.spec.random_facts, self._random_ids, self._random_cumulative):
+            i = categorical(cumulative, rng)
             new.append(ids[i:i + 1])
             bounds.append(np.array([[draw.atoms[i].lower, draw.atoms[i].upper]]))
         now = np.concatenate(new)
-        off = np.setdiff1d(self._set_now, now)  # last step's facts not set again: false now
+        again = set(now.tolist())
+        off = np.array([a for a in self._set_now.tolist() if a not in again], np.int64)  # not set again: false
         self._step_engine(np.concatenate([off, now]),
                           np.concatenate([np.zeros((len(off), 2)), *bounds]))
         self._set_now = now

@@ -1,0 +1,69 @@
+"""gymnasium's toy-text games written as rules (rules/toytext/) against gymnasium's own implementation:
+the same seed and actions give the same observations, rewards, terminated and truncated at every step."""
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.envs.toy_text.frozen_lake import generate_random_map
+from gymnasium.utils.env_checker import check_env
+
+import tracelab.envs  # noqa: F401  (registers tracelab/FrozenLake-v1)
+
+STEPS = 10_000  # random-action steps per variant, across episodes
+
+
+def run_side_by_side(ours: gym.Env, theirs: gym.Env, steps: int, seed: int) -> int:
+    """Step both envs with the same random actions until `steps` steps were compared; each new seed
+    starts an episode with reset(seed=...), and every other episode continues the stream (reset()).
+    Returns the number of episodes."""
+    actions = np.random.default_rng(seed)
+    done, episodes = True, 0
+    for n in range(steps):
+        if done:
+            s = None if episodes % 2 else seed + episodes
+            got, want = ours.reset(seed=s), theirs.reset(seed=s)
+            assert got[0] == want[0], f"reset {episodes} (seed {s}): obs {got[0]} != {want[0]}"
+            episodes += 1
+        a = int(actions.integers(4))
+        got, want = ours.step(a), theirs.step(a)
+        assert got[:4] == want[:4], f"step {n} (episode {episodes}, action {a}): {got[:4]} != {want[:4]}"
+        done = got[2] or got[3]
+    return episodes
+
+
+CUSTOM = ["SFFHF", "FHFFS", "FFHFF", "HFFFG"]  # not square, two start cells (drawn as gymnasium does)
+
+VARIANTS = {
+    "4x4-slippery": {},
+    "4x4-dry": {"is_slippery": False},
+    "8x8-slippery": {"map_name": "8x8"},
+    "8x8-dry": {"map_name": "8x8", "is_slippery": False},
+    "custom-rate-schedule": {"desc": CUSTOM, "success_rate": 0.6, "reward_schedule": (5, -2, 0.5)},
+    "generated": {"desc": generate_random_map(size=6, p=0.7, seed=11), "success_rate": 0.8},
+}
+
+
+@pytest.mark.parametrize("variant", list(VARIANTS))
+def test_frozen_lake_matches_gymnasium(variant: str) -> None:
+    kwargs = VARIANTS[variant]
+    ours = gym.make("tracelab/FrozenLake-v1", **kwargs)
+    theirs = gym.make("FrozenLake-v1", **kwargs)
+    assert ours.spec.max_episode_steps == theirs.spec.max_episode_steps == 100
+    assert ours.observation_space == theirs.observation_space and ours.action_space == theirs.action_space
+    episodes = run_side_by_side(ours, theirs, STEPS, seed=len(variant))
+    assert episodes > 50  # many episodes, so many seeds and many ends
+
+
+def test_frozen_lake_8x8_id_has_gymnasiums_limit() -> None:
+    ours, theirs = gym.make("tracelab/FrozenLake8x8-v1"), gym.make("FrozenLake8x8-v1")
+    assert ours.spec.max_episode_steps == theirs.spec.max_episode_steps == 200
+    run_side_by_side(ours, theirs, 2_000, seed=3)
+
+
+def test_frozen_lake_passes_gymnasiums_env_checker() -> None:
+    env = gym.make("tracelab/FrozenLake-v1", render_mode="ansi")
+    check_env(env.unwrapped)
+    env.reset(seed=0)
+    text = env.render()
+    assert text.splitlines()[1:] == ["@FFF", "FHFH", "FFFH", "HFFG"]
