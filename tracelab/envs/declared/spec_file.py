@@ -124,7 +124,7 @@ class SpecSource:
 def read_spec_file(path: str | os.PathLike[str]) -> SpecSource:
     """The spec at `path`: a regular UTF-8 file of at most SPEC_FILE_CAP bytes, parsed as TOML."""
     file = os.fspath(path)
-    text = read_text(file, SPEC_FILE_CAP, what="environment spec")
+    text = read_text(file, SPEC_FILE_CAP, what="spec file")
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
