@@ -13,20 +13,24 @@ import tracelab.envs  # noqa: F401  (registers tracelab/FrozenLake-v1)
 STEPS = 10_000  # random-action steps per variant, across episodes
 
 
-def run_side_by_side(ours: gym.Env, theirs: gym.Env, steps: int, seed: int) -> int:
+def run_side_by_side(ours: gym.Env, theirs: gym.Env, steps: int, seed: int, n_actions: int = 4,
+                     cut: int = 10**9) -> int:
     """Step both envs with the same random actions until `steps` steps were compared; each new seed
     starts an episode with reset(seed=...), and every other episode continues the stream (reset()).
-    Returns the number of episodes."""
+    An episode is also cut after `cut` steps (a game without a step limit). Returns the number of
+    episodes."""
     actions = np.random.default_rng(seed)
-    done, episodes = True, 0
+    done, episodes, length = True, 0, 0
     for n in range(steps):
-        if done:
+        if done or length >= cut:
+            length = 0
             s = None if episodes % 2 else seed + episodes
             got, want = ours.reset(seed=s), theirs.reset(seed=s)
             assert got[0] == want[0], f"reset {episodes} (seed {s}): obs {got[0]} != {want[0]}"
             episodes += 1
-        a = int(actions.integers(4))
+        a = int(actions.integers(n_actions))
         got, want = ours.step(a), theirs.step(a)
+        length += 1
         assert got[:4] == want[:4], f"step {n} (episode {episodes}, action {a}): {got[:4]} != {want[:4]}"
         done = got[2] or got[3]
     return episodes
@@ -67,3 +71,18 @@ def test_frozen_lake_passes_gymnasiums_env_checker() -> None:
     env.reset(seed=0)
     text = env.render()
     assert text.splitlines()[1:] == ["@FFF", "FHFH", "FFFH", "HFFG"]
+
+
+@pytest.mark.parametrize("is_slippery", [False, True])
+def test_cliff_walking_matches_gymnasium(is_slippery: bool) -> None:
+    ours = gym.make("tracelab/CliffWalking-v1", is_slippery=is_slippery)
+    theirs = gym.make("CliffWalking-v1", is_slippery=is_slippery)
+    assert ours.spec.max_episode_steps is theirs.spec.max_episode_steps is None
+    assert ours.observation_space == theirs.observation_space and ours.action_space == theirs.action_space
+    # random walks seldom reach the goal: episodes are cut after 150 steps, so that many seeds are drawn
+    assert run_side_by_side(ours, theirs, STEPS, seed=int(is_slippery), cut=150) > 50
+
+
+def test_cliff_walking_slippery_id() -> None:
+    ours, theirs = gym.make("tracelab/CliffWalkingSlippery-v1"), gym.make("CliffWalkingSlippery-v1")
+    run_side_by_side(ours, theirs, 2_000, seed=9, cut=150)

@@ -15,8 +15,11 @@ TOYTEXT_DIR = RULES_DIR / "toytext"
 TOYTEXT_ENVS = {
     "tracelab/FrozenLake-v1": ("frozen_lake.toml", 100),
     "tracelab/FrozenLake8x8-v1": ("frozen_lake.toml", 200),
+    "tracelab/CliffWalking-v1": ("cliff_walking.toml", None),
+    "tracelab/CliffWalkingSlippery-v1": ("cliff_walking.toml", None),
 }
-_EXTRA_KWARGS = {"tracelab/FrozenLake8x8-v1": {"map_name": "8x8"}}
+_EXTRA_KWARGS = {"tracelab/FrozenLake8x8-v1": {"map_name": "8x8"},
+                 "tracelab/CliffWalkingSlippery-v1": {"is_slippery": True}}
 
 
 def spec_path(name: str) -> Path:
