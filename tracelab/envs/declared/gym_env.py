@@ -53,7 +53,7 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
         self._last_action = a
         terminated, truncated = w.terminated(), w.truncated()
         self._running = not (terminated or truncated)
-        return self._observe(), w.reward(), terminated, truncated, self._info()
+        return self._observe(), w.last_reward, terminated, truncated, self._info()
 
     def _observe(self) -> Any:
         spec, w = self.world_spec, self.world

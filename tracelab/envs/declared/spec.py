@@ -8,6 +8,7 @@ expected). Nothing here steps an engine; world.py does."""
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 import os
 from collections.abc import Mapping
@@ -58,12 +59,17 @@ class ObservationPart:
 
 @dataclass(frozen=True)
 class Draw:
-    """One categorical draw from the env's np_random: value i's atom is set. `probabilities` fixed, or
-    `weights`: the values whose weight atom is true, equally likely (read when the episode starts)."""
+    """One draw from the env's np_random: value i sets the atoms `atoms[i]` (one per pattern).
+    `method` "categorical" is gymnasium's categorical_sample over `probabilities` (fixed), or over the
+    values whose `weights[i]` atoms are all true, equally likely (read when drawn); "choice" is
+    np_random.choice over the values whose weights hold. `after`: a random fact drawn after the step,
+    only when that atom is true then (applied by one more engine step)."""
     key: KeyPath
-    atoms: tuple[Atom, ...]
+    atoms: tuple[tuple[Atom, ...], ...]
     probabilities: np.ndarray | None
-    weights: tuple[Atom, ...] | None = None
+    weights: tuple[tuple[Atom, ...], ...] | None = None
+    method: str = "categorical"
+    after: Atom | None = None
 
 
 @dataclass
@@ -320,10 +326,10 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     r.table(("start",), ("facts", "choose"), default={})
     start_facts = check.atoms(("start", "facts"), r.strings(("start", "facts"), []), {AGENT_VAR: agents[0]},
                               bounds=True)
-    choices = tuple(_draw(r, check, ("start", "choose", i), domains, weighted=True)
-                    for i in range(len(_list(r, ("start", "choose")))))
-    randoms = tuple(_draw(r, check, ("random", i), domains, weighted=False)
-                    for i in range(len(_list(r, ("random",)))))
+    choices = tuple(d for i in range(len(_list(r, ("start", "choose"))))
+                    if (d := _draw(r, check, ("start", "choose", i), domains, start=True)) is not None)
+    randoms = tuple(d for i in range(len(_list(r, ("random",))))
+                    if (d := _draw(r, check, ("random", i), domains, start=False)) is not None)
     fps = r.integer(("env", "render_fps"), 4, minimum=1)
     del env
     return WorldSpec(src.path, names, program, tuple(agents), action_names, action_facts, mask, space, parts,
@@ -453,17 +459,53 @@ def _reward(r: _Reader, check: _Names, agent: str) -> tuple[tuple[tuple[Atom, fl
     return tuple(table), tuple(scaled)
 
 
-def _draw(r: _Reader, check: _Names, path: KeyPath, domains: dict[str, list[str]], *, weighted: bool) -> Draw:
-    keys = ("atom", "over", "probabilities", "weights") if weighted else ("atom", "over", "probabilities")
+DRAW_METHODS = ("categorical", "choice")
+
+
+def _draw(r: _Reader, check: _Names, path: KeyPath, domains: dict[str, list[str]], *, start: bool) -> Draw | None:
+    """A start choice (`start`) or a random fact; None when its `when` expression is false."""
+    keys = ("atom", "over", "probabilities", "weights", "method", "when", *(() if start else ("after",)))
     t = r.table(path, keys)
-    domain = _domain(r, (*path, "over"), domains)
-    atoms = check.over((*path, "atom"), r.string((*path, "atom")), domain)
+    if "when" in t:
+        when = r.value((*path, "when"))
+        if not isinstance(when, bool):
+            raise r.err((*path, "when"), f"expected a boolean, got {_kind(when)}")
+        if not when:
+            return None
+    patterns = t.get("atom")
+    patterns = [patterns] if isinstance(patterns, str) else r.strings((*path, "atom"))
+    variables = list(dict.fromkeys(v.name for p in patterns for v in _vars(p)))
+    over = r.raw((*path, "over"))
+    if isinstance(over, dict):
+        if list(over) != variables:
+            raise r.err((*path, "over"), f"expected one domain per variable of `atom`, in order: {', '.join(variables)}")
+        axes = [_domain(r, (*path, "over", v), domains) for v in variables]
+    else:
+        if len(variables) != 1:
+            raise r.err((*path, "atom"), "expected exactly one variable (or `over` as a table, a domain per variable)")
+        axes = [_domain(r, (*path, "over"), domains)]
+    values = [dict(zip(variables, combo)) for combo in itertools.product(*axes)]
+    if len(values) > MAX_DOMAIN:
+        raise r.err((*path, "over"), f"more than {MAX_DOMAIN} combinations")
+    lits = [check.pattern((*path, "atom"), p, tuple(variables), bounds=True) for p in patterns]
+    atoms = tuple(tuple(check.ground(lit, v) for lit in lits) for v in values)
+    method = r.string((*path, "method"), "categorical", choices=DRAW_METHODS)
+    after = None
+    if "after" in t:
+        after = check.ground(check.pattern((*path, "after"), r.string((*path, "after")), ()), {})
+    weights = probabilities = None
     if "weights" in t:
         if "probabilities" in t:
             raise r.err(path, "expected `probabilities` or `weights`, not both")
-        var = _vars(t["atom"])[0].name
-        wlit = check.pattern((*path, "weights"), r.string((*path, "weights")), (var,))
-        return Draw(path, atoms, None, tuple(check.ground(wlit, {var: v}) for v in domain))
-    if "probabilities" in t:
-        return Draw(path, atoms, r.numbers((*path, "probabilities"), len(atoms)))
-    return Draw(path, atoms, np.full(len(atoms), 1.0 / len(atoms)))
+        w = t["weights"]
+        wtexts = [w] if isinstance(w, str) else r.strings((*path, "weights"))
+        wlits = [check.pattern((*path, "weights"), x, tuple(variables)) for x in wtexts]
+        weights = tuple(tuple(check.ground(lit, v) for lit in wlits) for v in values)
+    elif "probabilities" in t:
+        if method == "choice":
+            raise r.err((*path, "method"), "\"choice\" draws uniformly among the values whose `weights` hold: "
+                                           "it takes no probabilities")
+        probabilities = r.numbers((*path, "probabilities"), len(values))
+    else:
+        probabilities = np.full(len(values), 1.0 / len(values))
+    return Draw(path, atoms, probabilities, weights, method, after)

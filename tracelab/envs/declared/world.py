@@ -7,10 +7,12 @@ Timeline (docs/worlds.md, "How a step runs"):
 - reset: the snapshot is restored, the start choices are drawn from np_random (in the spec's order) and
   one engine step applies the start facts and the chosen atoms ([1,1], or the fact's bound).
 - step: the action's facts and one value of each random fact (drawn in the spec's order) are set for the
-  step; last step's facts that are not set again go back to [0,0]. One engine step, then the observation,
-  reward and end are read off atoms.
-Draws follow gymnasium's `categorical_sample`: one `np_random.random()` u per draw, value
-argmax(cumsum(p) > u), so a seeded world draws exactly as gymnasium's toy-text games do."""
+  step; last step's facts that are not set again go back to [0,0]. One engine step; the reward is read.
+  Then each `after` random fact whose atom is true is drawn, and if any was, one more engine step applies
+  them (the step's facts back to [0,0]) and its reward is added. The observation and ends are read last.
+Draws follow gymnasium: "categorical" is `categorical_sample` (one `np_random.random()` u, the first
+value whose cumulative probability exceeds u), "choice" is `np_random.choice` over the possible values
+(one `integers(0, n)`), so a seeded world draws exactly as gymnasium's toy-text games do."""
 from __future__ import annotations
 
 from typing import Any
@@ -32,6 +34,37 @@ def categorical(cumulative: list[float], rng: np.random.Generator) -> int:
     return 0
 
 
+class _Drawer:
+    """One Draw's engine ids and how it picks a value."""
+
+    def __init__(self, draw: Draw, ids: Any) -> None:
+        self.draw = draw
+        self.value_ids = [ids(atoms) for atoms in draw.atoms]
+        self.value_bounds = [_bounds(atoms) for atoms in draw.atoms]
+        self.cumulative = None if draw.probabilities is None else np.cumsum(draw.probabilities).tolist()
+        self.weight_ids = None if draw.weights is None else \
+            np.array([ids(w) for w in draw.weights], np.int64).reshape(len(draw.weights), -1)
+        self.after = None if draw.after is None else ids([draw.after])
+
+    def pick(self, world: DeclaredWorld, rng: np.random.Generator) -> int:
+        d = self.draw
+        if self.weight_ids is None:
+            if d.method == "choice":
+                return int(rng.integers(0, len(self.value_ids)))
+            return categorical(self.cumulative, rng)  # type: ignore[arg-type]
+        w = self.weight_ids
+        ok = world.engine.is_true(w.ravel())[0].reshape(w.shape).all(axis=1)
+        possible = np.flatnonzero(ok)
+        if possible.size == 0:
+            raise RuntimeError(f"{world.spec.path}: {'.'.join(map(str, d.key))}: no value's weights "
+                               f"({', '.join(map(str, d.weights[0]))}, ...) hold: nothing to draw from")
+        if d.method == "choice":
+            return int(possible[rng.integers(0, possible.size)])
+        p = ok.astype(np.float64)
+        p /= p.sum()  # as gymnasium normalises initial_state_distrib
+        return categorical(np.cumsum(p).tolist(), rng)
+
+
 class DeclaredWorld:
     """One world of `spec` on its own engine (`kernel`: the engine's; `trace`: its change log)."""
 
@@ -41,16 +74,17 @@ class DeclaredWorld:
         ids = self._ids
         self._action_ids = [ids(facts) for facts in spec.action_facts[0]]
         self._action_bounds = [_bounds(f) for f in spec.action_facts[0]]
-        self._random_ids = [ids(d.atoms) for d in spec.random_facts]
-        self._random_cumulative = [np.cumsum(d.probabilities).tolist() for d in spec.random_facts]
-        self._choice_ids = [ids(d.atoms) for d in spec.start_choices]
+        self._choices = [_Drawer(d, ids) for d in spec.start_choices]
+        self._before = [_Drawer(d, ids) for d in spec.random_facts if d.after is None]
+        self._after = [_Drawer(d, ids) for d in spec.random_facts if d.after is not None]
         self._start_ids, self._start_bounds = ids(spec.start_facts), _bounds(spec.start_facts)
-        env_set = np.unique(np.concatenate([np.zeros(0, np.int64), *(a for a in self._action_ids),
-                                            *self._random_ids, *self._choice_ids, self._start_ids]))
-        if env_set.size:
-            eng.add_facts(env_set, 0.0, 0.0)
-        # what is read after each step: every atom in one is_true call, lower bounds where asked
-        self._weight_ids = [ids(d.weights) if d.weights is not None else None for d in spec.start_choices]
+        env_set = [self._start_ids, *self._action_ids]
+        for drawer in (*self._choices, *self._before, *self._after):
+            env_set.extend(drawer.value_ids)
+        env_set_ids = np.unique(np.concatenate([np.zeros(0, np.int64), *env_set]))
+        if env_set_ids.size:
+            eng.add_facts(env_set_ids, 0.0, 0.0)
+        # what is read after each step
         self._part_ids = [ids(p.atoms) for p in spec.parts]
         self._mask_ids = ids(spec.mask[0]) if spec.mask is not None else None
         self._table_ids = ids(a for a, _ in spec.reward_table)
@@ -63,8 +97,9 @@ class DeclaredWorld:
             [(ch, np.array([eng.atom(pred, c) for c in board.cells], np.int64)) for pred, ch in board.marks.items()]
         eng.step()  # t = 0: the program's and the board's facts
         self._snapshot = eng.snapshot()
-        self._set_now = np.zeros(0, np.int64)  # the step facts set [1,1] by the last step
+        self._set_now = np.zeros(0, np.int64)  # the step facts set by the last engine step
         self.steps = 0
+        self.last_reward = 0.0
 
     def _ids(self, atoms: Any) -> np.ndarray:
         return np.array([self.engine.atom(a.pred, *a.args) for a in atoms], np.int64)
@@ -72,42 +107,45 @@ class DeclaredWorld:
     # ---- episode ----
 
     def reset(self, rng: np.random.Generator) -> None:
-        eng = self.engine
-        eng.restore(self._snapshot, np.array([0]))
+        self.engine.restore(self._snapshot, np.array([0]))
         atoms, bounds = [self._start_ids], [self._start_bounds]
-        for draw, ids, wids in zip(self.spec.start_choices, self._choice_ids, self._weight_ids):
-            i = categorical(np.cumsum(self._probabilities(draw, wids)).tolist(), rng)
-            atoms.append(ids[i:i + 1])
-            bounds.append(np.array([[draw.atoms[i].lower, draw.atoms[i].upper]]))
+        for drawer in self._choices:
+            i = drawer.pick(self, rng)
+            atoms.append(drawer.value_ids[i])
+            bounds.append(drawer.value_bounds[i])
         self._step_engine(np.concatenate(atoms), np.concatenate(bounds))
         self._set_now = np.zeros(0, np.int64)
         self.steps = 0
 
-    def _probabilities(self, draw: Draw, weight_ids: np.ndarray | None) -> np.ndarray:
-        if weight_ids is None:
-            return draw.probabilities  # type: ignore[return-value]
-        w = self.engine.is_true(weight_ids)[0].astype(np.float64)
-        total = w.sum()
-        if total == 0:
-            raise RuntimeError(f"{self.spec.path}: {'.'.join(map(str, draw.key))}: no value's weight atom "
-                               f"({draw.weights[0].pred}) is true: nothing to choose from")
-        return w / total
-
     def step(self, action: int, rng: np.random.Generator) -> None:
-        """Set the action's facts and this step's random facts, and step the engine."""
-        new = [self._action_ids[action]]
-        bounds = [self._action_bounds[action]]
-        for draw, ids, cumulative in zip(self.spec.random_facts, self._random_ids, self._random_cumulative):
-            i = categorical(cumulative, rng)
-            new.append(ids[i:i + 1])
-            bounds.append(np.array([[draw.atoms[i].lower, draw.atoms[i].upper]]))
-        now = np.concatenate(new)
-        again = set(now.tolist())
-        off = np.array([a for a in self._set_now.tolist() if a not in again], np.int64)  # not set again: false
-        self._step_engine(np.concatenate([off, now]),
-                          np.concatenate([np.zeros((len(off), 2)), *bounds]))
-        self._set_now = now
+        """Set the action's facts and this step's random facts, step the engine (twice when an `after`
+        random fact is drawn); the reward of the step is then `last_reward`."""
+        new, bounds = [self._action_ids[action]], [self._action_bounds[action]]
+        for drawer in self._before:
+            i = drawer.pick(self, rng)
+            new.append(drawer.value_ids[i])
+            bounds.append(drawer.value_bounds[i])
+        self._set_step_facts(np.concatenate(new), np.concatenate(bounds))
+        reward = self._read_reward()
+        if self._after:
+            new, bounds = [], []
+            for drawer in self._after:
+                if self.true(drawer.after)[0]:
+                    i = drawer.pick(self, rng)
+                    new.append(drawer.value_ids[i])
+                    bounds.append(drawer.value_bounds[i])
+            if new:
+                self._set_step_facts(np.concatenate(new), np.concatenate(bounds))
+                reward += self._read_reward()
+        self.last_reward = reward
         self.steps += 1
+
+    def _set_step_facts(self, now: np.ndarray, bounds: np.ndarray) -> None:
+        """One engine step with `now` set and the last step's facts that are not set again false."""
+        again = set(now.tolist())
+        off = np.array([a for a in self._set_now.tolist() if a not in again], np.int64)
+        self._step_engine(np.concatenate([off, now]), np.concatenate([np.zeros((len(off), 2)), bounds]))
+        self._set_now = now
 
     def _step_engine(self, atoms: np.ndarray, bounds: np.ndarray) -> None:
         eng = self.engine
@@ -139,7 +177,7 @@ class DeclaredWorld:
             return lower
         return np.stack([lower, self.engine.upper[0, ids].astype(np.float32)], axis=1).ravel()
 
-    def reward(self) -> float:
+    def _read_reward(self) -> float:
         r = float(self._table_values[self.true(self._table_ids)].sum()) if len(self._table_ids) else 0.0
         if len(self._scaled_ids):
             r += float((self.engine.lower[0, self._scaled_ids] * self._scales).sum())
