@@ -13,27 +13,43 @@ import tracelab.envs  # noqa: F401  (registers tracelab/FrozenLake-v1)
 STEPS = 10_000  # random-action steps per variant, across episodes
 
 
-def run_side_by_side(ours: gym.Env, theirs: gym.Env, steps: int, seed: int, n_actions: int = 4,
-                     cut: int = 10**9) -> int:
+def run_side_by_side(ours: gym.Env, theirs: gym.Env, steps: int, seed: int, *, cut: int = 10**9,
+                     masked: float = 0.0, watch=None) -> int:
     """Step both envs with the same random actions until `steps` steps were compared; each new seed
     starts an episode with reset(seed=...), and every other episode continues the stream (reset()).
-    An episode is also cut after `cut` steps (a game without a step limit). Returns the number of
-    episodes."""
-    actions = np.random.default_rng(seed)
+    An episode is also cut after `cut` steps (a game without a step limit). With `masked` > 0 that share
+    of actions is drawn among those gymnasium's info["action_mask"] allows (which is then compared too),
+    so that rare events happen often. `watch(before, after)` sees gymnasium's states around each step.
+    Returns the number of episodes."""
+    rng = np.random.default_rng(seed)
+    n_actions = theirs.action_space.n
     done, episodes, length = True, 0, 0
     for n in range(steps):
         if done or length >= cut:
-            length = 0
             s = None if episodes % 2 else seed + episodes
             got, want = ours.reset(seed=s), theirs.reset(seed=s)
             assert got[0] == want[0], f"reset {episodes} (seed {s}): obs {got[0]} != {want[0]}"
-            episodes += 1
-        a = int(actions.integers(n_actions))
+            _same_mask(got[1], want[1], f"reset {episodes}")
+            info, episodes, length = want[1], episodes + 1, 0
+        if masked and rng.random() < masked:
+            a = int(rng.choice(np.flatnonzero(info["action_mask"])))
+        else:
+            a = int(rng.integers(n_actions))
+        before = theirs.unwrapped.s
         got, want = ours.step(a), theirs.step(a)
         length += 1
         assert got[:4] == want[:4], f"step {n} (episode {episodes}, action {a}): {got[:4]} != {want[:4]}"
-        done = got[2] or got[3]
+        _same_mask(got[4], want[4], f"step {n}")
+        if watch is not None:
+            watch(before, want[0])
+        info, done = want[4], got[2] or got[3]
     return episodes
+
+
+def _same_mask(got: dict, want: dict, where: str) -> None:
+    if "action_mask" in want:
+        assert got["action_mask"].tolist() == want["action_mask"].tolist(), \
+            f"{where}: action_mask {got['action_mask']} != {want['action_mask']}"
 
 
 CUSTOM = ["SFFHF", "FHFFS", "FFHFF", "HFFFG"]  # not square, two start cells (drawn as gymnasium does)
@@ -65,9 +81,13 @@ def test_frozen_lake_8x8_id_has_gymnasiums_limit() -> None:
     run_side_by_side(ours, theirs, 2_000, seed=3)
 
 
-def test_frozen_lake_passes_gymnasiums_env_checker() -> None:
+@pytest.mark.parametrize("env_id", ["tracelab/FrozenLake-v1", "tracelab/CliffWalking-v1", "tracelab/Taxi-v4"])
+def test_toytext_envs_pass_gymnasiums_env_checker(env_id: str) -> None:
+    check_env(gym.make(env_id, render_mode="ansi").unwrapped)
+
+
+def test_frozen_lake_renders_its_map_as_text() -> None:
     env = gym.make("tracelab/FrozenLake-v1", render_mode="ansi")
-    check_env(env.unwrapped)
     env.reset(seed=0)
     text = env.render()
     assert text.splitlines()[1:] == ["@FFF", "FHFH", "FFFH", "HFFG"]
@@ -86,3 +106,32 @@ def test_cliff_walking_matches_gymnasium(is_slippery: bool) -> None:
 def test_cliff_walking_slippery_id() -> None:
     ours, theirs = gym.make("tracelab/CliffWalkingSlippery-v1"), gym.make("CliffWalkingSlippery-v1")
     run_side_by_side(ours, theirs, 2_000, seed=9, cut=150)
+
+
+TAXI_VARIANTS = {
+    "dry": {},
+    "rainy": {"is_rainy": True, "rainy_probability": 0.7},
+    "fickle": {"fickle_passenger": True},
+    "rainy-fickle": {"is_rainy": True, "fickle_passenger": True, "fickle_probability": 0.9},
+}
+
+
+@pytest.mark.parametrize("variant", list(TAXI_VARIANTS))
+def test_taxi_matches_gymnasium(variant: str) -> None:
+    kwargs = TAXI_VARIANTS[variant]
+    ours, theirs = gym.make("tracelab/Taxi-v4", **kwargs), gym.make("Taxi-v4", **kwargs)
+    assert ours.spec.max_episode_steps == theirs.spec.max_episode_steps == 200
+    assert ours.observation_space == theirs.observation_space and ours.action_space == theirs.action_space
+    decode = theirs.unwrapped.decode
+    seen = {"pickups": 0, "dropoffs": 0, "new destinations": 0}
+
+    def watch(before: int, after: int) -> None:
+        (_, _, p0, d0), (_, _, p1, d1) = decode(before), decode(after)
+        seen["pickups"] += p0 < 4 and p1 == 4
+        seen["dropoffs"] += p0 == 4 and p1 < 4
+        seen["new destinations"] += d0 != d1
+
+    # 70% of the actions among the allowed ones, so that pickups, dropoffs and deliveries are frequent
+    episodes = run_side_by_side(ours, theirs, STEPS, seed=len(variant), masked=0.7, watch=watch)
+    assert episodes > 40 and seen["pickups"] > 50 and seen["dropoffs"] > 40, seen
+    assert (seen["new destinations"] > 5) == kwargs.get("fickle_passenger", False), seen

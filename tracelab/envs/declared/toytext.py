@@ -17,6 +17,7 @@ TOYTEXT_ENVS = {
     "tracelab/FrozenLake8x8-v1": ("frozen_lake.toml", 200),
     "tracelab/CliffWalking-v1": ("cliff_walking.toml", None),
     "tracelab/CliffWalkingSlippery-v1": ("cliff_walking.toml", None),
+    "tracelab/Taxi-v4": ("taxi.toml", 200),
 }
 _EXTRA_KWARGS = {"tracelab/FrozenLake8x8-v1": {"map_name": "8x8"},
                  "tracelab/CliffWalkingSlippery-v1": {"is_slippery": True}}
