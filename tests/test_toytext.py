@@ -135,3 +135,12 @@ def test_taxi_matches_gymnasium(variant: str) -> None:
     episodes = run_side_by_side(ours, theirs, STEPS, seed=len(variant), masked=0.7, watch=watch)
     assert episodes > 40 and seen["pickups"] > 50 and seen["dropoffs"] > 40, seen
     assert (seen["new destinations"] > 5) == kwargs.get("fickle_passenger", False), seen
+
+
+@pytest.mark.parametrize("kernel", ["lanes", "counting"])
+def test_a_kernel_asked_for_by_name_gives_the_same_games(kernel: str) -> None:
+    """The fused one-call step (the counting kernel, the default) and the engine's own steps (any kernel
+    named) read and draw alike."""
+    ours = gym.make("tracelab/Taxi-v4", is_rainy=True, fickle_passenger=True, kernel=kernel)
+    assert ours.unwrapped.world.engine.kernel == kernel
+    run_side_by_side(ours, gym.make("Taxi-v4", is_rainy=True, fickle_passenger=True), 3_000, seed=4, masked=0.7)

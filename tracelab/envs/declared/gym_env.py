@@ -56,16 +56,7 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
         return self._observe(), w.last_reward, terminated, truncated, self._info()
 
     def _observe(self) -> Any:
-        spec, w = self.world_spec, self.world
-        values = [w.part_values(i) for i in range(len(spec.parts))]
-        if spec.space == "Discrete":
-            dims = [len(p.atoms) for p in spec.parts]
-            return int(np.ravel_multi_index([int(v[0]) for v in values], dims))
-        if spec.space == "MultiDiscrete":
-            return np.concatenate(values).astype(np.int64)
-        if spec.space == "Box":
-            return np.concatenate([v.astype(np.float32) for v in values])
-        return {p.name: (int(v[0]) if p.read == "index" else v) for p, v in zip(spec.parts, values)}
+        return self.world.observation()
 
     def _info(self) -> dict[str, Any]:
         info: dict[str, Any] = {"t": self.world.steps}

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from tracelab.engine import Engine
+from tracelab.envs.declared import fused
 from tracelab.envs.declared.spec import Atom, Draw, WorldSpec
 
 
@@ -45,24 +46,38 @@ class _Drawer:
         self.weight_ids = None if draw.weights is None else \
             np.array([ids(w) for w in draw.weights], np.int64).reshape(len(draw.weights), -1)
         self.after = None if draw.after is None else ids([draw.after])
+        self.possible: np.ndarray | None = None
+        self.frozen = False
 
     def pick(self, world: DeclaredWorld, rng: np.random.Generator) -> int:
         d = self.draw
-        if self.weight_ids is None:
+        if self.weight_ids is None and self.possible is None:
             if d.method == "choice":
                 return int(rng.integers(0, len(self.value_ids)))
             return categorical(self.cumulative, rng)  # type: ignore[arg-type]
-        w = self.weight_ids
+        possible, cumulative = (self.possible, self.cumulative) if self.frozen else self._weighed(world)
+        if d.method == "choice":
+            return int(possible[rng.integers(0, possible.size)])
+        return categorical(cumulative, rng)
+
+    def freeze(self, world: DeclaredWorld) -> None:
+        """Read the weights now, once: a start choice reads them on the snapshot every episode starts
+        from, so they never change."""
+        if self.weight_ids is not None:
+            self.possible, self.cumulative = self._weighed(world)
+            self.frozen = True
+
+    def _weighed(self, world: DeclaredWorld) -> tuple[np.ndarray, list[float]]:
+        """The values whose weights all hold, and the cumulative probabilities of choosing each value."""
+        d, w = self.draw, self.weight_ids
         ok = world.engine.is_true(w.ravel())[0].reshape(w.shape).all(axis=1)
         possible = np.flatnonzero(ok)
         if possible.size == 0:
             raise RuntimeError(f"{world.spec.path}: {'.'.join(map(str, d.key))}: no value's weights "
                                f"({', '.join(map(str, d.weights[0]))}, ...) hold: nothing to draw from")
-        if d.method == "choice":
-            return int(possible[rng.integers(0, possible.size)])
         p = ok.astype(np.float64)
         p /= p.sum()  # as gymnasium normalises initial_state_distrib
-        return categorical(np.cumsum(p).tolist(), rng)
+        return possible, np.cumsum(p).tolist()
 
 
 class DeclaredWorld:
@@ -70,7 +85,10 @@ class DeclaredWorld:
 
     def __init__(self, spec: WorldSpec, *, kernel: str = "auto", trace: bool = False) -> None:
         self.spec = spec
-        self.engine = eng = Engine(spec.program, worlds=1, trace=trace, kernel=kernel)
+        # one world steps fastest on the counting kernel inside one compiled call (fused.py); another
+        # kernel asked for by name runs its own steps
+        self.engine = eng = Engine(spec.program, worlds=1, trace=trace,
+                                   kernel="counting" if kernel == "auto" else kernel)
         ids = self._ids
         self._action_ids = [ids(facts) for facts in spec.action_facts[0]]
         self._action_bounds = [_bounds(f) for f in spec.action_facts[0]]
@@ -84,22 +102,50 @@ class DeclaredWorld:
         env_set_ids = np.unique(np.concatenate([np.zeros(0, np.int64), *env_set]))
         if env_set_ids.size:
             eng.add_facts(env_set_ids, 0.0, 0.0)
-        # what is read after each step
+        # what is read after each step: index parts, the reward table, the ends and the mask in one
+        # compiled call (fused.read_step); the other parts and scaled rewards from the bound arrays
+        self._index_parts = [i for i, p in enumerate(spec.parts) if p.read == "index"]
         self._part_ids = [ids(p.atoms) for p in spec.parts]
-        self._mask_ids = ids(spec.mask[0]) if spec.mask is not None else None
-        self._table_ids = ids(a for a, _ in spec.reward_table)
-        self._table_values = np.array([v for _, v in spec.reward_table], np.float64)
+        self._part_sizes = [len(p.atoms) for p in spec.parts]
         self._scaled_ids = ids(a for a, _ in spec.reward_scaled)
         self._scales = np.array([s for _, s in spec.reward_scaled], np.float64)
-        self._term_ids, self._trunc_ids = ids(spec.terminated), ids(spec.truncated)
+        mask_ids = ids(spec.mask[0]) if spec.mask is not None else np.zeros(0, np.int64)
+        self._has_mask = spec.mask is not None
+        part_ptr, part_atoms, _ = fused.csr([self._part_ids[i] for i in self._index_parts], [])
+        self._reads = (part_ptr, part_atoms, ids(a for a, _ in spec.reward_table),
+                       np.array([v for _, v in spec.reward_table], np.float64), ids(spec.terminated),
+                       ids(spec.truncated), mask_ids)
+        self._out = (np.zeros(len(self._index_parts), np.int64), np.zeros(3), np.zeros(len(mask_ids), np.int8),
+                     np.zeros(1, np.int64))
         board = spec.board
         self._marks = [] if board is None else \
             [(ch, np.array([eng.atom(pred, c) for c in board.cells], np.int64)) for pred, ch in board.marks.items()]
+        self._tables = self._step_tables()
         eng.step()  # t = 0: the program's and the board's facts
         self._snapshot = eng.snapshot()
-        self._set_now = np.zeros(0, np.int64)  # the step facts set by the last engine step
+        self._buffers: fused.DeclaredBuffers | None = None
+        self._bound_version = -1
+        for drawer in self._choices:
+            drawer.freeze(self)
+        # picks per draw of the fused tables: the step's random facts, then the start's choices and facts
+        self._picks = np.full(len(self._tables[3]), -1, np.int64)
+        self._start_picks = self._picks.copy()
+        self._start_picks[-1] = 0  # the start facts: a draw with one value
         self.steps = 0
         self.last_reward = 0.0
+
+    def _step_tables(self) -> tuple[np.ndarray, ...]:
+        """fused.py's tables of the step facts, and its row buffers (room for every fact on and off)."""
+        act_ptr, act_atoms, act_bnd = fused.csr(self._action_ids, self._action_bounds)
+        groups = [d.value_ids for d in (*self._before, *self._after, *self._choices)] + [[self._start_ids]]
+        bounds = [d.value_bounds for d in (*self._before, *self._after, *self._choices)] + [[self._start_bounds]]
+        draw_base = np.cumsum([0] + [len(g) for g in groups])[:-1].astype(np.int64)
+        val_ptr, val_atoms, val_bnd = fused.csr([v for g in groups for v in g], [v for b in bounds for v in b])
+        cap = max((len(a) for a in self._action_ids), default=0) + \
+            sum(max((len(v) for v in g), default=0) for g in groups) + 1
+        self._ext = (np.zeros(2, np.int64), np.zeros((2 * cap, 3), np.int64), np.zeros((2 * cap, 2)))
+        return (act_ptr, act_atoms, act_bnd, draw_base, val_ptr, val_atoms, val_bnd, np.zeros(cap, np.int64),
+                np.zeros(1, np.int64), np.zeros(cap, np.int64), np.zeros((cap, 2)))
 
     def _ids(self, atoms: Any) -> np.ndarray:
         return np.array([self.engine.atom(a.pred, *a.args) for a in atoms], np.int64)
@@ -108,44 +154,94 @@ class DeclaredWorld:
 
     def reset(self, rng: np.random.Generator) -> None:
         self.engine.restore(self._snapshot, np.array([0]))
-        atoms, bounds = [self._start_ids], [self._start_bounds]
-        for drawer in self._choices:
-            i = drawer.pick(self, rng)
-            atoms.append(drawer.value_ids[i])
-            bounds.append(drawer.value_bounds[i])
-        self._step_engine(np.concatenate(atoms), np.concatenate(bounds))
-        self._set_now = np.zeros(0, np.int64)
+        picks, first = self._start_picks, len(self._before) + len(self._after)
+        for k, drawer in enumerate(self._choices):
+            picks[first + k] = drawer.pick(self, rng)
+        prev_n = self._tables[8]
+        prev_n[0] = 0  # the snapshot has every step fact false
+        self._fused_step(-1, picks)
+        prev_n[0] = 0  # the start's facts stay: the next step does not turn them off
         self.steps = 0
 
     def step(self, action: int, rng: np.random.Generator) -> None:
         """Set the action's facts and this step's random facts, step the engine (twice when an `after`
         random fact is drawn); the reward of the step is then `last_reward`."""
-        new, bounds = [self._action_ids[action]], [self._action_bounds[action]]
-        for drawer in self._before:
-            i = drawer.pick(self, rng)
-            new.append(drawer.value_ids[i])
-            bounds.append(drawer.value_bounds[i])
-        self._set_step_facts(np.concatenate(new), np.concatenate(bounds))
-        reward = self._read_reward()
+        picks = self._picks
+        picks[:] = -1
+        for d, drawer in enumerate(self._before):
+            picks[d] = drawer.pick(self, rng)
+        self._fused_step(action, picks)
+        reward = self._reward()
         if self._after:
-            new, bounds = [], []
-            for drawer in self._after:
+            picks[:len(self._before)] = -1
+            drawn = False
+            for d, drawer in enumerate(self._after, start=len(self._before)):
                 if self.true(drawer.after)[0]:
-                    i = drawer.pick(self, rng)
-                    new.append(drawer.value_ids[i])
-                    bounds.append(drawer.value_bounds[i])
-            if new:
-                self._set_step_facts(np.concatenate(new), np.concatenate(bounds))
-                reward += self._read_reward()
+                    picks[d] = drawer.pick(self, rng)
+                    drawn = True
+            if drawn:
+                self._fused_step(-1, picks)
+                reward += self._reward()
         self.last_reward = reward
         self.steps += 1
 
-    def _set_step_facts(self, now: np.ndarray, bounds: np.ndarray) -> None:
-        """One engine step with `now` set and the last step's facts that are not set again false."""
-        again = set(now.tolist())
-        off = np.array([a for a in self._set_now.tolist() if a not in again], np.int64)
-        self._step_engine(np.concatenate([off, now]), np.concatenate([np.zeros((len(off), 2)), bounds]))
-        self._set_now = now
+    def _fused_step(self, action: int, picks: np.ndarray) -> None:
+        eng = self.engine
+        if eng.kernel != "counting":  # the engine's own step, then the reads
+            self._unfused_step(action, picks)
+            return
+        b = self._bind()
+        status = fused.fused_step(b, action, picks, eng.t, eng.next_external_id())
+        ext_ptr, ext_i, ext_f = self._ext
+        eng.finish_fused_step(status, int(self._out[3][0]), ext_ptr, ext_i, ext_f)
+        if status != fused.STATUS_OK:  # the kernel paused (buffer room) and finish went on: read now
+            self._read()
+
+    def _bind(self) -> fused.DeclaredBuffers:
+        version = self.engine.prepare_fused_step()
+        if self._buffers is None or version != self._bound_version:
+            self._buffers = fused.bind(self.engine.fused_binding(), self._tables, self._ext, self._reads,
+                                       self._out)
+            self._bound_version = self.engine.layout_version
+        return self._buffers
+
+    def _unfused_step(self, action: int, picks: np.ndarray) -> None:
+        """The fused step's work with the engine's own calls (lanes or compiled kernel)."""
+        t = self._tables
+        act_ptr, act_atoms, act_bnd, draw_base, val_ptr, val_atoms, val_bnd, prev, prev_n = t[:9]
+        now, bnd = [np.zeros(0, np.int64)], [np.zeros((0, 2))]
+        if action >= 0:
+            now.append(act_atoms[act_ptr[action]:act_ptr[action + 1]])
+            bnd.append(act_bnd[act_ptr[action]:act_ptr[action + 1]])
+        for d, p in enumerate(picks):
+            if p >= 0:
+                v = draw_base[d] + p
+                now.append(val_atoms[val_ptr[v]:val_ptr[v + 1]])
+                bnd.append(val_bnd[val_ptr[v]:val_ptr[v + 1]])
+        new = np.concatenate(now)
+        again = set(new.tolist())
+        off = np.array([a for a in prev[:prev_n[0]].tolist() if a not in again], np.int64)
+        self._step_engine(np.concatenate([off, new]), np.concatenate([np.zeros((len(off), 2)), *bnd]))
+        prev[:len(new)] = new
+        prev_n[0] = len(new)
+        self._read()
+
+    def _read(self) -> None:
+        if self.engine.kernel != "counting":
+            self._read_unfused()
+        else:
+            fused.read_step(self._bind())
+
+    def _read_unfused(self) -> None:
+        part_ptr, part_atoms, table_atoms, table_values, term_atoms, trunc_atoms, mask_atoms = self._reads
+        index, res, mask, _ = self._out
+        for p in range(len(part_ptr) - 1):
+            hit = self.true(part_atoms[part_ptr[p]:part_ptr[p + 1]])
+            index[p] = int(np.argmax(hit)) if hit.any() else -1
+        res[0] = table_values[self.true(table_atoms)].sum() if len(table_atoms) else 0.0
+        res[1] = float(len(term_atoms) > 0 and self.true(term_atoms).any())
+        res[2] = float(len(trunc_atoms) > 0 and self.true(trunc_atoms).any())
+        mask[:] = self.true(mask_atoms) if len(mask_atoms) else 0
 
     def _step_engine(self, atoms: np.ndarray, bounds: np.ndarray) -> None:
         eng = self.engine
@@ -161,38 +257,51 @@ class DeclaredWorld:
     def true(self, ids: np.ndarray) -> np.ndarray:
         return self.engine.is_true(ids)[0]
 
-    def part_values(self, i: int) -> np.ndarray:
-        """Observation part i's numbers (an index: one int64; else float32)."""
-        part, ids = self.spec.parts[i], self._part_ids[i]
-        if part.read == "index":
-            hit = self.true(ids)
-            if not hit.any():
-                raise RuntimeError(f"{self.spec.path}: observation part {part.name!r}: no atom of "
-                                   f"{part.atoms[0].pred}(...) is true, so it has no index")
-            return np.array([int(np.argmax(hit))], np.int64)
-        if part.read == "onehot":
-            return self.true(ids).astype(np.float32)
-        lower = self.engine.lower[0, ids].astype(np.float32)
-        if part.read == "lower":
-            return lower
-        return np.stack([lower, self.engine.upper[0, ids].astype(np.float32)], axis=1).ravel()
+    def observation(self) -> Any:
+        """The observation in the spec's space (gym_env.observation_space)."""
+        spec, index = self.spec, self._out[0]
+        indices = index.tolist()
+        if indices and min(indices) < 0:
+            part = spec.parts[self._index_parts[indices.index(min(indices))]]
+            raise RuntimeError(f"{spec.path}: observation part {part.name!r}: no atom of "
+                               f"{part.atoms[0].pred}(...) is true, so it has no index")
+        if spec.space == "Discrete":
+            value = 0
+            for size, i in zip(self._part_sizes, indices):  # numpy's ravel_multi_index, first part slowest
+                value = value * size + i
+            return value
+        if spec.space == "MultiDiscrete":
+            return index.copy()
+        values = []
+        for k, (part, ids) in enumerate(zip(spec.parts, self._part_ids)):
+            if part.read == "index":
+                values.append(np.array([index[self._index_parts.index(k)]], np.int64))
+            elif part.read == "onehot":
+                values.append(self.true(ids).astype(np.float32))
+            elif part.read == "lower":
+                values.append(self.engine.lower[0, ids].astype(np.float32))
+            else:
+                values.append(np.stack([self.engine.lower[0, ids], self.engine.upper[0, ids]], axis=1)
+                              .ravel().astype(np.float32))
+        if spec.space == "Box":
+            return np.concatenate(values).astype(np.float32)
+        return {p.name: (int(v[0]) if p.read == "index" else v) for p, v in zip(spec.parts, values)}
 
-    def _read_reward(self) -> float:
-        r = float(self._table_values[self.true(self._table_ids)].sum()) if len(self._table_ids) else 0.0
+    def _reward(self) -> float:
+        r = float(self._out[1][0])
         if len(self._scaled_ids):
             r += float((self.engine.lower[0, self._scaled_ids] * self._scales).sum())
         return r
 
     def terminated(self) -> bool:
-        return bool(len(self._term_ids) and self.true(self._term_ids).any())
+        return bool(self._out[1][1])
 
     def truncated(self) -> bool:
         limit = self.spec.max_steps
-        return bool((limit is not None and self.steps >= limit)
-                    or (len(self._trunc_ids) and self.true(self._trunc_ids).any()))
+        return bool((limit is not None and self.steps >= limit) or self._out[1][2])
 
     def action_mask(self) -> np.ndarray | None:
-        return None if self._mask_ids is None else self.true(self._mask_ids).astype(np.int8)
+        return self._out[2].copy() if self._has_mask else None
 
     def marked_cells(self) -> dict[str, str]:
         """Board cell -> the mark of a `marks` predicate true there (for the text rendering)."""
