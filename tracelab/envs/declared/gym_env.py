@@ -30,7 +30,8 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
         self.world = DeclaredWorld(self.world_spec, kernel=kernel)
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": self.world_spec.render_fps}
-        self.action_space = spaces.Discrete(len(self.world_spec.action_names))
+        self._n_actions = len(self.world_spec.action_names)
+        self.action_space = spaces.Discrete(self._n_actions)
         self.observation_space = observation_space(self.world_spec)
         self._running = False
         self._last_action: int | None = None
@@ -46,7 +47,7 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
         if not self._running:
             raise RuntimeError("the episode is over (or never began): call reset() first")
         a = int(action)
-        if not 0 <= a < self.action_space.n or a != action:
+        if not 0 <= a < self._n_actions or a != action:
             raise ValueError(f"action {action!r} is outside the action space {self.action_space}")
         w = self.world
         w.step(a, self.np_random)

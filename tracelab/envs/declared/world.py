@@ -133,6 +133,7 @@ class DeclaredWorld:
         self._start_picks[-1] = 0  # the start facts: a draw with one value
         self.steps = 0
         self.last_reward = 0.0
+        self._ends = (False, False)
 
     def _step_tables(self) -> tuple[np.ndarray, ...]:
         """fused.py's tables of the step facts, and its row buffers (room for every fact on and off)."""
@@ -161,27 +162,27 @@ class DeclaredWorld:
         prev_n[0] = 0  # the snapshot has every step fact false
         self._fused_step(-1, picks)
         prev_n[0] = 0  # the start's facts stay: the next step does not turn them off
+        self._reward()  # the ends as they stand at the start
         self.steps = 0
 
     def step(self, action: int, rng: np.random.Generator) -> None:
         """Set the action's facts and this step's random facts, step the engine (twice when an `after`
         random fact is drawn); the reward of the step is then `last_reward`."""
-        picks = self._picks
-        picks[:] = -1
+        picks = self._picks  # the `after` draws' slots stay -1 between steps
         for d, drawer in enumerate(self._before):
             picks[d] = drawer.pick(self, rng)
         self._fused_step(action, picks)
         reward = self._reward()
         if self._after:
-            picks[:len(self._before)] = -1
-            drawn = False
-            for d, drawer in enumerate(self._after, start=len(self._before)):
+            n_before = len(self._before)
+            picks[:n_before] = -1
+            for d, drawer in enumerate(self._after, start=n_before):
                 if self.true(drawer.after)[0]:
                     picks[d] = drawer.pick(self, rng)
-                    drawn = True
-            if drawn:
+            if picks[n_before:].max() >= 0:
                 self._fused_step(-1, picks)
                 reward += self._reward()
+                picks[n_before:] = -1
         self.last_reward = reward
         self.steps += 1
 
@@ -288,17 +289,19 @@ class DeclaredWorld:
         return {p.name: (int(v[0]) if p.read == "index" else v) for p, v in zip(spec.parts, values)}
 
     def _reward(self) -> float:
-        r = float(self._out[1][0])
-        if len(self._scaled_ids):
-            r += float((self.engine.lower[0, self._scaled_ids] * self._scales).sum())
-        return r
+        """The step's reward; also keeps its ends (read_step's res: reward, terminated, truncated)."""
+        reward, terminated, truncated = self._out[1].tolist()
+        self._ends = (terminated == 1.0, truncated == 1.0)
+        if self._scaled_ids.size:
+            reward += float((self.engine.lower[0, self._scaled_ids] * self._scales).sum())
+        return reward
 
     def terminated(self) -> bool:
-        return bool(self._out[1][1])
+        return self._ends[0]
 
     def truncated(self) -> bool:
         limit = self.spec.max_steps
-        return bool((limit is not None and self.steps >= limit) or self._out[1][2])
+        return (limit is not None and self.steps >= limit) or self._ends[1]
 
     def action_mask(self) -> np.ndarray | None:
         return self._out[2].copy() if self._has_mask else None
