@@ -144,3 +144,16 @@ def test_a_kernel_asked_for_by_name_gives_the_same_games(kernel: str) -> None:
     ours = gym.make("tracelab/Taxi-v4", is_rainy=True, fickle_passenger=True, kernel=kernel)
     assert ours.unwrapped.world.engine.kernel == kernel
     run_side_by_side(ours, gym.make("Taxi-v4", is_rainy=True, fickle_passenger=True), 3_000, seed=4, masked=0.7)
+
+
+def test_bench_toytext_quick(capsys: pytest.CaptureFixture) -> None:
+    """`tracelab bench toytext` measures both sides of each game (figures in docs/worlds.md, not asserted)."""
+    import json
+
+    from tracelab.cli import main
+    assert main(["bench", "toytext", "--quick", "--json"]) == 0
+    r = json.loads(capsys.readouterr().out)
+    assert [g["game"] for g in r["games"]] == ["FrozenLake 4x4", "FrozenLake 8x8 dry", "CliffWalking", "Taxi"]
+    for g in r["games"]:
+        assert g["tracelab"]["steps_per_s"]["median"] > 0 and g["gymnasium"]["steps_per_s"]["median"] > 0
+        assert g["goal_met"] == (g["ratio"] >= r["goal_ratio"])
