@@ -157,3 +157,17 @@ def test_bench_toytext_quick(capsys: pytest.CaptureFixture) -> None:
     for g in r["games"]:
         assert g["tracelab"]["steps_per_s"]["median"] > 0 and g["gymnasium"]["steps_per_s"]["median"] > 0
         assert g["goal_met"] == (g["ratio"] >= r["goal_ratio"])
+
+
+def test_rgb_array_draws_the_declared_board() -> None:
+    env = gym.make("tracelab/FrozenLake-v1", render_mode="rgb_array", is_slippery=False)
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame.shape == (4 * 24, 4 * 24, 3) and frame.dtype == np.uint8
+    centre = lambda img, r, c: tuple(img[r * 24 + 12, c * 24 + 12])  # noqa: E731
+    assert centre(frame, 0, 0) == (0xD6, 0x27, 0x28)          # the player's disc on the start cell
+    assert centre(frame, 1, 1) == (0x1F, 0x3B, 0x73)          # a hole
+    env.step(2)  # right
+    after = env.render()
+    assert centre(after, 0, 0) == (0xCF, 0xE8, 0xF5) and centre(after, 0, 1) == (0xD6, 0x27, 0x28)
+    assert (env.render() == after).all()  # the same state, the same bytes

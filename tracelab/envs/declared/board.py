@@ -20,6 +20,8 @@ class Board:
     neighbours: dict[str, tuple[int, int]]
     edge: str  # "stay" | "none"
     marks: dict[str, str]  # unary predicate -> the character drawn on a cell where it holds (ansi)
+    colors: dict[str, tuple[int, int, int]]  # character -> its cells' colour (rgb_array)
+    mark_colors: dict[str, tuple[int, int, int]]  # marks' predicate -> its disc's colour (rgb_array)
 
     @property
     def height(self) -> int:
@@ -54,7 +56,8 @@ class Board:
         return out
 
     def text(self, marked: dict[str, str]) -> str:
-        """The board as text, a cell's character replaced by the mark of a predicate holding there
-        (`marked`: cell constant -> character)."""
-        return "\n".join("".join(marked.get(self.cell(r, c), ch) for c, ch in enumerate(line))
+        """The board as text, a cell's character replaced by the mark of the predicate holding there
+        (`marked`: cell constant -> predicate)."""
+        return "\n".join("".join(self.marks[marked[name]] if (name := self.cell(r, c)) in marked else ch
+                                 for c, ch in enumerate(line))
                          for r, line in enumerate(self.rows)) + "\n"

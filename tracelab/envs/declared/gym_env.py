@@ -13,10 +13,11 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from tracelab.envs.declared.render import DeclaredPainter
 from tracelab.envs.declared.spec import WorldSpec, load_spec
 from tracelab.envs.declared.world import DeclaredWorld
 
-RENDER_MODES = ["ansi"]
+RENDER_MODES = ["ansi", "rgb_array"]
 
 
 class DeclaredEnv(gym.Env[Any, np.int64]):
@@ -29,6 +30,10 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
         self.world_spec = spec if isinstance(spec, WorldSpec) else load_spec(spec, **params)
         self.world = DeclaredWorld(self.world_spec, kernel=kernel)
         self.render_mode = render_mode
+        board = self.world_spec.board
+        if render_mode == "rgb_array" and board is None:
+            raise ValueError(f"{self.world_spec.path}: render_mode 'rgb_array' draws the [board]; the spec has none")
+        self._painter = DeclaredPainter(board) if render_mode == "rgb_array" else None
         self.metadata = {**self.metadata, "render_fps": self.world_spec.render_fps}
         self._n_actions = len(self.world_spec.action_names)
         self.action_space = spaces.Discrete(self._n_actions)
@@ -66,7 +71,9 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
             info["action_mask"] = mask
         return info
 
-    def render(self) -> str | None:
+    def render(self) -> str | np.ndarray | None:
+        if self._painter is not None:
+            return self._painter(self.world.marked_cells(), self.world_spec.board.mark_colors)
         if self.render_mode != "ansi":
             return None
         board = self.world_spec.board

@@ -22,6 +22,7 @@ from tracelab.engine.parser import check_program, load_program, parse_literal
 from tracelab.engine.program import CONSTANT_RE, Fact, Literal, Program, SourceLoc, Term
 from tracelab.envs.declared.board import MAX_BOARD_CELLS, Board
 from tracelab.envs.declared.expressions import ExpressionError, evaluate
+from tracelab.envs.declared.render import hex_color
 from tracelab.envs.declared.spec_file import KeyPath, SpecError, SpecSource, read_spec_file
 
 READS = ("index", "lower", "bounds", "onehot")
@@ -296,6 +297,8 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
         if not CONSTANT_RE.fullmatch(a):
             raise r.err(("agents", "names", i), f"{a!r} is not a plain constant (lower-case letter or digit first)")
     check = _Names(r, program, [*(board.cells if board else []), *agents])
+    for pred in (board.marks if board else {}):  # a predicate of one argument, true of cells
+        check.pattern(("board", "marks", pred), f"{pred}(Cell)", ("Cell",))
 
     actions_t = r.table(("actions",))
     if not actions_t:
@@ -372,7 +375,7 @@ def _program(r: _Reader, files: list[str], board: Board | None) -> Program:
 
 
 def _board(r: _Reader) -> Board:
-    r.table(("board",), ("rows", "cell", "legend", "neighbours", "edge", "marks"))
+    r.table(("board",), ("rows", "cell", "legend", "neighbours", "edge", "marks", "colors", "mark_colors"))
     rows = r.strings(("board", "rows"))
     if not rows or any(len(x) != len(rows[0]) for x in rows) or not rows[0]:
         raise r.err(("board", "rows"), "expected rows of one length, at least one cell")
@@ -401,7 +404,20 @@ def _board(r: _Reader) -> Board:
         if not isinstance(ch, str) or len(ch) != 1:
             raise r.err(("board", "marks", pred), "expected one character")
         marks[pred] = ch
-    return Board(tuple(rows), fmt, legend, neighbours, edge, marks)
+    colors = {ch: _color(r, ("board", "colors", ch)) for ch in r.table(("board", "colors"), default={})}
+    mark_colors = {p: _color(r, ("board", "mark_colors", p)) for p in r.table(("board", "mark_colors"), default={})}
+    for pred in mark_colors:
+        if pred not in marks:
+            raise r.err(("board", "mark_colors", pred), "not a predicate of `marks`")
+    return Board(tuple(rows), fmt, legend, neighbours, edge, marks, colors, mark_colors)
+
+
+def _color(r: _Reader, path: KeyPath) -> tuple[int, int, int]:
+    v = r.raw(path)
+    rgb = hex_color(v) if isinstance(v, str) else None
+    if rgb is None:
+        raise r.err(path, f"expected a colour \"#rrggbb\", got {_kind(v)}")
+    return rgb
 
 
 def _domain(r: _Reader, path: KeyPath, domains: dict[str, list[str]]) -> list[str]:

@@ -119,7 +119,7 @@ class DeclaredWorld:
                      np.zeros(1, np.int64))
         board = spec.board
         self._marks = [] if board is None else \
-            [(ch, np.array([eng.atom(pred, c) for c in board.cells], np.int64)) for pred, ch in board.marks.items()]
+            [(pred, np.array([eng.atom(pred, c) for c in board.cells], np.int64)) for pred in board.marks]
         self._tables = self._step_tables()
         eng.step()  # t = 0: the program's and the board's facts
         self._snapshot = eng.snapshot()
@@ -307,9 +307,9 @@ class DeclaredWorld:
         return self._out[2].copy() if self._has_mask else None
 
     def marked_cells(self) -> dict[str, str]:
-        """Board cell -> the mark of a `marks` predicate true there (for the text rendering)."""
+        """Board cell -> the `marks` predicate true there (the last one written, when several are)."""
         cells = self.spec.board.cells if self.spec.board is not None else []
-        return {cells[k]: ch for ch, aids in self._marks for k in np.flatnonzero(self.true(aids))}
+        return {cells[k]: pred for pred, aids in self._marks for k in np.flatnonzero(self.true(aids))}
 
 
 def _bounds(atoms: tuple[Atom, ...]) -> np.ndarray:
