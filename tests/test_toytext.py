@@ -171,3 +171,23 @@ def test_rgb_array_draws_the_declared_board() -> None:
     after = env.render()
     assert centre(after, 0, 0) == (0xCF, 0xE8, 0xF5) and centre(after, 0, 1) == (0xD6, 0x27, 0x28)
     assert (env.render() == after).all()  # the same state, the same bytes
+
+
+def test_a_traced_world_plays_the_same_and_logs_why_the_agent_moved() -> None:
+    """With the engine's change log on (what tracing into the store will read), the fused step pauses for
+    trace room and goes on: the game is the same, and the rows name the slip and action facts."""
+    from tracelab.engine import CAUSE_EXTERNAL, CAUSE_RULE
+    from tracelab.envs.declared.gym_env import DeclaredEnv
+    from tracelab.envs.declared.toytext import spec_path
+    from tracelab.envs.declared.world import DeclaredWorld
+
+    traced = DeclaredEnv(spec_path("frozen_lake.toml"))
+    traced.world = DeclaredWorld(traced.world_spec, trace=True)
+    run_side_by_side(traced, gym.make("FrozenLake-v1").unwrapped, 3_000, seed=2)
+    eng = traced.world.engine
+    rows = eng.take_trace()
+    assert len(rows["atom"]) > 3_000
+    texts = {eng.atom_text(int(a)) for a in rows["atom"][rows["cause_kind"] == CAUSE_EXTERNAL]}
+    assert {"slip(cw)", "slip(straight)", "slip(ccw)", "pressed(left)", "pressed(up)"} <= texts
+    moved = rows["atom"][rows["cause_kind"] == CAUSE_RULE]
+    assert "at(c0_1)" in {eng.atom_text(int(a)) for a in moved}
