@@ -230,3 +230,47 @@ def test_the_cli_reports_a_spec_error_in_one_line(tmp_path: Path) -> None:
     out = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True, timeout=60)
     assert out.stdout.strip() == (f"{path}:27: observation.parts[0].atom: 'pos(C)': the program has no "
                                   "predicate 'pos'"), out.stdout + out.stderr
+
+
+@pytest.mark.parametrize("draw, where, fragment", [
+    ('atom = "push(robo, D)"\nover = ["west", "east"]\nmethod = "choice"\nprobabilities = [0.5, 0.5]',
+     "random[0].method", "takes no probabilities"),
+    ('atom = "push(robo, D)"\nover = { E = ["west"] }', "random[0].over", "one domain per variable"),
+    ('atom = ["push(A, D)"]\nover = ["west"]', "random[0].atom", "exactly one variable"),
+    ('atom = "push(robo, D)"\nover = ["west", "east"]\nprobabilities = [0.5]', "random[0].probabilities",
+     "a list of 2 numbers"),
+    ('atom = "push(robo, D)"\nover = ["west", "east"]\nwhen = "goal_reward"', "random[0].when", "expected a boolean"),
+    ('atom = "push(robo, D)"\nover = ["west", "east"]\nafter = "over(W)"', "random[0].after", "must be ground"),
+    ('atom = "push(robo, D)"\nover = "rows"', "random[0].over", "expected 'cells', a list of constants"),
+])
+def test_random_fact_mistakes_are_located(tmp_path: Path, draw: str, where: str, fragment: str) -> None:
+    path = write_world(tmp_path, SPEC + "\n[[random]]\n" + draw + "\n")
+    with pytest.raises(SpecError) as e:
+        load_spec(path)
+    msg = str(e.value)[len(str(path)) + 1:]
+    assert msg.split(": ", 1)[1].startswith(where) and fragment in msg, msg
+
+
+def test_draws_follow_the_spec(tmp_path: Path) -> None:
+    """A joint start choice over a product, weights that rule values out, `when` over the params."""
+    spec = SPEC.replace('facts = ["at(c0_0)", ', 'facts = [') + '''
+[[start.choose]]
+atom = ["at(C)", "push(robo, D)"]
+over = { C = "cells", D = ["west", "east"] }
+weights = ["floor(C)", "goal(C)"]
+
+[[random]]
+atom = "push(robo, D)"
+over = ["west", "east"]
+when = "goal_reward > 100"
+'''
+    path = write_world(tmp_path, spec)
+    assert len(load_spec(path).random_facts) == 0 and len(load_spec(path, goal_reward=200).random_facts) == 1
+    env = make_env(path)
+    starts = set()
+    for seed in range(40):
+        obs, _ = env.reset(seed=seed)
+        starts.add(tuple(obs[:4].tolist()))
+    assert starts == {(0, 0, 0, 1)}  # the goal cell is the only one whose weights both hold
+    rng = np.random.default_rng(5)  # the product's values, first variable slowest: (c0_3, west) is 6
+    assert env.world._choices[0].pick(env.world, rng) in (6, 7)

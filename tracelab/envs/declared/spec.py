@@ -421,11 +421,19 @@ def _color(r: _Reader, path: KeyPath) -> tuple[int, int, int]:
 
 
 def _domain(r: _Reader, path: KeyPath, domains: dict[str, list[str]]) -> list[str]:
-    v = r.value(path) if not (isinstance(r.raw(path), str) and r.raw(path) in domains) else r.raw(path)
-    if isinstance(v, str) and v in domains:
-        return domains[v]
+    """`over`: a named domain ("cells", the board's), a list of constants, or an expression giving one."""
+    expected = f"expected {' or '.join(map(repr, domains)) or 'a named domain'}, a list of constants, or an " \
+               "expression giving one"
+    v = r.raw(path)
+    if isinstance(v, str):
+        if v in domains:
+            return domains[v]
+        try:
+            v = evaluate(v, r.names)
+        except ExpressionError as e:
+            raise r.err(path, f"{expected} ({e})") from None
     if not isinstance(v, list) or not v or not all(isinstance(x, str) for x in v):
-        raise r.err(path, f"expected \"cells\" or a list of constants, got {_kind(v)}")
+        raise r.err(path, f"{expected}, got {_kind(v)}")
     if len(v) > MAX_DOMAIN:
         raise r.err(path, f"more than {MAX_DOMAIN} values")
     return v
