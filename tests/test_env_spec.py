@@ -274,3 +274,16 @@ when = "goal_reward > 100"
     assert starts == {(0, 0, 0, 1)}  # the goal cell is the only one whose weights both hold
     rng = np.random.default_rng(5)  # the product's values, first variable slowest: (c0_3, west) is 6
     assert env.world._choices[0].pick(env.world, rng) in (6, 7)
+
+
+@pytest.mark.parametrize("old, new, where, fragment", [
+    ('rows = ["S..G"]', 'rows = "[\'F\' * 1000] * 1000"', "8: board.rows", "more than 65536 cells"),
+    ('over = "cells"', 'over = "[\'c0_0\'] * 99999 + [\'c0_1\'] * 99999"', "28: observation.parts[0].over",
+     "more than 100000 items"),
+    ('[start]', '[[random]]\natom = ["at(C)", "push(robo, D)"]\nover = { C = "cells", D = "[\'west\'] * 30000" }'
+     '\n[start]', "45: random[0].over", "more than 100000 combinations"),
+])
+def test_specs_that_would_build_too_much_are_refused_first(tmp_path: Path, old: str, new: str, where: str,
+                                                           fragment: str) -> None:
+    msg = _located(tmp_path, old, new)
+    assert msg.startswith(where + ":") and fragment in msg, msg

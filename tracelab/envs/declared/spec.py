@@ -30,7 +30,7 @@ SPACES = ("Discrete", "MultiDiscrete", "Box", "Dict")
 SECTIONS = ("env", "params", "data", "board", "agents", "actions", "observation", "reward", "end", "start",
             "random")
 AGENT_VAR, ACTION_VAR = "Agent", "Action"
-MAX_DOMAIN = 1_000_000  # values of one `over`, atoms of one observation part
+MAX_DOMAIN = 100_000  # values of one `over` (or of a product of them), atoms of one observation part
 
 
 @dataclass(frozen=True)
@@ -508,9 +508,9 @@ def _draw(r: _Reader, check: _Names, path: KeyPath, domains: dict[str, list[str]
         if len(variables) != 1:
             raise r.err((*path, "atom"), "expected exactly one variable (or `over` as a table, a domain per variable)")
         axes = [_domain(r, (*path, "over"), domains)]
-    values = [dict(zip(variables, combo)) for combo in itertools.product(*axes)]
-    if len(values) > MAX_DOMAIN:
+    if math.prod(len(a) for a in axes) > MAX_DOMAIN:  # refused before the product is built
         raise r.err((*path, "over"), f"more than {MAX_DOMAIN} combinations")
+    values = [dict(zip(variables, combo)) for combo in itertools.product(*axes)]
     lits = [check.pattern((*path, "atom"), p, tuple(variables), bounds=True) for p in patterns]
     atoms = tuple(tuple(check.ground(lit, v) for lit in lits) for v in values)
     method = r.string((*path, "method"), "categorical", choices=DRAW_METHODS)
