@@ -169,6 +169,8 @@ def _located(tmp_path: Path, old: str, new: str, **params) -> str:
     ('max_steps = 5', 'max_steps = 0', "41: end.max_steps", "expected an integer >= 1"),
     ('edge = "none"', 'edge = "wrap"', "11: board.edge", "expected one of stay, none"),
     ('rows = ["S..G"]', 'rows = ["S..G", "S."]', "8: board.rows", "rows of one length"),
+    ('edge = "none"', 'edge = "none"\ncell = "{row:>999999999}{col}"', "12: board.cell", "expected a name"),
+    ('edge = "none"', 'edge = "none"\ncell = "{row.__class__}{col}"', "12: board.cell", "expected a name"),
     ('[start]', '[starts]', "43: starts", "unknown section"),
     ('max_steps = 5', 'max_step = 5', "41: end.max_step", "unknown key"),
     ('rules = ["corridor.rules"]', 'rules = ["../corridor.rules"]', "2: env.rules[0]", "inside it"),

@@ -11,6 +11,7 @@ import dataclasses
 import itertools
 import math
 import os
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -382,12 +383,13 @@ def _board(r: _Reader) -> Board:
     if len(rows) * len(rows[0]) > MAX_BOARD_CELLS:
         raise r.err(("board", "rows"), f"more than {MAX_BOARD_CELLS} cells")
     fmt = r.string(("board", "cell"), "c{row}_{col}")
-    try:
-        names = {fmt.format(row=0, col=0), fmt.format(row=len(rows) - 1, col=len(rows[0]) - 1)}
-    except (KeyError, IndexError, ValueError, AttributeError):
-        raise r.err(("board", "cell"), "expected a name with {row} and {col}, such as \"c{row}_{col}\"") from None
-    if not all(CONSTANT_RE.fullmatch(n) for n in names) or "{row}" not in fmt or "{col}" not in fmt:
-        raise r.err(("board", "cell"), f"{fmt!r} must make plain constants from {{row}} and {{col}}")
+    # only {row} and {col} between name characters: str.format is never given a field or format spec
+    # of the spec's own ({row.__class__}, {row:>999999999})
+    if not _CELL_FORMAT.fullmatch(fmt) or "{row}" not in fmt or "{col}" not in fmt \
+            or not CONSTANT_RE.fullmatch(fmt.format(row=0, col=0)):
+        raise r.err(("board", "cell"), f"expected a name made of letters, digits, _ and - with {{row}} and "
+                                       f"{{col}}, starting with a lower-case letter, such as \"c{{row}}_{{col}}\"; "
+                                       f"got {fmt!r}")
     legend: dict[str, tuple[str, ...]] = {}
     for ch, preds in r.table(("board", "legend"), default={}).items():
         if len(ch) != 1:
@@ -484,6 +486,7 @@ def _reward(r: _Reader, check: _Names, agent: str) -> tuple[tuple[tuple[Atom, fl
 
 
 DRAW_METHODS = ("categorical", "choice")
+_CELL_FORMAT = re.compile(r"(?:[A-Za-z0-9_-]|\{row\}|\{col\})+")
 
 
 def _draw(r: _Reader, check: _Names, path: KeyPath, domains: dict[str, list[str]], *, start: bool) -> Draw | None:
