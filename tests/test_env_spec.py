@@ -176,6 +176,7 @@ def _located(tmp_path: Path, old: str, new: str, **params) -> str:
     ('rules = ["corridor.rules"]', 'rules = ["../corridor.rules"]', "2: env.rules[0]", "inside it"),
     ('rules = ["corridor.rules"]', 'rules = ["/etc/passwd"]', "2: env.rules[0]", "inside it"),
     ('rules = ["corridor.rules"]', 'rules = ["missing.rules"]', "2: env.rules", "no such file"),
+    ('stay = ["push(Agent, stay)"]', 'wait = ["push(Agent, stay)"]', "20: actions.wait", "no constant 'wait'"),
     ('names = ["robo"]', 'names = ["Robo"]', "14: agents.names[0]", "not a plain constant"),
     ('facts = ["at(c0_0)"', 'facts = ["at(c0_9)"', "44: start.facts[0]", "no constant 'c0_9'"),
     ('goal_reward = 10', 'goal_reward = 10\n[data]\ngoal_reward = 1', "7: data.goal_reward", "both [data] and"),

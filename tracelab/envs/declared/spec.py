@@ -283,7 +283,7 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     names = {**data, **defaults, **params}
     r = _Reader(src, names)
 
-    env = r.table(("env",), ("rules", "render_fps"))
+    r.table(("env",), ("rules", "render_fps"))
     rule_files = [_inside(r, ("env", "rules", i), f) for i, f in enumerate(r.strings(("env", "rules")))]
     if not rule_files:
         raise r.err(("env", "rules"), "expected at least one rule file")
@@ -301,23 +301,7 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     for pred in (board.marks if board else {}):  # a predicate of one argument, true of cells
         check.pattern(("board", "marks", pred), f"{pred}(Cell)", ("Cell",))
 
-    actions_t = r.table(("actions",))
-    if not actions_t:
-        raise r.err(("actions",), "expected at least one action")
-    action_names = tuple(actions_t)
-    for name in action_names:
-        if not CONSTANT_RE.fullmatch(name):
-            raise r.err(("actions", name), "an action's name must be a plain constant (lower-case letter or "
-                                           "digit first; letters, digits, _ and -)")
-        r.strings(("actions", name))
-    action_facts = tuple(tuple(check.atoms(("actions", n), actions_t[n], {AGENT_VAR: a}, bounds=True)
-                               for n in action_names) for a in agents)
-    mask = None
-    if "mask" in agents_t:
-        check.constants |= set(action_names)
-        lit = check.pattern(("agents", "mask"), agents_t["mask"], (AGENT_VAR, ACTION_VAR))
-        mask = tuple(tuple(check.ground(lit, {AGENT_VAR: a, ACTION_VAR: n}) for n in action_names) for a in agents)
-
+    action_names, action_facts, mask = _actions(r, check, agents, agents_t.get("mask"))
     domains = {"cells": board.cells} if board else {}
     space, parts = _observation(r, check, domains)
     reward_table, reward_scaled = _reward(r, check, agents[0])
@@ -325,8 +309,6 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     terminated = check.atoms(("end", "terminated"), r.strings(("end", "terminated"), []), {AGENT_VAR: agents[0]})
     truncated = check.atoms(("end", "truncated"), r.strings(("end", "truncated"), []), {AGENT_VAR: agents[0]})
     max_steps = r.integer(("end", "max_steps"), None, minimum=1) if "max_steps" in end else None
-    if not terminated and max_steps is None and not truncated:
-        pass  # an endless world is allowed (gymnasium's TimeLimit may cut it)
     r.table(("start",), ("facts", "choose"), default={})
     start_facts = check.atoms(("start", "facts"), r.strings(("start", "facts"), []), {AGENT_VAR: agents[0]},
                               bounds=True)
@@ -335,10 +317,34 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     randoms = tuple(d for i in range(len(_list(r, ("random",))))
                     if (d := _draw(r, check, ("random", i), domains, start=False)) is not None)
     fps = r.integer(("env", "render_fps"), 4, minimum=1)
-    del env
     return WorldSpec(src.path, names, program, tuple(agents), action_names, action_facts, mask, space, parts,
                      reward_table, reward_scaled, terminated, truncated, max_steps, start_facts, choices,
                      randoms, board, fps, src)
+
+
+def _actions(r: _Reader, check: _Names, agents: list[str], mask_text: Any
+             ) -> tuple[tuple[str, ...], tuple[tuple[tuple[Atom, ...], ...], ...], tuple[tuple[Atom, ...], ...] | None]:
+    """[actions] in order: names, each agent's facts per action, and the mask's atom per agent and action."""
+    actions_t = r.table(("actions",))
+    if not actions_t:
+        raise r.err(("actions",), "expected at least one action")
+    names = tuple(actions_t)
+    for name in names:
+        if not CONSTANT_RE.fullmatch(name):
+            raise r.err(("actions", name), "an action's name must be a plain constant (lower-case letter or "
+                                           "digit first; letters, digits, _ and -)")
+        r.strings(("actions", name))
+    facts = tuple(tuple(check.atoms(("actions", n), actions_t[n], {AGENT_VAR: a}, bounds=True) for n in names)
+                  for a in agents)
+    if mask_text is None:
+        return names, facts, None
+    lit = check.pattern(("agents", "mask"), mask_text, (AGENT_VAR, ACTION_VAR))
+    for name in names:  # the mask's atoms name the actions: rules must be able to set them
+        if name not in check.constants:
+            raise r.err(("actions", name), f"the mask {mask_text!r} names this action, but the program has "
+                                           f"no constant {name!r}")
+    mask = tuple(tuple(check.ground(lit, {AGENT_VAR: a, ACTION_VAR: n}) for n in names) for a in agents)
+    return names, facts, mask
 
 
 def _list(r: _Reader, path: KeyPath) -> list[Any]:
