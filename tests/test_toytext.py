@@ -191,3 +191,13 @@ def test_a_traced_world_plays_the_same_and_logs_why_the_agent_moved() -> None:
     assert {"slip(cw)", "slip(straight)", "slip(ccw)", "pressed(left)", "pressed(up)"} <= texts
     moved = rows["atom"][rows["cause_kind"] == CAUSE_RULE]
     assert "at(c0_1)" in {eng.atom_text(int(a)) for a in moved}
+
+
+@pytest.mark.parametrize("spec, kwargs", [("frozen_lake.toml", {}), ("cliff_walking.toml", {}),
+                                          ("taxi.toml", {"fickle_passenger": True})])
+def test_the_toytext_programs_have_no_warnings(spec: str, kwargs: dict) -> None:
+    """Predicates only the env sets (pressed, slip, redirect) are known to be set: no "never set" (without
+    a fickle passenger, Taxi's fickle and redirect atoms are indeed never set, and it says so)."""
+    from tracelab.envs.declared.spec import load_spec
+    from tracelab.envs.declared.toytext import spec_path
+    assert load_spec(spec_path(spec), **kwargs).program.warnings == []

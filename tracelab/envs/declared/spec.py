@@ -317,6 +317,10 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     randoms = tuple(d for i in range(len(_list(r, ("random",))))
                     if (d := _draw(r, check, ("random", i), domains, start=False)) is not None)
     fps = r.integer(("env", "render_fps"), 4, minimum=1)
+    # the program's warnings again, knowing what the env sets: no "never set" for pressed(...), slip(...)
+    env_set = [*(a for per_agent in action_facts for facts in per_agent for a in facts), *start_facts,
+               *(a for d in (*choices, *randoms) for value in d.atoms for a in value)]
+    check_program(program, {a.pred: len(a.args) for a in env_set})
     return WorldSpec(src.path, names, program, tuple(agents), action_names, action_facts, mask, space, parts,
                      reward_table, reward_scaled, terminated, truncated, max_steps, start_facts, choices,
                      randoms, board, fps, src)
