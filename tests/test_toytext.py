@@ -64,6 +64,14 @@ VARIANTS = {
 }
 
 
+@pytest.mark.parametrize("desc", [np.asarray(CUSTOM, dtype="c"), [list(row) for row in CUSTOM]],
+                         ids=["numpy-bytes", "lists-of-characters"])
+def test_frozen_lake_takes_desc_in_gymnasiums_other_forms(desc) -> None:
+    ours, theirs = gym.make("tracelab/FrozenLake-v1", desc=desc), gym.make("FrozenLake-v1", desc=desc)
+    assert ours.observation_space == theirs.observation_space == gym.spaces.Discrete(20)
+    run_side_by_side(ours, theirs, 1_000, seed=6)
+
+
 @pytest.mark.parametrize("variant", list(VARIANTS))
 def test_frozen_lake_matches_gymnasium(variant: str) -> None:
     kwargs = VARIANTS[variant]

@@ -280,7 +280,7 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     clash = set(data) & set(defaults)
     if clash:
         raise src.error(("data", sorted(clash)[0]), "a name in both [data] and [params]")
-    names = {**data, **defaults, **params}
+    names = {**data, **defaults, **{k: _plain(v) for k, v in params.items()}}
     r = _Reader(src, names)
 
     r.table(("env",), ("rules", "render_fps"))
@@ -351,6 +351,20 @@ def _actions(r: _Reader, check: _Names, agents: list[str], mask_text: Any
     return names, facts, mask
 
 
+def _plain(value: Any) -> Any:
+    """A keyword argument as expressions see it: numpy arrays and tuples as lists, bytes as text
+    (gymnasium's FrozenLake takes desc as strings, lists of characters or a numpy array of bytes)."""
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, (bytes, np.bytes_)):
+        return bytes(value).decode("latin-1")
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
 def _list(r: _Reader, path: KeyPath) -> list[Any]:
     v = r.raw(path, [])
     if not isinstance(v, list) or not all(isinstance(x, dict) for x in v):
@@ -387,7 +401,11 @@ def _program(r: _Reader, files: list[str], board: Board | None) -> Program:
 
 def _board(r: _Reader) -> Board:
     r.table(("board",), ("rows", "cell", "legend", "neighbours", "edge", "marks", "colors", "mark_colors"))
-    rows = r.strings(("board", "rows"))
+    rows = r.value(("board", "rows"))
+    if isinstance(rows, list):  # rows of single characters, as gymnasium's np.asarray(desc, dtype="c") reads
+        rows = ["".join(x) if isinstance(x, list) and all(isinstance(c, str) for c in x) else x for x in rows]
+    if not isinstance(rows, list) or not all(isinstance(x, str) for x in rows):
+        raise r.err(("board", "rows"), f"expected a list of strings (one character per cell), got {_kind(rows)}")
     if not rows or any(len(x) != len(rows[0]) for x in rows) or not rows[0]:
         raise r.err(("board", "rows"), "expected rows of one length, at least one cell")
     if len(rows) * len(rows[0]) > MAX_BOARD_CELLS:
