@@ -290,3 +290,23 @@ def test_specs_that_would_build_too_much_are_refused_first(tmp_path: Path, old: 
                                                            fragment: str) -> None:
     msg = _located(tmp_path, old, new)
     assert msg.startswith(where + ":") and fragment in msg, msg
+
+
+def test_the_first_world_of_the_docs_runs_as_shown(tmp_path: Path) -> None:
+    """docs/worlds.md, "Your first world": its files, run in an empty folder, print what the page shows,
+    and its example mistake gives the message shown."""
+    import re
+    text = (Path(__file__).resolve().parents[1] / "docs" / "worlds.md").read_text()
+    section = text.split("## Your first world", 1)[1].split("\n## ", 1)[0]
+    rules, spec, script, output = re.findall(r"```[a-z]*\n(.*?)```", section, re.S)
+    (tmp_path / "corridor.rules").write_text(rules)
+    (tmp_path / "corridor.toml").write_text(spec)
+    (tmp_path / "run.py").write_text(script)
+    out = subprocess.run([sys.executable, "run.py"], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout == output
+    (tmp_path / "corridor.toml").write_text(spec.replace('atom = "at(C)"', 'atom = "pos(C)"', 1))
+    with pytest.raises(SpecError) as e:
+        load_spec(tmp_path / "corridor.toml")
+    shown = re.search(r"gives\n`(corridor.toml:[^`]*)`", section).group(1)
+    assert str(e.value) == f"{tmp_path / 'corridor.toml'}:{shown.split(':', 1)[1]}"
