@@ -8,7 +8,8 @@ bound once into a structref (one object to unbox) and bound again only when the 
 its arrays (Engine.layout_version). When the kernel pauses (trace or schedule room) or fails, the call
 returns its status and Python goes on with Engine.finish_fused_step, then `read_step`.
 
-Tables (int64 unless said): `act_ptr`/`act_atoms`/`act_bnd` (float64 [n, 2]): each action's facts;
+Tables (int64 unless said): `act_ptr`/`act_atoms`/`act_bnd` (float64 [n, 2]): each (agent, action)
+row's facts (row agent * n_actions + action);
 `val_ptr`/`val_atoms`/`val_bnd`: each value's facts, draws' values numbered one after another
 (`draw_base[d]` is draw d's value 0); `prev`/`prev_n`: the step facts set by the last engine step;
 `now`/`now_bnd`: scratch for this step's."""
@@ -76,13 +77,15 @@ def bind(binding: tuple, tables: tuple, ext: tuple, reads: tuple, out: tuple) ->
 
 
 @njit(cache=True)
-def fused_step(b, action, picks, t, first_id):  # noqa: ANN001, ANN201
-    """Set action `action`'s facts (-1: none) and, per draw d with picks[d] >= 0, the facts of its value
-    picks[d]; the last step's facts not set again become [0,0]. Steps the kernel; on STATUS_OK also
-    reads (read_step). Returns the kernel's status (b.out[3][0]: the world it paused at)."""
+def fused_step(b, actions, picks, t, first_id):  # noqa: ANN001, ANN201
+    """Set the facts of each action row in `actions` (-1: none) and, per draw d with picks[d] >= 0, the
+    facts of its value picks[d]; the last step's facts not set again become [0,0]. Steps the kernel; on
+    STATUS_OK also reads (read_step). Returns the kernel's status (b.out[4][0]: the world it paused at)."""
     act_ptr, act_atoms, act_bnd, draw_base, val_ptr, val_atoms, val_bnd, prev, prev_n, now, now_bnd = b.tables
     n = 0
-    if action >= 0:
+    for action in actions:
+        if action < 0:
+            continue
         for j in range(act_ptr[action], act_ptr[action + 1]):
             now[n] = act_atoms[j]
             now_bnd[n, 0] = act_bnd[j, 0]
@@ -125,7 +128,7 @@ def fused_step(b, action, picks, t, first_id):  # noqa: ANN001, ANN201
     cfg = b.cfg
     cfg[K.CFG_T] = t
     status, w_first = K.step_worlds(*((cfg, 0) + b.before + (ext_ptr, ext_i, ext_f) + b.after))
-    b.out[3][0] = w_first
+    b.out[4][0] = w_first
     if status == STATUS_OK:
         read_step(b)
     return status
@@ -133,10 +136,11 @@ def fused_step(b, action, picks, t, first_id):  # noqa: ANN001, ANN201
 
 @njit(cache=True)
 def read_step(b):  # noqa: ANN001, ANN201
-    """After a step: per index part the index of its first true atom (-1: none), the reward table's sum,
-    whether a terminated / truncated atom is true, and the mask (1 where the atom is [1,1])."""
-    part_ptr, part_atoms, table_atoms, table_values, term_atoms, trunc_atoms, mask_atoms = b.reads
-    index, res, mask, _ = b.out
+    """After a step: per (agent, index part) the index of its first true atom (-1: none), per agent the
+    reward table's sum, whether a terminated / truncated atom is true, and the mask (1 where the atom is
+    [1,1])."""
+    part_ptr, part_atoms, table_atoms, table_values, table_agent, term_atoms, trunc_atoms, mask_atoms = b.reads
+    index, rewards, res, mask, _ = b.out
     lower = b.lower
     for p in range(len(part_ptr) - 1):
         index[p] = -1
@@ -144,19 +148,18 @@ def read_step(b):  # noqa: ANN001, ANN201
             if lower[0, part_atoms[j]] == 1.0:
                 index[p] = j - part_ptr[p]
                 break
-    r = 0.0
+    rewards[:] = 0.0
     for j in range(len(table_atoms)):
         if lower[0, table_atoms[j]] == 1.0:
-            r += table_values[j]
-    res[0] = r
-    res[1] = 0.0
+            rewards[table_agent[j]] += table_values[j]
+    res[0] = 0.0
     for a in term_atoms:
         if lower[0, a] == 1.0:
-            res[1] = 1.0
-    res[2] = 0.0
+            res[0] = 1.0
+    res[1] = 0.0
     for a in trunc_atoms:
         if lower[0, a] == 1.0:
-            res[2] = 1.0
+            res[1] = 1.0
     for j in range(len(mask_atoms)):
         mask[j] = 1 if lower[0, mask_atoms[j]] == 1.0 else 0
 

@@ -28,6 +28,10 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
         if render_mode is not None and render_mode not in RENDER_MODES:
             raise ValueError(f"render_mode must be None or one of {RENDER_MODES}, got {render_mode!r}")
         self.world_spec = spec if isinstance(spec, WorldSpec) else load_spec(spec, **params)
+        if len(self.world_spec.agents) != 1:
+            raise ValueError(f"{self.world_spec.path}: a gymnasium Env plays one agent; this spec declares "
+                             f"{len(self.world_spec.agents)} (tracelab.envs.declared.parallel_env.DeclaredParallelEnv "
+                             "plays them all)")
         self.world = DeclaredWorld(self.world_spec, kernel=kernel)
         self.render_mode = render_mode
         board = self.world_spec.board
@@ -59,7 +63,7 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
         self._last_action = a
         terminated, truncated = w.terminated(), w.truncated()
         self._running = not (terminated or truncated)
-        return self._observe(), w.last_reward, terminated, truncated, self._info()
+        return self._observe(), float(w.last_rewards[0]), terminated, truncated, self._info()
 
     def _observe(self) -> Any:
         return self.world.observation()

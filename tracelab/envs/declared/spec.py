@@ -50,7 +50,12 @@ class Atom:
 class ObservationPart:
     name: str
     read: str  # one of READS
-    atoms: tuple[Atom, ...]  # in the part's order
+    per_agent: tuple[tuple[Atom, ...], ...]  # [agent] -> the atoms read, in the part's order
+
+    @property
+    def atoms(self) -> tuple[Atom, ...]:
+        """The first agent's atoms (every agent reads as many)."""
+        return self.per_agent[0]
 
     @property
     def width(self) -> int:
@@ -85,9 +90,9 @@ class WorldSpec:
     mask: tuple[tuple[Atom, ...], ...] | None  # [agent][action] -> the atom that allows it
     space: str
     parts: tuple[ObservationPart, ...]
-    reward_table: tuple[tuple[Atom, float], ...]
-    reward_scaled: tuple[tuple[Atom, float], ...]
-    terminated: tuple[Atom, ...]
+    reward_table: tuple[tuple[tuple[Atom, float], ...], ...]  # [agent] -> (atom, value)
+    reward_scaled: tuple[tuple[tuple[Atom, float], ...], ...]  # [agent] -> (atom, scale)
+    terminated: tuple[Atom, ...]  # every agent's, together: the episode ends for all at once
     truncated: tuple[Atom, ...]
     max_steps: int | None
     start_facts: tuple[Atom, ...]
@@ -245,14 +250,15 @@ class _Names:
         return tuple(self.ground(self.pattern((*path, i), t, tuple(values), bounds=bounds), values)
                      for i, t in enumerate(texts))
 
-    def over(self, path: KeyPath, pattern: Any, domain: list[str]) -> tuple[Atom, ...]:
-        """A pattern with (at most) one variable, grounded over the domain in order."""
+    def over(self, path: KeyPath, pattern: Any, domain: list[str], agent: str) -> tuple[Atom, ...]:
+        """A pattern with one variable besides `Agent`, grounded over the domain in order."""
         lit = self.pattern(path, pattern, tuple(a.name for a in _vars(pattern)))
-        names = {a.name for a in lit.args if a.is_var}
+        names = {a.name for a in lit.args if a.is_var} - {AGENT_VAR}
         if len(names) != 1:
-            raise self.r.err(path, f"{pattern!r}: expected exactly one variable (it ranges over `over`)")
+            raise self.r.err(path, f"{pattern!r}: expected exactly one variable besides {AGENT_VAR} (it ranges "
+                                   "over `over`)")
         var = names.pop()
-        return tuple(self.ground(lit, {var: v}) for v in domain)
+        return tuple(self.ground(lit, {var: v, AGENT_VAR: agent}) for v in domain)
 
 
 def _vars(text: str) -> list[Term]:
@@ -292,8 +298,8 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
 
     agents_t = r.table(("agents",), ("names", "mask"))
     agents = r.strings(("agents", "names"))
-    if len(agents) != 1:
-        raise r.err(("agents", "names"), f"expected one agent (several agents are not supported yet), got {len(agents)}")
+    if not agents or len(set(agents)) != len(agents):
+        raise r.err(("agents", "names"), "expected one or more distinct agents")
     for i, a in enumerate(agents):
         if not CONSTANT_RE.fullmatch(a):
             raise r.err(("agents", "names", i), f"{a!r} is not a plain constant (lower-case letter or digit first)")
@@ -303,15 +309,14 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
 
     action_names, action_facts, mask = _actions(r, check, agents, agents_t.get("mask"))
     domains = {"cells": board.cells} if board else {}
-    space, parts = _observation(r, check, domains)
-    reward_table, reward_scaled = _reward(r, check, agents[0])
+    space, parts = _observation(r, check, domains, agents)
+    reward_table, reward_scaled = _reward(r, check, agents)
     end = r.table(("end",), ("terminated", "truncated", "max_steps"), default={})
-    terminated = check.atoms(("end", "terminated"), r.strings(("end", "terminated"), []), {AGENT_VAR: agents[0]})
-    truncated = check.atoms(("end", "truncated"), r.strings(("end", "truncated"), []), {AGENT_VAR: agents[0]})
+    terminated = _every_agents(r, check, ("end", "terminated"), agents)
+    truncated = _every_agents(r, check, ("end", "truncated"), agents)
     max_steps = r.integer(("end", "max_steps"), None, minimum=1) if "max_steps" in end else None
     r.table(("start",), ("facts", "choose"), default={})
-    start_facts = check.atoms(("start", "facts"), r.strings(("start", "facts"), []), {AGENT_VAR: agents[0]},
-                              bounds=True)
+    start_facts = _every_agents(r, check, ("start", "facts"), agents, bounds=True)
     choices = tuple(d for i in range(len(_list(r, ("start", "choose"))))
                     if (d := _draw(r, check, ("start", "choose", i), domains, start=True)) is not None)
     randoms = tuple(d for i in range(len(_list(r, ("random",))))
@@ -363,6 +368,14 @@ def _plain(value: Any) -> Any:
     if isinstance(value, np.generic):
         return value.item()
     return value
+
+
+def _every_agents(r: _Reader, check: _Names, path: KeyPath, agents: list[str], *, bounds: bool = False
+                  ) -> tuple[Atom, ...]:
+    """A list of atoms, `Agent` standing for each agent in turn (an atom without it once)."""
+    texts = r.strings(path, [])
+    out = (a for agent in agents for a in check.atoms(path, texts, {AGENT_VAR: agent}, bounds=bounds))
+    return tuple(dict.fromkeys(out))
 
 
 def _list(r: _Reader, path: KeyPath) -> list[Any]:
@@ -469,7 +482,8 @@ def _domain(r: _Reader, path: KeyPath, domains: dict[str, list[str]]) -> list[st
     return v
 
 
-def _observation(r: _Reader, check: _Names, domains: dict[str, list[str]]) -> tuple[str, tuple[ObservationPart, ...]]:
+def _observation(r: _Reader, check: _Names, domains: dict[str, list[str]], agents: list[str]
+                 ) -> tuple[str, tuple[ObservationPart, ...]]:
     r.table(("observation",), ("space", "parts"))
     space = r.string(("observation", "space"), choices=SPACES)
     parts = []
@@ -484,12 +498,14 @@ def _observation(r: _Reader, check: _Names, domains: dict[str, list[str]]) -> tu
         if ("atoms" in p) == ("atom" in p):
             raise r.err(path, "expected either `atom` (with `over`) or `atoms` (a list of ground atoms)")
         if "atoms" in p:
-            atoms = check.atoms((*path, "atoms"), r.strings((*path, "atoms")), {})
+            texts = r.strings((*path, "atoms"))
+            per_agent = tuple(check.atoms((*path, "atoms"), texts, {AGENT_VAR: a}) for a in agents)
         else:
-            atoms = check.over((*path, "atom"), p["atom"], _domain(r, (*path, "over"), domains))
-        if not atoms:
+            domain = _domain(r, (*path, "over"), domains)
+            per_agent = tuple(check.over((*path, "atom"), p["atom"], domain, a) for a in agents)
+        if not per_agent[0]:
             raise r.err(path, "no atoms to read")
-        parts.append(ObservationPart(name, read, atoms))
+        parts.append(ObservationPart(name, read, per_agent))
     if space in ("Discrete", "MultiDiscrete"):
         for i, p in enumerate(parts):
             if p.read != "index":
@@ -500,17 +516,20 @@ def _observation(r: _Reader, check: _Names, domains: dict[str, list[str]]) -> tu
     return space, tuple(parts)
 
 
-def _reward(r: _Reader, check: _Names, agent: str) -> tuple[tuple[tuple[Atom, float], ...], tuple[tuple[Atom, float], ...]]:
+def _reward(r: _Reader, check: _Names, agents: list[str]
+            ) -> tuple[tuple[tuple[tuple[Atom, float], ...], ...], tuple[tuple[tuple[Atom, float], ...], ...]]:
+    """Per agent: the table's (atom, value) pairs and the scaled atom's (atom, scale)."""
     r.table(("reward",), ("table", "atom", "scale"), default={})
     table = []
     for text in r.table(("reward", "table"), default={}):
         path = ("reward", "table", text)
-        table.append((check.ground(check.pattern(path, text, (AGENT_VAR,)), {AGENT_VAR: agent}), r.number(path)))
+        table.append((check.pattern(path, text, (AGENT_VAR,)), r.number(path)))
     scaled = []
     if "atom" in r.raw(("reward",), {}):
         lit = check.pattern(("reward", "atom"), r.string(("reward", "atom")), (AGENT_VAR,))
-        scaled.append((check.ground(lit, {AGENT_VAR: agent}), r.number(("reward", "scale"), 1.0)))
-    return tuple(table), tuple(scaled)
+        scaled.append((lit, r.number(("reward", "scale"), 1.0)))
+    return tuple(tuple((check.ground(lit, {AGENT_VAR: a}), v) for lit, v in table) for a in agents), \
+        tuple(tuple((check.ground(lit, {AGENT_VAR: a}), v) for lit, v in scaled) for a in agents)
 
 
 DRAW_METHODS = ("categorical", "choice")

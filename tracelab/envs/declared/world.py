@@ -90,8 +90,11 @@ class DeclaredWorld:
         self.engine = eng = Engine(spec.program, worlds=1, trace=trace,
                                    kernel="counting" if kernel == "auto" else kernel)
         ids = self._ids
-        self._action_ids = [ids(facts) for facts in spec.action_facts[0]]
-        self._action_bounds = [_bounds(f) for f in spec.action_facts[0]]
+        # the facts of each (agent, action) row: row agent * n_actions + action
+        self.n_agents, self.n_actions = len(spec.agents), len(spec.action_names)
+        self._action_ids = [ids(facts) for per_agent in spec.action_facts for facts in per_agent]
+        self._action_bounds = [_bounds(facts) for per_agent in spec.action_facts for facts in per_agent]
+        self._rows = np.full(self.n_agents, -1, np.int64)  # this step's rows, one per agent
         self._choices = [_Drawer(d, ids) for d in spec.start_choices]
         self._before = [_Drawer(d, ids) for d in spec.random_facts if d.after is None]
         self._after = [_Drawer(d, ids) for d in spec.random_facts if d.after is not None]
@@ -105,18 +108,21 @@ class DeclaredWorld:
         # what is read after each step: index parts, the reward table, the ends and the mask in one
         # compiled call (fused.read_step); the other parts and scaled rewards from the bound arrays
         self._index_parts = [i for i, p in enumerate(spec.parts) if p.read == "index"]
-        self._part_ids = [ids(p.atoms) for p in spec.parts]
+        self._part_ids = [[ids(atoms) for atoms in p.per_agent] for p in spec.parts]  # [part][agent]
         self._part_sizes = [len(p.atoms) for p in spec.parts]
-        self._scaled_ids = ids(a for a, _ in spec.reward_scaled)
-        self._scales = np.array([s for _, s in spec.reward_scaled], np.float64)
-        mask_ids = ids(spec.mask[0]) if spec.mask is not None else np.zeros(0, np.int64)
+        self._scaled = [(ids(a for a, _ in pairs), np.array([v for _, v in pairs], np.float64))
+                        for pairs in spec.reward_scaled]
+        n = self.n_agents
+        mask_ids = np.concatenate([ids(m) for m in spec.mask]) if spec.mask is not None else np.zeros(0, np.int64)
         self._has_mask = spec.mask is not None
-        part_ptr, part_atoms, _ = fused.csr([self._part_ids[i] for i in self._index_parts], [])
-        self._reads = (part_ptr, part_atoms, ids(a for a, _ in spec.reward_table),
-                       np.array([v for _, v in spec.reward_table], np.float64), ids(spec.terminated),
-                       ids(spec.truncated), mask_ids)
-        self._out = (np.zeros(len(self._index_parts), np.int64), np.zeros(3), np.zeros(len(mask_ids), np.int8),
-                     np.zeros(1, np.int64))
+        part_ptr, part_atoms, _ = fused.csr([self._part_ids[i][a] for a in range(n) for i in self._index_parts], [])
+        table = [(atom, value, a) for a, pairs in enumerate(spec.reward_table) for atom, value in pairs]
+        self._reads = (part_ptr, part_atoms, ids(t[0] for t in table), np.array([t[1] for t in table], np.float64),
+                       np.array([t[2] for t in table], np.int64), ids(spec.terminated), ids(spec.truncated),
+                       mask_ids)
+        # read_step's results: indices [agent * index parts], rewards [agent], ends, masks, a paused world
+        self._out = (np.zeros(n * len(self._index_parts), np.int64), np.zeros(n), np.zeros(2),
+                     np.zeros(len(mask_ids), np.int8), np.zeros(1, np.int64))
         board = spec.board
         self._marks = [] if board is None else \
             [(pred, np.array([eng.atom(pred, c) for c in board.cells], np.int64)) for pred in board.marks]
@@ -132,7 +138,7 @@ class DeclaredWorld:
         self._start_picks = self._picks.copy()
         self._start_picks[-1] = 0  # the start facts: a draw with one value
         self.steps = 0
-        self.last_reward = 0.0
+        self.last_rewards = np.zeros(self.n_agents)
         self._ends = (False, False)
 
     def _step_tables(self) -> tuple[np.ndarray, ...]:
@@ -142,7 +148,7 @@ class DeclaredWorld:
         bounds = [d.value_bounds for d in (*self._before, *self._after, *self._choices)] + [[self._start_bounds]]
         draw_base = np.cumsum([0] + [len(g) for g in groups])[:-1].astype(np.int64)
         val_ptr, val_atoms, val_bnd = fused.csr([v for g in groups for v in g], [v for b in bounds for v in b])
-        cap = max((len(a) for a in self._action_ids), default=0) + \
+        cap = self.n_agents * max((len(a) for a in self._action_ids), default=0) + \
             sum(max((len(v) for v in g), default=0) for g in groups) + 1
         self._ext = (np.zeros(2, np.int64), np.zeros((2 * cap, 3), np.int64), np.zeros((2 * cap, 2)))
         return (act_ptr, act_atoms, act_bnd, draw_base, val_ptr, val_atoms, val_bnd, np.zeros(cap, np.int64),
@@ -160,19 +166,26 @@ class DeclaredWorld:
             picks[first + k] = drawer.pick(self, rng)
         prev_n = self._tables[8]
         prev_n[0] = 0  # the snapshot has every step fact false
-        self._fused_step(-1, picks)
+        self._rows[:] = -1
+        self._fused_step(self._rows, picks)
         prev_n[0] = 0  # the start's facts stay: the next step does not turn them off
-        self._reward()  # the ends as they stand at the start
+        self._rewards()  # the ends as they stand at the start
         self.steps = 0
 
-    def step(self, action: int, rng: np.random.Generator) -> None:
-        """Set the action's facts and this step's random facts, step the engine (twice when an `after`
-        random fact is drawn); the reward of the step is then `last_reward`."""
+    def step(self, actions: Any, rng: np.random.Generator) -> None:
+        """Set each agent's action's facts (`actions`: one index per agent, or an int for one agent) and
+        this step's random facts, step the engine (twice when an `after` random fact is drawn); the
+        step's rewards, one per agent, are then `last_rewards`."""
+        rows = self._rows
+        if self.n_agents == 1:
+            rows[0] = actions
+        else:
+            rows[:] = np.asarray(actions, np.int64) + np.arange(self.n_agents) * self.n_actions
         picks = self._picks  # the `after` draws' slots stay -1 between steps
         for d, drawer in enumerate(self._before):
             picks[d] = drawer.pick(self, rng)
-        self._fused_step(action, picks)
-        reward = self._reward()
+        self._fused_step(rows, picks)
+        rewards = self._rewards()
         if self._after:
             n_before = len(self._before)
             picks[:n_before] = -1
@@ -180,21 +193,22 @@ class DeclaredWorld:
                 if self.true(drawer.after)[0]:
                     picks[d] = drawer.pick(self, rng)
             if picks[n_before:].max() >= 0:
-                self._fused_step(-1, picks)
-                reward += self._reward()
+                rows[:] = -1
+                self._fused_step(rows, picks)
+                rewards = rewards + self._rewards()
                 picks[n_before:] = -1
-        self.last_reward = reward
+        self.last_rewards = rewards
         self.steps += 1
 
-    def _fused_step(self, action: int, picks: np.ndarray) -> None:
+    def _fused_step(self, rows: np.ndarray, picks: np.ndarray) -> None:
         eng = self.engine
         if eng.kernel != "counting":  # the engine's own step, then the reads
-            self._unfused_step(action, picks)
+            self._unfused_step(rows, picks)
             return
         b = self._bind()
-        status = fused.fused_step(b, action, picks, eng.t, eng.next_external_id())
+        status = fused.fused_step(b, rows, picks, eng.t, eng.next_external_id())
         ext_ptr, ext_i, ext_f = self._ext
-        eng.finish_fused_step(status, int(self._out[3][0]), ext_ptr, ext_i, ext_f)
+        eng.finish_fused_step(status, int(self._out[4][0]), ext_ptr, ext_i, ext_f)
         if status != fused.STATUS_OK:  # the kernel paused (buffer room) and finish went on: read now
             self._read()
 
@@ -206,12 +220,12 @@ class DeclaredWorld:
             self._bound_version = self.engine.layout_version
         return self._buffers
 
-    def _unfused_step(self, action: int, picks: np.ndarray) -> None:
+    def _unfused_step(self, rows: np.ndarray, picks: np.ndarray) -> None:
         """The fused step's work with the engine's own calls (lanes or compiled kernel)."""
         t = self._tables
         act_ptr, act_atoms, act_bnd, draw_base, val_ptr, val_atoms, val_bnd, prev, prev_n = t[:9]
         now, bnd = [np.zeros(0, np.int64)], [np.zeros((0, 2))]
-        if action >= 0:
+        for action in rows[rows >= 0]:
             now.append(act_atoms[act_ptr[action]:act_ptr[action + 1]])
             bnd.append(act_bnd[act_ptr[action]:act_ptr[action + 1]])
         for d, p in enumerate(picks):
@@ -234,14 +248,16 @@ class DeclaredWorld:
             fused.read_step(self._bind())
 
     def _read_unfused(self) -> None:
-        part_ptr, part_atoms, table_atoms, table_values, term_atoms, trunc_atoms, mask_atoms = self._reads
-        index, res, mask, _ = self._out
+        part_ptr, part_atoms, table_atoms, table_values, table_agent, term_atoms, trunc_atoms, mask_atoms = \
+            self._reads
+        index, rewards, res, mask, _ = self._out
         for p in range(len(part_ptr) - 1):
             hit = self.true(part_atoms[part_ptr[p]:part_ptr[p + 1]])
             index[p] = int(np.argmax(hit)) if hit.any() else -1
-        res[0] = table_values[self.true(table_atoms)].sum() if len(table_atoms) else 0.0
-        res[1] = float(len(term_atoms) > 0 and self.true(term_atoms).any())
-        res[2] = float(len(trunc_atoms) > 0 and self.true(trunc_atoms).any())
+        rewards[:] = np.bincount(table_agent, table_values * self.true(table_atoms), self.n_agents) \
+            if len(table_atoms) else 0.0
+        res[0] = float(len(term_atoms) > 0 and self.true(term_atoms).any())
+        res[1] = float(len(trunc_atoms) > 0 and self.true(trunc_atoms).any())
         mask[:] = self.true(mask_atoms) if len(mask_atoms) else 0
 
     def _step_engine(self, atoms: np.ndarray, bounds: np.ndarray) -> None:
@@ -258,10 +274,11 @@ class DeclaredWorld:
     def true(self, ids: np.ndarray) -> np.ndarray:
         return self.engine.is_true(ids)[0]
 
-    def observation(self) -> Any:
-        """The observation in the spec's space (gym_env.observation_space)."""
-        spec, index = self.spec, self._out[0]
-        indices = index.tolist()
+    def observation(self, agent: int = 0) -> Any:
+        """Agent `agent`'s observation in the spec's space (gym_env.observation_space)."""
+        spec = self.spec
+        n_index = len(self._index_parts)
+        indices = self._out[0][agent * n_index:(agent + 1) * n_index].tolist()
         if indices and min(indices) < 0:
             part = spec.parts[self._index_parts[indices.index(min(indices))]]
             raise RuntimeError(f"{spec.path}: observation part {part.name!r}: no atom of "
@@ -272,11 +289,12 @@ class DeclaredWorld:
                 value = value * size + i
             return value
         if spec.space == "MultiDiscrete":
-            return index.copy()
+            return np.array(indices, np.int64)
         values = []
-        for k, (part, ids) in enumerate(zip(spec.parts, self._part_ids)):
+        for k, part in enumerate(spec.parts):
+            ids = self._part_ids[k][agent]
             if part.read == "index":
-                values.append(np.array([index[self._index_parts.index(k)]], np.int64))
+                values.append(np.array([indices[self._index_parts.index(k)]], np.int64))
             elif part.read == "onehot":
                 values.append(self.true(ids).astype(np.float32))
             elif part.read == "lower":
@@ -288,13 +306,15 @@ class DeclaredWorld:
             return np.concatenate(values).astype(np.float32)
         return {p.name: (int(v[0]) if p.read == "index" else v) for p, v in zip(spec.parts, values)}
 
-    def _reward(self) -> float:
-        """The step's reward; also keeps its ends (read_step's res: reward, terminated, truncated)."""
-        reward, terminated, truncated = self._out[1].tolist()
+    def _rewards(self) -> np.ndarray:
+        """The engine step's rewards, one per agent; also keeps the ends (read_step's flags)."""
+        terminated, truncated = self._out[2].tolist()
         self._ends = (terminated == 1.0, truncated == 1.0)
-        if self._scaled_ids.size:
-            reward += float((self.engine.lower[0, self._scaled_ids] * self._scales).sum())
-        return reward
+        rewards = self._out[1].copy()
+        for a, (ids, scales) in enumerate(self._scaled):
+            if ids.size:
+                rewards[a] += float((self.engine.lower[0, ids] * scales).sum())
+        return rewards
 
     def terminated(self) -> bool:
         return self._ends[0]
@@ -303,8 +323,10 @@ class DeclaredWorld:
         limit = self.spec.max_steps
         return (limit is not None and self.steps >= limit) or self._ends[1]
 
-    def action_mask(self) -> np.ndarray | None:
-        return self._out[2].copy() if self._has_mask else None
+    def action_mask(self, agent: int = 0) -> np.ndarray | None:
+        if not self._has_mask:
+            return None
+        return self._out[3][agent * self.n_actions:(agent + 1) * self.n_actions].copy()
 
     def marked_cells(self) -> dict[str, str]:
         """Board cell -> the `marks` predicate true there (the last one written, when several are)."""
