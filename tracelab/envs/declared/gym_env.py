@@ -25,19 +25,14 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
 
     def __init__(self, spec: WorldSpec | str | os.PathLike[str], *, render_mode: str | None = None,
                  kernel: str = "auto", **params: Any) -> None:
-        if render_mode is not None and render_mode not in RENDER_MODES:
-            raise ValueError(f"render_mode must be None or one of {RENDER_MODES}, got {render_mode!r}")
         self.world_spec = spec if isinstance(spec, WorldSpec) else load_spec(spec, **params)
         if len(self.world_spec.agents) != 1:
             raise ValueError(f"{self.world_spec.path}: a gymnasium Env plays one agent; this spec declares "
                              f"{len(self.world_spec.agents)} (tracelab.envs.declared.parallel_env.DeclaredParallelEnv "
                              "plays them all)")
-        self.world = DeclaredWorld(self.world_spec, kernel=kernel)
+        self._painter = painter_for(self.world_spec, render_mode)
         self.render_mode = render_mode
-        board = self.world_spec.board
-        if render_mode == "rgb_array" and board is None:
-            raise ValueError(f"{self.world_spec.path}: render_mode 'rgb_array' draws the [board]; the spec has none")
-        self._painter = DeclaredPainter(board) if render_mode == "rgb_array" else None
+        self.world = DeclaredWorld(self.world_spec, kernel=kernel)
         self.metadata = {**self.metadata, "render_fps": self.world_spec.render_fps}
         self._n_actions = len(self.world_spec.action_names)
         self.action_space = spaces.Discrete(self._n_actions)
@@ -76,16 +71,32 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
         return info
 
     def render(self) -> str | np.ndarray | None:
-        if self._painter is not None:
-            return self._painter(self.world.marked_cells(), self.world_spec.board.mark_colors)
-        if self.render_mode != "ansi":
-            return None
-        board = self.world_spec.board
-        names = self.world_spec.action_names
-        head = f"  ({names[self._last_action]})\n" if self._last_action is not None else "\n"
-        if board is None:
-            return head + "\n".join(f"{k}: {v}" for k, v in self.world.engine.interpretation(0).items()) + "\n"
-        return head + board.text(self.world.marked_cells())
+        last = None if self._last_action is None else self.world_spec.action_names[self._last_action]
+        return render_world(self.world, self.render_mode, self._painter, last)
+
+
+def painter_for(spec: WorldSpec, render_mode: str | None) -> DeclaredPainter | None:
+    """The image painter of render_mode "rgb_array" (a ValueError for a mode the env lacks)."""
+    if render_mode is not None and render_mode not in RENDER_MODES:
+        raise ValueError(f"render_mode must be None or one of {RENDER_MODES}, got {render_mode!r}")
+    if render_mode == "rgb_array" and spec.board is None:
+        raise ValueError(f"{spec.path}: render_mode 'rgb_array' draws the [board]; the spec has none")
+    return DeclaredPainter(spec.board) if render_mode == "rgb_array" else None
+
+
+def render_world(world: DeclaredWorld, render_mode: str | None, painter: DeclaredPainter | None,
+                 last_actions: str | None) -> str | np.ndarray | None:
+    """The board now: an image ("rgb_array"), or text ("ansi": the last actions' names, then the board
+    with its marks, or the atoms that are set when the spec has no board)."""
+    board = world.spec.board
+    if painter is not None:
+        return painter(world.marked_cells(), board.mark_colors)
+    if render_mode != "ansi":
+        return None
+    head = f"  ({last_actions})\n" if last_actions is not None else "\n"
+    if board is None:
+        return head + "\n".join(f"{k}: {v}" for k, v in world.engine.interpretation(0).items()) + "\n"
+    return head + board.text(world.marked_cells())
 
 
 def observation_space(spec: WorldSpec) -> spaces.Space[Any]:

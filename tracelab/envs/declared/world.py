@@ -173,14 +173,16 @@ class DeclaredWorld:
         self.steps = 0
 
     def step(self, actions: Any, rng: np.random.Generator) -> None:
-        """Set each agent's action's facts (`actions`: one index per agent, or an int for one agent) and
+        """Set each agent's action's facts (`actions`: one index per agent, -1 for none, or an int for one
+        agent) and
         this step's random facts, step the engine (twice when an `after` random fact is drawn); the
         step's rewards, one per agent, are then `last_rewards`."""
         rows = self._rows
         if self.n_agents == 1:
             rows[0] = actions
-        else:
-            rows[:] = np.asarray(actions, np.int64) + np.arange(self.n_agents) * self.n_actions
+        else:  # an agent's -1: it does nothing this step
+            a = np.asarray(actions, np.int64)
+            rows[:] = np.where(a >= 0, a + np.arange(self.n_agents) * self.n_actions, -1)
         picks = self._picks  # the `after` draws' slots stay -1 between steps
         for d, drawer in enumerate(self._before):
             picks[d] = drawer.pick(self, rng)
