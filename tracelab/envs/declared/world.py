@@ -112,6 +112,7 @@ class DeclaredWorld:
         self._part_sizes = [len(p.atoms) for p in spec.parts]
         self._scaled = [(ids(a for a, _ in pairs), np.array([v for _, v in pairs], np.float64))
                         for pairs in spec.reward_scaled]
+        self._any_scaled = any(ids.size for ids, _ in self._scaled)
         n = self.n_agents
         mask_ids = np.concatenate([ids(m) for m in spec.mask]) if spec.mask is not None else np.zeros(0, np.int64)
         self._has_mask = spec.mask is not None
@@ -313,8 +314,8 @@ class DeclaredWorld:
         terminated, truncated = self._out[2].tolist()
         self._ends = (terminated == 1.0, truncated == 1.0)
         rewards = self._out[1].copy()
-        for a, (ids, scales) in enumerate(self._scaled):
-            if ids.size:
+        if self._any_scaled:
+            for a, (ids, scales) in enumerate(self._scaled):
                 rewards[a] += float((self.engine.lower[0, ids] * scales).sum())
         return rewards
 
