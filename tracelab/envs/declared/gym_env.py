@@ -111,8 +111,3 @@ def observation_space(spec: WorldSpec) -> spaces.Space[Any]:
         return spaces.Box(np.zeros_like(high), high, dtype=np.float32)
     return spaces.Dict({p.name: spaces.Discrete(len(p.atoms)) if p.read == "index" else
                         spaces.Box(0.0, 1.0, (p.width,), np.float32) for p in parts})
-
-
-def make_env(spec: str | os.PathLike[str], **kwargs: Any) -> DeclaredEnv:
-    """The gymnasium Env a spec declares; kwargs: the spec's [params], `render_mode`, `kernel`."""
-    return DeclaredEnv(spec, **kwargs)
