@@ -245,6 +245,8 @@ def test_the_cli_reports_a_spec_error_in_one_line(tmp_path: Path) -> None:
     ('atom = "push(robo, D)"\nover = ["west", "east"]\nwhen = "goal_reward"', "random[0].when", "expected a boolean"),
     ('atom = "push(robo, D)"\nover = ["west", "east"]\nafter = "over(W)"', "random[0].after", "must be ground"),
     ('atom = "push(robo, D)"\nover = "rows"', "random[0].over", "expected 'cells', a list of constants"),
+    ('atom = "push(robo, D)"\nover = ["west"]\n[[random]]\natom = "push(robo, E)"\nover = ["east"]', "random[1]",
+     "the draw name 'push' is also the name of random.0"),
 ])
 def test_random_fact_mistakes_are_located(tmp_path: Path, draw: str, where: str, fragment: str) -> None:
     path = write_world(tmp_path, SPEC + "\n[[random]]\n" + draw + "\n")

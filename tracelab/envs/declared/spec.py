@@ -72,6 +72,7 @@ class Draw:
     np_random.choice over the values whose weights hold. `after`: a random fact drawn after the step,
     only when that atom is true then (applied by one more engine step)."""
     key: KeyPath
+    name: str  # `name`, or the first atom's predicate: how records of the draws (traces) call it
     atoms: tuple[tuple[Atom, ...], ...]
     probabilities: np.ndarray | None
     weights: tuple[tuple[Atom, ...], ...] | None = None
@@ -321,6 +322,12 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
                     if (d := _draw(r, check, ("start", "choose", i), domains, start=True)) is not None)
     randoms = tuple(d for i in range(len(_list(r, ("random",))))
                     if (d := _draw(r, check, ("random", i), domains, start=False)) is not None)
+    seen: dict[str, KeyPath] = {}
+    for d in (*choices, *randoms):
+        if d.name in seen:
+            raise r.err(d.key, f"the draw name {d.name!r} is also the name of {'.'.join(map(str, seen[d.name]))} "
+                               "(give each draw its own `name`)")
+        seen[d.name] = d.key
     fps = r.integer(("env", "render_fps"), 4, minimum=1)
     # the program's warnings again, knowing what the env sets: no "never set" for pressed(...), slip(...)
     env_set = [*(a for per_agent in action_facts for facts in per_agent for a in facts), *start_facts,
@@ -538,7 +545,7 @@ _CELL_FORMAT = re.compile(r"(?:[A-Za-z0-9_-]|\{row\}|\{col\})+")
 
 def _draw(r: _Reader, check: _Names, path: KeyPath, domains: dict[str, list[str]], *, start: bool) -> Draw | None:
     """A start choice (`start`) or a random fact; None when its `when` expression is false."""
-    keys = ("atom", "over", "probabilities", "weights", "method", "when", *(() if start else ("after",)))
+    keys = ("name", "atom", "over", "probabilities", "weights", "method", "when", *(() if start else ("after",)))
     t = r.table(path, keys)
     if "when" in t:
         when = r.value((*path, "when"))
@@ -582,4 +589,5 @@ def _draw(r: _Reader, check: _Names, path: KeyPath, domains: dict[str, list[str]
         probabilities = r.numbers((*path, "probabilities"), len(values))
     else:
         probabilities = np.full(len(values), 1.0 / len(values))
-    return Draw(path, atoms, probabilities, weights, method, after)
+    name = r.string((*path, "name"), lits[0].pred)
+    return Draw(path, name, atoms, probabilities, weights, method, after)
