@@ -35,7 +35,7 @@ moved:     moved(w) <-! dest(E)
 leave:     at(C):[0,0] <-! was(C), moved(w), ~dest(C)
 ok_w:      allowed(A,west) <-! bot(A), at(C), west(C,E)
 ok_e:      allowed(A,east) <-! bot(A), at(C), east(C,E)
-ok_stay:   allowed(A,stay) <-! bot(A)
+ok_stay:   allowed(A,stay) <-! bot(A), at(C), floor(C)
 end:       over(w) <-! at(C), goal(C)
 push(robo, stay):[0,0]
 energy(robo):[0,1]
@@ -168,6 +168,7 @@ def _located(tmp_path: Path, old: str, new: str, **params) -> str:
     ('scale = 2', 'scale = "nope"', "37: reward.scale", "unknown name 'nope'"),
     ('max_steps = 5', 'max_steps = 0', "41: end.max_steps", "expected an integer >= 1"),
     ('edge = "none"', 'edge = "wrap"', "11: board.edge", "expected one of stay, none"),
+    ('G = ["floor", "goal"]', 'G = ["floor", "west"]', "7: board", "the board's facts do not fit the program"),
     ('rows = ["S..G"]', 'rows = ["S..G", "S."]', "8: board.rows", "rows of one length"),
     ('edge = "none"', 'edge = "none"\ncell = "{row:>999999999}{col}"', "12: board.cell", "expected a name"),
     ('edge = "none"', 'edge = "none"\ncell = "{row.__class__}{col}"', "12: board.cell", "expected a name"),

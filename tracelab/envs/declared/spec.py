@@ -295,7 +295,7 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     if not rule_files:
         raise r.err(("env", "rules"), "expected at least one rule file")
     board = _board(r) if "board" in src.data else None
-    program = _program(r, rule_files, board)
+    rules = _load_rules(r, rule_files)
 
     agents_t = r.table(("agents",), ("names", "mask"))
     agents = r.strings(("agents", "names"))
@@ -304,6 +304,9 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     for i, a in enumerate(agents):
         if not CONSTANT_RE.fullmatch(a):
             raise r.err(("agents", "names", i), f"{a!r} is not a plain constant (lower-case letter or digit first)")
+    # the board's predicates are names the spec may use too (FrozenLake's start cells are weights of the
+    # start choice, not read by a rule); a typo among them leaves the rules' predicate "never set"
+    program = _with_board(r, rules, board)
     check = _Names(r, program, [*(board.cells if board else []), *agents])
     for pred in (board.marks if board else {}):  # a predicate of one argument, true of cells
         check.pattern(("board", "marks", pred), f"{pred}(Cell)", ("Cell",))
@@ -401,11 +404,15 @@ def _inside(r: _Reader, path: KeyPath, name: str) -> str:
     return os.path.join(r.src.folder, name)
 
 
-def _program(r: _Reader, files: list[str], board: Board | None) -> Program:
+def _load_rules(r: _Reader, files: list[str]) -> Program:
     try:
-        program = load_program(*files)
+        return load_program(*files)
     except FileNotFoundError as e:
         raise r.err(("env", "rules"), f"{e.filename}: no such file") from None
+
+
+def _with_board(r: _Reader, program: Program, board: Board | None) -> Program:
+    """The program with the board's facts (static, at t = 0), checked again."""
     if board is None:
         return program
     loc = SourceLoc(r.src.path, r.src.key_lines.line(("board", "rows")), 1)
