@@ -58,7 +58,7 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
         self._last_action = a
         terminated, truncated = w.terminated(), w.truncated()
         self._running = not (terminated or truncated)
-        return self._observe(), float(w.last_rewards[0]), terminated, truncated, self._info()
+        return self._observe(), w.last_rewards[0], terminated, truncated, self._info()
 
     def _observe(self) -> Any:
         return self.world.observation()

@@ -71,7 +71,7 @@ class DeclaredParallelEnv(ParallelEnv[str, Any, int]):
         w.step(rows, self._np_random)
         self._last = rows
         terminated, truncated = w.terminated(), w.truncated()
-        rewards = dict(zip(self.possible_agents, w.last_rewards.tolist()))
+        rewards = dict(zip(self.possible_agents, w.last_rewards))
         obs, infos = self._observations(), self._infos()
         if terminated or truncated:
             self.agents = []

@@ -139,7 +139,10 @@ class DeclaredWorld:
         self._start_picks = self._picks.copy()
         self._start_picks[-1] = 0  # the start facts: a draw with one value
         self.steps = 0
-        self.last_rewards = np.zeros(self.n_agents)
+        self.last_rewards = [0.0] * self.n_agents
+        # one world on the counting kernel stays on it (only a lanes engine moves to counting)
+        self._fused = eng.kernel == "counting"
+        self._single_index = spec.space == "Discrete" and len(spec.parts) == 1
         self._ends = (False, False)
 
     def _step_tables(self) -> tuple[np.ndarray, ...]:
@@ -198,17 +201,19 @@ class DeclaredWorld:
             if picks[n_before:].max() >= 0:
                 rows[:] = -1
                 self._fused_step(rows, picks)
-                rewards = rewards + self._rewards()
+                rewards = [a + b for a, b in zip(rewards, self._rewards())]
                 picks[n_before:] = -1
         self.last_rewards = rewards
         self.steps += 1
 
     def _fused_step(self, rows: np.ndarray, picks: np.ndarray) -> None:
         eng = self.engine
-        if eng.kernel != "counting":  # the engine's own step, then the reads
+        if not self._fused:  # the engine's own step, then the reads
             self._unfused_step(rows, picks)
             return
-        b = self._bind()
+        b = self._buffers
+        if eng.prepare_fused_step() != self._bound_version or b is None:
+            b = self._bind()
         status = fused.fused_step(b, rows, picks, eng.t, eng.next_external_id())
         ext_ptr, ext_i, ext_f = self._ext
         eng.finish_fused_step(status, int(self._out[4][0]), ext_ptr, ext_i, ext_f)
@@ -245,7 +250,7 @@ class DeclaredWorld:
         self._read()
 
     def _read(self) -> None:
-        if self.engine.kernel != "counting":
+        if not self._fused:
             self._read_unfused()
         else:
             fused.read_step(self._bind())
@@ -280,6 +285,10 @@ class DeclaredWorld:
     def observation(self, agent: int = 0) -> Any:
         """Agent `agent`'s observation in the spec's space (gym_env.observation_space)."""
         spec = self.spec
+        if self._single_index:  # the toy-text games' case, kept short
+            value = int(self._out[0][agent])
+            if value >= 0:
+                return value
         n_index = len(self._index_parts)
         indices = self._out[0][agent * n_index:(agent + 1) * n_index].tolist()
         if indices and min(indices) < 0:
@@ -309,11 +318,11 @@ class DeclaredWorld:
             return np.concatenate(values).astype(np.float32)
         return {p.name: (int(v[0]) if p.read == "index" else v) for p, v in zip(spec.parts, values)}
 
-    def _rewards(self) -> np.ndarray:
+    def _rewards(self) -> list[float]:
         """The engine step's rewards, one per agent; also keeps the ends (read_step's flags)."""
         terminated, truncated = self._out[2].tolist()
         self._ends = (terminated == 1.0, truncated == 1.0)
-        rewards = self._out[1].copy()
+        rewards = self._out[1].tolist()
         if self._any_scaled:
             for a, (ids, scales) in enumerate(self._scaled):
                 rewards[a] += float((self.engine.lower[0, ids] * scales).sum())
