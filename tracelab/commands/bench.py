@@ -1,6 +1,6 @@
 """`tracelab bench`: speed and memory measured by benchmarks (docs/benchmarks.md), never by timed
 assertions in tests. `bench engine`, `bench env`, `bench store`, `bench replay`, `bench train`,
-`bench tui`, `bench aggregates`, `bench reason-store`, `bench all` (engine, env, store, replay, train);
+`bench tui`, `bench aggregates`, `bench reason-store`, `bench toytext`, `bench all` (engine, env, store, replay, train);
 each takes --json, --quick (small sizes: the smoke test) and --repeats (medians and spread over that
 many repeats)."""
 from __future__ import annotations
@@ -28,6 +28,7 @@ def register(sub: argparse._SubParsersAction) -> None:
              "tui": "the terminal UI on a 10M-row run: open, first page, scroll, jump, filter (headless)",
              "reason-store": "reason --run against reason --no-trace on a 1M-edge graph: the ratio, change "
                              "rows/s into the store, peak memory",
+             "toytext": "gymnasium's toy-text games as rules (docs/worlds.md) against gymnasium's own, one world",
              "all": "engine, env, store, replay and train"}
     for name, text in helps.items():
         q = what.add_parser(name, help=text)
@@ -53,7 +54,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         if name in ("engine", "all"):
             q.add_argument("--compile-repeats", type=positive_int, default=None,
                            help="first-ever compiles to time (default: min(repeats, 3); --quick: 1)")
-        if name not in ("store", "tui"):  # the sections that build engines
+        if name not in ("store", "tui", "toytext"):  # the sections that build engines (toytext: the envs')
             add_max_groundings(q)
         if name == "engine":
             q.add_argument("--graph-only", action="store_true",
@@ -97,6 +98,10 @@ def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], s
         from tracelab.bench import reason_store
         r = reason_store.run(args.quick, args.repeats)
         return r, reason_store.report(r)
+    if name == "toytext":
+        from tracelab.bench import toytext
+        r = toytext.run(args.quick, args.repeats)
+        return r, toytext.report(r)
     if name == "tui":
         from tracelab.bench import tui
         r = tui.run(args.quick, args.repeats, args.rows)

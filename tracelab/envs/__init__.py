@@ -1,2 +1,26 @@
 """The environments over the simulators: gymnasium (gym_env), batched gymnasium (vector_env), PettingZoo
-(parallel_env), their shared set-up (common), the per-episode tracer and the trace sinks."""
+(parallel_env), their shared set-up (common), the per-episode tracer and the trace sinks; and worlds
+declared by a spec beside a rule program (declared/, docs/worlds.md): `make_env(SPEC, **kwargs)` and the
+toy-text games registered as `tracelab/FrozenLake-v1`, ..."""
+from __future__ import annotations
+
+import os
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from tracelab.envs.declared.gym_env import DeclaredEnv
+
+
+def make_env(spec: str | os.PathLike[str], **kwargs: Any) -> DeclaredEnv:
+    """The gymnasium Env a spec declares (docs/worlds.md); kwargs: the spec's [params], `render_mode`,
+    `kernel` (the engine's)."""
+    from tracelab.envs.declared.gym_env import DeclaredEnv
+    return DeclaredEnv(spec, **kwargs)
+
+
+def _register() -> None:
+    from tracelab.envs.declared.toytext import register_toytext
+    register_toytext()
+
+
+_register()

@@ -1,0 +1,64 @@
+"""`tracelab bench toytext`: gymnasium's toy-text games written as rules (rules/toytext/, docs/worlds.md)
+against gymnasium's own pure-Python envs, one world each, untraced, in one run.
+
+Both envs are stepped unwrapped (no TimeLimit or checker wrappers) with the same fixed random actions,
+reset when an episode ends, so a figure includes the resets a random policy makes (FrozenLake 4x4
+resets every ~8 steps). The issue's goal for one world is a ratio of at least 0.5."""
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from tracelab.bench.common import block_rates, format_table
+
+GOAL_RATIO = 0.5
+TARGET_S = 0.5  # a timed block
+GAMES = (("FrozenLake 4x4", "tracelab/FrozenLake-v1", "FrozenLake-v1", {}),
+         ("FrozenLake 8x8 dry", "tracelab/FrozenLake-v1", "FrozenLake-v1", {"map_name": "8x8", "is_slippery": False}),
+         ("CliffWalking", "tracelab/CliffWalking-v1", "CliffWalking-v1", {}),
+         ("Taxi", "tracelab/Taxi-v4", "Taxi-v4", {}))
+
+
+def stepper(env: gym.Env) -> Any:
+    """run(k): k steps of fixed random actions, resetting as episodes end."""
+    actions = np.random.default_rng(0).integers(env.action_space.n, size=1 << 16).tolist()
+    env.reset(seed=0)
+    where = [0]
+
+    def run(k: int) -> None:
+        i = where[0]
+        for _ in range(k):
+            _, _, terminated, truncated, _ = env.step(actions[i])
+            i = (i + 1) & 0xFFFF
+            if terminated or truncated:
+                env.reset()
+        where[0] = i
+    return run
+
+
+def run(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
+    import tracelab.envs  # noqa: F401  (registers the ids)
+    repeats = 1 if quick else repeats
+    target = 0.05 if quick else TARGET_S
+    out = []
+    for name, ours_id, theirs_id, kwargs in GAMES:
+        ours = block_rates(stepper(gym.make(ours_id, **kwargs).unwrapped), repeats, target)
+        theirs = block_rates(stepper(gym.make(theirs_id, **kwargs).unwrapped), repeats, target)
+        ratio = ours["steps_per_s"]["median"] / theirs["steps_per_s"]["median"]
+        out.append({"game": name, "tracelab": ours, "gymnasium": theirs, "ratio": ratio,
+                    "goal_met": ratio >= GOAL_RATIO})
+    return {"games": out, "goal_ratio": GOAL_RATIO, "repeats": repeats}
+
+
+def report(r: dict[str, Any]) -> str:
+    rows = []
+    for g in r["games"]:
+        ours, theirs = g["tracelab"]["steps_per_s"]["median"], g["gymnasium"]["steps_per_s"]["median"]
+        rows.append([g["game"], f"{ours:,.0f}", f"{1e6 / ours:.1f}", f"{theirs:,.0f}", f"{1e6 / theirs:.1f}",
+                     f"{g['ratio']:.2f}", "yes" if g["goal_met"] else "no"])
+    head = (f"one world, untraced, random actions with resets (median of {r['repeats']}); "
+            f"goal: tracelab >= {r['goal_ratio']}x gymnasium")
+    return head + "\n" + format_table(["game", "tracelab steps/s", "us/step", "gymnasium steps/s", "us/step",
+                                       "ratio", "goal"], rows)

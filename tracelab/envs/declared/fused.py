@@ -1,0 +1,177 @@
+"""A declared world's step as ONE compiled call: the step's facts to engine rows, the counting kernel's
+step, and the reads (observation indices, the reward table, the ends, the action mask).
+
+Why: a numba call from Python unboxes every array it is given (~0.5 µs each on this machine); the
+counting kernel's step takes ~60 arrays, so calling it from Python costs ~40 µs, more than the step's
+work on a toy-text game. As in RuleSim's fused step (tracelab/game/rulesim_fused.py), the arrays are
+bound once into a structref (one object to unbox) and bound again only when the engine replaces one of
+its arrays (Engine.layout_version). When the kernel pauses (trace or schedule room) or fails, the call
+returns its status and Python goes on with Engine.finish_fused_step, then `read_step`.
+
+Tables (int64 unless said): `act_ptr`/`act_atoms`/`act_bnd` (float64 [n, 2]): each (agent, action)
+row's facts (row agent * n_actions + action);
+`val_ptr`/`val_atoms`/`val_bnd`: each value's facts, draws' values numbered one after another
+(`draw_base[d]` is draw d's value 0); `prev`/`prev_n`: the step facts set by the last engine step;
+`now`/`now_bnd`: scratch for this step's."""
+from __future__ import annotations
+
+import inspect
+
+import numpy as np
+from numba import njit
+from numba.core import types
+from numba.experimental import structref
+from numba.extending import overload
+
+from tracelab.engine import kernel as K
+from tracelab.game.rulesim_fused import _stamp_with_sources
+
+STATUS_OK = K.STATUS_OK
+FIELDS = ("cfg", "before", "after", "lower", "tables", "ext", "reads", "out")
+
+
+@structref.register
+class DeclaredBuffersType(types.StructRef):
+    def preprocess_fields(self, fields):  # noqa: ANN001, ANN201 (numba's hook)
+        return tuple((name, types.unliteral(t)) for name, t in fields)
+
+
+class DeclaredBuffers(structref.StructRefProxy):
+    """The arrays of one declared world's fused step (make it with `bind`)."""
+
+
+structref.define_boxing(DeclaredBuffersType, DeclaredBuffers)
+
+
+def _new_buffers(cfg, before, after, lower, tables, ext, reads, out):  # noqa: ANN001
+    raise NotImplementedError("compiled code only")
+
+
+@overload(_new_buffers)
+def _new_buffers_impl(cfg, before, after, lower, tables, ext, reads, out):  # noqa: ANN001
+    typ = DeclaredBuffersType(list(zip(FIELDS, (cfg, before, after, lower, tables, ext, reads, out))))
+
+    def impl(cfg, before, after, lower, tables, ext, reads, out):  # noqa: ANN001
+        b = structref.new(typ)
+        b.cfg = cfg
+        b.before = before
+        b.after = after
+        b.lower = lower
+        b.tables = tables
+        b.ext = ext
+        b.reads = reads
+        b.out = out
+        return b
+    return impl
+
+
+@njit(cache=True)
+def _make_buffers(cfg, before, after, lower, tables, ext, reads, out):  # noqa: ANN001
+    return _new_buffers(cfg, before, after, lower, tables, ext, reads, out)
+
+
+def bind(binding: tuple, tables: tuple, ext: tuple, reads: tuple, out: tuple) -> DeclaredBuffers:
+    """The buffers of a fused step over Engine.fused_binding() (cfg, before, after)."""
+    cfg, before, after = binding
+    return _make_buffers(cfg, before, after, after[1], tables, ext, reads, out)
+
+
+@njit(cache=True)
+def fused_step(b, actions, picks, t, first_id):  # noqa: ANN001, ANN201
+    """Set the facts of each action row in `actions` (-1: none) and, per draw d with picks[d] >= 0, the
+    facts of its value picks[d]; the last step's facts not set again become [0,0]. Steps the kernel; on
+    STATUS_OK also reads (read_step). Returns the kernel's status (b.out[4][0]: the world it paused at)."""
+    act_ptr, act_atoms, act_bnd, draw_base, val_ptr, val_atoms, val_bnd, prev, prev_n, now, now_bnd = b.tables
+    n = 0
+    for action in actions:
+        if action < 0:
+            continue
+        for j in range(act_ptr[action], act_ptr[action + 1]):
+            now[n] = act_atoms[j]
+            now_bnd[n, 0] = act_bnd[j, 0]
+            now_bnd[n, 1] = act_bnd[j, 1]
+            n += 1
+    for d in range(len(picks)):
+        if picks[d] >= 0:
+            v = draw_base[d] + picks[d]
+            for j in range(val_ptr[v], val_ptr[v + 1]):
+                now[n] = val_atoms[j]
+                now_bnd[n, 0] = val_bnd[j, 0]
+                now_bnd[n, 1] = val_bnd[j, 1]
+                n += 1
+    ext_ptr, ext_i, ext_f = b.ext
+    k = 0
+    for i in range(prev_n[0]):  # last step's facts that are not set again: false now
+        again = False
+        for j in range(n):
+            if now[j] == prev[i]:
+                again = True
+                break
+        if not again:
+            ext_i[k, 0] = prev[i]
+            ext_i[k, 1] = 0
+            ext_i[k, 2] = first_id + k
+            ext_f[k, 0] = 0.0
+            ext_f[k, 1] = 0.0
+            k += 1
+    for j in range(n):
+        ext_i[k, 0] = now[j]
+        ext_i[k, 1] = 0
+        ext_i[k, 2] = first_id + k
+        ext_f[k, 0] = now_bnd[j, 0]
+        ext_f[k, 1] = now_bnd[j, 1]
+        k += 1
+        prev[j] = now[j]
+    prev_n[0] = n
+    ext_ptr[0] = 0
+    ext_ptr[1] = k
+    cfg = b.cfg
+    cfg[K.CFG_T] = t
+    status, w_first = K.step_worlds(*((cfg, 0) + b.before + (ext_ptr, ext_i, ext_f) + b.after))
+    b.out[4][0] = w_first
+    if status == STATUS_OK:
+        read_step(b)
+    return status
+
+
+@njit(cache=True)
+def read_step(b):  # noqa: ANN001, ANN201
+    """After a step: per (agent, index part) the index of its first true atom (-1: none), per agent the
+    reward table's sum, whether a terminated / truncated atom is true, and the mask (1 where the atom is
+    [1,1])."""
+    part_ptr, part_atoms, table_atoms, table_values, table_agent, term_atoms, trunc_atoms, mask_atoms = b.reads
+    index, rewards, res, mask, _ = b.out
+    lower = b.lower
+    for p in range(len(part_ptr) - 1):
+        index[p] = -1
+        for j in range(part_ptr[p], part_ptr[p + 1]):
+            if lower[0, part_atoms[j]] == 1.0:
+                index[p] = j - part_ptr[p]
+                break
+    rewards[:] = 0.0
+    for j in range(len(table_atoms)):
+        if lower[0, table_atoms[j]] == 1.0:
+            rewards[table_agent[j]] += table_values[j]
+    res[0] = 0.0
+    for a in term_atoms:
+        if lower[0, a] == 1.0:
+            res[0] = 1.0
+    res[1] = 0.0
+    for a in trunc_atoms:
+        if lower[0, a] == 1.0:
+            res[1] = 1.0
+    for j in range(len(mask_atoms)):
+        mask[j] = 1 if lower[0, mask_atoms[j]] == 1.0 else 0
+
+
+SOURCE_STAMP = _stamp_with_sources(fused_step, (inspect.getmodule(bind), K))
+_stamp_with_sources(read_step, (inspect.getmodule(bind), K))
+
+
+def csr(groups: list[np.ndarray], bounds: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(ptr, atoms, bounds [n, 2]) of a list of atom groups."""
+    ptr = np.zeros(len(groups) + 1, np.int64)
+    ptr[1:] = np.cumsum([len(g) for g in groups])
+    atoms = np.concatenate([np.zeros(0, np.int64), *groups]).astype(np.int64)
+    bnd = np.concatenate([np.zeros((0, 2)), *bounds]).astype(np.float64).reshape(-1, 2)
+    return ptr, atoms, bnd

@@ -1,0 +1,113 @@
+"""`DeclaredEnv`: a world declared by a spec (docs/worlds.md) as a gymnasium Env.
+
+The spaces come from the spec: actions Discrete(number of actions); the observation Discrete (one index,
+or several as one number, first part most significant: numpy's ravel_multi_index), MultiDiscrete (the
+parts' indices), Box (the parts' numbers, float32, in order) or Dict (a space per part). `info` holds
+`action_mask` (int8, 1 = allowed) when the spec declares a mask, and `t` (steps into the episode)."""
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from tracelab.envs.declared.render import DeclaredPainter
+from tracelab.envs.declared.spec import WorldSpec, load_spec
+from tracelab.envs.declared.world import DeclaredWorld
+
+RENDER_MODES = ["ansi", "rgb_array"]
+
+
+class DeclaredEnv(gym.Env[Any, np.int64]):
+    metadata = {"render_modes": RENDER_MODES, "render_fps": 4}
+
+    def __init__(self, spec: WorldSpec | str | os.PathLike[str], *, render_mode: str | None = None,
+                 kernel: str = "auto", **params: Any) -> None:
+        self.world_spec = spec if isinstance(spec, WorldSpec) else load_spec(spec, **params)
+        if len(self.world_spec.agents) != 1:
+            raise ValueError(f"{self.world_spec.path}: a gymnasium Env plays one agent; this spec declares "
+                             f"{len(self.world_spec.agents)} (tracelab.envs.declared.parallel_env.DeclaredParallelEnv "
+                             "plays them all)")
+        self._painter = painter_for(self.world_spec, render_mode)
+        self.render_mode = render_mode
+        self.world = DeclaredWorld(self.world_spec, kernel=kernel)
+        self.metadata = {**self.metadata, "render_fps": self.world_spec.render_fps}
+        self._n_actions = len(self.world_spec.action_names)
+        self.action_space = spaces.Discrete(self._n_actions)
+        self.observation_space = observation_space(self.world_spec)
+        self._running = False
+        self._last_action: int | None = None
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        super().reset(seed=seed)
+        self.world.reset(self.np_random)
+        self._running = True
+        self._last_action = None
+        return self._observe(), self._info()
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        if not self._running:
+            raise RuntimeError("the episode is over (or never began): call reset() first")
+        a = int(action)
+        if not 0 <= a < self._n_actions or a != action:
+            raise ValueError(f"action {action!r} is outside the action space {self.action_space}")
+        w = self.world
+        w.step(a, self.np_random)
+        self._last_action = a
+        terminated, truncated = w.terminated(), w.truncated()
+        self._running = not (terminated or truncated)
+        return self._observe(), w.last_rewards[0], terminated, truncated, self._info()
+
+    def _observe(self) -> Any:
+        return self.world.observation()
+
+    def _info(self) -> dict[str, Any]:
+        info: dict[str, Any] = {"t": self.world.steps}
+        mask = self.world.action_mask()
+        if mask is not None:
+            info["action_mask"] = mask
+        return info
+
+    def render(self) -> str | np.ndarray | None:
+        last = None if self._last_action is None else self.world_spec.action_names[self._last_action]
+        return render_world(self.world, self.render_mode, self._painter, last)
+
+
+def painter_for(spec: WorldSpec, render_mode: str | None) -> DeclaredPainter | None:
+    """The image painter of render_mode "rgb_array" (a ValueError for a mode the env lacks)."""
+    if render_mode is not None and render_mode not in RENDER_MODES:
+        raise ValueError(f"render_mode must be None or one of {RENDER_MODES}, got {render_mode!r}")
+    if render_mode == "rgb_array" and spec.board is None:
+        raise ValueError(f"{spec.path}: render_mode 'rgb_array' draws the [board]; the spec has none")
+    return DeclaredPainter(spec.board) if render_mode == "rgb_array" else None
+
+
+def render_world(world: DeclaredWorld, render_mode: str | None, painter: DeclaredPainter | None,
+                 last_actions: str | None) -> str | np.ndarray | None:
+    """The board now: an image ("rgb_array"), or text ("ansi": the last actions' names, then the board
+    with its marks, or the atoms that are set when the spec has no board)."""
+    board = world.spec.board
+    if painter is not None:
+        return painter(world.marked_cells(), board.mark_colors)
+    if render_mode != "ansi":
+        return None
+    head = f"  ({last_actions})\n" if last_actions is not None else "\n"
+    if board is None:
+        return head + "\n".join(f"{k}: {v}" for k, v in world.engine.interpretation(0).items()) + "\n"
+    return head + board.text(world.marked_cells())
+
+
+def observation_space(spec: WorldSpec) -> spaces.Space[Any]:
+    parts = spec.parts
+    if spec.space == "Discrete":
+        return spaces.Discrete(int(np.prod([len(p.atoms) for p in parts])))
+    if spec.space == "MultiDiscrete":
+        return spaces.MultiDiscrete([len(p.atoms) for p in parts])
+    if spec.space == "Box":
+        high = np.concatenate([np.full(p.width, len(p.atoms) - 1 if p.read == "index" else 1.0, np.float32)
+                               for p in parts])
+        return spaces.Box(np.zeros_like(high), high, dtype=np.float32)
+    return spaces.Dict({p.name: spaces.Discrete(len(p.atoms)) if p.read == "index" else
+                        spaces.Box(0.0, 1.0, (p.width,), np.float32) for p in parts})

@@ -1,0 +1,48 @@
+"""A declared board as an RGB image (render_mode="rgb_array"), drawn with numpy as GridWar's boards are
+(tracelab/envs/render_rgb.py): each cell CELL pixels square, top row first, filled with its character's
+colour (`[board] colors`, hex; a grey of the character's rank in the legend otherwise) with a thin grid,
+and a disc on each cell where a `marks` predicate holds (`[board] mark_colors`, red by default)."""
+from __future__ import annotations
+
+import numpy as np
+
+from tracelab.envs.declared.board import Board
+from tracelab.envs.render_rgb import CELL, GRID, _disc
+
+DEFAULT_MARK = (230, 57, 70)
+
+
+def hex_color(text: str) -> tuple[int, int, int] | None:
+    """(r, g, b) of "#rrggbb", or None when the text is not one."""
+    if len(text) != 7 or text[0] != "#":
+        return None
+    try:
+        return int(text[1:3], 16), int(text[3:5], 16), int(text[5:7], 16)
+    except ValueError:
+        return None
+
+
+class DeclaredPainter:
+    def __init__(self, board: Board, cell: int = CELL) -> None:
+        self.board, self.cell = board, cell
+        chars = sorted({ch for row in board.rows for ch in row})
+        h, w = board.height, board.width
+        img = np.zeros((h * cell, w * cell, 3), np.uint8)
+        for r, row in enumerate(board.rows):
+            for c, ch in enumerate(row):
+                grey = 70 + 120 * chars.index(ch) // max(1, len(chars) - 1)
+                img[r * cell:(r + 1) * cell, c * cell:(c + 1) * cell] = board.colors.get(ch, (grey,) * 3)
+        img[::cell, :] = GRID
+        img[:, ::cell] = GRID
+        self.background = img
+        self._disc = _disc(cell, cell * 0.36)
+        self._cells = {name: divmod(i, w) for i, name in enumerate(board.cells)}
+
+    def __call__(self, marked: dict[str, str], mark_colors: dict[str, tuple[int, int, int]]) -> np.ndarray:
+        """The image with a disc on each marked cell (`marked`: cell -> the predicate that marks it)."""
+        img = self.background.copy()
+        for cell_name, pred in marked.items():
+            r, c = self._cells[cell_name]
+            tile = img[r * self.cell:(r + 1) * self.cell, c * self.cell:(c + 1) * self.cell]
+            tile[self._disc] = mark_colors.get(pred, DEFAULT_MARK)
+        return img

@@ -1,0 +1,600 @@
+"""An environment spec (a TOML file beside a rule program, docs/worlds.md) read into a `WorldSpec`.
+
+`load_spec(path, **params)` reads the file (spec_file), computes every expression with the params
+(expressions), builds the board's facts (board), loads the rule files, and checks every atom the spec
+names against the program: a predicate it lacks or uses with another arity, or a constant that is neither
+the program's, a board cell nor an agent, is a located error (`SpecError`: file:line: key: what was
+expected). Nothing here steps an engine; world.py does."""
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+import os
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from tracelab.engine.errors import ProgramError
+from tracelab.engine.parser import check_program, load_program, parse_literal
+from tracelab.engine.program import CONSTANT_RE, Fact, Literal, Program, SourceLoc, Term
+from tracelab.envs.declared.board import MAX_BOARD_CELLS, Board
+from tracelab.envs.declared.expressions import ExpressionError, evaluate
+from tracelab.envs.declared.render import hex_color
+from tracelab.envs.declared.spec_file import KeyPath, SpecError, SpecSource, read_spec_file
+
+READS = ("index", "lower", "bounds", "onehot")
+SPACES = ("Discrete", "MultiDiscrete", "Box", "Dict")
+SECTIONS = ("env", "params", "data", "board", "agents", "actions", "observation", "reward", "end", "start",
+            "random")
+AGENT_VAR, ACTION_VAR = "Agent", "Action"
+MAX_DOMAIN = 100_000  # values of one `over` (or of a product of them), atoms of one observation part
+
+
+@dataclass(frozen=True)
+class Atom:
+    """A ground atom the spec names, with the bound a fact sets (reads ignore it)."""
+    pred: str
+    args: tuple[str, ...]
+    lower: float = 1.0
+    upper: float = 1.0
+
+    def __str__(self) -> str:
+        return f"{self.pred}({','.join(self.args)})"
+
+
+@dataclass(frozen=True)
+class ObservationPart:
+    name: str
+    read: str  # one of READS
+    per_agent: tuple[tuple[Atom, ...], ...]  # [agent] -> the atoms read, in the part's order
+
+    @property
+    def atoms(self) -> tuple[Atom, ...]:
+        """The first agent's atoms (every agent reads as many)."""
+        return self.per_agent[0]
+
+    @property
+    def width(self) -> int:
+        """Numbers this part puts in a Box (an index is one number)."""
+        return {"index": 1, "lower": len(self.atoms), "bounds": 2 * len(self.atoms),
+                "onehot": len(self.atoms)}[self.read]
+
+
+@dataclass(frozen=True)
+class Draw:
+    """One draw from the env's np_random: value i sets the atoms `atoms[i]` (one per pattern).
+    `method` "categorical" is gymnasium's categorical_sample over `probabilities` (fixed), or over the
+    values whose `weights[i]` atoms are all true, equally likely (read when drawn); "choice" is
+    np_random.choice over the values whose weights hold. `after`: a random fact drawn after the step,
+    only when that atom is true then (applied by one more engine step)."""
+    key: KeyPath
+    name: str  # `name`, or the first atom's predicate: how records of the draws (traces) call it
+    atoms: tuple[tuple[Atom, ...], ...]
+    probabilities: np.ndarray | None
+    weights: tuple[tuple[Atom, ...], ...] | None = None
+    method: str = "categorical"
+    after: Atom | None = None
+
+
+@dataclass
+class WorldSpec:
+    path: str
+    params: dict[str, Any]
+    program: Program  # the rule files' program with the board's facts
+    agents: tuple[str, ...]
+    action_names: tuple[str, ...]
+    action_facts: tuple[tuple[tuple[Atom, ...], ...], ...]  # [agent][action] -> facts for the step
+    mask: tuple[tuple[Atom, ...], ...] | None  # [agent][action] -> the atom that allows it
+    space: str
+    parts: tuple[ObservationPart, ...]
+    reward_table: tuple[tuple[tuple[Atom, float], ...], ...]  # [agent] -> (atom, value)
+    reward_scaled: tuple[tuple[tuple[Atom, float], ...], ...]  # [agent] -> (atom, scale)
+    terminated: tuple[Atom, ...]  # every agent's, together: the episode ends for all at once
+    truncated: tuple[Atom, ...]
+    max_steps: int | None
+    start_facts: tuple[Atom, ...]
+    start_choices: tuple[Draw, ...]
+    random_facts: tuple[Draw, ...]
+    board: Board | None
+    render_fps: int
+    source: SpecSource = field(repr=False)
+
+
+# ---- reading typed values, located ----
+
+class _Reader:
+    """Typed access to the spec's values: each mistake a SpecError at the key's line."""
+
+    def __init__(self, src: SpecSource, names: dict[str, Any]) -> None:
+        self.src = src
+        self.names = names  # params and data, for expressions
+
+    def err(self, path: KeyPath, msg: str) -> SpecError:
+        return self.src.error(path, msg)
+
+    def raw(self, path: KeyPath, default: Any = ...) -> Any:
+        node: Any = self.src.data
+        for p in path:
+            if isinstance(node, dict) and isinstance(p, str) and p in node:
+                node = node[p]
+            elif isinstance(node, list) and isinstance(p, int) and p < len(node):
+                node = node[p]
+            else:
+                if default is ...:
+                    raise self.err(path, "missing (required)")
+                return default
+        return node
+
+    def value(self, path: KeyPath, default: Any = ..., *, expr: bool = True) -> Any:
+        """The value at path; a string where a number, boolean or list is expected is an expression."""
+        v = self.raw(path, default)
+        if expr and isinstance(v, str) and v is not default:
+            try:
+                return evaluate(v, self.names)
+            except ExpressionError as e:
+                raise self.err(path, str(e)) from None
+        return v
+
+    def table(self, path: KeyPath, allowed: tuple[str, ...] | None = None, default: Any = ...) -> dict[str, Any]:
+        v = self.raw(path, default)
+        if not isinstance(v, dict):
+            raise self.err(path, f"expected a table, got {_kind(v)}")
+        if allowed is not None:
+            for k in v:
+                if k not in allowed:
+                    raise self.err((*path, k), f"unknown key (expected one of: {', '.join(allowed)})")
+        return v
+
+    def string(self, path: KeyPath, default: Any = ..., choices: tuple[str, ...] | None = None) -> str:
+        v = self.raw(path, default)
+        if not isinstance(v, str):
+            raise self.err(path, f"expected a string, got {_kind(v)}")
+        if choices is not None and v not in choices:
+            raise self.err(path, f"expected one of {', '.join(choices)}, got {v!r}")
+        return v
+
+    def number(self, path: KeyPath, default: Any = ...) -> float:
+        v = self.value(path, default)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise self.err(path, f"expected a finite number, got {_kind(v)}")
+        return float(v)
+
+    def integer(self, path: KeyPath, default: Any = ..., minimum: int = 0) -> int:
+        v = self.value(path, default)
+        if v is None and default is None:
+            return None  # type: ignore[return-value]
+        if isinstance(v, bool) or not isinstance(v, int) or v < minimum:
+            raise self.err(path, f"expected an integer >= {minimum}, got {_kind(v)}")
+        return v
+
+    def strings(self, path: KeyPath, default: Any = ...) -> list[str]:
+        v = self.value(path, default)
+        if not isinstance(v, list) or not all(isinstance(s, str) for s in v):
+            raise self.err(path, f"expected a list of strings, got {_kind(v)}")
+        return v
+
+    def numbers(self, path: KeyPath, n: int) -> np.ndarray:
+        v = self.value(path)
+        if not isinstance(v, list) or len(v) != n or not all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+            raise self.err(path, f"expected a list of {n} numbers, got {_kind(v)}")
+        p = np.asarray(v, np.float64)
+        if not np.isfinite(p).all() or (p < 0).any() or p.sum() <= 0:
+            raise self.err(path, "expected probabilities >= 0 with a positive sum")
+        return p
+
+
+def _kind(v: Any) -> str:
+    if isinstance(v, str):
+        return f"the string {v[:40]!r}"
+    if isinstance(v, bool):
+        return f"the boolean {str(v).lower()}"
+    if isinstance(v, (int, float)):
+        return f"the number {v}"
+    if isinstance(v, list):
+        return f"a list of {len(v)}"
+    if isinstance(v, dict):
+        return "a table"
+    return "nothing" if v is None else type(v).__name__
+
+
+# ---- atoms, checked against the program ----
+
+class _Names:
+    """The program's predicates (with arity) and constants, the board's cells and the agents: what an
+    atom in the spec may name."""
+
+    def __init__(self, reader: _Reader, program: Program, extra_constants: list[str]) -> None:
+        self.r = reader
+        self.arity: dict[str, int] = {}
+        for item in [*program.rules, *program.facts]:
+            lits = (item.literal,) if isinstance(item, Fact) else (item.head, *item.body)
+            for lit in lits:
+                self.arity.setdefault(lit.pred, len(lit.args))
+        self.constants = set(program.constants()) | set(extra_constants)
+
+    def pattern(self, path: KeyPath, text: Any, variables: tuple[str, ...], *, bounds: bool = False) -> Literal:
+        """A literal whose variables are among `variables`, naming the program's predicates."""
+        if not isinstance(text, str):
+            raise self.r.err(path, f"expected an atom such as \"p(a)\", got {_kind(text)}")
+        try:
+            lit = parse_literal(text)
+        except ProgramError as e:
+            raise self.r.err(path, f"{text!r} is not an atom: {e.message}") from None
+        if lit.negated:
+            raise self.r.err(path, f"{text!r}: '~' is not allowed here")
+        if not bounds and (lit.lower, lit.upper) != (1.0, 1.0):
+            raise self.r.err(path, f"{text!r}: a bound is not allowed here (an atom is read, not set)")
+        if lit.pred not in self.arity:
+            raise self.r.err(path, f"{text!r}: the program has no predicate {lit.pred!r}")
+        if self.arity[lit.pred] != len(lit.args):
+            raise self.r.err(path, f"{text!r}: {lit.pred} takes {self.arity[lit.pred]} argument(s) in the "
+                                   f"program, not {len(lit.args)}")
+        for a in lit.args:
+            if a.is_var and a.name not in variables:
+                allowed = f"only {', '.join(variables)}" if variables else "none: the atom must be ground"
+                raise self.r.err(path, f"{text!r}: variable {a.name} is not allowed here ({allowed})")
+            if not a.is_var and a.name not in self.constants:
+                raise self.r.err(path, f"{text!r}: the program, the board and the agents have no constant "
+                                       f"{a.name!r}")
+        return lit
+
+    def ground(self, lit: Literal, values: Mapping[str, str]) -> Atom:
+        return Atom(lit.pred, tuple(values[a.name] if a.is_var else a.name for a in lit.args), lit.lower, lit.upper)
+
+    def atoms(self, path: KeyPath, texts: list[Any], values: Mapping[str, str], *, bounds: bool = False
+              ) -> tuple[Atom, ...]:
+        return tuple(self.ground(self.pattern((*path, i), t, tuple(values), bounds=bounds), values)
+                     for i, t in enumerate(texts))
+
+    def over(self, path: KeyPath, pattern: Any, domain: list[str], agent: str) -> tuple[Atom, ...]:
+        """A pattern with one variable besides `Agent`, grounded over the domain in order."""
+        lit = self.pattern(path, pattern, tuple(a.name for a in _vars(pattern)))
+        names = {a.name for a in lit.args if a.is_var} - {AGENT_VAR}
+        if len(names) != 1:
+            raise self.r.err(path, f"{pattern!r}: expected exactly one variable besides {AGENT_VAR} (it ranges "
+                                   "over `over`)")
+        var = names.pop()
+        return tuple(self.ground(lit, {var: v, AGENT_VAR: agent}) for v in domain)
+
+
+def _vars(text: str) -> list[Term]:
+    try:
+        return [a for a in parse_literal(text).args if a.is_var]
+    except ProgramError:
+        return []
+
+
+# ---- the sections ----
+
+def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
+    """Read and check the spec at `path` with `params` overriding its [params] defaults."""
+    src = read_spec_file(path)
+    for k in src.data:
+        if k not in SECTIONS:
+            raise src.error((k,), f"unknown section (expected one of: {', '.join(SECTIONS)})")
+    base = _Reader(src, {})
+    defaults = base.table(("params",), default={})
+    for k in params:
+        if k not in defaults:
+            known = ", ".join(defaults) or "none"
+            raise SpecError(f"{src.path}: unknown keyword argument {k!r} (the spec's [params]: {known})")
+    data = base.table(("data",), default={})
+    clash = set(data) & set(defaults)
+    if clash:
+        raise src.error(("data", sorted(clash)[0]), "a name in both [data] and [params]")
+    names = {**data, **defaults, **{k: _plain(v) for k, v in params.items()}}
+    r = _Reader(src, names)
+
+    r.table(("env",), ("rules", "render_fps"))
+    rule_files = [_inside(r, ("env", "rules", i), f) for i, f in enumerate(r.strings(("env", "rules")))]
+    if not rule_files:
+        raise r.err(("env", "rules"), "expected at least one rule file")
+    board = _board(r) if "board" in src.data else None
+    rules = _load_rules(r, rule_files)
+
+    agents_t = r.table(("agents",), ("names", "mask"))
+    agents = r.strings(("agents", "names"))
+    if not agents or len(set(agents)) != len(agents):
+        raise r.err(("agents", "names"), "expected one or more distinct agents")
+    for i, a in enumerate(agents):
+        if not CONSTANT_RE.fullmatch(a):
+            raise r.err(("agents", "names", i), f"{a!r} is not a plain constant (lower-case letter or digit first)")
+    # the board's predicates are names the spec may use too (FrozenLake's start cells are weights of the
+    # start choice, not read by a rule); a typo among them leaves the rules' predicate "never set"
+    program = _with_board(r, rules, board)
+    check = _Names(r, program, [*(board.cells if board else []), *agents])
+    for pred in (board.marks if board else {}):  # a predicate of one argument, true of cells
+        check.pattern(("board", "marks", pred), f"{pred}(Cell)", ("Cell",))
+
+    action_names, action_facts, mask = _actions(r, check, agents, agents_t.get("mask"))
+    domains = {"cells": board.cells} if board else {}
+    space, parts = _observation(r, check, domains, agents)
+    reward_table, reward_scaled = _reward(r, check, agents)
+    end = r.table(("end",), ("terminated", "truncated", "max_steps"), default={})
+    terminated = _every_agents(r, check, ("end", "terminated"), agents)
+    truncated = _every_agents(r, check, ("end", "truncated"), agents)
+    max_steps = r.integer(("end", "max_steps"), None, minimum=1) if "max_steps" in end else None
+    r.table(("start",), ("facts", "choose"), default={})
+    start_facts = _every_agents(r, check, ("start", "facts"), agents, bounds=True)
+    choices = tuple(d for i in range(len(_list(r, ("start", "choose"))))
+                    if (d := _draw(r, check, ("start", "choose", i), domains, start=True)) is not None)
+    randoms = tuple(d for i in range(len(_list(r, ("random",))))
+                    if (d := _draw(r, check, ("random", i), domains, start=False)) is not None)
+    seen: dict[str, KeyPath] = {}
+    for d in (*choices, *randoms):
+        if d.name in seen:
+            raise r.err(d.key, f"the draw name {d.name!r} is also the name of {'.'.join(map(str, seen[d.name]))} "
+                               "(give each draw its own `name`)")
+        seen[d.name] = d.key
+    fps = r.integer(("env", "render_fps"), 4, minimum=1)
+    # the program's warnings again, knowing what the env sets: no "never set" for pressed(...), slip(...)
+    env_set = [*(a for per_agent in action_facts for facts in per_agent for a in facts), *start_facts,
+               *(a for d in (*choices, *randoms) for value in d.atoms for a in value)]
+    check_program(program, {a.pred: len(a.args) for a in env_set})
+    return WorldSpec(src.path, names, program, tuple(agents), action_names, action_facts, mask, space, parts,
+                     reward_table, reward_scaled, terminated, truncated, max_steps, start_facts, choices,
+                     randoms, board, fps, src)
+
+
+def _actions(r: _Reader, check: _Names, agents: list[str], mask_text: Any
+             ) -> tuple[tuple[str, ...], tuple[tuple[tuple[Atom, ...], ...], ...], tuple[tuple[Atom, ...], ...] | None]:
+    """[actions] in order: names, each agent's facts per action, and the mask's atom per agent and action."""
+    actions_t = r.table(("actions",))
+    if not actions_t:
+        raise r.err(("actions",), "expected at least one action")
+    names = tuple(actions_t)
+    for name in names:
+        if not CONSTANT_RE.fullmatch(name):
+            raise r.err(("actions", name), "an action's name must be a plain constant (lower-case letter or "
+                                           "digit first; letters, digits, _ and -)")
+        r.strings(("actions", name))
+    facts = tuple(tuple(check.atoms(("actions", n), actions_t[n], {AGENT_VAR: a}, bounds=True) for n in names)
+                  for a in agents)
+    if mask_text is None:
+        return names, facts, None
+    lit = check.pattern(("agents", "mask"), mask_text, (AGENT_VAR, ACTION_VAR))
+    for name in names:  # the mask's atoms name the actions: rules must be able to set them
+        if name not in check.constants:
+            raise r.err(("actions", name), f"the mask {mask_text!r} names this action, but the program has "
+                                           f"no constant {name!r}")
+    mask = tuple(tuple(check.ground(lit, {AGENT_VAR: a, ACTION_VAR: n}) for n in names) for a in agents)
+    return names, facts, mask
+
+
+def _plain(value: Any) -> Any:
+    """A keyword argument as expressions see it: numpy arrays and tuples as lists, bytes as text
+    (gymnasium's FrozenLake takes desc as strings, lists of characters or a numpy array of bytes)."""
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, (bytes, np.bytes_)):
+        return bytes(value).decode("latin-1")
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def _every_agents(r: _Reader, check: _Names, path: KeyPath, agents: list[str], *, bounds: bool = False
+                  ) -> tuple[Atom, ...]:
+    """A list of atoms, `Agent` standing for each agent in turn (an atom without it once)."""
+    texts = r.strings(path, [])
+    out = (a for agent in agents for a in check.atoms(path, texts, {AGENT_VAR: agent}, bounds=bounds))
+    return tuple(dict.fromkeys(out))
+
+
+def _list(r: _Reader, path: KeyPath) -> list[Any]:
+    v = r.raw(path, [])
+    if not isinstance(v, list) or not all(isinstance(x, dict) for x in v):
+        raise r.err(path, f"expected an array of tables ([[{'.'.join(map(str, path))}]]), got {_kind(v)}")
+    return v
+
+
+def _inside(r: _Reader, path: KeyPath, name: str) -> str:
+    """A file named by the spec: relative, inside the spec's folder (a spec never makes tracelab read
+    elsewhere)."""
+    parts = name.replace("\\", "/").split("/")
+    if os.path.isabs(name) or ".." in parts or not name:
+        raise r.err(path, f"{name!r}: expected a path relative to the spec's folder, inside it")
+    return os.path.join(r.src.folder, name)
+
+
+def _load_rules(r: _Reader, files: list[str]) -> Program:
+    try:
+        return load_program(*files)
+    except FileNotFoundError as e:
+        raise r.err(("env", "rules"), f"{e.filename}: no such file") from None
+
+
+def _with_board(r: _Reader, program: Program, board: Board | None) -> Program:
+    """The program with the board's facts (static, at t = 0), checked again."""
+    if board is None:
+        return program
+    loc = SourceLoc(r.src.path, r.src.key_lines.line(("board", "rows")), 1)
+    facts = [Fact(f"board{i}", Literal(p, tuple(Term(a, False) for a in args), loc=loc), static=True, loc=loc)
+             for i, (p, args) in enumerate(board.facts())]
+    out = dataclasses.replace(program, facts=[*program.facts, *facts], warnings=[])
+    try:
+        check_program(out)
+    except ProgramError as e:
+        raise r.err(("board",), f"the board's facts do not fit the program: {e.message}") from None
+    return out
+
+
+def _board(r: _Reader) -> Board:
+    r.table(("board",), ("rows", "cell", "legend", "neighbours", "edge", "marks", "colors", "mark_colors"))
+    rows = r.value(("board", "rows"))
+    if isinstance(rows, list):  # rows of single characters, as gymnasium's np.asarray(desc, dtype="c") reads
+        rows = ["".join(x) if isinstance(x, list) and all(isinstance(c, str) for c in x) else x for x in rows]
+    if not isinstance(rows, list) or not all(isinstance(x, str) for x in rows):
+        raise r.err(("board", "rows"), f"expected a list of strings (one character per cell), got {_kind(rows)}")
+    if not rows or any(len(x) != len(rows[0]) for x in rows) or not rows[0]:
+        raise r.err(("board", "rows"), "expected rows of one length, at least one cell")
+    if len(rows) * len(rows[0]) > MAX_BOARD_CELLS:
+        raise r.err(("board", "rows"), f"more than {MAX_BOARD_CELLS} cells")
+    fmt = r.string(("board", "cell"), "c{row}_{col}")
+    # only {row} and {col} between name characters: str.format is never given a field or format spec
+    # of the spec's own ({row.__class__}, {row:>999999999})
+    if not _CELL_FORMAT.fullmatch(fmt) or "{row}" not in fmt or "{col}" not in fmt \
+            or not CONSTANT_RE.fullmatch(fmt.format(row=0, col=0)):
+        raise r.err(("board", "cell"), f"expected a name made of letters, digits, _ and - with {{row}} and "
+                                       f"{{col}}, starting with a lower-case letter, such as \"c{{row}}_{{col}}\"; "
+                                       f"got {fmt!r}")
+    legend: dict[str, tuple[str, ...]] = {}
+    for ch, preds in r.table(("board", "legend"), default={}).items():
+        if len(ch) != 1:
+            raise r.err(("board", "legend", ch), "expected a single character as the key")
+        legend[ch] = tuple(r.strings(("board", "legend", ch)))
+    neighbours: dict[str, tuple[int, int]] = {}
+    for name, d in r.table(("board", "neighbours"), default={}).items():
+        if not (isinstance(d, list) and len(d) == 2 and all(isinstance(x, int) and not isinstance(x, bool) for x in d)):
+            raise r.err(("board", "neighbours", name), f"expected [row step, column step], got {_kind(d)}")
+        neighbours[name] = (d[0], d[1])
+    edge = r.string(("board", "edge"), "stay", choices=("stay", "none"))
+    marks = {}
+    for pred, ch in r.table(("board", "marks"), default={}).items():
+        if not isinstance(ch, str) or len(ch) != 1:
+            raise r.err(("board", "marks", pred), "expected one character")
+        marks[pred] = ch
+    colors = {ch: _color(r, ("board", "colors", ch)) for ch in r.table(("board", "colors"), default={})}
+    mark_colors = {p: _color(r, ("board", "mark_colors", p)) for p in r.table(("board", "mark_colors"), default={})}
+    for pred in mark_colors:
+        if pred not in marks:
+            raise r.err(("board", "mark_colors", pred), "not a predicate of `marks`")
+    return Board(tuple(rows), fmt, legend, neighbours, edge, marks, colors, mark_colors)
+
+
+def _color(r: _Reader, path: KeyPath) -> tuple[int, int, int]:
+    v = r.raw(path)
+    rgb = hex_color(v) if isinstance(v, str) else None
+    if rgb is None:
+        raise r.err(path, f"expected a colour \"#rrggbb\", got {_kind(v)}")
+    return rgb
+
+
+def _domain(r: _Reader, path: KeyPath, domains: dict[str, list[str]]) -> list[str]:
+    """`over`: a named domain ("cells", the board's), a list of constants, or an expression giving one."""
+    expected = f"expected {' or '.join(map(repr, domains)) or 'a named domain'}, a list of constants, or an " \
+               "expression giving one"
+    v = r.raw(path)
+    if isinstance(v, str):
+        if v in domains:
+            return domains[v]
+        try:
+            v = evaluate(v, r.names)
+        except ExpressionError as e:
+            raise r.err(path, f"{expected} ({e})") from None
+    if not isinstance(v, list) or not v or not all(isinstance(x, str) for x in v):
+        raise r.err(path, f"{expected}, got {_kind(v)}")
+    if len(v) > MAX_DOMAIN:
+        raise r.err(path, f"more than {MAX_DOMAIN} values")
+    return v
+
+
+def _observation(r: _Reader, check: _Names, domains: dict[str, list[str]], agents: list[str]
+                 ) -> tuple[str, tuple[ObservationPart, ...]]:
+    r.table(("observation",), ("space", "parts"))
+    space = r.string(("observation", "space"), choices=SPACES)
+    parts = []
+    raw_parts = _list(r, ("observation", "parts"))
+    if not raw_parts:
+        raise r.err(("observation", "parts"), "expected at least one [[observation.parts]]")
+    for i, p in enumerate(raw_parts):
+        path = ("observation", "parts", i)
+        r.table(path, ("name", "read", "atom", "over", "atoms"))
+        name = r.string((*path, "name"), f"part{i}")
+        read = r.string((*path, "read"), choices=READS)
+        if ("atoms" in p) == ("atom" in p):
+            raise r.err(path, "expected either `atom` (with `over`) or `atoms` (a list of ground atoms)")
+        if "atoms" in p:
+            texts = r.strings((*path, "atoms"))
+            per_agent = tuple(check.atoms((*path, "atoms"), texts, {AGENT_VAR: a}) for a in agents)
+        else:
+            domain = _domain(r, (*path, "over"), domains)
+            per_agent = tuple(check.over((*path, "atom"), p["atom"], domain, a) for a in agents)
+        if not per_agent[0]:
+            raise r.err(path, "no atoms to read")
+        parts.append(ObservationPart(name, read, per_agent))
+    if space in ("Discrete", "MultiDiscrete"):
+        for i, p in enumerate(parts):
+            if p.read != "index":
+                raise r.err(("observation", "parts", i, "read"), f"a {space} observation reads indices: "
+                                                                  f"expected \"index\", got {p.read!r}")
+    if len({p.name for p in parts}) != len(parts):
+        raise r.err(("observation", "parts"), "two parts with one name")
+    return space, tuple(parts)
+
+
+def _reward(r: _Reader, check: _Names, agents: list[str]
+            ) -> tuple[tuple[tuple[tuple[Atom, float], ...], ...], tuple[tuple[tuple[Atom, float], ...], ...]]:
+    """Per agent: the table's (atom, value) pairs and the scaled atom's (atom, scale)."""
+    r.table(("reward",), ("table", "atom", "scale"), default={})
+    table = []
+    for text in r.table(("reward", "table"), default={}):
+        path = ("reward", "table", text)
+        table.append((check.pattern(path, text, (AGENT_VAR,)), r.number(path)))
+    scaled = []
+    if "atom" in r.raw(("reward",), {}):
+        lit = check.pattern(("reward", "atom"), r.string(("reward", "atom")), (AGENT_VAR,))
+        scaled.append((lit, r.number(("reward", "scale"), 1.0)))
+    return tuple(tuple((check.ground(lit, {AGENT_VAR: a}), v) for lit, v in table) for a in agents), \
+        tuple(tuple((check.ground(lit, {AGENT_VAR: a}), v) for lit, v in scaled) for a in agents)
+
+
+DRAW_METHODS = ("categorical", "choice")
+_CELL_FORMAT = re.compile(r"(?:[A-Za-z0-9_-]|\{row\}|\{col\})+")
+
+
+def _draw(r: _Reader, check: _Names, path: KeyPath, domains: dict[str, list[str]], *, start: bool) -> Draw | None:
+    """A start choice (`start`) or a random fact; None when its `when` expression is false."""
+    keys = ("name", "atom", "over", "probabilities", "weights", "method", "when", *(() if start else ("after",)))
+    t = r.table(path, keys)
+    if "when" in t:
+        when = r.value((*path, "when"))
+        if not isinstance(when, bool):
+            raise r.err((*path, "when"), f"expected a boolean, got {_kind(when)}")
+        if not when:
+            return None
+    patterns = t.get("atom")
+    patterns = [patterns] if isinstance(patterns, str) else r.strings((*path, "atom"))
+    variables = list(dict.fromkeys(v.name for p in patterns for v in _vars(p)))
+    over = r.raw((*path, "over"))
+    if isinstance(over, dict):
+        if list(over) != variables:
+            raise r.err((*path, "over"), f"expected one domain per variable of `atom`, in order: {', '.join(variables)}")
+        axes = [_domain(r, (*path, "over", v), domains) for v in variables]
+    else:
+        if len(variables) != 1:
+            raise r.err((*path, "atom"), "expected exactly one variable (or `over` as a table, a domain per variable)")
+        axes = [_domain(r, (*path, "over"), domains)]
+    if math.prod(len(a) for a in axes) > MAX_DOMAIN:  # refused before the product is built
+        raise r.err((*path, "over"), f"more than {MAX_DOMAIN} combinations")
+    values = [dict(zip(variables, combo)) for combo in itertools.product(*axes)]
+    lits = [check.pattern((*path, "atom"), p, tuple(variables), bounds=True) for p in patterns]
+    atoms = tuple(tuple(check.ground(lit, v) for lit in lits) for v in values)
+    method = r.string((*path, "method"), "categorical", choices=DRAW_METHODS)
+    after = None
+    if "after" in t:
+        after = check.ground(check.pattern((*path, "after"), r.string((*path, "after")), ()), {})
+    weights = probabilities = None
+    if "weights" in t:
+        if "probabilities" in t:
+            raise r.err(path, "expected `probabilities` or `weights`, not both")
+        w = t["weights"]
+        wtexts = [w] if isinstance(w, str) else r.strings((*path, "weights"))
+        wlits = [check.pattern((*path, "weights"), x, tuple(variables)) for x in wtexts]
+        weights = tuple(tuple(check.ground(lit, v) for lit in wlits) for v in values)
+    elif "probabilities" in t:
+        if method == "choice":
+            raise r.err((*path, "method"), "\"choice\" draws uniformly among the values whose `weights` hold: "
+                                           "it takes no probabilities")
+        probabilities = r.numbers((*path, "probabilities"), len(values))
+    else:
+        probabilities = np.full(len(values), 1.0 / len(values))
+    name = r.string((*path, "name"), lits[0].pred)
+    return Draw(path, name, atoms, probabilities, weights, method, after)

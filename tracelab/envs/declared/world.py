@@ -1,0 +1,350 @@
+"""A declared world running: the spec's program on the engine, facts in and atoms out, one world.
+
+Timeline (docs/worlds.md, "How a step runs"):
+- built: the engine's t = 0 applies the program's and the board's facts; every atom the env will set
+  (actions, random facts, start facts and choices) is set to [0,0] there, so that the rules are grounded
+  for them; the state after it is the snapshot every episode starts from.
+- reset: the snapshot is restored, the start choices are drawn from np_random (in the spec's order) and
+  one engine step applies the start facts and the chosen atoms ([1,1], or the fact's bound).
+- step: the action's facts and one value of each random fact (drawn in the spec's order) are set for the
+  step; last step's facts that are not set again go back to [0,0]. One engine step; the reward is read.
+  Then each `after` random fact whose atom is true is drawn, and if any was, one more engine step applies
+  them (the step's facts back to [0,0]) and its reward is added. The observation and ends are read last.
+Draws follow gymnasium: "categorical" is `categorical_sample` (one `np_random.random()` u, the first
+value whose cumulative probability exceeds u), "choice" is `np_random.choice` over the possible values
+(one `integers(0, n)`), so a seeded world draws exactly as gymnasium's toy-text games do."""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from tracelab.engine import Engine
+from tracelab.envs.declared import fused
+from tracelab.envs.declared.spec import Atom, Draw, WorldSpec
+
+
+def categorical(cumulative: list[float], rng: np.random.Generator) -> int:
+    """gymnasium.envs.toy_text.utils.categorical_sample, draw for draw: one rng.random() u, and the first
+    value whose cumulative probability (np.cumsum of the probabilities, the same float64 sums) exceeds u,
+    or value 0 when none does (argmax of all-false)."""
+    u = rng.random()
+    for i, c in enumerate(cumulative):
+        if c > u:
+            return i
+    return 0
+
+
+class _Drawer:
+    """One Draw's engine ids and how it picks a value."""
+
+    def __init__(self, draw: Draw, ids: Any) -> None:
+        self.draw = draw
+        self.value_ids = [ids(atoms) for atoms in draw.atoms]
+        self.value_bounds = [_bounds(atoms) for atoms in draw.atoms]
+        self.cumulative = None if draw.probabilities is None else np.cumsum(draw.probabilities).tolist()
+        self.weight_ids = None if draw.weights is None else \
+            np.array([ids(w) for w in draw.weights], np.int64).reshape(len(draw.weights), -1)
+        self.after = None if draw.after is None else ids([draw.after])
+        self.possible: np.ndarray | None = None
+        self.frozen = False
+
+    def pick(self, world: DeclaredWorld, rng: np.random.Generator) -> int:
+        d = self.draw
+        if self.weight_ids is None and self.possible is None:
+            if d.method == "choice":
+                return int(rng.integers(0, len(self.value_ids)))
+            return categorical(self.cumulative, rng)  # type: ignore[arg-type]
+        possible, cumulative = (self.possible, self.cumulative) if self.frozen else self._weighed(world)
+        if d.method == "choice":
+            return int(possible[rng.integers(0, possible.size)])
+        return categorical(cumulative, rng)
+
+    def freeze(self, world: DeclaredWorld) -> None:
+        """Read the weights now, once: a start choice reads them on the snapshot every episode starts
+        from, so they never change."""
+        if self.weight_ids is not None:
+            self.possible, self.cumulative = self._weighed(world)
+            self.frozen = True
+
+    def _weighed(self, world: DeclaredWorld) -> tuple[np.ndarray, list[float]]:
+        """The values whose weights all hold, and the cumulative probabilities of choosing each value."""
+        d, w = self.draw, self.weight_ids
+        ok = world.engine.is_true(w.ravel())[0].reshape(w.shape).all(axis=1)
+        possible = np.flatnonzero(ok)
+        if possible.size == 0:
+            raise RuntimeError(f"{world.spec.path}: {'.'.join(map(str, d.key))}: no value's weights "
+                               f"({', '.join(map(str, d.weights[0]))}, ...) hold: nothing to draw from")
+        p = ok.astype(np.float64)
+        p /= p.sum()  # as gymnasium normalises initial_state_distrib
+        return possible, np.cumsum(p).tolist()
+
+
+class DeclaredWorld:
+    """One world of `spec` on its own engine (`kernel`: the engine's; `trace`: its change log)."""
+
+    def __init__(self, spec: WorldSpec, *, kernel: str = "auto", trace: bool = False) -> None:
+        self.spec = spec
+        # one world steps fastest on the counting kernel inside one compiled call (fused.py); another
+        # kernel asked for by name runs its own steps
+        self.engine = eng = Engine(spec.program, worlds=1, trace=trace,
+                                   kernel="counting" if kernel == "auto" else kernel)
+        ids = self._ids
+        # the facts of each (agent, action) row: row agent * n_actions + action
+        self.n_agents, self.n_actions = len(spec.agents), len(spec.action_names)
+        self._action_ids = [ids(facts) for per_agent in spec.action_facts for facts in per_agent]
+        self._action_bounds = [_bounds(facts) for per_agent in spec.action_facts for facts in per_agent]
+        self._rows = np.full(self.n_agents, -1, np.int64)  # this step's rows, one per agent
+        self._choices = [_Drawer(d, ids) for d in spec.start_choices]
+        self._before = [_Drawer(d, ids) for d in spec.random_facts if d.after is None]
+        self._after = [_Drawer(d, ids) for d in spec.random_facts if d.after is not None]
+        self._start_ids, self._start_bounds = ids(spec.start_facts), _bounds(spec.start_facts)
+        env_set = [self._start_ids, *self._action_ids]
+        for drawer in (*self._choices, *self._before, *self._after):
+            env_set.extend(drawer.value_ids)
+        env_set_ids = np.unique(np.concatenate([np.zeros(0, np.int64), *env_set]))
+        if env_set_ids.size:
+            eng.add_facts(env_set_ids, 0.0, 0.0)
+        # what is read after each step: index parts, the reward table, the ends and the mask in one
+        # compiled call (fused.read_step); the other parts and scaled rewards from the bound arrays
+        self._index_parts = [i for i, p in enumerate(spec.parts) if p.read == "index"]
+        self._part_ids = [[ids(atoms) for atoms in p.per_agent] for p in spec.parts]  # [part][agent]
+        self._part_sizes = [len(p.atoms) for p in spec.parts]
+        self._scaled = [(ids(a for a, _ in pairs), np.array([v for _, v in pairs], np.float64))
+                        for pairs in spec.reward_scaled]
+        self._any_scaled = any(ids.size for ids, _ in self._scaled)
+        n = self.n_agents
+        mask_ids = np.concatenate([ids(m) for m in spec.mask]) if spec.mask is not None else np.zeros(0, np.int64)
+        self._has_mask = spec.mask is not None
+        part_ptr, part_atoms, _ = fused.csr([self._part_ids[i][a] for a in range(n) for i in self._index_parts], [])
+        table = [(atom, value, a) for a, pairs in enumerate(spec.reward_table) for atom, value in pairs]
+        self._reads = (part_ptr, part_atoms, ids(t[0] for t in table), np.array([t[1] for t in table], np.float64),
+                       np.array([t[2] for t in table], np.int64), ids(spec.terminated), ids(spec.truncated),
+                       mask_ids)
+        # read_step's results: indices [agent * index parts], rewards [agent], ends, masks, a paused world
+        self._out = (np.zeros(n * len(self._index_parts), np.int64), np.zeros(n), np.zeros(2),
+                     np.zeros(len(mask_ids), np.int8), np.zeros(1, np.int64))
+        board = spec.board
+        self._marks = [] if board is None else \
+            [(pred, np.array([eng.atom(pred, c) for c in board.cells], np.int64)) for pred in board.marks]
+        self._tables = self._step_tables()
+        eng.step()  # t = 0: the program's and the board's facts
+        self._snapshot = eng.snapshot()
+        self._buffers: fused.DeclaredBuffers | None = None
+        self._bound_version = -1
+        for drawer in self._choices:
+            drawer.freeze(self)
+        # picks per draw of the fused tables: the step's random facts, then the start's choices and facts
+        self._picks = np.full(len(self._tables[3]), -1, np.int64)
+        self._start_picks = self._picks.copy()
+        self._start_picks[-1] = 0  # the start facts: a draw with one value
+        self.steps = 0
+        self.last_rewards = [0.0] * self.n_agents
+        # one world on the counting kernel stays on it (only a lanes engine moves to counting)
+        self._fused = eng.kernel == "counting"
+        self._single_index = spec.space == "Discrete" and len(spec.parts) == 1
+        self._ends = (False, False)
+
+    def _step_tables(self) -> tuple[np.ndarray, ...]:
+        """fused.py's tables of the step facts, and its row buffers (room for every fact on and off)."""
+        act_ptr, act_atoms, act_bnd = fused.csr(self._action_ids, self._action_bounds)
+        groups = [d.value_ids for d in (*self._before, *self._after, *self._choices)] + [[self._start_ids]]
+        bounds = [d.value_bounds for d in (*self._before, *self._after, *self._choices)] + [[self._start_bounds]]
+        draw_base = np.cumsum([0] + [len(g) for g in groups])[:-1].astype(np.int64)
+        val_ptr, val_atoms, val_bnd = fused.csr([v for g in groups for v in g], [v for b in bounds for v in b])
+        cap = self.n_agents * max((len(a) for a in self._action_ids), default=0) + \
+            sum(max((len(v) for v in g), default=0) for g in groups) + 1
+        self._ext = (np.zeros(2, np.int64), np.zeros((2 * cap, 3), np.int64), np.zeros((2 * cap, 2)))
+        return (act_ptr, act_atoms, act_bnd, draw_base, val_ptr, val_atoms, val_bnd, np.zeros(cap, np.int64),
+                np.zeros(1, np.int64), np.zeros(cap, np.int64), np.zeros((cap, 2)))
+
+    def _ids(self, atoms: Any) -> np.ndarray:
+        return np.array([self.engine.atom(a.pred, *a.args) for a in atoms], np.int64)
+
+    # ---- episode ----
+
+    def reset(self, rng: np.random.Generator) -> None:
+        self.engine.restore(self._snapshot, np.array([0]))
+        picks, first = self._start_picks, len(self._before) + len(self._after)
+        for k, drawer in enumerate(self._choices):
+            picks[first + k] = drawer.pick(self, rng)
+        prev_n = self._tables[8]
+        prev_n[0] = 0  # the snapshot has every step fact false
+        self._rows[:] = -1
+        self._fused_step(self._rows, picks)
+        prev_n[0] = 0  # the start's facts stay: the next step does not turn them off
+        self._rewards()  # the ends as they stand at the start
+        self.steps = 0
+
+    def step(self, actions: Any, rng: np.random.Generator) -> None:
+        """Set each agent's action's facts (`actions`: one index per agent, -1 for none, or an int for one
+        agent) and
+        this step's random facts, step the engine (twice when an `after` random fact is drawn); the
+        step's rewards, one per agent, are then `last_rewards`."""
+        rows = self._rows
+        if self.n_agents == 1:
+            rows[0] = actions
+        else:  # an agent's -1: it does nothing this step
+            a = np.asarray(actions, np.int64)
+            rows[:] = np.where(a >= 0, a + np.arange(self.n_agents) * self.n_actions, -1)
+        picks = self._picks  # the `after` draws' slots stay -1 between steps
+        for d, drawer in enumerate(self._before):
+            picks[d] = drawer.pick(self, rng)
+        self._fused_step(rows, picks)
+        rewards = self._rewards()
+        if self._after:
+            n_before = len(self._before)
+            picks[:n_before] = -1
+            for d, drawer in enumerate(self._after, start=n_before):
+                if self.true(drawer.after)[0]:
+                    picks[d] = drawer.pick(self, rng)
+            if picks[n_before:].max() >= 0:
+                rows[:] = -1
+                self._fused_step(rows, picks)
+                rewards = [a + b for a, b in zip(rewards, self._rewards())]
+                picks[n_before:] = -1
+        self.last_rewards = rewards
+        self.steps += 1
+
+    def _fused_step(self, rows: np.ndarray, picks: np.ndarray) -> None:
+        eng = self.engine
+        if not self._fused:  # the engine's own step, then the reads
+            self._unfused_step(rows, picks)
+            return
+        b = self._buffers
+        if eng.prepare_fused_step() != self._bound_version or b is None:
+            b = self._bind()
+        status = fused.fused_step(b, rows, picks, eng.t, eng.next_external_id())
+        ext_ptr, ext_i, ext_f = self._ext
+        eng.finish_fused_step(status, int(self._out[4][0]), ext_ptr, ext_i, ext_f)
+        if status != fused.STATUS_OK:  # the kernel paused (buffer room) and finish went on: read now
+            self._read()
+
+    def _bind(self) -> fused.DeclaredBuffers:
+        version = self.engine.prepare_fused_step()
+        if self._buffers is None or version != self._bound_version:
+            self._buffers = fused.bind(self.engine.fused_binding(), self._tables, self._ext, self._reads,
+                                       self._out)
+            self._bound_version = self.engine.layout_version
+        return self._buffers
+
+    def _unfused_step(self, rows: np.ndarray, picks: np.ndarray) -> None:
+        """The fused step's work with the engine's own calls (lanes or compiled kernel)."""
+        t = self._tables
+        act_ptr, act_atoms, act_bnd, draw_base, val_ptr, val_atoms, val_bnd, prev, prev_n = t[:9]
+        now, bnd = [np.zeros(0, np.int64)], [np.zeros((0, 2))]
+        for action in rows[rows >= 0]:
+            now.append(act_atoms[act_ptr[action]:act_ptr[action + 1]])
+            bnd.append(act_bnd[act_ptr[action]:act_ptr[action + 1]])
+        for d, p in enumerate(picks):
+            if p >= 0:
+                v = draw_base[d] + p
+                now.append(val_atoms[val_ptr[v]:val_ptr[v + 1]])
+                bnd.append(val_bnd[val_ptr[v]:val_ptr[v + 1]])
+        new = np.concatenate(now)
+        again = set(new.tolist())
+        off = np.array([a for a in prev[:prev_n[0]].tolist() if a not in again], np.int64)
+        self._step_engine(np.concatenate([off, new]), np.concatenate([np.zeros((len(off), 2)), *bnd]))
+        prev[:len(new)] = new
+        prev_n[0] = len(new)
+        self._read()
+
+    def _read(self) -> None:
+        if not self._fused:
+            self._read_unfused()
+        else:
+            fused.read_step(self._bind())
+
+    def _read_unfused(self) -> None:
+        part_ptr, part_atoms, table_atoms, table_values, table_agent, term_atoms, trunc_atoms, mask_atoms = \
+            self._reads
+        index, rewards, res, mask, _ = self._out
+        for p in range(len(part_ptr) - 1):
+            hit = self.true(part_atoms[part_ptr[p]:part_ptr[p + 1]])
+            index[p] = int(np.argmax(hit)) if hit.any() else -1
+        rewards[:] = np.bincount(table_agent, table_values * self.true(table_atoms), self.n_agents) \
+            if len(table_atoms) else 0.0
+        res[0] = float(len(term_atoms) > 0 and self.true(term_atoms).any())
+        res[1] = float(len(trunc_atoms) > 0 and self.true(trunc_atoms).any())
+        mask[:] = self.true(mask_atoms) if len(mask_atoms) else 0
+
+    def _step_engine(self, atoms: np.ndarray, bounds: np.ndarray) -> None:
+        eng = self.engine
+        n = len(atoms)
+        rows = np.empty((n, 3), np.int64)
+        rows[:, 0] = atoms
+        rows[:, 1] = 0
+        rows[:, 2] = eng.next_external_id() + np.arange(n)
+        eng.step(external=(np.array([0, n], np.int64), rows, np.ascontiguousarray(bounds, np.float64)))
+
+    # ---- reading ----
+
+    def true(self, ids: np.ndarray) -> np.ndarray:
+        return self.engine.is_true(ids)[0]
+
+    def observation(self, agent: int = 0) -> Any:
+        """Agent `agent`'s observation in the spec's space (gym_env.observation_space)."""
+        spec = self.spec
+        if self._single_index:  # the toy-text games' case, kept short
+            value = int(self._out[0][agent])
+            if value >= 0:
+                return value
+        n_index = len(self._index_parts)
+        indices = self._out[0][agent * n_index:(agent + 1) * n_index].tolist()
+        if indices and min(indices) < 0:
+            part = spec.parts[self._index_parts[indices.index(min(indices))]]
+            raise RuntimeError(f"{spec.path}: observation part {part.name!r}: no atom of "
+                               f"{part.atoms[0].pred}(...) is true, so it has no index")
+        if spec.space == "Discrete":
+            value = 0
+            for size, i in zip(self._part_sizes, indices):  # numpy's ravel_multi_index, first part slowest
+                value = value * size + i
+            return value
+        if spec.space == "MultiDiscrete":
+            return np.array(indices, np.int64)
+        values = []
+        for k, part in enumerate(spec.parts):
+            ids = self._part_ids[k][agent]
+            if part.read == "index":
+                values.append(np.array([indices[self._index_parts.index(k)]], np.int64))
+            elif part.read == "onehot":
+                values.append(self.true(ids).astype(np.float32))
+            elif part.read == "lower":
+                values.append(self.engine.lower[0, ids].astype(np.float32))
+            else:
+                values.append(np.stack([self.engine.lower[0, ids], self.engine.upper[0, ids]], axis=1)
+                              .ravel().astype(np.float32))
+        if spec.space == "Box":
+            return np.concatenate(values).astype(np.float32)
+        return {p.name: (int(v[0]) if p.read == "index" else v) for p, v in zip(spec.parts, values)}
+
+    def _rewards(self) -> list[float]:
+        """The engine step's rewards, one per agent; also keeps the ends (read_step's flags)."""
+        terminated, truncated = self._out[2].tolist()
+        self._ends = (terminated == 1.0, truncated == 1.0)
+        rewards = self._out[1].tolist()
+        if self._any_scaled:
+            for a, (ids, scales) in enumerate(self._scaled):
+                rewards[a] += float((self.engine.lower[0, ids] * scales).sum())
+        return rewards
+
+    def terminated(self) -> bool:
+        return self._ends[0]
+
+    def truncated(self) -> bool:
+        limit = self.spec.max_steps
+        return (limit is not None and self.steps >= limit) or self._ends[1]
+
+    def action_mask(self, agent: int = 0) -> np.ndarray | None:
+        if not self._has_mask:
+            return None
+        return self._out[3][agent * self.n_actions:(agent + 1) * self.n_actions].copy()
+
+    def marked_cells(self) -> dict[str, str]:
+        """Board cell -> the `marks` predicate true there (the last one written, when several are)."""
+        cells = self.spec.board.cells if self.spec.board is not None else []
+        return {cells[k]: pred for pred, aids in self._marks for k in np.flatnonzero(self.true(aids))}
+
+
+def _bounds(atoms: tuple[Atom, ...]) -> np.ndarray:
+    return np.array([[a.lower, a.upper] for a in atoms], np.float64).reshape(len(atoms), 2)
