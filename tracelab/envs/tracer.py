@@ -8,7 +8,9 @@ are all out before its end is written), after every HANDOVER_STEPS steps (a live
 rows at most that many steps late, plus the writer's own flush delay), when HANDOVER_ROWS rows wait in the
 engine (its buffer stays bounded), before an env reset cuts recorded episodes short (`before_reset`),
 and at close. Taking
-them after every step cost more than the engine's step at one world (docs/benchmarks.md). Never at the
+them after every step cost more than the engine's step at one world (docs/benchmarks.md). The step records
+(observations, actions, rewards) are logged in arrays allocated once (StepLog) and handed over with the
+rows, or when HANDOVER_STEPS of them wait, always before the end of their episode. Never at the
 reset itself: a new episode's start rows are still queued then, and belong to whichever episode is
 current in that world when they are taken (RuleSim keeps them for a world reset again before it stepped).
 
@@ -33,6 +35,45 @@ from tracelab.game.state import WINNER_BLUE, WINNER_DRAW, WINNER_RED, StepResult
 
 HANDOVER_STEPS = 64
 HANDOVER_ROWS = 65_536
+
+
+class StepLog:
+    """The step records of up to `capacity` steps, kept in arrays allocated once and handed to the sink
+    in one call (a call and five copies per step cost more than the simulator's step at one world)."""
+
+    def __init__(self, capacity: int, worlds: int, obs_size: int, agents: int) -> None:
+        self.capacity, self.k = capacity, 0
+        self.t = np.empty((capacity, worlds), np.int64)
+        self.obs = np.empty((capacity, worlds, 2, obs_size), np.float32)
+        self.actions = np.empty((capacity, worlds, 2, agents), np.int64)
+        self.rewards = np.empty((capacity, worlds, 2, agents), np.float64)
+        self.episode = np.empty((capacity, worlds), np.int64)
+        self.recorded = np.empty((capacity, worlds), bool)
+
+    def add(self, res: StepResult, red: np.ndarray, blue: np.ndarray, episode: np.ndarray,
+            recorded: np.ndarray) -> bool:
+        """Log one step of every world (copies: the simulator reuses its arrays); True when full."""
+        k = self.k
+        self.t[k] = res.t
+        self.obs[k] = res.obs
+        self.actions[k, :, 0] = red
+        self.actions[k, :, 1] = blue
+        self.rewards[k] = res.agent_reward
+        self.episode[k] = episode
+        self.recorded[k] = recorded
+        self.k = k + 1
+        return self.k == self.capacity
+
+    def take(self) -> tuple[np.ndarray, ...] | None:
+        """(world, episode, t, obs, actions, rewards) of the logged rows of recorded episodes, new arrays
+        in step order then world order (the TraceSink.step layout); None if there are none. Empties the log."""
+        k, self.k = self.k, 0
+        keep = self.recorded[:k]
+        if not keep.any():
+            return None
+        world = np.nonzero(keep)[1]
+        return (world, self.episode[:k][keep], self.t[:k][keep], self.obs[:k][keep], self.actions[:k][keep],
+                self.rewards[:k][keep])
 
 
 def handover_due(sim: RuleSim, steps_waiting: int, episode_ended: bool) -> bool:
@@ -67,6 +108,7 @@ class EpisodeTracer:
         self._steps_waiting = 0                  # steps whose rows the simulator still holds
         self._seed: int | None = None
         self._names = [agent_name(t, j) for t in range(2) for j in range(n)]
+        self._log = StepLog(HANDOVER_STEPS, w, sim.obs_size, n)
         sink.begin_run(sim.engine if isinstance(sim, RuleSim) else None, scenario)
 
     def begin(self, worlds: np.ndarray, seed: int | None) -> None:
@@ -75,7 +117,10 @@ class EpisodeTracer:
         worlds = np.asarray(worlds, np.int64)
         if seed is not None or self._next_episode == 0:
             self._seed = seed
-        for w in worlds[self.open[worlds]].tolist():
+        cut = worlds[self.open[worlds]]
+        if len(cut):  # their logged steps go out before their end
+            self._hand_steps()
+        for w in cut.tolist():
             self._end(w, "aborted")
         ids = self._next_episode + np.arange(len(worlds), dtype=np.int64)
         self._next_episode += len(worlds)
@@ -96,31 +141,38 @@ class EpisodeTracer:
         stepped since its start holds only start rows, which stay for the episode that begins."""
         if self._steps_waiting:
             self._flush()
+        self._hand_steps()
 
-    def stepped(self, res: StepResult, actions: np.ndarray) -> None:
-        """After a step of every world (before any autoreset): its rows (when a handover is due), its step
-        records, episode ends."""
+    def stepped(self, res: StepResult, red: np.ndarray, blue: np.ndarray) -> None:
+        """After a step of every world (before any autoreset), with both teams' actions (spec ids,
+        [W, N]): its step record is logged; its rows and the logged steps are handed over when due;
+        episode ends."""
         self._steps_waiting += 1
         ended = (res.terminated | res.truncated) & self.open
-        if self._rules and handover_due(self.sim, self._steps_waiting, bool(ended.any())):
-            self._flush()
-        worlds = np.flatnonzero(self.open)
-        if len(worlds):
-            # copies: the simulator may reuse its arrays (RuleSim.reset writes into the last obs)
-            self.sink.step(worlds, self.cur_ep[worlds], res.t[worlds].astype(np.int64),
-                           np.array(res.obs[worlds], np.float32), np.array(actions, np.int64)[worlds],
-                           res.agent_reward[worlds].copy())
+        any_ended = bool(ended.any())
+        full = self._log.add(res, red, blue, self.cur_ep, self.open)
         self.steps[:] = res.t
         self.agent_return += res.agent_reward
         self.team_return += res.reward
-        for w in np.flatnonzero(ended).tolist():
-            self._end(w, outcome_name(res.winner[w], bool(res.truncated[w])))
+        if self._rules and handover_due(self.sim, self._steps_waiting, any_ended):
+            self._flush()
+        if any_ended or full:
+            self._hand_steps()
+            for w in np.flatnonzero(ended).tolist():
+                self._end(w, outcome_name(res.winner[w], bool(res.truncated[w])))
 
     def close(self) -> None:
         self._flush()
+        self._hand_steps()
         for w in np.flatnonzero(self.open).tolist():
             self._end(w, "aborted")
         self.sink.close()
+
+    def _hand_steps(self) -> None:
+        """The logged step records of recorded episodes to the sink, in step order."""
+        steps = self._log.take()
+        if steps is not None:
+            self.sink.step(*steps)
 
     def _flush(self) -> None:
         if not self._rules:

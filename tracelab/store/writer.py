@@ -251,6 +251,14 @@ class TraceWriter:
         if "groundings" in tables:
             self._groundings_have += tables["groundings"].num_rows
 
+    def write_engine_vocabulary(self, engine: Any) -> None:
+        """write_vocabulary() with an Engine's vocabulary and groundings: cheap when nothing is new (the
+        vocabulary is only rebuilt when the engine's counts moved)."""
+        vocab = getattr(engine, "vocab", None)
+        grown = vocab is None or (len(vocab.nodes), len(vocab.labels), vocab.n_atoms) != (
+            self._vocab_have["nodes"], self._vocab_have["labels"], self._vocab_have["atoms"])
+        self.write_vocabulary(engine.vocabulary() if grown else None, engine.groundings)
+
     def _check_stored(self, tables: Mapping[str, pa.Table], names: Sequence[str], what: str) -> None:
         """A reopened run: the stored rows of `names` must begin `tables` (the new engine's)."""
         assert self._stored_tables is not None
@@ -269,7 +277,8 @@ class TraceWriter:
 
     def begin_episodes(self, episodes: Sequence[Mapping[str, Any]]) -> None:
         """begin_episode for many episodes in one table (dicts with episode and optionally world,
-        t_start, seed, info): a training loop logs thousands of short episodes."""
+        t_start, seed, info, and started_at: when the episode began, if not now; a UTC datetime without
+        tzinfo, convert.utc_now()): a training loop logs thousands of short episodes."""
         rows, now = [], convert.utc_now()
         for e in episodes:
             episode = int(e["episode"])
@@ -277,7 +286,7 @@ class TraceWriter:
                 raise ValueError(f"episode {episode} was already begun and not yet ended")
             self._open_episodes.add(episode)
             rows.append({"episode": episode, "world": e.get("world", 0), "t_start": e.get("t_start"),
-                         "seed": e.get("seed"), "started_at": now, "info": convert.json_text(e.get("info"))})
+                         "seed": e.get("seed"), "started_at": e.get("started_at") or now, "info": convert.json_text(e.get("info"))})
         if rows:
             self._append({"episode_begin": pa.Table.from_pylist(rows, schema=SCHEMAS["episode_begin"])})
 
@@ -328,10 +337,7 @@ class TraceWriter:
         `rows`: trace rows the caller already took from it and leaves alone). Cheap per step: the
         vocabulary is only rebuilt when the engine's counts moved. take_trace's arrays are new at every
         call (the engine hands its buffers over or copies them out), so they are kept without a copy."""
-        vocab = getattr(engine, "vocab", None)
-        grown = vocab is None or (len(vocab.nodes), len(vocab.labels), vocab.n_atoms) != (
-            self._vocab_have["nodes"], self._vocab_have["labels"], self._vocab_have["atoms"])
-        self.write_vocabulary(engine.vocabulary() if grown else None, engine.groundings)
+        self.write_engine_vocabulary(engine)
         return self.write_changes(episode, engine.take_trace() if rows is None else rows, owned=True)
 
     def write_steps(self, episode: int | np.ndarray, arrays: Mapping[str, Any]) -> int:
