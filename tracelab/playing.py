@@ -18,10 +18,16 @@ from tracelab.envs.common import ActionMasker, make_sim, reset_sim, restart_worl
 from tracelab.envs.sinks import TraceSink
 from tracelab.envs.tracer import EpisodeTracer
 from tracelab.game.opponent import P_TOWARD
-from tracelab.game.scenario import RED, Scenario
+from tracelab.game.scenario import NOTHING, RED, Scenario
 
 OUTCOMES = {0: "win", 1: "loss", 2: "draw"}  # from red's side, by WINNER_RED / BLUE / DRAW
 POLICIES = ("random", "scripted")  # red's built-in policies
+
+
+def _scripted_ids(scenario: Scenario) -> list[int]:
+    """The spec ids the scripted policy can play (tracelab.game.opponent): moves, nothing, the scenario's
+    own actions, and shots in an advanced game."""
+    return sorted({0, 1, 2, 3, NOTHING, *scenario.action_ids, *((4, 5, 6, 7) if scenario.advanced else ())})
 
 
 class Games:
@@ -47,8 +53,10 @@ class Games:
         self._masker = ActionMasker(scenario)
         ids = self._masker.ids
         index_of = {a: i for i, a in enumerate(scenario.action_ids)}
-        # the scripted policy's spec ids as red plays them: an action the scenario does not offer is its first
-        self._scripted_red = ids[[index_of.get(a, 0) for a in range(9)]]
+        # the scripted policy's spec ids as red plays them: an action the scenario does not offer is its
+        # first (None: it offers all the policy plays, the usual case)
+        scripted_red = ids[[index_of.get(a, 0) for a in range(9)]]
+        self._scripted_red = None if (scripted_red == np.arange(9))[_scripted_ids(scenario)].all() else scripted_red
         self.finished: dict[int, dict[str, Any]] = {}  # episode -> steps, outcome, return
         self.wins = 0  # of the finished episodes
         self.episode_of_world = np.arange(self.worlds)
@@ -66,14 +74,13 @@ class Games:
         red = self._red_actions()
         blue = sim.scripted_actions("blue")
         res = sim.step(red, blue)
+        ended_worlds = res.terminated | res.truncated
         if self.tracer is not None:
-            self.tracer.stepped(res, red, blue)
-        played = int((self.episode_of_world < self.episodes).sum()) if self.worlds > 1 else \
-            int(self.episode_of_world[0] < self.episodes)
+            self.tracer.stepped(res, red, blue, ended_worlds)
+        played = int(np.count_nonzero(self.episode_of_world < self.episodes))
         self._returns += res.reward[:, RED]
         self._obs = res.obs
-        ended_worlds = res.terminated | res.truncated
-        if not ended_worlds.any():
+        if not np.count_nonzero(ended_worlds):
             return played, 0
         done = np.flatnonzero(ended_worlds)
         ended = 0
@@ -101,7 +108,8 @@ class Games:
             idx = np.asarray(self.trained.act(obs, may_act(self.scenario, self.sim.state), masks), np.int64)
             return self._masker.ids[idx.reshape(self.worlds, n)]
         if self.policy == "scripted":
-            return self._scripted_red[self.sim.scripted_actions("red")]
+            red = self.sim.scripted_actions("red")
+            return red if self._scripted_red is None else self._scripted_red[red]
         idx = self.rng.integers(0, self.scenario.n_actions, size=(self.worlds, self.scenario.agents_per_team))
         return self._masker.ids[idx]
 

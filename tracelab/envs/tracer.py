@@ -39,7 +39,9 @@ HANDOVER_ROWS = 65_536
 
 class StepLog:
     """The step records of up to `capacity` steps, kept in arrays allocated once and handed to the sink
-    in one call (a call and five copies per step cost more than the simulator's step at one world)."""
+    in one call (a call and five copies per step cost more than the simulator's step at one world).
+    The tracer takes the log before any world's episode changes (an end, a begin), so every logged row
+    of a world belongs to that world's current episode."""
 
     def __init__(self, capacity: int, worlds: int, obs_size: int, agents: int) -> None:
         self.capacity, self.k = capacity, 0
@@ -47,11 +49,8 @@ class StepLog:
         self.obs = np.empty((capacity, worlds, 2, obs_size), np.float32)
         self.actions = np.empty((capacity, worlds, 2, agents), np.int64)
         self.rewards = np.empty((capacity, worlds, 2, agents), np.float64)
-        self.episode = np.empty((capacity, worlds), np.int64)
-        self.recorded = np.empty((capacity, worlds), bool)
 
-    def add(self, res: StepResult, red: np.ndarray, blue: np.ndarray, episode: np.ndarray,
-            recorded: np.ndarray) -> bool:
+    def add(self, res: StepResult, red: np.ndarray, blue: np.ndarray) -> bool:
         """Log one step of every world (copies: the simulator reuses its arrays); True when full."""
         k = self.k
         self.t[k] = res.t
@@ -59,20 +58,25 @@ class StepLog:
         self.actions[k, :, 0] = red
         self.actions[k, :, 1] = blue
         self.rewards[k] = res.agent_reward
-        self.episode[k] = episode
-        self.recorded[k] = recorded
         self.k = k + 1
         return self.k == self.capacity
 
-    def take(self) -> tuple[np.ndarray, ...] | None:
-        """(world, episode, t, obs, actions, rewards) of the logged rows of recorded episodes, new arrays
-        in step order then world order (the TraceSink.step layout); None if there are none. Empties the log."""
+    def take(self, episode: np.ndarray, recorded: np.ndarray, agent_return: np.ndarray,
+             steps: np.ndarray) -> tuple[np.ndarray, ...] | None:
+        """Empty the log: add its rewards to `agent_return` [W, 2, N] and set `steps` [W] to the last t;
+        return (world, episode, t, obs, actions, rewards) of the rows of `recorded` worlds, new arrays in
+        step order then world order (the TraceSink.step layout; `episode`: each world's), or None."""
         k, self.k = self.k, 0
-        keep = self.recorded[:k]
-        if not keep.any():
+        if not k:
             return None
+        # added step by step, in order (accumulate, not sum), as a running total would: the same floats
+        agent_return[:] = np.add.accumulate(np.concatenate([agent_return[None], self.rewards[:k]]))[-1]
+        steps[:] = self.t[k - 1]
+        if not np.count_nonzero(recorded):
+            return None
+        keep = np.broadcast_to(recorded, (k, len(recorded)))
         world = np.nonzero(keep)[1]
-        return (world, self.episode[:k][keep], self.t[:k][keep], self.obs[:k][keep], self.actions[:k][keep],
+        return (world, episode[world], self.t[:k][keep], self.obs[:k][keep], self.actions[:k][keep],
                 self.rewards[:k][keep])
 
 
@@ -117,10 +121,8 @@ class EpisodeTracer:
         worlds = np.asarray(worlds, np.int64)
         if seed is not None or self._next_episode == 0:
             self._seed = seed
-        cut = worlds[self.open[worlds]]
-        if len(cut):  # their logged steps go out before their end
-            self._hand_steps()
-        for w in cut.tolist():
+        self._hand_steps()  # the logged steps belong to the episodes before (StepLog)
+        for w in worlds[self.open[worlds]].tolist():
             self._end(w, "aborted")
         ids = self._next_episode + np.arange(len(worlds), dtype=np.int64)
         self._next_episode += len(worlds)
@@ -143,16 +145,17 @@ class EpisodeTracer:
             self._flush()
         self._hand_steps()
 
-    def stepped(self, res: StepResult, red: np.ndarray, blue: np.ndarray) -> None:
+    def stepped(self, res: StepResult, red: np.ndarray, blue: np.ndarray, done: np.ndarray | None = None
+                ) -> None:
         """After a step of every world (before any autoreset), with both teams' actions (spec ids,
-        [W, N]): its step record is logged; its rows and the logged steps are handed over when due;
-        episode ends."""
+        [W, N]) and, if the caller has it, `done` = res.terminated | res.truncated: its step record is
+        logged; its rows and the logged steps are handed over when due; episode ends."""
         self._steps_waiting += 1
-        ended = (res.terminated | res.truncated) & self.open
-        any_ended = bool(ended.any())
-        full = self._log.add(res, red, blue, self.cur_ep, self.open)
-        self.steps[:] = res.t
-        self.agent_return += res.agent_reward
+        if done is None:
+            done = res.terminated | res.truncated
+        ended = done & self.open
+        any_ended = np.count_nonzero(ended) > 0  # (ndarray.any() costs a few microseconds more)
+        full = self._log.add(res, red, blue)
         self.team_return += res.reward
         if self._rules and handover_due(self.sim, self._steps_waiting, any_ended):
             self._flush()
@@ -169,8 +172,9 @@ class EpisodeTracer:
         self.sink.close()
 
     def _hand_steps(self) -> None:
-        """The logged step records of recorded episodes to the sink, in step order."""
-        steps = self._log.take()
+        """The logged step records of recorded episodes to the sink, in step order (and their rewards
+        into the returns)."""
+        steps = self._log.take(self.cur_ep, self.open, self.agent_return, self.steps)
         if steps is not None:
             self.sink.step(*steps)
 
