@@ -127,7 +127,8 @@ class TableParts:
 
     def _compact(self) -> None:
         """Merge the small parts into one, read one at a time (memory stays flat however many rows)."""
-        merged = self._write(pq.read_table(self.root / name, schema=self.schema, use_threads=False)
+        merged = self._write(pq.read_table(self.root / name, schema=self.schema, use_threads=False,
+                                           pre_buffer=False)
                              for name in self._small)
         self._retired.append((time.monotonic(), self._small))
         self._small, self._small_rows = [], 0
