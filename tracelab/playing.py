@@ -61,7 +61,8 @@ class Games:
         self.wins = 0  # of the finished episodes
         self.episode_of_world = np.arange(self.worlds)
         self._next_episode = self.worlds
-        self._returns = np.zeros(self.worlds)
+        self._playing = self.worlds  # worlds playing an asked-for episode
+        self._team_returns = np.zeros((self.worlds, 2))  # (all of StepResult.reward: a strided add costs more)
         self._obs = reset_sim(self.sim, self.tracer, seed)
 
     @property
@@ -77,8 +78,8 @@ class Games:
         ended_worlds = res.terminated | res.truncated
         if self.tracer is not None:
             self.tracer.stepped(res, red, blue, ended_worlds)
-        played = int(np.count_nonzero(self.episode_of_world < self.episodes))
-        self._returns += res.reward[:, RED]
+        played = self._playing
+        self._team_returns += res.reward
         self._obs = res.obs
         if not np.count_nonzero(ended_worlds):
             return played, 0
@@ -88,13 +89,14 @@ class Games:
             if self.episode_of_world[w] < self.episodes:
                 outcome = OUTCOMES.get(int(res.winner[w]), "truncated")
                 self.finished[int(self.episode_of_world[w])] = {
-                    "steps": int(res.t[w]), "outcome": outcome, "return": float(self._returns[w])}
+                    "steps": int(res.t[w]), "outcome": outcome, "return": float(self._team_returns[w, RED])}
                 self.wins += outcome == "win"
                 ended += 1
-            self._returns[w] = 0.0
+            self._team_returns[w] = 0.0
         self._obs = restart_worlds(sim, self.tracer, ended_worlds)
         self.episode_of_world[done] = self._next_episode + np.arange(len(done))  # as the tracer numbers them
         self._next_episode += len(done)
+        self._playing = int(np.count_nonzero(self.episode_of_world < self.episodes))
         return played, ended
 
     def _red_actions(self) -> np.ndarray:

@@ -8,11 +8,12 @@ are all out before its end is written), after every HANDOVER_STEPS steps (a live
 rows at most that many steps late, plus the writer's own flush delay), when HANDOVER_ROWS rows wait in the
 engine (its buffer stays bounded), before an env reset cuts recorded episodes short (`before_reset`),
 and at close. Taking
-them after every step cost more than the engine's step at one world (docs/benchmarks.md). The step records
-(observations, actions, rewards) are logged in arrays allocated once (StepLog) and handed over with the
-rows, or when HANDOVER_STEPS of them wait, always before the end of their episode. Never at the
+them after every step cost more than the engine's step at one world (docs/benchmarks.md). Never at the
 reset itself: a new episode's start rows are still queued then, and belong to whichever episode is
 current in that world when they are taken (RuleSim keeps them for a world reset again before it stepped).
+The step records (observations, actions, rewards) are logged in arrays allocated once (StepLog) and
+handed over at an episode's end (before it), when HANDOVER_STEPS of them wait, before any episode begins,
+and at close.
 
 With `limit` = N only the env's episodes 0..N-1 reach the sink: a world that begins episode N or later
 keeps playing (a vector env steps every world) but nothing of it is recorded, so a caller that steps
@@ -45,9 +46,11 @@ class StepLog:
 
     def __init__(self, capacity: int, worlds: int, obs_size: int, agents: int) -> None:
         self.capacity, self.k = capacity, 0
-        self.t = np.empty((capacity, worlds), np.int64)
+        # each the dtype of what is logged (a converting or strided copy costs more)
+        self.t = np.empty((capacity, worlds), np.int32)
         self.obs = np.empty((capacity, worlds, 2, obs_size), np.float32)
-        self.actions = np.empty((capacity, worlds, 2, agents), np.int64)
+        self.red = np.empty((capacity, worlds, agents), np.int64)
+        self.blue = np.empty((capacity, worlds, agents), np.int64)
         self.rewards = np.empty((capacity, worlds, 2, agents), np.float64)
 
     def add(self, res: StepResult, red: np.ndarray, blue: np.ndarray) -> bool:
@@ -55,8 +58,8 @@ class StepLog:
         k = self.k
         self.t[k] = res.t
         self.obs[k] = res.obs
-        self.actions[k, :, 0] = red
-        self.actions[k, :, 1] = blue
+        self.red[k] = red
+        self.blue[k] = blue
         self.rewards[k] = res.agent_reward
         self.k = k + 1
         return self.k == self.capacity
@@ -76,7 +79,8 @@ class StepLog:
             return None
         keep = np.broadcast_to(recorded, (k, len(recorded)))
         world = np.nonzero(keep)[1]
-        return (world, episode[world], self.t[:k][keep], self.obs[:k][keep], self.actions[:k][keep],
+        actions = np.stack([self.red[:k][keep], self.blue[:k][keep]], axis=1)
+        return (world, episode[world], self.t[:k][keep].astype(np.int64), self.obs[:k][keep], actions,
                 self.rewards[:k][keep])
 
 
