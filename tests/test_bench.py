@@ -174,3 +174,16 @@ def test_bench_aggregates_quick(capsys: pytest.CaptureFixture) -> None:
         assert x["set_atoms"] > 0 and x["passes"] >= 11
     by_rule = {x["rule"]: x["set_atoms"] for x in r["rules"]}
     assert by_rule["spread Δt=1"] == by_rule["[>= 1] Δt=1"]  # the same meaning, the same atoms
+
+
+def test_bench_play_quick(capsys: pytest.CaptureFixture) -> None:
+    r = bench_json(capsys, "play", "--repeats", "1", "--memory", "20")
+    machine(r["machine"])
+    assert [s["worlds"] for s in r["speed"]] == [1, 8]
+    for s in r["speed"]:
+        for name in ("loop", "play", "play_untraced"):
+            positive(s[name]["steps_per_s"])
+            positive(s[name]["steps_per_cpu_s"])
+        assert s["ratio"] > 0 and s["cpu_ratio"] > 0 and isinstance(s["goal_met"], bool)
+    (m,) = r["memory"]
+    assert m["episodes"] == 20 and len(m["rss_mb"]) == 10 and m["peak_mb"] >= max(m["rss_mb"]) > 0

@@ -86,7 +86,7 @@ def test_rows_wait_at_most_handover_steps_within_an_episode(monkeypatch: pytest.
 
 
 def test_the_store_gets_every_step_record_in_chunks(tmp_path) -> None:  # noqa: ANN001
-    """StoreSink writes step records in chunks (STEPS_PER_WRITE steps, episode ends, close): the steps
+    """StoreSink writes step records in chunks (WRITE_ROWS step rows, WRITE_INTERVAL_S, close): the steps
     table holds, per world-step, one row per agent with its team's observation, action and reward, as the
     env handed them over (MemorySink keeps the same calls)."""
     from tracelab.store.reader import open_run

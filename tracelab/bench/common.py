@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import platform
+import resource
 import statistics
 import subprocess
 import time
@@ -71,6 +72,15 @@ def rss_bytes() -> int:
     """This process's resident set size."""
     import psutil
     return int(psutil.Process().memory_info().rss)
+
+
+def high_water_bytes() -> int:
+    """This process's peak resident memory: VmHWM, which exec starts afresh (ru_maxrss keeps the peak of
+    the process that forked it, here the bench's own ~1 GB)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) * 1024
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024  # no /proc: an upper bound
 
 
 def _version(dist: str) -> str | None:

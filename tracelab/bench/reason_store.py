@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import gc
 import json
-import resource
 import shutil
 import subprocess
 import sys
@@ -28,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from tracelab.bench.biggraph import OUT_DEGREE, SPREAD_RULE, STEPS, write_graph
-from tracelab.bench.common import format_table, machine_info, rss_bytes, summarize
+from tracelab.bench.common import format_table, high_water_bytes, machine_info, rss_bytes, summarize
 from tracelab.engine.memory import BIG_WORK, release_freed_memory
 
 NODES, QUICK_NODES = 200_000, 20_000
@@ -166,16 +165,7 @@ def _child(rules: Path, graph: Path, run_dir: Path | None) -> int:
     return int(json.loads(proc.stdout.strip().splitlines()[-1])["peak_rss_bytes"])
 
 
-def _high_water_bytes() -> int:
-    """This process's peak resident memory: VmHWM, which exec starts afresh (ru_maxrss keeps the peak of
-    the process that forked it, here the bench's own ~1 GB)."""
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith("VmHWM:"):
-            return int(line.split()[1]) * 1024
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024  # no /proc: an upper bound
-
-
 if __name__ == "__main__":
     _rules, _graph, _run = sys.argv[1:4]
     reason_once(Path(_rules), Path(_graph), Path(_run) if _run else None)
-    print(json.dumps({"peak_rss_bytes": _high_water_bytes()}), flush=True)
+    print(json.dumps({"peak_rss_bytes": high_water_bytes()}), flush=True)

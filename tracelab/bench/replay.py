@@ -49,7 +49,7 @@ def write_idle_game(run_dir: Path, agents: int = 5, steps: int = 500, seed: int 
     for _ in range(steps):
         acts = np.where(rng.random((2, 1, agents)) < 0.8, 8, rng.integers(0, 8, (2, 1, agents)))
         res = sim.step(acts[0], acts[1])
-        tracer.stepped(res, np.stack([acts[0], acts[1]], axis=1))
+        tracer.stepped(res, acts[0], acts[1])
         if res.terminated[0] or res.truncated[0]:
             break
     tracer.close()
@@ -58,20 +58,20 @@ def write_idle_game(run_dir: Path, agents: int = 5, steps: int = 500, seed: int 
 
 def write_1v1_games(run_dir: Path, games: int = 100, seed: int = 0) -> None:
     """`games` traced 1v1 games of the advanced scenario, as `tracelab play` plays them."""
-    from argparse import Namespace
-
-    from tracelab.commands.play import play
     from tracelab.game.facts import GAME_RULES
     from tracelab.game.scenario import BOARD, builtin_scenario
     from tracelab.store import TraceWriter, seal_run
+    from tracelab.playing import Games
     from tracelab.store.sink import StoreSink
 
     scenario = builtin_scenario("advanced")
     meta = {"command": "tracelab bench replay", "scenario": scenario.name,
             "config": {"scenario": scenario.to_toml()}, "rule_files": [str(GAME_RULES)], "seed": seed,
             "board": BOARD}
-    play(scenario, Namespace(episodes=games, worlds=1, policy="scripted", seed=seed),
-         sink=StoreSink(TraceWriter.open(run_dir, meta)))
+    played = Games(scenario, games, seed=seed, sink=StoreSink(TraceWriter.open(run_dir, meta)))
+    while not played.done:
+        played.step()
+    played.close()
     seal_run(run_dir)
 
 

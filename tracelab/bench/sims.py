@@ -83,10 +83,13 @@ class EngineTimer:
 class Loop:
     """Steps `sim` with a fixed-seed random red policy and the scripted blue policy, resetting finished
     worlds and (with `trace`) taking the trace when the envs' tracer would (tracer.handover_due: when an
-    episode ended, else every HANDOVER_STEPS steps), so that a traced figure is what a traced run pays."""
+    episode ended, else every HANDOVER_STEPS steps), so that a traced figure is what a traced run pays.
+    `red="scripted"`: red plays the scripted base policy instead (sim.scripted_actions("red"), timed),
+    as `tracelab play` does by default."""
     sim: Sim
     trace: bool
     seed: int = 0
+    red: str = "random"
     rng: np.random.Generator = field(init=False)
 
     def __post_init__(self) -> None:
@@ -99,10 +102,11 @@ class Loop:
 
     def run(self, steps: int) -> None:
         sim = self.sim
-        red = self.rng.choice(self.ids, (steps, *self.shape))
+        scripted = self.red == "scripted"
+        red = None if scripted else self.rng.choice(self.ids, (steps, *self.shape))
         drain = self.trace and isinstance(sim, RuleSim)
         for i in range(steps):
-            res = sim.step(red[i], sim.scripted_actions("blue"))
+            res = sim.step(sim.scripted_actions("red") if scripted else red[i], sim.scripted_actions("blue"))
             done = res.terminated | res.truncated
             ended = bool(done.any())
             if drain and self._handover_due(ended):
@@ -118,11 +122,12 @@ class Loop:
         return False
 
 
-def measure(sim: Sim, trace: bool, repeats: int, target_s: float, engine_time: bool = True) -> dict[str, Any]:
+def measure(sim: Sim, trace: bool, repeats: int, target_s: float, engine_time: bool = True,
+            red: str = "random") -> dict[str, Any]:
     """Steps/s of `sim` (median over `repeats` blocks of a calibrated number of steps), env-steps/s
     (times the worlds), and for a RuleSim the engine's share: seconds per step inside engine.step() and
-    its work counters (engine.stats) per world-step."""
-    loop = Loop(sim, trace)
+    its work counters (engine.stats) per world-step. `red`: Loop's red policy."""
+    loop = Loop(sim, trace, red=red)
     block = calibrate(loop.run, target_s)
     loop.run(block)  # warm-up at full size: first touches of big batched arrays, caches, allocator
     rules = isinstance(sim, RuleSim)

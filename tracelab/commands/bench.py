@@ -1,6 +1,7 @@
 """`tracelab bench`: speed and memory measured by benchmarks (docs/benchmarks.md), never by timed
 assertions in tests. `bench engine`, `bench env`, `bench store`, `bench replay`, `bench train`,
-`bench tui`, `bench aggregates`, `bench reason-store`, `bench toytext`, `bench all` (engine, env, store, replay, train);
+`bench tui`, `bench aggregates`, `bench reason-store`, `bench toytext`, `bench play`, `bench all` (engine, env, store,
+replay, train);
 each takes --json, --quick (small sizes: the smoke test) and --repeats (medians and spread over that
 many repeats)."""
 from __future__ import annotations
@@ -29,6 +30,8 @@ def register(sub: argparse._SubParsersAction) -> None:
              "reason-store": "reason --run against reason --no-trace on a 1M-edge graph: the ratio, change "
                              "rows/s into the store, peak memory",
              "toytext": "gymnasium's toy-text games as rules (docs/worlds.md) against gymnasium's own, one world",
+             "play": "tracelab play --run against bench env's traced loop (1 and 64 worlds); --memory: the "
+                     "peak memory of 100 / 1,000 / 10,000 recorded episodes",
              "all": "engine, env, store, replay and train"}
     for name, text in helps.items():
         q = what.add_parser(name, help=text)
@@ -54,6 +57,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         if name in ("engine", "all"):
             q.add_argument("--compile-repeats", type=positive_int, default=None,
                            help="first-ever compiles to time (default: min(repeats, 3); --quick: 1)")
+        if name == "play":
+            q.add_argument("--worlds", type=positive_int, default=64,
+                           help="worlds of the batched figure (default 64; --quick: 8)")
+            q.add_argument("--memory", type=_counts, nargs="?", const=[100, 1000, 10_000], default=None,
+                           metavar="N,N,...", help="also the memory of recorded runs of these many episodes, "
+                                                   "each in a fresh process (default 100,1000,10000)")
         if name not in ("store", "tui", "toytext"):  # the sections that build engines (toytext: the envs')
             add_max_groundings(q)
         if name == "engine":
@@ -63,12 +72,19 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _sizes(text: str) -> list[int]:
+    sizes = _counts(text, "team sizes")
+    if 1 not in sizes:
+        raise argparse.ArgumentTypeError("team sizes must be >= 1 and include 1 (the 1v1 figures)")
+    return sizes
+
+
+def _counts(text: str, what: str = "counts") -> list[int]:
     try:
         sizes = [int(x) for x in text.split(",") if x.strip()]
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated team sizes, got {text!r}") from None
-    if not sizes or min(sizes) < 1 or 1 not in sizes:
-        raise argparse.ArgumentTypeError("team sizes must be >= 1 and include 1 (the 1v1 figures)")
+        raise argparse.ArgumentTypeError(f"expected comma-separated {what}, got {text!r}") from None
+    if not sizes or min(sizes) < 1:
+        raise argparse.ArgumentTypeError(f"{what} must be >= 1, got {text!r}")
     return sizes
 
 
@@ -90,6 +106,10 @@ def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], s
         from tracelab.bench import train
         r = train.run(args.quick, args.repeats, args.envs, args.threads)
         return r, train.report(r)
+    if name == "play":
+        from tracelab.bench import play
+        r = play.run(args.quick, args.repeats, args.worlds, args.memory)
+        return r, play.report(r)
     if name == "aggregates":
         from tracelab.bench import aggregates
         r = aggregates.run(args.quick, args.repeats)

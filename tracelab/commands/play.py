@@ -18,7 +18,6 @@ from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, non_nega
 from tracelab.errors import UserError, store_errors
 
 DEFAULT_SCENARIO = "base"  # the one train defaults to (TrainConfig.scenario)
-OUTCOMES = {0: "win", 1: "loss", 2: "draw"}  # from red's side, by WINNER_RED / BLUE / DRAW
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -121,89 +120,41 @@ def run(args: argparse.Namespace) -> int:
 
 
 def play(scenario, args: argparse.Namespace, sink) -> dict:
-    """Play exactly args.episodes episodes in args.worlds worlds of the vector env (rules backend). The
-    env numbers episodes in the order they begin (its autoreset begins a new one in every world that
-    ended); episodes numbered past the last one asked for are played but neither counted nor recorded
-    (trace_episodes), so the run holds exactly the episodes asked for, none of them cut short.
-    Shows the compile (first run) or the build while it happens and a progress bar over the episodes (on
-    a terminal); the steps/s leave out the first step, which includes any compiling."""
+    """Play exactly args.episodes episodes in args.worlds worlds (tracelab.playing.Games), showing the
+    compile (first run) or the build while it happens and a progress bar over the episodes (on a
+    terminal); the steps/s leave out the first step, which includes any compiling."""
     from tracelab.commands._progress import compiling_engine, progress
     from tracelab.engine.compile_job import say_running_compiles
     from tracelab.engine.core import LANES_MIN_WORLDS
-    from tracelab.envs.vector_env import GridWarVectorEnv
-    from tracelab.game.opponent import P_TOWARD
+    from tracelab.playing import Games
 
-    n_worlds = min(args.worlds, args.episodes)
-    trained = getattr(args, "trained", None)  # a loaded policy (run() sets it); callers in code may omit it
-    if trained is not None:
-        from tracelab.train.policy import may_act
-    opponent_p = getattr(args, "opponent_p", None)
-    rng = np.random.default_rng(args.seed)
-    index_of = {a: i for i, a in enumerate(scenario.action_ids)}
-    to_index = np.array([index_of.get(a, 0) for a in range(9)])  # spec action id -> action index
     n = scenario.agents_per_team
-    episode_of_world = np.arange(n_worlds)
-    next_episode = n_worlds
-    finished: dict[int, dict] = {}
-    returns = np.zeros(n_worlds)
-    last: dict = {}  # the observation and info red acts on
-
-    def one_step(env: GridWarVectorEnv) -> tuple[int, int]:
-        """Step every world once; returns (steps of asked-for episodes, how many of them ended)."""
-        nonlocal next_episode
-        if trained is not None:
-            masks = last["info"]["action_mask"].reshape(n_worlds, n, -1) if trained.mask else None
-            red = trained.act(last["obs"], may_act(scenario, env.sim.state), masks)
-        elif args.policy == "scripted":
-            red = to_index[env.sim.scripted_actions("red")]
-        else:
-            red = rng.integers(0, scenario.n_actions, size=(n_worlds, n))
-        last["obs"], reward, terminated, truncated, info = env.step(red[:, 0] if n == 1 else red)
-        last["info"] = info
-        played = int((episode_of_world < args.episodes).sum())
-        returns[:] += reward
-        done = np.flatnonzero(terminated | truncated)
-        ended = 0
-        for w in done:
-            if episode_of_world[w] < args.episodes:
-                final = info["final_info"]
-                finished[int(episode_of_world[w])] = {
-                    "steps": int(final["t"][w]),
-                    "outcome": OUTCOMES.get(int(final["winner"][w]), "truncated"),
-                    "return": float(returns[w])}
-                ended += 1
-            returns[w] = 0.0
-        episode_of_world[done] = next_episode + np.arange(len(done))  # as the env numbers them
-        next_episode += len(done)
-        return played, ended
-
     agents = f"{n} agent{'s' if n != 1 else ''} a team"
     kernel = getattr(args, "kernel", "auto")
+    n_worlds = min(args.worlds, args.episodes)
     lanes = kernel == "lanes" or (kernel == "auto" and n_worlds >= LANES_MIN_WORLDS)
     with compiling_engine(simulator=True, lanes=lanes,
                           busy=f"building the game's rules ({agents})…") as first:
-        env = GridWarVectorEnv(n_worlds, scenario, backend="rules", trace_sink=sink,
-                               trace_episodes=args.episodes,
-                               stack_previous=trained is not None and trained.stack_previous,
-                               opponent_p=P_TOWARD if opponent_p is None else opponent_p, kernel=kernel)
-        last["obs"], last["info"] = env.reset(seed=args.seed)
-        first_steps, ended = one_step(env)
+        games = Games(scenario, args.episodes, worlds=args.worlds, policy=args.policy,
+                      trained=getattr(args, "trained", None), seed=args.seed, sink=sink, kernel=kernel,
+                      opponent_p=getattr(args, "opponent_p", None))
+        first_steps, ended = games.step()
     steps = 0
     t0 = time.perf_counter()
     with progress(f"playing {scenario.name}", total=args.episodes, unit="episodes") as bar:
         bar.advance(ended)
-        while len(finished) < args.episodes:
-            played, ended = one_step(env)
+        while not games.done:
+            played, ended = games.step()
             steps += played
             if ended:
                 bar.advance(ended)
                 elapsed = time.perf_counter() - t0
-                bar.set_fields(wins=sum(e["outcome"] == "win" for e in finished.values()),
+                bar.set_fields(wins=games.wins,
                                **{"steps/s": steps / max(elapsed, 1e-9)})
     elapsed = time.perf_counter() - t0
-    env.close()
+    games.close()
     say_running_compiles()
-    return {"episodes": [finished[e] for e in sorted(finished)], "steps": steps + first_steps,
+    return {"episodes": [games.finished[e] for e in sorted(games.finished)], "steps": steps + first_steps,
             "timed_steps": steps, "seconds": elapsed, "scenario": scenario.name,
             "first_step_s": first.seconds, "compiled": first.compiled}
 

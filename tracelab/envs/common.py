@@ -163,6 +163,15 @@ def reset_sim(sim: Any, tracer: EpisodeTracer | None, seed: int | None) -> np.nd
     return obs
 
 
+def restart_worlds(sim: Any, tracer: EpisodeTracer | None, done: np.ndarray) -> np.ndarray:
+    """The same-step autoreset: the worlds of the bool mask `done` begin new episodes now (the tracer
+    numbers them in world order). Returns the simulator's observations [W, 2, D]."""
+    obs = sim.reset(worlds=done)
+    if tracer is not None:
+        tracer.begin(np.flatnonzero(done), None)
+    return obs
+
+
 def step_learner(sim: Any, masker: ActionMasker, tracer: Any, action: Any, n_worlds: int,
                  space: Any) -> tuple[Any, np.ndarray]:
     """One step with red playing `action` (indices into the scenario's actions, [n_worlds, N] after
@@ -175,7 +184,7 @@ def step_learner(sim: Any, masker: ActionMasker, tracer: Any, action: Any, n_wor
     blue = sim.scripted_actions("blue")
     res = sim.step(red, blue)
     if tracer is not None:
-        tracer.stepped(res, np.stack([red, blue], axis=1))
+        tracer.stepped(res, red, blue)
     return res, blue
 
 

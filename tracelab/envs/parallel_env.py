@@ -78,7 +78,7 @@ class GridWarParallelEnv(OneWorldEnv, ParallelEnv[str, np.ndarray, int]):
         acts = self._masker.ids[idx].reshape(1, 2, -1)
         res = self.sim.step(acts[:, 0], acts[:, 1])
         if self._tracer is not None:
-            self._tracer.stepped(res, acts)
+            self._tracer.stepped(res, acts[:, 0], acts[:, 1])
         rewards = dict(zip(self.possible_agents, res.agent_reward[0].ravel().tolist()))
         terminated = dict.fromkeys(self.possible_agents, bool(res.terminated[0]))
         truncated = dict.fromkeys(self.possible_agents, bool(res.truncated[0]))

@@ -5,7 +5,7 @@ An env given `trace_sink=` calls, in this order:
     begin_run(engine, scenario)                       once, when the env is built
     begin_episode(world, episode, seed, scenario)     when a world starts an episode (reset / autoreset)
     changes(rows, episode_of_world, t0_of_world)      the episode's start rows (t = 0), then each step's
-    step(world, episode, t, obs, actions, rewards)    after each step, batched over the worlds
+    step(world, episode, t, obs, actions, rewards)    after steps, batched over the worlds and steps
     end_episode(world, episode, steps, outcome, rewards)
     close()                                           from env.close(); the env owns its sink
 
@@ -19,7 +19,9 @@ Conventions:
   `episode` (int64, the env's id) and RuleSim's `world_episode` (that world's own episode count).
   `episode_of_world` is the env episode each world is playing, `t0_of_world` the engine time of its
   episode's t = 0. Only the rules backend has change rows; they may arrive with the first step's.
-- `step` arguments are arrays with one row per world that stepped: world, episode, t int64 [K];
+- `step` arguments are arrays with one row per world and step (in step order, then world order; the
+  tracer hands a chunk of steps over with the change rows, and always before the end of their episode):
+  world, episode, t int64 [K];
   obs float32 [K, 2, D] (both teams' observations after the step); actions int64 [K, 2, N] (spec ids);
   rewards float64 [K, 2, N] (`StepResult.agent_reward`).
 - `outcome` is red's (the learner's): "win", "loss", "draw", "truncated", or "aborted" for an episode

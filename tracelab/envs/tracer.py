@@ -11,6 +11,9 @@ and at close. Taking
 them after every step cost more than the engine's step at one world (docs/benchmarks.md). Never at the
 reset itself: a new episode's start rows are still queued then, and belong to whichever episode is
 current in that world when they are taken (RuleSim keeps them for a world reset again before it stepped).
+The step records (observations, actions, rewards) are logged in arrays allocated once (StepLog) and
+handed over at an episode's end (before it), when HANDOVER_STEPS of them wait, before any episode begins,
+and at close.
 
 With `limit` = N only the env's episodes 0..N-1 reach the sink: a world that begins episode N or later
 keeps playing (a vector env steps every world) but nothing of it is recorded, so a caller that steps
@@ -33,6 +36,52 @@ from tracelab.game.state import WINNER_BLUE, WINNER_DRAW, WINNER_RED, StepResult
 
 HANDOVER_STEPS = 64
 HANDOVER_ROWS = 65_536
+
+
+class StepLog:
+    """The step records of up to `capacity` steps, kept in arrays allocated once and handed to the sink
+    in one call (a call and five copies per step cost more than the simulator's step at one world).
+    The tracer takes the log before any world's episode changes (an end, a begin), so every logged row
+    of a world belongs to that world's current episode."""
+
+    def __init__(self, capacity: int, worlds: int, obs_size: int, agents: int) -> None:
+        self.capacity, self.k = capacity, 0
+        # each the dtype of what is logged (a converting or strided copy costs more)
+        self.t = np.empty((capacity, worlds), np.int32)
+        self.obs = np.empty((capacity, worlds, 2, obs_size), np.float32)
+        self.red = np.empty((capacity, worlds, agents), np.int64)
+        self.blue = np.empty((capacity, worlds, agents), np.int64)
+        self.rewards = np.empty((capacity, worlds, 2, agents), np.float64)
+
+    def add(self, res: StepResult, red: np.ndarray, blue: np.ndarray) -> bool:
+        """Log one step of every world (copies: the simulator reuses its arrays); True when full."""
+        k = self.k
+        self.t[k] = res.t
+        self.obs[k] = res.obs
+        self.red[k] = red
+        self.blue[k] = blue
+        self.rewards[k] = res.agent_reward
+        self.k = k + 1
+        return self.k == self.capacity
+
+    def take(self, episode: np.ndarray, recorded: np.ndarray, agent_return: np.ndarray,
+             steps: np.ndarray) -> tuple[np.ndarray, ...] | None:
+        """Empty the log: add its rewards to `agent_return` [W, 2, N] and set `steps` [W] to the last t;
+        return (world, episode, t, obs, actions, rewards) of the rows of `recorded` worlds, new arrays in
+        step order then world order (the TraceSink.step layout; `episode`: each world's), or None."""
+        k, self.k = self.k, 0
+        if not k:
+            return None
+        # added step by step, in order (accumulate, not sum), as a running total would: the same floats
+        agent_return[:] = np.add.accumulate(np.concatenate([agent_return[None], self.rewards[:k]]))[-1]
+        steps[:] = self.t[k - 1]
+        if not np.count_nonzero(recorded):
+            return None
+        keep = np.broadcast_to(recorded, (k, len(recorded)))
+        world = np.nonzero(keep)[1]
+        actions = np.stack([self.red[:k][keep], self.blue[:k][keep]], axis=1)
+        return (world, episode[world], self.t[:k][keep].astype(np.int64), self.obs[:k][keep], actions,
+                self.rewards[:k][keep])
 
 
 def handover_due(sim: RuleSim, steps_waiting: int, episode_ended: bool) -> bool:
@@ -67,6 +116,7 @@ class EpisodeTracer:
         self._steps_waiting = 0                  # steps whose rows the simulator still holds
         self._seed: int | None = None
         self._names = [agent_name(t, j) for t in range(2) for j in range(n)]
+        self._log = StepLog(HANDOVER_STEPS, w, sim.obs_size, n)
         sink.begin_run(sim.engine if isinstance(sim, RuleSim) else None, scenario)
 
     def begin(self, worlds: np.ndarray, seed: int | None) -> None:
@@ -75,6 +125,7 @@ class EpisodeTracer:
         worlds = np.asarray(worlds, np.int64)
         if seed is not None or self._next_episode == 0:
             self._seed = seed
+        self._hand_steps()  # the logged steps belong to the episodes before (StepLog)
         for w in worlds[self.open[worlds]].tolist():
             self._end(w, "aborted")
         ids = self._next_episode + np.arange(len(worlds), dtype=np.int64)
@@ -96,31 +147,40 @@ class EpisodeTracer:
         stepped since its start holds only start rows, which stay for the episode that begins."""
         if self._steps_waiting:
             self._flush()
+        self._hand_steps()
 
-    def stepped(self, res: StepResult, actions: np.ndarray) -> None:
-        """After a step of every world (before any autoreset): its rows (when a handover is due), its step
-        records, episode ends."""
+    def stepped(self, res: StepResult, red: np.ndarray, blue: np.ndarray, done: np.ndarray | None = None
+                ) -> None:
+        """After a step of every world (before any autoreset), with both teams' actions (spec ids,
+        [W, N]) and, if the caller has it, `done` = res.terminated | res.truncated: its step record is
+        logged; its rows and the logged steps are handed over when due; episode ends."""
         self._steps_waiting += 1
-        ended = (res.terminated | res.truncated) & self.open
-        if self._rules and handover_due(self.sim, self._steps_waiting, bool(ended.any())):
-            self._flush()
-        worlds = np.flatnonzero(self.open)
-        if len(worlds):
-            # copies: the simulator may reuse its arrays (RuleSim.reset writes into the last obs)
-            self.sink.step(worlds, self.cur_ep[worlds], res.t[worlds].astype(np.int64),
-                           np.array(res.obs[worlds], np.float32), np.array(actions, np.int64)[worlds],
-                           res.agent_reward[worlds].copy())
-        self.steps[:] = res.t
-        self.agent_return += res.agent_reward
+        if done is None:
+            done = res.terminated | res.truncated
+        ended = done & self.open
+        any_ended = np.count_nonzero(ended) > 0  # (ndarray.any() costs a few microseconds more)
+        full = self._log.add(res, red, blue)
         self.team_return += res.reward
-        for w in np.flatnonzero(ended).tolist():
-            self._end(w, outcome_name(res.winner[w], bool(res.truncated[w])))
+        if self._rules and handover_due(self.sim, self._steps_waiting, any_ended):
+            self._flush()
+        if any_ended or full:
+            self._hand_steps()
+            for w in np.flatnonzero(ended).tolist():
+                self._end(w, outcome_name(res.winner[w], bool(res.truncated[w])))
 
     def close(self) -> None:
         self._flush()
+        self._hand_steps()
         for w in np.flatnonzero(self.open).tolist():
             self._end(w, "aborted")
         self.sink.close()
+
+    def _hand_steps(self) -> None:
+        """The logged step records of recorded episodes to the sink, in step order (and their rewards
+        into the returns)."""
+        steps = self._log.take(self.cur_ep, self.open, self.agent_return, self.steps)
+        if steps is not None:
+            self.sink.step(*steps)
 
     def _flush(self) -> None:
         if not self._rules:

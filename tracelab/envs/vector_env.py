@@ -49,6 +49,7 @@ from tracelab.envs.common import (
     observation_space,
     reset_sim,
     resolve_scenario,
+    restart_worlds,
     step_learner,
 )
 from tracelab.envs.gym_env import reset_info, step_info
@@ -123,12 +124,10 @@ class GridWarVectorEnv(VectorEnv):
         """Reset the finished worlds now; `obs` and `info` switch to their reset values there."""
         final_info = self._with_masks({k: v.copy() for k, v in info.items()}, done)
         final_obs = obs.copy()
-        reset_obs = self.sim.reset(worlds=done)[:, RED]
+        reset_obs = restart_worlds(self.sim, self._tracer, done)[:, RED]
         obs[done] = reset_obs[done]
         for key, value in self._start_info.items():
             info[key][done] = value[0]
-        if self._tracer is not None:
-            self._tracer.begin(np.flatnonzero(done), None)
         info.update(final_obs=final_obs, _final_obs=done, final_info=final_info, _final_info=done)
         return info
 

@@ -10,8 +10,9 @@ drop rows (seen: a reader got only the big parts of a table, without the part th
 into). One manifest for all tables also gives a reader one consistent moment across tables.
 
 A publication writes one new part per table with rows; then the writer replaces the manifest. When a
-table holds `compact_files` small parts (< part_rows rows), they are merged into one new part and leave
-the table's list; their files are deleted `grace_seconds` later, so a reader still holding the previous
+table holds `compact_files` small parts (< part_rows rows), or small parts of part_rows rows in all, they
+are merged into one new part (read one at a time) and leave the table's list: a merge holds about
+part_rows rows, however long the run (merging 64 parts at a time held millions); their files are deleted `grace_seconds` later, so a reader still holding the previous
 manifest can finish its query. A crash before the manifest is replaced leaves parts nobody lists:
 invisible and harmless (seal ignores them and removes parts/)."""
 from __future__ import annotations
@@ -21,11 +22,13 @@ import os
 import re
 import time
 from pathlib import Path
+from collections.abc import Iterable
 from typing import Any
 
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from tracelab.engine.memory import release_freed_memory
 from tracelab.engine.safe_files import check_regular, read_json
 from tracelab.store import layout
 from tracelab.store.schema import ADDED_TABLES, DICTIONARY_COLUMNS, SCHEMAS
@@ -53,6 +56,7 @@ class TableParts:
         self.compression = compression
         self._next_file = 0
         self._small: list[str] = []   # listed parts with fewer than part_rows rows, oldest first
+        self._small_rows = 0          # and their rows
         self._big: list[str] = []
         self._retired: list[tuple[float, list[str]]] = []
         self.rows_published = 0
@@ -66,24 +70,45 @@ class TableParts:
                 self.rows_published += rows
             return
         # An empty first part, so that every table has a file that carries its schema.
-        self._add(self._write(self.schema.empty_table()), 0)
+        self._add(*self._write([self.schema.empty_table()]))
 
     @property
     def files(self) -> list[str]:
         """The table's parts now, as paths relative to parts/ (the manifest's form)."""
         return [f"{self.table}/{name}" for name in (*self._big, *self._small)]
 
-    def _write(self, table: pa.Table) -> str:
+    def _write(self, tables: Iterable[pa.Table]) -> tuple[str, int]:
+        """A new part of the rows of `tables`, in order, in row groups of ROW_GROUP_ROWS (the last one
+        smaller), taken one table at a time: memory for a row group and a table, however many rows the
+        part gets (a compaction merges millions). Returns its name and rows."""
         name = layout.part_name(self._next_file)
         self._next_file += 1
-        with layout.new_file(self.root / name) as f:
-            pq.write_table(table, f, compression=self.compression, row_group_size=ROW_GROUP_ROWS,
-                           use_dictionary=DICTIONARY_COLUMNS.get(self.table, True))
+        rows = 0
+        with layout.new_file(self.root / name) as f, pq.ParquetWriter(
+                f, self.schema, compression=self.compression,
+                use_dictionary=DICTIONARY_COLUMNS.get(self.table, True)) as out:
+            held: list[pa.Table] = []  # rows short of a full row group
+            for table in tables:
+                held.append(table)
+                rows += table.num_rows
+                waiting = sum(t.num_rows for t in held)
+                if waiting >= ROW_GROUP_ROWS:
+                    joined = pa.concat_tables(held)
+                    full = waiting - waiting % ROW_GROUP_ROWS
+                    out.write_table(joined.slice(0, full), row_group_size=ROW_GROUP_ROWS)
+                    held = [joined.slice(full)]
+            if rows == 0 or any(t.num_rows for t in held):
+                out.write_table(pa.concat_tables(held) if held else self.schema.empty_table(),
+                                row_group_size=ROW_GROUP_ROWS)
         self.files_written += 1
-        return name
+        return name, rows
 
     def _add(self, name: str, rows: int) -> None:
-        (self._big if rows >= self.part_rows else self._small).append(name)
+        if rows >= self.part_rows:
+            self._big.append(name)
+        else:
+            self._small.append(name)
+            self._small_rows += rows
 
     def publish(self, tables: list[pa.Table]) -> int:
         """Write these rows as a new part (merging small parts when there are enough) and list it; readers
@@ -92,23 +117,24 @@ class TableParts:
         if n == 0:
             return 0
         t0 = time.perf_counter()
-        table = pa.concat_tables(tables) if len(tables) > 1 else tables[0]
-        self._add(self._write(table), n)
+        self._add(*self._write(tables))
         self.rows_published += n
-        if len(self._small) >= self.compact_files:
+        if len(self._small) >= self.compact_files or (len(self._small) > 1 and self._small_rows >= self.part_rows):
             self._compact()
         self._drop_retired()
         self.seconds += time.perf_counter() - t0
         return n
 
     def _compact(self) -> None:
-        merged = pa.concat_tables([pq.read_table(self.root / name, schema=self.schema)
-                                   for name in self._small])
-        merged_name = self._write(merged)
+        """Merge the small parts into one, read one at a time (memory stays flat however many rows)."""
+        merged = self._write(pq.read_table(self.root / name, schema=self.schema, use_threads=False,
+                                           pre_buffer=False)
+                             for name in self._small)
         self._retired.append((time.monotonic(), self._small))
-        self._small = []
-        self._add(merged_name, merged.num_rows)
+        self._small, self._small_rows = [], 0
+        self._add(*merged)
         self.compactions += 1
+        release_freed_memory(merged[1])  # the parts read and written: back to the system
 
     def _drop_retired(self) -> None:
         now = time.monotonic()

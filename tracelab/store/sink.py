@@ -2,6 +2,7 @@
 the trace store, through TraceWriter."""
 from __future__ import annotations
 
+import time
 from typing import Any, Mapping
 
 import numpy as np
@@ -10,23 +11,28 @@ from tracelab.store.convert import utc_now
 from tracelab.store.writer import TraceWriter
 
 
-# What the env streams is written in chunks: every this many env steps, and at close (an Arrow table per
-# step, or per episode at one world, cost more than the simulator's step: docs/benchmarks.md).
-STEPS_PER_WRITE = 64
+# What the env streams is written in chunks: when WRITE_ROWS step rows wait, or WRITE_INTERVAL_S after
+# the last write, and at close (Arrow tables per step, or per episode at one world, cost more than the
+# simulator's step: docs/benchmarks.md). The writer publishes at most a second later anyway.
+WRITE_ROWS = 4096
+WRITE_INTERVAL_S = 0.1
 
 
 class StoreSink:
     """Writes everything an env streams (program, vocabulary, change rows, steps, episodes) to `writer`.
     The env owns the sink: env.close() closes the writer. Change rows, step records and episode ends are
-    kept until STEPS_PER_WRITE steps wait or the sink closes (`write_pending`), then written in that
-    order, so a reader of the run never sees an ended episode without its rows; episode begins are
-    written at once."""
+    kept until WRITE_ROWS step rows wait, WRITE_INTERVAL_S passed or the sink closes (`write_pending`),
+    then written after the episode begins kept with them, in that order, so a reader of the run never sees
+    an ended episode without its rows."""
 
     def __init__(self, writer: TraceWriter) -> None:
         self.writer = writer
         self._engine: Any = None
         self._agents: list[str] = []
+        self._begins: list[dict[str, Any]] = []  # writer.begin_episodes' rows
         self._changes: list[dict[str, np.ndarray]] = []
+        self._step_rows = 0
+        self._written_at = time.monotonic()
         self._steps: list[tuple[np.ndarray, ...]] = []  # (episode, t, obs, actions, rewards) per env step
         self._ends: list[dict[str, Any]] = []  # writer.end_episodes' rows, ended_at when they ended
 
@@ -38,7 +44,8 @@ class StoreSink:
             self.writer.write_engine_program(engine)
 
     def begin_episode(self, world: int, episode: int, seed: int | None, scenario: Any) -> None:
-        self.writer.begin_episode(int(episode), world=int(world), t_start=0, seed=seed)
+        self._begins.append({"episode": int(episode), "world": int(world), "t_start": 0, "seed": seed,
+                             "started_at": utc_now()})
 
     def changes(self, rows: dict[str, np.ndarray], episode_of_world: np.ndarray,
                 t0_of_world: np.ndarray) -> None:
@@ -48,7 +55,8 @@ class StoreSink:
              actions: np.ndarray, rewards: np.ndarray) -> None:
         # the env hands over new arrays (sinks.py), so they are kept as they are
         self._steps.append((episode, t, obs, actions, rewards))
-        if len(self._steps) >= STEPS_PER_WRITE:
+        self._step_rows += len(t)
+        if self._step_rows >= WRITE_ROWS or time.monotonic() - self._written_at >= WRITE_INTERVAL_S:
             self.write_pending()
 
     def end_episode(self, world: int, episode: int, steps: int, outcome: str,
@@ -59,16 +67,20 @@ class StoreSink:
                            "ended_at": utc_now()})
 
     def write_pending(self) -> None:
-        """Write what is kept: the vocabulary the rows name, the change rows, the step records (a row per
-        agent, with its team's observation), then the episode ends."""
+        """Write what is kept: the episode begins, the vocabulary the rows name, the change rows, the step
+        records (a row per agent, with its team's observation), then the episode ends."""
+        self._written_at = time.monotonic()
+        if self._begins:
+            begins, self._begins = self._begins, []
+            self.writer.begin_episodes(begins)
         if self._changes:
             if self._engine is not None:  # atoms and groundings the rows name must be written first
-                self.writer.write_vocabulary(self._engine.vocabulary(), self._engine.groundings)
+                self.writer.write_engine_vocabulary(self._engine)
             chunks, self._changes = self._changes, []
             self.writer.write_changes(None, {k: np.concatenate([c[k] for c in chunks]) for k in chunks[0]})
         if self._steps:
             episode, t, obs, actions, rewards = (np.concatenate(c) for c in zip(*self._steps))
-            self._steps = []
+            self._steps, self._step_rows = [], 0
             m = len(self._agents)  # both teams' agents, red first
             self.writer.write_steps(np.repeat(episode, m), {
                 "step": np.repeat(t, m), "t": np.repeat(t, m), "agent": np.tile(self._agents, len(t)),

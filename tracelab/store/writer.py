@@ -43,6 +43,15 @@ class RunSealed(ValueError):
 _OPEN_WRITERS: "weakref.WeakSet[TraceWriter]" = weakref.WeakSet()
 
 
+def _use_system_allocator() -> None:
+    """Arrow's buffers from malloc rather than pyarrow's default mimalloc, unless the user chose a pool
+    (ARROW_DEFAULT_MEMORY_POOL): mimalloc kept ~130 MB more resident after each merge of a table's small
+    parts (64 parts, 1.7M change rows: +130 MB against +40 MB at the peak and +8 MB after, with
+    malloc_trim), so a long run's memory rose with its length (docs/benchmarks.md, "play's memory")."""
+    if "ARROW_DEFAULT_MEMORY_POOL" not in os.environ and pa.default_memory_pool().backend_name != "system":
+        pa.set_memory_pool(pa.system_memory_pool())
+
+
 def _close_open_writers() -> None:
     for w in list(_OPEN_WRITERS):
         if w._pid != os.getpid():  # a forked child inherited it: the run belongs to the parent
@@ -76,10 +85,11 @@ class TraceWriter:
 
     def __init__(self, run_dir: str | Path, meta: RunMeta | dict[str, Any] | None = None, *,
                  flush_interval: float = 1.0, min_flush_gap: float = 0.05, part_rows: int = 250_000,
-                 compact_files: int = 64, max_pending_rows: int = 2_000_000,
+                 compact_files: int = 64, max_pending_rows: int = 500_000,
                  compression: str = "zstd", _reopen: Mapping[str, Any] | None = None) -> None:
         self.run_dir = Path(run_dir)
         self._pid = os.getpid()
+        _use_system_allocator()
         exists = os.path.lexists(layout.meta_path(self.run_dir))
         if _reopen is None and exists:
             raise FileExistsError(f"{str(self.run_dir)!r} already holds a run; choose a new run directory")
@@ -251,6 +261,14 @@ class TraceWriter:
         if "groundings" in tables:
             self._groundings_have += tables["groundings"].num_rows
 
+    def write_engine_vocabulary(self, engine: Any) -> None:
+        """write_vocabulary() with an Engine's vocabulary and groundings: cheap when nothing is new (the
+        vocabulary is only rebuilt when the engine's counts moved)."""
+        vocab = getattr(engine, "vocab", None)
+        grown = vocab is None or (len(vocab.nodes), len(vocab.labels), vocab.n_atoms) != (
+            self._vocab_have["nodes"], self._vocab_have["labels"], self._vocab_have["atoms"])
+        self.write_vocabulary(engine.vocabulary() if grown else None, engine.groundings)
+
     def _check_stored(self, tables: Mapping[str, pa.Table], names: Sequence[str], what: str) -> None:
         """A reopened run: the stored rows of `names` must begin `tables` (the new engine's)."""
         assert self._stored_tables is not None
@@ -269,7 +287,8 @@ class TraceWriter:
 
     def begin_episodes(self, episodes: Sequence[Mapping[str, Any]]) -> None:
         """begin_episode for many episodes in one table (dicts with episode and optionally world,
-        t_start, seed, info): a training loop logs thousands of short episodes."""
+        t_start, seed, info, and started_at: when the episode began, if not now; a UTC datetime without
+        tzinfo, convert.utc_now()): a training loop logs thousands of short episodes."""
         rows, now = [], convert.utc_now()
         for e in episodes:
             episode = int(e["episode"])
@@ -277,7 +296,7 @@ class TraceWriter:
                 raise ValueError(f"episode {episode} was already begun and not yet ended")
             self._open_episodes.add(episode)
             rows.append({"episode": episode, "world": e.get("world", 0), "t_start": e.get("t_start"),
-                         "seed": e.get("seed"), "started_at": now, "info": convert.json_text(e.get("info"))})
+                         "seed": e.get("seed"), "started_at": e.get("started_at") or now, "info": convert.json_text(e.get("info"))})
         if rows:
             self._append({"episode_begin": pa.Table.from_pylist(rows, schema=SCHEMAS["episode_begin"])})
 
@@ -328,10 +347,7 @@ class TraceWriter:
         `rows`: trace rows the caller already took from it and leaves alone). Cheap per step: the
         vocabulary is only rebuilt when the engine's counts moved. take_trace's arrays are new at every
         call (the engine hands its buffers over or copies them out), so they are kept without a copy."""
-        vocab = getattr(engine, "vocab", None)
-        grown = vocab is None or (len(vocab.nodes), len(vocab.labels), vocab.n_atoms) != (
-            self._vocab_have["nodes"], self._vocab_have["labels"], self._vocab_have["atoms"])
-        self.write_vocabulary(engine.vocabulary() if grown else None, engine.groundings)
+        self.write_engine_vocabulary(engine)
         return self.write_changes(episode, engine.take_trace() if rows is None else rows, owned=True)
 
     def write_steps(self, episode: int | np.ndarray, arrays: Mapping[str, Any]) -> int:
