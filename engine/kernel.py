@@ -656,10 +656,10 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
         if trace_on[w] and tri.shape[0] - tr_n[0] < n_touched[0]:
             return _pause(cfg, err, w, np.int64(PHASE_APPLY), np.int64(0), np.int64(0), hn, n_touched[0])
         changed[0] = 0
-        status, hn = _apply_groups(w, t, np.int64(0), policy, rule_i, rule_f, slot_of, touched, n_touched, si, sf, out, lo, up,
-                                   static, last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd, wc_flags,
-                                   wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap,
-                                   hn, in_heap, changed)
+        status, hn = _apply_groups(w, t, np.int64(0), policy, rule_i, rule_f, slot_of, touched, n_touched, si, sf, out,
+                                   lo, up, static, last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd,
+                                   wc_flags, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst,
+                                   heap, hn, in_heap, changed)
         if status != STATUS_OK:
             return status
         # every active immediate grounding is a candidate of the first immediate phase; after that, a
@@ -728,14 +728,14 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
                 if out[0] == cl and out[1] == cu:  # a {set_static} firing that only freezes the head
                     stats[w, STAT_REDERIVATIONS] += 1
                 elif inconsistent:
-                    hn = _set_atom(w, t, pass_no, np.int64(a), cl, cu, out[0], out[1], np.int64(CAUSE_POLICY), policy, g,
-                                   np.int64(1), np.int64(-1), lo, up,
+                    hn = _set_atom(w, t, pass_no, np.int64(a), cl, cu, out[0], out[1], np.int64(CAUSE_POLICY), policy,
+                                   g, np.int64(1), np.int64(-1), lo, up,
                                    last_cause, static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr,
                                    wc_bnd, wc_flags, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
                                    ih_inst, heap, hn, in_heap)
                 else:
-                    hn = _set_atom(w, t, pass_no, np.int64(a), cl, cu, out[0], out[1], np.int64(CAUSE_RULE), np.int64(r), g,
-                                   np.int64(1), g, lo, up, last_cause,
+                    hn = _set_atom(w, t, pass_no, np.int64(a), cl, cu, out[0], out[1], np.int64(CAUSE_RULE),
+                                   np.int64(r), g, np.int64(1), g, lo, up, last_cause,
                                    static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd,
                                    wc_flags, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst,
                                    heap, hn, in_heap)
@@ -749,8 +749,9 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
             for k in range(act_n[w, KIND_ORDINARY]):
                 g = act[w, base + k]
                 r = inst[g, INST_RULE]
-                _add_source(np.int64(inst[g, INST_HEAD]), rule_f[r, 0], rule_f[r, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
-                            2 * KEY_STRIDE + inst[g, INST_RANK], np.int64(CAUSE_RULE), np.int64(r), np.int64(g), rule_i[r, RULE_SET_STATIC] == 1,
+                _add_source(np.int64(inst[g, INST_HEAD]), rule_f[r, 0], rule_f[r, 1],
+                            rule_i[r, RULE_MODE] == MODE_OVERRIDE, 2 * KEY_STRIDE + inst[g, INST_RANK],
+                            np.int64(CAUSE_RULE), np.int64(r), np.int64(g), rule_i[r, RULE_SET_STATIC] == 1,
                             slot_of, touched, n_touched, si, sf)
             if hg_i.shape[0] > 0:
                 _agg_pass(w, rule_i, rule_f, inst, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn, ag_q, ag_qv, lo,
@@ -807,7 +808,8 @@ def _collect_pass0(w, t, fact_override, rule_i, inst, fact_i, fact_f, fact_order
                         fact_i[f, 3] == 1, slot_of, touched, n_touched, si, sf)
     for e in range(ext_ptr[w], ext_ptr[w + 1]):
         _add_source(ext_i[e, 0], ext_f[e, 0], ext_f[e, 1], fact_override, KEY_STRIDE + ext_i[e, 2],
-                    np.int64(CAUSE_EXTERNAL), ext_i[e, 2], np.int64(-1), ext_i[e, 1] == 1, slot_of, touched, n_touched, si, sf)
+                    np.int64(CAUSE_EXTERNAL), ext_i[e, 2], np.int64(-1), ext_i[e, 1] == 1,
+                    slot_of, touched, n_touched, si, sf)
     kept = 0
     for p in range(pend_n[w]):
         g = pend[w, p, 1]
@@ -1044,7 +1046,8 @@ def _agg_pass(w, rule_i, rule_f, inst, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_
         if g >= 0:
             r = ag_rule[ai, AR_RULE]
             _add_source(np.int64(hg_i[h, 1]), out[0], out[1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
-                        2 * KEY_STRIDE + inst[g, INST_RANK], np.int64(CAUSE_RULE), np.int64(r), np.int64(g), rule_i[r, RULE_SET_STATIC] == 1,
+                        2 * KEY_STRIDE + inst[g, INST_RANK],
+                        np.int64(CAUSE_RULE), np.int64(r), np.int64(g), rule_i[r, RULE_SET_STATIC] == 1,
                         slot_of, touched, n_touched, si, sf)
 
 
@@ -1056,7 +1059,8 @@ def _agg_user_sources(rule_i, inst, hg_i, ag_rule, req_i, req_f, req_n, slot_of,
         g = req_i[i, 1]
         r = ag_rule[hg_i[h, 0], AR_RULE]
         _add_source(np.int64(hg_i[h, 1]), req_f[i, 0], req_f[i, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
-                    2 * KEY_STRIDE + inst[g, INST_RANK], np.int64(CAUSE_RULE), np.int64(r), np.int64(g), rule_i[r, RULE_SET_STATIC] == 1,
+                    2 * KEY_STRIDE + inst[g, INST_RANK],
+                    np.int64(CAUSE_RULE), np.int64(r), np.int64(g), rule_i[r, RULE_SET_STATIC] == 1,
                     slot_of, touched, n_touched, si, sf)
     req_n[0] = 0
 

@@ -178,7 +178,10 @@ def compiling_engine(simulator: bool = False, lanes: bool = False,
     t0 = time.perf_counter()
     if notice and not on_terminal():  # one line, once: on a terminal the spinner says it
         print(f"tracelab: {notice}", file=sys.stderr, flush=True)
-    description = f"{notice}…" if notice else "compiling the engine (first run only)…" if cold is not False else busy
+    if notice:
+        description: str | None = f"{notice}…"
+    else:
+        description = "compiling the engine (first run only)…" if cold is not False else busy
     spinner = working(description) if description else nullcontext(Progress())
     with spinner as shown:
         warm = Warmup(shown._bar, shown._task)
