@@ -39,9 +39,14 @@ print(json.dumps({"code": code, "kernel": signatures(K), "rulesim_kernel": signa
 
 
 def _play(cache: Path, run_dir: Path) -> tuple[dict, list[str]]:
+    """The probe, run from a folder holding another `tracelab/` (as in another checkout): the second
+    process must still run this tracelab's code."""
+    decoy = cache / "elsewhere"
+    (decoy / "tracelab").mkdir(parents=True, exist_ok=True)
+    (decoy / "tracelab" / "__init__.py").write_text("raise ImportError('another tracelab')\n")
     env = {**os.environ, "NUMBA_CACHE_DIR": str(cache / "numba"), "TRACELAB_CACHE_DIR": str(cache / "tracelab")}
-    done = subprocess.run([sys.executable, "-c", PROBE, str(run_dir)], env=env, capture_output=True, text=True,
-                          timeout=900, check=False)
+    done = subprocess.run([sys.executable, "-P", "-c", PROBE, str(run_dir)], env=env, capture_output=True,
+                          text=True, timeout=900, check=False, cwd=decoy)
     assert done.returncode == 0, done.stderr[-3000:]
     return json.loads(done.stdout.splitlines()[-1]), done.stderr.splitlines()
 

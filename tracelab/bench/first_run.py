@@ -34,7 +34,7 @@ def timed_command(command: tuple[str, ...], cache_dir: str, run_dir: str) -> dic
     env = {**os.environ, "NUMBA_CACHE_DIR": os.path.join(cache_dir, "numba"),
            "TRACELAB_CACHE_DIR": os.path.join(cache_dir, "tracelab")}
     cpu0, t0 = _children_cpu_s(), time.perf_counter()
-    done = subprocess.run([sys.executable, "-m", "tracelab", *command, "--run", run_dir], env=env,
+    done = subprocess.run([sys.executable, "-P", "-m", "tracelab", *command, "--run", run_dir], env=env,
                           capture_output=True, text=True, timeout=TIMEOUT_S, check=False)
     wall, cpu = time.perf_counter() - t0, _children_cpu_s() - cpu0
     if done.returncode != 0:

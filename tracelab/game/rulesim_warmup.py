@@ -19,9 +19,11 @@ import json
 import subprocess
 import sys
 import tempfile
+import tomllib
 from typing import IO, Any
 
 from tracelab.engine.numba_cache import all_cached, is_cached
+from tracelab.game.scenario import Scenario, scenario_from_dict
 
 WAIT_S = 600  # a compile that takes longer is left to die; the RuleSim compiles what it still lacks
 
@@ -46,7 +48,7 @@ def _step_kernel(engine_kernel: str) -> Any:
 
 
 class Warmup:
-    """The second process: wait() for it (its status: "ready", "failed" or "timeout")."""
+    """The second process: wait() for it (its status: "ready", "failed" or "timeout"), or stop() it."""
 
     def __init__(self, proc: subprocess.Popen, log: IO[bytes]) -> None:
         self.proc, self.log = proc, log
@@ -85,14 +87,15 @@ def needed(engine_kernel: str, fused: bool) -> bool:
     return is_cached(_step_kernel(engine_kernel)) is False and all_cached(game_kernels(fused)) is False
 
 
-def start(scenario: Any, n_worlds: int, stack_previous: bool, engine_kernel: str, fused: bool) -> Warmup | None:
+def start(scenario: Scenario, n_worlds: int, stack_previous: bool, engine_kernel: str, fused: bool) -> Warmup | None:
     """The second process compiling the game's kernels of this RuleSim, when needed() (else None)."""
     if not needed(engine_kernel, fused):
         return None
     log = tempfile.TemporaryFile()  # its output: Warmup.why on a failure
     try:
-        proc = subprocess.Popen([sys.executable, "-m", "tracelab.game.rulesim_warmup"], stdin=subprocess.PIPE,
-                                stdout=log, stderr=log)
+        # -P: not the current folder first on sys.path, where another checkout's tracelab/ would be found
+        proc = subprocess.Popen([sys.executable, "-P", "-m", "tracelab.game.rulesim_warmup"],
+                                stdin=subprocess.PIPE, stdout=log, stderr=log)
     except OSError:  # no process to spare: this one compiles everything, as without it
         log.close()
         return None
@@ -105,7 +108,7 @@ def start(scenario: Any, n_worlds: int, stack_previous: bool, engine_kernel: str
     return Warmup(proc, log)
 
 
-def to_child(scenario: Any, n_worlds: int, stack_previous: bool, engine_kernel: str, fused: bool) -> bytes:
+def to_child(scenario: Scenario, n_worlds: int, stack_previous: bool, engine_kernel: str, fused: bool) -> bytes:
     """What the second process reads on stdin: the RuleSim's arguments as JSON, the scenario as its TOML
     text (read back as a scenario file is, its arrays read-only: a pickled one would come back writable,
     another argument type, and the kernels would compile for it in vain)."""
@@ -115,15 +118,12 @@ def to_child(scenario: Any, n_worlds: int, stack_previous: bool, engine_kernel: 
 
 def from_parent(message: bytes) -> dict[str, Any]:
     """compile_game_kernels' arguments from to_child's message."""
-    import tomllib
-
-    from tracelab.game.scenario import scenario_from_dict
     args = json.loads(message)
     args["scenario"] = scenario_from_dict(tomllib.loads(args["scenario"]))
     return args
 
 
-def compile_game_kernels(scenario: Any, n_worlds: int, stack_previous: bool, kernel: str, fused: bool) -> None:
+def compile_game_kernels(scenario: Scenario, n_worlds: int, stack_previous: bool, kernel: str, fused: bool) -> None:
     """Call every game kernel once, as a RuleSim of these arguments does, without stepping its engine."""
     import numpy as np
 
