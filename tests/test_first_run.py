@@ -88,7 +88,8 @@ def test_the_second_process_calls_the_game_kernels_with_the_types_a_rulesim_pass
 
 
 def test_no_second_process_once_the_kernels_are_cached() -> None:
-    RuleSim(builtin_scenario("base"), 1)  # loads (or compiles) the engine's and the game's kernels here
+    sim = RuleSim(builtin_scenario("base"), 1)  # loads (or compiles) the engine's and the game's kernels
+    sim.step(np.zeros((1, 1), np.int64), sim.scripted_actions("blue"))  # and the fused step's
     assert rulesim_warmup.needed("counting", fused=True) is False
     from tracelab.commands._progress import compile_notice
     assert compile_notice(simulator=True) is None
