@@ -143,7 +143,8 @@ def start(program: Program, entry: CacheEntry) -> tuple[BackgroundCompile, bool]
     entry.prepare()
     log = entry.dir / f"compile.{os.getpid()}.{time.monotonic_ns()}.log"
     with os.fdopen(create_new(log), "w") as out:
-        proc = subprocess.Popen([sys.executable, "-m", "tracelab.engine.compile_job", entry.key],
+        # -P: not the current folder first on sys.path, where another checkout's tracelab/ would be found
+        proc = subprocess.Popen([sys.executable, "-P", "-m", "tracelab.engine.compile_job", entry.key],
                                 stdin=subprocess.PIPE, stdout=out, stderr=subprocess.STDOUT,
                                 start_new_session=True)
     assert proc.stdin is not None

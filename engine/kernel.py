@@ -20,6 +20,10 @@ Why the code looks the way it does:
   reset (one row per atom), the application of a pass's groups (one per touched atom) and each
   immediate application (one); a world stopped inside its step resumes where it stopped (CFG_RESUME_*),
   so a step of any size fits.
+- Calls from one kernel function to another pass np.int64 values, never a bare constant or an int32
+  table entry: numba compiles a callee once per distinct argument types, and each constant is a type of
+  its own (Literal[int](2)), so _set_atom was compiled seven times (5 s of a first run's compile).
+  tests/test_first_run.py checks that each function has one signature.
 - Watches are grouped in classes: the groundings that read atom a with the same bound and sign share
   one truth test, and the groundings of a class are listed together (contiguous counts in memory).
 - An immediate application has one source, so it is applied directly; only pass 0 and ordinary passes,
@@ -464,13 +468,13 @@ def _apply_groups(w, t, pass_no, policy, rule_i, rule_f, slot_of, touched, n_tou
         if nl != cl or nu != cu:
             changed[0] += 1
             if inconsistent:
-                hn = _set_atom(w, t, pass_no, a, cl, cu, nl, nu, CAUSE_POLICY, policy, si[s, S_RULE_INST], nsrc,
-                               -1, lo, up, last_cause, static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_flags,
+                hn = _set_atom(w, t, pass_no, np.int64(a), cl, cu, nl, nu, np.int64(CAUSE_POLICY), policy,
+                               si[s, S_RULE_INST], nsrc, np.int64(-1), lo, up, last_cause, static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_flags,
                                wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst,
                                heap, hn, in_heap)
             else:
-                hn = _set_atom(w, t, pass_no, a, cl, cu, nl, nu, kind, si[s, S_PRIM_ID], si[s, S_PRIM_INST],
-                               nsrc, -1, lo, up, last_cause, static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd,
+                hn = _set_atom(w, t, pass_no, np.int64(a), cl, cu, nl, nu, kind, si[s, S_PRIM_ID], si[s, S_PRIM_INST],
+                               nsrc, np.int64(-1), lo, up, last_cause, static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd,
                                wc_flags, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
                                ih_inst, heap, hn, in_heap)
             if hn < 0:
@@ -521,7 +525,8 @@ def _reset_world(w, t, policy, rule_i, rule_f, lo, up, static, last_cause, trace
         cu = up[w, a]
         if cl == 0.0 and cu == 1.0:
             continue
-        hn = _set_atom(w, t, 0, a, cl, cu, 0.0, 1.0, CAUSE_RESET, -1, -1, 0, -1, lo, up, last_cause, static, rule_i, rule_f, policy, trace_on,
+        hn = _set_atom(w, t, np.int64(0), a, cl, cu, 0.0, 1.0, np.int64(CAUSE_RESET), np.int64(-1), np.int64(-1),
+                       np.int64(0), np.int64(-1), lo, up, last_cause, static, rule_i, rule_f, policy, trace_on,
                        tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_flags, wc_gptr, wg, unsat, inst, act, act_n,
                        act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap)
         if hn < 0:
@@ -636,7 +641,8 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
         # 1. start of the step
         if reset and t > 0:
             if trace_on[w] and tri.shape[0] - tr_n[0] < lo.shape[1]:
-                return _pause(cfg, err, w, PHASE_FRESH, 0, 0, 0, lo.shape[1])
+                return _pause(cfg, err, w, np.int64(PHASE_FRESH), np.int64(0), np.int64(0), np.int64(0),
+                              np.int64(lo.shape[1]))
             hn = _reset_world(w, t, policy, rule_i, rule_f, lo, up, static, last_cause, trace_on, tri, trf, tr_n, stats,
                               wc_ptr, wc_bnd, wc_flags, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
                               ih_inst, heap, hn, in_heap)
@@ -648,12 +654,12 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
         phase = PHASE_APPLY
     if phase == PHASE_APPLY and pass_no == 0:
         if trace_on[w] and tri.shape[0] - tr_n[0] < n_touched[0]:
-            return _pause(cfg, err, w, PHASE_APPLY, 0, 0, hn, n_touched[0])
+            return _pause(cfg, err, w, np.int64(PHASE_APPLY), np.int64(0), np.int64(0), hn, n_touched[0])
         changed[0] = 0
-        status, hn = _apply_groups(w, t, 0, policy, rule_i, rule_f, slot_of, touched, n_touched, si, sf, out, lo, up,
-                                   static, last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd, wc_flags,
-                                   wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap,
-                                   hn, in_heap, changed)
+        status, hn = _apply_groups(w, t, np.int64(0), policy, rule_i, rule_f, slot_of, touched, n_touched, si, sf, out,
+                                   lo, up, static, last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd,
+                                   wc_flags, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst,
+                                   heap, hn, in_heap, changed)
         if status != STATUS_OK:
             return status
         # every active immediate grounding is a candidate of the first immediate phase; after that, a
@@ -671,13 +677,13 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
             _agg_user_sources(rule_i, inst, hg_i, ag_rule, req_i, req_f, req_n, slot_of, touched, n_touched, si, sf)
             phase = PHASE_FRESH
             if trace_on[w] and tri.shape[0] - tr_n[0] < n_touched[0]:
-                return _pause(cfg, err, w, PHASE_APPLY, pass_no, n_immediate, hn, n_touched[0])
+                return _pause(cfg, err, w, np.int64(PHASE_APPLY), pass_no, n_immediate, hn, n_touched[0])
         elif phase != PHASE_APPLY:
             # immediate phase: apply the first (lowest rank) active immediate grounding that would change
             # its head, one at a time
             while hn > 0:
                 if trace_on[w] and tr_n[0] >= tri.shape[0]:
-                    return _pause(cfg, err, w, PHASE_IMMEDIATE, pass_no, n_immediate, hn, 1)
+                    return _pause(cfg, err, w, np.int64(PHASE_IMMEDIATE), pass_no, n_immediate, hn, np.int64(1))
                 key = _heap_pop(heap, hn)
                 hn -= 1
                 g = key & HEAP_MASK
@@ -722,12 +728,14 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
                 if out[0] == cl and out[1] == cu:  # a {set_static} firing that only freezes the head
                     stats[w, STAT_REDERIVATIONS] += 1
                 elif inconsistent:
-                    hn = _set_atom(w, t, pass_no, a, cl, cu, out[0], out[1], CAUSE_POLICY, policy, g, 1, -1, lo, up,
+                    hn = _set_atom(w, t, pass_no, np.int64(a), cl, cu, out[0], out[1], np.int64(CAUSE_POLICY), policy,
+                                   g, np.int64(1), np.int64(-1), lo, up,
                                    last_cause, static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr,
                                    wc_bnd, wc_flags, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
                                    ih_inst, heap, hn, in_heap)
                 else:
-                    hn = _set_atom(w, t, pass_no, a, cl, cu, out[0], out[1], CAUSE_RULE, r, g, 1, g, lo, up, last_cause,
+                    hn = _set_atom(w, t, pass_no, np.int64(a), cl, cu, out[0], out[1], np.int64(CAUSE_RULE),
+                                   np.int64(r), g, np.int64(1), g, lo, up, last_cause,
                                    static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd,
                                    wc_flags, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst,
                                    heap, hn, in_heap)
@@ -741,17 +749,18 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
             for k in range(act_n[w, KIND_ORDINARY]):
                 g = act[w, base + k]
                 r = inst[g, INST_RULE]
-                _add_source(inst[g, INST_HEAD], rule_f[r, 0], rule_f[r, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
-                            2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, rule_i[r, RULE_SET_STATIC] == 1,
+                _add_source(np.int64(inst[g, INST_HEAD]), rule_f[r, 0], rule_f[r, 1],
+                            rule_i[r, RULE_MODE] == MODE_OVERRIDE, 2 * KEY_STRIDE + inst[g, INST_RANK],
+                            np.int64(CAUSE_RULE), np.int64(r), np.int64(g), rule_i[r, RULE_SET_STATIC] == 1,
                             slot_of, touched, n_touched, si, sf)
             if hg_i.shape[0] > 0:
                 _agg_pass(w, rule_i, rule_f, inst, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn, ag_q, ag_qv, lo,
                           up, unsat, mark, stamp, g_l, g_u, g_w, req_i, req_n, out, slot_of, touched, n_touched, si, sf)
                 if req_n[0] > 0:  # Python computes the user annotation functions, then the pass goes on
-                    _pause(cfg, err, w, PHASE_USER, pass_no, n_immediate, hn, 0)
+                    _pause(cfg, err, w, np.int64(PHASE_USER), pass_no, n_immediate, hn, np.int64(0))
                     return STATUS_USER_FN
             if trace_on[w] and tri.shape[0] - tr_n[0] < n_touched[0]:
-                return _pause(cfg, err, w, PHASE_APPLY, pass_no, n_immediate, hn, n_touched[0])
+                return _pause(cfg, err, w, np.int64(PHASE_APPLY), pass_no, n_immediate, hn, n_touched[0])
         phase = PHASE_FRESH
         changed[0] = 0
         status, hn = _apply_groups(w, t, pass_no, policy, rule_i, rule_f, slot_of, touched, n_touched, si, sf, out, lo, up,
@@ -794,18 +803,21 @@ def _collect_pass0(w, t, fact_override, rule_i, inst, fact_i, fact_f, fact_order
         if fact_i[f, 2] < t:
             break
         if fact_i[f, 1] <= t:
-            _add_source(fact_i[f, 0], fact_f[f, 0], fact_f[f, 1], fact_override, np.int64(f), CAUSE_FACT, f, -1,
+            _add_source(np.int64(fact_i[f, 0]), fact_f[f, 0], fact_f[f, 1], fact_override, np.int64(f),
+                        np.int64(CAUSE_FACT), np.int64(f), np.int64(-1),
                         fact_i[f, 3] == 1, slot_of, touched, n_touched, si, sf)
     for e in range(ext_ptr[w], ext_ptr[w + 1]):
         _add_source(ext_i[e, 0], ext_f[e, 0], ext_f[e, 1], fact_override, KEY_STRIDE + ext_i[e, 2],
-                    CAUSE_EXTERNAL, ext_i[e, 2], -1, ext_i[e, 1] == 1, slot_of, touched, n_touched, si, sf)
+                    np.int64(CAUSE_EXTERNAL), ext_i[e, 2], np.int64(-1), ext_i[e, 1] == 1,
+                    slot_of, touched, n_touched, si, sf)
     kept = 0
     for p in range(pend_n[w]):
         g = pend[w, p, 1]
         if pend[w, p, 0] == t:
             r = inst[g, INST_RULE]
-            _add_source(inst[g, INST_HEAD], pend_f[w, p, 0], pend_f[w, p, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
-                        2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, rule_i[r, RULE_SET_STATIC] == 1,
+            _add_source(np.int64(inst[g, INST_HEAD]), pend_f[w, p, 0], pend_f[w, p, 1],
+                        rule_i[r, RULE_MODE] == MODE_OVERRIDE, 2 * KEY_STRIDE + inst[g, INST_RANK],
+                        np.int64(CAUSE_RULE), np.int64(r), np.int64(g), rule_i[r, RULE_SET_STATIC] == 1,
                         slot_of, touched, n_touched, si, sf)
         else:
             pend[w, kept, 0] = pend[w, p, 0]
@@ -890,7 +902,7 @@ def _agg_eval(w, h, lo, up, unsat, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, 
             d += 1
             if _holds(lo[w, a], up[w, a], ag_cf[ai, ci, 0], ag_cf[ai, ci, 1], ag_cn[ai, ci]):
                 n += 1
-        if not _compare(ag_q[qi, 1], n, d, ag_q[qi, 2] == 1, ag_qv[qi]):
+        if not _compare(ag_q[qi, 1], np.int64(n), np.int64(d), ag_q[qi, 2] == 1, ag_qv[qi]):
             return -1, 0
     if ag_rule[ai, AR_Q1] > ag_rule[ai, AR_Q0]:  # name the first join whose quantified atoms hold, if any
         for e in range(e0, e1):
@@ -1033,8 +1045,9 @@ def _agg_pass(w, rule_i, rule_f, inst, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_
                       lo, up, unsat, mark, stamp, g_l, g_u, g_w, req_i, req_n, out, h)
         if g >= 0:
             r = ag_rule[ai, AR_RULE]
-            _add_source(hg_i[h, 1], out[0], out[1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
-                        2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, rule_i[r, RULE_SET_STATIC] == 1,
+            _add_source(np.int64(hg_i[h, 1]), out[0], out[1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
+                        2 * KEY_STRIDE + inst[g, INST_RANK],
+                        np.int64(CAUSE_RULE), np.int64(r), np.int64(g), rule_i[r, RULE_SET_STATIC] == 1,
                         slot_of, touched, n_touched, si, sf)
 
 
@@ -1045,8 +1058,9 @@ def _agg_user_sources(rule_i, inst, hg_i, ag_rule, req_i, req_f, req_n, slot_of,
         h = req_i[i, 0]
         g = req_i[i, 1]
         r = ag_rule[hg_i[h, 0], AR_RULE]
-        _add_source(hg_i[h, 1], req_f[i, 0], req_f[i, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
-                    2 * KEY_STRIDE + inst[g, INST_RANK], CAUSE_RULE, r, g, rule_i[r, RULE_SET_STATIC] == 1,
+        _add_source(np.int64(hg_i[h, 1]), req_f[i, 0], req_f[i, 1], rule_i[r, RULE_MODE] == MODE_OVERRIDE,
+                    2 * KEY_STRIDE + inst[g, INST_RANK],
+                    np.int64(CAUSE_RULE), np.int64(r), np.int64(g), rule_i[r, RULE_SET_STATIC] == 1,
                     slot_of, touched, n_touched, si, sf)
     req_n[0] = 0
 

@@ -24,7 +24,9 @@ _LANES_KERNELS = (("tracelab.engine.lanes", "step_lanes"),)
 _SIMULATOR_KERNELS = (("tracelab.game.rulesim_kernel", "encode_actions"),
                       ("tracelab.game.rulesim_kernel", "read_and_settle"),
                       ("tracelab.game.rulesim_kernel", "settle_step"),
-                      ("tracelab.game.rulesim_fused", "fused_step"))  # one call per step (~17 s of CPU)
+                      ("tracelab.game.rulesim_fused", "fused_step"))  # one call per step
+# a first run of `play --scenario advanced --episodes 5` on two free cores (docs/benchmarks.md, issue 31)
+FIRST_RUN_ESTIMATE = "about 20 s"
 
 
 def on_terminal() -> bool:
@@ -109,22 +111,51 @@ def working(description: str, refresh_per_second: float = 10) -> Iterator[Progre
         yield Progress(bar, bar.add_task(description, total=None, figures=""))
 
 
+def _kernels(pairs: tuple[tuple[str, str], ...]) -> tuple[Any, ...] | None:
+    import importlib
+    try:
+        return tuple(getattr(importlib.import_module(module), name) for module, name in pairs)
+    except (ImportError, AttributeError):
+        return None
+
+
+def _cold(pairs: tuple[tuple[str, str], ...]) -> bool | None:
+    """True when some of these kernels must compile, False when all are loaded or cached, None: unknown."""
+    from tracelab.engine.numba_cache import all_cached
+    kernels = _kernels(pairs)
+    cached = all_cached(kernels) if kernels is not None else None
+    return None if cached is None else not cached
+
+
 def engine_cache_is_cold(simulator: bool = False, lanes: bool = False) -> bool | None:
     """True when the engine's compiled kernels (with `lanes` the lanes kernel's too, with `simulator`
-    the rule simulator's) are neither loaded nor in numba's disk cache (the first run compiles them for
-    30-60 s), False when they are, None when it cannot tell. Reads numba's cache index of each entry
-    point (a few ms)."""
-    import importlib
-    kernels = _ENGINE_KERNELS + (_LANES_KERNELS if lanes else ()) + (_SIMULATOR_KERNELS if simulator else ())
-    try:
-        for module, name in kernels:
-            fn = getattr(importlib.import_module(module), name)
-            # numba's own staleness check: an index whose source stamp differs loads as empty
-            if not fn.signatures and not fn._cache._cache_file._load_index():
-                return True
-        return False
-    except Exception:  # numba's cache layout is private: when it changes, say "don't know"
+    the rule simulator's) are neither loaded nor in numba's disk cache (the first run compiles them),
+    False when they are, None when it cannot tell. Reads numba's cache index of each entry point (a few
+    ms)."""
+    return _cold(_ENGINE_KERNELS + (_LANES_KERNELS if lanes else ()) + (_SIMULATOR_KERNELS if simulator else ()))
+
+
+def compile_notice(simulator: bool = False, lanes: bool = False) -> str | None:
+    """What a first run compiles, in words (None when nothing, or unknown): the engine's kernels, the
+    game's, and whether a second process takes the game's share (tracelab/game/rulesim_warmup.py)."""
+    engine = _cold(_ENGINE_KERNELS + (_LANES_KERNELS if lanes else ()))
+    game = _cold(_SIMULATOR_KERNELS) if simulator else False
+    if not engine and not game:
         return None
+    what = "the rule engine's step kernel" if engine else ""
+    if game:
+        both = engine and _game_warmup_runs(lanes)
+        what += (" and " if what else "") + "the game's kernels" + (" (in a second process)" if both else "")
+    kernels = _kernels(_ENGINE_KERNELS[:1])
+    from tracelab.engine.numba_cache import cache_folder
+    folder = cache_folder(kernels[0]) if kernels else None
+    cached = f"; cached for the next runs in {folder}" if folder else ""
+    return f"compiling the engine (first run only, {FIRST_RUN_ESTIMATE}): {what}{cached}"
+
+
+def _game_warmup_runs(lanes: bool) -> bool:
+    from tracelab.game.rulesim_warmup import needed
+    return needed("lanes" if lanes else "counting", fused=not lanes)
 
 
 class Warmup(Progress):
@@ -143,11 +174,14 @@ def compiling_engine(simulator: bool = False, lanes: bool = False,
     given) as a spinner on a terminal. The spinner counts the groundings found (a big build's work)."""
     from tracelab.engine.grounding import watch_grounding
     cold = engine_cache_is_cold(simulator, lanes)
+    notice = compile_notice(simulator, lanes) if cold else None
     t0 = time.perf_counter()
-    if cold and not on_terminal():
-        print("tracelab: compiling the engine (first run only, a minute or more)...", file=sys.stderr,
-              flush=True)
-    description = "compiling the engine (first run only)…" if cold is not False else busy
+    if notice and not on_terminal():  # one line, once: on a terminal the spinner says it
+        print(f"tracelab: {notice}", file=sys.stderr, flush=True)
+    if notice:
+        description: str | None = f"{notice}…"
+    else:
+        description = "compiling the engine (first run only)…" if cold is not False else busy
     spinner = working(description) if description else nullcontext(Progress())
     with spinner as shown:
         warm = Warmup(shown._bar, shown._task)

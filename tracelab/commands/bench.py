@@ -1,7 +1,7 @@
 """`tracelab bench`: speed and memory measured by benchmarks (docs/benchmarks.md), never by timed
 assertions in tests. `bench engine`, `bench env`, `bench store`, `bench replay`, `bench train`,
-`bench tui`, `bench aggregates`, `bench reason-store`, `bench toytext`, `bench play`, `bench all` (engine, env, store,
-replay, train);
+`bench tui`, `bench aggregates`, `bench reason-store`, `bench toytext`, `bench play`, `bench first-run`,
+`bench all` (engine, env, store, replay, train);
 each takes --json, --quick (small sizes: the smoke test) and --repeats (medians and spread over that
 many repeats)."""
 from __future__ import annotations
@@ -32,6 +32,8 @@ def register(sub: argparse._SubParsersAction) -> None:
              "toytext": "gymnasium's toy-text games as rules (docs/worlds.md) against gymnasium's own, one world",
              "play": "tracelab play --run against bench env's traced loop (1 and 64 worlds); --memory: the "
                      "peak memory of 100 / 1,000 / 10,000 recorded episodes",
+             "first-run": "the README's `play --scenario advanced --episodes 5` from empty caches (a fresh "
+                          "install) and again warm: wall and CPU time",
              "all": "engine, env, store, replay and train"}
     for name, text in helps.items():
         q = what.add_parser(name, help=text)
@@ -63,7 +65,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             q.add_argument("--memory", type=_counts, nargs="?", const=[100, 1000, 10_000], default=None,
                            metavar="N,N,...", help="also the memory of recorded runs of these many episodes, "
                                                    "each in a fresh process (default 100,1000,10000)")
-        if name not in ("store", "tui", "toytext"):  # the sections that build engines (toytext: the envs')
+        if name not in ("store", "tui", "toytext", "first-run"):  # the sections that build engines (toytext: the envs')
             add_max_groundings(q)
         if name == "engine":
             q.add_argument("--graph-only", action="store_true",
@@ -122,6 +124,10 @@ def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], s
         from tracelab.bench import toytext
         r = toytext.run(args.quick, args.repeats)
         return r, toytext.report(r)
+    if name == "first-run":
+        from tracelab.bench import first_run
+        r = first_run.run(args.quick, args.repeats)
+        return r, first_run.report(r)
     if name == "tui":
         from tracelab.bench import tui
         r = tui.run(args.quick, args.repeats, args.rows)

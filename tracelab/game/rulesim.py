@@ -10,6 +10,7 @@ import numpy as np
 from tracelab.engine import Engine
 from tracelab.engine.core import LANES_MIN_WORLDS
 
+from tracelab.game import rulesim_warmup
 from tracelab.game.facts import DIRECTIONS, agent_name, bullet_name, scenario_program
 from tracelab.game.observe import observe_step
 from tracelab.game.rulesim_fused import STATUS_BAD_ACTION, STATUS_OK, bind, fused_step
@@ -47,7 +48,7 @@ class RuleSim(GameSim):
         self._index_atoms()
         # t = 0 sets up the start; every action atom starts false, so the rules are grounded for them
         self.engine.add_facts(self._action_atoms[self._action_atoms >= 0], 0.0, 0.0)
-        self.engine.step()
+        self._first_step(fused)
         self._start = self.engine.snapshot()
         # the set-up rows of t = 0 (world 0's; all worlds start alike), replayed for each new episode
         self.episode_start = np.zeros(n_worlds, np.int64)  # engine time of each world's episode t = 0
@@ -79,6 +80,19 @@ class RuleSim(GameSim):
         self._bound: object | None = None  # rulesim_fused.StepBuffers of the engine's current arrays
         self._bound_version = -1  # the engine's layout_version they were bound at
         self._bound_res = np.zeros(2, np.int64)  # fused_step's report: [world the kernel paused at, rows]
+
+    def _first_step(self, fused: bool) -> None:
+        """Step t = 0. On a first run (numba's cache cold) the game's kernels compile meanwhile in a second
+        process (rulesim_warmup), loaded from the cache after this step has compiled the engine's."""
+        warmup = rulesim_warmup.start(self.scenario, self.n_worlds, self.stack_previous, self.engine.kernel, fused)
+        try:
+            self.engine.step()
+        except BaseException:
+            if warmup is not None:
+                warmup.stop()
+            raise
+        if warmup is not None:
+            warmup.wait()
 
     def _make_buffers(self) -> None:
         """The state, events, rewards and observations of every world: buffers rewritten in place by every

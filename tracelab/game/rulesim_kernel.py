@@ -7,6 +7,7 @@ across modules).
 """
 from __future__ import annotations
 
+import numpy as np
 from numba import njit
 
 from . import scenario as _scenario
@@ -44,7 +45,7 @@ def encode_actions(red, blue, terminated, truncated, allowed, action_atoms, prev
                 a = red[w, i] if tm == 0 else blue[w, i]
                 if a < 0 or a > 8 or not allowed[a]:
                     return -1 - ((w * 2 + tm) * n + i)
-    k = 0
+    k = np.int64(0)  # not a literal 0: _put_row is compiled for one type of k (tests/test_first_run.py)
     for w in range(n_worlds):
         ext_ptr[w] = k
         done = terminated[w] or truncated[w]
@@ -192,7 +193,7 @@ def read_and_settle(truth, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc
     (each call costs microseconds there, and ~0.2 µs more per array passed). Returns settle_step's count
     of done worlds."""
     read_back(truth, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc, bullet_flags, dir_ids, hits,
-              bullet_team, bullet_agent, win_ids, ammo0, damage, True, kind_hits, terminated, truncated, pos,
+              bullet_team, bullet_agent, win_ids, ammo0, damage, np.bool_(True), kind_hits, terminated, truncated, pos,
               health, alive, ammo, moving, dest, unsafe, invalid, acted, bpos, bdir, hits_made, hits_taken, win,
               was_done)
     return settle_step(was_done, win, unsafe, invalid, acted, hits_made, hits_taken, weights, max_steps, t,

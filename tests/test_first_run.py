@@ -1,0 +1,95 @@
+"""A newcomer's first run (issue 31 part 4): `tracelab play` on an empty numba cache compiles each kernel
+once, for one signature, the game's kernels in a second process (loaded, not compiled, by the play
+itself), and says so in one line. Times are measured by `tracelab bench first-run`, never here."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from tracelab.game import rulesim_warmup
+from tracelab.game.rulesim import RuleSim
+from tracelab.game.scenario import builtin_scenario
+
+# a play in this process, then what numba holds: each kernel.py function's signatures, the lanes
+# kernel's, and for each game kernel how often it was loaded from the disk cache and compiled here
+PROBE = r"""
+import json, sys
+from numba.core.registry import CPUDispatcher
+from tracelab.cli import main
+code = main(["play", "--scenario", "advanced", "--episodes", "2", "--run", sys.argv[1]])
+import tracelab.engine.kernel as K
+import tracelab.engine.lanes as L
+from tracelab.game import rulesim_kernel as RK
+from tracelab.game.rulesim_warmup import game_kernels
+
+def signatures(module):
+    return {n: len(v.signatures) for n, v in vars(module).items()
+            if isinstance(v, CPUDispatcher) and v.py_func.__module__ == module.__name__ and v.signatures}
+
+game = {k.__name__: [sum(k.stats.cache_hits.values()), sum(k.stats.cache_misses.values())]
+        for k in game_kernels(True)}
+print(json.dumps({"code": code, "kernel": signatures(K), "rulesim_kernel": signatures(RK),
+                  "lanes": signatures(L), "game": game}))
+"""
+
+
+def _play(cache: Path, run_dir: Path) -> tuple[dict, list[str]]:
+    """The probe, run from a folder holding another `tracelab/` (as in another checkout): the second
+    process must still run this tracelab's code."""
+    decoy = cache / "elsewhere"
+    (decoy / "tracelab").mkdir(parents=True, exist_ok=True)
+    (decoy / "tracelab" / "__init__.py").write_text("raise ImportError('another tracelab')\n")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache / "numba"), "TRACELAB_CACHE_DIR": str(cache / "tracelab")}
+    done = subprocess.run([sys.executable, "-P", "-c", PROBE, str(run_dir)], env=env, capture_output=True,
+                          text=True, timeout=900, check=False, cwd=decoy)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return json.loads(done.stdout.splitlines()[-1]), done.stderr.splitlines()
+
+
+def test_a_first_play_compiles_each_kernel_once_and_the_games_in_a_second_process(tmp_path: Path) -> None:
+    got, err = _play(tmp_path, tmp_path / "cold")
+    assert got["code"] == 0
+    # one signature per function: a constant argument no longer compiles a callee again (kernel.py's docstring)
+    assert got["kernel"]["step_worlds"] == 1 and got["kernel"]["_set_atom"] == 1
+    assert {n: c for n, c in got["kernel"].items() if c != 1} == {}
+    assert {n: c for n, c in got["rulesim_kernel"].items() if c != 1} == {}
+    assert got["lanes"] == {}  # one world: the counting kernel only, the lanes kernel never compiles
+    # the game's kernels came from numba's disk cache, written by the second process: none compiled here
+    assert all(hits >= 1 and misses == 0 for hits, misses in got["game"].values()), got["game"]
+    notice = [ln for ln in err if "compiling" in ln]
+    assert len(notice) == 1, err  # one line, once
+    assert notice[0].startswith("tracelab: compiling the engine (first run only")
+    assert "the rule engine's step kernel and the game's kernels (in a second process)" in notice[0]
+    assert str(tmp_path / "numba") in notice[0]  # where they are cached
+
+    again, err = _play(tmp_path, tmp_path / "warm")  # the next run loads everything: nothing said
+    assert again["code"] == 0 and not [ln for ln in err if "compiling" in ln], err
+    assert all(misses == 0 for _, misses in again["game"].values())
+
+
+def test_the_second_process_calls_the_game_kernels_with_the_types_a_rulesim_passes() -> None:
+    """Its RuleSim is built from the scenario's TOML text and never steps its engine; if it passed other
+    argument types (a writable copy of a read-only array, another dtype), its compiles would be in vain."""
+    scenario = builtin_scenario("advanced")
+    sim = RuleSim(scenario, 1, trace=True, kernel="counting", fused=False)  # each kernel called from Python
+    sim.step(np.zeros((1, 1), np.int64), sim.scripted_actions("blue"))
+    sim.reset(worlds=np.array([0]))
+    sim._bind()  # the fused step's buffers
+    before = {k.__name__: len(k.signatures) for k in rulesim_warmup.game_kernels(True)}
+    assert all(n == 1 for n in before.values()), before
+    message = rulesim_warmup.to_child(scenario, 1, False, sim.engine.kernel, True)
+    rulesim_warmup.compile_game_kernels(**rulesim_warmup.from_parent(message))
+    assert {k.__name__: len(k.signatures) for k in rulesim_warmup.game_kernels(True)} == before
+
+
+def test_no_second_process_once_the_kernels_are_cached() -> None:
+    sim = RuleSim(builtin_scenario("base"), 1)  # loads (or compiles) the engine's and the game's kernels
+    sim.step(np.zeros((1, 1), np.int64), sim.scripted_actions("blue"))  # and the fused step's
+    assert rulesim_warmup.needed("counting", fused=True) is False
+    from tracelab.commands._progress import compile_notice
+    assert compile_notice(simulator=True) is None
