@@ -113,17 +113,6 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
     return 0 if status == "finished" else 130
 
 
-def env_flags(source: Any) -> str:
-    return " ".join(["--env", shlex.quote(source.name),
-                     *(f"--env-arg {shlex.quote(f'{k}={_toml(v)}')}" for k, v in source.kwargs.items())])
-
-
-def _toml(value: Any) -> str:
-    """A kwarg's value as --env-arg reads it back."""
-    import json
-    return str(value).lower() if isinstance(value, bool) else json.dumps(value)
-
-
 def _report(trainer: Any, source: Any, run_dir: Path, status: str) -> None:
     ev = trainer.last_eval
     print(f"{status} at step {trainer.step:,}" + (
@@ -136,4 +125,4 @@ def _report(trainer: Any, source: Any, run_dir: Path, status: str) -> None:
     print(f"run: {run_dir}/  policy: {run_dir}/policy/")
     print(f"  tracelab sql {run} \"SELECT step, value FROM metrics WHERE name = 'eval/mean_return' ORDER BY step\"")
     if status == "finished":
-        print(f"  tracelab eval {run}/policy {env_flags(source)} --games 1000")
+        print(f"  tracelab eval {run}/policy --env {source.describe()} --games 1000")

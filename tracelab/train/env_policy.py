@@ -147,9 +147,13 @@ def make_vector_env(source: EnvSource, worlds: int) -> Any:
     return SyncVectorEnv([source.make] * worlds, autoreset_mode=AutoresetMode.SAME_STEP)
 
 
+EVAL_STEP_CAP = 10_000  # a greedy policy may walk in circles in an env without a step limit (CliffWalking)
+
+
 def play_env_games(env: Any, policy: EnvPolicy, games: int, seed: int,
-                   on_game: Callable[[float], None] | None = None) -> EnvEvalResult:
-    """`games` greedy episodes, each world of `env` playing a fixed share (not the first to finish)."""
+                   on_game: Callable[[float], None] | None = None, step_cap: int = EVAL_STEP_CAP) -> EnvEvalResult:
+    """`games` greedy episodes, each world of `env` playing a fixed share (not the first to finish). An
+    episode still running after `step_cap` steps ends there, counted truncated."""
     w = env.num_envs
     quota = np.full(w, games // w, np.int64)
     quota[: games % w] += 1
@@ -161,6 +165,8 @@ def play_env_games(env: Any, policy: EnvPolicy, games: int, seed: int,
         obs, reward, term, trunc, info = env.step(actions)
         ret += reward
         length += 1
+        capped = (length >= step_cap) & ~(term | trunc)
+        trunc = trunc | capped
         for k in np.flatnonzero((term | trunc) & (quota > 0)).tolist():
             result.returns.append(float(ret[k]))
             result.steps.append(int(length[k]))
@@ -171,7 +177,17 @@ def play_env_games(env: Any, policy: EnvPolicy, games: int, seed: int,
                 on_game(float(ret[k]))
         done = term | trunc
         ret[done], length[done] = 0.0, 0
+        if capped.any():  # the env did not end them: reset those worlds only
+            obs, info = _reset_worlds(env, obs, info, capped)
     return result
+
+
+def _reset_worlds(env: Any, obs: Any, info: dict[str, Any], worlds: np.ndarray) -> tuple[Any, dict[str, Any]]:
+    new_obs, new_info = env.reset(options={"reset_mask": worlds})
+    obs = np.where(worlds.reshape(-1, *([1] * (np.ndim(obs) - 1))), new_obs, obs)
+    if "action_mask" in info:
+        info = {**info, "action_mask": np.where(worlds[:, None], new_info["action_mask"], info["action_mask"])}
+    return obs, info
 
 
 def evaluate_env(policy: EnvPolicy, source: EnvSource, games: int, seed: int, worlds: int = 16,

@@ -7,6 +7,8 @@ side, a Box is read as it is, flattened. A run and its policy record the env and
 evaluation or a resume on another env is refused (`check_same_env`)."""
 from __future__ import annotations
 
+import json
+import shlex
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,8 +29,9 @@ class EnvSource:
         return {"name": self.name, "kwargs": dict(self.kwargs)}
 
     def describe(self) -> str:
-        args = " ".join(f"{k}={v!r}" for k, v in self.kwargs.items())
-        return f"{self.name}{' ' + args if args else ''}"
+        """As the command line gives it: `tracelab/FrozenLake-v1 --env-arg is_slippery=false`."""
+        return " ".join([shlex.quote(self.name),
+                         *(f"--env-arg {shlex.quote(f'{k}={_toml_value(v)}')}" for k, v in self.kwargs.items())])
 
     def make(self) -> Any:
         """A new env (gym.make for a registered id: its TimeLimit and checks; make_env for a spec file)."""
@@ -41,6 +44,11 @@ class EnvSource:
             raise UserError(f"--env {self.name!r}: neither a registered env id ({', '.join(known)}, or "
                             f"gymnasium's) nor a spec file")
         return tracelab.envs.make_env(self.name, **self.kwargs)
+
+
+def _toml_value(value: Any) -> str:
+    """A kwarg's value as --env-arg reads it back (TOML: true, 0.5, "8x8", ["SF", "HG"])."""
+    return str(value).lower() if isinstance(value, bool) else json.dumps(value)
 
 
 def env_source_from_json(d: Any, where: str) -> EnvSource:
