@@ -132,3 +132,13 @@ def test_value_iteration_finds_the_cliff_path_and_the_dry_lake_path() -> None:
     dry = enumerate_transitions(load_spec(spec_path("frozen_lake.toml"), is_slippery=False))
     v, _ = value_iteration(dry, horizon=6)
     assert v[0] == 1.0 and value_iteration(dry, horizon=5)[0][0] == 0.0  # six steps, no fewer
+
+
+def test_value_iteration_over_taxis_rules_matches_gymnasiums_table_in_every_state() -> None:
+    tr = enumerate_transitions(load_spec(spec_path("taxi.toml")), start_seeds=200)
+    ours, _ = value_iteration(tr, horizon=200)
+    env = gym.make("Taxi-v4").unwrapped
+    theirs = _gymnasium_value(env.P, 500, 6, 200)
+    reached = sorted(tr.outcomes)
+    assert len(reached) == 400  # the 100 with the passenger at its destination are ends or never reached
+    assert np.allclose(ours[reached], theirs[reached], atol=1e-9)

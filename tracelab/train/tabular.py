@@ -33,11 +33,23 @@ def _draw_values(spec: WorldSpec) -> list[list[tuple[int, float]]]:
     """Per random fact drawn before a step, its possible (value index, probability)."""
     out = []
     for d in spec.random_facts:
-        if d.after is not None or d.probabilities is None or d.method != "categorical":
+        if d.after is not None:  # drawn only if its atom holds after the step: _NoDraws refuses it then
+            continue
+        if d.probabilities is None or d.method != "categorical":
             raise ValueError(f"{spec.path}: random fact {d.name!r}: value iteration enumerates draws with fixed "
-                             f"probabilities before the step only")
+                             f"probabilities only")
         out.append([(i, float(p)) for i, p in enumerate(d.probabilities) if p > 0])
     return out
+
+
+class _NoDraws:
+    """The generator of an enumerated step: every draw before the step is given, so a draw here is an
+    `after` random fact that fired (Taxi's fickle passenger), which value iteration does not enumerate."""
+
+    def random(self) -> float:
+        raise ValueError("an `after` random fact was drawn: value iteration enumerates draws before the step only")
+
+    integers = random
 
 
 def enumerate_transitions(spec: WorldSpec, start_seeds: int = 64) -> Transitions:
@@ -66,7 +78,7 @@ def enumerate_transitions(spec: WorldSpec, start_seeds: int = 64) -> Transitions
             ways = []
             for combo in itertools.product(*draws):
                 world.load_state(state)
-                world.step(a, None, draws=[v for v, _ in combo])
+                world.step(a, _NoDraws(), draws=[v for v, _ in combo])
                 nxt, reward, term = int(world.observation()), float(world.last_rewards[0]), world.terminated()
                 ways.append((float(np.prod([p for _, p in combo])), nxt, reward, term))
                 if not term and nxt not in saved:
