@@ -55,7 +55,7 @@ def main(runs: Path) -> None:
         ax.set_title(env)
         ax.set_xlabel("training steps")
         ax.set_ylabel(metric)
-        ax.legend(loc="lower right")
+        ax.legend(loc="best", fontsize=8)
         ax.grid(alpha=0.3)
     fig.tight_layout()
     out_png = Path(__file__).with_name("evaluations.png")
