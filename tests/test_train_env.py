@@ -142,3 +142,23 @@ def test_value_iteration_over_taxis_rules_matches_gymnasiums_table_in_every_stat
     reached = sorted(tr.outcomes)
     assert len(reached) == 400  # the 100 with the passenger at its destination are ends or never reached
     assert np.allclose(ours[reached], theirs[reached], atol=1e-9)
+
+
+def test_masked_readable_training_on_taxi_keeps_the_masks_in_replay() -> None:
+    """--mask reads Taxi's info["action_mask"]: exploration takes allowed actions only and the replay holds
+    the next state's mask; --double-dqn trains the readable learner through the same loop."""
+    from tracelab.train.config import TrainConfig
+    from tracelab.train.env_trainer import EnvTrainer
+    from tracelab.train.replay import MASKED_Q
+    cfg = TrainConfig(steps=400, envs=4, warmup=100, batch=16, buffer=1000, eval_every=0, eval_games=4,
+                      eval_envs=2, log_every=200, mask=True, double_dqn=True, learner="readable")
+    tr = EnvTrainer(cfg, EnvSource("tracelab/Taxi-v4"))
+    try:
+        assert tr.train() == "finished"
+        buf = tr.learner.buffer
+        assert buf.masked and buf.size == 400 and tr.learner.updates > 0
+        penalties = buf.rows[:buf.size, buf._pen:buf._pen + 6]
+        assert (penalties == MASKED_Q).any() and (penalties == 0).all(axis=1).sum() < buf.size
+        assert tr.last_eval is not None and tr.last_eval.games == 4
+    finally:
+        tr.close()

@@ -56,10 +56,15 @@ def run_env(args: argparse.Namespace, given: dict[str, Any], limit: Any) -> int:
         cfg.trace_eval_games = 0  # nothing is traced in an --env evaluation
     name = Path(args.env).stem if Path(args.env).suffix == ".toml" else args.env.split("/")[-1]
     run_dir = Path(args.run or f"runs/{args.exp_name or 'train'}-{name}-{time.strftime('%Y%m%d-%H%M%S')}")
-    return train_env_into(cfg, source, run_dir, encoder.describe())
+    tensorboard = None
+    if args.tensorboard:  # checked before training: the install hint, a log directory already used
+        from tracelab.train.tensorboard import run_log_dir
+        tensorboard = run_log_dir(Path(args.tensorboard), run_dir.resolve().name, appending=False)
+    return train_env_into(cfg, source, run_dir, encoder.describe(), tensorboard=tensorboard)
 
 
-def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at: int | None = None) -> int:
+def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at: int | None = None,
+                   tensorboard: Path | None = None) -> int:
     import torch
 
     from tracelab.store import TraceWriter
@@ -77,11 +82,14 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
     torch.use_deterministic_algorithms(cfg.torch_deterministic)
     print(f"training on {source.describe()} ({encoding} observations, {cfg.envs} worlds in gymnasium's "
           f"SyncVectorEnv) for {cfg.steps:,} steps; run: {run_dir}", file=sys.stderr)
-    trainer = None
+    trainer = sink = None
     status = "failed"
     previous = signal.getsignal(signal.SIGINT)
     try:
-        trainer = EnvTrainer(cfg, source, writer, run_dir)
+        if tensorboard is not None:
+            from tracelab.train.tensorboard import TensorBoardSink
+            sink = TensorBoardSink(tensorboard)
+        trainer = EnvTrainer(cfg, source, writer, run_dir, metric_sinks=[sink] if sink else [])
         if trainer.learner_note:
             print(f"note: {trainer.learner_note}", file=sys.stderr)
 
@@ -107,9 +115,14 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
         torch.use_deterministic_algorithms(was_deterministic)
         if trainer is not None:
             trainer.close()
+        if sink is not None:
+            sink.close()
         writer.close(status=status)
     if trainer is not None:
         _report(trainer, source, run_dir, status)
+    if sink is not None:
+        print(f"  tensorboard --logdir {shlex.quote(str(tensorboard.parent))}   # {sink.scalars:,} scalars in "
+              f"{tensorboard}/")
     return 0 if status == "finished" else 130
 
 

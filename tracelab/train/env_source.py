@@ -79,10 +79,19 @@ def check_same_env(recorded: EnvSource, given: EnvSource, what: str) -> None:
         raise UserError(f"{what} was trained on --env {recorded.describe()}, not {given.describe()}")
 
 
+MAX_INPUTS = 1_000_000  # network inputs: a spec's Discrete(10**9) is refused before anything is built
+
+
 class ObservationEncoder:
     """A batch of observations of `space` -> float32 [K, size], the network's input."""
 
     def __init__(self, space: spaces.Space[Any], where: str) -> None:
+        self._read(space, where)
+        if self.size > MAX_INPUTS:
+            raise UserError(f"{where}: observation space {space} makes {self.size:,} network inputs (one-hot); "
+                            f"DQN here reads at most {MAX_INPUTS:,}")
+
+    def _read(self, space: spaces.Space[Any], where: str) -> None:
         if isinstance(space, spaces.Discrete):
             self.kind, self.size, self.n = "onehot", int(space.n), int(space.n)
             self.start = int(space.start)

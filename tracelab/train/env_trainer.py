@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from collections.abc import Sequence
 from typing import Any, Callable
 
 import numpy as np
@@ -21,25 +22,29 @@ from tracelab.train.config import TrainConfig
 from tracelab.train.env_policy import EnvEvalResult, EnvPolicy, make_vector_env, play_env_games, save_env_policy
 from tracelab.train.env_source import EnvSource, ObservationEncoder, action_count
 from tracelab.train.learner_protocol import Learner
-from tracelab.train.loop import acting_q, eval_seed, make_learner
+from tracelab.train.loop import acting_q, eval_seed, learn_pass, make_learner, write_metric_rows
 from tracelab.train.policy import BEST_POLICY_DIR
 from tracelab.train.qnet import NetSpec
+from tracelab.train.tensorboard import MetricSink
 
 Progress = Callable[[dict[str, Any]], None]
 
 
 class EnvTrainer:
     def __init__(self, cfg: TrainConfig, source: EnvSource, writer: TraceWriter | None = None,
-                 run_dir: Path | None = None, progress: Progress | None = None) -> None:
+                 run_dir: Path | None = None, progress: Progress | None = None,
+                 metric_sinks: Sequence[MetricSink] = ()) -> None:
         torch.set_num_threads(cfg.threads)
         self.cfg, self.source, self.writer, self.run_dir, self.progress = cfg, source, writer, run_dir, progress
+        self.metric_sinks = list(metric_sinks)  # besides the run: e.g. TensorBoard (train --tensorboard)
         self.worlds = w = cfg.envs
         self.env = make_vector_env(source, w)
         single = self.env.single_observation_space
         self.encoder = ObservationEncoder(single, source.name)
         self.n_actions = action_count(self.env.single_action_space, source.name)
-        self.action_names = list(getattr(self.env.envs[0].unwrapped, "world_spec", None).action_names) \
-            if hasattr(self.env.envs[0].unwrapped, "world_spec") else [str(a) for a in range(self.n_actions)]
+        declared = getattr(self.env.envs[0].unwrapped, "world_spec", None)  # a declared world names its actions
+        self.action_names = list(declared.action_names) if declared is not None else \
+            [str(a) for a in range(self.n_actions)]
         self.rng = np.random.default_rng(np.random.SeedSequence([cfg.seed, 0]))  # exploration, sampling
         self.torch_gen = torch.Generator().manual_seed(cfg.seed)
         self.net = NetSpec(self.encoder.size, cfg.hidden_sizes, self.n_actions, cfg.dueling)
@@ -134,18 +139,7 @@ class EnvTrainer:
             self._begin(ended)
 
     def learn(self) -> None:
-        cfg = self.cfg
-        if self.step < cfg.warmup or self.learner.buffer.size < cfg.batch:
-            return
-        self.update_credit += self.worlds * cfg.updates_per_step
-        k = int(self.update_credit)
-        self.update_credit -= k
-        for _ in range(k):
-            self.learner.update(self.rng)
-        block = self.step // cfg.target_every
-        if block > self.synced_block:
-            self.learner.sync_target()
-            self.synced_block = block
+        learn_pass(self, [self.learner])
 
     # ---- logging, evaluation, policies ----
     def _crossed(self, every: int, before: int) -> bool:
@@ -170,17 +164,18 @@ class EnvTrainer:
         self._rate_mark = (now, self.step, self.learner.updates)
         self.logged_step = self.step
         self._flush_episodes()
-        if self.writer is not None:
-            self.writer.write_metrics(self.step, m)
+        self.write_metrics(m)
         return m
+
+    def write_metrics(self, values: dict[str, float]) -> None:
+        write_metric_rows(self, values)
 
     def run_eval(self) -> EnvEvalResult:
         cfg = self.cfg
         if self._eval_env is None:
             self._eval_env = make_vector_env(self.source, min(cfg.eval_envs, cfg.eval_games))
         result = play_env_games(self._eval_env, self.policy, cfg.eval_games, eval_seed(cfg.seed, self.eval_round))
-        if self.writer is not None:
-            self.writer.write_metrics(self.step, result.metrics())
+        self.write_metrics(result.metrics())
         self.eval_round += 1
         self.last_eval, self.eval_step = result, self.step
         if self.best_eval is None or result.mean_return > self.best_eval[0]:

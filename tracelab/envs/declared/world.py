@@ -182,7 +182,7 @@ class DeclaredWorld:
         this step's random facts, step the engine (twice when an `after` random fact is drawn); the
         step's rewards, one per agent, are then `last_rewards`. `draws`: the value index of each random
         fact drawn before the step, in the spec's order, instead of drawing them from `rng` (to enumerate a
-        world's transitions: tracelab/train/value_iteration.py)."""
+        world's transitions: tracelab/train/tabular.py)."""
         rows = self._rows
         if self.n_agents == 1:
             rows[0] = actions
