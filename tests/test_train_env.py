@@ -74,6 +74,8 @@ def test_eval_env_refuses_another_env_in_one_line(dry_lake_run: Path) -> None:
                     "tracelab/FrozenLake-v1")
     _one_line_error(tracelab("eval", pol, "--env", "tracelab/Taxi-v4", cwd=cwd), "not tracelab/Taxi-v4")
     _one_line_error(tracelab("eval", pol, cwd=cwd), "name that env with --env")
+    _one_line_error(tracelab("train", "--resume", str(dry_lake_run), cwd=cwd),
+                    "an --env run keeps no checkpoint yet")
 
 
 @pytest.mark.parametrize("args, text", [

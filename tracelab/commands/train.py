@@ -107,7 +107,9 @@ def run(args: argparse.Namespace) -> int:
     state = None
     with store_errors():  # a bad value in the config or a checkpoint that does not load
         if args.resume:
+            from tracelab.commands.train_env import refuse_env_resume
             from tracelab.train.checkpoint import checkpoint_config, checkpoint_scenario, load_checkpoint
+            refuse_env_resume(Path(args.resume))
             extra = sorted(set(given) - RESUMABLE_FLAGS)
             if extra:
                 raise UserError(f"--resume continues the checkpoint's config; drop "

@@ -23,7 +23,22 @@ def env_source_of(args: argparse.Namespace) -> Any:
     from tracelab.train.env_source import EnvSource, parse_env_args
     if args.env is None:
         raise UserError("--env-arg needs --env SPEC_OR_ID")
-    return EnvSource(args.env, parse_env_args(args.env_arg))
+    return EnvSource.given(args.env, parse_env_args(args.env_arg))
+
+
+def refuse_env_resume(run: Path) -> None:
+    """--resume of a train --env run: one line saying it keeps no checkpoint yet, and what still works."""
+    from tracelab.store.meta import current_meta
+    from tracelab.train.env_source import env_source_from_json
+    try:
+        env = current_meta(run).get("config", {}).get("env")
+    except (OSError, ValueError, AttributeError):
+        return  # not a run (or not one of these): load_checkpoint says what it is
+    if env is not None:
+        source = env_source_from_json(env, str(run / "meta.json"))
+        raise UserError(f"{run} trained with --env {source.describe()}: an --env run keeps no checkpoint yet, "
+                        f"so it cannot be resumed; its policy plays: tracelab eval {shlex.quote(str(run))}/policy "
+                        f"--env {source.describe()}")
 
 
 def run_env(args: argparse.Namespace, given: dict[str, Any], limit: Any) -> int:

@@ -25,6 +25,16 @@ class EnvSource:
     name: str                                  # a registered id (tracelab/FrozenLake-v1) or a spec path
     kwargs: dict[str, Any] = field(default_factory=dict)
 
+    @classmethod
+    def given(cls, name: str, kwargs: dict[str, Any]) -> "EnvSource":
+        """As the user names it: a spec file by its absolute path (a run or policy then names the same file
+        from any folder), an id as it is."""
+        import gymnasium as gym
+        import tracelab.envs  # noqa: F401  (registers the toy-text ids)
+        if name not in gym.registry and Path(name).is_file():
+            name = str(Path(name).resolve())
+        return cls(name, kwargs)
+
     def to_json(self) -> dict[str, Any]:
         return {"name": self.name, "kwargs": dict(self.kwargs)}
 
