@@ -32,6 +32,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--envs", dest="envs", type=positive_int, help=argparse.SUPPRESS)  # the earlier name
     p.add_argument("--run", default=None, help="trace every game into this new run directory")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
+    p.add_argument("--env", default=None, metavar="SPEC_OR_ID",
+                   help="play a policy trained with train --env on that env (the same id or spec file and "
+                        "--env-arg values it was trained with)")
+    p.add_argument("--env-arg", action="append", default=[], metavar="KEY=VALUE",
+                   help="a keyword argument of --env (repeatable), as train --env-arg")
     add_max_groundings(p)
     p.set_defaults(func=run)
 
@@ -40,6 +45,11 @@ def run(args: argparse.Namespace) -> int:
     from tracelab.commands.train import load_scenario_arg
     from tracelab.train.policy import load_policy, policy_scenario, read_policy_spec
 
+    from tracelab.train.env_policy import ENV_FORMAT, policy_format
+    with store_errors():
+        trained_on_env = policy_format(args.policy) == ENV_FORMAT
+    if args.env is not None or args.env_arg or trained_on_env:
+        return _run_env(args)
     if not 0.0 <= args.opponent_p <= 1.0:
         raise UserError(f"--opponent-p must be in [0, 1], got {args.opponent_p}")
     with store_errors():  # a policy or scenario that does not load
@@ -55,6 +65,41 @@ def run(args: argparse.Namespace) -> int:
         print()
     else:
         _table(result, args, scenario.name)
+    return 0
+
+
+def _run_env(args: argparse.Namespace) -> int:
+    """eval --env: a policy of train --env, played greedily on the env it was trained on."""
+    from tracelab.commands.train_env import env_source_of
+    from tracelab.train.env_policy import evaluate_env, load_env_policy, policy_format, ENV_FORMAT
+    from tracelab.train.experiments.stats import wilson
+    with store_errors():
+        fmt = policy_format(args.policy)
+    if fmt != ENV_FORMAT:
+        raise UserError(f"{args.policy} is a GridWar policy ({fmt}); --env plays policies of train --env")
+    if args.env is None:
+        raise UserError(f"{args.policy} was trained with train --env: name that env with --env SPEC_OR_ID "
+                        f"(and its --env-arg values); its policy.json says which under \"env\"")
+    if args.scenario is not None or args.run is not None:
+        raise UserError(f"{'--scenario' if args.scenario is not None else '--run'} is GridWar's; eval --env "
+                        f"takes --games, --seed, --num-envs, --json")
+    source = env_source_of(args)
+    with store_errors():
+        policy, _ = load_env_policy(args.policy, source)
+    with progress(f"evaluating on {source.name}", total=args.games, unit="games") as bar:
+        result = evaluate_env(policy, source, args.games, args.seed, args.envs, lambda _: bar.advance(1))
+    if args.json:
+        json.dump({"policy": str(args.policy), "env": source.to_json(), "seed": args.seed, **result.to_dict()},
+                  sys.stdout, indent=1)
+        print()
+        return 0
+    low, high = wilson(result.successes, result.games)
+    print(f"{args.policy} on {source.describe()}, {result.games} greedy games, seed {args.seed}")
+    print(f"  mean return     {result.mean_return:.3f}")
+    print(f"  success rate    {100 * result.success_rate:.1f}% [{100 * low:.1f}%, {100 * high:.1f}%] "
+          f"(return > 0; 95% Wilson interval)")
+    print(f"  ended           {result.terminated} terminated, {result.truncated} truncated; mean "
+          f"{result.metrics('')['mean_steps']:.1f} steps")
     return 0
 
 

@@ -65,6 +65,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tensorboard", default=None, metavar="DIR",
                    help="also write the metrics as TensorBoard event files into DIR/<run name>/ while training "
                         "(needs the tensorboard package: pip install 'tracelab[tensorboard]')")
+    p.add_argument("--env", default=None, metavar="SPEC_OR_ID",
+                   help="train on this gymnasium env instead of GridWar: a registered id "
+                        "(tracelab/FrozenLake-v1, tracelab/Taxi-v4, ...) or a spec file (docs/worlds.md); a "
+                        "Discrete observation is one-hot encoded for the network (docs/training.md)")
+    p.add_argument("--env-arg", action="append", default=[], metavar="KEY=VALUE",
+                   help="a keyword argument of --env (repeatable), its value read as TOML: is_slippery=false")
     add_max_groundings(p)
     p.set_defaults(func=run)
 
@@ -93,12 +99,17 @@ def run(args: argparse.Namespace) -> int:
     # config, free with --resume; argv is the command line cli.main keeps
     given = {k: v for k, v in vars(args).items()
              if k not in ("func", "command", "argv", "run", "resume", "max_memory", "max_groundings", "exp_name",
-                          "tensorboard")}
+                          "tensorboard", "env", "env_arg")}
     limit = memory_limit(args.max_memory, "--max-memory")
+    if args.env is not None or args.env_arg:
+        from tracelab.commands.train_env import run_env
+        return run_env(args, given, limit)
     state = None
     with store_errors():  # a bad value in the config or a checkpoint that does not load
         if args.resume:
+            from tracelab.commands.train_env import refuse_env_resume
             from tracelab.train.checkpoint import checkpoint_config, checkpoint_scenario, load_checkpoint
+            refuse_env_resume(Path(args.resume))
             extra = sorted(set(given) - RESUMABLE_FLAGS)
             if extra:
                 raise UserError(f"--resume continues the checkpoint's config; drop "

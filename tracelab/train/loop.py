@@ -9,7 +9,7 @@ one would (tests/test_train.py)."""
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from pathlib import Path
 from typing import Any, Callable
 
@@ -87,6 +87,36 @@ def _agent_rewards(info: dict, done: np.ndarray) -> np.ndarray:
     if not done.any():
         return info["agent_reward"]
     return np.where(done[:, None], info["final_info"]["agent_reward"], info["agent_reward"])
+
+
+def learn_pass(tr: Any, learners: Collection[Learner]) -> None:
+    """After a pass of the loop: `worlds * updates_per_step` updates per learner once warm-up is over and
+    every buffer holds a minibatch (the fraction carried over in `tr.update_credit`), and the target
+    copies every `target_every` steps. `tr`: a trainer (GridWar's, or env_trainer's) with cfg, step,
+    worlds, rng, update_credit and synced_block."""
+    cfg = tr.cfg
+    if tr.step < cfg.warmup or any(lr.buffer.size < cfg.batch for lr in learners):
+        return
+    tr.update_credit += tr.worlds * cfg.updates_per_step
+    k = int(tr.update_credit)
+    tr.update_credit -= k
+    for learner in learners:
+        for _ in range(k):
+            learner.update(tr.rng)
+    block = tr.step // cfg.target_every
+    if block > tr.synced_block:
+        for learner in learners:
+            learner.sync_target()
+        tr.synced_block = block
+
+
+def write_metric_rows(tr: Any, values: dict[str, float]) -> None:
+    """Metric rows at the trainer's current step: into its run (`tr.writer`), and into every other sink."""
+    if tr.writer is not None:
+        tr.writer.write_metrics(tr.step, values)
+    for sink in tr.metric_sinks:
+        sink.write(tr.step, values)
+        sink.flush()
 
 
 class Trainer:
@@ -318,22 +348,7 @@ class Trainer:
                                            out["discount"][sel], None if allowed is None else allowed[sel])
 
     def learn(self) -> None:
-        cfg = self.cfg
-        if self.step < cfg.warmup:
-            return
-        if any(lr.buffer.size < cfg.batch for lr in self.learners.values()):
-            return
-        self.update_credit += self.worlds * cfg.updates_per_step
-        k = int(self.update_credit)
-        self.update_credit -= k
-        for learner in self.learners.values():
-            for _ in range(k):
-                learner.update(self.rng)
-        block = self.step // cfg.target_every
-        if block > self.synced_block:
-            for learner in self.learners.values():
-                learner.sync_target()
-            self.synced_block = block
+        learn_pass(self, self.learners.values())
 
     # ---- logging, evaluation, checkpoints ----
     def _crossed(self, every: int, before: int) -> bool:
@@ -367,12 +382,7 @@ class Trainer:
         return m
 
     def write_metrics(self, values: dict[str, float]) -> None:
-        """Metric rows at the current step: into the run, and into every other sink."""
-        if self.writer is not None:
-            self.writer.write_metrics(self.step, values)
-        for sink in self.metric_sinks:
-            sink.write(self.step, values)
-            sink.flush()
+        write_metric_rows(self, values)
 
     def run_eval(self) -> EvalResult:
         cfg = self.cfg

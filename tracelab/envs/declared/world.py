@@ -176,11 +176,13 @@ class DeclaredWorld:
         self._rewards()  # the ends as they stand at the start
         self.steps = 0
 
-    def step(self, actions: Any, rng: np.random.Generator) -> None:
+    def step(self, actions: Any, rng: np.random.Generator | None, draws: Any = None) -> None:
         """Set each agent's action's facts (`actions`: one index per agent, -1 for none, or an int for one
         agent) and
         this step's random facts, step the engine (twice when an `after` random fact is drawn); the
-        step's rewards, one per agent, are then `last_rewards`."""
+        step's rewards, one per agent, are then `last_rewards`. `draws`: the value index of each random
+        fact drawn before the step, in the spec's order, instead of drawing them from `rng` (to enumerate a
+        world's transitions: tracelab/train/tabular.py)."""
         rows = self._rows
         if self.n_agents == 1:
             rows[0] = actions
@@ -189,7 +191,7 @@ class DeclaredWorld:
             rows[:] = np.where(a >= 0, a + np.arange(self.n_agents) * self.n_actions, -1)
         picks = self._picks  # the `after` draws' slots stay -1 between steps
         for d, drawer in enumerate(self._before):
-            picks[d] = drawer.pick(self, rng)
+            picks[d] = drawer.pick(self, rng) if draws is None else draws[d]
         self._fused_step(rows, picks)
         rewards = self._rewards()
         if self._after:
@@ -276,6 +278,23 @@ class DeclaredWorld:
         rows[:, 1] = 0
         rows[:, 2] = eng.next_external_id() + np.arange(n)
         eng.step(external=(np.array([0, n], np.int64), rows, np.ascontiguousarray(bounds, np.float64)))
+
+    # ---- a world's whole state, to come back to (the engine's snapshot and what the env keeps beside it)
+
+    def save_state(self) -> tuple[Any, ...]:
+        """Everything the next step depends on, except the random draws: restore it with load_state."""
+        prev, prev_n = self._tables[7], self._tables[8]
+        return (self.engine.snapshot(), prev[:prev_n[0]].copy(), self.steps, list(self.last_rewards),
+                self._ends, tuple(o.copy() for o in self._out))
+
+    def load_state(self, state: tuple[Any, ...]) -> None:
+        snap, prev, self.steps, rewards, self._ends, out = state
+        self.engine.restore(snap, np.array([0]))
+        self._tables[7][:len(prev)] = prev
+        self._tables[8][0] = len(prev)
+        self.last_rewards = list(rewards)
+        for mine, saved in zip(self._out, out):
+            mine[:] = saved
 
     # ---- reading ----
 

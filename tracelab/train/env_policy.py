@@ -1,0 +1,199 @@
+"""A policy trained with `train --env` (any gymnasium env with Discrete actions), its files and its greedy
+evaluation.
+
+On disk it is a policy directory as GridWar's (policy.pt: `{"shared": state dict}`; policy.json: the
+network, docs/training.md "Policy format"), with its own format name and, instead of a scenario, the env
+it was trained on (`env`: id or spec file and kwargs) and how observations are encoded, so that
+`tracelab eval` plays it on that env and refuses another in one line."""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from tracelab.engine.safe_files import read_json
+from tracelab.train.env_source import EnvSource, ObservationEncoder, check_same_env, env_source_from_json
+from tracelab.train.policy import POLICY_JSON, POLICY_PT, _policy_dir, read_policy_networks, spec_net
+from tracelab.train.qnet import HiddenWidths, NumpyQ, QFunction
+from tracelab.train.experiments.stats import spread, wilson
+from tracelab.validation import Const, IntRange, ListOf, MapOf, OptionalKey, check_file
+
+ENV_FORMAT = "tracelab-dqn-env-policy/1"
+
+
+class EnvPolicy:
+    """Greedy actions of one network over encoded observations (among the allowed ones when the policy
+    masks and the env gives `action_mask`)."""
+
+    def __init__(self, q: QFunction, encoder: ObservationEncoder, mask: bool = False) -> None:
+        self.q, self.encoder, self.mask = q, encoder, mask
+
+    def act(self, obs: Any, masks: np.ndarray | None = None) -> np.ndarray:
+        q = self.q(self.encoder(obs))
+        if self.mask and masks is not None:
+            q = np.where(masks.astype(bool), q, -np.inf)
+        return q.argmax(axis=1)
+
+
+def save_env_policy(path: str | Path, source: EnvSource, weights: dict[str, Any], network: dict[str, Any],
+                    encoder: ObservationEncoder, action_names: list[str], mask: bool,
+                    trained: dict[str, Any]) -> Path:
+    import torch
+    out = Path(path)
+    out.mkdir(parents=True, exist_ok=True)
+    torch.save({"shared": {k: v.contiguous().clone() for k, v in weights.items()}}, out / (POLICY_PT + ".tmp"))
+    spec = {"format": ENV_FORMAT, "env": source.to_json(),
+            "observation": {"size": encoder.size, "encoding": encoder.describe()},
+            "actions": {"names": action_names}, "network": network, "networks": {"shared": [0]},
+            "mask": mask, "trained": trained}
+    (out / (POLICY_JSON + ".tmp")).write_text(json.dumps(spec, indent=1) + "\n")
+    (out / (POLICY_PT + ".tmp")).replace(out / POLICY_PT)
+    (out / (POLICY_JSON + ".tmp")).replace(out / POLICY_JSON)
+    return out
+
+
+ENV_SPEC_SCHEMA = {
+    "format": Const(ENV_FORMAT),
+    "env": {"name": str, "kwargs": MapOf(object)},
+    "network": {"inputs": IntRange(1), "hidden": OptionalKey(HiddenWidths()), "outputs": IntRange(1),
+                "dueling": OptionalKey(bool), "custom": OptionalKey(str)},
+    "networks": MapOf(ListOf(IntRange(0), min_len=1), min_len=1),
+    "mask": OptionalKey(bool),
+}
+
+
+def policy_format(path: str | Path) -> str | None:
+    """policy.json's `format` (None when absent or not text): which loader reads the policy."""
+    f = _policy_dir(path) / POLICY_JSON
+    if not f.exists():
+        return None
+    d = read_json(f, what="policy description", follow_symlinks=False)
+    return d.get("format") if isinstance(d, dict) and isinstance(d.get("format"), str) else None
+
+
+def load_env_policy(path: str | Path, given: EnvSource) -> tuple[EnvPolicy, dict[str, Any]]:
+    """(the policy, its policy.json), refused in one line unless it was trained on `given` (the env the
+    user named: a policy file never decides which spec file tracelab reads), its network's shape checked
+    against the env's spaces."""
+    f = _policy_dir(path) / POLICY_JSON
+    spec = check_file(read_json(f, what="policy description", follow_symlinks=False), ENV_SPEC_SCHEMA, f)
+    check_same_env(env_source_from_json(spec["env"], str(f)), given, str(_policy_dir(path)))
+    source = given
+    net = spec_net(spec)
+    states = read_policy_networks(path, spec)
+    q = NumpyQ(net, {k: v.float().numpy() for k, v in states["shared"].items()})
+    env = source.make()
+    try:
+        encoder = ObservationEncoder(env.observation_space, source.name)
+        n_actions = int(env.action_space.n)
+    finally:
+        env.close()
+    if (encoder.size, n_actions) != (net.inputs, net.actions):
+        raise ValueError(f"{f}: its network reads {net.inputs} inputs and gives {net.actions} Q-values; "
+                         f"{source.describe()} has {encoder.size} and {n_actions} now")
+    return EnvPolicy(q, encoder, spec.get("mask", False)), spec
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Greedy evaluation
+# ---------------------------------------------------------------------------------------------------------
+@dataclass
+class EnvEvalResult:
+    returns: list[float] = field(default_factory=list)
+    steps: list[int] = field(default_factory=list)
+    terminated: int = 0
+    truncated: int = 0
+
+    @property
+    def games(self) -> int:
+        return len(self.returns)
+
+    @property
+    def successes(self) -> int:
+        """Episodes with a positive return (FrozenLake: the goal reached)."""
+        return sum(r > 0 for r in self.returns)
+
+    @property
+    def success_rate(self) -> float:
+        return self.successes / self.games if self.games else 0.0
+
+    @property
+    def mean_return(self) -> float:
+        return float(np.mean(self.returns)) if self.returns else 0.0
+
+    def metrics(self, prefix: str = "eval/") -> dict[str, float]:
+        m = {"games": self.games, "mean_return": self.mean_return, "success_rate": self.success_rate,
+             "terminated": self.terminated, "truncated": self.truncated,
+             "mean_steps": float(np.mean(self.steps)) if self.steps else 0.0}
+        return {prefix + k: float(v) for k, v in m.items()}
+
+    def to_dict(self) -> dict[str, Any]:
+        d = {k: v for k, v in self.metrics("").items()}
+        d["success_rate_ci95"] = list(wilson(self.successes, self.games))
+        if self.games > 1:
+            s = spread(self.returns)
+            d["mean_return_ci95"] = [s["ci_low"], s["ci_high"]]
+        return d
+
+
+def make_vector_env(source: EnvSource, worlds: int) -> Any:
+    """`worlds` copies of the env stepped together, a world that ends reset within its step (SAME_STEP, as
+    GridWar's vector env): gymnasium's SyncVectorEnv over the env (a declared env's own batched engine is
+    not used here yet)."""
+    from gymnasium.vector import AutoresetMode, SyncVectorEnv
+    return SyncVectorEnv([source.make] * worlds, autoreset_mode=AutoresetMode.SAME_STEP)
+
+
+EVAL_STEP_CAP = 10_000  # a greedy policy may walk in circles in an env without a step limit (CliffWalking)
+
+
+def play_env_games(env: Any, policy: EnvPolicy, games: int, seed: int,
+                   on_game: Callable[[float], None] | None = None, step_cap: int = EVAL_STEP_CAP) -> EnvEvalResult:
+    """`games` greedy episodes, each world of `env` playing a fixed share (not the first to finish). An
+    episode still running after `step_cap` steps ends there, counted truncated."""
+    w = env.num_envs
+    quota = np.full(w, games // w, np.int64)
+    quota[: games % w] += 1
+    result = EnvEvalResult()
+    obs, info = env.reset(seed=seed)
+    ret, length = np.zeros(w), np.zeros(w, np.int64)
+    while quota.any():
+        actions = policy.act(obs, info.get("action_mask"))
+        obs, reward, term, trunc, info = env.step(actions)
+        ret += reward
+        length += 1
+        capped = (length >= step_cap) & ~(term | trunc)
+        trunc = trunc | capped
+        for k in np.flatnonzero((term | trunc) & (quota > 0)).tolist():
+            result.returns.append(float(ret[k]))
+            result.steps.append(int(length[k]))
+            result.terminated += bool(term[k])
+            result.truncated += bool(trunc[k]) and not bool(term[k])
+            quota[k] -= 1
+            if on_game is not None:
+                on_game(float(ret[k]))
+        done = term | trunc
+        ret[done], length[done] = 0.0, 0
+        if capped.any():  # the env did not end them: reset those worlds only
+            obs, info = _reset_worlds(env, obs, info, capped)
+    return result
+
+
+def _reset_worlds(env: Any, obs: Any, info: dict[str, Any], worlds: np.ndarray) -> tuple[Any, dict[str, Any]]:
+    new_obs, new_info = env.reset(options={"reset_mask": worlds})
+    obs = np.where(worlds.reshape(-1, *([1] * (np.ndim(obs) - 1))), new_obs, obs)
+    if "action_mask" in info:
+        info = {**info, "action_mask": np.where(worlds[:, None], new_info["action_mask"], info["action_mask"])}
+    return obs, info
+
+
+def evaluate_env(policy: EnvPolicy, source: EnvSource, games: int, seed: int, worlds: int = 16,
+                 on_game: Callable[[float], None] | None = None) -> EnvEvalResult:
+    env = make_vector_env(source, min(worlds, games))
+    try:
+        return play_env_games(env, policy, games, seed, on_game)
+    finally:
+        env.close()
