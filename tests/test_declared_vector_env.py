@@ -1,0 +1,153 @@
+"""The vector env of a declared world (tracelab/envs/declared/vector_env.py): every world, across its
+resets, equals gymnasium's own game stepped with the same seed and actions (gymnasium's SyncVectorEnv with
+SAME_STEP autoreset, final observations and infos included) and a single DeclaredEnv; its API; and the
+engine's restore from another world's state that its resets use."""
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.envs.toy_text.frozen_lake import generate_random_map
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from tracelab.engine import Engine, parse_program
+from tracelab.envs import make_env, make_vec_env
+from tracelab.envs.declared.toytext import spec_path
+from tracelab.envs.declared.vector_env import DeclaredVectorEnv
+
+WORLDS = 16
+STEPS = 700  # 11,200 world-steps a game
+
+GAMES = [  # (gymnasium's id, tracelab's id, keyword arguments of both)
+    ("FrozenLake-v1", "tracelab/FrozenLake-v1", {"is_slippery": True}),
+    ("FrozenLake-v1", "tracelab/FrozenLake-v1", {"desc": generate_random_map(6, seed=4), "is_slippery": True}),
+    ("CliffWalking-v1", "tracelab/CliffWalking-v1", {"max_episode_steps": 60}),  # random walks rarely end
+    ("CliffWalking-v1", "tracelab/CliffWalking-v1", {"is_slippery": True, "max_episode_steps": 60}),
+    ("Taxi-v4", "tracelab/Taxi-v4", {}),
+    ("Taxi-v4", "tracelab/Taxi-v4", {"is_rainy": True}),
+]
+
+
+def _theirs(gym_id: str, kwargs: dict, n: int) -> VectorEnv:
+    return gym.make_vec(gym_id, num_envs=n, vectorization_mode="sync",
+                        vector_kwargs={"autoreset_mode": AutoresetMode.SAME_STEP}, **kwargs)
+
+
+def _same_info(ours: dict, theirs: dict, step: int) -> None:
+    if "action_mask" in theirs:
+        np.testing.assert_array_equal(ours["action_mask"], theirs["action_mask"], err_msg=f"step {step}")
+        np.testing.assert_array_equal(ours["_action_mask"], theirs["_action_mask"])
+    np.testing.assert_array_equal(ours.get("_final_obs", np.zeros(WORLDS, bool)),
+                                  theirs.get("_final_obs", np.zeros(WORLDS, bool)), err_msg=f"step {step}")
+    if "_final_obs" in theirs:
+        ended = theirs["_final_obs"]
+        np.testing.assert_array_equal(ours["final_obs"][ended], theirs["final_obs"][ended].astype(np.int64))
+        final_mask = theirs["final_info"].get("action_mask")
+        if final_mask is not None:
+            np.testing.assert_array_equal(ours["final_info"]["action_mask"][ended], final_mask[ended])
+        np.testing.assert_array_equal(ours["final_info"]["_t"], ended)
+
+
+@pytest.mark.parametrize("gym_id, our_id, kwargs", GAMES, ids=lambda v: str(v)[:24] if isinstance(v, str) else None)
+def test_each_world_equals_gymnasiums_own_game(gym_id: str, our_id: str, kwargs: dict) -> None:
+    """Observations, rewards, terminated, truncated, action masks and the final observations of worlds that
+    ended, at every step of 16 worlds seeded 7..22 (SyncVectorEnv's seeding), across their resets."""
+    ours = gym.make_vec(our_id, num_envs=WORLDS, vectorization_mode="vector_entry_point", **kwargs)
+    theirs = _theirs(gym_id, kwargs, WORLDS)
+    assert isinstance(ours, DeclaredVectorEnv)
+    obs, info = ours.reset(seed=7)
+    their_obs, their_info = theirs.reset(seed=7)
+    np.testing.assert_array_equal(obs, their_obs)
+    if "action_mask" in their_info:
+        np.testing.assert_array_equal(info["action_mask"], their_info["action_mask"])
+    rng = np.random.default_rng(1)
+    n = ours.single_action_space.n
+    ends = 0
+    for step in range(STEPS):
+        actions = rng.integers(0, n, WORLDS)
+        mine, other = ours.step(actions), theirs.step(actions)
+        for k, name in enumerate(("obs", "reward", "terminated", "truncated")):
+            np.testing.assert_array_equal(mine[k], other[k], err_msg=f"{name} at step {step}")
+        _same_info(mine[4], other[4], step)
+        ends += int((mine[2] | mine[3]).sum())
+    assert ends >= WORLDS  # the worlds did restart (every game's episodes end under random actions)
+
+
+def test_each_world_equals_a_single_declared_env() -> None:
+    """World i of the vector env and a DeclaredEnv reset with seed[i] (a list of seeds) take the same
+    observations, rewards and ends; after an end, the DeclaredEnv resets without a seed, as the world does."""
+    seeds = [101, 5, 77, 3]
+    spec = spec_path("frozen_lake.toml")
+    vec = make_vec_env(spec, len(seeds), max_episode_steps=20)
+    singles = [make_env(spec) for _ in seeds]
+    obs, _ = vec.reset(seed=seeds)
+    assert obs.tolist() == [e.reset(seed=s)[0] for e, s in zip(singles, seeds)]
+    rng = np.random.default_rng(2)
+    for step in range(3000):
+        actions = rng.integers(0, 4, len(seeds))
+        obs, reward, terminated, truncated, info = vec.step(actions)
+        for i, env in enumerate(singles):
+            o, r, te, _, _ = env.step(int(actions[i]))
+            tr = env.world.steps >= 20
+            assert (r, te, tr) == (reward[i], terminated[i], truncated[i]), (step, i)
+            if te or tr:
+                assert info["final_obs"][i] == o and info["t"][i] == 0
+                o, _ = env.reset()
+            assert obs[i] == o, (step, i)
+
+
+def test_vector_api() -> None:
+    env = make_vec_env(spec_path("taxi.toml"), 5)
+    assert env.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
+    assert env.observation_space == batch_space(gym.spaces.Discrete(500), 5)
+    assert env.action_space == batch_space(gym.spaces.Discrete(6), 5)
+    obs, info = env.reset(seed=0)
+    assert env.observation_space.contains(obs)
+    assert info["action_mask"].shape == (5, 6) and info["action_mask"].dtype == np.int8 and info["_action_mask"].all()
+    obs, reward, terminated, truncated, info = env.step(np.zeros(5, np.int64))
+    assert reward.shape == terminated.shape == truncated.shape == (5,) and reward.dtype == np.float64
+    assert terminated.dtype == np.bool_ and info["t"].tolist() == [1] * 5
+    with pytest.raises(ValueError, match="actions must be 5 integers"):
+        env.step(np.full(5, 6))
+    with pytest.raises(ValueError, match="one seed per world"):
+        env.reset(seed=[1, 2])
+    # a reset with the same seed replays the same episodes
+    a = [env.reset(seed=9)[0].tolist()] + [env.step(np.full(5, k % 6))[0].tolist() for k in range(30)]
+    b = [env.reset(seed=9)[0].tolist()] + [env.step(np.full(5, k % 6))[0].tolist() for k in range(30)]
+    assert a == b
+
+
+def test_a_random_fact_drawn_after_a_step_is_refused() -> None:
+    """Taxi's fickle passenger is drawn after a step in some worlds only: not supported yet, said so."""
+    with pytest.raises(ValueError, match="redirect.*drawn `after` a step"):
+        make_vec_env(spec_path("taxi.toml"), 2, fickle_passenger=True)
+
+
+PROGRAM = """
+%timesteps persistent
+next(w) <-1 step(w)
+"""
+
+
+def test_engine_restore_from_another_worlds_state() -> None:
+    """Engine.restore(snap, worlds, source=...): world 0 takes world 2's state in the snapshot (its atoms
+    and its scheduled firings, shifted to the clock); world 1 keeps its own; the lanes kernel refuses."""
+    eng = Engine(parse_program(PROGRAM), worlds=3, kernel="counting")
+    step, nxt = eng.atom("step", "w"), eng.atom("next", "w")
+    eng.add_fact(step, world=2)
+    eng.step()
+    snap = eng.snapshot()  # world 2: step(w) true, next(w) scheduled for the next step
+    eng.run(3)
+    both = np.array([step, nxt])
+    assert eng.is_true(both).tolist() == [[False, False], [False, False], [True, True]]
+    eng.restore(snap, np.array([0]), source=np.array([2]))
+    assert eng.is_true(both).tolist() == [[True, False], [False, False], [True, True]]
+    eng.step()  # world 2's firing, restored into world 0, lands there now
+    assert eng.is_true(both).tolist() == [[True, True], [False, False], [True, True]]
+    with pytest.raises(ValueError, match="one world of the snapshot"):
+        eng.restore(snap, np.array([0, 1]), source=np.array([3, 0]))
+    lanes = Engine(parse_program(PROGRAM), worlds=3, kernel="lanes")
+    lanes.step()
+    with pytest.raises(ValueError, match="counting kernel"):
+        lanes.restore(lanes.snapshot(), np.array([0]), source=np.array([1]))
