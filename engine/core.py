@@ -377,7 +377,7 @@ class Engine:
         """Put `worlds` (indices or a bool mask) back into their state in `snap`. Their next step behaves
         as the snapshot's next step did: firings scheduled then are shifted to the current clock. (Program
         facts with time windows follow the engine's one clock; per-world restarts see them by that clock.)
-        `source` (counting layout only): world worlds[i] takes the state of snap's world source[i] instead
+        `source`: world worlds[i] takes the state of snap's world source[i] instead
         of its own, e.g. one of several start states prepared in a batch (a declared vector env's resets)."""
         worlds = np.flatnonzero(worlds) if np.asarray(worlds).dtype == np.bool_ else np.asarray(worlds)
         if worlds.size == 0:
@@ -390,11 +390,9 @@ class Engine:
         if source is None:
             self._state.restore(snap, worlds.astype(np.int64), shift)
             return
-        if snap["layout"] != "counting":
-            raise ValueError("restore(source=...) needs the counting kernel's layout (not the lanes kernel)")
         source = np.asarray(source, np.int64)
-        if source.shape != worlds.shape or source.min() < 0 or source.max() >= len(snap["lower"]):
-            raise ValueError(f"source must give one world of the snapshot (0..{len(snap['lower']) - 1}) per "
+        if source.shape != worlds.shape or source.min() < 0 or source.max() >= self.n_worlds:
+            raise ValueError(f"source must give one world of the snapshot (0..{self.n_worlds - 1}) per "
                              f"restored world, got {source.tolist()}")
         self._state.restore(snap, worlds.astype(np.int64), shift, source)
 

@@ -28,7 +28,8 @@ def register(sub: argparse._SubParsersAction) -> None:
              "tui": "the terminal UI on a 10M-row run: open, first page, scroll, jump, filter (headless)",
              "reason-store": "reason --run against reason --no-trace on a 1M-edge graph: the ratio, change "
                              "rows/s into the store, peak memory",
-             "toytext": "gymnasium's toy-text games as rules (docs/worlds.md) against gymnasium's own, one world",
+             "toytext": "gymnasium's toy-text games as rules (docs/worlds.md) against gymnasium's own: one world, "
+                        "and a vector env of --batch worlds against gymnasium's SyncVectorEnv",
              "all": "engine, env, store, replay and train"}
     for name, text in helps.items():
         q = what.add_parser(name, help=text)
@@ -44,7 +45,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         if name == "tui":
             q.add_argument("--rows", type=positive_int, default=None,
                            help="change rows of the synthetic run (default 10,000,000; --quick: 200,000)")
-        if name in ("env", "all"):
+        if name in ("env", "all", "toytext"):
             q.add_argument("--batch", type=positive_int, default=None,
                            help="worlds of the batched runs (default 256; --quick: 16)")
         if name in ("train", "all"):
@@ -100,7 +101,7 @@ def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], s
         return r, reason_store.report(r)
     if name == "toytext":
         from tracelab.bench import toytext
-        r = toytext.run(args.quick, args.repeats)
+        r = toytext.run(args.quick, args.repeats, args.batch)
         return r, toytext.report(r)
     if name == "tui":
         from tracelab.bench import tui

@@ -13,6 +13,9 @@ Seeding, as SyncVectorEnv seeds its envs: reset(seed=s) seeds world i's np_rando
 seeds world i with seed[i]; a world that restarts later draws on from its own generator. So world i
 steps exactly as DeclaredEnv (and gymnasium's own game) reset with seed s + i and given its actions.
 
+`kernel`: the engine's; "auto" takes the lanes kernel from 64 worlds on (bit-parallel, one call for all
+worlds) and counting below (every world in one compiled call with the reads, vector_fused.py).
+
 `max_episode_steps`: truncation after that many steps (gymnasium's TimeLimit; make_vec passes the
 registered limit)."""
 from __future__ import annotations
@@ -37,7 +40,7 @@ class DeclaredVectorEnv(VectorEnv):
 
     def __init__(self, spec: WorldSpec | str | os.PathLike[str], num_envs: int = 1, *,
                  max_episode_steps: int | None = None, render_mode: str | None = None, copy: bool = True,
-                 **params: Any) -> None:
+                 kernel: str = "auto", **params: Any) -> None:
         if render_mode is not None:
             raise ValueError("DeclaredVectorEnv does not render")
         if num_envs < 1:
@@ -51,7 +54,7 @@ class DeclaredVectorEnv(VectorEnv):
         self.num_envs = num_envs
         self.max_episode_steps = max_episode_steps
         self.copy = copy  # observations are new arrays either way; kept for SyncVectorEnv's signature
-        self.worlds = DeclaredWorlds(self.world_spec, num_envs)
+        self.worlds = DeclaredWorlds(self.world_spec, num_envs, kernel)
         self.single_observation_space = observation_space(self.world_spec)
         self.single_action_space = spaces.Discrete(len(self.world_spec.action_names))
         self.observation_space = batch_space(self.single_observation_space, num_envs)
