@@ -18,7 +18,7 @@ from tracelab.envs.declared.vector_env import DeclaredVectorEnv
 
 # (worlds, steps): 16 worlds run on the counting kernel (one compiled call with the reads), 64 on the lanes
 # kernel (the engine's step); over 10,000 world-steps a game either way
-SIZES = [(16, 700), (64, 160)]
+SIZES = [(16, 700), (64, 250)]
 
 GAMES = [  # (gymnasium's id, tracelab's id, keyword arguments of both)
     ("FrozenLake-v1", "tracelab/FrozenLake-v1", {"is_slippery": True}),
