@@ -10,6 +10,7 @@ import pytest
 from gymnasium.envs.toy_text.frozen_lake import generate_random_map
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
+from gymnasium.wrappers.vector import RecordEpisodeStatistics
 
 from tracelab.engine import Engine, parse_program
 from tracelab.envs import make_env, make_vec_env
@@ -120,6 +121,23 @@ def test_vector_api() -> None:
     a = [env.reset(seed=9)[0].tolist()] + [env.step(np.full(5, k % 6))[0].tolist() for k in range(30)]
     b = [env.reset(seed=9)[0].tolist()] + [env.step(np.full(5, k % 6))[0].tolist() for k in range(30)]
     assert a == b
+
+
+def test_gymnasiums_vector_wrappers_read_it() -> None:
+    """gymnasium 1.4 ships no vector env checker; its RecordEpisodeStatistics (which reads the autoreset
+    mode) counts the episodes' returns and lengths as the env reports them."""
+    env = RecordEpisodeStatistics(make_vec_env(spec_path("frozen_lake.toml"), 8, max_episode_steps=30))
+    env.reset(seed=0)
+    rng, lengths, t = np.random.default_rng(0), [], np.zeros(8, np.int64)
+    for _ in range(200):
+        _, _, terminated, truncated, info = env.step(rng.integers(0, 4, 8))
+        t += 1
+        done = terminated | truncated
+        if done.any():
+            np.testing.assert_array_equal(info["episode"]["l"][done], t[done])
+            lengths.extend(t[done].tolist())
+        t[done] = 0
+    assert len(lengths) > 8 and max(lengths) <= 30
 
 
 def test_a_random_fact_drawn_after_a_step_is_refused() -> None:

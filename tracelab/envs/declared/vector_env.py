@@ -76,9 +76,10 @@ class DeclaredVectorEnv(VectorEnv):
                 raise ValueError(f"reset(seed=...) needs one seed per world ({self.num_envs}), got {len(seeds)}")
         if seed is not None or not self._rngs:
             self._rngs = [seeding.np_random(s)[0] for s in seeds]
+            self.worlds.use_generators(self._rngs)
         if isinstance(seed, (int, np.integer)):
             super().reset(seed=int(seed))
-        self.worlds.reset(self._everywhere, self._rngs)
+        self.worlds.reset(self._everywhere)
         return self.worlds.observations(), self._info(self._all)
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
@@ -89,7 +90,7 @@ class DeclaredVectorEnv(VectorEnv):
         if a.shape != (self.num_envs,) or not np.issubdtype(a.dtype, np.integer) or a.min() < 0 or a.max() >= n:
             raise ValueError(f"actions must be {self.num_envs} integers in 0..{n - 1}, got {actions!r}")
         w = self.worlds
-        w.step(a.astype(np.int64), self._rngs)
+        w.step(a.astype(np.int64))
         obs = w.observations()
         reward = w.rewards()
         terminated, truncated = w.terminated(), w.truncated(self.max_episode_steps)
@@ -97,7 +98,7 @@ class DeclaredVectorEnv(VectorEnv):
         done = terminated | truncated
         if done.any():
             final_info = self._with_masks({k: v for k, v in info.items() if not k.startswith("_")}, done)
-            w.reset(np.flatnonzero(done), self._rngs)
+            w.reset(np.flatnonzero(done))
             final_obs, obs = obs, w.observations()  # the others' observations read again, unchanged
             info = self._info(self._all)
             info.update(final_obs=final_obs, _final_obs=done, final_info=final_info, _final_info=done)

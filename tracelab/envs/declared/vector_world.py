@@ -52,6 +52,9 @@ class DeclaredWorlds:
         self._rows = np.full((w, self.n_agents), -1, np.int64)
         self._picks = np.full((w, len(one._picks)), -1, np.int64)
         self.steps = np.zeros(w, np.int64)
+        # every draw one np_random.random() (the toy-text games): drawn a block at a time (_Uniforms)
+        self._only_uniforms = all(d.draw.method == "categorical" for d in (*one._choices, *one._before)) and \
+            all(d.weight_ids is None for d in one._before)
         self._starts = _StartOutcomes(self)
 
     @property
@@ -90,20 +93,28 @@ class DeclaredWorlds:
 
     # ---- episodes ----
 
-    def reset(self, worlds: np.ndarray, rngs: list[np.random.Generator]) -> None:
-        """Restart `worlds` (int64 indices): each draws its start choices from rngs[world]; then the
+    def use_generators(self, rngs: list[np.random.Generator]) -> None:
+        """Each world's np_random, from which its draws come from now on."""
+        if len(rngs) != self.n_worlds:
+            raise ValueError(f"{len(rngs)} generators for {self.n_worlds} worlds")
+        self.rngs = rngs
+        self._randoms = [r.random for r in rngs]  # bound once: a step draws one number per world
+        self.uniforms = _Uniforms(rngs) if self._only_uniforms else None
+
+    def reset(self, worlds: np.ndarray) -> None:
+        """Restart `worlds` (int64 indices): each draws its start choices from its generator; then the
         reads of every world are refreshed (the others' are unchanged)."""
-        self._starts.restore(worlds, rngs)
+        self._starts.restore(worlds, self)
         self._tables[8][worlds] = 0  # a start's facts stay: the next step does not turn them off
         self.steps[worlds] = 0
         self._read()
 
-    def step(self, actions: np.ndarray, rngs: list[np.random.Generator]) -> None:
-        """Every world plays actions[w] (one agent) and draws this step's random facts from rngs[w]."""
+    def step(self, actions: np.ndarray) -> None:
+        """Every world plays actions[w] (one agent) and draws this step's random facts from its generator."""
         self._rows[:, 0] = actions
         picks = self._picks
         for d, drawer in enumerate(self.one._before):
-            picks[:, d] = _draw_batch(drawer, self, rngs)
+            picks[:, d] = _draw_batch(drawer, self)
         self.engine_step(self._rows, picks)
         self.steps += 1
 
@@ -182,17 +193,18 @@ def _world(spec: WorldSpec, n_worlds: int, kernel: str) -> DeclaredWorld:
     return DeclaredWorld(spec, kernel="counting", worlds=n_worlds)
 
 
-def _draw_batch(drawer: Any, worlds: DeclaredWorlds, rngs: list[np.random.Generator]) -> np.ndarray:
+def _draw_batch(drawer: Any, worlds: DeclaredWorlds) -> np.ndarray:
     """One value of `drawer` per world, each from its world's generator, exactly as _Drawer.pick draws
     for one world (categorical: one random() u, the first value whose cumulative probability exceeds u,
     else 0; choice: one integers(0, n))."""
-    d = drawer.draw
+    d, rngs = drawer.draw, worlds.rngs
     if drawer.weight_ids is None and drawer.possible is None:
         if d.method == "choice":
             n = len(drawer.value_ids)
             return np.array([r.integers(0, n) for r in rngs], np.int64)
         cumulative = np.asarray(drawer.cumulative)
-        u = np.array([r.random() for r in rngs])
+        u = worlds.uniforms.each() if worlds.uniforms is not None else \
+            np.array([random() for random in worlds._randoms])
         picks = np.searchsorted(cumulative, u, side="right")
         picks[picks == len(cumulative)] = 0
         return picks.astype(np.int64)
@@ -222,6 +234,49 @@ def _nbytes(snapshot: Any) -> int:
     if isinstance(snapshot, (list, tuple)):
         return sum(_nbytes(v) for v in snapshot)
     return 0
+
+
+class _Uniforms:
+    """Each world's next np_random.random() numbers, BLOCK at a time: Generator.random(n) gives the numbers
+    n calls of random() give, one after another (both take next_double of the bit generator), so a world
+    whose every draw is one random() draws exactly what it would call by call, for one call per BLOCK."""
+    BLOCK = 64
+
+    def __init__(self, rngs: list[np.random.Generator]) -> None:
+        self.rngs = rngs
+        self.buf = np.empty((len(rngs), self.BLOCK))
+        self.pos = np.full(len(rngs), self.BLOCK)  # empty: filled on first use
+        self._every = np.arange(len(rngs))
+
+    def each(self) -> np.ndarray:
+        """One number per world."""
+        if self.pos.max() >= self.BLOCK:
+            for w in np.flatnonzero(self.pos >= self.BLOCK):
+                self._fill(w)
+        u = self.buf[self._every, self.pos]
+        self.pos += 1
+        return u
+
+    def random(self, w: int) -> float:
+        """World w's next number."""
+        if self.pos[w] >= self.BLOCK:
+            self._fill(w)
+        self.pos[w] += 1
+        return float(self.buf[w, self.pos[w] - 1])
+
+    def _fill(self, w: int) -> None:
+        self.buf[w] = self.rngs[w].random(self.BLOCK)
+        self.pos[w] = 0
+
+
+class _OneWorld:
+    """World w's numbers of a _Uniforms, as the generator a _Drawer draws from (it calls random())."""
+
+    def __init__(self, uniforms: _Uniforms, w: int) -> None:
+        self.uniforms, self.w = uniforms, w
+
+    def random(self) -> float:
+        return self.uniforms.random(self.w)
 
 
 class _StartOutcomes:
@@ -259,14 +314,15 @@ class _StartOutcomes:
             worlds.engine_step(rows, picks)
             self.snapshots.append(eng.snapshot())
 
-    def restore(self, targets: np.ndarray, rngs: list[np.random.Generator]) -> None:
-        """Worlds `targets` draw their start outcomes (rngs[world]) and take those outcomes' states."""
-        one, w = self.one, len(rngs)
+    def restore(self, targets: np.ndarray, worlds: DeclaredWorlds) -> None:
+        """Worlds `targets` draw their start outcomes (each from its generator) and take their states."""
+        one, w, rngs, uniforms = self.one, worlds.n_worlds, worlds.rngs, worlds.uniforms
         outcome = np.zeros(len(targets), np.int64)
         for i, t in enumerate(targets):
+            rng = rngs[t] if uniforms is None else _OneWorld(uniforms, t)
             k = 0
             for c, drawer in enumerate(self.drawers):  # in the spec's order, as DeclaredWorld.reset draws
-                k = k * self.sizes[c] + self.position[c][drawer.pick(one, rngs[t])]
+                k = k * self.sizes[c] + self.position[c][drawer.pick(one, rng)]
             outcome[i] = k
         batch = outcome // w
         for b in np.unique(batch):
