@@ -257,26 +257,17 @@ class _Uniforms:
         self.pos += 1
         return u
 
-    def random(self, w: int) -> float:
-        """World w's next number."""
-        if self.pos[w] >= self.BLOCK:
+    def take(self, worlds: np.ndarray) -> np.ndarray:
+        """One number for each of `worlds` (distinct indices)."""
+        for w in worlds[self.pos[worlds] >= self.BLOCK]:
             self._fill(w)
-        self.pos[w] += 1
-        return float(self.buf[w, self.pos[w] - 1])
+        u = self.buf[worlds, self.pos[worlds]]
+        self.pos[worlds] += 1
+        return u
 
     def _fill(self, w: int) -> None:
         self.buf[w] = self.rngs[w].random(self.BLOCK)
         self.pos[w] = 0
-
-
-class _OneWorld:
-    """World w's numbers of a _Uniforms, as the generator a _Drawer draws from (it calls random())."""
-
-    def __init__(self, uniforms: _Uniforms, w: int) -> None:
-        self.uniforms, self.w = uniforms, w
-
-    def random(self) -> float:
-        return self.uniforms.random(self.w)
 
 
 class _StartOutcomes:
@@ -291,6 +282,13 @@ class _StartOutcomes:
                        for d in self.drawers]  # each choice's possible values
         self.position = [{int(v): i for i, v in enumerate(vals)} for vals in self.values]
         self.sizes = [len(v) for v in self.values]
+        self.cumulative = [np.asarray(d.cumulative if d.cumulative is not None else [], np.float64)
+                           for d in self.drawers]
+        # value -> its position among the possible ones (an impossible value, which categorical's
+        # fallback to value 0 can give at probability ~1e-16, counts as the first possible one)
+        self.position_of = [np.zeros(len(d.value_ids), np.int64) for d in self.drawers]
+        for c, vals in enumerate(self.values):
+            self.position_of[c][vals] = np.arange(len(vals))
         n = math.prod(self.sizes)
         per_world = _nbytes(eng.snapshot()) // w
         batches = -(-n // w)
@@ -318,12 +316,17 @@ class _StartOutcomes:
         """Worlds `targets` draw their start outcomes (each from its generator) and take their states."""
         one, w, rngs, uniforms = self.one, worlds.n_worlds, worlds.rngs, worlds.uniforms
         outcome = np.zeros(len(targets), np.int64)
-        for i, t in enumerate(targets):
-            rng = rngs[t] if uniforms is None else _OneWorld(uniforms, t)
-            k = 0
+        if uniforms is not None:  # every choice is one random() a world: drawn for all targets at once
             for c, drawer in enumerate(self.drawers):  # in the spec's order, as DeclaredWorld.reset draws
-                k = k * self.sizes[c] + self.position[c][drawer.pick(one, rng)]
-            outcome[i] = k
+                value = np.searchsorted(self.cumulative[c], uniforms.take(targets), side="right")
+                value[value == len(self.cumulative[c])] = 0  # categorical's "none exceeds u": value 0
+                outcome = outcome * self.sizes[c] + self.position_of[c][value]
+        else:
+            for i, t in enumerate(targets):
+                k = 0
+                for c, drawer in enumerate(self.drawers):
+                    k = k * self.sizes[c] + self.position[c][drawer.pick(one, rngs[t])]
+                outcome[i] = k
         batch = outcome // w
         for b in np.unique(batch):
             sel = batch == b
