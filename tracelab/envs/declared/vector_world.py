@@ -1,7 +1,8 @@
-"""A batch of declared worlds on ONE engine (the counting kernel, every world stepped by one compiled call,
-vector_fused.py), each world with its own np_random, and episodes that restart one world at a time.
+"""A batch of declared worlds on ONE engine (from 64 worlds the lanes kernel, below it the counting kernel
+inside one compiled call with the reads, vector_fused.py), each world with its own np_random, and
+episodes that restart one world at a time.
 
-Resets without an engine step (docs/worlds.md, "The vector env"): a declared episode starts with an
+Resets without an engine step (docs/worlds.md, "256 worlds: the vector env"): a declared episode starts with an
 engine step (the start facts and the drawn start choices), but the engine steps every world at once. So
 the start of every possible outcome of the start choices (the product of their possible values: one for
 FrozenLake's and CliffWalking's maps, 300 for Taxi) is computed once, when the batch is built, a batch of
@@ -317,7 +318,7 @@ class _StartOutcomes:
         one, w, rngs, uniforms = self.one, worlds.n_worlds, worlds.rngs, worlds.uniforms
         outcome = np.zeros(len(targets), np.int64)
         if uniforms is not None:  # every choice is one random() a world: drawn for all targets at once
-            for c, drawer in enumerate(self.drawers):  # in the spec's order, as DeclaredWorld.reset draws
+            for c in range(len(self.drawers)):  # in the spec's order, as DeclaredWorld.reset draws
                 value = np.searchsorted(self.cumulative[c], uniforms.take(targets), side="right")
                 value[value == len(self.cumulative[c])] = 0  # categorical's "none exceeds u": value 0
                 outcome = outcome * self.sizes[c] + self.position_of[c][value]
