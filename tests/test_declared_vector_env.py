@@ -170,3 +170,18 @@ def test_engine_restore_from_another_worlds_state(kernel: str) -> None:
     assert eng.is_true(both).tolist() == [[True, True], [False, False], [True, True]]
     with pytest.raises(ValueError, match="one world of the snapshot"):
         eng.restore(snap, np.array([0, 1]), source=np.array([3, 0]))
+
+
+def test_bench_toytext_times_the_vector_env(capsys: pytest.CaptureFixture) -> None:
+    """`tracelab bench toytext --batch N` also times N worlds of each game in the vector env against
+    gymnasium's SyncVectorEnv, in env-steps/s (figures in docs/worlds.md, not asserted)."""
+    import json
+
+    from tracelab.cli import main
+    assert main(["bench", "toytext", "--quick", "--batch", "8", "--json"]) == 0
+    v = json.loads(capsys.readouterr().out)["vector"]
+    assert v["batch"] == 8 and v["goal_ratio"] == 5.0
+    assert [g["game"] for g in v["games"]] == ["FrozenLake 4x4 slippery", "CliffWalking", "Taxi"]
+    for g in v["games"]:
+        assert g["tracelab"]["median"] > 0 and g["gymnasium"]["median"] > 0
+        assert g["goal_met"] == (g["ratio"] >= 5.0)
