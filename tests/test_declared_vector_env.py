@@ -4,6 +4,8 @@ SAME_STEP autoreset, final observations and infos included) and a single Declare
 engine's restore from another world's state that its resets use."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -16,6 +18,7 @@ from tracelab.engine import Engine, parse_program
 from tracelab.envs import make_env, make_vec_env
 from tracelab.envs.declared.toytext import spec_path
 from tracelab.envs.declared.vector_env import DeclaredVectorEnv
+from test_env_spec import SPEC, write_world
 
 # (worlds, steps): 16 worlds run on the counting kernel (one compiled call with the reads), 64 on the lanes
 # kernel (the engine's step); over 10,000 world-steps a game either way
@@ -79,14 +82,20 @@ def test_each_world_equals_gymnasiums_own_game(gym_id: str, our_id: str, kwargs:
     assert ends >= worlds  # the worlds did restart (every game's episodes end under random actions)
 
 
-def test_each_world_equals_a_single_declared_env() -> None:
+@pytest.mark.parametrize("in_blocks", [True, False], ids=["numbers-in-blocks", "call-by-call"])
+def test_each_world_equals_a_single_declared_env(in_blocks: bool) -> None:
     """World i of the vector env and a DeclaredEnv reset with seed[i] (a list of seeds) take the same
-    observations, rewards and ends; after an end, the DeclaredEnv resets without a seed, as the world does."""
+    observations, rewards and ends; after an end, the DeclaredEnv resets without a seed, as the world does.
+    Both ways of drawing: random() numbers read 64 at a time (every draw of the toy-text games is one), and
+    call by call (what a spec with a `choice` draw or per-step weights uses)."""
     seeds = [101, 5, 77, 3]
     spec = spec_path("frozen_lake.toml")
     vec = make_vec_env(spec, len(seeds), max_episode_steps=20)
+    assert vec.worlds._only_uniforms
+    vec.worlds._only_uniforms = in_blocks
     singles = [make_env(spec) for _ in seeds]
     obs, _ = vec.reset(seed=seeds)
+    assert (vec.worlds.uniforms is not None) == in_blocks
     assert obs.tolist() == [e.reset(seed=s)[0] for e, s in zip(singles, seeds)]
     rng = np.random.default_rng(2)
     for step in range(3000):
@@ -100,6 +109,48 @@ def test_each_world_equals_a_single_declared_env() -> None:
                 assert info["final_obs"][i] == o and info["t"][i] == 0
                 o, _ = env.reset()
             assert obs[i] == o, (step, i)
+
+
+@pytest.mark.parametrize("space", ["Box", "MultiDiscrete", "Dict"])
+@pytest.mark.parametrize("worlds", [3, 64])
+def test_other_spaces_fuzzy_bounds_and_masks_world_by_world(tmp_path: Path, space: str, worlds: int) -> None:
+    """test_env_spec's corridor (a Box of one-hot cells and a fuzzy atom's bounds, a scaled reward, a
+    mask, a step limit; the fuzzy atom keeps even 64 worlds on the counting kernel) and its other
+    spaces: each world equals a DeclaredEnv given the same actions."""
+    spec = SPEC
+    if space != "Box":
+        head, rest = SPEC.split("[observation]")
+        parts = ('[[observation.parts]]\nname = "p0"\nread = "index"\natom = "at(C)"\nover = "cells"\n'
+                 + ('[[observation.parts]]\nname = "p1"\nread = "index"\natoms = ["bot(robo)", "over(w)"]\n'
+                    if space == "MultiDiscrete" else
+                    '[[observation.parts]]\nname = "p1"\nread = "lower"\natoms = ["energy(robo)"]\n'))
+        spec = head + f'[observation]\nspace = "{space}"\n' + parts + rest[rest.index("[reward]"):]
+    path = write_world(tmp_path, spec)
+    vec = make_vec_env(path, worlds)
+    assert vec.worlds.kernel == "counting"
+    singles = [make_env(path) for _ in range(worlds)]
+    obs, info = vec.reset(seed=0)
+    rng = np.random.default_rng(3)
+    starts = [e.reset(seed=i) for i, e in enumerate(singles)]
+    for step in range(40):
+        for i, (o, inf) in enumerate(starts):
+            mine = {k: v[i] for k, v in obs.items()} if space == "Dict" else obs[i]
+            theirs = o
+            if space == "Dict":
+                assert mine.keys() == theirs.keys() and all(np.array_equal(mine[k], theirs[k]) for k in mine)
+            else:
+                np.testing.assert_array_equal(mine, theirs, err_msg=f"step {step}, world {i}")
+            np.testing.assert_array_equal(info["action_mask"][i], inf["action_mask"])
+        assert vec.observation_space.contains(obs)
+        actions = rng.integers(0, 3, worlds)
+        obs, reward, terminated, truncated, info = vec.step(actions)
+        starts = []
+        for i, env in enumerate(singles):
+            o, r, te, tr, inf = env.step(int(actions[i]))
+            assert (r, te, tr) == (reward[i], terminated[i], truncated[i]), (step, i)
+            if te or tr:
+                o, inf = env.reset()
+            starts.append((o, inf))
 
 
 def test_vector_api() -> None:
