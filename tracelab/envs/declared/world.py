@@ -86,8 +86,8 @@ class DeclaredWorld:
     def __init__(self, spec: WorldSpec, *, kernel: str = "auto", trace: bool = False, worlds: int = 1) -> None:
         self.spec = spec
         # one world steps fastest on the counting kernel inside one compiled call (fused.py); another
-        # kernel asked for by name runs its own steps. `worlds` > 1: the engine of a batch
-        # (vector_world.DeclaredWorlds steps it; this object's own step plays world 0 only)
+        # kernel asked for by name runs its own steps. `worlds` > 1: the engine of a batch, which
+        # vector_world.DeclaredWorlds steps (this object's reset and step serve one world only)
         self.engine = eng = Engine(spec.program, worlds=worlds, trace=trace,
                                    kernel="counting" if kernel == "auto" else kernel)
         ids = self._ids
