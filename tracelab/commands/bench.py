@@ -28,8 +28,7 @@ def register(sub: argparse._SubParsersAction) -> None:
              "tui": "the terminal UI on a 10M-row run: open, first page, scroll, jump, filter (headless)",
              "reason-store": "reason --run against reason --no-trace on a 1M-edge graph: the ratio, change "
                              "rows/s into the store, peak memory",
-             "toytext": "gymnasium's toy-text games as rules (docs/worlds.md) against gymnasium's own: one world, "
-                        "and a vector env of --batch worlds against gymnasium's SyncVectorEnv",
+             "toytext": "gymnasium's toy-text games as rules (docs/worlds.md) against gymnasium's own, one world",
              "all": "engine, env, store, replay and train"}
     for name, text in helps.items():
         q = what.add_parser(name, help=text)
