@@ -201,23 +201,28 @@ class CountingState:
                 "act_pos": self._act_pos.copy(), "act_n": self._act_n.copy(), "pend": self._pend.copy(),
                 "pend_f": self._pend_f.copy(), "pend_n": self._pend_n.copy()}
 
-    def restore(self, snap: dict[str, Any], indices: np.ndarray, shift: int) -> None:
-        """Worlds `indices` take their state from snap; their scheduled firings move `shift` steps later."""
+    def restore(self, snap: dict[str, Any], indices: np.ndarray, shift: int, sources: np.ndarray | None = None
+                ) -> None:
+        """Worlds `indices` take their state from snap's worlds `sources` (default: the same worlds); their
+        scheduled firings move `shift` steps later."""
+        sources = indices if sources is None else sources
         worlds: slice | np.ndarray = indices
+        src: slice | np.ndarray = sources
         if indices.size == 1:  # one world (the usual episode end): basic indexing, no fancy-index copies
             worlds = slice(int(indices[0]), int(indices[0]) + 1)
+            src = slice(int(sources[0]), int(sources[0]) + 1)
         n_atoms = snap["lower"].shape[1]
         if n_atoms < self.n_atoms:  # atoms interned since the snapshot start unset
             self.lower[worlds] = 0.0
             self.upper[worlds] = 1.0
             self.static[worlds] = False
             self.last_cause[worlds] = -1
-        self.lower[worlds, :n_atoms] = snap["lower"][worlds]
-        self.upper[worlds, :n_atoms] = snap["upper"][worlds]
-        self.static[worlds, :n_atoms] = snap["static"][worlds]
-        self.last_cause[worlds, :n_atoms] = snap["last_cause"][worlds]
+        self.lower[worlds, :n_atoms] = snap["lower"][src]
+        self.upper[worlds, :n_atoms] = snap["upper"][src]
+        self.static[worlds, :n_atoms] = snap["static"][src]
+        self.last_cause[worlds, :n_atoms] = snap["last_cause"][src]
         if snap["unsat"].shape == self._unsat.shape and n_atoms == self.n_atoms:
-            restore_groundings(indices, snap["unsat"], snap["act"], snap["act_n"], self._unsat, self._act,
+            restore_groundings(indices, sources, snap["unsat"], snap["act"], snap["act_n"], self._unsat, self._act,
                                self._act_n, self._act_pos, self._kind_base)
         else:  # groundings grew since the snapshot: recount those worlds from their interpretation
             kt = self.kt
@@ -227,10 +232,10 @@ class CountingState:
         pend, pend_n = snap["pend"], snap["pend_n"]
         if pend.shape[1] > self._pend.shape[1]:
             self._grow_pending(pend.shape[1])
-        self._pend[worlds, :pend.shape[1]] = pend[worlds]
-        self._pend_f[worlds, :pend.shape[1]] = snap["pend_f"][worlds]
+        self._pend[worlds, :pend.shape[1]] = pend[src]
+        self._pend_f[worlds, :pend.shape[1]] = snap["pend_f"][src]
         self._pend[worlds, :, 0] += shift
-        self._pend_n[worlds] = pend_n[worlds]
+        self._pend_n[worlds] = pend_n[src]
 
     def bound(self, atom: int, world: int) -> tuple[float, float]:
         return float(self.lower[world, atom]), float(self.upper[world, atom])

@@ -164,7 +164,22 @@ class _Shard:
         L.restore_worlds(local, shift, part["st"], part["gs"], part["pend_due"], part["pend_g"], part["pend_m"],
                          self.st, self.gs, kt["inst"], self.alist, self.alist_n, self.apos, batch.kind_base,
                          self.pend_due, self.pend_g, self.pend_m, self.pend_n, self.wmask)
+        self._recount_if_grown(batch, part)
+
+    def restore_from(self, batch: LaneState, part: dict[str, Any], local: np.ndarray, sources: np.ndarray,
+                     shift: int) -> None:
+        """Worlds `local` take the states of `part`'s worlds `sources` (local to that snapshot part)."""
+        need = int(self.pend_n[0]) + len(part["pend_g"]) * len(local)
+        if need > len(self.pend_g):
+            self.grow_pending(need)
+        L.restore_worlds_from(local, sources, shift, part["st"], part["gs"], part["pend_due"], part["pend_g"],
+                              part["pend_m"], self.st, self.gs, batch.kt["inst"], self.alist, self.alist_n,
+                              self.apos, batch.kind_base, self.pend_due, self.pend_g, self.pend_m, self.pend_n)
+        self._recount_if_grown(batch, part)
+
+    def _recount_if_grown(self, batch: LaneState, part: dict[str, Any]) -> None:
         if len(part["gs"]) < len(self.gs):  # groundings grew: count them all again
+            kt = batch.kt
             L.fill_counts(0, self.valid, self.st, kt["b_ptr"], kt["b_atom"], kt["b_code"], self.gs, kt["inst"],
                           self.alist, self.alist_n, self.apos, batch.kind_base)
 
@@ -186,6 +201,7 @@ class LaneState:
         self.lc = np.zeros((0, w, 3), np.int32)
         self.wep = np.zeros(w, np.int32)  # restores per world
         self.lc_snap = np.full(w, -1, np.int64)  # the snapshot each world was last restored from
+        self.lc_col = np.arange(w)  # the world of that snapshot whose state it took
         self._snap_lc: dict[int, np.ndarray] = {}  # those snapshots' last causes [atom, world, 2]
         self.kind_base = np.zeros(K.N_KINDS, np.int64)
         self.n_ordinary = 0
@@ -251,7 +267,7 @@ class LaneState:
             worlds = np.flatnonzero(self.lc_snap == sid)
             theirs = np.full((len(out), len(worlds), 2), -1, np.int32)
             n = min(len(src), len(out))
-            theirs[:n] = src[:n][:, worlds]
+            theirs[:n] = src[:n][:, self.lc_col[worlds]]
             out[:, worlds] = np.where(stale[:, worlds, None], theirs, out[:, worlds])
         return out
 
@@ -259,7 +275,8 @@ class LaneState:
         src = self._snap_lc.get(int(self.lc_snap[world]))
         if src is None or atom >= len(src):
             return -1, -1
-        return int(src[atom, world, 0]), int(src[atom, world, 1])
+        col = int(self.lc_col[world])
+        return int(src[atom, col, 0]), int(src[atom, col, 1])
 
     # ---- building ----
 
@@ -315,12 +332,24 @@ class LaneState:
         return {"id": LaneState.events, "lc": self._resolved_causes(),
                 "shards": [sh.snapshot() for sh in self.shards]}
 
-    def restore(self, snap: dict[str, Any], indices: np.ndarray, shift: int) -> None:
-        for sh, part in zip(self.shards, snap["shards"]):
-            local = indices[(indices >= sh.w0) & (indices < sh.w1)] - sh.w0
-            if len(local):
-                sh.restore(self, part, local, shift)
-        # their last causes are now the snapshot's: count their restores on, so every cause is older
+    def restore(self, snap: dict[str, Any], indices: np.ndarray, shift: int, sources: np.ndarray | None = None
+                ) -> None:
+        """Worlds `indices` take their state from snap's worlds `sources` (default: the same worlds)."""
+        if sources is None:
+            for sh, part in zip(self.shards, snap["shards"]):
+                local = indices[(indices >= sh.w0) & (indices < sh.w1)] - sh.w0
+                if len(local):
+                    sh.restore(self, part, local, shift)
+        else:
+            for sh in self.shards:
+                mine = (indices >= sh.w0) & (indices < sh.w1)
+                for j, (src, part) in enumerate(zip(self.shards, snap["shards"])):
+                    pick = mine & (sources >= src.w0) & (sources < src.w1)
+                    if pick.any():
+                        sh.restore_from(self, part, indices[pick] - sh.w0, sources[pick] - src.w0, shift)
+        # their last causes are now the snapshot's (its column `sources`): count their restores on, so
+        # every cause is older
+        self.lc_col[indices] = indices if sources is None else sources
         self.wep[indices] += 1
         if snap["id"] not in self._snap_lc:  # forget the snapshots no world refers to any more
             live = set(np.unique(self.lc_snap).tolist())

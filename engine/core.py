@@ -373,10 +373,12 @@ class Engine:
         restores into the other, as after a switch to the compiled kernel)."""
         return "lanes" if self.kernel == "lanes" else "counting"
 
-    def restore(self, snap: dict[str, object], worlds: np.ndarray) -> None:
+    def restore(self, snap: dict[str, object], worlds: np.ndarray, source: np.ndarray | None = None) -> None:
         """Put `worlds` (indices or a bool mask) back into their state in `snap`. Their next step behaves
         as the snapshot's next step did: firings scheduled then are shifted to the current clock. (Program
-        facts with time windows follow the engine's one clock; per-world restarts see them by that clock.)"""
+        facts with time windows follow the engine's one clock; per-world restarts see them by that clock.)
+        `source`: world worlds[i] takes the state of snap's world source[i] instead
+        of its own, e.g. one of several start states prepared in a batch (a declared vector env's resets)."""
         worlds = np.flatnonzero(worlds) if np.asarray(worlds).dtype == np.bool_ else np.asarray(worlds)
         if worlds.size == 0:
             return
@@ -384,7 +386,15 @@ class Engine:
             raise RuntimeError(f"this snapshot was taken by the {snap['kernel']} kernel, but the engine now "
                                f"runs the {self.kernel} kernel (a non-crisp external fact arrived); take a "
                                "new snapshot")
-        self._state.restore(snap, worlds.astype(np.int64), self.t - int(snap["t"]))
+        shift = self.t - int(snap["t"])
+        if source is None:
+            self._state.restore(snap, worlds.astype(np.int64), shift)
+            return
+        source = np.asarray(source, np.int64)
+        if source.shape != worlds.shape or source.min() < 0 or source.max() >= self.n_worlds:
+            raise ValueError(f"source must give one world of the snapshot (0..{self.n_worlds - 1}) per "
+                             f"restored world, got {source.tolist()}")
+        self._state.restore(snap, worlds.astype(np.int64), shift, source)
 
     # ---- atoms ----
 

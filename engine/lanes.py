@@ -1031,6 +1031,63 @@ def restore_worlds(local, shift, snap_st, snap_gs, snap_due, snap_g, snap_m, st,
 
 
 @lanes_jit
+def restore_worlds_from(targets, sources, shift, snap_st, snap_gs, snap_due, snap_g, snap_m, st, gs, inst, alist,
+                        alist_n, apos, kind_base, pend_due, pend_g, pend_m, pend_n):
+    """Worlds `targets` (of this shard) take the state of the snapshot part's worlds `sources` (local to
+    that part), one by one: planes, counts and active masks bit by bit; atoms interned since unset; their
+    scheduled firings dropped and the source world's taken, `shift` steps later, as rows of their own.
+    The schedule must have room for its rows plus len(targets) times the snapshot's."""
+    nw = st.shape[2]
+    for i in range(targets.shape[0]):
+        t, s = targets[i], sources[i]
+        tk, tbit = t >> 6, ONE << np.uint64(t & 63)
+        sk, sshift = s >> 6, np.uint64(s & 63)
+        tshift = np.uint64(t & 63)
+        for a in range(st.shape[0]):
+            for p in range(N_PLANES):
+                bit = ((snap_st[a, p, sk] >> sshift) & ONE) if a < snap_st.shape[0] else ZERO
+                st[a, p, tk] = (st[a, p, tk] & ~tbit) | (bit << tshift)
+        for g in range(snap_gs.shape[0]):
+            old = gs[g, tk, 0]
+            for p in range(gs.shape[2]):
+                bit = (snap_gs[g, sk, p] >> sshift) & ONE
+                gs[g, tk, p] = (gs[g, tk, p] & ~tbit) | (bit << tshift)
+            if (old == ZERO) != (gs[g, tk, 0] == ZERO):
+                now_any = False
+                for k in range(nw):
+                    if gs[g, k, 0] != ZERO:
+                        now_any = True
+                        break
+                listed = apos[g] >= 0
+                if now_any and not listed:
+                    _list_add(g, inst, alist, alist_n, apos, kind_base)
+                elif listed and not now_any:
+                    _list_remove(g, inst, alist, alist_n, apos, kind_base)
+        j = 0
+        for r in range(pend_n[0]):  # keep the other worlds' firings, in order
+            pend_m[r, tk] &= ~tbit
+            left = False
+            for k in range(nw):
+                if pend_m[r, k] != ZERO:
+                    left = True
+            if left:
+                pend_due[j] = pend_due[r]
+                pend_g[j] = pend_g[r]
+                for k in range(nw):
+                    pend_m[j, k] = pend_m[r, k]
+                j += 1
+        for r in range(snap_g.shape[0]):
+            if (snap_m[r, sk] >> sshift) & ONE:
+                for k in range(nw):
+                    pend_m[j, k] = ZERO
+                pend_m[j, tk] = tbit
+                pend_due[j] = snap_due[r] + shift
+                pend_g[j] = snap_g[r]
+                j += 1
+        pend_n[0] = j
+
+
+@lanes_jit
 def plane_truth(st, plane, atoms, w0, n_worlds, out):
     """Sets out[w0 + w, j] where bit w of plane `plane` of atom atoms[j] is set, for w < n_worlds ([1,1]:
     P_T, [0,0]: P_F). `out` comes zeroed: only set bits are visited (most atoms hold in few worlds)."""

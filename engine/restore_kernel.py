@@ -11,22 +11,24 @@ from numba import njit
 
 
 @njit(cache=True, _nrt=False)
-def restore_groundings(worlds, s_unsat, s_act, s_act_n, unsat, act, act_n, act_pos, kind_base):
-    """Worlds `worlds` (int64 indices) take unsat, the active lists and act_n from the snapshot arrays;
-    afterwards act_pos and the lists' first act_n entries equal the snapshot's."""
+def restore_groundings(worlds, sources, s_unsat, s_act, s_act_n, unsat, act, act_n, act_pos, kind_base):
+    """Worlds `worlds` (int64 indices) take unsat, the active lists and act_n from the snapshot arrays'
+    worlds `sources` (int64, one per world; often the same indices); afterwards act_pos and the lists'
+    first act_n entries equal the snapshot world's."""
     for i in range(worlds.shape[0]):
         w = worlds[i]
+        s = sources[i]
         for k in range(act_n.shape[1]):
             base = kind_base[k]
             for p in range(act_n[w, k]):  # active now: inactive unless the snapshot lists it
                 act_pos[w, act[w, base + p]] = -1
         for k in range(act_n.shape[1]):
             base = kind_base[k]
-            n = s_act_n[w, k]
+            n = s_act_n[s, k]
             for p in range(n):
-                g = s_act[w, base + p]
+                g = s_act[s, base + p]
                 act[w, base + p] = g
                 act_pos[w, g] = p
             act_n[w, k] = n
         for g in range(unsat.shape[1]):
-            unsat[w, g] = s_unsat[w, g]
+            unsat[w, g] = s_unsat[s, g]

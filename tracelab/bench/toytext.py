@@ -11,6 +11,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from tracelab.bench import toytext_vector
 from tracelab.bench.common import block_rates, format_table
 
 GOAL_RATIO = 0.5
@@ -38,7 +39,7 @@ def stepper(env: gym.Env) -> Any:
     return run
 
 
-def run(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
+def run(quick: bool = False, repeats: int = 5, batch: int | None = None) -> dict[str, Any]:
     import tracelab.envs  # noqa: F401  (registers the ids)
     repeats = 1 if quick else repeats
     target = 0.05 if quick else TARGET_S
@@ -49,7 +50,8 @@ def run(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
         ratio = ours["steps_per_s"]["median"] / theirs["steps_per_s"]["median"]
         out.append({"game": name, "tracelab": ours, "gymnasium": theirs, "ratio": ratio,
                     "goal_met": ratio >= GOAL_RATIO})
-    return {"games": out, "goal_ratio": GOAL_RATIO, "repeats": repeats}
+    vector = toytext_vector.run(batch or (16 if quick else 256), quick, repeats)
+    return {"games": out, "goal_ratio": GOAL_RATIO, "repeats": repeats, "vector": vector}
 
 
 def report(r: dict[str, Any]) -> str:
@@ -61,4 +63,4 @@ def report(r: dict[str, Any]) -> str:
     head = (f"one world, untraced, random actions with resets (median of {r['repeats']}); "
             f"goal: tracelab >= {r['goal_ratio']}x gymnasium")
     return head + "\n" + format_table(["game", "tracelab steps/s", "us/step", "gymnasium steps/s", "us/step",
-                                       "ratio", "goal"], rows)
+                                       "ratio", "goal"], rows) + "\n\n" + toytext_vector.report(r["vector"])

@@ -49,7 +49,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         if name == "tui":
             q.add_argument("--rows", type=positive_int, default=None,
                            help="change rows of the synthetic run (default 10,000,000; --quick: 200,000)")
-        if name in ("env", "all"):
+        if name in ("env", "all", "toytext"):
             q.add_argument("--batch", type=positive_int, default=None,
                            help="worlds of the batched runs (default 256; --quick: 16)")
         if name in ("train", "all"):
@@ -122,7 +122,7 @@ def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], s
         return r, reason_store.report(r)
     if name == "toytext":
         from tracelab.bench import toytext
-        r = toytext.run(args.quick, args.repeats)
+        r = toytext.run(args.quick, args.repeats, args.batch)
         return r, toytext.report(r)
     if name == "first-run":
         from tracelab.bench import first_run

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from tracelab.envs.declared.gym_env import DeclaredEnv
+    from tracelab.envs.declared.vector_env import DeclaredVectorEnv
 
 
 def make_env(spec: str | os.PathLike[str], **kwargs: Any) -> DeclaredEnv:
@@ -16,6 +17,13 @@ def make_env(spec: str | os.PathLike[str], **kwargs: Any) -> DeclaredEnv:
     `kernel` (the engine's)."""
     from tracelab.envs.declared.gym_env import DeclaredEnv
     return DeclaredEnv(spec, **kwargs)
+
+
+def make_vec_env(spec: str | os.PathLike[str], num_envs: int, **kwargs: Any) -> DeclaredVectorEnv:
+    """`num_envs` worlds of a spec as one gymnasium VectorEnv on one engine (SAME_STEP autoreset); kwargs:
+    the spec's [params], `max_episode_steps`."""
+    from tracelab.envs.declared.vector_env import DeclaredVectorEnv
+    return DeclaredVectorEnv(spec, num_envs, **kwargs)
 
 
 def _register() -> None:

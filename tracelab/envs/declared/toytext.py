@@ -32,5 +32,6 @@ def register_toytext() -> None:
     for env_id, (spec, steps) in TOYTEXT_ENVS.items():
         if env_id not in gym.registry:
             gym.register(id=env_id, entry_point="tracelab.envs.declared.gym_env:DeclaredEnv",
+                         vector_entry_point="tracelab.envs.declared.vector_env:DeclaredVectorEnv",
                          kwargs={"spec": str(spec_path(spec)), **_EXTRA_KWARGS.get(env_id, {})},
                          max_episode_steps=steps)

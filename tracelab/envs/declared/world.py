@@ -83,11 +83,12 @@ class _Drawer:
 class DeclaredWorld:
     """One world of `spec` on its own engine (`kernel`: the engine's; `trace`: its change log)."""
 
-    def __init__(self, spec: WorldSpec, *, kernel: str = "auto", trace: bool = False) -> None:
+    def __init__(self, spec: WorldSpec, *, kernel: str = "auto", trace: bool = False, worlds: int = 1) -> None:
         self.spec = spec
         # one world steps fastest on the counting kernel inside one compiled call (fused.py); another
-        # kernel asked for by name runs its own steps
-        self.engine = eng = Engine(spec.program, worlds=1, trace=trace,
+        # kernel asked for by name runs its own steps. `worlds` > 1: the engine of a batch, which
+        # vector_world.DeclaredWorlds steps (this object's reset and step serve one world only)
+        self.engine = eng = Engine(spec.program, worlds=worlds, trace=trace,
                                    kernel="counting" if kernel == "auto" else kernel)
         ids = self._ids
         # the facts of each (agent, action) row: row agent * n_actions + action

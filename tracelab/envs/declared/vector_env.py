@@ -1,0 +1,115 @@
+"""`DeclaredVectorEnv`: `num_envs` worlds of a spec (docs/worlds.md) as one gymnasium VectorEnv, every world
+stepped by one engine call (vector_world.DeclaredWorlds). Spaces, rewards and infos are DeclaredEnv's,
+batched (gymnasium.vector.utils.batch_space).
+
+Autoreset: SAME_STEP, as tracelab.envs.vector_env.GridWarVectorEnv and gymnasium's SyncVectorEnv with
+autoreset_mode=SAME_STEP: a world whose episode ends returns its terminal reward and flags but its reset
+observation; info["final_obs"] (the observations' dtype and shape, valid where info["_final_obs"]) holds
+the terminal observations, info["final_info"] the step's info of those worlds (each key with its `_key`
+mask, the worlds that ended), info["_final_info"] marks them; the top-level info describes the returned
+observation (for a reset world: t = 0 and the new episode's action_mask). Every key has its `_key` mask.
+
+Seeding, as SyncVectorEnv seeds its envs: reset(seed=s) seeds world i's np_random with s + i, a list
+seeds world i with seed[i]; a world that restarts later draws on from its own generator. So world i
+steps exactly as DeclaredEnv (and gymnasium's own game) reset with seed s + i and given its actions.
+
+`kernel`: the engine's; "auto" takes the lanes kernel from 64 worlds on (bit-parallel, one call for all
+worlds) and counting below (every world in one compiled call with the reads, vector_fused.py).
+
+`max_episode_steps`: truncation after that many steps (gymnasium's TimeLimit; make_vec passes the
+registered limit)."""
+from __future__ import annotations
+
+import os
+from typing import Any, Sequence
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from tracelab.envs.declared.gym_env import observation_space
+from tracelab.envs.declared.spec import WorldSpec, load_spec
+from tracelab.envs.declared.vector_world import DeclaredWorlds
+from tracelab.envs.vector_env import GridWarVectorEnv
+
+
+class DeclaredVectorEnv(VectorEnv):
+    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
+
+    def __init__(self, spec: WorldSpec | str | os.PathLike[str], num_envs: int = 1, *,
+                 max_episode_steps: int | None = None, render_mode: str | None = None, copy: bool = True,
+                 kernel: str = "auto", **params: Any) -> None:
+        if render_mode is not None:
+            raise ValueError("DeclaredVectorEnv does not render")
+        if num_envs < 1:
+            raise ValueError(f"num_envs must be at least 1, got {num_envs}")
+        if max_episode_steps is not None and max_episode_steps < 1:
+            raise ValueError(f"max_episode_steps must be at least 1, got {max_episode_steps}")
+        self.world_spec = spec if isinstance(spec, WorldSpec) else load_spec(spec, **params)
+        if len(self.world_spec.agents) != 1:
+            raise ValueError(f"{self.world_spec.path}: the vector env plays one agent; this spec declares "
+                             f"{len(self.world_spec.agents)}")
+        self.num_envs = num_envs
+        self.max_episode_steps = max_episode_steps
+        self.copy = copy  # observations are new arrays either way; kept for SyncVectorEnv's signature
+        self.worlds = DeclaredWorlds(self.world_spec, num_envs, kernel)
+        self.single_observation_space = observation_space(self.world_spec)
+        self.single_action_space = spaces.Discrete(len(self.world_spec.action_names))
+        self.observation_space = batch_space(self.single_observation_space, num_envs)
+        self.action_space = batch_space(self.single_action_space, num_envs)
+        self._rngs: list[np.random.Generator] = []
+        self._all = np.ones(num_envs, bool)
+        self._all.flags.writeable = False  # shared by every `_key` mask that covers all worlds
+        self._everywhere = np.arange(num_envs)
+
+    def reset(self, *, seed: int | Sequence[int] | None = None, options: dict[str, Any] | None = None
+              ) -> tuple[Any, dict[str, Any]]:
+        if seed is None:
+            seeds: list[int | None] = [None] * self.num_envs
+        elif isinstance(seed, (int, np.integer)):
+            seeds = [int(seed) + i for i in range(self.num_envs)]
+        else:
+            seeds = [None if s is None else int(s) for s in seed]
+            if len(seeds) != self.num_envs:
+                raise ValueError(f"reset(seed=...) needs one seed per world ({self.num_envs}), got {len(seeds)}")
+        if seed is not None or not self._rngs:
+            self._rngs = [seeding.np_random(s)[0] for s in seeds]
+            self.worlds.use_generators(self._rngs)
+        if isinstance(seed, (int, np.integer)):
+            super().reset(seed=int(seed))
+        self.worlds.reset(self._everywhere)
+        return self.worlds.observations(), self._info(self._all)
+
+    def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        if not self._rngs:
+            raise RuntimeError("call reset() before step()")
+        a = np.asarray(actions)
+        n = self.single_action_space.n
+        if a.shape != (self.num_envs,) or not np.issubdtype(a.dtype, np.integer) or a.min() < 0 or a.max() >= n:
+            raise ValueError(f"actions must be {self.num_envs} integers in 0..{n - 1}, got {actions!r}")
+        w = self.worlds
+        w.step(a.astype(np.int64))
+        obs = w.observations()
+        reward = w.rewards()
+        terminated, truncated = w.terminated(), w.truncated(self.max_episode_steps)
+        info = self._info(self._all)
+        done = terminated | truncated
+        if done.any():
+            final_info = self._with_masks({k: v for k, v in info.items() if not k.startswith("_")}, done)
+            w.reset(np.flatnonzero(done))
+            final_obs, obs = obs, w.observations()  # the others' observations read again, unchanged
+            info = self._info(self._all)
+            info.update(final_obs=final_obs, _final_obs=done, final_info=final_info, _final_info=done)
+        return obs, reward, terminated, truncated, info
+
+    def _info(self, mask: np.ndarray) -> dict[str, Any]:
+        info: dict[str, Any] = {"t": self.worlds.steps.copy()}
+        masks = self.worlds.action_masks()
+        if masks is not None:
+            info["action_mask"] = masks
+        return self._with_masks(info, mask)
+
+    _with_masks = staticmethod(GridWarVectorEnv._with_masks)  # gymnasium's `_key` masks, as GridWar's
+

@@ -1,0 +1,334 @@
+"""A batch of declared worlds on ONE engine (from 64 worlds the lanes kernel, below it the counting kernel
+inside one compiled call with the reads, vector_fused.py), each world with its own np_random, and
+episodes that restart one world at a time.
+
+Resets without an engine step (docs/worlds.md, "256 worlds: the vector env"): a declared episode starts with an
+engine step (the start facts and the drawn start choices), but the engine steps every world at once. So
+the start of every possible outcome of the start choices (the product of their possible values: one for
+FrozenLake's and CliffWalking's maps, 300 for Taxi) is computed once, when the batch is built, a batch of
+worlds at a time, and kept as engine snapshots; a world that restarts draws its choices from its own
+np_random exactly as a single DeclaredWorld does, then takes the state of its outcome's world in those
+snapshots (Engine.restore(..., source=...)). The outcomes' states are bounded (MAX_START_BYTES)."""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from tracelab.engine.core import LANES_MIN_WORLDS
+from tracelab.envs.declared import fused, vector_fused
+from tracelab.envs.declared.spec import WorldSpec
+from tracelab.envs.declared.world import DeclaredWorld
+
+MAX_START_BYTES = 256 << 20  # the start outcomes' engine states, all together
+
+
+class DeclaredWorlds:
+    """`n_worlds` worlds of `spec` stepped together (rows: one action per world and agent)."""
+
+    def __init__(self, spec: WorldSpec, n_worlds: int, kernel: str = "auto") -> None:
+        after = [d for d in spec.random_facts if d.after is not None]
+        if after:
+            raise ValueError(f"{spec.path}: random fact {after[0].name!r} is drawn `after` a step, which the "
+                             "vector env does not support yet (a second engine step of some worlds only)")
+        self.spec = spec
+        self.n_worlds = w = n_worlds
+        # the single world's construction, on an engine of n_worlds worlds: its ids, draws and tables
+        self.one = one = _world(spec, n_worlds, kernel)
+        self.engine = one.engine
+        self.n_agents, self.n_actions = one.n_agents, one.n_actions
+        t = one._tables
+        cap = len(t[7])
+        self._tables = (*t[:7], np.zeros((w, cap), np.int64), np.zeros(w, np.int64), t[9], t[10])
+        self._ext = (np.zeros(w + 1, np.int64), np.zeros((w * 2 * cap, 3), np.int64), np.zeros((w * 2 * cap, 2)))
+        part_ptr, part_atoms, table_atoms, table_values, table_agent, term, trunc, mask = one._reads
+        read_atoms = np.concatenate([part_atoms, table_atoms, term, trunc, mask]).astype(np.int64)
+        self._reads = (read_atoms, np.zeros((w, len(read_atoms)), np.bool_), part_ptr, table_values, table_agent,
+                       np.array([len(part_atoms), len(table_atoms), len(term), len(trunc), len(mask)], np.int64))
+        self._out = (np.zeros((w, len(one._out[0])), np.int64), np.zeros((w, self.n_agents)), np.zeros((w, 2)),
+                     np.zeros((w, len(mask)), np.int8), np.zeros(1, np.int64))
+        self._buffers: fused.DeclaredBuffers | None = None
+        self._bound_version = -1
+        self._rows = np.full((w, self.n_agents), -1, np.int64)
+        self._picks = np.full((w, len(one._picks)), -1, np.int64)
+        self.steps = np.zeros(w, np.int64)
+        # every draw one np_random.random() (the toy-text games): drawn a block at a time (_Uniforms)
+        self._only_uniforms = all(d.draw.method == "categorical" for d in (*one._choices, *one._before)) and \
+            all(d.weight_ids is None for d in one._before)
+        self._starts = _StartOutcomes(self)
+
+    @property
+    def kernel(self) -> str:
+        return self.engine.kernel
+
+    # ---- the engine step of every world ----
+
+    def _bind(self) -> fused.DeclaredBuffers:
+        version = self.engine.prepare_fused_step()
+        if self._buffers is None or version != self._bound_version:
+            self._buffers = fused.bind(self.engine.fused_binding(), self._tables, self._ext, self._reads,
+                                       self._out)
+            self._bound_version = self.engine.layout_version
+        return self._buffers
+
+    def engine_step(self, rows: np.ndarray, picks: np.ndarray) -> None:
+        """One engine step of every world (rows, picks: vector_fused.build_rows'), then the reads."""
+        eng = self.engine
+        ext_ptr, ext_i, ext_f = self._ext
+        if eng.kernel != "counting":  # lanes (or compiled): the engine's own step, then the reads
+            k = vector_fused.build_rows(self._tables, self._ext, rows, picks, eng.next_external_id())
+            eng.step(external=(ext_ptr, ext_i[:k], ext_f[:k]))
+            self._read()
+            return
+        status = vector_fused.step_batch(self._bind(), rows, picks, eng.t, eng.next_external_id())
+        eng.finish_fused_step(status, int(self._out[4][0]), ext_ptr, ext_i, ext_f)
+        if status != vector_fused.STATUS_OK:  # the kernel paused (buffer room) and finish went on: read now
+            self._read()
+
+    def _read(self) -> None:
+        if self.engine.kernel == "counting":
+            vector_fused.read_batch(self._bind())
+        else:
+            vector_fused.read_truth(self.engine.is_true(self._reads[0]), self._reads, self._out)
+
+    # ---- episodes ----
+
+    def use_generators(self, rngs: list[np.random.Generator]) -> None:
+        """Each world's np_random, from which its draws come from now on."""
+        if len(rngs) != self.n_worlds:
+            raise ValueError(f"{len(rngs)} generators for {self.n_worlds} worlds")
+        self.rngs = rngs
+        self._randoms = [r.random for r in rngs]  # bound once: a step draws one number per world
+        self.uniforms = _Uniforms(rngs) if self._only_uniforms else None
+
+    def reset(self, worlds: np.ndarray) -> None:
+        """Restart `worlds` (int64 indices): each draws its start choices from its generator; then the
+        reads of every world are refreshed (the others' are unchanged)."""
+        self._starts.restore(worlds, self)
+        self._tables[8][worlds] = 0  # a start's facts stay: the next step does not turn them off
+        self.steps[worlds] = 0
+        self._read()
+
+    def step(self, actions: np.ndarray) -> None:
+        """Every world plays actions[w] (one agent) and draws this step's random facts from its generator."""
+        self._rows[:, 0] = actions
+        picks = self._picks
+        for d, drawer in enumerate(self.one._before):
+            picks[:, d] = _draw_batch(drawer, self)
+        self.engine_step(self._rows, picks)
+        self.steps += 1
+
+    # ---- reading (after a step or a reset) ----
+
+    def rewards(self, agent: int = 0) -> np.ndarray:
+        r = self._out[1][:, agent].copy()
+        ids, scales = self.one._scaled[agent]
+        if ids.size:
+            r += self.engine.lower[:, ids] @ scales
+        return r
+
+    def terminated(self) -> np.ndarray:
+        return self._out[2][:, 0] == 1.0
+
+    def truncated(self, limit: int | None) -> np.ndarray:
+        """A truncated atom, or the spec's step limit, or `limit` (a TimeLimit's) reached."""
+        out = self._out[2][:, 1] == 1.0
+        for n in (self.spec.max_steps, limit):
+            if n is not None:
+                out |= self.steps >= n
+        return out
+
+    def action_masks(self, agent: int = 0) -> np.ndarray | None:
+        if self.spec.mask is None:
+            return None
+        return self._out[3][:, agent * self.n_actions:(agent + 1) * self.n_actions].copy()
+
+    def observations(self, agent: int = 0) -> Any:
+        """Agent `agent`'s observation of every world: an array with a world axis (a dict of them for a
+        Dict space), as gymnasium's batch_space lays it out."""
+        one, spec = self.one, self.spec
+        n_index = len(one._index_parts)
+        index = self._out[0][:, agent * n_index:(agent + 1) * n_index]
+        if n_index and index.min() < 0:
+            w, p = np.argwhere(index < 0)[0]
+            part = spec.parts[one._index_parts[p]]
+            raise RuntimeError(f"{spec.path}: observation part {part.name!r}: no atom of "
+                               f"{part.atoms[0].pred}(...) is true in world {w}, so it has no index")
+        if spec.space == "Discrete":
+            value = np.zeros(self.n_worlds, np.int64)
+            for size, col in zip(one._part_sizes, index.T):  # first part slowest, as observation()
+                value = value * size + col
+            return value
+        if spec.space == "MultiDiscrete":
+            return index.astype(np.int64)
+        values = []
+        lower, upper = self.engine.lower, self.engine.upper
+        for k, part in enumerate(spec.parts):
+            ids = one._part_ids[k][agent]
+            if part.read == "index":
+                values.append(index[:, [one._index_parts.index(k)]])
+            elif part.read == "onehot":
+                values.append((lower[:, ids] == 1.0).astype(np.float32))
+            elif part.read == "lower":
+                values.append(lower[:, ids].astype(np.float32))
+            else:
+                values.append(np.stack([lower[:, ids], upper[:, ids]], axis=2).reshape(self.n_worlds, -1)
+                              .astype(np.float32))
+        if spec.space == "Box":
+            return np.concatenate(values, axis=1).astype(np.float32)
+        return {p.name: (v[:, 0].astype(np.int64) if p.read == "index" else v) for p, v in zip(spec.parts, values)}
+
+
+def _world(spec: WorldSpec, n_worlds: int, kernel: str) -> DeclaredWorld:
+    """The batch's DeclaredWorld; kernel "auto": the bit-parallel lanes kernel from a word of worlds on
+    (the engine's own rule, ~3-5x faster than counting on the toy-text games), for a crisp program."""
+    if kernel != "auto":
+        return DeclaredWorld(spec, kernel=kernel, worlds=n_worlds)
+    if n_worlds >= LANES_MIN_WORLDS:
+        try:
+            return DeclaredWorld(spec, kernel="lanes", worlds=n_worlds)
+        except ValueError as e:
+            if "crisp" not in str(e):
+                raise
+    return DeclaredWorld(spec, kernel="counting", worlds=n_worlds)
+
+
+def _draw_batch(drawer: Any, worlds: DeclaredWorlds) -> np.ndarray:
+    """One value of `drawer` per world, each from its world's generator, exactly as _Drawer.pick draws
+    for one world (categorical: one random() u, the first value whose cumulative probability exceeds u,
+    else 0; choice: one integers(0, n))."""
+    d, rngs = drawer.draw, worlds.rngs
+    if drawer.weight_ids is None and drawer.possible is None:
+        if d.method == "choice":
+            n = len(drawer.value_ids)
+            return np.array([r.integers(0, n) for r in rngs], np.int64)
+        cumulative = np.asarray(drawer.cumulative)
+        u = worlds.uniforms.each() if worlds.uniforms is not None else \
+            np.array([random() for random in worlds._randoms])
+        picks = np.searchsorted(cumulative, u, side="right")
+        picks[picks == len(cumulative)] = 0
+        return picks.astype(np.int64)
+    # weights read in each world's state now (none of the toy-text games draws so during a step)
+    w = drawer.weight_ids
+    ok = worlds.engine.is_true(w.ravel()).reshape(worlds.n_worlds, *w.shape).all(axis=2)
+    out = np.empty(worlds.n_worlds, np.int64)
+    for i, r in enumerate(rngs):
+        possible = np.flatnonzero(ok[i])
+        if possible.size == 0:
+            raise RuntimeError(f"{worlds.spec.path}: {'.'.join(map(str, d.key))}: no value's weights hold in "
+                               f"world {i}: nothing to draw from")
+        if d.method == "choice":
+            out[i] = possible[r.integers(0, possible.size)]
+        else:
+            cumulative = np.cumsum(ok[i] / ok[i].sum())
+            out[i] = int(np.argmax(cumulative > r.random())) if (cumulative > 0).any() else 0
+    return out
+
+
+def _nbytes(snapshot: Any) -> int:
+    """The arrays' bytes in an engine snapshot (a dict of arrays, lists and scalars)."""
+    if isinstance(snapshot, np.ndarray):
+        return snapshot.nbytes
+    if isinstance(snapshot, dict):
+        return sum(_nbytes(v) for v in snapshot.values())
+    if isinstance(snapshot, (list, tuple)):
+        return sum(_nbytes(v) for v in snapshot)
+    return 0
+
+
+class _Uniforms:
+    """Each world's next np_random.random() numbers, BLOCK at a time: Generator.random(n) gives the numbers
+    n calls of random() give, one after another (both take next_double of the bit generator), so a world
+    whose every draw is one random() draws exactly what it would call by call, for one call per BLOCK."""
+    BLOCK = 64
+
+    def __init__(self, rngs: list[np.random.Generator]) -> None:
+        self.rngs = rngs
+        self.buf = np.empty((len(rngs), self.BLOCK))
+        self.pos = np.full(len(rngs), self.BLOCK)  # empty: filled on first use
+        self._every = np.arange(len(rngs))
+
+    def each(self) -> np.ndarray:
+        """One number per world."""
+        if self.pos.max() >= self.BLOCK:
+            for w in np.flatnonzero(self.pos >= self.BLOCK):
+                self._fill(w)
+        u = self.buf[self._every, self.pos]
+        self.pos += 1
+        return u
+
+    def take(self, worlds: np.ndarray) -> np.ndarray:
+        """One number for each of `worlds` (distinct indices)."""
+        for w in worlds[self.pos[worlds] >= self.BLOCK]:
+            self._fill(w)
+        u = self.buf[worlds, self.pos[worlds]]
+        self.pos[worlds] += 1
+        return u
+
+    def _fill(self, w: int) -> None:
+        self.buf[w] = self.rngs[w].random(self.BLOCK)
+        self.pos[w] = 0
+
+
+class _StartOutcomes:
+    """Every outcome of the start choices, started once: outcome k's state is world k % W of snapshot
+    k // W. An outcome is the choices' values (each among its possible ones), first choice slowest."""
+
+    def __init__(self, worlds: DeclaredWorlds) -> None:
+        one, eng, w = worlds.one, worlds.engine, worlds.n_worlds
+        self.one = one
+        self.drawers = one._choices
+        self.values = [d.possible if d.possible is not None else np.arange(len(d.value_ids))
+                       for d in self.drawers]  # each choice's possible values
+        self.position = [{int(v): i for i, v in enumerate(vals)} for vals in self.values]
+        self.sizes = [len(v) for v in self.values]
+        self.cumulative = [np.asarray(d.cumulative if d.cumulative is not None else [], np.float64)
+                           for d in self.drawers]
+        # value -> its position among the possible ones (an impossible value, which categorical's
+        # fallback to value 0 can give at probability ~1e-16, counts as the first possible one)
+        self.position_of = [np.zeros(len(d.value_ids), np.int64) for d in self.drawers]
+        for c, vals in enumerate(self.values):
+            self.position_of[c][vals] = np.arange(len(vals))
+        n = math.prod(self.sizes)
+        per_world = _nbytes(eng.snapshot()) // w
+        batches = -(-n // w)
+        if batches * w * per_world > MAX_START_BYTES:
+            raise ValueError(f"{worlds.spec.path}: the start choices have {n} outcomes; their engine states "
+                             f"({batches * w * per_world >> 20} MiB at {w} worlds) exceed the vector env's "
+                             f"{MAX_START_BYTES >> 20} MiB")
+        first = len(one._before) + len(one._after)
+        start = one._snapshot
+        everywhere = np.arange(w)
+        rows = np.full((w, worlds.n_agents), -1, np.int64)
+        self.snapshots = []
+        for b in range(batches):
+            picks = np.tile(one._start_picks, (w, 1))
+            ks = np.minimum(np.arange(b * w, (b + 1) * w), n - 1)  # the last batch repeats its last outcome
+            for c, (vals, idx) in enumerate(zip(self.values, np.unravel_index(ks, self.sizes) if n > 1 else
+                                                [np.zeros(w, np.int64)] * len(self.sizes))):
+                picks[:, first + c] = vals[idx]
+            eng.restore(start, everywhere)
+            worlds._tables[8][:] = 0  # the snapshot has every step fact false
+            worlds.engine_step(rows, picks)
+            self.snapshots.append(eng.snapshot())
+
+    def restore(self, targets: np.ndarray, worlds: DeclaredWorlds) -> None:
+        """Worlds `targets` draw their start outcomes (each from its generator) and take their states."""
+        one, w, rngs, uniforms = self.one, worlds.n_worlds, worlds.rngs, worlds.uniforms
+        outcome = np.zeros(len(targets), np.int64)
+        if uniforms is not None:  # every choice is one random() a world: drawn for all targets at once
+            for c in range(len(self.drawers)):  # in the spec's order, as DeclaredWorld.reset draws
+                value = np.searchsorted(self.cumulative[c], uniforms.take(targets), side="right")
+                value[value == len(self.cumulative[c])] = 0  # categorical's "none exceeds u": value 0
+                outcome = outcome * self.sizes[c] + self.position_of[c][value]
+        else:
+            for i, t in enumerate(targets):
+                k = 0
+                for c, drawer in enumerate(self.drawers):
+                    k = k * self.sizes[c] + self.position[c][drawer.pick(one, rngs[t])]
+                outcome[i] = k
+        batch = outcome // w
+        for b in np.unique(batch):
+            sel = batch == b
+            one.engine.restore(self.snapshots[b], targets[sel], outcome[sel] % w)
