@@ -124,3 +124,23 @@ def test_play_env_mistakes_are_one_line(tmp_path: Path, args: list[str], fragmen
     assert proc.stderr.startswith("tracelab: error: ") and proc.stderr.count("\n") == 1, proc.stderr
     assert fragment in proc.stderr
     assert not (tmp_path / "run").exists()  # nothing written for a command that could not start
+
+
+def test_the_why_tutorial_of_the_docs_runs_as_shown(tmp_path: Path) -> None:
+    """docs/worlds.md, "Recording games, and why a game was won": each command, run in an empty folder
+    in the page's order, prints what the page shows (the play's steps/s aside: they vary)."""
+    import re
+    import shlex
+    text = (Path(__file__).resolve().parents[1] / "docs" / "worlds.md").read_text()
+    section = text.split("## Recording games, and why a game was won", 1)[1].split("\n## ", 1)[0]
+    blocks = re.findall(r"```console\n\$ (.*?)\n(.*?)```", section, re.S)
+    assert [shlex.split(c)[1] for c, _ in blocks] == ["play", "sql", "trace", "why", "why-not"]
+    for command, shown in blocks:
+        out = subprocess.run([sys.executable, "-m", "tracelab", *shlex.split(command)[1:]], cwd=tmp_path,
+                             capture_output=True, text=True, timeout=600)
+        assert out.returncode == 0, out.stderr
+        rate = re.compile(r"[\d,]+ steps/s")
+        assert rate.sub("N steps/s", out.stdout) == rate.sub("N steps/s", shown), command
+    # the tree shown reaches the draws of the ice and the keys pressed
+    why = blocks[3][1]
+    assert "slip(ccw):[1,1]" in why and "slip(straight):[1,1]" in why and "pressed(down):[1,1]" in why

@@ -114,7 +114,7 @@ def _what_to_open_env(run_dir: Path, spec: Any) -> None:
 
     con = open_run(run_dir)
     try:
-        best = con.execute("SELECT episode, t_end FROM episodes WHERE ended ORDER BY reward DESC, episode "
+        best = con.execute("SELECT episode, t_end FROM episodes WHERE ended ORDER BY reward DESC, steps, episode "
                            "LIMIT 1").fetchone()
         row = None
         if best is not None and spec.reward_table[0]:
@@ -124,10 +124,10 @@ def _what_to_open_env(run_dir: Path, spec: Any) -> None:
     finally:
         con.close()
     run = shlex.quote(str(run_dir))
-    ep = best[0] if best else 0
+    ep, last = best if best else (0, 1)
     print(f"\nrun written to {run_dir}/  — what to open:")
     print(f"  tracelab sql {run} \"SELECT episode, steps, reward, outcome FROM episodes ORDER BY reward DESC LIMIT 5\"")
-    print(f"  tracelab trace {run} --episode {ep} --from 1 --to 3")
+    print(f"  tracelab trace {run} --episode {ep} --from {last} --to {last}            # its last step")
     if row:
         print(f"  tracelab why {run} {shlex.quote(row[0])} --episode {ep} --at {row[1]}   # why is it true?")
     print(f"  tracelab tui {run}")
