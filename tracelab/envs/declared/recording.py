@@ -15,10 +15,13 @@ The env's facts are external facts (cause `action` in the store's views): the ac
 predicates are the agent's and which are draws (by name) is in the run's config (`declared_facts`).
 
 Rows are taken from the engine in chunks (tracelab.envs.tracer's cadence): when an episode ends, every
-HANDOVER_STEPS steps, when HANDOVER_ROWS rows wait, before a reset, and at close. Outcomes:
+HANDOVER_STEPS steps, when HANDOVER_ROWS rows wait, before a reset, and at close; everything is written
+every STEPS_PER_WRITE steps (StoreSink's) and WRITE_INTERVAL_S seconds, so a live reader sees a game a
+quarter of a second late, plus the writer's own delay. Outcomes:
 "terminated", "truncated", or "aborted" (cut short by a reset or close)."""
 from __future__ import annotations
 
+import time
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -26,11 +29,16 @@ import numpy as np
 from tracelab.envs.declared.spec import WorldSpec
 from tracelab.envs.declared.world import DeclaredWorld
 from tracelab.envs.tracer import HANDOVER_ROWS, HANDOVER_STEPS
+from tracelab.store.convert import utc_now
+from tracelab.store.sink import STEPS_PER_WRITE
 
 if TYPE_CHECKING:
     from tracelab.store.writer import TraceWriter
 
 CONFIG_KEY = "declared_facts"
+# What is kept is written every STEPS_PER_WRITE steps, but not more often than this: each write ends
+# episodes, which makes the writer publish soon, and the toy-text games end an episode every few steps.
+WRITE_INTERVAL_S = 0.25
 
 
 def declared_facts(spec: WorldSpec) -> dict[str, Any]:
@@ -51,7 +59,11 @@ def flat_observation(obs: Any) -> np.ndarray:
 
 class DeclaredRecorder:
     """Records `world`'s episodes into `writer`; the world's engine must trace (DeclaredWorld(trace=True))
-    and must not have stepped since it was built. `close()` closes the writer."""
+    and must not have stepped since it was built. `close()` closes the writer.
+
+    What an episode records is kept and written every STEPS_PER_WRITE steps and WRITE_INTERVAL_S (and at
+    close), as StoreSink does: episode begins, change rows, step rows, then episode ends, so a reader never sees an ended
+    episode without its rows. Writing per episode cost more than the toy-text games' steps."""
 
     def __init__(self, world: DeclaredWorld, writer: TraceWriter) -> None:
         eng = world.engine
@@ -65,17 +77,23 @@ class DeclaredRecorder:
         self.episode = -1
         self._open = False
         self._t0 = 0  # the engine time of the episode's t = 0
-        # step rows not written yet: (step, t, agent index, reward, action, terminated, truncated), and
-        # the observation after each of those env steps
-        self._steps: list[tuple[int, int, int, float, int, bool, bool]] = []
+        self._begins: list[dict[str, Any]] = []
+        self._changes: list[dict[str, np.ndarray]] = []  # engine rows with t episode-local and `episode`
+        # step rows: (episode, step, t, agent index, reward, action, terminated, truncated), and the
+        # observation after each of those env steps
+        self._steps: list[tuple[int, int, int, int, float, int, bool, bool]] = []
         self._obs: list[np.ndarray] = []
-        self._steps_waiting = 0
+        self._ends: list[dict[str, Any]] = []
+        self._clock = (np.zeros(1, np.int64), np.zeros(1, np.int64))  # (t0, episode) for take_trace
+        self._written_at = time.monotonic()
+        self._steps_waiting = 0  # steps whose rows the engine holds
+        self._steps_kept = 0     # steps whose records are kept here
         self._length = 0
         self._returns = [0.0] * len(self.agents)
         self._seed: int | None = None
 
     def before_reset(self) -> None:
-        """Before the world resets: the running episode's rows go out under its own clock, and it ends
+        """Before the world resets: the running episode's rows are taken under its own clock, and it ends
         as "aborted"."""
         if self._open:
             self._take_rows()
@@ -90,8 +108,9 @@ class DeclaredRecorder:
         self._open = True
         self._t0 = eng.t - 1
         self._length, self._returns = 0, [0.0] * len(self.agents)
-        self.writer.begin_episode(self.episode, t_start=0, seed=self._seed)
-        self._write_rows(self._setup)
+        self._clock = (np.array([self._t0], np.int64), np.array([self.episode], np.int64))
+        self._begins.append({"episode": self.episode, "t_start": 0, "seed": self._seed})
+        self._changes.append({**self._setup, "episode": np.full(len(self._setup["t"]), self.episode, np.int64)})
         self._take_rows()
 
     def stepped(self, actions: Any, rewards: list[float], obs: Any, terminated: bool, truncated: bool) -> None:
@@ -100,54 +119,73 @@ class DeclaredRecorder:
             return
         self._length += 1
         t = self.world.engine.t - 1 - self._t0
-        acts = np.atleast_1d(np.asarray(actions, np.int64))
-        for a in range(len(self.agents)):
-            self._returns[a] += float(rewards[a])
-            self._steps.append((self._length, t, a, float(rewards[a]), int(acts[a]), terminated, truncated))
-        self._obs.append(flat_observation(obs))
+        if isinstance(actions, (int, np.integer)):  # one agent (kept short: the toy-text games' case)
+            self._returns[0] += rewards[0]
+            self._steps.append((self.episode, self._length, t, 0, rewards[0], int(actions), terminated, truncated))
+        else:
+            for a, act in enumerate(np.asarray(actions, np.int64).tolist()):
+                self._returns[a] += rewards[a]
+                self._steps.append((self.episode, self._length, t, a, rewards[a], act, terminated, truncated))
+        self._obs.append(obs)  # as the env returned it (a new object each step); made numbers when written
         self._steps_waiting += 1
+        self._steps_kept += 1
         ended = terminated or truncated
         if ended or self._steps_waiting >= HANDOVER_STEPS or \
                 self.world.engine.trace_rows_waiting >= HANDOVER_ROWS:
             self._take_rows()
         if ended:
             self._end("terminated" if terminated else "truncated")
+        if self._steps_kept >= STEPS_PER_WRITE and time.monotonic() - self._written_at >= WRITE_INTERVAL_S:
+            self.write_pending()
 
     def close(self, status: str = "finished") -> None:
-        """The rows still in the engine, the running episode ended as "aborted", the writer closed."""
-        if self._open:
-            self._take_rows()
-            self._end("aborted")
-        self.writer.close(status=status)
+        """The rows still in the engine, the running episode ended as "aborted", all written, the
+        writer closed."""
+        try:
+            if self._open:
+                self._take_rows()
+                self._end("aborted")
+            self.write_pending()
+        finally:
+            self.writer.close(status=status)
+
+    def write_pending(self) -> None:
+        """Write what is kept: episode begins, the vocabulary the rows name, the change rows, the step
+        records (a row per agent), the episode ends."""
+        w, eng = self.writer, self.world.engine
+        self._steps_kept = 0
+        self._written_at = time.monotonic()
+        if self._begins:
+            begins, self._begins = self._begins, []
+            w.begin_episodes(begins)
+        if self._changes:
+            chunks, self._changes = self._changes, []
+            w.write_engine(None, eng, {k: np.concatenate([c[k] for c in chunks]) for k in chunks[0]})
+        if self._steps:
+            episode, step, t, agent, reward, action, term, trunc = (np.array(c) for c in zip(*self._steps))
+            w.write_steps(episode, {
+                "step": step, "t": t, "agent": [self.agents[a] for a in agent.tolist()], "action": action,
+                "reward": reward, "terminated": term, "truncated": trunc,
+                "obs": np.repeat(np.stack([flat_observation(o) for o in self._obs]), len(self.agents), axis=0)})
+            self._steps, self._obs = [], []
+        if self._ends:
+            ends, self._ends = self._ends, []
+            w.end_episodes(ends)
 
     # ----
 
     def _take_rows(self) -> None:
+        """The engine's rows, t counted from the episode's start and labelled with the episode (the
+        engine's own localising take: one compiled call, no copy of its buffers)."""
         self._steps_waiting = 0
-        rows = self.world.engine.take_trace()
+        rows = self.world.engine.take_trace(self._clock[0], self._clock[1])
         if len(rows["t"]):
-            rows["t"] = (rows["t"] - self._t0).astype(np.int32)
-            self._write_rows(rows)
-        self._write_steps()
-
-    def _write_rows(self, rows: dict[str, np.ndarray]) -> None:
-        self.writer.write_engine(self.episode, self.world.engine, dict(rows))
-
-    def _write_steps(self) -> None:
-        if not self._steps:
-            return
-        step, t, agent, reward, action, term, trunc = zip(*self._steps)
-        obs = np.stack(self._obs)
-        n_agents = len(self.agents)
-        self.writer.write_steps(self.episode, {
-            "step": np.array(step), "t": np.array(t), "agent": [self.agents[a] for a in agent],
-            "action": np.array(action), "reward": np.array(reward), "terminated": np.array(term),
-            "truncated": np.array(trunc), "obs": np.repeat(obs, n_agents, axis=0)})
-        self._steps, self._obs = [], []
+            rows["episode"] = rows.pop("world_episode")
+            self._changes.append(rows)
 
     def _end(self, outcome: str) -> None:
-        self._write_steps()
         t_end = self.world.engine.t - 1 - self._t0
-        self.writer.end_episode(self.episode, steps=self._length, t_end=t_end, outcome=outcome,
-                                reward=self._returns[0], rewards=dict(zip(self.agents, self._returns)))
+        self._ends.append({"episode": self.episode, "steps": self._length, "t_end": t_end, "outcome": outcome,
+                           "reward": self._returns[0], "rewards": dict(zip(self.agents, self._returns)),
+                           "ended_at": utc_now()})
         self._open = False
