@@ -87,11 +87,15 @@ def test_play_env_records_a_run_with_its_spec_and_says_what_to_open(tmp_path: Pa
     config = meta["config"]
     assert config["env_id"] == "tracelab/FrozenLake-v1" and config["env_args"] == {"map_name": "8x8",
                                                                                     "is_slippery": False}
-    assert "[board]" in config["spec"] and "land_goal" in "".join(config["rules"].values())
+    assert "[board]" in config["spec"] and "land_goal" in "".join(config["rule_texts"].values())
     assert config["declared_facts"] == {"actions": ["pressed"], "draws": {"start": ["at"], "slip": ["slip"]}}
     assert config["declared_board"]["rows"][0] == "SFFFFFFF"
     assert meta["rule_files"][0].endswith("frozen_lake.rules") if isinstance(meta["rule_files"][0], str) \
         else meta["rule_files"][0]["path"].endswith("frozen_lake.rules")
+    assert main(["show", str(run)]) == 0
+    shown = capsys.readouterr().out
+    assert "board     none drawn: a declared world's games" in shown and "\nspec      " in shown
+    assert '  legend = { S = ["start", "ice"]' in shown and '"spec":' not in shown  # the spec in its section
     con = open_run(run)
     assert con.execute("SELECT count(*) FROM episodes WHERE ended").fetchone()[0] == 12
     # not slippery: every slip drawn is `straight`

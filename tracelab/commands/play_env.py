@@ -76,7 +76,7 @@ def run_meta(source: Any, spec: Any, args: argparse.Namespace) -> dict[str, Any]
     config = {"env": source.text, "env_id": source.env_id, "spec_path": source.spec_path,
               "env_args": source.params, "episodes": args.episodes, "policy": "random",
               "kernel": args.kernel, "spec": Path(source.spec_path).read_text(),
-              "rules": {f: Path(f).read_text() for f in spec.program.files},
+              "rule_texts": {f: Path(f).read_text() for f in spec.program.files},
               CONFIG_KEY: declared_facts(spec),
               "declared_board": None if board is None else {"rows": list(board.rows), "cell": board.cell_format,
                                                             "marks": board.marks}}
