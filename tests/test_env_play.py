@@ -148,3 +148,36 @@ def test_the_why_tutorial_of_the_docs_runs_as_shown(tmp_path: Path) -> None:
     # the tree shown reaches the draws of the ice and the keys pressed
     why = blocks[3][1]
     assert "slip(ccw):[1,1]" in why and "slip(straight):[1,1]" in why and "pressed(down):[1,1]" in why
+
+
+def test_ctrl_c_keeps_the_games_played_and_says_so(tmp_path: Path) -> None:
+    import signal
+    import time
+    run = tmp_path / "run"
+    proc = subprocess.Popen([sys.executable, "-m", "tracelab", "play", "--env", "tracelab/FrozenLake-v1",
+                             "--episodes", "10000000", "--run", str(run)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 240
+        while time.monotonic() < deadline:  # some games written (the writer publishes every ~0.25 s)
+            if (run / "meta.json").exists():
+                con = open_run(run)
+                n = con.execute("SELECT count(*) FROM episodes WHERE ended").fetchone()[0]
+                con.close()
+                if n >= 5:
+                    break
+            time.sleep(0.3)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, err
+    kept = int(err.split(" keeps ")[1].split()[0])
+    assert err.startswith(f"tracelab: interrupted: {run} keeps ") and kept >= 5
+    assert json.loads((run / "meta.json").read_text())["status"] == "interrupted"
+    con = open_run(run)
+    outcomes = dict(con.execute("SELECT outcome, count(*) FROM episodes GROUP BY 1").fetchall())
+    # every game begun has ended: the one Ctrl-C cut short (if any) as aborted
+    assert set(outcomes) <= {"terminated", "aborted"} and outcomes.get("aborted", 0) <= 1
+    assert sum(outcomes.values()) == kept
+    con.close()

@@ -13,7 +13,6 @@ from typing import Any
 
 import numpy as np
 
-from tracelab.commands._args import grounding_limit_of
 from tracelab.errors import UserError, store_errors
 
 # play's flags that belong to the grid game (GridWar) only
@@ -33,8 +32,7 @@ def run_env(args: argparse.Namespace) -> int:
     if args.env_arg and args.env is None:
         raise UserError("--env-arg goes with --env")
     source = resolve_env(args.env, parse_env_args(args.env_arg))
-    with grounding_limit_of(args):
-        spec = source.load()
+    spec = source.load()
     if args.no_trace:
         _summary(source, _play(source, spec, args, None))
         return 0
@@ -42,7 +40,7 @@ def run_env(args: argparse.Namespace) -> int:
 
 
 def _record(source: Any, spec: Any, args: argparse.Namespace) -> int:
-    from tracelab.commands.play import check_run_dir
+    from tracelab.commands.play import _ended_episodes, check_run_dir
     from tracelab.store import TraceWriter
 
     run_dir = Path(args.run or f"runs/play-{source.name}-{time.strftime('%Y%m%d-%H%M%S')}")
@@ -54,10 +52,14 @@ def _record(source: Any, spec: Any, args: argparse.Namespace) -> int:
         raise UserError(f"cannot create the run directory {run_dir}: {e.strerror or e}") from e
     try:
         stats = _play(source, spec, args, writer)
-    except (KeyboardInterrupt, SystemExit):
+    except (KeyboardInterrupt, SystemExit) as e:  # Ctrl-C, or SIGTERM (the writer's handler exits)
         if not writer.closed:
-            writer.close(status="interrupted")  # flushes what was played
-        raise
+            writer.close(status="interrupted")
+        kept = f"{run_dir} keeps {_ended_episodes(run_dir)} finished episode(s) and the trace so far"
+        if isinstance(e, SystemExit):
+            print(f"tracelab: terminated: {kept}", file=sys.stderr)
+            raise
+        raise KeyboardInterrupt(kept) from None
     except BaseException:
         if not writer.closed:
             writer.close(status="failed")
@@ -80,7 +82,7 @@ def run_meta(source: Any, spec: Any, args: argparse.Namespace) -> dict[str, Any]
               CONFIG_KEY: declared_facts(spec),
               "declared_board": None if board is None else {"rows": list(board.rows), "cell": board.cell_format,
                                                             "marks": board.marks}}
-    return {"command": " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]), "config": config,
+    return {"command": " ".join(shlex.quote(a) for a in ["tracelab", *args.argv]), "config": config,
             "rule_files": list(spec.program.files), "seed": args.seed}
 
 
@@ -88,15 +90,17 @@ def _play(source: Any, spec: Any, args: argparse.Namespace, writer: Any) -> dict
     from tracelab.commands._progress import compiling_engine, progress
     from tracelab.envs.declared.play import make_declared_env, play_episodes, random_policy
 
-    with grounding_limit_of(args), compiling_engine(busy=f"building {source.name}'s rules…"):
+    with compiling_engine(busy=f"building {source.name}'s rules…"):
         env = make_declared_env(source, spec, kernel=args.kernel,
                                 **({} if writer is None else {"trace_writer": writer}))
     try:
         with progress(f"playing {source.name}", total=args.episodes, unit="episodes") as bar:
             stats = play_episodes(env, args.episodes, args.seed, random_policy(env, args.seed),
                                   on_episode=lambda e: bar.advance(1))
-    finally:
-        env.close()  # a traced env closes its writer: the last rows and episode ends are written
+    except BaseException as e:  # the run records how it ended, with what was played until then
+        env.unwrapped.close(status="interrupted" if isinstance(e, (KeyboardInterrupt, SystemExit)) else "failed")
+        raise
+    env.close()  # a traced env closes its writer: the last rows and episode ends are written
     return stats
 
 

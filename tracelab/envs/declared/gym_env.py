@@ -86,10 +86,12 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
             return None
         return gym.registry[self.spec.id].max_episode_steps
 
-    def close(self) -> None:
+    def close(self, status: str = "finished") -> None:
+        """Close the env; a traced env writes what it kept and closes its run with `status` (finished,
+        or interrupted / failed when the caller stops it early)."""
         if self._recorder is not None:
             recorder, self._recorder = self._recorder, None
-            recorder.close()
+            recorder.close(status)
         super().close()
 
     def _observe(self) -> Any:
