@@ -181,3 +181,13 @@ def test_ctrl_c_keeps_the_games_played_and_says_so(tmp_path: Path) -> None:
     assert set(outcomes) <= {"terminated", "aborted"} and outcomes.get("aborted", 0) <= 1
     assert sum(outcomes.values()) == kept
     con.close()
+
+
+def test_play_env_refuses_a_spec_of_several_agents_in_one_line(tmp_path: Path, capsys) -> None:
+    from test_env_spec_agents import RULES, SPEC
+    (tmp_path / "pair.rules").write_text(RULES)
+    (tmp_path / "pair.toml").write_text(SPEC)
+    assert main(["play", "--env", str(tmp_path / "pair.toml"), "--run", str(tmp_path / "run")]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "the spec declares 2 agents; play --env plays one" in err
+    assert not (tmp_path / "run").exists()

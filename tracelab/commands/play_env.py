@@ -33,6 +33,9 @@ def run_env(args: argparse.Namespace) -> int:
         raise UserError("--env-arg goes with --env")
     source = resolve_env(args.env, parse_env_args(args.env_arg))
     spec = source.load()
+    if len(spec.agents) != 1:
+        raise UserError(f"--env {args.env}: the spec declares {len(spec.agents)} agents; play --env plays "
+                        "one (tracelab.envs.declared.parallel_env.DeclaredParallelEnv plays them all)")
     if args.no_trace:
         _summary(source, _play(source, spec, args, None))
         return 0
