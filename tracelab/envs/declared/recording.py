@@ -16,8 +16,8 @@ predicates are the agent's and which are draws (by name) is in the run's config 
 
 Rows are taken from the engine in chunks (tracelab.envs.tracer's cadence): when an episode ends, every
 HANDOVER_STEPS steps, when HANDOVER_ROWS rows wait, before a reset, and at close; everything is written
-every STEPS_PER_WRITE steps (StoreSink's) and WRITE_INTERVAL_S seconds, so a live reader sees a game a
-quarter of a second late, plus the writer's own delay. Outcomes:
+at StoreSink's cadence (WRITE_ROWS steps, or WRITE_INTERVAL_S seconds), so a live reader sees a game
+that late at most, plus the writer's own delay. Outcomes:
 "terminated", "truncated", or "aborted" (cut short by a reset or close)."""
 from __future__ import annotations
 
@@ -30,15 +30,12 @@ from tracelab.envs.declared.spec import WorldSpec
 from tracelab.envs.declared.world import DeclaredWorld
 from tracelab.envs.tracer import HANDOVER_ROWS, HANDOVER_STEPS
 from tracelab.store.convert import utc_now
-from tracelab.store.sink import STEPS_PER_WRITE
+from tracelab.store.sink import WRITE_INTERVAL_S, WRITE_ROWS
 
 if TYPE_CHECKING:
     from tracelab.store.writer import TraceWriter
 
 CONFIG_KEY = "declared_facts"
-# What is kept is written every STEPS_PER_WRITE steps, but not more often than this: each write ends
-# episodes, which makes the writer publish soon, and the toy-text games end an episode every few steps.
-WRITE_INTERVAL_S = 0.25
 
 
 def declared_facts(spec: WorldSpec) -> dict[str, Any]:
@@ -61,8 +58,8 @@ class DeclaredRecorder:
     """Records `world`'s episodes into `writer`; the world's engine must trace (DeclaredWorld(trace=True))
     and must not have stepped since it was built. `close()` closes the writer.
 
-    What an episode records is kept and written every STEPS_PER_WRITE steps and WRITE_INTERVAL_S (and at
-    close), as StoreSink does: episode begins, change rows, step rows, then episode ends, so a reader never sees an ended
+    What an episode records is kept and written every WRITE_ROWS steps or WRITE_INTERVAL_S seconds (and
+    at close), as StoreSink does: episode begins, change rows, step rows, then episode ends, so a reader never sees an ended
     episode without its rows. Writing per episode cost more than the toy-text games' steps."""
 
     def __init__(self, world: DeclaredWorld, writer: TraceWriter) -> None:
@@ -109,7 +106,7 @@ class DeclaredRecorder:
         self._t0 = eng.t - 1
         self._length, self._returns = 0, [0.0] * len(self.agents)
         self._clock = (np.array([self._t0], np.int64), np.array([self.episode], np.int64))
-        self._begins.append({"episode": self.episode, "t_start": 0, "seed": self._seed})
+        self._begins.append({"episode": self.episode, "t_start": 0, "seed": self._seed, "started_at": utc_now()})
         self._changes.append({**self._setup, "episode": np.full(len(self._setup["t"]), self.episode, np.int64)})
         self._take_rows()
 
@@ -135,7 +132,7 @@ class DeclaredRecorder:
             self._take_rows()
         if ended:
             self._end("terminated" if terminated else "truncated")
-        if self._steps_kept >= STEPS_PER_WRITE and time.monotonic() - self._written_at >= WRITE_INTERVAL_S:
+        if self._steps_kept >= WRITE_ROWS or time.monotonic() - self._written_at >= WRITE_INTERVAL_S:
             self.write_pending()
 
     def close(self, status: str = "finished") -> None:
