@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from tui_helpers import episodes_ready, loaded, run_app, shown, shown_once, svg_text, wait_for
+from tui_helpers import episodes_ready, loaded, open_trace_at, run_app, shown, shown_once, svg_text, wait_for
 
 from tracelab.store.reader import open_run
 from tracelab.viewers.tui.graph_side import GraphSide
@@ -109,21 +109,6 @@ def test_neighbourhood_is_the_nodes_edges_and_the_labels_on_them() -> None:
         pair = f"retry-kit-ng>{n.other}" if n.direction == "out" else f"{n.other}>retry-kit-ng"
         assert [lab for lab, _, _ in n.labels] == labels[pair]
         assert all((lo, up) == (1, 1) for _, lo, up in n.labels)     # the graph's attributes hold at t=3
-
-
-async def open_trace_at(app: Any, pilot: Any, t: int) -> tuple[TracePane, GraphSide]:
-    await episodes_ready(app, pilot)
-    await pilot.press("enter")
-    pane = app.screen.query_one(TracePane)
-    await wait_for(pilot, lambda: pane.filter is not None and loaded(pane.table) and pane.table.count > 0)
-    jumps = pane.jumps
-    pane.query_one("#tr-goto").value = str(t)
-    await pilot.press("g", "enter")
-    await wait_for(pilot, lambda: pane.jumps > jumps and loaded(pane.table))
-    side = pane.query_one(GraphSide)
-    await wait_for(pilot, lambda: side.atoms is not None and side.atoms.t == t and side.hood is not None
-                   and loaded(side.table))
-    return pane, side
 
 
 def test_beside_the_trace_the_atoms_at_the_cursors_time_and_its_atoms_graph() -> None:

@@ -25,7 +25,9 @@ os.environ["XDG_STATE_HOME"] = _STATE
 atexit.register(shutil.rmtree, _STATE, ignore_errors=True)
 
 from tracelab.viewers.tui.app import TracelabApp  # noqa: E402
+from tracelab.viewers.tui.graph_side import GraphSide  # noqa: E402
 from tracelab.viewers.tui.lazy_table import LazyTable  # noqa: E402
+from tracelab.viewers.tui.trace import TracePane  # noqa: E402
 
 TESTS = Path(__file__).resolve().parent
 
@@ -48,6 +50,23 @@ async def episodes_ready(app: Any, pilot: Any) -> LazyTable:
     table = app.screen.query_one("#ep-table", LazyTable)
     await wait_for(pilot, lambda: loaded(table) and app.focused is table)
     return table
+
+
+async def open_trace_at(app: Any, pilot: Any, t: int) -> tuple[TracePane, GraphSide]:
+    """A run without a board: its first episode's trace at timestep t, with the atoms and the graph
+    beside it loaded."""
+    await episodes_ready(app, pilot)
+    await pilot.press("enter")
+    pane = app.screen.query_one(TracePane)
+    await wait_for(pilot, lambda: pane.filter is not None and loaded(pane.table) and pane.table.count > 0)
+    jumps = pane.jumps
+    pane.query_one("#tr-goto").value = str(t)
+    await pilot.press("g", "enter")
+    await wait_for(pilot, lambda: pane.jumps > jumps and loaded(pane.table))
+    side = pane.query_one(GraphSide)
+    await wait_for(pilot, lambda: side.atoms is not None and side.atoms.t == t and side.hood is not None
+                   and loaded(side.table))
+    return pane, side
 
 
 def run_app(paths: list[Path], body: Callable[[Any, Any], Any], size: tuple[int, int] = (80, 24)) -> None:

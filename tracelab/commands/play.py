@@ -31,9 +31,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="worlds stepped together (default 1)")
     for alias in ("--worlds", "--envs"):  # earlier spellings: accepted, not listed
         p.add_argument(alias, dest="worlds", type=positive_int, help=argparse.SUPPRESS)
-    p.add_argument("--policy", default="scripted",
+    p.add_argument("--env", default=None, metavar="SPEC_OR_ID",
+                   help="play a world declared in rules instead of the grid game: a spec file or a registered id "
+                        "such as tracelab/FrozenLake-v1 (docs/worlds.md; a random policy)")
+    p.add_argument("--env-arg", action="append", default=[], metavar="KEY=VALUE",
+                   help="a keyword argument of the --env (its spec's [params]), e.g. is_slippery=false (repeatable)")
+    p.add_argument("--policy", default=None,
                    help="red's policy: random, scripted (the scripted base policy, default) or the path of "
-                        "a trained policy (e.g. RUN/policy)")
+                        "a trained policy (e.g. RUN/policy); with --env, random")
     p.add_argument("--opponent-p", type=float, default=None,
                    help="the opponent's probability of a move towards red's base (default 0.7)")
     p.add_argument("--seed", type=non_negative_int, default=0,
@@ -71,6 +76,10 @@ def run(args: argparse.Namespace) -> int:
         load_scenario,
     )
 
+    if args.env is not None or args.env_arg:  # a declared world: its own module (play_env.py)
+        from tracelab.commands.play_env import run_env
+        return run_env(args)
+    args.policy = args.policy or "scripted"
     args.trained = None
     builtin = args.policy in ("random", "scripted")
     if not builtin:

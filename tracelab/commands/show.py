@@ -58,7 +58,7 @@ def describe_run(con: Any) -> dict[str, Any]:
 
 
 # config entries shown in sections of their own, not on the config line
-_OWN_SECTIONS = ("scenario", "sources", "translation", "graph")
+_OWN_SECTIONS = ("scenario", "sources", "translation", "graph", "spec", "rule_texts")
 
 
 def render(doc: dict[str, Any], all_rules: bool = False) -> str:
@@ -68,11 +68,13 @@ def render(doc: dict[str, Any], all_rules: bool = False) -> str:
              f"  started   {meta['started_at']}   ended {meta['ended_at'] or '-'}",
              f"  seed      {meta['seed']}   host {meta['host']}   pid {meta['pid']}",
              "  versions  " + ", ".join(f"{k} {v}" for k, v in sorted(meta["versions"].items()))]
+    config = meta["config"] if isinstance(meta["config"], dict) else {}
+    declared = isinstance(config.get("spec"), str)  # tracelab play --env: a world declared in rules
     lines.append(f"  board     {doc['board']}" if doc["board"] else
-                 "  board     none: a reasoning run (its episodes are reasonings, not games)")
+                 "  board     none drawn: a declared world's games (its spec's [board] is in the config)" if declared
+                 else "  board     none: a reasoning run (its episodes are reasonings, not games)")
     for f in meta["rule_files"]:
         lines.append(f"  rules     {f.get('path')} (sha256 {str(f.get('sha256'))[:12]})")
-    config = meta["config"] if isinstance(meta["config"], dict) else {}
     for source in config.get("sources") or []:
         if isinstance(source, dict) and source.get("role") in ("graph", "facts-table"):
             size = f" ({source['bytes']:,} bytes)" if isinstance(source.get("bytes"), int) else ""
@@ -92,6 +94,8 @@ def render(doc: dict[str, Any], all_rules: bool = False) -> str:
         lines += ["", f"scenario  {scenario['name']}"]
     if scenario["definition"]:
         lines += ["  " + ln for ln in scenario["definition"].rstrip().splitlines()]
+    if declared:
+        lines += ["", f"spec      {config.get('spec_path')}"] + ["  " + ln for ln in config["spec"].rstrip().splitlines()]
     rules = doc["rules"]
     shown = rules if all_rules else rules[:RULES_SHOWN]
     lines += ["", f"program   {len(rules)} rules, {counts['facts']} facts"]

@@ -1,5 +1,6 @@
 """GraphSide: what stands beside the trace where a game run has its board, for a run without one (a
-reasoning run). Above: the atoms true at the end of the cursor's timestep, or the atoms changed in it
+reasoning run). A declared world's run (`tracelab play --env`) has its spec's board on top, its marks
+where they hold at the cursor's t (declared_board.py). Above: the atoms true at the end of the cursor's timestep, or the atoms changed in it
 (`c`), filtered by a predicate name or an atom pattern (`exposed`, `exposed(*)`; `/`), each with its bound,
 at most graph_state.ATOMS_LIMIT of them with the count of all. Below: the neighbourhood in the graph of
 the selected atom (the trace's cursor, or the list's when it has the focus): its node's labels, edges
@@ -24,6 +25,7 @@ from textual.widget import Widget
 from textual.widgets import Input, Static
 
 from tracelab.viewers.tui.colours import DIM, bound_colour, styled_bound
+from tracelab.viewers.tui.declared_board import BoardRows, DeclaredBoard, marked_cells, run_board_rows
 from tracelab.viewers.tui.graph_state import AtomsAt, Neighbourhood, atoms_at, neighbourhood, unknown_pattern
 from tracelab.viewers.tui.lazy_table import Column, LazyTable
 from tracelab.viewers.tui.paging import ArrowSource
@@ -147,8 +149,12 @@ class GraphSide(Vertical):
         self._readers: dict[str, RunSource] = {}     # "atoms", "hood": connections of their own
         self._readers_lock = threading.Lock()
         self._closed = False
+        # a declared world's run (tracelab play --env) has its spec's board drawn above the atoms
+        self.declared: BoardRows | None = source.call(run_board_rows)
 
     def compose(self) -> ComposeResult:
+        if self.declared is not None:
+            yield DeclaredBoard(self.declared)
         with Vertical(id="gs-atoms"):
             yield Input(placeholder="atoms: exposed or exposed(*)", id="gs-filter", compact=True)
             yield LazyTable(TRUE_COLUMNS, id="gs-table")
@@ -236,13 +242,19 @@ class GraphSide(Vertical):
             found = atoms_at(reader, episode, t, mode, pattern, hide_static)
             if not found.rows and pattern:
                 problem = unknown_pattern(reader, pattern)
+            marked = None if self.declared is None else marked_cells(self.declared, {
+                pred: [r["atom"] for r in atoms_at(reader, episode, t, "true", f"{pred}(*)", False).rows]
+                for pred in self.declared.marks})
         except Exception as e:  # noqa: BLE001 - a bad pattern or a cancelled query: a message, not a crash
-            found, problem = None, str(e).splitlines()[0] if str(e) else type(e).__name__
-        self.app.call_from_thread(self._atoms_read, asked, found, problem)
+            found, problem, marked = None, str(e).splitlines()[0] if str(e) else type(e).__name__, None
+        self.app.call_from_thread(self._atoms_read, asked, found, problem, marked)
 
-    def _atoms_read(self, asked: tuple[Any, ...], found: AtomsAt | None, problem: str | None) -> None:
+    def _atoms_read(self, asked: tuple[Any, ...], found: AtomsAt | None, problem: str | None,
+                    marked: dict[str, str] | None = None) -> None:
         if asked != self._asked:
             return
+        if marked is not None:
+            self.query_one(DeclaredBoard).show(asked[1], marked)
         self.atoms = found
         table, status = self.table, self.query_one("#gs-status", Static)
         rows = found.rows if found is not None else []

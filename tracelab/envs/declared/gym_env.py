@@ -3,11 +3,12 @@
 The spaces come from the spec: actions Discrete(number of actions); the observation Discrete (one index,
 or several as one number, first part most significant: numpy's ravel_multi_index), MultiDiscrete (the
 parts' indices), Box (the parts' numbers, float32, in order) or Dict (a space per part). `info` holds
-`action_mask` (int8, 1 = allowed) when the spec declares a mask, and `t` (steps into the episode)."""
+`action_mask` (int8, 1 = allowed) when the spec declares a mask, and `t` (steps into the episode).
+`trace_writer`: a TraceWriter the env records its games into (recording.py); env.close() closes it."""
 from __future__ import annotations
 
 import os
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
@@ -17,6 +18,10 @@ from tracelab.envs.declared.render import DeclaredPainter
 from tracelab.envs.declared.spec import WorldSpec, load_spec
 from tracelab.envs.declared.world import DeclaredWorld
 
+if TYPE_CHECKING:
+    from tracelab.envs.declared.recording import DeclaredRecorder
+    from tracelab.store.writer import TraceWriter
+
 RENDER_MODES = ["ansi", "rgb_array"]
 
 
@@ -24,7 +29,7 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
     metadata = {"render_modes": RENDER_MODES, "render_fps": 4}
 
     def __init__(self, spec: WorldSpec | str | os.PathLike[str], *, render_mode: str | None = None,
-                 kernel: str = "auto", **params: Any) -> None:
+                 kernel: str = "auto", trace_writer: TraceWriter | None = None, **params: Any) -> None:
         self.world_spec = spec if isinstance(spec, WorldSpec) else load_spec(spec, **params)
         if len(self.world_spec.agents) != 1:
             raise ValueError(f"{self.world_spec.path}: a gymnasium Env plays one agent; this spec declares "
@@ -32,7 +37,11 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
                              "plays them all)")
         self._painter = painter_for(self.world_spec, render_mode)
         self.render_mode = render_mode
-        self.world = DeclaredWorld(self.world_spec, kernel=kernel)
+        self.world = DeclaredWorld(self.world_spec, kernel=kernel, trace=trace_writer is not None)
+        self._recorder: DeclaredRecorder | None = None
+        if trace_writer is not None:  # the store's modules only load for a traced env
+            from tracelab.envs.declared.recording import DeclaredRecorder
+            self._recorder = DeclaredRecorder(self.world, trace_writer)
         self.metadata = {**self.metadata, "render_fps": self.world_spec.render_fps}
         self._n_actions = len(self.world_spec.action_names)
         self.action_space = spaces.Discrete(self._n_actions)
@@ -42,7 +51,11 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         super().reset(seed=seed)
+        if self._recorder is not None:
+            self._recorder.before_reset()
         self.world.reset(self.np_random)
+        if self._recorder is not None:
+            self._recorder.begin(seed)
         self._running = True
         self._last_action = None
         return self._observe(), self._info()
@@ -58,7 +71,28 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
         self._last_action = a
         terminated, truncated = w.terminated(), w.truncated()
         self._running = not (terminated or truncated)
-        return self._observe(), w.last_rewards[0], terminated, truncated, self._info()
+        obs = self._observe()
+        if self._recorder is not None:
+            limit = self._registered_limit()
+            self._recorder.stepped(a, w.last_rewards, obs, terminated,
+                                   truncated or (limit is not None and w.steps >= limit))
+        return obs, w.last_rewards[0], terminated, truncated, self._info()
+
+    def _registered_limit(self) -> int | None:
+        """The step limit of the id gym.make built this env from: its TimeLimit wrapper truncates there,
+        and the records say so (gym.make leaves max_episode_steps out of the unwrapped env's spec; a
+        max_episode_steps= given to gym.make is not seen here)."""
+        if self.spec is None or self.spec.id not in gym.registry:
+            return None
+        return gym.registry[self.spec.id].max_episode_steps
+
+    def close(self, status: str = "finished") -> None:
+        """Close the env; a traced env writes what it kept and closes its run with `status` (finished,
+        or interrupted / failed when the caller stops it early)."""
+        if self._recorder is not None:
+            recorder, self._recorder = self._recorder, None
+            recorder.close(status)
+        super().close()
 
     def _observe(self) -> Any:
         return self.world.observation()

@@ -1,0 +1,141 @@
+"""`tracelab play --env SPEC_OR_ID`: games of a world declared in rules (docs/worlds.md), played by a
+random policy and recorded into a run of the trace store (tracelab/envs/declared/recording.py): every
+change with its cause, the actions and the random draws as the facts they set, one episode per game.
+play.py hands over to `run_env` when --env is given."""
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tracelab.errors import UserError, store_errors
+
+# play's flags that belong to the grid game (GridWar) only
+GRIDWAR_ONLY = (("scenario", None, "--scenario"), ("opponent_p", None, "--opponent-p"))
+
+
+def run_env(args: argparse.Namespace) -> int:
+    from tracelab.envs.declared.play import parse_env_args, resolve_env
+
+    for attr, default, flag in GRIDWAR_ONLY:
+        if getattr(args, attr) != default:
+            raise UserError(f"{flag} is the grid game's; --env plays the world its spec declares")
+    if args.policy not in (None, "random"):
+        raise UserError(f"--policy {args.policy}: --env plays a random policy (--policy random) for now")
+    if args.worlds != 1:
+        raise UserError("--num-envs: --env plays one world at a time for now")
+    if args.env_arg and args.env is None:
+        raise UserError("--env-arg goes with --env")
+    source = resolve_env(args.env, parse_env_args(args.env_arg))
+    spec = source.load()
+    if len(spec.agents) != 1:
+        raise UserError(f"--env {args.env}: the spec declares {len(spec.agents)} agents; play --env plays "
+                        "one (tracelab.envs.declared.parallel_env.DeclaredParallelEnv plays them all)")
+    if args.no_trace:
+        _summary(source, _play(source, spec, args, None))
+        return 0
+    return _record(source, spec, args)
+
+
+def _record(source: Any, spec: Any, args: argparse.Namespace) -> int:
+    from tracelab.commands.play import _ended_episodes, check_run_dir
+    from tracelab.store import TraceWriter
+
+    run_dir = Path(args.run or f"runs/play-{source.name}-{time.strftime('%Y%m%d-%H%M%S')}")
+    check_run_dir(run_dir)
+    try:
+        with store_errors():  # another process took the directory since the check: a RuntimeError
+            writer = TraceWriter.open(run_dir, run_meta(source, spec, args))
+    except OSError as e:
+        raise UserError(f"cannot create the run directory {run_dir}: {e.strerror or e}") from e
+    try:
+        stats = _play(source, spec, args, writer)
+    except (KeyboardInterrupt, SystemExit) as e:  # Ctrl-C, or SIGTERM (the writer's handler exits)
+        if not writer.closed:
+            writer.close(status="interrupted")
+        kept = f"{run_dir} keeps {_ended_episodes(run_dir)} finished episode(s) and the trace so far"
+        if isinstance(e, SystemExit):
+            print(f"tracelab: terminated: {kept}", file=sys.stderr)
+            raise
+        raise KeyboardInterrupt(kept) from None
+    except BaseException:
+        if not writer.closed:
+            writer.close(status="failed")
+        raise
+    _summary(source, stats)
+    _what_to_open_env(run_dir, spec)
+    return 0
+
+
+def run_meta(source: Any, spec: Any, args: argparse.Namespace) -> dict[str, Any]:
+    """The run's metadata: the command, the env (id or file, its arguments, the spec's text and the
+    rule files'), what sets each external fact (recording.declared_facts), the board's rows."""
+    from tracelab.envs.declared.recording import CONFIG_KEY, declared_facts
+
+    board = spec.board
+    config = {"env": source.text, "env_id": source.env_id, "spec_path": source.spec_path,
+              "env_args": source.params, "episodes": args.episodes, "policy": "random",
+              "kernel": args.kernel, "spec": Path(source.spec_path).read_text(),
+              "rule_texts": {f: Path(f).read_text() for f in spec.program.files},
+              CONFIG_KEY: declared_facts(spec),
+              "declared_board": None if board is None else {"rows": list(board.rows), "cell": board.cell_format,
+                                                            "marks": board.marks}}
+    return {"command": " ".join(shlex.quote(a) for a in ["tracelab", *args.argv]), "config": config,
+            "rule_files": list(spec.program.files), "seed": args.seed}
+
+
+def _play(source: Any, spec: Any, args: argparse.Namespace, writer: Any) -> dict[str, Any]:
+    from tracelab.commands._progress import compiling_engine, progress
+    from tracelab.envs.declared.play import make_declared_env, play_episodes, random_policy
+
+    with compiling_engine(busy=f"building {source.name}'s rules…"):
+        env = make_declared_env(source, spec, kernel=args.kernel,
+                                **({} if writer is None else {"trace_writer": writer}))
+    try:
+        with progress(f"playing {source.name}", total=args.episodes, unit="episodes") as bar:
+            stats = play_episodes(env, args.episodes, args.seed, random_policy(env, args.seed),
+                                  on_episode=lambda e: bar.advance(1))
+    except BaseException as e:  # the run records how it ended, with what was played until then
+        env.unwrapped.close(status="interrupted" if isinstance(e, (KeyboardInterrupt, SystemExit)) else "failed")
+        raise
+    env.close()  # a traced env closes its writer: the last rows and episode ends are written
+    return stats
+
+
+def _summary(source: Any, stats: dict[str, Any]) -> None:
+    eps = stats["episodes"]
+    returns = np.array([e["return"] for e in eps])
+    rate = f"{stats['steps'] / stats['seconds']:,.0f} steps/s" if stats["seconds"] > 0 else "too short to time"
+    print(f"played {len(eps)} episodes of {source.name} ({stats['steps']} steps, {rate})")
+    print(f"{int((returns > 0).sum())} with a positive return, "
+          f"{sum(e['outcome'] == 'truncated' for e in eps)} truncated; mean return {returns.mean():.2f}")
+
+
+def _what_to_open_env(run_dir: Path, spec: Any) -> None:
+    from tracelab.store import open_run
+
+    con = open_run(run_dir)
+    try:
+        best = con.execute("SELECT episode, t_end FROM episodes WHERE ended ORDER BY reward DESC, steps, episode "
+                           "LIMIT 1").fetchone()
+        row = None
+        if best is not None and spec.reward_table[0]:
+            names = [str(a) for a, _ in spec.reward_table[0]]
+            row = con.execute("SELECT atom, t FROM changes WHERE episode = ? AND atom IN (SELECT unnest(?)) "
+                              "AND new_lower = 1 ORDER BY t DESC LIMIT 1", [best[0], names]).fetchone()
+    finally:
+        con.close()
+    run = shlex.quote(str(run_dir))
+    ep, last = best if best else (0, 1)
+    print(f"\nrun written to {run_dir}/  — what to open:")
+    print(f"  tracelab sql {run} \"SELECT episode, steps, reward, outcome FROM episodes ORDER BY reward DESC, steps, episode LIMIT 5\"")
+    print(f"  tracelab trace {run} --episode {ep} --from {last} --to {last}            # its last step")
+    if row:
+        print(f"  tracelab why {run} {shlex.quote(row[0])} --episode {ep} --at {row[1]}   # why is it true?")
+    print(f"  tracelab tui {run}")
+    print(f"  tracelab replay {run} --episode {ep} --save replay.rrd")

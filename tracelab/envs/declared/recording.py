@@ -1,0 +1,188 @@
+"""A declared world's games recorded into a run of the trace store, as GridWar's envs record theirs
+(tracelab/envs/tracer.py, tracelab/store/sink.py): the program (rules, facts, the board's facts), the
+vocabulary and groundings, every change row with its cause and grounding, a step row per env step and
+one episode per game (seed; steps, return, outcome).
+
+Episode time. Each episode's trace starts at t = 0 with the rows of the world's build (the program's and
+the board's facts, and the env's atoms set to [0,0]), replayed for every episode so that its rows alone
+rebuild its world, then the rows of the reset's start step (start facts, the drawn start choices), also
+at t = 0. Env step k's rows have t = k, unless an `after` random fact took a second engine step in an
+earlier step (Taxi's fickle passenger): then `t` is the engine's step count from the start, and the step
+rows' `t` says which engine step each env step ended at (`step` is the env step).
+
+The env's facts are external facts (cause `action` in the store's views): the action's facts
+(`pressed(right)`) and each drawn random fact (`slip(cw)`), so that `tracelab why` ends at them. Which
+predicates are the agent's and which are draws (by name) is in the run's config (`declared_facts`).
+
+Rows are taken from the engine in chunks (tracelab.envs.tracer's cadence): when an episode ends, every
+HANDOVER_STEPS steps, when HANDOVER_ROWS rows wait, before a reset, and at close; everything is written
+at StoreSink's cadence (WRITE_ROWS steps, or WRITE_INTERVAL_S seconds), so a live reader sees a game
+that late at most, plus the writer's own delay. Outcomes:
+"terminated", "truncated", or "aborted" (cut short by a reset or close)."""
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from tracelab.envs.declared.spec import WorldSpec
+from tracelab.envs.declared.world import DeclaredWorld
+from tracelab.envs.tracer import HANDOVER_ROWS, HANDOVER_STEPS
+from tracelab.store.convert import utc_now
+from tracelab.store.sink import WRITE_INTERVAL_S, WRITE_ROWS
+
+if TYPE_CHECKING:
+    from tracelab.store.writer import TraceWriter
+
+CONFIG_KEY = "declared_facts"
+
+
+def declared_facts(spec: WorldSpec) -> dict[str, Any]:
+    """What sets each external fact of a run: the action facts' predicates, and each draw's name with
+    its atoms' predicates (the run's config under CONFIG_KEY)."""
+    actions = sorted({a.pred for per_agent in spec.action_facts for facts in per_agent for a in facts})
+    draws = {d.name: sorted({a.pred for value in d.atoms for a in value})
+             for d in (*spec.start_choices, *spec.random_facts)}
+    return {"actions": actions, "draws": draws}
+
+
+def flat_observation(obs: Any) -> np.ndarray:
+    """An observation of any of the spec's spaces as one row of numbers (a Dict's parts in order)."""
+    if isinstance(obs, dict):
+        return np.concatenate([np.asarray(v, np.float32).ravel() for v in obs.values()])
+    return np.asarray(obs, np.float32).ravel()
+
+
+class DeclaredRecorder:
+    """Records `world`'s episodes into `writer`; the world's engine must trace (DeclaredWorld(trace=True))
+    and must not have stepped since it was built. `close()` closes the writer.
+
+    What an episode records is kept and written every WRITE_ROWS steps or WRITE_INTERVAL_S seconds (and
+    at close), as StoreSink does: episode begins, change rows, step rows, then episode ends, so a reader never sees an ended
+    episode without its rows. Writing per episode cost more than the toy-text games' steps."""
+
+    def __init__(self, world: DeclaredWorld, writer: TraceWriter) -> None:
+        eng = world.engine
+        if not eng.trace_on.any():
+            raise ValueError("the declared world's engine does not trace: build it with trace=True")
+        self.world = world
+        self.writer = writer
+        self.agents = list(world.spec.agents)
+        writer.write_engine_program(eng)
+        self._setup = eng.take_trace()  # the build's rows (t = 0), replayed at every episode's start
+        self.episode = -1
+        self._open = False
+        self._t0 = 0  # the engine time of the episode's t = 0
+        self._begins: list[dict[str, Any]] = []
+        self._changes: list[dict[str, np.ndarray]] = []  # engine rows with t episode-local and `episode`
+        # step rows: (episode, step, t, agent index, reward, action, terminated, truncated), and the
+        # observation after each of those env steps
+        self._steps: list[tuple[int, int, int, int, float, int, bool, bool]] = []
+        self._obs: list[np.ndarray] = []
+        self._ends: list[dict[str, Any]] = []
+        self._clock = (np.zeros(1, np.int64), np.zeros(1, np.int64))  # (t0, episode) for take_trace
+        self._written_at = time.monotonic()
+        self._steps_waiting = 0  # steps whose rows the engine holds
+        self._steps_kept = 0     # steps whose records are kept here
+        self._length = 0
+        self._returns = [0.0] * len(self.agents)
+        self._seed: int | None = None
+
+    def before_reset(self) -> None:
+        """Before the world resets: the running episode's rows are taken under its own clock, and it ends
+        as "aborted"."""
+        if self._open:
+            self._take_rows()
+            self._end("aborted")
+
+    def begin(self, seed: int | None) -> None:
+        """After the world's reset: a new episode, its t = 0 the build's rows and the start step's."""
+        eng = self.world.engine
+        if seed is not None or self.episode < 0:
+            self._seed = seed
+        self.episode += 1
+        self._open = True
+        self._t0 = eng.t - 1
+        self._length, self._returns = 0, [0.0] * len(self.agents)
+        self._clock = (np.array([self._t0], np.int64), np.array([self.episode], np.int64))
+        self._begins.append({"episode": self.episode, "t_start": 0, "seed": self._seed, "started_at": utc_now()})
+        self._changes.append({**self._setup, "episode": np.full(len(self._setup["t"]), self.episode, np.int64)})
+        self._take_rows()
+
+    def stepped(self, actions: Any, rewards: list[float], obs: Any, terminated: bool, truncated: bool) -> None:
+        """After an env step: its step rows (one per agent), and its end when it ended."""
+        if not self._open:
+            return
+        self._length += 1
+        t = self.world.engine.t - 1 - self._t0
+        if isinstance(actions, (int, np.integer)):  # one agent (kept short: the toy-text games' case)
+            self._returns[0] += rewards[0]
+            self._steps.append((self.episode, self._length, t, 0, rewards[0], int(actions), terminated, truncated))
+        else:
+            for a, act in enumerate(np.asarray(actions, np.int64).tolist()):
+                self._returns[a] += rewards[a]
+                self._steps.append((self.episode, self._length, t, a, rewards[a], act, terminated, truncated))
+        self._obs.append(obs)  # as the env returned it (a new object each step); made numbers when written
+        self._steps_waiting += 1
+        self._steps_kept += 1
+        ended = terminated or truncated
+        if ended or self._steps_waiting >= HANDOVER_STEPS or \
+                self.world.engine.trace_rows_waiting >= HANDOVER_ROWS:
+            self._take_rows()
+        if ended:
+            self._end("terminated" if terminated else "truncated")
+        if self._steps_kept >= WRITE_ROWS or time.monotonic() - self._written_at >= WRITE_INTERVAL_S:
+            self.write_pending()
+
+    def close(self, status: str = "finished") -> None:
+        """The rows still in the engine, the running episode ended as "aborted", all written, the
+        writer closed."""
+        try:
+            if self._open:
+                self._take_rows()
+                self._end("aborted")
+            self.write_pending()
+        finally:
+            self.writer.close(status=status)
+
+    def write_pending(self) -> None:
+        """Write what is kept: episode begins, the vocabulary the rows name, the change rows, the step
+        records (a row per agent), the episode ends."""
+        w, eng = self.writer, self.world.engine
+        self._steps_kept = 0
+        self._written_at = time.monotonic()
+        if self._begins:
+            begins, self._begins = self._begins, []
+            w.begin_episodes(begins)
+        if self._changes:
+            chunks, self._changes = self._changes, []
+            w.write_engine(None, eng, {k: np.concatenate([c[k] for c in chunks]) for k in chunks[0]})
+        if self._steps:
+            episode, step, t, agent, reward, action, term, trunc = (np.array(c) for c in zip(*self._steps))
+            w.write_steps(episode, {
+                "step": step, "t": t, "agent": [self.agents[a] for a in agent.tolist()], "action": action,
+                "reward": reward, "terminated": term, "truncated": trunc,
+                "obs": np.repeat(np.stack([flat_observation(o) for o in self._obs]), len(self.agents), axis=0)})
+            self._steps, self._obs = [], []
+        if self._ends:
+            ends, self._ends = self._ends, []
+            w.end_episodes(ends)
+
+    # ----
+
+    def _take_rows(self) -> None:
+        """The engine's rows, t counted from the episode's start and labelled with the episode (the
+        engine's own localising take: one compiled call, no copy of its buffers)."""
+        self._steps_waiting = 0
+        rows = self.world.engine.take_trace(self._clock[0], self._clock[1])
+        if len(rows["t"]):
+            rows["episode"] = rows.pop("world_episode")
+            self._changes.append(rows)
+
+    def _end(self, outcome: str) -> None:
+        t_end = self.world.engine.t - 1 - self._t0
+        self._ends.append({"episode": self.episode, "steps": self._length, "t_end": t_end, "outcome": outcome,
+                           "reward": self._returns[0], "rewards": dict(zip(self.agents, self._returns)),
+                           "ended_at": utc_now()})
+        self._open = False
