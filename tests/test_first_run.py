@@ -80,8 +80,8 @@ def test_the_second_process_calls_the_game_kernels_with_the_types_a_rulesim_pass
     sim.step(np.zeros((1, 1), np.int64), sim.scripted_actions("blue"))
     sim.reset(worlds=np.array([0]))
     sim._bind()  # the fused step's buffers
+    # other tests in this process may have called a kernel with other types: only what the child adds counts
     before = {k.__name__: len(k.signatures) for k in rulesim_warmup.game_kernels(True)}
-    assert all(n == 1 for n in before.values()), before
     message = rulesim_warmup.to_child(scenario, 1, False, sim.engine.kernel, True)
     rulesim_warmup.compile_game_kernels(**rulesim_warmup.from_parent(message))
     assert {k.__name__: len(k.signatures) for k in rulesim_warmup.game_kernels(True)} == before
