@@ -86,6 +86,8 @@ async def _reasoning(run: Path) -> tuple[str, str]:
         await _until(pilot, lambda: side.atoms is not None and side.atoms.t == 3 and side.hood is not None
                      and side.table.idle and "alert" in side.query_one("#gs-filter").value)
         pane.table.focus()
+        # the graph around the atom under the cursor is read after the cursor rests: wait for that atom's
+        await _until(pilot, lambda: side.hood is not None and side.hood.atom.startswith("alert(") and side.hood.t == 3)
         await pilot.pause(0.5)
         trace_svg = app.export_screenshot(title="tracelab tui · a reasoning run: atoms and graph")
         await pilot.press("w")
