@@ -201,7 +201,7 @@ def _what_to_open(run_dir: Path) -> None:
     con.close()
     run = shlex.quote(str(run_dir))
     print(f"\nrun written to {run_dir}/  — what to open:")
-    print(f"  tracelab trace {run} --episode {ep} --from 1 --to 4        # the trace table (t=0: the map)")
+    print(f"  tracelab trace {run} --episode {ep} --from 1 --to 4        # the trace table (the map, t=0, hidden)")
     if row:
         print(f"  tracelab why {run} {shlex.quote(row[0])} --episode {ep} --at {row[1]}   # why is it true?")
     print(f"  tracelab sql {run} \"SELECT rule, count(*) AS n FROM firings GROUP BY rule ORDER BY n DESC\"")
