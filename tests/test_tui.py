@@ -537,3 +537,16 @@ def test_plot_axis_labels_fit_the_axis() -> None:
     assert all(len(t) <= AXIS_W - 1 for t in labels.values()), labels
     assert labels[-1440.0] == "-1.44k" and labels[250.0] == "250" and labels[-3.1e-3] == "-3e-3"
     assert all(abs(float(t.replace("k", "e3").replace("M", "e6")) - v) <= 0.06 * abs(v) for v, t in labels.items())
+
+
+def test_only_the_selected_atom_names_the_atom_in_the_status_line() -> None:
+    """`a` filters the trace to the atom under the cursor; the status line says which atom, not its id."""
+    async def body(app: Any, pilot: Any) -> None:
+        pane, trace = await open_first_trace(app, pilot)
+        atom = trace.cursor_row["atom"]
+        await pilot.press("a")
+        await wait_for(pilot, lambda: pane.filter is not None and pane.filter.atom_id is not None and loaded(trace))
+        status = str(pane.query_one("#tr-status").render())
+        assert f"only {atom}" in status and "atom #" not in status, status
+        assert {trace.row(i)["atom"] for i in range(trace.count)} == {atom}
+    run_app([ADVANCED], body, size=(100, 30))

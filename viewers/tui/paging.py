@@ -86,6 +86,7 @@ class TraceFilter:
     rule: str = ""
     atom_id: int | None = None          # one atom (by id), e.g. from the board or the why tree
     hide_static: bool = False           # leave out the rows of static facts (the trace pane does by default)
+    atom_text: str = ""                 # the text of atom_id, for the status line (`a`: only this atom)
 
     def describe(self) -> str:
         parts = [f"episode {self.episode}"]
@@ -93,7 +94,7 @@ class TraceFilter:
             parts.append(f"t {'' if self.t_from is None else self.t_from}..{'' if self.t_to is None else self.t_to}")
         parts += [f"{k} {v}" for k, v in (("atom", self.atom), ("label", self.label), ("rule", self.rule)) if v]
         if self.atom_id is not None:
-            parts.append(f"atom #{self.atom_id}")
+            parts.append(f"only {self.atom_text}" if self.atom_text else f"atom #{self.atom_id}")
         return ", ".join(parts)
 
 

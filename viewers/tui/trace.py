@@ -224,13 +224,22 @@ class TracePane(Vertical):
             return
         value = lambda name: self.query_one(name, Input).value.strip()  # noqa: E731
         self.filter = TraceFilter(episode, t_from, t_to, value("#tr-atom"), value("#tr-label"),
-                                  value("#tr-rule"), atom_id, self.hide_static)
+                                  value("#tr-rule"), atom_id, self.hide_static, self._atom_text(atom_id))
         start = ("seq", keep_seq) if keep_seq is not None else ("t", self._goto_t) if self._goto_t is not None \
             else None
         self._goto_t = None
         self.trace = TraceSource(self.source, self.filter, start)
         status.update(f" {self.filter.describe()} · loading…")
         self.table.set_source(self.trace)
+
+    def _atom_text(self, atom_id: int | None) -> str:
+        """The atom's text for the status line (a point lookup in the atoms table, once per filter)."""
+        if atom_id is None:
+            return ""
+        if self.filter is not None and self.filter.atom_id == atom_id:
+            return self.filter.atom_text
+        text = self.source.scalar("SELECT text FROM atoms WHERE atom = $atom", {"atom": atom_id})
+        return "" if text is None else str(text)
 
     def on_lazy_table_loaded(self, event: LazyTable.Loaded) -> None:
         event.stop()
