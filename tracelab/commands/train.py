@@ -218,25 +218,9 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
             else:
                 print(f"resumed from {resumed_from} at step {trainer.step:,}", file=sys.stderr)
 
-        def stop(signum: int, frame: Any) -> None:
-            if trainer.stop_requested:  # a second Ctrl-C: stop now
-                raise KeyboardInterrupt
-            trainer.stop_requested = True
-            print("\nstopping: finishing the step, writing a checkpoint (Ctrl-C again to abort)",
-                  file=sys.stderr)
-
-        signal.signal(signal.SIGINT, stop)
-        from tracelab.commands._progress import progress
-        with progress("train", total=cfg.steps) as bar:  # draws on a terminal only
-            bar.advance(trainer.step)
-
-            def show(fig: dict[str, Any]) -> None:
-                bar.advance(min(fig["step"], fig["steps"]) - bar.completed)
-                bar.set_fields(ε=fig["epsilon"], loss="-" if fig["loss"] is None else fig["loss"],
-                               win="-" if fig["win_rate"] is None else f"{100 * fig['win_rate']:.1f}%")
-
-            trainer.progress = show
-            status = trainer.train(stop_at)
+        from tracelab.commands._training import train_until_stopped
+        status = train_until_stopped(trainer, cfg.steps, stop_at, "a checkpoint", lambda fig: {
+            "win": "-" if fig["win_rate"] is None else f"{100 * fig['win_rate']:.1f}%"})
     except KeyboardInterrupt:
         status = "interrupted"
     finally:

@@ -108,21 +108,9 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
         if trainer.learner_note:
             print(f"note: {trainer.learner_note}", file=sys.stderr)
 
-        def stop(signum: int, frame: Any) -> None:
-            if trainer.stop_requested:
-                raise KeyboardInterrupt
-            trainer.stop_requested = True
-            print("\nstopping: finishing the step, writing the policy (Ctrl-C again to abort)", file=sys.stderr)
-
-        signal.signal(signal.SIGINT, stop)
-        from tracelab.commands._progress import progress
-        with progress("train", total=cfg.steps) as bar:
-            def show(fig: dict[str, Any]) -> None:
-                bar.advance(min(fig["step"], fig["steps"]) - bar.completed)
-                bar.set_fields(ε=fig["epsilon"], loss="-" if fig["loss"] is None else fig["loss"],
-                               ret="-" if fig["mean_return"] is None else f"{fig['mean_return']:.2f}")
-            trainer.progress = show
-            status = trainer.train(stop_at)
+        from tracelab.commands._training import train_until_stopped
+        status = train_until_stopped(trainer, cfg.steps, stop_at, "the policy", lambda fig: {
+            "ret": "-" if fig["mean_return"] is None else f"{fig['mean_return']:.2f}"})
     except KeyboardInterrupt:
         status = "interrupted"
     finally:

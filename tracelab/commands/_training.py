@@ -1,0 +1,36 @@
+"""The part of `tracelab train` that both trainers share: Ctrl-C once finishes the step and stops (the
+trainer writes what it keeps), Ctrl-C again aborts; a progress bar on a terminal."""
+from __future__ import annotations
+
+import signal
+import sys
+from collections.abc import Callable
+from typing import Any
+
+
+def train_until_stopped(trainer: Any, total: int, stop_at: int | None, keeps: str,
+                        fields: Callable[[dict[str, Any]], dict[str, str]]) -> str:
+    """trainer.train(stop_at) under the progress bar; `keeps` says what a first Ctrl-C writes, `fields`
+    the figures beside ε and the loss. Returns the trainer's status; a second Ctrl-C raises
+    KeyboardInterrupt. The SIGINT handler is the caller's again afterwards."""
+    from tracelab.commands._progress import progress
+
+    def stop(signum: int, frame: Any) -> None:
+        if trainer.stop_requested:  # a second Ctrl-C: stop now
+            raise KeyboardInterrupt
+        trainer.stop_requested = True
+        print(f"\nstopping: finishing the step, writing {keeps} (Ctrl-C again to abort)", file=sys.stderr)
+
+    previous = signal.signal(signal.SIGINT, stop)
+    try:
+        with progress("train", total=total) as bar:  # draws on a terminal only
+            bar.advance(trainer.step)
+
+            def show(fig: dict[str, Any]) -> None:
+                bar.advance(min(fig["step"], fig["steps"]) - bar.completed)
+                bar.set_fields(ε=fig["epsilon"], loss="-" if fig["loss"] is None else fig["loss"], **fields(fig))
+
+            trainer.progress = show
+            return str(trainer.train(stop_at))
+    finally:
+        signal.signal(signal.SIGINT, previous)
