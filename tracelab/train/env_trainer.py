@@ -22,7 +22,7 @@ from tracelab.train.config import TrainConfig
 from tracelab.train.env_policy import EnvEvalResult, EnvPolicy, make_vector_env, play_env_games, save_env_policy
 from tracelab.train.env_source import EnvSource, ObservationEncoder, action_count
 from tracelab.train.learner_protocol import Learner
-from tracelab.train.loop import acting_q, eval_seed, learn_pass, make_learner, write_metric_rows
+from tracelab.train.loop import acting_q, close_log, eval_seed, learn_pass, make_learner, write_metric_rows
 from tracelab.train.policy import BEST_POLICY_DIR
 from tracelab.train.qnet import NetSpec
 from tracelab.train.tensorboard import MetricSink
@@ -147,7 +147,6 @@ class EnvTrainer:
 
     def log_metrics(self) -> dict[str, float]:
         now = time.perf_counter()
-        t0, step0, upd0 = self._rate_mark
         m: dict[str, float] = {"epsilon": self.epsilon()}
         loss = self.learner.take_loss()
         if loss is not None:
@@ -155,17 +154,7 @@ class EnvTrainer:
         q = self.learner.q_max_mean()
         if q is not None:
             m["q_max_mean"] = q / self.cfg.reward_scale
-        if self.returns_since_log:
-            m["train_return"] = float(np.mean(self.returns_since_log))
-            self.returns_since_log = []
-        dt = max(now - t0, 1e-9)
-        m["env_steps_per_s"] = (self.step - step0) / dt
-        m["updates_per_s"] = (self.learner.updates - upd0) / dt
-        self._rate_mark = (now, self.step, self.learner.updates)
-        self.logged_step = self.step
-        self._flush_episodes()
-        self.write_metrics(m)
-        return m
+        return close_log(self, m, now, self.learner.updates)
 
     def write_metrics(self, values: dict[str, float]) -> None:
         write_metric_rows(self, values)

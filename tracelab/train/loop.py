@@ -110,6 +110,23 @@ def learn_pass(tr: Any, learners: Collection[Learner]) -> None:
         tr.synced_block = block
 
 
+def close_log(tr: Any, m: dict[str, float], now: float, updates: int) -> dict[str, float]:
+    """What every log of a trainer adds to its figures `m` (the mean training return since the last log,
+    env steps and updates per second), then its episodes and metric rows written; returns `m`."""
+    t0, step0, upd0 = tr._rate_mark
+    if tr.returns_since_log:
+        m["train_return"] = float(np.mean(tr.returns_since_log))
+        tr.returns_since_log = []
+    dt = max(now - t0, 1e-9)
+    m["env_steps_per_s"] = (tr.step - step0) / dt
+    m["updates_per_s"] = (updates - upd0) / dt
+    tr._rate_mark = (now, tr.step, updates)
+    tr.logged_step = tr.step
+    tr._flush_episodes()
+    tr.write_metrics(m)
+    return m
+
+
 def write_metric_rows(tr: Any, values: dict[str, float]) -> None:
     """Metric rows at the trainer's current step: into its run (`tr.writer`), and into every other sink."""
     if tr.writer is not None:
@@ -356,7 +373,6 @@ class Trainer:
 
     def log_metrics(self) -> dict[str, float]:
         now = time.perf_counter()
-        t0, step0, upd0 = self._rate_mark
         updates = sum(lr.updates for lr in self.learners.values())
         m: dict[str, float] = {"epsilon": self.epsilon()}
         losses = {name: lr.take_loss() for name, lr in self.learners.items()}
@@ -369,17 +385,7 @@ class Trainer:
         qs = [q for q in (lr.q_max_mean() for lr in self.learners.values()) if q is not None]
         if qs:
             m["q_max_mean"] = float(np.mean(qs)) / self.cfg.reward_scale  # in the game's reward units
-        if self.returns_since_log:
-            m["train_return"] = float(np.mean(self.returns_since_log))
-            self.returns_since_log = []
-        dt = max(now - t0, 1e-9)
-        m["env_steps_per_s"] = (self.step - step0) / dt
-        m["updates_per_s"] = (updates - upd0) / dt
-        self._rate_mark = (now, self.step, updates)
-        self.logged_step = self.step
-        self._flush_episodes()
-        self.write_metrics(m)
-        return m
+        return close_log(self, m, now, updates)
 
     def write_metrics(self, values: dict[str, float]) -> None:
         write_metric_rows(self, values)
