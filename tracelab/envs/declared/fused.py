@@ -77,11 +77,12 @@ def bind(binding: tuple, tables: tuple, ext: tuple, reads: tuple, out: tuple) ->
 
 
 @njit(cache=True)
-def fused_step(b, actions, picks, t, first_id):  # noqa: ANN001, ANN201
-    """Set the facts of each action row in `actions` (-1: none) and, per draw d with picks[d] >= 0, the
-    facts of its value picks[d]; the last step's facts not set again become [0,0]. Steps the kernel; on
-    STATUS_OK also reads (read_step). Returns the kernel's status (b.out[4][0]: the world it paused at)."""
-    act_ptr, act_atoms, act_bnd, draw_base, val_ptr, val_atoms, val_bnd, prev, prev_n, now, now_bnd = b.tables
+def world_fact_rows(tables, prev, prev_n, w, actions, picks, ext_i, ext_f, first_id, k):  # noqa: ANN001, ANN201
+    """World w's external fact rows of a step, from row k of (ext_i, ext_f): the facts of each action
+    row in `actions` (-1: none) and of each draw's picked value (picks[d] >= 0), and the facts the world
+    set last step that are not set again, now [0,0]; `prev` (that world's row) and prev_n[w] then hold
+    this step's. Returns the next free row."""
+    act_ptr, act_atoms, act_bnd, draw_base, val_ptr, val_atoms, val_bnd, _, _, now, now_bnd = tables
     n = 0
     for action in actions:
         if action < 0:
@@ -99,9 +100,7 @@ def fused_step(b, actions, picks, t, first_id):  # noqa: ANN001, ANN201
                 now_bnd[n, 0] = val_bnd[j, 0]
                 now_bnd[n, 1] = val_bnd[j, 1]
                 n += 1
-    ext_ptr, ext_i, ext_f = b.ext
-    k = 0
-    for i in range(prev_n[0]):  # last step's facts that are not set again: false now
+    for i in range(prev_n[w]):  # last step's facts that are not set again: false now
         again = False
         for j in range(n):
             if now[j] == prev[i]:
@@ -122,7 +121,18 @@ def fused_step(b, actions, picks, t, first_id):  # noqa: ANN001, ANN201
         ext_f[k, 1] = now_bnd[j, 1]
         k += 1
         prev[j] = now[j]
-    prev_n[0] = n
+    prev_n[w] = n
+    return k
+
+
+@njit(cache=True)
+def fused_step(b, actions, picks, t, first_id):  # noqa: ANN001, ANN201
+    """Set the facts of each action row in `actions` (-1: none) and, per draw d with picks[d] >= 0, the
+    facts of its value picks[d]; the last step's facts not set again become [0,0]. Steps the kernel; on
+    STATUS_OK also reads (read_step). Returns the kernel's status (b.out[4][0]: the world it paused at)."""
+    prev, prev_n = b.tables[7], b.tables[8]
+    ext_ptr, ext_i, ext_f = b.ext
+    k = world_fact_rows(b.tables, prev, prev_n, 0, actions, picks, ext_i, ext_f, first_id, 0)
     ext_ptr[0] = 0
     ext_ptr[1] = k
     cfg = b.cfg

@@ -27,50 +27,12 @@ STATUS_OK = K.STATUS_OK
 def build_rows(tables, ext, rows, picks, first_id):  # noqa: ANN001, ANN201
     """The external rows of every world's step, grouped by world (ext: ptr, rows, bounds): world w's
     action rows rows[w] and draws picks[w], and its last step's facts not set again as [0,0]."""
-    act_ptr, act_atoms, act_bnd, draw_base, val_ptr, val_atoms, val_bnd, prev, prev_n, now, now_bnd = tables
+    prev, prev_n = tables[7], tables[8]
     ext_ptr, ext_i, ext_f = ext
     k = 0
     for w in range(rows.shape[0]):
         ext_ptr[w] = k
-        n = 0
-        for action in rows[w]:
-            if action < 0:
-                continue
-            for j in range(act_ptr[action], act_ptr[action + 1]):
-                now[n] = act_atoms[j]
-                now_bnd[n, 0] = act_bnd[j, 0]
-                now_bnd[n, 1] = act_bnd[j, 1]
-                n += 1
-        for d in range(picks.shape[1]):
-            if picks[w, d] >= 0:
-                v = draw_base[d] + picks[w, d]
-                for j in range(val_ptr[v], val_ptr[v + 1]):
-                    now[n] = val_atoms[j]
-                    now_bnd[n, 0] = val_bnd[j, 0]
-                    now_bnd[n, 1] = val_bnd[j, 1]
-                    n += 1
-        for i in range(prev_n[w]):  # this world's last step facts that are not set again: false now
-            again = False
-            for j in range(n):
-                if now[j] == prev[w, i]:
-                    again = True
-                    break
-            if not again:
-                ext_i[k, 0] = prev[w, i]
-                ext_i[k, 1] = 0
-                ext_i[k, 2] = first_id + k
-                ext_f[k, 0] = 0.0
-                ext_f[k, 1] = 0.0
-                k += 1
-        for j in range(n):
-            ext_i[k, 0] = now[j]
-            ext_i[k, 1] = 0
-            ext_i[k, 2] = first_id + k
-            ext_f[k, 0] = now_bnd[j, 0]
-            ext_f[k, 1] = now_bnd[j, 1]
-            k += 1
-            prev[w, j] = now[j]
-        prev_n[w] = n
+        k = fused.world_fact_rows(tables, prev[w], prev_n, w, rows[w], picks[w], ext_i, ext_f, first_id, k)
     ext_ptr[rows.shape[0]] = k
     return k
 
