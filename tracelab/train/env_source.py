@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import shlex
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -17,6 +16,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
+from tracelab.envs.declared.play import parse_env_args  # noqa: F401 (--env-arg, one parser for play and train)
 from tracelab.errors import UserError
 
 
@@ -65,22 +65,6 @@ def env_source_from_json(d: Any, where: str) -> EnvSource:
     if not (isinstance(d, dict) and isinstance(d.get("name"), str) and isinstance(d.get("kwargs", {}), dict)):
         raise UserError(f"{where}: env: expected {{\"name\": str, \"kwargs\": {{...}}}}, got {str(d)[:80]}")
     return EnvSource(d["name"], dict(d.get("kwargs", {})))
-
-
-def parse_env_args(items: list[str]) -> dict[str, Any]:
-    """--env-arg key=value, the value read as a TOML value (false, 0.5, [1, 0, 0], "8x8") or else as the
-    text itself (8x8)."""
-    out: dict[str, Any] = {}
-    for item in items:
-        key, sep, text = item.partition("=")
-        key = key.strip()
-        if not sep or not key.isidentifier():
-            raise UserError(f"--env-arg {item!r}: expected key=value (e.g. is_slippery=false)")
-        try:
-            out[key] = tomllib.loads(f"v = {text}")["v"]
-        except tomllib.TOMLDecodeError:
-            out[key] = text
-    return out
 
 
 def check_same_env(recorded: EnvSource, given: EnvSource, what: str) -> None:

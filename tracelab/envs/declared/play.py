@@ -46,7 +46,7 @@ def parse_env_args(texts: list[str]) -> dict[str, Any]:
         key, eq, value = text.partition("=")
         key = key.strip()
         if not eq or not key.isidentifier():
-            raise UserError(f"--env-arg {text!r}: write KEY=VALUE, e.g. is_slippery=false")
+            raise UserError(f"--env-arg {text!r}: expected key=value (write KEY=VALUE, e.g. is_slippery=false)")
         try:
             out[key] = tomllib.loads(f"v = {value.strip()}")["v"]
         except tomllib.TOMLDecodeError:
