@@ -55,6 +55,7 @@ class _Program:
     rules: list[Rule] = field(default_factory=list)
     facts: list[Fact] = field(default_factory=list)
     closed: list[str] = field(default_factory=list)
+    reasoning: _Reasoning | None = None  # the last reason()'s, for again=True
     last: Interpretation | None = None
     timestamp: str = ""
 
@@ -68,7 +69,7 @@ _program = _Program()
 def reset() -> None:
     """Forget the graph, the facts, the closed-world predicates and the rules (PyReason's reset)."""
     global _program
-    _program = _Program(last=_program.last, timestamp=_program.timestamp)
+    _program = _Program(reasoning=_program.reasoning, last=_program.last, timestamp=_program.timestamp)
 
 
 def reset_rules() -> None:
@@ -203,24 +204,30 @@ def reason(timesteps: int = -1, convergence_threshold: int = -1, convergence_bou
     Convergence as PyReason's: with both thresholds -1, once no fact starts later and no delayed firing
     is pending; with convergence_threshold n, after a step that changed at most n atoms; with
     convergence_bound_threshold d, after a step whose largest bound change was at most d. `queries`
-    keeps only the rules they need (ruleset_filter)."""
-    if again:
-        raise unsupported("reason(again=True) (continuing a reasoning)")
+    keeps only the rules they need (ruleset_filter). As in PyReason the facts are used up: the facts
+    added after a reason() are the next one's. `again=True` continues the last reasoning for
+    `timesteps` more steps with the facts added since (`restart`: their times count from the first
+    new step; else they are absolute), delayed firings still pending included."""
+    if isinstance(timesteps, bool) or not isinstance(timesteps, (int, np.integer)) or timesteps < -1:
+        raise UserError(f"timesteps must be -1 (until convergence) or an integer >= 0, got {timesteps!r}")
+    convergence = _convergence(convergence_threshold, convergence_bound_threshold)
+    facts = [PFact(f.name or "", f.literal, f.start_time, f.end_time, f.static, SourceLoc(f"<Fact {f.name}>", 1, 1))
+             for f in _program.facts]
+    _program.facts.clear()
+    if again and _program.reasoning is not None:
+        _program.last = _program.reasoning.again(timesteps, restart, facts, convergence)
+        return _program.last
     if not _program.rules:
         raise UserError("There are no rules, use `add_rule` or `add_rules_from_file`")
-    if timesteps < -1 or isinstance(timesteps, bool) or not isinstance(timesteps, (int, np.integer)):
-        raise UserError(f"timesteps must be -1 (until convergence) or an integer >= 0, got {timesteps!r}")
     _program.timestamp = time.strftime("%Y%m%d-%H%M%S")
     rules = filter_ruleset(queries, _program.rules) if queries else _program.rules
     graph = settings.graph_for_engine(_program.graph) if _program.graph is not None else None
     names = copy.deepcopy(_program.names)
-    facts = [PFact(f.name or "", f.literal, f.start_time, f.end_time, f.static, SourceLoc(f"<Fact {f.name}>", 1, 1))
-             for f in _program.facts]
     constants = _ground_components(graph, facts) if settings.allow_ground_rules else frozenset()
     translated = translate([r.rule for r in rules], facts, graph, names, persistent=settings.persistent,
                            closed=_program.closed, constants=constants, directives=settings.directives())
-    run = _Reasoning(translated, graph)
-    _program.last = run.run(timesteps, _convergence(convergence_threshold, convergence_bound_threshold))
+    _program.reasoning = _Reasoning(translated, graph)
+    _program.last = _program.reasoning.run(timesteps, convergence)
     return _program.last
 
 
@@ -247,8 +254,8 @@ def _convergence(threshold: int, bound_threshold: float) -> _Convergence:
 
 
 class _Reasoning:
-    """One reason() call: the engine (through EpisodeRun, recorded when asked), its trace in PyReason's
-    layout, and the convergence test after each step."""
+    """One reasoning: the engine (through EpisodeRun, recorded when asked), its trace in PyReason's
+    layout, and the convergence test after each step; `again` continues it."""
 
     def __init__(self, translated: Any, graph: Graph | None) -> None:
         from tracelab.reasoning import ReasoningInputs
@@ -259,37 +266,76 @@ class _Reasoning:
         self.skip_graph_facts = 0 if settings.save_graph_attributes_to_trace else graph_facts
         self.last_fact = max([f.end for f in translated.program.facts if not f.static] +
                              [f.start for f in translated.program.facts], default=0)
+        self.t_last = -1
+        self.passes = 0
+        self.recorded = False
+        self.external: list[tuple[PFact, int]] = []  # facts of again(), with their first step
 
     def run(self, timesteps: int, convergence: _Convergence) -> Interpretation:
         from tracelab.reasoning import EpisodeRun, plan_episodes
-        steps = timesteps + 1 if timesteps >= 0 else MAX_TIMESTEPS_UNTIL_CONVERGED
-        plan = plan_episodes(self.inputs)[0]
         writer, recorder = self._recorder(timesteps)
+        self.recorded = writer is not None
         try:
-            episode = EpisodeRun(self.inputs, plan, trace=True, recorder=recorder)
-            engine = episode.engine
-            trace = PyReasonTrace(engine, self.translated.names, self.skip_graph_facts)
-            passes, t_last, converged = 0, -1, False
-            for t, rows in episode.steps(steps, rows_each_step=True):
-                trace.add(rows, passes)
-                passes = int(engine.stats["passes"][0])
-                t_last = t
-                if self._converged(engine, rows, t, convergence):
-                    converged = True
-                    break
-            episode.finish()
+            self.episode = EpisodeRun(self.inputs, plan_episodes(self.inputs)[0], trace=True, recorder=recorder)
+            self.trace = PyReasonTrace(self.episode.engine, self.translated.names, self.skip_graph_facts)
+            converged = self._steps(timesteps + 1 if timesteps >= 0 else -1, convergence)
+            self.episode.finish()
         except BaseException:
             if writer is not None:
                 writer.close(status="failed")
             raise
         if writer is not None:
             writer.close()
+        return self._interpretation(timesteps, converged)
+
+    def again(self, timesteps: int, restart: bool, facts: Sequence[PFact], convergence: _Convergence) -> Interpretation:
+        """`timesteps` more steps (-1: until convergence) with `facts` (their times from the first new
+        step when `restart`, else absolute) given to the engine as external facts, step by step."""
+        if self.recorded:
+            raise unsupported("reason(again=True) after a recorded reasoning (settings.tracelab_run)")
+        first = self.t_last + 1
+        for f in facts:
+            offset = first if restart else 0
+            self.external.append((f, offset))
+            self.last_fact = max(self.last_fact, offset + (f.start if f.static else f.end))
+        converged = self._steps(timesteps, convergence)
+        return self._interpretation(timesteps, converged)
+
+    def _steps(self, steps: int, convergence: _Convergence) -> bool:
+        """Step the engine `steps` times (-1: until convergence); whether it converged."""
+        engine = self.episode.engine
+        first = self.t_last + 1
+        self._feed(first)
+        for k, rows in self.episode.steps(steps if steps >= 0 else MAX_TIMESTEPS_UNTIL_CONVERGED,
+                                          rows_each_step=True):
+            t = first + k
+            self.trace.add(rows, self.passes)
+            self.passes = int(engine.stats["passes"][0])
+            self.t_last = t
+            if self._converged(engine, rows, t, convergence):
+                return True
+            self._feed(t + 1)
+        return False
+
+    def _feed(self, t: int) -> None:
+        """The external facts (of again()) that hold at step t, for the engine's next step."""
+        engine = self.episode.engine
+        for f, offset in self.external:
+            start, end = offset + f.start, offset + f.end
+            if (t == start) if f.static else (start <= t <= end):
+                lit = f.literal
+                atom = engine.atom(self.translated.names.predicate(lit.pred), *lit.args)
+                self.trace.external_names[engine.next_external_id()] = f.name
+                engine.add_fact(atom, lit.lower, lit.upper, static=f.static)
+
+    def _interpretation(self, timesteps: int, converged: bool) -> Interpretation:
         if timesteps < 0 and not converged:
             raise UserError(f"reason(timesteps=-1): no convergence in {MAX_TIMESTEPS_UNTIL_CONVERGED} timesteps; "
                             "give timesteps")
-        graph = self.inputs.graph
+        engine, graph = self.episode.engine, self.inputs.graph
         edges = [(graph.nodes[a], graph.nodes[b]) for a, b in graph.edges.tolist()] if graph is not None else []
-        return Interpretation(engine, trace, list(engine.vocab.nodes), edges, t_last, passes, settings.persistent)
+        return Interpretation(engine, self.trace, list(engine.vocab.nodes), edges, self.t_last, self.passes,
+                              settings.persistent)
 
     def _converged(self, engine: Any, rows: dict[str, np.ndarray], t: int, convergence: _Convergence) -> bool:
         from tracelab.engine import CAUSE_RESET

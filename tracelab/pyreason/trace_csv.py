@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from tracelab.engine import CAUSE_FACT, CAUSE_POLICY, CAUSE_RESET, CAUSE_RULE
+from tracelab.engine import CAUSE_EXTERNAL, CAUSE_FACT, CAUSE_POLICY, CAUSE_RESET, CAUSE_RULE
 
 from .names import NameMap
 
@@ -44,6 +44,7 @@ class PyReasonTrace:
         self.node_rows: list[list[object]] = []
         self.edge_rows: list[list[object]] = []
         self.clauses = {"node": 0, "edge": 0}
+        self.external_names: dict[int, str] = {}  # external facts' names by their id (pr.reason(again=True))
         self.node_bounds: list[tuple[float, float]] = []
         self.edge_bounds: list[tuple[float, float]] = []
 
@@ -78,6 +79,8 @@ class PyReasonTrace:
                 due, by = self.names.original_statement(rule.name), "Rule"
             elif kind == CAUSE_FACT:
                 due, by = self.names.original_statement(eng.fact(cid).name), "Fact"
+            elif kind == CAUSE_EXTERNAL and cid in self.external_names:
+                due, by = self.external_names[cid], "Fact"
             else:
                 due, by = "-", "Fact"
             message = "" if consistent else (
