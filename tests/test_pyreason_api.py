@@ -155,3 +155,25 @@ def test_reason_again_continues_with_the_new_facts_and_the_pending_firings() -> 
     # restart=True (PyReason's default): the new facts' times count from the first new step (t=5)
     pr.add_fact(pr.Fact("popular(Mary)", "popular_fact3", 1, 1))
     assert popular(pr.reason(timesteps=2, again=True))[5:] == [["John", "Justin"], ["Mary", "John"]]
+
+
+def test_annotation_functions_get_each_clauses_bounds_and_the_rules_weights() -> None:
+    numba = pytest.importorskip("numba")
+
+    @numba.njit
+    def count_clauses(annotations, weights):  # noqa: ANN001, ANN202 - PyReason's signature
+        return len(annotations[0]) * 0.1, 0.5 + len(annotations[1]) * 0.1 + weights[1] * 0.01
+
+    g = nx.DiGraph()
+    g.add_edge("a", "b", link=1)
+    g.add_edge("a", "c", link=1)
+    g.add_edge("b", "c", link=1)
+    g.add_node("b", score=0.5)
+    g.add_node("c", score=0.9)
+    pr.load_graph(g)
+    pr.add_annotation_function(count_clauses)
+    pr.add_rule(pr.Rule("h(x):count_clauses <-0 link(x,y), score(y):[0.5,1]", "r", weights=[1, 3]))
+    interpretation = pr.reason(timesteps=0)
+    # a: two link atoms and two score atoms counted, the second clause's weight 3
+    assert interpretation.query(pr.Query("h(a):[0,1]"), return_bool=False) == (0.2, 0.73)
+    assert interpretation.query(pr.Query("h(b):[0,1]"), return_bool=False) == (0.1, 0.63)

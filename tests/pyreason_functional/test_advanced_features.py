@@ -43,7 +43,6 @@ def identity_func(annotations):
     return result
 
 
-@pytest.mark.xfail(reason="tracelab: numba-typed intervals: PyReason's interval_type.closed in numba lists (tracelab.pyreason.closed is a plain Python interval)", strict=True)  # tracelab
 @pytest.mark.parametrize("mode", ["regular", "fp", "parallel"])
 def test_probability_func_consistency(mode):
     """Ensure annotation function behaves the same with and without JIT."""
@@ -85,7 +84,6 @@ def test_head_functions(mode):
     assert interpretation.query(pr.Query('Link(A, B)'), return_bool=True)
 
 
-@pytest.mark.xfail(reason="tracelab: PyReason's annotation functions (add_annotation_function: numba functions of intervals per clause)", strict=True)  # tracelab
 @pytest.mark.slow
 @pytest.mark.parametrize("mode", ["regular", "fp", "parallel"])
 def test_annotation_function(mode):

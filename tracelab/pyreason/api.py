@@ -8,6 +8,7 @@ The state is module-level, as in PyReason: one program per process."""
 from __future__ import annotations
 
 import copy
+import dataclasses
 import os
 import time
 import warnings
@@ -26,8 +27,8 @@ from .facts import PFact, read_facts
 from .graphml import load_pyreason_graphml, load_pyreason_networkx
 from .interpretation import Interpretation
 from .names import NameMap
-from .objects import Fact, Interval, Query, Rule, closed
-from .rules import read_rules, read_rules_txt
+from .objects import Fact, Interval, Query, Rule
+from .rules import PRule, read_rules, read_rules_txt
 from .ruleset_filter import filter_ruleset
 from .settings import Settings, settings_dict
 from .trace_csv import PyReasonTrace
@@ -55,6 +56,7 @@ class _Program:
     rules: list[Rule] = field(default_factory=list)
     facts: list[Fact] = field(default_factory=list)
     closed: list[str] = field(default_factory=list)
+    annotation_functions: dict[str, Callable[..., Any]] = field(default_factory=dict)  # by name
     reasoning: _Reasoning | None = None  # the last reason()'s, for again=True
     last: Interpretation | None = None
     timestamp: str = ""
@@ -73,7 +75,9 @@ def reset() -> None:
 
 
 def reset_rules() -> None:
+    """Forget the rules and the annotation functions (PyReason's reset_rules)."""
     _program.rules.clear()
+    _program.annotation_functions.clear()
 
 
 def reset_settings() -> None:
@@ -179,9 +183,11 @@ def add_closed_world_predicate(predicate_name: str) -> None:
 
 
 def add_annotation_function(function: Callable[..., Any]) -> None:
-    raise unsupported(f"add_annotation_function({function.__name__}) (PyReason's annotation functions take "
-                      "numba intervals per clause)", "register a function of bound arrays with "
-                      "tracelab.engine.register_annotation and name it in the rule head")
+    """A function `f(annotations, weights) -> (lower, upper)` that rule heads name (`p(x):f <- ...`):
+    `annotations` per body clause the typed list of its counted atoms' bounds (`.lower`, `.upper`),
+    `weights` one per clause (numba_interval.py). A numba `njit` function is compiled for these types
+    at its first call."""
+    _program.annotation_functions[function.__name__] = function
 
 
 def add_head_function(function: Callable[..., Any]) -> None:
@@ -224,11 +230,27 @@ def reason(timesteps: int = -1, convergence_threshold: int = -1, convergence_bou
     graph = settings.graph_for_engine(_program.graph) if _program.graph is not None else None
     names = copy.deepcopy(_program.names)
     constants = _ground_components(graph, facts) if settings.allow_ground_rules else frozenset()
-    translated = translate([r.rule for r in rules], facts, graph, names, persistent=settings.persistent,
+    translated = translate([_with_functions(r.rule, i) for i, r in enumerate(rules)], facts, graph, names,
+                           persistent=settings.persistent,
                            closed=_program.closed, constants=constants, directives=settings.directives())
     _program.reasoning = _Reasoning(translated, graph)
     _program.last = _program.reasoning.run(timesteps, convergence)
     return _program.last
+
+
+def _with_functions(rule: PRule, index: int) -> PRule:
+    """A rule whose head names a function of add_annotation_function, naming a registered adapter
+    instead (numba_interval.adapter) with weights that number the clauses; other rules as they are."""
+    fn = _program.annotation_functions.get(rule.head.function)
+    if fn is None:
+        return rule
+    from tracelab.engine import register_annotation
+    from .numba_interval import adapter
+    n = len(rule.body)
+    name = f"pyreason_{index}_" + "".join(c if c.isalnum() else "_" for c in rule.head.function.lower())
+    register_annotation(name, adapter(fn, rule.weights or [1.0] * n))
+    return dataclasses.replace(rule, head=dataclasses.replace(rule.head, function=name),
+                               weights=[float(k) for k in range(1, n + 1)])
 
 
 def _ground_components(graph: Graph | None, facts: Sequence[PFact]) -> frozenset[str]:
@@ -372,13 +394,13 @@ def _interp(interpretation: Any) -> Interpretation:
     return interpretation
 
 
-def filter_and_sort_nodes(interpretation: Interpretation, labels: Sequence[str], bound: Interval = closed(0, 1),
+def filter_and_sort_nodes(interpretation: Interpretation, labels: Sequence[str], bound: Interval = Interval(0.0, 1.0),
                           sort_by: str = "lower", descending: bool = True) -> list[Any]:
     """Per timestep a DataFrame (component, one column per label) of the nodes whose label changed then."""
     return _interp(interpretation).filter_and_sort(False, labels, bound, sort_by, descending)
 
 
-def filter_and_sort_edges(interpretation: Interpretation, labels: Sequence[str], bound: Interval = closed(0, 1),
+def filter_and_sort_edges(interpretation: Interpretation, labels: Sequence[str], bound: Interval = Interval(0.0, 1.0),
                           sort_by: str = "lower", descending: bool = True) -> list[Any]:
     """As filter_and_sort_nodes, for edges (component: a (source, target) tuple)."""
     return _interp(interpretation).filter_and_sort(True, labels, bound, sort_by, descending)

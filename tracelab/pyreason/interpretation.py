@@ -8,7 +8,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from .objects import Interval, Query, _pair, closed
+from .objects import Interval, Query, _pair
 from .trace_csv import EDGE_HEADER, NODE_HEADER, PyReasonTrace
 
 
@@ -74,7 +74,7 @@ class Interpretation:
         `bound` (the last change of each at that t), a column per label ([0,1] where it did not change),
         rows sorted by the new bound's lower or upper end."""
         pd = _pandas()
-        window = bound if isinstance(bound, Interval) else closed(*_pair(bound))
+        window = Interval(*_pair(bound))
         rows, bounds = (self.trace.edge_rows, self.trace.edge_bounds) if edges else \
             (self.trace.node_rows, self.trace.node_bounds)
         latest: dict[tuple[int, Any, str], tuple[float, float]] = {}

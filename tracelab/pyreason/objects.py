@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 from tracelab.engine.errors import RuleSyntaxError
 from tracelab.engine.program import SourceLoc
@@ -27,13 +28,17 @@ class Interval:
         return self.lower <= lo and up <= self.upper
 
 
-def closed(lower: float, upper: float) -> Interval:
-    return Interval(float(lower), float(upper))
+def closed(lower: float, upper: float) -> Any:
+    """PyReason's `interval.closed(l, u)`: an interval compiled functions can read (an annotation
+    function's bounds, numba_interval.py; compiling its constructor the first time in a process)."""
+    from .numba_interval import NumbaInterval
+    return NumbaInterval(lower, upper)
 
 
 def _pair(bound: object) -> tuple[float, float]:
-    if isinstance(bound, Interval):
-        return bound.lower, bound.upper
+    """(lower, upper) of an Interval, a closed() interval or a pair."""
+    if hasattr(bound, "lower") and hasattr(bound, "upper"):
+        return float(bound.lower), float(bound.upper)  # type: ignore[attr-defined]
     lo, up = bound  # type: ignore[misc]
     return float(lo), float(up)
 
