@@ -177,3 +177,16 @@ def test_annotation_functions_get_each_clauses_bounds_and_the_rules_weights() ->
     # a: two link atoms and two score atoms counted, the second clause's weight 3
     assert interpretation.query(pr.Query("h(a):[0,1]"), return_bool=False) == (0.2, 0.73)
     assert interpretation.query(pr.Query("h(b):[0,1]"), return_bool=False) == (0.1, 0.63)
+
+
+def test_classifier_outputs_become_facts_with_pyreasons_bounds() -> None:
+    torch = pytest.importorskip("torch")
+    options = pr.ModelInterfaceOptions(threshold=0.5, set_lower_bound=True, set_upper_bound=False, snap_value=0.95)
+    classifier = pr.LogicIntegratedClassifier(torch.nn.Identity(), ["cat", "dog", "rabbit"], identifier="img1",
+                                              interface_options=options)
+    _, probabilities, facts = classifier(torch.tensor([[2.0, 0.0, 0.0]]), 1, 3)
+    assert probabilities[0, 0].item() > 0.5 > probabilities[0, 1].item()  # softmax: cat 0.79, dog and rabbit 0.11
+    assert [(f.name, f.literal.pred, f.literal.args, f.literal.lower, f.literal.upper, f.start_time, f.end_time)
+            for f in facts] == [("img1-cat-fact", "cat", ("img1",), 0.95, 1.0, 1, 3),
+                                ("img1-dog-fact", "dog", ("img1",), 0.0, 1.0, 1, 3),
+                                ("img1-rabbit-fact", "rabbit", ("img1",), 0.0, 1.0, 1, 3)]

@@ -168,7 +168,6 @@ def test_custom_thresholds(mode):
     ], "TextMessage should have ViewedByAll bounds [1,1] for t=2 timesteps"
 
 
-@pytest.mark.xfail(reason="tracelab: the classifier integration (LogicIntegratedClassifier, ModelInterfaceOptions)", strict=True)  # tracelab
 @pytest.mark.skipif(not torch_available, reason="torch not installed")
 @pytest.mark.parametrize("mode", ["regular", "fp", "parallel"])
 def test_classifier_integration(mode):

@@ -7,6 +7,8 @@ written in PyReason's CSV layout.
 - objects.py: Rule, Fact, Query, Threshold, closed (PyReason's constructors);
 - interpretation.py: what reason() returns (get_dict, query, the DataFrames);
 - ruleset_filter.py: the rules a query needs (reason(queries=...));
+- classifier.py: LogicIntegratedClassifier (a torch model's outputs as facts; imports torch when used);
+- numba_interval.py: PyReason's annotation functions (closed(), the adapter);
 - rules.py: PyReason's rule text (and its CSV / JSON rule files, with thresholds and rule options);
 - facts.py: PyReason's fact text in its CSV / JSON fact files;
 - graphml.py: a GraphML file (or a networkx graph) with PyReason's attribute mapping (a number v is [v,1]);
@@ -16,8 +18,6 @@ written in PyReason's CSV layout.
 """
 from . import ruleset_filter
 from .api import (
-    LogicIntegratedClassifier,
-    ModelInterfaceOptions,
     UnsupportedFeature,
     add_annotation_function,
     add_closed_world_predicate,
@@ -60,3 +60,11 @@ __all__ = [
     "get_time", "load_graph", "load_graphml", "load_inconsistent_predicate_list", "load_pyreason", "reason",
     "record", "reset", "reset_rules", "reset_settings", "ruleset_filter", "save_rule_trace", "settings",
 ]
+
+
+def __getattr__(name: str) -> object:
+    """The classifier integration imports torch: only when a script asks for it."""
+    if name in ("LogicIntegratedClassifier", "ModelInterfaceOptions"):
+        from . import classifier
+        return getattr(classifier, name)
+    raise AttributeError(f"module 'tracelab.pyreason' has no attribute {name!r}")

@@ -194,14 +194,6 @@ def add_head_function(function: Callable[..., Any]) -> None:
     raise unsupported(f"head functions (add_head_function({function.__name__}))")
 
 
-def LogicIntegratedClassifier(*args: Any, **kwargs: Any) -> Any:  # noqa: N802 - PyReason's class name
-    raise unsupported("the classifier integration (LogicIntegratedClassifier)")
-
-
-def ModelInterfaceOptions(*args: Any, **kwargs: Any) -> Any:  # noqa: N802 - PyReason's class name
-    raise unsupported("the classifier integration (ModelInterfaceOptions)")
-
-
 # ---- reasoning ---------------------------------------------------------------------------------------
 
 def reason(timesteps: int = -1, convergence_threshold: int = -1, convergence_bound_threshold: float = -1,
