@@ -132,6 +132,8 @@ def test_what_is_not_supported_is_one_line_naming_it() -> None:
     with pytest.raises(UserError, match="There are no rules"):
         pr.reset_rules()
         pr.reason(timesteps=1)
+    pr.add_rule(pr.Rule(HELLO_RULE, "popular_rule"))  # the failed reason() kept the facts
+    assert popular(pr.reason(timesteps=1)) == [["Mary"], ["Mary", "Justin"]]
     with pytest.raises(TypeError, match="persistent must be True or False"):
         pr.settings.persistent = "yes"
     with pytest.raises(AttributeError, match="no setting 'persistant'"):

@@ -211,9 +211,9 @@ def reason(timesteps: int = -1, convergence_threshold: int = -1, convergence_bou
     convergence = _convergence(convergence_threshold, convergence_bound_threshold)
     facts = [PFact(f.name or "", f.literal, f.start_time, f.end_time, f.static, SourceLoc(f"<Fact {f.name}>", 1, 1))
              for f in _program.facts]
-    _program.facts.clear()
     if again and _program.reasoning is not None:
         _program.last = _program.reasoning.again(timesteps, restart, facts, convergence)
+        _program.facts.clear()
         return _program.last
     if not _program.rules:
         raise UserError("There are no rules, use `add_rule` or `add_rules_from_file`")
@@ -227,6 +227,7 @@ def reason(timesteps: int = -1, convergence_threshold: int = -1, convergence_bou
                            closed=_program.closed, constants=constants, directives=settings.directives())
     _program.reasoning = _Reasoning(translated, graph)
     _program.last = _program.reasoning.run(timesteps, convergence)
+    _program.facts.clear()  # used up only once reasoned with: a reason() that failed keeps them
     return _program.last
 
 

@@ -186,12 +186,14 @@ def _relocated(program: Program, origins: list[tuple[SourceLoc, str] | None]) ->
 def _located(e: ProgramError, origins: list[tuple[SourceLoc, str] | None], lines: list[str]) -> ProgramError:
     """An error found in the translation, located at the PyReason statement it came from."""
     if e.file == GENERATED and 0 < e.line <= len(origins) and origins[e.line - 1] is not None:
-        loc, _ = origins[e.line - 1]
+        loc, text = origins[e.line - 1]
         msg = f"{e.message} (in its translation: {lines[e.line - 1]})"
         if isinstance(e, RuleSyntaxError) and _SHARED_SYNTAX.search(lines[e.line - 1]):
             msg += ("; the translation uses the quantifiers, annotation functions or rule options of issue 14, "
                     "which this tracelab's rule parser may not read yet")
-        return type(e)(msg, loc.file, loc.line, loc.column, line_from_file(loc.file, loc.line))
+        # a rule made in Python (pr.Rule, file "<Rule ...>") has no file to read its line from
+        source = text if loc.file.startswith("<") else line_from_file(loc.file, loc.line)
+        return type(e)(msg, loc.file, loc.line, loc.column, source)
     if e.file != GENERATED and e.line > 0 and e.source_line is None:
         return type(e)(e.message, e.file, e.line, e.column, line_from_file(e.file, e.line))
     return e
