@@ -192,3 +192,21 @@ def test_classifier_outputs_become_facts_with_pyreasons_bounds() -> None:
             for f in facts] == [("img1-cat-fact", "cat", ("img1",), 0.95, 1.0, 1, 3),
                                 ("img1-dog-fact", "dog", ("img1",), 0.0, 1.0, 1, 3),
                                 ("img1-rabbit-fact", "rabbit", ("img1",), 0.0, 1.0, 1, 3)]
+
+
+def test_rules_and_facts_from_pyreasons_files() -> None:
+    data = Path(__file__).resolve().parent / "data" / "pyreason"
+    pr.load_graphml(data / "group_chat.graphml")
+    pr.add_rule_from_json(str(data / "viewed_rules.json"))  # its custom thresholds: viewed by all
+    pr.add_fact_from_csv(str(data / "viewed_facts.csv"))
+    assert [r.get_rule_name() for r in pr.get_rules()] == ["viewed_by_all_rule"]
+    frames = pr.filter_and_sort_nodes(pr.reason(timesteps=3), ["ViewedByAll"])
+    # PyReason's custom-thresholds tutorial, "Expected output": TextMessage from t=2 on
+    assert [df["component"].tolist() for df in frames] == [[], [], ["TextMessage"], ["TextMessage"]]
+    pr.reset(); pr.reset_rules()
+    pr.load_graphml(data / "friends_graph.graphml")
+    pr.add_rules_from_file(str(data / "hello_rules.txt"))  # the comment line skipped, named rule_0
+    pr.add_fact_from_csv(str(data / "hello_facts.csv"))
+    nodes, _ = pr.get_rule_trace(pr.reason(timesteps=2))
+    assert nodes["Occurred Due To"].tolist() == ["popular_fact", "popular_fact", "rule_0", "popular_fact",
+                                                 "rule_0", "rule_0"]

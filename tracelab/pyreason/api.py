@@ -129,12 +129,6 @@ def add_rule(pr_rule: Rule) -> None:
     _program.rules.append(pr_rule)
 
 
-def _wrapped_rule(r: Any) -> Rule:
-    rule = Rule.__new__(Rule)
-    rule.rule = r
-    return rule
-
-
 def add_rules_from_file(file_path: str | os.PathLike[str], infer_edges: bool = False,
                         raise_errors: bool = False) -> None:
     """PyReason's rule text file (one rule a line, `#` comments); infer_edges applies to every rule.
@@ -142,12 +136,14 @@ def add_rules_from_file(file_path: str | os.PathLike[str], infer_edges: bool = F
     for r in read_rules_txt(file_path):
         r.infer_edges = r.infer_edges or infer_edges
         r.name = f"rule_{len(_program.rules)}"
-        add_rule(_wrapped_rule(r))
+        add_rule(Rule.from_parsed(r))
 
 
 def add_rule_from_csv(csv_path: str | os.PathLike[str], raise_errors: bool = True) -> None:
+    """PyReason's rule CSV (`rule_text,name,infer_edges,set_static`) or, by a .json extension, its rule
+    JSON (with custom_thresholds and weights); errors are located and always raised."""
     for r in read_rules(csv_path):
-        add_rule(_wrapped_rule(r))
+        add_rule(Rule.from_parsed(r))
 
 
 add_rule_from_json = add_rule_from_csv  # read_rules reads the format the extension names
@@ -166,11 +162,7 @@ def add_fact(pyreason_fact: Fact) -> None:
 def add_fact_from_csv(csv_path: str | os.PathLike[str], raise_errors: bool = True) -> None:
     """PyReason's fact CSV (`fact_text,name,start_time,end_time,static`); errors are located."""
     for f in read_facts(csv_path):
-        fact = Fact.__new__(Fact)
-        fact.literal, fact.name, fact.start_time, fact.end_time, fact.static = \
-            f.literal, f.name, f.start, f.end, f.static
-        fact.type = "node" if len(f.literal.args) == 1 else "edge"
-        add_fact(fact)
+        add_fact(Fact.from_parsed(f))
 
 
 add_fact_from_json = add_fact_from_csv  # read_facts reads the format the extension names

@@ -12,7 +12,7 @@ from tracelab.engine.errors import RuleSyntaxError
 from tracelab.engine.program import SourceLoc
 
 from . import rules as _rules
-from .facts import parse_fact
+from .facts import PFact, parse_fact
 from .rules import PRule, parse_rule
 from .text import PLiteral, Squeezed, parse_literal
 
@@ -83,6 +83,13 @@ class Rule:
                 raise _error(where, rule_text, f"weights must be {n} numbers >= 0, one per body clause")
             self.rule.weights = w
 
+    @classmethod
+    def from_parsed(cls, rule: PRule) -> "Rule":
+        """A rule read from a file (rules.py) as a pr.Rule."""
+        made = cls.__new__(cls)
+        made.rule = rule
+        return made
+
     def get_rule_name(self) -> str | None:
         return self.rule.name or None
 
@@ -108,6 +115,15 @@ class Fact:
         self.end_time = int(end_time)
         self.static = bool(static)
         self.type = "node" if len(self.literal.args) == 1 else "edge"
+
+    @classmethod
+    def from_parsed(cls, fact: PFact) -> "Fact":
+        """A fact read from a file (facts.py) as a pr.Fact."""
+        made = cls.__new__(cls)
+        made.literal, made.name, made.start_time, made.end_time, made.static = \
+            fact.literal, fact.name, fact.start, fact.end, fact.static
+        made.type = "node" if len(fact.literal.args) == 1 else "edge"
+        return made
 
     def __str__(self) -> str:
         lit = self.literal
