@@ -9,6 +9,7 @@ written in PyReason's CSV layout.
 - ruleset_filter.py: the rules a query needs (reason(queries=...));
 - classifier.py: LogicIntegratedClassifier (a torch model's outputs as facts; imports torch when used);
 - numba_interval.py: PyReason's annotation functions (closed(), the adapter);
+- unsupported.py: UnsupportedFeature, the error of what tracelab does not have;
 - rules.py: PyReason's rule text (and its CSV / JSON rule files, with thresholds and rule options);
 - facts.py: PyReason's fact text in its CSV / JSON fact files;
 - graphml.py: a GraphML file (or a networkx graph) with PyReason's attribute mapping (a number v is [v,1]);

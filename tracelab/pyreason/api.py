@@ -32,20 +32,11 @@ from .rules import PRule, read_rules, read_rules_txt
 from .ruleset_filter import filter_ruleset
 from .settings import Settings, settings_dict
 from .trace_csv import PyReasonTrace
+from .unsupported import UnsupportedFeature, unsupported
 from .translate import translate
 
 # reason(timesteps=-1) runs until convergence; a program that never converges stops here with an error
 MAX_TIMESTEPS_UNTIL_CONVERGED = 100_000
-
-
-class UnsupportedFeature(UserError):
-    """A PyReason feature tracelab does not have; the message names it."""
-
-
-def unsupported(feature: str, hint: str = "") -> UnsupportedFeature:
-    """`feature` (what the user called) is not supported; `hint` what to do instead."""
-    return UnsupportedFeature(f"{feature} is not supported by tracelab.pyreason{'; ' + hint if hint else ''} "
-                              "(docs/pyreason.md, \"Switching from PyReason\")")
 
 
 @dataclass

@@ -10,13 +10,13 @@ from typing import Any
 
 from .objects import Interval, Query, _pair
 from .trace_csv import EDGE_HEADER, NODE_HEADER, PyReasonTrace
+from .unsupported import UnsupportedFeature, unsupported
 
 
 def _pandas() -> Any:
     try:
         import pandas
     except ImportError:
-        from .api import UnsupportedFeature
         raise UnsupportedFeature("PyReason's DataFrames need pandas: pip install 'tracelab[pyreason]'") from None
     return pandas
 
@@ -54,6 +54,12 @@ class Interpretation:
         if bound in query.get_bounds():
             return True if return_bool else (float(bound[0]), float(bound[1]))
         return False if return_bool else (0, 0)
+
+    def get_num_ground_atoms(self) -> list[int]:
+        raise unsupported("interpretation.get_num_ground_atoms()")
+
+    def get_final_num_ground_atoms(self) -> int:
+        raise unsupported("interpretation.get_final_num_ground_atoms()")
 
     def get_dict(self) -> dict[int, dict[Any, dict[str, tuple[float, float]]]]:
         """{t: {node or edge: {label: (lower, upper)}}} from the trace's rows: a label is there at t when
