@@ -19,7 +19,6 @@ written in PyReason's CSV layout.
 """
 from . import ruleset_filter
 from .api import (
-    UnsupportedFeature,
     add_annotation_function,
     add_closed_world_predicate,
     add_fact,
@@ -51,6 +50,7 @@ from .api import (
 from .interpretation import Interpretation
 from .objects import Fact, Query, Rule, Threshold, closed
 from .translate import PyReasonProgram, load_pyreason
+from .unsupported import UnsupportedFeature
 
 __all__ = [
     "Fact", "Interpretation", "LogicIntegratedClassifier", "ModelInterfaceOptions", "PyReasonProgram", "Query",
