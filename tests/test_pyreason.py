@@ -440,11 +440,12 @@ def test_pyreason_trace_csv_layout(tmp_path: Path, capsys: pytest.CaptureFixture
                        "Occurred Due To", "Consistent", "Triggered By", "Inconsistency Message",
                        "Clause-1", "Clause-2", "Clause-3", "Clause-4"]
     # the graph's own facts and the resets are no rows (PyReason's defaults); Mary's fact is re-applied
-    # each step, as in PyReason's example trace (examples/csv_outputs/basic_rule_trace_nodes_*.csv)
+    # each step, as in PyReason's example trace (examples/csv_outputs/basic_rule_trace_nodes_*.csv), in
+    # its order: John (node 0 of the graph) before Justin (node 2) at t = 2
     assert [r[:4] + r[5:6] for r in rows[1:]] == [
         ["0", "0", "Mary", "popular", "[1.0,1.0]"], ["1", "1", "Mary", "popular", "[1.0,1.0]"],
         ["1", "1", "Justin", "popular", "[1.0,1.0]"], ["2", "2", "Mary", "popular", "[1.0,1.0]"],
-        ["2", "2", "Justin", "popular", "[1.0,1.0]"], ["2", "2", "John", "popular", "[1.0,1.0]"]]
+        ["2", "2", "John", "popular", "[1.0,1.0]"], ["2", "2", "Justin", "popular", "[1.0,1.0]"]]
     assert rows[1][4:] == ["[0.0,1.0]", "[1.0,1.0]", "popular_fact", "True", "Fact", "", "", "", "", ""]
     assert rows[3][4:] == ["[0.0,1.0]", "[1.0,1.0]", "rule_0", "True", "Rule", "", "['Mary']",
                            "[('Justin', 'Mary')]", "[('Mary', 'Cat')]", "[('Justin', 'Cat')]"]

@@ -54,21 +54,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def check_run_dir(run_dir: Path) -> None:
-    """A run goes into a new or empty directory: never into a file, an existing run, or a folder of
-    other things (they would be mixed with the run's files)."""
-    from tracelab.store import layout
-    if run_dir.exists() and not run_dir.is_dir():
-        raise UserError(f"--run {run_dir}: this is a file, not a directory; give a new run directory")
-    if layout.meta_path(run_dir).exists():
-        raise UserError(f"--run {run_dir} already holds a run; give a new run directory")
-    if run_dir.is_dir():
-        others = sorted(p.name for p in run_dir.iterdir())
-        if others:
-            shown = ", ".join(others[:5]) + (", ..." if len(others) > 5 else "")
-            raise UserError(f"--run {run_dir} holds other files ({shown}); give a new or empty directory")
-
-
 def run(args: argparse.Namespace) -> int:
     from tracelab.game.scenario import (
         builtin_scenario,
@@ -101,7 +86,8 @@ def run(args: argparse.Namespace) -> int:
     from tracelab.store.sink import StoreSink
 
     run_dir = Path(args.run or f"runs/play-{scenario.name}-{time.strftime('%Y%m%d-%H%M%S')}")
-    check_run_dir(run_dir)
+    from tracelab.store.layout import check_new_run_dir
+    check_new_run_dir(run_dir)
     meta = {"command": " ".join(shlex.quote(a) for a in sys.argv), "scenario": scenario.name,
             "config": {"episodes": args.episodes, "worlds": args.worlds, "policy": args.policy, "kernel": args.kernel,
                        "opponent_p": args.opponent_p, "scenario": scenario.to_toml()},

@@ -43,7 +43,8 @@ def run_env(args: argparse.Namespace) -> int:
 
 
 def _record(source: Any, spec: Any, args: argparse.Namespace) -> int:
-    from tracelab.commands.play import _ended_episodes, check_run_dir
+    from tracelab.commands.play import _ended_episodes
+    from tracelab.store.layout import check_new_run_dir as check_run_dir
     from tracelab.store import TraceWriter
 
     run_dir = Path(args.run or f"runs/play-{source.name}-{time.strftime('%Y%m%d-%H%M%S')}")

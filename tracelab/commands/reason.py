@@ -67,8 +67,8 @@ def run(args: argparse.Namespace) -> int:
     if args.run is not None and args.no_trace:
         raise UserError("--run records the trace and --no-trace drops it: give one of them")
     if args.run is not None:
-        from tracelab.commands.play import check_run_dir
-        check_run_dir(Path(args.run))
+        from tracelab.store.layout import check_new_run_dir
+        check_new_run_dir(Path(args.run))
     inputs = load_inputs(args.program, dialect=args.dialect, graph_file=args.graph, fact_files=args.facts,
                          fact_tables=args.facts_table, persistent=args.persistent)
     for w in inputs.program.warnings:

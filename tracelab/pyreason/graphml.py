@@ -10,6 +10,7 @@ Hostile XML is refused by the engine's readers (engine/graph.py). Names become t
 from __future__ import annotations
 
 import os
+from typing import Any
 
 import numpy as np
 
@@ -62,7 +63,28 @@ def load_pyreason_graphml(path: str | os.PathLike[str], names: NameMap) -> Graph
     facts = numeric_facts(raw)
     if facts is None:
         facts = _python_facts(raw)
-    return _graph(raw, facts, names)
+    return _graph(list(raw.nodes), edge_pairs(raw), raw.file, facts, names)
+
+
+def load_pyreason_networkx(graph: Any, names: NameMap) -> Graph:
+    """A networkx graph (PyReason's `load_graph`) with the same mapping: networkx's DiGraph() of it (an
+    undirected edge both ways), each attribute through `attribute_fact`. Node ids are their str()."""
+    nodes = [str(n) for n in graph.nodes]
+    index = {n: i for i, n in enumerate(graph.nodes)}
+    facts = GraphFacts()
+    for n, attrs in graph.nodes(data=True):
+        for k, v in attrs.items():
+            facts.add(*attribute_fact(str(k), v), index[n], -1)
+    pairs: list[tuple[int, int]] = []
+    directed = graph.is_directed()
+    for src, dst, attrs in graph.edges(data=True):
+        ends = [(index[src], index[dst])] + ([(index[dst], index[src])] if not directed and src != dst else [])
+        for a, b in ends:
+            pairs.append((a, b))
+            for k, v in attrs.items():
+                facts.add(*attribute_fact(str(k), v), a, b)
+    edges = np.asarray(pairs, np.int32).reshape(-1, 2)
+    return _graph(nodes, edges, "<networkx graph>", facts, names)
 
 
 def _python_facts(raw: RawGraph) -> GraphFacts:
@@ -100,7 +122,7 @@ def _python_facts(raw: RawGraph) -> GraphFacts:
     return out
 
 
-def _graph(raw: RawGraph, facts: GraphFacts, names: NameMap) -> Graph:
+def _graph(nodes: list[str], edges: np.ndarray, file: str, facts: GraphFacts, names: NameMap) -> Graph:
     """The facts as the engine's Graph columns, PyReason labels named as tracelab predicates."""
     labels: list[str] = []
     arity: list[int] = []
@@ -117,11 +139,10 @@ def _graph(raw: RawGraph, facts: GraphFacts, names: NameMap) -> Graph:
         lid = label_of.get(name)
         if (on_nodes[j] and on_edges[j]) or (lid is not None and arity[lid] != ar):
             raise ProgramCheckError(f"attribute '{label}' is set on nodes and on edges, but a predicate has one "
-                                    "arity", raw.file)
+                                    "arity", file)
         if lid is None:
             lid = label_of[name] = len(labels)
             labels.append(name)
             arity.append(ar)
         lab_map[j] = lid
-    return Graph(list(raw.nodes), labels, arity, lab_map[fact_label], args, facts.bounds_array(), raw.file,
-                 edges=edge_pairs(raw))
+    return Graph(nodes, labels, arity, lab_map[fact_label], args, facts.bounds_array(), file, edges=edges)

@@ -101,6 +101,12 @@ def read_rules(path: str | os.PathLike[str]) -> list[PRule]:
     return _rules_txt(text, file)
 
 
+def read_rules_txt(path: str | os.PathLike[str]) -> list[PRule]:
+    """A PyReason rule text file whatever its extension (PyReason's add_rules_from_file)."""
+    file = os.fspath(path)
+    return _rules_txt(read_rule_file(file), file)
+
+
 def _rules_txt(text: str, file: str) -> list[PRule]:
     """PyReason's add_rules_from_file: each line that is not blank and does not start with '#'."""
     rules = []

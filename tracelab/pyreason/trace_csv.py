@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from tracelab.engine import CAUSE_FACT, CAUSE_POLICY, CAUSE_RESET, CAUSE_RULE
+from tracelab.engine import CAUSE_EXTERNAL, CAUSE_FACT, CAUSE_POLICY, CAUSE_RESET, CAUSE_RULE
 
 from .names import NameMap
 
@@ -32,7 +32,10 @@ def _bound(lo: float, up: float) -> str:
 
 
 class PyReasonTrace:
-    """Collects the rows of each step (`add`) and writes the two CSV files (`write`)."""
+    """Collects the rows of each step (`add`) and writes the two CSV files (`write`). A row holds its
+    component as PyReason's DataFrame does (a node id, an edge as a tuple) and each clause as a list of
+    components (`get_rule_trace`); the CSV prints them as Python does. `node_bounds` / `edge_bounds` hold
+    each row's new bound as numbers (`filter_and_sort_nodes`)."""
 
     def __init__(self, engine: Any, names: NameMap | None = None, graph_facts: int = 0) -> None:
         self.engine = engine
@@ -41,6 +44,9 @@ class PyReasonTrace:
         self.node_rows: list[list[object]] = []
         self.edge_rows: list[list[object]] = []
         self.clauses = {"node": 0, "edge": 0}
+        self.external_names: dict[int, str] = {}  # external facts' names by their id (pr.reason(again=True))
+        self.node_bounds: list[tuple[float, float]] = []
+        self.edge_bounds: list[tuple[float, float]] = []
 
     def _pred(self, tl: str) -> str:
         return self.names.original_predicate(tl)
@@ -51,9 +57,12 @@ class PyReasonTrace:
         return args[0] if len(args) == 1 else tuple(args)
 
     def add(self, rows: dict[str, np.ndarray], passes_before: int) -> None:
-        """One step's rows (Engine.take_trace()); `passes_before`: ordinary passes of the earlier steps."""
+        """One step's rows (Engine.take_trace()); `passes_before`: ordinary passes of the earlier steps.
+        Within a step's pass the rows come in PyReason's order: facts first, then each rule's in rule
+        order, a rule's heads in the graph's node order (PyReason's example trace: John before Justin)."""
         eng = self.engine
         cols = {k: v.tolist() for k, v in rows.items()}
+        step: list[tuple[tuple[int, ...], str, list[object], tuple[float, float]]] = []
         for i in range(len(cols["t"])):
             if int(cols["world"][i]) != 0:
                 continue
@@ -61,26 +70,36 @@ class PyReasonTrace:
             if kind == CAUSE_RESET or (kind == CAUSE_FACT and cid < self.graph_facts):
                 continue
             pred, args = eng.vocab.atom_parts(int(cols["atom"][i]))
+            rule_no = -1
             old = _bound(cols["old_lower"][i], cols["old_upper"][i])
             consistent = kind != CAUSE_POLICY
             if kind == CAUSE_RULE or (kind == CAUSE_POLICY and g >= 0):
-                rule = eng.rules[int(eng.groundings.rule[g])] if g >= 0 else eng.rules[cid]
+                rule_no = int(eng.groundings.rule[g]) if g >= 0 else cid
+                rule = eng.rules[rule_no]
                 due, by = self.names.original_statement(rule.name), "Rule"
             elif kind == CAUSE_FACT:
                 due, by = self.names.original_statement(eng.fact(cid).name), "Fact"
+            elif kind == CAUSE_EXTERNAL and cid in self.external_names:
+                due, by = self.external_names[cid], "Fact"
             else:
                 due, by = "-", "Fact"
             message = "" if consistent else (
                 f"Inconsistency occurred. Conflicting bounds for {self._pred(pred)}({','.join(args)}). "
                 f"Update from {old} is not allowed. Setting bounds to [0,1] and static=True for this timestep.")
             row: list[object] = [int(cols["t"][i]), passes_before + int(cols["pass_no"][i]),
-                                 str(self._component(args)), self._pred(pred), old,
+                                 self._component(args), self._pred(pred), old,
                                  _bound(cols["new_lower"][i], cols["new_upper"][i]), due, consistent, by, message]
             if g >= 0:
-                row += [str([self._component(eng.vocab.atom_parts(int(a))[1])]) for a in eng.groundings.body(g)]
+                row += [[self._component(eng.vocab.atom_parts(int(a))[1])] for a in eng.groundings.body(g)]
             which = "node" if len(args) == 1 else "edge"
             self.clauses[which] = max(self.clauses[which], len(row) - len(NODE_HEADER))
+            heads = [eng.vocab.node_ids[a] for a in args] if rule_no >= 0 else [i]  # facts keep their order
+            order = (int(cols["t"][i]), int(cols["pass_no"][i]), rule_no, *heads)
+            step.append((order, which, row, (float(cols["new_lower"][i]), float(cols["new_upper"][i]))))
+        step.sort(key=lambda r: r[0])  # stable: a fact's rows, and one rule's rows on one head, keep theirs
+        for _, which, row, bound in step:
             (self.node_rows if which == "node" else self.edge_rows).append(row)
+            (self.node_bounds if which == "node" else self.edge_bounds).append(bound)
 
     def write(self, folder: str | os.PathLike[str], timestamp: str | None = None) -> tuple[str, str]:
         """rule_trace_nodes_<timestamp>.csv and rule_trace_edges_<timestamp>.csv in `folder` (created)."""

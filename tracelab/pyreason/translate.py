@@ -6,7 +6,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import re
-from collections.abc import Sequence
+from collections.abc import Container, Sequence
 from dataclasses import dataclass, field
 
 from tracelab.engine import (
@@ -72,9 +72,12 @@ def _literal(lit: PLiteral, names: NameMap, args: Sequence[str]) -> str:
     return f"{names.predicate(lit.pred)}({','.join(args)})"
 
 
-def rule_text(r: PRule, names: NameMap) -> str:
-    """One PyReason rule as one tracelab rule statement."""
-    var = variable_names([a for lit in (r.head, *r.body) for a in lit.args])
+def rule_text(r: PRule, names: NameMap, constants: Container[str] = frozenset()) -> str:
+    """One PyReason rule as one tracelab rule statement. Components in `constants` (PyReason's ground
+    rules, `allow_ground_rules`: a component that names a node) are constants, the others variables."""
+    components = [a for lit in (r.head, *r.body) for a in lit.args]
+    var = variable_names([a for a in components if a not in constants])
+    var.update({a: constant_text(a) for a in components if a in constants})
     head = _literal(r.head, names, [var[a] for a in r.head.args])
     options: list[str] = []
     if r.head.function:
@@ -117,12 +120,23 @@ def graph_fact_lines(graph: Graph) -> list[str]:
 def load_pyreason(rule_files: Sequence[str | os.PathLike[str]], fact_files: Sequence[str | os.PathLike[str]] = (),
                   graph_file: str | os.PathLike[str] | None = None, *, persistent: bool = False,
                   embed_graph: bool = False) -> PyReasonProgram:
-    """Read PyReason files and translate them. PyReason's defaults become directives: non-persistent
-    timesteps (`%timesteps reset`) unless `persistent`; intersection updates and reset-and-freeze on
-    inconsistency are tracelab's defaults too. With `embed_graph` the graph's facts are written into the
-    text (a self-contained program) instead of being handed over as a Graph."""
+    """Read PyReason files and translate them (`translate`). With `embed_graph` the graph's facts are
+    written into the text (a self-contained program) instead of being handed over as a Graph."""
     names = NameMap()
     graph = load_pyreason_graphml(graph_file, names) if graph_file is not None else None
+    rules = [r for path in rule_files for r in read_rules(path)]
+    facts = [f for path in fact_files for f in read_facts(path)]
+    return translate(rules, facts, graph, names, persistent=persistent, embed_graph=embed_graph)
+
+
+def translate(rules: Sequence[PRule], facts: Sequence[PFact], graph: Graph | None, names: NameMap, *,
+              persistent: bool = False, embed_graph: bool = False, closed: Sequence[str] = (),
+              constants: Container[str] = frozenset(), directives: Sequence[str] = ()) -> PyReasonProgram:
+    """PyReason's rules, facts and graph (its predicates named through `names`) as one checked tracelab
+    program. PyReason's defaults become directives: non-persistent timesteps (`%timesteps reset`) unless
+    `persistent`; intersection updates and reset-and-freeze on inconsistency are tracelab's defaults too.
+    `closed`: PyReason's closed-world predicates (`%closed`); `constants`: rule components read as
+    constants (PyReason's `allow_ground_rules`); `directives`: more directive lines (settings.py)."""
     lines: list[str] = ["# translated from PyReason by tracelab (docs/pyreason.md)"]
     origins: list[tuple[SourceLoc, str] | None] = [None]
     if not persistent:
@@ -131,14 +145,17 @@ def load_pyreason(rule_files: Sequence[str | os.PathLike[str]], fact_files: Sequ
     if graph is not None and not embed_graph:
         lines.append("%edge_heads graph  # PyReason's: an edge rule sets only the graph's edges unless {infer_edges}")
         origins.append(None)
-    for path in rule_files:
-        for r in read_rules(path):
-            lines.append(rule_text(r, names))
-            origins.append((r.loc, r.text))
-    for path in fact_files:
-        for f in read_facts(path):
-            lines.append(fact_text(f, names))
-            origins.append((f.loc, ""))
+    lines += directives
+    origins += [None] * len(directives)
+    if closed:
+        lines.append("%closed " + ", ".join(names.predicate(p) for p in closed) + "  # add_closed_world_predicate")
+        origins.append(None)
+    for r in rules:
+        lines.append(rule_text(r, names, constants))
+        origins.append((r.loc, r.text))
+    for f in facts:
+        lines.append(fact_text(f, names))
+        origins.append((f.loc, ""))
     if graph is not None and embed_graph:
         lines.append("# the graph's facts; facts carry no edge set, so edge rules are not restricted to the graph's "
                      "edges as in PyReason (`tracelab reason --dialect pyreason` with the graph keeps that)")
@@ -169,12 +186,14 @@ def _relocated(program: Program, origins: list[tuple[SourceLoc, str] | None]) ->
 def _located(e: ProgramError, origins: list[tuple[SourceLoc, str] | None], lines: list[str]) -> ProgramError:
     """An error found in the translation, located at the PyReason statement it came from."""
     if e.file == GENERATED and 0 < e.line <= len(origins) and origins[e.line - 1] is not None:
-        loc, _ = origins[e.line - 1]
+        loc, text = origins[e.line - 1]
         msg = f"{e.message} (in its translation: {lines[e.line - 1]})"
         if isinstance(e, RuleSyntaxError) and _SHARED_SYNTAX.search(lines[e.line - 1]):
             msg += ("; the translation uses the quantifiers, annotation functions or rule options of issue 14, "
                     "which this tracelab's rule parser may not read yet")
-        return type(e)(msg, loc.file, loc.line, loc.column, line_from_file(loc.file, loc.line))
+        # a rule made in Python (pr.Rule, file "<Rule ...>") has no file to read its line from
+        source = text if loc.file.startswith("<") else line_from_file(loc.file, loc.line)
+        return type(e)(msg, loc.file, loc.line, loc.column, source)
     if e.file != GENERATED and e.line > 0 and e.source_line is None:
         return type(e)(e.message, e.file, e.line, e.column, line_from_file(e.file, e.line))
     return e

@@ -146,3 +146,18 @@ def replace_atomically(data: bytes, final: Path) -> None:
     """Write `data` to a temp name beside `final`, then rename it over `final`."""
     with new_file(final) as f:
         f.write(data)
+
+
+def check_new_run_dir(run_dir: Path, what: str = "--run") -> None:
+    """A run goes into a new or empty directory: never into a file, an existing run, or a folder of
+    other things (they would be mixed with the run's files). `what` names the option in the message."""
+    from tracelab.errors import UserError
+    if run_dir.exists() and not run_dir.is_dir():
+        raise UserError(f"{what} {run_dir}: this is a file, not a directory; give a new run directory")
+    if meta_path(run_dir).exists():
+        raise UserError(f"{what} {run_dir} already holds a run; give a new run directory")
+    if run_dir.is_dir():
+        others = sorted(p.name for p in run_dir.iterdir())
+        if others:
+            shown = ", ".join(others[:5]) + (", ..." if len(others) > 5 else "")
+            raise UserError(f"{what} {run_dir} holds other files ({shown}); give a new or empty directory")
