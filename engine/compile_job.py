@@ -168,13 +168,6 @@ def running() -> list[BackgroundCompile]:
     return [job for job in _JOBS.values() if job.poll() == "running"]
 
 
-def say_running_compiles() -> None:
-    """At the end of a run: one line per background compile still running (it goes on without the run)."""
-    for job in running():
-        print(f"tracelab: the compiled kernel is still being built in the background (pid {job.pid}); the "
-              f"next run takes it from the cache (--kernel compiled or auto)", file=sys.stderr, flush=True)
-
-
 def main(argv: list[str]) -> int:
     """The child: compile the program pickled on stdin by `start` (its parent); the last line of output
     is the outcome as JSON."""

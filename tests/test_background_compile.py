@@ -4,6 +4,7 @@ compiled kernel between two steps; the run is exactly the run that never switche
 small program into a temporary cache (numba compiles the whole kernel: tens of seconds of CPU, once)."""
 from __future__ import annotations
 
+import logging
 import subprocess
 import sys
 
@@ -48,7 +49,8 @@ def _drive(eng: Engine, t: int, snap: dict | None) -> None:
 
 
 def test_a_run_switches_to_the_compiled_kernel_exactly(tmp_path, monkeypatch: pytest.MonkeyPatch,
-                                                        capfd: pytest.CaptureFixture[str]) -> None:
+                                                        caplog: pytest.LogCaptureFixture) -> None:
+    caplog.set_level(logging.INFO, logger="tracelab")
     monkeypatch.setenv(cc.CACHE_ENV, str(tmp_path))
     program = parse_program(SMALL)
     switching = Engine(program, worlds=2, kernel="compiled", background_compile=True)
@@ -84,7 +86,7 @@ def test_a_run_switches_to_the_compiled_kernel_exactly(tmp_path, monkeypatch: py
     compiled_here = [not job.result["cached"], "compiled and cached" in err]
     assert sorted(compiled_here) == [False, True], (job.result, err)  # exactly one of the two compiled
     assert "loaded (already cached)" in err or job.result["cached"]
-    printed = capfd.readouterr().err
+    printed = caplog.text  # the engine's notices, on its logger (the CLI shows them on stderr)
     assert printed.count("being built in the background") == 1
     assert "switched to it at t=3" in printed
     assert "in the background in" in printed or "found in the cache" in printed
@@ -96,7 +98,7 @@ def test_a_run_switches_to_the_compiled_kernel_exactly(tmp_path, monkeypatch: py
 
 
 def test_a_failed_background_compile_leaves_the_run_on_the_counting_kernel(
-        tmp_path, monkeypatch: pytest.MonkeyPatch, capfd: pytest.CaptureFixture[str]) -> None:
+        tmp_path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
     """The child computes another key than the run (as after a library upgrade between them): it refuses
     before compiling, and the run goes on on the counting kernel with a one-line notice."""
     monkeypatch.setenv(cc.CACHE_ENV, str(tmp_path))
@@ -108,13 +110,12 @@ def test_a_failed_background_compile_leaves_the_run_on_the_counting_kernel(
     eng.step()
     assert eng.kernel == "counting" and eng.background is None
     assert "background compile failed" in eng.kernel_notice and "asked for" in eng.kernel_notice
-    err = capfd.readouterr().err
-    notices = [ln for ln in err.splitlines() if "notice" in ln]
+    notices = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
     assert len(notices) == 1 and "going on with the counting kernel" in notices[0]
 
 
 def test_an_unwritable_cache_leaves_the_run_on_the_counting_kernel(tmp_path, monkeypatch: pytest.MonkeyPatch,
-                                                                   capfd: pytest.CaptureFixture[str]) -> None:
+                                                                   caplog: pytest.LogCaptureFixture) -> None:
     blocker = tmp_path / "file"
     blocker.write_text("")  # the cache root is under a file: nothing can be created there
     monkeypatch.setenv(cc.CACHE_ENV, str(blocker))
@@ -122,5 +123,5 @@ def test_an_unwritable_cache_leaves_the_run_on_the_counting_kernel(tmp_path, mon
     eng.step()
     assert eng.kernel == "counting" and eng.background is None
     assert "cannot start its background compile" in eng.kernel_notice
-    err = capfd.readouterr().err
-    assert err.count("\n") == 1 and err.startswith("tracelab: notice: kernel 'compiled' not used")
+    (notice,) = caplog.records
+    assert notice.levelno == logging.WARNING and notice.getMessage().startswith("kernel 'compiled' not used")

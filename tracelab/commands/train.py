@@ -172,7 +172,7 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
     from tracelab.game.scenario import BOARD
     from tracelab.store import TraceWriter
     from tracelab.train.checkpoint import restore
-    from tracelab.engine.compile_job import say_running_compiles
+    from tracelab.commands._notices import say_running_compiles
     from tracelab.train.loop import Trainer
 
     meta = {"command": " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]),
