@@ -48,7 +48,7 @@ def machine() -> str:
     return f"{os.cpu_count()} cores, {model}, {platform.system()} {platform.release()}{load}"
 
 
-# the settings of the method's DQN (shared/paper-notes.md); a report names those an arm changes
+# the settings of the method's DQN (docs/training.md, "The command"); a report names those an arm changes
 DQN_FIELDS = ("hidden", "lr", "gamma", "batch", "buffer", "target_every", "eps_start", "eps_end",
               "eps_decay_start", "eps_decay_end", "updates_per_step", "reward_scale", "mask", "explore_scripted",
               "split_networks", "slow_every_step", "double_dqn", "dueling")
