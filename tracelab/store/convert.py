@@ -209,7 +209,7 @@ def program_tables(program: Any, facts: Sequence[Any] | None = None,
 
 def utc_now() -> _dt.datetime:
     """Now, in UTC, without tzinfo (the store's timestamps are all UTC)."""
-    return _dt.datetime.now(_dt.timezone.utc).replace(tzinfo=None)
+    return _dt.datetime.now(_dt.UTC).replace(tzinfo=None)
 
 
 def json_text(value: Any) -> str | None:
