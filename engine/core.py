@@ -12,7 +12,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from . import annotations
-from . import compile_job
+from . import compile_background
 from . import kernel as K
 from .aggregate_tables import aggregate_tables, aggregated_rules
 from .backend_compiled import CompiledState, compiled_backend
@@ -134,7 +134,7 @@ class Engine:
         self.kernel_notice: str | None = None  # why a requested compiled kernel is not used
         # kernel="compiled" with background_compile: the compile of a kernel not yet cached, running in a
         # child process while this engine steps on the counting kernel (step() takes it over when ready)
-        self.background: compile_job.BackgroundCompile | None = None
+        self.background: compile_background.BackgroundCompile | None = None
         self._next_poll = 0.0
         # bumped whenever an array the kernel steps is replaced (grown, handed over, another backend):
         # a caller holding fused_binding()'s arrays binds them again when it changes
@@ -241,7 +241,7 @@ class Engine:
 
     def _start_background_compile(self, entry: CacheEntry) -> None:
         try:
-            self.background, new = compile_job.start(self.program, entry)
+            self.background, new = compile_background.start(self.program, entry)
         except OSError as e:  # an unwritable cache, no process to spare: the run goes on regardless
             self.kernel_notice = (f"kernel 'compiled' not used: cannot start its background compile "
                                   f"({e.strerror or e}: {e.filename or entry.dir}); running on the counting kernel")

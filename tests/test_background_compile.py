@@ -1,7 +1,8 @@
-"""Background compiles (engine/compile_job.py): Engine(kernel="compiled", background_compile=True) on a
-program not yet cached starts on the counting kernel, compiles in a child process, and switches to the
-compiled kernel between two steps; the run is exactly the run that never switched. A real compile of a
-small program into a temporary cache (numba compiles the whole kernel: tens of seconds of CPU, once)."""
+"""Background compiles (engine/compile_background.py, the child: compile_job.py): Engine(kernel="compiled",
+background_compile=True) on a program not yet cached starts on the counting kernel, compiles in a child process,
+and switches to the compiled kernel between two steps; the run is exactly the run that never switched. A real
+compile of a small program into a temporary cache (numba compiles the whole kernel: tens of seconds of CPU,
+once)."""
 from __future__ import annotations
 
 import logging
@@ -12,7 +13,7 @@ import numpy as np
 import pytest
 from tracelab.engine import Engine, parse_program
 from tracelab.engine import compile_cache as cc
-from tracelab.engine import compile_job
+from tracelab.engine import compile_background
 
 SMALL = """
 r1: b(X) <-0 a(X), e(X,Y)
@@ -82,7 +83,7 @@ def test_a_run_switches_to_the_compiled_kernel_exactly(tmp_path, monkeypatch: py
     assert len(step.signatures) == 1 and not step.stats.cache_misses and step.stats.cache_hits
     out, err = other.communicate(timeout=1200)
     assert other.returncode == 0, err
-    job = compile_job._JOBS[entry.dir]
+    job = compile_background._JOBS[entry.dir]
     compiled_here = [not job.result["cached"], "compiled and cached" in err]
     assert sorted(compiled_here) == [False, True], (job.result, err)  # exactly one of the two compiled
     assert "loaded (already cached)" in err or job.result["cached"]

@@ -42,7 +42,7 @@ def showing_library_notices() -> Iterator[None]:
 
 def say_running_compiles() -> None:
     """At the end of a run: one line per background compile still running (it goes on without the run)."""
-    from tracelab.engine.compile_job import running  # when used: `tracelab --help` stays fast
+    from tracelab.engine.compile_background import running  # when used: `tracelab --help` stays fast
     for job in running():
         print(f"tracelab: the compiled kernel is still being built in the background (pid {job.pid}); the "
               f"next run takes it from the cache (--kernel compiled or auto)", file=sys.stderr, flush=True)

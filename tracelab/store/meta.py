@@ -56,7 +56,7 @@ def file_sha256(path: str | Path) -> str:
 
 
 def library_versions() -> dict[str, str]:
-    import duckdb
+    import duckdb  # when a run is written: reading run metadata needs no database
     import numpy
     import pyarrow
 
