@@ -15,6 +15,8 @@ from collections.abc import Callable
 
 import numpy as np
 
+from .program import PREDICATE_RE  # function names are written like predicates
+
 AnnotationFunction = Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[float, float]]
 
 
@@ -73,7 +75,6 @@ def register_annotation(name: str, fn: AnnotationFunction) -> float:
     (`risk(X):name <-1 ...`). `fn(lower, upper, weights) -> (lower, upper)` on float64 arrays; a numba
     `njit` function is compiled here for that signature, so the first firing pays nothing. Nothing of the
     engine is recompiled. Returns the seconds registration took."""
-    from .parser import PREDICATE_RE  # function names are written like predicates
     start = time.perf_counter()
     if not PREDICATE_RE.fullmatch(name):
         raise ValueError(f"annotation function name {name!r}: it must start with a lower-case letter and "

@@ -7,7 +7,7 @@ recounts) is inherited and runs kernel.py's functions; only `step_worlds` comes 
 from __future__ import annotations
 
 import dataclasses
-import sys
+import logging
 import time
 from types import ModuleType
 
@@ -69,10 +69,8 @@ _AFTER_REMOVAL = {"compile": "it is compiled again now (about a minute)",
                   "build": "it is compiled again in the background",
                   "skip": "this run uses the counting kernel (`tracelab compile` builds it again)"}
 _SAID: set[str] = set()  # notices said once per process
-
-
-def _notice(text: str) -> None:
-    print(f"tracelab: notice: {text}", file=sys.stderr)
+# notices go to the `tracelab` loggers (warnings: a kernel not used); the CLI shows them on stderr
+log = logging.getLogger(__name__)
 
 
 def compiled_backend(eng: EngineTables, program: Program, uncached: str
@@ -81,9 +79,9 @@ def compiled_backend(eng: EngineTables, program: Program, uncached: str
     `uncached` says what to do when the cache lacks this program's kernel: "skip" (kernel="auto": None,
     silently), "compile" (the backend, whose first step compiles) or "build" (None and the entry, for a
     background compile). A program the backend cannot take, or a cache that cannot be used, gets a
-    one-line notice on stderr and None (the caller runs the counting kernel), unless `uncached` is "skip".
-    A cache entry that fails its checks (compile_cache.py) is removed with a one-line notice, then
-    treated as not cached."""
+    one-line warning on this module's logger and None (the caller runs the counting kernel), unless
+    `uncached` is "skip". A cache entry that fails its checks (compile_cache.py) is removed with a
+    one-line warning, then treated as not cached."""
     why = unsupported(program)
     if why is None:
         try:
@@ -93,7 +91,7 @@ def compiled_backend(eng: EngineTables, program: Program, uncached: str
     if uncached == "skip":
         return None, None, None
     notice = f"kernel 'compiled' not used: {why}; running on the counting kernel"
-    _notice(notice)
+    log.warning(notice)
     return None, notice, None
 
 
@@ -101,7 +99,7 @@ def _from_cache(eng: EngineTables, entry: CacheEntry, uncached: str
                 ) -> tuple["CompiledState | None", str | None, CacheEntry | None]:
     if entry.ignored and entry.ignored not in _SAID:  # another user's entry: said once, not used
         _SAID.add(entry.ignored)
-        _notice(f"kernel cache: {entry.ignored}")
+        log.warning(f"kernel cache: {entry.ignored}")
     notice = None
     if entry.ready or uncached == "compile":
         try:
@@ -109,7 +107,7 @@ def _from_cache(eng: EngineTables, entry: CacheEntry, uncached: str
         except EntryRejected as e:  # its files are removed: the entry is now simply not cached
             notice = (f"kernel 'compiled': the cached kernel failed its check: {e}; removed it, "
                       f"{_AFTER_REMOVAL[uncached]}")
-            _notice(notice)
+            log.warning(notice)
         if uncached == "compile":
             return CompiledState(eng, entry), None, None
     if uncached == "build":

@@ -85,7 +85,8 @@ def _version(dist: str) -> str:
 def versions() -> dict[str, str]:
     """Everything besides the source that decides whether a compiled kernel can be reused (looked up
     once per process: each metadata.version reads the installed packages' metadata)."""
-    return {"generator": str(GENERATOR_VERSION), "cache_format": str(CACHE_FORMAT), "tracelab": _version("tracelab"), "numba": _version("numba"),
+    return {"generator": str(GENERATOR_VERSION), "cache_format": str(CACHE_FORMAT),
+            "tracelab": _version("tracelab"), "numba": _version("numba"),
             "llvmlite": _version("llvmlite"), "numpy": _version("numpy"), "python": sys.version.split()[0],
             "machine": platform.machine()}
 

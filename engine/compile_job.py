@@ -8,29 +8,26 @@ kernel at once compile it once: the second waits, then finds it cached. Every fi
 a temporary name and then linked (kernel.py, never replaced) or renamed (numba's index and data,
 ready.json), so a reader never loads half of one; compile_cache.py checks an entry before it is used.
 
-The background process is `python -m tracelab.engine.compile_job KEY`: it reads the program pickled by
-`start` from its stdin (a pipe from the parent, so no pickle file sits anywhere another process could
+The background process is `python -m tracelab.engine.compile_job KEY`, started by compile_background.py
+(which the Engine uses; this module imports the Engine, that one does not): it reads the program pickled
+by `start` from its stdin (a pipe from the parent, so no pickle file sits anywhere another process could
 replace: unpickling runs code), compiles it, and prints one JSON line (the times) as the last line of its
 log, `<entry>/compile.<pid>.<ns>.log` (removed once the kernel is ready; kept when it fails). It runs in
 its own session, so a Ctrl-C of the run does not stop it: a run that ends first leaves it to finish, and
-the next run finds the kernel via kernel="auto".
+the next run finds the kernel via kernel="auto". Its prints are that log, not a library's output.
 """
 from __future__ import annotations
 
 import dataclasses
 import json
-import os
 import pickle
-import subprocess
 import sys
-import threading
 import time
 from collections.abc import Callable
-from pathlib import Path
-from typing import IO
 
-from .compile_cache import CacheEntry, CacheRefused, EntryRejected
-from .safe_files import create_new
+from .compile_cache import CacheEntry
+from .core import Engine
+from .errors import FixpointError, InconsistencyError
 from .program import Program
 
 
@@ -51,8 +48,6 @@ def compile_program(program: Program, announce: Callable[[CacheEntry, bool], Non
     """Compile `program`'s kernel into the cache (or find it there), holding its entry's lock while the
     first step compiles. `announce(entry, cached)` is called once the lock is held, before the minute a
     compile takes. `expect_key`: refuse unless the kernel's cache key is this one."""
-    from .core import Engine  # core starts background compiles: import it only when compiling
-    from .errors import FixpointError, InconsistencyError
     t0, c0 = time.perf_counter(), time.process_time()
     engine = Engine(program, kernel="compiled", trace=True)  # writes the generated module, compiles nothing
     if engine.kernel != "compiled":
@@ -71,108 +66,6 @@ def compile_program(program: Program, announce: Callable[[CacheEntry, bool], Non
     if not entry.ready:
         raise CompileRefused(f"the kernel was not cached in {entry.dir}")
     return CompileOutcome(entry, cached, time.perf_counter() - t0, time.process_time() - c0)
-
-
-class BackgroundCompile:
-    """A compile of one cache entry in a child process (see the module's docstring)."""
-
-    def __init__(self, entry: CacheEntry, proc: subprocess.Popen, log: Path) -> None:
-        self.entry, self.proc, self.log = entry, proc, log
-        self.started = time.monotonic()
-        self.status = "running"  # then "ready" or "failed"
-        self.wall_s: float | None = None  # from start to the end of the process, seen from this one
-        self.result: dict = {}            # the child's JSON line: cached, wall_s, cpu_s
-        self.why = ""                     # why it failed: the last line of its log
-
-    @property
-    def pid(self) -> int:
-        return self.proc.pid
-
-    def poll(self) -> str:
-        """"running", "ready" or "failed" (a cheap check: one waitpid while it runs)."""
-        if self.status == "running" and self.proc.poll() is not None:
-            self._finished()
-        return self.status
-
-    def wait(self, timeout: float | None = None) -> str:
-        """Block until the child ends (or `timeout` seconds pass); its status."""
-        try:
-            self.proc.wait(timeout)
-        except subprocess.TimeoutExpired:
-            pass
-        return self.poll()
-
-    def _finished(self) -> None:
-        self.wall_s = time.monotonic() - self.started
-        lines = self.log.read_text(errors="replace").splitlines() if self.log.exists() else []
-        last = lines[-1] if lines else ""
-        try:
-            self.result = json.loads(last)
-        except ValueError:
-            self.result = {}
-        if self.proc.returncode == 0 and self.entry.ready:
-            try:
-                self.entry.load()  # checked here: an entry that fails is a failed compile, not an error mid-run
-            except (EntryRejected, CacheRefused) as e:
-                self.status, self.why = "failed", str(e)
-                return
-            self.status = "ready"
-            self.log.unlink(missing_ok=True)
-        else:
-            self.status = "failed"
-            self.why = f"exit status {self.proc.returncode}: {last.strip() or 'no output'} (log: {self.log})"
-
-    def describe(self) -> str:
-        """How it went, for the line a run prints when it switches kernels."""
-        took = f"{self.wall_s:.1f} s" if self.wall_s is not None else "?"
-        if self.result.get("cached"):
-            return f"found in the cache after {took} (another run compiled it)"
-        cpu = self.result.get("cpu_s")
-        return f"compiled in the background in {took}" + (f" ({cpu:.1f} s of CPU)" if cpu is not None else "")
-
-
-_JOBS: dict[Path, BackgroundCompile] = {}  # one background compile per cache entry and process
-
-
-def start(program: Program, entry: CacheEntry) -> tuple[BackgroundCompile, bool]:
-    """The background compile of `entry` (from `program`): this process's running or finished one for the
-    entry, else a new child process. Returns it and whether it is new."""
-    job = _JOBS.get(entry.dir)
-    if job is not None and job.poll() != "failed":
-        return job, False
-    entry.prepare()
-    log = entry.dir / f"compile.{os.getpid()}.{time.monotonic_ns()}.log"
-    with os.fdopen(create_new(log), "w") as out:
-        # -P: not the current folder first on sys.path, where another checkout's tracelab/ would be found
-        proc = subprocess.Popen([sys.executable, "-P", "-m", "tracelab.engine.compile_job", entry.key],
-                                stdin=subprocess.PIPE, stdout=out, stderr=subprocess.STDOUT,
-                                start_new_session=True)
-    assert proc.stdin is not None
-    # written by a thread: a program bigger than the pipe's buffer would block this run until the child
-    # has imported the engine and reads it
-    threading.Thread(target=_hand_over, args=(proc.stdin, pickle.dumps(program)), daemon=True).start()
-    job = _JOBS[entry.dir] = BackgroundCompile(entry, proc, log)
-    return job, True
-
-
-def _hand_over(pipe: IO[bytes], data: bytes) -> None:
-    try:
-        pipe.write(data)
-        pipe.close()
-    except OSError:  # the child died first: its exit status and log say why
-        pass
-
-
-def running() -> list[BackgroundCompile]:
-    """The background compiles this process started that are still running."""
-    return [job for job in _JOBS.values() if job.poll() == "running"]
-
-
-def say_running_compiles() -> None:
-    """At the end of a run: one line per background compile still running (it goes on without the run)."""
-    for job in running():
-        print(f"tracelab: the compiled kernel is still being built in the background (pid {job.pid}); the "
-              f"next run takes it from the cache (--kernel compiled or auto)", file=sys.stderr, flush=True)
 
 
 def main(argv: list[str]) -> int:

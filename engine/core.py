@@ -5,14 +5,14 @@ of the compiled kernel (kernel.step_worlds) for all worlds together.
 """
 from __future__ import annotations
 
-import sys
+import logging
 import time
 from collections.abc import Sequence
 
 import numpy as np
 
 from . import annotations
-from . import compile_job
+from . import compile_background
 from . import kernel as K
 from .aggregate_tables import aggregate_tables, aggregated_rules
 from .backend_compiled import CompiledState, compiled_backend
@@ -55,6 +55,9 @@ TRACE_MIN_ROWS = 1024
 LANES_MIN_WORLDS = 64
 # a running engine checks on its background compile at most this often (one waitpid per check)
 BACKGROUND_POLL_S = 0.5
+# notices (a requested kernel not used: warning; a background compile started or taken over: info) go to
+# the `tracelab` loggers; the library prints nothing, the CLI shows them on stderr
+log = logging.getLogger(__name__)
 STAT_NAMES = ("firings", "rederivations", "static_ignored", "changes", "passes", "watch_visits",
               "candidates")
 
@@ -125,13 +128,13 @@ class Engine:
         if threads is not None and threads < 1:
             raise ValueError(f"threads must be >= 1, got {threads}")
         # one thread unless asked: on this project's 2-core machines a second thread stepping half the
-        # batch gained nothing at 1v1 and 1.2x at 5v5 (docs/benchmarks.md)
+        # batch gained little (docs/benchmarks.md, "Threads")
         self.threads = threads or 1
         self._ext_codes = np.zeros(0, np.int8)  # crisp value codes of this step's external rows (lanes)
         self.kernel_notice: str | None = None  # why a requested compiled kernel is not used
         # kernel="compiled" with background_compile: the compile of a kernel not yet cached, running in a
         # child process while this engine steps on the counting kernel (step() takes it over when ready)
-        self.background: compile_job.BackgroundCompile | None = None
+        self.background: compile_background.BackgroundCompile | None = None
         self._next_poll = 0.0
         # bumped whenever an array the kernel steps is replaced (grown, handed over, another backend):
         # a caller holding fused_binding()'s arrays binds them again when it changes
@@ -220,7 +223,7 @@ class Engine:
             if kernel == "compiled":
                 self.kernel_notice = (f"kernel 'compiled' not used: {aggregated.described} has a quantifier or "
                                       "an annotation function; running on the counting kernel")
-                print(f"tracelab: notice: {self.kernel_notice}", file=sys.stderr)
+                log.warning(self.kernel_notice)
             return CountingState(self)
         if kernel == "lanes" and not_crisp:
             raise ValueError(f"kernel='lanes' needs a crisp program (bounds [0,0], [1,1] or [0,1] only): "
@@ -238,16 +241,15 @@ class Engine:
 
     def _start_background_compile(self, entry: CacheEntry) -> None:
         try:
-            self.background, new = compile_job.start(self.program, entry)
+            self.background, new = compile_background.start(self.program, entry)
         except OSError as e:  # an unwritable cache, no process to spare: the run goes on regardless
             self.kernel_notice = (f"kernel 'compiled' not used: cannot start its background compile "
                                   f"({e.strerror or e}: {e.filename or entry.dir}); running on the counting kernel")
-            print(f"tracelab: notice: {self.kernel_notice}", file=sys.stderr, flush=True)
+            log.warning(self.kernel_notice)
             return
         if new:  # engines of one process share a compile of one kernel: said once
-            print(f"tracelab: the compiled kernel is being built in the background (pid {self.background.pid}, "
-                  f"a minute or more); the run starts on the counting kernel and switches when it is "
-                  f"ready", file=sys.stderr, flush=True)
+            log.info(f"the compiled kernel is being built in the background (pid {self.background.pid}, a minute "
+                     "or more); the run starts on the counting kernel and switches when it is ready")
 
     def _poll_background(self) -> None:
         """Between two steps: once the background compile has finished, go on with the compiled kernel
@@ -265,12 +267,11 @@ class Engine:
         if status == "ready" and self.kernel == "counting":
             self._state = CompiledState.taking_over(self._state, job.entry)
             self.layout_version += 1  # a fused caller (RuleSim) sees another kernel and steps it apart
-            print(f"tracelab: the compiled kernel is ready ({job.describe()}); switched to it at t={self.t}",
-                  file=sys.stderr, flush=True)
+            log.info(f"the compiled kernel is ready ({job.describe()}); switched to it at t={self.t}")
         elif status == "failed":
             self.kernel_notice = (f"kernel 'compiled' not used: the background compile failed ({job.why}); "
                                   "going on with the counting kernel")
-            print(f"tracelab: notice: {self.kernel_notice}", file=sys.stderr, flush=True)
+            log.warning(self.kernel_notice)
 
     def wait_for_compile(self, timeout: float | None = None) -> str | None:
         """Block until the background compile ends (tests, benchmarks); the next step takes it over.

@@ -31,7 +31,7 @@ _UNQUOTE = "CASE WHEN left({q}, 1) IN ('\"', chr(39)) THEN substr({q}, 2, length
 def load_fact_table(path: str | os.PathLike[str]) -> Graph:
     """The facts of a Parquet (.parquet) or CSV file as a Graph (its nodes in order of first appearance).
     DuckDB parses the atoms and numbers the nodes and labels; Python only receives columns."""
-    import duckdb
+    import duckdb  # when used: the engine's other inputs need no database
 
     file = os.fspath(path)
     if not os.path.exists(file):

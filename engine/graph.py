@@ -18,8 +18,7 @@ from .errors import ProgramCheckError
 from .graphml_expat import read_graphml_expat, read_key_element
 from .graphml_raw import GraphKey, RawGraph, boolean_of_text
 from .memory import release_freed_memory
-from .parser import PREDICATE_RE
-from .program import Fact, Literal, SourceLoc, Term, constant_text, unwritable_constant
+from .program import PREDICATE_RE, Fact, Literal, SourceLoc, Term, constant_text, unwritable_constant
 from .safe_files import read_bytes
 
 __all__ = ["Graph", "load_graphml", "read_raw_graphml"]

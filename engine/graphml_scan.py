@@ -42,10 +42,11 @@ G_TAG, G_EDGEDEFAULT_S, G_EDGEDEFAULT_E = 0, 1, 2
 BOOLEAN_UNKNOWN = -2  # a value with non-ASCII bytes: its boolean is decided in Python (str.strip's spaces)
 
 # no reference counting (`_nrt=False`): each array passed to a helper would cost atomic operations per
-# call, which made a tag cost a microsecond; every buffer is allocated by the caller (`scan_graphml`)
+# call, a real cost per tag (figures: docs/benchmarks.md, "Figures behind the code");
+# every buffer is allocated by the caller (`scan_graphml`)
 scan_jit = njit(cache=True, _nrt=False)
-# small helpers called per tag or per byte, inlined in numba's IR: LLVM left some as calls (the checks
-# XML needs made `scan` 15-20% slower until they were inlined; inlined, it is ~5% faster than before them)
+# small helpers called per tag or per byte, inlined in numba's IR: LLVM left some as calls, and the checks
+# XML needs made `scan` slower until they were inlined; docs/benchmarks.md, "Figures behind the code")
 scan_inline = njit(cache=True, _nrt=False, inline="always")
 _POW10 = np.array([float(f"1e{k}") for k in range(23)])  # exact doubles
 
@@ -260,8 +261,8 @@ def _check_chars(b, i, end):
 def first_bad_char(b):
     """Offset of the first byte that does not start a character XML 1.0 allows in UTF-8, or -1. A block
     of 256 bytes is passed over in one vectorised test when it holds only ASCII and tab / LF / CR (blocks
-    aligned to the start and the test as comparisons: 2 ms on 77 MB, where a table lookup per byte, or
-    blocks at any offset, took 15-30 ms)."""
+    aligned to the start and the test as comparisons: several times faster than a table lookup per byte,
+    or blocks at any offset; docs/benchmarks.md, "Figures behind the code")."""
     n = b.shape[0]
     whole = n - n % 256
     i = 0  # checked up to here (a multi-byte character may end past a block)

@@ -598,7 +598,8 @@ def _most_per_key(keys: np.ndarray) -> int:
 
 
 def sorted_unique(x: np.ndarray) -> np.ndarray:
-    """np.unique by sorting (numpy's hash-based unique was ~5x slower on a million ids here)."""
+    """np.unique by sorting (numpy's hash-based unique is slower on a million ids:
+    docs/benchmarks.md, "Figures behind the code")."""
     s = np.sort(x)
     return s[np.concatenate([[True], s[1:] != s[:-1]])] if len(s) else s
 

@@ -21,6 +21,7 @@ from .program import (
     INCONSISTENCY_POLICIES,
     MAX_BINDING_CLAUSES,
     MAX_TIME,
+    PREDICATE_RE,
     TIMESTEP_MODES,
     UPDATE_MODES,
     Fact,
@@ -34,7 +35,6 @@ from .program import (
 
 __all__ = ["parse_program", "load_program", "parse_literal", "check_program"]
 
-PREDICATE_RE = re.compile(r"[a-z][A-Za-z0-9_]*")
 VARIABLE_RE = re.compile(r"[A-Z_][A-Za-z0-9_]*")
 STATEMENT_NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_-]*")
 

@@ -17,6 +17,8 @@ MAX_TIME = 1_000_000_000
 MAX_BINDING_CLAUSES = 127
 
 CONSTANT_RE = re.compile(r"[a-z0-9][A-Za-z0-9_-]*")  # unquoted constants; anything else must be quoted
+# predicate names; annotation functions and GraphML attribute names that become predicates are written so
+PREDICATE_RE = re.compile(r"[a-z][A-Za-z0-9_]*")
 
 
 def constant_text(name: str) -> str:

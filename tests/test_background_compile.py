@@ -1,9 +1,11 @@
-"""Background compiles (engine/compile_job.py): Engine(kernel="compiled", background_compile=True) on a
-program not yet cached starts on the counting kernel, compiles in a child process, and switches to the
-compiled kernel between two steps; the run is exactly the run that never switched. A real compile of a
-small program into a temporary cache (numba compiles the whole kernel: tens of seconds of CPU, once)."""
+"""Background compiles (engine/compile_background.py, the child: compile_job.py): Engine(kernel="compiled",
+background_compile=True) on a program not yet cached starts on the counting kernel, compiles in a child process,
+and switches to the compiled kernel between two steps; the run is exactly the run that never switched. A real
+compile of a small program into a temporary cache (numba compiles the whole kernel: tens of seconds of CPU,
+once)."""
 from __future__ import annotations
 
+import logging
 import subprocess
 import sys
 
@@ -11,7 +13,7 @@ import numpy as np
 import pytest
 from tracelab.engine import Engine, parse_program
 from tracelab.engine import compile_cache as cc
-from tracelab.engine import compile_job
+from tracelab.engine import compile_background
 
 SMALL = """
 r1: b(X) <-0 a(X), e(X,Y)
@@ -48,7 +50,8 @@ def _drive(eng: Engine, t: int, snap: dict | None) -> None:
 
 
 def test_a_run_switches_to_the_compiled_kernel_exactly(tmp_path, monkeypatch: pytest.MonkeyPatch,
-                                                        capfd: pytest.CaptureFixture[str]) -> None:
+                                                        caplog: pytest.LogCaptureFixture) -> None:
+    caplog.set_level(logging.INFO, logger="tracelab")
     monkeypatch.setenv(cc.CACHE_ENV, str(tmp_path))
     program = parse_program(SMALL)
     switching = Engine(program, worlds=2, kernel="compiled", background_compile=True)
@@ -80,11 +83,11 @@ def test_a_run_switches_to_the_compiled_kernel_exactly(tmp_path, monkeypatch: py
     assert len(step.signatures) == 1 and not step.stats.cache_misses and step.stats.cache_hits
     out, err = other.communicate(timeout=1200)
     assert other.returncode == 0, err
-    job = compile_job._JOBS[entry.dir]
+    job = compile_background._JOBS[entry.dir]
     compiled_here = [not job.result["cached"], "compiled and cached" in err]
     assert sorted(compiled_here) == [False, True], (job.result, err)  # exactly one of the two compiled
     assert "loaded (already cached)" in err or job.result["cached"]
-    printed = capfd.readouterr().err
+    printed = caplog.text  # the engine's notices, on its logger (the CLI shows them on stderr)
     assert printed.count("being built in the background") == 1
     assert "switched to it at t=3" in printed
     assert "in the background in" in printed or "found in the cache" in printed
@@ -96,7 +99,7 @@ def test_a_run_switches_to_the_compiled_kernel_exactly(tmp_path, monkeypatch: py
 
 
 def test_a_failed_background_compile_leaves_the_run_on_the_counting_kernel(
-        tmp_path, monkeypatch: pytest.MonkeyPatch, capfd: pytest.CaptureFixture[str]) -> None:
+        tmp_path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
     """The child computes another key than the run (as after a library upgrade between them): it refuses
     before compiling, and the run goes on on the counting kernel with a one-line notice."""
     monkeypatch.setenv(cc.CACHE_ENV, str(tmp_path))
@@ -108,13 +111,12 @@ def test_a_failed_background_compile_leaves_the_run_on_the_counting_kernel(
     eng.step()
     assert eng.kernel == "counting" and eng.background is None
     assert "background compile failed" in eng.kernel_notice and "asked for" in eng.kernel_notice
-    err = capfd.readouterr().err
-    notices = [ln for ln in err.splitlines() if "notice" in ln]
+    notices = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
     assert len(notices) == 1 and "going on with the counting kernel" in notices[0]
 
 
 def test_an_unwritable_cache_leaves_the_run_on_the_counting_kernel(tmp_path, monkeypatch: pytest.MonkeyPatch,
-                                                                   capfd: pytest.CaptureFixture[str]) -> None:
+                                                                   caplog: pytest.LogCaptureFixture) -> None:
     blocker = tmp_path / "file"
     blocker.write_text("")  # the cache root is under a file: nothing can be created there
     monkeypatch.setenv(cc.CACHE_ENV, str(blocker))
@@ -122,5 +124,5 @@ def test_an_unwritable_cache_leaves_the_run_on_the_counting_kernel(tmp_path, mon
     eng.step()
     assert eng.kernel == "counting" and eng.background is None
     assert "cannot start its background compile" in eng.kernel_notice
-    err = capfd.readouterr().err
-    assert err.count("\n") == 1 and err.startswith("tracelab: notice: kernel 'compiled' not used")
+    (notice,) = caplog.records
+    assert notice.levelno == logging.WARNING and notice.getMessage().startswith("kernel 'compiled' not used")

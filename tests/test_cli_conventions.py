@@ -81,7 +81,8 @@ def test_integers_in_exponent_form_everywhere() -> None:
     (["train", "--total-timestepz", "1000"],
      "tracelab train: error: unknown flag --total-timestepz; did you mean --total-timesteps? "
      "(tracelab train --help lists them)"),
-    (["train", "--learnin-rate=1e-3"], "unknown flag --learnin-rate; did you mean --learning-rate, --learning-starts, --learner?"),
+    (["train", "--learnin-rate=1e-3"],
+     "unknown flag --learnin-rate; did you mean --learning-rate, --learning-starts, --learner?"),
     (["eval", "pol", "--num-env", "4", "--gams", "3"], "unknown flag --gams; did you mean --games?"),
 ])
 def test_an_unknown_flag_is_one_line_of_its_subcommand(argv: list[str], expected: str,

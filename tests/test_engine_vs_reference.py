@@ -169,7 +169,7 @@ def run_until_abort(sc: Scenario, kernel: str) -> None:
                 eng.step()
             except type(e):
                 return
-            raise AssertionError(f"the reference raised {e!r} at t={t} but the engine did not")
+            raise AssertionError(f"the reference raised {e!r} at t={t} but the engine did not") from e
         eng.step()
         trace = eng.take_trace()
         for w in range(WORLDS):

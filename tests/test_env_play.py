@@ -52,7 +52,8 @@ def test_a_traced_frozen_lake_records_every_game_its_steps_and_explains_a_win(tm
     # each episode's rows start at t = 0 with the board's facts, so its rows alone rebuild its world
     firsts = con.execute("SELECT episode, min(t), count(*) FILTER (rule LIKE 'fact:board%') FROM changes "
                          "GROUP BY episode ORDER BY episode").fetchall()
-    assert [f[0] for f in firsts] == list(range(150)) and {(f[1], f[2]) for f in firsts} == {(0, 17 + 64)}  # legend (S: start, ice) + 4 neighbours
+    # legend (S: start, ice) + 4 neighbours
+    assert [f[0] for f in firsts] == list(range(150)) and {(f[1], f[2]) for f in firsts} == {(0, 17 + 64)}
     # a won game's goal is explained back through the rules to the keys pressed and the ice's slips
     won = [e for e, s, r, *_ in eps if r > 0]
     assert won, "no won game among 150 random ones (seeded: should not happen)"

@@ -89,7 +89,8 @@ def test_the_tui_trace_filter_names_a_typo_and_how_to_write_an_atom() -> None:
 
         jumps = pane.jumps
         await filter_by("#tr-atom", "alive")
-        expected = "no atom matches 'alive' in this run; write an atom as label(args) with * for any part, e.g. alive(*)"
+        expected = ("no atom matches 'alive' in this run; write an atom as label(args) with * for any part, "
+                    "e.g. alive(*)")
         assert trace.count == 0 and trace.error == expected and expected in str(status.render())
         jumps = pane.jumps
         await filter_by("#tr-atom", "alive(*)")

@@ -96,8 +96,8 @@ def run_pair(sc: Scenario, worlds: int, seed: int, threads: int) -> None:
 
 
 @settings(max_examples=int(60 * SCALE), deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(sc=scenarios(per_world=1, crisp=True, policies=INCONSISTENCY_POLICIES), worlds=st.sampled_from([70, 130]), seed=st.integers(0, 2**16),
-       threads=st.sampled_from([1, 2, 3]))
+@given(sc=scenarios(per_world=1, crisp=True, policies=INCONSISTENCY_POLICIES), worlds=st.sampled_from([70, 130]),
+       seed=st.integers(0, 2**16), threads=st.sampled_from([1, 2, 3]))
 def test_lanes_match_counting_in_wide_batches_with_restores(sc: Scenario, worlds: int, seed: int,
                                                             threads: int) -> None:
     """threads: the batch is cut into that many shards of whole words (at most one per word). Under

@@ -240,7 +240,8 @@ SYNTAX_ERRORS = [
     ("h(X) <- a(X)", 1, 8, "expected a delay right after '<-'"),
     ("h(X) <-0 a(X),\n\n# nothing follows\n", 1, 15, "expected a literal after ',', found end of file"),
     ("h(X) <-0", 1, 9, "expected a literal after '<-0', found end of file"),
-    ("h(X) <-0 a(X) {", 1, 16, "expected a rule option (intersection | override | set_static | infer_edges | weights=w1,w2,...), found end of line"),
+    ("h(X) <-0 a(X) {", 1, 16, "expected a rule option (intersection | override | set_static | infer_edges | "
+                               "weights=w1,w2,...), found end of line"),
     ("h(X) <-0 a(X) {override", 1, 24, "expected '}' or ',' after a rule option, found end of line"),
     ("h(X) <-0 a(X) {override} b(X)", 1, 26, "expected end of rule after the options, found 'b'"),
     ("p(a,b,c)", 1, 6, "expected ')' after the second argument"),
@@ -266,7 +267,8 @@ SYNTAX_ERRORS = [
     ("p(a) \\ q(a)", 1, 6, "'\\' continues a statement on the next line and must end its line"),
     ("16: p(a)", 1, 1, "invalid name '16'"),
     (": p(a)", 1, 1, "expected a rule, a fact or a directive, found ':'"),
-    ("%foo bar", 1, 2, "unknown directive '%foo' (expected one of %mode, %timesteps, %inconsistency, %edge_heads, %closed)"),
+    ("%foo bar", 1, 2, "unknown directive '%foo' (expected one of %mode, %timesteps, %inconsistency, %edge_heads, "
+                       "%closed)"),
     ("%", 1, 2, "expected a directive name after '%', found end of line"),
     ("%mode", 1, 6, "expected a value for %mode (intersection | override), found end of line"),
     ("%mode override extra", 1, 16, "expected end of line after '%mode override', found 'extra'"),
@@ -402,7 +404,7 @@ def test_printed_programs_parse_back_to_the_same_ast(case: tuple[str, list[Rule 
 
 def test_a_file_that_is_not_utf8_is_a_located_error(tmp_path: Path) -> None:
     f = tmp_path / "latin1.rules"
-    f.write_bytes("agent(a)\nname(b, ".encode() + "caf\xe9".encode("latin-1") + b")\n")
+    f.write_bytes(b"agent(a)\nname(b, " + "caf\xe9".encode("latin-1") + b")\n")
     with pytest.raises(RuleSyntaxError) as e:
         load_program(f)
     assert (e.value.file, e.value.line, e.value.column) == (str(f), 2, 12)

@@ -57,7 +57,8 @@ CHECK_ERRORS = [
     ("alarm(base) @2..1000000001", 1, 17, "the time 1000000001 is too large: a time is at most 1000000000"),
     ("r: h(X) <-0 " + ", ".join(f"a{i}(X)" for i in range(200)), 1, 1,
      "rule 'r' has 200 binding body clauses; the engine allows at most 127"),
-    ("h(X) <-0 a(X) {fast}", 1, 16, "unknown rule option 'fast' (expected intersection | override | set_static | infer_edges | weights=w1,w2,...)"),
+    ("h(X) <-0 a(X) {fast}", 1, 16, "unknown rule option 'fast' (expected intersection | override | set_static | "
+                                    "infer_edges | weights=w1,w2,...)"),
     ("h(X) <-0 a(X) {override, intersection}", 1, 26, "conflicting rule options 'override' and 'intersection'"),
     ("%timesteps never", 1, 12, "unknown value 'never' for %timesteps (expected persistent | reset)"),
     ("%inconsistency ignore", 1, 16, "unknown value 'ignore' for %inconsistency"),

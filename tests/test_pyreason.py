@@ -209,8 +209,8 @@ def test_graphml_reads_with_pyreasons_mapping(tmp_path: Path) -> None:
     t = load_pyreason([tmp_path / "r.txt"], [], g, embed_graph=True).text
     lines = t.splitlines()
     assert lines[2] == "rule_0: ok(X) <-0 health(X):[.5,1], color_red(X), near(X,Y)"
-    assert lines[3].startswith("# the graph's facts") and lines[4:] == ["health(a):[.75,1] static", "color_red(a) static", 'near(a,"B") static',
-                         'near("B",a) static']
+    assert lines[3].startswith("# the graph's facts")
+    assert lines[4:] == ["health(a):[.75,1] static", "color_red(a) static", 'near(a,"B") static', 'near("B",a) static']
     translated = load_pyreason([tmp_path / "r.txt"], [], g)
     engine = Engine(translated.program, translated.graph)
     engine.step()

@@ -145,7 +145,8 @@ def test_the_episode_index_hides_static_facts_as_sql_does() -> None:
                         (TraceFilter(0, rule="fact:*", t_to=0, hide_static=True), static)):
         by_sql = TraceSource(source, flt)
         count = by_sql.prepare()
-        assert by_sql.hidden == hidden and count == TraceSource(source, replace(flt, hide_static=False)).prepare() - hidden
+        assert by_sql.hidden == hidden
+        assert count == TraceSource(source, replace(flt, hide_static=False)).prepare() - hidden
         assert episode_index(source, 0) is not None
         indexed = TraceSource(source, flt)
         assert indexed.prepare() == count and indexed.anchors is not None and indexed.hidden == hidden

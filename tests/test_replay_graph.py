@@ -231,9 +231,11 @@ def test_the_supply_chain_sample_replays_its_thousands_of_nodes(tmp_path: Path) 
     n_nodes, n_edges = (con.execute(f"SELECT count(*) FROM raw.{t}").fetchall()[0][0] for t in ("nodes", "edges"))
     assert len(at(rows, 0, "GraphNodes:node_ids")) == n_nodes == 2430
     assert len(latest_at(rows, 0, "GraphEdges:edges")) == n_edges == 6667
-    changed = [t for (t,) in con.execute("SELECT DISTINCT t FROM changes WHERE label = 'exposed' ORDER BY t").fetchall()]
+    changed = [t for (t,) in con.execute("SELECT DISTINCT t FROM changes WHERE label = 'exposed' ORDER BY t")
+               .fetchall()]
     assert [r["step"] for r in rows if r.get("GraphNodes:colors")] == sorted({0, *changed})
-    exposed = {n for (n,) in con.execute("SELECT node FROM changes WHERE label = 'exposed' AND new_lower = 1").fetchall()}
+    exposed = {n for (n,) in con.execute("SELECT node FROM changes WHERE label = 'exposed' AND new_lower = 1")
+               .fetchall()}
     last = colours_at(rows, 7)
     assert {n for n, c in last.items() if c == RED} == exposed and len(exposed) > 1000
     assert sum(r["step"] == 5 for r in read_rrd(out)["supply-chain/episode-0"]["/rules/log"]) == \

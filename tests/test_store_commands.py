@@ -59,7 +59,8 @@ def test_trace_filters_formats_and_paging(run: str, capsys: pytest.CaptureFixtur
 
 def test_trace_of_a_missing_episode_names_the_known_ones(run: str, capsys: pytest.CaptureFixture) -> None:
     code, _, err = cli(capsys, "trace", run, "-e", "5")
-    assert code == 1 and err.strip() == f"tracelab: error: episode 5 has no trace rows in {run} (episodes with rows: [10, 11, 12])"
+    assert code == 1
+    assert err.strip() == f"tracelab: error: episode 5 has no trace rows in {run} (episodes with rows: [10, 11, 12])"
     code, _, err = cli(capsys, "trace", "no-such-run", "-e", "5")
     assert code == 1 and "no run 'no-such-run'" in err
 
@@ -88,7 +89,8 @@ def test_why_pass_explains_one_of_several_changes_in_a_step(capsys: pytest.Captu
     """acting(clock) changes twice at t=1 of the advanced sample run: cleared by clr_acting in pass 0, set
     again by p_act in pass 1 (immediate). Without --pass why explains the end of the step and says so."""
     code, out, err = cli(capsys, "why", ADVANCED, "acting(clock)", "-e", "0", "--at", "1", "--depth", "1")
-    assert code == 0 and out.startswith("acting(clock) = [1,1] at the end of t=1: set at t=1 pass 1 [0,0]->[1,1] by p_act")
+    assert code == 0
+    assert out.startswith("acting(clock) = [1,1] at the end of t=1: set at t=1 pass 1 [0,0]->[1,1] by p_act")
     assert "changed 2 times at t=1 (passes 0, 1)" in err and "--pass 0" in err
     code, out, err = cli(capsys, "why", ADVANCED, "acting(clock)", "-e", "0", "--at", "1", "--pass", "0", "--json")
     doc = json.loads(out)

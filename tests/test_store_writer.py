@@ -189,7 +189,7 @@ def test_writer_refuses_an_existing_run_and_records_failure(tmp_path: Path) -> N
             w.write_vocabulary(synthetic_vocabulary())
             w.begin_episode(0)
             w.write_changes(0, synthetic_trace(10))
-            1 / 0
+            raise ZeroDivisionError  # the program writing the run fails
     assert run_info(run).status == "failed"
     assert open_run(run).execute("SELECT count(*) FROM changes").fetchone()[0] == 10
     with pytest.raises(FileExistsError, match="already holds a run"):

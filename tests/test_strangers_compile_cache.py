@@ -24,7 +24,7 @@ from pathlib import Path
 import pytest
 from tracelab.engine import Engine, parse_program
 from tracelab.engine import compile_cache as cc
-from tracelab.engine import compile_job
+from tracelab.engine import compile_background
 from tracelab.engine.backend_compiled import cache_entry
 
 SMALL = """
@@ -248,7 +248,7 @@ def test_a_background_compile_gets_its_program_through_a_pipe(entry: Path) -> No
     target = cache_entry(Engine(program, kernel="counting"))
     assert target.dir == entry
     before = set(os.listdir(entry))
-    job, new = compile_job.start(program, target)
+    job, new = compile_background.start(program, target)
     try:
         assert new and job.proc.args[-2:] == ["tracelab.engine.compile_job", target.key]
         assert not [name for name in os.listdir(entry) if name not in before and not name.endswith(".log")]
@@ -257,4 +257,4 @@ def test_a_background_compile_gets_its_program_through_a_pipe(entry: Path) -> No
     finally:
         if job.proc.poll() is None:
             job.proc.kill()
-        compile_job._JOBS.pop(target.dir, None)
+        compile_background._JOBS.pop(target.dir, None)

@@ -202,7 +202,8 @@ def test_a_temp_name_planted_as_a_link_is_not_written_through(made: dict[str, Pa
     assert main(["check", str(run), "--repair"]) == 0, capsys.readouterr()
     assert snapshot(tmp_path, skip=run) == before
     assert not (run / "parts" / "manifest.json").is_symlink()
-    assert json.loads((run / "parts" / "manifest.json").read_text())["tables"]["metrics"] == ["metrics/00000000.parquet"]
+    manifest = json.loads((run / "parts" / "manifest.json").read_text())
+    assert manifest["tables"]["metrics"] == ["metrics/00000000.parquet"]
 
 
 @pytest.mark.parametrize("argv", [["show", "--json"], ["sql", "SELECT command FROM run"]])

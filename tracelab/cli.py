@@ -15,6 +15,7 @@ import sys
 
 from tracelab import __version__
 from tracelab.commands._args import grounding_limit_of
+from tracelab.commands._notices import showing_library_notices
 from tracelab.errors import user_error_message
 
 # One line per subcommand module; each module adds its own parsers and sets `func` on them.
@@ -72,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
         return _unknown_arguments(parser, args.command, unknown)
     args.argv = list(sys.argv[1:] if argv is None else argv)  # the command line, for runs that record it
     try:
-        with grounding_limit_of(args):
+        with grounding_limit_of(args), showing_library_notices():
             status = int(args.func(args) or 0)
         sys.stdout.flush()  # a closed pipe shows here for output still buffered
         return status

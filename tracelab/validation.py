@@ -140,7 +140,7 @@ INT64 = IntRange(-(1 << 63), (1 << 63) - 1, "a 64-bit integer")  # what a BIGINT
 def utc_time(text: str) -> _dt.datetime:
     """An ISO 8601 time as a naive UTC datetime (no offset: local time); ValueError or OverflowError if it
     is not one, or if its UTC time is outside the years 1-9999."""
-    return _dt.datetime.fromisoformat(text).astimezone(_dt.timezone.utc).replace(tzinfo=None)
+    return _dt.datetime.fromisoformat(text).astimezone(_dt.UTC).replace(tzinfo=None)
 
 
 class IsoTime(Spec):

@@ -93,7 +93,8 @@ def rule_costs(sizes: tuple[int, ...], repeats: int) -> list[dict[str, Any]]:
                     build.append(t1 - t0)
                     run.append(t2 - t1)
                 results[name] = eng.interpretation(0)
-                rows.append({"nodes": n, "rule": name, "build_s": summarize(build).to_dict(), "run_s": summarize(run).to_dict(),
+                rows.append({"nodes": n, "rule": name, "build_s": summarize(build).to_dict(),
+                             "run_s": summarize(run).to_dict(),
                              "set_atoms": len(results[name]), "passes": int(eng.stats["passes"][0])})
             for a, b in SAME_MEANING:
                 if results[a] != results[b]:

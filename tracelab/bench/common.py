@@ -6,13 +6,14 @@ import os
 import platform
 import resource
 import statistics
-import subprocess
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from importlib import metadata
 from pathlib import Path
 from typing import Any
+
+from tracelab.provenance import cpu_model, load_average, source_commit
 
 
 @dataclass(frozen=True)
@@ -90,44 +91,16 @@ def _version(dist: str) -> str | None:
         return None
 
 
-def _cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
-
-
-def _git_commit() -> str | None:
-    root = Path(__file__).resolve().parents[2]
-    try:
-        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True,
-                             text=True, timeout=5)
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return out.stdout.strip() or None
-
-
-def load_average() -> list[float]:
-    """The 1, 5 and 15 minute load averages (empty where the platform has none)."""
-    try:
-        return [round(x, 2) for x in os.getloadavg()]
-    except OSError:
-        return []
-
-
 def machine_info() -> dict[str, Any]:
     """Where the figures were taken: cores, load, memory, CPU, versions, the commit."""
     import psutil
     affinity = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     return {
         "cores": os.cpu_count(), "usable_cores": affinity, "load_average": load_average(),
-        "memory_gb": round(psutil.virtual_memory().total / 2**30, 1), "cpu": _cpu_model(),
+        "memory_gb": round(psutil.virtual_memory().total / 2**30, 1), "cpu": cpu_model(),
         "platform": platform.platform(), "python": platform.python_version(),
         "versions": {d: _version(d) for d in ("tracelab", "numpy", "numba", "duckdb", "gymnasium")},
-        "numba_cache_dir": os.environ.get("NUMBA_CACHE_DIR"), "commit": _git_commit(),
+        "numba_cache_dir": os.environ.get("NUMBA_CACHE_DIR"), "commit": source_commit(),
         "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
     }
 

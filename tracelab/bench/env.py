@@ -155,7 +155,8 @@ def report(r: dict[str, Any]) -> str:
     sims = format_table(
         ["agents", "worlds", "kernel", "reference env-steps/s", "rules off", "rules on", "rules/ref off",
          "rules/ref on", "spread ref/off/on"],
-        [[s["agents"], s["worlds"], s["rules_kernel"], env(s["reference"]), env(s["rules_trace_off"]), env(s["rules_trace_on"]),
+        [[s["agents"], s["worlds"], s["rules_kernel"], env(s["reference"]), env(s["rules_trace_off"]),
+          env(s["rules_trace_on"]),
           s["rules_over_reference"], s["rules_traced_over_reference"],
           "/".join(sp(s[k]) for k in ("reference", "rules_trace_off", "rules_trace_on"))] for s in r["sims"]])
     alone = format_table(

@@ -16,7 +16,8 @@ import tempfile
 import time
 from typing import Any
 
-from tracelab.bench.common import fmt_num, format_table, load_average, machine_info, summarize
+from tracelab.bench.common import fmt_num, format_table, machine_info, summarize
+from tracelab.provenance import load_average
 
 COMMAND = ("play", "--scenario", "advanced", "--episodes", "5")
 QUICK_COMMAND = ("play", "--scenario", "advanced", "--episodes", "1")

@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -206,7 +207,8 @@ def report(r: dict[str, Any]) -> str:
     shares = (f"medians of per-round ratios: fused update {r['fused_over_textbook']['median']:.2f}x the "
               f"textbook one, {r['fused_over_readable']['median']:.2f}x the readable learner's; end to end, "
               f"fused {r['e2e_fused_over_readable']['median']:.2f}x readable; the loop around the update "
-              f"{100 * r['loop_share']['median']:.0f}% of a training step (env included), the rest (buffer, ε, transitions, logging) "
+              f"{100 * r['loop_share']['median']:.0f}% of a training step (env included), the rest "
+              f"(buffer, ε, transitions, logging) "
               f"{100 * r['rest_share']['median']:.0f}%")
     goals = format_table(["goal", "target", "measured", "result"],
                          [[g["goal"], g["target"], g["measured"], "met" if g["met"] else "not met"]

@@ -1,6 +1,7 @@
 """`tracelab bench tui`: the terminal UI on a large run, timed through the app itself in textual's headless
 pilot (the same widgets, workers and queries a user drives; keys are sent with App.simulate_key, since
-Pilot.press waits for the process to look idle, up to a second per key, which would time the wait): open the run, open a 10M-row episode's
+Pilot.press waits for the process to look idle, up to a second per key, which would time the wait): open the
+run, open a 10M-row episode's
 trace (first page shown), scroll to an uncached page, jump to a timestep, filter by rule and by atom,
 and move to the atom's next change. Medians of several repeats.
 

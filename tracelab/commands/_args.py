@@ -5,7 +5,7 @@ import argparse
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-from tracelab.engine.kernel_names import KERNELS as ENGINE_KERNELS  # --kernel's choices (no numba import)
+from tracelab.engine.kernel_names import KERNELS as ENGINE_KERNELS  # noqa: F401  (--kernel's choices, for the commands)
 
 
 def integer(text: str) -> int:

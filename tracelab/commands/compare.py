@@ -39,7 +39,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "their status and last step, the config keys whose values differ, and "
                                    "each metric's value at the run's end (win rates also at their best, "
                                    "'VALUE @STEP'). For a run's episodes see `tracelab diff`.")
-    p.add_argument("runs", nargs="+", metavar="RUN", help="training runs: directories, .duckdb files or names under runs/")
+    p.add_argument("runs", nargs="+", metavar="RUN",
+                   help="training runs: directories, .duckdb files or names under runs/")
     add_format_options(p)
     p.set_defaults(func=run)
 

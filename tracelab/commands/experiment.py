@@ -20,8 +20,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("experiment", help="run one of the method's experiments: train (one run per seed), "
                                           "evaluate, write a report with plots under docs/experiments/")
     p.add_argument("name", choices=NAMES, help="the experiment")
-    p.add_argument("--seeds", type=positive_int, default=None, help="seeds per setting (default: the experiment's, >= 3)")
-    p.add_argument("--steps", type=positive_int, default=None, help="training steps per run (default: the experiment's)")
+    p.add_argument("--seeds", type=positive_int, default=None,
+                   help="seeds per setting (default: the experiment's, >= 3)")
+    p.add_argument("--steps", type=positive_int, default=None,
+                   help="training steps per run (default: the experiment's)")
     p.add_argument("--eval-games", type=positive_int, default=None,
                    help="games per evaluation and per final evaluation (default 500)")
     p.add_argument("--quick", action="store_true",

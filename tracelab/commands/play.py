@@ -119,7 +119,7 @@ def play(scenario, args: argparse.Namespace, sink) -> dict:
     compile (first run) or the build while it happens and a progress bar over the episodes (on a
     terminal); the steps/s leave out the first step, which includes any compiling."""
     from tracelab.commands._progress import compiling_engine, progress
-    from tracelab.engine.compile_job import say_running_compiles
+    from tracelab.commands._notices import say_running_compiles
     from tracelab.engine.core import LANES_MIN_WORLDS
     from tracelab.playing import Games
 

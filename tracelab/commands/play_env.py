@@ -134,7 +134,8 @@ def _what_to_open_env(run_dir: Path, spec: Any) -> None:
     run = shlex.quote(str(run_dir))
     ep, last = best if best else (0, 1)
     print(f"\nrun written to {run_dir}/  — what to open:")
-    print(f"  tracelab sql {run} \"SELECT episode, steps, reward, outcome FROM episodes ORDER BY reward DESC, steps, episode LIMIT 5\"")
+    print(f"  tracelab sql {run} \"SELECT episode, steps, reward, outcome FROM episodes "
+          f"ORDER BY reward DESC, steps, episode LIMIT 5\"")
     print(f"  tracelab trace {run} --episode {ep} --from {last} --to {last}            # its last step")
     if row:
         print(f"  tracelab why {run} {shlex.quote(row[0])} --episode {ep} --at {row[1]}   # why is it true?")

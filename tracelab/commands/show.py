@@ -95,7 +95,8 @@ def render(doc: dict[str, Any], all_rules: bool = False) -> str:
     if scenario["definition"]:
         lines += ["  " + ln for ln in scenario["definition"].rstrip().splitlines()]
     if declared:
-        lines += ["", f"spec      {config.get('spec_path')}"] + ["  " + ln for ln in config["spec"].rstrip().splitlines()]
+        lines += ["", f"spec      {config.get('spec_path')}"]
+        lines += ["  " + ln for ln in config["spec"].rstrip().splitlines()]
     rules = doc["rules"]
     shown = rules if all_rules else rules[:RULES_SHOWN]
     lines += ["", f"program   {len(rules)} rules, {counts['facts']} facts"]

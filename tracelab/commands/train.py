@@ -172,7 +172,7 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
     from tracelab.game.scenario import BOARD
     from tracelab.store import TraceWriter
     from tracelab.train.checkpoint import restore
-    from tracelab.engine.compile_job import say_running_compiles
+    from tracelab.commands._notices import say_running_compiles
     from tracelab.train.loop import Trainer
 
     meta = {"command": " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]),
@@ -188,7 +188,8 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
     was_deterministic = torch.are_deterministic_algorithms_enabled()
     torch.use_deterministic_algorithms(cfg.torch_deterministic)
     print(f"training {scenario.name} ({scenario.agents_per_team}v{scenario.agents_per_team}, "
-          f"{'non-Markov' if cfg.non_markov else 'Markov'}, {cfg.backend} backend{'' if cfg.kernel == 'auto' else f', {cfg.kernel} kernel'}, {cfg.envs} worlds) for "
+          f"{'non-Markov' if cfg.non_markov else 'Markov'}, {cfg.backend} backend"
+          f"{'' if cfg.kernel == 'auto' else f', {cfg.kernel} kernel'}, {cfg.envs} worlds) for "
           f"{cfg.steps:,} steps; torch on {torch.get_num_threads()} CPU thread"
           f"{'s' if torch.get_num_threads() != 1 else ''} (--threads); run: {run_dir}", file=sys.stderr)
     largest = max(abs(v) for v in dataclasses.asdict(scenario.rewards).values()) * cfg.reward_scale

@@ -9,7 +9,8 @@ opponent (blue, tracelab/game/opponent.py) inside.
 - `terminated` on a win, loss or draw; `truncated` at `scenario.max_steps`. Step again only after reset.
 - info: `action_mask` (int8, [n_actions] or [N, n_actions]; see tracelab.envs.common.ActionMasker: the
   shield rules' atoms on the rules backend, the same mask computed from the state on the reference
-  one), `t`, `winner` (refsim.WINNER_*: -1 none, 0 red, 1 blue, 2 draw), `opponent_actions` (blue's spec action ids in the step, -1 after reset), and red's per-agent `unsafe`, `invalid`, `hits_made`, `hits_taken`,
+  one), `t`, `winner` (refsim.WINNER_*: -1 none, 0 red, 1 blue, 2 draw), `opponent_actions` (blue's spec action
+  ids in the step, -1 after reset), and red's per-agent `unsafe`, `invalid`, `hits_made`, `hits_taken`,
   `agent_reward` for the last step (zeros after reset). For MultiDiscrete, sample with
   `space.sample(mask=tuple(info["action_mask"]))`.
 - Seeding: `reset(seed=s)` reseeds the opponent's generator; the same seed and actions give the same

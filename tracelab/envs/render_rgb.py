@@ -4,7 +4,8 @@ RecordVideo, `utils.save_video` and GIF writers work without a new dependency.
 Each cell is `CELL` pixels square, the game's top row (highest y) first, as `render_text` prints it:
 free cells dark grey with a thin grid, mountains brown, each base tinted in its team's colour, living
 agents as discs in their team's colour (smaller, one per quarter, when agents share a cell; a health bar
-under the disc when it takes more than one hit to kill), dead agents as a small grey cross, bullets as small squares in their team's lighter colour. The
+under the disc when it takes more than one hit to kill), dead agents as a small grey cross, bullets as small
+squares in their team's lighter colour. The
 colours are the replay's (viewers/replay/style.py), so a video and a replay read the same. The image
 depends on the state alone: the same state gives the same bytes."""
 from __future__ import annotations

@@ -26,13 +26,15 @@ Conventions:
   rewards float64 [K, 2, N] (`StepResult.agent_reward`).
 - `outcome` is red's (the learner's): "win", "loss", "draw", "truncated", or "aborted" for an episode
   cut short by a reset or close (a vector env's `trace_episodes=N` records none of those past N).
-- `seed` is the seed of the env's last reset(seed=...) for every episode (see tracelab/envs/tracer.py). `rewards` maps "red", "blue" (team returns) and every agent name
+- `seed` is the seed of the env's last reset(seed=...) for every episode (see tracelab/envs/tracer.py).
+  `rewards` maps "red", "blue" (team returns) and every agent name
   (`red-agent-1`, ...) to its return over the episode.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Mapping, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 

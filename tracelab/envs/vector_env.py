@@ -36,7 +36,8 @@ the step (in final_info for worlds that ended), so a step can be replayed on a s
 """
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv

@@ -96,7 +96,8 @@ def _policy_kernel(pos, alive, ammo, team, draws, action_ids, blocked, goal, adv
 
 @lru_cache(maxsize=256)
 def _int_array(values: tuple[int, ...]) -> np.ndarray:
-    """A read-only int64 array of a small tuple, made once (per call it would cost a microsecond)."""
+    """A read-only int64 array of a small tuple, made once (made per call, it would cost a measurable
+    share of a step: docs/benchmarks.md, "Figures behind the code")."""
     a = np.asarray(values, dtype=np.int64)
     a.flags.writeable = False
     return a
@@ -123,7 +124,8 @@ def scripted_actions(positions: np.ndarray, alive: np.ndarray, ammo: np.ndarray,
     n_worlds, _, n = alive.shape
     action_ids = _int_array(scenario.action_ids)
     # Always the same draws, whatever the state, so the stream stays aligned between simulators
-    # (one call for all three: each generator call costs microseconds, a step's budget is ~50).
+    # (one call for all three: each generator call costs microseconds, a fair share of a step's budget:
+    # docs/benchmarks.md, "Figures behind the code").
     draws = rng.random((3, n_worlds, n))
     out = np.empty((n_worlds, n), dtype=np.int64)
     _policy_kernel(pos, alive, ammo, t, draws, action_ids, np.ascontiguousarray(scenario.mountain_grid),

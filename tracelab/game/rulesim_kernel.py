@@ -190,8 +190,8 @@ def read_and_settle(truth, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc
                     dest, unsafe, invalid, acted, bpos, bdir, hits_made, hits_taken, win, was_done, weights,
                     max_steps, t, terminated, truncated, winner, agent_reward, reward):
     """After a step: read_back with the step's hits applied, then settle_step, in one call from Python
-    (each call costs microseconds there, and ~0.2 µs more per array passed). Returns settle_step's count
-    of done worlds."""
+    (each call costs microseconds there, and more per array passed: docs/benchmarks.md, "Figures behind
+    the code"). Returns settle_step's count of done worlds."""
     read_back(truth, agent_loc, cell_xy, agent_flags, dest_ids, bullet_loc, bullet_flags, dir_ids, hits,
               bullet_team, bullet_agent, win_ids, ammo0, damage, np.bool_(True), kind_hits, terminated, truncated, pos,
               health, alive, ammo, moving, dest, unsafe, invalid, acted, bpos, bdir, hits_made, hits_taken, win,

@@ -9,10 +9,11 @@ import json
 import math
 import tomllib
 from collections import deque
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, fields
 from functools import cached_property
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any
 
 import numpy as np
 from tracelab.engine.safe_files import FileRefused, read_bytes

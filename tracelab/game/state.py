@@ -81,7 +81,8 @@ class GameState:
                 getattr(self, f.name)[worlds] = getattr(other, f.name)[worlds]
 
 
-@dataclass(slots=True)  # not frozen: a frozen dataclass's __init__ costs ~1.3 µs more per step
+# not frozen: a frozen dataclass's __init__ costs more per step (docs/benchmarks.md, "Figures behind the code")
+@dataclass(slots=True)
 class StepResult:
     """Everything one batched step produced; arrays are [W, ...]. By default (a simulator built with
     copy=False) they are read-only views of the simulator's buffers, valid until its next step or reset:

@@ -67,7 +67,7 @@ def _parse_time(value: Any) -> _dt.datetime | None:
         t = _dt.datetime.fromisoformat(str(value))
     except ValueError:
         return None
-    return t.astimezone(_dt.timezone.utc).replace(tzinfo=None) if t.tzinfo else t
+    return t.astimezone(_dt.UTC).replace(tzinfo=None) if t.tzinfo else t
 
 
 def is_run(path: Path) -> bool:

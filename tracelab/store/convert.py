@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
+from tracelab.engine.program import INCONSISTENCY_POLICIES
 from tracelab.store.graph_tables import graph_fact_table
 from tracelab.store.schema import SCHEMAS, TRACE_COLUMNS
 
@@ -194,7 +195,6 @@ def program_tables(program: Any, facts: Sequence[Any] | None = None,
         fact_rows.append({"fact": i, "name": f.name, "text": f.text or "", "literal": str(f.literal),
                           "start": int(f.start), "end": int(f.end), "static": bool(f.static),
                           "file": file, "line": line})
-    from tracelab.engine.program import INCONSISTENCY_POLICIES
     policies = [{"code": i, "name": p} for i, p in enumerate(INCONSISTENCY_POLICIES)]
     return {
         "rules": pa.Table.from_pylist(rules, schema=SCHEMAS["rules"]),
@@ -209,7 +209,7 @@ def program_tables(program: Any, facts: Sequence[Any] | None = None,
 
 def utc_now() -> _dt.datetime:
     """Now, in UTC, without tzinfo (the store's timestamps are all UTC)."""
-    return _dt.datetime.now(_dt.timezone.utc).replace(tzinfo=None)
+    return _dt.datetime.now(_dt.UTC).replace(tzinfo=None)
 
 
 def json_text(value: Any) -> str | None:

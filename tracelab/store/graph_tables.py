@@ -9,6 +9,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
+from tracelab.engine.program import CONSTANT_RE, constant_text
 from tracelab.store.schema import SCHEMAS
 
 
@@ -16,7 +17,6 @@ def _quoted_names(names: pa.Array) -> pa.Array | None:
     """Each node as the rule language writes it (engine.program.constant_text): bare when it can be,
     quoted otherwise; None when every node is bare. The regular expression runs in Arrow, only the nodes
     that need quotes in Python."""
-    from tracelab.engine.program import CONSTANT_RE, constant_text
     bare = pc.match_substring_regex(names, f"^(?:{CONSTANT_RE.pattern})$")
     if pc.all(bare).as_py() is not False:
         return None

@@ -25,8 +25,9 @@ from __future__ import annotations
 import os
 import shutil
 import stat
+from contextlib import AbstractContextManager
 from pathlib import Path
-from typing import IO, ContextManager
+from typing import IO
 
 from tracelab.engine.safe_files import FileRefused, replacing
 
@@ -136,7 +137,7 @@ def remove_stale_temps(run_dir: Path) -> int:
     return n
 
 
-def new_file(final: Path) -> ContextManager[IO[bytes]]:
+def new_file(final: Path) -> AbstractContextManager[IO[bytes]]:
     """A file to write that becomes `final` when the block ends (`final` comes from run_path): created new
     under the store's temp name beside it, then renamed (engine.safe_files.replacing)."""
     return replacing(final, 0o644, tmp_name(final))

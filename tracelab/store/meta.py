@@ -44,7 +44,7 @@ class RunMeta:
 
 
 def now_iso() -> str:
-    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="microseconds")
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="microseconds")
 
 
 def file_sha256(path: str | Path) -> str:
@@ -56,7 +56,7 @@ def file_sha256(path: str | Path) -> str:
 
 
 def library_versions() -> dict[str, str]:
-    import duckdb
+    import duckdb  # when a run is written: reading run metadata needs no database
     import numpy
     import pyarrow
 

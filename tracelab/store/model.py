@@ -6,6 +6,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from tracelab.engine.errors import ProgramError
+from tracelab.engine.parser import parse_literal
+from tracelab.engine.program import satisfies as engine_satisfies
 from tracelab.store.names import UnknownName, unknown_name_message
 from tracelab.store.reader import RunConnection
 
@@ -54,7 +57,6 @@ class RuleInfo:
 def satisfies(bound: tuple[float, float], clause: Clause) -> bool:
     """I ⊨ clause (the engine's own test, tracelab.engine.program.satisfies, on a stored clause; a
     closed clause reads [0,1] as [0,0], as the engine does)."""
-    from tracelab.engine.program import satisfies as engine_satisfies
     return engine_satisfies(bound[0], bound[1], clause, clause.closed)  # type: ignore[arg-type]
 
 
@@ -199,7 +201,6 @@ class RunModel:
 
     def parse_atom(self, text: str) -> int:
         """The id of a ground atom written as text, e.g. atLoc(red-agent-1,16); errors name what is missing."""
-        from tracelab.engine import ProgramError, parse_literal
         try:
             lit = parse_literal(text)
         except ProgramError as e:

@@ -12,7 +12,8 @@ into). One manifest for all tables also gives a reader one consistent moment acr
 A publication writes one new part per table with rows; then the writer replaces the manifest. When a
 table holds `compact_files` small parts (< part_rows rows), or small parts of part_rows rows in all, they
 are merged into one new part (read one at a time) and leave the table's list: a merge holds about
-part_rows rows, however long the run (merging 64 parts at a time held millions); their files are deleted `grace_seconds` later, so a reader still holding the previous
+part_rows rows, however long the run (merging 64 parts at a time held millions); their files are deleted
+`grace_seconds` later, so a reader still holding the previous
 manifest can finish its query. A crash before the manifest is replaced leaves parts nobody lists:
 invisible and harmless (seal ignores them and removes parts/)."""
 from __future__ import annotations

@@ -34,7 +34,7 @@ class ReasoningRecorder:
     closes)."""
 
     def __init__(self, writer: TraceWriter, episodes: int = 1) -> None:
-        from tracelab.engine.core import TRACE_HANDOVER_ROWS
+        from tracelab.engine.core import TRACE_HANDOVER_ROWS  # when used: core imports numba and the kernels
         self.writer = writer
         self.rows = 0
         self.seconds = 0.0  # spent in this recorder's calls: what recording held the reasoning up

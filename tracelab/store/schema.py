@@ -92,8 +92,8 @@ TRACE_COLUMNS: dict[str, str] = {
 }
 
 # The columns of few distinct values, dictionary-encoded in Parquet parts (the others are not: trying a
-# dictionary on ids and texts that are all different costs write time and space; the 1M-edge reasoning's
-# changes wrote 1.6x faster and 30% smaller). Tables not listed encode every column so.
+# dictionary on ids and texts that are all different costs write time and space; figures:
+# docs/benchmarks.md, "Figures behind the code"). Tables not listed encode every column so.
 DICTIONARY_COLUMNS: dict[str, list[str]] = {
     "changes": ["episode", "world", "t", "pass_no", "old_lower", "old_upper", "new_lower", "new_upper",
                 "cause_kind", "cause_id", "n_sources"],

@@ -3,7 +3,8 @@ the trace store, through TraceWriter."""
 from __future__ import annotations
 
 import time
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 

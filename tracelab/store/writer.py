@@ -296,7 +296,8 @@ class TraceWriter:
                 raise ValueError(f"episode {episode} was already begun and not yet ended")
             self._open_episodes.add(episode)
             rows.append({"episode": episode, "world": e.get("world", 0), "t_start": e.get("t_start"),
-                         "seed": e.get("seed"), "started_at": e.get("started_at") or now, "info": convert.json_text(e.get("info"))})
+                         "seed": e.get("seed"), "started_at": e.get("started_at") or now,
+                         "info": convert.json_text(e.get("info"))})
         if rows:
             self._append({"episode_begin": pa.Table.from_pylist(rows, schema=SCHEMAS["episode_begin"])})
 

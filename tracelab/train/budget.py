@@ -2,7 +2,7 @@
 a training that ended with no wins well short of that gets (`tracelab train` prints it)."""
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 
 class Budget(NamedTuple):

@@ -39,7 +39,8 @@ class TrainConfig:
     agents: int | None = _opt("agents per team (default: the scenario's)", default=None)
     backend: str = _opt("simulator: rules (the rule engine) or reference (hand-written)", default="rules")
     kernel: str = _opt("the rule engine's kernel (--backend rules): auto (lanes from 64 worlds, else "
-                       "counting, stepped with the game as one compiled call), counting, lanes, or compiled (built in the "
+                       "counting, stepped with the game as one compiled call), counting, lanes, or compiled "
+                       "(built in the "
                        "background while training starts on the counting kernel, unless `tracelab compile` "
                        "built it ahead; docs/engine-api.md). Results are the same with every kernel",
                        default="auto")

@@ -8,9 +8,10 @@ it was trained on (`env`: id or spec file and kwargs) and how observations are e
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 

@@ -10,9 +10,9 @@ for the network by env_source.ObservationEncoder (a Discrete one is one-hot)."""
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from collections.abc import Sequence
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 import torch

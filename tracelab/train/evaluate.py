@@ -9,8 +9,9 @@ games). A few games can be traced in full into a run (`EvalTrace`): their change
 episodes, with begin info `{"kind": "eval", ...}` so `tracelab why` can explain them."""
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
-from typing import Any, Callable, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -157,7 +158,8 @@ def play_games(env: GridWarVectorEnv, policy: Policy, quota: np.ndarray, seed: i
 
 class EvalSink(StoreSink):
     """Streams chosen episodes of one env into a run it does not own (the env's program is written once,
-    at begin_run): `accept(info)` before a reset makes the episodes that reset begins traced ones, under fresh run-wide episode ids (`new_id`) with begin
+    at begin_run): `accept(info)` before a reset makes the episodes that reset begins traced ones, under fresh
+    run-wide episode ids (`new_id`) with begin
     `info`; later episodes of the env (autoresets) are dropped. close() leaves the writer open."""
 
     def __init__(self, writer: TraceWriter, new_id: Callable[[], int]) -> None:

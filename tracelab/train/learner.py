@@ -94,7 +94,8 @@ class DQNLearner:
         """One gradient step on a minibatch sampled from the buffer with `rng`."""
         self.buffer.sample(rng)
         # no tensor here requires grad: autograd records nothing (no torch.no_grad() needed)
-        # both networks' layer 1; tanh(z) = 2 sigmoid(2z) - 1: torch's CPU sigmoid is ~3x its tanh
+        # both networks' layer 1; tanh(z) = 2 sigmoid(2z) - 1: torch's CPU sigmoid is several times
+        # faster than its tanh (docs/benchmarks.md, "Figures behind the code")
         torch.baddbmm(self._pre, self._obs, self._w1a, beta=0.0, alpha=2.0, out=self._pre)
         torch.sigmoid(self._pre, out=self._h_act).mul_(2.0).sub_(1.0)
         torch.bmm(self._h, self._w2a, out=self._q)                           # Q(s), Q_target(s')
@@ -121,7 +122,8 @@ class DQNLearner:
     def _adam(self) -> None:
         """torch.optim.Adam's update (no weight decay, no amsgrad) on the online row: torch's fused CPU
         Adam kernel, the one `Adam(fused=True)` runs, called directly (two calls, where the optimizer
-        object costs ~30 times as much around it); without it, five calls:
+        object costs many times as much around it: docs/benchmarks.md, "Figures behind the code");
+        without it, five calls:
         lr/bc1 · m / (sqrt(v)/sqrt(bc2) + eps) = (lr·sqrt(bc2)/bc1) · m / (sqrt(v) + eps·sqrt(bc2))."""
         b1, b2 = ADAM_BETAS
         self.adam_step += 1

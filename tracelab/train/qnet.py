@@ -11,8 +11,9 @@ A network written through the Python API as any `torch.nn.Module` has no such de
 through torch (`TorchQ`), and its policy files say `custom` (docs/training.md)."""
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping
+from typing import Any
 
 import numpy as np
 

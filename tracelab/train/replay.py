@@ -8,7 +8,8 @@ Each transition is one float32 row laid out as the learner reads it: [obs, 1, ne
 (next penalty,) reward, discount] (the ones add the biases in the learner's matmuls; the one-hot picks the
 taken action's Q-value and carries its gradient). A buffer for a masked policy (`--mask`) also keeps, per
 action, a penalty added to the target network's Q(s') before its max: 0 where the action is allowed in s',
-MASKED_Q where the shield forbids it, so the bootstrap is the best action the policy could take there. So a minibatch is one `np.take` and the learner's torch tensors are
+MASKED_Q where the shield forbids it, so the bootstrap is the best action the policy could take there. So a
+minibatch is one `np.take` and the learner's torch tensors are
 fixed views of the batch array: sampling costs four numpy calls."""
 from __future__ import annotations
 

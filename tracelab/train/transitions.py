@@ -2,8 +2,8 @@
 
 An agent's transition runs from a step where it decides (alive; a slow agent on even steps) to its next
 decision, or to the end of the episode or of its life. The reward in between is summed with γ (one term
-for a fast agent, two for the slow agent's two-step move: shared/gridworld-spec.md, the non-Markov
-agent), and the bootstrap is discounted by γ^k, or cut (0) by termination or death. A truncated episode
+for a fast agent, two for the slow agent's two-step move: docs/game.md, "Slow agents (non-Markov
+variant)"), and the bootstrap is discounted by γ^k, or cut (0) by termination or death. A truncated episode
 (step limit) bootstraps from its last observation: the step limit is not part of the game's state."""
 from __future__ import annotations
 

@@ -3,7 +3,7 @@ training run's curves (its `metrics` rows, docs/store.md and the training-run co
 `train_step` timeline."""
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 import rerun as rr
@@ -39,7 +39,7 @@ def team_rewards(board: EpisodeBoard, rows: list[tuple[int, str, float]]) -> np.
     return out
 
 
-@lru_cache(maxsize=None)
+@cache
 def _series_style(team: str, kind: str) -> rr.SeriesLines:
     """A series' line style, built once (an archetype converts its data to Arrow when it is made)."""
     colour = style.TEAM_COLOR[TEAMS.index(team)].astype(float)

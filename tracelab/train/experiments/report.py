@@ -2,9 +2,6 @@
 opponent settings, every seed's final evaluation counted both ways, the spread over seeds, the goal."""
 from __future__ import annotations
 
-import os
-import platform
-import subprocess
 import textwrap
 import time
 from pathlib import Path
@@ -12,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from tracelab.provenance import machine_summary, source_commit
 from tracelab.train.evaluate import METHOD_CUT, EvalResult
 from tracelab.train.experiments import plots
 from tracelab.train.config import TrainConfig
@@ -21,34 +19,15 @@ from tracelab.train.experiments.stats import spread, wilson
 
 
 def commit() -> str:
-    here = Path(__file__).resolve().parent
-    try:
-        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True,
-                              check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=here,
-                               capture_output=True, text=True).stdout.strip()
-        return head + (" (with uncommitted changes)" if dirty else "")
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown (not a git checkout)"
+    return source_commit() or "unknown (not a git checkout)"
 
 
 def machine() -> str:
-    model = platform.processor() or "unknown CPU"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    try:
-        load = ", load average %.1f at the end" % os.getloadavg()[0]
-    except OSError:
-        load = ""
-    return f"{os.cpu_count()} cores, {model}, {platform.system()} {platform.release()}{load}"
+    """Called when the experiment ends: the load average is the one at its end."""
+    return machine_summary("at the end")
 
 
-# the settings of the method's DQN (shared/paper-notes.md); a report names those an arm changes
+# the settings of the method's DQN (docs/training.md, "The command"); a report names those an arm changes
 DQN_FIELDS = ("hidden", "lr", "gamma", "batch", "buffer", "target_every", "eps_start", "eps_end",
               "eps_decay_start", "eps_decay_end", "updates_per_step", "reward_scale", "mask", "explore_scripted",
               "split_networks", "slow_every_step", "double_dqn", "dueling")
