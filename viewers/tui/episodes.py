@@ -91,6 +91,7 @@ class EpisodesPane(Vertical):
         Binding("s", "sort(1)", "sort"),
         Binding("S", "sort(-1)", "reverse", show=False),
         Binding("f", "focus_filter", "filter"),
+        Binding("o", "next_outcome", "outcome"),
         Binding("e", "eval_only", "eval games", show=False),
     ]
     DEFAULT_CSS = """
@@ -105,6 +106,7 @@ class EpisodesPane(Vertical):
         self.source = source
         self.training = False
         self.sort_key, self.sort_desc = "episode", False
+        self.outcomes: list[str] = []      # the run's outcomes, the selector's options (o steps through them)
         self.columns = list(BASE_COLUMNS if source.board else BOARDLESS_COLUMNS)
         self._seen: dict | None = None     # episode counts last seen (live runs)
         self.live_reads = LiveReads(source)
@@ -163,6 +165,7 @@ class EpisodesPane(Vertical):
             self.columns = list(BASE_COLUMNS) + (TRAINING_COLUMNS if training else [])
         else:
             self.columns = list(BOARDLESS_COLUMNS) + ([ABOUT_COLUMN] if about else [])
+        self.outcomes = outcomes
         self.query_one("#ep-outcome", Select).set_options([(o, o) for o in outcomes])
         self.query_one("#ep-kind", Select).display = training
         self.query_one("#ep-kind-label").display = training
@@ -198,7 +201,7 @@ class EpisodesPane(Vertical):
     def on_lazy_table_loaded(self, event: LazyTable.Loaded) -> None:
         sort = f"sorted by {self.sort_key}{' (desc)' if self.sort_desc else ''}"
         self.query_one("#ep-status", Static).update(
-            f" {event.count} episode(s), {sort} · Enter: trace · s: sort · f: filter")
+            f" {event.count} episode(s), {sort} · Enter: trace · s: sort · f: filter · o: outcome")
 
     def on_lazy_table_row_selected(self, event: LazyTable.RowSelected) -> None:
         event.stop()
@@ -224,6 +227,13 @@ class EpisodesPane(Vertical):
 
     def action_focus_filter(self) -> None:
         self.query_one("#ep-length", Input).focus()
+
+    def action_next_outcome(self) -> None:
+        """The outcome selector's next value: all, then each outcome of the run, then all again."""
+        select = self.query_one("#ep-outcome", Select)
+        values = [Select.NULL, *self.outcomes]
+        at = values.index(select.value) if select.value in values else 0
+        select.value = values[(at + 1) % len(values)]
 
     def action_eval_only(self) -> None:
         if self.training:

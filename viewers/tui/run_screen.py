@@ -26,6 +26,9 @@ from tracelab.viewers.tui.why import WhyPane
 TABS = (("episodes", "1 Episodes"), ("trace", "2 Trace"), ("why", "3 Why"), ("rules", "4 Rules"),
         ("sql", "5 SQL"), ("training", "6 Training"))
 
+# where Esc goes from a view: the why tree to the trace it explains, the trace to the run's episodes; any
+# other view to the one the run opened on, and from that one back to the Runs screen
+BACK = {"why": "trace", "trace": "episodes"}
 EAGER = ("episodes", "trace")   # built with the screen; the other views when first shown
 STATUS_REFRESH_S = 1.0          # how often the run's status is read while it can change
 
@@ -150,8 +153,9 @@ class RunScreen(Screen):
             await self.pane(event.pane.id)
             self.call_after_refresh(self._focus_pane, event.pane.id)
 
-    def action_cancel_or_back(self) -> None:
-        """Esc: cancel the running query; else leave a text field (for its view's table); else go back."""
+    async def action_cancel_or_back(self) -> None:
+        """Esc: cancel the running query; else leave a text field (for its view's table); else go back one
+        view (BACK), and from the view the run opened on to the Runs screen."""
         if self.source.interrupt():
             self.notify("query cancelled")
             return
@@ -161,7 +165,11 @@ class RunScreen(Screen):
         if isinstance(self.focused, Input):
             self._focus_pane(self.query_one(TabbedContent).active)
             return
-        self.app.pop_screen()
+        active = self.query_one(TabbedContent).active
+        if active == self.initial:
+            self.app.pop_screen()
+        else:
+            await self.action_show(BACK.get(active, self.initial))
 
     def on_unmount(self) -> None:
         for source in (self.source, *self.overlaid):

@@ -411,10 +411,19 @@ class TracePane(Vertical):
             self.notify("not a training run: it has no evaluation games (episodes of kind 'eval')" if not games
                         else f"no {'later' if direction > 0 else 'earlier'} evaluation game", severity="warning")
             return
-        row = self.table.cursor_row
-        self._goto_t = None if row is None else int(row["t"])
+        self._goto_t = self._cursor_t()
         self._show_game(game.episode, game, True)
         self.apply_filters(game.episode, atom_id=None if self.filter is None else self.filter.atom_id)
+
+    def _cursor_t(self) -> int | None:
+        """The timestep the cursor is on; while a trace opening at a timestep is still loading (quick `]`
+        presses), the timestep it opens at, so that it is not lost to the empty table."""
+        trace, table = self.trace, self.table
+        if trace is not None and trace.start is not None and trace.start[0] == "t" \
+                and not (table.ready and table.source is trace):
+            return trace.start[1]
+        row = table.cursor_row
+        return None if row is None else int(row["t"])
 
     def action_only_atom(self) -> None:
         if self.filter is None:
