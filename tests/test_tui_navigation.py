@@ -93,3 +93,75 @@ def test_o_steps_the_episodes_outcome_selector_and_the_key_bar_says_so() -> None
                 {"loss", "win"} if select.is_blank() else {select.value})
         assert seen == ["loss", "win", None]
     run_app([ADVANCED], body)
+
+
+def test_a_run_reopened_in_the_session_opens_where_it_was_left() -> None:
+    """Episodes filtered and sorted with the cursor on a row, a trace filtered with the cursor on a change:
+    Esc to the Runs screen and Enter on the run again opens the trace there, and Episodes as left."""
+    async def body(app: Any, pilot: Any) -> None:
+        runs = app.screen.query_one(LazyTable)
+        await wait_for(pilot, lambda: loaded(runs) and runs.count == 5)
+        runs.move_to([runs.row(i)["name"] for i in range(runs.count)].index("advanced"))
+        await pilot.press("enter")
+        table = await episodes_ready(app, pilot)
+        episodes = app.screen.query_one("EpisodesPane")
+        app.screen.query_one("#ep-outcome").value = "loss"
+        await pilot.press("s", "s")                                 # losses, sorted by return
+        await wait_for(pilot, lambda: loaded(table) and table.count == 2 and episodes.sort_key == "reward")
+        await pilot.press("down")
+        await wait_for(pilot, lambda: table.cursor == 1)
+        chosen = table.cursor_row["episode"]
+        await pilot.press("enter")
+        pane = app.screen.query_one(TracePane)
+        trace = pane.table
+        await wait_for(pilot, lambda: pane.filter is not None and pane.filter.episode == chosen and loaded(trace))
+        pane.query_one("#tr-label").value = "atLoc"
+        await pilot.press("slash", "enter")
+        await wait_for(pilot, lambda: pane.filter.label == "atLoc" and loaded(trace) and app.focused is trace)
+        await pilot.press("down", "down", "down", "s")              # static facts shown, cursor kept
+        await wait_for(pilot, lambda: not pane.hide_static and loaded(trace) and trace.cursor > 0)
+        left = trace.cursor_row
+        await pilot.press("escape", "escape")                       # trace -> episodes -> Runs
+        await wait_for(pilot, lambda: type(app.screen).__name__ == "RunsScreen")
+        await pilot.press("enter")                                  # the same run again: its Episodes as left
+        table = await episodes_ready(app, pilot)
+        episodes = app.screen.query_one("EpisodesPane")
+        assert active_view(app) == "episodes"
+        await pilot.pause(0.3)                                      # no late reload puts the cursor on row 1
+        assert app.screen.query_one("#ep-outcome").value == "loss" and episodes.sort_key == "reward"
+        assert table.count == 2 and table.cursor == 1 and table.cursor_row["episode"] == chosen
+        await pilot.press("2")                                      # and its trace as left
+        pane = app.screen.query_one(TracePane)
+        trace = pane.table
+        await wait_for(pilot, lambda: active_view(app) == "trace" and pane.filter is not None and loaded(trace))
+        assert pane.filter.episode == chosen and pane.filter.label == "atLoc" and not pane.hide_static
+        assert trace.cursor_row["seq"] == left["seq"] and trace.cursor == 3
+        assert pane.query_one("#tr-label").value == "atLoc"
+    run_app([ROOT / "sample_runs"], body, size=(100, 30))
+
+
+def test_at_80x24_beside_the_board_every_trace_column_fits_and_the_cursor_row_shows() -> None:
+    """80x24 is the floor: with the board shown (b) the trace's columns narrow to fit beside it (the rule
+    column 12 wide, not two characters behind a sideways scroll), and the cursor row stays on screen."""
+    async def body(app: Any, pilot: Any) -> None:
+        pane, trace = await open_trace(app, pilot)
+        assert not pane.board.display                            # no room beside the table: hidden
+        await pilot.press("end")
+        await wait_for(pilot, lambda: loaded(trace) and trace.cursor == trace.count - 1)
+        await pilot.press("b")
+        await wait_for(pilot, lambda: pane.board.display and pane.board.board is not None)
+        await pilot.pause(0.3)
+        widths = {c.key: c.width for c in trace.columns}
+        assert widths["rule"] >= 12 and widths["node"] >= 12
+        assert trace._total_width() <= trace.scrollable_content_region.width      # no sideways scroll
+        assert trace.scrollable_content_region.height == trace.size.height        # so no scrollbar row
+        for keys in ((), ("pageup", "pageup", "up"), ("home", "pagedown", "down")):
+            for key in keys:
+                await pilot.press(key)
+            await wait_for(pilot, lambda: loaded(trace))
+            row = trace.cursor_row
+            lines = (await shown(app, pilot)).splitlines()
+            at = [ln for ln in lines if ln.lstrip().startswith(f"{row['t']} ") and row["rule"][:11] in ln
+                  and row["label"][:6] in ln]
+            assert at, (row, "\n".join(lines))                   # the cursor's row, its rule readable
+    run_app([ADVANCED], body, size=(80, 24))
