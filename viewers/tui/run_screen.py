@@ -78,7 +78,8 @@ class RunScreen(Screen):
         self.episode: int | None = None
         self._has_metrics: bool | None = None     # read once the run is no longer written
         self.panes: dict[str, Widget] = {
-            "episodes": EpisodesPane(self.source, place and place.episodes), "trace": TracePane(self.source), "why": WhyPane(self.source),
+            "episodes": EpisodesPane(self.source, place.episodes if place else None),
+            "trace": TracePane(self.source), "why": WhyPane(self.source),
             "rules": RulesPane(self.source), "sql": SqlPane(self.source),
             "training": TrainingPane(self.source, self.overlaid)}
         # reopened: on the view it was left on (the why tree: on the trace it explained)
