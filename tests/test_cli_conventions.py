@@ -116,3 +116,34 @@ def test_a_training_too_short_to_learn_says_so(tmp_path: Path, capsys: pytest.Ca
     # a budget that should have learned, or a win, is no question of budget
     assert too_short_hint(200_000, 0, 1) is None and too_short_hint(30_000, 1, 1) is None
     assert "3e5" in (too_short_hint(100_000, 0, 5) or "")
+
+
+def test_the_default_reward_scale_is_the_one_that_learns_and_every_report_names_the_scale(
+        tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """0.01 learned the 1v1 base scenario where the method's 1 did not (docs/experiments/1v1-base.md): it is
+    train's default, `--reward-scale 1` is the method's, and train's lines, `compare` and an experiment's
+    learner row say which scale was used."""
+    from tracelab.train.experiments.definitions import EXPERIMENTS
+    from tracelab.train.experiments.report import learner_text
+    from tracelab.train.experiments.run import ArmResult, ExperimentResult
+    assert TrainConfig().reward_scale == 0.01
+    assert TrainConfig.from_dict({"steps": 10}).reward_scale == 1   # a config from before the flag: resumed as it was
+    flags = ["--scenario", "base", "--total-timesteps", "32", "--num-envs", "2", "--learning-starts", "16",
+             "--batch-size", "8", "--eval-every", "0", "--eval-games", "2", "--eval-envs", "2",
+             "--trace-eval-games", "0", "--log-every", "16", "--kernel", "counting"]
+    for run, extra, said in (("default", [], "reward scale 0.01 (the method's: 1)"),
+                             ("method", ["--reward-scale", "1"], "reward scale 1 (the method's)")):
+        assert main(["train", *flags, *extra, "--run", str(tmp_path / run)]) == 0
+        out = capsys.readouterr()
+        assert said in out.err.splitlines()[0] and said in out.out.splitlines()[0], out
+        assert run_info(tmp_path / run).meta["config"]["reward_scale"] == (0.01 if run == "default" else 1)
+    assert main(["compare", str(tmp_path / "default"), str(tmp_path / "method")]) == 0
+    rows = [ln.split("  ") for ln in capsys.readouterr().out.splitlines()]
+    scale = next(r for r in rows if r[0] == "reward scale")
+    assert [c.strip() for c in scale if c.strip()][1:] == ["0.01", "1 (the method's)"]
+    assert main(["compare", str(tmp_path / "default")]) == 0   # one run: no differences, the scale still
+    assert "reward scale" in capsys.readouterr().out
+    exp = EXPERIMENTS["1v1-base"]
+    text = learner_text(ExperimentResult(exp, exp.quick, True, tmp_path, [ArmResult(a) for a in exp.arms]))
+    assert text == ("the method's DQN (docs/training.md), except: 1v1 base: reward scale 0.01; "
+                    "1v1 base, the method's reward scale: as the method, reward scale 1")

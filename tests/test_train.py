@@ -126,7 +126,7 @@ def test_the_learner_learns_to_walk_to_the_enemy_base():
     """A real assertion that learning happens: >= 95% wins after 4,000 steps (a random policy wins ~10%)."""
     cfg = TrainConfig(scenario="walk4", steps=4000, seed=0, warmup=200, envs=8, lr=3e-3, gamma=0.9,
                       target_every=250, buffer=5000, batch=64, opponent_p=0.0, eval_p=0.0, eval_every=0,
-                      eval_games=200, eval_envs=50, log_every=1000, checkpoint_every=0)
+                      eval_games=200, eval_envs=50, log_every=1000, checkpoint_every=0, reward_scale=1.0)
     trainer = Trainer(cfg, WALK)
     before = trainer.run_eval().win_rate
     assert trainer.train() == "finished"
@@ -141,8 +141,8 @@ def test_reward_scale_scales_what_the_learner_sees_and_nothing_that_is_logged():
     """--reward-scale multiplies the replay rewards only: the same seed plays the same games (warm-up, so
     no update changes the actions) and logs the same returns."""
     def buffered(scale):
-        cfg = TrainConfig(scenario="walk4", steps=400, seed=5, reward_scale=scale,
-                          **{**SMALL, "warmup": 1000, "eval_every": 0})
+        cfg = TrainConfig(scenario="walk4", steps=400, seed=5,
+                          **{**SMALL, "warmup": 1000, "eval_every": 0, "reward_scale": scale})
         trainer = Trainer(cfg, WALK)
         trainer.train()
         st = trainer.learners["shared"].buffer.state()
@@ -159,12 +159,18 @@ def test_reward_scale_scales_what_the_learner_sees_and_nothing_that_is_logged():
 def test_train_says_when_the_learner_sees_rewards_beyond_smooth_l1s_quadratic_zone(tmp_path, capsys):
     big = replace(WALK, rewards=replace(WALK.rewards, win=250.0, loss=-250.0))
     small_steps = {**SMALL, "eval_every": 0, "checkpoint_every": 0}
-    assert train_into(TrainConfig(scenario="walk4", steps=40, **small_steps), big, tmp_path / "a") == 0
+    method = TrainConfig(scenario="walk4", steps=40, **{**small_steps, "reward_scale": 1.0})   # the method's
+    assert train_into(method, big, tmp_path / "a") == 0
     assert "note: the learner sees rewards up to 250, where Smooth L1 caps the gradient; --reward-scale 0.01" \
         in capsys.readouterr().err
-    cfg = TrainConfig(scenario="walk4", steps=40, reward_scale=0.01, **small_steps)
+    cfg = TrainConfig(scenario="walk4", steps=40, **{**small_steps, "reward_scale": 0.01})
     assert train_into(cfg, big, tmp_path / "b") == 0
     assert "note:" not in capsys.readouterr().err
+    # the default scale (for GridWar's hundreds) on the walk's own rewards (up to 10): too small
+    cfg = TrainConfig(scenario="walk4", steps=40, **{k: v for k, v in small_steps.items() if k != "reward_scale"})
+    assert train_into(cfg, WALK, tmp_path / "c") == 0
+    assert "note: the learner sees rewards up to 0.1 only (--reward-scale 0.01 suits rewards in the hundreds); " \
+        "--reward-scale 0.1 puts them near 1" in capsys.readouterr().err
 
 
 def test_masked_training_records_the_moves_the_shield_allows_in_the_next_state():

@@ -35,6 +35,8 @@ def dry_lake_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
                  "--run", str(d / "run"), cwd=d)
     assert p.returncode == 0, p.stderr
     assert "Discrete(16) one-hot" in p.stderr
+    # an env keeps its own rewards (about 1): train's default scale (0.01) is for GridWar's hundreds
+    assert "reward scale 1 (the method's)" in p.stderr
     return d / "run"
 
 

@@ -172,3 +172,29 @@ def test_run_without_a_board_snapshots(size: tuple[int, int]) -> None:
     run_app([Path("sample_runs") / "supply-chain"], body, size)
     if failures:
         pytest.fail("\n".join(failures), pytrace=False)
+
+
+def test_trace_beside_the_board_at_80x24_snapshot() -> None:
+    """80x24, the floor: the advanced run's trace at t=10 with the board shown by `b`, every column of the
+    trace narrowed to fit beside it (the rule column readable, no sideways scroll)."""
+    failures: list[str] = []
+
+    async def body(app: Any, pilot: Any) -> None:
+        shots = Snapshots(app, pilot, "advanced-80x24")
+        await episodes_ready(app, pilot)
+        await pilot.press("enter")
+        pane = app.screen.query_one(TracePane)
+        await wait_for(pilot, lambda: pane.filter is not None and loaded(pane.table) and pane.table.count > 0)
+        await wait_for(pilot, lambda: app.focused is pane.table)
+        jumps = pane.jumps
+        pane.query_one("#tr-goto").value = "10"
+        await pilot.press("g", "enter")
+        await wait_for(pilot, lambda: pane.jumps > jumps and loaded(pane.table))
+        await pilot.press("b")
+        await wait_for(pilot, lambda: pane.board.display and pane.board.board is not None
+                       and pane.board.step == 10)
+        await shots.take("trace")
+        failures.extend(shots.failures)
+    run_app([Path("sample_runs") / "advanced"], body, (80, 24))
+    if failures:
+        pytest.fail("\n".join(failures), pytrace=False)

@@ -150,6 +150,16 @@ def _config_text(value: Any) -> str:
         return str(value)
 
 
+def reward_scale_of(config: dict[str, Any]) -> str:
+    """The reward scale a run trained at; a config without one is from before the flag, when the learner
+    saw the game's rewards as they are (the method's scale)."""
+    from tracelab.train.config import METHOD_REWARD_SCALE
+    scale = config.get("reward_scale", METHOD_REWARD_SCALE)
+    if not isinstance(scale, (int, float)) or isinstance(scale, bool):   # a stranger's config: as it is
+        return _config_text(scale)
+    return f"{scale:g}" + (" (the method's)" if scale == METHOD_REWARD_SCALE else "")
+
+
 def _number(v: float | None, precise: bool) -> str:
     if v is None or math.isnan(v):
         return "nan" if v is not None else MISSING
@@ -160,9 +170,10 @@ def _number(v: float | None, precise: bool) -> str:
 
 def comparison_rows(runs: list[TrainingRun], precise: bool = False) -> list[list[str]]:
     """The table: [key, one cell per run]. `precise`: numbers in full (CSV, JSON), else 4 digits."""
-    rows = [["status", *(r.status for r in runs)], ["last step", *(str(r.last_step) for r in runs)]]
+    rows = [["status", *(r.status for r in runs)], ["last step", *(str(r.last_step) for r in runs)],
+            ["reward scale", *(reward_scale_of(r.config) for r in runs)]]   # always: it decides what learns
     configs = [r.config for r in runs]
-    for key in differing_keys(configs) if len(runs) > 1 else []:
+    for key in [k for k in differing_keys(configs) if k != "reward_scale"] if len(runs) > 1 else []:
         rows.append([f"config {key}", *(_config_text(c.get(key, MISSING)) for c in configs)])
     names = sorted({n for r in runs for n in r.metrics}, key=lambda n: (not n.startswith("eval/"), n))
     for name in names:

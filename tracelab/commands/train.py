@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import math
 import shlex
 import signal
 import sys
@@ -187,16 +186,16 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
     torch.set_num_threads(cfg.threads)
     was_deterministic = torch.are_deterministic_algorithms_enabled()
     torch.use_deterministic_algorithms(cfg.torch_deterministic)
+    from tracelab.train.config import reward_scale_text
+    kernel = '' if cfg.kernel == 'auto' else f', {cfg.kernel} kernel'
     print(f"training {scenario.name} ({scenario.agents_per_team}v{scenario.agents_per_team}, "
-          f"{'non-Markov' if cfg.non_markov else 'Markov'}, {cfg.backend} backend"
-          f"{'' if cfg.kernel == 'auto' else f', {cfg.kernel} kernel'}, {cfg.envs} worlds) for "
-          f"{cfg.steps:,} steps; torch on {torch.get_num_threads()} CPU thread"
-          f"{'s' if torch.get_num_threads() != 1 else ''} (--threads); run: {run_dir}", file=sys.stderr)
-    largest = max(abs(v) for v in dataclasses.asdict(scenario.rewards).values()) * cfg.reward_scale
-    if largest > 10:  # far outside Smooth L1's quadratic zone: the learner crawls (docs/training.md)
-        print(f"note: the learner sees rewards up to {largest:g}, where Smooth L1 caps the gradient; "
-              f"--reward-scale {10 ** -math.floor(math.log10(largest)):g} learns several times faster "
-              f"(docs/training.md, \"Reward scale\")", file=sys.stderr)
+          f"{'non-Markov' if cfg.non_markov else 'Markov'}, {cfg.backend} backend{kernel}, {cfg.envs} worlds, "
+          f"{reward_scale_text(cfg.reward_scale)}) for {cfg.steps:,} steps; torch on {torch.get_num_threads()} "
+          f"CPU thread{'s' if torch.get_num_threads() != 1 else ''} (--threads); run: {run_dir}", file=sys.stderr)
+    from tracelab.train.budget import reward_scale_note
+    note = reward_scale_note(max(abs(v) for v in dataclasses.asdict(scenario.rewards).values()), cfg.reward_scale)
+    if note:
+        print(f"note: {note}", file=sys.stderr)
     trainer = sink = None
     status = "failed"
     previous = signal.getsignal(signal.SIGINT)
@@ -268,7 +267,9 @@ def _report(trainer: Any, run_dir: Path, status: str) -> None:
         return
     ev = trainer.last_eval
     run = shlex.quote(str(run_dir))
-    print(f"{status} at step {trainer.step:,}" + (f"; last evaluation: {ev.wins}/{ev.games} wins "
+    from tracelab.train.config import reward_scale_text
+    print(f"{status} at step {trainer.step:,}, {reward_scale_text(trainer.cfg.reward_scale)}"
+          + (f"; last evaluation: {ev.wins}/{ev.games} wins "
           f"({100 * ev.win_rate:.1f}%), method's counting {100 * ev.method_win_rate:.1f}%" if ev else ""))
     best = trainer.best_eval
     if best is not None and ev is not None and best[0] > ev.method_win_rate:  # training got worse after it

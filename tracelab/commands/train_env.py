@@ -42,7 +42,7 @@ def refuse_env_resume(run: Path) -> None:
 
 
 def run_env(args: argparse.Namespace, given: dict[str, Any], limit: Any) -> int:
-    from tracelab.train.config import TrainConfig, flag_of
+    from tracelab.train.config import METHOD_REWARD_SCALE, TrainConfig, flag_of
     from tracelab.train.memory import FLOAT
     from tracelab.train.replay import row_length
 
@@ -54,6 +54,9 @@ def run_env(args: argparse.Namespace, given: dict[str, Any], limit: Any) -> int:
     if gridwar:
         raise UserError(f"{', '.join(gridwar)} describe{'s' if len(gridwar) == 1 else ''} GridWar; "
                         f"--env {args.env} takes the DQN flags only")
+    # gymnasium's envs reward about 1 already: the scale that learns the game's hundreds would shrink them
+    # 100x, so an env is trained at its own scale unless told (docs/experiments/toytext.md)
+    given.setdefault("reward_scale", METHOD_REWARD_SCALE)
     with store_errors():
         cfg = TrainConfig(**given)
         probe = source.make()  # a bad id, spec or keyword argument fails here, in one line
@@ -83,6 +86,7 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
     import torch
 
     from tracelab.store import TraceWriter
+    from tracelab.train.config import reward_scale_text
     from tracelab.train.env_trainer import EnvTrainer
 
     meta = {"command": " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]),
@@ -96,7 +100,8 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
     was_deterministic = torch.are_deterministic_algorithms_enabled()
     torch.use_deterministic_algorithms(cfg.torch_deterministic)
     print(f"training on {source.describe()} ({encoding} observations, {cfg.envs} worlds in gymnasium's "
-          f"SyncVectorEnv) for {cfg.steps:,} steps; run: {run_dir}", file=sys.stderr)
+          f"SyncVectorEnv, {reward_scale_text(cfg.reward_scale)}) for {cfg.steps:,} steps; run: {run_dir}",
+          file=sys.stderr)
     trainer = sink = None
     status = "failed"
     previous = signal.getsignal(signal.SIGINT)

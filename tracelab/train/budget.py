@@ -1,8 +1,26 @@
-"""How many training steps the documented experiments needed before DQN won anything, and the one-line hint
-a training that ended with no wins well short of that gets (`tracelab train` prints it)."""
+"""What the documented experiments found about a training's settings, as the one-line notes `tracelab train`
+prints: the reward scale that lets the learner learn, and how many training steps DQN needed before it won
+anything (the hint a training that ended with no wins well short of that gets)."""
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
+
+
+def reward_scale_note(largest_reward: float, scale: float) -> str | None:
+    """A note when the learner's largest reward (the game's largest times `scale`) lies outside [1, 10]:
+    above, Smooth L1 caps the gradient and Q-values crawl (the method's scale on GridWar's hundreds: no
+    win in 760,000 steps); below, the default 0.01 on a game whose rewards are already small (the walk of
+    tests/test_train.py, rewards up to 10, won nothing in 4,000 steps at 0.01 and 95% at 1). None inside."""
+    seen = largest_reward * scale
+    if largest_reward <= 0 or 1 <= seen <= 10:
+        return None
+    better = 10 ** -math.floor(math.log10(largest_reward))     # puts the largest reward in [1, 10)
+    if seen > 10:
+        return (f"the learner sees rewards up to {seen:g}, where Smooth L1 caps the gradient; --reward-scale "
+                f"{better:g} learns several times faster (docs/training.md, \"Reward scale\")")
+    return (f"the learner sees rewards up to {seen:g} only (--reward-scale {scale:g} suits rewards in the "
+            f"hundreds); --reward-scale {better:g} puts them near 1 (docs/training.md, \"Reward scale\")")
 
 
 class Budget(NamedTuple):

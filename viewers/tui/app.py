@@ -11,6 +11,7 @@ from textual.screen import Screen
 
 from tracelab.store.catalog import DEFAULT_ROOTS, is_run
 from tracelab.viewers.tui.help import HelpScreen
+from tracelab.viewers.tui.places import RunPlace
 from tracelab.viewers.tui.run_screen import TABS, RunScreen
 from tracelab.viewers.tui.runs_screen import RunsScreen
 
@@ -33,6 +34,8 @@ class TracelabApp(App[None]):
     def __init__(self, paths: Sequence[str | Path] = ()) -> None:
         super().__init__()
         self.paths = [Path(p) for p in paths] or list(DEFAULT_ROOTS)
+        # where the user left each run (by its paths), so that reopening it in this session opens there
+        self.run_places: dict[tuple[Path, ...], RunPlace] = {}
 
     def on_mount(self) -> None:
         self.push_screen(RunsScreen(self.paths))
@@ -40,8 +43,10 @@ class TracelabApp(App[None]):
             self.show_run(self.paths[0], self.paths[1:])
 
     def show_run(self, path: Path, overlaid: Sequence[Path] = ()) -> None:
+        key = tuple(p.resolve() for p in (path, *overlaid))
         try:
-            screen = RunScreen(path, overlaid)
+            screen = RunScreen(path, overlaid, self.run_places.get(key),
+                               lambda place: self.run_places.__setitem__(key, place))
         except Exception as e:  # noqa: BLE001 - a run that cannot be opened is a message, not a crash
             self.notify(f"cannot open {', '.join(map(str, [path, *overlaid]))}: {e}", severity="error", timeout=8)
             return

@@ -20,6 +20,7 @@ from tracelab.viewers.tui.colours import FALSE, PARTIAL, TRUE, UNKNOWN
 from tracelab.viewers.tui.lazy_table import Column, LazyTable
 from tracelab.viewers.tui.messages import OpenTrace
 from tracelab.viewers.tui.paging import QuerySource
+from tracelab.viewers.tui.places import EpisodesPlace
 from tracelab.viewers.tui.source import LiveReads, RunSource
 
 OUTCOME_COLOURS = {"win": TRUE, "loss": FALSE, "draw": PARTIAL, "truncated": UNKNOWN,
@@ -91,6 +92,7 @@ class EpisodesPane(Vertical):
         Binding("s", "sort(1)", "sort"),
         Binding("S", "sort(-1)", "reverse", show=False),
         Binding("f", "focus_filter", "filter"),
+        Binding("o", "next_outcome", "outcome"),
         Binding("e", "eval_only", "eval games", show=False),
     ]
     DEFAULT_CSS = """
@@ -100,11 +102,15 @@ class EpisodesPane(Vertical):
     EpisodesPane .label { width: auto; padding: 0 1; }
     """
 
-    def __init__(self, source: RunSource) -> None:
+    def __init__(self, source: RunSource, place: EpisodesPlace | None = None) -> None:
+        """`place`: where this run's Episodes were left earlier in the session (filters, sort, cursor)."""
         super().__init__()
         self.source = source
+        self._reopen = place
+        self._applied: tuple[object, object] | None = None   # the selectors' values the table shows
         self.training = False
         self.sort_key, self.sort_desc = "episode", False
+        self.outcomes: list[str] = []      # the run's outcomes, the selector's options (o steps through them)
         self.columns = list(BASE_COLUMNS if source.board else BOARDLESS_COLUMNS)
         self._seen: dict | None = None     # episode counts last seen (live runs)
         self.live_reads = LiveReads(source)
@@ -163,16 +169,37 @@ class EpisodesPane(Vertical):
             self.columns = list(BASE_COLUMNS) + (TRAINING_COLUMNS if training else [])
         else:
             self.columns = list(BOARDLESS_COLUMNS) + ([ABOUT_COLUMN] if about else [])
+        self.outcomes = outcomes
         self.query_one("#ep-outcome", Select).set_options([(o, o) for o in outcomes])
         self.query_one("#ep-kind", Select).display = training
         self.query_one("#ep-kind-label").display = training
-        self.reload()
+        place, self._reopen = self._reopen, None
+        if place is None:
+            self.reload()
+            return
+        if place.outcome in outcomes:
+            self.query_one("#ep-outcome", Select).value = place.outcome
+        if training and place.kind is not None:
+            self.query_one("#ep-kind", Select).value = place.kind
+        self.query_one("#ep-length", Input).value = place.length
+        self.sort_key, self.sort_desc = place.sort_key, place.sort_desc
+        self.reload(cursor=place.cursor)
 
-    def reload(self, keep_cursor: bool = False) -> None:
+    def place(self) -> EpisodesPlace:
+        """Where the user is, for reopening the run later in the session."""
+        value = lambda name: self.query_one(name, Select).value  # noqa: E731
+        outcome, kind = value("#ep-outcome"), value("#ep-kind")
+        return EpisodesPlace(None if outcome is Select.NULL else str(outcome),
+                             None if kind is Select.NULL else str(kind),
+                             self.query_one("#ep-length", Input).value, self.sort_key, self.sort_desc,
+                             self.query_one(LazyTable).cursor)
+
+    def reload(self, keep_cursor: bool = False, cursor: int = 0) -> None:
         if not hasattr(self, "base"):
             return
         where = []
         outcome = self.query_one("#ep-outcome", Select).value
+        self._applied = (outcome, self.query_one("#ep-kind", Select).value)
         if outcome not in (Select.NULL, None):
             where.append("outcome = $outcome")
         kind = self.query_one("#ep-kind", Select).value
@@ -193,12 +220,12 @@ class EpisodesPane(Vertical):
         table = self.query_one(LazyTable)
         table.sort_key, table.sort_desc = self.sort_key, self.sort_desc
         table.set_source(QuerySource(self.source, sql, order, params or None), self.columns,
-                         cursor=table.cursor if keep_cursor else 0)
+                         cursor=table.cursor if keep_cursor else cursor)
 
     def on_lazy_table_loaded(self, event: LazyTable.Loaded) -> None:
         sort = f"sorted by {self.sort_key}{' (desc)' if self.sort_desc else ''}"
         self.query_one("#ep-status", Static).update(
-            f" {event.count} episode(s), {sort} · Enter: trace · s: sort · f: filter")
+            f" {event.count} episode(s), {sort} · Enter: trace · s: sort · f: filter · o: outcome")
 
     def on_lazy_table_row_selected(self, event: LazyTable.RowSelected) -> None:
         event.stop()
@@ -225,12 +252,21 @@ class EpisodesPane(Vertical):
     def action_focus_filter(self) -> None:
         self.query_one("#ep-length", Input).focus()
 
+    def action_next_outcome(self) -> None:
+        """The outcome selector's next value: all, then each outcome of the run, then all again."""
+        select = self.query_one("#ep-outcome", Select)
+        values = [Select.NULL, *self.outcomes]
+        at = values.index(select.value) if select.value in values else 0
+        select.value = values[(at + 1) % len(values)]
+
     def action_eval_only(self) -> None:
         if self.training:
             self.query_one("#ep-kind", Select).value = "eval"
 
     def on_select_changed(self, event: Select.Changed) -> None:
-        self.reload()
+        # a value set in code (reopening the run) is already shown: its late message reloads nothing
+        if (self.query_one("#ep-outcome", Select).value, self.query_one("#ep-kind", Select).value) != self._applied:
+            self.reload()
 
     def on_input_submitted(self, event: Input.Submitted) -> None:
         self.reload()

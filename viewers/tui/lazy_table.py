@@ -49,10 +49,22 @@ class Column:
     max_width: int = 40
     flex: int = 0                          # share of the room left over when the table is wider
     min_width: int | None = None           # the width before any room was shared out
+    narrowest: int | None = None           # a flex column narrower than the table's columns may go down to
 
     def cell(self, row: Row) -> Text:
         value = self.render(row) if self.render else plain_cell(row.get(self.key))
         return value if isinstance(value, Text) else Text(value)
+
+
+def _narrow(columns: list[Column], excess: int) -> None:
+    """Take `excess` cells from the columns, one at a time from the one with the most to spare above its
+    `narrowest` (weighted by its flex), until none has any to spare."""
+    while excess > 0:
+        spare = max(columns, key=lambda c: (c.width - (c.narrowest or c.width)) * c.flex)  # type: ignore[operator]
+        if spare.width <= (spare.narrowest or spare.width):  # type: ignore[operator]
+            return
+        spare.width -= 1  # type: ignore[operator]
+        excess -= 1
 
 
 class LazyTable(ScrollView, can_focus=True):
@@ -368,7 +380,9 @@ class LazyTable(ScrollView, can_focus=True):
         self.call_after_refresh(self._scroll_to_cursor)
 
     def _share_room(self) -> None:
-        """Widen the flex columns to fill the widget (back to their own width when it shrinks)."""
+        """Widen the flex columns to fill the widget (back to their own width when it shrinks); in a widget
+        narrower than the columns, narrow them down to their `narrowest` first, so that the last column
+        is not cut to a few characters behind a sideways scroll (the trace beside the board at 80x24)."""
         self._redraw()
         flex = [c for c in self.columns if c.flex and c.width is not None]
         if not flex:
@@ -380,6 +394,7 @@ class LazyTable(ScrollView, can_focus=True):
         total = sum(c.flex for c in flex)
         for c in flex:
             c.width = min(c.max_width, c.width + max(0, room) * c.flex // total)  # type: ignore[operator]
+        _narrow(flex, -room)
         self.virtual_size = Size(self._total_width(), self.virtual_size.height)
         self.refresh()
 

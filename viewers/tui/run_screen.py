@@ -4,7 +4,7 @@ messages that pass an episode, a rule or a change from one view to another. Its 
 run's life: live while written, then how it ended, then sealed."""
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from textual.app import ComposeResult
@@ -16,6 +16,7 @@ from textual.widgets import Input, Static, TabbedContent, TabPane, Tabs, TextAre
 from tracelab.viewers.tui.episodes import EpisodesPane
 from tracelab.viewers.tui.keybar import KeyBar
 from tracelab.viewers.tui.messages import ExplainChange, OpenTrace
+from tracelab.viewers.tui.places import RunPlace
 from tracelab.viewers.tui.rules import RulesPane
 from tracelab.viewers.tui.source import RunSource
 from tracelab.viewers.tui.sql import SqlPane
@@ -26,6 +27,9 @@ from tracelab.viewers.tui.why import WhyPane
 TABS = (("episodes", "1 Episodes"), ("trace", "2 Trace"), ("why", "3 Why"), ("rules", "4 Rules"),
         ("sql", "5 SQL"), ("training", "6 Training"))
 
+# where Esc goes from a view: the why tree to the trace it explains, the trace to the run's episodes; any
+# other view to the one the run opened on, and from that one back to the Runs screen
+BACK = {"why": "trace", "trace": "episodes"}
 EAGER = ("episodes", "trace")   # built with the screen; the other views when first shown
 STATUS_REFRESH_S = 1.0          # how often the run's status is read while it can change
 
@@ -54,8 +58,11 @@ class RunScreen(Screen):
         Binding("escape", "cancel_or_back", "back"),
     ]
 
-    def __init__(self, path: Path, overlaid: Sequence[Path] = ()) -> None:
-        """`overlaid`: other runs whose curves the Training view draws with this one's (it opens first)."""
+    def __init__(self, path: Path, overlaid: Sequence[Path] = (), place: RunPlace | None = None,
+                 keep_place: Callable[[RunPlace], None] | None = None) -> None:
+        """`overlaid`: other runs whose curves the Training view draws with this one's (it opens first).
+        `place`: where the user left this run earlier in the session (it opens there); `keep_place` is
+        told where the user is each time the screen is left."""
         super().__init__()
         self.path = path
         self.source = RunSource(path)
@@ -66,20 +73,25 @@ class RunScreen(Screen):
         except BaseException:  # a run that does not open: close the ones opened, the screen is not shown
             self.on_unmount()
             raise
-        self.initial = "training" if overlaid else "episodes"
+        self.initial = "training" if overlaid else "episodes"   # Esc from here closes the run
+        self.place_left, self.keep_place = place, keep_place
         self.episode: int | None = None
         self._has_metrics: bool | None = None     # read once the run is no longer written
         self.panes: dict[str, Widget] = {
-            "episodes": EpisodesPane(self.source), "trace": TracePane(self.source), "why": WhyPane(self.source),
+            "episodes": EpisodesPane(self.source, place.episodes if place else None),
+            "trace": TracePane(self.source), "why": WhyPane(self.source),
             "rules": RulesPane(self.source), "sql": SqlPane(self.source),
             "training": TrainingPane(self.source, self.overlaid)}
+        # reopened: on the view it was left on (the why tree: on the trace it explained)
+        view = "trace" if place and place.view == "why" else place.view if place else self.initial
+        self.opening = view if view in self.panes and self.has_view(view) else self.initial
 
     def compose(self) -> ComposeResult:
         yield Static(self._title(), id="title", classes="title")
-        with RunTabs(initial=self.initial, id="tabs"):
+        with RunTabs(initial=self.opening, id="tabs"):
             for tab, title in TABS:
                 with TabPane(title, id=tab):
-                    if tab in EAGER or tab == self.initial:
+                    if tab in EAGER or tab == self.opening:
                         yield self.panes[tab]
         yield KeyBar()
 
@@ -103,6 +115,9 @@ class RunScreen(Screen):
 
     def on_mount(self) -> None:
         self._hide_missing_views()
+        if self.place_left is not None and self.place_left.trace is not None:
+            self.episode = self.place_left.trace.episode
+            self.panes["trace"].reopen(self.place_left.trace)  # type: ignore[attr-defined]
         if self.source.can_change:  # its writer may close or die, `tracelab seal` may seal it
             self._status_timer = self.set_interval(STATUS_REFRESH_S, self._check_status)
 
@@ -150,8 +165,9 @@ class RunScreen(Screen):
             await self.pane(event.pane.id)
             self.call_after_refresh(self._focus_pane, event.pane.id)
 
-    def action_cancel_or_back(self) -> None:
-        """Esc: cancel the running query; else leave a text field (for its view's table); else go back."""
+    async def action_cancel_or_back(self) -> None:
+        """Esc: cancel the running query; else leave a text field (for its view's table); else go back one
+        view (BACK), and from the view the run opened on to the Runs screen."""
         if self.source.interrupt():
             self.notify("query cancelled")
             return
@@ -161,7 +177,22 @@ class RunScreen(Screen):
         if isinstance(self.focused, Input):
             self._focus_pane(self.query_one(TabbedContent).active)
             return
-        self.app.pop_screen()
+        active = self.query_one(TabbedContent).active
+        if active == self.initial:
+            self.app.pop_screen()
+        else:
+            await self.action_show(BACK.get(active, self.initial))
+
+    def place(self) -> RunPlace:
+        """Where the user is: the view, the Episodes' filters and cursor, the trace's episode and cursor."""
+        episodes, trace = self.panes["episodes"], self.panes["trace"]
+        assert isinstance(episodes, EpisodesPane) and isinstance(trace, TracePane)
+        return RunPlace(self.query_one(TabbedContent).active or self.initial,
+                        episodes.place() if episodes.is_mounted else None, trace.place())
+
+    def on_screen_suspend(self) -> None:
+        if self.keep_place is not None:   # left (back to the Runs screen, or a dialog over it)
+            self.keep_place(self.place())
 
     def on_unmount(self) -> None:
         for source in (self.source, *self.overlaid):

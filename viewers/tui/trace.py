@@ -27,6 +27,7 @@ from tracelab.viewers.tui.eval_games import EvalGame, eval_games, neighbour
 from tracelab.viewers.tui.graph_side import GraphSide
 from tracelab.viewers.tui.messages import ExplainChange
 from tracelab.viewers.tui.paging import PAGE, TraceFilter, TraceSource
+from tracelab.viewers.tui.places import TracePlace
 from tracelab.viewers.tui.source import LiveReads, RunSource
 
 
@@ -42,10 +43,12 @@ def _rule(row: dict[str, Any]) -> Text:
 
 TRACE_COLUMNS = [
     Column("t", "t", 5, align="right"),
-    Column("node", "node/edge", 18, render=lambda r: styled_name(r.get("place", r["node"])), flex=2, max_width=34),
-    Column("label", "label", 12, flex=1, max_width=18),
+    Column("node", "node/edge", 18, render=lambda r: styled_name(r.get("place", r["node"])), flex=2, max_width=34,
+           narrowest=12),
+    Column("label", "label", 12, flex=1, max_width=18, narrowest=7),
     Column("change", "old → new", 15, render=_change),
-    Column("rule", "rule", 22, render=_rule, flex=2, max_width=40),
+    # beside the board at 80 columns the table has 58: every column fits, the rule still 12 wide
+    Column("rule", "rule", 22, render=_rule, flex=2, max_width=40, narrowest=12),
 ]
 
 LIVE_REFRESH_S = 2.0
@@ -115,6 +118,31 @@ class TracePane(Vertical):
             yield LazyTable(TRACE_COLUMNS, id="tr-table")
             yield BoardView(self.source) if self.source.board else GraphSide(self.source)
         yield Static(" choose an episode (1 Episodes, Enter)", id="tr-status", classes="status")
+
+    def place(self) -> TracePlace | None:
+        """Where the user is (None: no episode opened), for reopening the run later in the session."""
+        if self.filter is None:
+            return None
+        row = self.table.cursor_row
+        value = lambda name: self.query_one(name, Input).value  # noqa: E731
+        return TracePlace(self.filter.episode, value("#tr-range"), value("#tr-atom"), value("#tr-label"),
+                          value("#tr-rule"), self.filter.atom_id, self.hide_static, self._board_choice,
+                          None if row is None else int(row["seq"]))
+
+    def reopen(self, place: TracePlace) -> None:
+        """Show the episode, filters and cursor of `place` (the run was left there earlier)."""
+        for name, text in (("#tr-range", place.time_range), ("#tr-atom", place.atom),
+                           ("#tr-label", place.label), ("#tr-rule", place.rule)):
+            self.query_one(name, Input).value = text
+        self.hide_static, self._board_choice = place.hide_static, place.board
+        if place.board is not None:
+            self.side.display = place.board
+        self.apply_filters(place.episode, keep_seq=place.seq, atom_id=place.atom_id)
+        self._read_game_later(place.episode)
+
+    def _read_game_later(self, episode: int) -> None:
+        self.run_worker(lambda: self._read_game(episode), thread=True, group="trace-game", exclusive=True,
+                        exit_on_error=False)
 
     def on_mount(self) -> None:
         if self.source.live:   # rows of the episode may still be arriving
@@ -207,8 +235,7 @@ class TracePane(Vertical):
                 self.query_one(name, Input).value = ""
         self._goto_t = at_t
         self.apply_filters(episode)
-        self.run_worker(lambda: self._read_game(episode), thread=True, group="trace-game", exclusive=True,
-                        exit_on_error=False)
+        self._read_game_later(episode)
 
     def apply_filters(self, episode: int | None = None, keep_seq: int | None = None,
                       atom_id: int | None = None) -> None:
@@ -411,10 +438,19 @@ class TracePane(Vertical):
             self.notify("not a training run: it has no evaluation games (episodes of kind 'eval')" if not games
                         else f"no {'later' if direction > 0 else 'earlier'} evaluation game", severity="warning")
             return
-        row = self.table.cursor_row
-        self._goto_t = None if row is None else int(row["t"])
+        self._goto_t = self._cursor_t()
         self._show_game(game.episode, game, True)
         self.apply_filters(game.episode, atom_id=None if self.filter is None else self.filter.atom_id)
+
+    def _cursor_t(self) -> int | None:
+        """The timestep the cursor is on; while a trace opening at a timestep is still loading (quick `]`
+        presses), the timestep it opens at, so that it is not lost to the empty table."""
+        trace, table = self.trace, self.table
+        if trace is not None and trace.start is not None and trace.start[0] == "t" \
+                and not (table.ready and table.source is trace):
+            return trace.start[1]
+        row = table.cursor_row
+        return None if row is None else int(row["t"])
 
     def action_only_atom(self) -> None:
         if self.filter is None:

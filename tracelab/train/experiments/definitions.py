@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from tracelab.game.scenario import Rewards, Scenario, builtin_scenario
+from tracelab.train.config import LEARNING_REWARD_SCALE, METHOD_REWARD_SCALE
 
 
 @dataclass(frozen=True)
@@ -55,9 +56,10 @@ class Experiment:
 
 
 # The experiments train with the game's rewards x 0.01 as the learner sees them (docs/training.md, "Reward
-# scale"): at the game's scale Smooth L1's gradient is capped and the method's settings barely learn.
-LEARNER_REWARD_SCALE = {"reward_scale": 0.01}
-METHODS_SETTINGS = {"reward_scale": 1.0}
+# scale"; train's default, pinned here so that a report reads the same if the default moves): at the
+# game's scale Smooth L1's gradient is capped and the method's settings barely learn.
+LEARNER_REWARD_SCALE = {"reward_scale": LEARNING_REWARD_SCALE}
+METHODS_SETTINGS = {"reward_scale": METHOD_REWARD_SCALE}
 # With five agents a team a uniformly random red never beats blue (0 of 2,000 games against p = 0.7), so
 # uniform exploration never shows the learner a win: half of the exploring actions come from the scripted
 # policy played for red (docs/training.md, "Scripted exploration").

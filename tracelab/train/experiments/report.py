@@ -12,7 +12,7 @@ import numpy as np
 from tracelab.provenance import machine_summary, source_commit
 from tracelab.train.evaluate import METHOD_CUT, EvalResult
 from tracelab.train.experiments import plots
-from tracelab.train.config import TrainConfig
+from tracelab.train.config import METHOD_REWARD_SCALE, TrainConfig
 from tracelab.train.experiments.run import EVAL_PS, TRAIN_P, ExperimentResult, train_config
 from tracelab.train.experiments.runner import curves, p_suffix
 from tracelab.train.experiments.stats import spread, wilson
@@ -42,14 +42,15 @@ def _setting(name: str, value: Any) -> str:
 
 
 def learner_text(result: ExperimentResult) -> str:
-    """Each arm's departures from the method's DQN settings."""
-    defaults = TrainConfig()
+    """Each arm's departures from the method's DQN settings, and its reward scale either way."""
+    method = TrainConfig(reward_scale=METHOD_REWARD_SCALE)   # train's defaults but for the reward scale
     parts = []
     for ar in result.arms:
         cfg = train_config(result.experiment, ar.arm, result.budget, 0)
         changed = [_setting(name, getattr(cfg, name)) for name in DQN_FIELDS
-                   if getattr(cfg, name) != getattr(defaults, name)]
-        parts.append(f"{ar.arm.label}: {', '.join(changed) if changed else 'as the method'}")
+                   if getattr(cfg, name) != getattr(method, name)]
+        same_scale = "" if cfg.reward_scale != METHOD_REWARD_SCALE else f", reward scale {METHOD_REWARD_SCALE:g}"
+        parts.append(f"{ar.arm.label}: {', '.join(changed) if changed else 'as the method'}{same_scale}")
     return "the method's DQN (docs/training.md), except: " + "; ".join(parts)
 
 

@@ -1,0 +1,167 @@
+"""The TUI keeps your place (issue 27 part 7): Esc steps back one view, a reopened run opens where it was
+left, quick `]` presses keep the timestep, the Episodes' outcome selector has a key, and 80x24 with the
+board shown keeps the rule column readable and the cursor row on screen. Headless, on the sample runs."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+os.environ["TEXTUAL_ANIMATIONS"] = "none"
+
+from tracelab.store.reader import open_run  # noqa: E402
+from tracelab.viewers.tui.lazy_table import LazyTable  # noqa: E402
+from tracelab.viewers.tui.trace import TracePane  # noqa: E402
+from tui_helpers import episodes_ready, loaded, run_app, shown, wait_for  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+ADVANCED = ROOT / "sample_runs" / "advanced"
+BASE_TRAIN = ROOT / "sample_runs" / "base-train"
+
+
+def active_view(app: Any) -> str:
+    return app.screen.query_one("TabbedContent").active
+
+
+async def open_trace(app: Any, pilot: Any) -> tuple[TracePane, LazyTable]:
+    await episodes_ready(app, pilot)
+    await pilot.press("enter")
+    pane = app.screen.query_one(TracePane)
+    await wait_for(pilot, lambda: pane.filter is not None and pane.table.count > 0 and loaded(pane.table))
+    await wait_for(pilot, lambda: app.focused is pane.table)
+    return pane, pane.table
+
+
+def test_esc_steps_back_one_view_why_trace_episodes_then_runs() -> None:
+    async def body(app: Any, pilot: Any) -> None:
+        pane, trace = await open_trace(app, pilot)
+        await pilot.press("w")
+        await wait_for(pilot, lambda: active_view(app) == "why")
+        await pilot.press("escape")                               # why -> the trace it explained
+        await wait_for(pilot, lambda: active_view(app) == "trace" and app.focused is trace)
+        await pilot.press("escape")                               # trace -> the run's episodes
+        await wait_for(pilot, lambda: active_view(app) == "episodes")
+        assert type(app.screen).__name__ == "RunScreen"
+        await pilot.press("4", "escape")                          # any other view -> episodes
+        await wait_for(pilot, lambda: active_view(app) == "episodes")
+        await wait_for(pilot, lambda: app.focused is app.screen.query_one("#ep-table"))
+        await pilot.press("escape")                               # episodes -> the Runs list
+        await wait_for(pilot, lambda: type(app.screen).__name__ == "RunsScreen")
+    run_app([ADVANCED], body)
+
+
+def test_quick_eval_game_presses_keep_the_timestep() -> None:
+    """Three `]` pressed before the games load land on the third game at the kept timestep (t=20), not
+    at t=0: a press made while the previous game is loading takes the timestep it is opening at."""
+    evals = [e for (e,) in open_run(BASE_TRAIN).execute(
+        "SELECT episode FROM episodes WHERE kind = 'eval' ORDER BY episode").fetchall()]
+
+    async def body(app: Any, pilot: Any) -> None:
+        await episodes_ready(app, pilot)
+        await pilot.press("enter")
+        pane = app.screen.query_one(TracePane)
+        trace = pane.table
+        await wait_for(pilot, lambda: pane.filter is not None and loaded(trace))
+        await pilot.press("right_square_bracket")
+        await wait_for(pilot, lambda: pane.filter.episode == evals[0] and trace.count > 0 and loaded(trace))
+        await wait_for(pilot, lambda: app.focused is trace)
+        jumps = pane.jumps
+        pane.query_one("#tr-goto").value = "20"
+        await pilot.press("g", "enter")
+        await wait_for(pilot, lambda: pane.jumps > jumps and loaded(trace) and trace.cursor_row["t"] == 20)
+        for _ in range(3):             # as fast as keys come: before the next game has loaded
+            pane.action_eval_game(1)
+        await wait_for(pilot, lambda: pane.filter.episode == evals[3] and loaded(trace) and trace.count > 0)
+        await pilot.pause(0.3)
+        assert pane.filter.episode == evals[3]
+        assert trace.cursor_row["t"] == 20 and trace.row(trace.cursor - 1)["t"] < 20
+    run_app([BASE_TRAIN], body, size=(120, 34))
+
+
+def test_o_steps_the_episodes_outcome_selector_and_the_key_bar_says_so() -> None:
+    async def body(app: Any, pilot: Any) -> None:
+        table = await episodes_ready(app, pilot)
+        assert " o outcome " in (await shown(app, pilot)).splitlines()[-1]     # the key bar, at 80 columns
+        select = app.screen.query_one("#ep-outcome")
+        seen = []
+        for _ in range(3):                                          # all -> loss -> win -> all
+            await pilot.press("o")
+            await wait_for(pilot, lambda: loaded(table) and table.count == (3 if select.is_blank() else
+                                                                            1 + (select.value == "loss")))
+            seen.append(None if select.is_blank() else select.value)
+            assert {table.row(i)["outcome"] for i in range(table.count)} == (
+                {"loss", "win"} if select.is_blank() else {select.value})
+        assert seen == ["loss", "win", None]
+    run_app([ADVANCED], body)
+
+
+def test_a_run_reopened_in_the_session_opens_where_it_was_left() -> None:
+    """Episodes filtered and sorted with the cursor on a row, a trace filtered with the cursor on a change:
+    Esc to the Runs screen and Enter on the run again opens the trace there, and Episodes as left."""
+    async def body(app: Any, pilot: Any) -> None:
+        runs = app.screen.query_one(LazyTable)
+        await wait_for(pilot, lambda: loaded(runs) and runs.count == 5)
+        runs.move_to([runs.row(i)["name"] for i in range(runs.count)].index("advanced"))
+        await pilot.press("enter")
+        table = await episodes_ready(app, pilot)
+        episodes = app.screen.query_one("EpisodesPane")
+        app.screen.query_one("#ep-outcome").value = "loss"
+        await pilot.press("s", "s")                                 # losses, sorted by return
+        await wait_for(pilot, lambda: loaded(table) and table.count == 2 and episodes.sort_key == "reward")
+        await pilot.press("down")
+        await wait_for(pilot, lambda: table.cursor == 1)
+        chosen = table.cursor_row["episode"]
+        await pilot.press("enter")
+        pane = app.screen.query_one(TracePane)
+        trace = pane.table
+        await wait_for(pilot, lambda: pane.filter is not None and pane.filter.episode == chosen and loaded(trace))
+        pane.query_one("#tr-label").value = "atLoc"
+        await pilot.press("slash", "enter")
+        await wait_for(pilot, lambda: pane.filter.label == "atLoc" and loaded(trace) and app.focused is trace)
+        await pilot.press("down", "down", "down", "s")              # static facts shown, cursor kept
+        await wait_for(pilot, lambda: not pane.hide_static and loaded(trace) and trace.cursor > 0)
+        left = trace.cursor_row
+        await pilot.press("escape", "escape")                       # trace -> episodes -> Runs
+        await wait_for(pilot, lambda: type(app.screen).__name__ == "RunsScreen")
+        await pilot.press("enter")                                  # the same run again: its Episodes as left
+        table = await episodes_ready(app, pilot)
+        episodes = app.screen.query_one("EpisodesPane")
+        assert active_view(app) == "episodes"
+        await pilot.pause(0.3)                                      # no late reload puts the cursor on row 1
+        assert app.screen.query_one("#ep-outcome").value == "loss" and episodes.sort_key == "reward"
+        assert table.count == 2 and table.cursor == 1 and table.cursor_row["episode"] == chosen
+        await pilot.press("2")                                      # and its trace as left
+        pane = app.screen.query_one(TracePane)
+        trace = pane.table
+        await wait_for(pilot, lambda: active_view(app) == "trace" and pane.filter is not None and loaded(trace))
+        assert pane.filter.episode == chosen and pane.filter.label == "atLoc" and not pane.hide_static
+        assert trace.cursor_row["seq"] == left["seq"] and trace.cursor == 3
+        assert pane.query_one("#tr-label").value == "atLoc"
+    run_app([ROOT / "sample_runs"], body, size=(100, 30))
+
+
+def test_at_80x24_beside_the_board_every_trace_column_fits_and_the_cursor_row_shows() -> None:
+    """80x24 is the floor: with the board shown (b) the trace's columns narrow to fit beside it (the rule
+    column 12 wide, not two characters behind a sideways scroll), and the cursor row stays on screen."""
+    async def body(app: Any, pilot: Any) -> None:
+        pane, trace = await open_trace(app, pilot)
+        assert not pane.board.display                            # no room beside the table: hidden
+        await pilot.press("end")
+        await wait_for(pilot, lambda: loaded(trace) and trace.cursor == trace.count - 1)
+        await pilot.press("b")
+        await wait_for(pilot, lambda: pane.board.display and pane.board.board is not None)
+        await pilot.pause(0.3)
+        widths = {c.key: c.width for c in trace.columns}
+        assert widths["rule"] >= 12 and widths["node"] >= 12
+        assert trace._total_width() <= trace.scrollable_content_region.width      # no sideways scroll
+        assert trace.scrollable_content_region.height == trace.size.height        # so no scrollbar row
+        for keys in ((), ("pageup", "pageup", "up"), ("home", "pagedown", "down")):
+            for key in keys:
+                await pilot.press(key)
+            await wait_for(pilot, lambda: loaded(trace))
+            row = trace.cursor_row
+            lines = (await shown(app, pilot)).splitlines()
+            at = [ln for ln in lines if ln.lstrip().startswith(f"{row['t']} ") and row["rule"][:11] in ln
+                  and row["label"][:6] in ln]
+            assert at, (row, "\n".join(lines))                   # the cursor's row, its rule readable
+    run_app([ADVANCED], body, size=(80, 24))
