@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, non_negative_int, positive_int
+from tracelab.engine.errors import is_interrupt
 from tracelab.errors import UserError, store_errors
 
 DEFAULT_SCENARIO = "base"  # the one train defaults to (TrainConfig.scenario)
@@ -113,16 +114,17 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"cannot create the run directory {run_dir}: {e.strerror or e}") from e
     try:
         stats = play(scenario, args, sink=StoreSink(writer))
-    except (KeyboardInterrupt, SystemExit) as e:  # Ctrl-C, or SIGTERM (the writer's handler exits)
+    except BaseException as e:
+        if not is_interrupt(e):  # the env did not close it: record how the run ended
+            writer.close(status="failed")
+            raise
+        # Ctrl-C, or SIGTERM (the writer's handler exits)
         writer.close(status="interrupted")  # flushes what was played
         kept = f"{run_dir} keeps {_ended_episodes(run_dir)} finished episode(s) and the trace so far"
         if isinstance(e, SystemExit):
             print(f"tracelab: terminated: {kept}", file=sys.stderr)
             raise
         raise KeyboardInterrupt(kept) from None
-    except BaseException:  # the env did not close it: record how the run ended
-        writer.close(status="failed")
-        raise
     _summary(stats)
     _what_to_open(run_dir)
     return 0

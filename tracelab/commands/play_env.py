@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from tracelab.engine.errors import is_interrupt
 from tracelab.errors import UserError, store_errors
 
 # play's flags that belong to the grid game (GridWar) only
@@ -55,7 +56,12 @@ def _record(source: Any, spec: Any, args: argparse.Namespace) -> int:
         raise UserError(f"cannot create the run directory {run_dir}: {e.strerror or e}") from e
     try:
         stats = _play(source, spec, args, writer)
-    except (KeyboardInterrupt, SystemExit) as e:  # Ctrl-C, or SIGTERM (the writer's handler exits)
+    except BaseException as e:
+        if not is_interrupt(e):
+            if not writer.closed:
+                writer.close(status="failed")
+            raise
+        # Ctrl-C, or SIGTERM (the writer's handler exits)
         if not writer.closed:
             writer.close(status="interrupted")
         kept = f"{run_dir} keeps {_ended_episodes(run_dir)} finished episode(s) and the trace so far"
@@ -63,10 +69,6 @@ def _record(source: Any, spec: Any, args: argparse.Namespace) -> int:
             print(f"tracelab: terminated: {kept}", file=sys.stderr)
             raise
         raise KeyboardInterrupt(kept) from None
-    except BaseException:
-        if not writer.closed:
-            writer.close(status="failed")
-        raise
     _summary(source, stats)
     _what_to_open_env(run_dir, spec)
     return 0
@@ -101,7 +103,7 @@ def _play(source: Any, spec: Any, args: argparse.Namespace, writer: Any) -> dict
             stats = play_episodes(env, args.episodes, args.seed, random_policy(env, args.seed),
                                   on_episode=lambda e: bar.advance(1))
     except BaseException as e:  # the run records how it ended, with what was played until then
-        env.unwrapped.close(status="interrupted" if isinstance(e, (KeyboardInterrupt, SystemExit)) else "failed")
+        env.unwrapped.close(status="interrupted" if is_interrupt(e) else "failed")
         raise
     env.close()  # a traced env closes its writer: the last rows and episode ends are written
     return stats

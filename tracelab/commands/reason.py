@@ -108,11 +108,8 @@ def _record(args: argparse.Namespace, inputs: Any, plans: list[Any]) -> int:
     recorder = ReasoningRecorder(writer, episodes=len(plans))
     try:
         docs = [_reason(args, inputs, plan, recorder, several=len(plans) > 1) for plan in plans]
-    except (KeyboardInterrupt, SystemExit):
-        writer.close(status="interrupted")  # flushes what was reasoned
-        raise
-    except BaseException:
-        writer.close(status="failed")
+    except BaseException as e:
+        writer.close(status="interrupted" if is_interrupt(e) else "failed")  # flushes what was reasoned
         raise
     writer.close()
     if args.json:
