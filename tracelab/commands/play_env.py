@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from tracelab.commands._interrupt import CtrlCBetweenSteps
 from tracelab.engine.errors import is_interrupt
 from tracelab.errors import UserError, store_errors
 
@@ -98,10 +99,15 @@ def _play(source: Any, spec: Any, args: argparse.Namespace, writer: Any) -> dict
     with compiling_engine(busy=f"building {source.name}'s rules…"):
         env = make_declared_env(source, spec, kernel=args.kernel,
                                 **({} if writer is None else {"trace_writer": writer}))
+    policy = random_policy(env, args.seed)
     try:
-        with progress(f"playing {source.name}", total=args.episodes, unit="episodes") as bar:
-            stats = play_episodes(env, args.episodes, args.seed, random_policy(env, args.seed),
-                                  on_episode=lambda e: bar.advance(1))
+        with CtrlCBetweenSteps() as ctrl_c, \
+                progress(f"playing {source.name}", total=args.episodes, unit="episodes") as bar:
+            def act(obs: Any, info: dict[str, Any]) -> int:
+                ctrl_c.check()  # a Ctrl-C stops the game between two steps (see CtrlCBetweenSteps)
+                return policy(obs, info)
+
+            stats = play_episodes(env, args.episodes, args.seed, act, on_episode=lambda e: bar.advance(1))
     except BaseException as e:  # the run records how it ended, with what was played until then
         env.unwrapped.close(status="interrupted" if is_interrupt(e) else "failed")
         raise
