@@ -14,7 +14,7 @@ _EXPORTS = {
     "register_annotation": "annotations",
     "Engine": "core", "STAT_NAMES": "core", "TRACE_COLUMNS": "core",
     "FixpointError": "errors", "InconsistencyError": "errors", "ProgramCheckError": "errors",
-    "ProgramError": "errors", "RuleSyntaxError": "errors",
+    "ProgramError": "errors", "RuleSyntaxError": "errors", "is_interrupt": "errors",
     "load_fact_table": "facttable",
     "Graph": "graph", "load_graphml": "graph",
     "GroundingTable": "grounding",
@@ -41,7 +41,8 @@ def __dir__() -> list[str]:
 if TYPE_CHECKING:  # for type checkers and editors: the same names, imported eagerly
     from .annotations import register_annotation
     from .core import STAT_NAMES, TRACE_COLUMNS, Engine
-    from .errors import FixpointError, InconsistencyError, ProgramCheckError, ProgramError, RuleSyntaxError
+    from .errors import (FixpointError, InconsistencyError, ProgramCheckError, ProgramError, RuleSyntaxError,
+                         is_interrupt)
     from .facttable import load_fact_table
     from .graph import Graph, load_graphml
     from .grounding import GroundingTable

@@ -62,3 +62,17 @@ class FixpointError(RuntimeError):
     def __init__(self, message: str) -> None:
         super().__init__(message)
         self.message = message
+
+
+def is_interrupt(error: BaseException) -> bool:
+    """Ctrl-C or SIGTERM ended the work that raised `error`. A KeyboardInterrupt that lands while numba's
+    dispatcher boxes a compiled function's result comes out as SystemError("... returned a result with an
+    exception set") whose cause is the KeyboardInterrupt, so the chain of causes is searched too."""
+    seen: set[int] = set()
+    current: BaseException | None = error
+    while current is not None and id(current) not in seen:
+        if isinstance(current, (KeyboardInterrupt, SystemExit)):
+            return True
+        seen.add(id(current))
+        current = current.__cause__ or current.__context__
+    return False

@@ -177,8 +177,10 @@ def test_a_second_play_into_the_same_run_is_refused_and_ctrl_c_says_what_was_kep
             time.sleep(0.2)
         first.send_signal(signal.SIGINT)
         code = first.wait(timeout=120)
-        assert code == 130, first.stderr.read().decode()
-        last = first.stderr.read().decode().splitlines()[-1]
+        err = first.stderr.read().decode()
+        assert code == 130, err
+        assert "stopping after this step" in err, err  # the first Ctrl-C stops between two steps
+        last = err.splitlines()[-1]
         assert re.fullmatch(rf"tracelab: interrupted: {re.escape(str(run))} keeps [1-9]\d* finished episode\(s\) "
                             r"and the trace so far", last), last
         assert '"status": "interrupted"' in (run / "meta.json").read_text()

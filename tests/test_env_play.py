@@ -174,7 +174,9 @@ def test_ctrl_c_keeps_the_games_played_and_says_so(tmp_path: Path) -> None:
         proc.kill()
     assert proc.returncode == 130, err
     kept = int(err.split(" keeps ")[1].split()[0])
-    assert err.startswith(f"tracelab: interrupted: {run} keeps ") and kept >= 5
+    lines = err.strip().splitlines()
+    assert lines[0] == "stopping after this step (Ctrl-C again to stop at once)", err  # between two steps
+    assert lines[-1].startswith(f"tracelab: interrupted: {run} keeps ") and kept >= 5, err
     assert json.loads((run / "meta.json").read_text())["status"] == "interrupted"
     con = open_run(run)
     outcomes = dict(con.execute("SELECT outcome, count(*) FROM episodes GROUP BY 1").fetchall())

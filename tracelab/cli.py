@@ -16,6 +16,7 @@ import sys
 from tracelab import __version__
 from tracelab.commands._args import grounding_limit_of
 from tracelab.commands._notices import showing_library_notices
+from tracelab.engine.errors import is_interrupt
 from tracelab.errors import user_error_message
 
 # One line per subcommand module; each module adds its own parsers and sets `func` on them.
@@ -84,6 +85,9 @@ def main(argv: list[str] | None = None) -> int:
         _silence_stdout()
         return EXIT_BROKEN_PIPE
     except Exception as e:
+        if is_interrupt(e):  # Ctrl-C inside a compiled call, which numba wraps in SystemError
+            print("tracelab: interrupted", file=sys.stderr)
+            return 130
         message = user_error_message(e)
         if message is None:
             raise

@@ -22,6 +22,8 @@ from typing import Any
 
 import numpy as np
 
+from tracelab.engine.errors import is_interrupt
+
 # the program text a run keeps of each rule and fact file (a bigger file is kept by path and hash only)
 SOURCE_TEXT_CAP = 1 << 20
 
@@ -172,7 +174,7 @@ class EpisodeRun:
         """A step raised: record the rows up to it and end the episode `failed` (or `interrupted`)."""
         if self.recorder is None:
             return
-        outcome = "interrupted" if isinstance(error, (KeyboardInterrupt, SystemExit)) else "failed"
+        outcome = "interrupted" if is_interrupt(error) else "failed"
         try:
             self.recorder.end_episode(self.plan.episode, self.engine, steps=steps, outcome=outcome,
                                       info={"error": str(error) or type(error).__name__, "kernel": self.engine.kernel})

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import signal
+import sys
 import threading
 from collections.abc import Callable
 from types import FrameType, TracebackType
@@ -70,3 +71,37 @@ def ctrl_c_stops_queries(what: str = "the query was stopped") -> CtrlCStops:
     store's connections is running (tracelab.store.sandbox.interrupt_queries), exit 130, one line."""
     from tracelab.store.sandbox import interrupt_queries  # DuckDB: imported only by the command that runs
     return CtrlCStops(interrupt_queries, what)
+
+
+class CtrlCBetweenSteps:
+    """`with CtrlCBetweenSteps() as ctrl_c:` around a loop that calls ctrl_c.check() between its steps:
+    the first Ctrl-C only asks, and check() raises KeyboardInterrupt at the next step's end. A
+    KeyboardInterrupt raised wherever Python's handler happens to run could land inside the trace
+    writer's locked hand-over to its flusher thread or inside a compiled call (which numba turns into
+    SystemError), and `play` then hung or printed a traceback; between steps nothing is half-done. A
+    second Ctrl-C raises at once (for a step that never ends)."""
+
+    def __init__(self, note: str = "stopping after this step (Ctrl-C again to stop at once)") -> None:
+        self.note = note  # said on the first Ctrl-C: a compile that is running ends first
+        self.requested = False
+        self.active = threading.current_thread() is threading.main_thread()
+
+    def __enter__(self) -> CtrlCBetweenSteps:
+        if self.active:
+            self.previous_handler = signal.signal(signal.SIGINT, self._on_sigint)
+        return self
+
+    def _on_sigint(self, signum: int, frame: FrameType | None) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+        print(f"\n{self.note}", file=sys.stderr)
+
+    def check(self) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+
+    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        if self.active:
+            signal.signal(signal.SIGINT, self.previous_handler)

@@ -15,6 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, non_negative_int, positive_int
+from tracelab.commands._interrupt import CtrlCBetweenSteps
+from tracelab.engine.errors import is_interrupt
 from tracelab.errors import UserError, store_errors
 
 DEFAULT_SCENARIO = "base"  # the one train defaults to (TrainConfig.scenario)
@@ -99,16 +101,17 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"cannot create the run directory {run_dir}: {e.strerror or e}") from e
     try:
         stats = play(scenario, args, sink=StoreSink(writer))
-    except (KeyboardInterrupt, SystemExit) as e:  # Ctrl-C, or SIGTERM (the writer's handler exits)
+    except BaseException as e:
+        if not is_interrupt(e):  # the env did not close it: record how the run ended
+            writer.close(status="failed")
+            raise
+        # Ctrl-C, or SIGTERM (the writer's handler exits)
         writer.close(status="interrupted")  # flushes what was played
         kept = f"{run_dir} keeps {_ended_episodes(run_dir)} finished episode(s) and the trace so far"
         if isinstance(e, SystemExit):
             print(f"tracelab: terminated: {kept}", file=sys.stderr)
             raise
         raise KeyboardInterrupt(kept) from None
-    except BaseException:  # the env did not close it: record how the run ended
-        writer.close(status="failed")
-        raise
     _summary(stats)
     _what_to_open(run_dir)
     return 0
@@ -128,24 +131,26 @@ def play(scenario, args: argparse.Namespace, sink) -> dict:
     kernel = getattr(args, "kernel", "auto")
     n_worlds = min(args.worlds, args.episodes)
     lanes = kernel == "lanes" or (kernel == "auto" and n_worlds >= LANES_MIN_WORLDS)
-    with compiling_engine(simulator=True, lanes=lanes,
-                          busy=f"building the game's rules ({agents})…") as first:
-        games = Games(scenario, args.episodes, worlds=args.worlds, policy=args.policy,
-                      trained=getattr(args, "trained", None), seed=args.seed, sink=sink, kernel=kernel,
-                      opponent_p=getattr(args, "opponent_p", None))
-        first_steps, ended = games.step()
-    steps = 0
-    t0 = time.perf_counter()
-    with progress(f"playing {scenario.name}", total=args.episodes, unit="episodes") as bar:
-        bar.advance(ended)
-        while not games.done:
-            played, ended = games.step()
-            steps += played
-            if ended:
-                bar.advance(ended)
-                elapsed = time.perf_counter() - t0
-                bar.set_fields(wins=games.wins,
-                               **{"steps/s": steps / max(elapsed, 1e-9)})
+    with CtrlCBetweenSteps() as ctrl_c:
+        with compiling_engine(simulator=True, lanes=lanes,
+                              busy=f"building the game's rules ({agents})…") as first:
+            games = Games(scenario, args.episodes, worlds=args.worlds, policy=args.policy,
+                          trained=getattr(args, "trained", None), seed=args.seed, sink=sink, kernel=kernel,
+                          opponent_p=getattr(args, "opponent_p", None))
+            first_steps, ended = games.step()
+        steps = 0
+        t0 = time.perf_counter()
+        with progress(f"playing {scenario.name}", total=args.episodes, unit="episodes") as bar:
+            bar.advance(ended)
+            while not games.done:
+                ctrl_c.check()
+                played, ended = games.step()
+                steps += played
+                if ended:
+                    bar.advance(ended)
+                    elapsed = time.perf_counter() - t0
+                    bar.set_fields(wins=games.wins,
+                                   **{"steps/s": steps / max(elapsed, 1e-9)})
     elapsed = time.perf_counter() - t0
     games.close()
     say_running_compiles()

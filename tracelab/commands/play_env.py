@@ -13,6 +13,8 @@ from typing import Any
 
 import numpy as np
 
+from tracelab.commands._interrupt import CtrlCBetweenSteps
+from tracelab.engine.errors import is_interrupt
 from tracelab.errors import UserError, store_errors
 
 # play's flags that belong to the grid game (GridWar) only
@@ -56,7 +58,12 @@ def _record(source: Any, spec: Any, args: argparse.Namespace) -> int:
         raise UserError(f"cannot create the run directory {run_dir}: {e.strerror or e}") from e
     try:
         stats = _play(source, spec, args, writer)
-    except (KeyboardInterrupt, SystemExit) as e:  # Ctrl-C, or SIGTERM (the writer's handler exits)
+    except BaseException as e:
+        if not is_interrupt(e):
+            if not writer.closed:
+                writer.close(status="failed")
+            raise
+        # Ctrl-C, or SIGTERM (the writer's handler exits)
         if not writer.closed:
             writer.close(status="interrupted")
         kept = f"{run_dir} keeps {_ended_episodes(run_dir)} finished episode(s) and the trace so far"
@@ -64,10 +71,6 @@ def _record(source: Any, spec: Any, args: argparse.Namespace) -> int:
             print(f"tracelab: terminated: {kept}", file=sys.stderr)
             raise
         raise KeyboardInterrupt(kept) from None
-    except BaseException:
-        if not writer.closed:
-            writer.close(status="failed")
-        raise
     _summary(source, stats)
     _what_to_open_env(run_dir, spec)
     return 0
@@ -97,12 +100,17 @@ def _play(source: Any, spec: Any, args: argparse.Namespace, writer: Any) -> dict
     with compiling_engine(busy=f"building {source.name}'s rules…"):
         env = make_declared_env(source, spec, kernel=args.kernel,
                                 **({} if writer is None else {"trace_writer": writer}))
+    policy = random_policy(env, args.seed)
     try:
-        with progress(f"playing {source.name}", total=args.episodes, unit="episodes") as bar:
-            stats = play_episodes(env, args.episodes, args.seed, random_policy(env, args.seed),
-                                  on_episode=lambda e: bar.advance(1))
+        with CtrlCBetweenSteps() as ctrl_c, \
+                progress(f"playing {source.name}", total=args.episodes, unit="episodes") as bar:
+            def act(obs: Any, info: dict[str, Any]) -> int:
+                ctrl_c.check()  # a Ctrl-C stops the game between two steps (see CtrlCBetweenSteps)
+                return policy(obs, info)
+
+            stats = play_episodes(env, args.episodes, args.seed, act, on_episode=lambda e: bar.advance(1))
     except BaseException as e:  # the run records how it ended, with what was played until then
-        env.unwrapped.close(status="interrupted" if isinstance(e, (KeyboardInterrupt, SystemExit)) else "failed")
+        env.unwrapped.close(status="interrupted" if is_interrupt(e) else "failed")
         raise
     env.close()  # a traced env closes its writer: the last rows and episode ends are written
     return stats

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, positive_int
+from tracelab.engine.errors import is_interrupt
 from tracelab.errors import UserError, store_errors
 
 
@@ -108,11 +109,8 @@ def _record(args: argparse.Namespace, inputs: Any, plans: list[Any]) -> int:
     recorder = ReasoningRecorder(writer, episodes=len(plans))
     try:
         docs = [_reason(args, inputs, plan, recorder, several=len(plans) > 1) for plan in plans]
-    except (KeyboardInterrupt, SystemExit):
-        writer.close(status="interrupted")  # flushes what was reasoned
-        raise
-    except BaseException:
-        writer.close(status="failed")
+    except BaseException as e:
+        writer.close(status="interrupted" if is_interrupt(e) else "failed")  # flushes what was reasoned
         raise
     writer.close()
     if args.json:

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
+from tracelab.engine.errors import is_interrupt
 from tracelab.store import convert, layout
 from tracelab.store.graph_tables import edges_table
 from tracelab.store.meta import (RunMeta, initial_meta, now_iso, open_writer_lock, read_meta, reopened_meta,
@@ -198,7 +199,7 @@ class TraceWriter:
                  tb: TracebackType | None) -> None:
         if exc_type is None:
             status = "finished"
-        elif issubclass(exc_type, (KeyboardInterrupt, SystemExit)):
+        elif exc is not None and is_interrupt(exc):
             status = "interrupted"
         else:
             status = "failed"
