@@ -127,6 +127,7 @@ def test_a_run_reopened_in_the_session_opens_where_it_was_left() -> None:
         table = await episodes_ready(app, pilot)
         episodes = app.screen.query_one("EpisodesPane")
         assert active_view(app) == "episodes"
+        await wait_for(pilot, lambda: loaded(table) and table.count == 2)  # the kept filter's reload, late when loaded
         await pilot.pause(0.3)                                      # no late reload puts the cursor on row 1
         assert app.screen.query_one("#ep-outcome").value == "loss" and episodes.sort_key == "reward"
         assert table.count == 2 and table.cursor == 1 and table.cursor_row["episode"] == chosen
