@@ -209,3 +209,17 @@ def test_pyarrow_alone_reads_the_parts_as_tracelab_sql_does(runs: dict[str, Path
                        f"SELECT run, count(*) AS n FROM raw.{table} GROUP BY run")
         assert by_run == {r["run"]: int(r["n"]) for r in rows}, table
         assert data.schema.field(0).name == next(iter(documented_tables()[table]))[0]
+
+
+def test_a_strangers_run_in_the_list_is_refused_before_anything_of_it_runs(
+        runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """Each run of the list gets the checks one run gets: a sealed file whose raw.run.command is computed
+    on read (it would show 'payload ran'), and a live run whose parts/ holds a link out of it."""
+    from test_strangers_sql import computed_command_copy
+    tampered = computed_command_copy(runs["sealed"], tmp_path / "generated")
+    line = one_line_error(capsys, str(runs["b"]), str(tampered), "SELECT run, command FROM run")
+    assert f"{tampered}/run.duckdb" in line and "generated column" in line and "payload ran" not in line
+    linked = Path(shutil.copytree(runs["b"], tmp_path / "linked"))
+    (linked / "parts" / "changes" / "outside.parquet").symlink_to("/etc/passwd")
+    line = one_line_error(capsys, str(runs["a"]), str(linked), "SELECT count(*) FROM changes")
+    assert "outside.parquet" in line and "symbolic link" in line
