@@ -37,6 +37,7 @@ def test_the_console_reads_every_run_given() -> None:
     async def body(app: Any, pilot: Any) -> None:
         sql = await open_console(app, pilot)
         assert "overlaid in Training and SQL" in str(app.screen.query_one("#title").render())
+        assert sql.editor.text.startswith("SELECT run, rule")   # the first query shown is per run
         await run_query(pilot, sql, "SELECT run, count(*) AS n FROM episodes GROUP BY run ORDER BY run")
         await wait_for(pilot, lambda: sql.result is not None)
         assert sql.result.to_pylist() == [{"run": "advanced", "n": 3}, {"run": "base", "n": 3}]

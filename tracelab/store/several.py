@@ -68,9 +68,8 @@ def expand_runs(given: Sequence[str | Path]) -> tuple[list[Path], bool]:
 
 def run_names(paths: Sequence[Path]) -> list[str]:
     """Each run's name in the `run` column: its folder's name (a lone .duckdb file's name without the
-    suffix; a run.duckdb its folder's name), and for runs that share that name, as many of the folders above it as tell them apart
-    (`a/seed-1`, `b/seed-1`)."""
-    # a sealed run's own run.duckdb, named by itself, is named after its folder like the run
+    suffix; a run's own run.duckdb, named by itself, its folder's name), and for runs that share that
+    name, as many of the folders above it as tell them apart (`a/seed-1`, `b/seed-1`)."""
     folders = [p.parent if p.is_file() and p.name == layout.SEALED else p for p in paths]
     parts = [list(p.absolute().parts[:-1]) + [p.stem if p.is_file() else p.name] for p in folders]
     depth = [1] * len(paths)
@@ -91,7 +90,7 @@ class SeveralRunsConnection(RefreshingConnection):
     def __init__(self, runs: Sequence[Path], names: Sequence[str]) -> None:
         self.runs = list(runs)
         self.names = list(names)
-        self._using: int | None = None    # the run whose views unqualified names read (in_run)
+        self._using: int | None = None    # the run whose own views unqualified names read (use)
         self._con, self._live = _build(self.runs)
 
     def refresh(self) -> None:

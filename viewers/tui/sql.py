@@ -168,8 +168,10 @@ class SqlPane(Vertical):
         self._executing: int | None = None        # the query of ours on the connection now, if any
 
     def compose(self) -> ComposeResult:
-        yield TextArea("SELECT rule, count(*) AS n FROM firings GROUP BY rule ORDER BY n DESC, rule",
-                       language=None, id="sql-editor", soft_wrap=True)
+        first = ("SELECT run, rule, count(*) AS n FROM firings GROUP BY run, rule ORDER BY run, n DESC, rule"
+                 if isinstance(self.source, SeveralRunsSource) else
+                 "SELECT rule, count(*) AS n FROM firings GROUP BY rule ORDER BY n DESC, rule")
+        yield TextArea(first, language=None, id="sql-editor", soft_wrap=True)
         yield Static("", id="sql-error")
         table = LazyTable(id="sql-results")
         table.placeholder = "  no query run yet: Ctrl+R runs the statement above"
