@@ -22,9 +22,12 @@ from tracelab.errors import UserError, store_errors
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("sql", help="read-only SQL on a run: views changes, firings, episodes, steps, "
-                                   "metrics, rules, facts, atoms, groundings, run")
-    p.add_argument("words", nargs="*", metavar="RUN... QUERY",
+    p = sub.add_parser("sql", help="read-only SQL on a run, or on several (a `run` column): views changes, "
+                                   "firings, episodes, steps, metrics, rules, facts, atoms, groundings, run",
+                       usage="tracelab sql [options] RUN [RUN ...] QUERY\n"
+                             "       tracelab sql [options] RUN [RUN ...] --query NAME [-p NAME=VALUE ...]\n"
+                             "       tracelab sql --list")
+    p.add_argument("words", nargs="*", metavar="RUN ... QUERY",
                    help="runs (directories, .duckdb files, names under runs/, or folders of runs), then one "
                         "SELECT statement; on several runs every view has a first column `run`")
     p.add_argument("--query", "-q", dest="saved", metavar="NAME", help="run a saved query instead")
