@@ -130,6 +130,17 @@ def test_errors_name_the_offending_run(runs: dict[str, Path], tmp_path: Path, ca
     assert f"{newer}/parts/manifest.json" in line and "tracelab-parts/2" in line
 
 
+def test_too_many_runs_are_refused_before_any_is_opened(runs: dict[str, Path], tmp_path: Path,
+                                                         capsys: pytest.CaptureFixture) -> None:
+    """A folder of thousands of runs would take minutes and gigabytes: refused at once, in one line."""
+    from tracelab.store.several import MAX_RUNS
+    for i in range(MAX_RUNS + 1):
+        (tmp_path / f"r{i:04d}").mkdir()
+        shutil.copy(runs["a"] / "meta.json", tmp_path / f"r{i:04d}" / "meta.json")
+    line = one_line_error(capsys, str(tmp_path), "SELECT 1")
+    assert f"{MAX_RUNS + 1} runs given" in line and f"at most {MAX_RUNS}" in line and "Parquet parts" in line
+
+
 def test_the_sandbox_holds_for_every_run(runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture,
                                          monkeypatch: pytest.MonkeyPatch) -> None:
     """The attacks one run refuses, refused on a live and a sealed run read together; another run's parts

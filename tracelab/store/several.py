@@ -45,6 +45,10 @@ from tracelab.store.sandbox import lock_configuration, lock_down, refusal, sandb
 from tracelab.store.schema import TABLES, VIEW_NAMES, VIEWS_SQL
 
 RUN_COLUMN = "run"
+# Runs one connection reads at most: each adds its views to the connection (about 0.25 s to open and 3 MB,
+# docs/benchmarks.md), so a folder of many thousands would take the command minutes and gigabytes.
+# More runs than this: an engine over their Parquet parts (docs/store.md).
+MAX_RUNS = 256
 DEFAULT_CATALOG = "memory"   # DuckDB's name for an in-memory connection's own database
 
 
@@ -114,6 +118,9 @@ def _catalog(index: int) -> str:
 
 
 def _build(runs: Sequence[Path]) -> tuple[duckdb.DuckDBPyConnection, list[LiveParts]]:
+    if len(runs) > MAX_RUNS:
+        raise ValueError(f"{len(runs)} runs given ({runs[0]} ... {runs[-1]}): tracelab reads at most {MAX_RUNS} "
+                         "at once; read more through their Parquet parts (docs/store.md, \"The Parquet parts\")")
     con = sandbox_connection()
     try:
         sealed = [sealed_file_of_run(p) for p in runs]
