@@ -41,18 +41,23 @@ def run_table_sql(columns: dict[str, str], changed: dict[str, str]) -> str:
         f'"{c}" {changed.get(c, t)}' for c, t in columns.items()) + ")"
 
 
+def computed_command_copy(sealed: Path, dest: Path) -> Path:
+    """A copy of the sealed run whose raw.run.command is computed on read: it succeeds where the file was
+    made (external access on) and fails with 'payload ran' inside tracelab's sandbox."""
+    payload = ("VARCHAR GENERATED ALWAYS AS (CASE WHEN current_setting('enable_external_access') "
+               "THEN 'made' ELSE error('payload ran') END) VIRTUAL")
+    return tampered_copy(sealed, dest,
+                         "CREATE TABLE saved AS SELECT * EXCLUDE (command) FROM raw.run", "DROP TABLE raw.run",
+                         run_table_sql(expected_columns()["run"], {"command": payload}),
+                         "INSERT INTO raw.run BY NAME SELECT * FROM saved", "DROP TABLE saved")
+
+
 # ---- section 3: the sealed file's catalog ---------------------------------------------------------------
 
 def test_a_generated_column_is_refused_before_its_expression_runs(sealed: Path, tmp_path: Path) -> None:
     """raw.run.command computed on read: it succeeds where the file was made (external access on) and
     fails with 'payload ran' inside tracelab's sandbox, so any read of it would show that text."""
-    payload = ("VARCHAR GENERATED ALWAYS AS (CASE WHEN current_setting('enable_external_access') "
-               "THEN 'made' ELSE error('payload ran') END) VIRTUAL")
-    columns = expected_columns()["run"]
-    run = tampered_copy(sealed, tmp_path / "generated",
-                        "CREATE TABLE saved AS SELECT * EXCLUDE (command) FROM raw.run", "DROP TABLE raw.run",
-                        run_table_sql(columns, {"command": payload}),
-                        "INSERT INTO raw.run BY NAME SELECT * FROM saved", "DROP TABLE saved")
+    run = computed_command_copy(sealed, tmp_path / "generated")
     for command in (["show", str(run)], ["sql", str(run), "SELECT command FROM run"]):
         done = subprocess.run([*TRACELAB, *command], capture_output=True, text=True, timeout=120)
         lines = done.stderr.strip().splitlines()

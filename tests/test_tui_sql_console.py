@@ -22,7 +22,7 @@ from tracelab.viewers.tui.lazy_table import LazyTable  # noqa: E402
 from tracelab.viewers.tui.source import RunSource  # noqa: E402
 from tracelab.viewers.tui.sql import SqlPane  # noqa: E402
 from tracelab.viewers.tui.sql_history import HISTORY_CAP, load_history  # noqa: E402
-from tui_helpers import episodes_ready, loaded, run_app, shown, shown_once, wait_for  # noqa: E402
+from tui_helpers import episodes_ready, loaded, run_app, run_query, shown, shown_once, wait_for  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 ADVANCED = ROOT / "sample_runs" / "advanced"
@@ -42,12 +42,6 @@ async def open_console(app: Any, pilot: Any) -> SqlPane:
     await pilot.press("5")
     await wait_for(pilot, lambda: app.screen.panes["sql"].is_attached)
     return app.screen.panes["sql"]
-
-
-async def run_query(pilot: Any, sql: SqlPane, statement: str) -> None:
-    sql.editor.text = statement
-    sql.editor.focus()
-    await pilot.press("ctrl+r")
 
 
 def status(sql: SqlPane) -> str:

@@ -77,6 +77,13 @@ def run_app(paths: list[Path], body: Callable[[Any, Any], Any], size: tuple[int,
     asyncio.run(go())
 
 
+async def run_query(pilot: Any, sql: Any, statement: str) -> None:
+    """In the SQL console `sql` (a SqlPane): STATEMENT in the editor, then Ctrl+R."""
+    sql.editor.text = statement
+    sql.editor.focus()
+    await pilot.press("ctrl+r")
+
+
 async def pick_saved_query(app: Any, pilot: Any, name: str, value: str) -> None:
     """In the SQL console: F2, the saved query NAME, VALUE for its one parameter, Enter (it runs)."""
     await pilot.press("f2")

@@ -1,4 +1,6 @@
-"""`tracelab sql`: a read-only SQL query on a run (live or sealed), or one of the saved queries.
+"""`tracelab sql`: a read-only SQL query on a run (live or sealed), or one of the saved queries; on several
+runs (or a folder of runs) every view has a first column `run` and a saved query runs on each run
+(tracelab.store.several; docs/store.md, "Several runs").
 
 Table output shows at most DEFAULT_TABLE_ROWS rows unless --limit says otherwise (a note on stderr says
 how to get everything); CSV, JSON and Parquet stream the whole result batch by batch."""
@@ -6,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.commands._output import (
@@ -19,10 +22,14 @@ from tracelab.errors import UserError, store_errors
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("sql", help="read-only SQL on a run: views changes, firings, episodes, steps, "
-                                   "metrics, rules, facts, atoms, groundings, run")
-    p.add_argument("run", nargs="?", help="run directory, .duckdb file, or run name under runs/")
-    p.add_argument("query", nargs="?", help="one SELECT statement")
+    p = sub.add_parser("sql", help="read-only SQL on a run, or on several (a `run` column): views changes, "
+                                   "firings, episodes, steps, metrics, rules, facts, atoms, groundings, run",
+                       usage="tracelab sql [options] RUN [RUN ...] QUERY\n"
+                             "       tracelab sql [options] RUN [RUN ...] --query NAME [-p NAME=VALUE ...]\n"
+                             "       tracelab sql --list")
+    p.add_argument("words", nargs="*", metavar="RUN ... QUERY",
+                   help="runs (directories, .duckdb files, names under runs/, or folders of runs), then one "
+                        "SELECT statement; on several runs every view has a first column `run`")
     p.add_argument("--query", "-q", dest="saved", metavar="NAME", help="run a saved query instead")
     p.add_argument("--param", "-p", action="append", default=[], metavar="NAME=VALUE",
                    help="a saved query's parameter (repeatable)")
@@ -62,45 +69,97 @@ def print_saved_queries() -> None:
             print(f"    {p.name} ({p.type}, default {p.default!r}){': ' + p.help if p.help else ''}")
 
 
-def _statement(args: argparse.Namespace) -> tuple[str, dict | None, str | None]:
+def _runs_and_query(args: argparse.Namespace) -> tuple[list[str], str | None]:
+    """The runs named, and the SQL (the last word) unless a saved query (--query NAME) was asked for."""
+    words = list(args.words)
+    if args.saved is not None:
+        if words and any(c.isspace() for c in words[-1]) and not Path(words[-1]).exists():
+            raise UserError("give either a SQL query or --query NAME (see --list)")
+        return words, None
+    if len(words) < 2:
+        raise UserError("give a run and a SQL query, or --query NAME (see --list)")
+    return words[:-1], words[-1]
+
+
+def _statement(args: argparse.Namespace, query: str | None) -> tuple[str, dict | None, str | None]:
     """The SQL, its parameters, and why it needs a game run (a saved query about games), if it does."""
     from tracelab.store.queries import get_query
-    if args.run is None:
-        raise UserError("give a run and a SQL query, or --query NAME (see --list)")
-    if (args.query is None) == (args.saved is None):
-        raise UserError("give either a SQL query or --query NAME (see --list)")
     if args.saved is not None:
         saved = get_query(args.saved)
         return saved.sql, saved.bind(_params(args.param)), saved.needs_board
     if args.param:
         raise UserError("--param only applies to saved queries (--query NAME)")
-    return utf8_text(args.query, "the SQL query"), None, None
+    return utf8_text(query, "the SQL query"), None, None
 
 
 def run(args: argparse.Namespace) -> int:
-    from tracelab.store.kind import run_board
-    from tracelab.store.reader import arrow_stream, fetch_arrow, open_run, query_readonly, retrying
     if args.list:
         print_saved_queries()
         return 0
     with store_errors(), ctrl_c_stops_queries():
-        sql, params, needs_board = _statement(args)
-        con = open_run(args.run)
-        if needs_board is not None and run_board(con) is None:
-            from tracelab.store.queries import list_queries
-            any_run = ", ".join(q.name for q in list_queries() if not q.needs_board)
-            raise UserError(f"saved query {args.saved} reads games ({needs_board}), and {args.run} has no "
-                            f"board (a reasoning run); these read any run: {any_run}")
-        if args.format == "table":
-            limit = DEFAULT_TABLE_ROWS + 1 if args.limit is None else args.limit
-            table = retrying(lambda: fetch_arrow(query_readonly(con, sql, params), limit, args.offset))
-            cut = args.limit is None and table.num_rows > DEFAULT_TABLE_ROWS
-            write_table(table.slice(0, DEFAULT_TABLE_ROWS) if cut else table, "table", args.output)
-            if cut:
-                print(f"note: showing the first {DEFAULT_TABLE_ROWS} rows; --limit N shows more, and "
-                      "--format csv|json|parquet [-o FILE] writes every row", file=sys.stderr)
+        runs, query = _runs_and_query(args)
+        if not runs:
+            raise UserError("give a run and a SQL query, or --query NAME (see --list)")
+        sql, params, needs_board = _statement(args, query)
+        from tracelab.store.several import expand_runs
+        paths, folder = expand_runs(runs)
+        if len(paths) == 1 and not folder:
+            _query_one_run(args, runs[0], sql, params, needs_board)
         else:
-            schema, batches = retrying(lambda: arrow_stream(query_readonly(con, sql, params),
-                                                            args.limit, args.offset))
-            write_stream(schema, batches, args.format, args.output)
+            _query_several_runs(args, paths, sql, params, needs_board)
     return 0
+
+
+def _query_one_run(args: argparse.Namespace, run: str, sql: str, params: dict | None,
+                   needs_board: str | None) -> None:
+    from tracelab.store.kind import run_board
+    from tracelab.store.reader import arrow_stream, fetch_arrow, open_run, query_readonly, retrying
+    con = open_run(run)
+    if needs_board is not None and run_board(con) is None:
+        from tracelab.store.queries import list_queries
+        any_run = ", ".join(q.name for q in list_queries() if not q.needs_board)
+        raise UserError(f"saved query {args.saved} reads games ({needs_board}), and {run} has no "
+                        f"board (a reasoning run); these read any run: {any_run}")
+    if args.format == "table":
+        _write_table_output(args, lambda limit: retrying(
+            lambda: fetch_arrow(query_readonly(con, sql, params), limit, args.offset)))
+    else:
+        schema, batches = retrying(lambda: arrow_stream(query_readonly(con, sql, params),
+                                                        args.limit, args.offset))
+        write_stream(schema, batches, args.format, args.output)
+
+
+def _query_several_runs(args: argparse.Namespace, paths: list, sql: str, params: dict | None,
+                        needs_board: str | None) -> None:
+    """The SQL on the union of the runs' views; a saved query on each run in turn (its rows prefixed by
+    the run's name)."""
+    import pyarrow as pa
+
+    from tracelab.store.reader import arrow_stream, query_readonly, retrying
+    from tracelab.store.several import SeveralRunsConnection, each_run_stream, run_names
+    con = SeveralRunsConnection(paths, run_names(paths))
+
+    def stream(limit: int | None):
+        if args.saved is not None:
+            return each_run_stream(con, sql, params, limit, args.offset, needs_board)
+        return arrow_stream(query_readonly(con, sql, params), limit, args.offset)
+
+    if args.format == "table":
+        def table(limit: int | None) -> pa.Table:
+            schema, batches = stream(limit)
+            return pa.Table.from_batches(list(batches), schema=schema)
+        _write_table_output(args, lambda limit: retrying(lambda: table(limit)))
+    else:
+        schema, batches = retrying(lambda: stream(args.limit))
+        write_stream(schema, batches, args.format, args.output)
+
+
+def _write_table_output(args: argparse.Namespace, fetch) -> None:
+    """At most DEFAULT_TABLE_ROWS rows unless --limit says otherwise, with a note when rows were left."""
+    limit = DEFAULT_TABLE_ROWS + 1 if args.limit is None else args.limit
+    table = fetch(limit)
+    cut = args.limit is None and table.num_rows > DEFAULT_TABLE_ROWS
+    write_table(table.slice(0, DEFAULT_TABLE_ROWS) if cut else table, "table", args.output)
+    if cut:
+        print(f"note: showing the first {DEFAULT_TABLE_ROWS} rows; --limit N shows more, and "
+              "--format csv|json|parquet [-o FILE] writes every row", file=sys.stderr)

@@ -83,6 +83,15 @@ def _sealed_file(p: Path) -> Path | None:
     return check_regular(s, follow_symlinks=False)
 
 
+def sealed_file_of_run(p: Path) -> Path | None:
+    """The run's sealed file (see _sealed_file), None for a live run directory; ValueError for a path
+    that is neither."""
+    sealed = _sealed_file(p)
+    if sealed is None and not p.is_dir():
+        raise ValueError(f"{str(p)!r} is neither a run directory nor a sealed .duckdb file")
+    return sealed
+
+
 def run_info(run: str | Path) -> RunInfo:
     """The run's metadata and its status now."""
     p = resolve_run(run)
@@ -103,65 +112,62 @@ def run_info(run: str | Path) -> RunInfo:
     return RunInfo(p, sealed, meta, meta["status"])
 
 
-def _parts_variable(table: str) -> str:
-    return f"tracelab_parts_{table}"
+def _parts_variable(table: str, prefix: str = "") -> str:
+    return f"tracelab_parts_{prefix}{table}"
 
 
-class LiveRunConnection:
-    """A DuckDB connection on a run being written. Before each statement it re-reads the run's manifest
-    and, if it changed, points every raw.<table> view at the parts it lists (DuckDB variables read by the
-    views), and while the run is running it rebuilds raw.run when its status changed (a writer closing
-    or dying); everything else is the DuckDB connection's own API.
+class LiveParts:
+    """What keeps one live run's raw.<table> views current on a connection: the DuckDB variables naming
+    the parts its manifest lists, and its raw.run row while its status can still change. `raw` is the
+    schema of its raw views ("raw", or "run_2.raw" among several runs) and `prefix` tells its variables
+    from another run's on the same connection."""
 
-    Once the run is sealed (`tracelab seal`, from any process) it moves over to the sealed file: seal
-    writes run.duckdb before it removes the parts, so a statement that finds the sealed file, or finds
-    the parts gone, reopens the run on run.duckdb; a statement already reading parts that vanish fails
-    with "No such file" and succeeds when run again (retrying())."""
-
-    def __init__(self, con: duckdb.DuckDBPyConnection, run_dir: Path) -> None:
-        self._con = con
-        self._run_dir = run_dir
+    def __init__(self, con: duckdb.DuckDBPyConnection, run_dir: Path, raw: str = "raw",
+                 prefix: str = "") -> None:
+        self.con = con
+        self.run_dir = run_dir
+        self.raw = raw
+        self.prefix = prefix
         self._seen = b""
         self._status: str | None = None
-        self._ready = False   # the views exist (open_run done): only then can it move to the sealed file
-        self.sealed = False   # reading run.duckdb now
-        self.refresh()
 
-    def refresh(self) -> None:
-        """Bring the views up to the manifest's latest flush and raw.run up to the run's status (cheap
-        when nothing changed), or move to the sealed file once there is one."""
-        if self.sealed:
-            return
-        if self._ready and _sealed_file(self._run_dir) is not None:
-            self._move_to_sealed()
-            return
+    def sealed_now(self) -> bool:
+        return _sealed_file(self.run_dir) is not None
+
+    def update(self, ready: bool) -> bool:
+        """Bring the variables up to the manifest's latest flush and raw.run up to the run's status
+        (cheap when nothing changed). False, with nothing changed, once the run is sealed: the caller
+        reopens it on run.duckdb (only once the views exist, `ready`; before that a sealed run whose
+        parts are gone raises)."""
+        if ready and self.sealed_now():
+            return False
         try:
-            raw = read_bytes(layout.manifest_path(self._run_dir), JSON_CAP, what="parts manifest",
+            raw = read_bytes(layout.manifest_path(self.run_dir), JSON_CAP, what="parts manifest",
                              follow_symlinks=False)
         except FileNotFoundError:
-            if not self._ready or _sealed_file(self._run_dir) is None:
+            if not ready or not self.sealed_now():
                 raise
-            self._move_to_sealed()   # sealed between the two looks
-            return
+            return False   # sealed between the two looks
         if raw != self._seen:
-            for table, files in read_manifest(self._run_dir).items():
-                self._con.execute(f"SET VARIABLE {_parts_variable(table)} = ?", [[str(f) for f in files]])
+            for table, files in read_manifest(self.run_dir).items():
+                self.con.execute(f"SET VARIABLE {_parts_variable(table, self.prefix)} = ?",
+                                 [[str(f) for f in files]])
             self._seen = raw
         if self._status in (None, "running"):
-            doc = current_meta(self._run_dir)
+            doc = current_meta(self.run_dir)
             if doc["status"] != self._status:
-                _replace_run_table(self._con, meta_table(doc, doc["status"]))
+                _replace_run_table(self.con, meta_table(doc, doc["status"]), self.raw)
                 self._status = doc["status"]
+        return True
 
-    def views_ready(self) -> None:
-        """open_run has built the views: from now on a seal moves the connection to the sealed file."""
-        self._ready = True
 
-    def _move_to_sealed(self) -> None:
-        sealed = open_run(self._run_dir)
-        old, self._con = self._con, sealed
-        self.sealed = True
-        old.close()
+class RefreshingConnection:
+    """A DuckDB connection (`_con`) whose views are brought up to date (`refresh`) before every
+    statement; everything else is the DuckDB connection's own API."""
+    _con: duckdb.DuckDBPyConnection
+
+    def refresh(self) -> None:
+        raise NotImplementedError
 
     def execute(self, query: Any, parameters: Any = None) -> duckdb.DuckDBPyConnection:
         self.refresh()
@@ -175,7 +181,42 @@ class LiveRunConnection:
         return getattr(self._con, name)
 
 
-RunConnection = duckdb.DuckDBPyConnection | LiveRunConnection
+class LiveRunConnection(RefreshingConnection):
+    """A DuckDB connection on a run being written. Before each statement it re-reads the run's manifest
+    and, if it changed, points every raw.<table> view at the parts it lists (DuckDB variables read by the
+    views), and while the run is running it rebuilds raw.run when its status changed (a writer closing
+    or dying); everything else is the DuckDB connection's own API (LiveParts does the updating).
+
+    Once the run is sealed (`tracelab seal`, from any process) it moves over to the sealed file: seal
+    writes run.duckdb before it removes the parts, so a statement that finds the sealed file, or finds
+    the parts gone, reopens the run on run.duckdb; a statement already reading parts that vanish fails
+    with "No such file" and succeeds when run again (retrying())."""
+
+    def __init__(self, con: duckdb.DuckDBPyConnection, run_dir: Path) -> None:
+        self._con = con
+        self._run_dir = run_dir
+        self._parts = LiveParts(con, run_dir)
+        self._ready = False   # the views exist (open_run done): only then can it move to the sealed file
+        self.sealed = False   # reading run.duckdb now
+        self.refresh()
+
+    def refresh(self) -> None:
+        """Bring the views up to the run's latest flush and status, or move to the sealed file once
+        there is one."""
+        if not self.sealed and not self._parts.update(self._ready):
+            self._move_to_sealed()
+
+    def views_ready(self) -> None:
+        """open_run has built the views: from now on a seal moves the connection to the sealed file."""
+        self._ready = True
+
+    def _move_to_sealed(self) -> None:
+        sealed = open_run(self._run_dir)
+        old, self._con = self._con, sealed
+        self.sealed = True
+        old.close()
+
+RunConnection = duckdb.DuckDBPyConnection | RefreshingConnection
 
 
 def open_run(run: str | Path) -> RunConnection:
@@ -183,32 +224,17 @@ def open_run(run: str | Path) -> RunConnection:
     rules, facts, atoms, groundings, run (and raw.* underneath). Works on a run being written: then every
     statement sees the latest flush."""
     p = resolve_run(run)
-    sealed = _sealed_file(p)
-    if sealed is None and not p.is_dir():
-        raise ValueError(f"{str(p)!r} is neither a run directory nor a sealed .duckdb file")
+    sealed = sealed_file_of_run(p)
     con = sandbox_connection()
     try:
         if sealed is not None:
             _attach_sealed(con, sealed)
-            _check_run_row(con, sealed)
             result: RunConnection = con
         else:
-            current_meta(p)  # a directory without meta.json is not a run: say so first
-            _refuse_links(layout.parts_dir(p))
-            lock_down(con, [str(p.resolve() / layout.PARTS) + "/"])
+            lock_down(con, [check_live_run(p)])
             con.execute("CREATE SCHEMA raw")
             result = LiveRunConnection(con, p.resolve())  # sets the variables the views read, and raw.run
-            listed = read_manifest(p.resolve())
-            for t in TABLES:
-                if not listed[t]:  # a table added after the run was written (schema.ADDED_TABLES)
-                    con.execute(f"CREATE VIEW raw.{t} AS {empty_sql(t)}")
-                    continue
-                parts = f"read_parquet(getvariable({_sql_str(_parts_variable(t))}))"
-                con.execute(f"CREATE VIEW raw.{t} AS SELECT * FROM {parts}")
-                have = {c for (c, *_) in con.execute(f"DESCRIBE raw.{t}").fetchall()}
-                extra = _defaults_for_missing(t, have)
-                if extra:  # parts written before a column was added
-                    con.execute(f"CREATE OR REPLACE VIEW raw.{t} AS SELECT *, {extra} FROM {parts}")
+            create_live_raw_views(con, p.resolve())
         con.execute(VIEWS_SQL)
         lock_configuration(con)
         if isinstance(result, LiveRunConnection):
@@ -219,6 +245,31 @@ def open_run(run: str | Path) -> RunConnection:
             return open_run(p)  # sealed (its parts removed) while it was being opened: read the sealed file
         raise
     return result
+
+
+def check_live_run(p: Path) -> str:
+    """Refuse a live run directory that is not a run or whose parts/ holds links or special files (before
+    anything reads it); returns the one directory a query on it may read (for allowed_directories)."""
+    current_meta(p)  # a directory without meta.json is not a run: say so first
+    _refuse_links(layout.parts_dir(p))
+    return str(p.resolve() / layout.PARTS) + "/"
+
+
+def create_live_raw_views(con: duckdb.DuckDBPyConnection, run_dir: Path, raw: str = "raw",
+                          prefix: str = "") -> None:
+    """The views `raw`.<table> over the parts the run's manifest lists (read from the DuckDB variables
+    LiveParts keeps current: it must have run once)."""
+    listed = read_manifest(run_dir)
+    for t in TABLES:
+        if not listed[t]:  # a table added after the run was written (schema.ADDED_TABLES)
+            con.execute(f"CREATE VIEW {raw}.{t} AS {empty_sql(t)}")
+            continue
+        parts = f"read_parquet(getvariable({_sql_str(_parts_variable(t, prefix))}))"
+        con.execute(f"CREATE VIEW {raw}.{t} AS SELECT * FROM {parts}")
+        have = {c for (c, *_) in con.execute(f"DESCRIBE {raw}.{t}").fetchall()}
+        extra = _defaults_for_missing(t, have)
+        if extra:  # parts written before a column was added
+            con.execute(f"CREATE OR REPLACE VIEW {raw}.{t} AS SELECT *, {extra} FROM {parts}")
 
 
 def _refuse_links(parts: Path) -> None:
@@ -232,9 +283,9 @@ def _refuse_links(parts: Path) -> None:
             check_regular(entry, follow_symlinks=False)  # FileRefused naming what it is
 
 
-def _check_run_row(con: duckdb.DuckDBPyConnection, sealed: Path) -> None:
+def _check_run_row(con: duckdb.DuckDBPyConnection, sealed: Path, raw: str = "raw") -> None:
     """raw.run is the run's one metadata row: every reader of the run takes it for granted."""
-    (rows,) = con.execute("SELECT count(*) FROM raw.run").fetchone()
+    (rows,) = con.execute(f"SELECT count(*) FROM {raw}.run").fetchone()
     if rows != 1:
         raise ValueError(f"{sealed}: raw.run holds {rows} rows, not the run's one metadata row: not a "
                          "tracelab run, or a damaged one")
@@ -244,21 +295,33 @@ def _attach_sealed(con: duckdb.DuckDBPyConnection, sealed: Path) -> None:
     """Attach the sealed file read-only (before external access is switched off: ATTACH needs the file),
     check its catalog before reading anything (tracelab.store.sealed_catalog), then map raw.<table> onto
     its stored tables."""
+    attach_sealed_file(con, sealed, "store")
+    lock_down(con)
+    con.execute("CREATE SCHEMA raw")
+    create_sealed_raw_views(con, sealed, "store", "raw")
+
+
+def attach_sealed_file(con: duckdb.DuckDBPyConnection, sealed: Path, database: str) -> None:
+    """ATTACH the sealed file READ_ONLY as `database`; refused if a write-ahead log lies beside it."""
     wal = Path(f"{sealed.resolve()}.wal")
     if os.path.lexists(wal):  # ATTACH replays a write-ahead log, running the SQL in it (ALTER ... USING)
         raise SealedFileRefused(f"{str(wal)!r}: a sealed run has no write-ahead log, and tracelab does not "
                                 "replay one it brings along (it holds SQL that would run on opening)")
-    con.execute(f"ATTACH {_sql_str(sealed.resolve())} AS store (READ_ONLY)")
-    lock_down(con)
-    columns = check_sealed_catalog(con, "store", sealed)
-    con.execute("CREATE SCHEMA raw")
+    con.execute(f"ATTACH {_sql_str(sealed.resolve())} AS {database} (READ_ONLY)")
+
+
+def create_sealed_raw_views(con: duckdb.DuckDBPyConnection, sealed: Path, database: str, raw: str) -> None:
+    """Check the attached file's catalog (nothing of it is read before), then the views `raw`.<table>
+    over its stored tables (with the added columns and tables an older run lacks), and check raw.run."""
+    columns = check_sealed_catalog(con, database, sealed)
     for t, names in STORED_COLUMNS.items():
         if t in ADDED_TABLES and not columns[t]:  # a table added after the run was sealed
-            con.execute(f"CREATE VIEW raw.{t} AS {empty_sql(t)}")
+            con.execute(f"CREATE VIEW {raw}.{t} AS {empty_sql(t)}")
             continue
         extra = _defaults_for_missing(t, columns[t])
         cols = ", ".join([f'"{c}"' for c in names if c in columns[t]] + ([extra] if extra else []))
-        con.execute(f"CREATE VIEW raw.{t} AS SELECT {cols} FROM store.raw.{t}")
+        con.execute(f"CREATE VIEW {raw}.{t} AS SELECT {cols} FROM {database}.raw.{t}")
+    _check_run_row(con, sealed, raw)
 
 
 def _defaults_for_missing(table: str, have: set[str]) -> str:
@@ -277,12 +340,12 @@ def _create_table(con: duckdb.DuckDBPyConnection, name: str, table: Any) -> None
 _DUCKDB_TYPES = {pa.string(): "VARCHAR", pa.int64(): "BIGINT", pa.timestamp("us"): "TIMESTAMP"}
 
 
-def _replace_run_table(con: duckdb.DuckDBPyConnection, row: pa.Table) -> None:
+def _replace_run_table(con: duckdb.DuckDBPyConnection, row: pa.Table, raw: str = "raw") -> None:
     """(Re)create raw.run from meta_table()'s one row. By parameters, not register(): DuckDB refuses
     register() while the caller still holds an unfinished result of this connection."""
     values = row.to_pylist()[0]
     select = ", ".join(f'CAST(? AS {_DUCKDB_TYPES[f.type]}) AS "{f.name}"' for f in row.schema)
-    con.execute(f"CREATE OR REPLACE TABLE raw.run AS SELECT {select}", list(values.values()))
+    con.execute(f"CREATE OR REPLACE TABLE {raw}.run AS SELECT {select}", list(values.values()))
 
 
 def query_readonly(con: RunConnection, sql: str,

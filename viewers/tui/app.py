@@ -39,7 +39,7 @@ class TracelabApp(App[None]):
 
     def on_mount(self) -> None:
         self.push_screen(RunsScreen(self.paths))
-        if all(is_run(p) for p in self.paths):  # several runs: the first, the others overlaid in Training
+        if all(is_run(p) for p in self.paths):  # several runs: the first, the others overlaid in Training and SQL
             self.show_run(self.paths[0], self.paths[1:])
 
     def show_run(self, path: Path, overlaid: Sequence[Path] = ()) -> None:

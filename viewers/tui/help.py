@@ -17,7 +17,7 @@ first) · the mouse selects rows, tabs, keys in the bottom bar and header column
 
 | view | keys |
 |---|---|
-| Runs | `Enter` open · `space` mark · `c` open the marked runs, curves overlaid in Training · `r` refresh (also every 2 s) |
+| Runs | `Enter` open · `space` mark · `c` open the marked runs, curves overlaid in Training, SQL on them all · `r` refresh (also every 2 s) |
 | 1 Episodes | `Enter` trace · `s` / `S` sort column / direction (or click a header) · `f` length filter (`10..50`, `>=20`) · `o` next outcome (all, each, all) · `e` evaluation games |
 | 2 Trace | `Enter`/`w` why · `n` / `p` next / previous change of the atom · `g` go to timestep · `/` atom filter (also t range, label, rule; Enter applies) · `a` only this atom · `x` clear filters · `b` board · `]` / `[` next / previous evaluation game (training runs) |
 | 2 Trace, a run without a board (a reasoning) | `b` the atoms true at the cursor's t and the graph around its atom, beside the trace · `c` true / changed at t · in the atoms (`Tab`): `/` filter (`exposed`, `exposed(*)`) · `Enter` only that atom's changes · its cursor picks the atom whose edges show · `s` static facts |

@@ -18,7 +18,7 @@ from tracelab.viewers.tui.keybar import KeyBar
 from tracelab.viewers.tui.messages import ExplainChange, OpenTrace
 from tracelab.viewers.tui.places import RunPlace
 from tracelab.viewers.tui.rules import RulesPane
-from tracelab.viewers.tui.source import RunSource
+from tracelab.viewers.tui.source import RunSource, SeveralRunsSource
 from tracelab.viewers.tui.sql import SqlPane
 from tracelab.viewers.tui.trace import TracePane
 from tracelab.viewers.tui.training import TrainingPane
@@ -67,9 +67,12 @@ class RunScreen(Screen):
         self.path = path
         self.source = RunSource(path)
         self.overlaid: list[RunSource] = []
+        self.sql_source: RunSource | SeveralRunsSource = self.source
         try:
             for p in overlaid:
                 self.overlaid.append(RunSource(p))
+            if overlaid:   # the SQL console reads them all, every view with a `run` column
+                self.sql_source = SeveralRunsSource([path, *overlaid])
         except BaseException:  # a run that does not open: close the ones opened, the screen is not shown
             self.on_unmount()
             raise
@@ -80,7 +83,7 @@ class RunScreen(Screen):
         self.panes: dict[str, Widget] = {
             "episodes": EpisodesPane(self.source, place.episodes if place else None),
             "trace": TracePane(self.source), "why": WhyPane(self.source),
-            "rules": RulesPane(self.source), "sql": SqlPane(self.source),
+            "rules": RulesPane(self.source), "sql": SqlPane(self.sql_source),
             "training": TrainingPane(self.source, self.overlaid)}
         # reopened: on the view it was left on (the why tree: on the trace it explained)
         view = "trace" if place and place.view == "why" else place.view if place else self.initial
@@ -96,7 +99,7 @@ class RunScreen(Screen):
         yield KeyBar()
 
     def _title(self) -> str:
-        overlaid = f" + {len(self.overlaid)} overlaid in Training" if self.overlaid else ""
+        overlaid = f" + {len(self.overlaid)} overlaid in Training and SQL" if self.overlaid else ""
         return f" {self.path.name}{overlaid}  ·  {self.source.state}  ·  {self.source.command}"
 
     def has_view(self, tab: str) -> bool:
@@ -168,7 +171,7 @@ class RunScreen(Screen):
     async def action_cancel_or_back(self) -> None:
         """Esc: cancel the running query; else leave a text field (for its view's table); else go back one
         view (BACK), and from the view the run opened on to the Runs screen."""
-        if self.source.interrupt():
+        if [source for source in self._sources() if source.interrupt()]:   # every one: no short cut
             self.notify("query cancelled")
             return
         if isinstance(self.focused, TextArea):   # the SQL editor: to its results (where 1-6 work again)
@@ -194,8 +197,12 @@ class RunScreen(Screen):
         if self.keep_place is not None:   # left (back to the Runs screen, or a dialog over it)
             self.keep_place(self.place())
 
+    def _sources(self) -> list[RunSource | SeveralRunsSource]:
+        """Every connection the screen holds (the SQL console's own one for several runs)."""
+        return [self.source, *self.overlaid, *([self.sql_source] if self.sql_source is not self.source else [])]
+
     def on_unmount(self) -> None:
-        for source in (self.source, *self.overlaid):
+        for source in self._sources():
             source.close()
 
     # ---- passing things between views ------------------------------------------------------------------

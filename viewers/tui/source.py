@@ -1,12 +1,12 @@
-"""One open run for the TUI: its connection (tracelab.store.open_run) behind a lock, so that queries from
-worker threads never overlap on it, and every statement through the store's read-only path
-(query_readonly inside retrying). `interrupt()` cancels the running query (Esc). The run's life as
+"""One open run for the TUI (or several, for the SQL console: SeveralRunsSource): its connection
+(tracelab.store.open_run) behind a lock, so that queries from worker threads never overlap on it, and
+every statement through the store's read-only path (query_readonly inside retrying). `interrupt()` cancels the running query (Esc). The run's life as
 other processes change it (its writer closing or dying, `tracelab seal`) is read by `follow()`; the
 views re-read a run while it is `live` and once more after it closes (LiveReads)."""
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, TypeVar
@@ -15,21 +15,78 @@ import pyarrow as pa
 
 from tracelab.store.catalog import short_command
 from tracelab.store.kind import run_board
-from tracelab.store.reader import RunConnection, open_run, query_readonly, retrying, run_info
+from tracelab.store.reader import RunConnection, fetch_arrow, open_run, query_readonly, retrying, run_info
+from tracelab.store.several import SeveralRunsConnection, each_run_stream, run_names
 
 T = TypeVar("T")
 
 
-class RunSource:
+class LockedConnection:
+    """A store connection behind a lock: queries from worker threads never overlap on it, every statement
+    goes through the store's read-only path (query_readonly inside retrying), `interrupt()` cancels the
+    running query (Esc)."""
+
+    def __init__(self, con: RunConnection) -> None:
+        self.con = con
+        self._lock = threading.Lock()
+        self._busy = 0
+
+    @property
+    def busy(self) -> bool:
+        return self._busy > 0
+
+    def call(self, fn: Callable[[RunConnection], T]) -> T:
+        """fn(connection) alone on the connection (the explain functions take a connection)."""
+        with self._lock:
+            self._busy += 1
+            try:
+                return retrying(lambda: fn(self.con))
+            finally:
+                self._busy -= 1
+
+    def arrow(self, sql: str, params: dict[str, Any] | None = None) -> pa.Table:
+        return self.call(lambda con: query_readonly(con, sql, params).to_arrow_table())
+
+    def rows(self, sql: str, params: dict[str, Any] | None = None) -> list[dict[str, Any]]:
+        return self.arrow(sql, params).to_pylist()
+
+    def scalar(self, sql: str, params: dict[str, Any] | None = None) -> Any:
+        rows = self.call(lambda con: query_readonly(con, sql, params).fetchall())
+        return rows[0][0] if rows else None
+
+    def fetch(self, con: RunConnection, sql: str, params: dict[str, Any] | None, saved: bool,
+              limit: int) -> pa.Table:
+        """The first `limit` rows of a statement (the SQL console's; `saved`: a saved query's text)."""
+        return fetch_arrow(query_readonly(con, sql, params), limit)
+
+    def interrupt(self) -> bool:
+        """Cancel the query running now, if any; True if there was one."""
+        if not self.busy:
+            return False
+        self.con.interrupt()
+        return True
+
+    def close(self) -> None:
+        # a long query would otherwise hold the lock, and closing the app, for minutes; interrupted again
+        # until the lock is ours: a query that had the lock but had not started yet missed the first one
+        while not self._lock.acquire(timeout=0.05):
+            self.interrupt()
+        try:
+            self.con.close()
+        finally:
+            self._lock.release()
+
+
+class RunSource(LockedConnection):
+    """One open run: its connection (open_run), its status and kind."""
+
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         info = run_info(self.path)
         self.status: str = info.status
         self.sealed = info.sealed_file is not None
         self.command = short_command(str(info.meta.get("command") or ""))
-        self.con: RunConnection = open_run(self.path)
-        self._lock = threading.Lock()
-        self._busy = 0
+        super().__init__(open_run(self.path))
         # the board the run declares (a game's), None for a run without one (a reasoning run): the views
         # show the atoms and the graph instead, and no game columns
         self.board: str | None = self.call(run_board)
@@ -62,45 +119,27 @@ class RunSource:
         self.status, self.sealed = now
         return changed
 
-    @property
-    def busy(self) -> bool:
-        return self._busy > 0
 
-    def call(self, fn: Callable[[RunConnection], T]) -> T:
-        """fn(connection) alone on the connection (the explain functions take a connection)."""
-        with self._lock:
-            self._busy += 1
-            try:
-                return retrying(lambda: fn(self.con))
-            finally:
-                self._busy -= 1
+class SeveralRunsSource(LockedConnection):
+    """Several runs on one connection (tracelab.store.several), for the SQL console: every view with a
+    first column `run`; a saved query runs on each run, its rows after the run's name."""
 
-    def arrow(self, sql: str, params: dict[str, Any] | None = None) -> pa.Table:
-        return self.call(lambda con: query_readonly(con, sql, params).to_arrow_table())
+    def __init__(self, paths: Sequence[Path]) -> None:
+        self.path = Path(paths[0])     # the first run: names the console's export
+        con = SeveralRunsConnection(list(paths), run_names(paths))
+        super().__init__(con)
+        boards = [con.execute("SELECT board FROM raw.run WHERE run = ?", [name]).fetchall()[0][0]
+                  for name in con.names]
+        # the saved queries about games are offered only when every run has a board
+        self.board: str | None = boards[0] if all(boards) else None
 
-    def rows(self, sql: str, params: dict[str, Any] | None = None) -> list[dict[str, Any]]:
-        return self.arrow(sql, params).to_pylist()
-
-    def scalar(self, sql: str, params: dict[str, Any] | None = None) -> Any:
-        rows = self.call(lambda con: query_readonly(con, sql, params).fetchall())
-        return rows[0][0] if rows else None
-
-    def interrupt(self) -> bool:
-        """Cancel the query running now, if any; True if there was one."""
-        if not self.busy:
-            return False
-        self.con.interrupt()
-        return True
-
-    def close(self) -> None:
-        # a long query would otherwise hold the lock, and closing the app, for minutes; interrupted again
-        # until the lock is ours: a query that had the lock but had not started yet missed the first one
-        while not self._lock.acquire(timeout=0.05):
-            self.interrupt()
-        try:
-            self.con.close()
-        finally:
-            self._lock.release()
+    def fetch(self, con: RunConnection, sql: str, params: dict[str, Any] | None, saved: bool,
+              limit: int) -> pa.Table:
+        if not saved:
+            return super().fetch(con, sql, params, saved, limit)
+        assert isinstance(con, SeveralRunsConnection)
+        schema, batches = each_run_stream(con, sql, params, limit)
+        return pa.Table.from_batches(list(batches), schema=schema)
 
 
 class LiveReads:

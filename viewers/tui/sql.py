@@ -21,11 +21,10 @@ from textual.widgets import Input, Label, OptionList, Static, TextArea
 from textual.widgets.option_list import Option
 
 from tracelab.store.queries import SavedQuery, list_queries
-from tracelab.store.reader import fetch_arrow, query_readonly
 from tracelab.viewers.tui.export import ExportDialog, free_name
 from tracelab.viewers.tui.lazy_table import Column, LazyTable
 from tracelab.viewers.tui.paging import ArrowSource
-from tracelab.viewers.tui.source import RunSource
+from tracelab.viewers.tui.source import RunSource, SeveralRunsSource
 from tracelab.viewers.tui.sql_history import add_to_history, history_path, load_history, save_history
 
 KEYS = "Ctrl+R runs · F2 saved · F3 history · F4 export"
@@ -154,7 +153,8 @@ class SqlPane(Vertical):
     SqlPane #sql-error { color: $error; height: auto; max-height: 6; }
     """
 
-    def __init__(self, source: RunSource) -> None:
+    def __init__(self, source: RunSource | SeveralRunsSource) -> None:
+        """source: the run's, or several runs' (SeveralRunsSource: views with a `run` column)."""
         super().__init__()
         self.source = source
         self.history_file = history_path()
@@ -168,8 +168,10 @@ class SqlPane(Vertical):
         self._executing: int | None = None        # the query of ours on the connection now, if any
 
     def compose(self) -> ComposeResult:
-        yield TextArea("SELECT rule, count(*) AS n FROM firings GROUP BY rule ORDER BY n DESC, rule",
-                       language=None, id="sql-editor", soft_wrap=True)
+        first = ("SELECT run, rule, count(*) AS n FROM firings GROUP BY run, rule ORDER BY run, n DESC, rule"
+                 if isinstance(self.source, SeveralRunsSource) else
+                 "SELECT rule, count(*) AS n FROM firings GROUP BY rule ORDER BY n DESC, rule")
+        yield TextArea(first, language=None, id="sql-editor", soft_wrap=True)
         yield Static("", id="sql-error")
         table = LazyTable(id="sql-results")
         table.placeholder = "  no query run yet: Ctrl+R runs the statement above"
@@ -204,6 +206,7 @@ class SqlPane(Vertical):
 
     def run_sql(self, sql: str, params: dict[str, Any] | None = None, label: str = "") -> None:
         self._remember(sql)
+        saved = self.params_for == sql   # a saved query's text: on several runs, run on each run
         # A query of ours still running is cancelled: the new one would otherwise wait behind it for
         # the connection (minutes, for a big join), and its late result would replace the new one's.
         superseded = self._interrupt_own()
@@ -220,7 +223,7 @@ class SqlPane(Vertical):
                 return None                 # superseded before it began: never run it
             self._executing = run_id        # now ours is the statement an interrupt() stops
             try:
-                return fetch_arrow(query_readonly(con, sql, params), MAX_ROWS)
+                return self.source.fetch(con, sql, params, saved, MAX_ROWS)
             finally:
                 self._executing = None
 
