@@ -1,0 +1,32 @@
+"""A Box or Dict observation's numbers, read from the engine's bounds for a batch of worlds: what the
+one-world env (world.py) and the vector env (vector_world.py) both report."""
+from __future__ import annotations
+
+import numpy as np
+
+from tracelab.envs.declared.spec import ObservationPart
+
+
+def missing_index(part: ObservationPart, index: np.ndarray) -> bool:
+    """True when an index part has no true atom in some world (index -1) and declares no `missing`."""
+    return part.missing is None and bool((index < 0).any())
+
+
+def part_numbers(part: ObservationPart, index: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                 ids: np.ndarray) -> np.ndarray:
+    """float32 [worlds, part.width]: `index` [worlds] is the part's index (-1: no atom true) for an
+    index part; lower and upper [worlds, atoms] the engine's bounds; ids the part's atoms."""
+    if part.read == "index":
+        numbers = index.astype(np.float64) if part.values is None else \
+            np.asarray(part.values, np.float64)[np.maximum(index, 0)]
+        if part.missing is not None:
+            numbers = np.where(index < 0, part.missing, numbers)
+        return numbers.astype(np.float32)[:, None]
+    true = lower[:, ids] == 1.0
+    if part.read == "count":
+        return true.sum(axis=1, dtype=np.int64).astype(np.float32)[:, None]
+    if part.read == "onehot":
+        return true.astype(np.float32)
+    if part.read == "lower":
+        return lower[:, ids].astype(np.float32)
+    return np.stack([lower[:, ids], upper[:, ids]], axis=2).reshape(len(lower), -1).astype(np.float32)
