@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from tracelab.engine import Engine
+
 from tracelab.envs.declared.spec import ObservationPart
 
 
@@ -12,21 +14,21 @@ def missing_index(part: ObservationPart, index: np.ndarray) -> bool:
     return part.missing is None and bool((index < 0).any())
 
 
-def part_numbers(part: ObservationPart, index: np.ndarray, lower: np.ndarray, upper: np.ndarray,
-                 ids: np.ndarray) -> np.ndarray:
+def part_numbers(part: ObservationPart, index: np.ndarray, engine: Engine, ids: np.ndarray) -> np.ndarray:
     """float32 [worlds, part.width]: `index` [worlds] is the part's index (-1: no atom true) for an
-    index part; lower and upper [worlds, atoms] the engine's bounds; ids the part's atoms."""
+    index part; ids the part's atoms, read from `engine` (its truth for onehot and count: the lanes
+    kernel reads a few atoms off its planes, where its bounds are a copy of every atom)."""
     if part.read == "index":
         numbers = index.astype(np.float64) if part.values is None else \
             np.asarray(part.values, np.float64)[np.maximum(index, 0)]
         if part.missing is not None:
             numbers = np.where(index < 0, part.missing, numbers)
         return numbers.astype(np.float32)[:, None]
-    true = lower[:, ids] == 1.0
     if part.read == "count":
-        return true.sum(axis=1, dtype=np.int64).astype(np.float32)[:, None]
+        return engine.is_true(ids).sum(axis=1, dtype=np.int64).astype(np.float32)[:, None]
     if part.read == "onehot":
-        return true.astype(np.float32)
+        return engine.is_true(ids).astype(np.float32)
+    lower = engine.lower[:, ids]
     if part.read == "lower":
-        return lower[:, ids].astype(np.float32)
-    return np.stack([lower[:, ids], upper[:, ids]], axis=2).reshape(len(lower), -1).astype(np.float32)
+        return lower.astype(np.float32)
+    return np.stack([lower, engine.upper[:, ids]], axis=2).reshape(len(lower), -1).astype(np.float32)

@@ -166,9 +166,8 @@ class DeclaredWorlds:
             return value
         if spec.space == "MultiDiscrete":
             return index.astype(np.int64)
-        lower, upper = self.engine.lower, self.engine.upper
         values = [part_numbers(part, index[:, one._index_parts.index(k)] if part.read == "index" else index[:, :0],
-                               lower, upper, one._part_ids[k][agent]) for k, part in enumerate(spec.parts)]
+                               self.engine, one._part_ids[k][agent]) for k, part in enumerate(spec.parts)]
         if spec.space == "Box":
             return np.concatenate(values, axis=1).astype(np.float32)
         return {p.name: (v[:, 0].astype(np.int64) if p.is_discrete else v) for p, v in zip(spec.parts, values)}

@@ -324,9 +324,8 @@ class DeclaredWorld:
             return value
         if spec.space == "MultiDiscrete":
             return indices.astype(np.int64)
-        lower, upper = self.engine.lower[:1], self.engine.upper[:1]
         values = [part_numbers(part, indices[[self._index_parts.index(k)]] if part.read == "index" else indices[:0],
-                               lower, upper, self._part_ids[k][agent])[0] for k, part in enumerate(spec.parts)]
+                               self.engine, self._part_ids[k][agent])[0] for k, part in enumerate(spec.parts)]
         if spec.space == "Box":
             return np.concatenate(values).astype(np.float32)
         return {p.name: (int(v[0]) if p.is_discrete else v) for p, v in zip(spec.parts, values)}
