@@ -19,11 +19,10 @@ def part_numbers(part: ObservationPart, index: np.ndarray, engine: Engine, ids: 
     index part; ids the part's atoms, read from `engine` (its truth for onehot and count: the lanes
     kernel reads a few atoms off its planes, where its bounds are a copy of every atom)."""
     if part.read == "index":
-        numbers = index.astype(np.float64) if part.values is None else \
-            np.asarray(part.values, np.float64)[np.maximum(index, 0)]
+        numbers = index.astype(np.float32) if part.value_array is None else part.value_array[np.maximum(index, 0)]
         if part.missing is not None:
-            numbers = np.where(index < 0, part.missing, numbers)
-        return numbers.astype(np.float32)[:, None]
+            numbers = np.where(index < 0, np.float32(part.missing), numbers)
+        return numbers[:, None]
     if part.read == "count":
         return engine.is_true(ids).sum(axis=1, dtype=np.int64).astype(np.float32)[:, None]
     if part.read == "onehot":

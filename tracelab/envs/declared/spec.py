@@ -14,6 +14,7 @@ import os
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -66,6 +67,11 @@ class ObservationPart:
         """Numbers this part puts in a Box (an index is one number)."""
         return {"index": 1, "lower": len(self.atoms), "bounds": 2 * len(self.atoms),
                 "onehot": len(self.atoms), "count": 1}[self.read]
+
+    @cached_property
+    def value_array(self) -> np.ndarray | None:
+        """`values` as float32, made once (an observation reads it every step)."""
+        return None if self.values is None else np.asarray(self.values, np.float32)
 
     @property
     def is_discrete(self) -> bool:
