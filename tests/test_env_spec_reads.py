@@ -101,3 +101,10 @@ def test_a_discrete_index_takes_no_numbers(tmp_path: Path) -> None:
     text = numbers_spec().replace('space = "Box"', 'space = "MultiDiscrete"').replace('read = "count"', 'read = "index"')
     with pytest.raises(SpecError, match=r"observation.parts\[0\].values: `values` is for an index part of a Box"):
         load_spec(write_world(tmp_path, text))
+
+
+def test_a_board_of_too_many_facts_is_refused_before_they_are_built(tmp_path: Path) -> None:
+    text = numbers_spec().replace('rows = ["S..G"]', 'rows = "[\'.\' * 256] * 256"').replace(
+        'edge = "none"', 'edge = "none"\nrays = { n = [-1, 0], s = [1, 0], e = [0, 1], w = [0, -1] }')
+    msg = _located(tmp_path, "[board]", "[board]", text)
+    assert ": board: makes" in msg and "at most 2,000,000" in msg, msg
