@@ -62,6 +62,21 @@ def test_an_index_read_as_numbers_and_a_count(tmp_path: Path) -> None:
     check_env(env)
 
 
+def test_the_nearest_thing_on_the_board(tmp_path: Path) -> None:
+    """Two keys lie in the corridor; the part reads the column of the one nearest the bot (a tie goes to
+    the key listed first), -1 once the bot is gone."""
+    rules = RULES + "lies(k1, c0_3)\nlies(k2, c0_1)\ngone: at(C):[0,0] <-! at(C), push(A,stay)\n"
+    nearest = NUMBERS.replace('read = "index"\natom = "at(C)"\nover = "cells"\nvalues = [30, 20, 10, 0]',
+                              'read = "nearest"\natom = "lies(Thing, C)"\nthings = ["k1", "k2"]\nfrom = "at(C)"\n'
+                              'values = [0, 1, 2, 3]')
+    env = make_env(write_world(tmp_path, numbers_spec().replace(NUMBERS, nearest), rules))
+    assert env.observation_space.low.tolist() == [-1, 0] and env.observation_space.high.tolist() == [3, 2]
+    assert env.reset(seed=0)[0].tolist() == [1, 1]  # k2, one cell away
+    assert env.step(1)[0].tolist() == [1, 1]  # on k2
+    assert env.step(1)[0].tolist() == [3, 1]  # one cell from each: k1, listed first
+    assert env.step(2)[0].tolist() == [-1, 1]  # no bot, no distance
+
+
 def test_missing_is_read_when_no_atom_holds(tmp_path: Path) -> None:
     rules = RULES + "gone: at(C):[0,0] <-! at(C), push(A,stay)\n"  # staying makes the bot vanish
     env = make_env(write_world(tmp_path, numbers_spec(), rules))
@@ -88,7 +103,9 @@ def test_constants_only_the_spec_names(tmp_path: Path) -> None:
     ('west = [0, -1]', 'west = [[0, -1], [1]]', "board.neighbours.west", "or a list of them"),
     ('values = [30, 20, 10, 0]', 'values = [30, 20]', "observation.parts[0].values", "a list of 4 finite numbers"),
     ('missing = -1', 'missing = "x"', "observation.parts[0].missing", "unknown name 'x'"),
-    ('read = "count"', 'read = "count"\nmissing = 0', "observation.parts[1].missing", "for an index part"),
+    ('read = "count"', 'read = "count"\nmissing = 0', "observation.parts[1].missing", "for an index or nearest"),
+    ('read = "count"', 'read = "count"\nthings = ["robo"]', "observation.parts[1].things", "read = \"nearest\""),
+    ('read = "index"', 'read = "nearest"', "observation.parts[0].things", "missing (required"),
     ('rules = ["corridor.rules"]', 'rules = ["corridor.rules"]\nconstants = ["Robo"]', "env.constants[0]",
      "not a plain constant"),
 ])
@@ -99,7 +116,7 @@ def test_mistakes_in_the_new_keys_are_located(tmp_path: Path, old: str, new: str
 
 def test_a_discrete_index_takes_no_numbers(tmp_path: Path) -> None:
     text = numbers_spec().replace('space = "Box"', 'space = "MultiDiscrete"').replace('read = "count"', 'read = "index"')
-    with pytest.raises(SpecError, match=r"observation.parts\[0\].values: `values` is for an index part of a Box"):
+    with pytest.raises(SpecError, match=r"observation.parts\[0\].values: `values` is for an index or nearest part of a Box"):
         load_spec(write_world(tmp_path, text))
 
 

