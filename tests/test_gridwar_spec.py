@@ -81,3 +81,34 @@ def test_the_declared_war_game_passes_gymnasiums_checker(name: str) -> None:
     env.reset(seed=0)
     assert env.render().splitlines()[1:] == ["b.......", "........", "....M...", "..MMM...", "..MM....",
                                              "........", "........", ".......r"]
+
+
+def test_two_agents_a_team_equal_rulesim_step_by_step() -> None:
+    """war_base_2v2.toml as a PettingZoo env: each red agent's observation (the team's view), mask and
+    reward (RuleSim's agent_reward) and the ends, against GridWarEnv on a 2v2 base scenario."""
+    from tracelab.envs.declared.parallel_env import DeclaredParallelEnv
+    scenario = replace(builtin_scenario("base"), name="base-2v2", agents_per_team=2, red_starts=None,
+                       blue_starts=None)
+    ref = GridWarEnv(scenario)
+    dec = DeclaredParallelEnv(RULES_DIR / "gridworld" / "war_base_2v2.toml")
+    names = dec.possible_agents
+    rng = np.random.default_rng(7)
+    o1, i1 = ref.reset(seed=3)
+    o2, i2 = dec.reset(seed=3)
+    ends = unsafe = 0
+    for k in range(300):
+        for j, a in enumerate(names):
+            assert o1.tolist() == o2[a].tolist(), (k, o1, o2)
+            assert i1["action_mask"][j].tolist() == i2[a]["action_mask"].tolist(), (k, j, i1, i2)
+        acts = [int(rng.choice(np.flatnonzero(i1["action_mask"][j]))) if rng.random() < 0.75 else int(rng.integers(5))
+                for j in range(2)]
+        o1, _, te1, tr1, i1 = ref.step(np.array(acts))
+        o2, r2, te2, tr2, i2 = dec.step(dict(zip(names, acts)))
+        assert [r2[a] for a in names] == i1["agent_reward"].tolist(), (k, r2, i1)
+        assert all((te2[a], tr2[a]) == (te1, tr1) for a in names), (k, te1, tr1, te2, tr2)
+        unsafe += int(i1["unsafe"].sum())
+        if te1 or tr1:
+            ends += 1
+            o1, i1 = ref.reset()
+            o2, i2 = dec.reset()
+    assert ends > 5 and unsafe, (ends, unsafe)
