@@ -6,6 +6,9 @@ Reads numba's own cache index of a dispatcher (numba 0.68: `Dispatcher._cache`, 
 """
 from __future__ import annotations
 
+import hashlib
+import inspect
+from types import ModuleType
 from typing import Any
 
 
@@ -36,3 +39,20 @@ def cache_folder(dispatcher: Any) -> str | None:
         return str(dispatcher._cache._cache_path)
     except Exception:
         return None
+
+
+def stamp_with_sources(dispatcher: Any, modules: tuple[ModuleType, ...]) -> bytes:
+    """Make `dispatcher`'s disk cache stale when any of `modules` changes: numba stamps only the file
+    defining the function, not the callees it compiles in from other modules (the engine's kernel, a
+    game's read-back). Uses numba's cache file object (numba 0.68: Cache._cache_file._source_stamp,
+    compared on every load). Returns the stamp: a hash of the modules' sources."""
+    digest = hashlib.sha256()
+    for m in modules:
+        digest.update(inspect.getsource(m).encode())
+        digest.update(b"\0")
+    stamp = digest.digest()
+    cache_file = dispatcher._cache._cache_file
+    if not hasattr(cache_file, "_source_stamp"):
+        raise ImportError(f"numba's cache no longer has _source_stamp: {dispatcher.__name__} cannot key its cache")
+    cache_file._source_stamp = stamp
+    return stamp

@@ -109,6 +109,13 @@ def test_bench_env_quick(capsys: pytest.CaptureFixture) -> None:
             ("rules", "single"), ("rules", "vector"), ("reference", "single"), ("reference", "vector")]
         for x in gym["rows"]:
             positive(x["steps_per_s"])
+    # GridWar through both paths: RuleSim's envs and the declared spec's, with the ratio
+    assert [(d["scenario"], d["kind"]) for d in r["declared"]] == [
+        ("base", "single"), ("base", "vector"), ("advanced", "single"), ("advanced", "vector")]
+    for d in r["declared"]:
+        positive(d["rulesim"])
+        positive(d["declared"])
+        assert d["declared_over_rulesim"] == pytest.approx(d["declared"]["median"] / d["rulesim"]["median"])
 
 
 def test_bench_replay_quick(capsys: pytest.CaptureFixture) -> None:

@@ -142,9 +142,10 @@ def test_observation_spaces_pass_gymnasiums_checker(tmp_path: Path, space: str, 
     assert env.observation_space.contains(obs)
 
 
-def _located(tmp_path: Path, old: str, new: str, **params) -> str:
-    assert old in SPEC, old
-    path = write_world(tmp_path, SPEC.replace(old, new, 1))
+def _located(tmp_path: Path, old: str, new: str, spec: str = SPEC, **params) -> str:
+    """The one-line SpecError of `spec` with `old` replaced by `new`, after its 'file:'."""
+    assert old in spec, old
+    path = write_world(tmp_path, spec.replace(old, new, 1))
     with pytest.raises(SpecError) as e:
         load_spec(path, **params)
     msg = str(e.value)

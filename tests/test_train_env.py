@@ -14,7 +14,8 @@ import pytest
 from tracelab.cli import main
 from tracelab.envs.declared.spec import load_spec
 from tracelab.envs.declared.toytext import spec_path
-from tracelab.train.env_source import EnvSource, ObservationEncoder, parse_env_args
+from tracelab.envs.declared.env_source import EnvSource, parse_env_args
+from tracelab.train.env_source import ObservationEncoder
 from tracelab.train.tabular import enumerate_transitions, optimal_start_value, value_iteration
 
 TIMEOUT = 600  # a command that hangs fails the test instead

@@ -1,6 +1,8 @@
 """`tracelab bench env`: the rule-driven simulator (RuleSim) and the hand-written one (RefSim) side by
 side, by team size, one world and batched, RuleSim with tracing on and off; then the gymnasium envs
-(tracelab.envs.gym_env, tracelab.envs.vector_env) on both backends when they import. Goals: docs/benchmarks.md."""
+(tracelab.envs.gym_env, tracelab.envs.vector_env) on both backends when they import; then GridWar through
+both paths: RuleSim's envs against the declared spec's (rules/gridworld/war_*.toml, docs/worlds.md), one
+world and batched, with their ratios. Goals: docs/benchmarks.md."""
 from __future__ import annotations
 
 from typing import Any
@@ -108,6 +110,32 @@ def gym_rates(worlds: int, repeats: int, target_s: float) -> dict[str, Any]:
     return out
 
 
+def declared_rates(worlds: int, repeats: int, target_s: float) -> list[dict[str, Any]]:
+    """GridWar 1v1 through RuleSim (GridWarEnv, GridWarVectorEnv: rulesim_fused, the game's own Python
+    glue) and through its declared spec (DeclaredEnv, DeclaredVectorEnv over rules/gridworld/war_*.toml):
+    one world and `worlds` worlds, untraced, the same random actions; the ratio declared / RuleSim."""
+    from tracelab import RULES_DIR
+    from tracelab.envs import make_env, make_vec_env
+    from tracelab.envs.gym_env import GridWarEnv
+    from tracelab.envs.vector_env import GridWarVectorEnv
+    rows = []
+    for name in ("base", "advanced"):
+        spec = RULES_DIR / "gridworld" / f"war_{name}.toml"
+        for kind, n, make_rules, make_declared, runner in (
+                ("single", 1, lambda: GridWarEnv(name), lambda: make_env(spec), _single_runner),
+                ("vector", worlds, lambda: GridWarVectorEnv(worlds, name), lambda: make_vec_env(spec, worlds),
+                 _vector_runner)):
+            row: dict[str, Any] = {"scenario": name, "kind": kind, "worlds": n}
+            for path, make in (("rulesim", make_rules), ("declared", make_declared)):
+                env = make()
+                rates = block_rates(runner(env), repeats, target_s)
+                row[path] = summarize([x * n for x in rates["steps_per_s"]["runs"]]).to_dict()
+                env.close()
+            row["declared_over_rulesim"] = row["declared"]["median"] / row["rulesim"]["median"]
+            rows.append(row)
+    return rows
+
+
 def _single_runner(env: Any) -> Any:
     rng = np.random.default_rng(0)
     env.reset(seed=0)
@@ -143,9 +171,10 @@ def run(quick: bool = False, repeats: int = 5, agents: list[int] | None = None,
     target_s = 0.1 if quick else 1.0
     rows = sim_rates(agents or ([1, 2] if quick else [1, 5, 20]), sorted({1, batch}), repeats, target_s, kernel)
     gym = gym_rates(batch, repeats, target_s)
+    declared = declared_rates(batch, repeats, target_s)
     info["load_average_end"] = machine_info()["load_average"]
     return {"machine": info, "quick": quick, "repeats": repeats, "batched_worlds": batch, "sims": rows,
-            "goals": goals(rows), "gym": gym}
+            "goals": goals(rows), "gym": gym, "declared": declared}
 
 
 def report(r: dict[str, Any]) -> str:
@@ -176,7 +205,14 @@ def report(r: dict[str, Any]) -> str:
             ["backend", "env", "worlds", "steps/s", "env-steps/s", "spread"],
             [[x["backend"], x["kind"], x["worlds"], med(x), env(x) if "env_steps_per_s" in x else med(x), sp(x)]
              for x in g["rows"]])
+    declared = "GridWar 1v1 through RuleSim and through its declared spec (rules/gridworld/war_*.toml), " \
+               "untraced\n" + format_table(
+                   ["scenario", "env", "worlds", "RuleSim env-steps/s", "declared env-steps/s", "declared/RuleSim",
+                    "spread RuleSim/declared"],
+                   [[d["scenario"], d["kind"], d["worlds"], d["rulesim"]["median"], d["declared"]["median"],
+                     d["declared_over_rulesim"], f"{100 * d['rulesim']['spread']:.0f}%/{100 * d['declared']['spread']:.0f}%"]
+                    for d in r.get("declared", [])])
     return "\n\n".join([machine_line(r["machine"], r["quick"], r["repeats"]),
                         "simulators (env-steps/s = steps/s x worlds)\n" + sims,
                         "the engine alone, replaying the loop's steps (share = loop / engine alone)\n" + alone,
-                        goals_t, gym_t])
+                        goals_t, gym_t, declared])

@@ -22,7 +22,8 @@ GRIDWAR_ONLY = (("scenario", None, "--scenario"), ("opponent_p", None, "--oppone
 
 
 def run_env(args: argparse.Namespace) -> int:
-    from tracelab.envs.declared.play import parse_env_args, resolve_env
+    from tracelab.envs.declared.env_source import EnvSource, parse_env_args
+    from tracelab.envs.declared.play import load_declared
 
     for attr, default, flag in GRIDWAR_ONLY:
         if getattr(args, attr) != default:
@@ -33,8 +34,8 @@ def run_env(args: argparse.Namespace) -> int:
         raise UserError("--num-envs: --env plays one world at a time for now")
     if args.env_arg and args.env is None:
         raise UserError("--env-arg goes with --env")
-    source = resolve_env(args.env, parse_env_args(args.env_arg))
-    spec = source.load()
+    source = EnvSource.given(args.env, parse_env_args(args.env_arg))
+    spec = load_declared(source)
     if len(spec.agents) != 1:
         raise UserError(f"--env {args.env}: the spec declares {len(spec.agents)} agents; play --env plays "
                         "one (tracelab.envs.declared.parallel_env.DeclaredParallelEnv plays them all)")
@@ -46,10 +47,10 @@ def run_env(args: argparse.Namespace) -> int:
 
 def _record(source: Any, spec: Any, args: argparse.Namespace) -> int:
     from tracelab.commands.play import _ended_episodes
-    from tracelab.store.layout import check_new_run_dir as check_run_dir
     from tracelab.store import TraceWriter
+    from tracelab.store.layout import check_new_run_dir as check_run_dir
 
-    run_dir = Path(args.run or f"runs/play-{source.name}-{time.strftime('%Y%m%d-%H%M%S')}")
+    run_dir = Path(args.run or f"runs/play-{source.short_name}-{time.strftime('%Y%m%d-%H%M%S')}")
     check_run_dir(run_dir)
     try:
         with store_errors():  # another process took the directory since the check: a RuntimeError
@@ -82,9 +83,10 @@ def run_meta(source: Any, spec: Any, args: argparse.Namespace) -> dict[str, Any]
     from tracelab.envs.declared.recording import CONFIG_KEY, declared_facts
 
     board = spec.board
-    config = {"env": source.text, "env_id": source.env_id, "spec_path": source.spec_path,
-              "env_args": source.params, "episodes": args.episodes, "policy": "random",
-              "kernel": args.kernel, "spec": Path(source.spec_path).read_text(),
+    spec_path, params = source.declared()
+    config = {"env": source.name, "env_id": source.env_id, "spec_path": spec_path,
+              "env_args": params, "episodes": args.episodes, "policy": "random",
+              "kernel": args.kernel, "spec": Path(spec_path).read_text(),
               "rule_texts": {f: Path(f).read_text() for f in spec.program.files},
               CONFIG_KEY: declared_facts(spec),
               "declared_board": None if board is None else {"rows": list(board.rows), "cell": board.cell_format,
@@ -97,13 +99,13 @@ def _play(source: Any, spec: Any, args: argparse.Namespace, writer: Any) -> dict
     from tracelab.commands._progress import compiling_engine, progress
     from tracelab.envs.declared.play import make_declared_env, play_episodes, random_policy
 
-    with compiling_engine(busy=f"building {source.name}'s rules…"):
+    with compiling_engine(busy=f"building {source.short_name}'s rules…"):
         env = make_declared_env(source, spec, kernel=args.kernel,
                                 **({} if writer is None else {"trace_writer": writer}))
     policy = random_policy(env, args.seed)
     try:
         with CtrlCBetweenSteps() as ctrl_c, \
-                progress(f"playing {source.name}", total=args.episodes, unit="episodes") as bar:
+                progress(f"playing {source.short_name}", total=args.episodes, unit="episodes") as bar:
             def act(obs: Any, info: dict[str, Any]) -> int:
                 ctrl_c.check()  # a Ctrl-C stops the game between two steps (see CtrlCBetweenSteps)
                 return policy(obs, info)
@@ -120,7 +122,7 @@ def _summary(source: Any, stats: dict[str, Any]) -> None:
     eps = stats["episodes"]
     returns = np.array([e["return"] for e in eps])
     rate = f"{stats['steps'] / stats['seconds']:,.0f} steps/s" if stats["seconds"] > 0 else "too short to time"
-    print(f"played {len(eps)} episodes of {source.name} ({stats['steps']} steps, {rate})")
+    print(f"played {len(eps)} episodes of {source.short_name} ({stats['steps']} steps, {rate})")
     print(f"{int((returns > 0).sum())} with a positive return, "
           f"{sum(e['outcome'] == 'truncated' for e in eps)} truncated; mean return {returns.mean():.2f}")
 

@@ -20,7 +20,7 @@ GRIDWAR_ONLY = ("scenario", "non_markov", "split_networks", "slow_every_step", "
 
 
 def env_source_of(args: argparse.Namespace) -> Any:
-    from tracelab.train.env_source import EnvSource, parse_env_args
+    from tracelab.envs.declared.env_source import EnvSource, parse_env_args
     if args.env is None:
         raise UserError("--env-arg needs --env SPEC_OR_ID")
     return EnvSource.given(args.env, parse_env_args(args.env_arg))
@@ -29,7 +29,7 @@ def env_source_of(args: argparse.Namespace) -> Any:
 def refuse_env_resume(run: Path) -> None:
     """--resume of a train --env run: one line saying it keeps no checkpoint yet, and what still works."""
     from tracelab.store.meta import current_meta
-    from tracelab.train.env_source import env_source_from_json
+    from tracelab.envs.declared.env_source import env_source_from_json
     try:
         env = current_meta(run).get("config", {}).get("env")
     except (OSError, ValueError, AttributeError):

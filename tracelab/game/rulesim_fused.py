@@ -14,7 +14,6 @@ of fused_step is a hash of all four sources: a change in any of them compiles it
 """
 from __future__ import annotations
 
-import hashlib
 import inspect
 
 import numpy as np
@@ -24,6 +23,7 @@ from numba.experimental import structref
 from numba.extending import overload
 
 from tracelab.engine import kernel as K
+from tracelab.engine.numba_cache import stamp_with_sources
 from tracelab.game import observe as _observe
 from tracelab.game import rulesim_kernel as _rk
 from tracelab.game.observe import observe_step
@@ -118,20 +118,4 @@ def fused_step(b, red, blue, t, first_id):  # noqa: ANN001, ANN201
     return status
 
 
-def _stamp_with_sources(dispatcher, modules) -> bytes:  # noqa: ANN001
-    """Make `dispatcher`'s disk cache stale when any of `modules` changes (numba stamps only the file
-    defining the function). Uses numba's cache file object (numba 0.68: Cache._cache_file._source_stamp,
-    compared on every load)."""
-    digest = hashlib.sha256()
-    for m in modules:
-        digest.update(inspect.getsource(m).encode())
-        digest.update(b"\0")
-    stamp = digest.digest()
-    cache_file = dispatcher._cache._cache_file
-    if not hasattr(cache_file, "_source_stamp"):
-        raise ImportError("numba's cache no longer has _source_stamp: rulesim_fused cannot key its cache")
-    cache_file._source_stamp = stamp
-    return stamp
-
-
-SOURCE_STAMP = _stamp_with_sources(fused_step, (inspect.getmodule(bind), K, _rk, _observe))
+SOURCE_STAMP = stamp_with_sources(fused_step, (inspect.getmodule(bind), K, _rk, _observe))

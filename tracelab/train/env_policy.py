@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 
 from tracelab.engine.safe_files import read_json
-from tracelab.train.env_source import EnvSource, ObservationEncoder, check_same_env, env_source_from_json
+from tracelab.envs.declared.env_source import EnvSource, check_same_env, env_source_from_json
+from tracelab.train.env_source import ObservationEncoder
 from tracelab.train.policy import POLICY_JSON, POLICY_PT, _policy_dir, read_policy_networks, spec_net
 from tracelab.train.qnet import HiddenWidths, NumpyQ, QFunction
 from tracelab.train.experiments.stats import spread, wilson

@@ -20,7 +20,8 @@ import torch
 from tracelab.store.writer import TraceWriter
 from tracelab.train.config import TrainConfig
 from tracelab.train.env_policy import EnvEvalResult, EnvPolicy, make_vector_env, play_env_games, save_env_policy
-from tracelab.train.env_source import EnvSource, ObservationEncoder, action_count
+from tracelab.envs.declared.env_source import EnvSource
+from tracelab.train.env_source import ObservationEncoder, action_count
 from tracelab.train.learner_protocol import Learner
 from tracelab.train.loop import acting_q, close_log, eval_seed, learn_pass, make_learner, write_metric_rows
 from tracelab.train.policy import BEST_POLICY_DIR

@@ -24,7 +24,7 @@ from numba.experimental import structref
 from numba.extending import overload
 
 from tracelab.engine import kernel as K
-from tracelab.game.rulesim_fused import _stamp_with_sources
+from tracelab.engine.numba_cache import stamp_with_sources
 
 STATUS_OK = K.STATUS_OK
 FIELDS = ("cfg", "before", "after", "lower", "tables", "ext", "reads", "out")
@@ -174,8 +174,8 @@ def read_step(b):  # noqa: ANN001, ANN201
         mask[j] = 1 if lower[0, mask_atoms[j]] == 1.0 else 0
 
 
-SOURCE_STAMP = _stamp_with_sources(fused_step, (inspect.getmodule(bind), K))
-_stamp_with_sources(read_step, (inspect.getmodule(bind), K))
+SOURCE_STAMP = stamp_with_sources(fused_step, (inspect.getmodule(bind), K))
+stamp_with_sources(read_step, (inspect.getmodule(bind), K))
 
 
 def csr(groups: list[np.ndarray], bounds: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

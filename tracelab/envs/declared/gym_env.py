@@ -140,8 +140,7 @@ def observation_space(spec: WorldSpec) -> spaces.Space[Any]:
     if spec.space == "MultiDiscrete":
         return spaces.MultiDiscrete([len(p.atoms) for p in parts])
     if spec.space == "Box":
-        high = np.concatenate([np.full(p.width, len(p.atoms) - 1 if p.read == "index" else 1.0, np.float32)
-                               for p in parts])
-        return spaces.Box(np.zeros_like(high), high, dtype=np.float32)
-    return spaces.Dict({p.name: spaces.Discrete(len(p.atoms)) if p.read == "index" else
-                        spaces.Box(0.0, 1.0, (p.width,), np.float32) for p in parts})
+        bounds = [np.full((p.width, 2), p.low_high, np.float32) for p in parts]
+        low_high = np.concatenate(bounds)
+        return spaces.Box(low_high[:, 0], low_high[:, 1], dtype=np.float32)
+    return spaces.Dict({p.name: spaces.Discrete(len(p.atoms)) if p.is_discrete else spaces.Box(*p.low_high, (p.width,), np.float32) for p in parts})

@@ -14,6 +14,7 @@ import os
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -21,16 +22,16 @@ import numpy as np
 from tracelab.engine.errors import ProgramError
 from tracelab.engine.parser import check_program, load_program, parse_literal
 from tracelab.engine.program import CONSTANT_RE, Fact, Literal, Program, SourceLoc, Term
-from tracelab.envs.declared.board import MAX_BOARD_CELLS, Board
+from tracelab.envs.declared.board import MAX_BOARD_CELLS, MAX_BOARD_FACTS, Board
 from tracelab.envs.declared.expressions import ExpressionError, evaluate
 from tracelab.envs.declared.render import hex_color
 from tracelab.envs.declared.spec_file import KeyPath, SpecError, SpecSource, read_spec_file
 
-READS = ("index", "lower", "bounds", "onehot")
+READS = ("index", "lower", "bounds", "onehot", "count", "nearest")
 SPACES = ("Discrete", "MultiDiscrete", "Box", "Dict")
 SECTIONS = ("env", "params", "data", "board", "agents", "actions", "observation", "reward", "end", "start",
             "random")
-AGENT_VAR, ACTION_VAR = "Agent", "Action"
+AGENT_VAR, ACTION_VAR, THING_VAR = "Agent", "Action", "Thing"
 MAX_DOMAIN = 100_000  # values of one `over` (or of a product of them), atoms of one observation part
 
 
@@ -51,6 +52,13 @@ class ObservationPart:
     name: str
     read: str  # one of READS
     per_agent: tuple[tuple[Atom, ...], ...]  # [agent] -> the atoms read, in the part's order
+    # an index part of a Box or Dict: the number reported for each atom (its index when None) and for
+    # none true (an error when None)
+    values: tuple[float, ...] | None = None
+    missing: float | None = None
+    # a nearest part: per_agent holds the `from` atoms over the board's cells, then each thing's over them
+    n_things: int = 0
+    board_width: int = 0
 
     @property
     def atoms(self) -> tuple[Atom, ...]:
@@ -61,7 +69,30 @@ class ObservationPart:
     def width(self) -> int:
         """Numbers this part puts in a Box (an index is one number)."""
         return {"index": 1, "lower": len(self.atoms), "bounds": 2 * len(self.atoms),
-                "onehot": len(self.atoms)}[self.read]
+                "onehot": len(self.atoms), "count": 1, "nearest": 1}[self.read]
+
+    @cached_property
+    def value_array(self) -> np.ndarray | None:
+        """`values` as float32, made once (an observation reads it every step)."""
+        return None if self.values is None else np.asarray(self.values, np.float32)
+
+    @property
+    def is_discrete(self) -> bool:
+        """An index without numbers of its own: a Dict's Discrete entry."""
+        return self.read == "index" and self.values is None and self.missing is None
+
+    @property
+    def low_high(self) -> tuple[float, float]:
+        """The least and greatest number the part reports (a Box's bounds)."""
+        if self.read == "count":
+            return 0.0, float(len(self.atoms))
+        if self.read not in ("index", "nearest"):
+            return 0.0, 1.0
+        cells = len(self.atoms) // (1 + self.n_things)  # an index part: its atoms; nearest: the board's cells
+        numbers = list(self.values) if self.values is not None else [0.0, cells - 1.0]
+        if self.missing is not None:
+            numbers.append(self.missing)
+        return min(numbers), max(numbers)
 
 
 @dataclass(frozen=True)
@@ -290,7 +321,7 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     names = {**data, **defaults, **{k: _plain(v) for k, v in params.items()}}
     r = _Reader(src, names)
 
-    r.table(("env",), ("rules", "render_fps"))
+    r.table(("env",), ("rules", "render_fps", "constants"))
     rule_files = [_inside(r, ("env", "rules", i), f) for i, f in enumerate(r.strings(("env", "rules")))]
     if not rule_files:
         raise r.err(("env", "rules"), "expected at least one rule file")
@@ -307,7 +338,11 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     # the board's predicates are names the spec may use too (FrozenLake's start cells are weights of the
     # start choice, not read by a rule); a typo among them leaves the rules' predicate "never set"
     program = _with_board(r, rules, board)
-    check = _Names(r, program, [*(board.cells if board else []), *agents])
+    constants = r.strings(("env", "constants"), [])  # things no rule names (an opponent, its bullets)
+    for i, c in enumerate(constants):
+        if not CONSTANT_RE.fullmatch(c):
+            raise r.err(("env", "constants", i), f"{c!r} is not a plain constant (lower-case letter or digit first)")
+    check = _Names(r, program, [*(board.cells if board else []), *agents, *constants])
     for pred in (board.marks if board else {}):  # a predicate of one argument, true of cells
         check.pattern(("board", "marks", pred), f"{pred}(Cell)", ("Cell",))
 
@@ -427,7 +462,8 @@ def _with_board(r: _Reader, program: Program, board: Board | None) -> Program:
 
 
 def _board(r: _Reader) -> Board:
-    r.table(("board",), ("rows", "cell", "legend", "neighbours", "edge", "marks", "colors", "mark_colors"))
+    r.table(("board",), ("rows", "cell", "legend", "neighbours", "rays", "edges", "edge", "marks", "colors",
+                         "mark_colors"))
     rows = r.value(("board", "rows"))
     if isinstance(rows, list):  # rows of single characters, as gymnasium's np.asarray(desc, dtype="c") reads
         rows = ["".join(x) if isinstance(x, list) and all(isinstance(c, str) for c in x) else x for x in rows]
@@ -450,11 +486,14 @@ def _board(r: _Reader) -> Board:
         if len(ch) != 1:
             raise r.err(("board", "legend", ch), "expected a single character as the key")
         legend[ch] = tuple(r.strings(("board", "legend", ch)))
-    neighbours: dict[str, tuple[int, int]] = {}
-    for name, d in r.table(("board", "neighbours"), default={}).items():
-        if not (isinstance(d, list) and len(d) == 2 and all(isinstance(x, int) and not isinstance(x, bool) for x in d)):
-            raise r.err(("board", "neighbours", name), f"expected [row step, column step], got {_kind(d)}")
-        neighbours[name] = (d[0], d[1])
+    neighbours = {name: _offsets(r, ("board", "neighbours", name), several=True)
+                  for name in r.table(("board", "neighbours"), default={})}
+    rays = {name: _offsets(r, ("board", "rays", name))[0] for name in r.table(("board", "rays"), default={})}
+    edges = {name: _offsets(r, ("board", "edges", name))[0] for name in r.table(("board", "edges"), default={})}
+    for key, names in (("rays", rays), ("edges", edges)):
+        for name, (dr, dc) in names.items():
+            if (dr, dc) == (0, 0):
+                raise r.err(("board", key, name), "expected a step that moves: [0, 0] stays on the cell")
     edge = r.string(("board", "edge"), "stay", choices=("stay", "none"))
     marks = {}
     for pred, ch in r.table(("board", "marks"), default={}).items():
@@ -466,7 +505,23 @@ def _board(r: _Reader) -> Board:
     for pred in mark_colors:
         if pred not in marks:
             raise r.err(("board", "mark_colors", pred), "not a predicate of `marks`")
-    return Board(tuple(rows), fmt, legend, neighbours, edge, marks, colors, mark_colors)
+    board = Board(tuple(rows), fmt, legend, neighbours, edge, marks, colors, mark_colors, rays, edges)
+    if board.fact_count() > MAX_BOARD_FACTS:  # refused before the facts are built
+        raise r.err(("board",), f"makes {board.fact_count():,} facts; a board may make at most {MAX_BOARD_FACTS:,}")
+    return board
+
+
+def _offsets(r: _Reader, path: KeyPath, *, several: bool = False) -> tuple[tuple[int, int], ...]:
+    """[row step, column step], or (`several`) a list of them."""
+    d = r.raw(path)
+    is_step = lambda x: isinstance(x, list) and len(x) == 2 and all(  # noqa: E731
+        isinstance(v, int) and not isinstance(v, bool) for v in x)
+    if is_step(d):
+        return ((d[0], d[1]),)
+    if several and isinstance(d, list) and d and all(is_step(x) for x in d):
+        return tuple((x[0], x[1]) for x in d)
+    more = ", or a list of them" if several else ""
+    raise r.err(path, f"expected [row step, column step]{more}, got {_kind(d)}")
 
 
 def _color(r: _Reader, path: KeyPath) -> tuple[int, int, int]:
@@ -506,9 +561,15 @@ def _observation(r: _Reader, check: _Names, domains: dict[str, list[str]], agent
         raise r.err(("observation", "parts"), "expected at least one [[observation.parts]]")
     for i, p in enumerate(raw_parts):
         path = ("observation", "parts", i)
-        r.table(path, ("name", "read", "atom", "over", "atoms"))
+        r.table(path, ("name", "read", "atom", "over", "atoms", "values", "missing", "things", "from"))
         name = r.string((*path, "name"), f"part{i}")
         read = r.string((*path, "read"), choices=READS)
+        if read == "nearest":
+            parts.append(_nearest(r, check, path, p, name, space, domains, agents))
+            continue
+        for key in ("things", "from"):
+            if key in p:
+                raise r.err((*path, key), f"`{key}` is for a part with read = \"nearest\"")
         if ("atoms" in p) == ("atom" in p):
             raise r.err(path, "expected either `atom` (with `over`) or `atoms` (a list of ground atoms)")
         if "atoms" in p:
@@ -519,7 +580,8 @@ def _observation(r: _Reader, check: _Names, domains: dict[str, list[str]], agent
             per_agent = tuple(check.over((*path, "atom"), p["atom"], domain, a) for a in agents)
         if not per_agent[0]:
             raise r.err(path, "no atoms to read")
-        parts.append(ObservationPart(name, read, per_agent))
+        values, missing = _index_numbers(r, path, p, read, space, len(per_agent[0]))
+        parts.append(ObservationPart(name, read, per_agent, values, missing))
     if space in ("Discrete", "MultiDiscrete"):
         for i, p in enumerate(parts):
             if p.read != "index":
@@ -528,6 +590,59 @@ def _observation(r: _Reader, check: _Names, domains: dict[str, list[str]], agent
     if len({p.name for p in parts}) != len(parts):
         raise r.err(("observation", "parts"), "two parts with one name")
     return space, tuple(parts)
+
+
+def _nearest(r: _Reader, check: _Names, path: KeyPath, p: dict[str, Any], name: str, space: str,
+             domains: dict[str, list[str]], agents: list[str]) -> ObservationPart:
+    """A `nearest` part: of the `things` (in order, the first winning a tie), the board cell of the one
+    nearest (Manhattan distance, in rows and columns) to the cell where `from` holds; `atom` says where
+    a thing is (`Thing` and a cell variable)."""
+    cells = domains.get("cells")
+    if cells is None:
+        raise r.err((*path, "read"), "\"nearest\" measures distances on the [board]; the spec has none")
+    for key in ("atom", "things", "from"):
+        if key not in p:
+            raise r.err((*path, key), "missing (required for read = \"nearest\")")
+    if "over" in p or "atoms" in p:
+        raise r.err(path, "a \"nearest\" part reads the board's cells: no `over` or `atoms`")
+    things = r.strings((*path, "things"))
+    for i, t in enumerate(things):
+        if t not in check.constants:
+            raise r.err((*path, "things", i), f"the program, the board and the agents have no constant {t!r}")
+    if not things or len(things) * len(cells) > MAX_DOMAIN:
+        raise r.err((*path, "things"), f"expected 1 to {MAX_DOMAIN // len(cells)} things")
+    text = p["atom"]
+    lit = check.pattern((*path, "atom"), text, tuple(v.name for v in _vars(text)))
+    others = {a.name for a in lit.args if a.is_var} - {AGENT_VAR, THING_VAR}
+    if THING_VAR not in {a.name for a in lit.args if a.is_var} or len(others) != 1:
+        raise r.err((*path, "atom"), f"{text!r}: expected {THING_VAR} (each of `things`) and one variable for "
+                                     "the cell")
+    cell_var = others.pop()
+    per_agent = tuple((*check.over((*path, "from"), p["from"], cells, a),
+                       *(check.ground(lit, {THING_VAR: t, cell_var: c, AGENT_VAR: a}) for t in things for c in cells))
+                      for a in agents)
+    values, missing = _index_numbers(r, path, p, "nearest", space, len(cells))
+    width = len(cells) // len(r.value(("board", "rows")))
+    return ObservationPart(name, "nearest", per_agent, values, missing, len(things), width)
+
+
+def _index_numbers(r: _Reader, path: KeyPath, part: dict[str, Any], read: str, space: str, n: int
+                   ) -> tuple[tuple[float, ...] | None, float | None]:
+    """An index part's `values` (a number per atom, reported instead of its position) and `missing` (the
+    number when no atom is true): Box and Dict parts only, where an index is a number."""
+    values = missing = None
+    for key in ("values", "missing"):
+        if key in part and (read not in ("index", "nearest") or space not in ("Box", "Dict")):
+            raise r.err((*path, key), f"`{key}` is for an index or nearest part of a Box or Dict observation")
+    if "values" in part:
+        v = r.value((*path, "values"))
+        if not isinstance(v, list) or len(v) != n or not all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v):
+            raise r.err((*path, "values"), f"expected a list of {n} finite numbers (one per atom), got {_kind(v)}")
+        values = tuple(float(x) for x in v)
+    if "missing" in part:
+        missing = r.number((*path, "missing"))
+    return values, missing
 
 
 def _reward(r: _Reader, check: _Names, agents: list[str]

@@ -17,8 +17,8 @@ import inspect
 from numba import njit
 
 from tracelab.engine import kernel as K
+from tracelab.engine.numba_cache import stamp_with_sources
 from tracelab.envs.declared import fused
-from tracelab.game.rulesim_fused import _stamp_with_sources
 
 STATUS_OK = K.STATUS_OK
 
@@ -95,6 +95,6 @@ def read_truth(truth, reads, out):  # noqa: ANN001, ANN201
             mask[w, j] = 1 if truth[w, c + j] else 0
 
 
-SOURCE_STAMP = _stamp_with_sources(step_batch, (inspect.getmodule(step_batch), K, fused))
+SOURCE_STAMP = stamp_with_sources(step_batch, (inspect.getmodule(step_batch), K, fused))
 for _f in (build_rows, read_batch, read_truth):
-    _stamp_with_sources(_f, (inspect.getmodule(step_batch), K, fused))
+    stamp_with_sources(_f, (inspect.getmodule(step_batch), K, fused))

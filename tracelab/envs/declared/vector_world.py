@@ -18,6 +18,7 @@ import numpy as np
 
 from tracelab.engine.core import LANES_MIN_WORLDS
 from tracelab.envs.declared import fused, vector_fused
+from tracelab.envs.declared.observe import missing_index, part_numbers
 from tracelab.envs.declared.spec import WorldSpec
 from tracelab.envs.declared.world import DeclaredWorld
 
@@ -132,11 +133,13 @@ class DeclaredWorlds:
         return self._out[2][:, 0] == 1.0
 
     def truncated(self, limit: int | None) -> np.ndarray:
-        """A truncated atom, or the spec's step limit, or `limit` (a TimeLimit's) reached."""
+        """A truncated atom, or the spec's step limit reached in a world that did not terminate, or
+        `limit` (a TimeLimit's, which truncates whatever the step did) reached."""
         out = self._out[2][:, 1] == 1.0
-        for n in (self.spec.max_steps, limit):
-            if n is not None:
-                out |= self.steps >= n
+        if self.spec.max_steps is not None:
+            out |= (self.steps >= self.spec.max_steps) & ~self.terminated()
+        if limit is not None:
+            out |= self.steps >= limit
         return out
 
     def action_masks(self, agent: int = 0) -> np.ndarray | None:
@@ -150,11 +153,12 @@ class DeclaredWorlds:
         one, spec = self.one, self.spec
         n_index = len(one._index_parts)
         index = self._out[0][:, agent * n_index:(agent + 1) * n_index]
-        if n_index and index.min() < 0:
-            w, p = np.argwhere(index < 0)[0]
+        for p in range(n_index):
             part = spec.parts[one._index_parts[p]]
-            raise RuntimeError(f"{spec.path}: observation part {part.name!r}: no atom of "
-                               f"{part.atoms[0].pred}(...) is true in world {w}, so it has no index")
+            if missing_index(part, index[:, p]):
+                w = int(np.flatnonzero(index[:, p] < 0)[0])
+                raise RuntimeError(f"{spec.path}: observation part {part.name!r}: no atom of "
+                                   f"{part.atoms[0].pred}(...) is true in world {w}, so it has no index")
         if spec.space == "Discrete":
             value = np.zeros(self.n_worlds, np.int64)
             for size, col in zip(one._part_sizes, index.T):  # first part slowest, as observation()
@@ -162,22 +166,11 @@ class DeclaredWorlds:
             return value
         if spec.space == "MultiDiscrete":
             return index.astype(np.int64)
-        values = []
-        lower, upper = self.engine.lower, self.engine.upper
-        for k, part in enumerate(spec.parts):
-            ids = one._part_ids[k][agent]
-            if part.read == "index":
-                values.append(index[:, [one._index_parts.index(k)]])
-            elif part.read == "onehot":
-                values.append((lower[:, ids] == 1.0).astype(np.float32))
-            elif part.read == "lower":
-                values.append(lower[:, ids].astype(np.float32))
-            else:
-                values.append(np.stack([lower[:, ids], upper[:, ids]], axis=2).reshape(self.n_worlds, -1)
-                              .astype(np.float32))
+        values = [part_numbers(part, index[:, one._index_parts.index(k)] if part.read == "index" else index[:, :0],
+                               self.engine, one._part_ids[k][agent]) for k, part in enumerate(spec.parts)]
         if spec.space == "Box":
             return np.concatenate(values, axis=1).astype(np.float32)
-        return {p.name: (v[:, 0].astype(np.int64) if p.read == "index" else v) for p, v in zip(spec.parts, values)}
+        return {p.name: (v[:, 0].astype(np.int64) if p.is_discrete else v) for p, v in zip(spec.parts, values)}
 
 
 def _world(spec: WorldSpec, n_worlds: int, kernel: str) -> DeclaredWorld:

@@ -21,6 +21,7 @@ import numpy as np
 
 from tracelab.engine import Engine
 from tracelab.envs.declared import fused
+from tracelab.envs.declared.observe import part_numbers
 from tracelab.envs.declared.spec import Atom, Draw, WorldSpec
 
 
@@ -310,33 +311,24 @@ class DeclaredWorld:
             if value >= 0:
                 return value
         n_index = len(self._index_parts)
-        indices = self._out[0][agent * n_index:(agent + 1) * n_index].tolist()
-        if indices and min(indices) < 0:
-            part = spec.parts[self._index_parts[indices.index(min(indices))]]
-            raise RuntimeError(f"{spec.path}: observation part {part.name!r}: no atom of "
-                               f"{part.atoms[0].pred}(...) is true, so it has no index")
+        indices = self._out[0][agent * n_index:(agent + 1) * n_index]
+        for p, i in enumerate(indices.tolist()):
+            part = spec.parts[self._index_parts[p]]
+            if i < 0 and part.missing is None:
+                raise RuntimeError(f"{spec.path}: observation part {part.name!r}: no atom of "
+                                   f"{part.atoms[0].pred}(...) is true, so it has no index")
         if spec.space == "Discrete":
             value = 0
-            for size, i in zip(self._part_sizes, indices):  # numpy's ravel_multi_index, first part slowest
+            for size, i in zip(self._part_sizes, indices.tolist()):  # ravel_multi_index, first part slowest
                 value = value * size + i
             return value
         if spec.space == "MultiDiscrete":
-            return np.array(indices, np.int64)
-        values = []
-        for k, part in enumerate(spec.parts):
-            ids = self._part_ids[k][agent]
-            if part.read == "index":
-                values.append(np.array([indices[self._index_parts.index(k)]], np.int64))
-            elif part.read == "onehot":
-                values.append(self.true(ids).astype(np.float32))
-            elif part.read == "lower":
-                values.append(self.engine.lower[0, ids].astype(np.float32))
-            else:
-                values.append(np.stack([self.engine.lower[0, ids], self.engine.upper[0, ids]], axis=1)
-                              .ravel().astype(np.float32))
+            return indices.astype(np.int64)
+        values = [part_numbers(part, indices[[self._index_parts.index(k)]] if part.read == "index" else indices[:0],
+                               self.engine, self._part_ids[k][agent])[0] for k, part in enumerate(spec.parts)]
         if spec.space == "Box":
             return np.concatenate(values).astype(np.float32)
-        return {p.name: (int(v[0]) if p.read == "index" else v) for p, v in zip(spec.parts, values)}
+        return {p.name: (int(v[0]) if p.is_discrete else v) for p, v in zip(spec.parts, values)}
 
     def _rewards(self) -> list[float]:
         """The engine step's rewards, one per agent; also keeps the ends (read_step's flags)."""
@@ -352,8 +344,10 @@ class DeclaredWorld:
         return self._ends[0]
 
     def truncated(self) -> bool:
+        """A truncated atom, or the spec's step limit reached by a step that did not terminate (a game won
+        on its last step is won, not cut short)."""
         limit = self.spec.max_steps
-        return (limit is not None and self.steps >= limit) or self._ends[1]
+        return (limit is not None and self.steps >= limit and not self._ends[0]) or self._ends[1]
 
     def action_mask(self, agent: int = 0) -> np.ndarray | None:
         if not self._has_mask:
