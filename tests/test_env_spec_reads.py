@@ -23,7 +23,8 @@ def test_rays_edges_and_several_offsets_make_board_facts() -> None:
                   rays={"eastward": (0, 1)}, edges={"northEdge": (-1, 0)})
     facts = board.facts()
     assert [args for p, args in facts if p == "eastward" and args[0] == "c0_0"] == [("c0_0", "c0_1"), ("c0_0", "c0_2")]
-    assert sorted(args for p, args in facts if p == "near" and args[0] == "c1_1") == [("c1_1", "c1_0"), ("c1_1", "c1_2")]
+    near = sorted(args for p, args in facts if p == "near" and args[0] == "c1_1")
+    assert near == [("c1_1", "c1_0"), ("c1_1", "c1_2")]
     assert {args[0] for p, args in facts if p == "northEdge"} == {"c0_0", "c0_1", "c0_2"}
     assert board.fact_count() >= len(facts)
 
@@ -115,8 +116,10 @@ def test_mistakes_in_the_new_keys_are_located(tmp_path: Path, old: str, new: str
 
 
 def test_a_discrete_index_takes_no_numbers(tmp_path: Path) -> None:
-    text = numbers_spec().replace('space = "Box"', 'space = "MultiDiscrete"').replace('read = "count"', 'read = "index"')
-    with pytest.raises(SpecError, match=r"observation.parts\[0\].values: `values` is for an index or nearest part of a Box"):
+    text = (numbers_spec().replace('space = "Box"', 'space = "MultiDiscrete"')
+            .replace('read = "count"', 'read = "index"'))
+    with pytest.raises(SpecError,
+                       match=r"observation.parts\[0\].values: `values` is for an index or nearest part of a Box"):
         load_spec(write_world(tmp_path, text))
 
 

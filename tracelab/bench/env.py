@@ -122,9 +122,9 @@ def declared_rates(worlds: int, repeats: int, target_s: float) -> list[dict[str,
     for name in ("base", "advanced"):
         spec = RULES_DIR / "gridworld" / f"war_{name}.toml"
         for kind, n, make_rules, make_declared, runner in (
-                ("single", 1, lambda: GridWarEnv(name), lambda: make_env(spec), _single_runner),
-                ("vector", worlds, lambda: GridWarVectorEnv(worlds, name), lambda: make_vec_env(spec, worlds),
-                 _vector_runner)):
+                ("single", 1, lambda name=name: GridWarEnv(name), lambda spec=spec: make_env(spec), _single_runner),
+                ("vector", worlds, lambda name=name: GridWarVectorEnv(worlds, name),
+                 lambda spec=spec: make_vec_env(spec, worlds), _vector_runner)):
             row: dict[str, Any] = {"scenario": name, "kind": kind, "worlds": n}
             for path, make in (("rulesim", make_rules), ("declared", make_declared)):
                 env = make()
@@ -210,7 +210,8 @@ def report(r: dict[str, Any]) -> str:
                    ["scenario", "env", "worlds", "RuleSim env-steps/s", "declared env-steps/s", "declared/RuleSim",
                     "spread RuleSim/declared"],
                    [[d["scenario"], d["kind"], d["worlds"], d["rulesim"]["median"], d["declared"]["median"],
-                     d["declared_over_rulesim"], f"{100 * d['rulesim']['spread']:.0f}%/{100 * d['declared']['spread']:.0f}%"]
+                     d["declared_over_rulesim"],
+                     f"{100 * d['rulesim']['spread']:.0f}%/{100 * d['declared']['spread']:.0f}%"]
                     for d in r.get("declared", [])])
     return "\n\n".join([machine_line(r["machine"], r["quick"], r["repeats"]),
                         "simulators (env-steps/s = steps/s x worlds)\n" + sims,
