@@ -2,6 +2,7 @@
 on a rules-declared env and on GridWar base, read back through tracelab's store and CLI."""
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import pytest
@@ -130,14 +131,34 @@ class _StopAt(BaseCallback):
         return self.num_timesteps < self.step
 
 
-def test_a_training_stopped_early_is_interrupted_and_one_that_raises_failed(tmp_path: Path) -> None:
-    stopped = TracelabCallback(tmp_path / "stopped", FROZEN, eval_every=0, eval_games=2, trace_eval_games=1)
-    _ppo(FROZEN).learn(STEPS, callback=CallbackList([stopped, _StopAt(256)]))
-    assert current_meta(tmp_path / "stopped")["status"] == "interrupted"
-    # stopped early: no final evaluation, the episodes so far
-    assert _rows(tmp_path / "stopped", "SELECT count(*) FROM metrics WHERE name LIKE 'eval/%'") == [(0,)]
-    assert _rows(tmp_path / "stopped", "SELECT sum(steps) FROM episodes") == [(256,)]
+class _Peek(BaseCallback):
+    """Reads the run while SB3 trains (from step 512: after the first rollout's dump): its status and the
+    metric rows another process would see by then (the writer publishes within a second)."""
+    def __init__(self, run: Path) -> None:
+        super().__init__()
+        self.run, self.seen = run, None
 
+    def _on_step(self) -> bool:
+        if self.seen is None and self.num_timesteps >= 512:
+            deadline = time.monotonic() + 10
+            while not (n := _rows(self.run, "SELECT count(*) FROM metrics")[0][0]) and time.monotonic() < deadline:
+                time.sleep(0.1)
+            self.seen = (current_meta(self.run)["status"], n)
+        return True
+
+
+def test_the_run_is_read_live_and_a_training_stopped_early_is_interrupted(tmp_path: Path) -> None:
+    run = tmp_path / "stopped"
+    stopped, peek = TracelabCallback(run, FROZEN, eval_every=0, eval_games=2, trace_eval_games=1), _Peek(run)
+    _ppo(FROZEN).learn(STEPS, callback=CallbackList([stopped, peek, _StopAt(768)]))
+    assert peek.seen is not None and peek.seen[0] == "running" and peek.seen[1] > 0
+    assert current_meta(run)["status"] == "interrupted"
+    # stopped early: no final evaluation, the episodes so far
+    assert _rows(run, "SELECT count(*) FROM metrics WHERE name LIKE 'eval/%'") == [(0,)]
+    assert _rows(run, "SELECT sum(steps) FROM episodes") == [(768,)]
+
+
+def test_a_training_that_raises_inside_the_with_is_failed(tmp_path: Path) -> None:
     class Boom(BaseCallback):
         def _on_step(self) -> bool:
             if self.num_timesteps >= 128:
@@ -154,3 +175,16 @@ def test_an_env_whose_games_cannot_be_traced_is_refused_in_one_line(tmp_path: Pa
     with pytest.raises(UserError, match="'CartPole-v1': not a GridWar id .* cannot trace its games"):
         _ppo("CartPole-v1").learn(64, callback=cb)
     assert not (tmp_path / "run").exists()
+
+
+def test_logging_and_evaluating_leave_the_training_as_it_would_be_without(tmp_path: Path) -> None:
+    """The evaluations play in their own envs with greedy actions: the trained weights are the same bit for
+    bit as without the callback (same seed)."""
+    plain = _ppo(FROZEN)  # built (seeding torch's and numpy's global generators) and trained, then the other
+    plain.learn(512)
+    logged = _ppo(FROZEN)
+    with TracelabCallback(tmp_path / "run", FROZEN, eval_every=128, eval_games=3, trace_eval_games=1) as cb:
+        logged.learn(512, callback=cb)
+    assert _rows(tmp_path / "run", "SELECT count(DISTINCT step) FROM metrics WHERE name = 'eval/games'") == [(4,)]
+    a, b = plain.policy.state_dict(), logged.policy.state_dict()
+    assert all(torch.equal(a[k], b[k]) for k in a)

@@ -14,6 +14,7 @@ The library's adapter (train/sb3.py) feeds it: `steps()` after every vector step
 library logs, `maybe_evaluate()`, then `close(status)`."""
 from __future__ import annotations
 
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -32,7 +33,7 @@ class ExternalRun:
         self.target: EvalTarget = eval_target(env_id, env_kwargs)
         self.settings = evaluation
         described = self.target.run_meta()
-        config = {**described.pop("config"), "learner": dict(learner), "eval": vars(evaluation).copy()}
+        config = {**described.pop("config"), "learner": dict(learner), "eval": asdict(evaluation)}
         self.run_dir = Path(run_dir)
         self.writer = TraceWriter.open(self.run_dir, {"command": command, "seed": seed, "config": config,
                                                       **described})

@@ -97,7 +97,9 @@ class TracelabCallback(BaseCallback):
         try:
             if finished and run.eval_step != step:
                 run.evaluate(self.greedy_actions, step)
-            run.metrics(step, {})  # the return of the episodes since the last row, the episodes
+            # what SB3 logged after its last dump (PPO's last update: train/...), which it would write at
+            # the next rollout's; the return of the episodes since the last row; the episodes
+            run.metrics(step, self.model.logger.name_to_value)
             if self.save_model:
                 (self.run_dir / MODEL_FILE).parent.mkdir(exist_ok=True)
                 self.model.save(self.run_dir / MODEL_FILE)
