@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -188,3 +189,20 @@ def test_logging_and_evaluating_leave_the_training_as_it_would_be_without(tmp_pa
     assert _rows(tmp_path / "run", "SELECT count(DISTINCT step) FROM metrics WHERE name = 'eval/games'") == [(4,)]
     a, b = plain.policy.state_dict(), logged.policy.state_dict()
     assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_the_tui_training_view_draws_the_ppo_run_s_curves(gridwar_run: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Its loss plot draws SB3's train/loss, its return plot train_return, its win-rate plot eval/win_rate."""
+    monkeypatch.setenv("TEXTUAL_ANIMATIONS", "none")
+    from tracelab.viewers.tui.plot import BraillePlot
+    from tui_helpers import run_app, wait_for
+
+    async def body(app: Any, pilot: Any) -> None:
+        await pilot.press("6")
+        await wait_for(pilot, lambda: app.screen.panes["training"].is_attached)
+        plots = {p: app.screen.query_one(f"#plot-{p}", BraillePlot) for p in ("loss", "return", "win-rate")}
+        await wait_for(pilot, lambda: all(plot.points > 0 for plot in plots.values()))
+        assert [s.name for s in plots["loss"].series] == ["train/loss"]
+        assert "train_return" in [s.name for s in plots["return"].series]
+        assert "eval/win_rate" in [s.name for s in plots["win-rate"].series]
+    run_app([gridwar_run], body, size=(100, 30))

@@ -30,7 +30,8 @@ except ImportError as e:  # pragma: no cover - the message is the point
 from tracelab.train.external_eval import EvalSettings
 from tracelab.train.external_run import ExternalRun
 
-MODEL_FILE = "sb3/model.zip"  # the trained model, beside the run's store files (SB3's own format)
+MODEL_FILE = "sb3/model.zip"
+PROGRESS = ("num_timesteps",)  # a model's attributes that count progress, not settings: not in the config  # the trained model, beside the run's store files (SB3's own format)
 
 
 class _RunOutput(KVWriter):
@@ -150,7 +151,7 @@ class TracelabCallback(BaseCallback):
 
 def learner_settings(model: Any) -> dict[str, Any]:
     """The model's class, policy and plain settings (numbers, text, flags), for the run's config."""
-    plain = {k: v for k, v in vars(model).items()
-             if not k.startswith("_") and isinstance(v, (int, float, str, bool)) and not isinstance(v, np.generic)}
+    plain = {k: v for k, v in vars(model).items() if not k.startswith("_") and k not in PROGRESS
+             and isinstance(v, (int, float, str, bool)) and not isinstance(v, np.generic)}
     return {"library": "stable-baselines3", "algorithm": type(model).__name__,
             "policy": type(model.policy).__name__, **plain}
