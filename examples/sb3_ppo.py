@@ -13,6 +13,7 @@ import argparse
 import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import VecNormalize
 
 import tracelab.envs.gym_env  # noqa: F401  (registers tracelab/GridWar-*-v0 and the declared toy-text ids)
 from tracelab.train.sb3 import TracelabCallback
@@ -29,10 +30,15 @@ def main() -> None:
     p.add_argument("--eval-every", type=int, default=10_000)
     p.add_argument("--eval-games", type=int, default=50)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--normalize-reward", action="store_true",
+                   help="train on SB3's VecNormalize'd rewards (GridWar's are in the hundreds); the run's returns "
+                        "stay the env's own")
     args = p.parse_args()
 
     torch.set_num_threads(1)  # a small MLP: one thread is fastest, and the machine stays usable
     env = make_vec_env(args.env, n_envs=args.n_envs, seed=args.seed)
+    if args.normalize_reward:
+        env = VecNormalize(env, norm_obs=False, norm_reward=True)
     model = PPO("MlpPolicy", env, n_steps=args.n_steps, batch_size=256, seed=args.seed, device="cpu")
     with TracelabCallback(args.run, args.env, eval_every=args.eval_every, eval_games=args.eval_games,
                           seed=args.seed) as callback:

@@ -22,6 +22,7 @@ that late at most, plus the writer's own delay. Outcomes:
 from __future__ import annotations
 
 import time
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -52,7 +53,6 @@ def declared_facts(spec: WorldSpec) -> dict[str, Any]:
 def declared_run_config(spec: WorldSpec) -> dict[str, Any]:
     """What a run of a declared world's games records of it in its config, for its readers: the spec's
     and the rule files' texts, what sets each external fact (CONFIG_KEY), the board the viewers draw."""
-    from pathlib import Path
     board = spec.board
     return {"spec": Path(spec.path).read_text(), "rule_texts": {f: Path(f).read_text() for f in spec.program.files},
             CONFIG_KEY: declared_facts(spec),
