@@ -159,16 +159,19 @@ def test_the_run_is_read_live_and_a_training_stopped_early_is_interrupted(tmp_pa
     assert _rows(run, "SELECT sum(steps) FROM episodes") == [(768,)]
 
 
-def test_a_training_that_raises_inside_the_with_is_failed(tmp_path: Path) -> None:
+@pytest.mark.parametrize("error, status", [(RuntimeError, "failed"), (KeyboardInterrupt, "interrupted")])
+def test_a_training_that_raises_inside_the_with_is_failed_or_interrupted(
+        tmp_path: Path, error: type[BaseException], status: str) -> None:
     class Boom(BaseCallback):
         def _on_step(self) -> bool:
             if self.num_timesteps >= 128:
-                raise RuntimeError("boom")
+                raise error("boom")
             return True
-    with pytest.raises(RuntimeError, match="boom"):
-        with TracelabCallback(tmp_path / "failed", FROZEN, eval_every=0) as cb:
+    with pytest.raises(error, match="boom"):
+        with TracelabCallback(tmp_path / "run", FROZEN, eval_every=0) as cb:
             _ppo(FROZEN).learn(STEPS, callback=CallbackList([cb, Boom()]))
-    assert current_meta(tmp_path / "failed")["status"] == "failed"
+    assert current_meta(tmp_path / "run")["status"] == status
+    assert _rows(tmp_path / "run", "SELECT count(*) FROM episodes WHERE NOT ended") == [(0,)]
 
 
 def test_an_env_whose_games_cannot_be_traced_is_refused_in_one_line(tmp_path: Path) -> None:

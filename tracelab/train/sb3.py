@@ -139,12 +139,9 @@ class TracelabCallback(BaseCallback):
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  tb: TracebackType | None) -> None:
-        if exc_type is None:
-            status = "interrupted"  # learn() returned without its end (not called: nothing to close)
-        elif issubclass(exc_type, (KeyboardInterrupt, SystemExit)):
-            status = "interrupted"
-        else:
-            status = "failed"
+        # learn()'s end closed the run already unless it raised (or the `with` left before learn() ended)
+        status = "failed" if exc_type is not None and not issubclass(exc_type, (KeyboardInterrupt, SystemExit)) \
+            else "interrupted"
         if self.run is not None and not self.run.writer.closed:
             self._close(status)
 
