@@ -10,9 +10,10 @@ registered id such as tracelab/FrozenLake-v1, or a spec file: a traced DeclaredE
 actions (`Act`): the library's greedy prediction."""
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping, Protocol
+from typing import Any, Protocol
 
 import numpy as np
 

@@ -14,9 +14,10 @@ The library's adapter (train/sb3.py) feeds it: `steps()` after every vector step
 library logs, `maybe_evaluate()`, then `close(status)`."""
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -26,10 +27,11 @@ from tracelab.train.external_eval import Act, EvalSettings, EvalTarget, Evaluato
 
 class ExternalRun:
     def __init__(self, run_dir: str | Path, env_id: str, env_kwargs: Mapping[str, Any] | None = None, *,
-                 command: str, learner: Mapping[str, Any], evaluation: EvalSettings = EvalSettings(),
+                 command: str, learner: Mapping[str, Any], evaluation: EvalSettings | None = None,
                  seed: int | None = None) -> None:
         """Opens the run (a directory that holds none yet). `learner`: the library's settings, kept as the
-        run's config['learner']."""
+        run's config['learner']; `evaluation`: when and how it is evaluated (default EvalSettings())."""
+        evaluation = evaluation or EvalSettings()
         self.target: EvalTarget = eval_target(env_id, env_kwargs)
         self.settings = evaluation
         described = self.target.run_meta()

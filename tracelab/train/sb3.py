@@ -15,9 +15,10 @@ stops early (a callback stopped it, or Ctrl-C inside the `with`), `failed` on an
 `with`, `crashed` when the process dies. Needs the `sb3` extra: pip install 'tracelab[sb3]'."""
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -30,8 +31,8 @@ except ImportError as e:  # pragma: no cover - the message is the point
 from tracelab.train.external_eval import EvalSettings
 from tracelab.train.external_run import ExternalRun
 
-MODEL_FILE = "sb3/model.zip"
-PROGRESS = ("num_timesteps",)  # a model's attributes that count progress, not settings: not in the config  # the trained model, beside the run's store files (SB3's own format)
+MODEL_FILE = "sb3/model.zip"  # the trained model, beside the run's store files (SB3's own format)
+PROGRESS = ("num_timesteps",)  # a model's attributes that count progress, not settings: not in the config
 
 
 class _RunOutput(KVWriter):
