@@ -80,17 +80,12 @@ def _record(source: Any, spec: Any, args: argparse.Namespace) -> int:
 def run_meta(source: Any, spec: Any, args: argparse.Namespace) -> dict[str, Any]:
     """The run's metadata: the command, the env (id or file, its arguments, the spec's text and the
     rule files'), what sets each external fact (recording.declared_facts), the board's rows."""
-    from tracelab.envs.declared.recording import CONFIG_KEY, declared_facts
+    from tracelab.envs.declared.recording import declared_run_config
 
-    board = spec.board
     spec_path, params = source.declared()
     config = {"env": source.name, "env_id": source.env_id, "spec_path": spec_path,
               "env_args": params, "episodes": args.episodes, "policy": "random",
-              "kernel": args.kernel, "spec": Path(spec_path).read_text(),
-              "rule_texts": {f: Path(f).read_text() for f in spec.program.files},
-              CONFIG_KEY: declared_facts(spec),
-              "declared_board": None if board is None else {"rows": list(board.rows), "cell": board.cell_format,
-                                                            "marks": board.marks}}
+              "kernel": args.kernel, **declared_run_config(spec)}
     return {"command": " ".join(shlex.quote(a) for a in ["tracelab", *args.argv]), "config": config,
             "rule_files": list(spec.program.files), "seed": args.seed}
 

@@ -1,5 +1,6 @@
 """The Training view: live curves from the run's `metrics` (docs: HELPER_GUIDE's training-run contract):
-win rate (eval/win_rate, per opponent setting), return (train_return, eval/mean_return), loss and epsilon.
+win rate (eval/win_rate, per opponent setting), return (train_return, eval/mean_return), loss (tracelab's
+`loss`, or Stable-Baselines3's `train/loss` in a run it trained) and epsilon.
 It re-reads the metrics every second while the run is live, so the curves grow while `tracelab train`
 writes, and once more when it closes. `v` shows the evaluation games in the Episodes view.
 
@@ -24,7 +25,7 @@ PALETTE = (TRUE, BLUE_TEAM, PARTIAL, RED_TEAM, UNKNOWN)
 # plot id, title, metric names (a name ending in '@' takes every suffix: eval/win_rate@p0.3, ...)
 PLOTS = (("win-rate", "win rate", ("eval/win_rate", "eval/win_rate@", "eval/method_win_rate")),
          ("return", "return", ("train_return", "eval/mean_return", "eval/mean_return@")),
-         ("loss", "loss", ("loss",)),
+         ("loss", "loss", ("loss", "train/loss")),  # tracelab's DQN; Stable-Baselines3's (train/sb3.py)
          ("epsilon", "epsilon", ("epsilon",)))
 
 

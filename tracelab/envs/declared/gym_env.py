@@ -4,10 +4,13 @@ The spaces come from the spec: actions Discrete(number of actions); the observat
 or several as one number, first part most significant: numpy's ravel_multi_index), MultiDiscrete (the
 parts' indices), Box (the parts' numbers, float32, in order) or Dict (a space per part). `info` holds
 `action_mask` (int8, 1 = allowed) when the spec declares a mask, and `t` (steps into the episode).
-`trace_writer`: a TraceWriter the env records its games into (recording.py); env.close() closes it."""
+`trace_writer`: a TraceWriter the env records its games into (recording.py); env.close() closes it, unless
+`trace_episode_ids` is given: the run is then another's (a training's, recording its evaluation games), the
+games take their episode ids from it and begin with the info `trace_info()` sets."""
 from __future__ import annotations
 
 import os
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
@@ -29,7 +32,8 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
     metadata = {"render_modes": RENDER_MODES, "render_fps": 4}
 
     def __init__(self, spec: WorldSpec | str | os.PathLike[str], *, render_mode: str | None = None,
-                 kernel: str = "auto", trace_writer: TraceWriter | None = None, **params: Any) -> None:
+                 kernel: str = "auto", trace_writer: TraceWriter | None = None,
+                 trace_episode_ids: Callable[[], int] | None = None, **params: Any) -> None:
         self.world_spec = spec if isinstance(spec, WorldSpec) else load_spec(spec, **params)
         if len(self.world_spec.agents) != 1:
             raise ValueError(f"{self.world_spec.path}: a gymnasium Env plays one agent; this spec declares "
@@ -41,7 +45,7 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
         self._recorder: DeclaredRecorder | None = None
         if trace_writer is not None:  # the store's modules only load for a traced env
             from tracelab.envs.declared.recording import DeclaredRecorder
-            self._recorder = DeclaredRecorder(self.world, trace_writer)
+            self._recorder = DeclaredRecorder(self.world, trace_writer, trace_episode_ids)
         self.metadata = {**self.metadata, "render_fps": self.world_spec.render_fps}
         self._n_actions = len(self.world_spec.action_names)
         self.action_space = spaces.Discrete(self._n_actions)
@@ -77,6 +81,12 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
             self._recorder.stepped(a, w.last_rewards, obs, terminated,
                                    truncated or (limit is not None and w.steps >= limit))
         return obs, w.last_rewards[0], terminated, truncated, self._info()
+
+    def trace_info(self, info: Mapping[str, Any] | None) -> None:
+        """The begin info of the games a traced env records from its next reset on."""
+        if self._recorder is None:
+            raise RuntimeError("trace_info: this env records no games (it was built without trace_writer)")
+        self._recorder.begin_info = info
 
     def _registered_limit(self) -> int | None:
         """The step limit of the id gym.make built this env from: its TimeLimit wrapper truncates there,

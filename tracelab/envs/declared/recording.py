@@ -22,6 +22,7 @@ that late at most, plus the writer's own delay. Outcomes:
 from __future__ import annotations
 
 import time
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -33,6 +34,8 @@ from tracelab.store.convert import utc_now
 from tracelab.store.sink import WRITE_INTERVAL_S, WRITE_ROWS
 
 if TYPE_CHECKING:
+    from collections.abc import Callable, Mapping
+
     from tracelab.store.writer import TraceWriter
 
 CONFIG_KEY = "declared_facts"
@@ -45,6 +48,16 @@ def declared_facts(spec: WorldSpec) -> dict[str, Any]:
     draws = {d.name: sorted({a.pred for value in d.atoms for a in value})
              for d in (*spec.start_choices, *spec.random_facts)}
     return {"actions": actions, "draws": draws}
+
+
+def declared_run_config(spec: WorldSpec) -> dict[str, Any]:
+    """What a run of a declared world's games records of it in its config, for its readers: the spec's
+    and the rule files' texts, what sets each external fact (CONFIG_KEY), the board the viewers draw."""
+    board = spec.board
+    return {"spec": Path(spec.path).read_text(), "rule_texts": {f: Path(f).read_text() for f in spec.program.files},
+            CONFIG_KEY: declared_facts(spec),
+            "declared_board": None if board is None else {"rows": list(board.rows), "cell": board.cell_format,
+                                                          "marks": board.marks}}
 
 
 def flat_observation(obs: Any) -> np.ndarray:
@@ -60,9 +73,13 @@ class DeclaredRecorder:
 
     What an episode records is kept and written every WRITE_ROWS steps or WRITE_INTERVAL_S seconds (and
     at close), as StoreSink does: episode begins, change rows, step rows, then episode ends, so a reader never sees an ended
-    episode without its rows. Writing per episode cost more than the toy-text games' steps."""
+    episode without its rows. Writing per episode cost more than the toy-text games' steps.
 
-    def __init__(self, world: DeclaredWorld, writer: TraceWriter) -> None:
+    `episode_ids`: a run the recorder does not own (a training's, whose evaluation games it records):
+    episodes take their ids from it, begin with `begin_info`, and close() leaves the writer open."""
+
+    def __init__(self, world: DeclaredWorld, writer: TraceWriter,
+                 episode_ids: Callable[[], int] | None = None) -> None:
         eng = world.engine
         if not eng.trace_on.any():
             raise ValueError("the declared world's engine does not trace: build it with trace=True")
@@ -72,6 +89,8 @@ class DeclaredRecorder:
         writer.write_engine_program(eng)
         self._setup = eng.take_trace()  # the build's rows (t = 0), replayed at every episode's start
         self.episode = -1
+        self._episode_ids = episode_ids
+        self.begin_info: Mapping[str, Any] | None = None  # each episode's begin info, from the next reset on
         self._open = False
         self._t0 = 0  # the engine time of the episode's t = 0
         self._begins: list[dict[str, Any]] = []
@@ -101,12 +120,13 @@ class DeclaredRecorder:
         eng = self.world.engine
         if seed is not None or self.episode < 0:
             self._seed = seed
-        self.episode += 1
+        self.episode = self.episode + 1 if self._episode_ids is None else self._episode_ids()
         self._open = True
         self._t0 = eng.t - 1
         self._length, self._returns = 0, [0.0] * len(self.agents)
         self._clock = (np.array([self._t0], np.int64), np.array([self.episode], np.int64))
-        self._begins.append({"episode": self.episode, "t_start": 0, "seed": self._seed, "started_at": utc_now()})
+        self._begins.append({"episode": self.episode, "t_start": 0, "seed": self._seed, "started_at": utc_now(),
+                             "info": None if self.begin_info is None else dict(self.begin_info)})
         self._changes.append({**self._setup, "episode": np.full(len(self._setup["t"]), self.episode, np.int64)})
         self._take_rows()
 
@@ -137,14 +157,15 @@ class DeclaredRecorder:
 
     def close(self, status: str = "finished") -> None:
         """The rows still in the engine, the running episode ended as "aborted", all written, the
-        writer closed."""
+        writer closed (unless the run is not the recorder's: `episode_ids`)."""
         try:
             if self._open:
                 self._take_rows()
                 self._end("aborted")
             self.write_pending()
         finally:
-            self.writer.close(status=status)
+            if self._episode_ids is None:
+                self.writer.close(status=status)
 
     def write_pending(self) -> None:
         """Write what is kept: episode begins, the vocabulary the rows name, the change rows, the step

@@ -1,0 +1,256 @@
+"""Evaluations of a policy another library trains (Stable-Baselines3, ...), as tracelab's trainer makes its
+own: greedy games every so many steps, the first few of each evaluation traced in full into the training's
+run (begin info `{"kind": "eval", "train_step": N, "eval_round": K, ...}`), so `tracelab why`, `replay`
+and the TUI's evaluation games work on them, and the figures as the run's `eval/...` metrics.
+
+Two kinds of env are traced: GridWar (its gymnasium ids, tracelab/GridWar-*-v0: the games are played and
+traced by train/evaluate.py's EvalTrace, as in `tracelab train`) and the rules-declared worlds (a
+registered id such as tracelab/FrozenLake-v1, or a spec file: a traced DeclaredEnv records them, as
+`tracelab play --env --run` does). The policy is a function from a batch of observations to a batch of
+actions (`Act`): the library's greedy prediction."""
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from tracelab.errors import UserError
+from tracelab.store.writer import TraceWriter
+from tracelab.train.env_policy import EVAL_STEP_CAP, EnvEvalResult, make_vector_env, play_env_games
+from tracelab.envs.declared.env_source import EnvSource
+from tracelab.train.loop import eval_seed
+
+Act = Callable[[Any], np.ndarray]  # a batch of observations -> the batch's (greedy) actions
+NewId = Callable[[], int]          # the run's next free episode id
+
+
+@dataclass(frozen=True)
+class EvalSettings:
+    """When and how a training is evaluated (tracelab train's --eval-every, --eval-games, ... alike)."""
+    every: int = 10_000      # training steps between evaluations (0: only at the end)
+    games: int = 50          # games per evaluation
+    traced: int = 5          # of which traced in full into the run
+    envs: int = 16           # worlds stepped together for the untraced games
+    opponent_p: float = 0.3  # GridWar: the scripted opponent's probability of a move towards red's base
+    seed: int = 0            # evaluation seeds: eval_seed(seed, round), as tracelab train's
+
+    def __post_init__(self) -> None:
+        if self.every < 0 or self.games < 1 or self.traced < 0 or self.envs < 1:
+            raise ValueError(f"evaluation settings: every >= 0, games >= 1, traced >= 0, envs >= 1; got {self}")
+        if not 0.0 <= self.opponent_p <= 1.0:
+            raise ValueError(f"evaluation settings: opponent_p must lie in [0, 1], got {self.opponent_p}")
+
+
+class Evaluator(Protocol):
+    def run(self, act: Act, step: int, round_no: int) -> dict[str, float]:
+        """One evaluation at training step `step`; returns its `eval/...` metrics."""
+
+    def close(self) -> None: ...
+
+
+class EvalTarget(Protocol):
+    """An env another library trains on, as tracelab records and evaluates it."""
+    name: str
+
+    def run_meta(self) -> dict[str, Any]:
+        """The run's meta.json fields that describe the env (scenario, board, rule files, config)."""
+
+    def outcome(self, info: Mapping[str, Any], terminated: bool, truncated: bool) -> str:
+        """A training episode's outcome from its last step."""
+
+    def evaluator(self, writer: TraceWriter, new_id: NewId, settings: EvalSettings) -> Evaluator: ...
+
+
+def eval_info(step: int, round_no: int, **more: Any) -> dict[str, Any]:
+    """An evaluation game's begin info (docs/training.md, "What is logged, and where")."""
+    return {"kind": "eval", "train_step": int(step), "eval_round": int(round_no), **more}
+
+
+# ---------------------------------------------------------------------------------------------------------
+# GridWar
+# ---------------------------------------------------------------------------------------------------------
+class _GreedyTeam:
+    """tracelab.train.policy.Policy's acting interface over an `Act`: the library's actions for the agents
+    that decide this step, do-nothing for the others (no action mask: the library's policy has none)."""
+    mask = False
+
+    def __init__(self, act: Act, scenario: Any, stack_previous: bool) -> None:
+        from tracelab.game.scenario import NOTHING
+        self._act, self.stack_previous = act, stack_previous
+        self.nothing = scenario.action_ids.index(NOTHING)
+
+    def act(self, team_obs: np.ndarray, acting: np.ndarray, masks: np.ndarray | None = None) -> np.ndarray:
+        actions = np.asarray(self._act(team_obs), np.int64).reshape(acting.shape)
+        return np.where(acting, actions, self.nothing)
+
+
+@dataclass
+class GridWarTarget:
+    name: str
+    scenario: Any
+    backend: str = "rules"
+    stack_previous: bool = False
+
+    def run_meta(self) -> dict[str, Any]:
+        from tracelab.game.facts import GAME_RULES
+        from tracelab.game.scenario import BOARD
+        return {"scenario": self.scenario.name, "board": BOARD, "rule_files": [str(GAME_RULES)],
+                "config": {"env": {"name": self.name}, "scenario_toml": self.scenario.to_toml(),
+                           "backend": self.backend, "stack_previous": self.stack_previous}}
+
+    def outcome(self, info: Mapping[str, Any], terminated: bool, truncated: bool) -> str:
+        from tracelab.envs.tracer import outcome_name
+        return outcome_name(int(info.get("winner", -1)), truncated)
+
+    def evaluator(self, writer: TraceWriter, new_id: NewId, settings: EvalSettings) -> Evaluator:
+        return GridWarEvaluator(self, writer, new_id, settings)
+
+
+class GridWarEvaluator:
+    def __init__(self, target: GridWarTarget, writer: TraceWriter, new_id: NewId, settings: EvalSettings) -> None:
+        from tracelab.envs.vector_env import GridWarVectorEnv
+        from tracelab.train.evaluate import EvalTrace
+        self.target, self.settings = target, settings
+        traced = min(settings.traced, settings.games)
+        self.trace = EvalTrace(writer, target.scenario, target.backend, target.stack_previous, traced,
+                               settings.opponent_p, new_id) if traced else None
+        rest = settings.games - traced
+        self.env = GridWarVectorEnv(min(settings.envs, rest), target.scenario, backend=target.backend,
+                                    stack_previous=target.stack_previous, opponent_p=settings.opponent_p,
+                                    copy=False) if rest else None
+
+    def run(self, act: Act, step: int, round_no: int) -> dict[str, float]:
+        from tracelab.train.evaluate import evaluate
+        s, t = self.settings, self.target
+        result = evaluate(_GreedyTeam(act, t.scenario, t.stack_previous), t.scenario, games=s.games,
+                          backend=t.backend, seed=eval_seed(s.seed, round_no), opponent_p=s.opponent_p,
+                          stack_previous=t.stack_previous, trace=self.trace,
+                          trace_info=eval_info(step, round_no, opponent_p=s.opponent_p), env=self.env)
+        return result.metrics()
+
+    def close(self) -> None:
+        if self.trace is not None:
+            self.trace.close()
+        if self.env is not None:
+            self.env.close()
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Rules-declared worlds
+# ---------------------------------------------------------------------------------------------------------
+class _GreedyAgent:
+    """env_policy.EnvPolicy's acting interface over an `Act` (the library's policy has no action mask)."""
+
+    def __init__(self, act: Act) -> None:
+        self._act = act
+
+    def act(self, obs: Any, masks: np.ndarray | None = None) -> np.ndarray:
+        return np.asarray(self._act(obs))
+
+
+def batch_of_one(obs: Any) -> Any:
+    """One env's observation as a batch of one (a Dict space's parts each)."""
+    if isinstance(obs, dict):
+        return {k: np.asarray(v)[None] for k, v in obs.items()}
+    return np.asarray(obs)[None]
+
+
+@dataclass
+class DeclaredTarget:
+    source: EnvSource
+    spec: Any = field(repr=False)  # the WorldSpec
+
+    @property
+    def name(self) -> str:
+        return self.source.name
+
+    def run_meta(self) -> dict[str, Any]:
+        from tracelab.envs.declared.recording import declared_run_config
+        return {"scenario": Path(self.source.name).name, "rule_files": list(self.spec.program.files),
+                "config": {"env": self.source.to_json(), **declared_run_config(self.spec)}}
+
+    def outcome(self, info: Mapping[str, Any], terminated: bool, truncated: bool) -> str:
+        return "terminated" if terminated else "truncated"
+
+    def evaluator(self, writer: TraceWriter, new_id: NewId, settings: EvalSettings) -> Evaluator:
+        return DeclaredEvaluator(self.source, writer, new_id, settings)
+
+
+class DeclaredEvaluator:
+    """The traced games one at a time in one traced env (kept for the run: its program is written once);
+    the rest in a vector env of untraced copies, as `train --env` evaluates (env_policy.play_env_games)."""
+
+    def __init__(self, source: EnvSource, writer: TraceWriter, new_id: NewId, settings: EvalSettings) -> None:
+        self.source, self.settings = source, settings
+        self.traced = min(settings.traced, settings.games)
+        self.trace_env = EnvSource(source.name, {**source.kwargs, "trace_writer": writer,
+                                                 "trace_episode_ids": new_id}).make() if self.traced else None
+        rest = settings.games - self.traced
+        self.env = make_vector_env(source, min(settings.envs, rest)) if rest else None
+
+    def run(self, act: Act, step: int, round_no: int) -> dict[str, float]:
+        seed = eval_seed(self.settings.seed, round_no)
+        result = EnvEvalResult()
+        if self.trace_env is not None:
+            self.trace_env.unwrapped.trace_info(eval_info(step, round_no))
+            for k in range(self.traced):
+                self._play_one(act, seed + 1 + k, result)
+        rest = self.settings.games - self.traced
+        if rest and self.env is not None:
+            more = play_env_games(self.env, _GreedyAgent(act), rest, seed)
+            result.returns += more.returns
+            result.steps += more.steps
+            result.terminated += more.terminated
+            result.truncated += more.truncated
+        return result.metrics()
+
+    def _play_one(self, act: Act, seed: int, result: EnvEvalResult) -> None:
+        """One greedy game in the traced env; one that runs EVAL_STEP_CAP steps without an end is counted
+        truncated (its record ends 'aborted' at the next game's reset)."""
+        env = self.trace_env
+        obs, _ = env.reset(seed=seed)
+        ret, steps, terminated, truncated = 0.0, 0, False, False
+        while not (terminated or truncated) and steps < EVAL_STEP_CAP:
+            obs, reward, terminated, truncated, _ = env.step(int(np.asarray(act(batch_of_one(obs))).reshape(-1)[0]))
+            ret += float(reward)
+            steps += 1
+        result.returns.append(ret)
+        result.steps.append(steps)
+        result.terminated += bool(terminated)
+        result.truncated += not terminated
+
+    def close(self) -> None:
+        if self.trace_env is not None:
+            self.trace_env.close()  # the recorder writes what it kept; the run stays open (trace_episode_ids)
+        if self.env is not None:
+            self.env.close()
+
+
+# ---------------------------------------------------------------------------------------------------------
+def eval_target(env_id: str, env_kwargs: Mapping[str, Any] | None = None) -> EvalTarget:
+    """What `env_id` (a GridWar id, a declared env's id, or a spec file) is, for recording and evaluating
+    a training on it; a UserError names any other env (its games cannot be traced)."""
+    import gymnasium as gym
+
+    import tracelab.envs  # noqa: F401  (registers the toy-text ids)
+    import tracelab.envs.gym_env  # noqa: F401  (registers GridWar's)
+    kwargs = dict(env_kwargs or {})
+    registered = gym.registry.get(env_id)
+    if registered is not None and registered.entry_point == "tracelab.envs.gym_env:GridWarEnv":
+        from tracelab.envs.common import resolve_scenario
+        merged = {**registered.kwargs, **kwargs}
+        return GridWarTarget(env_id, resolve_scenario(merged.get("scenario", "advanced")),
+                             merged.get("backend", "rules"), bool(merged.get("stack_previous", False)))
+    source = EnvSource.given(env_id, kwargs)
+    env = source.make()
+    try:
+        spec = getattr(env.unwrapped, "world_spec", None)
+    finally:
+        env.close()
+    if spec is None:
+        raise UserError(f"{env_id!r}: not a GridWar id (tracelab/GridWar-base-v0, ...) nor a rules-declared "
+                        f"env (tracelab/FrozenLake-v1, a spec file): tracelab cannot trace its games")
+    return DeclaredTarget(source, spec)
