@@ -16,10 +16,6 @@ from .backend_api import EngineTables
 from .program import effective_bound
 from .restore_kernel import restore_groundings
 
-# Watched clauses (kernel.py, "watched clauses"): an inactive grounding hears only of its one watched clause
-# instead of every change of every clause it reads. The same run either way; off: slower here (docs/benchmarks.md).
-WATCHED_CLAUSES = False
-
 
 class CountingState:
     name = "counting"
@@ -46,8 +42,6 @@ class CountingState:
         self._n_grounded = 0
         self._stamp = np.zeros(1, np.int64)  # aggregated rules: distinct-atom marks are stamps
         self._req_n = np.zeros(1, np.int64)
-        self.watched = WATCHED_CLAUSES
-        self._watch: tuple[np.ndarray, ...] = ()
         self._scratch(0, 0)
 
     @property
@@ -100,32 +94,7 @@ class CountingState:
                                  self._act_pos)
         self._n_grounded = n_inst
         self._scratch(n_atoms, n_inst)
-        self._listen_all()
         self.eng.layout_version += 1  # kernel_args() changed
-
-    def use_watched(self, on: bool) -> None:
-        """Step with watched clauses (on) or with a count per grounding of its false clauses (off); the
-        run is the same. Switching recounts every world (a watched world's unsat is 0 or 1, no count)."""
-        if on == self.watched:
-            return
-        self.watched = on
-        if self._n_grounded:
-            kt = self.kt
-            K.recount_worlds(np.arange(self.eng.n_worlds), self.lower, self.upper, kt["b_ptr"], kt["b_atom"],
-                             kt["b_flags"], kt["b_bnd"], kt["inst"], self._kind_base, self._unsat, self._act,
-                             self._act_n, self._act_pos)
-            self._listen_all()
-        self.eng.layout_version += 1  # kernel_args() changed
-
-    def _listen_all(self) -> None:
-        """The watched clauses' tables of every world (from the intervals and unsat); with watched clauses
-        off, per-class tables with no columns (the kernel then counts)."""
-        kt, w = self.kt, self.eng.n_worlds
-        n_classes = len(kt["wc_gptr"]) - 1 if self.watched else 0
-        self._watch = (kt["b_ptr"], kt["b_rec"], kt["e_off"], np.zeros((w, n_classes), np.int32),
-                       np.zeros((w, n_classes), np.int32))
-        if self.watched:
-            K.watch_worlds(np.arange(w), self.lower, self.upper, self._unsat, self._watch)
 
     def _agg_args(self) -> tuple[np.ndarray, ...]:
         kt = self.kt
@@ -159,7 +128,7 @@ class CountingState:
                  self._act_n, self._act_pos, self._pend, self._pend_n, eng.trace_on, eng._tri, eng._trf,
                  eng._tr_n, eng._stats, eng._err, self._slot_of, self._touched, self._n_touched, self._si,
                  self._sf, self._out, self._heap, self._in_heap, self._changed, *self._agg_args(), self._req_i,
-                 self._req_f, self._req_n, self._pend_f, self._watch)
+                 self._req_f, self._req_n, self._pend_f)
         return before, after
 
     def step(self, ext_ptr: np.ndarray, ext_i: np.ndarray, ext_f: np.ndarray) -> int:
@@ -183,7 +152,7 @@ class CountingState:
                 self._act_pos, self._pend, self._pend_n, eng.trace_on, eng._tri, eng._trf, eng._tr_n,
                 eng._stats, eng._err, self._slot_of, self._touched, self._n_touched, self._si, self._sf,
                 self._out, self._heap, self._in_heap, self._changed, *self._agg_args(), self._req_i, self._req_f,
-                self._req_n, self._pend_f, self._watch)
+                self._req_n, self._pend_f)
         if status != K.STATUS_OK:
             self._reset_after_error()
         return status
@@ -230,7 +199,7 @@ class CountingState:
         return {"lower": self.lower.copy(), "upper": self.upper.copy(), "static": self.static.copy(),
                 "last_cause": self.last_cause.copy(), "unsat": self._unsat.copy(), "act": self._act.copy(),
                 "act_pos": self._act_pos.copy(), "act_n": self._act_n.copy(), "pend": self._pend.copy(),
-                "pend_f": self._pend_f.copy(), "pend_n": self._pend_n.copy(), "unsat_counted": not self.watched}
+                "pend_f": self._pend_f.copy(), "pend_n": self._pend_n.copy()}
 
     def restore(self, snap: dict[str, Any], indices: np.ndarray, shift: int, sources: np.ndarray | None = None
                 ) -> None:
@@ -243,35 +212,6 @@ class CountingState:
             worlds = slice(int(indices[0]), int(indices[0]) + 1)
             src = slice(int(sources[0]), int(sources[0]) + 1)
         n_atoms = snap["lower"].shape[1]
-        if self.watched and snap["unsat"].shape == self._unsat.shape and n_atoms == self.n_atoms:
-            self._restore_watched(snap, indices, sources, worlds, src)
-        else:
-            self._restore_all(snap, indices, sources, worlds, src)
-        pend, pend_n = snap["pend"], snap["pend_n"]
-        if pend.shape[1] > self._pend.shape[1]:
-            self._grow_pending(pend.shape[1])
-        self._pend[worlds, :pend.shape[1]] = pend[src]
-        self._pend_f[worlds, :pend.shape[1]] = snap["pend_f"][src]
-        self._pend[worlds, :, 0] += shift
-        self._pend_n[worlds] = pend_n[src]
-
-    def _restore_watched(self, snap: dict[str, Any], indices: np.ndarray, sources: np.ndarray,
-                         worlds: slice | np.ndarray, src: slice | np.ndarray) -> None:
-        """restore()'s interpretation and groundings with watched clauses: the atoms that differ change one
-        by one (kernel.restore_watched), as rebuilding the listeners of a world costs every grounding."""
-        eng, kt = self.eng, self.kt
-        self.static[worlds] = snap["static"][src]
-        self.last_cause[worlds] = snap["last_cause"][src]
-        K.restore_watched(np.asarray(indices, np.int64), np.asarray(sources, np.int64), snap["lower"],
-                          snap["upper"], self.lower, self.upper, self.static, eng._rule_i, eng._rule_f,
-                          eng._cfg[K.CFG_POLICY], kt["wc_ptr"], kt["wc_bnd"], kt["wc_flags"], kt["wc_gptr"],
-                          kt["wg"], self._unsat, kt["inst"], self._act, self._act_n, self._act_pos, self._kind_base,
-                          self._heap, self._in_heap, self._watch)
-
-    def _restore_all(self, snap: dict[str, Any], indices: np.ndarray, sources: np.ndarray,
-                     worlds: slice | np.ndarray, src: slice | np.ndarray) -> None:
-        """restore()'s interpretation and groundings, copied (counts) or recounted."""
-        n_atoms = snap["lower"].shape[1]
         if n_atoms < self.n_atoms:  # atoms interned since the snapshot start unset
             self.lower[worlds] = 0.0
             self.upper[worlds] = 1.0
@@ -281,8 +221,7 @@ class CountingState:
         self.upper[worlds, :n_atoms] = snap["upper"][src]
         self.static[worlds, :n_atoms] = snap["static"][src]
         self.last_cause[worlds, :n_atoms] = snap["last_cause"][src]
-        counted = snap.get("unsat_counted", True)  # a watched world's unsat is 0 or 1: recounted here
-        if snap["unsat"].shape == self._unsat.shape and n_atoms == self.n_atoms and (counted or self.watched):
+        if snap["unsat"].shape == self._unsat.shape and n_atoms == self.n_atoms:
             restore_groundings(indices, sources, snap["unsat"], snap["act"], snap["act_n"], self._unsat, self._act,
                                self._act_n, self._act_pos, self._kind_base)
         else:  # groundings grew since the snapshot: recount those worlds from their interpretation
@@ -290,8 +229,13 @@ class CountingState:
             K.recount_worlds(indices, self.lower, self.upper, kt["b_ptr"], kt["b_atom"], kt["b_flags"],
                              kt["b_bnd"], kt["inst"], self._kind_base, self._unsat, self._act, self._act_n,
                              self._act_pos)
-        if self.watched:
-            K.watch_worlds(np.asarray(indices, np.int64), self.lower, self.upper, self._unsat, self._watch)
+        pend, pend_n = snap["pend"], snap["pend_n"]
+        if pend.shape[1] > self._pend.shape[1]:
+            self._grow_pending(pend.shape[1])
+        self._pend[worlds, :pend.shape[1]] = pend[src]
+        self._pend_f[worlds, :pend.shape[1]] = snap["pend_f"][src]
+        self._pend[worlds, :, 0] += shift
+        self._pend_n[worlds] = pend_n[src]
 
     def bound(self, atom: int, world: int) -> tuple[float, float]:
         return float(self.lower[world, atom]), float(self.upper[world, atom])

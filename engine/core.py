@@ -297,12 +297,6 @@ class Engine:
         """The kernel stepping this engine: "counting", "lanes" or "compiled"."""
         return self._state.name
 
-    def use_watched_clauses(self, on: bool) -> None:
-        """The counting and compiled kernels: step with watched clauses (on) or with clause counts (off),
-        for measuring one against the other; the run is the same. Other kernels: nothing changes."""
-        if isinstance(self._state, CountingState):
-            self._state.use_watched(on)
-
     @property
     def lower(self) -> np.ndarray:
         """Lower bounds, float64 [worlds, atoms] (read-only use: the counting kernel's own array, which

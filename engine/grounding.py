@@ -543,13 +543,6 @@ class Grounder:
         ih_ptr = np.zeros(n_atoms + 1, np.int64)
         np.add.at(ih_ptr, heads[imm] + 1, 1)
         np.cumsum(ih_ptr, out=ih_ptr)
-        # watched clauses (kernel.py): one record per binding clause (lower, upper, atom, class * 4 + flags),
-        # and each edge's place in its grounding's body
-        b_class = np.empty(total, np.int64)
-        b_class[order] = np.repeat(np.arange(len(first), dtype=np.int64), np.diff(wc_gptr))
-        b_rec = np.column_stack([b_lo_a, b_up_a, b_atom_a, b_class * 4 + b_flags_a]).astype(np.float64) \
-            if total else np.zeros((0, 4), np.float64)
-        e_off = (order - b_ptr[b_inst_a[order]]).astype(np.int8)
         t_code = truth_codes(t_lo, t_up, t_neg, t_closed)
         w_test = s_test[first]
         # offsets and atom ids as int32 (tables of over 2^31 entries would not fit in memory here anyway):
@@ -570,8 +563,6 @@ class Grounder:
             "b_atom": b_atom_a.astype(np.int32),
             "b_flags": b_flags_a,
             "b_bnd": np.ascontiguousarray(b_bnd),
-            "b_rec": np.ascontiguousarray(b_rec),
-            "e_off": e_off,
         }
 
     def body_atoms(self, groundings: np.ndarray) -> np.ndarray:

@@ -202,167 +202,9 @@ def _applies(w, g, lo, up, static, rule_i, rule_f, policy, inst):
 
 
 @kernel_jit
-def _leave_active(w, g, inst, act, act_n, act_pos, kind_base):
-    """Grounding g of world w is no longer active: it leaves its kind's list (swapped with the last)."""
-    k = inst[g, INST_KIND]
-    base = kind_base[k]
-    p = act_pos[w, g]
-    last_i = act_n[w, k] - 1
-    last = act[w, base + last_i]
-    act[w, base + p] = last
-    act_pos[w, last] = p
-    act_pos[w, g] = -1
-    act_n[w, k] = last_i
-
-
-@kernel_jit
-def _join_active(w, g, lo, up, static, rule_i, rule_f, policy, inst, act, act_n, act_pos, kind_base, heap, hn,
-                 in_heap):
-    """Grounding g of world w became active: it joins its kind's list, and an immediate one that would
-    change its head becomes a candidate. Returns the heap size."""
-    k = inst[g, INST_KIND]
-    p = act_n[w, k]
-    act[w, kind_base[k] + p] = g
-    act_pos[w, g] = p
-    act_n[w, k] = p + 1
-    if k == KIND_IMMEDIATE and _applies(w, g, lo, up, static, rule_i, rule_f, policy, inst):
-        hn = _push(g, inst, heap, hn, in_heap)
-    return hn
-
-
-# ------------------------------------------------------------------ watched clauses
-# `watch` = (b_ptr, b_rec, e_off, nact, nwatch): each grounding's binding clauses b_ptr[g]..b_ptr[g + 1] as
-# one record each (b_rec: lower, upper, atom, class * 4 + flags; one row per clause so that a grounding's
-# body is one or two cache lines), each edge's place in its grounding's body (e_off: wg[e]'s clause), then
-# per world and class the number of active groundings that read it (nact) and of inactive groundings that
-# watch it (nwatch). An inactive grounding watches one of its clauses that does not hold: its unsat is 1 +
-# that clause's place in its body (so unsat == 0 still means active). A class that stops holding concerns
-# only its active readers, one that holds again only its watchers: when it has none its groundings are
-# not visited, else they are read in order (wg, contiguous) until the last one concerned is found.
-# nact with no columns: the counting scheme (unsat counts the false clauses; every edge visited).
-
-@kernel_jit
-def _false_clause(w, g, lo, up, b_ptr, b_rec):
-    """A binding clause of grounding g that does not hold in world w (its index in b_rec), or -1. Read from
-    the last: clauses on atoms only program facts set come last, and one of them that fails never wakes."""
-    for j in range(b_ptr[g + 1] - 1, b_ptr[g] - 1, -1):
-        x = np.int64(b_rec[j, 2])
-        if not _holds(lo[w, x], up[w, x], b_rec[j, 0], b_rec[j, 1], np.int64(b_rec[j, 3]) & 3):
-            return j
-    return -1
-
-
-@kernel_jit
-def _read_by(w, g, step, b_ptr, b_rec, nact):
-    """Grounding g became active (step 1) or inactive (step -1): each class it reads counts it."""
-    for j in range(b_ptr[g], b_ptr[g + 1]):
-        nact[w, np.int64(b_rec[j, 3]) >> 2] += step
-
-
-@kernel_jit
-def _wake_watchers(w, a, cl, cu, nl, nu, lo, up, static, rule_i, rule_f, policy, wc_ptr, wc_bnd, wc_flags,
-                   wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, heap, hn, in_heap, watch):
-    """Atom a of world w changed from [cl,cu] to [nl,nu] (already written): the groundings concerned by each
-    of its classes whose truth flipped. One that stopped holding deactivates its active readers (each now
-    watches it); one that holds again moves each grounding watching it to another clause that does not
-    hold, or activates it. Returns (heap size, groundings visited)."""
-    b_ptr, b_rec, e_off, nact, nwatch = watch
-    visits = 0
-    for c in range(wc_ptr[a], wc_ptr[a + 1]):
-        bl = wc_bnd[c, 0]
-        bu = wc_bnd[c, 1]
-        flags = wc_flags[c]
-        was = _holds(cl, cu, bl, bu, flags)
-        if was == _holds(nl, nu, bl, bu, flags):
-            continue
-        e = wc_gptr[c]
-        if was:  # c stopped holding: its active readers now watch it
-            while nact[w, c] > 0 and e < wc_gptr[c + 1]:
-                g = np.int64(wg[e])
-                if unsat[w, g] == 0:
-                    unsat[w, g] = 1 + e_off[e]
-                    nwatch[w, c] += 1
-                    _read_by(w, g, np.int64(-1), b_ptr, b_rec, nact)
-                    _leave_active(w, g, inst, act, act_n, act_pos, kind_base)
-                e += 1
-        else:  # c holds again: each grounding watching it watches another false clause, or is active
-            while nwatch[w, c] > 0 and e < wc_gptr[c + 1]:
-                g = np.int64(wg[e])
-                if unsat[w, g] == 1 + e_off[e]:
-                    nwatch[w, c] -= 1
-                    k = _false_clause(w, g, lo, up, b_ptr, b_rec)
-                    if k >= 0:
-                        unsat[w, g] = 1 + k - b_ptr[g]
-                        nwatch[w, np.int64(b_rec[k, 3]) >> 2] += 1
-                    else:
-                        unsat[w, g] = 0
-                        _read_by(w, g, np.int64(1), b_ptr, b_rec, nact)
-                        hn = _join_active(w, g, lo, up, static, rule_i, rule_f, policy, inst, act, act_n, act_pos,
-                                          kind_base, heap, hn, in_heap)
-                e += 1
-        visits += e - wc_gptr[c]
-    return hn, visits
-
-
-@kernel_jit
-def watch_worlds(worlds, lo, up, unsat, watch):
-    """The watched clauses of the given worlds from scratch, from their intervals and unsat (0: active):
-    an inactive grounding watches its first false clause (read from the last)."""
-    b_ptr, b_rec, e_off, nact, nwatch = watch
-    for i in range(worlds.shape[0]):
-        w = worlds[i]
-        for c in range(nact.shape[1]):
-            nact[w, c] = 0
-            nwatch[w, c] = 0
-        for g in range(b_ptr.shape[0] - 1):
-            if unsat[w, g] == 0:
-                _read_by(w, np.int64(g), np.int64(1), b_ptr, b_rec, nact)
-                continue
-            j = _false_clause(w, np.int64(g), lo, up, b_ptr, b_rec)
-            if j < 0:  # counts and intervals disagree (cannot happen: recounts and steps keep them together)
-                continue
-            unsat[w, g] = 1 + j - b_ptr[g]
-            nwatch[w, np.int64(b_rec[j, 3]) >> 2] += 1
-
-
-@kernel_jit
-def restore_watched(worlds, sources, s_lo, s_up, lo, up, static, rule_i, rule_f, policy, wc_ptr, wc_bnd, wc_flags,
-                    wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, heap, in_heap, watch):
-    """Worlds `worlds` take the intervals of snapshot worlds `sources` (s_lo, s_up) with watched clauses:
-    each atom that differs changes as in a step (without a trace row), so unsat, the active lists and the
-    listeners follow at the cost of the differences, not of every grounding. Immediate groundings made
-    candidates meanwhile are dropped (a step starts with none)."""
-    for i in range(worlds.shape[0]):
-        w = worlds[i]
-        s = sources[i]
-        hn = np.int64(0)
-        for a in range(s_lo.shape[1]):
-            nl = s_lo[s, a]
-            nu = s_up[s, a]
-            cl = lo[w, a]
-            cu = up[w, a]
-            if nl == cl and nu == cu:
-                continue
-            lo[w, a] = nl
-            up[w, a] = nu
-            hn, _ = _wake_watchers(w, np.int64(a), cl, cu, nl, nu, lo, up, static, rule_i, rule_f, policy, wc_ptr,
-                                   wc_bnd, wc_flags, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, heap,
-                                   hn, in_heap, watch)
-        _drop_candidates(heap, hn, in_heap)
-
-
-@kernel_jit
-def _drop_candidates(heap, hn, in_heap):
-    """Forget the heap's candidates (their membership flags too); returns the empty heap's size."""
-    for k in range(hn):
-        in_heap[heap[k] & HEAP_MASK] = False
-    return np.int64(0)
-
-
-@kernel_jit
 def _set_atom(w, t, pass_no, a, cl, cu, nl, nu, kind, cid, g_src, nsrc, skip, lo, up, last_cause,
               static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_flags, wc_gptr, wg, unsat, inst,
-              act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap, watch):
+              act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap):
     """Change atom a of world w from [cl,cu] to [nl,nu]: log the row, update the counts of the
     groundings that read a (activating and deactivating them), and make the immediate groundings
     that became active, or that set a, candidates; except `skip`, an immediate grounding that just
@@ -390,38 +232,46 @@ def _set_atom(w, t, pass_no, a, cl, cu, nl, nu, kind, cid, g_src, nsrc, skip, lo
     last_cause[w, a, 0] = kind
     last_cause[w, a, 1] = cid
     stats[w, STAT_CHANGES] += 1
-    if watch[3].shape[1] > 0:  # watched clauses (the per-world class tables exist)
-        hn, visits = _wake_watchers(w, a, cl, cu, nl, nu, lo, up, static, rule_i, rule_f, policy, wc_ptr, wc_bnd,
-                                    wc_flags, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, heap, hn,
-                                    in_heap, watch)
-    else:
-        visits = 0
-        for c in range(wc_ptr[a], wc_ptr[a + 1]):
-            bl = wc_bnd[c, 0]
-            bu = wc_bnd[c, 1]
-            flags = wc_flags[c]
-            was = _holds(cl, cu, bl, bu, flags)
-            now = _holds(nl, nu, bl, bu, flags)
-            if was == now:
-                continue
-            e0 = wc_gptr[c]
-            e1 = wc_gptr[c + 1]
-            visits += e1 - e0
-            if was:  # the clause stopped holding: one more unsatisfied clause
-                for e in range(e0, e1):
-                    g = wg[e]
-                    u = unsat[w, g] + 1
-                    unsat[w, g] = u
-                    if u == 1:  # was active
-                        _leave_active(w, np.int64(g), inst, act, act_n, act_pos, kind_base)
-            else:
-                for e in range(e0, e1):
-                    g = wg[e]
-                    u = unsat[w, g] - 1
-                    unsat[w, g] = u
-                    if u == 0:
-                        hn = _join_active(w, np.int64(g), lo, up, static, rule_i, rule_f, policy, inst, act, act_n,
-                                          act_pos, kind_base, heap, hn, in_heap)
+    visits = 0
+    for c in range(wc_ptr[a], wc_ptr[a + 1]):
+        bl = wc_bnd[c, 0]
+        bu = wc_bnd[c, 1]
+        flags = wc_flags[c]
+        was = _holds(cl, cu, bl, bu, flags)
+        now = _holds(nl, nu, bl, bu, flags)
+        if was == now:
+            continue
+        e0 = wc_gptr[c]
+        e1 = wc_gptr[c + 1]
+        visits += e1 - e0
+        if was:  # the clause stopped holding: one more unsatisfied clause
+            for e in range(e0, e1):
+                g = wg[e]
+                u = unsat[w, g] + 1
+                unsat[w, g] = u
+                if u == 1:  # was active: leave its kind's list (swap with the last)
+                    k = inst[g, INST_KIND]
+                    base = kind_base[k]
+                    p = act_pos[w, g]
+                    last_i = act_n[w, k] - 1
+                    last = act[w, base + last_i]
+                    act[w, base + p] = last
+                    act_pos[w, last] = p
+                    act_pos[w, g] = -1
+                    act_n[w, k] = last_i
+        else:
+            for e in range(e0, e1):
+                g = wg[e]
+                u = unsat[w, g] - 1
+                unsat[w, g] = u
+                if u == 0:  # became active: join its kind's list
+                    k = inst[g, INST_KIND]
+                    p = act_n[w, k]
+                    act[w, kind_base[k] + p] = g
+                    act_pos[w, g] = p
+                    act_n[w, k] = p + 1
+                    if k == KIND_IMMEDIATE and _applies(w, g, lo, up, static, rule_i, rule_f, policy, inst):
+                        hn = _push(g, inst, heap, hn, in_heap)
     stats[w, STAT_WATCH_VISITS] += visits
     # the immediate groundings that set a may now change it (back)
     for k in range(ih_ptr[a], ih_ptr[a + 1]):
@@ -575,7 +425,7 @@ def _sort_small(a, n):
 def _apply_groups(w, t, pass_no, policy, rule_i, rule_f, slot_of, touched, n_touched, si, sf, out, lo, up,
                   static, last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd, wc_flags, wc_gptr, wg,
                   unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap,
-                  changed, watch):
+                  changed):
     """Apply every pending group of this pass (one per touched atom), in atom order.
     changed[0] counts the atoms that changed. Returns (status, heap size)."""
     n = n_touched[0]
@@ -621,12 +471,12 @@ def _apply_groups(w, t, pass_no, policy, rule_i, rule_f, slot_of, touched, n_tou
                 hn = _set_atom(w, t, pass_no, np.int64(a), cl, cu, nl, nu, np.int64(CAUSE_POLICY), policy,
                                si[s, S_RULE_INST], nsrc, np.int64(-1), lo, up, last_cause, static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_flags,
                                wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst,
-                               heap, hn, in_heap, watch)
+                               heap, hn, in_heap)
             else:
                 hn = _set_atom(w, t, pass_no, np.int64(a), cl, cu, nl, nu, kind, si[s, S_PRIM_ID], si[s, S_PRIM_INST],
                                nsrc, np.int64(-1), lo, up, last_cause, static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd,
                                wc_flags, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
-                               ih_inst, heap, hn, in_heap, watch)
+                               ih_inst, heap, hn, in_heap)
             if hn < 0:
                 status = STATUS_TRACE_LIMIT
                 err[E_WORLD] = w
@@ -666,7 +516,7 @@ def _one_source(cl, cu, l, u, override, policy, out):
 
 @kernel_jit
 def _reset_world(w, t, policy, rule_i, rule_f, lo, up, static, last_cause, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_flags,
-                 wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap, watch):
+                 wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap):
     """`%timesteps reset`: every non-static atom goes back to [0,1] at the start of a step."""
     for a in range(lo.shape[1]):
         if static[w, a]:
@@ -678,7 +528,7 @@ def _reset_world(w, t, policy, rule_i, rule_f, lo, up, static, last_cause, trace
         hn = _set_atom(w, t, np.int64(0), a, cl, cu, 0.0, 1.0, np.int64(CAUSE_RESET), np.int64(-1), np.int64(-1),
                        np.int64(0), np.int64(-1), lo, up, last_cause, static, rule_i, rule_f, policy, trace_on,
                        tri, trf, tr_n, stats, wc_ptr, wc_bnd, wc_flags, wc_gptr, wg, unsat, inst, act, act_n,
-                       act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap, watch)
+                       act_pos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap)
         if hn < 0:
             return hn
     return hn
@@ -690,7 +540,7 @@ def step_worlds(cfg, w_first, rule_i, rule_f, inst, kind_base, wc_ptr, wc_bnd, w
                 lo, up, static, last_cause, unsat, act, act_n, act_pos, pend, pend_n,
                 trace_on, tri, trf, tr_n, stats, err, slot_of, touched, n_touched, si, sf, out, heap, in_heap,
                 changed, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn, ag_q, ag_qv, mark, stamp, g_l, g_u,
-                g_w, req_i, req_f, req_n, pend_f, watch):
+                g_w, req_i, req_f, req_n, pend_f):
     """Compute timestep cfg[CFG_T] for worlds w_first.. in order. Returns (status, world): STATUS_OK and
     the number of worlds, or a status and the world it concerns (STATUS_TRACE_ROOM / STATUS_PEND_ROOM:
     grow that buffer and call again from that world)."""
@@ -733,7 +583,7 @@ def step_worlds(cfg, w_first, rule_i, rule_f, inst, kind_base, wc_ptr, wc_bnd, w
                                  last_cause, unsat, act, act_n, act_pos, pend, pend_n, trace_on, tri, trf, tr_n,
                                  stats, err, slot_of, touched, n_touched, si, sf, out, heap, in_heap, changed,
                                  hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn, ag_q, ag_qv, mark, stamp, g_l,
-                                 g_u, g_w, req_i, req_f, req_n, pend_f, watch)
+                                 g_u, g_w, req_i, req_f, req_n, pend_f)
             if status != STATUS_OK:
                 return status, w
         # delayed rules read the final interpretation of t and schedule their heads (room for every
@@ -778,7 +628,7 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
                 ext_i, ext_f, reset, lo, up, static, last_cause, unsat, act, act_n, act_pos, pend, pend_n,
                 trace_on, tri, trf, tr_n, stats, err, slot_of, touched, n_touched, si, sf, out, heap, in_heap,
                 changed, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn, ag_q, ag_qv, mark, stamp, g_l, g_u,
-                g_w, req_i, req_f, req_n, pend_f, watch):
+                g_w, req_i, req_f, req_n, pend_f):
     """One world's timestep t up to its fixpoint (docs/language.md, 'One timestep t'), without the
     scheduling of delayed rules. Returns a status (STATUS_TRACE_ROOM: resume by calling again, cfg says
     where)."""
@@ -795,7 +645,7 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
                               np.int64(lo.shape[1]))
             hn = _reset_world(w, t, policy, rule_i, rule_f, lo, up, static, last_cause, trace_on, tri, trf, tr_n, stats,
                               wc_ptr, wc_bnd, wc_flags, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
-                              ih_inst, heap, hn, in_heap, watch)
+                              ih_inst, heap, hn, in_heap)
             if hn < 0:
                 err[E_WORLD] = w
                 return STATUS_TRACE_LIMIT
@@ -809,7 +659,7 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
         status, hn = _apply_groups(w, t, np.int64(0), policy, rule_i, rule_f, slot_of, touched, n_touched, si, sf, out,
                                    lo, up, static, last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd,
                                    wc_flags, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst,
-                                   heap, hn, in_heap, changed, watch)
+                                   heap, hn, in_heap, changed)
         if status != STATUS_OK:
             return status
         # every active immediate grounding is a candidate of the first immediate phase; after that, a
@@ -882,13 +732,13 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
                                    g, np.int64(1), np.int64(-1), lo, up,
                                    last_cause, static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr,
                                    wc_bnd, wc_flags, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
-                                   ih_inst, heap, hn, in_heap, watch)
+                                   ih_inst, heap, hn, in_heap)
                 else:
                     hn = _set_atom(w, t, pass_no, np.int64(a), cl, cu, out[0], out[1], np.int64(CAUSE_RULE),
                                    np.int64(r), g, np.int64(1), g, lo, up, last_cause,
                                    static, rule_i, rule_f, policy, trace_on, tri, trf, tr_n, stats, wc_ptr, wc_bnd,
                                    wc_flags, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr, ih_inst,
-                                   heap, hn, in_heap, watch)
+                                   heap, hn, in_heap)
                 if hn < 0:
                     err[E_WORLD] = w
                     return STATUS_TRACE_LIMIT
@@ -916,7 +766,7 @@ def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rul
         status, hn = _apply_groups(w, t, pass_no, policy, rule_i, rule_f, slot_of, touched, n_touched, si, sf, out, lo, up,
                                    static, last_cause, trace_on, tri, trf, tr_n, stats, err, wc_ptr, wc_bnd,
                                    wc_flags, wc_gptr, wg, unsat, inst, act, act_n, act_pos, kind_base, ih_ptr,
-                                   ih_inst, heap, hn, in_heap, changed, watch)
+                                   ih_inst, heap, hn, in_heap, changed)
         if status != STATUS_OK:
             return status
         stats[w, STAT_PASSES] += 1

@@ -1,7 +1,6 @@
 """Two engine kernels on the same recorded work, in one process, in alternating blocks (CPU time):
 `python -m tracelab.bench.kernel_ab [--agents 1,5] [--worlds 1] [--steps 2000] [--rounds 9]
-[--kernels counting,compiled]`;
-kernels are Engine kernel names or "watched" / "unwatched" (the counting kernel with watched clauses on, off).
+[--kernels counting,compiled]`.
 
 On a shared, loaded machine the wall-clock figures of two separate `bench env` runs move by more than
 the difference between kernels; a paired ratio of CPU times, alternating A and B, does not. For each
@@ -20,7 +19,6 @@ from typing import Any
 import numpy as np
 
 from tracelab.bench.sims import Loop, record_replay, scenario_for
-from tracelab.engine import backend_counting
 from tracelab.game.rulesim import RuleSim
 
 
@@ -35,28 +33,11 @@ def _replayer(sim: RuleSim, trace: bool, steps: int) -> Callable[[], float]:
     return timed
 
 
-# kernel variants beside Engine's kernel names: the counting kernel with watched clauses on or off
-VARIANTS = {"watched": ("counting", True), "unwatched": ("counting", False)}
-
-
-def _sim(agents: int, worlds: int, kernel: str) -> RuleSim:
-    """A RuleSim on `kernel`: an Engine kernel name or a VARIANTS name."""
-    name, watched = VARIANTS.get(kernel, (kernel, None))
-    default = backend_counting.WATCHED_CLAUSES
-    if watched is not None:  # from the start: the RuleSim's start snapshot is then taken in that mode
-        backend_counting.WATCHED_CLAUSES = watched
-    try:
-        sim = RuleSim(scenario_for(agents), worlds, seed=0, trace=True, kernel=name)
-    finally:
-        backend_counting.WATCHED_CLAUSES = default
-    assert sim.engine.kernel == name, (kernel, sim.engine.kernel, sim.engine.kernel_notice)
-    return sim
-
-
 def compare(agents: int, worlds: int, trace: bool, steps: int, rounds: int, kernels: list[str]) -> dict[str, Any]:
     replays = []
     for k in kernels:
-        sim = _sim(agents, worlds, k)
+        sim = RuleSim(scenario_for(agents), worlds, seed=0, trace=True, kernel=k)
+        assert sim.engine.kernel == k, (k, sim.engine.kernel, sim.engine.kernel_notice)
         sim.engine.trace_on[:] = trace
         replays.append(_replayer(sim, trace, steps))
     for r in replays:
