@@ -32,7 +32,9 @@ def train(run_dir: str, stop_file: str) -> None:
     with TraceWriter(run_dir, {"command": "tracelab train --test", "config": {"test": True}},
                      flush_interval=0.1) as w:
         step, episode = 0, 0
-        while not Path(stop_file).exists() and step < 5_000:
+        # the stop file ends it; the cap (~2 min of rounds) only bounds a test that never touches it: at 5,000
+        # steps (~10 s) a TUI test on a loaded machine once sent its Ctrl-C to a training already finished
+        while not Path(stop_file).exists() and step < 60_000:
             step += 100
             w.begin_episode(episode, info={"kind": "train", "train_step": step})
             w.end_episode(episode, steps=10, outcome="win" if episode % 3 == 0 else "loss", reward=1.0)
