@@ -57,13 +57,20 @@ def test_ray_and_jobs_together_is_one_line(capsys):
     assert err == ["tracelab: error: --jobs and --ray: Ray decides how many trainings run at a time; give one of them"]
 
 
-def test_ctrl_c_cancels_the_ray_tasks_and_closes_their_runs(tmp_path):
-    out = tmp_path / "exp"
-    proc = subprocess.Popen([sys.executable, "-m", "tracelab", "experiment", "1v1-base", "--quick", "--steps",
-                             "50000000", "--kernel", "counting", "--ray", "--out", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+def test_an_address_where_nothing_answers_is_one_line(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "tracelab", "experiment", "1v1-base", "--quick", "--ray",
+                           "127.0.0.1:1", "--out", str(tmp_path / "exp")], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 1
+    assert proc.stderr.splitlines() == ["tracelab: error: --ray 127.0.0.1:1: no Ray cluster answers there "
+                                        "(Connection refused)"]
+
+
+def interrupt_when_training(argv: list[str], runs: list[Path]) -> str:
+    """Start `tracelab ARGV` (SIGINT as a terminal's, not ignored as a background job's), press Ctrl-C once
+    every run in `runs` trains; its stderr, after checking it ended with status 130."""
+    proc = subprocess.Popen([sys.executable, "-m", "tracelab", *argv], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    runs = [out / arm for arm in ARMS]
     try:
         deadline = time.monotonic() + 240
         while time.monotonic() < deadline and not all((r / "meta.json").exists() for r in runs):
@@ -77,8 +84,29 @@ def test_ctrl_c_cancels_the_ray_tasks_and_closes_their_runs(tmp_path):
             proc.kill()
             proc.wait()
     assert proc.returncode == 130, err
+    return err
+
+
+def test_ctrl_c_cancels_the_ray_tasks_and_closes_their_runs(tmp_path):
+    out = tmp_path / "exp"
+    runs = [out / arm for arm in ARMS]
+    err = interrupt_when_training(["experiment", "1v1-base", "--quick", "--steps", "50000000", "--kernel", "counting",
+                                   "--ray", "--out", str(out)], runs)
     assert err.strip().splitlines()[-1] == f"tracelab: interrupted: no report written (the runs so far are in {out})"
     assert [run_info(r).status for r in runs] == ["interrupted", "interrupted"]
+
+
+def test_ctrl_c_stops_the_sweep_and_closes_its_trials(tmp_path):
+    """Evaluations far apart: the trials still stop (they report to Tune at least every 2 s)."""
+    out = tmp_path / "sweep"
+    runs = [out / "trial-000", out / "trial-001"]
+    err = interrupt_when_training(["sweep", "--set", "steps=50000000", "--set", "eval_every=10000000", "--set",
+                                   "envs=8", "--set", "kernel=counting", "--grid", "lr=1e-4,1e-3", "--out", str(out)],
+                                  runs)
+    assert err.strip().splitlines()[-1] == (f"tracelab: interrupted: the sweep was stopped (its trials' runs are "
+                                            f"closed, in {out})")
+    assert [run_info(r).status for r in runs] == ["interrupted", "interrupted"]
+    assert all((r / "checkpoint").is_dir() for r in runs)
 
 
 def last_metric(run: Path, name: str) -> float:

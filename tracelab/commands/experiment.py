@@ -61,8 +61,8 @@ def run(args: argparse.Namespace) -> int:
     if args.ray is not None:
         if args.jobs > 1:
             raise UserError("--jobs and --ray: Ray decides how many trainings run at a time; give one of them")
-        from tracelab.train.ray_session import import_ray
-        import_ray()  # the install hint before anything is checked or trained
+        from tracelab.train.ray_session import check_address
+        check_address(args.ray)  # the install hint, or an address where nothing answers, before any training
     taken = [out / f"{a.slug}-seed{s}{tail}" for a in exp.arms for s in range(budget.seeds)
              for tail in ("", "-traces") if (out / f"{a.slug}-seed{s}{tail}").exists()]
     if taken:

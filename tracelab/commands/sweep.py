@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from tracelab.commands._args import positive_int
+from tracelab.commands._interrupt import CtrlCStops
 from tracelab.errors import UserError
 
 
@@ -45,7 +46,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from tracelab.commands.train import load_scenario_arg
     from tracelab.errors import store_errors
-    from tracelab.train.ray_session import import_ray, ray_session
+    from tracelab.train.ray_session import check_address, ray_session
     from tracelab.train.sweep_spec import build_spec
 
     spec = build_spec(sets=args.set, grids=args.grid, randoms=args.random, file=args.spec, samples=args.samples,
@@ -56,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out or _default_out())
     if out.exists() and any(out.iterdir()):
         raise UserError(f"{out} is not empty: give another --out or remove it")
-    import_ray()  # the install hint before anything starts
+    check_address(args.ray)  # the install hint, or an address where nothing answers, before anything starts
     from tracelab.train.sweep import run_sweep
 
     command = " ".join(shlex.quote(a) for a in ["tracelab", "sweep", *args.argv[1:]])
@@ -68,22 +69,29 @@ def run(args: argparse.Namespace) -> int:
         signal.raise_signal(signal.SIGINT)
 
     previous = signal.signal(signal.SIGTERM, terminated)
+    # Ctrl-C during the search is Tune's (it stops the trials, whose runs close as interrupted, and returns):
+    # CtrlCStops sees the press through the wakeup fd and ends the command with status 130 after the list
+    stopped = CtrlCStops(lambda: None, f"the sweep was stopped (its trials' runs are closed, in {out})")
     try:
-        with ray_session(args.ray):
-            result = run_sweep(spec, scenario, out, command)
+        with stopped:
+            with ray_session(args.ray):
+                result = run_sweep(spec, scenario, out, command)
+            for t in sorted(result.trials, key=lambda t: t["run"]):
+                shown = ("no evaluation" if t["value"] is None
+                         else f"{spec.metric} {t['value']:.3f} at step {t['step']:,}")
+                say(f"  {t['run']}: {_values(t['config'])}: {shown}" + (f" (failed: {t['error']})" if t["error"] else ""))
+            if stopped.pressed.is_set():
+                return 130  # CtrlCStops raises KeyboardInterrupt on the way out
     finally:
         signal.signal(signal.SIGTERM, previous)
-    for t in sorted(result.trials, key=lambda t: t["run"]):
-        values = ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in t["config"].items())
-        shown = "no evaluation" if t["value"] is None else f"{spec.metric} {t['value']:.3f} at step {t['step']:,}"
-        say(f"  {t['run']}: {values}: {shown}" + (f" (failed: {t['error']})" if t["error"] else ""))
-    if result.interrupted:
-        raise KeyboardInterrupt(f"the sweep was stopped (its trials' runs are closed, in {out})")
     if result.best_dir is None:
         raise UserError(f"no trial reported {spec.metric} (see the runs in {out})")
-    values = ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in result.best_config.items())
-    print(f"best trial: {result.best_dir}  {values}  ({spec.metric} {result.best_value:.3f})")
+    print(f"best trial: {result.best_dir}  {_values(result.best_config)}  ({spec.metric} {result.best_value:.3f})")
     return 0
+
+
+def _values(config: dict) -> str:
+    return ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in config.items())
 
 
 def _default_out() -> str:

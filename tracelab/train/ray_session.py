@@ -16,6 +16,7 @@ from tracelab.errors import UserError
 
 INSTALL_HINT = "Ray is not installed: pip install 'tracelab[ray]' (or pip install 'ray[tune]')"
 LOCAL = "local"  # Ray's own address for "start a new local Ray for this process"
+CONNECT_TIMEOUT_S = 5.0  # Ray itself retries an address where nothing answers for minutes
 
 
 def import_ray() -> ModuleType:
@@ -40,7 +41,7 @@ def ray_session(address: str = LOCAL) -> Iterator[ModuleType]:
     """`with ray_session(address) as ray:` Ray initialised for the block and shut down after it (a local
     Ray started here stops with it; a cluster keeps running). A cluster that cannot be reached is a
     UserError naming the address."""
-    ray = import_ray()
+    ray = check_address(address)
     quiet = {"log_to_driver": False, "logging_level": logging.ERROR}  # workers' output stays in Ray's logs
     try:
         if address == LOCAL:
@@ -54,3 +55,24 @@ def ray_session(address: str = LOCAL) -> Iterator[ModuleType]:
         yield ray
     finally:
         ray.shutdown()
+
+
+def check_address(address: str) -> ModuleType:
+    """Before anything starts: Ray is installed, and a cluster's address answers. Returns the ray module."""
+    ray = import_ray()
+    if address not in (LOCAL, "auto"):
+        check_reachable(address)
+    return ray
+
+
+def check_reachable(address: str) -> None:
+    """HOST:PORT (or ray://HOST:PORT) answers a TCP connection within CONNECT_TIMEOUT_S, else a UserError
+    naming it (ray.init would retry it for minutes, printing warnings)."""
+    import socket
+    host, sep, port = address.removeprefix("ray://").rpartition(":")
+    if not sep or not host or not port.isdigit():
+        raise UserError(f"--ray {address}: expected HOST:PORT, ray://HOST:PORT, auto, or no address (a local Ray)")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=CONNECT_TIMEOUT_S).close()
+    except OSError as e:
+        raise UserError(f"--ray {address}: no Ray cluster answers there ({e.strerror or e})") from None

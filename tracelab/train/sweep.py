@@ -10,6 +10,7 @@ step of its last evaluation, with a checkpoint (train --resume continues it)."""
 from __future__ import annotations
 
 import logging
+import os
 import queue
 import re
 import threading
@@ -28,6 +29,7 @@ from tracelab.train.sweep_spec import Axis, SweepSpec
 
 CLOSE_WAIT_S = 300       # a stopped trial's last pass, checkpoint and policy before its actor goes
 ASHA_REDUCTION = 2       # each rung keeps the best half (sweeps here are a few to a few dozen trials)
+HEARTBEAT_S = 2.0        # a trial reports at least this often (its evaluations may be far apart)
 TUNE_DIR = "tune"        # Tune's own records of the sweep, under --out
 
 
@@ -98,10 +100,17 @@ class TracelabTrial(tune.Trainable):
             trainer.stop_requested = True
 
     def step(self) -> dict[str, Any]:
+        """The trial's next evaluation; or, after HEARTBEAT_S without one, the step it is at (no metric:
+        the scheduler passes it by). Tune's actor runs one call at a time, so returning now and then is
+        what lets a stop (ASHA, Ctrl-C) reach cleanup() between evaluations far apart."""
         if not self.first:
             self.go.release()  # the training goes on to its next evaluation
         self.first = False
-        item = self.results.get()
+        try:
+            item = self.results.get(timeout=HEARTBEAT_S)
+        except queue.Empty:
+            self.first = True  # the training is not waiting: nothing to release next time
+            return {"step": self.trainer.step if self.trainer is not None else 0}
         if isinstance(item, BaseException):
             raise item
         if item is None:  # the metric never came (evaluations off): what Tune sees ends here
@@ -117,13 +126,22 @@ class TracelabTrial(tune.Trainable):
         self.thread.join(CLOSE_WAIT_S)
 
 
+def last_evaluation(results: Any, metric: str) -> tuple[float | None, int | None]:
+    """The metric's last value in a trial's results (a DataFrame; heartbeats have no metric) and its step."""
+    if results is None or metric not in results.columns:
+        return None, None
+    rows = results[results[metric].notna()]
+    if rows.empty:
+        return None, None
+    return float(rows[metric].iloc[-1]), int(rows["step"].iloc[-1])
+
+
 @dataclass
 class SweepResult:
     best_dir: Path | None
     best_config: dict[str, Any]
     best_value: float | None
-    trials: list[dict[str, Any]]      # per trial: run, config, status, the metric's last value, step
-    interrupted: bool
+    trials: list[dict[str, Any]]      # per trial: run, config, the metric's last value and its step, error
 
 
 def run_sweep(spec: SweepSpec, scenario: Scenario, out: Path, command: str) -> SweepResult:
@@ -151,6 +169,7 @@ def run_sweep(spec: SweepSpec, scenario: Scenario, out: Path, command: str) -> S
     # command names each trial's error in one line)
     tune_logger = logging.getLogger("ray.tune")
     level = tune_logger.level
+    os.environ["TUNE_DISABLE_STRICT_METRIC_CHECKING"] = "1"  # heartbeats carry no metric (TracelabTrial.step)
     with open(out / "tune.log", "a") as log, redirect_stdout(log):
         handler = logging.StreamHandler(log)
         tune_logger.addHandler(handler)
@@ -163,13 +182,12 @@ def run_sweep(spec: SweepSpec, scenario: Scenario, out: Path, command: str) -> S
     trials = []
     for r in grid:
         trial_id = r.metrics.get("trial_id") or re.search(r"_([0-9a-f]+_\d{5})_", Path(r.path).name).group(1)
-        trials.append({"run": trial_dir(out, trial_id), "config": dict(r.config),
-                       "value": r.metrics.get(spec.metric), "step": r.metrics.get("step"),
+        value, step = last_evaluation(r.metrics_dataframe, spec.metric)
+        trials.append({"run": trial_dir(out, trial_id), "config": dict(r.config), "value": value, "step": step,
                        "error": None if r.error is None else str(r.error).strip().splitlines()[-1]})
-    finished = [t for t in trials if t["value"] is not None]
-    interrupted = grid.num_terminated + grid.num_errors < len(grid)
-    if not finished:
-        return SweepResult(None, {}, None, trials, interrupted)
+    evaluated = [t for t in trials if t["value"] is not None]
+    if not evaluated:
+        return SweepResult(None, {}, None, trials)
     sign = 1 if spec.mode == "max" else -1
-    best = max(finished, key=lambda t: sign * t["value"])
-    return SweepResult(best["run"], best["config"], best["value"], trials, interrupted)
+    best = max(evaluated, key=lambda t: sign * t["value"])
+    return SweepResult(best["run"], best["config"], best["value"], trials)
