@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
     with store_errors():  # a scenario file that does not load
         scenario = load_scenario_arg(cfg.scenario, cfg.agents)
     out = Path(args.out or _default_out())
-    if out.exists() and any(out.iterdir()):
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise UserError(f"{out} is not empty: give another --out or remove it")
     check_address(args.ray)  # the install hint, or an address where nothing answers, before anything starts
     from tracelab.train.sweep import run_sweep

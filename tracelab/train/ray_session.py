@@ -50,6 +50,8 @@ def ray_session(address: str = LOCAL) -> Iterator[ModuleType]:
             ray.init(address=address, **quiet)
     except (ConnectionError, ValueError, RuntimeError) as e:
         first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        if address == LOCAL:
+            raise UserError(f"could not start a local Ray ({first})") from None
         raise UserError(f"--ray {address}: no Ray cluster there ({first})") from None
     try:
         yield ray
