@@ -166,6 +166,9 @@ def test_sweep_spec_file_and_its_errors(tmp_path):
     with pytest.raises(SweepSpecError, match=r"sweep.toml: grid.learning_rate: TrainConfig has no field "
                                              r"'learning_rate' \(did you mean learning-rate\?\)"):
         build_spec(file=str(f))
+    with pytest.raises(SweepSpecError, match=r"^metric must be one of the evaluations' metrics \(eval/games, .*"
+                                             r"eval/method_win_rate, eval/actions_per_win\), got 'eval/win_rat'$"):
+        build_spec(grids=["lr=1e-4,3e-4"], metric="eval/win_rat")
     with pytest.raises(SweepSpecError, match=r"asha stops trials at their evaluations: it needs eval_every"):
         build_spec(grids=["lr=1e-4,3e-4"], sets=["steps=1000", "eval_every=0"], scheduler="asha")
 

@@ -229,9 +229,16 @@ def _top_level(top: dict[str, Any], samples: int | None, scheduler: str | None, 
     for key, allowed in (("scheduler", SCHEDULERS), ("mode", MODES)):
         if key in out and out[key] not in allowed:
             raise SweepSpecError(f"{key} must be one of {', '.join(allowed)}, got {out[key]!r}")
-    if "metric" in out and (not isinstance(out["metric"], str) or not out["metric"].strip()):
-        raise SweepSpecError(f"metric must be a metric's name such as {DEFAULT_METRIC}, got {out['metric']!r}")
+    if "metric" in out and out["metric"] not in evaluation_metrics():
+        raise SweepSpecError(f"metric must be one of the evaluations' metrics ({', '.join(evaluation_metrics())}), "
+                             f"got {out['metric']!r}")
     return out
+
+
+def evaluation_metrics() -> list[str]:
+    """What a trainer's evaluation writes (Tune reads a trial at its evaluations)."""
+    from tracelab.train.evaluate import EvalResult
+    return list(EvalResult(games=0, actions_per_win=0.0).metrics())
 
 
 def _read_file(path: str) -> tuple[dict[str, dict[str, tuple[Any, str]]], dict[str, Any]]:
