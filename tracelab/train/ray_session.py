@@ -52,7 +52,8 @@ def ray_session(address: str = LOCAL) -> Iterator[ModuleType]:
         first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
         if address == LOCAL:
             raise UserError(f"could not start a local Ray ({first})") from None
-        raise UserError(f"--ray {address}: no Ray cluster there ({first})") from None
+        raise UserError(f"--ray {address}: could not join the Ray cluster there ({first}; a cluster with token "
+                        f"authentication needs RAY_AUTH_MODE=token and its token, docs/scaling.md)") from None
     try:
         yield ray
     finally:
