@@ -109,10 +109,12 @@ def test_ctrl_c_stops_the_sweep_and_closes_its_trials(tmp_path):
     assert all((r / "checkpoint").is_dir() for r in runs)
 
 
-def last_metric(run: Path, name: str) -> float:
+def best_metric(run: Path, name: str) -> tuple[float, int]:
+    """The highest value of a metric in a run, and its first step."""
     con = open_run(run)
     try:
-        return con.execute("SELECT value FROM metrics WHERE name = ? ORDER BY step DESC LIMIT 1", [name]).fetchone()[0]
+        return con.execute("SELECT value, step FROM metrics WHERE name = ? ORDER BY value DESC, step LIMIT 1",
+                           [name]).fetchone()
     finally:
         con.close()
 
@@ -126,10 +128,12 @@ def test_sweep_names_the_best_trial_from_its_runs(tmp_path, capsys):
     assert [t.name for t in trials] == ["trial-000", "trial-001"]
     assert [run_info(t).status for t in trials] == ["finished", "finished"]
     assert sorted(run_info(t).meta["config"]["lr"] for t in trials) == [1e-4, 3e-3]
-    returns = {t: last_metric(t, "eval/mean_return") for t in trials}
-    best = max(trials, key=lambda t: returns[t])
+    returns = {t: best_metric(t, "eval/mean_return") for t in trials}
+    best = max(trials, key=lambda t: returns[t][0])
     line = captured.out.strip().splitlines()[-1]
-    assert line.startswith(f"best trial: {best}  lr=") and f"(eval/mean_return {returns[best]:.3f})" in line
+    value, step = returns[best]
+    assert line.startswith(f"best trial: {best}  lr=") and line.endswith(f"(eval/mean_return {value:.3f} at step "
+                                                                         f"{step:,})")
     assert "Configuration for experiment" not in captured.out + captured.err  # Tune's tables: in tune.log
     assert "Configuration for experiment" in (out / "tune.log").read_text()
 

@@ -78,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
                 result = run_sweep(spec, scenario, out, command)
             for t in sorted(result.trials, key=lambda t: t["run"]):
                 shown = ("no evaluation" if t["value"] is None
-                         else f"{spec.metric} {t['value']:.3f} at step {t['step']:,}")
+                         else f"best {spec.metric} {t['value']:.3f} at step {t['step']:,} (last {t['last']:.3f})")
                 say(f"  {t['run']}: {_values(t['config'])}: {shown}" + (f" (failed: {t['error']})" if t["error"] else ""))
             if stopped.pressed.is_set():
                 return 130  # CtrlCStops raises KeyboardInterrupt on the way out
@@ -86,7 +86,9 @@ def run(args: argparse.Namespace) -> int:
         signal.signal(signal.SIGTERM, previous)
     if result.best_dir is None:
         raise UserError(f"no trial reported {spec.metric} (see the runs in {out})")
-    print(f"best trial: {result.best_dir}  {_values(result.best_config)}  ({spec.metric} {result.best_value:.3f})")
+    best = next(t for t in result.trials if t["run"] == result.best_dir)
+    print(f"best trial: {result.best_dir}  {_values(result.best_config)}  ({spec.metric} {result.best_value:.3f} "
+          f"at step {best['step']:,})")
     return 0
 
 

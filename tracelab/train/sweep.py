@@ -126,14 +126,19 @@ class TracelabTrial(tune.Trainable):
         self.thread.join(CLOSE_WAIT_S)
 
 
-def last_evaluation(results: Any, metric: str) -> tuple[float | None, int | None]:
-    """The metric's last value in a trial's results (a DataFrame; heartbeats have no metric) and its step."""
+def best_evaluation(results: Any, metric: str, mode: str) -> tuple[float | None, int | None, float | None]:
+    """A trial's best evaluation by `metric` (the earliest of equals), its step, and the metric's last
+    value; from Tune's results of the trial (a DataFrame; heartbeats have no metric). The best, not the
+    last: DQN's greedy policy can get worse late in training, and every run keeps the policy of its best
+    evaluation (RUN/policy-best, by eval/method_win_rate)."""
     if results is None or metric not in results.columns:
-        return None, None
+        return None, None, None
     rows = results[results[metric].notna()]
     if rows.empty:
-        return None, None
-    return float(rows[metric].iloc[-1]), int(rows["step"].iloc[-1])
+        return None, None, None
+    values = rows[metric].to_numpy(float)
+    at = int(values.argmax() if mode == "max" else values.argmin())
+    return float(values[at]), int(rows["step"].iloc[at]), float(values[-1])
 
 
 @dataclass
@@ -141,7 +146,7 @@ class SweepResult:
     best_dir: Path | None
     best_config: dict[str, Any]
     best_value: float | None
-    trials: list[dict[str, Any]]      # per trial: run, config, the metric's last value and its step, error
+    trials: list[dict[str, Any]]      # per trial: run, config, its best value, that step, the last value, error
 
 
 def run_sweep(spec: SweepSpec, scenario: Scenario, out: Path, command: str) -> SweepResult:
@@ -182,9 +187,9 @@ def run_sweep(spec: SweepSpec, scenario: Scenario, out: Path, command: str) -> S
     trials = []
     for r in grid:
         trial_id = r.metrics.get("trial_id") or re.search(r"_([0-9a-f]+_\d{5})_", Path(r.path).name).group(1)
-        value, step = last_evaluation(r.metrics_dataframe, spec.metric)
+        value, step, last = best_evaluation(r.metrics_dataframe, spec.metric, spec.mode)
         trials.append({"run": trial_dir(out, trial_id), "config": dict(r.config), "value": value, "step": step,
-                       "error": None if r.error is None else str(r.error).strip().splitlines()[-1]})
+                       "last": last, "error": None if r.error is None else str(r.error).strip().splitlines()[-1]})
     evaluated = [t for t in trials if t["value"] is not None]
     if not evaluated:
         return SweepResult(None, {}, None, trials)
