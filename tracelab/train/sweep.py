@@ -152,7 +152,7 @@ class SweepResult:
 def run_sweep(spec: SweepSpec, scenario: Scenario, out: Path, command: str) -> SweepResult:
     """The search (Ray initialised by the caller): trials under `out`, Tune's records in out/tune, what
     Tune prints in out/tune.log."""
-    out = out.absolute()  # Tune's actors work in folders of their own
+    given, out = out, out.absolute()  # Tune's actors work in folders of their own
     out.mkdir(parents=True, exist_ok=True)
     scheduler = None
     if spec.scheduler == "asha":
@@ -188,7 +188,7 @@ def run_sweep(spec: SweepSpec, scenario: Scenario, out: Path, command: str) -> S
     for r in grid:
         trial_id = r.metrics.get("trial_id") or re.search(r"_([0-9a-f]+_\d{5})_", Path(r.path).name).group(1)
         value, step, last = best_evaluation(r.metrics_dataframe, spec.metric, spec.mode)
-        trials.append({"run": trial_dir(out, trial_id), "config": dict(r.config), "value": value, "step": step,
+        trials.append({"run": trial_dir(given, trial_id), "config": dict(r.config), "value": value, "step": step,
                        "last": last, "error": None if r.error is None else str(r.error).strip().splitlines()[-1]})
     evaluated = [t for t in trials if t["value"] is not None]
     if not evaluated:
