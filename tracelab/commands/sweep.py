@@ -79,7 +79,8 @@ def run(args: argparse.Namespace) -> int:
             for t in sorted(result.trials, key=lambda t: t["run"]):
                 shown = ("no evaluation" if t["value"] is None
                          else f"best {spec.metric} {t['value']:.3f} at step {t['step']:,} (last {t['last']:.3f})")
-                say(f"  {t['run']}: {_values(t['config'])}: {shown}" + (f" (failed: {t['error']})" if t["error"] else ""))
+                failed = f" (failed: {t['error']})" if t["error"] else ""
+                say(f"  {t['run']}: {_values(t['config'])}: {shown}{failed}")
             if stopped.pressed.is_set():
                 return 130  # CtrlCStops raises KeyboardInterrupt on the way out
     finally:
