@@ -27,7 +27,7 @@ COMMAND_MODULES = [
     "tracelab.commands.bench", "tracelab.commands.check", "tracelab.commands.show",
     "tracelab.commands.replay", "tracelab.commands.train", "tracelab.commands.eval",
     "tracelab.commands.runs", "tracelab.commands.tui",
-    "tracelab.commands.experiment", "tracelab.commands.compile",
+    "tracelab.commands.experiment", "tracelab.commands.sweep", "tracelab.commands.compile",
     "tracelab.commands.compare", "tracelab.commands.export",
 ]
 EXIT_USER_ERROR = 1

@@ -30,6 +30,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="a smoke run: few steps, one seed, a small evaluation, small plots (under 2 minutes)")
     p.add_argument("--jobs", type=positive_int, default=1,
                    help="trainings run at a time, each in its own process (default 1)")
+    p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+                   help="run each training as a Ray task: on a local Ray started for the command, limited to this "
+                        "machine's cores, or on the Ray cluster at ADDRESS (host:port, auto, ray://...); --out "
+                        "must then be a folder every node sees (docs/scaling.md; pip install 'tracelab[ray]')")
     p.add_argument("--kernel", choices=ENGINE_KERNELS, default="auto",
                    help="the rule engine's kernel of the trainings (train --kernel; default auto)")
     p.add_argument("--out", default=None, help="directory of the runs (default runs/experiments/NAME)")
@@ -54,6 +58,11 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("the experiment plots need matplotlib: pip install 'tracelab[experiments]'") from None
     if args.report_only:
         return _report_again(exp, out, report_dir)
+    if args.ray is not None:
+        if args.jobs > 1:
+            raise UserError("--jobs and --ray: Ray decides how many trainings run at a time; give one of them")
+        from tracelab.train.ray_session import check_address
+        check_address(args.ray)  # the install hint, or an address where nothing answers, before any training
     taken = [out / f"{a.slug}-seed{s}{tail}" for a in exp.arms for s in range(budget.seeds)
              for tail in ("", "-traces") if (out / f"{a.slug}-seed{s}{tail}").exists()]
     if taken:
@@ -70,7 +79,8 @@ def run(args: argparse.Namespace) -> int:
 
     previous = signal.signal(signal.SIGTERM, terminated)
     try:
-        result = run_experiment(exp, budget, out, command, args.quick, say, jobs=args.jobs, kernel=args.kernel)
+        result = run_experiment(exp, budget, out, command, args.quick, say, jobs=args.jobs, kernel=args.kernel,
+                                ray=args.ray)
     except KeyboardInterrupt:  # main() prints this and exits 130
         raise KeyboardInterrupt(f"no report written (the runs so far are in {out})") from None
     finally:

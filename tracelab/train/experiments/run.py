@@ -54,10 +54,11 @@ def train_config(exp: Experiment, arm: Arm, budget: Budget, seed: int) -> TrainC
 
 
 def run_experiment(exp: Experiment, budget: Budget, out_dir: Path, command: str, quick: bool,
-                   say: Say = print, jobs: int = 1, kernel: str = "auto") -> ExperimentResult:
-    """Train every arm once per seed (`jobs` trainings at a time, each in its own process), then the
-    experiment's own measurements on the saved policies. `kernel`: the trainings' (TrainConfig.kernel;
-    the results do not depend on it)."""
+                   say: Say = print, jobs: int = 1, kernel: str = "auto",
+                   ray: str | None = None) -> ExperimentResult:
+    """Train every arm once per seed (`jobs` trainings at a time, each in its own process; or, with `ray`
+    a Ray address or "local", each as a Ray task), then the experiment's own measurements on the saved
+    policies. `kernel`: the trainings' (TrainConfig.kernel; the results do not depend on it)."""
     t0 = time.perf_counter()
     out_dir.mkdir(parents=True, exist_ok=True)
     from tracelab.train.experiments.report import commit
@@ -72,7 +73,10 @@ def run_experiment(exp: Experiment, budget: Budget, out_dir: Path, command: str,
     for ar, seed in tasks:
         say(f"[{exp.name}] {ar.arm.label}, seed {seed}: training {budget.steps:,} steps into "
             f"{out_dir / f'{ar.arm.slug}-seed{seed}'}")
-    if jobs > 1 and len(tasks) > 1:
+    if ray is not None:
+        from tracelab.train.experiments.ray_tasks import in_ray_tasks
+        runs = in_ray_tasks([task_args(ar, seed) for ar, seed in tasks], ray)
+    elif jobs > 1 and len(tasks) > 1:
         runs = _in_workers(min(jobs, len(tasks)), [task_args(ar, seed) for ar, seed in tasks])
     else:
         runs = [train_seed(*task_args(ar, seed)) for ar, seed in tasks]

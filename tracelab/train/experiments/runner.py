@@ -7,7 +7,7 @@ import shlex
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
@@ -15,6 +15,10 @@ from tracelab.game.scenario import Scenario
 from tracelab.train.config import TrainConfig
 from tracelab.train.evaluate import EvalResult, evaluate, evaluate_into
 from tracelab.train.policy import BEST_POLICY_DIR, Policy, load_policy
+
+if TYPE_CHECKING:
+    from tracelab.train.loop import Trainer
+    from tracelab.train.tensorboard import MetricSink
 
 FINAL_EVAL_ROUND = 1_000_000  # seeds of the final evaluations: apart from the training's rounds
 
@@ -42,9 +46,12 @@ def final_eval_seed(seed: int, p: float) -> int:
 
 
 def train_seed(cfg: TrainConfig, scenario: Scenario, run_dir: Path, command: str,
-               eval_ps: tuple[float, ...], eval_games: int) -> SeedRun:
+               eval_ps: tuple[float, ...], eval_games: int, metric_sinks: Sequence[MetricSink] = (),
+               started: Callable[[Trainer], None] | None = None) -> SeedRun:
     """Train `cfg` into a new run at `run_dir`, then evaluate the final policy `eval_games` games
-    against each opponent p in `eval_ps`, writing `eval/...@pP` metrics at the last step."""
+    against each opponent p in `eval_ps`, writing `eval/...@pP` metrics at the last step. `metric_sinks`
+    receive the training's metrics besides the run; `started` is called with the Trainer before it trains
+    (a sweep's trial stops it through it: Trainer.stop_requested)."""
     import torch
 
     from tracelab.game.facts import GAME_RULES
@@ -60,7 +67,9 @@ def train_seed(cfg: TrainConfig, scenario: Scenario, run_dir: Path, command: str
     trainer, status = None, "failed"
     t0 = time.perf_counter()
     try:
-        trainer = Trainer(cfg, scenario, writer, run_dir)
+        trainer = Trainer(cfg, scenario, writer, run_dir, metric_sinks=metric_sinks)
+        if started is not None:
+            started(trainer)
         status = trainer.train()
         out = SeedRun(cfg.seed, run_dir, trainer.step, status, policy_dir=run_dir / "policy")
         policies = [("eval/", trainer.policy, out.final)]

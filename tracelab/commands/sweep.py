@@ -1,0 +1,102 @@
+"""`tracelab sweep`: a hyperparameter search over TrainConfig's fields with Ray Tune, each trial an
+ordinary run under --out, the best trial named at the end (docs/scaling.md "Sweeps")."""
+from __future__ import annotations
+
+import argparse
+import shlex
+import signal
+import sys
+from pathlib import Path
+
+from tracelab.commands._args import positive_int
+from tracelab.commands._interrupt import CtrlCStops
+from tracelab.errors import UserError
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    from tracelab.train.sweep_spec import DEFAULT_METRIC, MODES, SCHEDULERS
+    p = sub.add_parser("sweep", help="search training settings with Ray Tune (grid, random, ASHA early stopping): "
+                                     "one run per trial under --out, the best trial named at the end")
+    p.add_argument("spec", nargs="?", default=None, metavar="SWEEP.toml",
+                   help="a sweep file ([set], [grid], [random], samples, scheduler, metric, mode); the flags "
+                        "below add to it")
+    p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                   help="a training setting of every trial, e.g. steps=20000 (repeatable; any train flag's field)")
+    p.add_argument("--grid", action="append", default=[], metavar="FIELD=V1,V2,...",
+                   help="try each value, e.g. lr=1e-4,3e-4 (repeatable; grids multiply)")
+    p.add_argument("--random", action="append", default=[], metavar="FIELD=DIST:LOW,HIGH",
+                   help="draw the field per trial: uniform:A,B, loguniform:A,B (floats), randint:A,B (integers, "
+                        "both bounds included) or choice:V1,V2 (repeatable)")
+    p.add_argument("--samples", type=positive_int, default=None,
+                   help="trials drawn (default 1); with --grid, per grid point")
+    p.add_argument("--scheduler", choices=SCHEDULERS, default=None,
+                   help="fifo: every trial trains to the end (default); asha: trials behind the others at an "
+                        "evaluation stop there (needs eval_every below steps)")
+    p.add_argument("--metric", default=None, help=f"the metric Tune compares (default {DEFAULT_METRIC}, the "
+                                                  f"evaluations' win rate of the method)")
+    p.add_argument("--mode", choices=MODES, default=None, help="max (default) or min of --metric")
+    p.add_argument("--out", default=None, help="directory of the trials' runs (default runs/sweeps/sweep-<time>); "
+                                               "on a cluster, a folder every node sees")
+    p.add_argument("--ray", default="local", metavar="ADDRESS",
+                   help="the Ray cluster (host:port, auto, ray://...; default: a local Ray started for the "
+                        "command, limited to this machine's cores)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from tracelab.commands.train import load_scenario_arg
+    from tracelab.errors import store_errors
+    from tracelab.train.ray_session import check_address, ray_session
+    from tracelab.train.sweep_spec import build_spec
+
+    spec = build_spec(sets=args.set, grids=args.grid, randoms=args.random, file=args.spec, samples=args.samples,
+                      scheduler=args.scheduler, metric=args.metric, mode=args.mode)
+    cfg = spec.base_config()
+    with store_errors():  # a scenario file that does not load
+        scenario = load_scenario_arg(cfg.scenario, cfg.agents)
+    out = Path(args.out or _default_out())
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise UserError(f"{out} is not empty: give another --out or remove it")
+    check_address(args.ray)  # the install hint, or an address where nothing answers, before anything starts
+    from tracelab.train.sweep import run_sweep
+
+    command = " ".join(shlex.quote(a) for a in ["tracelab", "sweep", *args.argv[1:]])
+    say = lambda s: print(s, file=sys.stderr, flush=True)  # noqa: E731
+    say(f"sweep: {spec.trials} trial{'s' * (spec.trials != 1)} ({'; '.join(a.describe() for a in spec.axes)}; "
+        f"scheduler {spec.scheduler}, {spec.mode} {spec.metric}), runs in {out}/")
+
+    def terminated(signum: int, frame: object) -> None:  # SIGTERM stops the sweep as Ctrl-C does
+        signal.raise_signal(signal.SIGINT)
+
+    previous = signal.signal(signal.SIGTERM, terminated)
+    # Ctrl-C during the search is Tune's (it stops the trials, whose runs close as interrupted, and returns):
+    # CtrlCStops sees the press through the wakeup fd and ends the command with status 130 after the list
+    stopped = CtrlCStops(lambda: None, f"the sweep was stopped (its trials' runs are closed, in {out})")
+    try:
+        with stopped:
+            with ray_session(args.ray):
+                result = run_sweep(spec, scenario, out, command)
+            for t in sorted(result.trials, key=lambda t: t["run"]):
+                shown = ("no evaluation" if t["value"] is None
+                         else f"best {spec.metric} {t['value']:.3f} at step {t['step']:,} (last {t['last']:.3f})")
+                failed = f" (failed: {t['error']})" if t["error"] else ""
+                say(f"  {t['run']}: {_values(t['config'])}: {shown}{failed}")
+            if stopped.pressed.is_set():
+                return 130  # CtrlCStops raises KeyboardInterrupt on the way out
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    if result.best_dir is None:
+        raise UserError(f"no trial reported {spec.metric} (see the runs in {out})")
+    best = next(t for t in result.trials if t["run"] == result.best_dir)
+    print(f"best trial: {result.best_dir}  {_values(result.best_config)}  ({spec.metric} {result.best_value:.3f} "
+          f"at step {best['step']:,})")
+    return 0
+
+
+def _values(config: dict) -> str:
+    return ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in config.items())
+
+
+def _default_out() -> str:
+    import time
+    return f"runs/sweeps/sweep-{time.strftime('%Y%m%d-%H%M%S')}"
