@@ -359,7 +359,7 @@ def test_average_annotation_function(tmp_path: Path) -> None:
     ("p(x) <-1 q(x):[0.5,1.5]", 20, "outside [0,1]"),
     ("p(x) <-1 q(x):[0.9, 0.5]", 15, "greater than"),
     ("p(x) <-1 q(x) > 3", 15, "comparison clauses"),
-    ("p(f(x)) <-1 q(x)", 4, "head functions"),
+    ("p(x) <-1 q(f(x))", 13, "head functions are only allowed in a rule head"),
     ("p(x) <-1 q(x), 1q(x)", 16, "not a predicate name"),
     ("p(x) <-1 q(x,y,z)", 12, "3 arguments"),
     ("p(x) <-1", 9, "without a body"),

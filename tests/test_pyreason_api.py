@@ -127,8 +127,8 @@ def test_what_is_not_supported_is_one_line_naming_it() -> None:
     assert str(e.value).startswith("the inconsistent predicate list (add_inconsistent_predicate('sick', "
                                    "'healthy')) is not supported by tracelab.pyreason")
     hello_world()
-    with pytest.raises(ProgramError, match=r"1:24: error: functions in arguments \(head functions\) are not supported"):
-        pr.Rule("Processed(identity_func(X)) <- property(X)")  # located in the rule's text
+    with pytest.raises(ProgramError, match=r"1:39: error: a function call in the arguments of a body clause"):
+        pr.Rule("Processed(X) <- property(identity_func(X))")  # located in the rule's text
     with pytest.raises(UserError, match="There are no rules"):
         pr.reset_rules()
         pr.reason(timesteps=1)
@@ -210,3 +210,48 @@ def test_rules_and_facts_from_pyreasons_files() -> None:
     nodes, _ = pr.get_rule_trace(pr.reason(timesteps=2))
     assert nodes["Occurred Due To"].tolist() == ["popular_fact", "popular_fact", "rule_0", "popular_fact",
                                                  "rule_0", "rule_0"]
+
+
+# ---- head functions (docs/pyreason.md "Head functions") ---------------------------------------------
+
+def successor(args):
+    """A PyReason head function in plain Python: the node after the first argument's node."""
+    return [{"A": "B", "B": "C", "C": "A"}[args[0][0]]]
+
+
+def both(args):
+    return [args[0][0], "C"]
+
+
+def chain() -> None:
+    g = nx.DiGraph()
+    g.add_nodes_from(["A", "B", "C"], property=1)
+    g.add_edge("A", "B", connected=1)
+    g.add_edge("B", "C", connected=1)
+    pr.load_graph(g)
+
+
+def test_a_head_function_is_called_per_grounding() -> None:
+    """Processed(successor(X)): X grounds to A and B (the sources of an edge), so B and C are processed,
+    not A; Next(X, successor(X)) stays on the graph's edges (A->B, B->C) as PyReason's edge heads do."""
+    chain()
+    pr.add_head_function(successor)
+    pr.add_rule(pr.Rule("Processed(successor(X)) <- property(X), connected(X, Y)", "node_rule"))
+    pr.add_rule(pr.Rule("Next(X, successor(X)) <- property(X), connected(X, Y)", "edge_rule"))
+    interp = pr.reason(timesteps=0)
+    assert [df["component"].tolist() for df in pr.filter_and_sort_nodes(interp, ["Processed"])] == [["B", "C"]]
+    assert interp.query(pr.Query("Next(A, B)")) and interp.query(pr.Query("Next(B, C)"))
+    assert not interp.query(pr.Query("Processed(A)"))
+
+
+def test_head_function_misuse_is_one_located_line() -> None:
+    chain()
+    pr.add_rule(pr.Rule("Processed(missing_fn(X)) <- property(X)", "r"))
+    with pytest.raises(ProgramError, match=r"unknown head function 'missing_fn'") as e:
+        pr.reason(timesteps=0)
+    assert e.value.file == "<Rule 'r'>" and "\n" not in e.value.message
+    pr.reset_rules()
+    pr.add_head_function(both)
+    pr.add_rule(pr.Rule("Processed(both(X)) <- property(X)", "r2"))
+    with pytest.raises(ProgramError, match=r"both returned \['A', 'C'\] .* exactly one node name"):
+        pr.reason(timesteps=0)

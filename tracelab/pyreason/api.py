@@ -48,6 +48,7 @@ class _Program:
     facts: list[Fact] = field(default_factory=list)
     closed: list[str] = field(default_factory=list)
     annotation_functions: dict[str, Callable[..., Any]] = field(default_factory=dict)  # by name
+    head_functions: dict[str, Callable[..., Any]] = field(default_factory=dict)  # by name
     reasoning: _Reasoning | None = None  # the last reason()'s, for again=True
     last: Interpretation | None = None
     timestamp: str = ""
@@ -66,9 +67,10 @@ def reset() -> None:
 
 
 def reset_rules() -> None:
-    """Forget the rules and the annotation functions (PyReason's reset_rules)."""
+    """Forget the rules, the annotation and the head functions (PyReason's reset_rules)."""
     _program.rules.clear()
     _program.annotation_functions.clear()
+    _program.head_functions.clear()
 
 
 def reset_settings() -> None:
@@ -174,7 +176,11 @@ def add_annotation_function(function: Callable[..., Any]) -> None:
 
 
 def add_head_function(function: Callable[..., Any]) -> None:
-    raise unsupported(f"head functions (add_head_function({function.__name__}))")
+    """A function `f(args)` that rule heads name in an argument (`Processed(f(X)) <- ...`): `args` per
+    argument of the call the typed list of its node names, and `f` returns a typed list of node names.
+    tracelab calls it once per grounding, with one name per argument, and takes the one node it returns
+    (head_functions.py; docs/pyreason.md "Head functions")."""
+    _program.head_functions[function.__name__] = function
 
 
 # ---- reasoning ---------------------------------------------------------------------------------------
@@ -207,7 +213,8 @@ def reason(timesteps: int = -1, convergence_threshold: int = -1, convergence_bou
     constants = _ground_components(graph, facts) if settings.allow_ground_rules else frozenset()
     translated = translate([_with_functions(r.rule, i) for i, r in enumerate(rules)], facts, graph, names,
                            persistent=settings.persistent,
-                           closed=_program.closed, constants=constants, directives=settings.directives())
+                           closed=_program.closed, constants=constants, directives=settings.directives(),
+                           head_functions=_registered_head_functions())
     _program.reasoning = _Reasoning(translated, graph)
     _program.last = _program.reasoning.run(timesteps, convergence)
     _program.facts.clear()  # used up only once reasoned with: a reason() that failed keeps them
@@ -227,6 +234,17 @@ def _with_functions(rule: PRule, index: int) -> PRule:
     register_annotation(name, adapter(fn, rule.weights or [1.0] * n))
     return dataclasses.replace(rule, head=dataclasses.replace(rule.head, function=name),
                                weights=[float(k) for k in range(1, n + 1)])
+
+
+def _registered_head_functions() -> dict[str, str]:
+    """Register add_head_function's functions with the engine: PyReason's name -> the engine's."""
+    from tracelab.engine import register_head_function
+    from .head_functions import adapter, engine_name
+    out = {}
+    for i, (name, fn) in enumerate(_program.head_functions.items()):
+        out[name] = engine_name(i, fn)
+        register_head_function(out[name], adapter(fn))
+    return out
 
 
 def _ground_components(graph: Graph | None, facts: Sequence[PFact]) -> frozenset[str]:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import re
-from collections.abc import Container, Sequence
+from collections.abc import Container, Mapping, Sequence
 from dataclasses import dataclass, field
 
 from tracelab.engine import (
@@ -72,13 +72,23 @@ def _literal(lit: PLiteral, names: NameMap, args: Sequence[str]) -> str:
     return f"{names.predicate(lit.pred)}({','.join(args)})"
 
 
-def rule_text(r: PRule, names: NameMap, constants: Container[str] = frozenset()) -> str:
+def rule_text(r: PRule, names: NameMap, constants: Container[str] = frozenset(),
+              head_functions: Mapping[str, str] | None = None) -> str:
     """One PyReason rule as one tracelab rule statement. Components in `constants` (PyReason's ground
-    rules, `allow_ground_rules`: a component that names a node) are constants, the others variables."""
-    components = [a for lit in (r.head, *r.body) for a in lit.args]
+    rules, `allow_ground_rules`: a component that names a node) are constants, and so are the head's
+    components that no body clause has (PyReason grounds such a head variable to the node of its name);
+    the others are variables. A head function call `f(x)` names the engine's function `head_functions[f]`
+    (api.add_head_function)."""
+    body_components = {a for lit in r.body for a in lit.args}
+    head_components = [a for a, c in zip(r.head.args, r.head.calls or [None] * len(r.head.args)) for a in
+                       (c[1] if c is not None else (a,))]
+    constants = {a for a in head_components if a in constants or a not in body_components} | {
+        a for a in body_components if a in constants}
+    components = [*head_components, *(a for lit in r.body for a in lit.args)]
     var = variable_names([a for a in components if a not in constants])
     var.update({a: constant_text(a) for a in components if a in constants})
-    head = _literal(r.head, names, [var[a] for a in r.head.args])
+    head = _literal(r.head, names, [_head_arg(a, c, var, head_functions or {})
+                                    for a, c in zip(r.head.args, r.head.calls or [None] * len(r.head.args))])
     options: list[str] = []
     if r.head.function:
         fn = _FUNCTIONS.get(r.head.function, r.head.function)
@@ -99,6 +109,15 @@ def rule_text(r: PRule, names: NameMap, constants: Container[str] = frozenset())
         options.append("infer_edges")
     opts = f" {{{', '.join(options)}}}" if options else ""
     return f"{names.statement(r.name)}: {head} <-{r.delay} {', '.join(body)}{opts}"
+
+
+def _head_arg(arg: str, call: tuple[str, tuple[str, ...]] | None, var: Mapping[str, str],
+              head_functions: Mapping[str, str]) -> str:
+    if call is None:
+        return var[arg]
+    fn, args = call
+    # an unregistered name stays as it is: the engine's check names it (a located error)
+    return f"{head_functions.get(fn, fn)}({','.join(var[a] for a in args)})"
 
 
 def fact_text(f: PFact, names: NameMap) -> str:
@@ -131,12 +150,14 @@ def load_pyreason(rule_files: Sequence[str | os.PathLike[str]], fact_files: Sequ
 
 def translate(rules: Sequence[PRule], facts: Sequence[PFact], graph: Graph | None, names: NameMap, *,
               persistent: bool = False, embed_graph: bool = False, closed: Sequence[str] = (),
-              constants: Container[str] = frozenset(), directives: Sequence[str] = ()) -> PyReasonProgram:
+              constants: Container[str] = frozenset(), directives: Sequence[str] = (),
+              head_functions: Mapping[str, str] | None = None) -> PyReasonProgram:
     """PyReason's rules, facts and graph (its predicates named through `names`) as one checked tracelab
     program. PyReason's defaults become directives: non-persistent timesteps (`%timesteps reset`) unless
     `persistent`; intersection updates and reset-and-freeze on inconsistency are tracelab's defaults too.
     `closed`: PyReason's closed-world predicates (`%closed`); `constants`: rule components read as
-    constants (PyReason's `allow_ground_rules`); `directives`: more directive lines (settings.py)."""
+    constants (PyReason's `allow_ground_rules`); `directives`: more directive lines (settings.py);
+    `head_functions`: PyReason's head function names -> the engine's (api.add_head_function)."""
     lines: list[str] = ["# translated from PyReason by tracelab (docs/pyreason.md)"]
     origins: list[tuple[SourceLoc, str] | None] = [None]
     if not persistent:
@@ -151,7 +172,7 @@ def translate(rules: Sequence[PRule], facts: Sequence[PFact], graph: Graph | Non
         lines.append("%closed " + ", ".join(names.predicate(p) for p in closed) + "  # add_closed_world_predicate")
         origins.append(None)
     for r in rules:
-        lines.append(rule_text(r, names, constants))
+        lines.append(rule_text(r, names, constants, head_functions))
         origins.append((r.loc, r.text))
     for f in facts:
         lines.append(fact_text(f, names))
