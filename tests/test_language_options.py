@@ -360,3 +360,28 @@ def test_a_head_function_returning_an_unknown_node_is_a_located_error(head_funct
     with pytest.raises(Exception, match=r"head function 'partner' .*returned 'nowhere'.*not a node") as e:
         Engine(program, kernel="counting").step()
     assert e.value.line == 2
+
+
+COMPLEMENTARY = """
+%timesteps reset
+sick(a):[0.8,1] @0..2
+healthy(b):[0.6,0.9] @0..2
+healthy(c):[0.9,1] @0..2
+contact(a,c) @0..2
+sick(Y):[0.5,0.7] <-1 sick(X):[0.5,1], contact(X,Y)
+~healthy(X):max <-0 sick(X):[0.000000002,1]
+~healthy(X):max <-0 sick(X):[0,0.999999998]
+~sick(X):max <-0 healthy(X):[0.000000002,1]
+~sick(X):max <-0 healthy(X):[0,0.999999998]
+"""
+
+
+def test_complementary_predicates_by_rules():
+    """docs/language.md "Complementary predicates": each side gets the other's complement (reference and
+    counting kernel agree); sick(c) from the delayed rule at t=1 contradicts healthy(c): both reset, frozen."""
+    steps = run_all(COMPLEMENTARY, 3, lanes=False)
+    assert steps[0]["healthy(a)"] == pytest.approx((0.0, 0.2)) and steps[0]["sick(b)"] == pytest.approx((0.1, 0.4))
+    assert steps[0]["sick(c)"] == pytest.approx((0.0, 0.1))
+    for t in (1, 2):  # [0,1] (not listed); at t=2 the fact healthy(c) would set it again were it not frozen
+        assert "sick(c)" not in steps[t] and "healthy(c)" not in steps[t]
+    assert steps[2]["healthy(a)"] == pytest.approx((0.0, 0.2))

@@ -122,10 +122,10 @@ def test_static_graph_facts_false_holds_the_graph_at_t0_only() -> None:
 
 def test_what_is_not_supported_is_one_line_naming_it() -> None:
     with pytest.raises(pr.UnsupportedFeature) as e:
-        pr.add_inconsistent_predicate("sick", "healthy")
+        pr.load_inconsistent_predicate_list("ipl.yaml")
     assert isinstance(e.value, UserError) and "\n" not in str(e.value)
-    assert str(e.value).startswith("the inconsistent predicate list (add_inconsistent_predicate('sick', "
-                                   "'healthy')) is not supported by tracelab.pyreason")
+    assert str(e.value).startswith("the inconsistent predicate list from a YAML file "
+                                   "(load_inconsistent_predicate_list) is not supported by tracelab.pyreason")
     hello_world()
     with pytest.raises(ProgramError, match=r"1:39: error: a function call in the arguments of a body clause"):
         pr.Rule("Processed(X) <- property(identity_func(X))")  # located in the rule's text
@@ -255,3 +255,49 @@ def test_head_function_misuse_is_one_located_line() -> None:
     pr.add_rule(pr.Rule("Processed(both(X)) <- property(X)", "r2"))
     with pytest.raises(ProgramError, match=r"both returned \['A', 'C'\] .* exactly one node name"):
         pr.reason(timesteps=0)
+
+
+# ---- the inconsistent predicate list (docs/pyreason.md "The inconsistent predicate list") -----------
+
+def contact_graph() -> None:
+    g = nx.DiGraph()
+    g.add_nodes_from(["Alice", "Bob", "Carol"])
+    g.add_edge("Alice", "Bob", contact=1)
+    pr.load_graph(g)
+
+
+def test_inconsistent_predicates_are_kept_complementary() -> None:
+    """sick(Alice) [0.8,1] makes healthy(Alice) [0,0.2]; the rule's sick(Bob) [0.5,0.7] makes healthy(Bob)
+    [0.3,0.5]; a healthy fact on Carol makes sick(Carol) its complement (the pair works both ways)."""
+    contact_graph()
+    pr.add_inconsistent_predicate("sick", "healthy")
+    pr.add_rule(pr.Rule("sick(y):[0.5,0.7] <- sick(x):[0.5,1.0], contact(x,y)", "spread"))
+    pr.add_fact(pr.Fact("sick(Alice):[0.8,1.0]", "alice_sick", 0, 1))
+    pr.add_fact(pr.Fact("healthy(Carol):[0.6,0.9]", "carol_healthy", 0, 1))
+    d = pr.reason(timesteps=1).get_dict()
+    for t in (0, 1):
+        assert d[t]["Alice"]["healthy"] == pytest.approx((0.0, 0.2))
+        assert d[t]["Bob"]["sick"] == (0.5, 0.7) and d[t]["Bob"]["healthy"] == pytest.approx((0.3, 0.5))
+        assert d[t]["Carol"]["sick"] == pytest.approx((0.1, 0.4))
+
+
+def test_a_conflict_with_the_partner_resets_and_freezes_both_as_pyreason_reports_it() -> None:
+    """healthy(Bob) [0.9,1] from t=0 and the rule's sick(Bob) [0.5,0.7] at t=1 conflict: both atoms are [0,1]
+    and frozen from then on (t=2 too), with PyReason's IPL rows and message."""
+    contact_graph()
+    pr.add_inconsistent_predicate("sick", "healthy")
+    pr.add_rule(pr.Rule("sick(y):[0.5,0.7] <-1 sick(x):[0.5,1.0], contact(x,y)", "spread"))
+    pr.add_fact(pr.Fact("sick(Alice):[0.8,1.0]", "alice_sick", 0, 2))
+    pr.add_fact(pr.Fact("healthy(Bob):[0.9,1.0]", "bob_healthy", 0, 2))
+    interp = pr.reason(timesteps=2)
+    d = interp.get_dict()
+    assert d[0]["Bob"] == {"healthy": (0.9, 1.0), "sick": pytest.approx((0.0, 0.1))}
+    assert d[1]["Bob"] == {"sick": (0.0, 1.0), "healthy": (0.0, 1.0)}
+    assert d[2]["Bob"].get("sick", (0.0, 1.0)) == (0.0, 1.0)  # frozen: the rule's firing at t=2 is ignored
+    assert not interp.query(pr.Query("sick(Bob):[0.5,0.7]"))
+    nodes, _ = pr.get_rule_trace(interp)
+    bad = nodes[~nodes["Consistent"].astype(bool)]
+    assert set(bad["Label"]) == {"sick", "healthy"} and set(bad["Time"]) == {1}
+    assert set(bad["Triggered By"]) <= {"IPL", "Rule"} and "IPL" in set(bad["Triggered By"])
+    assert any(m.startswith("Inconsistency occurred. Grounding healthy(Bob) conflicts with grounding sick(Bob).")
+               for m in bad["Inconsistency Message"])

@@ -47,6 +47,7 @@ class _Program:
     rules: list[Rule] = field(default_factory=list)
     facts: list[Fact] = field(default_factory=list)
     closed: list[str] = field(default_factory=list)
+    ipl: list[tuple[str, str]] = field(default_factory=list)  # add_inconsistent_predicate's pairs
     annotation_functions: dict[str, Callable[..., Any]] = field(default_factory=dict)  # by name
     head_functions: dict[str, Callable[..., Any]] = field(default_factory=dict)  # by name
     reasoning: _Reasoning | None = None  # the last reason()'s, for again=True
@@ -103,11 +104,19 @@ def load_graph(graph: Any) -> None:
 
 
 def load_inconsistent_predicate_list(path: str | os.PathLike[str]) -> None:
-    raise unsupported("the inconsistent predicate list (load_inconsistent_predicate_list)")
+    raise unsupported("the inconsistent predicate list from a YAML file (load_inconsistent_predicate_list)",
+                      "call add_inconsistent_predicate(a, b) for each pair")
 
 
 def add_inconsistent_predicate(pred1: str, pred2: str) -> None:
-    raise unsupported(f"the inconsistent predicate list (add_inconsistent_predicate({pred1!r}, {pred2!r}))")
+    """Keep pred1 and pred2 complementary on every node or edge: when one is set to [l,u] the other gets
+    [1-u,1-l], and a bound that contradicts it is an inconsistency (docs/pyreason.md, "The inconsistent
+    predicate list")."""
+    for p in (pred1, pred2):
+        if not isinstance(p, str) or not p:
+            raise UserError(f"add_inconsistent_predicate: a predicate name is a non-empty str, got {p!r}")
+    if (pred1, pred2) not in _program.ipl:
+        _program.ipl.append((pred1, pred2))
 
 
 # ---- rules and facts ---------------------------------------------------------------------------------
@@ -214,7 +223,7 @@ def reason(timesteps: int = -1, convergence_threshold: int = -1, convergence_bou
     translated = translate([_with_functions(r.rule, i) for i, r in enumerate(rules)], facts, graph, names,
                            persistent=settings.persistent,
                            closed=_program.closed, constants=constants, directives=settings.directives(),
-                           head_functions=_registered_head_functions())
+                           head_functions=_registered_head_functions(), ipl=_program.ipl)
     _program.reasoning = _Reasoning(translated, graph)
     _program.last = _program.reasoning.run(timesteps, convergence)
     _program.facts.clear()  # used up only once reasoned with: a reason() that failed keeps them
@@ -293,7 +302,8 @@ class _Reasoning:
         self.recorded = writer is not None
         try:
             self.episode = EpisodeRun(self.inputs, plan_episodes(self.inputs)[0], trace=True, recorder=recorder)
-            self.trace = PyReasonTrace(self.episode.engine, self.translated.names, self.skip_graph_facts)
+            self.trace = PyReasonTrace(self.episode.engine, self.translated.names, self.skip_graph_facts,
+                                       self.translated.ipl_rules)
             converged = self._steps(timesteps + 1 if timesteps >= 0 else -1, convergence)
             self.episode.finish()
         except BaseException:

@@ -42,6 +42,7 @@ class PyReasonProgram:
     graph: Graph | None
     names: NameMap
     origins: list[tuple[SourceLoc, str] | None] = field(default_factory=list)  # per line of text
+    ipl_rules: dict[str, str] = field(default_factory=dict)  # the IPL's rules -> the predicate they copy
 
 
 def number(v: float) -> str:
@@ -151,13 +152,15 @@ def load_pyreason(rule_files: Sequence[str | os.PathLike[str]], fact_files: Sequ
 def translate(rules: Sequence[PRule], facts: Sequence[PFact], graph: Graph | None, names: NameMap, *,
               persistent: bool = False, embed_graph: bool = False, closed: Sequence[str] = (),
               constants: Container[str] = frozenset(), directives: Sequence[str] = (),
-              head_functions: Mapping[str, str] | None = None) -> PyReasonProgram:
+              head_functions: Mapping[str, str] | None = None, ipl: Sequence[tuple[str, str]] = ()
+              ) -> PyReasonProgram:
     """PyReason's rules, facts and graph (its predicates named through `names`) as one checked tracelab
     program. PyReason's defaults become directives: non-persistent timesteps (`%timesteps reset`) unless
     `persistent`; intersection updates and reset-and-freeze on inconsistency are tracelab's defaults too.
     `closed`: PyReason's closed-world predicates (`%closed`); `constants`: rule components read as
     constants (PyReason's `allow_ground_rules`); `directives`: more directive lines (settings.py);
-    `head_functions`: PyReason's head function names -> the engine's (api.add_head_function)."""
+    `head_functions`: PyReason's head function names -> the engine's (api.add_head_function); `ipl`: the
+    inconsistent predicate list (ipl_rule_lines)."""
     lines: list[str] = ["# translated from PyReason by tracelab (docs/pyreason.md)"]
     origins: list[tuple[SourceLoc, str] | None] = [None]
     if not persistent:
@@ -174,6 +177,11 @@ def translate(rules: Sequence[PRule], facts: Sequence[PFact], graph: Graph | Non
     for r in rules:
         lines.append(rule_text(r, names, constants, head_functions))
         origins.append((r.loc, r.text))
+    ipl_rules: dict[str, str] = {}
+    for line, source in ipl_rule_lines(ipl, names, _arities(rules, facts, graph, names)):
+        lines.append(line)
+        origins.append(None)
+        ipl_rules[line.split(":", 1)[0]] = source
     for f in facts:
         lines.append(fact_text(f, names))
         origins.append((f.loc, ""))
@@ -191,7 +199,44 @@ def translate(rules: Sequence[PRule], facts: Sequence[PFact], graph: Graph | Non
     except ProgramError as e:
         raise _located(e, origins, lines) from None
     program.files = sorted({str(o[0].file) for o in origins if o is not None})
-    return PyReasonProgram(text, program, graph, names, origins)
+    return PyReasonProgram(text, program, graph, names, origins, ipl_rules)
+
+
+# A bound excluding exactly the atoms within the engine's EPS of [0,1] (never set, or set back to it): a
+# clause `p(X):[IPL_SET,1]` holds when p(X) > [0,1] from below, `p(X):[0,1-IPL_SET]` from above
+IPL_SET = "0.000000002"
+IPL_BELOW_ONE = "0.999999998"
+
+
+def ipl_rule_lines(ipl: Sequence[tuple[str, str]], names: NameMap, arity: Mapping[str, int]
+                   ) -> list[tuple[str, str]]:
+    """PyReason's inconsistent predicate list as rules (docs/pyreason.md, "The inconsistent predicate
+    list"): for a pair (a, b), whenever a(x) is set to [l,u] (not [0,1]), b(x) gets [1-u,1-l] in the next
+    pass (`~b(X):max <-0 a(X):...`: `max` of the one atom is its bound, and the `~` head sets its
+    complement), and the other way round. A conflict is then an ordinary inconsistency of b(x), resolved
+    by the program's policy (PyReason's: [0,1], frozen). Returns (rule line, the predicate it copies)."""
+    out = []
+    for k, (a, b) in enumerate(ipl):
+        n = arity.get(a, arity.get(b))
+        if n is None:
+            continue  # neither predicate is used: nothing to keep complementary
+        args = "X" if n == 1 else "X,Y"
+        for src, dst in ((a, b), (b, a)):
+            for j, clause in enumerate((f"[{IPL_SET},1]", f"[0,{IPL_BELOW_ONE}]")):
+                name = f"pyreason_ipl_{k}_{names.predicate(src)}_{j}"
+                out.append((f"{name}: ~{names.predicate(dst)}({args}):max <-0 {names.predicate(src)}({args}):{clause}",
+                            src))
+    return out
+
+
+def _arities(rules: Sequence[PRule], facts: Sequence[PFact], graph: Graph | None, names: NameMap) -> dict[str, int]:
+    """PyReason predicate -> its number of arguments, from the rules, facts and graph."""
+    out = {lit.pred: len(lit.args) for r in rules for lit in (r.head, *r.body)}
+    out.update({f.literal.pred: len(f.literal.args) for f in facts})
+    if graph is not None:
+        for tl, n in graph.predicates().items():
+            out.setdefault(names.original_predicate(tl), n)
+    return out
 
 
 def _relocated(program: Program, origins: list[tuple[SourceLoc, str] | None]) -> Program:
