@@ -301,3 +301,13 @@ def test_a_conflict_with_the_partner_resets_and_freezes_both_as_pyreason_reports
     assert set(bad["Triggered By"]) <= {"IPL", "Rule"} and "IPL" in set(bad["Triggered By"])
     assert any(m.startswith("Inconsistency occurred. Grounding healthy(Bob) conflicts with grounding sick(Bob).")
                for m in bad["Inconsistency Message"])
+
+
+def test_an_edge_pair_is_complementary_on_inferred_edges_too() -> None:
+    contact_graph()
+    pr.add_inconsistent_predicate("trusts", "distrusts")
+    pr.add_rule(pr.Rule("trusts(x,y):[0.7,1] <- met(x), met(y)", "trust", infer_edges=True))
+    pr.add_fact(pr.Fact("met(Alice)", "m1", 0, 0))
+    pr.add_fact(pr.Fact("met(Carol)", "m2", 0, 0))
+    d = pr.reason(timesteps=0).get_dict()
+    assert d[0][("Alice", "Carol")]["distrusts"] == pytest.approx((0.0, 0.3))  # Alice->Carol is not a graph edge

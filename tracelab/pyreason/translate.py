@@ -220,12 +220,13 @@ def ipl_rule_lines(ipl: Sequence[tuple[str, str]], names: NameMap, arity: Mappin
         n = arity.get(a, arity.get(b))
         if n is None:
             continue  # neither predicate is used: nothing to keep complementary
-        args = "X" if n == 1 else "X,Y"
+        # an edge pair holds on inferred edges too (PyReason adds them to its graph): {infer_edges}
+        args, opts = ("X", "") if n == 1 else ("X,Y", " {infer_edges}")
         for src, dst in ((a, b), (b, a)):
             for j, clause in enumerate((f"[{IPL_SET},1]", f"[0,{IPL_BELOW_ONE}]")):
                 name = f"pyreason_ipl_{k}_{names.predicate(src)}_{j}"
-                out.append((f"{name}: ~{names.predicate(dst)}({args}):max <-0 {names.predicate(src)}({args}):{clause}",
-                            src))
+                out.append((f"{name}: ~{names.predicate(dst)}({args}):max <-0 {names.predicate(src)}({args}):{clause}"
+                             f"{opts}", src))
     return out
 
 
