@@ -375,7 +375,7 @@ def test_bad_rules_name_file_line_and_column(tmp_path: Path, line: str, col: int
 
 def test_engine_checks_point_back_at_the_pyreason_file(tmp_path: Path) -> None:
     f = tmp_path / "rules.txt"
-    f.write_text("p(x) <-1 q(x)\np(x,y) <-1 q(x), q(y)\n")
+    f.write_text("p(x) <-1 q(x)\np(x) <-1 q(x):[0,1]\n")  # x is unsafe: [0,1] binds nothing
     with pytest.raises(ProgramError) as e:
         load_pyreason([f])
     assert (e.value.file, e.value.line) == (str(f), 2) and "in its translation" in e.value.message

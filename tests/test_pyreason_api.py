@@ -311,3 +311,22 @@ def test_an_edge_pair_is_complementary_on_inferred_edges_too() -> None:
     pr.add_fact(pr.Fact("met(Carol)", "m2", 0, 0))
     d = pr.reason(timesteps=0).get_dict()
     assert d[0][("Alice", "Carol")]["distrusts"] == pytest.approx((0.0, 0.3))  # Alice->Carol is not a graph edge
+
+
+# ---- one predicate on nodes and on edges (docs/pyreason.md "What maps to what") ----------------------
+
+def test_one_predicate_on_nodes_and_on_edges_stays_two_labels() -> None:
+    """PyReason keeps node and edge labels apart: `risk` on nodes and on edges (graph and rules) are two
+    labels, each queried, filtered and traced as `risk`."""
+    g = nx.DiGraph()
+    g.add_node("A", risk=1)
+    g.add_node("B")
+    g.add_edge("A", "B", risk=1)
+    pr.load_graph(g)
+    pr.add_rule(pr.Rule("risk(y) <-1 risk(x), risk(x,y)", "node_risk"))
+    pr.add_rule(pr.Rule("risk(y,x) <-0 risk(x,y)", "back", infer_edges=True))
+    interp = pr.reason(timesteps=1)
+    assert interp.query(pr.Query("risk(B)")) and interp.query(pr.Query("risk(B,A)"))
+    assert not interp.query(pr.Query("risk(A,A)"))
+    assert [df["component"].tolist() for df in pr.filter_and_sort_nodes(interp, ["risk"])][-1] == ["B"]
+    assert [df["component"].tolist() for df in pr.filter_and_sort_edges(interp, ["risk"])][0] == [("B", "A")]

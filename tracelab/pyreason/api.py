@@ -350,7 +350,7 @@ class _Reasoning:
             start, end = offset + f.start, offset + f.end
             if (t == start) if f.static else (start <= t <= end):
                 lit = f.literal
-                atom = engine.atom(self.translated.names.predicate(lit.pred), *lit.args)
+                atom = engine.atom(self.translated.names.predicate(lit.pred, len(lit.args)), *lit.args)
                 self.trace.external_names[engine.next_external_id()] = f.name
                 engine.add_fact(atom, lit.lower, lit.upper, static=f.static)
 

@@ -70,7 +70,7 @@ def threshold_text(t: Threshold, forall: bool) -> str:
 
 
 def _literal(lit: PLiteral, names: NameMap, args: Sequence[str]) -> str:
-    return f"{names.predicate(lit.pred)}({','.join(args)})"
+    return f"{names.predicate(lit.pred, len(lit.args))}({','.join(args)})"
 
 
 def rule_text(r: PRule, names: NameMap, constants: Container[str] = frozenset(),
@@ -123,7 +123,7 @@ def _head_arg(arg: str, call: tuple[str, tuple[str, ...]] | None, var: Mapping[s
 
 def fact_text(f: PFact, names: NameMap) -> str:
     lit = f.literal
-    atom = f"{names.predicate(lit.pred)}({','.join(constant_text(a) for a in lit.args)})"
+    atom = f"{names.predicate(lit.pred, len(lit.args))}({','.join(constant_text(a) for a in lit.args)})"
     when = " static" if f.static else (f" @{f.start}" if f.start == f.end else f" @{f.start}..{f.end}")
     return f"{names.statement(f.name)}: {atom}{bound_text(lit.lower, lit.upper)}{when}"
 
@@ -171,12 +171,13 @@ def translate(rules: Sequence[PRule], facts: Sequence[PFact], graph: Graph | Non
         origins.append(None)
     lines += directives
     origins += [None] * len(directives)
-    if closed:
-        lines.append("%closed " + ", ".join(names.predicate(p) for p in closed) + "  # add_closed_world_predicate")
-        origins.append(None)
     for r in rules:
         lines.append(rule_text(r, names, constants, head_functions))
         origins.append((r.loc, r.text))
+    if closed:  # after the rules and facts: a predicate's name depends on the arities it is used with
+        lines.append("%closed " + ", ".join(tl for p in closed for tl in names.predicates_named(p)) +
+                     "  # add_closed_world_predicate")
+        origins.append(None)
     ipl_rules: dict[str, str] = {}
     for line, source in ipl_rule_lines(ipl, names, _arities(rules, facts, graph, names)):
         lines.append(line)
@@ -208,7 +209,7 @@ IPL_SET = "0.000000002"
 IPL_BELOW_ONE = "0.999999998"
 
 
-def ipl_rule_lines(ipl: Sequence[tuple[str, str]], names: NameMap, arity: Mapping[str, int]
+def ipl_rule_lines(ipl: Sequence[tuple[str, str]], names: NameMap, arity: Mapping[str, set[int]]
                    ) -> list[tuple[str, str]]:
     """PyReason's inconsistent predicate list as rules (docs/pyreason.md, "The inconsistent predicate
     list"): for a pair (a, b), whenever a(x) is set to [l,u] (not [0,1]), b(x) gets [1-u,1-l] in the next
@@ -217,26 +218,33 @@ def ipl_rule_lines(ipl: Sequence[tuple[str, str]], names: NameMap, arity: Mappin
     by the program's policy (PyReason's: [0,1], frozen). Returns (rule line, the predicate it copies)."""
     out = []
     for k, (a, b) in enumerate(ipl):
-        n = arity.get(a, arity.get(b))
-        if n is None:
-            continue  # neither predicate is used: nothing to keep complementary
-        # an edge pair holds on inferred edges too (PyReason adds them to its graph): {infer_edges}
-        args, opts = ("X", "") if n == 1 else ("X,Y", " {infer_edges}")
-        for src, dst in ((a, b), (b, a)):
-            for j, clause in enumerate((f"[{IPL_SET},1]", f"[0,{IPL_BELOW_ONE}]")):
-                name = f"pyreason_ipl_{k}_{names.predicate(src)}_{j}"
-                out.append((f"{name}: ~{names.predicate(dst)}({args}):max <-0 {names.predicate(src)}({args}):{clause}"
-                             f"{opts}", src))
+        for n in sorted(arity.get(a, set()) | arity.get(b, set())):  # none: nothing to keep complementary
+            out += _ipl_pair(k, a, b, n, names)
     return out
 
 
-def _arities(rules: Sequence[PRule], facts: Sequence[PFact], graph: Graph | None, names: NameMap) -> dict[str, int]:
-    """PyReason predicate -> its number of arguments, from the rules, facts and graph."""
-    out = {lit.pred: len(lit.args) for r in rules for lit in (r.head, *r.body)}
-    out.update({f.literal.pred: len(f.literal.args) for f in facts})
+def _ipl_pair(k: int, a: str, b: str, n: int, names: NameMap) -> list[tuple[str, str]]:
+    """The four rules of one pair on predicates of arity n."""
+    # an edge pair holds on inferred edges too (PyReason adds them to its graph): {infer_edges}
+    args, opts = ("X", "") if n == 1 else ("X,Y", " {infer_edges}")
+    out = []
+    for src, dst in ((a, b), (b, a)):
+        for j, clause in enumerate((f"[{IPL_SET},1]", f"[0,{IPL_BELOW_ONE}]")):
+            name = f"pyreason_ipl_{k}_{names.predicate(src, n)}_{j}"
+            out.append((f"{name}: ~{names.predicate(dst, n)}({args}):max <-0 {names.predicate(src, n)}({args}):"
+                        f"{clause}{opts}", src))
+    return out
+
+
+def _arities(rules: Sequence[PRule], facts: Sequence[PFact], graph: Graph | None, names: NameMap
+             ) -> dict[str, set[int]]:
+    """PyReason predicate -> the numbers of arguments it is used with, in the rules, facts and graph."""
+    out: dict[str, set[int]] = {}
+    for lit in [*(lit for r in rules for lit in (r.head, *r.body)), *(f.literal for f in facts)]:
+        out.setdefault(lit.pred, set()).add(len(lit.args))
     if graph is not None:
         for tl, n in graph.predicates().items():
-            out.setdefault(names.original_predicate(tl), n)
+            out.setdefault(names.original_predicate(tl), set()).add(n)
     return out
 
 
