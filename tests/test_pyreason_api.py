@@ -25,6 +25,7 @@ def fresh() -> None:
     pr.reset()
     pr.reset_rules()
     pr.reset_settings()
+    pr.api._program.ipl.clear()  # PyReason's reset() keeps the inconsistent predicate list; tests start without
 
 
 def hello_world(end: int = 2) -> None:
@@ -330,3 +331,13 @@ def test_one_predicate_on_nodes_and_on_edges_stays_two_labels() -> None:
     assert not interp.query(pr.Query("risk(A,A)"))
     assert [df["component"].tolist() for df in pr.filter_and_sort_nodes(interp, ["risk"])][-1] == ["B"]
     assert [df["component"].tolist() for df in pr.filter_and_sort_edges(interp, ["risk"])][0] == [("B", "A")]
+
+
+def test_the_inconsistent_predicate_list_outlives_reset_as_in_pyreason() -> None:
+    pr.add_inconsistent_predicate("sick", "healthy")
+    pr.reset()
+    pr.reset_rules()
+    contact_graph()
+    pr.add_rule(pr.Rule("sick(y) <- sick(x), contact(x,y)", "spread"))
+    pr.add_fact(pr.Fact("sick(Alice)", "alice_sick", 0, 0))
+    assert pr.reason(timesteps=0).get_dict()[0]["Bob"]["healthy"] == (0.0, 0.0)

@@ -62,9 +62,11 @@ _program = _Program()
 # ---- state -------------------------------------------------------------------------------------------
 
 def reset() -> None:
-    """Forget the graph, the facts, the closed-world predicates and the rules (PyReason's reset)."""
+    """Forget the graph, the facts, the closed-world predicates and the rules (PyReason's reset). The
+    inconsistent predicate list stays, as PyReason's does (nothing of PyReason's clears it)."""
     global _program
-    _program = _Program(reasoning=_program.reasoning, last=_program.last, timestamp=_program.timestamp)
+    _program = _Program(reasoning=_program.reasoning, last=_program.last, timestamp=_program.timestamp,
+                        ipl=_program.ipl)
 
 
 def reset_rules() -> None:
