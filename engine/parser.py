@@ -506,7 +506,10 @@ class _Parser:
     def term(self, allow_call: bool = False) -> Term:
         """A constant or a variable; in a rule head (`allow_call`) also a head function call `f(X, b)`."""
         t = self.peek()
-        if allow_call and t.kind == NAME and PREDICATE_RE.fullmatch(t.text) and self.peek(1).is_punct("("):
+        if t.kind == NAME and PREDICATE_RE.fullmatch(t.text) and self.peek(1).is_punct("("):
+            if not allow_call:
+                raise self.syntax(t, f"'{t.text}(' is a head function call, which only a rule head's argument "
+                                     "may be")
             return self.call()
         if t.kind == QUOTED:
             if len(t.text) == 2:

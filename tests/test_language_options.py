@@ -346,9 +346,10 @@ def test_head_functions_compute_the_head_node_in_every_kernel(head_functions):
     ("p(partner(a))\n", "a fact must be ground: 'partner(a)' is a head function call"),
     ("p(partner(X)) <-0 q(X):[0,1]\n", "unsafe variable 'X'"),
     ("p(partner(X)):average <-0 q(X)\nq(a)\n", "cannot be combined with quantifiers or an annotation function"),
+    ("p(X) <-0 q(partner(X))\n", "'partner(' is a head function call, which only a rule head's argument may be"),
 ])
 def test_head_function_misuse_is_a_located_error(head_functions, text, message):
-    with pytest.raises(ProgramCheckError) as e:
+    with pytest.raises((ProgramCheckError, RuleSyntaxError)) as e:
         parse_program(text, "<test>")
     assert message in e.value.message and e.value.line == 1 and e.value.column > 1
 
