@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 # public name -> the submodule that defines it
 _EXPORTS = {
     "register_annotation": "annotations",
+    "register_head_function": "head_functions", "unregister_head_function": "head_functions",
     "Engine": "core", "STAT_NAMES": "core", "TRACE_COLUMNS": "core",
     "FixpointError": "errors", "InconsistencyError": "errors", "ProgramCheckError": "errors",
     "ProgramError": "errors", "RuleSyntaxError": "errors", "is_interrupt": "errors",
@@ -40,6 +41,7 @@ def __dir__() -> list[str]:
 
 if TYPE_CHECKING:  # for type checkers and editors: the same names, imported eagerly
     from .annotations import register_annotation
+    from .head_functions import register_head_function, unregister_head_function
     from .core import STAT_NAMES, TRACE_COLUMNS, Engine
     from .errors import (FixpointError, InconsistencyError, ProgramCheckError, ProgramError, RuleSyntaxError,
                          is_interrupt)

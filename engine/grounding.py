@@ -19,9 +19,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import head_functions
 from .errors import ProgramError
+from .head_functions import HeadFunction
 from .grounding_limit import limit_in_force
-from .program import EPS, Literal, Rule, effective_bound
+from .program import EPS, Literal, Rule, Term, effective_bound
 from .vocabulary import Vocabulary
 
 
@@ -69,6 +71,9 @@ class _CompiledRule:
     binding: list[int]  # indices of enumerating clauses (joins find the groundings through them)
     watched: list[int]  # indices of the clauses a grounding must test: not true of every interval
     on_edges: bool  # `%edge_heads graph` and no {infer_edges}: heads only on the graph's edges
+    # per head argument: None, or a head function call (engine/head_functions.py) and its arguments coded
+    # as head_args are (its head_args entry is then unused)
+    head_calls: list[tuple[Term, HeadFunction, list[int]] | None]
 
 
 # a planned join: the rule, its start clause, the start atoms, each binding clause's relation, its bound
@@ -119,7 +124,13 @@ class Grounder:
         var_index = {v: i for i, v in enumerate(rule.variables)}
 
         def args_of(lit: Literal) -> list[int]:
-            return [var_index[t.name] if t.is_var else -self.vocab.node(t.name) - 1 for t in lit.args]
+            return [var_index[t.name] if t.is_var else -self.vocab.node(t.name) - 1 if t.function is None else 0
+                    for t in lit.args]
+
+        def call_of(t: Term) -> tuple[Term, HeadFunction, list[int]] | None:
+            if t.function is None:
+                return None
+            return t, head_functions.bind(t), args_of(Literal("", t.call_args))
 
         return _CompiledRule(
             index=index, rule=rule, n_vars=len(var_index),
@@ -131,6 +142,7 @@ class Grounder:
             binding=rule.binding_clauses(self.closed),
             watched=rule.watched_clauses(),
             on_edges=self.edge_heads == "graph" and len(rule.head.args) == 2 and not rule.infer_edges,
+            head_calls=[call_of(t) for t in rule.head.args],
         )
 
     # ---- sizes and state ----
@@ -411,14 +423,48 @@ class Grounder:
     def _on_edges(self, cr: _CompiledRule, rows: np.ndarray, found: dict[int, np.ndarray] | None
                   ) -> tuple[np.ndarray, dict[int, np.ndarray] | None]:
         """The rows whose head (source, target) is an edge of the graph."""
-        src, dst = (np.full(len(rows), -x - 1, np.int64) if x < 0 else rows[:, x] for x in cr.head_args)
+        src, dst = self._head_columns(cr, rows)
         keys = (src << 24) | dst
         pos = np.minimum(np.searchsorted(self._edge_keys, keys), max(len(self._edge_keys) - 1, 0))
         keep = self._edge_keys[pos] == keys if len(self._edge_keys) else np.zeros(len(rows), np.bool_)
         return rows[keep], None if found is None else {c: a[keep] for c, a in found.items()}
 
-    def _ground_atoms(self, label: int, args: list[int], rows: np.ndarray) -> np.ndarray:
-        cols = [np.full(len(rows), -x - 1, np.int64) if x < 0 else rows[:, x] for x in args]
+    @staticmethod
+    def _columns(args: list[int], rows: np.ndarray) -> list[np.ndarray]:
+        """Node ids per row of each argument (a variable's column or a constant)."""
+        return [np.full(len(rows), -x - 1, np.int64) if x < 0 else rows[:, x].astype(np.int64) for x in args]
+
+    def _head_columns(self, cr: _CompiledRule, rows: np.ndarray) -> list[np.ndarray]:
+        """The head's node ids per row, a head function call's computed (once per distinct arguments)."""
+        cols = self._columns(cr.head_args, rows)
+        for k, hc in enumerate(cr.head_calls):
+            if hc is not None:
+                cols[k] = self._called(cr, *hc, rows)
+        return cols
+
+    def _called(self, cr: _CompiledRule, term: Term, fn: HeadFunction, args: list[int], rows: np.ndarray
+                ) -> np.ndarray:
+        arg_cols = np.stack(self._columns(args, rows), axis=1) if len(rows) else np.zeros((0, len(args)), np.int64)
+        distinct, inverse = np.unique(arg_cols, axis=0, return_inverse=True)
+        nodes = self.vocab.nodes
+        out = np.empty(len(distinct), np.int64)
+        for i, ids in enumerate(distinct):
+            names = tuple(nodes[x] for x in ids)
+            try:
+                name = head_functions.call(fn, term, names, cr.rule.name)
+            except head_functions.HeadFunctionError as e:
+                raise ProgramError.at(cr.rule.loc, str(e)) from None
+            nid = self.vocab.node_ids.get(name)
+            if nid is None:
+                raise ProgramError.at(cr.rule.loc, f"head function '{term.function}' (rule {cr.rule.name}) "
+                                      f"returned {name!r} for {', '.join(names)}, which is not a node of the "
+                                      "program or its graph")
+            out[i] = nid
+        return out[inverse.reshape(-1)]
+
+    def _ground_atoms(self, label: int, args: list[int], rows: np.ndarray,
+                      cols: list[np.ndarray] | None = None) -> np.ndarray:
+        cols = cols if cols is not None else self._columns(args, rows)
         a1 = cols[1] if len(cols) > 1 else np.full(len(rows), -1, np.int64)
         return self.vocab.atoms(np.full(len(rows), label, np.int64), cols[0], a1)
 
@@ -427,7 +473,7 @@ class Grounder:
         if cr.on_edges:
             rows, found = self._on_edges(cr, rows, found)
         m = len(rows)
-        heads = self._ground_atoms(cr.head_label, cr.head_args, rows)
+        heads = self._ground_atoms(cr.head_label, cr.head_args, rows, self._head_columns(cr, rows))
         found = found or {}
         body = [found[ci] if ci in found else self._ground_atoms(lab, args, rows)
                 for ci, (lab, args) in enumerate(zip(cr.clause_labels, cr.clause_args))]

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 from itertools import groupby
 from pathlib import Path
 
-from . import annotations
+from . import annotations, head_functions
 from .errors import ProgramCheckError, RuleSyntaxError
 from .safe_files import MIB, read_bytes
 from .vocabulary import MAX_LABELS
@@ -31,6 +31,7 @@ from .program import (
     Rule,
     SourceLoc,
     Term,
+    constant_text,
 )
 
 __all__ = ["parse_program", "load_program", "parse_literal", "check_program"]
@@ -478,7 +479,7 @@ class _Parser:
         locs: list[SourceLoc] = []
         while True:
             t = self.peek()
-            args.append(self.term())
+            args.append(self.term(allow_call=allow_function))
             locs.append(self.loc(t))
             t = self.peek()
             if t.is_punct(")"):
@@ -502,8 +503,14 @@ class _Parser:
         self.unit.arg_locs[id(lit)] = (lit, tuple(locs))
         return lit
 
-    def term(self) -> Term:
+    def term(self, allow_call: bool = False) -> Term:
+        """A constant or a variable; in a rule head (`allow_call`) also a head function call `f(X, b)`."""
         t = self.peek()
+        if t.kind == NAME and PREDICATE_RE.fullmatch(t.text) and self.peek(1).is_punct("("):
+            if not allow_call:
+                raise self.syntax(t, f"'{t.text}(' is a head function call, which only a rule head's argument "
+                                     "may be")
+            return self.call()
         if t.kind == QUOTED:
             if len(t.text) == 2:
                 raise self.syntax(t, "empty quoted constant")
@@ -520,6 +527,21 @@ class _Parser:
                                  "and '_' (quote it to make it a constant)")
         hint = " (quote a constant that contains other characters)" if t.kind == NUMBER else ""
         raise self.syntax(t, f"expected an argument (a constant or a variable), found {t.describe()}{hint}")
+
+    def call(self) -> Term:
+        """`f(arg, ...)`: a head function applied to constants and variables (docs/language.md)."""
+        fn = self.take()
+        self.take()  # "("
+        args = [self.term()]
+        while self.peek().is_punct(","):
+            self.take()
+            args.append(self.term())
+        self.expect_punct(")", f"after the arguments of head function '{fn.text}'")
+        text = f"{fn.text}({','.join(constant_text(a.name) if not a.is_var else a.name for a in args)})"
+        term = Term(text, is_var=False, function=fn.text, call_args=tuple(args))
+        if (why := head_functions.check_call(term)) is not None:
+            raise self.check(fn, why)
+        return term
 
     def bound(self) -> tuple[float, float]:
         bracket = self.expect_punct("[", "after ':' (an annotation is ':[lower,upper]')")
@@ -723,6 +745,9 @@ class _Checker:
     def fact(self, f: Fact) -> None:
         self.literal(f.literal)
         for i, t in enumerate(f.literal.args):
+            if t.function is not None:
+                raise self.fail(self.arg_loc(f.literal, i), f"a fact must be ground: '{t.name}' is a head "
+                                "function call, which only a rule head may hold")
             if t.is_var:
                 raise self.fail(self.arg_loc(f.literal, i),
                                 f"a fact must be ground: '{t.name}' is a variable (quote it, \"{t.name}\", "
@@ -757,12 +782,13 @@ class _Checker:
             raise self.fail(r.loc, f"rule '{r.name}': unknown rule option '{r.mode}' "
                                    f"(expected {' | '.join(RULE_OPTIONS)})")
         self.aggregation(r)
+        self.head_calls(r)
         binding = {v for ci in r.binding_clauses(self.program.closed) for v in r.body[ci].variables}
         for var in r.variables:
             if var in binding:
                 continue
             lit, i = next((lit, i) for lit in (r.head, *r.body) for i, t in enumerate(lit.args)
-                          if t.is_var and t.name == var)
+                          if var in t.variables)
             quantified = [ci for ci, b in enumerate(r.body) if var in b.variables and r.quantifier(ci) is not None]
             if quantified:
                 lit, i = next((r.body[ci], i) for ci in quantified
@@ -773,6 +799,24 @@ class _Checker:
             else:
                 why = _unsafe_why(self.program, r, var)
             raise self.fail(self.arg_loc(lit, i), f"unsafe variable '{var}' in rule '{r.name}': {why}")
+
+    def head_calls(self, r: Rule) -> None:
+        """Head function calls: only in the head, of a registered function with its number of arguments,
+        not in a rule evaluated per head grounding (docs/language.md, "Head functions")."""
+        for lit in r.body:
+            for i, t in enumerate(lit.args):
+                if t.function is not None:
+                    raise self.fail(self.arg_loc(lit, i), f"rule '{r.name}': a head function call ('{t.name}') "
+                                    "may only be an argument of the rule head")
+        for i, t in enumerate(r.head.args):
+            if t.function is None:
+                continue
+            if (why := head_functions.check_call(t)) is not None:
+                raise self.fail(self.arg_loc(r.head, i), f"rule '{r.name}': {why}")
+            if r.aggregated:
+                raise self.fail(self.arg_loc(r.head, i), f"rule '{r.name}': a head function call cannot be "
+                                "combined with quantifiers or an annotation function (head groups are formed "
+                                "from the head's variables)")
 
     def aggregation(self, r: Rule) -> None:
         """Quantifiers, annotation function and weights of a rule (docs/language.md)."""

@@ -53,8 +53,18 @@ class SourceLoc:
 
 @dataclass(frozen=True)
 class Term:
-    name: str
+    name: str  # a call's is its text, `first(X)`
     is_var: bool
+    # a head function call `first(X, b)` in a rule head (engine/head_functions.py): its name and arguments
+    function: str | None = None
+    call_args: tuple[Term, ...] = ()
+
+    @property
+    def variables(self) -> tuple[str, ...]:
+        """The variables this argument reads: itself, or a call's variable arguments."""
+        if self.is_var:
+            return (self.name,)
+        return tuple(a.name for a in self.call_args if a.is_var)
 
 
 @dataclass(frozen=True)
@@ -68,7 +78,12 @@ class Literal:
 
     @property
     def variables(self) -> tuple[str, ...]:
-        return tuple(t.name for t in self.args if t.is_var)
+        return tuple(v for t in self.args for v in t.variables)
+
+    @property
+    def calls(self) -> bool:
+        """Whether an argument is a head function call."""
+        return any(t.function is not None for t in self.args)
 
     @property
     def binds(self) -> bool:
@@ -201,8 +216,9 @@ class Program:
             lits = (item.literal,) if isinstance(item, Fact) else (item.head, *item.body)
             for lit in lits:
                 for t in lit.args:
-                    if not t.is_var:
-                        seen.setdefault(t.name, None)
+                    for c in t.call_args if t.function is not None else (t,):  # a call's constant arguments
+                        if not c.is_var:
+                            seen.setdefault(c.name, None)
         return list(seen)
 
 

@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import annotations
-from .errors import FixpointError, InconsistencyError
+from . import annotations, head_functions
+from .errors import FixpointError, InconsistencyError, ProgramError
 from .program import (
     EPS,
     INCONSISTENCY_POLICIES,
@@ -22,6 +22,7 @@ from .program import (
     Program,
     Quantifier,
     Rule,
+    Term,
     constant_text,
     ordered_nodes,
 )
@@ -167,9 +168,21 @@ class ReferenceEvaluator:
         a, b = _effective(*self._read(atom), lit.negated)
         return a >= lit.lower - EPS and b <= lit.upper + EPS
 
-    @staticmethod
-    def _ground(lit: Literal, binding: dict[str, str]) -> Atom:
-        return (lit.pred, tuple(binding[t.name] if t.is_var else t.name for t in lit.args))
+    def _ground(self, lit: Literal, binding: dict[str, str]) -> Atom:
+        return (lit.pred, tuple(binding[t.name] if t.is_var else t.name if t.function is None
+                                else self._called(t, binding) for t in lit.args))
+
+    def _called(self, term: Term, binding: dict[str, str]) -> str:
+        """A head function call's node (docs/language.md "Head functions"), one that exists."""
+        args = tuple(binding[a.name] if a.is_var else a.name for a in term.call_args)
+        try:
+            name = head_functions.call(head_functions.bind(term), term, args, term.name)
+        except head_functions.HeadFunctionError as e:
+            raise ProgramError(str(e), "<reference>") from None
+        if name not in self.nodes:
+            raise ProgramError(f"head function '{term.function}' returned {name!r}, which is not a node",
+                               "<reference>")
+        return name
 
     def _active_groundings(self, rule: Rule) -> list[tuple[tuple[int, ...], tuple[str, ...], Atom]]:
         """Every assignment of rule.variables over all nodes whose body holds, smallest node ids first

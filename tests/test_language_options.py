@@ -304,3 +304,85 @@ best(X,Y):max <-0 person(X), person(Y), likes(X,Y)
     assert true_atoms(s, "near") == ["near(a,b)", "near(c,b)"]  # (a,c) is no edge of the graph
     assert true_atoms(s, "reach") == ["reach(a,b)", "reach(a,c)", "reach(c,b)"]
     assert true_atoms(s, "best") == ["best(a,b)", "best(c,b)"]
+
+
+# ---- head functions -------------------------------------------------------------------------------
+
+HEAD_FUNCTIONS = """
+%timesteps reset
+prop(a) @0..3
+prop(b) @0..3
+conn(a,b) @0..3
+conn(b,c) @1..3
+processed(partner(X)) <-0 prop(X), conn(X,Y)
+route(partner(X), Y) <-0 conn(X,Y)
+seen(first_of(X, c)) <-1 processed(X)
+"""
+
+
+@pytest.fixture
+def head_functions():
+    from tracelab.engine import register_head_function, unregister_head_function
+    register_head_function("partner", lambda x: {"a": "b", "b": "c", "c": "a"}[x])
+    register_head_function("first_of", lambda x, y: min(x, y))
+    yield
+    unregister_head_function("partner")
+    unregister_head_function("first_of")
+
+
+def test_head_functions_compute_the_head_node_in_every_kernel(head_functions):
+    """The head atom is the function's node for each grounding: reference, counting and lanes agree."""
+    steps = run_all(HEAD_FUNCTIONS, 3)
+    assert true_atoms(steps[0], "processed") == ["processed(b)"]  # partner(a) = b; b has no conn at t=0
+    assert true_atoms(steps[1], "processed") == ["processed(b)", "processed(c)"]
+    assert true_atoms(steps[1], "route") == ["route(b,b)", "route(c,c)"]
+    assert true_atoms(steps[1], "seen") == ["seen(b)"]  # first_of(b, c) from processed(b) at t=0
+    assert true_atoms(steps[2], "seen") == ["seen(b)", "seen(c)"]
+
+
+@pytest.mark.parametrize("text, message", [
+    ("processed(nope(X)) <-0 prop(X)\nprop(a)\n", "unknown head function 'nope'"),
+    ("processed(partner(X,Y)) <-0 conn(X,Y)\nconn(a,b)\n", "head function 'partner' takes 1 argument, given 2"),
+    ("p(partner(a))\n", "a fact must be ground: 'partner(a)' is a head function call"),
+    ("p(partner(X)) <-0 q(X):[0,1]\n", "unsafe variable 'X'"),
+    ("p(partner(X)):average <-0 q(X)\nq(a)\n", "cannot be combined with quantifiers or an annotation function"),
+    ("p(X) <-0 q(partner(X))\n", "'partner(' is a head function call, which only a rule head's argument may be"),
+])
+def test_head_function_misuse_is_a_located_error(head_functions, text, message):
+    with pytest.raises((ProgramCheckError, RuleSyntaxError)) as e:
+        parse_program(text, "<test>")
+    assert message in e.value.message and e.value.line == 1 and e.value.column > 1
+
+
+def test_a_head_function_returning_an_unknown_node_is_a_located_error(head_functions):
+    from tracelab.engine import register_head_function
+    register_head_function("partner", lambda x: "nowhere")
+    program = parse_program("prop(a)\nprocessed(partner(X)) <-0 prop(X)\n", "<test>")
+    with pytest.raises(Exception, match=r"head function 'partner' .*returned 'nowhere'.*not a node") as e:
+        Engine(program, kernel="counting").step()
+    assert e.value.line == 2
+
+
+COMPLEMENTARY = """
+%timesteps reset
+sick(a):[0.8,1] @0..2
+healthy(b):[0.6,0.9] @0..2
+healthy(c):[0.9,1] @0..2
+contact(a,c) @0..2
+sick(Y):[0.5,0.7] <-1 sick(X):[0.5,1], contact(X,Y)
+~healthy(X):max <-0 sick(X):[0.000000002,1]
+~healthy(X):max <-0 sick(X):[0,0.999999998]
+~sick(X):max <-0 healthy(X):[0.000000002,1]
+~sick(X):max <-0 healthy(X):[0,0.999999998]
+"""
+
+
+def test_complementary_predicates_by_rules():
+    """docs/language.md "Complementary predicates": each side gets the other's complement (reference and
+    counting kernel agree); sick(c) from the delayed rule at t=1 contradicts healthy(c): both reset, frozen."""
+    steps = run_all(COMPLEMENTARY, 3, lanes=False)
+    assert steps[0]["healthy(a)"] == pytest.approx((0.0, 0.2)) and steps[0]["sick(b)"] == pytest.approx((0.1, 0.4))
+    assert steps[0]["sick(c)"] == pytest.approx((0.0, 0.1))
+    for t in (1, 2):  # [0,1] (not listed); at t=2 the fact healthy(c) would set it again were it not frozen
+        assert "sick(c)" not in steps[t] and "healthy(c)" not in steps[t]
+    assert steps[2]["healthy(a)"] == pytest.approx((0.0, 0.2))

@@ -359,7 +359,7 @@ def test_average_annotation_function(tmp_path: Path) -> None:
     ("p(x) <-1 q(x):[0.5,1.5]", 20, "outside [0,1]"),
     ("p(x) <-1 q(x):[0.9, 0.5]", 15, "greater than"),
     ("p(x) <-1 q(x) > 3", 15, "comparison clauses"),
-    ("p(f(x)) <-1 q(x)", 4, "head functions"),
+    ("p(x) <-1 q(f(x))", 13, "head functions are only allowed in a rule head"),
     ("p(x) <-1 q(x), 1q(x)", 16, "not a predicate name"),
     ("p(x) <-1 q(x,y,z)", 12, "3 arguments"),
     ("p(x) <-1", 9, "without a body"),
@@ -375,7 +375,7 @@ def test_bad_rules_name_file_line_and_column(tmp_path: Path, line: str, col: int
 
 def test_engine_checks_point_back_at_the_pyreason_file(tmp_path: Path) -> None:
     f = tmp_path / "rules.txt"
-    f.write_text("p(x) <-1 q(x)\np(x,y) <-1 q(x), q(y)\n")
+    f.write_text("p(x) <-1 q(x)\np(x) <-1 q(x):[0,1]\n")  # x is unsafe: [0,1] binds nothing
     with pytest.raises(ProgramError) as e:
         load_pyreason([f])
     assert (e.value.file, e.value.line) == (str(f), 2) and "in its translation" in e.value.message

@@ -25,6 +25,7 @@ def fresh() -> None:
     pr.reset()
     pr.reset_rules()
     pr.reset_settings()
+    pr.api._program.ipl.clear()  # PyReason's reset() keeps the inconsistent predicate list; tests start without
 
 
 def hello_world(end: int = 2) -> None:
@@ -122,13 +123,13 @@ def test_static_graph_facts_false_holds_the_graph_at_t0_only() -> None:
 
 def test_what_is_not_supported_is_one_line_naming_it() -> None:
     with pytest.raises(pr.UnsupportedFeature) as e:
-        pr.add_inconsistent_predicate("sick", "healthy")
+        pr.load_inconsistent_predicate_list("ipl.yaml")
     assert isinstance(e.value, UserError) and "\n" not in str(e.value)
-    assert str(e.value).startswith("the inconsistent predicate list (add_inconsistent_predicate('sick', "
-                                   "'healthy')) is not supported by tracelab.pyreason")
+    assert str(e.value).startswith("the inconsistent predicate list from a YAML file "
+                                   "(load_inconsistent_predicate_list) is not supported by tracelab.pyreason")
     hello_world()
-    with pytest.raises(ProgramError, match=r"1:24: error: functions in arguments \(head functions\) are not supported"):
-        pr.Rule("Processed(identity_func(X)) <- property(X)")  # located in the rule's text
+    with pytest.raises(ProgramError, match=r"1:39: error: a function call in the arguments of a body clause"):
+        pr.Rule("Processed(X) <- property(identity_func(X))")  # located in the rule's text
     with pytest.raises(UserError, match="There are no rules"):
         pr.reset_rules()
         pr.reason(timesteps=1)
@@ -210,3 +211,133 @@ def test_rules_and_facts_from_pyreasons_files() -> None:
     nodes, _ = pr.get_rule_trace(pr.reason(timesteps=2))
     assert nodes["Occurred Due To"].tolist() == ["popular_fact", "popular_fact", "rule_0", "popular_fact",
                                                  "rule_0", "rule_0"]
+
+
+# ---- head functions (docs/pyreason.md "Head functions") ---------------------------------------------
+
+def successor(args):
+    """A PyReason head function in plain Python: the node after the first argument's node."""
+    return [{"A": "B", "B": "C", "C": "A"}[args[0][0]]]
+
+
+def both(args):
+    return [args[0][0], "C"]
+
+
+def chain() -> None:
+    g = nx.DiGraph()
+    g.add_nodes_from(["A", "B", "C"], property=1)
+    g.add_edge("A", "B", connected=1)
+    g.add_edge("B", "C", connected=1)
+    pr.load_graph(g)
+
+
+def test_a_head_function_is_called_per_grounding() -> None:
+    """Processed(successor(X)): X grounds to A and B (the sources of an edge), so B and C are processed,
+    not A; Next(X, successor(X)) stays on the graph's edges (A->B, B->C) as PyReason's edge heads do."""
+    chain()
+    pr.add_head_function(successor)
+    pr.add_rule(pr.Rule("Processed(successor(X)) <- property(X), connected(X, Y)", "node_rule"))
+    pr.add_rule(pr.Rule("Next(X, successor(X)) <- property(X), connected(X, Y)", "edge_rule"))
+    interp = pr.reason(timesteps=0)
+    assert [df["component"].tolist() for df in pr.filter_and_sort_nodes(interp, ["Processed"])] == [["B", "C"]]
+    assert interp.query(pr.Query("Next(A, B)")) and interp.query(pr.Query("Next(B, C)"))
+    assert not interp.query(pr.Query("Processed(A)"))
+
+
+def test_head_function_misuse_is_one_located_line() -> None:
+    chain()
+    pr.add_rule(pr.Rule("Processed(missing_fn(X)) <- property(X)", "r"))
+    with pytest.raises(ProgramError, match=r"unknown head function 'missing_fn'") as e:
+        pr.reason(timesteps=0)
+    assert e.value.file == "<Rule 'r'>" and "\n" not in e.value.message
+    pr.reset_rules()
+    pr.add_head_function(both)
+    pr.add_rule(pr.Rule("Processed(both(X)) <- property(X)", "r2"))
+    with pytest.raises(ProgramError, match=r"both returned \['A', 'C'\] .* exactly one node name"):
+        pr.reason(timesteps=0)
+
+
+# ---- the inconsistent predicate list (docs/pyreason.md "The inconsistent predicate list") -----------
+
+def contact_graph() -> None:
+    g = nx.DiGraph()
+    g.add_nodes_from(["Alice", "Bob", "Carol"])
+    g.add_edge("Alice", "Bob", contact=1)
+    pr.load_graph(g)
+
+
+def test_inconsistent_predicates_are_kept_complementary() -> None:
+    """sick(Alice) [0.8,1] makes healthy(Alice) [0,0.2]; the rule's sick(Bob) [0.5,0.7] makes healthy(Bob)
+    [0.3,0.5]; a healthy fact on Carol makes sick(Carol) its complement (the pair works both ways)."""
+    contact_graph()
+    pr.add_inconsistent_predicate("sick", "healthy")
+    pr.add_rule(pr.Rule("sick(y):[0.5,0.7] <- sick(x):[0.5,1.0], contact(x,y)", "spread"))
+    pr.add_fact(pr.Fact("sick(Alice):[0.8,1.0]", "alice_sick", 0, 1))
+    pr.add_fact(pr.Fact("healthy(Carol):[0.6,0.9]", "carol_healthy", 0, 1))
+    d = pr.reason(timesteps=1).get_dict()
+    for t in (0, 1):
+        assert d[t]["Alice"]["healthy"] == pytest.approx((0.0, 0.2))
+        assert d[t]["Bob"]["sick"] == (0.5, 0.7) and d[t]["Bob"]["healthy"] == pytest.approx((0.3, 0.5))
+        assert d[t]["Carol"]["sick"] == pytest.approx((0.1, 0.4))
+
+
+def test_a_conflict_with_the_partner_resets_and_freezes_both_as_pyreason_reports_it() -> None:
+    """healthy(Bob) [0.9,1] from t=0 and the rule's sick(Bob) [0.5,0.7] at t=1 conflict: both atoms are [0,1]
+    and frozen from then on (t=2 too), with PyReason's IPL rows and message."""
+    contact_graph()
+    pr.add_inconsistent_predicate("sick", "healthy")
+    pr.add_rule(pr.Rule("sick(y):[0.5,0.7] <-1 sick(x):[0.5,1.0], contact(x,y)", "spread"))
+    pr.add_fact(pr.Fact("sick(Alice):[0.8,1.0]", "alice_sick", 0, 2))
+    pr.add_fact(pr.Fact("healthy(Bob):[0.9,1.0]", "bob_healthy", 0, 2))
+    interp = pr.reason(timesteps=2)
+    d = interp.get_dict()
+    assert d[0]["Bob"] == {"healthy": (0.9, 1.0), "sick": pytest.approx((0.0, 0.1))}
+    assert d[1]["Bob"] == {"sick": (0.0, 1.0), "healthy": (0.0, 1.0)}
+    assert d[2]["Bob"].get("sick", (0.0, 1.0)) == (0.0, 1.0)  # frozen: the rule's firing at t=2 is ignored
+    assert not interp.query(pr.Query("sick(Bob):[0.5,0.7]"))
+    nodes, _ = pr.get_rule_trace(interp)
+    bad = nodes[~nodes["Consistent"].astype(bool)]
+    assert set(bad["Label"]) == {"sick", "healthy"} and set(bad["Time"]) == {1}
+    assert set(bad["Triggered By"]) <= {"IPL", "Rule"} and "IPL" in set(bad["Triggered By"])
+    assert any(m.startswith("Inconsistency occurred. Grounding healthy(Bob) conflicts with grounding sick(Bob).")
+               for m in bad["Inconsistency Message"])
+
+
+def test_an_edge_pair_is_complementary_on_inferred_edges_too() -> None:
+    contact_graph()
+    pr.add_inconsistent_predicate("trusts", "distrusts")
+    pr.add_rule(pr.Rule("trusts(x,y):[0.7,1] <- met(x), met(y)", "trust", infer_edges=True))
+    pr.add_fact(pr.Fact("met(Alice)", "m1", 0, 0))
+    pr.add_fact(pr.Fact("met(Carol)", "m2", 0, 0))
+    d = pr.reason(timesteps=0).get_dict()
+    assert d[0][("Alice", "Carol")]["distrusts"] == pytest.approx((0.0, 0.3))  # Alice->Carol is not a graph edge
+
+
+# ---- one predicate on nodes and on edges (docs/pyreason.md "What maps to what") ----------------------
+
+def test_one_predicate_on_nodes_and_on_edges_stays_two_labels() -> None:
+    """PyReason keeps node and edge labels apart: `risk` on nodes and on edges (graph and rules) are two
+    labels, each queried, filtered and traced as `risk`."""
+    g = nx.DiGraph()
+    g.add_node("A", risk=1)
+    g.add_node("B")
+    g.add_edge("A", "B", risk=1)
+    pr.load_graph(g)
+    pr.add_rule(pr.Rule("risk(y) <-1 risk(x), risk(x,y)", "node_risk"))
+    pr.add_rule(pr.Rule("risk(y,x) <-0 risk(x,y)", "back", infer_edges=True))
+    interp = pr.reason(timesteps=1)
+    assert interp.query(pr.Query("risk(B)")) and interp.query(pr.Query("risk(B,A)"))
+    assert not interp.query(pr.Query("risk(A,A)"))
+    assert [df["component"].tolist() for df in pr.filter_and_sort_nodes(interp, ["risk"])][-1] == ["B"]
+    assert [df["component"].tolist() for df in pr.filter_and_sort_edges(interp, ["risk"])][0] == [("B", "A")]
+
+
+def test_the_inconsistent_predicate_list_outlives_reset_as_in_pyreason() -> None:
+    pr.add_inconsistent_predicate("sick", "healthy")
+    pr.reset()
+    pr.reset_rules()
+    contact_graph()
+    pr.add_rule(pr.Rule("sick(y) <- sick(x), contact(x,y)", "spread"))
+    pr.add_fact(pr.Fact("sick(Alice)", "alice_sick", 0, 0))
+    assert pr.reason(timesteps=0).get_dict()[0]["Bob"]["healthy"] == (0.0, 0.0)

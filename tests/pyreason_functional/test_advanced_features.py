@@ -56,7 +56,6 @@ def test_probability_func_consistency(mode):
     assert jit_res == py_res
 
 
-@pytest.mark.xfail(reason="tracelab: head functions (add_head_function, `Processed(identity_func(X))`)", strict=True)  # tracelab
 @pytest.mark.slow
 @pytest.mark.parametrize("mode", ["regular", "fp", "parallel"])
 def test_head_functions(mode):

@@ -15,7 +15,6 @@ def setup_mode(mode):
         pr.settings.parallel_computing = True
 
 
-@pytest.mark.xfail(reason="tracelab: the inconsistent predicate list (add_inconsistent_predicate)", strict=True)  # tracelab
 @pytest.mark.slow
 @pytest.mark.parametrize("mode", ["regular", "fp", "parallel"])
 def test_inconsistency_trace_message_format(mode):

@@ -47,7 +47,9 @@ class _Program:
     rules: list[Rule] = field(default_factory=list)
     facts: list[Fact] = field(default_factory=list)
     closed: list[str] = field(default_factory=list)
+    ipl: list[tuple[str, str]] = field(default_factory=list)  # add_inconsistent_predicate's pairs
     annotation_functions: dict[str, Callable[..., Any]] = field(default_factory=dict)  # by name
+    head_functions: dict[str, Callable[..., Any]] = field(default_factory=dict)  # by name
     reasoning: _Reasoning | None = None  # the last reason()'s, for again=True
     last: Interpretation | None = None
     timestamp: str = ""
@@ -60,15 +62,18 @@ _program = _Program()
 # ---- state -------------------------------------------------------------------------------------------
 
 def reset() -> None:
-    """Forget the graph, the facts, the closed-world predicates and the rules (PyReason's reset)."""
+    """Forget the graph, the facts, the closed-world predicates and the rules (PyReason's reset). The
+    inconsistent predicate list stays, as PyReason's does (nothing of PyReason's clears it)."""
     global _program
-    _program = _Program(reasoning=_program.reasoning, last=_program.last, timestamp=_program.timestamp)
+    _program = _Program(reasoning=_program.reasoning, last=_program.last, timestamp=_program.timestamp,
+                        ipl=_program.ipl)
 
 
 def reset_rules() -> None:
-    """Forget the rules and the annotation functions (PyReason's reset_rules)."""
+    """Forget the rules, the annotation and the head functions (PyReason's reset_rules)."""
     _program.rules.clear()
     _program.annotation_functions.clear()
+    _program.head_functions.clear()
 
 
 def reset_settings() -> None:
@@ -101,11 +106,19 @@ def load_graph(graph: Any) -> None:
 
 
 def load_inconsistent_predicate_list(path: str | os.PathLike[str]) -> None:
-    raise unsupported("the inconsistent predicate list (load_inconsistent_predicate_list)")
+    raise unsupported("the inconsistent predicate list from a YAML file (load_inconsistent_predicate_list)",
+                      "call add_inconsistent_predicate(a, b) for each pair")
 
 
 def add_inconsistent_predicate(pred1: str, pred2: str) -> None:
-    raise unsupported(f"the inconsistent predicate list (add_inconsistent_predicate({pred1!r}, {pred2!r}))")
+    """Keep pred1 and pred2 complementary on every node or edge: when one is set to [l,u] the other gets
+    [1-u,1-l], and a bound that contradicts it is an inconsistency (docs/pyreason.md, "The inconsistent
+    predicate list")."""
+    for p in (pred1, pred2):
+        if not isinstance(p, str) or not p:
+            raise UserError(f"add_inconsistent_predicate: a predicate name is a non-empty str, got {p!r}")
+    if (pred1, pred2) not in _program.ipl:
+        _program.ipl.append((pred1, pred2))
 
 
 # ---- rules and facts ---------------------------------------------------------------------------------
@@ -174,7 +187,11 @@ def add_annotation_function(function: Callable[..., Any]) -> None:
 
 
 def add_head_function(function: Callable[..., Any]) -> None:
-    raise unsupported(f"head functions (add_head_function({function.__name__}))")
+    """A function `f(args)` that rule heads name in an argument (`Processed(f(X)) <- ...`): `args` per
+    argument of the call the typed list of its node names, and `f` returns a typed list of node names.
+    tracelab calls it once per grounding, with one name per argument, and takes the one node it returns
+    (head_functions.py; docs/pyreason.md "Head functions")."""
+    _program.head_functions[function.__name__] = function
 
 
 # ---- reasoning ---------------------------------------------------------------------------------------
@@ -207,7 +224,8 @@ def reason(timesteps: int = -1, convergence_threshold: int = -1, convergence_bou
     constants = _ground_components(graph, facts) if settings.allow_ground_rules else frozenset()
     translated = translate([_with_functions(r.rule, i) for i, r in enumerate(rules)], facts, graph, names,
                            persistent=settings.persistent,
-                           closed=_program.closed, constants=constants, directives=settings.directives())
+                           closed=_program.closed, constants=constants, directives=settings.directives(),
+                           head_functions=_registered_head_functions(), ipl=_program.ipl)
     _program.reasoning = _Reasoning(translated, graph)
     _program.last = _program.reasoning.run(timesteps, convergence)
     _program.facts.clear()  # used up only once reasoned with: a reason() that failed keeps them
@@ -227,6 +245,17 @@ def _with_functions(rule: PRule, index: int) -> PRule:
     register_annotation(name, adapter(fn, rule.weights or [1.0] * n))
     return dataclasses.replace(rule, head=dataclasses.replace(rule.head, function=name),
                                weights=[float(k) for k in range(1, n + 1)])
+
+
+def _registered_head_functions() -> dict[str, str]:
+    """Register add_head_function's functions with the engine: PyReason's name -> the engine's."""
+    from tracelab.engine import register_head_function
+    from .head_functions import adapter, engine_name
+    out = {}
+    for i, (name, fn) in enumerate(_program.head_functions.items()):
+        out[name] = engine_name(i, fn)
+        register_head_function(out[name], adapter(fn))
+    return out
 
 
 def _ground_components(graph: Graph | None, facts: Sequence[PFact]) -> frozenset[str]:
@@ -275,7 +304,8 @@ class _Reasoning:
         self.recorded = writer is not None
         try:
             self.episode = EpisodeRun(self.inputs, plan_episodes(self.inputs)[0], trace=True, recorder=recorder)
-            self.trace = PyReasonTrace(self.episode.engine, self.translated.names, self.skip_graph_facts)
+            self.trace = PyReasonTrace(self.episode.engine, self.translated.names, self.skip_graph_facts,
+                                       self.translated.ipl_rules)
             converged = self._steps(timesteps + 1 if timesteps >= 0 else -1, convergence)
             self.episode.finish()
         except BaseException:
@@ -322,7 +352,7 @@ class _Reasoning:
             start, end = offset + f.start, offset + f.end
             if (t == start) if f.static else (start <= t <= end):
                 lit = f.literal
-                atom = engine.atom(self.translated.names.predicate(lit.pred), *lit.args)
+                atom = engine.atom(self.translated.names.predicate(lit.pred, len(lit.args)), *lit.args)
                 self.trace.external_names[engine.next_external_id()] = f.name
                 engine.add_fact(atom, lit.lower, lit.upper, static=f.static)
 

@@ -127,22 +127,23 @@ def _graph(nodes: list[str], edges: np.ndarray, file: str, facts: GraphFacts, na
     labels: list[str] = []
     arity: list[int] = []
     label_of: dict[str, int] = {}
-    lab_map = np.zeros(len(facts.labels), np.int32)
+    # per PyReason label, its tracelab label on nodes and on edges (PyReason keeps them apart: one
+    # attribute on both is two predicates, NameMap.predicate)
+    lab_map = np.zeros((len(facts.labels), 2), np.int32)
     fact_label, args = facts.label_array(), facts.args_array()
-    on_nodes = np.bincount(fact_label[args[:, 1] < 0], minlength=len(facts.labels)) > 0
-    on_edges = np.bincount(fact_label[args[:, 1] >= 0], minlength=len(facts.labels)) > 0
+    on_edge = (args[:, 1] >= 0).astype(np.int64)
+    used = np.zeros((len(facts.labels), 2), np.bool_)
+    used[fact_label, on_edge] = True
     for j, label in enumerate(facts.labels):
-        if not (on_nodes[j] or on_edges[j]):
-            continue
-        name = names.predicate(label)
-        ar = 2 if on_edges[j] else 1
-        lid = label_of.get(name)
-        if (on_nodes[j] and on_edges[j]) or (lid is not None and arity[lid] != ar):
-            raise ProgramCheckError(f"attribute '{label}' is set on nodes and on edges, but a predicate has one "
-                                    "arity", file)
-        if lid is None:
-            lid = label_of[name] = len(labels)
-            labels.append(name)
-            arity.append(ar)
-        lab_map[j] = lid
-    return Graph(nodes, labels, arity, lab_map[fact_label], args, facts.bounds_array(), file, edges=edges)
+        for ar in (1, 2):
+            if not used[j, ar - 1]:
+                continue
+            name = names.predicate(label, ar)
+            lid = label_of.get(name)
+            if lid is None:
+                lid = label_of[name] = len(labels)
+                labels.append(name)
+                arity.append(ar)
+            lab_map[j, ar - 1] = lid
+    fact_label = lab_map[fact_label, on_edge] if len(fact_label) else fact_label
+    return Graph(nodes, labels, arity, fact_label, args, facts.bounds_array(), file, edges=edges)

@@ -37,8 +37,8 @@ class Interpretation:
     def _atom(self, pred: str, component: str | tuple[str, ...]) -> int | None:
         """The engine's id of PyReason's pred(component), None if the engine never made it."""
         vocab = self.engine.vocab
-        label = vocab.label_ids.get(self.trace.names.predicate(pred))
         args = (component,) if isinstance(component, str) else tuple(component)
+        label = vocab.label_ids.get(self.trace.names.predicate(pred, len(args)))
         nodes = [vocab.node_ids.get(a) for a in args]
         if label is None or any(n is None for n in nodes):
             return None

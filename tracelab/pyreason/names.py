@@ -25,13 +25,15 @@ class NameMap:
     """Predicate names and rule/fact names of one translated program, both ways."""
 
     def __init__(self) -> None:
-        self.pred_to_tl: dict[str, str] = {}
+        self.pred_to_tl: dict[tuple[str, int], str] = {}  # (PyReason name, arity) -> tracelab name
         self.pred_from_tl: dict[str, str] = {}
         self.stmt_from_tl: dict[str, str] = {}
 
-    def predicate(self, name: str) -> str:
-        """`Friends` -> `friends`, `has.part` -> `has_part`, `_x` -> `p_x`; a clash adds `_2`."""
-        got = self.pred_to_tl.get(name)
+    def predicate(self, name: str, arity: int = 1) -> str:
+        """`Friends` -> `friends`, `has.part` -> `has_part`, `_x` -> `p_x`; a clash adds `_2`. PyReason
+        keeps node and edge labels apart: a name used with both arities is two predicates here, the
+        arity met second named `<name>_edge` (or `<name>_node`)."""
+        got = self.pred_to_tl.get((name, arity))
         if got is not None:
             return got
         base = name
@@ -40,9 +42,15 @@ class NameMap:
             base = base[0].lower() + base[1:] if base[0].isupper() else base
             if not base[0].islower():
                 base = "p" + base
+        if (name, 3 - arity) in self.pred_to_tl:
+            base += "_edge" if arity == 2 else "_node"
         got = _unique(base, self.pred_from_tl, name)
-        self.pred_to_tl[name] = got
+        self.pred_to_tl[(name, arity)] = got
         return got
+
+    def predicates_named(self, name: str) -> list[str]:
+        """The tracelab predicates of PyReason's `name` (one per arity it is used with), at least one."""
+        return [tl for (n, _), tl in self.pred_to_tl.items() if n == name] or [self.predicate(name)]
 
     def statement(self, name: str) -> str:
         """A new rule or fact name for each call (PyReason allows a name twice, tracelab does not); names

@@ -26,6 +26,8 @@ class PLiteral:
     column: int  # 1-based, in the original line
     forall: bool = False  # `forall(p(y))` in a rule body
     function: str = ""  # an annotation function in a rule head (`p(x):average`)
+    # per argument of a rule head: None, or a head function call `f(x,y)` as (f, (x, y)); args holds its text
+    calls: tuple[tuple[str, tuple[str, ...]] | None, ...] = ()
 
 
 class Squeezed:
@@ -101,8 +103,10 @@ def negate(lower: float, upper: float) -> tuple[float, float]:
     return round(1 - upper, 10), round(1 - lower, 10)
 
 
-def parse_atom(sq: Squeezed, lo: int, hi: int, what: str) -> tuple[str, tuple[str, ...], int]:
-    """`pred(a)` or `pred(a,b)` filling sq.s[lo:hi] exactly: (pred, args, index after ')')."""
+def parse_atom(sq: Squeezed, lo: int, hi: int, what: str, allow_calls: bool = False
+               ) -> tuple[str, tuple[str, ...], int, tuple[tuple[str, tuple[str, ...]] | None, ...]]:
+    """`pred(a)` or `pred(a,b)` filling sq.s[lo:hi] exactly: (pred, args, index after ')', calls). With
+    `allow_calls` (a rule head) an argument may be a head function call `f(x,y)` (PyReason's)."""
     s = sq.s
     op = s.find("(", lo, hi)
     if op < 0:
@@ -111,23 +115,51 @@ def parse_atom(sq: Squeezed, lo: int, hi: int, what: str) -> tuple[str, tuple[st
     if not PREDICATE_RE.fullmatch(pred):
         raise sq.error(lo, f"'{pred}' is not a predicate name (a letter or '_', then letters, digits, "
                            "'_', '.' and '-')")
-    cp = s.find(")", op, hi)
+    cp = _closing(s, op, hi)
     if cp < 0:
         raise sq.error(hi, f"expected ')' to close the {what} '{pred}('")
-    if "(" in s[op + 1:cp]:
-        raise sq.error(s.find("(", op + 1, cp), "functions in arguments (head functions) are not supported "
-                                               "by tracelab")
-    args = s[op + 1:cp].split(",")
-    pos = op + 1
-    for a in args:
-        if not COMPONENT_RE.fullmatch(a):
-            raise sq.error(pos, f"'{a}' is not a component name (letters, digits, '_', then also '.', "
-                                "'@' and '-')")
-        pos += len(a) + 1
+    if "(" in s[op + 1:cp] and not allow_calls:
+        raise sq.error(s.find("(", op + 1, cp), f"a function call in the arguments of a {what}: head functions "
+                                               "are only allowed in a rule head")
+    args, calls = [], []
+    for a_lo, a_hi in split_top(sq, op + 1, cp):
+        a = s[a_lo:a_hi]
+        calls.append(_call(sq, a_lo, a_hi) if "(" in a else None)
+        if calls[-1] is None and not COMPONENT_RE.fullmatch(a):
+            raise sq.error(a_lo, f"'{a}' is not a component name (letters, digits, '_', then also '.', "
+                                 "'@' and '-')")
+        args.append(a)
     if len(args) > 2:
         raise sq.error(op + 1, f"'{pred}' has {len(args)} arguments: a PyReason literal is on a node (one) "
                                "or an edge (two)")
-    return pred, tuple(args), cp + 1
+    return pred, tuple(args), cp + 1, tuple(calls) if any(calls) else ()
+
+
+def _closing(s: str, op: int, hi: int) -> int:
+    """The index of the ')' that closes the '(' at op, or -1."""
+    depth = 0
+    for i in range(op, hi):
+        depth += {"(": 1, ")": -1}.get(s[i], 0)
+        if depth == 0:
+            return i
+    return -1
+
+
+def _call(sq: Squeezed, lo: int, hi: int) -> tuple[str, tuple[str, ...]]:
+    """A head function call `f(x,y)` in sq.s[lo:hi]: (f, (x, y))."""
+    s = sq.s
+    op = s.find("(", lo, hi)
+    name = s[lo:op]
+    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
+        raise sq.error(lo, f"'{name}' is not a head function name")
+    if _closing(s, op, hi) != hi - 1 or op + 1 == hi - 1:
+        raise sq.error(op, f"expected {name}(arguments) as a head function call")
+    args = tuple(s[a:b] for a, b in split_top(sq, op + 1, hi - 1))
+    for (a_lo, _), a in zip(split_top(sq, op + 1, hi - 1), args):
+        if not COMPONENT_RE.fullmatch(a):
+            raise sq.error(a_lo, f"'{a}' is not a component name: a head function's arguments are variables "
+                                 "or node names")
+    return name, args
 
 
 def parse_literal(sq: Squeezed, lo: int, hi: int, what: str, *, allow_function: bool = False) -> PLiteral:
@@ -141,7 +173,7 @@ def parse_literal(sq: Squeezed, lo: int, hi: int, what: str, *, allow_function: 
         k = s.find(op, start, hi)
         if k >= 0:
             raise sq.error(k, f"comparison clauses ('{op}') are not supported by tracelab")
-    pred, args, after = parse_atom(sq, start, hi, what)
+    pred, args, after, calls = parse_atom(sq, start, hi, what, allow_calls=allow_function)
     lower, upper = 1.0, 1.0
     if after < hi:
         if s[after] != ":":
@@ -155,8 +187,8 @@ def parse_literal(sq: Squeezed, lo: int, hi: int, what: str, *, allow_function: 
                 raise sq.error(after + 1, f"expected a bound [l,u], True or False after ':', found '{name}'")
             if neg or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
                 raise sq.error(after + 1, f"'{name}' is not a bound nor an annotation function name")
-            return PLiteral(pred, args, 0.0, 1.0, sq.col(lo), function=name)
+            return PLiteral(pred, args, 0.0, 1.0, sq.col(lo), function=name, calls=calls)
         lower, upper = negate(*bound) if neg else bound  # ~p(x):True is p(x):[0,0]
     elif neg:
         lower, upper = 0.0, 0.0
-    return PLiteral(pred, args, lower, upper, sq.col(lo))
+    return PLiteral(pred, args, lower, upper, sq.col(lo), calls=calls)

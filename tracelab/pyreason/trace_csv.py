@@ -37,8 +37,10 @@ class PyReasonTrace:
     components (`get_rule_trace`); the CSV prints them as Python does. `node_bounds` / `edge_bounds` hold
     each row's new bound as numbers (`filter_and_sort_nodes`)."""
 
-    def __init__(self, engine: Any, names: NameMap | None = None, graph_facts: int = 0) -> None:
+    def __init__(self, engine: Any, names: NameMap | None = None, graph_facts: int = 0,
+                 ipl_rules: dict[str, str] | None = None) -> None:
         self.engine = engine
+        self.ipl_rules = ipl_rules or {}  # the inconsistent predicate list's rules -> the predicate they copy
         self.names = names or NameMap()
         self.graph_facts = graph_facts
         self.node_rows: list[list[object]] = []
@@ -77,15 +79,15 @@ class PyReasonTrace:
                 rule_no = int(eng.groundings.rule[g]) if g >= 0 else cid
                 rule = eng.rules[rule_no]
                 due, by = self.names.original_statement(rule.name), "Rule"
+                if rule.name in self.ipl_rules:  # PyReason's names for what its IPL sets
+                    due, by = f"IPL: {self.ipl_rules[rule.name]}", "IPL"
             elif kind == CAUSE_FACT:
                 due, by = self.names.original_statement(eng.fact(cid).name), "Fact"
             elif kind == CAUSE_EXTERNAL and cid in self.external_names:
                 due, by = self.external_names[cid], "Fact"
             else:
                 due, by = "-", "Fact"
-            message = "" if consistent else (
-                f"Inconsistency occurred. Conflicting bounds for {self._pred(pred)}({','.join(args)}). "
-                f"Update from {old} is not allowed. Setting bounds to [0,1] and static=True for this timestep.")
+            message = "" if consistent else self._inconsistency(pred, args, old, by, due)
             row: list[object] = [int(cols["t"][i]), passes_before + int(cols["pass_no"][i]),
                                  self._component(args), self._pred(pred), old,
                                  _bound(cols["new_lower"][i], cols["new_upper"][i]), due, consistent, by, message]
@@ -100,6 +102,16 @@ class PyReasonTrace:
         for _, which, row, bound in step:
             (self.node_rows if which == "node" else self.edge_rows).append(row)
             (self.node_bounds if which == "node" else self.edge_bounds).append(bound)
+
+    def _inconsistency(self, pred: str, args: tuple[str, ...], old: str, by: str, due: str) -> str:
+        """PyReason's message: a conflict with the IPL partner names both groundings."""
+        atom = f"{self._pred(pred)}({','.join(args)})"
+        if by == "IPL":
+            return (f"Inconsistency occurred. Grounding {atom} conflicts with grounding "
+                    f"{due.removeprefix('IPL: ')}({','.join(args)}). Setting bounds to [0,1] and static=True for "
+                    "this timestep.")
+        return (f"Inconsistency occurred. Conflicting bounds for {atom}. Update from {old} is not allowed. "
+                "Setting bounds to [0,1] and static=True for this timestep.")
 
     def write(self, folder: str | os.PathLike[str], timestamp: str | None = None) -> tuple[str, str]:
         """rule_trace_nodes_<timestamp>.csv and rule_trace_edges_<timestamp>.csv in `folder` (created)."""

@@ -6,7 +6,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import re
-from collections.abc import Container, Sequence
+from collections.abc import Container, Mapping, Sequence
 from dataclasses import dataclass, field
 
 from tracelab.engine import (
@@ -42,6 +42,7 @@ class PyReasonProgram:
     graph: Graph | None
     names: NameMap
     origins: list[tuple[SourceLoc, str] | None] = field(default_factory=list)  # per line of text
+    ipl_rules: dict[str, str] = field(default_factory=dict)  # the IPL's rules -> the predicate they copy
 
 
 def number(v: float) -> str:
@@ -69,16 +70,26 @@ def threshold_text(t: Threshold, forall: bool) -> str:
 
 
 def _literal(lit: PLiteral, names: NameMap, args: Sequence[str]) -> str:
-    return f"{names.predicate(lit.pred)}({','.join(args)})"
+    return f"{names.predicate(lit.pred, len(lit.args))}({','.join(args)})"
 
 
-def rule_text(r: PRule, names: NameMap, constants: Container[str] = frozenset()) -> str:
+def rule_text(r: PRule, names: NameMap, constants: Container[str] = frozenset(),
+              head_functions: Mapping[str, str] | None = None) -> str:
     """One PyReason rule as one tracelab rule statement. Components in `constants` (PyReason's ground
-    rules, `allow_ground_rules`: a component that names a node) are constants, the others variables."""
-    components = [a for lit in (r.head, *r.body) for a in lit.args]
+    rules, `allow_ground_rules`: a component that names a node) are constants, and so are the head's
+    components that no body clause has (PyReason grounds such a head variable to the node of its name);
+    the others are variables. A head function call `f(x)` names the engine's function `head_functions[f]`
+    (api.add_head_function)."""
+    body_components = {a for lit in r.body for a in lit.args}
+    head_components = [a for a, c in zip(r.head.args, r.head.calls or [None] * len(r.head.args)) for a in
+                       (c[1] if c is not None else (a,))]
+    constants = {a for a in head_components if a in constants or a not in body_components} | {
+        a for a in body_components if a in constants}
+    components = [*head_components, *(a for lit in r.body for a in lit.args)]
     var = variable_names([a for a in components if a not in constants])
     var.update({a: constant_text(a) for a in components if a in constants})
-    head = _literal(r.head, names, [var[a] for a in r.head.args])
+    head = _literal(r.head, names, [_head_arg(a, c, var, head_functions or {})
+                                    for a, c in zip(r.head.args, r.head.calls or [None] * len(r.head.args))])
     options: list[str] = []
     if r.head.function:
         fn = _FUNCTIONS.get(r.head.function, r.head.function)
@@ -101,9 +112,18 @@ def rule_text(r: PRule, names: NameMap, constants: Container[str] = frozenset())
     return f"{names.statement(r.name)}: {head} <-{r.delay} {', '.join(body)}{opts}"
 
 
+def _head_arg(arg: str, call: tuple[str, tuple[str, ...]] | None, var: Mapping[str, str],
+              head_functions: Mapping[str, str]) -> str:
+    if call is None:
+        return var[arg]
+    fn, args = call
+    # an unregistered name stays as it is: the engine's check names it (a located error)
+    return f"{head_functions.get(fn, fn)}({','.join(var[a] for a in args)})"
+
+
 def fact_text(f: PFact, names: NameMap) -> str:
     lit = f.literal
-    atom = f"{names.predicate(lit.pred)}({','.join(constant_text(a) for a in lit.args)})"
+    atom = f"{names.predicate(lit.pred, len(lit.args))}({','.join(constant_text(a) for a in lit.args)})"
     when = " static" if f.static else (f" @{f.start}" if f.start == f.end else f" @{f.start}..{f.end}")
     return f"{names.statement(f.name)}: {atom}{bound_text(lit.lower, lit.upper)}{when}"
 
@@ -131,12 +151,16 @@ def load_pyreason(rule_files: Sequence[str | os.PathLike[str]], fact_files: Sequ
 
 def translate(rules: Sequence[PRule], facts: Sequence[PFact], graph: Graph | None, names: NameMap, *,
               persistent: bool = False, embed_graph: bool = False, closed: Sequence[str] = (),
-              constants: Container[str] = frozenset(), directives: Sequence[str] = ()) -> PyReasonProgram:
+              constants: Container[str] = frozenset(), directives: Sequence[str] = (),
+              head_functions: Mapping[str, str] | None = None, ipl: Sequence[tuple[str, str]] = ()
+              ) -> PyReasonProgram:
     """PyReason's rules, facts and graph (its predicates named through `names`) as one checked tracelab
     program. PyReason's defaults become directives: non-persistent timesteps (`%timesteps reset`) unless
     `persistent`; intersection updates and reset-and-freeze on inconsistency are tracelab's defaults too.
     `closed`: PyReason's closed-world predicates (`%closed`); `constants`: rule components read as
-    constants (PyReason's `allow_ground_rules`); `directives`: more directive lines (settings.py)."""
+    constants (PyReason's `allow_ground_rules`); `directives`: more directive lines (settings.py);
+    `head_functions`: PyReason's head function names -> the engine's (api.add_head_function); `ipl`: the
+    inconsistent predicate list (ipl_rule_lines)."""
     lines: list[str] = ["# translated from PyReason by tracelab (docs/pyreason.md)"]
     origins: list[tuple[SourceLoc, str] | None] = [None]
     if not persistent:
@@ -147,12 +171,18 @@ def translate(rules: Sequence[PRule], facts: Sequence[PFact], graph: Graph | Non
         origins.append(None)
     lines += directives
     origins += [None] * len(directives)
-    if closed:
-        lines.append("%closed " + ", ".join(names.predicate(p) for p in closed) + "  # add_closed_world_predicate")
-        origins.append(None)
     for r in rules:
-        lines.append(rule_text(r, names, constants))
+        lines.append(rule_text(r, names, constants, head_functions))
         origins.append((r.loc, r.text))
+    if closed:  # after the rules and facts: a predicate's name depends on the arities it is used with
+        lines.append("%closed " + ", ".join(tl for p in closed for tl in names.predicates_named(p)) +
+                     "  # add_closed_world_predicate")
+        origins.append(None)
+    ipl_rules: dict[str, str] = {}
+    for line, source in ipl_rule_lines(ipl, names, _arities(rules, facts, graph, names)):
+        lines.append(line)
+        origins.append(None)
+        ipl_rules[line.split(":", 1)[0]] = source
     for f in facts:
         lines.append(fact_text(f, names))
         origins.append((f.loc, ""))
@@ -170,7 +200,52 @@ def translate(rules: Sequence[PRule], facts: Sequence[PFact], graph: Graph | Non
     except ProgramError as e:
         raise _located(e, origins, lines) from None
     program.files = sorted({str(o[0].file) for o in origins if o is not None})
-    return PyReasonProgram(text, program, graph, names, origins)
+    return PyReasonProgram(text, program, graph, names, origins, ipl_rules)
+
+
+# A bound excluding exactly the atoms within the engine's EPS of [0,1] (never set, or set back to it): a
+# clause `p(X):[IPL_SET,1]` holds when p(X) > [0,1] from below, `p(X):[0,1-IPL_SET]` from above
+IPL_SET = "0.000000002"
+IPL_BELOW_ONE = "0.999999998"
+
+
+def ipl_rule_lines(ipl: Sequence[tuple[str, str]], names: NameMap, arity: Mapping[str, set[int]]
+                   ) -> list[tuple[str, str]]:
+    """PyReason's inconsistent predicate list as rules (docs/pyreason.md, "The inconsistent predicate
+    list"): for a pair (a, b), whenever a(x) is set to [l,u] (not [0,1]), b(x) gets [1-u,1-l] in the next
+    pass (`~b(X):max <-0 a(X):...`: `max` of the one atom is its bound, and the `~` head sets its
+    complement), and the other way round. A conflict is then an ordinary inconsistency of b(x), resolved
+    by the program's policy (PyReason's: [0,1], frozen). Returns (rule line, the predicate it copies)."""
+    out = []
+    for k, (a, b) in enumerate(ipl):
+        for n in sorted(arity.get(a, set()) | arity.get(b, set())):  # none: nothing to keep complementary
+            out += _ipl_pair(k, a, b, n, names)
+    return out
+
+
+def _ipl_pair(k: int, a: str, b: str, n: int, names: NameMap) -> list[tuple[str, str]]:
+    """The four rules of one pair on predicates of arity n."""
+    # an edge pair holds on inferred edges too (PyReason adds them to its graph): {infer_edges}
+    args, opts = ("X", "") if n == 1 else ("X,Y", " {infer_edges}")
+    out = []
+    for src, dst in ((a, b), (b, a)):
+        for j, clause in enumerate((f"[{IPL_SET},1]", f"[0,{IPL_BELOW_ONE}]")):
+            name = f"pyreason_ipl_{k}_{names.predicate(src, n)}_{j}"
+            out.append((f"{name}: ~{names.predicate(dst, n)}({args}):max <-0 {names.predicate(src, n)}({args}):"
+                        f"{clause}{opts}", src))
+    return out
+
+
+def _arities(rules: Sequence[PRule], facts: Sequence[PFact], graph: Graph | None, names: NameMap
+             ) -> dict[str, set[int]]:
+    """PyReason predicate -> the numbers of arguments it is used with, in the rules, facts and graph."""
+    out: dict[str, set[int]] = {}
+    for lit in [*(lit for r in rules for lit in (r.head, *r.body)), *(f.literal for f in facts)]:
+        out.setdefault(lit.pred, set()).add(len(lit.args))
+    if graph is not None:
+        for tl, n in graph.predicates().items():
+            out.setdefault(names.original_predicate(tl), set()).add(n)
+    return out
 
 
 def _relocated(program: Program, origins: list[tuple[SourceLoc, str] | None]) -> Program:
