@@ -375,7 +375,8 @@ class Trainer:
 
     # ---- checkpoints: the parts' states side by side ----
     def state(self) -> dict[str, Any]:
-        """Everything that decides what happens next, as tensors, arrays and plain values."""
+        """Everything that decides what happens next, as tensors, arrays and plain values (some arrays are
+        the parts' live ones: save_checkpoint copies them)."""
         episodes = self.episodes.state()
         return {
             "step": self.step, "eval_round": self.eval_round, "eval_step": self.eval_step,
