@@ -146,7 +146,7 @@ def test_reward_scale_scales_what_the_learner_sees_and_nothing_that_is_logged():
         trainer = Trainer(cfg, WALK)
         trainer.train()
         st = trainer.learners["shared"].buffer.state()
-        returns = trainer.ep_return.copy()
+        returns = trainer.episodes.returns.copy()
         trainer.close()
         return st, returns
     (one, ret_one), (small, ret_small) = buffered(1.0), buffered(0.01)

@@ -4,10 +4,9 @@ three generators (exploration and sampling, torch, the opponent's), the step, an
 `learner` says which learner wrote the networks' state (fused or readable; absent: fused, written before
 there were two), and a resume takes that one whatever `--learner auto` would pick today.
 
-The simulators' worlds are not pickled: a rule engine's state is not meant to move between processes.
-Instead the checkpoint keeps, per world, the actions both teams played since its episode began, and a
-restore replays them into a fresh env: the game is deterministic given the actions, so the worlds come
-back exactly (the observation they end in is checked against the saved one).
+The trainer's state is its parts' (Trainer.state: each part saves and loads itself, under the keys
+checkpoints have always had). The simulators' worlds are not pickled: the checkpoint keeps the actions
+played since each episode began and a restore replays them (game_record.py).
 
 A checkpoint may come from a stranger (a run attached to a bug report), so it holds nothing but tensors
 and plain values (format 2: numpy arrays are saved as tensors), loads with torch's weights_only
@@ -24,7 +23,7 @@ import numpy as np
 import torch
 
 from tracelab.engine.safe_files import FileRefused
-from tracelab.game.scenario import NOTHING, RED, Scenario, scenario_from_dict
+from tracelab.game.scenario import NOTHING, Scenario, scenario_from_dict
 from tracelab.validation import (Const, ExactKeys, IntRange, ListOf, MapOf, Mismatch, Nullable, OneOf,
                                  OptionalKey, Tuple, check)
 from tracelab.train.config import TrainConfig, config_schema
@@ -55,23 +54,12 @@ def _as_tensors(value: Any) -> Any:
 
 
 def save_checkpoint(tr: Any, run_dir: Path) -> Path:
-    """Write the trainer's whole state; returns the file."""
+    """Write the trainer's whole state (its parts', Trainer.state) with its config and scenario; returns
+    the file."""
     path = checkpoint_path(run_dir)
     path.parent.mkdir(parents=True, exist_ok=True)
-    state = {
-        "format": FORMAT, "config": tr.cfg.to_dict(), "scenario_toml": tr.scenario.to_toml(),
-        "run": str(run_dir), "step": tr.step, "next_episode": tr.next_episode, "update_credit": tr.update_credit,
-        "synced_block": tr.synced_block, "eval_round": tr.eval_round, "returns_since_log": list(tr.returns_since_log),
-        "last_loss": tr.last_loss, "logged_step": tr.logged_step, "eval_step": tr.eval_step,
-        "best_eval": tr.best_eval, "best_weights": tr.best_weights,
-        "learner": tr.learner_kind, "custom_network": tr.custom_network,
-        "learners": {name: lr.state() for name, lr in tr.learners.items()},
-        "rng": tr.rng.bit_generator.state, "torch_rng": tr.torch_gen.get_state(),
-        "env_rng": tr.env.sim.rng.bit_generator.state,
-        "games": {"history": tr.history, "ep_len": tr.ep_len, "ep_return": tr.ep_return,
-                  "ep_id": tr.ep_id, "ep_start": tr.ep_start, "obs": tr.obs},
-        "pending": tr.pending.state(),
-    }
+    state = {"format": FORMAT, "config": tr.cfg.to_dict(), "scenario_toml": tr.scenario.to_toml(),
+             "run": str(run_dir), **tr.state()}
     tmp = path.with_suffix(".tmp")
     torch.save(_as_tensors(state), tmp)
     tmp.replace(path)
@@ -272,58 +260,4 @@ def checkpoint_scenario(state: dict[str, Any]) -> Scenario:
 
 def restore(tr: Any, state: dict[str, Any]) -> None:
     """Put a freshly built Trainer (same config) into the checkpoint's state."""
-    kind = state.get("learner", "fused")
-    if tr.learner_kind != kind:
-        raise ValueError(f"the checkpoint holds the {kind} learner's state; this trainer runs the "
-                         f"{tr.learner_kind} one")
-    for name, lr in tr.learners.items():
-        lr.load_state(state["learners"][name])
-    tr.step, tr.next_episode = int(state["step"]), int(state["next_episode"])
-    tr.update_credit, tr.synced_block = float(state["update_credit"]), int(state["synced_block"])
-    tr.eval_round, tr.last_loss = int(state["eval_round"]), state["last_loss"]
-    tr.logged_step, tr.eval_step = int(state["logged_step"]), int(state["eval_step"])
-    tr.returns_since_log = list(state["returns_since_log"])
-    best = state["best_eval"]
-    tr.best_eval = None if best is None else (float(best[0]), int(best[1]))
-    tr.best_weights = dict(state["best_weights"])
-    tr.write_best_policy()  # a resumed run into a new directory keeps it too
-    tr.rng.bit_generator.state = state["rng"]
-    tr.torch_gen.set_state(state["torch_rng"])
-    g = state["games"]
-    tr.history[...] = g["history"]
-    tr.ep_len[...] = g["ep_len"]
-    tr.ep_return[...] = g["ep_return"]
-    tr.ep_id[...] = g["ep_id"]
-    tr.ep_start[...] = g["ep_start"]
-    _replay_games(tr.env.sim, tr.history, tr.ep_len)
-    tr.env.sim.rng.bit_generator.state = state["env_rng"]
-    obs = tr.env.sim.observe(RED)
-    if not np.array_equal(obs, g["obs"]):
-        raise RuntimeError("restoring the checkpoint's games did not reproduce their observations: it was written "
-                           "with another simulator, or edited")
-    tr.obs = obs
-    tr.acting = tr.may_act()
-    tr.pending.load_state(state["pending"])
-
-
-def _replay_games(sim: Any, history: np.ndarray, ep_len: np.ndarray) -> None:
-    """Bring every world to the state after its episode's first ep_len[w] steps. Worlds start their
-    replay so that all end together; before that they idle (both teams do nothing), then are reset."""
-    worlds, n = history.shape[0], history.shape[3]
-    longest = int(ep_len.max()) if worlds else 0
-    start = longest - ep_len
-    sim.reset(worlds=np.ones(worlds, bool))
-    idle = np.full((worlds, n), NOTHING, np.int64)
-    for k in range(longest):
-        begin = start == k
-        if begin.any():
-            sim.reset(worlds=begin)
-        k_w = k - start
-        playing = k_w >= 0
-        red, blue = idle.copy(), idle.copy()
-        idx = np.flatnonzero(playing)
-        red[idx] = history[idx, k_w[idx], 0]
-        blue[idx] = history[idx, k_w[idx], 1]
-        sim.step(red, blue)
-    if (ep_len == 0).any():
-        sim.reset(worlds=ep_len == 0)
+    tr.load_state(state)

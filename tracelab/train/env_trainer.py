@@ -3,7 +3,8 @@ batched worlds, transitions into replay, one update per world-step, target copie
 metrics and episodes, the final and the best policy.
 
 It is the GridWar Trainer's loop (loop.py) without what is GridWar's (teams, the scripted opponent, slow
-agents, replaying games from a checkpoint): the same TrainConfig and ε schedule, the same learners
+agents, replaying games from a checkpoint): the same TrainConfig and the same parts (rngs.Generators,
+Exploration, UpdateSchedule, EpisodeLog, MetricLog, BestPolicy), the same learners
 (make_learner: fused or readable, behind the Learner protocol), the same replay buffer, the same update
 and target-copy cadence, the same metric names where they mean the same thing. Observations are encoded
 for the network by env_source.ObservationEncoder (a Discrete one is one-hot)."""
@@ -23,10 +24,16 @@ from tracelab.train.env_policy import EnvEvalResult, EnvPolicy, make_vector_env,
 from tracelab.envs.declared.env_source import EnvSource
 from tracelab.train.env_source import ObservationEncoder, action_count
 from tracelab.train.learner_protocol import Learner
-from tracelab.train.loop import acting_q, close_log, eval_seed, learn_pass, make_learner, write_metric_rows
+from tracelab.train.best_policy import BestPolicy
+from tracelab.train.episode_log import EpisodeLog
+from tracelab.train.exploration import Exploration
+from tracelab.train.loop import acting_q, end_training, make_learner
+from tracelab.train.metric_log import MetricLog
 from tracelab.train.policy import BEST_POLICY_DIR
 from tracelab.train.qnet import NetSpec
+from tracelab.train.rngs import Generators
 from tracelab.train.tensorboard import MetricSink
+from tracelab.train.update_schedule import UpdateSchedule
 
 Progress = Callable[[dict[str, Any]], None]
 
@@ -37,7 +44,6 @@ class EnvTrainer:
                  metric_sinks: Sequence[MetricSink] = ()) -> None:
         torch.set_num_threads(cfg.threads)
         self.cfg, self.source, self.writer, self.run_dir, self.progress = cfg, source, writer, run_dir, progress
-        self.metric_sinks = list(metric_sinks)  # besides the run: e.g. TensorBoard (train --tensorboard)
         self.worlds = w = cfg.envs
         self.env = make_vector_env(source, w)
         single = self.env.single_observation_space
@@ -46,65 +52,40 @@ class EnvTrainer:
         declared = getattr(self.env.envs[0].unwrapped, "world_spec", None)  # a declared world names its actions
         self.action_names = list(declared.action_names) if declared is not None else \
             [str(a) for a in range(self.n_actions)]
-        self.rng = np.random.default_rng(np.random.SeedSequence([cfg.seed, 0]))  # exploration, sampling
-        self.torch_gen = torch.Generator().manual_seed(cfg.seed)
+        self.rngs = Generators(cfg.seed)
+        self.exploration = Exploration(cfg, self.rngs.numpy)
         self.net = NetSpec(self.encoder.size, cfg.hidden_sizes, self.n_actions, cfg.dueling)
         self.learner_kind, self.learner_note = cfg.learner_choice()
-        self.learner: Learner = make_learner(self.learner_kind, self.net, cfg, self.torch_gen)
+        self.learner: Learner = make_learner(self.learner_kind, self.net, cfg, self.rngs.torch)
         self.policy = EnvPolicy(acting_q(self.learner, self.net), self.encoder, cfg.mask)
+        self.schedule = UpdateSchedule(cfg, w)
+        self.episodes = EpisodeLog(w, writer)
+        self.metrics = MetricLog(writer, metric_sinks)
+        self.best = BestPolicy()  # by the evaluation's mean return
         self.step = 0
-        self.update_credit = 0.0
-        self.synced_block = 0
         self.eval_round = 0
-        self.next_episode = 0
-        self.ep_id = np.zeros(w, np.int64)
-        self.ep_len = np.zeros(w, np.int64)
-        self.ep_return = np.zeros(w)
-        self.returns_since_log: list[float] = []
-        self._begun: list[dict[str, Any]] = []
-        self._ended: list[dict[str, Any]] = []
+        self.eval_step = -1
         self.last_eval: EnvEvalResult | None = None
-        self.best_eval: tuple[float, int] | None = None  # (mean return, step) of the best evaluation
-        self.best_weights: dict[str, torch.Tensor] = {}
-        self.last_loss: float | None = None
-        self.logged_step = self.eval_step = -1
         self.stop_requested = False
         self._eval_env: Any = None
-        self.obs, self.info = self.env.reset(seed=int(np.random.SeedSequence([cfg.seed, 2]).generate_state(1)[0]))
-        self._begin(np.arange(w))
-        self._rate_mark = (time.perf_counter(), 0, 0)
+        self.obs, self.info = self.env.reset(seed=self.rngs.env_seed())
+        self.episodes.begin(np.arange(w), self.step)
 
-    # ---- episodes ----
-    def _begin(self, worlds: np.ndarray) -> None:
-        for k in worlds.tolist():
-            self.ep_id[k] = self.next_episode
-            self.next_episode += 1
-            self._begun.append({"episode": int(self.ep_id[k]), "world": k, "t_start": 0,
-                                "info": {"kind": "train", "train_step": self.step}})
-        self.ep_len[worlds] = 0
-        self.ep_return[worlds] = 0.0
-
-    def _flush_episodes(self) -> None:
-        if self.writer is not None and (self._begun or self._ended):
-            self.writer.begin_episodes(self._begun)
-            self.writer.end_episodes(self._ended)
-        self._begun, self._ended = [], []
+    @property
+    def best_eval(self) -> tuple[float, int] | None:
+        """(mean return, step) of the best evaluation so far."""
+        return self.best.eval
 
     # ---- one pass: every world makes one step ----
     def epsilon(self) -> float:
-        return 1.0 if self.step < self.cfg.warmup else self.cfg.epsilon(self.step)
+        return self.exploration.epsilon(self.step)
 
     def _masks(self) -> np.ndarray | None:
         return self.info.get("action_mask") if self.cfg.mask else None
 
     def _choose(self) -> np.ndarray:
-        w, a = self.worlds, self.n_actions
         masks = self._masks()
-        explore = self.rng.random(w) < self.epsilon()
-        if masks is None:
-            random = self.rng.integers(0, a, w)
-        else:  # uniform among the allowed actions
-            random = np.argmax(self.rng.random((w, a)) * masks, axis=1)
+        explore, random = self.exploration.draw(self.step, (self.worlds,), self.n_actions, masks)
         if explore.all():
             return random
         return np.where(explore, random, self.policy.act(self.obs, masks))
@@ -126,53 +107,45 @@ class EnvTrainer:
             allowed[done] = True  # a reset world's mask is its new start's: max over every action
         self.learner.buffer.add(obs_now, actions, (reward * cfg.reward_scale).astype(np.float32),
                                 self.encoder(next_obs), (cfg.gamma * ~terminated).astype(np.float32), allowed)
-        self.ep_len += 1
-        self.ep_return += reward
+        self.episodes.add_step(reward)
         self.step += self.worlds
         self.obs, self.info = obs, info
         if done.any():
             ended = np.flatnonzero(done)
-            for k in ended.tolist():
-                self.returns_since_log.append(float(self.ep_return[k]))
-                self._ended.append({"episode": int(self.ep_id[k]), "steps": int(self.ep_len[k]),
-                                    "outcome": "terminated" if terminated[k] else "truncated",
-                                    "reward": float(self.ep_return[k])})
-            self._begin(ended)
-
-    def learn(self) -> None:
-        learn_pass(self, [self.learner])
+            self.episodes.end(ended, ["terminated" if terminated[k] else "truncated" for k in ended.tolist()])
+            self.episodes.begin(ended, self.step)
 
     # ---- logging, evaluation, policies ----
     def _crossed(self, every: int, before: int) -> bool:
         return every > 0 and self.step // every > before // every
 
     def log_metrics(self) -> dict[str, float]:
-        now = time.perf_counter()
         m: dict[str, float] = {"epsilon": self.epsilon()}
         loss = self.learner.take_loss()
         if loss is not None:
-            m["loss"] = self.last_loss = loss
+            m["loss"] = loss
         q = self.learner.q_max_mean()
         if q is not None:
             m["q_max_mean"] = q / self.cfg.reward_scale
-        return close_log(self, m, now, self.learner.updates)
+        self.metrics.complete(m, self.step, self.learner.updates, self.episodes.take_returns())
+        self.episodes.flush()
+        self.write_metrics(m)
+        return m
 
     def write_metrics(self, values: dict[str, float]) -> None:
-        write_metric_rows(self, values)
+        self.metrics.write(self.step, values)
 
     def run_eval(self) -> EnvEvalResult:
         cfg = self.cfg
         if self._eval_env is None:
             self._eval_env = make_vector_env(self.source, min(cfg.eval_envs, cfg.eval_games))
-        result = play_env_games(self._eval_env, self.policy, cfg.eval_games, eval_seed(cfg.seed, self.eval_round))
+        result = play_env_games(self._eval_env, self.policy, cfg.eval_games, self.rngs.eval_seed(self.eval_round))
         self.write_metrics(result.metrics())
         self.eval_round += 1
         self.last_eval, self.eval_step = result, self.step
-        if self.best_eval is None or result.mean_return > self.best_eval[0]:
-            self.best_eval = (result.mean_return, self.step)
-            self.best_weights = {k: v.clone() for k, v in self.learner.online_weights().items()}
+        if self.best.consider(result.mean_return, self.step, self.learner.online_weights()):
             if self.run_dir is not None:
-                self._save(self.run_dir / BEST_POLICY_DIR, self.best_weights, self.step,
+                self._save(self.run_dir / BEST_POLICY_DIR, self.best.weights, self.step,
                            {"metric": "eval/mean_return", "value": result.mean_return})
         return result
 
@@ -193,8 +166,8 @@ class EnvTrainer:
         end = cfg.steps if stop_at is None else min(cfg.steps, stop_at)
         while self.step < end and not self.stop_requested:
             before = self.step
-            self.env_step()
-            self.learn()
+            self.env_step()  # collect and store
+            self.schedule.run(self.step, [self.learner], self.rngs.numpy)  # updates, target copies
             if self._crossed(cfg.log_every, before):
                 self.log_metrics()
             if self._crossed(cfg.eval_every, before):
@@ -202,15 +175,7 @@ class EnvTrainer:
             if self.progress is not None and time.monotonic() - last_progress > 0.2:
                 last_progress = time.monotonic()
                 self.progress(self.figures())
-        status = "interrupted" if self.step < cfg.steps else "finished"
-        if status == "finished":
-            if self.logged_step != self.step:
-                self.log_metrics()
-            if self.eval_step != self.step:
-                self.run_eval()
-        self._ended += [{"episode": int(self.ep_id[k]), "steps": int(self.ep_len[k]), "outcome": "aborted",
-                         "reward": float(self.ep_return[k])} for k in range(self.worlds)]
-        self._flush_episodes()
+        status = end_training(self)
         if self.run_dir is not None:
             self.save_policy(self.run_dir / "policy")
         if self.progress is not None:
@@ -219,7 +184,7 @@ class EnvTrainer:
 
     def figures(self) -> dict[str, Any]:
         ev = self.last_eval
-        return {"step": self.step, "steps": self.cfg.steps, "epsilon": self.epsilon(), "loss": self.last_loss,
+        return {"step": self.step, "steps": self.cfg.steps, "epsilon": self.epsilon(), "loss": self.metrics.last_loss,
                 "mean_return": None if ev is None else ev.mean_return,
                 "success_rate": None if ev is None else ev.success_rate}
 

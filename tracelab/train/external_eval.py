@@ -21,7 +21,7 @@ from tracelab.errors import UserError
 from tracelab.store.writer import TraceWriter
 from tracelab.train.env_policy import EVAL_STEP_CAP, EnvEvalResult, make_vector_env, play_env_games
 from tracelab.envs.declared.env_source import EnvSource
-from tracelab.train.loop import eval_seed
+from tracelab.train.rngs import eval_seed
 
 Act = Callable[[Any], np.ndarray]  # a batch of observations -> the batch's (greedy) actions
 NewId = Callable[[], int]          # the run's next free episode id
