@@ -136,7 +136,8 @@ class DeclaredRecorder:
         self._begins.append({"episode": self.episode, "t_start": 0, "seed": self._seed, "started_at": utc_now(),
                              "info": None if self.begin_info is None else dict(self.begin_info)})
         self._changes.append({**self._setup, "episode": np.full(len(self._setup["t"]), self.episode, np.int64)})
-        self._take_rows()
+        # the start step's rows stay in the engine until the episode's next take, under this same clock
+        # (a take per episode fewer: FrozenLake's episodes are ~8 steps)
 
     def stepped(self, actions: Any, rewards: list[float], obs: Any, terminated: bool, truncated: bool) -> None:
         """After an env step: its step rows (one per agent), and its end when it ended."""
