@@ -165,6 +165,10 @@ def test_bench_toytext_quick(capsys: pytest.CaptureFixture) -> None:
     for g in r["games"]:
         assert g["tracelab"]["steps_per_s"]["median"] > 0 and g["gymnasium"]["steps_per_s"]["median"] > 0
         assert g["goal_met"] == (g["ratio"] >= r["goal_ratio"])
+        # traced and untraced in turn, also per CPU second (the writer's thread included)
+        assert g["traced"]["steps_per_cpu_s"]["median"] > 0 and g["tracelab"]["steps_per_cpu_s"]["median"] > 0
+        assert g["traced_cpu_ratio"] == pytest.approx(g["traced"]["steps_per_cpu_s"]["median"]
+                                                      / g["tracelab"]["steps_per_cpu_s"]["median"])
 
 
 def test_rgb_array_draws_the_declared_board() -> None:

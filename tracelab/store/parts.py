@@ -10,10 +10,10 @@ drop rows (seen: a reader got only the big parts of a table, without the part th
 into). One manifest for all tables also gives a reader one consistent moment across tables.
 
 A publication writes one new part per table with rows; then the writer replaces the manifest. When a
-table holds `compact_files` small parts (< part_rows rows), or small parts of part_rows rows in all, they
-are merged into one new part (read one at a time) and leave the table's list: a merge holds about
-part_rows rows, however long the run (merging 64 parts at a time held millions); their files are deleted
-`grace_seconds` later, so a reader still holding the previous
+table holds `compact_files` small parts (fewer rows than part_rows and than MERGE_BELOW_ROWS), or small
+parts of part_rows rows in all, they are merged into one new part (read one at a time) and leave the
+table's list: a merge holds about part_rows rows, however long the run (merging 64 parts at a time held
+millions); their files are deleted `grace_seconds` later, so a reader still holding the previous
 manifest can finish its query. A crash before the manifest is replaced leaves parts nobody lists:
 invisible and harmless (seal ignores them and removes parts/)."""
 from __future__ import annotations
@@ -32,10 +32,15 @@ import pyarrow.parquet as pq
 from tracelab.engine.memory import release_freed_memory
 from tracelab.engine.safe_files import check_regular, read_json
 from tracelab.store import layout
-from tracelab.store.schema import ADDED_TABLES, DICTIONARY_COLUMNS, SCHEMAS
+from tracelab.store.schema import ADDED_TABLES, DICTIONARY_COLUMNS, PART_OPTIONS, SCHEMAS
 from tracelab.validation import Const, ExactKeys, IntRange, ListOf, Matches, OptionalKey, check_file
 
 ROW_GROUP_ROWS = 131_072
+# A part of at least this many rows (or of part_rows, if fewer) is never merged: merging re-encodes every
+# row, which took half the writer's CPU in a fast `tracelab play --run` (its parts of 50k-150k rows were
+# merged in twos: docs/benchmarks.md, "Traced runs: the writer"), and such a part fills a quarter of a
+# row group already. Smaller parts (a slow run's, flushed every second) are merged as before.
+MERGE_BELOW_ROWS = 32_768
 MANIFEST_FORMAT = "tracelab-parts/1"
 
 
@@ -52,11 +57,12 @@ class TableParts:
         self.schema = SCHEMAS[table]
         self.root = layout.make_run_dirs(run_dir, layout.PARTS, table)
         self.part_rows = part_rows
+        self.big_rows = min(part_rows, MERGE_BELOW_ROWS)  # parts this big are never merged
         self.compact_files = compact_files
         self.grace_seconds = grace_seconds
         self.compression = compression
         self._next_file = 0
-        self._small: list[str] = []   # listed parts with fewer than part_rows rows, oldest first
+        self._small: list[str] = []   # listed parts with fewer than big_rows rows, oldest first
         self._small_rows = 0          # and their rows
         self._big: list[str] = []
         self._retired: list[tuple[float, list[str]]] = []
@@ -87,7 +93,7 @@ class TableParts:
         rows = 0
         with layout.new_file(self.root / name) as f, pq.ParquetWriter(
                 f, self.schema, compression=self.compression,
-                use_dictionary=DICTIONARY_COLUMNS.get(self.table, True)) as out:
+                use_dictionary=DICTIONARY_COLUMNS.get(self.table, True), **PART_OPTIONS.get(self.table, {})) as out:
             held: list[pa.Table] = []  # rows short of a full row group
             for table in tables:
                 held.append(table)
@@ -105,7 +111,7 @@ class TableParts:
         return name, rows
 
     def _add(self, name: str, rows: int) -> None:
-        if rows >= self.part_rows:
+        if rows >= self.big_rows:
             self._big.append(name)
         else:
             self._small.append(name)

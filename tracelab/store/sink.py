@@ -78,7 +78,9 @@ class StoreSink:
             if self._engine is not None:  # atoms and groundings the rows name must be written first
                 self.writer.write_engine_vocabulary(self._engine)
             chunks, self._changes = self._changes, []
-            self.writer.write_changes(None, {k: np.concatenate([c[k] for c in chunks]) for k in chunks[0]})
+            # new arrays, handed over (owned): the writer keeps them without another copy
+            self.writer.write_changes(None, {k: np.concatenate([c[k] for c in chunks]) for k in chunks[0]},
+                                      owned=True)
         if self._steps:
             episode, t, obs, actions, rewards = (np.concatenate(c) for c in zip(*self._steps))
             self._steps, self._step_rows = [], 0

@@ -67,6 +67,14 @@ def flat_observation(obs: Any) -> np.ndarray:
     return np.asarray(obs, np.float32).ravel()
 
 
+def observation_rows(observations: list[Any]) -> np.ndarray:
+    """flat_observation of each observation, stacked: in one conversion unless they are Dicts (a call
+    per step cost a toy-text game's recorder ~1 us a step: docs/benchmarks.md)."""
+    if observations and not isinstance(observations[0], dict):
+        return np.asarray(observations, np.float32).reshape(len(observations), -1)
+    return np.stack([flat_observation(o) for o in observations])
+
+
 class DeclaredRecorder:
     """Records `world`'s episodes into `writer`; the world's engine must trace (DeclaredWorld(trace=True))
     and must not have stepped since it was built. `close()` closes the writer.
@@ -128,7 +136,8 @@ class DeclaredRecorder:
         self._begins.append({"episode": self.episode, "t_start": 0, "seed": self._seed, "started_at": utc_now(),
                              "info": None if self.begin_info is None else dict(self.begin_info)})
         self._changes.append({**self._setup, "episode": np.full(len(self._setup["t"]), self.episode, np.int64)})
-        self._take_rows()
+        # the start step's rows stay in the engine until the episode's next take, under this same clock
+        # (a take per episode fewer: FrozenLake's episodes are ~8 steps)
 
     def stepped(self, actions: Any, rewards: list[float], obs: Any, terminated: bool, truncated: bool) -> None:
         """After an env step: its step rows (one per agent), and its end when it ended."""
@@ -184,7 +193,7 @@ class DeclaredRecorder:
             w.write_steps(episode, {
                 "step": step, "t": t, "agent": [self.agents[a] for a in agent.tolist()], "action": action,
                 "reward": reward, "terminated": term, "truncated": trunc,
-                "obs": np.repeat(np.stack([flat_observation(o) for o in self._obs]), len(self.agents), axis=0)})
+                "obs": np.repeat(observation_rows(self._obs), len(self.agents), axis=0)})
             self._steps, self._obs = [], []
         if self._ends:
             ends, self._ends = self._ends, []
