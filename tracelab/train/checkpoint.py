@@ -161,12 +161,10 @@ def _rng_state() -> dict[str, Any]:
             "has_uint32": IntRange(0, 1), "uinteger": IntRange(0)}
 
 
-def _network_tensors(cfg: TrainConfig, scenario: Scenario, network: Any) -> tuple[dict[str, Any], dict[str, Any]]:
+def _network_tensors(net: Any, network: Any) -> tuple[dict[str, Any], dict[str, Any]]:
     """(the online network's state dict, Adam's moments by parameter name) as schemas: from the
-    architecture cfg describes, computed (a stranger's config builds nothing before it is checked), or from
-    a custom module's own state dict."""
-    from tracelab.train.loop import training_net
-    net = training_net(cfg, scenario)
+    architecture `net` (a NetSpec) describes, computed (a stranger's config builds nothing before it is
+    checked), or from a custom module's own state dict."""
     if network is None:
         shapes = {k: (torch.float32, s) for k, s in net.state_dict_shapes().items()}
         params = set(shapes)
@@ -185,27 +183,8 @@ def _state_schema(cfg: TrainConfig, scenario: Scenario, network: Any = None) -> 
     the learner the checkpoint names)."""
     from tracelab.train.loop import network_groups, training_net
     net = training_net(cfg, scenario)
-    w, n, d, a = cfg.envs, scenario.agents_per_team, net.inputs, net.actions
-    buffer = {"size": IntRange(0, cfg.buffer), "pos": IntRange(0, cfg.buffer - 1),
-              "obs": Tensor(torch.float32, (None, d)), "next_obs": Tensor(torch.float32, (None, d)),
-              "action": Tensor(torch.int64, (None,)), "reward": Tensor(torch.float32, (None,)),
-              "discount": Tensor(torch.float32, (None,))}
-    if cfg.mask:
-        buffer["next_allowed"] = Tensor(torch.bool, (None, a))
-    weights, adam = _network_tensors(cfg, scenario, network)
-    if cfg.learner == "fused":
-        p = net.n_params
-        learner = {"params": Tensor(torch.float32, (2, p)), "adam_m": Tensor(torch.float32, (p,)),
-                   "adam_v": Tensor(torch.float32, (p,)), "adam_step": IntRange(0), "updates": IntRange(0),
-                   "buffer": buffer, "loss_sum": float, "loss_n": IntRange(0),
-                   "last_q": Nullable(Tensor(torch.float32, (2, cfg.batch, a)))}
-        # the best evaluation's networks as state dicts, or (written before) as the fused layout's rows
-        best = {"best_weights": OptionalKey(MapOf(weights)),
-                "best_rows": OptionalKey(MapOf(Tensor(torch.float32, (p,))))}
-    else:
-        learner = {"online": weights, "target": weights, "adam": adam, "updates": IntRange(0), "buffer": buffer,
-                   "loss_sum": float, "loss_n": IntRange(0), "last_q": Nullable(Tensor(torch.float32, (cfg.batch, a)))}
-        best = {"best_weights": MapOf(weights)}
+    w, n, d = cfg.envs, scenario.agents_per_team, net.inputs
+    learner, best = learner_schema(cfg, net, network)
     generator_bytes = torch.Generator().get_state().numel()
     return {
         "run": str, "step": IntRange(0), "next_episode": IntRange(0), "update_credit": float,
@@ -224,16 +203,40 @@ def _state_schema(cfg: TrainConfig, scenario: Scenario, network: Any = None) -> 
     }
 
 
+def learner_schema(cfg: TrainConfig, net: Any, network: Any = None) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(one learner's state, the best evaluation's networks) as schemas for the architecture `net` (a
+    NetSpec) under cfg's learner, buffer and batch: GridWar's checkpoints and train --env's
+    (env_checkpoint.py) check their networks with it."""
+    a, d = net.actions, net.inputs
+    buffer = {"size": IntRange(0, cfg.buffer), "pos": IntRange(0, cfg.buffer - 1),
+              "obs": Tensor(torch.float32, (None, d)), "next_obs": Tensor(torch.float32, (None, d)),
+              "action": Tensor(torch.int64, (None,)), "reward": Tensor(torch.float32, (None,)),
+              "discount": Tensor(torch.float32, (None,))}
+    if cfg.mask:
+        buffer["next_allowed"] = Tensor(torch.bool, (None, a))
+    weights, adam = _network_tensors(net, network)
+    if cfg.learner == "fused":
+        p = net.n_params
+        learner = {"params": Tensor(torch.float32, (2, p)), "adam_m": Tensor(torch.float32, (p,)),
+                   "adam_v": Tensor(torch.float32, (p,)), "adam_step": IntRange(0), "updates": IntRange(0),
+                   "buffer": buffer, "loss_sum": float, "loss_n": IntRange(0),
+                   "last_q": Nullable(Tensor(torch.float32, (2, cfg.batch, a)))}
+        # the best evaluation's networks as state dicts, or (written before) as the fused layout's rows
+        best = {"best_weights": OptionalKey(MapOf(weights)),
+                "best_rows": OptionalKey(MapOf(Tensor(torch.float32, (p,))))}
+    else:
+        learner = {"online": weights, "target": weights, "adam": adam, "updates": IntRange(0), "buffer": buffer,
+                   "loss_sum": float, "loss_n": IntRange(0), "last_q": Nullable(Tensor(torch.float32, (cfg.batch, a)))}
+        best = {"best_weights": MapOf(weights)}
+    return learner, best
+
+
 def _check_consistency(state: dict[str, Any], cfg: TrainConfig, scenario: Scenario) -> None:
     """What a schema cannot say: lengths that follow other keys, and the values the code indexes with (the
     replayed actions reach compiled kernels, which do not check bounds)."""
     n_actions = scenario.n_actions
     for name, learner in state["learners"].items():
-        buf, where = learner["buffer"], f"learners.{name}.buffer"
-        for key in ("obs", "next_obs", "action", "reward", "discount", "next_allowed"):
-            if key in buf and len(buf[key]) != buf["size"]:
-                raise Mismatch(f"{where}.{key}", f"{buf['size']} rows (its size)", buf[key])
-        _in_range(buf["action"], 0, n_actions - 1, f"{where}.action")
+        check_buffer_rows(learner["buffer"], n_actions, f"learners.{name}.buffer")
     _in_range(state["pending"]["action"], 0, n_actions - 1, "pending.action")
     games = state["games"]
     _in_range(games["ep_len"], 0, scenario.max_steps, "games.ep_len")
@@ -253,6 +256,14 @@ def _check_consistency(state: dict[str, Any], cfg: TrainConfig, scenario: Scenar
             np.random.PCG64().state = state[key]
         except (ValueError, TypeError, OverflowError) as e:
             raise Mismatch(key, f"a numpy PCG64 generator state (numpy: {e})", state[key]) from None
+
+
+def check_buffer_rows(buf: dict[str, Any], n_actions: int, where: str) -> None:
+    """A replay buffer's state: as many rows as its size says, actions the networks have (they index)."""
+    for key in ("obs", "next_obs", "action", "reward", "discount", "next_allowed"):
+        if key in buf and len(buf[key]) != buf["size"]:
+            raise Mismatch(f"{where}.{key}", f"{buf['size']} rows (its size)", buf[key])
+    _in_range(buf["action"], 0, n_actions - 1, f"{where}.action")
 
 
 def _in_range(values: torch.Tensor, lo: int, hi: int, where: str) -> None:
@@ -278,17 +289,9 @@ def restore(tr: Any, state: dict[str, Any]) -> None:
                          f"{tr.learner_kind} one")
     for name, lr in tr.learners.items():
         lr.load_state(state["learners"][name])
-    tr.step, tr.next_episode = int(state["step"]), int(state["next_episode"])
-    tr.update_credit, tr.synced_block = float(state["update_credit"]), int(state["synced_block"])
-    tr.eval_round, tr.last_loss = int(state["eval_round"]), state["last_loss"]
-    tr.logged_step, tr.eval_step = int(state["logged_step"]), int(state["eval_step"])
-    tr.returns_since_log = list(state["returns_since_log"])
-    best = state["best_eval"]
-    tr.best_eval = None if best is None else (float(best[0]), int(best[1]))
+    restore_progress(tr, state)
     tr.best_weights = dict(state["best_weights"])
     tr.write_best_policy()  # a resumed run into a new directory keeps it too
-    tr.rng.bit_generator.state = state["rng"]
-    tr.torch_gen.set_state(state["torch_rng"])
     g = state["games"]
     tr.history[...] = g["history"]
     tr.ep_len[...] = g["ep_len"]
@@ -304,6 +307,20 @@ def restore(tr: Any, state: dict[str, Any]) -> None:
     tr.obs = obs
     tr.acting = tr.may_act()
     tr.pending.load_state(state["pending"])
+
+
+def restore_progress(tr: Any, state: dict[str, Any]) -> None:
+    """The counters, the logging state, the best evaluation's figures and the trainer's two generators
+    from a checkpoint: what GridWar's and train --env's trainers (env_checkpoint.py) share."""
+    tr.step, tr.next_episode = int(state["step"]), int(state["next_episode"])
+    tr.update_credit, tr.synced_block = float(state["update_credit"]), int(state["synced_block"])
+    tr.eval_round, tr.last_loss = int(state["eval_round"]), state["last_loss"]
+    tr.logged_step, tr.eval_step = int(state["logged_step"]), int(state["eval_step"])
+    tr.returns_since_log = list(state["returns_since_log"])
+    best = state["best_eval"]
+    tr.best_eval = None if best is None else (float(best[0]), int(best[1]))
+    tr.rng.bit_generator.state = state["rng"]
+    tr.torch_gen.set_state(state["torch_rng"])
 
 
 def _replay_games(sim: Any, history: np.ndarray, ep_len: np.ndarray) -> None:

@@ -3,10 +3,12 @@ batched worlds, transitions into replay, one update per world-step, target copie
 metrics and episodes, the final and the best policy.
 
 It is the GridWar Trainer's loop (loop.py) without what is GridWar's (teams, the scripted opponent, slow
-agents, replaying games from a checkpoint): the same TrainConfig and ε schedule, the same learners
+agents): the same TrainConfig and ε schedule, the same learners
 (make_learner: fused or readable, behind the Learner protocol), the same replay buffer, the same update
 and target-copy cadence, the same metric names where they mean the same thing. Observations are encoded
-for the network by env_source.ObservationEncoder (a Discrete one is one-hot)."""
+for the network by env_source.ObservationEncoder (a Discrete one is one-hot). Checkpoints and their
+restore (replaying the worlds' episodes) are env_checkpoint.py's; a declared world's first evaluation games
+are traced into the run (external_eval.DeclaredEvaluator), as GridWar's are."""
 from __future__ import annotations
 
 import time
@@ -19,6 +21,7 @@ import torch
 
 from tracelab.store.writer import TraceWriter
 from tracelab.train.config import TrainConfig
+from tracelab.train.env_checkpoint import save_env_checkpoint
 from tracelab.train.env_policy import EnvEvalResult, EnvPolicy, make_vector_env, play_env_games, save_env_policy
 from tracelab.envs.declared.env_source import EnvSource
 from tracelab.train.env_source import ObservationEncoder, action_count
@@ -39,11 +42,12 @@ class EnvTrainer:
         self.cfg, self.source, self.writer, self.run_dir, self.progress = cfg, source, writer, run_dir, progress
         self.metric_sinks = list(metric_sinks)  # besides the run: e.g. TensorBoard (train --tensorboard)
         self.worlds = w = cfg.envs
-        self.env = make_vector_env(source, w)
+        self.env = make_vector_env(source, w, replayable=True)  # a checkpoint replays its worlds
         single = self.env.single_observation_space
         self.encoder = ObservationEncoder(single, source.name)
         self.n_actions = action_count(self.env.single_action_space, source.name)
         declared = getattr(self.env.envs[0].unwrapped, "world_spec", None)  # a declared world names its actions
+        self.declared = declared is not None
         self.action_names = list(declared.action_names) if declared is not None else \
             [str(a) for a in range(self.n_actions)]
         self.rng = np.random.default_rng(np.random.SeedSequence([cfg.seed, 0]))  # exploration, sampling
@@ -70,6 +74,7 @@ class EnvTrainer:
         self.logged_step = self.eval_step = -1
         self.stop_requested = False
         self._eval_env: Any = None
+        self._evaluator: Any = None  # a declared world's, tracing the first games of each evaluation
         self.obs, self.info = self.env.reset(seed=int(np.random.SeedSequence([cfg.seed, 2]).generate_state(1)[0]))
         self._begin(np.arange(w))
         self._rate_mark = (time.perf_counter(), 0, 0)
@@ -77,12 +82,30 @@ class EnvTrainer:
     # ---- episodes ----
     def _begin(self, worlds: np.ndarray) -> None:
         for k in worlds.tolist():
-            self.ep_id[k] = self.next_episode
-            self.next_episode += 1
+            self.ep_id[k] = self.new_episode_id()
             self._begun.append({"episode": int(self.ep_id[k]), "world": k, "t_start": 0,
                                 "info": {"kind": "train", "train_step": self.step}})
         self.ep_len[worlds] = 0
         self.ep_return[worlds] = 0.0
+
+    def new_episode_id(self) -> int:
+        """The run's next episode id (training games and traced evaluation games share them)."""
+        self.next_episode += 1
+        return self.next_episode - 1
+
+    def resume_games(self, first_free: int | None = None) -> None:
+        """After a restore: the games in progress begin in the run again. `first_free`: the run is the
+        checkpoint's own, which holds them already (ended 'aborted' at the stop): they go on under new ids
+        from there, their begin info naming the id each continues."""
+        self._begun = []
+        if first_free is not None:
+            self.next_episode = max(self.next_episode, first_free)
+        for k in range(self.worlds):
+            info: dict[str, Any] = {"kind": "train", "train_step": self.step}
+            if first_free is not None:
+                info["continues"] = int(self.ep_id[k])
+                self.ep_id[k] = self.new_episode_id()
+            self._begun.append({"episode": int(self.ep_id[k]), "world": k, "t_start": 0, "info": info})
 
     def _flush_episodes(self) -> None:
         if self.writer is not None and (self._begun or self._ended):
@@ -162,19 +185,34 @@ class EnvTrainer:
 
     def run_eval(self) -> EnvEvalResult:
         cfg = self.cfg
-        if self._eval_env is None:
-            self._eval_env = make_vector_env(self.source, min(cfg.eval_envs, cfg.eval_games))
-        result = play_env_games(self._eval_env, self.policy, cfg.eval_games, eval_seed(cfg.seed, self.eval_round))
+        if self.writer is not None and cfg.trace_eval_games and self.declared:
+            if self._evaluator is None:
+                from tracelab.train.external_eval import DeclaredEvaluator, EvalSettings
+                settings = EvalSettings(cfg.eval_every, cfg.eval_games, cfg.trace_eval_games, cfg.eval_envs,
+                                        seed=cfg.seed)
+                self._evaluator = DeclaredEvaluator(self.source, self.writer, self.new_episode_id, settings)
+            result = self._evaluator.play(self.policy, self.step, self.eval_round)
+        else:
+            if self._eval_env is None:
+                self._eval_env = make_vector_env(self.source, min(cfg.eval_envs, cfg.eval_games))
+            result = play_env_games(self._eval_env, self.policy, cfg.eval_games,
+                                    eval_seed(cfg.seed, self.eval_round))
         self.write_metrics(result.metrics())
         self.eval_round += 1
         self.last_eval, self.eval_step = result, self.step
         if self.best_eval is None or result.mean_return > self.best_eval[0]:
             self.best_eval = (result.mean_return, self.step)
             self.best_weights = {k: v.clone() for k, v in self.learner.online_weights().items()}
-            if self.run_dir is not None:
-                self._save(self.run_dir / BEST_POLICY_DIR, self.best_weights, self.step,
-                           {"metric": "eval/mean_return", "value": result.mean_return})
+            self.write_best_policy()
         return result
+
+    def write_best_policy(self) -> None:
+        """RUN/policy-best/ from the kept parameters (also after a resume into a new run)."""
+        if self.run_dir is None or self.best_eval is None:
+            return
+        value, step = self.best_eval
+        self._save(self.run_dir / BEST_POLICY_DIR, self.best_weights, step,
+                   {"metric": "eval/mean_return", "value": value})
 
     def _save(self, path: Path, weights: dict[str, torch.Tensor], step: int,
               selected_by: dict[str, Any] | None = None) -> Path:
@@ -199,6 +237,9 @@ class EnvTrainer:
                 self.log_metrics()
             if self._crossed(cfg.eval_every, before):
                 self.run_eval()
+            if self.run_dir is not None and self._crossed(cfg.checkpoint_every, before):
+                self._flush_episodes()  # the run holds every episode the checkpoint has counted
+                save_env_checkpoint(self, self.run_dir)
             if self.progress is not None and time.monotonic() - last_progress > 0.2:
                 last_progress = time.monotonic()
                 self.progress(self.figures())
@@ -212,6 +253,7 @@ class EnvTrainer:
                          "reward": float(self.ep_return[k])} for k in range(self.worlds)]
         self._flush_episodes()
         if self.run_dir is not None:
+            save_env_checkpoint(self, self.run_dir)
             self.save_policy(self.run_dir / "policy")
         if self.progress is not None:
             self.progress(self.figures())
@@ -227,3 +269,5 @@ class EnvTrainer:
         self.env.close()
         if self._eval_env is not None:
             self._eval_env.close()
+        if self._evaluator is not None:
+            self._evaluator.close()
