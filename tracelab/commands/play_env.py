@@ -38,6 +38,9 @@ def run_env(args: argparse.Namespace) -> int:
     if len(spec.agents) != 1:
         raise UserError(f"--env {args.env}: the spec declares {len(spec.agents)} agents; play --env plays "
                         "one (tracelab.envs.declared.parallel_env.DeclaredParallelEnv plays them all)")
+    if args.policy == "scripted":
+        raise UserError("--policy scripted is the grid game's; --env plays random (the default) or a policy "
+                        "train --env trained on that env (RUN/policy)")
     if args.policy not in (None, "random"):
         from tracelab.train.env_policy import load_env_policy
         with store_errors():  # a policy that does not load, or was trained on another env
