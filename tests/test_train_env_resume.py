@@ -79,6 +79,28 @@ def test_evaluation_games_are_traced_so_why_and_the_tui_reach_them(runs: tuple[P
     assert capsys.readouterr().out.startswith(f"{atom} = ")
 
 
+def test_the_tui_steps_through_the_evaluation_games_with_the_bracket_keys(runs: tuple[Path, Path]) -> None:
+    from typing import Any
+
+    from tracelab.viewers.tui.trace import TracePane
+    from tui_helpers import episodes_ready, loaded, run_app, wait_for
+    _, stopped = runs
+    evals = [g.episode for g in eval_games(RunSource(stopped))]
+
+    async def body(app: Any, pilot: Any) -> None:
+        await episodes_ready(app, pilot)
+        await pilot.press("enter")
+        pane = app.screen.query_one(TracePane)
+        await wait_for(pilot, lambda: pane.filter is not None and loaded(pane.table))
+        for episode in evals[:3]:  # each press opens the next evaluation game's trace
+            await pilot.press("right_square_bracket")
+            await wait_for(pilot, lambda e=episode: pane.filter.episode == e and loaded(pane.table)
+                           and pane.table.count > 0)
+        await pilot.press("left_square_bracket")
+        await wait_for(pilot, lambda: pane.filter.episode == evals[1] and loaded(pane.table))
+    run_app([stopped], body, size=(120, 34))
+
+
 def _one_line(argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
     capsys.readouterr()
     assert main(argv) == 1
