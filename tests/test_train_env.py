@@ -78,7 +78,7 @@ def test_eval_env_refuses_another_env_in_one_line(dry_lake_run: Path) -> None:
     _one_line_error(tracelab("eval", pol, "--env", "tracelab/Taxi-v4", cwd=cwd), "not tracelab/Taxi-v4")
     _one_line_error(tracelab("eval", pol, cwd=cwd), "name that env with --env")
     _one_line_error(tracelab("train", "--resume", str(dry_lake_run), cwd=cwd),
-                    "an --env run keeps no checkpoint yet")
+                    f"tracelab train --resume {dry_lake_run} --env tracelab/FrozenLake-v1 --env-arg is_slippery=false")
 
 
 @pytest.mark.parametrize("args, text", [
@@ -87,7 +87,7 @@ def test_eval_env_refuses_another_env_in_one_line(dry_lake_run: Path) -> None:
     (["--env", "tracelab/FrozenLake-v1", "--env-arg", "bogus=1"], "unknown keyword argument 'bogus'"),
     (["--env", "tracelab/FrozenLake-v1", "--env-arg", "is_slippery"], "expected key=value"),
     (["--env-arg", "is_slippery=false"], "--env-arg needs --env"),
-    (["--env", "tracelab/FrozenLake-v1", "--resume", "runs/x"], "an --env run keeps no checkpoint"),
+    (["--env", "tracelab/FrozenLake-v1", "--resume", "runs/x"], "runs/x: not a training run's directory"),
 ])
 def test_train_env_mistakes_are_one_line(args: list[str], text: str, tmp_path: Path,
                                          capsys: pytest.CaptureFixture[str]) -> None:

@@ -1,6 +1,12 @@
-"""The tiny game and settings the training tests run on (tests/test_train.py, tests/test_strangers_train.py)."""
+"""The tiny game and settings the training tests run on (tests/test_train.py, tests/test_strangers_train.py),
+and reading a run and stopping a training the way a user does (tests/test_train_env_resume.py)."""
 from __future__ import annotations
 
+import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 from tracelab.game.scenario import Rewards, Scenario
@@ -22,3 +28,35 @@ def tiny_training_run(run: Path, steps: int = 200, seed: int = 1, **options: obj
     cfg = TrainConfig(scenario="walk4", steps=steps, seed=seed, **{**SMALL, **options})
     assert train_into(cfg, WALK, run) == 0
     return run
+
+
+def run_rows(run: Path, sql: str) -> list[tuple]:
+    """The rows of `sql` over a run."""
+    from tracelab.store import open_run
+    con = open_run(run)
+    try:
+        return con.execute(sql).fetchall()
+    finally:
+        con.close()
+
+
+def ctrl_c_once_training(argv: list[str], run: Path, timeout: float = 120) -> tuple[int, str, str]:
+    """`tracelab *argv` (a training into `run`) in a subprocess, sent one SIGINT once a `loss` metric is in
+    the run; (its exit status, stdout, stderr). Killed if it outlives `timeout` after the signal."""
+    proc = subprocess.Popen([sys.executable, "-m", "tracelab.cli", *argv], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    try:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            try:
+                if run_rows(run, "SELECT count(*) FROM metrics WHERE name = 'loss'")[0][0]:
+                    break
+            except Exception:  # noqa: BLE001 - not created yet, or between flushes
+                pass
+            time.sleep(0.3)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=timeout)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    return proc.returncode, out, err

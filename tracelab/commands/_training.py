@@ -1,10 +1,11 @@
 """The part of `tracelab train` that both trainers share: Ctrl-C once finishes the step and stops (the
-trainer writes what it keeps), Ctrl-C again aborts; a progress bar on a terminal."""
+trainer writes what it keeps), Ctrl-C again aborts; a progress bar on a terminal; what a resume says."""
 from __future__ import annotations
 
 import signal
 import sys
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 
@@ -34,3 +35,15 @@ def train_until_stopped(trainer: Any, total: int, stop_at: int | None, keeps: st
             return str(trainer.train(stop_at))
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+def say_resumed(trainer: Any, writer: Any, run_dir: Path, resumed_from: str | None, same_run: bool) -> None:
+    """After a restore: into the same run, a `resumed` metric row (which resume, at the checkpoint's step:
+    the event, in the curves); then one line saying where training goes on."""
+    if same_run:
+        resumes = len(writer.meta["resumes"])
+        trainer.write_metrics({"resumed": float(resumes)})
+        print(f"resumed {run_dir} at step {trainer.step:,} in the same run (resume {resumes}; --run NEW would "
+              f"branch into a new run)", file=sys.stderr)
+    else:
+        print(f"resumed from {resumed_from} at step {trainer.step:,}", file=sys.stderr)

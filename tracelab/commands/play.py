@@ -35,12 +35,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         p.add_argument(alias, dest="worlds", type=positive_int, help=argparse.SUPPRESS)
     p.add_argument("--env", default=None, metavar="SPEC_OR_ID",
                    help="play a world declared in rules instead of the grid game: a spec file or a registered id "
-                        "such as tracelab/FrozenLake-v1 (docs/worlds.md; a random policy)")
+                        "such as tracelab/FrozenLake-v1 (docs/worlds.md; a random policy unless --policy)")
     p.add_argument("--env-arg", action="append", default=[], metavar="KEY=VALUE",
                    help="a keyword argument of the --env (its spec's [params]), e.g. is_slippery=false (repeatable)")
     p.add_argument("--policy", default=None,
                    help="red's policy: random, scripted (the scripted base policy, default) or the path of "
-                        "a trained policy (e.g. RUN/policy); with --env, random")
+                        "a trained policy (e.g. RUN/policy); with --env, random (default) or a policy that "
+                        "train --env trained on that env")
     p.add_argument("--opponent-p", type=float, default=None,
                    help="the opponent's probability of a move towards red's base (default 0.7)")
     p.add_argument("--seed", type=non_negative_int, default=0,

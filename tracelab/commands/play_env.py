@@ -1,5 +1,6 @@
 """`tracelab play --env SPEC_OR_ID`: games of a world declared in rules (docs/worlds.md), played by a
-random policy and recorded into a run of the trace store (tracelab/envs/declared/recording.py): every
+random policy or a policy `train --env` trained on it (`--policy RUN/policy`), and recorded into a run of
+the trace store (tracelab/envs/declared/recording.py): every
 change with its cause, the actions and the random draws as the facts they set, one episode per game.
 play.py hands over to `run_env` when --env is given."""
 from __future__ import annotations
@@ -28,8 +29,6 @@ def run_env(args: argparse.Namespace) -> int:
     for attr, default, flag in GRIDWAR_ONLY:
         if getattr(args, attr) != default:
             raise UserError(f"{flag} is the grid game's; --env plays the world its spec declares")
-    if args.policy not in (None, "random"):
-        raise UserError(f"--policy {args.policy}: --env plays a random policy (--policy random) for now")
     if args.worlds != 1:
         raise UserError("--num-envs: --env plays one world at a time for now")
     if args.env_arg and args.env is None:
@@ -39,6 +38,13 @@ def run_env(args: argparse.Namespace) -> int:
     if len(spec.agents) != 1:
         raise UserError(f"--env {args.env}: the spec declares {len(spec.agents)} agents; play --env plays "
                         "one (tracelab.envs.declared.parallel_env.DeclaredParallelEnv plays them all)")
+    if args.policy == "scripted":
+        raise UserError("--policy scripted is the grid game's; --env plays random (the default) or a policy "
+                        "train --env trained on that env (RUN/policy)")
+    if args.policy not in (None, "random"):
+        from tracelab.train.env_policy import load_env_policy
+        with store_errors():  # a policy that does not load, or was trained on another env
+            args.trained, _ = load_env_policy(args.policy, source)
     if args.no_trace:
         _summary(source, _play(source, spec, args, None))
         return 0
@@ -84,7 +90,7 @@ def run_meta(source: Any, spec: Any, args: argparse.Namespace) -> dict[str, Any]
 
     spec_path, params = source.declared()
     config = {"env": source.name, "env_id": source.env_id, "spec_path": spec_path,
-              "env_args": params, "episodes": args.episodes, "policy": "random",
+              "env_args": params, "episodes": args.episodes, "policy": args.policy or "random",
               "kernel": args.kernel, **declared_run_config(spec)}
     return {"command": " ".join(shlex.quote(a) for a in ["tracelab", *args.argv]), "config": config,
             "rule_files": list(spec.program.files), "seed": args.seed}
@@ -97,7 +103,11 @@ def _play(source: Any, spec: Any, args: argparse.Namespace, writer: Any) -> dict
     with compiling_engine(busy=f"building {source.short_name}'s rules…"):
         env = make_declared_env(source, spec, kernel=args.kernel,
                                 **({} if writer is None else {"trace_writer": writer}))
-    policy = random_policy(env, args.seed)
+    if getattr(args, "trained", None) is None:
+        policy, cap = random_policy(env, args.seed), None
+    else:  # greedy: it may walk in circles where the env sets no step limit (CliffWalking)
+        from tracelab.train.env_policy import EVAL_STEP_CAP, one_env_actor
+        policy, cap = one_env_actor(args.trained), EVAL_STEP_CAP
     try:
         with CtrlCBetweenSteps() as ctrl_c, \
                 progress(f"playing {source.short_name}", total=args.episodes, unit="episodes") as bar:
@@ -105,7 +115,8 @@ def _play(source: Any, spec: Any, args: argparse.Namespace, writer: Any) -> dict
                 ctrl_c.check()  # a Ctrl-C stops the game between two steps (see CtrlCBetweenSteps)
                 return policy(obs, info)
 
-            stats = play_episodes(env, args.episodes, args.seed, act, on_episode=lambda e: bar.advance(1))
+            stats = play_episodes(env, args.episodes, args.seed, act, on_episode=lambda e: bar.advance(1),
+                                  step_cap=cap)
     except BaseException as e:  # the run records how it ended, with what was played until then
         env.unwrapped.close(status="interrupted" if is_interrupt(e) else "failed")
         raise

@@ -91,7 +91,7 @@ def load_scenario_arg(text: str, agents: int | None = None) -> Any:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tracelab.train.config import TrainConfig, flag_of
+    from tracelab.train.config import TrainConfig
     from tracelab.train.memory import check_training_memory, memory_limit
 
     # --max-memory and --max-groundings are no training settings (cli.main applies the second): not in the
@@ -100,19 +100,14 @@ def run(args: argparse.Namespace) -> int:
              if k not in ("func", "command", "argv", "run", "resume", "max_memory", "max_groundings", "exp_name",
                           "tensorboard", "env", "env_arg")}
     limit = memory_limit(args.max_memory, "--max-memory")
-    if args.env is not None or args.env_arg:
-        from tracelab.commands.train_env import run_env
+    from tracelab.commands.train_env import is_env_run, run_env
+    if args.env is not None or args.env_arg or (args.resume and is_env_run(Path(args.resume))):
         return run_env(args, given, limit)
     state = None
     with store_errors():  # a bad value in the config or a checkpoint that does not load
         if args.resume:
-            from tracelab.commands.train_env import refuse_env_resume
             from tracelab.train.checkpoint import checkpoint_config, checkpoint_scenario, load_checkpoint
-            refuse_env_resume(Path(args.resume))
-            extra = sorted(set(given) - RESUMABLE_FLAGS)
-            if extra:
-                raise UserError(f"--resume continues the checkpoint's config; drop "
-                                f"{', '.join(flag_of(k) for k in extra)}")
+            check_resume_flags(given)
             state = load_checkpoint(args.resume, limit.bytes)
             cfg = dataclasses.replace(checkpoint_config(state), **given)
             check_budget(args.resume, state["step"], cfg.steps, "steps" in given)
@@ -127,32 +122,49 @@ def run(args: argparse.Namespace) -> int:
     if cfg.trace_eval_games > cfg.eval_games:
         raise UserError(f"--trace-eval-games ({cfg.trace_eval_games}) exceeds --eval-games "
                         f"({cfg.eval_games})")
-    if state is not None:  # the same run unless --run names another
-        default_run = str(args.resume)
-    else:
-        default_run = f"runs/{args.exp_name or 'train'}-{scenario.name}-{time.strftime('%Y%m%d-%H%M%S')}"
-    run_dir = Path(args.run or default_run)
-    same_run = state is not None and _same_directory(run_dir, Path(args.resume))
-    tensorboard = None
-    if args.tensorboard:  # checked before training: the install hint, a log directory already used
-        from tracelab.train.tensorboard import run_log_dir
-        tensorboard = run_log_dir(Path(args.tensorboard), run_dir.resolve().name, appending=same_run)
+    run_dir, same_run, tensorboard = where_to_train(args, state is not None, scenario.name)
     return train_into(cfg, scenario, run_dir, state, resumed_from=args.resume, same_run=same_run,
                       tensorboard=tensorboard)
 
 
-def check_budget(run: str, step: int, steps: int, given: bool) -> None:
-    """--resume: the budget must lie past the checkpoint (a UserError naming how to go on otherwise)."""
+def where_to_train(args: argparse.Namespace, resuming: bool, name: str) -> tuple[Path, bool, Path | None]:
+    """(the run directory, whether it is the resumed run's own, the TensorBoard log directory or None): a
+    resume continues its run unless --run names another; a new run is runs/<exp-name>-<name>-<time>. The
+    TensorBoard directory is checked before training (the install hint, a log directory already used)."""
+    if resuming:
+        default_run = str(args.resume)
+    else:
+        default_run = f"runs/{args.exp_name or 'train'}-{name}-{time.strftime('%Y%m%d-%H%M%S')}"
+    run_dir = Path(args.run or default_run)
+    same_run = resuming and same_directory(run_dir, Path(args.resume))
+    tensorboard = None
+    if args.tensorboard:
+        from tracelab.train.tensorboard import run_log_dir
+        tensorboard = run_log_dir(Path(args.tensorboard), run_dir.resolve().name, appending=same_run)
+    return run_dir, same_run, tensorboard
+
+
+def check_resume_flags(given: dict[str, Any]) -> None:
+    """--resume takes the checkpoint's config: a UserError naming the flags it may not change."""
+    from tracelab.train.config import flag_of
+    extra = sorted(set(given) - RESUMABLE_FLAGS)
+    if extra:
+        raise UserError(f"--resume continues the checkpoint's config; drop {', '.join(flag_of(k) for k in extra)}")
+
+
+def check_budget(run: str, step: int, steps: int, given: bool, env: str = "") -> None:
+    """--resume: the budget must lie past the checkpoint (a UserError naming how to go on otherwise; `env`:
+    the --env flags the command needs, for an --env run)."""
     if given and steps < step:
         raise UserError(f"--total-timesteps {steps:,} is below the checkpoint's step {step:,} of {run}: give "
                         f"a budget above it")
     if step >= steps:
         raise UserError(f"nothing to resume: {run}'s checkpoint is at step {step:,} of its {steps:,}; to train "
-                        f"on, raise the budget: tracelab train --resume {shlex.quote(run)} --total-timesteps N "
+                        f"on, raise the budget: tracelab train --resume {shlex.quote(run)}{env} --total-timesteps N "
                         f"(N > {step})")
 
 
-def _same_directory(a: Path, b: Path) -> bool:
+def same_directory(a: Path, b: Path) -> bool:
     try:
         return a.resolve() == b.resolve()
     except OSError:
@@ -181,7 +193,7 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
     if not meta["command"].startswith("tracelab train"):  # called from Python: say what it stands for
         meta["command"] = "tracelab train (python: tracelab.commands.train.train_into)"
     with store_errors():  # the run directory exists, or another writer holds it
-        writer = _reopen(run_dir, cfg, state["step"], meta["command"]) if same_run else \
+        writer = reopen_run(run_dir, cfg, state["step"], meta["command"]) if same_run else \
             TraceWriter.open(run_dir, meta)
     torch.set_num_threads(cfg.threads)
     was_deterministic = torch.are_deterministic_algorithms_enabled()
@@ -211,12 +223,8 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
                 restore(trainer, state)
             if same_run:
                 trainer.renumber_games(writer.next_free_episode)
-                resumes = len(writer.meta["resumes"])
-                trainer.write_metrics({"resumed": float(resumes)})  # the event, in the curves
-                print(f"resumed {run_dir} at step {trainer.step:,} in the same run (resume {resumes}; "
-                      f"--run NEW would branch into a new run)", file=sys.stderr)
-            else:
-                print(f"resumed from {resumed_from} at step {trainer.step:,}", file=sys.stderr)
+            from tracelab.commands._training import say_resumed
+            say_resumed(trainer, writer, run_dir, resumed_from, same_run)
 
         from tracelab.commands._training import train_until_stopped
         status = train_until_stopped(trainer, cfg.steps, stop_at, "a checkpoint", lambda fig: {
@@ -244,7 +252,7 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
     return 0 if status == "finished" else 130
 
 
-def _reopen(run_dir: Path, cfg: Any, step: int, command: str) -> Any:
+def reopen_run(run_dir: Path, cfg: Any, step: int, command: str) -> Any:
     """The checkpoint's own run, reopened for appending: its config takes the (maybe raised) budget and
     meta.json's `resumes` records this resume (when, at which step, after which status)."""
     from tracelab.store import TraceWriter

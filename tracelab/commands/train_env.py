@@ -1,14 +1,16 @@
 """`tracelab train --env SPEC_OR_ID [--env-arg key=value ...]`: DQN on a gymnasium env (a declared world
 or any registered env with Discrete actions), with train's DQN flags, logged into a run as GridWar's
-training is (metrics, episodes, RUN/policy/, RUN/policy-best/). tracelab/train/env_trainer.py holds the
-loop."""
+training is (metrics, episodes, a declared world's traced evaluation games, RUN/policy/, RUN/policy-best/,
+RUN/checkpoint/); `--resume RUN --env SPEC_OR_ID` continues it (in RUN, or with --run NEW in a new run) as
+train --resume does GridWar's. tracelab/train/env_trainer.py holds the loop, env_checkpoint.py the
+checkpoints."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import shlex
 import signal
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
@@ -16,7 +18,7 @@ from tracelab.errors import UserError, store_errors
 
 # TrainConfig fields that describe GridWar (its scenario, teams, opponent, simulator): refused with --env
 GRIDWAR_ONLY = ("scenario", "non_markov", "split_networks", "slow_every_step", "agents", "backend", "kernel",
-                "opponent_p", "eval_p", "explore_scripted", "trace_eval_games")
+                "opponent_p", "eval_p", "explore_scripted")
 
 
 def env_source_of(args: argparse.Namespace) -> Any:
@@ -26,19 +28,14 @@ def env_source_of(args: argparse.Namespace) -> Any:
     return EnvSource.given(args.env, parse_env_args(args.env_arg))
 
 
-def refuse_env_resume(run: Path) -> None:
-    """--resume of a train --env run: one line saying it keeps no checkpoint yet, and what still works."""
+def is_env_run(run: Path) -> bool:
+    """Whether `run` is a `train --env` run (its meta.json's config names an env)."""
     from tracelab.store.meta import current_meta
-    from tracelab.envs.declared.env_source import env_source_from_json
     try:
-        env = current_meta(run).get("config", {}).get("env")
+        config = current_meta(run).get("config", {})
     except (OSError, ValueError, AttributeError):
-        return  # not a run (or not one of these): load_checkpoint says what it is
-    if env is not None:
-        source = env_source_from_json(env, str(run / "meta.json"))
-        raise UserError(f"{run} trained with --env {source.describe()}: an --env run keeps no checkpoint yet, "
-                        f"so it cannot be resumed; its policy plays: tracelab eval {shlex.quote(str(run))}/policy "
-                        f"--env {source.describe()}")
+        return False  # not a run (or not one of these): load_checkpoint says what it is
+    return isinstance(config, dict) and config.get("env") is not None
 
 
 def run_env(args: argparse.Namespace, given: dict[str, Any], limit: Any) -> int:
@@ -46,56 +43,71 @@ def run_env(args: argparse.Namespace, given: dict[str, Any], limit: Any) -> int:
     from tracelab.train.memory import FLOAT
     from tracelab.train.replay import row_length
 
-    source = env_source_of(args)
-    if args.resume:
-        raise UserError(f"--resume continues GridWar runs; an --env run keeps no checkpoint yet: train "
-                        f"{args.env} again (or evaluate RUN/policy with tracelab eval --env)")
+    source = env_source_of(args) if args.env is not None or args.env_arg else None
     gridwar = [flag_of(k) for k in GRIDWAR_ONLY if k in given]
     if gridwar:
         raise UserError(f"{', '.join(gridwar)} describe{'s' if len(gridwar) == 1 else ''} GridWar; "
                         f"--env {args.env} takes the DQN flags only")
-    # gymnasium's envs reward about 1 already: the scale that learns the game's hundreds would shrink them
-    # 100x, so an env is trained at its own scale unless told (docs/experiments/toytext.md)
-    given.setdefault("reward_scale", METHOD_REWARD_SCALE)
+    state = None
     with store_errors():
-        cfg = TrainConfig(**given)
+        if args.resume:
+            from tracelab.commands.train import check_budget, check_resume_flags
+            from tracelab.train.checkpoint import checkpoint_config
+            from tracelab.train.env_checkpoint import load_env_checkpoint
+            check_resume_flags(given)
+            state = load_env_checkpoint(args.resume, source, limit.bytes)  # names the env unless given
+            cfg = dataclasses.replace(checkpoint_config(state), **given)
+            check_budget(args.resume, state["step"], cfg.steps, "steps" in given, f" --env {source.describe()}")
+        else:
+            # gymnasium's envs reward about 1 already: the scale that learns the game's hundreds would shrink
+            # them 100x, so an env is trained at its own scale unless told (docs/experiments/toytext.md)
+            given.setdefault("reward_scale", METHOD_REWARD_SCALE)
+            cfg = TrainConfig(**given)
         probe = source.make()  # a bad id, spec or keyword argument fails here, in one line
     try:
         from tracelab.train.env_source import ObservationEncoder, action_count
         encoder = ObservationEncoder(probe.observation_space, args.env)
         n_actions = action_count(probe.action_space, args.env)
+        declared = getattr(probe.unwrapped, "world_spec", None) is not None
     finally:
         probe.close()
     need = cfg.buffer * row_length(encoder.size, n_actions, cfg.mask) * FLOAT
     if need > limit.bytes:
         raise UserError(f"--buffer-size {cfg.buffer:,}: the replay buffer would take {need:,} bytes, over the "
                         f"limit of {limit}")
-    if cfg.trace_eval_games > cfg.eval_games:
-        cfg.trace_eval_games = 0  # nothing is traced in an --env evaluation
-    name = Path(args.env).stem if Path(args.env).suffix == ".toml" else args.env.split("/")[-1]
-    run_dir = Path(args.run or f"runs/{args.exp_name or 'train'}-{name}-{time.strftime('%Y%m%d-%H%M%S')}")
-    tensorboard = None
-    if args.tensorboard:  # checked before training: the install hint, a log directory already used
-        from tracelab.train.tensorboard import run_log_dir
-        tensorboard = run_log_dir(Path(args.tensorboard), run_dir.resolve().name, appending=False)
-    return train_env_into(cfg, source, run_dir, encoder.describe(), tensorboard=tensorboard)
+    if not declared:
+        cfg.trace_eval_games = 0  # only a world declared in rules is traced
+    elif cfg.trace_eval_games > cfg.eval_games:
+        raise UserError(f"--trace-eval-games ({cfg.trace_eval_games}) exceeds --eval-games ({cfg.eval_games})")
+    from tracelab.commands.train import where_to_train
+    run_dir, same_run, tensorboard = where_to_train(args, state is not None, source.short_name)
+    return train_env_into(cfg, source, run_dir, encoder.describe(), tensorboard=tensorboard, state=state,
+                          resumed_from=args.resume, same_run=same_run)
 
 
 def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at: int | None = None,
-                   tensorboard: Path | None = None) -> int:
+                   tensorboard: Path | None = None, state: dict[str, Any] | None = None,
+                   resumed_from: str | None = None, same_run: bool = False) -> int:
+    """Train into a new run at `run_dir` (from a checkpoint `state` if given; `same_run`: the checkpoint's
+    own run, `run_dir`, continues); returns the exit status. `stop_at`: stop there as Ctrl-C would (tests)."""
     import torch
 
+    from tracelab.commands.train import reopen_run
     from tracelab.store import TraceWriter
     from tracelab.train.config import reward_scale_text
     from tracelab.train.env_trainer import EnvTrainer
 
     meta = {"command": " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]),
             "scenario": source.name, "seed": cfg.seed,
-            "config": {**cfg.to_dict(), "env": source.to_json()}}
+            "config": {**cfg.to_dict(), "env": source.to_json(),
+                       "resumed_from": None if state is None else {"run": resumed_from, "step": state["step"]}}}
+    if cfg.trace_eval_games:  # a declared world's evaluation games are traced: what its readers need
+        meta = _with_declared_meta(meta, source)
     if not meta["command"].startswith("tracelab train"):
         meta["command"] = "tracelab train --env (python: tracelab.commands.train_env.train_env_into)"
     with store_errors():
-        writer = TraceWriter.open(run_dir, meta)
+        writer = reopen_run(run_dir, cfg, state["step"], meta["command"]) if same_run else \
+            TraceWriter.open(run_dir, meta)
     torch.set_num_threads(cfg.threads)
     was_deterministic = torch.are_deterministic_algorithms_enabled()
     torch.use_deterministic_algorithms(cfg.torch_deterministic)
@@ -108,13 +120,15 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
     try:
         if tensorboard is not None:
             from tracelab.train.tensorboard import TensorBoardSink
-            sink = TensorBoardSink(tensorboard)
+            sink = TensorBoardSink(tensorboard, purge_step=state["step"] if same_run else None)
         trainer = EnvTrainer(cfg, source, writer, run_dir, metric_sinks=[sink] if sink else [])
         if trainer.learner_note:
             print(f"note: {trainer.learner_note}", file=sys.stderr)
+        if state is not None:
+            _restore(trainer, state, writer, run_dir, resumed_from, same_run)
 
         from tracelab.commands._training import train_until_stopped
-        status = train_until_stopped(trainer, cfg.steps, stop_at, "the policy", lambda fig: {
+        status = train_until_stopped(trainer, cfg.steps, stop_at, "a checkpoint", lambda fig: {
             "ret": "-" if fig["mean_return"] is None else f"{fig['mean_return']:.2f}"})
     except KeyboardInterrupt:
         status = "interrupted"
@@ -134,6 +148,29 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
     return 0 if status == "finished" else 130
 
 
+def _with_declared_meta(meta: dict[str, Any], source: Any) -> dict[str, Any]:
+    """The run's meta with what `why`, `tui` and `replay` read of a declared world (its rule files, its
+    spec's and rules' texts, what sets each external fact, its board): DeclaredTarget's."""
+    from tracelab.envs.declared.play import load_declared
+    from tracelab.train.external_eval import DeclaredTarget
+    try:
+        spec = load_declared(source)
+    except UserError:  # not a declared world: its evaluations are not traced
+        return meta
+    described = DeclaredTarget(source, spec).run_meta()
+    return {**meta, "rule_files": described["rule_files"], "config": {**described["config"], **meta["config"]}}
+
+
+def _restore(trainer: Any, state: dict[str, Any], writer: Any, run_dir: Path, resumed_from: str | None,
+             same_run: bool) -> None:
+    with store_errors():  # games that do not replay to their observations: another env
+        trainer.load_state(state)
+    if same_run:
+        trainer.renumber_games(writer.next_free_episode)
+    from tracelab.commands._training import say_resumed
+    say_resumed(trainer, writer, run_dir, resumed_from, same_run)
+
+
 def _report(trainer: Any, source: Any, run_dir: Path, status: str) -> None:
     ev = trainer.last_eval
     print(f"{status} at step {trainer.step:,}" + (
@@ -143,7 +180,9 @@ def _report(trainer: Any, source: Any, run_dir: Path, status: str) -> None:
         print(f"best evaluation at step {trainer.best_eval[1]:,} (mean return {trainer.best_eval[0]:.3f}): its "
               f"policy is kept in {run_dir}/policy-best/")
     run = shlex.quote(str(run_dir))
-    print(f"run: {run_dir}/  policy: {run_dir}/policy/")
+    print(f"run: {run_dir}/  checkpoint: {run_dir}/checkpoint/  policy: {run_dir}/policy/")
+    if status != "finished":
+        print(f"  continue with: tracelab train --resume {run} --env {source.describe()}")
     print(f"  tracelab sql {run} \"SELECT step, value FROM metrics WHERE name = 'eval/mean_return' ORDER BY step\"")
     if status == "finished":
         print(f"  tracelab eval {run}/policy --env {source.describe()} --games 1000")

@@ -39,13 +39,13 @@ def checkpoint_path(run_dir: Path) -> Path:
     return Path(run_dir) / CHECKPOINT_DIR / CHECKPOINT_FILE
 
 
-def _as_tensors(value: Any) -> Any:
+def as_tensors(value: Any) -> Any:
     """Our own state with numpy arrays as tensors and numpy scalars as Python numbers: what weights_only
     loads."""
     if isinstance(value, dict):
-        return {k: _as_tensors(v) for k, v in value.items()}
+        return {k: as_tensors(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return type(value)(_as_tensors(v) for v in value)
+        return type(value)(as_tensors(v) for v in value)
     if isinstance(value, np.ndarray):
         return torch.from_numpy(np.array(value))  # a copy: the trainer's arrays go on changing
     if isinstance(value, np.generic):
@@ -61,12 +61,12 @@ def save_checkpoint(tr: Any, run_dir: Path) -> Path:
     state = {"format": FORMAT, "config": tr.cfg.to_dict(), "scenario_toml": tr.scenario.to_toml(),
              "run": str(run_dir), **tr.state()}
     tmp = path.with_suffix(".tmp")
-    torch.save(_as_tensors(state), tmp)
+    torch.save(as_tensors(state), tmp)
     tmp.replace(path)
     return path
 
 
-def _checkpoint_file(run: Path) -> Path:
+def checkpoint_file(run: Path) -> Path:
     """RUN/checkpoint/checkpoint.pt of a run directory, refusing anything else before it is opened."""
     if not run.is_dir():
         raise FileRefused(f"{run}: not a training run's directory (one holding {CHECKPOINT_DIR}/"
@@ -100,7 +100,7 @@ def load_checkpoint(run: str | Path, max_bytes: int | None = None, network: Any 
     Trainer's `network`), whose state dict says what the checkpoint's networks must hold."""
     from tracelab.train.memory import memory_limit
     run = Path(run)
-    f = _checkpoint_file(run)
+    f = checkpoint_file(run)
     try:
         state = load_tensors(f, memory_limit().bytes if max_bytes is None else max_bytes)
     except CodeInFile as e:
@@ -144,17 +144,15 @@ def load_checkpoint(run: str | Path, max_bytes: int | None = None, network: Any 
     return state
 
 
-def _rng_state() -> dict[str, Any]:
+def rng_state_schema() -> dict[str, Any]:
     return {"bit_generator": Const("PCG64"), "state": {"state": IntRange(0), "inc": IntRange(0)},
             "has_uint32": IntRange(0, 1), "uinteger": IntRange(0)}
 
 
-def _network_tensors(cfg: TrainConfig, scenario: Scenario, network: Any) -> tuple[dict[str, Any], dict[str, Any]]:
+def _network_tensors(net: Any, network: Any) -> tuple[dict[str, Any], dict[str, Any]]:
     """(the online network's state dict, Adam's moments by parameter name) as schemas: from the
-    architecture cfg describes, computed (a stranger's config builds nothing before it is checked), or from
-    a custom module's own state dict."""
-    from tracelab.train.loop import training_net
-    net = training_net(cfg, scenario)
+    architecture `net` (a NetSpec) describes, computed (a stranger's config builds nothing before it is
+    checked), or from a custom module's own state dict."""
     if network is None:
         shapes = {k: (torch.float32, s) for k, s in net.state_dict_shapes().items()}
         params = set(shapes)
@@ -173,14 +171,50 @@ def _state_schema(cfg: TrainConfig, scenario: Scenario, network: Any = None) -> 
     the learner the checkpoint names)."""
     from tracelab.train.loop import network_groups, training_net
     net = training_net(cfg, scenario)
-    w, n, d, a = cfg.envs, scenario.agents_per_team, net.inputs, net.actions
+    w, n, d = cfg.envs, scenario.agents_per_team, net.inputs
+    learner, best = learner_schema(cfg, net, network)
+    return {
+        **parts_schema(), **best,
+        "learners": {name: learner for name in network_groups(scenario, cfg.split_networks)},
+        "env_rng": rng_state_schema(),
+        "games": {"history": Tensor(torch.int16, (w, scenario.max_steps, 2, n)), **episode_games_schema(w),
+                  "obs": Tensor(torch.float32, (w, d))},
+        "pending": {"obs": Tensor(torch.float32, (w, n, d)), "action": Tensor(torch.int64, (w, n)),
+                    "reward": Tensor(torch.float64, (w, n)), "discount": Tensor(torch.float64, (w, n)),
+                    "open": Tensor(torch.bool, (w, n))},
+    }
+
+
+def parts_schema() -> dict[str, Any]:
+    """The keys both trainers' parts write (GridWar's Trainer.state, EnvTrainer.state): the step and
+    evaluation rounds, UpdateSchedule, EpisodeLog's counters, MetricLog, BestPolicy's figures, Generators."""
+    return {
+        "run": str, "step": IntRange(0), "next_episode": IntRange(0), "update_credit": float,
+        "synced_block": IntRange(0), "eval_round": IntRange(0), "returns_since_log": ListOf(float),
+        "last_loss": Nullable(float), "logged_step": IntRange(-1), "eval_step": IntRange(-1),
+        "best_eval": Nullable(Tuple(float, IntRange(0))),
+        "rng": rng_state_schema(), "torch_rng": Tensor(torch.uint8, (torch.Generator().get_state().numel(),)),
+    }
+
+
+def episode_games_schema(worlds: int) -> dict[str, Any]:
+    """EpisodeLog's arrays under `games`."""
+    return {"ep_len": Tensor(torch.int64, (worlds,)), "ep_return": Tensor(torch.float64, (worlds,)),
+            "ep_id": Tensor(torch.int64, (worlds,)), "ep_start": Tensor(torch.int64, (worlds,))}
+
+
+def learner_schema(cfg: TrainConfig, net: Any, network: Any = None) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(one learner's state, the best evaluation's networks) as schemas for the architecture `net` (a
+    NetSpec) under cfg's learner, buffer and batch: GridWar's checkpoints and train --env's
+    (env_checkpoint.py) check their networks with it."""
+    a, d = net.actions, net.inputs
     buffer = {"size": IntRange(0, cfg.buffer), "pos": IntRange(0, cfg.buffer - 1),
               "obs": Tensor(torch.float32, (None, d)), "next_obs": Tensor(torch.float32, (None, d)),
               "action": Tensor(torch.int64, (None,)), "reward": Tensor(torch.float32, (None,)),
               "discount": Tensor(torch.float32, (None,))}
     if cfg.mask:
         buffer["next_allowed"] = Tensor(torch.bool, (None, a))
-    weights, adam = _network_tensors(cfg, scenario, network)
+    weights, adam = _network_tensors(net, network)
     if cfg.learner == "fused":
         p = net.n_params
         learner = {"params": Tensor(torch.float32, (2, p)), "adam_m": Tensor(torch.float32, (p,)),
@@ -194,22 +228,7 @@ def _state_schema(cfg: TrainConfig, scenario: Scenario, network: Any = None) -> 
         learner = {"online": weights, "target": weights, "adam": adam, "updates": IntRange(0), "buffer": buffer,
                    "loss_sum": float, "loss_n": IntRange(0), "last_q": Nullable(Tensor(torch.float32, (cfg.batch, a)))}
         best = {"best_weights": MapOf(weights)}
-    generator_bytes = torch.Generator().get_state().numel()
-    return {
-        "run": str, "step": IntRange(0), "next_episode": IntRange(0), "update_credit": float,
-        "synced_block": IntRange(0), "eval_round": IntRange(0), "returns_since_log": ListOf(float),
-        "last_loss": Nullable(float), "logged_step": IntRange(-1), "eval_step": IntRange(-1),
-        "best_eval": Nullable(Tuple(float, IntRange(0))), **best,
-        "learners": {name: learner for name in network_groups(scenario, cfg.split_networks)},
-        "rng": _rng_state(), "env_rng": _rng_state(), "torch_rng": Tensor(torch.uint8, (generator_bytes,)),
-        "games": {"history": Tensor(torch.int16, (w, scenario.max_steps, 2, n)),
-                  "ep_len": Tensor(torch.int64, (w,)), "ep_return": Tensor(torch.float64, (w,)),
-                  "ep_id": Tensor(torch.int64, (w,)), "ep_start": Tensor(torch.int64, (w,)),
-                  "obs": Tensor(torch.float32, (w, d))},
-        "pending": {"obs": Tensor(torch.float32, (w, n, d)), "action": Tensor(torch.int64, (w, n)),
-                    "reward": Tensor(torch.float64, (w, n)), "discount": Tensor(torch.float64, (w, n)),
-                    "open": Tensor(torch.bool, (w, n))},
-    }
+    return learner, best
 
 
 def _check_consistency(state: dict[str, Any], cfg: TrainConfig, scenario: Scenario) -> None:
@@ -217,25 +236,14 @@ def _check_consistency(state: dict[str, Any], cfg: TrainConfig, scenario: Scenar
     replayed actions reach compiled kernels, which do not check bounds)."""
     n_actions = scenario.n_actions
     for name, learner in state["learners"].items():
-        buf, where = learner["buffer"], f"learners.{name}.buffer"
-        for key in ("obs", "next_obs", "action", "reward", "discount", "next_allowed"):
-            if key in buf and len(buf[key]) != buf["size"]:
-                raise Mismatch(f"{where}.{key}", f"{buf['size']} rows (its size)", buf[key])
-        _in_range(buf["action"], 0, n_actions - 1, f"{where}.action")
-    _in_range(state["pending"]["action"], 0, n_actions - 1, "pending.action")
+        check_buffer_rows(learner["buffer"], n_actions, f"learners.{name}.buffer")
+    in_range(state["pending"]["action"], 0, n_actions - 1, "pending.action")
     games = state["games"]
-    _in_range(games["ep_len"], 0, scenario.max_steps, "games.ep_len")
+    in_range(games["ep_len"], 0, scenario.max_steps, "games.ep_len")
     history = games["history"]
     played = torch.arange(history.shape[1])[None, :] < games["ep_len"][:, None]  # [W, steps]
-    _in_range(history[played], 0, NOTHING, "games.history")
-    groups = set(state["learners"])
-    key = "best_weights" if "best_weights" in state else "best_rows"
-    if key not in state:
-        raise Mismatch("best_weights", "the best evaluation's networks", missing=True)
-    best = state[key]
-    if (state["best_eval"] is None) != (not best) or (best and set(best) != groups):
-        raise Mismatch(key, f"one network per network name ({', '.join(sorted(groups))}) with best_eval, "
-                            f"none without", best)
+    in_range(history[played], 0, NOTHING, "games.history")
+    check_best(state, set(state["learners"]))
     for key in ("rng", "env_rng"):
         try:
             np.random.PCG64().state = state[key]
@@ -243,7 +251,26 @@ def _check_consistency(state: dict[str, Any], cfg: TrainConfig, scenario: Scenar
             raise Mismatch(key, f"a numpy PCG64 generator state (numpy: {e})", state[key]) from None
 
 
-def _in_range(values: torch.Tensor, lo: int, hi: int, where: str) -> None:
+def check_best(state: dict[str, Any], groups: set[str]) -> None:
+    """The best evaluation's networks: one per network name when there was an evaluation, none before."""
+    key = "best_weights" if "best_weights" in state else "best_rows"
+    if key not in state:
+        raise Mismatch("best_weights", "the best evaluation's networks", missing=True)
+    best = state[key]
+    if (state["best_eval"] is None) != (not best) or (best and set(best) != groups):
+        raise Mismatch(key, f"one network per network name ({', '.join(sorted(groups))}) with best_eval, "
+                            f"none without", best)
+
+
+def check_buffer_rows(buf: dict[str, Any], n_actions: int, where: str) -> None:
+    """A replay buffer's state: as many rows as its size says, actions the networks have (they index)."""
+    for key in ("obs", "next_obs", "action", "reward", "discount", "next_allowed"):
+        if key in buf and len(buf[key]) != buf["size"]:
+            raise Mismatch(f"{where}.{key}", f"{buf['size']} rows (its size)", buf[key])
+    in_range(buf["action"], 0, n_actions - 1, f"{where}.action")
+
+
+def in_range(values: torch.Tensor, lo: int, hi: int, where: str) -> None:
     if values.numel() and (int(values.min()) < lo or int(values.max()) > hi):
         raise Mismatch(where, f"values from {lo} to {hi}", values)
 

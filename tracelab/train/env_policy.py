@@ -40,6 +40,23 @@ class EnvPolicy:
         return q.argmax(axis=1)
 
 
+def batch_of_one(obs: Any) -> Any:
+    """One env's observation as a batch of one (a Dict space's parts each)."""
+    if isinstance(obs, dict):
+        return {k: np.asarray(v)[None] for k, v in obs.items()}
+    return np.asarray(obs)[None]
+
+
+def one_env_actor(policy: Any) -> Callable[[Any, dict[str, Any]], int]:
+    """The greedy action in one env from its observation and info, of a policy that acts on batches
+    (EnvPolicy's `act(obs, masks)`): play --env --policy, traced evaluation games."""
+    def act(obs: Any, info: dict[str, Any]) -> int:
+        mask = info.get("action_mask")
+        return int(np.asarray(policy.act(batch_of_one(obs), None if mask is None else np.asarray(mask)[None]))
+                   .reshape(-1)[0])
+    return act
+
+
 def save_env_policy(path: str | Path, source: EnvSource, weights: dict[str, Any], network: dict[str, Any],
                     encoder: ObservationEncoder, action_names: list[str], mask: bool,
                     trained: dict[str, Any]) -> Path:
@@ -141,12 +158,18 @@ class EnvEvalResult:
         return d
 
 
-def make_vector_env(source: EnvSource, worlds: int) -> Any:
+def make_vector_env(source: EnvSource, worlds: int, replayable: bool = False) -> Any:
     """`worlds` copies of the env stepped together, a world that ends reset within its step (SAME_STEP, as
     GridWar's vector env): gymnasium's SyncVectorEnv over the env (a declared env's own batched engine is
-    not used here yet)."""
+    not used here yet). `replayable`: each world an env_checkpoint.ReplayableEnv (a checkpoint replays it)."""
     from gymnasium.vector import AutoresetMode, SyncVectorEnv
-    return SyncVectorEnv([source.make] * worlds, autoreset_mode=AutoresetMode.SAME_STEP)
+    make = source.make
+    if replayable:
+        from tracelab.train.env_checkpoint import ReplayableEnv
+
+        def make() -> Any:
+            return ReplayableEnv(source.make())
+    return SyncVectorEnv([make] * worlds, autoreset_mode=AutoresetMode.SAME_STEP)
 
 
 EVAL_STEP_CAP = 10_000  # a greedy policy may walk in circles in an env without a step limit (CliffWalking)

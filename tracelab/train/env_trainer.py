@@ -3,11 +3,13 @@ batched worlds, transitions into replay, one update per world-step, target copie
 metrics and episodes, the final and the best policy.
 
 It is the GridWar Trainer's loop (loop.py) without what is GridWar's (teams, the scripted opponent, slow
-agents, replaying games from a checkpoint): the same TrainConfig and the same parts (rngs.Generators,
-Exploration, UpdateSchedule, EpisodeLog, MetricLog, BestPolicy), the same learners
+agents): the same TrainConfig and the same parts (rngs.Generators, Exploration, UpdateSchedule,
+EpisodeLog, MetricLog, BestPolicy), each saving and loading itself (EnvTrainer.state), the same learners
 (make_learner: fused or readable, behind the Learner protocol), the same replay buffer, the same update
 and target-copy cadence, the same metric names where they mean the same thing. Observations are encoded
-for the network by env_source.ObservationEncoder (a Discrete one is one-hot)."""
+for the network by env_source.ObservationEncoder (a Discrete one is one-hot). Checkpoints and the replay
+of the worlds' episodes are env_checkpoint.py's; a declared world's first evaluation games are traced into
+the run (external_eval.DeclaredEvaluator), as GridWar's are."""
 from __future__ import annotations
 
 import time
@@ -20,6 +22,7 @@ import torch
 
 from tracelab.store.writer import TraceWriter
 from tracelab.train.config import TrainConfig
+from tracelab.train.env_checkpoint import replay_worlds, save_env_checkpoint, worlds_state
 from tracelab.train.env_policy import EnvEvalResult, EnvPolicy, make_vector_env, play_env_games, save_env_policy
 from tracelab.envs.declared.env_source import EnvSource
 from tracelab.train.env_source import ObservationEncoder, action_count
@@ -27,7 +30,7 @@ from tracelab.train.learner_protocol import Learner
 from tracelab.train.best_policy import BestPolicy
 from tracelab.train.episode_log import EpisodeLog
 from tracelab.train.exploration import Exploration
-from tracelab.train.loop import acting_q, end_training, make_learner
+from tracelab.train.loop import acting_q, end_training, load_shared_state, make_learner
 from tracelab.train.metric_log import MetricLog
 from tracelab.train.policy import BEST_POLICY_DIR
 from tracelab.train.qnet import NetSpec
@@ -35,6 +38,7 @@ from tracelab.train.rngs import Generators
 from tracelab.train.tensorboard import MetricSink
 from tracelab.train.update_schedule import UpdateSchedule
 
+SHARED = "shared"  # the one network's name (GridWar's trainer may have one per team role)
 Progress = Callable[[dict[str, Any]], None]
 
 
@@ -45,11 +49,12 @@ class EnvTrainer:
         torch.set_num_threads(cfg.threads)
         self.cfg, self.source, self.writer, self.run_dir, self.progress = cfg, source, writer, run_dir, progress
         self.worlds = w = cfg.envs
-        self.env = make_vector_env(source, w)
+        self.env = make_vector_env(source, w, replayable=True)  # a checkpoint replays its worlds
         single = self.env.single_observation_space
         self.encoder = ObservationEncoder(single, source.name)
         self.n_actions = action_count(self.env.single_action_space, source.name)
         declared = getattr(self.env.envs[0].unwrapped, "world_spec", None)  # a declared world names its actions
+        self.declared = declared is not None
         self.action_names = list(declared.action_names) if declared is not None else \
             [str(a) for a in range(self.n_actions)]
         self.rngs = Generators(cfg.seed)
@@ -59,15 +64,16 @@ class EnvTrainer:
         self.learner: Learner = make_learner(self.learner_kind, self.net, cfg, self.rngs.torch)
         self.policy = EnvPolicy(acting_q(self.learner, self.net), self.encoder, cfg.mask)
         self.schedule = UpdateSchedule(cfg, w)
-        self.episodes = EpisodeLog(w, writer)
+        self.episodes = EpisodeLog(w, writer, logging=False)  # begins are written once train() starts
         self.metrics = MetricLog(writer, metric_sinks)
-        self.best = BestPolicy()  # by the evaluation's mean return
+        self.best = BestPolicy()  # by the evaluation's mean return; its networks by name, as GridWar's
         self.step = 0
         self.eval_round = 0
         self.eval_step = -1
         self.last_eval: EnvEvalResult | None = None
         self.stop_requested = False
         self._eval_env: Any = None
+        self._evaluator: Any = None  # a declared world's, tracing the first games of each evaluation
         self.obs, self.info = self.env.reset(seed=self.rngs.env_seed())
         self.episodes.begin(np.arange(w), self.step)
 
@@ -137,17 +143,31 @@ class EnvTrainer:
 
     def run_eval(self) -> EnvEvalResult:
         cfg = self.cfg
-        if self._eval_env is None:
-            self._eval_env = make_vector_env(self.source, min(cfg.eval_envs, cfg.eval_games))
-        result = play_env_games(self._eval_env, self.policy, cfg.eval_games, self.rngs.eval_seed(self.eval_round))
+        if self.writer is not None and cfg.trace_eval_games and self.declared:
+            if self._evaluator is None:
+                from tracelab.train.external_eval import DeclaredEvaluator, EvalSettings
+                settings = EvalSettings(cfg.eval_every, cfg.eval_games, cfg.trace_eval_games, cfg.eval_envs,
+                                        seed=cfg.seed)
+                self._evaluator = DeclaredEvaluator(self.source, self.writer, self.episodes.new_id, settings)
+            result = self._evaluator.play(self.policy, self.step, self.eval_round)
+        else:
+            if self._eval_env is None:
+                self._eval_env = make_vector_env(self.source, min(cfg.eval_envs, cfg.eval_games))
+            result = play_env_games(self._eval_env, self.policy, cfg.eval_games, self.rngs.eval_seed(self.eval_round))
         self.write_metrics(result.metrics())
         self.eval_round += 1
         self.last_eval, self.eval_step = result, self.step
-        if self.best.consider(result.mean_return, self.step, self.learner.online_weights()):
-            if self.run_dir is not None:
-                self._save(self.run_dir / BEST_POLICY_DIR, self.best.weights, self.step,
-                           {"metric": "eval/mean_return", "value": result.mean_return})
+        if self.best.consider(result.mean_return, self.step, {SHARED: self.learner.online_weights()}):
+            self.write_best_policy()
         return result
+
+    def write_best_policy(self) -> None:
+        """RUN/policy-best/ from the kept parameters (also after a resume into a new run)."""
+        if self.run_dir is None or self.best.eval is None:
+            return
+        value, step = self.best.eval
+        self._save(self.run_dir / BEST_POLICY_DIR, self.best.weights[SHARED], step,
+                   {"metric": "eval/mean_return", "value": value})
 
     def _save(self, path: Path, weights: dict[str, torch.Tensor], step: int,
               selected_by: dict[str, Any] | None = None) -> Path:
@@ -163,6 +183,7 @@ class EnvTrainer:
     def train(self, stop_at: int | None = None) -> str:
         cfg = self.cfg
         last_progress = 0.0
+        self.episodes.start_logging(self.step)
         end = cfg.steps if stop_at is None else min(cfg.steps, stop_at)
         while self.step < end and not self.stop_requested:
             before = self.step
@@ -172,15 +193,50 @@ class EnvTrainer:
                 self.log_metrics()
             if self._crossed(cfg.eval_every, before):
                 self.run_eval()
+            if self.run_dir is not None and self._crossed(cfg.checkpoint_every, before):
+                self.episodes.flush()  # the run holds every episode the checkpoint has counted
+                save_env_checkpoint(self, self.run_dir)
             if self.progress is not None and time.monotonic() - last_progress > 0.2:
                 last_progress = time.monotonic()
                 self.progress(self.figures())
         status = end_training(self)
         if self.run_dir is not None:
+            save_env_checkpoint(self, self.run_dir)
             self.save_policy(self.run_dir / "policy")
         if self.progress is not None:
             self.progress(self.figures())
         return status
+
+    # ---- checkpoints: the parts' states side by side (env_checkpoint.py writes and checks them) ----
+    def state(self) -> dict[str, Any]:
+        """Everything that decides what happens next, as tensors, arrays and plain values (some arrays are
+        the parts' live ones: save_env_checkpoint copies them)."""
+        episodes = self.episodes.state()
+        worlds = worlds_state(self.env.envs)
+        return {
+            "step": self.step, "eval_round": self.eval_round, "eval_step": self.eval_step,
+            "learner": self.learner_kind, "learners": {SHARED: self.learner.state()},
+            **self.rngs.state(), **self.schedule.state(), **self.metrics.state(), **self.best.state(), **episodes,
+            "games": {**episodes["games"], "actions": worlds.pop("actions"), "obs": self.encoder(self.obs)},
+            "env_rng": worlds,
+        }
+
+    def load_state(self, st: dict[str, Any]) -> None:
+        """Continue from `state()`'s output (checked by env_checkpoint.load_env_checkpoint); the worlds are
+        rebuilt by replaying their episodes. ValueError when the replay does not end in the saved
+        observations (another env, or version of it, than the checkpoint's)."""
+        load_shared_state(self, {SHARED: self.learner}, st)
+        g = st["games"]
+        obs, self.info = replay_worlds(self.env, g["actions"], self.episodes.lengths, st["env_rng"])
+        if not np.array_equal(self.encoder(obs), g["obs"]):
+            raise ValueError("replaying the checkpoint's games did not reproduce their observations: another env "
+                             "(or version of it) than the one it was written with, or an edited file")
+        self.obs = obs
+
+    def renumber_games(self, first_free: int) -> None:
+        """After a restore into the checkpoint's own run: the games go on under new episode ids
+        (EpisodeLog.renumber)."""
+        self.episodes.renumber(first_free)
 
     def figures(self) -> dict[str, Any]:
         ev = self.last_eval
@@ -192,3 +248,5 @@ class EnvTrainer:
         self.env.close()
         if self._eval_env is not None:
             self._eval_env.close()
+        if self._evaluator is not None:
+            self._evaluator.close()

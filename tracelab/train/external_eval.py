@@ -19,7 +19,7 @@ import numpy as np
 
 from tracelab.errors import UserError
 from tracelab.store.writer import TraceWriter
-from tracelab.train.env_policy import EVAL_STEP_CAP, EnvEvalResult, make_vector_env, play_env_games
+from tracelab.train.env_policy import EVAL_STEP_CAP, EnvEvalResult, make_vector_env, one_env_actor, play_env_games
 from tracelab.envs.declared.env_source import EnvSource
 from tracelab.train.rngs import eval_seed
 
@@ -151,13 +151,6 @@ class _GreedyAgent:
         return np.asarray(self._act(obs))
 
 
-def batch_of_one(obs: Any) -> Any:
-    """One env's observation as a batch of one (a Dict space's parts each)."""
-    if isinstance(obs, dict):
-        return {k: np.asarray(v)[None] for k, v in obs.items()}
-    return np.asarray(obs)[None]
-
-
 @dataclass
 class DeclaredTarget:
     source: EnvSource
@@ -192,29 +185,33 @@ class DeclaredEvaluator:
         self.env = make_vector_env(source, min(settings.envs, rest)) if rest else None
 
     def run(self, act: Act, step: int, round_no: int) -> dict[str, float]:
+        return self.play(_GreedyAgent(act), step, round_no).metrics()
+
+    def play(self, agent: Any, step: int, round_no: int) -> EnvEvalResult:
+        """One evaluation of `agent` (env_policy.EnvPolicy's `act(obs, masks)`: `train --env`'s policy)."""
         seed = eval_seed(self.settings.seed, round_no)
         result = EnvEvalResult()
         if self.trace_env is not None:
             self.trace_env.unwrapped.trace_info(eval_info(step, round_no))
             for k in range(self.traced):
-                self._play_one(act, seed + 1 + k, result)
+                self._play_one(agent, seed + 1 + k, result)
         rest = self.settings.games - self.traced
         if rest and self.env is not None:
-            more = play_env_games(self.env, _GreedyAgent(act), rest, seed)
+            more = play_env_games(self.env, agent, rest, seed)
             result.returns += more.returns
             result.steps += more.steps
             result.terminated += more.terminated
             result.truncated += more.truncated
-        return result.metrics()
+        return result
 
-    def _play_one(self, act: Act, seed: int, result: EnvEvalResult) -> None:
+    def _play_one(self, agent: Any, seed: int, result: EnvEvalResult) -> None:
         """One greedy game in the traced env; one that runs EVAL_STEP_CAP steps without an end is counted
         truncated (its record ends 'aborted' at the next game's reset)."""
-        env = self.trace_env
-        obs, _ = env.reset(seed=seed)
+        env, act = self.trace_env, one_env_actor(agent)
+        obs, info = env.reset(seed=seed)
         ret, steps, terminated, truncated = 0.0, 0, False, False
         while not (terminated or truncated) and steps < EVAL_STEP_CAP:
-            obs, reward, terminated, truncated, _ = env.step(int(np.asarray(act(batch_of_one(obs))).reshape(-1)[0]))
+            obs, reward, terminated, truncated, info = env.step(act(obs, info))
             ret += float(reward)
             steps += 1
         result.returns.append(ret)

@@ -106,6 +106,25 @@ def end_training(tr: Any) -> str:
     return status
 
 
+def load_shared_state(tr: Any, learners: dict[str, Learner], st: dict[str, Any]) -> None:
+    """What both trainers' load_state restore alike (GridWar's, env_trainer's): the learners (by network
+    name; ValueError when the checkpoint is another learner's), the step and evaluation rounds, and the
+    parts both have (UpdateSchedule, MetricLog, BestPolicy, Generators, EpisodeLog)."""
+    kind = st.get("learner", "fused")  # absent: written before there were two learners
+    if tr.learner_kind != kind:
+        raise ValueError(f"the checkpoint holds the {kind} learner's state; this trainer runs the "
+                         f"{tr.learner_kind} one")
+    for name, lr in learners.items():
+        lr.load_state(st["learners"][name])
+    tr.step, tr.eval_round, tr.eval_step = int(st["step"]), int(st["eval_round"]), int(st["eval_step"])
+    tr.schedule.load_state(st)
+    tr.metrics.load_state(st)
+    tr.best.load_state(st)
+    tr.write_best_policy()  # a resumed run into a new directory keeps it too
+    tr.rngs.load_state(st)
+    tr.episodes.load_state(st)
+
+
 class Trainer:
     """GridWar's DQN trainer. Its state is owned by parts that each save and load themselves (a
     checkpoint is their states side by side, checkpoint.py): `rngs` (every generator, from the seed),
@@ -391,19 +410,7 @@ class Trainer:
     def load_state(self, st: dict[str, Any]) -> None:
         """Continue from `state()`'s output (checked by checkpoint.load_checkpoint); the worlds are rebuilt
         by replaying their games."""
-        kind = st.get("learner", "fused")
-        if self.learner_kind != kind:
-            raise ValueError(f"the checkpoint holds the {kind} learner's state; this trainer runs the "
-                             f"{self.learner_kind} one")
-        for name, lr in self.learners.items():
-            lr.load_state(st["learners"][name])
-        self.step, self.eval_round, self.eval_step = int(st["step"]), int(st["eval_round"]), int(st["eval_step"])
-        self.schedule.load_state(st)
-        self.metrics.load_state(st)
-        self.best.load_state(st)
-        self.write_best_policy()  # a resumed run into a new directory keeps it too
-        self.rngs.load_state(st)
-        self.episodes.load_state(st)
+        load_shared_state(self, self.learners, st)
         self.games.load_state(st["games"])
         self.games.replay_into(self.env.sim, self.episodes.lengths)
         self.env.sim.rng.bit_generator.state = st["env_rng"]

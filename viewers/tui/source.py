@@ -90,6 +90,10 @@ class RunSource(LockedConnection):
         # the board the run declares (a game's), None for a run without one (a reasoning run): the views
         # show the atoms and the graph instead, and no game columns
         self.board: str | None = self.call(run_board)
+        # a training run's evaluation games (kind 'eval'), with a board or without (a declared world's,
+        # which the views show as a reasoning run): ] and [ step through them
+        self.has_eval_games: bool = self.call(lambda con: bool(con.execute(
+            "SELECT EXISTS (SELECT 1 FROM episodes WHERE kind = 'eval')").fetchall()[0][0]))
 
     @property
     def live(self) -> bool:

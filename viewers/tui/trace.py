@@ -181,8 +181,11 @@ class TracePane(Vertical):
         return self.query_one("#tr-body > BoardView, #tr-body > GraphSide")  # type: ignore[return-value]
 
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
-        # a run without a board has its atoms beside the trace (key b: "atoms"), and no evaluation games
-        if action in ("toggle_board", "eval_game"):
+        # a run without a board has its atoms beside the trace (key b: "atoms"); evaluation games are a
+        # game's (GridWar's board) or a training's of a declared world (no such board); a live run may get them
+        if action == "eval_game":
+            return self.source.board is not None or self.source.has_eval_games or self.source.live
+        if action == "toggle_board":
             return self.source.board is not None
         if action == "toggle_side":
             return self.source.board is None

@@ -44,9 +44,12 @@ def random_policy(env: gym.Env, seed: int) -> Callable[[Any, dict[str, Any]], in
 
 
 def play_episodes(env: gym.Env, episodes: int, seed: int, act: Callable[[Any, dict[str, Any]], int],
-                  on_episode: Callable[[dict[str, Any]], None] | None = None) -> dict[str, Any]:
+                  on_episode: Callable[[dict[str, Any]], None] | None = None,
+                  step_cap: int | None = None) -> dict[str, Any]:
     """Play `episodes` episodes (the first reset seeded with `seed`, the others continuing its stream);
-    returns each episode's steps, return and outcome, the steps and the seconds they took."""
+    returns each episode's steps, return and outcome, the steps and the seconds they took. `step_cap`: an
+    episode still running after that many steps ends there, counted truncated (a traced one's record ends
+    'aborted' at the next reset)."""
     out: list[dict[str, Any]] = []
     steps = 0
     t0 = time.perf_counter()
@@ -59,6 +62,7 @@ def play_episodes(env: gym.Env, episodes: int, seed: int, act: Callable[[Any, di
             obs, reward, terminated, truncated, info = env.step(act(obs, info))
             ret += float(reward)
             n += 1
+            truncated = truncated or (step_cap is not None and n >= step_cap and not terminated)
         steps += n
         out.append({"steps": n, "return": ret, "outcome": "terminated" if terminated else "truncated"})
         if on_episode is not None:
