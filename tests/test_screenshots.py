@@ -12,8 +12,8 @@ from tracelab.cli import main
 
 ROOT = Path(__file__).resolve().parent.parent
 # where metrics may be written: the store's writer (the method), training, evaluation, experiments, and
-# `train`'s resume event
-METRIC_WRITERS = {"tracelab/store/writer.py", "tracelab/commands/train.py"}
+# the resume event of `train` and `train --env` (commands/_training.say_resumed)
+METRIC_WRITERS = {"tracelab/store/writer.py", "tracelab/commands/_training.py"}
 METRIC_WRITER_DIRS = ("tracelab/train/",)
 
 
