@@ -12,7 +12,6 @@ of the worlds' episodes are env_checkpoint.py's; a declared world's first evalua
 the run (external_eval.DeclaredEvaluator), as GridWar's are."""
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -30,7 +29,7 @@ from tracelab.train.learner_protocol import Learner
 from tracelab.train.best_policy import BestPolicy
 from tracelab.train.episode_log import EpisodeLog
 from tracelab.train.exploration import Exploration
-from tracelab.train.loop import acting_q, end_training, load_shared_state, make_learner
+from tracelab.train.loop import acting_q, load_shared_state, make_learner, train_loop
 from tracelab.train.metric_log import MetricLog
 from tracelab.train.policy import BEST_POLICY_DIR
 from tracelab.train.qnet import NetSpec
@@ -122,9 +121,6 @@ class EnvTrainer:
             self.episodes.begin(ended, self.step)
 
     # ---- logging, evaluation, policies ----
-    def _crossed(self, every: int, before: int) -> bool:
-        return every > 0 and self.step // every > before // every
-
     def log_metrics(self) -> dict[str, float]:
         m: dict[str, float] = {"epsilon": self.epsilon()}
         loss = self.learner.take_loss()
@@ -181,31 +177,9 @@ class EnvTrainer:
 
     # ---- the loop ----
     def train(self, stop_at: int | None = None) -> str:
-        cfg = self.cfg
-        last_progress = 0.0
-        self.episodes.start_logging(self.step)
-        end = cfg.steps if stop_at is None else min(cfg.steps, stop_at)
-        while self.step < end and not self.stop_requested:
-            before = self.step
-            self.env_step()  # collect and store
-            self.schedule.run(self.step, [self.learner], self.rngs.numpy)  # updates, target copies
-            if self._crossed(cfg.log_every, before):
-                self.log_metrics()
-            if self._crossed(cfg.eval_every, before):
-                self.run_eval()
-            if self.run_dir is not None and self._crossed(cfg.checkpoint_every, before):
-                self.episodes.flush()  # the run holds every episode the checkpoint has counted
-                save_env_checkpoint(self, self.run_dir)
-            if self.progress is not None and time.monotonic() - last_progress > 0.2:
-                last_progress = time.monotonic()
-                self.progress(self.figures())
-        status = end_training(self)
-        if self.run_dir is not None:
-            save_env_checkpoint(self, self.run_dir)
-            self.save_policy(self.run_dir / "policy")
-        if self.progress is not None:
-            self.progress(self.figures())
-        return status
+        """Train until cfg.steps, or until stop_requested (Ctrl-C) or step `stop_at`: the loop GridWar's
+        trainer runs (loop.train_loop), each step one env_step of every world."""
+        return train_loop(self, stop_at, self.env_step, [self.learner], save_env_checkpoint)
 
     # ---- checkpoints: the parts' states side by side (env_checkpoint.py writes and checks them) ----
     def state(self) -> dict[str, Any]:

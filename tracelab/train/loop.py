@@ -10,7 +10,7 @@ would (tests/test_train.py, tests/test_train_parts.py)."""
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -106,6 +106,45 @@ def end_training(tr: Any) -> str:
     return status
 
 
+def train_loop(tr: Any, stop_at: int | None, collect_and_store: Callable[[], None],
+               learners: Collection[Learner], save_checkpoint: Callable[[Any, Path], None]) -> str:
+    """The loop both trainers run (GridWar's Trainer, env_trainer's EnvTrainer), top to bottom: every
+    world makes one step and its closed transitions are stored (`collect_and_store`); the updates and
+    target copies that are due; the log, the evaluation and the checkpoint at their intervals. Until
+    cfg.steps, stop_requested (Ctrl-C) or step `stop_at` (as an interruption there would); returns
+    "finished" or "interrupted"."""
+    cfg = tr.cfg
+    last_progress = 0.0
+    tr.episodes.start_logging(tr.step)
+    end = cfg.steps if stop_at is None else min(cfg.steps, stop_at)
+    while tr.step < end and not tr.stop_requested:
+        before = tr.step
+        collect_and_store()
+        tr.schedule.run(tr.step, learners, tr.rngs.numpy)  # updates, target copies
+        if _crossed(cfg.log_every, before, tr.step):
+            tr.log_metrics()
+        if _crossed(cfg.eval_every, before, tr.step):
+            tr.run_eval()
+        if tr.run_dir is not None and _crossed(cfg.checkpoint_every, before, tr.step):
+            tr.episodes.flush()  # the run holds every episode the checkpoint has counted
+            save_checkpoint(tr, tr.run_dir)
+        if tr.progress is not None and time.monotonic() - last_progress > 0.2:
+            last_progress = time.monotonic()
+            tr.progress(tr.figures())
+    status = end_training(tr)
+    if tr.run_dir is not None:
+        save_checkpoint(tr, tr.run_dir)
+        tr.save_policy(tr.run_dir / "policy")
+    if tr.progress is not None:
+        tr.progress(tr.figures())
+    return status
+
+
+def _crossed(every: int, before: int, step: int) -> bool:
+    """A multiple of `every` lies in (before, step]: the interval's work is due."""
+    return every > 0 and step // every > before // every
+
+
 def load_shared_state(tr: Any, learners: dict[str, Learner], st: dict[str, Any]) -> None:
     """What both trainers' load_state restore alike (GridWar's, env_trainer's): the learners (by network
     name; ValueError when the checkpoint is another learner's), the step and evaluation rounds, and the
@@ -199,32 +238,12 @@ class Trainer:
         """Train until cfg.steps, or until stop_requested (Ctrl-C) or step `stop_at` (as an interruption
         there would); returns "finished" or "interrupted"."""
         from tracelab.train.checkpoint import save_checkpoint
-        cfg = self.cfg
-        last_progress = 0.0
-        self.episodes.start_logging(self.step)
-        end = cfg.steps if stop_at is None else min(cfg.steps, stop_at)
-        while self.step < end and not self.stop_requested:
-            before = self.step
+
+        def collect_and_store() -> None:
             closed, true_next = self.collect()  # every world one ε-greedy step
             self.store(closed, true_next)        # the transitions that closed, into their network's replay
-            self.schedule.run(self.step, self.learners.values(), self.rngs.numpy)  # updates, target copies
-            if self._crossed(cfg.log_every, before):
-                self.log_metrics()
-            if self._crossed(cfg.eval_every, before):
-                self.run_eval()
-            if self.run_dir is not None and self._crossed(cfg.checkpoint_every, before):
-                self.episodes.flush()  # the run holds every episode the checkpoint has counted
-                save_checkpoint(self, self.run_dir)
-            if self.progress is not None and time.monotonic() - last_progress > 0.2:
-                last_progress = time.monotonic()
-                self.progress(self.figures())
-        status = end_training(self)
-        if self.run_dir is not None:
-            save_checkpoint(self, self.run_dir)
-            self.save_policy(self.run_dir / "policy")
-        if self.progress is not None:
-            self.progress(self.figures())
-        return status
+
+        return train_loop(self, stop_at, collect_and_store, self.learners.values(), save_checkpoint)
 
     # ---- collect: every world makes one step ----
     def collect(self) -> tuple[dict[str, np.ndarray], np.ndarray]:
@@ -309,9 +328,6 @@ class Trainer:
                                            None if allowed is None else allowed[sel])
 
     # ---- log ----
-    def _crossed(self, every: int, before: int) -> bool:
-        return every > 0 and self.step // every > before // every
-
     def epsilon(self) -> float:
         return self.exploration.epsilon(self.step)
 
