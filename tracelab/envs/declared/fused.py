@@ -16,6 +16,7 @@ row's facts (row agent * n_actions + action);
 from __future__ import annotations
 
 import inspect
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
@@ -25,6 +26,9 @@ from numba.extending import overload
 
 from tracelab.engine import kernel as K
 from tracelab.engine.numba_cache import stamp_with_sources
+
+if TYPE_CHECKING:
+    from tracelab.engine import Engine
 
 STATUS_OK = K.STATUS_OK
 FIELDS = ("cfg", "before", "after", "lower", "tables", "ext", "reads", "out")
@@ -74,6 +78,26 @@ def bind(binding: tuple, tables: tuple, ext: tuple, reads: tuple, out: tuple) ->
     """The buffers of a fused step over Engine.fused_binding() (cfg, before, after)."""
     cfg, before, after = binding
     return _make_buffers(cfg, before, after, after[1], tables, ext, reads, out)
+
+
+class FusedBinding:
+    """A declared world's fused-step buffers over its engine, bound again whenever the engine's layout
+    changes (a regrounding moves the kernel's arrays). One world (world.py) and a batch (vector_world.py)
+    keep one each; their tables, rows, reads and outputs are allocated once, before the first bind."""
+
+    def __init__(self, engine: Engine, tables: tuple, ext: tuple, reads: tuple, out: tuple) -> None:
+        self._engine = engine
+        self._arrays = (tables, ext, reads, out)
+        self._buffers: DeclaredBuffers | None = None
+        self._version = -1
+
+    def buffers(self) -> DeclaredBuffers:
+        """The buffers for the next fused step (grounds what is new first, as Engine.step() does)."""
+        version = self._engine.prepare_fused_step()
+        if self._buffers is None or version != self._version:
+            self._buffers = bind(self._engine.fused_binding(), *self._arrays)
+            self._version = self._engine.layout_version
+        return self._buffers
 
 
 @njit(cache=True)

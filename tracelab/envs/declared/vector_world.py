@@ -49,8 +49,7 @@ class DeclaredWorlds:
                        np.array([len(part_atoms), len(table_atoms), len(term), len(trunc), len(mask)], np.int64))
         self._out = (np.zeros((w, len(one._out[0])), np.int64), np.zeros((w, self.n_agents)), np.zeros((w, 2)),
                      np.zeros((w, len(mask)), np.int8), np.zeros(1, np.int64))
-        self._buffers: fused.DeclaredBuffers | None = None
-        self._bound_version = -1
+        self._binding = fused.FusedBinding(self.engine, self._tables, self._ext, self._reads, self._out)
         self._rows = np.full((w, self.n_agents), -1, np.int64)
         self._picks = np.full((w, len(one._picks)), -1, np.int64)
         self.steps = np.zeros(w, np.int64)
@@ -65,14 +64,6 @@ class DeclaredWorlds:
 
     # ---- the engine step of every world ----
 
-    def _bind(self) -> fused.DeclaredBuffers:
-        version = self.engine.prepare_fused_step()
-        if self._buffers is None or version != self._bound_version:
-            self._buffers = fused.bind(self.engine.fused_binding(), self._tables, self._ext, self._reads,
-                                       self._out)
-            self._bound_version = self.engine.layout_version
-        return self._buffers
-
     def engine_step(self, rows: np.ndarray, picks: np.ndarray) -> None:
         """One engine step of every world (rows, picks: vector_fused.build_rows'), then the reads."""
         eng = self.engine
@@ -82,14 +73,14 @@ class DeclaredWorlds:
             eng.step(external=(ext_ptr, ext_i[:k], ext_f[:k]))
             self._read()
             return
-        status = vector_fused.step_batch(self._bind(), rows, picks, eng.t, eng.next_external_id())
+        status = vector_fused.step_batch(self._binding.buffers(), rows, picks, eng.t, eng.next_external_id())
         eng.finish_fused_step(status, int(self._out[4][0]), ext_ptr, ext_i, ext_f)
         if status != vector_fused.STATUS_OK:  # the kernel paused (buffer room) and finish went on: read now
             self._read()
 
     def _read(self) -> None:
         if self.engine.kernel == "counting":
-            vector_fused.read_batch(self._bind())
+            vector_fused.read_batch(self._binding.buffers())
         else:
             vector_fused.read_truth(self.engine.is_true(self._reads[0]), self._reads, self._out)
 

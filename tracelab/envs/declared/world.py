@@ -132,8 +132,7 @@ class DeclaredWorld:
         self._tables = self._step_tables()
         eng.step()  # t = 0: the program's and the board's facts
         self._snapshot = eng.snapshot()
-        self._buffers: fused.DeclaredBuffers | None = None
-        self._bound_version = -1
+        self._binding = fused.FusedBinding(eng, self._tables, self._ext, self._reads, self._out)
         for drawer in self._choices:
             drawer.freeze(self)
         # picks per draw of the fused tables: the step's random facts, then the start's choices and facts
@@ -215,22 +214,11 @@ class DeclaredWorld:
         if not self._fused:  # the engine's own step, then the reads
             self._unfused_step(rows, picks)
             return
-        b = self._buffers
-        if eng.prepare_fused_step() != self._bound_version or b is None:
-            b = self._bind()
-        status = fused.fused_step(b, rows, picks, eng.t, eng.next_external_id())
+        status = fused.fused_step(self._binding.buffers(), rows, picks, eng.t, eng.next_external_id())
         ext_ptr, ext_i, ext_f = self._ext
         eng.finish_fused_step(status, int(self._out[4][0]), ext_ptr, ext_i, ext_f)
         if status != fused.STATUS_OK:  # the kernel paused (buffer room) and finish went on: read now
             self._read()
-
-    def _bind(self) -> fused.DeclaredBuffers:
-        version = self.engine.prepare_fused_step()
-        if self._buffers is None or version != self._bound_version:
-            self._buffers = fused.bind(self.engine.fused_binding(), self._tables, self._ext, self._reads,
-                                       self._out)
-            self._bound_version = self.engine.layout_version
-        return self._buffers
 
     def _unfused_step(self, rows: np.ndarray, picks: np.ndarray) -> None:
         """The fused step's work with the engine's own calls (lanes or compiled kernel)."""
@@ -257,7 +245,7 @@ class DeclaredWorld:
         if not self._fused:
             self._read_unfused()
         else:
-            fused.read_step(self._bind())
+            fused.read_step(self._binding.buffers())
 
     def _read_unfused(self) -> None:
         part_ptr, part_atoms, table_atoms, table_values, table_agent, term_atoms, trunc_atoms, mask_atoms = \
