@@ -2,6 +2,26 @@
 immediate rules), compiled with numba, batched over worlds, with a columnar trace of every change.
 The language and its semantics: docs/language.md.
 
+The files by stage (a program flows down; each boundary is a named type, as Soufflé names its stages):
+
+    language   parser.py -> program.py (the AST), errors.py, annotations.py, head_functions.py
+    inputs     graph.py, graphml_scan.py, graphml_expat.py, graphml_raw.py, facttable.py, safe_files.py,
+               vocabulary.py (nodes, labels and atoms as dense ids)
+    grounding  grounding.py, grounding_limit.py, aggregate_tables.py -> kernel_tables.py (what the kernels read)
+    kernels    kernel.py (counting), lanes.py (crisp, 64 worlds a word), restore_kernel.py, trace_take.py,
+               codegen.py (kernel.py rewritten for one program)
+    backends   backend_api.py (what a backend may touch of the Engine), backend_counting.py, backend_lanes.py,
+               backend_compiled.py, compile_cache.py, compile_job.py, compile_background.py, numba_cache.py,
+               kernel_names.py
+    the Engine core.py (builds, steps, traces, snapshots), memory.py
+    oracle     reference.py (docs/language.md run naively; the differential tests' other side)
+
+They stay in one flat folder, not a folder per stage: numba keys its disk cache by a function's file,
+so moving kernel.py, lanes.py, restore_kernel.py, trace_take.py or graphml_scan.py would make every user's
+first run compile them all again, and 79 files outside engine/ import its modules by name. With 33 files
+the stage is already in most names (backend_*, compile_*, graphml_*, grounding*) and in this map;
+Soufflé's stage folders each hold dozens.
+
 The names below are imported on first use (PEP 562): importing a light submodule such as
 `tracelab.engine.safe_files` (which the store and the CLI use) must not import numba and the kernels."""
 

@@ -13,6 +13,7 @@ import numpy as np
 
 from . import kernel as K
 from .grounding import Grounder
+from .kernel_tables import AggregateTables
 from .program import COMPARISONS, Rule
 
 # the kernel's code of each built-in annotation function (engine/annotations.py has them in Python)
@@ -25,7 +26,7 @@ def aggregated_rules(rules: list[Rule]) -> list[int]:
 
 
 def aggregate_tables(grounder: Grounder, rules: list[Rule], inst: np.ndarray,
-                     user_slots: dict[str, int]) -> dict[str, np.ndarray]:
+                     user_slots: dict[str, int]) -> AggregateTables:
     """The kernel's tables of the aggregated rules over the groundings found so far. `inst` is the
     grounding table of kernel_tables (rule, head, rank, kind); `user_slots` numbers the user functions."""
     agg = aggregated_rules(rules)
@@ -73,13 +74,12 @@ def aggregate_tables(grounder: Grounder, rules: list[Rule], inst: np.ndarray,
     sizes = np.diff(hg_ptr) * ag_rule[hg_i[:, 0], K.AR_NBODY] if len(starts) else np.zeros(0, np.int64)
     user = ag_rule[hg_i[:, 0], K.AR_FN] == K.FN_USER if len(starts) else np.zeros(0, np.bool_)
     n_user = int(user.sum())
-    return {
-        "ag_rule": ag_rule, "ag_cf": ag_cf, "ag_cn": ag_cn,
-        "ag_q": np.array(q_rows, np.int64).reshape(-1, 4), "ag_qv": np.array(q_vals, np.float64),
-        "hg_i": hg_i, "hg_ptr": hg_ptr, "je_g": gs.astype(np.int64), "je_body": je_body,
-        # scratch sizes: the atoms one group can feed a function, the user-function requests of a pass
-        "gather_cap": np.array([max(int(sizes.max()) if len(sizes) else 0, 1)], np.int64),
-        "request_cap": np.array([max(n_user, 1)], np.int64),
-        "user_gather_cap": np.array([max(int(sizes[user].sum()) if n_user else 0, 1)], np.int64),
-    }
+    return AggregateTables(
+        ag_rule=ag_rule, ag_cf=ag_cf, ag_cn=ag_cn,
+        ag_q=np.array(q_rows, np.int64).reshape(-1, 4), ag_qv=np.array(q_vals, np.float64),
+        hg_i=hg_i, hg_ptr=hg_ptr, je_g=gs.astype(np.int64), je_body=je_body,
+        gather_cap=max(int(sizes.max()) if len(sizes) else 0, 1),
+        request_cap=max(n_user, 1),
+        user_gather_cap=max(int(sizes[user].sum()) if n_user else 0, 1),
+    )
 

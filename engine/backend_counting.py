@@ -13,6 +13,7 @@ import numpy as np
 from . import annotations
 from . import kernel as K
 from .backend_api import EngineTables
+from .kernel_tables import AggregateTables, KernelTables
 from .program import effective_bound
 from .restore_kernel import restore_groundings
 
@@ -58,18 +59,18 @@ class CountingState:
         self._heap = np.zeros(max(n_inst, 1), np.int64)
         self._in_heap = np.zeros(max(n_inst, 1), np.bool_)
         # aggregated rules: atom marks, the atoms one head group feeds its function, user-function requests
-        cap = int(self.kt["gather_cap"][0]) if n_inst or n_atoms else 1
+        cap = self.agg.gather_cap if n_inst or n_atoms else 1
         self._mark = np.zeros((2, max(n_atoms, cap, 1)), np.int64)  # stamps by atom; a clause's candidates
         self._g = np.zeros((3, cap), np.float64)
-        req = int(self.kt["request_cap"][0]) if n_inst or n_atoms else 1
+        req = self.agg.request_cap if n_inst or n_atoms else 1
         self._req_i = np.zeros((req, 2), np.int64)
         self._req_f = np.zeros((req, 2), np.float64)
         self._req_ptr = np.zeros(req + 1, np.int64)
-        self._req_atoms = np.zeros((3, int(self.kt["user_gather_cap"][0]) if n_inst or n_atoms else 1))
+        self._req_atoms = np.zeros((3, self.agg.user_gather_cap if n_inst or n_atoms else 1))
 
-    def grow(self, n_atoms: int, kt: dict[str, np.ndarray]) -> None:
+    def grow(self, n_atoms: int, kt: KernelTables, agg: AggregateTables) -> None:
         """Room for n_atoms atoms and every grounding of kt (new atoms start at [0,1], new groundings
-        are counted from the current intervals)."""
+        are counted from the current intervals); agg: the aggregated rules' head groups."""
         w = self.eng.n_worlds
         grow = n_atoms - self.n_atoms
         if grow > 0:
@@ -77,40 +78,40 @@ class CountingState:
             self.upper = np.concatenate([self.upper, np.ones((w, grow))], axis=1)
             self.static = np.concatenate([self.static, np.zeros((w, grow), np.bool_)], axis=1)
             self.last_cause = np.concatenate([self.last_cause, np.full((w, grow, 2), -1, np.int32)], axis=1)
-        self.kt = kt
-        n_inst = len(kt["inst"])
+        self.kt, self.agg = kt, agg
+        n_inst = len(kt.inst)
         first = self._n_grounded
         if n_inst > first:
             # each kind's active list has room for every grounding of that kind
-            counts = np.bincount(kt["inst"][:, K.INST_KIND], minlength=K.N_KINDS)
+            counts = np.bincount(kt.inst[:, K.INST_KIND], minlength=K.N_KINDS)
             kind_base = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
             act = np.zeros((w, n_inst), np.int32)
             K.relayout_active(self._act, self._kind_base, act, kind_base, self._act_n)
             self._act, self._kind_base = act, kind_base
             self._unsat = np.concatenate([self._unsat, np.zeros((w, n_inst - first), np.int8)], axis=1)
             self._act_pos = np.concatenate([self._act_pos, np.full((w, n_inst - first), -1, np.int32)], axis=1)
-            K.recount_groundings(first, self.lower, self.upper, kt["b_ptr"], kt["b_atom"], kt["b_flags"],
-                                 kt["b_bnd"], kt["inst"], self._kind_base, self._unsat, self._act, self._act_n,
+            K.recount_groundings(first, self.lower, self.upper, kt.b_ptr, kt.b_atom, kt.b_flags,
+                                 kt.b_bnd, kt.inst, self._kind_base, self._unsat, self._act, self._act_n,
                                  self._act_pos)
         self._n_grounded = n_inst
         self._scratch(n_atoms, n_inst)
         self.eng.layout_version += 1  # kernel_args() changed
 
     def _agg_args(self) -> tuple[np.ndarray, ...]:
-        kt = self.kt
-        return (kt["hg_i"], kt["hg_ptr"], kt["je_g"], kt["je_body"], kt["ag_rule"], kt["ag_cf"], kt["ag_cn"],
-                kt["ag_q"], kt["ag_qv"], self._mark, self._stamp, self._g[0], self._g[1], self._g[2])
+        agg = self.agg
+        return (agg.hg_i, agg.hg_ptr, agg.je_g, agg.je_body, agg.ag_rule, agg.ag_cf, agg.ag_cn,
+                agg.ag_q, agg.ag_qv, self._mark, self._stamp, self._g[0], self._g[1], self._g[2])
 
     def _user_functions(self, w: int) -> None:
         """The kernel waits on queued head groups with user annotation functions: compute their bounds."""
-        kt, eng = self.kt, self.eng
+        agg, eng = self.agg, self.eng
         K.agg_gather_requests(w, self.lower, self.upper, self._unsat, *self._agg_args(), self._req_i,
                               self._req_n, self._req_atoms, self._req_ptr)
         ptr, atoms = self._req_ptr, self._req_atoms
         for i in range(int(self._req_n[0])):
-            ai = int(kt["hg_i"][self._req_i[i, 0], 0])
-            rule = eng.rules[int(kt["ag_rule"][ai, K.AR_RULE])]
-            name, fn = eng._user_functions[int(kt["ag_rule"][ai, K.AR_USER])]
+            ai = int(agg.hg_i[self._req_i[i, 0], 0])
+            rule = eng.rules[int(agg.ag_rule[ai, K.AR_RULE])]
+            name, fn = eng._user_functions[int(agg.ag_rule[ai, K.AR_USER])]
             a, b = ptr[i], ptr[i + 1]
             lo, up = annotations.call_user(name, fn, rule.name, atoms[0, a:b], atoms[1, a:b], atoms[2, a:b])
             self._req_f[i] = effective_bound(lo, up, rule.head.negated)
@@ -121,8 +122,8 @@ class CountingState:
         pend_f); the call is step_kernel(cfg, w_first, *before, ext_ptr, ext_i, ext_f, *after). Valid
         until eng.layout_version changes (a buffer replaced)."""
         eng, kt = self.eng, self.kt
-        before = (eng._rule_i, eng._rule_f, kt["inst"], self._kind_base, kt["wc_ptr"], kt["wc_bnd"],
-                  kt["wc_flags"], kt["wc_gptr"], kt["wg"], kt["ih_ptr"], kt["ih_inst"], eng._fact_i, eng._fact_f,
+        before = (eng._rule_i, eng._rule_f, kt.inst, self._kind_base, kt.wc_ptr, kt.wc_bnd,
+                  kt.wc_flags, kt.wc_gptr, kt.wg, kt.ih_ptr, kt.ih_inst, eng._fact_i, eng._fact_f,
                   eng._fact_order)
         after = (eng._settable, self.lower, self.upper, self.static, self.last_cause, self._unsat, self._act,
                  self._act_n, self._act_pos, self._pend, self._pend_n, eng.trace_on, eng._tri, eng._trf,
@@ -145,8 +146,8 @@ class CountingState:
             if status is not None and not self._serve(status, w_first):
                 break
             status, w_first = self.step_kernel(
-                eng._cfg, w_first, eng._rule_i, eng._rule_f, kt["inst"], self._kind_base, kt["wc_ptr"],
-                kt["wc_bnd"], kt["wc_flags"], kt["wc_gptr"], kt["wg"], kt["ih_ptr"], kt["ih_inst"], eng._fact_i,
+                eng._cfg, w_first, eng._rule_i, eng._rule_f, kt.inst, self._kind_base, kt.wc_ptr,
+                kt.wc_bnd, kt.wc_flags, kt.wc_gptr, kt.wg, kt.ih_ptr, kt.ih_inst, eng._fact_i,
                 eng._fact_f, eng._fact_order, ext_ptr, ext_i, ext_f, eng._settable,
                 self.lower, self.upper, self.static, self.last_cause, self._unsat, self._act, self._act_n,
                 self._act_pos, self._pend, self._pend_n, eng.trace_on, eng._tri, eng._trf, eng._tr_n,
@@ -160,12 +161,12 @@ class CountingState:
     def _serve(self, status: int, w_first: int) -> bool:
         """What a kernel call that paused with `status` at world w_first needs before it goes on; False
         when it does not go on (done, or an error)."""
-        eng, kt = self.eng, self.kt
+        eng = self.eng
         if status == K.STATUS_TRACE_ROOM:  # grow the trace buffer, go on in that world
             eng._grow_trace(int(eng._tr_n[0]) + int(eng._cfg[K.CFG_TRACE_NEED]))
         elif status == K.STATUS_PEND_ROOM:  # grow the schedule, then that world schedules its firings
             self._grow_pending(int(self._pend_n[w_first]) + int(self._act_n[w_first, K.KIND_DELAYED])
-                               + len(kt["hg_i"]))
+                               + len(self.agg.hg_i))
             eng._cfg[K.CFG_RESUME_SCHEDULE] = K.RESUME_PEND_ROOM
         elif status == K.STATUS_USER_FN:  # Python computes the user functions, the kernel goes on
             try:
@@ -226,8 +227,8 @@ class CountingState:
                                self._act_n, self._act_pos, self._kind_base)
         else:  # groundings grew since the snapshot: recount those worlds from their interpretation
             kt = self.kt
-            K.recount_worlds(indices, self.lower, self.upper, kt["b_ptr"], kt["b_atom"], kt["b_flags"],
-                             kt["b_bnd"], kt["inst"], self._kind_base, self._unsat, self._act, self._act_n,
+            K.recount_worlds(indices, self.lower, self.upper, kt.b_ptr, kt.b_atom, kt.b_flags,
+                             kt.b_bnd, kt.inst, self._kind_base, self._unsat, self._act, self._act_n,
                              self._act_pos)
         pend, pend_n = snap["pend"], snap["pend_n"]
         if pend.shape[1] > self._pend.shape[1]:
@@ -251,15 +252,15 @@ class CountingState:
         return [(int(d), int(g)) for d, g in self._pend[world, :n]]
 
     def adopt(self, lower: np.ndarray, upper: np.ndarray, static: np.ndarray, last_cause: np.ndarray,
-              pending: list[list[tuple[int, int]]], kt: dict[str, np.ndarray]) -> None:
+              pending: list[list[tuple[int, int]]], kt: KernelTables, agg: AggregateTables) -> None:
         """Take over a batch from another backend: intervals [world, atom], schedules per world."""
         self.lower, self.upper = np.ascontiguousarray(lower), np.ascontiguousarray(upper)
         self.static, self.last_cause = np.ascontiguousarray(static), np.ascontiguousarray(last_cause)
-        self.grow(self.n_atoms, kt)  # counts every grounding from these intervals
+        self.grow(self.n_atoms, kt, agg)  # counts every grounding from these intervals
         cap = max((len(p) for p in pending), default=0)
         self._grow_pending(cap)
         for w, entries in enumerate(pending):
             for i, (due, g) in enumerate(entries):  # the lanes kernel serves no aggregated rule
                 self._pend[w, i] = (due, g)
-                self._pend_f[w, i] = self.eng._rule_f[kt["inst"][g, K.INST_RULE]]
+                self._pend_f[w, i] = self.eng._rule_f[kt.inst[g, K.INST_RULE]]
             self._pend_n[w] = len(entries)

@@ -21,6 +21,7 @@ import numpy as np
 from . import kernel as K
 from . import lanes as L
 from .backend_api import EngineTables
+from .kernel_tables import AggregateTables, KernelTables
 
 
 def crisp_codes(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
@@ -87,17 +88,17 @@ class _Shard:
         self.heap = np.zeros(max(n_inst, 1), np.int64)
         self.in_heap = np.zeros(max(n_inst, 1), np.bool_)
 
-    def grow(self, n_atoms: int, kt: dict[str, np.ndarray], kind_base: np.ndarray) -> None:
+    def grow(self, n_atoms: int, kt: KernelTables, kind_base: np.ndarray) -> None:
         nw = self.n_words
         if n_atoms > len(self.st):
             self.st = np.concatenate([self.st, np.zeros((n_atoms - len(self.st), L.N_PLANES, nw), np.uint64)])
-        n_inst, first = len(kt["inst"]), len(self.gs)
+        n_inst, first = len(kt.inst), len(self.gs)
         if n_inst > first:
             self.gs = np.concatenate([self.gs, np.zeros((n_inst - first, nw, self.gs.shape[2]), np.uint64)])
             self.alist = np.zeros(n_inst, np.int32)
             self.apos = np.full(n_inst, -1, np.int32)
-            L.fill_counts(first, self.valid, self.st, kt["b_ptr"], kt["b_atom"], kt["b_code"], self.gs,
-                          kt["inst"], self.alist, self.alist_n, self.apos, kind_base)
+            L.fill_counts(first, self.valid, self.st, kt.b_ptr, kt.b_atom, kt.b_code, self.gs,
+                          kt.inst, self.alist, self.alist_n, self.apos, kind_base)
         self.scratch(n_atoms, n_inst)
 
     def step(self, batch: LaneState, ext_ptr: np.ndarray, ext_i: np.ndarray, ext_v: np.ndarray) -> int:
@@ -115,8 +116,8 @@ class _Shard:
         stats = eng._stats[w0:w1]
         while True:
             status = L.step_lanes(
-                eng._cfg, w0, self.ctl, eng._rule_i, eng._rule_v, kt["inst"], batch.kind_base, kt["wc_ptr"],
-                kt["wc_code"], kt["wc_gptr"], kt["wg"], kt["ih_ptr"], kt["ih_inst"], eng._fact_i, eng._fact_v,
+                eng._cfg, w0, self.ctl, eng._rule_i, eng._rule_v, kt.inst, batch.kind_base, kt.wc_ptr,
+                kt.wc_code, kt.wc_gptr, kt.wg, kt.ih_ptr, kt.ih_inst, eng._fact_i, eng._fact_v,
                 eng._fact_order, ext_ptr, ext_i, ext_v, eng._settable, self.valid, tmask, self.st, batch.wep,
                 batch.lc, self.gs, self.alist, self.alist_n, self.apos, self.pend_due, self.pend_g,
                 self.pend_m, self.pend_n, self.tri, self.trf, self.tr_n, stats, self.err, self.slot_of,
@@ -162,7 +163,7 @@ class _Shard:
         if need > len(self.pend_g):
             self.grow_pending(need)
         L.restore_worlds(local, shift, part["st"], part["gs"], part["pend_due"], part["pend_g"], part["pend_m"],
-                         self.st, self.gs, kt["inst"], self.alist, self.alist_n, self.apos, batch.kind_base,
+                         self.st, self.gs, kt.inst, self.alist, self.alist_n, self.apos, batch.kind_base,
                          self.pend_due, self.pend_g, self.pend_m, self.pend_n, self.wmask)
         self._recount_if_grown(batch, part)
 
@@ -173,14 +174,14 @@ class _Shard:
         if need > len(self.pend_g):
             self.grow_pending(need)
         L.restore_worlds_from(local, sources, shift, part["st"], part["gs"], part["pend_due"], part["pend_g"],
-                              part["pend_m"], self.st, self.gs, batch.kt["inst"], self.alist, self.alist_n,
+                              part["pend_m"], self.st, self.gs, batch.kt.inst, self.alist, self.alist_n,
                               self.apos, batch.kind_base, self.pend_due, self.pend_g, self.pend_m, self.pend_n)
         self._recount_if_grown(batch, part)
 
     def _recount_if_grown(self, batch: LaneState, part: dict[str, Any]) -> None:
         if len(part["gs"]) < len(self.gs):  # groundings grew: count them all again
             kt = batch.kt
-            L.fill_counts(0, self.valid, self.st, kt["b_ptr"], kt["b_atom"], kt["b_code"], self.gs, kt["inst"],
+            L.fill_counts(0, self.valid, self.st, kt.b_ptr, kt.b_atom, kt.b_code, self.gs, kt.inst,
                           self.alist, self.alist_n, self.apos, batch.kind_base)
 
     def pending(self, local: int) -> list[tuple[int, int]]:
@@ -280,7 +281,9 @@ class LaneState:
 
     # ---- building ----
 
-    def grow(self, n_atoms: int, kt: dict[str, np.ndarray]) -> None:
+    def grow(self, n_atoms: int, kt: KernelTables, agg: AggregateTables) -> None:
+        """Room for n_atoms atoms and every grounding of kt (agg is not read: the engine runs the counting
+        kernel for aggregated rules)."""
         w = self.eng.n_worlds
         grow = n_atoms - self.n_atoms
         if grow > 0:
@@ -288,7 +291,7 @@ class LaneState:
             new[:, :, 2] = self.wep  # never set, in this episode as in any snapshot
             self.lc = np.concatenate([self.lc, new])
         self.kt = kt
-        counts = np.bincount(kt["inst"][:, K.INST_KIND], minlength=K.N_KINDS)
+        counts = np.bincount(kt.inst[:, K.INST_KIND], minlength=K.N_KINDS)
         self.kind_base = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
         self.n_ordinary = int(counts[K.KIND_ORDINARY])
         for sh in self.shards:

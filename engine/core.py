@@ -23,6 +23,7 @@ from .errors import FixpointError, InconsistencyError, ProgramCheckError
 from .graph import Graph
 from .grounding import Grounder, GroundingTable, rule_head_bound
 from .kernel_names import KERNELS
+from .kernel_tables import AggregateTables, KernelTables
 from .memory import release_freed_memory
 from .parser import check_program, parse_literal
 from .program import (
@@ -146,7 +147,8 @@ class Engine:
         self._ext_count = 0
         self._n_grounded = 0
         self._table: GroundingTable | None = None
-        self._kt: dict[str, np.ndarray] | None = None
+        self._kt: KernelTables | None = None  # the groundings as the kernels read them (kernel_tables.py)
+        self._agg: AggregateTables | None = None
         self._sync()
         release_freed_memory(self.vocab.n_atoms)  # a big build's temporaries: back to the OS
 
@@ -341,8 +343,8 @@ class Engine:
             return
         kt = g.kernel_tables(self._rule_kinds(), self._fact_i[:, 0])
         slots = {name: i for i, (name, _) in enumerate(self._user_functions)}
-        self._kt = {**kt, **aggregate_tables(g, self.rules, kt["inst"], slots)}
-        self._state.grow(n_atoms, self._kt)
+        self._kt, self._agg = kt, aggregate_tables(g, self.rules, kt.inst, slots)
+        self._state.grow(n_atoms, self._kt, self._agg)
         self._n_grounded = n_inst
         self._table = None
 
@@ -359,7 +361,8 @@ class Engine:
         """Go on with the counting kernel (a bound the lanes kernel cannot hold arrived)."""
         lower, upper, static, last_cause, pending = self._state.export()
         state = CountingState(self)
-        state.adopt(lower, upper, static, last_cause, pending, self._kt)
+        assert self._kt is not None and self._agg is not None  # built by _sync before the lanes kernel stepped
+        state.adopt(lower, upper, static, last_cause, pending, self._kt, self._agg)
         self._state = state
         self.layout_version += 1
 

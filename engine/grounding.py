@@ -22,6 +22,7 @@ import numpy as np
 from . import head_functions
 from .errors import ProgramError
 from .head_functions import HeadFunction
+from .kernel_tables import KernelTables
 from .grounding_limit import limit_in_force
 from .program import EPS, Literal, Rule, Term, effective_bound
 from .vocabulary import Vocabulary
@@ -515,8 +516,8 @@ class Grounder:
         return rank
 
     def kernel_tables(self, kinds: np.ndarray | None = None,
-                      fact_atoms: np.ndarray | None = None) -> dict[str, np.ndarray]:
-        """The kernel's tables (engine/kernel.py): `inst` [G,4] (rule, head, rank, kind index from
+                      fact_atoms: np.ndarray | None = None) -> KernelTables:
+        """The kernel's tables (engine/kernel_tables.py): `inst` [G,4] (rule, head, rank, kind index from
         `kinds`, a per-rule array), watches grouped in classes (CSR by atom over distinct (bound, sign)
         of the binding clauses that read it, then CSR by class over groundings), the immediate
         groundings by the atom they set, and per-grounding binding clauses (for recounts and the lanes
@@ -593,23 +594,23 @@ class Grounder:
         w_test = s_test[first]
         # offsets and atom ids as int32 (tables of over 2^31 entries would not fit in memory here anyway):
         # per atom and per binding clause, int64 cost a million-edge graph 25 MB more
-        return {
-            "wc_code": t_code[w_test],
-            "b_code": t_code[b_test],
-            "inst": inst,
-            "wc_ptr": wc_ptr.astype(np.int32),
-            "wc_bnd": np.ascontiguousarray(np.column_stack([t_lo[w_test], t_up[w_test]])
-                                           if len(first) else np.zeros((0, 2), np.float64)),
-            "wc_flags": t_flags[w_test],
-            "wc_gptr": wc_gptr.astype(np.int32),
-            "wg": b_inst_a[order].astype(np.int32),
-            "ih_ptr": ih_ptr.astype(np.int32),
-            "ih_inst": imm.astype(np.int32),
-            "b_ptr": b_ptr.astype(np.int32),
-            "b_atom": b_atom_a.astype(np.int32),
-            "b_flags": b_flags_a,
-            "b_bnd": np.ascontiguousarray(b_bnd),
-        }
+        return KernelTables(
+            inst=inst,
+            wc_ptr=wc_ptr.astype(np.int32),
+            wc_bnd=np.ascontiguousarray(np.column_stack([t_lo[w_test], t_up[w_test]])
+                                        if len(first) else np.zeros((0, 2), np.float64)),
+            wc_flags=t_flags[w_test],
+            wc_code=t_code[w_test],
+            wc_gptr=wc_gptr.astype(np.int32),
+            wg=b_inst_a[order].astype(np.int32),
+            ih_ptr=ih_ptr.astype(np.int32),
+            ih_inst=imm.astype(np.int32),
+            b_ptr=b_ptr.astype(np.int32),
+            b_atom=b_atom_a.astype(np.int32),
+            b_flags=b_flags_a,
+            b_bnd=np.ascontiguousarray(b_bnd),
+            b_code=t_code[b_test],
+        )
 
     def body_atoms(self, groundings: np.ndarray) -> np.ndarray:
         """int64[len(groundings), max_body]: every clause's atom per grounding (-1 past a rule's body)."""

@@ -951,6 +951,22 @@ def rebuild_lists(gs, inst, alist, alist_n, apos, kind_base):
 
 
 @lanes_jit
+def _relist(g, gs, inst, alist, alist_n, apos, kind_base):
+    """A restore turned grounding g's active mask to or from zero in a word: g joins or leaves its kind's
+    active-anywhere list as it is now active in some world or in none. g is an int64 (one signature)."""
+    now_any = False
+    for k in range(gs.shape[1]):
+        if gs[g, k, 0] != ZERO:
+            now_any = True
+            break
+    listed = apos[g] >= 0
+    if now_any and not listed:
+        _list_add(g, inst, alist, alist_n, apos, kind_base)
+    elif listed and not now_any:
+        _list_remove(g, inst, alist, alist_n, apos, kind_base)
+
+
+@lanes_jit
 def _restore_lanes(wmask, snap_st, snap_gs, st, gs, inst, alist, alist_n, apos, kind_base):
     """The worlds of wmask take their planes, counts and active masks from the snapshot (atoms and
     groundings the snapshot has); the active-anywhere lists follow. Words without such worlds are
@@ -974,16 +990,7 @@ def _restore_lanes(wmask, snap_st, snap_gs, st, gs, inst, alist, alist_n, apos, 
             if (old == ZERO) != (gs[g, k, 0] == ZERO):
                 flipped = True
         if flipped:
-            now_any = False
-            for k in range(nw):
-                if gs[g, k, 0] != ZERO:
-                    now_any = True
-                    break
-            listed = apos[g] >= 0
-            if now_any and not listed:
-                _list_add(g, inst, alist, alist_n, apos, kind_base)
-            elif listed and not now_any:
-                _list_remove(g, inst, alist, alist_n, apos, kind_base)
+            _relist(g, gs, inst, alist, alist_n, apos, kind_base)
 
 
 @lanes_jit
@@ -1053,16 +1060,7 @@ def restore_worlds_from(targets, sources, shift, snap_st, snap_gs, snap_due, sna
                 bit = (snap_gs[g, sk, p] >> sshift) & ONE
                 gs[g, tk, p] = (gs[g, tk, p] & ~tbit) | (bit << tshift)
             if (old == ZERO) != (gs[g, tk, 0] == ZERO):
-                now_any = False
-                for k in range(nw):
-                    if gs[g, k, 0] != ZERO:
-                        now_any = True
-                        break
-                listed = apos[g] >= 0
-                if now_any and not listed:
-                    _list_add(g, inst, alist, alist_n, apos, kind_base)
-                elif listed and not now_any:
-                    _list_remove(g, inst, alist, alist_n, apos, kind_base)
+                _relist(g, gs, inst, alist, alist_n, apos, kind_base)
         j = 0
         for r in range(pend_n[0]):  # keep the other worlds' firings, in order
             pend_m[r, tk] &= ~tbit
