@@ -1,5 +1,5 @@
 """A table's small parts are merged once they hold part_rows rows (not only at compact_files files), read
-one part at a time, into row groups of ROW_GROUP_ROWS: a merge holds about part_rows rows however long
+one part at a time, into row groups of MERGE_ROW_GROUP_ROWS: a merge holds about part_rows rows however long
 the run, and keeps every row in order."""
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ def steps_rows(start: int, n: int):  # noqa: ANN201 - a pyarrow Table
 
 
 def test_small_parts_merge_at_part_rows_rows(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(parts, "ROW_GROUP_ROWS", 256)
+    monkeypatch.setattr(parts, "MERGE_ROW_GROUP_ROWS", 256)
     (tmp_path / "parts").mkdir()
     table = TableParts(tmp_path, "steps", part_rows=1000, compact_files=64)
     for k in range(3):

@@ -13,6 +13,7 @@ import numpy as np
 import pyarrow as pa
 
 from tracelab.engine.program import INCONSISTENCY_POLICIES
+from tracelab.store import arrow_build as ab
 from tracelab.store.graph_tables import graph_fact_table
 from tracelab.store.schema import SCHEMAS, TRACE_COLUMNS
 
@@ -34,9 +35,7 @@ def _col(arrays: Mapping[str, Any], name: str, dtype: str, n: int | None, what: 
 
 
 def _list_array(offsets: np.ndarray, values: np.ndarray, value_type: pa.DataType) -> pa.ListArray:
-    if len(values) >= 2**31:
-        raise ValueError(f"list column too large for int32 offsets: {len(values)} values")
-    return pa.ListArray.from_arrays(pa.array(offsets.astype(np.int32)), pa.array(values, type=value_type))
+    return ab.list_array(offsets, ab.from_numpy(values, value_type))
 
 
 def trace_table(arrays: Mapping[str, Any], episode: int | Sequence[int] | np.ndarray | None,
@@ -85,8 +84,7 @@ def trace_table(arrays: Mapping[str, Any], episode: int | Sequence[int] | np.nda
             raise ValueError(f"trace row has cause_kind {bad}; known kinds are 0..4")
     seq = np.arange(seq_start, seq_start + n, dtype=np.int64)
     data = {"seq": seq, "episode": ep, **cols}
-    return pa.Table.from_arrays([pa.array(data[f.name]) for f in SCHEMAS["changes"]],
-                                schema=SCHEMAS["changes"])
+    return ab.table({name: ab.from_numpy(a) for name, a in data.items()}, SCHEMAS["changes"])
 
 
 # ---- vocabulary and groundings: suffixes beyond what is already stored -------------------------------
@@ -109,15 +107,14 @@ def vocabulary_tables(vocab: Mapping[str, Any], have: Mapping[str, int]) -> dict
             raise ValueError(f"vocabulary shrank: it has {now} {name}, the store already holds {have[name]}")
     n0, l0, a0 = have["nodes"], have["labels"], have["atoms"]
     out = {
-        "nodes": pa.table({"node": pa.array(np.arange(n0, len(nodes), dtype=np.int32)),
-                           "name": pa.array([str(x) for x in nodes[n0:]], type=pa.string())},
-                          schema=SCHEMAS["nodes"]),
-        "labels": pa.table({"label": pa.array(np.arange(l0, len(labels), dtype=np.int32)),
-                            "name": pa.array([str(x) for x in labels[l0:]], type=pa.string()),
-                            "arity": pa.array(arity[l0:])}, schema=SCHEMAS["labels"]),
-        "atoms": pa.table({"atom": pa.array(np.arange(a0, len(atom_label), dtype=np.int32)),
-                           "label": pa.array(atom_label[a0:]), "arg0": pa.array(arg0[a0:]),
-                           "arg1": pa.array(arg1[a0:])}, schema=SCHEMAS["atoms"]),
+        "nodes": ab.table({"node": ab.from_numpy(np.arange(n0, len(nodes), dtype=np.int32)),
+                           "name": ab.strings([str(x) for x in nodes[n0:]])}, SCHEMAS["nodes"]),
+        "labels": ab.table({"label": ab.from_numpy(np.arange(l0, len(labels), dtype=np.int32)),
+                            "name": ab.strings([str(x) for x in labels[l0:]]),
+                            "arity": ab.from_numpy(arity[l0:])}, SCHEMAS["labels"]),
+        "atoms": ab.table({"atom": ab.from_numpy(np.arange(a0, len(atom_label), dtype=np.int32)),
+                           "label": ab.from_numpy(atom_label[a0:]), "arg0": ab.from_numpy(arg0[a0:]),
+                           "arg1": ab.from_numpy(arg1[a0:])}, SCHEMAS["atoms"]),
     }
     sl = atom_label[a0:]
     if len(sl) and (sl.min() < 0 or sl.max() >= len(labels)):
@@ -154,7 +151,7 @@ def groundings_table(groundings: Any, have: int) -> pa.Table:
     bp = body_ptr[have:] - body_ptr[have]
     vp = var_ptr[have:] - var_ptr[have]
     return pa.Table.from_arrays([
-        pa.array(np.arange(have, g, dtype=np.int32)), pa.array(rule[have:]),
+        ab.from_numpy(np.arange(have, g, dtype=np.int32)), ab.from_numpy(rule[have:]),
         _list_array(bp, body[body_ptr[have]:body_ptr[g]], pa.int32()),
         _list_array(vp, var[var_ptr[have]:var_ptr[g]], pa.int32()),
     ], schema=SCHEMAS["groundings"])
@@ -197,11 +194,11 @@ def program_tables(program: Any, facts: Sequence[Any] | None = None,
                           "file": file, "line": line})
     policies = [{"code": i, "name": p} for i, p in enumerate(INCONSISTENCY_POLICIES)]
     return {
-        "rules": pa.Table.from_pylist(rules, schema=SCHEMAS["rules"]),
-        "clauses": pa.Table.from_pylist(clauses, schema=SCHEMAS["clauses"]),
+        "rules": ab.table_from_rows(rules, SCHEMAS["rules"]),
+        "clauses": ab.table_from_rows(clauses, SCHEMAS["clauses"]),
         "facts": pa.concat_tables([*([graph_fact_table(graph)] if graph is not None else []),
-                                   pa.Table.from_pylist(fact_rows, schema=SCHEMAS["facts"])]),
-        "policies": pa.Table.from_pylist(policies, schema=SCHEMAS["policies"]),
+                                   ab.table_from_rows(fact_rows, SCHEMAS["facts"])]),
+        "policies": ab.table_from_rows(policies, SCHEMAS["policies"]),
     }
 
 
@@ -249,17 +246,17 @@ def steps_table(episode: int | np.ndarray, arrays: Mapping[str, Any]) -> pa.Tabl
     else:
         obs_arr = pa.nulls(n, type=pa.list_(pa.float32()))
     agent = np.asarray(arrays.get("agent", ""))
-    agents = [str(agent)] * n if agent.ndim == 0 else [str(a) for a in agent]
+    agents = [str(agent)] * n if agent.ndim == 0 else agent.astype(str).tolist()  # 3x a str() per row
     if len(agents) != n:
         raise ValueError(f"step column 'agent' has {len(agents)} rows, expected {n}")
     episodes = np.asarray(episode, dtype=np.int64)
     if episodes.ndim and len(episodes) != n:
         raise ValueError(f"steps' episode array has {len(episodes)} rows, expected {n}")
     return pa.Table.from_arrays([
-        pa.array(np.full(n, episodes) if episodes.ndim == 0 else episodes), pa.array(col("step", np.int32, 0)),
-        pa.array(col("t", np.int32, -1)), pa.array(agents, type=pa.string()),
-        pa.array(col("action", np.int32, 0)), pa.array(col("reward", np.float64, 0.0)),
-        pa.array(col("terminated", np.bool_, False)), pa.array(col("truncated", np.bool_, False)),
+        ab.from_numpy(np.full(n, episodes) if episodes.ndim == 0 else episodes),
+        ab.from_numpy(col("step", np.int32, 0)), ab.from_numpy(col("t", np.int32, -1)), ab.strings(agents),
+        ab.from_numpy(col("action", np.int32, 0)), ab.from_numpy(col("reward", np.float64, 0.0)),
+        ab.from_numpy(col("terminated", np.bool_, False)), ab.from_numpy(col("truncated", np.bool_, False)),
         obs_arr,
     ], schema=SCHEMAS["steps"])
 
@@ -273,8 +270,5 @@ def metrics_table(step: int, values: Mapping[str, float], episode: int | None) -
         except (TypeError, ValueError):
             raise TypeError(f"metric {k!r} has non-numeric value {values[k]!r}") from None
     now = utc_now()
-    return pa.table({"step": pa.array([int(step)] * len(names), pa.int64()),
-                     "name": pa.array(names, pa.string()), "value": pa.array(vals, pa.float64()),
-                     "episode": pa.array([episode] * len(names), pa.int64()),
-                     "time": pa.array([now] * len(names), pa.timestamp("us"))},
-                    schema=SCHEMAS["metrics"])
+    return ab.table_from_rows([{"step": int(step), "name": name, "value": value, "episode": episode,
+                                "time": now} for name, value in zip(names, vals)], SCHEMAS["metrics"])

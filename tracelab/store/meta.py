@@ -21,6 +21,7 @@ import pyarrow as pa
 
 from tracelab.engine.safe_files import open_regular, read_json
 from tracelab.store import layout
+from tracelab.store.arrow_build import table_from_rows
 from tracelab.store.schema import BOARD_BEFORE_DECLARED
 from tracelab.validation import (INT64, Const, IsoTime, ListOf, MapOf, Nullable, OneOf, OptionalKey, check_file,
                                  utc_time)
@@ -56,13 +57,28 @@ def file_sha256(path: str | Path) -> str:
 
 
 def library_versions() -> dict[str, str]:
-    import duckdb  # when a run is written: reading run metadata needs no database
     import numpy
     import pyarrow
 
     import tracelab
     return {"tracelab": tracelab.__version__, "python": platform.python_version(),
-            "numpy": numpy.__version__, "duckdb": duckdb.__version__, "pyarrow": pyarrow.__version__}
+            "numpy": numpy.__version__, "duckdb": _duckdb_version(), "pyarrow": pyarrow.__version__}
+
+
+def _duckdb_version() -> str:
+    """DuckDB's version without importing it (a process that only writes a run need not load DuckDB:
+    docs/benchmarks.md, "Memory of long runs"): its installed distribution's version, which is the
+    module's; the module's if it is loaded already or has no distribution record."""
+    import sys
+    from importlib import metadata
+
+    module = sys.modules.get("duckdb")
+    if module is None:
+        try:
+            return metadata.version("duckdb")
+        except metadata.PackageNotFoundError:
+            import duckdb as module
+    return module.__version__
 
 
 def initial_meta(run_dir: Path, meta: RunMeta | dict[str, Any] | None) -> dict[str, Any]:
@@ -202,4 +218,4 @@ def meta_table(doc: dict[str, Any], status: str) -> pa.Table:
                         ("ended_at", ts), ("config", pa.string()), ("rule_files", pa.string()),
                         ("versions", pa.string()), ("pid", pa.int64()), ("host", pa.string()),
                         ("board", pa.string())])
-    return pa.Table.from_pylist([row], schema=schema)
+    return table_from_rows([row], schema)  # not Table.from_pylist: it imports pandas (arrow_build)

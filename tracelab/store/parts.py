@@ -29,9 +29,10 @@ from typing import Any
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from tracelab.engine.memory import release_freed_memory
+from tracelab.engine.memory import BIG_WORK, release_freed_memory
 from tracelab.engine.safe_files import check_regular, read_json
 from tracelab.store import layout
+from tracelab.store.arrow_build import empty_table
 from tracelab.store.schema import ADDED_TABLES, DICTIONARY_COLUMNS, PART_OPTIONS, SCHEMAS
 from tracelab.validation import Const, ExactKeys, IntRange, ListOf, Matches, OptionalKey, check_file
 
@@ -41,6 +42,11 @@ ROW_GROUP_ROWS = 131_072
 # merged in twos: docs/benchmarks.md, "Traced runs: the writer"), and such a part fills a quarter of a
 # row group already. Smaller parts (a slow run's, flushed every second) are merged as before.
 MERGE_BELOW_ROWS = 32_768
+# A merge's row groups: a quarter of ROW_GROUP_ROWS, since a merge's rows are read from disk while the
+# game goes on (a published part's rows are in memory already). A merge of ~250k change rows then held
+# 7-13 MB at its peak, 22-25 MB with row groups of ROW_GROUP_ROWS (docs/benchmarks.md, "Memory of long
+# runs"); its part is ~9% larger.
+MERGE_ROW_GROUP_ROWS = 32_768
 MANIFEST_FORMAT = "tracelab-parts/1"
 
 
@@ -77,17 +83,18 @@ class TableParts:
                 self.rows_published += rows
             return
         # An empty first part, so that every table has a file that carries its schema.
-        self._add(*self._write([self.schema.empty_table()]))
+        self._add(*self._write([empty_table(self.schema)]))
 
     @property
     def files(self) -> list[str]:
         """The table's parts now, as paths relative to parts/ (the manifest's form)."""
         return [f"{self.table}/{name}" for name in (*self._big, *self._small)]
 
-    def _write(self, tables: Iterable[pa.Table]) -> tuple[str, int]:
-        """A new part of the rows of `tables`, in order, in row groups of ROW_GROUP_ROWS (the last one
-        smaller), taken one table at a time: memory for a row group and a table, however many rows the
-        part gets (a compaction merges millions). Returns its name and rows."""
+    def _write(self, tables: Iterable[pa.Table], group_rows: int | None = None) -> tuple[str, int]:
+        """A new part of the rows of `tables`, in order, in row groups of `group_rows` (ROW_GROUP_ROWS
+        unless given; the last one smaller), taken one table at a time: memory for a row group and a
+        table, however many rows the part gets (a compaction merges millions). Returns its name and rows."""
+        group_rows = group_rows or ROW_GROUP_ROWS
         name = layout.part_name(self._next_file)
         self._next_file += 1
         rows = 0
@@ -99,14 +106,14 @@ class TableParts:
                 held.append(table)
                 rows += table.num_rows
                 waiting = sum(t.num_rows for t in held)
-                if waiting >= ROW_GROUP_ROWS:
+                if waiting >= group_rows:
                     joined = pa.concat_tables(held)
-                    full = waiting - waiting % ROW_GROUP_ROWS
-                    out.write_table(joined.slice(0, full), row_group_size=ROW_GROUP_ROWS)
+                    full = waiting - waiting % group_rows
+                    out.write_table(joined.slice(0, full), row_group_size=group_rows)
                     held = [joined.slice(full)]
             if rows == 0 or any(t.num_rows for t in held):
-                out.write_table(pa.concat_tables(held) if held else self.schema.empty_table(),
-                                row_group_size=ROW_GROUP_ROWS)
+                out.write_table(pa.concat_tables(held) if held else empty_table(self.schema),
+                                row_group_size=group_rows)
         self.files_written += 1
         return name, rows
 
@@ -134,20 +141,29 @@ class TableParts:
 
     def _compact(self) -> None:
         """Merge the small parts into one, read one at a time (memory stays flat however many rows)."""
-        merged = self._write(pq.read_table(self.root / name, schema=self.schema, use_threads=False,
-                                           pre_buffer=False)
-                             for name in self._small)
+        merged = self._write((_read_part(self.root / name) for name in self._small), MERGE_ROW_GROUP_ROWS)
         self._retired.append((time.monotonic(), self._small))
         self._small, self._small_rows = [], 0
         self._add(*merged)
         self.compactions += 1
-        release_freed_memory(merged[1])  # the parts read and written: back to the system
+        # what the reads and the writer freed, back to the system: after every merge, however few its rows
+        # (64 parts of a few thousand steps rows each left ~10 MB resident until the next big merge)
+        release_freed_memory(BIG_WORK)
 
     def _drop_retired(self) -> None:
         now = time.monotonic()
         while self._retired and now - self._retired[0][0] >= self.grace_seconds:
             for name in self._retired.pop(0)[1]:
                 (self.root / name).unlink(missing_ok=True)
+
+
+def _read_part(path: Path) -> pa.Table:
+    """One part's rows, for a merge: through ParquetFile, not pq.read_table, whose dataset layer loads
+    Arrow's dataset, Acero and Substrait libraries (~15 MB resident that a writing process kept for good
+    after its first merge: docs/benchmarks.md, "Memory of long runs"); single-threaded and without
+    pre-buffering (pyarrow's IO threads' buffers)."""
+    with pq.ParquetFile(path, pre_buffer=False) as f:
+        return f.read(use_threads=False)
 
 
 def write_manifest(run_dir: Path, parts: dict[str, TableParts], flushes: int) -> None:
@@ -179,7 +195,7 @@ def write_empty_part(run_dir: Path, table: str) -> str:
     directory = layout.make_run_dirs(run_dir, layout.PARTS, table)
     final = directory / layout.part_name(next_part_number(directory))
     with layout.new_file(final) as f:
-        pq.write_table(SCHEMAS[table].empty_table(), f)
+        pq.write_table(empty_table(SCHEMAS[table]), f)
     return f"{table}/{final.name}"
 
 

@@ -6,7 +6,7 @@ publishes the buffers: a new part per table, then a new manifest that lists them
 table at the same moment (layout and atomicity: tracelab.store.parts):
 - at most `flush_interval` (1 s) after a row arrives,
 - soon after an episode ends (at most one such flush per `min_flush_gap`),
-- when the buffers hold `part_rows` rows, and on flush() / close();
+- when the buffers hold `part_rows` rows (or `max_pending_rows`, if fewer), and on flush() / close();
 every publication is one new immutable part per table that has rows (small parts are compacted).
 A kill -9 therefore loses at most the rows of the last second (or since the last episode end), and the
 run still opens. SIGTERM and interpreter exit close open writers (status 'interrupted')."""
@@ -29,7 +29,7 @@ import numpy as np
 import pyarrow as pa
 
 from tracelab.engine.errors import is_interrupt
-from tracelab.store import convert, layout
+from tracelab.store import arrow_build, convert, layout
 from tracelab.store.graph_tables import edges_table
 from tracelab.store.meta import (RunMeta, initial_meta, now_iso, open_writer_lock, read_meta, reopened_meta,
                                  write_meta)
@@ -42,6 +42,11 @@ class RunSealed(ValueError):
 
 
 _OPEN_WRITERS: "weakref.WeakSet[TraceWriter]" = weakref.WeakSet()
+# Back-pressure: callers wait while this many rows are buffered (a row group of changes, ~10 MB). The
+# flusher takes them all at once and the caller refills the buffers meanwhile, so a busy writer (a merge,
+# a loaded machine) holds about twice this: at 500k rows a 10,000-episode play peaked ~60 MB higher
+# (docs/benchmarks.md, "Memory of long runs").
+MAX_PENDING_ROWS = 131_072
 
 
 def _use_system_allocator() -> None:
@@ -86,7 +91,7 @@ class TraceWriter:
 
     def __init__(self, run_dir: str | Path, meta: RunMeta | dict[str, Any] | None = None, *,
                  flush_interval: float = 1.0, min_flush_gap: float = 0.05, part_rows: int = 250_000,
-                 compact_files: int = 64, max_pending_rows: int = 500_000,
+                 compact_files: int = 64, max_pending_rows: int = MAX_PENDING_ROWS,
                  compression: str = "zstd", _reopen: Mapping[str, Any] | None = None) -> None:
         self.run_dir = Path(run_dir)
         self._pid = os.getpid()
@@ -118,6 +123,7 @@ class TraceWriter:
         self.min_flush_gap = min_flush_gap
         self.part_rows = part_rows
         self.max_pending_rows = max_pending_rows
+        self._flush_rows = min(part_rows, max_pending_rows)  # buffered rows that make a flush due now
         layout.remove_stale_temps(self.run_dir)
         self._parts = {t: TableParts(self.run_dir, t, part_rows, compact_files, compression=compression,
                                      existing=None if stored is None else stored.parts[t])
@@ -300,7 +306,7 @@ class TraceWriter:
                          "seed": e.get("seed"), "started_at": e.get("started_at") or now,
                          "info": convert.json_text(e.get("info"))})
         if rows:
-            self._append({"episode_begin": pa.Table.from_pylist(rows, schema=SCHEMAS["episode_begin"])})
+            self._append({"episode_begin": arrow_build.table_from_rows(rows, SCHEMAS["episode_begin"])})
 
     def end_episode(self, episode: int, *, steps: int, outcome: str, reward: float | None = None,
                     rewards: Mapping[str, float] | None = None, t_end: int | None = None,
@@ -327,7 +333,7 @@ class TraceWriter:
                          "rewards": convert.json_text(dict(rewards) if rewards is not None else None),
                          "ended_at": e.get("ended_at") or now, "info": convert.json_text(e.get("info"))})
         if rows:
-            self._append({"episode_end": pa.Table.from_pylist(rows, schema=SCHEMAS["episode_end"])},
+            self._append({"episode_end": arrow_build.table_from_rows(rows, SCHEMAS["episode_end"])},
                          urgent=True)
 
     # ---- rows ------------------------------------------------------------------------------------------
@@ -383,7 +389,7 @@ class TraceWriter:
                 self._pending_since = time.monotonic()
             self._pending_rows += added
             self._urgent = self._urgent or urgent
-            if first or urgent or self._pending_rows >= self.part_rows:
+            if first or urgent or self._pending_rows >= self._flush_rows:
                 self._cond.notify_all()  # the flusher recomputes when its next flush is due
             while self._pending_rows >= self.max_pending_rows and self._error is None:
                 self._cond.wait(0.1)  # back-pressure: let the flusher catch up
@@ -402,7 +408,7 @@ class TraceWriter:
 
     def _due_in(self, now: float) -> float | None:
         """Seconds until a flush is due (<= 0: now), or None if nothing is due at all."""
-        if self._closing or self._requested > self._done or self._pending_rows >= self.part_rows:
+        if self._closing or self._requested > self._done or self._pending_rows >= self._flush_rows:
             return 0.0
         if self._pending_since is None:
             return None
@@ -422,6 +428,7 @@ class TraceWriter:
                 take, self._pending = self._pending, {t: [] for t in TABLES}
                 self._pending_rows, self._pending_since, self._urgent = 0, None, False
                 request, closing = self._requested, self._closing
+                self._cond.notify_all()  # a caller held back by back-pressure goes on now
             try:
                 if any(take.values()):
                     for name in TABLES:

@@ -1,0 +1,127 @@
+"""Arrow arrays and tables built from numpy arrays and Python values straight from their buffers, for the
+path that writes a run.
+
+pyarrow's own converter (pa.array, pa.scalar, Table.from_pylist, Schema.empty_table, a compute call given
+a Python value) imports pandas on its first call, to ask whether the values are pandas objects: ~30 MB
+resident for good in a process that has none (`tracelab play --run`: docs/benchmarks.md, "Memory of long
+runs"). These build the same arrays (value for value, nulls included) from buffers, which never asks.
+Readers may use pyarrow's converter freely."""
+from __future__ import annotations
+
+import datetime as _dt
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+
+_EPOCH = _dt.datetime(1970, 1, 1)
+_MICROSECOND = _dt.timedelta(microseconds=1)
+
+
+def _bitmap(flags: np.ndarray) -> pa.Buffer:
+    return pa.py_buffer(np.packbits(flags, bitorder="little"))
+
+
+def from_numpy(values: np.ndarray, type: pa.DataType | None = None, null: np.ndarray | None = None) -> pa.Array:
+    """A 1-D numpy array of numbers or booleans as an Arrow array (zero-copy when contiguous: the
+    array must not change afterwards); `type` (default: the dtype's) must have the dtype's width;
+    `null`: True where the value is NULL."""
+    values = np.ascontiguousarray(values)
+    if values.ndim != 1:
+        raise ValueError(f"expected a 1-D array, got shape {values.shape}")
+    if type is None:
+        type = pa.from_numpy_dtype(values.dtype)
+    elif pa.types.is_boolean(type) != (values.dtype == np.bool_) or (
+            not pa.types.is_boolean(type) and type.bit_width != 8 * values.dtype.itemsize):
+        raise TypeError(f"a {values.dtype} array cannot be stored as {type}")
+    return _array(type, values, null)
+
+
+def _array(type: pa.DataType, values: np.ndarray, null: np.ndarray | None) -> pa.Array:
+    """from_numpy once `values` is contiguous and of `type`'s width."""
+    data = _bitmap(values) if values.dtype == np.bool_ else pa.py_buffer(values)
+    if null is None or not null.any():
+        return pa.Array.from_buffers(type, len(values), [None, data], null_count=0)
+    return pa.Array.from_buffers(type, len(values), [_bitmap(~null), data], null_count=int(null.sum()))
+
+
+def bools_to_numpy(values: pa.BooleanArray) -> np.ndarray:
+    """A boolean Arrow array without NULLs as a numpy array (Array.to_numpy goes through pandas' check)."""
+    if values.null_count:
+        raise ValueError("a boolean array with NULLs")
+    bits = np.frombuffer(values.buffers()[1], dtype=np.uint8)
+    return np.unpackbits(bits, bitorder="little", count=values.offset + len(values))[values.offset:].astype(np.bool_)
+
+
+def strings(values: Sequence[str | None]) -> pa.StringArray:
+    """Python strings (None: NULL) as an Arrow string array (TypeError for anything else)."""
+    values = list(values)
+    null = None
+    if None in values:
+        null = np.fromiter((v is None for v in values), dtype=np.bool_, count=len(values))
+        values = ["" if v is None else v for v in values]
+    text = "".join(values)  # TypeError unless every value is a str
+    data = text.encode()
+    if len(data) == len(text):  # all ASCII: a character is a byte
+        lengths = np.fromiter(map(len, values), dtype=np.int64, count=len(values))
+    else:
+        lengths = np.fromiter((len(v.encode()) for v in values), dtype=np.int64, count=len(values))
+    if len(data) >= 2**31:
+        raise ValueError(f"string column too large for int32 offsets: {len(data)} bytes")
+    offsets = np.zeros(len(values) + 1, dtype=np.int32)
+    np.cumsum(lengths, out=offsets[1:])
+    if null is None:
+        return pa.Array.from_buffers(pa.string(), len(values), [None, pa.py_buffer(offsets), pa.py_buffer(data)],
+                                     null_count=0)
+    return pa.Array.from_buffers(pa.string(), len(values), [_bitmap(~null), pa.py_buffer(offsets),
+                                                            pa.py_buffer(data)], null_count=int(null.sum()))
+
+
+def scalar(value: str) -> pa.Scalar:
+    """A string as an Arrow scalar (for a compute function's argument)."""
+    return strings([value])[0]
+
+
+def list_array(offsets: np.ndarray, values: pa.Array) -> pa.ListArray:
+    """A list array: row i holds values[offsets[i]:offsets[i + 1]]."""
+    if len(values) >= 2**31:
+        raise ValueError(f"list column too large for int32 offsets: {len(values)} values")
+    return pa.ListArray.from_arrays(from_numpy(np.asarray(offsets, dtype=np.int32)), values)
+
+
+def column(values: Sequence[Any], type: pa.DataType) -> pa.Array:
+    """Python values (None: NULL) as an Arrow array of `type`: integers, floats, booleans, strings,
+    naive UTC datetimes as timestamp('us'), and lists of those."""
+    if pa.types.is_string(type):
+        return strings(values)
+    null = np.fromiter((v is None for v in values), dtype=np.bool_, count=len(values)) if None in values else None
+    if pa.types.is_list(type):
+        if null is not None:
+            raise ValueError("a NULL list is not supported here")
+        offsets = np.zeros(len(values) + 1, dtype=np.int64)
+        np.cumsum(np.fromiter(map(len, values), dtype=np.int64, count=len(values)), out=offsets[1:])
+        return list_array(offsets, column([x for v in values for x in v], type.value_type))
+    if pa.types.is_timestamp(type):
+        if type.unit != "us" or type.tz is not None:
+            raise TypeError(f"only naive timestamp('us') columns are supported, not {type}")
+        micros = [0 if v is None else (v - _EPOCH) // _MICROSECOND for v in values]
+        return _array(type, np.array(micros, dtype=np.int64), null)
+    dtype = np.bool_ if pa.types.is_boolean(type) else type.to_pandas_dtype()
+    filled = np.array(values if null is None else [0 if v is None else v for v in values], dtype=dtype)
+    return _array(type, filled, null)
+
+
+def table(columns: Mapping[str, pa.Array], schema: pa.Schema) -> pa.Table:
+    """A table of `schema` from arrays by column name."""
+    return pa.Table.from_arrays([columns[f.name] for f in schema], schema=schema)
+
+
+def table_from_rows(rows: Sequence[Mapping[str, Any]], schema: pa.Schema) -> pa.Table:
+    """Table.from_pylist(rows, schema): a missing key is NULL."""
+    return table({f.name: column([r.get(f.name) for r in rows], f.type) for f in schema}, schema)
+
+
+def empty_table(schema: pa.Schema) -> pa.Table:
+    """schema.empty_table(): no rows (one empty chunk per column, as Parquet writers expect)."""
+    return table({f.name: pa.nulls(0, f.type) for f in schema}, schema)
