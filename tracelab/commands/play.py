@@ -16,7 +16,7 @@ import numpy as np
 
 from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, non_negative_int, positive_int
 from tracelab.commands._interrupt import CtrlCBetweenSteps
-from tracelab.engine.errors import is_interrupt
+from tracelab.commands._recording import recording_into
 from tracelab.errors import UserError, store_errors
 
 DEFAULT_SCENARIO = "base"  # the one train defaults to (TrainConfig.scenario)
@@ -100,19 +100,8 @@ def run(args: argparse.Namespace) -> int:
             writer = TraceWriter.open(run_dir, meta)
     except OSError as e:
         raise UserError(f"cannot create the run directory {run_dir}: {e.strerror or e}") from e
-    try:
+    with recording_into(writer, run_dir):
         stats = play(scenario, args, sink=StoreSink(writer))
-    except BaseException as e:
-        if not is_interrupt(e):  # the env did not close it: record how the run ended
-            writer.close(status="failed")
-            raise
-        # Ctrl-C, or SIGTERM (the writer's handler exits)
-        writer.close(status="interrupted")  # flushes what was played
-        kept = f"{run_dir} keeps {_ended_episodes(run_dir)} finished episode(s) and the trace so far"
-        if isinstance(e, SystemExit):
-            print(f"tracelab: terminated: {kept}", file=sys.stderr)
-            raise
-        raise KeyboardInterrupt(kept) from None
     _summary(stats)
     _what_to_open(run_dir)
     return 0
@@ -171,15 +160,6 @@ def _summary(stats: dict) -> None:
     print(f"played {len(eps)} episodes of {stats['scenario']} ({stats['steps']} steps, {rate} after the "
           f"first step{first})")
     print("red: " + ", ".join(f"{v} {k}" for k, v in outcomes.items()) + f"; mean return {mean_return:.1f}")
-
-
-def _ended_episodes(run_dir: Path) -> int:
-    from tracelab.store import open_run
-    con = open_run(run_dir)
-    try:
-        return int(con.execute("SELECT count(*) FROM episodes WHERE ended").fetchall()[0][0])
-    finally:
-        con.close()
 
 
 def _what_to_open(run_dir: Path) -> None:

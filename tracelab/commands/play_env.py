@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import argparse
 import shlex
-import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -15,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from tracelab.commands._interrupt import CtrlCBetweenSteps
+from tracelab.commands._recording import recording_into
 from tracelab.engine.errors import is_interrupt
 from tracelab.errors import UserError, store_errors
 
@@ -52,7 +52,6 @@ def run_env(args: argparse.Namespace) -> int:
 
 
 def _record(source: Any, spec: Any, args: argparse.Namespace) -> int:
-    from tracelab.commands.play import _ended_episodes
     from tracelab.store import TraceWriter
     from tracelab.store.layout import check_new_run_dir as check_run_dir
 
@@ -63,21 +62,8 @@ def _record(source: Any, spec: Any, args: argparse.Namespace) -> int:
             writer = TraceWriter.open(run_dir, run_meta(source, spec, args))
     except OSError as e:
         raise UserError(f"cannot create the run directory {run_dir}: {e.strerror or e}") from e
-    try:
+    with recording_into(writer, run_dir):
         stats = _play(source, spec, args, writer)
-    except BaseException as e:
-        if not is_interrupt(e):
-            if not writer.closed:
-                writer.close(status="failed")
-            raise
-        # Ctrl-C, or SIGTERM (the writer's handler exits)
-        if not writer.closed:
-            writer.close(status="interrupted")
-        kept = f"{run_dir} keeps {_ended_episodes(run_dir)} finished episode(s) and the trace so far"
-        if isinstance(e, SystemExit):
-            print(f"tracelab: terminated: {kept}", file=sys.stderr)
-            raise
-        raise KeyboardInterrupt(kept) from None
     _summary(source, stats)
     _what_to_open_env(run_dir, spec)
     return 0
