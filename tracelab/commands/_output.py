@@ -12,7 +12,6 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 from tracelab.commands._args import non_negative_int
 from tracelab.errors import UserError
-from tracelab.store.table_files import cell_text, python_rows, write_csv, write_parquet
 
 if TYPE_CHECKING:  # imported where used, so that `tracelab --help` stays fast
     import pyarrow as pa
@@ -40,6 +39,9 @@ def _json_value(v: Any) -> Any:
 
 def write_table(table: "pa.Table", fmt: str, output: str | None = None, out: TextIO | None = None) -> None:
     """Write `table` in `fmt` to `output` (a path) or to `out` (default stdout)."""
+    # deferred: importing tracelab.store loads DuckDB and pandas, which `tracelab --help` does not need
+    from tracelab.store.table_files import cell_text, python_rows, write_csv, write_parquet
+
     if fmt == "parquet":
         if not output:
             raise UserError("--format parquet needs --output FILE")
@@ -78,6 +80,8 @@ DEFAULT_TABLE_ROWS = 1000  # rows a table-format result shows unless --limit say
 
 
 def _rows(batches: "Iterable[pa.RecordBatch]") -> "Iterator[dict[str, Any]]":
+    from tracelab.store.table_files import python_rows  # deferred: see write_table
+
     for batch in batches:
         yield from python_rows(batch)
 
@@ -86,6 +90,8 @@ def write_stream(schema: "pa.Schema", batches: "Iterable[pa.RecordBatch]", fmt: 
                  output: str | None = None, out: TextIO | None = None) -> int:
     """Write record batches as CSV, JSON or Parquet as they come (one batch in memory at a time); returns
     the number of rows. Table format needs every row for its widths: use write_table."""
+    from tracelab.store.table_files import write_csv, write_parquet  # deferred: see write_table
+
     if fmt == "parquet":
         if not output:
             raise UserError("--format parquet needs --output FILE")
