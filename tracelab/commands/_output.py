@@ -61,6 +61,7 @@ def write_table(table: "pa.Table", fmt: str, output: str | None = None, out: Tex
         json.dump([{k: _json_value(v) for k, v in r.items()} for r in rows], out, indent=1, default=str)
         out.write("\n")
     elif fmt == "table":
+        # deferred: loads pyarrow; every command is imported to build the CLI's parser
         import pyarrow as pa
         cells = [[cell_text(r[n]) for n in names] for r in rows]
         widths = [max([len(n), *(len(c[i]) for c in cells)]) for i, n in enumerate(names)]

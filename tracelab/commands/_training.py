@@ -17,7 +17,8 @@ from typing import Any
 
 from tracelab.commands._progress import progress
 from tracelab.errors import UserError
-from tracelab.train.tensorboard import TensorBoardSink
+from tracelab.train.config import flag_of
+from tracelab.train.tensorboard import TensorBoardSink, run_log_dir
 
 # what --resume may change (the rest is the checkpoint's): the threads and the kernel change no result; the
 # budget (steps) may be raised, which moves the ε schedule's fractions with it
@@ -74,14 +75,12 @@ def where_to_train(args: argparse.Namespace, resuming: bool, name: str) -> tuple
     same_run = resuming and same_directory(run_dir, Path(args.resume))
     tensorboard = None
     if args.tensorboard:
-        from tracelab.train.tensorboard import run_log_dir
         tensorboard = run_log_dir(Path(args.tensorboard), run_dir.resolve().name, appending=same_run)
     return run_dir, same_run, tensorboard
 
 
 def check_resume_flags(given: dict[str, Any]) -> None:
     """--resume takes the checkpoint's config: a UserError naming the flags it may not change."""
-    from tracelab.train.config import flag_of
     extra = sorted(set(given) - RESUMABLE_FLAGS)
     if extra:
         raise UserError(f"--resume continues the checkpoint's config; drop {', '.join(flag_of(k) for k in extra)}")
@@ -109,6 +108,7 @@ def same_directory(a: Path, b: Path) -> bool:
 def reopen_run(run_dir: Path, cfg: Any, step: int, command: str) -> Any:
     """The checkpoint's own run, reopened for appending: its config takes the (maybe raised) budget and
     meta.json's `resumes` records this resume (when, at which step, after which status)."""
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store import TraceWriter
     from tracelab.store.meta import current_meta, now_iso
     from tracelab.store.writer import RunSealed

@@ -10,6 +10,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, boolean, byte_size, integer
+from tracelab.commands._notices import say_running_compiles
 from tracelab.commands._training import (
     check_budget,
     check_resume_flags,
@@ -19,13 +21,13 @@ from tracelab.commands._training import (
     training_session,
     where_to_train,
 )
+from tracelab.commands.train_env import is_env_run, run_env
 from tracelab.errors import UserError, store_errors
+from tracelab.train.budget import reward_scale_note, too_short_hint
+from tracelab.train.config import LEARNERS, TrainConfig, config_fields, reward_scale_text
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, boolean, byte_size, integer
-    from tracelab.train.config import LEARNERS, config_fields
-
     p = sub.add_parser("train", help="train red with DQN, logging metrics, episodes and traced evaluation "
                                      "games into a run", argument_default=argparse.SUPPRESS)
     for f in config_fields():
@@ -86,6 +88,7 @@ def run_name(text: str) -> str:
 
 def load_scenario_arg(text: str, agents: int | None = None) -> Any:
     """A built-in scenario name or a .toml file, with `agents` per team if given."""
+    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
     from tracelab.game.scenario import builtin_scenario, builtin_scenario_names, load_scenario
     sc = builtin_scenario(text) if text in builtin_scenario_names() else load_scenario(text)
     if agents is not None and agents != sc.agents_per_team:
@@ -94,7 +97,7 @@ def load_scenario_arg(text: str, agents: int | None = None) -> Any:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tracelab.train.config import TrainConfig
+    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
     from tracelab.train.memory import check_training_memory, memory_limit
 
     # --max-memory and --max-groundings are no training settings (cli.main applies the second): not in the
@@ -103,12 +106,12 @@ def run(args: argparse.Namespace) -> int:
              if k not in ("func", "command", "argv", "run", "resume", "max_memory", "max_groundings", "exp_name",
                           "tensorboard", "env", "env_arg")}
     limit = memory_limit(args.max_memory, "--max-memory")
-    from tracelab.commands.train_env import is_env_run, run_env
     if args.env is not None or args.env_arg or (args.resume and is_env_run(Path(args.resume))):
         return run_env(args, given, limit)
     state = None
     with store_errors():  # a bad value in the config or a checkpoint that does not load
         if args.resume:
+            # deferred: loads torch; every command is imported to build the CLI's parser
             from tracelab.train.checkpoint import checkpoint_config, checkpoint_scenario, load_checkpoint
             check_resume_flags(given)
             state = load_checkpoint(args.resume, limit.bytes)
@@ -136,13 +139,15 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
     """Train into a new run at `run_dir` (from a checkpoint `state` if given; `same_run`: the checkpoint's
     own run, `run_dir`, continues); returns the exit status. `stop_at`: stop there as Ctrl-C would (tests).
     `tensorboard`: a log directory that also receives the metrics (tracelab.train.tensorboard)."""
+    # deferred: loads torch; every command is imported to build the CLI's parser
     import torch
 
+    # deferred: loads DuckDB, torch; every command is imported to build the CLI's parser
     from tracelab.game.facts import GAME_RULES
     from tracelab.game.scenario import BOARD
     from tracelab.store import TraceWriter
     from tracelab.train.checkpoint import restore
-    from tracelab.commands._notices import say_running_compiles
+    # deferred: loads DuckDB, gymnasium, numba, torch; every command is imported to build the CLI's parser
     from tracelab.train.loop import Trainer
 
     meta = {"command": " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]),
@@ -155,13 +160,11 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
         writer = reopen_run(run_dir, cfg, state["step"], meta["command"]) if same_run else \
             TraceWriter.open(run_dir, meta)
     torch.set_num_threads(cfg.threads)
-    from tracelab.train.config import reward_scale_text
     kernel = '' if cfg.kernel == 'auto' else f', {cfg.kernel} kernel'
     print(f"training {scenario.name} ({scenario.agents_per_team}v{scenario.agents_per_team}, "
           f"{'non-Markov' if cfg.non_markov else 'Markov'}, {cfg.backend} backend{kernel}, {cfg.envs} worlds, "
           f"{reward_scale_text(cfg.reward_scale)}) for {cfg.steps:,} steps; torch on {torch.get_num_threads()} "
           f"CPU thread{'s' if torch.get_num_threads() != 1 else ''} (--threads); run: {run_dir}", file=sys.stderr)
-    from tracelab.train.budget import reward_scale_note
     note = reward_scale_note(max(abs(v) for v in dataclasses.asdict(scenario.rewards).values()), cfg.reward_scale)
     if note:
         print(f"note: {note}", file=sys.stderr)
@@ -184,7 +187,6 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
         print(f"  tensorboard --logdir {shlex.quote(str(tensorboard.parent))}   # {sink.scalars:,} scalars in "
               f"{tensorboard}/")
     if trainer is not None and trainer.last_eval is not None:
-        from tracelab.train.budget import too_short_hint
         hint = too_short_hint(trainer.step, trainer.last_eval.wins, scenario.agents_per_team)
         if hint:
             print(f"hint: {hint}", file=sys.stderr)
@@ -197,7 +199,6 @@ def _report(trainer: Any, run_dir: Path, status: str) -> None:
         return
     ev = trainer.last_eval
     run = shlex.quote(str(run_dir))
-    from tracelab.train.config import reward_scale_text
     print(f"{status} at step {trainer.step:,}, {reward_scale_text(trainer.cfg.reward_scale)}"
           + (f"; last evaluation: {ev.wins}/{ev.games} wins "
           f"({100 * ev.win_rate:.1f}%), method's counting {100 * ev.method_win_rate:.1f}%" if ev else ""))

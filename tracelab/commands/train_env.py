@@ -23,6 +23,8 @@ from tracelab.commands._training import (
     where_to_train,
 )
 from tracelab.errors import UserError, store_errors
+from tracelab.train.config import METHOD_REWARD_SCALE, TrainConfig, flag_of, reward_scale_text
+from tracelab.train.replay import row_length
 
 # TrainConfig fields that describe GridWar (its scenario, teams, opponent, simulator): refused with --env
 GRIDWAR_ONLY = ("scenario", "non_markov", "split_networks", "slow_every_step", "agents", "backend", "kernel",
@@ -30,6 +32,7 @@ GRIDWAR_ONLY = ("scenario", "non_markov", "split_networks", "slow_every_step", "
 
 
 def env_source_of(args: argparse.Namespace) -> Any:
+    # deferred: loads gymnasium; every command is imported to build the CLI's parser
     from tracelab.envs.declared.env_source import EnvSource, parse_env_args
     if args.env is None:
         raise UserError("--env-arg needs --env SPEC_OR_ID")
@@ -38,6 +41,7 @@ def env_source_of(args: argparse.Namespace) -> Any:
 
 def is_env_run(run: Path) -> bool:
     """Whether `run` is a `train --env` run (its meta.json's config names an env)."""
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.meta import current_meta
     try:
         config = current_meta(run).get("config", {})
@@ -47,9 +51,8 @@ def is_env_run(run: Path) -> bool:
 
 
 def run_env(args: argparse.Namespace, given: dict[str, Any], limit: Any) -> int:
-    from tracelab.train.config import METHOD_REWARD_SCALE, TrainConfig, flag_of
+    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
     from tracelab.train.memory import FLOAT
-    from tracelab.train.replay import row_length
 
     source = env_source_of(args) if args.env is not None or args.env_arg else None
     gridwar = [flag_of(k) for k in GRIDWAR_ONLY if k in given]
@@ -59,6 +62,7 @@ def run_env(args: argparse.Namespace, given: dict[str, Any], limit: Any) -> int:
     state = None
     with store_errors():
         if args.resume:
+            # deferred: loads gymnasium, torch; every command is imported to build the CLI's parser
             from tracelab.train.checkpoint import checkpoint_config
             from tracelab.train.env_checkpoint import load_env_checkpoint
             check_resume_flags(given)
@@ -72,6 +76,7 @@ def run_env(args: argparse.Namespace, given: dict[str, Any], limit: Any) -> int:
             cfg = TrainConfig(**given)
         probe = source.make()  # a bad id, spec or keyword argument fails here, in one line
     try:
+        # deferred: loads gymnasium; every command is imported to build the CLI's parser
         from tracelab.train.env_source import ObservationEncoder, action_count
         encoder = ObservationEncoder(probe.observation_space, args.env)
         n_actions = action_count(probe.action_space, args.env)
@@ -96,10 +101,12 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
                    resumed_from: str | None = None, same_run: bool = False) -> int:
     """Train into a new run at `run_dir` (from a checkpoint `state` if given; `same_run`: the checkpoint's
     own run, `run_dir`, continues); returns the exit status. `stop_at`: stop there as Ctrl-C would (tests)."""
+    # deferred: loads torch; every command is imported to build the CLI's parser
     import torch
 
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store import TraceWriter
-    from tracelab.train.config import reward_scale_text
+    # deferred: loads DuckDB, gymnasium, numba, torch; every command is imported to build the CLI's parser
     from tracelab.train.env_trainer import EnvTrainer
 
     meta = {"command": " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]),
@@ -138,6 +145,7 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
 def _with_declared_meta(meta: dict[str, Any], source: Any) -> dict[str, Any]:
     """The run's meta with what `why`, `tui` and `replay` read of a declared world (its rule files, its
     spec's and rules' texts, what sets each external fact, its board): DeclaredTarget's."""
+    # deferred: loads DuckDB, gymnasium, torch; every command is imported to build the CLI's parser
     from tracelab.envs.declared.play import load_declared
     from tracelab.train.external_eval import DeclaredTarget
     try:
