@@ -240,7 +240,7 @@ def eval_target(env_id: str, env_kwargs: Mapping[str, Any] | None = None) -> Eva
     kwargs = dict(env_kwargs or {})
     registered = gym.registry.get(env_id)
     if registered is not None and registered.entry_point == "tracelab.envs.gym_env:GridWarEnv":
-        from tracelab.envs.common import resolve_scenario
+        from tracelab.envs.common import resolve_scenario  # deferred: numba, as above
         merged = {**registered.kwargs, **kwargs}
         return GridWarTarget(env_id, resolve_scenario(merged.get("scenario", "advanced")),
                              merged.get("backend", "rules"), bool(merged.get("stack_previous", False)))

@@ -20,7 +20,7 @@ def _pyplot():
     except ImportError as e:
         raise RuntimeError("the experiment plots need matplotlib: pip install 'tracelab[experiments]'") from e
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # deferred: after matplotlib.use, as matplotlib asks
     return plt
 
 
