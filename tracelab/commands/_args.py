@@ -4,7 +4,6 @@ from __future__ import annotations
 import argparse
 from collections.abc import Iterator
 from contextlib import contextmanager
-from decimal import Decimal, InvalidOperation
 
 from tracelab.engine.grounding_limit import grounding_limit
 from tracelab.engine.kernel_names import KERNELS as ENGINE_KERNELS  # noqa: F401  (--kernel's choices, for the commands)
@@ -17,6 +16,8 @@ def integer(text: str) -> int:
         return int(text)
     except ValueError:
         pass
+    # deferred: only a budget written 1e5 needs decimal; every command starts through this module
+    from decimal import Decimal, InvalidOperation
     try:
         value = Decimal(text.strip().replace("_", ""))
     except InvalidOperation:
