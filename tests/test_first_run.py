@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tracelab.game import rulesim_warmup
+from tracelab.game import rulesim_warmup, rulesim_warmup_child
 from tracelab.game.rulesim import RuleSim
 from tracelab.game.scenario import builtin_scenario
 
@@ -83,7 +83,7 @@ def test_the_second_process_calls_the_game_kernels_with_the_types_a_rulesim_pass
     # other tests in this process may have called a kernel with other types: only what the child adds counts
     before = {k.__name__: len(k.signatures) for k in rulesim_warmup.game_kernels(True)}
     message = rulesim_warmup.to_child(scenario, 1, False, sim.engine.kernel, True)
-    rulesim_warmup.compile_game_kernels(**rulesim_warmup.from_parent(message))
+    rulesim_warmup_child.compile_game_kernels(**rulesim_warmup_child.from_parent(message))
     assert {k.__name__: len(k.signatures) for k in rulesim_warmup.game_kernels(True)} == before
 
 

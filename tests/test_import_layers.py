@@ -1,13 +1,18 @@
 """How the packages lean on each other (issue 28 §2), read from the source: the commands sit on top and
-nothing else imports them; the engine's modules import each other without a circle, counting the imports
-written inside functions (which hide a circle from Python but not from a reader)."""
+nothing else imports them; tracelab's modules (the engine's, the viewers' and the rest) import each other
+without a circle, counting the imports written inside functions (which hide a circle from Python but not
+from a reader); and `tracelab --help` loads none of the heavy packages the commands defer."""
 from __future__ import annotations
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 ENGINE = ROOT / "engine"
+# the source folders and the packages they are imported as (pyproject's package-dir)
+PACKAGES = {"tracelab": ROOT / "tracelab", "tracelab.engine": ENGINE, "tracelab.viewers": ROOT / "viewers"}
 
 
 def _imports(path: Path) -> list[tuple[str, int]]:
@@ -81,6 +86,71 @@ def test_the_engine_modules_import_each_other_without_a_circle() -> None:
     graph = _engine_graph()
     assert graph["core"] and graph["parser"]  # the reading found the imports
     assert _a_cycle(graph) is None, " -> ".join(_a_cycle(graph) or [])
+
+
+def _module_files() -> dict[str, Path]:
+    """Every module of tracelab by its dotted name (a package by its __init__.py)."""
+    out = {}
+    for prefix, folder in PACKAGES.items():
+        for path in folder.rglob("*.py"):
+            parts = list(path.relative_to(folder).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts.pop()
+            out[".".join([prefix, *parts])] = path
+    return out
+
+
+def _imported_names(path: Path, package: str) -> list[str]:
+    """Every name an import of the file gives, absolute, at any depth of the file: `from p import x` as
+    p.x (x may be a module; _tree_graph takes p when it is not)."""
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            out += [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parts = package.split(".")
+                base = ".".join(parts[:len(parts) - (node.level - 1)] + ([base] if base else []))
+            out += [f"{base}.{a.name}" for a in node.names]
+    return out
+
+
+def _tree_graph() -> dict[str, set[str]]:
+    """tracelab module -> the tracelab modules it imports. A module's parent packages are left out
+    (Python runs their __init__ first, but a reader does not follow them there)."""
+    files = _module_files()
+    graph: dict[str, set[str]] = {}
+    for name, path in files.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        targets = set()
+        for imported in _imported_names(path, package):
+            while imported not in files and "." in imported:  # p.x where x is no module: p
+                imported = imported.rpartition(".")[0]
+            if imported in files and imported != name:
+                targets.add(imported)
+        graph[name] = targets
+    return graph
+
+
+def test_tracelab_modules_import_each_other_without_a_circle() -> None:
+    graph = _tree_graph()
+    assert len(graph) > 250 and "tracelab.viewers.tui.app" in graph["tracelab.commands.tui"]  # the reading found them
+    assert "tracelab.train.experiments.run" in graph["tracelab.train.experiments.report"]
+    assert _a_cycle(graph) is None, " -> ".join(_a_cycle(graph) or [])
+
+
+HEAVY = ("torch", "ray", "pandas", "pyarrow", "duckdb", "rerun", "textual", "matplotlib", "numba",
+         "stable_baselines3", "tensorboard", "gymnasium")
+
+
+def test_the_commands_parser_loads_no_heavy_package() -> None:
+    """`tracelab --help` builds every command's parser: the packages a command needs are imported when it
+    runs, not when the CLI starts."""
+    code = ("import sys; from tracelab.cli import build_parser; build_parser(); "
+            f"print(' '.join(m for m in {HEAVY!r} if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True)
+    assert out.stdout.split() == []
 
 
 def test_the_cycle_finder_finds_one() -> None:

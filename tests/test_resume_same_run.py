@@ -4,31 +4,20 @@ branches; `--total-timesteps` raises the budget; a run with nothing left to trai
 is refused with the way to branch."""
 from __future__ import annotations
 
-import os
-import signal
 import subprocess
 import sys
-import time
 
 from tracelab.cli import main
 from tracelab.commands.train import train_into
-from tracelab.store import open_run, run_info
+from tracelab.store import run_info
 from tracelab.store.seal import seal_run
 from tracelab.train.checkpoint import checkpoint_config, checkpoint_scenario, load_checkpoint
 from tracelab.train.config import TrainConfig
-from train_helpers import SMALL, WALK
-
-
-def _rows(run, sql: str) -> list[tuple]:
-    con = open_run(run)
-    try:
-        return con.execute(sql).fetchall()
-    finally:
-        con.close()
+from train_helpers import SMALL, WALK, ctrl_c_once_training, run_rows
 
 
 def _steps_of(run, name: str) -> list[int]:
-    return [s for (s,) in _rows(run, f"SELECT step FROM metrics WHERE name = '{name}' ORDER BY step")]
+    return [s for (s,) in run_rows(run, f"SELECT step FROM metrics WHERE name = '{name}' ORDER BY step")]
 
 
 def _error_line(capsys, status: int) -> str:
@@ -41,7 +30,7 @@ def test_resume_continues_the_same_run_after_a_stop(tmp_path, capsys):
     run = tmp_path / "run"
     cfg = TrainConfig(scenario="walk4", steps=480, seed=11, **SMALL)
     assert train_into(cfg, WALK, run, stop_at=246) == 130  # stops as Ctrl-C would, at step 248
-    before = _rows(run, "SELECT count(*) FROM episodes")[0][0]
+    before = run_rows(run, "SELECT count(*) FROM episodes")[0][0]
     assert main(["train", "--resume", str(run)]) == 0
     assert not list(tmp_path.glob("run-from-*"))  # no second run
     info = run_info(run)
@@ -50,14 +39,14 @@ def test_resume_continues_the_same_run_after_a_stop(tmp_path, capsys):
     assert _steps_of(run, "epsilon") == [100, 200, 300, 400, 480]
     assert _steps_of(run, "eval/win_rate") == [200, 400, 480]
     # the interruption is an event the curves and sql show, and meta.json records it
-    assert _rows(run, "SELECT step, value FROM metrics WHERE name = 'resumed'") == [(248, 1.0)]
+    assert run_rows(run, "SELECT step, value FROM metrics WHERE name = 'resumed'") == [(248, 1.0)]
     assert [(r["step"], r["after"]) for r in info.meta["resumes"]] == [(248, "interrupted")]
     # episodes: ids never repeat; the games under way at the stop go on under new ids naming the old one
-    total, distinct = _rows(run, "SELECT count(*), count(DISTINCT episode) FROM episodes")[0]
+    total, distinct = run_rows(run, "SELECT count(*), count(DISTINCT episode) FROM episodes")[0]
     assert total == distinct > before
-    continued = _rows(run, "SELECT json_extract(begin_info, '$.continues') FROM episodes "
+    continued = run_rows(run, "SELECT json_extract(begin_info, '$.continues') FROM episodes "
                            "WHERE json_extract(begin_info, '$.continues') IS NOT NULL")
-    aborted = {e for (e,) in _rows(run, "SELECT episode FROM episodes WHERE outcome = 'aborted' "
+    aborted = {e for (e,) in run_rows(run, "SELECT episode FROM episodes WHERE outcome = 'aborted' "
                                         "AND train_step < 248")}
     assert continued and {int(c) for (c,) in continued} <= aborted
     assert load_checkpoint(run)["step"] == 480
@@ -67,33 +56,17 @@ def test_ctrl_c_then_resume_gives_one_run_whose_metrics_continue(tmp_path):
     """A real Ctrl-C of `tracelab train` in a subprocess, then --resume: one run, metrics past the
     checkpoint continue without overlap, status running while it trains and finished at the end."""
     run = tmp_path / "run"
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     common = ["--log-every", "64", "--eval-every", "0", "--learning-starts", "64", "--num-envs", "4",
               "--eval-games", "4", "--eval-envs", "4", "--trace-eval-games", "2", "--buffer-size", "5000",
               "--batch-size", "32"]
-    proc = subprocess.Popen([sys.executable, "-m", "tracelab.cli", "train", "--scenario", "base",
-                             "--total-timesteps", "100000000", *common, "--run", str(run)],
-                            stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
-    try:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline:
-            try:
-                if _rows(run, "SELECT count(*) FROM metrics WHERE name = 'loss'")[0][0]:
-                    break
-            except Exception:  # noqa: BLE001 - not created yet, or between flushes
-                pass
-            time.sleep(0.3)
-        proc.send_signal(signal.SIGINT)
-        proc.communicate(timeout=120)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    assert proc.returncode == 130 and run_info(run).status == "interrupted"
+    status, _, _ = ctrl_c_once_training(["train", "--scenario", "base", "--total-timesteps", "100000000", *common,
+                                         "--run", str(run)], run)
+    assert status == 130 and run_info(run).status == "interrupted"
     stopped = load_checkpoint(run)["step"]
     logged_before = _steps_of(run, "epsilon")
     budget = stopped + 200
     resumed = subprocess.run([sys.executable, "-m", "tracelab.cli", "train", "--resume", str(run),
-                              "--total-timesteps", str(budget)], capture_output=True, text=True, env=env,
+                              "--total-timesteps", str(budget)], capture_output=True, text=True,
                              timeout=300)
     assert resumed.returncode == 0, resumed.stderr
     assert "in the same run" in resumed.stderr
@@ -101,7 +74,7 @@ def test_ctrl_c_then_resume_gives_one_run_whose_metrics_continue(tmp_path):
     assert after[:len(logged_before)] == logged_before and len(set(after)) == len(after)
     new = after[len(logged_before):]
     assert new and min(new) > stopped and max(new) >= budget  # continues past the checkpoint, to the end
-    assert _rows(run, "SELECT step FROM metrics WHERE name = 'resumed'") == [(stopped,)]
+    assert run_rows(run, "SELECT step FROM metrics WHERE name = 'resumed'") == [(stopped,)]
     meta = run_info(run).meta
     assert meta["status"] == "finished" and meta["config"]["steps"] == budget
     assert meta["resumes"][0]["after"] == "interrupted"
@@ -137,14 +110,14 @@ def test_nothing_to_resume_and_a_budget_below_the_checkpoint_say_so(tmp_path, ca
     run = tmp_path / "run"
     assert train_into(TrainConfig(scenario="walk4", steps=200, seed=2, **SMALL), WALK, run) == 0
     capsys.readouterr()
-    metrics = _rows(run, "SELECT count(*) FROM metrics")[0][0]
+    metrics = run_rows(run, "SELECT count(*) FROM metrics")[0][0]
     line = _error_line(capsys, main(["train", "--resume", str(run)]))
     assert "nothing to resume" in line and "--total-timesteps" in line and "200" in line
     line = _error_line(capsys, main(["train", "--resume", str(run), "--total-timesteps", "100"]))
     assert "--total-timesteps 100 is below the checkpoint's step 200" in line
     # nothing was written: the run is as it was
     assert run_info(run).status == "finished" and "resumes" not in run_info(run).meta
-    assert _rows(run, "SELECT count(*) FROM metrics")[0][0] == metrics
+    assert run_rows(run, "SELECT count(*) FROM metrics")[0][0] == metrics
     assert not list(tmp_path.glob("run-from-*"))
 
 
@@ -169,8 +142,8 @@ def test_a_run_resumed_twice_keeps_counting(tmp_path):
                  stop_at=300, same_run=True) == 130
     assert main(["train", "--resume", str(run)]) == 0
     assert _steps_of(run, "epsilon") == [100, 200, 300, 400, 480]
-    assert [v for (v,) in _rows(run, "SELECT value FROM metrics WHERE name = 'resumed' ORDER BY step")] == \
+    assert [v for (v,) in run_rows(run, "SELECT value FROM metrics WHERE name = 'resumed' ORDER BY step")] == \
         [1.0, 2.0]
     assert len(run_info(run).meta["resumes"]) == 2
-    total, distinct = _rows(run, "SELECT count(*), count(DISTINCT episode) FROM episodes")[0]
+    total, distinct = run_rows(run, "SELECT count(*), count(DISTINCT episode) FROM episodes")[0]
     assert total == distinct

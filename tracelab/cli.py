@@ -47,7 +47,7 @@ def build_parser() -> argparse.ArgumentParser:
 def _unknown_arguments(parser: argparse.ArgumentParser, command: str, unknown: list[str]) -> int:
     """An unknown flag is a usage error of its subcommand: one line naming it, with the closest flags,
     not the usage of every subcommand (what the top-level parser would print)."""
-    import difflib
+    import difflib  # deferred: only an unknown flag needs it; every command starts through this module
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices[command]
     flags = [s for a in sub._actions for s in a.option_strings if s.startswith("--")]
     flag = next((u.partition("=")[0] for u in unknown if u.startswith("-")), None)

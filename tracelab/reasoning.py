@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from tracelab.engine.errors import is_interrupt
+from tracelab.engine.safe_files import FileRefused, read_text
 
 # the program text a run keeps of each rule and fact file (a bigger file is kept by path and hash only)
 SOURCE_TEXT_CAP = 1 << 20
@@ -50,10 +51,12 @@ def load_inputs(program_files: Sequence[str], *, dialect: str = "tracelab", grap
                 fact_files: Sequence[str] = (), fact_tables: Sequence[str] = (),
                 persistent: bool = False) -> ReasoningInputs:
     """Read and check the program, graph and facts (errors are the engine's located ones)."""
+    # deferred: the graph and fact readers load numba, which `import tracelab.pyreason` does not need
     from tracelab.engine import check_program, load_fact_table, load_graphml, load_program
     names, translation = None, None
     if dialect == "pyreason":
-        from tracelab.pyreason import load_pyreason
+        # deferred: the PyReason translator loads numba, which the tracelab dialect does not need
+        from tracelab.pyreason.translate import load_pyreason
         translated = load_pyreason(program_files, fact_files, graph_file, persistent=persistent)
         program, graph, names = translated.program, translated.graph, translated.names
         translation = translated.text
@@ -126,7 +129,7 @@ class EpisodeRun:
 
     def __init__(self, inputs: ReasoningInputs, plan: EpisodePlan, *, trace: bool = True, kernel: str = "auto",
                  recorder: Any = None) -> None:
-        from tracelab.engine import Engine
+        from tracelab.engine import Engine  # deferred: see load_inputs
         self.plan = plan
         self.recorder = recorder
         if recorder is not None:  # the program and facts first: written while the engine grounds
@@ -235,7 +238,6 @@ def _size(path: str) -> int | None:
 
 def _text(path: str) -> str | None:
     """A rule or fact file's text, if it is UTF-8 and at most SOURCE_TEXT_CAP bytes."""
-    from tracelab.engine.safe_files import FileRefused, read_text
     try:
         return read_text(Path(path), SOURCE_TEXT_CAP, what="program file")
     except (OSError, FileRefused):

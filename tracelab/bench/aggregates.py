@@ -16,10 +16,13 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numba
 import numpy as np
 
 from tracelab.bench import biggraph
 from tracelab.bench.common import format_table, summarize
+from tracelab.engine import Engine, kernel as K, load_graphml, parse_program, register_annotation
+from tracelab.engine.annotations import unregister_annotation
 
 SIZES = (2_000, 20_000)
 QUICK_SIZES = (2_000,)
@@ -41,8 +44,6 @@ def _python_average(lower: np.ndarray, upper: np.ndarray, weights: np.ndarray) -
 
 def _fresh_njit():
     """A new numba dispatcher each call (a registration compiles it)."""
-    import numba
-
     @numba.njit
     def njit_average(lower, upper, weights):
         return lower.mean(), upper.mean()
@@ -52,9 +53,6 @@ def _fresh_njit():
 def registration(repeats: int) -> dict[str, Any]:
     """Seconds per registration; the kernel's compiled signatures around registering and then running a
     rule with a fresh user function (loading the kernel from numba's cache first)."""
-    from tracelab.engine import Engine, parse_program, register_annotation
-    from tracelab.engine import kernel as K
-    from tracelab.engine.annotations import unregister_annotation
     Engine(parse_program("p(a)\nq(X) <-0 p(X)\n")).step()  # the kernel is loaded (or compiled) now
     before = len(K.step_worlds.signatures)
     python_s, njit_s = [], []
@@ -71,7 +69,6 @@ def registration(repeats: int) -> dict[str, Any]:
 
 
 def rule_costs(sizes: tuple[int, ...], repeats: int) -> list[dict[str, Any]]:
-    from tracelab.engine import Engine, load_graphml, parse_program, register_annotation
     register_annotation("bench_average", _python_average)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -53,8 +54,7 @@ def write_graph(path: Path, nodes: int, seed: int = 0) -> int:
 
 def measure(graph_file: str) -> dict[str, Any]:
     """In this process: load, build, run; times, trace rows and peak RSS (call in a fresh process)."""
-    import resource
-
+    # deferred: the engine loads numba, which bench engine's other importers (machine_line) do not need
     from tracelab.engine import Engine, load_graphml, parse_program
 
     program = parse_program(SPREAD_RULE, "spread.rules")

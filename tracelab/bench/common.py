@@ -13,6 +13,8 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+import psutil
+
 from tracelab.provenance import cpu_model, load_average, source_commit
 
 
@@ -71,7 +73,6 @@ def calibrate(run: Callable[[int], object], target_s: float, min_units: int = 3,
 
 def rss_bytes() -> int:
     """This process's resident set size."""
-    import psutil
     return int(psutil.Process().memory_info().rss)
 
 
@@ -93,7 +94,6 @@ def _version(dist: str) -> str | None:
 
 def machine_info() -> dict[str, Any]:
     """Where the figures were taken: cores, load, memory, CPU, versions, the commit."""
-    import psutil
     affinity = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     return {
         "cores": os.cpu_count(), "usable_cores": affinity, "load_average": load_average(),

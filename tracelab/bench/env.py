@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from tracelab import RULES_DIR
 from tracelab.bench.common import (
     block_rates,
     fmt_num,
@@ -17,6 +18,9 @@ from tracelab.bench.common import (
     summarize,
 )
 from tracelab.bench.engine import GOAL_STEPS_PER_S, machine_line
+from tracelab.bench.sims import get_sim, measure, measure_engine_only, release, scenario_for
+from tracelab.envs import make_env, make_vec_env
+from tracelab.game.rulesim import RuleSim
 
 GOAL_BATCHED_ENV_STEPS_PER_S = 1_000_000  # batched, tracing off
 GOAL_MAX_SLOWDOWN = 5.0  # rule-driven within 5x of the hand-written simulator
@@ -27,7 +31,6 @@ def sim_rates(agents: list[int], worlds: list[int], repeats: int, target_s: floa
               kernel: str = "auto") -> list[dict[str, Any]]:
     """One row per (agents, worlds): RefSim, RuleSim (engine kernel `kernel`) traced and untraced, and the
     ratios."""
-    from tracelab.bench.sims import get_sim, measure, release
     rows = []
     for n in agents:
         for w in worlds:
@@ -53,8 +56,6 @@ def engine_only_rates(agents: int, worlds: int, repeats: int, target_s: float,
                       kernel: str = "auto") -> dict[str, Any]:
     """The engine of a RuleSim alone, tracing off and on, replaying the stepping loop's own steps
     (sims.measure_engine_only), on a simulator built for it and dropped afterwards."""
-    from tracelab.bench.sims import measure_engine_only, scenario_for
-    from tracelab.game.rulesim import RuleSim
     sim = RuleSim(scenario_for(agents), worlds, seed=0, trace=True, kernel=kernel)
     return {"trace_off": measure_engine_only(sim, False, repeats, target_s),
             "trace_on": measure_engine_only(sim, True, repeats, target_s)}
@@ -90,6 +91,7 @@ def gym_rates(worlds: int, repeats: int, target_s: float) -> dict[str, Any]:
     """Steps/s through gymnasium: the single env (gymnasium.make, 1v1) and the vector env (`worlds`
     worlds, gymnasium.make_vec), both backends, tracing off (no trace sink); skipped if not importable."""
     try:
+        # deferred: imported under try: the bench reports what does not import and goes on
         import gymnasium as gym
 
         import tracelab.envs.gym_env  # noqa: F401  (registers the ids)
@@ -114,8 +116,7 @@ def declared_rates(worlds: int, repeats: int, target_s: float) -> list[dict[str,
     """GridWar 1v1 through RuleSim (GridWarEnv, GridWarVectorEnv: rulesim_fused, the game's own Python
     glue) and through its declared spec (DeclaredEnv, DeclaredVectorEnv over rules/gridworld/war_*.toml):
     one world and `worlds` worlds, untraced, the same random actions; the ratio declared / RuleSim."""
-    from tracelab import RULES_DIR
-    from tracelab.envs import make_env, make_vec_env
+    # deferred: as in gym_rates
     from tracelab.envs.gym_env import GridWarEnv
     from tracelab.envs.vector_env import GridWarVectorEnv
     rows = []

@@ -31,6 +31,12 @@ from typing import Any
 
 from tracelab.bench.common import calibrate, format_table, high_water_bytes, machine_info, rss_bytes, summarize
 from tracelab.bench.engine import machine_line
+from tracelab.bench.sims import Loop
+from tracelab.game.rulesim import RuleSim
+from tracelab.game.scenario import builtin_scenario
+from tracelab.playing import Games
+from tracelab.store import TraceWriter
+from tracelab.store.sink import StoreSink
 
 GOAL_RATIO = 0.7
 GOAL_PEAK_MB = 300
@@ -41,10 +47,6 @@ MEMORY_SCENARIO, MEMORY_SEED = "advanced", 3
 def _play(scenario: Any, episodes: int, worlds: int, run_dir: Path | None) -> tuple[int, float, float]:
     """A `tracelab play` of `episodes` episodes (into a new run at `run_dir`, or untraced): (batched
     steps after the first, wall and CPU seconds from after the first step to the run closed)."""
-    from tracelab.playing import Games
-    from tracelab.store import TraceWriter
-    from tracelab.store.sink import StoreSink
-
     sink = None if run_dir is None else StoreSink(TraceWriter.open(run_dir, {"command": "tracelab bench play",
                                                                             "scenario": scenario.name}))
     games = Games(scenario, episodes, worlds=worlds, seed=SEED, sink=sink)
@@ -60,10 +62,6 @@ def _play(scenario: Any, episodes: int, worlds: int, run_dir: Path | None) -> tu
 
 def speed(worlds: int, repeats: int, target_s: float, tmp: Path) -> dict[str, Any]:
     """The loop, play traced and play untraced at `worlds` worlds, in turn (module docstring)."""
-    from tracelab.bench.sims import Loop
-    from tracelab.game.rulesim import RuleSim
-    from tracelab.game.scenario import builtin_scenario
-
     scenario = builtin_scenario(SCENARIO)
     loop = Loop(RuleSim(scenario, worlds, seed=SEED, trace=True), True, seed=SEED, red="scripted")
     loop.run(100)  # the first steps ground the rules that the start left ungrounded: not a block's pace
@@ -154,11 +152,6 @@ def report(r: dict[str, Any]) -> str:
 def _memory_child(episodes: int) -> dict[str, Any]:
     """Play `episodes` episodes as `tracelab play --scenario advanced --seed 3 --run R` does (one world),
     sampling RSS every tenth of them."""
-    from tracelab.playing import Games
-    from tracelab.game.scenario import builtin_scenario
-    from tracelab.store import TraceWriter
-    from tracelab.store.sink import StoreSink
-
     scenario = builtin_scenario(MEMORY_SCENARIO)
     tmp = Path(tempfile.mkdtemp(prefix="tracelab-bench-play-memory-"))
     try:

@@ -29,6 +29,9 @@ from typing import Any
 from tracelab.bench.biggraph import OUT_DEGREE, SPREAD_RULE, STEPS, write_graph
 from tracelab.bench.common import format_table, high_water_bytes, machine_info, rss_bytes, summarize
 from tracelab.engine.memory import BIG_WORK, release_freed_memory
+from tracelab.reasoning import EpisodeRun, load_inputs, plan_episodes, run_meta
+from tracelab.store import TraceWriter
+from tracelab.store.reasoning import ReasoningRecorder
 
 NODES, QUICK_NODES = 200_000, 20_000
 GOAL_RATIO = 1.5            # reason --run <= 1.5x reason --no-trace
@@ -62,10 +65,6 @@ class PeakRss:
 def reason_once(rules: Path, graph: Path, run_dir: Path | None) -> dict[str, Any]:
     """One reasoning as `tracelab reason RULES --graph GRAPH --steps 11` does it, recorded into
     `run_dir` (as with --run) or not traced at all (as with --no-trace)."""
-    from tracelab.reasoning import EpisodeRun, load_inputs, plan_episodes, run_meta
-    from tracelab.store import TraceWriter
-    from tracelab.store.reasoning import ReasoningRecorder
-
     gc.collect()
     release_freed_memory(BIG_WORK)  # what the run before left in the heap: back to the system
     out: dict[str, Any] = {"base_rss_bytes": rss_bytes()}

@@ -20,6 +20,19 @@ import numpy as np
 
 from tracelab.bench.common import Summary, format_table, machine_info, summarize
 from tracelab.bench.engine import machine_line
+from tracelab.envs.tracer import EpisodeTracer
+from tracelab.game.facts import GAME_RULES
+from tracelab.game.rulesim import RuleSim
+from tracelab.game.scenario import BOARD, Scenario, builtin_scenario
+from tracelab.playing import Games
+from tracelab.store import TraceWriter, seal_run
+from tracelab.store.reader import open_run
+from tracelab.store.sink import StoreSink
+from tracelab.viewers.replay import board_layer, plots, rules_layer
+from tracelab.viewers.replay.outputs import SaveOutput
+from tracelab.viewers.replay.recording import RunContext, new_recording
+from tracelab.viewers.replay.replay import replay_run
+from tracelab.viewers.replay.select import EpisodeFilter
 
 GOAL_5V5_S = 0.5
 GOAL_100_GAMES_S = 5.0
@@ -28,13 +41,6 @@ GOAL_100_GAMES_S = 5.0
 def write_idle_game(run_dir: Path, agents: int = 5, steps: int = 500, seed: int = 0) -> None:
     """One traced game that lasts `steps` steps: each agent does nothing 80% of the time, else a random
     action (moves and shots); health 10 makes a kill take 10 hits, more than the bullets in play."""
-    from tracelab.envs.tracer import EpisodeTracer
-    from tracelab.game.facts import GAME_RULES
-    from tracelab.game.rulesim import RuleSim
-    from tracelab.game.scenario import BOARD, Scenario
-    from tracelab.store import TraceWriter, seal_run
-    from tracelab.store.sink import StoreSink
-
     scenario = Scenario(name=f"bench{agents}v{agents}", width=16, height=16, red_base=(15, 0),
                         blue_base=(0, 15), mountains=((7, 7), (8, 7), (7, 8), (8, 8), (3, 12), (12, 3)),
                         agents_per_team=agents, advanced=True, health=10.0, max_steps=steps)
@@ -58,12 +64,6 @@ def write_idle_game(run_dir: Path, agents: int = 5, steps: int = 500, seed: int 
 
 def write_1v1_games(run_dir: Path, games: int = 100, seed: int = 0) -> None:
     """`games` traced 1v1 games of the advanced scenario, as `tracelab play` plays them."""
-    from tracelab.game.facts import GAME_RULES
-    from tracelab.game.scenario import BOARD, builtin_scenario
-    from tracelab.store import TraceWriter, seal_run
-    from tracelab.playing import Games
-    from tracelab.store.sink import StoreSink
-
     scenario = builtin_scenario("advanced")
     meta = {"command": "tracelab bench replay", "scenario": scenario.name,
             "config": {"scenario": scenario.to_toml()}, "rule_files": [str(GAME_RULES)], "seed": seed,
@@ -77,12 +77,6 @@ def write_1v1_games(run_dir: Path, games: int = 100, seed: int = 0) -> None:
 
 def convert(run: Path, out: Path) -> int:
     """`tracelab replay RUN --save OUT` without the process start-up; returns the recordings written."""
-    from tracelab.store.reader import open_run
-    from tracelab.viewers.replay.outputs import SaveOutput
-    from tracelab.viewers.replay.recording import RunContext
-    from tracelab.viewers.replay.replay import replay_run
-    from tracelab.viewers.replay.select import EpisodeFilter
-
     con = open_run(run)
     try:
         return replay_run(RunContext.of(con, run.name), EpisodeFilter(), SaveOutput(out))
@@ -114,10 +108,6 @@ def _model_of(ctx: Any) -> Callable[[], Any]:
 
 def layer_times(run: Path, repeats: int) -> dict[str, float]:
     """Median seconds of each part of converting the run's first episode (recording kept in memory)."""
-
-    from tracelab.store.reader import open_run
-    from tracelab.viewers.replay import board_layer, plots, rules_layer
-    from tracelab.viewers.replay.recording import RunContext, new_recording
 
     con = open_run(run)
     ctx = RunContext.of(con, run.name)
@@ -157,7 +147,6 @@ def run(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
         one, one_cpu = wall_and_cpu(lambda: convert(big, tmp_path / "big.rrd"), repeats)
         hundred, hundred_cpu = wall_and_cpu(lambda: convert(many, tmp_path / "many.rrd"), repeats)
         layers = layer_times(big, repeats)
-        from tracelab.store.reader import open_run
         con = open_run(big)
         played = con.execute("SELECT steps FROM episodes WHERE steps > 0").fetchall()[0][0]
         rows = con.execute("SELECT count(*) FROM raw.changes").fetchall()[0][0]

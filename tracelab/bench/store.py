@@ -6,12 +6,12 @@ from typing import Any
 
 from tracelab.bench.common import format_table, machine_info, summarize
 from tracelab.bench.engine import machine_line
+from tracelab.store.bench import store_benchmark
 
 
 def run(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
     """Ingest rows/s (median over `repeats` runs), seal rows/s and point-query latency; --quick ingests
     200k rows instead of 2M."""
-    from tracelab.store.bench import store_benchmark
     info = machine_info()
     result = store_benchmark(rows=200_000 if quick else 2_000_000, repeats=max(1, repeats))
     info["load_average_end"] = machine_info()["load_average"]

@@ -9,13 +9,17 @@ untraced env take their timed blocks in turn (so both see the same load), timed 
 seconds of the process (the store writer's thread included: the steadier figure on a busy machine)."""
 from __future__ import annotations
 
+import tempfile
+import time
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
+import tracelab.envs  # noqa: F401  (registers the ids)
 from tracelab.bench import toytext_vector
 from tracelab.bench.common import block_rates, calibrate, format_table, summarize
+from tracelab.store import TraceWriter
 
 GOAL_RATIO = 0.5
 TARGET_S = 0.5  # a timed block
@@ -43,7 +47,6 @@ def stepper(env: gym.Env) -> Any:
 
 
 def run(quick: bool = False, repeats: int = 5, batch: int | None = None) -> dict[str, Any]:
-    import tracelab.envs  # noqa: F401  (registers the ids)
     repeats = 1 if quick else repeats
     target = 0.05 if quick else TARGET_S
     out = []
@@ -64,10 +67,6 @@ def traced_and_untraced_rates(env_id: str, kwargs: dict[str, Any], repeats: int,
                               ) -> tuple[dict[str, Any], dict[str, Any]]:
     """The env untraced, and the same env recording every game into a run of the trace store (a
     temporary directory), their timed blocks in turn; the writer's close (its last rows) timed apart."""
-    import tempfile
-    import time
-
-    from tracelab.store import TraceWriter
     with tempfile.TemporaryDirectory(prefix="tracelab-bench-toytext-") as tmp:
         env = gym.make(env_id, trace_writer=TraceWriter.open(f"{tmp}/run"), **kwargs).unwrapped
         runs = {"untraced": stepper(gym.make(env_id, **kwargs).unwrapped), "traced": stepper(env)}

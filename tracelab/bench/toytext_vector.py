@@ -10,6 +10,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode
 
+import tracelab.envs  # noqa: F401  (registers the ids)
 from tracelab.bench.common import block_rates, format_table
 
 GOAL_RATIO = 5.0
@@ -36,7 +37,6 @@ def vector_stepper(env: gym.vector.VectorEnv) -> Any:
 
 
 def run(batch: int, quick: bool = False, repeats: int = 5) -> dict[str, Any]:
-    import tracelab.envs  # noqa: F401  (registers the ids)
     target = 0.05 if quick else TARGET_S
     out = []
     for name, ours_id, theirs_id, kwargs in GAMES:

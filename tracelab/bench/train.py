@@ -14,9 +14,16 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
 
 from tracelab.bench.common import fmt_num, format_table, machine_info, summarize
 from tracelab.bench.engine import machine_line
+from tracelab.envs.vector_env import GridWarVectorEnv
+from tracelab.game.scenario import builtin_scenario
+from tracelab.store import TraceWriter
+from tracelab.train.config import TrainConfig
+from tracelab.train.loop import Trainer, make_learner
+from tracelab.train.qnet import NetSpec
 
 GOAL_TRANSITIONS_PER_S = 5_000
 GOAL_LOOP_SHARE = 0.15
@@ -24,7 +31,6 @@ GOAL_FUSED_OVER_TEXTBOOK = 4.0
 
 
 def _config(envs: int, threads: int, learner: str = "fused") -> Any:
-    from tracelab.train.config import TrainConfig
     # the method's defaults; no evaluations or checkpoints inside the timed blocks
     return TrainConfig(scenario="base", steps=10_000_000, envs=envs, threads=threads, eval_every=0,
                        checkpoint_every=0, learner=learner)
@@ -35,9 +41,6 @@ class EndToEnd:
     steps through Trainer.train (logging, ε, replay, updates: everything but evaluations)."""
 
     def __init__(self, envs: int, threads: int, run_dir: Path, learner: str) -> None:
-        from tracelab.game.scenario import builtin_scenario
-        from tracelab.store import TraceWriter
-        from tracelab.train.loop import Trainer
         cfg = _config(envs, threads, learner)
         self.writer = TraceWriter.open(run_dir, {"command": "tracelab bench train", "config": cfg.to_dict()})
         self.trainer = Trainer(cfg, builtin_scenario("base"), self.writer)
@@ -52,10 +55,6 @@ class EndToEnd:
 
 
 def _filled_learner(threads: int, learner: str = "fused") -> Any:
-    import torch
-
-    from tracelab.train.loop import make_learner
-    from tracelab.train.qnet import NetSpec
     torch.set_num_threads(threads)
     cfg = _config(1, threads, learner)
     learner = make_learner(learner, NetSpec(4, cfg.hidden_sizes, 5), cfg, torch.Generator().manual_seed(0))
@@ -80,7 +79,6 @@ def learner_updates(threads: int, learner: str) -> Callable[[int], None]:
 
 def textbook_updates(threads: int) -> Callable[[int], None]:
     """The same update as autograd + nn.Sequential + torch.optim.Adam (foreach) would run it."""
-    import torch
     learner = _filled_learner(threads)
     cfg = _config(1, threads)
     h = cfg.hidden_sizes[0]
@@ -108,7 +106,6 @@ def textbook_updates(threads: int) -> Callable[[int], None]:
 
 def env_steps(envs: int) -> tuple[Callable[[int], None], Any]:
     """The batched env alone (random actions, rules backend, no trace): run(k) makes k passes."""
-    from tracelab.envs.vector_env import GridWarVectorEnv
     env = GridWarVectorEnv(envs, "base", backend="rules")
     env.reset(seed=0)
     rng = np.random.default_rng(0)

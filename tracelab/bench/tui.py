@@ -21,6 +21,15 @@ from pathlib import Path
 from typing import Any
 
 from tracelab.bench.common import format_table, machine_info, summarize
+from tracelab.bench.engine import machine_line
+from tracelab.store.bench import synthetic_trace, synthetic_vocabulary
+from tracelab.store.seal import seal_run
+from tracelab.store.writer import TraceWriter
+from tracelab.viewers.tui.app import TracelabApp
+from tracelab.viewers.tui.lazy_table import LazyTable
+from tracelab.viewers.tui.paging import PAGE, TraceFilter, TraceSource
+from tracelab.viewers.tui.source import RunSource
+from tracelab.viewers.tui.trace import TracePane
 
 GOAL_OPEN_S = 2.0
 GOAL_PAGE_S = 0.2
@@ -29,9 +38,6 @@ BATCH = 250_000
 
 def bench_run(rows: int, directory: Path | None = None) -> Path:
     """A sealed synthetic run of `rows` change rows in one episode (made once, then reused)."""
-    from tracelab.store.bench import synthetic_trace, synthetic_vocabulary
-    from tracelab.store.seal import seal_run
-    from tracelab.store.writer import TraceWriter
     root = directory or Path(tempfile.gettempdir()) / "tracelab-bench-tui"
     run = root / f"changes-{rows}"
     if (run / "run.duckdb").exists():
@@ -67,9 +73,6 @@ async def _focus(pilot: Any, app: Any, key: str, widget_id: str) -> None:
 
 async def _session(run: Path, seed: int) -> dict[str, float]:
     """One pass through the app; seconds per action."""
-    from tracelab.viewers.tui.app import TracelabApp
-    from tracelab.viewers.tui.lazy_table import LazyTable
-    from tracelab.viewers.tui.trace import TracePane
     rng = random.Random(seed)
     out: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -140,8 +143,6 @@ async def _session(run: Path, seed: int) -> dict[str, float]:
 
 def _queries(run: Path, seed: int) -> dict[str, float]:
     """The same steps at the paging layer alone (TraceSource, no app): what DuckDB costs."""
-    from tracelab.viewers.tui.paging import PAGE, TraceFilter, TraceSource
-    from tracelab.viewers.tui.source import RunSource
     rng = random.Random(seed)
     source = RunSource(run)
     out: dict[str, float] = {}
@@ -184,7 +185,6 @@ def run(quick: bool = False, repeats: int = 5, rows: int | None = None) -> dict[
 
 
 def report(r: dict[str, Any]) -> str:
-    from tracelab.bench.engine import machine_line
     rows = []
     for name, s in r["figures"].items():
         goal = GOAL_OPEN_S if name.startswith(("open", "page index")) else GOAL_PAGE_S

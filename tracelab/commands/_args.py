@@ -5,17 +5,19 @@ import argparse
 from collections.abc import Iterator
 from contextlib import contextmanager
 
+from tracelab.engine.grounding_limit import grounding_limit
 from tracelab.engine.kernel_names import KERNELS as ENGINE_KERNELS  # noqa: F401  (--kernel's choices, for the commands)
 
 
 def integer(text: str) -> int:
     """An integer, also written as the field writes budgets: 100000, 100_000, 1e5, 1.5e3. The value must be a
     whole number: 1.5 is refused, not rounded."""
-    from decimal import Decimal, InvalidOperation
     try:
         return int(text)
     except ValueError:
         pass
+    # deferred: only a budget written 1e5 needs decimal; every command starts through this module
+    from decimal import Decimal, InvalidOperation
     try:
         value = Decimal(text.strip().replace("_", ""))
     except InvalidOperation:
@@ -85,6 +87,5 @@ def grounding_limit_of(args: argparse.Namespace) -> Iterator[None]:
     if n is None:
         yield
         return
-    from tracelab.engine.grounding_limit import grounding_limit
     with grounding_limit(n):
         yield

@@ -12,7 +12,6 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 from tracelab.commands._args import non_negative_int
 from tracelab.errors import UserError
-from tracelab.store.table_files import cell_text, python_rows, write_csv, write_parquet
 
 if TYPE_CHECKING:  # imported where used, so that `tracelab --help` stays fast
     import pyarrow as pa
@@ -40,6 +39,9 @@ def _json_value(v: Any) -> Any:
 
 def write_table(table: "pa.Table", fmt: str, output: str | None = None, out: TextIO | None = None) -> None:
     """Write `table` in `fmt` to `output` (a path) or to `out` (default stdout)."""
+    # deferred: importing tracelab.store loads DuckDB and pandas, which `tracelab --help` does not need
+    from tracelab.store.table_files import cell_text, python_rows, write_csv, write_parquet
+
     if fmt == "parquet":
         if not output:
             raise UserError("--format parquet needs --output FILE")
@@ -59,6 +61,7 @@ def write_table(table: "pa.Table", fmt: str, output: str | None = None, out: Tex
         json.dump([{k: _json_value(v) for k, v in r.items()} for r in rows], out, indent=1, default=str)
         out.write("\n")
     elif fmt == "table":
+        # deferred: loads pyarrow; every command is imported to build the CLI's parser
         import pyarrow as pa
         cells = [[cell_text(r[n]) for n in names] for r in rows]
         widths = [max([len(n), *(len(c[i]) for c in cells)]) for i, n in enumerate(names)]
@@ -78,6 +81,8 @@ DEFAULT_TABLE_ROWS = 1000  # rows a table-format result shows unless --limit say
 
 
 def _rows(batches: "Iterable[pa.RecordBatch]") -> "Iterator[dict[str, Any]]":
+    from tracelab.store.table_files import python_rows  # deferred: see write_table
+
     for batch in batches:
         yield from python_rows(batch)
 
@@ -86,6 +91,8 @@ def write_stream(schema: "pa.Schema", batches: "Iterable[pa.RecordBatch]", fmt: 
                  output: str | None = None, out: TextIO | None = None) -> int:
     """Write record batches as CSV, JSON or Parquet as they come (one batch in memory at a time); returns
     the number of rows. Table format needs every row for its widths: use write_table."""
+    from tracelab.store.table_files import write_csv, write_parquet  # deferred: see write_table
+
     if fmt == "parquet":
         if not output:
             raise UserError("--format parquet needs --output FILE")

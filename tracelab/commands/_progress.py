@@ -11,6 +11,7 @@ clean. rich is imported only when something is drawn, so that `tracelab --help` 
 """
 from __future__ import annotations
 
+import importlib
 import sys
 import time
 from collections.abc import Iterator
@@ -70,6 +71,7 @@ def progress(description: str, total: int | None, unit: str | None = "steps") ->
     if not on_terminal():
         yield Progress()
         return
+    # deferred: loads rich; every command is imported to build the CLI's parser
     from rich.console import Console
     from rich.progress import (
         BarColumn,
@@ -102,6 +104,7 @@ def working(description: str, refresh_per_second: float = 10) -> Iterator[Progre
     if not on_terminal():
         yield Progress()
         return
+    # deferred: loads rich; every command is imported to build the CLI's parser
     from rich.console import Console
     from rich.progress import Progress as RichProgress
     from rich.progress import SpinnerColumn, TextColumn, TimeElapsedColumn
@@ -112,7 +115,6 @@ def working(description: str, refresh_per_second: float = 10) -> Iterator[Progre
 
 
 def _kernels(pairs: tuple[tuple[str, str], ...]) -> tuple[Any, ...] | None:
-    import importlib
     try:
         return tuple(getattr(importlib.import_module(module), name) for module, name in pairs)
     except (ImportError, AttributeError):
@@ -121,6 +123,7 @@ def _kernels(pairs: tuple[tuple[str, str], ...]) -> tuple[Any, ...] | None:
 
 def _cold(pairs: tuple[tuple[str, str], ...]) -> bool | None:
     """True when some of these kernels must compile, False when all are loaded or cached, None: unknown."""
+    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
     from tracelab.engine.numba_cache import all_cached
     kernels = _kernels(pairs)
     cached = all_cached(kernels) if kernels is not None else None
@@ -147,6 +150,7 @@ def compile_notice(simulator: bool = False, lanes: bool = False) -> str | None:
         both = engine and _game_warmup_runs(lanes)
         what += (" and " if what else "") + "the game's kernels" + (" (in a second process)" if both else "")
     kernels = _kernels(_ENGINE_KERNELS[:1])
+    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
     from tracelab.engine.numba_cache import cache_folder
     folder = cache_folder(kernels[0]) if kernels else None
     cached = f"; cached for the next runs in {folder}" if folder else ""
@@ -154,6 +158,7 @@ def compile_notice(simulator: bool = False, lanes: bool = False) -> str | None:
 
 
 def _game_warmup_runs(lanes: bool) -> bool:
+    # deferred: loads numba; every command is imported to build the CLI's parser
     from tracelab.game.rulesim_warmup import needed
     return needed("lanes" if lanes else "counting", fused=not lanes)
 
@@ -172,6 +177,7 @@ def compiling_engine(simulator: bool = False, lanes: bool = False,
     `simulator`: the rule simulator's too): when the kernels must be compiled, say so while it happens
     (a spinner on a terminal, one line on stderr otherwise); when they are cached, show `busy` (if
     given) as a spinner on a terminal. The spinner counts the groundings found (a big build's work)."""
+    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
     from tracelab.engine.grounding import watch_grounding
     cold = engine_cache_is_cold(simulator, lanes)
     notice = compile_notice(simulator, lanes) if cold else None

@@ -12,6 +12,7 @@ import sys
 from typing import Any
 
 from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, positive_int
+from tracelab.commands._progress import on_terminal, working
 
 SECTIONS = ("engine", "env", "store", "replay", "train")
 
@@ -92,47 +93,48 @@ def _counts(text: str, what: str = "counts") -> list[int]:
 
 def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], str]:
     if name == "engine":
+        # deferred: each benchmark's module loads what it measures (numba, torch, DuckDB, rerun, textual)
         from tracelab.bench import engine
         r = engine.run(args.quick, args.repeats, args.compile_repeats, args.agents,
                        getattr(args, "graph_only", False), args.kernel)
         return r, engine.report(r)
     if name == "env":
-        from tracelab.bench import env
+        from tracelab.bench import env  # deferred: as engine's, above
         r = env.run(args.quick, args.repeats, args.agents, args.batch, args.kernel)
         return r, env.report(r)
     if name == "replay":
-        from tracelab.bench import replay
+        from tracelab.bench import replay  # deferred: as engine's, above
         r = replay.run(args.quick, args.repeats)
         return r, replay.report(r)
     if name == "train":
-        from tracelab.bench import train
+        from tracelab.bench import train  # deferred: as engine's, above
         r = train.run(args.quick, args.repeats, args.envs, args.threads)
         return r, train.report(r)
     if name == "play":
-        from tracelab.bench import play
+        from tracelab.bench import play  # deferred: as engine's, above
         r = play.run(args.quick, args.repeats, args.worlds, args.memory)
         return r, play.report(r)
     if name == "aggregates":
-        from tracelab.bench import aggregates
+        from tracelab.bench import aggregates  # deferred: as engine's, above
         r = aggregates.run(args.quick, args.repeats)
         return r, aggregates.report(r)
     if name == "reason-store":
-        from tracelab.bench import reason_store
+        from tracelab.bench import reason_store  # deferred: as engine's, above
         r = reason_store.run(args.quick, args.repeats)
         return r, reason_store.report(r)
     if name == "toytext":
-        from tracelab.bench import toytext
+        from tracelab.bench import toytext  # deferred: as engine's, above
         r = toytext.run(args.quick, args.repeats, args.batch)
         return r, toytext.report(r)
     if name == "first-run":
-        from tracelab.bench import first_run
+        from tracelab.bench import first_run  # deferred: as engine's, above
         r = first_run.run(args.quick, args.repeats)
         return r, first_run.report(r)
     if name == "tui":
-        from tracelab.bench import tui
+        from tracelab.bench import tui  # deferred: as engine's, above
         r = tui.run(args.quick, args.repeats, args.rows)
         return r, tui.report(r)
-    from tracelab.bench import store
+    from tracelab.bench import store  # deferred: as engine's, above
     r = store.run(args.quick, args.repeats)
     return r, store.report(r)
 
@@ -140,7 +142,6 @@ def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], s
 def run(args: argparse.Namespace) -> int:
     names = SECTIONS if args.bench == "all" else (args.bench,)
     results = {}
-    from tracelab.commands._progress import on_terminal, working
     for name in names:
         what = f"bench {name}{' (quick)' if args.quick else ''}: measuring"
         if not on_terminal():

@@ -21,6 +21,7 @@ def _size(n: int) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.check import check_run
     with store_errors():
         report = check_run(args.run, repair=args.repair)

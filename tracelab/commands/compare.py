@@ -15,6 +15,7 @@ from typing import Any
 from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.commands._output import add_format_options, write_table
 from tracelab.errors import UserError, store_errors
+from tracelab.train.config import METHOD_REWARD_SCALE
 
 MAX_METRIC_NAMES = 200     # metric names read per run (a training writes about 15); the rest are named as a count
 MAX_CONFIG_DEPTH = 4       # nested config deeper than this is shown as one value
@@ -51,6 +52,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"run {repeated!r} is given twice")
     with store_errors(), ctrl_c_stops_queries():
         runs = [read_training_run(r) for r in args.runs]
+    # deferred: loads pyarrow; every command is imported to build the CLI's parser
     import pyarrow as pa
     rows = comparison_rows(runs, precise=args.format != "table")
     names = ["key", *("./key" if r.label == "key" else r.label for r in runs)]   # column names are unique
@@ -67,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
 
 def read_training_run(path: str) -> TrainingRun:
     """A training run's status, config and final metrics; a UserError (one line) for a run that is not one."""
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.reader import open_run, query_readonly, retrying
     con = open_run(path)
     try:
@@ -153,7 +156,6 @@ def _config_text(value: Any) -> str:
 def reward_scale_of(config: dict[str, Any]) -> str:
     """The reward scale a run trained at; a config without one is from before the flag, when the learner
     saw the game's rewards as they are (the method's scale)."""
-    from tracelab.train.config import METHOD_REWARD_SCALE
     scale = config.get("reward_scale", METHOD_REWARD_SCALE)
     if not isinstance(scale, (int, float)) or isinstance(scale, bool):   # a stranger's config: as it is
         return _config_text(scale)

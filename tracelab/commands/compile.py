@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import argparse
 import sys
+from contextlib import ExitStack
 
 from tracelab.commands._args import add_max_groundings
+from tracelab.commands._progress import working
 from tracelab.errors import UserError
 
 
@@ -22,9 +24,7 @@ def _say(text: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from contextlib import ExitStack
-
-    from tracelab.commands._progress import working
+    # deferred: loads numba; every command is imported to build the CLI's parser
     from tracelab.engine import load_program
     from tracelab.engine.backend_compiled import unsupported
     from tracelab.engine.compile_job import CompileRefused, compile_program

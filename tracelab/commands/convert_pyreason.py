@@ -21,6 +21,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # deferred: loads numba; every command is imported to build the CLI's parser
     from tracelab.pyreason import load_pyreason
 
     translated = load_pyreason(args.rules, args.facts, args.graph, persistent=args.persistent, embed_graph=True)

@@ -49,6 +49,7 @@ def _run_and_episode(text: str) -> tuple[str, int]:
 
 def _side(text: str) -> tuple[str, int | None]:
     """RUN:EP, or a RUN alone (episode None: its only one)."""
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.reader import resolve_run
     try:
         return _run_and_episode(text)
@@ -64,6 +65,7 @@ def _side(text: str) -> tuple[str, int | None]:
 
 
 def _is_run(text: str) -> bool:
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.reader import resolve_run
     try:
         resolve_run(text)
@@ -95,6 +97,7 @@ def only_episode(con: object, run: str) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.diff import first_divergence, render_divergence
     from tracelab.store.reader import open_run, resolve_run, retrying
     (run_a, a), (run_b, b) = parse_sides(args.sides)

@@ -11,7 +11,10 @@ from pathlib import Path
 
 from tracelab.commands._args import add_max_groundings, non_negative_int, positive_int
 from tracelab.commands._progress import Progress, progress
+from tracelab.commands.train import load_scenario_arg
+from tracelab.commands.train_env import env_source_of
 from tracelab.errors import UserError, store_errors
+from tracelab.train.experiments.stats import wilson
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -42,9 +45,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tracelab.commands.train import load_scenario_arg
+    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
     from tracelab.train.policy import load_policy, policy_scenario, read_policy_spec
 
+    # deferred: loads gymnasium; every command is imported to build the CLI's parser
     from tracelab.train.env_policy import ENV_FORMAT, policy_format
     with store_errors():
         trained_on_env = policy_format(args.policy) == ENV_FORMAT
@@ -70,9 +74,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_env(args: argparse.Namespace) -> int:
     """eval --env: a policy of train --env, played greedily on the env it was trained on."""
-    from tracelab.commands.train_env import env_source_of
+    # deferred: loads gymnasium; every command is imported to build the CLI's parser
     from tracelab.train.env_policy import evaluate_env, load_env_policy, policy_format, ENV_FORMAT
-    from tracelab.train.experiments.stats import wilson
     with store_errors():
         fmt = policy_format(args.policy)
     if fmt != ENV_FORMAT:
@@ -116,11 +119,13 @@ def _counting(bar: Progress):
 
 
 def _evaluate(args: argparse.Namespace, policy, scenario, spec, on_game):
+    # deferred: loads DuckDB, gymnasium, numba; every command is imported to build the CLI's parser
     from tracelab.train.evaluate import evaluate, evaluate_into
     if args.run is None:
         return evaluate(policy, scenario, games=args.games, backend=args.backend, seed=args.seed,
                         opponent_p=args.opponent_p, stack_previous=policy.stack_previous,
                         envs=args.envs, on_game=on_game)
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.game.facts import GAME_RULES
     from tracelab.game.scenario import BOARD
     from tracelab.store import TraceWriter
@@ -136,6 +141,7 @@ def _evaluate(args: argparse.Namespace, policy, scenario, spec, on_game):
 
 
 def _table(result, args: argparse.Namespace, scenario: str) -> None:
+    # deferred: loads DuckDB, gymnasium, numba; every command is imported to build the CLI's parser
     from tracelab.bench.common import format_table
     from tracelab.train.evaluate import METHOD_CUT, comparison_rows
     print(f"{args.policy} on {scenario} ({args.backend} backend), {result.games} games against the scripted "

@@ -45,6 +45,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # deferred: loads DuckDB, gymnasium, numba; every command is imported to build the CLI's parser
     from tracelab.train.experiments.definitions import EXPERIMENTS
     from tracelab.train.experiments.run import scaled
 
@@ -61,12 +62,14 @@ def run(args: argparse.Namespace) -> int:
     if args.ray is not None:
         if args.jobs > 1:
             raise UserError("--jobs and --ray: Ray decides how many trainings run at a time; give one of them")
+        # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
         from tracelab.train.ray_session import check_address
         check_address(args.ray)  # the install hint, or an address where nothing answers, before any training
     taken = [out / f"{a.slug}-seed{s}{tail}" for a in exp.arms for s in range(budget.seeds)
              for tail in ("", "-traces") if (out / f"{a.slug}-seed{s}{tail}").exists()]
     if taken:
         raise UserError(f"{taken[0]} already exists: give another --out or remove it")
+    # deferred: loads DuckDB, gymnasium, numba; every command is imported to build the CLI's parser
     from tracelab.train.experiments.report import write_report
     from tracelab.train.experiments.run import run_experiment
 
@@ -92,6 +95,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _report_again(exp, out: Path, report_dir: Path) -> int:
+    # deferred: loads DuckDB, gymnasium, numba; every command is imported to build the CLI's parser
     from tracelab.train.experiments.report import write_report
     from tracelab.train.experiments.run import load_result
     with store_errors():  # no finished experiment in --out

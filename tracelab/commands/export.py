@@ -10,7 +10,9 @@ from pathlib import Path
 from typing import Any
 
 from tracelab.commands._interrupt import ctrl_c_stops_queries
+from tracelab.commands.compare import without_metrics
 from tracelab.errors import UserError, store_errors
+from tracelab.train.tensorboard import EVENTS_GLOB, TensorBoardSink, export_metrics, run_log_dir
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -35,9 +37,8 @@ def run_name(run: Path) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tracelab.commands.compare import without_metrics
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.reader import open_run, query_readonly, resolve_run, retrying
-    from tracelab.train.tensorboard import run_log_dir
     with store_errors(), ctrl_c_stops_queries():
         path = resolve_run(args.run)
         log_dir = run_log_dir(Path(args.tensorboard), run_name(path))
@@ -62,7 +63,6 @@ def run(args: argparse.Namespace) -> int:
 def _export(con: Any, log_dir: Path) -> dict[str, int]:
     """The run's metrics into a new event file in log_dir; an export that fails (or Ctrl-C) removes it, so
     that a second try does not find half a run there."""
-    from tracelab.train.tensorboard import EVENTS_GLOB, TensorBoardSink, export_metrics
     sink = TensorBoardSink(log_dir)
     try:
         counts = export_metrics(con, sink)

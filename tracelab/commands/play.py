@@ -16,7 +16,10 @@ import numpy as np
 
 from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, non_negative_int, positive_int
 from tracelab.commands._interrupt import CtrlCBetweenSteps
-from tracelab.engine.errors import is_interrupt
+from tracelab.commands._notices import say_running_compiles
+from tracelab.commands._progress import compiling_engine, progress
+from tracelab.commands._recording import recording_into
+from tracelab.commands.play_env import run_env
 from tracelab.errors import UserError, store_errors
 
 DEFAULT_SCENARIO = "base"  # the one train defaults to (TrainConfig.scenario)
@@ -58,6 +61,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
     from tracelab.game.scenario import (
         builtin_scenario,
         builtin_scenario_names,
@@ -65,12 +69,12 @@ def run(args: argparse.Namespace) -> int:
     )
 
     if args.env is not None or args.env_arg:  # a declared world: its own module (play_env.py)
-        from tracelab.commands.play_env import run_env
         return run_env(args)
     args.policy = args.policy or "scripted"
     args.trained = None
     builtin = args.policy in ("random", "scripted")
     if not builtin:
+        # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
         from tracelab.train.policy import load_policy, policy_scenario, read_policy_spec
         with store_errors():  # a policy that does not load is the user's to fix
             scenario = policy_scenario(read_policy_spec(args.policy))
@@ -83,12 +87,14 @@ def run(args: argparse.Namespace) -> int:
     if args.no_trace:
         _summary(play(scenario, args, sink=None))
         return 0
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.game.facts import GAME_RULES
     from tracelab.game.scenario import BOARD
     from tracelab.store import TraceWriter
     from tracelab.store.sink import StoreSink
 
     run_dir = Path(args.run or f"runs/play-{scenario.name}-{time.strftime('%Y%m%d-%H%M%S')}")
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.layout import check_new_run_dir
     check_new_run_dir(run_dir)
     meta = {"command": " ".join(shlex.quote(a) for a in sys.argv), "scenario": scenario.name,
@@ -100,19 +106,8 @@ def run(args: argparse.Namespace) -> int:
             writer = TraceWriter.open(run_dir, meta)
     except OSError as e:
         raise UserError(f"cannot create the run directory {run_dir}: {e.strerror or e}") from e
-    try:
+    with recording_into(writer, run_dir):
         stats = play(scenario, args, sink=StoreSink(writer))
-    except BaseException as e:
-        if not is_interrupt(e):  # the env did not close it: record how the run ended
-            writer.close(status="failed")
-            raise
-        # Ctrl-C, or SIGTERM (the writer's handler exits)
-        writer.close(status="interrupted")  # flushes what was played
-        kept = f"{run_dir} keeps {_ended_episodes(run_dir)} finished episode(s) and the trace so far"
-        if isinstance(e, SystemExit):
-            print(f"tracelab: terminated: {kept}", file=sys.stderr)
-            raise
-        raise KeyboardInterrupt(kept) from None
     _summary(stats)
     _what_to_open(run_dir)
     return 0
@@ -122,8 +117,7 @@ def play(scenario, args: argparse.Namespace, sink) -> dict:
     """Play exactly args.episodes episodes in args.worlds worlds (tracelab.playing.Games), showing the
     compile (first run) or the build while it happens and a progress bar over the episodes (on a
     terminal); the steps/s leave out the first step, which includes any compiling."""
-    from tracelab.commands._progress import compiling_engine, progress
-    from tracelab.commands._notices import say_running_compiles
+    # deferred: loads gymnasium, numba; every command is imported to build the CLI's parser
     from tracelab.engine.core import LANES_MIN_WORLDS
     from tracelab.playing import Games
 
@@ -173,16 +167,8 @@ def _summary(stats: dict) -> None:
     print("red: " + ", ".join(f"{v} {k}" for k, v in outcomes.items()) + f"; mean return {mean_return:.1f}")
 
 
-def _ended_episodes(run_dir: Path) -> int:
-    from tracelab.store import open_run
-    con = open_run(run_dir)
-    try:
-        return int(con.execute("SELECT count(*) FROM episodes WHERE ended").fetchall()[0][0])
-    finally:
-        con.close()
-
-
 def _what_to_open(run_dir: Path) -> None:
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store import open_run
 
     con = open_run(run_dir)

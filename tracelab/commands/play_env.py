@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import argparse
 import shlex
-import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -15,6 +14,8 @@ from typing import Any
 import numpy as np
 
 from tracelab.commands._interrupt import CtrlCBetweenSteps
+from tracelab.commands._progress import compiling_engine, progress
+from tracelab.commands._recording import recording_into
 from tracelab.engine.errors import is_interrupt
 from tracelab.errors import UserError, store_errors
 
@@ -23,6 +24,7 @@ GRIDWAR_ONLY = (("scenario", None, "--scenario"), ("opponent_p", None, "--oppone
 
 
 def run_env(args: argparse.Namespace) -> int:
+    # deferred: loads gymnasium; every command is imported to build the CLI's parser
     from tracelab.envs.declared.env_source import EnvSource, parse_env_args
     from tracelab.envs.declared.play import load_declared
 
@@ -42,6 +44,7 @@ def run_env(args: argparse.Namespace) -> int:
         raise UserError("--policy scripted is the grid game's; --env plays random (the default) or a policy "
                         "train --env trained on that env (RUN/policy)")
     if args.policy not in (None, "random"):
+        # deferred: loads gymnasium; every command is imported to build the CLI's parser
         from tracelab.train.env_policy import load_env_policy
         with store_errors():  # a policy that does not load, or was trained on another env
             args.trained, _ = load_env_policy(args.policy, source)
@@ -52,7 +55,7 @@ def run_env(args: argparse.Namespace) -> int:
 
 
 def _record(source: Any, spec: Any, args: argparse.Namespace) -> int:
-    from tracelab.commands.play import _ended_episodes
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store import TraceWriter
     from tracelab.store.layout import check_new_run_dir as check_run_dir
 
@@ -63,21 +66,8 @@ def _record(source: Any, spec: Any, args: argparse.Namespace) -> int:
             writer = TraceWriter.open(run_dir, run_meta(source, spec, args))
     except OSError as e:
         raise UserError(f"cannot create the run directory {run_dir}: {e.strerror or e}") from e
-    try:
+    with recording_into(writer, run_dir):
         stats = _play(source, spec, args, writer)
-    except BaseException as e:
-        if not is_interrupt(e):
-            if not writer.closed:
-                writer.close(status="failed")
-            raise
-        # Ctrl-C, or SIGTERM (the writer's handler exits)
-        if not writer.closed:
-            writer.close(status="interrupted")
-        kept = f"{run_dir} keeps {_ended_episodes(run_dir)} finished episode(s) and the trace so far"
-        if isinstance(e, SystemExit):
-            print(f"tracelab: terminated: {kept}", file=sys.stderr)
-            raise
-        raise KeyboardInterrupt(kept) from None
     _summary(source, stats)
     _what_to_open_env(run_dir, spec)
     return 0
@@ -86,6 +76,7 @@ def _record(source: Any, spec: Any, args: argparse.Namespace) -> int:
 def run_meta(source: Any, spec: Any, args: argparse.Namespace) -> dict[str, Any]:
     """The run's metadata: the command, the env (id or file, its arguments, the spec's text and the
     rule files'), what sets each external fact (recording.declared_facts), the board's rows."""
+    # deferred: loads DuckDB, gymnasium, numba; every command is imported to build the CLI's parser
     from tracelab.envs.declared.recording import declared_run_config
 
     spec_path, params = source.declared()
@@ -97,7 +88,7 @@ def run_meta(source: Any, spec: Any, args: argparse.Namespace) -> dict[str, Any]
 
 
 def _play(source: Any, spec: Any, args: argparse.Namespace, writer: Any) -> dict[str, Any]:
-    from tracelab.commands._progress import compiling_engine, progress
+    # deferred: loads gymnasium; every command is imported to build the CLI's parser
     from tracelab.envs.declared.play import make_declared_env, play_episodes, random_policy
 
     with compiling_engine(busy=f"building {source.short_name}'s rules…"):
@@ -106,6 +97,7 @@ def _play(source: Any, spec: Any, args: argparse.Namespace, writer: Any) -> dict
     if getattr(args, "trained", None) is None:
         policy, cap = random_policy(env, args.seed), None
     else:  # greedy: it may walk in circles where the env sets no step limit (CliffWalking)
+        # deferred: loads gymnasium; every command is imported to build the CLI's parser
         from tracelab.train.env_policy import EVAL_STEP_CAP, one_env_actor
         policy, cap = one_env_actor(args.trained), EVAL_STEP_CAP
     try:
@@ -134,6 +126,7 @@ def _summary(source: Any, stats: dict[str, Any]) -> None:
 
 
 def _what_to_open_env(run_dir: Path, spec: Any) -> None:
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store import open_run
 
     con = open_run(run_dir)

@@ -15,8 +15,11 @@ from typing import Any
 import numpy as np
 
 from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, positive_int
+from tracelab.commands._progress import compiling_engine
 from tracelab.engine.errors import is_interrupt
+from tracelab.engine.program import constant_text
 from tracelab.errors import UserError, store_errors
+from tracelab.reasoning import EpisodeRun, load_inputs, plan_episodes, run_meta
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -60,14 +63,15 @@ def run(args: argparse.Namespace) -> int:
     """Program errors (located), unreadable files, InconsistencyError and FixpointError (naming the atom,
     the time and the rules and facts with their file:line) are raised for main() to report; with --run
     the run keeps what was reasoned until then (status failed)."""
+    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
     from tracelab.engine import ProgramError, parse_literal
-    from tracelab.reasoning import load_inputs, plan_episodes
 
     if args.persistent and args.dialect != "pyreason":
         raise UserError("--persistent belongs to --dialect pyreason (tracelab programs say %timesteps)")
     if args.run is not None and args.no_trace:
         raise UserError("--run records the trace and --no-trace drops it: give one of them")
     if args.run is not None:
+        # deferred: loads DuckDB; every command is imported to build the CLI's parser
         from tracelab.store.layout import check_new_run_dir
         check_new_run_dir(Path(args.run))
     inputs = load_inputs(args.program, dialect=args.dialect, graph_file=args.graph, fact_files=args.facts,
@@ -94,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _record(args: argparse.Namespace, inputs: Any, plans: list[Any]) -> int:
     """The reasoning into a new run of the store (tracelab.store.reasoning): the trace goes there."""
-    from tracelab.reasoning import run_meta
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store import TraceWriter
     from tracelab.store.reasoning import ReasoningRecorder
 
@@ -127,9 +131,6 @@ def _record(args: argparse.Namespace, inputs: Any, plans: list[Any]) -> int:
 def _reason(args: argparse.Namespace, inputs: Any, plan: Any, recorder: Any, several: bool) -> dict[str, Any]:
     """One episode: build, step, print (or record) its trace and answer the queries; returns what --json
     prints of it."""
-    from tracelab.commands._progress import compiling_engine
-    from tracelab.reasoning import EpisodeRun
-
     if several and not args.json and recorder is None:
         print(f"episode {plan.episode}:")
     printing = recorder is None and not args.no_trace
@@ -141,6 +142,7 @@ def _reason(args: argparse.Namespace, inputs: Any, plan: Any, recorder: Any, sev
                              recorder=recorder)
         engine = episode.engine
         if args.pyreason_trace is not None:
+            # deferred: loads numba; every command is imported to build the CLI's parser
             from tracelab.pyreason.trace_csv import PyReasonTrace
             pr_trace = PyReasonTrace(engine, inputs.names, inputs.graph_facts)
         stepper = episode.steps(args.steps, rows_each_step=printing or pr_trace is not None)
@@ -197,7 +199,6 @@ def _reason(args: argparse.Namespace, inputs: Any, plan: Any, recorder: Any, sev
 
 
 def _print_answers(args: argparse.Namespace, answers: list[dict[str, Any]]) -> None:
-    from tracelab.engine.program import constant_text
     if args.json:
         return
     for q in args.query:
@@ -211,7 +212,7 @@ def _print_answers(args: argparse.Namespace, answers: list[dict[str, Any]]) -> N
 
 def _what_to_open(run_dir: Path, episode: int) -> None:
     """Commands to read the run, with an atom the reasoning set true last as the example."""
-    from tracelab.engine.program import constant_text
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store import open_run
 
     con = open_run(run_dir)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 
 from tracelab.commands._args import non_negative_int, positive_int
 from tracelab.errors import store_errors
@@ -43,6 +44,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # deferred: loads DuckDB, rerun; every command is imported to build the CLI's parser
     from tracelab.store.reader import open_run, resolve_run
     from tracelab.viewers.replay.outputs import GrpcOutput, SaveOutput
     from tracelab.viewers.replay.recording import ReplayOptions
@@ -76,7 +78,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _wait_forever() -> None:
-    import time
     try:
         while True:
             time.sleep(3600)

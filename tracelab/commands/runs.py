@@ -20,8 +20,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # deferred: loads pyarrow; every command is imported to build the CLI's parser
     import pyarrow as pa
 
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.catalog import DEFAULT_ROOTS, list_runs
     roots = args.dirs or list(DEFAULT_ROOTS)
     with store_errors(), ctrl_c_stops_queries():

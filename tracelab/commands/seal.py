@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 
+from tracelab.commands._progress import progress
 from tracelab.errors import store_errors
 
 
@@ -14,7 +15,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tracelab.commands._progress import progress
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.schema import TABLES
     from tracelab.store.seal import seal_run
     with store_errors(), progress("sealing", total=len(TABLES), unit=None) as bar:

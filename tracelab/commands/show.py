@@ -108,6 +108,7 @@ def render(doc: dict[str, Any], all_rules: bool = False) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.reader import open_run, retrying
     with store_errors(), ctrl_c_stops_queries():
         con = open_run(args.run)

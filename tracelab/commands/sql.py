@@ -62,6 +62,7 @@ def utf8_text(text: str, what: str) -> str:
 
 
 def print_saved_queries() -> None:
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.queries import list_queries
     for q in list_queries():
         print(f"{q.name}: {q.description}{' (game runs only)' if q.needs_board else ''}")
@@ -83,6 +84,7 @@ def _runs_and_query(args: argparse.Namespace) -> tuple[list[str], str | None]:
 
 def _statement(args: argparse.Namespace, query: str | None) -> tuple[str, dict | None, str | None]:
     """The SQL, its parameters, and why it needs a game run (a saved query about games), if it does."""
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.queries import get_query
     if args.saved is not None:
         saved = get_query(args.saved)
@@ -101,6 +103,7 @@ def run(args: argparse.Namespace) -> int:
         if not runs:
             raise UserError("give a run and a SQL query, or --query NAME (see --list)")
         sql, params, needs_board = _statement(args, query)
+        # deferred: loads DuckDB; every command is imported to build the CLI's parser
         from tracelab.store.several import expand_runs
         paths, folder = expand_runs(runs)
         if len(paths) == 1 and not folder:
@@ -112,10 +115,12 @@ def run(args: argparse.Namespace) -> int:
 
 def _query_one_run(args: argparse.Namespace, run: str, sql: str, params: dict | None,
                    needs_board: str | None) -> None:
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.kind import run_board
     from tracelab.store.reader import arrow_stream, fetch_arrow, open_run, query_readonly, retrying
     con = open_run(run)
     if needs_board is not None and run_board(con) is None:
+        # deferred: loads DuckDB; every command is imported to build the CLI's parser
         from tracelab.store.queries import list_queries
         any_run = ", ".join(q.name for q in list_queries() if not q.needs_board)
         raise UserError(f"saved query {args.saved} reads games ({needs_board}), and {run} has no "
@@ -133,8 +138,10 @@ def _query_several_runs(args: argparse.Namespace, paths: list, sql: str, params:
                         needs_board: str | None) -> None:
     """The SQL on the union of the runs' views; a saved query on each run in turn (its rows prefixed by
     the run's name)."""
+    # deferred: loads pyarrow; every command is imported to build the CLI's parser
     import pyarrow as pa
 
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.reader import arrow_stream, query_readonly, retrying
     from tracelab.store.several import SeveralRunsConnection, each_run_stream, run_names
     con = SeveralRunsConnection(paths, run_names(paths))

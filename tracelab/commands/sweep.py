@@ -6,15 +6,17 @@ import argparse
 import shlex
 import signal
 import sys
+import time
 from pathlib import Path
 
 from tracelab.commands._args import positive_int
 from tracelab.commands._interrupt import CtrlCStops
-from tracelab.errors import UserError
+from tracelab.commands.train import load_scenario_arg
+from tracelab.errors import UserError, store_errors
+from tracelab.train.sweep_spec import DEFAULT_METRIC, MODES, SCHEDULERS, build_spec
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from tracelab.train.sweep_spec import DEFAULT_METRIC, MODES, SCHEDULERS
     p = sub.add_parser("sweep", help="search training settings with Ray Tune (grid, random, ASHA early stopping): "
                                      "one run per trial under --out, the best trial named at the end")
     p.add_argument("spec", nargs="?", default=None, metavar="SWEEP.toml",
@@ -44,10 +46,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tracelab.commands.train import load_scenario_arg
-    from tracelab.errors import store_errors
+    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
     from tracelab.train.ray_session import check_address, ray_session
-    from tracelab.train.sweep_spec import build_spec
 
     spec = build_spec(sets=args.set, grids=args.grid, randoms=args.random, file=args.spec, samples=args.samples,
                       scheduler=args.scheduler, metric=args.metric, mode=args.mode)
@@ -58,6 +58,7 @@ def run(args: argparse.Namespace) -> int:
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise UserError(f"{out} is not empty: give another --out or remove it")
     check_address(args.ray)  # the install hint, or an address where nothing answers, before anything starts
+    # deferred: loads DuckDB, Ray, gymnasium, numba; every command is imported to build the CLI's parser
     from tracelab.train.sweep import run_sweep
 
     command = " ".join(shlex.quote(a) for a in ["tracelab", "sweep", *args.argv[1:]])
@@ -98,5 +99,4 @@ def _values(config: dict) -> str:
 
 
 def _default_out() -> str:
-    import time
     return f"runs/sweeps/sweep-{time.strftime('%Y%m%d-%H%M%S')}"

@@ -75,6 +75,7 @@ def trace_where(args: argparse.Namespace) -> tuple[list[str], list[object]]:
 
 
 def trace_sql(args: argparse.Namespace) -> tuple[str, list[object]]:
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.static_facts import STATIC_ROW_SQL
     where, params = trace_where(args)
     if hides_static(args):
@@ -94,6 +95,7 @@ def check_range(args: argparse.Namespace) -> None:
 
 def check_filters(con: "duckdb.DuckDBPyConnection", args: argparse.Namespace) -> None:
     """A filter that matches nothing in the run is a typo: say so, with the close names, not "(0 rows)"."""
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.names import check_name
     for kind, patterns in (("atom", args.atom), ("label", args.label), ("cause", args.rule)):
         for pattern in patterns:
@@ -101,6 +103,7 @@ def check_filters(con: "duckdb.DuckDBPyConnection", args: argparse.Namespace) ->
 
 
 def run(args: argparse.Namespace) -> int:
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.coordinates import run_grid
     from tracelab.store.reader import arrow_stream, open_run, retrying
     check_range(args)
@@ -130,6 +133,7 @@ def run(args: argparse.Namespace) -> int:
 
 def hidden_static_rows(con: "duckdb.DuckDBPyConnection", args: argparse.Namespace) -> int:
     """How many rows under the user's filters are static facts' (the ones hiding them leaves out)."""
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.static_facts import STATIC_ROW_SQL
     where, params = trace_where(args)
     sql = f"SELECT count(*) FROM changes WHERE {' AND '.join(where)} AND {STATIC_ROW_SQL}"
@@ -142,6 +146,7 @@ def _b(lo: float, up: float) -> str:
 
 def paper_table(table: "pa.Table", grid: "Grid | None" = None) -> "pa.Table":
     """The method's columns: t, node/edge, label, old, new, rule; with a grid, cells as `30@(6,3)`."""
+    # deferred: loads pyarrow; every command is imported to build the CLI's parser
     import pyarrow as pa
     c = table.to_pydict()
     nodes = c["node"] if grid is None else [grid.with_coordinates(n) for n in c["node"]]

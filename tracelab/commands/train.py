@@ -6,23 +6,28 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import shlex
-import signal
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
+from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, boolean, byte_size, integer
+from tracelab.commands._notices import say_running_compiles
+from tracelab.commands._training import (
+    check_budget,
+    check_resume_flags,
+    reopen_run,
+    say_resumed,
+    train_until_stopped,
+    training_session,
+    where_to_train,
+)
+from tracelab.commands.train_env import is_env_run, run_env
 from tracelab.errors import UserError, store_errors
-
-# what --resume may change (the rest is the checkpoint's): the threads and the kernel change no result; the
-# budget (steps) may be raised, which moves the ε schedule's fractions with it
-RESUMABLE_FLAGS = {"threads", "kernel", "steps"}
+from tracelab.train.budget import reward_scale_note, too_short_hint
+from tracelab.train.config import LEARNERS, TrainConfig, config_fields, reward_scale_text
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, boolean, byte_size, integer
-    from tracelab.train.config import LEARNERS, config_fields
-
     p = sub.add_parser("train", help="train red with DQN, logging metrics, episodes and traced evaluation "
                                      "games into a run", argument_default=argparse.SUPPRESS)
     for f in config_fields():
@@ -83,6 +88,7 @@ def run_name(text: str) -> str:
 
 def load_scenario_arg(text: str, agents: int | None = None) -> Any:
     """A built-in scenario name or a .toml file, with `agents` per team if given."""
+    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
     from tracelab.game.scenario import builtin_scenario, builtin_scenario_names, load_scenario
     sc = builtin_scenario(text) if text in builtin_scenario_names() else load_scenario(text)
     if agents is not None and agents != sc.agents_per_team:
@@ -91,7 +97,7 @@ def load_scenario_arg(text: str, agents: int | None = None) -> Any:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tracelab.train.config import TrainConfig
+    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
     from tracelab.train.memory import check_training_memory, memory_limit
 
     # --max-memory and --max-groundings are no training settings (cli.main applies the second): not in the
@@ -100,12 +106,12 @@ def run(args: argparse.Namespace) -> int:
              if k not in ("func", "command", "argv", "run", "resume", "max_memory", "max_groundings", "exp_name",
                           "tensorboard", "env", "env_arg")}
     limit = memory_limit(args.max_memory, "--max-memory")
-    from tracelab.commands.train_env import is_env_run, run_env
     if args.env is not None or args.env_arg or (args.resume and is_env_run(Path(args.resume))):
         return run_env(args, given, limit)
     state = None
     with store_errors():  # a bad value in the config or a checkpoint that does not load
         if args.resume:
+            # deferred: loads torch; every command is imported to build the CLI's parser
             from tracelab.train.checkpoint import checkpoint_config, checkpoint_scenario, load_checkpoint
             check_resume_flags(given)
             state = load_checkpoint(args.resume, limit.bytes)
@@ -127,63 +133,21 @@ def run(args: argparse.Namespace) -> int:
                       tensorboard=tensorboard)
 
 
-def where_to_train(args: argparse.Namespace, resuming: bool, name: str) -> tuple[Path, bool, Path | None]:
-    """(the run directory, whether it is the resumed run's own, the TensorBoard log directory or None): a
-    resume continues its run unless --run names another; a new run is runs/<exp-name>-<name>-<time>. The
-    TensorBoard directory is checked before training (the install hint, a log directory already used)."""
-    if resuming:
-        default_run = str(args.resume)
-    else:
-        default_run = f"runs/{args.exp_name or 'train'}-{name}-{time.strftime('%Y%m%d-%H%M%S')}"
-    run_dir = Path(args.run or default_run)
-    same_run = resuming and same_directory(run_dir, Path(args.resume))
-    tensorboard = None
-    if args.tensorboard:
-        from tracelab.train.tensorboard import run_log_dir
-        tensorboard = run_log_dir(Path(args.tensorboard), run_dir.resolve().name, appending=same_run)
-    return run_dir, same_run, tensorboard
-
-
-def check_resume_flags(given: dict[str, Any]) -> None:
-    """--resume takes the checkpoint's config: a UserError naming the flags it may not change."""
-    from tracelab.train.config import flag_of
-    extra = sorted(set(given) - RESUMABLE_FLAGS)
-    if extra:
-        raise UserError(f"--resume continues the checkpoint's config; drop {', '.join(flag_of(k) for k in extra)}")
-
-
-def check_budget(run: str, step: int, steps: int, given: bool, env: str = "") -> None:
-    """--resume: the budget must lie past the checkpoint (a UserError naming how to go on otherwise; `env`:
-    the --env flags the command needs, for an --env run)."""
-    if given and steps < step:
-        raise UserError(f"--total-timesteps {steps:,} is below the checkpoint's step {step:,} of {run}: give "
-                        f"a budget above it")
-    if step >= steps:
-        raise UserError(f"nothing to resume: {run}'s checkpoint is at step {step:,} of its {steps:,}; to train "
-                        f"on, raise the budget: tracelab train --resume {shlex.quote(run)}{env} --total-timesteps N "
-                        f"(N > {step})")
-
-
-def same_directory(a: Path, b: Path) -> bool:
-    try:
-        return a.resolve() == b.resolve()
-    except OSError:
-        return False
-
-
 def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None,
                resumed_from: str | None = None, stop_at: int | None = None, same_run: bool = False,
                tensorboard: Path | None = None) -> int:
     """Train into a new run at `run_dir` (from a checkpoint `state` if given; `same_run`: the checkpoint's
     own run, `run_dir`, continues); returns the exit status. `stop_at`: stop there as Ctrl-C would (tests).
     `tensorboard`: a log directory that also receives the metrics (tracelab.train.tensorboard)."""
+    # deferred: loads torch; every command is imported to build the CLI's parser
     import torch
 
+    # deferred: loads DuckDB, torch; every command is imported to build the CLI's parser
     from tracelab.game.facts import GAME_RULES
     from tracelab.game.scenario import BOARD
     from tracelab.store import TraceWriter
     from tracelab.train.checkpoint import restore
-    from tracelab.commands._notices import say_running_compiles
+    # deferred: loads DuckDB, gymnasium, numba, torch; every command is imported to build the CLI's parser
     from tracelab.train.loop import Trainer
 
     meta = {"command": " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]),
@@ -196,26 +160,17 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
         writer = reopen_run(run_dir, cfg, state["step"], meta["command"]) if same_run else \
             TraceWriter.open(run_dir, meta)
     torch.set_num_threads(cfg.threads)
-    was_deterministic = torch.are_deterministic_algorithms_enabled()
-    torch.use_deterministic_algorithms(cfg.torch_deterministic)
-    from tracelab.train.config import reward_scale_text
     kernel = '' if cfg.kernel == 'auto' else f', {cfg.kernel} kernel'
     print(f"training {scenario.name} ({scenario.agents_per_team}v{scenario.agents_per_team}, "
           f"{'non-Markov' if cfg.non_markov else 'Markov'}, {cfg.backend} backend{kernel}, {cfg.envs} worlds, "
           f"{reward_scale_text(cfg.reward_scale)}) for {cfg.steps:,} steps; torch on {torch.get_num_threads()} "
           f"CPU thread{'s' if torch.get_num_threads() != 1 else ''} (--threads); run: {run_dir}", file=sys.stderr)
-    from tracelab.train.budget import reward_scale_note
     note = reward_scale_note(max(abs(v) for v in dataclasses.asdict(scenario.rewards).values()), cfg.reward_scale)
     if note:
         print(f"note: {note}", file=sys.stderr)
-    trainer = sink = None
-    status = "failed"
-    previous = signal.getsignal(signal.SIGINT)
-    try:
-        if tensorboard is not None:
-            from tracelab.train.tensorboard import TensorBoardSink
-            sink = TensorBoardSink(tensorboard, purge_step=state["step"] if same_run else None)
-        trainer = Trainer(cfg, scenario, writer, run_dir, metric_sinks=[sink] if sink else [])
+    purge_step = state["step"] if same_run else None
+    with training_session(writer, cfg.torch_deterministic, tensorboard, purge_step) as session:
+        session.trainer = trainer = Trainer(cfg, scenario, writer, run_dir, metric_sinks=session.metric_sinks)
         if trainer.learner_note:  # auto fell back from the fused learner
             print(f"note: {trainer.learner_note}", file=sys.stderr)
         if state is not None:
@@ -223,28 +178,15 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
                 restore(trainer, state)
             if same_run:
                 trainer.renumber_games(writer.next_free_episode)
-            from tracelab.commands._training import say_resumed
             say_resumed(trainer, writer, run_dir, resumed_from, same_run)
-
-        from tracelab.commands._training import train_until_stopped
-        status = train_until_stopped(trainer, cfg.steps, stop_at, "a checkpoint", lambda fig: {
+        session.status = train_until_stopped(trainer, cfg.steps, stop_at, "a checkpoint", lambda fig: {
             "win": "-" if fig["win_rate"] is None else f"{100 * fig['win_rate']:.1f}%"})
-    except KeyboardInterrupt:
-        status = "interrupted"
-    finally:
-        signal.signal(signal.SIGINT, previous)
-        torch.use_deterministic_algorithms(was_deterministic)
-        if trainer is not None:
-            trainer.close()
-        if sink is not None:
-            sink.close()
-        writer.close(status=status)
+    trainer, sink, status = session.trainer, session.sink, session.status
     _report(trainer, run_dir, status)
     if sink is not None:
         print(f"  tensorboard --logdir {shlex.quote(str(tensorboard.parent))}   # {sink.scalars:,} scalars in "
               f"{tensorboard}/")
     if trainer is not None and trainer.last_eval is not None:
-        from tracelab.train.budget import too_short_hint
         hint = too_short_hint(trainer.step, trainer.last_eval.wins, scenario.agents_per_team)
         if hint:
             print(f"hint: {hint}", file=sys.stderr)
@@ -252,30 +194,11 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
     return 0 if status == "finished" else 130
 
 
-def reopen_run(run_dir: Path, cfg: Any, step: int, command: str) -> Any:
-    """The checkpoint's own run, reopened for appending: its config takes the (maybe raised) budget and
-    meta.json's `resumes` records this resume (when, at which step, after which status)."""
-    from tracelab.store import TraceWriter
-    from tracelab.store.meta import current_meta, now_iso
-    from tracelab.store.writer import RunSealed
-    before = current_meta(run_dir)
-    resume = {"at": now_iso(), "step": step, "after": before.get("status"), "steps": cfg.steps,
-              "command": command}
-    changes = {"config": {**before.get("config", {}), **cfg.to_dict()},
-               "resumes": [*before.get("resumes", []), resume]}
-    try:
-        return TraceWriter.reopen(run_dir, changes)
-    except RunSealed as e:
-        raise UserError(f"{e}; resume into a new run: tracelab train --resume {shlex.quote(str(run_dir))} "
-                        f"--run NEW") from None
-
-
 def _report(trainer: Any, run_dir: Path, status: str) -> None:
     if trainer is None:
         return
     ev = trainer.last_eval
     run = shlex.quote(str(run_dir))
-    from tracelab.train.config import reward_scale_text
     print(f"{status} at step {trainer.step:,}, {reward_scale_text(trainer.cfg.reward_scale)}"
           + (f"; last evaluation: {ev.wins}/{ev.games} wins "
           f"({100 * ev.win_rate:.1f}%), method's counting {100 * ev.method_win_rate:.1f}%" if ev else ""))

@@ -9,12 +9,22 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import shlex
-import signal
 import sys
 from pathlib import Path
 from typing import Any
 
+from tracelab.commands._training import (
+    check_budget,
+    check_resume_flags,
+    reopen_run,
+    say_resumed,
+    train_until_stopped,
+    training_session,
+    where_to_train,
+)
 from tracelab.errors import UserError, store_errors
+from tracelab.train.config import METHOD_REWARD_SCALE, TrainConfig, flag_of, reward_scale_text
+from tracelab.train.replay import row_length
 
 # TrainConfig fields that describe GridWar (its scenario, teams, opponent, simulator): refused with --env
 GRIDWAR_ONLY = ("scenario", "non_markov", "split_networks", "slow_every_step", "agents", "backend", "kernel",
@@ -22,6 +32,7 @@ GRIDWAR_ONLY = ("scenario", "non_markov", "split_networks", "slow_every_step", "
 
 
 def env_source_of(args: argparse.Namespace) -> Any:
+    # deferred: loads gymnasium; every command is imported to build the CLI's parser
     from tracelab.envs.declared.env_source import EnvSource, parse_env_args
     if args.env is None:
         raise UserError("--env-arg needs --env SPEC_OR_ID")
@@ -30,6 +41,7 @@ def env_source_of(args: argparse.Namespace) -> Any:
 
 def is_env_run(run: Path) -> bool:
     """Whether `run` is a `train --env` run (its meta.json's config names an env)."""
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.meta import current_meta
     try:
         config = current_meta(run).get("config", {})
@@ -39,9 +51,8 @@ def is_env_run(run: Path) -> bool:
 
 
 def run_env(args: argparse.Namespace, given: dict[str, Any], limit: Any) -> int:
-    from tracelab.train.config import METHOD_REWARD_SCALE, TrainConfig, flag_of
+    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
     from tracelab.train.memory import FLOAT
-    from tracelab.train.replay import row_length
 
     source = env_source_of(args) if args.env is not None or args.env_arg else None
     gridwar = [flag_of(k) for k in GRIDWAR_ONLY if k in given]
@@ -51,7 +62,7 @@ def run_env(args: argparse.Namespace, given: dict[str, Any], limit: Any) -> int:
     state = None
     with store_errors():
         if args.resume:
-            from tracelab.commands.train import check_budget, check_resume_flags
+            # deferred: loads gymnasium, torch; every command is imported to build the CLI's parser
             from tracelab.train.checkpoint import checkpoint_config
             from tracelab.train.env_checkpoint import load_env_checkpoint
             check_resume_flags(given)
@@ -65,6 +76,7 @@ def run_env(args: argparse.Namespace, given: dict[str, Any], limit: Any) -> int:
             cfg = TrainConfig(**given)
         probe = source.make()  # a bad id, spec or keyword argument fails here, in one line
     try:
+        # deferred: loads gymnasium; every command is imported to build the CLI's parser
         from tracelab.train.env_source import ObservationEncoder, action_count
         encoder = ObservationEncoder(probe.observation_space, args.env)
         n_actions = action_count(probe.action_space, args.env)
@@ -79,7 +91,6 @@ def run_env(args: argparse.Namespace, given: dict[str, Any], limit: Any) -> int:
         cfg.trace_eval_games = 0  # only a world declared in rules is traced
     elif cfg.trace_eval_games > cfg.eval_games:
         raise UserError(f"--trace-eval-games ({cfg.trace_eval_games}) exceeds --eval-games ({cfg.eval_games})")
-    from tracelab.commands.train import where_to_train
     run_dir, same_run, tensorboard = where_to_train(args, state is not None, source.short_name)
     return train_env_into(cfg, source, run_dir, encoder.describe(), tensorboard=tensorboard, state=state,
                           resumed_from=args.resume, same_run=same_run)
@@ -90,11 +101,12 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
                    resumed_from: str | None = None, same_run: bool = False) -> int:
     """Train into a new run at `run_dir` (from a checkpoint `state` if given; `same_run`: the checkpoint's
     own run, `run_dir`, continues); returns the exit status. `stop_at`: stop there as Ctrl-C would (tests)."""
+    # deferred: loads torch; every command is imported to build the CLI's parser
     import torch
 
-    from tracelab.commands.train import reopen_run
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store import TraceWriter
-    from tracelab.train.config import reward_scale_text
+    # deferred: loads DuckDB, gymnasium, numba, torch; every command is imported to build the CLI's parser
     from tracelab.train.env_trainer import EnvTrainer
 
     meta = {"command": " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]),
@@ -109,37 +121,19 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
         writer = reopen_run(run_dir, cfg, state["step"], meta["command"]) if same_run else \
             TraceWriter.open(run_dir, meta)
     torch.set_num_threads(cfg.threads)
-    was_deterministic = torch.are_deterministic_algorithms_enabled()
-    torch.use_deterministic_algorithms(cfg.torch_deterministic)
     print(f"training on {source.describe()} ({encoding} observations, {cfg.envs} worlds in gymnasium's "
           f"SyncVectorEnv, {reward_scale_text(cfg.reward_scale)}) for {cfg.steps:,} steps; run: {run_dir}",
           file=sys.stderr)
-    trainer = sink = None
-    status = "failed"
-    previous = signal.getsignal(signal.SIGINT)
-    try:
-        if tensorboard is not None:
-            from tracelab.train.tensorboard import TensorBoardSink
-            sink = TensorBoardSink(tensorboard, purge_step=state["step"] if same_run else None)
-        trainer = EnvTrainer(cfg, source, writer, run_dir, metric_sinks=[sink] if sink else [])
+    purge_step = state["step"] if same_run else None
+    with training_session(writer, cfg.torch_deterministic, tensorboard, purge_step) as session:
+        session.trainer = trainer = EnvTrainer(cfg, source, writer, run_dir, metric_sinks=session.metric_sinks)
         if trainer.learner_note:
             print(f"note: {trainer.learner_note}", file=sys.stderr)
         if state is not None:
             _restore(trainer, state, writer, run_dir, resumed_from, same_run)
-
-        from tracelab.commands._training import train_until_stopped
-        status = train_until_stopped(trainer, cfg.steps, stop_at, "a checkpoint", lambda fig: {
+        session.status = train_until_stopped(trainer, cfg.steps, stop_at, "a checkpoint", lambda fig: {
             "ret": "-" if fig["mean_return"] is None else f"{fig['mean_return']:.2f}"})
-    except KeyboardInterrupt:
-        status = "interrupted"
-    finally:
-        signal.signal(signal.SIGINT, previous)
-        torch.use_deterministic_algorithms(was_deterministic)
-        if trainer is not None:
-            trainer.close()
-        if sink is not None:
-            sink.close()
-        writer.close(status=status)
+    trainer, sink, status = session.trainer, session.sink, session.status
     if trainer is not None:
         _report(trainer, source, run_dir, status)
     if sink is not None:
@@ -151,6 +145,7 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
 def _with_declared_meta(meta: dict[str, Any], source: Any) -> dict[str, Any]:
     """The run's meta with what `why`, `tui` and `replay` read of a declared world (its rule files, its
     spec's and rules' texts, what sets each external fact, its board): DeclaredTarget's."""
+    # deferred: loads DuckDB, gymnasium, torch; every command is imported to build the CLI's parser
     from tracelab.envs.declared.play import load_declared
     from tracelab.train.external_eval import DeclaredTarget
     try:
@@ -167,7 +162,6 @@ def _restore(trainer: Any, state: dict[str, Any], writer: Any, run_dir: Path, re
         trainer.load_state(state)
     if same_run:
         trainer.renumber_games(writer.next_free_episode)
-    from tracelab.commands._training import say_resumed
     say_resumed(trainer, writer, run_dir, resumed_from, same_run)
 
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from tracelab.errors import UserError, store_errors
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("tui", help="terminal UI: browse runs, traces, why-trees, rules, SQL, training curves")
@@ -20,17 +22,18 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tracelab.errors import UserError, store_errors
     missing = [p for p in args.paths if not Path(p).exists()]
     if missing:
         raise UserError(f"no such run or directory: {missing[0]!r}")
     if args.screenshots:
+        # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
         from tracelab.viewers.tui.screenshots import write_screenshots
         with store_errors():  # no rsvg-convert, or a run that does not open
             trace_run, training_run, reasoning_run = (Path(p) if p else None for p in (args.paths + [None] * 3)[:3])
             for path in write_screenshots(Path(args.screenshots), trace_run, training_run, reasoning_run):
                 print(path)
         return 0
+    # deferred: loads DuckDB, textual; every command is imported to build the CLI's parser
     from tracelab.viewers.tui.app import TracelabApp
     TracelabApp(args.paths).run()
     return 0

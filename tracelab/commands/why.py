@@ -75,6 +75,7 @@ def change_in_pass(changes: list[tuple[int, int]], atom: str, t: int, pass_no: i
 
 
 def run(args: argparse.Namespace) -> int:
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.coordinates import run_grid
     from tracelab.store.reader import open_run, retrying
     from tracelab.store.why import explain, explain_change, render_why

@@ -6,6 +6,7 @@ import json
 
 from tracelab.commands._args import non_negative_int
 from tracelab.commands._interrupt import ctrl_c_stops_queries
+from tracelab.commands.why import check_at, last_t
 from tracelab.errors import store_errors
 
 
@@ -23,7 +24,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tracelab.commands.why import check_at, last_t
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.reader import open_run, retrying
     from tracelab.store.why import parse_bindings, render_why_not, why_not
     with store_errors(), ctrl_c_stops_queries():

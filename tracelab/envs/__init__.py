@@ -7,6 +7,8 @@ from __future__ import annotations
 import os
 from typing import TYPE_CHECKING, Any
 
+from tracelab.envs.declared.toytext import register_toytext
+
 if TYPE_CHECKING:
     from tracelab.envs.declared.gym_env import DeclaredEnv
     from tracelab.envs.declared.vector_env import DeclaredVectorEnv
@@ -15,6 +17,7 @@ if TYPE_CHECKING:
 def make_env(spec: str | os.PathLike[str], **kwargs: Any) -> DeclaredEnv:
     """The gymnasium Env a spec declares (docs/worlds.md); kwargs: the spec's [params], `render_mode`,
     `kernel` (the engine's)."""
+    # deferred: declared worlds load the engine (numba); importing tracelab.envs only registers the ids
     from tracelab.envs.declared.gym_env import DeclaredEnv
     return DeclaredEnv(spec, **kwargs)
 
@@ -22,13 +25,9 @@ def make_env(spec: str | os.PathLike[str], **kwargs: Any) -> DeclaredEnv:
 def make_vec_env(spec: str | os.PathLike[str], num_envs: int, **kwargs: Any) -> DeclaredVectorEnv:
     """`num_envs` worlds of a spec as one gymnasium VectorEnv on one engine (SAME_STEP autoreset); kwargs:
     the spec's [params], `max_episode_steps`."""
+    # deferred: as in make_env
     from tracelab.envs.declared.vector_env import DeclaredVectorEnv
     return DeclaredVectorEnv(spec, num_envs, **kwargs)
 
 
-def _register() -> None:
-    from tracelab.envs.declared.toytext import register_toytext
-    register_toytext()
-
-
-_register()
+register_toytext()

@@ -11,7 +11,10 @@ process's share. It is started only when both shares are to compile (a cold cach
 waits for it after its own first step; if it fails or is slow, the RuleSim simply compiles what is
 missing itself, as before.
 
-    python -m tracelab.game.rulesim_warmup   (the RuleSim's arguments as JSON on stdin, from `start`)
+This module is the first process's side (start, wait, stop); the second process runs
+tracelab/game/rulesim_warmup_child.py:
+
+    python -m tracelab.game.rulesim_warmup_child   (the RuleSim's arguments as JSON on stdin, from `start`)
 """
 from __future__ import annotations
 
@@ -19,11 +22,14 @@ import json
 import subprocess
 import sys
 import tempfile
-import tomllib
 from typing import IO, Any
 
 from tracelab.engine.numba_cache import all_cached, is_cached
-from tracelab.game.scenario import Scenario, scenario_from_dict
+from tracelab.game.observe import observe_step
+from tracelab.game.opponent import _policy_kernel
+from tracelab.game.rulesim_fused import _make_buffers
+from tracelab.game.rulesim_kernel import encode_actions, read_and_settle, read_back
+from tracelab.game.scenario import Scenario
 
 WAIT_S = 600  # a compile that takes longer is left to die; the RuleSim compiles what it still lacks
 
@@ -31,19 +37,16 @@ WAIT_S = 600  # a compile that takes longer is left to die; the RuleSim compiles
 def game_kernels(fused: bool) -> tuple[Any, ...]:
     """The numba functions a RuleSim calls besides the engine's step kernel (those the second process
     compiles)."""
-    from tracelab.game.observe import observe_step
-    from tracelab.game.opponent import _policy_kernel
-    from tracelab.game.rulesim_fused import _make_buffers
-    from tracelab.game.rulesim_kernel import encode_actions, read_and_settle, read_back
     kernels = (read_back, read_and_settle, observe_step, encode_actions, _policy_kernel)
     return kernels + (_make_buffers,) if fused else kernels
 
 
 def _step_kernel(engine_kernel: str) -> Any:
     if engine_kernel == "lanes":
+        # deferred: only the engine kernel asked for (each module compiles its own)
         from tracelab.engine.lanes import step_lanes
         return step_lanes
-    from tracelab.engine.kernel import step_worlds
+    from tracelab.engine.kernel import step_worlds  # deferred: as above
     return step_worlds
 
 
@@ -94,7 +97,7 @@ def start(scenario: Scenario, n_worlds: int, stack_previous: bool, engine_kernel
     log = tempfile.TemporaryFile()  # its output: Warmup.why on a failure
     try:
         # -P: not the current folder first on sys.path, where another checkout's tracelab/ would be found
-        proc = subprocess.Popen([sys.executable, "-P", "-m", "tracelab.game.rulesim_warmup"],
+        proc = subprocess.Popen([sys.executable, "-P", "-m", "tracelab.game.rulesim_warmup_child"],
                                 stdin=subprocess.PIPE, stdout=log, stderr=log)
     except OSError:  # no process to spare: this one compiles everything, as without it
         log.close()
@@ -114,40 +117,3 @@ def to_child(scenario: Scenario, n_worlds: int, stack_previous: bool, engine_ker
     another argument type, and the kernels would compile for it in vain)."""
     return json.dumps({"scenario": scenario.to_toml(), "n_worlds": n_worlds, "stack_previous": stack_previous,
                        "kernel": engine_kernel, "fused": fused}).encode()
-
-
-def from_parent(message: bytes) -> dict[str, Any]:
-    """compile_game_kernels' arguments from to_child's message."""
-    args = json.loads(message)
-    args["scenario"] = scenario_from_dict(tomllib.loads(args["scenario"]))
-    return args
-
-
-def compile_game_kernels(scenario: Scenario, n_worlds: int, stack_previous: bool, kernel: str, fused: bool) -> None:
-    """Call every game kernel once, as a RuleSim of these arguments does, without stepping its engine."""
-    import numpy as np
-
-    from tracelab.game.rulesim import RuleSim
-    from tracelab.game.rulesim_kernel import read_and_settle
-
-    class UnsteppedRuleSim(RuleSim):
-        def _first_step(self, fused: bool) -> None:
-            """The engine's step kernel is the other process's share."""
-
-    sim = UnsteppedRuleSim(scenario, n_worlds, stack_previous=stack_previous, kernel=kernel, fused=fused)
-    sim.scripted_actions("blue")
-    actions = np.full((n_worlds, scenario.agents_per_team), scenario.action_ids[0], np.int64)
-    sim._action_rows(actions, actions)
-    read_and_settle(sim.engine.is_true(sim._read_atoms), *sim._settle_args)
-    sim.engine.restore(sim._start, np.zeros(1, np.int64))
-    if fused and sim.engine.fused_binding() is not None:
-        sim._bind()
-
-
-def main() -> int:
-    compile_game_kernels(**from_parent(sys.stdin.buffer.read()))
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

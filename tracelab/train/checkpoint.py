@@ -24,6 +24,8 @@ import torch
 
 from tracelab.engine.safe_files import FileRefused
 from tracelab.game.scenario import NOTHING, Scenario, scenario_from_dict
+from tracelab.train.memory import memory_limit
+from tracelab.train.network import Shape, to_state_dict
 from tracelab.validation import (Const, ExactKeys, IntRange, ListOf, MapOf, Mismatch, Nullable, OneOf,
                                  OptionalKey, Tuple, check)
 from tracelab.train.config import TrainConfig, config_schema
@@ -98,7 +100,6 @@ def load_checkpoint(run: str | Path, max_bytes: int | None = None, network: Any 
     array has the shape and type they imply. `max_bytes`: the largest file read (default: the memory
     limit, tracelab.train.memory). `network`: the factory of the custom module a run trained (Python API,
     Trainer's `network`), whose state dict says what the checkpoint's networks must hold."""
-    from tracelab.train.memory import memory_limit
     run = Path(run)
     f = checkpoint_file(run)
     try:
@@ -131,8 +132,8 @@ def load_checkpoint(run: str | Path, max_bytes: int | None = None, network: Any 
     except Mismatch as e:
         raise FileRefused(f"{f}: {e}") from None
     if "best_rows" in state:  # written before the readable learner: the fused layout's rows
-        from tracelab.train.loop import training_net
-        from tracelab.train.network import Shape, to_state_dict
+        # deferred: run_networks loads the game's numba modules, which an env's checkpoint does not need
+        from tracelab.train.run_networks import training_net
         net = training_net(cfg, scenario)
         shape = Shape(net.inputs, net.hidden[0], net.actions)
         state["best_weights"] = {name: to_state_dict(row, shape) for name, row in state.pop("best_rows").items()}
@@ -169,7 +170,8 @@ def _network_tensors(net: Any, network: Any) -> tuple[dict[str, Any], dict[str, 
 def _state_schema(cfg: TrainConfig, scenario: Scenario, network: Any = None) -> dict[str, Any]:
     """Every key of a format-2 checkpoint of this config and scenario, with its type and shape (cfg.learner:
     the learner the checkpoint names)."""
-    from tracelab.train.loop import network_groups, training_net
+    # deferred: see load_checkpoint
+    from tracelab.train.run_networks import network_groups, training_net
     net = training_net(cfg, scenario)
     w, n, d = cfg.envs, scenario.agents_per_team, net.inputs
     learner, best = learner_schema(cfg, net, network)

@@ -32,6 +32,8 @@ from tracelab.train.checkpoint import (as_tensors, check_best, check_buffer_rows
                                        checkpoint_file, checkpoint_path, episode_games_schema, in_range,
                                        learner_schema, parts_schema, rng_state_schema)
 from tracelab.train.config import config_schema
+from tracelab.train.env_source import ObservationEncoder, action_count
+from tracelab.train.qnet import NetSpec
 from tracelab.train.torch_files import Tensor, load_tensors
 from tracelab.validation import Const, MapOf, Mismatch, OneOf, Tuple, check
 
@@ -125,8 +127,6 @@ def checkpoint_env(run: str | Path, max_bytes: int) -> tuple[dict[str, Any], Env
 def load_env_checkpoint(run: str | Path, given: EnvSource | None, max_bytes: int) -> dict[str, Any]:
     """The checkpoint of a `train --env` run, checked against the env the user names (`given`; None: a
     UserError saying how to name it) and the shapes that env and the checkpoint's config imply."""
-    from tracelab.train.env_source import ObservationEncoder, action_count
-    from tracelab.train.qnet import NetSpec
     f = checkpoint_path(Path(run))
     state, recorded = checkpoint_env(run, max_bytes)
     if given is None:

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 from tracelab.engine.safe_files import read_json
 from tracelab.envs.declared.env_source import EnvSource, check_same_env, env_source_from_json
@@ -60,6 +61,7 @@ def one_env_actor(policy: Any) -> Callable[[Any, dict[str, Any]], int]:
 def save_env_policy(path: str | Path, source: EnvSource, weights: dict[str, Any], network: dict[str, Any],
                     encoder: ObservationEncoder, action_names: list[str], mask: bool,
                     trained: dict[str, Any]) -> Path:
+    # deferred: torch, which reading a policy's spec does not need
     import torch
     out = Path(path)
     out.mkdir(parents=True, exist_ok=True)
@@ -162,9 +164,9 @@ def make_vector_env(source: EnvSource, worlds: int, replayable: bool = False) ->
     """`worlds` copies of the env stepped together, a world that ends reset within its step (SAME_STEP, as
     GridWar's vector env): gymnasium's SyncVectorEnv over the env (a declared env's own batched engine is
     not used here yet). `replayable`: each world an env_checkpoint.ReplayableEnv (a checkpoint replays it)."""
-    from gymnasium.vector import AutoresetMode, SyncVectorEnv
     make = source.make
     if replayable:
+        # deferred: env_checkpoint loads torch
         from tracelab.train.env_checkpoint import ReplayableEnv
 
         def make() -> Any:

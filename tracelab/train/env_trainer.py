@@ -25,6 +25,7 @@ from tracelab.train.env_checkpoint import replay_worlds, save_env_checkpoint, wo
 from tracelab.train.env_policy import EnvEvalResult, EnvPolicy, make_vector_env, play_env_games, save_env_policy
 from tracelab.envs.declared.env_source import EnvSource
 from tracelab.train.env_source import ObservationEncoder, action_count
+from tracelab.train.external_eval import DeclaredEvaluator, EvalSettings
 from tracelab.train.learner_protocol import Learner
 from tracelab.train.best_policy import BestPolicy
 from tracelab.train.episode_log import EpisodeLog
@@ -141,7 +142,6 @@ class EnvTrainer:
         cfg = self.cfg
         if self.writer is not None and cfg.trace_eval_games and self.declared:
             if self._evaluator is None:
-                from tracelab.train.external_eval import DeclaredEvaluator, EvalSettings
                 settings = EvalSettings(cfg.eval_every, cfg.eval_games, cfg.trace_eval_games, cfg.eval_envs,
                                         seed=cfg.seed)
                 self._evaluator = DeclaredEvaluator(self.source, self.writer, self.episodes.new_id, settings)

@@ -15,9 +15,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
+import gymnasium as gym
 import numpy as np
 
+import tracelab.envs  # noqa: F401  (registers the toy-text ids)
 from tracelab.errors import UserError
+from tracelab.game.facts import GAME_RULES
+from tracelab.game.scenario import BOARD, NOTHING
 from tracelab.store.writer import TraceWriter
 from tracelab.train.env_policy import EVAL_STEP_CAP, EnvEvalResult, make_vector_env, one_env_actor, play_env_games
 from tracelab.envs.declared.env_source import EnvSource
@@ -78,7 +82,6 @@ class _GreedyTeam:
     mask = False
 
     def __init__(self, act: Act, scenario: Any, stack_previous: bool) -> None:
-        from tracelab.game.scenario import NOTHING
         self._act, self.stack_previous = act, stack_previous
         self.nothing = scenario.action_ids.index(NOTHING)
 
@@ -95,13 +98,12 @@ class GridWarTarget:
     stack_previous: bool = False
 
     def run_meta(self) -> dict[str, Any]:
-        from tracelab.game.facts import GAME_RULES
-        from tracelab.game.scenario import BOARD
         return {"scenario": self.scenario.name, "board": BOARD, "rule_files": [str(GAME_RULES)],
                 "config": {"env": {"name": self.name}, "scenario_toml": self.scenario.to_toml(),
                            "backend": self.backend, "stack_previous": self.stack_previous}}
 
     def outcome(self, info: Mapping[str, Any], terminated: bool, truncated: bool) -> str:
+        # deferred: the game's modules load numba, which a gymnasium env's training does not need
         from tracelab.envs.tracer import outcome_name
         return outcome_name(int(info.get("winner", -1)), truncated)
 
@@ -111,6 +113,7 @@ class GridWarTarget:
 
 class GridWarEvaluator:
     def __init__(self, target: GridWarTarget, writer: TraceWriter, new_id: NewId, settings: EvalSettings) -> None:
+        # deferred: the game's modules load numba, which a gymnasium env's training does not need
         from tracelab.envs.vector_env import GridWarVectorEnv
         from tracelab.train.evaluate import EvalTrace
         self.target, self.settings = target, settings
@@ -123,6 +126,7 @@ class GridWarEvaluator:
                                     copy=False) if rest else None
 
     def run(self, act: Act, step: int, round_no: int) -> dict[str, float]:
+        # deferred: the game's modules load numba, which a gymnasium env's training does not need
         from tracelab.train.evaluate import evaluate
         s, t = self.settings, self.target
         result = evaluate(_GreedyTeam(act, t.scenario, t.stack_previous), t.scenario, games=s.games,
@@ -161,6 +165,7 @@ class DeclaredTarget:
         return self.source.name
 
     def run_meta(self) -> dict[str, Any]:
+        # deferred: the game's modules load numba, which a gymnasium env's training does not need
         from tracelab.envs.declared.recording import declared_run_config
         return {"scenario": Path(self.source.name).name, "rule_files": list(self.spec.program.files),
                 "config": {"env": self.source.to_json(), **declared_run_config(self.spec)}}
@@ -230,14 +235,12 @@ class DeclaredEvaluator:
 def eval_target(env_id: str, env_kwargs: Mapping[str, Any] | None = None) -> EvalTarget:
     """What `env_id` (a GridWar id, a declared env's id, or a spec file) is, for recording and evaluating
     a training on it; a UserError names any other env (its games cannot be traced)."""
-    import gymnasium as gym
-
-    import tracelab.envs  # noqa: F401  (registers the toy-text ids)
+    # deferred: the game's modules load numba, which a gymnasium env's training does not need
     import tracelab.envs.gym_env  # noqa: F401  (registers GridWar's)
     kwargs = dict(env_kwargs or {})
     registered = gym.registry.get(env_id)
     if registered is not None and registered.entry_point == "tracelab.envs.gym_env:GridWarEnv":
-        from tracelab.envs.common import resolve_scenario
+        from tracelab.envs.common import resolve_scenario  # deferred: numba, as above
         merged = {**registered.kwargs, **kwargs}
         return GridWarTarget(env_id, resolve_scenario(merged.get("scenario", "advanced")),
                              merged.get("backend", "rules"), bool(merged.get("stack_previous", False)))

@@ -20,11 +20,11 @@ import torch
 from tracelab.envs.common import ActionMasker
 from tracelab.envs.tracer import outcome_name
 from tracelab.envs.vector_env import GridWarVectorEnv
-from tracelab.game.observe import obs_size
 from tracelab.game.opponent import scripted_actions
 from tracelab.game.scenario import NOTHING, RED, Scenario
 from tracelab.store.writer import TraceWriter
 from tracelab.train.best_policy import BestPolicy
+from tracelab.train.checkpoint import save_checkpoint
 from tracelab.train.config import TrainConfig
 from tracelab.train.evaluate import EvalResult, EvalTrace, evaluate
 from tracelab.train.dqn import DQN, make_q_network
@@ -39,28 +39,13 @@ from tracelab.train.policy import BEST_POLICY_DIR, Policy, may_act, save_policy
 from tracelab.train.qnet import NetSpec, NumpyQ, QFunction, TorchQ
 from tracelab.train.replay import ReplayBuffer
 from tracelab.train.rngs import Generators
+from tracelab.train.run_networks import network_groups, training_net
 from tracelab.train.tensorboard import MetricSink
 from tracelab.train.transitions import PendingTransitions
 from tracelab.train.update_schedule import UpdateSchedule
 
 Progress = Callable[[dict[str, Any]], None]
 NetworkFactory = Callable[[int, int], torch.nn.Module]  # (observation size, actions) -> a Q-network
-
-
-def network_groups(scenario: Scenario, split: bool) -> dict[str, list[int]]:
-    """Network name -> red agents it plays: one shared network, or (split) one for the fast and one for
-    the slow agents."""
-    n = scenario.agents_per_team
-    if not split:
-        return {"shared": list(range(n))}
-    slow = scenario.slow_mask[RED]
-    groups = {"fast": [j for j in range(n) if not slow[j]], "slow": [j for j in range(n) if slow[j]]}
-    return {k: v for k, v in groups.items() if v}
-
-
-def training_net(cfg: TrainConfig, scenario: Scenario) -> NetSpec:
-    """The networks' architecture: the observation (stacked in the non-Markov setup), hidden layers, actions."""
-    return NetSpec(obs_size(scenario, cfg.non_markov), cfg.hidden_sizes, scenario.n_actions, cfg.dueling)
 
 
 def make_learner(kind: str, net: NetSpec, cfg: TrainConfig, generator: torch.Generator,
@@ -237,8 +222,6 @@ class Trainer:
     def train(self, stop_at: int | None = None) -> str:
         """Train until cfg.steps, or until stop_requested (Ctrl-C) or step `stop_at` (as an interruption
         there would); returns "finished" or "interrupted"."""
-        from tracelab.train.checkpoint import save_checkpoint
-
         def collect_and_store() -> None:
             closed, true_next = self.collect()  # every world one ε-greedy step
             self.store(closed, true_next)        # the transitions that closed, into their network's replay

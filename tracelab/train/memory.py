@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from tracelab.engine.grounding_limit import usable_memory
 from tracelab.train.qnet import NetSpec
 from tracelab.train.replay import row_length
 
@@ -43,7 +44,6 @@ def memory_limit(max_bytes: int | None = None, flag: str | None = None) -> Limit
     machine's memory (`flag`, if any, is named as the way to raise it)."""
     if max_bytes is not None:
         return Limit(max_bytes, f"set by {flag}" if flag else "given")
-    from tracelab.engine.grounding_limit import usable_memory  # the machine's, or its container's limit
     total = usable_memory()
     raise_it = f"; {flag} raises it" if flag else ""
     return Limit(int(total * MACHINE_SHARE), f"half of this machine's {_gib(total)}{raise_it}")
@@ -80,7 +80,8 @@ def world_bytes(scenario: Any, shape: NetSpec) -> int:
 def training_estimate(cfg: Any, scenario: Any) -> list[tuple[str, str, int]]:
     """(flags with their values, what they size, estimated bytes) of each part of a training run that
     grows with a setting."""
-    from tracelab.train.loop import network_groups, training_net
+    # deferred: run_networks loads the game's numba modules, which the memory limit alone does not need
+    from tracelab.train.run_networks import network_groups, training_net
     shape, k = training_net(cfg, scenario), len(network_groups(scenario, cfg.split_networks))
     nets = f"{k} network{'s' * (k > 1)}"
     eval_worlds = min(cfg.eval_envs, cfg.eval_games)

@@ -40,6 +40,7 @@ def views(row, shape: Shape) -> tuple:
 def init_row(shape: Shape, generator) -> "torch.Tensor":  # noqa: F821
     """nn.Linear's default initialisation (uniform in ±1/sqrt(fan_in), weights and biases), drawn from a
     seeded torch generator."""
+    # deferred: torch, which the fused layout's numpy side does not need
     import torch
     row = torch.empty(shape.n_params)
     w1, b1, w2, b2 = views(row, shape)

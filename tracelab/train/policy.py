@@ -12,6 +12,7 @@ each network plays. `load_policy` needs neither the training code's objects nor 
 from __future__ import annotations
 
 import json
+import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +20,7 @@ import numpy as np
 
 from tracelab.engine.safe_files import read_json
 from tracelab.game.scenario import ACTION_NAMES, NOTHING, Scenario, scenario_from_dict
+from tracelab.train.memory import check_policy_memory, memory_limit
 from tracelab.validation import Const, IntRange, ListOf, MapOf, OptionalKey, check_file
 from tracelab.train.qnet import HiddenWidths, NetSpec, NumpyQ, QFunction
 
@@ -110,6 +112,7 @@ def save_policy(path: str | Path, scenario: Scenario, weights: dict[str, dict[st
     """Write policy.pt and policy.json into directory `path`. weights: network name -> its state dict;
     agents: network name -> red agent indices it plays; network: policy.json's description of the
     architecture (NetSpec.to_json, or a custom module's)."""
+    # deferred: torch, which reading a policy's spec does not need
     import torch
     out = Path(path)
     out.mkdir(parents=True, exist_ok=True)
@@ -166,7 +169,6 @@ def read_policy_spec(path: str | Path) -> dict[str, Any]:
 
 
 def policy_scenario(spec: dict[str, Any]) -> Scenario:
-    import tomllib
     return scenario_from_dict(tomllib.loads(spec["scenario"]["toml"]), source="policy.json scenario")
 
 
@@ -182,6 +184,7 @@ def spec_net(spec: dict[str, Any]) -> NetSpec:
 
 def _state_dict_schema(names: list[str], net: NetSpec) -> dict[str, Any]:
     """policy.pt: per network, the state dict of the module `net` describes."""
+    # deferred: torch_files loads torch
     from tracelab.train.torch_files import Tensor
     layers = {k: Tensor(None, shape) for k, shape in net.state_dict_shapes().items()}
     return {name: layers for name in names}
@@ -190,7 +193,7 @@ def _state_dict_schema(names: list[str], net: NetSpec) -> dict[str, Any]:
 def read_policy_networks(path: str | Path, spec: dict[str, Any]) -> dict[str, Any]:
     """policy.pt of a policy directory, whose policy.json is `spec`: loaded without running code (torch's
     weights_only), no bigger than the networks it declares, each network's state dict of their shape."""
-    from tracelab.train.memory import check_policy_memory, memory_limit
+    # deferred: torch_files loads torch
     from tracelab.train.torch_files import load_tensors
     d = _policy_dir(path)
     net, names = spec_net(spec), list(spec["networks"])
@@ -211,6 +214,7 @@ def load_policy(path: str | Path, scenario: Scenario | None = None) -> Policy:
     scenario = scenario or trained_on
     stack = spec["observation"]["stack_previous"]
     net = spec_net(spec)
+    # deferred: the game's observation module loads numba
     from tracelab.game.observe import obs_size
     if (obs_size(scenario, stack), scenario.n_actions, scenario.agents_per_team) != \
             (net.inputs, net.actions, trained_on.agents_per_team):

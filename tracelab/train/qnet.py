@@ -125,6 +125,7 @@ class TorchQ:
         self.module = module
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
+        # deferred: torch, which `tracelab --help` (config.py imports this module) does not need
         import torch
         with torch.no_grad():
             return self.module(torch.from_numpy(np.ascontiguousarray(obs, np.float32))).numpy()

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import os
+import socket
 from collections.abc import Iterator
 from contextlib import contextmanager
 from types import ModuleType
@@ -22,6 +23,7 @@ CONNECT_TIMEOUT_S = 5.0  # Ray itself retries an address where nothing answers f
 def import_ray() -> ModuleType:
     """The ray module, or a UserError saying how to install it."""
     try:
+        # deferred: Ray is an optional extra (tracelab[ray])
         import ray
     except ImportError:
         raise UserError(INSTALL_HINT) from None
@@ -71,7 +73,6 @@ def check_address(address: str) -> ModuleType:
 def check_reachable(address: str) -> None:
     """HOST:PORT (or ray://HOST:PORT) answers a TCP connection within CONNECT_TIMEOUT_S, else a UserError
     naming it (ray.init would retry it for minutes, printing warnings)."""
-    import socket
     host, sep, port = address.removeprefix("ray://").rpartition(":")
     if not sep or not host or not port.isdigit():
         raise UserError(f"--ray {address}: expected HOST:PORT, ray://HOST:PORT, auto, or no address (a local Ray)")

@@ -22,6 +22,7 @@ import tomllib
 from dataclasses import dataclass, field, fields
 from typing import Any
 
+from tracelab.engine.safe_files import FileRefused, read_text
 from tracelab.errors import UserError
 from tracelab.train.config import TrainConfig, config_fields
 
@@ -237,13 +238,13 @@ def _top_level(top: dict[str, Any], samples: int | None, scheduler: str | None, 
 
 def evaluation_metrics() -> list[str]:
     """What a trainer's evaluation writes (Tune reads a trial at its evaluations)."""
+    # deferred: evaluate loads the engine (numba) and the store; `tracelab --help` imports this module
     from tracelab.train.evaluate import EvalResult
     return list(EvalResult(games=0, actions_per_win=0.0).metrics())
 
 
 def _read_file(path: str) -> tuple[dict[str, dict[str, tuple[Any, str]]], dict[str, Any]]:
     """A sweep file's tables (field -> (value, where)) and top-level settings; a file is data only."""
-    from tracelab.engine.safe_files import FileRefused, read_text
     try:
         data = tomllib.loads(read_text(path, SPEC_FILE_CAP, what="sweep file"))
     except FileRefused as e:

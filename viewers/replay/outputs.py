@@ -16,6 +16,7 @@ from tracelab.viewers.replay.recording import APPLICATION_ID, new_recording
 def rerun_cli() -> str:
     """The `rerun` executable shipped with the installed rerun-sdk (the same version as the SDK)."""
     try:
+        # deferred: imported under try: without the package, the `rerun` on PATH is used
         import rerun_cli
         exe = Path(rerun_cli.__file__).parent / "rerun"
         if exe.exists():

@@ -22,6 +22,14 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from tracelab.store.reader import open_run
+from tracelab.viewers.tui.app import TracelabApp
+from tracelab.viewers.tui.graph_side import GraphSide
+from tracelab.viewers.tui.lazy_table import LazyTable
+from tracelab.viewers.tui.plot import BraillePlot
+from tracelab.viewers.tui.trace import TracePane
+from tracelab.viewers.tui.why import WhyPane
+
 SIZE = (124, 34)
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -36,10 +44,6 @@ async def _until(pilot: Any, done: Callable[[], bool], timeout: float = 60.0) ->
 
 
 async def _trace_and_why(run: Path) -> tuple[str, str]:
-    from tracelab.viewers.tui.app import TracelabApp
-    from tracelab.viewers.tui.lazy_table import LazyTable
-    from tracelab.viewers.tui.trace import TracePane
-    from tracelab.viewers.tui.why import WhyPane
     app = TracelabApp([run])
     async with app.run_test(size=SIZE) as pilot:
         episodes = app.screen.query_one("#ep-table", LazyTable)
@@ -63,11 +67,6 @@ async def _trace_and_why(run: Path) -> tuple[str, str]:
 
 
 async def _reasoning(run: Path) -> tuple[str, str]:
-    from tracelab.viewers.tui.app import TracelabApp
-    from tracelab.viewers.tui.graph_side import GraphSide
-    from tracelab.viewers.tui.lazy_table import LazyTable
-    from tracelab.viewers.tui.trace import TracePane
-    from tracelab.viewers.tui.why import WhyPane
     app = TracelabApp([run])
     async with app.run_test(size=SIZE) as pilot:
         episodes = app.screen.query_one("#ep-table", LazyTable)
@@ -99,8 +98,6 @@ async def _reasoning(run: Path) -> tuple[str, str]:
 
 
 async def _training(run: Path) -> str:
-    from tracelab.viewers.tui.app import TracelabApp
-    from tracelab.viewers.tui.plot import BraillePlot
     app = TracelabApp([run])
     async with app.run_test(size=SIZE) as pilot:
         await pilot.press("6")
@@ -144,7 +141,6 @@ def to_png(svg: str, png: Path) -> Path:
 
 def training_run_problem(run: Path) -> str | None:
     """Why `run` cannot be the training picture's run (no metrics: not a training run), or None."""
-    from tracelab.store.reader import open_run
     con = open_run(run)
     try:
         (metrics,) = con.execute("SELECT count(*) FROM metrics").fetchone()

@@ -16,6 +16,7 @@ from textual.containers import Grid, Vertical
 from textual.widgets import Static, TabbedContent
 
 from tracelab.viewers.tui.colours import BLUE_TEAM, PARTIAL, RED_TEAM, TRUE, UNKNOWN
+from tracelab.viewers.tui.episodes import EpisodesPane
 from tracelab.viewers.tui.plot import Band, BraillePlot, Series
 from tracelab.viewers.tui.run_overlay import RunCurves, mean_band, run_labels
 from tracelab.viewers.tui.source import LiveReads, RunSource
@@ -136,6 +137,5 @@ class TrainingPane(Vertical, can_focus=True):
         self._draw()
 
     async def action_eval_games(self) -> None:
-        from tracelab.viewers.tui.episodes import EpisodesPane
         await self.screen.action_show("episodes")  # type: ignore[attr-defined]
         self.screen.query_one(EpisodesPane).action_eval_only()

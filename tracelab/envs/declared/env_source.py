@@ -14,6 +14,7 @@ from typing import Any
 
 import gymnasium as gym
 
+from tracelab.envs import make_env  # importing tracelab.envs registers the toy-text ids
 from tracelab.errors import UserError
 
 DECLARED_ENTRY_POINT = "tracelab.envs.declared.gym_env:DeclaredEnv"
@@ -21,7 +22,7 @@ DECLARED_ENTRY_POINT = "tracelab.envs.declared.gym_env:DeclaredEnv"
 
 def _registry() -> Any:
     """gymnasium's registry with tracelab's ids in it (the toy-text games and GridWar's)."""
-    import tracelab.envs  # noqa: F401 - registers the toy-text ids
+    # deferred: GridWar's env loads the engine (numba), which a toy-text or declared id does not need
     import tracelab.envs.gym_env  # noqa: F401 - registers GridWar's ids
     return gym.registry
 
@@ -82,7 +83,6 @@ class EnvSource:
             known = sorted(k for k in _registry() if k.startswith("tracelab/"))
             raise UserError(f"--env {self.name!r}: neither a registered env id ({', '.join(known)}, or "
                             f"gymnasium's) nor a spec file")
-        from tracelab.envs import make_env
         return make_env(self.name, **self.kwargs)
 
 

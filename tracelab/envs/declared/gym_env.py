@@ -43,7 +43,8 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
         self.render_mode = render_mode
         self.world = DeclaredWorld(self.world_spec, kernel=kernel, trace=trace_writer is not None)
         self._recorder: DeclaredRecorder | None = None
-        if trace_writer is not None:  # the store's modules only load for a traced env
+        if trace_writer is not None:
+            # deferred: the store's modules (DuckDB) only load for a traced env
             from tracelab.envs.declared.recording import DeclaredRecorder
             self._recorder = DeclaredRecorder(self.world, trace_writer, trace_episode_ids)
         self.metadata = {**self.metadata, "render_fps": self.world_spec.render_fps}

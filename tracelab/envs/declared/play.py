@@ -19,6 +19,7 @@ def make_declared_env(source: EnvSource, spec: WorldSpec, **options: Any) -> gym
     gym.make (its step limit, TimeLimit, which the traced env reads from its EnvSpec), a file as it is."""
     if source.env_id is not None:
         return gym.make(source.env_id, spec=spec, **options)
+    # deferred: the declared env loads the engine (numba); a registered id goes through gym.make
     from tracelab.envs.declared.gym_env import DeclaredEnv
     return DeclaredEnv(spec, **options)
 

@@ -2,6 +2,7 @@
 names its number of seeds and a spread (min-max over seeds of the final evaluation)."""
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 from typing import Sequence
 
@@ -14,11 +15,12 @@ ARM_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd")
 
 def _pyplot():
     try:
+        # deferred: matplotlib is an optional extra (tracelab[experiments])
         import matplotlib
     except ImportError as e:
         raise RuntimeError("the experiment plots need matplotlib: pip install 'tracelab[experiments]'") from e
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # deferred: after matplotlib.use, as matplotlib asks
     return plt
 
 
@@ -128,11 +130,11 @@ def paired_bars(path: Path, groups: Sequence[str], series: dict[str, Sequence[tu
 
 
 def _title(ax, lines: Sequence[str], small: bool) -> None:
-    import textwrap
     width = 65 if small else 85  # characters that fit over the axes (the legend takes the right)
     ax.set_title("\n".join(textwrap.fill(t, width) for t in lines if t), fontsize=7 if small else 10)
 
 
 def _thousands():
+    # deferred: matplotlib, see _pyplot
     from matplotlib.ticker import FuncFormatter
     return FuncFormatter(lambda v, _: f"{v / 1000:g}K" if abs(v) >= 1000 else f"{v:g}")

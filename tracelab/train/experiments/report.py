@@ -9,22 +9,13 @@ from typing import Any
 
 import numpy as np
 
-from tracelab.provenance import machine_summary, source_commit
+from tracelab.game.scenario import ACTION_NAMES
 from tracelab.train.evaluate import METHOD_CUT, EvalResult
 from tracelab.train.experiments import plots
 from tracelab.train.config import METHOD_REWARD_SCALE, TrainConfig
-from tracelab.train.experiments.run import EVAL_PS, TRAIN_P, ExperimentResult, train_config
-from tracelab.train.experiments.runner import curves, p_suffix
+from tracelab.train.experiments.run import EVAL_PS, TRAIN_P, ExperimentResult, commit, machine, train_config
+from tracelab.train.experiments.runner import curves, p_suffix, run_sql
 from tracelab.train.experiments.stats import spread, wilson
-
-
-def commit() -> str:
-    return source_commit() or "unknown (not a git checkout)"
-
-
-def machine() -> str:
-    """Called when the experiment ends: the load average is the one at its end."""
-    return machine_summary("at the end")
 
 
 # the settings of the method's DQN (docs/training.md, "The command"); a report names those an arm changes
@@ -139,8 +130,6 @@ def write_report(result: ExperimentResult, report_dir: Path) -> Path:
 
 def action_section(result: ExperimentResult) -> list[str]:
     """Red's actions in each seed's last traced evaluation games: what the final greedy policy does."""
-    from tracelab.game.scenario import ACTION_NAMES
-    from tracelab.train.experiments.runner import run_sql
     ids = sorted({int(i) for ar in result.arms for i in ar.arm.build_scenario().action_ids})
     names = [ACTION_NAMES[i] for i in ids]
     L = ["## What the final policies do", "",
@@ -410,4 +399,4 @@ def make_plots(result: ExperimentResult, fig_dir: Path) -> list[tuple[str, Path]
     return out
 
 
-__all__ = ["write_report", "commit", "machine", "np", "p_suffix"]
+__all__ = ["write_report", "np", "p_suffix"]

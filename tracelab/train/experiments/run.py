@@ -3,6 +3,7 @@ experiment's own measurements (portability, reward shaping), then the report and
 from __future__ import annotations
 
 import json
+import multiprocessing
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -11,11 +12,21 @@ from typing import Any, Callable
 import numpy as np
 
 from tracelab.game.scenario import ACTION_NAMES
+from tracelab.provenance import machine_summary, source_commit
 from tracelab.train.config import TrainConfig
 from tracelab.train.evaluate import EvalResult, evaluate
 from tracelab.train.experiments.definitions import Arm, Budget, Experiment
-from tracelab.train.experiments.runner import SeedRun, p_suffix, run_query, run_sql, traced_games, train_seed
+from tracelab.train.experiments.runner import (
+    SeedRun,
+    final_eval_seed,
+    p_suffix,
+    run_query,
+    run_sql,
+    traced_games,
+    train_seed,
+)
 from tracelab.train.experiments.stats import bootstrap_diff_ci, two_proportion_test
+from tracelab.train.policy import load_policy
 
 TRAIN_P, EVAL_PS = 0.7, (0.3, 0.7)  # the method's code: trained against p = 0.7, evaluated against 0.3
 SAVED_QUERIES = ("hid_behind_mountain", "learner_events", "actions_per_win", "steps_before_loss")
@@ -43,6 +54,16 @@ class ExperimentResult:
     machine: str = ""  # cores, CPU, the load when it ended
 
 
+def commit() -> str:
+    """The code that trains: git HEAD (with its uncommitted-changes note) when the experiment starts."""
+    return source_commit() or "unknown (not a git checkout)"
+
+
+def machine() -> str:
+    """Called when the experiment ends: the load average is the one at its end."""
+    return machine_summary("at the end")
+
+
 def train_config(exp: Experiment, arm: Arm, budget: Budget, seed: int) -> TrainConfig:
     evals = max(1, budget.evals)
     return TrainConfig(scenario=arm.scenario, agents=arm.agents, non_markov=arm.non_markov, steps=budget.steps,
@@ -61,7 +82,6 @@ def run_experiment(exp: Experiment, budget: Budget, out_dir: Path, command: str,
     policies. `kernel`: the trainings' (TrainConfig.kernel; the results do not depend on it)."""
     t0 = time.perf_counter()
     out_dir.mkdir(parents=True, exist_ok=True)
-    from tracelab.train.experiments.report import commit
     result = ExperimentResult(exp, budget, quick, out_dir, [ArmResult(a) for a in exp.arms], command=command,
                               commit=commit())
     tasks = [(ar, seed) for ar in result.arms for seed in range(budget.seeds)]
@@ -74,6 +94,7 @@ def run_experiment(exp: Experiment, budget: Budget, out_dir: Path, command: str,
         say(f"[{exp.name}] {ar.arm.label}, seed {seed}: training {budget.steps:,} steps into "
             f"{out_dir / f'{ar.arm.slug}-seed{seed}'}")
     if ray is not None:
+        # deferred: Ray is an optional extra (tracelab[ray])
         from tracelab.train.experiments.ray_tasks import in_ray_tasks
         runs = in_ray_tasks([task_args(ar, seed) for ar, seed in tasks], ray)
     elif jobs > 1 and len(tasks) > 1:
@@ -90,7 +111,6 @@ def run_experiment(exp: Experiment, budget: Budget, out_dir: Path, command: str,
         elif exp.name == "reward-shaping":
             ar.extra[seed] = shaping_traces(sr, scenario, out_dir, 6 if quick else 100, command, say)
     result.wall_s = time.perf_counter() - t0
-    from tracelab.train.experiments.report import machine
     result.machine = machine()
     (out_dir / f"{exp.name}.json").write_text(json.dumps(summary_json(result), indent=1))
     return result
@@ -100,8 +120,6 @@ def _in_workers(jobs: int, args: list[tuple]) -> list[SeedRun]:
     """train_seed on each of `args` in `jobs` spawned processes. Any way out before all are done (Ctrl-C,
     SIGTERM, a failed training) terminates the workers: a killed experiment leaves no orphans training on
     (each worker's SIGTERM closes its run as 'interrupted', docs/store.md)."""
-    import multiprocessing
-
     pool = multiprocessing.get_context("spawn").Pool(jobs)
     try:
         pending = [pool.apply_async(train_seed, a) for a in args]
@@ -120,9 +138,6 @@ def portability(sr: SeedRun, scenario: Any, games: int, say: Say) -> dict[str, A
     """Per opponent p: the policy's games in the reference simulator with the rules run's seeds (game by
     game identical if the simulators agree) and with other seeds (an independent sample: the gap and a
     test of it)."""
-    from tracelab.train.policy import load_policy
-    from tracelab.train.experiments.runner import final_eval_seed
-
     policy = load_policy(sr.policy_dir, scenario)
     out: dict[str, Any] = {}
     for p in EVAL_PS:
@@ -152,9 +167,6 @@ def shaping_traces(sr: SeedRun, scenario: Any, out_dir: Path, games: int, comman
                    say: Say) -> dict[str, Any]:
     """Trace `games` evaluation games of the final policy (against p = 0.3) into their own run and read
     the saved queries' figures off it."""
-    from tracelab.train.policy import load_policy
-    from tracelab.train.experiments.runner import final_eval_seed
-
     policy = load_policy(sr.policy_dir, scenario)
     trace_dir = out_dir / f"{sr.run_dir.name}-traces"
     traced_games(policy, scenario, trace_dir, games=games, backend="rules", seed=final_eval_seed(sr.seed, 0.3) + 2,

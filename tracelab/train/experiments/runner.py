@@ -11,7 +11,11 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
-from tracelab.game.scenario import Scenario
+from tracelab.game.facts import GAME_RULES
+from tracelab.game.scenario import BOARD, Scenario
+from tracelab.store import TraceWriter
+from tracelab.store.queries import get_query
+from tracelab.store.reader import fetch_arrow, open_run, query_readonly, retrying
 from tracelab.train.config import TrainConfig
 from tracelab.train.evaluate import EvalResult, evaluate, evaluate_into
 from tracelab.train.policy import BEST_POLICY_DIR, Policy, load_policy
@@ -52,11 +56,9 @@ def train_seed(cfg: TrainConfig, scenario: Scenario, run_dir: Path, command: str
     against each opponent p in `eval_ps`, writing `eval/...@pP` metrics at the last step. `metric_sinks`
     receive the training's metrics besides the run; `started` is called with the Trainer before it trains
     (a sweep's trial stops it through it: Trainer.stop_requested)."""
+    # deferred: torch and the trainer, which reading results and queries does not need
     import torch
 
-    from tracelab.game.facts import GAME_RULES
-    from tracelab.game.scenario import BOARD
-    from tracelab.store import TraceWriter
     from tracelab.train.loop import Trainer
 
     meta = {"command": f"tracelab train (from: {command})", "scenario": scenario.name, "seed": cfg.seed,
@@ -98,10 +100,6 @@ def traced_games(policy: Policy, scenario: Scenario, run_dir: Path, *, games: in
                  opponent_p: float, command: str, about: dict[str, Any]) -> EvalResult:
     """`games` evaluation games of `policy`, every one traced in full into a new run (as `tracelab eval
     --run` does): the saved queries then read only evaluation games."""
-    from tracelab.game.facts import GAME_RULES
-    from tracelab.game.scenario import BOARD
-    from tracelab.store import TraceWriter
-
     meta = {"command": command, "scenario": scenario.name, "seed": seed, "rule_files": [str(GAME_RULES)],
             "board": BOARD,
             "config": {**about, "games": games, "backend": backend, "opponent_p": opponent_p,
@@ -112,9 +110,6 @@ def traced_games(policy: Policy, scenario: Scenario, run_dir: Path, *, games: in
 
 def run_query(run_dir: Path, name: str, **params: str) -> list[dict[str, Any]]:
     """A saved query (tracelab/queries/NAME.sql) on a run, through the sandboxed read path."""
-    from tracelab.store.queries import get_query
-    from tracelab.store.reader import fetch_arrow, open_run, query_readonly, retrying
-
     saved = get_query(name)
     con = open_run(run_dir)
     try:
@@ -126,8 +121,6 @@ def run_query(run_dir: Path, name: str, **params: str) -> list[dict[str, Any]]:
 
 def run_sql(run_dir: Path, sql: str) -> list[dict[str, Any]]:
     """A read-only query on a run, through the sandboxed read path."""
-    from tracelab.store.reader import fetch_arrow, open_run, query_readonly, retrying
-
     con = open_run(run_dir)
     try:
         return retrying(lambda: fetch_arrow(query_readonly(con, sql))).to_pylist()
