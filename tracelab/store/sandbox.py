@@ -92,7 +92,10 @@ def query_memory() -> QueryMemory:
         total = usable_memory()
         memory = min(total // MACHINE_FRACTION, DEFAULT_CAP)
         source = f"a quarter of this machine's {human_bytes(total)}, at most {human_bytes(DEFAULT_CAP)}"
-    free = shutil.disk_usage(tempfile.gettempdir()).free
+    try:
+        free = shutil.disk_usage(tempfile.gettempdir()).free
+    except OSError:
+        free = 0  # no temp folder: no spilling (_spill_directory)
     threads = max(1, min(os.cpu_count() or 1, memory // BYTES_PER_THREAD))
     return QueryMemory(memory, max(1, min(SPILL_FACTOR * memory, free // 2)), threads, source)
 
@@ -118,13 +121,17 @@ _spill_names = itertools.count()
 def _spill_directory() -> str:
     """A new folder name (DuckDB creates it when it first spills and removes it on close) inside a private
     folder of this process (mkdtemp: 0700, so no other user can plant or read anything there), which is
-    removed at exit."""
+    removed at exit; "" (no spilling: a query needing more memory fails) where no temp folder can be made."""
     if not _spill_root:
-        root = tempfile.mkdtemp(prefix="tracelab-spill-")
+        try:
+            root = tempfile.mkdtemp(prefix="tracelab-spill-")
+        except OSError:
+            return ""
         owner = os.getpid()  # a forked child inherits the handler, not the folder
         atexit.register(lambda: os.getpid() == owner and shutil.rmtree(root, ignore_errors=True))
         _spill_root.append(root)
     return os.path.join(_spill_root[0], f"{os.getpid()}-{next(_spill_names)}")
+
 
 READONLY_STATEMENTS = {duckdb.StatementType.SELECT}
 
