@@ -42,6 +42,23 @@ def _kind(mode: int) -> str:
     return "not a regular file"
 
 
+_BYTE_UNITS = {"": 1, "K": 1 << 10, "M": MIB, "G": 1 << 30, "T": 1 << 40}
+
+
+def parse_byte_size(text: str) -> int:
+    """A number of bytes: 2000000000, 500M, 8G, 1.5T (binary units; a trailing B or iB is allowed);
+    ValueError naming the text otherwise."""
+    s = text.strip().upper().removesuffix("IB").removesuffix("B")
+    unit = s[-1:] if s[-1:] in _BYTE_UNITS else ""
+    try:
+        value = float(s[:len(s) - len(unit)]) * _BYTE_UNITS[unit]
+    except ValueError:
+        raise ValueError(f"expected a size such as 8G or 500M, got {text!r}") from None
+    if not value >= 1 or value == float("inf"):
+        raise ValueError(f"must be at least 1 byte, got {text!r}")
+    return int(value)
+
+
 def human_bytes(n: int) -> str:
     for unit, size in (("GiB", 1 << 30), ("MiB", MIB), ("KiB", 1 << 10)):
         if n >= size:

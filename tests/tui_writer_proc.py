@@ -5,19 +5,23 @@ train  the training-run contract (HELPER_GUIDE): meta command `tracelab train ..
        begin info {"kind": "train", "train_step": N}, `metrics` rows (loss, epsilon, train_return,
        eval/win_rate); prints `step N`
 trace  episode 0 growing: 50 synthetic change rows a round (tracelab.store.bench's format); prints
-       `rows N`"""
+       `rows N`
+Ctrl-C stops it at the end of a round, as `tracelab train` stops at the end of a step (CtrlCBetweenSteps):
+a KeyboardInterrupt raised wherever the handler happened to run could be swallowed (the process then wrote
+on until its cap, and the TUI test waiting 30 s for it to end failed on a loaded machine)."""
 from __future__ import annotations
 
 import sys
 import time
 from pathlib import Path
 
+from tracelab.commands._interrupt import CtrlCBetweenSteps
 from tracelab.store.writer import TraceWriter
 
 
 def trace(run_dir: str, stop_file: str) -> None:
     from tracelab.store.bench import synthetic_trace, synthetic_vocabulary
-    with TraceWriter(run_dir, {"command": "tui test trace"}, flush_interval=0.1) as w:
+    with TraceWriter(run_dir, {"command": "tui test trace"}, flush_interval=0.1) as w, CtrlCBetweenSteps() as ctrl_c:
         w.write_vocabulary(synthetic_vocabulary())
         w.begin_episode(0, t_start=0)
         rows = 0
@@ -26,11 +30,12 @@ def trace(run_dir: str, stop_file: str) -> None:
             w.flush()
             print(f"rows {rows}", flush=True)
             time.sleep(0.2)
+            ctrl_c.check()
 
 
 def train(run_dir: str, stop_file: str) -> None:
     with TraceWriter(run_dir, {"command": "tracelab train --test", "config": {"test": True}},
-                     flush_interval=0.1) as w:
+                     flush_interval=0.1) as w, CtrlCBetweenSteps() as ctrl_c:
         step, episode = 0, 0
         # the stop file ends it; the cap (~2 min of rounds) only bounds a test that never touches it: at 5,000
         # steps (~10 s) a TUI test on a loaded machine once sent its Ctrl-C to a training already finished
@@ -46,6 +51,7 @@ def train(run_dir: str, stop_file: str) -> None:
             print(f"step {step}", flush=True)
             episode += 1
             time.sleep(0.2)
+            ctrl_c.check()
 
 
 if __name__ == "__main__":

@@ -21,7 +21,7 @@ _FOREIGN = (
     ("tracelab.engine.errors", ("ProgramError", "InconsistencyError", "FixpointError")),
     ("tracelab.engine.safe_files", ("FileRefused",)),
     ("tracelab.game.scenario", ("ScenarioError",)),
-    ("tracelab.store.sandbox", ("QueryRefused",)),  # raised wherever a query's rows are read
+    ("tracelab.store.sandbox", ("QueryRefused", "SandboxSettingError")),  # wherever a query's rows are read
     ("duckdb", ("Error",)),
 )
 
@@ -68,6 +68,9 @@ def user_error_message(e: BaseException) -> str | None:
         if e.strerror and e.filename is not None:
             return f"{e.filename}: {e.strerror}"
         return one_line(str(e))
+    sandbox = sys.modules.get("tracelab.store.sandbox")
+    if sandbox is not None and isinstance(e, sandbox.duckdb.OutOfMemoryException):
+        return sandbox.out_of_memory_message(e)  # names the limit and how to raise it
     if isinstance(e, _foreign_user_errors()):
         return one_line(str(e))
     return None

@@ -7,6 +7,7 @@ from contextlib import contextmanager
 
 from tracelab.engine.grounding_limit import grounding_limit
 from tracelab.engine.kernel_names import KERNELS as ENGINE_KERNELS  # noqa: F401  (--kernel's choices, for the commands)
+from tracelab.engine.safe_files import parse_byte_size
 
 
 def integer(text: str) -> int:
@@ -55,20 +56,12 @@ def positive_int(text: str) -> int:
 
 
 
-_BYTE_UNITS = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
-
-
 def byte_size(text: str) -> int:
     """A number of bytes: 2000000000, 500M, 8G, 1.5T (binary units; a trailing B or iB is allowed)."""
-    s = text.strip().upper().removesuffix("IB").removesuffix("B")
-    unit = s[-1:] if s[-1:] in _BYTE_UNITS else ""
     try:
-        value = float(s[:len(s) - len(unit)]) * _BYTE_UNITS[unit]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a size such as 8G or 500M, got {text!r}") from None
-    if not value >= 1 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"must be at least 1 byte, got {text!r}")
-    return int(value)
+        return parse_byte_size(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
 
 
 def add_max_groundings(parser: argparse.ArgumentParser) -> None:

@@ -8,7 +8,10 @@ Two layers (docs/store.md, "Security model"):
      no URL, no COPY/ATTACH/EXPORT to anywhere else;
    - extensions are never installed nor loaded (autoinstall/autoload off, community extensions off);
    - DuckDB's home, extension and secret directories point at a path under /dev/null, where nothing can
-     be created, and spilling to a temp directory is off: a query writes no file anywhere;
+     be created: a query writes no file anywhere but DuckDB's own spill files;
+   - memory is bounded (`query_memory`: a quarter of the machine's, at most 4 GiB, or
+     $TRACELAB_QUERY_MEMORY), and so are the threads and the spill files, which DuckDB writes only in a
+     private folder of this process (0700, emptied when the connection closes);
    - `lock_configuration = true` once the views exist, so no statement can switch any of this back.
    The order matters: DuckDB refuses to change `allowed_directories` once external access is off, and
    an ATTACH needs access to the file (and its .wal name), so the sealed file is attached first.
@@ -17,10 +20,20 @@ Two layers (docs/store.md, "Security model"):
    ANALYZE runs it. This layer names the problem in plain words; layer 1 holds even if it missed one."""
 from __future__ import annotations
 
+import atexit
+import itertools
+import math
+import os
+import shutil
+import tempfile
 import weakref
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import duckdb
+
+from tracelab.engine.grounding_limit import usable_memory
+from tracelab.engine.safe_files import human_bytes, parse_byte_size
 
 # Not a directory, so nothing can ever be created under it (not even by root).
 NOWHERE = "/dev/null/tracelab"
@@ -29,11 +42,96 @@ SANDBOX_CONFIG: dict[str, object] = {
     "autoinstall_known_extensions": False,
     "autoload_known_extensions": False,
     "allow_community_extensions": False,
-    "temp_directory": "",            # no spilling to disk: a query writes nothing
     "home_directory": NOWHERE,       # DuckDB would create ~/.duckdb for extensions and secrets
     "extension_directory": NOWHERE,
     "secret_directory": NOWHERE,
 }
+
+GIB = 1 << 30
+QUERY_MEMORY_ENV = "TRACELAB_QUERY_MEMORY"
+# DuckDB's own default is 80% of the machine, per connection: a `trace --limit 5` on a 400M-row live run
+# once took 18.5 GB. By default a connection gets a quarter of the machine, at most 4 GiB...
+MACHINE_FRACTION = 4
+DEFAULT_CAP = 4 * GIB
+# ... and may spill up to 4 times that to disk (at most half the free space there): a big sort or join
+# still finishes, slower, instead of failing, and never fills the disk (DuckDB's default: 90% of it).
+SPILL_FACTOR = 4
+# one thread per GiB (DuckDB advises 1-4 GiB per thread for joins and aggregates; each thread holds its
+# own buffers, so more threads than that fail sooner under the same limit)
+BYTES_PER_THREAD = GIB
+
+
+class SandboxSettingError(ValueError):
+    """A setting of the sandbox given in the environment that cannot be used (one line, names it)."""
+
+
+@dataclass(frozen=True)
+class QueryMemory:
+    """What one sandbox connection may use: bytes of memory and of spill files, and threads."""
+    memory: int
+    spill: int
+    threads: int
+    source: str  # how the memory limit was chosen, for messages
+
+    def duckdb_config(self) -> dict[str, object]:
+        return {"memory_limit": f"{self.memory}B", "max_temp_directory_size": f"{self.spill}B",
+                "threads": self.threads}
+
+
+def query_memory() -> QueryMemory:
+    """The limits of a sandbox connection: $TRACELAB_QUERY_MEMORY (a size: 8G, 500M) if set, else a
+    quarter of this machine's memory (or its container's), at most 4 GiB."""
+    given = os.environ.get(QUERY_MEMORY_ENV, "").strip()
+    if given:
+        try:
+            memory = parse_byte_size(given)
+        except ValueError as e:
+            raise SandboxSettingError(f"{QUERY_MEMORY_ENV}={given!r}: {e}") from None
+        source = f"set by {QUERY_MEMORY_ENV}"
+    else:
+        total = usable_memory()
+        memory = min(total // MACHINE_FRACTION, DEFAULT_CAP)
+        source = f"a quarter of this machine's {human_bytes(total)}, at most {human_bytes(DEFAULT_CAP)}"
+    try:
+        free = shutil.disk_usage(tempfile.gettempdir()).free
+    except OSError:
+        free = 0  # no temp folder: no spilling (_spill_directory)
+    threads = max(1, min(os.cpu_count() or 1, memory // BYTES_PER_THREAD))
+    return QueryMemory(memory, max(1, min(SPILL_FACTOR * memory, free // 2)), threads, source)
+
+
+def out_of_memory_message(e: duckdb.OutOfMemoryException) -> str:
+    """DuckDB's out-of-memory error (a dozen lines advising SET statements the sandbox refuses) as one
+    line naming the limits and the way to raise them."""
+    first = str(e).splitlines()[0].removeprefix("Out of Memory Error: ").rstrip(".")
+    try:
+        limits = query_memory()
+    except SandboxSettingError as bad:
+        return f"out of memory ({first}); {bad}"
+    bigger = math.ceil(2 * limits.memory / GIB)
+    return (f"out of memory ({first}): a query on a run may use {human_bytes(limits.memory)} of memory "
+            f"({limits.source}) and spill {human_bytes(limits.spill)} to disk; set {QUERY_MEMORY_ENV} "
+            f"to raise both (e.g. {QUERY_MEMORY_ENV}={bigger}G)")
+
+
+_spill_root: list[str] = []   # this process's private folder for DuckDB's spill files, once made
+_spill_names = itertools.count()
+
+
+def _spill_directory() -> str:
+    """A new folder name (DuckDB creates it when it first spills and removes it on close) inside a private
+    folder of this process (mkdtemp: 0700, so no other user can plant or read anything there), which is
+    removed at exit; "" (no spilling: a query needing more memory fails) where no temp folder can be made."""
+    if not _spill_root:
+        try:
+            root = tempfile.mkdtemp(prefix="tracelab-spill-")
+        except OSError:
+            return ""
+        owner = os.getpid()  # a forked child inherits the handler, not the folder
+        atexit.register(lambda: os.getpid() == owner and shutil.rmtree(root, ignore_errors=True))
+        _spill_root.append(root)
+    return os.path.join(_spill_root[0], f"{os.getpid()}-{next(_spill_names)}")
+
 
 READONLY_STATEMENTS = {duckdb.StatementType.SELECT}
 
@@ -47,9 +145,11 @@ _CONNECTIONS: weakref.WeakSet[duckdb.DuckDBPyConnection] = weakref.WeakSet()
 
 
 def sandbox_connection(database: str = ":memory:") -> duckdb.DuckDBPyConnection:
-    """A DuckDB connection (in memory; `seal` passes the file it builds) with extensions, home and temp
-    directories already shut off; call lock_down() once anything it must attach is attached."""
-    con = duckdb.connect(database, config=dict(SANDBOX_CONFIG))
+    """A DuckDB connection (in memory; `seal` passes the file it builds) with extensions and home
+    directories already shut off and its memory, threads and spill files bounded (query_memory), all in
+    force before any statement runs; call lock_down() once anything it must attach is attached."""
+    config = {**SANDBOX_CONFIG, **query_memory().duckdb_config(), "temp_directory": _spill_directory()}
+    con = duckdb.connect(database, config=config)
     _CONNECTIONS.add(con)
     return con
 

@@ -9,7 +9,13 @@ table at the same moment (layout and atomicity: tracelab.store.parts):
 - when the buffers hold `part_rows` rows (or `max_pending_rows`, if fewer), and on flush() / close();
 every publication is one new immutable part per table that has rows (small parts are compacted).
 A kill -9 therefore loses at most the rows of the last second (or since the last episode end), and the
-run still opens. SIGTERM and interpreter exit close open writers (status 'interrupted')."""
+run still opens. SIGTERM and interpreter exit close open writers (status 'interrupted').
+
+Ctrl-C and SIGTERM raise wherever Python's handler runs in the calling thread, which may be inside a
+hand-over to the flusher. So the caller's thread takes the writer's lock only through a C lock's own `with`
+(no Python frame between acquiring and the block's cleanup, where threading.Condition's __enter__ has one:
+a KeyboardInterrupt landing there left the lock held, and close() then waited forever for the flusher) and
+never waits on a Condition; it waits on a lock of its own that the flusher releases (`_wait_for_flusher`)."""
 from __future__ import annotations
 
 import atexit
@@ -20,7 +26,7 @@ import signal
 import threading
 import time
 import weakref
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -146,7 +152,9 @@ class TraceWriter:
             self._meta = reopened_meta(read_meta(self.run_dir), _reopen)
         write_meta(self.run_dir, self._meta)  # the run exists (or runs again) from here on
 
-        self._cond = threading.Condition()
+        self._lock = threading.Lock()  # the caller's thread takes it only by `with` (see the module's doc)
+        self._cond = threading.Condition(self._lock)  # the flusher waits on it; the caller only notifies
+        self._waiters: list[Any] = []  # the caller's locks the flusher releases after each flush
         self._pending: dict[str, list[pa.Table]] = {t: [] for t in TABLES}
         self._pending_rows = 0
         self._pending_since: float | None = None
@@ -377,7 +385,7 @@ class TraceWriter:
             raise RuntimeError(f"the trace writer of {str(self.run_dir)!r} is closed")
 
     def _append(self, tables: Mapping[str, pa.Table], urgent: bool = False) -> None:
-        with self._cond:
+        with self._lock:
             self._check()
             added = 0
             for name, table in tables.items():
@@ -391,20 +399,37 @@ class TraceWriter:
             self._urgent = self._urgent or urgent
             if first or urgent or self._pending_rows >= self._flush_rows:
                 self._cond.notify_all()  # the flusher recomputes when its next flush is due
-            while self._pending_rows >= self.max_pending_rows and self._error is None:
-                self._cond.wait(0.1)  # back-pressure: let the flusher catch up
-            self._check()
+        # back-pressure: let the flusher catch up
+        self._wait_for_flusher(lambda: self._pending_rows < self.max_pending_rows)
 
     def flush(self) -> None:
         """Publish everything written so far; returns when readers can see it."""
-        with self._cond:
+        with self._lock:
             self._check()
             self._requested += 1
             mine = self._requested
             self._cond.notify_all()
-            while self._done < mine and self._error is None:
-                self._cond.wait(0.1)
-            self._check()
+        self._wait_for_flusher(lambda: self._done >= mine)
+
+    def _wait_for_flusher(self, done: Callable[[], bool]) -> None:
+        """Return once done() holds (checked under the lock), raising if the writer failed meanwhile. The
+        wait is on a new lock of this call's own, which the flusher releases after its next flush: an
+        interrupt landing anywhere here leaves no lock held that the flusher or close() needs."""
+        while True:
+            with self._lock:
+                self._check()
+                if done():
+                    return
+                waiter = threading.Lock()
+                waiter.acquire()
+                self._waiters.append(waiter)
+            waiter.acquire(timeout=0.1)
+
+    def _wake_waiters(self) -> None:
+        """The flusher, holding the lock: release every waiter registered so far."""
+        for waiter in self._waiters:
+            waiter.release()
+        self._waiters.clear()
 
     def _due_in(self, now: float) -> float | None:
         """Seconds until a flush is due (<= 0: now), or None if nothing is due at all."""
@@ -438,13 +463,13 @@ class TraceWriter:
             except BaseException as e:  # noqa: BLE001 - reported to the caller by _check()
                 with self._cond:
                     self._error = e
-                    self._cond.notify_all()
+                    self._wake_waiters()
                 return
             with self._cond:
                 self._done = request
                 self._last_flush = time.monotonic()
                 self.flushes += 1
-                self._cond.notify_all()
+                self._wake_waiters()
             if closing:
                 return
 
@@ -453,11 +478,11 @@ class TraceWriter:
         """Flush, stop the flusher, record the end time and status, release the run directory."""
         if self._closed:
             return
-        self._closed = True
-        with self._cond:
+        with self._lock:
             self._closing = True
             self._cond.notify_all()
-        self._thread.join()
+        self._thread.join()  # a second Ctrl-C here leaves the writer open: atexit closes it
+        self._closed = True
         error = self._error
         self._meta.update(ended_at=now_iso(), status="failed" if error else status)
         try:

@@ -5,10 +5,8 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from tracelab.train.experiments.runner import SeedRun, train_seed
+from tracelab.train.experiments.runner import CLOSE_WAIT_S, SeedRun, train_seed
 from tracelab.train.ray_session import LOCAL, ray_session
-
-CANCEL_WAIT_S = 60  # how long a cancelled training may take to close its run
 
 
 def in_ray_tasks(args: list[tuple], address: str = LOCAL) -> list[SeedRun]:
@@ -26,7 +24,7 @@ def in_ray_tasks(args: list[tuple], address: str = LOCAL) -> list[SeedRun]:
         except BaseException:
             for ref in refs:
                 ray.cancel(ref)  # not force: the training stops as on Ctrl-C and closes its run
-            ray.wait(refs, num_returns=len(refs), timeout=CANCEL_WAIT_S)
+            ray.wait(refs, num_returns=len(refs), timeout=CLOSE_WAIT_S)
             raise
     # the paths as the experiment gave them, as the process pool's results have them
     return [dataclasses.replace(sr, run_dir=run_dir, policy_dir=run_dir / "policy" if sr.policy_dir else None)

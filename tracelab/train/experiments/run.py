@@ -17,6 +17,7 @@ from tracelab.train.config import TrainConfig
 from tracelab.train.evaluate import EvalResult, evaluate
 from tracelab.train.experiments.definitions import Arm, Budget, Experiment
 from tracelab.train.experiments.runner import (
+    CLOSE_WAIT_S,
     SeedRun,
     final_eval_seed,
     p_suffix,
@@ -28,6 +29,7 @@ from tracelab.train.experiments.runner import (
 from tracelab.train.experiments.stats import bootstrap_diff_ci, two_proportion_test
 from tracelab.train.policy import load_policy
 
+RESULT_POLL_S = 0.2  # how often the experiment looks for a worker's finished training
 TRAIN_P, EVAL_PS = 0.7, (0.3, 0.7)  # the method's code: trained against p = 0.7, evaluated against 0.3
 SAVED_QUERIES = ("hid_behind_mountain", "learner_events", "actions_per_win", "steps_before_loss")
 
@@ -123,14 +125,36 @@ def _in_workers(jobs: int, args: list[tuple]) -> list[SeedRun]:
     pool = multiprocessing.get_context("spawn").Pool(jobs)
     try:
         pending = [pool.apply_async(train_seed, a) for a in args]
-        runs = [p.get() for p in pending]
+        runs = []
+        for result in pending:
+            # sleep, not result.get(): the interrupt lands here, never inside the result's Event, whose
+            # lock it could leave held (threading's Condition takes it in Python code), and then the
+            # pool's result thread, and terminate(), would wait for it forever
+            while not result.ready():
+                time.sleep(RESULT_POLL_S)
+            runs.append(result.get())
     except BaseException:
-        pool.terminate()
+        _terminate(pool)
         raise
-    finally:
-        pool.close()
-        pool.join()
+    pool.close()
+    pool.join()
     return runs
+
+
+def _terminate(pool: Any) -> None:
+    """pool.terminate(), bounded: it sends each worker SIGTERM and waits for it, and a worker that does
+    not end (its SystemExit raised where something swallowed it, a close that hung) would keep it waiting
+    forever; after CLOSE_WAIT_S the workers still alive are killed (their runs then read as crashed)."""
+    import multiprocessing
+    import threading
+
+    stopper = threading.Thread(target=pool.terminate, name="pool-terminate", daemon=True)
+    stopper.start()
+    stopper.join(CLOSE_WAIT_S)
+    if stopper.is_alive():
+        for worker in multiprocessing.active_children():
+            worker.kill()
+        stopper.join(CLOSE_WAIT_S)
 
 
 # ---- portability: the same policy in both simulators ----

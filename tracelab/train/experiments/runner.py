@@ -41,6 +41,9 @@ class SeedRun:
     wall_s: float = 0.0
 
 
+CLOSE_WAIT_S = 60  # how long a stopped or cancelled training may take to close its run
+
+
 def p_suffix(p: float) -> str:
     return f"@p{p:g}"
 
