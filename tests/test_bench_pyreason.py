@@ -23,11 +23,16 @@ def test_tracelab_side_on_the_hello_world(capsys: pytest.CaptureFixture) -> None
     assert notice == ["tracelab: bench pyreason: PyReason's side not run (give --pyreason-python PYTHON, the "
                       "interpreter of a PyReason install)"]
     r = json.loads(out)
+    # each run, as it ends, is one JSON line on stderr: a stopped bench keeps what it measured
+    ended = [json.loads(line.split(": ", 1)[1]) for line in err.splitlines() if line.startswith("bench pyreason run: ")]
+    assert [(e["program"], e["side"], e["kind"]) for e in ended] == [("hello world", "tracelab", "first run"),
+                                                                   ("hello world", "tracelab", "warm")]
     assert r["pyreason"] is None and r["warm_repeats"] == 1
     assert list(r["programs"]) == ["hello world"]
     hello = r["programs"]["hello world"]
     assert hello["script"] == "examples/pyreason_hello_world.py" and "pyreason" not in hello
     side = hello["tracelab"]
+    assert side["first_cold"] is True and ended[0]["cpu_s"] == side["first"]["cpu_s"]
     for run in (side["first"], *side["warm"]):
         assert run["error"] is None
         # the script's own last line: Justin is popular at t = 2, as in PyReason's documented output

@@ -16,12 +16,14 @@ RSS every SAMPLE_S seconds from /proc/PID/status (memory over time; the peak is 
 VmHWM and the samples), and the load average around it."""
 from __future__ import annotations
 
+import functools
 import os
 import shutil
 import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -146,29 +148,37 @@ def timed_run(command: list[str], env: dict[str, str], cwd: Path, timeout_s: flo
     stdout = out_path.read_text(errors="replace").strip().splitlines()
     stderr = err_path.read_text(errors="replace").strip().splitlines()
     error = (f"timed out after {timeout_s:.0f} s" if timed_out else
+             f"stopped by signal {-proc.returncode}" if proc.returncode < 0 else
              (stderr[-1] if stderr else f"exit status {proc.returncode}") if proc.returncode else None)
     return {"wall_s": wall, "cpu_s": cpu, "peak_rss_bytes": peak, "rss_samples": samples, "error": error,
             "result": stdout[-1] if stdout else "", "load_before": load_before, "load_after": load_average()}
 
 
 def _side_runs(python: str, import_line: str, script: Path, args: list[str], env: dict[str, str],
-               work: Path, warm_repeats: int, timeout_s: float) -> dict[str, Any]:
-    """The first run (env's caches empty) and `warm_repeats` runs on the caches it filled."""
+               work: Path, warm_repeats: int, timeout_s: float, done: Callable[[str, dict], None]) -> dict[str, Any]:
+    """The first run (env's caches empty) and `warm_repeats` runs on the caches it filled; `done(kind, run)`
+    after each (a PyReason run can take many minutes: what is measured is not lost if the bench is stopped)."""
     work.mkdir(parents=True, exist_ok=True)
     command = [python, "-P", "-c", RUNNER, str(script), TRACELAB_IMPORT, import_line, *args]
     first = timed_run(command, env, work, timeout_s)
-    warm = [] if first["error"] else [timed_run(command, env, work, timeout_s) for _ in range(warm_repeats)]
+    done("first run", first)
+    warm = []
+    for _ in range(0 if first["error"] else warm_repeats):
+        warm.append(timed_run(command, env, work, timeout_s))
+        done("warm", warm[-1])
     return {"first": first, "warm": warm,
             "warm_wall_s": summarize([r["wall_s"] for r in warm]).to_dict() if warm else None,
             "warm_cpu_s": summarize([r["cpu_s"] for r in warm]).to_dict() if warm else None}
 
 
 def run(quick: bool, repeats: int, pyreason_python: str | None, timeout_s: float,
-        chosen: tuple[str, ...] = PROGRAMS, cache_dir: Path | None = None) -> dict[str, Any]:
+        chosen: tuple[str, ...] = PROGRAMS, cache_dir: Path | None = None,
+        progress: Callable[[dict[str, Any]], None] | None = None) -> dict[str, Any]:
     """Each chosen program (--quick: the hello world) under tracelab, then (with `pyreason_python`) under
     PyReason; see the docstring. Each program's caches start empty in a temporary folder; with `cache_dir`
     every program uses that folder's (made if missing, kept afterwards), and a first run that finds them
-    filled by an earlier run is marked `"first_cold": false`."""
+    filled by an earlier run is marked `"first_cold": false`. `progress` receives each run as it ends, with
+    its program, side and kind."""
     pyreason = check_pyreason_python(pyreason_python) if pyreason_python else None
     warm_repeats = 1 if quick else repeats
     result: dict[str, Any] = {"pyreason": pyreason, "warm_repeats": warm_repeats, "programs": {},
@@ -183,12 +193,16 @@ def run(quick: bool, repeats: int, pyreason_python: str | None, timeout_s: float
                 write_graph(graph, SPREAD_NODES)  # seeded: the same graph every time
                 args.append(str(graph))
             sides: dict[str, Any] = {}
+
+            def done(kind: str, r: dict[str, Any], program: str = name, side: str = "tracelab") -> None:
+                if progress:
+                    progress({"program": program, "side": side, "kind": kind, **r})
             numba_cache = caches / "tracelab-cache" / "numba"
             cold = not numba_cache.is_dir() or not any(numba_cache.iterdir())
             tl_env = {**os.environ, "NUMBA_CACHE_DIR": str(numba_cache),
                       "TRACELAB_CACHE_DIR": str(caches / "tracelab-cache" / "tracelab")}
             sides["tracelab"] = {"first_cold": cold, **_side_runs(
-                sys.executable, TRACELAB_IMPORT, script, args, tl_env, tmp / f"tl{i}", warm_repeats, timeout_s)}
+                sys.executable, TRACELAB_IMPORT, script, args, tl_env, tmp / f"tl{i}", warm_repeats, timeout_s, done)}
             if pyreason:
                 site = caches / "pyreason-site"
                 cold = not (site / "pyreason").is_dir()
@@ -197,7 +211,7 @@ def run(quick: bool, repeats: int, pyreason_python: str | None, timeout_s: float
                 pr_env = {**os.environ, "PYTHONPATH": str(site)}
                 sides["pyreason"] = {"first_cold": cold, **_side_runs(
                     pyreason["python"], PYREASON_IMPORT, script, args, pr_env, tmp / f"pr{i}", warm_repeats,
-                    timeout_s)}
+                    timeout_s, functools.partial(done, side="pyreason"))}
             result["programs"][name] = {"script": str(script.relative_to(script.parents[1])), "args": needs,
                                         **sides}
     result["load_after"] = load_average()
@@ -232,7 +246,7 @@ def report(r: dict[str, Any]) -> str:
                 continue
             s = p[side]
             first = s["first"]
-            kind = "first run" if s["first_cold"] else "first run, caches filled before"
+            kind = "first run" if s.get("first_cold", True) else "first run, caches filled before"
             rows.append(_row(program, side, kind, first, fmt_num(first["wall_s"]), fmt_num(first["cpu_s"])))
             series.append(f"{program}, {side}, {kind}: {rss_series(first['rss_samples'])}")
             if s["warm"]:
@@ -267,7 +281,7 @@ def plot(r: dict[str, Any], path: Path) -> None:
             if side not in r["programs"][name]:
                 continue
             runs = r["programs"][name][side]
-            first = "first run" if runs["first_cold"] else "first run, caches filled before"
+            first = "first run" if runs.get("first_cold", True) else "first run, caches filled before"
             for kind, run_, style in ((first, runs["first"], "-"),
                                       ("warm", runs["warm"][-1] if runs["warm"] else None, "--")):
                 if run_ and run_["rss_samples"]:
@@ -280,8 +294,25 @@ def plot(r: dict[str, Any], path: Path) -> None:
         ax.set_title(name)
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=8)
-    load = r["load_before"][0] if r["load_before"] else None
-    fig.suptitle(f"RSS every {SAMPLE_S} s; 2-core machine, load average {load} at the start", fontsize=10)
+    loads = [x["load_before"][0] for p in r["programs"].values() for side in ("pyreason", "tracelab")
+             if side in p for x in (p[side]["first"], *p[side]["warm"]) if x["load_before"]]
+    said = f", load average (1 min) {min(loads):.1f}-{max(loads):.1f} at the runs' starts" if loads else ""
+    fig.suptitle(f"RSS every {SAMPLE_S} s; {os.cpu_count()} cores{said}", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def merge(results: list[dict[str, Any]]) -> dict[str, Any]:
+    """Several runs of the bench (e.g. one per --program) as one result: the programs of all, the load
+    before the first and after the last."""
+    merged = {**results[0], "programs": {}}
+    for r in results:
+        merged["programs"].update(r["programs"])
+    merged["load_after"] = results[-1]["load_after"]
+    return merged
+
+
+if __name__ == "__main__":  # python -m tracelab.bench.pyreason_compare OUT.png RESULT.json ... (from --json)
+    import json
+    plot(merge([json.loads(Path(f).read_text()) for f in sys.argv[2:]]), Path(sys.argv[1]))

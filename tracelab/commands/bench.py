@@ -154,7 +154,8 @@ def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], s
             print("tracelab: bench pyreason: PyReason's side not run (give --pyreason-python PYTHON, the "
                   "interpreter of a PyReason install)", file=sys.stderr, flush=True)
         r = pyreason_compare.run(args.quick, args.repeats, args.pyreason_python, args.timeout,
-                                  tuple(args.program or pyreason_compare.PROGRAMS), args.cache_dir)
+                                  tuple(args.program or pyreason_compare.PROGRAMS), args.cache_dir,
+                                  progress=_say_pyreason_run)
         if args.plot:
             pyreason_compare.plot(r, Path(args.plot))
         return r, pyreason_compare.report(r)
@@ -165,6 +166,11 @@ def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], s
     from tracelab.bench import store
     r = store.run(args.quick, args.repeats)
     return r, store.report(r)
+
+
+def _say_pyreason_run(r: dict[str, Any]) -> None:
+    """bench pyreason's runs as they end, one JSON line each on stderr (its RSS samples included)."""
+    print("bench pyreason run: " + json.dumps(r), file=sys.stderr, flush=True)
 
 
 def run(args: argparse.Namespace) -> int:
