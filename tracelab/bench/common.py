@@ -76,6 +76,13 @@ def rss_bytes() -> int:
     return int(psutil.Process().memory_info().rss)
 
 
+def children_cpu_s() -> float:
+    """User + sys seconds of every child process this one has waited for (and of theirs): the difference
+    around a subprocess is its CPU time, the processes it waited for included."""
+    use = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return use.ru_utime + use.ru_stime
+
+
 def high_water_bytes() -> int:
     """This process's peak resident memory: VmHWM, which exec starts afresh (ru_maxrss keeps the peak of
     the process that forked it, here the bench's own ~1 GB)."""

@@ -9,14 +9,13 @@ The load average before and after is part of the result."""
 from __future__ import annotations
 
 import os
-import resource
 import subprocess
 import sys
 import tempfile
 import time
 from typing import Any
 
-from tracelab.bench.common import fmt_num, format_table, machine_info, summarize
+from tracelab.bench.common import children_cpu_s, fmt_num, format_table, machine_info, summarize
 from tracelab.provenance import load_average
 
 COMMAND = ("play", "--scenario", "advanced", "--episodes", "5")
@@ -24,20 +23,15 @@ QUICK_COMMAND = ("play", "--scenario", "advanced", "--episodes", "1")
 TIMEOUT_S = 1800  # a cold compile on a loaded machine has taken 3 minutes of wall time
 
 
-def _children_cpu_s() -> float:
-    use = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return use.ru_utime + use.ru_stime
-
-
 def timed_command(command: tuple[str, ...], cache_dir: str, run_dir: str) -> dict[str, Any]:
     """One `tracelab COMMAND --run RUN_DIR` in a fresh process with its caches in `cache_dir`: wall and CPU
     seconds, and the compile notice it printed (the lines of stderr that start with it)."""
     env = {**os.environ, "NUMBA_CACHE_DIR": os.path.join(cache_dir, "numba"),
            "TRACELAB_CACHE_DIR": os.path.join(cache_dir, "tracelab")}
-    cpu0, t0 = _children_cpu_s(), time.perf_counter()
+    cpu0, t0 = children_cpu_s(), time.perf_counter()
     done = subprocess.run([sys.executable, "-P", "-m", "tracelab", *command, "--run", run_dir], env=env,
                           capture_output=True, text=True, timeout=TIMEOUT_S, check=False)
-    wall, cpu = time.perf_counter() - t0, _children_cpu_s() - cpu0
+    wall, cpu = time.perf_counter() - t0, children_cpu_s() - cpu0
     if done.returncode != 0:
         raise RuntimeError(f"`tracelab {' '.join(command)}` failed (exit {done.returncode}):\n{done.stderr[-2000:]}")
     notice = [ln for ln in done.stderr.splitlines() if ln.startswith("tracelab: compiling")]

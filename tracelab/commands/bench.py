@@ -1,7 +1,7 @@
 """`tracelab bench`: speed and memory measured by benchmarks (docs/benchmarks.md), never by timed
 assertions in tests. `bench engine`, `bench env`, `bench store`, `bench replay`, `bench train`,
 `bench tui`, `bench aggregates`, `bench reason-store`, `bench toytext`, `bench play`, `bench first-run`,
-`bench all` (engine, env, store, replay, train);
+`bench pyreason`, `bench all` (engine, env, store, replay, train);
 each takes --json, --quick (small sizes: the smoke test) and --repeats (medians and spread over that
 many repeats)."""
 from __future__ import annotations
@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 from typing import Any
 
 from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, positive_int
@@ -35,6 +36,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                      "peak memory of 100 / 1,000 / 10,000 recorded episodes",
              "first-run": "the README's `play --scenario advanced --episodes 5` from empty caches (a fresh "
                           "install) and again warm: wall and CPU time",
+             "pyreason": "PyReason against tracelab on the same scripts (examples/), import changed only: "
+                         "first run from empty caches, warm runs, peak memory and memory over time",
              "all": "engine, env, store, replay and train"}
     for name, text in helps.items():
         q = what.add_parser(name, help=text)
@@ -66,7 +69,24 @@ def register(sub: argparse._SubParsersAction) -> None:
             q.add_argument("--memory", type=_counts, nargs="?", const=[100, 1000, 10_000], default=None,
                            metavar="N,N,...", help="also the memory of recorded runs of these many episodes, "
                                                    "each in a fresh process (default 100,1000,10000)")
-        if name not in ("store", "tui", "toytext", "first-run"):  # the sections that build engines (toytext: the envs')
+        if name == "pyreason":
+            q.add_argument("--pyreason-python", metavar="PYTHON", default=None,
+                           help="the interpreter of a PyReason install (e.g. a venv's bin/python); without "
+                                "it only tracelab's side runs")
+            q.add_argument("--timeout", type=positive_int, default=3600, metavar="S",
+                           help="seconds before a run is stopped and reported as timed out (default 3600: "
+                                "PyReason's first compile has taken 15 minutes)")
+            q.add_argument("--program", choices=("hello", "spread"), action="append", default=None,
+                           help="the programs to run (repeat it for several; default both: PyReason's hello "
+                                "world and a spread over a 2,000-node graph)")
+            q.add_argument("--cache-dir", metavar="DIR", type=Path, default=None,
+                           help="keep the caches (tracelab's, and the copy of PyReason that holds its own) in "
+                                "DIR, shared by the programs, instead of empty ones per program in a "
+                                "temporary folder; a first run that finds them filled is marked so")
+            q.add_argument("--plot", metavar="PNG", default=None,
+                           help="also draw every run's memory over time into this PNG (matplotlib)")
+        # the sections that build engines (toytext: the envs')
+        if name not in ("store", "tui", "toytext", "first-run", "pyreason"):
             add_max_groundings(q)
         if name == "engine":
             q.add_argument("--graph-only", action="store_true",
@@ -130,6 +150,17 @@ def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], s
         from tracelab.bench import first_run  # deferred: as engine's, above
         r = first_run.run(args.quick, args.repeats)
         return r, first_run.report(r)
+    if name == "pyreason":
+        from tracelab.bench import pyreason_compare
+        if not args.pyreason_python:
+            print("tracelab: bench pyreason: PyReason's side not run (give --pyreason-python PYTHON, the "
+                  "interpreter of a PyReason install)", file=sys.stderr, flush=True)
+        r = pyreason_compare.run(args.quick, args.repeats, args.pyreason_python, args.timeout,
+                                  tuple(args.program or pyreason_compare.PROGRAMS), args.cache_dir,
+                                  progress=_say_pyreason_run)
+        if args.plot:
+            pyreason_compare.plot(r, Path(args.plot))
+        return r, pyreason_compare.report(r)
     if name == "tui":
         from tracelab.bench import tui  # deferred: as engine's, above
         r = tui.run(args.quick, args.repeats, args.rows)
@@ -137,6 +168,11 @@ def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], s
     from tracelab.bench import store  # deferred: as engine's, above
     r = store.run(args.quick, args.repeats)
     return r, store.report(r)
+
+
+def _say_pyreason_run(r: dict[str, Any]) -> None:
+    """bench pyreason's runs as they end, one JSON line each on stderr (its RSS samples included)."""
+    print("bench pyreason run: " + json.dumps(r), file=sys.stderr, flush=True)
 
 
 def run(args: argparse.Namespace) -> int:
