@@ -1,0 +1,132 @@
+"""The envs' tracer's per-step work as compiled calls (tracelab/envs/tracer.py): the step log, the
+returns, and which trace rows belong to which recorded episode.
+
+A traced step's Python cost more than the simulator's own step at one world (docs/benchmarks.md, issue
+31): five array copies, two sums and two mask tests per step, a dozen numpy calls per hand-over. Here a
+step is one compiled call (`log_step`), and the labelling of trace rows one more per hand-over.
+Each kernel compiles for one signature (the tracer passes the same array types every time: the
+simulator's read-only result buffers, its own arrays), cached on disk like the engine's."""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from tracelab.game.state import StepResult
+
+
+@njit(cache=True)
+def _log_step(log_t, log_obs, log_actions, log_rewards, k, t, obs, red, blue, agent_reward, reward,
+              agent_return, team_return, steps, done, recording):  # noqa: ANN001, ANN202 (numba)
+    """Row k of the log from one step of every world; the returns (a running total, so the same floats
+    as np.add.accumulate over the steps) and steps; returns how many `recording` worlds are `done`."""
+    worlds, agents = red.shape
+    ended = 0
+    for w in range(worlds):
+        log_t[k, w] = t[w]
+        log_obs[k, w] = obs[w]
+        for j in range(agents):
+            log_actions[k, w, 0, j] = red[w, j]
+            log_actions[k, w, 1, j] = blue[w, j]
+            for team in range(2):
+                r = agent_reward[w, team, j]
+                log_rewards[k, w, team, j] = r
+                agent_return[w, team, j] += r
+        team_return[w, 0] += reward[w, 0]
+        team_return[w, 1] += reward[w, 1]
+        steps[w] = t[w]
+        if done[w] and recording[w]:
+            ended += 1
+    return ended
+
+
+@njit(cache=True)
+def _episode_of_rows(world, world_episode, episode_of_world, sim_episode_of_world, recording):  # noqa: ANN001, ANN202
+    """The env episode of each trace row (-1: not recorded: the simulator's start before the env's first
+    episode, or a world whose episode is past the limit or ended) and how many are recorded; -1 as the
+    count if a row belongs to a simulator episode the env never began."""
+    n = world.shape[0]
+    out = np.empty(n, np.int64)
+    kept = 0
+    for i in range(n):
+        w = world[i]
+        current = sim_episode_of_world[w]
+        if world_episode[i] > current:
+            return out, -1
+        if world_episode[i] == current and recording[w]:
+            out[i] = episode_of_world[w]
+            kept += 1
+        else:
+            out[i] = -1
+    return out, kept
+
+
+def label_rows(rows: dict[str, np.ndarray], episode_of_world: np.ndarray, sim_episode_of_world: np.ndarray,
+               recording: np.ndarray) -> dict[str, np.ndarray]:
+    """RuleSim.take_trace() rows with `episode` (the env's id) added, keeping those of recorded episodes
+    (`recording` [W]: the world's current episode is recorded and open; `sim_episode_of_world`: its
+    RuleSim.world_episode)."""
+    # contiguous int32 / int64 columns (a big hand-over's are strided views): one compiled signature
+    world = np.ascontiguousarray(rows["world"], np.int32)
+    episode, kept = _episode_of_rows(world, np.ascontiguousarray(rows["world_episode"], np.int64),
+                                     episode_of_world, sim_episode_of_world, recording)
+    if kept < 0:
+        raise RuntimeError("trace rows of a simulator episode the env never began")
+    if kept < len(episode):
+        keep = episode >= 0
+        rows = {name: col[keep] for name, col in rows.items()}
+        episode = episode[keep]
+    rows["episode"] = episode
+    return rows
+
+
+class StepLog:
+    """The step records of up to `capacity` steps, kept in arrays allocated once and handed to the sink
+    in one call (a call and five copies per step cost more than the simulator's step at one world).
+    The tracer takes the log before any world's episode changes (an end, a begin), so every logged row
+    of a world belongs to that world's current episode. Logging a step also keeps each world's returns
+    and steps (`agent_return` [W, 2, N], `team_return` [W, 2], `steps` [W]; the tracer zeroes them when
+    an episode begins)."""
+
+    def __init__(self, capacity: int, worlds: int, obs_size: int, agents: int) -> None:
+        self.capacity, self.k = capacity, 0
+        # each the dtype of what is logged (a converting copy costs more)
+        self.t = np.empty((capacity, worlds), np.int32)
+        self.obs = np.empty((capacity, worlds, 2, obs_size), np.float32)
+        self.actions = np.empty((capacity, worlds, 2, agents), np.int64)
+        self.rewards = np.empty((capacity, worlds, 2, agents), np.float64)
+        self.agent_return = np.zeros((worlds, 2, agents))
+        self.team_return = np.zeros((worlds, 2))
+        self.steps = np.zeros(worlds, np.int64)
+        self._worlds = np.arange(worlds, dtype=np.int64)
+
+    def add(self, res: StepResult, red: np.ndarray, blue: np.ndarray, done: np.ndarray,
+            recording: np.ndarray) -> tuple[int, bool]:
+        """Log one step of every world (copies: the simulator reuses its arrays). Returns how many
+        `recording` worlds are `done`, and whether the log is full."""
+        k = self.k
+        ended = _log_step(self.t, self.obs, self.actions, self.rewards, k, res.t, res.obs, red, blue,
+                          res.agent_reward, res.reward, self.agent_return, self.team_return, self.steps, done,
+                          recording)
+        self.k = k + 1
+        return ended, self.k == self.capacity
+
+    def take(self, episode: np.ndarray, recorded: np.ndarray) -> tuple[np.ndarray, ...] | None:
+        """Empty the log: (world, episode, t, obs, actions, rewards) of the rows of `recorded` worlds, new
+        arrays in step order then world order (the TraceSink.step layout; `episode`: each world's), or
+        None."""
+        k, self.k = self.k, 0
+        if not k:
+            return None
+        n = np.count_nonzero(recorded)
+        if not n:
+            return None
+        if n == len(recorded):  # every world recorded (the usual case): the log's rows as they lie
+            rows = k * n
+            world = np.tile(self._worlds, k)
+            return (world, episode[world], self.t[:k].reshape(rows).astype(np.int64),
+                    self.obs[:k].reshape(rows, 2, -1).copy(), self.actions[:k].reshape(rows, 2, -1).copy(),
+                    self.rewards[:k].reshape(rows, 2, -1).copy())
+        keep = np.broadcast_to(recorded, (k, len(recorded)))
+        world = np.nonzero(keep)[1]
+        return (world, episode[world], self.t[:k][keep].astype(np.int64), self.obs[:k][keep],
+                self.actions[:k][keep], self.rewards[:k][keep])
