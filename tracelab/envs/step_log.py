@@ -60,6 +60,26 @@ def _episode_of_rows(world, world_episode, episode_of_world, sim_episode_of_worl
     return out, kept
 
 
+@njit(cache=True)
+def _begin_episodes(worlds, first_id, limit, episode_of_world, sim_episode_of_world, world_episode, recording,
+                    agent_return, team_return, steps):  # noqa: ANN001, ANN202 (numba)
+    """Episodes first_id, first_id + 1, ... begin in `worlds` (in that order): their ids, the simulator's
+    episode numbers (`world_episode`), returns and steps zeroed; those numbered below `limit` are recorded.
+    Returns how many are (a prefix of `worlds`: the ids grow)."""
+    recorded = 0
+    for i in range(worlds.shape[0]):
+        w = worlds[i]
+        episode = first_id + i
+        episode_of_world[w] = episode
+        sim_episode_of_world[w] = world_episode[w]
+        recording[w] = episode < limit
+        recorded += episode < limit
+        agent_return[w] = 0.0
+        team_return[w] = 0.0
+        steps[w] = 0
+    return recorded
+
+
 def label_rows(rows: dict[str, np.ndarray], episode_of_world: np.ndarray, sim_episode_of_world: np.ndarray,
                recording: np.ndarray) -> dict[str, np.ndarray]:
     """RuleSim.take_trace() rows with `episode` (the env's id) added, keeping those of recorded episodes
@@ -109,6 +129,15 @@ class StepLog:
                           recording)
         self.k = k + 1
         return ended, self.k == self.capacity
+
+    def begin(self, worlds: np.ndarray, first_id: int, limit: int, episode_of_world: np.ndarray,
+              sim_episode_of_world: np.ndarray, world_episode: np.ndarray, recording: np.ndarray) -> int:
+        """Episodes begin in `worlds` (int64 indices), numbered from `first_id` in that order: their ids
+        into `episode_of_world`, `world_episode` (the simulator's count) into `sim_episode_of_world`,
+        `recording` set for those numbered below `limit`, returns and steps zeroed. Returns how many are
+        recorded (the first ones of `worlds`)."""
+        return _begin_episodes(worlds, first_id, limit, episode_of_world, sim_episode_of_world, world_episode,
+                               recording, self.agent_return, self.team_return, self.steps)
 
     def take(self, episode: np.ndarray, recorded: np.ndarray) -> tuple[np.ndarray, ...] | None:
         """Empty the log: (world, episode, t, obs, actions, rewards) of the rows of `recorded` worlds, new

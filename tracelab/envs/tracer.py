@@ -57,6 +57,7 @@ class EpisodeTracer:
                  limit: int | None = None) -> None:
         self.sink = sink
         self.limit = limit
+        self._limit = np.iinfo(np.int64).max if limit is None else limit
         self.scenario = scenario
         self.sim = sim
         self._rules = isinstance(sim, RuleSim) and bool(sim.engine.trace_on.any())
@@ -67,7 +68,8 @@ class EpisodeTracer:
         self._next_episode = 0
         self._steps_waiting = 0                  # steps whose rows the simulator still holds
         self._seed: int | None = None
-        self._names = [agent_name(t, j) for t in range(2) for j in range(n)]
+        # an episode's `rewards`: the teams' returns, then each agent's
+        self._return_names = [*TEAMS, *(agent_name(t, j) for t in range(2) for j in range(n))]
         self._log = StepLog(HANDOVER_STEPS, w, sim.obs_size, n)
         # each world's returns and steps, kept by the log's step call
         self.steps, self.agent_return, self.team_return = self._log.steps, self._log.agent_return, \
@@ -81,20 +83,16 @@ class EpisodeTracer:
         if seed is not None or self._next_episode == 0:
             self._seed = seed
         self._hand_steps()  # the logged steps belong to the episodes before (StepLog)
-        for w in worlds[self.open[worlds]].tolist():
-            self._end(w, "aborted")
-        ids = self._next_episode + np.arange(len(worlds), dtype=np.int64)
+        if np.count_nonzero(self.open[worlds]):
+            for w in worlds[self.open[worlds]].tolist():
+                self._end(w, "aborted")
+        first = self._next_episode
         self._next_episode += len(worlds)
-        self.cur_ep[worlds] = ids
-        if self._rules:
-            self.cur_wep[worlds] = self.sim.world_episode[worlds]
-        recorded = ids < self.limit if self.limit is not None else np.ones(len(ids), bool)
-        self.open[worlds] = recorded
-        self.steps[worlds] = 0
-        self.agent_return[worlds] = 0.0
-        self.team_return[worlds] = 0.0
-        for w, e in zip(worlds[recorded].tolist(), ids[recorded].tolist()):
-            self.sink.begin_episode(w, e, self._seed, self.scenario)
+        # a RefSim has no episode count of its own: the tracer's is copied onto itself
+        recorded = self._log.begin(worlds, first, self._limit, self.cur_ep, self.cur_wep,
+                                   self.sim.world_episode if self._rules else self.cur_wep, self.open)
+        for i, w in enumerate(worlds[:recorded].tolist()):
+            self.sink.begin_episode(w, first + i, self._seed, self.scenario)
 
     def before_reset(self) -> None:
         """Before an env reset (not an autoreset): the rows of steps not handed over yet, so that the
@@ -146,7 +144,6 @@ class EpisodeTracer:
             self.sink.changes(rows, self.cur_ep.copy(), self.sim.episode_start.copy())
 
     def _end(self, w: int, outcome: str) -> None:
-        rewards = {team: float(self.team_return[w, t]) for t, team in enumerate(TEAMS)}
-        rewards.update(zip(self._names, self.agent_return[w].ravel().tolist()))
+        rewards = dict(zip(self._return_names, self.team_return[w].tolist() + self.agent_return[w].ravel().tolist()))
         self.sink.end_episode(w, int(self.cur_ep[w]), int(self.steps[w]), outcome, rewards)
         self.open[w] = False
