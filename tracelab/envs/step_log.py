@@ -3,9 +3,11 @@ returns, and which trace rows belong to which recorded episode.
 
 A traced step's Python cost more than the simulator's own step at one world (docs/benchmarks.md, issue
 31): five array copies, two sums and two mask tests per step, a dozen numpy calls per hand-over. Here a
-step is one compiled call (`log_step`), and the labelling of trace rows one more per hand-over.
-Each kernel compiles for one signature (the tracer passes the same array types every time: the
-simulator's read-only result buffers, its own arrays), cached on disk like the engine's."""
+step is one compiled call (`StepLog.add`), an episode's begin another (`StepLog.begin`), and the
+labelling of a hand-over's trace rows a third (`label_rows`). Each compiles for one signature (the
+tracer passes the same array types every time: the simulator's read-only result buffers, its own
+arrays), cached on disk like the engine's, in ~1 s of CPU on a first run (scalar loops: the slice
+assignments they replace compiled for seconds)."""
 from __future__ import annotations
 
 import numpy as np
@@ -20,10 +22,13 @@ def _log_step(log_t, log_obs, log_actions, log_rewards, k, t, obs, red, blue, ag
     """Row k of the log from one step of every world; the returns (a running total, so the same floats
     as np.add.accumulate over the steps) and steps; returns how many `recording` worlds are `done`."""
     worlds, agents = red.shape
+    size = obs.shape[2]
     ended = 0
     for w in range(worlds):
         log_t[k, w] = t[w]
-        log_obs[k, w] = obs[w]
+        for team in range(2):  # scalar loops: a slice assignment compiles for seconds longer
+            for d in range(size):
+                log_obs[k, w, team, d] = obs[w, team, d]
         for j in range(agents):
             log_actions[k, w, 0, j] = red[w, j]
             log_actions[k, w, 1, j] = blue[w, j]
@@ -74,8 +79,10 @@ def _begin_episodes(worlds, first_id, limit, episode_of_world, sim_episode_of_wo
         sim_episode_of_world[w] = world_episode[w]
         recording[w] = episode < limit
         recorded += episode < limit
-        agent_return[w] = 0.0
-        team_return[w] = 0.0
+        for team in range(2):
+            team_return[w, team] = 0.0
+            for j in range(agent_return.shape[2]):
+                agent_return[w, team, j] = 0.0
         steps[w] = 0
     return recorded
 
