@@ -10,6 +10,8 @@ arrays), cached on disk like the engine's, in ~1 s of CPU on a first run (scalar
 assignments they replace compiled for seconds)."""
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numba import njit
 
@@ -166,3 +168,19 @@ class StepLog:
         world = np.nonzero(keep)[1]
         return (world, episode[world], self.t[:k][keep].astype(np.int64), self.obs[:k][keep],
                 self.actions[:k][keep], self.rewards[:k][keep])
+
+
+def compile_for(sim: Any) -> None:
+    """Compile (or load) the kernels above for a RuleSim's argument types without stepping it: a first
+    run's second process (tracelab/game/rulesim_warmup.py) does this while the play's process compiles
+    the engine, so that the play loads them from numba's cache. Calls each as the tracer does: the
+    simulator's result buffers, new int64 actions, a new bool `done`, the tracer's own arrays."""
+    res = sim._result
+    worlds, agents = sim.n_worlds, sim.scenario.agents_per_team
+    log = StepLog(1, worlds, sim.obs_size, agents)
+    ids, recording = np.full(worlds, -1, np.int64), np.zeros(worlds, np.bool_)
+    log.begin(np.arange(worlds, dtype=np.int64), 0, 1, ids, ids.copy(), sim.world_episode, recording)
+    actions = np.zeros((worlds, agents), np.int64)
+    log.add(res, actions, actions.copy(), res.terminated | res.truncated, recording)
+    label_rows({"world": np.zeros(1, np.int32), "world_episode": np.zeros(1, np.int64)}, ids, ids.copy(),
+               recording)

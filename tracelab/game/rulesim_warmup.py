@@ -142,6 +142,9 @@ def compile_game_kernels(scenario: Scenario, n_worlds: int, stack_previous: bool
     sim.engine.restore(sim._start, np.zeros(1, np.int64))
     if fused and sim.engine.fused_binding() is not None:
         sim._bind()
+    # the envs' tracer's kernels (~1 s of CPU), which a traced play calls next
+    from tracelab.envs.step_log import compile_for
+    compile_for(sim)
 
 
 def main() -> int:
