@@ -62,8 +62,10 @@ class Games:
         self.episode_of_world = np.arange(self.worlds)
         self._next_episode = self.worlds
         self._playing = self.worlds  # worlds playing an asked-for episode
-        self._team_returns = np.zeros((self.worlds, 2))  # (all of StepResult.reward: a strided add costs more)
         self._obs = reset_sim(self.sim, self.tracer, seed)
+        # each world's team returns over its episode: the tracer keeps them when there is one (the same
+        # sums); all of StepResult.reward (a strided add costs more)
+        self._team_returns = np.zeros((self.worlds, 2)) if self.tracer is None else self.tracer.team_return
 
     @property
     def done(self) -> bool:
@@ -79,7 +81,8 @@ class Games:
         if self.tracer is not None:
             self.tracer.stepped(res, red, blue, ended_worlds)
         played = self._playing
-        self._team_returns += res.reward
+        if self.tracer is None:
+            self._team_returns += res.reward
         self._obs = res.obs
         if not np.count_nonzero(ended_worlds):
             return played, 0
@@ -92,7 +95,8 @@ class Games:
                     "steps": int(res.t[w]), "outcome": outcome, "return": float(self._team_returns[w, RED])}
                 self.wins += outcome == "win"
                 ended += 1
-            self._team_returns[w] = 0.0
+        if self.tracer is None:
+            self._team_returns[done] = 0.0  # (the tracer zeroes its own when the episodes begin)
         self._obs = restart_worlds(sim, self.tracer, ended_worlds)
         self.episode_of_world[done] = self._next_episode + np.arange(len(done))  # as the tracer numbers them
         self._next_episode += len(done)

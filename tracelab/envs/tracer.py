@@ -27,6 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from tracelab.envs.sinks import TraceSink
+from tracelab.envs.step_log import StepLog, label_rows
 from tracelab.game.facts import agent_name
 from tracelab.game.refsim import RefSim
 from tracelab.game.rulesim import RuleSim
@@ -36,52 +37,6 @@ from tracelab.game.state import WINNER_BLUE, WINNER_DRAW, WINNER_RED, StepResult
 
 HANDOVER_STEPS = 64
 HANDOVER_ROWS = 65_536
-
-
-class StepLog:
-    """The step records of up to `capacity` steps, kept in arrays allocated once and handed to the sink
-    in one call (a call and five copies per step cost more than the simulator's step at one world).
-    The tracer takes the log before any world's episode changes (an end, a begin), so every logged row
-    of a world belongs to that world's current episode."""
-
-    def __init__(self, capacity: int, worlds: int, obs_size: int, agents: int) -> None:
-        self.capacity, self.k = capacity, 0
-        # each the dtype of what is logged (a converting or strided copy costs more)
-        self.t = np.empty((capacity, worlds), np.int32)
-        self.obs = np.empty((capacity, worlds, 2, obs_size), np.float32)
-        self.red = np.empty((capacity, worlds, agents), np.int64)
-        self.blue = np.empty((capacity, worlds, agents), np.int64)
-        self.rewards = np.empty((capacity, worlds, 2, agents), np.float64)
-
-    def add(self, res: StepResult, red: np.ndarray, blue: np.ndarray) -> bool:
-        """Log one step of every world (copies: the simulator reuses its arrays); True when full."""
-        k = self.k
-        self.t[k] = res.t
-        self.obs[k] = res.obs
-        self.red[k] = red
-        self.blue[k] = blue
-        self.rewards[k] = res.agent_reward
-        self.k = k + 1
-        return self.k == self.capacity
-
-    def take(self, episode: np.ndarray, recorded: np.ndarray, agent_return: np.ndarray,
-             steps: np.ndarray) -> tuple[np.ndarray, ...] | None:
-        """Empty the log: add its rewards to `agent_return` [W, 2, N] and set `steps` [W] to the last t;
-        return (world, episode, t, obs, actions, rewards) of the rows of `recorded` worlds, new arrays in
-        step order then world order (the TraceSink.step layout; `episode`: each world's), or None."""
-        k, self.k = self.k, 0
-        if not k:
-            return None
-        # added step by step, in order (accumulate, not sum), as a running total would: the same floats
-        agent_return[:] = np.add.accumulate(np.concatenate([agent_return[None], self.rewards[:k]]))[-1]
-        steps[:] = self.t[k - 1]
-        if not np.count_nonzero(recorded):
-            return None
-        keep = np.broadcast_to(recorded, (k, len(recorded)))
-        world = np.nonzero(keep)[1]
-        actions = np.stack([self.red[:k][keep], self.blue[:k][keep]], axis=1)
-        return (world, episode[world], self.t[:k][keep].astype(np.int64), self.obs[:k][keep], actions,
-                self.rewards[:k][keep])
 
 
 def handover_due(sim: RuleSim, steps_waiting: int, episode_ended: bool) -> bool:
@@ -102,6 +57,7 @@ class EpisodeTracer:
                  limit: int | None = None) -> None:
         self.sink = sink
         self.limit = limit
+        self._limit = np.iinfo(np.int64).max if limit is None else limit
         self.scenario = scenario
         self.sim = sim
         self._rules = isinstance(sim, RuleSim) and bool(sim.engine.trace_on.any())
@@ -109,14 +65,15 @@ class EpisodeTracer:
         self.open = np.zeros(w, bool)             # the world's current episode is recorded and not ended
         self.cur_ep = np.full(w, -1, np.int64)   # the env's id of each world's current episode
         self.cur_wep = np.full(w, -1, np.int64)  # and the simulator's world_episode for it
-        self.steps = np.zeros(w, np.int64)
-        self.agent_return = np.zeros((w, 2, n))
-        self.team_return = np.zeros((w, 2))
         self._next_episode = 0
         self._steps_waiting = 0                  # steps whose rows the simulator still holds
         self._seed: int | None = None
-        self._names = [agent_name(t, j) for t in range(2) for j in range(n)]
+        # an episode's `rewards`: the teams' returns, then each agent's
+        self._return_names = [*TEAMS, *(agent_name(t, j) for t in range(2) for j in range(n))]
         self._log = StepLog(HANDOVER_STEPS, w, sim.obs_size, n)
+        # each world's returns and steps, kept by the log's step call
+        self.steps, self.agent_return, self.team_return = self._log.steps, self._log.agent_return, \
+            self._log.team_return
         sink.begin_run(sim.engine if isinstance(sim, RuleSim) else None, scenario)
 
     def begin(self, worlds: np.ndarray, seed: int | None) -> None:
@@ -126,20 +83,16 @@ class EpisodeTracer:
         if seed is not None or self._next_episode == 0:
             self._seed = seed
         self._hand_steps()  # the logged steps belong to the episodes before (StepLog)
-        for w in worlds[self.open[worlds]].tolist():
-            self._end(w, "aborted")
-        ids = self._next_episode + np.arange(len(worlds), dtype=np.int64)
+        if np.count_nonzero(self.open[worlds]):
+            for w in worlds[self.open[worlds]].tolist():
+                self._end(w, "aborted")
+        first = self._next_episode
         self._next_episode += len(worlds)
-        self.cur_ep[worlds] = ids
-        if self._rules:
-            self.cur_wep[worlds] = self.sim.world_episode[worlds]
-        recorded = ids < self.limit if self.limit is not None else np.ones(len(ids), bool)
-        self.open[worlds] = recorded
-        self.steps[worlds] = 0
-        self.agent_return[worlds] = 0.0
-        self.team_return[worlds] = 0.0
-        for w, e in zip(worlds[recorded].tolist(), ids[recorded].tolist()):
-            self.sink.begin_episode(w, e, self._seed, self.scenario)
+        # a RefSim has no episode count of its own: the tracer's is copied onto itself
+        recorded = self._log.begin(worlds, first, self._limit, self.cur_ep, self.cur_wep,
+                                   self.sim.world_episode if self._rules else self.cur_wep, self.open)
+        for i, w in enumerate(worlds[:recorded].tolist()):
+            self.sink.begin_episode(w, first + i, self._seed, self.scenario)
 
     def before_reset(self) -> None:
         """Before an env reset (not an autoreset): the rows of steps not handed over yet, so that the
@@ -157,16 +110,14 @@ class EpisodeTracer:
         self._steps_waiting += 1
         if done is None:
             done = res.terminated | res.truncated
-        ended = done & self.open
-        any_ended = np.count_nonzero(ended) > 0  # (ndarray.any() costs a few microseconds more)
-        full = self._log.add(res, red, blue)
-        self.team_return += res.reward
-        if self._rules and handover_due(self.sim, self._steps_waiting, any_ended):
+        ended, full = self._log.add(res, red, blue, done, self.open)
+        if self._rules and handover_due(self.sim, self._steps_waiting, ended > 0):
             self._flush()
-        if any_ended or full:
+        if ended or full:
             self._hand_steps()
-            for w in np.flatnonzero(ended).tolist():
-                self._end(w, outcome_name(res.winner[w], bool(res.truncated[w])))
+            if ended:
+                for w in np.flatnonzero(done & self.open).tolist():
+                    self._end(w, outcome_name(res.winner[w], bool(res.truncated[w])))
 
     def close(self) -> None:
         self._flush()
@@ -176,9 +127,8 @@ class EpisodeTracer:
         self.sink.close()
 
     def _hand_steps(self) -> None:
-        """The logged step records of recorded episodes to the sink, in step order (and their rewards
-        into the returns)."""
-        steps = self._log.take(self.cur_ep, self.open, self.agent_return, self.steps)
+        """The logged step records of recorded episodes to the sink, in step order."""
+        steps = self._log.take(self.cur_ep, self.open)
         if steps is not None:
             self.sink.step(*steps)
 
@@ -189,20 +139,11 @@ class EpisodeTracer:
         rows = self.sim.take_trace()
         if not len(rows["t"]):
             return
-        w, k = rows["world"].astype(np.int64), rows["world_episode"]
-        if (k > self.cur_wep[w]).any():
-            raise RuntimeError("trace rows of a simulator episode the env never began")
-        keep = (k == self.cur_wep[w]) & self.open[w]
-        if not keep.all():  # the simulator's own start (before the env's first episode in that world),
-            #                 or a world whose episode is not recorded (limit) or already ended
-            rows = {name: col[keep] for name, col in rows.items()}
-            w = w[keep]
-        rows["episode"] = self.cur_ep[w]
-        if len(w):
+        rows = label_rows(rows, self.cur_ep, self.cur_wep, self.open)
+        if len(rows["episode"]):
             self.sink.changes(rows, self.cur_ep.copy(), self.sim.episode_start.copy())
 
     def _end(self, w: int, outcome: str) -> None:
-        rewards = {team: float(self.team_return[w, t]) for t, team in enumerate(TEAMS)}
-        rewards.update(zip(self._names, self.agent_return[w].ravel().tolist()))
+        rewards = dict(zip(self._return_names, self.team_return[w].tolist() + self.agent_return[w].ravel().tolist()))
         self.sink.end_episode(w, int(self.cur_ep[w]), int(self.steps[w]), outcome, rewards)
         self.open[w] = False

@@ -39,6 +39,10 @@ def compile_game_kernels(scenario: Scenario, n_worlds: int, stack_previous: bool
     sim.engine.restore(sim._start, np.zeros(1, np.int64))
     if fused and sim.engine.fused_binding() is not None:
         sim._bind()
+    # the envs' tracer's kernels, which a traced play calls next (deferred: envs sits above game; only this
+    # process's entry point reaches up to it)
+    from tracelab.envs.step_log import compile_for
+    compile_for(sim)
 
 
 def main() -> int:

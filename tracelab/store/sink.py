@@ -14,9 +14,12 @@ from tracelab.store.writer import TraceWriter
 
 # What the env streams is written in chunks: when WRITE_ROWS step rows wait, or WRITE_INTERVAL_S after
 # the last write, and at close (Arrow tables per step, or per episode at one world, cost more than the
-# simulator's step: docs/benchmarks.md). The writer publishes at most a second later anyway.
+# simulator's step: docs/benchmarks.md). Each write costs ~2 ms in this thread and a publication of four
+# tables in the writer's (an episode end asks for one), whatever its size: every 0.1 s, that was a fifth
+# of a traced play's CPU at one world. A live reader sees an episode ~0.3 s after it ended; the writer
+# publishes rows at most a second later anyway.
 WRITE_ROWS = 4096
-WRITE_INTERVAL_S = 0.1
+WRITE_INTERVAL_S = 0.25
 
 
 class StoreSink:

@@ -1,0 +1,185 @@
+"""The envs' tracer's per-step work as compiled calls (tracelab/envs/tracer.py): the step log, the
+returns, and which trace rows belong to which recorded episode.
+
+A traced step's Python cost more than the simulator's own step at one world (docs/benchmarks.md, issue
+31): five array copies, two sums and two mask tests per step, a dozen numpy calls per hand-over. Here a
+step is one compiled call (`StepLog.add`), an episode's begin another (`StepLog.begin`), and the
+labelling of a hand-over's trace rows a third (`label_rows`). Each compiles for one signature (the
+tracer passes the same array types every time: the simulator's read-only result buffers, its own
+arrays), cached on disk like the engine's: ~0.9 s of CPU, spent on a first run in its second process
+(`compile_for`; scalar loops: the slice assignments they replace compiled for seconds)."""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from tracelab.game.rulesim import RuleSim
+from tracelab.game.state import StepResult
+
+
+@njit(cache=True)
+def _log_step(log_t, log_obs, log_actions, log_rewards, k, t, obs, red, blue, agent_reward, reward,
+              agent_return, team_return, steps, done, recording):  # noqa: ANN001, ANN202 (numba)
+    """Row k of the log from one step of every world; the returns (a running total, so the same floats
+    as np.add.accumulate over the steps) and steps; returns how many `recording` worlds are `done`."""
+    worlds, agents = red.shape
+    size = obs.shape[2]
+    ended = 0
+    for w in range(worlds):
+        log_t[k, w] = t[w]
+        for team in range(2):  # scalar loops: a slice assignment compiles for seconds longer
+            for d in range(size):
+                log_obs[k, w, team, d] = obs[w, team, d]
+        for j in range(agents):
+            log_actions[k, w, 0, j] = red[w, j]
+            log_actions[k, w, 1, j] = blue[w, j]
+            for team in range(2):
+                r = agent_reward[w, team, j]
+                log_rewards[k, w, team, j] = r
+                agent_return[w, team, j] += r
+        team_return[w, 0] += reward[w, 0]
+        team_return[w, 1] += reward[w, 1]
+        steps[w] = t[w]
+        if done[w] and recording[w]:
+            ended += 1
+    return ended
+
+
+@njit(cache=True)
+def _episode_of_rows(world, world_episode, episode_of_world, sim_episode_of_world, recording):  # noqa: ANN001, ANN202
+    """The env episode of each trace row (-1: not recorded: the simulator's start before the env's first
+    episode, or a world whose episode is past the limit or ended) and how many are recorded; -1 as the
+    count if a row belongs to a simulator episode the env never began."""
+    n = world.shape[0]
+    out = np.empty(n, np.int64)
+    kept = 0
+    for i in range(n):
+        w = world[i]
+        current = sim_episode_of_world[w]
+        if world_episode[i] > current:
+            return out, -1
+        if world_episode[i] == current and recording[w]:
+            out[i] = episode_of_world[w]
+            kept += 1
+        else:
+            out[i] = -1
+    return out, kept
+
+
+@njit(cache=True)
+def _begin_episodes(worlds, first_id, limit, episode_of_world, sim_episode_of_world, world_episode, recording,
+                    agent_return, team_return, steps):  # noqa: ANN001, ANN202 (numba)
+    """Episodes first_id, first_id + 1, ... begin in `worlds` (in that order): their ids, the simulator's
+    episode numbers (`world_episode`), returns and steps zeroed; those numbered below `limit` are recorded.
+    Returns how many are (a prefix of `worlds`: the ids grow)."""
+    recorded = 0
+    for i in range(worlds.shape[0]):
+        w = worlds[i]
+        episode = first_id + i
+        episode_of_world[w] = episode
+        sim_episode_of_world[w] = world_episode[w]
+        recording[w] = episode < limit
+        recorded += episode < limit
+        for team in range(2):
+            team_return[w, team] = 0.0
+            for j in range(agent_return.shape[2]):
+                agent_return[w, team, j] = 0.0
+        steps[w] = 0
+    return recorded
+
+
+def label_rows(rows: dict[str, np.ndarray], episode_of_world: np.ndarray, sim_episode_of_world: np.ndarray,
+               recording: np.ndarray) -> dict[str, np.ndarray]:
+    """RuleSim.take_trace() rows with `episode` (the env's id) added, keeping those of recorded episodes
+    (`recording` [W]: the world's current episode is recorded and open; `sim_episode_of_world`: its
+    RuleSim.world_episode)."""
+    # contiguous int32 / int64 columns (a big hand-over's are strided views): one compiled signature
+    world = np.ascontiguousarray(rows["world"], np.int32)
+    episode, kept = _episode_of_rows(world, np.ascontiguousarray(rows["world_episode"], np.int64),
+                                     episode_of_world, sim_episode_of_world, recording)
+    if kept < 0:
+        raise RuntimeError("trace rows of a simulator episode the env never began")
+    if kept < len(episode):
+        keep = episode >= 0
+        rows = {name: col[keep] for name, col in rows.items()}
+        episode = episode[keep]
+    rows["episode"] = episode
+    return rows
+
+
+class StepLog:
+    """The step records of up to `capacity` steps, kept in arrays allocated once and handed to the sink
+    in one call (a call and five copies per step cost more than the simulator's step at one world).
+    The tracer takes the log before any world's episode changes (an end, a begin), so every logged row
+    of a world belongs to that world's current episode. Logging a step also keeps each world's returns
+    and steps (`agent_return` [W, 2, N], `team_return` [W, 2], `steps` [W]; the tracer zeroes them when
+    an episode begins)."""
+
+    def __init__(self, capacity: int, worlds: int, obs_size: int, agents: int) -> None:
+        self.capacity, self.k = capacity, 0
+        # each the dtype of what is logged (a converting copy costs more)
+        self.t = np.empty((capacity, worlds), np.int32)
+        self.obs = np.empty((capacity, worlds, 2, obs_size), np.float32)
+        self.actions = np.empty((capacity, worlds, 2, agents), np.int64)
+        self.rewards = np.empty((capacity, worlds, 2, agents), np.float64)
+        self.agent_return = np.zeros((worlds, 2, agents))
+        self.team_return = np.zeros((worlds, 2))
+        self.steps = np.zeros(worlds, np.int64)
+        self._worlds = np.arange(worlds, dtype=np.int64)
+
+    def add(self, res: StepResult, red: np.ndarray, blue: np.ndarray, done: np.ndarray,
+            recording: np.ndarray) -> tuple[int, bool]:
+        """Log one step of every world (copies: the simulator reuses its arrays). Returns how many
+        `recording` worlds are `done`, and whether the log is full."""
+        k = self.k
+        ended = _log_step(self.t, self.obs, self.actions, self.rewards, k, res.t, res.obs, red, blue,
+                          res.agent_reward, res.reward, self.agent_return, self.team_return, self.steps, done,
+                          recording)
+        self.k = k + 1
+        return ended, self.k == self.capacity
+
+    def begin(self, worlds: np.ndarray, first_id: int, limit: int, episode_of_world: np.ndarray,
+              sim_episode_of_world: np.ndarray, world_episode: np.ndarray, recording: np.ndarray) -> int:
+        """Episodes begin in `worlds` (int64 indices), numbered from `first_id` in that order: their ids
+        into `episode_of_world`, `world_episode` (the simulator's count) into `sim_episode_of_world`,
+        `recording` set for those numbered below `limit`, returns and steps zeroed. Returns how many are
+        recorded (the first ones of `worlds`)."""
+        return _begin_episodes(worlds, first_id, limit, episode_of_world, sim_episode_of_world, world_episode,
+                               recording, self.agent_return, self.team_return, self.steps)
+
+    def take(self, episode: np.ndarray, recorded: np.ndarray) -> tuple[np.ndarray, ...] | None:
+        """Empty the log: (world, episode, t, obs, actions, rewards) of the rows of `recorded` worlds, new
+        arrays in step order then world order (the TraceSink.step layout; `episode`: each world's), or
+        None."""
+        k, self.k = self.k, 0
+        if not k:
+            return None
+        n = np.count_nonzero(recorded)
+        if not n:
+            return None
+        if n == len(recorded):  # every world recorded (the usual case): the log's rows as they lie
+            rows = k * n
+            world = np.tile(self._worlds, k)
+            return (world, episode[world], self.t[:k].reshape(rows).astype(np.int64),
+                    self.obs[:k].reshape(rows, 2, -1).copy(), self.actions[:k].reshape(rows, 2, -1).copy(),
+                    self.rewards[:k].reshape(rows, 2, -1).copy())
+        keep = np.broadcast_to(recorded, (k, len(recorded)))
+        world = np.nonzero(keep)[1]
+        return (world, episode[world], self.t[:k][keep].astype(np.int64), self.obs[:k][keep],
+                self.actions[:k][keep], self.rewards[:k][keep])
+
+
+def compile_for(sim: RuleSim) -> None:
+    """Compile (or load) the kernels above for a RuleSim's argument types without stepping it: a first
+    run's second process (tracelab/game/rulesim_warmup.py) does this while the play's process compiles
+    the engine, so that the play loads them from numba's cache. Calls each as the tracer does: the
+    simulator's result buffers, new int64 actions, a new bool `done`, the tracer's own arrays."""
+    res = sim._result  # what its step() returns (the buffers, read-only)
+    worlds, agents = sim.n_worlds, sim.scenario.agents_per_team
+    log = StepLog(1, worlds, sim.obs_size, agents)
+    ids, recording = np.full(worlds, -1, np.int64), np.zeros(worlds, np.bool_)
+    log.begin(np.arange(worlds, dtype=np.int64), 0, 1, ids, ids.copy(), sim.world_episode, recording)
+    actions = np.zeros((worlds, agents), np.int64)
+    log.add(res, actions, actions.copy(), res.terminated | res.truncated, recording)
+    label_rows({"world": np.zeros(1, np.int32), "world_episode": np.zeros(1, np.int64)}, ids, ids.copy(),
+               recording)
