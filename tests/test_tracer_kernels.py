@@ -1,5 +1,5 @@
 """The envs' tracer's compiled calls (tracelab/envs/step_log.py) compile once each: a first run's second
-process (tracelab/game/rulesim_warmup.py), a traced play at one and several worlds, an episode limit that
+process (tracelab/game/rulesim_warmup_child.py), a traced play at one and several worlds, an episode limit that
 leaves worlds unrecorded, and an env reset that cuts episodes short all pass them the same argument types
 (a second signature would be a second compile on a first run: tests/test_first_run.py)."""
 from __future__ import annotations
@@ -11,7 +11,7 @@ import numpy as np
 from tracelab.envs import step_log
 from tracelab.envs.sinks import MemorySink
 from tracelab.envs.vector_env import GridWarVectorEnv
-from tracelab.game.rulesim_warmup import compile_game_kernels
+from tracelab.game.rulesim_warmup_child import compile_game_kernels
 from tracelab.game.scenario import builtin_scenario
 from tracelab.playing import Games
 
