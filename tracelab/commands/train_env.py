@@ -176,6 +176,10 @@ def _report(trainer: Any, source: Any, run_dir: Path, status: str) -> None:
     print(f"{status} at step {trainer.step:,}" + (
         f"; last evaluation: mean return {ev.mean_return:.3f}, success (return > 0) {ev.successes}/{ev.games} "
         f"({100 * ev.success_rate:.1f}%)" if ev else ""))
+    from tracelab.commands._training import eval_time_line
+    timing = eval_time_line(trainer.metrics)
+    if timing:
+        print(timing)
     if trainer.best_eval is not None and ev is not None and trainer.best_eval[0] > ev.mean_return:
         print(f"best evaluation at step {trainer.best_eval[1]:,} (mean return {trainer.best_eval[0]:.3f}): its "
               f"policy is kept in {run_dir}/policy-best/")
