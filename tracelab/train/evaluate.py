@@ -163,26 +163,28 @@ class EvalSink(StoreSink):
     """Streams chosen episodes of one env into a run it does not own (the env's program is written once,
     at begin_run): `accept(info)` before a reset makes the episodes that reset begins traced ones, under fresh
     run-wide episode ids (`new_id`) with begin
-    `info`; later episodes of the env (autoresets) are dropped. close() leaves the writer open."""
+    `info`; later episodes of the env (autoresets) are dropped. close() leaves the writer open.
+    An evaluation's rows are written at its end (EvalTrace.play), or every WRITE_ROWS step rows, not
+    every WRITE_INTERVAL_S: each write that ends episodes is a publication of the run."""
+    write_interval_s = None
 
     def __init__(self, writer: TraceWriter, new_id: Callable[[], int]) -> None:
         super().__init__(writer)
         self._new_id = new_id
         self._ids: dict[int, int] = {}     # env episode -> run episode, while traced
-        self._info: Mapping[str, Any] | None = None
         self._budget = 0
 
     def accept(self, info: Mapping[str, Any] | None, episodes: int = 0) -> None:
         """Trace the next `episodes` episodes the env begins, with begin `info`."""
-        self._info, self._budget = info, episodes
+        self.begin_info, self._budget = (None if info is None else dict(info)), episodes
 
     def begin_episode(self, world: int, episode: int, seed: int | None, scenario: Any) -> None:
-        if self._info is None or self._budget <= 0:
+        if self.begin_info is None or self._budget <= 0:
             return
         self._budget -= 1
         run_ep = self._new_id()
         self._ids[int(episode)] = run_ep
-        self.writer.begin_episode(run_ep, world=int(world), t_start=0, seed=seed, info=dict(self._info))
+        super().begin_episode(world, run_ep, seed, scenario)
 
     def changes(self, rows: dict[str, np.ndarray], episode_of_world: np.ndarray,
                 t0_of_world: np.ndarray) -> None:
