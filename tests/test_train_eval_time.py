@@ -71,3 +71,11 @@ def test_the_share_counts_only_the_time_inside_the_training_loop() -> None:
     m = log.evaluation_timed(0.0, {"traced": 0.0})
     assert set(m) == {EVAL_SECONDS, EVAL_WALL_SHARE, EVAL_PART_SECONDS["traced"]}
     assert log.loop_seconds() == before        # time outside the loop is not the training's
+
+
+def test_compare_shows_the_share_beside_the_other_final_metrics(trained, capsys) -> None:
+    run, _ = trained
+    assert main(["compare", str(run), "--format", "csv"]) == 0
+    rows = dict(line.split(",", 1) for line in capsys.readouterr().out.splitlines())
+    share = run_rows(run, f"SELECT arg_max(value, step) FROM metrics WHERE name = '{EVAL_WALL_SHARE}'")[0][0]
+    assert float(rows[EVAL_WALL_SHARE]) == pytest.approx(share)
