@@ -156,7 +156,7 @@ def report(r: dict[str, Any]) -> str:
              f"{'met' if s['goal_met'] else 'not met'} ({s['ratio_cpu']:.2f}x)"]
     m = r["memory"]
     if m:
-        parts.append(f"{m['command']} --total-timesteps {m['steps']:,}, a fresh process, RSS every second: "
+        parts.append(f"{m['command']}, a fresh process, RSS every second: "
                      f"{m['after_warm_up_mb']:.0f} MB after warm-up (second tenth), {m['end_mb']:.0f} MB in the "
                      f"last tenth ({m['growth_mb']:+.0f} MB), peak {m['peak_mb']:.0f} MB, {m['seconds']:.0f} s")
     return "\n\n".join(parts)
