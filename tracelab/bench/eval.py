@@ -6,7 +6,9 @@ game; the same seeds) played
 - `traced`: as train traces them (train/evaluate.py's EvalTrace: `worlds` worlds, one game each, into a
   run of the store that stays open, as the training's run does), and
 - `untraced`: as train plays the rest (play_games in a vector env of as many worlds, no trace),
-in turn, `evaluations` evaluations per block, `repeats` blocks of each. Figures are seconds per evaluation,
+in turn, `evaluations` evaluations per block, `repeats` blocks of each; a traced block ends when the run's
+writer has published its rows (its thread would otherwise encode them during the next untraced block,
+whose process CPU time would count them). Figures are seconds per evaluation,
 medians: wall clock, CPU of the whole process (the store writer's thread included) and CPU of the game's
 thread alone. `ratio`: traced over untraced per CPU second and per wall second (the goal: <= 1.3). Both
 must play the same games (`same_games`: their outcomes and lengths compared).
@@ -55,9 +57,10 @@ def _policy() -> Any:
 Evaluation = Callable[[int], list[Any]]  # seed -> the games' records
 
 
-def evaluations(worlds: int, run_dir: Path) -> tuple[Evaluation, Evaluation, Callable[[], None]]:
-    """(traced, untraced, close): an evaluation of `worlds` games with a seed, traced into a new run at
-    `run_dir` or untraced."""
+def evaluations(worlds: int, run_dir: Path) -> tuple[Evaluation, Evaluation, Callable[[], None],
+                                                     Callable[[], None]]:
+    """(traced, untraced, published, close): an evaluation of `worlds` games with a seed, traced into a
+    new run at `run_dir` or untraced; `published()` returns once the traced rows are in the run."""
     from tracelab.envs.vector_env import GridWarVectorEnv
     from tracelab.game.scenario import builtin_scenario
     from tracelab.store import TraceWriter
@@ -76,15 +79,16 @@ def evaluations(worlds: int, run_dir: Path) -> tuple[Evaluation, Evaluation, Cal
         writer.close()
 
     return (lambda seed: trace.play(policy, seed, {"kind": "eval"}),
-            lambda seed: play_games(env, policy, one_each, seed), close)
+            lambda seed: play_games(env, policy, one_each, seed), writer.flush, close)
 
 
 def speed(worlds: int, per_block: int, repeats: int) -> dict[str, Any]:
     """Traced and untraced evaluations of `worlds` games, in turn (module docstring)."""
     with tempfile.TemporaryDirectory(prefix="tracelab-bench-eval-") as tmp:
-        traced, untraced, close = evaluations(worlds, Path(tmp) / "run")
+        traced, untraced, published, close = evaluations(worlds, Path(tmp) / "run")
         try:
             same = [(r.outcome, r.steps) for r in traced(0)] == [(r.outcome, r.steps) for r in untraced(0)]
+            published()
             kinds = {"traced": traced, "untraced": untraced}
             figures: dict[str, dict[str, list[float]]] = {k: {"wall": [], "cpu": [], "thread": []} for k in kinds}
             steps = {k: 0 for k in kinds}
@@ -94,6 +98,8 @@ def speed(worlds: int, per_block: int, repeats: int) -> dict[str, Any]:
                     t0, c0, m0 = time.perf_counter(), time.process_time(), time.thread_time()
                     for seed in seeds:
                         steps[name] += sum(r.steps for r in play(seed))
+                    if name == "traced":
+                        published()
                     for key, used in (("wall", time.perf_counter() - t0), ("cpu", time.process_time() - c0),
                                       ("thread", time.thread_time() - m0)):
                         figures[name][key].append(used / per_block)
