@@ -194,3 +194,20 @@ def test_bench_play_quick(capsys: pytest.CaptureFixture) -> None:
         assert s["ratio"] > 0 and s["cpu_ratio"] > 0 and isinstance(s["goal_met"], bool)
     (m,) = r["memory"]
     assert m["episodes"] == 20 and len(m["rss_mb"]) == 10 and m["peak_mb"] >= max(m["rss_mb"]) > 0
+
+
+def test_bench_eval_quick(capsys: pytest.CaptureFixture) -> None:
+    r = bench_json(capsys, "eval", "--repeats", "2", "--worlds", "3", "--memory", "1000")
+    machine(r["machine"])
+    s = r["speed"]
+    assert s["worlds"] == 3 and s["same_games"] is True          # traced and untraced play the same games
+    assert s["game_steps"]["traced"] == s["game_steps"]["untraced"] > 0
+    for name in ("traced", "untraced"):
+        for key in ("wall_s", "cpu_s", "thread_s"):
+            positive(s[name][key])
+            assert len(s[name][key]["runs"]) == 2
+    assert all(s[f"ratio_{k}"] > 0 for k in ("wall", "cpu", "thread")) and isinstance(s["goal_met"], bool)
+    m = r["memory"]
+    assert m["steps"] == 1000 and m["command"].startswith("tracelab train --scenario base")
+    assert m["rss_mb"] and all(mb > 0 for _, mb in m["rss_mb"]) and m["peak_mb"] >= max(mb for _, mb in m["rss_mb"])
+    assert m["growth_mb"] == pytest.approx(m["end_mb"] - m["after_warm_up_mb"])

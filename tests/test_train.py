@@ -22,13 +22,14 @@ from tracelab.store.why import explain, render_why
 from tracelab.train.checkpoint import checkpoint_path, load_checkpoint
 from tracelab.train.config import TrainConfig
 from tracelab.train.loop import Trainer
+from tracelab.train.metric_log import WALL_CLOCK_METRICS
 from tracelab.train.policy import load_policy, read_policy_spec
 from train_helpers import SMALL, WALK
 
 TRAINING_METRICS = {"loss", "epsilon", "q_max_mean", "env_steps_per_s", "updates_per_s", "train_return"}
 EVAL_METRICS = {f"eval/{k}" for k in ("games", "wins", "losses", "draws", "truncated", "win_rate", "mean_return",
                                        "method_win_rate")}
-TIMING = ("env_steps_per_s", "updates_per_s")
+TIMING = WALL_CLOCK_METRICS
 
 
 def _metrics(run) -> dict[tuple[int, str], float]:

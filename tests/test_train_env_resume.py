@@ -15,6 +15,7 @@ from tracelab.envs.declared.env_source import EnvSource
 from tracelab.store.meta import current_meta
 from tracelab.train.checkpoint import checkpoint_path
 from tracelab.train.config import TrainConfig
+from tracelab.train.metric_log import WALL_CLOCK_METRICS
 from tracelab.viewers.tui.eval_games import eval_games, neighbour
 from tracelab.viewers.tui.source import RunSource
 
@@ -25,7 +26,7 @@ SETTINGS = dict(steps=3000, envs=4, warmup=200, target_every=200, eval_every=100
                 trace_eval_games=2, log_every=250, checkpoint_every=1000, reward_scale=1.0, buffer=5000,
                 batch=32, seed=3)
 ENCODING = "Discrete(16) one-hot"
-RATES = ("env_steps_per_s", "updates_per_s")  # wall-clock figures: differ between any two runs
+RATES = WALL_CLOCK_METRICS  # differ between any two runs
 TIMEOUT = 300
 
 

@@ -6,6 +6,8 @@ import os
 import platform
 import resource
 import statistics
+import subprocess
+import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
@@ -71,9 +73,39 @@ def calibrate(run: Callable[[int], object], target_s: float, min_units: int = 3,
     return int(min(max_units, max(min_units, k * target_s / max(dt, 1e-9))))
 
 
-def rss_bytes() -> int:
-    """This process's resident set size."""
-    return int(psutil.Process().memory_info().rss)
+def rss_bytes(pid: int | None = None) -> int:
+    """The resident set size of this process, or of process `pid`."""
+    return int(psutil.Process(pid).memory_info().rss)
+
+
+def sampled_child_rss(argv: Sequence[str], every_s: float = 1.0, timeout_s: float = 4 * 3600) -> dict[str, Any]:
+    """Run `argv` in a child process, sampling its resident memory every `every_s` seconds until it exits:
+    `rss_mb` [(seconds since start, MB)], `peak_mb` (the child's own VmHWM, from wait4), `seconds`,
+    `returncode`, `stderr` (its last 2,000 characters). A child still running after `timeout_s` is
+    killed (returncode -9)."""
+    with tempfile.TemporaryFile() as err:
+        child = subprocess.Popen(list(argv), stdout=subprocess.DEVNULL, stderr=err)
+        t0 = time.perf_counter()
+        samples: list[tuple[float, float]] = []
+        while True:
+            waited, status, usage = os.wait4(child.pid, os.WNOHANG)
+            if waited:
+                break
+            elapsed = time.perf_counter() - t0
+            if elapsed > timeout_s:
+                child.kill()
+                waited, status, usage = os.wait4(child.pid, 0)
+                break
+            try:
+                samples.append((elapsed, rss_bytes(child.pid) / 2**20))
+            except psutil.NoSuchProcess:  # exited between the wait and the read
+                pass
+            time.sleep(every_s)
+        child.returncode = os.waitstatus_to_exitcode(status)
+        err.seek(0)
+        stderr = err.read().decode(errors="replace")[-2000:]
+    return {"rss_mb": samples, "peak_mb": usage.ru_maxrss / 1024, "seconds": time.perf_counter() - t0,
+            "returncode": child.returncode, "stderr": stderr}
 
 
 def children_cpu_s() -> float:

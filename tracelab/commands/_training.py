@@ -1,13 +1,14 @@
 """The part of `tracelab train` that both trainers (train.py, GridWar; train_env.py, --env) share: where a
 run goes and what --resume may change; the session around a training, which closes the trainer, the
 TensorBoard sink and the run whatever happens; Ctrl-C once finishes the step and stops (the trainer writes
-what it keeps), Ctrl-C again aborts; a progress bar on a terminal; what a resume says."""
+what it keeps), Ctrl-C again aborts; a progress bar on a terminal; what a resume says; the final summary's
+line on the evaluations' wall time."""
 from __future__ import annotations
 
-import signal
-import sys
 import argparse
 import shlex
+import signal
+import sys
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -168,3 +169,16 @@ def training_session(writer: Any, torch_deterministic: bool, tensorboard: Path |
         if session.sink is not None:
             session.sink.close()
         writer.close(status=session.status)
+
+
+def eval_time_line(metrics: Any) -> str | None:
+    """The summary's line on the evaluations' wall time in this process (a trainer's MetricLog), e.g.
+    `evaluations: 11 in 9.8 s, 14.2% of the training's 69.0 s (traced games 2.7 s, untraced 6.6 s)`;
+    None when none ran."""
+    share = metrics.eval_share()
+    if not metrics.eval_count or share is None:
+        return None
+    parts = [f"{name} games {metrics.eval_part_seconds[name]:.1f} s" for name in ("traced", "untraced")
+             if metrics.eval_part_seconds[name] > 0]
+    return (f"evaluations: {metrics.eval_count} in {metrics.eval_seconds:.1f} s, {100 * share:.1f}% of the "
+            f"training's {metrics.loop_seconds():.1f} s" + (f" ({', '.join(parts)})" if parts else ""))

@@ -1,7 +1,7 @@
 """`tracelab bench`: speed and memory measured by benchmarks (docs/benchmarks.md), never by timed
 assertions in tests. `bench engine`, `bench env`, `bench store`, `bench replay`, `bench train`,
-`bench tui`, `bench aggregates`, `bench reason-store`, `bench toytext`, `bench play`, `bench first-run`,
-`bench pyreason`, `bench all` (engine, env, store, replay, train);
+`bench tui`, `bench aggregates`, `bench reason-store`, `bench toytext`, `bench play`, `bench eval`,
+`bench first-run`, `bench pyreason`, `bench all` (engine, env, store, replay, train);
 each takes --json, --quick (small sizes: the smoke test) and --repeats (medians and spread over that
 many repeats)."""
 from __future__ import annotations
@@ -34,6 +34,8 @@ def register(sub: argparse._SubParsersAction) -> None:
              "toytext": "gymnasium's toy-text games as rules (docs/worlds.md) against gymnasium's own, one world",
              "play": "tracelab play --run against bench env's traced loop (1 and 64 worlds); --memory: the "
                      "peak memory of 100 / 1,000 / 10,000 recorded episodes",
+             "eval": "train's evaluation games traced into a run against the same games untraced; --memory: "
+                     "a training with traced evaluations, its memory sampled every second",
              "first-run": "the README's `play --scenario advanced --episodes 5` from empty caches (a fresh "
                           "install) and again warm: wall and CPU time",
              "pyreason": "PyReason against tracelab on the same scripts (examples/), import changed only: "
@@ -69,6 +71,12 @@ def register(sub: argparse._SubParsersAction) -> None:
             q.add_argument("--memory", type=_counts, nargs="?", const=[100, 1000, 10_000], default=None,
                            metavar="N,N,...", help="also the memory of recorded runs of these many episodes, "
                                                    "each in a fresh process (default 100,1000,10000)")
+        if name == "eval":
+            q.add_argument("--worlds", type=positive_int, default=5,
+                           help="games per evaluation, one per world (default 5, as train's --trace-eval-games)")
+            q.add_argument("--memory", type=positive_int, nargs="?", const=1_000_000, default=None,
+                           metavar="STEPS", help="also the memory of a `tracelab train` of this many steps with "
+                                                 "traced evaluations, in a fresh process (default 1,000,000)")
         if name == "pyreason":
             q.add_argument("--pyreason-python", metavar="PYTHON", default=None,
                            help="the interpreter of a PyReason install (e.g. a venv's bin/python); without "
@@ -134,6 +142,10 @@ def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], s
         from tracelab.bench import play  # deferred: as engine's, above
         r = play.run(args.quick, args.repeats, args.worlds, args.memory)
         return r, play.report(r)
+    if name == "eval":
+        from tracelab.bench import eval as evaluations  # deferred: as engine's, above
+        r = evaluations.run(args.quick, args.repeats, args.worlds, args.memory)
+        return r, evaluations.report(r)
     if name == "aggregates":
         from tracelab.bench import aggregates  # deferred: as engine's, above
         r = aggregates.run(args.quick, args.repeats)

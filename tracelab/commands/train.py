@@ -15,6 +15,7 @@ from tracelab.commands._notices import say_running_compiles
 from tracelab.commands._training import (
     check_budget,
     check_resume_flags,
+    eval_time_line,
     reopen_run,
     say_resumed,
     train_until_stopped,
@@ -202,6 +203,9 @@ def _report(trainer: Any, run_dir: Path, status: str) -> None:
     print(f"{status} at step {trainer.step:,}, {reward_scale_text(trainer.cfg.reward_scale)}"
           + (f"; last evaluation: {ev.wins}/{ev.games} wins "
           f"({100 * ev.win_rate:.1f}%), method's counting {100 * ev.method_win_rate:.1f}%" if ev else ""))
+    timing = eval_time_line(trainer.metrics)
+    if timing:
+        print(timing)
     best = trainer.best_eval
     if best is not None and ev is not None and best[0] > ev.method_win_rate:  # training got worse after it
         print(f"best evaluation at step {best[1]:,} (method's counting {100 * best[0]:.1f}%): its policy is "

@@ -16,6 +16,7 @@ from typing import Any
 from tracelab.commands._training import (
     check_budget,
     check_resume_flags,
+    eval_time_line,
     reopen_run,
     say_resumed,
     train_until_stopped,
@@ -170,6 +171,9 @@ def _report(trainer: Any, source: Any, run_dir: Path, status: str) -> None:
     print(f"{status} at step {trainer.step:,}" + (
         f"; last evaluation: mean return {ev.mean_return:.3f}, success (return > 0) {ev.successes}/{ev.games} "
         f"({100 * ev.success_rate:.1f}%)" if ev else ""))
+    timing = eval_time_line(trainer.metrics)
+    if timing:
+        print(timing)
     if trainer.best_eval is not None and ev is not None and trainer.best_eval[0] > ev.mean_return:
         print(f"best evaluation at step {trainer.best_eval[1]:,} (mean return {trainer.best_eval[0]:.3f}): its "
               f"policy is kept in {run_dir}/policy-best/")

@@ -27,7 +27,10 @@ class StoreSink:
     The env owns the sink: env.close() closes the writer. Change rows, step records and episode ends are
     kept until WRITE_ROWS step rows wait, WRITE_INTERVAL_S passed or the sink closes (`write_pending`),
     then written after the episode begins kept with them, in that order, so a reader of the run never sees
-    an ended episode without its rows."""
+    an ended episode without its rows. `write_interval_s` None: no write for time's sake (a subclass
+    that writes at its own ends); `begin_info`: the begin info of the episodes it begins."""
+    write_interval_s: float | None = WRITE_INTERVAL_S
+    begin_info: Mapping[str, Any] | None = None
 
     def __init__(self, writer: TraceWriter) -> None:
         self.writer = writer
@@ -49,7 +52,7 @@ class StoreSink:
 
     def begin_episode(self, world: int, episode: int, seed: int | None, scenario: Any) -> None:
         self._begins.append({"episode": int(episode), "world": int(world), "t_start": 0, "seed": seed,
-                             "started_at": utc_now()})
+                             "started_at": utc_now(), "info": self.begin_info})
 
     def changes(self, rows: dict[str, np.ndarray], episode_of_world: np.ndarray,
                 t0_of_world: np.ndarray) -> None:
@@ -60,7 +63,8 @@ class StoreSink:
         # the env hands over new arrays (sinks.py), so they are kept as they are
         self._steps.append((episode, t, obs, actions, rewards))
         self._step_rows += len(t)
-        if self._step_rows >= WRITE_ROWS or time.monotonic() - self._written_at >= WRITE_INTERVAL_S:
+        if self._step_rows >= WRITE_ROWS or (self.write_interval_s is not None
+                                             and time.monotonic() - self._written_at >= self.write_interval_s):
             self.write_pending()
 
     def end_episode(self, world: int, episode: int, steps: int, outcome: str,

@@ -127,6 +127,8 @@ class EnvEvalResult:
     steps: list[int] = field(default_factory=list)
     terminated: int = 0
     truncated: int = 0
+    # wall seconds of the traced and of the untraced games (DeclaredEvaluator.play): a cost, not a result
+    seconds: dict[str, float] = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def games(self) -> int:

@@ -9,6 +9,7 @@ games). A few games can be traced in full into a run (`EvalTrace`): their change
 episodes, with begin info `{"kind": "eval", ...}` so `tracelab why` can explain them."""
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from typing import Any
@@ -49,6 +50,8 @@ class EvalResult:
     method_non_wins: int = 0     # draws and wins by elimination
     method_actions_per_win: float | None = None
     records: list[GameRecord] = field(default_factory=list, repr=False)
+    # wall seconds of the traced and of the untraced games (evaluate()): not a result, a cost
+    seconds: dict[str, float] = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def win_rate(self) -> float:
@@ -95,7 +98,7 @@ class EvalResult:
         return out
 
     def to_dict(self) -> dict[str, Any]:
-        d = {k: v for k, v in asdict(self).items() if k != "records"}
+        d = {k: v for k, v in asdict(self).items() if k not in ("records", "seconds")}
         d.update(win_rate=self.win_rate, method_win_rate=self.method_win_rate)
         d.update({f"{k}_ci95": list(v) for k, v in self.intervals().items()})
         return d
@@ -160,46 +163,55 @@ class EvalSink(StoreSink):
     """Streams chosen episodes of one env into a run it does not own (the env's program is written once,
     at begin_run): `accept(info)` before a reset makes the episodes that reset begins traced ones, under fresh
     run-wide episode ids (`new_id`) with begin
-    `info`; later episodes of the env (autoresets) are dropped. close() leaves the writer open."""
+    `info`; later episodes of the env (autoresets) are dropped. close() leaves the writer open.
+    An evaluation's rows are written at its end (EvalTrace.play), or every WRITE_ROWS step rows, not
+    every WRITE_INTERVAL_S: each write that ends episodes is a publication of the run."""
+    write_interval_s = None
 
     def __init__(self, writer: TraceWriter, new_id: Callable[[], int]) -> None:
         super().__init__(writer)
         self._new_id = new_id
         self._ids: dict[int, int] = {}     # env episode -> run episode, while traced
-        self._info: Mapping[str, Any] | None = None
         self._budget = 0
 
     def accept(self, info: Mapping[str, Any] | None, episodes: int = 0) -> None:
         """Trace the next `episodes` episodes the env begins, with begin `info`."""
-        self._info, self._budget = info, episodes
+        self.begin_info, self._budget = (None if info is None else dict(info)), episodes
 
     def begin_episode(self, world: int, episode: int, seed: int | None, scenario: Any) -> None:
-        if self._info is None or self._budget <= 0:
+        if self.begin_info is None or self._budget <= 0:
             return
         self._budget -= 1
         run_ep = self._new_id()
         self._ids[int(episode)] = run_ep
-        self.writer.begin_episode(run_ep, world=int(world), t_start=0, seed=seed, info=dict(self._info))
+        super().begin_episode(world, run_ep, seed, scenario)
 
     def changes(self, rows: dict[str, np.ndarray], episode_of_world: np.ndarray,
                 t0_of_world: np.ndarray) -> None:
-        if not self._ids:
-            return
-        env_ids = np.fromiter(self._ids, np.int64)
-        keep = np.isin(rows["episode"], env_ids)
-        if not keep.any():
-            return
-        lookup = dict(self._ids)
-        kept = {k: v[keep] for k, v in rows.items()}
-        kept["episode"] = np.array([lookup[e] for e in kept["episode"].tolist()], np.int64)
-        super().changes(kept, episode_of_world, t0_of_world)
+        keep, run_eps = self._traced(rows["episode"])
+        if run_eps.size:
+            kept = {k: v[keep] for k, v in rows.items()}
+            kept["episode"] = run_eps
+            super().changes(kept, episode_of_world, t0_of_world)
 
     def step(self, world: np.ndarray, episode: np.ndarray, t: np.ndarray, obs: np.ndarray,
              actions: np.ndarray, rewards: np.ndarray) -> None:
-        keep = [i for i, e in enumerate(episode.tolist()) if e in self._ids]
-        if keep:
-            run_eps = np.array([self._ids[int(episode[i])] for i in keep], np.int64)
+        keep, run_eps = self._traced(episode)
+        if run_eps.size:
             super().step(world[keep], run_eps, t[keep], obs[keep], actions[keep], rewards[keep])
+
+    def _traced(self, env_episodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(which rows of `env_episodes` are of traced episodes, those rows' run episode ids), by array
+        lookup: a change row each costs too much in Python (thousands a step)."""
+        if not self._ids:
+            return np.zeros(len(env_episodes), bool), np.zeros(0, np.int64)
+        env_ids = np.fromiter(self._ids, np.int64, len(self._ids))
+        run_ids = np.fromiter(self._ids.values(), np.int64, len(self._ids))
+        order = np.argsort(env_ids)
+        env_ids, run_ids = env_ids[order], run_ids[order]
+        at = np.minimum(np.searchsorted(env_ids, env_episodes), len(env_ids) - 1)
+        keep = env_ids[at] == env_episodes
+        return keep, run_ids[at[keep]]
 
     def end_episode(self, world: int, episode: int, steps: int, outcome: str,
                     rewards: Mapping[str, float]) -> None:
@@ -243,13 +255,17 @@ def evaluate(policy: Policy, scenario: Scenario, *, games: int, backend: str, se
     `trace.games` of them are played (and traced) in `trace`'s env, the rest in `env` (or a new one with
     `envs` worlds). `on_game` is called with each game as it ends."""
     records: list[GameRecord] = []
+    seconds: dict[str, float] = {}
     n_traced = min(trace.games, games) if trace is not None else 0
     if n_traced:
         if n_traced < trace.games:
             raise ValueError(f"{games} games cannot fill the {trace.games} traced worlds")
+        t0 = time.perf_counter()
         records += trace.play(policy, seed + 1, trace_info or {"kind": "eval"}, on_game)
+        seconds["traced"] = time.perf_counter() - t0
     rest = games - n_traced
     if rest:
+        t0 = time.perf_counter()
         own = env is None
         if own:
             env = GridWarVectorEnv(min(envs, rest), scenario, backend=backend, stack_previous=stack_previous,
@@ -259,7 +275,10 @@ def evaluate(policy: Policy, scenario: Scenario, *, games: int, backend: str, se
         finally:
             if own:
                 env.close()
-    return EvalResult.of(records)
+        seconds["untraced"] = time.perf_counter() - t0
+    result = EvalResult.of(records)
+    result.seconds = seconds
+    return result
 
 
 def evaluate_into(writer: TraceWriter, policy: Policy, scenario: Scenario, *, games: int, backend: str,

@@ -10,6 +10,7 @@ registered id such as tracelab/FrozenLake-v1, or a spec file: a traced DeclaredE
 actions (`Act`): the library's greedy prediction."""
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -197,16 +198,20 @@ class DeclaredEvaluator:
         seed = eval_seed(self.settings.seed, round_no)
         result = EnvEvalResult()
         if self.trace_env is not None:
+            t0 = time.perf_counter()
             self.trace_env.unwrapped.trace_info(eval_info(step, round_no))
             for k in range(self.traced):
                 self._play_one(agent, seed + 1 + k, result)
+            result.seconds["traced"] = time.perf_counter() - t0
         rest = self.settings.games - self.traced
         if rest and self.env is not None:
+            t0 = time.perf_counter()
             more = play_env_games(self.env, agent, rest, seed)
             result.returns += more.returns
             result.steps += more.steps
             result.terminated += more.terminated
             result.truncated += more.truncated
+            result.seconds["untraced"] = time.perf_counter() - t0
         return result
 
     def _play_one(self, agent: Any, seed: int, result: EnvEvalResult) -> None:

@@ -86,9 +86,19 @@ def end_training(tr: Any) -> str:
         if tr.metrics.logged_step != tr.step:
             tr.log_metrics()
         if tr.eval_step != tr.step:
-            tr.run_eval()
+            timed_eval(tr)
     tr.episodes.abort_open()
     return status
+
+
+def timed_eval(tr: Any) -> None:
+    """A trainer's evaluation (run_eval), and its wall time into the run's metrics at the same step
+    (MetricLog.evaluation_timed: this evaluation's seconds, its traced and untraced games', and the
+    evaluations' share of the training's wall time)."""
+    t0 = time.perf_counter()
+    result = tr.run_eval()
+    seconds = time.perf_counter() - t0
+    tr.write_metrics(tr.metrics.evaluation_timed(seconds, getattr(result, "seconds", {})))
 
 
 def train_loop(tr: Any, stop_at: int | None, collect_and_store: Callable[[], None],
@@ -102,24 +112,28 @@ def train_loop(tr: Any, stop_at: int | None, collect_and_store: Callable[[], Non
     last_progress = 0.0
     tr.episodes.start_logging(tr.step)
     end = cfg.steps if stop_at is None else min(cfg.steps, stop_at)
-    while tr.step < end and not tr.stop_requested:
-        before = tr.step
-        collect_and_store()
-        tr.schedule.run(tr.step, learners, tr.rngs.numpy)  # updates, target copies
-        if _crossed(cfg.log_every, before, tr.step):
-            tr.log_metrics()
-        if _crossed(cfg.eval_every, before, tr.step):
-            tr.run_eval()
-        if tr.run_dir is not None and _crossed(cfg.checkpoint_every, before, tr.step):
-            tr.episodes.flush()  # the run holds every episode the checkpoint has counted
+    tr.metrics.loop_started()
+    try:
+        while tr.step < end and not tr.stop_requested:
+            before = tr.step
+            collect_and_store()
+            tr.schedule.run(tr.step, learners, tr.rngs.numpy)  # updates, target copies
+            if _crossed(cfg.log_every, before, tr.step):
+                tr.log_metrics()
+            if _crossed(cfg.eval_every, before, tr.step):
+                timed_eval(tr)
+            if tr.run_dir is not None and _crossed(cfg.checkpoint_every, before, tr.step):
+                tr.episodes.flush()  # the run holds every episode the checkpoint has counted
+                save_checkpoint(tr, tr.run_dir)
+            if tr.progress is not None and time.monotonic() - last_progress > 0.2:
+                last_progress = time.monotonic()
+                tr.progress(tr.figures())
+        status = end_training(tr)
+        if tr.run_dir is not None:
             save_checkpoint(tr, tr.run_dir)
-        if tr.progress is not None and time.monotonic() - last_progress > 0.2:
-            last_progress = time.monotonic()
-            tr.progress(tr.figures())
-    status = end_training(tr)
-    if tr.run_dir is not None:
-        save_checkpoint(tr, tr.run_dir)
-        tr.save_policy(tr.run_dir / "policy")
+            tr.save_policy(tr.run_dir / "policy")
+    finally:
+        tr.metrics.loop_stopped()
     if tr.progress is not None:
         tr.progress(tr.figures())
     return status

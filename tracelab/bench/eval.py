@@ -1,0 +1,168 @@
+"""`tracelab bench eval`: what tracing costs `tracelab train`'s evaluations, and the memory of a long
+training with traced evaluations.
+
+Speed, in one process: the same evaluation games (one policy: a seeded untrained network of the 1v1 base
+game; the same seeds) played
+- `traced`: as train traces them (train/evaluate.py's EvalTrace: `worlds` worlds, one game each, into a
+  run of the store that stays open, as the training's run does), and
+- `untraced`: as train plays the rest (play_games in a vector env of as many worlds, no trace),
+in turn, `evaluations` evaluations per block, `repeats` blocks of each; a traced block ends when the run's
+writer has published its rows (its thread would otherwise encode them during the next untraced block,
+whose process CPU time would count them). Figures are seconds per evaluation,
+medians: wall clock, CPU of the whole process (the store writer's thread included) and CPU of the game's
+thread alone. `ratio`: traced over untraced per CPU second and per wall second (the goal: <= 1.3). Both
+must play the same games (`same_games`: their outcomes and lengths compared).
+
+Memory (`--memory STEPS`): `tracelab train --scenario base --total-timesteps STEPS --eval-every 10000
+--eval-games 50 --trace-eval-games 5` in a fresh process, its resident memory sampled every second
+(common.sampled_child_rss) and its peak. Flat after warm-up: the growth from the median of the samples in
+the second tenth of the run to the median of those in its last tenth."""
+from __future__ import annotations
+
+import statistics
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tracelab.bench.common import format_table, machine_info, sampled_child_rss, summarize
+from tracelab.bench.engine import machine_line
+
+GOAL_RATIO = 1.3
+SCENARIO = "base"
+EVAL_P = 0.3   # train's --eval-p
+MEMORY_TRAIN_ARGS = ("--scenario", SCENARIO, "--eval-every", "10000", "--eval-games", "50",
+                     "--trace-eval-games", "5")
+
+
+def _policy() -> Any:
+    """A seeded, untrained greedy policy of the 1v1 base game (the networks a Trainer starts from)."""
+    import torch
+
+    from tracelab.game.scenario import builtin_scenario
+    from tracelab.train.config import TrainConfig
+    from tracelab.train.loop import acting_q, make_learner, training_net
+    from tracelab.train.policy import Policy
+    scenario = builtin_scenario(SCENARIO)
+    cfg = TrainConfig(scenario=SCENARIO)
+    net = training_net(cfg, scenario)
+    learner = make_learner("fused", net, cfg, torch.Generator().manual_seed(0))
+    return Policy(scenario, [acting_q(learner, net)], [0] * scenario.agents_per_team, False, False)
+
+
+Evaluation = Callable[[int], list[Any]]  # seed -> the games' records
+
+
+def evaluations(worlds: int, run_dir: Path) -> tuple[Evaluation, Evaluation, Callable[[], None],
+                                                     Callable[[], None]]:
+    """(traced, untraced, published, close): an evaluation of `worlds` games with a seed, traced into a
+    new run at `run_dir` or untraced; `published()` returns once the traced rows are in the run."""
+    from tracelab.envs.vector_env import GridWarVectorEnv
+    from tracelab.game.scenario import builtin_scenario
+    from tracelab.store import TraceWriter
+    from tracelab.train.evaluate import EvalTrace, play_games
+
+    scenario, policy = builtin_scenario(SCENARIO), _policy()
+    writer = TraceWriter.open(run_dir, {"command": "tracelab bench eval", "scenario": SCENARIO})
+    ids = iter(range(1 << 62))
+    trace = EvalTrace(writer, scenario, "rules", False, worlds, EVAL_P, lambda: next(ids))
+    env = GridWarVectorEnv(worlds, scenario, backend="rules", opponent_p=EVAL_P, copy=False)
+    one_each = np.ones(worlds, np.int64)
+
+    def close() -> None:
+        trace.close()
+        env.close()
+        writer.close()
+
+    return (lambda seed: trace.play(policy, seed, {"kind": "eval"}),
+            lambda seed: play_games(env, policy, one_each, seed), writer.flush, close)
+
+
+def speed(worlds: int, per_block: int, repeats: int) -> dict[str, Any]:
+    """Traced and untraced evaluations of `worlds` games, in turn (module docstring)."""
+    with tempfile.TemporaryDirectory(prefix="tracelab-bench-eval-") as tmp:
+        traced, untraced, published, close = evaluations(worlds, Path(tmp) / "run")
+        try:
+            same = [(r.outcome, r.steps) for r in traced(0)] == [(r.outcome, r.steps) for r in untraced(0)]
+            published()
+            kinds = {"traced": traced, "untraced": untraced}
+            figures: dict[str, dict[str, list[float]]] = {k: {"wall": [], "cpu": [], "thread": []} for k in kinds}
+            steps = {k: 0 for k in kinds}
+            for block in range(max(1, repeats)):
+                seeds = range(1 + block * per_block, 1 + (block + 1) * per_block)
+                for name, play in kinds.items():
+                    t0, c0, m0 = time.perf_counter(), time.process_time(), time.thread_time()
+                    for seed in seeds:
+                        steps[name] += sum(r.steps for r in play(seed))
+                    if name == "traced":
+                        published()
+                    for key, used in (("wall", time.perf_counter() - t0), ("cpu", time.process_time() - c0),
+                                      ("thread", time.thread_time() - m0)):
+                        figures[name][key].append(used / per_block)
+        finally:
+            close()
+    out: dict[str, Any] = {"worlds": worlds, "evaluations_per_block": per_block, "same_games": same,
+                           "game_steps": steps}
+    for name, f in figures.items():
+        out[name] = {f"{key}_s": summarize(v).to_dict() for key, v in f.items()}
+    for key in ("wall", "cpu", "thread"):  # medians of the blocks' ratios: each pair shares the load
+        out[f"ratio_{key}"] = statistics.median(t / u for t, u in zip(figures["traced"][key],
+                                                                        figures["untraced"][key]))
+    out["goal_met"] = out["ratio_cpu"] <= GOAL_RATIO
+    return out
+
+
+def memory(steps: int) -> dict[str, Any]:
+    """A `tracelab train` of `steps` steps with traced evaluations in a fresh process, its RSS sampled."""
+    with tempfile.TemporaryDirectory(prefix="tracelab-bench-eval-memory-") as tmp:
+        argv = [sys.executable, "-m", "tracelab", "train", *MEMORY_TRAIN_ARGS, "--total-timesteps", str(steps),
+                "--run", str(Path(tmp) / "run")]
+        r = sampled_child_rss(argv, every_s=1.0)
+    if r["returncode"] != 0:
+        raise RuntimeError(f"the training failed ({r['returncode']}): {r['stderr']}")
+    return {"steps": steps, "command": " ".join(["tracelab", *argv[3:-2]]), **flatness(r["rss_mb"]),
+            "peak_mb": r["peak_mb"], "seconds": r["seconds"], "rss_mb": r["rss_mb"]}
+
+
+def flatness(samples: list[tuple[float, float]]) -> dict[str, float]:
+    """RSS after warm-up (median of the second tenth of the samples), at the end (median of the last
+    tenth) and the growth between them, MB."""
+    mb = [m for _, m in samples]
+    tenth = max(1, len(mb) // 10)
+    after_warm_up = statistics.median(mb[tenth:2 * tenth] or mb)
+    end = statistics.median(mb[-tenth:])
+    return {"after_warm_up_mb": after_warm_up, "end_mb": end, "growth_mb": end - after_warm_up}
+
+
+def run(quick: bool = False, repeats: int = 5, worlds: int = 5, memory_steps: int | None = None) -> dict[str, Any]:
+    info = machine_info()
+    result = speed(worlds, 2 if quick else 20, repeats)
+    mem = memory(memory_steps) if memory_steps else None
+    info["load_average_end"] = machine_info()["load_average"]
+    return {"machine": info, "quick": quick, "repeats": repeats, "scenario": SCENARIO, "speed": result,
+            "memory": mem}
+
+
+def report(r: dict[str, Any]) -> str:
+    s = r["speed"]
+    ms = lambda d: 1000 * d["median"]  # noqa: E731
+    rows = [[name, ms(s[name]["wall_s"]), ms(s[name]["cpu_s"]), ms(s[name]["thread_s"]),
+             f"{100 * s[name]['cpu_s']['spread']:.0f}%"] for name in ("traced", "untraced")]
+    rows.append(["traced / untraced", s["ratio_wall"], s["ratio_cpu"], s["ratio_thread"], ""])
+    parts = [machine_line(r["machine"], r["quick"], r["repeats"]),
+             f"an evaluation of {s['worlds']} games of {r['scenario']} (one per world, a seeded untrained policy, "
+             f"the same seeds), ms each, {s['evaluations_per_block']} per block; the same games: "
+             f"{'yes' if s['same_games'] else 'NO'}\n"
+             + format_table(["evaluation", "wall", "CPU (process)", "CPU (game's thread)", "CPU spread"], rows),
+             f"goal traced <= {GOAL_RATIO}x untraced per CPU second: "
+             f"{'met' if s['goal_met'] else 'not met'} ({s['ratio_cpu']:.2f}x)"]
+    m = r["memory"]
+    if m:
+        parts.append(f"{m['command']}, a fresh process, RSS every second: "
+                     f"{m['after_warm_up_mb']:.0f} MB after warm-up (second tenth), {m['end_mb']:.0f} MB in the "
+                     f"last tenth ({m['growth_mb']:+.0f} MB), peak {m['peak_mb']:.0f} MB, {m['seconds']:.0f} s")
+    return "\n\n".join(parts)
