@@ -17,8 +17,12 @@ written in PyReason's CSV layout.
 - translate.py: all of it as one tracelab program text, parsed by the engine's parser;
 - trace_csv.py: the engine's trace rows as PyReason's rule_trace_nodes / rule_trace_edges rows.
 """
-from . import ruleset_filter
-from .api import (
+from tracelab.engine.numba_startup import defer_scipy_import
+
+defer_scipy_import()  # a reasoning loads kernels; numba would import scipy.linalg then, unused (0.17 s)
+
+from . import ruleset_filter  # noqa: E402 - after numba's start-up above
+from .api import (  # noqa: E402
     add_annotation_function,
     add_closed_world_predicate,
     add_fact,
@@ -47,10 +51,10 @@ from .api import (
     save_rule_trace,
     settings,
 )
-from .interpretation import Interpretation
-from .objects import Fact, Query, Rule, Threshold, closed
-from .translate import PyReasonProgram, load_pyreason
-from .unsupported import UnsupportedFeature
+from .interpretation import Interpretation  # noqa: E402
+from .objects import Fact, Query, Rule, Threshold, closed  # noqa: E402
+from .translate import PyReasonProgram, load_pyreason  # noqa: E402
+from .unsupported import UnsupportedFeature  # noqa: E402
 
 __all__ = [
     "Fact", "Interpretation", "LogicIntegratedClassifier", "ModelInterfaceOptions", "PyReasonProgram", "Query",
