@@ -21,10 +21,8 @@ import gc
 
 from tracelab.engine.numba_startup import defer_scipy_import
 
-defer_scipy_import()  # a reasoning loads kernels; numba would import scipy.linalg then, unused (0.17 s)
-
-from . import ruleset_filter  # noqa: E402 - after numba's start-up above
-from .api import (  # noqa: E402
+from . import ruleset_filter
+from .api import (
     add_annotation_function,
     add_closed_world_predicate,
     add_fact,
@@ -53,11 +51,12 @@ from .api import (  # noqa: E402
     save_rule_trace,
     settings,
 )
-from .interpretation import Interpretation  # noqa: E402
-from .objects import Fact, Query, Rule, Threshold, closed  # noqa: E402
-from .translate import PyReasonProgram, load_pyreason  # noqa: E402
-from .unsupported import UnsupportedFeature  # noqa: E402
+from .interpretation import Interpretation
+from .objects import Fact, Query, Rule, Threshold, closed
+from .translate import PyReasonProgram, load_pyreason
+from .unsupported import UnsupportedFeature
 
+defer_scipy_import()  # a reasoning loads kernels; numba would import scipy.linalg then, unused (0.17 s)
 # The ~100,000 objects of the modules imported so far (numba's above all) live until the process exits:
 # frozen, no later garbage collection traverses them, the interpreter's final ones at exit included
 # (~0.25 s of CPU, a quarter of the warm hello world; docs/pyreason.md, "Speed"). Objects made from here
