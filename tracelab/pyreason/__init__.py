@@ -57,7 +57,7 @@ from .translate import PyReasonProgram, load_pyreason
 from .unsupported import UnsupportedFeature
 
 defer_scipy_import()  # a reasoning loads kernels; numba would import scipy.linalg then, unused (0.17 s)
-# The ~100,000 objects of the modules imported so far (numba's above all) live until the process exits:
+# The ~70,000 objects of the modules imported so far (numba's above all) live until the process exits:
 # frozen, no later garbage collection traverses them, the interpreter's final ones at exit included
 # (~0.25 s of CPU, a quarter of the warm hello world; docs/pyreason.md, "Speed"). Objects made from here
 # on are collected as before (a script's reference cycles too, at exit). What this gives up: an object
