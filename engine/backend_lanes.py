@@ -24,16 +24,6 @@ from .backend_api import EngineTables
 from .kernel_tables import AggregateTables, KernelTables
 
 
-def crisp_codes(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
-    """The lanes value code of each bound ([0,1] V_U, [1,1] V_T, [0,0] V_F), -1 where it is not crisp."""
-    lower, upper = np.asarray(lower, np.float64), np.asarray(upper, np.float64)
-    code = np.full(lower.shape, -1, np.int8)
-    code[(lower == 0.0) & (upper == 1.0)] = L.V_U
-    code[(lower == 1.0) & (upper == 1.0)] = L.V_T
-    code[(lower == 0.0) & (upper == 0.0)] = L.V_F
-    return code
-
-
 def world_mask(local: np.ndarray, n_words: int) -> np.ndarray:
     """Words with the bits of the given (shard-local) worlds set."""
     mask = np.zeros(n_words, np.uint64)

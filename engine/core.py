@@ -8,6 +8,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -17,8 +18,8 @@ from . import kernel as K
 from .aggregate_tables import aggregate_tables, aggregated_rules
 from .backend_compiled import CompiledState, compiled_backend
 from .backend_counting import CountingState
-from .backend_lanes import LaneState, crisp_codes
 from .compile_cache import CacheEntry
+from .crisp import crisp_codes
 from .errors import FixpointError, InconsistencyError, ProgramCheckError
 from .graph import Graph
 from .grounding import Grounder, GroundingTable, rule_head_bound
@@ -39,6 +40,9 @@ from .program import (
 )
 from .trace_take import INT32_COLUMNS, take_local_columns
 from .vocabulary import Vocabulary
+
+if TYPE_CHECKING:
+    from .backend_lanes import LaneState
 
 TRACE_COLUMNS = ("world", "t", "pass_no", "atom", "cause_kind", "cause_id", "grounding", "n_sources",
                  "old_lower", "old_upper", "new_lower", "new_upper")
@@ -231,6 +235,7 @@ class Engine:
             raise ValueError(f"kernel='lanes' needs a crisp program (bounds [0,0], [1,1] or [0,1] only): "
                              f"{not_crisp}")
         if kernel == "lanes" or (kernel == "auto" and not not_crisp and self.n_worlds >= LANES_MIN_WORLDS):
+            from .backend_lanes import LaneState  # imported for crisp batches only: its 28 kernels' set-up
             return LaneState(self, self.threads)
         if kernel in ("compiled", "auto"):  # auto: only a program the compile cache already holds
             uncached = "skip" if kernel == "auto" else "build" if background_compile else "compile"

@@ -13,7 +13,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import graphml_scan as S
 from .errors import ProgramCheckError
 from .graphml_expat import read_graphml_expat, read_key_element
 from .graphml_raw import GraphKey, RawGraph, boolean_of_text
@@ -28,6 +27,10 @@ _BOUND_RE = re.compile(rf"\s*(?:\[\s*{_NUM}\s*,\s*{_NUM}\s*\]|{_NUM}\s*,\s*{_NUM
 # a GraphML file is read whole into memory: refused past this (the million-edge graph of `tracelab bench
 # engine` is ~75 MB), and never waited on (a FIFO is refused)
 GRAPH_FILE_CAP = 4 << 30
+# a smaller file is read by expat (~1 ms of CPU per 12 KB) rather than the compiled scanner, whose module
+# and four cached kernels cost ~35 ms of CPU to load in a new process (docs/benchmarks.md, "PyReason's
+# API"); the two read alike (tests/test_graphml_differential.py)
+SCANNER_MIN_BYTES = 64 << 10
 _UTF8_BOM = b"\xef\xbb\xbf"
 _UTF16_BOMS = (b"\xff\xfe", b"\xfe\xff")
 _S, _EQ = rb"[ \t\r\n]", rb"[ \t\r\n]*=[ \t\r\n]*"
@@ -152,8 +155,8 @@ def read_raw_graphml(path: str | os.PathLike[str]) -> RawGraph:
     another attribute mapping, such as PyReason's: tracelab/pyreason/graphml.py)."""
     file = os.fspath(path)
     data = read_bytes(file, GRAPH_FILE_CAP, what="GraphML file")
-    raw = _scan(file, data)
-    if raw is None:  # outside the scanner's subset: the complete reader
+    raw = _scan(file, data) if len(data) >= SCANNER_MIN_BYTES else None
+    if raw is None:  # small, or outside the scanner's subset: the complete reader
         data = b""
         raw = read_graphml_expat(file)
     return raw
@@ -161,6 +164,7 @@ def read_raw_graphml(path: str | os.PathLike[str]) -> RawGraph:
 
 def _scan(file: str, data: bytes) -> RawGraph | None:
     """The compiled scanner's reading of `data`, or None when the file leaves its subset (graphml_scan.py)."""
+    from . import graphml_scan as S  # numba kernels: loaded only for a file big enough to need them
     start = _scan_start(data)
     if start is None:
         return None

@@ -10,25 +10,40 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import sys
+from functools import cache
+from typing import Any
 
 # below this many facts / atoms the temporaries are small: not worth a call
 BIG_WORK = 100_000
 
-_trim = None
-if sys.platform.startswith("linux"):
+
+@cache
+def _malloc_trim() -> Any:
+    """glibc's malloc_trim, or None (musl and others lack it). Looked up on first big work, and by the
+    soname first: `ctypes.util.find_library` runs `ldconfig -p` in a subprocess (milliseconds, at every
+    import of the engine before)."""
+    if not sys.platform.startswith("linux"):
+        return None
     try:
-        _libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        _trim = _libc.malloc_trim  # glibc only; musl and others lack it
-        _trim.argtypes = [ctypes.c_size_t]
-        _trim.restype = ctypes.c_int
+        try:
+            libc = ctypes.CDLL("libc.so.6")
+        except OSError:
+            libc = ctypes.CDLL(ctypes.util.find_library("c"))
+        trim = libc.malloc_trim
     except (OSError, AttributeError):
-        _trim = None
+        return None
+    trim.argtypes = [ctypes.c_size_t]
+    trim.restype = ctypes.c_int
+    return trim
 
 
 def release_freed_memory(size: int) -> bool:
     """After work on `size` facts or atoms: return the heap's free pages to the OS (glibc), if the work
     was big. True if it ran."""
-    if _trim is None or size < BIG_WORK:
+    if size < BIG_WORK:
         return False
-    _trim(0)
+    trim = _malloc_trim()
+    if trim is None:
+        return False
+    trim(0)
     return True

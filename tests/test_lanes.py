@@ -152,9 +152,11 @@ def test_a_bound_the_lanes_cannot_hold_moves_the_engine_to_counting_without_losi
 
 
 def test_the_two_kernel_modules_spell_their_shared_codes_alike() -> None:
-    from tracelab.engine import kernel, lanes
+    from tracelab.engine import crisp, kernel, lanes
     for name in lanes.SHARED_CODES:
         assert getattr(lanes, name) == getattr(kernel, name), name
+    # the Engine reads bounds as lanes' value codes without importing lanes (engine/crisp.py)
+    assert (crisp.V_U, crisp.V_T, crisp.V_F) == (lanes.V_U, lanes.V_T, lanes.V_F)
 
 
 def test_abort_after_a_restore_names_the_snapshots_cause() -> None:

@@ -245,6 +245,27 @@ def test_a_head_function_is_called_per_grounding() -> None:
     assert not interp.query(pr.Query("Processed(A)"))
 
 
+def test_why_not_names_a_head_function_rules_head_from_the_run(tmp_path: Path,
+                                                             capsys: pytest.CaptureFixture) -> None:
+    """The run does not store the Python function: why-not reads the head atom off the change a grounding
+    with the same head values made (successor(A) is B, not A), and says so in one line when none made one
+    (X=B's head, Processed(C), was already set by a fact: the firing changed nothing)."""
+    chain()
+    pr.add_head_function(successor)
+    pr.add_rule(pr.Rule("Processed(successor(X)) <- property(X), connected(X, Y)", "node_rule"))
+    pr.add_fact(pr.Fact("Processed(C)", "c_fact", 0, 0))
+    pr.settings.tracelab_run = str(tmp_path / "run")
+    pr.reason(timesteps=0)
+    run = ["why-not", str(tmp_path / "run"), "--episode", "0", "--rule", "node_rule", "--at", "0"]
+    assert main([*run, "--grounding", "X=A"]) == 0
+    assert capsys.readouterr().out.splitlines()[-1] == ("every body clause holds: the rule was active; "
+                                                        "its head processed(B) = [1,1] at the end of t=0")
+    assert main([*run, "--grounding", "X=B"]) == 0
+    last = capsys.readouterr().out.splitlines()[-1]
+    assert last.startswith("every body clause holds: the rule was active; its head calls the head function "
+                           "pyreason_0_successor(X), which the run does not store") and "unknown" in last
+
+
 def test_head_function_misuse_is_one_located_line() -> None:
     chain()
     pr.add_rule(pr.Rule("Processed(missing_fn(X)) <- property(X)", "r"))

@@ -17,6 +17,10 @@ written in PyReason's CSV layout.
 - translate.py: all of it as one tracelab program text, parsed by the engine's parser;
 - trace_csv.py: the engine's trace rows as PyReason's rule_trace_nodes / rule_trace_edges rows.
 """
+import gc
+
+from tracelab.engine.numba_startup import defer_scipy_import
+
 from . import ruleset_filter
 from .api import (
     add_annotation_function,
@@ -51,6 +55,14 @@ from .interpretation import Interpretation
 from .objects import Fact, Query, Rule, Threshold, closed
 from .translate import PyReasonProgram, load_pyreason
 from .unsupported import UnsupportedFeature
+
+defer_scipy_import()  # a reasoning loads kernels; numba would import scipy.linalg then, unused (0.17 s)
+# The ~70,000 objects of the modules imported so far (numba's above all) live until the process exits:
+# frozen, no later garbage collection traverses them, the interpreter's final ones at exit included
+# (~0.25 s of CPU, a quarter of the warm hello world; docs/pyreason.md, "Speed"). Objects made from here
+# on are collected as before (a script's reference cycles too, at exit). What this gives up: an object
+# made before this import that later becomes cyclic garbage is never freed.
+gc.freeze()
 
 __all__ = [
     "Fact", "Interpretation", "LogicIntegratedClassifier", "ModelInterfaceOptions", "PyReasonProgram", "Query",

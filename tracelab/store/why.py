@@ -12,6 +12,7 @@ them (the end of t−Δt; the end of t for Δt=0) under the given bindings, exte
 atoms of the vocabulary for unbound variables; reports the first clause that could not be satisfied."""
 from __future__ import annotations
 
+import re
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -243,6 +244,7 @@ class WhyNot:
     failed: int | None             # index into checks of the first failed clause; None if all hold
     head: str | None = None
     head_value: list[float] | None = None
+    head_note: str = ""            # why the head atom is not named (a head function the run cannot call)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -267,12 +269,52 @@ def why_not(con: RunConnection, episode: int, rule_name: str, bindings: dict[str
     result = WhyNot(rule.name, rule.text, binding, at, reads_at, checks,
                     failed=None if ok else len(checks) - 1)
     if ok and set(rule.head.variables()) <= set(binding):
-        args = tuple(binding.get(a, a) if v else a for a, v in zip(rule.head.args, rule.head.is_var))
-        aid = model.find_atom(rule.head.label, args)
-        result.head = f"{rule.head.label}({','.join(args)})"
+        calls = _head_calls(model, rule.head)
+        if calls:  # computed while grounding by a Python function: the run knows the head from its changes
+            aid = _changed_head(con, model, rule, binding, episode)
+            if aid is None:
+                result.head_note = (f"its head calls the head function {calls[0]}, which the run does not "
+                                    "store, and no grounding with these head values changed an atom in the "
+                                    "episode: its head atom is unknown")
+                return result
+            result.head = model.atom_texts([aid])[aid]
+        else:
+            args = tuple(binding.get(a, a) if v else a for a, v in zip(rule.head.args, rule.head.is_var))
+            aid = model.find_atom(rule.head.label, args)
+            result.head = f"{rule.head.label}({','.join(args)})"
         head_row = None if aid is None else EpisodeTrace(con, episode, upto_t=at).last_at_end_of(aid, at)
         result.head_value = list(EpisodeTrace.bound(head_row))
     return result
+
+
+# a head argument that calls a head function is stored as the call's text, `f(X)` (engine/program.py Term)
+_CALL_RE = re.compile(r"[a-z][A-Za-z0-9_]*\(.*\)", re.S)
+_CALL_ARG_RE = re.compile(r"\"[^\"]*\"|'[^']*'|[^,\s]+")  # a call's arguments: quoted constants, names
+_CAUSE_RULE = next(code for code, name in CAUSE_NAMES.items() if name == "rule")
+
+
+def _head_calls(model: RunModel, head: Clause) -> list[str]:
+    """The head's arguments that call a head function (a node of that name is a node, not a call)."""
+    return [a for a, v in zip(head.args, head.is_var)
+            if not v and a not in model.node_ids and _CALL_RE.fullmatch(a)]
+
+
+def _changed_head(con: RunConnection, model: RunModel, rule: RuleInfo, binding: dict[str, str],
+                  episode: int) -> int | None:
+    """The head atom of `rule` under `binding`, read off the changes of the episode: the atom changed by a
+    grounding of the rule that agrees with `binding` on the variables the head reads (its arguments' and
+    its calls'), which all name the same head. None when none changed an atom (or one is unbound)."""
+    head_vars = set(rule.head.variables())
+    for call in _head_calls(model, rule.head):
+        head_vars.update(t for t in _CALL_ARG_RE.findall(call[call.index("(") + 1:-1]) if t in rule.variables)
+    if not head_vars <= set(binding):
+        return None
+    where = "".join(f" AND g.var_values[{rule.variables.index(v) + 1}] = ?" for v in sorted(head_vars))
+    params = [rule.rule, episode, _CAUSE_RULE] + [model.node_ids[binding[v]] for v in sorted(head_vars)]
+    rows = con.execute("SELECT c.atom FROM raw.groundings g JOIN raw.changes c ON c.grounding = g.grounding "
+                       "WHERE g.rule = ? AND c.episode = ? AND c.cause_kind = ?" + where + " LIMIT 1",
+                       params).fetchall()
+    return int(rows[0][0]) if rows else None
 
 
 class _Search:
@@ -371,7 +413,7 @@ def render_why_not(w: WhyNot) -> str:
     if w.failed is None:
         lines.append("every body clause holds: the rule was active"
                      + (f"; its head {w.head} = {_bound_text(w.head_value)} at the end of t={w.at}"
-                        if w.head else ""))
+                        if w.head else f"; {w.head_note}" if w.head_note else ""))
     else:
         c = w.checks[w.failed]
         lines.append(f"first failed clause: #{c.pos + 1} {c.clause}"
