@@ -24,6 +24,7 @@ from tracelab import RULES_DIR
 from tracelab.cli import build_parser
 from tracelab.engine import Engine, ProgramError, load_graphml, load_program, parse_program
 from tracelab.engine.grounding_limit import default_max_groundings, grounding_limit
+from tracelab.engine.errors import FixpointError, InconsistencyError
 from tracelab.engine.parser import RULE_FILE_CAP
 from tracelab.engine.vocabulary import MAX_LABELS
 
@@ -124,7 +125,10 @@ def test_the_estimate_is_at_least_the_groundings_made(sc) -> None:  # noqa: ANN0
     for step in sc.externals:
         for f in step:
             eng.add_fact(eng.atom(f.pred, *f.args), f.lower, f.upper, static=f.static)
-        eng.step()
+        try:
+            eng.step()
+        except (FixpointError, InconsistencyError):  # a random program may not settle: what it grounded stands
+            break
     assert eng.grounder.estimated >= eng.grounder.n_groundings
 
 
