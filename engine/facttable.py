@@ -18,7 +18,8 @@ import numpy as np
 from .errors import ProgramCheckError
 from .graph import Graph
 from .program import MAX_TIME, unwritable_constant
-from .safe_files import check_regular
+from .duckdb_limits import QUERY_MEMORY_ENV, query_memory
+from .safe_files import check_regular, human_bytes
 
 _CONST = r"""("[^"]*"|'[^']*'|[A-Za-z0-9_-]+)"""
 _ATOM_RE = rf"^\s*(~?)\s*([a-z][A-Za-z0-9_]*)\s*\(\s*{_CONST}\s*(?:,\s*{_CONST}\s*)?\)\s*$"
@@ -38,9 +39,14 @@ def load_fact_table(path: str | os.PathLike[str]) -> Graph:
         raise ProgramCheckError("no such fact table", file)
     check_regular(file)  # DuckDB would wait on a FIFO forever
     full = os.path.abspath(file)
-    # this connection may read that one file and nothing else, and never installs or loads extensions
+    # this connection may read that one file and nothing else, never installs or loads extensions, and is
+    # bounded in memory and threads as a query on a run is; it never spills (an in-memory database would
+    # spill into the working folder's .tmp/): a table too big for the limit is refused in one line
+    limits = query_memory()
     con = duckdb.connect(":memory:", config={"autoinstall_known_extensions": False,
-                                              "autoload_known_extensions": False})
+                                              "autoload_known_extensions": False,
+                                              "memory_limit": f"{limits.memory}B", "threads": limits.threads,
+                                              "temp_directory": ""})
     try:
         con.execute("SET allowed_paths = ?", [[full]])
         con.execute("SET enable_external_access = false")
@@ -86,6 +92,10 @@ def load_fact_table(path: str | os.PathLike[str]) -> Graph:
             JOIN ids i0 ON i0.name = {_UNQUOTE.format(q='q0')}
             LEFT JOIN ids i1 ON q1 <> '' AND i1.name = {_UNQUOTE.format(q='q1')}
             ORDER BY f.row""").fetchnumpy()
+    except duckdb.OutOfMemoryException:
+        raise ProgramCheckError(f"reading this fact table needs more than the {human_bytes(limits.memory)} of "
+                                f"memory a DuckDB reading may use ({limits.source}); set {QUERY_MEMORY_ENV} to "
+                                "raise it (e.g. 8G)", file) from None
     except duckdb.Error as e:
         raise ProgramCheckError(f"not a readable fact table: {str(e).splitlines()[0]}", file) from None
     finally:

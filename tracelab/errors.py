@@ -20,8 +20,9 @@ class UserError(ValueError):
 _FOREIGN = (
     ("tracelab.engine.errors", ("ProgramError", "InconsistencyError", "FixpointError")),
     ("tracelab.engine.safe_files", ("FileRefused",)),
+    ("tracelab.engine.duckdb_limits", ("SandboxSettingError",)),  # $TRACELAB_QUERY_MEMORY, where DuckDB reads
     ("tracelab.game.scenario", ("ScenarioError",)),
-    ("tracelab.store.sandbox", ("QueryRefused", "SandboxSettingError")),  # wherever a query's rows are read
+    ("tracelab.store.sandbox", ("QueryRefused",)),  # wherever a query's rows are read
     ("duckdb", ("Error",)),
 )
 
