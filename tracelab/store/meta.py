@@ -14,11 +14,14 @@ import socket
 import sys
 import time
 from dataclasses import asdict, dataclass, field
+from importlib import metadata
 from pathlib import Path
 from typing import IO, Any
 
+import numpy as np
 import pyarrow as pa
 
+import tracelab
 from tracelab.engine.safe_files import open_regular, read_json
 from tracelab.store import layout
 from tracelab.store.arrow_build import table_from_rows
@@ -57,21 +60,14 @@ def file_sha256(path: str | Path) -> str:
 
 
 def library_versions() -> dict[str, str]:
-    import numpy
-    import pyarrow
-
-    import tracelab
     return {"tracelab": tracelab.__version__, "python": platform.python_version(),
-            "numpy": numpy.__version__, "duckdb": _duckdb_version(), "pyarrow": pyarrow.__version__}
+            "numpy": np.__version__, "duckdb": _duckdb_version(), "pyarrow": pa.__version__}
 
 
 def _duckdb_version() -> str:
     """DuckDB's version without importing it (a process that only writes a run need not load DuckDB:
     docs/benchmarks.md, "Memory of long runs"): its installed distribution's version, which is the
     module's; the module's if it is loaded already or has no distribution record."""
-    import sys
-    from importlib import metadata
-
     module = sys.modules.get("duckdb")
     if module is None:
         try:

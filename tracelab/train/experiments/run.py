@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import multiprocessing
+import threading
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -145,9 +146,6 @@ def _terminate(pool: Any) -> None:
     """pool.terminate(), bounded: it sends each worker SIGTERM and waits for it, and a worker that does
     not end (its SystemExit raised where something swallowed it, a close that hung) would keep it waiting
     forever; after CLOSE_WAIT_S the workers still alive are killed (their runs then read as crashed)."""
-    import multiprocessing
-    import threading
-
     stopper = threading.Thread(target=pool.terminate, name="pool-terminate", daemon=True)
     stopper.start()
     stopper.join(CLOSE_WAIT_S)
