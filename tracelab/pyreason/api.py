@@ -290,7 +290,7 @@ class _Reasoning:
         graph_facts = graph.n_facts if graph is not None else 0
         self.inputs = ReasoningInputs(translated.program, graph, translated.names, graph_facts, "pyreason",
                                       translation=translated.text)
-        self.skip_graph_facts = 0 if settings.save_graph_attributes_to_trace else graph_facts
+        self.graph_facts = graph_facts
         self.last_fact = max([f.end for f in translated.program.facts if not f.static] +
                              [f.start for f in translated.program.facts], default=0)
         self.t_last = -1
@@ -304,8 +304,9 @@ class _Reasoning:
         self.recorded = writer is not None
         try:
             self.episode = EpisodeRun(self.inputs, plan_episodes(self.inputs)[0], trace=True, recorder=recorder)
-            self.trace = PyReasonTrace(self.episode.engine, self.translated.names, self.skip_graph_facts,
-                                       self.translated.ipl_rules)
+            self.trace = PyReasonTrace(self.episode.engine, self.translated.names, self.graph_facts,
+                                       self.translated.ipl_rules,
+                                       skip_graph_facts=not settings.save_graph_attributes_to_trace)
             converged = self._steps(timesteps + 1 if timesteps >= 0 else -1, convergence)
             self.episode.finish()
         except BaseException:

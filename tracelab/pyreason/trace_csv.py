@@ -25,6 +25,7 @@ from .names import NameMap
 NODE_HEADER = ["Time", "Fixed-Point-Operation", "Node", "Label", "Old Bound", "New Bound", "Occurred Due To",
                "Consistent", "Triggered By", "Inconsistency Message"]
 EDGE_HEADER = ["Edge" if h == "Node" else h for h in NODE_HEADER]
+GRAPH_ATTRIBUTE_FACT = "graph-attribute-fact"  # PyReason's `Occurred Due To` of a graph attribute's row
 
 
 def _bound(lo: float, up: float) -> str:
@@ -38,11 +39,12 @@ class PyReasonTrace:
     each row's new bound as numbers (`filter_and_sort_nodes`)."""
 
     def __init__(self, engine: Any, names: NameMap | None = None, graph_facts: int = 0,
-                 ipl_rules: dict[str, str] | None = None) -> None:
+                 ipl_rules: dict[str, str] | None = None, *, skip_graph_facts: bool = True) -> None:
         self.engine = engine
         self.ipl_rules = ipl_rules or {}  # the inconsistent predicate list's rules -> the predicate they copy
         self.names = names or NameMap()
-        self.graph_facts = graph_facts
+        self.graph_facts = graph_facts  # the engine's facts 0..graph_facts-1 are the graph's attributes
+        self.skip_graph_facts = skip_graph_facts  # PyReason's save_graph_attributes_to_trace=False
         self.node_rows: list[list[object]] = []
         self.edge_rows: list[list[object]] = []
         self.clauses = {"node": 0, "edge": 0}
@@ -69,7 +71,8 @@ class PyReasonTrace:
             if int(cols["world"][i]) != 0:
                 continue
             kind, cid, g = int(cols["cause_kind"][i]), int(cols["cause_id"][i]), int(cols["grounding"][i])
-            if kind == CAUSE_RESET or (kind == CAUSE_FACT and cid < self.graph_facts):
+            graph_fact = kind == CAUSE_FACT and cid < self.graph_facts
+            if kind == CAUSE_RESET or (graph_fact and self.skip_graph_facts):
                 continue
             pred, args = eng.vocab.atom_parts(int(cols["atom"][i]))
             rule_no = -1
@@ -81,6 +84,8 @@ class PyReasonTrace:
                 due, by = self.names.original_statement(rule.name), "Rule"
                 if rule.name in self.ipl_rules:  # PyReason's names for what its IPL sets
                     due, by = f"IPL: {self.ipl_rules[rule.name]}", "IPL"
+            elif graph_fact:
+                due, by = GRAPH_ATTRIBUTE_FACT, "Fact"
             elif kind == CAUSE_FACT:
                 due, by = self.names.original_statement(eng.fact(cid).name), "Fact"
             elif kind == CAUSE_EXTERNAL and cid in self.external_names:
