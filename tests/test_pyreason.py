@@ -486,4 +486,4 @@ def test_a_pyreason_error_on_the_command_line_is_one_line(tmp_path: Path) -> Non
     r = subprocess.run([sys.executable, "-m", "tracelab", "reason", "--dialect", "pyreason", str(f), "--steps", "1"],
                        capture_output=True, text=True, check=False)
     assert r.returncode == 1 and r.stdout == ""
-    assert r.stderr.strip().splitlines() == [f"tracelab: error: {f}:1:13: missing ')' or ']'"]
+    assert r.stderr.strip().splitlines() == [f"tracelab: error: {f}:1:13: Failed to parse rule - missing ')' or ']'"]

@@ -135,7 +135,7 @@ def test_what_is_not_supported_is_one_line_naming_it() -> None:
         pr.reason(timesteps=1)
     pr.add_rule(pr.Rule(HELLO_RULE, "popular_rule"))  # the failed reason() kept the facts
     assert popular(pr.reason(timesteps=1)) == [["Mary"], ["Mary", "Justin"]]
-    with pytest.raises(TypeError, match="persistent must be True or False"):
+    with pytest.raises(TypeError, match="persistent: value has to be a bool"):
         pr.settings.persistent = "yes"
     with pytest.raises(AttributeError, match="no setting 'persistant'"):
         pr.settings.persistant = True

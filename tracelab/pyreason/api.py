@@ -24,6 +24,7 @@ from tracelab.engine.program import SourceLoc
 from tracelab.errors import UserError
 
 from .facts import PFact, read_facts
+from .files import PyReasonFileError
 from .graphml import load_pyreason_graphml, load_pyreason_networkx
 from .interpretation import Interpretation
 from .names import NameMap
@@ -80,8 +81,9 @@ def reset_settings() -> None:
     settings.reset()
 
 
-def get_rules() -> list[Rule]:
-    return list(_program.rules)
+def get_rules() -> list[Rule] | None:
+    """The rules added so far, or None when there are none (PyReason's get_rules after reset_rules)."""
+    return list(_program.rules) or None
 
 
 def record(run_dir: str | os.PathLike[str] | None) -> None:
@@ -136,18 +138,22 @@ def add_rule(pr_rule: Rule) -> None:
 def add_rules_from_file(file_path: str | os.PathLike[str], infer_edges: bool = False,
                         raise_errors: bool = False) -> None:
     """PyReason's rule text file (one rule a line, `#` comments); infer_edges applies to every rule.
-    Errors are always raised (located), whatever raise_errors says."""
-    for r in read_rules_txt(file_path):
+    A rule that does not parse raises a located ValueError with raise_errors, else warns and is skipped
+    (PyReason's default here)."""
+    for r in read_rules_txt(file_path, _Report(raise_errors).on_error, first=len(_program.rules)):
         r.infer_edges = r.infer_edges or infer_edges
-        r.name = f"rule_{len(_program.rules)}"
         add_rule(Rule.from_parsed(r))
 
 
 def add_rule_from_csv(csv_path: str | os.PathLike[str], raise_errors: bool = True) -> None:
     """PyReason's rule CSV (`rule_text,name,infer_edges,set_static`) or, by a .json extension, its rule
-    JSON (with custom_thresholds and weights); errors are located and always raised."""
-    for r in read_rules(csv_path):
-        add_rule(Rule.from_parsed(r))
+    JSON (with custom_thresholds and weights). A bad row, or a name the file repeats, raises a located
+    ValueError with raise_errors; else it warns and the row is skipped (a bad option: its default)."""
+    report = _Report(raise_errors)
+    rules = [Rule.from_parsed(r) for r in _unique(read_rules(csv_path, report.on_error), raise_errors, "rule")]
+    report.if_empty(rules, csv_path, "rules")
+    for r in rules:
+        add_rule(r)
 
 
 add_rule_from_json = add_rule_from_csv  # read_rules reads the format the extension names
@@ -164,12 +170,50 @@ def add_fact(pyreason_fact: Fact) -> None:
 
 
 def add_fact_from_csv(csv_path: str | os.PathLike[str], raise_errors: bool = True) -> None:
-    """PyReason's fact CSV (`fact_text,name,start_time,end_time,static`); errors are located."""
-    for f in read_facts(csv_path):
-        add_fact(Fact.from_parsed(f))
+    """PyReason's fact CSV (`fact_text,name,start_time,end_time,static`) or, by a .json extension, its
+    fact JSON; bad rows as add_rule_from_csv's."""
+    report = _Report(raise_errors)
+    facts = [Fact.from_parsed(f) for f in _unique(read_facts(csv_path, report.on_error), raise_errors, "fact")]
+    report.if_empty(facts, csv_path, "facts")
+    for f in facts:
+        add_fact(f)
 
 
 add_fact_from_json = add_fact_from_csv  # read_facts reads the format the extension names
+
+
+class _Report:
+    """How a loader treats a file's bad rows: raise (`on_error` None), or warn with the located message
+    and go on; an empty file warns, as PyReason's loaders do."""
+
+    def __init__(self, raise_errors: bool) -> None:
+        self.warned = 0
+        self.on_error = None if raise_errors else self._warn
+
+    def _warn(self, e: PyReasonFileError) -> None:
+        self.warned += 1
+        warnings.warn(str(e), UserWarning, stacklevel=5)
+
+    def if_empty(self, loaded: list[Any], path: str | os.PathLike[str], what: str) -> None:
+        if not loaded and not self.warned:
+            warnings.warn(f"{os.fspath(path)} contains an empty array or no rows, no {what} loaded", stacklevel=3)
+
+
+def _unique(items: list[Any], raise_errors: bool, what: str) -> list[Any]:
+    """The items of one file whose names it has not used before: a repeated name raises (ValueError)
+    with raise_errors, else warns and the item is skipped (PyReason's loaders)."""
+    out, seen = [], set()
+    for it in items:
+        if it.name in seen:
+            err = PyReasonFileError(f"Loaded name '{it.name}' is a duplicate - all {what} names must be unique.",
+                                    it.loc.file, it.loc.line, it.loc.column, None)
+            if raise_errors:
+                raise err
+            warnings.warn(str(err), UserWarning, stacklevel=3)
+            continue
+        seen.add(it.name)
+        out.append(it)
+    return out
 
 
 def add_closed_world_predicate(predicate_name: str) -> None:
