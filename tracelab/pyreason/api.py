@@ -255,8 +255,14 @@ def reason(timesteps: int = -1, convergence_threshold: int = -1, convergence_bou
     convergence = _convergence(convergence_threshold, convergence_bound_threshold)
     facts = [PFact(f.name or "", f.literal, f.start_time, f.end_time, f.static, SourceLoc(f"<Fact {f.name}>", 1, 1))
              for f in _program.facts]
-    if again and _program.reasoning is not None:
-        _program.last = _program.reasoning.again(timesteps, restart, facts, convergence)
+    last = _program.reasoning
+    if again and last is not None:
+        if _program.rules != last.rules:  # rules added (or reset) since: PyReason's again applies them
+            if not _program.rules:
+                raise UserError("There are no rules, use `add_rule` or `add_rules_from_file`")
+            last = _program.reasoning = last.continued_with(_translated(_program.rules, last.facts, last.graph),
+                                                            list(_program.rules))
+        _program.last = last.again(timesteps, restart, facts, convergence)
         _program.facts.clear()
         return _program.last
     if not _program.rules:
@@ -264,16 +270,19 @@ def reason(timesteps: int = -1, convergence_threshold: int = -1, convergence_bou
     _program.timestamp = time.strftime("%Y%m%d-%H%M%S")
     rules = filter_ruleset(queries, _program.rules) if queries else _program.rules
     graph = settings.graph_for_engine(_program.graph) if _program.graph is not None else None
-    names = copy.deepcopy(_program.names)
-    constants = _ground_components(graph, facts) if settings.allow_ground_rules else frozenset()
-    translated = translate([_with_functions(r.rule, i) for i, r in enumerate(rules)], facts, graph, names,
-                           persistent=settings.persistent,
-                           closed=_program.closed, constants=constants, directives=settings.directives(),
-                           head_functions=_registered_head_functions(), ipl=_program.ipl)
-    _program.reasoning = _Reasoning(translated, graph)
+    _program.reasoning = _Reasoning(_translated(rules, facts, graph), graph, facts, list(_program.rules))
     _program.last = _program.reasoning.run(timesteps, convergence)
     _program.facts.clear()  # used up only once reasoned with: a reason() that failed keeps them
     return _program.last
+
+
+def _translated(rules: Sequence[Rule], facts: list[PFact], graph: Graph | None) -> Any:
+    """The program of these rules and facts on the graph, with the settings and the registered functions."""
+    constants = _ground_components(graph, facts) if settings.allow_ground_rules else frozenset()
+    return translate([_with_functions(r.rule, i) for i, r in enumerate(rules)], facts, graph,
+                     copy.deepcopy(_program.names), persistent=settings.persistent, closed=_program.closed,
+                     constants=constants, directives=settings.directives(),
+                     head_functions=_registered_head_functions(), ipl=_program.ipl)
 
 
 def _with_functions(rule: PRule, index: int) -> PRule:
@@ -328,9 +337,10 @@ class _Reasoning:
     """One reasoning: the engine (through EpisodeRun, recorded when asked), its trace in PyReason's
     layout, and the convergence test after each step; `again` continues it."""
 
-    def __init__(self, translated: Any, graph: Graph | None) -> None:
+    def __init__(self, translated: Any, graph: Graph | None, facts: list[PFact], rules: list[Rule]) -> None:
         from tracelab.reasoning import ReasoningInputs
         self.translated = translated
+        self.graph, self.facts, self.rules = graph, facts, rules  # what it was translated from
         graph_facts = graph.n_facts if graph is not None else 0
         self.inputs = ReasoningInputs(translated.program, graph, translated.names, graph_facts, "pyreason",
                                       translation=translated.text)
@@ -339,6 +349,7 @@ class _Reasoning:
                              [f.start for f in translated.program.facts], default=0)
         self.t_last = -1
         self.passes = 0
+        self.passes_before = 0  # of the reasoning this one continues (continued_with)
         self.recorded = False
         self.external: list[tuple[PFact, int]] = []  # facts of again(), with their first step
 
@@ -360,6 +371,27 @@ class _Reasoning:
         if writer is not None:
             writer.close()
         return self._interpretation(timesteps, converged)
+
+    def continued_with(self, translated: Any, rules: list[Rule]) -> _Reasoning:
+        """This reasoning going on in a new engine built from `translated` (its rules changed): world 0's
+        atoms keep their bounds and static flags, the clock, the trace so far and the facts of again() go
+        on; delayed firings still pending are dropped (as PyReason drops them at the end of a reason())."""
+        if self.recorded:
+            raise unsupported("reason(again=True) after a recorded reasoning (settings.tracelab_run)")
+        from tracelab.reasoning import EpisodeRun, plan_episodes
+        new = _Reasoning(translated, self.graph, self.facts, rules)
+        new.episode = EpisodeRun(new.inputs, plan_episodes(new.inputs)[0], trace=True)
+        old, eng = self.episode.engine, new.episode.engine
+        held = np.flatnonzero((old.lower[0] != 0.0) | (old.upper[0] != 1.0) | old.static[0])
+        atoms = [eng.atom(pred, *args) for pred, args in (old.vocab.atom_parts(int(a)) for a in held)]
+        eng.set_bounds(np.array(atoms, np.int64), old.lower[0, held], old.upper[0, held], old.static[0, held])
+        eng.t = old.t
+        new.trace = PyReasonTrace(eng, translated.names, new.graph_facts, translated.ipl_rules,
+                                  skip_graph_facts=self.trace.skip_graph_facts)
+        new.trace.carry(self.trace)
+        new.t_last, new.passes, new.passes_before = self.t_last, self.passes, self.passes
+        new.external, new.last_fact = list(self.external), max(new.last_fact, self.last_fact)
+        return new
 
     def again(self, timesteps: int, restart: bool, facts: Sequence[PFact], convergence: _Convergence) -> Interpretation:
         """`timesteps` more steps (-1: until convergence) with `facts` (their times from the first new
@@ -383,7 +415,7 @@ class _Reasoning:
                                           rows_each_step=True):
             t = first + k
             self.trace.add(rows, self.passes)
-            self.passes = int(engine.stats["passes"][0])
+            self.passes = self.passes_before + int(engine.stats["passes"][0])
             self.t_last = t
             if self._converged(engine, rows, t, convergence):
                 return True
@@ -393,12 +425,14 @@ class _Reasoning:
     def _feed(self, t: int) -> None:
         """The external facts (of again()) that hold at step t, for the engine's next step."""
         engine = self.episode.engine
+        next_id = engine.next_external_id()  # the facts queued for one step take ids next_id, next_id + 1, ...
         for f, offset in self.external:
             start, end = offset + f.start, offset + f.end
             if (t == start) if f.static else (start <= t <= end):
                 lit = f.literal
                 atom = engine.atom(self.translated.names.predicate(lit.pred, len(lit.args)), *lit.args)
-                self.trace.external_names[engine.next_external_id()] = f.name
+                self.trace.external_names[next_id] = f.name
+                next_id += 1
                 engine.add_fact(atom, lit.lower, lit.upper, static=f.static)
 
     def _interpretation(self, timesteps: int, converged: bool) -> Interpretation:

@@ -21,6 +21,7 @@ import numpy as np
 from tracelab.engine import CAUSE_EXTERNAL, CAUSE_FACT, CAUSE_POLICY, CAUSE_RESET, CAUSE_RULE
 
 from .names import NameMap
+from .translate import DOMAIN
 
 NODE_HEADER = ["Time", "Fixed-Point-Operation", "Node", "Label", "Old Bound", "New Bound", "Occurred Due To",
                "Consistent", "Triggered By", "Inconsistency Message"]
@@ -52,6 +53,12 @@ class PyReasonTrace:
         self.node_bounds: list[tuple[float, float]] = []
         self.edge_bounds: list[tuple[float, float]] = []
 
+    def carry(self, earlier: PyReasonTrace) -> None:
+        """Begin with the rows of `earlier` (a reasoning continued in a new engine)."""
+        self.node_rows, self.edge_rows = list(earlier.node_rows), list(earlier.edge_rows)
+        self.node_bounds, self.edge_bounds = list(earlier.node_bounds), list(earlier.edge_bounds)
+        self.clauses = dict(earlier.clauses)
+
     def _pred(self, tl: str) -> str:
         return self.names.original_predicate(tl)
 
@@ -75,6 +82,8 @@ class PyReasonTrace:
             if kind == CAUSE_RESET or (graph_fact and self.skip_graph_facts):
                 continue
             pred, args = eng.vocab.atom_parts(int(cols["atom"][i]))
+            if pred == DOMAIN:  # the translation's own (translate.DOMAIN), not PyReason's
+                continue
             rule_no = -1
             old = _bound(cols["old_lower"][i], cols["old_upper"][i])
             consistent = kind != CAUSE_POLICY
@@ -97,7 +106,8 @@ class PyReasonTrace:
                                  self._component(args), self._pred(pred), old,
                                  _bound(cols["new_lower"][i], cols["new_upper"][i]), due, consistent, by, message]
             if g >= 0:
-                row += [[self._component(eng.vocab.atom_parts(int(a))[1])] for a in eng.groundings.body(g)]
+                parts = [eng.vocab.atom_parts(int(a)) for a in eng.groundings.body(g)]
+                row += [[self._component(a)] for p, a in parts if p != DOMAIN]
             which = "node" if len(args) == 1 else "edge"
             self.clauses[which] = max(self.clauses[which], len(row) - len(NODE_HEADER))
             heads = [eng.vocab.node_ids[a] for a in args] if rule_no >= 0 else [i]  # facts keep their order

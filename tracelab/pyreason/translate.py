@@ -73,8 +73,29 @@ def _literal(lit: PLiteral, names: NameMap, args: Sequence[str]) -> str:
     return f"{names.predicate(lit.pred, len(lit.args))}({','.join(args)})"
 
 
+# PyReason grounds a variable that only a closed-world clause has (`~h(X)`, `h` closed) over the graph's
+# nodes; the translation gives such a variable this predicate's clause, true of every node (static facts
+# named DOMAIN_FACT_<k>), which the trace, get_dict and the DataFrames leave out
+DOMAIN = "pyreason_node_domain"
+DOMAIN_FACT = "pyreason_domain"
+
+
+def closed_only_variables(r: PRule, closed: Container[str]) -> list[str]:
+    """The rule's body components that only clauses of closed predicates reading [0,0] as true have (such
+    a clause does not bind: docs/language.md, "%closed"), in order of appearance."""
+    def binds(lit: PLiteral) -> bool:
+        if lit.pred in closed:
+            return lit.lower > 0
+        return not (lit.lower == 0 and lit.upper == 1)
+    bound = {a for lit in r.body if binds(lit) for a in lit.args}
+    out: list[str] = []
+    for lit in r.body:
+        out += [a for a in lit.args if a not in bound and a not in out and lit.pred in closed]
+    return out
+
+
 def rule_text(r: PRule, names: NameMap, constants: Container[str] = frozenset(),
-              head_functions: Mapping[str, str] | None = None) -> str:
+              head_functions: Mapping[str, str] | None = None, closed: Container[str] = frozenset()) -> str:
     """One PyReason rule as one tracelab rule statement. Components in `constants` (PyReason's ground
     rules, `allow_ground_rules`: a component that names a node) are constants, and so are the head's
     components that no body clause has (PyReason grounds such a head variable to the node of its name);
@@ -104,6 +125,7 @@ def rule_text(r: PRule, names: NameMap, constants: Container[str] = frozenset(),
         head += bound_text(r.head.lower, r.head.upper)
     body = [threshold_text(t, c.forall) + _literal(c, names, [var[a] for a in c.args]) + bound_text(c.lower, c.upper)
             for c, t in zip(r.body, r.thresholds)]
+    body += [f"{DOMAIN}({var[a]})" for a in closed_only_variables(r, closed) if a not in constants]
     if r.set_static:
         options.append("set_static")
     if r.infer_edges and len(r.head.args) == 2:  # PyReason ignores it on node rules
@@ -172,7 +194,7 @@ def translate(rules: Sequence[PRule], facts: Sequence[PFact], graph: Graph | Non
     lines += directives
     origins += [None] * len(directives)
     for r in rules:
-        lines.append(rule_text(r, names, constants, head_functions))
+        lines.append(rule_text(r, names, constants, head_functions, frozenset(closed)))
         origins.append((r.loc, r.text))
     if closed:  # after the rules and facts: a predicate's name depends on the arities it is used with
         lines.append("%closed " + ", ".join(tl for p in closed for tl in names.predicates_named(p)) +
@@ -186,6 +208,11 @@ def translate(rules: Sequence[PRule], facts: Sequence[PFact], graph: Graph | Non
     for f in facts:
         lines.append(fact_text(f, names))
         origins.append((f.loc, ""))
+    if any(f"{DOMAIN}(" in line for line in lines):
+        nodes = dict.fromkeys([*(graph.nodes if graph is not None else ()),
+                               *(a for f in facts for a in f.literal.args)])
+        lines += [f"{DOMAIN_FACT}_{k}: {DOMAIN}({constant_text(n)}) static" for k, n in enumerate(nodes)]
+        origins += [None] * len(nodes)
     if graph is not None and embed_graph:
         lines.append("# the graph's facts; facts carry no edge set, so edge rules are not restricted to the graph's "
                      "edges as in PyReason (`tracelab reason --dialect pyreason` with the graph keeps that)")
