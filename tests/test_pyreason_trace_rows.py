@@ -42,3 +42,31 @@ def test_graph_attribute_rows_are_named_as_pyreason_names_them_non_ascii_kept(tm
     assert graph_rows == [
         ("Chișinău_International_Airport", "Chișinău_International_Airport", "graph-attribute-fact"),
         ("Yali", "Yali", "graph-attribute-fact")]
+
+
+def two_facts_each(first: str, second: str) -> pr.Interpretation:
+    g = nx.DiGraph()
+    g.add_nodes_from(["Bob", "a"])
+    pr.load_graph(g)
+    pr.add_rule(pr.Rule("rested(x) <- tired(x):[0,0.2]", "rest_rule"))
+    pr.add_fact(pr.Fact(f"tired(Bob):{first}", "bob_tired_fact_1", 0, 0))
+    pr.add_fact(pr.Fact(f"tired(Bob):{second}", "bob_tired_fact_2", 0, 0))
+    return pr.reason(timesteps=0)
+
+
+def test_conflicting_facts_are_two_rows_and_a_reset_as_pyreasons_committed_trace(tmp_path: Path) -> None:
+    # PyReason's examples/csv_outputs/inconsistency_example_nodes_20260318-083700.csv, its tired(Bob) rows
+    rows = saved_node_rows(two_facts_each("[0.8,1.0]", "[0.0,0.1]"), tmp_path)
+    assert [list(r.values())[:10] for r in rows] == [
+        ["0", "0", "Bob", "tired", "[0.0,1.0]", "[0.8,1.0]", "bob_tired_fact_1", "True", "Fact", ""],
+        ["0", "0", "Bob", "tired", "[0.8,1.0]", "[0.0,1.0]", "bob_tired_fact_2", "False", "Fact",
+         "Inconsistency occurred. Conflicting bounds for tired(Bob). Update from [0.800, 1.000] to [0.000, 0.100] "
+         "is not allowed. Setting bounds to [0,1] and static=True for this timestep."]]
+
+
+def test_overlapping_facts_are_a_row_each() -> None:
+    interpretation = two_facts_each("[0.5,1.0]", "[0.2,0.9]")
+    nodes, _ = pr.get_rule_trace(interpretation)
+    assert nodes[["Old Bound", "New Bound", "Occurred Due To", "Consistent"]].values.tolist() == [
+        ["[0.0,1.0]", "[0.5,1.0]", "bob_tired_fact_1", True], ["[0.5,1.0]", "[0.5,0.9]", "bob_tired_fact_2", True]]
+    assert interpretation.get_dict()[0]["Bob"] == {"tired": (0.5, 0.9)}

@@ -414,7 +414,7 @@ class _Reasoning:
         for k, rows in self.episode.steps(steps if steps >= 0 else MAX_TIMESTEPS_UNTIL_CONVERGED,
                                           rows_each_step=True):
             t = first + k
-            self.trace.add(rows, self.passes)
+            self.trace.add(rows, self.passes, t)
             self.passes = self.passes_before + int(engine.stats["passes"][0])
             self.t_last = t
             if self._converged(engine, rows, t, convergence):

@@ -20,6 +20,9 @@ import numpy as np
 
 from tracelab.engine import CAUSE_EXTERNAL, CAUSE_FACT, CAUSE_POLICY, CAUSE_RESET, CAUSE_RULE
 
+from tracelab.engine.program import effective_bound
+
+from .fact_sequence import StepFact, applied_one_by_one, conflict_message
 from .names import NameMap
 from .translate import DOMAIN
 
@@ -51,6 +54,8 @@ class PyReasonTrace:
         self.clauses = {"node": 0, "edge": 0}
         self.external_names: dict[int, str] = {}  # external facts' names by their id (pr.reason(again=True))
         self.node_bounds: list[tuple[float, float]] = []
+        self._multi: dict[int, list[tuple[int, int, StepFact]]] | None = None  # _facts_by_atom
+        self.frozen: set[int] = set()  # atoms a conflict of facts froze (static from then on)
         self.edge_bounds: list[tuple[float, float]] = []
 
     def carry(self, earlier: PyReasonTrace) -> None:
@@ -67,17 +72,25 @@ class PyReasonTrace:
         """A node as its id, an edge as a tuple (written as Python writes it: `('a', 'b')`)."""
         return args[0] if len(args) == 1 else tuple(args)
 
-    def add(self, rows: dict[str, np.ndarray], passes_before: int) -> None:
-        """One step's rows (Engine.take_trace()); `passes_before`: ordinary passes of the earlier steps.
-        Within a step's pass the rows come in PyReason's order: facts first, then each rule's in rule
-        order, a rule's heads in the graph's node order (PyReason's example trace: John before Justin)."""
+    def add(self, rows: dict[str, np.ndarray], passes_before: int, t: int | None = None) -> None:
+        """One step's rows (Engine.take_trace()); `passes_before`: ordinary passes of the earlier steps;
+        `t`: the step (needed for the rows of facts that conflict from [0,1], which the engine does not
+        write). Within a step's pass the rows come in PyReason's order: facts first, then each rule's in
+        rule order, a rule's heads in the graph's node order (PyReason's example trace: John before
+        Justin). An atom several facts set in the step has a row per fact (fact_sequence.py)."""
         eng = self.engine
         cols = {k: v.tolist() for k, v in rows.items()}
         step: list[tuple[tuple[int, ...], str, list[object], tuple[float, float]]] = []
+        several = self._several_facts(t if t is not None else (int(cols["t"][0]) if cols["t"] else -1))
         for i in range(len(cols["t"])):
             if int(cols["world"][i]) != 0:
                 continue
             kind, cid, g = int(cols["cause_kind"][i]), int(cols["cause_id"][i]), int(cols["grounding"][i])
+            atom = int(cols["atom"][i])
+            if atom in several and int(cols["pass_no"][i]) == 0 and g < 0 and kind in (CAUSE_FACT, CAUSE_POLICY):
+                old, new = (cols["old_lower"][i], cols["old_upper"][i]), (cols["new_lower"][i], cols["new_upper"][i])
+                if self._fact_rows(step, atom, several.pop(atom), old, new, int(cols["t"][i]), passes_before, i):
+                    continue
             graph_fact = kind == CAUSE_FACT and cid < self.graph_facts
             if kind == CAUSE_RESET or (graph_fact and self.skip_graph_facts):
                 continue
@@ -113,10 +126,57 @@ class PyReasonTrace:
             heads = [eng.vocab.node_ids[a] for a in args] if rule_no >= 0 else [i]  # facts keep their order
             order = (int(cols["t"][i]), int(cols["pass_no"][i]), rule_no, *heads)
             step.append((order, which, row, (float(cols["new_lower"][i]), float(cols["new_upper"][i]))))
+        for atom, facts in several.items():  # no row: from [0,1], a conflict leaves [0,1]
+            if t is not None and self.engine.static[0, atom] and self.engine.bound(atom) == (0.0, 1.0):
+                self._fact_rows(step, atom, facts, (0.0, 1.0), (0.0, 1.0), t, passes_before, -1)
         step.sort(key=lambda r: r[0])  # stable: a fact's rows, and one rule's rows on one head, keep theirs
         for _, which, row, bound in step:
             (self.node_rows if which == "node" else self.edge_rows).append(row)
             (self.node_bounds if which == "node" else self.edge_bounds).append(bound)
+
+    def _facts_by_atom(self) -> dict[int, list[tuple[int, int, StepFact]]]:
+        """The program's facts (not the graph's) by atom, for the atoms two or more facts set: (start,
+        end, fact), in the facts' order. Only under PyReason's default policy (reset to [0,1], frozen),
+        the one fact_sequence.py follows."""
+        if self._multi is None:
+            eng, by_atom = self.engine, {}
+            if eng.program.inconsistency == "reset_freeze":
+                for f in eng.program.facts:
+                    lit = f.literal
+                    atom = eng.atom(lit.pred, *(a.name for a in lit.args))
+                    lo, up = effective_bound(lit.lower, lit.upper, lit.negated)
+                    by_atom.setdefault(atom, []).append((f.start, f.end, StepFact(self.names.original_statement(f.name),
+                                                                                  lo, up)))
+            self._multi = {a: fs for a, fs in by_atom.items() if len(fs) > 1}
+        return self._multi
+
+    def _several_facts(self, t: int) -> dict[int, list[StepFact]]:
+        """The atoms two or more facts set at step t (and no conflict froze before), with those facts."""
+        out = {}
+        for atom, facts in self._facts_by_atom().items():
+            now = [f for start, end, f in facts if start <= t <= end]
+            if len(now) > 1 and atom not in self.frozen:
+                out[atom] = now
+        return out
+
+    def _fact_rows(self, step: list, atom: int, facts: list[StepFact], old: tuple[float, float],
+                   new: tuple[float, float], t: int, passes_before: int, i: int) -> bool:
+        """PyReason's rows of `facts` applied one by one to `atom` (from `old`), into `step`, when they
+        end where the engine did (`new`); else False and nothing added."""
+        rows, end = applied_one_by_one(old, facts)
+        if end != new:
+            return False
+        pred, args = self.engine.vocab.atom_parts(atom)
+        which = "node" if len(args) == 1 else "edge"
+        for k, r in enumerate(rows):
+            message = "" if r.consistent else conflict_message(f"{self._pred(pred)}({','.join(args)})", r.old,
+                                                               r.incoming)
+            if not r.consistent:
+                self.frozen.add(atom)
+            row: list[object] = [t, passes_before, self._component(args), self._pred(pred), _bound(*r.old),
+                                 _bound(*r.new), r.name, r.consistent, "Fact", message]
+            step.append(((t, 0, -1, i, k), which, row, r.new))
+        return True
 
     def _inconsistency(self, pred: str, args: tuple[str, ...], old: str, by: str, due: str) -> str:
         """PyReason's message: a conflict with the IPL partner names both groundings."""
