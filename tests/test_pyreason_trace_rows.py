@@ -70,3 +70,26 @@ def test_overlapping_facts_are_a_row_each() -> None:
     assert nodes[["Old Bound", "New Bound", "Occurred Due To", "Consistent"]].values.tolist() == [
         ["[0.0,1.0]", "[0.5,1.0]", "bob_tired_fact_1", True], ["[0.5,1.0]", "[0.5,0.9]", "bob_tired_fact_2", True]]
     assert interpretation.get_dict()[0]["Bob"] == {"tired": (0.5, 0.9)}
+
+
+def test_a_rule_that_contradicts_an_ipl_partner_resets_both_as_pyreason() -> None:
+    # PyReason's examples/inconsistency_example.py, Carol: healthy(Carol) [0.9,1] makes sick(Carol) at most
+    # 0.1, the spread rule then sets sick(Carol) [0.5,0.7]; PyReason resets both to [0,1] (its committed
+    # trace: "Grounding sick(Carol) conflicts with grounding healthy(Carol)")
+    g = nx.DiGraph()
+    g.add_nodes_from(["Bob", "Carol"])
+    g.add_edge("Bob", "Carol", contact=1)
+    pr.load_graph(g)
+    pr.add_inconsistent_predicate("sick", "healthy")
+    pr.add_rule(pr.Rule("sick(y):[0.5,0.7] <- sick(x):[0.5,1.0], contact(x,y)", "spread_rule"))
+    pr.add_fact(pr.Fact("healthy(Carol):[0.9,1.0]", "carol_healthy_fact", 0, 0))
+    pr.add_fact(pr.Fact("sick(Bob):[0.6,0.8]", "bob_sick_fact", 0, 0))
+    interpretation = pr.reason(timesteps=0)
+    carol = interpretation.get_dict()[0]["Carol"]
+    assert carol.get("sick", (0.0, 1.0)) == (0.0, 1.0) and carol["healthy"] == (0.0, 1.0)
+    assert not interpretation.query(pr.Query("healthy(Carol):[0.9,1.0]"))
+    nodes, _ = pr.get_rule_trace(interpretation)
+    (row,) = nodes[~nodes["Consistent"].astype(bool)].values.tolist()
+    assert row[2:10] == ["Carol", "healthy", "[0.9,1.0]", "[0.0,1.0]", "spread_rule", False, "IPL",
+                         "Inconsistency occurred. Grounding healthy(Carol) conflicts with grounding sick(Carol). "
+                         "Setting bounds to [0,1] and static=True for this timestep."]

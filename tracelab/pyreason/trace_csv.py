@@ -46,6 +46,7 @@ class PyReasonTrace:
                  ipl_rules: dict[str, str] | None = None, *, skip_graph_facts: bool = True) -> None:
         self.engine = engine
         self.ipl_rules = ipl_rules or {}  # the inconsistent predicate list's rules -> the predicate they copy
+        self.ipl_twin_rules: dict[str, str] = {}  # translate.ipl_twins' rules -> their rule's PyReason name
         self.names = names or NameMap()
         self.graph_facts = graph_facts  # the engine's facts 0..graph_facts-1 are the graph's attributes
         self.skip_graph_facts = skip_graph_facts  # PyReason's save_graph_attributes_to_trace=False
@@ -104,7 +105,9 @@ class PyReasonTrace:
                 rule_no = int(eng.groundings.rule[g]) if g >= 0 else cid
                 rule = eng.rules[rule_no]
                 due, by = self.names.original_statement(rule.name), "Rule"
-                if rule.name in self.ipl_rules:  # PyReason's names for what its IPL sets
+                if rule.name in self.ipl_twin_rules:  # a rule's partner head (translate.ipl_twins)
+                    due, by = self.ipl_twin_rules[rule.name], "IPL"
+                elif rule.name in self.ipl_rules:  # PyReason's names for what its IPL sets
                     due, by = f"IPL: {self.ipl_rules[rule.name]}", "IPL"
             elif graph_fact:
                 due, by = GRAPH_ATTRIBUTE_FACT, "Fact"
@@ -114,7 +117,8 @@ class PyReasonTrace:
                 due, by = self.external_names[cid], "Fact"
             else:
                 due, by = "-", "Fact"
-            message = "" if consistent else self._inconsistency(pred, args, old, by, due)
+            message = "" if consistent else self._inconsistency(pred, args, old, by, self.ipl_rules.get(rule.name, "")
+                                                                if rule_no >= 0 else "")
             row: list[object] = [int(cols["t"][i]), passes_before + int(cols["pass_no"][i]),
                                  self._component(args), self._pred(pred), old,
                                  _bound(cols["new_lower"][i], cols["new_upper"][i]), due, consistent, by, message]
@@ -178,13 +182,12 @@ class PyReasonTrace:
             step.append(((t, 0, -1, i, k), which, row, r.new))
         return True
 
-    def _inconsistency(self, pred: str, args: tuple[str, ...], old: str, by: str, due: str) -> str:
-        """PyReason's message: a conflict with the IPL partner names both groundings."""
+    def _inconsistency(self, pred: str, args: tuple[str, ...], old: str, by: str, partner: str) -> str:
+        """PyReason's message: a conflict with the IPL partner (`partner`) names both groundings."""
         atom = f"{self._pred(pred)}({','.join(args)})"
         if by == "IPL":
             return (f"Inconsistency occurred. Grounding {atom} conflicts with grounding "
-                    f"{due.removeprefix('IPL: ')}({','.join(args)}). Setting bounds to [0,1] and static=True for "
-                    "this timestep.")
+                    f"{partner}({','.join(args)}). Setting bounds to [0,1] and static=True for this timestep.")
         return (f"Inconsistency occurred. Conflicting bounds for {atom}. Update from {old} is not allowed. "
                 "Setting bounds to [0,1] and static=True for this timestep.")
 

@@ -43,6 +43,7 @@ class PyReasonProgram:
     names: NameMap
     origins: list[tuple[SourceLoc, str] | None] = field(default_factory=list)  # per line of text
     ipl_rules: dict[str, str] = field(default_factory=dict)  # the IPL's rules -> the predicate they copy
+    ipl_twin_rules: dict[str, str] = field(default_factory=dict)  # ipl_twins' rules -> their rule's name
 
 
 def number(v: float) -> str:
@@ -205,6 +206,12 @@ def translate(rules: Sequence[PRule], facts: Sequence[PFact], graph: Graph | Non
         lines.append(line)
         origins.append(None)
         ipl_rules[line.split(":", 1)[0]] = source
+    ipl_twin_rules: dict[str, str] = {}
+    for twin, source, of in ipl_twins(rules, ipl):
+        lines.append(rule_text(twin, names, constants, head_functions, frozenset(closed)))
+        origins.append((twin.loc, twin.text))
+        ipl_rules[lines[-1].split(":", 1)[0]] = source
+        ipl_twin_rules[lines[-1].split(":", 1)[0]] = of
     for f in facts:
         lines.append(fact_text(f, names))
         origins.append((f.loc, ""))
@@ -227,7 +234,7 @@ def translate(rules: Sequence[PRule], facts: Sequence[PFact], graph: Graph | Non
     except ProgramError as e:
         raise _located(e, origins, lines) from None
     program.files = sorted({str(o[0].file) for o in origins if o is not None})
-    return PyReasonProgram(text, program, graph, names, origins, ipl_rules)
+    return PyReasonProgram(text, program, graph, names, origins, ipl_rules, ipl_twin_rules)
 
 
 # A bound excluding exactly the atoms within the engine's EPS of [0,1] (never set, or set back to it): a
@@ -247,6 +254,29 @@ def ipl_rule_lines(ipl: Sequence[tuple[str, str]], names: NameMap, arity: Mappin
     for k, (a, b) in enumerate(ipl):
         for n in sorted(arity.get(a, set()) | arity.get(b, set())):  # none: nothing to keep complementary
             out += _ipl_pair(k, a, b, n, names)
+    return out
+
+
+def ipl_twins(rules: Sequence[PRule], ipl: Sequence[tuple[str, str]]) -> list[tuple[PRule, str, str]]:
+    """For each rule whose head predicate has an IPL partner, its twin: the same body, the partner as
+    head with the complement bound ([1-u,1-l]), so that the partner is set in the same pass as PyReason
+    sets it inside the rule's update, and a conflict resets both atoms as PyReason does (the pass's
+    groups of both atoms conflict). Rules whose head bound comes from an annotation function have none,
+    and so have delayed rules: their firings land in pass 0 with the facts, where the IPL's own rules of
+    pass 1 already meet them.
+    Returns (twin, the head predicate it copies, the rule's name)."""
+    out = []
+    for i, r in enumerate(rules):
+        if r.head.function or r.delay > 0:
+            continue
+        for a, b in ipl:
+            for src, dst in ((a, b), (b, a)):
+                if r.head.pred != src:
+                    continue
+                head = dataclasses.replace(r.head, pred=dst, lower=round(1 - r.head.upper, 10),
+                                           upper=round(1 - r.head.lower, 10))
+                out.append((dataclasses.replace(r, name=f"pyreason_ipl_twin_{i}_{dst}", head=head,
+                                                set_static=False), src, r.name))
     return out
 
 
