@@ -83,7 +83,7 @@ def test_rule_loaders_warn_and_skip_bad_rows(tmp_path: Path) -> None:
     (pr.add_rule_from_csv, "csv", '"a(x) <- b(x)",duplicate-name\n"c(x) <- b(x)",duplicate-name\n'),
     (pr.add_rule_from_json, "json", '[{"rule_text": "a(x) <- b(x)", "name": "duplicate-name"},'
                                     ' {"rule_text": "c(x) <- b(x)", "name": "duplicate-name"}]'),
-])
+], ids=["fact-csv", "fact-json", "rule-csv", "rule-json"])
 def test_a_name_a_file_repeats_is_refused_or_warned(tmp_path: Path, load, ext: str, text: str) -> None:
     path = tmp_path / f"items.{ext}"
     path.write_text(text)
