@@ -407,3 +407,12 @@ def test_reason_again_applies_rules_added_since_and_names_each_new_fact() -> Non
         [3, "Mary", "rich", "fact_mary"], [3, "Cat", "rich", "fact_cat"],
         [3, "Mary", "happy", "happy_rule"], [3, "Cat", "happy", "happy_rule"]]
     assert nodes["Time"].tolist()[:3] == [0, 1, 1]  # the first call's rows are kept
+
+
+def test_a_comparison_clause_is_located_and_says_what_pyreason_does_with_it() -> None:
+    # PyReason's creating-rules tutorial: `c_id(x) != c_id(y)`; PyReason 3.x parses it and skips it when
+    # grounding (interpretation.py: "This is a comparison clause: pass")
+    with pytest.raises(ProgramError) as e:
+        pr.Rule("car_friend(x,y) <- owns_car(x,z), owns_car(y,z) , c_id(x) != c_id(y) ", "car_friend_rule")
+    assert e.value.column == 59 and "PyReason added them in 1.8.11" in e.value.message
+    assert "since 3.0.0 its grounding skips them" in e.value.message and "without this clause" in e.value.message
