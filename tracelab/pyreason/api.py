@@ -361,8 +361,8 @@ class _Reasoning:
             self.episode = EpisodeRun(self.inputs, plan_episodes(self.inputs)[0], trace=True, recorder=recorder)
             self.trace = PyReasonTrace(self.episode.engine, self.translated.names, self.graph_facts,
                                        self.translated.ipl_rules,
-                                       skip_graph_facts=not settings.save_graph_attributes_to_trace)
-            self.trace.ipl_twin_rules = self.translated.ipl_twin_rules
+                                       skip_graph_facts=not settings.save_graph_attributes_to_trace,
+                                       ipl_twin_rules=self.translated.ipl_twin_rules)
             converged = self._steps(timesteps + 1 if timesteps >= 0 else -1, convergence)
             self.episode.finish()
         except BaseException:
@@ -388,8 +388,8 @@ class _Reasoning:
         eng.set_bounds(np.array(atoms, np.int64), old.lower[0, held], old.upper[0, held], old.static[0, held])
         eng.t = old.t
         new.trace = PyReasonTrace(eng, translated.names, new.graph_facts, translated.ipl_rules,
-                                  skip_graph_facts=self.trace.skip_graph_facts)
-        new.trace.ipl_twin_rules = translated.ipl_twin_rules
+                                  skip_graph_facts=self.trace.skip_graph_facts,
+                                  ipl_twin_rules=translated.ipl_twin_rules)
         new.trace.carry(self.trace)
         new.t_last, new.passes, new.passes_before = self.t_last, self.passes, self.passes
         new.external, new.last_fact = list(self.external), max(new.last_fact, self.last_fact)

@@ -43,10 +43,11 @@ class PyReasonTrace:
     each row's new bound as numbers (`filter_and_sort_nodes`)."""
 
     def __init__(self, engine: Any, names: NameMap | None = None, graph_facts: int = 0,
-                 ipl_rules: dict[str, str] | None = None, *, skip_graph_facts: bool = True) -> None:
+                 ipl_rules: dict[str, str] | None = None, *, skip_graph_facts: bool = True,
+                 ipl_twin_rules: dict[str, str] | None = None) -> None:
         self.engine = engine
         self.ipl_rules = ipl_rules or {}  # the inconsistent predicate list's rules -> the predicate they copy
-        self.ipl_twin_rules: dict[str, str] = {}  # translate.ipl_twins' rules -> their rule's PyReason name
+        self.ipl_twin_rules = ipl_twin_rules or {}  # translate.ipl_twins' rules -> their rule's PyReason name
         self.names = names or NameMap()
         self.graph_facts = graph_facts  # the engine's facts 0..graph_facts-1 are the graph's attributes
         self.skip_graph_facts = skip_graph_facts  # PyReason's save_graph_attributes_to_trace=False
