@@ -93,3 +93,20 @@ def test_a_rule_that_contradicts_an_ipl_partner_resets_both_as_pyreason() -> Non
     assert row[2:10] == ["Carol", "healthy", "[0.9,1.0]", "[0.0,1.0]", "spread_rule", False, "IPL",
                          "Inconsistency occurred. Grounding healthy(Carol) conflicts with grounding sick(Carol). "
                          "Setting bounds to [0,1] and static=True for this timestep."]
+
+
+def test_a_rules_partner_row_comes_in_its_pass_as_pyreasons_committed_trace(tmp_path: Path) -> None:
+    # PyReason's examples/csv_outputs/cybersecurity_rule_trace_nodes.csv: workstation_1's vulnerable row
+    # by vulnerability_rule and its IPL row `patched`, in the same fixed-point operation, without clauses
+    g = nx.DiGraph()
+    g.add_node("workstation_1")
+    pr.load_graph(g)
+    pr.add_inconsistent_predicate("patched", "vulnerable")
+    pr.add_rule(pr.Rule("vulnerable(x):[0.8,1.0] <- exposed(x)", "vulnerability_rule"))
+    pr.add_fact(pr.Fact("exposed(workstation_1)", "exposed_fact", 0, 0))
+    rows = saved_node_rows(pr.reason(timesteps=0), tmp_path)
+    assert [list(r.values())[:11] for r in rows[1:]] == [
+        ["0", "1", "workstation_1", "vulnerable", "[0.0,1.0]", "[0.8,1.0]", "vulnerability_rule", "True", "Rule", "",
+         "['workstation_1']"],
+        ["0", "1", "workstation_1", "patched", "[0.0,1.0]", "[0.0,0.19999999999999996]", "IPL: vulnerable", "True",
+         "IPL", "", ""]]

@@ -106,8 +106,10 @@ class PyReasonTrace:
                 rule_no = int(eng.groundings.rule[g]) if g >= 0 else cid
                 rule = eng.rules[rule_no]
                 due, by = self.names.original_statement(rule.name), "Rule"
-                if rule.name in self.ipl_twin_rules:  # a rule's partner head (translate.ipl_twins)
-                    due, by = self.ipl_twin_rules[rule.name], "IPL"
+                if rule.name in self.ipl_twin_rules:  # a rule's partner head (translate.ipl_twins):
+                    # PyReason names the rule on a conflict, else the predicate copied
+                    due = self.ipl_twin_rules[rule.name] if kind == CAUSE_POLICY else f"IPL: {self.ipl_rules[rule.name]}"
+                    by = "IPL"
                 elif rule.name in self.ipl_rules:  # PyReason's names for what its IPL sets
                     due, by = f"IPL: {self.ipl_rules[rule.name]}", "IPL"
             elif graph_fact:
@@ -123,7 +125,7 @@ class PyReasonTrace:
             row: list[object] = [int(cols["t"][i]), passes_before + int(cols["pass_no"][i]),
                                  self._component(args), self._pred(pred), old,
                                  _bound(cols["new_lower"][i], cols["new_upper"][i]), due, consistent, by, message]
-            if g >= 0:
+            if g >= 0 and by != "IPL":  # PyReason's IPL rows have no clauses
                 parts = [eng.vocab.atom_parts(int(a)) for a in eng.groundings.body(g)]
                 row += [[self._component(a)] for p, a in parts if p != DOMAIN]
             which = "node" if len(args) == 1 else "edge"

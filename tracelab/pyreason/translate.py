@@ -273,8 +273,8 @@ def ipl_twins(rules: Sequence[PRule], ipl: Sequence[tuple[str, str]]) -> list[tu
             for src, dst in ((a, b), (b, a)):
                 if r.head.pred != src:
                     continue
-                head = dataclasses.replace(r.head, pred=dst, lower=round(1 - r.head.upper, 10),
-                                           upper=round(1 - r.head.lower, 10))
+                # unrounded, as the pair's `~` rules and PyReason compute it (1 - 0.8 = 0.19999999999999996)
+                head = dataclasses.replace(r.head, pred=dst, lower=1 - r.head.upper, upper=1 - r.head.lower)
                 out.append((dataclasses.replace(r, name=f"pyreason_ipl_twin_{i}_{dst}", head=head,
                                                 set_static=False), src, r.name))
     return out
