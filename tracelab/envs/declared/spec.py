@@ -21,6 +21,7 @@ import numpy as np
 
 from tracelab.engine.errors import ProgramError
 from tracelab.engine.parser import check_program, load_program, parse_literal
+from tracelab.engine.safe_files import FileRefused, path_inside
 from tracelab.engine.program import CONSTANT_RE, Fact, Literal, Program, SourceLoc, Term
 from tracelab.envs.declared.board import MAX_BOARD_CELLS, MAX_BOARD_FACTS, Board
 from tracelab.envs.declared.expressions import ExpressionError, evaluate
@@ -293,7 +294,10 @@ class _Names:
         return tuple(self.ground(lit, {var: v, AGENT_VAR: agent}) for v in domain)
 
 
-def _vars(text: str) -> list[Term]:
+def _vars(text: Any) -> list[Term]:
+    """The variables of an atom's text (none for a text that is not an atom: pattern() says why)."""
+    if not isinstance(text, str):
+        return []
     try:
         return [a for a in parse_literal(text).args if a.is_var]
     except ProgramError:
@@ -354,6 +358,9 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     terminated = _every_agents(r, check, ("end", "terminated"), agents)
     truncated = _every_agents(r, check, ("end", "truncated"), agents)
     max_steps = r.integer(("end", "max_steps"), None, minimum=1) if "max_steps" in end else None
+    if not (terminated or truncated or max_steps):  # play --env would step such a world forever
+        raise r.err(("end",), "the episode can never end: expected `terminated`, `truncated` or `max_steps` "
+                              "(max_steps = N for a task that never ends by itself)")
     r.table(("start",), ("facts", "choose"), default={})
     start_facts = _every_agents(r, check, ("start", "facts"), agents, bounds=True)
     choices = tuple(d for i in range(len(_list(r, ("start", "choose"))))
@@ -431,12 +438,12 @@ def _list(r: _Reader, path: KeyPath) -> list[Any]:
 
 
 def _inside(r: _Reader, path: KeyPath, name: str) -> str:
-    """A file named by the spec: relative, inside the spec's folder (a spec never makes tracelab read
-    elsewhere)."""
-    parts = name.replace("\\", "/").split("/")
-    if os.path.isabs(name) or ".." in parts or not name:
-        raise r.err(path, f"{name!r}: expected a path relative to the spec's folder, inside it")
-    return os.path.join(r.src.folder, name)
+    """A file named by the spec: relative, inside the spec's folder once links are resolved (a spec never
+    makes tracelab read elsewhere); the resolved path."""
+    try:
+        return str(path_inside(r.src.folder, name))
+    except FileRefused as e:
+        raise r.err(path, f"{e} (a path relative to the spec's folder, inside it)") from None
 
 
 def _load_rules(r: _Reader, files: list[str]) -> Program:
