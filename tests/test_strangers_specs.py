@@ -181,7 +181,7 @@ NO_WEIGHT = SPEC + '[[start.choose]]\natom = "at(C)"\nover = "cells"\nweights = 
 @pytest.mark.parametrize("spec_text, where, fragment", [
     (NEVER_INDEX, ":34: observation.parts[2]: ", "no atom of over(...) is true, so the part has no index"),
     (NO_WEIGHT, ":48: start.choose[0].weights: ", "no value's weights (bot(c0_0), ...) hold"),
-])
+], ids=["index-part-never-true", "no-start-weight-holds"])
 def test_a_state_the_spec_cannot_read_is_one_located_line(tmp_path: Path, capsys: pytest.CaptureFixture,
                                                            spec_text: str, where: str, fragment: str) -> None:
     spec = write_world(tmp_path, spec_text)
