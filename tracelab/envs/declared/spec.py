@@ -21,11 +21,13 @@ import numpy as np
 
 from tracelab.engine.errors import ProgramError
 from tracelab.engine.parser import check_program, load_program, parse_literal
+from tracelab.engine.safe_files import FileRefused, path_inside
 from tracelab.engine.program import CONSTANT_RE, Fact, Literal, Program, SourceLoc, Term
 from tracelab.envs.declared.board import MAX_BOARD_CELLS, MAX_BOARD_FACTS, Board
 from tracelab.envs.declared.expressions import ExpressionError, evaluate
 from tracelab.envs.declared.render import hex_color
 from tracelab.envs.declared.spec_file import KeyPath, SpecError, SpecSource, read_spec_file
+from tracelab.errors import close_names
 
 READS = ("index", "lower", "bounds", "onehot", "count", "nearest")
 SPACES = ("Discrete", "MultiDiscrete", "Box", "Dict")
@@ -269,10 +271,18 @@ class _Names:
             if a.is_var and a.name not in variables:
                 allowed = f"only {', '.join(variables)}" if variables else "none: the atom must be ground"
                 raise self.r.err(path, f"{text!r}: variable {a.name} is not allowed here ({allowed})")
-            if not a.is_var and a.name not in self.constants:
-                raise self.r.err(path, f"{text!r}: the program, the board and the agents have no constant "
-                                       f"{a.name!r}")
+            if not a.is_var:
+                self.constant(path, a.name, f"{text!r}: ")
         return lit
+
+    def constant(self, path: KeyPath, name: str, context: str = "") -> None:
+        """A constant the spec names (in an atom, a domain, `things`): the program's, a board cell, an
+        agent or one of [env] constants; otherwise an error with the closest ones."""
+        if name not in self.constants:
+            near = close_names(name, sorted(self.constants))
+            hint = f"; did you mean {', '.join(near)}?" if near else ""
+            raise self.r.err(path, f"{context}the program, the board and the agents have no constant "
+                                   f"{name!r}{hint}")
 
     def ground(self, lit: Literal, values: Mapping[str, str]) -> Atom:
         return Atom(lit.pred, tuple(values[a.name] if a.is_var else a.name for a in lit.args), lit.lower, lit.upper)
@@ -292,8 +302,16 @@ class _Names:
         var = names.pop()
         return tuple(self.ground(lit, {var: v, AGENT_VAR: agent}) for v in domain)
 
+    def domain(self, path: KeyPath, values: list[str]) -> None:
+        """Every value of an `over` is a constant an atom can take (a typo would leave an atom never true)."""
+        for i, v in enumerate(values):
+            self.constant((*path, i), v)
 
-def _vars(text: str) -> list[Term]:
+
+def _vars(text: Any) -> list[Term]:
+    """The variables of an atom's text (none for a text that is not an atom: pattern() says why)."""
+    if not isinstance(text, str):
+        return []
     try:
         return [a for a in parse_literal(text).args if a.is_var]
     except ProgramError:
@@ -354,6 +372,9 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     terminated = _every_agents(r, check, ("end", "terminated"), agents)
     truncated = _every_agents(r, check, ("end", "truncated"), agents)
     max_steps = r.integer(("end", "max_steps"), None, minimum=1) if "max_steps" in end else None
+    if not (terminated or truncated or max_steps):  # play --env would step such a world forever
+        raise r.err(("end",), "the episode can never end: expected `terminated`, `truncated` or `max_steps` "
+                              "(max_steps = N for a task that never ends by itself)")
     r.table(("start",), ("facts", "choose"), default={})
     start_facts = _every_agents(r, check, ("start", "facts"), agents, bounds=True)
     choices = tuple(d for i in range(len(_list(r, ("start", "choose"))))
@@ -367,6 +388,12 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
                                "(give each draw its own `name`)")
         seen[d.name] = d.key
     fps = r.integer(("env", "render_fps"), 4, minimum=1)
+    if board is not None:
+        spec_read = [*(a for part in parts for atoms in part.per_agent for a in atoms), *terminated, *truncated,
+                     *(a for per_agent in (*reward_table, *reward_scaled) for a, _ in per_agent),
+                     *(a for per_agent in (mask or ()) for a in per_agent),
+                     *(a for d in (*choices, *randoms) for value in (d.weights or ()) for a in value)]
+        _check_board_names(r, rules, board, {a.pred for a in spec_read})
     # the program's warnings again, knowing what the env sets: no "never set" for pressed(...), slip(...)
     env_set = [*(a for per_agent in action_facts for facts in per_agent for a in facts), *start_facts,
                *(a for d in (*choices, *randoms) for value in d.atoms for a in value)]
@@ -431,12 +458,12 @@ def _list(r: _Reader, path: KeyPath) -> list[Any]:
 
 
 def _inside(r: _Reader, path: KeyPath, name: str) -> str:
-    """A file named by the spec: relative, inside the spec's folder (a spec never makes tracelab read
-    elsewhere)."""
-    parts = name.replace("\\", "/").split("/")
-    if os.path.isabs(name) or ".." in parts or not name:
-        raise r.err(path, f"{name!r}: expected a path relative to the spec's folder, inside it")
-    return os.path.join(r.src.folder, name)
+    """A file named by the spec: relative, inside the spec's folder once links are resolved (a spec never
+    makes tracelab read elsewhere); the resolved path."""
+    try:
+        return str(path_inside(r.src.folder, name))
+    except FileRefused as e:
+        raise r.err(path, f"{e} (a path relative to the spec's folder, inside it)") from None
 
 
 def _load_rules(r: _Reader, files: list[str]) -> Program:
@@ -444,6 +471,24 @@ def _load_rules(r: _Reader, files: list[str]) -> Program:
         return load_program(*files)
     except FileNotFoundError as e:
         raise r.err(("env", "rules"), f"{e.filename}: no such file") from None
+
+
+def _check_board_names(r: _Reader, rules: Program, board: Board, spec_read: set[str]) -> None:
+    """Each predicate the board makes (legend, neighbours, rays, edges) is read by a rule or by an atom of
+    the spec: one that nothing reads is a typo (`G = ["floor", "gaol"]` leaves the rules' goal never
+    true), named with the predicates the rules read but nothing sets."""
+    read = {lit.pred for rule in rules.rules for lit in rule.body} | spec_read
+    set_by = {f.literal.pred for f in rules.facts} | {rule.head.pred for rule in rules.rules}
+    wanted = sorted(read - set_by) or sorted(read)
+    made = [(("board", "legend", ch, i), p) for ch, preds in board.legend.items() for i, p in enumerate(preds)]
+    made += [(("board", key, name), name) for key, names in (("neighbours", board.neighbours),
+                                                             ("rays", board.rays), ("edges", board.edges))
+             for name in names]
+    for path, pred in made:
+        if pred not in read:
+            near = close_names(pred, wanted)
+            hint = f"did you mean {', '.join(near)}?" if near else f"the rules read: {', '.join(wanted[:12])}"
+            raise r.err(path, f"no rule and no atom of the spec reads the predicate {pred!r}; {hint}")
 
 
 def _with_board(r: _Reader, program: Program, board: Board | None) -> Program:
@@ -577,6 +622,7 @@ def _observation(r: _Reader, check: _Names, domains: dict[str, list[str]], agent
             per_agent = tuple(check.atoms((*path, "atoms"), texts, {AGENT_VAR: a}) for a in agents)
         else:
             domain = _domain(r, (*path, "over"), domains)
+            check.domain((*path, "over"), domain)
             per_agent = tuple(check.over((*path, "atom"), p["atom"], domain, a) for a in agents)
         if not per_agent[0]:
             raise r.err(path, "no atoms to read")
@@ -606,9 +652,7 @@ def _nearest(r: _Reader, check: _Names, path: KeyPath, p: dict[str, Any], name: 
     if "over" in p or "atoms" in p:
         raise r.err(path, "a \"nearest\" part reads the board's cells: no `over` or `atoms`")
     things = r.strings((*path, "things"))
-    for i, t in enumerate(things):
-        if t not in check.constants:
-            raise r.err((*path, "things", i), f"the program, the board and the agents have no constant {t!r}")
+    check.domain((*path, "things"), things)
     if not things or len(things) * len(cells) > MAX_DOMAIN:
         raise r.err((*path, "things"), f"expected 1 to {MAX_DOMAIN // len(cells)} things")
     text = p["atom"]
@@ -683,10 +727,13 @@ def _draw(r: _Reader, check: _Names, path: KeyPath, domains: dict[str, list[str]
         if list(over) != variables:
             raise r.err((*path, "over"), f"expected one domain per variable of `atom`, in order: {', '.join(variables)}")
         axes = [_domain(r, (*path, "over", v), domains) for v in variables]
+        for v, axis in zip(variables, axes):
+            check.domain((*path, "over", v), axis)
     else:
         if len(variables) != 1:
             raise r.err((*path, "atom"), "expected exactly one variable (or `over` as a table, a domain per variable)")
         axes = [_domain(r, (*path, "over"), domains)]
+        check.domain((*path, "over"), axes[0])
     if math.prod(len(a) for a in axes) > MAX_DOMAIN:  # refused before the product is built
         raise r.err((*path, "over"), f"more than {MAX_DOMAIN} combinations")
     values = [dict(zip(variables, combo)) for combo in itertools.product(*axes)]

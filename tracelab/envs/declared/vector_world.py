@@ -20,6 +20,7 @@ from tracelab.engine.core import LANES_MIN_WORLDS
 from tracelab.envs.declared import fused, vector_fused
 from tracelab.envs.declared.observe import missing_index, part_numbers
 from tracelab.envs.declared.spec import WorldSpec
+from tracelab.envs.declared.state_errors import no_index, no_weights_hold
 from tracelab.envs.declared.world import DeclaredWorld
 
 MAX_START_BYTES = 256 << 20  # the start outcomes' engine states, all together
@@ -148,8 +149,7 @@ class DeclaredWorlds:
             part = spec.parts[one._index_parts[p]]
             if missing_index(part, index[:, p]):
                 w = int(np.flatnonzero(index[:, p] < 0)[0])
-                raise RuntimeError(f"{spec.path}: observation part {part.name!r}: no atom of "
-                                   f"{part.atoms[0].pred}(...) is true in world {w}, so it has no index")
+                raise no_index(spec, part, w)
         if spec.space == "Discrete":
             value = np.zeros(self.n_worlds, np.int64)
             for size, col in zip(one._part_sizes, index.T):  # first part slowest, as observation()
@@ -200,8 +200,7 @@ def _draw_batch(drawer: Any, worlds: DeclaredWorlds) -> np.ndarray:
     for i, r in enumerate(rngs):
         possible = np.flatnonzero(ok[i])
         if possible.size == 0:
-            raise RuntimeError(f"{worlds.spec.path}: {'.'.join(map(str, d.key))}: no value's weights hold in "
-                               f"world {i}: nothing to draw from")
+            raise no_weights_hold(worlds.spec, d, i)
         if d.method == "choice":
             out[i] = possible[r.integers(0, possible.size)]
         else:
