@@ -154,9 +154,8 @@ class _Reader:
 
     def charge(self, path: KeyPath, atoms: int, agents: int = 1) -> None:
         """Charge the atoms a key is about to ground (`atoms` for each of `agents`) to the spec's budget."""
-        what = f"{atoms:,} atoms" + (f" for each of {agents:,} agents" if agents > 1 else "")
         try:
-            self.budget.charge(atoms * agents, what)
+            self.budget.charge(atoms * agents, _atoms_for(atoms, agents))
         except SpecTooBig as e:
             raise self.err(path, str(e)) from None
 
@@ -230,6 +229,10 @@ class _Reader:
         if not np.isfinite(p).all() or (p < 0).any() or p.sum() <= 0:
             raise self.err(path, "expected probabilities >= 0 with a positive sum")
         return p
+
+
+def _atoms_for(atoms: int, agents: int) -> str:
+    return f"{atoms:,} atoms" + (f" for each of {agents:,} agents" if agents > 1 else "")
 
 
 def _kind(v: Any) -> str:
@@ -358,6 +361,7 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     for i, a in enumerate(agents):
         if not CONSTANT_RE.fullmatch(a):
             raise r.err(("agents", "names", i), f"{a!r} is not a plain constant (lower-case letter or digit first)")
+    _every_agents_atoms_ahead(r, board, len(agents))
     # the board's predicates are names the spec may use too (FrozenLake's start cells are weights of the
     # start choice, not read by a rule); a typo among them leaves the rules' predicate "never set"
     program = _with_board(r, rules, board)
@@ -397,6 +401,29 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     return WorldSpec(src.path, names, program, tuple(agents), action_names, action_facts, mask, space, parts,
                      reward_table, reward_scaled, terminated, truncated, max_steps, start_facts, choices,
                      randoms, board, fps, src, r.budget.board_facts + r.budget.atoms)
+
+
+def _every_agents_atoms_ahead(r: _Reader, board: Board | None, agents: int) -> None:
+    """Refuse a spec whose atoms for every agent (actions, mask, observation parts, rewards, ends, start
+    facts), counted from its text, could not fit, before the board's facts or any atom is made."""
+    def length(v: Any) -> int:
+        return len(v) if isinstance(v, (list, dict)) else 1
+    cells = board.height * board.width if board else 0
+    actions = r.raw(("actions",), {})
+    n = sum(length(v) for v in actions.values()) if isinstance(actions, dict) else 0
+    n += length(actions) if "mask" in r.raw(("agents",), {}) else 0
+    for part in r.raw(("observation", "parts"), []):
+        if not isinstance(part, dict):
+            continue
+        over = part.get("over")
+        n += length(part.get("atoms", [])) + (cells if over == "cells" else len(over) if isinstance(over, list) else 0)
+        n += (1 + length(part.get("things", []))) * cells if part.get("read") == "nearest" else 0
+    n += length(r.raw(("reward", "table"), {})) + 1
+    n += sum(length(r.raw(path, [])) for path in (("end", "terminated"), ("end", "truncated"), ("start", "facts")))
+    try:
+        r.budget.ahead(n * agents, _atoms_for(n, agents))
+    except SpecTooBig as e:
+        raise r.err(("agents", "names"), str(e)) from None
 
 
 def _actions(r: _Reader, check: _Names, agents: list[str], mask_text: Any

@@ -67,10 +67,16 @@ class SpecBudget:
         self.atoms += atoms
         self._check(what)
 
-    def _check(self, what: str) -> None:
-        if self.bytes > self.limit:
-            raise SpecTooBig(f"{what} brings the spec to about {human_bytes(self.bytes)} once built, over "
-                             f"the limit of {human_bytes(self.limit)} ({self.source})")
+    def ahead(self, atoms: int, what: str) -> None:
+        """Refuse now if `atoms` more atoms, counted from the spec's text before any is made, would pass
+        the limit (each is charged again when it is made)."""
+        self._check(what, atoms)
+
+    def _check(self, what: str, ahead: int = 0) -> None:
+        need = self.bytes + ahead * BYTES_PER_SPEC_ATOM
+        if need > self.limit:
+            raise SpecTooBig(f"{what} brings the spec to about {human_bytes(need)} once built, over the limit "
+                             f"of {human_bytes(self.limit)} ({self.source})")
 
 
 def check_worlds(worlds: int, atoms: int, what: str = "worlds") -> None:
