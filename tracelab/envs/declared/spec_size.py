@@ -28,9 +28,10 @@ BYTES_PER_SPEC_ATOM = 1024
 # one more world of a batch, per engine atom: its bounds, the kernel's rows and the change flags
 BYTES_PER_WORLD_ATOM = 64
 # one env of gymnasium's SyncVectorEnv (train --env): its own engine, spec tables and wrappers, plus its
-# atoms (measured at 200 envs: FrozenLake 374 KiB with 140 atoms, Taxi 1.38 MiB with 2,653), rounded up
+# atoms and the groundings over them (measured at 100-200 envs: FrozenLake 374 KiB with 140 atoms, Taxi
+# 1.38 MiB with 2,653, war_base 3.5 MiB with 3,264), rounded up
 ENV_BYTES = 384 << 10
-BYTES_PER_ENV_ATOM = 640
+BYTES_PER_ENV_ATOM = 1024
 
 
 class SpecTooBig(UserError):
