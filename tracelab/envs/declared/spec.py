@@ -28,6 +28,7 @@ from tracelab.envs.declared.expressions import ExpressionError, evaluate
 from tracelab.envs.declared.render import hex_color
 from tracelab.envs.declared.spec_file import KeyPath, SpecError, SpecSource, read_spec_file
 from tracelab.errors import close_names
+from tracelab.envs.declared.spec_size import SpecBudget, SpecTooBig
 
 READS = ("index", "lower", "bounds", "onehot", "count", "nearest")
 SPACES = ("Discrete", "MultiDiscrete", "Box", "Dict")
@@ -135,6 +136,9 @@ class WorldSpec:
     board: Board | None
     render_fps: int
     source: SpecSource = field(repr=False)
+    # the board's facts and the atoms the spec names, every agent's: the fewest atoms its engine has
+    # (what a batch of worlds is estimated from, spec_size.check_worlds)
+    named_atoms: int = 0
 
 
 # ---- reading typed values, located ----
@@ -145,9 +149,17 @@ class _Reader:
     def __init__(self, src: SpecSource, names: dict[str, Any]) -> None:
         self.src = src
         self.names = names  # params and data, for expressions
+        self.budget = SpecBudget()  # what the spec builds, charged before it is built
 
     def err(self, path: KeyPath, msg: str) -> SpecError:
         return self.src.error(path, msg)
+
+    def charge(self, path: KeyPath, atoms: int, agents: int = 1) -> None:
+        """Charge the atoms a key is about to ground (`atoms` for each of `agents`) to the spec's budget."""
+        try:
+            self.budget.charge(atoms * agents, _atoms_for(atoms, agents))
+        except SpecTooBig as e:
+            raise self.err(path, str(e)) from None
 
     def raw(self, path: KeyPath, default: Any = ...) -> Any:
         node: Any = self.src.data
@@ -221,6 +233,10 @@ class _Reader:
         return p
 
 
+def _atoms_for(atoms: int, agents: int) -> str:
+    return f"{atoms:,} atoms" + (f" for each of {agents:,} agents" if agents > 1 else "")
+
+
 def _kind(v: Any) -> str:
     if isinstance(v, str):
         return f"the string {v[:40]!r}"
@@ -249,9 +265,19 @@ class _Names:
             for lit in lits:
                 self.arity.setdefault(lit.pred, len(lit.args))
         self.constants = set(program.constants()) | set(extra_constants)
+        # a pattern is grounded for every agent: parsed and checked once (its first use raises any error)
+        self._checked: dict[tuple[str, tuple[str, ...], bool], Literal] = {}
 
     def pattern(self, path: KeyPath, text: Any, variables: tuple[str, ...], *, bounds: bool = False) -> Literal:
         """A literal whose variables are among `variables`, naming the program's predicates."""
+        key = (text, variables, bounds) if isinstance(text, str) else None
+        if key in self._checked:
+            return self._checked[key]
+        lit = self._check_pattern(path, text, variables, bounds=bounds)
+        self._checked[key] = lit  # type: ignore[index]
+        return lit
+
+    def _check_pattern(self, path: KeyPath, text: Any, variables: tuple[str, ...], *, bounds: bool) -> Literal:
         if not isinstance(text, str):
             raise self.r.err(path, f"expected an atom such as \"p(a)\", got {_kind(text)}")
         try:
@@ -353,6 +379,7 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     for i, a in enumerate(agents):
         if not CONSTANT_RE.fullmatch(a):
             raise r.err(("agents", "names", i), f"{a!r} is not a plain constant (lower-case letter or digit first)")
+    _every_agents_atoms_ahead(r, board, len(agents))
     # the board's predicates are names the spec may use too (FrozenLake's start cells are weights of the
     # start choice, not read by a rule); a typo among them leaves the rules' predicate "never set"
     program = _with_board(r, rules, board)
@@ -400,7 +427,30 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     check_program(program, {a.pred: len(a.args) for a in env_set})
     return WorldSpec(src.path, names, program, tuple(agents), action_names, action_facts, mask, space, parts,
                      reward_table, reward_scaled, terminated, truncated, max_steps, start_facts, choices,
-                     randoms, board, fps, src)
+                     randoms, board, fps, src, r.budget.board_facts + r.budget.atoms)
+
+
+def _every_agents_atoms_ahead(r: _Reader, board: Board | None, agents: int) -> None:
+    """Refuse a spec whose atoms for every agent (actions, mask, observation parts, rewards, ends, start
+    facts), counted from its text, could not fit, before the board's facts or any atom is made."""
+    def length(v: Any) -> int:
+        return len(v) if isinstance(v, (list, dict)) else 1
+    cells = board.height * board.width if board else 0
+    actions = r.raw(("actions",), {})
+    n = sum(length(v) for v in actions.values()) if isinstance(actions, dict) else 0
+    n += length(actions) if "mask" in r.raw(("agents",), {}) else 0
+    for part in r.raw(("observation", "parts"), []):
+        if not isinstance(part, dict):
+            continue
+        over = part.get("over")
+        n += length(part.get("atoms", [])) + (cells if over == "cells" else len(over) if isinstance(over, list) else 0)
+        n += (1 + length(part.get("things", []))) * cells if part.get("read") == "nearest" else 0
+    n += length(r.raw(("reward", "table"), {})) + 1
+    n += sum(length(r.raw(path, [])) for path in (("end", "terminated"), ("end", "truncated"), ("start", "facts")))
+    try:
+        r.budget.ahead(n * agents, _atoms_for(n, agents))
+    except SpecTooBig as e:
+        raise r.err(("agents", "names"), str(e)) from None
 
 
 def _actions(r: _Reader, check: _Names, agents: list[str], mask_text: Any
@@ -415,6 +465,8 @@ def _actions(r: _Reader, check: _Names, agents: list[str], mask_text: Any
             raise r.err(("actions", name), "an action's name must be a plain constant (lower-case letter or "
                                            "digit first; letters, digits, _ and -)")
         r.strings(("actions", name))
+    r.charge(("actions",), sum(len(actions_t[n]) for n in names) + (len(names) if mask_text is not None else 0),
+             len(agents))
     facts = tuple(tuple(check.atoms(("actions", n), actions_t[n], {AGENT_VAR: a}, bounds=True) for n in names)
                   for a in agents)
     if mask_text is None:
@@ -446,6 +498,7 @@ def _every_agents(r: _Reader, check: _Names, path: KeyPath, agents: list[str], *
                   ) -> tuple[Atom, ...]:
     """A list of atoms, `Agent` standing for each agent in turn (an atom without it once)."""
     texts = r.strings(path, [])
+    r.charge(path, len(texts), len(agents))
     out = (a for agent in agents for a in check.atoms(path, texts, {AGENT_VAR: agent}, bounds=bounds))
     return tuple(dict.fromkeys(out))
 
@@ -553,6 +606,10 @@ def _board(r: _Reader) -> Board:
     board = Board(tuple(rows), fmt, legend, neighbours, edge, marks, colors, mark_colors, rays, edges)
     if board.fact_count() > MAX_BOARD_FACTS:  # refused before the facts are built
         raise r.err(("board",), f"makes {board.fact_count():,} facts; a board may make at most {MAX_BOARD_FACTS:,}")
+    try:
+        r.budget.board(board.fact_count())
+    except SpecTooBig as e:
+        raise r.err(("board",), str(e)) from None
     return board
 
 
@@ -619,9 +676,11 @@ def _observation(r: _Reader, check: _Names, domains: dict[str, list[str]], agent
             raise r.err(path, "expected either `atom` (with `over`) or `atoms` (a list of ground atoms)")
         if "atoms" in p:
             texts = r.strings((*path, "atoms"))
+            r.charge((*path, "atoms"), len(texts), len(agents))
             per_agent = tuple(check.atoms((*path, "atoms"), texts, {AGENT_VAR: a}) for a in agents)
         else:
             domain = _domain(r, (*path, "over"), domains)
+            r.charge((*path, "over"), len(domain), len(agents))
             check.domain((*path, "over"), domain)
             per_agent = tuple(check.over((*path, "atom"), p["atom"], domain, a) for a in agents)
         if not per_agent[0]:
@@ -662,6 +721,7 @@ def _nearest(r: _Reader, check: _Names, path: KeyPath, p: dict[str, Any], name: 
         raise r.err((*path, "atom"), f"{text!r}: expected {THING_VAR} (each of `things`) and one variable for "
                                      "the cell")
     cell_var = others.pop()
+    r.charge((*path, "things"), (1 + len(things)) * len(cells), len(agents))
     per_agent = tuple((*check.over((*path, "from"), p["from"], cells, a),
                        *(check.ground(lit, {THING_VAR: t, cell_var: c, AGENT_VAR: a}) for t in things for c in cells))
                       for a in agents)
@@ -693,6 +753,8 @@ def _reward(r: _Reader, check: _Names, agents: list[str]
             ) -> tuple[tuple[tuple[tuple[Atom, float], ...], ...], tuple[tuple[tuple[Atom, float], ...], ...]]:
     """Per agent: the table's (atom, value) pairs and the scaled atom's (atom, scale)."""
     r.table(("reward",), ("table", "atom", "scale"), default={})
+    r.charge(("reward",), len(r.table(("reward", "table"), default={})) + ("atom" in r.raw(("reward",), {})),
+             len(agents))
     table = []
     for text in r.table(("reward", "table"), default={}):
         path = ("reward", "table", text)
@@ -736,6 +798,8 @@ def _draw(r: _Reader, check: _Names, path: KeyPath, domains: dict[str, list[str]
         check.domain((*path, "over"), axes[0])
     if math.prod(len(a) for a in axes) > MAX_DOMAIN:  # refused before the product is built
         raise r.err((*path, "over"), f"more than {MAX_DOMAIN} combinations")
+    n_weights = len(w) if isinstance(w := t.get("weights", []), list) else 1
+    r.charge((*path, "over"), math.prod(len(a) for a in axes) * (len(patterns) + n_weights))
     values = [dict(zip(variables, combo)) for combo in itertools.product(*axes)]
     lits = [check.pattern((*path, "atom"), p, tuple(variables), bounds=True) for p in patterns]
     atoms = tuple(tuple(check.ground(lit, v) for lit in lits) for v in values)

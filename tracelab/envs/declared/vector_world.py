@@ -21,6 +21,7 @@ from tracelab.envs.declared import fused, vector_fused
 from tracelab.envs.declared.observe import missing_index, part_numbers
 from tracelab.envs.declared.spec import WorldSpec
 from tracelab.envs.declared.state_errors import no_index, no_weights_hold
+from tracelab.envs.declared.spec_size import check_worlds
 from tracelab.envs.declared.world import DeclaredWorld
 
 MAX_START_BYTES = 256 << 20  # the start outcomes' engine states, all together
@@ -34,6 +35,7 @@ class DeclaredWorlds:
         if after:
             raise ValueError(f"{spec.path}: random fact {after[0].name!r} is drawn `after` a step, which the "
                              "vector env does not support yet (a second engine step of some worlds only)")
+        check_worlds(n_worlds, spec.named_atoms, f"num_envs={n_worlds:,}")  # before the batch's engine
         self.spec = spec
         self.n_worlds = w = n_worlds
         # the single world's construction, on an engine of n_worlds worlds: its ids, draws and tables
