@@ -24,6 +24,7 @@ def run(args: argparse.Namespace) -> int:
     import pyarrow as pa
 
     # deferred: loads DuckDB; every command is imported to build the CLI's parser
+    from tracelab.store.arrow_build import table_from_rows  # not Table.from_pylist: it imports pandas
     from tracelab.store.catalog import DEFAULT_ROOTS, list_runs
     roots = args.dirs or list(DEFAULT_ROOTS)
     with store_errors(), ctrl_c_stops_queries():
@@ -38,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
         schema = pa.schema([("name", pa.string()), ("status", pa.string()), ("episodes", pa.int64()),
                             ("rows", pa.int64()), ("size", pa.string()), ("started", pa.string()),
                             ("scenario", pa.string()), ("command", pa.string()), ("path", pa.string())])
-        write_table(pa.Table.from_pylist(rows, schema=schema), args.format, args.output)
+        write_table(table_from_rows(rows, schema), args.format, args.output)
         for r in runs:
             if r.error:
                 print(f"note: {r.path}: {r.error}", file=sys.stderr)
