@@ -15,13 +15,19 @@ from pathlib import Path
 from typing import Any
 
 import duckdb
+import pyarrow as pa
 
 from tracelab.store import layout
+from tracelab.store.arrow_build import table_from_rows
 from tracelab.store.reader import attach_sealed_file, open_run, query_readonly, retrying, run_info, sealed_file_of_run
 from tracelab.store.sandbox import lock_down, sandbox_connection
 from tracelab.store.sealed_catalog import check_sealed_catalog
 
 DEFAULT_ROOTS = (Path("runs"), Path("sample_runs"))
+# RunSummary.as_row()'s columns, in the order `tracelab runs` prints them
+ROW_SCHEMA = pa.schema([("name", pa.string()), ("status", pa.string()), ("episodes", pa.int64()),
+                        ("rows", pa.int64()), ("size", pa.string()), ("started", pa.string()),
+                        ("scenario", pa.string()), ("command", pa.string()), ("path", pa.string())])
 
 
 @dataclass
@@ -41,6 +47,11 @@ class RunSummary:
         return {"name": self.name, "status": self.status, "episodes": self.episodes, "rows": self.rows,
                 "size": human_size(self.size), "started": _time_text(self.started_at),
                 "scenario": self.scenario, "command": self.command, "path": str(self.path)}
+
+
+def catalog_table(rows: Sequence[dict[str, Any]]) -> pa.Table:
+    """Rows of RunSummary.as_row() as an Arrow table (built from buffers: Table.from_pylist imports pandas)."""
+    return table_from_rows(rows, ROW_SCHEMA)
 
 
 def short_command(command: str) -> str:
