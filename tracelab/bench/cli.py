@@ -15,6 +15,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -61,7 +62,8 @@ def _cpu_of(argv: list[str], env: dict[str, str]) -> float:
     return cpu
 
 
-def run(quick: bool, repeats: int) -> dict[str, Any]:
+def run(quick: bool, repeats: int, only: Sequence[str] | None = None) -> dict[str, Any]:
+    """`only`: the names of the commands to time (the floor is always timed); None: all."""
     runs = _sample_runs()
     repeats = 1 if quick else repeats
     env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
@@ -71,7 +73,8 @@ def run(quick: bool, repeats: int) -> dict[str, Any]:
         for i in range(1, COMPARED_RUNS + 1):
             shutil.copytree(runs / "base-train", copies / f"train-{i:02d}")
         timed = [("floor", [sys.executable, *FLOOR[1:]], None)] + [
-            (name, [sys.executable, "-m", "tracelab", *argv], goal) for name, argv, goal in commands(runs, copies)]
+            (name, [sys.executable, "-m", "tracelab", *argv], goal) for name, argv, goal in commands(runs, copies)
+            if only is None or name.split()[0] in only]
         for _, argv, _ in timed:  # writes the .pyc files a user's first run writes; not measured
             _cpu_of(argv, env)
         cpu: dict[str, list[float]] = {name: [] for name, _, _ in timed}

@@ -79,6 +79,9 @@ def register(sub: argparse._SubParsersAction) -> None:
             q.add_argument("--memory", type=positive_int, nargs="?", const=1_000_000, default=None,
                            metavar="STEPS", help="also the memory of a `tracelab train` of this many steps with "
                                                  "traced evaluations, in a fresh process (default 1,000,000)")
+        if name == "cli":
+            q.add_argument("--only", action="append", default=None, metavar="COMMAND",
+                           help="time this command only, beside the floor (repeatable; e.g. sql, compare)")
         if name == "pyreason":
             q.add_argument("--pyreason-python", metavar="PYTHON", default=None,
                            help="the interpreter of a PyReason install (e.g. a venv's bin/python); without "
@@ -166,7 +169,7 @@ def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], s
         return r, first_run.report(r)
     if name == "cli":
         from tracelab.bench import cli  # deferred: as engine's, above
-        r = cli.run(args.quick, args.repeats)
+        r = cli.run(args.quick, args.repeats, args.only)
         return r, cli.report(r)
     if name == "pyreason":
         from tracelab.bench import pyreason_compare
