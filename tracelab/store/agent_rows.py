@@ -1,0 +1,129 @@
+"""The agent's half of a traced step, as the store records it: what the policy valued and chose
+(`Decisions`, a row per agent and step: the action, the policy's output for every action, explored or
+greedy, ε, the action mask) and what its reward was made of (`RewardTerms`, a row per agent, step and
+non-zero term, summing to the step's reward). Both of a run's tracers (GridWar's StoreSink and a declared
+world's DeclaredRecorder) keep them in an `AgentRows` and write them with it, before the episode ends they
+belong to (tables decisions, reward_terms and action_names: tracelab/store/schema.py)."""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+import pyarrow as pa
+
+from tracelab.store import arrow_build as ab
+
+if TYPE_CHECKING:
+    from tracelab.store.writer import TraceWriter
+
+Q_VALUES, LOGITS = "q", "logits"  # what a decision's `values` are
+
+
+@dataclass(frozen=True)
+class PolicyOutput:
+    """A policy's output for a batch of B decisions: `values` [B, A] (Q-values, or an actor's logits), in
+    the order of the policy's actions; an actor-critic's state values [B] (None otherwise); whether each
+    action was explored (None: all greedy) and the ε it explored with."""
+    values: np.ndarray
+    output: str = Q_VALUES
+    state_value: np.ndarray | None = None
+    explored: np.ndarray | None = None
+    epsilon: float = 0.0
+
+    def rows(self, keep: np.ndarray | slice) -> "PolicyOutput":
+        """The decisions at `keep` (a mask or index over the batch)."""
+        return replace(self, values=self.values[keep],
+                       state_value=None if self.state_value is None else self.state_value[keep],
+                       explored=None if self.explored is None else self.explored[keep])
+
+
+@dataclass(frozen=True)
+class Decisions:
+    """Decision rows: each row's episode, step (steps.step), agent, the action taken (as steps.action holds
+    it) and the policy's output (one row of `policy` per decision); `mask` [K, A]: the allowed actions
+    (None: no mask)."""
+    episode: np.ndarray
+    step: np.ndarray
+    agent: Sequence[str]
+    action: np.ndarray
+    policy: PolicyOutput
+    mask: np.ndarray | None = None
+
+    def table(self) -> pa.Table:
+        from tracelab.store.schema import SCHEMAS
+        n, values = len(self.episode), np.ascontiguousarray(self.policy.values, np.float32)
+        a = values.shape[1] if values.ndim == 2 else 0
+        offsets = np.arange(n + 1, dtype=np.int32) * a
+        p = self.policy
+        explored = np.zeros(n, bool) if p.explored is None else np.asarray(p.explored, bool)
+        mask = pa.nulls(n, pa.list_(pa.bool_())) if self.mask is None else \
+            ab.list_array(offsets, ab.from_numpy(np.asarray(self.mask, bool).reshape(-1)))
+        return pa.Table.from_arrays([
+            ab.from_numpy(np.asarray(self.episode, np.int64)), ab.from_numpy(np.asarray(self.step, np.int32)),
+            ab.strings(list(self.agent)), ab.from_numpy(np.asarray(self.action, np.int32)),
+            ab.strings([p.output] * n),
+            ab.list_array(offsets, ab.from_numpy(values.reshape(-1))),
+            ab.from_numpy(np.full(n, np.nan) if p.state_value is None else np.asarray(p.state_value, np.float64),
+                          null=np.ones(n, bool) if p.state_value is None else None),
+            ab.from_numpy(explored), ab.from_numpy(np.full(n, float(p.epsilon))), mask,
+        ], schema=SCHEMAS["decisions"])
+
+
+@dataclass(frozen=True)
+class RewardTerms:
+    """Reward-term rows: episode, step, agent, term name, value (zeros are left out by `table`)."""
+    episode: np.ndarray
+    step: np.ndarray
+    agent: Sequence[str]
+    term: Sequence[str]
+    value: np.ndarray
+
+    def table(self) -> pa.Table:
+        from tracelab.store.schema import SCHEMAS
+        value = np.asarray(self.value, np.float64)
+        keep = np.flatnonzero(value != 0.0)
+        agent, term = np.asarray(self.agent, object)[keep], np.asarray(self.term, object)[keep]
+        return pa.Table.from_arrays([
+            ab.from_numpy(np.asarray(self.episode, np.int64)[keep]), ab.from_numpy(np.asarray(self.step, np.int32)[keep]),
+            ab.strings(agent.tolist()), ab.strings(term.tolist()), ab.from_numpy(value[keep]),
+        ], schema=SCHEMAS["reward_terms"])
+
+
+def action_names_table(names: Sequence[str], positions: Sequence[int | None] | None = None) -> pa.Table:
+    """The run's actions: action k (as steps.action holds it) is names[k], at positions[k] in a decision's
+    values (default: k)."""
+    from tracelab.store.schema import SCHEMAS
+    n = len(names)
+    pos = list(range(n)) if positions is None else list(positions)
+    missing = np.array([p is None for p in pos], bool)
+    return pa.Table.from_arrays([
+        ab.from_numpy(np.arange(n, dtype=np.int32)), ab.strings([str(x) for x in names]),
+        ab.from_numpy(np.array([-1 if p is None else p for p in pos], np.int32), null=missing)],
+        schema=SCHEMAS["action_names"])
+
+
+class AgentRows:
+    """Decision and reward-term rows kept until the tracer writes (`write`, before its episode ends)."""
+
+    def __init__(self) -> None:
+        self._decisions: list[Decisions] = []
+        self._terms: list[RewardTerms] = []
+
+    def decisions(self, rows: Decisions) -> None:
+        if len(rows.episode):
+            self._decisions.append(rows)
+
+    def reward_terms(self, rows: RewardTerms) -> None:
+        if len(rows.episode):
+            self._terms.append(rows)
+
+    def write(self, writer: "TraceWriter") -> None:
+        decisions, self._decisions = self._decisions, []
+        terms, self._terms = self._terms, []
+        if decisions:
+            writer.write_agent_tables("decisions", [d.table() for d in decisions])
+        if terms:
+            writer.write_agent_tables("reward_terms", [t.table() for t in terms])
+
