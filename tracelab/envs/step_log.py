@@ -18,15 +18,18 @@ from tracelab.game.state import StepResult
 
 
 @njit(cache=True)
-def _log_step(log_t, log_obs, log_actions, log_rewards, k, t, obs, red, blue, agent_reward, reward,
-              agent_return, team_return, steps, done, recording):  # noqa: ANN001, ANN202 (numba)
-    """Row k of the log from one step of every world; the returns (a running total, so the same floats
+def _log_step(log_t, log_obs, log_actions, log_rewards, log_events, log_winner, k, t, obs, red, blue,
+              agent_reward, reward, unsafe, invalid, hits_made, hits_taken, winner, agent_return, team_return,
+              steps, done, recording):  # noqa: ANN001, ANN202 (numba)
+    """Row k of the log from one step of every world (with the events its reward terms are made of:
+    unsafe, invalid, hits made, hits taken, the winner); the returns (a running total, so the same floats
     as np.add.accumulate over the steps) and steps; returns how many `recording` worlds are `done`."""
     worlds, agents = red.shape
     size = obs.shape[2]
     ended = 0
     for w in range(worlds):
         log_t[k, w] = t[w]
+        log_winner[k, w] = winner[w]
         for team in range(2):  # scalar loops: a slice assignment compiles for seconds longer
             for d in range(size):
                 log_obs[k, w, team, d] = obs[w, team, d]
@@ -37,6 +40,10 @@ def _log_step(log_t, log_obs, log_actions, log_rewards, k, t, obs, red, blue, ag
                 r = agent_reward[w, team, j]
                 log_rewards[k, w, team, j] = r
                 agent_return[w, team, j] += r
+                log_events[k, w, team, j, 0] = unsafe[w, team, j]
+                log_events[k, w, team, j, 1] = invalid[w, team, j]
+                log_events[k, w, team, j, 2] = hits_made[w, team, j]
+                log_events[k, w, team, j, 3] = hits_taken[w, team, j]
         team_return[w, 0] += reward[w, 0]
         team_return[w, 1] += reward[w, 1]
         steps[w] = t[w]
@@ -122,6 +129,8 @@ class StepLog:
         self.obs = np.empty((capacity, worlds, 2, obs_size), np.float32)
         self.actions = np.empty((capacity, worlds, 2, agents), np.int64)
         self.rewards = np.empty((capacity, worlds, 2, agents), np.float64)
+        self.events = np.empty((capacity, worlds, 2, agents, 4), np.int32)  # unsafe, invalid, hits made, taken
+        self.winner = np.empty((capacity, worlds), np.int8)
         self.agent_return = np.zeros((worlds, 2, agents))
         self.team_return = np.zeros((worlds, 2))
         self.steps = np.zeros(worlds, np.int64)
@@ -132,9 +141,10 @@ class StepLog:
         """Log one step of every world (copies: the simulator reuses its arrays). Returns how many
         `recording` worlds are `done`, and whether the log is full."""
         k = self.k
-        ended = _log_step(self.t, self.obs, self.actions, self.rewards, k, res.t, res.obs, red, blue,
-                          res.agent_reward, res.reward, self.agent_return, self.team_return, self.steps, done,
-                          recording)
+        ended = _log_step(self.t, self.obs, self.actions, self.rewards, self.events, self.winner, k, res.t,
+                          res.obs, red, blue, res.agent_reward, res.reward, res.unsafe, res.invalid,
+                          res.hits_made, res.hits_taken, res.winner, self.agent_return, self.team_return,
+                          self.steps, done, recording)
         self.k = k + 1
         return ended, self.k == self.capacity
 
@@ -148,9 +158,9 @@ class StepLog:
                                recording, self.agent_return, self.team_return, self.steps)
 
     def take(self, episode: np.ndarray, recorded: np.ndarray) -> tuple[np.ndarray, ...] | None:
-        """Empty the log: (world, episode, t, obs, actions, rewards) of the rows of `recorded` worlds, new
-        arrays in step order then world order (the TraceSink.step layout; `episode`: each world's), or
-        None."""
+        """Empty the log: (world, episode, t, obs, actions, rewards, events, winner) of the rows of
+        `recorded` worlds, new arrays in step order then world order (the first six: the TraceSink.step
+        layout; `episode`: each world's), or None."""
         k, self.k = self.k, 0
         if not k:
             return None
@@ -162,11 +172,12 @@ class StepLog:
             world = np.tile(self._worlds, k)
             return (world, episode[world], self.t[:k].reshape(rows).astype(np.int64),
                     self.obs[:k].reshape(rows, 2, -1).copy(), self.actions[:k].reshape(rows, 2, -1).copy(),
-                    self.rewards[:k].reshape(rows, 2, -1).copy())
+                    self.rewards[:k].reshape(rows, 2, -1).copy(),
+                    self.events[:k].reshape(rows, *self.events.shape[2:]).copy(), self.winner[:k].reshape(rows).copy())
         keep = np.broadcast_to(recorded, (k, len(recorded)))
         world = np.nonzero(keep)[1]
         return (world, episode[world], self.t[:k][keep].astype(np.int64), self.obs[:k][keep],
-                self.actions[:k][keep], self.rewards[:k][keep])
+                self.actions[:k][keep], self.rewards[:k][keep], self.events[:k][keep], self.winner[:k][keep])
 
 
 def compile_for(sim: RuleSim) -> None:

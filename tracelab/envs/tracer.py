@@ -31,8 +31,9 @@ from tracelab.envs.step_log import StepLog, label_rows
 from tracelab.game.facts import agent_name
 from tracelab.game.refsim import RefSim
 from tracelab.game.rulesim import RuleSim
-from tracelab.game.scenario import TEAMS, Scenario
+from tracelab.game.scenario import TEAMS, Rewards, Scenario
 from tracelab.game.state import WINNER_BLUE, WINNER_DRAW, WINNER_RED, StepResult
+from tracelab.store.agent_rows import Decisions, PolicyOutput, RewardTerms
 
 
 HANDOVER_STEPS = 64
@@ -43,6 +44,30 @@ def handover_due(sim: RuleSim, steps_waiting: int, episode_ended: bool) -> bool:
     """Whether the simulator's trace rows are to be taken now (the tracer's cadence, module docstring):
     an episode ended in the last step, or HANDOVER_STEPS steps or HANDOVER_ROWS rows wait."""
     return episode_ended or steps_waiting >= HANDOVER_STEPS or sim.engine.trace_rows_waiting >= HANDOVER_ROWS
+
+
+# GridWar's reward terms (docs/game.md, Rewards), as the store names them
+REWARD_TERMS = ("win", "loss", "hit", "got_shot", "step", "unsafe", "invalid")
+
+
+def reward_terms(weights: Rewards, rewards: np.ndarray, events: np.ndarray, winner: np.ndarray) -> np.ndarray:
+    """float64 [K, 2, N, len(REWARD_TERMS)]: each agent's reward of K logged world-steps split by term, from
+    the step's events (`events` [K, 2, N, 4]: unsafe, invalid, hits made, hits taken; `winner` [K]) and the
+    scenario's reward `weights`; the step term (a valid action's) is what the others leave of the agent's
+    reward `rewards` [K, 2, N], so the terms sum to it (tests check that it is 0 or valid_action)."""
+    k, _, n, _ = events.shape
+    out = np.zeros((k, 2, n, len(REWARD_TERMS)))
+    unsafe = events[..., 0] != 0
+    won = np.stack([winner == WINNER_RED, winner == WINNER_BLUE], axis=1)[:, :, None]  # [K, 2, 1]
+    lost = np.stack([winner == WINNER_BLUE, winner == WINNER_RED], axis=1)[:, :, None]
+    out[..., 0] = np.where(won, weights.win, 0.0)
+    out[..., 1] = np.where(lost, weights.loss, 0.0)
+    out[..., 2] = events[..., 2] * weights.hit_opponent
+    out[..., 3] = events[..., 3] * weights.got_shot
+    out[..., 5] = np.where(unsafe, weights.unsafe, 0.0)
+    out[..., 6] = np.where(~unsafe & (events[..., 1] != 0), weights.invalid, 0.0)
+    out[..., 4] = rewards - out.sum(axis=-1)
+    return out
 
 
 def outcome_name(winner: int, truncated: bool) -> str:
@@ -71,6 +96,8 @@ class EpisodeTracer:
         # an episode's `rewards`: the teams' returns, then each agent's
         self._return_names = [*TEAMS, *(agent_name(t, j) for t in range(2) for j in range(n))]
         self._log = StepLog(HANDOVER_STEPS, w, sim.obs_size, n)
+        self._agent_names = np.array([agent_name(t, j) for t in range(2) for j in range(n)], object)
+        self._decided: tuple[PolicyOutput, np.ndarray, np.ndarray | None] | None = None
         # each world's returns and steps, kept by the log's step call
         self.steps, self.agent_return, self.team_return = self._log.steps, self._log.agent_return, \
             self._log.team_return
@@ -102,12 +129,21 @@ class EpisodeTracer:
             self._flush()
         self._hand_steps()
 
+    def decided(self, output: PolicyOutput, acting: np.ndarray, masks: np.ndarray | None = None) -> None:
+        """Red's policy output for the coming step: `output`'s rows [W, N, ...] (values [W, N, A] in the
+        scenario's action order), `acting` [W, N] which agents chose, `masks` [W, N, A] the allowed
+        actions (None: none). Recorded as the decisions of the next `stepped`."""
+        self._decided = (output, acting, masks)
+
     def stepped(self, res: StepResult, red: np.ndarray, blue: np.ndarray, done: np.ndarray | None = None
                 ) -> None:
         """After a step of every world (before any autoreset), with both teams' actions (spec ids,
         [W, N]) and, if the caller has it, `done` = res.terminated | res.truncated: its step record is
-        logged; its rows and the logged steps are handed over when due; episode ends."""
+        logged (with the decisions `decided` before it); its rows and the logged steps are handed over
+        when due; episode ends."""
         self._steps_waiting += 1
+        if self._decided is not None:
+            self._hand_decisions(res, red)
         if done is None:
             done = res.terminated | res.truncated
         ended, full = self._log.add(res, red, blue, done, self.open)
@@ -126,11 +162,32 @@ class EpisodeTracer:
             self._end(w, "aborted")
         self.sink.close()
 
+    def _hand_decisions(self, res: StepResult, red: np.ndarray) -> None:
+        output, acting, masks = self._decided
+        self._decided = None
+        keep = acting & self.open[:, None]
+        if not keep.any():
+            return
+        world, agent = np.nonzero(keep)
+        self.sink.decisions(Decisions(self.cur_ep[world], np.asarray(res.t)[world], self._agent_names[agent],
+                                      red[world, agent], output.rows(keep),
+                                      None if masks is None else np.asarray(masks)[keep]))
+
     def _hand_steps(self) -> None:
-        """The logged step records of recorded episodes to the sink, in step order."""
+        """The logged step records of recorded episodes to the sink, in step order, and their reward
+        terms."""
         steps = self._log.take(self.cur_ep, self.open)
-        if steps is not None:
-            self.sink.step(*steps)
+        if steps is None:
+            return
+        world, episode, t, obs, actions, rewards, events, winner = steps
+        self.sink.step(world, episode, t, obs, actions, rewards)
+        terms = reward_terms(self.scenario.rewards, rewards, events, winner)  # [K, 2, N, T]
+        k, m = len(t), len(self._agent_names)
+        per_row = m * len(REWARD_TERMS)
+        self.sink.reward_terms(RewardTerms(
+            np.repeat(episode, per_row), np.repeat(t, per_row),
+            np.tile(np.repeat(self._agent_names, len(REWARD_TERMS)), k),
+            np.tile(np.array(REWARD_TERMS, object), k * m), terms.reshape(-1)))
 
     def _flush(self) -> None:
         if not self._rules:

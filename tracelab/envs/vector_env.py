@@ -56,6 +56,7 @@ from tracelab.envs.common import (
 from tracelab.envs.gym_env import reset_info, step_info
 from tracelab.envs.sinks import TraceSink
 from tracelab.envs.tracer import EpisodeTracer
+from tracelab.store.agent_rows import PolicyOutput
 from tracelab.game.opponent import P_TOWARD
 from tracelab.game.scenario import RED, Scenario
 
@@ -120,6 +121,17 @@ class GridWarVectorEnv(VectorEnv):
         if done.any():
             info = self._autoreset(done, obs, info)
         return obs, reward, terminated, truncated, self._with_masks(info, self._all)
+
+    @property
+    def traced(self) -> bool:
+        """Whether the env records its episodes (a trace sink): then `decided` is worth calling."""
+        return self._tracer is not None
+
+    def decided(self, output: PolicyOutput, acting: np.ndarray, masks: np.ndarray | None = None) -> None:
+        """Red's policy output for the next step, recorded as its decisions when traced
+        (EpisodeTracer.decided: values [W, N, A] in the scenario's action order, `acting` [W, N])."""
+        if self._tracer is not None:
+            self._tracer.decided(output, acting, masks)
 
     def _autoreset(self, done: np.ndarray, obs: np.ndarray, info: dict[str, Any]) -> dict[str, Any]:
         """Reset the finished worlds now; `obs` and `info` switch to their reset values there."""

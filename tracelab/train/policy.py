@@ -20,6 +20,7 @@ import numpy as np
 
 from tracelab.engine.safe_files import read_json
 from tracelab.game.scenario import ACTION_NAMES, NOTHING, Scenario, scenario_from_dict
+from tracelab.store.agent_rows import PolicyOutput
 from tracelab.train.memory import check_policy_memory, memory_limit
 from tracelab.validation import Const, IntRange, ListOf, MapOf, OptionalKey, check_file
 from tracelab.train.qnet import HiddenWidths, NetSpec, NumpyQ, QFunction
@@ -90,17 +91,25 @@ class Policy:
     def act(self, team_obs: np.ndarray, acting: np.ndarray, masks: np.ndarray | None = None) -> np.ndarray:
         """Action indices [W, N]: greedy for acting agents (among allowed ones if the policy masks and
         `masks` [W, N, A] is given), do-nothing for the others."""
+        return self.decide(team_obs, acting, masks)[0]
+
+    def decide(self, team_obs: np.ndarray, acting: np.ndarray, masks: np.ndarray | None = None
+               ) -> tuple[np.ndarray, PolicyOutput]:
+        """act()'s actions [W, N] and the Q-values they were chosen from ([W, N, A], unmasked; NaN for
+        agents that do not act), for a traced game's decisions (tracelab.store.agent_rows)."""
         w, n = acting.shape
         out = np.full((w, n), self.nothing, np.int64)
+        values = np.full((w, n, self.scenario.n_actions), np.nan, np.float32)
         for j in range(n):
             rows = np.flatnonzero(acting[:, j])
             if not len(rows):
                 continue
             q = self.nets[self.network_of_agent[j]](self.agent_obs(team_obs[rows], j))
+            values[rows, j] = q
             if self.mask and masks is not None:
                 q = np.where(masks[rows, j].astype(bool), q, -np.inf)
             out[rows, j] = q.argmax(axis=1)
-        return out
+        return out, PolicyOutput(values)
 
 
 # ---------------------------------------------------------------------------------------------------------
