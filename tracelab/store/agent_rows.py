@@ -32,6 +32,15 @@ class PolicyOutput:
     explored: np.ndarray | None = None
     epsilon: float = 0.0
 
+    @staticmethod
+    def concat(outputs: Sequence["PolicyOutput"]) -> "PolicyOutput":
+        """One batch of the decisions of several (of one policy: one output kind and ε)."""
+        first = outputs[0]
+        return PolicyOutput(
+            np.concatenate([o.values for o in outputs]), first.output,
+            None if first.state_value is None else np.concatenate([o.state_value for o in outputs]),
+            None if first.explored is None else np.concatenate([o.explored for o in outputs]), first.epsilon)
+
     def rows(self, keep: np.ndarray | slice) -> "PolicyOutput":
         """The decisions at `keep` (a mask or index over the batch)."""
         return replace(self, values=self.values[keep],

@@ -217,7 +217,8 @@ class DeclaredEvaluator:
     def _play_one(self, agent: Any, seed: int, result: EnvEvalResult) -> None:
         """One greedy game in the traced env; one that runs EVAL_STEP_CAP steps without an end is counted
         truncated (its record ends 'aborted' at the next game's reset)."""
-        env, act = self.trace_env, one_env_actor(agent)
+        env = self.trace_env
+        act = one_env_actor(agent, env)
         obs, info = env.reset(seed=seed)
         ret, steps, terminated, truncated = 0.0, 0, False, False
         while not (terminated or truncated) and steps < EVAL_STEP_CAP:
