@@ -113,6 +113,34 @@ def action_names_table(names: Sequence[str], positions: Sequence[int | None] | N
         schema=SCHEMAS["action_names"])
 
 
+@dataclass(frozen=True)
+class ObservationName:
+    """What entry `position` of a step's observation is (table observation_names): a number called
+    `name`, or, with `size`, the part (obs // divisor) % size of it; `labels[v]`: the atom value v is read
+    from (an index part's)."""
+    position: int
+    name: str
+    divisor: int = 1
+    size: int | None = None
+    labels: Sequence[str] | None = None
+
+
+def observation_names_table(names: Sequence[ObservationName]) -> pa.Table:
+    from tracelab.store.schema import SCHEMAS
+    n = len(names)
+    labels = [list(x.labels) if x.labels is not None else None for x in names]
+    flat = [str(v) for x in labels if x is not None for v in x]
+    offsets = np.cumsum([0] + [len(x) if x is not None else 0 for x in labels])
+    return pa.Table.from_arrays([
+        ab.from_numpy(np.array([x.position for x in names], np.int32)), ab.strings([x.name for x in names]),
+        ab.from_numpy(np.array([x.divisor for x in names], np.int64)),
+        ab.from_numpy(np.array([x.size or 0 for x in names], np.int32),
+                      null=np.array([x.size is None for x in names], bool)),
+        pa.ListArray.from_arrays(ab.from_numpy(offsets.astype(np.int32)), ab.strings(flat),
+                                 mask=ab.from_numpy(np.array([x is None for x in labels], bool))),
+    ], schema=SCHEMAS["observation_names"]) if n else None
+
+
 class AgentRows:
     """Decision and reward-term rows kept until the tracer writes (`write`, before its episode ends)."""
 

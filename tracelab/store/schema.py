@@ -62,6 +62,11 @@ SCHEMAS: dict[str, pa.Schema] = {
     # for an action the policy does not offer), the policy's decision per agent and step, and each
     # step's reward split by term (tracelab.store.agent_rows). Only non-zero terms have a row.
     "action_names": pa.schema([("action", pa.int32()), ("name", pa.string()), ("position", pa.int32())]),
+    # What each entry of steps.obs is: entry `position`, read as (obs // divisor) % size when `size` is
+    # set (one number holding several parts: a Discrete space), and `labels[value]` the atom a value
+    # stands for (an index part's), else the number itself.
+    "observation_names": pa.schema([("position", pa.int32()), ("name", pa.string()), ("divisor", pa.int64()),
+                                    ("size", pa.int32()), ("labels", _STR_LIST)]),
     "decisions": pa.schema([("episode", pa.int64()), ("step", pa.int32()), ("agent", pa.string()),
                             ("action", pa.int32()), ("output", pa.string()), ("values", pa.list_(pa.float32())),
                             ("state_value", pa.float64()), ("explored", pa.bool_()), ("epsilon", pa.float64()),
@@ -85,9 +90,10 @@ ADDED_COLUMNS: dict[str, dict[str, str]] = {"clauses": {"closed": "false"},
                                             "run": {"board": f"'{BOARD_BEFORE_DECLARED}'"},
                                             "facts": {"episode": "CAST(NULL AS BIGINT)"}}
 # Tables added after the first release: a run written before has none and reads it as empty (EMPTY_SQL).
-ADDED_TABLES: tuple[str, ...] = ("edges", "action_names", "decisions", "reward_terms")
+ADDED_TABLES: tuple[str, ...] = ("edges", "action_names", "observation_names", "decisions", "reward_terms")
 _DUCKDB_TYPES = {pa.int32(): "INTEGER", pa.int64(): "BIGINT", pa.string(): "VARCHAR", pa.float64(): "DOUBLE",
-                 pa.bool_(): "BOOLEAN", pa.list_(pa.float32()): "FLOAT[]", pa.list_(pa.bool_()): "BOOLEAN[]"}
+                 pa.bool_(): "BOOLEAN", pa.list_(pa.float32()): "FLOAT[]", pa.list_(pa.bool_()): "BOOLEAN[]",
+                 _STR_LIST: "VARCHAR[]"}
 
 
 def empty_sql(table: str) -> str:
@@ -128,6 +134,7 @@ SEAL_ORDER: dict[str, str] = {
     "changes": "episode, seq", "steps": "episode, step, agent", "metrics": "step, name",
     "groundings": "grounding", "atoms": "atom", "nodes": "node", "labels": "label", "edges": "source, target",
     "episode_begin": "episode", "episode_end": "episode", "action_names": "action",
+    "observation_names": "position, divisor",
     "decisions": "episode, step, agent", "reward_terms": "episode, step, agent, term",
 }
 

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from tracelab.store.agent_rows import AgentRows, Decisions, RewardTerms
+from tracelab.store.agent_rows import AgentRows, Decisions, ObservationName, RewardTerms
 from tracelab.store.convert import utc_now
 from tracelab.store.writer import TraceWriter
 
@@ -36,6 +36,8 @@ class StoreSink:
     def __init__(self, writer: TraceWriter) -> None:
         self.writer = writer
         self._engine: Any = None
+        self._scenario: Any = None
+        self._observation_named = False
         self._agents: list[str] = []
         self._begins: list[dict[str, Any]] = []  # writer.begin_episodes' rows
         self._changes: list[dict[str, np.ndarray]] = []
@@ -47,6 +49,7 @@ class StoreSink:
 
     def begin_run(self, engine: Any, scenario: Any) -> None:
         self._engine = engine
+        self._scenario = scenario
         n = scenario.agents_per_team
         self._agents = [f"{team}-agent-{j + 1}" for team in ("red", "blue") for j in range(n)]
         if engine is not None:
@@ -105,6 +108,8 @@ class StoreSink:
                                       owned=True)
         if self._steps:
             episode, t, obs, actions, rewards = (np.concatenate(c) for c in zip(*self._steps))
+            if self._scenario is not None and not self._observation_named:
+                self._write_observation_names(obs.shape[-1])
             self._steps, self._step_rows = [], 0
             m = len(self._agents)  # both teams' agents, red first
             self.writer.write_steps(np.repeat(episode, m), {
@@ -115,6 +120,15 @@ class StoreSink:
         if self._ends:
             ends, self._ends = self._ends, []
             self.writer.end_episodes(ends)
+
+    def _write_observation_names(self, size: int) -> None:
+        """What the steps' observation entries are, with the first steps (their size says whether the
+        observation stacks the previous one)."""
+        # deferred: the game's observation module loads numba, which a sink's importers need not
+        from tracelab.game.observe import obs_size, team_observation_names
+        self._observation_named = True
+        names = team_observation_names(self._scenario, size == obs_size(self._scenario, True))
+        self.writer.write_observation_names([ObservationName(i, x) for i, x in enumerate(names)])
 
     def close(self) -> None:
         self.write_pending()

@@ -47,19 +47,6 @@ def agent_view_order(scenario: Scenario, stack_previous: bool) -> np.ndarray:
     return np.asarray(orders, np.int64)
 
 
-def observation_layout(scenario: Scenario, stack_previous: bool) -> list[str]:
-    """Names of an agent's observation entries, in the order its network reads them."""
-    n = scenario.agents_per_team
-    own = ["self"] + [f"mate{k}" for k in range(1, n)]
-    names = [f"{a}_{c}" for a in own for c in "xy"]
-    names += [f"opponent{k + 1}_{c}" for k in range(n) for c in "xy"]
-    if scenario.advanced:
-        names += [f"{a}_{c}" for a in own for c in ("opponent_bullets", "nearest_bullet_x", "nearest_bullet_y")]
-    if stack_previous:
-        names += [f"previous_{x}" for x in names]
-    return names
-
-
 def may_act(scenario: Scenario, state: Any, slow_every_step: bool = False) -> np.ndarray:
     """bool [W, N]: which red agents choose an action this step (alive; a slow agent on even steps, or on
     every step with `slow_every_step`: the game ignores its choices where it may not act)."""
@@ -121,8 +108,10 @@ def save_policy(path: str | Path, scenario: Scenario, weights: dict[str, dict[st
     """Write policy.pt and policy.json into directory `path`. weights: network name -> its state dict;
     agents: network name -> red agent indices it plays; network: policy.json's description of the
     architecture (NetSpec.to_json, or a custom module's)."""
-    # deferred: torch, which reading a policy's spec does not need
+    # deferred: torch, which reading a policy's spec does not need; the game's observation module loads numba
     import torch
+
+    from tracelab.game.observe import observation_layout
     out = Path(path)
     out.mkdir(parents=True, exist_ok=True)
     torch.save({name: {k: v.contiguous().clone() for k, v in sd.items()} for name, sd in weights.items()},

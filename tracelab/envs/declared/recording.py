@@ -30,7 +30,7 @@ import numpy as np
 from tracelab.envs.declared.spec import WorldSpec
 from tracelab.envs.declared.world import DeclaredWorld
 from tracelab.envs.tracer import HANDOVER_ROWS, HANDOVER_STEPS
-from tracelab.store.agent_rows import AgentRows, Decisions, PolicyOutput, RewardTerms
+from tracelab.store.agent_rows import AgentRows, Decisions, ObservationName, PolicyOutput, RewardTerms
 from tracelab.store.convert import utc_now
 from tracelab.store.sink import WRITE_INTERVAL_S, WRITE_ROWS
 
@@ -59,6 +59,32 @@ def declared_run_config(spec: WorldSpec) -> dict[str, Any]:
             CONFIG_KEY: declared_facts(spec),
             "declared_board": None if board is None else {"rows": list(board.rows), "cell": board.cell_format,
                                                           "marks": board.marks}}
+
+
+def observation_names(spec: WorldSpec) -> list[ObservationName]:
+    """What each entry of a recorded observation (flat_observation) is, named from the spec's observation
+    parts: a Discrete space's one number holds every index part (the first the slowest), a
+    MultiDiscrete's a number per part; a Box's or Dict's parts put part.width numbers each."""
+    parts = spec.parts
+    if spec.space == "Discrete":
+        sizes = [len(p.atoms) for p in parts]
+        divisors = [int(np.prod(sizes[k + 1:], dtype=np.int64)) for k in range(len(parts))]
+        return [ObservationName(0, p.name, d, len(p.atoms), [str(a) for a in p.atoms]) for p, d in zip(parts, divisors)]
+    if spec.space == "MultiDiscrete":
+        return [ObservationName(k, p.name, 1, len(p.atoms), [str(a) for a in p.atoms]) for k, p in enumerate(parts)]
+    out: list[ObservationName] = []
+    for p in parts:
+        at = len(out) and out[-1].position + 1
+        if p.read == "index" and p.values is None:
+            out.append(ObservationName(at, p.name, 1, len(p.atoms), [str(a) for a in p.atoms]))
+        elif p.width == 1:
+            out.append(ObservationName(at, p.name))
+        elif p.read == "bounds":
+            out += [ObservationName(at + 2 * i + b, f"{p.name}[{a}].{end}")
+                    for i, a in enumerate(p.atoms) for b, end in enumerate(("lower", "upper"))]
+        else:
+            out += [ObservationName(at + i, f"{p.name}[{a}]") for i, a in enumerate(p.atoms)]
+    return out
 
 
 def flat_observation(obs: Any) -> np.ndarray:
@@ -97,6 +123,7 @@ class DeclaredRecorder:
         self.agents = list(world.spec.agents)
         writer.write_engine_program(eng)
         writer.write_action_names(world.spec.action_names)
+        writer.write_observation_names(observation_names(world.spec))
         world.keep_reward_terms = True
         self._agent_rows = AgentRows()
         # decisions (episode, step, agent, action, the policy's output, mask) and reward terms (episode,
