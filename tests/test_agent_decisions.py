@@ -158,3 +158,62 @@ def test_runs_written_before_read_as_having_no_decisions():
     finally:
         con.close()
     assert counts == [0, 0, 0, 0] and names == 0
+
+
+def test_why_action_names_the_choice_the_ranking_the_observation_and_the_reward_terms(taxi_run, capsys):
+    con = open_run(taxi_run)
+    try:
+        step, name, actions, values, mask = con.execute(
+            "SELECT step, action_name, actions, \"values\", mask FROM decisions WHERE episode = 0 AND step > 1 "
+            "ORDER BY step LIMIT 1").fetchone()
+        terms = con.execute("SELECT term, value FROM rewards WHERE episode = 0 AND step = ?", [step]).fetchall()
+    finally:
+        con.close()
+    assert main(["why", str(taxi_run), "--action", "taxi", "--episode", "0", "--at", str(step), "--json"]) == 0
+    e = json.loads(capsys.readouterr().out)
+    assert e["action"] == name and not e["explored"]
+    assert [a["name"] for a in e["ranked"]] == [actions[i] for i in np.argsort(-np.array(values), kind="stable")]
+    best_other = max(v for a, v, m in zip(actions, values, mask) if m and a != name)
+    assert e["margin"] == pytest.approx(values[actions.index(name)] - best_other)
+    features = {f["name"]: f["value"] for f in e["features"]}
+    assert set(features) == {"taxi", "passenger", "destination"} and features["taxi"].startswith("at(c")
+    assert {(t["term"], t["value"]) for t in e["terms"]} == set(terms)
+
+    assert main(["why", str(taxi_run), "--action", "taxi", "--episode", "0", "--at", str(step)]) == 0
+    text = capsys.readouterr().out
+    assert f"-> {name}" in text and "taxi = at(c" in text and "reward" in text
+
+    refused = next(a for a, m in zip(actions, mask) if not m)
+    assert main(["why-not", str(taxi_run), "--action", refused, "--episode", "0", "--at", str(step)]) == 0
+    assert "action mask did not allow" in capsys.readouterr().out
+    allowed = [a for a, m in zip(actions, mask) if m and a != name]
+    if allowed:
+        assert main(["why-not", str(taxi_run), "--action", allowed[0], "--episode", "0", "--at", str(step),
+                     "--json"]) == 0
+        w = json.loads(capsys.readouterr().out)
+        assert not w["masked"] and w["gap"] == pytest.approx(values[actions.index(name)] - values[actions.index(allowed[0])])
+
+
+def test_why_action_on_gridwar_names_the_observation_layout(gridwar_run, capsys):
+    assert main(["why", str(gridwar_run), "--action", "red-agent-1", "--episode", "0", "--at", "2", "--json"]) == 0
+    e = json.loads(capsys.readouterr().out)
+    assert [f["name"] for f in e["features"]][:4] == ["agent1_x", "agent1_y", "opponent1_x", "opponent1_y"]
+    assert len(e["ranked"]) == ADVANCED.n_actions
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--action", "red-agent-1", "--episode", "0"], "--action needs --at"),
+    (["--action", "nobody", "--episode", "0", "--at", "1"], "no decisions of agent nobody"),
+    (["--action", "red-agent-1", "--episode", "0", "--at", "9999"], "no decision of red-agent-1 at step 9999"),
+    (["alive(red-agent-1)", "--action", "red-agent-1", "--episode", "0", "--at", "1"], "give one of them"),
+])
+def test_why_action_errors_are_one_line(gridwar_run, capsys, argv, message):
+    assert main(["why", str(gridwar_run), *argv]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("tracelab: error:") and message in err and "Traceback" not in err
+
+
+def test_why_not_action_errors_are_one_line(gridwar_run, capsys):
+    assert main(["why-not", str(gridwar_run), "--action", "fly", "--episode", "0", "--at", "1"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("tracelab: error:") and "no action fly" in err and "shoot_left" in err
