@@ -79,8 +79,10 @@ def outcome_name(winner: int, truncated: bool) -> str:
 
 class EpisodeTracer:
     def __init__(self, sink: TraceSink, scenario: Scenario, sim: RuleSim | RefSim,
-                 limit: int | None = None) -> None:
+                 limit: int | None = None, agent_rows: bool = True) -> None:
+        """`agent_rows`: record the decisions and reward terms (False: the world's half only)."""
         self.sink = sink
+        self.agent_rows = agent_rows
         self.limit = limit
         self._limit = np.iinfo(np.int64).max if limit is None else limit
         self.scenario = scenario
@@ -142,7 +144,7 @@ class EpisodeTracer:
         logged (with the decisions `decided` before it); its rows and the logged steps are handed over
         when due; episode ends."""
         self._steps_waiting += 1
-        if self._decided is not None:
+        if self._decided is not None and self.agent_rows:
             self._hand_decisions(res, red)
         if done is None:
             done = res.terminated | res.truncated
@@ -181,6 +183,8 @@ class EpisodeTracer:
             return
         world, episode, t, obs, actions, rewards, events, winner = steps
         self.sink.step(world, episode, t, obs, actions, rewards)
+        if not self.agent_rows:
+            return
         terms = reward_terms(self.scenario.rewards, rewards, events, winner)  # [K, 2, N, T]
         k, m = len(t), len(self._agent_names)
         per_row = m * len(REWARD_TERMS)

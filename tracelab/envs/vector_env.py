@@ -72,7 +72,7 @@ class GridWarVectorEnv(VectorEnv):
 
     def __init__(self, num_envs: int = 1, scenario: Scenario | str = "advanced", *, backend: str = "rules",
                  stack_previous: bool = False, trace_sink: TraceSink | None = None,
-                 trace_episodes: int | None = None, render_mode: str | None = None,
+                 trace_episodes: int | None = None, trace_agent: bool = True, render_mode: str | None = None,
                  opponent_p: float = P_TOWARD, copy: bool = True, kernel: str = "auto") -> None:
         if render_mode is not None:
             raise ValueError("GridWarVectorEnv does not render")
@@ -97,7 +97,8 @@ class GridWarVectorEnv(VectorEnv):
         # every episode starts from the scenario's start state: one world's reset info serves all
         self._start_info = reset_info(1, self._masks()[:1], self._n == 1)
         self._tracer = None if trace_sink is None else EpisodeTracer(trace_sink, self.scenario, self.sim,
-                                                                     limit=trace_episodes)
+                                                                     limit=trace_episodes,
+                                                                     agent_rows=trace_agent)
         self._ready = False
 
     def reset(self, *, seed: int | Sequence[int] | None = None, options: dict[str, Any] | None = None
@@ -123,9 +124,10 @@ class GridWarVectorEnv(VectorEnv):
         return obs, reward, terminated, truncated, self._with_masks(info, self._all)
 
     @property
-    def traced(self) -> bool:
-        """Whether the env records its episodes (a trace sink): then `decided` is worth calling."""
-        return self._tracer is not None
+    def records_decisions(self) -> bool:
+        """Whether the env records its policy's decisions (a trace sink, `trace_agent`): then `decided` is
+        worth calling."""
+        return self._tracer is not None and self._tracer.agent_rows
 
     def decided(self, output: PolicyOutput, acting: np.ndarray, masks: np.ndarray | None = None) -> None:
         """Red's policy output for the next step, recorded as its decisions when traced

@@ -57,7 +57,7 @@ def one_env_actor(policy: Any, env: Any = None) -> Callable[[Any, dict[str, Any]
     (EnvPolicy's `act(obs, masks)`): play --env --policy, traced evaluation games. With a traced `env`
     (a DeclaredEnv with a recorder) and a policy that can `decide`, its output is recorded as the step's
     decision."""
-    record = env is not None and getattr(env.unwrapped, "traced", False) and hasattr(policy, "decide")
+    record = env is not None and getattr(env.unwrapped, "records_decisions", False) and hasattr(policy, "decide")
 
     def act(obs: Any, info: dict[str, Any]) -> int:
         mask = info.get("action_mask")

@@ -137,7 +137,7 @@ def play_games(env: GridWarVectorEnv, policy: Policy, quota: np.ndarray, seed: i
     ret = np.zeros(env.num_envs)
     decisions = np.zeros(env.num_envs, np.int64)
     records: list[GameRecord] = []
-    decide = getattr(env, "traced", False) and hasattr(policy, "decide")  # record the policy's values
+    decide = getattr(env, "records_decisions", False) and hasattr(policy, "decide")  # record the policy's values
     while left.any():
         acting = may_act(sc, env.sim.state)
         masks = info["action_mask"].reshape(env.num_envs, n, -1) if policy.mask or decide else None
@@ -246,11 +246,14 @@ class EvalTrace:
     vocabulary and groundings stay one), `games` worlds, one traced game per world per evaluation."""
 
     def __init__(self, writer: TraceWriter, scenario: Scenario, backend: str, stack_previous: bool,
-                 games: int, opponent_p: float, new_id: Callable[[], int], kernel: str = "auto") -> None:
+                 games: int, opponent_p: float, new_id: Callable[[], int], kernel: str = "auto",
+                 agent_rows: bool = True) -> None:
+        """`agent_rows`: record the policy's decisions and the reward terms too."""
         self.sink = EvalSink(writer, new_id)
         self.games = games
         self.env = GridWarVectorEnv(games, scenario, backend=backend, stack_previous=stack_previous,
-                                    trace_sink=self.sink, opponent_p=opponent_p, kernel=kernel, copy=False)
+                                    trace_sink=self.sink, opponent_p=opponent_p, kernel=kernel, copy=False,
+                                    trace_agent=agent_rows)
 
     def play(self, policy: Policy, seed: int, info: Mapping[str, Any],
              on_game: GameCallback | None = None) -> list[GameRecord]:

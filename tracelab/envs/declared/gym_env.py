@@ -85,8 +85,8 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
         return obs, w.last_rewards[0], terminated, truncated, self._info()
 
     @property
-    def traced(self) -> bool:
-        """Whether the env records its games: then `decided` is worth calling."""
+    def records_decisions(self) -> bool:
+        """Whether the env records its games (and so its policy's decisions): then `decided` is worth calling."""
         return self._recorder is not None
 
     def decided(self, output: "PolicyOutput", mask: np.ndarray | None = None) -> None:
