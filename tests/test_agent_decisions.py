@@ -191,7 +191,8 @@ def test_why_action_names_the_choice_the_ranking_the_observation_and_the_reward_
         assert main(["why-not", str(taxi_run), "--action", allowed[0], "--episode", "0", "--at", str(step),
                      "--json"]) == 0
         w = json.loads(capsys.readouterr().out)
-        assert not w["masked"] and w["gap"] == pytest.approx(values[actions.index(name)] - values[actions.index(allowed[0])])
+        gap = values[actions.index(name)] - values[actions.index(allowed[0])]
+        assert not w["masked"] and w["gap"] == pytest.approx(gap)
 
 
 def test_why_action_on_gridwar_names_the_observation_layout(gridwar_run, capsys):

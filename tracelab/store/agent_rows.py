@@ -95,7 +95,8 @@ class RewardTerms:
         keep = np.flatnonzero(value != 0.0)
         agent, term = np.asarray(self.agent, object)[keep], np.asarray(self.term, object)[keep]
         return pa.Table.from_arrays([
-            ab.from_numpy(np.asarray(self.episode, np.int64)[keep]), ab.from_numpy(np.asarray(self.step, np.int32)[keep]),
+            ab.from_numpy(np.asarray(self.episode, np.int64)[keep]),
+            ab.from_numpy(np.asarray(self.step, np.int32)[keep]),
             ab.strings(agent.tolist()), ab.strings(term.tolist()), ab.from_numpy(value[keep]),
         ], schema=SCHEMAS["reward_terms"])
 

@@ -91,8 +91,10 @@ def _no_decision(con: RunConnection, episode: int, agent: str, step: int) -> str
     if not have[0]:
         return f"episode {episode} records no decisions"
     if agent not in have[3]:
-        return f"no decisions of agent {shown(agent)} in episode {episode}; its agents: {', '.join(map(shown, have[3]))}"
-    return f"no decision of {shown(agent)} at step {step} of episode {episode} (it decided at steps {have[1]}..{have[2]})"
+        agents = ", ".join(map(shown, have[3]))
+        return f"no decisions of agent {shown(agent)} in episode {episode}; its agents: {agents}"
+    return (f"no decision of {shown(agent)} at step {step} of episode {episode} "
+            f"(it decided at steps {have[1]}..{have[2]})")
 
 
 def _features(con: RunConnection, episode: int, agent: str, step: int) -> tuple[int | None, list[Feature]]:
