@@ -218,3 +218,25 @@ def test_why_not_action_errors_are_one_line(gridwar_run, capsys):
     assert main(["why-not", str(gridwar_run), "--action", "fly", "--episode", "0", "--at", "1"]) == 1
     err = capsys.readouterr().err
     assert err.startswith("tracelab: error:") and "no action fly" in err and "shoot_left" in err
+
+
+def test_a_sealed_run_keeps_the_agents_half(taxi_run, tmp_path, capsys):
+    import shutil
+    run = tmp_path / "sealed"
+    shutil.copytree(taxi_run, run)
+    assert main(["seal", str(run)]) == 0
+    assert (run / "run.duckdb").exists()
+    capsys.readouterr()
+    check_decisions(run, "%", 6, masked=True)
+    check_reward_terms(run)
+
+
+def test_why_action_reads_the_run_without_torch(taxi_run):
+    import subprocess
+    import sys
+    code = ("import sys; from tracelab.cli import main; "
+            f"status = main(['why', {str(taxi_run)!r}, '--action', 'taxi', '--episode', '0', '--at', '2']); "
+            "assert status == 0; assert 'torch' not in sys.modules, 'torch was imported'")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "actions by Q-value" in r.stdout

@@ -27,13 +27,13 @@ from __future__ import annotations
 import numpy as np
 
 from tracelab.envs.sinks import TraceSink
-from tracelab.envs.step_log import StepLog, label_rows
+from tracelab.envs.step_log import DecisionLog, StepLog, label_rows
 from tracelab.game.facts import agent_name
 from tracelab.game.refsim import RefSim
 from tracelab.game.rulesim import RuleSim
 from tracelab.game.scenario import TEAMS, Rewards, Scenario
 from tracelab.game.state import WINNER_BLUE, WINNER_DRAW, WINNER_RED, StepResult
-from tracelab.store.agent_rows import Decisions, PolicyOutput, RewardTerms
+from tracelab.store.agent_rows import PolicyOutput, RewardTerms
 
 
 HANDOVER_STEPS = 64
@@ -98,8 +98,10 @@ class EpisodeTracer:
         # an episode's `rewards`: the teams' returns, then each agent's
         self._return_names = [*TEAMS, *(agent_name(t, j) for t in range(2) for j in range(n))]
         self._log = StepLog(HANDOVER_STEPS, w, sim.obs_size, n)
-        self._agent_names = np.array([agent_name(t, j) for t in range(2) for j in range(n)], object)
+        self._agent_names = [agent_name(t, j) for t in range(2) for j in range(n)]  # red's first
         self._decided: tuple[PolicyOutput, np.ndarray, np.ndarray | None] | None = None
+        self._decisions = DecisionLog(HANDOVER_STEPS, w, n)
+        self._red_codes = np.arange(n)
         # each world's returns and steps, kept by the log's step call
         self.steps, self.agent_return, self.team_return = self._log.steps, self._log.agent_return, \
             self._log.team_return
@@ -144,11 +146,16 @@ class EpisodeTracer:
         logged (with the decisions `decided` before it); its rows and the logged steps are handed over
         when due; episode ends."""
         self._steps_waiting += 1
-        if self._decided is not None and self.agent_rows:
-            self._hand_decisions(res, red)
+        decisions_full = False
+        if self._decided is not None:
+            output, acting, masks = self._decided
+            self._decided = None
+            if self.agent_rows:
+                decisions_full = self._decisions.add(res.t, output, acting, red, masks)
         if done is None:
             done = res.terminated | res.truncated
         ended, full = self._log.add(res, red, blue, done, self.open)
+        full = full or decisions_full
         if self._rules and handover_due(self.sim, self._steps_waiting, ended > 0):
             self._flush()
         if ended or full:
@@ -164,20 +171,12 @@ class EpisodeTracer:
             self._end(w, "aborted")
         self.sink.close()
 
-    def _hand_decisions(self, res: StepResult, red: np.ndarray) -> None:
-        output, acting, masks = self._decided
-        self._decided = None
-        keep = acting & self.open[:, None]
-        if not keep.any():
-            return
-        world, agent = np.nonzero(keep)
-        self.sink.decisions(Decisions(self.cur_ep[world], np.asarray(res.t)[world], self._agent_names[agent],
-                                      red[world, agent], output.rows(keep),
-                                      None if masks is None else np.asarray(masks)[keep]))
-
     def _hand_steps(self) -> None:
         """The logged step records of recorded episodes to the sink, in step order, and their reward
         terms."""
+        decisions = self._decisions.take(self.cur_ep, self.open, self._red_codes, self._agent_names)
+        if decisions is not None:
+            self.sink.decisions(decisions)
         steps = self._log.take(self.cur_ep, self.open)
         if steps is None:
             return
@@ -186,12 +185,11 @@ class EpisodeTracer:
         if not self.agent_rows:
             return
         terms = reward_terms(self.scenario.rewards, rewards, events, winner)  # [K, 2, N, T]
-        k, m = len(t), len(self._agent_names)
-        per_row = m * len(REWARD_TERMS)
+        k, m, n_terms = len(t), len(self._agent_names), len(REWARD_TERMS)
+        per_row = m * n_terms
         self.sink.reward_terms(RewardTerms(
-            np.repeat(episode, per_row), np.repeat(t, per_row),
-            np.tile(np.repeat(self._agent_names, len(REWARD_TERMS)), k),
-            np.tile(np.array(REWARD_TERMS, object), k * m), terms.reshape(-1)))
+            np.repeat(episode, per_row), np.repeat(t, per_row), np.tile(np.repeat(np.arange(m), n_terms), k),
+            self._agent_names, np.tile(np.arange(n_terms), k * m), REWARD_TERMS, terms.reshape(-1)))
 
     def _flush(self) -> None:
         if not self._rules:

@@ -48,17 +48,41 @@ class PolicyOutput:
                        explored=None if self.explored is None else self.explored[keep])
 
 
+def coded_strings(codes: np.ndarray, names: Sequence[str]) -> pa.Array:
+    """names[codes] as an Arrow string array, decoded in Arrow (a Python string per row costs more)."""
+    return pa.DictionaryArray.from_arrays(ab.from_numpy(np.asarray(codes, np.int32)),
+                                          ab.strings(list(names))).dictionary_decode()
+
+
 @dataclass(frozen=True)
 class Decisions:
-    """Decision rows: each row's episode, step (steps.step), agent, the action taken (as steps.action holds
-    it) and the policy's output (one row of `policy` per decision); `mask` [K, A]: the allowed actions
-    (None: no mask)."""
+    """Decision rows: each row's episode, step (steps.step), agent (a code: agents[code] is its name), the
+    action taken (as steps.action holds it) and the policy's output (one row of `policy` per decision);
+    `mask` [K, A]: the allowed actions (None: no mask)."""
     episode: np.ndarray
     step: np.ndarray
-    agent: Sequence[str]
+    agent: np.ndarray
+    agents: Sequence[str]
     action: np.ndarray
     policy: PolicyOutput
     mask: np.ndarray | None = None
+
+    def rows(self, keep: np.ndarray, episode: np.ndarray | None = None) -> "Decisions":
+        """The rows at `keep` (a mask), with `episode` as their episodes if given."""
+        return Decisions(self.episode[keep] if episode is None else episode, self.step[keep], self.agent[keep],
+                         self.agents, self.action[keep], self.policy.rows(keep),
+                         None if self.mask is None else self.mask[keep])
+
+    @staticmethod
+    def concat(batches: Sequence["Decisions"]) -> "Decisions":
+        """One batch of several of one tracer's (the same agents, policy output kind and mask or none)."""
+        first = batches[0]
+        if len(batches) == 1:
+            return first
+        return Decisions(*(np.concatenate([getattr(b, f) for b in batches]) for f in ("episode", "step", "agent")),
+                         first.agents, np.concatenate([b.action for b in batches]),
+                         PolicyOutput.concat([b.policy for b in batches]),
+                         None if first.mask is None else np.concatenate([b.mask for b in batches]))
 
     def table(self) -> pa.Table:
         from tracelab.store.schema import SCHEMAS
@@ -71,8 +95,8 @@ class Decisions:
             ab.list_array(offsets, ab.from_numpy(np.asarray(self.mask, bool).reshape(-1)))
         return pa.Table.from_arrays([
             ab.from_numpy(np.asarray(self.episode, np.int64)), ab.from_numpy(np.asarray(self.step, np.int32)),
-            ab.strings(list(self.agent)), ab.from_numpy(np.asarray(self.action, np.int32)),
-            ab.strings([p.output] * n),
+            coded_strings(self.agent, self.agents), ab.from_numpy(np.asarray(self.action, np.int32)),
+            coded_strings(np.zeros(n, np.int32), [p.output]),
             ab.list_array(offsets, ab.from_numpy(values.reshape(-1))),
             ab.from_numpy(np.full(n, np.nan) if p.state_value is None else np.asarray(p.state_value, np.float64),
                           null=np.ones(n, bool) if p.state_value is None else None),
@@ -82,22 +106,40 @@ class Decisions:
 
 @dataclass(frozen=True)
 class RewardTerms:
-    """Reward-term rows: episode, step, agent, term name, value (zeros are left out by `table`)."""
+    """Reward-term rows: episode, step, agent and term (codes: agents[code], terms[code] their names),
+    value (zeros are left out by `table`)."""
     episode: np.ndarray
     step: np.ndarray
-    agent: Sequence[str]
-    term: Sequence[str]
+    agent: np.ndarray
+    agents: Sequence[str]
+    term: np.ndarray
+    terms: Sequence[str]
     value: np.ndarray
+
+    def rows(self, keep: np.ndarray, episode: np.ndarray | None = None) -> "RewardTerms":
+        """The rows at `keep` (a mask), with `episode` as their episodes if given."""
+        return RewardTerms(self.episode[keep] if episode is None else episode, self.step[keep], self.agent[keep],
+                           self.agents, self.term[keep], self.terms, self.value[keep])
+
+    @staticmethod
+    def concat(batches: Sequence["RewardTerms"]) -> "RewardTerms":
+        first = batches[0]
+        if len(batches) == 1:
+            return first
+        cols = {f: np.concatenate([getattr(b, f) for b in batches]) for f in ("episode", "step", "agent", "term",
+                                                                                "value")}
+        return RewardTerms(cols["episode"], cols["step"], cols["agent"], first.agents, cols["term"], first.terms,
+                           cols["value"])
 
     def table(self) -> pa.Table:
         from tracelab.store.schema import SCHEMAS
         value = np.asarray(self.value, np.float64)
         keep = np.flatnonzero(value != 0.0)
-        agent, term = np.asarray(self.agent, object)[keep], np.asarray(self.term, object)[keep]
         return pa.Table.from_arrays([
             ab.from_numpy(np.asarray(self.episode, np.int64)[keep]),
             ab.from_numpy(np.asarray(self.step, np.int32)[keep]),
-            ab.strings(agent.tolist()), ab.strings(term.tolist()), ab.from_numpy(value[keep]),
+            coded_strings(np.asarray(self.agent)[keep], self.agents),
+            coded_strings(np.asarray(self.term)[keep], self.terms), ab.from_numpy(value[keep]),
         ], schema=SCHEMAS["reward_terms"])
 
 
@@ -161,7 +203,7 @@ class AgentRows:
         decisions, self._decisions = self._decisions, []
         terms, self._terms = self._terms, []
         if decisions:
-            writer.write_agent_tables("decisions", [d.table() for d in decisions])
+            writer.write_agent_table("decisions", Decisions.concat(decisions).table())
         if terms:
-            writer.write_agent_tables("reward_terms", [t.table() for t in terms])
+            writer.write_agent_table("reward_terms", RewardTerms.concat(terms).table())
 

@@ -378,11 +378,11 @@ class TraceWriter:
         self._append({"steps": table})
         return table.num_rows
 
-    def write_agent_tables(self, table: str, tables: Sequence[pa.Table]) -> None:
+    def write_agent_table(self, table: str, rows: pa.Table) -> None:
         """Decision or reward-term rows (tracelab.store.agent_rows: Decisions.table, RewardTerms.table)."""
         if table not in ("decisions", "reward_terms"):
-            raise ValueError(f"write_agent_tables writes decisions or reward_terms, not {table!r}")
-        self._append({table: pa.concat_tables(tables) if len(tables) > 1 else tables[0]})
+            raise ValueError(f"write_agent_table writes decisions or reward_terms, not {table!r}")
+        self._append({table: rows})
 
     def write_action_names(self, names: Sequence[str], positions: Sequence[int | None] | None = None) -> None:
         """The run's actions, once: action k (as steps.action holds it) is names[k], at positions[k] in a

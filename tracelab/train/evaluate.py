@@ -209,14 +209,12 @@ class EvalSink(StoreSink):
     def decisions(self, rows: Decisions) -> None:
         keep, run_eps = self._traced(rows.episode)
         if run_eps.size:
-            super().decisions(Decisions(run_eps, rows.step[keep], np.asarray(rows.agent)[keep], rows.action[keep],
-                                        rows.policy.rows(keep), None if rows.mask is None else rows.mask[keep]))
+            super().decisions(rows.rows(keep, run_eps))
 
     def reward_terms(self, rows: RewardTerms) -> None:
         keep, run_eps = self._traced(rows.episode)
         if run_eps.size:
-            super().reward_terms(RewardTerms(run_eps, rows.step[keep], np.asarray(rows.agent)[keep],
-                                             np.asarray(rows.term)[keep], rows.value[keep]))
+            super().reward_terms(rows.rows(keep, run_eps))
 
     def _traced(self, env_episodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(which rows of `env_episodes` are of traced episodes, those rows' run episode ids), by array

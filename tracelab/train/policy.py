@@ -85,6 +85,10 @@ class Policy:
         """act()'s actions [W, N] and the Q-values they were chosen from ([W, N, A], unmasked; NaN for
         agents that do not act), for a traced game's decisions (tracelab.store.agent_rows)."""
         w, n = acting.shape
+        if n == 1 and acting.all():  # one agent, choosing in every world (the 1v1 games): no copies
+            values = self.nets[self.network_of_agent[0]](team_obs)
+            q = np.where(masks[:, 0].astype(bool), values, -np.inf) if self.mask and masks is not None else values
+            return q.argmax(axis=1)[:, None], PolicyOutput(values[:, None])
         out = np.full((w, n), self.nothing, np.int64)
         values = np.full((w, n, self.scenario.n_actions), np.nan, np.float32)
         for j in range(n):

@@ -261,14 +261,13 @@ class DeclaredRecorder:
             k, m, n_terms = values.shape
             per_step = m * n_terms
             self._agent_rows.reward_terms(RewardTerms(
-                np.repeat(episode, per_step), np.repeat(step, per_step),
-                np.tile(np.repeat(np.array(self.agents, object), n_terms), k),
-                np.tile(np.array(self.world.spec.reward_terms, object), k * m), values.reshape(-1)))
+                np.repeat(episode, per_step), np.repeat(step, per_step), np.tile(np.repeat(np.arange(m), n_terms), k),
+                self.agents, np.tile(np.arange(n_terms), k * m), self.world.spec.reward_terms, values.reshape(-1)))
         if self._decisions:
             episode, step, agent, action, outputs, masks = zip(*self._decisions)
             self._decisions = []
             self._agent_rows.decisions(Decisions(
-                np.array(episode), np.array(step), [self.agents[a] for a in agent], np.array(action),
+                np.array(episode), np.array(step), np.array(agent), self.agents, np.array(action),
                 PolicyOutput.concat(outputs), None if masks[0] is None else np.stack(masks)))
 
     def _take_rows(self) -> None:
