@@ -24,7 +24,8 @@ reproducible for a given seed and num_envs. A list of seeds is combined into one
 
 Tracing: with `trace_sink`, every episode goes to the sink; with `trace_episodes=N` too, only the
 episodes 0..N-1 (ids in the order episodes begin; see tracelab/envs/tracer.py), so stepping until those
-ended records exactly N episodes.
+ended records exactly N episodes. The sink also gets the reward terms of each step and the decisions
+a caller hands over with `decided()` before a step; `trace_agent=False`: neither (docs/envs.md).
 
 `kernel`: the rule engine's kernel (backend "rules"; tracelab.envs.common.make_sim): auto, counting,
 lanes or compiled (built in the background while the env steps on the counting kernel if not cached).
