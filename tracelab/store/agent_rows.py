@@ -8,15 +8,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 import pyarrow as pa
 
 from tracelab.store import arrow_build as ab
-
-if TYPE_CHECKING:
-    from tracelab.store.writer import TraceWriter
+from tracelab.store.schema import SCHEMAS
 
 Q_VALUES, LOGITS = "q", "logits"  # what a decision's `values` are
 
@@ -85,7 +83,6 @@ class Decisions:
                          None if first.mask is None else np.concatenate([b.mask for b in batches]))
 
     def table(self) -> pa.Table:
-        from tracelab.store.schema import SCHEMAS
         n, values = len(self.episode), np.ascontiguousarray(self.policy.values, np.float32)
         a = values.shape[1] if values.ndim == 2 else 0
         offsets = np.arange(n + 1, dtype=np.int32) * a
@@ -132,7 +129,6 @@ class RewardTerms:
                            cols["value"])
 
     def table(self) -> pa.Table:
-        from tracelab.store.schema import SCHEMAS
         value = np.asarray(self.value, np.float64)
         keep = np.flatnonzero(value != 0.0)
         return pa.Table.from_arrays([
@@ -146,7 +142,6 @@ class RewardTerms:
 def action_names_table(names: Sequence[str], positions: Sequence[int | None] | None = None) -> pa.Table:
     """The run's actions: action k (as steps.action holds it) is names[k], at positions[k] in a decision's
     values (default: k)."""
-    from tracelab.store.schema import SCHEMAS
     n = len(names)
     pos = list(range(n)) if positions is None else list(positions)
     missing = np.array([p is None for p in pos], bool)
@@ -169,7 +164,6 @@ class ObservationName:
 
 
 def observation_names_table(names: Sequence[ObservationName]) -> pa.Table:
-    from tracelab.store.schema import SCHEMAS
     n = len(names)
     labels = [list(x.labels) if x.labels is not None else None for x in names]
     flat = [str(v) for x in labels if x is not None for v in x]
@@ -182,6 +176,12 @@ def observation_names_table(names: Sequence[ObservationName]) -> pa.Table:
         pa.ListArray.from_arrays(ab.from_numpy(offsets.astype(np.int32)), ab.strings(flat),
                                  mask=ab.from_numpy(np.array([x is None for x in labels], bool))),
     ], schema=SCHEMAS["observation_names"]) if n else None
+
+
+class AgentTableWriter(Protocol):
+    """What AgentRows writes through (TraceWriter)."""
+
+    def write_agent_table(self, table: str, rows: pa.Table) -> None: ...
 
 
 class AgentRows:
@@ -199,7 +199,7 @@ class AgentRows:
         if len(rows.episode):
             self._terms.append(rows)
 
-    def write(self, writer: "TraceWriter") -> None:
+    def write(self, writer: AgentTableWriter) -> None:
         decisions, self._decisions = self._decisions, []
         terms, self._terms = self._terms, []
         if decisions:
