@@ -201,12 +201,14 @@ def test_bench_eval_quick(capsys: pytest.CaptureFixture) -> None:
     machine(r["machine"])
     s = r["speed"]
     assert s["worlds"] == 3 and s["same_games"] is True          # traced and untraced play the same games
-    assert s["game_steps"]["traced"] == s["game_steps"]["untraced"] > 0
-    for name in ("traced", "untraced"):
+    assert s["game_steps"]["traced"] == s["game_steps"]["untraced"] == s["game_steps"]["traced_world"] > 0
+    for name in ("traced", "untraced", "traced_world"):
         for key in ("wall_s", "cpu_s", "thread_s"):
             positive(s[name][key])
             assert len(s[name][key]["runs"]) == 2
     assert all(s[f"ratio_{k}"] > 0 for k in ("wall", "cpu", "thread")) and isinstance(s["goal_met"], bool)
+    assert all(s[f"agent_ratio_{k}"] > 0 for k in ("wall", "cpu", "thread"))  # decisions and reward terms
+    assert isinstance(s["agent_goal_met"], bool)
     m = r["memory"]
     assert m["steps"] == 1000 and m["command"].startswith("tracelab train --scenario base")
     assert m["rss_mb"] and all(mb > 0 for _, mb in m["rss_mb"]) and m["peak_mb"] >= max(mb for _, mb in m["rss_mb"])

@@ -99,7 +99,7 @@ def _play(source: Any, spec: Any, args: argparse.Namespace, writer: Any) -> dict
     else:  # greedy: it may walk in circles where the env sets no step limit (CliffWalking)
         # deferred: loads gymnasium; every command is imported to build the CLI's parser
         from tracelab.train.env_policy import EVAL_STEP_CAP, one_env_actor
-        policy, cap = one_env_actor(args.trained), EVAL_STEP_CAP
+        policy, cap = one_env_actor(args.trained, env), EVAL_STEP_CAP
     try:
         with CtrlCBetweenSteps() as ctrl_c, \
                 progress(f"playing {source.short_name}", total=args.episodes, unit="episodes") as bar:
