@@ -75,6 +75,8 @@ def open_regular(path: str | os.PathLike[str], *, follow_symlinks: bool = True,
         | (0 if follow_symlinks else os.O_NOFOLLOW)
     try:
         fd = os.open(path, flags, 0o644)
+    except ValueError:  # a NUL byte, which no file name can hold (a path written in a stranger's file)
+        raise FileRefused(f"{os.fspath(path)!r}: a file name cannot hold a NUL byte; refused") from None
     except OSError as e:
         if e.errno == errno.ELOOP and not follow_symlinks:
             raise FileRefused(f"{path}: is a symbolic link; refused") from None
@@ -129,6 +131,21 @@ def read_json(path: str | os.PathLike[str], max_bytes: int = JSON_CAP, *, what: 
         raise FileRefused(f"{path}:{e.lineno}:{e.colno}: not valid JSON: {e.msg}") from None
     except RecursionError:
         raise FileRefused(f"{path}: JSON nested too deeply; refused") from None
+
+
+def resolve_inside(folder: str | os.PathLike[str], name: str) -> Path:
+    """A file that a file in `folder` names by `name`: relative to `folder`, and inside it once every
+    symbolic link of both is resolved (a link beside a stranger's file may point anywhere); FileRefused
+    otherwise."""
+    if "\0" in name:
+        raise FileRefused(f"{name!r}: a file name cannot hold a NUL byte; refused")
+    root = Path(folder).resolve()
+    if os.path.isabs(name):
+        raise FileRefused(f"{name!r}: expected a path relative to {str(root)!r}, inside it; refused")
+    target = (root / name).resolve()
+    if not target.is_relative_to(root):
+        raise FileRefused(f"{name!r}: resolves to {str(target)!r}, outside {str(root)!r}; refused")
+    return target
 
 
 def create_new(path: str | os.PathLike[str], mode: int = 0o600) -> int:

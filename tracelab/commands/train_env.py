@@ -25,7 +25,6 @@ from tracelab.commands._training import (
 )
 from tracelab.errors import UserError, store_errors
 from tracelab.train.config import METHOD_REWARD_SCALE, TrainConfig, flag_of, reward_scale_text
-from tracelab.train.replay import row_length
 
 # TrainConfig fields that describe GridWar (its scenario, teams, opponent, simulator): refused with --env
 GRIDWAR_ONLY = ("scenario", "non_markov", "split_networks", "slow_every_step", "agents", "backend", "kernel",
@@ -53,7 +52,8 @@ def is_env_run(run: Path) -> bool:
 
 def run_env(args: argparse.Namespace, given: dict[str, Any], limit: Any) -> int:
     # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
-    from tracelab.train.memory import FLOAT
+    from tracelab.train.memory import check_estimate, env_training_estimate
+    from tracelab.train.qnet import NetSpec
 
     source = env_source_of(args) if args.env is not None or args.env_arg else None
     gridwar = [flag_of(k) for k in GRIDWAR_ONLY if k in given]
@@ -67,7 +67,7 @@ def run_env(args: argparse.Namespace, given: dict[str, Any], limit: Any) -> int:
             from tracelab.train.checkpoint import checkpoint_config
             from tracelab.train.env_checkpoint import load_env_checkpoint
             check_resume_flags(given)
-            state = load_env_checkpoint(args.resume, source, limit.bytes)  # names the env unless given
+            state = load_env_checkpoint(args.resume, source, limit)  # names the env unless given
             cfg = dataclasses.replace(checkpoint_config(state), **given)
             check_budget(args.resume, state["step"], cfg.steps, "steps" in given, f" --env {source.describe()}")
         else:
@@ -84,10 +84,9 @@ def run_env(args: argparse.Namespace, given: dict[str, Any], limit: Any) -> int:
         declared = getattr(probe.unwrapped, "world_spec", None) is not None
     finally:
         probe.close()
-    need = cfg.buffer * row_length(encoder.size, n_actions, cfg.mask) * FLOAT
-    if need > limit.bytes:
-        raise UserError(f"--buffer-size {cfg.buffer:,}: the replay buffer would take {need:,} bytes, over the "
-                        f"limit of {limit}")
+    with store_errors():  # --num-envs 1e7 would build ten million worlds before its first step
+        check_estimate(env_training_estimate(cfg, NetSpec(encoder.size, cfg.hidden_sizes, n_actions, cfg.dueling),
+                                             declared), limit)
     if not declared:
         cfg.trace_eval_games = 0  # only a world declared in rules is traced
     elif cfg.trace_eval_games > cfg.eval_games:

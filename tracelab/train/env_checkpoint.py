@@ -33,6 +33,7 @@ from tracelab.train.checkpoint import (as_tensors, check_best, check_buffer_rows
                                        learner_schema, parts_schema, rng_state_schema)
 from tracelab.train.config import config_schema
 from tracelab.train.env_source import ObservationEncoder, action_count
+from tracelab.train.memory import Limit, MemoryLimitExceeded, check_estimate, env_training_estimate
 from tracelab.train.qnet import NetSpec
 from tracelab.train.torch_files import Tensor, load_tensors
 from tracelab.validation import Const, MapOf, Mismatch, OneOf, Tuple, check
@@ -124,11 +125,12 @@ def checkpoint_env(run: str | Path, max_bytes: int) -> tuple[dict[str, Any], Env
     return state, env_source_from_json(state["env"], str(f))
 
 
-def load_env_checkpoint(run: str | Path, given: EnvSource | None, max_bytes: int) -> dict[str, Any]:
+def load_env_checkpoint(run: str | Path, given: EnvSource | None, limit: Limit) -> dict[str, Any]:
     """The checkpoint of a `train --env` run, checked against the env the user names (`given`; None: a
-    UserError saying how to name it) and the shapes that env and the checkpoint's config imply."""
+    UserError saying how to name it) and the shapes that env and the checkpoint's config imply; a config
+    whose training would not fit `limit` is refused before anything it sizes is built."""
     f = checkpoint_path(Path(run))
-    state, recorded = checkpoint_env(run, max_bytes)
+    state, recorded = checkpoint_env(run, limit.bytes)
     if given is None:
         raise UserError(f"{run} trained on an env: name it again to resume (tracelab reads no spec a run "
                         f"names by itself): tracelab train --resume {run} --env {recorded.describe()}")
@@ -141,9 +143,14 @@ def load_env_checkpoint(run: str | Path, given: EnvSource | None, max_bytes: int
     try:
         encoder = ObservationEncoder(probe.observation_space, given.name)
         n_actions = action_count(probe.action_space, given.name)
+        declared = getattr(probe.unwrapped, "world_spec", None) is not None
     finally:
         probe.close()
     net = NetSpec(encoder.size, cfg.hidden_sizes, n_actions, cfg.dueling)
+    try:  # config.envs sizes the schema below: a stranger's 1e9 is refused here, not by the OOM killer
+        check_estimate(env_training_estimate(cfg, net, declared), limit)
+    except MemoryLimitExceeded as e:
+        raise FileRefused(f"{f}: config: {e}") from None
     learner, best = learner_schema(cfg, net)
     w = cfg.envs
     state.pop("best_rows", None)  # GridWar's old layout of the best networks: never an --env run's
