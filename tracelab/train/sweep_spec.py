@@ -319,12 +319,12 @@ def check_trials_memory(spec: SweepSpec, scenario: Any, limit: Limit) -> None:
     for axis in spec.axes:
         largest[axis.name] = max(axis.values, key=lambda v: estimate({**spec.fixed, axis.name: v}))
     try:
-        cfg = TrainConfig(**largest)
-    except ValueError:  # the largest values of two fields do not go together: the largest of each alone
-        cfg = TrainConfig(**{**spec.fixed, **dict([max(((k, v) for k, v in largest.items() if k not in spec.fixed),
-                                                       key=lambda kv: estimate({**spec.fixed, kv[0]: kv[1]}))])})
+        trials = [TrainConfig(**largest)]
+    except ValueError:  # the largest values of two fields do not go together: each one's trial alone
+        trials = [TrainConfig(**{**spec.fixed, a.name: largest[a.name]}) for a in spec.axes]
     try:
-        check_training_memory(cfg, scenario, limit)
+        for cfg in trials:
+            check_training_memory(cfg, scenario, limit)
     except MemoryLimitExceeded as e:
         name = field_name(e.flags.split()[0], "the estimate")
         raise SweepSpecError(f"{spec.sources.get(name, 'a trial')}: {e}") from None
