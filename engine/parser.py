@@ -12,6 +12,7 @@ from pathlib import Path
 
 from . import annotations, head_functions
 from .errors import ProgramCheckError, RuleSyntaxError
+from .parse_limit import ParseBudget
 from .safe_files import MIB, read_bytes
 from .vocabulary import MAX_LABELS
 from .program import (
@@ -573,6 +574,7 @@ class _Parser:
 
 def parse_program(text: str, file: str = "<string>") -> Program:
     """Parse and check one program text; `file` is the name used in error locations."""
+    ParseBudget().spend(file, text)
     return _build([_Parser(text, file).parse_file()])
 
 
@@ -581,11 +583,11 @@ def load_program(*paths: str | os.PathLike[str]) -> Program:
     check it. Directives must agree across files; names are unique across files."""
     if not paths:
         raise ValueError("load_program needs at least one file")
-    units = []
-    for p in paths:
-        file = os.fspath(p)
-        units.append(_Parser(read_rule_file(file), file).parse_file())
-    return _build(units)
+    texts = [(os.fspath(p), read_rule_file(os.fspath(p))) for p in paths]
+    budget = ParseBudget()
+    for file, text in texts:  # every file measured before any is parsed
+        budget.spend(file, text)
+    return _build([_Parser(text, file).parse_file() for file, text in texts])
 
 
 def read_rule_file(file: str) -> str:

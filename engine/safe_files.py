@@ -75,6 +75,8 @@ def open_regular(path: str | os.PathLike[str], *, follow_symlinks: bool = True,
         | (0 if follow_symlinks else os.O_NOFOLLOW)
     try:
         fd = os.open(path, flags, 0o644)
+    except ValueError:  # a NUL byte, which no file name can hold (a path written in a stranger's file)
+        raise FileRefused(f"{os.fspath(path)!r}: a file name cannot hold a NUL byte; refused") from None
     except OSError as e:
         if e.errno == errno.ELOOP and not follow_symlinks:
             raise FileRefused(f"{path}: is a symbolic link; refused") from None
@@ -102,9 +104,14 @@ def read_bytes(path: str | os.PathLike[str], max_bytes: int, *, what: str = "fil
     """The whole file, refused past `max_bytes` (`what` names the kind of file in the message)."""
     too_big = FileRefused(f"{path}: larger than {human_bytes(max_bytes)}, the limit for a {what}; refused")
     with open_regular(path, follow_symlinks=follow_symlinks) as f:
-        if os.fstat(f.fileno()).st_size > max_bytes:  # refused before reading a (sparse) giant into memory
+        size = os.fstat(f.fileno()).st_size
+        if size > max_bytes:  # refused before reading a (sparse) giant into memory
             raise too_big
-        data = f.read(max_bytes + 1)
+        # read(n) allocates n bytes first: the file's size (and one more, to see it grow), not the cap
+        chunks = [f.read(size + 1)]
+        while chunks[-1] and sum(map(len, chunks)) <= max_bytes:  # a file that grows as it is read
+            chunks.append(f.read(min(MIB, max_bytes + 1 - sum(map(len, chunks)))))
+    data = b"".join(chunks)
     if len(data) > max_bytes:
         raise too_big
     return data

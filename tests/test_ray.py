@@ -162,10 +162,10 @@ def test_sweep_spec_file_and_its_errors(tmp_path):
             build_spec(grids=[value] if flag == "--grid" else [], randoms=[value] if flag == "--random" else [])
         assert str(e.value) == message
     f.write_text('steps_per_trial = 3\n[grid]\nlr = [1e-4]\n')
-    with pytest.raises(SweepSpecError, match=r"sweep.toml: unknown key 'steps_per_trial'"):
+    with pytest.raises(SweepSpecError, match=r"sweep.toml:1:1: steps_per_trial: unknown key"):
         build_spec(file=str(f))
     f.write_text('[grid]\nlr = [1e-4]\nlearning_rate = [3]\n')
-    with pytest.raises(SweepSpecError, match=r"sweep.toml: grid.learning_rate: TrainConfig has no field "
+    with pytest.raises(SweepSpecError, match=r"sweep.toml:3:1: grid.learning_rate: TrainConfig has no field "
                                              r"'learning_rate' \(did you mean learning-rate\?\)"):
         build_spec(file=str(f))
     with pytest.raises(SweepSpecError, match=r"^metric must be one of the evaluations' metrics \(eval/games, .*"

@@ -9,11 +9,11 @@ import sys
 import time
 from pathlib import Path
 
-from tracelab.commands._args import positive_int
+from tracelab.commands._args import byte_size, positive_int
 from tracelab.commands._interrupt import CtrlCStops
 from tracelab.commands.train import load_scenario_arg
 from tracelab.errors import UserError, store_errors
-from tracelab.train.sweep_spec import DEFAULT_METRIC, MODES, SCHEDULERS, build_spec
+from tracelab.train.sweep_spec import DEFAULT_METRIC, MODES, SCHEDULERS, build_spec, check_trials_memory
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -42,11 +42,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--ray", default="local", metavar="ADDRESS",
                    help="the Ray cluster (host:port, auto, ray://...; default: a local Ray started for the "
                         "command, limited to this machine's cores)")
+    p.add_argument("--max-memory", type=byte_size, default=None, metavar="SIZE",
+                   help="refuse a sweep whose largest trial's networks, replay buffers and worlds are estimated "
+                        "to need more, as train does (e.g. 12G; default: half of this machine's memory)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
+    from tracelab.train.memory import memory_limit
     from tracelab.train.ray_session import check_address, ray_session
 
     spec = build_spec(sets=args.set, grids=args.grid, randoms=args.random, file=args.spec, samples=args.samples,
@@ -54,6 +58,7 @@ def run(args: argparse.Namespace) -> int:
     cfg = spec.base_config()
     with store_errors():  # a scenario file that does not load
         scenario = load_scenario_arg(cfg.scenario, cfg.agents)
+    check_trials_memory(spec, scenario, memory_limit(args.max_memory, "--max-memory"))  # before Ray starts
     out = Path(args.out or _default_out())
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise UserError(f"{out} is not empty: give another --out or remove it")

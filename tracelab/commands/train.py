@@ -115,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
             # deferred: loads torch; every command is imported to build the CLI's parser
             from tracelab.train.checkpoint import checkpoint_config, checkpoint_scenario, load_checkpoint
             check_resume_flags(given)
-            state = load_checkpoint(args.resume, limit.bytes)
+            state = load_checkpoint(args.resume, limit)
             cfg = dataclasses.replace(checkpoint_config(state), **given)
             check_budget(args.resume, state["step"], cfg.steps, "steps" in given)
             scenario = checkpoint_scenario(state)

@@ -25,7 +25,6 @@ from tracelab.commands._training import (
 )
 from tracelab.errors import UserError, store_errors
 from tracelab.train.config import METHOD_REWARD_SCALE, TrainConfig, flag_of, reward_scale_text
-from tracelab.train.replay import row_length
 
 # TrainConfig fields that describe GridWar (its scenario, teams, opponent, simulator): refused with --env
 GRIDWAR_ONLY = ("scenario", "non_markov", "split_networks", "slow_every_step", "agents", "backend", "kernel",
@@ -53,7 +52,8 @@ def is_env_run(run: Path) -> bool:
 
 def run_env(args: argparse.Namespace, given: dict[str, Any], limit: Any) -> int:
     # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
-    from tracelab.train.memory import FLOAT
+    from tracelab.train.memory import check_estimate, env_training_estimate, env_world_bytes
+    from tracelab.train.qnet import NetSpec
 
     source = env_source_of(args) if args.env is not None or args.env_arg else None
     gridwar = [flag_of(k) for k in GRIDWAR_ONLY if k in given]
@@ -67,7 +67,7 @@ def run_env(args: argparse.Namespace, given: dict[str, Any], limit: Any) -> int:
             from tracelab.train.checkpoint import checkpoint_config
             from tracelab.train.env_checkpoint import load_env_checkpoint
             check_resume_flags(given)
-            state = load_env_checkpoint(args.resume, source, limit.bytes)  # names the env unless given
+            state = load_env_checkpoint(args.resume, source, limit)  # names the env unless given
             cfg = dataclasses.replace(checkpoint_config(state), **given)
             check_budget(args.resume, state["step"], cfg.steps, "steps" in given, f" --env {source.describe()}")
         else:
@@ -81,15 +81,13 @@ def run_env(args: argparse.Namespace, given: dict[str, Any], limit: Any) -> int:
         from tracelab.train.env_source import ObservationEncoder, action_count
         encoder = ObservationEncoder(probe.observation_space, args.env)
         n_actions = action_count(probe.action_space, args.env)
-        declared = getattr(probe.unwrapped, "world_spec", None) is not None
+        spec = getattr(probe.unwrapped, "world_spec", None)
+        declared = spec is not None
     finally:
         probe.close()
-    _check_env_count(cfg, getattr(probe.unwrapped, "world_spec", None), limit, resumed=state is not None,
-                     given=given)
-    need = cfg.buffer * row_length(encoder.size, n_actions, cfg.mask) * FLOAT
-    if need > limit.bytes:
-        raise UserError(f"--buffer-size {cfg.buffer:,}: the replay buffer would take {need:,} bytes, over the "
-                        f"limit of {limit}")
+    with store_errors():  # --num-envs 1e7 would build ten million worlds before its first step
+        check_estimate(env_training_estimate(cfg, NetSpec(encoder.size, cfg.hidden_sizes, n_actions, cfg.dueling),
+                                             env_world_bytes(spec)), limit)
     if not declared:
         cfg.trace_eval_games = 0  # only a world declared in rules is traced
     elif cfg.trace_eval_games > cfg.eval_games:
@@ -97,20 +95,6 @@ def run_env(args: argparse.Namespace, given: dict[str, Any], limit: Any) -> int:
     run_dir, same_run, tensorboard = where_to_train(args, state is not None, source.short_name)
     return train_env_into(cfg, source, run_dir, encoder.describe(), tensorboard=tensorboard, state=state,
                           resumed_from=args.resume, same_run=same_run)
-
-
-def _check_env_count(cfg: TrainConfig, spec: Any, limit: Any, *, resumed: bool, given: dict[str, Any]) -> None:
-    """Refuse --num-envs (or --eval-envs) envs that would not fit the memory limit, before one is made
-    (10,000,000 were still being built after 180 s; a checkpoint's 1e9 met the out-of-memory killer)."""
-    # deferred: loads gymnasium and the engine; every command is imported to build the CLI's parser
-    from tracelab.engine.safe_files import human_bytes
-    from tracelab.envs.declared.spec_size import env_bytes
-    each = env_bytes(spec.named_atoms if spec is not None else 0)
-    for name, n in (("envs", cfg.envs), ("eval_envs", min(cfg.eval_envs, cfg.eval_games))):
-        if n * each > limit.bytes:
-            whose = " (the checkpoint's; give the flag to change it)" if resumed and name not in given else ""
-            raise UserError(f"{flag_of(name)} {n:,}{whose}: {n:,} envs of about {human_bytes(each)} each would "
-                            f"take {human_bytes(n * each)}, over the limit of {limit}")
 
 
 def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at: int | None = None,

@@ -60,9 +60,9 @@ def numeric_facts(raw: RawGraph) -> GraphFacts | None:
     values = np.where(is_bool, booleans, raw.numbers)
     if np.isnan(values).any() or (values < 0).any() or (values > 1).any():
         return None
-    labels = list(dict.fromkeys(k.name for k in keys))
-    n_labels = max(len(labels), 1)
-    lab = np.array([labels.index(k.name) for k in keys], np.int64)[kidx] if keys else np.zeros(0, np.int64)
+    label_of = {name: i for i, name in enumerate(dict.fromkeys(k.name for k in keys))}  # (not list.index: K^2)
+    labels, n_labels = list(label_of), max(len(label_of), 1)
+    lab = np.array([label_of[k.name] for k in keys], np.int64)[kidx] if keys else np.zeros(0, np.int64)
 
     # nodes: a node's attributes in order of first appearance, each with its last value
     rows = np.flatnonzero(kind == 0)

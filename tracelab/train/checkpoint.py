@@ -24,7 +24,7 @@ import torch
 
 from tracelab.engine.safe_files import FileRefused
 from tracelab.game.scenario import NOTHING, Scenario, scenario_from_dict
-from tracelab.train.memory import memory_limit
+from tracelab.train.memory import Limit, MemoryLimitExceeded, check_training_memory, memory_limit
 from tracelab.train.network import Shape, to_state_dict
 from tracelab.validation import (Const, ExactKeys, IntRange, ListOf, MapOf, Mismatch, Nullable, OneOf,
                                  OptionalKey, Tuple, check)
@@ -95,15 +95,15 @@ def _refusal_with_a_way_on(run: Path, said: str) -> FileRefused:
     return FileRefused(f"{said}: {instead}")
 
 
-def load_checkpoint(run: str | Path, max_bytes: int | None = None, network: Any = None) -> dict[str, Any]:
-    """The checkpoint of a training run directory, checked: its config and scenario are valid and every
-    array has the shape and type they imply. `max_bytes`: the largest file read (default: the memory
-    limit, tracelab.train.memory). `network`: the factory of the custom module a run trained (Python API,
+def load_checkpoint(run: str | Path, limit: Limit | None = None, network: Any = None) -> dict[str, Any]:
+    """The checkpoint of a training run directory, checked: its config and scenario are valid, its training
+    fits `limit` (default: the memory limit, tracelab.train.memory; also the largest file read) and every
+    array has the shape and type they imply. `network`: the factory of the custom module a run trained (Python API,
     Trainer's `network`), whose state dict says what the checkpoint's networks must hold."""
-    run = Path(run)
+    run, limit = Path(run), memory_limit() if limit is None else limit
     f = checkpoint_file(run)
     try:
-        state = load_tensors(f, memory_limit().bytes if max_bytes is None else max_bytes)
+        state = load_tensors(f, limit.bytes)
     except CodeInFile as e:
         said = f"{f}: a checkpoint of an older tracelab (format 1, holding numpy objects that only a loader " \
                f"that runs code could read); refused" if any(mark in e.pickled for mark in OLD_FORMATS) else str(e)
@@ -123,6 +123,10 @@ def load_checkpoint(run: str | Path, max_bytes: int | None = None, network: Any 
         raise FileRefused(f"{f}: scenario_toml: not valid TOML: {e}") from None
     except ValueError as e:  # ScenarioError: names the field
         raise FileRefused(f"{f}: {e}") from None
+    try:  # the config sizes the schema below (config.envs = 1e9: a billion worlds' games)
+        check_training_memory(cfg, scenario, limit)
+    except MemoryLimitExceeded as e:
+        raise FileRefused(f"{f}: config: {e}") from None
     if state.get("custom_network") and network is None:
         raise FileRefused(f"{f}: the run trained a custom torch module (Python API): resume it in Python, "
                           f"load_checkpoint(run, network=...) and Trainer(..., network=...) with the same module")

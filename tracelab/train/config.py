@@ -21,6 +21,9 @@ LEARNERS = ("auto", "fused", "readable")
 # "Reward scale"; docs/experiments/1v1-base.md), so 0.01 is the default and `--reward-scale 1` the method's.
 LEARNING_REWARD_SCALE = 0.01
 METHOD_REWARD_SCALE = 1.0
+# torch CPU threads: one is fastest for these networks; past this many a stranger's config (a checkpoint, a
+# sweep file) is asking the system for threads it cannot start ("can't start new thread" at 100,000)
+MAX_THREADS = 256
 
 
 def reward_scale_text(scale: float) -> str:
@@ -120,6 +123,8 @@ class TrainConfig:
                      "eval_envs", "log_every", "threads"):
             if getattr(self, name) < 1:
                 problems.append(f"{name} must be at least 1, got {getattr(self, name)}")
+        if self.threads > MAX_THREADS:
+            problems.append(f"threads must be at most {MAX_THREADS}, got {self.threads}")
         for name in ("warmup", "eval_every", "trace_eval_games", "checkpoint_every"):
             if getattr(self, name) < 0:
                 problems.append(f"{name} must be >= 0, got {getattr(self, name)}")

@@ -25,15 +25,16 @@ import torch
 from gymnasium.utils import seeding
 from gymnasium.vector.utils import concatenate, create_empty_array
 
-from tracelab.engine.safe_files import FileRefused, human_bytes
+from tracelab.engine.safe_files import FileRefused
 from tracelab.envs.declared.env_source import EnvSource, check_same_env, env_source_from_json
-from tracelab.envs.declared.spec_size import env_bytes
 from tracelab.errors import UserError
 from tracelab.train.checkpoint import (as_tensors, check_best, check_buffer_rows, checkpoint_config,
                                        checkpoint_file, checkpoint_path, episode_games_schema, in_range,
                                        learner_schema, parts_schema, rng_state_schema)
 from tracelab.train.config import config_schema
 from tracelab.train.env_source import ObservationEncoder, action_count
+from tracelab.train.memory import (Limit, MemoryLimitExceeded, check_estimate, env_training_estimate,
+                                   env_world_bytes)
 from tracelab.train.qnet import NetSpec
 from tracelab.train.torch_files import Tensor, load_tensors
 from tracelab.validation import Const, MapOf, Mismatch, OneOf, Tuple, check
@@ -125,11 +126,12 @@ def checkpoint_env(run: str | Path, max_bytes: int) -> tuple[dict[str, Any], Env
     return state, env_source_from_json(state["env"], str(f))
 
 
-def load_env_checkpoint(run: str | Path, given: EnvSource | None, max_bytes: int) -> dict[str, Any]:
+def load_env_checkpoint(run: str | Path, given: EnvSource | None, limit: Limit) -> dict[str, Any]:
     """The checkpoint of a `train --env` run, checked against the env the user names (`given`; None: a
-    UserError saying how to name it) and the shapes that env and the checkpoint's config imply."""
+    UserError saying how to name it) and the shapes that env and the checkpoint's config imply; a config
+    whose training would not fit `limit` is refused before anything it sizes is built."""
     f = checkpoint_path(Path(run))
-    state, recorded = checkpoint_env(run, max_bytes)
+    state, recorded = checkpoint_env(run, limit.bytes)
     if given is None:
         raise UserError(f"{run} trained on an env: name it again to resume (tracelab reads no spec a run "
                         f"names by itself): tracelab train --resume {run} --env {recorded.describe()}")
@@ -143,14 +145,13 @@ def load_env_checkpoint(run: str | Path, given: EnvSource | None, max_bytes: int
         encoder = ObservationEncoder(probe.observation_space, given.name)
         n_actions = action_count(probe.action_space, given.name)
         spec = getattr(probe.unwrapped, "world_spec", None)
-        each = env_bytes(spec.named_atoms if spec is not None else 0)
     finally:
         probe.close()
-    if cfg.envs * each > max_bytes:  # refused before a schema of that many worlds is made
-        raise FileRefused(f"{f}: config.envs: {cfg.envs:,} envs of about {human_bytes(each)} each would take "
-                          f"{human_bytes(cfg.envs * each)}, over the limit of {human_bytes(max_bytes)} "
-                          "(--max-memory raises it)")
     net = NetSpec(encoder.size, cfg.hidden_sizes, n_actions, cfg.dueling)
+    try:  # config.envs sizes the schema below: a stranger's 1e9 is refused here, not by the OOM killer
+        check_estimate(env_training_estimate(cfg, net, env_world_bytes(spec)), limit)
+    except MemoryLimitExceeded as e:
+        raise FileRefused(f"{f}: config: {e}") from None
     learner, best = learner_schema(cfg, net)
     w = cfg.envs
     state.pop("best_rows", None)  # GridWar's old layout of the best networks: never an --env run's

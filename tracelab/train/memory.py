@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from tracelab.engine.grounding_limit import usable_memory
+from tracelab.envs.declared.spec_size import env_bytes
 from tracelab.train.qnet import NetSpec
 from tracelab.train.replay import row_length
 
@@ -19,6 +20,9 @@ FLOAT = 4            # bytes of a float32
 # the rule engine's state per world and per map cell and agent: measured 0.7-4 KiB on 8x8 maps (counting
 # and lanes kernels, base and advanced scenarios; 256 to 8,192 worlds), rounded up
 WORLD_BYTES_PER_CELL_AGENT = 4096
+# a gymnasium env's world in train --env's vector env that is not declared in rules: a small Python object
+# at least (a declared world's is estimated from its spec: spec_size.env_bytes)
+GYM_WORLD_BYTES = 4 << 10
 # per network parameter: online and target rows, the gradient, Adam's two moments and its work row, the
 # copies of a checkpoint, the best policy and a saved policy
 PARAM_COPIES = 12
@@ -27,7 +31,12 @@ ACTIVATION_COPIES = 8
 
 
 class MemoryLimitExceeded(ValueError):
-    """A size whose estimated memory is over the limit; the message names it and the estimate."""
+    """A size whose estimated memory is over the limit; the message names it and the estimate, `flags` the
+    flags with their values of the part that takes the most ("--buffer 100000000")."""
+
+    def __init__(self, message: str, flags: str = "") -> None:
+        super().__init__(message)
+        self.flags = flags
 
 
 @dataclass(frozen=True)
@@ -100,6 +109,31 @@ def training_estimate(cfg: Any, scenario: Any) -> list[tuple[str, str, int]]:
     ]
 
 
+def env_world_bytes(spec: Any) -> int:
+    """One world of train --env's vector env: a world declared in rules (`spec`, its WorldSpec) from the atoms
+    its spec names, any other env (None) a small Python object."""
+    return env_bytes(spec.named_atoms) if spec is not None else GYM_WORLD_BYTES
+
+
+def env_training_estimate(cfg: Any, shape: NetSpec, world_bytes: int) -> list[tuple[str, str, int]]:
+    """training_estimate's parts for `train --env`: one network of `shape`, its env's worlds of
+    `world_bytes` each (env_world_bytes)."""
+    world = world_bytes + 2 * shape.inputs * FLOAT  # and its observation, current and next
+    eval_worlds = min(cfg.eval_envs, cfg.eval_games)
+    return [
+        (f"--hidden {cfg.hidden}", f"a network of {shape.inputs:,} inputs x {shape.hidden_text()} hidden units x "
+                                   f"{shape.actions:,} actions", network_bytes(shape)),
+        (f"--hidden {cfg.hidden} and --batch-size {cfg.batch}", f"the update's activations ({cfg.batch:,} "
+         f"transitions x {shape.hidden_text()} hidden units)", activation_bytes(cfg.batch, shape)),
+        (f"--batch-size {cfg.batch}", f"minibatches of {cfg.batch:,} transitions",
+         minibatch_bytes(cfg.batch, shape, cfg.mask)),
+        (f"--buffer-size {cfg.buffer}", f"a replay buffer of {cfg.buffer:,} transitions",
+         replay_bytes(cfg.buffer, shape, cfg.mask)),
+        (f"--num-envs {cfg.envs}", f"{cfg.envs:,} training worlds", cfg.envs * world),
+        (f"--eval-envs {cfg.eval_envs}", f"{eval_worlds:,} evaluation worlds", eval_worlds * world),
+    ]
+
+
 def _gib(n: int) -> str:
     return f"{n / (1 << 30):,.1f} GiB" if n >= 1 << 30 else f"{n / (1 << 20):,.1f} MiB"
 
@@ -107,13 +141,18 @@ def _gib(n: int) -> str:
 def check_training_memory(cfg: Any, scenario: Any, limit: Limit) -> int:
     """Refuse a training run whose estimate is over `limit`, naming the setting that takes the most;
     returns the estimate."""
-    parts = training_estimate(cfg, scenario)
+    return check_estimate(training_estimate(cfg, scenario), limit)
+
+
+def check_estimate(parts: list[tuple[str, str, int]], limit: Limit) -> int:
+    """Refuse an estimate (training_estimate's or env_training_estimate's parts) over `limit`, naming the
+    setting that takes the most; returns the total."""
     total = sum(b for _, _, b in parts)
     if total > limit.bytes:
         flags, what, most = max(parts, key=lambda p: p[2])
         whole = "" if most > limit.bytes else f"; the run {total:,} bytes in all"
         raise MemoryLimitExceeded(f"{flags}: {what} would take an estimated {most:,} bytes ({_gib(most)}"
-                                  f"{whole}), over the limit of {limit}")
+                                  f"{whole}), over the limit of {limit}", flags)
     return total
 
 

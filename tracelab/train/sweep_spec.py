@@ -18,13 +18,16 @@ from __future__ import annotations
 
 import difflib
 import math
-import tomllib
+import os
 from dataclasses import dataclass, field, fields
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from tracelab.engine.safe_files import FileRefused, read_text
+from tracelab.engine.safe_files import FileRefused, path_inside, read_text
 from tracelab.errors import UserError
 from tracelab.train.config import TrainConfig, config_fields
+
+if TYPE_CHECKING:
+    from tracelab.train.memory import Limit
 
 DISTRIBUTIONS = ("uniform", "loguniform", "randint", "choice")
 SCHEDULERS = ("fifo", "asha")
@@ -62,6 +65,7 @@ class SweepSpec:
     scheduler: str = "fifo"
     metric: str = DEFAULT_METRIC
     mode: str = "max"
+    sources: dict[str, str] = field(default_factory=dict, compare=False)  # field -> where it was given
 
     @property
     def trials(self) -> int:
@@ -98,7 +102,7 @@ def parse_value(name: str, text: Any, where: str) -> Any:
         expected = {"int": int, "int | None": int, "float": float, "bool": bool, "str": str}[kind]
         if isinstance(text, expected) and not (expected is int and isinstance(text, bool)):
             return text
-        raise SweepSpecError(f"{where}: {text!r} is not a {kind.replace(' | None', '')} ({name})")
+        raise SweepSpecError(f"{where}: {text!r} is not {'an int' if 'int' in kind else 'a ' + kind} ({name})")
     s = text.strip()
     try:
         if kind == "float":
@@ -192,7 +196,7 @@ def build_spec(*, sets: list[str] = (), grids: list[str] = (), randoms: list[str
     try:
         TrainConfig(**fixed)
     except ValueError as e:
-        raise SweepSpecError(f"--set: {e}") from None
+        raise SweepSpecError(f"{_culprit(fixed, raw['set'])}: {e}") from None
     axes: list[Axis] = []
     for table in ("grid", "random"):
         for name, (value, where) in raw[table].items():
@@ -209,7 +213,8 @@ def build_spec(*, sets: list[str] = (), grids: list[str] = (), randoms: list[str
     if not axes:
         raise SweepSpecError("nothing to search: give --grid FIELD=V1,V2 or --random FIELD=DIST:LOW,HIGH "
                              "(or a sweep file with [grid] or [random])")
-    spec = SweepSpec(fixed, tuple(axes), **_top_level(top, samples, scheduler, metric, mode))
+    sources = {name: where for table in raw.values() for name, (_, where) in table.items()}
+    spec = SweepSpec(fixed, tuple(axes), sources=sources, **_top_level(top, samples, scheduler, metric, mode))
     if spec.trials > MAX_TRIALS:
         raise SweepSpecError(f"{spec.trials:,} trials (grid points x samples): more than {MAX_TRIALS:,}")
     if spec.scheduler == "asha":
@@ -218,6 +223,17 @@ def build_spec(*, sets: list[str] = (), grids: list[str] = (), randoms: list[str
             raise SweepSpecError(f"--scheduler asha stops trials at their evaluations: it needs eval_every "
                                  f"between 0 and steps ({cfg.steps}), got {cfg.eval_every} (--set eval_every=N)")
     return spec
+
+
+def _culprit(fixed: dict[str, Any], given: dict[str, tuple[Any, str]]) -> str:
+    """Where the first fixed setting that TrainConfig refuses on its own was given ("--set" if they are
+    refused only together)."""
+    for name, (_, where) in given.items():
+        try:
+            TrainConfig(**{name: fixed[name]})
+        except ValueError:
+            return where
+    return "--set"
 
 
 def _top_level(top: dict[str, Any], samples: int | None, scheduler: str | None, metric: str | None,
@@ -244,23 +260,71 @@ def evaluation_metrics() -> list[str]:
 
 
 def _read_file(path: str) -> tuple[dict[str, dict[str, tuple[Any, str]]], dict[str, Any]]:
-    """A sweep file's tables (field -> (value, where)) and top-level settings; a file is data only."""
+    """A sweep file's tables (field -> (value, where: FILE:LINE:COLUMN: TABLE.KEY)) and top-level settings;
+    a file is data only, and the scenario file it names lies inside its folder."""
+    # deferred: tracelab.envs registers gymnasium's ids; `tracelab --help` imports this module
+    from tracelab.envs.declared.spec_file import KeyLines, SpecError, parse_toml
     try:
-        data = tomllib.loads(read_text(path, SPEC_FILE_CAP, what="sweep file"))
-    except FileRefused as e:
+        text = read_text(path, SPEC_FILE_CAP, what="sweep file")
+        data = parse_toml(text, path)
+    except (FileRefused, SpecError) as e:
         raise SweepSpecError(str(e)) from None
     except OSError as e:
         raise SweepSpecError(f"{path}: cannot read: {e.strerror or e}") from None
-    except tomllib.TOMLDecodeError as e:
-        raise SweepSpecError(f"{path}: not valid TOML: {e}") from None
+    lines, keys = text.splitlines(), KeyLines.scan(text)
+
+    def where(*key: str) -> str:
+        n = keys.line(key)
+        column = len(lines[n - 1]) - len(lines[n - 1].lstrip()) + 1 if n else 0
+        return f"{path}:{n}:{column}: {'.'.join(key)}" if n else f"{path}: {'.'.join(key)}"
+
     unknown = sorted(set(data) - FILE_KEYS)
     if unknown:
-        raise SweepSpecError(f"{path}: unknown key {unknown[0]!r} (expected {', '.join(sorted(FILE_KEYS))})")
+        raise SweepSpecError(f"{where(unknown[0])}: unknown key (expected {', '.join(sorted(FILE_KEYS))})")
     tables: dict[str, dict[str, tuple[Any, str]]] = {}
     for table in ("set", "grid", "random"):
         entries = data.get(table, {})
         if not isinstance(entries, dict):
-            raise SweepSpecError(f"{path}: {table} must be a table ([{table}])")
-        tables[table] = {field_name(k, f"{path}: {table}.{k}"): (v, f"{path}: {table}.{k}")
-                         for k, v in entries.items()}
+            raise SweepSpecError(f"{where(table)}: must be a table ([{table}])")
+        tables[table] = {field_name(k, where(table, k)): (v, where(table, k)) for k, v in entries.items()}
+    if "scenario" in tables["set"]:
+        tables["set"]["scenario"] = _scenario_inside(path, *tables["set"]["scenario"])
     return tables, {k: data[k] for k in ("samples", "scheduler", "metric", "mode") if k in data}
+
+
+def _scenario_inside(path: str, value: Any, where: str) -> tuple[Any, str]:
+    """A sweep file's scenario: a built-in name, or a file relative to the sweep file's folder and inside
+    it (links resolved): a stranger's sweep file never makes tracelab read /etc/passwd."""
+    # deferred: loads the game's modules; `tracelab --help` imports this module
+    from tracelab.game.scenario import builtin_scenario_names
+    if not isinstance(value, str) or value in builtin_scenario_names():
+        return value, where
+    try:
+        return str(path_inside(os.path.dirname(os.path.abspath(path)), value)), where
+    except FileRefused as e:
+        raise SweepSpecError(f"{where}: {e}") from None
+
+
+def check_trials_memory(spec: SweepSpec, scenario: Any, limit: Limit) -> None:
+    """Refuse a sweep whose largest trial would not fit `limit`, as `train` refuses a run, before Ray
+    starts: each searched field at its value (a grid's, a choice's, a range's bound) that takes the most
+    memory (each size grows the estimate whatever the others are), the others at the fixed settings."""
+    # deferred: memory's estimate loads the game's modules; `tracelab --help` imports this module
+    from tracelab.train.memory import MemoryLimitExceeded, check_training_memory, training_estimate
+
+    def estimate(settings: dict[str, Any]) -> int:
+        return sum(b for *_, b in training_estimate(TrainConfig(**settings), scenario))
+
+    largest = dict(spec.fixed)
+    for axis in spec.axes:
+        largest[axis.name] = max(axis.values, key=lambda v: estimate({**spec.fixed, axis.name: v}))
+    try:
+        trials = [TrainConfig(**largest)]
+    except ValueError:  # the largest values of two fields do not go together: each one's trial alone
+        trials = [TrainConfig(**{**spec.fixed, a.name: largest[a.name]}) for a in spec.axes]
+    try:
+        for cfg in trials:
+            check_training_memory(cfg, scenario, limit)
+    except MemoryLimitExceeded as e:
+        name = field_name(e.flags.split()[0], "the estimate")
+        raise SweepSpecError(f"{spec.sources.get(name, 'a trial')}: {e}") from None

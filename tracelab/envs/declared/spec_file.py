@@ -196,9 +196,16 @@ def read_spec_file(path: str | os.PathLike[str]) -> SpecSource:
     """The spec at `path`: a regular UTF-8 file of at most SPEC_FILE_CAP bytes, parsed as TOML."""
     file = os.fspath(path)
     text = read_text(file, SPEC_FILE_CAP, what="spec file")
+    return SpecSource(file, parse_toml(text, file), KeyLines.scan(text))
+
+
+def parse_toml(text: str, file: str) -> dict[str, Any]:
+    """A stranger's TOML text (a spec, a sweep file); SpecError at FILE:LINE:COLUMN if it is not TOML, has
+    keys of too many parts (tomllib's time grows with their square: check_key_parts), or nests deeper than
+    tomllib's recursion can go."""
     check_key_parts(text, file)
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         m = re.search(r"\(at line (\d+), column (\d+)\)", str(e))
         where = f"{file}:{m.group(1)}:{m.group(2)}" if m else file
@@ -206,4 +213,3 @@ def read_spec_file(path: str | os.PathLike[str]) -> SpecSource:
         raise SpecError(f"{where}: not valid TOML: {msg}") from None
     except RecursionError:
         raise SpecError(f"{file}: TOML nested too deeply; refused") from None
-    return SpecSource(file, data, KeyLines.scan(text))
