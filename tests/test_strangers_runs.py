@@ -4,11 +4,13 @@ their control characters escaped; a repair is all or nothing; a closing hint nev
 from __future__ import annotations
 
 import json
+import re
 import shutil
+import subprocess
 from pathlib import Path
 
 import pytest
-from store_helpers import write_walk_run
+from store_helpers import TRACELAB, tampered_copy, write_walk_run
 
 from tracelab.cli import main
 from tracelab.store.seal import seal_run
@@ -72,3 +74,61 @@ def test_seal_refuses_a_path_with_a_question_mark_in_one_line(walk: Path, tmp_pa
     assert main(["seal", str(tmp_path / "r?z")]) == 1
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "'?'" in err and "Traceback" not in err
+
+
+# ---- 37.7: a run's strings reach the terminal with their control characters escaped -------------------
+
+# a title (OSC 0 ... BEL), a clear screen (CSI 2J), an OSC-8 link, an 8-bit CSI (U+009B) and a bidi
+# override: none of them may reach the terminal raw
+PAYLOAD = ("\x1b]0;owned\x07\x1b[2J\x1b]8;;https://evil.example/\x1b\\click\x1b]8;;\x1b\\"
+           "\u009b31m\u202egnp.exe")
+RAW_CONTROL = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069]")
+
+
+def assert_no_raw_controls(text: str) -> None:
+    found = RAW_CONTROL.findall(text)
+    assert not found, f"raw control characters reached the terminal: {found!r}"
+
+
+@pytest.fixture(scope="module")
+def planted(walk: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A folder with the walk run twice: `live`, whose meta.json command and host carry the payload, and
+    `sealed`, whose raw.run command and outcomes were set to it with plain DuckDB."""
+    folder = tmp_path_factory.mktemp("planted")
+    live = shutil.copytree(walk, folder / "live")
+    doc = json.loads((live / "meta.json").read_text())
+    doc.update(command=PAYLOAD, host=PAYLOAD, scenario=PAYLOAD)
+    (live / "meta.json").write_text(json.dumps(doc))
+    sealed = shutil.copytree(walk, folder / "plain")
+    seal_run(sealed)
+    quoted = PAYLOAD.replace("'", "''")
+    tampered_copy(sealed, folder / "sealed", f"UPDATE raw.run SET command = '{quoted}', host = '{quoted}'",
+                  f"UPDATE raw.episode_end SET outcome = '{quoted}'")
+    shutil.rmtree(sealed)
+    return folder
+
+
+def tracelab(*argv: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([*TRACELAB, *argv], capture_output=True, text=True, timeout=300)
+
+
+@pytest.mark.parametrize("argv", [
+    ["show", "{planted}/live"],
+    ["show", "{planted}/sealed", "--json"],
+    ["sql", "{planted}/live", "SELECT command, host FROM run"],
+    ["sql", "{planted}/sealed", "SELECT outcome FROM episodes"],
+    ["sql", "{planted}/sealed", "SELECT command FROM run", "--format", "csv"],
+    ["runs", "{planted}"],
+], ids=lambda a: "-".join(a)[10:50])
+def test_the_cli_prints_a_runs_strings_escaped(planted: Path, argv: list[str]) -> None:
+    done = tracelab(*(a.format(planted=planted) for a in argv))
+    assert done.returncode == 0, done.stderr
+    assert_no_raw_controls(done.stdout + done.stderr)
+    assert re.search(r"\\(x1b|u001b)\]0;owned", done.stdout), done.stdout  # shown, as text
+
+
+def test_an_error_quoting_a_runs_string_is_escaped(planted: Path) -> None:
+    done = tracelab("sql", str(planted / "sealed"), "SELECT error(command) FROM run")
+    assert done.returncode == 1 and len(done.stderr.strip().splitlines()) == 1, done.stderr
+    assert_no_raw_controls(done.stderr)
+    assert "\\x1b]0;owned" in done.stderr
