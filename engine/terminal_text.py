@@ -26,3 +26,8 @@ def printable(text: str, keep: str = "") -> str:
     if keep:
         return _UNSAFE.sub(lambda m: m.group() if m.group() in keep else _escape(m), text)
     return _UNSAFE.sub(_escape, text)
+
+
+def has_unsafe(text: str) -> bool:
+    """Whether `printable` would change `text` (tab and newline count: a one-line cell has neither)."""
+    return _UNSAFE.search(text) is not None

@@ -8,6 +8,7 @@ import re
 import shutil
 import subprocess
 from pathlib import Path
+from typing import Any
 
 import pytest
 from store_helpers import TRACELAB, tampered_copy, write_walk_run
@@ -82,6 +83,7 @@ def test_seal_refuses_a_path_with_a_question_mark_in_one_line(walk: Path, tmp_pa
 # override: none of them may reach the terminal raw
 PAYLOAD = ("\x1b]0;owned\x07\x1b[2J\x1b]8;;https://evil.example/\x1b\\click\x1b]8;;\x1b\\"
            "\u009b31m\u202egnp.exe")
+MARKUP = "[bold]B[/bold][@click=app.quit]Q[/]"  # must show as these characters in the TUI
 RAW_CONTROL = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069]")
 
 
@@ -103,8 +105,12 @@ def planted(walk: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     seal_run(sealed)
     quoted = PAYLOAD.replace("'", "''")
     tampered_copy(sealed, folder / "sealed", f"UPDATE raw.run SET command = '{quoted}', host = '{quoted}'",
-                  f"UPDATE raw.episode_end SET outcome = '{quoted}'")
+                  f"UPDATE raw.episode_end SET outcome = '{quoted}'",
+                  f"UPDATE raw.rules SET name = '{MARKUP}' || name || '{quoted}'")
     shutil.rmtree(sealed)
+    doc = json.loads((folder / "sealed" / "meta.json").read_text())
+    doc.update(command=PAYLOAD, host=PAYLOAD)
+    (folder / "sealed" / "meta.json").write_text(json.dumps(doc))
     return folder
 
 
@@ -132,3 +138,28 @@ def test_an_error_quoting_a_runs_string_is_escaped(planted: Path) -> None:
     assert done.returncode == 1 and len(done.stderr.strip().splitlines()) == 1, done.stderr
     assert_no_raw_controls(done.stderr)
     assert "\\x1b]0;owned" in done.stderr
+
+
+def test_the_tui_shows_a_runs_strings_escaped_and_never_as_markup(planted: Path) -> None:
+    """The run's command in the title, its outcomes in Episodes and its rule names in Rules: shown as
+    text (escapes written out, markup as its characters), never sent to the terminal raw."""
+    from tui_helpers import LazyTable, episodes_ready, loaded, run_app, shown_once
+
+    async def body(app: Any, pilot: Any) -> None:
+        await episodes_ready(app, pilot)
+        screens = [await shown_once(app, pilot, lambda text: "owned" in text)]
+        await pilot.press("4")
+        await wait_until(pilot, lambda: app.screen.panes["rules"].is_attached)
+        table = app.screen.panes["rules"].query_one(LazyTable)
+        await wait_until(pilot, lambda: loaded(table) and table.count > 0)
+        screens.append(await shown_once(app, pilot, lambda text: "[bold]" in text))
+        for text in screens:
+            assert_no_raw_controls(text)
+            assert "\\x1b]0;owned" in text, text
+        assert "[bold]B[/bold]" in screens[1], screens[1]
+    run_app([planted / "sealed"], body, size=(160, 40))
+
+
+async def wait_until(pilot: Any, done: Any) -> None:
+    from tui_helpers import wait_for
+    await wait_for(pilot, done, timeout=120)
