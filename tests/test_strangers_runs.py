@@ -163,3 +163,45 @@ def test_the_tui_shows_a_runs_strings_escaped_and_never_as_markup(planted: Path)
 async def wait_until(pilot: Any, done: Any) -> None:
     from tui_helpers import wait_for
     await wait_for(pilot, done, timeout=120)
+
+
+# ---- a reasoning run from a stranger, replayed -----------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def reasoning(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """test_replay_graph's run (a graph with positions, infected spreading along links), sealed."""
+    from test_replay_graph import record
+    run = record(tmp_path_factory.mktemp("reasoning"), positions=True)
+    seal_run(run)
+    return run
+
+
+def test_the_replays_text_holds_no_raw_control_characters(reasoning: Path, tmp_path: Path) -> None:
+    """Rule and node names planted with escapes: the rule log (text and level) and the why documents
+    of the recording hold them escaped."""
+    from test_replay import read_rrd
+    quoted = PAYLOAD.replace("'", "''")
+    run = tampered_copy(reasoning, tmp_path / "run", f"UPDATE raw.rules SET name = name || '{quoted}'",
+                        f"UPDATE raw.nodes SET name = name || '{quoted}' WHERE name <> 'd'")
+    assert main(["replay", str(run), "--save", str(tmp_path / "r.rrd"), "--why", "infected(d)"]) == 0
+    (recording,) = read_rrd(tmp_path / "r.rrd").values()
+    texts = [*(r["TextLog:text"][0] + r["TextLog:level"][0] for r in recording["/rules/log"]),
+             *(r["TextDocument:text"][0] for r in recording["/why"])]
+    assert texts and any("\\x1b]0;owned" in t for t in texts)
+    for text in texts:
+        assert_no_raw_controls(text)
+
+
+@pytest.mark.parametrize("tamper", [
+    "UPDATE raw.edges SET source = 1000 WHERE source = 0",
+    "UPDATE raw.edges SET target = -5",
+    "UPDATE raw.atoms SET arg0 = 777 WHERE arg1 < 0 AND arg0 >= 0",   # a node's x/y, colour atoms
+    "UPDATE raw.atoms SET arg1 = 99 WHERE arg1 >= 0",                 # the edges drawn from binary atoms
+], ids=["edge-source", "edge-target", "unary-atom-node", "binary-atom-node"])
+def test_a_replay_of_node_ids_out_of_range_is_one_line(reasoning: Path, tmp_path: Path, tamper: str,
+                                                        capsys: pytest.CaptureFixture) -> None:
+    run = tampered_copy(reasoning, tmp_path / "run", tamper)
+    assert main(["replay", str(run), "--save", str(tmp_path / "r.rrd")]) == 1
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+    assert "out of range" in err
