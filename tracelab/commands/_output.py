@@ -23,7 +23,7 @@ FORMATS = ("table", "csv", "json", "parquet")
 
 
 class EscapingStream:
-    """A text stream that writes to `raw` with every control character but newline and tab escaped
+    """A text stream that writes to `raw` with every control character but newline, tab (and CRLF) escaped
     (engine.terminal_text.printable): a run's strings (its command, rule names, atoms, outcomes) reach
     the terminal as text, never as escape sequences. Everything else is the raw stream's."""
 
@@ -31,7 +31,8 @@ class EscapingStream:
         self.raw = raw
 
     def write(self, text: str) -> int:
-        self.raw.write(printable(text, keep="\n\t"))
+        # CSV ends its lines with \r\n: kept as a pair (a lone \r, which rewrites a line, is escaped)
+        self.raw.write("\r\n".join(printable(part, keep="\n\t") for part in text.split("\r\n")))
         return len(text)
 
     def writelines(self, lines: Iterable[str]) -> None:
