@@ -205,3 +205,36 @@ def test_a_replay_of_node_ids_out_of_range_is_one_line(reasoning: Path, tmp_path
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
     assert "out of range" in err
+
+
+# ---- 43.1: nothing a command writes into a run goes through a link -------------------------------------
+
+def tree_digest(folder: Path) -> dict[str, str]:
+    import hashlib
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else "dir"
+            for p in sorted(folder.rglob("*"))}
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from train_helpers import tiny_training_run
+    return tiny_training_run(tmp_path_factory.mktemp("trained") / "run")
+
+
+@pytest.mark.parametrize("linked", ["policy", "policy-best", "checkpoint"])
+def test_train_resume_never_writes_through_a_link_in_the_run(trained: Path, tmp_path: Path, linked: str,
+                                                            capsys: pytest.CaptureFixture) -> None:
+    """RUN/policy (policy-best, checkpoint) a link to a folder outside the run: the resume refuses it in
+    one line and the folder it leads to is as it was."""
+    run = shutil.copytree(trained, tmp_path / "run")
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (outside / "keep.txt").write_text("mine\n")
+    shutil.rmtree(run / linked)
+    (run / linked).symlink_to(outside, target_is_directory=True)
+    before = tree_digest(outside)
+    status = main(["train", "--resume", str(run), "--steps", "400"])
+    err = capsys.readouterr().err
+    assert tree_digest(outside) == before
+    errors = [line for line in err.splitlines() if line.startswith("tracelab: error:")]
+    assert status == 1 and len(errors) == 1 and "symbolic link" in errors[0] and "Traceback" not in err, err
