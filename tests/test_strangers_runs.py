@@ -238,3 +238,19 @@ def test_train_resume_never_writes_through_a_link_in_the_run(trained: Path, tmp_
     assert tree_digest(outside) == before
     errors = [line for line in err.splitlines() if line.startswith("tracelab: error:")]
     assert status == 1 and len(errors) == 1 and "symbolic link" in errors[0] and "Traceback" not in err, err
+
+
+# ---- 43.5: a closing hint never fails a command that did its job ----------------------------------------
+
+def test_play_env_succeeds_when_its_hint_query_runs_out_of_memory(tmp_path: Path) -> None:
+    """A query memory too small for the hints' reads (what a 4M-grounding run meets at the defaults):
+    the run is written, the command exits 0 and says what to open."""
+    import os
+    run = tmp_path / "run"
+    done = subprocess.run([*TRACELAB, "play", "--env", "tracelab/FrozenLake-v1", "--env-arg", "map_name=8x8",
+                           "--env-arg", "is_slippery=false", "--episodes", "12", "--seed", "2", "--run", str(run)],
+                          capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "TRACELAB_QUERY_MEMORY": "4M"})
+    assert done.returncode == 0 and "error" not in done.stderr, done.stderr
+    assert f"run written to {run}/" in done.stdout and f"tracelab tui {run}" in done.stdout
+    assert json.loads((run / "meta.json").read_text())["status"] == "finished"
