@@ -254,3 +254,37 @@ def test_play_env_succeeds_when_its_hint_query_runs_out_of_memory(tmp_path: Path
     assert done.returncode == 0 and "error" not in done.stderr, done.stderr
     assert f"run written to {run}/" in done.stdout and f"tracelab tui {run}" in done.stdout
     assert json.loads((run / "meta.json").read_text())["status"] == "finished"
+
+
+# ---- 43.6: a repair is all or nothing ---------------------------------------------------------------------
+
+# `tracelab check --repair RUN` with files limited to a few bytes (RLIMIT_FSIZE: writing past it fails with
+# EFBIG once SIGXFSZ is ignored), as a full disk fails the repair's writes: a real error of the real code
+REPAIR_WITHOUT_ROOM = """
+import resource, signal, sys
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+resource.setrlimit(resource.RLIMIT_FSIZE, (64, 64))
+from tracelab.cli import main
+sys.exit(main(["check", "--repair", sys.argv[1]]))
+"""
+
+
+@pytest.mark.parametrize("damaged", ["changes", "edges"])  # edges: its only part, so an empty one is written
+def test_a_repair_that_cannot_write_leaves_the_run_as_it_was(walk: Path, tmp_path: Path, damaged: str,
+                                                             capsys: pytest.CaptureFixture) -> None:
+    import sys
+    run = shutil.copytree(walk, tmp_path / "run")
+    part = sorted((run / "parts" / damaged).glob("*.parquet"))[-1]
+    part.write_bytes(part.read_bytes()[: len(part.read_bytes()) // 2])   # torn: its footer is gone
+    before = tree_digest(run)
+    done = subprocess.run([sys.executable, "-c", REPAIR_WITHOUT_ROOM, str(run)], capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 1 and len(done.stderr.strip().splitlines()) == 1, done.stderr
+    assert "repair not made" in done.stderr
+    assert {k: v for k, v in tree_digest(run).items() if k != "writer.lock"} == \
+        {k: v for k, v in before.items() if k != "writer.lock"}
+    assert main(["check", "--repair", str(run)]) == 0    # room again: the repair is made
+    assert (run / "quarantine" / damaged / part.name).is_file() and not part.exists()
+    assert main(["check", str(run)]) == 0
+    capsys.readouterr()
+    assert json_rows(["sql", str(run), "SELECT count(*) AS n FROM episodes"], capsys) == [{"n": 3}]
