@@ -125,7 +125,7 @@ def tracelab(*argv: str) -> subprocess.CompletedProcess[str]:
     ["sql", "{planted}/sealed", "SELECT outcome FROM episodes"],
     ["sql", "{planted}/sealed", "SELECT command FROM run", "--format", "csv"],
     ["runs", "{planted}"],
-], ids=lambda a: "-".join(a)[10:50])
+], ids=["show-live", "show-json-sealed", "sql-command-live", "sql-outcome-sealed", "sql-csv-sealed", "runs"])
 def test_the_cli_prints_a_runs_strings_escaped(planted: Path, argv: list[str]) -> None:
     done = tracelab(*(a.format(planted=planted) for a in argv))
     assert done.returncode == 0, done.stderr
