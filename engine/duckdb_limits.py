@@ -62,3 +62,13 @@ def query_memory() -> QueryMemory:
         free = 0  # no temp folder: no spilling (tracelab/store/sandbox.py, _spill_directory)
     threads = max(1, min(os.cpu_count() or 1, memory // BYTES_PER_THREAD))
     return QueryMemory(memory, max(1, min(SPILL_FACTOR * memory, free // 2)), threads, source)
+
+
+_GLOB_CHARACTERS = "*?["
+
+
+def exact_file(path: str | os.PathLike[str]) -> str:
+    """`path` as DuckDB's read_parquet/read_csv take it to name that one file: they expand `*`, `?` and
+    `[..]` anywhere in a path (a run folder named `r*` once read the parts of every run beside it), so
+    each such character is written as a one-character class (`[*]`), which matches only itself."""
+    return "".join(f"[{c}]" if c in _GLOB_CHARACTERS else c for c in os.fspath(path))

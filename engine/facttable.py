@@ -18,7 +18,7 @@ import numpy as np
 from .errors import ProgramCheckError
 from .graph import Graph
 from .program import MAX_TIME, unwritable_constant
-from .duckdb_limits import QUERY_MEMORY_ENV, query_memory
+from .duckdb_limits import QUERY_MEMORY_ENV, exact_file, query_memory
 from .safe_files import check_regular, human_bytes
 
 _CONST = r"""("[^"]*"|'[^']*'|[A-Za-z0-9_-]+)"""
@@ -39,6 +39,7 @@ def load_fact_table(path: str | os.PathLike[str]) -> Graph:
         raise ProgramCheckError("no such fact table", file)
     check_regular(file)  # DuckDB would wait on a FIFO forever
     full = os.path.abspath(file)
+    named = exact_file(full)  # read_csv/read_parquet would expand a `*` or `[` in the path
     # this connection may read that one file and nothing else, never installs or loads extensions, and is
     # bounded in memory and threads as a query on a run is; it never spills (an in-memory database would
     # spill into the working folder's .tmp/): a table too big for the limit is refused in one line
@@ -48,14 +49,14 @@ def load_fact_table(path: str | os.PathLike[str]) -> Graph:
                                               "memory_limit": f"{limits.memory}B", "threads": limits.threads,
                                               "temp_directory": ""})
     try:
-        con.execute("SET allowed_paths = ?", [[full]])
+        con.execute("SET allowed_paths = ?", [[full, named]])
         con.execute("SET enable_external_access = false")
         con.execute("SET enable_progress_bar = false")
         con.execute("SET lock_configuration = true")
         # CSV: a header row, comma-separated, "-quoted ("" inside quotes)
         source = "read_parquet(?)" if file.lower().endswith((".parquet", ".pq")) else \
             "read_csv(?, header = true, delim = ',', quote = '\"', escape = '\"')"
-        columns = {c[0].lower(): c[0] for c in con.execute(f"DESCRIBE SELECT * FROM {source}", [full]).fetchall()}
+        columns = {c[0].lower(): c[0] for c in con.execute(f"DESCRIBE SELECT * FROM {source}", [named]).fetchall()}
         if "atom" not in columns:
             raise ProgramCheckError(f"a fact table needs an 'atom' column (found: {', '.join(columns)})", file)
         cols = {name: f'"{columns[name]}"' if name in columns else default for name, default in _OPTIONAL.items()}
@@ -68,7 +69,7 @@ def load_fact_table(path: str | os.PathLike[str]) -> Graph:
                          CAST({cols['lower']} AS DOUBLE) AS lower, CAST({cols['upper']} AS DOUBLE) AS upper,
                          CAST({cols['start']} AS BIGINT) AS start, CAST({cols['end']} AS BIGINT) AS "end",
                          CAST({cols['static']} AS BOOLEAN) AS static, CAST({cols['episode']} AS BIGINT) AS episode
-                  FROM {source})""", [_ATOM_RE, full])
+                  FROM {source})""", [_ATOM_RE, named])
         _check_rows(con, file)
         con.execute(f"""
             CREATE TEMP TABLE ids AS SELECT name, row_number() OVER (ORDER BY min(place)) - 1 AS id

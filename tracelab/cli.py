@@ -3,6 +3,9 @@
 The `tracelab` command. Each subcommand lives in its own module under tracelab/commands/ and exposes
 `register(subparsers)`; modules are imported lazily so that `tracelab --help` stays fast (no torch).
 
+Output: everything a command prints goes through commands._output.escaped_output (control characters
+escaped: a run's strings never reach the terminal as escape sequences).
+
 Errors: commands raise, main() reports. A user error (tracelab.errors.user_error_message) is one line
 `tracelab: error: ...` on stderr and exit status 1; a usage error is argparse's message and status 2; a
 closed pipe (`tracelab trace ... | head`) ends quietly; anything else is a bug and keeps its traceback."""
@@ -16,6 +19,7 @@ import sys
 from tracelab import __version__
 from tracelab.commands._args import grounding_limit_of
 from tracelab.commands._notices import showing_library_notices
+from tracelab.commands._output import escaped_output
 from tracelab.engine.errors import is_interrupt
 from tracelab.errors import user_error_message
 
@@ -69,6 +73,11 @@ def _silence_stdout() -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    with escaped_output():  # strings from runs, specs and rule files reach the terminal escaped
+        return _main(argv)
+
+
+def _main(argv: list[str] | None) -> int:
     parser = build_parser()
     args, unknown = parser.parse_known_args(argv)  # usage errors: argparse prints them and exits 2
     if unknown:

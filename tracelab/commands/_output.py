@@ -1,5 +1,6 @@
-"""Shared by the commands that print query results: the --format/--output/--limit options, writing an
-Arrow table as an aligned text table, CSV, JSON or Parquet."""
+"""Shared by the commands that print: the terminal's escaping of everything a command writes to stdout
+and stderr (`escaped_output`), the --format/--output/--limit options, writing an Arrow table as an
+aligned text table, CSV, JSON or Parquet."""
 from __future__ import annotations
 
 import argparse
@@ -8,15 +9,56 @@ import json
 import math
 import sys
 from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any, TextIO
 
 from tracelab.commands._args import non_negative_int
+from tracelab.engine.terminal_text import printable
 from tracelab.errors import UserError
 
 if TYPE_CHECKING:  # imported where used, so that `tracelab --help` stays fast
     import pyarrow as pa
 
 FORMATS = ("table", "csv", "json", "parquet")
+
+
+class EscapingStream:
+    """A text stream that writes to `raw` with every control character but newline, tab (and CRLF) escaped
+    (engine.terminal_text.printable): a run's strings (its command, rule names, atoms, outcomes) reach
+    the terminal as text, never as escape sequences. Everything else is the raw stream's."""
+
+    def __init__(self, raw: TextIO) -> None:
+        self.raw = raw
+
+    def write(self, text: str) -> int:
+        # CSV ends its lines with \r\n: kept as a pair (a lone \r, which rewrites a line, is escaped)
+        self.raw.write("\r\n".join(printable(part, keep="\n\t") for part in text.split("\r\n")))
+        return len(text)
+
+    def writelines(self, lines: Iterable[str]) -> None:
+        for line in lines:
+            self.write(line)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.raw, name)
+
+
+def raw_stream(stream: TextIO) -> TextIO:
+    """The stream under an EscapingStream: for output that draws with escape sequences of its own
+    (the progress bars), from our own strings."""
+    return stream.raw if isinstance(stream, EscapingStream) else stream
+
+
+@contextmanager
+def escaped_output() -> Iterator[None]:
+    """Inside: everything printed to stdout and stderr goes through an EscapingStream. Output written
+    to a file (--output) is data and is written as it is."""
+    saved = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = EscapingStream(sys.stdout), EscapingStream(sys.stderr)  # type: ignore[assignment]
+    try:
+        yield
+    finally:
+        sys.stdout, sys.stderr = saved
 
 
 def add_format_options(p: argparse.ArgumentParser) -> None:

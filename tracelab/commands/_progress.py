@@ -18,6 +18,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager, nullcontext
 from typing import Any
 
+from tracelab.commands._output import raw_stream
+
 # the numba kernels whose first call compiles the engine (the counting kernel serves every program, the
 # lanes kernel batches of 64 worlds or more), the trace taker of a recorder with an episode clock (a simulator's,
 # a declared env's recording; not `reason`: a notice about it would show on every reasoning), and those the rule
@@ -95,7 +97,7 @@ def progress(description: str, total: int | None, unit: str | None = "steps") ->
     columns = [TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                *([RateColumn()] if unit else []), TimeElapsedColumn(), TextColumn("eta"),
                TimeRemainingColumn(), TextColumn("{task.fields[figures]}")]
-    with RichProgress(*columns, console=Console(file=sys.stderr), transient=True) as bar:
+    with RichProgress(*columns, console=Console(file=raw_stream(sys.stderr)), transient=True) as bar:
         task = bar.add_task(description, total=total, figures="")
         yield Progress(bar, task)
 
@@ -112,7 +114,7 @@ def working(description: str, refresh_per_second: float = 10) -> Iterator[Progre
     from rich.progress import Progress as RichProgress
     from rich.progress import SpinnerColumn, TextColumn, TimeElapsedColumn
     with RichProgress(SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(),
-                      TextColumn("{task.fields[figures]}"), console=Console(file=sys.stderr),
+                      TextColumn("{task.fields[figures]}"), console=Console(file=raw_stream(sys.stderr)),
                       transient=True, refresh_per_second=refresh_per_second) as bar:
         yield Progress(bar, bar.add_task(description, total=None, figures=""))
 

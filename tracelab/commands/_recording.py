@@ -1,15 +1,36 @@
 """The end of a play recorded into a run (`tracelab play`, `tracelab play --env`): a failure closes the run
 as "failed"; Ctrl-C or SIGTERM closes it as "interrupted" and ends the command with one line saying what
-the run keeps (tracelab.cli.main prints a KeyboardInterrupt's message)."""
+the run keeps (tracelab.cli.main prints a KeyboardInterrupt's message). And the closing hints' reads of
+the run written (`read_for_hints`), which never fail the command."""
 from __future__ import annotations
 
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from tracelab.engine.errors import is_interrupt
+
+T = TypeVar("T")
+
+
+def read_for_hints(run_dir: Path, read: Callable[[Any], T]) -> T | None:
+    """`read(con)` on the run just written, for the "what to open" hints printed after it; None if the
+    run cannot be opened or the read fails (a big run past the query memory, say): the command did its
+    job, and a hint is not worth failing it. Hints read the raw tables they need, not the joined views."""
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
+    from tracelab.store import open_run
+    try:
+        con = open_run(run_dir)
+    except Exception:  # whatever the store or DuckDB raise: the run is written, the hint is optional
+        return None
+    try:
+        return read(con)
+    except Exception:
+        return None
+    finally:
+        con.close()
 
 
 @contextmanager

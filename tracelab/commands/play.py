@@ -18,7 +18,7 @@ from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, non_nega
 from tracelab.commands._interrupt import CtrlCBetweenSteps
 from tracelab.commands._notices import say_running_compiles
 from tracelab.commands._progress import compiling_engine, progress
-from tracelab.commands._recording import recording_into
+from tracelab.commands._recording import read_for_hints, recording_into
 from tracelab.commands.play_env import run_env
 from tracelab.errors import UserError, store_errors
 
@@ -168,15 +168,11 @@ def _summary(stats: dict) -> None:
 
 
 def _what_to_open(run_dir: Path) -> None:
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store import open_run
-
-    con = open_run(run_dir)
     ep = 0
-    row = con.execute(
-        "SELECT atom, t FROM changes WHERE episode = ? AND label = 'atLoc' AND atom LIKE 'atLoc(red-agent-1,%' "
-        "AND new_lower = 1 ORDER BY t DESC LIMIT 1", [ep]).fetchone()
-    con.close()
+    row = read_for_hints(run_dir, lambda con: con.execute(
+        "SELECT a.text, c.t FROM raw.changes c JOIN (SELECT atom, text FROM atoms WHERE label = 'atLoc' AND "
+        "text LIKE 'atLoc(red-agent-1,%') a ON a.atom = c.atom WHERE c.episode = ? AND c.new_lower = 1 "
+        "ORDER BY c.t DESC LIMIT 1", [ep]).fetchone())
     run = shlex.quote(str(run_dir))
     print(f"\nrun written to {run_dir}/  — what to open:")
     print(f"  tracelab trace {run} --episode {ep} --from 1 --to 4        # the trace table (the map, t=0, hidden)")

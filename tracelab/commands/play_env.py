@@ -15,7 +15,7 @@ import numpy as np
 
 from tracelab.commands._interrupt import CtrlCBetweenSteps
 from tracelab.commands._progress import compiling_engine, progress
-from tracelab.commands._recording import recording_into
+from tracelab.commands._recording import read_for_hints, recording_into
 from tracelab.engine.errors import is_interrupt
 from tracelab.errors import UserError, store_errors
 
@@ -126,20 +126,15 @@ def _summary(source: Any, stats: dict[str, Any]) -> None:
 
 
 def _what_to_open_env(run_dir: Path, spec: Any) -> None:
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store import open_run
-
-    con = open_run(run_dir)
-    try:
-        best = con.execute("SELECT episode, t_end FROM episodes WHERE ended ORDER BY reward DESC, steps, episode "
-                           "LIMIT 1").fetchone()
-        row = None
-        if best is not None and spec.reward_table[0]:
-            names = [str(a) for a, _ in spec.reward_table[0]]
-            row = con.execute("SELECT atom, t FROM changes WHERE episode = ? AND atom IN (SELECT unnest(?)) "
-                              "AND new_lower = 1 ORDER BY t DESC LIMIT 1", [best[0], names]).fetchone()
-    finally:
-        con.close()
+    names = [str(a) for a, _ in spec.reward_table[0]]
+    best = read_for_hints(run_dir, lambda con: con.execute(
+        "SELECT episode, t_end FROM raw.episode_end ORDER BY reward DESC, steps, episode LIMIT 1").fetchone())
+    row = None
+    if best is not None and names:
+        row = read_for_hints(run_dir, lambda con: con.execute(
+            "SELECT a.text, c.t FROM raw.changes c JOIN (SELECT atom, text FROM atoms WHERE text IN "
+            "(SELECT unnest(?))) a ON a.atom = c.atom WHERE c.episode = ? AND c.new_lower = 1 "
+            "ORDER BY c.t DESC LIMIT 1", [names, best[0]]).fetchone())
     run = shlex.quote(str(run_dir))
     ep, last = best if best else (0, 1)
     print(f"\nrun written to {run_dir}/  — what to open:")

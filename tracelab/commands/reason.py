@@ -16,6 +16,7 @@ import numpy as np
 
 from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, positive_int
 from tracelab.commands._progress import compiling_engine
+from tracelab.commands._recording import read_for_hints
 from tracelab.engine.errors import is_interrupt
 from tracelab.engine.program import constant_text
 from tracelab.errors import UserError, store_errors
@@ -256,16 +257,10 @@ def _print_answers(args: argparse.Namespace, answers: list[dict[str, Any]]) -> N
 
 def _what_to_open(run_dir: Path, episode: int) -> None:
     """Commands to read the run, with an atom the reasoning set true last as the example."""
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store import open_run
-
-    con = open_run(run_dir)
-    try:
-        row = con.execute("SELECT a.label, a.arg0, a.arg1, c.t FROM changes c JOIN atoms a ON a.atom = c.atom_id "
-                          "WHERE c.episode = ? AND c.cause_kind = 2 AND c.new_lower = 1 ORDER BY c.seq DESC LIMIT 1",
-                          [episode]).fetchall()
-    finally:
-        con.close()
+    row = read_for_hints(run_dir, lambda con: con.execute(
+        "SELECT a.label, a.arg0, a.arg1, c.t FROM raw.changes c JOIN atoms a ON a.atom = c.atom "
+        "WHERE c.episode = ? AND c.cause_kind = 2 AND c.new_lower = 1 ORDER BY c.seq DESC LIMIT 1",
+        [episode]).fetchall())
     run = shlex.quote(str(run_dir))
     hints = [(f"tracelab trace {run} --episode {episode} --limit 20", "the trace table")]
     if row:

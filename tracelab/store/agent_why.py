@@ -8,6 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from tracelab.engine.terminal_text import printable
 from tracelab.store.reader import RunConnection
 
 
@@ -91,9 +92,9 @@ def _no_decision(con: RunConnection, episode: int, agent: str, step: int) -> str
     if not have[0]:
         return f"episode {episode} records no decisions"
     if agent not in have[3]:
-        agents = ", ".join(map(shown, have[3]))
-        return f"no decisions of agent {shown(agent)} in episode {episode}; its agents: {agents}"
-    return (f"no decision of {shown(agent)} at step {step} of episode {episode} "
+        agents = ", ".join(map(printable, have[3]))
+        return f"no decisions of agent {printable(agent)} in episode {episode}; its agents: {agents}"
+    return (f"no decision of {printable(agent)} at step {step} of episode {episode} "
             f"(it decided at steps {have[1]}..{have[2]})")
 
 
@@ -140,24 +141,19 @@ def why_not_action(e: ActionExplanation, name: str) -> WhyNotAction:
     """Why `name` was not taken at e's step: the mask refused it, or its value fell short by `gap`."""
     match = [a for a in e.ranked if a.name == name]
     if not match:
-        raise KeyError(f"no action {shown(name)}: the actions are {', '.join(shown(a.name) for a in e.ranked)}")
+        raise KeyError(f"no action {printable(name)}: the actions are {', '.join(printable(a.name) for a in e.ranked)}")
     a = match[0]
     return WhyNotAction(e, name, not a.allowed, e.chosen.value - a.value)
 
 
 # ---- text ----
 
-def shown(text: str) -> str:
-    """A string from a run as a terminal may show it: control characters escaped."""
-    return text if text.isprintable() else repr(text)[1:-1]
-
-
 def render_action(e: ActionExplanation, run: str = "RUN") -> str:
     what = "Q-value" if e.output == "q" else "logit"
     how = (f"explored (ε = {e.epsilon:g}): a random action, not the policy's choice" if e.explored
            else "greedy" + (f" (ε = {e.epsilon:g})" if e.epsilon else ""))
     margin = e.margin
-    lines = [f"{shown(e.agent)} at step {e.step} of episode {e.episode}: {shown(e.action)}, {how}",
+    lines = [f"{printable(e.agent)} at step {e.step} of episode {e.episode}: {printable(e.action)}, {how}",
              f"  {what} {e.chosen.value:.4g}" + ("" if margin is None else
                                                 f", {margin:+.4g} over the next allowed action")
              + ("" if e.state_value is None else f"; state value {e.state_value:.4g}")]
@@ -165,32 +161,33 @@ def render_action(e: ActionExplanation, run: str = "RUN") -> str:
     for a in e.ranked:
         mark = "->" if a.name == e.action else "  "
         gap = "" if a.name == e.action else f"  ({a.value - e.chosen.value:+.4g})"
-        lines.append(f"  {mark} {shown(a.name):<14} {a.value:>10.4g}{gap}{'' if a.allowed else '  masked'}")
+        lines.append(f"  {mark} {printable(a.name):<14} {a.value:>10.4g}{gap}{'' if a.allowed else '  masked'}")
     if e.observed_at is None:
         lines.append("observation: the episode's start (not recorded)")
     else:
         lines.append(f"observation (recorded after step {e.observed_at}):")
         for f in e.features:
-            lines.append(f"  {shown(f.name)} = {shown(f.value)}")
+            lines.append(f"  {printable(f.name)} = {printable(f.value)}")
         atoms = [f.atom for f in e.features if f.atom is not None]
         if atoms:
-            lines.append(f"  why an atom held: tracelab why {run} '{shown(atoms[0])}' --episode {e.episode} "
+            lines.append(f"  why an atom held: tracelab why {run} '{printable(atoms[0])}' --episode {e.episode} "
                          f"--at {e.observed_at}")
     if e.reward is not None:
-        terms = ", ".join(f"{shown(t)} {v:+g}" for t, v in e.terms) or "no term"
+        terms = ", ".join(f"{printable(t)} {v:+g}" for t, v in e.terms) or "no term"
         lines.append(f"reward {e.reward:+g}: {terms}")
     return "\n".join(lines)
 
 
 def render_why_not_action(w: WhyNotAction) -> str:
     e = w.explanation
-    head = f"{shown(e.agent)} at step {e.step} of episode {e.episode} took {shown(e.action)}, not {shown(w.name)}"
+    head = (f"{printable(e.agent)} at step {e.step} of episode {e.episode} took {printable(e.action)}, "
+            f"not {printable(w.name)}")
     if w.name == e.action:
-        return f"{shown(e.agent)} did take {shown(w.name)} at step {e.step} of episode {e.episode}"
+        return f"{printable(e.agent)} did take {printable(w.name)} at step {e.step} of episode {e.episode}"
     if w.masked:
-        return f"{head}: the action mask did not allow {shown(w.name)}"
+        return f"{head}: the action mask did not allow {printable(w.name)}"
     if e.explored:
         return f"{head}: the action was explored (a random one, ε = {e.epsilon:g}), not chosen by value"
     value = next(a.value for a in e.ranked if a.name == w.name)
-    return (f"{head}: its value {value:.4g} is {w.gap:.4g} below {shown(e.action)}'s {e.chosen.value:.4g}"
+    return (f"{head}: its value {value:.4g} is {w.gap:.4g} below {printable(e.action)}'s {e.chosen.value:.4g}"
             f" (rank {[a.name for a in e.ranked].index(w.name) + 1} of {len(e.ranked)})")

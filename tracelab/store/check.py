@@ -153,19 +153,35 @@ def check_run(run: str | Path, *, repair: bool = False) -> CheckReport:
     with open_writer_lock(run_dir) as lock:
         take_writer_lock(run_dir, lock, doc, "repairing it")
         keep = _check_parts(run_dir, report)
-        # every target checked (no link on the way out of the run) before anything moves
-        targets = [layout.run_path(run_dir, layout.QUARANTINE, part.table, part.path.name)
-                   for part in report.damaged]
-        for part, target in zip(report.damaged, targets):
-            layout.make_run_dirs(run_dir, layout.QUARANTINE, part.table)
-            if os.path.lexists(run_dir / part.path):
-                os.replace(run_dir / part.path, target)
-            report.quarantined.append(target.relative_to(run_dir))
         if report.damaged:
-            for table, entries in keep.items():
-                if not entries:  # every table keeps one file that carries its schema
-                    entries.append(write_empty_part(run_dir, table))
-            write_manifest_lists(run_dir, keep, manifest_flushes(run_dir))
+            _repair(run_dir, report, keep)
         report.temps = layout.remove_stale_temps(run_dir)
         report.unlisted_bytes = remove_unlisted(run_dir)
     return report
+
+
+def _repair(run_dir: Path, report: CheckReport, keep: dict[str, list[str]]) -> None:
+    """All or nothing: the new files (empty parts, the manifest without the damaged parts) are written
+    first, and a failure there (a full disk) removes what it wrote and leaves the run as it was; only
+    then are the damaged parts, no longer listed, moved to the quarantine (renames, which need no
+    space: should one fail, the run reads without that part all the same)."""
+    # every target checked (no link on the way out of the run) before anything is written or moved
+    targets = [layout.run_path(run_dir, layout.QUARANTINE, part.table, part.path.name)
+               for part in report.damaged]
+    written: list[Path] = []
+    try:
+        for table, entries in keep.items():
+            if not entries:  # every table keeps one file that carries its schema
+                entries.append(write_empty_part(run_dir, table))
+                written.append(layout.run_path(run_dir, layout.PARTS, *entries[-1].split("/")))
+        write_manifest_lists(run_dir, keep, manifest_flushes(run_dir))
+    except OSError as e:
+        for path in written:
+            path.unlink(missing_ok=True)
+        raise RuntimeError(f"{run_dir}: repair not made, the run is as it was: {e.strerror or e} "
+                           f"({e.filename or 'writing the manifest'})") from e
+    for part, target in zip(report.damaged, targets):
+        layout.make_run_dirs(run_dir, layout.QUARANTINE, part.table)
+        if os.path.lexists(run_dir / part.path):
+            os.replace(run_dir / part.path, target)
+        report.quarantined.append(target.relative_to(run_dir))

@@ -30,6 +30,7 @@ from typing import Any, TypeVar
 import duckdb
 import pyarrow as pa
 
+from tracelab.engine.duckdb_limits import exact_file
 from tracelab.engine.safe_files import JSON_CAP, check_regular, read_bytes
 from tracelab.store import layout
 from tracelab.store.meta import current_meta, meta_table
@@ -151,7 +152,7 @@ class LiveParts:
         if raw != self._seen:
             for table, files in read_manifest(self.run_dir).items():
                 self.con.execute(f"SET VARIABLE {_parts_variable(table, self.prefix)} = ?",
-                                 [[str(f) for f in files]])
+                                 [[exact_file(f) for f in files]])
             self._seen = raw
         if self._status in (None, "running"):
             doc = current_meta(self.run_dir)

@@ -35,6 +35,7 @@ from tracelab.engine.duckdb_limits import (
     GIB,
     QUERY_MEMORY_ENV,
     SandboxSettingError,
+    exact_file,
     query_memory,
 )
 from tracelab.engine.safe_files import human_bytes
@@ -121,9 +122,12 @@ def _sql_list(items: Sequence[str]) -> str:
 
 def lock_down(con: duckdb.DuckDBPyConnection, allowed_directories: Sequence[str] = ()) -> None:
     """Switch external access off, except for reading under `allowed_directories` (absolute paths ending
-    in '/')."""
+    in '/'). Each is allowed as written and as exact_file writes it: a run's files are named to DuckDB
+    that way (a folder `r*` as `r[*]`), and DuckDB checks the name it is given as well as the files it
+    finds, so a name can still reach only files under a directory as written."""
     if allowed_directories:
-        con.execute(f"SET allowed_directories = {_sql_list(allowed_directories)}")
+        allowed = list(dict.fromkeys([*allowed_directories, *map(exact_file, allowed_directories)]))
+        con.execute(f"SET allowed_directories = {_sql_list(allowed)}")
     con.execute("SET enable_external_access = false")
 
 

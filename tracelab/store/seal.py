@@ -13,6 +13,7 @@ import shutil
 from collections.abc import Callable
 from pathlib import Path
 
+from tracelab.engine.duckdb_limits import exact_file
 from tracelab.engine.safe_files import check_regular
 from tracelab.store import layout
 from tracelab.store.meta import meta_table, now_iso, open_writer_lock, read_meta, take_writer_lock, write_meta
@@ -29,6 +30,9 @@ def seal_run(run: str | Path, *, keep_parts: bool = False,
     run_dir = resolve_run(run)
     if not run_dir.is_dir():
         raise ValueError(f"{str(run_dir)!r} is not a run directory (a lone .duckdb file is already sealed)")
+    if "?" in str(run_dir.resolve()):  # DuckDB 2.0 names the .wal of `a?b/run.duckdb` `a.wal?b/run.duckdb`
+        raise ValueError(f"{str(run_dir)!r}: DuckDB cannot build a database file in a path with '?'; seal a "
+                         "copy of the run in a folder without one (reading the run works as it is)")
     sealed = layout.sealed_path(run_dir)
     doc = read_meta(run_dir)
     with open_writer_lock(run_dir) as lock:
@@ -72,7 +76,7 @@ def _build(run_dir: Path, sealed: Path, parts: dict[str, list[Path]], doc: dict,
                     con.execute(f"CREATE TABLE raw.{t} AS {empty_sql(t)}")
                 else:
                     con.execute(f"CREATE TABLE raw.{t} AS SELECT * FROM read_parquet(?){order}",
-                                [[str(f) for f in parts[t]]])
+                                [[exact_file(f) for f in parts[t]]])
                 if on_table is not None:
                     on_table(t)
             _create_table(con, "raw.run", meta_table(doc, doc["status"]))

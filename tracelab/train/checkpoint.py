@@ -23,6 +23,7 @@ import numpy as np
 import torch
 
 from tracelab.engine.safe_files import FileRefused
+from tracelab.store import layout
 from tracelab.game.scenario import NOTHING, Scenario, scenario_from_dict
 from tracelab.train.memory import Limit, MemoryLimitExceeded, check_training_memory, memory_limit
 from tracelab.train.network import Shape, to_state_dict
@@ -58,13 +59,18 @@ def as_tensors(value: Any) -> Any:
 def save_checkpoint(tr: Any, run_dir: Path) -> Path:
     """Write the trainer's whole state (its parts', Trainer.state) with its config and scenario; returns
     the file."""
-    path = checkpoint_path(run_dir)
-    path.parent.mkdir(parents=True, exist_ok=True)
     state = {"format": FORMAT, "config": tr.cfg.to_dict(), "scenario_toml": tr.scenario.to_toml(),
              "run": str(run_dir), **tr.state()}
-    tmp = path.with_suffix(".tmp")
-    torch.save(as_tensors(state), tmp)
-    tmp.replace(path)
+    return write_checkpoint(run_dir, state)
+
+
+def write_checkpoint(run_dir: Path, state: dict[str, Any]) -> Path:
+    """RUN/checkpoint/checkpoint.pt, through the store's path resolver (as parts and meta.json are
+    written): created new under a temp name and renamed in, never through a link; returns the file."""
+    layout.make_run_dirs(run_dir, CHECKPOINT_DIR)
+    path = layout.run_path(run_dir, CHECKPOINT_DIR, CHECKPOINT_FILE)
+    with layout.new_file(path) as f:
+        torch.save(as_tensors(state), f)
     return path
 
 

@@ -28,9 +28,9 @@ from gymnasium.vector.utils import concatenate, create_empty_array
 from tracelab.engine.safe_files import FileRefused
 from tracelab.envs.declared.env_source import EnvSource, check_same_env, env_source_from_json
 from tracelab.errors import UserError
-from tracelab.train.checkpoint import (as_tensors, check_best, check_buffer_rows, checkpoint_config,
+from tracelab.train.checkpoint import (check_best, check_buffer_rows, checkpoint_config,
                                        checkpoint_file, checkpoint_path, episode_games_schema, in_range,
-                                       learner_schema, parts_schema, rng_state_schema)
+                                       learner_schema, parts_schema, rng_state_schema, write_checkpoint)
 from tracelab.train.config import config_schema
 from tracelab.train.env_source import ObservationEncoder, action_count
 from tracelab.train.memory import (Limit, MemoryLimitExceeded, check_estimate, env_training_estimate,
@@ -104,14 +104,9 @@ def replay_worlds(vector_env: Any, actions: np.ndarray, lengths: np.ndarray,
 def save_env_checkpoint(tr: Any, run_dir: Path) -> Path:
     """Write an EnvTrainer's whole state (its parts', EnvTrainer.state) with its config and env; returns
     the file."""
-    path = checkpoint_path(run_dir)
-    path.parent.mkdir(parents=True, exist_ok=True)
     state = {"format": ENV_FORMAT, "config": tr.cfg.to_dict(), "env": tr.source.to_json(), "run": str(run_dir),
              **tr.state()}
-    tmp = path.with_suffix(".tmp")
-    torch.save(as_tensors(state), tmp)
-    tmp.replace(path)
-    return path
+    return write_checkpoint(run_dir, state)
 
 
 def checkpoint_env(run: str | Path, max_bytes: int) -> tuple[dict[str, Any], EnvSource]:

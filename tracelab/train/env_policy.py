@@ -7,7 +7,6 @@ it was trained on (`env`: id or spec file and kwargs) and how observations are e
 `tracelab eval` plays it on that env and refuses another in one line."""
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,7 +19,7 @@ from tracelab.engine.safe_files import read_json
 from tracelab.store.agent_rows import PolicyOutput
 from tracelab.envs.declared.env_source import EnvSource, check_same_env, env_source_from_json
 from tracelab.train.env_source import ObservationEncoder
-from tracelab.train.policy import POLICY_JSON, POLICY_PT, _policy_dir, read_policy_networks, spec_net
+from tracelab.train.policy import POLICY_JSON, _policy_dir, read_policy_networks, spec_net, write_policy_files
 from tracelab.train.qnet import HiddenWidths, NumpyQ, QFunction
 from tracelab.train.experiments.stats import spread, wilson
 from tracelab.validation import Const, IntRange, ListOf, MapOf, OptionalKey, check_file
@@ -73,19 +72,11 @@ def one_env_actor(policy: Any, env: Any = None) -> Callable[[Any, dict[str, Any]
 def save_env_policy(path: str | Path, source: EnvSource, weights: dict[str, Any], network: dict[str, Any],
                     encoder: ObservationEncoder, action_names: list[str], mask: bool,
                     trained: dict[str, Any]) -> Path:
-    # deferred: torch, which reading a policy's spec does not need
-    import torch
-    out = Path(path)
-    out.mkdir(parents=True, exist_ok=True)
-    torch.save({"shared": {k: v.contiguous().clone() for k, v in weights.items()}}, out / (POLICY_PT + ".tmp"))
     spec = {"format": ENV_FORMAT, "env": source.to_json(),
             "observation": {"size": encoder.size, "encoding": encoder.describe()},
             "actions": {"names": action_names}, "network": network, "networks": {"shared": [0]},
             "mask": mask, "trained": trained}
-    (out / (POLICY_JSON + ".tmp")).write_text(json.dumps(spec, indent=1) + "\n")
-    (out / (POLICY_PT + ".tmp")).replace(out / POLICY_PT)
-    (out / (POLICY_JSON + ".tmp")).replace(out / POLICY_JSON)
-    return out
+    return write_policy_files(Path(path), {"shared": weights}, spec)
 
 
 ENV_SPEC_SCHEMA = {

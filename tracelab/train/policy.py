@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from tracelab.engine.safe_files import read_json
+from tracelab.store import layout
 from tracelab.game.scenario import ACTION_NAMES, NOTHING, Scenario, scenario_from_dict
 from tracelab.store.agent_rows import PolicyOutput
 from tracelab.train.memory import check_policy_memory, memory_limit
@@ -112,14 +113,8 @@ def save_policy(path: str | Path, scenario: Scenario, weights: dict[str, dict[st
     """Write policy.pt and policy.json into directory `path`. weights: network name -> its state dict;
     agents: network name -> red agent indices it plays; network: policy.json's description of the
     architecture (NetSpec.to_json, or a custom module's)."""
-    # deferred: torch, which reading a policy's spec does not need; the game's observation module loads numba
-    import torch
-
+    # deferred: the game's observation module loads numba, which reading a policy's spec does not need
     from tracelab.game.observe import observation_layout
-    out = Path(path)
-    out.mkdir(parents=True, exist_ok=True)
-    torch.save({name: {k: v.contiguous().clone() for k, v in sd.items()} for name, sd in weights.items()},
-               out / (POLICY_PT + ".tmp"))
     spec = {
         "format": FORMAT,
         "scenario": {"name": scenario.name, "toml": scenario.to_toml()},
@@ -131,9 +126,22 @@ def save_policy(path: str | Path, scenario: Scenario, weights: dict[str, dict[st
         "mask": mask,
         "trained": trained,
     }
-    (out / (POLICY_JSON + ".tmp")).write_text(json.dumps(spec, indent=1) + "\n")
-    (out / (POLICY_PT + ".tmp")).replace(out / POLICY_PT)  # the pair appears together enough for readers
-    (out / (POLICY_JSON + ".tmp")).replace(out / POLICY_JSON)
+    return write_policy_files(Path(path), weights, spec)
+
+
+def write_policy_files(out: Path, weights: dict[str, dict[str, Any]], spec: dict[str, Any]) -> Path:
+    """policy.pt (weights: network name -> state dict) and policy.json into the folder `out` (a run's
+    policy/ or policy-best/), through the store's path resolver: `out` is made or must be a folder, not
+    a link, and each file is created new under a temp name and renamed in (never written through a link
+    a stranger's run planted there). policy.pt is renamed first: the pair appears together for readers."""
+    import torch  # deferred: reading a policy's spec does not need it
+
+    out = layout.make_run_dirs(out.parent, out.name)
+    with layout.new_file(layout.run_path(out, POLICY_JSON)) as spec_file, \
+            layout.new_file(layout.run_path(out, POLICY_PT)) as weights_file:
+        torch.save({name: {k: v.contiguous().clone() for k, v in sd.items()} for name, sd in weights.items()},
+                   weights_file)
+        spec_file.write((json.dumps(spec, indent=1) + "\n").encode())
     return out
 
 

@@ -28,11 +28,13 @@ try:
 except ImportError as e:  # pragma: no cover - the message is the point
     raise ImportError("tracelab.train.sb3 needs Stable-Baselines3: pip install 'tracelab[sb3]'") from e
 
+from tracelab.store import layout
 from tracelab.store.agent_rows import LOGITS, PolicyOutput
 from tracelab.train.external_eval import EvalSettings
 from tracelab.train.external_run import ExternalRun
 
-MODEL_FILE = "sb3/model.zip"  # the trained model, beside the run's store files (SB3's own format)
+MODEL_DIR, MODEL_NAME = "sb3", "model.zip"  # the trained model, beside the run's store files (SB3's own format)
+MODEL_FILE = f"{MODEL_DIR}/{MODEL_NAME}"
 PROGRESS = ("num_timesteps",)  # a model's attributes that count progress, not settings: not in the config
 
 
@@ -117,9 +119,10 @@ class TracelabCallback(BaseCallback):
             # what SB3 logged after its last dump (PPO's last update: train/...), which it would write at
             # the next rollout's; the return of the episodes since the last row; the episodes
             run.metrics(step, self.model.logger.name_to_value)
-            if self.save_model:
-                (self.run_dir / MODEL_FILE).parent.mkdir(exist_ok=True)
-                self.model.save(self.run_dir / MODEL_FILE)
+            if self.save_model:  # through the store's resolver: never through a link planted in the run
+                layout.make_run_dirs(self.run_dir, MODEL_DIR)
+                with layout.new_file(layout.run_path(self.run_dir, MODEL_DIR, MODEL_NAME)) as f:
+                    self.model.save(f)
         except BaseException:
             self._close("failed")
             raise

@@ -17,6 +17,7 @@ from tracelab.store.episode import EpisodeTrace
 from tracelab.store.model import RunModel
 from tracelab.store.reader import RunConnection
 from tracelab.store.why import WhyNode, explain_in, render_why
+from tracelab.engine.terminal_text import printable
 
 MORE = "more"   # the level of the line that counts a step's firings past the log's limit
 
@@ -35,7 +36,8 @@ def log_rule_log(rec: rr.RecordingStream, episode: GraphEpisode) -> None:
         return
     order = np.argsort(np.asarray(steps), kind="stable")
     rec.send_columns(style.RULE_LOG, indexes=[rr.TimeColumn(style.STEP, sequence=np.asarray(steps)[order])],
-                     columns=rr.TextLog.columns(text=[lines[i] for i in order], level=[levels[i] for i in order]))
+                     columns=rr.TextLog.columns(text=[printable(lines[i]) for i in order],
+                                                level=[printable(levels[i]) for i in order]))
 
 
 def log_changed(rec: rr.RecordingStream, episode: GraphEpisode) -> None:
@@ -118,4 +120,5 @@ def log_why(rec: rr.RecordingStream, con: RunConnection, episode: GraphEpisode, 
             edges: Callable[[int], dict[str, int]] = lambda s: {}) -> None:
     docs = why_documents(con, episode, atoms, depth, model, edges)
     rec.send_columns(style.WHY, indexes=[rr.TimeColumn(style.STEP, sequence=np.arange(len(docs)))],
-                     columns=rr.TextDocument.columns(text=docs, media_type=["text/markdown"] * len(docs)))
+                     columns=rr.TextDocument.columns(text=[printable(d, keep="\n\t") for d in docs],
+                                                     media_type=["text/markdown"] * len(docs)))

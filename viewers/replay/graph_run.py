@@ -48,6 +48,7 @@ class RunGraph:
                              f"draws at most {MAX_NODES:,} nodes and {MAX_EDGES:,} edges (read the run with "
                              f"tracelab trace, why, sql or the TUI)")
         nodes = [n for (n,) in con.execute("SELECT name FROM raw.nodes ORDER BY node").fetchall()]
+        _check_node_ids(con, len(nodes))
         labels = con.execute("SELECT name, label, arity FROM raw.labels ORDER BY name").fetchall()
         e = con.execute("SELECT source, target FROM raw.edges").fetchnumpy()
         edges = np.stack([np.asarray(e["source"], np.int64), np.asarray(e["target"], np.int64)], axis=1)
@@ -88,6 +89,20 @@ class RunGraph:
             return None
         out[:, 1] *= -1.0                 # the viewer's y grows downwards
         return out
+
+
+def _check_node_ids(con: RunConnection, n_nodes: int) -> None:
+    """Every node id the replay indexes its arrays with (the edges' ends, the atoms' arguments) names one
+    of the run's `n_nodes` nodes (-1: no argument): a run from a stranger may hold any number there."""
+    (edges, atoms), = con.execute(
+        "SELECT (SELECT count(*) FROM raw.edges WHERE coalesce(source NOT BETWEEN 0 AND $n - 1 "
+        "OR target NOT BETWEEN 0 AND $n - 1, true)), "
+        "(SELECT count(*) FROM raw.atoms WHERE coalesce(arg0 NOT BETWEEN -1 AND $n - 1 "
+        "OR arg1 NOT BETWEEN -1 AND $n - 1, true))", {"n": n_nodes}).fetchall()
+    if edges or atoms:
+        where = f"{edges:,} edges" if edges else f"{atoms:,} atoms"
+        raise ValueError(f"this run's {where} name a node id out of range (it has {n_nodes:,} nodes): a "
+                         "damaged or hand-made run; the replay cannot draw it")
 
 
 @dataclass

@@ -17,6 +17,7 @@ from tracelab.store.names import unknown_name_message
 from tracelab.store.reader import RunConnection
 from tracelab.store.coordinates import run_grid
 from tracelab.store.why import explain_in, render_why
+from tracelab.engine.terminal_text import printable
 
 LANE_LABELS = ("alive", "atLoc", "health", "ammo", "action")
 END_LABELS = ("captured", "eliminated")
@@ -44,7 +45,7 @@ def log_rule_log(rec: rr.RecordingStream, board: EpisodeBoard) -> None:
     rec.send_columns(style.RULE_LOG,
                      indexes=[rr.TimeColumn(style.STEP, sequence=f.step),
                               rr.TimeColumn(style.PASS, sequence=style.pass_time(f.step, f.phase))],
-                     columns=rr.TextLog.columns(text=firing_lines(board),
+                     columns=rr.TextLog.columns(text=[printable(line) for line in firing_lines(board)],
                                                 level=np.array(PHASES, dtype=object)[f.phase].tolist(),
                                                 color=colours[f.phase]))
 
@@ -163,4 +164,5 @@ def log_why(rec: rr.RecordingStream, con: RunConnection, board: EpisodeBoard,
     steps = np.arange(board.steps + 1)
     rec.send_columns(style.WHY, indexes=[rr.TimeColumn(style.STEP, sequence=steps),
                                          rr.TimeColumn(style.PASS, sequence=style.pass_time(steps, 0))],
-                     columns=rr.TextDocument.columns(text=docs, media_type=["text/markdown"] * len(docs)))
+                     columns=rr.TextDocument.columns(text=[printable(d, keep="\n\t") for d in docs],
+                                                     media_type=["text/markdown"] * len(docs)))

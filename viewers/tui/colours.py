@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from rich.text import Text
+from tracelab.viewers.tui.shown_text import shown
 
 RED_TEAM = "#ff5f5f"
 BLUE_TEAM = "#5fafff"
@@ -48,4 +49,4 @@ def team_colour(name: str | None) -> str | None:
 
 def styled_name(name: str | None) -> Text:
     colour = team_colour(name)
-    return Text(name or "", style=colour or "")
+    return shown(name or "", colour or "")

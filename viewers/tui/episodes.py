@@ -22,6 +22,7 @@ from tracelab.viewers.tui.messages import OpenTrace
 from tracelab.viewers.tui.paging import QuerySource
 from tracelab.viewers.tui.places import EpisodesPlace
 from tracelab.viewers.tui.source import LiveReads, RunSource
+from tracelab.viewers.tui.shown_text import shown
 
 OUTCOME_COLOURS = {"win": TRUE, "loss": FALSE, "draw": PARTIAL, "truncated": UNKNOWN,
                    # a reasoning's: more steps would change nothing / it ran its steps / a step raised
@@ -30,7 +31,7 @@ OUTCOME_COLOURS = {"win": TRUE, "loss": FALSE, "draw": PARTIAL, "truncated": UNK
 
 def outcome_text(row: dict[str, Any]) -> Text:
     o = row.get("outcome") or ("running" if not row.get("ended") else "")
-    return Text(o, style=OUTCOME_COLOURS.get(o, ""))
+    return shown(o, OUTCOME_COLOURS.get(o, ""))
 
 
 def _reward(row: dict[str, Any]) -> str:
@@ -209,7 +210,7 @@ class EpisodesPane(Vertical):
         try:
             length = length_clause(self.query_one("#ep-length", Input).value)
         except ValueError as e:
-            status.update(Text(str(e), style="bold red"))
+            status.update(shown(str(e), "bold red"))
             return
         if length:
             where.append(length)

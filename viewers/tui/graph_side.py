@@ -30,6 +30,7 @@ from tracelab.viewers.tui.graph_state import AtomsAt, Neighbourhood, atoms_at, n
 from tracelab.viewers.tui.lazy_table import Column, LazyTable
 from tracelab.viewers.tui.paging import ArrowSource
 from tracelab.viewers.tui.source import RunSource
+from tracelab.viewers.tui.shown_text import shown
 
 ARROWS = {"out": "→", "in": "←", "both": "↔"}
 # the atoms are read once the trace's cursor rests on a timestep this long, not for every row passed
@@ -92,7 +93,7 @@ def draw_neighbourhood(hood: Neighbourhood, width: int = 80) -> Text:
             "no edges" if not shown else f"{shown} neighbour{'s' if shown != 1 else ''}"
         lines.append(Text(f" {more}", style=f"italic {DIM}"))
     if not hood.nodes:
-        lines.append(Text(f"{hood.atom}: not an atom of this run", style=f"italic {DIM}"))
+        lines.append(shown(f"{hood.atom}: not an atom of this run", f"italic {DIM}"))
     return Text("\n").join(lines)
 
 
@@ -263,7 +264,7 @@ class GraphSide(Vertical):
                          cursor=self._row_of(self._trace_atom))
         if problem is not None or found is None:
             table.placeholder = ""
-            status.update(Text(problem or "cannot read the atoms", style="bold red"))
+            status.update(shown(problem or "cannot read the atoms", "bold red"))
             return
         table.placeholder = f"no atom {found.mode} at t={found.t}"
         status.update(self._describe(found, asked[3]))
@@ -274,7 +275,7 @@ class GraphSide(Vertical):
             what = f"first {len(found.rows):,} of {what}"
         if found.static_hidden:
             what += f" · {found.static_hidden:,} static hidden (s)"
-        return Text(what)
+        return shown(what)
 
     def _row_of(self, atom_id: int | None) -> int:
         rows = self.atoms.rows if self.atoms is not None else []
@@ -313,10 +314,10 @@ class GraphSide(Vertical):
         box, text = self.query_one("#gs-hood"), self.query_one(HoodText)
         if isinstance(hood, str):
             self.hood = None
-            text.show(None, Text(hood, style="bold red"))
+            text.show(None, shown(hood, "bold red"))
             return
         self.hood = hood
-        box.border_title = f"{hood.atom} at t={hood.t}"
+        box.border_title = shown(f"{hood.atom} at t={hood.t}")
         text.show(hood)
 
     # ---- the list's own events and keys -------------------------------------------------------------------

@@ -23,6 +23,7 @@ from textual.scroll_view import ScrollView
 from textual.strip import Strip
 
 from tracelab.viewers.tui.paging import PAGE, PageSource, fetch_span
+from tracelab.viewers.tui.shown_text import shown, shown_text
 
 Row = dict[str, Any]
 CACHED_PAGES = 64
@@ -53,7 +54,7 @@ class Column:
 
     def cell(self, row: Row) -> Text:
         value = self.render(row) if self.render else plain_cell(row.get(self.key))
-        return value if isinstance(value, Text) else Text(value)
+        return shown_text(value) if isinstance(value, Text) else shown(value)
 
 
 def _narrow(columns: list[Column], excess: int) -> None:
@@ -345,7 +346,7 @@ class LazyTable(ScrollView, can_focus=True):
         if index == 0 and not self.ready:
             return Text("  loading…  (Esc cancels)", style="italic")
         if index == 0 and self.error:
-            return Text(self.error.splitlines()[0], style="bold red")
+            return shown(self.error.splitlines()[0], "bold red")
         if index >= self.count:
             if index == 0 and self.ready:
                 return Text("  (no rows)", style="italic")

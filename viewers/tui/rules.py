@@ -17,6 +17,7 @@ from tracelab.viewers.tui.lazy_table import Column, LazyTable
 from tracelab.viewers.tui.messages import OpenTrace
 from tracelab.viewers.tui.paging import QuerySource
 from tracelab.viewers.tui.source import RunSource
+from tracelab.engine.terminal_text import printable
 
 PER_RULE_SQL = """
 SELECT r.name AS rule, count(c.seq) AS firings, count(DISTINCT c.episode) AS episodes,
@@ -121,6 +122,7 @@ class RulesPane(Vertical):
         if episode is None:
             episode = row.get("first_episode")
         if episode is None:
-            self.notify(f"rule {row['rule']} never fired: no trace to show", severity="warning")
+            self.notify(printable(f"rule {row['rule']} never fired: no trace to show"), severity="warning",
+                        markup=False)
             return
         self.post_message(OpenTrace(int(episode), rule=row["rule"]))

@@ -11,6 +11,7 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.screen import Screen
 from textual.widget import Widget
+from rich.text import Text
 from textual.widgets import Input, Static, TabbedContent, TabPane, Tabs, TextArea
 
 from tracelab.viewers.tui.episodes import EpisodesPane
@@ -23,6 +24,7 @@ from tracelab.viewers.tui.sql import SqlPane
 from tracelab.viewers.tui.trace import TracePane
 from tracelab.viewers.tui.training import TrainingPane
 from tracelab.viewers.tui.why import WhyPane
+from tracelab.viewers.tui.shown_text import shown
 
 TABS = (("episodes", "1 Episodes"), ("trace", "2 Trace"), ("why", "3 Why"), ("rules", "4 Rules"),
         ("sql", "5 SQL"), ("training", "6 Training"))
@@ -98,9 +100,9 @@ class RunScreen(Screen):
                         yield self.panes[tab]
         yield KeyBar()
 
-    def _title(self) -> str:
+    def _title(self) -> Text:
         overlaid = f" + {len(self.overlaid)} overlaid in Training and SQL" if self.overlaid else ""
-        return f" {self.path.name}{overlaid}  ·  {self.source.state}  ·  {self.source.command}"
+        return shown(f" {self.path.name}{overlaid}  ·  {self.source.state}  ·  {self.source.command}")
 
     def has_view(self, tab: str) -> bool:
         """Whether the run has this view: a closed run without a board (a reasoning) and without metrics

@@ -26,6 +26,7 @@ from tracelab.viewers.tui.lazy_table import Column, LazyTable
 from tracelab.viewers.tui.paging import ArrowSource
 from tracelab.viewers.tui.source import RunSource, SeveralRunsSource
 from tracelab.viewers.tui.sql_history import add_to_history, history_path, load_history, save_history
+from tracelab.viewers.tui.shown_text import shown
 
 KEYS = "Ctrl+R runs · F2 saved · F3 history · F4 export"
 MAX_ROWS = 1_000_000   # results kept in memory (streamed; the rest is never read)
@@ -285,7 +286,7 @@ class SqlPane(Vertical):
         err = locate_error(sql, message)
         self.last_error = err
         where = f" (line {err.line + 1}, column {err.column + 1})" if err.line is not None else ""
-        self.query_one("#sql-error", Static).update(Text(err.message + where, style="bold"))
+        self.query_one("#sql-error", Static).update(shown(err.message + where, "bold"))
         self._clear_result("no result: the query failed (the error is above)")
         self._set_status("error · fix the query and Ctrl+R")
         if err.line is not None and self.editor.text.strip() == sql:

@@ -29,6 +29,8 @@ from tracelab.viewers.tui.messages import ExplainChange
 from tracelab.viewers.tui.paging import PAGE, TraceFilter, TraceSource
 from tracelab.viewers.tui.places import TracePlace
 from tracelab.viewers.tui.source import LiveReads, RunSource
+from tracelab.viewers.tui.shown_text import shown
+from tracelab.engine.terminal_text import printable
 
 
 def _change(row: dict[str, Any]) -> Text:
@@ -250,7 +252,7 @@ class TracePane(Vertical):
         try:
             t_from, t_to = parse_range(self.query_one("#tr-range", Input).value)
         except ValueError as e:
-            status.update(Text(str(e), style="bold red"))
+            status.update(shown(str(e), "bold red"))
             return
         value = lambda name: self.query_one(name, Input).value.strip()  # noqa: E731
         self.filter = TraceFilter(episode, t_from, t_to, value("#tr-atom"), value("#tr-label"),
@@ -309,14 +311,14 @@ class TracePane(Vertical):
             return
         table = self.table
         if table.error:      # e.g. a filter that matches nothing in the run: the message says how to write one
-            self.query_one("#tr-status", Static).update(Text(f" {table.error}", style="bold red"))
+            self.query_one("#tr-status", Static).update(shown(f" {table.error}", "bold red"))
             return
         where = f"row {table.cursor + 1:,} of {table.count:,}" if table.count else "no rows"
         row = table.cursor_row
         atom = f" · {self._place(row['atom'])}" if row else ""
         hidden = self.trace.hidden if self.trace is not None else 0
         static = f" · {hidden:,} static hidden (s shows)" if hidden else ""
-        self.query_one("#tr-status", Static).update(f" {self.filter.describe()} · {where}{static}{atom}")
+        self.query_one("#tr-status", Static).update(shown(f" {self.filter.describe()} · {where}{static}{atom}"))
 
     def _place(self, text: str) -> str:
         grid = self.trace.grid if self.trace is not None else None
@@ -373,7 +375,7 @@ class TracePane(Vertical):
                 index = where(trace)
                 page = None if index is None else (index // PAGE, trace.fetch(index // PAGE))
             except Exception as e:  # noqa: BLE001
-                self.app.call_from_thread(self.notify, str(e), severity="error")
+                self.app.call_from_thread(self.notify, printable(str(e)), severity="error", markup=False)
                 return
             if trace is not self.trace:
                 return
@@ -428,7 +430,7 @@ class TracePane(Vertical):
             try:
                 games = eval_games(self.source)
             except Exception as e:  # noqa: BLE001
-                self.app.call_from_thread(self.notify, str(e), severity="error")
+                self.app.call_from_thread(self.notify, printable(str(e)), severity="error", markup=False)
                 return
             self.app.call_from_thread(self._step_game, games, direction)
 
