@@ -1,8 +1,12 @@
 """What kind of run a run is, as the run itself says: the board it declares in its metadata
 (RunMeta.board, the `board` column of the `run` view). A game run declares its board and viewers draw its
 episodes on it; a run without a board (a reasoning run, `tracelab reason --run`) has only its trace,
-program and graph. The store reads no game's vocabulary to tell them apart."""
+program and graph. The store reads no game's vocabulary to tell them apart. What the run says of its
+world beyond that (a spec world's board, params and wins) is in its config (`run_config`)."""
 from __future__ import annotations
+
+import json
+from typing import Any
 
 from tracelab.store.reader import RunConnection
 
@@ -16,3 +20,14 @@ def run_board(con: RunConnection) -> str | None:
 
 def has_board(con: RunConnection) -> bool:
     return run_board(con) is not None
+
+
+def run_config(con: RunConnection) -> dict[str, Any]:
+    """The run's config (RunMeta.config), {} when it has none or it is not a JSON object (a run's config
+    comes from anywhere: its readers check what they take from it)."""
+    rows = con.execute("SELECT config FROM raw.run").fetchall()
+    try:
+        config = json.loads(rows[0][0]) if rows and rows[0][0] else {}
+    except (TypeError, ValueError):
+        return {}
+    return config if isinstance(config, dict) else {}

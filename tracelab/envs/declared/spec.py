@@ -11,7 +11,6 @@ import dataclasses
 import itertools
 import math
 import os
-import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -22,9 +21,8 @@ import numpy as np
 from tracelab.engine.errors import ProgramError
 from tracelab.engine.parser import check_program, load_program, parse_literal
 from tracelab.engine.program import CONSTANT_RE, Fact, Literal, Program, SourceLoc, Term
-from tracelab.envs.declared.board import MAX_BOARD_CELLS, MAX_BOARD_FACTS, Board
+from tracelab.envs.declared.board import CELL_FORMAT, MAX_BOARD_CELLS, MAX_BOARD_FACTS, Board, hex_color
 from tracelab.envs.declared.expressions import ExpressionError, evaluate
-from tracelab.envs.declared.render import hex_color
 from tracelab.envs.declared.spec_file import KeyPath, SpecError, SpecSource, read_spec_file
 
 READS = ("index", "lower", "bounds", "onehot", "count", "nearest")
@@ -474,9 +472,7 @@ def _board(r: _Reader) -> Board:
     if len(rows) * len(rows[0]) > MAX_BOARD_CELLS:
         raise r.err(("board", "rows"), f"more than {MAX_BOARD_CELLS} cells")
     fmt = r.string(("board", "cell"), "c{row}_{col}")
-    # only {row} and {col} between name characters: str.format is never given a field or format spec
-    # of the spec's own ({row.__class__}, {row:>999999999})
-    if not _CELL_FORMAT.fullmatch(fmt) or "{row}" not in fmt or "{col}" not in fmt \
+    if not CELL_FORMAT.fullmatch(fmt) or "{row}" not in fmt or "{col}" not in fmt \
             or not CONSTANT_RE.fullmatch(fmt.format(row=0, col=0)):
         raise r.err(("board", "cell"), f"expected a name made of letters, digits, _ and - with {{row}} and "
                                        f"{{col}}, starting with a lower-case letter, such as \"c{{row}}_{{col}}\"; "
@@ -662,7 +658,6 @@ def _reward(r: _Reader, check: _Names, agents: list[str]
 
 
 DRAW_METHODS = ("categorical", "choice")
-_CELL_FORMAT = re.compile(r"(?:[A-Za-z0-9_-]|\{row\}|\{col\})+")
 
 
 def _draw(r: _Reader, check: _Names, path: KeyPath, domains: dict[str, list[str]], *, start: bool) -> Draw | None:
