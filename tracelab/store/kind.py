@@ -22,6 +22,18 @@ def has_board(con: RunConnection) -> bool:
     return run_board(con) is not None
 
 
+def is_game_run(con: RunConnection) -> bool:
+    """A run of games: it declares a board (the grid game's), or its episodes have returns (a spec
+    world's games, any env's); a reasoning run's have none."""
+    return has_board(con) or bool(con.execute(
+        "SELECT EXISTS (SELECT 1 FROM episodes WHERE reward IS NOT NULL)").fetchall()[0][0])
+
+
+def can_read(con: RunConnection, needs: str | None) -> bool:
+    """Whether a saved query that `needs` "games" or "board" (tracelab.store.queries) reads this run."""
+    return needs is None or (has_board(con) if needs == "board" else is_game_run(con))
+
+
 def run_config(con: RunConnection) -> dict[str, Any]:
     """The run's config (RunMeta.config), {} when it has none or it is not a JSON object (a run's config
     comes from anywhere: its readers check what they take from it)."""

@@ -228,6 +228,9 @@ class DeclaredEvaluator:
         result.steps.append(steps)
         result.terminated += bool(terminated)
         result.truncated += not terminated
+        world = env.unwrapped.world
+        if world.spec.win:
+            result.wins = (result.wins or 0) + (terminated and world.outcome() == "win")
 
     def close(self) -> None:
         if self.trace_env is not None:

@@ -159,7 +159,7 @@ class DeclaredRecorder:
                 self.world.engine.trace_rows_waiting >= HANDOVER_ROWS:
             self._take_rows()
         if ended:
-            self._end("terminated" if terminated else "truncated")
+            self._end(self.world.outcome() if terminated else "truncated")
         if self._steps_kept >= WRITE_ROWS or time.monotonic() - self._written_at >= WRITE_INTERVAL_S:
             self.write_pending()
 

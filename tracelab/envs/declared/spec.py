@@ -131,6 +131,9 @@ class WorldSpec:
     board: Board | None
     render_fps: int
     source: SpecSource = field(repr=False)
+    # what a game's end counts as (`[end] win`, `loss`): an episode that terminated with one of them [1,1]
+    win: tuple[Atom, ...] = ()
+    loss: tuple[Atom, ...] = ()
 
 
 # ---- reading typed values, located ----
@@ -348,9 +351,11 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     domains = {"cells": board.cells} if board else {}
     space, parts = _observation(r, check, domains, agents)
     reward_table, reward_scaled = _reward(r, check, agents)
-    end = r.table(("end",), ("terminated", "truncated", "max_steps"), default={})
+    end = r.table(("end",), ("terminated", "truncated", "max_steps", "win", "loss"), default={})
     terminated = _every_agents(r, check, ("end", "terminated"), agents)
     truncated = _every_agents(r, check, ("end", "truncated"), agents)
+    win = _every_agents(r, check, ("end", "win"), agents)
+    loss = _every_agents(r, check, ("end", "loss"), agents)
     max_steps = r.integer(("end", "max_steps"), None, minimum=1) if "max_steps" in end else None
     r.table(("start",), ("facts", "choose"), default={})
     start_facts = _every_agents(r, check, ("start", "facts"), agents, bounds=True)
@@ -371,7 +376,7 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     check_program(program, {a.pred: len(a.args) for a in env_set})
     return WorldSpec(src.path, names, program, tuple(agents), action_names, action_facts, mask, space, parts,
                      reward_table, reward_scaled, terminated, truncated, max_steps, start_facts, choices,
-                     randoms, board, fps, src)
+                     randoms, board, fps, src, win, loss)
 
 
 def _actions(r: _Reader, check: _Names, agents: list[str], mask_text: Any
