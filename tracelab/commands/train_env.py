@@ -24,12 +24,8 @@ from tracelab.commands._training import (
     where_to_train,
 )
 from tracelab.errors import UserError, store_errors
-from tracelab.train.config import METHOD_REWARD_SCALE, TrainConfig, flag_of, reward_scale_text
+from tracelab.train.config import GRIDWAR_ONLY, METHOD_REWARD_SCALE, TrainConfig, flag_of, reward_scale_text
 from tracelab.train.replay import row_length
-
-# TrainConfig fields that describe GridWar (its scenario, teams, opponent, simulator): refused with --env
-GRIDWAR_ONLY = ("scenario", "non_markov", "split_networks", "slow_every_step", "agents", "backend", "kernel",
-                "opponent_p", "eval_p", "explore_scripted")
 
 
 def env_source_of(args: argparse.Namespace) -> Any:
@@ -112,7 +108,7 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
 
     meta = {"command": " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]),
             "scenario": source.name, "seed": cfg.seed,
-            "config": {**cfg.to_dict(), "env": source.to_json(),
+            "config": {**cfg.env_dict(), "env": source.to_json(),
                        "resumed_from": None if state is None else {"run": resumed_from, "step": state["step"]}}}
     if cfg.trace_eval_games:  # a declared world's evaluation games are traced: what its readers need
         meta = _with_declared_meta(meta, source)

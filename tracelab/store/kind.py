@@ -6,6 +6,7 @@ world beyond that (a spec world's board, params and wins) is in its config (`run
 from __future__ import annotations
 
 import json
+import tomllib
 from typing import Any
 
 from tracelab.store.reader import RunConnection
@@ -43,3 +44,23 @@ def run_config(con: RunConnection) -> dict[str, Any]:
     except (TypeError, ValueError):
         return {}
     return config if isinstance(config, dict) else {}
+
+
+MAX_SPEC_TEXT = 1 << 20  # a spec file's own limit
+
+
+def world_params(config: dict[str, Any]) -> dict[str, Any] | None:
+    """A spec world's run's params (the spec's `[params]` with the run's keyword arguments over them: `play
+    --env`'s `env_args`, `train --env`'s `env.kwargs`), or None for a run of no spec world. The spec's
+    text is a stranger's: read with tomllib only, at most MAX_SPEC_TEXT characters."""
+    text = config.get("spec")
+    if not isinstance(text, str) or len(text) > MAX_SPEC_TEXT:
+        return None
+    try:
+        params = tomllib.loads(text).get("params", {})
+    except (tomllib.TOMLDecodeError, RecursionError):
+        return None
+    env = config.get("env")
+    given = config.get("env_args") if isinstance(config.get("env_args"), dict) else \
+        env.get("kwargs") if isinstance(env, dict) and isinstance(env.get("kwargs"), dict) else {}
+    return {**(params if isinstance(params, dict) else {}), **given}
