@@ -75,7 +75,8 @@ def render(doc: dict[str, Any], all_rules: bool = False) -> str:
     config = meta["config"] if isinstance(meta["config"], dict) else {}
     declared = isinstance(config.get("spec"), str)  # tracelab play --env: a world declared in rules
     lines.append(f"  board     {doc['board']}" if doc["board"] else
-                 "  board     none drawn: a declared world's games (its spec's [board] is in the config)" if declared
+                 ("  board     the spec's [board] (drawn by the TUI and the replay)" if config.get("declared_board")
+                  else "  board     none: a spec world without a [board]") if declared
                  else "  board     none: a reasoning run (its episodes are reasonings, not games)")
     for f in meta["rule_files"]:
         lines.append(f"  rules     {f.get('path')} (sha256 {str(f.get('sha256'))[:12]})")

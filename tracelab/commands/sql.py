@@ -123,9 +123,9 @@ def _query_one_run(args: argparse.Namespace, run: str, sql: str, params: dict | 
         # deferred: loads DuckDB; every command is imported to build the CLI's parser
         from tracelab.store.queries import list_queries
         any_run = ", ".join(q.name for q in list_queries() if not q.needs_board)
-        what = "games" if needs[0] == "games" else "the grid game's board"
-        raise UserError(f"saved query {args.saved} reads {what} ({needs[1]}), and {run} has none "
-                        f"(a reasoning run?); these read any run: {any_run}")
+        lacks = "is not a run of games" if needs[0] == "games" else "has no board"
+        raise UserError(f"saved query {args.saved} reads games ({needs[1]}), and {run} {lacks} (a reasoning "
+                        f"run); these read any run: {any_run}")
     if args.format == "table":
         _write_table_output(args, lambda limit: retrying(
             lambda: fetch_arrow(query_readonly(con, sql, params), limit, args.offset)))
