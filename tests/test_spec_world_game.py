@@ -169,3 +169,42 @@ def test_training_counts_wins_and_show_and_compare_list_the_worlds_params(
     assert "(the method's)" not in compared and "opponent_p" not in compared
     (param,) = [line.split() for line in compared.splitlines() if line.startswith("param door_reward")]
     assert param[2:] == ["1", "2"]
+
+
+def test_a_sweep_trains_the_world_with_its_trials_reading_its_evaluations(world: Path) -> None:
+    """`tracelab sweep --set env=SPEC` (was: "TrainConfig has no field 'env'"): the spec names the world and
+    defaults to a metric every env's evaluation writes; each trial is a `train --env` whose evaluations
+    reach the sink Tune reads. Ray itself is left out (tests/test_ray.py runs Tune)."""
+    from tracelab.envs.declared.env_source import EnvSource
+    from tracelab.train.sweep import train_env_seed
+    from tracelab.train.sweep_spec import SweepSpecError, build_spec
+
+    spec = build_spec(sets=[f"env={world / 'trap.toml'}", "steps=100", "eval_every=50", "eval_games=4",
+                            "learning-starts=20", "trace_eval_games=1"], grids=["lr=1e-3,3e-4"])
+    assert spec.env == str(world / "trap.toml") and spec.metric == "eval/mean_return" and spec.trials == 2
+    assert build_spec(sets=[f"env={world / 'trap.toml'}"], grids=["lr=1e-3"], metric="eval/win_rate").metric \
+        == "eval/win_rate"
+    with pytest.raises(SweepSpecError, match="opponent_p describes GridWar"):
+        build_spec(sets=[f"env={world / 'trap.toml'}", "opponent_p=0.5"], grids=["lr=1e-3"])
+    with pytest.raises(SweepSpecError, match="env cannot be searched"):
+        build_spec(grids=["env=a.toml,b.toml"])
+
+    class Sink:
+        def __init__(self) -> None:
+            self.rows: list[tuple[int, dict]] = []
+
+        def write(self, step: int, values: dict) -> None:
+            self.rows.append((step, dict(values)))
+
+        def flush(self) -> None:
+            pass
+
+    sink, started = Sink(), []
+    run = world / "runs" / "trial"
+    cfg = spec.base_config()
+    assert train_env_seed(cfg, EnvSource.given(spec.env, {}), run, "tracelab sweep (test)", [sink],
+                          started.append) == "finished"
+    assert len(started) == 1
+    evaluations = [(step, v["eval/win_rate"]) for step, v in sink.rows if "eval/win_rate" in v]
+    assert [s for s, _ in evaluations][-1] >= 100 and all(0 <= w <= 1 for _, w in evaluations)
+    assert rows(run, "SELECT status FROM run") == [("finished",)]
