@@ -154,8 +154,15 @@ def test_training_counts_wins_and_show_and_compare_list_the_worlds_params(
                      "--total-timesteps", "100", "--learning-starts", "20", "--eval-every", "100",
                      "--eval-games", "8", "--trace-eval-games", "2", "--run", str(run)]) == 0
         runs.append(run)
-    (win_rate,), = rows(runs[0], "SELECT value FROM metrics WHERE name = 'eval/win_rate' ORDER BY step DESC LIMIT 1")
-    assert 0.0 <= win_rate <= 1.0
+    # every evaluation game counted (traced and untraced): in this world a win is the one positive return
+    rates = rows(runs[0], "SELECT w.step, w.value, s.value FROM metrics w JOIN metrics s ON s.step = w.step AND "
+                          "s.name = 'eval/success_rate' WHERE w.name = 'eval/win_rate' ORDER BY w.step")
+    assert rates and all(win == success for _, win, success in rates)
+    capsys.readouterr()
+    assert main(["eval", str(runs[0] / "policy"), "--env", str(world / "trap.toml"), "--env-arg", "door_reward=1",
+                 "--games", "20", "--json"]) == 0
+    evaluated = json.loads(capsys.readouterr().out)
+    assert evaluated["games"] == 20 and evaluated["win_rate"] == evaluated["success_rate"]
     traced = dict(rows(runs[0], "SELECT outcome, count(*) FROM episodes WHERE kind = 'eval' GROUP BY 1"))
     assert set(traced) <= {"win", "loss", "truncated"} and sum(traced.values()) >= 2
     capsys.readouterr()

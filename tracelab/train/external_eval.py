@@ -211,6 +211,8 @@ class DeclaredEvaluator:
             result.steps += more.steps
             result.terminated += more.terminated
             result.truncated += more.truncated
+            if more.wins is not None:
+                result.wins = (result.wins or 0) + more.wins
             result.seconds["untraced"] = time.perf_counter() - t0
         return result
 
@@ -228,9 +230,8 @@ class DeclaredEvaluator:
         result.steps.append(steps)
         result.terminated += bool(terminated)
         result.truncated += not terminated
-        world = env.unwrapped.world
-        if world.spec.win:
-            result.wins = (result.wins or 0) + (terminated and world.outcome() == "win")
+        if "won" in info:  # the world declares a win (DeclaredEnv's info at a game's end)
+            result.wins = (result.wins or 0) + bool(info["won"])
 
     def close(self) -> None:
         if self.trace_env is not None:

@@ -81,7 +81,10 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
             limit = self._registered_limit()
             self._recorder.stepped(a, w.last_rewards, obs, terminated,
                                    truncated or (limit is not None and w.steps >= limit))
-        return obs, w.last_rewards[0], terminated, truncated, self._info()
+        info = self._info()
+        if self.world_spec.win and not self._running:  # what the world declares a win ([end] win)
+            info["won"] = w.outcome() == "win"
+        return obs, w.last_rewards[0], terminated, truncated, info
 
     def trace_info(self, info: Mapping[str, Any] | None) -> None:
         """The begin info of the games a traced env records from its next reset on."""
