@@ -165,6 +165,8 @@ def test_training_counts_wins_and_show_and_compare_list_the_worlds_params(
     assert evaluated["games"] == 20 and evaluated["win_rate"] == evaluated["success_rate"]
     traced = dict(rows(runs[0], "SELECT outcome, count(*) FROM episodes WHERE kind = 'eval' GROUP BY 1"))
     assert set(traced) <= {"win", "loss", "truncated"} and sum(traced.values()) >= 2
+    trained = dict(rows(runs[0], "SELECT outcome, count(*) FROM episodes WHERE kind = 'train' GROUP BY 1"))
+    assert set(trained) <= {"win", "loss", "truncated", "aborted"} and {"win", "loss"} <= set(trained)
     capsys.readouterr()
     assert main(["show", str(runs[1])]) == 0
     shown = capsys.readouterr().out

@@ -118,7 +118,9 @@ class EnvTrainer:
         self.obs, self.info = obs, info
         if done.any():
             ended = np.flatnonzero(done)
-            self.episodes.end(ended, ["terminated" if terminated[k] else "truncated" for k in ended.tolist()])
+            named = info.get("final_info", {}).get("outcome")  # win / loss, where the world declares them
+            self.episodes.end(ended, [str(named[k]) if named is not None and named[k] else
+                                      "terminated" if terminated[k] else "truncated" for k in ended.tolist()])
             self.episodes.begin(ended, self.step)
 
     # ---- logging, evaluation, policies ----

@@ -83,7 +83,8 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
                                    truncated or (limit is not None and w.steps >= limit))
         info = self._info()
         if self.world_spec.win and not self._running:  # what the world declares a win ([end] win)
-            info["won"] = w.outcome() == "win"
+            info["outcome"] = w.outcome()
+            info["won"] = info["outcome"] == "win"
         return obs, w.last_rewards[0], terminated, truncated, info
 
     def trace_info(self, info: Mapping[str, Any] | None) -> None:
