@@ -202,6 +202,17 @@ class CountingState:
                 "act_pos": self._act_pos.copy(), "act_n": self._act_n.copy(), "pend": self._pend.copy(),
                 "pend_f": self._pend_f.copy(), "pend_n": self._pend_n.copy()}
 
+    def set_bounds(self, world: int, atoms: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                   static: np.ndarray) -> None:
+        """World `world`'s atoms take these bounds (no cause); its groundings are recounted from them."""
+        self.lower[world, atoms] = lower
+        self.upper[world, atoms] = upper
+        self.static[world, atoms] = static
+        self.last_cause[world, atoms] = -1
+        kt = self.kt
+        K.recount_worlds(np.array([world], np.int64), self.lower, self.upper, kt.b_ptr, kt.b_atom, kt.b_flags,
+                         kt.b_bnd, kt.inst, self._kind_base, self._unsat, self._act, self._act_n, self._act_pos)
+
     def restore(self, snap: dict[str, Any], indices: np.ndarray, shift: int, sources: np.ndarray | None = None
                 ) -> None:
         """Worlds `indices` take their state from snap's worlds `sources` (default: the same worlds); their

@@ -405,6 +405,20 @@ class Engine:
                              f"restored world, got {source.tolist()}")
         self._state.restore(snap, worlds.astype(np.int64), shift, source)
 
+    def set_bounds(self, atoms: np.ndarray, lower: np.ndarray, upper: np.ndarray, static: np.ndarray,
+                   world: int = 0) -> None:
+        """Put `world`'s atoms at these bounds before the next step, as if set then (no trace row, no cause):
+        an interpretation carried over from another engine, e.g. a reasoning continued with more rules
+        (tracelab.pyreason's reason(again=True)). The atoms become settable, and the groundings that read
+        them are recounted (the counting kernel goes on)."""
+        atoms = np.asarray(atoms, np.int64)
+        self.grounder.add_settable_many(atoms)
+        self._sync()
+        if self.kernel == "lanes":
+            self._to_counting()
+        self._state.set_bounds(world, atoms, np.asarray(lower, np.float64), np.asarray(upper, np.float64),
+                               np.asarray(static, np.bool_))
+
     # ---- atoms ----
 
     def atom(self, pred: str, *args: str) -> int:

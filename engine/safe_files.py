@@ -131,6 +131,23 @@ def read_json(path: str | os.PathLike[str], max_bytes: int = JSON_CAP, *, what: 
         raise FileRefused(f"{path}: JSON nested too deeply; refused") from None
 
 
+def path_inside(folder: str | os.PathLike[str], name: str) -> Path:
+    """`name`, a path relative to `folder` that a file from a stranger wrote (a spec's rule file), resolved
+    with every link followed and refused (FileRefused) unless it stays inside `folder` (itself resolved):
+    a link beside or below the file may point anywhere, so the written path alone proves nothing. The
+    caller opens the resolved path, which names no link."""
+    if not isinstance(name, str) or not name or "\0" in name:
+        raise FileRefused(f"{name!r}: expected a file name (no NUL byte)")
+    parts = name.replace("\\", "/").split("/")
+    if os.path.isabs(name) or ".." in parts:
+        raise FileRefused(f"{name!r}: expected a path relative to the folder, inside it")
+    root = os.path.realpath(folder)
+    resolved = os.path.realpath(os.path.join(root, name))
+    if os.path.commonpath([root, resolved]) != root:
+        raise FileRefused(f"{name!r}: a link to a file outside the folder {root}; refused")
+    return Path(resolved)
+
+
 def create_new(path: str | os.PathLike[str], mode: int = 0o600) -> int:
     """A file descriptor, open for writing, of a file created now: never an existing file (O_EXCL) and
     never through a symbolic link (O_NOFOLLOW), whatever sits at `path`."""

@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from patience import PATIENCE
 from tracelab.engine import Engine, load_program
 
 from tracelab.store.bench import synthetic_trace, synthetic_vocabulary  # noqa: F401 - re-exported for tests
@@ -115,7 +116,7 @@ def ctrl_c_after_start(argv: list[str], running_for: float = 3.0) -> tuple[int, 
     killed after 20 s)."""
     proc = subprocess.Popen([*TRACELAB, *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + PATIENCE
         while not _duckdb_loaded(proc.pid):
             assert proc.poll() is None and time.monotonic() < deadline, "the command did not start"
             time.sleep(0.05)
@@ -123,7 +124,7 @@ def ctrl_c_after_start(argv: list[str], running_for: float = 3.0) -> tuple[int, 
         assert proc.poll() is None, f"the command ended before Ctrl-C: {proc.communicate()}"
         proc.send_signal(signal.SIGINT)
         sent = time.monotonic()
-        _, err = proc.communicate(timeout=20)
+        _, err = proc.communicate(timeout=PATIENCE)
         return proc.returncode, err.strip().splitlines(), time.monotonic() - sent
     finally:
         proc.kill()

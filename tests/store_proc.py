@@ -7,6 +7,7 @@ idle    write 500 rows of episode 0 without flushing, print `wrote`, then sleep 
 from __future__ import annotations
 
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -52,7 +53,7 @@ def main(mode: str, run_dir: str, *rest: str) -> None:
         w.begin_episode(0)
         w.write_changes(0, synthetic_trace(500))
         print("wrote", flush=True)
-        time.sleep(60)
+        threading.Event().wait()  # idle until killed: only the writer's own timer can publish the rows
     else:
         raise SystemExit(f"unknown mode {mode!r}")
 

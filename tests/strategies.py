@@ -344,3 +344,22 @@ def scenarios(draw: st.DrawFn, per_world: int = 0, with_graph: bool = True,
         return Scenario(text, program, steps, graph, [[] for _ in range(steps)], world_ext)
     nodes = [*sig.nodes, *FRESH_NODES]
     return Scenario(text, program, steps, graph, [draw(ext_facts(sig, nodes, crisp=crisp)) for _ in range(steps)])
+
+
+# ---- TOML values of every kind, as text: a spec key given a value of the wrong type --------------------
+
+_TOML_SCALARS = st.one_of(
+    st.integers(-3, 10**6).map(str), st.sampled_from(["true", "false", "1.5", "-0.0", "nan", "inf", "1e400"]),
+    st.sampled_from(["1979-05-27", "07:32:00", "1979-05-27T07:32:00Z"]),
+    st.sampled_from(['""', '"x"', '"c0_0"', '"at(C)"', '"1 +"', '"[1, 2]"', '"a\\u0000b"', '"cells"', '"{}"',
+                     "'p(X'", '"~at(C)"', '"at(c0_0):[0.5,1]"', '"len"', '"goal_reward"']),
+)
+
+
+def toml_values() -> st.SearchStrategy[str]:
+    """TOML value texts of any type: numbers, booleans, dates, strings (atoms, expressions, a NUL),
+    arrays and inline tables of them, nested."""
+    return st.recursive(_TOML_SCALARS, lambda inner: st.one_of(
+        st.lists(inner, max_size=3).map(lambda xs: f"[{', '.join(xs)}]"),
+        st.lists(st.tuples(st.sampled_from(["a", "x", "G", "name"]), inner), max_size=2, unique_by=lambda kv: kv[0])
+        .map(lambda kvs: "{" + ", ".join(f"{k} = {v}" for k, v in kvs) + "}")), max_leaves=6)

@@ -347,3 +347,19 @@ def test_a_big_step_hands_its_trace_buffer_over_unchanged(monkeypatch: pytest.Mo
         assert a.keys() == b.keys()
         for name in a:
             assert a[name].dtype == b[name].dtype and np.array_equal(a[name], b[name]), name
+
+
+def test_set_bounds_carries_an_interpretation_and_the_rules_read_it():
+    # an interpretation from elsewhere (tracelab.pyreason's reason(again=True) with new rules): the atoms
+    # take their bounds, static ones stay frozen, and the groundings that read them are counted again
+    eng = Engine(parse_program(CHAIN + "%timesteps reset\n"))
+    eng.step()
+    assert eng.query("seen(a)") == (0.0, 1.0)
+    atoms = np.array([eng.atom("reach", "a"), eng.atom("seen", "d")])
+    eng.set_bounds(atoms, np.array([1.0, 0.0]), np.array([1.0, 0.0]), np.array([True, True]))
+    eng.take_trace()
+    eng.step()  # reach(a) is static through the reset: mark reads it at once, spread one step later
+    assert eng.query("seen(a)") == (1.0, 1.0) and eng.query("reach(a)") == (1.0, 1.0)
+    eng.step()
+    assert eng.query("reach(b)") == (1.0, 1.0)
+    assert eng.query("seen(d)") == (0.0, 0.0)  # frozen: no rule or reset moves it

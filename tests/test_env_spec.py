@@ -165,7 +165,7 @@ def _located(tmp_path: Path, old: str, new: str, spec: str = SPEC, **params) -> 
     ('scale = 2', 'scale = "2 +"', "37: reward.scale", "not an expression"),
     ('scale = 2', 'scale = "__import__(\'os\').system(\'x\')"', "37: reward.scale", "Call is not allowed"),
     ('scale = 2', 'scale = "goal_reward.real"', "37: reward.scale", "Attribute is not allowed"),
-    ('scale = 2', 'scale = "[0] * 10000000"', "37: reward.scale", "more than 100000 items"),
+    ('scale = 2', 'scale = "[0] * 10000000"', "37: reward.scale", "10,000,001 items"),
     ('scale = 2', 'scale = "nope"', "37: reward.scale", "unknown name 'nope'"),
     ('max_steps = 5', 'max_steps = 0', "41: end.max_steps", "expected an integer >= 1"),
     ('edge = "none"', 'edge = "wrap"', "11: board.edge", "expected one of stay, none"),
@@ -284,10 +284,11 @@ when = "goal_reward > 100"
 
 
 @pytest.mark.parametrize("old, new, where, fragment", [
-    ('rows = ["S..G"]', 'rows = "[\'F\' * 1000] * 1000"', "8: board.rows", "more than 65536 cells"),
+    ('rows = ["S..G"]', 'rows = "[\'F\' * 300] * 300"', "8: board.rows", "more than 65536 cells"),
+    ('rows = ["S..G"]', 'rows = "[\'F\' * 1000] * 1000"', "8: board.rows", "a value of 1,000,001 items"),
     ('over = "cells"', 'over = "[\'c0_0\'] * 99999 + [\'c0_1\'] * 99999"', "28: observation.parts[0].over",
-     "more than 100000 items"),
-    ('[start]', '[[random]]\natom = ["at(C)", "push(robo, D)"]\nover = { C = "cells", D = "[\'west\'] * 30000" }'
+     "a value of 399,997 items"),
+    ('[start]', '[[random]]\natom = ["at(C)", "push(robo, D)"]\nover = { C = "cells", D = "[\'w\'] * 30000" }'
      '\n[start]', "45: random[0].over", "more than 100000 combinations"),
 ])
 def test_specs_that_would_build_too_much_are_refused_first(tmp_path: Path, old: str, new: str, where: str,

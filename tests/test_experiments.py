@@ -10,13 +10,15 @@ import re
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
 
 pytest.importorskip("matplotlib")
 from PIL import Image  # noqa: E402
+
+from patience import PATIENCE, wait_until  # noqa: E402
+from train_helpers import training  # noqa: E402
 
 from tracelab.cli import main  # noqa: E402
 from tracelab.store import open_run, run_info  # noqa: E402
@@ -177,18 +179,13 @@ def test_sigterm_to_a_parallel_experiment_stops_its_workers(tmp_path):
 
 
 def _terminate_when_training(proc, runs: list[Path], workers: set[int]) -> None:
-    deadline = time.monotonic() + 300
-    while time.monotonic() < deadline and not all((r / "meta.json").exists() for r in runs):
-        workers |= _children(proc.pid)
-        assert proc.poll() is None, proc.stderr.read()
-        time.sleep(0.5)
-    workers |= _children(proc.pid)
-    assert all((r / "meta.json").exists() for r in runs), sorted(p.name for p in runs[0].parent.iterdir())
+    def started() -> bool:
+        workers.update(_children(proc.pid))
+        return training(proc, runs)
+    wait_until(started, f"both arms of {runs[0].parent} training", poll=0.5)
     proc.send_signal(signal.SIGTERM)
-    _, err = proc.communicate(timeout=120)
+    _, err = proc.communicate(timeout=PATIENCE)
     assert proc.returncode == 130, err
     assert "no report written" in err.strip().splitlines()[-1]
-    deadline = time.monotonic() + 30
-    while time.monotonic() < deadline and any(_alive(p) for p in workers):
-        time.sleep(0.2)
-    assert workers and not any(_alive(p) for p in workers)
+    wait_until(lambda: not any(_alive(p) for p in workers), "the workers gone after the pool's end", poll=0.2)
+    assert workers

@@ -460,8 +460,10 @@ def test_pyreason_trace_marks_an_inconsistency(tmp_path: Path, capsys: pytest.Ca
     nodes, = (tmp_path / "out").glob("rule_trace_nodes_*.csv")
     rows = list(csv.reader(nodes.open()))[1:]
     assert [r[:8] for r in rows] == [["0", "0", "a", "p", "[0.0,1.0]", "[0.0,0.2]", "lo", "True"],
-                                     ["1", "1", "a", "p", "[0.0,0.2]", "[0.0,1.0]", "-", "False"]]
-    assert rows[1][9].startswith("Inconsistency occurred. Conflicting bounds for p(a).")
+                                     ["1", "1", "a", "p", "[0.0,0.2]", "[0.0,1.0]", "hi", "False"]]
+    # the fact that met the other's bound is named, as PyReason names it (docs/pyreason.md)
+    assert rows[1][9] == ("Inconsistency occurred. Conflicting bounds for p(a). Update from [0.000, 0.200] to "
+                          "[0.800, 1.000] is not allowed. Setting bounds to [0,1] and static=True for this timestep.")
 
 
 def test_pyreason_trace_writes_edges_as_tuples(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
@@ -486,4 +488,4 @@ def test_a_pyreason_error_on_the_command_line_is_one_line(tmp_path: Path) -> Non
     r = subprocess.run([sys.executable, "-m", "tracelab", "reason", "--dialect", "pyreason", str(f), "--steps", "1"],
                        capture_output=True, text=True, check=False)
     assert r.returncode == 1 and r.stdout == ""
-    assert r.stderr.strip().splitlines() == [f"tracelab: error: {f}:1:13: missing ')' or ']'"]
+    assert r.stderr.strip().splitlines() == [f"tracelab: error: {f}:1:13: Failed to parse rule - missing ')' or ']'"]

@@ -135,7 +135,7 @@ def test_what_is_not_supported_is_one_line_naming_it() -> None:
         pr.reason(timesteps=1)
     pr.add_rule(pr.Rule(HELLO_RULE, "popular_rule"))  # the failed reason() kept the facts
     assert popular(pr.reason(timesteps=1)) == [["Mary"], ["Mary", "Justin"]]
-    with pytest.raises(TypeError, match="persistent must be True or False"):
+    with pytest.raises(TypeError, match="persistent: value has to be a bool"):
         pr.settings.persistent = "yes"
     with pytest.raises(AttributeError, match="no setting 'persistant'"):
         pr.settings.persistant = True
@@ -362,3 +362,57 @@ def test_the_inconsistent_predicate_list_outlives_reset_as_in_pyreason() -> None
     pr.add_rule(pr.Rule("sick(y) <- sick(x), contact(x,y)", "spread"))
     pr.add_fact(pr.Fact("sick(Alice)", "alice_sick", 0, 0))
     assert pr.reason(timesteps=0).get_dict()[0]["Bob"]["healthy"] == (0.0, 0.0)
+
+
+def test_a_closed_clause_with_its_own_variable_ranges_over_the_nodes() -> None:
+    # PyReason's examples/closed_world_pred_ex.py: `~hackerControl(X)` with X in no other clause holds for
+    # some node whose hackerControl is unset (closed: [0,0]), so inconsistent(cb_2) at t = 1
+    g = nx.DiGraph()
+    g.add_nodes_from(["cb_1", "cb_2", "l1", "l2"])
+    g.add_edge("cb_1", "cb_2", stepFrom=1)
+    g.add_edge("cb_1", "l1", hasLabel=1)
+    g.add_edge("cb_2", "l2", hasLabel=1)
+    pr.load_graph(g)
+    pr.add_closed_world_predicate("hackerControl")
+    pr.add_fact(pr.Fact("stepFrom(cb_1, cb_2)", "step_from_fact", 0, 1))
+    pr.add_fact(pr.Fact("hackerControl(cb_1)", "hacker_control_initial_fact", 0, 0))
+    pr.add_rule(pr.Rule("future(Y) <-1 stepFrom(X,Y), hackerControl(X)"))
+    pr.add_rule(pr.Rule("inconsistent(Y) <- future(Y), ~hackerControl(Y), ~hackerControl(X)", "inconsistent_rule"))
+    interpretation = pr.reason(timesteps=2)
+    assert [df["component"].tolist() for df in pr.filter_and_sort_nodes(interpretation, ["inconsistent"])][:2] == \
+        [[], ["cb_2"]]
+    nodes, _ = pr.get_rule_trace(interpretation)
+    row = nodes[nodes["Label"] == "inconsistent"].iloc[0]
+    assert row["Clause-1"] == ["cb_2"] and row["Clause-2"] == ["cb_2"] and len(row["Clause-3"]) == 1
+    assert "Clause-4" not in nodes.columns  # the translation's node clause is not PyReason's
+    assert "pyreason_node_domain" not in set(nodes["Label"])
+
+
+def test_reason_again_applies_rules_added_since_and_names_each_new_fact() -> None:
+    # PyReason's user guide, section 8: "To specify additional facts or rules, you can add them as you
+    # normally would"; each fact's row names that fact, however many again=True calls came before
+    hello_world(end=1)
+    pr.reason(timesteps=1)
+    pr.add_fact(pr.Fact("rich(Justin)", "fact_justin", 0, 0))
+    pr.add_fact(pr.Fact("rich(John)", "fact_john", 0, 0))
+    pr.add_rule(pr.Rule("happy(x) <- rich(x)", "happy_rule"))
+    pr.reason(timesteps=1, again=True)
+    pr.add_fact(pr.Fact("rich(Mary)", "fact_mary", 0, 0))
+    pr.add_fact(pr.Fact("rich(Cat)", "fact_cat", 0, 0))
+    nodes, _ = pr.get_rule_trace(pr.reason(timesteps=1, again=True))
+    rows = nodes[nodes["Label"].isin(["rich", "happy"])][["Time", "Node", "Label", "Occurred Due To"]]
+    assert rows.values.tolist() == [
+        [2, "Justin", "rich", "fact_justin"], [2, "John", "rich", "fact_john"],
+        [2, "John", "happy", "happy_rule"], [2, "Justin", "happy", "happy_rule"],
+        [3, "Mary", "rich", "fact_mary"], [3, "Cat", "rich", "fact_cat"],
+        [3, "Mary", "happy", "happy_rule"], [3, "Cat", "happy", "happy_rule"]]
+    assert nodes["Time"].tolist()[:3] == [0, 1, 1]  # the first call's rows are kept
+
+
+def test_a_comparison_clause_is_located_and_says_what_pyreason_does_with_it() -> None:
+    # PyReason's creating-rules tutorial: `c_id(x) != c_id(y)`; PyReason 3.x parses it and skips it when
+    # grounding (interpretation.py: "This is a comparison clause: pass")
+    with pytest.raises(ProgramError) as e:
+        pr.Rule("car_friend(x,y) <- owns_car(x,z), owns_car(y,z) , c_id(x) != c_id(y) ", "car_friend_rule")
+    assert e.value.column == 59 and "PyReason added them in 1.8.11" in e.value.message
+    assert "since 3.0.0 its grounding skips them" in e.value.message and "without this clause" in e.value.message

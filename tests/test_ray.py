@@ -8,13 +8,15 @@ import json
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
 
 pytest.importorskip("ray")
 pytest.importorskip("matplotlib")
+
+from patience import PATIENCE, wait_until  # noqa: E402
+from train_helpers import training  # noqa: E402
 
 from tracelab.cli import main  # noqa: E402
 from tracelab.store import open_run, run_info  # noqa: E402
@@ -72,13 +74,9 @@ def interrupt_when_training(argv: list[str], runs: list[Path]) -> str:
                             stderr=subprocess.PIPE, text=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
-        deadline = time.monotonic() + 240
-        while time.monotonic() < deadline and not all((r / "meta.json").exists() for r in runs):
-            assert proc.poll() is None, proc.stderr.read()
-            time.sleep(0.5)
-        time.sleep(2)  # training, not starting
+        wait_until(lambda: training(proc, runs), f"every trial of {runs[0].parent} training", poll=0.5)
         proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=120)
+        _, err = proc.communicate(timeout=PATIENCE)
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -180,7 +178,7 @@ def test_sweep_spec_file_and_its_errors(tmp_path):
 def test_bad_sweep_is_one_line_before_ray_starts(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "tracelab", "sweep", "--grid", "lr=1e-4", "--random",
                            "gamma=uniform:0.9,1.5", "--out", str(tmp_path / "s")],
-                          capture_output=True, text=True, timeout=60)
+                          capture_output=True, text=True, timeout=PATIENCE)
     assert proc.returncode == 1
     assert proc.stderr.splitlines() == ["tracelab: error: --random gamma=uniform:0.9,1.5: gamma must be in (0, 1] "
                                         "and lr > 0, got 1.5, 0.0005"]

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import runpy
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +15,8 @@ import torch  # noqa: E402
 from stable_baselines3 import PPO  # noqa: E402
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList  # noqa: E402
 from stable_baselines3.common.env_util import make_vec_env  # noqa: E402
+
+from patience import wait_until  # noqa: E402
 
 import tracelab.envs.gym_env  # noqa: E402,F401  (registers the GridWar and toy-text ids)
 from tracelab.cli import main  # noqa: E402
@@ -143,10 +144,9 @@ class _Peek(BaseCallback):
 
     def _on_step(self) -> bool:
         if self.seen is None and self.num_timesteps >= 512:
-            deadline = time.monotonic() + 10
-            while not (n := _rows(self.run, "SELECT count(*) FROM metrics")[0][0]) and time.monotonic() < deadline:
-                time.sleep(0.1)
-            self.seen = (current_meta(self.run)["status"], n)
+            wait_until(lambda: _rows(self.run, "SELECT count(*) FROM metrics")[0][0] > 0,
+                       "the first rollout's metrics visible while SB3 trains")
+            self.seen = (current_meta(self.run)["status"], _rows(self.run, "SELECT count(*) FROM metrics")[0][0])
         return True
 
 

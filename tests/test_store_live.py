@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 import pytest
+from patience import PATIENCE, wait_until
 from store_helpers import episode_rows
 
 from tracelab.store import layout
@@ -25,7 +26,7 @@ def start_writer(mode: str, run_dir: Path, *args: str) -> subprocess.Popen:
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
-def wait_for_run(run_dir: Path, proc: subprocess.Popen, timeout: float = 30.0) -> None:
+def wait_for_run(run_dir: Path, proc: subprocess.Popen, timeout: float = PATIENCE) -> None:
     deadline = time.monotonic() + timeout
     while not layout.meta_path(run_dir).exists():
         assert proc.poll() is None, proc.stderr.read()
@@ -77,7 +78,7 @@ def test_second_process_reads_a_run_while_it_is_written(tmp_path: Path) -> None:
     assert len(listed) < episodes < len(written), "the writer should have compacted its parts while we read"
 
 
-def _read_lines_until(proc: subprocess.Popen, predicate, timeout: float = 60.0) -> list[str]:  # noqa: ANN001
+def _read_lines_until(proc: subprocess.Popen, predicate, timeout: float = PATIENCE) -> list[str]:  # noqa: ANN001
     lines: list[str] = []
     deadline = time.monotonic() + timeout
     while not predicate(lines):
@@ -95,7 +96,7 @@ def test_sigkill_loses_nothing_committed_and_the_run_still_opens(tmp_path: Path)
         lines = _read_lines_until(proc, lambda ls: len(ls) >= 6)
         time.sleep(0.013)  # land the kill somewhere inside the next episode
         proc.send_signal(signal.SIGKILL)
-        proc.wait(10)
+        proc.wait(PATIENCE)
         # the last lines it printed before dying
         lines += [ln.strip() for ln in proc.stdout.read().splitlines()]
     finally:
@@ -119,18 +120,18 @@ def test_sigkill_loses_nothing_committed_and_the_run_still_opens(tmp_path: Path)
     assert json.loads((run_dir / "meta.json").read_text())["status"] == "crashed"
 
 
-def test_rows_are_flushed_within_a_second_without_any_call(tmp_path: Path) -> None:
+def test_rows_are_published_without_any_call(tmp_path: Path) -> None:
+    """The writer's process makes no call after its rows (it waits until killed): only the writer's own
+    timer can publish them. How soon it does is `tracelab bench store`'s question, not this test's."""
     run_dir = tmp_path / "idle"
     proc = start_writer("idle", run_dir)
     try:
         _read_lines_until(proc, lambda ls: "wrote" in ls)
-        wrote_at = time.monotonic()
         con = open_run(run_dir)
-        while con.execute("SELECT count(*) FROM raw.changes").fetchone()[0] < 500:
-            assert time.monotonic() - wrote_at < 2.5, "rows not visible 2.5 s after they were written"
-            time.sleep(0.05)
+        wait_until(lambda: con.execute("SELECT count(*) FROM raw.changes").fetchone()[0] >= 500,
+                   "the idle writer's 500 rows visible to another process")
         proc.send_signal(signal.SIGKILL)
-        proc.wait(10)
+        proc.wait(PATIENCE)
     finally:
         proc.kill()
     assert open_run(run_dir).execute("SELECT count(*) FROM changes").fetchone()[0] == 500
@@ -142,7 +143,7 @@ def test_sigterm_flushes_and_marks_the_run_interrupted(tmp_path: Path) -> None:
     try:
         _read_lines_until(proc, lambda ls: "wrote" in ls)
         proc.send_signal(signal.SIGTERM)  # before the 1 s timer: only the exit path can flush
-        assert proc.wait(10) == 128 + signal.SIGTERM
+        assert proc.wait(PATIENCE) == 128 + signal.SIGTERM
     finally:
         proc.kill()
     info = run_info(run_dir)
@@ -163,6 +164,6 @@ def test_sealing_a_run_being_written_is_refused(tmp_path: Path) -> None:
         assert con.execute("SELECT status FROM run").fetchone()[0] == "running"
     finally:
         proc.kill()
-        proc.wait(10)
+        proc.wait(PATIENCE)
     assert run_info(run_dir).status == "crashed"
     assert con.execute("SELECT status, ended_at FROM run").fetchone() == ("crashed", None)

@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 import pytest
+from patience import PATIENCE
 from store_helpers import WALK_EPISODES, write_walk_run
 
 from tracelab.cli import main
@@ -53,13 +54,13 @@ def killed_run(run_dir: Path, commits: int = 6) -> Path:
                             stderr=subprocess.PIPE, text=True)
     try:
         seen = 0
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + PATIENCE
         while seen < commits:
             line = proc.stdout.readline()
             assert line and time.monotonic() < deadline, proc.stderr.read()
             seen += line.startswith("committed")
         proc.send_signal(signal.SIGKILL)
-        proc.wait(10)
+        proc.wait(PATIENCE)
     finally:
         proc.kill()
     return run_dir
@@ -159,4 +160,4 @@ def test_repair_is_refused_while_a_writer_holds_the_run(tmp_path: Path, capsys: 
         assert main(["check", str(run)]) == 0  # checking alone reads, and needs no lock
     finally:
         proc.kill()
-        proc.wait(10)
+        proc.wait(PATIENCE)

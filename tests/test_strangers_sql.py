@@ -148,7 +148,7 @@ def test_escape_cancels_a_running_query_in_the_tui_console() -> None:
         await pilot.press("ctrl+r")
         await wait_for(pilot, lambda: app.screen.source.busy)
         await pilot.press("escape")
-        await wait_for(pilot, lambda: "cancelled" in str(status.render()), timeout=10)
+        await wait_for(pilot, lambda: "cancelled" in str(status.render()))
         assert sql.last_error is None and str(sql.query_one("#sql-error").render()) == ""
         assert type(app.screen).__name__ == "RunScreen"          # Esc cancelled; it did not go back
         sql.editor.text = "SELECT * FROM sniff_csv('/etc/passwd')"  # a refusal: one friendly line

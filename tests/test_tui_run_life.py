@@ -11,6 +11,7 @@ from typing import Any
 os.environ["TEXTUAL_ANIMATIONS"] = "none"
 
 from store_helpers import synthetic_trace, synthetic_vocabulary  # noqa: E402
+from patience import PATIENCE  # noqa: E402
 from tui_helpers import episodes_ready, live_writer, loaded, run_app, shown, wait_for  # noqa: E402
 
 from tracelab.store import layout  # noqa: E402
@@ -79,12 +80,12 @@ def test_the_header_follows_a_training_stopped_by_ctrl_c_and_the_views_stop_re_r
             assert "live · running" in title(app) and "re-read every second" in text
 
             writer.send_signal(signal.SIGINT)                # Ctrl-C in the training's terminal
-            writer.wait(timeout=30)
+            writer.wait(timeout=PATIENCE)
             assert run_info(run).status == "interrupted"
-            await wait_for(pilot, lambda: "interrupted" in title(app), timeout=15)
+            await wait_for(pilot, lambda: "interrupted" in title(app))
             assert "· live" not in title(app) and "running" not in title(app)
             status = app.screen.query_one("#train-status")
-            await wait_for(pilot, lambda: "interrupted" in str(status.render()), timeout=15)
+            await wait_for(pilot, lambda: "interrupted" in str(status.render()))
             text = await shown(app, pilot)
             assert "re-read every second" not in text and "interrupted" in text
             # the curves hold everything the writer flushed before it closed
@@ -93,7 +94,7 @@ def test_the_header_follows_a_training_stopped_by_ctrl_c_and_the_views_stop_re_r
             assert not steps or last >= steps[-1]
             # one last read after the close, then none: the views no longer re-read the run
             episodes = app.screen.panes["episodes"]
-            await wait_for(pilot, lambda: training.live_reads.done and episodes.live_reads.done, timeout=15)
+            await wait_for(pilot, lambda: training.live_reads.done and episodes.live_reads.done)
         run_app([run], body, size=(100, 30))
 
 
@@ -109,10 +110,10 @@ def test_enter_on_an_episode_after_the_run_was_sealed_shows_its_trace(tmp_path: 
         pane = app.screen.query_one(TracePane)
         trace = pane.table
         await wait_for(pilot, lambda: (trace.ready and trace.error is not None)
-                       or (trace.count > 0 and loaded(trace)), timeout=20)
+                       or (trace.count > 0 and loaded(trace)))
         assert trace.error is None, trace.error
         assert trace.count == ROWS and trace.row(0) is not None and trace.row(0)["seq"] == 0
         text = await shown(app, pilot)
         assert "No such file" not in text and "Errno" not in text
-        await wait_for(pilot, lambda: "sealed" in title(app), timeout=15)
+        await wait_for(pilot, lambda: "sealed" in title(app))
     run_app([run], body)

@@ -22,6 +22,7 @@ from tracelab.viewers.tui.lazy_table import LazyTable  # noqa: E402
 from tracelab.viewers.tui.source import RunSource  # noqa: E402
 from tracelab.viewers.tui.sql import SqlPane  # noqa: E402
 from tracelab.viewers.tui.sql_history import HISTORY_CAP, load_history  # noqa: E402
+from patience import PATIENCE  # noqa: E402
 from tui_helpers import episodes_ready, loaded, run_app, run_query, shown, shown_once, wait_for  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -70,7 +71,7 @@ def test_console_opens_idle_and_failed_or_cancelled_queries_leave_no_stale_resul
             await wait_for(pilot, lambda: app.screen.source.busy and sql._executing is not None)
             assert "running query" in status(sql)
             await run_query(pilot, sql, "SELECT 42 AS answer")   # while the endless one runs
-            await wait_for(pilot, lambda: loaded(results) and results.count == 1, timeout=15)
+            await wait_for(pilot, lambda: loaded(results) and results.count == 1)
         finally:
             app.screen.source.con.interrupt()   # on a regression the endless query must not outlive the test
         assert results.row(0)["answer"] == 42 and sql.last_error is None
@@ -87,7 +88,7 @@ def test_closing_a_run_cancels_its_running_query() -> None:
         query.join(0.01)
     closing = threading.Thread(target=source.close, daemon=True)
     closing.start()
-    closing.join(timeout=15)
+    closing.join(timeout=PATIENCE)
     if closing.is_alive():   # a regression: stop the query so the test process can end
         source.con.interrupt()
     assert not closing.is_alive()

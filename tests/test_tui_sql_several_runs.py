@@ -50,5 +50,5 @@ def test_the_console_reads_every_run_given() -> None:
         await run_query(pilot, sql, ENDLESS)
         await wait_for(pilot, lambda: app.screen.sql_source.busy and sql._executing is not None)
         await pilot.press("escape")
-        await wait_for(pilot, lambda: "cancelled" in str(sql.query_one("#sql-status").render()), timeout=10)
+        await wait_for(pilot, lambda: "cancelled" in str(sql.query_one("#sql-status").render()))
     run_app([BASE, ADVANCED], body, size=(120, 34))

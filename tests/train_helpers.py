@@ -6,8 +6,9 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
+
+from patience import PATIENCE, wait_until
 
 from tracelab.game.scenario import Rewards, Scenario
 
@@ -30,6 +31,20 @@ def tiny_training_run(run: Path, steps: int = 200, seed: int = 1, **options: obj
     return run
 
 
+def has_trained(run: Path) -> bool:
+    """Whether a training has logged a loss into `run`: it is training, not starting."""
+    try:
+        return bool(run_rows(run, "SELECT count(*) FROM metrics WHERE name = 'loss'")[0][0])
+    except Exception:  # noqa: BLE001 - not created yet, or between flushes
+        return False
+
+
+def training(proc: subprocess.Popen, runs: list[Path]) -> bool:
+    """Whether every run in `runs` has logged a loss; fails at once if `proc` (their training) ended."""
+    assert proc.poll() is None, f"the training ended first: {proc.stderr.read() if proc.stderr else ''}"
+    return all(has_trained(r) for r in runs)
+
+
 def run_rows(run: Path, sql: str) -> list[tuple]:
     """The rows of `sql` over a run."""
     from tracelab.store import open_run
@@ -40,22 +55,15 @@ def run_rows(run: Path, sql: str) -> list[tuple]:
         con.close()
 
 
-def ctrl_c_once_training(argv: list[str], run: Path, timeout: float = 120) -> tuple[int, str, str]:
+def ctrl_c_once_training(argv: list[str], run: Path) -> tuple[int, str, str]:
     """`tracelab *argv` (a training into `run`) in a subprocess, sent one SIGINT once a `loss` metric is in
-    the run; (its exit status, stdout, stderr). Killed if it outlives `timeout` after the signal."""
+    the run; (its exit status, stdout, stderr)."""
     proc = subprocess.Popen([sys.executable, "-m", "tracelab.cli", *argv], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
     try:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            try:
-                if run_rows(run, "SELECT count(*) FROM metrics WHERE name = 'loss'")[0][0]:
-                    break
-            except Exception:  # noqa: BLE001 - not created yet, or between flushes
-                pass
-            time.sleep(0.3)
+        wait_until(lambda: training(proc, [run]), f"a loss logged into {run}", poll=0.3)
         proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=timeout)
+        out, err = proc.communicate(timeout=PATIENCE)
     finally:
         if proc.poll() is None:
             proc.kill()

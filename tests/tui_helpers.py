@@ -18,6 +18,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from patience import PATIENCE
+
 os.environ["TEXTUAL_ANIMATIONS"] = "none"
 # the SQL console keeps its history in the user's state folder: never the real one in tests
 _STATE = tempfile.mkdtemp(prefix="tracelab-test-state-")
@@ -32,7 +34,7 @@ from tracelab.viewers.tui.trace import TracePane  # noqa: E402
 TESTS = Path(__file__).resolve().parent
 
 
-async def wait_for(pilot: Any, done: Callable[[], bool], timeout: float = 30.0) -> None:
+async def wait_for(pilot: Any, done: Callable[[], bool], timeout: float = PATIENCE) -> None:
     t0 = time.monotonic()
     while not done():
         await pilot.pause(0.05)
@@ -111,7 +113,7 @@ def svg_text(svg: str) -> str:
     return "\n".join("".join(t for _, t in sorted(parts)) for _, parts in sorted(lines.items()))
 
 
-async def shown_once(app: Any, pilot: Any, ready: Callable[[str], bool], timeout: float = 30.0) -> str:
+async def shown_once(app: Any, pilot: Any, ready: Callable[[str], bool], timeout: float = PATIENCE) -> str:
     """The screen's text once `ready` holds for it (a table's rows are painted a frame after they load),
     or the last text seen after `timeout` seconds (the caller's assertion then says what is missing)."""
     t0 = time.monotonic()
@@ -134,7 +136,7 @@ def live_writer(mode: str, tmp_path: Path) -> Iterator[tuple[Path, subprocess.Po
         yield run, proc
     finally:
         stop.touch()
-        proc.wait(timeout=30)
+        proc.wait(timeout=PATIENCE)
 
 
 @contextmanager

@@ -22,6 +22,7 @@ from tracelab.errors import user_error_message
 # One line per subcommand module; each module adds its own parsers and sets `func` on them.
 COMMAND_MODULES = [
     "tracelab.commands.play", "tracelab.commands.reason", "tracelab.commands.convert_pyreason",
+    "tracelab.commands.run_pyreason",
     "tracelab.commands.trace", "tracelab.commands.why", "tracelab.commands.why_not",
     "tracelab.commands.sql", "tracelab.commands.diff", "tracelab.commands.seal",
     "tracelab.commands.bench", "tracelab.commands.check", "tracelab.commands.show",

@@ -6,14 +6,28 @@ imports nothing heavy: the error classes of the engine, the scenarios and DuckDB
 their modules were imported, since an error of a module never imported cannot have been raised."""
 from __future__ import annotations
 
+import difflib
 import re
 import sys
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 
 
 class UserError(ValueError):
     """A mistake in what the user asked for (a bad value, a run that does not exist, ...)."""
+
+
+SUGGESTION_CANDIDATES = 20_000  # names compared for a did-you-mean (difflib is linear in them)
+SUGGESTION_LENGTH = 200  # and quadratic in a name's length: a longer name gets no suggestion
+
+
+def close_names(name: str, known: Iterable[str], n: int = 5) -> list[str]:
+    """The known names closest to a mistyped `name`, best first (none close: []), for `did you mean`;
+    bounded in cost whatever a stranger's file names."""
+    if len(name) > SUGGESTION_LENGTH:
+        return []
+    candidates = [k for _, k in zip(range(SUGGESTION_CANDIDATES), known) if len(k) <= SUGGESTION_LENGTH]
+    return difflib.get_close_matches(name, candidates, n=n)
 
 
 # (module, class names): user errors of other parts of tracelab and of DuckDB

@@ -56,9 +56,11 @@ def run(args: argparse.Namespace) -> int:
         runs = [read_training_run(r) for r in args.runs]
     # deferred: loads pyarrow; every command is imported to build the CLI's parser
     import pyarrow as pa
+
+    from tracelab.store.arrow_build import strings  # not pa.array of strings: it imports pandas (arrow_build)
     rows = comparison_rows(runs, precise=args.format != "table")
     names = ["key", *("./key" if r.label == "key" else r.label for r in runs)]   # column names are unique
-    columns = [pa.array([r[i] for r in rows], pa.string()) for i in range(len(names))]
+    columns = [strings([r[i] for r in rows]) for i in range(len(names))]
     write_table(pa.Table.from_arrays(columns, names=names), args.format, args.output)
     if len(runs) > 1 and not any(key.startswith("config ") for key, *_ in rows):
         print("note: the runs' configs are the same", file=sys.stderr)

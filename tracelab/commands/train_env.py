@@ -80,6 +80,8 @@ def run_env(args: argparse.Namespace, given: dict[str, Any], limit: Any) -> int:
         declared = getattr(probe.unwrapped, "world_spec", None) is not None
     finally:
         probe.close()
+    _check_env_count(cfg, getattr(probe.unwrapped, "world_spec", None), limit, resumed=state is not None,
+                     given=given)
     need = cfg.buffer * row_length(encoder.size, n_actions, cfg.mask) * FLOAT
     if need > limit.bytes:
         raise UserError(f"--buffer-size {cfg.buffer:,}: the replay buffer would take {need:,} bytes, over the "
@@ -91,6 +93,20 @@ def run_env(args: argparse.Namespace, given: dict[str, Any], limit: Any) -> int:
     run_dir, same_run, tensorboard = where_to_train(args, state is not None, source.short_name)
     return train_env_into(cfg, source, run_dir, encoder.describe(), tensorboard=tensorboard, state=state,
                           resumed_from=args.resume, same_run=same_run)
+
+
+def _check_env_count(cfg: TrainConfig, spec: Any, limit: Any, *, resumed: bool, given: dict[str, Any]) -> None:
+    """Refuse --num-envs (or --eval-envs) envs that would not fit the memory limit, before one is made
+    (10,000,000 were still being built after 180 s; a checkpoint's 1e9 met the out-of-memory killer)."""
+    # deferred: loads gymnasium and the engine; every command is imported to build the CLI's parser
+    from tracelab.engine.safe_files import human_bytes
+    from tracelab.envs.declared.spec_size import env_bytes
+    each = env_bytes(spec.named_atoms if spec is not None else 0)
+    for name, n in (("envs", cfg.envs), ("eval_envs", min(cfg.eval_envs, cfg.eval_games))):
+        if n * each > limit.bytes:
+            whose = " (the checkpoint's; give the flag to change it)" if resumed and name not in given else ""
+            raise UserError(f"{flag_of(name)} {n:,}{whose}: {n:,} envs of about {human_bytes(each)} each would "
+                            f"take {human_bytes(n * each)}, over the limit of {limit}")
 
 
 def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at: int | None = None,

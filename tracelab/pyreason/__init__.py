@@ -15,7 +15,10 @@ written in PyReason's CSV layout.
 - graphml.py: a GraphML file (or a networkx graph) with PyReason's attribute mapping (a number v is [v,1]);
 - names.py: PyReason names (predicates, variables, rule names) as tracelab names, and back;
 - translate.py: all of it as one tracelab program text, parsed by the engine's parser;
-- trace_csv.py: the engine's trace rows as PyReason's rule_trace_nodes / rule_trace_edges rows.
+- trace_csv.py: the engine's trace rows as PyReason's rule_trace_nodes / rule_trace_edges rows;
+- fact_sequence.py: PyReason's rows of an atom several facts set in one timestep (one by one);
+- files.py: what the rule and fact files share (CSV rows, JSON items, PyReason's raise_errors contract);
+- as_pyreason.py, __main__.py: `python -m tracelab.pyreason SCRIPT.py`, a PyReason script run unchanged.
 """
 import gc
 

@@ -24,6 +24,7 @@ from tracelab.engine.program import SourceLoc
 from tracelab.errors import UserError
 
 from .facts import PFact, read_facts
+from .files import PyReasonFileError
 from .graphml import load_pyreason_graphml, load_pyreason_networkx
 from .interpretation import Interpretation
 from .names import NameMap
@@ -80,8 +81,9 @@ def reset_settings() -> None:
     settings.reset()
 
 
-def get_rules() -> list[Rule]:
-    return list(_program.rules)
+def get_rules() -> list[Rule] | None:
+    """The rules added so far, or None when there are none (PyReason's get_rules after reset_rules)."""
+    return list(_program.rules) or None
 
 
 def record(run_dir: str | os.PathLike[str] | None) -> None:
@@ -136,18 +138,22 @@ def add_rule(pr_rule: Rule) -> None:
 def add_rules_from_file(file_path: str | os.PathLike[str], infer_edges: bool = False,
                         raise_errors: bool = False) -> None:
     """PyReason's rule text file (one rule a line, `#` comments); infer_edges applies to every rule.
-    Errors are always raised (located), whatever raise_errors says."""
-    for r in read_rules_txt(file_path):
+    A rule that does not parse raises a located ValueError with raise_errors, else warns and is skipped
+    (PyReason's default here)."""
+    for r in read_rules_txt(file_path, _Report(raise_errors).on_error, first=len(_program.rules)):
         r.infer_edges = r.infer_edges or infer_edges
-        r.name = f"rule_{len(_program.rules)}"
         add_rule(Rule.from_parsed(r))
 
 
 def add_rule_from_csv(csv_path: str | os.PathLike[str], raise_errors: bool = True) -> None:
     """PyReason's rule CSV (`rule_text,name,infer_edges,set_static`) or, by a .json extension, its rule
-    JSON (with custom_thresholds and weights); errors are located and always raised."""
-    for r in read_rules(csv_path):
-        add_rule(Rule.from_parsed(r))
+    JSON (with custom_thresholds and weights). A bad row, or a name the file repeats, raises a located
+    ValueError with raise_errors; else it warns and the row is skipped (a bad option: its default)."""
+    report = _Report(raise_errors)
+    rules = [Rule.from_parsed(r) for r in _unique(read_rules(csv_path, report.on_error), raise_errors, "rule")]
+    report.if_empty(rules, csv_path, "rules")
+    for r in rules:
+        add_rule(r)
 
 
 add_rule_from_json = add_rule_from_csv  # read_rules reads the format the extension names
@@ -164,12 +170,50 @@ def add_fact(pyreason_fact: Fact) -> None:
 
 
 def add_fact_from_csv(csv_path: str | os.PathLike[str], raise_errors: bool = True) -> None:
-    """PyReason's fact CSV (`fact_text,name,start_time,end_time,static`); errors are located."""
-    for f in read_facts(csv_path):
-        add_fact(Fact.from_parsed(f))
+    """PyReason's fact CSV (`fact_text,name,start_time,end_time,static`) or, by a .json extension, its
+    fact JSON; bad rows as add_rule_from_csv's."""
+    report = _Report(raise_errors)
+    facts = [Fact.from_parsed(f) for f in _unique(read_facts(csv_path, report.on_error), raise_errors, "fact")]
+    report.if_empty(facts, csv_path, "facts")
+    for f in facts:
+        add_fact(f)
 
 
 add_fact_from_json = add_fact_from_csv  # read_facts reads the format the extension names
+
+
+class _Report:
+    """How a loader treats a file's bad rows: raise (`on_error` None), or warn with the located message
+    and go on; an empty file warns, as PyReason's loaders do."""
+
+    def __init__(self, raise_errors: bool) -> None:
+        self.warned = 0
+        self.on_error = None if raise_errors else self._warn
+
+    def _warn(self, e: PyReasonFileError) -> None:
+        self.warned += 1
+        warnings.warn(str(e), UserWarning, stacklevel=5)
+
+    def if_empty(self, loaded: list[Any], path: str | os.PathLike[str], what: str) -> None:
+        if not loaded and not self.warned:
+            warnings.warn(f"{os.fspath(path)} contains an empty array or no rows, no {what} loaded", stacklevel=3)
+
+
+def _unique(items: list[Any], raise_errors: bool, what: str) -> list[Any]:
+    """The items of one file whose names it has not used before: a repeated name raises (ValueError)
+    with raise_errors, else warns and the item is skipped (PyReason's loaders)."""
+    out, seen = [], set()
+    for it in items:
+        if it.name in seen:
+            err = PyReasonFileError(f"Loaded name '{it.name}' is a duplicate - all {what} names must be unique.",
+                                    it.loc.file, it.loc.line, it.loc.column, None)
+            if raise_errors:
+                raise err
+            warnings.warn(str(err), UserWarning, stacklevel=3)
+            continue
+        seen.add(it.name)
+        out.append(it)
+    return out
 
 
 def add_closed_world_predicate(predicate_name: str) -> None:
@@ -211,8 +255,14 @@ def reason(timesteps: int = -1, convergence_threshold: int = -1, convergence_bou
     convergence = _convergence(convergence_threshold, convergence_bound_threshold)
     facts = [PFact(f.name or "", f.literal, f.start_time, f.end_time, f.static, SourceLoc(f"<Fact {f.name}>", 1, 1))
              for f in _program.facts]
-    if again and _program.reasoning is not None:
-        _program.last = _program.reasoning.again(timesteps, restart, facts, convergence)
+    last = _program.reasoning
+    if again and last is not None:
+        if _program.rules != last.rules:  # rules added (or reset) since: PyReason's again applies them
+            if not _program.rules:
+                raise UserError("There are no rules, use `add_rule` or `add_rules_from_file`")
+            last = _program.reasoning = last.continued_with(_translated(_program.rules, last.facts, last.graph),
+                                                            list(_program.rules))
+        _program.last = last.again(timesteps, restart, facts, convergence)
         _program.facts.clear()
         return _program.last
     if not _program.rules:
@@ -220,16 +270,19 @@ def reason(timesteps: int = -1, convergence_threshold: int = -1, convergence_bou
     _program.timestamp = time.strftime("%Y%m%d-%H%M%S")
     rules = filter_ruleset(queries, _program.rules) if queries else _program.rules
     graph = settings.graph_for_engine(_program.graph) if _program.graph is not None else None
-    names = copy.deepcopy(_program.names)
-    constants = _ground_components(graph, facts) if settings.allow_ground_rules else frozenset()
-    translated = translate([_with_functions(r.rule, i) for i, r in enumerate(rules)], facts, graph, names,
-                           persistent=settings.persistent,
-                           closed=_program.closed, constants=constants, directives=settings.directives(),
-                           head_functions=_registered_head_functions(), ipl=_program.ipl)
-    _program.reasoning = _Reasoning(translated, graph)
+    _program.reasoning = _Reasoning(_translated(rules, facts, graph), graph, facts, list(_program.rules))
     _program.last = _program.reasoning.run(timesteps, convergence)
     _program.facts.clear()  # used up only once reasoned with: a reason() that failed keeps them
     return _program.last
+
+
+def _translated(rules: Sequence[Rule], facts: list[PFact], graph: Graph | None) -> Any:
+    """The program of these rules and facts on the graph, with the settings and the registered functions."""
+    constants = _ground_components(graph, facts) if settings.allow_ground_rules else frozenset()
+    return translate([_with_functions(r.rule, i) for i, r in enumerate(rules)], facts, graph,
+                     copy.deepcopy(_program.names), persistent=settings.persistent, closed=_program.closed,
+                     constants=constants, directives=settings.directives(),
+                     head_functions=_registered_head_functions(), ipl=_program.ipl)
 
 
 def _with_functions(rule: PRule, index: int) -> PRule:
@@ -284,17 +337,19 @@ class _Reasoning:
     """One reasoning: the engine (through EpisodeRun, recorded when asked), its trace in PyReason's
     layout, and the convergence test after each step; `again` continues it."""
 
-    def __init__(self, translated: Any, graph: Graph | None) -> None:
+    def __init__(self, translated: Any, graph: Graph | None, facts: list[PFact], rules: list[Rule]) -> None:
         from tracelab.reasoning import ReasoningInputs
         self.translated = translated
+        self.graph, self.facts, self.rules = graph, facts, rules  # what it was translated from
         graph_facts = graph.n_facts if graph is not None else 0
         self.inputs = ReasoningInputs(translated.program, graph, translated.names, graph_facts, "pyreason",
                                       translation=translated.text)
-        self.skip_graph_facts = 0 if settings.save_graph_attributes_to_trace else graph_facts
+        self.graph_facts = graph_facts
         self.last_fact = max([f.end for f in translated.program.facts if not f.static] +
                              [f.start for f in translated.program.facts], default=0)
         self.t_last = -1
         self.passes = 0
+        self.passes_before = 0  # of the reasoning this one continues (continued_with)
         self.recorded = False
         self.external: list[tuple[PFact, int]] = []  # facts of again(), with their first step
 
@@ -304,8 +359,10 @@ class _Reasoning:
         self.recorded = writer is not None
         try:
             self.episode = EpisodeRun(self.inputs, plan_episodes(self.inputs)[0], trace=True, recorder=recorder)
-            self.trace = PyReasonTrace(self.episode.engine, self.translated.names, self.skip_graph_facts,
-                                       self.translated.ipl_rules)
+            self.trace = PyReasonTrace(self.episode.engine, self.translated.names, self.graph_facts,
+                                       self.translated.ipl_rules,
+                                       skip_graph_facts=not settings.save_graph_attributes_to_trace,
+                                       ipl_twin_rules=self.translated.ipl_twin_rules)
             converged = self._steps(timesteps + 1 if timesteps >= 0 else -1, convergence)
             self.episode.finish()
         except BaseException:
@@ -315,6 +372,28 @@ class _Reasoning:
         if writer is not None:
             writer.close()
         return self._interpretation(timesteps, converged)
+
+    def continued_with(self, translated: Any, rules: list[Rule]) -> _Reasoning:
+        """This reasoning going on in a new engine built from `translated` (its rules changed): world 0's
+        atoms keep their bounds and static flags, the clock, the trace so far and the facts of again() go
+        on; delayed firings still pending are dropped (as PyReason drops them at the end of a reason())."""
+        if self.recorded:
+            raise unsupported("reason(again=True) after a recorded reasoning (settings.tracelab_run)")
+        from tracelab.reasoning import EpisodeRun, plan_episodes
+        new = _Reasoning(translated, self.graph, self.facts, rules)
+        new.episode = EpisodeRun(new.inputs, plan_episodes(new.inputs)[0], trace=True)
+        old, eng = self.episode.engine, new.episode.engine
+        held = np.flatnonzero((old.lower[0] != 0.0) | (old.upper[0] != 1.0) | old.static[0])
+        atoms = [eng.atom(pred, *args) for pred, args in (old.vocab.atom_parts(int(a)) for a in held)]
+        eng.set_bounds(np.array(atoms, np.int64), old.lower[0, held], old.upper[0, held], old.static[0, held])
+        eng.t = old.t
+        new.trace = PyReasonTrace(eng, translated.names, new.graph_facts, translated.ipl_rules,
+                                  skip_graph_facts=self.trace.skip_graph_facts,
+                                  ipl_twin_rules=translated.ipl_twin_rules)
+        new.trace.carry(self.trace)
+        new.t_last, new.passes, new.passes_before = self.t_last, self.passes, self.passes
+        new.external, new.last_fact = list(self.external), max(new.last_fact, self.last_fact)
+        return new
 
     def again(self, timesteps: int, restart: bool, facts: Sequence[PFact], convergence: _Convergence) -> Interpretation:
         """`timesteps` more steps (-1: until convergence) with `facts` (their times from the first new
@@ -337,8 +416,8 @@ class _Reasoning:
         for k, rows in self.episode.steps(steps if steps >= 0 else MAX_TIMESTEPS_UNTIL_CONVERGED,
                                           rows_each_step=True):
             t = first + k
-            self.trace.add(rows, self.passes)
-            self.passes = int(engine.stats["passes"][0])
+            self.trace.add(rows, self.passes, t)
+            self.passes = self.passes_before + int(engine.stats["passes"][0])
             self.t_last = t
             if self._converged(engine, rows, t, convergence):
                 return True
@@ -348,12 +427,14 @@ class _Reasoning:
     def _feed(self, t: int) -> None:
         """The external facts (of again()) that hold at step t, for the engine's next step."""
         engine = self.episode.engine
+        next_id = engine.next_external_id()  # the facts queued for one step take ids next_id, next_id + 1, ...
         for f, offset in self.external:
             start, end = offset + f.start, offset + f.end
             if (t == start) if f.static else (start <= t <= end):
                 lit = f.literal
                 atom = engine.atom(self.translated.names.predicate(lit.pred, len(lit.args)), *lit.args)
-                self.trace.external_names[engine.next_external_id()] = f.name
+                self.trace.external_names[next_id] = f.name
+                next_id += 1
                 engine.add_fact(atom, lit.lower, lit.upper, static=f.static)
 
     def _interpretation(self, timesteps: int, converged: bool) -> Interpretation:

@@ -7,11 +7,21 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 
-from tracelab.engine.errors import RuleSyntaxError
 from tracelab.engine.parser import read_rule_file
 from tracelab.engine.program import SourceLoc
 
-from .files import csv_rows, json_items, parse_bool
+from .files import (
+    CsvRow,
+    JsonFinder,
+    OnError,
+    PyReasonFileError,
+    csv_rows,
+    each_row,
+    json_items,
+    or_default,
+    parse_bool,
+    required_text,
+)
 from .text import PLiteral, Squeezed, parse_literal
 
 
@@ -32,60 +42,64 @@ def parse_fact(text: str, loc: SourceLoc, source_line: str | None = None) -> PLi
     return parse_literal(sq, 0, len(sq.s), "fact")
 
 
-def read_facts(path: str | os.PathLike[str]) -> list[PFact]:
+def read_facts(path: str | os.PathLike[str], on_error: OnError = None) -> list[PFact]:
+    """The facts of a PyReason fact file; a bad row raises (located), or with `on_error` is reported
+    and skipped (a bad time or static flag: reported, and PyReason's default used)."""
     file = os.fspath(path)
     text = read_rule_file(file)
     if os.path.splitext(file)[1].lower() == ".json":
-        return _facts_json(text, file)
-    return _facts_csv(text, file)
+        return _facts_json(text, file, on_error)
+    return _facts_csv(text, file, on_error)
 
 
-def _time(value: str, what: str, loc: SourceLoc, line: str | None) -> int:
-    v = value.strip()
-    if not v:
-        return 0
-    if not v.isdigit():
-        raise RuleSyntaxError(f"{what} '{value}' is not a time (an integer >= 0)", loc.file, loc.line,
-                              loc.column, line)
-    return int(v)
+def _time(value: object, what: str, loc: SourceLoc, line: str | None) -> int:
+    v = "" if value is None else value
+    if isinstance(v, int) and not isinstance(v, bool) and v >= 0:
+        return v
+    if isinstance(v, str) and (not v.strip() or v.strip().isdigit()):
+        return int(v.strip() or 0)
+    raise PyReasonFileError(f"Invalid {what} '{value}' (a time: an integer >= 0)", loc.file, loc.line, loc.column,
+                            line)
 
 
 def _checked(f: PFact, line: str | None, where: SourceLoc) -> PFact:
     if f.end < f.start and not f.static:
-        raise RuleSyntaxError(f"fact {f.name}: end_time {f.end} is before start_time {f.start} (PyReason "
-                              "would never apply it)", where.file, where.line, where.column, line)
+        raise PyReasonFileError(f"fact {f.name}: end_time {f.end} is before start_time {f.start} (PyReason "
+                                "would never apply it)", where.file, where.line, where.column, line)
     return f
 
 
-def _facts_csv(text: str, file: str) -> list[PFact]:
-    out: list[PFact] = []
-    for row in csv_rows(text, file, ["fact_text", "name", "start_time", "end_time", "static"]):
+def _facts_csv(text: str, file: str, on_error: OnError) -> list[PFact]:
+    def fact(row: CsvRow) -> PFact:
         src = row.source
+        if not row.fields[0].strip():
+            raise PyReasonFileError(f"Row {row.line}: Missing required 'fact_text'", file, row.line, 1, src)
         lit = parse_fact(row.fields[0], row.at(0), src)
         name = row.field(1).strip() or f"fact_{len(out)}"
-        start = _time(row.field(2), "start_time", row.at(2), src)
-        end = _time(row.field(3), "end_time", row.at(3), src)
-        static = parse_bool(row.field(4), "static", row.at(4), src)
-        out.append(_checked(PFact(name, lit, start, end, static, row.at(0)), src, row.at(3)))
+        start = or_default(lambda: _time(row.field(2), "start_time", row.at(2), src), 0, on_error)
+        end = or_default(lambda: _time(row.field(3), "end_time", row.at(3), src), 0, on_error)
+        static = or_default(lambda: parse_bool(row.field(4), "static", row.at(4), src), False, on_error)
+        return _checked(PFact(name, lit, start, end, static, row.at(0)), src, row.at(3))
+    out: list[PFact] = []
+    for row in csv_rows(text, file, ["fact_text", "name", "start_time", "end_time", "static"]):
+        out += each_row([row], fact, on_error, "fact")
     return out
 
 
-def _facts_json(text: str, file: str) -> list[PFact]:
-    out: list[PFact] = []
-    for _, obj, loc, finder in json_items(text, file, "fact_text", "fact"):
+def _facts_json(text: str, file: str, on_error: OnError) -> list[PFact]:
+    def fact(item: tuple[int, object, SourceLoc, JsonFinder]) -> PFact:
+        i, obj, loc, finder = item
         src = finder.line(loc.line)
-        lit = parse_fact(obj["fact_text"], loc, src)
+        lit = parse_fact(required_text(i, obj, "fact_text", loc, finder), loc, src)
+        assert isinstance(obj, dict)
         name = str(obj.get("name") or f"fact_{len(out)}")
-        times = []
-        for key in ("start_time", "end_time"):
-            v = obj.get(key, 0)
-            if v is None or v == "":
-                v = 0
-            if isinstance(v, bool) or not (isinstance(v, int) or (isinstance(v, str) and v.strip().isdigit())) \
-                    or int(v) < 0:
-                raise finder.error(loc, f"fact {name}: {key} {v!r} is not a time (an integer >= 0)")
-            times.append(int(v))
+        start, end = (or_default(lambda k=k: _time(obj.get(k, 0), k, loc, src), 0, on_error)
+                      for k in ("start_time", "end_time"))
         static = obj.get("static", False)
-        static = parse_bool(static, "static", loc, src or "") if isinstance(static, str) else bool(static)
-        out.append(_checked(PFact(name, lit, times[0], times[1], static, loc), src, loc))
+        if isinstance(static, str):
+            static = or_default(lambda: parse_bool(static, "static", loc, src or ""), False, on_error)
+        return _checked(PFact(name, lit, start, end, bool(static), loc), src, loc)
+    out: list[PFact] = []
+    for item in json_items(text, file, "fact_text", "fact"):
+        out += each_row([item], fact, on_error, "fact")
     return out

@@ -11,7 +11,18 @@ from dataclasses import dataclass, field
 from tracelab.engine.parser import read_rule_file
 from tracelab.engine.program import SourceLoc
 
-from .files import JsonFinder, csv_rows, json_items, parse_bool
+from .files import (
+    CsvRow,
+    JsonFinder,
+    OnError,
+    PyReasonFileError,
+    csv_rows,
+    each_row,
+    json_items,
+    or_default,
+    parse_bool,
+    required_text,
+)
 from .text import PLiteral, Squeezed, parse_literal, split_top
 
 QUANTIFIERS = ("greater_equal", "greater", "less_equal", "less", "equal")
@@ -89,53 +100,60 @@ def _forall(lit: PLiteral) -> PLiteral:
 
 # ------------------------------------------------------------------------------------------ the files
 
-def read_rules(path: str | os.PathLike[str]) -> list[PRule]:
-    """A PyReason rule file by its extension: .csv, .json, else the text format."""
+def read_rules(path: str | os.PathLike[str], on_error: OnError = None) -> list[PRule]:
+    """A PyReason rule file by its extension: .csv, .json, else the text format. A bad row raises
+    (located), or with `on_error` is reported and skipped (a bad option: reported, its default used)."""
     file = os.fspath(path)
     text = read_rule_file(file)
     ext = os.path.splitext(file)[1].lower()
     if ext == ".csv":
-        return _rules_csv(text, file)
+        return _rules_csv(text, file, on_error)
     if ext == ".json":
-        return _rules_json(text, file)
-    return _rules_txt(text, file)
+        return _rules_json(text, file, on_error)
+    return _rules_txt(text, file, on_error)
 
 
-def read_rules_txt(path: str | os.PathLike[str]) -> list[PRule]:
-    """A PyReason rule text file whatever its extension (PyReason's add_rules_from_file)."""
+def read_rules_txt(path: str | os.PathLike[str], on_error: OnError = None, first: int = 0) -> list[PRule]:
+    """A PyReason rule text file whatever its extension (PyReason's add_rules_from_file); its rules are
+    named rule_<first>, rule_<first + 1>, ... by line, as PyReason names them."""
     file = os.fspath(path)
-    return _rules_txt(read_rule_file(file), file)
+    return _rules_txt(read_rule_file(file), file, on_error, first)
 
 
-def _rules_txt(text: str, file: str) -> list[PRule]:
+def _rules_txt(text: str, file: str, on_error: OnError, first: int = 0) -> list[PRule]:
     """PyReason's add_rules_from_file: each line that is not blank and does not start with '#'."""
-    rules = []
-    for n, line in enumerate(text.splitlines(), 1):
-        r = line.rstrip()
-        if not r or r[0] == "#":
-            continue
-        rules.append(parse_rule(r, f"rule_{len(rules)}", SourceLoc(file, n, 1), line))
-    return rules
+    lines = [(n, line) for n, line in enumerate(text.splitlines(), 1) if line.rstrip() and line.rstrip()[0] != "#"]
+    return each_row(enumerate(lines), lambda item: parse_rule(item[1][1].rstrip(), f"rule_{first + item[0]}",
+                                                                SourceLoc(file, item[1][0], 1), item[1][1]),
+                    on_error, "rule")
 
 
-def _rules_csv(text: str, file: str) -> list[PRule]:
-    rules: list[PRule] = []
-    for row in csv_rows(text, file, ["rule_text", "name", "infer_edges", "set_static"]):
+def _rules_csv(text: str, file: str, on_error: OnError) -> list[PRule]:
+    def rule(row: CsvRow) -> PRule:
+        if not row.fields[0].strip():
+            raise PyReasonFileError(f"Row {row.line}: Missing required 'rule_text'", file, row.line, 1, row.source)
         name = row.field(1).strip() or f"rule_{len(rules)}"
         r = parse_rule(row.fields[0], name, row.at(0), row.source)
-        r.infer_edges = parse_bool(row.field(2), "infer_edges", row.at(2), row.source)
-        r.set_static = parse_bool(row.field(3), "set_static", row.at(3), row.source)
-        rules.append(r)
+        r.infer_edges = or_default(lambda: parse_bool(row.field(2), "infer_edges", row.at(2), row.source), False,
+                                   on_error)
+        r.set_static = or_default(lambda: parse_bool(row.field(3), "set_static", row.at(3), row.source), False,
+                                  on_error)
+        return r
+    rules: list[PRule] = []
+    for row in csv_rows(text, file, ["rule_text", "name", "infer_edges", "set_static"]):
+        rules += each_row([row], rule, on_error, "rule")
     return rules
 
 
-def _rules_json(text: str, file: str) -> list[PRule]:
-    rules: list[PRule] = []
-    for _, obj, loc, finder in json_items(text, file, "rule_text", "rule"):
+def _rules_json(text: str, file: str, on_error: OnError) -> list[PRule]:
+    def rule(item: tuple[int, object, SourceLoc, JsonFinder]) -> PRule:
+        i, obj, loc, finder = item
+        r_text = required_text(i, obj, "rule_text", loc, finder)
+        assert isinstance(obj, dict)
         name = str(obj.get("name") or f"rule_{len(rules)}")
-        r = parse_rule(obj["rule_text"], name, loc, finder.line(loc.line))
-        r.infer_edges = _json_bool(obj, "infer_edges", loc, finder)
-        r.set_static = _json_bool(obj, "set_static", loc, finder)
+        r = parse_rule(r_text, name, loc, finder.line(loc.line))
+        r.infer_edges = or_default(lambda: _json_bool(obj, "infer_edges", loc, finder), False, on_error)
+        r.set_static = or_default(lambda: _json_bool(obj, "set_static", loc, finder), False, on_error)
         r.thresholds = _json_thresholds(obj.get("custom_thresholds"), r, loc, finder)
         w = obj.get("weights")
         if w is not None:
@@ -144,7 +162,10 @@ def _rules_json(text: str, file: str) -> list[PRule]:
                 raise finder.error(loc, f"rule {name}: 'weights' must be {len(r.body)} numbers >= 0, one per "
                                         "body clause")
             r.weights = [float(x) for x in w]
-        rules.append(r)
+        return r
+    rules: list[PRule] = []
+    for item in json_items(text, file, "rule_text", "rule"):
+        rules += each_row([item], rule, on_error, "rule")
     return rules
 
 
@@ -156,7 +177,7 @@ def _json_bool(obj: dict, key: str, loc: SourceLoc, finder: JsonFinder) -> bool:
         return parse_bool(v, key, loc, finder.line(loc.line) or "")
     if isinstance(v, (int, float)):
         return bool(v)
-    raise finder.error(loc, f"'{key}' must be a boolean")
+    raise finder.error(loc, f"Invalid {key} value type '{type(v).__name__}' (a boolean)")
 
 
 def _json_thresholds(raw: object, r: PRule, loc: SourceLoc, finder: JsonFinder) -> list[Threshold]:

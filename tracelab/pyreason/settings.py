@@ -29,7 +29,7 @@ SETTINGS: dict[str, tuple[Any, str]] = {
     "static_graph_facts": (True, "False: the graph's facts hold at t = 0 only, not frozen"),
     "store_interpretation_changes": (True, "no-op: the trace is always kept"),
     "parallel_computing": (False, "no-op: one engine, its kernel chosen by tracelab"),
-    "update_mode": ("intersection", "'override': `%mode override`"),
+    "update_mode": ("intersection", "'override': `%mode override`; any other str intersects, as in PyReason"),
     "allow_ground_rules": (False, "True: a rule component that names a node is that node (a constant)"),
     "fp_version": (False, "no-op: one engine, the same answers"),
     "tracelab_run": (None, "a directory: each reason() records into this new tracelab run"),
@@ -52,11 +52,11 @@ class Settings:
             raise AttributeError(f"pr.settings has no setting {name!r}")
         default = SETTINGS[name][0]
         if isinstance(default, bool) and not isinstance(value, bool):
-            raise TypeError(f"pr.settings.{name} must be True or False, got {value!r}")
-        if name == "update_mode" and value not in ("intersection", "override"):
-            raise ValueError(f"pr.settings.update_mode must be 'intersection' or 'override', got {value!r}")
+            raise TypeError(f"pr.settings.{name}: value has to be a bool, got {value!r}")
+        if name == "update_mode" and not isinstance(value, str):  # as PyReason: any other str intersects
+            raise TypeError(f"pr.settings.update_mode: value has to be a str, got {value!r}")
         if name in ("output_file_name",) and not isinstance(value, str):
-            raise TypeError(f"pr.settings.{name} must be a string, got {value!r}")
+            raise TypeError(f"pr.settings.{name}: file_name has to be a string, got {value!r}")
         if name == "tracelab_run" and value is not None and not isinstance(value, (str, os.PathLike)):
             raise TypeError(f"pr.settings.tracelab_run must be a directory path or None, got {value!r}")
         object.__setattr__(self, name, value)

@@ -172,7 +172,10 @@ def parse_literal(sq: Squeezed, lo: int, hi: int, what: str, *, allow_function: 
     for op in OPERATORS:
         k = s.find(op, start, hi)
         if k >= 0:
-            raise sq.error(k, f"comparison clauses ('{op}') are not supported by tracelab")
+            raise sq.error(k, f"comparison clauses ('{op}') are not supported by tracelab: PyReason added them in "
+                              "1.8.11, and since 3.0.0 its grounding skips them (a rule with one fires as the "
+                              "rule without it); write the rule without this clause, or the comparison as a "
+                              "predicate set by facts (e.g. different(x,y))")
     pred, args, after, calls = parse_atom(sq, start, hi, what, allow_calls=allow_function)
     lower, upper = 1.0, 1.0
     if after < hi:

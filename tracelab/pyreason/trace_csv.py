@@ -20,11 +20,16 @@ import numpy as np
 
 from tracelab.engine import CAUSE_EXTERNAL, CAUSE_FACT, CAUSE_POLICY, CAUSE_RESET, CAUSE_RULE
 
+from tracelab.engine.program import effective_bound
+
+from .fact_sequence import StepFact, applied_one_by_one, conflict_message
 from .names import NameMap
+from .translate import DOMAIN
 
 NODE_HEADER = ["Time", "Fixed-Point-Operation", "Node", "Label", "Old Bound", "New Bound", "Occurred Due To",
                "Consistent", "Triggered By", "Inconsistency Message"]
 EDGE_HEADER = ["Edge" if h == "Node" else h for h in NODE_HEADER]
+GRAPH_ATTRIBUTE_FACT = "graph-attribute-fact"  # PyReason's `Occurred Due To` of a graph attribute's row
 
 
 def _bound(lo: float, up: float) -> str:
@@ -38,17 +43,28 @@ class PyReasonTrace:
     each row's new bound as numbers (`filter_and_sort_nodes`)."""
 
     def __init__(self, engine: Any, names: NameMap | None = None, graph_facts: int = 0,
-                 ipl_rules: dict[str, str] | None = None) -> None:
+                 ipl_rules: dict[str, str] | None = None, *, skip_graph_facts: bool = True,
+                 ipl_twin_rules: dict[str, str] | None = None) -> None:
         self.engine = engine
         self.ipl_rules = ipl_rules or {}  # the inconsistent predicate list's rules -> the predicate they copy
+        self.ipl_twin_rules = ipl_twin_rules or {}  # translate.ipl_twins' rules -> their rule's PyReason name
         self.names = names or NameMap()
-        self.graph_facts = graph_facts
+        self.graph_facts = graph_facts  # the engine's facts 0..graph_facts-1 are the graph's attributes
+        self.skip_graph_facts = skip_graph_facts  # PyReason's save_graph_attributes_to_trace=False
         self.node_rows: list[list[object]] = []
         self.edge_rows: list[list[object]] = []
         self.clauses = {"node": 0, "edge": 0}
         self.external_names: dict[int, str] = {}  # external facts' names by their id (pr.reason(again=True))
         self.node_bounds: list[tuple[float, float]] = []
+        self._multi: dict[int, list[tuple[int, int, StepFact]]] | None = None  # _facts_by_atom
+        self.frozen: set[int] = set()  # atoms a conflict of facts froze (static from then on)
         self.edge_bounds: list[tuple[float, float]] = []
+
+    def carry(self, earlier: PyReasonTrace) -> None:
+        """Begin with the rows of `earlier` (a reasoning continued in a new engine)."""
+        self.node_rows, self.edge_rows = list(earlier.node_rows), list(earlier.edge_rows)
+        self.node_bounds, self.edge_bounds = list(earlier.node_bounds), list(earlier.edge_bounds)
+        self.clauses = dict(earlier.clauses)
 
     def _pred(self, tl: str) -> str:
         return self.names.original_predicate(tl)
@@ -58,20 +74,31 @@ class PyReasonTrace:
         """A node as its id, an edge as a tuple (written as Python writes it: `('a', 'b')`)."""
         return args[0] if len(args) == 1 else tuple(args)
 
-    def add(self, rows: dict[str, np.ndarray], passes_before: int) -> None:
-        """One step's rows (Engine.take_trace()); `passes_before`: ordinary passes of the earlier steps.
-        Within a step's pass the rows come in PyReason's order: facts first, then each rule's in rule
-        order, a rule's heads in the graph's node order (PyReason's example trace: John before Justin)."""
+    def add(self, rows: dict[str, np.ndarray], passes_before: int, t: int | None = None) -> None:
+        """One step's rows (Engine.take_trace()); `passes_before`: ordinary passes of the earlier steps;
+        `t`: the step (needed for the rows of facts that conflict from [0,1], which the engine does not
+        write). Within a step's pass the rows come in PyReason's order: facts first, then each rule's in
+        rule order, a rule's heads in the graph's node order (PyReason's example trace: John before
+        Justin). An atom several facts set in the step has a row per fact (fact_sequence.py)."""
         eng = self.engine
         cols = {k: v.tolist() for k, v in rows.items()}
         step: list[tuple[tuple[int, ...], str, list[object], tuple[float, float]]] = []
+        several = self._several_facts(t if t is not None else (int(cols["t"][0]) if cols["t"] else -1))
         for i in range(len(cols["t"])):
             if int(cols["world"][i]) != 0:
                 continue
             kind, cid, g = int(cols["cause_kind"][i]), int(cols["cause_id"][i]), int(cols["grounding"][i])
-            if kind == CAUSE_RESET or (kind == CAUSE_FACT and cid < self.graph_facts):
+            atom = int(cols["atom"][i])
+            if atom in several and int(cols["pass_no"][i]) == 0 and g < 0 and kind in (CAUSE_FACT, CAUSE_POLICY):
+                old, new = (cols["old_lower"][i], cols["old_upper"][i]), (cols["new_lower"][i], cols["new_upper"][i])
+                if self._fact_rows(step, atom, several.pop(atom), old, new, int(cols["t"][i]), passes_before, i):
+                    continue
+            graph_fact = kind == CAUSE_FACT and cid < self.graph_facts
+            if kind == CAUSE_RESET or (graph_fact and self.skip_graph_facts):
                 continue
             pred, args = eng.vocab.atom_parts(int(cols["atom"][i]))
+            if pred == DOMAIN:  # the translation's own (translate.DOMAIN), not PyReason's
+                continue
             rule_no = -1
             old = _bound(cols["old_lower"][i], cols["old_upper"][i])
             consistent = kind != CAUSE_POLICY
@@ -79,37 +106,91 @@ class PyReasonTrace:
                 rule_no = int(eng.groundings.rule[g]) if g >= 0 else cid
                 rule = eng.rules[rule_no]
                 due, by = self.names.original_statement(rule.name), "Rule"
-                if rule.name in self.ipl_rules:  # PyReason's names for what its IPL sets
+                if rule.name in self.ipl_twin_rules:  # a rule's partner head (translate.ipl_twins):
+                    # PyReason names the rule on a conflict, else the predicate copied
+                    due = self.ipl_twin_rules[rule.name] if kind == CAUSE_POLICY else f"IPL: {self.ipl_rules[rule.name]}"
+                    by = "IPL"
+                elif rule.name in self.ipl_rules:  # PyReason's names for what its IPL sets
                     due, by = f"IPL: {self.ipl_rules[rule.name]}", "IPL"
+            elif graph_fact:
+                due, by = GRAPH_ATTRIBUTE_FACT, "Fact"
             elif kind == CAUSE_FACT:
                 due, by = self.names.original_statement(eng.fact(cid).name), "Fact"
             elif kind == CAUSE_EXTERNAL and cid in self.external_names:
                 due, by = self.external_names[cid], "Fact"
             else:
                 due, by = "-", "Fact"
-            message = "" if consistent else self._inconsistency(pred, args, old, by, due)
+            message = "" if consistent else self._inconsistency(pred, args, old, by, self.ipl_rules.get(rule.name, "")
+                                                                if rule_no >= 0 else "")
             row: list[object] = [int(cols["t"][i]), passes_before + int(cols["pass_no"][i]),
                                  self._component(args), self._pred(pred), old,
                                  _bound(cols["new_lower"][i], cols["new_upper"][i]), due, consistent, by, message]
-            if g >= 0:
-                row += [[self._component(eng.vocab.atom_parts(int(a))[1])] for a in eng.groundings.body(g)]
+            if g >= 0 and by != "IPL":  # PyReason's IPL rows have no clauses
+                parts = [eng.vocab.atom_parts(int(a)) for a in eng.groundings.body(g)]
+                row += [[self._component(a)] for p, a in parts if p != DOMAIN]
             which = "node" if len(args) == 1 else "edge"
             self.clauses[which] = max(self.clauses[which], len(row) - len(NODE_HEADER))
             heads = [eng.vocab.node_ids[a] for a in args] if rule_no >= 0 else [i]  # facts keep their order
             order = (int(cols["t"][i]), int(cols["pass_no"][i]), rule_no, *heads)
             step.append((order, which, row, (float(cols["new_lower"][i]), float(cols["new_upper"][i]))))
+        for atom, facts in several.items():  # no row: from [0,1], a conflict leaves [0,1]
+            if t is not None and self.engine.static[0, atom] and self.engine.bound(atom) == (0.0, 1.0):
+                self._fact_rows(step, atom, facts, (0.0, 1.0), (0.0, 1.0), t, passes_before, -1)
         step.sort(key=lambda r: r[0])  # stable: a fact's rows, and one rule's rows on one head, keep theirs
         for _, which, row, bound in step:
             (self.node_rows if which == "node" else self.edge_rows).append(row)
             (self.node_bounds if which == "node" else self.edge_bounds).append(bound)
 
-    def _inconsistency(self, pred: str, args: tuple[str, ...], old: str, by: str, due: str) -> str:
-        """PyReason's message: a conflict with the IPL partner names both groundings."""
+    def _facts_by_atom(self) -> dict[int, list[tuple[int, int, StepFact]]]:
+        """The program's facts (not the graph's) by atom, for the atoms two or more facts set: (start,
+        end, fact), in the facts' order. Only under PyReason's default policy (reset to [0,1], frozen),
+        the one fact_sequence.py follows."""
+        if self._multi is None:
+            eng, by_atom = self.engine, {}
+            if eng.program.inconsistency == "reset_freeze":
+                for f in eng.program.facts:
+                    lit = f.literal
+                    atom = eng.atom(lit.pred, *(a.name for a in lit.args))
+                    lo, up = effective_bound(lit.lower, lit.upper, lit.negated)
+                    by_atom.setdefault(atom, []).append((f.start, f.end, StepFact(self.names.original_statement(f.name),
+                                                                                  lo, up)))
+            self._multi = {a: fs for a, fs in by_atom.items() if len(fs) > 1}
+        return self._multi
+
+    def _several_facts(self, t: int) -> dict[int, list[StepFact]]:
+        """The atoms two or more facts set at step t (and no conflict froze before), with those facts."""
+        out = {}
+        for atom, facts in self._facts_by_atom().items():
+            now = [f for start, end, f in facts if start <= t <= end]
+            if len(now) > 1 and atom not in self.frozen:
+                out[atom] = now
+        return out
+
+    def _fact_rows(self, step: list, atom: int, facts: list[StepFact], old: tuple[float, float],
+                   new: tuple[float, float], t: int, passes_before: int, i: int) -> bool:
+        """PyReason's rows of `facts` applied one by one to `atom` (from `old`), into `step`, when they
+        end where the engine did (`new`); else False and nothing added."""
+        rows, end = applied_one_by_one(old, facts)
+        if end != new:
+            return False
+        pred, args = self.engine.vocab.atom_parts(atom)
+        which = "node" if len(args) == 1 else "edge"
+        for k, r in enumerate(rows):
+            message = "" if r.consistent else conflict_message(f"{self._pred(pred)}({','.join(args)})", r.old,
+                                                               r.incoming)
+            if not r.consistent:
+                self.frozen.add(atom)
+            row: list[object] = [t, passes_before, self._component(args), self._pred(pred), _bound(*r.old),
+                                 _bound(*r.new), r.name, r.consistent, "Fact", message]
+            step.append(((t, 0, -1, i, k), which, row, r.new))
+        return True
+
+    def _inconsistency(self, pred: str, args: tuple[str, ...], old: str, by: str, partner: str) -> str:
+        """PyReason's message: a conflict with the IPL partner (`partner`) names both groundings."""
         atom = f"{self._pred(pred)}({','.join(args)})"
         if by == "IPL":
             return (f"Inconsistency occurred. Grounding {atom} conflicts with grounding "
-                    f"{due.removeprefix('IPL: ')}({','.join(args)}). Setting bounds to [0,1] and static=True for "
-                    "this timestep.")
+                    f"{partner}({','.join(args)}). Setting bounds to [0,1] and static=True for this timestep.")
         return (f"Inconsistency occurred. Conflicting bounds for {atom}. Update from {old} is not allowed. "
                 "Setting bounds to [0,1] and static=True for this timestep.")
 

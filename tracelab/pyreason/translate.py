@@ -43,6 +43,7 @@ class PyReasonProgram:
     names: NameMap
     origins: list[tuple[SourceLoc, str] | None] = field(default_factory=list)  # per line of text
     ipl_rules: dict[str, str] = field(default_factory=dict)  # the IPL's rules -> the predicate they copy
+    ipl_twin_rules: dict[str, str] = field(default_factory=dict)  # ipl_twins' rules -> their rule's name
 
 
 def number(v: float) -> str:
@@ -73,8 +74,29 @@ def _literal(lit: PLiteral, names: NameMap, args: Sequence[str]) -> str:
     return f"{names.predicate(lit.pred, len(lit.args))}({','.join(args)})"
 
 
+# PyReason grounds a variable that only a closed-world clause has (`~h(X)`, `h` closed) over the graph's
+# nodes; the translation gives such a variable this predicate's clause, true of every node (static facts
+# named DOMAIN_FACT_<k>), which the trace, get_dict and the DataFrames leave out
+DOMAIN = "pyreason_node_domain"
+DOMAIN_FACT = "pyreason_domain"
+
+
+def closed_only_variables(r: PRule, closed: Container[str]) -> list[str]:
+    """The rule's body components that only clauses of closed predicates reading [0,0] as true have (such
+    a clause does not bind: docs/language.md, "%closed"), in order of appearance."""
+    def binds(lit: PLiteral) -> bool:
+        if lit.pred in closed:
+            return lit.lower > 0
+        return not (lit.lower == 0 and lit.upper == 1)
+    bound = {a for lit in r.body if binds(lit) for a in lit.args}
+    out: list[str] = []
+    for lit in r.body:
+        out += [a for a in lit.args if a not in bound and a not in out and lit.pred in closed]
+    return out
+
+
 def rule_text(r: PRule, names: NameMap, constants: Container[str] = frozenset(),
-              head_functions: Mapping[str, str] | None = None) -> str:
+              head_functions: Mapping[str, str] | None = None, closed: Container[str] = frozenset()) -> str:
     """One PyReason rule as one tracelab rule statement. Components in `constants` (PyReason's ground
     rules, `allow_ground_rules`: a component that names a node) are constants, and so are the head's
     components that no body clause has (PyReason grounds such a head variable to the node of its name);
@@ -104,6 +126,7 @@ def rule_text(r: PRule, names: NameMap, constants: Container[str] = frozenset(),
         head += bound_text(r.head.lower, r.head.upper)
     body = [threshold_text(t, c.forall) + _literal(c, names, [var[a] for a in c.args]) + bound_text(c.lower, c.upper)
             for c, t in zip(r.body, r.thresholds)]
+    body += [f"{DOMAIN}({var[a]})" for a in closed_only_variables(r, closed) if a not in constants]
     if r.set_static:
         options.append("set_static")
     if r.infer_edges and len(r.head.args) == 2:  # PyReason ignores it on node rules
@@ -172,7 +195,7 @@ def translate(rules: Sequence[PRule], facts: Sequence[PFact], graph: Graph | Non
     lines += directives
     origins += [None] * len(directives)
     for r in rules:
-        lines.append(rule_text(r, names, constants, head_functions))
+        lines.append(rule_text(r, names, constants, head_functions, frozenset(closed)))
         origins.append((r.loc, r.text))
     if closed:  # after the rules and facts: a predicate's name depends on the arities it is used with
         lines.append("%closed " + ", ".join(tl for p in closed for tl in names.predicates_named(p)) +
@@ -183,9 +206,20 @@ def translate(rules: Sequence[PRule], facts: Sequence[PFact], graph: Graph | Non
         lines.append(line)
         origins.append(None)
         ipl_rules[line.split(":", 1)[0]] = source
+    ipl_twin_rules: dict[str, str] = {}
+    for twin, source, of in ipl_twins(rules, ipl):
+        lines.append(rule_text(twin, names, constants, head_functions, frozenset(closed)))
+        origins.append((twin.loc, twin.text))
+        ipl_rules[lines[-1].split(":", 1)[0]] = source
+        ipl_twin_rules[lines[-1].split(":", 1)[0]] = of
     for f in facts:
         lines.append(fact_text(f, names))
         origins.append((f.loc, ""))
+    if any(f"{DOMAIN}(" in line for line in lines):
+        nodes = dict.fromkeys([*(graph.nodes if graph is not None else ()),
+                               *(a for f in facts for a in f.literal.args)])
+        lines += [f"{DOMAIN_FACT}_{k}: {DOMAIN}({constant_text(n)}) static" for k, n in enumerate(nodes)]
+        origins += [None] * len(nodes)
     if graph is not None and embed_graph:
         lines.append("# the graph's facts; facts carry no edge set, so edge rules are not restricted to the graph's "
                      "edges as in PyReason (`tracelab reason --dialect pyreason` with the graph keeps that)")
@@ -200,7 +234,7 @@ def translate(rules: Sequence[PRule], facts: Sequence[PFact], graph: Graph | Non
     except ProgramError as e:
         raise _located(e, origins, lines) from None
     program.files = sorted({str(o[0].file) for o in origins if o is not None})
-    return PyReasonProgram(text, program, graph, names, origins, ipl_rules)
+    return PyReasonProgram(text, program, graph, names, origins, ipl_rules, ipl_twin_rules)
 
 
 # A bound excluding exactly the atoms within the engine's EPS of [0,1] (never set, or set back to it): a
@@ -220,6 +254,29 @@ def ipl_rule_lines(ipl: Sequence[tuple[str, str]], names: NameMap, arity: Mappin
     for k, (a, b) in enumerate(ipl):
         for n in sorted(arity.get(a, set()) | arity.get(b, set())):  # none: nothing to keep complementary
             out += _ipl_pair(k, a, b, n, names)
+    return out
+
+
+def ipl_twins(rules: Sequence[PRule], ipl: Sequence[tuple[str, str]]) -> list[tuple[PRule, str, str]]:
+    """For each rule whose head predicate has an IPL partner, its twin: the same body, the partner as
+    head with the complement bound ([1-u,1-l]), so that the partner is set in the same pass as PyReason
+    sets it inside the rule's update, and a conflict resets both atoms as PyReason does (the pass's
+    groups of both atoms conflict). Rules whose head bound comes from an annotation function have none,
+    and so have delayed rules: their firings land in pass 0 with the facts, where the IPL's own rules of
+    pass 1 already meet them.
+    Returns (twin, the head predicate it copies, the rule's name)."""
+    out = []
+    for i, r in enumerate(rules):
+        if r.head.function or r.delay > 0:
+            continue
+        for a, b in ipl:
+            for src, dst in ((a, b), (b, a)):
+                if r.head.pred != src:
+                    continue
+                # unrounded, as the pair's `~` rules and PyReason compute it (1 - 0.8 = 0.19999999999999996)
+                head = dataclasses.replace(r.head, pred=dst, lower=1 - r.head.upper, upper=1 - r.head.lower)
+                out.append((dataclasses.replace(r, name=f"pyreason_ipl_twin_{i}_{dst}", head=head,
+                                                set_static=False), src, r.name))
     return out
 
 

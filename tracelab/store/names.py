@@ -10,6 +10,8 @@ import re
 from collections.abc import Sequence
 from typing import Any
 
+from tracelab.errors import close_names
+
 # The SQL of each kind's names, one column `name`. A cause is what the changes view's `rule` column
 # names: a rule, fact:NAME, policy:NAME, action, reset.
 _NAMES_SQL = {
@@ -37,7 +39,7 @@ class UnknownName(KeyError):
 
 def unknown_name_message(kind: str, name: str, known: Sequence[str], where: str = " in this run") -> str:
     """`no KIND 'NAME'WHERE; did you mean A, B?`, or the known names listed when none is close."""
-    near = difflib.get_close_matches(name, list(known), n=5)
+    near = close_names(name, known)
     if near:
         return f"no {kind} {name!r}{where}; did you mean {', '.join(near)}?"
     listed = sorted(known)[:LISTED]

@@ -24,6 +24,7 @@ import duckdb
 import pyarrow as pa
 
 from tracelab.store import layout
+from tracelab.store.arrow_build import strings
 from tracelab.store.catalog import find_runs, is_run
 from tracelab.store.kind import can_read
 from tracelab.store.reader import (
@@ -197,7 +198,7 @@ def each_run_stream(con: SeveralRunsConnection, sql: str, params: dict[str, Any]
             try:
                 reader = reader or _open_reader(con, i, sql, params)
                 for batch in _refusing(reader):
-                    named = pa.array([name] * batch.num_rows, pa.string())
+                    named = strings([name] * batch.num_rows)  # not pa.array: it imports pandas
                     yield pa.RecordBatch.from_arrays([named, *batch.columns], schema=pa.schema(
                         [schema.field(0), *batch.schema])).cast(schema)
             finally:

@@ -25,8 +25,9 @@ import torch
 from gymnasium.utils import seeding
 from gymnasium.vector.utils import concatenate, create_empty_array
 
-from tracelab.engine.safe_files import FileRefused
+from tracelab.engine.safe_files import FileRefused, human_bytes
 from tracelab.envs.declared.env_source import EnvSource, check_same_env, env_source_from_json
+from tracelab.envs.declared.spec_size import env_bytes
 from tracelab.errors import UserError
 from tracelab.train.checkpoint import (as_tensors, check_best, check_buffer_rows, checkpoint_config,
                                        checkpoint_file, checkpoint_path, episode_games_schema, in_range,
@@ -141,8 +142,14 @@ def load_env_checkpoint(run: str | Path, given: EnvSource | None, max_bytes: int
     try:
         encoder = ObservationEncoder(probe.observation_space, given.name)
         n_actions = action_count(probe.action_space, given.name)
+        spec = getattr(probe.unwrapped, "world_spec", None)
+        each = env_bytes(spec.named_atoms if spec is not None else 0)
     finally:
         probe.close()
+    if cfg.envs * each > max_bytes:  # refused before a schema of that many worlds is made
+        raise FileRefused(f"{f}: config.envs: {cfg.envs:,} envs of about {human_bytes(each)} each would take "
+                          f"{human_bytes(cfg.envs * each)}, over the limit of {human_bytes(max_bytes)} "
+                          "(--max-memory raises it)")
     net = NetSpec(encoder.size, cfg.hidden_sizes, n_actions, cfg.dueling)
     learner, best = learner_schema(cfg, net)
     w = cfg.envs

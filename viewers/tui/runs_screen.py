@@ -66,7 +66,8 @@ class RunsScreen(Screen):
             self.action_refresh()
 
     def _tick(self) -> None:
-        if self.is_current:  # not while a run is open over it
+        reading = any(w.group == "catalog" and w.is_running for w in self.workers)
+        if self.is_current and not reading:  # not while a run is open over it, nor over a slow read
             self.action_refresh()
 
     def action_refresh(self) -> None:

@@ -20,10 +20,13 @@ import numpy as np
 
 from tracelab.engine.errors import ProgramError
 from tracelab.engine.parser import check_program, load_program, parse_literal
+from tracelab.engine.safe_files import FileRefused, path_inside
 from tracelab.engine.program import CONSTANT_RE, Fact, Literal, Program, SourceLoc, Term
 from tracelab.envs.declared.board import CELL_FORMAT, MAX_BOARD_CELLS, MAX_BOARD_FACTS, Board, hex_color
 from tracelab.envs.declared.expressions import ExpressionError, evaluate
 from tracelab.envs.declared.spec_file import KeyPath, SpecError, SpecSource, read_spec_file
+from tracelab.errors import close_names
+from tracelab.envs.declared.spec_size import SpecBudget, SpecTooBig
 
 READS = ("index", "lower", "bounds", "onehot", "count", "nearest")
 SPACES = ("Discrete", "MultiDiscrete", "Box", "Dict")
@@ -131,6 +134,9 @@ class WorldSpec:
     board: Board | None
     render_fps: int
     source: SpecSource = field(repr=False)
+    # the board's facts and the atoms the spec names, every agent's: the fewest atoms its engine has
+    # (what a batch of worlds is estimated from, spec_size.check_worlds)
+    named_atoms: int = 0
     # what a game's end counts as (`[end] win`, `loss`): an episode that terminated with one of them [1,1]
     win: tuple[Atom, ...] = ()
     loss: tuple[Atom, ...] = ()
@@ -144,9 +150,17 @@ class _Reader:
     def __init__(self, src: SpecSource, names: dict[str, Any]) -> None:
         self.src = src
         self.names = names  # params and data, for expressions
+        self.budget = SpecBudget()  # what the spec builds, charged before it is built
 
     def err(self, path: KeyPath, msg: str) -> SpecError:
         return self.src.error(path, msg)
+
+    def charge(self, path: KeyPath, atoms: int, agents: int = 1) -> None:
+        """Charge the atoms a key is about to ground (`atoms` for each of `agents`) to the spec's budget."""
+        try:
+            self.budget.charge(atoms * agents, _atoms_for(atoms, agents))
+        except SpecTooBig as e:
+            raise self.err(path, str(e)) from None
 
     def raw(self, path: KeyPath, default: Any = ...) -> Any:
         node: Any = self.src.data
@@ -220,6 +234,10 @@ class _Reader:
         return p
 
 
+def _atoms_for(atoms: int, agents: int) -> str:
+    return f"{atoms:,} atoms" + (f" for each of {agents:,} agents" if agents > 1 else "")
+
+
 def _kind(v: Any) -> str:
     if isinstance(v, str):
         return f"the string {v[:40]!r}"
@@ -248,9 +266,19 @@ class _Names:
             for lit in lits:
                 self.arity.setdefault(lit.pred, len(lit.args))
         self.constants = set(program.constants()) | set(extra_constants)
+        # a pattern is grounded for every agent: parsed and checked once (its first use raises any error)
+        self._checked: dict[tuple[str, tuple[str, ...], bool], Literal] = {}
 
     def pattern(self, path: KeyPath, text: Any, variables: tuple[str, ...], *, bounds: bool = False) -> Literal:
         """A literal whose variables are among `variables`, naming the program's predicates."""
+        key = (text, variables, bounds) if isinstance(text, str) else None
+        if key in self._checked:
+            return self._checked[key]
+        lit = self._check_pattern(path, text, variables, bounds=bounds)
+        self._checked[key] = lit  # type: ignore[index]
+        return lit
+
+    def _check_pattern(self, path: KeyPath, text: Any, variables: tuple[str, ...], *, bounds: bool) -> Literal:
         if not isinstance(text, str):
             raise self.r.err(path, f"expected an atom such as \"p(a)\", got {_kind(text)}")
         try:
@@ -270,10 +298,18 @@ class _Names:
             if a.is_var and a.name not in variables:
                 allowed = f"only {', '.join(variables)}" if variables else "none: the atom must be ground"
                 raise self.r.err(path, f"{text!r}: variable {a.name} is not allowed here ({allowed})")
-            if not a.is_var and a.name not in self.constants:
-                raise self.r.err(path, f"{text!r}: the program, the board and the agents have no constant "
-                                       f"{a.name!r}")
+            if not a.is_var:
+                self.constant(path, a.name, f"{text!r}: ")
         return lit
+
+    def constant(self, path: KeyPath, name: str, context: str = "") -> None:
+        """A constant the spec names (in an atom, a domain, `things`): the program's, a board cell, an
+        agent or one of [env] constants; otherwise an error with the closest ones."""
+        if name not in self.constants:
+            near = close_names(name, sorted(self.constants))
+            hint = f"; did you mean {', '.join(near)}?" if near else ""
+            raise self.r.err(path, f"{context}the program, the board and the agents have no constant "
+                                   f"{name!r}{hint}")
 
     def ground(self, lit: Literal, values: Mapping[str, str]) -> Atom:
         return Atom(lit.pred, tuple(values[a.name] if a.is_var else a.name for a in lit.args), lit.lower, lit.upper)
@@ -293,8 +329,16 @@ class _Names:
         var = names.pop()
         return tuple(self.ground(lit, {var: v, AGENT_VAR: agent}) for v in domain)
 
+    def domain(self, path: KeyPath, values: list[str]) -> None:
+        """Every value of an `over` is a constant an atom can take (a typo would leave an atom never true)."""
+        for i, v in enumerate(values):
+            self.constant((*path, i), v)
 
-def _vars(text: str) -> list[Term]:
+
+def _vars(text: Any) -> list[Term]:
+    """The variables of an atom's text (none for a text that is not an atom: pattern() says why)."""
+    if not isinstance(text, str):
+        return []
     try:
         return [a for a in parse_literal(text).args if a.is_var]
     except ProgramError:
@@ -336,6 +380,7 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     for i, a in enumerate(agents):
         if not CONSTANT_RE.fullmatch(a):
             raise r.err(("agents", "names", i), f"{a!r} is not a plain constant (lower-case letter or digit first)")
+    _every_agents_atoms_ahead(r, board, len(agents))
     # the board's predicates are names the spec may use too (FrozenLake's start cells are weights of the
     # start choice, not read by a rule); a typo among them leaves the rules' predicate "never set"
     program = _with_board(r, rules, board)
@@ -357,6 +402,9 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     win = _every_agents(r, check, ("end", "win"), agents)
     loss = _every_agents(r, check, ("end", "loss"), agents)
     max_steps = r.integer(("end", "max_steps"), None, minimum=1) if "max_steps" in end else None
+    if not (terminated or truncated or max_steps):  # play --env would step such a world forever
+        raise r.err(("end",), "the episode can never end: expected `terminated`, `truncated` or `max_steps` "
+                              "(max_steps = N for a task that never ends by itself)")
     r.table(("start",), ("facts", "choose"), default={})
     start_facts = _every_agents(r, check, ("start", "facts"), agents, bounds=True)
     choices = tuple(d for i in range(len(_list(r, ("start", "choose"))))
@@ -370,13 +418,43 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
                                "(give each draw its own `name`)")
         seen[d.name] = d.key
     fps = r.integer(("env", "render_fps"), 4, minimum=1)
+    if board is not None:
+        spec_read = [*(a for part in parts for atoms in part.per_agent for a in atoms), *terminated, *truncated,
+                     *(a for per_agent in (*reward_table, *reward_scaled) for a, _ in per_agent),
+                     *(a for per_agent in (mask or ()) for a in per_agent),
+                     *(a for d in (*choices, *randoms) for value in (d.weights or ()) for a in value)]
+        _check_board_names(r, rules, board, {a.pred for a in spec_read})
     # the program's warnings again, knowing what the env sets: no "never set" for pressed(...), slip(...)
     env_set = [*(a for per_agent in action_facts for facts in per_agent for a in facts), *start_facts,
                *(a for d in (*choices, *randoms) for value in d.atoms for a in value)]
     check_program(program, {a.pred: len(a.args) for a in env_set})
     return WorldSpec(src.path, names, program, tuple(agents), action_names, action_facts, mask, space, parts,
                      reward_table, reward_scaled, terminated, truncated, max_steps, start_facts, choices,
-                     randoms, board, fps, src, win, loss)
+                     randoms, board, fps, src, r.budget.board_facts + r.budget.atoms, win, loss)
+
+
+def _every_agents_atoms_ahead(r: _Reader, board: Board | None, agents: int) -> None:
+    """Refuse a spec whose atoms for every agent (actions, mask, observation parts, rewards, ends, start
+    facts), counted from its text, could not fit, before the board's facts or any atom is made."""
+    def length(v: Any) -> int:
+        return len(v) if isinstance(v, (list, dict)) else 1
+    cells = board.height * board.width if board else 0
+    actions = r.raw(("actions",), {})
+    n = sum(length(v) for v in actions.values()) if isinstance(actions, dict) else 0
+    n += length(actions) if "mask" in r.raw(("agents",), {}) else 0
+    for part in r.raw(("observation", "parts"), []):
+        if not isinstance(part, dict):
+            continue
+        over = part.get("over")
+        n += length(part.get("atoms", [])) + (cells if over == "cells" else len(over) if isinstance(over, list) else 0)
+        n += (1 + length(part.get("things", []))) * cells if part.get("read") == "nearest" else 0
+    n += length(r.raw(("reward", "table"), {})) + 1
+    n += sum(length(r.raw(path, [])) for path in (("end", "terminated"), ("end", "truncated"), ("end", "win"),
+                                                   ("end", "loss"), ("start", "facts")))
+    try:
+        r.budget.ahead(n * agents, _atoms_for(n, agents))
+    except SpecTooBig as e:
+        raise r.err(("agents", "names"), str(e)) from None
 
 
 def _actions(r: _Reader, check: _Names, agents: list[str], mask_text: Any
@@ -391,6 +469,8 @@ def _actions(r: _Reader, check: _Names, agents: list[str], mask_text: Any
             raise r.err(("actions", name), "an action's name must be a plain constant (lower-case letter or "
                                            "digit first; letters, digits, _ and -)")
         r.strings(("actions", name))
+    r.charge(("actions",), sum(len(actions_t[n]) for n in names) + (len(names) if mask_text is not None else 0),
+             len(agents))
     facts = tuple(tuple(check.atoms(("actions", n), actions_t[n], {AGENT_VAR: a}, bounds=True) for n in names)
                   for a in agents)
     if mask_text is None:
@@ -422,6 +502,7 @@ def _every_agents(r: _Reader, check: _Names, path: KeyPath, agents: list[str], *
                   ) -> tuple[Atom, ...]:
     """A list of atoms, `Agent` standing for each agent in turn (an atom without it once)."""
     texts = r.strings(path, [])
+    r.charge(path, len(texts), len(agents))
     out = (a for agent in agents for a in check.atoms(path, texts, {AGENT_VAR: agent}, bounds=bounds))
     return tuple(dict.fromkeys(out))
 
@@ -434,12 +515,12 @@ def _list(r: _Reader, path: KeyPath) -> list[Any]:
 
 
 def _inside(r: _Reader, path: KeyPath, name: str) -> str:
-    """A file named by the spec: relative, inside the spec's folder (a spec never makes tracelab read
-    elsewhere)."""
-    parts = name.replace("\\", "/").split("/")
-    if os.path.isabs(name) or ".." in parts or not name:
-        raise r.err(path, f"{name!r}: expected a path relative to the spec's folder, inside it")
-    return os.path.join(r.src.folder, name)
+    """A file named by the spec: relative, inside the spec's folder once links are resolved (a spec never
+    makes tracelab read elsewhere); the resolved path."""
+    try:
+        return str(path_inside(r.src.folder, name))
+    except FileRefused as e:
+        raise r.err(path, f"{e} (a path relative to the spec's folder, inside it)") from None
 
 
 def _load_rules(r: _Reader, files: list[str]) -> Program:
@@ -447,6 +528,24 @@ def _load_rules(r: _Reader, files: list[str]) -> Program:
         return load_program(*files)
     except FileNotFoundError as e:
         raise r.err(("env", "rules"), f"{e.filename}: no such file") from None
+
+
+def _check_board_names(r: _Reader, rules: Program, board: Board, spec_read: set[str]) -> None:
+    """Each predicate the board makes (legend, neighbours, rays, edges) is read by a rule or by an atom of
+    the spec: one that nothing reads is a typo (`G = ["floor", "gaol"]` leaves the rules' goal never
+    true), named with the predicates the rules read but nothing sets."""
+    read = {lit.pred for rule in rules.rules for lit in rule.body} | spec_read
+    set_by = {f.literal.pred for f in rules.facts} | {rule.head.pred for rule in rules.rules}
+    wanted = sorted(read - set_by) or sorted(read)
+    made = [(("board", "legend", ch, i), p) for ch, preds in board.legend.items() for i, p in enumerate(preds)]
+    made += [(("board", key, name), name) for key, names in (("neighbours", board.neighbours),
+                                                             ("rays", board.rays), ("edges", board.edges))
+             for name in names]
+    for path, pred in made:
+        if pred not in read:
+            near = close_names(pred, wanted)
+            hint = f"did you mean {', '.join(near)}?" if near else f"the rules read: {', '.join(wanted[:12])}"
+            raise r.err(path, f"no rule and no atom of the spec reads the predicate {pred!r}; {hint}")
 
 
 def _with_board(r: _Reader, program: Program, board: Board | None) -> Program:
@@ -509,6 +608,10 @@ def _board(r: _Reader) -> Board:
     board = Board(tuple(rows), fmt, legend, neighbours, edge, marks, colors, mark_colors, rays, edges)
     if board.fact_count() > MAX_BOARD_FACTS:  # refused before the facts are built
         raise r.err(("board",), f"makes {board.fact_count():,} facts; a board may make at most {MAX_BOARD_FACTS:,}")
+    try:
+        r.budget.board(board.fact_count())
+    except SpecTooBig as e:
+        raise r.err(("board",), str(e)) from None
     return board
 
 
@@ -575,9 +678,12 @@ def _observation(r: _Reader, check: _Names, domains: dict[str, list[str]], agent
             raise r.err(path, "expected either `atom` (with `over`) or `atoms` (a list of ground atoms)")
         if "atoms" in p:
             texts = r.strings((*path, "atoms"))
+            r.charge((*path, "atoms"), len(texts), len(agents))
             per_agent = tuple(check.atoms((*path, "atoms"), texts, {AGENT_VAR: a}) for a in agents)
         else:
             domain = _domain(r, (*path, "over"), domains)
+            r.charge((*path, "over"), len(domain), len(agents))
+            check.domain((*path, "over"), domain)
             per_agent = tuple(check.over((*path, "atom"), p["atom"], domain, a) for a in agents)
         if not per_agent[0]:
             raise r.err(path, "no atoms to read")
@@ -607,9 +713,7 @@ def _nearest(r: _Reader, check: _Names, path: KeyPath, p: dict[str, Any], name: 
     if "over" in p or "atoms" in p:
         raise r.err(path, "a \"nearest\" part reads the board's cells: no `over` or `atoms`")
     things = r.strings((*path, "things"))
-    for i, t in enumerate(things):
-        if t not in check.constants:
-            raise r.err((*path, "things", i), f"the program, the board and the agents have no constant {t!r}")
+    check.domain((*path, "things"), things)
     if not things or len(things) * len(cells) > MAX_DOMAIN:
         raise r.err((*path, "things"), f"expected 1 to {MAX_DOMAIN // len(cells)} things")
     text = p["atom"]
@@ -619,6 +723,7 @@ def _nearest(r: _Reader, check: _Names, path: KeyPath, p: dict[str, Any], name: 
         raise r.err((*path, "atom"), f"{text!r}: expected {THING_VAR} (each of `things`) and one variable for "
                                      "the cell")
     cell_var = others.pop()
+    r.charge((*path, "things"), (1 + len(things)) * len(cells), len(agents))
     per_agent = tuple((*check.over((*path, "from"), p["from"], cells, a),
                        *(check.ground(lit, {THING_VAR: t, cell_var: c, AGENT_VAR: a}) for t in things for c in cells))
                       for a in agents)
@@ -650,6 +755,8 @@ def _reward(r: _Reader, check: _Names, agents: list[str]
             ) -> tuple[tuple[tuple[tuple[Atom, float], ...], ...], tuple[tuple[tuple[Atom, float], ...], ...]]:
     """Per agent: the table's (atom, value) pairs and the scaled atom's (atom, scale)."""
     r.table(("reward",), ("table", "atom", "scale"), default={})
+    r.charge(("reward",), len(r.table(("reward", "table"), default={})) + ("atom" in r.raw(("reward",), {})),
+             len(agents))
     table = []
     for text in r.table(("reward", "table"), default={}):
         path = ("reward", "table", text)
@@ -683,12 +790,17 @@ def _draw(r: _Reader, check: _Names, path: KeyPath, domains: dict[str, list[str]
         if list(over) != variables:
             raise r.err((*path, "over"), f"expected one domain per variable of `atom`, in order: {', '.join(variables)}")
         axes = [_domain(r, (*path, "over", v), domains) for v in variables]
+        for v, axis in zip(variables, axes):
+            check.domain((*path, "over", v), axis)
     else:
         if len(variables) != 1:
             raise r.err((*path, "atom"), "expected exactly one variable (or `over` as a table, a domain per variable)")
         axes = [_domain(r, (*path, "over"), domains)]
+        check.domain((*path, "over"), axes[0])
     if math.prod(len(a) for a in axes) > MAX_DOMAIN:  # refused before the product is built
         raise r.err((*path, "over"), f"more than {MAX_DOMAIN} combinations")
+    n_weights = len(w) if isinstance(w := t.get("weights", []), list) else 1
+    r.charge((*path, "over"), math.prod(len(a) for a in axes) * (len(patterns) + n_weights))
     values = [dict(zip(variables, combo)) for combo in itertools.product(*axes)]
     lits = [check.pattern((*path, "atom"), p, tuple(variables), bounds=True) for p in patterns]
     atoms = tuple(tuple(check.ground(lit, v) for lit in lits) for v in values)

@@ -2,7 +2,11 @@
 
 tomllib gives values without positions, so `KeyLines` scans the text once for table headers (`[a.b]`,
 `[[a]]`) and `key = ` lines and maps a key path such as ("reward", "table") or ("actions", 2) to the line
-that writes it (a key inside an inline table or an array gets its enclosing key's line)."""
+that writes it (a key inside an inline table or an array gets its enclosing key's line).
+
+Reading is linear in the file: the scans use no pattern that can backtrack, and a dotted key of many
+parts (`a.a.a...`, whose every prefix tomllib rebuilds: quadratic time and memory) is refused before
+tomllib sees it."""
 from __future__ import annotations
 
 import os
@@ -23,7 +27,13 @@ class SpecError(UserError):
     """A mistake in an environment spec: one line, `FILE:LINE: KEY: what was expected`."""
 
 
-_HEADER = re.compile(r"^\s*(\[\[?)\s*([^\]]+?)\s*\]\]?\s*(#.*)?$")
+class WorldStateError(SpecError, RuntimeError):
+    """A world of a spec that reached a state its spec cannot read (no atom of an index part true, no
+    start value whose weights hold), found while stepping: located at the key, as a SpecError is (a
+    RuntimeError too: the env cannot go on)."""
+
+
+MAX_KEY_PARTS = 10  # parts of one dotted key or table header; specs use 2 or 3 ([data.maps], a.b = 1)
 _KEY = re.compile(r"""^\s*("[^"]*"|'[^']*'|[A-Za-z0-9_.-]+)\s*=""")
 
 
@@ -46,10 +56,10 @@ class KeyLines:
         for n, line in enumerate(text.splitlines(), start=1):
             code = _strip_comment(line)
             if depth == 0:
-                m = _HEADER.match(code)
-                if m and "=" not in code:
-                    name = _split_dotted(m.group(2))
-                    if m.group(1) == "[[":
+                header = _header(code)
+                if header is not None:
+                    double, name = header
+                    if double:
                         i = counts.get(name, 0)
                         counts[name] = i + 1
                         table = (*name, i)
@@ -70,6 +80,67 @@ class KeyLines:
             if path[:i] in self.lines:
                 return self.lines[path[:i]]
         return 0
+
+
+def _header(code: str) -> tuple[bool, tuple[str, ...]] | None:
+    """A table header `[a.b]` or `[[a]]` (double: True) and its name's parts; None for any other line."""
+    text = code.strip()
+    if not (text.startswith("[") and text.endswith("]")) or "=" in text or len(text) < 3:
+        return None
+    double = text.startswith("[[") and text.endswith("]]") and len(text) >= 5
+    inner = text[2:-2] if double else text[1:-1]
+    if "]" in inner:
+        return None
+    return double, _split_dotted(inner)
+
+
+_KEY_CHAIN_BREAKS = re.compile(r"""["'#\n=,\[\]{}.]""")  # what ends or extends a run of dotted key parts
+_BASIC_END = re.compile(r'(?:[^"\\\n]|\\.)*"')  # the rest of a "string" (alternatives never overlap)
+_MULTI_BASIC_END = re.compile(r'(?:[^"\\]|\\[\s\S]|"(?!""))*"""')
+
+
+def check_key_parts(text: str, file: str) -> None:
+    """SpecError when a dotted key or table header outside strings and comments has more than
+    MAX_KEY_PARTS parts: counted in one pass before tomllib, which is quadratic in them. A value has at
+    most one dot (1.5, a time's fraction), so a longer run of dots is a key's."""
+    dots, pos = 0, 0
+    while True:
+        m = _KEY_CHAIN_BREAKS.search(text, pos)
+        if m is None:
+            return
+        c, pos = m.group(), m.end()
+        if c == ".":
+            dots += 1
+            if dots >= MAX_KEY_PARTS:
+                line = text.count("\n", 0, pos) + 1
+                raise SpecError(f"{file}:{line}: a dotted key or table name of more than {MAX_KEY_PARTS} parts; "
+                                "refused")
+            continue
+        if c == "#":
+            end = text.find("\n", pos)
+            pos = len(text) if end < 0 else end
+        elif c in "\"'":  # a string is one part of a key (or a value): the run of dots goes on after it
+            pos = _string_end(text, pos, c)
+            if pos < 0:
+                return  # unterminated: tomllib says where
+        else:
+            dots = 0
+
+
+def _string_end(text: str, pos: int, quote: str) -> int:
+    """Where the string opened by `quote` just before `pos` ends (-1: it does not)."""
+    multi = text.startswith(quote * 2, pos)
+    if quote == '"':
+        m = (_MULTI_BASIC_END if multi else _BASIC_END).match(text, pos + 2 if multi else pos)
+        end = -1 if m is None else m.end()
+    else:
+        end = text.find(quote * 3 if multi else quote, pos + 2 if multi else pos)
+        end = -1 if end < 0 else end + (3 if multi else 1)
+    if multi and end >= 0:  # up to two quotes of the content may stand right before the closing three
+        for _ in range(2):
+            if text.startswith(quote, end):
+                end += 1
+    return end
 
 
 def _bracket_balance(code: str) -> int:
@@ -113,18 +184,19 @@ class SpecSource:
     def folder(self) -> str:
         return os.path.dirname(os.path.abspath(self.path))
 
-    def error(self, path: KeyPath, message: str) -> SpecError:
-        """A located error about the value at `path`."""
+    def error(self, path: KeyPath, message: str, kind: type[SpecError] = SpecError) -> SpecError:
+        """A located error (`kind`) about the value at `path`."""
         line = self.key_lines.line(path)
         where = f"{self.path}:{line}" if line else self.path
         key = ".".join(str(p) if isinstance(p, str) else f"[{p}]" for p in path).replace(".[", "[")
-        return SpecError(f"{where}: {key}: {message}" if key else f"{where}: {message}")
+        return kind(f"{where}: {key}: {message}" if key else f"{where}: {message}")
 
 
 def read_spec_file(path: str | os.PathLike[str]) -> SpecSource:
     """The spec at `path`: a regular UTF-8 file of at most SPEC_FILE_CAP bytes, parsed as TOML."""
     file = os.fspath(path)
     text = read_text(file, SPEC_FILE_CAP, what="spec file")
+    check_key_parts(text, file)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:

@@ -20,6 +20,8 @@ from tracelab.engine.core import LANES_MIN_WORLDS
 from tracelab.envs.declared import fused, vector_fused
 from tracelab.envs.declared.observe import missing_index, part_numbers
 from tracelab.envs.declared.spec import WorldSpec
+from tracelab.envs.declared.state_errors import no_index, no_weights_hold
+from tracelab.envs.declared.spec_size import check_worlds
 from tracelab.envs.declared.world import DeclaredWorld
 
 MAX_START_BYTES = 256 << 20  # the start outcomes' engine states, all together
@@ -33,6 +35,7 @@ class DeclaredWorlds:
         if after:
             raise ValueError(f"{spec.path}: random fact {after[0].name!r} is drawn `after` a step, which the "
                              "vector env does not support yet (a second engine step of some worlds only)")
+        check_worlds(n_worlds, spec.named_atoms, f"num_envs={n_worlds:,}")  # before the batch's engine
         self.spec = spec
         self.n_worlds = w = n_worlds
         # the single world's construction, on an engine of n_worlds worlds: its ids, draws and tables
@@ -153,8 +156,7 @@ class DeclaredWorlds:
             part = spec.parts[one._index_parts[p]]
             if missing_index(part, index[:, p]):
                 w = int(np.flatnonzero(index[:, p] < 0)[0])
-                raise RuntimeError(f"{spec.path}: observation part {part.name!r}: no atom of "
-                                   f"{part.atoms[0].pred}(...) is true in world {w}, so it has no index")
+                raise no_index(spec, part, w)
         if spec.space == "Discrete":
             value = np.zeros(self.n_worlds, np.int64)
             for size, col in zip(one._part_sizes, index.T):  # first part slowest, as observation()
@@ -205,8 +207,7 @@ def _draw_batch(drawer: Any, worlds: DeclaredWorlds) -> np.ndarray:
     for i, r in enumerate(rngs):
         possible = np.flatnonzero(ok[i])
         if possible.size == 0:
-            raise RuntimeError(f"{worlds.spec.path}: {'.'.join(map(str, d.key))}: no value's weights hold in "
-                               f"world {i}: nothing to draw from")
+            raise no_weights_hold(worlds.spec, d, i)
         if d.method == "choice":
             out[i] = possible[r.integers(0, possible.size)]
         else:

@@ -23,6 +23,7 @@ from tracelab.engine import Engine
 from tracelab.envs.declared import fused
 from tracelab.envs.declared.observe import part_numbers
 from tracelab.envs.declared.spec import Atom, Draw, WorldSpec
+from tracelab.envs.declared.state_errors import no_index, no_weights_hold
 
 
 def categorical(cumulative: list[float], rng: np.random.Generator) -> int:
@@ -74,8 +75,7 @@ class _Drawer:
         ok = world.engine.is_true(w.ravel())[0].reshape(w.shape).all(axis=1)
         possible = np.flatnonzero(ok)
         if possible.size == 0:
-            raise RuntimeError(f"{world.spec.path}: {'.'.join(map(str, d.key))}: no value's weights "
-                               f"({', '.join(map(str, d.weights[0]))}, ...) hold: nothing to draw from")
+            raise no_weights_hold(world.spec, d)
         p = ok.astype(np.float64)
         p /= p.sum()  # as gymnasium normalises initial_state_distrib
         return possible, np.cumsum(p).tolist()
@@ -304,8 +304,7 @@ class DeclaredWorld:
         for p, i in enumerate(indices.tolist()):
             part = spec.parts[self._index_parts[p]]
             if i < 0 and part.missing is None:
-                raise RuntimeError(f"{spec.path}: observation part {part.name!r}: no atom of "
-                                   f"{part.atoms[0].pred}(...) is true, so it has no index")
+                raise no_index(spec, part)
         if spec.space == "Discrete":
             value = 0
             for size, i in zip(self._part_sizes, indices.tolist()):  # ravel_multi_index, first part slowest
