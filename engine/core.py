@@ -26,6 +26,7 @@ from .grounding import Grounder, GroundingTable, rule_head_bound
 from .kernel_names import KERNELS
 from .kernel_tables import AggregateTables, KernelTables
 from .memory import release_freed_memory
+from .numba_startup import defer_scipy_import
 from .parser import check_program, parse_literal
 from .program import (
     EPS,
@@ -43,6 +44,10 @@ from .vocabulary import Vocabulary
 
 if TYPE_CHECKING:
     from .backend_lanes import LaneState
+
+# Before the first kernel loads from numba's cache: numba would import scipy.linalg then, unused (about 0.17 s
+# of CPU, or a second under load: issue 40). Here, where every Engine's kernels load.
+defer_scipy_import()
 
 TRACE_COLUMNS = ("world", "t", "pass_no", "atom", "cause_kind", "cause_id", "grounding", "n_sources",
                  "old_lower", "old_upper", "new_lower", "new_upper")

@@ -201,13 +201,35 @@ def test_bench_eval_quick(capsys: pytest.CaptureFixture) -> None:
     machine(r["machine"])
     s = r["speed"]
     assert s["worlds"] == 3 and s["same_games"] is True          # traced and untraced play the same games
-    assert s["game_steps"]["traced"] == s["game_steps"]["untraced"] > 0
-    for name in ("traced", "untraced"):
+    assert s["game_steps"]["traced"] == s["game_steps"]["untraced"] == s["game_steps"]["traced_world"] > 0
+    for name in ("traced", "untraced", "traced_world"):
         for key in ("wall_s", "cpu_s", "thread_s"):
             positive(s[name][key])
             assert len(s[name][key]["runs"]) == 2
     assert all(s[f"ratio_{k}"] > 0 for k in ("wall", "cpu", "thread")) and isinstance(s["goal_met"], bool)
+    assert all(s[f"agent_ratio_{k}"] > 0 for k in ("wall", "cpu", "thread"))  # decisions and reward terms
+    assert isinstance(s["agent_goal_met"], bool)
     m = r["memory"]
     assert m["steps"] == 1000 and m["command"].startswith("tracelab train --scenario base")
     assert m["rss_mb"] and all(mb > 0 for _, mb in m["rss_mb"]) and m["peak_mb"] >= max(mb for _, mb in m["rss_mb"])
     assert m["growth_mb"] == pytest.approx(m["end_mb"] - m["after_warm_up_mb"])
+
+
+def test_bench_cli_quick(capsys: pytest.CaptureFixture) -> None:
+    """One command beside the floor, in fresh processes; every command the bench times is one the CLI takes."""
+    from pathlib import Path
+
+    from tracelab.bench.cli import commands
+    from tracelab.cli import build_parser
+    r = bench_json(capsys, "cli", "--only", "sql")
+    assert [c["name"] for c in r["commands"]] == ["floor", "sql"] and r["repeats"] == 1
+    floor, sql = r["commands"]
+    positive(floor["cpu_s"])
+    positive(sql["cpu_s"])
+    assert floor["ratio"] == 1.0 and sql["ratio"] == sql["cpu_s"]["median"] / r["floor_cpu_s"]
+    assert sql["goal"] == 1.5 and sql["met"] == (sql["ratio"] <= 1.5)
+    assert sql["command"] == "tracelab sql sample_runs/advanced SELECT 1"
+    machine(r["machine"])
+    parser = build_parser()
+    for _, argv, _ in commands(Path("sample_runs"), Path("copies")):
+        assert parser.parse_args(list(argv)).func

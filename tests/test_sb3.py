@@ -11,6 +11,7 @@ import pytest
 
 pytest.importorskip("stable_baselines3")
 
+import numpy as np  # noqa: E402
 import torch  # noqa: E402
 from stable_baselines3 import PPO  # noqa: E402
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList  # noqa: E402
@@ -211,6 +212,36 @@ def test_the_tui_training_view_draws_the_ppo_run_s_curves(gridwar_run: Path, mon
         assert "train_return" in [s.name for s in plots["return"].series]
         assert "eval/win_rate" in [s.name for s in plots["win-rate"].series]
     run_app([gridwar_run], body, size=(100, 30))
+
+
+def _greedy_decisions(run: Path, output: str) -> list[tuple]:
+    """Every traced evaluation step has a decision with the model's output for every action, and the
+    greedy action is its argmax (issue 39)."""
+    steps = _rows(run, "SELECT s.episode, s.step, s.agent, s.action_name FROM steps s JOIN episodes e USING (episode) "
+                       "WHERE e.kind = 'eval' AND s.agent NOT LIKE 'blue%' ORDER BY ALL")
+    rows = _rows(run, "SELECT episode, step, agent, action_name, output, actions, \"values\", state_value "
+                      "FROM decisions ORDER BY episode, step, agent")
+    assert steps and [r[:4] for r in rows] == steps
+    for *_, name, kind, actions, values, state_value in rows:
+        assert kind == output and len(values) == len(actions) and actions[int(np.argmax(values))] == name
+        assert (state_value is not None) == (output == "logits")
+    return rows
+
+
+def test_ppo_traced_evaluations_record_the_logits_and_state_value(frozen_run: Path, gridwar_run: Path) -> None:
+    assert len(_greedy_decisions(frozen_run, "logits")[0][5]) == 4
+    _greedy_decisions(gridwar_run, "logits")
+
+
+def test_dqn_traced_evaluations_record_the_q_values(tmp_path: Path) -> None:
+    from stable_baselines3 import DQN
+    torch.set_num_threads(1)
+    model = DQN("MlpPolicy", make_vec_env(FROZEN, n_envs=1, seed=0), learning_starts=0, buffer_size=1000, seed=0,
+                device="cpu")
+    run = tmp_path / "dqn"
+    with TracelabCallback(run, FROZEN, eval_every=0, eval_games=2, trace_eval_games=2, eval_envs=1) as cb:
+        model.learn(64, callback=cb)
+    _greedy_decisions(run, "q")
 
 
 def test_ppo_takes_a_spec_file_as_the_docs_and_the_example_say(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -158,6 +158,8 @@ def _board_spec(folder: Path, rows: int, cols: int, far: int) -> Path:
     offsets = ", ".join(f"[0, {k}]" for k in range(1, far + 1))
     spec = payload_world(folder, "neighbours = { west = [0, -1], east = [0, 1] }",
                          f"neighbours = {{ west = [0, -1], east = [0, 1], far = [{offsets}] }}")
+    with (folder / "corridor.rules").open("a") as rules:  # a predicate no rule reads is refused by name
+        rules.write("far_seen:  far_seen(C) <-! at(C), far(C,E)\n")
     return _rewrite(spec, 'rows = ["S..G"]', f"rows = \"['S' + '.' * {cols - 2} + 'G'] * {rows}\"")
 
 

@@ -109,10 +109,16 @@ class Games:
             from tracelab.train.policy import may_act
             n = self.scenario.agents_per_team
             obs = np.ascontiguousarray(self._obs[:, RED])
+            traced = self.tracer is not None
             masks = (self._masker.for_sim(self.sim, RED).reshape(self.worlds, n, -1)
-                     if self.trained.mask else None)
-            idx = np.asarray(self.trained.act(obs, may_act(self.scenario, self.sim.state), masks), np.int64)
-            return self._masker.ids[idx.reshape(self.worlds, n)]
+                     if self.trained.mask or traced else None)
+            acting = may_act(self.scenario, self.sim.state)
+            if traced:  # the policy's values recorded as the step's decisions
+                idx, output = self.trained.decide(obs, acting, masks if self.trained.mask else None)
+                self.tracer.decided(output, acting, masks)
+            else:
+                idx = self.trained.act(obs, acting, masks)
+            return self._masker.ids[np.asarray(idx, np.int64).reshape(self.worlds, n)]
         if self.policy == "scripted":
             red = self.sim.scripted_actions("red")
             return red if self._scripted_red is None else self._scripted_red[red]

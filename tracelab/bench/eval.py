@@ -6,6 +6,8 @@ game; the same seeds) played
 - `traced`: as train traces them (train/evaluate.py's EvalTrace: `worlds` worlds, one game each, into a
   run of the store that stays open, as the training's run does), and
 - `untraced`: as train plays the rest (play_games in a vector env of as many worlds, no trace),
+- `traced_world`: traced as before issue 39, the world's half only: no decisions, no reward terms
+  (EvalTrace's agent_rows=False, into a second run),
 in turn, `evaluations` evaluations per block, `repeats` blocks of each; a traced block ends when the run's
 writer has published its rows (its thread would otherwise encode them during the next untraced block,
 whose process CPU time would count them). Figures are seconds per evaluation,
@@ -33,6 +35,7 @@ from tracelab.bench.common import format_table, machine_info, sampled_child_rss,
 from tracelab.bench.engine import machine_line
 
 GOAL_RATIO = 1.3
+AGENT_GOAL_RATIO = 1.1  # issue 39: recording the agent's half costs traced evaluations at most 10%
 SCENARIO = "base"
 EVAL_P = 0.3   # train's --eval-p
 MEMORY_TRAIN_ARGS = ("--scenario", SCENARIO, "--eval-every", "10000", "--eval-games", "50",
@@ -57,10 +60,11 @@ def _policy() -> Any:
 Evaluation = Callable[[int], list[Any]]  # seed -> the games' records
 
 
-def evaluations(worlds: int, run_dir: Path) -> tuple[Evaluation, Evaluation, Callable[[], None],
+def evaluations(worlds: int, run_dir: Path) -> tuple[Evaluation, Evaluation, Evaluation, Callable[[], None],
                                                      Callable[[], None]]:
-    """(traced, untraced, published, close): an evaluation of `worlds` games with a seed, traced into a
-    new run at `run_dir` or untraced; `published()` returns once the traced rows are in the run."""
+    """(traced, untraced, traced_world, published, close): an evaluation of `worlds` games with a seed,
+    traced into a new run at `run_dir`, untraced, or traced without the agent's decisions and reward
+    terms into `run_dir`-world; `published()` returns once the traced rows are in the runs."""
     from tracelab.envs.vector_env import GridWarVectorEnv
     from tracelab.game.scenario import builtin_scenario
     from tracelab.store import TraceWriter
@@ -70,26 +74,39 @@ def evaluations(worlds: int, run_dir: Path) -> tuple[Evaluation, Evaluation, Cal
     writer = TraceWriter.open(run_dir, {"command": "tracelab bench eval", "scenario": SCENARIO})
     ids = iter(range(1 << 62))
     trace = EvalTrace(writer, scenario, "rules", False, worlds, EVAL_P, lambda: next(ids))
+    world_writer = TraceWriter.open(run_dir.with_name(run_dir.name + "-world"), {"command": "tracelab bench eval"})
+    world_ids = iter(range(1 << 62))
+    world_trace = EvalTrace(world_writer, scenario, "rules", False, worlds, EVAL_P, lambda: next(world_ids),
+                            agent_rows=False)
     env = GridWarVectorEnv(worlds, scenario, backend="rules", opponent_p=EVAL_P, copy=False)
     one_each = np.ones(worlds, np.int64)
 
+    def published() -> None:
+        writer.flush()
+        world_writer.flush()
+
     def close() -> None:
         trace.close()
+        world_trace.close()
         env.close()
         writer.close()
+        world_writer.close()
 
     return (lambda seed: trace.play(policy, seed, {"kind": "eval"}),
-            lambda seed: play_games(env, policy, one_each, seed), writer.flush, close)
+            lambda seed: play_games(env, policy, one_each, seed),
+            lambda seed: world_trace.play(policy, seed, {"kind": "eval"}), published, close)
 
 
 def speed(worlds: int, per_block: int, repeats: int) -> dict[str, Any]:
     """Traced and untraced evaluations of `worlds` games, in turn (module docstring)."""
     with tempfile.TemporaryDirectory(prefix="tracelab-bench-eval-") as tmp:
-        traced, untraced, published, close = evaluations(worlds, Path(tmp) / "run")
+        traced, untraced, traced_world, published, close = evaluations(worlds, Path(tmp) / "run")
         try:
-            same = [(r.outcome, r.steps) for r in traced(0)] == [(r.outcome, r.steps) for r in untraced(0)]
+            games = [(r.outcome, r.steps) for r in traced(0)]
+            same = games == [(r.outcome, r.steps) for r in untraced(0)] == \
+                [(r.outcome, r.steps) for r in traced_world(0)]
             published()
-            kinds = {"traced": traced, "untraced": untraced}
+            kinds = {"traced": traced, "untraced": untraced, "traced_world": traced_world}
             figures: dict[str, dict[str, list[float]]] = {k: {"wall": [], "cpu": [], "thread": []} for k in kinds}
             steps = {k: 0 for k in kinds}
             for block in range(max(1, repeats)):
@@ -98,7 +115,7 @@ def speed(worlds: int, per_block: int, repeats: int) -> dict[str, Any]:
                     t0, c0, m0 = time.perf_counter(), time.process_time(), time.thread_time()
                     for seed in seeds:
                         steps[name] += sum(r.steps for r in play(seed))
-                    if name == "traced":
+                    if name.startswith("traced"):
                         published()
                     for key, used in (("wall", time.perf_counter() - t0), ("cpu", time.process_time() - c0),
                                       ("thread", time.thread_time() - m0)):
@@ -112,7 +129,10 @@ def speed(worlds: int, per_block: int, repeats: int) -> dict[str, Any]:
     for key in ("wall", "cpu", "thread"):  # medians of the blocks' ratios: each pair shares the load
         out[f"ratio_{key}"] = statistics.median(t / u for t, u in zip(figures["traced"][key],
                                                                         figures["untraced"][key]))
+        out[f"agent_ratio_{key}"] = statistics.median(t / u for t, u in zip(figures["traced"][key],
+                                                                              figures["traced_world"][key]))
     out["goal_met"] = out["ratio_cpu"] <= GOAL_RATIO
+    out["agent_goal_met"] = out["agent_ratio_cpu"] <= AGENT_GOAL_RATIO
     return out
 
 
@@ -151,15 +171,18 @@ def report(r: dict[str, Any]) -> str:
     s = r["speed"]
     ms = lambda d: 1000 * d["median"]  # noqa: E731
     rows = [[name, ms(s[name]["wall_s"]), ms(s[name]["cpu_s"]), ms(s[name]["thread_s"]),
-             f"{100 * s[name]['cpu_s']['spread']:.0f}%"] for name in ("traced", "untraced")]
+             f"{100 * s[name]['cpu_s']['spread']:.0f}%"] for name in ("traced", "traced_world", "untraced")]
     rows.append(["traced / untraced", s["ratio_wall"], s["ratio_cpu"], s["ratio_thread"], ""])
+    rows.append(["traced / traced_world", s["agent_ratio_wall"], s["agent_ratio_cpu"], s["agent_ratio_thread"], ""])
     parts = [machine_line(r["machine"], r["quick"], r["repeats"]),
              f"an evaluation of {s['worlds']} games of {r['scenario']} (one per world, a seeded untrained policy, "
              f"the same seeds), ms each, {s['evaluations_per_block']} per block; the same games: "
              f"{'yes' if s['same_games'] else 'NO'}\n"
              + format_table(["evaluation", "wall", "CPU (process)", "CPU (game's thread)", "CPU spread"], rows),
              f"goal traced <= {GOAL_RATIO}x untraced per CPU second: "
-             f"{'met' if s['goal_met'] else 'not met'} ({s['ratio_cpu']:.2f}x)"]
+             f"{'met' if s['goal_met'] else 'not met'} ({s['ratio_cpu']:.2f}x)",
+             f"goal decisions and reward terms <= {AGENT_GOAL_RATIO}x the world's trace alone (traced_world) per "
+             f"CPU second: {'met' if s['agent_goal_met'] else 'not met'} ({s['agent_ratio_cpu']:.2f}x)"]
     m = r["memory"]
     if m:
         parts.append(f"{m['command']}, a fresh process, RSS every second: "

@@ -19,8 +19,11 @@ from contextlib import contextmanager, nullcontext
 from typing import Any
 
 # the numba kernels whose first call compiles the engine (the counting kernel serves every program, the
-# lanes kernel batches of 64 worlds or more), and those the rule simulator adds
-_ENGINE_KERNELS = (("tracelab.engine.kernel", "step_worlds"), ("tracelab.engine.trace_take", "take_local_columns"))
+# lanes kernel batches of 64 worlds or more), the trace taker of a recorder with an episode clock (a simulator's,
+# a declared env's recording; not `reason`: a notice about it would show on every reasoning), and those the rule
+# simulator adds
+_ENGINE_KERNELS = (("tracelab.engine.kernel", "step_worlds"),)
+_LOCAL_TRACE_KERNELS = (("tracelab.engine.trace_take", "take_local_columns"),)
 _LANES_KERNELS = (("tracelab.engine.lanes", "step_lanes"),)
 _SIMULATOR_KERNELS = (("tracelab.game.rulesim_kernel", "encode_actions"),
                       ("tracelab.game.rulesim_kernel", "read_and_settle"),
@@ -130,18 +133,22 @@ def _cold(pairs: tuple[tuple[str, str], ...]) -> bool | None:
     return None if cached is None else not cached
 
 
-def engine_cache_is_cold(simulator: bool = False, lanes: bool = False) -> bool | None:
+def _engine_kernels(lanes: bool, local_trace: bool) -> tuple[tuple[str, str], ...]:
+    return _ENGINE_KERNELS + (_LANES_KERNELS if lanes else ()) + (_LOCAL_TRACE_KERNELS if local_trace else ())
+
+
+def engine_cache_is_cold(simulator: bool = False, lanes: bool = False, local_trace: bool = False) -> bool | None:
     """True when the engine's compiled kernels (with `lanes` the lanes kernel's too, with `simulator`
-    the rule simulator's) are neither loaded nor in numba's disk cache (the first run compiles them),
-    False when they are, None when it cannot tell. Reads numba's cache index of each entry point (a few
-    ms)."""
-    return _cold(_ENGINE_KERNELS + (_LANES_KERNELS if lanes else ()) + (_SIMULATOR_KERNELS if simulator else ()))
+    the rule simulator's and its trace taker's, with `local_trace` the trace taker's) are neither loaded
+    nor in numba's disk cache (the first run compiles them), False when they are, None when it cannot
+    tell. Reads numba's cache index of each entry point (a few ms)."""
+    return _cold(_engine_kernels(lanes, local_trace or simulator) + (_SIMULATOR_KERNELS if simulator else ()))
 
 
-def compile_notice(simulator: bool = False, lanes: bool = False) -> str | None:
+def compile_notice(simulator: bool = False, lanes: bool = False, local_trace: bool = False) -> str | None:
     """What a first run compiles, in words (None when nothing, or unknown): the engine's kernels, the
     game's, and whether a second process takes the game's share (tracelab/game/rulesim_warmup.py)."""
-    engine = _cold(_ENGINE_KERNELS + (_LANES_KERNELS if lanes else ()))
+    engine = _cold(_engine_kernels(lanes, local_trace or simulator))
     game = _cold(_SIMULATOR_KERNELS) if simulator else False
     if not engine and not game:
         return None
@@ -171,16 +178,16 @@ class Warmup(Progress):
 
 
 @contextmanager
-def compiling_engine(simulator: bool = False, lanes: bool = False,
-                     busy: str | None = None) -> Iterator[Warmup]:
+def compiling_engine(simulator: bool = False, lanes: bool = False, busy: str | None = None,
+                     local_trace: bool = False) -> Iterator[Warmup]:
     """Around the engine's build and first step (with `lanes`: a batch that takes the lanes kernel; with
     `simulator`: the rule simulator's too): when the kernels must be compiled, say so while it happens
     (a spinner on a terminal, one line on stderr otherwise); when they are cached, show `busy` (if
     given) as a spinner on a terminal. The spinner counts the groundings found (a big build's work)."""
     # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
     from tracelab.engine.grounding import watch_grounding
-    cold = engine_cache_is_cold(simulator, lanes)
-    notice = compile_notice(simulator, lanes) if cold else None
+    cold = engine_cache_is_cold(simulator, lanes, local_trace)
+    notice = compile_notice(simulator, lanes, local_trace) if cold else None
     t0 = time.perf_counter()
     if notice and not on_terminal():  # one line, once: on a terminal the spinner says it
         print(f"tracelab: {notice}", file=sys.stderr, flush=True)

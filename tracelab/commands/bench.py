@@ -1,7 +1,7 @@
 """`tracelab bench`: speed and memory measured by benchmarks (docs/benchmarks.md), never by timed
 assertions in tests. `bench engine`, `bench env`, `bench store`, `bench replay`, `bench train`,
 `bench tui`, `bench aggregates`, `bench reason-store`, `bench toytext`, `bench play`, `bench eval`,
-`bench first-run`, `bench pyreason`, `bench all` (engine, env, store, replay, train);
+`bench first-run`, `bench pyreason`, `bench cli`, `bench all` (engine, env, store, replay, train);
 each takes --json, --quick (small sizes: the smoke test) and --repeats (medians and spread over that
 many repeats)."""
 from __future__ import annotations
@@ -40,6 +40,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                           "install) and again warm: wall and CPU time",
              "pyreason": "PyReason against tracelab on the same scripts (examples/), import changed only: "
                          "first run from empty caches, warm runs, peak memory and memory over time",
+             "cli": "the reading commands' and reason's CPU seconds on the sample runs, each beside the floor "
+                    "(python importing DuckDB and running SELECT 1), with the ratios and issue 40's goals",
              "all": "engine, env, store, replay and train"}
     for name, text in helps.items():
         q = what.add_parser(name, help=text)
@@ -77,6 +79,9 @@ def register(sub: argparse._SubParsersAction) -> None:
             q.add_argument("--memory", type=positive_int, nargs="?", const=1_000_000, default=None,
                            metavar="STEPS", help="also the memory of a `tracelab train` of this many steps with "
                                                  "traced evaluations, in a fresh process (default 1,000,000)")
+        if name == "cli":
+            q.add_argument("--only", action="append", default=None, metavar="COMMAND",
+                           help="time this command only, beside the floor (repeatable; e.g. sql, compare)")
         if name == "pyreason":
             q.add_argument("--pyreason-python", metavar="PYTHON", default=None,
                            help="the interpreter of a PyReason install (e.g. a venv's bin/python); without "
@@ -94,7 +99,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             q.add_argument("--plot", metavar="PNG", default=None,
                            help="also draw every run's memory over time into this PNG (matplotlib)")
         # the sections that build engines (toytext: the envs')
-        if name not in ("store", "tui", "toytext", "first-run", "pyreason"):
+        if name not in ("store", "tui", "toytext", "first-run", "pyreason", "cli"):
             add_max_groundings(q)
         if name == "engine":
             q.add_argument("--graph-only", action="store_true",
@@ -162,6 +167,10 @@ def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], s
         from tracelab.bench import first_run  # deferred: as engine's, above
         r = first_run.run(args.quick, args.repeats)
         return r, first_run.report(r)
+    if name == "cli":
+        from tracelab.bench import cli  # deferred: as engine's, above
+        r = cli.run(args.quick, args.repeats, args.only)
+        return r, cli.report(r)
     if name == "pyreason":
         from tracelab.bench import pyreason_compare
         if not args.pyreason_python:

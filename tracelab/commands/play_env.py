@@ -91,7 +91,7 @@ def _play(source: Any, spec: Any, args: argparse.Namespace, writer: Any) -> dict
     # deferred: loads gymnasium; every command is imported to build the CLI's parser
     from tracelab.envs.declared.play import make_declared_env, play_episodes, random_policy
 
-    with compiling_engine(busy=f"building {source.short_name}'s rules…"):
+    with compiling_engine(busy=f"building {source.short_name}'s rules…", local_trace=writer is not None):
         env = make_declared_env(source, spec, kernel=args.kernel,
                                 **({} if writer is None else {"trace_writer": writer}))
     if getattr(args, "trained", None) is None:
@@ -99,7 +99,7 @@ def _play(source: Any, spec: Any, args: argparse.Namespace, writer: Any) -> dict
     else:  # greedy: it may walk in circles where the env sets no step limit (CliffWalking)
         # deferred: loads gymnasium; every command is imported to build the CLI's parser
         from tracelab.train.env_policy import EVAL_STEP_CAP, one_env_actor
-        policy, cap = one_env_actor(args.trained), EVAL_STEP_CAP
+        policy, cap = one_env_actor(args.trained, env), EVAL_STEP_CAP
     try:
         with CtrlCBetweenSteps() as ctrl_c, \
                 progress(f"playing {source.short_name}", total=args.episodes, unit="episodes") as bar:

@@ -133,6 +133,10 @@ def _reason(args: argparse.Namespace, inputs: Any, plan: Any, recorder: Any, sev
     prints of it."""
     if several and not args.json and recorder is None:
         print(f"episode {plan.episode}:")
+    if not several and _reference_serves(args, inputs, plan, recorder):
+        doc = _reason_by_reference(args, inputs)
+        if doc is not None:
+            return doc
     printing = recorder is None and not args.no_trace
     pr_trace = None
     busy = "grounding the program…" if args.kernel != "compiled" else \
@@ -166,18 +170,14 @@ def _reason(args: argparse.Namespace, inputs: Any, plan: Any, recorder: Any, sev
         if args.json:
             changes.extend(step_changes)
             continue
-        for c in step_changes:
-            if not header:
-                print(f"{'t':>4} {'pass':>4}  {'atom':<32} {'old':<11} {'new':<11} cause")
-                header = True
-            print(f"{c['t']:>4} {c['pass']:>4}  {c['atom']:<32} {_fmt(c['old']):<11} {_fmt(c['new']):<11} "
-                  f"{c['cause']}{'  ' + c['grounding'] if c['grounding'] else ''}")
+        header = _print_changes(step_changes, header)
     outcome = episode.finish()
     if pr_trace is not None:
         target = args.pyreason_trace if not several else os.path.join(args.pyreason_trace, f"episode-{plan.episode}")
         for path in pr_trace.write(target):
             print(f"wrote {path}", file=sys.stderr)
     stats = {k: int(np.sum(v)) for k, v in engine.stats.items()}
+    stats["evaluator"] = "compiled"  # which ran: the engine's kernels (or the reference evaluator's, below)
     if recorder is not None:
         _print_answers(args, answers)
         return {"episode": plan.episode, "steps": args.steps, "outcome": outcome, "queries": answers,
@@ -192,10 +192,54 @@ def _reason(args: argparse.Namespace, inputs: Any, plan: Any, recorder: Any, sev
     if args.query:
         _print_answers(args, answers)
         return {}
+    _print_final(args, final)
+    return {}
+
+
+def _reference_serves(args: argparse.Namespace, inputs: Any, plan: Any, recorder: Any) -> bool:
+    """A small program printed as it reasons, and nothing the reference evaluator does not do (a run, a
+    graph or fact table, PyReason's trace, queries, a chosen kernel): no need to load the compiled engine."""
+    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
+    from tracelab.reasoning_reference import reference_fits
+    return (recorder is None and args.kernel == "auto" and args.pyreason_trace is None and not args.query
+            and inputs.graph is None and plan.graph is None and reference_fits(inputs.program, args.steps))
+
+
+def _reason_by_reference(args: argparse.Namespace, inputs: Any) -> dict[str, Any] | None:
+    """The episode on the reference evaluator, printed as the compiled engine's is; None (nothing printed)
+    when it cannot finish it: the compiled engine then runs it and says why in its own words."""
+    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
+    from tracelab.reasoning_reference import reference_reasoning
+    try:
+        steps, final = reference_reasoning(inputs.program, args.steps)
+    except Exception:  # noqa: BLE001 - no fixpoint, an inconsistency: the engine's error names the rules
+        return None
+    changes = [c for step in steps for c in step]
+    stats = {"evaluator": "reference", "changes": len(changes)}
+    if args.json:
+        return {"steps": args.steps, "changes": [] if args.no_trace else changes,
+                "interpretation": {k: list(v) for k, v in final.items()}, "queries": [], "stats": stats}
+    if not args.no_trace and _print_changes(changes, False):
+        print()
+    _print_final(args, final)
+    return {}
+
+
+def _print_changes(changes: list[dict[str, Any]], header: bool) -> bool:
+    """Trace rows as a table (its header first unless `header` says it is printed); whether it is now."""
+    for c in changes:
+        if not header:
+            print(f"{'t':>4} {'pass':>4}  {'atom':<32} {'old':<11} {'new':<11} cause")
+            header = True
+        print(f"{c['t']:>4} {c['pass']:>4}  {c['atom']:<32} {_fmt(c['old']):<11} {_fmt(c['new']):<11} "
+              f"{c['cause']}{'  ' + c['grounding'] if c['grounding'] else ''}")
+    return header
+
+
+def _print_final(args: argparse.Namespace, final: dict[str, Any]) -> None:
     print(f"final interpretation at t={args.steps - 1}:")
     for atom, bound in sorted(final.items()):
         print(f"  {atom}: {_fmt(bound)}")
-    return {}
 
 
 def _print_answers(args: argparse.Namespace, answers: list[dict[str, Any]]) -> None:

@@ -20,11 +20,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    # deferred: loads pyarrow; every command is imported to build the CLI's parser
-    import pyarrow as pa
-
     # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.catalog import DEFAULT_ROOTS, list_runs
+    from tracelab.store.catalog import DEFAULT_ROOTS, catalog_table, list_runs
     roots = args.dirs or list(DEFAULT_ROOTS)
     with store_errors(), ctrl_c_stops_queries():
         missing = [d for d in args.dirs if not Path(d).exists()]
@@ -35,10 +32,7 @@ def run(args: argparse.Namespace) -> int:
         if args.format == "table":
             for r in rows:
                 r["command"] = _short(r["command"])
-        schema = pa.schema([("name", pa.string()), ("status", pa.string()), ("episodes", pa.int64()),
-                            ("rows", pa.int64()), ("size", pa.string()), ("started", pa.string()),
-                            ("scenario", pa.string()), ("command", pa.string()), ("path", pa.string())])
-        write_table(pa.Table.from_pylist(rows, schema=schema), args.format, args.output)
+        write_table(catalog_table(rows), args.format, args.output)
         for r in runs:
             if r.error:
                 print(f"note: {r.path}: {r.error}", file=sys.stderr)

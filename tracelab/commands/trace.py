@@ -148,11 +148,13 @@ def paper_table(table: "pa.Table", grid: "Grid | None" = None) -> "pa.Table":
     """The method's columns: t, node/edge, label, old, new, rule; with a grid, cells as `30@(6,3)`."""
     # deferred: loads pyarrow; every command is imported to build the CLI's parser
     import pyarrow as pa
+
+    from tracelab.store import arrow_build as ab  # not pa.table of lists: it imports pandas (arrow_build)
     c = table.to_pydict()
     nodes = c["node"] if grid is None else [grid.with_coordinates(n) for n in c["node"]]
-    return pa.table({
-        "t": c["t"], "node/edge": nodes, "label": c["label"],
-        "old": [_b(a, b) for a, b in zip(c["old_lower"], c["old_upper"])],
-        "new": [_b(a, b) for a, b in zip(c["new_lower"], c["new_upper"])],
-        "rule": c["rule"],
-    })
+    return pa.Table.from_arrays([
+        table.column("t"), ab.strings(nodes), ab.strings(c["label"]),
+        ab.strings([_b(a, b) for a, b in zip(c["old_lower"], c["old_upper"])]),
+        ab.strings([_b(a, b) for a, b in zip(c["new_lower"], c["new_upper"])]),
+        ab.strings(c["rule"]),
+    ], names=["t", "node/edge", "label", "old", "new", "rule"])

@@ -6,15 +6,19 @@ import json
 
 from tracelab.commands._args import non_negative_int
 from tracelab.commands._interrupt import ctrl_c_stops_queries
-from tracelab.commands.why import check_at, last_t
-from tracelab.errors import store_errors
+from tracelab.commands.why import action_explanation, check_at, last_t
+from tracelab.errors import UserError, store_errors
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("why-not", help="the first body clause of a rule that failed for a grounding at a time")
     p.add_argument("run", help="run directory, .duckdb file, or run name under runs/")
     p.add_argument("--episode", "-e", type=non_negative_int, required=True, help="the episode to look in")
-    p.add_argument("--rule", required=True, help="rule name")
+    p.add_argument("--rule", help="rule name")
+    p.add_argument("--action", metavar="NAME",
+                   help="instead of a rule: why --agent did not take action NAME at step --at (the mask, or "
+                        "how far its value fell below the chosen action's)")
+    p.add_argument("--agent", help="with --action: the agent (default: the episode's one deciding agent)")
     p.add_argument("--grounding", default="", help="variable values, e.g. A=red-agent-1,X=16 "
                                                    "(unbound variables are searched)")
     p.add_argument("--at", type=non_negative_int, required=True,
@@ -27,9 +31,40 @@ def run(args: argparse.Namespace) -> int:
     # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.reader import open_run, retrying
     from tracelab.store.why import parse_bindings, render_why_not, why_not
+    if (args.rule is None) == (args.action is None):
+        raise UserError("why-not asks about a rule (--rule NAME) or an agent's action (--action NAME): give one")
+    if args.action is not None:
+        return run_action(args)
     with store_errors(), ctrl_c_stops_queries():
         con, bindings = open_run(args.run), parse_bindings(args.grounding)
         check_at(args.at, args.episode, last_t(con, args.episode))
         result = retrying(lambda: why_not(con, args.episode, args.rule, bindings, args.at))
     print(json.dumps(result.to_dict(), indent=1) if args.json else render_why_not(result))
+    return 0
+
+
+def run_action(args: argparse.Namespace) -> int:
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
+    from tracelab.store.agent_why import render_why_not_action, why_not_action
+    from tracelab.store.reader import open_run
+    if args.grounding:
+        raise UserError("--grounding goes with --rule, not --action")
+    name = args.action
+    if args.agent is None:
+        with store_errors():
+            con = open_run(args.run)
+            try:
+                agents = [a for (a,) in con.execute("SELECT DISTINCT agent FROM raw.decisions WHERE episode = ? "
+                                                    "ORDER BY agent", [args.episode]).fetchall()]
+            finally:
+                con.close()
+        if len(agents) != 1:
+            raise UserError(f"--agent: episode {args.episode} has {len(agents)} deciding agents"
+                            + (f" ({', '.join(agents)})" if agents else "") + "; name one")
+        args.agent = agents[0]
+    args.action = args.agent
+    e = action_explanation(args)
+    with store_errors():
+        result = why_not_action(e, name)
+    print(json.dumps(result.to_dict(), indent=1) if args.json else render_why_not_action(result))
     return 0

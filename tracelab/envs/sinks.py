@@ -5,7 +5,9 @@ An env given `trace_sink=` calls, in this order:
     begin_run(engine, scenario)                       once, when the env is built
     begin_episode(world, episode, seed, scenario)     when a world starts an episode (reset / autoreset)
     changes(rows, episode_of_world, t0_of_world)      the episode's start rows (t = 0), then each step's
+    decisions(rows)                                   the policy's decisions of a step (if it gave them)
     step(world, episode, t, obs, actions, rewards)    after steps, batched over the worlds and steps
+    reward_terms(rows)                                those steps' rewards by term, after them
     end_episode(world, episode, steps, outcome, rewards)
     close()                                           from env.close(); the env owns its sink
 
@@ -24,6 +26,9 @@ Conventions:
   world, episode, t int64 [K];
   obs float32 [K, 2, D] (both teams' observations after the step); actions int64 [K, 2, N] (spec ids);
   rewards float64 [K, 2, N] (`StepResult.agent_reward`).
+- `decisions` and `reward_terms` rows (tracelab.store.agent_rows.Decisions, RewardTerms) carry the env's
+  episode ids, and `step` as the step rows' `t`; decisions come only from a caller that told the env its
+  policy's output (EpisodeTracer.decided); reward terms sum to each agent's `rewards` entry.
 - `outcome` is red's (the learner's): "win", "loss", "draw", "truncated", or "aborted" for an episode
   cut short by a reset or close (a vector env's `trace_episodes=N` records none of those past N).
 - `seed` is the seed of the env's last reset(seed=...) for every episode (see tracelab/envs/tracer.py).
@@ -40,6 +45,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     from tracelab.engine import Engine
+    from tracelab.store.agent_rows import Decisions, RewardTerms
 
     from tracelab.game.scenario import Scenario
 
@@ -55,6 +61,10 @@ class TraceSink(Protocol):
 
     def step(self, world: np.ndarray, episode: np.ndarray, t: np.ndarray, obs: np.ndarray,
              actions: np.ndarray, rewards: np.ndarray) -> None: ...
+
+    def decisions(self, rows: "Decisions") -> None: ...
+
+    def reward_terms(self, rows: "RewardTerms") -> None: ...
 
     def end_episode(self, world: int, episode: int, steps: int, outcome: str,
                     rewards: Mapping[str, float]) -> None: ...
@@ -76,6 +86,8 @@ class MemorySink:
     change_chunks: list[dict[str, np.ndarray]] = field(default_factory=list)
     step_chunks: list[dict[str, np.ndarray]] = field(default_factory=list)
     ended: list[dict[str, Any]] = field(default_factory=list)        # world, episode, steps, outcome, rewards
+    decision_rows: list["Decisions"] = field(default_factory=list)
+    reward_term_rows: list["RewardTerms"] = field(default_factory=list)
     closed: bool = False
 
     def begin_run(self, engine: "Engine | None", scenario: "Scenario") -> None:
@@ -92,6 +104,12 @@ class MemorySink:
              actions: np.ndarray, rewards: np.ndarray) -> None:
         self.step_chunks.append({"world": world, "episode": episode, "t": t, "obs": obs,
                                  "actions": actions, "rewards": rewards})
+
+    def decisions(self, rows: "Decisions") -> None:
+        self.decision_rows.append(rows)
+
+    def reward_terms(self, rows: "RewardTerms") -> None:
+        self.reward_term_rows.append(rows)
 
     def end_episode(self, world: int, episode: int, steps: int, outcome: str,
                     rewards: Mapping[str, float]) -> None:

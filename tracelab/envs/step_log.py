@@ -15,18 +15,22 @@ from numba import njit
 
 from tracelab.game.rulesim import RuleSim
 from tracelab.game.state import StepResult
+from tracelab.store.agent_rows import Decisions, PolicyOutput
 
 
 @njit(cache=True)
-def _log_step(log_t, log_obs, log_actions, log_rewards, k, t, obs, red, blue, agent_reward, reward,
-              agent_return, team_return, steps, done, recording):  # noqa: ANN001, ANN202 (numba)
-    """Row k of the log from one step of every world; the returns (a running total, so the same floats
+def _log_step(log_t, log_obs, log_actions, log_rewards, log_events, log_winner, k, t, obs, red, blue,
+              agent_reward, reward, unsafe, invalid, hits_made, hits_taken, winner, agent_return, team_return,
+              steps, done, recording):  # noqa: ANN001, ANN202 (numba)
+    """Row k of the log from one step of every world (with the events its reward terms are made of:
+    unsafe, invalid, hits made, hits taken, the winner); the returns (a running total, so the same floats
     as np.add.accumulate over the steps) and steps; returns how many `recording` worlds are `done`."""
     worlds, agents = red.shape
     size = obs.shape[2]
     ended = 0
     for w in range(worlds):
         log_t[k, w] = t[w]
+        log_winner[k, w] = winner[w]
         for team in range(2):  # scalar loops: a slice assignment compiles for seconds longer
             for d in range(size):
                 log_obs[k, w, team, d] = obs[w, team, d]
@@ -37,6 +41,10 @@ def _log_step(log_t, log_obs, log_actions, log_rewards, k, t, obs, red, blue, ag
                 r = agent_reward[w, team, j]
                 log_rewards[k, w, team, j] = r
                 agent_return[w, team, j] += r
+                log_events[k, w, team, j, 0] = unsafe[w, team, j]
+                log_events[k, w, team, j, 1] = invalid[w, team, j]
+                log_events[k, w, team, j, 2] = hits_made[w, team, j]
+                log_events[k, w, team, j, 3] = hits_taken[w, team, j]
         team_return[w, 0] += reward[w, 0]
         team_return[w, 1] += reward[w, 1]
         steps[w] = t[w]
@@ -122,6 +130,8 @@ class StepLog:
         self.obs = np.empty((capacity, worlds, 2, obs_size), np.float32)
         self.actions = np.empty((capacity, worlds, 2, agents), np.int64)
         self.rewards = np.empty((capacity, worlds, 2, agents), np.float64)
+        self.events = np.empty((capacity, worlds, 2, agents, 4), np.int32)  # unsafe, invalid, hits made, taken
+        self.winner = np.empty((capacity, worlds), np.int8)
         self.agent_return = np.zeros((worlds, 2, agents))
         self.team_return = np.zeros((worlds, 2))
         self.steps = np.zeros(worlds, np.int64)
@@ -132,9 +142,10 @@ class StepLog:
         """Log one step of every world (copies: the simulator reuses its arrays). Returns how many
         `recording` worlds are `done`, and whether the log is full."""
         k = self.k
-        ended = _log_step(self.t, self.obs, self.actions, self.rewards, k, res.t, res.obs, red, blue,
-                          res.agent_reward, res.reward, self.agent_return, self.team_return, self.steps, done,
-                          recording)
+        ended = _log_step(self.t, self.obs, self.actions, self.rewards, self.events, self.winner, k, res.t,
+                          res.obs, red, blue, res.agent_reward, res.reward, res.unsafe, res.invalid,
+                          res.hits_made, res.hits_taken, res.winner, self.agent_return, self.team_return,
+                          self.steps, done, recording)
         self.k = k + 1
         return ended, self.k == self.capacity
 
@@ -148,9 +159,9 @@ class StepLog:
                                recording, self.agent_return, self.team_return, self.steps)
 
     def take(self, episode: np.ndarray, recorded: np.ndarray) -> tuple[np.ndarray, ...] | None:
-        """Empty the log: (world, episode, t, obs, actions, rewards) of the rows of `recorded` worlds, new
-        arrays in step order then world order (the TraceSink.step layout; `episode`: each world's), or
-        None."""
+        """Empty the log: (world, episode, t, obs, actions, rewards, events, winner) of the rows of
+        `recorded` worlds, new arrays in step order then world order (the first six: the TraceSink.step
+        layout; `episode`: each world's), or None."""
         k, self.k = self.k, 0
         if not k:
             return None
@@ -162,11 +173,73 @@ class StepLog:
             world = np.tile(self._worlds, k)
             return (world, episode[world], self.t[:k].reshape(rows).astype(np.int64),
                     self.obs[:k].reshape(rows, 2, -1).copy(), self.actions[:k].reshape(rows, 2, -1).copy(),
-                    self.rewards[:k].reshape(rows, 2, -1).copy())
+                    self.rewards[:k].reshape(rows, 2, -1).copy(),
+                    self.events[:k].reshape(rows, *self.events.shape[2:]).copy(), self.winner[:k].reshape(rows).copy())
         keep = np.broadcast_to(recorded, (k, len(recorded)))
         world = np.nonzero(keep)[1]
         return (world, episode[world], self.t[:k][keep].astype(np.int64), self.obs[:k][keep],
-                self.actions[:k][keep], self.rewards[:k][keep])
+                self.actions[:k][keep], self.rewards[:k][keep], self.events[:k][keep], self.winner[:k][keep])
+
+
+class DecisionLog:
+    """The policy's decisions of up to `capacity` steps (EpisodeTracer.decided), kept in arrays allocated
+    at the first (when the policy's action count is known) and taken with the step log (so every row of
+    a world belongs to its current episode): a record per step cost traced evaluations 70% more CPU."""
+
+    def __init__(self, capacity: int, worlds: int, agents: int) -> None:
+        self.capacity, self.worlds, self.agents, self.k = capacity, worlds, agents, 0
+        self.t = np.empty((capacity, worlds), np.int64)
+        self.acting = np.empty((capacity, worlds, agents), np.bool_)
+        self.action = np.empty((capacity, worlds, agents), np.int64)
+        self.values: np.ndarray | None = None
+        self.mask: np.ndarray | None = None
+        self.state_value: np.ndarray | None = None
+        self.explored: np.ndarray | None = None
+        self.output: PolicyOutput | None = None  # the last one: its kind and ε
+
+    def add(self, t: np.ndarray, output: PolicyOutput, acting: np.ndarray, action: np.ndarray,
+            mask: np.ndarray | None) -> bool:
+        """Log one step's decisions (values [W, N, A]); returns whether the log is full."""
+        k = self.k
+        if self.values is None or self.values.shape[3] != output.values.shape[-1]:
+            self._allocate(output, mask is not None)
+        self.t[k], self.acting[k], self.action[k] = t, acting, action
+        self.values[k] = output.values
+        if self.mask is not None:
+            self.mask[k] = mask if mask is not None else True
+        if self.state_value is not None:
+            self.state_value[k] = output.state_value
+        if self.explored is not None:
+            self.explored[k] = output.explored if output.explored is not None else False
+        self.output = output
+        self.k = k + 1
+        return self.k == self.capacity
+
+    def _allocate(self, output: PolicyOutput, masked: bool) -> None:
+        shape = (self.capacity, self.worlds, self.agents)
+        self.values = np.empty((*shape, output.values.shape[-1]), np.float32)
+        self.mask = np.empty((*shape, output.values.shape[-1]), np.bool_) if masked else None
+        self.state_value = None if output.state_value is None else np.empty(shape)
+        self.explored = None if output.explored is None else np.empty(shape, np.bool_)
+
+    def take(self, episode: np.ndarray, recorded: np.ndarray, agents: np.ndarray, names: list[str]
+             ) -> Decisions | None:
+        """Empty the log: the decisions of acting agents of `recorded` worlds (`episode`: each world's;
+        `agents`: the agents' codes in `names`), in step order, or None."""
+        k, self.k = self.k, 0
+        if not k or self.values is None:
+            return None
+        keep = self.acting[:k] & recorded[None, :, None]
+        if not keep.any():
+            return None
+        world = np.nonzero(keep)[1]
+        out = self.output
+        policy = PolicyOutput(self.values[:k][keep], out.output,
+                              None if self.state_value is None else self.state_value[:k][keep],
+                              None if self.explored is None else self.explored[:k][keep], out.epsilon)
+        return Decisions(episode[world], np.broadcast_to(self.t[:k, :, None], keep.shape)[keep],
+                         np.broadcast_to(agents, keep.shape)[keep], names, self.action[:k][keep], policy,
+                         None if self.mask is None else self.mask[:k][keep])
 
 
 def compile_for(sim: RuleSim) -> None:

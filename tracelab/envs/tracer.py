@@ -27,12 +27,13 @@ from __future__ import annotations
 import numpy as np
 
 from tracelab.envs.sinks import TraceSink
-from tracelab.envs.step_log import StepLog, label_rows
+from tracelab.envs.step_log import DecisionLog, StepLog, label_rows
 from tracelab.game.facts import agent_name
 from tracelab.game.refsim import RefSim
 from tracelab.game.rulesim import RuleSim
-from tracelab.game.scenario import TEAMS, Scenario
+from tracelab.game.scenario import TEAMS, Rewards, Scenario
 from tracelab.game.state import WINNER_BLUE, WINNER_DRAW, WINNER_RED, StepResult
+from tracelab.store.agent_rows import PolicyOutput, RewardTerms
 
 
 HANDOVER_STEPS = 64
@@ -45,6 +46,30 @@ def handover_due(sim: RuleSim, steps_waiting: int, episode_ended: bool) -> bool:
     return episode_ended or steps_waiting >= HANDOVER_STEPS or sim.engine.trace_rows_waiting >= HANDOVER_ROWS
 
 
+# GridWar's reward terms (docs/game.md, Rewards), as the store names them
+REWARD_TERMS = ("win", "loss", "hit", "got_shot", "step", "unsafe", "invalid")
+
+
+def reward_terms(weights: Rewards, rewards: np.ndarray, events: np.ndarray, winner: np.ndarray) -> np.ndarray:
+    """float64 [K, 2, N, len(REWARD_TERMS)]: each agent's reward of K logged world-steps split by term, from
+    the step's events (`events` [K, 2, N, 4]: unsafe, invalid, hits made, hits taken; `winner` [K]) and the
+    scenario's reward `weights`; the step term (a valid action's) is what the others leave of the agent's
+    reward `rewards` [K, 2, N], so the terms sum to it (tests check that it is 0 or valid_action)."""
+    k, _, n, _ = events.shape
+    out = np.zeros((k, 2, n, len(REWARD_TERMS)))
+    unsafe = events[..., 0] != 0
+    won = np.stack([winner == WINNER_RED, winner == WINNER_BLUE], axis=1)[:, :, None]  # [K, 2, 1]
+    lost = np.stack([winner == WINNER_BLUE, winner == WINNER_RED], axis=1)[:, :, None]
+    out[..., 0] = np.where(won, weights.win, 0.0)
+    out[..., 1] = np.where(lost, weights.loss, 0.0)
+    out[..., 2] = events[..., 2] * weights.hit_opponent
+    out[..., 3] = events[..., 3] * weights.got_shot
+    out[..., 5] = np.where(unsafe, weights.unsafe, 0.0)
+    out[..., 6] = np.where(~unsafe & (events[..., 1] != 0), weights.invalid, 0.0)
+    out[..., 4] = rewards - out.sum(axis=-1)
+    return out
+
+
 def outcome_name(winner: int, truncated: bool) -> str:
     """Red's outcome of a finished episode."""
     if truncated:
@@ -54,8 +79,10 @@ def outcome_name(winner: int, truncated: bool) -> str:
 
 class EpisodeTracer:
     def __init__(self, sink: TraceSink, scenario: Scenario, sim: RuleSim | RefSim,
-                 limit: int | None = None) -> None:
+                 limit: int | None = None, agent_rows: bool = True) -> None:
+        """`agent_rows`: record the decisions and reward terms (False: the world's half only)."""
         self.sink = sink
+        self.agent_rows = agent_rows
         self.limit = limit
         self._limit = np.iinfo(np.int64).max if limit is None else limit
         self.scenario = scenario
@@ -71,6 +98,10 @@ class EpisodeTracer:
         # an episode's `rewards`: the teams' returns, then each agent's
         self._return_names = [*TEAMS, *(agent_name(t, j) for t in range(2) for j in range(n))]
         self._log = StepLog(HANDOVER_STEPS, w, sim.obs_size, n)
+        self._agent_names = [agent_name(t, j) for t in range(2) for j in range(n)]  # red's first
+        self._decided: tuple[PolicyOutput, np.ndarray, np.ndarray | None] | None = None
+        self._decisions = DecisionLog(HANDOVER_STEPS, w, n)
+        self._red_codes = np.arange(n)
         # each world's returns and steps, kept by the log's step call
         self.steps, self.agent_return, self.team_return = self._log.steps, self._log.agent_return, \
             self._log.team_return
@@ -102,15 +133,29 @@ class EpisodeTracer:
             self._flush()
         self._hand_steps()
 
+    def decided(self, output: PolicyOutput, acting: np.ndarray, masks: np.ndarray | None = None) -> None:
+        """Red's policy output for the coming step: `output`'s rows [W, N, ...] (values [W, N, A] in the
+        scenario's action order), `acting` [W, N] which agents chose, `masks` [W, N, A] the allowed
+        actions (None: none). Recorded as the decisions of the next `stepped`."""
+        self._decided = (output, acting, masks)
+
     def stepped(self, res: StepResult, red: np.ndarray, blue: np.ndarray, done: np.ndarray | None = None
                 ) -> None:
         """After a step of every world (before any autoreset), with both teams' actions (spec ids,
         [W, N]) and, if the caller has it, `done` = res.terminated | res.truncated: its step record is
-        logged; its rows and the logged steps are handed over when due; episode ends."""
+        logged (with the decisions `decided` before it); its rows and the logged steps are handed over
+        when due; episode ends."""
         self._steps_waiting += 1
+        decisions_full = False
+        if self._decided is not None:
+            output, acting, masks = self._decided
+            self._decided = None
+            if self.agent_rows:
+                decisions_full = self._decisions.add(res.t, output, acting, red, masks)
         if done is None:
             done = res.terminated | res.truncated
         ended, full = self._log.add(res, red, blue, done, self.open)
+        full = full or decisions_full
         if self._rules and handover_due(self.sim, self._steps_waiting, ended > 0):
             self._flush()
         if ended or full:
@@ -127,10 +172,24 @@ class EpisodeTracer:
         self.sink.close()
 
     def _hand_steps(self) -> None:
-        """The logged step records of recorded episodes to the sink, in step order."""
+        """The logged step records of recorded episodes to the sink, in step order, and their reward
+        terms."""
+        decisions = self._decisions.take(self.cur_ep, self.open, self._red_codes, self._agent_names)
+        if decisions is not None:
+            self.sink.decisions(decisions)
         steps = self._log.take(self.cur_ep, self.open)
-        if steps is not None:
-            self.sink.step(*steps)
+        if steps is None:
+            return
+        world, episode, t, obs, actions, rewards, events, winner = steps
+        self.sink.step(world, episode, t, obs, actions, rewards)
+        if not self.agent_rows:
+            return
+        terms = reward_terms(self.scenario.rewards, rewards, events, winner)  # [K, 2, N, T]
+        k, m, n_terms = len(t), len(self._agent_names), len(REWARD_TERMS)
+        per_row = m * n_terms
+        self.sink.reward_terms(RewardTerms(
+            np.repeat(episode, per_row), np.repeat(t, per_row), np.tile(np.repeat(np.arange(m), n_terms), k),
+            self._agent_names, np.tile(np.arange(n_terms), k * m), REWARD_TERMS, terms.reshape(-1)))
 
     def _flush(self) -> None:
         if not self._rules:

@@ -24,7 +24,8 @@ reproducible for a given seed and num_envs. A list of seeds is combined into one
 
 Tracing: with `trace_sink`, every episode goes to the sink; with `trace_episodes=N` too, only the
 episodes 0..N-1 (ids in the order episodes begin; see tracelab/envs/tracer.py), so stepping until those
-ended records exactly N episodes.
+ended records exactly N episodes. The sink also gets the reward terms of each step and the decisions
+a caller hands over with `decided()` before a step; `trace_agent=False`: neither (docs/envs.md).
 
 `kernel`: the rule engine's kernel (backend "rules"; tracelab.envs.common.make_sim): auto, counting,
 lanes or compiled (built in the background while the env steps on the counting kernel if not cached).
@@ -56,6 +57,7 @@ from tracelab.envs.common import (
 from tracelab.envs.gym_env import reset_info, step_info
 from tracelab.envs.sinks import TraceSink
 from tracelab.envs.tracer import EpisodeTracer
+from tracelab.store.agent_rows import PolicyOutput
 from tracelab.game.opponent import P_TOWARD
 from tracelab.game.scenario import RED, Scenario
 
@@ -71,7 +73,7 @@ class GridWarVectorEnv(VectorEnv):
 
     def __init__(self, num_envs: int = 1, scenario: Scenario | str = "advanced", *, backend: str = "rules",
                  stack_previous: bool = False, trace_sink: TraceSink | None = None,
-                 trace_episodes: int | None = None, render_mode: str | None = None,
+                 trace_episodes: int | None = None, trace_agent: bool = True, render_mode: str | None = None,
                  opponent_p: float = P_TOWARD, copy: bool = True, kernel: str = "auto") -> None:
         if render_mode is not None:
             raise ValueError("GridWarVectorEnv does not render")
@@ -96,7 +98,8 @@ class GridWarVectorEnv(VectorEnv):
         # every episode starts from the scenario's start state: one world's reset info serves all
         self._start_info = reset_info(1, self._masks()[:1], self._n == 1)
         self._tracer = None if trace_sink is None else EpisodeTracer(trace_sink, self.scenario, self.sim,
-                                                                     limit=trace_episodes)
+                                                                     limit=trace_episodes,
+                                                                     agent_rows=trace_agent)
         self._ready = False
 
     def reset(self, *, seed: int | Sequence[int] | None = None, options: dict[str, Any] | None = None
@@ -120,6 +123,18 @@ class GridWarVectorEnv(VectorEnv):
         if done.any():
             info = self._autoreset(done, obs, info)
         return obs, reward, terminated, truncated, self._with_masks(info, self._all)
+
+    @property
+    def records_decisions(self) -> bool:
+        """Whether the env records its policy's decisions (a trace sink, `trace_agent`): then `decided` is
+        worth calling."""
+        return self._tracer is not None and self._tracer.agent_rows
+
+    def decided(self, output: PolicyOutput, acting: np.ndarray, masks: np.ndarray | None = None) -> None:
+        """Red's policy output for the next step, recorded as its decisions when traced
+        (EpisodeTracer.decided: values [W, N, A] in the scenario's action order, `acting` [W, N])."""
+        if self._tracer is not None:
+            self._tracer.decided(output, acting, masks)
 
     def _autoreset(self, done: np.ndarray, obs: np.ndarray, info: dict[str, Any]) -> dict[str, Any]:
         """Reset the finished worlds now; `obs` and `info` switch to their reset values there."""

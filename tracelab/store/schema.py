@@ -2,7 +2,8 @@
 and the readable SQL views built on them.
 
 Storage tables live in the DuckDB schema `raw`; the views users query (`changes`, `firings`, `episodes`,
-`steps`, `metrics`, `rules`, `facts`, `atoms`, `groundings`, `edges`, `run`) live in `main` and only read `raw.*`,
+`steps`, `metrics`, `rules`, `facts`, `atoms`, `groundings`, `edges`, `decisions`, `action_values`, `rewards`,
+`returns`, `run`) live in `main` and only read `raw.*`,
 so the same view text serves a live run (raw.* are views over Parquet parts) and a sealed one (raw.* are
 tables)."""
 from __future__ import annotations
@@ -57,6 +58,21 @@ SCHEMAS: dict[str, pa.Schema] = {
                         ("agent", pa.string()), ("action", pa.int32()), ("reward", pa.float64()),
                         ("terminated", pa.bool_()), ("truncated", pa.bool_()),
                         ("obs", pa.list_(pa.float32()))]),
+    # The run's actions (steps.action -> name; `position`: the action's place in decisions.values, NULL
+    # for an action the policy does not offer), the policy's decision per agent and step, and each
+    # step's reward split by term (tracelab.store.agent_rows). Only non-zero terms have a row.
+    "action_names": pa.schema([("action", pa.int32()), ("name", pa.string()), ("position", pa.int32())]),
+    # What each entry of steps.obs is: entry `position`, read as (obs // divisor) % size when `size` is
+    # set (one number holding several parts: a Discrete space), and `labels[value]` the atom a value
+    # stands for (an index part's), else the number itself.
+    "observation_names": pa.schema([("position", pa.int32()), ("name", pa.string()), ("divisor", pa.int64()),
+                                    ("size", pa.int32()), ("labels", _STR_LIST)]),
+    "decisions": pa.schema([("episode", pa.int64()), ("step", pa.int32()), ("agent", pa.string()),
+                            ("action", pa.int32()), ("output", pa.string()), ("values", pa.list_(pa.float32())),
+                            ("state_value", pa.float64()), ("explored", pa.bool_()), ("epsilon", pa.float64()),
+                            ("mask", pa.list_(pa.bool_()))]),
+    "reward_terms": pa.schema([("episode", pa.int64()), ("step", pa.int32()), ("agent", pa.string()),
+                               ("term", pa.string()), ("value", pa.float64())]),
     "metrics": pa.schema([("step", pa.int64()), ("name", pa.string()), ("value", pa.float64()),
                           ("episode", pa.int64()), ("time", _TS)]),
     "episode_end": pa.schema([("episode", pa.int64()), ("steps", pa.int32()), ("t_end", pa.int32()),
@@ -74,8 +90,10 @@ ADDED_COLUMNS: dict[str, dict[str, str]] = {"clauses": {"closed": "false"},
                                             "run": {"board": f"'{BOARD_BEFORE_DECLARED}'"},
                                             "facts": {"episode": "CAST(NULL AS BIGINT)"}}
 # Tables added after the first release: a run written before has none and reads it as empty (EMPTY_SQL).
-ADDED_TABLES: tuple[str, ...] = ("edges",)
-_DUCKDB_TYPES = {pa.int32(): "INTEGER", pa.int64(): "BIGINT", pa.string(): "VARCHAR"}
+ADDED_TABLES: tuple[str, ...] = ("edges", "action_names", "observation_names", "decisions", "reward_terms")
+_DUCKDB_TYPES = {pa.int32(): "INTEGER", pa.int64(): "BIGINT", pa.string(): "VARCHAR", pa.float64(): "DOUBLE",
+                 pa.bool_(): "BOOLEAN", pa.list_(pa.float32()): "FLOAT[]", pa.list_(pa.bool_()): "BOOLEAN[]",
+                 _STR_LIST: "VARCHAR[]"}
 
 
 def empty_sql(table: str) -> str:
@@ -99,6 +117,8 @@ DICTIONARY_COLUMNS: dict[str, list[str]] = {
                 "cause_kind", "cause_id", "n_sources"],
     "facts": ["start", "end", "static", "file", "line", "episode"],
     "atoms": ["label"], "groundings": ["rule"], "edges": [], "nodes": [],
+    "decisions": ["episode", "agent", "output", "explored", "epsilon"],
+    "reward_terms": ["episode", "agent", "term", "value"],
 }
 # Parquet options of a table's parts beyond the dictionaries: the change rows' `seq` (a counter) delta
 # encoded, and min/max statistics only on the columns readers filter a live run by (episode, time, seq;
@@ -113,7 +133,9 @@ PART_OPTIONS: dict[str, dict[str, object]] = {
 SEAL_ORDER: dict[str, str] = {
     "changes": "episode, seq", "steps": "episode, step, agent", "metrics": "step, name",
     "groundings": "grounding", "atoms": "atom", "nodes": "node", "labels": "label", "edges": "source, target",
-    "episode_begin": "episode", "episode_end": "episode",
+    "episode_begin": "episode", "episode_end": "episode", "action_names": "action",
+    "observation_names": "position, divisor",
+    "decisions": "episode, step, agent", "reward_terms": "episode, step, agent, term",
 }
 
 VIEWS_SQL = r"""
@@ -182,7 +204,32 @@ SELECT coalesce(b.episode, e.episode) AS episode, b.world, e.steps, e.outcome, e
        TRY_CAST(json_extract(b.info, '$.train_step') AS BIGINT) AS train_step
 FROM raw.episode_begin b FULL JOIN raw.episode_end e ON e.episode = b.episode;
 
-CREATE OR REPLACE VIEW steps AS SELECT * FROM raw.steps;
+-- the action's name from the run's action_names (NULL in a run written before they were recorded)
+CREATE OR REPLACE VIEW steps AS
+SELECT s.*, an.names[s.action + 1] AS action_name
+FROM raw.steps s, (SELECT list(name ORDER BY action) AS names FROM raw.action_names) an;
+
+-- the policy's decision per agent and step: `actions` names the entries of `values` (and `mask`)
+CREATE OR REPLACE VIEW decisions AS
+SELECT d.episode, d.step, d.agent, d.action, an.names[d.action + 1] AS action_name, d.explored, d.epsilon,
+       d.output, an.offered AS actions, d.values, d.mask, d.state_value
+FROM raw.decisions d,
+     (SELECT list(name ORDER BY action) AS names,
+             list(name ORDER BY position) FILTER (WHERE position IS NOT NULL) AS offered
+      FROM raw.action_names) an;
+
+-- one row per action of each decision: its value, whether the mask allowed it, whether it was chosen
+CREATE OR REPLACE VIEW action_values AS
+SELECT d.episode, d.step, d.agent, u.pos - 1 AS position, d.actions[u.pos] AS action_name,
+       d."values"[u.pos] AS value, coalesce(d.mask[u.pos], true) AS allowed, d.actions[u.pos] = d.action_name AS chosen
+FROM decisions d, (SELECT unnest(range(1, 1 + max(len("values")))) AS pos FROM raw.decisions) u
+WHERE u.pos <= len(d."values");
+
+-- each step's reward by term (rows of non-zero terms: their sum is steps.reward), and each episode's
+-- return by term
+CREATE OR REPLACE VIEW rewards AS SELECT episode, step, agent, term, value FROM raw.reward_terms;
+CREATE OR REPLACE VIEW returns AS
+SELECT episode, agent, term, sum(value) AS value, count(*) AS steps FROM raw.reward_terms GROUP BY ALL;
 CREATE OR REPLACE VIEW metrics AS SELECT * FROM raw.metrics;
 CREATE OR REPLACE VIEW run AS SELECT * FROM raw.run;
 """

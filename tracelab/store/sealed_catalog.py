@@ -19,6 +19,7 @@ from typing import Any
 import duckdb
 import pyarrow as pa
 
+from tracelab.store.arrow_build import empty_table
 from tracelab.store.meta import meta_table
 from tracelab.store.sandbox import lock_down, sandbox_connection
 from tracelab.store.schema import ADDED_COLUMNS, ADDED_TABLES, SCHEMAS, VIEW_NAMES
@@ -54,7 +55,7 @@ def expected_columns() -> dict[str, dict[str, str]]:
     con = sandbox_connection()
     try:
         lock_down(con)
-        return {t: dict(zip(s.names, (str(x) for x in con.from_arrow(s.empty_table()).types)))
+        return {t: dict(zip(s.names, (str(x) for x in con.from_arrow(empty_table(s)).types)))
                 for t, s in STORED_SCHEMAS.items()}
     finally:
         con.close()

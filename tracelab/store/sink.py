@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from tracelab.store.agent_rows import AgentRows, Decisions, ObservationName, RewardTerms
 from tracelab.store.convert import utc_now
 from tracelab.store.writer import TraceWriter
 
@@ -35,6 +36,8 @@ class StoreSink:
     def __init__(self, writer: TraceWriter) -> None:
         self.writer = writer
         self._engine: Any = None
+        self._scenario: Any = None
+        self._observation_named = False
         self._agents: list[str] = []
         self._begins: list[dict[str, Any]] = []  # writer.begin_episodes' rows
         self._changes: list[dict[str, np.ndarray]] = []
@@ -42,13 +45,21 @@ class StoreSink:
         self._written_at = time.monotonic()
         self._steps: list[tuple[np.ndarray, ...]] = []  # (episode, t, obs, actions, rewards) per env step
         self._ends: list[dict[str, Any]] = []  # writer.end_episodes' rows, ended_at when they ended
+        self._agent_rows = AgentRows()  # decisions and reward terms
 
     def begin_run(self, engine: Any, scenario: Any) -> None:
         self._engine = engine
+        self._scenario = scenario
         n = scenario.agents_per_team
         self._agents = [f"{team}-agent-{j + 1}" for team in ("red", "blue") for j in range(n)]
         if engine is not None:
             self.writer.write_engine_program(engine)
+        # deferred: importing the game's scenario module takes most of a second, which the store's other
+        # users (readers, a declared world's recorder) need not pay
+        from tracelab.game.scenario import ACTION_NAMES
+        offered = list(scenario.action_ids)
+        self.writer.write_action_names(ACTION_NAMES, [offered.index(a) if a in offered else None
+                                                      for a in range(len(ACTION_NAMES))])
 
     def begin_episode(self, world: int, episode: int, seed: int | None, scenario: Any) -> None:
         self._begins.append({"episode": int(episode), "world": int(world), "t_start": 0, "seed": seed,
@@ -67,6 +78,12 @@ class StoreSink:
                                              and time.monotonic() - self._written_at >= self.write_interval_s):
             self.write_pending()
 
+    def decisions(self, rows: Decisions) -> None:
+        self._agent_rows.decisions(rows)
+
+    def reward_terms(self, rows: RewardTerms) -> None:
+        self._agent_rows.reward_terms(rows)
+
     def end_episode(self, world: int, episode: int, steps: int, outcome: str,
                     rewards: Mapping[str, float]) -> None:
         # episode-local time: the last step's t is the number of steps (t_start is 0)
@@ -76,7 +93,8 @@ class StoreSink:
 
     def write_pending(self) -> None:
         """Write what is kept: the episode begins, the vocabulary the rows name, the change rows, the step
-        records (a row per agent, with its team's observation), then the episode ends."""
+        records (a row per agent, with its team's observation), the decisions and reward terms, then the
+        episode ends."""
         self._written_at = time.monotonic()
         if self._begins:
             begins, self._begins = self._begins, []
@@ -90,15 +108,27 @@ class StoreSink:
                                       owned=True)
         if self._steps:
             episode, t, obs, actions, rewards = (np.concatenate(c) for c in zip(*self._steps))
+            if self._scenario is not None and not self._observation_named:
+                self._write_observation_names(obs.shape[-1])
             self._steps, self._step_rows = [], 0
             m = len(self._agents)  # both teams' agents, red first
             self.writer.write_steps(np.repeat(episode, m), {
                 "step": np.repeat(t, m), "t": np.repeat(t, m), "agent": np.tile(self._agents, len(t)),
                 "action": actions.reshape(-1), "reward": rewards.reshape(-1),
                 "obs": np.repeat(obs, m // 2, axis=1).reshape(len(t) * m, -1)})
+        self._agent_rows.write(self.writer)
         if self._ends:
             ends, self._ends = self._ends, []
             self.writer.end_episodes(ends)
+
+    def _write_observation_names(self, size: int) -> None:
+        """What the steps' observation entries are, with the first steps (their size says whether the
+        observation stacks the previous one)."""
+        # deferred: the game's observation module loads numba, which a sink's importers need not
+        from tracelab.game.observe import obs_size, team_observation_names
+        self._observation_named = True
+        names = team_observation_names(self._scenario, size == obs_size(self._scenario, True))
+        self.writer.write_observation_names([ObservationName(i, x) for i, x in enumerate(names)])
 
     def close(self) -> None:
         self.write_pending()

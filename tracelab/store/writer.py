@@ -36,6 +36,7 @@ import pyarrow as pa
 
 from tracelab.engine.errors import is_interrupt
 from tracelab.store import arrow_build, convert, layout
+from tracelab.store.agent_rows import ObservationName, action_names_table, observation_names_table
 from tracelab.store.graph_tables import edges_table
 from tracelab.store.meta import (RunMeta, initial_meta, now_iso, open_writer_lock, read_meta, reopened_meta,
                                  write_meta)
@@ -139,6 +140,8 @@ class TraceWriter:
         self._groundings_have = 0
         self._seq = 0
         self._program_written = False
+        self._action_names_written = False
+        self._observation_names_written = False
         self._open_episodes: set[int] = set()
         self.flushes = 0
         # A reopened run's program and vocabulary, to check a new engine's against (first call only)
@@ -200,6 +203,8 @@ class TraceWriter:
         self._groundings_have = stored.groundings
         self._seq = stored.changes
         self._program_written = stored.rows("policies") > 0  # every program writes the policy names
+        self._action_names_written = stored.rows("action_names") > 0
+        self._observation_names_written = stored.rows("observation_names") > 0
         self._open_episodes = set(stored.open_episodes)
         self.flushes = stored.flushes  # the manifest's count keeps growing: readers watch it
         self._stored_tables = stored.small_tables
@@ -372,6 +377,27 @@ class TraceWriter:
         table = convert.steps_table(episode, arrays)
         self._append({"steps": table})
         return table.num_rows
+
+    def write_agent_table(self, table: str, rows: pa.Table) -> None:
+        """Decision or reward-term rows (tracelab.store.agent_rows: Decisions.table, RewardTerms.table)."""
+        if table not in ("decisions", "reward_terms"):
+            raise ValueError(f"write_agent_table writes decisions or reward_terms, not {table!r}")
+        self._append({table: rows})
+
+    def write_action_names(self, names: Sequence[str], positions: Sequence[int | None] | None = None) -> None:
+        """The run's actions, once: action k (as steps.action holds it) is names[k], at positions[k] in a
+        decision's values (default k; None: the policy does not offer it). A reopened run keeps its own."""
+        if self._action_names_written:
+            return
+        self._action_names_written = True
+        self._append({"action_names": action_names_table(names, positions)})
+
+    def write_observation_names(self, names: Sequence[ObservationName]) -> None:
+        """What the entries of steps.obs are (agent_rows.ObservationName), once; a reopened run keeps its own."""
+        if self._observation_names_written or not names:
+            return
+        self._observation_names_written = True
+        self._append({"observation_names": observation_names_table(names)})
 
     def write_metrics(self, step: int, values: Mapping[str, float], episode: int | None = None) -> None:
         """Training metrics at a global training step, one row per name."""

@@ -17,6 +17,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 from tracelab.engine.safe_files import read_json
+from tracelab.store.agent_rows import PolicyOutput
 from tracelab.envs.declared.env_source import EnvSource, check_same_env, env_source_from_json
 from tracelab.train.env_source import ObservationEncoder
 from tracelab.train.policy import POLICY_JSON, POLICY_PT, _policy_dir, read_policy_networks, spec_net
@@ -35,10 +36,13 @@ class EnvPolicy:
         self.q, self.encoder, self.mask = q, encoder, mask
 
     def act(self, obs: Any, masks: np.ndarray | None = None) -> np.ndarray:
-        q = self.q(self.encoder(obs))
-        if self.mask and masks is not None:
-            q = np.where(masks.astype(bool), q, -np.inf)
-        return q.argmax(axis=1)
+        return self.decide(obs, masks)[0]
+
+    def decide(self, obs: Any, masks: np.ndarray | None = None) -> tuple[np.ndarray, PolicyOutput]:
+        """act()'s actions and the Q-values they were chosen from (unmasked), for a traced game."""
+        values = self.q(self.encoder(obs))
+        q = np.where(masks.astype(bool), values, -np.inf) if self.mask and masks is not None else values
+        return q.argmax(axis=1), PolicyOutput(np.asarray(values, np.float32))
 
 
 def batch_of_one(obs: Any) -> Any:
@@ -48,13 +52,21 @@ def batch_of_one(obs: Any) -> Any:
     return np.asarray(obs)[None]
 
 
-def one_env_actor(policy: Any) -> Callable[[Any, dict[str, Any]], int]:
+def one_env_actor(policy: Any, env: Any = None) -> Callable[[Any, dict[str, Any]], int]:
     """The greedy action in one env from its observation and info, of a policy that acts on batches
-    (EnvPolicy's `act(obs, masks)`): play --env --policy, traced evaluation games."""
+    (EnvPolicy's `act(obs, masks)`): play --env --policy, traced evaluation games. With a traced `env`
+    (a DeclaredEnv with a recorder) and a policy that can `decide`, its output is recorded as the step's
+    decision."""
+    record = env is not None and getattr(env.unwrapped, "records_decisions", False) and hasattr(policy, "decide")
+
     def act(obs: Any, info: dict[str, Any]) -> int:
         mask = info.get("action_mask")
-        return int(np.asarray(policy.act(batch_of_one(obs), None if mask is None else np.asarray(mask)[None]))
-                   .reshape(-1)[0])
+        masks = None if mask is None else np.asarray(mask)[None]
+        if not record:
+            return int(np.asarray(policy.act(batch_of_one(obs), masks)).reshape(-1)[0])
+        actions, output = policy.decide(batch_of_one(obs), masks)
+        env.unwrapped.decided(output, masks)
+        return int(np.asarray(actions).reshape(-1)[0])
     return act
 
 

@@ -19,6 +19,7 @@ import numpy as np
 from tracelab.envs.tracer import outcome_name
 from tracelab.envs.vector_env import GridWarVectorEnv
 from tracelab.game.scenario import Scenario
+from tracelab.store.agent_rows import Decisions, RewardTerms
 from tracelab.store.sink import StoreSink
 from tracelab.store.writer import TraceWriter
 from tracelab.train.experiments.stats import spread, wilson
@@ -136,10 +137,15 @@ def play_games(env: GridWarVectorEnv, policy: Policy, quota: np.ndarray, seed: i
     ret = np.zeros(env.num_envs)
     decisions = np.zeros(env.num_envs, np.int64)
     records: list[GameRecord] = []
+    decide = getattr(env, "records_decisions", False) and hasattr(policy, "decide")  # record the policy's values
     while left.any():
         acting = may_act(sc, env.sim.state)
-        masks = info["action_mask"].reshape(env.num_envs, n, -1) if policy.mask else None
-        actions = policy.act(obs, acting, masks)
+        masks = info["action_mask"].reshape(env.num_envs, n, -1) if policy.mask or decide else None
+        if decide:
+            actions, output = policy.decide(obs, acting, masks if policy.mask else None)
+            env.decided(output, acting, masks)
+        else:
+            actions = policy.act(obs, acting, masks)
         decisions += acting.sum(axis=1)
         obs, reward, terminated, truncated, info = env.step(actions[:, 0] if n == 1 else actions)
         ret += reward
@@ -200,6 +206,16 @@ class EvalSink(StoreSink):
         if run_eps.size:
             super().step(world[keep], run_eps, t[keep], obs[keep], actions[keep], rewards[keep])
 
+    def decisions(self, rows: Decisions) -> None:
+        keep, run_eps = self._traced(rows.episode)
+        if run_eps.size:
+            super().decisions(rows.rows(keep, run_eps))
+
+    def reward_terms(self, rows: RewardTerms) -> None:
+        keep, run_eps = self._traced(rows.episode)
+        if run_eps.size:
+            super().reward_terms(rows.rows(keep, run_eps))
+
     def _traced(self, env_episodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(which rows of `env_episodes` are of traced episodes, those rows' run episode ids), by array
         lookup: a change row each costs too much in Python (thousands a step)."""
@@ -228,11 +244,14 @@ class EvalTrace:
     vocabulary and groundings stay one), `games` worlds, one traced game per world per evaluation."""
 
     def __init__(self, writer: TraceWriter, scenario: Scenario, backend: str, stack_previous: bool,
-                 games: int, opponent_p: float, new_id: Callable[[], int], kernel: str = "auto") -> None:
+                 games: int, opponent_p: float, new_id: Callable[[], int], kernel: str = "auto",
+                 agent_rows: bool = True) -> None:
+        """`agent_rows`: record the policy's decisions and the reward terms too."""
         self.sink = EvalSink(writer, new_id)
         self.games = games
         self.env = GridWarVectorEnv(games, scenario, backend=backend, stack_previous=stack_previous,
-                                    trace_sink=self.sink, opponent_p=opponent_p, kernel=kernel, copy=False)
+                                    trace_sink=self.sink, opponent_p=opponent_p, kernel=kernel, copy=False,
+                                    trace_agent=agent_rows)
 
     def play(self, policy: Policy, seed: int, info: Mapping[str, Any],
              on_game: GameCallback | None = None) -> list[GameRecord]:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -23,6 +23,7 @@ import tracelab.envs  # noqa: F401  (registers the toy-text ids)
 from tracelab.errors import UserError
 from tracelab.game.facts import GAME_RULES
 from tracelab.game.scenario import BOARD, NOTHING
+from tracelab.store.agent_rows import PolicyOutput
 from tracelab.store.writer import TraceWriter
 from tracelab.train.env_policy import EVAL_STEP_CAP, EnvEvalResult, make_vector_env, one_env_actor, play_env_games
 from tracelab.envs.declared.env_source import EnvSource
@@ -79,16 +80,31 @@ def eval_info(step: int, round_no: int, **more: Any) -> dict[str, Any]:
 # ---------------------------------------------------------------------------------------------------------
 class _GreedyTeam:
     """tracelab.train.policy.Policy's acting interface over an `Act`: the library's actions for the agents
-    that decide this step, do-nothing for the others (no action mask: the library's policy has none)."""
+    that decide this step, do-nothing for the others (no action mask: the library's policy has none).
+    An `Act` that can also `decide` (obs -> actions and its PolicyOutput, or None) gives its values to
+    the traced games."""
     mask = False
 
     def __init__(self, act: Act, scenario: Any, stack_previous: bool) -> None:
         self._act, self.stack_previous = act, stack_previous
         self.nothing = scenario.action_ids.index(NOTHING)
+        if hasattr(act, "decide"):
+            self.decide = self._decide
 
     def act(self, team_obs: np.ndarray, acting: np.ndarray, masks: np.ndarray | None = None) -> np.ndarray:
         actions = np.asarray(self._act(team_obs), np.int64).reshape(acting.shape)
         return np.where(acting, actions, self.nothing)
+
+    def _decide(self, team_obs: np.ndarray, acting: np.ndarray, masks: np.ndarray | None = None
+                ) -> tuple[np.ndarray, PolicyOutput]:
+        actions, output = self._act.decide(team_obs)
+        actions = np.where(acting, np.asarray(actions, np.int64).reshape(acting.shape), self.nothing)
+        if output is None:  # a model whose values are not read: NaN, the decision's action only
+            return actions, PolicyOutput(np.full((*acting.shape, 0), np.nan, np.float32))
+        w, n = acting.shape
+        return actions, replace(output, values=output.values.reshape(w, n, -1),
+                                state_value=None if output.state_value is None else
+                                np.repeat(output.state_value.reshape(w, 1), n, axis=1))
 
 
 @dataclass
@@ -147,13 +163,21 @@ class GridWarEvaluator:
 # Rules-declared worlds
 # ---------------------------------------------------------------------------------------------------------
 class _GreedyAgent:
-    """env_policy.EnvPolicy's acting interface over an `Act` (the library's policy has no action mask)."""
+    """env_policy.EnvPolicy's acting interface over an `Act` (the library's policy has no action mask);
+    `decide` as _GreedyTeam's, when the `Act` has one."""
 
     def __init__(self, act: Act) -> None:
         self._act = act
+        if hasattr(act, "decide"):
+            self.decide = self._decide
 
     def act(self, obs: Any, masks: np.ndarray | None = None) -> np.ndarray:
         return np.asarray(self._act(obs))
+
+    def _decide(self, obs: Any, masks: np.ndarray | None = None) -> tuple[np.ndarray, PolicyOutput]:
+        actions, output = self._act.decide(obs)
+        n = len(np.asarray(actions).reshape(-1))
+        return np.asarray(actions), output or PolicyOutput(np.full((n, 0), np.nan, np.float32))
 
 
 @dataclass
@@ -219,7 +243,8 @@ class DeclaredEvaluator:
     def _play_one(self, agent: Any, seed: int, result: EnvEvalResult) -> None:
         """One greedy game in the traced env; one that runs EVAL_STEP_CAP steps without an end is counted
         truncated (its record ends 'aborted' at the next game's reset)."""
-        env, act = self.trace_env, one_env_actor(agent)
+        env = self.trace_env
+        act = one_env_actor(agent, env)
         obs, info = env.reset(seed=seed)
         ret, steps, terminated, truncated = 0.0, 0, False, False
         while not (terminated or truncated) and steps < EVAL_STEP_CAP:

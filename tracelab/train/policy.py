@@ -20,6 +20,7 @@ import numpy as np
 
 from tracelab.engine.safe_files import read_json
 from tracelab.game.scenario import ACTION_NAMES, NOTHING, Scenario, scenario_from_dict
+from tracelab.store.agent_rows import PolicyOutput
 from tracelab.train.memory import check_policy_memory, memory_limit
 from tracelab.validation import Const, IntRange, ListOf, MapOf, OptionalKey, check_file
 from tracelab.train.qnet import HiddenWidths, NetSpec, NumpyQ, QFunction
@@ -44,19 +45,6 @@ def agent_view_order(scenario: Scenario, stack_previous: bool) -> np.ndarray:
             half = half + [block + i for i in half]
         orders.append(half)
     return np.asarray(orders, np.int64)
-
-
-def observation_layout(scenario: Scenario, stack_previous: bool) -> list[str]:
-    """Names of an agent's observation entries, in the order its network reads them."""
-    n = scenario.agents_per_team
-    own = ["self"] + [f"mate{k}" for k in range(1, n)]
-    names = [f"{a}_{c}" for a in own for c in "xy"]
-    names += [f"opponent{k + 1}_{c}" for k in range(n) for c in "xy"]
-    if scenario.advanced:
-        names += [f"{a}_{c}" for a in own for c in ("opponent_bullets", "nearest_bullet_x", "nearest_bullet_y")]
-    if stack_previous:
-        names += [f"previous_{x}" for x in names]
-    return names
 
 
 def may_act(scenario: Scenario, state: Any, slow_every_step: bool = False) -> np.ndarray:
@@ -90,17 +78,29 @@ class Policy:
     def act(self, team_obs: np.ndarray, acting: np.ndarray, masks: np.ndarray | None = None) -> np.ndarray:
         """Action indices [W, N]: greedy for acting agents (among allowed ones if the policy masks and
         `masks` [W, N, A] is given), do-nothing for the others."""
+        return self.decide(team_obs, acting, masks)[0]
+
+    def decide(self, team_obs: np.ndarray, acting: np.ndarray, masks: np.ndarray | None = None
+               ) -> tuple[np.ndarray, PolicyOutput]:
+        """act()'s actions [W, N] and the Q-values they were chosen from ([W, N, A], unmasked; NaN for
+        agents that do not act), for a traced game's decisions (tracelab.store.agent_rows)."""
         w, n = acting.shape
+        if n == 1 and acting.all():  # one agent, choosing in every world (the 1v1 games): no copies
+            values = self.nets[self.network_of_agent[0]](team_obs)
+            q = np.where(masks[:, 0].astype(bool), values, -np.inf) if self.mask and masks is not None else values
+            return q.argmax(axis=1)[:, None], PolicyOutput(values[:, None])
         out = np.full((w, n), self.nothing, np.int64)
+        values = np.full((w, n, self.scenario.n_actions), np.nan, np.float32)
         for j in range(n):
             rows = np.flatnonzero(acting[:, j])
             if not len(rows):
                 continue
             q = self.nets[self.network_of_agent[j]](self.agent_obs(team_obs[rows], j))
+            values[rows, j] = q
             if self.mask and masks is not None:
                 q = np.where(masks[rows, j].astype(bool), q, -np.inf)
             out[rows, j] = q.argmax(axis=1)
-        return out
+        return out, PolicyOutput(values)
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -112,8 +112,10 @@ def save_policy(path: str | Path, scenario: Scenario, weights: dict[str, dict[st
     """Write policy.pt and policy.json into directory `path`. weights: network name -> its state dict;
     agents: network name -> red agent indices it plays; network: policy.json's description of the
     architecture (NetSpec.to_json, or a custom module's)."""
-    # deferred: torch, which reading a policy's spec does not need
+    # deferred: torch, which reading a policy's spec does not need; the game's observation module loads numba
     import torch
+
+    from tracelab.game.observe import observation_layout
     out = Path(path)
     out.mkdir(parents=True, exist_ok=True)
     torch.save({name: {k: v.contiguous().clone() for k, v in sd.items()} for name, sd in weights.items()},

@@ -30,6 +30,7 @@ except ImportError as e:  # pragma: no cover - the message is the point
     raise ImportError("tracelab.train.sb3 needs Stable-Baselines3: pip install 'tracelab[sb3]'") from e
 
 from tracelab.envs.declared.env_source import EnvSource
+from tracelab.store.agent_rows import LOGITS, PolicyOutput
 from tracelab.train.external_eval import EvalSettings
 from tracelab.train.external_run import ExternalRun
 
@@ -60,6 +61,20 @@ class _RunOutput(KVWriter):
 
     def close(self) -> None:
         pass
+
+
+class ModelActor:
+    """The callback's model as the evaluations' `Act` (its greedy actions), which can also `decide`: the
+    actions with the values they were chosen from, recorded into the traced games."""
+
+    def __init__(self, callback: "TracelabCallback") -> None:
+        self._callback = callback
+
+    def __call__(self, obs: Any) -> np.ndarray:
+        return self._callback.greedy_actions(obs)
+
+    def decide(self, obs: Any) -> tuple[np.ndarray, PolicyOutput | None]:
+        return self._callback.greedy_decisions(obs)
 
 
 class TracelabCallback(BaseCallback):
@@ -102,7 +117,7 @@ class TracelabCallback(BaseCallback):
         step = self.num_timesteps
         run.steps(step, self.locals["rewards"], self.locals["dones"], self.locals["infos"])
         if run.due(step, step - self.training_env.num_envs):
-            run.evaluate(self.greedy_actions, step)
+            run.evaluate(ModelActor(self), step)
         return True
 
     def _on_training_end(self) -> None:
@@ -112,7 +127,7 @@ class TracelabCallback(BaseCallback):
         finished = self._total is None or step >= self._total
         try:
             if finished and run.eval_step != step:
-                run.evaluate(self.greedy_actions, step)
+                run.evaluate(ModelActor(self), step)
             # what SB3 logged after its last dump (PPO's last update: train/...), which it would write at
             # the next rollout's; the return of the episodes since the last row; the episodes
             run.metrics(step, self.model.logger.name_to_value)
@@ -133,11 +148,33 @@ class TracelabCallback(BaseCallback):
     def greedy_actions(self, obs: Any) -> np.ndarray:
         """The model's deterministic actions for a batch of raw observations (normalised first when the
         model trains behind a VecNormalize)."""
-        normalize = self.model.get_vec_normalize_env()
-        if normalize is not None:
-            obs = normalize.normalize_obs(obs)
-        actions, _ = self.model.predict(obs, deterministic=True)
+        actions, _ = self.model.predict(self._normalized(obs), deterministic=True)
         return np.asarray(actions)
+
+    def greedy_decisions(self, obs: Any) -> tuple[np.ndarray, PolicyOutput | None]:
+        """greedy_actions and what the model chose them from, for a traced game's decisions: a DQN's
+        Q-values; an actor-critic's (PPO, A2C) action logits (normalised log-probabilities, one block per
+        sub-action of a MultiDiscrete space) and state value; None for another model."""
+        # deferred: torch, loaded by SB3 already; not needed to import this module's names
+        import torch
+        actions = self.greedy_actions(obs)
+        policy = self.model.policy
+        tensor, _ = policy.obs_to_tensor(self._normalized(obs))
+        with torch.no_grad():
+            if hasattr(policy, "q_net"):  # DQN
+                return actions, PolicyOutput(policy.q_net(tensor).cpu().numpy().astype(np.float32))
+            if hasattr(policy, "get_distribution") and hasattr(policy, "predict_values"):
+                dist = policy.get_distribution(tensor).distribution
+                logits = torch.cat([d.logits for d in dist], dim=1) if isinstance(dist, list) else \
+                    getattr(dist, "logits", None)
+                if logits is not None:
+                    value = policy.predict_values(tensor).reshape(-1).cpu().numpy()
+                    return actions, PolicyOutput(logits.cpu().numpy().astype(np.float32), LOGITS, value)
+        return actions, None
+
+    def _normalized(self, obs: Any) -> Any:
+        normalize = self.model.get_vec_normalize_env()
+        return obs if normalize is None else normalize.normalize_obs(obs)
 
     def _close(self, status: str) -> None:
         if self._output is not None:

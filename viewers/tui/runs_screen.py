@@ -6,14 +6,13 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
-import pyarrow as pa
 from rich.text import Text
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.screen import Screen
 from textual.widgets import Static
 
-from tracelab.store.catalog import RunSummary, list_runs
+from tracelab.store.catalog import RunSummary, catalog_table, list_runs
 from tracelab.viewers.tui.colours import FALSE, PARTIAL, TRUE, UNKNOWN
 from tracelab.viewers.tui.keybar import KeyBar
 from tracelab.viewers.tui.lazy_table import Column, LazyTable
@@ -84,7 +83,7 @@ class RunsScreen(Screen):
         table = self.query_one(LazyTable)
         if changed or redraw or not table.ready:
             rows = [r.as_row() for r in runs]
-            table.set_source(ArrowSource(pa.Table.from_pylist(rows) if rows else pa.table({})),
+            table.set_source(ArrowSource(catalog_table(rows)),
                              cursor=table.cursor)
         live = sum(r.status == "running" for r in runs)
         marked = (f"{len(self.marked)} marked, c compares them" if self.marked else "space marks runs to compare")

@@ -23,6 +23,7 @@ from tracelab.envs.declared.world import DeclaredWorld
 
 if TYPE_CHECKING:
     from tracelab.envs.declared.recording import DeclaredRecorder
+    from tracelab.store.agent_rows import PolicyOutput
     from tracelab.store.writer import TraceWriter
 
 RENDER_MODES = ["ansi", "rgb_array"]
@@ -86,6 +87,16 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
             info["outcome"] = w.outcome()
             info["won"] = info["outcome"] == "win"
         return obs, w.last_rewards[0], terminated, truncated, info
+
+    @property
+    def records_decisions(self) -> bool:
+        """Whether the env records its games (and so its policy's decisions): then `decided` is worth calling."""
+        return self._recorder is not None
+
+    def decided(self, output: "PolicyOutput", mask: np.ndarray | None = None) -> None:
+        """The policy's output for the next step (a batch of one), recorded as its decision when traced."""
+        if self._recorder is not None:
+            self._recorder.decided(output, mask)
 
     def trace_info(self, info: Mapping[str, Any] | None) -> None:
         """The begin info of the games a traced env records from its next reset on."""

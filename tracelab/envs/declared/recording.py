@@ -31,6 +31,7 @@ from tracelab.envs.declared.board import RUN_CONFIG_KEY, board_config
 from tracelab.envs.declared.spec import WorldSpec
 from tracelab.envs.declared.world import DeclaredWorld
 from tracelab.envs.tracer import HANDOVER_ROWS, HANDOVER_STEPS
+from tracelab.store.agent_rows import AgentRows, Decisions, ObservationName, PolicyOutput, RewardTerms
 from tracelab.store.convert import utc_now
 from tracelab.store.sink import WRITE_INTERVAL_S, WRITE_ROWS
 
@@ -57,6 +58,32 @@ def declared_run_config(spec: WorldSpec) -> dict[str, Any]:
     return {"spec": Path(spec.path).read_text(), "rule_texts": {f: Path(f).read_text() for f in spec.program.files},
             CONFIG_KEY: declared_facts(spec),
             RUN_CONFIG_KEY: None if spec.board is None else board_config(spec.board)}
+
+
+def observation_names(spec: WorldSpec) -> list[ObservationName]:
+    """What each entry of a recorded observation (flat_observation) is, named from the spec's observation
+    parts: a Discrete space's one number holds every index part (the first the slowest), a
+    MultiDiscrete's a number per part; a Box's or Dict's parts put part.width numbers each."""
+    parts = spec.parts
+    if spec.space == "Discrete":
+        sizes = [len(p.atoms) for p in parts]
+        divisors = [int(np.prod(sizes[k + 1:], dtype=np.int64)) for k in range(len(parts))]
+        return [ObservationName(0, p.name, d, len(p.atoms), [str(a) for a in p.atoms]) for p, d in zip(parts, divisors)]
+    if spec.space == "MultiDiscrete":
+        return [ObservationName(k, p.name, 1, len(p.atoms), [str(a) for a in p.atoms]) for k, p in enumerate(parts)]
+    out: list[ObservationName] = []
+    for p in parts:
+        at = len(out) and out[-1].position + 1
+        if p.read == "index" and p.values is None:
+            out.append(ObservationName(at, p.name, 1, len(p.atoms), [str(a) for a in p.atoms]))
+        elif p.width == 1:
+            out.append(ObservationName(at, p.name))
+        elif p.read == "bounds":
+            out += [ObservationName(at + 2 * i + b, f"{p.name}[{a}].{end}")
+                    for i, a in enumerate(p.atoms) for b, end in enumerate(("lower", "upper"))]
+        else:
+            out += [ObservationName(at + i, f"{p.name}[{a}]") for i, a in enumerate(p.atoms)]
+    return out
 
 
 def flat_observation(obs: Any) -> np.ndarray:
@@ -94,6 +121,15 @@ class DeclaredRecorder:
         self.writer = writer
         self.agents = list(world.spec.agents)
         writer.write_engine_program(eng)
+        writer.write_action_names(world.spec.action_names)
+        writer.write_observation_names(observation_names(world.spec))
+        world.keep_reward_terms = True
+        self._agent_rows = AgentRows()
+        # decisions (episode, step, agent, action, the policy's output, mask) and reward terms (episode,
+        # step, [agent, term] values) of the steps kept, as tuples (a record per step costs more)
+        self._decided: tuple[PolicyOutput, np.ndarray | None] | None = None
+        self._decisions: list[tuple[int, int, int, int, PolicyOutput, np.ndarray | None]] = []
+        self._terms: list[tuple[int, int, np.ndarray]] = []
         self._setup = eng.take_trace()  # the build's rows (t = 0), replayed at every episode's start
         self.episode = -1
         self._episode_ids = episode_ids
@@ -138,12 +174,25 @@ class DeclaredRecorder:
         # the start step's rows stay in the engine until the episode's next take, under this same clock
         # (a take per episode fewer: FrozenLake's episodes are ~8 steps)
 
+    def decided(self, output: PolicyOutput, mask: np.ndarray | None = None) -> None:
+        """The policy's output (a batch of one decision per agent) and the action mask (one row per
+        agent, or None) for the next step: recorded as its decisions."""
+        self._decided = (output, mask)
+
     def stepped(self, actions: Any, rewards: list[float], obs: Any, terminated: bool, truncated: bool) -> None:
-        """After an env step: its step rows (one per agent), and its end when it ended."""
+        """After an env step: its step rows (one per agent), its reward terms and decisions, and its end
+        when it ended."""
+        decided, self._decided = self._decided, None
         if not self._open:
             return
         self._length += 1
         t = self.world.engine.t - 1 - self._t0
+        self._terms.append((self.episode, self._length, self.world.last_reward_terms))
+        if decided is not None:
+            for a, act in enumerate(np.asarray(actions, np.int64).reshape(-1).tolist()):
+                mask = decided[1]
+                self._decisions.append((self.episode, self._length, a, act, decided[0].rows(slice(a, a + 1)),
+                                        None if mask is None else np.asarray(mask).reshape(len(self.agents), -1)[a]))
         if isinstance(actions, (int, np.integer)):  # one agent (kept short: the toy-text games' case)
             self._returns[0] += rewards[0]
             self._steps.append((self.episode, self._length, t, 0, rewards[0], int(actions), terminated, truncated))
@@ -194,11 +243,31 @@ class DeclaredRecorder:
                 "reward": reward, "terminated": term, "truncated": trunc,
                 "obs": np.repeat(observation_rows(self._obs), len(self.agents), axis=0)})
             self._steps, self._obs = [], []
+        self._keep_agent_rows()
+        self._agent_rows.write(w)
         if self._ends:
             ends, self._ends = self._ends, []
             w.end_episodes(ends)
 
     # ----
+
+    def _keep_agent_rows(self) -> None:
+        """The kept decisions and reward terms as the store's records (agent_rows)."""
+        if self._terms:
+            episode, step, terms = zip(*self._terms)
+            self._terms = []
+            values = np.stack(terms)  # [steps, agents, terms]
+            k, m, n_terms = values.shape
+            per_step = m * n_terms
+            self._agent_rows.reward_terms(RewardTerms(
+                np.repeat(episode, per_step), np.repeat(step, per_step), np.tile(np.repeat(np.arange(m), n_terms), k),
+                self.agents, np.tile(np.arange(n_terms), k * m), self.world.spec.reward_terms, values.reshape(-1)))
+        if self._decisions:
+            episode, step, agent, action, outputs, masks = zip(*self._decisions)
+            self._decisions = []
+            self._agent_rows.decisions(Decisions(
+                np.array(episode), np.array(step), np.array(agent), self.agents, np.array(action),
+                PolicyOutput.concat(outputs), None if masks[0] is None else np.stack(masks)))
 
     def _take_rows(self) -> None:
         """The engine's rows, t counted from the episode's start and labelled with the episode (the

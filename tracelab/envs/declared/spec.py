@@ -137,6 +137,9 @@ class WorldSpec:
     # the board's facts and the atoms the spec names, every agent's: the fewest atoms its engine has
     # (what a batch of worlds is estimated from, spec_size.check_worlds)
     named_atoms: int = 0
+    # the names of the reward's terms, as each agent's reward_table then reward_scaled entries are
+    # recorded (tracelab.store.agent_rows): the [reward.table] keys, then the scaled atom
+    reward_terms: tuple[str, ...] = ()
     # what a game's end counts as (`[end] win`, `loss`): an episode that terminated with one of them [1,1]
     win: tuple[Atom, ...] = ()
     loss: tuple[Atom, ...] = ()
@@ -395,7 +398,7 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     action_names, action_facts, mask = _actions(r, check, agents, agents_t.get("mask"))
     domains = {"cells": board.cells} if board else {}
     space, parts = _observation(r, check, domains, agents)
-    reward_table, reward_scaled = _reward(r, check, agents)
+    reward_table, reward_scaled, reward_terms = _reward(r, check, agents)
     end = r.table(("end",), ("terminated", "truncated", "max_steps", "win", "loss"), default={})
     terminated = _every_agents(r, check, ("end", "terminated"), agents)
     truncated = _every_agents(r, check, ("end", "truncated"), agents)
@@ -430,7 +433,7 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     check_program(program, {a.pred: len(a.args) for a in env_set})
     return WorldSpec(src.path, names, program, tuple(agents), action_names, action_facts, mask, space, parts,
                      reward_table, reward_scaled, terminated, truncated, max_steps, start_facts, choices,
-                     randoms, board, fps, src, r.budget.board_facts + r.budget.atoms, win, loss)
+                     randoms, board, fps, src, r.budget.board_facts + r.budget.atoms, reward_terms, win, loss)
 
 
 def _every_agents_atoms_ahead(r: _Reader, board: Board | None, agents: int) -> None:
@@ -752,8 +755,10 @@ def _index_numbers(r: _Reader, path: KeyPath, part: dict[str, Any], read: str, s
 
 
 def _reward(r: _Reader, check: _Names, agents: list[str]
-            ) -> tuple[tuple[tuple[tuple[Atom, float], ...], ...], tuple[tuple[tuple[Atom, float], ...], ...]]:
-    """Per agent: the table's (atom, value) pairs and the scaled atom's (atom, scale)."""
+            ) -> tuple[tuple[tuple[tuple[Atom, float], ...], ...], tuple[tuple[tuple[Atom, float], ...], ...],
+                       tuple[str, ...]]:
+    """Per agent: the table's (atom, value) pairs and the scaled atom's (atom, scale); the terms' names
+    (the table's keys, then the scaled atom's text)."""
     r.table(("reward",), ("table", "atom", "scale"), default={})
     r.charge(("reward",), len(r.table(("reward", "table"), default={})) + ("atom" in r.raw(("reward",), {})),
              len(agents))
@@ -761,12 +766,13 @@ def _reward(r: _Reader, check: _Names, agents: list[str]
     for text in r.table(("reward", "table"), default={}):
         path = ("reward", "table", text)
         table.append((check.pattern(path, text, (AGENT_VAR,)), r.number(path)))
-    scaled = []
+    scaled, names = [], list(r.table(("reward", "table"), default={}))
     if "atom" in r.raw(("reward",), {}):
         lit = check.pattern(("reward", "atom"), r.string(("reward", "atom")), (AGENT_VAR,))
         scaled.append((lit, r.number(("reward", "scale"), 1.0)))
+        names.append(r.string(("reward", "atom")))
     return tuple(tuple((check.ground(lit, {AGENT_VAR: a}), v) for lit, v in table) for a in agents), \
-        tuple(tuple((check.ground(lit, {AGENT_VAR: a}), v) for lit, v in scaled) for a in agents)
+        tuple(tuple((check.ground(lit, {AGENT_VAR: a}), v) for lit, v in scaled) for a in agents), tuple(names)
 
 
 DRAW_METHODS = ("categorical", "choice")

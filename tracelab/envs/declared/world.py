@@ -142,6 +142,9 @@ class DeclaredWorld:
         self._start_picks[-1] = 0  # the start facts: a draw with one value
         self.steps = 0
         self.last_rewards = [0.0] * self.n_agents
+        # a recorder's: each step's reward by term [agent, term] (spec.reward_terms) in `last_reward_terms`
+        self.keep_reward_terms = False
+        self.last_reward_terms: np.ndarray | None = None
         # one world on the counting kernel stays on it (only a lanes engine moves to counting)
         self._fused = eng.kernel == "counting"
         self._single_index = spec.space == "Discrete" and len(spec.parts) == 1
@@ -196,6 +199,7 @@ class DeclaredWorld:
             picks[d] = drawer.pick(self, rng) if draws is None else draws[d]
         self._fused_step(rows, picks)
         rewards = self._rewards()
+        terms = self._reward_terms() if self.keep_reward_terms else None
         if self._after:
             n_before = len(self._before)
             picks[:n_before] = -1
@@ -206,8 +210,11 @@ class DeclaredWorld:
                 rows[:] = -1
                 self._fused_step(rows, picks)
                 rewards = [a + b for a, b in zip(rewards, self._rewards())]
+                if terms is not None:
+                    terms = terms + self._reward_terms()
                 picks[n_before:] = -1
         self.last_rewards = rewards
+        self.last_reward_terms = terms
         self.steps += 1
 
     def _fused_step(self, rows: np.ndarray, picks: np.ndarray) -> None:
@@ -327,6 +334,14 @@ class DeclaredWorld:
             for a, (ids, scales) in enumerate(self._scaled):
                 rewards[a] += float((self.engine.lower[0, ids] * scales).sum())
         return rewards
+
+    def _reward_terms(self) -> np.ndarray:
+        """The engine step's reward by term [agent, term]: each [reward.table] entry's value where its atom
+        is true, then the scaled atom's bound times its scale (what _rewards sums)."""
+        _, _, table_atoms, table_values, _, _, _, _ = self._reads
+        table = (table_values * self.true(table_atoms)).reshape(self.n_agents, -1)
+        scaled = [self.engine.lower[0, ids] * scales for ids, scales in self._scaled]
+        return np.concatenate([table, np.asarray(scaled, np.float64).reshape(self.n_agents, -1)], axis=1)
 
     def terminated(self) -> bool:
         return self._ends[0]

@@ -1,0 +1,65 @@
+"""A reading command loads only what it uses (issue 40): DuckDB, pyarrow and numpy (which pyarrow imports),
+never pandas (pyarrow's converter imports it for a Python list: tracelab.store.arrow_build builds from
+buffers), numba, torch, rerun, textual or the rest. Each command runs in one child interpreter, in turn,
+and the heavy packages it left in sys.modules are printed after each: one that loads a forbidden package
+is named."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+RUNS = ROOT / "sample_runs"
+PLAY = str(RUNS / "advanced")
+TRAIN = str(RUNS / "base-train")
+
+ALLOWED = {"duckdb", "pyarrow", "numpy"}
+HEAVY = ("torch", "ray", "pandas", "pyarrow", "duckdb", "rerun", "textual", "matplotlib", "numba", "llvmlite",
+         "scipy", "stable_baselines3", "tensorboard", "gymnasium", "pettingzoo", "networkx")
+
+COMMANDS = [
+    ["sql", PLAY, "SELECT label, count(*) FROM atoms GROUP BY ALL ORDER BY ALL LIMIT 3"],
+    ["sql", "--format", "csv", PLAY, "SELECT * FROM changes LIMIT 3"],
+    ["sql", "--format", "json", str(RUNS / "base"), str(RUNS / "nonmarkov"),
+     "SELECT run, count(*) FROM changes GROUP BY ALL"],
+    ["sql", "--query", "rule_coverage", str(RUNS / "base"), str(RUNS / "nonmarkov")],
+    ["trace", PLAY, "--episode", "0", "--from", "1", "--to", "4"],
+    ["trace", PLAY, "--episode", "0", "--from", "1", "--to", "4", "--format", "csv"],
+    ["why", PLAY, "captured(red)", "--episode", "2", "--at", "18", "--depth", "3"],
+    ["why", PLAY, "captured(red)", "--episode", "2", "--at", "18", "--depth", "3", "--json"],
+    ["why-not", PLAY, "--rule", "snap_at", "--episode", "2", "--at", "18"],
+    ["diff", PLAY, "0", "1"],
+    ["show", PLAY],
+    ["show", TRAIN],
+    ["runs", str(RUNS)],
+    ["runs", "--format", "json", str(RUNS)],
+    ["check", PLAY],
+    ["compare", TRAIN],
+    ["compare", "--format", "json", TRAIN],
+]
+
+CHILD = """
+import contextlib, io, json, sys
+from tracelab.cli import main
+heavy, commands = json.loads(sys.argv[1]), json.loads(sys.argv[2])
+for argv in commands:
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        status = main(argv)
+    print(json.dumps({"argv": argv, "status": status, "printed": bool(out.getvalue()),
+                      "loaded": [m for m in heavy if m in sys.modules]}), file=sys.__stdout__)
+"""
+
+
+def test_reading_commands_load_only_duckdb_pyarrow_and_numpy() -> None:
+    out = subprocess.run([sys.executable, "-c", CHILD, json.dumps(HEAVY), json.dumps(COMMANDS)], cwd=ROOT,
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    reports = [json.loads(line) for line in out.stdout.splitlines()]
+    assert [r["argv"] for r in reports] == COMMANDS, out.stderr
+    for r in reports:
+        assert r["status"] == 0 and r["printed"], (r, out.stderr)  # each command did its work
+        assert set(r["loaded"]) <= ALLOWED, f"{' '.join(r['argv'][:1])} loaded {sorted(set(r['loaded']) - ALLOWED)}"
+    assert {"duckdb", "pyarrow"} <= set(reports[-1]["loaded"])  # the check sees what a command loads
