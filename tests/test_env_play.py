@@ -95,7 +95,7 @@ def test_play_env_records_a_run_with_its_spec_and_says_what_to_open(tmp_path: Pa
         else meta["rule_files"][0]["path"].endswith("frozen_lake.rules")
     assert main(["show", str(run)]) == 0
     shown = capsys.readouterr().out
-    assert "board     none drawn: a declared world's games" in shown and "\nspec      " in shown
+    assert "board     the spec's [board] (drawn by the TUI and the replay)" in shown and "\nspec      " in shown
     assert '  legend = { S = ["start", "ice"]' in shown and '"spec":' not in shown  # the spec in its section
     con = open_run(run)
     assert con.execute("SELECT count(*) FROM episodes WHERE ended").fetchone()[0] == 12

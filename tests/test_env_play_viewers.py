@@ -10,7 +10,8 @@ from tui_helpers import open_trace_at, run_app, wait_for
 
 from tracelab.cli import main
 from tracelab.store import open_run
-from tracelab.viewers.tui.declared_board import DeclaredBoard, board_of_config
+from tracelab.envs.declared.board import board_of_config
+from tracelab.viewers.tui.declared_board import DeclaredBoard
 
 
 @pytest.fixture(scope="module")
@@ -54,6 +55,6 @@ def test_a_board_declaration_from_elsewhere_is_checked_before_it_is_drawn() -> N
     for bad in ({**good, "rows": "SF"}, {**good, "rows": ["x" * 300]}, {**good, "marks": {"at": "@@"}},
                 {**good, "cell": 3}, {**good, "marks": {"__import__('os')": "@"}}):
         assert board_of_config({"declared_board": bad}) is None
-    # the cell format is filled in by replacement: a format's attribute access stays text
-    sneaky = board_of_config({"declared_board": {**good, "cell": "{row.__class__}_{col}"}})
-    assert sneaky.cell(0, 1) == "{row.__class__}_1"
+    # the cell format is the spec's: {row} and {col} only, never a format's field of a stranger's
+    for sneaky in ("{row.__class__}_{col}", "c{row:>999999999}_{col}"):
+        assert board_of_config({"declared_board": {**good, "cell": sneaky}}) is None

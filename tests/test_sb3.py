@@ -2,6 +2,8 @@
 on a rules-declared env and on GridWar base, read back through tracelab's store and CLI."""
 from __future__ import annotations
 
+import runpy
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -240,3 +242,29 @@ def test_dqn_traced_evaluations_record_the_q_values(tmp_path: Path) -> None:
     with TracelabCallback(run, FROZEN, eval_every=0, eval_games=2, trace_eval_games=2, eval_envs=1) as cb:
         model.learn(64, callback=cb)
     _greedy_decisions(run, "q")
+
+
+def test_ppo_takes_a_spec_file_as_the_docs_and_the_example_say(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """docs/training.md's `make_vec_env(spec file)` and `examples/sb3_ppo.py --env my.toml` (SB3's own
+    make_vec_env takes ids only: a path was a `Malformed environment ID`)."""
+    from test_spec_world_game import RULES, SPEC
+
+    from tracelab.train.sb3 import make_vec_env as tracelab_vec_env
+    (tmp_path / "trap.rules").write_text(RULES)
+    spec = tmp_path / "trap.toml"
+    spec.write_text(SPEC)
+    torch.set_num_threads(1)
+    model = PPO("MlpPolicy", tracelab_vec_env(str(spec), n_envs=2, seed=0, env_kwargs={"door_reward": 2.0}),
+                n_steps=64, batch_size=64, n_epochs=1, seed=0, device="cpu")
+    with TracelabCallback(tmp_path / "ppo", str(spec), {"door_reward": 2.0}, eval_every=0, eval_games=4,
+                          trace_eval_games=1, eval_envs=2) as cb:
+        model.learn(128, callback=cb)
+    assert _rows(tmp_path / "ppo", "SELECT DISTINCT outcome FROM episodes WHERE kind = 'eval' AND outcome <> "
+                                   "'aborted'")[0][0] in ("win", "loss", "truncated")
+    assert current_meta(tmp_path / "ppo")["config"]["env"]["kwargs"] == {"door_reward": 2.0}
+    example = Path(__file__).resolve().parent.parent / "examples" / "sb3_ppo.py"
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "argv", [str(example), "--env", "trap.toml", "--steps", "128", "--n-envs", "2",
+                                      "--n-steps", "64", "--eval-every", "0", "--eval-games", "2", "--run", "runs/ex"])
+    runpy.run_path(str(example), run_name="__main__")
+    assert current_meta(tmp_path / "runs" / "ex")["status"] == "finished"

@@ -111,9 +111,9 @@ def test_saved_queries_run_on_each_run(runs: dict[str, Path], capsys: pytest.Cap
                       "--offset", "1", "--limit", "3")
     full = sql_csv(capsys, str(runs["a"]), str(runs["b"]), "--query", "firings_per_episode", "-p", "episode=1")
     assert limited == full[1:4] and {r["episode"] for r in full} == {"1"}
-    # a query about games names the run that has no board
+    # a query about games names the run that is not a run of games
     line = one_line_error(capsys, str(runs["a"]), str(REASONING_RUN), "--query", "actions_per_win")
-    assert str(REASONING_RUN) in line and "no board" in line
+    assert str(REASONING_RUN) in line and "not a run of games" in line
 
 
 def test_errors_name_the_offending_run(runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:

@@ -26,7 +26,6 @@ repeats the previous one); `[:, -1]` is the state at the end of each step.
 """
 from __future__ import annotations
 
-import json
 import tomllib
 from dataclasses import dataclass
 from typing import Any
@@ -34,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from tracelab.game.scenario import BOARD
-from tracelab.store.kind import run_board
+from tracelab.store.kind import run_board, run_config
 from tracelab.store.reader import RunConnection
 
 PHASES = ("start", "bullets", "hits", "act", "walk-in", "deaths", "end", "shield")
@@ -259,10 +258,8 @@ def _ordinal(name: str) -> tuple[int, ...]:
 def _health_scale(con: RunConnection, hits_to_kill: int) -> tuple[float, float]:
     """(start health, damage per hit): the scenario's, from the run's config if it holds the scenario's
     TOML (as `tracelab play` writes it), else health 1 split evenly over the hits that kill."""
-    rows = con.execute("SELECT config FROM raw.run").fetchall()
     try:
-        config = json.loads(rows[0][0]) if rows and rows[0][0] else {}
-        text = config.get("scenario") if isinstance(config, dict) else None
+        text = run_config(con).get("scenario")
         if isinstance(text, str) and "\n" in text:
             s = tomllib.loads(text)
             return float(s.get("health", 1.0)), float(s.get("damage", 1.0))

@@ -14,6 +14,7 @@ from typing import Any
 
 from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.commands._output import add_format_options, write_table
+from tracelab.commands.show import OWN_SECTIONS
 from tracelab.errors import UserError, store_errors
 from tracelab.train.config import METHOD_REWARD_SCALE
 
@@ -32,6 +33,7 @@ class TrainingRun:
     # name -> (step of its last value, last value, (best value, its step) or None)
     metrics: dict[str, tuple[int, float | None, tuple[float, int] | None]] = field(default_factory=dict)
     more_metrics: int = 0                          # names beyond MAX_METRIC_NAMES, not read
+    params: dict[str, Any] | None = None           # a spec world's params (store.kind.world_params)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -72,6 +74,7 @@ def run(args: argparse.Namespace) -> int:
 def read_training_run(path: str) -> TrainingRun:
     """A training run's status, config and final metrics; a UserError (one line) for a run that is not one."""
     # deferred: loads DuckDB; every command is imported to build the CLI's parser
+    from tracelab.store.kind import world_params
     from tracelab.store.reader import open_run, query_readonly, retrying
     con = open_run(path)
     try:
@@ -95,8 +98,12 @@ def read_training_run(path: str) -> TrainingRun:
         con.close()
     best_of = {name: (value, step) for name, step, value in best}
     metrics = {name: (step, value, best_of.get(name) if name in BEST_OF else None) for name, step, value in last}
-    return TrainingRun(path, str(status), flat_config(_json_object(config_text)),
-                       max(step for step, _, _ in metrics.values()), metrics, max(0, names - MAX_METRIC_NAMES))
+    config = _json_object(config_text)
+    params = world_params(config)
+    if params is not None:  # a spec world's: its texts are not settings, its params are listed as such
+        config = {k: v for k, v in config.items() if k not in OWN_SECTIONS and k != "env"}
+    return TrainingRun(path, str(status), flat_config(config), max(step for step, _, _ in metrics.values()),
+                       metrics, max(0, names - MAX_METRIC_NAMES), params)
 
 
 def without_metrics(path: str, board: str | None, command: str | None) -> str:
@@ -155,13 +162,14 @@ def _config_text(value: Any) -> str:
         return str(value)
 
 
-def reward_scale_of(config: dict[str, Any]) -> str:
+def reward_scale_of(config: dict[str, Any], method: bool = True) -> str:
     """The reward scale a run trained at; a config without one is from before the flag, when the learner
-    saw the game's rewards as they are (the method's scale)."""
+    saw the game's rewards as they are (the method's scale). `method`: a grid game's run (the method's
+    scale is named as such)."""
     scale = config.get("reward_scale", METHOD_REWARD_SCALE)
     if not isinstance(scale, (int, float)) or isinstance(scale, bool):   # a stranger's config: as it is
         return _config_text(scale)
-    return f"{scale:g}" + (" (the method's)" if scale == METHOD_REWARD_SCALE else "")
+    return f"{scale:g}" + (" (the method's)" if scale == METHOD_REWARD_SCALE and method else "")
 
 
 def _number(v: float | None, precise: bool) -> str:
@@ -175,7 +183,10 @@ def _number(v: float | None, precise: bool) -> str:
 def comparison_rows(runs: list[TrainingRun], precise: bool = False) -> list[list[str]]:
     """The table: [key, one cell per run]. `precise`: numbers in full (CSV, JSON), else 4 digits."""
     rows = [["status", *(r.status for r in runs)], ["last step", *(str(r.last_step) for r in runs)],
-            ["reward scale", *(reward_scale_of(r.config) for r in runs)]]   # always: it decides what learns
+            ["reward scale", *(reward_scale_of(r.config, r.params is None) for r in runs)]]  # it decides what learns
+    for name in dict.fromkeys(k for r in runs for k in (r.params or {})):  # a spec world's own params, all
+        rows.append([f"param {name}", *(MISSING if r.params is None or name not in r.params
+                                        else _config_text(r.params[name]) for r in runs)])
     configs = [r.config for r in runs]
     for key in [k for k in differing_keys(configs) if k != "reward_scale"] if len(runs) > 1 else []:
         rows.append([f"config {key}", *(_config_text(c.get(key, MISSING)) for c in configs)])

@@ -101,6 +101,10 @@ def _run_env(args: argparse.Namespace) -> int:
     print(f"  mean return     {result.mean_return:.3f}")
     print(f"  success rate    {100 * result.success_rate:.1f}% [{100 * low:.1f}%, {100 * high:.1f}%] "
           f"(return > 0; 95% Wilson interval)")
+    if result.wins is not None:  # the world declares what a win is ([end] win)
+        low, high = wilson(result.wins, result.games)
+        print(f"  win rate        {100 * result.wins / result.games:.1f}% [{100 * low:.1f}%, {100 * high:.1f}%] "
+              f"({result.wins} won, as the world's [end] win declares)")
     print(f"  ended           {result.terminated} terminated, {result.truncated} truncated; mean "
           f"{result.metrics('')['mean_steps']:.1f} steps")
     return 0

@@ -28,7 +28,9 @@ def _json_field(text: str | None, default: Any) -> Any:
 
 
 def describe_run(con: Any) -> dict[str, Any]:
-    """The run's metadata, program, scenario and counts as plain data."""
+    """The run's metadata, program, scenario (or a spec world's params) and counts as plain data."""
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
+    from tracelab.store.kind import world_params
     rel = con.execute("SELECT * FROM run")
     names = [d[0] for d in rel.description]
     meta = dict(zip(names, rel.fetchall()[0]))
@@ -48,17 +50,19 @@ def describe_run(con: Any) -> dict[str, Any]:
     rules = [dict(zip(("name", "text", "file", "line"), r)) for r in
              con.execute("SELECT name, text, file, line FROM rules ORDER BY rule").fetchall()]
     config = meta["config"] if isinstance(meta["config"], dict) else {}
-    scenario_text = config.get("scenario") if isinstance(config.get("scenario"), str) else None
+    params = world_params(config)
+    scenario_text = config.get("scenario") if isinstance(config.get("scenario"), str) and params is None else None
     graph = dict(zip(("nodes", "edges"), con.execute(
         "SELECT (SELECT count(*) FROM raw.nodes), (SELECT count(*) FROM raw.edges)").fetchall()[0]))
     return {"run": meta, "episodes": {"total": sum(outcomes.values()), "by_outcome": outcomes},
-            "counts": counts, "rules": rules, "scenario": {"name": meta.get("scenario"),
-                                                           "definition": scenario_text},
+            "counts": counts, "rules": rules, "params": params,
+            "scenario": {"name": meta.get("scenario") if params is None else None, "definition": scenario_text},
             "board": meta.get("board"), "graph": graph}
 
 
-# config entries shown in sections of their own, not on the config line
-_OWN_SECTIONS = ("scenario", "sources", "translation", "graph", "spec", "rule_texts")
+# config entries shown in sections of their own (or as a spec world's params), not on the config line
+OWN_SECTIONS = ("scenario", "sources", "translation", "graph", "spec", "rule_texts", "declared_board",
+                 "declared_facts", "spec_path", "env_args", "env_id")
 
 
 def render(doc: dict[str, Any], all_rules: bool = False) -> str:
@@ -71,7 +75,8 @@ def render(doc: dict[str, Any], all_rules: bool = False) -> str:
     config = meta["config"] if isinstance(meta["config"], dict) else {}
     declared = isinstance(config.get("spec"), str)  # tracelab play --env: a world declared in rules
     lines.append(f"  board     {doc['board']}" if doc["board"] else
-                 "  board     none drawn: a declared world's games (its spec's [board] is in the config)" if declared
+                 ("  board     the spec's [board] (drawn by the TUI and the replay)" if config.get("declared_board")
+                  else "  board     none: a spec world without a [board]") if declared
                  else "  board     none: a reasoning run (its episodes are reasonings, not games)")
     for f in meta["rule_files"]:
         lines.append(f"  rules     {f.get('path')} (sha256 {str(f.get('sha256'))[:12]})")
@@ -79,10 +84,13 @@ def render(doc: dict[str, Any], all_rules: bool = False) -> str:
         if isinstance(source, dict) and source.get("role") in ("graph", "facts-table"):
             size = f" ({source['bytes']:,} bytes)" if isinstance(source.get("bytes"), int) else ""
             lines.append(f"  {source['role']:<9} {source.get('path')}{size}")
-    shown = {k: v for k, v in config.items() if k not in _OWN_SECTIONS} \
+    shown = {k: v for k, v in config.items() if k not in OWN_SECTIONS} \
         if isinstance(meta["config"], dict) else meta["config"]
     if shown:
         lines.append(f"  config    {json.dumps(shown, sort_keys=True)}")
+    if doc["params"] is not None:  # a spec world's: its [params] with the run's keyword arguments over them
+        lines.append("  params    " + (", ".join(f"{k} = {json.dumps(v)}" for k, v in doc["params"].items())
+                                       or "none (the spec declares no [params])"))
     episodes = doc["episodes"]
     lines += ["", f"episodes  {episodes['total']}" + (
         " (" + ", ".join(f"{n} {o}" for o, n in episodes["by_outcome"].items()) + ")" if episodes["total"] else "")]
@@ -95,7 +103,8 @@ def render(doc: dict[str, Any], all_rules: bool = False) -> str:
     if scenario["definition"]:
         lines += ["  " + ln for ln in scenario["definition"].rstrip().splitlines()]
     if declared:
-        lines += ["", f"spec      {config.get('spec_path')}"]
+        env = config.get("env")
+        lines += ["", f"spec      {config.get('spec_path') or (env.get('name') if isinstance(env, dict) else env)}"]
         lines += ["  " + ln for ln in config["spec"].rstrip().splitlines()]
     rules = doc["rules"]
     shown = rules if all_rules else rules[:RULES_SHOWN]

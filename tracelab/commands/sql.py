@@ -88,7 +88,7 @@ def _statement(args: argparse.Namespace, query: str | None) -> tuple[str, dict |
     from tracelab.store.queries import get_query
     if args.saved is not None:
         saved = get_query(args.saved)
-        return saved.sql, saved.bind(_params(args.param)), saved.needs_board
+        return saved.sql, saved.bind(_params(args.param)), saved.needs and (saved.needs, saved.needs_board)
     if args.param:
         raise UserError("--param only applies to saved queries (--query NAME)")
     return utf8_text(query, "the SQL query"), None, None
@@ -102,29 +102,30 @@ def run(args: argparse.Namespace) -> int:
         runs, query = _runs_and_query(args)
         if not runs:
             raise UserError("give a run and a SQL query, or --query NAME (see --list)")
-        sql, params, needs_board = _statement(args, query)
+        sql, params, needs = _statement(args, query)
         # deferred: loads DuckDB; every command is imported to build the CLI's parser
         from tracelab.store.several import expand_runs
         paths, folder = expand_runs(runs)
         if len(paths) == 1 and not folder:
-            _query_one_run(args, runs[0], sql, params, needs_board)
+            _query_one_run(args, runs[0], sql, params, needs)
         else:
-            _query_several_runs(args, paths, sql, params, needs_board)
+            _query_several_runs(args, paths, sql, params, needs)
     return 0
 
 
 def _query_one_run(args: argparse.Namespace, run: str, sql: str, params: dict | None,
-                   needs_board: str | None) -> None:
+                   needs: tuple[str, str] | None) -> None:
     # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.kind import run_board
+    from tracelab.store.kind import can_read
     from tracelab.store.reader import arrow_stream, fetch_arrow, open_run, query_readonly, retrying
     con = open_run(run)
-    if needs_board is not None and run_board(con) is None:
+    if needs is not None and not can_read(con, needs[0]):
         # deferred: loads DuckDB; every command is imported to build the CLI's parser
         from tracelab.store.queries import list_queries
         any_run = ", ".join(q.name for q in list_queries() if not q.needs_board)
-        raise UserError(f"saved query {args.saved} reads games ({needs_board}), and {run} has no "
-                        f"board (a reasoning run); these read any run: {any_run}")
+        lacks = "is not a run of games" if needs[0] == "games" else "has no board"
+        raise UserError(f"saved query {args.saved} reads games ({needs[1]}), and {run} {lacks} (a reasoning "
+                        f"run); these read any run: {any_run}")
     if args.format == "table":
         _write_table_output(args, lambda limit: retrying(
             lambda: fetch_arrow(query_readonly(con, sql, params), limit, args.offset)))
@@ -135,7 +136,7 @@ def _query_one_run(args: argparse.Namespace, run: str, sql: str, params: dict | 
 
 
 def _query_several_runs(args: argparse.Namespace, paths: list, sql: str, params: dict | None,
-                        needs_board: str | None) -> None:
+                        needs: tuple[str, str] | None) -> None:
     """The SQL on the union of the runs' views; a saved query on each run in turn (its rows prefixed by
     the run's name)."""
     # deferred: loads pyarrow; every command is imported to build the CLI's parser
@@ -148,7 +149,7 @@ def _query_several_runs(args: argparse.Namespace, paths: list, sql: str, params:
 
     def stream(limit: int | None):
         if args.saved is not None:
-            return each_run_stream(con, sql, params, limit, args.offset, needs_board)
+            return each_run_stream(con, sql, params, limit, args.offset, needs)
         return arrow_stream(query_readonly(con, sql, params), limit, args.offset)
 
     if args.format == "table":

@@ -23,7 +23,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="a sweep file ([set], [grid], [random], samples, scheduler, metric, mode); the flags "
                         "below add to it")
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
-                   help="a training setting of every trial, e.g. steps=20000 (repeatable; any train flag's field)")
+                   help="a training setting of every trial, e.g. steps=20000 (repeatable; any train flag's field; "
+                        "env=SPEC_OR_ID trains every trial on that env, as train --env)")
+    p.add_argument("--env-arg", action="append", default=[], metavar="KEY=VALUE",
+                   help="a keyword argument of the --set env=... (its spec's [params]; repeatable)")
     p.add_argument("--grid", action="append", default=[], metavar="FIELD=V1,V2,...",
                    help="try each value, e.g. lr=1e-4,3e-4 (repeatable; grids multiply)")
     p.add_argument("--random", action="append", default=[], metavar="FIELD=DIST:LOW,HIGH",
@@ -56,9 +59,18 @@ def run(args: argparse.Namespace) -> int:
     spec = build_spec(sets=args.set, grids=args.grid, randoms=args.random, file=args.spec, samples=args.samples,
                       scheduler=args.scheduler, metric=args.metric, mode=args.mode)
     cfg = spec.base_config()
-    with store_errors():  # a scenario file that does not load
-        scenario = load_scenario_arg(cfg.scenario, cfg.agents)
-    check_trials_memory(spec, scenario, memory_limit(args.max_memory, "--max-memory"))  # before Ray starts
+    with store_errors():  # a scenario file, an env or a spec that does not load
+        if spec.env is not None:
+            # deferred: loads gymnasium; every command is imported to build the CLI's parser
+            from tracelab.envs.declared.env_source import EnvSource, parse_env_args
+            scenario = EnvSource.given(spec.env, parse_env_args(args.env_arg))
+            scenario.make().close()  # a bad id, spec or keyword argument: one line, before Ray starts
+        elif args.env_arg:
+            raise UserError("--env-arg needs --set env=SPEC_OR_ID")
+        else:
+            scenario = load_scenario_arg(cfg.scenario, cfg.agents)
+    if spec.env is None:  # a GridWar trial's memory, before Ray starts (an env trial's is train --env's)
+        check_trials_memory(spec, scenario, memory_limit(args.max_memory, "--max-memory"))
     out = Path(args.out or _default_out())
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise UserError(f"{out} is not empty: give another --out or remove it")

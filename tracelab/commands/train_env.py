@@ -24,11 +24,7 @@ from tracelab.commands._training import (
     where_to_train,
 )
 from tracelab.errors import UserError, store_errors
-from tracelab.train.config import METHOD_REWARD_SCALE, TrainConfig, flag_of, reward_scale_text
-
-# TrainConfig fields that describe GridWar (its scenario, teams, opponent, simulator): refused with --env
-GRIDWAR_ONLY = ("scenario", "non_markov", "split_networks", "slow_every_step", "agents", "backend", "kernel",
-                "opponent_p", "eval_p", "explore_scripted")
+from tracelab.train.config import GRIDWAR_ONLY, METHOD_REWARD_SCALE, TrainConfig, flag_of, reward_scale_text
 
 
 def env_source_of(args: argparse.Namespace) -> Any:
@@ -108,14 +104,10 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
     # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store import TraceWriter
     # deferred: loads DuckDB, gymnasium, numba, torch; every command is imported to build the CLI's parser
-    from tracelab.train.env_trainer import EnvTrainer
+    from tracelab.train.env_trainer import EnvTrainer, env_run_meta
 
-    meta = {"command": " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]),
-            "scenario": source.name, "seed": cfg.seed,
-            "config": {**cfg.to_dict(), "env": source.to_json(),
-                       "resumed_from": None if state is None else {"run": resumed_from, "step": state["step"]}}}
-    if cfg.trace_eval_games:  # a declared world's evaluation games are traced: what its readers need
-        meta = _with_declared_meta(meta, source)
+    meta = env_run_meta(cfg, source, " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]),
+                        None if state is None else {"run": resumed_from, "step": state["step"]})
     if not meta["command"].startswith("tracelab train"):
         meta["command"] = "tracelab train --env (python: tracelab.commands.train_env.train_env_into)"
     with store_errors():
@@ -141,20 +133,6 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
         print(f"  tensorboard --logdir {shlex.quote(str(tensorboard.parent))}   # {sink.scalars:,} scalars in "
               f"{tensorboard}/")
     return 0 if status == "finished" else 130
-
-
-def _with_declared_meta(meta: dict[str, Any], source: Any) -> dict[str, Any]:
-    """The run's meta with what `why`, `tui` and `replay` read of a declared world (its rule files, its
-    spec's and rules' texts, what sets each external fact, its board): DeclaredTarget's."""
-    # deferred: loads DuckDB, gymnasium, torch; every command is imported to build the CLI's parser
-    from tracelab.envs.declared.play import load_declared
-    from tracelab.train.external_eval import DeclaredTarget
-    try:
-        spec = load_declared(source)
-    except UserError:  # not a declared world: its evaluations are not traced
-        return meta
-    described = DeclaredTarget(source, spec).run_meta()
-    return {**meta, "rule_files": described["rule_files"], "config": {**described["config"], **meta["config"]}}
 
 
 def _restore(trainer: Any, state: dict[str, Any], writer: Any, run_dir: Path, resumed_from: str | None,

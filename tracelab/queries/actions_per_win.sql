@@ -1,5 +1,5 @@
 -- Actions per win: how many episodes the learner won, their mean length in steps and mean number of learner actions.
--- needs board : the learner's steps in won games
+-- needs games : the learner's steps in won games
 -- param win str = 'win' : the outcome that counts as a win
 -- param learner str = '%' : the agents whose step rows are learner actions (SQL LIKE, e.g. red-agent-%)
 SELECT count(*) AS wins, avg(e.steps) AS steps_per_win, avg(coalesce(a.actions, 0)) AS actions_per_win

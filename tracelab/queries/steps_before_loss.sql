@@ -1,5 +1,5 @@
 -- The steps before a loss: the last n steps of every lost episode (each agent's action and reward), in order.
--- needs board : the agents' steps in lost games
+-- needs games : the agents' steps in lost games
 -- param loss str = 'loss' : the outcome that counts as a loss
 -- param n int = 5 : how many final steps
 -- param learner str = '%' : which agents (SQL LIKE, e.g. red-agent-%)

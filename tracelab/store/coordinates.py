@@ -9,11 +9,12 @@ and height are read as the same declaration. A run with neither (a reasoning run
 its nodes read as their ids, as before."""
 from __future__ import annotations
 
-import json
 import re
 import tomllib
 from dataclasses import dataclass
 from typing import Any
+
+from tracelab.store.kind import run_config
 
 GRID_KEY = "grid"
 _MAX_CELLS = 2**31 - 1            # cell ids are int32 node names
@@ -78,9 +79,4 @@ def grid_from_config(config: dict[str, Any]) -> Grid | None:
 
 def run_grid(con: Any) -> Grid | None:
     """The grid the run open on `con` (tracelab.store.open_run) declares, or None."""
-    rows = con.execute("SELECT config FROM raw.run").fetchall()
-    try:
-        config = json.loads(rows[0][0]) if rows and rows[0][0] else {}
-    except (TypeError, ValueError):
-        return None
-    return grid_from_config(config) if isinstance(config, dict) else None
+    return grid_from_config(run_config(con))

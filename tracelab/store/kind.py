@@ -1,8 +1,13 @@
 """What kind of run a run is, as the run itself says: the board it declares in its metadata
 (RunMeta.board, the `board` column of the `run` view). A game run declares its board and viewers draw its
 episodes on it; a run without a board (a reasoning run, `tracelab reason --run`) has only its trace,
-program and graph. The store reads no game's vocabulary to tell them apart."""
+program and graph. The store reads no game's vocabulary to tell them apart. What the run says of its
+world beyond that (a spec world's board, params and wins) is in its config (`run_config`)."""
 from __future__ import annotations
+
+import json
+import tomllib
+from typing import Any
 
 from tracelab.store.reader import RunConnection
 
@@ -16,3 +21,46 @@ def run_board(con: RunConnection) -> str | None:
 
 def has_board(con: RunConnection) -> bool:
     return run_board(con) is not None
+
+
+def is_game_run(con: RunConnection) -> bool:
+    """A run of games: it declares a board (the grid game's), or its episodes have returns (a spec
+    world's games, any env's); a reasoning run's have none."""
+    return has_board(con) or bool(con.execute(
+        "SELECT EXISTS (SELECT 1 FROM episodes WHERE reward IS NOT NULL)").fetchall()[0][0])
+
+
+def can_read(con: RunConnection, needs: str | None) -> bool:
+    """Whether a saved query that `needs` "games" or "board" (tracelab.store.queries) reads this run."""
+    return needs is None or (has_board(con) if needs == "board" else is_game_run(con))
+
+
+def run_config(con: RunConnection) -> dict[str, Any]:
+    """The run's config (RunMeta.config), {} when it has none or it is not a JSON object (a run's config
+    comes from anywhere: its readers check what they take from it)."""
+    rows = con.execute("SELECT config FROM raw.run").fetchall()
+    try:
+        config = json.loads(rows[0][0]) if rows and rows[0][0] else {}
+    except (TypeError, ValueError):
+        return {}
+    return config if isinstance(config, dict) else {}
+
+
+MAX_SPEC_TEXT = 1 << 20  # a spec file's own limit
+
+
+def world_params(config: dict[str, Any]) -> dict[str, Any] | None:
+    """A spec world's run's params (the spec's `[params]` with the run's keyword arguments over them: `play
+    --env`'s `env_args`, `train --env`'s `env.kwargs`), or None for a run of no spec world. The spec's
+    text is a stranger's: read with tomllib only, at most MAX_SPEC_TEXT characters."""
+    text = config.get("spec")
+    if not isinstance(text, str) or len(text) > MAX_SPEC_TEXT:
+        return None
+    try:
+        params = tomllib.loads(text).get("params", {})
+    except (tomllib.TOMLDecodeError, RecursionError):
+        return None
+    env = config.get("env")
+    given = config.get("env_args") if isinstance(config.get("env_args"), dict) else \
+        env.get("kwargs") if isinstance(env, dict) and isinstance(env.get("kwargs"), dict) else {}
+    return {**(params if isinstance(params, dict) else {}), **given}

@@ -4,9 +4,10 @@ A query file starts with comment lines: the first is its description; each param
     -- param NAME TYPE = DEFAULT : help
 with TYPE int, float or str and DEFAULT a literal or `null`. The SQL refers to it as $NAME (cast it,
 e.g. CAST($episode AS BIGINT), where DuckDB cannot infer its type from the context). A query about games
-(agents' steps, outcomes, the board's labels) says so with a line
-    -- needs board : why
-and is refused, with that reason, on a run that declares no board (a reasoning run; tracelab.store.kind)."""
+says so with a line
+    -- needs games : why        (agents' steps, outcomes: any run of games, a spec world's too)
+    -- needs board : why        (the grid game's board and labels)
+and is refused, with that reason, on a run that is not one (a reasoning run; tracelab.store.kind)."""
 from __future__ import annotations
 
 import re
@@ -16,7 +17,7 @@ from typing import Any
 
 QUERIES_DIR = Path(__file__).resolve().parent.parent / "queries"
 _PARAM = re.compile(r"^--\s*param\s+(\w+)\s+(int|float|str)\s*=\s*(.*?)\s*(?::\s*(.*))?$")
-_NEEDS_BOARD = re.compile(r"^--\s*needs\s+board\s*(?::\s*(.*))?$")
+_NEEDS = re.compile(r"^--\s*needs\s+(board|games)\s*(?::\s*(.*))?$")
 _TYPES = {"int": int, "float": float, "str": str}
 
 
@@ -43,6 +44,7 @@ class SavedQuery:
     sql: str
     params: list[Param] = field(default_factory=list)
     needs_board: str | None = None     # why it reads only game runs (None: it reads any run)
+    needs: str | None = None           # "games" (any game run) or "board" (the grid game's), as kind.can_read
 
     def bind(self, given: dict[str, str]) -> dict[str, Any]:
         """Parameter values: the given ones (text, converted) over the defaults."""
@@ -63,14 +65,14 @@ def _literal(p: Param, text: str) -> Any:
 
 def load_query(path: Path) -> SavedQuery:
     lines = path.read_text().splitlines()
-    description, params, needs_board = "", [], None
+    description, params, needs_board, needs = "", [], None, None
     for line in lines:
         if not line.startswith("--"):
             break
         m = _PARAM.match(line)
-        board = _NEEDS_BOARD.match(line)
+        board = _NEEDS.match(line)
         if board:
-            needs_board = (board[1] or "it reads games").strip()
+            needs, needs_board = board[1], (board[2] or "it reads games").strip()
         elif m:
             p = Param(m[1], m[2], None, (m[4] or "").strip())
             p.default = _literal(p, m[3])
@@ -81,7 +83,7 @@ def load_query(path: Path) -> SavedQuery:
     for p in params:
         if f"${p.name}" not in sql:
             raise ValueError(f"{path}: parameter {p.name} is declared but the SQL never uses ${p.name}")
-    return SavedQuery(path.stem, description, sql, params, needs_board)
+    return SavedQuery(path.stem, description, sql, params, needs_board, needs)
 
 
 def list_queries(directory: Path = QUERIES_DIR) -> list[SavedQuery]:

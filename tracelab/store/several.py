@@ -26,7 +26,7 @@ import pyarrow as pa
 from tracelab.store import layout
 from tracelab.store.arrow_build import strings
 from tracelab.store.catalog import find_runs, is_run
-from tracelab.store.kind import run_board
+from tracelab.store.kind import can_read
 from tracelab.store.reader import (
     BATCH_ROWS,
     LiveParts,
@@ -175,18 +175,18 @@ def open_runs(given: Sequence[str | Path]) -> SeveralRunsConnection:
 
 def each_run_stream(con: SeveralRunsConnection, sql: str, params: dict[str, Any] | None = None,
                     limit: int | None = None, offset: int = 0,
-                    needs_board: str | None = None) -> tuple[pa.Schema, Iterator[pa.RecordBatch]]:
+                    needs: tuple[str, str] | None = None) -> tuple[pa.Schema, Iterator[pa.RecordBatch]]:
     """A query written for one run (a saved query) run on each run in turn, its rows prefixed by the
     run's name in a first column `run`; rows [offset, offset+limit) of the whole, streamed: one run's
-    rows are read while they are written. `needs_board`: refuse (ValueError naming the run) a run
-    without a board."""
-    if needs_board is not None:
+    rows are read while they are written. `needs` (a saved query's: "games" or
+    "board", and why): refuse (ValueError naming the run) a run it cannot read (kind.can_read)."""
+    if needs is not None:
         for i, name in enumerate(con.names):
             con.use(i)
             try:
-                if run_board(con) is None:
-                    raise ValueError(f"{con.runs[i]}: has no board (a reasoning run), and this query reads "
-                                     f"games ({needs_board})")
+                if not can_read(con, needs[0]):
+                    raise ValueError(f"{con.runs[i]}: is not a run of games (a reasoning run?), and this query "
+                                     f"reads {needs[0]} ({needs[1]})")
             finally:
                 con.use(None)
     first = _open_reader(con, 0, sql, params)

@@ -39,6 +39,12 @@ def _opt(help: str, flag: str | None = None, **kw: Any) -> Any:
     return field(metadata={"help": help, "flag": flag}, **kw)
 
 
+# TrainConfig fields that describe GridWar (its scenario, teams, opponent, simulator): refused with --env,
+# and not recorded as an env training's settings
+GRIDWAR_ONLY = ("scenario", "non_markov", "split_networks", "slow_every_step", "agents", "backend", "kernel",
+                "opponent_p", "eval_p", "explore_scripted")
+
+
 @dataclass
 class TrainConfig:
     # ---- what is trained ----
@@ -196,6 +202,10 @@ class TrainConfig:
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
+
+    def env_dict(self) -> dict[str, Any]:
+        """The fields an env's training uses (to_dict without GridWar's): what its run records."""
+        return {k: v for k, v in asdict(self).items() if k not in GRIDWAR_ONLY}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "TrainConfig":

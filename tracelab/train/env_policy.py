@@ -130,6 +130,7 @@ class EnvEvalResult:
     steps: list[int] = field(default_factory=list)
     terminated: int = 0
     truncated: int = 0
+    wins: int | None = None  # games won, counted when the world declares a win (a spec's `[end] win`)
     # wall seconds of the traced and of the untraced games (DeclaredEvaluator.play): a cost, not a result
     seconds: dict[str, float] = field(default_factory=dict, repr=False, compare=False)
 
@@ -154,6 +155,8 @@ class EnvEvalResult:
         m = {"games": self.games, "mean_return": self.mean_return, "success_rate": self.success_rate,
              "terminated": self.terminated, "truncated": self.truncated,
              "mean_steps": float(np.mean(self.steps)) if self.steps else 0.0}
+        if self.wins is not None:  # the name the grid game's evaluation logs and the views plot
+            m["win_rate"] = self.wins / self.games if self.games else 0.0
         return {prefix + k: float(v) for k, v in m.items()}
 
     def to_dict(self) -> dict[str, Any]:
@@ -203,6 +206,9 @@ def play_env_games(env: Any, policy: EnvPolicy, games: int, seed: int,
             result.returns.append(float(ret[k]))
             result.steps.append(int(length[k]))
             result.terminated += bool(term[k])
+            won = info.get("final_info", {}).get("won")
+            if won is not None:
+                result.wins = (result.wins or 0) + bool(won[k])
             result.truncated += bool(trunc[k]) and not bool(term[k])
             quota[k] -= 1
             if on_game is not None:

@@ -118,7 +118,9 @@ class EnvTrainer:
         self.obs, self.info = obs, info
         if done.any():
             ended = np.flatnonzero(done)
-            self.episodes.end(ended, ["terminated" if terminated[k] else "truncated" for k in ended.tolist()])
+            named = info.get("final_info", {}).get("outcome")  # win / loss, where the world declares them
+            self.episodes.end(ended, [str(named[k]) if named is not None and named[k] else
+                                      "terminated" if terminated[k] else "truncated" for k in ended.tolist()])
             self.episodes.begin(ended, self.step)
 
     # ---- logging, evaluation, policies ----
@@ -224,3 +226,26 @@ class EnvTrainer:
             self._eval_env.close()
         if self._evaluator is not None:
             self._evaluator.close()
+
+
+def env_run_meta(cfg: TrainConfig, source: EnvSource, command: str,
+                 resumed_from: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The meta of a run that trains on `source` (`train --env`, a sweep's trial): the env and the
+    training's settings; for a declared world whose evaluations are traced, what `why`, `tui` and
+    `replay` read of it (its rule files, its spec's and rules' texts, what sets each external fact, its
+    board: DeclaredTarget's)."""
+    # deferred: loads the engine (numba), which a gymnasium id's training does not need
+    from tracelab.envs.declared.play import load_declared
+    from tracelab.errors import UserError
+    from tracelab.train.external_eval import DeclaredTarget
+
+    meta = {"command": command, "scenario": source.name, "seed": cfg.seed,
+            "config": {**cfg.env_dict(), "env": source.to_json(), "resumed_from": resumed_from}}
+    if not cfg.trace_eval_games:
+        return meta
+    try:
+        spec = load_declared(source)
+    except UserError:  # not a declared world: its evaluations are not traced
+        return meta
+    described = DeclaredTarget(source, spec).run_meta()
+    return {**meta, "rule_files": described["rule_files"], "config": {**described["config"], **meta["config"]}}

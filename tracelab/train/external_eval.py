@@ -235,6 +235,8 @@ class DeclaredEvaluator:
             result.steps += more.steps
             result.terminated += more.terminated
             result.truncated += more.truncated
+            if more.wins is not None:
+                result.wins = (result.wins or 0) + more.wins
             result.seconds["untraced"] = time.perf_counter() - t0
         return result
 
@@ -253,6 +255,8 @@ class DeclaredEvaluator:
         result.steps.append(steps)
         result.terminated += bool(terminated)
         result.truncated += not terminated
+        if "won" in info:  # the world declares a win (DeclaredEnv's info at a game's end)
+            result.wins = (result.wins or 0) + bool(info["won"])
 
     def close(self) -> None:
         if self.trace_env is not None:

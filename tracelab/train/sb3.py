@@ -5,7 +5,7 @@ traced in full, so `tracelab tui RUN`, `tracelab why RUN ...` and `tracelab repl
 trained by SB3's PPO, A2C, DQN, ... on GridWar or on a rules-declared env.
 
     from stable_baselines3 import PPO
-    from tracelab.train.sb3 import TracelabCallback
+    from tracelab.train.sb3 import TracelabCallback, make_vec_env
     model = PPO("MlpPolicy", make_vec_env("tracelab/GridWar-base-v0", n_envs=4), n_steps=256)
     with TracelabCallback("runs/ppo-base", "tracelab/GridWar-base-v0", eval_every=10_000) as cb:
         model.learn(100_000, callback=cb)
@@ -15,7 +15,7 @@ stops early (a callback stopped it, or Ctrl-C inside the `with`), `failed` on an
 `with`, `crashed` when the process dies. Needs the `sb3` extra: pip install 'tracelab[sb3]'."""
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -23,12 +23,14 @@ from typing import Any
 import numpy as np
 
 try:
+    from stable_baselines3.common import env_util
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.logger import KVWriter
 except ImportError as e:  # pragma: no cover - the message is the point
     raise ImportError("tracelab.train.sb3 needs Stable-Baselines3: pip install 'tracelab[sb3]'") from e
 
 from tracelab.store import layout
+from tracelab.envs.declared.env_source import EnvSource
 from tracelab.store.agent_rows import LOGITS, PolicyOutput
 from tracelab.train.external_eval import EvalSettings
 from tracelab.train.external_run import ExternalRun
@@ -36,6 +38,18 @@ from tracelab.train.external_run import ExternalRun
 MODEL_DIR, MODEL_NAME = "sb3", "model.zip"  # the trained model, beside the run's store files (SB3's own format)
 MODEL_FILE = f"{MODEL_DIR}/{MODEL_NAME}"
 PROGRESS = ("num_timesteps",)  # a model's attributes that count progress, not settings: not in the config
+
+
+def env_maker(env: str, env_kwargs: Mapping[str, Any] | None = None) -> Callable[[], Any]:
+    """What makes one env of `env`: a registered id (gym.make) or a spec file (tracelab.envs.make_env),
+    with its keyword arguments, as `train --env` and TracelabCallback take it."""
+    return EnvSource.given(str(env), dict(env_kwargs or {})).make
+
+
+def make_vec_env(env: str, n_envs: int = 1, env_kwargs: Mapping[str, Any] | None = None, **sb3: Any) -> Any:
+    """SB3's make_vec_env of `env`, an id or a spec file (SB3's own takes ids only: a path is a `Malformed
+    environment ID`); `sb3`: its other arguments (seed, vec_env_cls, ...)."""
+    return env_util.make_vec_env(env_maker(env, env_kwargs), n_envs=n_envs, **sb3)
 
 
 class _RunOutput(KVWriter):

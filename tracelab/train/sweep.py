@@ -1,5 +1,6 @@
 """A hyperparameter search with Ray Tune (tracelab sweep, docs/scaling.md "Sweeps"): each trial is an
-ordinary training run in the store (OUT/trial-NNN, the experiments' train_seed) whose evaluations Tune
+ordinary training run in the store (OUT/trial-NNN, the experiments' train_seed, or `train --env`'s
+EnvTrainer for a sweep of an env, `--set env=SPEC_OR_ID`) whose evaluations Tune
 reads as they are written, through a metric sink of the trainer; the scheduler (FIFO, or ASHA stopping
 weak trials at their evaluations) and the search are Tune's.
 
@@ -22,6 +23,7 @@ from typing import Any
 
 from ray import tune
 
+from tracelab.envs.declared.env_source import EnvSource
 from tracelab.game.scenario import Scenario
 from tracelab.train.config import TrainConfig
 from tracelab.train.experiments.runner import train_seed
@@ -73,8 +75,8 @@ class _TuneSink:
 class TracelabTrial(tune.Trainable):
     """One trial: TrainConfig(fixed + the trial's values) trained into OUT/trial-NNN."""
 
-    def setup(self, config: dict[str, Any], fixed: dict[str, Any], scenario: Scenario, out: str, metric: str,
-              command: str) -> None:
+    def setup(self, config: dict[str, Any], fixed: dict[str, Any], scenario: Scenario | EnvSource, out: str,
+              metric: str, command: str) -> None:
         cfg = TrainConfig(**{**fixed, **config})
         self.steps = cfg.steps
         self.results: queue.Queue = queue.Queue()
@@ -87,7 +89,10 @@ class TracelabTrial(tune.Trainable):
 
         def train() -> None:
             try:
-                train_seed(cfg, scenario, run_dir, command, (), cfg.eval_games, [sink], self._started)
+                if isinstance(scenario, EnvSource):
+                    train_env_seed(cfg, scenario, run_dir, command, [sink], self._started)
+                else:
+                    train_seed(cfg, scenario, run_dir, command, (), cfg.eval_games, [sink], self._started)
                 self.results.put(None)  # trained to the end
             except BaseException as e:  # noqa: BLE001  (handed to Tune's thread: the trial errors)
                 self.results.put(e)
@@ -126,6 +131,32 @@ class TracelabTrial(tune.Trainable):
         self.thread.join(CLOSE_WAIT_S)
 
 
+def train_env_seed(cfg: TrainConfig, source: EnvSource, run_dir: Path, command: str, metric_sinks: list[Any],
+                   started: Any) -> str:
+    """A `train --env` of `source` into a new run at `run_dir` (a sweep's trial); returns its status."""
+    # deferred: torch and the trainer, which building the search does not need
+    import torch
+
+    from tracelab.store.writer import TraceWriter
+    from tracelab.train.env_trainer import EnvTrainer, env_run_meta
+
+    writer = TraceWriter.open(run_dir, env_run_meta(cfg, source, f"tracelab train --env (from: {command})"))
+    torch.set_num_threads(cfg.threads)
+    trainer, status = None, "failed"
+    try:
+        trainer = EnvTrainer(cfg, source, writer, run_dir, metric_sinks=metric_sinks)
+        started(trainer)
+        status = str(trainer.train())
+        return status
+    except (KeyboardInterrupt, SystemExit):
+        status = "interrupted"
+        raise
+    finally:
+        if trainer is not None:
+            trainer.close()
+        writer.close(status=status)
+
+
 def best_evaluation(results: Any, metric: str, mode: str) -> tuple[float | None, int | None, float | None]:
     """A trial's best evaluation by `metric` (the earliest of equals), its step, and the metric's last
     value; from Tune's results of the trial (a DataFrame; heartbeats have no metric). The best, not the
@@ -149,7 +180,7 @@ class SweepResult:
     trials: list[dict[str, Any]]      # per trial: run, config, its best value, that step, the last value, error
 
 
-def run_sweep(spec: SweepSpec, scenario: Scenario, out: Path, command: str) -> SweepResult:
+def run_sweep(spec: SweepSpec, scenario: Scenario | EnvSource, out: Path, command: str) -> SweepResult:
     """The search (Ray initialised by the caller): trials under `out`, Tune's records in out/tune, what
     Tune prints in out/tune.log."""
     given, out = out, out.absolute()  # Tune's actors work in folders of their own

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 from tracelab.engine.safe_files import FileRefused, path_inside, read_text
 from tracelab.errors import UserError
-from tracelab.train.config import TrainConfig, config_fields
+from tracelab.train.config import GRIDWAR_ONLY, TrainConfig, config_fields
 
 if TYPE_CHECKING:
     from tracelab.train.memory import Limit
@@ -36,8 +36,10 @@ DEFAULT_METRIC = "eval/method_win_rate"
 MAX_TRIALS = 1_000           # a spec's trials (grid points x samples): refused past this, before any start
 SPEC_FILE_CAP = 64 * 1024    # a sweep file is a few lines
 FILE_KEYS = {"set", "grid", "random", "samples", "scheduler", "metric", "mode"}
-# one sweep trains one scenario (its runs are compared with each other); where the runs go is --out's
-NOT_SEARCHED = {"scenario": "one sweep trains one scenario", "agents": "one sweep trains one scenario"}
+# one sweep trains one scenario or world (its runs are compared with each other); where the runs go is --out's
+NOT_SEARCHED = {"scenario": "one sweep trains one scenario", "agents": "one sweep trains one scenario",
+                "env": "one sweep trains one world"}
+ENV_KEY = "env"  # `--set env=SPEC_OR_ID`: the trials train on that env (train --env), not on GridWar
 
 
 class SweepSpecError(UserError):
@@ -66,6 +68,7 @@ class SweepSpec:
     metric: str = DEFAULT_METRIC
     mode: str = "max"
     sources: dict[str, str] = field(default_factory=dict, compare=False)  # field -> where it was given
+    env: str | None = None     # a spec file or a registered id: every trial is a `train --env` of it
 
     @property
     def trials(self) -> int:
@@ -172,7 +175,7 @@ def _assignment(text: str, flag: str) -> tuple[str, str]:
     name, sep, value = text.partition("=")
     if not sep or not name.strip():
         raise SweepSpecError(f"{flag} {text!r}: expected FIELD=VALUES")
-    return field_name(name, f"{flag} {text}"), value
+    return (ENV_KEY if name.strip() == ENV_KEY else field_name(name, f"{flag} {text}")), value
 
 
 def build_spec(*, sets: list[str] = (), grids: list[str] = (), randoms: list[str] = (), file: str | None = None,
@@ -191,8 +194,18 @@ def build_spec(*, sets: list[str] = (), grids: list[str] = (), randoms: list[str
                 other.pop(name, None)
             raw[table][name] = (value.split(",") if table == "grid" else value, f"{flag} {text}")
     fixed: dict[str, Any] = {}
+    env = None
     for name, (value, where) in raw["set"].items():
-        fixed[name] = parse_value(name, value, where)
+        if name == ENV_KEY:
+            if not isinstance(value, str) or not value.strip():
+                raise SweepSpecError(f"{where}: env is a spec file or a registered id, got {value!r}")
+            env = value.strip()
+        else:
+            fixed[name] = parse_value(name, value, where)
+    gridwar = [k for k in (*fixed, *raw["grid"], *raw["random"]) if k in GRIDWAR_ONLY] if env else []
+    if gridwar:
+        raise SweepSpecError(f"{', '.join(gridwar)} describe{'s' * (len(gridwar) == 1)} GridWar; a sweep of "
+                             f"--set env={env} searches the DQN's settings only")
     try:
         TrainConfig(**fixed)
     except ValueError as e:
@@ -214,7 +227,8 @@ def build_spec(*, sets: list[str] = (), grids: list[str] = (), randoms: list[str
         raise SweepSpecError("nothing to search: give --grid FIELD=V1,V2 or --random FIELD=DIST:LOW,HIGH "
                              "(or a sweep file with [grid] or [random])")
     sources = {name: where for table in raw.values() for name, (_, where) in table.items()}
-    spec = SweepSpec(fixed, tuple(axes), sources=sources, **_top_level(top, samples, scheduler, metric, mode))
+    spec = SweepSpec(fixed, tuple(axes), sources=sources, **_top_level(top, samples, scheduler, metric, mode, env),
+                     env=env)
     if spec.trials > MAX_TRIALS:
         raise SweepSpecError(f"{spec.trials:,} trials (grid points x samples): more than {MAX_TRIALS:,}")
     if spec.scheduler == "asha":
@@ -237,7 +251,7 @@ def _culprit(fixed: dict[str, Any], given: dict[str, tuple[Any, str]]) -> str:
 
 
 def _top_level(top: dict[str, Any], samples: int | None, scheduler: str | None, metric: str | None,
-               mode: str | None) -> dict[str, Any]:
+               mode: str | None, env: str | None = None) -> dict[str, Any]:
     out = {**top, **{k: v for k, v in (("samples", samples), ("scheduler", scheduler), ("metric", metric),
                                       ("mode", mode)) if v is not None}}
     if "samples" in out and (isinstance(out["samples"], bool) or not isinstance(out["samples"], int)
@@ -246,14 +260,22 @@ def _top_level(top: dict[str, Any], samples: int | None, scheduler: str | None, 
     for key, allowed in (("scheduler", SCHEDULERS), ("mode", MODES)):
         if key in out and out[key] not in allowed:
             raise SweepSpecError(f"{key} must be one of {', '.join(allowed)}, got {out[key]!r}")
-    if "metric" in out and out["metric"] not in evaluation_metrics():
-        raise SweepSpecError(f"metric must be one of the evaluations' metrics ({', '.join(evaluation_metrics())}), "
+    if env is not None and "metric" not in out:  # every env's evaluation has it (a win rate, only some)
+        out["metric"] = "eval/mean_return"
+    known = evaluation_metrics(env is not None)
+    if "metric" in out and out["metric"] not in known:
+        raise SweepSpecError(f"metric must be one of the evaluations' metrics ({', '.join(known)}), "
                              f"got {out['metric']!r}")
     return out
 
 
-def evaluation_metrics() -> list[str]:
-    """What a trainer's evaluation writes (Tune reads a trial at its evaluations)."""
+def evaluation_metrics(env: bool = False) -> list[str]:
+    """What a trainer's evaluation writes (Tune reads a trial at its evaluations): GridWar's, or (`env`)
+    an env's (`eval/win_rate` when its world declares a win)."""
+    if env:
+        # deferred: loads torch; `tracelab --help` imports this module
+        from tracelab.train.env_policy import EnvEvalResult
+        return list(EnvEvalResult(wins=0).metrics())
     # deferred: evaluate loads the engine (numba) and the store; `tracelab --help` imports this module
     from tracelab.train.evaluate import EvalResult
     return list(EvalResult(games=0, actions_per_win=0.0).metrics())
@@ -286,9 +308,12 @@ def _read_file(path: str) -> tuple[dict[str, dict[str, tuple[Any, str]]], dict[s
         entries = data.get(table, {})
         if not isinstance(entries, dict):
             raise SweepSpecError(f"{where(table)}: must be a table ([{table}])")
-        tables[table] = {field_name(k, where(table, k)): (v, where(table, k)) for k, v in entries.items()}
+        tables[table] = {(ENV_KEY if k == ENV_KEY else field_name(k, where(table, k))): (v, where(table, k))
+                         for k, v in entries.items()}
     if "scenario" in tables["set"]:
         tables["set"]["scenario"] = _scenario_inside(path, *tables["set"]["scenario"])
+    if ENV_KEY in tables["set"]:
+        tables["set"][ENV_KEY] = _spec_inside(path, *tables["set"][ENV_KEY])
     return tables, {k: data[k] for k in ("samples", "scheduler", "metric", "mode") if k in data}
 
 
@@ -301,6 +326,17 @@ def _scenario_inside(path: str, value: Any, where: str) -> tuple[Any, str]:
         return value, where
     try:
         return str(path_inside(os.path.dirname(os.path.abspath(path)), value)), where
+    except FileRefused as e:
+        raise SweepSpecError(f"{where}: {e}") from None
+
+
+def _spec_inside(path: str, value: Any, where: str) -> tuple[Any, str]:
+    """A sweep file's env: a registered id, or a spec file (.toml) relative to the sweep file's folder and
+    inside it (links resolved)."""
+    if not isinstance(value, str) or not value.strip().endswith(".toml"):
+        return value, where
+    try:
+        return str(path_inside(os.path.dirname(os.path.abspath(path)), value.strip())), where
     except FileRefused as e:
         raise SweepSpecError(f"{where}: {e}") from None
 

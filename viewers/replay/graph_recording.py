@@ -9,12 +9,14 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 from rerun.blueprint.encodings import TextLogColumn, TextLogColumnKind
-from tracelab.viewers.replay import graph_layer, graph_rules, style
+from tracelab.viewers.replay import graph_layer, graph_rules, plots, spec_board, style
 from tracelab.viewers.replay.blueprint import step_axis
 from tracelab.viewers.replay.graph_layout import fit_given, layout
 from tracelab.viewers.replay.graph_run import GraphEpisode, RunGraph, read_episode
 from tracelab.viewers.replay.recording import ReplayOptions
 
+from tracelab.envs.declared.board import Board, board_of_config
+from tracelab.store.kind import run_config
 from tracelab.store.model import RunModel
 from tracelab.store.reader import RunConnection
 
@@ -28,13 +30,14 @@ class GraphRunContext:
     con: RunConnection
     name: str
     graph: RunGraph
+    board: Board | None = None      # a spec world's board, drawn instead of the graph
     _positions: np.ndarray | None = None
     _model: RunModel | None = None
     _color_label: tuple[str | None] | None = None   # decided at the first episode, kept for the others
 
     @classmethod
     def of(cls, con: RunConnection, name: str) -> GraphRunContext:
-        return cls(con, name, RunGraph.read(con))
+        return cls(con, name, RunGraph.read(con), board_of_config(run_config(con)))
 
     def positions(self, episode: int) -> np.ndarray:
         """[nodes, 2] float32 drawing positions, decided at the first episode replayed."""
@@ -89,9 +92,10 @@ def color_legend(label: str | None) -> str:
 
 
 def graph_blueprint(positions: np.ndarray, color_label: str | None, open_at: str = "start",
-                    last_step: int = 0) -> rrb.Blueprint:
-    """The graph beside the rule log, the why document and the changes per step; the graph view's bounds
-    fit the nodes, and its force simulation is off (every node has its position)."""
+                    last_step: int = 0, board: Board | None = None, rewards: bool = False) -> rrb.Blueprint:
+    """The graph (or the board) beside the rule log, the why document and the changes per step, the
+    rewards and returns under it when there are some; the graph view's bounds fit the nodes, and its
+    force simulation is off (every node has its position)."""
     lo, hi = (positions.min(axis=0), positions.max(axis=0)) if len(positions) else (np.zeros(2), np.ones(2))
     pad = float((hi - lo).max()) * GRAPH_MARGIN + style.NODE_RADIUS * 2
     graph = rrb.GraphView(
@@ -108,6 +112,12 @@ def graph_blueprint(positions: np.ndarray, color_label: str | None, open_at: str
         origin=style.RULE_LOG, name="Fired rules (level = rule)",
         columns=rrb.TextLogColumns(text_log_columns=[TextLogColumn(TextLogColumnKind.LogLevel),
                                                      TextLogColumn(TextLogColumnKind.Body)]))
+    if board is not None:
+        graph = rrb.Spatial2DView(origin=style.BOARD, name="Board", background=(24, 24, 28))
+    if rewards:
+        plot = rrb.TimeSeriesView(origin=style.PLOTS, name="Reward and return", axis_x=step_axis(last_step),
+                                  contents=[f"+ {style.PLOTS}/reward/**", f"+ {style.PLOTS}/return/**"])
+        graph = rrb.Vertical(graph, plot, row_shares=[3, 2])
     side = rrb.Vertical(rule_log,
                         rrb.TextDocumentView(origin=style.WHY, name="Step and why"),
                         rrb.TimeSeriesView(origin=style.CHANGED, name="Atoms changed per step",
@@ -128,10 +138,16 @@ def record_graph_episode(ctx: GraphRunContext, episode: int, rec: rr.RecordingSt
     data = read_episode(ctx.con, ctx.graph, episode, ctx.color_label(options.color_by, episode))
     positions = ctx.positions(episode)
     rec.send_recording_name(f"{ctx.name} episode {episode} ({data.outcome or 'running'}, {data.steps} steps)")
+    rows = plots.step_rewards(ctx.con, [episode]).get(episode, [])
     if blueprint:
         rec.send_blueprint(graph_blueprint(positions, data.color_label, options.open_at,
-                                           max(last_step, data.steps - 1)))
+                                           max(last_step, data.steps - 1), ctx.board, bool(rows)))
     drawn = graph_layer.log_graph(rec, ctx.graph, positions, data)
+    if ctx.board is not None:
+        spec_board.log_board(rec, ctx.con, ctx.board, episode, data.steps)
+    if rows:
+        agents = list(dict.fromkeys(agent for _, agent, _ in rows))
+        plots.log_rewards(rec, plots.agent_rewards(agents, rows), agents)
     graph_rules.log_rule_log(rec, data)
     graph_rules.log_changed(rec, data)
     graph_rules.log_why(rec, ctx.con, data, options.why_atoms, options.why_depth, lambda: ctx.model,

@@ -72,7 +72,7 @@ def _step_header(episode: GraphEpisode, s: int, edges: dict[str, int]) -> list[s
     last = episode.steps - 1
     lines = [f"## Episode {episode.episode}, step {s} of {last}"]
     if s == last and episode.outcome:
-        lines.append(f"**The reasoning ended: {episode.outcome}.**\n")
+        lines.append(f"**It ended: {episode.outcome}.**\n")
     changed = episode.changed.get(s, {})
     if edges:
         lines.append("- edges: " + ", ".join(f"{name} {n:,}" for name, n in edges.items()))

@@ -120,7 +120,7 @@ class Firings:
 class GraphEpisode:
     """One episode of a run without a board, as the replay draws it."""
     episode: int
-    steps: int                     # t = 0 .. steps - 1
+    steps: int                     # timesteps drawn: t = 0 .. steps - 1
     outcome: str | None
     color_label: str | None
     color_nodes: np.ndarray               # node ids that have an atom of the colour predicate (may be coloured)
@@ -150,10 +150,12 @@ def read_firings(con: RunConnection, episode: int) -> Firings:
 def read_episode(con: RunConnection, graph: RunGraph, episode: int, label: str | None) -> GraphEpisode:
     """The episode's rows of the colour predicate `label`, edge rows, rule log and change counts (one
     query each)."""
-    ends = con.execute("SELECT steps, outcome FROM episodes WHERE episode = ?", [episode]).fetchall()
+    # the timesteps drawn are t = 0 .. the last: an env's episode of n steps ends at t = n (its t = 0 is the
+    # start), a reasoning's of n timesteps at t = n - 1, a running episode at its last change so far
+    ends = con.execute("SELECT outcome, t_end FROM episodes WHERE episode = ?", [episode]).fetchall()
     last = con.execute("SELECT max(t) FROM raw.changes WHERE episode = ?", [episode]).fetchall()[0][0]
-    steps = int(ends[0][0]) if ends and ends[0][0] is not None else int(last or 0) + 1
-    outcome = ends[0][1] if ends else None
+    steps = max(int(last or 0), int(ends[0][1] or 0) if ends else 0) + 1
+    outcome = ends[0][0] if ends else None
     color_rows: dict[str, np.ndarray] = {"t": np.zeros(0, np.int64), "node": np.zeros(0, np.int64),
                                          "lower": np.zeros(0), "upper": np.zeros(0)}
     color_nodes = np.zeros(0, np.int64)

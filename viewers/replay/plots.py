@@ -1,4 +1,5 @@
-"""Plots: each team's reward and return per step of an episode (from the run's `steps` rows), and a
+"""Plots: the reward and return per step of an episode (from the run's `steps` rows), each team's in a
+grid game, each agent's in any other game, and a
 training run's curves (its `metrics` rows, docs/store.md and the training-run contract) on their own
 `train_step` timeline."""
 from __future__ import annotations
@@ -17,10 +18,11 @@ REWARD_PALER = 0.5      # a reward line's team colour, this far towards white
 
 
 def step_rewards(con: RunConnection, episodes: list[int]) -> dict[int, list[tuple[int, str, float]]]:
-    """episode -> its `steps` rows (step, agent, reward), for all these episodes in one query."""
+    """episode -> its `steps` rows (t, agent, reward), for all these episodes in one query (`t`: the
+    timestep an env step ended at, the replay's `step`)."""
     out: dict[int, list[tuple[int, str, float]]] = {}
     for episode, step, agent, reward in con.execute(
-            "SELECT episode, step, agent, reward FROM steps WHERE episode IN (SELECT unnest(?::BIGINT[]))",
+            "SELECT episode, t, agent, reward FROM steps WHERE episode IN (SELECT unnest(?::BIGINT[]))",
             [list(episodes)]).fetchall():
         out.setdefault(episode, []).append((step, agent, reward))
     return out
@@ -39,24 +41,42 @@ def team_rewards(board: EpisodeBoard, rows: list[tuple[int, str, float]]) -> np.
     return out
 
 
+def agent_rewards(agents: list[str], rows: list[tuple[int, str, float]]) -> np.ndarray | None:
+    """[last t + 1, len(agents)] each agent's reward per timestep (0 where it took no step) from the
+    episode's `steps` rows, or None when the run has none for it."""
+    if not rows:
+        return None
+    column = {a: i for i, a in enumerate(agents)}
+    out = np.zeros((max(t for t, _, _ in rows) + 1, len(agents)))
+    for t, agent, reward in rows:
+        if t >= 0 and agent in column:
+            out[t, column[agent]] += reward
+    return out
+
+
 @cache
-def _series_style(team: str, kind: str) -> rr.SeriesLines:
+def _series_style(name: str, kind: str, colour: tuple[int, int, int]) -> rr.SeriesLines:
     """A series' line style, built once (an archetype converts its data to Arrow when it is made)."""
-    colour = style.TEAM_COLOR[TEAMS.index(team)].astype(float)
+    c = np.asarray(colour, float)
     if kind == "reward":  # paler than the return: the legend's dots tell the two apart
-        colour += (255 - colour) * REWARD_PALER
-    return rr.SeriesLines(colors=[int(c) for c in colour], names=f"{team} {kind}",
-                          widths=2.0 if kind == "return" else 1.0)
+        c += (255 - c) * REWARD_PALER
+    return rr.SeriesLines(colors=[int(v) for v in c], names=f"{name} {kind}", widths=2.0 if kind == "return" else 1.0)
 
 
-def log_rewards(rec: rr.RecordingStream, rewards: np.ndarray) -> None:
+def log_rewards(rec: rr.RecordingStream, rewards: np.ndarray, names: list[str] | tuple[str, ...] = TEAMS,
+                colours: list[tuple[int, int, int]] | None = None) -> None:
+    """Each column of `rewards` ([steps, len(names)]: a team's or an agent's reward at each step) as its
+    reward and its return (the running sum), in `colours` (the teams' by default, else the palette's)."""
+    if colours is None:
+        colours = [tuple(int(v) for v in c) for c in style.TEAM_COLOR] if tuple(names) == TEAMS else \
+            [style.SERIES_COLORS[i % len(style.SERIES_COLORS)] for i in range(len(names))]
     steps = np.arange(len(rewards))
-    series = [(team, kind, values) for t, team in enumerate(TEAMS)
-              for kind, values in (("reward", rewards[:, t]), ("return", np.cumsum(rewards[:, t])))]
-    for team, kind, _ in series:
-        rec.log(f"{style.PLOTS}/{kind}/{team}", _series_style(team, kind), static=True)
+    series = [(name, kind, values) for i, name in enumerate(names)
+              for kind, values in (("reward", rewards[:, i]), ("return", np.cumsum(rewards[:, i])))]
+    for (name, kind, _), colour in zip(series, [c for c in colours for _ in range(2)]):
+        rec.log(f"{style.PLOTS}/{kind}/{name}", _series_style(name, kind, colour), static=True)
     every = np.tile(steps, len(series))
-    send_per_entity(rec, [f"{style.PLOTS}/{kind}/{team}" for team, kind, _ in series], [len(steps)] * len(series),
+    send_per_entity(rec, [f"{style.PLOTS}/{kind}/{name}" for name, kind, _ in series], [len(steps)] * len(series),
                     [rr.TimeColumn(style.STEP, sequence=every),
                      rr.TimeColumn(style.PASS, sequence=style.pass_time(every, 0))],
                     rr.Scalars.columns(scalars=np.concatenate([v for _, _, v in series])))

@@ -112,7 +112,7 @@ class EpisodesPane(Vertical):
         self.training = False
         self.sort_key, self.sort_desc = "episode", False
         self.outcomes: list[str] = []      # the run's outcomes, the selector's options (o steps through them)
-        self.columns = list(BASE_COLUMNS if source.board else BOARDLESS_COLUMNS)
+        self.columns = list(BASE_COLUMNS if source.games else BOARDLESS_COLUMNS)
         self._seen: dict | None = None     # episode counts last seen (live runs)
         self.live_reads = LiveReads(source)
 
@@ -166,7 +166,7 @@ class EpisodesPane(Vertical):
 
     def _inspected(self, base: str, outcomes: list[str], training: bool, about: bool = False) -> None:
         self.base, self.training = base, training
-        if self.source.board or training:     # a training run's episodes are games, board or not
+        if self.source.games or training:     # a training run's episodes are games, board or not
             self.columns = list(BASE_COLUMNS) + (TRAINING_COLUMNS if training else [])
         else:
             self.columns = list(BOARDLESS_COLUMNS) + ([ABOUT_COLUMN] if about else [])

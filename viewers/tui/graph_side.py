@@ -25,7 +25,9 @@ from textual.widget import Widget
 from textual.widgets import Input, Static
 
 from tracelab.viewers.tui.colours import DIM, bound_colour, styled_bound
-from tracelab.viewers.tui.declared_board import BoardRows, DeclaredBoard, marked_cells, run_board_rows
+from tracelab.envs.declared.board import Board, board_of_config, marked_cells
+from tracelab.store.kind import run_config
+from tracelab.viewers.tui.declared_board import DeclaredBoard
 from tracelab.viewers.tui.graph_state import AtomsAt, Neighbourhood, atoms_at, neighbourhood, unknown_pattern
 from tracelab.viewers.tui.lazy_table import Column, LazyTable
 from tracelab.viewers.tui.paging import ArrowSource
@@ -151,7 +153,7 @@ class GraphSide(Vertical):
         self._readers_lock = threading.Lock()
         self._closed = False
         # a declared world's run (tracelab play --env) has its spec's board drawn above the atoms
-        self.declared: BoardRows | None = source.call(run_board_rows)
+        self.declared: Board | None = board_of_config(source.call(run_config))
 
     def compose(self) -> ComposeResult:
         if self.declared is not None:

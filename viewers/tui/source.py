@@ -14,7 +14,7 @@ from typing import Any, TypeVar
 import pyarrow as pa
 
 from tracelab.store.catalog import short_command
-from tracelab.store.kind import run_board
+from tracelab.store.kind import is_game_run, run_board
 from tracelab.store.reader import RunConnection, fetch_arrow, open_run, query_readonly, retrying, run_info
 from tracelab.store.several import SeveralRunsConnection, each_run_stream, run_names
 
@@ -90,6 +90,8 @@ class RunSource(LockedConnection):
         # the board the run declares (a game's), None for a run without one (a reasoning run): the views
         # show the atoms and the graph instead, and no game columns
         self.board: str | None = self.call(run_board)
+        # a run of games (a board, or episodes with returns: a spec world's): return, outcome, game queries
+        self.games: bool = self.call(is_game_run)
         # a training run's evaluation games (kind 'eval'), with a board or without (a declared world's,
         # which the views show as a reasoning run): ] and [ step through them
         self.has_eval_games: bool = self.call(lambda con: bool(con.execute(
@@ -136,6 +138,12 @@ class SeveralRunsSource(LockedConnection):
                   for name in con.names]
         # the saved queries about games are offered only when every run has a board
         self.board: str | None = boards[0] if all(boards) else None
+        games = []
+        for i in range(len(con.names)):
+            con.use(i)
+            games.append(is_game_run(con))
+        con.use(None)
+        self.games = all(games)
 
     def fetch(self, con: RunConnection, sql: str, params: dict[str, Any] | None, saved: bool,
               limit: int) -> pa.Table:

@@ -80,11 +80,12 @@ class SavedQueryPicker(ModalScreen[tuple[SavedQuery, dict[str, str]] | None]):
     SavedQueryPicker #params Label { width: 100%; }
     """
 
-    def __init__(self, board: bool = True) -> None:
-        """board: the run has a board; without one, the saved queries that read games are not offered
-        (`-- needs board` in their header: `tracelab sql --query` refuses them on such a run)."""
+    def __init__(self, board: bool = True, games: bool = True) -> None:
+        """board: the run has the grid game's board; games: it is a run of games. The saved queries that
+        need what the run is not are not offered (`-- needs board` or `-- needs games` in their header:
+        `tracelab sql --query` refuses them on such a run)."""
         super().__init__()
-        self.queries = [q for q in list_queries() if board or q.needs_board is None]
+        self.queries = [q for q in list_queries() if q.needs is None or (board if q.needs == "board" else games)]
         self.chosen: SavedQuery | None = None
 
     def compose(self) -> ComposeResult:
@@ -308,7 +309,7 @@ class SqlPane(Vertical):
             self.params, self.params_for = params or None, query.sql.strip()
             self.run_sql(query.sql.strip(), params or None, label=query.name)
 
-        self.app.push_screen(SavedQueryPicker(board=self.source.board is not None), chosen)
+        self.app.push_screen(SavedQueryPicker(board=self.source.board is not None, games=self.source.games), chosen)
 
     def action_history(self) -> None:
         if not self.history:

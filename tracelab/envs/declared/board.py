@@ -8,13 +8,24 @@ of the board is the cell itself (`edge = "stay"`, gymnasium's toy-text games cla
 each of them). Each ray gives a binary predicate from a cell to every cell 1, 2, ... steps that way up
 to the edge (`up = [-1, 0]` -> the cells straight above: what is "in line"); each edge gives a unary
 predicate true of the cells whose step that way leaves the board. Cells are listed row by row, top row
-first: that order is the domain `cells`."""
+first: that order is the domain `cells`.
+
+A run of the world's games records its board in its config (`board_config`); the viewers (the TUI, the
+replay) read it back from there (`board_of_config`), checked, as a run's config comes from anywhere."""
 from __future__ import annotations
 
+import re
+from collections.abc import Iterable
 from dataclasses import dataclass, field
+from typing import Any
 
 MAX_BOARD_CELLS = 65_536  # 256 x 256: with a legend and four neighbours, ~330k facts built in Python
 MAX_BOARD_FACTS = 2_000_000  # rays make a row or a column per cell: refused before they are built
+# only {row} and {col} between name characters: str.format is never given a field or format spec of a
+# stranger's ({row.__class__}, {row:>999999999})
+CELL_FORMAT = re.compile(r"(?:[A-Za-z0-9_-]|\{row\}|\{col\})+")
+RUN_CONFIG_KEY = "declared_board"  # where a run's config holds the board (board_config)
+MAX_RECORDED_SIDE = 256  # rows and columns of a board read from a run (the spec's own limit is 65,536 cells)
 
 
 @dataclass(frozen=True)
@@ -92,3 +103,54 @@ class Board:
         return "\n".join("".join(self.marks[marked[name]] if (name := self.cell(r, c)) in marked else ch
                                  for c, ch in enumerate(line))
                          for r, line in enumerate(self.rows)) + "\n"
+
+
+def hex_color(text: str) -> tuple[int, int, int] | None:
+    """(r, g, b) of "#rrggbb", or None when the text is not one."""
+    if len(text) != 7 or text[0] != "#":
+        return None
+    try:
+        return int(text[1:3], 16), int(text[3:5], 16), int(text[5:7], 16)
+    except ValueError:
+        return None
+
+
+def board_config(board: Board) -> dict[str, Any]:
+    """What a run records of the board for the viewers to draw it (its facts are in the run already)."""
+    hexes = lambda colors: {k: "#{:02x}{:02x}{:02x}".format(*rgb) for k, rgb in colors.items()}  # noqa: E731
+    return {"rows": list(board.rows), "cell": board.cell_format, "marks": dict(board.marks),
+            "colors": hexes(board.colors), "mark_colors": hexes(board.mark_colors)}
+
+
+def board_of_config(config: Any) -> Board | None:
+    """The board a run's config declares (under RUN_CONFIG_KEY), or None: none declared, or a declaration
+    that does not hold (types, sizes, the cell format, the colours)."""
+    doc = config.get(RUN_CONFIG_KEY) if isinstance(config, dict) else None
+    if not isinstance(doc, dict):
+        return None
+    rows, cell, marks = doc.get("rows"), doc.get("cell"), doc.get("marks")
+    colors, mark_colors = doc.get("colors", {}), doc.get("mark_colors", {})
+    ok = (isinstance(rows, list) and 0 < len(rows) <= MAX_RECORDED_SIDE
+          and all(isinstance(r, str) and 0 < len(r) <= MAX_RECORDED_SIDE and len(r) == len(rows[0]) for r in rows)
+          and isinstance(cell, str) and len(cell) <= 100 and bool(CELL_FORMAT.fullmatch(cell))
+          and isinstance(marks, dict) and len(marks) <= 64
+          and all(isinstance(k, str) and k.isidentifier() and isinstance(v, str) and len(v) == 1
+                  for k, v in marks.items())
+          and all(isinstance(c, dict) and len(c) <= 256 and all(
+              isinstance(k, str) and isinstance(v, str) and hex_color(v) for k, v in c.items())
+              for c in (colors, mark_colors)))
+    if not ok:
+        return None
+    return Board(tuple(rows), cell, {}, {}, "stay", dict(marks), {k: hex_color(v) for k, v in colors.items()},
+                 {k: hex_color(v) for k, v in mark_colors.items() if k in marks})
+
+
+def marked_cells(board: Board, true_atoms: dict[str, Iterable[str]]) -> dict[str, str]:
+    """Cell constant -> the `marks` predicate true there, from each mark predicate's true atoms' texts
+    (`at(c1_2)`); the last predicate listed wins a cell where several hold."""
+    out: dict[str, str] = {}
+    for pred, atoms in true_atoms.items():
+        for atom in atoms:
+            if atom.startswith(pred + "(") and atom.endswith(")"):
+                out[atom[len(pred) + 1:-1]] = pred
+    return out

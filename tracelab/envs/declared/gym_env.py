@@ -82,7 +82,11 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
             limit = self._registered_limit()
             self._recorder.stepped(a, w.last_rewards, obs, terminated,
                                    truncated or (limit is not None and w.steps >= limit))
-        return obs, w.last_rewards[0], terminated, truncated, self._info()
+        info = self._info()
+        if self.world_spec.win and not self._running:  # what the world declares a win ([end] win)
+            info["outcome"] = w.outcome()
+            info["won"] = info["outcome"] == "win"
+        return obs, w.last_rewards[0], terminated, truncated, info
 
     @property
     def records_decisions(self) -> bool:

@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from tracelab.envs.declared.board import RUN_CONFIG_KEY, board_config
 from tracelab.envs.declared.spec import WorldSpec
 from tracelab.envs.declared.world import DeclaredWorld
 from tracelab.envs.tracer import HANDOVER_ROWS, HANDOVER_STEPS
@@ -54,11 +55,9 @@ def declared_facts(spec: WorldSpec) -> dict[str, Any]:
 def declared_run_config(spec: WorldSpec) -> dict[str, Any]:
     """What a run of a declared world's games records of it in its config, for its readers: the spec's
     and the rule files' texts, what sets each external fact (CONFIG_KEY), the board the viewers draw."""
-    board = spec.board
     return {"spec": Path(spec.path).read_text(), "rule_texts": {f: Path(f).read_text() for f in spec.program.files},
             CONFIG_KEY: declared_facts(spec),
-            "declared_board": None if board is None else {"rows": list(board.rows), "cell": board.cell_format,
-                                                          "marks": board.marks}}
+            RUN_CONFIG_KEY: None if spec.board is None else board_config(spec.board)}
 
 
 def observation_names(spec: WorldSpec) -> list[ObservationName]:
@@ -209,7 +208,7 @@ class DeclaredRecorder:
                 self.world.engine.trace_rows_waiting >= HANDOVER_ROWS:
             self._take_rows()
         if ended:
-            self._end("terminated" if terminated else "truncated")
+            self._end(self.world.outcome() if terminated else "truncated")
         if self._steps_kept >= WRITE_ROWS or time.monotonic() - self._written_at >= WRITE_INTERVAL_S:
             self.write_pending()
 

@@ -12,16 +12,6 @@ from tracelab.envs.render_rgb import CELL, GRID, _disc
 DEFAULT_MARK = (230, 57, 70)
 
 
-def hex_color(text: str) -> tuple[int, int, int] | None:
-    """(r, g, b) of "#rrggbb", or None when the text is not one."""
-    if len(text) != 7 or text[0] != "#":
-        return None
-    try:
-        return int(text[1:3], 16), int(text[3:5], 16), int(text[5:7], 16)
-    except ValueError:
-        return None
-
-
 class DeclaredPainter:
     def __init__(self, board: Board, cell: int = CELL) -> None:
         self.board, self.cell = board, cell

@@ -11,7 +11,6 @@ import dataclasses
 import itertools
 import math
 import os
-import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -23,9 +22,8 @@ from tracelab.engine.errors import ProgramError
 from tracelab.engine.parser import check_program, load_program, parse_literal
 from tracelab.engine.safe_files import FileRefused, path_inside
 from tracelab.engine.program import CONSTANT_RE, Fact, Literal, Program, SourceLoc, Term
-from tracelab.envs.declared.board import MAX_BOARD_CELLS, MAX_BOARD_FACTS, Board
+from tracelab.envs.declared.board import CELL_FORMAT, MAX_BOARD_CELLS, MAX_BOARD_FACTS, Board, hex_color
 from tracelab.envs.declared.expressions import ExpressionError, evaluate
-from tracelab.envs.declared.render import hex_color
 from tracelab.envs.declared.spec_file import KeyPath, SpecError, SpecSource, read_spec_file
 from tracelab.errors import close_names
 from tracelab.envs.declared.spec_size import SpecBudget, SpecTooBig
@@ -142,6 +140,9 @@ class WorldSpec:
     # the names of the reward's terms, as each agent's reward_table then reward_scaled entries are
     # recorded (tracelab.store.agent_rows): the [reward.table] keys, then the scaled atom
     reward_terms: tuple[str, ...] = ()
+    # what a game's end counts as (`[end] win`, `loss`): an episode that terminated with one of them [1,1]
+    win: tuple[Atom, ...] = ()
+    loss: tuple[Atom, ...] = ()
 
 
 # ---- reading typed values, located ----
@@ -398,9 +399,11 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     domains = {"cells": board.cells} if board else {}
     space, parts = _observation(r, check, domains, agents)
     reward_table, reward_scaled, reward_terms = _reward(r, check, agents)
-    end = r.table(("end",), ("terminated", "truncated", "max_steps"), default={})
+    end = r.table(("end",), ("terminated", "truncated", "max_steps", "win", "loss"), default={})
     terminated = _every_agents(r, check, ("end", "terminated"), agents)
     truncated = _every_agents(r, check, ("end", "truncated"), agents)
+    win = _every_agents(r, check, ("end", "win"), agents)
+    loss = _every_agents(r, check, ("end", "loss"), agents)
     max_steps = r.integer(("end", "max_steps"), None, minimum=1) if "max_steps" in end else None
     if not (terminated or truncated or max_steps):  # play --env would step such a world forever
         raise r.err(("end",), "the episode can never end: expected `terminated`, `truncated` or `max_steps` "
@@ -430,7 +433,7 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     check_program(program, {a.pred: len(a.args) for a in env_set})
     return WorldSpec(src.path, names, program, tuple(agents), action_names, action_facts, mask, space, parts,
                      reward_table, reward_scaled, terminated, truncated, max_steps, start_facts, choices,
-                     randoms, board, fps, src, r.budget.board_facts + r.budget.atoms, reward_terms)
+                     randoms, board, fps, src, r.budget.board_facts + r.budget.atoms, reward_terms, win, loss)
 
 
 def _every_agents_atoms_ahead(r: _Reader, board: Board | None, agents: int) -> None:
@@ -449,7 +452,8 @@ def _every_agents_atoms_ahead(r: _Reader, board: Board | None, agents: int) -> N
         n += length(part.get("atoms", [])) + (cells if over == "cells" else len(over) if isinstance(over, list) else 0)
         n += (1 + length(part.get("things", []))) * cells if part.get("read") == "nearest" else 0
     n += length(r.raw(("reward", "table"), {})) + 1
-    n += sum(length(r.raw(path, [])) for path in (("end", "terminated"), ("end", "truncated"), ("start", "facts")))
+    n += sum(length(r.raw(path, [])) for path in (("end", "terminated"), ("end", "truncated"), ("end", "win"),
+                                                   ("end", "loss"), ("start", "facts")))
     try:
         r.budget.ahead(n * agents, _atoms_for(n, agents))
     except SpecTooBig as e:
@@ -575,9 +579,7 @@ def _board(r: _Reader) -> Board:
     if len(rows) * len(rows[0]) > MAX_BOARD_CELLS:
         raise r.err(("board", "rows"), f"more than {MAX_BOARD_CELLS} cells")
     fmt = r.string(("board", "cell"), "c{row}_{col}")
-    # only {row} and {col} between name characters: str.format is never given a field or format spec
-    # of the spec's own ({row.__class__}, {row:>999999999})
-    if not _CELL_FORMAT.fullmatch(fmt) or "{row}" not in fmt or "{col}" not in fmt \
+    if not CELL_FORMAT.fullmatch(fmt) or "{row}" not in fmt or "{col}" not in fmt \
             or not CONSTANT_RE.fullmatch(fmt.format(row=0, col=0)):
         raise r.err(("board", "cell"), f"expected a name made of letters, digits, _ and - with {{row}} and "
                                        f"{{col}}, starting with a lower-case letter, such as \"c{{row}}_{{col}}\"; "
@@ -774,7 +776,6 @@ def _reward(r: _Reader, check: _Names, agents: list[str]
 
 
 DRAW_METHODS = ("categorical", "choice")
-_CELL_FORMAT = re.compile(r"(?:[A-Za-z0-9_-]|\{row\}|\{col\})+")
 
 
 def _draw(r: _Reader, check: _Names, path: KeyPath, domains: dict[str, list[str]], *, start: bool) -> Draw | None:

@@ -98,6 +98,8 @@ class DeclaredVectorEnv(VectorEnv):
         done = terminated | truncated
         if done.any():
             final_info = self._with_masks({k: v for k, v in info.items() if not k.startswith("_")}, done)
+            if w.spec.win:  # what the world declares a win (its [end] win), for the counting of wins
+                final_info["won"] = w.won()
             w.reset(np.flatnonzero(done))
             final_obs, obs = obs, w.observations()  # the others' observations read again, unchanged
             info = self._info(self._all)

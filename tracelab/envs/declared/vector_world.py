@@ -126,6 +126,11 @@ class DeclaredWorlds:
     def terminated(self) -> np.ndarray:
         return self._out[2][:, 0] == 1.0
 
+    def won(self) -> np.ndarray:
+        """Per world: terminated with one of the spec's `[end] win` atoms [1,1] (DeclaredWorld.outcome)."""
+        ids = self.one._win_ids
+        return self.terminated() & self.engine.is_true(ids).any(axis=1) if ids.size else np.zeros(self.n_worlds, bool)
+
     def truncated(self, limit: int | None) -> np.ndarray:
         """A truncated atom, or the spec's step limit reached in a world that did not terminate, or
         `limit` (a TimeLimit's, which truncates whatever the step did) reached."""

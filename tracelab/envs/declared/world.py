@@ -101,6 +101,7 @@ class DeclaredWorld:
         self._before = [_Drawer(d, ids) for d in spec.random_facts if d.after is None]
         self._after = [_Drawer(d, ids) for d in spec.random_facts if d.after is not None]
         self._start_ids, self._start_bounds = ids(spec.start_facts), _bounds(spec.start_facts)
+        self._win_ids, self._loss_ids = ids(spec.win), ids(spec.loss)
         env_set = [self._start_ids, *self._action_ids]
         for drawer in (*self._choices, *self._before, *self._after):
             env_set.extend(drawer.value_ids)
@@ -344,6 +345,15 @@ class DeclaredWorld:
 
     def terminated(self) -> bool:
         return self._ends[0]
+
+    def outcome(self) -> str:
+        """How the episode ended, after its last step: "win" or "loss" when the spec's `[end] win` or
+        `loss` atom holds at a termination (a win first), else "terminated" or "truncated"."""
+        if self._ends[0]:
+            for name, ids in (("win", self._win_ids), ("loss", self._loss_ids)):
+                if ids.size and self.true(ids).any():
+                    return name
+        return "terminated" if self._ends[0] else "truncated"
 
     def truncated(self) -> bool:
         """A truncated atom, or the spec's step limit reached by a step that did not terminate (a game won
