@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 from test_env_spec import SPEC, write_world
 from test_strangers_sizes import one_error_line
 
-from tracelab.envs.declared.expressions import (
+from tracelab.expressions import (
     MAX_EXPRESSION_STEPS,
     MAX_VALUE_ITEMS,
     Evaluation,

@@ -33,7 +33,7 @@ COMMAND_MODULES = [
     "tracelab.commands.replay", "tracelab.commands.train", "tracelab.commands.eval",
     "tracelab.commands.runs", "tracelab.commands.tui",
     "tracelab.commands.experiment", "tracelab.commands.sweep", "tracelab.commands.compile",
-    "tracelab.commands.compare", "tracelab.commands.export",
+    "tracelab.commands.compare", "tracelab.commands.export", "tracelab.commands.rewards",
 ]
 EXIT_USER_ERROR = 1
 EXIT_USAGE = 2  # argparse's status for a usage error
