@@ -1,0 +1,120 @@
+"""`tracelab rewards RUN --set TERM=VALUE` re-scores every recorded episode from the run's reward terms
+without re-simulating (issue 39 item 5): on a spec world's run, the re-scored returns are the returns of
+the same games played again with the edited spec (the same seed, the same random actions), for a table
+term, a term that also ends the game and the scaled atom (whose --set is the scale). A run written before
+terms were recorded says so in one line; an unknown term is one line with a did-you-mean."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from test_reading_imports import ALLOWED, CHILD, HEAVY
+from test_spec_world_game import RULES, SPEC
+
+from tracelab.cli import main
+from tracelab.store import open_run
+
+ROOT = Path(__file__).resolve().parents[1]
+# the trap world with a table term that ends nothing (standing on c0_3) and a scaled atom (was(c0_2))
+TABLE = '[reward.table]\n"home(me)" = "door_reward"\n"dead(me)" = -1\n'
+assert TABLE in SPEC
+BASE = SPEC.replace(TABLE, '[reward]\natom = "was(c0_2)"\nscale = 0.5\n\n' + TABLE + '"at(c0_3)" = 0.25\n')
+SETS = {"at(c0_3)": 2.0, "home(me)": 5.0, "was(c0_2)": 3.0}
+EDITED = BASE.replace('"at(c0_3)" = 0.25', '"at(c0_3)" = 2.0').replace("door_reward = 1.0", "door_reward = 5.0") \
+    .replace("scale = 0.5", "scale = 3.0")
+
+
+def play(folder: Path, name: str, text: str) -> Path:
+    (folder / f"{name}.toml").write_text(text)
+    run = folder / "runs" / name
+    assert main(["play", "--env", str(folder / f"{name}.toml"), "--episodes", "12", "--seed", "3",
+                 "--run", str(run)]) == 0
+    return run
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    folder = tmp_path_factory.mktemp("rescore")
+    (folder / "trap.rules").write_text(RULES)
+    return play(folder, "base", BASE), play(folder, "edited", EDITED)
+
+
+def returns(run: Path) -> dict[int, float]:
+    con = open_run(run)
+    try:
+        return {int(e): float(r) for e, r in con.execute("SELECT episode, reward FROM episodes").fetchall()}
+    finally:
+        con.close()
+
+
+def test_rescored_returns_match_the_games_played_with_the_edited_spec(runs: tuple[Path, Path],
+                                                                     capsys: pytest.CaptureFixture) -> None:
+    base, edited = runs
+    old, new = returns(base), returns(edited)
+    assert old.keys() == new.keys() and old != new  # the edit changes some return
+    capsys.readouterr()
+    argv = ["rewards", str(base), "--json", *(a for t, v in SETS.items() for a in ("--set", f"{t}={v}"))]
+    assert main(argv) == 0
+    got = json.loads(capsys.readouterr().out)
+    assert got["set"] == {"at(c0_3)": {"old": 0.25, "new": 2.0}, "home(me)": {"old": 1.0, "new": 5.0},
+                          "was(c0_2)": {"old": 0.5, "new": 3.0}}
+    assert {r["episode"]: r["return"] for r in got["episodes"]} == pytest.approx(old)
+    assert {r["episode"]: r["rescored"] for r in got["episodes"]} == pytest.approx(new)
+    assert got["total"]["rescored"] == pytest.approx(sum(new.values()))
+    # every term occurred, so each --set mattered
+    assert {t for r in got["episodes"] for t in r["by_term"]} == {"home(me)", "dead(me)", "at(c0_3)", "was(c0_2)"}
+    notes = "\n".join(got["notes"])
+    assert "home(me) also ends an episode ([end] terminated, win)" in notes
+    assert "--set was(c0_2)=S sets the scale" in notes
+    assert "at(c0_3) also ends" not in notes
+
+
+def test_the_table_has_a_column_per_term_and_a_total(runs: tuple[Path, Path], capsys: pytest.CaptureFixture) -> None:
+    base, _ = runs
+    capsys.readouterr()
+    assert main(["rewards", str(base)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    # the spec's terms in its order (the table's keys, then the scaled atom)
+    assert lines[0].split() == ["episode", "agent", "home(me)", "dead(me)", "at(c0_3)", "was(c0_2)", "return"]
+    rows = {int(line.split()[0]): [float(x) for x in line.split()[2:]] for line in lines[1:-1]}
+    assert {e: r[-1] for e, r in rows.items()} == pytest.approx(returns(base))
+    assert all(sum(r[:-1]) == pytest.approx(r[-1]) for r in rows.values())
+    total = [float(x) for x in lines[-1].split()[1:]]
+    assert lines[-1].startswith("total") and total == pytest.approx([sum(c) for c in zip(*rows.values())])
+    capsys.readouterr()
+    assert main(["rewards", str(base), "--episode", "0"]) == 0
+    assert capsys.readouterr().out.splitlines()[1].split()[:2] == ["0", "me"]
+
+
+def one_error_line(capsys: pytest.CaptureFixture, argv: list[str]) -> str:
+    capsys.readouterr()
+    assert main(argv) == 1
+    out = capsys.readouterr()
+    assert out.out == "" and len(out.err.splitlines()) == 1, out
+    return out.err
+
+
+def test_an_unknown_term_is_one_line_with_a_did_you_mean(runs: tuple[Path, Path],
+                                                         capsys: pytest.CaptureFixture) -> None:
+    err = one_error_line(capsys, ["rewards", str(runs[0]), "--set", "home(m)=2"])
+    assert err.startswith("tracelab: error: --set: no reward term 'home(m)' in this run; did you mean home(me)")
+
+
+def test_a_run_written_before_reward_terms_says_it_has_none(capsys: pytest.CaptureFixture) -> None:
+    err = one_error_line(capsys, ["rewards", str(ROOT / "sample_runs" / "base"), "--set", "win=1"])
+    assert err.startswith("tracelab: error: the run records no reward terms")
+
+
+def test_rewards_loads_only_duckdb_pyarrow_and_numpy(runs: tuple[Path, Path]) -> None:
+    """A reading command (tests/test_reading_imports.py): the spec's values are read from the run's config
+    with tomllib and tracelab.expressions, not through the env package (which loads gymnasium)."""
+    argv = [["rewards", str(runs[0]), "--set", "was(c0_2)=2", "--set", "at(c0_3)=1"]]
+    out = subprocess.run([sys.executable, "-c", CHILD, json.dumps(HEAVY), json.dumps(argv)], cwd=ROOT,
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    (report,) = [json.loads(line) for line in out.stdout.splitlines()]
+    assert report["status"] == 0 and report["printed"], (report, out.stderr)
+    assert {"duckdb", "pyarrow"} <= set(report["loaded"]) <= ALLOWED, report["loaded"]
