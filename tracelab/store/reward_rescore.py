@@ -170,7 +170,10 @@ def parse_sets(sets: list[str], terms: list[Term]) -> dict[str, tuple[float, flo
 def rescore(con: RunConnection, sets: list[str], episode: int | None = None) -> Rescored:
     """Each episode's return by term and agent (every recorded episode, or `episode`), re-scored with
     `sets` (TERM=VALUE texts); KeyError when the run records no reward terms or no such episode."""
-    if not con.execute("SELECT EXISTS (SELECT 1 FROM raw.reward_terms)").fetchall()[0][0]:
+    # no term rows and a non-zero reward: a run written before terms were recorded (a run whose every
+    # reward is 0 has no term rows either: its returns are 0 by every term)
+    if not con.execute("SELECT EXISTS (SELECT 1 FROM raw.reward_terms)").fetchall()[0][0] and \
+            con.execute("SELECT EXISTS (SELECT 1 FROM raw.steps WHERE reward <> 0)").fetchall()[0][0]:
         raise KeyError(NO_TERMS)
     terms, notes = run_terms(con)
     changed = parse_sets(sets, terms)
@@ -178,7 +181,8 @@ def rescore(con: RunConnection, sets: list[str], episode: int | None = None) -> 
     returns = con.execute(f"SELECT episode, agent, sum(reward) FROM steps {where} GROUP BY ALL ORDER BY ALL",
                           params).fetchall()
     if not returns:
-        raise KeyError(f"episode {episode} has no steps in this run")
+        raise KeyError("the run records no steps (not a run of games)" if episode is None else
+                       f"episode {episode} has no steps in this run")
     by_term = con.execute(f"SELECT episode, agent, term, value FROM returns {where}", params).fetchall()
     values: dict[tuple[int, str], dict[str, float]] = {}
     for e, a, t, v in by_term:
