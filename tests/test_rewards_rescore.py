@@ -118,3 +118,17 @@ def test_rewards_loads_only_duckdb_pyarrow_and_numpy(runs: tuple[Path, Path]) ->
     (report,) = [json.loads(line) for line in out.stdout.splitlines()]
     assert report["status"] == 0 and report["printed"], (report, out.stderr)
     assert {"duckdb", "pyarrow"} <= set(report["loaded"]) <= ALLOWED, report["loaded"]
+
+
+def test_a_run_whose_rewards_are_all_zero_reads_as_zero_returns(tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture) -> None:
+    """No term rows and no non-zero reward is not an older run: FrozenLake's random games (ice and holes
+    pay 0). A term worth 0 in the run left no rows, so it cannot be re-scored from the record."""
+    run = tmp_path / "lake"
+    assert main(["play", "--env", "tracelab/FrozenLake-v1", "--episodes", "2", "--seed", "0", "--run", str(run)]) == 0
+    capsys.readouterr()
+    assert main(["rewards", str(run), "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    assert [(r["episode"], r["return"], r["by_term"]) for r in got["episodes"]] == [(0, 0.0, {}), (1, 0.0, {})]
+    err = one_error_line(capsys, ["rewards", str(run), "--set", "landed(hole)=-1"])
+    assert "landed(hole) is 0 in this run, so its occurrences were not recorded" in err
