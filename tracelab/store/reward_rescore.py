@@ -13,14 +13,13 @@ from typing import Any
 
 from tracelab.expressions import ExpressionError, evaluate
 from tracelab.errors import UserError, close_names
+from tracelab.game.scenario import Rewards
 from tracelab.store.kind import MAX_SPEC_TEXT, run_config, world_params
 from tracelab.store.reader import RunConnection
 
 # GridWar's terms as the store names them (envs/tracer.REWARD_TERMS) -> the scenario's [rewards] keys
 GRIDWAR_TERMS = {"win": "win", "loss": "loss", "hit": "hit_opponent", "got_shot": "got_shot",
                  "step": "valid_action", "unsafe": "unsafe", "invalid": "invalid"}
-GRIDWAR_DEFAULTS = {"win": 250.0, "loss": -250.0, "hit_opponent": 400.0, "got_shot": -200.0,
-                    "valid_action": -2.0, "unsafe": -200.0, "invalid": -10.0}  # game.scenario.Rewards'
 GRIDWAR_NOTES = {
     "unsafe": "an unsafe move is refused by the game whatever its reward (the agent stays), and a learner "
               "trained with --mask never chooses one: re-scoring changes the reward only",
@@ -116,7 +115,8 @@ def _gridwar_terms(config: dict[str, Any]) -> list[Term] | None:
     except (tomllib.TOMLDecodeError, RecursionError):
         return None
     given = given if isinstance(given, dict) else {}
-    return [Term(term, _number(given.get(key, GRIDWAR_DEFAULTS[key]), {}),
+    defaults = Rewards()  # a scenario's [rewards] key left out has the game's default
+    return [Term(term, _number(given.get(key, getattr(defaults, key)), {}),
                  notes=(f"{term}: {GRIDWAR_NOTES[term]}",) if term in GRIDWAR_NOTES else ())
             for term, key in GRIDWAR_TERMS.items()]
 
