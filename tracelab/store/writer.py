@@ -43,6 +43,7 @@ from tracelab.store.meta import (RunMeta, initial_meta, now_iso, open_writer_loc
 from tracelab.store.parts import TableParts, remove_unlisted, write_manifest
 from tracelab.store.stored import PROGRAM_TABLES, VOCABULARY_TABLES, StoredRun, stored_run
 from tracelab.store.schema import SCHEMAS, TABLES
+from tracelab.store.sources import sources_tables
 
 class RunSealed(ValueError):
     """Reopening a sealed run: its rows live in run.duckdb now, which takes no more."""
@@ -142,6 +143,7 @@ class TraceWriter:
         self._program_written = False
         self._action_names_written = False
         self._observation_names_written = False
+        self._sources_written = False
         self._open_episodes: set[int] = set()
         self.flushes = 0
         # A reopened run's program and vocabulary, to check a new engine's against (first call only)
@@ -205,6 +207,7 @@ class TraceWriter:
         self._program_written = stored.rows("policies") > 0  # every program writes the policy names
         self._action_names_written = stored.rows("action_names") > 0
         self._observation_names_written = stored.rows("observation_names") > 0
+        self._sources_written = stored.rows("sources") > 0
         self._open_episodes = set(stored.open_episodes)
         self.flushes = stored.flushes  # the manifest's count keeps growing: readers watch it
         self._stored_tables = stored.small_tables
@@ -398,6 +401,14 @@ class TraceWriter:
             return
         self._observation_names_written = True
         self._append({"observation_names": observation_names_table(names)})
+
+    def write_sources(self, rows: Sequence[Mapping[str, Any]]) -> None:
+        """The files the program was read from, with their texts (tracelab.store.sources.read_sources),
+        once; a reopened run keeps its own."""
+        if self._sources_written or not rows:
+            return
+        self._sources_written = True
+        self._append({"sources": pa.concat_tables(sources_tables(rows))})
 
     def write_metrics(self, step: int, values: Mapping[str, float], episode: int | None = None) -> None:
         """Training metrics at a global training step, one row per name."""
