@@ -112,14 +112,19 @@ def reopened_meta(doc: dict[str, Any], changes: dict[str, Any]) -> dict[str, Any
     return check_file(doc, META_SCHEMA, Path(layout.META))
 
 
-def write_meta(run_dir: Path, doc: dict[str, Any]) -> None:
-    """meta.json, atomically; refused (FileRefused, nothing written) past META_CAP."""
+def meta_bytes(run_dir: Path, doc: dict[str, Any]) -> bytes:
+    """meta.json's bytes; refused (FileRefused) past META_CAP."""
     data = json.dumps(doc, indent=2, sort_keys=True, default=str).encode()
     if len(data) > META_CAP:
         raise FileRefused(f"{layout.meta_path(run_dir)}: run metadata of {human_bytes(len(data))} is over "
                           f"the {human_bytes(META_CAP)} its readers accept; refused (a big text, such as "
                           f"a program's file, belongs in the run's parts)")
-    layout.replace_atomically(data, layout.meta_path(run_dir))
+    return data
+
+
+def write_meta(run_dir: Path, doc: dict[str, Any]) -> None:
+    """meta.json, atomically; refused (FileRefused, nothing written) past META_CAP."""
+    layout.replace_atomically(meta_bytes(run_dir, doc), layout.meta_path(run_dir))
 
 
 # What each key of meta.json must hold (every key optional: runs of earlier versions lack some). Checked

@@ -1,5 +1,6 @@
 """The files a run's program was read from (a spec, its rule files, a reasoning's fact files), kept in the
-run as the `sources` table: one row per file with its role, path, size, sha256 and text.
+run as the `sources` table: one row per file with its role, path, size, sha256 and text (and a text no
+file holds: a PyReason program's translation).
 
 The texts go in a part, not in meta.json: a rule file may be tens of MiB (engine.parser.RULE_FILE_CAP)
 while every reader of meta.json refuses more than META_CAP. meta.json keeps each source's summary
@@ -31,6 +32,12 @@ def read_sources(files: Iterable[tuple[str, str]]) -> list[dict[str, Any]]:
         rows.append({"role": role, "path": str(path), "bytes": len(data),
                      "sha256": hashlib.sha256(data).hexdigest(), "text": text})
     return rows
+
+
+def text_source(role: str, text: str) -> dict[str, Any]:
+    """A `sources` row of a text no file holds (a PyReason program's tracelab translation): no path."""
+    data = text.encode()
+    return {"role": role, "path": None, "bytes": len(data), "sha256": hashlib.sha256(data).hexdigest(), "text": text}
 
 
 def source_summaries(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:

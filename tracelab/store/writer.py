@@ -38,8 +38,8 @@ from tracelab.engine.errors import is_interrupt
 from tracelab.store import arrow_build, convert, layout
 from tracelab.store.agent_rows import ObservationName, action_names_table, observation_names_table
 from tracelab.store.graph_tables import edges_table
-from tracelab.store.meta import (RunMeta, initial_meta, now_iso, open_writer_lock, read_meta, reopened_meta,
-                                 write_meta)
+from tracelab.store.meta import (RunMeta, initial_meta, meta_bytes, now_iso, open_writer_lock, read_meta,
+                                 reopened_meta, write_meta)
 from tracelab.store.parts import TableParts, remove_unlisted, write_manifest
 from tracelab.store.stored import PROGRAM_TABLES, VOCABULARY_TABLES, StoredRun, stored_run
 from tracelab.store.schema import SCHEMAS, TABLES
@@ -111,6 +111,10 @@ class TraceWriter:
             raise FileNotFoundError(f"{str(self.run_dir)!r} is not a tracelab run: it has no {layout.META}")
         if flush_interval <= 0 or part_rows <= 0:
             raise ValueError(f"flush_interval ({flush_interval}) and part_rows ({part_rows}) must be > 0")
+        # a new run's metadata, refused before anything is created if its readers would refuse it
+        new_meta = initial_meta(self.run_dir, meta) if _reopen is None else {}
+        if _reopen is None:
+            meta_bytes(self.run_dir, new_meta)
         self.run_dir.mkdir(parents=True, exist_ok=True)
         self._lock_file = open_writer_lock(self.run_dir)
         try:
@@ -151,7 +155,7 @@ class TraceWriter:
         self.next_free_episode = 0  # one past the highest episode id the run held when opened
         if stored is None:
             write_manifest(self.run_dir, self._parts, 0)
-            self._meta = initial_meta(self.run_dir, meta)
+            self._meta = new_meta
         else:
             self._continue_counts(stored)
             self._meta = reopened_meta(read_meta(self.run_dir), _reopen)
