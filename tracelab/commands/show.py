@@ -31,7 +31,7 @@ def _json_field(text: str | None, default: Any) -> Any:
 def describe_run(con: Any) -> dict[str, Any]:
     """The run's metadata, program, scenario (or a spec world's params) and counts as plain data."""
     # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.kind import world_params
+    from tracelab.store.kind import spec_text, world_params
     rel = con.execute("SELECT * FROM run")
     names = [d[0] for d in rel.description]
     meta = dict(zip(names, rel.fetchall()[0]))
@@ -51,7 +51,7 @@ def describe_run(con: Any) -> dict[str, Any]:
     rules = [dict(zip(("name", "text", "file", "line"), r)) for r in
              con.execute("SELECT name, text, file, line FROM rules ORDER BY rule").fetchall()]
     config = meta["config"] if isinstance(meta["config"], dict) else {}
-    params = world_params(config)
+    params = world_params(config, spec_text(con, config))
     scenario_text = config.get("scenario") if isinstance(config.get("scenario"), str) and params is None else None
     sources = [dict(zip(("role", "path", "bytes", "sha256", "text"), r)) for r in con.execute(
         "SELECT role, path, bytes, sha256, text FROM raw.sources").fetchall()] or sources_in_config(config)
