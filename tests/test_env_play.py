@@ -88,7 +88,9 @@ def test_play_env_records_a_run_with_its_spec_and_says_what_to_open(tmp_path: Pa
     config = meta["config"]
     assert config["env_id"] == "tracelab/FrozenLake-v1" and config["env_args"] == {"map_name": "8x8",
                                                                                     "is_slippery": False}
-    assert "[board]" in config["spec"] and "land_goal" in "".join(config["rule_texts"].values())
+    # the program's files by path, size and hash; their texts in the run's `sources` table
+    assert [s["role"] for s in config["sources"]] == ["spec", "rules"] and "spec" not in config
+    assert config["sources"][1]["path"].endswith("frozen_lake.rules") and config["sources"][1]["bytes"] > 0
     assert config["declared_facts"] == {"actions": ["pressed"], "draws": {"start": ["at"], "slip": ["slip"]}}
     assert config["declared_board"]["rows"][0] == "SFFFFFFF"
     assert meta["rule_files"][0].endswith("frozen_lake.rules") if isinstance(meta["rule_files"][0], str) \
@@ -98,6 +100,8 @@ def test_play_env_records_a_run_with_its_spec_and_says_what_to_open(tmp_path: Pa
     assert "board     the spec's [board] (drawn by the TUI and the replay)" in shown and "\nspec      " in shown
     assert '  legend = { S = ["start", "ice"]' in shown and '"spec":' not in shown  # the spec in its section
     con = open_run(run)
+    texts = dict(con.execute("SELECT role, text FROM raw.sources").fetchall())
+    assert "[board]" in texts["spec"] and "land_goal" in texts["rules"]
     assert con.execute("SELECT count(*) FROM episodes WHERE ended").fetchone()[0] == 12
     # not slippery: every slip drawn is `straight`
     assert con.execute("SELECT DISTINCT atom FROM changes WHERE atom LIKE 'slip(%' AND new_lower = 1"

@@ -107,8 +107,9 @@ def test_reason_run_records_every_change_and_the_program_graph_and_command(
     command, config, board = rows(run, "SELECT command, config, board FROM run")[0]
     config = json.loads(config)
     assert "--run" in command and board is None and config["steps"] == 6
-    assert [s["role"] for s in config["sources"]] == ["rules", "graph"]
-    assert config["sources"][0]["text"] == RULES  # the program text itself
+    assert [s["role"] for s in config["sources"]] == ["rules", "graph"] and "text" not in config["sources"][0]
+    assert config["sources"][0]["bytes"] == len(RULES.encode())
+    assert rows(run, "SELECT role, text FROM raw.sources") == [("rules", RULES)]  # the program text itself
     # eve's infection at t=3 is the last change; two quiet steps (the spread's delay, plus one) converge
     assert rows(run, "SELECT episode, steps, t_end, outcome FROM episodes") == [(0, 6, 5, "converged")]
 
@@ -318,8 +319,10 @@ def test_a_pyreason_program_recorded_and_explained(tmp_path: Path, capsys: pytes
     assert code == 0 and "by rule_0 (Δt=1; X=Justin, Y=Mary, Z=Cat" in lines[0]
     assert "ok popular(Mary):[1,1] = [1,1]: set at t=1 pass 0 [0,1]->[1,1] by fact:popular_fact" in lines[1]
     config = json.loads(rows(tmp_path / "r", "SELECT config FROM run")[0][0])
-    assert config["dialect"] == "pyreason" and "rule_0: popular(X) <-1" in config["translation"]
-    assert config["sources"][0]["text"] == (PYREASON / "hello_rules.txt").read_text()
+    assert config["dialect"] == "pyreason" and "translation" not in config
+    texts = dict(rows(tmp_path / "r", "SELECT role, text FROM raw.sources"))
+    assert "rule_0: popular(X) <-1" in texts["translation"]
+    assert texts["rules"] == (PYREASON / "hello_rules.txt").read_text()
 
 
 # ---- the store without a game -----------------------------------------------------------------------

@@ -14,6 +14,7 @@ import pytest
 from store_helpers import TRACELAB, tampered_copy, write_walk_run
 
 from tracelab.cli import main
+from tracelab.store import TraceWriter
 from tracelab.store.seal import seal_run
 
 
@@ -288,3 +289,80 @@ def test_a_repair_that_cannot_write_leaves_the_run_as_it_was(walk: Path, tmp_pat
     assert main(["check", str(run)]) == 0
     capsys.readouterr()
     assert json_rows(["sql", str(run), "SELECT count(*) AS n FROM episodes"], capsys) == [{"n": 3}]
+
+
+# ---- 37.5: a run never writes what its own readers refuse; the program goes in as a part ------------------
+
+def test_a_spec_with_a_big_rule_file_makes_a_run_that_every_reader_reads(tmp_path: Path,
+                                                                          capsys: pytest.CaptureFixture) -> None:
+    """FrozenLake's spec with 20 MiB of comments in its rule file (under the rule-file cap and the parse
+    memory's estimate, over what meta.json's readers accept): the texts go in the run's `sources` table,
+    meta.json stays a few KB, and `show`, `sql` and `runs` read the run, live and sealed."""
+    from tracelab.engine.safe_files import JSON_CAP
+    from tracelab.envs.declared.toytext import spec_path
+    world = tmp_path / "world"
+    world.mkdir()
+    shutil.copy(spec_path("frozen_lake.toml"), world)
+    rules = spec_path("frozen_lake.toml").with_name("frozen_lake.rules").read_text()
+    (world / "frozen_lake.rules").write_text(rules + ("# " + "x" * 1021 + "\n") * (20 << 10))
+    size = (world / "frozen_lake.rules").stat().st_size
+    assert size > JSON_CAP  # on main, the text landed in meta.json, which every reader then refused
+    run = tmp_path / "runs" / "big"
+    assert main(["play", "--env", str(world / "frozen_lake.toml"), "--episodes", "2", "--seed", "1",
+                 "--run", str(run)]) == 0
+    capsys.readouterr()
+    assert (run / "meta.json").stat().st_size < 16 << 10
+    config = json.loads((run / "meta.json").read_text())["config"]
+    assert config["sources"][1]["bytes"] == size and len(config["sources"][1]["sha256"]) == 64
+    for sealed in (False, True):
+        if sealed:
+            seal_run(run)
+        assert main(["show", str(run)]) == 0
+        shown = capsys.readouterr().out
+        assert f"\nspec      {world / 'frozen_lake.toml'}\n" in shown and 'rules = ["frozen_lake.rules"]' in shown
+        assert "xxxx" not in shown  # the rule file's text is not printed (`sql` reads it)
+        assert json_rows(["sql", str(run), "SELECT role, bytes, length(text) AS n, text LIKE '%frozen%' AS ours "
+                          "FROM raw.sources"], capsys) == [
+            {"role": "spec", "bytes": (world / "frozen_lake.toml").stat().st_size,
+             "n": len((world / "frozen_lake.toml").read_text()), "ours": True},
+            {"role": "rules", "bytes": size, "n": size, "ours": True}]
+        listed = json_rows(["runs", str(tmp_path / "runs")], capsys)
+        assert [(r["name"], r["status"], r["episodes"]) for r in listed] == [("big", "finished", 2)]
+
+
+@pytest.mark.parametrize("sealed", [False, True], ids=["live", "sealed"])
+def test_an_older_run_with_its_program_in_meta_json_still_shows_it(tmp_path: Path, sealed: bool,
+                                                                   capsys: pytest.CaptureFixture) -> None:
+    """A run written before the `sources` table: its spec's and rule files' texts in meta.json's config
+    (`spec`, `rule_texts`), no `sources` in its manifest or sealed file. `show` prints its spec."""
+    run = tmp_path / "old"
+    spec = '[env]\nrules = ["old.rules"]\n\n[board]\nrows = ["S.G"]\n'
+    with TraceWriter(run, {"command": "tracelab play --env old.toml", "config": {
+            "spec": spec, "rule_texts": {"old.rules": "a: b(x) <-1 c(x)\n"}, "spec_path": "old.toml",
+            "declared_facts": {"actions": ["pressed"], "draws": {}}}}):
+        pass
+    manifest = json.loads((run / "parts" / "manifest.json").read_text())
+    del manifest["tables"]["sources"]
+    (run / "parts" / "manifest.json").write_text(json.dumps(manifest))
+    shutil.rmtree(run / "parts" / "sources", ignore_errors=True)
+    if sealed:
+        seal_run(run)
+        run = tampered_copy(run, tmp_path / "old-sealed", "DROP TABLE raw.sources")
+    assert main(["show", str(run)]) == 0
+    shown = capsys.readouterr().out
+    assert "\nspec      old.toml\n  [env]\n  rules = [\"old.rules\"]\n" in shown and '  rows = ["S.G"]' in shown
+    assert json_rows(["sql", str(run), "SELECT count(*) AS n FROM raw.sources"], capsys) == [{"n": 0}]
+
+
+def test_a_run_whose_meta_json_its_readers_would_refuse_is_never_written(tmp_path: Path) -> None:
+    """meta.json is written only as big as read_meta accepts (META_CAP): past it the writer refuses with
+    one line, before it creates anything."""
+    from tracelab.engine.safe_files import FileRefused
+    from tracelab.store.meta import META_CAP
+    run = tmp_path / "run"
+    with pytest.raises(FileRefused, match=r"meta.json: run metadata of 8.* is over the 8 MiB its readers accept"):
+        TraceWriter(run, {"config": {"note": "x" * META_CAP}})
+    assert not run.exists()
+    with TraceWriter(run, {"config": {"note": "x" * (META_CAP - 4096)}}):  # just under: written and read
+        pass
+    assert main(["show", str(run)]) == 0

@@ -23,10 +23,6 @@ from typing import Any
 import numpy as np
 
 from tracelab.engine.errors import is_interrupt
-from tracelab.engine.safe_files import FileRefused, read_text
-
-# the program text a run keeps of each rule and fact file (a bigger file is kept by path and hash only)
-SOURCE_TEXT_CAP = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -209,24 +205,42 @@ def _last_fact_start(program: Any, graph: Any) -> int:
 
 # ---- what a run records of the reasoning -------------------------------------------------------------
 
-def run_meta(inputs: ReasoningInputs, command: str, settings: dict[str, Any]) -> dict[str, Any]:
+def run_meta(inputs: ReasoningInputs, command: str, settings: dict[str, Any],
+             sources: Sequence[dict[str, Any]] = ()) -> dict[str, Any]:
     """The run's metadata (tracelab.store.RunMeta fields): the command, the settings, the program's
-    files (hashed by the writer) and their text, the graph and fact tables by path and size. No board:
-    a reasoning run's episodes are a trace, not games."""
-    sources = []
-    for s in inputs.sources:
-        entry: dict[str, Any] = {"role": s.role, "path": s.path, "bytes": _size(s.path)}
-        if s.role in ("rules", "facts"):
-            entry["text"] = _text(s.path)
-        sources.append(entry)
-    config = {**settings, "dialect": inputs.dialect, "sources": sources}
-    if inputs.translation is not None:
-        config["translation"] = inputs.translation
+    files and a PyReason program's translation (`sources`: their run_sources rows, by path, size and hash;
+    their texts go in the run's `sources` table), the graph and fact tables by path and size. No board: a
+    reasoning run's episodes are a trace, not games."""
+    # deferred: tracelab.store loads pyarrow, which a printed reasoning does not need
+    from tracelab.store.sources import source_summaries
+    read = {(r["role"], r["path"]): r for r in source_summaries(sources)}
+    listed = [read.pop((s.role, s.path), None) or {"role": s.role, "path": s.path, "bytes": _size(s.path)}
+              for s in inputs.sources]
+    config = {**settings, "dialect": inputs.dialect, "sources": [*listed, *read.values()]}  # then the translation
     if inputs.graph is not None:
         config["graph"] = {"nodes": len(inputs.graph.nodes), "edges": int(len(inputs.graph.edges)),
                            "facts": int(inputs.graph.n_facts), "graphml_facts": inputs.graph_facts}
     return {"command": command, "config": config,
             "rule_files": [s.path for s in inputs.sources if s.role in ("rules", "facts")]}
+
+
+def run_sources(inputs: ReasoningInputs) -> list[dict[str, Any]]:
+    """The run's `sources` rows (tracelab.store.sources): each rule and fact file with its text, then the
+    tracelab program a PyReason program became (role `translation`, no path)."""
+    # deferred: tracelab.store loads pyarrow, which a printed reasoning does not need
+    from tracelab.store.sources import read_sources, text_source
+    rows = read_sources((s.role, s.path) for s in inputs.sources if s.role in ("rules", "facts"))
+    return rows if inputs.translation is None else [*rows, text_source("translation", inputs.translation)]
+
+
+def open_reasoning_run(run_dir: Path, inputs: ReasoningInputs, command: str, settings: dict[str, Any]) -> Any:
+    """A new run of the store (a TraceWriter) for a reasoning: its metadata (run_meta) and its sources."""
+    # deferred: tracelab.store loads pyarrow, which a printed reasoning does not need
+    from tracelab.store import TraceWriter
+    sources = run_sources(inputs)
+    writer = TraceWriter.open(run_dir, run_meta(inputs, command, settings, sources))
+    writer.write_sources(sources)
+    return writer
 
 
 def _size(path: str) -> int | None:
@@ -236,9 +250,3 @@ def _size(path: str) -> int | None:
         return None
 
 
-def _text(path: str) -> str | None:
-    """A rule or fact file's text, if it is UTF-8 and at most SOURCE_TEXT_CAP bytes."""
-    try:
-        return read_text(Path(path), SOURCE_TEXT_CAP, what="program file")
-    except (OSError, FileRefused):
-        return None

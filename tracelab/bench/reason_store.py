@@ -29,8 +29,7 @@ from typing import Any
 from tracelab.bench.biggraph import OUT_DEGREE, SPREAD_RULE, STEPS, write_graph
 from tracelab.bench.common import format_table, high_water_bytes, machine_info, rss_bytes, summarize
 from tracelab.engine.memory import BIG_WORK, release_freed_memory
-from tracelab.reasoning import EpisodeRun, load_inputs, plan_episodes, run_meta
-from tracelab.store import TraceWriter
+from tracelab.reasoning import EpisodeRun, load_inputs, open_reasoning_run, plan_episodes
 from tracelab.store.reasoning import ReasoningRecorder
 
 NODES, QUICK_NODES = 200_000, 20_000
@@ -74,7 +73,7 @@ def reason_once(rules: Path, graph: Path, run_dir: Path | None) -> dict[str, Any
         plan = plan_episodes(inputs)[0]
         writer = recorder = None
         if run_dir is not None:
-            writer = TraceWriter.open(run_dir, run_meta(inputs, "tracelab bench reason-store", {"steps": STEPS}))
+            writer = open_reasoning_run(run_dir, inputs, "tracelab bench reason-store", {"steps": STEPS})
             recorder = ReasoningRecorder(writer)
         episode = EpisodeRun(inputs, plan, trace=False, recorder=recorder)
         for _ in episode.steps(STEPS):

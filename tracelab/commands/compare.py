@@ -74,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
 def read_training_run(path: str) -> TrainingRun:
     """A training run's status, config and final metrics; a UserError (one line) for a run that is not one."""
     # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.kind import world_params
+    from tracelab.store.kind import spec_text, world_params
     from tracelab.store.reader import open_run, query_readonly, retrying
     con = open_run(path)
     try:
@@ -82,6 +82,8 @@ def read_training_run(path: str) -> TrainingRun:
             return retrying(lambda: query_readonly(con, sql).fetchall())
 
         status, config_text, board, command = rows("SELECT status, config, board, command FROM run")[0]
+        config = _json_object(config_text)
+        spec = retrying(lambda: spec_text(con, config))
         (names,) = rows("SELECT count(DISTINCT name) FROM metrics")[0]
         if not names:
             raise UserError(f"{without_metrics(path, board, command)}: compare puts training runs side by side; "
@@ -98,8 +100,7 @@ def read_training_run(path: str) -> TrainingRun:
         con.close()
     best_of = {name: (value, step) for name, step, value in best}
     metrics = {name: (step, value, best_of.get(name) if name in BEST_OF else None) for name, step, value in last}
-    config = _json_object(config_text)
-    params = world_params(config)
+    params = world_params(config, spec)
     if params is not None:  # a spec world's: its texts are not settings, its params are listed as such
         config = {k: v for k, v in config.items() if k not in OWN_SECTIONS and k != "env"}
     return TrainingRun(path, str(status), flat_config(config), max(step for step, _, _ in metrics.values()),

@@ -74,8 +74,9 @@ def _record(source: Any, spec: Any, args: argparse.Namespace) -> int:
 
 
 def run_meta(source: Any, spec: Any, args: argparse.Namespace) -> dict[str, Any]:
-    """The run's metadata: the command, the env (id or file, its arguments, the spec's text and the
-    rule files'), what sets each external fact (recording.declared_facts), the board's rows."""
+    """The run's metadata: the command, the env (id or file, its arguments, the spec and the rule files by
+    path, size and hash: their texts go in the run's `sources` table), what sets each external fact
+    (recording.declared_facts), the board's rows."""
     # deferred: loads DuckDB, gymnasium, numba; every command is imported to build the CLI's parser
     from tracelab.envs.declared.recording import declared_run_config
 

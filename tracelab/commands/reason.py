@@ -20,7 +20,7 @@ from tracelab.commands._recording import read_for_hints
 from tracelab.engine.errors import is_interrupt
 from tracelab.engine.program import constant_text
 from tracelab.errors import UserError, store_errors
-from tracelab.reasoning import EpisodeRun, load_inputs, plan_episodes, run_meta
+from tracelab.reasoning import EpisodeRun, load_inputs, open_reasoning_run, plan_episodes
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -100,15 +100,14 @@ def run(args: argparse.Namespace) -> int:
 def _record(args: argparse.Namespace, inputs: Any, plans: list[Any]) -> int:
     """The reasoning into a new run of the store (tracelab.store.reasoning): the trace goes there."""
     # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store import TraceWriter
     from tracelab.store.reasoning import ReasoningRecorder
 
     run_dir = Path(args.run)
     settings = {"steps": args.steps, "repeat": args.repeat, "kernel": args.kernel, "persistent": args.persistent}
-    meta = run_meta(inputs, " ".join(shlex.quote(a) for a in ["tracelab", *args.argv]), settings)
+    command = " ".join(shlex.quote(a) for a in ["tracelab", *args.argv])
     try:
         with store_errors():  # another process took the directory since the check: a RuntimeError
-            writer = TraceWriter.open(run_dir, meta)
+            writer = open_reasoning_run(run_dir, inputs, command, settings)
     except OSError as e:
         raise UserError(f"cannot create the run directory {run_dir}: {e.strerror or e}") from e
     recorder = ReasoningRecorder(writer, episodes=len(plans))

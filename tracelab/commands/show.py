@@ -9,6 +9,7 @@ from typing import Any
 from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.errors import store_errors
 
+DECLARED_FACTS = "declared_facts"  # a spec world's config entry (tracelab.envs.declared.recording.CONFIG_KEY)
 RULES_SHOWN = 40  # the rest: `tracelab sql RUN "SELECT * FROM rules"`
 
 
@@ -30,7 +31,7 @@ def _json_field(text: str | None, default: Any) -> Any:
 def describe_run(con: Any) -> dict[str, Any]:
     """The run's metadata, program, scenario (or a spec world's params) and counts as plain data."""
     # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.kind import world_params
+    from tracelab.store.kind import spec_text, world_params
     rel = con.execute("SELECT * FROM run")
     names = [d[0] for d in rel.description]
     meta = dict(zip(names, rel.fetchall()[0]))
@@ -50,14 +51,27 @@ def describe_run(con: Any) -> dict[str, Any]:
     rules = [dict(zip(("name", "text", "file", "line"), r)) for r in
              con.execute("SELECT name, text, file, line FROM rules ORDER BY rule").fetchall()]
     config = meta["config"] if isinstance(meta["config"], dict) else {}
-    params = world_params(config)
+    params = world_params(config, spec_text(con, config))
     scenario_text = config.get("scenario") if isinstance(config.get("scenario"), str) and params is None else None
+    sources = [dict(zip(("role", "path", "bytes", "sha256", "text"), r)) for r in con.execute(
+        "SELECT role, path, bytes, sha256, text FROM raw.sources").fetchall()] or sources_in_config(config)
     graph = dict(zip(("nodes", "edges"), con.execute(
         "SELECT (SELECT count(*) FROM raw.nodes), (SELECT count(*) FROM raw.edges)").fetchall()[0]))
     return {"run": meta, "episodes": {"total": sum(outcomes.values()), "by_outcome": outcomes},
             "counts": counts, "rules": rules, "params": params,
             "scenario": {"name": meta.get("scenario") if params is None else None, "definition": scenario_text},
-            "board": meta.get("board"), "graph": graph}
+            "board": meta.get("board"), "graph": graph, "sources": sources}
+
+
+def sources_in_config(config: dict[str, Any]) -> list[dict[str, Any]]:
+    """The program's files of a run written before the `sources` table: their texts were in meta.json's
+    config (a spec world's `spec` and `rule_texts`)."""
+    texts = config.get("rule_texts")
+    rows = [{"role": "spec", "path": config.get("spec_path"), "text": config["spec"]}] \
+        if isinstance(config.get("spec"), str) else []
+    if isinstance(texts, dict):
+        rows += [{"role": "rules", "path": path, "text": text} for path, text in texts.items() if isinstance(text, str)]
+    return rows
 
 
 # config entries shown in sections of their own (or as a spec world's params), not on the config line
@@ -73,7 +87,9 @@ def render(doc: dict[str, Any], all_rules: bool = False) -> str:
              f"  seed      {meta['seed']}   host {meta['host']}   pid {meta['pid']}",
              "  versions  " + ", ".join(f"{k} {v}" for k, v in sorted(meta["versions"].items()))]
     config = meta["config"] if isinstance(meta["config"], dict) else {}
-    declared = isinstance(config.get("spec"), str)  # tracelab play --env: a world declared in rules
+    # tracelab play --env: a world declared in rules (its spec's text in `sources`, in an older run the config)
+    spec = next((s for s in doc["sources"] if s["role"] == "spec"), None)
+    declared = spec is not None or DECLARED_FACTS in config
     lines.append(f"  board     {doc['board']}" if doc["board"] else
                  ("  board     the spec's [board] (drawn by the TUI and the replay)" if config.get("declared_board")
                   else "  board     none: a spec world without a [board]") if declared
@@ -105,7 +121,7 @@ def render(doc: dict[str, Any], all_rules: bool = False) -> str:
     if declared:
         env = config.get("env")
         lines += ["", f"spec      {config.get('spec_path') or (env.get('name') if isinstance(env, dict) else env)}"]
-        lines += ["  " + ln for ln in config["spec"].rstrip().splitlines()]
+        lines += ["  " + ln for ln in (spec and spec["text"] or "").rstrip().splitlines()]
     rules = doc["rules"]
     shown = rules if all_rules else rules[:RULES_SHOWN]
     lines += ["", f"program   {len(rules)} rules, {counts['facts']} facts"]

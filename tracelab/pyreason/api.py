@@ -461,15 +461,14 @@ class _Reasoning:
         """The run's writer and recorder when settings.tracelab_run names a directory, else (None, None)."""
         if settings.tracelab_run is None:
             return None, None
-        from tracelab.reasoning import run_meta
-        from tracelab.store import TraceWriter
+        from tracelab.reasoning import open_reasoning_run
         from tracelab.store.layout import check_new_run_dir
         from tracelab.store.reasoning import ReasoningRecorder
         run_dir = Path(settings.tracelab_run)
         check_new_run_dir(run_dir, "pr.settings.tracelab_run")
-        meta = run_meta(self.inputs, f"tracelab.pyreason.reason(timesteps={timesteps})",
-                        {"steps": timesteps + 1 if timesteps >= 0 else None, "pyreason_settings": settings_dict(settings)})
-        writer = TraceWriter.open(run_dir, meta)
+        writer = open_reasoning_run(run_dir, self.inputs, f"tracelab.pyreason.reason(timesteps={timesteps})",
+                                    {"steps": timesteps + 1 if timesteps >= 0 else None,
+                                     "pyreason_settings": settings_dict(settings)})
         return writer, ReasoningRecorder(writer)
 
 

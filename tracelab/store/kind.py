@@ -49,11 +49,19 @@ def run_config(con: RunConnection) -> dict[str, Any]:
 MAX_SPEC_TEXT = 1 << 20  # a spec file's own limit
 
 
-def world_params(config: dict[str, Any]) -> dict[str, Any] | None:
-    """A spec world's run's params (the spec's `[params]` with the run's keyword arguments over them: `play
-    --env`'s `env_args`, `train --env`'s `env.kwargs`), or None for a run of no spec world. The spec's
-    text is a stranger's: read with tomllib only, at most MAX_SPEC_TEXT characters."""
-    text = config.get("spec")
+def spec_text(con: RunConnection, config: dict[str, Any]) -> str | None:
+    """A spec world's run's spec text: its `sources` row (role `spec`), or in a run written before that
+    table, its config's `spec`; None for a run of no spec world, or a spec past MAX_SPEC_TEXT bytes."""
+    rows = con.execute("SELECT text FROM raw.sources WHERE role = 'spec' AND bytes <= ? LIMIT 1",
+                       [MAX_SPEC_TEXT]).fetchall()
+    text = rows[0][0] if rows else config.get("spec")
+    return text if isinstance(text, str) and len(text) <= MAX_SPEC_TEXT else None
+
+
+def world_params(config: dict[str, Any], text: str | None) -> dict[str, Any] | None:
+    """A spec world's run's params (the `[params]` of its spec's `text`, spec_text, with the run's keyword
+    arguments over them: `play --env`'s `env_args`, `train --env`'s `env.kwargs`), or None for a run of no
+    spec world. The spec's text is a stranger's: read with tomllib only, at most MAX_SPEC_TEXT characters."""
     if not isinstance(text, str) or len(text) > MAX_SPEC_TEXT:
         return None
     try:

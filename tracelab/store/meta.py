@@ -22,7 +22,7 @@ import numpy as np
 import pyarrow as pa
 
 import tracelab
-from tracelab.engine.safe_files import open_regular, read_json
+from tracelab.engine.safe_files import JSON_CAP, FileRefused, human_bytes, open_regular, read_json
 from tracelab.store import layout
 from tracelab.store.arrow_build import table_from_rows
 from tracelab.store.schema import BOARD_BEFORE_DECLARED
@@ -31,6 +31,10 @@ from tracelab.validation import (INT64, Const, IsoTime, ListOf, MapOf, Nullable,
 
 FORMAT = "tracelab-run/1"
 STATUSES = ("running", "finished", "failed", "interrupted", "crashed")
+# The most meta.json may hold: what its readers accept (read_meta) is what its writer may write, so a run
+# never holds a meta.json that its own readers refuse. Big texts (a program's files) go in parts instead
+# (tracelab.store.sources).
+META_CAP = JSON_CAP
 
 
 @dataclass
@@ -108,9 +112,19 @@ def reopened_meta(doc: dict[str, Any], changes: dict[str, Any]) -> dict[str, Any
     return check_file(doc, META_SCHEMA, Path(layout.META))
 
 
-def write_meta(run_dir: Path, doc: dict[str, Any]) -> None:
+def meta_bytes(run_dir: Path, doc: dict[str, Any]) -> bytes:
+    """meta.json's bytes; refused (FileRefused) past META_CAP."""
     data = json.dumps(doc, indent=2, sort_keys=True, default=str).encode()
-    layout.replace_atomically(data, layout.meta_path(run_dir))
+    if len(data) > META_CAP:
+        raise FileRefused(f"{layout.meta_path(run_dir)}: run metadata of {human_bytes(len(data))} is over "
+                          f"the {human_bytes(META_CAP)} its readers accept; refused (a big text, such as "
+                          f"a program's file, belongs in the run's parts)")
+    return data
+
+
+def write_meta(run_dir: Path, doc: dict[str, Any]) -> None:
+    """meta.json, atomically; refused (FileRefused, nothing written) past META_CAP."""
+    layout.replace_atomically(meta_bytes(run_dir, doc), layout.meta_path(run_dir))
 
 
 # What each key of meta.json must hold (every key optional: runs of earlier versions lack some). Checked
@@ -141,7 +155,7 @@ META_SCHEMA: dict[str, Any] = {key: OptionalKey(spec) for key, spec in {
 def read_meta(run_dir: Path) -> dict[str, Any]:
     path = layout.meta_path(run_dir)
     try:
-        doc = read_json(path, what="run's meta.json", follow_symlinks=False)
+        doc = read_json(path, META_CAP, what="run's meta.json", follow_symlinks=False)
     except FileNotFoundError:
         raise FileNotFoundError(f"{str(run_dir)!r} is not a tracelab run: it has no {layout.META}") from None
     return check_file(doc, META_SCHEMA, path)

@@ -43,6 +43,10 @@ SCHEMAS: dict[str, pa.Schema] = {
                         ("literal", pa.string()), ("start", pa.int32()), ("end", pa.int32()),
                         ("static", pa.bool_()), ("file", pa.string()), ("line", pa.int32()),
                         ("episode", pa.int64())]),  # the one episode the fact belongs to, NULL: every one
+    # The files the run's program was read from (a spec, its rule files), with their texts: in a part,
+    # not in meta.json, whose readers refuse more than a few MiB (tracelab.store.sources).
+    "sources": pa.schema([("role", pa.string()), ("path", pa.string()), ("bytes", pa.int64()),
+                          ("sha256", pa.string()), ("text", pa.string())]),
     "policies": pa.schema([("code", pa.int32()), ("name", pa.string())]),
     "groundings": pa.schema([("grounding", pa.int32()), ("rule", pa.int32()),
                              ("body_atoms", _INT_LIST), ("var_values", _INT_LIST)]),
@@ -90,7 +94,8 @@ ADDED_COLUMNS: dict[str, dict[str, str]] = {"clauses": {"closed": "false"},
                                             "run": {"board": f"'{BOARD_BEFORE_DECLARED}'"},
                                             "facts": {"episode": "CAST(NULL AS BIGINT)"}}
 # Tables added after the first release: a run written before has none and reads it as empty (EMPTY_SQL).
-ADDED_TABLES: tuple[str, ...] = ("edges", "action_names", "observation_names", "decisions", "reward_terms")
+ADDED_TABLES: tuple[str, ...] = ("edges", "action_names", "observation_names", "decisions", "reward_terms",
+                                  "sources")
 _DUCKDB_TYPES = {pa.int32(): "INTEGER", pa.int64(): "BIGINT", pa.string(): "VARCHAR", pa.float64(): "DOUBLE",
                  pa.bool_(): "BOOLEAN", pa.list_(pa.float32()): "FLOAT[]", pa.list_(pa.bool_()): "BOOLEAN[]",
                  _STR_LIST: "VARCHAR[]"}
@@ -116,7 +121,7 @@ DICTIONARY_COLUMNS: dict[str, list[str]] = {
     "changes": ["episode", "world", "t", "pass_no", "old_lower", "old_upper", "new_lower", "new_upper",
                 "cause_kind", "cause_id", "n_sources"],
     "facts": ["start", "end", "static", "file", "line", "episode"],
-    "atoms": ["label"], "groundings": ["rule"], "edges": [], "nodes": [],
+    "atoms": ["label"], "groundings": ["rule"], "edges": [], "nodes": [], "sources": ["role"],
     "decisions": ["episode", "agent", "output", "explored", "epsilon"],
     "reward_terms": ["episode", "agent", "term", "value"],
 }

@@ -38,11 +38,12 @@ from tracelab.engine.errors import is_interrupt
 from tracelab.store import arrow_build, convert, layout
 from tracelab.store.agent_rows import ObservationName, action_names_table, observation_names_table
 from tracelab.store.graph_tables import edges_table
-from tracelab.store.meta import (RunMeta, initial_meta, now_iso, open_writer_lock, read_meta, reopened_meta,
-                                 write_meta)
+from tracelab.store.meta import (RunMeta, initial_meta, meta_bytes, now_iso, open_writer_lock, read_meta,
+                                 reopened_meta, write_meta)
 from tracelab.store.parts import TableParts, remove_unlisted, write_manifest
 from tracelab.store.stored import PROGRAM_TABLES, VOCABULARY_TABLES, StoredRun, stored_run
 from tracelab.store.schema import SCHEMAS, TABLES
+from tracelab.store.sources import sources_tables
 
 class RunSealed(ValueError):
     """Reopening a sealed run: its rows live in run.duckdb now, which takes no more."""
@@ -110,6 +111,10 @@ class TraceWriter:
             raise FileNotFoundError(f"{str(self.run_dir)!r} is not a tracelab run: it has no {layout.META}")
         if flush_interval <= 0 or part_rows <= 0:
             raise ValueError(f"flush_interval ({flush_interval}) and part_rows ({part_rows}) must be > 0")
+        # a new run's metadata, refused before anything is created if its readers would refuse it
+        new_meta = initial_meta(self.run_dir, meta) if _reopen is None else {}
+        if _reopen is None:
+            meta_bytes(self.run_dir, new_meta)
         self.run_dir.mkdir(parents=True, exist_ok=True)
         self._lock_file = open_writer_lock(self.run_dir)
         try:
@@ -142,6 +147,7 @@ class TraceWriter:
         self._program_written = False
         self._action_names_written = False
         self._observation_names_written = False
+        self._sources_written = False
         self._open_episodes: set[int] = set()
         self.flushes = 0
         # A reopened run's program and vocabulary, to check a new engine's against (first call only)
@@ -149,7 +155,7 @@ class TraceWriter:
         self.next_free_episode = 0  # one past the highest episode id the run held when opened
         if stored is None:
             write_manifest(self.run_dir, self._parts, 0)
-            self._meta = initial_meta(self.run_dir, meta)
+            self._meta = new_meta
         else:
             self._continue_counts(stored)
             self._meta = reopened_meta(read_meta(self.run_dir), _reopen)
@@ -205,6 +211,7 @@ class TraceWriter:
         self._program_written = stored.rows("policies") > 0  # every program writes the policy names
         self._action_names_written = stored.rows("action_names") > 0
         self._observation_names_written = stored.rows("observation_names") > 0
+        self._sources_written = stored.rows("sources") > 0
         self._open_episodes = set(stored.open_episodes)
         self.flushes = stored.flushes  # the manifest's count keeps growing: readers watch it
         self._stored_tables = stored.small_tables
@@ -398,6 +405,14 @@ class TraceWriter:
             return
         self._observation_names_written = True
         self._append({"observation_names": observation_names_table(names)})
+
+    def write_sources(self, rows: Sequence[Mapping[str, Any]]) -> None:
+        """The files the program was read from, with their texts (tracelab.store.sources.read_sources),
+        once; a reopened run keeps its own."""
+        if self._sources_written or not rows:
+            return
+        self._sources_written = True
+        self._append({"sources": pa.concat_tables(sources_tables(rows))})
 
     def write_metrics(self, step: int, values: Mapping[str, float], episode: int | None = None) -> None:
         """Training metrics at a global training step, one row per name."""

@@ -232,8 +232,8 @@ def env_run_meta(cfg: TrainConfig, source: EnvSource, command: str,
                  resumed_from: dict[str, Any] | None = None) -> dict[str, Any]:
     """The meta of a run that trains on `source` (`train --env`, a sweep's trial): the env and the
     training's settings; for a declared world whose evaluations are traced, what `why`, `tui` and
-    `replay` read of it (its rule files, its spec's and rules' texts, what sets each external fact, its
-    board: DeclaredTarget's)."""
+    `replay` read of it (its rule files, its spec and rules by path, size and hash, what sets each external
+    fact, its board: DeclaredTarget's; the texts go in the run's `sources` table with its traced games)."""
     # deferred: loads the engine (numba), which a gymnasium id's training does not need
     from tracelab.envs.declared.play import load_declared
     from tracelab.errors import UserError

@@ -22,7 +22,6 @@ that late at most, plus the writer's own delay. Outcomes:
 from __future__ import annotations
 
 import time
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -34,6 +33,7 @@ from tracelab.envs.tracer import HANDOVER_ROWS, HANDOVER_STEPS
 from tracelab.store.agent_rows import AgentRows, Decisions, ObservationName, PolicyOutput, RewardTerms
 from tracelab.store.convert import utc_now
 from tracelab.store.sink import WRITE_INTERVAL_S, WRITE_ROWS
+from tracelab.store.sources import read_sources, source_summaries
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Mapping
@@ -52,11 +52,16 @@ def declared_facts(spec: WorldSpec) -> dict[str, Any]:
     return {"actions": actions, "draws": draws}
 
 
+def spec_sources(spec: WorldSpec) -> list[dict[str, Any]]:
+    """The run's `sources` rows of a declared world (tracelab.store.sources): the spec, then each rule file."""
+    return read_sources([("spec", str(spec.path)), *(("rules", str(f)) for f in spec.program.files)])
+
+
 def declared_run_config(spec: WorldSpec) -> dict[str, Any]:
     """What a run of a declared world's games records of it in its config, for its readers: the spec's
-    and the rule files' texts, what sets each external fact (CONFIG_KEY), the board the viewers draw."""
-    return {"spec": Path(spec.path).read_text(), "rule_texts": {f: Path(f).read_text() for f in spec.program.files},
-            CONFIG_KEY: declared_facts(spec),
+    and the rule files' paths, sizes and hashes (their texts go in the run's `sources` table, written by
+    DeclaredRecorder), what sets each external fact (CONFIG_KEY), the board the viewers draw."""
+    return {"sources": source_summaries(spec_sources(spec)), CONFIG_KEY: declared_facts(spec),
             RUN_CONFIG_KEY: None if spec.board is None else board_config(spec.board)}
 
 
@@ -121,6 +126,7 @@ class DeclaredRecorder:
         self.writer = writer
         self.agents = list(world.spec.agents)
         writer.write_engine_program(eng)
+        writer.write_sources(spec_sources(world.spec))
         writer.write_action_names(world.spec.action_names)
         writer.write_observation_names(observation_names(world.spec))
         world.keep_reward_terms = True
