@@ -146,3 +146,14 @@ def test_back_pressure_flushes_at_max_pending_rows_without_waiting_for_the_inter
     writer.close()
     assert not alive, "a caller at max_pending_rows waited for flush_interval"
     assert writer.stats()["rows"]["steps"] == 3_000
+
+
+def test_coded_strings_and_lists_with_nulls_are_the_converters() -> None:
+    names = ["up", "down", "ä-left", "", "shoot"]
+    codes = np.random.default_rng(0).integers(0, len(names), 1000)
+    assert ab.coded_strings(codes, names).equals(pa.array([names[c] for c in codes]))
+    assert ab.coded_strings(np.array([], np.int64), names).equals(pa.array([], pa.string()))
+    rows = [["a", "b"], None, [], ["c"]]
+    built = ab.list_array(np.array([0, 2, 2, 2, 3]), ab.strings(["a", "b", "c"]),
+                          null=np.array([r is None for r in rows]))
+    assert built.equals(pa.array(rows, pa.list_(pa.string())))

@@ -47,9 +47,8 @@ class PolicyOutput:
 
 
 def coded_strings(codes: np.ndarray, names: Sequence[str]) -> pa.Array:
-    """names[codes] as an Arrow string array, decoded in Arrow (a Python string per row costs more)."""
-    return pa.DictionaryArray.from_arrays(ab.from_numpy(np.asarray(codes, np.int32)),
-                                          ab.strings(list(names))).dictionary_decode()
+    """names[codes] as an Arrow string array (ab.coded_strings: no Python string per row)."""
+    return ab.coded_strings(np.asarray(codes, np.int64), names)
 
 
 @dataclass(frozen=True)
@@ -173,8 +172,7 @@ def observation_names_table(names: Sequence[ObservationName]) -> pa.Table:
         ab.from_numpy(np.array([x.divisor for x in names], np.int64)),
         ab.from_numpy(np.array([x.size or 0 for x in names], np.int32),
                       null=np.array([x.size is None for x in names], bool)),
-        pa.ListArray.from_arrays(ab.from_numpy(offsets.astype(np.int32)), ab.strings(flat),
-                                 mask=ab.from_numpy(np.array([x is None for x in labels], bool))),
+        ab.list_array(offsets, ab.strings(flat), null=np.array([x is None for x in labels], bool)),
     ], schema=SCHEMAS["observation_names"]) if n else None
 
 

@@ -78,16 +78,38 @@ def strings(values: Sequence[str | None]) -> pa.StringArray:
                                                             pa.py_buffer(data)], null_count=int(null.sum()))
 
 
+def coded_strings(codes: np.ndarray, names: Sequence[str]) -> pa.StringArray:
+    """names[codes] as an Arrow string array, its bytes gathered by numpy (a Python string per row costs
+    more; Arrow's dictionary_decode loads pyarrow.compute, which a writing process does without)."""
+    encoded = [n.encode() for n in names]
+    name_len = np.array([len(b) for b in encoded], dtype=np.int64)
+    name_start = np.cumsum(name_len) - name_len
+    lengths = name_len[codes]
+    offsets = np.zeros(len(codes) + 1, dtype=np.int64)
+    np.cumsum(lengths, out=offsets[1:])
+    if offsets[-1] >= 2**31:
+        raise ValueError(f"string column too large for int32 offsets: {offsets[-1]} bytes")
+    pool = np.frombuffer(b"".join(encoded), dtype=np.uint8)
+    at = np.repeat(name_start[codes] - offsets[:-1], lengths) + np.arange(offsets[-1])
+    return pa.Array.from_buffers(pa.string(), len(codes), [None, pa.py_buffer(offsets.astype(np.int32)),
+                                                           pa.py_buffer(pool[at].tobytes())], null_count=0)
+
+
 def scalar(value: str) -> pa.Scalar:
     """A string as an Arrow scalar (for a compute function's argument)."""
     return strings([value])[0]
 
 
-def list_array(offsets: np.ndarray, values: pa.Array) -> pa.ListArray:
-    """A list array: row i holds values[offsets[i]:offsets[i + 1]]."""
+def list_array(offsets: np.ndarray, values: pa.Array, null: np.ndarray | None = None) -> pa.ListArray:
+    """A list array: row i holds values[offsets[i]:offsets[i + 1]]; `null`: True where the row is NULL
+    (from buffers: ListArray.from_arrays's mask loads pyarrow.compute)."""
     if len(values) >= 2**31:
         raise ValueError(f"list column too large for int32 offsets: {len(values)} values")
-    return pa.ListArray.from_arrays(from_numpy(np.asarray(offsets, dtype=np.int32)), values)
+    offsets = np.ascontiguousarray(offsets, dtype=np.int32)
+    if null is None or not null.any():
+        return pa.ListArray.from_arrays(from_numpy(offsets), values)
+    return pa.Array.from_buffers(pa.list_(values.type), len(offsets) - 1, [_bitmap(~null), pa.py_buffer(offsets)],
+                                 null_count=int(null.sum()), children=[values])
 
 
 def column(values: Sequence[Any], type: pa.DataType) -> pa.Array:
