@@ -147,3 +147,15 @@ def test_the_default_reward_scale_is_the_one_that_learns_and_every_report_names_
     text = learner_text(ExperimentResult(exp, exp.quick, True, tmp_path, [ArmResult(a) for a in exp.arms]))
     assert text == ("the method's DQN (docs/training.md), except: 1v1 base: reward scale 0.01; "
                     "1v1 base, the method's reward scale: as the method, reward scale 1")
+
+
+def test_an_atom_given_after_the_flags_is_the_same_question(capsys: pytest.CaptureFixture) -> None:
+    """`why`'s atom is optional (--action asks about a decision instead): argparse alone would match it,
+    empty, before the first flag and call a late atom an unexpected argument."""
+    run = str(Path(__file__).resolve().parent.parent / "sample_runs" / "advanced")
+    assert main(["why", run, "captured(red)", "--episode", "2", "--at", "18", "--depth", "2"]) == 0
+    first = capsys.readouterr().out
+    assert main(["why", run, "--episode", "2", "--at", "18", "--depth", "2", "captured(red)"]) == 0
+    assert capsys.readouterr().out == first and "captured(red)" in first
+    assert main(["why", run, "--episode", "2", "captured(red)", "extra"]) == 2
+    assert "unexpected argument: extra" in capsys.readouterr().err

@@ -49,6 +49,19 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _late_positionals(parser: argparse.ArgumentParser, args: argparse.Namespace, unknown: list[str]) -> list[str]:
+    """Fill an optional positional (nargs="?") given after the flags: argparse matches it, empty, with the
+    positionals before the first flag (`tracelab why RUN --episode 2 'dead(me)'`); what is left stays
+    unknown."""
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices[args.command]
+    for action in sub._actions:
+        if not unknown or unknown[0].startswith("-"):
+            break
+        if not action.option_strings and action.nargs == "?" and getattr(args, action.dest) is None:
+            setattr(args, action.dest, unknown.pop(0))
+    return unknown
+
+
 def _unknown_arguments(parser: argparse.ArgumentParser, command: str, unknown: list[str]) -> int:
     """An unknown flag is a usage error of its subcommand: one line naming it, with the closest flags,
     not the usage of every subcommand (what the top-level parser would print)."""
@@ -80,6 +93,7 @@ def main(argv: list[str] | None = None) -> int:
 def _main(argv: list[str] | None) -> int:
     parser = build_parser()
     args, unknown = parser.parse_known_args(argv)  # usage errors: argparse prints them and exits 2
+    unknown = _late_positionals(parser, args, unknown)
     if unknown:
         return _unknown_arguments(parser, args.command, unknown)
     args.argv = list(sys.argv[1:] if argv is None else argv)  # the command line, for runs that record it
