@@ -47,8 +47,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--pyreason-trace", metavar="DIR",
                    help="also write the rule trace in PyReason's CSV layout (rule_trace_nodes_*.csv, "
                         "rule_trace_edges_*.csv) into DIR")
-    p.add_argument("--kernel", choices=ENGINE_KERNELS, default="auto",
-                   help="the engine's kernel (default auto; compiled: the program's own, docs/engine-api.md)")
+    p.add_argument("--kernel", choices=ENGINE_KERNELS, default=None,
+                   help="the engine's kernel (default auto, or the reference evaluator for a small program "
+                        "printed as it reasons; compiled: the program's own, docs/engine-api.md)")
     add_max_groundings(p)
     p.add_argument("--run", metavar="DIR",
                    help="record the reasoning into a new (or empty) run directory of the trace store instead of "
@@ -66,6 +67,8 @@ def run(args: argparse.Namespace) -> int:
     the run keeps what was reasoned until then (status failed)."""
     # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
     from tracelab.engine import ProgramError, parse_literal
+
+    args.kernel_chosen, args.kernel = args.kernel is not None, args.kernel or "auto"
 
     if args.persistent and args.dialect != "pyreason":
         raise UserError("--persistent belongs to --dialect pyreason (tracelab programs say %timesteps)")
@@ -201,7 +204,7 @@ def _reference_serves(args: argparse.Namespace, inputs: Any, plan: Any, recorder
     graph or fact table, PyReason's trace, queries, a chosen kernel): no need to load the compiled engine."""
     # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
     from tracelab.reasoning_reference import reference_fits
-    return (recorder is None and args.kernel == "auto" and args.pyreason_trace is None and not args.query
+    return (recorder is None and not args.kernel_chosen and args.pyreason_trace is None and not args.query
             and inputs.graph is None and plan.graph is None and reference_fits(inputs.program, args.steps))
 
 
