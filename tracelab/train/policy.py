@@ -136,6 +136,7 @@ def write_policy_files(out: Path, weights: dict[str, dict[str, Any]], spec: dict
     a stranger's run planted there). policy.pt is renamed first: the pair appears together for readers."""
     import torch  # deferred: reading a policy's spec does not need it
 
+    out.parent.mkdir(parents=True, exist_ok=True)  # the run's own folder, which the caller named
     out = layout.make_run_dirs(out.parent, out.name)
     with layout.new_file(layout.run_path(out, POLICY_JSON)) as spec_file, \
             layout.new_file(layout.run_path(out, POLICY_PT)) as weights_file:
