@@ -10,7 +10,7 @@ from tui_helpers import open_trace_at, run_app, wait_for
 
 from tracelab.cli import main
 from tracelab.store import open_run
-from tracelab.envs.declared.board import board_of_config
+from tracelab.board import board_of_config
 from tracelab.viewers.tui.declared_board import DeclaredBoard
 
 

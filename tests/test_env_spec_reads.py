@@ -13,7 +13,7 @@ from gymnasium.utils.env_checker import check_env
 
 from tests.test_env_spec import RULES, SPEC, _located, write_world
 from tracelab.envs import make_env
-from tracelab.envs.declared.board import Board
+from tracelab.board import Board
 from tracelab.envs.declared.spec import load_spec
 from tracelab.envs.declared.spec_file import SpecError
 

@@ -15,7 +15,7 @@ from tracelab.viewers.replay.graph_layout import fit_given, layout
 from tracelab.viewers.replay.graph_run import GraphEpisode, RunGraph, read_episode
 from tracelab.viewers.replay.recording import ReplayOptions
 
-from tracelab.envs.declared.board import Board, board_of_config
+from tracelab.board import Board, board_of_config
 from tracelab.store.kind import run_config
 from tracelab.store.model import RunModel
 from tracelab.store.reader import RunConnection

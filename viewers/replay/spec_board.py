@@ -1,7 +1,7 @@
 """The board of a spec world's episode in the replay (a run whose config records the spec's `[board]`:
 `tracelab play --env`, a training's evaluation games): the image the env's `rgb_array` draws
 (tracelab.envs.declared.render), a frame at t = 0 and at each timestep where a mark moved, read from the
-run's changes of the marks' predicates. The same board the TUI draws (tracelab.envs.declared.board)."""
+run's changes of the marks' predicates. The same board the TUI draws (tracelab.board)."""
 from __future__ import annotations
 
 from itertools import groupby
@@ -9,7 +9,7 @@ from itertools import groupby
 import rerun as rr
 from tracelab.viewers.replay import style
 
-from tracelab.envs.declared.board import Board
+from tracelab.board import Board
 from tracelab.envs.declared.render import DeclaredPainter
 from tracelab.envs.render_rgb import CELL
 from tracelab.store.reader import RunConnection

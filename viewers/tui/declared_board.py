@@ -1,14 +1,14 @@
 """The board of a declared world's run (`tracelab play --env`, docs/worlds.md) above the atoms beside the
 trace: the spec's rows, each cell's character replaced by its mark where the mark's predicate holds at
 the cursor's t (FrozenLake's `@` where `at(C)` is true). The board is the one the run's config records
-(tracelab.envs.declared.board, which the replay and `rgb_array` draw too); a run without one shows
+(tracelab.board, which the replay and `rgb_array` draw too); a run without one shows
 nothing here."""
 from __future__ import annotations
 
 from rich.text import Text
 from textual.widget import Widget
 
-from tracelab.envs.declared.board import Board
+from tracelab.board import Board
 from tracelab.viewers.tui.colours import DIM
 
 

@@ -25,7 +25,7 @@ from textual.widget import Widget
 from textual.widgets import Input, Static
 
 from tracelab.viewers.tui.colours import DIM, bound_colour, styled_bound
-from tracelab.envs.declared.board import Board, board_of_config, marked_cells
+from tracelab.board import Board, board_of_config, marked_cells
 from tracelab.store.kind import run_config
 from tracelab.viewers.tui.declared_board import DeclaredBoard
 from tracelab.viewers.tui.graph_state import AtomsAt, Neighbourhood, atoms_at, neighbourhood, unknown_pattern

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from tracelab.envs.declared.board import RUN_CONFIG_KEY, board_config
+from tracelab.board import RUN_CONFIG_KEY, board_config
 from tracelab.envs.declared.spec import WorldSpec
 from tracelab.envs.declared.world import DeclaredWorld
 from tracelab.envs.tracer import HANDOVER_ROWS, HANDOVER_STEPS

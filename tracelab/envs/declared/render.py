@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tracelab.envs.declared.board import Board
+from tracelab.board import Board
 from tracelab.envs.render_rgb import CELL, GRID, _disc
 
 DEFAULT_MARK = (230, 57, 70)

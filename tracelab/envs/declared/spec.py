@@ -22,7 +22,7 @@ from tracelab.engine.errors import ProgramError
 from tracelab.engine.parser import check_program, load_program, parse_literal
 from tracelab.engine.safe_files import FileRefused, path_inside
 from tracelab.engine.program import CONSTANT_RE, Fact, Literal, Program, SourceLoc, Term
-from tracelab.envs.declared.board import CELL_FORMAT, MAX_BOARD_CELLS, MAX_BOARD_FACTS, Board, hex_color
+from tracelab.board import CELL_FORMAT, MAX_BOARD_CELLS, MAX_BOARD_FACTS, Board, hex_color
 from tracelab.expressions import ExpressionError, evaluate
 from tracelab.envs.declared.spec_file import KeyPath, SpecError, SpecSource, read_spec_file
 from tracelab.errors import close_names
