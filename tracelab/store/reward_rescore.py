@@ -14,7 +14,7 @@ from typing import Any
 from tracelab.expressions import ExpressionError, evaluate
 from tracelab.errors import UserError, close_names
 from tracelab.game.scenario import Rewards
-from tracelab.store.kind import MAX_SPEC_TEXT, run_config, world_params
+from tracelab.store.kind import MAX_SPEC_TEXT, run_config, spec_text, world_params
 from tracelab.store.reader import RunConnection
 
 # GridWar's terms as the store names them (envs/tracer.REWARD_TERMS) -> the scenario's [rewards] keys
@@ -69,9 +69,8 @@ def _number(v: Any, names: dict[str, Any]) -> float | None:
     return float(v)
 
 
-def _spec_terms(config: dict[str, Any]) -> list[Term] | None:
-    """A spec world's terms from the spec text in the run's config: its [reward.table] keys and scaled atom."""
-    text = config.get("spec")
+def _spec_terms(config: dict[str, Any], text: str | None) -> list[Term] | None:
+    """A spec world's terms from its spec's `text` (kind.spec_text): its [reward.table] keys and scaled atom."""
     if not isinstance(text, str) or len(text) > MAX_SPEC_TEXT:
         return None
     try:
@@ -82,7 +81,7 @@ def _spec_terms(config: dict[str, Any]) -> list[Term] | None:
     if not isinstance(reward, dict):
         return None
     data = spec.get("data", {})
-    names = {**(data if isinstance(data, dict) else {}), **(world_params(config) or {})}
+    names = {**(data if isinstance(data, dict) else {}), **(world_params(config, text) or {})}
     ends = {k: [str(a).replace(" ", "") for a in end.get(k, [])] for k in ("terminated", "truncated", "win", "loss")
             if isinstance(end, dict) and isinstance(end.get(k), list)}
 
@@ -125,7 +124,7 @@ def run_terms(con: RunConnection) -> tuple[list[Term], list[str]]:
     """The run's reward terms with their values per occurrence (from its config; a term recorded but not
     in the config has per None), and the run-wide notes (a learner's reward scale)."""
     config = run_config(con)
-    terms = _spec_terms(config) or _gridwar_terms(config) or []
+    terms = _spec_terms(config, spec_text(con, config)) or _gridwar_terms(config) or []
     named = {t.name for t in terms}
     recorded = [r[0] for r in con.execute("SELECT DISTINCT term FROM raw.reward_terms ORDER BY 1").fetchall()]
     terms += [Term(str(t), None) for t in recorded if t not in named]
