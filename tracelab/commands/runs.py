@@ -33,9 +33,9 @@ def run(args: argparse.Namespace) -> int:
             for r in rows:
                 r["command"] = _short(r["command"])
         write_table(catalog_table(rows), args.format, args.output)
-        for r in runs:
-            if r.error:
-                print(f"note: {r.path}: {r.error}", file=sys.stderr)
+    for r in runs:  # after the block: a Ctrl-C that broke a read ends the command there, with no notes
+        if r.error:
+            print(f"note: {r.path}: {r.error}", file=sys.stderr)
     return 0
 
 
