@@ -379,3 +379,13 @@ def test_runs_of_something_that_is_not_a_folder_is_one_line_and_fails(tmp_path: 
     assert main(["runs", str(path)]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "not a directory or run" in err and kind in err, err
+
+
+def test_the_replays_markdown_shows_a_runs_strings_as_text() -> None:
+    """A why-document's atom, rule and outcome from a run are text, never markup: an image or a link in
+    an atom's name is escaped, and a tree holding ``` stays inside its code block."""
+    from tracelab.viewers.replay.markdown_text import code_block, literal
+    assert literal("p(![x](https://example.org/a.png))") == r"p(\!\[x\](https://example.org/a.png))"
+    assert literal("<img src=x>") == r"\<img src=x\>" and literal("alive(red-agent-1)") == "alive(red-agent-1)"
+    fence, body, end = code_block("a ``` b ```` c")
+    assert fence == "`````text" and end == "`````" and body == "a ``` b ```` c"
