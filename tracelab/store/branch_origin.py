@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -177,3 +178,13 @@ def branch_origin(config: dict[str, Any]) -> Origin | None:
 def run_origin(con: RunConnection) -> Origin | None:
     """The origin of the run open on `con`, if it is a branch."""
     return branch_origin(run_config(con))
+
+
+def origin_episode(branch: RunConnection, run: Path) -> int | None:
+    """The episode of the run at `run` that the run open on `branch` branched off, None when that run is
+    not its origin (its origin is named by path, or by run id when the origin has moved since)."""
+    origin = run_origin(branch)
+    if origin is None:
+        return None
+    here = run.resolve()
+    return origin.episode if Path(origin.run) == here or origin.run_id == here.name else None
