@@ -126,3 +126,24 @@ def test_a_user_error_is_one_line_and_writes_nothing(world: str, flags: list[str
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and err.startswith("tracelab: error: ") and message in err, err
     assert not out.exists()
+
+
+def test_a_training_runs_traced_evaluation_game_branches_and_a_policy_plays_on(tmp_path: Path,
+                                                                               capsys: pytest.CaptureFixture) -> None:
+    """train --env's traced evaluation games are each reset with their own seed; --policy's greedy actions
+    play on after the branch (recorded as decisions)."""
+    run = tmp_path / "train"
+    assert main(["train", "--env", "tracelab/FrozenLake-v1", "--total-timesteps", "400", "--num-envs", "2",
+                 "--learning-starts", "100", "--eval-every", "200", "--eval-games", "2", "--trace-eval-games", "2",
+                 "--run", str(run)]) == 0
+    episode = rows(run, "SELECT max(episode) FROM episodes WHERE kind = 'eval' AND steps >= 2")[0][0]
+    names = action_names(run, episode)
+    same = branch(run, tmp_path / "same", episode, 1, names[0])
+    assert steps_of(same, 0) == steps_of(run, episode) and changes_of(same, 0) == changes_of(run, episode)
+    played = branch(run, tmp_path / "policy", episode, 1, names[0], "--policy", str(run / "policy"))
+    decided = rows(played, "SELECT min(step), count(*) FROM decisions")[0]
+    assert decided == (2, len(steps_of(played, 0)) - 1)   # the policy decided every step after the branch
+    capsys.readouterr()
+    assert main(["whatif", str(run), "--episode", "0", "--at", "1", "--action", "left",
+                 "--run", str(tmp_path / "no")]) == 1
+    assert "episode 0 records no steps (only traced games keep theirs" in capsys.readouterr().err

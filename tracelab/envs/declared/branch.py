@@ -225,6 +225,9 @@ def plan_branch(con: RunConnection, run: str, run_id: str, episode: int, at: int
         raise UserError(f"--agent {agent!r}: the run's agent is {agents[0]!r}")
     name = agent or (agents[0] if agents else "")
     recorded = recorded_steps(con, episode, name)
+    if not len(recorded):
+        raise UserError(f"{run}: episode {episode} records no steps (only traced games keep theirs: play --env, "
+                        "train --env's traced evaluations)")
     if at < 1 or at > len(recorded):
         raise UserError(f"--at {at}: episode {episode} has {len(recorded)} step(s) (--at counts them from 1)")
     seeds = episode_seeds(con)
