@@ -7,6 +7,7 @@ the branch; a user error is one line and writes nothing."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -107,6 +108,20 @@ def test_another_action_diverges_at_its_step(world: str, origins: dict[str, Path
     assert listed["other"] == f"branch of {world}:{episode} at step {at} ({other} instead of {names[at - 1]})"
     assert main(["diff", str(run), str(origin)]) == 0
     assert capsys.readouterr().out.startswith(f"episodes {run}:0 (")
+    if world == "frozen":  # the TUI's run list shows the catalog's rows
+        tui_lists(tmp_path, listed["other"])
+
+
+def tui_lists(root: Path, scenario: str) -> None:
+    from tui_helpers import loaded, run_app, wait_for
+
+    from tracelab.viewers.tui.lazy_table import LazyTable
+
+    async def body(app: Any, pilot: Any) -> None:
+        table = app.screen.query_one(LazyTable)
+        await wait_for(pilot, lambda: loaded(table) and table.count == 1)
+        assert table.row(0)["scenario"] == scenario
+    run_app([root], body, size=(200, 24))
 
 
 @pytest.mark.parametrize("world, flags, message", [
