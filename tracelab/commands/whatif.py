@@ -64,8 +64,7 @@ def run(args: argparse.Namespace) -> int:
         policy = _policy(args.policy, plan.world) if args.policy else None
         out = Path(args.out or f"runs/whatif-{origin_dir.name}-e{args.episode}-t{args.at}-"
                                f"{time.strftime('%Y%m%d-%H%M%S')}")
-        origin = plan.origin(spec, args.policy)
-        origin = type(origin)(**{**origin.to_json(), "run": str(origin_dir)})
+        origin = plan.origin(spec, str(origin_dir), args.policy)
         writer = _open_writer(out, _meta(args, plan, spec, origin))
         with recording_into(writer, out):
             played = plan.play(spec, writer, policy, begin_info={"whatif": origin.to_json()})

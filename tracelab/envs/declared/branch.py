@@ -108,8 +108,9 @@ class BranchPlan:
     def recorded_action(self) -> int:
         return int(self.recorded.action[self.at - 1])
 
-    def origin(self, spec: WorldSpec, policy: str | None) -> Origin:
-        return Origin(self.run, self.run_id, self.episode, self.at, self.action_name,
+    def origin(self, spec: WorldSpec, run_path: str, policy: str | None) -> Origin:
+        """What the branch run records of its origin (`run_path`: the origin run's resolved path)."""
+        return Origin(run_path, self.run_id, self.episode, self.at, self.action_name,
                       spec.action_names[self.recorded_action], policy)
 
     def rehearse(self, spec: WorldSpec, action: str, kernel: str = "auto") -> None:
