@@ -96,8 +96,13 @@ def test_another_action_diverges_at_its_step(world: str, origins: dict[str, Path
     # a step whose recorded action is a move; `nothing` (war) is allowed wherever the agent can act
     at = next(k for k, a in enumerate(names, 1) if k > 1 and a not in ("nothing", "left"))
     other = "nothing" if world == "war" else "left"
-    run = branch(origin, tmp_path / "other", episode, at, other)
+    run = branch(origin, tmp_path / "other", episode, at, other, "--steps", "2")
     out = capsys.readouterr().out
+    played = steps_of(run, 0)
+    assert len(played) <= at + 2  # --steps 2: at most two steps after the branch
+    if not (played[-1][5] or played[-1][6]):  # neither terminated nor truncated: stopped, and says so
+        assert "the branch stopped before its end: --steps 2 played after step" in out
+        assert rows(run, "SELECT outcome FROM episodes") == [("aborted",)]
     assert f"({other} instead of {names[at - 1]})" in out and f"first divergence of the trace: {at} steps in" in out
     d = divergence(origin, episode, run)
     assert d.rel_t == at and d.first_action_difference["step"] == at
