@@ -18,7 +18,8 @@ import numpy as np
 
 from tracelab.engine.core import LANES_MIN_WORLDS
 from tracelab.envs.declared import fused, vector_fused
-from tracelab.envs.declared.observe import missing_index, part_numbers
+from tracelab.envs.declared.observe import missing_index
+from tracelab.envs.declared.observe_kernel import split_parts
 from tracelab.envs.declared.spec import WorldSpec
 from tracelab.envs.declared.state_errors import no_index, no_weights_hold
 from tracelab.envs.declared.spec_size import check_worlds
@@ -59,6 +60,7 @@ class DeclaredWorlds:
         # every draw one np_random.random() (the toy-text games): drawn a block at a time (_Uniforms)
         self._only_uniforms = all(d.draw.method == "categorical" for d in (*one._choices, *one._before)) and \
             all(d.weight_ids is None for d in one._before)
+        self._observer = one._observer  # built for the engine's n_worlds worlds
         self._starts = _StartOutcomes(self)
 
     @property
@@ -164,11 +166,12 @@ class DeclaredWorlds:
             return value
         if spec.space == "MultiDiscrete":
             return index.astype(np.int64)
-        values = [part_numbers(part, index[:, one._index_parts.index(k)] if part.read == "index" else index[:, :0],
-                               self.engine, one._part_ids[k][agent]) for k, part in enumerate(spec.parts)]
+        width = one.observation_program.width
+        numbers = self._observer.read(self.engine)[:, agent * width:(agent + 1) * width].copy()
         if spec.space == "Box":
-            return np.concatenate(values, axis=1).astype(np.float32)
-        return {p.name: (v[:, 0].astype(np.int64) if p.is_discrete else v) for p, v in zip(spec.parts, values)}
+            return numbers
+        parts = split_parts(spec, numbers)
+        return {p.name: (v[:, 0].astype(np.int64) if p.is_discrete else v) for p, v in zip(spec.parts, parts)}
 
 
 def _world(spec: WorldSpec, n_worlds: int, kernel: str) -> DeclaredWorld:
