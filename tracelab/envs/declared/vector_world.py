@@ -110,9 +110,11 @@ class DeclaredWorlds:
     def step(self, actions: np.ndarray) -> None:
         """Every world plays actions[w] (one agent) and draws this step's random facts from its generator."""
         self._rows[:, 0] = actions
-        picks = self._picks
-        for d, drawer in enumerate(self.one._before):
-            picks[:, d] = _draw_batch(drawer, self)
+        picks, before = self._picks, self.one._before
+        # every draw one random() a world: the step's numbers of all draws taken at once, in the spec's order
+        u = self.uniforms.each(len(before)) if self.uniforms is not None and before else None
+        for d, drawer in enumerate(before):
+            picks[:, d] = _draw_batch(drawer, self, None if u is None else u[:, d])
         self.engine_step(self._rows, picks)
         self.steps += 1
 
@@ -188,18 +190,19 @@ def _world(spec: WorldSpec, n_worlds: int, kernel: str) -> DeclaredWorld:
     return DeclaredWorld(spec, kernel="counting", worlds=n_worlds)
 
 
-def _draw_batch(drawer: Any, worlds: DeclaredWorlds) -> np.ndarray:
+def _draw_batch(drawer: Any, worlds: DeclaredWorlds, u: np.ndarray | None = None) -> np.ndarray:
     """One value of `drawer` per world, each from its world's generator, exactly as _Drawer.pick draws
     for one world (categorical: one random() u, the first value whose cumulative probability exceeds u,
-    else 0; choice: one integers(0, n))."""
+    else 0; choice: one integers(0, n)). `u`: a categorical draw's numbers, already taken."""
     d, rngs = drawer.draw, worlds.rngs
     if drawer.weight_ids is None and drawer.possible is None:
         if d.method == "choice":
             n = len(drawer.value_ids)
             return np.array([r.integers(0, n) for r in rngs], np.int64)
         cumulative = np.asarray(drawer.cumulative)
-        u = worlds.uniforms.each() if worlds.uniforms is not None else \
-            np.array([random() for random in worlds._randoms])
+        if u is None:
+            u = worlds.uniforms.each(1)[:, 0] if worlds.uniforms is not None else \
+                np.array([random() for random in worlds._randoms])
         picks = np.searchsorted(cumulative, u, side="right")
         picks[picks == len(cumulative)] = 0
         return picks.astype(np.int64)
@@ -242,13 +245,13 @@ class _Uniforms:
         self.pos = np.full(len(rngs), self.BLOCK)  # empty: filled on first use
         self._every = np.arange(len(rngs))
 
-    def each(self) -> np.ndarray:
-        """One number per world."""
-        if self.pos.max() >= self.BLOCK:
-            for w in np.flatnonzero(self.pos >= self.BLOCK):
+    def each(self, k: int) -> np.ndarray:
+        """The next k numbers of every world [worlds, k] (k <= BLOCK)."""
+        if self.pos.max() > self.BLOCK - k:
+            for w in np.flatnonzero(self.pos > self.BLOCK - k):
                 self._fill(w)
-        u = self.buf[self._every, self.pos]
-        self.pos += 1
+        u = self.buf[self._every[:, None], self.pos[:, None] + np.arange(k)]
+        self.pos += k
         return u
 
     def take(self, worlds: np.ndarray) -> np.ndarray:
@@ -260,7 +263,10 @@ class _Uniforms:
         return u
 
     def _fill(self, w: int) -> None:
-        self.buf[w] = self.rngs[w].random(self.BLOCK)
+        """World w's numbers not taken yet, moved to the front, then new ones after them."""
+        left = self.BLOCK - self.pos[w]
+        self.buf[w, :left] = self.buf[w, self.pos[w]:]
+        self.buf[w, left:] = self.rngs[w].random(self.BLOCK - left)
         self.pos[w] = 0
 
 
