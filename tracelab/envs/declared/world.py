@@ -118,6 +118,7 @@ class DeclaredWorld:
             if spec.space in ("Box", "Dict") else None
         self._observer = None if self.observation_program is None else \
             ObservationReader(self.observation_program, spec, self._part_ids, worlds)
+        self._numbers_stale = True  # every agent's numbers are read once per engine state (several agents)
         self._scaled = [(ids(a for a, _ in pairs), np.array([v for _, v in pairs], np.float64))
                         for pairs in spec.reward_scaled]
         self._any_scaled = any(ids.size for ids, _ in self._scaled)
@@ -224,6 +225,7 @@ class DeclaredWorld:
 
     def _fused_step(self, rows: np.ndarray, picks: np.ndarray) -> None:
         eng = self.engine
+        self._numbers_stale = True
         if not self._fused:  # the engine's own step, then the reads
             self._unfused_step(rows, picks)
             return
@@ -293,6 +295,7 @@ class DeclaredWorld:
     def load_state(self, state: tuple[Any, ...]) -> None:
         snap, prev, self.steps, rewards, self._ends, out = state
         self.engine.restore(snap, np.array([0]))
+        self._numbers_stale = True
         self._tables[7][:len(prev)] = prev
         self._tables[8][0] = len(prev)
         self.last_rewards = list(rewards)
@@ -325,7 +328,10 @@ class DeclaredWorld:
         if spec.space == "MultiDiscrete":
             return indices.astype(np.int64)
         width = self.observation_program.width
-        numbers = self._observer.read(self.engine)[0, agent * width:(agent + 1) * width].copy()
+        if self._numbers_stale:
+            self._observer.read(self.engine)
+            self._numbers_stale = False
+        numbers = self._observer.numbers[0, agent * width:(agent + 1) * width].copy()
         if spec.space == "Box":
             return numbers
         parts = split_parts(spec, numbers[None])
