@@ -272,3 +272,35 @@ def test_restore_from_other_worlds_alike_on_both_kernels() -> None:
     for t, (mine, theirs) in enumerate(zip(*seen)):
         for name, x, y in zip(("lower", "upper", "last cause"), mine, theirs):
             np.testing.assert_array_equal(x, y, err_msg=f"{name} at step {t}")
+
+
+@pytest.mark.parametrize("kernel", ["counting", "lanes"])
+def test_gridwar_worlds_equal_single_declared_envs(kernel: str) -> None:
+    """GridWar's advanced spec (a Box of seven parts, two `nearest`; three draws a step, taken for all
+    worlds at once; one start outcome, restored world by world from its own snapshot world): each world of
+    the vector env equals a DeclaredEnv reset with seed + i, given the same actions, across resets."""
+    from tracelab import RULES_DIR
+    spec, n, seed = RULES_DIR / "gridworld" / "war_advanced.toml", 3, 11
+    vec = make_vec_env(spec, n, kernel=kernel)
+    assert vec.worlds.kernel == kernel
+    singles = [make_env(spec) for _ in range(n)]
+    obs, info = vec.reset(seed=seed)
+    assert vec.worlds.uniforms is not None  # every draw one random(): a step's three taken at once
+    for i, env in enumerate(singles):
+        o, inf = env.reset(seed=seed + i)
+        np.testing.assert_array_equal(obs[i], o)
+        np.testing.assert_array_equal(info["action_mask"][i], inf["action_mask"])
+    rng, ends = np.random.default_rng(4), 0
+    for step in range(250):
+        actions = rng.integers(0, 9, n)
+        obs, reward, terminated, truncated, info = vec.step(actions)
+        for i, env in enumerate(singles):
+            o, r, te, tr, inf = env.step(int(actions[i]))
+            assert (r, te, tr) == (reward[i], terminated[i], truncated[i]), (step, i)
+            if te or tr:
+                np.testing.assert_array_equal(info["final_obs"][i], o)
+                o, inf = env.reset()
+                ends += 1
+            np.testing.assert_array_equal(obs[i], o, err_msg=f"step {step}, world {i}")
+            np.testing.assert_array_equal(info["action_mask"][i], inf["action_mask"])
+    assert ends >= n  # the restarts were compared too

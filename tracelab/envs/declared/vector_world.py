@@ -18,7 +18,8 @@ import numpy as np
 
 from tracelab.engine.core import LANES_MIN_WORLDS
 from tracelab.envs.declared import fused, vector_fused
-from tracelab.envs.declared.observe import missing_index, part_numbers
+from tracelab.envs.declared.observe import missing_index
+from tracelab.envs.declared.observe_kernel import split_parts
 from tracelab.envs.declared.spec import WorldSpec
 from tracelab.envs.declared.state_errors import no_index, no_weights_hold
 from tracelab.envs.declared.spec_size import check_worlds
@@ -59,6 +60,7 @@ class DeclaredWorlds:
         # every draw one np_random.random() (the toy-text games): drawn a block at a time (_Uniforms)
         self._only_uniforms = all(d.draw.method == "categorical" for d in (*one._choices, *one._before)) and \
             all(d.weight_ids is None for d in one._before)
+        self._observer = one._observer  # built for the engine's n_worlds worlds
         self._starts = _StartOutcomes(self)
 
     @property
@@ -108,9 +110,11 @@ class DeclaredWorlds:
     def step(self, actions: np.ndarray) -> None:
         """Every world plays actions[w] (one agent) and draws this step's random facts from its generator."""
         self._rows[:, 0] = actions
-        picks = self._picks
-        for d, drawer in enumerate(self.one._before):
-            picks[:, d] = _draw_batch(drawer, self)
+        picks, before = self._picks, self.one._before
+        # every draw one random() a world: the step's numbers of all draws taken at once, in the spec's order
+        u = self.uniforms.each(len(before)) if self.uniforms is not None and before else None
+        for d, drawer in enumerate(before):
+            picks[:, d] = _draw_batch(drawer, self, None if u is None else u[:, d])
         self.engine_step(self._rows, picks)
         self.steps += 1
 
@@ -176,11 +180,12 @@ class DeclaredWorlds:
             return value
         if spec.space == "MultiDiscrete":
             return index.astype(np.int64)
-        values = [part_numbers(part, index[:, one._index_parts.index(k)] if part.read == "index" else index[:, :0],
-                               self.engine, one._part_ids[k][agent]) for k, part in enumerate(spec.parts)]
+        width = one.observation_program.width
+        numbers = self._observer.read(self.engine)[:, agent * width:(agent + 1) * width].copy()
         if spec.space == "Box":
-            return np.concatenate(values, axis=1).astype(np.float32)
-        return {p.name: (v[:, 0].astype(np.int64) if p.is_discrete else v) for p, v in zip(spec.parts, values)}
+            return numbers
+        parts = split_parts(spec, numbers)
+        return {p.name: (v[:, 0].astype(np.int64) if p.is_discrete else v) for p, v in zip(spec.parts, parts)}
 
 
 def _world(spec: WorldSpec, n_worlds: int, kernel: str) -> DeclaredWorld:
@@ -197,18 +202,19 @@ def _world(spec: WorldSpec, n_worlds: int, kernel: str) -> DeclaredWorld:
     return DeclaredWorld(spec, kernel="counting", worlds=n_worlds)
 
 
-def _draw_batch(drawer: Any, worlds: DeclaredWorlds) -> np.ndarray:
+def _draw_batch(drawer: Any, worlds: DeclaredWorlds, u: np.ndarray | None = None) -> np.ndarray:
     """One value of `drawer` per world, each from its world's generator, exactly as _Drawer.pick draws
     for one world (categorical: one random() u, the first value whose cumulative probability exceeds u,
-    else 0; choice: one integers(0, n))."""
+    else 0; choice: one integers(0, n)). `u`: a categorical draw's numbers, already taken."""
     d, rngs = drawer.draw, worlds.rngs
     if drawer.weight_ids is None and drawer.possible is None:
         if d.method == "choice":
             n = len(drawer.value_ids)
             return np.array([r.integers(0, n) for r in rngs], np.int64)
         cumulative = np.asarray(drawer.cumulative)
-        u = worlds.uniforms.each() if worlds.uniforms is not None else \
-            np.array([random() for random in worlds._randoms])
+        if u is None:
+            u = worlds.uniforms.each(1)[:, 0] if worlds.uniforms is not None else \
+                np.array([random() for random in worlds._randoms])
         picks = np.searchsorted(cumulative, u, side="right")
         picks[picks == len(cumulative)] = 0
         return picks.astype(np.int64)
@@ -251,13 +257,13 @@ class _Uniforms:
         self.pos = np.full(len(rngs), self.BLOCK)  # empty: filled on first use
         self._every = np.arange(len(rngs))
 
-    def each(self) -> np.ndarray:
-        """One number per world."""
-        if self.pos.max() >= self.BLOCK:
-            for w in np.flatnonzero(self.pos >= self.BLOCK):
+    def each(self, k: int) -> np.ndarray:
+        """The next k numbers of every world [worlds, k] (k <= BLOCK)."""
+        if self.pos.max() > self.BLOCK - k:
+            for w in np.flatnonzero(self.pos > self.BLOCK - k):
                 self._fill(w)
-        u = self.buf[self._every, self.pos]
-        self.pos += 1
+        u = self.buf[self._every[:, None], self.pos[:, None] + np.arange(k)]
+        self.pos += k
         return u
 
     def take(self, worlds: np.ndarray) -> np.ndarray:
@@ -269,7 +275,10 @@ class _Uniforms:
         return u
 
     def _fill(self, w: int) -> None:
-        self.buf[w] = self.rngs[w].random(self.BLOCK)
+        """World w's numbers not taken yet, moved to the front, then new ones after them."""
+        left = self.BLOCK - self.pos[w]
+        self.buf[w, :left] = self.buf[w, self.pos[w]:]
+        self.buf[w, left:] = self.rngs[w].random(self.BLOCK - left)
         self.pos[w] = 0
 
 
@@ -292,7 +301,7 @@ class _StartOutcomes:
         self.position_of = [np.zeros(len(d.value_ids), np.int64) for d in self.drawers]
         for c, vals in enumerate(self.values):
             self.position_of[c][vals] = np.arange(len(vals))
-        n = math.prod(self.sizes)
+        self.n = n = math.prod(self.sizes)
         per_world = _nbytes(eng.snapshot()) // w
         batches = -(-n // w)
         if batches * w * per_world > MAX_START_BYTES:
@@ -330,6 +339,9 @@ class _StartOutcomes:
                 for c, drawer in enumerate(self.drawers):
                     k = k * self.sizes[c] + self.position[c][drawer.pick(one, rngs[t])]
                 outcome[i] = k
+        if self.n == 1:  # every world of the snapshot holds the one outcome: each takes its own world's
+            one.engine.restore(self.snapshots[0], targets)  # (word-parallel; ~7x restoring from a source)
+            return
         batch = outcome // w
         for b in np.unique(batch):
             sel = batch == b

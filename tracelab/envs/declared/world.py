@@ -21,7 +21,7 @@ import numpy as np
 
 from tracelab.engine import Engine
 from tracelab.envs.declared import fused
-from tracelab.envs.declared.observe import part_numbers
+from tracelab.envs.declared.observe_kernel import ObservationProgram, ObservationReader, split_parts
 from tracelab.envs.declared.spec import Atom, Draw, WorldSpec
 from tracelab.envs.declared.state_errors import no_index, no_weights_hold
 
@@ -113,6 +113,12 @@ class DeclaredWorld:
         self._index_parts = [i for i, p in enumerate(spec.parts) if p.read == "index"]
         self._part_ids = [[ids(atoms) for atoms in p.per_agent] for p in spec.parts]  # [part][agent]
         self._part_sizes = [len(p.atoms) for p in spec.parts]
+        # a Box or Dict observation: every agent's numbers in one compiled call (observe_kernel.py)
+        self.observation_program = ObservationProgram(spec, self._part_ids) \
+            if spec.space in ("Box", "Dict") else None
+        self._observer = None if self.observation_program is None else \
+            ObservationReader(self.observation_program, spec, self._part_ids, worlds)
+        self._numbers_stale = True  # every agent's numbers are read once per engine state (several agents)
         self._scaled = [(ids(a for a, _ in pairs), np.array([v for _, v in pairs], np.float64))
                         for pairs in spec.reward_scaled]
         self._any_scaled = any(ids.size for ids, _ in self._scaled)
@@ -219,6 +225,7 @@ class DeclaredWorld:
 
     def _fused_step(self, rows: np.ndarray, picks: np.ndarray) -> None:
         eng = self.engine
+        self._numbers_stale = True
         if not self._fused:  # the engine's own step, then the reads
             self._unfused_step(rows, picks)
             return
@@ -288,6 +295,7 @@ class DeclaredWorld:
     def load_state(self, state: tuple[Any, ...]) -> None:
         snap, prev, self.steps, rewards, self._ends, out = state
         self.engine.restore(snap, np.array([0]))
+        self._numbers_stale = True
         self._tables[7][:len(prev)] = prev
         self._tables[8][0] = len(prev)
         self.last_rewards = list(rewards)
@@ -319,11 +327,15 @@ class DeclaredWorld:
             return value
         if spec.space == "MultiDiscrete":
             return indices.astype(np.int64)
-        values = [part_numbers(part, indices[[self._index_parts.index(k)]] if part.read == "index" else indices[:0],
-                               self.engine, self._part_ids[k][agent])[0] for k, part in enumerate(spec.parts)]
+        width = self.observation_program.width
+        if self._numbers_stale:
+            self._observer.read(self.engine)
+            self._numbers_stale = False
+        numbers = self._observer.numbers[0, agent * width:(agent + 1) * width].copy()
         if spec.space == "Box":
-            return np.concatenate(values).astype(np.float32)
-        return {p.name: (int(v[0]) if p.is_discrete else v) for p, v in zip(spec.parts, values)}
+            return numbers
+        parts = split_parts(spec, numbers[None])
+        return {p.name: (int(v[0, 0]) if p.is_discrete else v[0]) for p, v in zip(spec.parts, parts)}
 
     def _rewards(self) -> list[float]:
         """The engine step's rewards, one per agent; also keeps the ends (read_step's flags)."""
