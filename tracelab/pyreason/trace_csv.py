@@ -44,10 +44,14 @@ class PyReasonTrace:
 
     def __init__(self, engine: Any, names: NameMap | None = None, graph_facts: int = 0,
                  ipl_rules: dict[str, str] | None = None, *, skip_graph_facts: bool = True,
-                 ipl_twin_rules: dict[str, str] | None = None) -> None:
+                 ipl_twin_rules: dict[str, str] | None = None, ipl_facts: dict[str, tuple[str, str]] | None = None,
+                 ipl_partners: dict[str, str] | None = None) -> None:
         self.engine = engine
         self.ipl_rules = ipl_rules or {}  # the inconsistent predicate list's rules -> the predicate they copy
         self.ipl_twin_rules = ipl_twin_rules or {}  # translate.ipl_twins' rules -> their rule's PyReason name
+        self.ipl_facts = ipl_facts or {}  # translate.ipl_facts' facts -> (the predicate copied, its fact's name)
+        self.ipl_partners = ipl_partners or {}  # a PyReason predicate -> its IPL partner
+        self._rule_numbers: dict[str, int] | None = None  # a rule's PyReason name -> its engine index
         self.names = names or NameMap()
         self.graph_facts = graph_facts  # the engine's facts 0..graph_facts-1 are the graph's attributes
         self.skip_graph_facts = skip_graph_facts  # PyReason's save_graph_attributes_to_trace=False
@@ -84,6 +88,7 @@ class PyReasonTrace:
         cols = {k: v.tolist() for k, v in rows.items()}
         step: list[tuple[tuple[int, ...], str, list[object], tuple[float, float]]] = []
         several = self._several_facts(t if t is not None else (int(cols["t"][0]) if cols["t"] else -1))
+        conflicts = self._rule_conflicts(cols)
         for i in range(len(cols["t"])):
             if int(cols["world"][i]) != 0:
                 continue
@@ -106,22 +111,25 @@ class PyReasonTrace:
                 rule_no = int(eng.groundings.rule[g]) if g >= 0 else cid
                 rule = eng.rules[rule_no]
                 due, by = self.names.original_statement(rule.name), "Rule"
-                if rule.name in self.ipl_twin_rules:  # a rule's partner head (translate.ipl_twins):
-                    # PyReason names the rule on a conflict, else the predicate copied
-                    due = self.ipl_twin_rules[rule.name] if kind == CAUSE_POLICY else f"IPL: {self.ipl_rules[rule.name]}"
-                    by = "IPL"
-                elif rule.name in self.ipl_rules:  # PyReason's names for what its IPL sets
+                if rule.name in self.ipl_rules:  # PyReason's names for what its IPL sets
                     due, by = f"IPL: {self.ipl_rules[rule.name]}", "IPL"
+                    partner = (int(cols["pass_no"][i]), self.ipl_partners.get(self._pred(pred)), args)
+                    if kind == CAUSE_POLICY and partner in conflicts:  # PyReason resets the partner of an
+                        rule_no = conflicts[partner]  # atom a rule's update conflicts on, naming that rule
+                        rule = eng.rules[rule_no]
+                        due = self.names.original_statement(rule.name)
             elif graph_fact:
                 due, by = GRAPH_ATTRIBUTE_FACT, "Fact"
+            elif kind == CAUSE_FACT and eng.fact(cid).name in self.ipl_facts:  # a fact's IPL partner
+                due, by = f"IPL: {self.ipl_facts[eng.fact(cid).name][0]}", "IPL"
             elif kind == CAUSE_FACT:
                 due, by = self.names.original_statement(eng.fact(cid).name), "Fact"
             elif kind == CAUSE_EXTERNAL and cid in self.external_names:
                 due, by = self.external_names[cid], "Fact"
             else:
                 due, by = "-", "Fact"
-            message = "" if consistent else self._inconsistency(pred, args, old, by, self.ipl_rules.get(rule.name, "")
-                                                                if rule_no >= 0 else "")
+            message = "" if consistent else self._inconsistency(pred, args, old, rule if rule_no >= 0 else None,
+                                                                by == "IPL")
             row: list[object] = [int(cols["t"][i]), passes_before + int(cols["pass_no"][i]),
                                  self._component(args), self._pred(pred), old,
                                  _bound(cols["new_lower"][i], cols["new_upper"][i]), due, consistent, by, message]
@@ -130,8 +138,12 @@ class PyReasonTrace:
                 row += [[self._component(a)] for p, a in parts if p != DOMAIN]
             which = "node" if len(args) == 1 else "edge"
             self.clauses[which] = max(self.clauses[which], len(row) - len(NODE_HEADER))
-            heads = [eng.vocab.node_ids[a] for a in args] if rule_no >= 0 else [i]  # facts keep their order
-            order = (int(cols["t"][i]), int(cols["pass_no"][i]), rule_no, *heads)
+            # facts in the program's order; a rule's heads in node order, its IPL twin's row right after it
+            heads = ([eng.vocab.node_ids[a] for a in args] if rule_no >= 0 else
+                     [cid] if kind == CAUSE_FACT else [len(eng.program.facts) + i])
+            twin = rule_no >= 0 and rule.name in self.ipl_twin_rules
+            ordered_no = self._rule_number(self.ipl_twin_rules[rule.name]) if twin else rule_no
+            order = (int(cols["t"][i]), int(cols["pass_no"][i]), ordered_no, *heads, int(by == "IPL"))
             step.append((order, which, row, (float(cols["new_lower"][i]), float(cols["new_upper"][i]))))
         for atom, facts in several.items():  # no row: from [0,1], a conflict leaves [0,1]
             if t is not None and self.engine.static[0, atom] and self.engine.bound(atom) == (0.0, 1.0):
@@ -148,12 +160,17 @@ class PyReasonTrace:
         if self._multi is None:
             eng, by_atom = self.engine, {}
             if eng.program.inconsistency == "reset_freeze":
-                for f in eng.program.facts:
+                for k, f in enumerate(eng.program.facts, start=eng.graph.n_facts):  # k: the fact's id (Engine.fact)
                     lit = f.literal
                     atom = eng.atom(lit.pred, *(a.name for a in lit.args))
                     lo, up = effective_bound(lit.lower, lit.upper, lit.negated)
-                    by_atom.setdefault(atom, []).append((f.start, f.end, StepFact(self.names.original_statement(f.name),
-                                                                                  lo, up)))
+                    name = self.names.original_statement(f.name)
+                    if f.name in self.ipl_facts:  # PyReason's rows of the partner a fact's IPL sets
+                        src, of = self.ipl_facts[f.name]
+                        fact = StepFact(f"IPL: {src}", lo, up, k, "IPL", of, src)
+                    else:
+                        fact = StepFact(name, lo, up, k, "Fact", "", self._pred(lit.pred))
+                    by_atom.setdefault(atom, []).append((f.start, f.end, fact))
             self._multi = {a: fs for a, fs in by_atom.items() if len(fs) > 1}
         return self._multi
 
@@ -176,21 +193,59 @@ class PyReasonTrace:
         pred, args = self.engine.vocab.atom_parts(atom)
         which = "node" if len(args) == 1 else "edge"
         for k, r in enumerate(rows):
-            message = "" if r.consistent else conflict_message(f"{self._pred(pred)}({','.join(args)})", r.old,
-                                                               r.incoming)
+            fact = r.fact
+            assert fact is not None
+            message = ""
+            if not r.consistent and fact.pred in self.ipl_partners:  # PyReason names the IPL's two groundings
+                message = self._ipl_message(fact.pred, self.ipl_partners[fact.pred], args)
+            elif not r.consistent:
+                message = conflict_message(f"{self._pred(pred)}({','.join(args)})", r.old, r.incoming)
             if not r.consistent:
                 self.frozen.add(atom)
             row: list[object] = [t, passes_before, self._component(args), self._pred(pred), _bound(*r.old),
-                                 _bound(*r.new), r.name, r.consistent, "Fact", message]
-            step.append(((t, 0, -1, i, k), which, row, r.new))
+                                 _bound(*r.new), r.name, r.consistent, fact.by, message]
+            step.append(((t, 0, -1, fact.order, k), which, row, r.new))
         return True
 
-    def _inconsistency(self, pred: str, args: tuple[str, ...], old: str, by: str, partner: str) -> str:
-        """PyReason's message: a conflict with the IPL partner (`partner`) names both groundings."""
-        atom = f"{self._pred(pred)}({','.join(args)})"
-        if by == "IPL":
-            return (f"Inconsistency occurred. Grounding {atom} conflicts with grounding "
-                    f"{partner}({','.join(args)}). Setting bounds to [0,1] and static=True for this timestep.")
+    def _rule_conflicts(self, cols: dict[str, list]) -> dict[tuple[int, str, tuple[str, ...]], int]:
+        """(pass, PyReason predicate, args) -> the rule (not the IPL's) whose update conflicted there."""
+        out = {}
+        for i in range(len(cols["t"])):
+            g = int(cols["grounding"][i])
+            if int(cols["world"][i]) == 0 and int(cols["cause_kind"][i]) == CAUSE_POLICY and g >= 0:
+                rule_no = int(self.engine.groundings.rule[g])
+                if self.engine.rules[rule_no].name not in self.ipl_rules:
+                    pred, args = self.engine.vocab.atom_parts(int(cols["atom"][i]))
+                    out[(int(cols["pass_no"][i]), self._pred(pred), args)] = rule_no
+        return out
+
+    def _rule_number(self, name: str) -> int:
+        """The engine's index of the rule PyReason names `name`."""
+        if self._rule_numbers is None:
+            self._rule_numbers = {}
+            for k, r in enumerate(self.engine.rules):
+                self._rule_numbers.setdefault(self.names.original_statement(r.name), k)
+        return self._rule_numbers.get(name, -1)
+
+    @staticmethod
+    def _ipl_message(pred: str, partner: str, args: tuple[str, ...]) -> str:
+        comp = ",".join(args)
+        return (f"Inconsistency occurred. Grounding {pred}({comp}) conflicts with grounding {partner}({comp}). "
+                "Setting bounds to [0,1] and static=True for this timestep.")
+
+    def _inconsistency(self, pred: str, args: tuple[str, ...], old: str, rule: Any, partner_row: bool) -> str:
+        """PyReason's message of the conflict `rule` (None: a fact) caused on pred(args): a predicate of the
+        IPL names both groundings, the conflicting update's first (on the partner's row, the other); else
+        the bounds."""
+        name = self._pred(pred)
+        if partner_row and name in self.ipl_partners:
+            return self._ipl_message(self.ipl_partners[name], name, args)
+        if name in self.ipl_partners:
+            return self._ipl_message(name, self.ipl_partners[name], args)
+        atom = f"{name}({','.join(args)})"
+        if rule is not None and rule.annotation is None:  # PyReason quotes both bounds
+            lo, up = effective_bound(rule.head.lower, rule.head.upper, rule.head.negated)
+            return conflict_message(atom, tuple(float(v) for v in old.strip("[]").split(",")), (lo, up))
         return (f"Inconsistency occurred. Conflicting bounds for {atom}. Update from {old} is not allowed. "
                 "Setting bounds to [0,1] and static=True for this timestep.")
 
