@@ -60,7 +60,7 @@ class PyReasonTrace:
         self.clauses = {"node": 0, "edge": 0}
         self.external_names: dict[int, str] = {}  # external facts' names by their id (pr.reason(again=True))
         self.node_bounds: list[tuple[float, float]] = []
-        self._multi: dict[int, list[tuple[int, int, StepFact]]] | None = None  # _facts_by_atom
+        self._facts: dict[int, list[tuple[int, int, StepFact]]] | None = None  # _facts_by_atom
         self.frozen: set[int] = set()  # atoms a conflict of facts froze (static from then on)
         self.edge_bounds: list[tuple[float, float]] = []
 
@@ -148,16 +148,17 @@ class PyReasonTrace:
         for atom, facts in several.items():  # no row: from [0,1], a conflict leaves [0,1]
             if t is not None and self.engine.static[0, atom] and self.engine.bound(atom) == (0.0, 1.0):
                 self._fact_rows(step, atom, facts, (0.0, 1.0), (0.0, 1.0), t, passes_before, -1)
+        if t is not None:
+            self._delayed_conflicts(step, t, passes_before)
         step.sort(key=lambda r: r[0])  # stable: a fact's rows, and one rule's rows on one head, keep theirs
         for _, which, row, bound in step:
             (self.node_rows if which == "node" else self.edge_rows).append(row)
             (self.node_bounds if which == "node" else self.edge_bounds).append(bound)
 
     def _facts_by_atom(self) -> dict[int, list[tuple[int, int, StepFact]]]:
-        """The program's facts (not the graph's) by atom, for the atoms two or more facts set: (start,
-        end, fact), in the facts' order. Only under PyReason's default policy (reset to [0,1], frozen),
-        the one fact_sequence.py follows."""
-        if self._multi is None:
+        """The program's facts (not the graph's) by atom: (start, end, fact), in the facts' order. Only
+        under PyReason's default policy (reset to [0,1], frozen), the one fact_sequence.py follows."""
+        if self._facts is None:
             eng, by_atom = self.engine, {}
             if eng.program.inconsistency == "reset_freeze":
                 for k, f in enumerate(eng.program.facts, start=eng.graph.n_facts):  # k: the fact's id (Engine.fact)
@@ -171,14 +172,17 @@ class PyReasonTrace:
                     else:
                         fact = StepFact(name, lo, up, k, "Fact", "", self._pred(lit.pred))
                     by_atom.setdefault(atom, []).append((f.start, f.end, fact))
-            self._multi = {a: fs for a, fs in by_atom.items() if len(fs) > 1}
-        return self._multi
+            self._facts = by_atom
+        return self._facts
+
+    def _facts_at(self, atom: int, t: int) -> list[StepFact]:
+        return [f for start, end, f in self._facts_by_atom().get(atom, []) if start <= t <= end]
 
     def _several_facts(self, t: int) -> dict[int, list[StepFact]]:
         """The atoms two or more facts set at step t (and no conflict froze before), with those facts."""
         out = {}
-        for atom, facts in self._facts_by_atom().items():
-            now = [f for start, end, f in facts if start <= t <= end]
+        for atom in self._facts_by_atom():
+            now = self._facts_at(atom, t)
             if len(now) > 1 and atom not in self.frozen:
                 out[atom] = now
         return out
@@ -206,6 +210,52 @@ class PyReasonTrace:
                                  _bound(*r.new), r.name, r.consistent, fact.by, message]
             step.append(((t, 0, -1, fact.order, k), which, row, r.new))
         return True
+
+    def _delayed_conflicts(self, step: list, t: int, passes_before: int) -> None:
+        """PyReason's rows of a delayed rule's firing that contradicts a fact's IPL partner: both land in
+        pass 0 of a step that began at [0,1], so the engine resets the pair without a row. Rows: the facts
+        (and the partners they set), then the rule's head reset and its partner's, named by the delayed
+        rule with that head predicate (without clauses: the engine keeps no row of which grounding)."""
+        eng, seen = self.engine, {repr(row[2:4]) for _, _, row, _ in step if row[0] == t}
+        delayed = {self._pred(r.head.pred): k
+                   for k, r in reversed(list(enumerate(eng.rules)))
+                   if r.delay > 0 and r.name not in self.ipl_rules}
+        for atom in np.flatnonzero(eng.static[0]):
+            atom = int(atom)
+            pred, args = eng.vocab.atom_parts(atom)
+            name = self._pred(pred)
+            partner_name = self.ipl_partners.get(name)
+            if name not in delayed or partner_name is None or atom in self.frozen or eng.bound(atom) != (0.0, 1.0):
+                continue
+            partner_tl = self.names.pred_to_tl.get((partner_name, len(args)))
+            partner = eng.atom(partner_tl, *args) if partner_tl is not None else None
+            if partner is None or partner >= eng.static.shape[1] or not eng.static[0, partner] or eng.bound(partner) != (0.0, 1.0) \
+                    or repr([self._component(args), name]) in seen:
+                continue
+            fact_rows, ends = [], {}
+            for a in (atom, partner):
+                rows, ends[a] = applied_one_by_one((0.0, 1.0), self._facts_at(a, t))
+                if any(not r.consistent for r in rows):
+                    break
+                fact_rows += rows
+            else:
+                which = "node" if len(args) == 1 else "edge"
+                for k, r in enumerate(sorted(fact_rows, key=lambda r: r.fact.order)):
+                    a_name = r.fact.pred if r.fact.by == "Fact" else self.ipl_partners[r.fact.pred]
+                    row = [t, passes_before, self._component(args), a_name, _bound(*r.old), _bound(*r.new),
+                           r.name, True, r.fact.by, ""]
+                    step.append(((t, 0, -1, r.fact.order, k), which, row, r.new))
+                rule_no = delayed[name]
+                due = self.names.original_statement(eng.rules[rule_no].name)
+                if due in self.ipl_twin_rules:
+                    due = self.ipl_twin_rules[due]
+                message = self._ipl_message(name, partner_name, args)
+                heads = [eng.vocab.node_ids[a] for a in args]
+                for sub, (a, label, by) in enumerate(((atom, name, "Rule"), (partner, partner_name, "IPL"))):
+                    row = [t, passes_before, self._component(args), label, _bound(*ends[a]), _bound(0.0, 1.0), due,
+                           False, by, message]
+                    step.append(((t, 0, rule_no, *heads, sub), which, row, (0.0, 1.0)))
+                self.frozen.update((atom, partner))
 
     def _rule_conflicts(self, cols: dict[str, list]) -> dict[tuple[int, str, tuple[str, ...]], int]:
         """(pass, PyReason predicate, args) -> the rule (not the IPL's) whose update conflicted there."""

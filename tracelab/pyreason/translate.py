@@ -271,13 +271,13 @@ def ipl_twins(rules: Sequence[PRule], ipl: Sequence[tuple[str, str]]) -> list[tu
     """For each rule whose head predicate has an IPL partner, its twin: the same body, the partner as
     head with the complement bound ([1-u,1-l]), so that the partner is set in the same pass as PyReason
     sets it inside the rule's update, and a conflict resets both atoms as PyReason does (the pass's
-    groups of both atoms conflict). Rules whose head bound comes from an annotation function have none,
-    and so have delayed rules: their firings land in pass 0 with the facts, where the IPL's own rules of
-    pass 1 already meet them.
+    groups of both atoms conflict). A delayed rule's twin has its delay: both firings land in pass 0 with
+    the facts and their IPL partners (ipl_facts), as PyReason applies them. Rules whose head bound comes
+    from an annotation function have none.
     Returns (twin, the head predicate it copies, the rule's name)."""
     out = []
     for i, r in enumerate(rules):
-        if r.head.function or r.delay > 0:
+        if r.head.function:
             continue
         for a, b in ipl:
             for src, dst in ((a, b), (b, a)):
