@@ -321,8 +321,12 @@ def test_a_conflict_with_the_partner_resets_and_freezes_both_as_pyreason_reports
     bad = nodes[~nodes["Consistent"].astype(bool)]
     assert set(bad["Label"]) == {"sick", "healthy"} and set(bad["Time"]) == {1}
     assert set(bad["Triggered By"]) <= {"IPL", "Rule"} and "IPL" in set(bad["Triggered By"])
-    assert any(m.startswith("Inconsistency occurred. Grounding healthy(Bob) conflicts with grounding sick(Bob).")
-               for m in bad["Inconsistency Message"])
+    # PyReason's resolve_inconsistency names the conflicting update's grounding (the rule's sick) first
+    assert set(bad["Inconsistency Message"]) == {
+        "Inconsistency occurred. Grounding sick(Bob) conflicts with grounding healthy(Bob). Setting bounds to [0,1] "
+        "and static=True for this timestep."}
+    assert bad[["Label", "Occurred Due To", "Triggered By"]].values.tolist() == [
+        ["sick", "spread", "Rule"], ["healthy", "spread", "IPL"]]
 
 
 def test_an_edge_pair_is_complementary_on_inferred_edges_too() -> None:

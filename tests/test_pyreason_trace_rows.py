@@ -44,6 +44,15 @@ def test_graph_attribute_rows_are_named_as_pyreason_names_them_non_ascii_kept(tm
         ("Yali", "Yali", "graph-attribute-fact")]
 
 
+def csv_rows(interpretation: pr.Interpretation, folder: Path, which: str = "nodes") -> list[str]:
+    """The saved trace's lines after the header, as PyReason's committed CSVs hold them."""
+    for old in folder.glob("rule_trace_*.csv"):
+        old.unlink()
+    pr.save_rule_trace(interpretation, str(folder))
+    (path,) = folder.glob(f"rule_trace_{which}_*.csv")
+    return path.read_text(encoding="utf-8").splitlines()[1:]
+
+
 def two_facts_each(first: str, second: str) -> pr.Interpretation:
     g = nx.DiGraph()
     g.add_nodes_from(["Bob", "a"])
@@ -72,7 +81,7 @@ def test_overlapping_facts_are_a_row_each() -> None:
     assert interpretation.get_dict()[0]["Bob"] == {"tired": (0.5, 0.9)}
 
 
-def test_a_rule_that_contradicts_an_ipl_partner_resets_both_as_pyreason() -> None:
+def test_a_rule_that_contradicts_an_ipl_partner_resets_both_as_pyreason(tmp_path: Path) -> None:
     # PyReason's examples/inconsistency_example.py, Carol: healthy(Carol) [0.9,1] makes sick(Carol) at most
     # 0.1, the spread rule then sets sick(Carol) [0.5,0.7]; PyReason resets both to [0,1] (its committed
     # trace: "Grounding sick(Carol) conflicts with grounding healthy(Carol)")
@@ -88,11 +97,18 @@ def test_a_rule_that_contradicts_an_ipl_partner_resets_both_as_pyreason() -> Non
     carol = interpretation.get_dict()[0]["Carol"]
     assert carol.get("sick", (0.0, 1.0)) == (0.0, 1.0) and carol["healthy"] == (0.0, 1.0)
     assert not interpretation.query(pr.Query("healthy(Carol):[0.9,1.0]"))
-    nodes, _ = pr.get_rule_trace(interpretation)
-    (row,) = nodes[~nodes["Consistent"].astype(bool)].values.tolist()
-    assert row[2:10] == ["Carol", "healthy", "[0.9,1.0]", "[0.0,1.0]", "spread_rule", False, "IPL",
-                         "Inconsistency occurred. Grounding healthy(Carol) conflicts with grounding sick(Carol). "
-                         "Setting bounds to [0,1] and static=True for this timestep."]
+    # the committed trace's rows for Carol: the IPL row of the fact's pass, then the rule's conflict with its
+    # clauses and the partner's reset naming the rule; Bob's IPL row in the fact's pass too
+    message = ("Inconsistency occurred. Grounding sick(Carol) conflicts with grounding healthy(Carol). "
+               "Setting bounds to [0,1] and static=True for this timestep.")
+    assert csv_rows(interpretation, tmp_path) == [
+        '0,0,Carol,healthy,"[0.0,1.0]","[0.9,1.0]",carol_healthy_fact,True,Fact,,,',
+        '0,0,Carol,sick,"[0.0,1.0]","[0.0,0.09999999999999998]",IPL: healthy,True,IPL,,,',
+        '0,0,Bob,sick,"[0.0,1.0]","[0.6,0.8]",bob_sick_fact,True,Fact,,,',
+        '0,0,Bob,healthy,"[0.0,1.0]","[0.19999999999999996,0.4]",IPL: sick,True,IPL,,,',
+        f'0,1,Carol,sick,"[0.0,0.09999999999999998]","[0.0,1.0]",spread_rule,False,Rule,"{message}",[\'Bob\'],'
+        '"[(\'Bob\', \'Carol\')]"',
+        f'0,1,Carol,healthy,"[0.9,1.0]","[0.0,1.0]",spread_rule,False,IPL,"{message}",,']
 
 
 def test_a_rules_partner_row_comes_in_its_pass_as_pyreasons_committed_trace(tmp_path: Path) -> None:
@@ -110,3 +126,64 @@ def test_a_rules_partner_row_comes_in_its_pass_as_pyreasons_committed_trace(tmp_
          "['workstation_1']"],
         ["0", "1", "workstation_1", "patched", "[0.0,1.0]", "[0.0,0.19999999999999996]", "IPL: vulnerable", "True",
          "IPL", "", ""]]
+
+
+def inconsistency_example() -> pr.Interpretation:
+    """PyReason's examples/inconsistency_example.py (its program; printing left out)."""
+    g = nx.DiGraph()
+    g.add_nodes_from(["Alice", "Bob", "Carol", "Dave"])
+    for a, b in (("Alice", "Bob"), ("Bob", "Carol"), ("Bob", "Dave")):
+        g.add_edge(a, b, contact=1)
+    pr.settings.atom_trace = True
+    pr.load_graph(g)
+    pr.add_inconsistent_predicate("sick", "healthy")
+    pr.add_inconsistent_predicate("close_contact", "no_contact")
+    for rule, name in (("sick(y):[0.5,0.7] <- sick(x):[0.5,1.0], contact(x,y)", "spread_rule"),
+                       ("no_contact(x,y):[0.8,1.0] <- sick(x):[0.5,1.0], sick(y):[0.5,1.0], contact(x,y)",
+                        "quarantine_rule"),
+                       ("trust(x,y):[0.0,0.2] <- sick(x):[0.5,1.0], contact(x,y)", "distrust_rule"),
+                       ("risk(x,y):[0.6,0.8] <- sick(x):[0.5,1.0], contact(x,y)", "risk_rule")):
+        pr.add_rule(pr.Rule(rule, name))
+    for fact, name in (("sick(Alice):[0.8,1.0]", "alice_sick_fact"), ("healthy(Alice):[0.9,1.0]", "alice_healthy_fact"),
+                       ("sick(Bob):[0.6,0.8]", "bob_sick_fact"), ("healthy(Carol):[0.9,1.0]", "carol_healthy_fact"),
+                       ("tired(Bob):[0.8,1.0]", "bob_tired_fact_1"), ("tired(Bob):[0.0,0.1]", "bob_tired_fact_2"),
+                       ("close_contact(Alice,Bob):[0.8,1.0]", "alice_bob_close_fact"),
+                       ("trust(Bob,Carol):[0.9,1.0]", "bob_carol_trust_high")):
+        pr.add_fact(pr.Fact(fact, name, 0, 0))
+    return pr.reason(timesteps=2)
+
+
+# PyReason's examples/csv_outputs/inconsistency_example_{nodes,edges}_20260318-083700.csv, after the header
+INCONSISTENCY_EXAMPLE_NODES = [
+    '0,0,Alice,sick,"[0.0,1.0]","[0.8,1.0]",alice_sick_fact,True,Fact,,,',
+    '0,0,Alice,healthy,"[0.0,1.0]","[0.0,0.19999999999999996]",IPL: sick,True,IPL,,,',
+    '0,0,Alice,healthy,"[0.0,0.19999999999999996]","[0.0,1.0]",alice_healthy_fact,False,Fact,"Inconsistency occurred. Grounding healthy(Alice) conflicts with grounding sick(Alice). Setting bounds to [0,1] and static=True for this timestep.",,',  # noqa: E501 (PyReason's line as it is)
+    '0,0,Alice,sick,"[0.8,1.0]","[0.0,1.0]",alice_healthy_fact,False,IPL,"Inconsistency occurred. Grounding healthy(Alice) conflicts with grounding sick(Alice). Setting bounds to [0,1] and static=True for this timestep.",,',  # noqa: E501 (PyReason's line as it is)
+    '0,0,Bob,sick,"[0.0,1.0]","[0.6,0.8]",bob_sick_fact,True,Fact,,,',
+    '0,0,Bob,healthy,"[0.0,1.0]","[0.19999999999999996,0.4]",IPL: sick,True,IPL,,,',
+    '0,0,Carol,healthy,"[0.0,1.0]","[0.9,1.0]",carol_healthy_fact,True,Fact,,,',
+    '0,0,Carol,sick,"[0.0,1.0]","[0.0,0.09999999999999998]",IPL: healthy,True,IPL,,,',
+    '0,0,Bob,tired,"[0.0,1.0]","[0.8,1.0]",bob_tired_fact_1,True,Fact,,,',
+    '0,0,Bob,tired,"[0.8,1.0]","[0.0,1.0]",bob_tired_fact_2,False,Fact,"Inconsistency occurred. Conflicting bounds for tired(Bob). Update from [0.800, 1.000] to [0.000, 0.100] is not allowed. Setting bounds to [0,1] and static=True for this timestep.",,',  # noqa: E501 (PyReason's line as it is)
+    '0,1,Carol,sick,"[0.0,0.09999999999999998]","[0.0,1.0]",spread_rule,False,Rule,"Inconsistency occurred. Grounding sick(Carol) conflicts with grounding healthy(Carol). Setting bounds to [0,1] and static=True for this timestep.",[\'Bob\'],"[(\'Bob\', \'Carol\')]"',  # noqa: E501 (PyReason's line as it is)
+    '0,1,Carol,healthy,"[0.9,1.0]","[0.0,1.0]",spread_rule,False,IPL,"Inconsistency occurred. Grounding sick(Carol) conflicts with grounding healthy(Carol). Setting bounds to [0,1] and static=True for this timestep.",,',  # noqa: E501 (PyReason's line as it is)
+    '0,1,Dave,sick,"[0.0,1.0]","[0.5,0.7]",spread_rule,True,Rule,,[\'Bob\'],"[(\'Bob\', \'Dave\')]"',
+    '0,1,Dave,healthy,"[0.0,1.0]","[0.30000000000000004,0.5]",IPL: sick,True,IPL,,,',
+]
+INCONSISTENCY_EXAMPLE_EDGES = [
+    '0,0,"(\'Alice\', \'Bob\')",close_contact,"[0.0,1.0]","[0.8,1.0]",alice_bob_close_fact,True,Fact,,,,',
+    '0,0,"(\'Alice\', \'Bob\')",no_contact,"[0.0,1.0]","[0.0,0.19999999999999996]",IPL: close_contact,True,IPL,,,,',
+    '0,0,"(\'Bob\', \'Carol\')",trust,"[0.0,1.0]","[0.9,1.0]",bob_carol_trust_high,True,Fact,,,,',
+    '0,1,"(\'Bob\', \'Carol\')",trust,"[0.9,1.0]","[0.0,1.0]",distrust_rule,False,Rule,"Inconsistency occurred. Conflicting bounds for trust(Bob,Carol). Update from [0.900, 1.000] to [0.000, 0.200] is not allowed. Setting bounds to [0,1] and static=True for this timestep.",[\'Bob\'],"[(\'Bob\', \'Carol\')]",',  # noqa: E501 (PyReason's line as it is)
+    '0,1,"(\'Bob\', \'Dave\')",trust,"[0.0,1.0]","[0.0,0.2]",distrust_rule,True,Rule,,[\'Bob\'],"[(\'Bob\', \'Dave\')]",',  # noqa: E501 (PyReason's line as it is)
+    '0,1,"(\'Bob\', \'Carol\')",risk,"[0.0,1.0]","[0.6,0.8]",risk_rule,True,Rule,,[\'Bob\'],"[(\'Bob\', \'Carol\')]",',
+    '0,1,"(\'Bob\', \'Dave\')",risk,"[0.0,1.0]","[0.6,0.8]",risk_rule,True,Rule,,[\'Bob\'],"[(\'Bob\', \'Dave\')]",',
+    '0,2,"(\'Bob\', \'Dave\')",no_contact,"[0.0,1.0]","[0.8,1.0]",quarantine_rule,True,Rule,,[\'Bob\'],[\'Dave\'],"[(\'Bob\', \'Dave\')]"',  # noqa: E501 (PyReason's line as it is)
+    '0,2,"(\'Bob\', \'Dave\')",close_contact,"[0.0,1.0]","[0.0,0.19999999999999996]",IPL: no_contact,True,IPL,,,,',
+]
+
+
+def test_the_inconsistency_example_trace_is_pyreasons_committed_one(tmp_path: Path) -> None:
+    interpretation = inconsistency_example()
+    assert csv_rows(interpretation, tmp_path) == INCONSISTENCY_EXAMPLE_NODES
+    assert csv_rows(interpretation, tmp_path, "edges") == INCONSISTENCY_EXAMPLE_EDGES

@@ -362,7 +362,9 @@ class _Reasoning:
             self.trace = PyReasonTrace(self.episode.engine, self.translated.names, self.graph_facts,
                                        self.translated.ipl_rules,
                                        skip_graph_facts=not settings.save_graph_attributes_to_trace,
-                                       ipl_twin_rules=self.translated.ipl_twin_rules)
+                                       ipl_twin_rules=self.translated.ipl_twin_rules,
+                                       ipl_facts=self.translated.ipl_facts,
+                                       ipl_partners=self.translated.ipl_partners)
             converged = self._steps(timesteps + 1 if timesteps >= 0 else -1, convergence)
             self.episode.finish()
         except BaseException:
@@ -389,7 +391,8 @@ class _Reasoning:
         eng.t = old.t
         new.trace = PyReasonTrace(eng, translated.names, new.graph_facts, translated.ipl_rules,
                                   skip_graph_facts=self.trace.skip_graph_facts,
-                                  ipl_twin_rules=translated.ipl_twin_rules)
+                                  ipl_twin_rules=translated.ipl_twin_rules, ipl_facts=translated.ipl_facts,
+                                  ipl_partners=translated.ipl_partners)
         new.trace.carry(self.trace)
         new.t_last, new.passes, new.passes_before = self.t_last, self.passes, self.passes
         new.external, new.last_fact = list(self.external), max(new.last_fact, self.last_fact)

@@ -15,9 +15,13 @@ EPS = 1e-9  # the engine's tolerance for an empty intersection (engine/kernel.py
 
 @dataclass(frozen=True)
 class StepFact:
-    name: str
+    name: str  # `Occurred Due To` of its row
     lower: float
     upper: float
+    order: int = 0  # its place among the program's facts (PyReason applies them in that order)
+    by: str = "Fact"  # `Triggered By`: "IPL" for the partner a fact's IPL sets (translate.ipl_facts)
+    conflict_name: str = ""  # `Occurred Due To` of its conflict row, if not `name` (an IPL partner's: the fact)
+    pred: str = ""  # the PyReason predicate whose grounding conflicts (an IPL partner's: the fact's)
 
 
 @dataclass(frozen=True)
@@ -27,6 +31,7 @@ class FactRow:
     name: str
     consistent: bool
     incoming: tuple[float, float]  # the fact's bound (the message quotes it)
+    fact: StepFact | None = None
 
 
 def applied_one_by_one(old: tuple[float, float], facts: list[StepFact]) -> tuple[list[FactRow], tuple[float, float]]:
@@ -37,10 +42,10 @@ def applied_one_by_one(old: tuple[float, float], facts: list[StepFact]) -> tuple
     for f in facts:
         lo, up = max(bound[0], f.lower), min(bound[1], f.upper)
         if lo > up + EPS:
-            rows.append(FactRow(bound, (0.0, 1.0), f.name, False, (f.lower, f.upper)))
+            rows.append(FactRow(bound, (0.0, 1.0), f.conflict_name or f.name, False, (f.lower, f.upper), f))
             return rows, (0.0, 1.0)
         if (lo, up) != bound:
-            rows.append(FactRow(bound, (lo, up), f.name, True, (f.lower, f.upper)))
+            rows.append(FactRow(bound, (lo, up), f.name, True, (f.lower, f.upper), f))
             bound = (lo, up)
     return rows, bound
 

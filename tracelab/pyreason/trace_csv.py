@@ -44,10 +44,14 @@ class PyReasonTrace:
 
     def __init__(self, engine: Any, names: NameMap | None = None, graph_facts: int = 0,
                  ipl_rules: dict[str, str] | None = None, *, skip_graph_facts: bool = True,
-                 ipl_twin_rules: dict[str, str] | None = None) -> None:
+                 ipl_twin_rules: dict[str, str] | None = None, ipl_facts: dict[str, tuple[str, str]] | None = None,
+                 ipl_partners: dict[str, str] | None = None) -> None:
         self.engine = engine
         self.ipl_rules = ipl_rules or {}  # the inconsistent predicate list's rules -> the predicate they copy
         self.ipl_twin_rules = ipl_twin_rules or {}  # translate.ipl_twins' rules -> their rule's PyReason name
+        self.ipl_facts = ipl_facts or {}  # translate.ipl_facts' facts -> (the predicate copied, its fact's name)
+        self.ipl_partners = ipl_partners or {}  # a PyReason predicate -> its IPL partner
+        self._rule_numbers: dict[str, int] | None = None  # a rule's PyReason name -> its engine index
         self.names = names or NameMap()
         self.graph_facts = graph_facts  # the engine's facts 0..graph_facts-1 are the graph's attributes
         self.skip_graph_facts = skip_graph_facts  # PyReason's save_graph_attributes_to_trace=False
@@ -56,7 +60,7 @@ class PyReasonTrace:
         self.clauses = {"node": 0, "edge": 0}
         self.external_names: dict[int, str] = {}  # external facts' names by their id (pr.reason(again=True))
         self.node_bounds: list[tuple[float, float]] = []
-        self._multi: dict[int, list[tuple[int, int, StepFact]]] | None = None  # _facts_by_atom
+        self._facts: dict[int, list[tuple[int, int, StepFact]]] | None = None  # _facts_by_atom
         self.frozen: set[int] = set()  # atoms a conflict of facts froze (static from then on)
         self.edge_bounds: list[tuple[float, float]] = []
 
@@ -84,6 +88,7 @@ class PyReasonTrace:
         cols = {k: v.tolist() for k, v in rows.items()}
         step: list[tuple[tuple[int, ...], str, list[object], tuple[float, float]]] = []
         several = self._several_facts(t if t is not None else (int(cols["t"][0]) if cols["t"] else -1))
+        conflicts = self._rule_conflicts(cols)
         for i in range(len(cols["t"])):
             if int(cols["world"][i]) != 0:
                 continue
@@ -106,22 +111,25 @@ class PyReasonTrace:
                 rule_no = int(eng.groundings.rule[g]) if g >= 0 else cid
                 rule = eng.rules[rule_no]
                 due, by = self.names.original_statement(rule.name), "Rule"
-                if rule.name in self.ipl_twin_rules:  # a rule's partner head (translate.ipl_twins):
-                    # PyReason names the rule on a conflict, else the predicate copied
-                    due = self.ipl_twin_rules[rule.name] if kind == CAUSE_POLICY else f"IPL: {self.ipl_rules[rule.name]}"
-                    by = "IPL"
-                elif rule.name in self.ipl_rules:  # PyReason's names for what its IPL sets
+                if rule.name in self.ipl_rules:  # PyReason's names for what its IPL sets
                     due, by = f"IPL: {self.ipl_rules[rule.name]}", "IPL"
+                    partner = (int(cols["pass_no"][i]), self.ipl_partners.get(self._pred(pred)), args)
+                    if kind == CAUSE_POLICY and partner in conflicts:  # PyReason resets the partner of an
+                        rule_no = conflicts[partner]  # atom a rule's update conflicts on, naming that rule
+                        rule = eng.rules[rule_no]
+                        due = self.names.original_statement(rule.name)
             elif graph_fact:
                 due, by = GRAPH_ATTRIBUTE_FACT, "Fact"
+            elif kind == CAUSE_FACT and eng.fact(cid).name in self.ipl_facts:  # a fact's IPL partner
+                due, by = f"IPL: {self.ipl_facts[eng.fact(cid).name][0]}", "IPL"
             elif kind == CAUSE_FACT:
                 due, by = self.names.original_statement(eng.fact(cid).name), "Fact"
             elif kind == CAUSE_EXTERNAL and cid in self.external_names:
                 due, by = self.external_names[cid], "Fact"
             else:
                 due, by = "-", "Fact"
-            message = "" if consistent else self._inconsistency(pred, args, old, by, self.ipl_rules.get(rule.name, "")
-                                                                if rule_no >= 0 else "")
+            message = "" if consistent else self._inconsistency(pred, args, old, rule if rule_no >= 0 else None,
+                                                                by == "IPL")
             row: list[object] = [int(cols["t"][i]), passes_before + int(cols["pass_no"][i]),
                                  self._component(args), self._pred(pred), old,
                                  _bound(cols["new_lower"][i], cols["new_upper"][i]), due, consistent, by, message]
@@ -130,38 +138,51 @@ class PyReasonTrace:
                 row += [[self._component(a)] for p, a in parts if p != DOMAIN]
             which = "node" if len(args) == 1 else "edge"
             self.clauses[which] = max(self.clauses[which], len(row) - len(NODE_HEADER))
-            heads = [eng.vocab.node_ids[a] for a in args] if rule_no >= 0 else [i]  # facts keep their order
-            order = (int(cols["t"][i]), int(cols["pass_no"][i]), rule_no, *heads)
+            # facts in the program's order; a rule's heads in node order, its IPL twin's row right after it
+            heads = ([eng.vocab.node_ids[a] for a in args] if rule_no >= 0 else
+                     [cid] if kind == CAUSE_FACT else [len(eng.program.facts) + i])
+            twin = rule_no >= 0 and rule.name in self.ipl_twin_rules
+            ordered_no = self._rule_number(self.ipl_twin_rules[rule.name]) if twin else rule_no
+            order = (int(cols["t"][i]), int(cols["pass_no"][i]), ordered_no, *heads, int(by == "IPL"))
             step.append((order, which, row, (float(cols["new_lower"][i]), float(cols["new_upper"][i]))))
         for atom, facts in several.items():  # no row: from [0,1], a conflict leaves [0,1]
             if t is not None and self.engine.static[0, atom] and self.engine.bound(atom) == (0.0, 1.0):
                 self._fact_rows(step, atom, facts, (0.0, 1.0), (0.0, 1.0), t, passes_before, -1)
+        if t is not None:
+            self._delayed_conflicts(step, t, passes_before)
         step.sort(key=lambda r: r[0])  # stable: a fact's rows, and one rule's rows on one head, keep theirs
         for _, which, row, bound in step:
             (self.node_rows if which == "node" else self.edge_rows).append(row)
             (self.node_bounds if which == "node" else self.edge_bounds).append(bound)
 
     def _facts_by_atom(self) -> dict[int, list[tuple[int, int, StepFact]]]:
-        """The program's facts (not the graph's) by atom, for the atoms two or more facts set: (start,
-        end, fact), in the facts' order. Only under PyReason's default policy (reset to [0,1], frozen),
-        the one fact_sequence.py follows."""
-        if self._multi is None:
+        """The program's facts (not the graph's) by atom: (start, end, fact), in the facts' order. Only
+        under PyReason's default policy (reset to [0,1], frozen), the one fact_sequence.py follows."""
+        if self._facts is None:
             eng, by_atom = self.engine, {}
             if eng.program.inconsistency == "reset_freeze":
-                for f in eng.program.facts:
+                for k, f in enumerate(eng.program.facts, start=eng.graph.n_facts):  # k: the fact's id (Engine.fact)
                     lit = f.literal
                     atom = eng.atom(lit.pred, *(a.name for a in lit.args))
                     lo, up = effective_bound(lit.lower, lit.upper, lit.negated)
-                    by_atom.setdefault(atom, []).append((f.start, f.end, StepFact(self.names.original_statement(f.name),
-                                                                                  lo, up)))
-            self._multi = {a: fs for a, fs in by_atom.items() if len(fs) > 1}
-        return self._multi
+                    name = self.names.original_statement(f.name)
+                    if f.name in self.ipl_facts:  # PyReason's rows of the partner a fact's IPL sets
+                        src, of = self.ipl_facts[f.name]
+                        fact = StepFact(f"IPL: {src}", lo, up, k, "IPL", of, src)
+                    else:
+                        fact = StepFact(name, lo, up, k, "Fact", "", self._pred(lit.pred))
+                    by_atom.setdefault(atom, []).append((f.start, f.end, fact))
+            self._facts = by_atom
+        return self._facts
+
+    def _facts_at(self, atom: int, t: int) -> list[StepFact]:
+        return [f for start, end, f in self._facts_by_atom().get(atom, []) if start <= t <= end]
 
     def _several_facts(self, t: int) -> dict[int, list[StepFact]]:
         """The atoms two or more facts set at step t (and no conflict froze before), with those facts."""
         out = {}
-        for atom, facts in self._facts_by_atom().items():
-            now = [f for start, end, f in facts if start <= t <= end]
+        for atom in self._facts_by_atom():
+            now = self._facts_at(atom, t)
             if len(now) > 1 and atom not in self.frozen:
                 out[atom] = now
         return out
@@ -176,21 +197,105 @@ class PyReasonTrace:
         pred, args = self.engine.vocab.atom_parts(atom)
         which = "node" if len(args) == 1 else "edge"
         for k, r in enumerate(rows):
-            message = "" if r.consistent else conflict_message(f"{self._pred(pred)}({','.join(args)})", r.old,
-                                                               r.incoming)
+            fact = r.fact
+            assert fact is not None
+            message = ""
+            if not r.consistent and fact.pred in self.ipl_partners:  # PyReason names the IPL's two groundings
+                message = self._ipl_message(fact.pred, self.ipl_partners[fact.pred], args)
+            elif not r.consistent:
+                message = conflict_message(f"{self._pred(pred)}({','.join(args)})", r.old, r.incoming)
             if not r.consistent:
                 self.frozen.add(atom)
             row: list[object] = [t, passes_before, self._component(args), self._pred(pred), _bound(*r.old),
-                                 _bound(*r.new), r.name, r.consistent, "Fact", message]
-            step.append(((t, 0, -1, i, k), which, row, r.new))
+                                 _bound(*r.new), r.name, r.consistent, fact.by, message]
+            step.append(((t, 0, -1, fact.order, k), which, row, r.new))
         return True
 
-    def _inconsistency(self, pred: str, args: tuple[str, ...], old: str, by: str, partner: str) -> str:
-        """PyReason's message: a conflict with the IPL partner (`partner`) names both groundings."""
-        atom = f"{self._pred(pred)}({','.join(args)})"
-        if by == "IPL":
-            return (f"Inconsistency occurred. Grounding {atom} conflicts with grounding "
-                    f"{partner}({','.join(args)}). Setting bounds to [0,1] and static=True for this timestep.")
+    def _delayed_conflicts(self, step: list, t: int, passes_before: int) -> None:
+        """PyReason's rows of a delayed rule's firing that contradicts a fact's IPL partner: both land in
+        pass 0 of a step that began at [0,1], so the engine resets the pair without a row. Rows: the facts
+        (and the partners they set), then the rule's head reset and its partner's, named by the delayed
+        rule with that head predicate (without clauses: the engine keeps no row of which grounding)."""
+        eng, seen = self.engine, {repr(row[2:4]) for _, _, row, _ in step if row[0] == t}
+        delayed = {self._pred(r.head.pred): k
+                   for k, r in reversed(list(enumerate(eng.rules)))
+                   if r.delay > 0 and r.name not in self.ipl_rules}
+        for atom in np.flatnonzero(eng.static[0]):
+            atom = int(atom)
+            pred, args = eng.vocab.atom_parts(atom)
+            name = self._pred(pred)
+            partner_name = self.ipl_partners.get(name)
+            if name not in delayed or partner_name is None or atom in self.frozen or eng.bound(atom) != (0.0, 1.0):
+                continue
+            partner_tl = self.names.pred_to_tl.get((partner_name, len(args)))
+            partner = eng.atom(partner_tl, *args) if partner_tl is not None else None
+            if partner is None or partner >= eng.static.shape[1] or not eng.static[0, partner] or eng.bound(partner) != (0.0, 1.0) \
+                    or repr([self._component(args), name]) in seen:
+                continue
+            fact_rows, ends = [], {}
+            for a in (atom, partner):
+                rows, ends[a] = applied_one_by_one((0.0, 1.0), self._facts_at(a, t))
+                if any(not r.consistent for r in rows):
+                    break
+                fact_rows += rows
+            else:
+                which = "node" if len(args) == 1 else "edge"
+                for k, r in enumerate(sorted(fact_rows, key=lambda r: r.fact.order)):
+                    a_name = r.fact.pred if r.fact.by == "Fact" else self.ipl_partners[r.fact.pred]
+                    row = [t, passes_before, self._component(args), a_name, _bound(*r.old), _bound(*r.new),
+                           r.name, True, r.fact.by, ""]
+                    step.append(((t, 0, -1, r.fact.order, k), which, row, r.new))
+                rule_no = delayed[name]
+                due = self.names.original_statement(eng.rules[rule_no].name)
+                if due in self.ipl_twin_rules:
+                    due = self.ipl_twin_rules[due]
+                message = self._ipl_message(name, partner_name, args)
+                heads = [eng.vocab.node_ids[a] for a in args]
+                for sub, (a, label, by) in enumerate(((atom, name, "Rule"), (partner, partner_name, "IPL"))):
+                    row = [t, passes_before, self._component(args), label, _bound(*ends[a]), _bound(0.0, 1.0), due,
+                           False, by, message]
+                    step.append(((t, 0, rule_no, *heads, sub), which, row, (0.0, 1.0)))
+                self.frozen.update((atom, partner))
+
+    def _rule_conflicts(self, cols: dict[str, list]) -> dict[tuple[int, str, tuple[str, ...]], int]:
+        """(pass, PyReason predicate, args) -> the rule (not the IPL's) whose update conflicted there."""
+        out = {}
+        for i in range(len(cols["t"])):
+            g = int(cols["grounding"][i])
+            if int(cols["world"][i]) == 0 and int(cols["cause_kind"][i]) == CAUSE_POLICY and g >= 0:
+                rule_no = int(self.engine.groundings.rule[g])
+                if self.engine.rules[rule_no].name not in self.ipl_rules:
+                    pred, args = self.engine.vocab.atom_parts(int(cols["atom"][i]))
+                    out[(int(cols["pass_no"][i]), self._pred(pred), args)] = rule_no
+        return out
+
+    def _rule_number(self, name: str) -> int:
+        """The engine's index of the rule PyReason names `name`."""
+        if self._rule_numbers is None:
+            self._rule_numbers = {}
+            for k, r in enumerate(self.engine.rules):
+                self._rule_numbers.setdefault(self.names.original_statement(r.name), k)
+        return self._rule_numbers.get(name, -1)
+
+    @staticmethod
+    def _ipl_message(pred: str, partner: str, args: tuple[str, ...]) -> str:
+        comp = ",".join(args)
+        return (f"Inconsistency occurred. Grounding {pred}({comp}) conflicts with grounding {partner}({comp}). "
+                "Setting bounds to [0,1] and static=True for this timestep.")
+
+    def _inconsistency(self, pred: str, args: tuple[str, ...], old: str, rule: Any, partner_row: bool) -> str:
+        """PyReason's message of the conflict `rule` (None: a fact) caused on pred(args): a predicate of the
+        IPL names both groundings, the conflicting update's first (on the partner's row, the other); else
+        the bounds."""
+        name = self._pred(pred)
+        if partner_row and name in self.ipl_partners:
+            return self._ipl_message(self.ipl_partners[name], name, args)
+        if name in self.ipl_partners:
+            return self._ipl_message(name, self.ipl_partners[name], args)
+        atom = f"{name}({','.join(args)})"
+        if rule is not None and rule.annotation is None:  # PyReason quotes both bounds
+            lo, up = effective_bound(rule.head.lower, rule.head.upper, rule.head.negated)
+            return conflict_message(atom, tuple(float(v) for v in old.strip("[]").split(",")), (lo, up))
         return (f"Inconsistency occurred. Conflicting bounds for {atom}. Update from {old} is not allowed. "
                 "Setting bounds to [0,1] and static=True for this timestep.")
 

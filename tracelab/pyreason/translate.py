@@ -44,6 +44,9 @@ class PyReasonProgram:
     origins: list[tuple[SourceLoc, str] | None] = field(default_factory=list)  # per line of text
     ipl_rules: dict[str, str] = field(default_factory=dict)  # the IPL's rules -> the predicate they copy
     ipl_twin_rules: dict[str, str] = field(default_factory=dict)  # ipl_twins' rules -> their rule's name
+    # ipl_facts' facts -> (the predicate they copy, the PyReason name of the fact they copy)
+    ipl_facts: dict[str, tuple[str, str]] = field(default_factory=dict)
+    ipl_partners: dict[str, str] = field(default_factory=dict)  # a PyReason predicate -> its IPL partner
 
 
 def number(v: float) -> str:
@@ -212,9 +215,15 @@ def translate(rules: Sequence[PRule], facts: Sequence[PFact], graph: Graph | Non
         origins.append((twin.loc, twin.text))
         ipl_rules[lines[-1].split(":", 1)[0]] = source
         ipl_twin_rules[lines[-1].split(":", 1)[0]] = of
-    for f in facts:
+    ipl_fact_names: dict[str, tuple[str, str]] = {}
+    for k, f in enumerate(facts):
         lines.append(fact_text(f, names))
         origins.append((f.loc, ""))
+        for partner in ipl_facts(f, ipl):
+            name = f"pyreason_ipl_fact_{k}_{len(ipl_fact_names)}"
+            lines.append(fact_text(dataclasses.replace(partner, name=name), names))
+            origins.append((f.loc, ""))
+            ipl_fact_names[lines[-1].split(":", 1)[0]] = (f.literal.pred, f.name)
     if any(f"{DOMAIN}(" in line for line in lines):
         nodes = dict.fromkeys([*(graph.nodes if graph is not None else ()),
                                *(a for f in facts for a in f.literal.args)])
@@ -234,7 +243,8 @@ def translate(rules: Sequence[PRule], facts: Sequence[PFact], graph: Graph | Non
     except ProgramError as e:
         raise _located(e, origins, lines) from None
     program.files = sorted({str(o[0].file) for o in origins if o is not None})
-    return PyReasonProgram(text, program, graph, names, origins, ipl_rules, ipl_twin_rules)
+    return PyReasonProgram(text, program, graph, names, origins, ipl_rules, ipl_twin_rules, ipl_fact_names,
+                           {**{a: b for a, b in ipl}, **{b: a for a, b in ipl}})
 
 
 # A bound excluding exactly the atoms within the engine's EPS of [0,1] (never set, or set back to it): a
@@ -261,13 +271,13 @@ def ipl_twins(rules: Sequence[PRule], ipl: Sequence[tuple[str, str]]) -> list[tu
     """For each rule whose head predicate has an IPL partner, its twin: the same body, the partner as
     head with the complement bound ([1-u,1-l]), so that the partner is set in the same pass as PyReason
     sets it inside the rule's update, and a conflict resets both atoms as PyReason does (the pass's
-    groups of both atoms conflict). Rules whose head bound comes from an annotation function have none,
-    and so have delayed rules: their firings land in pass 0 with the facts, where the IPL's own rules of
-    pass 1 already meet them.
+    groups of both atoms conflict). A delayed rule's twin has its delay: both firings land in pass 0 with
+    the facts and their IPL partners (ipl_facts), as PyReason applies them. Rules whose head bound comes
+    from an annotation function have none.
     Returns (twin, the head predicate it copies, the rule's name)."""
     out = []
     for i, r in enumerate(rules):
-        if r.head.function or r.delay > 0:
+        if r.head.function:
             continue
         for a, b in ipl:
             for src, dst in ((a, b), (b, a)):
@@ -277,6 +287,22 @@ def ipl_twins(rules: Sequence[PRule], ipl: Sequence[tuple[str, str]]) -> list[tu
                 head = dataclasses.replace(r.head, pred=dst, lower=1 - r.head.upper, upper=1 - r.head.lower)
                 out.append((dataclasses.replace(r, name=f"pyreason_ipl_twin_{i}_{dst}", head=head,
                                                 set_static=False), src, r.name))
+    return out
+
+
+def ipl_facts(f: PFact, ipl: Sequence[tuple[str, str]]) -> list[PFact]:
+    """The facts PyReason's IPL sets with fact `f`: its partners with the complement of its bound, at the
+    same times, applied right after it in the same pass (PyReason sets them inside the fact's update).
+    A conflict with one of them is then a conflict of facts, reset in pass 0 as PyReason resets it."""
+    lit = f.literal
+    if (lit.lower, lit.upper) == (0.0, 1.0):
+        return []
+    out = []
+    for a, b in ipl:
+        for src, dst in ((a, b), (b, a)):
+            if lit.pred == src:  # unrounded, as PyReason computes it (1 - 0.8 = 0.19999999999999996)
+                partner = dataclasses.replace(lit, pred=dst, lower=1 - lit.upper, upper=1 - lit.lower)
+                out.append(dataclasses.replace(f, literal=partner))
     return out
 
 
