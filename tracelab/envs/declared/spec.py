@@ -377,10 +377,10 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
         raise src.error(("data", sorted(clash)[0]), "a name in both [data] and [params]")
     names = {**data, **defaults, **{k: _plain(v) for k, v in params.items()}}
     r = _Reader(src, names)
+    _require(r)  # before anything is generated from the params
     r.src = src = expand_spec(src, names, lambda path, n: r.budget_ahead(path, n, "generated values"))
 
     r.table(("env",), ("rules", "render_fps", "constants", "require"))
-    _require(r)
     rule_files = [_inside(r, ("env", "rules", i), f) for i, f in enumerate(r.strings(("env", "rules")))]
     if not rule_files:
         raise r.err(("env", "rules"), "expected at least one rule file")
