@@ -1,7 +1,7 @@
 """`tracelab bench env`: the rule-driven simulator (RuleSim) and the hand-written one (RefSim) side by
 side, by team size, one world and batched, RuleSim with tracing on and off; then the gymnasium envs
 (tracelab.envs.gym_env, tracelab.envs.vector_env) on both backends when they import; then GridWar through
-both paths: RuleSim's envs against the declared spec's (rules/gridworld/war_*.toml, docs/worlds.md), one
+both paths: RuleSim's envs against the declared spec's (rules/gridworld/war.toml, docs/worlds.md), one
 world and batched, with their ratios. Goals: docs/benchmarks.md."""
 from __future__ import annotations
 
@@ -114,18 +114,19 @@ def gym_rates(worlds: int, repeats: int, target_s: float) -> dict[str, Any]:
 
 def declared_rates(worlds: int, repeats: int, target_s: float) -> list[dict[str, Any]]:
     """GridWar 1v1 through RuleSim (GridWarEnv, GridWarVectorEnv: rulesim_fused, the game's own Python
-    glue) and through its declared spec (DeclaredEnv, DeclaredVectorEnv over rules/gridworld/war_*.toml):
+    glue) and through its declared spec (DeclaredEnv, DeclaredVectorEnv over rules/gridworld/war.toml):
     one world and `worlds` worlds, untraced, the same random actions; the ratio declared / RuleSim."""
     # deferred: as in gym_rates
     from tracelab.envs.gym_env import GridWarEnv
     from tracelab.envs.vector_env import GridWarVectorEnv
     rows = []
     for name in ("base", "advanced"):
-        spec = RULES_DIR / "gridworld" / f"war_{name}.toml"
+        spec, advanced = RULES_DIR / "gridworld" / "war.toml", name == "advanced"
         for kind, n, make_rules, make_declared, runner in (
-                ("single", 1, lambda name=name: GridWarEnv(name), lambda spec=spec: make_env(spec), _single_runner),
+                ("single", 1, lambda name=name: GridWarEnv(name),
+                 lambda advanced=advanced: make_env(spec, advanced=advanced), _single_runner),
                 ("vector", worlds, lambda name=name: GridWarVectorEnv(worlds, name),
-                 lambda spec=spec: make_vec_env(spec, worlds), _vector_runner)):
+                 lambda advanced=advanced: make_vec_env(spec, worlds, advanced=advanced), _vector_runner)):
             row: dict[str, Any] = {"scenario": name, "kind": kind, "worlds": n}
             for path, make in (("rulesim", make_rules), ("declared", make_declared)):
                 env = make()
@@ -206,7 +207,7 @@ def report(r: dict[str, Any]) -> str:
             ["backend", "env", "worlds", "steps/s", "env-steps/s", "spread"],
             [[x["backend"], x["kind"], x["worlds"], med(x), env(x) if "env_steps_per_s" in x else med(x), sp(x)]
              for x in g["rows"]])
-    declared = "GridWar 1v1 through RuleSim and through its declared spec (rules/gridworld/war_*.toml), " \
+    declared = "GridWar 1v1 through RuleSim and through its declared spec (rules/gridworld/war.toml), " \
                "untraced\n" + format_table(
                    ["scenario", "env", "worlds", "RuleSim env-steps/s", "declared env-steps/s", "declared/RuleSim",
                     "spread RuleSim/declared"],
