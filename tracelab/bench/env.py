@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from tracelab import RULES_DIR
+from tracelab.envs.declared.gridwar import WAR_SPEC
 from tracelab.bench.common import (
     block_rates,
     fmt_num,
@@ -121,12 +121,12 @@ def declared_rates(worlds: int, repeats: int, target_s: float) -> list[dict[str,
     from tracelab.envs.vector_env import GridWarVectorEnv
     rows = []
     for name in ("base", "advanced"):
-        spec, advanced = RULES_DIR / "gridworld" / "war.toml", name == "advanced"
+        advanced = name == "advanced"
         for kind, n, make_rules, make_declared, runner in (
                 ("single", 1, lambda name=name: GridWarEnv(name),
-                 lambda advanced=advanced: make_env(spec, advanced=advanced), _single_runner),
+                 lambda advanced=advanced: make_env(WAR_SPEC, advanced=advanced), _single_runner),
                 ("vector", worlds, lambda name=name: GridWarVectorEnv(worlds, name),
-                 lambda advanced=advanced: make_vec_env(spec, worlds, advanced=advanced), _vector_runner)):
+                 lambda advanced=advanced: make_vec_env(WAR_SPEC, worlds, advanced=advanced), _vector_runner)):
             row: dict[str, Any] = {"scenario": name, "kind": kind, "worlds": n}
             for path, make in (("rulesim", make_rules), ("declared", make_declared)):
                 env = make()
