@@ -101,14 +101,15 @@ def test_a_world_is_generated_from_its_params(tmp_path: Path, length: int) -> No
      "no constant 'c9_1'"),
     ('each = ["at(c0_{i}):[0,0]"]', 'each = ["at(c0_{i + length}):[0,0]"]',
      "corridor.toml:40: start.facts[1].each[0] (i = 1)", "no constant 'c0_5'"),
-    ('"{i * 10}"', '"{i * }"', "corridor.toml:33: reward.table.cells.each.at(c0_{i})", "not an expression"),
-    ('"at(c0_{i})" = "{i * 10}"', '"at(c0_{i // 2})" = 1', "corridor.toml:33: reward.table.cells.each.at(c0_{i // 2})",
-     "makes the key 'at(c0_1)' twice (i = 3)"),
+    ('"{i * 10}"', '"{i * }"', "corridor.toml:33: reward.table.cells.each.at(c0_{i}) (i = 1)", "not an expression"),
+    ('"at(c0_{i})" = "{i * 10}"', '"at(c0_{i // 2})" = 1',
+     "corridor.toml:33: reward.table.cells.each.at(c0_{i // 2}) (i = 3)",
+     "makes the key 'at(c0_1)' twice"),
     ('i = "range(1, length)"', 'i = "length"', "corridor.toml:33: reward.table.cells.for.i",
      "expected a list of whole numbers or strings, got int"),
     ('i = "range(1, length)"', 'length = "range(3)"', "corridor.toml:33: reward.table.cells.for.length",
      "hides a param"),
-    ('"{length - 1 - i}"', '"{length - 1 - i"', "corridor.toml:30: observation.parts[0].values[0].each[0]",
+    ('"{length - 1 - i}"', '"{length - 1 - i"', "corridor.toml:30: observation.parts[0].values[0].each[0] (i = 0)",
      "a '{' with no '}'"),
     ('cells = { for', 'cells = { fro', "corridor.toml:33: reward.table.cells", "'cells' is not an atom"),
 ])
@@ -163,10 +164,27 @@ def test_gridwar_params_that_do_not_make_a_game_are_located(params: dict, fragme
 
 
 def test_gridwar_generation_is_charged_to_the_memory_budget(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Past TRACELAB_SPEC_MEMORY what the params would generate is refused before it is made."""
+    """Past TRACELAB_SPEC_MEMORY what the params would generate is refused before it is made: at the `for`
+    whose values pass it, or at the agents once their atoms are counted."""
+    monkeypatch.setenv("TRACELAB_SPEC_MEMORY", "5M")
+    with pytest.raises(SpecError, match=r"war.toml:\d+: [a-z.\[\]0-9]+\.for: [\d,]+ generated values brings the spec "
+                                        r"to about [\d.]+ MiB once built, over the limit of 5 MiB"):
+        load_spec(WAR, agents_per_team=10)
     monkeypatch.setenv("TRACELAB_SPEC_MEMORY", "20M")
     with pytest.raises(SpecError, match=r"war.toml:\d+: [a-z.\[\]0-9]+: .*over the limit of 20 MiB \(set by "
                                         r"TRACELAB_SPEC_MEMORY\)"):
-        load_spec(WAR, agents_per_team=40)
+        load_spec(WAR, agents_per_team=10)
     monkeypatch.setenv("TRACELAB_SPEC_MEMORY", "2G")
-    assert len(load_spec(WAR, agents_per_team=40).agents) == 40
+    assert len(load_spec(WAR, agents_per_team=10).agents) == 10
+
+
+def test_expressions_of_generated_parts_share_one_step_budget(tmp_path: Path) -> None:
+    """100,000 copies of an expression of 100,000 steps would take hours: refused once the copies'
+    expressions have spent MAX_GENERATION_STEPS, at the template."""
+    spec = SPEC.replace('each = ["{length - 1 - i}"]', 'each = ["{length - 1 - i + len([0] * 99999) * 0}"]')
+    spec = spec.replace('for = { i = "range(length)" }, each = ["{length',
+                        'for = { i = "range(1000)", k = "range(100)" }, each = ["{length')
+    with pytest.raises(SpecError, match=r"corridor.toml:30: observation.parts\[0\].values\[0\].each\[0\] "
+                                        r"\(i = \d+, k = \d+\): "
+                                        r"generating the spec's parts takes more than 8,000,000 steps"):
+        load_spec(write(tmp_path, spec))

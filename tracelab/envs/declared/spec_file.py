@@ -186,9 +186,11 @@ class SpecSource:
     def folder(self) -> str:
         return os.path.dirname(os.path.abspath(self.path))
 
-    def error(self, path: KeyPath, message: str, kind: type[SpecError] = SpecError) -> SpecError:
-        """A located error (`kind`) about the value at `path` (a generated one's: at its template)."""
-        path, note = self.written_at(path)
+    def error(self, path: KeyPath, message: str, kind: type[SpecError] = SpecError, note: str = "") -> SpecError:
+        """A located error (`kind`) about the value at `path` (a generated one's: at its template, with the
+        `for` variables' values, or `note`)."""
+        path, generated = self.written_at(path)
+        note = generated or note
         line = self.key_lines.line(path)
         where = f"{self.path}:{line}" if line else self.path
         key = ".".join(str(p) if isinstance(p, str) else f"[{p}]" for p in path).replace(".[", "[")

@@ -23,11 +23,15 @@ from collections.abc import Callable
 from typing import Any
 
 from tracelab.envs.declared.spec_file import KeyPath, SpecError, SpecSource
-from tracelab.expressions import ExpressionError, evaluate
+from tracelab.expressions import MAX_EXPRESSION_STEPS, Evaluation, ExpressionError
 
 FOR, EACH = "for", "each"
 NOT_GENERATED = ("params", "data")  # read before any expression can be computed
 MAX_GENERATED = 1_000_000  # values generated in all (strings, numbers, tables), whatever the memory budget
+# the expressions of all `for`s and `{expr}`s together, in the evaluator's steps (a node, an item), plus
+# one a character parsed: seconds (~30 s of CPU at most on a loaded machine), where 1,000,000 copies of an expression of
+# MAX_EXPRESSION_STEPS each would never end (GridWar at 20 agents a team takes ~0.3M)
+MAX_GENERATION_STEPS = 8 * MAX_EXPRESSION_STEPS
 
 # a generated path -> (its template's path, the variables' values), as SpecSource.origins holds them
 Origins = dict[KeyPath, tuple[KeyPath, str]]
@@ -58,9 +62,10 @@ class _Generator:
         self.charge = charge
         self.origins: Origins = {}
         self.generated = 0
+        self.steps = 0  # spent by every expression so far, of MAX_GENERATION_STEPS
 
-    def err(self, path: KeyPath, msg: str) -> SpecError:
-        return self.src.error(path, msg)
+    def err(self, path: KeyPath, msg: str, note: str = "") -> SpecError:
+        return self.src.error(path, msg, note=note)
 
     def node(self, v: Any, new: KeyPath, orig: KeyPath, env: dict[str, Any], note: str) -> Any:
         """`v` (written at `orig`, now at `new`) with its `for`s expanded and, inside a repeat (`env` holds
@@ -68,7 +73,7 @@ class _Generator:
         if new != orig or note:
             self.origins[new] = (orig, note)
         if isinstance(v, str):
-            return self.fill(v, orig, env) if env else v
+            return self.fill(v, orig, env, note) if env else v
         if isinstance(v, list):
             return self.items(v, new, orig, env, note)
         if isinstance(v, dict):
@@ -104,7 +109,7 @@ class _Generator:
         out: dict[str, Any] = {}
         for key, x in v.items():
             if not (isinstance(x, dict) and FOR in x):
-                name = self.key(key, (*orig, key), env)
+                name = self.key(key, (*orig, key), env, note)
                 self.put(out, name, self.node(x, (*new, name), (*orig, key), env, note), (*orig, key))
                 continue
             where = (*orig, key)
@@ -115,20 +120,20 @@ class _Generator:
             for values, inner_note in self.combinations(x[FOR], where, env, note, len(template), template):
                 inner = {**env, **values}
                 for k, y in template.items():
-                    name = self.key(k, (*where, EACH, k), inner)
+                    name = self.key(k, (*where, EACH, k), inner, inner_note)
                     self.put(out, name, self.node(y, (*new, name), (*where, EACH, k), inner, inner_note),
                              (*where, EACH, k), inner_note)
         return out
 
     def put(self, out: dict[str, Any], name: str, value: Any, where: KeyPath, note: str = "") -> None:
         if name in out:
-            raise self.err(where, f"makes the key {name!r} twice{f' ({note})' if note else ''}")
+            raise self.err(where, f"makes the key {name!r} twice", note)
         out[name] = value
 
-    def key(self, key: str, where: KeyPath, env: dict[str, Any]) -> str:
+    def key(self, key: str, where: KeyPath, env: dict[str, Any], note: str) -> str:
         if not env:
             return key
-        name = self.fill(key, where, env)
+        name = self.fill(key, where, env, note)
         return name if isinstance(name, str) else str(name)
 
     def combinations(self, spec: Any, where: KeyPath, env: dict[str, Any], note: str, per: int, template: Any
@@ -146,7 +151,7 @@ class _Generator:
             if var in self.names or var in env:
                 raise self.err((*path, var), f"the variable {var!r} hides a param, a data name or an outer "
                                              "variable of the same name")
-            value = self.compute(text, (*path, var), env) if isinstance(text, str) else text
+            value = self.compute(text, (*path, var), env, note) if isinstance(text, str) else text
             if not isinstance(value, list) or not all(isinstance(x, (int, str)) and not isinstance(x, bool)
                                                       for x in value):
                 raise self.err((*path, var), f"expected a list of whole numbers or strings, got {_kind(value)}")
@@ -164,13 +169,22 @@ class _Generator:
             out.append((values, f"{note}, {text}" if note else text))
         return out
 
-    def compute(self, text: str, where: KeyPath, env: dict[str, Any]) -> Any:
+    def compute(self, text: str, where: KeyPath, env: dict[str, Any], note: str) -> Any:
+        left = MAX_GENERATION_STEPS - self.steps - len(text)
+        run = Evaluation({**self.names, **env}, min(left, MAX_EXPRESSION_STEPS))
         try:
-            return evaluate(text, {**self.names, **env})
+            if left <= 0:
+                raise ExpressionError("out of steps")
+            return run.run(text)
         except ExpressionError as e:
-            raise self.err(where, str(e)) from None
+            if left <= MAX_EXPRESSION_STEPS and run.steps >= left:
+                raise self.err(where, f"generating the spec's parts takes more than {MAX_GENERATION_STEPS:,} "
+                                      "steps of expressions (items built, compared or read)", note) from None
+            raise self.err(where, str(e), note) from None
+        finally:
+            self.steps += len(text) + run.steps
 
-    def fill(self, text: str, where: KeyPath, env: dict[str, Any]) -> Any:
+    def fill(self, text: str, where: KeyPath, env: dict[str, Any], note: str) -> Any:
         """`text` with each `{expr}` replaced by its value; exactly one `{expr}`: the value itself."""
         pieces, i = [], 0
         while i < len(text):
@@ -181,17 +195,17 @@ class _Generator:
             elif c == "{":
                 end = text.find("}", i)
                 if end < 0:
-                    raise self.err(where, f"{text[:60]!r}: a '{{' with no '}}' (write '{{{{' for a brace)")
-                value = self.compute(text[i + 1:end], where, env)
+                    raise self.err(where, f"{text[:60]!r}: a '{{' with no '}}' (write '{{{{' for a brace)", note)
+                value = self.compute(text[i + 1:end], where, env, note)
                 if i == 0 and end == len(text) - 1:
                     return value
                 if not isinstance(value, (int, float, str)):
                     raise self.err(where, f"{text[:60]!r}: {{{text[i + 1:end]}}} is {_kind(value)}, not a "
-                                          "number or a string to write in the text")
+                                          "number or a string to write in the text", note)
                 pieces.append(str(value))
                 i = end + 1
             elif c == "}":
-                raise self.err(where, f"{text[:60]!r}: a '}}' with no '{{' (write '}}}}' for a brace)")
+                raise self.err(where, f"{text[:60]!r}: a '}}' with no '{{' (write '}}}}' for a brace)", note)
             else:
                 j = min((k for k in (text.find("{", i), text.find("}", i)) if k >= 0), default=len(text))
                 pieces.append(text[i:j])
