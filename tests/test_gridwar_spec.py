@@ -48,6 +48,9 @@ def play_both(name: str, steps: int, seed: int, max_steps: int, scenario: Scenar
         seen["invalid"] += i1["invalid"]
         seen["blue shot"] += i1["opponent_actions"] in (4, 5, 6, 7)
         if te1 or tr1:
+            assert i2["won"] == (i1["winner"] == 0), (k, i1, i2)  # [end] win: red's win alone
+            assert i2["outcome"] == ("win" if i1["winner"] == 0 else "loss" if i1["winner"] == 1 else
+                                     "truncated" if tr1 else "terminated"), (k, i1, i2)
             seen["truncated"] += tr1
             seen["red won"] += i1["winner"] == 0
             seen["blue won"] += i1["winner"] == 1
