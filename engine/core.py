@@ -138,7 +138,7 @@ class Engine:
         if threads is not None and threads < 1:
             raise ValueError(f"threads must be >= 1, got {threads}")
         # one thread unless asked: on this project's 2-core machines a second thread stepping half the
-        # batch gained little (docs/benchmarks.md, "Threads")
+        # batch gained little (docs/benchmarks/history.md, "Threads")
         self.threads = threads or 1
         self._ext_codes = np.zeros(0, np.int8)  # crisp value codes of this step's external rows (lanes)
         self.kernel_notice: str | None = None  # why a requested compiled kernel is not used

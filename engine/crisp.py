@@ -1,7 +1,7 @@
 """The crisp bounds as value codes: [0,1] V_U, [1,1] V_T, [0,0] V_F. The Engine reads every program's
 bounds as codes (a program is crisp when all are) to choose its kernel; the lanes kernel (lanes.py) runs on
 them. Here, without numba, so that a reasoning on the counting kernel does not import the lanes kernel
-(docs/benchmarks.md, "PyReason's API").
+(docs/benchmarks/history.md, "PyReason's API").
 
 The codes are written out again in lanes.py, not imported there: numba freezes globals into its cached
 machine code and does not notice a change in another module; tests/test_lanes.py checks both agree."""

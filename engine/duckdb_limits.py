@@ -9,7 +9,7 @@ import tempfile
 from dataclasses import dataclass
 
 from tracelab.engine.grounding_limit import usable_memory
-from tracelab.engine.safe_files import human_bytes, parse_byte_size
+from tracelab.engine.safe_files import human_bytes, size_setting
 
 GIB = 1 << 30
 QUERY_MEMORY_ENV = "TRACELAB_QUERY_MEMORY"
@@ -45,13 +45,9 @@ class QueryMemory:
 def query_memory() -> QueryMemory:
     """The limits of a sandbox connection: $TRACELAB_QUERY_MEMORY (a size: 8G, 500M) if set, else a
     quarter of this machine's memory (or its container's), at most 4 GiB."""
-    given = os.environ.get(QUERY_MEMORY_ENV, "").strip()
-    if given:
-        try:
-            memory = parse_byte_size(given)
-        except ValueError as e:
-            raise SandboxSettingError(f"{QUERY_MEMORY_ENV}={given!r}: {e}") from None
-        source = f"set by {QUERY_MEMORY_ENV}"
+    given = size_setting(QUERY_MEMORY_ENV, SandboxSettingError)
+    if given is not None:
+        memory, source = given, f"set by {QUERY_MEMORY_ENV}"
     else:
         total = usable_memory()
         memory = min(total // MACHINE_FRACTION, DEFAULT_CAP)

@@ -29,7 +29,7 @@ _BOUND_RE = re.compile(rf"\s*(?:\[\s*{_NUM}\s*,\s*{_NUM}\s*\]|{_NUM}\s*,\s*{_NUM
 # engine` is ~75 MB), and never waited on (a FIFO is refused)
 GRAPH_FILE_CAP = 4 << 30
 # a smaller file is read by expat (~1 ms of CPU per 12 KB) rather than the compiled scanner, whose module
-# and four cached kernels cost ~35 ms of CPU to load in a new process (docs/benchmarks.md, "PyReason's
+# and four cached kernels cost ~35 ms of CPU to load in a new process (docs/benchmarks/history.md, "PyReason's
 # API"); the two read alike (tests/test_graphml_differential.py)
 SCANNER_MIN_BYTES = 64 << 10
 _UTF8_BOM = b"\xef\xbb\xbf"

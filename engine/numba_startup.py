@@ -3,7 +3,7 @@
 The first kernel a process loads from numba's disk cache refreshes numba's target context, which imports
 numba.np.arraymath, whose import asks `_check_blas()` (numba 0.68: `import scipy.linalg.cython_blas`) to
 set `_HAVE_BLAS`, read only when np.correlate / np.convolve is compiled. Importing scipy.linalg costs
-about 0.17 s of CPU (scipy 1.17; docs/benchmarks.md, "PyReason's API"), and no tracelab kernel uses BLAS.
+about 0.17 s of CPU (scipy 1.17; docs/benchmarks/history.md, "PyReason's API"), and no tracelab kernel uses BLAS.
 `defer_scipy_import()` imports arraymath with that check held back and gives `_HAVE_BLAS` the same answer
 when numba first reads it: scipy is imported then, by the code that needs it, not by every reasoning.
 

@@ -9,10 +9,9 @@ $TRACELAB_PARSE_MEMORY says otherwise (a size: 4G, 500M): about 400,000 short fa
 in a --facts-table (Parquet, read by DuckDB without parsing)."""
 from __future__ import annotations
 
-import os
 import re
 
-from .safe_files import FileRefused, human_bytes, parse_byte_size
+from .safe_files import FileRefused, human_bytes, size_setting
 
 PARSE_MEMORY_ENV = "TRACELAB_PARSE_MEMORY"
 DEFAULT_PARSE_MEMORY = 1 << 30
@@ -23,13 +22,10 @@ _CODE_LINE = re.compile(rb"^[ \t]*[^\s#]", re.M)  # a line that is neither blank
 
 def parse_memory_limit() -> tuple[int, str]:
     """The limit in bytes and how it was set (for the message)."""
-    given = os.environ.get(PARSE_MEMORY_ENV, "").strip()
-    if not given:
+    given = size_setting(PARSE_MEMORY_ENV, FileRefused)
+    if given is None:
         return DEFAULT_PARSE_MEMORY, f"the default; ${PARSE_MEMORY_ENV} raises it"
-    try:
-        return parse_byte_size(given), f"set by ${PARSE_MEMORY_ENV}"
-    except ValueError as e:
-        raise FileRefused(f"{PARSE_MEMORY_ENV}={given!r}: {e}") from None
+    return given, f"set by ${PARSE_MEMORY_ENV}"
 
 
 def parse_estimate(text: str) -> tuple[int, int]:

@@ -59,6 +59,18 @@ def parse_byte_size(text: str) -> int:
     return int(value)
 
 
+def size_setting(variable: str, error: type[Exception]) -> int | None:
+    """The size an environment variable such as $TRACELAB_PARSE_MEMORY sets (8G, 500M), or None when it
+    is unset or blank; `error` (one line naming the variable and its value) when it is not a size."""
+    given = os.environ.get(variable, "").strip()
+    if not given:
+        return None
+    try:
+        return parse_byte_size(given)
+    except ValueError as e:
+        raise error(f"{variable}={given!r}: {e}") from None
+
+
 def human_bytes(n: int) -> str:
     for unit, size in (("GiB", 1 << 30), ("MiB", MIB), ("KiB", 1 << 10)):
         if n >= size:

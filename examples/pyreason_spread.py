@@ -10,7 +10,7 @@ import tracelab.pyreason as pr
 pr.settings.verbose = False
 pr.load_graphml(sys.argv[1])
 pr.add_rule(pr.Rule('infected(x) <-1 infected(y), link(y,x)', 'spread'))
-interpretation = pr.reason(timesteps=10)  # t = 0..10: the 11 steps of docs/benchmarks.md's "Big graph"
+interpretation = pr.reason(timesteps=10)  # t = 0..10: the 11 steps of docs/benchmarks/history.md's "Big graph"
 
 last = pr.filter_and_sort_nodes(interpretation, ['infected'])[-1]
 infected = sum(1 for bound in last['infected'] if bound[0] == 1)

@@ -1,4 +1,4 @@
-"""What logging into a tracelab run costs a Stable-Baselines3 training (docs/benchmarks.md, "Stable-Baselines3
+"""What logging into a tracelab run costs a Stable-Baselines3 training (docs/benchmarks/history.md, "Stable-Baselines3
 callback"): PPO's steps per second on an env without the callback, with it logging only (one 1-game
 evaluation at the end), and with it evaluating as by default (every 10,000 steps, 50 games, 5 traced);
 the three interleaved `--repeats` times in one process, the median of each, per wall second and per CPU

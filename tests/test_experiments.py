@@ -189,3 +189,32 @@ def _terminate_when_training(proc, runs: list[Path], workers: set[int]) -> None:
     assert "no report written" in err.strip().splitlines()[-1]
     wait_until(lambda: not any(_alive(p) for p in workers), "the workers gone after the pool's end", poll=0.2)
     assert workers
+
+
+def test_an_experiment_on_a_world_of_its_own_counts_its_declared_outcomes(tmp_path, capsys):
+    """trap-corridor trains train --env's trainer on a repo spec (rules/examples/trap_corridor.toml) with a
+    param per arm: its final evaluations are counted as the world declares ([end] win / loss), written into
+    the runs, the report and its JSON, and the report is written again from them (issue 38, item 3)."""
+    out = tmp_path / "exp"
+    run_quick("trap-corridor", out, capsys)
+    text = (out / "trap-corridor.md").read_text()
+    assert "| world | door reward 1: `" in text and "door_reward=0.2" in text and "| opponent |" not in text
+    summary = json.loads((out / "trap-corridor.json").read_text())
+    for arm, slug, reward in ((0, "door-reward-1-seed0", 1.0), (1, "door-reward-0-2-seed0", 0.2)):
+        run = out / slug
+        assert run_info(run).meta["config"]["env"]["kwargs"] == {"door_reward": reward}
+        m = final_metrics(run)
+        assert m["eval/games@p0"] == 12
+        assert m["eval/wins@p0"] + m["eval/losses@p0"] + m["eval/draws@p0"] + m["eval/truncated@p0"] == 12
+        final = summary["arms"][arm]["seeds"][0]["final"]["@p0"]
+        assert final["wins"] == m["eval/wins@p0"] and final["method_win_rate"] == m["eval/win_rate@p0"]
+        row = [r for r in text.splitlines() if r.startswith(f"| {summary['arms'][arm]['label']} | 0 | - |")]
+        cells = [c.strip() for c in row[0].strip("|").split("|")]
+        assert list(map(int, cells[3:8])) == [12, final["wins"], final["losses"], final["draws"], final["truncated"]]
+        # the world's returns: a loss in the trap is -1, a win at the door the arm's reward
+        assert m["eval/mean_return@p0"] == pytest.approx((final["wins"] * reward - final["losses"]) / 12)
+    for png in ("win_rate.png", "mean_return.png", "final_win_rate.png"):
+        check_png(out / "trap-corridor" / png)
+    again = tmp_path / "again"
+    assert main(["experiment", "trap-corridor", "--report-only", "--out", str(out), "--report-dir", str(again)]) == 0
+    assert (again / "trap-corridor.md").read_text().split("## Result")[1] == text.split("## Result")[1]

@@ -1,6 +1,6 @@
 """What PyReason's hello world (examples/pyreason_hello_world.py) imports, run as a user runs it in a new
 process: nothing it does not use. Each module kept out here cost the warm hello world CPU time it does not
-need (docs/benchmarks.md, "PyReason's API"): scipy.linalg (numba's BLAS check, engine/numba_startup.py),
+need (docs/benchmarks/history.md, "PyReason's API"): scipy.linalg (numba's BLAS check, engine/numba_startup.py),
 the lanes kernel (a single world runs on the counting kernel), the compiled GraphML scanner (a small file is
 read by expat), and the heavy parts of tracelab a reasoning without `settings.tracelab_run` never touches.
 Not a timing test: a module that comes back fails it on any machine."""

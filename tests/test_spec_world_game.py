@@ -111,6 +111,15 @@ def test_a_worlds_declared_win_and_loss_are_its_games_outcomes(played: Path, cap
     assert answer["wins"] == outcomes["win"]
 
 
+def test_play_counts_the_worlds_wins_and_losses(world: Path, played: Path, capsys: pytest.CaptureFixture) -> None:
+    """The summary of `play --env` names wins and losses where the world declares them (it said "with a
+    positive return"), the same games as the recorded run's outcomes."""
+    capsys.readouterr()
+    assert main(["play", "--env", str(world / "trap.toml"), "--episodes", "30", "--seed", "1", "--no-trace"]) == 0
+    outcomes = dict(rows(played, "SELECT outcome, count(*) FROM episodes GROUP BY 1"))
+    assert f"{outcomes['win']} won, {outcomes['loss']} lost, 0 truncated" in capsys.readouterr().out
+
+
 def test_the_replay_draws_the_board_and_the_return_to_the_last_step(played: Path, tmp_path: Path) -> None:
     (episode, t_end, reward), = rows(played, "SELECT episode, t_end, reward FROM episodes WHERE outcome = 'loss' "
                                              "ORDER BY t_end DESC, episode LIMIT 1")

@@ -1,4 +1,4 @@
-"""What a process that writes a run loads (issue 31 part 3, docs/benchmarks.md "Memory of long runs"):
+"""What a process that writes a run loads (issue 31 part 3, docs/benchmarks/history.md "Memory of long runs"):
 `tracelab play --run`'s writing path, merges of small parts included, imports neither DuckDB (~10 MB
 resident plus its catalog), nor pandas (~30 MB: pyarrow's converter imports it on first use), nor Arrow's
 dataset layer (pq.read_table's: ~15 MB), nor pyarrow.compute (~7 MB; a game's graph has no facts). And

@@ -4,6 +4,7 @@ their control characters escaped; a repair is all or nothing; a closing hint nev
 from __future__ import annotations
 
 import json
+import os
 import re
 import shutil
 import subprocess
@@ -366,3 +367,25 @@ def test_a_run_whose_meta_json_its_readers_would_refuse_is_never_written(tmp_pat
     with TraceWriter(run, {"config": {"note": "x" * (META_CAP - 4096)}}):  # just under: written and read
         pass
     assert main(["show", str(run)]) == 0
+
+
+@pytest.mark.parametrize("kind", ["fifo", "file"])
+def test_runs_of_something_that_is_not_a_folder_is_one_line_and_fails(tmp_path: Path, kind: str,
+                                                                      capsys: pytest.CaptureFixture) -> None:
+    """`tracelab runs NAME` where NAME is a FIFO or a file: neither a folder of runs nor a run, so it is
+    an error (it listed nothing and exited 0), and the FIFO is never opened (a read would block)."""
+    path = tmp_path / kind
+    os.mkfifo(path) if kind == "fifo" else path.write_text("not a run")
+    assert main(["runs", str(path)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not a directory or run" in err and kind in err, err
+
+
+def test_the_replays_markdown_shows_a_runs_strings_as_text() -> None:
+    """A why-document's atom, rule and outcome from a run are text, never markup: an image or a link in
+    an atom's name is escaped, and a tree holding ``` stays inside its code block."""
+    from tracelab.viewers.replay.markdown_text import code_block, literal
+    assert literal("p(![x](https://example.org/a.png))") == r"p(\!\[x\](https://example.org/a.png))"
+    assert literal("<img src=x>") == r"\<img src=x\>" and literal("alive(red-agent-1)") == "alive(red-agent-1)"
+    fence, body, end = code_block("a ``` b ```` c")
+    assert fence == "`````text" and end == "`````" and body == "a ``` b ```` c"

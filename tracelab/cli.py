@@ -34,6 +34,7 @@ COMMAND_MODULES = [
     "tracelab.commands.runs", "tracelab.commands.tui",
     "tracelab.commands.experiment", "tracelab.commands.sweep", "tracelab.commands.compile",
     "tracelab.commands.compare", "tracelab.commands.export", "tracelab.commands.rewards",
+    "tracelab.commands.whatif",
 ]
 EXIT_USER_ERROR = 1
 EXIT_USAGE = 2  # argparse's status for a usage error

@@ -1,7 +1,7 @@
 """A small program reasoned by the reference evaluator (engine/reference.py), not the compiled engine.
 
 `tracelab reason` on a five-line program spent most of its time loading numba and the engine's cached
-kernels (about 1.3 s of CPU of 1.9, docs/benchmarks.md "Interactive speed"); the reference evaluator,
+kernels (about 1.3 s of CPU of 1.9, docs/benchmarks/history.md "Interactive speed"); the reference evaluator,
 plain Python over the same semantics (tests/test_engine_vs_reference.py holds the two equal), answers such
 a program in milliseconds. It tries every assignment of a rule's variables over every node each pass, so it
 serves only programs whose assignments stay few (REFERENCE_MAX_ASSIGNMENTS); anything else, and anything it

@@ -97,9 +97,11 @@ def sampled_child_rss(argv: Sequence[str], every_s: float = 1.0, timeout_s: floa
                 waited, status, usage = os.wait4(child.pid, 0)
                 break
             try:
-                samples.append((elapsed, rss_bytes(child.pid) / 2**20))
+                rss = rss_bytes(child.pid)
             except psutil.NoSuchProcess:  # exited between the wait and the read
-                pass
+                rss = 0
+            if rss:  # 0: it exited between the wait and the read, and is a zombie until waited for
+                samples.append((elapsed, rss / 2**20))
             time.sleep(every_s)
         child.returncode = os.waitstatus_to_exitcode(status)
         err.seek(0)

@@ -35,7 +35,7 @@ from tracelab.provenance import load_average
 TRACELAB_IMPORT = "import tracelab.pyreason as pr"
 PYREASON_IMPORT = "import pyreason as pr"
 SAMPLE_S = 0.25
-SPREAD_NODES = 2_000  # docs/benchmarks.md's "Big graph" size, where issue 14 measured PyReason at 268 s
+SPREAD_NODES = 2_000  # docs/benchmarks/history.md's "Big graph" size, where issue 14 measured PyReason at 268 s
 SERIES_MARKS_S = (1, 2, 5, 10, 30, 60, 120, 300, 600, 1200, 2400)
 
 # Runs a script with its first `import tracelab.pyreason as pr` replaced, as the script itself (its

@@ -3,7 +3,7 @@ backend, one update per transition, live logging into a run) with the fused lear
 one (tracelab/train/dqn.py), and beside them, in the same process: the update alone (the fused learner's,
 the readable learner's, and the textbook autograd + torch.optim.Adam update of the same network and batch
 written inline) and the env alone. The loop's share = 1 - (update time / training-step time).
-Goals (docs/benchmarks.md, "Training"): loop around the update <= 15% of a step; >= 5,000 transitions/s;
+Goals (docs/benchmarks/history.md, "Training"): loop around the update <= 15% of a step; >= 5,000 transitions/s;
 the fused update >= 4x the textbook one."""
 from __future__ import annotations
 

@@ -31,7 +31,7 @@ _SIMULATOR_KERNELS = (("tracelab.game.rulesim_kernel", "encode_actions"),
                       ("tracelab.game.rulesim_kernel", "read_and_settle"),
                       ("tracelab.game.rulesim_kernel", "settle_step"),
                       ("tracelab.game.rulesim_fused", "fused_step"))  # one call per step
-# a first run of `play --scenario advanced --episodes 5` on two free cores (docs/benchmarks.md, issue 31)
+# a first run of `play --scenario advanced --episodes 5` on two free cores (docs/benchmarks/history.md, issue 31)
 FIRST_RUN_ESTIMATE = "about 20 s"
 
 

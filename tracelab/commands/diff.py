@@ -3,7 +3,8 @@ they first diverge (trace and actions), in one run or across runs.
 
     tracelab diff RUN A B                 episodes A and B of RUN
     tracelab diff RUN_A:EP RUN_B:EP       episode EP of RUN_A against episode EP of RUN_B
-    tracelab diff RUN_A RUN_B             two runs of one episode each (two reasonings, say)
+    tracelab diff RUN_A RUN_B             two runs of one episode each (two reasonings, say), or a what-if
+                                          branch (tracelab whatif) and its origin: the episode it branched off
 """
 from __future__ import annotations
 
@@ -96,20 +97,37 @@ def only_episode(con: object, run: str) -> int:
     return int(episodes[0])
 
 
+def _is_one_run(run_a: str, run_b: str) -> bool:
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
+    from tracelab.store.reader import resolve_run
+    return resolve_run(run_a).resolve() == resolve_run(run_b).resolve()
+
+
+def _episode_of(con: object, run: str, other: object) -> int:
+    """The episode of `run` to compare when none is named: the one the other run branched off when it is
+    a what-if branch of `run` (tracelab whatif), else its only one."""
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
+    from tracelab.store.branch_origin import origin_episode
+    from tracelab.store.reader import resolve_run
+    e = origin_episode(other, resolve_run(run))  # type: ignore[arg-type]
+    return only_episode(con, run) if e is None else e
+
+
 def run(args: argparse.Namespace) -> int:
     # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.diff import first_divergence, render_divergence
-    from tracelab.store.reader import open_run, resolve_run, retrying
+    from tracelab.store.reader import open_run, retrying
     (run_a, a), (run_b, b) = parse_sides(args.sides)
     with store_errors(), ctrl_c_stops_queries():
         con_a = open_run(run_a)
-        a = only_episode(con_a, run_a) if a is None else a
-        if resolve_run(run_a).resolve() == resolve_run(run_b).resolve():
+        if _is_one_run(run_a, run_b):
+            a = only_episode(con_a, run_a) if a is None else a
             b = only_episode(con_a, run_b) if b is None else b
             d = retrying(lambda: first_divergence(con_a, a, b))
         else:
             con_b = open_run(run_b)
-            b = only_episode(con_b, run_b) if b is None else b
+            a = _episode_of(con_a, run_a, con_b) if a is None else a
+            b = _episode_of(con_b, run_b, con_a) if b is None else b
             d = retrying(lambda: first_divergence(con_a, a, b, con_b, run_names=(run_a, run_b)))
     print(json.dumps(d.to_dict(), indent=1, default=str) if args.json else render_divergence(d))
     return 0

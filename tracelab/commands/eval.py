@@ -105,6 +105,9 @@ def _run_env(args: argparse.Namespace) -> int:
         low, high = wilson(result.wins, result.games)
         print(f"  win rate        {100 * result.wins / result.games:.1f}% [{100 * low:.1f}%, {100 * high:.1f}%] "
               f"({result.wins} won, as the world's [end] win declares)")
+        print(f"  outcomes        {result.wins} won, {result.losses} lost, {result.draws} drawn (ended by "
+              f"neither), {result.truncated} truncated; the method's win rate is the win rate (a game cut "
+              f"short is lost)")
     print(f"  ended           {result.terminated} terminated, {result.truncated} truncated; mean "
           f"{result.metrics('')['mean_steps']:.1f} steps")
     return 0

@@ -13,7 +13,7 @@ from tracelab.commands._args import ENGINE_KERNELS, positive_int
 from tracelab.errors import UserError, store_errors
 
 NAMES = ("1v1-base", "5v5-base", "portability", "markov-vs-nonmarkov", "markov-vs-nonmarkov-every-step",
-         "reward-shaping")
+         "reward-shaping", "trap-corridor")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -60,6 +60,9 @@ def run(args: argparse.Namespace) -> int:
     if args.report_only:
         return _report_again(exp, out, report_dir)
     if args.ray is not None:
+        if any(a.env is not None for a in exp.arms):
+            raise UserError(f"--ray runs GridWar's experiments only for now; {exp.name} trains a world of its own: "
+                            f"use --jobs")
         if args.jobs > 1:
             raise UserError("--jobs and --ray: Ray decides how many trainings run at a time; give one of them")
         # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)

@@ -49,7 +49,7 @@ def run_env(args: argparse.Namespace) -> int:
         with store_errors():  # a policy that does not load, or was trained on another env
             args.trained, _ = load_env_policy(args.policy, source)
     if args.no_trace:
-        _summary(source, _play(source, spec, args, None))
+        _summary(source, spec, _play(source, spec, args, None))
         return 0
     return _record(source, spec, args)
 
@@ -68,7 +68,7 @@ def _record(source: Any, spec: Any, args: argparse.Namespace) -> int:
         raise UserError(f"cannot create the run directory {run_dir}: {e.strerror or e}") from e
     with recording_into(writer, run_dir):
         stats = _play(source, spec, args, writer)
-    _summary(source, stats)
+    _summary(source, spec, stats)
     _what_to_open_env(run_dir, spec)
     return 0
 
@@ -117,13 +117,17 @@ def _play(source: Any, spec: Any, args: argparse.Namespace, writer: Any) -> dict
     return stats
 
 
-def _summary(source: Any, stats: dict[str, Any]) -> None:
+def _summary(source: Any, spec: Any, stats: dict[str, Any]) -> None:
     eps = stats["episodes"]
     returns = np.array([e["return"] for e in eps])
     rate = f"{stats['steps'] / stats['seconds']:,.0f} steps/s" if stats["seconds"] > 0 else "too short to time"
     print(f"played {len(eps)} episodes of {source.short_name} ({stats['steps']} steps, {rate})")
-    print(f"{int((returns > 0).sum())} with a positive return, "
-          f"{sum(e['outcome'] == 'truncated' for e in eps)} truncated; mean return {returns.mean():.2f}")
+    outcomes = [e["outcome"] for e in eps]
+    truncated = f"{outcomes.count('truncated')} truncated; mean return {returns.mean():.2f}"
+    if spec.win:  # the spec's `[end] win/loss` says what counts, as the grid game's games do
+        print(f"{outcomes.count('win')} won, {outcomes.count('loss')} lost, {truncated}")
+    else:
+        print(f"{int((returns > 0).sum())} with a positive return, {truncated}")
 
 
 def _what_to_open_env(run_dir: Path, spec: Any) -> None:

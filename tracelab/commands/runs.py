@@ -24,9 +24,11 @@ def run(args: argparse.Namespace) -> int:
     from tracelab.store.catalog import DEFAULT_ROOTS, catalog_table, list_runs
     roots = args.dirs or list(DEFAULT_ROOTS)
     with store_errors(), ctrl_c_stops_queries():
-        missing = [d for d in args.dirs if not Path(d).exists()]
-        if missing:
-            raise FileNotFoundError(f"no such directory or run: {missing[0]!r}")
+        for d in args.dirs:
+            if not Path(d).exists():
+                raise FileNotFoundError(f"no such directory or run: {d!r}")
+            if not Path(d).is_dir():  # a run is a directory too; a file or FIFO is neither
+                raise NotADirectoryError(f"not a directory or run: {d!r}")
         runs = list_runs(roots)
         rows = [r.as_row() for r in runs]
         if args.format == "table":

@@ -114,12 +114,14 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
         writer = reopen_run(run_dir, cfg, state["step"], meta["command"]) if same_run else \
             TraceWriter.open(run_dir, meta)
     torch.set_num_threads(cfg.threads)
-    print(f"training on {source.describe()} ({encoding} observations, {cfg.envs} worlds in gymnasium's "
-          f"SyncVectorEnv, {reward_scale_text(cfg.reward_scale)}) for {cfg.steps:,} steps; run: {run_dir}",
-          file=sys.stderr)
     purge_step = state["step"] if same_run else None
     with training_session(writer, cfg.torch_deterministic, tensorboard, purge_step) as session:
         session.trainer = trainer = EnvTrainer(cfg, source, writer, run_dir, metric_sinks=session.metric_sinks)
+        print(f"training on {source.describe()} ({encoding} observations, {cfg.envs} worlds in "
+              f"{type(trainer.env).__name__}, {reward_scale_text(cfg.reward_scale)}) for {cfg.steps:,} steps; "
+              f"run: {run_dir}", file=sys.stderr)
+        if trainer.vector_note:
+            print(f"note: {trainer.vector_note}", file=sys.stderr)
         if trainer.learner_note:
             print(f"note: {trainer.learner_note}", file=sys.stderr)
         if state is not None:
@@ -148,13 +150,16 @@ def _report(trainer: Any, source: Any, run_dir: Path, status: str) -> None:
     ev = trainer.last_eval
     print(f"{status} at step {trainer.step:,}" + (
         f"; last evaluation: mean return {ev.mean_return:.3f}, success (return > 0) {ev.successes}/{ev.games} "
-        f"({100 * ev.success_rate:.1f}%)" if ev else ""))
+        f"({100 * ev.success_rate:.1f}%)" if ev else "") + (
+        f", won {ev.wins}, lost {ev.losses}, drawn {ev.draws}, truncated {ev.truncated} (win rate "
+        f"{100 * ev.win_rate:.1f}%)" if ev and ev.counts_wins else ""))
     timing = eval_time_line(trainer.metrics)
     if timing:
         print(timing)
-    if trainer.best_eval is not None and ev is not None and trainer.best_eval[0] > ev.mean_return:
-        print(f"best evaluation at step {trainer.best_eval[1]:,} (mean return {trainer.best_eval[0]:.3f}): its "
-              f"policy is kept in {run_dir}/policy-best/")
+    if trainer.best_eval is not None and ev is not None and trainer.best_eval[0] > ev.selection()[1]:
+        metric, _ = ev.selection()
+        print(f"best evaluation at step {trainer.best_eval[1]:,} ({metric.removeprefix('eval/')} "
+              f"{trainer.best_eval[0]:.3f}): its policy is kept in {run_dir}/policy-best/")
     run = shlex.quote(str(run_dir))
     print(f"run: {run_dir}/  checkpoint: {run_dir}/checkpoint/  policy: {run_dir}/policy/")
     if status != "finished":

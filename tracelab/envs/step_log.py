@@ -1,7 +1,7 @@
 """The envs' tracer's per-step work as compiled calls (tracelab/envs/tracer.py): the step log, the
 returns, and which trace rows belong to which recorded episode.
 
-A traced step's Python cost more than the simulator's own step at one world (docs/benchmarks.md, issue
+A traced step's Python cost more than the simulator's own step at one world (docs/benchmarks/history.md, issue
 31): five array copies, two sums and two mask tests per step, a dozen numpy calls per hand-over. Here a
 step is one compiled call (`StepLog.add`), an episode's begin another (`StepLog.begin`), and the
 labelling of a hand-over's trace rows a third (`label_rows`). Each compiles for one signature (the

@@ -1,5 +1,5 @@
 """RuleSim's step as ONE compiled call: actions to fact rows, the counting kernel's step, the read-back's
-truth table, read_and_settle and observe_step (docs/benchmarks.md, "One call per step").
+truth table, read_and_settle and observe_step (docs/benchmarks/history.md, "One call per step").
 
 Each numba call from Python pays for unboxing every array it is given (~0.1-0.2 µs an array; a step
 passes ~120). Here the arrays are bound once into a structref (`StepBuffers`, one object to unbox) and

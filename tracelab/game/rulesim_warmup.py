@@ -1,7 +1,7 @@
 """A first run's compile on two cores: while a RuleSim's process compiles the engine's step kernel (the
 longest compile, ~13 s of CPU), a second process compiles the game's kernels (read-back, observations,
 actions, the opponent, the fused step's buffers: ~10 s) into numba's disk cache, and the RuleSim loads
-them from there instead of compiling them after its first step (docs/benchmarks.md, issue 31 part 4).
+them from there instead of compiling them after its first step (docs/benchmarks/history.md, issue 31 part 4).
 
 numba compiles under one lock per process, so threads cannot share the work; processes can, through the
 disk cache (a function compiled by the second process is loaded by the first when it first calls it).

@@ -3,7 +3,7 @@ views (docs/store.md).
 
 The names below are imported on first use (PEP 562), not with the package: a process that only writes
 a run (`tracelab play --run`, TraceWriter) would otherwise load DuckDB with the reader, ~10 MB of its
-library resident and more in its catalog, for nothing (docs/benchmarks.md, "Memory of long runs")."""
+library resident and more in its catalog, for nothing (docs/benchmarks/history.md, "Memory of long runs")."""
 from __future__ import annotations
 
 import importlib

@@ -3,7 +3,7 @@ path that writes a run.
 
 pyarrow's own converter (pa.array, pa.scalar, Table.from_pylist, Schema.empty_table, a compute call given
 a Python value) imports pandas on its first call, to ask whether the values are pandas objects: ~30 MB
-resident for good in a process that has none (`tracelab play --run`: docs/benchmarks.md, "Memory of long
+resident for good in a process that has none (`tracelab play --run`: docs/benchmarks/history.md, "Memory of long
 runs"). These build the same arrays (value for value, nulls included) from buffers, which never asks.
 Readers may use pyarrow's converter freely."""
 from __future__ import annotations

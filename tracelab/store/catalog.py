@@ -19,6 +19,7 @@ import pyarrow as pa
 
 from tracelab.store import layout
 from tracelab.store.arrow_build import table_from_rows
+from tracelab.store.branch_origin import branch_origin
 from tracelab.store.reader import attach_sealed_file, open_run, query_readonly, retrying, run_info, sealed_file_of_run
 from tracelab.store.sandbox import lock_down, sandbox_connection
 from tracelab.store.sealed_catalog import check_sealed_catalog
@@ -42,11 +43,13 @@ class RunSummary:
     size: int                    # bytes on disk
     started_at: _dt.datetime | None
     error: str = ""              # why the run could not be read (status 'unreadable')
+    origin: str = ""             # a what-if branch's origin (branch_origin.Origin.describe), shown by its scenario
 
     def as_row(self) -> dict[str, Any]:
+        scenario = f"{self.scenario} ({self.origin})" if self.scenario and self.origin else self.scenario or self.origin
         return {"name": self.name, "status": self.status, "episodes": self.episodes, "rows": self.rows,
                 "size": human_size(self.size), "started": _time_text(self.started_at),
-                "scenario": self.scenario, "command": self.command, "path": str(self.path)}
+                "scenario": scenario, "command": self.command, "path": str(self.path)}
 
 
 def catalog_table(rows: Sequence[dict[str, Any]]) -> pa.Table:
@@ -190,9 +193,11 @@ def summarize_run(path: Path, counts: tuple[int, int] | Exception | None = None)
         return RunSummary(path, name, "unreadable", "", "", None, None, _disk_size(path), None,
                           error=str(e).splitlines()[0] if str(e) else type(e).__name__)
     meta = info.meta
+    config = meta.get("config")
+    origin = branch_origin(config) if isinstance(config, dict) else None
     return RunSummary(path, name, info.status, short_command(str(meta.get("command") or "")),
                       str(meta.get("scenario") or ""), episodes, rows, _disk_size(path),
-                      _parse_time(meta.get("started_at")))
+                      _parse_time(meta.get("started_at")), origin=origin.describe() if origin else "")
 
 
 def list_runs(roots: Sequence[str | Path] = DEFAULT_ROOTS) -> list[RunSummary]:

@@ -66,7 +66,7 @@ def graph_fact_table(graph: Any, first_id: int = 0) -> pa.Table:
     if n == 0:  # a game's graph: its facts are the program's
         return ab.empty_table(SCHEMAS["facts"])
     # deferred: pyarrow.compute builds a wrapper per compute function (~7 MB resident), which a process
-    # that writes a game's run never needs (docs/benchmarks.md, "Memory of long runs")
+    # that writes a game's run never needs (docs/benchmarks/history.md, "Memory of long runs")
     import pyarrow.compute as pc  # deferred: ~7 MB resident, and a game's graph has no facts to compute on
     a0, a1 = graph.fact_args[:, 0], graph.fact_args[:, 1]
     labels = pc.take(ab.strings(list(graph.labels)), ab.from_numpy(np.asarray(graph.fact_label)))

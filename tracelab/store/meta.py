@@ -70,7 +70,7 @@ def library_versions() -> dict[str, str]:
 
 def _duckdb_version() -> str:
     """DuckDB's version without importing it (a process that only writes a run need not load DuckDB:
-    docs/benchmarks.md, "Memory of long runs"): its installed distribution's version, which is the
+    docs/benchmarks/history.md, "Memory of long runs"): its installed distribution's version, which is the
     module's; the module's if it is loaded already or has no distribution record."""
     module = sys.modules.get("duckdb")
     if module is None:

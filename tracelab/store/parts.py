@@ -39,12 +39,12 @@ from tracelab.validation import Const, ExactKeys, IntRange, ListOf, Matches, Opt
 ROW_GROUP_ROWS = 131_072
 # A part of at least this many rows (or of part_rows, if fewer) is never merged: merging re-encodes every
 # row, which took half the writer's CPU in a fast `tracelab play --run` (its parts of 50k-150k rows were
-# merged in twos: docs/benchmarks.md, "Traced runs: the writer"), and such a part fills a quarter of a
+# merged in twos: docs/benchmarks/history.md, "Traced runs: the writer"), and such a part fills a quarter of a
 # row group already. Smaller parts (a slow run's, flushed every second) are merged as before.
 MERGE_BELOW_ROWS = 32_768
 # A merge's row groups: a quarter of ROW_GROUP_ROWS, since a merge's rows are read from disk while the
 # game goes on (a published part's rows are in memory already). A merge of ~250k change rows then held
-# 7-13 MB at its peak, 22-25 MB with row groups of ROW_GROUP_ROWS (docs/benchmarks.md, "Memory of long
+# 7-13 MB at its peak, 22-25 MB with row groups of ROW_GROUP_ROWS (docs/benchmarks/history.md, "Memory of long
 # runs"); its part is ~9% larger.
 MERGE_ROW_GROUP_ROWS = 32_768
 MANIFEST_FORMAT = "tracelab-parts/1"
@@ -160,7 +160,7 @@ class TableParts:
 def _read_part(path: Path) -> pa.Table:
     """One part's rows, for a merge: through ParquetFile, not pq.read_table, whose dataset layer loads
     Arrow's dataset, Acero and Substrait libraries (~15 MB resident that a writing process kept for good
-    after its first merge: docs/benchmarks.md, "Memory of long runs"); single-threaded and without
+    after its first merge: docs/benchmarks/history.md, "Memory of long runs"); single-threaded and without
     pre-buffering (pyarrow's IO threads' buffers)."""
     with pq.ParquetFile(path, pre_buffer=False) as f:
         return f.read(use_threads=False)

@@ -128,7 +128,7 @@ DICTIONARY_COLUMNS: dict[str, list[str]] = {
 # Parquet options of a table's parts beyond the dictionaries: the change rows' `seq` (a counter) delta
 # encoded, and min/max statistics only on the columns readers filter a live run by (episode, time, seq;
 # an atom's or grounding's min/max over a row group spans nearly all of them). Together 20% less of the
-# writer's encoding time of a traced play (docs/benchmarks.md, "Traced runs: the writer").
+# writer's encoding time of a traced play (docs/benchmarks/history.md, "Traced runs: the writer").
 PART_OPTIONS: dict[str, dict[str, object]] = {
     "changes": {"column_encoding": {"seq": "DELTA_BINARY_PACKED"},
                 "write_statistics": ["seq", "episode", "world", "t"]},

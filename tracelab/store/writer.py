@@ -53,7 +53,7 @@ _OPEN_WRITERS: "weakref.WeakSet[TraceWriter]" = weakref.WeakSet()
 # Back-pressure: callers wait while this many rows are buffered (a row group of changes, ~10 MB). The
 # flusher takes them all at once and the caller refills the buffers meanwhile, so a busy writer (a merge,
 # a loaded machine) holds about twice this: at 500k rows a 10,000-episode play peaked ~60 MB higher
-# (docs/benchmarks.md, "Memory of long runs").
+# (docs/benchmarks/history.md, "Memory of long runs").
 MAX_PENDING_ROWS = 131_072
 
 
@@ -61,7 +61,7 @@ def _use_system_allocator() -> None:
     """Arrow's buffers from malloc rather than pyarrow's default mimalloc, unless the user chose a pool
     (ARROW_DEFAULT_MEMORY_POOL): mimalloc kept ~130 MB more resident after each merge of a table's small
     parts (64 parts, 1.7M change rows: +130 MB against +40 MB at the peak and +8 MB after, with
-    malloc_trim), so a long run's memory rose with its length (docs/benchmarks.md, "play's memory")."""
+    malloc_trim), so a long run's memory rose with its length (docs/benchmarks/history.md, "Memory of long runs")."""
     if "ARROW_DEFAULT_MEMORY_POOL" not in os.environ and pa.default_memory_pool().backend_name != "system":
         pa.set_memory_pool(pa.system_memory_pool())
 

@@ -1,14 +1,16 @@
 """Checkpoints of a `train --env` run, in the same place as GridWar's (RUN/checkpoint/checkpoint.pt,
 checkpoint.py) under their own format: the config, the env as the user named it, the network and Adam,
-the replay buffer, the generators, the step and the logging state, and the games in progress.
+the replay buffer, the generators, the step and the logging state, and the worlds' actions.
 
 The trainer's state is its parts' (EnvTrainer.state, as GridWar's Trainer.state). An env's worlds are not
 pickled (a declared world's engine does not move between processes, and gymnasium's envs are not made to
-be). Each world is wrapped in ReplayableEnv, which keeps the state of the
-env's np_random when its episode began and the actions since; a restore sets that state, resets and
-replays the actions. That brings a world back exactly when all of its randomness is its np_random
-(gymnasium's contract, and how every declared world draws); the observation each replay ends in is
-checked against the saved one.
+be): the training's vector env (a declared world's DeclaredVectorEnv, or gymnasium's SyncVectorEnv) was
+reset once with the run's env seed, and ActionLog keeps every action its worlds took since; a restore
+resets a new vector env with that seed and steps it through them again. That brings the worlds back
+exactly when all of their randomness comes from the seed (gymnasium's contract, and how every declared
+world draws), whatever buffering of random numbers the vector env does; the observations the replay ends
+in are checked against the saved ones. The log costs 8 bytes a training step; the replay runs the env
+alone (no network), as many steps as the run has trained.
 
 A checkpoint may come from a stranger: it holds only tensors and plain values, loads with torch's
 weights_only unpickler and is checked against the shapes its config and env imply. It names its env, but
@@ -19,86 +21,59 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 import torch
-from gymnasium.utils import seeding
-from gymnasium.vector.utils import concatenate, create_empty_array
 
 from tracelab.engine.safe_files import FileRefused
 from tracelab.envs.declared.env_source import EnvSource, check_same_env, env_source_from_json
 from tracelab.errors import UserError
 from tracelab.train.checkpoint import (check_best, check_buffer_rows, checkpoint_config,
                                        checkpoint_file, checkpoint_path, episode_games_schema, in_range,
-                                       learner_schema, parts_schema, rng_state_schema, write_checkpoint)
+                                       learner_schema, parts_schema, write_checkpoint)
 from tracelab.train.config import config_schema
 from tracelab.train.env_source import ObservationEncoder, action_count
 from tracelab.train.memory import (Limit, MemoryLimitExceeded, check_estimate, env_training_estimate,
                                    env_world_bytes)
 from tracelab.train.qnet import NetSpec
 from tracelab.train.torch_files import Tensor, load_tensors
-from tracelab.validation import Const, MapOf, Mismatch, OneOf, Tuple, check
+from tracelab.validation import Const, IntRange, MapOf, Mismatch, OneOf, check
 
-ENV_FORMAT = "tracelab-dqn-env-checkpoint/1"
-
-
-class ReplayableEnv(gym.Wrapper):
-    """An env that remembers how its episode began (its np_random's state before the reset's draws) and
-    the actions since, and can replay them into itself."""
-
-    def __init__(self, env: gym.Env) -> None:
-        super().__init__(env)
-        self.start_state: dict[str, Any] | None = None
-        self.actions: list[int] = []
-
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
-        rng = seeding.np_random(seed)[0] if seed is not None else self.env.unwrapped.np_random
-        self.start_state, self.actions = rng.bit_generator.state, []
-        return self.env.reset(seed=seed, options=options)
-
-    def step(self, action: Any) -> tuple[Any, Any, bool, bool, dict[str, Any]]:
-        self.actions.append(int(action))
-        return self.env.step(action)
-
-    def replay(self, start_state: dict[str, Any], actions: list[int]) -> tuple[Any, dict[str, Any]]:
-        """The episode that began in `start_state` and played `actions`, brought back; (its observation,
-        its last info). ValueError when it ended before its last action (another env, or an edited file)."""
-        rng = np.random.Generator(np.random.PCG64())
-        rng.bit_generator.state = start_state
-        self.env.unwrapped.np_random = rng
-        obs, info = self.reset()
-        self.start_state = start_state
-        for k, action in enumerate(actions):
-            obs, _, terminated, truncated, info = self.step(action)
-            if (terminated or truncated) and k < len(actions) - 1:
-                raise ValueError(f"the replayed episode ended after {k + 1} of its {len(actions)} actions")
-        return obs, info
+ENV_FORMAT = "tracelab-dqn-env-checkpoint/2"
+# the first format kept each world's generator state and its episode's actions (per-world replay in
+# gymnasium's SyncVectorEnv); the batched declared env has no per-world generator state to set
+OLD_FORMATS = ("tracelab-dqn-env-checkpoint/1",)
 
 
-def worlds_state(envs: list[ReplayableEnv]) -> dict[str, Any]:
-    """What replays the worlds (a checkpoint's `env_rng` and `games.actions`): each np_random's state at
-    its episode's start and now, and the actions since the start [W, longest] (zero-padded)."""
-    actions = np.zeros((len(envs), max((len(e.actions) for e in envs), default=0)), np.int64)
-    for k, e in enumerate(envs):
-        actions[k, :len(e.actions)] = e.actions
-    return {"start": [e.start_state for e in envs], "now": [e.unwrapped.np_random.bit_generator.state for e in envs],
-            "actions": actions}
+class ActionLog:
+    """Every action of the training worlds since their vector env's reset, one row [W] a pass."""
+
+    def __init__(self, worlds: int) -> None:
+        self.rows = np.zeros((1024, worlds), np.int64)
+        self.n = 0
+
+    def add(self, actions: np.ndarray) -> None:
+        if self.n == len(self.rows):  # doubling: amortised O(1) a pass
+            self.rows = np.concatenate([self.rows, np.zeros_like(self.rows)])
+        self.rows[self.n] = actions
+        self.n += 1
+
+    def array(self) -> np.ndarray:
+        return self.rows[:self.n]
+
+    def load(self, actions: np.ndarray) -> None:
+        self.rows = np.array(actions, np.int64).reshape(-1, self.rows.shape[1])
+        self.n = len(self.rows)
+        if self.n == 0:
+            self.rows = np.zeros((1024, self.rows.shape[1]), np.int64)
 
 
-def replay_worlds(vector_env: Any, actions: np.ndarray, lengths: np.ndarray,
-                  env_rng: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
-    """Bring each world of `vector_env` (ReplayableEnvs) back to its episode's first lengths[w] actions,
-    its np_random to its saved state; (the batch's observations, its info). ValueError when an episode
-    ends early."""
-    observations, infos = [], []
-    for k, env in enumerate(vector_env.envs):
-        obs, info = env.replay(env_rng["start"][k], actions[k, :lengths[k]].tolist())
-        env.unwrapped.np_random.bit_generator.state = env_rng["now"][k]
-        observations.append(obs)
-        infos.append(info)
-    space = vector_env.single_observation_space
-    obs = concatenate(space, observations, create_empty_array(space, len(observations)))
-    return obs, {"action_mask": np.stack([i["action_mask"] for i in infos])} if "action_mask" in infos[0] else {}
+def replay_actions(vector_env: Any, seed: int, actions: np.ndarray) -> tuple[Any, dict[str, Any]]:
+    """`vector_env` reset with `seed` and stepped through `actions` [passes, W]: (its observations, its
+    last info), where the training that logged them was."""
+    obs, info = vector_env.reset(seed=seed)
+    for row in actions:
+        obs, _, _, _, info = vector_env.step(row)
+    return obs, info
 
 
 def save_env_checkpoint(tr: Any, run_dir: Path) -> Path:
@@ -113,6 +88,10 @@ def checkpoint_env(run: str | Path, max_bytes: int) -> tuple[dict[str, Any], Env
     """(the raw checkpoint of an --env run, the env it names), its format checked; FileRefused otherwise."""
     f = checkpoint_file(Path(run))
     state = load_tensors(f, max_bytes)
+    if state.get("format") in OLD_FORMATS:
+        raise FileRefused(f"{f}: written by an earlier tracelab ({state['format']}), whose worlds this one "
+                          f"cannot rebuild: resume it with that version, or train again from its policy's "
+                          f"settings (RUN/policy/policy.json, \"trained\")")
     try:
         check(state, {"format": Const(ENV_FORMAT), "config": config_schema(),
                       "env": {"name": str, "kwargs": MapOf(object)}, "learner": OneOf("fused", "readable")})
@@ -150,26 +129,25 @@ def load_env_checkpoint(run: str | Path, given: EnvSource | None, limit: Limit) 
     learner, best = learner_schema(cfg, net)
     w = cfg.envs
     state.pop("best_rows", None)  # GridWar's old layout of the best networks: never an --env run's
-    rngs = Tuple(*[rng_state_schema()] * w)  # one per world
     try:
         check(state, {
             **parts_schema(), **best, "learners": {"shared": learner},
-            "games": {**episode_games_schema(w), "actions": Tensor(torch.int64, (w, None)),
-                      "obs": Tensor(torch.float32, (w, encoder.size))},
-            "env_rng": {"start": rngs, "now": rngs}})
+            "games": {**episode_games_schema(w), "obs": Tensor(torch.float32, (w, encoder.size))},
+            "env_seed": IntRange(0), "env_actions": Tensor(torch.int64, (None, w))})
         check_buffer_rows(state["learners"]["shared"]["buffer"], n_actions, "learners.shared.buffer")
         check_best(state, {"shared"})
-        games = state["games"]
-        in_range(games["ep_len"], 0, games["actions"].shape[1], "games.ep_len")
-        in_range(games["actions"], 0, n_actions - 1, "games.actions")
-        for where, value in [("rng", state["rng"]), *((f"env_rng.{k}", s) for k in ("start", "now")
-                                                      for s in state["env_rng"][k])]:
-            try:
-                np.random.PCG64().state = value
-            except (ValueError, TypeError, OverflowError) as e:
-                raise Mismatch(where, f"a numpy PCG64 generator state (numpy: {e})", value) from None
+        passes = state["step"] // w
+        if state["env_actions"].shape[0] != passes:
+            raise Mismatch("env_actions", f"{passes} rows (step {state['step']} of {w} worlds)",
+                           f"{state['env_actions'].shape[0]} rows")
+        in_range(state["env_actions"], 0, n_actions - 1, "env_actions")
+        try:
+            np.random.PCG64().state = state["rng"]
+        except (ValueError, TypeError, OverflowError) as e:
+            raise Mismatch("rng", f"a numpy PCG64 generator state (numpy: {e})", state["rng"]) from None
     except Mismatch as e:
         raise FileRefused(f"{f}: {e}") from None
+    state["env_actions"] = state["env_actions"].numpy()
     state["games"] = {k: v.numpy() for k, v in state["games"].items()}
     buf = state["learners"]["shared"]["buffer"]
     state["learners"]["shared"]["buffer"] = {k: v.numpy() if isinstance(v, torch.Tensor) else v

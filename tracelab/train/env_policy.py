@@ -13,9 +13,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import gymnasium as gym
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 from tracelab.engine.safe_files import read_json
+from tracelab.errors import UserError
 from tracelab.store.agent_rows import PolicyOutput
 from tracelab.envs.declared.env_source import EnvSource, check_same_env, env_source_from_json
 from tracelab.train.env_source import ObservationEncoder
@@ -126,13 +128,46 @@ def load_env_policy(path: str | Path, given: EnvSource) -> tuple[EnvPolicy, dict
 # ---------------------------------------------------------------------------------------------------------
 @dataclass
 class EnvEvalResult:
+    """An evaluation's games on any env. Where the world declares how a game ends (a spec's `[end] win`,
+    `loss`) its outcomes are counted as GridWar's are (evaluate.EvalResult): wins, losses, draws (ended by
+    neither) and truncated games, and the method's win rate, in which a game cut short counts as a loss
+    (a spec world's cut is its own step limit, so its method win rate is its win rate); otherwise returns
+    and the success rate (return > 0)."""
     returns: list[float] = field(default_factory=list)
     steps: list[int] = field(default_factory=list)
     terminated: int = 0
     truncated: int = 0
-    wins: int | None = None  # games won, counted when the world declares a win (a spec's `[end] win`)
+    wins: int | None = None  # None: the world declares no outcomes ([end] win / loss)
+    losses: int = 0
+    draws: int = 0
+    win_steps: list[int] = field(default_factory=list, repr=False)  # the won games' lengths
     # wall seconds of the traced and of the untraced games (DeclaredEvaluator.play): a cost, not a result
     seconds: dict[str, float] = field(default_factory=dict, repr=False, compare=False)
+
+    def add(self, ret: float, steps: int, terminated: bool, truncated: bool, outcome: str | None) -> None:
+        """One game: its return, length, end flags and declared outcome (None: the world declares none)."""
+        self.returns.append(float(ret))
+        self.steps.append(int(steps))
+        self.terminated += bool(terminated)
+        self.truncated += bool(truncated) and not bool(terminated)
+        if outcome is None:
+            return
+        self.wins = (self.wins or 0) + (outcome == "win")
+        self.losses += outcome == "loss"
+        self.draws += outcome == "terminated"  # ended by neither a win nor a loss
+        if outcome == "win":
+            self.win_steps.append(int(steps))
+
+    def extend(self, other: "EnvEvalResult") -> None:
+        self.returns += other.returns
+        self.steps += other.steps
+        self.win_steps += other.win_steps
+        self.terminated += other.terminated
+        self.truncated += other.truncated
+        self.losses += other.losses
+        self.draws += other.draws
+        if other.wins is not None:
+            self.wins = (self.wins or 0) + other.wins
 
     @property
     def games(self) -> int:
@@ -151,35 +186,74 @@ class EnvEvalResult:
     def mean_return(self) -> float:
         return float(np.mean(self.returns)) if self.returns else 0.0
 
+    @property
+    def win_rate(self) -> float | None:
+        return None if self.wins is None else (self.wins / self.games if self.games else 0.0)
+
+    @property
+    def counts_wins(self) -> bool:
+        return self.wins is not None
+
+    def selection(self) -> tuple[str, float]:
+        """What the best policy is kept by: the method's win rate where the world declares a win, else
+        the mean return (metric name, value)."""
+        if self.wins is not None:
+            return "eval/method_win_rate", float(self.win_rate or 0.0)
+        return "eval/mean_return", self.mean_return
+
     def metrics(self, prefix: str = "eval/") -> dict[str, float]:
         m = {"games": self.games, "mean_return": self.mean_return, "success_rate": self.success_rate,
              "terminated": self.terminated, "truncated": self.truncated,
              "mean_steps": float(np.mean(self.steps)) if self.steps else 0.0}
-        if self.wins is not None:  # the name the grid game's evaluation logs and the views plot
-            m["win_rate"] = self.wins / self.games if self.games else 0.0
+        if self.wins is not None:  # GridWar's names, which the views plot and the reports read
+            m.update(wins=self.wins, losses=self.losses, draws=self.draws, win_rate=self.win_rate,
+                     method_win_rate=self.win_rate)
+            if self.win_steps:
+                m["actions_per_win"] = float(np.mean(self.win_steps))
         return {prefix + k: float(v) for k, v in m.items()}
 
     def to_dict(self) -> dict[str, Any]:
         d = {k: v for k, v in self.metrics("").items()}
         d["success_rate_ci95"] = list(wilson(self.successes, self.games))
+        if self.wins is not None:
+            d["win_rate_ci95"] = d["method_win_rate_ci95"] = list(wilson(self.wins, self.games))
         if self.games > 1:
             s = spread(self.returns)
             d["mean_return_ci95"] = [s["ci_low"], s["ci_high"]]
         return d
 
 
-def make_vector_env(source: EnvSource, worlds: int, replayable: bool = False) -> Any:
+def make_vector_env(source: EnvSource, worlds: int) -> tuple[Any, str | None]:
     """`worlds` copies of the env stepped together, a world that ends reset within its step (SAME_STEP, as
-    GridWar's vector env): gymnasium's SyncVectorEnv over the env (a declared env's own batched engine is
-    not used here yet). `replayable`: each world an env_checkpoint.ReplayableEnv (a checkpoint replays it)."""
-    make = source.make
-    if replayable:
-        # deferred: env_checkpoint loads torch
-        from tracelab.train.env_checkpoint import ReplayableEnv
+    GridWar's vector env): a declared world's own batched engine (DeclaredVectorEnv, every world in one
+    engine call), else gymnasium's SyncVectorEnv over the env. World i steps as the env reset with seed
+    s + i either way. Returns (the env, why a declared world fell back to SyncVectorEnv, or None)."""
+    try:
+        spec_file, params = source.declared()
+    except UserError:  # not a declared world: any gymnasium env
+        return SyncVectorEnv([source.make] * worlds, autoreset_mode=AutoresetMode.SAME_STEP), None
+    # deferred: loads the engine (numba)
+    from tracelab.envs.declared.vector_env import DeclaredVectorEnv
+    limit = gym.registry[source.env_id].max_episode_steps if source.env_id is not None else None
+    try:
+        return DeclaredVectorEnv(spec_file, worlds, max_episode_steps=limit, **params), None
+    except ValueError as e:  # a spec the batched engine does not play yet (several agents, draws `after`)
+        note = f"{source.short_name}: {str(e).splitlines()[0]}; its worlds step in gymnasium's SyncVectorEnv"
+        return SyncVectorEnv([source.make] * worlds, autoreset_mode=AutoresetMode.SAME_STEP), note
 
-        def make() -> Any:
-            return ReplayableEnv(source.make())
-    return SyncVectorEnv([make] * worlds, autoreset_mode=AutoresetMode.SAME_STEP)
+
+def world_spec_of(env: Any) -> Any:
+    """The WorldSpec of a declared world's env, vector env (either kind) or None."""
+    spec = getattr(env, "world_spec", None)
+    if spec is None and getattr(env, "envs", None):
+        spec = getattr(env.envs[0].unwrapped, "world_spec", None)
+    return spec if spec is not None else getattr(getattr(env, "unwrapped", None), "world_spec", None)
+
+
+def declares_outcomes(env: Any) -> bool:
+    """Whether the env's world declares how a game ends (a spec's `[end] win` or `loss`)."""
+    spec = world_spec_of(env)
+    return spec is not None and bool(spec.win or spec.loss)
 
 
 EVAL_STEP_CAP = 10_000  # a greedy policy may walk in circles in an env without a step limit (CliffWalking)
@@ -193,6 +267,7 @@ def play_env_games(env: Any, policy: EnvPolicy, games: int, seed: int,
     quota = np.full(w, games // w, np.int64)
     quota[: games % w] += 1
     result = EnvEvalResult()
+    declares = declares_outcomes(env)
     obs, info = env.reset(seed=seed)
     ret, length = np.zeros(w), np.zeros(w, np.int64)
     while quota.any():
@@ -202,14 +277,10 @@ def play_env_games(env: Any, policy: EnvPolicy, games: int, seed: int,
         length += 1
         capped = (length >= step_cap) & ~(term | trunc)
         trunc = trunc | capped
+        outcomes = info.get("final_info", {}).get("outcome")  # where the world declares how games end
         for k in np.flatnonzero((term | trunc) & (quota > 0)).tolist():
-            result.returns.append(float(ret[k]))
-            result.steps.append(int(length[k]))
-            result.terminated += bool(term[k])
-            won = info.get("final_info", {}).get("won")
-            if won is not None:
-                result.wins = (result.wins or 0) + bool(won[k])
-            result.truncated += bool(trunc[k]) and not bool(term[k])
+            outcome = None if not declares else "truncated" if capped[k] or outcomes is None else str(outcomes[k])
+            result.add(float(ret[k]), int(length[k]), bool(term[k]), bool(trunc[k]), outcome)
             quota[k] -= 1
             if on_game is not None:
                 on_game(float(ret[k]))
@@ -230,7 +301,7 @@ def _reset_worlds(env: Any, obs: Any, info: dict[str, Any], worlds: np.ndarray) 
 
 def evaluate_env(policy: EnvPolicy, source: EnvSource, games: int, seed: int, worlds: int = 16,
                  on_game: Callable[[float], None] | None = None) -> EnvEvalResult:
-    env = make_vector_env(source, min(worlds, games))
+    env, _ = make_vector_env(source, min(worlds, games))
     try:
         return play_env_games(env, policy, games, seed, on_game)
     finally:

@@ -21,8 +21,9 @@ import torch
 
 from tracelab.store.writer import TraceWriter
 from tracelab.train.config import TrainConfig
-from tracelab.train.env_checkpoint import replay_worlds, save_env_checkpoint, worlds_state
-from tracelab.train.env_policy import EnvEvalResult, EnvPolicy, make_vector_env, play_env_games, save_env_policy
+from tracelab.train.env_checkpoint import ActionLog, replay_actions, save_env_checkpoint
+from tracelab.train.env_policy import (EnvEvalResult, EnvPolicy, declares_outcomes, make_vector_env, play_env_games,
+                                       save_env_policy, world_spec_of)
 from tracelab.envs.declared.env_source import EnvSource
 from tracelab.train.env_source import ObservationEncoder, action_count
 from tracelab.train.external_eval import DeclaredEvaluator, EvalSettings
@@ -49,12 +50,15 @@ class EnvTrainer:
         torch.set_num_threads(cfg.threads)
         self.cfg, self.source, self.writer, self.run_dir, self.progress = cfg, source, writer, run_dir, progress
         self.worlds = w = cfg.envs
-        self.env = make_vector_env(source, w, replayable=True)  # a checkpoint replays its worlds
+        # a declared world's own batched engine where its spec allows (else SyncVectorEnv, and why)
+        self.env, self.vector_note = make_vector_env(source, w)
+        self.actions_log = ActionLog(w)  # a checkpoint replays the worlds from their reset (env_checkpoint.py)
         single = self.env.single_observation_space
         self.encoder = ObservationEncoder(single, source.name)
         self.n_actions = action_count(self.env.single_action_space, source.name)
-        declared = getattr(self.env.envs[0].unwrapped, "world_spec", None)  # a declared world names its actions
+        declared = world_spec_of(self.env)  # a declared world names its actions
         self.declared = declared is not None
+        self.counts_wins = declares_outcomes(self.env)  # its [end] win / loss: the method's counting
         self.action_names = list(declared.action_names) if declared is not None else \
             [str(a) for a in range(self.n_actions)]
         self.rngs = Generators(cfg.seed)
@@ -66,7 +70,8 @@ class EnvTrainer:
         self.schedule = UpdateSchedule(cfg, w)
         self.episodes = EpisodeLog(w, writer, logging=False)  # begins are written once train() starts
         self.metrics = MetricLog(writer, metric_sinks)
-        self.best = BestPolicy()  # by the evaluation's mean return; its networks by name, as GridWar's
+        # by the method's win rate where the world declares a win, else the mean return (EnvEvalResult.selection)
+        self.best = BestPolicy()
         self.step = 0
         self.eval_round = 0
         self.eval_step = -1
@@ -74,12 +79,13 @@ class EnvTrainer:
         self.stop_requested = False
         self._eval_env: Any = None
         self._evaluator: Any = None  # a declared world's, tracing the first games of each evaluation
-        self.obs, self.info = self.env.reset(seed=self.rngs.env_seed())
+        self.env_seed = self.rngs.env_seed()
+        self.obs, self.info = self.env.reset(seed=self.env_seed)
         self.episodes.begin(np.arange(w), self.step)
 
     @property
     def best_eval(self) -> tuple[float, int] | None:
-        """(mean return, step) of the best evaluation so far."""
+        """(the selection's value, step) of the best evaluation so far (EnvEvalResult.selection)."""
         return self.best.eval
 
     # ---- one pass: every world makes one step ----
@@ -101,6 +107,7 @@ class EnvTrainer:
         actions = self._choose()
         obs_now = self.encoder(self.obs)
         obs, reward, terminated, truncated, info = self.env.step(actions)
+        self.actions_log.add(actions)
         done = terminated | truncated
         next_obs = obs
         if done.any():  # SAME_STEP autoreset: a world that ended shows its new start; its last state is final_obs
@@ -150,12 +157,12 @@ class EnvTrainer:
             result = self._evaluator.play(self.policy, self.step, self.eval_round)
         else:
             if self._eval_env is None:
-                self._eval_env = make_vector_env(self.source, min(cfg.eval_envs, cfg.eval_games))
+                self._eval_env, _ = make_vector_env(self.source, min(cfg.eval_envs, cfg.eval_games))
             result = play_env_games(self._eval_env, self.policy, cfg.eval_games, self.rngs.eval_seed(self.eval_round))
         self.write_metrics(result.metrics())
         self.eval_round += 1
         self.last_eval, self.eval_step = result, self.step
-        if self.best.consider(result.mean_return, self.step, {SHARED: self.learner.online_weights()}):
+        if self.best.consider(result.selection()[1], self.step, {SHARED: self.learner.online_weights()}):
             self.write_best_policy()
         return result
 
@@ -164,8 +171,8 @@ class EnvTrainer:
         if self.run_dir is None or self.best.eval is None:
             return
         value, step = self.best.eval
-        self._save(self.run_dir / BEST_POLICY_DIR, self.best.weights[SHARED], step,
-                   {"metric": "eval/mean_return", "value": value})
+        metric = "eval/method_win_rate" if self.counts_wins else "eval/mean_return"
+        self._save(self.run_dir / BEST_POLICY_DIR, self.best.weights[SHARED], step, {"metric": metric, "value": value})
 
     def _save(self, path: Path, weights: dict[str, torch.Tensor], step: int,
               selected_by: dict[str, Any] | None = None) -> Path:
@@ -188,22 +195,23 @@ class EnvTrainer:
         """Everything that decides what happens next, as tensors, arrays and plain values (some arrays are
         the parts' live ones: save_env_checkpoint copies them)."""
         episodes = self.episodes.state()
-        worlds = worlds_state(self.env.envs)
         return {
             "step": self.step, "eval_round": self.eval_round, "eval_step": self.eval_step,
             "learner": self.learner_kind, "learners": {SHARED: self.learner.state()},
             **self.rngs.state(), **self.schedule.state(), **self.metrics.state(), **self.best.state(), **episodes,
-            "games": {**episodes["games"], "actions": worlds.pop("actions"), "obs": self.encoder(self.obs)},
-            "env_rng": worlds,
+            "games": {**episodes["games"], "obs": self.encoder(self.obs)},
+            "env_seed": self.env_seed, "env_actions": self.actions_log.array(),
         }
 
     def load_state(self, st: dict[str, Any]) -> None:
         """Continue from `state()`'s output (checked by env_checkpoint.load_env_checkpoint); the worlds are
-        rebuilt by replaying their episodes. ValueError when the replay does not end in the saved
+        rebuilt by replaying their actions from the reset. ValueError when the replay does not end in the saved
         observations (another env, or version of it, than the checkpoint's)."""
         load_shared_state(self, {SHARED: self.learner}, st)
         g = st["games"]
-        obs, self.info = replay_worlds(self.env, g["actions"], self.episodes.lengths, st["env_rng"])
+        self.env_seed = int(st["env_seed"])
+        self.actions_log.load(st["env_actions"])
+        obs, self.info = replay_actions(self.env, self.env_seed, self.actions_log.array())
         if not np.array_equal(self.encoder(obs), g["obs"]):
             raise ValueError("replaying the checkpoint's games did not reproduce their observations: another env "
                              "(or version of it) than the one it was written with, or an edited file")
@@ -218,6 +226,7 @@ class EnvTrainer:
         ev = self.last_eval
         return {"step": self.step, "steps": self.cfg.steps, "epsilon": self.epsilon(), "loss": self.metrics.last_loss,
                 "mean_return": None if ev is None else ev.mean_return,
+                "win_rate": None if ev is None else ev.win_rate,
                 "success_rate": None if ev is None else ev.success_rate}
 
     def close(self) -> None:

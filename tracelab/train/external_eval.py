@@ -25,7 +25,8 @@ from tracelab.game.facts import GAME_RULES
 from tracelab.game.scenario import BOARD, NOTHING
 from tracelab.store.agent_rows import PolicyOutput
 from tracelab.store.writer import TraceWriter
-from tracelab.train.env_policy import EVAL_STEP_CAP, EnvEvalResult, make_vector_env, one_env_actor, play_env_games
+from tracelab.train.env_policy import (EVAL_STEP_CAP, EnvEvalResult, declares_outcomes, make_vector_env,
+                                       one_env_actor, play_env_games)
 from tracelab.envs.declared.env_source import EnvSource
 from tracelab.train.rngs import eval_seed
 
@@ -212,7 +213,7 @@ class DeclaredEvaluator:
         self.trace_env = EnvSource(source.name, {**source.kwargs, "trace_writer": writer,
                                                  "trace_episode_ids": new_id}).make() if self.traced else None
         rest = settings.games - self.traced
-        self.env = make_vector_env(source, min(settings.envs, rest)) if rest else None
+        self.env = make_vector_env(source, min(settings.envs, rest))[0] if rest else None
 
     def run(self, act: Act, step: int, round_no: int) -> dict[str, float]:
         return self.play(_GreedyAgent(act), step, round_no).metrics()
@@ -230,13 +231,7 @@ class DeclaredEvaluator:
         rest = self.settings.games - self.traced
         if rest and self.env is not None:
             t0 = time.perf_counter()
-            more = play_env_games(self.env, agent, rest, seed)
-            result.returns += more.returns
-            result.steps += more.steps
-            result.terminated += more.terminated
-            result.truncated += more.truncated
-            if more.wins is not None:
-                result.wins = (result.wins or 0) + more.wins
+            result.extend(play_env_games(self.env, agent, rest, seed))
             result.seconds["untraced"] = time.perf_counter() - t0
         return result
 
@@ -251,12 +246,10 @@ class DeclaredEvaluator:
             obs, reward, terminated, truncated, info = env.step(act(obs, info))
             ret += float(reward)
             steps += 1
-        result.returns.append(ret)
-        result.steps.append(steps)
-        result.terminated += bool(terminated)
-        result.truncated += not terminated
-        if "won" in info:  # the world declares a win (DeclaredEnv's info at a game's end)
-            result.wins = (result.wins or 0) + bool(info["won"])
+        outcome = None
+        if declares_outcomes(env):  # the world declares how a game ends; one cut at the cap is truncated
+            outcome = str(info["outcome"]) if "outcome" in info and (terminated or truncated) else "truncated"
+        result.add(ret, steps, terminated, not terminated, outcome)
 
     def close(self) -> None:
         if self.trace_env is not None:

@@ -6,7 +6,7 @@ The update is written out by hand in torch ops (forward of both networks as batc
 gradient, backward through the two layers, Adam on one flat vector) instead of autograd plus
 torch.optim: for a 64-unit network the arithmetic is nothing and each torch call's overhead is
 everything; this form makes 20 calls where autograd + Adam make several times more
-(docs/benchmarks.md, "Training"). It computes
+(docs/benchmarks/history.md, "Training"). It computes
 what `smooth_l1_loss(Q(s)[a], r + discount * max_a' Q_target(s'))` with autograd and Adam would;
 tests/test_learners.py holds it equal to dqn.py's, for every option this learner supports (masked or not).
 Double DQN, a dueling head or more hidden layers are dqn.py's alone (`--learner auto` picks it then)."""

@@ -5,7 +5,7 @@ The fused learner keeps the online and the target network in one tensor `[2, n]`
 each row holding W1ᵀ [D, H], b1 [H], W2ᵀ [H, A], b2 [A] back to back. Stacked that way, both networks'
 forward passes are one batched matmul per layer, the target copy is one copy, and the optimizer works on
 one flat vector: the per-operation overhead of torch, not arithmetic, is what costs here
-(docs/benchmarks.md, "Training"). Saved policies use nn.Sequential(Linear, Tanh, Linear)'s state dict
+(docs/benchmarks/history.md, "Training"). Saved policies use nn.Sequential(Linear, Tanh, Linear)'s state dict
 names, so plain torch loads them too."""
 from __future__ import annotations
 

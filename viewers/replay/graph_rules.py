@@ -18,6 +18,7 @@ from tracelab.store.model import RunModel
 from tracelab.store.reader import RunConnection
 from tracelab.store.why import WhyNode, explain_in, render_why
 from tracelab.engine.terminal_text import printable
+from tracelab.viewers.replay.markdown_text import code_block, literal
 
 MORE = "more"   # the level of the line that counts a step's firings past the log's limit
 
@@ -72,15 +73,15 @@ def _step_header(episode: GraphEpisode, s: int, edges: dict[str, int]) -> list[s
     last = episode.steps - 1
     lines = [f"## Episode {episode.episode}, step {s} of {last}"]
     if s == last and episode.outcome:
-        lines.append(f"**It ended: {episode.outcome}.**\n")
+        lines.append(f"**It ended: {literal(episode.outcome)}.**\n")
     changed = episode.changed.get(s, {})
     if edges:
-        lines.append("- edges: " + ", ".join(f"{name} {n:,}" for name, n in edges.items()))
-    lines.append("- changed: " + (", ".join(f"{name} {n:,}" for name, n in changed.items()) or "nothing"))
+        lines.append("- edges: " + ", ".join(f"{literal(name)} {n:,}" for name, n in edges.items()))
+    lines.append("- changed: " + (", ".join(f"{literal(name)} {n:,}" for name, n in changed.items()) or "nothing"))
     fired = Counter(r for r, t in zip(episode.firings.rule, episode.firings.t.tolist()) if t == s)
     total = episode.firings.per_step.get(s, 0)
     if total:
-        lines.append(f"- fired: {total:,} (" + ", ".join(f"{r} {n:,}" for r, n in fired.most_common()) + ")")
+        lines.append(f"- fired: {total:,} (" + ", ".join(f"{literal(r)} {n:,}" for r, n in fired.most_common()) + ")")
     return lines
 
 
@@ -102,7 +103,7 @@ def why_documents(con: RunConnection, episode: GraphEpisode, atoms: tuple[str, .
         lines = _step_header(episode, s, edges(s))
         if trace is None:
             example = next((head for head, t in zip(episode.firings.head, episode.firings.t.tolist())
-                            if t == s), None)
+                            if t == s and "`" not in head), None)  # a backtick would end the code span
             if example:
                 lines.append(f"\nAsk why an atom has its bound: `tracelab replay RUN --why '{example}'`.")
         for atom in atoms:
@@ -110,7 +111,7 @@ def why_documents(con: RunConnection, episode: GraphEpisode, atoms: tuple[str, .
             key = (atom, -1 if last is None else last.index)
             if key not in trees:
                 trees[key] = explain_in(run_model, trace, atom, s, depth)
-            lines += [f"\n### Why {atom}", "```text", render_why(trees[key], s), "```"]
+            lines += [f"\n### Why {literal(atom)}", *code_block(render_why(trees[key], s))]
         docs.append("\n".join(lines))
     return docs
 

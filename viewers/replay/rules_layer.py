@@ -18,6 +18,7 @@ from tracelab.store.reader import RunConnection
 from tracelab.store.coordinates import run_grid
 from tracelab.store.why import explain_in, render_why
 from tracelab.engine.terminal_text import printable
+from tracelab.viewers.replay.markdown_text import code_block, literal
 
 LANE_LABELS = ("alive", "atLoc", "health", "ammo", "action")
 END_LABELS = ("captured", "eliminated")
@@ -123,9 +124,9 @@ def explained_atoms(board: EpisodeBoard) -> dict[int, list[str]]:
 def _step_header(board: EpisodeBoard, s: int, rewards: np.ndarray | None) -> list[str]:
     lines = [f"## Episode {board.episode}, step {s} of {board.steps}"]
     if s == board.steps and board.outcome:
-        lines.append(f"**End of the game: {board.outcome} for red.**\n")
+        lines.append(f"**End of the game: {literal(board.outcome)} for red.**\n")
     if s > 0:
-        acts = ", ".join(f"{style.short_name(a)} {style.ACTION_NAMES[act] if act >= 0 else '-'}"
+        acts = ", ".join(f"{literal(style.short_name(a))} {style.ACTION_NAMES[act] if act >= 0 else '-'}"
                          for a, act, live in zip(board.agents, board.action[s].tolist(),
                                                  board.alive[s - 1].tolist()) if live)
         lines.append(f"- actions: {acts or 'none (no agent alive)'}")
@@ -152,7 +153,7 @@ def why_documents(con: RunConnection, board: EpisodeBoard, rewards: np.ndarray |
             lines.append("\nNo death and no end of game in this step.")
         for atom in atoms:
             tree = render_why(explain_in(run_model, trace, atom, s, depth), s, grid)
-            lines += [f"\n### Why {atom}", "```text", tree, "```"]
+            lines += [f"\n### Why {literal(atom)}", *code_block(tree)]
         docs.append("\n".join(lines))
     return docs
 

@@ -83,7 +83,7 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
             self._recorder.stepped(a, w.last_rewards, obs, terminated,
                                    truncated or (limit is not None and w.steps >= limit))
         info = self._info()
-        if self.world_spec.win and not self._running:  # what the world declares a win ([end] win)
+        if (self.world_spec.win or self.world_spec.loss) and not self._running:  # as declared ([end] win, loss)
             info["outcome"] = w.outcome()
             info["won"] = info["outcome"] == "win"
         return obs, w.last_rewards[0], terminated, truncated, info

@@ -65,7 +65,9 @@ def play_episodes(env: gym.Env, episodes: int, seed: int, act: Callable[[Any, di
             n += 1
             truncated = truncated or (step_cap is not None and n >= step_cap and not terminated)
         steps += n
-        out.append({"steps": n, "return": ret, "outcome": "terminated" if terminated else "truncated"})
+        # the env's own outcome where the world declares a win ([end] win: "win" or "loss")
+        outcome = info.get("outcome", "terminated") if terminated else "truncated"
+        out.append({"steps": n, "return": ret, "outcome": outcome})
         if on_episode is not None:
             on_episode(out[-1])
     return {"episodes": out, "steps": steps, "seconds": time.perf_counter() - t0}

@@ -10,9 +10,8 @@ and $TRACELAB_SPEC_MEMORY, which raises it. The figures are measured peaks round
 are far below them); they tell a world that fits from one off by orders of magnitude."""
 from __future__ import annotations
 
-import os
 
-from tracelab.engine.safe_files import MIB, human_bytes, parse_byte_size
+from tracelab.engine.safe_files import MIB, human_bytes, size_setting
 from tracelab.errors import UserError
 
 SPEC_MEMORY_ENV = "TRACELAB_SPEC_MEMORY"
@@ -40,13 +39,10 @@ class SpecTooBig(UserError):
 
 def spec_memory_limit() -> tuple[int, str]:
     """The limit (bytes) and how it was set: $TRACELAB_SPEC_MEMORY (a size: 2G, 800M), else the default."""
-    given = os.environ.get(SPEC_MEMORY_ENV, "").strip()
-    if not given:
+    given = size_setting(SPEC_MEMORY_ENV, SpecTooBig)
+    if given is None:
         return DEFAULT_SPEC_MEMORY, f"the default; {SPEC_MEMORY_ENV}=2G raises it"
-    try:
-        return parse_byte_size(given), f"set by {SPEC_MEMORY_ENV}"
-    except ValueError as e:
-        raise SpecTooBig(f"{SPEC_MEMORY_ENV}={given!r}: {e}") from None
+    return given, f"set by {SPEC_MEMORY_ENV}"
 
 
 class SpecBudget:

@@ -66,6 +66,10 @@ class DeclaredVectorEnv(VectorEnv):
 
     def reset(self, *, seed: int | Sequence[int] | None = None, options: dict[str, Any] | None = None
               ) -> tuple[Any, dict[str, Any]]:
+        mask = (options or {}).get("reset_mask")
+        if mask is not None and self._rngs:  # only these worlds restart, drawing on from their generators
+            self.worlds.reset(np.flatnonzero(np.asarray(mask, bool)))
+            return self.worlds.observations(), self._info(self._all)
         if seed is None:
             seeds: list[int | None] = [None] * self.num_envs
         elif isinstance(seed, (int, np.integer)):
@@ -98,8 +102,9 @@ class DeclaredVectorEnv(VectorEnv):
         done = terminated | truncated
         if done.any():
             final_info = self._with_masks({k: v for k, v in info.items() if not k.startswith("_")}, done)
-            if w.spec.win:  # what the world declares a win (its [end] win), for the counting of wins
-                final_info["won"] = w.won()
+            if w.spec.win or w.spec.loss:  # how the games ended, as the world declares ([end] win, loss)
+                final_info["outcome"] = w.outcomes()
+                final_info["won"] = final_info["outcome"] == "win"
             w.reset(np.flatnonzero(done))
             final_obs, obs = obs, w.observations()  # the others' observations read again, unchanged
             info = self._info(self._all)

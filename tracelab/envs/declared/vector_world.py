@@ -131,6 +131,18 @@ class DeclaredWorlds:
         ids = self.one._win_ids
         return self.terminated() & self.engine.is_true(ids).any(axis=1) if ids.size else np.zeros(self.n_worlds, bool)
 
+    def outcomes(self) -> np.ndarray:
+        """Per world, after its last step: "win" or "loss" when one of the spec's `[end] win` or `loss`
+        atoms holds at a termination (a win first), else "terminated" or "truncated"
+        (DeclaredWorld.outcome's names; read for the worlds whose episode just ended)."""
+        term = self.terminated()
+        out = np.where(term, "terminated", "truncated").astype("<U10")
+        lost = term & self.engine.is_true(self.one._loss_ids).any(axis=1) if self.one._loss_ids.size else \
+            np.zeros(self.n_worlds, bool)
+        out[lost] = "loss"
+        out[self.won()] = "win"
+        return out
+
     def truncated(self, limit: int | None) -> np.ndarray:
         """A truncated atom, or the spec's step limit reached in a world that did not terminate, or
         `limit` (a TimeLimit's, which truncates whatever the step did) reached."""

@@ -4,10 +4,14 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+from tracelab import RULES_DIR
 from tracelab.game.scenario import Rewards, Scenario, builtin_scenario
 from tracelab.train.config import LEARNING_REWARD_SCALE, METHOD_REWARD_SCALE
+
+if TYPE_CHECKING:
+    from tracelab.envs.declared.env_source import EnvSource
 
 
 @dataclass(frozen=True)
@@ -21,6 +25,19 @@ class Arm:
     published: float | None = None                           # the method's win rate for this setting
     published_note: str = ""
     train: dict[str, Any] = field(default_factory=dict)      # TrainConfig overrides of this arm only
+    # a world other than GridWar: a spec file under rules/ (or a registered id) and its --env-arg values;
+    # its games are counted as the world declares ([end] win / loss) and it has no opponent setting
+    env: str | None = None
+    env_args: dict[str, Any] = field(default_factory=dict)
+
+    def build_world(self) -> Scenario | EnvSource:
+        """What the arm trains on: GridWar's scenario, or the env of a world arm."""
+        if self.env is None:
+            return self.build_scenario()
+        # deferred: loads gymnasium, which GridWar's experiments do not need
+        from tracelab.envs.declared.env_source import EnvSource
+        spec = RULES_DIR / self.env
+        return EnvSource(str(spec) if spec.is_file() else self.env, dict(self.env_args))
 
     def build_scenario(self) -> Scenario:
         sc = builtin_scenario(self.scenario)
@@ -71,6 +88,8 @@ SHOT_AFTER = {"got_shot": -200.0, "invalid": -10.0}         # the method's fix
 NO_AMMO_HIGH = {"got_shot": -200.0, "invalid": -200.0}      # "a penalty of 10 (not more)": what more does
 assert Rewards().got_shot == -200.0 and Rewards().invalid == -10.0  # the defaults are the method's fix
 
+TRAP_CORRIDOR = "examples/trap_corridor.toml"  # under rules/
+
 EXPERIMENTS: dict[str, Experiment] = {e.name: e for e in (
     Experiment(
         "1v1-base", "1v1 base scenario: win rate over training",
@@ -120,6 +139,16 @@ EXPERIMENTS: dict[str, Experiment] = {e.name: e for e in (
         quick=Budget(seeds=1, steps=1_500, eval_games=20, evals=1),
         goal="non-Markov above Markov by a margin outside the seed spread",
         train={**LEARNER_REWARD_SCALE, **SCRIPTED_EXPLORATION}),
+    Experiment(
+        "trap-corridor", "A world of its own: the trap corridor (rules/examples/trap_corridor.toml)",
+        # any world trains, is counted and reported as GridWar is: its spec declares a win (the door) and a
+        # loss (the trap, a step after it is stepped on); the arms differ in the door's reward (a param)
+        (Arm("door reward 1", "", env=TRAP_CORRIDOR, env_args={"door_reward": 1.0}),
+         Arm("door reward 0.2", "", env=TRAP_CORRIDOR, env_args={"door_reward": 0.2})),
+        full=Budget(seeds=3, steps=5_000, eval_games=200, evals=5),
+        quick=Budget(seeds=1, steps=300, eval_games=12, evals=1),
+        goal="both arms learn to walk to the door: win rate 100% (the world's [end] win)",
+        train={"reward_scale": 1.0}),  # the world's rewards are about 1, not hundreds as GridWar's
     Experiment(
         "reward-shaping", "Reward shaping from traces: penalty for being shot 400, then 200",
         (Arm("shot -400", "advanced", rewards=SHOT_BEFORE),

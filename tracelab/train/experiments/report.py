@@ -13,7 +13,8 @@ from tracelab.game.scenario import ACTION_NAMES
 from tracelab.train.evaluate import METHOD_CUT, EvalResult
 from tracelab.train.experiments import plots
 from tracelab.train.config import METHOD_REWARD_SCALE, TrainConfig
-from tracelab.train.experiments.run import EVAL_PS, TRAIN_P, ExperimentResult, commit, machine, train_config
+from tracelab.train.experiments.run import (TRAIN_P, ExperimentResult, commit, eval_ps, is_world, machine,
+                                           train_config)
 from tracelab.train.experiments.runner import curves, p_suffix, run_sql
 from tracelab.train.experiments.stats import spread, wilson
 
@@ -81,11 +82,7 @@ def write_report(result: ExperimentResult, report_dir: Path) -> Path:
           f"| budget | {budget.seeds} seed{'s' if budget.seeds != 1 else ''} x {budget.steps:,} training steps per "
           f"setting; {budget.eval_games} games per evaluation, {budget.evals} evaluation(s) over training |",
           f"| learner | {learner_text(result)} |",
-          f"| opponent | scripted blue: with probability p a move towards red's base, else a random action "
-          f"(advanced: shoots first until out of ammo); training p = {TRAIN_P}, evaluation p = "
-          f"{' and '.join(f'{p:g}' for p in EVAL_PS)} (the method's code: trained 0.7, evaluated 0.3) |",
-          f"| counting | tracelab's: wins, losses, draws, truncations (step limit) separately; the method's: "
-          f"cut at {METHOD_CUT} steps, a cut game a loss, draws and wins by elimination non-wins |",
+          *setting_rows(result),
           f"| runs | `{result.out_dir}` (one training run per seed; `tracelab sql RUN ...`) |", ""]
     L += ["## Result", "", *goal_lines(result), ""]
     L += ["## Final evaluations, per seed", "",
@@ -98,15 +95,15 @@ def write_report(result: ExperimentResult, report_dir: Path) -> Path:
         for s in ar.seeds:
             for p, r in s.final.items():
                 lo, hi = wilson(r.method_wins, r.games)
-                L.append(f"| {ar.arm.label} | {s.seed} | {p:g} | {r.games} | {r.wins} | {r.losses} | {r.draws} | "
+                L.append(f"| {ar.arm.label} | {s.seed} | {p_text(result, p)} | {r.games} | {r.wins} | {r.losses} | {r.draws} | "
                          f"{r.truncated} | {pct(r.win_rate)} | {pct(r.method_win_rate)} [{pct(lo)}-{pct(hi)}] | "
                          f"{r.mean_return:.1f} | {num(r.method_actions_per_win)} |")
     L += ["", "Over seeds (method's counting):", ""]
     for ar in result.arms:
-        for p in EVAL_PS:
+        for p in eval_ps(exp):
             vals = [s.final[p].method_win_rate for s in ar.seeds if p in s.final]
             if vals:
-                L.append(f"- {ar.arm.label}, p = {p:g}: {spread_text(vals)}"
+                L.append(f"- {ar.arm.label}{against(result, p)}: {spread_text(vals)}"
                          + (f"; the method: {ar.arm.published_note}" if ar.arm.published_note and p == 0.3 else ""))
     L += [""]
     L += best_policy_section(result)
@@ -117,8 +114,9 @@ def write_report(result: ExperimentResult, report_dir: Path) -> Path:
         L += [f"**{caption}**", "", f"![{caption}]({path.relative_to(report_dir).as_posix()})", ""]
     L += ["## Reading the runs", "",
           "Each seed's run holds its learning curve (`metrics`, step = training step), its training episodes "
-          "and its traced evaluation games; the final evaluations are the metrics with the suffix `@p0.3` / "
-          "`@p0.7` at the last step:", "",
+          "and its traced evaluation games; the final evaluations are the metrics with the suffix "
+          + ("`@p0` (a world has no opponent setting)" if is_world(exp) else "`@p0.3` / `@p0.7`")
+          + " at the last step:", "",
           "```",
           f"tracelab sql {result.arms[0].seeds[0].run_dir if result.arms[0].seeds else 'RUN'} \"SELECT name, value "
           "FROM metrics WHERE name LIKE 'eval/%@p%' ORDER BY name\"",
@@ -128,8 +126,41 @@ def write_report(result: ExperimentResult, report_dir: Path) -> Path:
     return path
 
 
+def setting_rows(result: ExperimentResult) -> list[str]:
+    """The report's rows on what is played and how games are counted: GridWar's opponent and the method's
+    counting, or a world's spec and its own declared outcomes."""
+    if is_world(result.experiment):
+        worlds = "; ".join(f"{ar.arm.label}: `{ar.arm.build_world().describe()}`" for ar in result.arms)
+        return [f"| world | {worlds} |",
+                "| counting | as the world declares (`[end] win` / `loss`, docs/worlds.md): wins, losses, draws "
+                "(ended by neither), truncations (its step limit); the method's counting: a truncated game is a "
+                "loss, so a world's method win rate is its win rate |"]
+    return [f"| opponent | scripted blue: with probability p a move towards red's base, else a random action "
+            f"(advanced: shoots first until out of ammo); training p = {TRAIN_P}, evaluation p = "
+            f"{' and '.join(f'{p:g}' for p in eval_ps(result.experiment))} (the method's code: trained 0.7, "
+            f"evaluated 0.3) |",
+            f"| counting | tracelab's: wins, losses, draws, truncations (step limit) separately; the method's: "
+            f"cut at {METHOD_CUT} steps, a cut game a loss, draws and wins by elimination non-wins |"]
+
+
+def p_text(result: ExperimentResult, p: float) -> str:
+    """An evaluation's opponent p in a table: '-' for a world, which has none."""
+    return "-" if is_world(result.experiment) else f"{p:g}"
+
+
+def against(result: ExperimentResult, p: float) -> str:
+    return "" if is_world(result.experiment) else f" against p = {p:g}"
+
+
+def p_label(result: ExperimentResult, p: float) -> str:
+    return "final evaluation" if is_world(result.experiment) else f"p = {p:g}"
+
+
 def action_section(result: ExperimentResult) -> list[str]:
-    """Red's actions in each seed's last traced evaluation games: what the final greedy policy does."""
+    """Red's actions in each seed's last traced evaluation games: what the final greedy policy does
+    (GridWar's; a world's actions are in its runs' `steps`)."""
+    if is_world(result.experiment):
+        return []
     ids = sorted({int(i) for ar in result.arms for i in ar.arm.build_scenario().action_ids})
     names = [ACTION_NAMES[i] for i in ids]
     L = ["## What the final policies do", "",
@@ -157,15 +188,21 @@ def goal_lines(result: ExperimentResult) -> list[str]:
     exp = result.experiment
     out = [f"Goal: {exp.goal}.", ""]
     for ar in result.arms:
+        if is_world(exp) and ar.arm.published is None:  # the goal: every seed's final policy wins every game
+            vals = [s.final[p].method_win_rate for s in ar.seeds for p in eval_ps(exp) if p in s.final]
+            reached = sum(v >= 1.0 for v in vals)
+            out.append(f"- {ar.arm.label}: {reached} of {len(vals)} seeds win every final game; win rate "
+                       f"{spread_text(vals) if vals else '-'}.")
         if ar.arm.published is None or exp.name == "portability" or is_markov(exp):
             continue
-        vals = [s.final[0.3].method_win_rate for s in ar.seeds if 0.3 in s.final]
+        first = eval_ps(exp)[0]
+        vals = [s.final[first].method_win_rate for s in ar.seeds if first in s.final]
         reached = sum(v >= ar.arm.published for v in vals)
         verdict = "**reached**" if vals and reached == len(vals) else "**not reached**"
         out.append(f"- {ar.arm.label}: {verdict}, {reached} of {len(vals)} seeds reach it with {result.budget.steps:,} "
-                   f"steps: method's win rate against p = 0.3 {spread_text(vals)}; the method: "
+                   f"steps: method's win rate{against(result, first)} {spread_text(vals)}; the method: "
                    f"{ar.arm.published_note}.")
-        kept = [kept_or_final(s, 0.3) for s in ar.seeds]
+        kept = [kept_or_final(s, first) for s in ar.seeds]
         if any(s.best for s in ar.seeds) and None not in kept:
             n_kept = sum(v >= ar.arm.published for v in kept)
             out.append(f"  The kept best policies (below): {n_kept} of {len(kept)} seeds reach it, {spread_text(kept)}.")
@@ -213,7 +250,7 @@ def best_policy_section(result: ExperimentResult) -> list[str]:
         return []
     L = ["## The kept best policies", "",
          "A run also keeps the policy of its best evaluation during training (`RUN/policy-best/`, chosen by "
-         "the method's win rate against p = 0.3 over that evaluation's games; docs/training.md, \"The best "
+         "the method's win rate against the evaluation's opponent over that evaluation's games; docs/training.md, \"The best "
          "policy\"). Here it plays the final evaluation's games (other games than those that chose it, the "
          "same ones the final policy played). Seeds whose final policy was their best have no row.", "",
          "| setting | seed | kept at step | opponent p | method win rate [95% CI] | final policy's | mean return |",
@@ -222,14 +259,14 @@ def best_policy_section(result: ExperimentResult) -> list[str]:
         for p, r in s.best.items():
             lo, hi = wilson(r.method_wins, r.games)
             fin = s.final.get(p)
-            L.append(f"| {ar.arm.label} | {s.seed} | {s.best_step:,} | {p:g} | {pct(r.method_win_rate)} "
+            L.append(f"| {ar.arm.label} | {s.seed} | {s.best_step:,} | {p_text(result, p)} | {pct(r.method_win_rate)} "
                      f"[{pct(lo)}-{pct(hi)}] | {pct(fin.method_win_rate) if fin else '-'} | {r.mean_return:.1f} |")
     L += ["", "Over seeds, each seed's kept policy (its final one where that was its best), method's counting:", ""]
     for ar in result.arms:
-        for p in EVAL_PS:
+        for p in eval_ps(result.experiment):
             vals = [kept_or_final(s, p) for s in ar.seeds]
             if vals and None not in vals:
-                L.append(f"- {ar.arm.label}, p = {p:g}: {spread_text(vals)}")
+                L.append(f"- {ar.arm.label}{against(result, p)}: {spread_text(vals)}")
     return L + [""]
 
 
@@ -357,26 +394,30 @@ def make_plots(result: ExperimentResult, fig_dir: Path) -> list[tuple[str, Path]
         return [{"label": ar.arm.label, "published": ar.arm.published if with_published else None,
                  "seeds": [(seed, *c[metric]) for seed, c in per_seed]} for ar, per_seed in arms]
 
-    seeds_note = f"{n} seed{'s' if n != 1 else ''} per setting, opponent p = 0.3, {result.budget.eval_games} games per point"
+    ps = eval_ps(result.experiment)
+    seeds_note = f"{n} seed{'s' if n != 1 else ''} per setting{against(result, ps[0])}, {result.budget.eval_games} " \
+                 "games per point"
     out = [("Win rate (the method's counting) against training steps",
             plots.learning_curves(fig_dir / "win_rate.png", series("eval/method_win_rate", True),
                                   metric="eval/method_win_rate", ylabel="win rate, method's counting (%)",
                                   title=f"{result.experiment.title}: {seeds_note}", percent=True, small=small)),
            ("Mean return against training steps",
             plots.learning_curves(fig_dir / "mean_return.png", series("eval/mean_return", False),
-                                  metric="eval/mean_return", ylabel="mean return of red (evaluation)",
+                                  metric="eval/mean_return", ylabel="mean return (evaluation)",
                                   title=f"Mean return: {seeds_note}", percent=False, small=small))]
-    groups, by_p = [], {f"p = {p:g}": [] for p in EVAL_PS}
+    by_p: dict[str, list] = {p_label(result, p): [] for p in ps}
+    groups = []
     for ar in result.arms:
         for s in ar.seeds:
             groups.append(f"{textwrap.fill(ar.arm.label, 12)}\nseed {s.seed}" if len(result.arms) > 1
                           else f"seed {s.seed}")
-            for p in EVAL_PS:
+            for p in ps:
                 r: EvalResult = s.final[p]
                 lo, hi = wilson(r.method_wins, r.games)
-                by_p[f"p = {p:g}"].append((r.method_win_rate, lo, hi))
+                by_p[p_label(result, p)].append((r.method_win_rate, lo, hi))
     ref = result.arms[0].arm.published if len(result.arms) == 1 else None
-    out.append(("Final win rate per seed against both opponent settings (95% Wilson intervals)",
+    out.append(("Final win rate per seed" + ("" if is_world(result.experiment) else " against both opponent settings")
+                + " (95% Wilson intervals)",
                 plots.paired_bars(fig_dir / "final_win_rate.png", groups, by_p,
                                   ylabel="win rate, method's counting (%)", reference=ref, small=small,
                                   title=f"Final evaluation, {result.budget.eval_games} games each, {n} "

@@ -19,6 +19,7 @@ from tracelab.train.evaluate import EvalResult, evaluate
 from tracelab.train.experiments.definitions import Arm, Budget, Experiment
 from tracelab.train.experiments.runner import (
     CLOSE_WAIT_S,
+    WORLD_P,
     SeedRun,
     final_eval_seed,
     p_suffix,
@@ -69,12 +70,26 @@ def machine() -> str:
 
 def train_config(exp: Experiment, arm: Arm, budget: Budget, seed: int) -> TrainConfig:
     evals = max(1, budget.evals)
-    return TrainConfig(scenario=arm.scenario, agents=arm.agents, non_markov=arm.non_markov, steps=budget.steps,
-                       seed=seed, opponent_p=TRAIN_P, eval_p=EVAL_PS[0], eval_games=budget.eval_games,
-                       eval_every=budget.steps // evals if evals > 1 else 0,
-                       trace_eval_games=min(5, budget.eval_games), eval_envs=min(50, budget.eval_games),
-                       checkpoint_every=0, log_every=min(1_000, max(100, budget.steps // 20)),
-                       warmup=min(1_000, budget.steps // 4), **{**exp.train, **arm.train})
+    common = dict(steps=budget.steps, seed=seed, eval_games=budget.eval_games,
+                  eval_every=budget.steps // evals if evals > 1 else 0,
+                  trace_eval_games=min(5, budget.eval_games), eval_envs=min(50, budget.eval_games),
+                  checkpoint_every=0, log_every=min(1_000, max(100, budget.steps // 20)),
+                  warmup=min(1_000, budget.steps // 4), **{**exp.train, **arm.train})
+    if arm.env is not None:  # a world of its own: GridWar's settings do not apply
+        return TrainConfig(**common)
+    return TrainConfig(scenario=arm.scenario, agents=arm.agents, non_markov=arm.non_markov, opponent_p=TRAIN_P,
+                       eval_p=EVAL_PS[0], **common)
+
+
+def eval_ps(exp: Experiment) -> tuple[float, ...]:
+    """The opponent settings the final policies are evaluated against: GridWar's two, or a world's one
+    evaluation (WORLD_P: it has no opponent)."""
+    return (WORLD_P,) if is_world(exp) else EVAL_PS
+
+
+def is_world(exp: Experiment) -> bool:
+    """An experiment on a world other than GridWar (its arms name an env)."""
+    return any(a.env is not None for a in exp.arms)
 
 
 def run_experiment(exp: Experiment, budget: Budget, out_dir: Path, command: str, quick: bool,
@@ -90,12 +105,15 @@ def run_experiment(exp: Experiment, budget: Budget, out_dir: Path, command: str,
     tasks = [(ar, seed) for ar in result.arms for seed in range(budget.seeds)]
 
     def task_args(ar: ArmResult, seed: int) -> tuple:
-        return (replace(train_config(exp, ar.arm, budget, seed), kernel=kernel), ar.arm.build_scenario(),
-                out_dir / f"{ar.arm.slug}-seed{seed}", command, EVAL_PS, budget.eval_games)
+        cfg = train_config(exp, ar.arm, budget, seed)
+        return (cfg if is_world(exp) else replace(cfg, kernel=kernel), ar.arm.build_world(),
+                out_dir / f"{ar.arm.slug}-seed{seed}", command, eval_ps(exp), budget.eval_games)
 
     for ar, seed in tasks:
         say(f"[{exp.name}] {ar.arm.label}, seed {seed}: training {budget.steps:,} steps into "
             f"{out_dir / f'{ar.arm.slug}-seed{seed}'}")
+    if ray is not None and is_world(exp):
+        raise ValueError(f"{exp.name}: --ray runs GridWar's experiments only for now; use --jobs")
     if ray is not None:
         # deferred: Ray is an optional extra (tracelab[ray])
         from tracelab.train.experiments.ray_tasks import in_ray_tasks
@@ -107,12 +125,13 @@ def run_experiment(exp: Experiment, budget: Budget, out_dir: Path, command: str,
     for (ar, seed), sr in zip(tasks, runs):
         ar.seeds.append(sr)
         say(f"[{exp.name}] {ar.arm.label}, seed {seed}: {sr.status} after {sr.wall_s:.0f} s; "
-            + ", ".join(f"method's win rate vs p={p:g}: {100 * r.method_win_rate:.1f}%" for p, r in sr.final.items()))
-        scenario = ar.arm.build_scenario()
+            + ", ".join(f"method's win rate{'' if is_world(exp) else f' vs p={p:g}'}: "
+                        f"{100 * r.method_win_rate:.1f}%" for p, r in sr.final.items()))
         if exp.name == "portability":
+            scenario = ar.arm.build_scenario()
             ar.extra[seed] = portability(sr, scenario, budget.eval_games, say)
         elif exp.name == "reward-shaping":
-            ar.extra[seed] = shaping_traces(sr, scenario, out_dir, 6 if quick else 100, command, say)
+            ar.extra[seed] = shaping_traces(sr, ar.arm.build_scenario(), out_dir, 6 if quick else 100, command, say)
     result.wall_s = time.perf_counter() - t0
     result.machine = machine()
     (out_dir / f"{exp.name}.json").write_text(json.dumps(summary_json(result), indent=1))

@@ -21,9 +21,12 @@ from tracelab.train.evaluate import EvalResult, evaluate, evaluate_into
 from tracelab.train.policy import BEST_POLICY_DIR, Policy, load_policy
 
 if TYPE_CHECKING:
+    from tracelab.envs.declared.env_source import EnvSource
+    from tracelab.train.env_policy import EnvEvalResult
     from tracelab.train.loop import Trainer
     from tracelab.train.tensorboard import MetricSink
 
+WORLD_P = 0.0  # a world other than GridWar has no opponent setting: its final evaluation's key
 FINAL_EVAL_ROUND = 1_000_000  # seeds of the final evaluations: apart from the training's rounds
 
 
@@ -52,27 +55,26 @@ def final_eval_seed(seed: int, p: float) -> int:
     return int(np.random.SeedSequence([seed, 3, FINAL_EVAL_ROUND, int(round(p * 1000))]).generate_state(1)[0])
 
 
-def train_seed(cfg: TrainConfig, scenario: Scenario, run_dir: Path, command: str,
+def train_seed(cfg: TrainConfig, scenario: Scenario | EnvSource, run_dir: Path, command: str,
                eval_ps: tuple[float, ...], eval_games: int, metric_sinks: Sequence[MetricSink] = (),
                started: Callable[[Trainer], None] | None = None) -> SeedRun:
     """Train `cfg` into a new run at `run_dir`, then evaluate the final policy `eval_games` games
     against each opponent p in `eval_ps`, writing `eval/...@pP` metrics at the last step. `metric_sinks`
     receive the training's metrics besides the run; `started` is called with the Trainer before it trains
-    (a sweep's trial stops it through it: Trainer.stop_requested)."""
-    # deferred: torch and the trainer, which reading results and queries does not need
+    (a sweep's trial stops it through it: Trainer.stop_requested). `scenario` an EnvSource: a world other
+    than GridWar, trained with train --env's trainer (_world_parts)."""
+    # deferred: torch and the trainers, which reading results and queries does not need
     import torch
 
-    from tracelab.train.loop import Trainer
-
-    meta = {"command": f"tracelab train (from: {command})", "scenario": scenario.name, "seed": cfg.seed,
-            "rule_files": [str(GAME_RULES)], "board": BOARD,
-            "config": {**cfg.to_dict(), "scenario_toml": scenario.to_toml(), "resumed_from": None}}
+    from tracelab.envs.declared.env_source import EnvSource
+    parts = _world_parts if isinstance(scenario, EnvSource) else _gridwar_parts
+    meta, make_trainer, final_evaluation = parts(cfg, scenario, command, eval_ps, eval_games)
     writer = TraceWriter.open(run_dir, meta)
     torch.set_num_threads(cfg.threads)
     trainer, status = None, "failed"
     t0 = time.perf_counter()
     try:
-        trainer = Trainer(cfg, scenario, writer, run_dir, metric_sinks=metric_sinks)
+        trainer = make_trainer(cfg, scenario, writer, run_dir, metric_sinks=metric_sinks)
         if started is not None:
             started(trainer)
         status = trainer.train()
@@ -80,12 +82,9 @@ def train_seed(cfg: TrainConfig, scenario: Scenario, run_dir: Path, command: str
         policies = [("eval/", trainer.policy, out.final)]
         if trainer.best_eval is not None and trainer.best_eval[1] != trainer.step:  # else the final one
             out.best_step = trainer.best_eval[1]
-            policies.append(("eval_best/", load_policy(run_dir / BEST_POLICY_DIR, scenario), out.best))
-        for prefix, policy, into in policies:
-            for p in eval_ps:  # the same games for both policies: a paired comparison
-                result = evaluate(policy, scenario, games=eval_games, backend=cfg.backend,
-                                  seed=final_eval_seed(cfg.seed, p), opponent_p=p, stack_previous=trainer.stack,
-                                  envs=cfg.eval_envs)
+            policies.append(("eval_best/", run_dir / BEST_POLICY_DIR, out.best))
+        for prefix, policy, into in policies:  # the same games for both policies: a paired comparison
+            for p, result in final_evaluation(trainer, policy).items():
                 writer.write_metrics(trainer.step, result.metrics(p_suffix(p), prefix))
                 into[p] = result
         out.wall_s = time.perf_counter() - t0
@@ -97,6 +96,51 @@ def train_seed(cfg: TrainConfig, scenario: Scenario, run_dir: Path, command: str
         if trainer is not None:
             trainer.close()
         writer.close(status=status)
+
+
+FinalEvaluation = Callable[[Any, Any], dict[float, EvalResult]]  # (trainer, policy or its folder) -> per p
+
+
+def _gridwar_parts(cfg: TrainConfig, scenario: Scenario, command: str, eval_ps: tuple[float, ...],
+                   eval_games: int) -> tuple[dict[str, Any], Any, FinalEvaluation]:
+    """GridWar's run meta, its Trainer, and the final evaluation against each opponent p of `eval_ps`."""
+    from tracelab.train.loop import Trainer
+
+    meta = {"command": f"tracelab train (from: {command})", "scenario": scenario.name, "seed": cfg.seed,
+            "rule_files": [str(GAME_RULES)], "board": BOARD,
+            "config": {**cfg.to_dict(), "scenario_toml": scenario.to_toml(), "resumed_from": None}}
+
+    def final_evaluation(trainer: Any, policy: Any) -> dict[float, EvalResult]:
+        if isinstance(policy, Path):
+            policy = load_policy(policy, scenario)
+        return {p: evaluate(policy, scenario, games=eval_games, backend=cfg.backend, seed=final_eval_seed(cfg.seed, p),
+                            opponent_p=p, stack_previous=trainer.stack, envs=cfg.eval_envs) for p in eval_ps}
+    return meta, Trainer, final_evaluation
+
+
+def _world_parts(cfg: TrainConfig, source: EnvSource, command: str, eval_ps: tuple[float, ...],
+                 eval_games: int) -> tuple[dict[str, Any], Any, FinalEvaluation]:
+    """A world other than GridWar: train --env's run meta and trainer; its final evaluation, `eval_games`
+    games counted as the world declares, keyed WORLD_P (it has no opponent setting)."""
+    from tracelab.train.env_policy import evaluate_env, load_env_policy
+    from tracelab.train.env_trainer import EnvTrainer, env_run_meta
+
+    def final_evaluation(trainer: Any, policy: Any) -> dict[float, EvalResult]:
+        if isinstance(policy, Path):
+            policy = load_env_policy(policy, source)[0]
+        return {WORLD_P: as_eval_result(evaluate_env(policy, source, eval_games, final_eval_seed(cfg.seed, WORLD_P),
+                                                     cfg.eval_envs))}
+    return env_run_meta(cfg, source, f"tracelab train --env (from: {command})"), EnvTrainer, final_evaluation
+
+
+def as_eval_result(r: EnvEvalResult) -> EvalResult:
+    """An evaluation of any world as GridWar's EvalResult, which the reports read: its declared outcomes
+    (none declared: no wins); the method's counting is the world's own (a cut game lost, draws non-wins)."""
+    wins = r.wins or 0
+    apw = float(np.mean(r.win_steps)) if r.win_steps else None
+    return EvalResult(games=r.games, wins=wins, losses=r.losses, draws=r.draws, truncated=r.truncated,
+                      mean_return=r.mean_return, actions_per_win=apw, method_wins=wins,
+                      method_losses=r.losses + r.truncated, method_non_wins=r.draws, method_actions_per_win=apw)
 
 
 def traced_games(policy: Policy, scenario: Scenario, run_dir: Path, *, games: int, backend: str, seed: int,
