@@ -280,10 +280,10 @@ def test_gridwar_worlds_equal_single_declared_envs(kernel: str) -> None:
     worlds at once; one start outcome, restored world by world from its own snapshot world): each world of
     the vector env equals a DeclaredEnv reset with seed + i, given the same actions, across resets."""
     from tracelab import RULES_DIR
-    spec, n, seed = RULES_DIR / "gridworld" / "war_advanced.toml", 3, 11
-    vec = make_vec_env(spec, n, kernel=kernel)
+    spec, n, seed = RULES_DIR / "gridworld" / "war.toml", 3, 11
+    vec = make_vec_env(spec, n, kernel=kernel, advanced=True)
     assert vec.worlds.kernel == kernel
-    singles = [make_env(spec) for _ in range(n)]
+    singles = [make_env(spec, advanced=True) for _ in range(n)]
     obs, info = vec.reset(seed=seed)
     assert vec.worlds.uniforms is not None  # every draw one random(): a step's three taken at once
     for i, env in enumerate(singles):

@@ -117,9 +117,19 @@ def test_play_env_from_a_spec_file_without_trace(tmp_path: Path, capsys, monkeyp
     assert not (tmp_path / "runs").exists()
 
 
+def test_play_env_plays_gridwar_ids_through_its_spec(tmp_path: Path, capsys, monkeypatch) -> None:
+    """GridWar's ids name rules/gridworld/war.toml for --env, its params set by --env-arg."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["play", "--env", "tracelab/GridWar-base-v0", "--env-arg", "map=open", "--env-arg", "max_steps=5",
+                 "--episodes", "2", "--no-trace"]) == 0
+    assert "played 2 episodes of GridWar-base-v0 (10 steps" in capsys.readouterr().out
+
+
 @pytest.mark.parametrize("args, fragment", [
     (["--env", "tracelab/NoSuchLake-v9"], "--env tracelab/NoSuchLake-v9: neither a spec file nor a registered id"),
-    (["--env", "tracelab/GridWar-base-v0"], "not one declared in rules"),
+    (["--env", "tracelab/GridWar-nonmarkov-v0"], "not one declared in rules"),
+    (["--env", "tracelab/GridWar-base-v0", "--env-arg", "map=moon"], "war.toml:26: env.require.map in maps"),
+    (["--env", "tracelab/GridWar-advanced-v0", "--env-arg", "agents_per_team=2"], "plays one agent a team for now"),
     (["--env", "tracelab/FrozenLake-v1", "--env-arg", "slippery=false"], "unknown keyword argument 'slippery'"),
     (["--env", "tracelab/FrozenLake-v1", "--env-arg", "is_slippery"], "write KEY=VALUE"),
     (["--env", "tracelab/FrozenLake-v1", "--env-arg", "map_name=9x9"], "map_name"),

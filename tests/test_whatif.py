@@ -1,6 +1,6 @@
 """`tracelab whatif RUN --episode E --at T --action NAME` (issue 39 item 4), on a toy-text world
 (FrozenLake, slippery: its draws come from the seeded stream that play's later games continue) and on
-GridWar's base scenario as a spec (rules/gridworld/war_base.toml, masked actions): the recorded action
+GridWar's base scenario as a spec (rules/gridworld/war.toml, masked actions): the recorded action
 reproduces the episode exactly (every step's row, reward terms and change rows), another action diverges
 at T; `diff` of the branch against its origin picks the episode with no arguments; the run catalog marks
 the branch; a user error is one line and writes nothing."""
@@ -18,7 +18,7 @@ from tracelab.store.diff import first_divergence
 
 ROOT = Path(__file__).resolve().parents[1]
 WORLDS = {"frozen": (["--env", "tracelab/FrozenLake-v1", "--episodes", "4", "--seed", "3"], 2),
-          "war": (["--env", str(ROOT / "rules/gridworld/war_base.toml"), "--episodes", "2", "--seed", "1"], 1)}
+          "war": (["--env", str(ROOT / "rules/gridworld/war.toml"), "--episodes", "2", "--seed", "1"], 1)}
 
 
 @pytest.fixture(scope="module")

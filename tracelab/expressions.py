@@ -32,6 +32,7 @@ _COMPARE = {ast.Eq: operator.eq, ast.NotEq: operator.ne, ast.Lt: operator.lt, as
             ast.Gt: operator.gt, ast.GtE: operator.ge, ast.In: lambda a, b: a in b,
             ast.NotIn: lambda a, b: a not in b, ast.Is: operator.is_, ast.IsNot: operator.is_not}
 _FUNCTIONS = {"len": len, "min": min, "max": max, "abs": abs, "float": float, "int": int}
+_RANGE = "range"  # range(stop) / range(start, stop[, step]): a list of whole numbers, its size checked first
 _SCALARS = (int, float, str, bool, type(None))
 # a printf conversion as str % reads it: %[(key)][flags][width][.precision][length]type
 _CONVERSION = re.compile(r"%(?:\((?P<key>[^()]*)\))?[-#0 +]*(?P<width>\*|\d+)?(?:\.(?P<precision>\*|\d*))?"
@@ -133,9 +134,20 @@ class Evaluation:
             if _is_int(result) and result.bit_length() > MAX_INT_BITS:
                 raise ExpressionError(f"a number of more than {MAX_INT_BITS} bits")
             return result
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == _RANGE \
+                and not node.keywords and 1 <= len(node.args) <= 3:
+            return self.range([self.value(a) for a in node.args])
         raise ExpressionError(f"{type(node).__name__} is not allowed in a spec expression "
                               "(numbers, names, lists, + - * / // %, comparisons, and/or/not, "
-                              "x if c else y, x[i], len/min/max/abs/float/int)")
+                              "x if c else y, x[i], len/min/max/abs/float/int/range)")
+
+    def range(self, args: list[Any]) -> list[int]:
+        """Python's range as a list, refused past MAX_VALUE_ITEMS before it is built."""
+        if not all(_is_int(a) for a in args):
+            raise ExpressionError(f"range takes whole numbers, got {', '.join(repr(a)[:20] for a in args)}")
+        numbers = range(*args)  # lazy: its length is known before any item is made
+        self.reserve(1 + len(numbers))
+        return self.sizes.remember(list(numbers), 1 + len(numbers))
 
     def binary(self, op: ast.operator, left: Any, right: Any) -> Any:
         """`left op right`, the size of a string, list or number it builds checked before it is built."""

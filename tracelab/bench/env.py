@@ -1,7 +1,7 @@
 """`tracelab bench env`: the rule-driven simulator (RuleSim) and the hand-written one (RefSim) side by
 side, by team size, one world and batched, RuleSim with tracing on and off; then the gymnasium envs
 (tracelab.envs.gym_env, tracelab.envs.vector_env) on both backends when they import; then GridWar through
-both paths: RuleSim's envs against the declared spec's (rules/gridworld/war_*.toml, docs/worlds.md), one
+both paths: RuleSim's envs against the declared spec's (rules/gridworld/war.toml, docs/worlds.md), one
 world and batched, with their ratios. Goals: docs/benchmarks.md."""
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from tracelab import RULES_DIR
+from tracelab.envs.declared.gridwar import WAR_SPEC
 from tracelab.bench.common import (
     block_rates,
     fmt_num,
@@ -113,39 +113,31 @@ def gym_rates(worlds: int, repeats: int, target_s: float) -> dict[str, Any]:
 
 
 def declared_rates(worlds: int, repeats: int, target_s: float) -> list[dict[str, Any]]:
-    """GridWar through RuleSim (GridWarEnv, GridWarVectorEnv: rulesim_fused, the game's own Python glue)
-    and through its declared spec (DeclaredEnv, DeclaredVectorEnv): a row per spec file
-    rules/gridworld/war_*.toml present, one world and `worlds` worlds, untraced and traced (the engine's
-    change log on, taken after every step), the same random actions; the ratio declared / RuleSim. RuleSim
-    plays the scenario the spec's name gives (war_base.toml: base); a spec without one, or with several
-    learning agents (the envs here play one), is listed with the reason it was not measured."""
+    """GridWar 1v1 through RuleSim (GridWarEnv, GridWarVectorEnv: rulesim_fused, the game's own Python
+    glue) and through its declared spec (DeclaredEnv, DeclaredVectorEnv over rules/gridworld/war.toml),
+    base and advanced, one world and `worlds` worlds, untraced and traced (the engine's change log on,
+    taken after every step), the same random actions; the ratio declared / RuleSim."""
     # deferred: as in gym_rates
     from tracelab.envs.gym_env import GridWarEnv
     from tracelab.envs.vector_env import GridWarVectorEnv
     rows = []
-    for spec in sorted((RULES_DIR / "gridworld").glob("war_*.toml")):
-        name = spec.stem.removeprefix("war_")
+    for name in ("base", "advanced"):
+        advanced = name == "advanced"
         for kind, n, make_rules, make_declared, runner in (
-                ("single", 1, lambda name=name: GridWarEnv(name), lambda spec=spec: make_env(spec), _single_runner),
+                ("single", 1, lambda name=name: GridWarEnv(name),
+                 lambda advanced=advanced: make_env(WAR_SPEC, advanced=advanced), _single_runner),
                 ("vector", worlds, lambda name=name: GridWarVectorEnv(worlds, name),
-                 lambda spec=spec: make_vec_env(spec, worlds), _vector_runner)):
+                 lambda advanced=advanced: make_vec_env(WAR_SPEC, worlds, advanced=advanced), _vector_runner)):
             for trace in (False, True):
-                row: dict[str, Any] = {"spec": spec.name, "scenario": name, "kind": kind, "worlds": n,
+                row: dict[str, Any] = {"spec": WAR_SPEC.name, "scenario": name, "kind": kind, "worlds": n,
                                        "trace": trace}
-                try:
-                    for path, make in (("declared", make_declared), ("rulesim", make_rules)):
-                        env = make()
-                        rates = block_rates(runner(env, _engine_of(env) if trace else None), repeats, target_s)
-                        row[path] = summarize([x * n for x in rates["steps_per_s"]["runs"]]).to_dict()
-                        env.close()
-                except (ValueError, KeyError, FileNotFoundError) as e:  # no such scenario, several learners
-                    row["skipped"] = f"{type(e).__name__}: {e}".splitlines()[0]
-                    rows.append(row)
-                    break
+                for path, make in (("declared", make_declared), ("rulesim", make_rules)):
+                    env = make()
+                    rates = block_rates(runner(env, _engine_of(env) if trace else None), repeats, target_s)
+                    row[path] = summarize([x * n for x in rates["steps_per_s"]["runs"]]).to_dict()
+                    env.close()
                 row["declared_over_rulesim"] = row["declared"]["median"] / row["rulesim"]["median"]
                 rows.append(row)
-            if "skipped" in rows[-1]:
-                break
     return rows
 
 
@@ -231,11 +223,11 @@ def report(r: dict[str, Any]) -> str:
             [[x["backend"], x["kind"], x["worlds"], med(x), env(x) if "env_steps_per_s" in x else med(x), sp(x)]
              for x in g["rows"]])
     measured = [d for d in r.get("declared", []) if "skipped" not in d]
-    declared = "GridWar through RuleSim and through its declared spec (a row per rules/gridworld/war_*.toml; " \
+    declared = "GridWar 1v1 through RuleSim and through its declared spec (rules/gridworld/war.toml; " \
                "traced: the engine's change log on)\n" + format_table(
-                   ["spec", "env", "worlds", "trace", "RuleSim env-steps/s", "declared env-steps/s",
+                   ["scenario", "env", "worlds", "trace", "RuleSim env-steps/s", "declared env-steps/s",
                     "declared/RuleSim", "spread RuleSim/declared"],
-                   [[d["spec"], d["kind"], d["worlds"], "on" if d["trace"] else "off",
+                   [[d["scenario"], d["kind"], d["worlds"], "on" if d["trace"] else "off",
                      d["rulesim"]["median"], d["declared"]["median"], d["declared_over_rulesim"],
                      f"{100 * d['rulesim']['spread']:.0f}%/{100 * d['declared']['spread']:.0f}%"]
                     for d in measured]) + "".join(

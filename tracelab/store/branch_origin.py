@@ -78,7 +78,7 @@ def recorded_world(con: RunConnection, run: str) -> RecordedWorld:
         gridwar = bool(board) and board[0][0] == BOARD_BEFORE_DECLARED
         what = "a GridWar (RuleSim) run" if gridwar else "not a run of a spec world"
         raise UserError(f"{run}: {what}: whatif rebuilds the world from the spec its run keeps, and this run "
-                        "keeps none (record the game with play --env, e.g. rules/gridworld/war_base.toml)")
+                        "keeps none (record the game with play --env, e.g. rules/gridworld/war.toml)")
     env = config.get("env")
     name, args = (env, config.get("env_args")) if isinstance(env, str) else \
         (env.get("name"), env.get("kwargs")) if isinstance(env, dict) else (None, None)

@@ -15,6 +15,7 @@ from typing import Any
 import gymnasium as gym
 
 from tracelab.envs import make_env  # importing tracelab.envs registers the toy-text ids
+from tracelab.envs.declared.gridwar import GRIDWAR_SPEC_IDS, WAR_SPEC
 from tracelab.errors import UserError
 
 DECLARED_ENTRY_POINT = "tracelab.envs.declared.gym_env:DeclaredEnv"
@@ -42,17 +43,19 @@ class EnvSource:
 
     @property
     def env_id(self) -> str | None:
-        """The registered id, or None for a spec file."""
-        return self.name if self.name in _registry() else None
+        """The registered id, or None for a spec file (and for GridWar's ids, names of war.toml here)."""
+        return self.name if self.name in _registry() and self.name not in GRIDWAR_SPEC_IDS else None
 
     @property
     def short_name(self) -> str:
         """For a run directory and messages: the id without its namespace, or the spec file's stem."""
-        return self.name.split("/")[-1] if self.env_id else Path(self.name).stem
+        return self.name.split("/")[-1] if self.name in _registry() else Path(self.name).stem
 
     def declared(self) -> tuple[str, dict[str, Any]]:
         """The spec file of a declared world and the spec's [params] to load it with (an id's own fixed
         ones, map_name of FrozenLake8x8, then the user's); UserError when the source is not one."""
+        if self.name in GRIDWAR_SPEC_IDS:
+            return str(WAR_SPEC), {**GRIDWAR_SPEC_IDS[self.name], **self.kwargs}
         if self.env_id is not None:
             entry = _registry()[self.env_id]
             kwargs = dict(entry.kwargs)
@@ -76,7 +79,11 @@ class EnvSource:
                          *(f"--env-arg {shlex.quote(f'{k}={_toml_value(v)}')}" for k, v in self.kwargs.items())])
 
     def make(self) -> Any:
-        """A new env (gym.make for a registered id: its TimeLimit and checks; make_env for a spec file)."""
+        """A new env (gym.make for a registered id: its TimeLimit and checks; make_env for a spec file and
+        for GridWar's ids, whose spec is war.toml)."""
+        if self.name in GRIDWAR_SPEC_IDS:
+            spec, params = self.declared()
+            return make_env(spec, **params)
         if self.env_id is not None:
             return gym.make(self.name, **self.kwargs)
         if not Path(self.name).is_file():

@@ -7,6 +7,7 @@ the program's, a board cell nor an agent, is a located error (`SpecError`: file:
 expected). Nothing here steps an engine; world.py does."""
 from __future__ import annotations
 
+import ast
 import dataclasses
 import itertools
 import math
@@ -26,6 +27,7 @@ from tracelab.board import CELL_FORMAT, MAX_BOARD_CELLS, MAX_BOARD_FACTS, Board,
 from tracelab.expressions import ExpressionError, evaluate
 from tracelab.envs.declared.spec_file import KeyPath, SpecError, SpecSource, read_spec_file
 from tracelab.errors import close_names
+from tracelab.envs.declared.spec_repeat import expand_spec
 from tracelab.envs.declared.spec_size import SpecBudget, SpecTooBig
 
 READS = ("index", "lower", "bounds", "onehot", "count", "nearest")
@@ -162,6 +164,13 @@ class _Reader:
         """Charge the atoms a key is about to ground (`atoms` for each of `agents`) to the spec's budget."""
         try:
             self.budget.charge(atoms * agents, _atoms_for(atoms, agents))
+        except SpecTooBig as e:
+            raise self.err(path, str(e)) from None
+
+    def budget_ahead(self, path: KeyPath, n: int, what: str) -> None:
+        """Refuse now if `n` more atoms, about to be made from the text, would pass the budget."""
+        try:
+            self.budget.ahead(n, f"{n:,} {what}")
         except SpecTooBig as e:
             raise self.err(path, str(e)) from None
 
@@ -368,8 +377,10 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
         raise src.error(("data", sorted(clash)[0]), "a name in both [data] and [params]")
     names = {**data, **defaults, **{k: _plain(v) for k, v in params.items()}}
     r = _Reader(src, names)
+    _require(r)  # before anything is generated from the params
+    r.src = src = expand_spec(src, names, lambda path, n: r.budget_ahead(path, n, "generated values"))
 
-    r.table(("env",), ("rules", "render_fps", "constants"))
+    r.table(("env",), ("rules", "render_fps", "constants", "require"))
     rule_files = [_inside(r, ("env", "rules", i), f) for i, f in enumerate(r.strings(("env", "rules")))]
     if not rule_files:
         raise r.err(("env", "rules"), "expected at least one rule file")
@@ -434,6 +445,24 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     return WorldSpec(src.path, names, program, tuple(agents), action_names, action_facts, mask, space, parts,
                      reward_table, reward_scaled, terminated, truncated, max_steps, start_facts, choices,
                      randoms, board, fps, src, r.budget.board_facts + r.budget.atoms, reward_terms, win, loss)
+
+
+def _require(r: _Reader) -> None:
+    """`[env.require]`: each key an expression over the params that must hold, its value the reason; one
+    that is false refuses the spec at its line, with the params it names."""
+    for text, reason in r.table(("env", "require"), default={}).items():
+        path = ("env", "require", text)
+        if not isinstance(reason, str):
+            raise r.err(path, f"expected the reason as a string, got {_kind(reason)}")
+        try:
+            holds = evaluate(text, r.names)
+        except ExpressionError as e:
+            raise r.err(path, str(e)) from None
+        if not holds:
+            named = dict.fromkeys(n.id for n in ast.walk(ast.parse(text.strip(), mode="eval"))
+                                  if isinstance(n, ast.Name) and n.id in r.names and not isinstance(r.names[n.id], dict))
+            given = ", ".join(f"{n} = {r.names[n]!r}"[:60] for n in named)
+            raise r.err(path, f"{reason} (given {given})" if given else reason)
 
 
 def _every_agents_atoms_ahead(r: _Reader, board: Board | None, agents: int) -> None:

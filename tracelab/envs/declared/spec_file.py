@@ -179,17 +179,31 @@ class SpecSource:
     path: str
     data: dict[str, Any]
     key_lines: KeyLines
+    # the paths of generated parts (spec_repeat): where their template is written, and with which values
+    origins: dict[KeyPath, tuple[KeyPath, str]] = field(default_factory=dict)
 
     @property
     def folder(self) -> str:
         return os.path.dirname(os.path.abspath(self.path))
 
-    def error(self, path: KeyPath, message: str, kind: type[SpecError] = SpecError) -> SpecError:
-        """A located error (`kind`) about the value at `path`."""
+    def error(self, path: KeyPath, message: str, kind: type[SpecError] = SpecError, note: str = "") -> SpecError:
+        """A located error (`kind`) about the value at `path` (a generated one's: at its template, with the
+        `for` variables' values, or `note`)."""
+        path, generated = self.written_at(path)
+        note = generated or note
         line = self.key_lines.line(path)
         where = f"{self.path}:{line}" if line else self.path
         key = ".".join(str(p) if isinstance(p, str) else f"[{p}]" for p in path).replace(".[", "[")
+        key += f" ({note})" if note else ""
         return kind(f"{where}: {key}: {message}" if key else f"{where}: {message}")
+
+    def written_at(self, path: KeyPath) -> tuple[KeyPath, str]:
+        """Where `path` is written in the file, and the `for` variables' values that generated it."""
+        for i in range(len(path), 0, -1):
+            if path[:i] in self.origins:
+                orig, note = self.origins[path[:i]]
+                return (*orig, *path[i:]), note
+        return path, ""
 
 
 def read_spec_file(path: str | os.PathLike[str]) -> SpecSource:

@@ -28,7 +28,7 @@ BYTES_PER_SPEC_ATOM = 1024
 BYTES_PER_WORLD_ATOM = 64
 # one env of gymnasium's SyncVectorEnv (train --env): its own engine, spec tables and wrappers, plus its
 # atoms and the groundings over them (measured at 100-200 envs: FrozenLake 374 KiB with 140 atoms, Taxi
-# 1.38 MiB with 2,653, war_base 3.5 MiB with 3,264), rounded up
+# 1.38 MiB with 2,653, war.toml's base 3.5 MiB with 3,264), rounded up
 ENV_BYTES = 384 << 10
 BYTES_PER_ENV_ATOM = 1024
 
