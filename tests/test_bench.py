@@ -7,7 +7,6 @@ import json
 from typing import Any
 
 import pytest
-from tracelab import RULES_DIR
 from tracelab.engine import STAT_NAMES
 
 from tracelab.bench.common import format_table, median_of, summarize
