@@ -87,8 +87,10 @@ def interpreter(fresh_venv: bool) -> Iterator[str]:
     with tempfile.TemporaryDirectory(prefix="tracelab-first-run-venv-") as tmp:
         subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", tmp], check=True, timeout=600)
         python = os.path.join(tmp, "bin", "python")
-        subprocess.run([python, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation",
-                        "--no-compile", str(ROOT)], check=True, timeout=1200, capture_output=True)
+        done = subprocess.run([python, "-m", "pip", "install", "-q", "--no-deps", "--no-compile", str(ROOT)],
+                              timeout=1200, capture_output=True, text=True, check=False)
+        if done.returncode != 0:
+            raise RuntimeError(f"installing {ROOT} into a fresh venv failed:\n{done.stderr[-2000:]}")
         yield python
 
 
