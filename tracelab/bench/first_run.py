@@ -24,6 +24,7 @@ from __future__ import annotations
 import datetime
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -37,26 +38,34 @@ from tracelab.bench.common import children_cpu_s, format_table, machine_info, su
 from tracelab.provenance import load_average
 
 ROOT = Path(__file__).resolve().parents[2]
-SPEC = ROOT / "rules" / "toytext" / "frozen_lake.toml"
-_ENV_STEP = ("import numpy as np; from tracelab.envs import {make}; e = {make}({spec!r}{n}); "
+_ENV_STEP = ("import logging, numpy as np; logging.basicConfig(level=logging.INFO, format='%(message)s'); "
+             "from tracelab.envs import {make}; e = {make}({spec!r}{n}); "
              "e.reset(seed=0); e.step({action}); print('stepped')")
-# (name, what runs, argv after the interpreter: `-m tracelab ...` or `-c ...`); RUN: the run folder
-PHASES: tuple[tuple[str, str, tuple[str, ...]], ...] = (
-    ("play", "tracelab play --scenario advanced --episodes 5",
-     ("-m", "tracelab", "play", "--scenario", "advanced", "--episodes", "5", "--run", "RUN")),
-    ("reason-small", "tracelab reason rules/examples/reach.rules --steps 5",
-     ("-m", "tracelab", "reason", str(ROOT / "rules" / "examples" / "reach.rules"), "--steps", "5")),
-    ("reason-large", "tracelab reason rules/examples/supply_chain.rules --graph ...supply_chain.graphml --steps 8",
-     ("-m", "tracelab", "reason", str(ROOT / "rules" / "examples" / "supply_chain.rules"), "--graph",
-      str(ROOT / "rules" / "examples" / "supply_chain.graphml"), "--steps", "8")),
-    ("spec-env", "make_env(frozen_lake.toml): reset, one step",
-     ("-c", _ENV_STEP.format(make="make_env", spec=str(SPEC), n="", action="0"))),
-    ("spec-vector-env", "make_vec_env(frozen_lake.toml, 8): reset, one step",
-     ("-c", _ENV_STEP.format(make="make_vec_env", spec=str(SPEC), n=", 8", action="np.zeros(8, np.int64)"))),
-    ("train", "tracelab train --scenario base --total-timesteps 600 --learning-starts 500",
-     ("-m", "tracelab", "train", "--scenario", "base", "--total-timesteps", "600", "--learning-starts", "500",
-      "--eval-every", "100000", "--run", "RUN")),
-)
+
+
+def phases(root: Path) -> tuple[tuple[str, str, tuple[str, ...]], ...]:
+    """(name, what runs, argv after the interpreter: `-m tracelab ...` or `-c ...`; RUN: the run folder) of
+    each phase, on the source tree at `root`."""
+    examples, spec = root / "rules" / "examples", str(root / "rules" / "toytext" / "frozen_lake.toml")
+    return (
+        ("play", "tracelab play --scenario advanced --episodes 5",
+         ("-m", "tracelab", "play", "--scenario", "advanced", "--episodes", "5", "--run", "RUN")),
+        ("reason-small", "tracelab reason rules/examples/reach.rules --steps 5",
+         ("-m", "tracelab", "reason", str(examples / "reach.rules"), "--steps", "5")),
+        ("reason-large", "tracelab reason rules/examples/supply_chain.rules --graph ...supply_chain.graphml --steps 8",
+         ("-m", "tracelab", "reason", str(examples / "supply_chain.rules"), "--graph",
+          str(examples / "supply_chain.graphml"), "--steps", "8")),
+        ("spec-env", "make_env(frozen_lake.toml): reset, one step",
+         ("-c", _ENV_STEP.format(make="make_env", spec=spec, n="", action="0"))),
+        ("spec-vector-env", "make_vec_env(frozen_lake.toml, 8): reset, one step",
+         ("-c", _ENV_STEP.format(make="make_vec_env", spec=spec, n=", 8", action="np.zeros(8, np.int64)"))),
+        ("train", "tracelab train --scenario base --total-timesteps 600 --learning-starts 500",
+         ("-m", "tracelab", "train", "--scenario", "base", "--total-timesteps", "600", "--learning-starts", "500",
+          "--eval-every", "100000", "--run", "RUN")),
+    )
+
+
+PHASES = [name for name, _, _ in phases(ROOT)]
 QUICK_PHASES = ("reason-small", "spec-env")
 FIGURES = Path(__file__).resolve().parents[1] / "first_run_figures.json"
 TIMEOUT_S = 1800  # a cold compile on a loaded machine has taken 3 minutes of wall time
@@ -79,42 +88,46 @@ def timed(python: str, argv: tuple[str, ...], cache_dir: str, run_dir: str) -> d
 
 
 @contextmanager
-def interpreter(fresh_venv: bool) -> Iterator[str]:
-    """This Python, or one of a new venv with the project installed in it (no deps, no editable link)."""
+def interpreter(fresh_venv: bool) -> Iterator[tuple[str, Path]]:
+    """This Python and source tree, or a new venv with a copy of the tree (no .pyc files: Python's bytecode
+    cache as cold as numba's) installed in it as the README installs it (editable: the game's rules and the
+    examples stay in the tree; a plain install leaves rules/ out), without deps."""
     if not fresh_venv:
-        yield sys.executable
+        yield sys.executable, ROOT
         return
     with tempfile.TemporaryDirectory(prefix="tracelab-first-run-venv-") as tmp:
-        subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", tmp], check=True, timeout=600)
-        python = os.path.join(tmp, "bin", "python")
-        done = subprocess.run([python, "-m", "pip", "install", "-q", "--no-deps", "--no-compile", str(ROOT)],
+        venv, root = os.path.join(tmp, "venv"), Path(tmp) / "tracelab"
+        shutil.copytree(ROOT, root, ignore=shutil.ignore_patterns(".git", ".venv", "__pycache__", "*.egg-info",
+                                                                   "build", "runs"))
+        subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", venv], check=True, timeout=600)
+        python = os.path.join(venv, "bin", "python")
+        done = subprocess.run([python, "-m", "pip", "install", "-q", "--no-deps", "--no-compile", "-e", str(root)],
                               timeout=1200, capture_output=True, text=True, check=False)
         if done.returncode != 0:
-            raise RuntimeError(f"installing {ROOT} into a fresh venv failed:\n{done.stderr[-2000:]}")
-        yield python
+            raise RuntimeError(f"installing {root} into a fresh venv failed:\n{done.stderr[-2000:]}")
+        yield python, root
 
 
 def run(quick: bool, repeats: int, fresh_venv: bool = False, only: list[str] | None = None) -> dict[str, Any]:
-    names = [p[0] for p in PHASES]
-    unknown = sorted(set(only or []) - set(names))
+    unknown = sorted(set(only or []) - set(PHASES))
     if unknown:
-        raise ValueError(f"bench first-run: no phase {', '.join(unknown)} (phases: {', '.join(names)})")
-    chosen = [p for p in PHASES if (p[0] in only if only else (p[0] in QUICK_PHASES or not quick))]
+        raise ValueError(f"bench first-run: no phase {', '.join(unknown)} (phases: {', '.join(PHASES)})")
     repeats = 1 if quick else repeats
     load_before = load_average()
-    phases: dict[str, Any] = {}
-    with interpreter(fresh_venv) as python:
+    measured: dict[str, Any] = {}
+    with interpreter(fresh_venv) as (python, root):
+        chosen = [p for p in phases(root) if (p[0] in only if only else (p[0] in QUICK_PHASES or not quick))]
         for name, what, argv in chosen:
             cold, warm = [], []
             for _ in range(repeats):
                 with tempfile.TemporaryDirectory(prefix="tracelab-first-run-") as tmp:
                     cold.append(timed(python, argv, tmp, os.path.join(tmp, "run-cold")))
                     warm.append(timed(python, argv, tmp, os.path.join(tmp, "run-warm")))
-            phases[name] = {"command": what,
+            measured[name] = {"command": what,
                             **{f"{which}_{figure}": summarize([r[figure] for r in runs]).to_dict()
                                for which, runs in (("cold", cold), ("warm", warm)) for figure in ("wall_s", "cpu_s")},
                             "cold_notice": cold[0]["notice"], "warm_notice": warm[0]["notice"]}
-    return {"repeats": repeats, "fresh_venv": fresh_venv, "phases": phases,
+    return {"repeats": repeats, "fresh_venv": fresh_venv, "phases": measured,
             "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"),
             "load_before": load_before, "load_after": load_average(), "machine": machine_info()}
 
