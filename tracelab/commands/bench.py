@@ -90,7 +90,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                                 "notices quote")
         if name == "cli":
             q.add_argument("--only", action="append", default=None, metavar="COMMAND",
-                           help="time this command only, beside the floor (repeatable; e.g. sql, compare)")
+                           help="time this command only, beside the floor (repeatable; e.g. sql, compare; start: "
+                                "eval's and train's CPU before their first step)")
         if name == "pyreason":
             q.add_argument("--pyreason-python", metavar="PYTHON", default=None,
                            help="the interpreter of a PyReason install (e.g. a venv's bin/python); without "
