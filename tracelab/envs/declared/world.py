@@ -90,8 +90,7 @@ class _Drawer:
 
 def _say_if_cold(spec: WorldSpec, kernel: str, worlds: int) -> None:
     """Before the build: one notice (once per process) when the kernels this world steps on are not in
-    numba's cache yet, so their first call compiles them (a fresh install: ~20-60 s, the notice says how
-    long the bench measured)."""
+    numba's cache yet, so their first call compiles them (the notice quotes what bench first-run measured)."""
     if kernel == "counting":
         engine = counting_kernel.step_worlds
         world = (fused.fused_step, fused.read_step) if worlds == 1 else (vector_fused.step_batch, vector_fused.read_batch)
