@@ -65,12 +65,13 @@ def test_a_notice_is_said_once_per_process_and_only_when_something_compiles(capl
 
 def test_the_figure_quoted_is_the_bench_table_s(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     table = tmp_path / "figures.json"
-    table.write_text(json.dumps({"measured": "2026-11-28 21:50 UTC", "figures": {"play": {"wall_s": 17.4,
-                                                                                        "cpu_s": 24.6}}}))
+    table.write_text(json.dumps({"measured": "2026-11-28 21:50 UTC", "load": [[0.4, 0.2, 0.1], [1.0, 0.5, 0.2]],
+                                 "cores": 2, "figures": {"play": {"wall_s": 17.4, "cpu_s": 24.6}}}))
     monkeypatch.setattr(first_run_figures, "FIGURES", table)
     first_run_figures._table.cache_clear()
     try:
-        assert measured("play") == "first run only; a fresh install measured 17 s (25 s of CPU) on 2026-11-28"
+        assert measured("play") == ("first run only; a fresh install measured 25 s of CPU, 17 s wall at load 0 "
+                                    "on 2 cores, 2026-11-28")
         assert measured("train") == "first run only"  # not measured: no figure is made up
     finally:
         first_run_figures._table.cache_clear()

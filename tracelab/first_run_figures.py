@@ -23,15 +23,20 @@ def _table() -> dict[str, Any]:
 
 
 def measured(phase: str) -> str:
-    """`first run only; a fresh install measured 14 s (24 s of CPU) on 2026-11-25` for a phase the bench
-    timed, `first run only` for one it did not."""
+    """`first run only; a fresh install measured 63 s of CPU, 372 s wall at load 15 on 2 cores, 2026-11-28`
+    for a phase the bench timed (CPU first: the wall time is the measuring machine's load's as much as
+    the compile's), `first run only` for one it did not."""
     table = _table()
     figure = table.get("figures", {}).get(phase)
     if not isinstance(figure, dict) or not {"wall_s", "cpu_s"} <= figure.keys():
         return "first run only"
     when = str(table.get("measured", "?")).split(" ")[0]
-    return (f"first run only; a fresh install measured {figure['wall_s']:.0f} s "
-            f"({figure['cpu_s']:.0f} s of CPU) on {when}")
+    try:
+        load = f" at load {table['load'][0][0]:.0f} on {table['cores']} cores"
+    except (KeyError, IndexError, TypeError, ValueError):
+        load = ""
+    return (f"first run only; a fresh install measured {figure['cpu_s']:.0f} s of CPU, "
+            f"{figure['wall_s']:.0f} s wall{load}, {when}")
 
 
 _said: set[str] = set()
