@@ -4,6 +4,7 @@ positive measurements. Nothing here asserts a speed: figures come from the bench
 from __future__ import annotations
 
 import json
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -236,3 +237,35 @@ def test_bench_cli_quick(capsys: pytest.CaptureFixture) -> None:
     parser = build_parser()
     for _, argv, _ in commands(Path("sample_runs"), Path("copies")):
         assert parser.parse_args(list(argv)).func
+
+
+def test_bench_cli_start_quick(capsys: pytest.CaptureFixture) -> None:
+    """eval's and train's CPU before their first step, after their imports (issue 40), in fresh processes."""
+    r = bench_json(capsys, "cli", "--only", "start")
+    assert [s["name"] for s in r["start"]] == ["eval --games 50", "train"]
+    for s in r["start"]:
+        positive(s["to_first_step_cpu_s"])
+        positive(s["imports_cpu_s"])
+        assert s["met"] == (s["to_first_step_cpu_s"]["median"] <= s["goal_s"] == 1.0)
+
+
+def test_bench_first_run_phase_and_the_figures_it_writes(capsys: pytest.CaptureFixture, tmp_path: Path,
+                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    """A phase from empty caches and again warm, in fresh processes; the table the notices quote."""
+    from tracelab import first_run_figures
+    from tracelab.bench.first_run import write_figures
+    r = bench_json(capsys, "first-run", "--only", "reason-small")
+    p = r["phases"]["reason-small"]
+    for key in ("cold_wall_s", "cold_cpu_s", "warm_wall_s", "warm_cpu_s"):
+        positive(p[key])
+    assert p["warm_notice"] == [] and r["fresh_venv"] is False  # the reference evaluator compiles nothing
+    write_figures(r, tmp_path / "figures.json")
+    monkeypatch.setattr(first_run_figures, "FIGURES", tmp_path / "figures.json")
+    first_run_figures._table.cache_clear()
+    try:
+        said = first_run_figures.measured("reason-small")
+    finally:
+        first_run_figures._table.cache_clear()
+    assert said.startswith(f"first run only; a fresh install measured {round(p['cold_cpu_s']['median'], 1):.0f} s "
+                           f"of CPU, {round(p['cold_wall_s']['median'], 1):.0f} s wall at load ")
+    assert said.endswith(f" cores, {r['date'].split()[0]}")

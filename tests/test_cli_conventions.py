@@ -159,3 +159,17 @@ def test_an_atom_given_after_the_flags_is_the_same_question(capsys: pytest.Captu
     assert capsys.readouterr().out == first and "captured(red)" in first
     assert main(["why", run, "--episode", "2", "captured(red)", "extra"]) == 2
     assert "unexpected argument: extra" in capsys.readouterr().err
+
+
+def test_each_command_module_registers_the_command_named_after_it() -> None:
+    """`tracelab CMD ...` builds CMD's parser alone from the module named after it (cli.command_module):
+    a module that registered another command too, or under another name, would lose it there."""
+    from tracelab.cli import COMMAND_MODULES, command_module
+    full = build_parser()
+    names = next(a for a in full._actions if isinstance(a, argparse._SubParsersAction)).choices
+    assert sorted(command_module(name) for name in names) == sorted(COMMAND_MODULES)
+    for name in names:
+        alone = build_parser(name)
+        assert list(next(a for a in alone._actions if isinstance(a, argparse._SubParsersAction)).choices) == [name]
+    assert command_module("no-such-command") is None
+    assert build_parser("no-such-command").format_help() == full.format_help()  # the typo's message names all

@@ -2,13 +2,15 @@
 never pandas (pyarrow's converter imports it for a Python list: tracelab.store.arrow_build builds from
 buffers), numba, torch, rerun, textual or the rest. Each command runs in one child interpreter, in turn,
 and the heavy packages it left in sys.modules are printed after each: one that loads a forbidden package
-is named."""
+is named. A command builds its own parser only: no other command's module is imported."""
 from __future__ import annotations
 
 import json
 import subprocess
 import sys
 from pathlib import Path
+
+from tracelab.cli import command_module
 
 ROOT = Path(__file__).resolve().parents[1]
 RUNS = ROOT / "sample_runs"
@@ -43,13 +45,16 @@ COMMANDS = [
 CHILD = """
 import contextlib, io, json, sys
 from tracelab.cli import main
+def commands_loaded():
+    return [m for m in sys.modules if m.startswith("tracelab.commands.") and not m.rpartition(".")[2].startswith("_")]
 heavy, commands = json.loads(sys.argv[1]), json.loads(sys.argv[2])
 for argv in commands:
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
         status = main(argv)
     print(json.dumps({"argv": argv, "status": status, "printed": bool(out.getvalue()),
-                      "loaded": [m for m in heavy if m in sys.modules]}), file=sys.__stdout__)
+                      "loaded": [m for m in heavy if m in sys.modules],
+                      "commands": commands_loaded()}), file=sys.__stdout__)
 """
 
 
@@ -62,4 +67,6 @@ def test_reading_commands_load_only_duckdb_pyarrow_and_numpy() -> None:
     for r in reports:
         assert r["status"] == 0 and r["printed"], (r, out.stderr)  # each command did its work
         assert set(r["loaded"]) <= ALLOWED, f"{' '.join(r['argv'][:1])} loaded {sorted(set(r['loaded']) - ALLOWED)}"
+        ran = {command_module(argv[0]) for argv in COMMANDS[:reports.index(r) + 1]}
+        assert set(r["commands"]) <= ran, f"{r['argv'][0]} imported {sorted(set(r['commands']) - ran)}"
     assert {"duckdb", "pyarrow"} <= set(reports[-1]["loaded"])  # the check sees what a command loads

@@ -1,7 +1,9 @@
 """tracelab: a semantic simulation proxy for reinforcement learning that explains itself.
 
-The `tracelab` command. Each subcommand lives in its own module under tracelab/commands/ and exposes
-`register(subparsers)`; modules are imported lazily so that `tracelab --help` stays fast (no torch).
+The `tracelab` command. Each subcommand lives in its own module under tracelab/commands/, named after it
+(`why-not`: commands/why_not.py), and exposes `register(subparsers)`; modules are imported lazily so that
+`tracelab --help` stays fast (no torch), and a command builds its own parser only (`tracelab sql ...` does
+not build the other 23: they cost ~0.3 s of CPU, a reading command's budget, docs/benchmarks.md).
 
 Output: everything a command prints goes through commands._output.escaped_output (control characters
 escaped: a run's strings never reach the terminal as escape sequences).
@@ -23,7 +25,8 @@ from tracelab.commands._output import escaped_output
 from tracelab.engine.errors import is_interrupt
 from tracelab.errors import user_error_message
 
-# One line per subcommand module; each module adds its own parsers and sets `func` on them.
+# One line per subcommand module; each module adds the parser of the command it is named after and sets
+# `func` on it.
 COMMAND_MODULES = [
     "tracelab.commands.play", "tracelab.commands.reason", "tracelab.commands.convert_pyreason",
     "tracelab.commands.run_pyreason",
@@ -41,11 +44,19 @@ EXIT_USAGE = 2  # argparse's status for a usage error
 EXIT_BROKEN_PIPE = 141  # what a shell reports for a process ended by SIGPIPE
 
 
-def build_parser() -> argparse.ArgumentParser:
+def command_module(command: str) -> str | None:
+    """The module of a command's name (`why-not`: tracelab.commands.why_not), None for no command."""
+    module = "tracelab.commands." + command.replace("-", "_")
+    return module if module in COMMAND_MODULES else None
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser of every command, or of `command` alone (what running it needs)."""
     parser = argparse.ArgumentParser(prog="tracelab", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"tracelab {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
-    for name in COMMAND_MODULES:
+    only = command_module(command) if command is not None else None
+    for name in [only] if only else COMMAND_MODULES:
         importlib.import_module(name).register(sub)
     return parser
 
@@ -92,7 +103,9 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(argv: list[str] | None) -> int:
-    parser = build_parser()
+    given = sys.argv[1:] if argv is None else argv
+    # a command's own parser when the line starts with one; else (--help, --version, a typo) all of them
+    parser = build_parser(given[0] if given else None)
     args, unknown = parser.parse_known_args(argv)  # usage errors: argparse prints them and exits 2
     unknown = _late_positionals(parser, args, unknown)
     if unknown:

@@ -7,7 +7,8 @@ tree), with PYTHONDONTWRITEBYTECODE unset (a user's Python writes .pyc files; on
 them first). A round runs every command once, the floor included, so that the machine's other load falls
 on all of them alike; the figure is each command's median over --repeats rounds of its CPU seconds (user +
 sys of the child and of what it waited for), and its ratio to the floor's median. Each goal (issue 40) is
-a ratio; the verdict says whether the median met it."""
+a ratio; the verdict says whether the median met it. `start`: the CPU seconds `eval --games 50` and `train`
+spend after their imports until their first step (tracelab/bench/start.py; goal: within 1 s)."""
 from __future__ import annotations
 
 import os
@@ -81,6 +82,9 @@ def run(quick: bool, repeats: int, only: Sequence[str] | None = None) -> dict[st
         for _ in range(repeats):
             for name, argv, _ in timed:
                 cpu[name].append(_cpu_of(argv, env))
+    # deferred: its child imports torch; the reading commands' rounds above do not need it
+    from tracelab.bench import start
+    starts = start.run(runs, repeats) if only is None or "start" in only else []
     floor = summarize(cpu["floor"]).median
     rows = []
     for name, argv, goal in timed:
@@ -91,7 +95,7 @@ def run(quick: bool, repeats: int, only: Sequence[str] | None = None) -> dict[st
         rows.append({"name": name, "command": shown,
                      "cpu_s": s.to_dict(), "ratio": ratio, "goal": goal,
                      "met": None if goal is None else ratio <= goal})
-    return {"repeats": repeats, "floor_cpu_s": floor, "commands": rows, "load_before": load_before,
+    return {"repeats": repeats, "floor_cpu_s": floor, "commands": rows, "start": starts, "load_before": load_before,
             "load_after": load_average(), "machine": machine_info()}
 
 
@@ -105,4 +109,9 @@ def report(r: dict[str, Any]) -> str:
              format_table(["command", "CPU s", "range", "x floor", "goal", "verdict"], table),
              "commands (RUN: sample_runs/advanced; compare: copies of sample_runs/base-train):"]
     lines += [f"  {c['name']}: {c['command']}" for c in r["commands"]]
+    if r.get("start"):
+        lines += ["start: CPU s after the imports until the first step (goal <= 1 s), and of the imports",
+                  format_table(["command", "to first step", "imports", "verdict"],
+                               [(s["name"], s["to_first_step_cpu_s"]["median"], s["imports_cpu_s"]["median"],
+                                 "met" if s["met"] else "NOT met") for s in r["start"]])]
     return "\n".join(lines)

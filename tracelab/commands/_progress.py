@@ -31,8 +31,6 @@ _SIMULATOR_KERNELS = (("tracelab.game.rulesim_kernel", "encode_actions"),
                       ("tracelab.game.rulesim_kernel", "read_and_settle"),
                       ("tracelab.game.rulesim_kernel", "settle_step"),
                       ("tracelab.game.rulesim_fused", "fused_step"))  # one call per step
-# a first run of `play --scenario advanced --episodes 5` on two free cores (docs/benchmarks/history.md, issue 31)
-FIRST_RUN_ESTIMATE = "about 20 s"
 
 
 def on_terminal() -> bool:
@@ -147,9 +145,11 @@ def engine_cache_is_cold(simulator: bool = False, lanes: bool = False, local_tra
     return _cold(_engine_kernels(lanes, local_trace or simulator) + (_SIMULATOR_KERNELS if simulator else ()))
 
 
-def compile_notice(simulator: bool = False, lanes: bool = False, local_trace: bool = False) -> str | None:
+def compile_notice(simulator: bool = False, lanes: bool = False, local_trace: bool = False,
+                   phase: str = "play") -> str | None:
     """What a first run compiles, in words (None when nothing, or unknown): the engine's kernels, the
-    game's, and whether a second process takes the game's share (tracelab/game/rulesim_warmup.py)."""
+    game's, and whether a second process takes the game's share (tracelab/game/rulesim_warmup.py); with
+    what `tracelab bench first-run` measured for `phase` (tracelab/first_run_figures.py)."""
     engine = _cold(_engine_kernels(lanes, local_trace or simulator))
     game = _cold(_SIMULATOR_KERNELS) if simulator else False
     if not engine and not game:
@@ -163,7 +163,9 @@ def compile_notice(simulator: bool = False, lanes: bool = False, local_trace: bo
     from tracelab.engine.numba_cache import cache_folder
     folder = cache_folder(kernels[0]) if kernels else None
     cached = f"; cached for the next runs in {folder}" if folder else ""
-    return f"compiling the engine (first run only, {FIRST_RUN_ESTIMATE}): {what}{cached}"
+    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
+    from tracelab.first_run_figures import measured
+    return f"compiling the engine ({measured(phase)}): {what}{cached}"
 
 
 def _game_warmup_runs(lanes: bool) -> bool:
@@ -181,15 +183,17 @@ class Warmup(Progress):
 
 @contextmanager
 def compiling_engine(simulator: bool = False, lanes: bool = False, busy: str | None = None,
-                     local_trace: bool = False) -> Iterator[Warmup]:
+                     local_trace: bool = False, phase: str | None = "play") -> Iterator[Warmup]:
     """Around the engine's build and first step (with `lanes`: a batch that takes the lanes kernel; with
     `simulator`: the rule simulator's too): when the kernels must be compiled, say so while it happens
     (a spinner on a terminal, one line on stderr otherwise); when they are cached, show `busy` (if
-    given) as a spinner on a terminal. The spinner counts the groundings found (a big build's work)."""
+    given) as a spinner on a terminal. The spinner counts the groundings found (a big build's work).
+    `phase`: the first run `tracelab bench first-run` measured for the notice's figure; None: the body's
+    library code says its own notice (a declared world: tracelab/envs/declared/world.py)."""
     # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
     from tracelab.engine.grounding import watch_grounding
     cold = engine_cache_is_cold(simulator, lanes, local_trace)
-    notice = compile_notice(simulator, lanes, local_trace) if cold else None
+    notice = compile_notice(simulator, lanes, local_trace, phase) if cold and phase else None
     t0 = time.perf_counter()
     if notice and not on_terminal():  # one line, once: on a terminal the spinner says it
         print(f"tracelab: {notice}", file=sys.stderr, flush=True)

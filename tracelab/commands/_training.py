@@ -151,8 +151,11 @@ def training_session(writer: Any, torch_deterministic: bool, tensorboard: Path |
     # deferred: torch, which `tracelab --help` (it imports this module) does not need
     import torch
 
+    # deferred: loads torch, as above
+    from tracelab.train.determinism import use_deterministic_algorithms
+
     was_deterministic = torch.are_deterministic_algorithms_enabled()
-    torch.use_deterministic_algorithms(torch_deterministic)
+    use_deterministic_algorithms(torch_deterministic)
     previous = signal.getsignal(signal.SIGINT)
     session = TrainingSession(writer)
     try:
@@ -163,7 +166,7 @@ def training_session(writer: Any, torch_deterministic: bool, tensorboard: Path |
         session.status = "interrupted"
     finally:
         signal.signal(signal.SIGINT, previous)
-        torch.use_deterministic_algorithms(was_deterministic)
+        use_deterministic_algorithms(was_deterministic)
         if session.trainer is not None:
             session.trainer.close()
         if session.sink is not None:

@@ -36,8 +36,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                      "peak memory of 100 / 1,000 / 10,000 recorded episodes",
              "eval": "train's evaluation games traced into a run against the same games untraced; --memory: "
                      "a training with traced evaluations, its memory sampled every second",
-             "first-run": "the README's `play --scenario advanced --episodes 5` from empty caches (a fresh "
-                          "install) and again warm: wall and CPU time",
+             "first-run": "every first compile a user meets (play, reason, a spec's env and vector env, train) "
+                          "from empty caches (a fresh install) and again warm: wall and CPU time",
              "pyreason": "PyReason against tracelab on the same scripts (examples/), import changed only: "
                          "first run from empty caches, warm runs, peak memory and memory over time",
              "cli": "the reading commands' and reason's CPU seconds on the sample runs, each beside the floor "
@@ -79,9 +79,19 @@ def register(sub: argparse._SubParsersAction) -> None:
             q.add_argument("--memory", type=positive_int, nargs="?", const=1_000_000, default=None,
                            metavar="STEPS", help="also the memory of a `tracelab train` of this many steps with "
                                                  "traced evaluations, in a fresh process (default 1,000,000)")
+        if name == "first-run":
+            q.add_argument("--only", action="append", default=None, metavar="PHASE",
+                           help="run this phase only (repeatable): play, reason-small, reason-large, spec-env, "
+                                "spec-vector-env, train")
+            q.add_argument("--fresh-venv", action="store_true",
+                           help="run in a new venv (--system-site-packages, the project installed without deps)")
+            q.add_argument("--write-figures", action="store_true",
+                           help="write the cold figures into tracelab/first_run_figures.json, which the compile "
+                                "notices quote")
         if name == "cli":
             q.add_argument("--only", action="append", default=None, metavar="COMMAND",
-                           help="time this command only, beside the floor (repeatable; e.g. sql, compare)")
+                           help="time this command only, beside the floor (repeatable; e.g. sql, compare; start: "
+                                "eval's and train's CPU before their first step)")
         if name == "pyreason":
             q.add_argument("--pyreason-python", metavar="PYTHON", default=None,
                            help="the interpreter of a PyReason install (e.g. a venv's bin/python); without "
@@ -165,7 +175,9 @@ def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], s
         return r, toytext.report(r)
     if name == "first-run":
         from tracelab.bench import first_run  # deferred: as engine's, above
-        r = first_run.run(args.quick, args.repeats)
+        r = first_run.run(args.quick, args.repeats, args.fresh_venv, args.only)
+        if args.write_figures:
+            first_run.write_figures(r)
         return r, first_run.report(r)
     if name == "cli":
         from tracelab.bench import cli  # deferred: as engine's, above

@@ -92,7 +92,8 @@ def _play(source: Any, spec: Any, args: argparse.Namespace, writer: Any) -> dict
     # deferred: loads gymnasium; every command is imported to build the CLI's parser
     from tracelab.envs.declared.play import make_declared_env, play_episodes, random_policy
 
-    with compiling_engine(busy=f"building {source.short_name}'s rules…", local_trace=writer is not None):
+    with compiling_engine(busy=f"building {source.short_name}'s rules…", local_trace=writer is not None,
+                          phase=None):  # the declared world says what compiles (its library notice)
         env = make_declared_env(source, spec, kernel=args.kernel,
                                 **({} if writer is None else {"trace_writer": writer}))
     if getattr(args, "trained", None) is None:

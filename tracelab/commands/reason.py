@@ -144,7 +144,7 @@ def _reason(args: argparse.Namespace, inputs: Any, plan: Any, recorder: Any, sev
     pr_trace = None
     busy = "grounding the program…" if args.kernel != "compiled" else \
         "grounding; compiling the program's own kernel unless cached (about a minute the first time)…"
-    with compiling_engine(busy=busy):  # the first step compiles (cold cache) and grounds
+    with compiling_engine(busy=busy, phase="reason-large"):  # the first step compiles (cold cache) and grounds
         episode = EpisodeRun(inputs, plan, trace=printing or args.pyreason_trace is not None, kernel=args.kernel,
                              recorder=recorder)
         engine = episode.engine

@@ -15,15 +15,22 @@ value whose cumulative probability exceeds u), "choice" is `np_random.choice` ov
 (one `integers(0, n)`), so a seeded world draws exactly as gymnasium's toy-text games do."""
 from __future__ import annotations
 
+import logging
 from typing import Any
 
 import numpy as np
 
 from tracelab.engine import Engine
-from tracelab.envs.declared import fused
+from tracelab.engine import kernel as counting_kernel
+from tracelab.engine import lanes as lanes_kernel
+from tracelab.engine.numba_cache import is_cached
+from tracelab.envs.declared import fused, vector_fused
 from tracelab.envs.declared.observe_kernel import ObservationProgram, ObservationReader, split_parts
 from tracelab.envs.declared.spec import Atom, Draw, WorldSpec
 from tracelab.envs.declared.state_errors import no_index, no_weights_hold
+from tracelab.first_run_figures import say_first_compile
+
+log = logging.getLogger(__name__)
 
 
 def categorical(cumulative: list[float], rng: np.random.Generator) -> int:
@@ -81,6 +88,21 @@ class _Drawer:
         return possible, np.cumsum(p).tolist()
 
 
+def _say_if_cold(spec: WorldSpec, kernel: str, worlds: int) -> None:
+    """Before the build: one notice (once per process) when the kernels this world steps on are not in
+    numba's cache yet, so their first call compiles them (the notice quotes what bench first-run measured)."""
+    if kernel == "counting":
+        engine = counting_kernel.step_worlds
+        world = (fused.fused_step, fused.read_step) if worlds == 1 else (vector_fused.step_batch, vector_fused.read_batch)
+    elif kernel == "lanes":
+        engine, world = lanes_kernel.step_lanes, (vector_fused.build_rows, vector_fused.read_truth)
+    else:
+        return  # the compiled backend says its own (tracelab compile)
+    phase = "spec-env" if worlds == 1 else "spec-vector-env"
+    what = "the rule engine's step kernel and a declared world's " + ("step" if worlds == 1 else "batch step")
+    say_first_compile(log, phase, f"{what} for {spec.path}", (is_cached(k) for k in (engine, *world)))
+
+
 class DeclaredWorld:
     """One world of `spec` on its own engine (`kernel`: the engine's; `trace`: its change log)."""
 
@@ -89,6 +111,7 @@ class DeclaredWorld:
         # one world steps fastest on the counting kernel inside one compiled call (fused.py); another
         # kernel asked for by name runs its own steps. `worlds` > 1: the engine of a batch, which
         # vector_world.DeclaredWorlds steps (this object's reset and step serve one world only)
+        _say_if_cold(spec, "counting" if kernel == "auto" else kernel, worlds)  # the engine's build steps it once
         self.engine = eng = Engine(spec.program, worlds=worlds, trace=trace,
                                    kernel="counting" if kernel == "auto" else kernel)
         ids = self._ids
