@@ -99,7 +99,8 @@ class TracePane(Vertical):
     TracePane #tr-range, TracePane #tr-goto { max-width: 10; }
     TracePane #tr-body { height: 1fr; }
     TracePane #tr-side { width: 22; height: 1fr; }
-    TracePane #tr-side BoardView { height: auto; }
+    TracePane #tr-side BoardView { height: 1fr; }
+    TracePane #tr-side.-decision BoardView { height: auto; }   /* the decision right under the board */
     """
 
     def __init__(self, source: RunSource) -> None:
@@ -438,6 +439,9 @@ class TracePane(Vertical):
     def on_decision_panel_shown(self, event: DecisionPanel.Shown) -> None:
         event.stop()
         self.refresh_bindings()     # `d` is offered while a decision shows
+        panel = self.decision
+        for side in self.query("#tr-side"):
+            side.set_class(panel is not None and panel.display, "-decision")
 
     def action_why(self) -> None:
         row = self.table.cursor_row
