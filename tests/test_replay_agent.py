@@ -51,8 +51,11 @@ def test_action_values_and_the_return_by_term_of_a_traced_evaluation(tmp_path: P
         assert name == path.rsplit("/", 1)[1]
         assert values == want[path]
 
-    # per agent: the stacked lines step up by each term's running return; the top one is the return
-    for agent in {a for a, _, _ in steps}:
+    # per deciding agent (red: blue is the scripted opponent, its terms not stacked): the stacked lines
+    # step up by each term's running return; the top one is the return
+    deciders = {agent for _, agent, _, _ in decided}
+    assert {path.split("/")[2] for path in entities if path.startswith("/terms/")} == deciders
+    for agent in deciders:
         ts = [t for a, t, _ in steps if a == agent]
         ret = np.cumsum([r for a, _, r in steps if a == agent])
         mine = {path.rsplit("/", 1)[1]: series(rows)[1] for path, rows in entities.items()

@@ -1,6 +1,7 @@
 """The agent's half of an episode as plots (the run's `decisions` and `rewards` views, docs/store.md): the
 policy's value of every action per step, a series per action (/values/AGENT/ACTION), and each agent's
-return by reward term, stacked under its return (/terms/AGENT/TERM, /terms/AGENT/return). A run without
+return by reward term, stacked under its return (/terms/AGENT/TERM, /terms/AGENT/return): the deciding
+agents' where the policy decided for some (GridWar's red against the scripted blue), else every agent's. A run without
 decisions or reward terms (written before they were recorded, or played by a scripted policy) has none."""
 from __future__ import annotations
 
@@ -49,7 +50,11 @@ def read_series(con: RunConnection, episode: int) -> AgentSeries:
             continue
         running = per_term.setdefault(agent, {}).setdefault(term, np.zeros(len(ts)))
         running[np.searchsorted(ts, t):] += value     # a running sum: the term's return up to each step
+    # a run whose policy decided for some agents (GridWar's red; blue is the scripted opponent): theirs only
+    deciders = {agent for agent, _ in out.values}
     for agent, terms in per_term.items():
+        if deciders and agent not in deciders:
+            continue
         ts, stacked, below = steps[agent], {}, np.zeros(len(steps[agent]))
         # the largest terms at the bottom: each line is its term's running return on top of the ones below
         for term in sorted(terms, key=lambda k: (-abs(terms[k][-1]), k)):
