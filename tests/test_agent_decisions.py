@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from older_runs import older_run
+
 from tracelab.cli import main
 from tracelab.envs.common import resolve_scenario
 from tracelab.envs.declared.env_source import EnvSource
@@ -149,8 +151,8 @@ def test_play_policy_records_decisions(tmp_path):
     check_reward_terms(run)
 
 
-def test_runs_written_before_read_as_having_no_decisions():
-    con = open_run(ROOT / "sample_runs" / "base")
+def test_runs_written_before_read_as_having_no_decisions(tmp_path):
+    con = open_run(older_run(ROOT / "sample_runs" / "base", tmp_path / "older"))
     try:
         counts = [con.execute(f"SELECT count(*) FROM {v}").fetchone()[0]
                   for v in ("decisions", "action_values", "rewards", "returns")]

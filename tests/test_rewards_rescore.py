@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 from test_reading_imports import ALLOWED, CHILD, HEAVY
+from older_runs import older_run
 from test_spec_world_game import RULES, SPEC
 
 from tracelab.cli import main
@@ -103,8 +104,9 @@ def test_an_unknown_term_is_one_line_with_a_did_you_mean(runs: tuple[Path, Path]
     assert err.startswith("tracelab: error: --set: no reward term 'home(m)' in this run; did you mean home(me)")
 
 
-def test_a_run_written_before_reward_terms_says_it_has_none(capsys: pytest.CaptureFixture) -> None:
-    err = one_error_line(capsys, ["rewards", str(ROOT / "sample_runs" / "base"), "--set", "win=1"])
+def test_a_run_written_before_reward_terms_says_it_has_none(capsys: pytest.CaptureFixture, tmp_path: Path) -> None:
+    older = older_run(ROOT / "sample_runs" / "base", tmp_path / "older")
+    err = one_error_line(capsys, ["rewards", str(older), "--set", "win=1"])
     assert err.startswith("tracelab: error: the run records no reward terms")
 
 

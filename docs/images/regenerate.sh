@@ -30,6 +30,11 @@ shot "$tmp/kill.rrd" docs/images/replay.png
 tracelab replay sample_runs/nonmarkov --episode 0 --open-at end --save "$tmp/2v2.rrd"
 shot "$tmp/2v2.rrd" docs/images/replay-2v2.png
 
+# the trained sample's first traced evaluation game (episode 772): the policy's value of each action per
+# step and the return by reward term, stacked under the return, beside the board
+tracelab replay sample_runs/base-train --episode 772 --open-at end --save "$tmp/values.rrd"
+shot "$tmp/values.rrd" docs/images/replay-values.png
+
 # a 3v3 game of the advanced rules
 cat > "$tmp/3v3.toml" <<'TOML'
 name = "advanced3v3"

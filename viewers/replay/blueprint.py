@@ -23,12 +23,22 @@ def step_axis(last_step: int) -> rrb.archetypes.TimeAxis:
                                                            end=rr.TimeRangeBoundary.absolute(seq=end)))
 
 
+def agent_views(last_step: int, values: bool, terms: bool) -> list[rrb.View]:
+    """The plots of the agent's half (agent_plots.py), for a run that records decisions and reward terms."""
+    return ([rrb.TimeSeriesView(origin=style.VALUES, name="Action values", axis_x=step_axis(last_step))]
+            if values else []) + \
+        ([rrb.TimeSeriesView(origin=style.TERMS, name="Return by term (stacked)", axis_x=step_axis(last_step))]
+         if terms else [])
+
+
 def replay_blueprint(board_map: BoardMap, training: bool = False, open_at: str = "start",
-                     last_step: int = 0) -> rrb.Blueprint:
+                     last_step: int = 0, values: bool = False, terms: bool = False) -> rrb.Blueprint:
     """open_at: where the time cursor starts, "start" (paused at step 0) or "end" (following: the last
-    step). last_step: the longest episode's last step, where the plots' and lanes' axes end."""
+    step). last_step: the longest episode's last step, where the plots' and lanes' axes end. values,
+    terms: the run records decisions, reward terms (their plots under the reward's)."""
     plots: list[rrb.View] = [rrb.TimeSeriesView(origin=style.PLOTS, name="Reward and return",
-                                                axis_x=step_axis(last_step))]
+                                                axis_x=step_axis(last_step)),
+                             *agent_views(last_step, values, terms)]
     if training:
         plots.append(rrb.TimeSeriesView(origin=style.TRAIN, name="Training"))
     board = rrb.Spatial2DView(

@@ -9,8 +9,8 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 from rerun.blueprint.encodings import TextLogColumn, TextLogColumnKind
-from tracelab.viewers.replay import graph_layer, graph_rules, plots, spec_board, style
-from tracelab.viewers.replay.blueprint import step_axis
+from tracelab.viewers.replay import agent_plots, graph_layer, graph_rules, plots, spec_board, style
+from tracelab.viewers.replay.blueprint import agent_views, step_axis
 from tracelab.viewers.replay.graph_layout import fit_given, layout
 from tracelab.viewers.replay.graph_run import GraphEpisode, RunGraph, read_episode
 from tracelab.viewers.replay.recording import ReplayOptions
@@ -92,7 +92,8 @@ def color_legend(label: str | None) -> str:
 
 
 def graph_blueprint(positions: np.ndarray, color_label: str | None, open_at: str = "start",
-                    last_step: int = 0, board: Board | None = None, rewards: bool = False) -> rrb.Blueprint:
+                    last_step: int = 0, board: Board | None = None, rewards: bool = False,
+                    values: bool = False, terms: bool = False) -> rrb.Blueprint:
     """The graph (or the board) beside the rule log, the why document and the changes per step, the
     rewards and returns under it when there are some; the graph view's bounds fit the nodes, and its
     force simulation is off (every node has its position)."""
@@ -117,7 +118,8 @@ def graph_blueprint(positions: np.ndarray, color_label: str | None, open_at: str
     if rewards:
         plot = rrb.TimeSeriesView(origin=style.PLOTS, name="Reward and return", axis_x=step_axis(last_step),
                                   contents=[f"+ {style.PLOTS}/reward/**", f"+ {style.PLOTS}/return/**"])
-        graph = rrb.Vertical(graph, plot, row_shares=[3, 2])
+        agent = agent_views(last_step, values, terms)
+        graph = rrb.Vertical(graph, rrb.Horizontal(plot, *agent) if agent else plot, row_shares=[3, 2])
     side = rrb.Vertical(rule_log,
                         rrb.TextDocumentView(origin=style.WHY, name="Step and why"),
                         rrb.TimeSeriesView(origin=style.CHANGED, name="Atoms changed per step",
@@ -139,15 +141,18 @@ def record_graph_episode(ctx: GraphRunContext, episode: int, rec: rr.RecordingSt
     positions = ctx.positions(episode)
     rec.send_recording_name(f"{ctx.name} episode {episode} ({data.outcome or 'running'}, {data.steps} steps)")
     rows = plots.step_rewards(ctx.con, [episode]).get(episode, [])
+    agent = agent_plots.read_series(ctx.con, episode)
     if blueprint:
         rec.send_blueprint(graph_blueprint(positions, data.color_label, options.open_at,
-                                           max(last_step, data.steps - 1), ctx.board, bool(rows)))
+                                           max(last_step, data.steps - 1), ctx.board, bool(rows),
+                                           bool(agent.values), bool(agent.terms)))
     drawn = graph_layer.log_graph(rec, ctx.graph, positions, data)
     if ctx.board is not None:
         spec_board.log_board(rec, ctx.con, ctx.board, episode, data.steps)
     if rows:
         agents = list(dict.fromkeys(agent for _, agent, _ in rows))
         plots.log_rewards(rec, plots.agent_rewards(agents, rows), agents)
+    agent_plots.log_agent_series(rec, agent)
     graph_rules.log_rule_log(rec, data)
     graph_rules.log_changed(rec, data)
     graph_rules.log_why(rec, ctx.con, data, options.why_atoms, options.why_depth, lambda: ctx.model,

@@ -1,12 +1,12 @@
 """One traced episode as one rerun recording: the board, the fired rules, the state lanes, the why
-documents, the plots and the blueprint."""
+documents, the plots (the agent's: agent_plots.py) and the blueprint."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
 import numpy as np
 import rerun as rr
-from tracelab.viewers.replay import board_layer, plots, rules_layer
+from tracelab.viewers.replay import agent_plots, board_layer, plots, rules_layer
 from tracelab.viewers.replay.blueprint import replay_blueprint
 
 from tracelab.viewers.board import BoardLoader, EpisodeBoard
@@ -96,15 +96,17 @@ def record_episode(ctx: RunContext, episode: int, rec: rr.RecordingStream,
     options = options or ReplayOptions()
     board = ctx.loader.load(episode)
     rec.send_recording_name(f"{ctx.name} episode {episode} ({board.outcome or 'running'}, {board.steps} steps)")
+    agent = agent_plots.read_series(ctx.con, episode)
     if blueprint:
         rec.send_blueprint(replay_blueprint(board.map, bool(ctx.metrics), options.open_at,
-                                            max(last_step, board.steps)))
+                                            max(last_step, board.steps), bool(agent.values), bool(agent.terms)))
     board_layer.log_board(rec, board)
     rules_layer.log_rule_log(rec, board)
     rules_layer.log_lanes(rec, board, options.lanes)
     rewards = plots.team_rewards(board, ctx.step_rewards(episode))
     if rewards is not None:
         plots.log_rewards(rec, rewards)
+    agent_plots.log_agent_series(rec, agent)
     rules_layer.log_why(rec, ctx.con, board, rewards, options.why_depth, lambda: ctx.model)
     if ctx.metrics:
         plots.log_training(rec, ctx.metrics)

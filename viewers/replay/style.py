@@ -31,6 +31,8 @@ LANES = "/lanes"                    # /lanes/alive/red-agent-1, /lanes/atLoc/...
 WHY = "/why"
 PLOTS = "/plots"                    # /plots/reward/red, /plots/return/blue
 TRAIN = "/train"                    # /train/eval/win_rate, /train/loss, ...
+VALUES = "/values"                  # /values/red-agent-1/up: the policy's value of each action
+TERMS = "/terms"                    # /terms/red-agent-1/step: the return by reward term, stacked
 
 # ---- classes (AnnotationContext on /board) ---------------------------------------------------------------
 FREE, MOUNTAIN, RED_BASE, BLUE_BASE = 0, 1, 2, 3

@@ -96,7 +96,7 @@ class BoardView(Widget):
         self.board, self.note = board, note
         if board is not None:
             self._place()
-        self.refresh()
+        self.refresh(layout=True)   # beside the decision panel its height is its content's
 
     def _place(self) -> None:
         assert self.board is not None and self._want is not None

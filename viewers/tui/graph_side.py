@@ -1,6 +1,7 @@
 """GraphSide: what stands beside the trace where a game run has its board, for a run without one (a
 reasoning run). A declared world's run (`tracelab play --env`) has its spec's board on top, its marks
-where they hold at the cursor's t (declared_board.py). Above: the atoms true at the end of the cursor's timestep, or the atoms changed in it
+where they hold at the cursor's t (declared_board.py), the
+decision of the cursor's step under it (decision.py). Above: the atoms true at the end of the cursor's timestep, or the atoms changed in it
 (`c`), filtered by a predicate name or an atom pattern (`exposed`, `exposed(*)`; `/`), each with its bound,
 at most graph_state.ATOMS_LIMIT of them with the count of all. Below: the neighbourhood in the graph of
 the selected atom (the trace's cursor, or the list's when it has the focus): its node's labels, edges
@@ -28,6 +29,7 @@ from tracelab.viewers.tui.colours import DIM, bound_colour, styled_bound
 from tracelab.board import Board, board_of_config, marked_cells
 from tracelab.store.kind import run_config
 from tracelab.viewers.tui.declared_board import DeclaredBoard
+from tracelab.viewers.tui.decision import DecisionPanel
 from tracelab.viewers.tui.graph_state import AtomsAt, Neighbourhood, atoms_at, neighbourhood, unknown_pattern
 from tracelab.viewers.tui.lazy_table import Column, LazyTable
 from tracelab.viewers.tui.paging import ArrowSource
@@ -158,6 +160,7 @@ class GraphSide(Vertical):
     def compose(self) -> ComposeResult:
         if self.declared is not None:
             yield DeclaredBoard(self.declared)
+            yield DecisionPanel(self.source)   # the trace cursor's step's decision (TracePane)
         with Vertical(id="gs-atoms"):
             yield Input(placeholder="atoms: exposed or exposed(*)", id="gs-filter", compact=True)
             yield LazyTable(TRUE_COLUMNS, id="gs-table")

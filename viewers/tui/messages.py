@@ -18,3 +18,11 @@ class ExplainChange(Message):
         super().__init__()
         self.episode, self.atom, self.t, self.seq = episode, atom, t, seq
 
+
+
+class ExplainAction(Message):
+    """Open the why of `agent`'s decision at `step` of an episode (`tracelab why --action`); `action`: the
+    action row chosen in the decision panel (its why-not when the agent took another)."""
+    def __init__(self, episode: int, agent: str, step: int, action: str) -> None:
+        super().__init__()
+        self.episode, self.agent, self.step, self.action = episode, agent, step, action

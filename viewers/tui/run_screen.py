@@ -16,7 +16,7 @@ from textual.widgets import Input, Static, TabbedContent, TabPane, Tabs, TextAre
 
 from tracelab.viewers.tui.episodes import EpisodesPane
 from tracelab.viewers.tui.keybar import KeyBar
-from tracelab.viewers.tui.messages import ExplainChange, OpenTrace
+from tracelab.viewers.tui.messages import ExplainAction, ExplainChange, OpenTrace
 from tracelab.viewers.tui.places import RunPlace
 from tracelab.viewers.tui.rules import RulesPane
 from tracelab.viewers.tui.source import RunSource, SeveralRunsSource
@@ -219,4 +219,10 @@ class RunScreen(Screen):
         why = await self.pane("why")
         assert isinstance(why, WhyPane)
         why.explain(message.episode, message.atom, message.t, message.seq)
+        await self.action_show("why")
+
+    async def on_explain_action(self, message: ExplainAction) -> None:
+        why = await self.pane("why")
+        assert isinstance(why, WhyPane)
+        why.explain_action(message.episode, message.agent, message.step, message.action)
         await self.action_show("why")

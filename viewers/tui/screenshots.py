@@ -8,6 +8,9 @@ tui-reasoning.png   sample_runs/supply-chain, a reasoning run (no board): the tr
 tui-training.png    the Training view of a real training run: sample_runs/base-train, made by
                     `tracelab train` in sample_runs/regenerate.sh (its command is in the picture's header).
                     Nothing here writes metrics: a picture of curves shows a run on disk or none.
+tui-decision.png    the same training run's first traced evaluation game at t=10: the board with the
+                    trained agent's decision under it (its Q-values, the chosen action, the reward
+                    terms), above the Why view of that decision with the why-not of the runner-up
 
 textual saves SVG; rsvg-convert (Debian: librsvg2-bin) turns it into PNG. textual's SVG names the web font
 Fira Code and spaces as &#160;, which rsvg draws narrow: both are replaced (DejaVu Sans Mono) first."""
@@ -24,6 +27,7 @@ from typing import Any
 
 from tracelab.store.reader import open_run
 from tracelab.viewers.tui.app import TracelabApp
+from tracelab.viewers.tui.decision import DecisionPanel
 from tracelab.viewers.tui.graph_side import GraphSide
 from tracelab.viewers.tui.lazy_table import LazyTable
 from tracelab.viewers.tui.plot import BraillePlot
@@ -97,6 +101,30 @@ async def _reasoning(run: Path) -> tuple[str, str]:
         return trace_svg, app.export_screenshot(title="tracelab tui · why")
 
 
+async def _decision(run: Path) -> tuple[str, str]:
+    app = TracelabApp([run])
+    async with app.run_test(size=SIZE) as pilot:
+        episodes = app.screen.query_one("#ep-table", LazyTable)
+        await _until(pilot, lambda: episodes.idle and episodes.cursor_row is not None)
+        await pilot.press("enter")
+        pane = app.screen.query_one(TracePane)
+        await _until(pilot, lambda: pane.filter is not None and pane.table.idle)
+        await pilot.press("right_square_bracket")             # the first evaluation game (traced)
+        await _until(pilot, lambda: pane.table.idle and pane.table.count > 0)
+        pane.query_one("#tr-goto").value = "10"
+        await pilot.press("g", "enter")
+        panel = pane.query_one(DecisionPanel)
+        await _until(pilot, lambda: panel.step is not None and panel.step.step == 10 and panel.display
+                     and pane.board is not None and pane.board.board is not None and pane.board.step == 10)
+        await pilot.pause(0.5)
+        trace_svg = app.export_screenshot(title="tracelab tui · trace: the board and the agent's decision")
+        await pilot.press("d", "down", "w")
+        why = app.screen.query_one(WhyPane)
+        await _until(pilot, lambda: why.action is not None)
+        await pilot.pause(0.3)
+        return trace_svg, app.export_screenshot(title="tracelab tui · why the agent did it")
+
+
 async def _training(run: Path) -> str:
     app = TracelabApp([run])
     async with app.run_test(size=SIZE) as pilot:
@@ -155,7 +183,8 @@ def write_screenshots(directory: Path, trace_run: Path | None = None,
                       training_run: Path | None = None, reasoning_run: Path | None = None) -> list[Path]:
     """Write tui-trace-why.png (from `trace_run`, default sample_runs/advanced), tui-training.png (from
     `training_run`, default sample_runs/base-train: a real training run) and tui-reasoning.png (from
-    `reasoning_run`, default sample_runs/supply-chain: a run without a board) to `directory`."""
+    `reasoning_run`, default sample_runs/supply-chain: a run without a board) and tui-decision.png (from
+    `training_run`: its evaluation games record the policy's decisions) to `directory`."""
     os.environ.setdefault("TEXTUAL_ANIMATIONS", "none")
     trace_run = trace_run or ROOT / "sample_runs" / "advanced"
     training_run = training_run or ROOT / "sample_runs" / "base-train"
@@ -171,4 +200,5 @@ def write_screenshots(directory: Path, trace_run: Path | None = None,
     out = [to_png(stack([trace_svg, why_svg]), directory / "tui-trace-why.png")]
     out.append(to_png(asyncio.run(_training(training_run)), directory / "tui-training.png"))
     out.append(to_png(stack(list(asyncio.run(_reasoning(reasoning_run)))), directory / "tui-reasoning.png"))
+    out.append(to_png(stack(list(asyncio.run(_decision(training_run)))), directory / "tui-decision.png"))
     return out

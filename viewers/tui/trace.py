@@ -7,7 +7,10 @@ atoms at the cursor's time and the selected atom's graph neighbourhood (graph_si
 changed); `s` shows or hides the rows of static facts (hidden by default: the status line says how
 many). Cells read `30@(6,3)` where the run declares a grid. In a training run `]` / `[` move to the
 next / previous evaluation game (the filters and the cursor's timestep kept), and a header line says which
-game is shown. On a live run the trace is re-read when the episode grows."""
+game is shown. On a live run the trace is re-read when the episode grows. Under the board (a declared
+world's: above its atoms) the decision of the cursor's step: the policy's value of each action, the
+chosen one, explored or greedy, the reward by term (decision.py; `d` moves into it, `w` there explains the
+decision as `tracelab why --action` does)."""
 from __future__ import annotations
 
 import re
@@ -23,6 +26,7 @@ from tracelab.store.names import UnknownName, check_name
 from tracelab.viewers.tui.colours import DIM, styled_bound, styled_name
 from tracelab.viewers.tui.lazy_table import Column, LazyTable
 from tracelab.viewers.tui.board import BoardView
+from tracelab.viewers.tui.decision import DecisionPanel
 from tracelab.viewers.tui.eval_games import EvalGame, eval_games, neighbour
 from tracelab.viewers.tui.graph_side import GraphSide
 from tracelab.viewers.tui.messages import ExplainChange
@@ -78,6 +82,7 @@ class TracePane(Vertical):
         Binding("n", "next_change(1)", "next"),
         Binding("p", "next_change(-1)", "prev"),
         Binding("w", "why", "why"),
+        Binding("d", "focus_decision", "decision"),      # the step's decision beside the board (check_action)
         Binding("a", "only_atom", "only atom", show=False),
         Binding("x", "clear", "clear filters", show=False),
         Binding("b", "toggle_board", "board"),
@@ -93,6 +98,9 @@ class TracePane(Vertical):
     TracePane #tr-filters Input { width: 1fr; margin-right: 1; }
     TracePane #tr-range, TracePane #tr-goto { max-width: 10; }
     TracePane #tr-body { height: 1fr; }
+    TracePane #tr-side { width: 22; height: 1fr; }
+    TracePane #tr-side BoardView { height: 1fr; }
+    TracePane #tr-side.-decision BoardView { height: auto; }   /* the decision right under the board */
     """
 
     def __init__(self, source: RunSource) -> None:
@@ -118,7 +126,12 @@ class TracePane(Vertical):
             yield Input(placeholder="go to t", id="tr-goto", compact=True)
         with Horizontal(id="tr-body"):
             yield LazyTable(TRACE_COLUMNS, id="tr-table")
-            yield BoardView(self.source) if self.source.board else GraphSide(self.source)
+            if self.source.board:
+                with Vertical(id="tr-side"):
+                    yield BoardView(self.source)
+                    yield DecisionPanel(self.source)
+            else:
+                yield GraphSide(self.source)
         yield Static(" choose an episode (1 Episodes, Enter)", id="tr-status", classes="status")
 
     def place(self) -> TracePlace | None:
@@ -138,7 +151,7 @@ class TracePane(Vertical):
             self.query_one(name, Input).value = text
         self.hide_static, self._board_choice = place.hide_static, place.board
         if place.board is not None:
-            self.side.display = place.board
+            self.side_box.display = place.board
         self.apply_filters(place.episode, keep_seq=place.seq, atom_id=place.atom_id)
         self._read_game_later(place.episode)
 
@@ -178,9 +191,19 @@ class TracePane(Vertical):
         return next(iter(self.query(BoardView)), None) if self.is_mounted else None
 
     @property
+    def side_box(self) -> Vertical:
+        """What `b` shows or hides beside the table: the board with the decision under it, or the atoms."""
+        return self.query_one("#tr-body > #tr-side, #tr-body > GraphSide")  # type: ignore[return-value]
+
+    @property
+    def decision(self) -> DecisionPanel | None:
+        """The panel of the cursor's step's decision (None: a run without a board of any kind)."""
+        return next(iter(self.query(DecisionPanel)), None) if self.is_mounted else None
+
+    @property
     def side(self) -> BoardView | GraphSide:
         """What stands beside the table: the board of a game run, else the atoms and the graph."""
-        return self.query_one("#tr-body > BoardView, #tr-body > GraphSide")  # type: ignore[return-value]
+        return self.query_one("#tr-side > BoardView, #tr-body > GraphSide")  # type: ignore[return-value]
 
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
         # a run without a board has its atoms beside the trace (key b: "atoms"); evaluation games are a
@@ -193,15 +216,18 @@ class TracePane(Vertical):
             return self.source.board is None
         if action == "atoms_mode":
             return self.source.board is None and self.is_mounted and self.side.display
+        if action == "focus_decision":   # offered while the cursor's step has a decision shown
+            panel = self.decision
+            return panel is not None and panel.display and self.side_box.display
         return True
 
     def on_resize(self) -> None:
         if self._board_choice is None:   # by default the board shows when there is room beside the table
-            self.side.display = self.size.width >= BOARD_MIN_WIDTH
+            self.side_box.display = self.size.width >= BOARD_MIN_WIDTH
             self.refresh_bindings()
 
     def action_toggle_board(self) -> None:
-        side = self.side
+        side = self.side_box
         self._board_choice = side.display = not side.display
         self.refresh_bindings()     # `c` is offered while the atoms show
         row = self.table.cursor_row
@@ -224,6 +250,9 @@ class TracePane(Vertical):
             side.show(self.filter.episode, int(row["t"]), int(row["seq"]))
         else:
             side.show(self.filter.episode, int(row["t"]), int(row["atom_id"]))
+        panel = self.decision
+        if panel is not None:
+            panel.show(self.filter.episode, int(row["t"]))
 
     def focus_default(self) -> None:
         self.table.focus()
@@ -337,7 +366,7 @@ class TracePane(Vertical):
     def on_lazy_table_row_highlighted(self, event: LazyTable.RowHighlighted) -> None:
         event.stop()
         self._update_status()
-        if event.row is not None and self.side.display:
+        if event.row is not None and self.side_box.display:
             self._follow_cursor(event.row)
 
     def on_graph_side_only_atom(self, event: GraphSide.OnlyAtom) -> None:
@@ -401,6 +430,18 @@ class TracePane(Vertical):
             return
         atom, seq = int(row["atom_id"]), int(row["seq"])
         self._jump(lambda tr: tr.next_change(atom, seq, direction > 0))
+
+    def action_focus_decision(self) -> None:
+        panel = self.decision
+        if panel is not None and panel.display:
+            panel.focus()
+
+    def on_decision_panel_shown(self, event: DecisionPanel.Shown) -> None:
+        event.stop()
+        self.refresh_bindings()     # `d` is offered while a decision shows
+        panel = self.decision
+        for side in self.query("#tr-side"):
+            side.set_class(panel is not None and panel.display, "-decision")
 
     def action_why(self) -> None:
         row = self.table.cursor_row

@@ -1,10 +1,14 @@
 """The Why view: the proof tree of the change selected in the trace (tracelab.store.why.explain_change: that
 row's own rule and grounding, even when its atom changed again later in the step) as an expandable tree,
 and why-not for a rule and bindings (`tracelab why-not`): type `RULE A=red-agent-1,X=16 at T` in the
-why-not line."""
+why-not line. For a decision (`w` in the trace's decision panel) the agent's why, as `tracelab why
+--action` prints it: the actions ranked by value, the observation it acted on (Enter on a feature read
+from an atom opens that atom's why tree), the reward terms; and why-not of the action under the panel's
+cursor when the agent took another."""
 from __future__ import annotations
 
 import re
+from typing import Any
 
 from rich.text import Text
 from textual.app import ComposeResult
@@ -13,6 +17,15 @@ from textual.containers import Vertical, VerticalScroll
 from textual.widgets import Input, Static, Tree
 from textual.widgets.tree import TreeNode
 
+from tracelab.engine.terminal_text import printable
+
+from tracelab.store.agent_why import (
+    ActionExplanation,
+    explain_action,
+    render_action,
+    render_why_not_action,
+    why_not_action,
+)
 from tracelab.store.why import (
     WhyNode,
     WhyNot,
@@ -24,6 +37,7 @@ from tracelab.store.why import (
 )
 from tracelab.viewers.tui.colours import DIM, FALSE, TRUE, bound_colour, bound_text, styled_name
 from tracelab.viewers.tui.source import RunSource
+from tracelab.viewers.tui.shown_text import shown
 
 DEPTH = 12
 _WHY_NOT = re.compile(r"^\s*(\S+)\s*(.*?)\s*(?:\bat\s+|@\s*)(-?\d+)\s*$")
@@ -85,6 +99,7 @@ class WhyPane(Vertical):
         self.source = source
         self.episode: int | None = None
         self.at: int | None = None
+        self.action: ActionExplanation | None = None   # the decision shown (tests wait on it)
 
     def compose(self) -> ComposeResult:
         yield Static(" select a change in the trace and press Enter or w", id="why-head", classes="status")
@@ -117,10 +132,58 @@ class WhyPane(Vertical):
 
         self.run_worker(work, thread=True, group="why", exclusive=True, exit_on_error=False)
 
+    def explain_action(self, episode: int, agent: str, step: int, action: str) -> None:
+        """The why of `agent`'s decision at `step` (`tracelab why --action`); `action` not the one taken:
+        its why-not too (`why-not --action`)."""
+        self.episode, self.at = episode, step
+        self.query_one("#why-head", Static).update(
+            shown(f" why {agent} did what it did at step {step}, episode {episode} · working…"))
+
+        def work() -> None:
+            try:
+                e = self.source.call(lambda con: explain_action(con, episode, agent, step))
+            except Exception as err:  # noqa: BLE001
+                self.app.call_from_thread(self._failed, str(err).strip("'\""))
+                return
+            self.app.call_from_thread(self._show_action, e, action)
+
+        self.run_worker(work, thread=True, group="why", exclusive=True, exit_on_error=False)
+
+    def _show_action(self, e: ActionExplanation, action: str) -> None:
+        """The decision as a tree: the text of `why --action`, one node a line, its sections expandable;
+        a feature read from an atom carries it (Enter opens the atom's why)."""
+        self.action = e
+        tree = self.query_one(Tree)
+        tree.clear()
+        lines = render_action(e).splitlines()
+        if action != e.action:
+            lines[2:2] = ["why not " + action + ": " + render_why_not_action(why_not_action(e, action)).split(": ", 1)[-1]]
+        tree.root.set_label(Text(lines[0], style="bold"))
+        tree.root.data = None
+        atoms = {f"  {printable(f.name)} = {printable(f.value)}": f.atom for f in e.features if f.atom is not None}
+        section: TreeNode[Any] = tree.root
+        for line in lines[1:]:
+            if line.startswith("  "):
+                section.add_leaf(Text(line[2:]), data=atoms.get(line))
+            else:
+                section = tree.root.add(Text(line), expand=True)
+        tree.root.expand()
+        self.query_one("#why-head", Static).update(shown(
+            f" why {e.agent}'s {e.action} at step {e.step}, episode {e.episode} · Enter on a feature: its atom's why"))
+
+    def on_tree_node_selected(self, event: Tree.NodeSelected[Any]) -> None:
+        """Enter on an observation feature read from an atom: that atom's why tree, where it was read."""
+        e, atom = self.action, event.node.data
+        if e is not None and isinstance(atom, str) and e.observed_at is not None:
+            event.stop()
+            self.action = None
+            self.explain(e.episode, atom, e.observed_at)
+
     def _failed(self, message: str) -> None:
         self.query_one("#why-head", Static).update(Text(f" {message}", style="bold red"))
 
     def _show(self, root: WhyNode, t: int, episode: int, of_change: bool) -> None:
+        self.action = None
         tree = self.query_one(Tree)
         tree.clear()
         tree.root.set_label(node_label(root, None if of_change else t))
