@@ -115,13 +115,12 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
             TraceWriter.open(run_dir, meta)
     torch.set_num_threads(cfg.threads)
     print(f"training on {source.describe()} ({encoding} observations, {cfg.envs} worlds in gymnasium's "
-          f"SyncVectorEnv, {reward_scale_text(cfg.reward_scale)}) for {cfg.steps:,} steps; run: {run_dir}",
+          f"SyncVectorEnv, {reward_scale_text(cfg.reward_scale)}) for {cfg.steps:,} steps with "
+          f"{cfg.learner_text()}; run: {run_dir}",
           file=sys.stderr)
     purge_step = state["step"] if same_run else None
     with training_session(writer, cfg.torch_deterministic, tensorboard, purge_step) as session:
         session.trainer = trainer = EnvTrainer(cfg, source, writer, run_dir, metric_sinks=session.metric_sinks)
-        if trainer.learner_note:
-            print(f"note: {trainer.learner_note}", file=sys.stderr)
         if state is not None:
             _restore(trainer, state, writer, run_dir, resumed_from, same_run)
         session.status = train_until_stopped(trainer, cfg.steps, stop_at, "a checkpoint", lambda fig: {

@@ -15,6 +15,7 @@ from tracelab.validation import Mismatch, Nullable, OptionalKey, Spec
 
 
 LEARNERS = ("auto", "fused", "readable")
+LEARNER_FILES = {"fused": "tracelab/train/learner.py", "readable": "tracelab/train/dqn.py"}
 
 # The game's rewards (hundreds) times this are what the learner sees. The method uses them as they are (1),
 # which does not learn the 1v1 base scenario in 760,000 steps; 0.01 learns it in 200,000 (docs/training.md,
@@ -189,6 +190,17 @@ class TrainConfig:
         why = self.fused_refusal()
         return ("readable", f"--learner auto takes the readable learner (autograd, tracelab/train/dqn.py): the "
                             f"fused one {why}") if why else ("fused", None)
+
+    def learner_text(self) -> str:
+        """Which learner trains and why, as `train`'s first line says it (docs/training.md, "The learner")."""
+        kind, fell_back = self.learner_choice()
+        if self.learner != "auto":
+            return f"the {kind} learner ({LEARNER_FILES[kind]}, --learner {kind})"
+        if fell_back:
+            return f"the readable learner ({LEARNER_FILES['readable']}; --learner auto: the fused one " \
+                   f"{self.fused_refusal()})"
+        return (f"the fused learner ({LEARNER_FILES['fused']}, dqn.py's update written by hand; --learner auto takes "
+                f"it for the method's network; an edited dqn.py trains with --learner readable)")
 
     def epsilon(self, step: int) -> float:
         """The method's schedule: eps_start until eps_decay_start of training, then linear down to eps_end

@@ -1,13 +1,13 @@
 """The DQN update as a reader expects it (CleanRL's dqn.py): a torch.nn.Module Q-network and its target copy,
 autograd, torch.optim.Adam, the TD target and the loss in plain sight: the learner to read and change
 (docs/training.md, "The learner"). tracelab/train/learner.py computes the same update for the method's
-one-layer network by hand, several times faster (tests/test_learners.py holds the two equal). A
-transition's `discount` is γ^k of the steps it spans, 0 where the episode or the agent ended."""
+one-layer network by hand, several times faster (tests/test_learners.py holds the two equal). The network
+is the one tracelab/train/qnet.py describes (`NetSpec`): its layers and initial weights are read from
+there, so both learners train the same network. A transition's `discount` is γ^k of the steps it spans,
+0 where the episode or the agent ended."""
 from __future__ import annotations
 
 import copy
-import math
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -16,15 +16,16 @@ import torch.nn.functional as F
 from torch import nn
 
 from tracelab.train.learner_protocol import RunningLoss
+from tracelab.train.qnet import NetSpec, draw_weights
 from tracelab.train.replay import ReplayBuffer
 
 
 class DuelingQ(nn.Module):
     """Q(s, a) = V(s) + A(s, a) - mean_a A(s, a) on a shared trunk (Wang et al., 2016)."""
 
-    def __init__(self, trunk: nn.Module, width: int, actions: int) -> None:
+    def __init__(self, trunk: nn.Module, value: nn.Linear, advantage: nn.Linear) -> None:
         super().__init__()
-        self.trunk, self.value, self.advantage = trunk, nn.Linear(width, 1), nn.Linear(width, actions)
+        self.trunk, self.value, self.advantage = trunk, value, advantage
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         h = self.trunk(x)
@@ -32,21 +33,15 @@ class DuelingQ(nn.Module):
         return self.value(h) + advantage - advantage.mean(dim=1, keepdim=True)
 
 
-def make_q_network(inputs: int, hidden: Sequence[int], actions: int, dueling: bool = False,
-                   generator: torch.Generator | None = None) -> nn.Module:
-    """tanh layers of widths `hidden`, then one Q-value per action (or a dueling head). The weights are
-    drawn as nn.Linear draws them, from `generator`, in the fused learner's order: same seed, same network."""
-    layers: list[nn.Module] = []
-    for fan_in, width in zip((inputs, *hidden), hidden):
-        layers += [nn.Linear(fan_in, width), nn.Tanh()]
-    net = DuelingQ(nn.Sequential(*layers), hidden[-1], actions) if dueling else \
-        nn.Sequential(*layers, nn.Linear(hidden[-1], actions))
-    with torch.no_grad():
-        for layer in (m for m in net.modules() if isinstance(m, nn.Linear)):
-            bound = 1 / math.sqrt(layer.in_features)
-            w_t = torch.empty(layer.in_features, layer.out_features).uniform_(-bound, bound, generator=generator)
-            layer.weight.copy_(w_t.t())
-            layer.bias.uniform_(-bound, bound, generator=generator)
+def make_q_network(spec: NetSpec, generator: torch.Generator | None = None) -> nn.Module:
+    """The module `spec` describes: a Linear and a Tanh per hidden layer, then one Q-value per action (or
+    the dueling head), holding `draw_weights(spec, generator)`; loading them is strict, so the module's
+    parameter names are the description's."""
+    linears = [nn.Linear(fan_in, fan_out) for _, fan_in, fan_out in spec.linears()]
+    heads = 2 if spec.dueling else 1
+    trunk = [m for layer in linears[:-heads] for m in (layer, nn.Tanh())]
+    net = DuelingQ(nn.Sequential(*trunk), *linears[-2:]) if spec.dueling else nn.Sequential(*trunk, linears[-1])
+    net.load_state_dict(draw_weights(spec, generator))
     return net
 
 

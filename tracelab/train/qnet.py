@@ -1,16 +1,19 @@
-"""A Q-network's architecture as data (`NetSpec`), and acting with its weights in numpy.
+"""The Q-network, described once (`NetSpec`): its layers, their parameters' names and shapes, and the
+initial weights a seed draws (`draw_weights`). Everything else is derived from it: the torch module the
+readable learner trains (tracelab/train/dqn.py, `make_q_network`), the fused learner's flat parameter row
+(tracelab/train/network.py), the policy files and the checkpoints' schemas, and acting in numpy (`NumpyQ`).
 
 The architecture travels in files a stranger may hand us (policy.json, a checkpoint's config), so it is
 described, not pickled: tanh hidden layers of the given widths, then one Q-value per action, or a dueling
 head (V(s) + A(s, a) - mean_a A(s, a)). From that description alone tracelab knows every parameter's name
 and shape (to check a file before using it, and to bound its memory) and computes Q-values in numpy (acting
-reads the learner's live weights without torch's per-call overhead). The torch module itself is built in
-tracelab/train/dqn.py (`make_q_network`); a test holds the two descriptions equal.
+reads the learner's live weights without torch's per-call overhead).
 
 A network written through the Python API as any `torch.nn.Module` has no such description: it acts
 through torch (`TorchQ`), and its policy files say `custom` (docs/training.md)."""
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -85,6 +88,21 @@ class NetSpec:
     def from_json(cls, net: dict[str, Any]) -> "NetSpec":
         h = net["hidden"]
         return cls(net["inputs"], (h,) if isinstance(h, int) else tuple(h), net["outputs"], net.get("dueling", False))
+
+
+def draw_weights(spec: NetSpec, generator: Any = None) -> dict[str, Any]:
+    """The network's initial weights as a state dict: nn.Linear's default initialisation (uniform in
+    ±1/sqrt(fan_in), weight then bias, layer by layer in `linears()` order) drawn from a seeded torch
+    generator. Both learners start from these, so the same seed draws the same network in either."""
+    # deferred: torch, which `tracelab --help` (config.py imports this module) does not need
+    import torch
+    weights = {}
+    for name, fan_in, fan_out in spec.linears():
+        bound = 1 / math.sqrt(fan_in)
+        w_t = torch.empty(fan_in, fan_out).uniform_(-bound, bound, generator=generator)
+        weights[f"{name}.weight"] = w_t.t().contiguous()
+        weights[f"{name}.bias"] = torch.empty(fan_out).uniform_(-bound, bound, generator=generator)
+    return weights
 
 
 class HiddenWidths(Spec):
