@@ -148,7 +148,7 @@ def test_train_says_in_its_first_line_which_learner_runs_and_why(tmp_path, capsy
     assert main([*common, "--run", str(tmp_path / "a"), "--hidden", "8,8", "--dueling"]) == 0
     assert first_line().split(" steps with ")[1].split("; torch on")[0] == (
         "the readable learner (tracelab/train/dqn.py; --learner auto: the fused one supports one hidden layer "
-        "without --double-dqn or --dueling (given: --dueling, --hidden 8,8))")
+        "without --double-dqn, --dueling or --decompose (given: --dueling, --hidden 8,8))")
     assert load_checkpoint(tmp_path / "a")["learner"] == "readable"
     assert main([*common, "--run", str(tmp_path / "b")]) == 0
     assert "with the fused learner (tracelab/train/learner.py, dqn.py's update written by hand; --learner auto " \
@@ -158,8 +158,8 @@ def test_train_says_in_its_first_line_which_learner_runs_and_why(tmp_path, capsy
     assert "with the readable learner (tracelab/train/dqn.py, --learner readable); torch on" in first_line()
     assert main([*common, "--run", str(tmp_path / "c"), "--learner", "fused", "--double-dqn"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == ["tracelab: error: learner fused supports one hidden layer without --double-dqn or --dueling "
-                   "(given: --double-dqn); use --learner readable (or auto)"]
+    assert err == ["tracelab: error: learner fused supports one hidden layer without --double-dqn, --dueling or "
+                   "--decompose (given: --double-dqn); use --learner readable (or auto)"]
     assert not (tmp_path / "c").exists()
 
 

@@ -221,7 +221,8 @@ def learner_schema(cfg: TrainConfig, net: Any, network: Any = None) -> tuple[dic
     a, d = net.actions, net.inputs
     buffer = {"size": IntRange(0, cfg.buffer), "pos": IntRange(0, cfg.buffer - 1),
               "obs": Tensor(torch.float32, (None, d)), "next_obs": Tensor(torch.float32, (None, d)),
-              "action": Tensor(torch.int64, (None,)), "reward": Tensor(torch.float32, (None,)),
+              "action": Tensor(torch.int64, (None,)),
+              "reward": Tensor(torch.float32, (None, len(net.terms)) if net.terms else (None,)),
               "discount": Tensor(torch.float32, (None,))}
     if cfg.mask:
         buffer["next_allowed"] = Tensor(torch.bool, (None, a))

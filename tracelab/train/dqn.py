@@ -117,3 +117,40 @@ class DQN:
         self.buffer.load_state(st["buffer"])
         self.losses.load_state(st)
         self._last_q = st["last_q"]
+
+
+class DecomposedDQN(DQN):
+    """Reward decomposition (Juozapaitis et al. 2019, drQ): the network has one Q head per reward term
+    (`NetSpec.terms`), Q is their sum, and each head learns the expected return of its own term, all heads
+    bootstrapping from the one greedy action of the summed target Q: for term k,
+    y_k = r_k + discount * Q_target,k(s', argmax_a' Σ_j Q_target,j(s', a')). Summed over the terms, the targets
+    are the ordinary DQN target (the terms' rewards sum to the reward). The loss is the sum over the terms of
+    the method's Smooth L1. The buffer keeps each transition's reward by term (ReplayBuffer(reward_terms=K))."""
+
+    def __init__(self, q_network: nn.Module, buffer: ReplayBuffer, *, lr: float, double_dqn: bool = False) -> None:
+        super().__init__(q_network, buffer, lr=lr, double_dqn=double_dqn)
+        self.terms, self.actions = buffer.reward_terms, buffer.n_actions
+
+    def q_terms(self, network: nn.Module, obs: torch.Tensor) -> torch.Tensor:
+        """Q-values by term [B, K, A]."""
+        return network(obs).view(len(obs), self.terms, self.actions)
+
+    def update(self, rng: np.random.Generator) -> None:
+        data = self.buffer.sample_batch(rng)
+        obs, actions, rewards, next_obs, discounts = (torch.from_numpy(x) for x in data[:5])  # rewards [B, K]
+        penalty = 0.0 if data.next_penalty is None else torch.from_numpy(data.next_penalty)
+        with torch.no_grad():
+            next_terms = self.q_terms(self.target_network, next_obs)
+            chooser = self.q_terms(self.q_network, next_obs) if self.double_dqn else next_terms
+            best_next = (chooser.sum(dim=1) + penalty).argmax(dim=1)            # a' of the summed Q [B]
+            next_value = next_terms[torch.arange(len(obs)), :, best_next]       # [B, K]
+            td_target = rewards + discounts * next_value
+        q_terms = self.q_terms(self.q_network, obs)
+        taken = q_terms.gather(2, actions.unsqueeze(1).expand(-1, self.terms, 1)).squeeze(2)  # [B, K]
+        loss = F.smooth_l1_loss(taken, td_target, reduction="none").mean(dim=0).sum()
+        self.optimizer.zero_grad()
+        loss.backward()
+        self.optimizer.step()
+        self.losses.add(loss)
+        self._last_q = q_terms.detach().sum(dim=1)
+        self.updates += 1

@@ -39,9 +39,12 @@ class EnvPolicy:
 
     def decide(self, obs: Any, masks: np.ndarray | None = None) -> tuple[np.ndarray, PolicyOutput]:
         """act()'s actions and the Q-values they were chosen from (unmasked), for a traced game."""
-        values = self.q(self.encoder(obs))
+        x = self.encoder(obs)
+        terms = getattr(self.q, "term_names", ())  # a decomposed network's: its values by reward term too
+        by_term = self.q.per_term(x) if terms else None
+        values = by_term.sum(axis=1) if by_term is not None else self.q(x)
         q = np.where(masks.astype(bool), values, -np.inf) if self.mask and masks is not None else values
-        return q.argmax(axis=1), PolicyOutput(np.asarray(values, np.float32))
+        return q.argmax(axis=1), PolicyOutput(np.asarray(values, np.float32), terms=terms, term_values=by_term)
 
 
 def batch_of_one(obs: Any) -> Any:
@@ -83,7 +86,7 @@ ENV_SPEC_SCHEMA = {
     "format": Const(ENV_FORMAT),
     "env": {"name": str, "kwargs": MapOf(object)},
     "network": {"inputs": IntRange(1), "hidden": OptionalKey(HiddenWidths()), "outputs": IntRange(1),
-                "dueling": OptionalKey(bool), "custom": OptionalKey(str)},
+                "dueling": OptionalKey(bool), "custom": OptionalKey(str), "terms": OptionalKey(ListOf(str, min_len=1))},
     "networks": MapOf(ListOf(IntRange(0), min_len=1), min_len=1),
     "mask": OptionalKey(bool),
 }

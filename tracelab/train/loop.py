@@ -27,7 +27,7 @@ from tracelab.train.best_policy import BestPolicy
 from tracelab.train.checkpoint import save_checkpoint
 from tracelab.train.config import TrainConfig
 from tracelab.train.evaluate import EvalResult, EvalTrace, evaluate
-from tracelab.train.dqn import DQN, make_q_network
+from tracelab.train.dqn import DQN, DecomposedDQN, make_q_network
 from tracelab.train.episode_log import EpisodeLog
 from tracelab.train.exploration import Exploration
 from tracelab.train.game_record import GameRecord
@@ -56,8 +56,10 @@ def make_learner(kind: str, net: NetSpec, cfg: TrainConfig, generator: torch.Gen
                           buffer=cfg.buffer, generator=generator, masked=cfg.mask)
     module = network(net.inputs, net.actions) if network is not None else \
         make_q_network(net, generator)
-    return learner_class(module, ReplayBuffer(cfg.buffer, net.inputs, net.actions, cfg.batch, cfg.mask),
-                         lr=cfg.lr, double_dqn=cfg.double_dqn)
+    if net.terms:  # --decompose: a head per reward term, a reward per term in the buffer
+        learner_class = DecomposedDQN
+    return learner_class(module, ReplayBuffer(cfg.buffer, net.inputs, net.actions, cfg.batch, cfg.mask,
+                                              max(1, len(net.terms))), lr=cfg.lr, double_dqn=cfg.double_dqn)
 
 
 def acting_q(learner: Learner, net: NetSpec | None) -> QFunction:
