@@ -17,7 +17,7 @@ from tracelab.train.config import TrainConfig
 from tracelab.train.dqn import DQN, make_q_network
 from tracelab.train.learner import DQNLearner
 from tracelab.train.loop import Trainer
-from tracelab.train.network import Shape, to_state_dict
+from tracelab.train.network import to_state_dict
 from tracelab.train.policy import load_policy, read_policy_spec
 from tracelab.train.qnet import NetSpec, NumpyQ
 from tracelab.train.replay import ReplayBuffer
@@ -39,18 +39,18 @@ def test_fused_update_equals_the_readable_one_loss_and_weights(masked):
     """Same init, same minibatches: after 40 updates (two target copies) the fused learner's weights and
     sampled losses are the readable learner's; masked (--mask): the max runs over the actions allowed in s'."""
     torch.set_num_threads(1)
-    shape = Shape(4, 16, 5)
-    fused = DQNLearner(shape, lr=1e-2, batch=32, buffer=100, generator=torch.Generator().manual_seed(0),
+    spec = NetSpec(4, (16,), 5)
+    fused = DQNLearner(spec, lr=1e-2, batch=32, buffer=100, generator=torch.Generator().manual_seed(0),
                        masked=masked)
-    readable = DQN(make_q_network(4, (16,), 5, generator=torch.Generator().manual_seed(0)),
-                   ReplayBuffer(100, 4, 5, 32, masked), lr=1e-2)
-    # the same seed draws the same network in both
+    readable = DQN(make_q_network(spec, torch.Generator().manual_seed(0)), ReplayBuffer(100, 4, 5, 32, masked),
+                   lr=1e-2)
+    # the same seed draws the same network in both: the fused row reads back as the module's weights
     for k, v in readable.online_weights().items():
         assert torch.equal(v, fused.online_weights()[k])
     _filled(fused.buffer, masked)
     _filled(readable.buffer, masked)
     fused.params[1] += 0.1  # a target network that differs from the online one
-    readable.target_network.load_state_dict(to_state_dict(fused.params[1], shape))
+    readable.target_network.load_state_dict(to_state_dict(fused.params[1], spec))
     rng_f, rng_r = np.random.default_rng(5), np.random.default_rng(5)
     compared = 0
     for i in range(40):
@@ -78,11 +78,11 @@ def test_double_dqn_takes_the_target_networks_value_of_the_online_networks_choic
     torch.manual_seed(0)
     buffer = ReplayBuffer(50, 4, 5, 50)
     _filled(buffer, False)
-    learners = {double: DQN(make_q_network(4, (8,), 5, generator=torch.Generator().manual_seed(1)),
+    learners = {double: DQN(make_q_network(NetSpec(4, (8,), 5), torch.Generator().manual_seed(1)),
                             ReplayBuffer(50, 4, 5, 50), lr=1e-3, double_dqn=double) for double in (False, True)}
     for lr in learners.values():
         _filled(lr.buffer, False)
-        lr.target_network.load_state_dict(make_q_network(4, (8,), 5, generator=torch.Generator().manual_seed(2))
+        lr.target_network.load_state_dict(make_q_network(NetSpec(4, (8,), 5), torch.Generator().manual_seed(2))
                                           .state_dict())
     data = learners[True].buffer.sample_batch(np.random.default_rng(3))
     obs, actions, rewards, next_obs, discounts = (torch.from_numpy(x.copy()) for x in data[:5])
@@ -100,11 +100,11 @@ def test_double_dqn_takes_the_target_networks_value_of_the_online_networks_choic
 
 
 @pytest.mark.parametrize("dueling", [False, True])
-def test_the_described_network_is_the_module_numpy_acting_and_the_state_dict_agree(dueling):
+def test_numpy_acting_computes_the_modules_q_values(dueling):
+    """The module is built from the description (its names are checked as it loads its weights); acting
+    computes its forward pass a second time, in numpy: the two agree."""
     spec = NetSpec(6, (16, 8), 5, dueling)
-    module = make_q_network(6, (16, 8), 5, dueling, torch.Generator().manual_seed(0))
-    assert {k: tuple(v.shape) for k, v in module.state_dict().items()} == spec.state_dict_shapes()
-    assert sum(p.numel() for p in module.parameters()) == spec.n_params
+    module = make_q_network(spec, torch.Generator().manual_seed(0))
     obs = np.random.default_rng(0).normal(size=(20, 6)).astype(np.float32)
     q = NumpyQ(spec, {k: v.numpy() for k, v in module.state_dict().items()})(obs)
     with torch.no_grad():
@@ -132,7 +132,7 @@ def test_a_dueling_double_dqn_two_layer_run_learns_resumes_and_its_policy_loads(
     spec = read_policy_spec(straight / "policy")
     assert spec["network"]["hidden"] == [32, 32] and spec["network"]["dueling"] is True
     obs = np.random.default_rng(0).integers(0, 4, (50, 4)).astype(np.float32)
-    trained = make_q_network(4, (32, 32), 5, dueling=True)
+    trained = make_q_network(NetSpec(4, (32, 32), 5, dueling=True))
     trained.load_state_dict(torch.load(straight / "policy" / "policy.pt", weights_only=True)["shared"])
     with torch.no_grad():
         greedy = trained(torch.from_numpy(obs)).argmax(1).numpy()
@@ -140,23 +140,26 @@ def test_a_dueling_double_dqn_two_layer_run_learns_resumes_and_its_policy_loads(
     assert main(["eval", str(straight / "policy"), "--games", "4", "--json"]) == 0
 
 
-def test_learner_auto_says_in_one_line_when_it_takes_the_readable_learner(tmp_path, capsys):
+def test_train_says_in_its_first_line_which_learner_runs_and_why(tmp_path, capsys):
     common = ["train", "--scenario", "base", "--total-timesteps", "8", "--num-envs", "4", "--learning-starts", "4",
               "--eval-every", "0", "--eval-games", "2", "--trace-eval-games", "1", "--eval-envs", "2",
               "--reward-scale", "0.01"]
+    first_line = lambda: capsys.readouterr().err.splitlines()[0]  # noqa: E731
     assert main([*common, "--run", str(tmp_path / "a"), "--hidden", "8,8", "--dueling"]) == 0
-    notes = [line for line in capsys.readouterr().err.splitlines() if "--learner auto" in line]
-    assert notes == ["note: --learner auto takes the readable learner (autograd, tracelab/train/dqn.py): the fused "
-                     "one supports one hidden layer without --double-dqn or --dueling (given: --dueling, "
-                     "--hidden 8,8)"]
+    assert first_line().split(" steps with ")[1].split("; torch on")[0] == (
+        "the readable learner (tracelab/train/dqn.py; --learner auto: the fused one supports one hidden layer "
+        "without --double-dqn, --dueling or --decompose (given: --dueling, --hidden 8,8))")
     assert load_checkpoint(tmp_path / "a")["learner"] == "readable"
     assert main([*common, "--run", str(tmp_path / "b")]) == 0
-    assert "--learner auto" not in capsys.readouterr().err
+    assert "with the fused learner (tracelab/train/learner.py, dqn.py's update written by hand; --learner auto " \
+           "takes it for the method's network; an edited dqn.py trains with --learner readable)" in first_line()
     assert load_checkpoint(tmp_path / "b")["learner"] == "fused"
+    assert main([*common, "--run", str(tmp_path / "r"), "--learner", "readable"]) == 0
+    assert "with the readable learner (tracelab/train/dqn.py, --learner readable); torch on" in first_line()
     assert main([*common, "--run", str(tmp_path / "c"), "--learner", "fused", "--double-dqn"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == ["tracelab: error: learner fused supports one hidden layer without --double-dqn or --dueling "
-                   "(given: --double-dqn); use --learner readable (or auto)"]
+    assert err == ["tracelab: error: learner fused supports one hidden layer without --double-dqn, --dueling or "
+                   "--decompose (given: --double-dqn); use --learner readable (or auto)"]
     assert not (tmp_path / "c").exists()
 
 
@@ -167,7 +170,6 @@ def test_a_checkpoint_written_before_the_readable_learner_still_resumes(tmp_path
     assert train_into(cfg, WALK, run, stop_at=246) == 130
     state = torch.load(checkpoint_path(run), weights_only=True)
     del state["learner"], state["custom_network"]
-    shape = Shape(4, 64, 5)
     best = state.pop("best_weights")
     assert best  # an evaluation at step 200 kept a best policy
     state["best_rows"] = {name: torch.cat([w.t().reshape(-1) if k.endswith("weight") else w
@@ -178,7 +180,7 @@ def test_a_checkpoint_written_before_the_readable_learner_still_resumes(tmp_path
     torch.save(state, checkpoint_path(run))
     loaded = load_checkpoint(run)
     for name, sd in best.items():
-        for k, w in to_state_dict(state["best_rows"][name], shape).items():
+        for k, w in to_state_dict(state["best_rows"][name], NetSpec(4, (64,), 5)).items():
             assert torch.equal(loaded["best_weights"][name][k], w) and torch.equal(w, sd[k])
     assert main(["train", "--resume", str(run)]) == 0
     assert load_checkpoint(run)["learner"] == "fused"
@@ -220,7 +222,7 @@ class ConservativeDQN(DQN):
 def test_a_new_loss_is_a_subclass_and_trains_through_the_trainer(tmp_path):
     """The worked example: its loss is the method's plus the conservative term, it trains through
     Trainer(learner_class=...) into a run whose checkpoint resumes."""
-    learner = ConservativeDQN(make_q_network(4, (8,), 5, generator=torch.Generator().manual_seed(1)),
+    learner = ConservativeDQN(make_q_network(NetSpec(4, (8,), 5), torch.Generator().manual_seed(1)),
                               ReplayBuffer(50, 4, 5, 50), lr=1e-3)
     _filled(learner.buffer, False)
     data = learner.buffer.sample_batch(np.random.default_rng(3))

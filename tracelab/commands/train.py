@@ -164,7 +164,8 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
     kernel = '' if cfg.kernel == 'auto' else f', {cfg.kernel} kernel'
     print(f"training {scenario.name} ({scenario.agents_per_team}v{scenario.agents_per_team}, "
           f"{'non-Markov' if cfg.non_markov else 'Markov'}, {cfg.backend} backend{kernel}, {cfg.envs} worlds, "
-          f"{reward_scale_text(cfg.reward_scale)}) for {cfg.steps:,} steps; torch on {torch.get_num_threads()} "
+          f"{reward_scale_text(cfg.reward_scale)}) for {cfg.steps:,} steps with {cfg.learner_text()}; "
+          f"torch on {torch.get_num_threads()} "
           f"CPU thread{'s' if torch.get_num_threads() != 1 else ''} (--threads); run: {run_dir}", file=sys.stderr)
     note = reward_scale_note(max(abs(v) for v in dataclasses.asdict(scenario.rewards).values()), cfg.reward_scale)
     if note:
@@ -172,8 +173,6 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
     purge_step = state["step"] if same_run else None
     with training_session(writer, cfg.torch_deterministic, tensorboard, purge_step) as session:
         session.trainer = trainer = Trainer(cfg, scenario, writer, run_dir, metric_sinks=session.metric_sinks)
-        if trainer.learner_note:  # auto fell back from the fused learner
-            print(f"note: {trainer.learner_note}", file=sys.stderr)
         if state is not None:
             with store_errors():  # games that do not replay to their observations: another simulator
                 restore(trainer, state)

@@ -118,12 +118,10 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
     with training_session(writer, cfg.torch_deterministic, tensorboard, purge_step) as session:
         session.trainer = trainer = EnvTrainer(cfg, source, writer, run_dir, metric_sinks=session.metric_sinks)
         print(f"training on {source.describe()} ({encoding} observations, {cfg.envs} worlds in "
-              f"{type(trainer.env).__name__}, {reward_scale_text(cfg.reward_scale)}) for {cfg.steps:,} steps; "
-              f"run: {run_dir}", file=sys.stderr)
+              f"{type(trainer.env).__name__}, {reward_scale_text(cfg.reward_scale)}) for {cfg.steps:,} steps "
+              f"with {cfg.learner_text()}; run: {run_dir}", file=sys.stderr)
         if trainer.vector_note:
             print(f"note: {trainer.vector_note}", file=sys.stderr)
-        if trainer.learner_note:
-            print(f"note: {trainer.learner_note}", file=sys.stderr)
         if state is not None:
             _restore(trainer, state, writer, run_dir, resumed_from, same_run)
         session.status = train_until_stopped(trainer, cfg.steps, stop_at, "a checkpoint", lambda fig: {

@@ -23,12 +23,15 @@ Q_VALUES, LOGITS = "q", "logits"  # what a decision's `values` are
 class PolicyOutput:
     """A policy's output for a batch of B decisions: `values` [B, A] (Q-values, or an actor's logits), in
     the order of the policy's actions; an actor-critic's state values [B] (None otherwise); whether each
-    action was explored (None: all greedy) and the ε it explored with."""
+    action was explored (None: all greedy) and the ε it explored with; a decomposed Q-network's values by
+    reward term `term_values` [B, len(terms), A] (they sum to `values`)."""
     values: np.ndarray
     output: str = Q_VALUES
     state_value: np.ndarray | None = None
     explored: np.ndarray | None = None
     epsilon: float = 0.0
+    terms: tuple[str, ...] = ()
+    term_values: np.ndarray | None = None
 
     @staticmethod
     def concat(outputs: Sequence["PolicyOutput"]) -> "PolicyOutput":
@@ -37,13 +40,15 @@ class PolicyOutput:
         return PolicyOutput(
             np.concatenate([o.values for o in outputs]), first.output,
             None if first.state_value is None else np.concatenate([o.state_value for o in outputs]),
-            None if first.explored is None else np.concatenate([o.explored for o in outputs]), first.epsilon)
+            None if first.explored is None else np.concatenate([o.explored for o in outputs]), first.epsilon,
+            first.terms, None if first.term_values is None else np.concatenate([o.term_values for o in outputs]))
 
     def rows(self, keep: np.ndarray | slice) -> "PolicyOutput":
         """The decisions at `keep` (a mask or index over the batch)."""
         return replace(self, values=self.values[keep],
                        state_value=None if self.state_value is None else self.state_value[keep],
-                       explored=None if self.explored is None else self.explored[keep])
+                       explored=None if self.explored is None else self.explored[keep],
+                       term_values=None if self.term_values is None else self.term_values[keep])
 
 
 def coded_strings(codes: np.ndarray, names: Sequence[str]) -> pa.Array:
@@ -96,8 +101,19 @@ class Decisions:
             ab.list_array(offsets, ab.from_numpy(values.reshape(-1))),
             ab.from_numpy(np.full(n, np.nan) if p.state_value is None else np.asarray(p.state_value, np.float64),
                           null=np.ones(n, bool) if p.state_value is None else None),
-            ab.from_numpy(explored), ab.from_numpy(np.full(n, float(p.epsilon))), mask,
+            ab.from_numpy(explored), ab.from_numpy(np.full(n, float(p.epsilon))), mask, *self._term_columns(n),
         ], schema=SCHEMAS["decisions"])
+
+    def _term_columns(self, n: int) -> tuple[pa.Array, pa.Array]:
+        """`terms` and `term_values` (NULL unless the policy is decomposed by reward term)."""
+        p = self.policy
+        if p.term_values is None:
+            return pa.nulls(n, SCHEMAS["decisions"].field("terms").type), \
+                pa.nulls(n, SCHEMAS["decisions"].field("term_values").type)
+        flat = np.ascontiguousarray(p.term_values, np.float32).reshape(n, -1)
+        k = len(p.terms)
+        return (ab.list_array(np.arange(n + 1, dtype=np.int32) * k, ab.strings(list(p.terms) * n)),
+                ab.list_array(np.arange(n + 1, dtype=np.int32) * flat.shape[1], ab.from_numpy(flat.reshape(-1))))
 
 
 @dataclass(frozen=True)

@@ -2,7 +2,8 @@
 --action NAME`): the recorded decision (the chosen action, the others ranked by the policy's value with
 the margin, greedy or explored, the mask), the observation it acted on named from the run's
 observation_names (each index part's value with the atom it was read from, which `tracelab why` explains
-in turn), and the reward terms the step received. Everything is in the run: no policy is loaded."""
+in turn), and the reward terms the step received; for a decomposed policy (train --decompose), each
+action's expected return by reward term. Everything is in the run: no policy is loaded."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -41,6 +42,8 @@ class ActionExplanation:
     observed_at: int | None = None   # the step whose recorded observation the agent acted on (None: the start)
     terms: list[tuple[str, float]] = field(default_factory=list)
     reward: float | None = None
+    # a decomposed policy's Q-values by reward term: term -> {action: value} (empty for any other policy)
+    by_term: dict[str, dict[str, float]] = field(default_factory=dict)
 
     @property
     def chosen(self) -> ActionValue:
@@ -58,21 +61,27 @@ class ActionExplanation:
                 "state_value": self.state_value, "margin": self.margin,
                 "ranked": [a.__dict__ for a in self.ranked], "observed_at": self.observed_at,
                 "features": [f.__dict__ for f in self.features],
-                "reward": self.reward, "terms": [{"term": t, "value": v} for t, v in self.terms]}
+                "reward": self.reward, "terms": [{"term": t, "value": v} for t, v in self.terms],
+                "q_by_term": self.by_term}
 
 
 def explain_action(con: RunConnection, episode: int, agent: str, step: int) -> ActionExplanation:
     """The decision of `agent` at `step` of `episode` with its observation and reward terms (KeyError,
     naming what the run has, when there is none)."""
-    rows = con.execute("SELECT action_name, output, explored, epsilon, state_value, actions, \"values\", mask "
-                       "FROM decisions WHERE episode = ? AND step = ? AND agent = ?", [episode, step, agent]).fetchall()
+    rows = con.execute("SELECT action_name, output, explored, epsilon, state_value, actions, \"values\", mask, "
+                       "terms, term_values FROM decisions WHERE episode = ? AND step = ? AND agent = ?",
+                       [episode, step, agent]).fetchall()
     if not rows:
         raise KeyError(_no_decision(con, episode, agent, step))
-    name, output, explored, epsilon, state_value, actions, values, mask = rows[0]
+    name, output, explored, epsilon, state_value, actions, values, mask, term_names, term_values = rows[0]
     allowed = mask if mask is not None else [True] * len(values)
     ranked = sorted((ActionValue(str(a), float(v), bool(m)) for a, v, m in zip(actions, values, allowed)),
                     key=lambda a: -a.value)
     e = ActionExplanation(episode, step, agent, str(name), str(output), bool(explored), epsilon, state_value, ranked)
+    if term_names and term_values and len(term_values) == len(term_names) * len(actions):
+        a = len(actions)
+        e.by_term = {str(t): {str(n): float(v) for n, v in zip(actions, term_values[k * a:(k + 1) * a])}
+                     for k, t in enumerate(term_names)}
     e.observed_at, e.features = _features(con, episode, agent, step)
     terms = con.execute("SELECT term, value FROM rewards WHERE episode = ? AND step = ? AND agent = ? "
                         "ORDER BY abs(value) DESC, term", [episode, step, agent]).fetchall()
@@ -162,6 +171,15 @@ def render_action(e: ActionExplanation, run: str = "RUN") -> str:
         mark = "->" if a.name == e.action else "  "
         gap = "" if a.name == e.action else f"  ({a.value - e.chosen.value:+.4g})"
         lines.append(f"  {mark} {printable(a.name):<14} {a.value:>10.4g}{gap}{'' if a.allowed else '  masked'}")
+    if e.by_term:
+        lines.append("expected return by reward term (the Q-value's heads, summing to it):")
+        names = [printable(t) for t in e.by_term]
+        widths = [max(10, len(n)) for n in names]
+        lines.append("     " + " " * 14 + "".join(f" {n:>{w}}" for n, w in zip(names, widths)))
+        for a in e.ranked:
+            mark = "->" if a.name == e.action else "  "
+            lines.append(f"  {mark} {printable(a.name):<14}"
+                         + "".join(f" {v[a.name]:>{w}.4g}" for v, w in zip(e.by_term.values(), widths)))
     if e.observed_at is None:
         lines.append("observation: the episode's start (not recorded)")
     else:

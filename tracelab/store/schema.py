@@ -74,7 +74,11 @@ SCHEMAS: dict[str, pa.Schema] = {
     "decisions": pa.schema([("episode", pa.int64()), ("step", pa.int32()), ("agent", pa.string()),
                             ("action", pa.int32()), ("output", pa.string()), ("values", pa.list_(pa.float32())),
                             ("state_value", pa.float64()), ("explored", pa.bool_()), ("epsilon", pa.float64()),
-                            ("mask", pa.list_(pa.bool_()))]),
+                            ("mask", pa.list_(pa.bool_())),
+                            # a decomposed policy's (train --decompose) Q-values by reward term: `terms`
+                            # names them, `term_values` holds each term's values of every action back to
+                            # back (term-major, len(terms) x len(values)); NULL for any other policy
+                            ("terms", _STR_LIST), ("term_values", pa.list_(pa.float32()))]),
     "reward_terms": pa.schema([("episode", pa.int64()), ("step", pa.int32()), ("agent", pa.string()),
                                ("term", pa.string()), ("value", pa.float64())]),
     "metrics": pa.schema([("step", pa.int64()), ("name", pa.string()), ("value", pa.float64()),
@@ -92,7 +96,9 @@ BOARD_BEFORE_DECLARED = "gridworld"
 # run.board, the run's declared board; facts.episode, a fact given for one episode only.
 ADDED_COLUMNS: dict[str, dict[str, str]] = {"clauses": {"closed": "false"},
                                             "run": {"board": f"'{BOARD_BEFORE_DECLARED}'"},
-                                            "facts": {"episode": "CAST(NULL AS BIGINT)"}}
+                                            "facts": {"episode": "CAST(NULL AS BIGINT)"},
+                                            "decisions": {"terms": "CAST(NULL AS VARCHAR[])",
+                                                          "term_values": "CAST(NULL AS FLOAT[])"}}
 # Tables added after the first release: a run written before has none and reads it as empty (EMPTY_SQL).
 ADDED_TABLES: tuple[str, ...] = ("edges", "action_names", "observation_names", "decisions", "reward_terms",
                                   "sources")
@@ -217,7 +223,7 @@ FROM raw.steps s, (SELECT list(name ORDER BY action) AS names FROM raw.action_na
 -- the policy's decision per agent and step: `actions` names the entries of `values` (and `mask`)
 CREATE OR REPLACE VIEW decisions AS
 SELECT d.episode, d.step, d.agent, d.action, an.names[d.action + 1] AS action_name, d.explored, d.epsilon,
-       d.output, an.offered AS actions, d.values, d.mask, d.state_value
+       d.output, an.offered AS actions, d.values, d.mask, d.state_value, d.terms, d.term_values
 FROM raw.decisions d,
      (SELECT list(name ORDER BY action) AS names,
              list(name ORDER BY position) FILTER (WHERE position IS NOT NULL) AS offered

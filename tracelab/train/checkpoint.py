@@ -26,7 +26,7 @@ from tracelab.engine.safe_files import FileRefused
 from tracelab.store import layout
 from tracelab.game.scenario import NOTHING, Scenario, scenario_from_dict
 from tracelab.train.memory import Limit, MemoryLimitExceeded, check_training_memory, memory_limit
-from tracelab.train.network import Shape, to_state_dict
+from tracelab.train.network import to_state_dict
 from tracelab.validation import (Const, ExactKeys, IntRange, ListOf, MapOf, Mismatch, Nullable, OneOf,
                                  OptionalKey, Tuple, check)
 from tracelab.train.config import TrainConfig, config_schema
@@ -145,8 +145,7 @@ def load_checkpoint(run: str | Path, limit: Limit | None = None, network: Any = 
         # deferred: run_networks loads the game's numba modules, which an env's checkpoint does not need
         from tracelab.train.run_networks import training_net
         net = training_net(cfg, scenario)
-        shape = Shape(net.inputs, net.hidden[0], net.actions)
-        state["best_weights"] = {name: to_state_dict(row, shape) for name, row in state.pop("best_rows").items()}
+        state["best_weights"] = {name: to_state_dict(row, net) for name, row in state.pop("best_rows").items()}
     for section in NUMPY_SECTIONS:
         state[section] = {k: v.numpy() for k, v in state[section].items()}
     for learner in state["learners"].values():
@@ -222,7 +221,8 @@ def learner_schema(cfg: TrainConfig, net: Any, network: Any = None) -> tuple[dic
     a, d = net.actions, net.inputs
     buffer = {"size": IntRange(0, cfg.buffer), "pos": IntRange(0, cfg.buffer - 1),
               "obs": Tensor(torch.float32, (None, d)), "next_obs": Tensor(torch.float32, (None, d)),
-              "action": Tensor(torch.int64, (None,)), "reward": Tensor(torch.float32, (None,)),
+              "action": Tensor(torch.int64, (None,)),
+              "reward": Tensor(torch.float32, (None, len(net.terms)) if net.terms else (None,)),
               "discount": Tensor(torch.float32, (None,))}
     if cfg.mask:
         buffer["next_allowed"] = Tensor(torch.bool, (None, a))

@@ -10,11 +10,12 @@ from dataclasses import MISSING, asdict, dataclass, field, fields
 from typing import Any
 
 from tracelab.engine.kernel_names import KERNELS as ENGINE_KERNELS
-from tracelab.train.qnet import parse_hidden
+from tracelab.train.qnet import NetSpec, parse_hidden
 from tracelab.validation import Mismatch, Nullable, OptionalKey, Spec
 
 
 LEARNERS = ("auto", "fused", "readable")
+LEARNER_FILES = {"fused": "tracelab/train/learner.py", "readable": "tracelab/train/dqn.py"}
 
 # The game's rewards (hundreds) times this are what the learner sees. The method uses them as they are (1),
 # which does not learn the 1v1 base scenario in 760,000 steps; 0.01 learns it in 200,000 (docs/training.md,
@@ -86,6 +87,9 @@ class TrainConfig:
     double_dqn: bool = _opt("Double DQN: the online network picks the next action, the target network values it "
                             "(the readable learner)", default=False)
     dueling: bool = _opt("a dueling head: Q = V(s) + A(s, a) - mean A (the readable learner)", default=False)
+    decompose: bool = _opt("reward decomposition: one Q head per reward term of a spec world's [reward], each "
+                           "learning its term's expected return, Q their sum (the readable learner; train --env)",
+                           default=False)
     lr: float = _opt("Adam learning rate", flag="learning-rate", default=5e-4)
     gamma: float = _opt("discount", default=0.99)
     batch: int = _opt("minibatch size", flag="batch-size", default=128)
@@ -162,6 +166,8 @@ class TrainConfig:
             problems.append(str(e))
         if self.learner not in LEARNERS:
             problems.append(f"learner must be one of {', '.join(LEARNERS)}, got {self.learner!r}")
+        if self.decompose and self.dueling:
+            problems.append("--decompose and --dueling: a decomposed network has one plain head per reward term")
         elif self.learner == "fused" and not problems and self.fused_refusal():
             problems.append(f"learner fused {self.fused_refusal()}; use --learner readable (or auto)")
         if self.agents is not None and self.agents < 1:
@@ -177,10 +183,11 @@ class TrainConfig:
         """Why the fused learner cannot run this config (None: it can): it is written for one tanh hidden
         layer and the plain max target."""
         given = [flag for flag, on in (("--double-dqn", self.double_dqn), ("--dueling", self.dueling),
+                                       ("--decompose", self.decompose),
                                        (f"--hidden {self.hidden}", len(self.hidden_sizes) > 1)) if on]
         if not given:
             return None
-        return f"supports one hidden layer without --double-dqn or --dueling (given: {', '.join(given)})"
+        return f"supports one hidden layer without --double-dqn, --dueling or --decompose (given: {', '.join(given)})"
 
     def learner_choice(self) -> tuple[str, str | None]:
         """(the learner a run uses, fused or readable; why auto fell back to the readable one, or None)."""
@@ -189,6 +196,26 @@ class TrainConfig:
         why = self.fused_refusal()
         return ("readable", f"--learner auto takes the readable learner (autograd, tracelab/train/dqn.py): the "
                             f"fused one {why}") if why else ("fused", None)
+
+    def network(self, inputs: int, actions: int, reward_terms: tuple[str, ...] = ()) -> NetSpec:
+        """The Q-network this config trains on `inputs` observation features and `actions` actions;
+        `reward_terms`: the world's, one head each with --decompose (ValueError when it has none)."""
+        if self.decompose and not reward_terms:
+            raise ValueError("--decompose needs a world whose reward is split into terms: a spec world's "
+                             "[reward] (train --env FILE.toml; GridWar's 1v1 base: train --env "
+                             "rules/gridworld/war.toml --decompose)")
+        return NetSpec(inputs, self.hidden_sizes, actions, self.dueling, tuple(reward_terms) if self.decompose else ())
+
+    def learner_text(self) -> str:
+        """Which learner trains and why, as `train`'s first line says it (docs/training.md, "The learner")."""
+        kind, fell_back = self.learner_choice()
+        if self.learner != "auto":
+            return f"the {kind} learner ({LEARNER_FILES[kind]}, --learner {kind})"
+        if fell_back:
+            return f"the readable learner ({LEARNER_FILES['readable']}; --learner auto: the fused one " \
+                   f"{self.fused_refusal()})"
+        return (f"the fused learner ({LEARNER_FILES['fused']}, dqn.py's update written by hand; --learner auto takes "
+                f"it for the method's network; an edited dqn.py trains with --learner readable)")
 
     def epsilon(self, step: int) -> float:
         """The method's schedule: eps_start until eps_decay_start of training, then linear down to eps_end

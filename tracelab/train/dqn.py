@@ -1,13 +1,13 @@
 """The DQN update as a reader expects it (CleanRL's dqn.py): a torch.nn.Module Q-network and its target copy,
 autograd, torch.optim.Adam, the TD target and the loss in plain sight: the learner to read and change
 (docs/training.md, "The learner"). tracelab/train/learner.py computes the same update for the method's
-one-layer network by hand, several times faster (tests/test_learners.py holds the two equal). A
-transition's `discount` is γ^k of the steps it spans, 0 where the episode or the agent ended."""
+one-layer network by hand, several times faster (tests/test_learners.py holds the two equal). The network
+is the one tracelab/train/qnet.py describes (`NetSpec`): its layers and initial weights are read from
+there, so both learners train the same network. A transition's `discount` is γ^k of the steps it spans,
+0 where the episode or the agent ended."""
 from __future__ import annotations
 
 import copy
-import math
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -16,15 +16,16 @@ import torch.nn.functional as F
 from torch import nn
 
 from tracelab.train.learner_protocol import RunningLoss
+from tracelab.train.qnet import NetSpec, draw_weights
 from tracelab.train.replay import ReplayBuffer
 
 
 class DuelingQ(nn.Module):
     """Q(s, a) = V(s) + A(s, a) - mean_a A(s, a) on a shared trunk (Wang et al., 2016)."""
 
-    def __init__(self, trunk: nn.Module, width: int, actions: int) -> None:
+    def __init__(self, trunk: nn.Module, value: nn.Linear, advantage: nn.Linear) -> None:
         super().__init__()
-        self.trunk, self.value, self.advantage = trunk, nn.Linear(width, 1), nn.Linear(width, actions)
+        self.trunk, self.value, self.advantage = trunk, value, advantage
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         h = self.trunk(x)
@@ -32,21 +33,15 @@ class DuelingQ(nn.Module):
         return self.value(h) + advantage - advantage.mean(dim=1, keepdim=True)
 
 
-def make_q_network(inputs: int, hidden: Sequence[int], actions: int, dueling: bool = False,
-                   generator: torch.Generator | None = None) -> nn.Module:
-    """tanh layers of widths `hidden`, then one Q-value per action (or a dueling head). The weights are
-    drawn as nn.Linear draws them, from `generator`, in the fused learner's order: same seed, same network."""
-    layers: list[nn.Module] = []
-    for fan_in, width in zip((inputs, *hidden), hidden):
-        layers += [nn.Linear(fan_in, width), nn.Tanh()]
-    net = DuelingQ(nn.Sequential(*layers), hidden[-1], actions) if dueling else \
-        nn.Sequential(*layers, nn.Linear(hidden[-1], actions))
-    with torch.no_grad():
-        for layer in (m for m in net.modules() if isinstance(m, nn.Linear)):
-            bound = 1 / math.sqrt(layer.in_features)
-            w_t = torch.empty(layer.in_features, layer.out_features).uniform_(-bound, bound, generator=generator)
-            layer.weight.copy_(w_t.t())
-            layer.bias.uniform_(-bound, bound, generator=generator)
+def make_q_network(spec: NetSpec, generator: torch.Generator | None = None) -> nn.Module:
+    """The module `spec` describes: a Linear and a Tanh per hidden layer, then one Q-value per action (or
+    the dueling head), holding `draw_weights(spec, generator)`; loading them is strict, so the module's
+    parameter names are the description's."""
+    linears = [nn.Linear(fan_in, fan_out) for _, fan_in, fan_out in spec.linears()]
+    heads = 2 if spec.dueling else 1
+    trunk = [m for layer in linears[:-heads] for m in (layer, nn.Tanh())]
+    net = DuelingQ(nn.Sequential(*trunk), *linears[-2:]) if spec.dueling else nn.Sequential(*trunk, linears[-1])
+    net.load_state_dict(draw_weights(spec, generator))
     return net
 
 
@@ -122,3 +117,40 @@ class DQN:
         self.buffer.load_state(st["buffer"])
         self.losses.load_state(st)
         self._last_q = st["last_q"]
+
+
+class DecomposedDQN(DQN):
+    """Reward decomposition (Juozapaitis et al. 2019, drQ): the network has one Q head per reward term
+    (`NetSpec.terms`), Q is their sum, and each head learns the expected return of its own term, all heads
+    bootstrapping from the one greedy action of the summed target Q: for term k,
+    y_k = r_k + discount * Q_target,k(s', argmax_a' Σ_j Q_target,j(s', a')). Summed over the terms, the targets
+    are the ordinary DQN target (the terms' rewards sum to the reward). The loss is the sum over the terms of
+    the method's Smooth L1. The buffer keeps each transition's reward by term (ReplayBuffer(reward_terms=K))."""
+
+    def __init__(self, q_network: nn.Module, buffer: ReplayBuffer, *, lr: float, double_dqn: bool = False) -> None:
+        super().__init__(q_network, buffer, lr=lr, double_dqn=double_dqn)
+        self.terms, self.actions = buffer.reward_terms, buffer.n_actions
+
+    def q_terms(self, network: nn.Module, obs: torch.Tensor) -> torch.Tensor:
+        """Q-values by term [B, K, A]."""
+        return network(obs).view(len(obs), self.terms, self.actions)
+
+    def update(self, rng: np.random.Generator) -> None:
+        data = self.buffer.sample_batch(rng)
+        obs, actions, rewards, next_obs, discounts = (torch.from_numpy(x) for x in data[:5])  # rewards [B, K]
+        penalty = 0.0 if data.next_penalty is None else torch.from_numpy(data.next_penalty)
+        with torch.no_grad():
+            next_terms = self.q_terms(self.target_network, next_obs)
+            chooser = self.q_terms(self.q_network, next_obs) if self.double_dqn else next_terms
+            best_next = (chooser.sum(dim=1) + penalty).argmax(dim=1)            # a' of the summed Q [B]
+            next_value = next_terms[torch.arange(len(obs)), :, best_next]       # [B, K]
+            td_target = rewards + discounts * next_value
+        q_terms = self.q_terms(self.q_network, obs)
+        taken = q_terms.gather(2, actions.unsqueeze(1).expand(-1, self.terms, 1)).squeeze(2)  # [B, K]
+        loss = F.smooth_l1_loss(taken, td_target, reduction="none").mean(dim=0).sum()
+        self.optimizer.zero_grad()
+        loss.backward()
+        self.optimizer.step()
+        self.losses.add(loss)
+        self._last_q = q_terms.detach().sum(dim=1)
+        self.updates += 1

@@ -34,7 +34,6 @@ from tracelab.train.config import config_schema
 from tracelab.train.env_source import ObservationEncoder, action_count
 from tracelab.train.memory import (Limit, MemoryLimitExceeded, check_estimate, env_training_estimate,
                                    env_world_bytes)
-from tracelab.train.qnet import NetSpec
 from tracelab.train.torch_files import Tensor, load_tensors
 from tracelab.validation import Const, IntRange, MapOf, Mismatch, OneOf, check
 
@@ -121,7 +120,10 @@ def load_env_checkpoint(run: str | Path, given: EnvSource | None, limit: Limit) 
         spec = getattr(probe.unwrapped, "world_spec", None)
     finally:
         probe.close()
-    net = NetSpec(encoder.size, cfg.hidden_sizes, n_actions, cfg.dueling)
+    try:
+        net = cfg.network(encoder.size, n_actions, spec.reward_terms if spec is not None else ())
+    except ValueError as e:
+        raise FileRefused(f"{f}: config: {e}") from None
     try:  # config.envs sizes the schema below: a stranger's 1e9 is refused here, not by the OOM killer
         check_estimate(env_training_estimate(cfg, net, env_world_bytes(spec)), limit)
     except MemoryLimitExceeded as e:

@@ -41,9 +41,12 @@ class EnvPolicy:
 
     def decide(self, obs: Any, masks: np.ndarray | None = None) -> tuple[np.ndarray, PolicyOutput]:
         """act()'s actions and the Q-values they were chosen from (unmasked), for a traced game."""
-        values = self.q(self.encoder(obs))
+        x = self.encoder(obs)
+        terms = getattr(self.q, "term_names", ())  # a decomposed network's: its values by reward term too
+        by_term = self.q.per_term(x) if terms else None
+        values = by_term.sum(axis=1) if by_term is not None else self.q(x)
         q = np.where(masks.astype(bool), values, -np.inf) if self.mask and masks is not None else values
-        return q.argmax(axis=1), PolicyOutput(np.asarray(values, np.float32))
+        return q.argmax(axis=1), PolicyOutput(np.asarray(values, np.float32), terms=terms, term_values=by_term)
 
 
 def batch_of_one(obs: Any) -> Any:
@@ -85,7 +88,7 @@ ENV_SPEC_SCHEMA = {
     "format": Const(ENV_FORMAT),
     "env": {"name": str, "kwargs": MapOf(object)},
     "network": {"inputs": IntRange(1), "hidden": OptionalKey(HiddenWidths()), "outputs": IntRange(1),
-                "dueling": OptionalKey(bool), "custom": OptionalKey(str)},
+                "dueling": OptionalKey(bool), "custom": OptionalKey(str), "terms": OptionalKey(ListOf(str, min_len=1))},
     "networks": MapOf(ListOf(IntRange(0), min_len=1), min_len=1),
     "mask": OptionalKey(bool),
 }
@@ -223,11 +226,16 @@ class EnvEvalResult:
         return d
 
 
-def make_vector_env(source: EnvSource, worlds: int) -> tuple[Any, str | None]:
+def make_vector_env(source: EnvSource, worlds: int, by_term: bool = False) -> tuple[Any, str | None]:
     """`worlds` copies of the env stepped together, a world that ends reset within its step (SAME_STEP, as
     GridWar's vector env): a declared world's own batched engine (DeclaredVectorEnv, every world in one
     engine call), else gymnasium's SyncVectorEnv over the env. World i steps as the env reset with seed
-    s + i either way. Returns (the env, why a declared world fell back to SyncVectorEnv, or None)."""
+    s + i either way. `by_term`: each world's reward by term is read (train --decompose), which only a
+    world of its own keeps: SyncVectorEnv. Returns (the env, why a declared world is not batched, or None)."""
+    if by_term:
+        note = f"{source.short_name}: --decompose reads each world's reward by term; its worlds step in " \
+               "gymnasium's SyncVectorEnv"
+        return SyncVectorEnv([source.make] * worlds, autoreset_mode=AutoresetMode.SAME_STEP), note
     try:
         spec_file, params = source.declared()
     except UserError:  # not a declared world: any gymnasium env

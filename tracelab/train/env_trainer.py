@@ -34,7 +34,6 @@ from tracelab.train.exploration import Exploration
 from tracelab.train.loop import acting_q, load_shared_state, make_learner, train_loop
 from tracelab.train.metric_log import MetricLog
 from tracelab.train.policy import BEST_POLICY_DIR
-from tracelab.train.qnet import NetSpec
 from tracelab.train.rngs import Generators
 from tracelab.train.tensorboard import MetricSink
 from tracelab.train.update_schedule import UpdateSchedule
@@ -51,7 +50,7 @@ class EnvTrainer:
         self.cfg, self.source, self.writer, self.run_dir, self.progress = cfg, source, writer, run_dir, progress
         self.worlds = w = cfg.envs
         # a declared world's own batched engine where its spec allows (else SyncVectorEnv, and why)
-        self.env, self.vector_note = make_vector_env(source, w)
+        self.env, self.vector_note = make_vector_env(source, w, by_term=cfg.decompose)
         self.actions_log = ActionLog(w)  # a checkpoint replays the worlds from their reset (env_checkpoint.py)
         single = self.env.single_observation_space
         self.encoder = ObservationEncoder(single, source.name)
@@ -63,7 +62,9 @@ class EnvTrainer:
             [str(a) for a in range(self.n_actions)]
         self.rngs = Generators(cfg.seed)
         self.exploration = Exploration(cfg, self.rngs.numpy)
-        self.net = NetSpec(self.encoder.size, cfg.hidden_sizes, self.n_actions, cfg.dueling)
+        self.net = cfg.network(self.encoder.size, self.n_actions, declared.reward_terms if declared else ())
+        for env in self.env.envs if self.net.terms else ():  # --decompose: each step's reward by term
+            env.unwrapped.world.keep_reward_terms = True
         self.learner_kind, self.learner_note = cfg.learner_choice()
         self.learner: Learner = make_learner(self.learner_kind, self.net, cfg, self.rngs.torch)
         self.policy = EnvPolicy(acting_q(self.learner, self.net), self.encoder, cfg.mask)
@@ -118,7 +119,10 @@ class EnvTrainer:
         if cfg.mask and "action_mask" in info:  # what may be done in s' bounds the target's max (replay.py)
             allowed = info["action_mask"].astype(bool).copy()
             allowed[done] = True  # a reset world's mask is its new start's: max over every action
-        self.learner.buffer.add(obs_now, actions, (reward * cfg.reward_scale).astype(np.float32),
+        learned = reward  # --decompose: each world's step reward by term, [W, terms] (they sum to `reward`)
+        if self.net.terms:
+            learned = np.stack([env.unwrapped.world.last_reward_terms[0] for env in self.env.envs])
+        self.learner.buffer.add(obs_now, actions, (learned * cfg.reward_scale).astype(np.float32),
                                 self.encoder(next_obs), (cfg.gamma * ~terminated).astype(np.float32), allowed)
         self.episodes.add_step(reward)
         self.step += self.worlds

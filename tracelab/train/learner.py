@@ -1,4 +1,5 @@
-"""The fused DQN learner, the fast path: the method's network (one tanh hidden layer, tracelab/train/network.py),
+"""The fused DQN learner, the fast path: the method's network (one tanh hidden layer, as tracelab/train/qnet.py
+describes it, laid out flat as tracelab/train/network.py says),
 Adam, its replay buffer, and the update, keeping the Learner protocol (learner_protocol.py). To read or change
 the update, read tracelab/train/dqn.py: the same update with autograd and torch.optim.Adam, for any network.
 
@@ -18,7 +19,8 @@ import numpy as np
 import torch
 
 from tracelab.train.learner_protocol import RunningLoss
-from tracelab.train.network import Shape, init_row, state_dict_views
+from tracelab.train.network import block_views, init_row, state_dict_views
+from tracelab.train.qnet import NetSpec
 from tracelab.train.replay import ReplayBuffer
 
 ADAM_BETAS = (0.9, 0.999)
@@ -28,20 +30,23 @@ _FUSED_ADAM = getattr(torch, "_fused_adam_", None)  # private, but torch is pinn
 
 
 class DQNLearner:
-    def __init__(self, shape: Shape, *, lr: float, batch: int, buffer: int, generator: torch.Generator,
+    def __init__(self, spec: NetSpec, *, lr: float, batch: int, buffer: int, generator: torch.Generator,
                  masked: bool = False) -> None:
-        self.shape = shape
+        if len(spec.hidden) != 1 or spec.dueling:
+            raise ValueError(f"the fused learner is written for one tanh hidden layer without a dueling head, "
+                             f"not {spec.torch_text()}")
+        self.spec = spec
         self.lr = lr
         self.batch = batch
-        self.params = torch.empty(2, shape.n_params)   # row 0 online, row 1 target
-        self.params[0] = init_row(shape, generator)
+        self.params = torch.empty(2, spec.n_params)   # row 0 online, row 1 target
+        self.params[0] = init_row(spec, generator)
         self.params[1] = self.params[0]
-        self.grad = torch.zeros(shape.n_params)
-        self.adam_m = torch.zeros(shape.n_params)
-        self.adam_v = torch.zeros(shape.n_params)
+        self.grad = torch.zeros(spec.n_params)
+        self.adam_m = torch.zeros(spec.n_params)
+        self.adam_v = torch.zeros(spec.n_params)
         self.adam_step = 0
         self.updates = 0
-        self.buffer = ReplayBuffer(buffer, shape.inputs, shape.actions, batch, masked)
+        self.buffer = ReplayBuffer(buffer, spec.inputs, spec.actions, batch, masked)
         self.losses = RunningLoss()  # Smooth L1 of the sampled updates since take_loss()
         self._have_q = False
         self._one = torch.ones(())
@@ -54,16 +59,15 @@ class DQNLearner:
         every step of the update writes into a preallocated tensor (`out=`), so it is one torch call per
         line and no allocation. A bias is the last row of its layer's weight block (network.py), so the
         inputs carry a column of ones and one matmul gives a layer's weight and bias gradients."""
-        sh, b = self.shape, self.batch
-        o = sh.offsets()
+        b = self.batch
+        d, (h,), a = self.spec.inputs, self.spec.hidden, self.spec.actions
         p = self.params
-        d, h, a = sh.inputs, sh.hidden, sh.actions
         self._online = p[0]
-        self._w1a = p[:, o[0]:o[2]].view(2, d + 1, h)        # [W1ᵀ; b1] of both networks
-        self._w2a = p[:, o[2]:o[4]].view(2, h + 1, a)        # [W2ᵀ; b2]
-        self._w2t_online = p[0, o[2]:o[3]].view(h, a).t()    # W2 [A, H] of the online network
-        self._g1 = self.grad[o[0]:o[2]].view(d + 1, h)
-        self._g2 = self.grad[o[2]:o[4]].view(h + 1, a)
+        split = (d + 1) * h                                  # where layer 2's block starts
+        self._w1a = p[:, :split].view(2, d + 1, h)           # [W1ᵀ; b1] of both networks
+        self._w2a = p[:, split:].view(2, h + 1, a)           # [W2ᵀ; b2]
+        self._w2t_online = self._w2a[0, :h].t()              # W2 [A, H] of the online network
+        self._g1, self._g2 = block_views(self.grad, self.spec)
         buf = self.buffer
         batch = torch.from_numpy(buf.batch)                  # [B, row]: see replay.py's row layout
         hot = 2 * (d + 1)
@@ -87,7 +91,7 @@ class DQNLearner:
         self._q_taken = self._q_taken3.view(b, 1)
         self._qmax, self._target = torch.empty(b, 1), torch.empty(b, 1)
         self._dq, self._dh, self._dtanh = torch.empty(b, a), torch.empty(b, h), torch.empty(b, h)
-        self._denom = torch.empty(sh.n_params)
+        self._denom = torch.empty(self.spec.n_params)
 
     # ---- learning ----
     def update(self, rng: np.random.Generator) -> None:
@@ -144,7 +148,7 @@ class DQNLearner:
         self.params[1].copy_(self.params[0])
 
     def online_weights(self) -> dict[str, torch.Tensor]:
-        return state_dict_views(self._online, self.shape)
+        return state_dict_views(self._online, self.spec)
 
     def take_loss(self) -> float | None:
         """Mean loss of the sampled updates since the last call (None if there were none)."""

@@ -27,14 +27,13 @@ from tracelab.train.best_policy import BestPolicy
 from tracelab.train.checkpoint import save_checkpoint
 from tracelab.train.config import TrainConfig
 from tracelab.train.evaluate import EvalResult, EvalTrace, evaluate
-from tracelab.train.dqn import DQN, make_q_network
+from tracelab.train.dqn import DQN, DecomposedDQN, make_q_network
 from tracelab.train.episode_log import EpisodeLog
 from tracelab.train.exploration import Exploration
 from tracelab.train.game_record import GameRecord
 from tracelab.train.learner import DQNLearner
 from tracelab.train.learner_protocol import Learner
 from tracelab.train.metric_log import MetricLog
-from tracelab.train.network import Shape
 from tracelab.train.policy import BEST_POLICY_DIR, Policy, may_act, save_policy
 from tracelab.train.qnet import NetSpec, NumpyQ, QFunction, TorchQ
 from tracelab.train.replay import ReplayBuffer
@@ -53,12 +52,14 @@ def make_learner(kind: str, net: NetSpec, cfg: TrainConfig, generator: torch.Gen
     """The fused learner for `net` (one tanh layer), or the readable one (`learner_class`: DQN or a
     subclass) on `network`'s module (default: the module `net` describes, drawn from `generator`)."""
     if kind == "fused":
-        return DQNLearner(Shape(net.inputs, net.hidden[0], net.actions), lr=cfg.lr, batch=cfg.batch,
+        return DQNLearner(net, lr=cfg.lr, batch=cfg.batch,
                           buffer=cfg.buffer, generator=generator, masked=cfg.mask)
     module = network(net.inputs, net.actions) if network is not None else \
-        make_q_network(net.inputs, net.hidden, net.actions, net.dueling, generator)
-    return learner_class(module, ReplayBuffer(cfg.buffer, net.inputs, net.actions, cfg.batch, cfg.mask),
-                         lr=cfg.lr, double_dqn=cfg.double_dqn)
+        make_q_network(net, generator)
+    if net.terms:  # --decompose: a head per reward term, a reward per term in the buffer
+        learner_class = DecomposedDQN
+    return learner_class(module, ReplayBuffer(cfg.buffer, net.inputs, net.actions, cfg.batch, cfg.mask,
+                                              max(1, len(net.terms))), lr=cfg.lr, double_dqn=cfg.double_dqn)
 
 
 def acting_q(learner: Learner, net: NetSpec | None) -> QFunction:

@@ -65,11 +65,11 @@ def network_bytes(shape: NetSpec) -> int:
 
 def replay_bytes(capacity: int, shape: NetSpec, masked: bool) -> int:
     """A replay buffer (its float32 rows and action ids), twice: a checkpoint copies what it holds."""
-    return 2 * capacity * (row_length(shape.inputs, shape.actions, masked) * FLOAT + 8)
+    return 2 * capacity * (row_length(shape.inputs, shape.actions, masked, max(1, len(shape.terms))) * FLOAT + 8)
 
 
 def minibatch_bytes(batch: int, shape: NetSpec, masked: bool) -> int:
-    return batch * row_length(shape.inputs, shape.actions, masked) * FLOAT
+    return batch * row_length(shape.inputs, shape.actions, masked, max(1, len(shape.terms))) * FLOAT
 
 
 def activation_bytes(batch: int, shape: NetSpec) -> int:

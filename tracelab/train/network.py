@@ -1,61 +1,53 @@
-"""The fused learner's parameter layout for the method's Q-network: one tanh hidden layer, then a linear layer
-to one Q-value per action (any other network is the readable learner's, tracelab/train/dqn.py).
+"""The fused learner's parameter layout: a network described by a NetSpec (tracelab/train/qnet.py) as one flat
+row, each linear layer a block [Wᵀ; b] of shape [fan_in + 1, fan_out] (the bias as the weight block's last
+row), the layers back to back in the description's order.
 
-The fused learner keeps the online and the target network in one tensor `[2, n]` (row 0 online, row 1 target),
-each row holding W1ᵀ [D, H], b1 [H], W2ᵀ [H, A], b2 [A] back to back. Stacked that way, both networks'
-forward passes are one batched matmul per layer, the target copy is one copy, and the optimizer works on
-one flat vector: the per-operation overhead of torch, not arithmetic, is what costs here
-(docs/benchmarks/history.md, "Training"). Saved policies use nn.Sequential(Linear, Tanh, Linear)'s state dict
-names, so plain torch loads them too."""
+The fused learner keeps the online and the target network in one tensor `[2, n]` (row 0 online, row 1 target).
+Stacked that way, both networks' forward passes are one batched matmul per layer, the target copy is one
+copy, and the optimizer works on one flat vector: the per-operation overhead of torch, not arithmetic, is
+what costs here (docs/benchmarks/history.md, "Training"). The row reads back as the description's state dict, so
+policies and checkpoints are the same files whichever learner wrote them."""
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
+
+import torch
+
+from tracelab.train.qnet import NetSpec, draw_weights
 
 
-@dataclass(frozen=True)
-class Shape:
-    inputs: int   # D: observation length
-    hidden: int   # H
-    actions: int  # A
-
-    @property
-    def n_params(self) -> int:
-        d, h, a = self.inputs, self.hidden, self.actions
-        return d * h + h + h * a + a
-
-    def offsets(self) -> tuple[int, int, int, int, int]:
-        """Start of W1ᵀ, b1, W2ᵀ, b2 in a row, and the row's end."""
-        d, h, a = self.inputs, self.hidden, self.actions
-        return 0, d * h, d * h + h, d * h + h + h * a, self.n_params
+def layer_blocks(spec: NetSpec) -> list[tuple[str, int, int, int]]:
+    """(state dict prefix, start in the row, fan in, fan out) of each linear layer; its block is
+    row[start : start + (fan_in + 1) * fan_out] viewed as [fan_in + 1, fan_out] = [Wᵀ; b]."""
+    out, start = [], 0
+    for name, fan_in, fan_out in spec.linears():
+        out.append((name, start, fan_in, fan_out))
+        start += (fan_in + 1) * fan_out
+    return out
 
 
-def views(row, shape: Shape) -> tuple:
-    """W1ᵀ [D, H], b1 [H], W2ᵀ [H, A], b2 [A] as views of one parameter row (torch or numpy)."""
-    o0, o1, o2, o3, o4 = shape.offsets()
-    d, h, a = shape.inputs, shape.hidden, shape.actions
-    return row[o0:o1].reshape(d, h), row[o1:o2], row[o2:o3].reshape(h, a), row[o3:o4]
+def block_views(row: torch.Tensor, spec: NetSpec) -> list[torch.Tensor]:
+    """Each layer's [Wᵀ; b] block as a view of `row` (torch), in the description's order."""
+    return [row[start:start + (fan_in + 1) * fan_out].view(fan_in + 1, fan_out)
+            for _, start, fan_in, fan_out in layer_blocks(spec)]
 
 
-def init_row(shape: Shape, generator) -> "torch.Tensor":  # noqa: F821
-    """nn.Linear's default initialisation (uniform in ±1/sqrt(fan_in), weights and biases), drawn from a
-    seeded torch generator."""
-    # deferred: torch, which the fused layout's numpy side does not need
-    import torch
-    row = torch.empty(shape.n_params)
-    w1, b1, w2, b2 = views(row, shape)
-    for t, fan_in in ((w1, shape.inputs), (b1, shape.inputs), (w2, shape.hidden), (b2, shape.hidden)):
-        bound = 1.0 / math.sqrt(fan_in)
-        t.uniform_(-bound, bound, generator=generator)
-    return row
+def state_dict_views(row: torch.Tensor, spec: NetSpec) -> dict[str, torch.Tensor]:
+    """A parameter row as the module's state dict (qnet.py's names), of views (live)."""
+    out = {}
+    for (name, *_), block in zip(layer_blocks(spec), block_views(row, spec)):
+        out[f"{name}.weight"], out[f"{name}.bias"] = block[:-1].t(), block[-1]
+    return out
 
 
-def state_dict_views(row, shape: Shape) -> dict:
-    """A parameter row as nn.Sequential(Linear(D, H), Tanh(), Linear(H, A))'s state dict, of views (live)."""
-    w1, b1, w2, b2 = views(row, shape)
-    return {"0.weight": w1.t(), "0.bias": b1, "2.weight": w2.t(), "2.bias": b2}
-
-
-def to_state_dict(row, shape: Shape) -> dict:
+def to_state_dict(row: torch.Tensor, spec: NetSpec) -> dict[str, torch.Tensor]:
     """The same, copied."""
-    return {k: v.contiguous().clone() for k, v in state_dict_views(row, shape).items()}
+    return {k: v.contiguous().clone() for k, v in state_dict_views(row, spec).items()}
+
+
+def init_row(spec: NetSpec, generator: torch.Generator) -> torch.Tensor:
+    """The row of `draw_weights(spec, generator)`: the readable learner's initial network, laid out flat."""
+    row = torch.empty(spec.n_params)
+    views = state_dict_views(row, spec)
+    for name, value in draw_weights(spec, generator).items():
+        views[name].copy_(value)
+    return row

@@ -162,7 +162,7 @@ SPEC_SCHEMA = {
     "scenario": {"name": str, "toml": str},
     "observation": {"stack_previous": bool},
     "network": {"inputs": IntRange(1), "hidden": OptionalKey(HiddenWidths()), "outputs": IntRange(1),
-                "dueling": OptionalKey(bool), "custom": OptionalKey(str)},
+                "dueling": OptionalKey(bool), "custom": OptionalKey(str), "terms": OptionalKey(ListOf(str, min_len=1))},
     "networks": MapOf(ListOf(IntRange(0), min_len=1), min_len=1),
     "mask": OptionalKey(bool),
 }

@@ -1,16 +1,19 @@
-"""A Q-network's architecture as data (`NetSpec`), and acting with its weights in numpy.
+"""The Q-network, described once (`NetSpec`): its layers, their parameters' names and shapes, and the
+initial weights a seed draws (`draw_weights`). Everything else is derived from it: the torch module the
+readable learner trains (tracelab/train/dqn.py, `make_q_network`), the fused learner's flat parameter row
+(tracelab/train/network.py), the policy files and the checkpoints' schemas, and acting in numpy (`NumpyQ`).
 
 The architecture travels in files a stranger may hand us (policy.json, a checkpoint's config), so it is
 described, not pickled: tanh hidden layers of the given widths, then one Q-value per action, or a dueling
 head (V(s) + A(s, a) - mean_a A(s, a)). From that description alone tracelab knows every parameter's name
 and shape (to check a file before using it, and to bound its memory) and computes Q-values in numpy (acting
-reads the learner's live weights without torch's per-call overhead). The torch module itself is built in
-tracelab/train/dqn.py (`make_q_network`); a test holds the two descriptions equal.
+reads the learner's live weights without torch's per-call overhead).
 
 A network written through the Python API as any `torch.nn.Module` has no such description: it acts
 through torch (`TorchQ`), and its policy files say `custom` (docs/training.md)."""
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -38,6 +41,14 @@ class NetSpec:
     hidden: tuple[int, ...]
     actions: int
     dueling: bool = False
+    # reward decomposition (`train --decompose`): one Q head per reward term, the output layer holding each
+    # term's Q-values of every action back to back ([term, action]); Q is their sum
+    terms: tuple[str, ...] = ()
+
+    @property
+    def outputs(self) -> int:
+        """The output layer's width: one Q-value per action, per reward term when decomposed."""
+        return self.actions * max(1, len(self.terms))
 
     def linears(self) -> list[tuple[str, int, int]]:
         """(state dict prefix, fan in, fan out) of each linear layer, in the order the module holds them:
@@ -46,7 +57,7 @@ class NetSpec:
         trunk = [(str(2 * i), a, b) for i, (a, b) in enumerate(zip(widths, widths[1:]))]
         last = widths[-1]
         if not self.dueling:
-            return [*trunk, (str(2 * len(self.hidden)), last, self.actions)]
+            return [*trunk, (str(2 * len(self.hidden)), last, self.outputs)]
         return [(f"trunk.{k}", a, b) for k, a, b in trunk] + [("value", last, 1), ("advantage", last, self.actions)]
 
     def state_dict_shapes(self) -> dict[str, tuple[int, ...]]:
@@ -70,6 +81,9 @@ class NetSpec:
         """The module as torch code, for people reading policy.json."""
         widths = (self.inputs, *self.hidden)
         trunk = ", ".join(f"nn.Linear({a}, {b}), nn.Tanh()" for a, b in zip(widths, widths[1:]))
+        if self.terms:
+            return (f"nn.Sequential({trunk}, nn.Linear({widths[-1]}, {self.outputs})); Q per term = output.view(-1, "
+                    f"{len(self.terms)}, {self.actions}) (terms {', '.join(self.terms)}), Q = its sum over terms")
         if not self.dueling:
             return f"nn.Sequential({trunk}, nn.Linear({widths[-1]}, {self.actions}))"
         return (f"dueling: trunk = nn.Sequential({trunk}), value = nn.Linear({widths[-1]}, 1), advantage = "
@@ -77,14 +91,32 @@ class NetSpec:
 
     def to_json(self) -> dict[str, Any]:
         """policy.json's `network` (a one-layer network keeps `hidden` a number, as before dueling)."""
-        return {"inputs": self.inputs, "hidden": self.hidden[0] if len(self.hidden) == 1 else list(self.hidden),
-                "outputs": self.actions, "dueling": self.dueling, "activation": "tanh",
-                "state_dict_keys": list(self.state_dict_shapes()), "torch": self.torch_text()}
+        out = {"inputs": self.inputs, "hidden": self.hidden[0] if len(self.hidden) == 1 else list(self.hidden),
+               "outputs": self.actions, "dueling": self.dueling, "activation": "tanh",
+               "state_dict_keys": list(self.state_dict_shapes()), "torch": self.torch_text()}
+        return {**out, "terms": list(self.terms)} if self.terms else out
 
     @classmethod
     def from_json(cls, net: dict[str, Any]) -> "NetSpec":
+        """policy.json's `network` (`terms`: absent in a plain network's and in files written before)."""
         h = net["hidden"]
-        return cls(net["inputs"], (h,) if isinstance(h, int) else tuple(h), net["outputs"], net.get("dueling", False))
+        return cls(net["inputs"], (h,) if isinstance(h, int) else tuple(h), net["outputs"], net.get("dueling", False),
+                   tuple(net.get("terms", ())))
+
+
+def draw_weights(spec: NetSpec, generator: Any = None) -> dict[str, Any]:
+    """The network's initial weights as a state dict: nn.Linear's default initialisation (uniform in
+    ±1/sqrt(fan_in), weight then bias, layer by layer in `linears()` order) drawn from a seeded torch
+    generator. Both learners start from these, so the same seed draws the same network in either."""
+    # deferred: torch, which `tracelab --help` (config.py imports this module) does not need
+    import torch
+    weights = {}
+    for name, fan_in, fan_out in spec.linears():
+        bound = 1 / math.sqrt(fan_in)
+        w_t = torch.empty(fan_in, fan_out).uniform_(-bound, bound, generator=generator)
+        weights[f"{name}.weight"] = w_t.t().contiguous()
+        weights[f"{name}.bias"] = torch.empty(fan_out).uniform_(-bound, bound, generator=generator)
+    return weights
 
 
 class HiddenWidths(Spec):
@@ -102,10 +134,13 @@ class NumpyQ:
     the learner's live parameters while training, loaded copies otherwise)."""
 
     def __init__(self, spec: NetSpec, weights: Mapping[str, np.ndarray]) -> None:
-        self.dueling = spec.dueling
+        self.dueling, self.terms, self.actions = spec.dueling, len(spec.terms), spec.actions
+        self.term_names = spec.terms
         self.layers = [(weights[f"{name}.weight"].T, weights[f"{name}.bias"]) for name, _, _ in spec.linears()]
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
+        if self.terms:
+            return self.per_term(obs).sum(axis=1)
         x = obs
         heads = 2 if self.dueling else 1
         for w, b in self.layers[:-heads]:
@@ -116,6 +151,14 @@ class NumpyQ:
         (wv, bv), (wa, ba) = self.layers[-2:]
         adv = x @ wa + ba
         return x @ wv + bv + adv - adv.mean(axis=1, keepdims=True)
+
+    def per_term(self, obs: np.ndarray) -> np.ndarray:
+        """A decomposed network's Q-values by reward term, [K, terms, A] (their sum over terms is Q)."""
+        x = obs
+        for w, b in self.layers[:-1]:
+            x = np.tanh(x @ w + b)
+        w, b = self.layers[-1]
+        return (x @ w + b).reshape(len(x), self.terms, self.actions)
 
 
 class TorchQ:

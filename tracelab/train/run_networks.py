@@ -22,4 +22,4 @@ def network_groups(scenario: Scenario, split: bool) -> dict[str, list[int]]:
 
 def training_net(cfg: TrainConfig, scenario: Scenario) -> NetSpec:
     """The networks' architecture: the observation (stacked in the non-Markov setup), hidden layers, actions."""
-    return NetSpec(obs_size(scenario, cfg.non_markov), cfg.hidden_sizes, scenario.n_actions, cfg.dueling)
+    return cfg.network(obs_size(scenario, cfg.non_markov), scenario.n_actions)
