@@ -20,13 +20,14 @@ SPECS = {name: RULES_DIR / "gridworld" / f"war_{name}.toml" for name in ("base",
 DECLARED_OBS = {"base": 4, "advanced": 7}
 
 
-def play_both(name: str, steps: int, seed: int, max_steps: int) -> dict[str, int]:
+def play_both(name: str, steps: int, seed: int, max_steps: int, stack_previous: bool = False) -> dict[str, int]:
     """Step GridWarEnv (RuleSim) and the declared env side by side; assert every step equal. Red plays a
     random allowed action 3 times in 4, else any action (unsafe moves, shots with no ammo). Returns what
     happened, to show the comparison covered it."""
-    ref = GridWarEnv(replace(builtin_scenario(name), max_steps=max_steps))
-    dec = DeclaredEnv(SPECS[name], max_steps=max_steps)
-    n_obs = DECLARED_OBS[name]
+    ref = GridWarEnv(replace(builtin_scenario(name), max_steps=max_steps), stack_previous=stack_previous)
+    extra = {"stack_previous": True} if stack_previous else {}
+    dec = DeclaredEnv(SPECS[name], max_steps=max_steps, **extra)
+    n_obs = DECLARED_OBS[name] * (2 if stack_previous else 1)
     assert dec.observation_space.shape == (n_obs,) and dec.action_space == ref.action_space
     rng = np.random.default_rng(seed + 1000)
     seen = {"red won": 0, "blue won": 0, "truncated": 0, "hit": 0, "unsafe": 0, "invalid": 0, "blue shot": 0}
@@ -66,6 +67,44 @@ def test_advanced_game_equals_rulesim_step_by_step(seed: int) -> None:
     assert seen["red won"] and seen["blue won"] and seen["hit"] and seen["blue shot"] and seen["unsafe"], seen
 
 
+def test_stack_previous_equals_rulesim_step_by_step() -> None:
+    """`[observation] previous = 1` (the spec's stack_previous param): [current, previous] as RuleSim's
+    stack_previous gives it, at resets (the start twice), after steps and across episode ends."""
+    seen = play_both("advanced", 300, 4, max_steps=30, stack_previous=True)
+    assert seen["truncated"] and (seen["red won"] or seen["blue won"]), seen
+
+
+def test_stack_previous_in_the_vector_env_equals_single_envs() -> None:
+    """The vector env's [current, previous]: each world as a single DeclaredEnv seeded seed + i steps it
+    (that env equals RuleSim above), final observations included, and a restarted world's history is
+    its start."""
+    from tracelab.envs.declared.vector_env import DeclaredVectorEnv
+    n = 3
+    vec = DeclaredVectorEnv(SPECS["advanced"], n, stack_previous=True, max_steps=12)
+    singles = [DeclaredEnv(SPECS["advanced"], stack_previous=True, max_steps=12) for _ in range(n)]
+    assert vec.single_observation_space == singles[0].observation_space
+    rng = np.random.default_rng(5)
+    o, info = vec.reset(seed=20)
+    outs = [env.reset(seed=20 + i) for i, env in enumerate(singles)]
+    ends = 0
+    for k in range(60):
+        assert o.tolist() == [x[0].tolist() for x in outs], k
+        acts = np.array([rng.choice(np.flatnonzero(x[1]["action_mask"])) for x in outs])
+        o, r, te, tr, info = vec.step(acts)
+        for i, env in enumerate(singles):
+            o1, r1, te1, tr1, _ = env.step(int(acts[i]))
+            assert (r[i], te[i], tr[i]) == (r1, te1, tr1), (k, i)
+            if te1 or tr1:
+                ends += 1
+                assert info["final_obs"][i].tolist() == o1.tolist(), (k, i)
+                o1, i1 = env.reset()
+                assert o1[:7].tolist() == o1[7:].tolist()
+            else:
+                i1 = {"action_mask": env._info()["action_mask"]}
+            outs[i] = (o1, i1)
+    assert ends >= n, ends
+
+
 @pytest.mark.parametrize("name", ["base", "advanced"])
 def test_the_step_limit_truncates_as_rulesim(name: str) -> None:
     """A short step limit: truncated episodes, and games won on their last step stay won (RuleSim)."""
@@ -83,14 +122,16 @@ def test_the_declared_war_game_passes_gymnasiums_checker(name: str) -> None:
                                              "........", "........", ".......r"]
 
 
-def test_two_agents_a_team_equal_rulesim_step_by_step() -> None:
-    """war_base_2v2.toml as a PettingZoo env: each red agent's observation (the team's view), mask and
-    reward (RuleSim's agent_reward) and the ends, against GridWarEnv on a 2v2 base scenario."""
+@pytest.mark.parametrize("stack_previous", [False, True])
+def test_two_agents_a_team_equal_rulesim_step_by_step(stack_previous: bool) -> None:
+    """war_base_2v2.toml as a PettingZoo env: each red agent's observation (the team's view, with the last
+    step's after it for stack_previous), mask and reward (RuleSim's agent_reward) and the ends, against
+    GridWarEnv on a 2v2 base scenario."""
     from tracelab.envs.declared.parallel_env import DeclaredParallelEnv
     scenario = replace(builtin_scenario("base"), name="base-2v2", agents_per_team=2, red_starts=None,
                        blue_starts=None)
-    ref = GridWarEnv(scenario)
-    dec = DeclaredParallelEnv(RULES_DIR / "gridworld" / "war_base_2v2.toml")
+    ref = GridWarEnv(scenario, stack_previous=stack_previous)
+    dec = DeclaredParallelEnv(RULES_DIR / "gridworld" / "war_base_2v2.toml", stack_previous=stack_previous)
     names = dec.possible_agents
     rng = np.random.default_rng(7)
     o1, i1 = ref.reset(seed=3)

@@ -143,6 +143,9 @@ class WorldSpec:
     # what a game's end counts as (`[end] win`, `loss`): an episode that terminated with one of them [1,1]
     win: tuple[Atom, ...] = ()
     loss: tuple[Atom, ...] = ()
+    # `[observation] previous`: the observations of that many earlier steps follow the current one
+    # (history.py; at a reset every one of them is the start's)
+    previous: int = 0
 
 
 # ---- reading typed values, located ----
@@ -398,6 +401,7 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     action_names, action_facts, mask = _actions(r, check, agents, agents_t.get("mask"))
     domains = {"cells": board.cells} if board else {}
     space, parts = _observation(r, check, domains, agents)
+    previous = _previous(r, space)
     reward_table, reward_scaled, reward_terms = _reward(r, check, agents)
     end = r.table(("end",), ("terminated", "truncated", "max_steps", "win", "loss"), default={})
     terminated = _every_agents(r, check, ("end", "terminated"), agents)
@@ -433,7 +437,8 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     check_program(program, {a.pred: len(a.args) for a in env_set})
     return WorldSpec(src.path, names, program, tuple(agents), action_names, action_facts, mask, space, parts,
                      reward_table, reward_scaled, terminated, truncated, max_steps, start_facts, choices,
-                     randoms, board, fps, src, r.budget.board_facts + r.budget.atoms, reward_terms, win, loss)
+                     randoms, board, fps, src, r.budget.board_facts + r.budget.atoms, reward_terms, win, loss,
+                     previous)
 
 
 def _every_agents_atoms_ahead(r: _Reader, board: Board | None, agents: int) -> None:
@@ -660,7 +665,7 @@ def _domain(r: _Reader, path: KeyPath, domains: dict[str, list[str]]) -> list[st
 
 def _observation(r: _Reader, check: _Names, domains: dict[str, list[str]], agents: list[str]
                  ) -> tuple[str, tuple[ObservationPart, ...]]:
-    r.table(("observation",), ("space", "parts"))
+    r.table(("observation",), ("space", "parts", "previous"))
     space = r.string(("observation", "space"), choices=SPACES)
     parts = []
     raw_parts = _list(r, ("observation", "parts"))
@@ -700,6 +705,21 @@ def _observation(r: _Reader, check: _Names, domains: dict[str, list[str]], agent
     if len({p.name for p in parts}) != len(parts):
         raise r.err(("observation", "parts"), "two parts with one name")
     return space, tuple(parts)
+
+
+MAX_PREVIOUS = 64  # earlier observations an observation may carry
+
+
+def _previous(r: _Reader, space: str) -> int:
+    """`[observation] previous = N`: the observations of the N steps before follow the current one."""
+    path = ("observation", "previous")
+    n = r.integer(path, 0)
+    if n > MAX_PREVIOUS:
+        raise r.err(path, f"at most {MAX_PREVIOUS} earlier observations, got {n}")
+    if n and space == "Discrete":
+        raise r.err(path, "a Discrete observation is one number: earlier observations need a MultiDiscrete, "
+                          "Box or Dict space")
+    return n
 
 
 def _nearest(r: _Reader, check: _Names, path: KeyPath, p: dict[str, Any], name: str, space: str,
