@@ -111,6 +111,10 @@ class DeclaredWorlds:
         picks = self._picks
         for d, drawer in enumerate(self.one._before):
             picks[:, d] = _draw_batch(drawer, self)
+        computed = self.one._computed
+        if len(computed):
+            base = self.one.computed_base
+            picks[:, base:base + len(computed)] = computed.picks(self.engine, self.steps)
         self.engine_step(self._rows, picks)
         self.steps += 1
 
