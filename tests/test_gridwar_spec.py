@@ -12,7 +12,7 @@ import pytest
 from tracelab import RULES_DIR
 from tracelab.envs.declared.gym_env import DeclaredEnv
 from tracelab.envs.gym_env import GridWarEnv
-from tracelab.game.scenario import builtin_scenario
+from tracelab.game.scenario import Scenario, builtin_scenario
 
 SPECS = {name: RULES_DIR / "gridworld" / f"war_{name}.toml" for name in ("base", "advanced")}
 # RuleSim's observation numbers the spec declares: own x, y, opponent x, y (and, advanced, the
@@ -122,34 +122,69 @@ def test_the_declared_war_game_passes_gymnasiums_checker(name: str) -> None:
                                              "........", "........", ".......r"]
 
 
-@pytest.mark.parametrize("stack_previous", [False, True])
-def test_two_agents_a_team_equal_rulesim_step_by_step(stack_previous: bool) -> None:
-    """war_base_2v2.toml as a PettingZoo env: each red agent's observation (the team's view, with the last
-    step's after it for stack_previous), mask and reward (RuleSim's agent_reward) and the ends, against
-    GridWarEnv on a 2v2 base scenario."""
+def play_teams(spec: str, scenario: Scenario, steps: int, seed: int, stack_previous: bool = False) -> dict[str, int]:
+    """Step GridWarEnv (RuleSim) with two agents a team and the spec's PettingZoo env side by side: each red
+    agent's observation (the team's view) and mask, its reward (RuleSim's agent_reward) and the ends are
+    equal at every step. Red plays random allowed actions 3 times in 4, else any. Returns what happened."""
     from tracelab.envs.declared.parallel_env import DeclaredParallelEnv
-    scenario = replace(builtin_scenario("base"), name="base-2v2", agents_per_team=2, red_starts=None,
-                       blue_starts=None)
     ref = GridWarEnv(scenario, stack_previous=stack_previous)
-    dec = DeclaredParallelEnv(RULES_DIR / "gridworld" / "war_base_2v2.toml", stack_previous=stack_previous)
+    dec = DeclaredParallelEnv(RULES_DIR / "gridworld" / spec, stack_previous=stack_previous)
     names = dec.possible_agents
-    rng = np.random.default_rng(7)
-    o1, i1 = ref.reset(seed=3)
-    o2, i2 = dec.reset(seed=3)
-    ends = unsafe = 0
-    for k in range(300):
+    n_actions = len(scenario.action_ids)
+    rng = np.random.default_rng(seed + 1000)
+    seen = dict.fromkeys(["ends", "red won", "blue won", "truncated", "unsafe", "invalid", "hit", "blue hit",
+                          "slow move", "slow move hit"], 0)
+    o1, i1 = ref.reset(seed=seed)
+    o2, i2 = dec.reset(seed=seed)
+    for k in range(steps):
         for j, a in enumerate(names):
-            assert o1.tolist() == o2[a].tolist(), (k, o1, o2)
+            assert o1.tolist() == o2[a].tolist(), (k, j, o1, o2)
             assert i1["action_mask"][j].tolist() == i2[a]["action_mask"].tolist(), (k, j, i1, i2)
-        acts = [int(rng.choice(np.flatnonzero(i1["action_mask"][j]))) if rng.random() < 0.75 else int(rng.integers(5))
-                for j in range(2)]
+        acts = [int(rng.choice(np.flatnonzero(i1["action_mask"][j]))) if rng.random() < 0.75
+                else int(rng.integers(n_actions)) for j in range(2)]
+        state = ref.sim.state
+        moving = state.moving[0].copy()  # [team, agent]: a slow agent between its two steps
         o1, _, te1, tr1, i1 = ref.step(np.array(acts))
         o2, r2, te2, tr2, i2 = dec.step(dict(zip(names, acts)))
-        assert [r2[a] for a in names] == i1["agent_reward"].tolist(), (k, r2, i1)
+        assert [r2[a] for a in names] == i1["agent_reward"].tolist(), (k, acts, r2, i1)
         assert all((te2[a], tr2[a]) == (te1, tr1) for a in names), (k, te1, tr1, te2, tr2)
-        unsafe += int(i1["unsafe"].sum())
+        seen["unsafe"] += int(i1["unsafe"].sum())
+        seen["invalid"] += int(i1["invalid"].sum())
+        seen["hit"] += int(i1["hits_made"].sum())
+        seen["blue hit"] += int(i1["hits_taken"].sum())
+        seen["slow move"] += int(moving.sum())
+        seen["slow move hit"] += int((moving & ~state.alive[0]).sum())  # a hit stopped the move
         if te1 or tr1:
-            ends += 1
+            seen["ends"] += 1
+            seen["truncated"] += tr1
+            seen["red won"] += i1["winner"] == 0
+            seen["blue won"] += i1["winner"] == 1
             o1, i1 = ref.reset()
             o2, i2 = dec.reset()
-    assert ends > 5 and unsafe, (ends, unsafe)
+    return seen
+
+
+@pytest.mark.parametrize("stack_previous", [False, True])
+def test_two_agents_a_team_equal_rulesim_step_by_step(stack_previous: bool) -> None:
+    """war_base_2v2.toml as a PettingZoo env (the last step's view after the team's for stack_previous)
+    against GridWarEnv on a 2v2 base scenario."""
+    scenario = replace(builtin_scenario("base"), name="base-2v2", agents_per_team=2, red_starts=None,
+                       blue_starts=None)
+    seen = play_teams("war_base_2v2.toml", scenario, 300, 3, stack_previous)
+    assert seen["ends"] > 5 and seen["unsafe"], seen
+
+
+def test_advanced_two_agents_a_team_equal_rulesim_step_by_step() -> None:
+    """war_advanced_2v2.toml: each opponent shoots at its nearest living enemy in line ([[nearest]]) and
+    each agent is rewarded for its own hits, as RuleSim's 2v2 advanced game."""
+    scenario = replace(builtin_scenario("advanced"), name="advanced-2v2", agents_per_team=2, red_starts=None,
+                       blue_starts=None)
+    seen = play_teams("war_advanced_2v2.toml", scenario, 400, 0)
+    assert seen["ends"] > 5 and seen["hit"] and seen["blue hit"] and seen["invalid"], seen
+
+
+def test_nonmarkov_scenario_equals_rulesim_step_by_step() -> None:
+    """war_nonmarkov.toml: the slow agents act on the episode's even steps ([[clock]]), their moves take
+    two steps and a hit stops one; [current, previous] observations; against GridWarEnv's nonmarkov."""
+    seen = play_teams("war_nonmarkov.toml", builtin_scenario("nonmarkov"), 400, 1, stack_previous=True)
+    assert seen["ends"] > 5 and seen["slow move"] and seen["slow move hit"] and seen["hit"], seen
