@@ -744,8 +744,10 @@ def _observation(r: _Reader, check: _Names, domains: dict[str, list[str]], agent
 def _clock(r: _Reader, check: _Names, path: KeyPath) -> Clock:
     """A `[[clock]]`: its facts on the episode's steps k with k % every == at."""
     t = r.table(path, ("atom", "every", "at"))
-    texts = [t["atom"]] if isinstance(t.get("atom"), str) else r.strings((*path, "atom"))
-    atoms = check.atoms((*path, "atom"), texts, {}, bounds=True)
+    if isinstance(t.get("atom"), str):
+        atoms = (check.ground(check.pattern((*path, "atom"), t["atom"], (), bounds=True), {}),)
+    else:
+        atoms = check.atoms((*path, "atom"), r.strings((*path, "atom")), {}, bounds=True)
     if not atoms:
         raise r.err((*path, "atom"), "expected at least one atom")
     every = r.integer((*path, "every"), minimum=1)
