@@ -65,6 +65,19 @@ def test_a_clock_sets_its_facts_on_every_kth_step_with_the_last_observation_afte
     assert [env2.step(0)[0][0] for _ in range(5)] == [0, 1, 0, 1, 0]
 
 
+def test_a_dict_observation_gains_previous_entries(tmp_path: Path) -> None:
+    """previous = 2 in a Dict space: `previous_tick` and `previous2_tick`, the start's at a reset."""
+    env = DeclaredEnv(world(tmp_path, SPEC.replace('space = "Box"\nprevious = 1', 'space = "Dict"\nprevious = 2')))
+    assert sorted(env.observation_space.spaces) == ["previous2_tick", "previous_tick", "tick"]
+    obs, _ = env.reset(seed=0)
+    seen = [obs]
+    for _ in range(3):
+        seen.append(env.step(0)[0])
+    assert [[float(o[k][0]) for k in ("tick", "previous_tick", "previous2_tick")] for o in seen] == \
+        [[0, 0, 0], [0, 0, 0], [1, 0, 0], [0, 1, 0]]
+    assert all(env.observation_space.contains(o) for o in seen)
+
+
 def test_the_vector_env_counts_each_worlds_steps(tmp_path: Path) -> None:
     """Every world ticks on its own episode's steps; a world restarted by autoreset starts from its start
     observation twice, the ended episode's last one in final_obs."""
