@@ -6,6 +6,7 @@ and truncated as GridWarEnv on RuleSim, step by step, for the same seed and acti
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -27,9 +28,10 @@ def play_both(name: str, steps: int, seed: int, max_steps: int, scenario: Scenar
     """Step GridWarEnv (RuleSim) and the declared env side by side; assert every step equal. Red plays a
     random allowed action 3 times in 4, else any action (unsafe moves, shots with no ammo). Returns what
     happened, to show the comparison covered it."""
-    ref = GridWarEnv(replace(scenario or builtin_scenario(name), max_steps=max_steps))
+    stack_previous = bool(params.get("stack_previous", False))
+    ref = GridWarEnv(replace(scenario or builtin_scenario(name), max_steps=max_steps), stack_previous=stack_previous)
     dec = DeclaredEnv(WAR, max_steps=max_steps, **PARAMS[name], **params)
-    n_obs = DECLARED_OBS[name]
+    n_obs = DECLARED_OBS[name] * (2 if stack_previous else 1)
     assert dec.observation_space.shape == (n_obs,) and dec.action_space == ref.action_space
     rng = np.random.default_rng(seed + 1000)
     seen = {"red won": 0, "blue won": 0, "truncated": 0, "hit": 0, "unsafe": 0, "invalid": 0, "blue shot": 0}
@@ -72,6 +74,44 @@ def test_advanced_game_equals_rulesim_step_by_step(seed: int) -> None:
     assert seen["red won"] and seen["blue won"] and seen["hit"] and seen["blue shot"] and seen["unsafe"], seen
 
 
+def test_stack_previous_equals_rulesim_step_by_step() -> None:
+    """`[observation] previous = 1` (the spec's stack_previous param): [current, previous] as RuleSim's
+    stack_previous gives it, at resets (the start twice), after steps and across episode ends."""
+    seen = play_both("advanced", 300, 4, max_steps=30, stack_previous=True)
+    assert seen["truncated"] and (seen["red won"] or seen["blue won"]), seen
+
+
+def test_stack_previous_in_the_vector_env_equals_single_envs() -> None:
+    """The vector env's [current, previous]: each world as a single DeclaredEnv seeded seed + i steps it
+    (that env equals RuleSim above), final observations included, and a restarted world's history is
+    its start."""
+    from tracelab.envs.declared.vector_env import DeclaredVectorEnv
+    n = 3
+    vec = DeclaredVectorEnv(WAR, n, advanced=True, stack_previous=True, max_steps=12)
+    singles = [DeclaredEnv(WAR, advanced=True, stack_previous=True, max_steps=12) for _ in range(n)]
+    assert vec.single_observation_space == singles[0].observation_space
+    rng = np.random.default_rng(5)
+    o, info = vec.reset(seed=20)
+    outs = [env.reset(seed=20 + i) for i, env in enumerate(singles)]
+    ends = 0
+    for k in range(60):
+        assert o.tolist() == [x[0].tolist() for x in outs], k
+        acts = np.array([rng.choice(np.flatnonzero(x[1]["action_mask"])) for x in outs])
+        o, r, te, tr, info = vec.step(acts)
+        for i, env in enumerate(singles):
+            o1, r1, te1, tr1, _ = env.step(int(acts[i]))
+            assert (r[i], te[i], tr[i]) == (r1, te1, tr1), (k, i)
+            if te1 or tr1:
+                ends += 1
+                assert info["final_obs"][i].tolist() == o1.tolist(), (k, i)
+                o1, i1 = env.reset()
+                assert o1[:7].tolist() == o1[7:].tolist()
+            else:
+                i1 = {"action_mask": env._info()["action_mask"]}
+            outs[i] = (o1, i1)
+    assert ends >= n, ends
+
+
 @pytest.mark.parametrize("name", ["base", "advanced"])
 def test_the_step_limit_truncates_as_rulesim(name: str) -> None:
     """A short step limit: truncated episodes, and games won on their last step stay won (RuleSim)."""
@@ -89,33 +129,42 @@ def test_the_declared_war_game_passes_gymnasiums_checker(name: str) -> None:
                                              "........", "........", ".......r"]
 
 
-def play_teams(params: dict, scenario: Scenario, steps: int, seed: int) -> dict[str, int]:
-    """war.toml with `params` as a PettingZoo env beside GridWarEnv on `scenario`: each red agent's
-    observation (the team's view), mask and reward (RuleSim's agent_reward) and the ends, step by step."""
+def play_teams(spec: Path, params: dict, scenario: Scenario, steps: int, seed: int,
+               stack_previous: bool = False) -> dict[str, int]:
+    """Step GridWarEnv (RuleSim) with several agents a team and the spec's PettingZoo env (`params`) side by
+    side: each red agent's observation (the team's view) and mask, its reward (RuleSim's agent_reward) and the ends are
+    equal at every step. Red plays random allowed actions 3 times in 4, else any. Returns what happened."""
     from tracelab.envs.declared.parallel_env import DeclaredParallelEnv
-    ref = GridWarEnv(scenario)
-    dec = DeclaredParallelEnv(WAR, **params)
+    ref = GridWarEnv(scenario, stack_previous=stack_previous)
+    dec = DeclaredParallelEnv(spec, **params, stack_previous=stack_previous)
     names = dec.possible_agents
-    n = scenario.agents_per_team
-    assert len(names) == n
+    n_actions = len(scenario.action_ids)
     rng = np.random.default_rng(seed + 1000)
+    seen = dict.fromkeys(["ends", "red won", "blue won", "truncated", "unsafe", "invalid", "hit", "blue hit",
+                          "slow move", "slow move hit"], 0)
     o1, i1 = ref.reset(seed=seed)
     o2, i2 = dec.reset(seed=seed)
-    seen = {"ends": 0, "unsafe": 0, "red won": 0, "blue won": 0}
     for k in range(steps):
-        masks = np.asarray(i1["action_mask"]).reshape(n, -1)
         for j, a in enumerate(names):
-            assert o1.tolist() == o2[a].tolist(), (k, o1, o2)
-            assert masks[j].tolist() == i2[a]["action_mask"].tolist(), (k, j, i1, i2)
-        acts = [int(rng.choice(np.flatnonzero(masks[j]))) if rng.random() < 0.75 else int(rng.integers(5))
-                for j in range(n)]
-        o1, _, te1, tr1, i1 = ref.step(np.array(acts) if n > 1 else acts[0])
+            assert o1.tolist() == o2[a].tolist(), (k, j, o1, o2)
+            assert i1["action_mask"][j].tolist() == i2[a]["action_mask"].tolist(), (k, j, i1, i2)
+        acts = [int(rng.choice(np.flatnonzero(i1["action_mask"][j]))) if rng.random() < 0.75
+                else int(rng.integers(n_actions)) for j in range(len(names))]
+        state = ref.sim.state
+        moving = state.moving[0].copy()  # [team, agent]: a slow agent between its two steps
+        o1, _, te1, tr1, i1 = ref.step(np.array(acts))
         o2, r2, te2, tr2, i2 = dec.step(dict(zip(names, acts)))
-        assert [r2[a] for a in names] == np.atleast_1d(i1["agent_reward"]).tolist(), (k, r2, i1)
+        assert [r2[a] for a in names] == i1["agent_reward"].tolist(), (k, acts, r2, i1)
         assert all((te2[a], tr2[a]) == (te1, tr1) for a in names), (k, te1, tr1, te2, tr2)
-        seen["unsafe"] += int(np.sum(i1["unsafe"]))
+        seen["unsafe"] += int(i1["unsafe"].sum())
+        seen["invalid"] += int(i1["invalid"].sum())
+        seen["hit"] += int(i1["hits_made"].sum())
+        seen["blue hit"] += int(i1["hits_taken"].sum())
+        seen["slow move"] += int(moving.sum())
+        seen["slow move hit"] += int((moving & ~state.alive[0]).sum())  # a hit stopped the move
         if te1 or tr1:
             seen["ends"] += 1
+            seen["truncated"] += tr1
             seen["red won"] += i1["winner"] == 0
             seen["blue won"] += i1["winner"] == 1
             o1, i1 = ref.reset()
@@ -123,15 +172,17 @@ def play_teams(params: dict, scenario: Scenario, steps: int, seed: int) -> dict[
     return seen
 
 
-def test_two_agents_a_team_equal_rulesim_step_by_step() -> None:
-    """agents_per_team = 2: each red agent's view, mask and reward, against GridWarEnv on a 2v2 base."""
-    seen = play_teams({"agents_per_team": 2}, team_scenario(2), 300, 3)
+@pytest.mark.parametrize("stack_previous", [False, True])
+def test_two_agents_a_team_equal_rulesim_step_by_step(stack_previous: bool) -> None:
+    """agents_per_team = 2: each red agent's view (the last step's after it for stack_previous), mask and
+    reward, against GridWarEnv on a 2v2 base."""
+    seen = play_teams(WAR, {"agents_per_team": 2}, team_scenario(2), 300, 3, stack_previous)
     assert seen["ends"] > 5 and seen["unsafe"], seen
 
 
 def test_five_agents_a_team_equal_rulesim_step_by_step() -> None:
     """The 5v5 base game of the method's experiment (5v5-base), generated from agents_per_team = 5."""
-    seen = play_teams({"agents_per_team": 5}, team_scenario(5), 300, 4)
+    seen = play_teams(WAR, {"agents_per_team": 5}, team_scenario(5), 300, 4)
     assert seen["ends"] >= 2 and seen["unsafe"], seen
 
 
@@ -147,3 +198,20 @@ def test_another_map_and_rewards_equal_rulesim_step_by_step() -> None:
 def team_scenario(n: int) -> Scenario:
     return replace(builtin_scenario("base"), name=f"base-{n}v{n}", agents_per_team=n, red_starts=None,
                    blue_starts=None)
+
+
+def test_advanced_two_agents_a_team_equal_rulesim_step_by_step() -> None:
+    """war_advanced_2v2.toml: each opponent shoots at its nearest living enemy in line ([[nearest]]) and
+    each agent is rewarded for its own hits, as RuleSim's 2v2 advanced game."""
+    scenario = replace(builtin_scenario("advanced"), name="advanced-2v2", agents_per_team=2, red_starts=None,
+                       blue_starts=None)
+    seen = play_teams(RULES_DIR / "gridworld" / "war_advanced_2v2.toml", {}, scenario, 400, 0)
+    assert seen["ends"] > 5 and seen["hit"] and seen["blue hit"] and seen["invalid"], seen
+
+
+def test_nonmarkov_scenario_equals_rulesim_step_by_step() -> None:
+    """war_nonmarkov.toml: the slow agents act on the episode's even steps ([[clock]]), their moves take
+    two steps and a hit stops one; [current, previous] observations; against GridWarEnv's nonmarkov."""
+    seen = play_teams(RULES_DIR / "gridworld" / "war_nonmarkov.toml", {}, builtin_scenario("nonmarkov"), 400, 1,
+                      stack_previous=True)
+    assert seen["ends"] > 5 and seen["slow move"] and seen["slow move hit"] and seen["hit"], seen

@@ -109,6 +109,7 @@ def scenario_facts(scenario: Scenario) -> list[Fact]:
             if ammo:
                 fact("ready", bullet_name(t, j, 0), static=False)
     fact("evenStep", "clock", lower=0.0, upper=0.0, static=False)
+    fact("countsSteps", "clock")  # game.rules' clock counts the steps (a declared env's spec sets evenStep)
     # phases within a step (game.rules sections 3 and 4) and the tally's counting chains
     fact("clock", "clock")
     fact("acting", "clock", lower=0.0, upper=0.0, static=False)

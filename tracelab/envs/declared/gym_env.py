@@ -17,6 +17,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from tracelab.envs.declared.history import ObservationHistory, stacked_space
 from tracelab.envs.declared.render import DeclaredPainter
 from tracelab.envs.declared.spec import WorldSpec, load_spec
 from tracelab.envs.declared.world import DeclaredWorld
@@ -52,6 +53,7 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
         self._n_actions = len(self.world_spec.action_names)
         self.action_space = spaces.Discrete(self._n_actions)
         self.observation_space = observation_space(self.world_spec)
+        self._history = ObservationHistory(self.world_spec.previous)
         self._running = False
         self._last_action: int | None = None
 
@@ -64,7 +66,7 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
             self._recorder.begin(seed)
         self._running = True
         self._last_action = None
-        return self._observe(), self._info()
+        return self._history.start(self._observe()), self._info()
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
         if not self._running:
@@ -77,7 +79,7 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
         self._last_action = a
         terminated, truncated = w.terminated(), w.truncated()
         self._running = not (terminated or truncated)
-        obs = self._observe()
+        obs = self._history.step(self._observe())
         if self._recorder is not None:
             limit = self._registered_limit()
             self._recorder.stepped(a, w.last_rewards, obs, terminated,
@@ -160,6 +162,11 @@ def render_world(world: DeclaredWorld, render_mode: str | None, painter: Declare
 
 
 def observation_space(spec: WorldSpec) -> spaces.Space[Any]:
+    """The space of an observation of `spec`, the earlier ones (`[observation] previous`) included."""
+    return stacked_space(_one_observation_space(spec), spec.previous)
+
+
+def _one_observation_space(spec: WorldSpec) -> spaces.Space[Any]:
     parts = spec.parts
     if spec.space == "Discrete":
         return spaces.Discrete(int(np.prod([len(p.atoms) for p in parts])))

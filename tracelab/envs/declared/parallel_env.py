@@ -20,6 +20,7 @@ from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
 from tracelab.envs.declared.gym_env import RENDER_MODES, observation_space, painter_for, render_world
+from tracelab.envs.declared.history import ObservationHistory
 from tracelab.envs.declared.spec import WorldSpec, load_spec
 from tracelab.envs.declared.world import DeclaredWorld
 
@@ -39,6 +40,7 @@ class DeclaredParallelEnv(ParallelEnv[str, Any, int]):
         self.agents: list[str] = []
         self._obs_space = observation_space(self.world_spec)
         self._act_space = spaces.Discrete(len(self.world_spec.action_names))
+        self._histories = [ObservationHistory(self.world_spec.previous) for _ in self.possible_agents]
         self._np_random, _ = seeding.np_random(None)
         self._last: np.ndarray | None = None
 
@@ -55,7 +57,7 @@ class DeclaredParallelEnv(ParallelEnv[str, Any, int]):
         self.world.reset(self._np_random)
         self.agents = list(self.possible_agents)
         self._last = None
-        return self._observations(), self._infos()
+        return self._observations(start=True), self._infos()
 
     def step(self, actions: dict[str, int]) -> tuple[dict[str, Any], dict[str, float], dict[str, bool],
                                                       dict[str, bool], dict[str, dict[str, Any]]]:
@@ -78,8 +80,10 @@ class DeclaredParallelEnv(ParallelEnv[str, Any, int]):
         return (obs, rewards, dict.fromkeys(self.possible_agents, terminated),
                 dict.fromkeys(self.possible_agents, truncated), infos)
 
-    def _observations(self) -> dict[str, Any]:
-        return {a: self.world.observation(i) for i, a in enumerate(self.possible_agents)}
+    def _observations(self, start: bool = False) -> dict[str, Any]:
+        """Each agent's observation (with its earlier ones: `start` begins an episode's)."""
+        return {a: (h.start if start else h.step)(self.world.observation(i))
+                for i, (a, h) in enumerate(zip(self.possible_agents, self._histories))}
 
     def _infos(self) -> dict[str, dict[str, Any]]:
         out = {}

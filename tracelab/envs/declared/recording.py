@@ -45,11 +45,14 @@ CONFIG_KEY = "declared_facts"
 
 def declared_facts(spec: WorldSpec) -> dict[str, Any]:
     """What sets each external fact of a run: the action facts' predicates, and each draw's name with
-    its atoms' predicates (the run's config under CONFIG_KEY)."""
+    its atoms' predicates, and the predicates the env computes ([[clock]], [[nearest]]; the run's config
+    under CONFIG_KEY)."""
     actions = sorted({a.pred for per_agent in spec.action_facts for facts in per_agent for a in facts})
     draws = {d.name: sorted({a.pred for value in d.atoms for a in value})
              for d in (*spec.start_choices, *spec.random_facts)}
-    return {"actions": actions, "draws": draws}
+    computed = sorted({a.pred for c in spec.clocks for a in c.atoms} |
+                      {a.pred for n in spec.nearest_facts for per in n.atoms for a in per})
+    return {"actions": actions, "draws": draws, **({"computed": computed} if computed else {})}
 
 
 def spec_sources(spec: WorldSpec) -> list[dict[str, Any]]:

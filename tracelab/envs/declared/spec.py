@@ -33,7 +33,7 @@ from tracelab.envs.declared.spec_size import SpecBudget, SpecTooBig
 READS = ("index", "lower", "bounds", "onehot", "count", "nearest")
 SPACES = ("Discrete", "MultiDiscrete", "Box", "Dict")
 SECTIONS = ("env", "params", "data", "board", "agents", "actions", "observation", "reward", "end", "start",
-            "random")
+            "random", "clock", "nearest")
 AGENT_VAR, ACTION_VAR, THING_VAR = "Agent", "Action", "Thing"
 MAX_DOMAIN = 100_000  # values of one `over` (or of a product of them), atoms of one observation part
 
@@ -114,6 +114,33 @@ class Draw:
     after: Atom | None = None
 
 
+@dataclass(frozen=True)
+class Clock:
+    """`[[clock]]`: facts set for the steps k of an episode (0: the first step after reset) with
+    k % every == at, and [0,0] on the others (a step fact, as an action's)."""
+    key: KeyPath
+    atoms: tuple[Atom, ...]
+    every: int
+    at: int
+
+
+@dataclass(frozen=True)
+class NearestFacts:
+    """`[[nearest]]`: for each of `who`, the fact atoms[who][thing] of its nearest thing, set for each
+    step from the state the step starts from (none when no thing qualifies). `where` holds, over the
+    board's cells, each who's atoms then each thing's (where it is); `lines`: only things straight
+    along one of these (row, col) steps count, a tie going to the line listed first (the same cell
+    counts as the first line); without lines every thing counts. Distance: rows plus columns; a tie
+    left goes to the thing listed first."""
+    key: KeyPath
+    atoms: tuple[tuple[Atom, ...], ...]
+    where: tuple[Atom, ...]
+    n_who: int
+    n_things: int
+    board_width: int
+    lines: tuple[tuple[int, int], ...] | None
+
+
 @dataclass
 class WorldSpec:
     path: str
@@ -145,6 +172,11 @@ class WorldSpec:
     # what a game's end counts as (`[end] win`, `loss`): an episode that terminated with one of them [1,1]
     win: tuple[Atom, ...] = ()
     loss: tuple[Atom, ...] = ()
+    # `[observation] previous`: the observations of that many earlier steps follow the current one
+    # (history.py; at a reset every one of them is the start's)
+    previous: int = 0
+    clocks: tuple[Clock, ...] = ()
+    nearest_facts: tuple[NearestFacts, ...] = ()
 
 
 # ---- reading typed values, located ----
@@ -409,6 +441,7 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     action_names, action_facts, mask = _actions(r, check, agents, agents_t.get("mask"))
     domains = {"cells": board.cells} if board else {}
     space, parts = _observation(r, check, domains, agents)
+    previous = _previous(r, space)
     reward_table, reward_scaled, reward_terms = _reward(r, check, agents)
     end = r.table(("end",), ("terminated", "truncated", "max_steps", "win", "loss"), default={})
     terminated = _every_agents(r, check, ("end", "terminated"), agents)
@@ -431,20 +464,26 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
             raise r.err(d.key, f"the draw name {d.name!r} is also the name of {'.'.join(map(str, seen[d.name]))} "
                                "(give each draw its own `name`)")
         seen[d.name] = d.key
+    clocks = tuple(_clock(r, check, ("clock", i)) for i in range(len(_list(r, ("clock",)))))
+    nearest_facts = tuple(_nearest_facts(r, check, ("nearest", i), domains)
+                          for i in range(len(_list(r, ("nearest",)))))
     fps = r.integer(("env", "render_fps"), 4, minimum=1)
     if board is not None:
         spec_read = [*(a for part in parts for atoms in part.per_agent for a in atoms), *terminated, *truncated,
                      *(a for per_agent in (*reward_table, *reward_scaled) for a, _ in per_agent),
                      *(a for per_agent in (mask or ()) for a in per_agent),
-                     *(a for d in (*choices, *randoms) for value in (d.weights or ()) for a in value)]
+                     *(a for d in (*choices, *randoms) for value in (d.weights or ()) for a in value),
+                     *(a for n in nearest_facts for a in n.where)]
         _check_board_names(r, rules, board, {a.pred for a in spec_read})
     # the program's warnings again, knowing what the env sets: no "never set" for pressed(...), slip(...)
     env_set = [*(a for per_agent in action_facts for facts in per_agent for a in facts), *start_facts,
-               *(a for d in (*choices, *randoms) for value in d.atoms for a in value)]
+               *(a for d in (*choices, *randoms) for value in d.atoms for a in value),
+               *(a for c in clocks for a in c.atoms), *(a for n in nearest_facts for per in n.atoms for a in per)]
     check_program(program, {a.pred: len(a.args) for a in env_set})
     return WorldSpec(src.path, names, program, tuple(agents), action_names, action_facts, mask, space, parts,
                      reward_table, reward_scaled, terminated, truncated, max_steps, start_facts, choices,
-                     randoms, board, fps, src, r.budget.board_facts + r.budget.atoms, reward_terms, win, loss)
+                     randoms, board, fps, src, r.budget.board_facts + r.budget.atoms, reward_terms, win, loss,
+                     previous, clocks, nearest_facts)
 
 
 def _require(r: _Reader) -> None:
@@ -689,7 +728,7 @@ def _domain(r: _Reader, path: KeyPath, domains: dict[str, list[str]]) -> list[st
 
 def _observation(r: _Reader, check: _Names, domains: dict[str, list[str]], agents: list[str]
                  ) -> tuple[str, tuple[ObservationPart, ...]]:
-    r.table(("observation",), ("space", "parts"))
+    r.table(("observation",), ("space", "parts", "previous"))
     space = r.string(("observation", "space"), choices=SPACES)
     parts = []
     raw_parts = _list(r, ("observation", "parts"))
@@ -729,6 +768,75 @@ def _observation(r: _Reader, check: _Names, domains: dict[str, list[str]], agent
     if len({p.name for p in parts}) != len(parts):
         raise r.err(("observation", "parts"), "two parts with one name")
     return space, tuple(parts)
+
+
+def _clock(r: _Reader, check: _Names, path: KeyPath) -> Clock:
+    """A `[[clock]]`: its facts on the episode's steps k with k % every == at."""
+    t = r.table(path, ("atom", "every", "at"))
+    if isinstance(t.get("atom"), str):
+        atoms = (check.ground(check.pattern((*path, "atom"), t["atom"], (), bounds=True), {}),)
+    else:
+        atoms = check.atoms((*path, "atom"), r.strings((*path, "atom")), {}, bounds=True)
+    if not atoms:
+        raise r.err((*path, "atom"), "expected at least one atom")
+    every = r.integer((*path, "every"), minimum=1)
+    at = r.integer((*path, "at"), 0)
+    if at >= every:
+        raise r.err((*path, "at"), f"expected a step in 0..{every - 1} (of every {every}), got {at}")
+    return Clock(path, atoms, every, at)
+
+
+WHO_VAR = "Who"
+
+
+def _nearest_facts(r: _Reader, check: _Names, path: KeyPath, domains: dict[str, list[str]]) -> NearestFacts:
+    """A `[[nearest]]`: `atom` (with Who and Thing) set for each of `who` and its nearest of `things`, where
+    each is found by `where` (Thing and a cell variable), before every step."""
+    t = r.table(path, ("atom", "who", "things", "where", "lines"))
+    cells = domains.get("cells")
+    if cells is None:
+        raise r.err(path, "[[nearest]] measures distances on the [board]; the spec has none")
+    who, things = r.strings((*path, "who")), r.strings((*path, "things"))
+    check.domain((*path, "who"), who)
+    check.domain((*path, "things"), things)
+    if not who or not things or (len(who) + len(things)) * len(cells) > MAX_DOMAIN:
+        raise r.err(path, f"expected `who` and `things`, together at most {MAX_DOMAIN // len(cells)}")
+    lit = check.pattern((*path, "atom"), r.string((*path, "atom")), (WHO_VAR, THING_VAR), bounds=True)
+    if {a.name for a in lit.args if a.is_var} != {WHO_VAR, THING_VAR}:
+        raise r.err((*path, "atom"), f"expected the variables {WHO_VAR} and {THING_VAR}")
+    text = r.string((*path, "where"))
+    where = check.pattern((*path, "where"), text, tuple(v.name for v in _vars(text)))
+    others = {a.name for a in where.args if a.is_var} - {THING_VAR}
+    if THING_VAR not in {a.name for a in where.args if a.is_var} or len(others) != 1:
+        raise r.err((*path, "where"), f"{text!r}: expected {THING_VAR} and one variable for the cell")
+    cell_var = others.pop()
+    r.charge(path, (len(who) + len(things)) * len(cells) + len(who) * len(things))
+    where_atoms = tuple(check.ground(where, {THING_VAR: x, cell_var: c}) for x in (*who, *things) for c in cells)
+    atoms = tuple(tuple(check.ground(lit, {WHO_VAR: w, THING_VAR: x}) for x in things) for w in who)
+    lines = None
+    if "lines" in t:
+        raw = r.value((*path, "lines"))
+        if not isinstance(raw, list) or not raw or not all(
+                isinstance(x, list) and len(x) == 2 and all(type(v) is int for v in x) and x != [0, 0] for x in raw):
+            raise r.err((*path, "lines"), "expected a list of [row, col] steps such as [[-1, 0], [1, 0]]")
+        lines = tuple((int(x[0]), int(x[1])) for x in raw)
+    width = len(cells) // len(r.value(("board", "rows")))
+    return NearestFacts(path, atoms, where_atoms, len(who), len(things), width, lines)
+
+
+MAX_PREVIOUS = 64  # earlier observations an observation may carry
+
+
+def _previous(r: _Reader, space: str) -> int:
+    """`[observation] previous = N`: the observations of the N steps before follow the current one."""
+    path = ("observation", "previous")
+    n = r.integer(path, 0)
+    if n > MAX_PREVIOUS:
+        raise r.err(path, f"at most {MAX_PREVIOUS} earlier observations, got {n}")
+    if n and space == "Discrete":
+        raise r.err(path, "a Discrete observation is one number: earlier observations need a MultiDiscrete, "
+                          "Box or Dict space")
+    return n
 
 
 def _nearest(r: _Reader, check: _Names, path: KeyPath, p: dict[str, Any], name: str, space: str,

@@ -30,6 +30,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from tracelab.envs.declared.gym_env import observation_space
+from tracelab.envs.declared.history import ObservationHistory
 from tracelab.envs.declared.spec import WorldSpec, load_spec
 from tracelab.envs.declared.vector_world import DeclaredWorlds
 from tracelab.envs.vector_env import GridWarVectorEnv
@@ -63,6 +64,7 @@ class DeclaredVectorEnv(VectorEnv):
         self._all = np.ones(num_envs, bool)
         self._all.flags.writeable = False  # shared by every `_key` mask that covers all worlds
         self._everywhere = np.arange(num_envs)
+        self._history = ObservationHistory(self.world_spec.previous)
 
     def reset(self, *, seed: int | Sequence[int] | None = None, options: dict[str, Any] | None = None
               ) -> tuple[Any, dict[str, Any]]:
@@ -84,7 +86,7 @@ class DeclaredVectorEnv(VectorEnv):
         if isinstance(seed, (int, np.integer)):
             super().reset(seed=int(seed))
         self.worlds.reset(self._everywhere)
-        return self.worlds.observations(), self._info(self._all)
+        return self._history.start(self.worlds.observations()), self._info(self._all)
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         if not self._rngs:
@@ -95,7 +97,7 @@ class DeclaredVectorEnv(VectorEnv):
             raise ValueError(f"actions must be {self.num_envs} integers in 0..{n - 1}, got {actions!r}")
         w = self.worlds
         w.step(a.astype(np.int64))
-        obs = w.observations()
+        obs = self._history.step(w.observations())
         reward = w.rewards()
         terminated, truncated = w.terminated(), w.truncated(self.max_episode_steps)
         info = self._info(self._all)
@@ -105,8 +107,10 @@ class DeclaredVectorEnv(VectorEnv):
             if w.spec.win or w.spec.loss:  # how the games ended, as the world declares ([end] win, loss)
                 final_info["outcome"] = w.outcomes()
                 final_info["won"] = final_info["outcome"] == "win"
-            w.reset(np.flatnonzero(done))
-            final_obs, obs = obs, w.observations()  # the others' observations read again, unchanged
+            ended = np.flatnonzero(done)
+            w.reset(ended)
+            # the others' observations read again, unchanged; the restarted worlds' history is their start
+            final_obs, obs = obs, self._history.start(w.observations(), ended)
             info = self._info(self._all)
             info.update(final_obs=final_obs, _final_obs=done, final_info=final_info, _final_info=done)
         return obs, reward, terminated, truncated, info

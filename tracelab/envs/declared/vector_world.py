@@ -115,6 +115,10 @@ class DeclaredWorlds:
         u = self.uniforms.each(len(before)) if self.uniforms is not None and before else None
         for d, drawer in enumerate(before):
             picks[:, d] = _draw_batch(drawer, self, None if u is None else u[:, d])
+        computed = self.one._computed
+        if len(computed):
+            base = self.one.computed_base
+            picks[:, base:base + len(computed)] = computed.picks(self.engine, self.steps)
         self.engine_step(self._rows, picks)
         self.steps += 1
 

@@ -25,6 +25,7 @@ from tracelab.engine import kernel as counting_kernel
 from tracelab.engine import lanes as lanes_kernel
 from tracelab.engine.numba_cache import is_cached
 from tracelab.envs.declared import fused, vector_fused
+from tracelab.envs.declared.computed import ComputedFacts
 from tracelab.envs.declared.observe_kernel import ObservationProgram, ObservationReader, split_parts
 from tracelab.envs.declared.spec import Atom, Draw, WorldSpec
 from tracelab.envs.declared.state_errors import no_index, no_weights_hold
@@ -124,10 +125,13 @@ class DeclaredWorld:
         self._before = [_Drawer(d, ids) for d in spec.random_facts if d.after is None]
         self._after = [_Drawer(d, ids) for d in spec.random_facts if d.after is not None]
         self._start_ids, self._start_bounds = ids(spec.start_facts), _bounds(spec.start_facts)
+        self._computed = ComputedFacts(spec, ids)  # the clocks' and nearest facts, set for each step
         self._win_ids, self._loss_ids = ids(spec.win), ids(spec.loss)
         env_set = [self._start_ids, *self._action_ids]
         for drawer in (*self._choices, *self._before, *self._after):
             env_set.extend(drawer.value_ids)
+        for values in self._computed.value_ids:
+            env_set.extend(values)
         env_set_ids = np.unique(np.concatenate([np.zeros(0, np.int64), *env_set]))
         if env_set_ids.size:
             eng.add_facts(env_set_ids, 0.0, 0.0)
@@ -182,8 +186,11 @@ class DeclaredWorld:
     def _step_tables(self) -> tuple[np.ndarray, ...]:
         """fused.py's tables of the step facts, and its row buffers (room for every fact on and off)."""
         act_ptr, act_atoms, act_bnd = fused.csr(self._action_ids, self._action_bounds)
-        groups = [d.value_ids for d in (*self._before, *self._after, *self._choices)] + [[self._start_ids]]
-        bounds = [d.value_bounds for d in (*self._before, *self._after, *self._choices)] + [[self._start_bounds]]
+        drawers = (*self._before, *self._after, *self._choices)
+        # the computed facts' groups after the draws' (their picks from computed_base), the start facts last
+        self.computed_base = len(drawers)
+        groups = [d.value_ids for d in drawers] + self._computed.value_ids + [[self._start_ids]]
+        bounds = [d.value_bounds for d in drawers] + self._computed.value_bounds + [[self._start_bounds]]
         draw_base = np.cumsum([0] + [len(g) for g in groups])[:-1].astype(np.int64)
         val_ptr, val_atoms, val_bnd = fused.csr([v for g in groups for v in g], [v for b in bounds for v in b])
         cap = self.n_agents * max((len(a) for a in self._action_ids), default=0) + \
@@ -226,6 +233,9 @@ class DeclaredWorld:
         picks = self._picks  # the `after` draws' slots stay -1 between steps
         for d, drawer in enumerate(self._before):
             picks[d] = drawer.pick(self, rng) if draws is None else draws[d]
+        if len(self._computed):
+            base = self.computed_base
+            picks[base:base + len(self._computed)] = self._computed.picks(self.engine, np.array([self.steps]))[0]
         self._fused_step(rows, picks)
         rewards = self._rewards()
         terms = self._reward_terms() if self.keep_reward_terms else None
