@@ -347,7 +347,7 @@ def test_board_follows_the_trace_cursor() -> None:
     async def body(app: Any, pilot: Any) -> None:
         pane, trace = await open_first_trace(app, pilot)
         board = pane.board
-        assert board is not None and board.display                  # 120 columns: room for it
+        assert board is not None and pane.side_box.display          # 120 columns: room for it
         jumps = pane.jumps
         pane.query_one("#tr-goto").value = "15"
         await pilot.press("g", "enter")
@@ -360,8 +360,8 @@ def test_board_follows_the_trace_cursor() -> None:
         trace.move_to(death)
         await wait_for(pilot, lambda: board.phase >= 0)
         assert "R1 dead" in await shown(app, pilot)
-        await pilot.press("b")                                         # hide it
-        assert not board.display
+        await pilot.press("b")                                         # hide it (its box, with the decision)
+        assert not pane.side_box.display
     run_app([ADVANCED], body, size=(120, 34))
 
 

@@ -146,11 +146,11 @@ def test_at_80x24_beside_the_board_every_trace_column_fits_and_the_cursor_row_sh
     column 12 wide, not two characters behind a sideways scroll), and the cursor row stays on screen."""
     async def body(app: Any, pilot: Any) -> None:
         pane, trace = await open_trace(app, pilot)
-        assert not pane.board.display                            # no room beside the table: hidden
+        assert not pane.side_box.display                         # no room beside the table: hidden
         await pilot.press("end")
         await wait_for(pilot, lambda: loaded(trace) and trace.cursor == trace.count - 1)
         await pilot.press("b")
-        await wait_for(pilot, lambda: pane.board.display and pane.board.board is not None)
+        await wait_for(pilot, lambda: pane.side_box.display and pane.board.board is not None)
         await pilot.pause(0.3)
         widths = {c.key: c.width for c in trace.columns}
         assert widths["rule"] >= 12 and widths["node"] >= 12

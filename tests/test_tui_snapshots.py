@@ -198,7 +198,7 @@ def test_trace_beside_the_board_at_80x24_snapshot() -> None:
         await pilot.press("g", "enter")
         await wait_for(pilot, lambda: pane.jumps > jumps and loaded(pane.table))
         await pilot.press("b")
-        await wait_for(pilot, lambda: pane.board.display and pane.board.board is not None
+        await wait_for(pilot, lambda: pane.side_box.display and pane.board.board is not None
                        and pane.board.step == 10)
         await shots.take("trace")
         failures.extend(shots.failures)

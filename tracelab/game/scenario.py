@@ -177,11 +177,11 @@ def game_fact_counts(width: int, height: int, agents: int, ammo: int, hits_to_ki
     """How many facts tracelab.game.facts.scenario_facts makes of a scenario, by the field that drives
     them (tests/test_strangers_sizes.py checks the sum against it): per cell its kind and, per direction,
     a neighbour and nextTo or an edge; per agent 15 and per team 1; per bullet 5 and one per enemy
-    target; per bullet place of a team 1, and 3 per hit to kill; 5 more."""
+    target; per bullet place of a team 1, and 3 per hit to kill; 6 more (the clock's)."""
     cells = width * height + 4 * ((width - 1) * height + width * (height - 1)) + 2 * (width + height)
     bullets = agents * ammo
     return {"width": cells,
-            "agents_per_team": 2 * (15 * agents + 1) + 2 * bullets * agents + 5,
+            "agents_per_team": 2 * (15 * agents + 1) + 2 * bullets * agents + 6,
             "ammo": 2 * bullets * 5 + bullets,
             "health": 3 * bullets * hits_to_kill}
 
