@@ -108,3 +108,21 @@ def test_seeded_runs_repeat(pair: Path) -> None:
     firsts = [env.reset(seed=s)[0]["ann"] for s in (3, 3, 4, 5, 6, 7, 8)]
     assert firsts[0] == firsts[1] and set(firsts) == {0, 1}
     assert np.random.default_rng(3).random() < 0.5 and firsts[0] == 0  # categorical: u < 1/2 takes value 0
+
+
+def test_a_spec_of_one_agent_steps_as_a_pettingzoo_env_and_as_its_gymnasium_env() -> None:
+    """DeclaredParallelEnv of a one-agent spec (war.toml at 1v1) steps (it failed: the world took its one
+    agent's action as a number, and was handed a row of them), and gives what the gymnasium env gives."""
+    from tracelab import RULES_DIR
+    spec = RULES_DIR / "gridworld" / "war.toml"
+    par, env = DeclaredParallelEnv(spec), make_env(spec)
+    (agent,) = par.possible_agents
+    obs, _ = par.reset(seed=3)
+    o, _ = env.reset(seed=3)
+    for a in [3, 3, 0, 2, 4, 1, 3, 0]:
+        assert obs[agent].tolist() == o.tolist()
+        obs, rewards, terminated, truncated, _ = par.step({agent: a})
+        o, r, te, tr, _ = env.step(a)
+        assert (rewards[agent], terminated[agent], truncated[agent]) == (r, te, tr)
+        if te or tr:
+            break

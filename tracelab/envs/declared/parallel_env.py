@@ -70,7 +70,7 @@ class DeclaredParallelEnv(ParallelEnv[str, Any, int]):
                 raise ValueError(f"action {a!r} of {agent} is outside {self._act_space}")
             rows[i] = int(a)
         w = self.world
-        w.step(rows, self._np_random)
+        w.step(rows if len(rows) > 1 else int(rows[0]), self._np_random)  # one agent: its action, as an Env's
         self._last = rows
         terminated, truncated = w.terminated(), w.truncated()
         rewards = dict(zip(self.possible_agents, w.last_rewards))
