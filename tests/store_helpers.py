@@ -9,10 +9,12 @@ synthetic_trace / synthetic_vocabulary (from tracelab.store.bench): data in the 
 for volume (live reading, crashes)."""
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -109,11 +111,17 @@ def _duckdb_loaded(pid: int) -> bool:
     return "_duckdb" in Path(f"/proc/{pid}/maps").read_text()
 
 
+def _cpu_seconds(pid: int) -> float:
+    """User + system CPU seconds of a running process, all its threads (/proc/PID/stat)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def ctrl_c_after_start(argv: list[str], running_for: float = 3.0) -> tuple[int, list[str], float]:
     """`tracelab ARGV` in a subprocess, sent SIGINT (Ctrl-C) `running_for` seconds after it loaded DuckDB
     (into its query, even on a loaded machine; it must still be running then). Returns its exit status,
-    its stderr's lines and the seconds from the signal to its end (a command that ignores the signal is
-    killed after 20 s)."""
+    its stderr's lines and the CPU seconds it spent from the signal to its end: CPU, not wall time, so that
+    a loaded machine does not make a prompt stop look slow (a query that ran on would spend many more)."""
     proc = subprocess.Popen([*TRACELAB, *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + PATIENCE
@@ -122,10 +130,16 @@ def ctrl_c_after_start(argv: list[str], running_for: float = 3.0) -> tuple[int, 
             time.sleep(0.05)
         time.sleep(running_for)
         assert proc.poll() is None, f"the command ended before Ctrl-C: {proc.communicate()}"
+        before = _cpu_seconds(proc.pid)
         proc.send_signal(signal.SIGINT)
-        sent = time.monotonic()
-        _, err = proc.communicate(timeout=PATIENCE)
-        return proc.returncode, err.strip().splitlines(), time.monotonic() - sent
+        with ThreadPoolExecutor(2) as pool:  # drain both pipes, as communicate() would, then reap with wait4
+            out, err = pool.submit(proc.stdout.read), pool.submit(proc.stderr.read)
+            err_text = err.result(timeout=PATIENCE)
+            out.result(timeout=PATIENCE)
+        _, status, usage = os.wait4(proc.pid, 0)
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        return proc.returncode, err_text.strip().splitlines(), usage.ru_utime + usage.ru_stime - before
     finally:
-        proc.kill()
-        proc.communicate()
+        if proc.returncode is None:
+            proc.kill()
+            proc.communicate()

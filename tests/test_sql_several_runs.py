@@ -164,8 +164,8 @@ def test_the_sandbox_holds_for_every_run(runs: dict[str, Path], tmp_path: Path, 
 
 
 def test_ctrl_c_stops_a_query_on_several_runs(runs: dict[str, Path]) -> None:
-    status, lines, took = ctrl_c_after_start(["sql", str(runs["a"]), str(runs["sealed"]), ENDLESS])
-    assert took < 5
+    status, lines, cpu = ctrl_c_after_start(["sql", str(runs["a"]), str(runs["sealed"]), ENDLESS])
+    assert cpu < 3
     assert status == 130 and len(lines) == 1 and lines[0].startswith("tracelab: interrupted"), lines
 
 

@@ -128,8 +128,8 @@ def test_a_write_ahead_log_beside_the_sealed_file_is_not_replayed(sealed: Path, 
 def test_ctrl_c_stops_a_long_sql_query(query: str, fmt: str) -> None:
     """Before: the query ran on (30 s and more), or DuckDB's own check ended it as an error (exit 1);
     EXPLAIN ANALYZE, interrupted, was run again."""
-    status, lines, took = ctrl_c_after_start(["sql", str(SAMPLE_RUNS[0]), query, "--format", fmt])
-    assert took < 5
+    status, lines, cpu = ctrl_c_after_start(["sql", str(SAMPLE_RUNS[0]), query, "--format", fmt])
+    assert cpu < 3
     assert status == 130 and len(lines) == 1 and lines[0].startswith("tracelab: interrupted"), lines
 
 
