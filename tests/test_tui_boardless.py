@@ -255,16 +255,16 @@ def test_a_run_of_a_million_changes_lists_a_bounded_page_of_atoms(big_run: Path)
     try:
         assert source.board is None and source.scalar("SELECT count(*) FROM changes") == BIG_CHANGES
         tracemalloc.start()
-        t0 = time.perf_counter()
+        t0 = time.process_time()  # CPU seconds of this process and DuckDB's threads: load does not inflate them
         found = atoms_at(source, 0, 99_999, "true")
-        seconds = time.perf_counter() - t0
+        cpu = time.process_time() - t0
         peak = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
     finally:
         source.close()
     assert len(found.rows) == 500 and found.total > 90_000 and found.truncated
     assert peak < 20e6, f"{peak / 1e6:.1f} MB of Python objects for one page of atoms"
-    assert seconds < 20
+    assert cpu < 20, f"{cpu:.1f} CPU s for one page of atoms"
 
 
 def test_the_atoms_beside_the_trace_of_a_million_changes(big_run: Path) -> None:
