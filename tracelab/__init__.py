@@ -9,5 +9,7 @@ __version__ = "0.1.0"
 # Python would print warnings of an unconfigured logger to stderr itself.
 logging.getLogger(__name__).addHandler(logging.NullHandler())
 
-# rules/ lives beside the package in the source tree (the project is installed editable).
-RULES_DIR = Path(__file__).resolve().parent.parent / "rules"
+# The rule programs and specs: inside the package in a built wheel (pyproject maps rules/ to tracelab/rules),
+# beside it in the source tree that an editable install runs from.
+_PACKAGED_RULES = Path(__file__).resolve().parent / "rules"
+RULES_DIR = _PACKAGED_RULES if _PACKAGED_RULES.is_dir() else _PACKAGED_RULES.parent.parent / "rules"
