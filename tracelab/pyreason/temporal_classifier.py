@@ -13,6 +13,7 @@ as in PyReason. `stop()` ends the thread (PyReason has none: its thread lives un
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable, Sequence
 from datetime import timedelta
 from typing import Any
@@ -28,7 +29,6 @@ class WallClock:
     """Seconds of time.monotonic(); waiting is Event.wait (ended early by the stop event)."""
 
     def now(self) -> float:
-        import time
         return time.monotonic()
 
     def wait_until(self, deadline: float, stop: threading.Event) -> bool:
@@ -92,13 +92,14 @@ class TemporalLogicIntegratedClassifier(LogicIntegratedClassifier):
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         if poll_interval is not None and input_fn is not None:
-            # the first deadline is set here, not in the thread: a clock advanced right after the
-            # constructor returns is never missed
-            # (the int interval's: the end of the first reason() from now on, or the current time)
-            first = (self.clock.now() + poll_interval.total_seconds() if isinstance(poll_interval, timedelta)
-                     else float(api.current_time()) if api.current_time() >= 0 else -1.0 - len(api.REASONED_TO))
-            self._thread = threading.Thread(target=self._poll_loop, args=(first,), daemon=True,
-                                            name=f"pyreason-poll-{identifier}")
+            # where the polls start is fixed here, not in the thread, so that nothing the script does
+            # right after the constructor returns (advancing a clock, reasoning) is missed
+            if isinstance(poll_interval, timedelta):
+                target, args = self._poll_by_clock, (self.clock.now() + poll_interval.total_seconds(),)
+            else:  # from the current time, or the end of the next reason()
+                now = api.current_time()
+                target, args = self._poll_by_steps, ((now, None) if now >= 0 else (None, len(api.REASONED_TO)))
+            self._thread = threading.Thread(target=target, args=args, daemon=True, name=f"pyreason-poll-{identifier}")
             self._thread.start()
 
     def get_class_facts(self, t1: int, t2: int) -> list[Fact]:
@@ -142,24 +143,21 @@ class TemporalLogicIntegratedClassifier(LogicIntegratedClassifier):
             self.polls += int(reasoned)
             self._counted.notify_all()
 
-    def _poll_loop(self, first_deadline: float | None) -> None:
-        if isinstance(self.poll_interval, timedelta):
-            seconds, deadline = self.poll_interval.total_seconds(), first_deadline
-            assert deadline is not None
-            while self.clock.wait_until(deadline, self._stop):
-                self._count(self.poll(api.current_time() + 1))
-                deadline = max(deadline + seconds, self.clock.now()) if seconds > 0 else self.clock.now()
-        else:
-            steps = max(int(self.poll_interval or 0), 1)  # 0 would poll without end on a false condition
-            assert first_deadline is not None
-            last: int | None = int(first_deadline)
-            if first_deadline < 0:  # -1 - k: wait for reason() number k + 1, whose end is the first time seen
-                k = int(-1 - first_deadline)
-                if api.wait_for_time(lambda now: True, self._stop, k + 1) is None:
-                    return
-                last = api.REASONED_TO[k]
-            # PyReason's: the first poll once the time is `steps` past the step after the first one seen
-            due = last + 1 + steps
-            while (now := api.wait_for_time(lambda now, due=due: now >= due, self._stop)) is not None:
-                self._count(self.poll(now))
-                due = now + steps
+    def _poll_by_clock(self, deadline: float) -> None:
+        assert isinstance(self.poll_interval, timedelta)
+        seconds = self.poll_interval.total_seconds()
+        while self.clock.wait_until(deadline, self._stop):
+            self._count(self.poll(api.current_time() + 1))
+            deadline = max(deadline + seconds, self.clock.now()) if seconds > 0 else self.clock.now()
+
+    def _poll_by_steps(self, first_seen: int | None, reasoning_no: int | None) -> None:
+        steps = max(int(self.poll_interval or 0), 1)  # 0 would poll without end on a false condition
+        if first_seen is None:  # the first time seen: the end of reason() number reasoning_no
+            assert reasoning_no is not None
+            if api.wait_for_time(lambda now: True, self._stop, reasoning_no + 1) is None:
+                return
+            first_seen = api.REASONED_TO[reasoning_no]
+        due = first_seen + 1 + steps  # PyReason's: `steps` past the step after the first one seen
+        while (now := api.wait_for_time(lambda now, due=due: now >= due, self._stop)) is not None:
+            self._count(self.poll(now))
+            due = now + steps
