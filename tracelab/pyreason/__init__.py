@@ -8,6 +8,7 @@ written in PyReason's CSV layout.
 - interpretation.py: what reason() returns (get_dict, query, the DataFrames);
 - ruleset_filter.py: the rules a query needs (reason(queries=...));
 - classifier.py: LogicIntegratedClassifier (a torch model's outputs as facts; imports torch when used);
+- temporal_classifier.py: TemporalLogicIntegratedClassifier (the same, polled from a thread on a clock);
 - numba_interval.py: PyReason's annotation functions (closed(), the adapter);
 - unsupported.py: UnsupportedFeature, the error of what tracelab does not have;
 - rules.py: PyReason's rule text (and its CSV / JSON rule files, with thresholds and rule options);
@@ -26,6 +27,7 @@ from tracelab.engine.numba_startup import defer_scipy_import
 
 from . import ruleset_filter
 from .api import (
+    _Settings,
     add_annotation_function,
     add_closed_world_predicate,
     add_fact,
@@ -68,7 +70,7 @@ defer_scipy_import()  # a reasoning loads kernels; numba would import scipy.lina
 gc.freeze()
 
 __all__ = [
-    "Fact", "Interpretation", "LogicIntegratedClassifier", "ModelInterfaceOptions", "PyReasonProgram", "Query",
+    "Fact", "Interpretation", "LogicIntegratedClassifier", "TemporalLogicIntegratedClassifier", "_Settings", "ModelInterfaceOptions", "PyReasonProgram", "Query",
     "Rule", "Threshold", "UnsupportedFeature", "add_annotation_function", "add_closed_world_predicate",
     "add_fact", "add_fact_from_csv", "add_fact_from_json", "add_head_function", "add_inconsistent_predicate",
     "add_rule", "add_rule_from_csv", "add_rule_from_json", "add_rules_from_file", "closed",
@@ -83,4 +85,7 @@ def __getattr__(name: str) -> object:
     if name in ("LogicIntegratedClassifier", "ModelInterfaceOptions"):
         from . import classifier
         return getattr(classifier, name)
+    if name == "TemporalLogicIntegratedClassifier":
+        from . import temporal_classifier
+        return temporal_classifier.TemporalLogicIntegratedClassifier
     raise AttributeError(f"module 'tracelab.pyreason' has no attribute {name!r}")

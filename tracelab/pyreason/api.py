@@ -10,6 +10,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import os
+import threading
 import time
 import warnings
 from collections.abc import Callable, Sequence
@@ -58,6 +59,26 @@ class _Program:
 
 settings = Settings()
 _program = _Program()
+# held by reason() and add_fact(), and by a background poll (temporal_classifier.py) for the whole poll
+LOCK = threading.RLock()
+_time_moved = threading.Condition(LOCK)  # notified after each reason()
+REASONED_TO: list[int] = []  # each reason()'s last timestep, in order (a poller's first one: its start)
+
+
+class _SettingsClass(type):
+    """PyReason's scripts may set a setting on the class `_Settings` itself (examples/temporal_classifier_ex.py:
+    `settings = Settings; settings.atom_trace = True`), which in PyReason replaces the property and so
+    changes the setting: here it sets (and reads) `settings`'s, type-checked as there."""
+
+    def __setattr__(cls, name: str, value: Any) -> None:
+        setattr(settings, name, value)
+
+    def __getattr__(cls, name: str) -> Any:
+        return getattr(settings, name)
+
+
+class _Settings(metaclass=_SettingsClass):
+    """PyReason's settings class (`from pyreason.pyreason import _Settings`); its attributes are `settings`'s."""
 
 
 # ---- state -------------------------------------------------------------------------------------------
@@ -161,6 +182,11 @@ add_rule_from_json = add_rule_from_csv  # read_rules reads the format the extens
 
 def add_fact(pyreason_fact: Fact) -> None:
     """Add a fact; an unnamed one is fact_<n> as in PyReason."""
+    with LOCK:
+        _add_fact(pyreason_fact)
+
+
+def _add_fact(pyreason_fact: Fact) -> None:
     if pyreason_fact.name is None:
         pyreason_fact.name = f"fact_{len(_program.facts)}"
     if any(f.name == pyreason_fact.name for f in _program.facts):
@@ -242,6 +268,35 @@ def add_head_function(function: Callable[..., Any]) -> None:
 
 def reason(timesteps: int = -1, convergence_threshold: int = -1, convergence_bound_threshold: float = -1,
            queries: Sequence[Query] | None = None, again: bool = False, restart: bool = True) -> Interpretation:
+    """PyReason's reason() (below, _reason), one at a time (LOCK: a classifier may poll from its thread)."""
+    with LOCK:
+        try:
+            return _reason(timesteps, convergence_threshold, convergence_bound_threshold, queries, again, restart)
+        finally:
+            REASONED_TO.append(current_time())
+            _time_moved.notify_all()
+
+
+def current_time() -> int:
+    """The last reasoned timestep (the interpretation's time), -1 before any reason()."""
+    return _program.last.time if _program.last is not None else -1
+
+
+def wait_for_time(ready: Callable[[int], bool], stop: threading.Event, reasonings: int = 0) -> int | None:
+    """Wait (woken by each reason()) until `reasonings` reason() calls have ended and ready(current_time());
+    that time, or None once `stop` is set."""
+    with _time_moved:
+        _time_moved.wait_for(lambda: stop.is_set() or len(REASONED_TO) >= reasonings and ready(current_time()))
+        return None if stop.is_set() else current_time()
+
+
+def wake_time_waiters() -> None:
+    with _time_moved:
+        _time_moved.notify_all()
+
+
+def _reason(timesteps: int, convergence_threshold: int, convergence_bound_threshold: float,
+            queries: Sequence[Query] | None, again: bool, restart: bool) -> Interpretation:
     """Run the program for timesteps + 1 steps (t = 0..timesteps), or until it converges with -1.
     Convergence as PyReason's: with both thresholds -1, once no fact starts later and no delayed firing
     is pending; with convergence_threshold n, after a step that changed at most n atoms; with

@@ -25,7 +25,7 @@ MODULES = {
     "pyreason.scripts.numba_wrapper.numba_types.interval_type": "tracelab.pyreason.numba_interval",
     "pyreason.scripts.interval.interval": "tracelab.pyreason.numba_interval",
     "pyreason.scripts.learning.classification.classifier": "tracelab.pyreason.classifier",
-    "pyreason.scripts.learning.classification.temporal_classifier": "tracelab.pyreason.classifier",
+    "pyreason.scripts.learning.classification.temporal_classifier": "tracelab.pyreason.temporal_classifier",
     "pyreason.scripts.learning.utils.model_interface": "tracelab.pyreason.classifier",
     "pyreason.scripts.utils.filter_ruleset": "tracelab.pyreason.ruleset_filter",
 }

@@ -36,18 +36,28 @@ class FactRow:
 
 def applied_one_by_one(old: tuple[float, float], facts: list[StepFact]) -> tuple[list[FactRow], tuple[float, float]]:
     """The rows of `facts` applied in order to an atom at `old` (intersection; a conflict resets to [0,1]
-    and freezes, so later facts leave no row), and the atom's bound at the end."""
+    and freezes, so the facts after it are rows of a frozen atom: `on_frozen_atom`), and the atom's bound at
+    the end."""
     rows: list[FactRow] = []
     bound = old
-    for f in facts:
+    for k, f in enumerate(facts):
         lo, up = max(bound[0], f.lower), min(bound[1], f.upper)
         if lo > up + EPS:
             rows.append(FactRow(bound, (0.0, 1.0), f.conflict_name or f.name, False, (f.lower, f.upper), f))
-            return rows, (0.0, 1.0)
+            return rows + on_frozen_atom(facts[k + 1:]), (0.0, 1.0)
         if (lo, up) != bound:
             rows.append(FactRow(bound, (lo, up), f.name, True, (f.lower, f.upper), f))
             bound = (lo, up)
     return rows, bound
+
+
+def on_frozen_atom(facts: list[StepFact]) -> list[FactRow]:
+    """PyReason's rows of facts applied to a frozen (static) atom: the atom keeps its bound, yet each fact
+    is a row with its own bound as old and new (its interpretation.py, "Check if bnd is static": the row
+    holds the fact's bound; the committed cybersecurity trace's severity_source_B row). The partner rows a
+    fact's IPL sets (`by` "IPL") are not PyReason's here: it writes the partner's bound with the fact."""
+    return [FactRow((f.lower, f.upper), (f.lower, f.upper), f.name, True, (f.lower, f.upper), f)
+            for f in facts if f.by == "Fact"]
 
 
 def conflict_message(atom: str, old: tuple[float, float], incoming: tuple[float, float]) -> str:

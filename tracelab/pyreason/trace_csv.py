@@ -22,7 +22,7 @@ from tracelab.engine import CAUSE_EXTERNAL, CAUSE_FACT, CAUSE_POLICY, CAUSE_RESE
 
 from tracelab.engine.program import effective_bound
 
-from .fact_sequence import StepFact, applied_one_by_one, conflict_message
+from .fact_sequence import StepFact, applied_one_by_one, conflict_message, on_frozen_atom
 from .names import NameMap
 from .translate import DOMAIN
 
@@ -62,6 +62,7 @@ class PyReasonTrace:
         self.node_bounds: list[tuple[float, float]] = []
         self._facts: dict[int, list[tuple[int, int, StepFact]]] | None = None  # _facts_by_atom
         self.frozen: set[int] = set()  # atoms a conflict of facts froze (static from then on)
+        self.static_before: np.ndarray | None = None  # the engine's static flags after the last step added
         self.edge_bounds: list[tuple[float, float]] = []
 
     def carry(self, earlier: PyReasonTrace) -> None:
@@ -150,6 +151,8 @@ class PyReasonTrace:
                 self._fact_rows(step, atom, facts, (0.0, 1.0), (0.0, 1.0), t, passes_before, -1)
         if t is not None:
             self._delayed_conflicts(step, t, passes_before)
+            self._facts_on_frozen_atoms(step, t, passes_before)
+        self.static_before = eng.static[0].copy()
         step.sort(key=lambda r: r[0])  # stable: a fact's rows, and one rule's rows on one head, keep theirs
         for _, which, row, bound in step:
             (self.node_rows if which == "node" else self.edge_rows).append(row)
@@ -183,9 +186,41 @@ class PyReasonTrace:
         out = {}
         for atom in self._facts_by_atom():
             now = self._facts_at(atom, t)
-            if len(now) > 1 and atom not in self.frozen:
+            if len(now) > 1 and atom not in self.frozen and not self._was_static(atom):
                 out[atom] = now
         return out
+
+    def _was_static(self, atom: int) -> bool:
+        """Whether `atom` was frozen when the step began (by a conflict, a static fact or rule)."""
+        return self.static_before is not None and atom < len(self.static_before) and bool(self.static_before[atom])
+
+    def _facts_on_frozen_atoms(self, step: list, t: int, passes_before: int) -> None:
+        """PyReason's rows of the step's facts on atoms frozen before it (fact_sequence.on_frozen_atom),
+        each followed by its IPL partner's row (the partner's bound as old and new, `Occurred Due To` the
+        fact, as PyReason's committed cybersecurity trace: `vulnerable(web_server)` [0,1] -> [0,1] by
+        patch_db_fact). The engine writes no row: the atom does not change."""
+        eng = self.engine
+        for atom in self._facts_by_atom():
+            if not self._was_static(atom):
+                continue
+            pred, args = eng.vocab.atom_parts(atom)
+            which = "node" if len(args) == 1 else "edge"
+            for r in on_frozen_atom(self._facts_at(atom, t)):
+                fact = r.fact
+                assert fact is not None
+                row: list[object] = [t, passes_before, self._component(args), fact.pred, _bound(*r.old),
+                                     _bound(*r.new), r.name, True, "Fact", ""]
+                step.append(((t, 0, -1, fact.order, 0), which, row, r.new))
+                partner_name = self.ipl_partners.get(fact.pred)
+                partner_tl = self.names.pred_to_tl.get((partner_name, len(args))) if partner_name else None
+                if partner_tl is None:
+                    continue
+                partner = eng.atom(partner_tl, *args)
+                if self._was_static(partner):  # a frozen partner keeps its bound through the step
+                    bound = eng.bound(partner)
+                    row = [t, passes_before, self._component(args), partner_name, _bound(*bound), _bound(*bound),
+                           r.name, True, "IPL", ""]
+                    step.append(((t, 0, -1, fact.order, 1), which, row, bound))
 
     def _fact_rows(self, step: list, atom: int, facts: list[StepFact], old: tuple[float, float],
                    new: tuple[float, float], t: int, passes_before: int, i: int) -> bool:
