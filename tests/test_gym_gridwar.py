@@ -1,5 +1,5 @@
 """GridWar's registered ids make the declared env over rules/gridworld/war.toml (issue 38, item 2): gym.make
-and gym.make_vec pass gymnasium's checks, take GridWarEnv's keyword arguments mapped onto the spec's
+and gym.make_vec pass gymnasium's checks, take the old RuleSim env's keyword arguments mapped onto the spec's
 params (tracelab/envs/declared/gridwar.py) and refuse, in one line naming it, one the spec cannot honour;
 rgb_array draws the spec's [board]. The step-by-step equality with RefSim is tests/test_gridwar_spec.py's."""
 from __future__ import annotations
