@@ -99,3 +99,17 @@ def test_rgb_array_draws_the_specs_board() -> None:
         return tuple(frame[row * CELL + CELL // 2, col * CELL + CELL // 2])
     assert centre(2, 4) == (0x6b, 0x4f, 0x3a) and centre(7, 7) == (0xe6, 0x39, 0x46)
     assert centre(0, 0) == (0x3a, 0x86, 0xff)
+
+
+def test_the_sb3_evaluations_of_a_gridwar_id_play_the_declared_env_against_eval_p() -> None:
+    """TracelabCallback's evaluations (train/external_eval.py): GridWar's ids are declared targets, their
+    games against the scripted opponent with the evaluation's opponent_p (the spec's p_toward)."""
+    from tracelab.train.external_eval import DeclaredTarget, EvalSettings, eval_target
+    target = eval_target(IDS["base"], {"map": "open"})
+    assert isinstance(target, DeclaredTarget)
+    evaluator = target.evaluator(None, lambda: 0, EvalSettings(games=2, traced=0, envs=2, opponent_p=0.1))
+    try:
+        assert evaluator.env.world_spec.params["p_toward"] == 0.1 and evaluator.env.world_spec.params["map"] == "open"
+        assert target.outcome({"outcome": "win"}, True, False) == "win"
+    finally:
+        evaluator.close()
