@@ -47,6 +47,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from tracelab.envs.declared.vector_env import with_masks
 from tracelab.envs.common import (
     ActionMasker,
     learner_action_space,
@@ -183,14 +184,7 @@ class GridWarVectorEnv(VectorEnv):
     def _masks(self) -> np.ndarray:
         return self._masker.for_sim(self.sim, RED)
 
-    @staticmethod
-    def _with_masks(info: dict[str, Any], mask: np.ndarray) -> dict[str, Any]:
-        """gymnasium's vector info layout: each key with a `_key` bool mask of the worlds it covers."""
-        out = dict(info)
-        for key in info:
-            if not key.startswith("_"):
-                out.setdefault(f"_{key}", mask)
-        return out
+    _with_masks = staticmethod(with_masks)
 
     def close_extras(self, **kwargs: Any) -> None:
         if self._tracer is not None:
