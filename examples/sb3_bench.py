@@ -15,10 +15,7 @@ from pathlib import Path
 
 import torch
 from stable_baselines3 import PPO
-from stable_baselines3.common.env_util import make_vec_env
-
-import tracelab.envs.gym_env  # noqa: F401  (registers the ids)
-from tracelab.train.sb3 import TracelabCallback
+from tracelab.train.sb3 import TracelabCallback, make_vec_env  # an id or a spec file
 
 SETUPS = {"no callback": None, "callback, logging only": {"eval_every": 0, "eval_games": 1, "trace_eval_games": 0},
           "callback, evaluating (default)": {}}

@@ -14,7 +14,6 @@ import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecNormalize
 
-import tracelab.envs.gym_env  # noqa: F401  (registers tracelab/GridWar-*-v0 and the declared toy-text ids)
 from tracelab.train.sb3 import TracelabCallback, make_vec_env
 
 

@@ -1,36 +1,40 @@
 """GridWar through the declared path (issue 26 item 4, issue 38): rules/gridworld/war.toml over game.rules,
 its agents, bullets, tally and rewards generated from its params, the scripted opponent written as rules
 (opponent.rules, opponent_shots.rules), gives the same observations, rewards, action masks, terminated
-and truncated as GridWarEnv on RuleSim, step by step, for the same seed and actions: base and advanced at
-1v1, base at 2v2 and 5v5, and another map."""
+and truncated as RefSim (the hand-written oracle, tests/gridwar_refsim.py), step by step, for the same seed
+and actions: gym.make of the registered ids at base and advanced 1v1, the PettingZoo env at 2v2 and 5v5,
+and another map."""
 from __future__ import annotations
 
 from dataclasses import replace
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
 from tracelab import RULES_DIR
 from tracelab.envs.declared.gym_env import DeclaredEnv
-from tracelab.envs.gym_env import GridWarEnv
 from tracelab.game.scenario import Scenario, builtin_scenario
+
+from gridwar_refsim import RefGridWar
 
 WAR = RULES_DIR / "gridworld" / "war.toml"
 PARAMS = {"base": {}, "advanced": {"advanced": True}}  # the spec's params of each built-in scenario
-# RuleSim's observation numbers the spec declares: own x, y, opponent x, y (and, advanced, the
+IDS = {"base": "tracelab/GridWar-base-v0", "advanced": "tracelab/GridWar-advanced-v0"}
+# RefSim's observation numbers the spec declares: own x, y, opponent x, y (and, advanced, the
 # opponent's bullets in flight); not the nearest bullet's x, y (docs/worlds.md, "not supported yet")
 DECLARED_OBS = {"base": 4, "advanced": 7}
 
 
 def play_both(name: str, steps: int, seed: int, max_steps: int, scenario: Scenario | None = None,
               **params: object) -> dict[str, int]:
-    """Step GridWarEnv (RuleSim) and the declared env side by side; assert every step equal. Red plays a
+    """Step RefSim and gym.make of the GridWar id side by side; assert every step equal. Red plays a
     random allowed action 3 times in 4, else any action (unsafe moves, shots with no ammo). Returns what
     happened, to show the comparison covered it."""
     stack_previous = bool(params.get("stack_previous", False))
-    ref = GridWarEnv(replace(scenario or builtin_scenario(name), max_steps=max_steps), stack_previous=stack_previous)
-    dec = DeclaredEnv(WAR, max_steps=max_steps, **PARAMS[name], **params)
+    ref = RefGridWar(replace(scenario or builtin_scenario(name), max_steps=max_steps), stack_previous=stack_previous)
+    dec = gym.make(IDS[name], max_steps=max_steps, **params)
     n_obs = DECLARED_OBS[name] * (2 if stack_previous else 1)
     assert dec.observation_space.shape == (n_obs,) and dec.action_space == ref.action_space
     rng = np.random.default_rng(seed + 1000)
@@ -63,19 +67,19 @@ def play_both(name: str, steps: int, seed: int, max_steps: int, scenario: Scenar
 
 
 @pytest.mark.parametrize("seed", [0, 1])
-def test_base_game_equals_rulesim_step_by_step(seed: int) -> None:
+def test_base_game_equals_refsim_step_by_step(seed: int) -> None:
     seen = play_both("base", 400, seed, max_steps=200)
     assert seen["blue won"] and seen["unsafe"], seen
 
 
 @pytest.mark.parametrize("seed", [0, 1])
-def test_advanced_game_equals_rulesim_step_by_step(seed: int) -> None:
+def test_advanced_game_equals_refsim_step_by_step(seed: int) -> None:
     seen = play_both("advanced", 400, seed, max_steps=200)
     assert seen["red won"] and seen["blue won"] and seen["hit"] and seen["blue shot"] and seen["unsafe"], seen
 
 
-def test_stack_previous_equals_rulesim_step_by_step() -> None:
-    """`[observation] previous = 1` (the spec's stack_previous param): [current, previous] as RuleSim's
+def test_stack_previous_equals_refsim_step_by_step() -> None:
+    """`[observation] previous = 1` (the spec's stack_previous param): [current, previous] as RefSim's
     stack_previous gives it, at resets (the start twice), after steps and across episode ends."""
     seen = play_both("advanced", 300, 4, max_steps=30, stack_previous=True)
     assert seen["truncated"] and (seen["red won"] or seen["blue won"]), seen
@@ -83,7 +87,7 @@ def test_stack_previous_equals_rulesim_step_by_step() -> None:
 
 def test_stack_previous_in_the_vector_env_equals_single_envs() -> None:
     """The vector env's [current, previous]: each world as a single DeclaredEnv seeded seed + i steps it
-    (that env equals RuleSim above), final observations included, and a restarted world's history is
+    (that env equals RefSim above), final observations included, and a restarted world's history is
     its start."""
     from tracelab.envs.declared.vector_env import DeclaredVectorEnv
     n = 3
@@ -113,8 +117,8 @@ def test_stack_previous_in_the_vector_env_equals_single_envs() -> None:
 
 
 @pytest.mark.parametrize("name", ["base", "advanced"])
-def test_the_step_limit_truncates_as_rulesim(name: str) -> None:
-    """A short step limit: truncated episodes, and games won on their last step stay won (RuleSim)."""
+def test_the_step_limit_truncates_as_refsim(name: str) -> None:
+    """A short step limit: truncated episodes, and games won on their last step stay won (RefSim)."""
     seen = play_both(name, 300, 2, max_steps=9)
     assert seen["truncated"], seen
 
@@ -131,11 +135,11 @@ def test_the_declared_war_game_passes_gymnasiums_checker(name: str) -> None:
 
 def play_teams(spec: Path, params: dict, scenario: Scenario, steps: int, seed: int,
                stack_previous: bool = False) -> dict[str, int]:
-    """Step GridWarEnv (RuleSim) with several agents a team and the spec's PettingZoo env (`params`) side by
-    side: each red agent's observation (the team's view) and mask, its reward (RuleSim's agent_reward) and the ends are
+    """Step RefSim with several agents a team and the spec's PettingZoo env (`params`) side by
+    side: each red agent's observation (the team's view) and mask, its reward (RefSim's agent_reward) and the ends are
     equal at every step. Red plays random allowed actions 3 times in 4, else any. Returns what happened."""
     from tracelab.envs.declared.parallel_env import DeclaredParallelEnv
-    ref = GridWarEnv(scenario, stack_previous=stack_previous)
+    ref = RefGridWar(scenario, stack_previous=stack_previous)
     dec = DeclaredParallelEnv(spec, **params, stack_previous=stack_previous)
     names = dec.possible_agents
     n_actions = len(scenario.action_ids)
@@ -173,22 +177,22 @@ def play_teams(spec: Path, params: dict, scenario: Scenario, steps: int, seed: i
 
 
 @pytest.mark.parametrize("stack_previous", [False, True])
-def test_two_agents_a_team_equal_rulesim_step_by_step(stack_previous: bool) -> None:
+def test_two_agents_a_team_equal_refsim_step_by_step(stack_previous: bool) -> None:
     """agents_per_team = 2: each red agent's view (the last step's after it for stack_previous), mask and
-    reward, against GridWarEnv on a 2v2 base."""
+    reward, against RefSim on a 2v2 base."""
     seen = play_teams(WAR, {"agents_per_team": 2}, team_scenario(2), 300, 3, stack_previous)
     assert seen["ends"] > 5 and seen["unsafe"], seen
 
 
-def test_five_agents_a_team_equal_rulesim_step_by_step() -> None:
+def test_five_agents_a_team_equal_refsim_step_by_step() -> None:
     """The 5v5 base game of the method's experiment (5v5-base), generated from agents_per_team = 5."""
     seen = play_teams(WAR, {"agents_per_team": 5}, team_scenario(5), 300, 4)
     assert seen["ends"] >= 2 and seen["unsafe"], seen
 
 
-def test_another_map_and_rewards_equal_rulesim_step_by_step() -> None:
+def test_another_map_and_rewards_equal_refsim_step_by_step() -> None:
     """map = "open" (no mountains), other rewards, a step limit of 30:
-    the same game as RuleSim's scenario with those fields."""
+    the same game as RefSim's scenario with those fields."""
     rewards = replace(builtin_scenario("base").rewards, win=100.0, unsafe=-50.0, valid_action=-1.0)
     scenario = replace(builtin_scenario("base"), mountains=(), max_steps=30, rewards=rewards)
     seen = play_both("base", 300, 5, 30, scenario, map="open", win=100.0, unsafe=-50.0, valid_action=-1.0)
@@ -200,18 +204,18 @@ def team_scenario(n: int) -> Scenario:
                    blue_starts=None)
 
 
-def test_advanced_two_agents_a_team_equal_rulesim_step_by_step() -> None:
+def test_advanced_two_agents_a_team_equal_refsim_step_by_step() -> None:
     """war_advanced_2v2.toml: each opponent shoots at its nearest living enemy in line ([[nearest]]) and
-    each agent is rewarded for its own hits, as RuleSim's 2v2 advanced game."""
+    each agent is rewarded for its own hits, as RefSim's 2v2 advanced game."""
     scenario = replace(builtin_scenario("advanced"), name="advanced-2v2", agents_per_team=2, red_starts=None,
                        blue_starts=None)
     seen = play_teams(RULES_DIR / "gridworld" / "war_advanced_2v2.toml", {}, scenario, 400, 0)
     assert seen["ends"] > 5 and seen["hit"] and seen["blue hit"] and seen["invalid"], seen
 
 
-def test_nonmarkov_scenario_equals_rulesim_step_by_step() -> None:
+def test_nonmarkov_scenario_equals_refsim_step_by_step() -> None:
     """war_nonmarkov.toml: the slow agents act on the episode's even steps ([[clock]]), their moves take
-    two steps and a hit stops one; [current, previous] observations; against GridWarEnv's nonmarkov."""
+    two steps and a hit stops one; [current, previous] observations; against RefSim's nonmarkov."""
     seen = play_teams(RULES_DIR / "gridworld" / "war_nonmarkov.toml", {}, builtin_scenario("nonmarkov"), 400, 1,
                       stack_previous=True)
     assert seen["ends"] > 5 and seen["slow move"] and seen["slow move hit"] and seen["hit"], seen

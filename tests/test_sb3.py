@@ -19,7 +19,7 @@ from stable_baselines3.common.env_util import make_vec_env  # noqa: E402
 
 from patience import wait_until  # noqa: E402
 
-import tracelab.envs.gym_env  # noqa: E402,F401  (registers the GridWar and toy-text ids)
+import tracelab.envs  # noqa: E402,F401  (registers the GridWar and toy-text ids)
 from tracelab.cli import main  # noqa: E402
 from tracelab.errors import UserError  # noqa: E402
 from tracelab.store.meta import current_meta  # noqa: E402
@@ -119,7 +119,8 @@ def test_ppo_on_gridwar_base_logs_win_rates_and_traced_games_that_why_explains(
     outcomes = {o for (o,) in _rows(gridwar_run, "SELECT DISTINCT outcome FROM episodes WHERE kind = 'train'")}
     assert outcomes <= {"win", "loss", "draw", "truncated", "aborted"} and outcomes & {"win", "loss", "draw"}
     meta = current_meta(gridwar_run)
-    assert meta["scenario"] == "base" and meta["board"] is not None
+    assert meta["scenario"] == "GridWar-base-v0"  # the declared env over war.toml: its board from the spec
+    assert meta["config"]["declared_board"]["rows"][-1] == ".......r"
     _why_answers(gridwar_run, capsys)
     out = tmp_path / "replay.rrd"
     episode = _eval_games(gridwar_run)[0][0]
@@ -179,7 +180,7 @@ def test_a_training_that_raises_inside_the_with_is_failed_or_interrupted(
 
 def test_an_env_whose_games_cannot_be_traced_is_refused_in_one_line(tmp_path: Path) -> None:
     cb = TracelabCallback(tmp_path / "run", "CartPole-v1")
-    with pytest.raises(UserError, match="'CartPole-v1': not a GridWar id .* cannot trace its games"):
+    with pytest.raises(UserError, match="'CartPole-v1': not a rules-declared env .* cannot trace its games"):
         _ppo("CartPole-v1").learn(64, callback=cb)
     assert not (tmp_path / "run").exists()
 

@@ -5,13 +5,10 @@ from __future__ import annotations
 
 import dataclasses
 
-import gymnasium as gym
 import numpy as np
 import pytest
 
-import tracelab.envs.gym_env  # noqa: F401  (registers the ids)
-from tracelab.envs.gym_env import GridWarEnv
-from tracelab.envs.parallel_env import GridWarParallelEnv
+from tracelab.envs.declared.gridwar import parallel_env
 from tracelab.envs.vector_env import GridWarVectorEnv
 from tracelab.game.opponent import TeamPolicy, scripted_actions
 from tracelab.game.refsim import RefSim
@@ -109,34 +106,17 @@ def test_team_policy_draws_what_scripted_actions_draws() -> None:
     assert a.random() == b.random()  # the streams stayed aligned
 
 
-@pytest.mark.parametrize("backend", ["rules", "reference"])
-def test_single_env_hands_out_nothing_a_later_step_changes(backend: str) -> None:
-    env = GridWarEnv(short_base(6), backend=backend)
-    obs, info = env.reset(seed=0)
-    kept = [obs, *[v for v in info.values() if isinstance(v, np.ndarray)]]
-    for k in range(12):
-        obs, _, term, trunc, info = env.step(k % 2)
-        kept += [obs, *[v for v in info.values() if isinstance(v, np.ndarray)]]
-        if term or trunc:
-            kept.append(env.reset()[0])
-    copies = [k.copy() for k in kept]
-    for k in range(12):
-        _, _, term, trunc, _ = env.step((k + 1) % 4)
-        if term or trunc:
-            env.reset()
-    assert all(np.array_equal(a, b) for a, b in zip(kept, copies))
-
-
 def test_parallel_env_hands_out_nothing_a_later_step_changes() -> None:
-    env = GridWarParallelEnv(short_base(6), backend="rules")
+    env = parallel_env("tracelab/GridWar-base-v0", agents_per_team=2, max_steps=6)
+    up, down = env.world_spec.action_names.index("up"), env.world_spec.action_names.index("down")
     obs, infos = env.reset(seed=0)
     kept = list(obs.values()) + [i["action_mask"] for i in infos.values()]
     for _ in range(3):
-        obs, _, _, _, infos = env.step({a: UP for a in env.agents})
+        obs, _, _, _, infos = env.step({a: up for a in env.agents})
         kept += list(obs.values()) + [i["action_mask"] for i in infos.values()]
     copies = [k.copy() for k in kept]
     for _ in range(2):
-        env.step({a: DOWN for a in env.agents})
+        env.step({a: down for a in env.agents})
     assert all(np.array_equal(a, b) for a, b in zip(kept, copies))
 
 
@@ -153,7 +133,7 @@ def test_vector_env_infos_are_new_and_copy_false_returns_its_buffer(backend: str
         env.step(np.full(4, (k + 1) % 4))
     assert all(np.array_equal(a, b) for a, b in zip(kept, copies))
 
-    lean = gym.make_vec("tracelab/GridWar-base-v0", num_envs=4, backend=backend, copy=False)
+    lean = GridWarVectorEnv(4, "base", backend=backend, copy=False)
     ref = GridWarVectorEnv(4, "base", backend=backend)
     first, _ = lean.reset(seed=1)
     np.testing.assert_array_equal(first, ref.reset(seed=1)[0])

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from tracelab.envs import tracer
-from tracelab.envs.gym_env import GridWarEnv
 from tracelab.envs.sinks import MemorySink
 from tracelab.envs.vector_env import GridWarVectorEnv
 from tracelab.game.scenario import builtin_scenario
@@ -73,12 +72,12 @@ def test_an_episodes_rows_are_out_before_its_end() -> None:
 def test_rows_wait_at_most_handover_steps_within_an_episode(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(tracer, "HANDOVER_STEPS", 6)
     sink = MemorySink()
-    env = GridWarEnv(replace(builtin_scenario("advanced"), max_steps=500), backend="rules", trace_sink=sink)
+    env = GridWarVectorEnv(1, replace(builtin_scenario("advanced"), max_steps=500), backend="rules", trace_sink=sink)
     env.reset(seed=0)
-    nothing = 8  # the learner stays put; the episode runs on unless blue ends it
+    nothing = np.array([8])  # the learner stays put; the episode runs on unless blue ends it
     for k in range(1, 13):
         _, _, term, trunc, _ = env.step(nothing)
-        assert not (term or trunc), "this test needs an episode of 12 steps at least (another seed)"
+        assert not (term[0] or trunc[0]), "this test needs an episode of 12 steps at least (another seed)"
         t = set(sink.rows(0)["t"].tolist()) if sink.change_chunks else set()
         handed_up_to = 6 * (k // 6)  # the last handover's step (none before step 6)
         assert t == (set(range(handed_up_to + 1)) if handed_up_to else set()), k

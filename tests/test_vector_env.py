@@ -8,11 +8,10 @@ from dataclasses import replace
 import gymnasium as gym
 import numpy as np
 import pytest
-from gymnasium.vector import AutoresetMode, SyncVectorEnv, VectorEnv
+from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 from gymnasium.wrappers.vector import RecordEpisodeStatistics
 
-from tracelab.envs.gym_env import ENV_IDS, GridWarEnv
 from tracelab.envs.sinks import MemorySink
 from tracelab.envs.vector_env import GridWarVectorEnv
 from tracelab.game.scenario import NOTHING, Scenario, builtin_scenario
@@ -31,13 +30,13 @@ def random_actions(env: VectorEnv, steps: int, seed: int = 0) -> np.ndarray:
     return np.random.default_rng(seed).integers(0, n, (steps, *env.action_space.shape))
 
 
-def test_vector_api_and_registration() -> None:
+def test_vector_api() -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        env = gym.make_vec(ENV_IDS["nonmarkov"], num_envs=5, backend="reference")  # the vector entry point
+        env = GridWarVectorEnv(5, "nonmarkov", backend="reference", stack_previous=True)
     assert isinstance(env, GridWarVectorEnv) and isinstance(env, VectorEnv)
     assert env.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
-    assert env.single_observation_space.shape == (28,)  # registered with history
+    assert env.single_observation_space.shape == (28,)  # with history
     assert env.observation_space == batch_space(env.single_observation_space, 5)
     assert env.action_space == batch_space(env.single_action_space, 5)
     obs, info = env.reset(seed=0)
@@ -50,37 +49,6 @@ def test_vector_api_and_registration() -> None:
         assert all(info[f"_{k}"].shape == (5,) for k in info if not k.startswith("_"))
     with pytest.raises(ValueError):
         env.step(np.full((5, 2), 9))
-
-
-@pytest.mark.parametrize("backend", BACKENDS)
-@pytest.mark.parametrize("name", ("base", "advanced", "nonmarkov"))
-def test_same_as_gymnasiums_sync_vector_env(name: str, backend: str) -> None:
-    """With one world, the batched env and gymnasium's SyncVectorEnv of GridWarEnv (same-step autoreset)
-    return the same observations, rewards, flags, infos, final observations and final infos."""
-    scenario = short(name)
-    ours = GridWarVectorEnv(1, scenario, backend=backend, stack_previous=True)
-    theirs = SyncVectorEnv([lambda: GridWarEnv(scenario, backend=backend, stack_previous=True)],
-                           autoreset_mode=AutoresetMode.SAME_STEP)
-    a, b = ours.reset(seed=4), theirs.reset(seed=4)
-    np.testing.assert_array_equal(a[0], b[0])
-    ends = 0
-    for act in random_actions(ours, 120, seed=4):
-        a, b = ours.step(act), theirs.step(act)
-        for x, y in zip(a[:4], b[:4]):
-            np.testing.assert_array_equal(x, y)
-        ia, ib = a[4], b[4]
-        assert ia.keys() == ib.keys()
-        for key in ia:
-            if key == "final_obs":
-                np.testing.assert_array_equal(ia[key][ia["_final_obs"]], np.stack(ib[key][ib["_final_obs"]]))
-            elif key == "final_info":
-                assert ia[key].keys() == ib[key].keys()
-                for k in ia[key]:
-                    np.testing.assert_array_equal(ia[key][k], ib[key][k], err_msg=f"final_info[{k}]")
-            else:
-                np.testing.assert_array_equal(ia[key], ib[key], err_msg=key)
-        ends += int(a[2][0] or a[3][0])
-    assert ends >= 5
 
 
 @pytest.mark.parametrize("name", ("advanced", "nonmarkov"))

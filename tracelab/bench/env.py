@@ -1,8 +1,8 @@
 """`tracelab bench env`: the rule-driven simulator (RuleSim) and the hand-written one (RefSim) side by
-side, by team size, one world and batched, RuleSim with tracing on and off; then the gymnasium envs
-(tracelab.envs.gym_env, tracelab.envs.vector_env) on both backends when they import; then GridWar through
-both paths: RuleSim's envs against the declared spec's (rules/gridworld/war.toml, docs/worlds.md), one
-world and batched, with their ratios. Goals: docs/benchmarks.md."""
+side, by team size, one world and batched, RuleSim with tracing on and off; then GridWar's registered id
+through gymnasium (gym.make, gym.make_vec: the declared env over rules/gridworld/war.toml); then GridWar
+through both paths: RuleSim's vector env (tracelab.envs.vector_env, the trainer's) against the declared
+spec's (docs/worlds.md), one world and batched, with their ratios. Goals: docs/benchmarks.md."""
 from __future__ import annotations
 
 from typing import Any
@@ -89,51 +89,43 @@ def goals(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def gym_rates(worlds: int, repeats: int, target_s: float) -> dict[str, Any]:
     """Steps/s through gymnasium: the single env (gymnasium.make, 1v1) and the vector env (`worlds`
-    worlds, gymnasium.make_vec), both backends, tracing off (no trace sink); skipped if not importable."""
-    try:
-        # deferred: imported under try: the bench reports what does not import and goes on
-        import gymnasium as gym
-
-        import tracelab.envs.gym_env  # noqa: F401  (registers the ids)
-        import tracelab.envs.vector_env  # noqa: F401
-    except Exception as e:  # another engineer may be mid-way through these modules
-        return {"skipped": f"tracelab.envs.gym_env / tracelab.envs.vector_env not importable: {type(e).__name__}: {e}"}
+    worlds, gymnasium.make_vec) of GridWar's id, the declared spec's, tracing off."""
+    # deferred: gymnasium is only needed here
+    import gymnasium as gym
     out: dict[str, Any] = {"env_id": ENV_ID, "vector_worlds": worlds, "trace": False, "rows": []}
-    for backend in ("rules", "reference"):
-        env = gym.make(ENV_ID, backend=backend)
-        out["rows"].append({"backend": backend, "kind": "single", "worlds": 1,
-                            **block_rates(_single_runner(env), repeats, target_s)})
-        env.close()
-        venv = gym.make_vec(ENV_ID, num_envs=worlds, backend=backend)
-        row = block_rates(_vector_runner(venv), repeats, target_s)
-        row["env_steps_per_s"] = summarize([x * worlds for x in row["steps_per_s"]["runs"]]).to_dict()
-        out["rows"].append({"backend": backend, "kind": "vector", "worlds": worlds, **row})
-        venv.close()
+    env = gym.make(ENV_ID)
+    out["rows"].append({"backend": "spec", "kind": "single", "worlds": 1,
+                        **block_rates(_single_runner(env), repeats, target_s)})
+    env.close()
+    venv = gym.make_vec(ENV_ID, num_envs=worlds)
+    row = block_rates(_vector_runner(venv), repeats, target_s)
+    row["env_steps_per_s"] = summarize([x * worlds for x in row["steps_per_s"]["runs"]]).to_dict()
+    out["rows"].append({"backend": "spec", "kind": "vector", "worlds": worlds, **row})
+    venv.close()
     return out
 
 
 def declared_rates(worlds: int, repeats: int, target_s: float) -> list[dict[str, Any]]:
-    """GridWar 1v1 through RuleSim (GridWarEnv, GridWarVectorEnv: rulesim_fused, the game's own Python
-    glue) and through its declared spec (DeclaredEnv, DeclaredVectorEnv over rules/gridworld/war.toml),
+    """GridWar 1v1 through RuleSim (GridWarVectorEnv of 1 and `worlds` worlds: rulesim_fused, the game's own
+    Python glue) and through its declared spec (DeclaredEnv, DeclaredVectorEnv over rules/gridworld/war.toml),
     base and advanced, one world and `worlds` worlds, untraced and traced (the engine's change log on,
     taken after every step), the same random actions; the ratio declared / RuleSim."""
-    # deferred: as in gym_rates
-    from tracelab.envs.gym_env import GridWarEnv
+    # deferred: RuleSim's env loads the game's numba glue
     from tracelab.envs.vector_env import GridWarVectorEnv
     rows = []
     for name in ("base", "advanced"):
         advanced = name == "advanced"
         for kind, n, make_rules, make_declared, runner in (
-                ("single", 1, lambda name=name: GridWarEnv(name),
+                ("single", 1, lambda name=name: GridWarVectorEnv(1, name),
                  lambda advanced=advanced: make_env(WAR_SPEC, advanced=advanced), _single_runner),
                 ("vector", worlds, lambda name=name: GridWarVectorEnv(worlds, name),
                  lambda advanced=advanced: make_vec_env(WAR_SPEC, worlds, advanced=advanced), _vector_runner)):
             for trace in (False, True):
                 row: dict[str, Any] = {"spec": WAR_SPEC.name, "scenario": name, "kind": kind, "worlds": n,
                                        "trace": trace}
-                for path, make in (("declared", make_declared), ("rulesim", make_rules)):
+                for path, make, run in (("declared", make_declared, runner), ("rulesim", make_rules, _vector_runner)):
                     env = make()
-                    rates = block_rates(runner(env, _engine_of(env) if trace else None), repeats, target_s)
+                    rates = block_rates(run(env, _engine_of(env) if trace else None), repeats, target_s)
                     row[path] = summarize([x * n for x in rates["steps_per_s"]["runs"]]).to_dict()
                     env.close()
                 row["declared_over_rulesim"] = row["declared"]["median"] / row["rulesim"]["median"]
@@ -215,13 +207,10 @@ def report(r: dict[str, Any]) -> str:
                              f"{fmt_num(g['engine_alone'])} {g['unit']}" if "engine_alone" in g else "",
                              "met" if g["met"] else "not met"] for g in r["goals"]])
     g = r["gym"]
-    if "skipped" in g:
-        gym_t = f"gymnasium: skipped ({g['skipped']})"
-    else:
-        gym_t = f"gymnasium ({g['env_id']}, tracing off)\n" + format_table(
-            ["backend", "env", "worlds", "steps/s", "env-steps/s", "spread"],
-            [[x["backend"], x["kind"], x["worlds"], med(x), env(x) if "env_steps_per_s" in x else med(x), sp(x)]
-             for x in g["rows"]])
+    gym_t = f"gymnasium ({g['env_id']}: the declared env, tracing off)\n" + format_table(
+        ["backend", "env", "worlds", "steps/s", "env-steps/s", "spread"],
+        [[x["backend"], x["kind"], x["worlds"], med(x), env(x) if "env_steps_per_s" in x else med(x), sp(x)]
+         for x in g["rows"]])
     measured = [d for d in r.get("declared", []) if "skipped" not in d]
     declared = "GridWar 1v1 through RuleSim and through its declared spec (rules/gridworld/war.toml; " \
                "traced: the engine's change log on)\n" + format_table(

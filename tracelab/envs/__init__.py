@@ -1,12 +1,14 @@
-"""The environments over the simulators: gymnasium (gym_env), batched gymnasium (vector_env), PettingZoo
-(parallel_env), their shared set-up (common), the per-episode tracer and the trace sinks; and worlds
-declared by a spec beside a rule program (declared/, docs/worlds.md): `make_env(SPEC, **kwargs)` and the
-toy-text games registered as `tracelab/FrozenLake-v1`, ..."""
+"""The environments: worlds declared by a spec beside a rule program (declared/, docs/worlds.md) as a
+gymnasium Env, vector env and PettingZoo env: `make_env(SPEC, **kwargs)`, GridWar's ids
+(`tracelab/GridWar-base-v0`, ...: declared/gridwar.py) and the toy-text games (`tracelab/FrozenLake-v1`,
+...) registered with gymnasium; and RuleSim's batched env (vector_env), its per-episode tracer and trace
+sinks, which the GridWar trainer steps."""
 from __future__ import annotations
 
 import os
 from typing import TYPE_CHECKING, Any
 
+from tracelab.envs.declared.gridwar import register_gridwar
 from tracelab.envs.declared.toytext import register_toytext
 
 if TYPE_CHECKING:
@@ -31,3 +33,4 @@ def make_vec_env(spec: str | os.PathLike[str], num_envs: int, **kwargs: Any) -> 
 
 
 register_toytext()
+register_gridwar()

@@ -1,5 +1,5 @@
-"""What the gymnasium, vector and PettingZoo envs share: the simulator backend, the spaces, the action
-masks (the shield, read from the state) and the renderings (text here, images in render_rgb)."""
+"""What RuleSim's batched env (vector_env) and the GridWar trainer share: the simulator backend, the spaces,
+the action masks (the shield, read from the state) and the resets."""
 from __future__ import annotations
 
 from typing import Any
@@ -7,8 +7,6 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from tracelab.envs.render_rgb import BoardPainter
-from tracelab.envs.sinks import TraceSink
 from tracelab.envs.tracer import EpisodeTracer
 from tracelab.game.refsim import RefSim
 from tracelab.game.rulesim import RuleSim
@@ -25,8 +23,6 @@ from tracelab.game.scenario import (
 from tracelab.game.state import GameState
 
 BACKENDS = ("rules", "reference")
-RENDER_MODES = ["ansi", "rgb_array"]
-RENDER_FPS = 4
 Simulator = RuleSim | RefSim
 
 
@@ -48,39 +44,6 @@ def make_sim(scenario: Scenario, backend: str, n_worlds: int, stack_previous: bo
     if backend == "reference":
         return RefSim(scenario, n_worlds, seed=None, stack_previous=stack_previous)
     raise ValueError(f"unknown backend {backend!r}; expected one of {BACKENDS}")
-
-
-class OneWorldEnv:
-    """What the one-world envs (gymnasium's GridWarEnv, PettingZoo's GridWarParallelEnv) share: the
-    scenario, the simulator, the tracer feeding a sink, the action masker, rendering (text or an RGB image)
-    and closing.
-    Put it first among the bases: close() goes on to the framework's own."""
-
-    def _set_up(self, scenario: Scenario | str, backend: str, stack_previous: bool, trace_sink: TraceSink | None,
-                render_mode: str | None) -> None:
-        if render_mode is not None and render_mode not in RENDER_MODES:
-            raise ValueError(f"render_mode must be None or one of {RENDER_MODES}, got {render_mode!r}")
-        self.scenario = resolve_scenario(scenario)
-        self.sim = make_sim(self.scenario, backend, 1, stack_previous, trace=trace_sink is not None)
-        self._tracer = None if trace_sink is None else EpisodeTracer(trace_sink, self.scenario, self.sim)
-        self.backend = backend
-        self.render_mode = render_mode
-        self._masker = ActionMasker(self.scenario)
-        self._painter = BoardPainter(self.scenario) if render_mode == "rgb_array" else None
-
-    def render(self) -> str | np.ndarray | None:
-        """The board now: text ("ansi") or uint8 [H, W, 3] ("rgb_array", tracelab.envs.render_rgb)."""
-        if self.render_mode == "ansi":
-            return render_text(self.scenario, self.sim.state)
-        if self._painter is not None:
-            return self._painter(self.sim.state)
-        return None
-
-    def close(self) -> None:
-        if self._tracer is not None:
-            self._tracer.close()
-            self._tracer = None
-        super().close()  # type: ignore[misc]
 
 
 def observation_space(scenario: Scenario, stack_previous: bool) -> spaces.Box:
@@ -186,20 +149,3 @@ def step_learner(sim: Any, masker: ActionMasker, tracer: Any, action: Any, n_wor
     if tracer is not None:
         tracer.stepped(res, red, blue)
     return res, blue
-
-
-def render_text(scenario: Scenario, state: GameState, world: int = 0) -> str:
-    """The map, top row first: # mountain, r/b base, R/B living agent, * bullet, . free."""
-    grid = np.full((scenario.height, scenario.width), ".", dtype="<U1")
-    for x, y in scenario.mountains:
-        grid[y, x] = "#"
-    for mark, (x, y) in zip("rb", scenario.bases):
-        grid[y, x] = mark
-    for (x, y), d in zip(state.bullet_pos[world], state.bullet_dir[world]):
-        if d >= 0:
-            grid[y, x] = "*"
-    for team, mark in enumerate("RB"):
-        for (x, y), alive in zip(state.pos[world, team], state.alive[world, team]):
-            if alive:
-                grid[y, x] = mark
-    return "\n".join("".join(row) for row in grid[::-1]) + f"\nt={int(state.t[world])}\n"

@@ -1,6 +1,9 @@
 """`GridWarVectorEnv`: `num_envs` games of the learner (red) against the scripted opponent, stepped by one
 simulator call per step (RuleSim / RefSim with n_worlds = num_envs). Spaces, rewards, infos and backends
-are those of tracelab.envs.gym_env.GridWarEnv, batched.
+are red's (docs/game.md, Observations), batched:
+- Action: an index into `scenario.action_ids` per world (Discrete), one per agent (MultiDiscrete) for more.
+- info: `action_mask`, `t`, `winner` (-1 none, 0 red, 1 blue, 2 draw), `opponent_actions` and red's
+  per-agent `unsafe`, `invalid`, `hits_made`, `hits_taken`, `agent_reward` (step_info).
 
 Autoreset: SAME_STEP (`metadata["autoreset_mode"]`). A world whose episode ends in a step is reset
 within that step: the step returns its terminal reward and terminated/truncated flags, but the reset
@@ -31,7 +34,7 @@ a caller hands over with `decided()` before a step; `trace_agent=False`: neither
 lanes or compiled (built in the background while the env steps on the counting kernel if not cached).
 
 `opponent_p`: the scripted opponent's probability of a move towards red's base (0.7, the method's
-training setting). info["opponent_actions"] (int64, spec ids, as GridWarEnv's) holds what blue played in
+training setting). info["opponent_actions"] (int64, spec ids) holds what blue played in
 the step (in final_info for worlds that ended), so a step can be replayed on a simulator
 (`sim.step(red, blue)`), e.g. to restore a checkpoint.
 """
@@ -44,6 +47,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from tracelab.envs.declared.vector_env import with_masks
 from tracelab.envs.common import (
     ActionMasker,
     learner_action_space,
@@ -54,12 +58,35 @@ from tracelab.envs.common import (
     restart_worlds,
     step_learner,
 )
-from tracelab.envs.gym_env import reset_info, step_info
 from tracelab.envs.sinks import TraceSink
 from tracelab.envs.tracer import EpisodeTracer
 from tracelab.store.agent_rows import PolicyOutput
 from tracelab.game.opponent import P_TOWARD
 from tracelab.game.scenario import RED, Scenario
+from tracelab.game.state import WINNER_NONE, StepResult
+
+
+def step_info(res: StepResult, masks: np.ndarray, one_agent: bool, opponent: np.ndarray) -> dict[str, Any]:
+    """info of every world after a step, arrays [W, ...] (red's view); masks: [W, N, n_actions];
+    opponent: blue's actions (spec ids, [W, N]). With one agent per team the agent axis is dropped
+    (masks [W, n_actions], events [W]). Every array is new: the StepResult's are the simulator's buffers."""
+    info = {"action_mask": masks, "opponent_actions": np.asarray(opponent, np.int64),
+            "unsafe": res.unsafe[:, RED].copy(), "invalid": res.invalid[:, RED].copy(),
+            "hits_made": res.hits_made[:, RED].astype(np.int64),
+            "hits_taken": res.hits_taken[:, RED].astype(np.int64), "agent_reward": res.agent_reward[:, RED].copy()}
+    if one_agent:
+        info = {k: v[:, 0] for k, v in info.items()}
+    return {"t": res.t.astype(np.int64), "winner": res.winner.astype(np.int64), **info}
+
+
+def reset_info(n_worlds: int, masks: np.ndarray, one_agent: bool) -> dict[str, Any]:
+    """info of worlds at the start of an episode: nothing has happened yet."""
+    shape = (n_worlds,) if one_agent else (n_worlds, masks.shape[1])
+    return {"t": np.zeros(n_worlds, np.int64), "winner": np.full(n_worlds, WINNER_NONE, np.int64),
+            "action_mask": masks[:, 0] if one_agent else masks, "opponent_actions": np.full(shape, -1, np.int64),
+            "unsafe": np.zeros(shape, bool),
+            "invalid": np.zeros(shape, bool), "hits_made": np.zeros(shape, np.int64),
+            "hits_taken": np.zeros(shape, np.int64), "agent_reward": np.zeros(shape)}
 
 
 def _batch_seed(seed: int | Sequence[int] | None) -> int | None:
@@ -157,14 +184,7 @@ class GridWarVectorEnv(VectorEnv):
     def _masks(self) -> np.ndarray:
         return self._masker.for_sim(self.sim, RED)
 
-    @staticmethod
-    def _with_masks(info: dict[str, Any], mask: np.ndarray) -> dict[str, Any]:
-        """gymnasium's vector info layout: each key with a `_key` bool mask of the worlds it covers."""
-        out = dict(info)
-        for key in info:
-            if not key.startswith("_"):
-                out.setdefault(f"_{key}", mask)
-        return out
+    _with_masks = staticmethod(with_masks)
 
     def close_extras(self, **kwargs: Any) -> None:
         if self._tracer is not None:

@@ -3,26 +3,23 @@ own: greedy games every so many steps, the first few of each evaluation traced i
 run (begin info `{"kind": "eval", "train_step": N, "eval_round": K, ...}`), so `tracelab why`, `replay`
 and the TUI's evaluation games work on them, and the figures as the run's `eval/...` metrics.
 
-Two kinds of env are traced: GridWar (its gymnasium ids, tracelab/GridWar-*-v0: the games are played and
-traced by train/evaluate.py's EvalTrace, as in `tracelab train`) and the rules-declared worlds (a
-registered id such as tracelab/FrozenLake-v1, or a spec file: a traced DeclaredEnv records them, as
-`tracelab play --env --run` does). The policy is a function from a batch of observations to a batch of
-actions (`Act`): the library's greedy prediction."""
+The envs traced are the rules-declared worlds (a registered id such as tracelab/GridWar-base-v0 or
+tracelab/FrozenLake-v1, or a spec file): a traced DeclaredEnv records them, as `tracelab play --env --run`
+does. The policy is a function from a batch of observations to a batch of actions (`Act`): the library's
+greedy prediction."""
 from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
-import gymnasium as gym
 import numpy as np
 
-import tracelab.envs  # noqa: F401  (registers the toy-text ids)
+import tracelab.envs  # noqa: F401  (registers the toy-text and GridWar ids)
+from tracelab.envs.declared.gridwar import GRIDWAR_SPEC_IDS
 from tracelab.errors import UserError
-from tracelab.game.facts import GAME_RULES
-from tracelab.game.scenario import BOARD, NOTHING
 from tracelab.store.agent_rows import PolicyOutput
 from tracelab.store.writer import TraceWriter
 from tracelab.train.env_policy import (EVAL_STEP_CAP, EnvEvalResult, declares_outcomes, make_vector_env,
@@ -41,7 +38,7 @@ class EvalSettings:
     games: int = 50          # games per evaluation
     traced: int = 5          # of which traced in full into the run
     envs: int = 16           # worlds stepped together for the untraced games
-    opponent_p: float = 0.3  # GridWar: the scripted opponent's probability of a move towards red's base
+    opponent_p: float = 0.3  # GridWar's ids: the scripted opponent's probability of a move towards red's base
     seed: int = 0            # evaluation seeds: eval_seed(seed, round), as tracelab train's
 
     def __post_init__(self) -> None:
@@ -77,95 +74,12 @@ def eval_info(step: int, round_no: int, **more: Any) -> dict[str, Any]:
 
 
 # ---------------------------------------------------------------------------------------------------------
-# GridWar
-# ---------------------------------------------------------------------------------------------------------
-class _GreedyTeam:
-    """tracelab.train.policy.Policy's acting interface over an `Act`: the library's actions for the agents
-    that decide this step, do-nothing for the others (no action mask: the library's policy has none).
-    An `Act` that can also `decide` (obs -> actions and its PolicyOutput, or None) gives its values to
-    the traced games."""
-    mask = False
-
-    def __init__(self, act: Act, scenario: Any, stack_previous: bool) -> None:
-        self._act, self.stack_previous = act, stack_previous
-        self.nothing = scenario.action_ids.index(NOTHING)
-        if hasattr(act, "decide"):
-            self.decide = self._decide
-
-    def act(self, team_obs: np.ndarray, acting: np.ndarray, masks: np.ndarray | None = None) -> np.ndarray:
-        actions = np.asarray(self._act(team_obs), np.int64).reshape(acting.shape)
-        return np.where(acting, actions, self.nothing)
-
-    def _decide(self, team_obs: np.ndarray, acting: np.ndarray, masks: np.ndarray | None = None
-                ) -> tuple[np.ndarray, PolicyOutput]:
-        actions, output = self._act.decide(team_obs)
-        actions = np.where(acting, np.asarray(actions, np.int64).reshape(acting.shape), self.nothing)
-        if output is None:  # a model whose values are not read: NaN, the decision's action only
-            return actions, PolicyOutput(np.full((*acting.shape, 0), np.nan, np.float32))
-        w, n = acting.shape
-        return actions, replace(output, values=output.values.reshape(w, n, -1),
-                                state_value=None if output.state_value is None else
-                                np.repeat(output.state_value.reshape(w, 1), n, axis=1))
-
-
-@dataclass
-class GridWarTarget:
-    name: str
-    scenario: Any
-    backend: str = "rules"
-    stack_previous: bool = False
-
-    def run_meta(self) -> dict[str, Any]:
-        return {"scenario": self.scenario.name, "board": BOARD, "rule_files": [str(GAME_RULES)],
-                "config": {"env": {"name": self.name}, "scenario_toml": self.scenario.to_toml(),
-                           "backend": self.backend, "stack_previous": self.stack_previous}}
-
-    def outcome(self, info: Mapping[str, Any], terminated: bool, truncated: bool) -> str:
-        # deferred: the game's modules load numba, which a gymnasium env's training does not need
-        from tracelab.envs.tracer import outcome_name
-        return outcome_name(int(info.get("winner", -1)), truncated)
-
-    def evaluator(self, writer: TraceWriter, new_id: NewId, settings: EvalSettings) -> Evaluator:
-        return GridWarEvaluator(self, writer, new_id, settings)
-
-
-class GridWarEvaluator:
-    def __init__(self, target: GridWarTarget, writer: TraceWriter, new_id: NewId, settings: EvalSettings) -> None:
-        # deferred: the game's modules load numba, which a gymnasium env's training does not need
-        from tracelab.envs.vector_env import GridWarVectorEnv
-        from tracelab.train.evaluate import EvalTrace
-        self.target, self.settings = target, settings
-        traced = min(settings.traced, settings.games)
-        self.trace = EvalTrace(writer, target.scenario, target.backend, target.stack_previous, traced,
-                               settings.opponent_p, new_id) if traced else None
-        rest = settings.games - traced
-        self.env = GridWarVectorEnv(min(settings.envs, rest), target.scenario, backend=target.backend,
-                                    stack_previous=target.stack_previous, opponent_p=settings.opponent_p,
-                                    copy=False) if rest else None
-
-    def run(self, act: Act, step: int, round_no: int) -> dict[str, float]:
-        # deferred: the game's modules load numba, which a gymnasium env's training does not need
-        from tracelab.train.evaluate import evaluate
-        s, t = self.settings, self.target
-        result = evaluate(_GreedyTeam(act, t.scenario, t.stack_previous), t.scenario, games=s.games,
-                          backend=t.backend, seed=eval_seed(s.seed, round_no), opponent_p=s.opponent_p,
-                          stack_previous=t.stack_previous, trace=self.trace,
-                          trace_info=eval_info(step, round_no, opponent_p=s.opponent_p), env=self.env)
-        return result.metrics()
-
-    def close(self) -> None:
-        if self.trace is not None:
-            self.trace.close()
-        if self.env is not None:
-            self.env.close()
-
-
-# ---------------------------------------------------------------------------------------------------------
 # Rules-declared worlds
 # ---------------------------------------------------------------------------------------------------------
 class _GreedyAgent:
     """env_policy.EnvPolicy's acting interface over an `Act` (the library's policy has no action mask);
-    `decide` as _GreedyTeam's, when the `Act` has one."""
+    an `Act` that can also `decide` (obs -> actions and its PolicyOutput, or None) gives its values to the
+    traced games."""
 
     def __init__(self, act: Act) -> None:
         self._act = act
@@ -197,10 +111,14 @@ class DeclaredTarget:
                 "config": {"env": self.source.to_json(), **declared_run_config(self.spec)}}
 
     def outcome(self, info: Mapping[str, Any], terminated: bool, truncated: bool) -> str:
-        return "terminated" if terminated else "truncated"
+        # the world's own outcome where it declares a win ([end] win, loss: "win", "loss")
+        return str(info.get("outcome", "terminated" if terminated else "truncated"))
 
     def evaluator(self, writer: TraceWriter, new_id: NewId, settings: EvalSettings) -> Evaluator:
-        return DeclaredEvaluator(self.source, writer, new_id, settings)
+        source = self.source
+        if source.name in GRIDWAR_SPEC_IDS:  # the games against the scripted opponent of the evaluations
+            source = EnvSource(source.name, {**source.kwargs, "opponent_p": settings.opponent_p})
+        return DeclaredEvaluator(source, writer, new_id, settings)
 
 
 class DeclaredEvaluator:
@@ -260,24 +178,15 @@ class DeclaredEvaluator:
 
 # ---------------------------------------------------------------------------------------------------------
 def eval_target(env_id: str, env_kwargs: Mapping[str, Any] | None = None) -> EvalTarget:
-    """What `env_id` (a GridWar id, a declared env's id, or a spec file) is, for recording and evaluating
-    a training on it; a UserError names any other env (its games cannot be traced)."""
-    # deferred: the game's modules load numba, which a gymnasium env's training does not need
-    import tracelab.envs.gym_env  # noqa: F401  (registers GridWar's)
-    kwargs = dict(env_kwargs or {})
-    registered = gym.registry.get(env_id)
-    if registered is not None and registered.entry_point == "tracelab.envs.gym_env:GridWarEnv":
-        from tracelab.envs.common import resolve_scenario  # deferred: numba, as above
-        merged = {**registered.kwargs, **kwargs}
-        return GridWarTarget(env_id, resolve_scenario(merged.get("scenario", "advanced")),
-                             merged.get("backend", "rules"), bool(merged.get("stack_previous", False)))
-    source = EnvSource.given(env_id, kwargs)
+    """What `env_id` (a declared env's id such as tracelab/GridWar-base-v0, or a spec file) is, for
+    recording and evaluating a training on it; a UserError names any other env (its games cannot be traced)."""
+    source = EnvSource.given(env_id, dict(env_kwargs or {}))
     env = source.make()
     try:
         spec = getattr(env.unwrapped, "world_spec", None)
     finally:
         env.close()
     if spec is None:
-        raise UserError(f"{env_id!r}: not a GridWar id (tracelab/GridWar-base-v0, ...) nor a rules-declared "
-                        f"env (tracelab/FrozenLake-v1, a spec file): tracelab cannot trace its games")
+        raise UserError(f"{env_id!r}: not a rules-declared env (tracelab/GridWar-base-v0, tracelab/FrozenLake-v1, "
+                        f"a spec file): tracelab cannot trace its games")
     return DeclaredTarget(source, spec)

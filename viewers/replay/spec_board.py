@@ -11,7 +11,7 @@ from tracelab.viewers.replay import style
 
 from tracelab.board import Board
 from tracelab.envs.declared.render import DeclaredPainter
-from tracelab.envs.render_rgb import CELL
+from tracelab.envs.declared.render import CELL
 from tracelab.store.reader import RunConnection
 
 MAX_IMAGE_SIDE = 1536  # pixels: a big board's cells are drawn smaller (a frame of 256 x 24 px a side is 113 MB)

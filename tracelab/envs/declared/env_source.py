@@ -14,17 +14,15 @@ from typing import Any
 
 import gymnasium as gym
 
-from tracelab.envs import make_env  # importing tracelab.envs registers the toy-text ids
-from tracelab.envs.declared.gridwar import GRIDWAR_SPEC_IDS, WAR_SPEC
+from tracelab.envs import make_env  # importing tracelab.envs registers the toy-text and GridWar ids
+from tracelab.envs.declared.gridwar import GRIDWAR_SPEC_IDS, spec_and_params
 from tracelab.errors import UserError
 
 DECLARED_ENTRY_POINT = "tracelab.envs.declared.gym_env:DeclaredEnv"
 
 
 def _registry() -> Any:
-    """gymnasium's registry with tracelab's ids in it (the toy-text games and GridWar's)."""
-    # deferred: GridWar's env loads the engine (numba), which a toy-text or declared id does not need
-    import tracelab.envs.gym_env  # noqa: F401 - registers GridWar's ids
+    """gymnasium's registry with tracelab's ids in it (importing tracelab.envs registers them)."""
     return gym.registry
 
 
@@ -43,7 +41,8 @@ class EnvSource:
 
     @property
     def env_id(self) -> str | None:
-        """The registered id, or None for a spec file (and for GridWar's ids, names of war.toml here)."""
+        """The registered id whose entry is DeclaredEnv over its `spec` kwarg, or None for a spec file (and
+        for GridWar's ids, whose keyword arguments gridwar.spec_and_params maps onto their spec's)."""
         return self.name if self.name in _registry() and self.name not in GRIDWAR_SPEC_IDS else None
 
     @property
@@ -55,7 +54,8 @@ class EnvSource:
         """The spec file of a declared world and the spec's [params] to load it with (an id's own fixed
         ones, map_name of FrozenLake8x8, then the user's); UserError when the source is not one."""
         if self.name in GRIDWAR_SPEC_IDS:
-            return str(WAR_SPEC), {**GRIDWAR_SPEC_IDS[self.name], **self.kwargs}
+            spec, params = spec_and_params(self.name, self.kwargs)
+            return str(spec), params
         if self.env_id is not None:
             entry = _registry()[self.env_id]
             kwargs = dict(entry.kwargs)
@@ -79,12 +79,9 @@ class EnvSource:
                          *(f"--env-arg {shlex.quote(f'{k}={_toml_value(v)}')}" for k, v in self.kwargs.items())])
 
     def make(self) -> Any:
-        """A new env (gym.make for a registered id: its TimeLimit and checks; make_env for a spec file and
-        for GridWar's ids, whose spec is war.toml)."""
-        if self.name in GRIDWAR_SPEC_IDS:
-            spec, params = self.declared()
-            return make_env(spec, **params)
-        if self.env_id is not None:
+        """A new env (gym.make for a registered id, GridWar's too: its TimeLimit and checks; make_env for a
+        spec file)."""
+        if self.name in _registry():
             return gym.make(self.name, **self.kwargs)
         if not Path(self.name).is_file():
             known = sorted(k for k in _registry() if k.startswith("tracelab/"))

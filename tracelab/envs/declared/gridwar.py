@@ -1,17 +1,105 @@
-"""GridWar declared by one spec, rules/gridworld/war.toml, sized by its params (agents_per_team, ammo,
-health, damage, p_toward, max_steps, the rewards and reward_scale, map; docs/worlds.md, "GridWar through
-the same path"). The commands that take `--env` (play, train, eval) play GridWar's ids through it, with
-`--env-arg` for the params; gymnasium's own `gym.make` of these ids still builds GridWarEnv (RuleSim)
-until the envs above the spec are one (issue 38)."""
+"""GridWar's registered ids (`tracelab/GridWar-{base,advanced,nonmarkov}-v0`) as declared worlds: each id is
+a spec in rules/gridworld/ with its fixed params (war.toml sized by its params: agents_per_team, ammo,
+health, damage, p_toward, max_steps, map, the rewards and reward_scale, stack_previous; docs/worlds.md,
+"GridWar through the same path"). `gym.make(id, **kwargs)`, `gym.make_vec`, the PettingZoo env
+(`parallel_env(id, **kwargs)`, several agents a team) and the commands' `--env id --env-arg ...` all map
+their keyword arguments onto the spec's params here (`spec_and_params`), where a keyword the spec cannot
+honour is refused in one line naming it."""
 from __future__ import annotations
 
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import gymnasium as gym
 
 from tracelab import RULES_DIR
+from tracelab.errors import UserError
+
+if TYPE_CHECKING:
+    from tracelab.envs.declared.gym_env import DeclaredEnv
+    from tracelab.envs.declared.parallel_env import DeclaredParallelEnv
+    from tracelab.envs.declared.vector_env import DeclaredVectorEnv
 
 WAR_SPEC = RULES_DIR / "gridworld" / "war.toml"
-# a GridWar id -> the spec's params that make its scenario (the others keep the spec's defaults)
-GRIDWAR_SPEC_IDS: dict[str, dict[str, Any]] = {
-    "tracelab/GridWar-base-v0": {"advanced": False},
-    "tracelab/GridWar-advanced-v0": {"advanced": True},
+# a GridWar id -> its spec and the params that make its scenario (the others keep the spec's defaults)
+GRIDWAR_SPEC_IDS: dict[str, tuple[Path, dict[str, Any]]] = {
+    "tracelab/GridWar-base-v0": (WAR_SPEC, {"advanced": False}),
+    "tracelab/GridWar-advanced-v0": (WAR_SPEC, {"advanced": True}),
+    # two agents a team, agent 2 slow, observing the last step too: a PettingZoo env (parallel_env)
+    "tracelab/GridWar-nonmarkov-v0": (RULES_DIR / "gridworld" / "war_nonmarkov.toml", {}),
 }
+# the old RuleSim env's keyword arguments, as the spec's params name them
+RENAMED = {"opponent_p": "p_toward"}
+# why the spec path cannot honour the others: refused naming them
+REFUSED = {
+    "trace_sink": "a declared env records its games through trace_writer (a TraceWriter), not a TraceSink",
+    "trace_episodes": "a declared env records every game of its trace_writer",
+    "trace_agent": "a declared env records its policy's decisions through env.decided()",
+}
+
+
+def spec_and_params(env_id: str, kwargs: dict[str, Any]) -> tuple[Path, dict[str, Any]]:
+    """The spec file of a GridWar id and the keyword arguments to load it with: the id's fixed params, then
+    `kwargs` with the old RuleSim env's names mapped onto the spec's (opponent_p: p_toward; scenario
+    "base" / "advanced": advanced); a UserError names a keyword the spec cannot honour."""
+    spec, fixed = GRIDWAR_SPEC_IDS[env_id]
+    params = dict(fixed)
+    for key, value in kwargs.items():
+        if key in REFUSED:
+            raise UserError(f"{env_id}: {key}={value!r} is not supported: {REFUSED[key]}")
+        if key == "backend" and value != "rules":
+            raise UserError(f"{env_id}: backend={value!r} is not supported: the ids play the spec on the rule "
+                            "engine (RefSim, the hand-written oracle, is tracelab.game.refsim.RefSim)")
+        if key == "scenario":
+            if spec != WAR_SPEC or value not in ("base", "advanced"):
+                raise UserError(f"{env_id}: scenario={value!r} is not supported: the id names its scenario "
+                                "(tracelab/GridWar-base-v0, -advanced-v0, -nonmarkov-v0); its params "
+                                "(agents_per_team, map, ...) size it")
+            params["advanced"] = value == "advanced"
+        elif key != "backend":
+            params[RENAMED.get(key, key)] = value
+    return spec, params
+
+
+def make_env(env_id: str, **kwargs: Any) -> DeclaredEnv:
+    """gym.make's entry point of a GridWar id: the declared gymnasium Env (one agent a team)."""
+    # deferred: the declared worlds load the engine (numba); registering the ids does not
+    from tracelab.envs.declared.gym_env import DeclaredEnv
+    spec, params = spec_and_params(env_id, kwargs)
+    _one_agent(env_id, params, "a gymnasium Env")
+    return DeclaredEnv(spec, **params)
+
+
+def make_vec_env(env_id: str, num_envs: int = 1, **kwargs: Any) -> DeclaredVectorEnv:
+    """gym.make_vec's entry point of a GridWar id: `num_envs` worlds on one engine (SAME_STEP autoreset)."""
+    # deferred: as in make_env
+    from tracelab.envs.declared.vector_env import DeclaredVectorEnv
+    spec, params = spec_and_params(env_id, kwargs)
+    _one_agent(env_id, params, "the vector env")
+    return DeclaredVectorEnv(spec, num_envs, **params)
+
+
+def parallel_env(env_id: str = "tracelab/GridWar-base-v0", **kwargs: Any) -> DeclaredParallelEnv:
+    """GridWar as a PettingZoo ParallelEnv: every red agent a player (agents_per_team of them), the blue
+    team the scripted opponent written as rules."""
+    # deferred: as in make_env
+    from tracelab.envs.declared.parallel_env import DeclaredParallelEnv
+    if env_id not in GRIDWAR_SPEC_IDS:
+        raise UserError(f"{env_id!r}: not a GridWar id ({', '.join(GRIDWAR_SPEC_IDS)})")
+    spec, params = spec_and_params(env_id, kwargs)
+    return DeclaredParallelEnv(spec, **params)
+
+
+def _one_agent(env_id: str, params: dict[str, Any], what: str) -> None:
+    if env_id == "tracelab/GridWar-nonmarkov-v0" or params.get("agents_per_team", 1) != 1:
+        size = params.get("agents_per_team", 2)
+        raise UserError(f"{env_id}: agents_per_team={size!r} is not supported by {what}, which plays one agent "
+                        "(tracelab.envs.declared.gridwar.parallel_env plays every red agent)")
+
+
+def register_gridwar() -> None:
+    """Register GridWar's ids (idempotent): gym.make and gym.make_vec build the declared envs."""
+    for env_id in GRIDWAR_SPEC_IDS:
+        if env_id not in gym.registry:
+            gym.register(id=env_id, entry_point="tracelab.envs.declared.gridwar:make_env",
+                         vector_entry_point="tracelab.envs.declared.gridwar:make_vec_env", kwargs={"env_id": env_id})

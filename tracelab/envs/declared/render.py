@@ -1,15 +1,22 @@
-"""A declared board as an RGB image (render_mode="rgb_array"), drawn with numpy as GridWar's boards are
-(tracelab/envs/render_rgb.py): each cell CELL pixels square, top row first, filled with its character's
-colour (`[board] colors`, hex; a grey of the character's rank in the legend otherwise) with a thin grid,
+"""A declared board as an RGB image (render_mode="rgb_array"), drawn with numpy alone (gymnasium's
+RecordVideo, `utils.save_video` and GIF writers work without a new dependency): each cell CELL pixels
+square, top row first, filled with its character's colour (`[board] colors`, hex; a grey of the character's rank in the legend otherwise) with a thin grid,
 and a disc on each cell where a `marks` predicate holds (`[board] mark_colors`, red by default)."""
 from __future__ import annotations
 
 import numpy as np
 
 from tracelab.board import Board
-from tracelab.envs.render_rgb import CELL, GRID, _disc
 
+CELL = 24  # pixels per cell: a 16x16 board is 384x384, small enough for a video of many episodes
+GRID = (45, 45, 45)
 DEFAULT_MARK = (230, 57, 70)
+
+
+def _disc(size: int, radius: float) -> np.ndarray:
+    """bool [size, size]: the pixels whose centres lie within `radius` of the square's centre."""
+    c = np.arange(size) + 0.5 - size / 2
+    return c[:, None] ** 2 + c[None, :] ** 2 <= radius ** 2
 
 
 class DeclaredPainter:

@@ -33,7 +33,15 @@ from tracelab.envs.declared.gym_env import observation_space
 from tracelab.envs.declared.history import ObservationHistory
 from tracelab.envs.declared.spec import WorldSpec, load_spec
 from tracelab.envs.declared.vector_world import DeclaredWorlds
-from tracelab.envs.vector_env import GridWarVectorEnv
+
+
+def with_masks(info: dict[str, Any], mask: np.ndarray) -> dict[str, Any]:
+    """gymnasium's vector info layout: each key with a `_key` bool mask of the worlds it covers."""
+    out = dict(info)
+    for key in info:
+        if not key.startswith("_"):
+            out.setdefault(f"_{key}", mask)
+    return out
 
 
 class DeclaredVectorEnv(VectorEnv):
@@ -122,5 +130,5 @@ class DeclaredVectorEnv(VectorEnv):
             info["action_mask"] = masks
         return self._with_masks(info, mask)
 
-    _with_masks = staticmethod(GridWarVectorEnv._with_masks)  # gymnasium's `_key` masks, as GridWar's
+    _with_masks = staticmethod(with_masks)
 
