@@ -45,9 +45,11 @@ Progress = Callable[[dict[str, Any]], None]
 class EnvTrainer:
     def __init__(self, cfg: TrainConfig, source: EnvSource, writer: TraceWriter | None = None,
                  run_dir: Path | None = None, progress: Progress | None = None,
-                 metric_sinks: Sequence[MetricSink] = ()) -> None:
+                 metric_sinks: Sequence[MetricSink] = (), eval_source: EnvSource | None = None) -> None:
+        """`eval_source`: the env evaluations play, if not `source` (GridWar's opponent at --eval-p)."""
         torch.set_num_threads(cfg.threads)
         self.cfg, self.source, self.writer, self.run_dir, self.progress = cfg, source, writer, run_dir, progress
+        self.eval_source = eval_source or source
         self.worlds = w = cfg.envs
         # a declared world's own batched engine where its spec allows (else SyncVectorEnv, and why)
         self.env, self.vector_note = make_vector_env(source, w, by_term=cfg.decompose)
@@ -157,11 +159,11 @@ class EnvTrainer:
             if self._evaluator is None:
                 settings = EvalSettings(cfg.eval_every, cfg.eval_games, cfg.trace_eval_games, cfg.eval_envs,
                                         seed=cfg.seed)
-                self._evaluator = DeclaredEvaluator(self.source, self.writer, self.episodes.new_id, settings)
+                self._evaluator = DeclaredEvaluator(self.eval_source, self.writer, self.episodes.new_id, settings)
             result = self._evaluator.play(self.policy, self.step, self.eval_round)
         else:
             if self._eval_env is None:
-                self._eval_env, _ = make_vector_env(self.source, min(cfg.eval_envs, cfg.eval_games))
+                self._eval_env, _ = make_vector_env(self.eval_source, min(cfg.eval_envs, cfg.eval_games))
             result = play_env_games(self._eval_env, self.policy, cfg.eval_games, self.rngs.eval_seed(self.eval_round))
         self.write_metrics(result.metrics())
         self.eval_round += 1
@@ -242,18 +244,21 @@ class EnvTrainer:
 
 
 def env_run_meta(cfg: TrainConfig, source: EnvSource, command: str,
-                 resumed_from: dict[str, Any] | None = None) -> dict[str, Any]:
+                 resumed_from: dict[str, Any] | None = None, scenario: Any = None) -> dict[str, Any]:
     """The meta of a run that trains on `source` (`train --env`, a sweep's trial): the env and the
     training's settings; for a declared world whose evaluations are traced, what `why`, `tui` and
     `replay` read of it (its rule files, its spec and rules by path, size and hash, what sets each external
-    fact, its board: DeclaredTarget's; the texts go in the run's `sources` table with its traced games)."""
+    fact, its board: DeclaredTarget's; the texts go in the run's `sources` table with its traced games).
+    `scenario`: the GridWar scenario `source` plays (train --scenario): the run names it and keeps its
+    settings (every config field, the scenario's TOML), as show, compare and the TUI read them."""
     # deferred: loads the engine (numba), which a gymnasium id's training does not need
     from tracelab.envs.declared.play import load_declared
     from tracelab.errors import UserError
     from tracelab.train.external_eval import DeclaredTarget
 
-    meta = {"command": command, "scenario": source.name, "seed": cfg.seed,
-            "config": {**cfg.env_dict(), "env": source.to_json(), "resumed_from": resumed_from}}
+    settings = cfg.env_dict() if scenario is None else {**cfg.to_dict(), "scenario_toml": scenario.to_toml()}
+    meta = {"command": command, "scenario": source.name if scenario is None else scenario.name, "seed": cfg.seed,
+            "config": {**settings, "env": source.to_json(), "resumed_from": resumed_from}}
     if not cfg.trace_eval_games:
         return meta
     try:
