@@ -30,11 +30,6 @@ from tracelab.train.budget import reward_scale_note, too_short_hint
 from tracelab.train.config import (GRIDWAR_ONLY, LEARNERS, METHOD_REWARD_SCALE, TrainConfig, config_fields,
                                    flag_of, reward_scale_text)
 
-# GridWar's settings the spec path does not train yet: each refused in one line when set
-NOT_ON_THE_SPEC_PATH = {"split_networks": "one network for every agent", "slow_every_step": "no slow agents",
-                        "explore_scripted": "uniform exploration (no scripted policy for red)",
-                        "backend": "the rule engine"}
-
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("train", help="train red with DQN, logging metrics, episodes and traced evaluation "
@@ -113,21 +108,6 @@ def env_source_of(args: argparse.Namespace) -> Any:
     return EnvSource.given(args.env, parse_env_args(args.env_arg))
 
 
-def gridwar_sources(cfg: TrainConfig, scenario: Any) -> tuple[Any, Any]:
-    """(the env GridWar's `scenario` trains on, the one its evaluations play: the opponent at --eval-p), as
-    GridWar spec ids and params; a UserError naming a setting the spec path does not train."""
-    # deferred: loads gymnasium; every command is imported to build the CLI's parser
-    from tracelab.envs.declared.env_source import EnvSource
-    from tracelab.envs.declared.gridwar import scenario_env
-    defaults = TrainConfig()
-    for name, only in NOT_ON_THE_SPEC_PATH.items():
-        if getattr(cfg, name) != getattr(defaults, name):
-            raise UserError(f"{flag_of(name)} {getattr(cfg, name)}: GridWar trains through its spec "
-                            f"(rules/gridworld/war.toml) with {only}; drop the flag")
-    name, params = scenario_env(scenario, cfg.opponent_p, cfg.non_markov)
-    return EnvSource(name, params), EnvSource(name, {**params, "p_toward": cfg.eval_p})
-
-
 def run(args: argparse.Namespace) -> int:
     # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
     from tracelab.train.memory import check_estimate, env_training_estimate, env_world_bytes, memory_limit
@@ -147,6 +127,8 @@ def run(args: argparse.Namespace) -> int:
                         f"--env {args.env} takes the DQN flags only")
     if args.resume and not on_env and is_rulesim_run(Path(args.resume)):
         return _resume_rulesim(args, given, limit)
+    # deferred: loads gymnasium, torch; every command is imported to build the CLI's parser
+    from tracelab.train.env_trainer import gridwar_sources
     state, scenario = None, None
     with store_errors():  # a bad value in the config or a checkpoint that does not load
         if args.resume:
@@ -223,6 +205,7 @@ def _resumed(args: argparse.Namespace, given: dict[str, Any], source: Any, limit
     from tracelab.game.scenario import builtin_scenario_names
     from tracelab.train.checkpoint import checkpoint_config
     from tracelab.train.env_checkpoint import checkpoint_env, load_env_checkpoint
+    from tracelab.train.env_trainer import gridwar_sources
     scenario_given = given.pop("scenario", None)
     check_resume_flags(given)
     raw, recorded = checkpoint_env(args.resume, limit.bytes)

@@ -20,7 +20,10 @@ import numpy as np
 import torch
 
 from tracelab.store.writer import TraceWriter
-from tracelab.train.config import TrainConfig
+from tracelab.errors import UserError
+from tracelab.envs.declared.gridwar import scenario_env
+from tracelab.game.scenario import Scenario
+from tracelab.train.config import TrainConfig, flag_of
 from tracelab.train.env_checkpoint import ActionLog, replay_actions, save_env_checkpoint
 from tracelab.train.env_policy import (EnvEvalResult, EnvPolicy, declares_outcomes, make_vector_env, play_env_games,
                                        save_env_policy, world_spec_of)
@@ -38,6 +41,10 @@ from tracelab.train.rngs import Generators
 from tracelab.train.tensorboard import MetricSink
 from tracelab.train.update_schedule import UpdateSchedule
 
+# GridWar's settings the spec path does not train yet: each refused in one line when set
+NOT_ON_THE_SPEC_PATH = {"split_networks": "one network for every agent", "slow_every_step": "no slow agents",
+                        "explore_scripted": "uniform exploration (no scripted policy for red)",
+                        "backend": "the rule engine"}
 SHARED = "shared"  # the one network's name (GridWar's trainer may have one per team role)
 Progress = Callable[[dict[str, Any]], None]
 
@@ -243,6 +250,18 @@ class EnvTrainer:
             self._evaluator.close()
 
 
+def gridwar_sources(cfg: TrainConfig, scenario: Scenario) -> tuple[EnvSource, EnvSource]:
+    """(the env GridWar's `scenario` trains on, the one its evaluations play: the opponent at --eval-p), as
+    GridWar spec ids and params; a UserError naming a setting the spec path does not train."""
+    defaults = TrainConfig()
+    for name, only in NOT_ON_THE_SPEC_PATH.items():
+        if getattr(cfg, name) != getattr(defaults, name):
+            raise UserError(f"{flag_of(name)} {getattr(cfg, name)}: GridWar trains through its spec "
+                            f"(rules/gridworld/war.toml) with {only}; drop the flag")
+    name, params = scenario_env(scenario, cfg.opponent_p, cfg.non_markov)
+    return EnvSource(name, params), EnvSource(name, {**params, "p_toward": cfg.eval_p})
+
+
 def env_run_meta(cfg: TrainConfig, source: EnvSource, command: str,
                  resumed_from: dict[str, Any] | None = None, scenario: Any = None) -> dict[str, Any]:
     """The meta of a run that trains on `source` (`train --env`, a sweep's trial): the env and the
@@ -253,7 +272,6 @@ def env_run_meta(cfg: TrainConfig, source: EnvSource, command: str,
     settings (every config field, the scenario's TOML), as show, compare and the TUI read them."""
     # deferred: loads the engine (numba), which a gymnasium id's training does not need
     from tracelab.envs.declared.play import load_declared
-    from tracelab.errors import UserError
     from tracelab.train.external_eval import DeclaredTarget
 
     settings = cfg.env_dict() if scenario is None else {**cfg.to_dict(), "scenario_toml": scenario.to_toml()}
