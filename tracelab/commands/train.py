@@ -144,15 +144,9 @@ def run(args: argparse.Namespace) -> int:
         eval_source = None
         if scenario is not None:
             source, eval_source = gridwar_sources(cfg, scenario)
-        probe = source.make()  # a bad id, spec or keyword argument fails here, in one line
-    try:
         # deferred: loads gymnasium; every command is imported to build the CLI's parser
-        from tracelab.train.env_source import ObservationEncoder, action_count
-        encoder = ObservationEncoder(probe.observation_space, source.name)
-        n_actions = action_count(probe.action_space, source.name)
-        spec = getattr(probe.unwrapped, "world_spec", None)
-    finally:
-        probe.close()
+        from tracelab.train.env_source import probe_env
+        encoder, n_actions, spec = probe_env(source)
     with store_errors():  # --num-envs 1e7 would build ten million worlds before its first step
         check_estimate(env_training_estimate(cfg, NetSpec(encoder.size, cfg.hidden_sizes, n_actions, cfg.dueling),
                                              env_world_bytes(spec)), limit)

@@ -32,7 +32,7 @@ from tracelab.train.checkpoint import (check_best, check_buffer_rows, checkpoint
                                        checkpoint_file, checkpoint_path, episode_games_schema, in_range,
                                        learner_schema, parts_schema, write_checkpoint)
 from tracelab.train.config import TrainConfig, config_fields, config_schema
-from tracelab.train.env_source import ObservationEncoder, action_count
+from tracelab.train.env_source import probe_env
 from tracelab.train.memory import (Limit, MemoryLimitExceeded, check_estimate, env_training_estimate,
                                    env_world_bytes)
 from tracelab.train.torch_files import Tensor, load_tensors
@@ -143,13 +143,7 @@ def load_env_checkpoint(run: str | Path, given: EnvSource | None, limit: Limit) 
         cfg = checkpoint_config(state)
     except ValueError as e:
         raise FileRefused(f"{f}: config: {e}") from None
-    probe = given.make()
-    try:
-        encoder = ObservationEncoder(probe.observation_space, given.name)
-        n_actions = action_count(probe.action_space, given.name)
-        spec = getattr(probe.unwrapped, "world_spec", None)
-    finally:
-        probe.close()
+    encoder, n_actions, spec = probe_env(given)
     try:
         net = cfg.network(encoder.size, n_actions, spec.reward_terms if spec is not None else ())
     except ValueError as e:
