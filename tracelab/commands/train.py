@@ -160,16 +160,22 @@ def run(args: argparse.Namespace) -> int:
                       resumed_from=args.resume, same_run=same_run, scenario=scenario, eval_source=eval_source)
 
 
-def is_rulesim_run(run: Path) -> bool:
-    """Whether `run` was trained by RuleSim's trainer (tracelab before GridWar trained through its spec, or
-    train_into from Python): its meta.json's config names no env."""
+def _run_config(run: Path) -> dict[str, Any]:
+    """The config in `run`'s meta.json ({} when it is not a run: the checkpoint's loader says what it is)."""
     # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.meta import current_meta
     try:
         config = current_meta(run).get("config", {})
     except (OSError, ValueError, AttributeError):
-        return False  # not a run (or not one of these): the checkpoint's loader says what it is
-    return isinstance(config, dict) and "scenario_toml" in config and config.get("env") is None
+        return {}
+    return config if isinstance(config, dict) else {}
+
+
+def is_rulesim_run(run: Path) -> bool:
+    """Whether `run` was trained by RuleSim's trainer (tracelab before GridWar trained through its spec, or
+    train_into from Python): its config names a scenario and no env."""
+    config = _run_config(run)
+    return "scenario_toml" in config and config.get("env") is None
 
 
 def _resume_rulesim(args: argparse.Namespace, given: dict[str, Any], limit: Any) -> int:
@@ -204,7 +210,7 @@ def _resumed(args: argparse.Namespace, given: dict[str, Any], source: Any, limit
     check_resume_flags(given)
     raw, recorded = checkpoint_env(args.resume, limit.bytes)
     scenario = None
-    if source is None and recorded.name in GRIDWAR_SPEC_IDS:
+    if source is None and recorded.name in GRIDWAR_SPEC_IDS and "scenario_toml" in _run_config(Path(args.resume)):
         cfg = checkpoint_config(raw)
         if scenario_given not in (None, cfg.scenario):
             raise UserError(f"--scenario {scenario_given}: {args.resume} trained scenario {cfg.scenario!r}")
