@@ -126,6 +126,8 @@ def test_sweep_names_the_best_trial_from_its_runs(tmp_path, capsys):
     assert [t.name for t in trials] == ["trial-000", "trial-001"]
     assert [run_info(t).status for t in trials] == ["finished", "finished"]
     assert sorted(run_info(t).meta["config"]["lr"] for t in trials) == [1e-4, 3e-3]
+    # a GridWar sweep's trials train through its spec, as `train --scenario` does (issue 38)
+    assert {run_info(t).meta["config"]["env"]["name"] for t in trials} == {"tracelab/GridWar-base-v0"}
     returns = {t: best_metric(t, "eval/mean_return") for t in trials}
     best = max(trials, key=lambda t: returns[t][0])
     line = captured.out.strip().splitlines()[-1]

@@ -202,7 +202,7 @@ def test_train_env_with_ten_million_worlds_is_refused_naming_the_flag(tmp_path: 
 def test_a_stranger_s_env_checkpoint_asking_for_a_billion_worlds_is_refused_on_resume(tmp_path: Path) -> None:
     import torch
 
-    from tracelab.commands.train_env import train_env_into
+    from tracelab.commands.train import train_env_into
     from tracelab.envs.declared.env_source import EnvSource
     from tracelab.train.checkpoint import checkpoint_path
     from tracelab.train.config import TrainConfig

@@ -266,8 +266,8 @@ def test_the_sample_run_s_policy_still_loads(capsys):
 # ---------------------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("flag, value, named", [
     ("--hidden", "100000000", "--hidden 100000000"),
-    ("--buffer", "10000000000", "--buffer 10000000000"),
-    ("--envs", "100000000", "--envs 100000000"),
+    ("--buffer", "10000000000", "--buffer-size 10000000000"),  # the documented flag of the alias typed
+    ("--envs", "100000000", "--num-envs 100000000"),
 ])
 def test_a_run_too_big_for_the_machine_is_refused_before_anything_is_built(flag, value, named, tmp_path, capsys):
     err = error_line(capsys, main(["train", flag, value, "--run", str(tmp_path / "run")]))

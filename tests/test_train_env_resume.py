@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from tracelab.cli import main
-from tracelab.commands.train_env import train_env_into
+from tracelab.commands.train import train_env_into
 from tracelab.envs.declared.env_source import EnvSource
 from tracelab.store.meta import current_meta
 from tracelab.train.checkpoint import checkpoint_path

@@ -1,4 +1,4 @@
-"""The part of `tracelab train` that both trainers (train.py, GridWar; train_env.py, --env) share: where a
+"""The parts of `tracelab train` (train.py) around its trainer: where a
 run goes and what --resume may change; the session around a training, which closes the trainer, the
 TensorBoard sink and the run whatever happens; Ctrl-C once finishes the step and stops (the trainer writes
 what it keeps), Ctrl-C again aborts; a progress bar on a terminal; what a resume says; the final summary's

@@ -12,7 +12,7 @@ from pathlib import Path
 from tracelab.commands._args import add_max_groundings, non_negative_int, positive_int
 from tracelab.commands._progress import Progress, progress
 from tracelab.commands.train import load_scenario_arg
-from tracelab.commands.train_env import env_source_of
+from tracelab.commands.train import env_source_of
 from tracelab.errors import UserError, store_errors
 from tracelab.train.experiments.stats import wilson
 

@@ -1,5 +1,8 @@
-"""`tracelab train`: DQN against the scripted opponent, logged live into a trace-store run
-(docs/training.md). Ctrl-C stops cleanly (the run ends `interrupted`, with a checkpoint);
+"""`tracelab train`: DQN on a world, logged live into a trace-store run (docs/training.md): GridWar's
+scenario (`--scenario NAME`, with its flags: team size, opponent p, rewards, --non-markov) as the GridWar
+spec id and params it maps to (envs/declared/gridwar.py, scenario_env), or any gymnasium env (`--env
+SPEC_OR_ID [--env-arg key=value ...]`); both train through EnvTrainer (tracelab/train/env_trainer.py,
+checkpoints in env_checkpoint.py). Ctrl-C stops cleanly (the run ends `interrupted`, with a checkpoint);
 `--resume RUN` continues a run's last checkpoint in the same run (`--run NEW`: into a new one)."""
 from __future__ import annotations
 
@@ -22,10 +25,10 @@ from tracelab.commands._training import (
     training_session,
     where_to_train,
 )
-from tracelab.commands.train_env import is_env_run, run_env
 from tracelab.errors import UserError, store_errors
 from tracelab.train.budget import reward_scale_note, too_short_hint
-from tracelab.train.config import LEARNERS, TrainConfig, config_fields, reward_scale_text
+from tracelab.train.config import (GRIDWAR_ONLY, LEARNERS, METHOD_REWARD_SCALE, TrainConfig, config_fields,
+                                   flag_of, reward_scale_text)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -97,9 +100,18 @@ def load_scenario_arg(text: str, agents: int | None = None) -> Any:
     return sc
 
 
+def env_source_of(args: argparse.Namespace) -> Any:
+    # deferred: loads gymnasium; every command is imported to build the CLI's parser
+    from tracelab.envs.declared.env_source import EnvSource, parse_env_args
+    if args.env is None:
+        raise UserError("--env-arg needs --env SPEC_OR_ID")
+    return EnvSource.given(args.env, parse_env_args(args.env_arg))
+
+
 def run(args: argparse.Namespace) -> int:
     # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
-    from tracelab.train.memory import check_training_memory, memory_limit
+    from tracelab.train.memory import check_estimate, env_training_estimate, env_world_bytes, memory_limit
+    from tracelab.train.qnet import NetSpec
 
     # --max-memory and --max-groundings are no training settings (cli.main applies the second): not in the
     # config, free with --resume; argv is the command line cli.main keeps
@@ -107,38 +119,213 @@ def run(args: argparse.Namespace) -> int:
              if k not in ("func", "command", "argv", "run", "resume", "max_memory", "max_groundings", "exp_name",
                           "tensorboard", "env", "env_arg")}
     limit = memory_limit(args.max_memory, "--max-memory")
-    if args.env is not None or args.env_arg or (args.resume and is_env_run(Path(args.resume))):
-        return run_env(args, given, limit)
-    state = None
+    on_env = args.env is not None or bool(args.env_arg)
+    source = env_source_of(args) if on_env else None
+    gridwar = [flag_of(k) for k in GRIDWAR_ONLY if k in given]
+    if on_env and gridwar:
+        raise UserError(f"{', '.join(gridwar)} describe{'s' if len(gridwar) == 1 else ''} GridWar; "
+                        f"--env {args.env} takes the DQN flags only")
+    if args.resume and not on_env and is_rulesim_run(Path(args.resume)):
+        return _resume_rulesim(args, given, limit)
+    # deferred: loads gymnasium, torch; every command is imported to build the CLI's parser
+    from tracelab.train.env_trainer import gridwar_sources
+    state, scenario = None, None
     with store_errors():  # a bad value in the config or a checkpoint that does not load
         if args.resume:
-            # deferred: loads torch; every command is imported to build the CLI's parser
-            from tracelab.train.checkpoint import checkpoint_config, checkpoint_scenario, load_checkpoint
-            check_resume_flags(given)
-            state = load_checkpoint(args.resume, limit)
-            cfg = dataclasses.replace(checkpoint_config(state), **given)
-            check_budget(args.resume, state["step"], cfg.steps, "steps" in given)
-            scenario = checkpoint_scenario(state)
+            state, cfg, source, scenario = _resumed(args, given, source, limit)
+        elif on_env:
+            # gymnasium's envs reward about 1 already: the scale that learns the game's hundreds would shrink
+            # them 100x, so an env is trained at its own scale unless told (docs/experiments/toytext.md)
+            given.setdefault("reward_scale", METHOD_REWARD_SCALE)
+            cfg = TrainConfig(**given)
         else:
             cfg = TrainConfig(**given)
             scenario = load_scenario_arg(cfg.scenario, cfg.agents)
+        eval_source = None
+        if scenario is not None:
+            source, eval_source = gridwar_sources(cfg, scenario)
+        # deferred: loads gymnasium; every command is imported to build the CLI's parser
+        from tracelab.train.env_source import probe_env
+        encoder, n_actions, spec = probe_env(source)
+    with store_errors():  # --num-envs 1e7 would build ten million worlds before its first step
+        check_estimate(env_training_estimate(cfg, NetSpec(encoder.size, cfg.hidden_sizes, n_actions, cfg.dueling),
+                                             env_world_bytes(spec)), limit)
+    if spec is None:
+        cfg.trace_eval_games = 0  # only a world declared in rules is traced
+    elif cfg.trace_eval_games > cfg.eval_games:
+        raise UserError(f"--trace-eval-games ({cfg.trace_eval_games}) exceeds --eval-games ({cfg.eval_games})")
+    run_dir, same_run, tensorboard = where_to_train(args, state is not None,
+                                                    source.short_name if scenario is None else scenario.name)
+    return train_env_into(cfg, source, run_dir, encoder.describe(), tensorboard=tensorboard, state=state,
+                      resumed_from=args.resume, same_run=same_run, scenario=scenario, eval_source=eval_source)
+
+
+def _run_config(run: Path) -> dict[str, Any]:
+    """The config in `run`'s meta.json ({} when it is not a run: the checkpoint's loader says what it is)."""
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
+    from tracelab.store.meta import current_meta
+    try:
+        config = current_meta(run).get("config", {})
+    except (OSError, ValueError, AttributeError):
+        return {}
+    return config if isinstance(config, dict) else {}
+
+
+def is_rulesim_run(run: Path) -> bool:
+    """Whether `run` was trained by RuleSim's trainer (tracelab before GridWar trained through its spec, or
+    train_into from Python): its config names a scenario and no env."""
+    config = _run_config(run)
+    return "scenario_toml" in config and config.get("env") is None
+
+
+def _resume_rulesim(args: argparse.Namespace, given: dict[str, Any], limit: Any) -> int:
+    """--resume of a RuleSim run: it continues in its own format and trainer (its observations are not the
+    spec's), until that trainer goes (issue 38)."""
+    # deferred: loads torch; every command is imported to build the CLI's parser
+    from tracelab.train.checkpoint import checkpoint_config, checkpoint_scenario, load_checkpoint
+    from tracelab.train.memory import check_training_memory
+    with store_errors():  # a bad value in the config or a checkpoint that does not load
+        check_resume_flags(given)
+        state = load_checkpoint(args.resume, limit)
+        cfg = dataclasses.replace(checkpoint_config(state), **given)
+        check_budget(args.resume, state["step"], cfg.steps, "steps" in given)
+        scenario = checkpoint_scenario(state)
         check_training_memory(cfg, scenario, limit)  # before anything is built
-    if cfg.non_markov and not scenario.is_non_markov:
-        print(f"note: scenario {scenario.name!r} has no slow agent: --non-markov only stacks the previous "
-              f"observation", file=sys.stderr)
-    if cfg.trace_eval_games > cfg.eval_games:
-        raise UserError(f"--trace-eval-games ({cfg.trace_eval_games}) exceeds --eval-games "
-                        f"({cfg.eval_games})")
-    run_dir, same_run, tensorboard = where_to_train(args, state is not None, scenario.name)
+    run_dir, same_run, tensorboard = where_to_train(args, True, scenario.name)
     return train_into(cfg, scenario, run_dir, state, resumed_from=args.resume, same_run=same_run,
                       tensorboard=tensorboard)
+
+
+def _resumed(args: argparse.Namespace, given: dict[str, Any], source: Any, limit: Any) -> tuple[Any, ...]:
+    """--resume: (the checkpoint, its config with the flags given, the env it trains on, GridWar's scenario
+    or None). A GridWar run's env is rebuilt from its config's scenario (a built-in one, or --scenario FILE
+    given again: a file never names the file tracelab reads) and checked equal to the checkpoint's."""
+    # deferred: loads gymnasium, torch; every command is imported to build the CLI's parser
+    from tracelab.envs.declared.gridwar import GRIDWAR_SPEC_IDS
+    from tracelab.game.scenario import builtin_scenario_names
+    from tracelab.train.checkpoint import checkpoint_config
+    from tracelab.train.env_checkpoint import checkpoint_env, load_env_checkpoint
+    from tracelab.train.env_trainer import gridwar_sources
+    scenario_given = given.pop("scenario", None)
+    check_resume_flags(given)
+    raw, recorded = checkpoint_env(args.resume, limit.bytes)
+    scenario = None
+    if source is None and recorded.name in GRIDWAR_SPEC_IDS and "scenario_toml" in _run_config(Path(args.resume)):
+        cfg = checkpoint_config(raw)
+        if scenario_given not in (None, cfg.scenario):
+            raise UserError(f"--scenario {scenario_given}: {args.resume} trained scenario {cfg.scenario!r}")
+        if scenario_given is None and cfg.scenario not in builtin_scenario_names():
+            raise UserError(f"{args.resume} trained the scenario file {cfg.scenario!r}: name it again to resume "
+                            f"(tracelab reads no file a run names by itself): tracelab train --resume "
+                            f"{shlex.quote(args.resume)} --scenario {shlex.quote(cfg.scenario)}")
+        scenario = load_scenario_arg(cfg.scenario, cfg.agents)
+        source, _ = gridwar_sources(cfg, scenario)
+    state = load_env_checkpoint(args.resume, source, limit)  # names the env unless given
+    cfg = dataclasses.replace(checkpoint_config(state), **given)
+    again = "" if scenario is not None else f" --env {source.describe()}"
+    check_budget(args.resume, state["step"], cfg.steps, "steps" in given, again)
+    return state, cfg, source, scenario
+
+
+def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at: int | None = None,
+               tensorboard: Path | None = None, state: dict[str, Any] | None = None,
+               resumed_from: str | None = None, same_run: bool = False, scenario: Any = None,
+               eval_source: Any = None) -> int:
+    """Train on `source` into a new run at `run_dir` (from a checkpoint `state` if given; `same_run`: the
+    checkpoint's own run, `run_dir`, continues); returns the exit status. `stop_at`: stop there as Ctrl-C
+    would (tests). `scenario`: the GridWar scenario `source` plays (the run names it and its settings),
+    `eval_source` the env its evaluations play (the opponent at --eval-p); `tensorboard`: a log directory
+    that also receives the metrics (tracelab.train.tensorboard)."""
+    # deferred: loads torch; every command is imported to build the CLI's parser
+    import torch
+
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
+    from tracelab.store import TraceWriter
+    # deferred: loads DuckDB, gymnasium, numba, torch; every command is imported to build the CLI's parser
+    from tracelab.train.env_trainer import EnvTrainer, env_run_meta
+
+    meta = env_run_meta(cfg, source, " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]),
+                        None if state is None else {"run": resumed_from, "step": state["step"]}, scenario)
+    if not meta["command"].startswith("tracelab train"):  # called from Python: say what it stands for
+        meta["command"] = "tracelab train (python: tracelab.commands.train.train_env_into)"
+    if eval_source is not None:  # the env of the traced evaluation games (the opponent at --eval-p)
+        meta["config"]["eval_env"] = eval_source.to_json()
+    with store_errors():  # the run directory exists, or another writer holds it
+        writer = reopen_run(run_dir, cfg, state["step"], meta["command"]) if same_run else \
+            TraceWriter.open(run_dir, meta)
+    torch.set_num_threads(cfg.threads)
+    purge_step = state["step"] if same_run else None
+    with training_session(writer, cfg.torch_deterministic, tensorboard, purge_step) as session:
+        session.trainer = trainer = EnvTrainer(cfg, source, writer, run_dir, metric_sinks=session.metric_sinks,
+                                               eval_source=eval_source)
+        what = source.describe() if scenario is None else \
+            f"{scenario.name} ({'non-Markov' if cfg.non_markov else 'Markov'}, opponent p {cfg.opponent_p:g}, " \
+            f"evaluated against p {cfg.eval_p:g}; --env {source.describe()})"
+        print(f"training on {what} ({encoding} observations, {cfg.envs} worlds in {type(trainer.env).__name__}, "
+              f"{reward_scale_text(cfg.reward_scale)}) for {cfg.steps:,} steps with {cfg.learner_text()}; "
+              f"torch on {torch.get_num_threads()} CPU thread{'s' if torch.get_num_threads() != 1 else ''} "
+              f"(--threads); run: {run_dir}", file=sys.stderr)
+        if trainer.vector_note:
+            print(f"note: {trainer.vector_note}", file=sys.stderr)
+        if scenario is not None:
+            note = reward_scale_note(max(abs(v) for v in dataclasses.asdict(scenario.rewards).values()),
+                                     cfg.reward_scale)
+            if note:
+                print(f"note: {note}", file=sys.stderr)
+        if state is not None:
+            with store_errors():  # games that do not replay to their observations: another env
+                trainer.load_state(state)
+            if same_run:
+                trainer.renumber_games(writer.next_free_episode)
+            say_resumed(trainer, writer, run_dir, resumed_from, same_run)
+        session.status = train_until_stopped(trainer, cfg.steps, stop_at, "a checkpoint", lambda fig: {
+            "ret": "-" if fig["mean_return"] is None else f"{fig['mean_return']:.2f}",
+            **({} if fig["win_rate"] is None else {"win": f"{100 * fig['win_rate']:.1f}%"})})
+    trainer, sink, status = session.trainer, session.sink, session.status
+    if trainer is not None:
+        _report(trainer, source, run_dir, status, scenario is not None)
+        ev = trainer.last_eval
+        if scenario is not None and ev is not None and ev.wins is not None:
+            hint = too_short_hint(trainer.step, ev.wins, scenario.agents_per_team)
+            if hint:
+                print(f"hint: {hint}", file=sys.stderr)
+    if sink is not None:
+        print(f"  tensorboard --logdir {shlex.quote(str(tensorboard.parent))}   # {sink.scalars:,} scalars in "
+              f"{tensorboard}/")
+    say_running_compiles()
+    return 0 if status == "finished" else 130
+
+
+def _report(trainer: Any, source: Any, run_dir: Path, status: str, gridwar: bool) -> None:
+    ev = trainer.last_eval
+    print(f"{status} at step {trainer.step:,}, {reward_scale_text(trainer.cfg.reward_scale)}" + (
+        f"; last evaluation: mean return {ev.mean_return:.3f}, success (return > 0) {ev.successes}/{ev.games} "
+        f"({100 * ev.success_rate:.1f}%)" if ev else "") + (
+        f", won {ev.wins}, lost {ev.losses}, drawn {ev.draws}, truncated {ev.truncated} (win rate "
+        f"{100 * ev.win_rate:.1f}%)" if ev and ev.counts_wins else ""))
+    timing = eval_time_line(trainer.metrics)
+    if timing:
+        print(timing)
+    if trainer.best_eval is not None and ev is not None and trainer.best_eval[0] > ev.selection()[1]:
+        metric, _ = ev.selection()
+        print(f"best evaluation at step {trainer.best_eval[1]:,} ({metric.removeprefix('eval/')} "
+              f"{trainer.best_eval[0]:.3f}): its policy is kept in {run_dir}/policy-best/")
+    run = shlex.quote(str(run_dir))
+    print(f"run: {run_dir}/  checkpoint: {run_dir}/checkpoint/  policy: {run_dir}/policy/")
+    if status != "finished":
+        print(f"  continue with: tracelab train --resume {run}" + ("" if gridwar else f" --env {source.describe()}"))
+    print(f"  tracelab sql {run} \"SELECT step, value FROM metrics WHERE name = 'eval/mean_return' ORDER BY step\"")
+    if status == "finished":
+        print(f"  tracelab eval {run}/policy --env {source.describe()} --games 1000")
 
 
 def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None,
                resumed_from: str | None = None, stop_at: int | None = None, same_run: bool = False,
                tensorboard: Path | None = None) -> int:
-    """Train into a new run at `run_dir` (from a checkpoint `state` if given; `same_run`: the checkpoint's
-    own run, `run_dir`, continues); returns the exit status. `stop_at`: stop there as Ctrl-C would (tests).
+    """RuleSim's trainer (tracelab.train.loop.Trainer) on a Scenario object, from Python only: the tests' small
+    worlds (a 4x4 walk) that war.toml's maps do not hold yet; `tracelab train` trains through the spec
+    (train_env_into). Train into a new run at `run_dir` (from a checkpoint `state` if given; `same_run`: the
+    checkpoint's own run, `run_dir`, continues); returns the exit status. `stop_at`: stop there as Ctrl-C would (tests).
     `tensorboard`: a log directory that also receives the metrics (tracelab.train.tensorboard)."""
     # deferred: loads torch; every command is imported to build the CLI's parser
     import torch
@@ -182,7 +369,7 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
         session.status = train_until_stopped(trainer, cfg.steps, stop_at, "a checkpoint", lambda fig: {
             "win": "-" if fig["win_rate"] is None else f"{100 * fig['win_rate']:.1f}%"})
     trainer, sink, status = session.trainer, session.sink, session.status
-    _report(trainer, run_dir, status)
+    _report_rulesim(trainer, run_dir, status)
     if sink is not None:
         print(f"  tensorboard --logdir {shlex.quote(str(tensorboard.parent))}   # {sink.scalars:,} scalars in "
               f"{tensorboard}/")
@@ -194,7 +381,7 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
     return 0 if status == "finished" else 130
 
 
-def _report(trainer: Any, run_dir: Path, status: str) -> None:
+def _report_rulesim(trainer: Any, run_dir: Path, status: str) -> None:
     if trainer is None:
         return
     ev = trainer.last_eval

@@ -18,6 +18,7 @@ a resume makes the env the user names (`--env`, checked equal to the checkpoint'
 which spec file tracelab reads."""
 from __future__ import annotations
 
+import shlex
 from pathlib import Path
 from typing import Any
 
@@ -30,8 +31,8 @@ from tracelab.errors import UserError
 from tracelab.train.checkpoint import (check_best, check_buffer_rows, checkpoint_config,
                                        checkpoint_file, checkpoint_path, episode_games_schema, in_range,
                                        learner_schema, parts_schema, write_checkpoint)
-from tracelab.train.config import config_schema
-from tracelab.train.env_source import ObservationEncoder, action_count
+from tracelab.train.config import TrainConfig, config_fields, config_schema
+from tracelab.train.env_source import probe_env
 from tracelab.train.memory import (Limit, MemoryLimitExceeded, check_estimate, env_training_estimate,
                                    env_world_bytes)
 from tracelab.train.torch_files import Tensor, load_tensors
@@ -41,6 +42,10 @@ ENV_FORMAT = "tracelab-dqn-env-checkpoint/2"
 # the first format kept each world's generator state and its episode's actions (per-world replay in
 # gymnasium's SyncVectorEnv); the batched declared env has no per-world generator state to set
 OLD_FORMATS = ("tracelab-dqn-env-checkpoint/1",)
+# GridWar's RuleSim trainer's checkpoints (tracelab before GridWar trained through its spec, issue 38): its
+# observations (RuleSim's, with the nearest bullet) and its replay of the worlds are not the spec's, so its
+# networks and buffer cannot continue here honestly
+RULESIM_FORMATS = ("tracelab-dqn-checkpoint/2",)
 
 
 class ActionLog:
@@ -91,12 +96,37 @@ def checkpoint_env(run: str | Path, max_bytes: int) -> tuple[dict[str, Any], Env
         raise FileRefused(f"{f}: written by an earlier tracelab ({state['format']}), whose worlds this one "
                           f"cannot rebuild: resume it with that version, or train again from its policy's "
                           f"settings (RUN/policy/policy.json, \"trained\")")
+    if state.get("format") in RULESIM_FORMATS:
+        raise FileRefused(f"{f}: trained by tracelab's RuleSim trainer (before GridWar trained through its "
+                          f"spec), whose observations and worlds the spec path does not rebuild: start a new "
+                          f"run with its settings: {_new_run_command(state.get('config'))}")
     try:
         check(state, {"format": Const(ENV_FORMAT), "config": config_schema(),
                       "env": {"name": str, "kwargs": MapOf(object)}, "learner": OneOf("fused", "readable")})
     except Mismatch as e:
         raise FileRefused(f"{f}: not a tracelab --env training checkpoint ({e})") from None
     return state, env_source_from_json(state["env"], str(f))
+
+
+def _new_run_command(config: Any) -> str:
+    """`tracelab train` with the flags of an old checkpoint's config that differ from the defaults (a
+    stranger's: only known fields of the right types, quoted)."""
+    out = ["tracelab train"]
+    try:
+        cfg = checkpoint_config({"config": config})
+    except (ValueError, TypeError, Mismatch):
+        return " ".join(out + ["--scenario NAME ..."])
+    default = TrainConfig()
+    for f in config_fields():
+        value = getattr(cfg, f.name)
+        if value == getattr(default, f.name):
+            continue
+        if isinstance(value, bool):
+            out.append(("--" if value else "--no-") + f.flag if f.name != "non_markov" else
+                       ("--non-markov" if value else "--markov"))
+        else:
+            out.append(f"--{f.flag} {shlex.quote(str(value))}")
+    return " ".join(out)
 
 
 def load_env_checkpoint(run: str | Path, given: EnvSource | None, limit: Limit) -> dict[str, Any]:
@@ -113,13 +143,7 @@ def load_env_checkpoint(run: str | Path, given: EnvSource | None, limit: Limit) 
         cfg = checkpoint_config(state)
     except ValueError as e:
         raise FileRefused(f"{f}: config: {e}") from None
-    probe = given.make()
-    try:
-        encoder = ObservationEncoder(probe.observation_space, given.name)
-        n_actions = action_count(probe.action_space, given.name)
-        spec = getattr(probe.unwrapped, "world_spec", None)
-    finally:
-        probe.close()
+    encoder, n_actions, spec = probe_env(given)
     try:
         net = cfg.network(encoder.size, n_actions, spec.reward_terms if spec is not None else ())
     except ValueError as e:

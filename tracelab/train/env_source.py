@@ -63,3 +63,14 @@ def action_count(space: spaces.Space[Any], where: str) -> int:
     if not isinstance(space, spaces.Discrete):
         raise UserError(f"{where}: action space {space} is not Discrete: DQN picks one of n actions")
     return int(space.n)
+
+
+def probe_env(source: Any) -> tuple[ObservationEncoder, int, Any]:
+    """(the encoder of `source`'s observations, its action count, its WorldSpec or None) from one env made
+    and closed: what sizes a training on it (a bad id, spec or keyword argument fails here, in one line)."""
+    probe = source.make()
+    try:
+        return (ObservationEncoder(probe.observation_space, source.name),
+                action_count(probe.action_space, source.name), getattr(probe.unwrapped, "world_spec", None))
+    finally:
+        probe.close()

@@ -20,7 +20,10 @@ import numpy as np
 import torch
 
 from tracelab.store.writer import TraceWriter
-from tracelab.train.config import TrainConfig
+from tracelab.errors import UserError
+from tracelab.envs.declared.gridwar import scenario_env
+from tracelab.game.scenario import Scenario
+from tracelab.train.config import TrainConfig, flag_of
 from tracelab.train.env_checkpoint import ActionLog, replay_actions, save_env_checkpoint
 from tracelab.train.env_policy import (EnvEvalResult, EnvPolicy, declares_outcomes, make_vector_env, play_env_games,
                                        save_env_policy, world_spec_of)
@@ -38,6 +41,10 @@ from tracelab.train.rngs import Generators
 from tracelab.train.tensorboard import MetricSink
 from tracelab.train.update_schedule import UpdateSchedule
 
+# GridWar's settings the spec path does not train yet: each refused in one line when set
+NOT_ON_THE_SPEC_PATH = {"split_networks": "one network for every agent", "slow_every_step": "no slow agents",
+                        "explore_scripted": "uniform exploration (no scripted policy for red)",
+                        "backend": "the rule engine"}
 SHARED = "shared"  # the one network's name (GridWar's trainer may have one per team role)
 Progress = Callable[[dict[str, Any]], None]
 
@@ -45,9 +52,11 @@ Progress = Callable[[dict[str, Any]], None]
 class EnvTrainer:
     def __init__(self, cfg: TrainConfig, source: EnvSource, writer: TraceWriter | None = None,
                  run_dir: Path | None = None, progress: Progress | None = None,
-                 metric_sinks: Sequence[MetricSink] = ()) -> None:
+                 metric_sinks: Sequence[MetricSink] = (), eval_source: EnvSource | None = None) -> None:
+        """`eval_source`: the env evaluations play, if not `source` (GridWar's opponent at --eval-p)."""
         torch.set_num_threads(cfg.threads)
         self.cfg, self.source, self.writer, self.run_dir, self.progress = cfg, source, writer, run_dir, progress
+        self.eval_source = eval_source or source
         self.worlds = w = cfg.envs
         # a declared world's own batched engine where its spec allows (else SyncVectorEnv, and why)
         self.env, self.vector_note = make_vector_env(source, w, by_term=cfg.decompose)
@@ -157,11 +166,11 @@ class EnvTrainer:
             if self._evaluator is None:
                 settings = EvalSettings(cfg.eval_every, cfg.eval_games, cfg.trace_eval_games, cfg.eval_envs,
                                         seed=cfg.seed)
-                self._evaluator = DeclaredEvaluator(self.source, self.writer, self.episodes.new_id, settings)
+                self._evaluator = DeclaredEvaluator(self.eval_source, self.writer, self.episodes.new_id, settings)
             result = self._evaluator.play(self.policy, self.step, self.eval_round)
         else:
             if self._eval_env is None:
-                self._eval_env, _ = make_vector_env(self.source, min(cfg.eval_envs, cfg.eval_games))
+                self._eval_env, _ = make_vector_env(self.eval_source, min(cfg.eval_envs, cfg.eval_games))
             result = play_env_games(self._eval_env, self.policy, cfg.eval_games, self.rngs.eval_seed(self.eval_round))
         self.write_metrics(result.metrics())
         self.eval_round += 1
@@ -241,19 +250,33 @@ class EnvTrainer:
             self._evaluator.close()
 
 
+def gridwar_sources(cfg: TrainConfig, scenario: Scenario) -> tuple[EnvSource, EnvSource]:
+    """(the env GridWar's `scenario` trains on, the one its evaluations play: the opponent at --eval-p), as
+    GridWar spec ids and params; a UserError naming a setting the spec path does not train."""
+    defaults = TrainConfig()
+    for name, only in NOT_ON_THE_SPEC_PATH.items():
+        if getattr(cfg, name) != getattr(defaults, name):
+            raise UserError(f"{flag_of(name)} {getattr(cfg, name)}: GridWar trains through its spec "
+                            f"(rules/gridworld/war.toml) with {only}; drop the flag")
+    name, params = scenario_env(scenario, cfg.opponent_p, cfg.non_markov)
+    return EnvSource(name, params), EnvSource(name, {**params, "p_toward": cfg.eval_p})
+
+
 def env_run_meta(cfg: TrainConfig, source: EnvSource, command: str,
-                 resumed_from: dict[str, Any] | None = None) -> dict[str, Any]:
+                 resumed_from: dict[str, Any] | None = None, scenario: Any = None) -> dict[str, Any]:
     """The meta of a run that trains on `source` (`train --env`, a sweep's trial): the env and the
     training's settings; for a declared world whose evaluations are traced, what `why`, `tui` and
     `replay` read of it (its rule files, its spec and rules by path, size and hash, what sets each external
-    fact, its board: DeclaredTarget's; the texts go in the run's `sources` table with its traced games)."""
+    fact, its board: DeclaredTarget's; the texts go in the run's `sources` table with its traced games).
+    `scenario`: the GridWar scenario `source` plays (train --scenario): the run names it and keeps its
+    settings (every config field, the scenario's TOML), as show, compare and the TUI read them."""
     # deferred: loads the engine (numba), which a gymnasium id's training does not need
     from tracelab.envs.declared.play import load_declared
-    from tracelab.errors import UserError
     from tracelab.train.external_eval import DeclaredTarget
 
-    meta = {"command": command, "scenario": source.name, "seed": cfg.seed,
-            "config": {**cfg.env_dict(), "env": source.to_json(), "resumed_from": resumed_from}}
+    settings = cfg.env_dict() if scenario is None else {**cfg.to_dict(), "scenario_toml": scenario.to_toml()}
+    meta = {"command": command, "scenario": source.name if scenario is None else scenario.name, "seed": cfg.seed,
+            "config": {**settings, "env": source.to_json(), "resumed_from": resumed_from}}
     if not cfg.trace_eval_games:
         return meta
     try:

@@ -13,7 +13,7 @@ from tracelab.game.scenario import ACTION_NAMES
 from tracelab.train.evaluate import METHOD_CUT, EvalResult
 from tracelab.train.experiments import plots
 from tracelab.train.config import METHOD_REWARD_SCALE, TrainConfig
-from tracelab.train.experiments.run import (TRAIN_P, ExperimentResult, commit, eval_ps, is_world, machine,
+from tracelab.train.experiments.run import (TRAIN_P, ExperimentResult, commit, eval_ps, is_world, machine, trainer_note,
                                            train_config)
 from tracelab.train.experiments.runner import curves, p_suffix, run_sql
 from tracelab.train.experiments.stats import spread, wilson
@@ -82,6 +82,7 @@ def write_report(result: ExperimentResult, report_dir: Path) -> Path:
           f"| budget | {budget.seeds} seed{'s' if budget.seeds != 1 else ''} x {budget.steps:,} training steps per "
           f"setting; {budget.eval_games} games per evaluation, {budget.evals} evaluation(s) over training |",
           f"| learner | {learner_text(result)} |",
+          f"| trainer | {trainer_note(exp)} |",
           *setting_rows(result),
           f"| runs | `{result.out_dir}` (one training run per seed; `tracelab sql RUN ...`) |", ""]
     L += ["## Result", "", *goal_lines(result), ""]

@@ -81,6 +81,24 @@ def train_config(exp: Experiment, arm: Arm, budget: Budget, seed: int) -> TrainC
                        eval_p=EVAL_PS[0], **common)
 
 
+# The experiments that still train on RuleSim's Trainer, and why: the spec path trains one agent a team
+# with uniform exploration (train --scenario's refusals), and two measure RuleSim's policies themselves
+RULESIM = {"5v5-base": "five agents a team, scripted exploration",
+           "portability": "it compares RuleSim's policies in RuleSim and RefSim",
+           "markov-vs-nonmarkov": "two agents a team, one slow, scripted exploration",
+           "markov-vs-nonmarkov-every-step": "two agents a team, one slow, scripted exploration",
+           "reward-shaping": "scripted exploration; its saved queries read RuleSim's traced games"}
+
+
+def trainer_note(exp: Experiment) -> str:
+    """Which trainer the experiment's GridWar arms go through, as its log and report say it."""
+    if is_world(exp):
+        return "trains through the world's spec (EnvTrainer)"
+    why = RULESIM.get(exp.name)
+    return f"trains on RuleSim's Trainer ({why})" if why else \
+        "trains GridWar through its spec (rules/gridworld/war.toml, EnvTrainer)"
+
+
 def eval_ps(exp: Experiment) -> tuple[float, ...]:
     """The opponent settings the final policies are evaluated against: GridWar's two, or a world's one
     evaluation (WORLD_P: it has no opponent)."""
@@ -107,7 +125,10 @@ def run_experiment(exp: Experiment, budget: Budget, out_dir: Path, command: str,
     def task_args(ar: ArmResult, seed: int) -> tuple:
         cfg = train_config(exp, ar.arm, budget, seed)
         return (cfg if is_world(exp) else replace(cfg, kernel=kernel), ar.arm.build_world(),
-                out_dir / f"{ar.arm.slug}-seed{seed}", command, eval_ps(exp), budget.eval_games)
+                out_dir / f"{ar.arm.slug}-seed{seed}", command, eval_ps(exp), budget.eval_games, (), None,
+                exp.name in RULESIM)
+
+    say(f"[{exp.name}] {trainer_note(exp)}")
 
     for ar, seed in tasks:
         say(f"[{exp.name}] {ar.arm.label}, seed {seed}: training {budget.steps:,} steps into "

@@ -57,17 +57,19 @@ def final_eval_seed(seed: int, p: float) -> int:
 
 def train_seed(cfg: TrainConfig, scenario: Scenario | EnvSource, run_dir: Path, command: str,
                eval_ps: tuple[float, ...], eval_games: int, metric_sinks: Sequence[MetricSink] = (),
-               started: Callable[[Trainer], None] | None = None) -> SeedRun:
+               started: Callable[[Trainer], None] | None = None, rulesim: bool = False) -> SeedRun:
     """Train `cfg` into a new run at `run_dir`, then evaluate the final policy `eval_games` games
     against each opponent p in `eval_ps`, writing `eval/...@pP` metrics at the last step. `metric_sinks`
     receive the training's metrics besides the run; `started` is called with the Trainer before it trains
     (a sweep's trial stops it through it: Trainer.stop_requested). `scenario` an EnvSource: a world other
-    than GridWar, trained with train --env's trainer (_world_parts)."""
+    than GridWar, trained with train --env's trainer (_world_parts); a GridWar scenario trains through its
+    spec as `train --scenario` does (_gridwar_parts), or with `rulesim` through RuleSim's Trainer
+    (_rulesim_parts: what the spec path does not train yet, experiments/run.py's RULESIM)."""
     # deferred: torch and the trainers, which reading results and queries does not need
     import torch
 
     from tracelab.envs.declared.env_source import EnvSource
-    parts = _world_parts if isinstance(scenario, EnvSource) else _gridwar_parts
+    parts = _world_parts if isinstance(scenario, EnvSource) else _rulesim_parts if rulesim else _gridwar_parts
     meta, make_trainer, final_evaluation = parts(cfg, scenario, command, eval_ps, eval_games)
     writer = TraceWriter.open(run_dir, meta)
     torch.set_num_threads(cfg.threads)
@@ -103,7 +105,33 @@ FinalEvaluation = Callable[[Any, Any], dict[float, EvalResult]]  # (trainer, pol
 
 def _gridwar_parts(cfg: TrainConfig, scenario: Scenario, command: str, eval_ps: tuple[float, ...],
                    eval_games: int) -> tuple[dict[str, Any], Any, FinalEvaluation]:
-    """GridWar's run meta, its Trainer, and the final evaluation against each opponent p of `eval_ps`."""
+    """GridWar through its spec, as `train --scenario` trains it: the run meta, EnvTrainer on the scenario's
+    GridWar id (evaluating at --eval-p), and the final evaluation against each opponent p of `eval_ps`
+    (the same env with that p_toward), counted by the spec's [end] win / loss."""
+    from tracelab.envs.declared.env_source import EnvSource
+    from tracelab.train.env_policy import evaluate_env, load_env_policy
+    from tracelab.train.env_trainer import EnvTrainer, env_run_meta, gridwar_sources
+
+    source, eval_source = gridwar_sources(cfg, scenario)
+    meta = env_run_meta(cfg, source, f"tracelab train (from: {command})", None, scenario)
+    meta["config"]["eval_env"] = eval_source.to_json()
+
+    def make_trainer(cfg: TrainConfig, _: Scenario, *args: Any, **kw: Any) -> EnvTrainer:
+        return EnvTrainer(cfg, source, *args, eval_source=eval_source, **kw)
+
+    def final_evaluation(trainer: Any, policy: Any) -> dict[float, EvalResult]:
+        if isinstance(policy, Path):
+            policy = load_env_policy(policy, source)[0]
+        return {p: as_eval_result(evaluate_env(policy, EnvSource(source.name, {**source.kwargs, "p_toward": p}),
+                                               eval_games, final_eval_seed(cfg.seed, p), cfg.eval_envs))
+                for p in eval_ps}
+    return meta, make_trainer, final_evaluation
+
+
+def _rulesim_parts(cfg: TrainConfig, scenario: Scenario, command: str, eval_ps: tuple[float, ...],
+                   eval_games: int) -> tuple[dict[str, Any], Any, FinalEvaluation]:
+    """GridWar on RuleSim: the run meta, its Trainer, and the final evaluation against each opponent p of
+    `eval_ps`."""
     from tracelab.train.loop import Trainer
 
     meta = {"command": f"tracelab train (from: {command})", "scenario": scenario.name, "seed": cfg.seed,

@@ -1,0 +1,96 @@
+"""`tracelab train --scenario NAME` trains GridWar through its spec (issue 38 item 2, one trainer): the
+scenario and GridWar's flags become rules/gridworld/war.toml params of a GridWar id, EnvTrainer trains it
+and writes env_checkpoint's format, the run still names the scenario and its settings; what the spec path
+cannot train is refused in one line; an old RuleSim run resumed with --env is refused in one line saying
+how to start again."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from tracelab.cli import main
+from tracelab.envs.declared.gridwar import scenario_env
+from tracelab.game.scenario import Rewards, builtin_scenario
+from tracelab.store.meta import current_meta
+from tracelab.train.checkpoint import checkpoint_path
+from tracelab.train.env_checkpoint import ENV_FORMAT
+from tracelab.train.torch_files import load_tensors
+
+from train_helpers import run_rows, tiny_training_run
+
+TINY = ["--total-timesteps", "200", "--num-envs", "4", "--learning-starts", "50", "--eval-every", "200",
+        "--eval-games", "4", "--eval-envs", "3", "--trace-eval-games", "1", "--log-every", "100",
+        "--buffer-size", "500", "--batch-size", "16"]
+
+
+def error_line(capsys: pytest.CaptureFixture[str], status: int) -> str:
+    err = capsys.readouterr().err
+    assert status == 1, err
+    assert err.startswith("tracelab: error: ") and err.count("\n") == 1, err
+    return err
+
+
+def test_a_scenario_and_its_flags_are_war_toml_params() -> None:
+    """The one mapping: the advanced scenario is its id; the opponent's p, --non-markov and the scenario's
+    rewards are params; params at war.toml's defaults are left out."""
+    assert scenario_env(builtin_scenario("base"), 0.7, False) == ("tracelab/GridWar-base-v0", {})
+    shaped = builtin_scenario("advanced")
+    shaped = type(shaped)(**{**shaped.__dict__, "rewards": Rewards(got_shot=-400.0), "max_steps": 50})
+    assert scenario_env(shaped, 0.3, True) == ("tracelab/GridWar-advanced-v0", {
+        "p_toward": 0.3, "stack_previous": True, "max_steps": 50, "got_shot": -400.0})
+
+
+def test_train_scenario_runs_through_the_spec_and_resumes(tmp_path: Path,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    run = tmp_path / "run"
+    assert main(["train", "--scenario", "base", "--opponent-p", "0.5", *TINY, "--run", str(run)]) == 0
+    meta = current_meta(run)
+    config = meta["config"]
+    # the run names the scenario and every GridWar setting, as show / compare / the TUI read them
+    assert meta["scenario"] == "base" and config["opponent_p"] == 0.5 and config["eval_p"] == 0.3
+    assert 'name = "base"' in config["scenario_toml"]
+    # ... and the env it trained on: the spec's id with the opponent's p; evaluations at --eval-p
+    assert config["env"] == {"name": "tracelab/GridWar-base-v0", "kwargs": {"p_toward": 0.5}}
+    assert config["eval_env"] == {"name": "tracelab/GridWar-base-v0", "kwargs": {"p_toward": 0.3}}
+    state = load_tensors(checkpoint_path(run), 10**9)
+    assert state["format"] == ENV_FORMAT and state["step"] == 200
+    # the traced evaluation games are the spec's, counted as wins or losses
+    outcomes = {o for (o,) in run_rows(run, "SELECT outcome FROM episodes WHERE kind = 'eval'")}
+    assert outcomes and outcomes <= {"win", "loss", "truncated"}, outcomes
+    capsys.readouterr()
+    # --resume needs no --env: the scenario's env is rebuilt from the config and checked equal
+    assert main(["train", "--resume", str(run), "--total-timesteps", "300"]) == 0
+    assert load_tensors(checkpoint_path(run), 10**9)["step"] == 300
+
+
+@pytest.mark.parametrize("argv, fragment", [
+    (["--scenario", "nonmarkov"], "scenario 'nonmarkov': 2 agents a team"),
+    (["--agents", "2"], "scenario 'base': 2 agents a team"),
+    (["--explore-scripted", "0.5"], "--explore-scripted 0.5: GridWar trains through its spec"),
+    (["--split-networks"], "--split-networks True: GridWar trains through its spec"),
+])
+def test_what_the_spec_path_cannot_train_is_refused_in_one_line(argv: list[str], fragment: str, tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    err = error_line(capsys, main(["train", *argv, *TINY, "--run", str(tmp_path / "run")]))
+    assert fragment in err
+    assert not (tmp_path / "run").exists()  # refused before a run is made
+
+
+def test_a_scenario_file_with_another_map_is_refused_in_one_line(tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    f = tmp_path / "small.toml"
+    f.write_text('name = "small"\nwidth = 4\nheight = 4\nred_base = [3, 0]\nblue_base = [0, 3]\n')
+    err = error_line(capsys, main(["train", "--scenario", str(f), *TINY, "--run", str(tmp_path / "run")]))
+    assert "scenario 'small': its map is not one of war.toml's [data.maps]" in err
+
+
+def test_an_old_rulesim_checkpoint_on_the_spec_path_is_refused_saying_how_to_start_again(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A RuleSim run (RuleSim's observations, its replay of the worlds) does not convert to the spec's
+    trainer: resumed on a GridWar id it is refused with the command that starts it again."""
+    run = tiny_training_run(tmp_path / "old", seed=4)
+    capsys.readouterr()
+    err = error_line(capsys, main(["train", "--resume", str(run), "--env", "tracelab/GridWar-base-v0"]))
+    assert "trained by tracelab's RuleSim trainer" in err
+    assert "start a new run with its settings: tracelab train --scenario walk4 --total-timesteps 200 --seed 4" in err
