@@ -12,21 +12,14 @@ through DuckDB's metadata functions, which report stored definitions as text and
 refuses anything else with one line naming the entry."""
 from __future__ import annotations
 
-from functools import cache
 from pathlib import Path
 from typing import Any
 
 import duckdb
-import pyarrow as pa
 
-from tracelab.store.arrow_build import empty_table
-from tracelab.store.meta import meta_table
-from tracelab.store.sandbox import lock_down, sandbox_connection
-from tracelab.store.schema import ADDED_COLUMNS, ADDED_TABLES, SCHEMAS, VIEW_NAMES
+from tracelab.store.schema import ADDED_COLUMNS, ADDED_TABLES, STORED_COLUMNS, VIEW_NAMES
 
 SCHEMA_NAMES = ("main", "raw")
-# The stored tables of a sealed run (raw.run: the run's metadata row).
-STORED_SCHEMAS: dict[str, pa.Schema] = {**SCHEMAS, "run": meta_table({}, "").schema}
 # Catalog entries no sealed run holds: the names a file has of each kind (parameter: its database).
 _NEVER_HELD: dict[str, str] = {
     "a macro": "SELECT schema_name, function_name FROM duckdb_functions() WHERE database_name = ?",
@@ -46,19 +39,6 @@ _NOT_A_RUN = "which a tracelab run does not have"
 
 class SealedFileRefused(ValueError):
     """A sealed run file whose catalog is not the one `seal` writes (one line, names the entry)."""
-
-
-@cache
-def expected_columns() -> dict[str, dict[str, str]]:
-    """raw.<table> -> column -> DuckDB type, as `seal` stores them (DuckDB's names for the Arrow types,
-    as duckdb_columns() reports them)."""
-    con = sandbox_connection()
-    try:
-        lock_down(con)
-        return {t: dict(zip(s.names, (str(x) for x in con.from_arrow(empty_table(s)).types)))
-                for t, s in STORED_SCHEMAS.items()}
-    finally:
-        con.close()
 
 
 def check_sealed_catalog(con: duckdb.DuckDBPyConnection, database: str, path: Path) -> dict[str, set[str]]:
@@ -99,7 +79,7 @@ class _Catalog:
                 raise SealedFileRefused(f"holds {_name('raw', view)} as a view, not a stored table: {_RUNS_SQL}")
             if view not in VIEW_NAMES:
                 raise SealedFileRefused(f"holds a view {_name(schema, view)}, {_NOT_A_RUN}")
-        expected = expected_columns()
+        expected = STORED_COLUMNS
         tables = self.rows("SELECT schema_name, table_name FROM duckdb_tables() WHERE database_name = ? "
                            "ORDER BY ALL")
         for schema, table in tables:
@@ -115,7 +95,7 @@ class _Catalog:
 
     def check_columns(self) -> dict[str, set[str]]:
         """Each raw table's columns: stored (not generated, no default), expected, of the expected type."""
-        expected = expected_columns()
+        expected = STORED_COLUMNS
         have: dict[str, set[str]] = {t: set() for t in expected}
         for table, column, data_type, default, generated in self.rows(
                 "SELECT table_name, column_name, data_type, column_default, is_generated FROM duckdb_columns() "
