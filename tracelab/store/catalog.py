@@ -12,23 +12,24 @@ import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import duckdb
-import pyarrow as pa
 
 from tracelab.store import layout
-from tracelab.store.arrow_build import table_from_rows
 from tracelab.store.branch_origin import branch_origin
 from tracelab.store.reader import attach_sealed_file, open_run, query_readonly, retrying, run_info, sealed_file_of_run
 from tracelab.store.sandbox import lock_down, sandbox_connection
 from tracelab.store.sealed_catalog import check_sealed_catalog
 
+if TYPE_CHECKING:
+    import pyarrow as pa
+
 DEFAULT_ROOTS = (Path("runs"), Path("sample_runs"))
 # RunSummary.as_row()'s columns, in the order `tracelab runs` prints them
-ROW_SCHEMA = pa.schema([("name", pa.string()), ("status", pa.string()), ("episodes", pa.int64()),
-                        ("rows", pa.int64()), ("size", pa.string()), ("started", pa.string()),
-                        ("scenario", pa.string()), ("command", pa.string()), ("path", pa.string())])
+# A row of the catalog (RunSummary.as_row()): its columns, and which are numbers.
+ROW_COLUMNS: dict[str, bool] = {"name": False, "status": False, "episodes": True, "rows": True, "size": False,
+                                "started": False, "scenario": False, "command": False, "path": False}
 
 
 @dataclass
@@ -52,9 +53,13 @@ class RunSummary:
                 "scenario": scenario, "command": self.command, "path": str(self.path)}
 
 
-def catalog_table(rows: Sequence[dict[str, Any]]) -> pa.Table:
+def catalog_table(rows: Sequence[dict[str, Any]]) -> "pa.Table":
     """Rows of RunSummary.as_row() as an Arrow table (built from buffers: Table.from_pylist imports pandas)."""
-    return table_from_rows(rows, ROW_SCHEMA)
+    import pyarrow as pa  # deferred: listing runs as a text table needs none
+
+    from tracelab.store.arrow_build import table_from_rows
+    schema = pa.schema([(name, pa.int64() if number else pa.string()) for name, number in ROW_COLUMNS.items()])
+    return table_from_rows(rows, schema)
 
 
 def short_command(command: str) -> str:

@@ -403,6 +403,34 @@ def _sliced(batches: "Iterator[pa.RecordBatch]", limit: int | None, offset: int)
             return
 
 
+# DuckDB's number types (a text table aligns them right)
+_NUMBER_TYPES = frozenset({"TINYINT", "SMALLINT", "INTEGER", "BIGINT", "HUGEINT", "UTINYINT", "USMALLINT",
+                           "UINTEGER", "UBIGINT", "UHUGEINT", "FLOAT", "DOUBLE"})
+
+
+@dataclass
+class QueryRows:
+    """A query's result as Python rows: what a text table prints, read without pyarrow."""
+    names: list[str]
+    types: list[str]   # DuckDB's type names
+    rows: list[tuple[Any, ...]]
+
+    @property
+    def numeric(self) -> list[bool]:
+        return [t in _NUMBER_TYPES for t in self.types]
+
+
+def fetch_rows(rel: duckdb.DuckDBPyRelation, limit: int | None = None, offset: int = 0) -> QueryRows:
+    """The rows [offset, offset+limit) of a relation as Python tuples; rows past the limit are never
+    computed. A query reaching outside the run raises sandbox.QueryRefused."""
+    if limit is not None or offset:
+        rel = rel.limit(2**62 if limit is None else limit, offset)
+    try:
+        return QueryRows(list(rel.columns), [str(t) for t in rel.types], rel.fetchall())
+    except duckdb.PermissionException as e:
+        raise refusal(e) from None
+
+
 def fetch_arrow(rel: duckdb.DuckDBPyRelation, limit: int | None = None, offset: int = 0) -> "pa.Table":
     """The rows [offset, offset+limit) of a relation as an Arrow table; rows past the limit are never
     materialised."""

@@ -18,13 +18,11 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import duckdb
-import pyarrow as pa
 
 from tracelab.store import layout
-from tracelab.store.arrow_build import strings
 from tracelab.store.catalog import find_runs, is_run
 from tracelab.store.kind import can_read
 from tracelab.store.reader import (
@@ -44,6 +42,9 @@ from tracelab.store.reader import (
 )
 from tracelab.store.sandbox import lock_configuration, lock_down, refusal, sandbox_connection
 from tracelab.store.schema import TABLES, VIEW_NAMES, VIEWS_SQL
+
+if TYPE_CHECKING:  # loaded by each_run_stream only: a SQL query over several runs needs no pyarrow
+    import pyarrow as pa
 
 RUN_COLUMN = "run"
 # Runs one connection reads at most: each adds its views to the connection (about 0.25 s to open and 3 MB,
@@ -175,11 +176,14 @@ def open_runs(given: Sequence[str | Path]) -> SeveralRunsConnection:
 
 def each_run_stream(con: SeveralRunsConnection, sql: str, params: dict[str, Any] | None = None,
                     limit: int | None = None, offset: int = 0,
-                    needs: tuple[str, str] | None = None) -> tuple[pa.Schema, Iterator[pa.RecordBatch]]:
+                    needs: tuple[str, str] | None = None) -> "tuple[pa.Schema, Iterator[pa.RecordBatch]]":
     """A query written for one run (a saved query) run on each run in turn, its rows prefixed by the
     run's name in a first column `run`; rows [offset, offset+limit) of the whole, streamed: one run's
     rows are read while they are written. `needs` (a saved query's: "games" or
     "board", and why): refuse (ValueError naming the run) a run it cannot read (kind.can_read)."""
+    import pyarrow as pa  # deferred: see TYPE_CHECKING above
+
+    from tracelab.store.arrow_build import strings
     if needs is not None:
         for i, name in enumerate(con.names):
             con.use(i)
@@ -192,7 +196,7 @@ def each_run_stream(con: SeveralRunsConnection, sql: str, params: dict[str, Any]
     first = _open_reader(con, 0, sql, params)
     schema = pa.schema([pa.field(RUN_COLUMN, pa.string()), *first.schema])
 
-    def batches() -> Iterator[pa.RecordBatch]:
+    def batches() -> "Iterator[pa.RecordBatch]":
         reader: pa.RecordBatchReader | None = first
         for i, name in enumerate(con.names):
             try:
@@ -211,7 +215,7 @@ def each_run_stream(con: SeveralRunsConnection, sql: str, params: dict[str, Any]
 
 
 def _open_reader(con: SeveralRunsConnection, index: int, sql: str,
-                 params: dict[str, Any] | None) -> pa.RecordBatchReader:
+                 params: dict[str, Any] | None) -> "pa.RecordBatchReader":
     """The query's rows on run `index`'s own views; the connection reads that run until con.use(None)."""
     con.use(index)
     try:
