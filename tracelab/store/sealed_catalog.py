@@ -59,37 +59,49 @@ def _name(*parts: str) -> str:
     return text if text.isprintable() and len(text) <= 80 else repr(text[:80])
 
 
+# The entries check_entries looks at, by kind: (schema, name) of each, or (schema, parent) of a schema.
+_ENTRIES: dict[str, str] = {
+    "schema": "SELECT schema_name, parent_schema FROM duckdb_schemas() WHERE database_name = ?",
+    "view": "SELECT schema_name, view_name FROM duckdb_views() WHERE database_name = ?",
+    "table": "SELECT schema_name, table_name FROM duckdb_tables() WHERE database_name = ?",
+    **_NEVER_HELD,
+}
+
+
 class _Catalog:
     def __init__(self, con: duckdb.DuckDBPyConnection, database: str) -> None:
         self.con = con
         self.database = database
+        # every kind of entry in one statement (each statement costs its own planning and run)
+        union = " UNION ALL ".join(f"SELECT {i} AS kind, * FROM ({sql})" for i, sql in enumerate(_ENTRIES.values()))
+        kinds = list(_ENTRIES)
+        self.entries: dict[str, list[tuple[Any, ...]]] = {kind: [] for kind in kinds}
+        for kind, *entry in con.execute(f"{union} ORDER BY ALL", [database] * len(kinds)).fetchall():
+            self.entries[kinds[kind]].append(tuple(entry))
 
     def rows(self, sql: str) -> list[tuple[Any, ...]]:
         return self.con.execute(sql, [self.database]).fetchall()
 
     def check_entries(self) -> None:
         """Schemas, views and tables are the expected ones; nothing of any other kind."""
-        for schema, parent in self.rows("SELECT schema_name, parent_schema FROM duckdb_schemas() "
-                                        "WHERE database_name = ? ORDER BY ALL"):
+        for schema, parent in self.entries["schema"]:
             if parent is not None or schema not in SCHEMA_NAMES:  # raw nested in another schema too
                 raise SealedFileRefused(f"holds a schema {_name(*filter(None, (parent, schema)))}, {_NOT_A_RUN}")
-        for schema, view in self.rows("SELECT schema_name, view_name FROM duckdb_views() "
-                                      "WHERE database_name = ? ORDER BY ALL"):
+        for schema, view in self.entries["view"]:
             if schema == "raw":
                 raise SealedFileRefused(f"holds {_name('raw', view)} as a view, not a stored table: {_RUNS_SQL}")
             if view not in VIEW_NAMES:
                 raise SealedFileRefused(f"holds a view {_name(schema, view)}, {_NOT_A_RUN}")
         expected = STORED_COLUMNS
-        tables = self.rows("SELECT schema_name, table_name FROM duckdb_tables() WHERE database_name = ? "
-                           "ORDER BY ALL")
+        tables = self.entries["table"]
         for schema, table in tables:
             if schema != "raw" or table not in expected:
                 raise SealedFileRefused(f"holds a table {_name(schema, table)}, {_NOT_A_RUN}")
         missing = [t for t in expected if ("raw", t) not in tables and t not in ADDED_TABLES]
         if missing:
             raise SealedFileRefused(f"has no table raw.{missing[0]}: not a tracelab run")
-        for kind, sql in _NEVER_HELD.items():
-            found = self.rows(sql + " ORDER BY ALL")
+        for kind in _NEVER_HELD:
+            found = self.entries[kind]
             if found:
                 raise SealedFileRefused(f"holds {kind} {_name(*found[0])}, {_NOT_A_RUN}: {_RUNS_SQL}")
 
