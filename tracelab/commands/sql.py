@@ -123,7 +123,7 @@ def _query_one_run(args: argparse.Namespace, run: str, sql: str, params: dict | 
                    needs: tuple[str, str] | None) -> None:
     # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.kind import can_read
-    from tracelab.store.reader import arrow_stream, fetch_rows, open_run, query_readonly, retrying
+    from tracelab.store.reader import arrow_stream, open_run, query_readonly, retrying
     con = open_run(run)
     if needs is not None and not can_read(con, needs[0]):
         # deferred: loads DuckDB; every command is imported to build the CLI's parser
@@ -133,23 +133,25 @@ def _query_one_run(args: argparse.Namespace, run: str, sql: str, params: dict | 
         raise UserError(f"saved query {args.saved} reads games ({needs[1]}), and {run} {lacks} (a reasoning "
                         f"run); these read any run: {any_run}")
     if args.format == "table":
-        def rows(limit: int | None) -> Rows:
-            result = fetch_rows(query_readonly(con, sql, params), limit, args.offset)
-            return result.names, result.numeric, result.rows
-        _write_table_output(args, lambda limit: retrying(lambda: rows(limit)))
+        _write_table_output(args, lambda limit: retrying(lambda: _rows(con, sql, params, limit, args.offset)))
     else:
         schema, batches = retrying(lambda: arrow_stream(query_readonly(con, sql, params),
                                                         args.limit, args.offset))
         write_stream(schema, batches, args.format, args.output)
 
 
+def _rows(con: Any, sql: str, params: dict | None, limit: int | None, offset: int) -> Rows:
+    """The query's rows [offset, offset+limit) as the table format prints them (no pyarrow)."""
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
+    from tracelab.store.reader import fetch_rows, query_readonly
+    result = fetch_rows(query_readonly(con, sql, params), limit, offset)
+    return result.names, result.numeric, result.rows
+
+
 def _query_several_runs(args: argparse.Namespace, paths: list, sql: str, params: dict | None,
                         needs: tuple[str, str] | None) -> None:
     """The SQL on the union of the runs' views; a saved query on each run in turn (its rows prefixed by
     the run's name)."""
-    # deferred: loads pyarrow; every command is imported to build the CLI's parser
-    import pyarrow as pa
-
     # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.reader import arrow_stream, query_readonly, retrying
     from tracelab.store.several import SeveralRunsConnection, each_run_stream, run_names
@@ -160,8 +162,11 @@ def _query_several_runs(args: argparse.Namespace, paths: list, sql: str, params:
             return each_run_stream(con, sql, params, limit, args.offset, needs)
         return arrow_stream(query_readonly(con, sql, params), limit, args.offset)
 
-    if args.format == "table":
+    if args.format == "table" and args.saved is None:
+        _write_table_output(args, lambda limit: retrying(lambda: _rows(con, sql, params, limit, args.offset)))
+    elif args.format == "table":
         def rows(limit: int | None) -> Rows:
+            import pyarrow as pa  # deferred: loads pyarrow, which a saved query's stream needs
             schema, batches = stream(limit)
             return arrow_rows(pa.Table.from_batches(list(batches), schema=schema))
         _write_table_output(args, lambda limit: retrying(lambda: rows(limit)))
