@@ -84,7 +84,7 @@ def read_training_runs(paths: list[str]) -> list[TrainingRun]:
     from tracelab.store.reader import resolve_run
     from tracelab.store.several import SeveralRunsConnection, run_names
     resolved = [resolve_run(p) for p in paths]
-    con = SeveralRunsConnection(resolved, run_names(resolved))
+    con = SeveralRunsConnection(resolved, run_names(resolved), union_views=False)
     try:
         runs = []
         for i, path in enumerate(paths):

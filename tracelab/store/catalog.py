@@ -17,10 +17,9 @@ from typing import TYPE_CHECKING, Any
 import duckdb
 
 from tracelab.store import layout
-from tracelab.store.branch_origin import branch_origin
 from tracelab.store.reader import attach_sealed_file, open_run, query_readonly, retrying, run_info, sealed_file_of_run
 from tracelab.store.sandbox import lock_down, sandbox_connection
-from tracelab.store.sealed_catalog import check_sealed_catalog
+from tracelab.store.sealed_catalog import check_sealed_catalog, read_sealed_catalogs
 
 if TYPE_CHECKING:
     import pyarrow as pa
@@ -169,9 +168,10 @@ def _sealed_counts(sealed: dict[Path, Path]) -> dict[Path, tuple[int, int] | Exc
                 except Exception as e:  # noqa: BLE001 - one broken run must not hide the others
                     found[run] = e
             lock_down(con)
+            catalogs = read_sealed_catalogs(con, list(attached.values()))  # one pass for every file
             for run, database in attached.items():
                 try:
-                    check_sealed_catalog(con, database, sealed[run])
+                    check_sealed_catalog(con, database, sealed[run], catalogs[database])
                     eps, rows = con.execute(_counts_sql(f"{database}.raw")).fetchall()[0]
                     found[run] = (int(eps), int(rows))
                 except duckdb.InterruptException:
@@ -199,6 +199,7 @@ def summarize_run(path: Path, counts: tuple[int, int] | Exception | None = None)
                           error=str(e).splitlines()[0] if str(e) else type(e).__name__)
     meta = info.meta
     config = meta.get("config")
+    from tracelab.store.branch_origin import branch_origin  # deferred: `sql` imports this module, needs none
     origin = branch_origin(config) if isinstance(config, dict) else None
     return RunSummary(path, name, info.status, short_command(str(meta.get("command") or "")),
                       str(meta.get("scenario") or ""), episodes, rows, _disk_size(path),

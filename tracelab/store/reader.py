@@ -41,7 +41,7 @@ from tracelab.store.sandbox import (
     sandbox_connection,
 )
 from tracelab.store.schema import ADDED_COLUMNS, ADDED_TABLES, RUN_COLUMNS, STORED_COLUMNS, TABLES, VIEWS_SQL, empty_sql
-from tracelab.store.sealed_catalog import SealedFileRefused, check_sealed_catalog
+from tracelab.store.sealed_catalog import SealedCatalog, SealedFileRefused, check_sealed_catalog
 
 if TYPE_CHECKING:  # loaded by what streams Arrow (arrow_stream): a command printing a table needs none
     import pyarrow as pa
@@ -312,10 +312,12 @@ def attach_sealed_file(con: duckdb.DuckDBPyConnection, sealed: Path, database: s
     con.execute(f"ATTACH {_sql_str(sealed.resolve())} AS {database} (READ_ONLY)")
 
 
-def create_sealed_raw_views(con: duckdb.DuckDBPyConnection, sealed: Path, database: str, raw: str) -> None:
-    """Check the attached file's catalog (nothing of it is read before), then the views `raw`.<table>
-    over its stored tables (with the added columns and tables an older run lacks), and check raw.run."""
-    columns = check_sealed_catalog(con, database, sealed)
+def create_sealed_raw_views(con: duckdb.DuckDBPyConnection, sealed: Path, database: str, raw: str,
+                            catalog: SealedCatalog | None = None) -> None:
+    """Check the attached file's catalog (nothing of it is read before; `catalog`: its entries read with
+    other files', sealed_catalog.read_sealed_catalogs), then the views `raw`.<table> over its stored
+    tables (with the added columns and tables an older run lacks), and check raw.run."""
+    columns = check_sealed_catalog(con, database, sealed, catalog)
     for t, names in STORED_COLUMNS.items():
         if t in ADDED_TABLES and not columns[t]:  # a table added after the run was sealed
             con.execute(f"CREATE VIEW {raw}.{t} AS {empty_sql(t)}")

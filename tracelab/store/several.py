@@ -42,6 +42,7 @@ from tracelab.store.reader import (
 )
 from tracelab.store.sandbox import lock_configuration, lock_down, refusal, sandbox_connection
 from tracelab.store.schema import TABLES, VIEW_NAMES, VIEWS_SQL
+from tracelab.store.sealed_catalog import read_sealed_catalogs
 
 if TYPE_CHECKING:  # loaded by each_run_stream only: a SQL query over several runs needs no pyarrow
     import pyarrow as pa
@@ -93,16 +94,18 @@ class SeveralRunsConnection(RefreshingConnection):
     live run's views are brought up to its latest flush and status (reader.LiveParts); everything else is
     the DuckDB connection's own API."""
 
-    def __init__(self, runs: Sequence[Path], names: Sequence[str]) -> None:
+    def __init__(self, runs: Sequence[Path], names: Sequence[str], union_views: bool = True) -> None:
+        """`union_views`: False for a caller that reads one run at a time (use), never the union."""
         self.runs = list(runs)
         self.names = list(names)
+        self._union_views = union_views
         self._using: int | None = None    # the run whose own views unqualified names read (use)
-        self._con, self._live = _build(self.runs)
+        self._con, self._live = _build(self.runs, union_views)
 
     def refresh(self) -> None:
         for live in self._live:
             if not live.update(ready=True):   # sealed meanwhile: attach its file on a new connection
-                old, (self._con, self._live) = self._con, _build(self.runs)
+                old, (self._con, self._live) = self._con, _build(self.runs, self._union_views)
                 old.close()
                 if self._using is not None:
                     self._con.execute(f"USE {_catalog(self._using)}")
@@ -119,7 +122,7 @@ def _catalog(index: int) -> str:
     return f"run_{index + 1}"
 
 
-def _build(runs: Sequence[Path]) -> tuple[duckdb.DuckDBPyConnection, list[LiveParts]]:
+def _build(runs: Sequence[Path], union_views: bool = True) -> tuple[duckdb.DuckDBPyConnection, list[LiveParts]]:
     if len(runs) > MAX_RUNS:
         raise ValueError(f"{len(runs)} runs given ({runs[0]} ... {runs[-1]}): tracelab reads at most {MAX_RUNS} "
                          "at once; read more through their Parquet parts (docs/store.md, \"The Parquet parts\")")
@@ -135,11 +138,13 @@ def _build(runs: Sequence[Path]) -> tuple[duckdb.DuckDBPyConnection, list[LivePa
             else:
                 allowed.append(check_live_run(p))
         lock_down(con, allowed)
+        # every attached file's catalog read in one pass (each still checked before anything of it is read)
+        catalogs = read_sealed_catalogs(con, [f"store_{i + 1}" for i, s in enumerate(sealed) if s is not None])
         live = []
         for i, (p, s) in enumerate(zip(runs, sealed)):
             raw = f"{_catalog(i)}.raw"
             if s is not None:
-                create_sealed_raw_views(con, s, f"store_{i + 1}", raw)
+                create_sealed_raw_views(con, s, f"store_{i + 1}", raw, catalogs[f"store_{i + 1}"])
             else:
                 parts = LiveParts(con, p.resolve(), raw, prefix=f"{i + 1}_")
                 parts.update(ready=False)
@@ -148,7 +153,8 @@ def _build(runs: Sequence[Path]) -> tuple[duckdb.DuckDBPyConnection, list[LivePa
             con.execute(f"USE {_catalog(i)}")
             con.execute(VIEWS_SQL)
         con.execute(f"USE {DEFAULT_CATALOG}")
-        _create_union_views(con, run_names(runs))
+        if union_views:
+            _create_union_views(con, run_names(runs))
         lock_configuration(con)
     except BaseException:
         con.close()
