@@ -6,43 +6,13 @@ A live run's parts are checked by tracelab.store.check_parts (pyarrow); a sealed
 every stored table through the sandboxed reader (DuckDB only)."""
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from pathlib import Path
 
 from tracelab.store import layout
+from tracelab.store.check_report import CheckReport, one_line
 from tracelab.store.meta import open_writer_lock, read_meta, take_writer_lock
 from tracelab.store.reader import _sealed_file, open_run, resolve_run
 from tracelab.store.schema import STORED_COLUMNS
-
-
-@dataclass
-class DamagedPart:
-    table: str
-    path: Path          # relative to the run directory
-    error: str
-    episodes: str       # which episodes it held, in words
-
-
-@dataclass
-class CheckReport:
-    run: Path
-    sealed: bool
-    parts: int = 0
-    rows: int = 0
-    damaged: list[DamagedPart] = field(default_factory=list)
-    error: str | None = None              # a sealed file that does not read
-    quarantined: list[Path] = field(default_factory=list)
-    unlisted_bytes: int = 0
-    temps: int = 0
-
-    @property
-    def ok(self) -> bool:
-        return self.error is None and (not self.damaged or bool(self.quarantined))
-
-
-def _one_line(e: BaseException) -> str:
-    text = str(e).strip().splitlines()
-    return f"{type(e).__name__}: {text[0] if text else ''}"
 
 
 def _check_sealed(run: Path, report: CheckReport) -> None:
@@ -57,7 +27,7 @@ def _check_sealed(run: Path, report: CheckReport) -> None:
         finally:
             con.close()
     except Exception as e:  # noqa: BLE001 - a sealed file that does not read is the finding
-        report.error = _one_line(e)
+        report.error = one_line(e)
 
 
 def check_run(run: str | Path, *, repair: bool = False) -> CheckReport:

@@ -10,7 +10,7 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from tracelab.store import layout
-from tracelab.store.check import CheckReport, DamagedPart, _one_line
+from tracelab.store.check_report import CheckReport, DamagedPart, one_line
 from tracelab.store.parts import manifest_flushes, read_manifest, write_empty_part, write_manifest_lists
 from tracelab.store.schema import ADDED_COLUMNS, COLUMNS
 
@@ -49,7 +49,7 @@ def verify_part(path: Path, table: str) -> tuple[int, str | None]:
     try:
         data = pq.read_table(path)
     except Exception as e:  # noqa: BLE001 - any failure to read is damage
-        return 0, _one_line(e)
+        return 0, one_line(e)
     # a part written before a column was added (schema.ADDED_COLUMNS) lacks it, and reads without it
     expected = [c for c in list(COLUMNS[table])
                 if c in data.schema.names or c not in ADDED_COLUMNS.get(table, {})]
