@@ -78,8 +78,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def read_training_runs(paths: list[str]) -> list[TrainingRun]:
-    """The runs (as the user named them) read on one sandboxed connection: one DuckDB instance and its
-    views for them all, not one per run (tracelab.store.several)."""
+    """The runs (as the user named them) read on one sandboxed connection: one DuckDB instance for them
+    all, not one per run, and only their raw.* tables, which is all compare reads (tracelab.store.several)."""
     # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.reader import resolve_run
     from tracelab.store.several import SeveralRunsConnection, run_names
@@ -96,7 +96,7 @@ def read_training_runs(paths: list[str]) -> list[TrainingRun]:
 
 
 def read_training_run(con: "RunConnection", path: str) -> TrainingRun:
-    """A training run's status, config and final metrics, read on `con` (its views are the run's); a
+    """A training run's status, config and final metrics, read on `con` (its raw.* are the run's); a
     UserError (one line) for a run that is not one."""
     # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.kind import spec_text, world_params
@@ -104,19 +104,19 @@ def read_training_run(con: "RunConnection", path: str) -> TrainingRun:
     def rows(sql: str) -> list[tuple]:
         return retrying(lambda: query_readonly(con, sql).fetchall())
 
-    status, config_text, board, command = rows("SELECT status, config, board, command FROM run")[0]
+    status, config_text, board, command = rows("SELECT status, config, board, command FROM raw.run")[0]
     config = _json_object(config_text)
     spec = retrying(lambda: spec_text(con, config))
-    (names,) = rows("SELECT count(DISTINCT name) FROM metrics")[0]
+    (names,) = rows("SELECT count(DISTINCT name) FROM raw.metrics")[0]
     if not names:
         raise UserError(f"{without_metrics(path, board, command)}: compare puts training runs side by side; "
                         f"`tracelab diff RUN_A RUN_B` compares the episodes of two runs")
     last = rows(f"""
-        SELECT name, step, value FROM (SELECT DISTINCT name FROM metrics ORDER BY name LIMIT {MAX_METRIC_NAMES})
-        JOIN metrics USING (name)
+        SELECT name, step, value FROM (SELECT DISTINCT name FROM raw.metrics ORDER BY name LIMIT {MAX_METRIC_NAMES})
+        JOIN raw.metrics USING (name)
         QUALIFY row_number() OVER (PARTITION BY name ORDER BY step DESC, time DESC) = 1 ORDER BY name""")
     best = rows(f"""
-        SELECT name, step, value FROM metrics
+        SELECT name, step, value FROM raw.metrics
         WHERE name IN ({", ".join(_sql_text(n) for n in BEST_OF)}) AND NOT isnan(value)
         QUALIFY row_number() OVER (PARTITION BY name ORDER BY value DESC, step) = 1""")
     best_of = {name: (value, step) for name, step, value in best}

@@ -95,7 +95,8 @@ class SeveralRunsConnection(RefreshingConnection):
     the DuckDB connection's own API."""
 
     def __init__(self, runs: Sequence[Path], names: Sequence[str], union_views: bool = True) -> None:
-        """`union_views`: False for a caller that reads one run at a time (use), never the union."""
+        """`union_views`: False for a caller of its own SQL that reads one run's raw.* at a time (use):
+        neither the union views nor each run's user-facing views are built (15 views a run)."""
         self.runs = list(runs)
         self.names = list(names)
         self._union_views = union_views
@@ -150,8 +151,9 @@ def _build(runs: Sequence[Path], union_views: bool = True) -> tuple[duckdb.DuckD
                 parts.update(ready=False)
                 create_live_raw_views(con, p.resolve(), raw, prefix=f"{i + 1}_")
                 live.append(parts)
-            con.execute(f"USE {_catalog(i)}")
-            con.execute(VIEWS_SQL)
+            if union_views:
+                con.execute(f"USE {_catalog(i)}")
+                con.execute(VIEWS_SQL)
         con.execute(f"USE {DEFAULT_CATALOG}")
         if union_views:
             _create_union_views(con, run_names(runs))
