@@ -19,11 +19,12 @@ def _check_sealed(run: Path, report: CheckReport) -> None:
     try:
         con = open_run(run)
         try:
-            for table in STORED_COLUMNS:
-                # hash of every row: every column of every row group is read and decoded
-                n, _ = con.execute(f"SELECT count(*), sum(hash(r)) FROM raw.{table} r").fetchone()
-                report.rows += n
-                report.parts += 1
+            # hash of every row: every column of every row group is read and decoded; all tables in one
+            # statement (twenty cost ~0.03 s of CPU more in planning and round trips)
+            counts = con.execute(" UNION ALL ".join(
+                f"SELECT count(*), sum(hash(r)) FROM raw.{table} r" for table in STORED_COLUMNS)).fetchall()
+            report.rows += sum(n for n, _ in counts)
+            report.parts += len(counts)
         finally:
             con.close()
     except Exception as e:  # noqa: BLE001 - a sealed file that does not read is the finding
