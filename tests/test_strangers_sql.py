@@ -12,7 +12,7 @@ from store_helpers import TRACELAB, ctrl_c_after_start, live_and_sealed_walk_run
 
 from tracelab.cli import main
 from tracelab.store.reader import open_run
-from tracelab.store.sealed_catalog import expected_columns
+from tracelab.store.schema import STORED_COLUMNS
 
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLE_RUNS = sorted(p for p in (ROOT / "sample_runs").iterdir() if (p / "run.duckdb").is_file())
@@ -48,7 +48,7 @@ def computed_command_copy(sealed: Path, dest: Path) -> Path:
                "THEN 'made' ELSE error('payload ran') END) VIRTUAL")
     return tampered_copy(sealed, dest,
                          "CREATE TABLE saved AS SELECT * EXCLUDE (command) FROM raw.run", "DROP TABLE raw.run",
-                         run_table_sql(expected_columns()["run"], {"command": payload}),
+                         run_table_sql(STORED_COLUMNS["run"], {"command": payload}),
                          "INSERT INTO raw.run BY NAME SELECT * FROM saved", "DROP TABLE saved")
 
 

@@ -22,7 +22,6 @@ from tracelab import __version__
 from tracelab.commands._args import grounding_limit_of
 from tracelab.commands._notices import showing_library_notices
 from tracelab.commands._output import escaped_output
-from tracelab.engine.errors import is_interrupt
 from tracelab.errors import user_error_message
 
 # One line per subcommand module; each module adds the parser of the command it is named after and sets
@@ -123,6 +122,8 @@ def _main(argv: list[str] | None) -> int:
         _silence_stdout()
         return EXIT_BROKEN_PIPE
     except Exception as e:
+        # deferred: the engine's error classes (its program model) cost a reading command's start-up
+        from tracelab.engine.errors import is_interrupt
         if is_interrupt(e):  # Ctrl-C inside a compiled call, which numba wraps in SystemError
             print("tracelab: interrupted", file=sys.stderr)
             return 130

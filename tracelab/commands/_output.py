@@ -8,7 +8,7 @@ import datetime as _dt
 import json
 import math
 import sys
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any, TextIO
 
@@ -82,7 +82,7 @@ def _json_value(v: Any) -> Any:
 def write_table(table: "pa.Table", fmt: str, output: str | None = None, out: TextIO | None = None) -> None:
     """Write `table` in `fmt` to `output` (a path) or to `out` (default stdout)."""
     # deferred: importing tracelab.store loads DuckDB and pandas, which `tracelab --help` does not need
-    from tracelab.store.table_files import cell_text, python_rows, write_csv, write_parquet
+    from tracelab.store.table_files import python_rows, write_csv, write_parquet
 
     if fmt == "parquet":
         if not output:
@@ -97,26 +97,47 @@ def write_table(table: "pa.Table", fmt: str, output: str | None = None, out: Tex
     if fmt == "csv":
         write_csv(table.schema, table.to_batches(), out)
         return
-    names = table.column_names
-    rows = python_rows(table)
-    if fmt == "json":
+    if fmt == "table":
+        write_rows(*arrow_rows(table), out=out)
+    elif fmt == "json":
+        rows = python_rows(table)
         json.dump([{k: _json_value(v) for k, v in r.items()} for r in rows], out, indent=1, default=str)
         out.write("\n")
-    elif fmt == "table":
-        # deferred: loads pyarrow; every command is imported to build the CLI's parser
-        import pyarrow as pa
-        cells = [[cell_text(r[n]) for n in names] for r in rows]
-        widths = [max([len(n), *(len(c[i]) for c in cells)]) for i, n in enumerate(names)]
-        numeric = [pa.types.is_integer(t) or pa.types.is_floating(t) for t in table.schema.types]
-        fmt_row = lambda vals: "  ".join(  # noqa: E731
-            v.rjust(w) if num else v.ljust(w) for v, w, num in zip(vals, widths, numeric)).rstrip()
-        out.write(fmt_row(names) + "\n")
-        out.write("  ".join("-" * w for w in widths) + "\n")
-        for c in cells:
-            out.write(fmt_row(c) + "\n")
-        out.write(f"({len(rows)} row{'s' if len(rows) != 1 else ''})\n")
     else:
         raise UserError(f"unknown format {fmt!r}; choose one of {', '.join(FORMATS)}")
+
+
+def arrow_rows(table: "pa.Table") -> tuple[list[str], list[bool], list[tuple[Any, ...]]]:
+    """An Arrow table as write_rows takes it: its column names, which are numbers, its rows."""
+    import pyarrow as pa  # deferred: loads pyarrow; every command is imported to build the CLI's parser
+
+    from tracelab.store.table_files import column_values  # deferred: see write_table
+    names = table.column_names
+    columns = [column_values(table.column(i), name) for i, name in enumerate(names)]
+    return (names, [pa.types.is_integer(t) or pa.types.is_floating(t) for t in table.schema.types],
+            list(zip(*columns)))
+
+
+def write_rows(names: Sequence[str], numeric: Sequence[bool], rows: Sequence[Sequence[Any]],
+               output: str | None = None, out: TextIO | None = None) -> None:
+    """Rows as an aligned text table (numbers right-aligned), then their count, to `output` (a path) or
+    to `out` (default stdout): the table format, from Python values (DuckDB's rows need no pyarrow)."""
+    # deferred: importing tracelab.store loads DuckDB, which `tracelab --help` does not need
+    from tracelab.store.table_files import cell_text
+    if output:
+        with open(output, "w", newline="") as f:
+            write_rows(names, numeric, rows, None, f)
+        return
+    out = out or sys.stdout
+    cells = [[cell_text(v) for v in r] for r in rows]
+    widths = [max([len(n), *(len(c[i]) for c in cells)]) for i, n in enumerate(names)]
+    fmt_row = lambda vals: "  ".join(  # noqa: E731
+        v.rjust(w) if num else v.ljust(w) for v, w, num in zip(vals, widths, numeric)).rstrip()
+    out.write(fmt_row(names) + "\n")
+    out.write("  ".join("-" * w for w in widths) + "\n")
+    for c in cells:
+        out.write(fmt_row(c) + "\n")
+    out.write(f"({len(rows)} row{'s' if len(rows) != 1 else ''})\n")
 
 
 DEFAULT_TABLE_ROWS = 1000  # rows a table-format result shows unless --limit says otherwise

@@ -10,13 +10,16 @@ import math
 import sys
 import tomllib
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from tracelab.commands._interrupt import ctrl_c_stops_queries
-from tracelab.commands._output import add_format_options, write_table
+from tracelab.commands._output import add_format_options, write_rows, write_table
 from tracelab.commands.show import OWN_SECTIONS
 from tracelab.errors import UserError, store_errors
 from tracelab.train.config import METHOD_REWARD_SCALE
+
+if TYPE_CHECKING:
+    from tracelab.store.reader import RunConnection
 
 MAX_METRIC_NAMES = 200     # metric names read per run (a training writes about 15); the rest are named as a count
 MAX_CONFIG_DEPTH = 4       # nested config deeper than this is shown as one value
@@ -53,15 +56,18 @@ def run(args: argparse.Namespace) -> int:
     if repeated is not None:
         raise UserError(f"run {repeated!r} is given twice")
     with store_errors(), ctrl_c_stops_queries():
-        runs = [read_training_run(r) for r in args.runs]
-    # deferred: loads pyarrow; every command is imported to build the CLI's parser
-    import pyarrow as pa
-
-    from tracelab.store.arrow_build import strings  # not pa.array of strings: it imports pandas (arrow_build)
+        runs = read_training_runs(args.runs)
     rows = comparison_rows(runs, precise=args.format != "table")
     names = ["key", *("./key" if r.label == "key" else r.label for r in runs)]   # column names are unique
-    columns = [strings([r[i] for r in rows]) for i in range(len(names))]
-    write_table(pa.Table.from_arrays(columns, names=names), args.format, args.output)
+    if args.format == "table":
+        write_rows(names, [False] * len(names), rows, args.output)
+    else:
+        # deferred: loads pyarrow; every command is imported to build the CLI's parser
+        import pyarrow as pa
+
+        from tracelab.store.arrow_build import strings  # not pa.array of strings: it imports pandas (arrow_build)
+        columns = [strings([r[i] for r in rows]) for i in range(len(names))]
+        write_table(pa.Table.from_arrays(columns, names=names), args.format, args.output)
     if len(runs) > 1 and not any(key.startswith("config ") for key, *_ in rows):
         print("note: the runs' configs are the same", file=sys.stderr)
     for r in runs:
@@ -71,33 +77,48 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def read_training_run(path: str) -> TrainingRun:
-    """A training run's status, config and final metrics; a UserError (one line) for a run that is not one."""
+def read_training_runs(paths: list[str]) -> list[TrainingRun]:
+    """The runs (as the user named them) read on one sandboxed connection: one DuckDB instance for them
+    all, not one per run, and only their raw.* tables, which is all compare reads (tracelab.store.several)."""
     # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.kind import spec_text, world_params
-    from tracelab.store.reader import open_run, query_readonly, retrying
-    con = open_run(path)
+    from tracelab.store.reader import resolve_run
+    from tracelab.store.several import SeveralRunsConnection, run_names
+    resolved = [resolve_run(p) for p in paths]
+    con = SeveralRunsConnection(resolved, run_names(resolved), union_views=False)
     try:
-        def rows(sql: str) -> list[tuple]:
-            return retrying(lambda: query_readonly(con, sql).fetchall())
-
-        status, config_text, board, command = rows("SELECT status, config, board, command FROM run")[0]
-        config = _json_object(config_text)
-        spec = retrying(lambda: spec_text(con, config))
-        (names,) = rows("SELECT count(DISTINCT name) FROM metrics")[0]
-        if not names:
-            raise UserError(f"{without_metrics(path, board, command)}: compare puts training runs side by side; "
-                            f"`tracelab diff RUN_A RUN_B` compares the episodes of two runs")
-        last = rows(f"""
-            SELECT name, step, value FROM (SELECT DISTINCT name FROM metrics ORDER BY name LIMIT {MAX_METRIC_NAMES})
-            JOIN metrics USING (name)
-            QUALIFY row_number() OVER (PARTITION BY name ORDER BY step DESC, time DESC) = 1 ORDER BY name""")
-        best = rows(f"""
-            SELECT name, step, value FROM metrics
-            WHERE name IN ({", ".join(_sql_text(n) for n in BEST_OF)}) AND NOT isnan(value)
-            QUALIFY row_number() OVER (PARTITION BY name ORDER BY value DESC, step) = 1""")
+        runs = []
+        for i, path in enumerate(paths):
+            con.use(i)
+            runs.append(read_training_run(con, path))
+        return runs
     finally:
         con.close()
+
+
+def read_training_run(con: "RunConnection", path: str) -> TrainingRun:
+    """A training run's status, config and final metrics, read on `con` (its raw.* are the run's); a
+    UserError (one line) for a run that is not one."""
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
+    from tracelab.store.kind import spec_text, world_params
+    from tracelab.store.reader import query_readonly, retrying
+    def rows(sql: str) -> list[tuple]:
+        return retrying(lambda: query_readonly(con, sql).fetchall())
+
+    status, config_text, board, command = rows("SELECT status, config, board, command FROM raw.run")[0]
+    config = _json_object(config_text)
+    spec = retrying(lambda: spec_text(con, config))
+    (names,) = rows("SELECT count(DISTINCT name) FROM raw.metrics")[0]
+    if not names:
+        raise UserError(f"{without_metrics(path, board, command)}: compare puts training runs side by side; "
+                        f"`tracelab diff RUN_A RUN_B` compares the episodes of two runs")
+    last = rows(f"""
+        SELECT name, step, value FROM (SELECT DISTINCT name FROM raw.metrics ORDER BY name LIMIT {MAX_METRIC_NAMES})
+        JOIN raw.metrics USING (name)
+        QUALIFY row_number() OVER (PARTITION BY name ORDER BY step DESC, time DESC) = 1 ORDER BY name""")
+    best = rows(f"""
+        SELECT name, step, value FROM raw.metrics
+        WHERE name IN ({", ".join(_sql_text(n) for n in BEST_OF)}) AND NOT isnan(value)
+        QUALIFY row_number() OVER (PARTITION BY name ORDER BY value DESC, step) = 1""")
     best_of = {name: (value, step) for name, step, value in best}
     metrics = {name: (step, value, best_of.get(name) if name in BEST_OF else None) for name, step, value in last}
     params = world_params(config, spec)

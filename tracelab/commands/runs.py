@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from tracelab.commands._interrupt import ctrl_c_stops_queries
-from tracelab.commands._output import add_format_options, write_table
+from tracelab.commands._output import add_format_options, write_rows, write_table
 from tracelab.errors import store_errors
 
 
@@ -21,7 +21,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.catalog import DEFAULT_ROOTS, catalog_table, list_runs
+    from tracelab.store.catalog import DEFAULT_ROOTS, ROW_COLUMNS, catalog_table, list_runs
     roots = args.dirs or list(DEFAULT_ROOTS)
     with store_errors(), ctrl_c_stops_queries():
         for d in args.dirs:
@@ -34,7 +34,9 @@ def run(args: argparse.Namespace) -> int:
         if args.format == "table":
             for r in rows:
                 r["command"] = _short(r["command"])
-        write_table(catalog_table(rows), args.format, args.output)
+            write_rows(list(ROW_COLUMNS), list(ROW_COLUMNS.values()), [tuple(r.values()) for r in rows], args.output)
+        else:
+            write_table(catalog_table(rows), args.format, args.output)
     for r in runs:  # after the block: a Ctrl-C that broke a read ends the command there, with no notes
         if r.error:
             print(f"note: {r.path}: {r.error}", file=sys.stderr)

@@ -8,17 +8,23 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.commands._output import (
     DEFAULT_TABLE_ROWS,
     add_format_options,
     add_paging_options,
+    arrow_rows,
+    write_rows,
     write_stream,
-    write_table,
 )
 from tracelab.errors import UserError, store_errors
+
+# a result as the table format prints it: column names, which are numbers, the rows
+Rows = tuple[list[str], list[bool], list[tuple[Any, ...]]]
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -117,7 +123,7 @@ def _query_one_run(args: argparse.Namespace, run: str, sql: str, params: dict | 
                    needs: tuple[str, str] | None) -> None:
     # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.kind import can_read
-    from tracelab.store.reader import arrow_stream, fetch_arrow, open_run, query_readonly, retrying
+    from tracelab.store.reader import arrow_stream, open_run, query_readonly, retrying
     con = open_run(run)
     if needs is not None and not can_read(con, needs[0]):
         # deferred: loads DuckDB; every command is imported to build the CLI's parser
@@ -127,21 +133,25 @@ def _query_one_run(args: argparse.Namespace, run: str, sql: str, params: dict | 
         raise UserError(f"saved query {args.saved} reads games ({needs[1]}), and {run} {lacks} (a reasoning "
                         f"run); these read any run: {any_run}")
     if args.format == "table":
-        _write_table_output(args, lambda limit: retrying(
-            lambda: fetch_arrow(query_readonly(con, sql, params), limit, args.offset)))
+        _write_table_output(args, lambda limit: retrying(lambda: _rows(con, sql, params, limit, args.offset)))
     else:
         schema, batches = retrying(lambda: arrow_stream(query_readonly(con, sql, params),
                                                         args.limit, args.offset))
         write_stream(schema, batches, args.format, args.output)
 
 
+def _rows(con: Any, sql: str, params: dict | None, limit: int | None, offset: int) -> Rows:
+    """The query's rows [offset, offset+limit) as the table format prints them (no pyarrow)."""
+    # deferred: loads DuckDB; every command is imported to build the CLI's parser
+    from tracelab.store.reader import fetch_rows, query_readonly
+    result = fetch_rows(query_readonly(con, sql, params), limit, offset)
+    return result.names, result.numeric, result.rows
+
+
 def _query_several_runs(args: argparse.Namespace, paths: list, sql: str, params: dict | None,
                         needs: tuple[str, str] | None) -> None:
     """The SQL on the union of the runs' views; a saved query on each run in turn (its rows prefixed by
     the run's name)."""
-    # deferred: loads pyarrow; every command is imported to build the CLI's parser
-    import pyarrow as pa
-
     # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.reader import arrow_stream, query_readonly, retrying
     from tracelab.store.several import SeveralRunsConnection, each_run_stream, run_names
@@ -152,22 +162,25 @@ def _query_several_runs(args: argparse.Namespace, paths: list, sql: str, params:
             return each_run_stream(con, sql, params, limit, args.offset, needs)
         return arrow_stream(query_readonly(con, sql, params), limit, args.offset)
 
-    if args.format == "table":
-        def table(limit: int | None) -> pa.Table:
+    if args.format == "table" and args.saved is None:
+        _write_table_output(args, lambda limit: retrying(lambda: _rows(con, sql, params, limit, args.offset)))
+    elif args.format == "table":
+        def rows(limit: int | None) -> Rows:
+            import pyarrow as pa  # deferred: loads pyarrow, which a saved query's stream needs
             schema, batches = stream(limit)
-            return pa.Table.from_batches(list(batches), schema=schema)
-        _write_table_output(args, lambda limit: retrying(lambda: table(limit)))
+            return arrow_rows(pa.Table.from_batches(list(batches), schema=schema))
+        _write_table_output(args, lambda limit: retrying(lambda: rows(limit)))
     else:
         schema, batches = retrying(lambda: stream(args.limit))
         write_stream(schema, batches, args.format, args.output)
 
 
-def _write_table_output(args: argparse.Namespace, fetch) -> None:
+def _write_table_output(args: argparse.Namespace, fetch: Callable[[int | None], Rows]) -> None:
     """At most DEFAULT_TABLE_ROWS rows unless --limit says otherwise, with a note when rows were left."""
     limit = DEFAULT_TABLE_ROWS + 1 if args.limit is None else args.limit
-    table = fetch(limit)
-    cut = args.limit is None and table.num_rows > DEFAULT_TABLE_ROWS
-    write_table(table.slice(0, DEFAULT_TABLE_ROWS) if cut else table, "table", args.output)
+    names, numeric, rows = fetch(limit)
+    cut = args.limit is None and len(rows) > DEFAULT_TABLE_ROWS
+    write_rows(names, numeric, rows[:DEFAULT_TABLE_ROWS] if cut else rows, args.output)
     if cut:
         print(f"note: showing the first {DEFAULT_TABLE_ROWS} rows; --limit N shows more, and "
               "--format csv|json|parquet [-o FILE] writes every row", file=sys.stderr)

@@ -16,16 +16,16 @@ from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.commands._output import (
     add_format_options,
     add_paging_options,
+    write_rows,
     write_stream,
-    write_table,
 )
 from tracelab.errors import UserError, store_errors
 
 if TYPE_CHECKING:
     import duckdb
-    import pyarrow as pa
 
     from tracelab.store.coordinates import Grid
+    from tracelab.store.reader import QueryRows
 
 FULL_COLUMNS = ("t, pass_no, atom, node, label, old_lower, old_upper, new_lower, new_upper, rule, "
                 "grounding, seq")
@@ -105,7 +105,7 @@ def check_filters(con: "duckdb.DuckDBPyConnection", args: argparse.Namespace) ->
 def run(args: argparse.Namespace) -> int:
     # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.coordinates import run_grid
-    from tracelab.store.reader import arrow_stream, open_run, retrying
+    from tracelab.store.reader import arrow_stream, fetch_rows, open_run, retrying
     check_range(args)
     with store_errors(), ctrl_c_stops_queries():
         con = open_run(args.run)
@@ -119,8 +119,9 @@ def run(args: argparse.Namespace) -> int:
         sql, params = trace_sql(args)
         hidden = retrying(lambda: hidden_static_rows(con, args)) if hides_static(args) else 0
         if args.format == "table":
-            table = retrying(lambda: con.sql(sql, params=params).to_arrow_table())
-            write_table(paper_table(table, run_grid(con)), args.format, args.output)
+            rows = retrying(lambda: fetch_rows(con.sql(sql, params=params)))
+            write_rows(PAPER_COLUMNS, [name == "t" for name in PAPER_COLUMNS], paper_rows(rows, run_grid(con)),
+                       args.output)
         else:  # streamed, batch by batch
             schema, batches = retrying(lambda: arrow_stream(con.sql(sql, params=params)))
             write_stream(schema, batches, args.format, args.output)
@@ -144,17 +145,14 @@ def _b(lo: float, up: float) -> str:
     return f"[{lo:g},{up:g}]"
 
 
-def paper_table(table: "pa.Table", grid: "Grid | None" = None) -> "pa.Table":
-    """The method's columns: t, node/edge, label, old, new, rule; with a grid, cells as `30@(6,3)`."""
-    # deferred: loads pyarrow; every command is imported to build the CLI's parser
-    import pyarrow as pa
+PAPER_COLUMNS = ["t", "node/edge", "label", "old", "new", "rule"]
 
-    from tracelab.store import arrow_build as ab  # not pa.table of lists: it imports pandas (arrow_build)
-    c = table.to_pydict()
-    nodes = c["node"] if grid is None else [grid.with_coordinates(n) for n in c["node"]]
-    return pa.Table.from_arrays([
-        table.column("t"), ab.strings(nodes), ab.strings(c["label"]),
-        ab.strings([_b(a, b) for a, b in zip(c["old_lower"], c["old_upper"])]),
-        ab.strings([_b(a, b) for a, b in zip(c["new_lower"], c["new_upper"])]),
-        ab.strings(c["rule"]),
-    ], names=["t", "node/edge", "label", "old", "new", "rule"])
+
+def paper_rows(result: "QueryRows", grid: "Grid | None" = None) -> list[tuple[object, ...]]:
+    """The method's columns (PAPER_COLUMNS): t, node/edge, label, old, new, rule; with a grid, cells as
+    `30@(6,3)`."""
+    col = {name: i for i, name in enumerate(result.names)}
+    t, node, label, rule = col["t"], col["node"], col["label"], col["rule"]
+    bounds = col["old_lower"], col["old_upper"], col["new_lower"], col["new_upper"]
+    return [(r[t], r[node] if grid is None else grid.with_coordinates(r[node]), r[label],
+             _b(r[bounds[0]], r[bounds[1]]), _b(r[bounds[2]], r[bounds[3]]), r[rule]) for r in result.rows]

@@ -12,15 +12,15 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
-from tracelab.engine.parser import RULE_FILE_CAP
 from tracelab.errors import UserError
 from tracelab.store.kind import run_config, spec_text
 from tracelab.store.reader import RunConnection
 from tracelab.store.schema import BOARD_BEFORE_DECLARED
+
+if TYPE_CHECKING:  # loaded by recorded_steps only: finding a run's origin (runs, diff) needs no numpy
+    import numpy as np
 
 ORIGIN_KEY = "whatif"
 MAX_REPLAY_ENV = "TRACELAB_WHATIF_MAX_STEPS"
@@ -57,11 +57,11 @@ class RecordedWorld:
 @dataclass
 class RecordedSteps:
     """One episode's step rows of one agent, in step order (obs: one row of numbers per step)."""
-    step: np.ndarray
-    action: np.ndarray
-    reward: np.ndarray
-    terminated: np.ndarray
-    truncated: np.ndarray
+    step: "np.ndarray"
+    action: "np.ndarray"
+    reward: "np.ndarray"
+    terminated: "np.ndarray"
+    truncated: "np.ndarray"
     obs: list[Any] = field(default_factory=list)
 
     def __len__(self) -> int:
@@ -71,6 +71,7 @@ class RecordedSteps:
 def recorded_world(con: RunConnection, run: str) -> RecordedWorld:
     """The spec world of the run (UserError, one line, for a run of no spec world: a GridWar run, a
     reasoning run, or one whose texts are missing or past the store's caps)."""
+    from tracelab.engine.parser import RULE_FILE_CAP  # deferred: the parser loads numpy; runs and diff need none
     config = run_config(con)
     text = spec_text(con, config)
     if text is None:
@@ -116,6 +117,7 @@ def stream_of(seeds: dict[int, int | None], episode: int) -> list[int]:
 
 def recorded_steps(con: RunConnection, episode: int, agent: str) -> RecordedSteps:
     """The step rows of `agent` in `episode`."""
+    import numpy as np  # deferred: see TYPE_CHECKING above
     rows = con.execute("SELECT step, action, reward, terminated, truncated, obs FROM raw.steps "
                        "WHERE episode = ? AND agent = ? ORDER BY step", [episode, agent]).fetchall()
     cols = list(zip(*rows)) if rows else [[]] * 6

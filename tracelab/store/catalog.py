@@ -12,23 +12,23 @@ import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import duckdb
-import pyarrow as pa
 
 from tracelab.store import layout
-from tracelab.store.arrow_build import table_from_rows
-from tracelab.store.branch_origin import branch_origin
 from tracelab.store.reader import attach_sealed_file, open_run, query_readonly, retrying, run_info, sealed_file_of_run
 from tracelab.store.sandbox import lock_down, sandbox_connection
-from tracelab.store.sealed_catalog import check_sealed_catalog
+from tracelab.store.sealed_catalog import check_sealed_catalog, read_sealed_catalogs
+
+if TYPE_CHECKING:
+    import pyarrow as pa
 
 DEFAULT_ROOTS = (Path("runs"), Path("sample_runs"))
 # RunSummary.as_row()'s columns, in the order `tracelab runs` prints them
-ROW_SCHEMA = pa.schema([("name", pa.string()), ("status", pa.string()), ("episodes", pa.int64()),
-                        ("rows", pa.int64()), ("size", pa.string()), ("started", pa.string()),
-                        ("scenario", pa.string()), ("command", pa.string()), ("path", pa.string())])
+# A row of the catalog (RunSummary.as_row()): its columns, and which are numbers.
+ROW_COLUMNS: dict[str, bool] = {"name": False, "status": False, "episodes": True, "rows": True, "size": False,
+                                "started": False, "scenario": False, "command": False, "path": False}
 
 
 @dataclass
@@ -52,9 +52,13 @@ class RunSummary:
                 "scenario": scenario, "command": self.command, "path": str(self.path)}
 
 
-def catalog_table(rows: Sequence[dict[str, Any]]) -> pa.Table:
+def catalog_table(rows: Sequence[dict[str, Any]]) -> "pa.Table":
     """Rows of RunSummary.as_row() as an Arrow table (built from buffers: Table.from_pylist imports pandas)."""
-    return table_from_rows(rows, ROW_SCHEMA)
+    import pyarrow as pa  # deferred: listing runs as a text table needs none
+
+    from tracelab.store.arrow_build import table_from_rows
+    schema = pa.schema([(name, pa.int64() if number else pa.string()) for name, number in ROW_COLUMNS.items()])
+    return table_from_rows(rows, schema)
 
 
 def short_command(command: str) -> str:
@@ -164,9 +168,10 @@ def _sealed_counts(sealed: dict[Path, Path]) -> dict[Path, tuple[int, int] | Exc
                 except Exception as e:  # noqa: BLE001 - one broken run must not hide the others
                     found[run] = e
             lock_down(con)
+            catalogs = read_sealed_catalogs(con, list(attached.values()))  # one pass for every file
             for run, database in attached.items():
                 try:
-                    check_sealed_catalog(con, database, sealed[run])
+                    check_sealed_catalog(con, database, sealed[run], catalogs[database])
                     eps, rows = con.execute(_counts_sql(f"{database}.raw")).fetchall()[0]
                     found[run] = (int(eps), int(rows))
                 except duckdb.InterruptException:
@@ -194,6 +199,7 @@ def summarize_run(path: Path, counts: tuple[int, int] | Exception | None = None)
                           error=str(e).splitlines()[0] if str(e) else type(e).__name__)
     meta = info.meta
     config = meta.get("config")
+    from tracelab.store.branch_origin import branch_origin  # deferred: `sql` imports this module, needs none
     origin = branch_origin(config) if isinstance(config, dict) else None
     return RunSummary(path, name, info.status, short_command(str(meta.get("command") or "")),
                       str(meta.get("scenario") or ""), episodes, rows, _disk_size(path),

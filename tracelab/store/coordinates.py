@@ -10,7 +10,6 @@ its nodes read as their ids, as before."""
 from __future__ import annotations
 
 import re
-import tomllib
 from dataclasses import dataclass
 from typing import Any
 
@@ -66,6 +65,8 @@ def grid_from_config(config: dict[str, Any]) -> Grid | None:
     declared = config.get(GRID_KEY)
     if isinstance(declared, dict):
         return _checked(declared.get("width"), declared.get("height"))
+    import tomllib  # deferred: only runs written before the declaration need it
+
     for key in _SCENARIO_KEYS:   # game runs written before the declaration
         text = config.get(key)
         if isinstance(text, str):

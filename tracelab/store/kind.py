@@ -6,7 +6,6 @@ world beyond that (a spec world's board, params and wins) is in its config (`run
 from __future__ import annotations
 
 import json
-import tomllib
 from typing import Any
 
 from tracelab.store.reader import RunConnection
@@ -62,6 +61,8 @@ def world_params(config: dict[str, Any], text: str | None) -> dict[str, Any] | N
     """A spec world's run's params (the `[params]` of its spec's `text`, spec_text, with the run's keyword
     arguments over them: `play --env`'s `env_args`, `train --env`'s `env.kwargs`), or None for a run of no
     spec world. The spec's text is a stranger's: read with tomllib only, at most MAX_SPEC_TEXT characters."""
+    import tomllib  # deferred: most readers of a run's kind never parse its spec
+
     if not isinstance(text, str) or len(text) > MAX_SPEC_TEXT:
         return None
     try:

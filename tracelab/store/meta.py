@@ -16,18 +16,17 @@ import time
 from dataclasses import asdict, dataclass, field
 from importlib import metadata
 from pathlib import Path
-from typing import IO, Any
-
-import numpy as np
-import pyarrow as pa
+from typing import IO, TYPE_CHECKING, Any
 
 import tracelab
 from tracelab.engine.safe_files import JSON_CAP, FileRefused, human_bytes, open_regular, read_json
 from tracelab.store import layout
-from tracelab.store.arrow_build import table_from_rows
-from tracelab.store.schema import BOARD_BEFORE_DECLARED
+from tracelab.store.schema import BOARD_BEFORE_DECLARED, arrow_schema
 from tracelab.validation import (INT64, Const, IsoTime, ListOf, MapOf, Nullable, OneOf, OptionalKey, check_file,
                                  utc_time)
+
+if TYPE_CHECKING:
+    import pyarrow as pa
 
 FORMAT = "tracelab-run/1"
 STATUSES = ("running", "finished", "failed", "interrupted", "crashed")
@@ -64,6 +63,9 @@ def file_sha256(path: str | Path) -> str:
 
 
 def library_versions() -> dict[str, str]:
+    # deferred: a writer has loaded both; a reader of meta.json (every reading command) need not
+    import numpy as np
+    import pyarrow as pa
     return {"tracelab": tracelab.__version__, "python": platform.python_version(),
             "numpy": np.__version__, "duckdb": _duckdb_version(), "pyarrow": pa.__version__}
 
@@ -211,9 +213,9 @@ def _ts(value: str | None) -> _dt.datetime | None:
     return utc_time(value) if value else None
 
 
-def meta_table(doc: dict[str, Any], status: str) -> pa.Table:
-    """raw.run: one row; config, rule files and versions as JSON text."""
-    row = {
+def meta_row(doc: dict[str, Any], status: str) -> dict[str, Any]:
+    """raw.run's one row (schema.RUN_COLUMNS); config, rule files and versions as JSON text."""
+    return {
         "run_id": doc.get("run_id"), "command": doc.get("command"), "scenario": doc.get("scenario"),
         "seed": doc.get("seed"), "status": status,
         "started_at": _ts(doc.get("started_at")), "ended_at": _ts(doc.get("ended_at")),
@@ -222,10 +224,10 @@ def meta_table(doc: dict[str, Any], status: str) -> pa.Table:
         "versions": json.dumps(doc.get("versions", {}), sort_keys=True),
         "pid": doc.get("pid"), "host": doc.get("host"), "board": doc.get("board", BOARD_BEFORE_DECLARED),
     }
-    ts = pa.timestamp("us")  # UTC
-    schema = pa.schema([("run_id", pa.string()), ("command", pa.string()), ("scenario", pa.string()),
-                        ("seed", pa.int64()), ("status", pa.string()), ("started_at", ts),
-                        ("ended_at", ts), ("config", pa.string()), ("rule_files", pa.string()),
-                        ("versions", pa.string()), ("pid", pa.int64()), ("host", pa.string()),
-                        ("board", pa.string())])
-    return table_from_rows([row], schema)  # not Table.from_pylist: it imports pandas (arrow_build)
+
+
+def meta_table(doc: dict[str, Any], status: str) -> "pa.Table":
+    """raw.run as an Arrow table of its one row (meta_row)."""
+    # deferred: loads pyarrow, which a reader need not; not Table.from_pylist: it imports pandas (arrow_build)
+    from tracelab.store.arrow_build import table_from_rows
+    return table_from_rows([meta_row(doc, status)], arrow_schema("run"))

@@ -25,16 +25,14 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import duckdb
-import pyarrow as pa
 
 from tracelab.engine.duckdb_limits import exact_file
 from tracelab.engine.safe_files import JSON_CAP, check_regular, read_bytes
 from tracelab.store import layout
-from tracelab.store.meta import current_meta, meta_table
-from tracelab.store.parts import read_manifest
+from tracelab.store.meta import current_meta, meta_row
 from tracelab.store.sandbox import (
     check_readonly,
     lock_configuration,
@@ -42,12 +40,13 @@ from tracelab.store.sandbox import (
     refusal,
     sandbox_connection,
 )
-from tracelab.store.schema import ADDED_COLUMNS, ADDED_TABLES, TABLES, VIEWS_SQL, empty_sql
-from tracelab.store.sealed_catalog import STORED_SCHEMAS, SealedFileRefused, check_sealed_catalog
+from tracelab.store.schema import ADDED_COLUMNS, ADDED_TABLES, RUN_COLUMNS, STORED_COLUMNS, TABLES, VIEWS_SQL, empty_sql
+from tracelab.store.sealed_catalog import SealedCatalog, SealedFileRefused, check_sealed_catalog
+
+if TYPE_CHECKING:  # loaded by what streams Arrow (arrow_stream): a command printing a table needs none
+    import pyarrow as pa
 
 RUNS_DIR = Path("runs")
-# The columns tracelab reads from each stored table (raw.run: the run's metadata row).
-STORED_COLUMNS: dict[str, list[str]] = {t: s.names for t, s in STORED_SCHEMAS.items()}
 
 
 @dataclass
@@ -150,6 +149,7 @@ class LiveParts:
                 raise
             return False   # sealed between the two looks
         if raw != self._seen:
+            from tracelab.store.parts import read_manifest  # deferred: loads pyarrow (a live run's parts)
             for table, files in read_manifest(self.run_dir).items():
                 self.con.execute(f"SET VARIABLE {_parts_variable(table, self.prefix)} = ?",
                                  [[exact_file(f) for f in files]])
@@ -157,7 +157,7 @@ class LiveParts:
         if self._status in (None, "running"):
             doc = current_meta(self.run_dir)
             if doc["status"] != self._status:
-                _replace_run_table(self.con, meta_table(doc, doc["status"]), self.raw)
+                _replace_run_table(self.con, meta_row(doc, doc["status"]), self.raw)
                 self._status = doc["status"]
         return True
 
@@ -260,6 +260,7 @@ def create_live_raw_views(con: duckdb.DuckDBPyConnection, run_dir: Path, raw: st
                           prefix: str = "") -> None:
     """The views `raw`.<table> over the parts the run's manifest lists (read from the DuckDB variables
     LiveParts keeps current: it must have run once)."""
+    from tracelab.store.parts import read_manifest  # deferred: loads pyarrow (a live run's parts)
     listed = read_manifest(run_dir)
     for t in TABLES:
         if not listed[t]:  # a table added after the run was written (schema.ADDED_TABLES)
@@ -311,10 +312,12 @@ def attach_sealed_file(con: duckdb.DuckDBPyConnection, sealed: Path, database: s
     con.execute(f"ATTACH {_sql_str(sealed.resolve())} AS {database} (READ_ONLY)")
 
 
-def create_sealed_raw_views(con: duckdb.DuckDBPyConnection, sealed: Path, database: str, raw: str) -> None:
-    """Check the attached file's catalog (nothing of it is read before), then the views `raw`.<table>
-    over its stored tables (with the added columns and tables an older run lacks), and check raw.run."""
-    columns = check_sealed_catalog(con, database, sealed)
+def create_sealed_raw_views(con: duckdb.DuckDBPyConnection, sealed: Path, database: str, raw: str,
+                            catalog: SealedCatalog | None = None) -> None:
+    """Check the attached file's catalog (nothing of it is read before; `catalog`: its entries read with
+    other files', sealed_catalog.read_sealed_catalogs), then the views `raw`.<table> over its stored
+    tables (with the added columns and tables an older run lacks), and check raw.run."""
+    columns = check_sealed_catalog(con, database, sealed, catalog)
     for t, names in STORED_COLUMNS.items():
         if t in ADDED_TABLES and not columns[t]:  # a table added after the run was sealed
             con.execute(f"CREATE VIEW {raw}.{t} AS {empty_sql(t)}")
@@ -338,15 +341,11 @@ def _create_table(con: duckdb.DuckDBPyConnection, name: str, table: Any) -> None
         con.unregister("_tracelab_tmp")
 
 
-_DUCKDB_TYPES = {pa.string(): "VARCHAR", pa.int64(): "BIGINT", pa.timestamp("us"): "TIMESTAMP"}
-
-
-def _replace_run_table(con: duckdb.DuckDBPyConnection, row: pa.Table, raw: str = "raw") -> None:
-    """(Re)create raw.run from meta_table()'s one row. By parameters, not register(): DuckDB refuses
+def _replace_run_table(con: duckdb.DuckDBPyConnection, row: dict[str, Any], raw: str = "raw") -> None:
+    """(Re)create raw.run from meta_row()'s one row. By parameters, not register(): DuckDB refuses
     register() while the caller still holds an unfinished result of this connection."""
-    values = row.to_pylist()[0]
-    select = ", ".join(f'CAST(? AS {_DUCKDB_TYPES[f.type]}) AS "{f.name}"' for f in row.schema)
-    con.execute(f"CREATE OR REPLACE TABLE {raw}.run AS SELECT {select}", list(values.values()))
+    select = ", ".join(f'CAST(? AS {RUN_COLUMNS[c]}) AS "{c}"' for c in row)
+    con.execute(f"CREATE OR REPLACE TABLE {raw}.run AS SELECT {select}", list(row.values()))
 
 
 def query_readonly(con: RunConnection, sql: str,
@@ -373,7 +372,7 @@ BATCH_ROWS = 65_536
 
 
 def arrow_stream(rel: duckdb.DuckDBPyRelation, limit: int | None = None,
-                 offset: int = 0) -> tuple[pa.Schema, Iterator[pa.RecordBatch]]:
+                 offset: int = 0) -> "tuple[pa.Schema, Iterator[pa.RecordBatch]]":
     """The schema and the rows [offset, offset+limit) of a relation as Arrow record batches, read as
     they are needed: nothing past the limit is computed beyond DuckDB's current batch. A query reaching
     outside the run (refused only as its rows are read) raises sandbox.QueryRefused."""
@@ -384,14 +383,14 @@ def arrow_stream(rel: duckdb.DuckDBPyRelation, limit: int | None = None,
     return reader.schema, _sliced(reader, limit, offset)
 
 
-def _refusing(batches: Iterator[pa.RecordBatch]) -> Iterator[pa.RecordBatch]:
+def _refusing(batches: "Iterator[pa.RecordBatch]") -> "Iterator[pa.RecordBatch]":
     try:
         yield from batches
     except duckdb.PermissionException as e:
         raise refusal(e) from None
 
 
-def _sliced(batches: Iterator[pa.RecordBatch], limit: int | None, offset: int) -> Iterator[pa.RecordBatch]:
+def _sliced(batches: "Iterator[pa.RecordBatch]", limit: int | None, offset: int) -> "Iterator[pa.RecordBatch]":
     skip, left = offset, limit
     for batch in _refusing(batches):
         if skip:
@@ -406,9 +405,38 @@ def _sliced(batches: Iterator[pa.RecordBatch], limit: int | None, offset: int) -
             return
 
 
-def fetch_arrow(rel: duckdb.DuckDBPyRelation, limit: int | None = None, offset: int = 0) -> pa.Table:
+# DuckDB's number types (a text table aligns them right)
+_NUMBER_TYPES = frozenset({"TINYINT", "SMALLINT", "INTEGER", "BIGINT", "HUGEINT", "UTINYINT", "USMALLINT",
+                           "UINTEGER", "UBIGINT", "UHUGEINT", "FLOAT", "DOUBLE"})
+
+
+@dataclass
+class QueryRows:
+    """A query's result as Python rows: what a text table prints, read without pyarrow."""
+    names: list[str]
+    types: list[str]   # DuckDB's type names
+    rows: list[tuple[Any, ...]]
+
+    @property
+    def numeric(self) -> list[bool]:
+        return [t in _NUMBER_TYPES for t in self.types]
+
+
+def fetch_rows(rel: duckdb.DuckDBPyRelation, limit: int | None = None, offset: int = 0) -> QueryRows:
+    """The rows [offset, offset+limit) of a relation as Python tuples; rows past the limit are never
+    computed. A query reaching outside the run raises sandbox.QueryRefused."""
+    if limit is not None or offset:
+        rel = rel.limit(2**62 if limit is None else limit, offset)
+    try:
+        return QueryRows(list(rel.columns), [str(t) for t in rel.types], rel.fetchall())
+    except duckdb.PermissionException as e:
+        raise refusal(e) from None
+
+
+def fetch_arrow(rel: duckdb.DuckDBPyRelation, limit: int | None = None, offset: int = 0) -> "pa.Table":
     """The rows [offset, offset+limit) of a relation as an Arrow table; rows past the limit are never
     materialised."""
+    import pyarrow as pa  # deferred: see TYPE_CHECKING above
     schema, batches = arrow_stream(rel, limit, offset)
     return pa.Table.from_batches(list(batches), schema=schema)
 

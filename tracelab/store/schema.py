@@ -1,5 +1,5 @@
-"""The trace store's tables: their Arrow schemas (the same in Parquet parts and in a sealed .duckdb file)
-and the readable SQL views built on them.
+"""The trace store's tables: their columns and types (the same in Parquet parts and in a sealed .duckdb
+file; as Arrow schemas for the writers) and the readable SQL views built on them.
 
 Storage tables live in the DuckDB schema `raw`; the views users query (`changes`, `firings`, `episodes`,
 `steps`, `metrics`, `rules`, `facts`, `atoms`, `groundings`, `edges`, `decisions`, `action_values`, `rewards`,
@@ -9,85 +9,115 @@ tables)."""
 from __future__ import annotations
 
 import re
+from functools import cache
+from typing import TYPE_CHECKING, Any
 
-import pyarrow as pa
+if TYPE_CHECKING:  # built on first use (arrow_schema): a reading command never loads pyarrow for it
+    import pyarrow as pa
 
 # The engine's cause kinds (tracelab.engine.CAUSE_*), as the store names them: external facts are the
 # agents' actions.
 CAUSE_NAMES = {0: "fact", 1: "action", 2: "rule", 3: "policy", 4: "reset"}
 
-_INT_LIST = pa.list_(pa.int32())
-_STR_LIST = pa.list_(pa.string())
-_TS = pa.timestamp("us")  # UTC (naive: reading TIMESTAMPTZ into Python needs pytz)
-
+# Each stored table's columns and their DuckDB types, the one statement of the schema: the Arrow schemas
+# of the parts and of the writer's tables are built from it (arrow_schema), and a sealed file's catalog is
+# checked against it (tracelab.store.sealed_catalog) without loading pyarrow. TIMESTAMP is UTC (naive:
+# reading TIMESTAMPTZ into Python needs pytz).
 # Tables in flush order: whatever a row refers to is written before it, so a reader that sees part of a
 # flush never sees a change whose atom, rule or grounding is missing, nor an ended episode without its rows.
-SCHEMAS: dict[str, pa.Schema] = {
-    "nodes": pa.schema([("node", pa.int32()), ("name", pa.string())]),
-    "labels": pa.schema([("label", pa.int32()), ("name", pa.string()), ("arity", pa.int8())]),
-    "atoms": pa.schema([("atom", pa.int32()), ("label", pa.int32()), ("arg0", pa.int32()),
-                        ("arg1", pa.int32())]),
+COLUMNS: dict[str, dict[str, str]] = {
+    "nodes": {"node": "INTEGER", "name": "VARCHAR"},
+    "labels": {"label": "INTEGER", "name": "VARCHAR", "arity": "TINYINT"},
+    "atoms": {"atom": "INTEGER", "label": "INTEGER", "arg0": "INTEGER", "arg1": "INTEGER"},
     # The graph's edges (a reasoning run's GraphML, tracelab.store.graph_tables), node ids of `nodes`; an
     # undirected edge both ways. Its labels are the binary facts on the pair.
-    "edges": pa.schema([("source", pa.int32()), ("target", pa.int32())]),
-    "rules": pa.schema([("rule", pa.int32()), ("name", pa.string()), ("text", pa.string()),
-                        ("head", pa.string()), ("delay", pa.int32()), ("immediate", pa.bool_()),
-                        ("mode", pa.string()), ("variables", _STR_LIST), ("file", pa.string()),
-                        ("line", pa.int32())]),
+    "edges": {"source": "INTEGER", "target": "INTEGER"},
+    "rules": {"rule": "INTEGER", "name": "VARCHAR", "text": "VARCHAR", "head": "VARCHAR", "delay": "INTEGER",
+              "immediate": "BOOLEAN", "mode": "VARCHAR", "variables": "VARCHAR[]", "file": "VARCHAR",
+              "line": "INTEGER"},
     # One row per clause of a rule: pos -1 is the head, 0.. the body in source order.
-    "clauses": pa.schema([("rule", pa.int32()), ("pos", pa.int32()), ("label", pa.string()),
-                          ("args", _STR_LIST), ("is_var", pa.list_(pa.bool_())),
-                          ("negated", pa.bool_()), ("lower", pa.float64()), ("upper", pa.float64()),
-                          ("text", pa.string()), ("closed", pa.bool_())]),
-    "facts": pa.schema([("fact", pa.int32()), ("name", pa.string()), ("text", pa.string()),
-                        ("literal", pa.string()), ("start", pa.int32()), ("end", pa.int32()),
-                        ("static", pa.bool_()), ("file", pa.string()), ("line", pa.int32()),
-                        ("episode", pa.int64())]),  # the one episode the fact belongs to, NULL: every one
+    "clauses": {"rule": "INTEGER", "pos": "INTEGER", "label": "VARCHAR", "args": "VARCHAR[]",
+                "is_var": "BOOLEAN[]", "negated": "BOOLEAN", "lower": "DOUBLE", "upper": "DOUBLE",
+                "text": "VARCHAR", "closed": "BOOLEAN"},
+    "facts": {"fact": "INTEGER", "name": "VARCHAR", "text": "VARCHAR", "literal": "VARCHAR", "start": "INTEGER",
+              "end": "INTEGER", "static": "BOOLEAN", "file": "VARCHAR", "line": "INTEGER",
+              "episode": "BIGINT"},  # the one episode the fact belongs to, NULL: every one
     # The files the run's program was read from (a spec, its rule files), with their texts: in a part,
     # not in meta.json, whose readers refuse more than a few MiB (tracelab.store.sources).
-    "sources": pa.schema([("role", pa.string()), ("path", pa.string()), ("bytes", pa.int64()),
-                          ("sha256", pa.string()), ("text", pa.string())]),
-    "policies": pa.schema([("code", pa.int32()), ("name", pa.string())]),
-    "groundings": pa.schema([("grounding", pa.int32()), ("rule", pa.int32()),
-                             ("body_atoms", _INT_LIST), ("var_values", _INT_LIST)]),
-    "episode_begin": pa.schema([("episode", pa.int64()), ("world", pa.int32()), ("t_start", pa.int32()),
-                                ("seed", pa.int64()), ("started_at", _TS), ("info", pa.string())]),
-    "changes": pa.schema([("seq", pa.int64()), ("episode", pa.int64()), ("world", pa.int32()),
-                          ("t", pa.int32()), ("pass_no", pa.int32()), ("atom", pa.int32()),
-                          ("old_lower", pa.float64()), ("old_upper", pa.float64()),
-                          ("new_lower", pa.float64()), ("new_upper", pa.float64()),
-                          ("cause_kind", pa.int8()), ("cause_id", pa.int32()), ("grounding", pa.int32()),
-                          ("n_sources", pa.int16())]),
-    "steps": pa.schema([("episode", pa.int64()), ("step", pa.int32()), ("t", pa.int32()),
-                        ("agent", pa.string()), ("action", pa.int32()), ("reward", pa.float64()),
-                        ("terminated", pa.bool_()), ("truncated", pa.bool_()),
-                        ("obs", pa.list_(pa.float32()))]),
+    "sources": {"role": "VARCHAR", "path": "VARCHAR", "bytes": "BIGINT", "sha256": "VARCHAR", "text": "VARCHAR"},
+    "policies": {"code": "INTEGER", "name": "VARCHAR"},
+    "groundings": {"grounding": "INTEGER", "rule": "INTEGER", "body_atoms": "INTEGER[]",
+                   "var_values": "INTEGER[]"},
+    "episode_begin": {"episode": "BIGINT", "world": "INTEGER", "t_start": "INTEGER", "seed": "BIGINT",
+                      "started_at": "TIMESTAMP", "info": "VARCHAR"},
+    "changes": {"seq": "BIGINT", "episode": "BIGINT", "world": "INTEGER", "t": "INTEGER", "pass_no": "INTEGER",
+                "atom": "INTEGER", "old_lower": "DOUBLE", "old_upper": "DOUBLE", "new_lower": "DOUBLE",
+                "new_upper": "DOUBLE", "cause_kind": "TINYINT", "cause_id": "INTEGER", "grounding": "INTEGER",
+                "n_sources": "SMALLINT"},
+    "steps": {"episode": "BIGINT", "step": "INTEGER", "t": "INTEGER", "agent": "VARCHAR", "action": "INTEGER",
+              "reward": "DOUBLE", "terminated": "BOOLEAN", "truncated": "BOOLEAN", "obs": "FLOAT[]"},
     # The run's actions (steps.action -> name; `position`: the action's place in decisions.values, NULL
     # for an action the policy does not offer), the policy's decision per agent and step, and each
     # step's reward split by term (tracelab.store.agent_rows). Only non-zero terms have a row.
-    "action_names": pa.schema([("action", pa.int32()), ("name", pa.string()), ("position", pa.int32())]),
+    "action_names": {"action": "INTEGER", "name": "VARCHAR", "position": "INTEGER"},
     # What each entry of steps.obs is: entry `position`, read as (obs // divisor) % size when `size` is
     # set (one number holding several parts: a Discrete space), and `labels[value]` the atom a value
     # stands for (an index part's), else the number itself.
-    "observation_names": pa.schema([("position", pa.int32()), ("name", pa.string()), ("divisor", pa.int64()),
-                                    ("size", pa.int32()), ("labels", _STR_LIST)]),
-    "decisions": pa.schema([("episode", pa.int64()), ("step", pa.int32()), ("agent", pa.string()),
-                            ("action", pa.int32()), ("output", pa.string()), ("values", pa.list_(pa.float32())),
-                            ("state_value", pa.float64()), ("explored", pa.bool_()), ("epsilon", pa.float64()),
-                            ("mask", pa.list_(pa.bool_())),
-                            # a decomposed policy's (train --decompose) Q-values by reward term: `terms`
-                            # names them, `term_values` holds each term's values of every action back to
-                            # back (term-major, len(terms) x len(values)); NULL for any other policy
-                            ("terms", _STR_LIST), ("term_values", pa.list_(pa.float32()))]),
-    "reward_terms": pa.schema([("episode", pa.int64()), ("step", pa.int32()), ("agent", pa.string()),
-                               ("term", pa.string()), ("value", pa.float64())]),
-    "metrics": pa.schema([("step", pa.int64()), ("name", pa.string()), ("value", pa.float64()),
-                          ("episode", pa.int64()), ("time", _TS)]),
-    "episode_end": pa.schema([("episode", pa.int64()), ("steps", pa.int32()), ("t_end", pa.int32()),
-                              ("outcome", pa.string()), ("reward", pa.float64()), ("rewards", pa.string()),
-                              ("ended_at", _TS), ("info", pa.string())]),
+    "observation_names": {"position": "INTEGER", "name": "VARCHAR", "divisor": "BIGINT", "size": "INTEGER",
+                          "labels": "VARCHAR[]"},
+    "decisions": {"episode": "BIGINT", "step": "INTEGER", "agent": "VARCHAR", "action": "INTEGER",
+                  "output": "VARCHAR", "values": "FLOAT[]", "state_value": "DOUBLE", "explored": "BOOLEAN",
+                  "epsilon": "DOUBLE", "mask": "BOOLEAN[]",
+                  # a decomposed policy's (train --decompose) Q-values by reward term: `terms` names them,
+                  # `term_values` holds each term's values of every action back to back (term-major,
+                  # len(terms) x len(values)); NULL for any other policy
+                  "terms": "VARCHAR[]", "term_values": "FLOAT[]"},
+    "reward_terms": {"episode": "BIGINT", "step": "INTEGER", "agent": "VARCHAR", "term": "VARCHAR",
+                     "value": "DOUBLE"},
+    "metrics": {"step": "BIGINT", "name": "VARCHAR", "value": "DOUBLE", "episode": "BIGINT", "time": "TIMESTAMP"},
+    "episode_end": {"episode": "BIGINT", "steps": "INTEGER", "t_end": "INTEGER", "outcome": "VARCHAR",
+                    "reward": "DOUBLE", "rewards": "VARCHAR", "ended_at": "TIMESTAMP", "info": "VARCHAR"},
 }
-TABLES: tuple[str, ...] = tuple(SCHEMAS)
+# raw.run: the run's one metadata row (tracelab.store.meta.meta_table; config, rule files and versions as
+# JSON text); not a part table, but stored in a sealed file beside the others.
+RUN_COLUMNS: dict[str, str] = {
+    "run_id": "VARCHAR", "command": "VARCHAR", "scenario": "VARCHAR", "seed": "BIGINT", "status": "VARCHAR",
+    "started_at": "TIMESTAMP", "ended_at": "TIMESTAMP", "config": "VARCHAR", "rule_files": "VARCHAR",
+    "versions": "VARCHAR", "pid": "BIGINT", "host": "VARCHAR", "board": "VARCHAR"}
+# The stored tables of a sealed run.
+STORED_COLUMNS: dict[str, dict[str, str]] = {**COLUMNS, "run": RUN_COLUMNS}
+
+
+def _arrow_type(duckdb_type: str) -> "pa.DataType":
+    import pyarrow as pa
+    if duckdb_type.endswith("[]"):
+        return pa.list_(_arrow_type(duckdb_type[:-2]))
+    return {"TINYINT": pa.int8(), "SMALLINT": pa.int16(), "INTEGER": pa.int32(), "BIGINT": pa.int64(),
+            "FLOAT": pa.float32(), "DOUBLE": pa.float64(), "BOOLEAN": pa.bool_(), "VARCHAR": pa.string(),
+            "TIMESTAMP": pa.timestamp("us")}[duckdb_type]
+
+
+@cache
+def arrow_schema(table: str) -> "pa.Schema":
+    """The Arrow schema of a stored table (its parts, the writer's tables; "run": raw.run's row)."""
+    import pyarrow as pa
+    return pa.schema([(name, _arrow_type(t)) for name, t in STORED_COLUMNS[table].items()])
+
+
+@cache
+def _schemas() -> "dict[str, pa.Schema]":
+    return {t: arrow_schema(t) for t in COLUMNS}
+
+
+def __getattr__(name: str) -> Any:
+    # SCHEMAS (table -> Arrow schema, for the writers) is built on first use: importing this module loads
+    # no pyarrow
+    if name == "SCHEMAS":
+        return _schemas()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+TABLES: tuple[str, ...] = tuple(COLUMNS)
 # What a run written before runs declared their board (RunMeta.board) reads as: every command that
 # wrote runs then played the grid game.
 BOARD_BEFORE_DECLARED = "gridworld"
@@ -102,15 +132,11 @@ ADDED_COLUMNS: dict[str, dict[str, str]] = {"clauses": {"closed": "false"},
 # Tables added after the first release: a run written before has none and reads it as empty (EMPTY_SQL).
 ADDED_TABLES: tuple[str, ...] = ("edges", "action_names", "observation_names", "decisions", "reward_terms",
                                   "sources")
-_DUCKDB_TYPES = {pa.int32(): "INTEGER", pa.int64(): "BIGINT", pa.string(): "VARCHAR", pa.float64(): "DOUBLE",
-                 pa.bool_(): "BOOLEAN", pa.list_(pa.float32()): "FLOAT[]", pa.list_(pa.bool_()): "BOOLEAN[]",
-                 _STR_LIST: "VARCHAR[]"}
 
 
 def empty_sql(table: str) -> str:
     """A SELECT of no rows with an added table's columns and types (what a run written before reads)."""
-    return "SELECT " + ", ".join(f'CAST(NULL AS {_DUCKDB_TYPES[f.type]}) AS "{f.name}"'
-                                 for f in SCHEMAS[table]) + " LIMIT 0"
+    return "SELECT " + ", ".join(f'CAST(NULL AS {t}) AS "{c}"' for c, t in COLUMNS[table].items()) + " LIMIT 0"
 
 
 # The engine's trace columns (docs/engine-api.md) and the dtype each is stored as.

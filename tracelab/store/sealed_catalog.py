@@ -12,33 +12,25 @@ through DuckDB's metadata functions, which report stored definitions as text and
 refuses anything else with one line naming the entry."""
 from __future__ import annotations
 
-from functools import cache
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import duckdb
-import pyarrow as pa
 
-from tracelab.store.arrow_build import empty_table
-from tracelab.store.meta import meta_table
-from tracelab.store.sandbox import lock_down, sandbox_connection
-from tracelab.store.schema import ADDED_COLUMNS, ADDED_TABLES, SCHEMAS, VIEW_NAMES
+from tracelab.store.schema import ADDED_COLUMNS, ADDED_TABLES, STORED_COLUMNS, VIEW_NAMES
 
 SCHEMA_NAMES = ("main", "raw")
-# The stored tables of a sealed run (raw.run: the run's metadata row).
-STORED_SCHEMAS: dict[str, pa.Schema] = {**SCHEMAS, "run": meta_table({}, "").schema}
-# Catalog entries no sealed run holds: the names a file has of each kind (parameter: its database).
+# Catalog entries no sealed run holds: the database and names of each kind.
 _NEVER_HELD: dict[str, str] = {
-    "a macro": "SELECT schema_name, function_name FROM duckdb_functions() WHERE database_name = ?",
-    "a sequence": "SELECT schema_name, sequence_name FROM duckdb_sequences() WHERE database_name = ?",
-    "an index": "SELECT schema_name, index_name FROM duckdb_indexes() WHERE database_name = ?",
-    "a trigger": "SELECT schema_name, trigger_name FROM duckdb_triggers() WHERE database_name = ?",
-    "a constraint": "SELECT schema_name, table_name || ' ' || constraint_type FROM duckdb_constraints() "
-                  "WHERE database_name = ?",
+    "a macro": "SELECT database_name, schema_name, function_name FROM duckdb_functions()",
+    "a sequence": "SELECT database_name, schema_name, sequence_name FROM duckdb_sequences()",
+    "an index": "SELECT database_name, schema_name, index_name FROM duckdb_indexes()",
+    "a trigger": "SELECT database_name, schema_name, trigger_name FROM duckdb_triggers()",
+    "a constraint": "SELECT database_name, schema_name, table_name || ' ' || constraint_type FROM duckdb_constraints()",
     # every database lists DuckDB's own types, as internal ones
-    "a type": "SELECT schema_name, type_name FROM duckdb_types() WHERE database_name = ? AND NOT internal",
-    "a coordinate system": "SELECT schema_name, crs_name FROM duckdb_coordinate_systems() "
-                         "WHERE database_name = ?",
+    "a type": "SELECT database_name, schema_name, type_name FROM duckdb_types() WHERE NOT internal",
+    "a coordinate system": "SELECT database_name, schema_name, crs_name FROM duckdb_coordinate_systems()",
 }
 _RUNS_SQL = "tracelab does not open runs whose data is computed by SQL they bring along"
 _NOT_A_RUN = "which a tracelab run does not have"
@@ -48,24 +40,13 @@ class SealedFileRefused(ValueError):
     """A sealed run file whose catalog is not the one `seal` writes (one line, names the entry)."""
 
 
-@cache
-def expected_columns() -> dict[str, dict[str, str]]:
-    """raw.<table> -> column -> DuckDB type, as `seal` stores them (DuckDB's names for the Arrow types,
-    as duckdb_columns() reports them)."""
-    con = sandbox_connection()
-    try:
-        lock_down(con)
-        return {t: dict(zip(s.names, (str(x) for x in con.from_arrow(empty_table(s)).types)))
-                for t, s in STORED_SCHEMAS.items()}
-    finally:
-        con.close()
-
-
-def check_sealed_catalog(con: duckdb.DuckDBPyConnection, database: str, path: Path) -> dict[str, set[str]]:
+def check_sealed_catalog(con: duckdb.DuckDBPyConnection, database: str, path: Path,
+                         catalog: SealedCatalog | None = None) -> dict[str, set[str]]:
     """Refuse (SealedFileRefused) the attached `database` unless it holds what a sealed run holds and
     nothing else; return the columns each raw table has (an older run lacks some ADDED_COLUMNS, and has
-    no columns of an ADDED_TABLES table it lacks)."""
-    catalog = _Catalog(con, database)
+    no columns of an ADDED_TABLES table it lacks). `catalog`: its entries as read_sealed_catalogs read
+    them (with the others' on the connection), else read here."""
+    catalog = catalog or read_sealed_catalogs(con, [database])[database]
     try:
         catalog.check_entries()
         return catalog.check_columns()
@@ -79,47 +60,72 @@ def _name(*parts: str) -> str:
     return text if text.isprintable() and len(text) <= 80 else repr(text[:80])
 
 
-class _Catalog:
-    def __init__(self, con: duckdb.DuckDBPyConnection, database: str) -> None:
-        self.con = con
-        self.database = database
+# The entries check_entries looks at, by kind: (database, schema, name) of each, or (database, schema,
+# parent) of a schema.
+_ENTRIES: dict[str, str] = {
+    "schema": "SELECT database_name, schema_name, parent_schema FROM duckdb_schemas()",
+    "view": "SELECT database_name, schema_name, view_name FROM duckdb_views()",
+    "table": "SELECT database_name, schema_name, table_name FROM duckdb_tables()",
+    **_NEVER_HELD,
+}
+_COLUMNS_SQL = ("SELECT database_name, table_name, column_name, data_type, column_default, is_generated "
+                "FROM duckdb_columns() WHERE list_contains(?, database_name) AND schema_name = 'raw' "
+                "ORDER BY database_name, table_name, column_index")
 
-    def rows(self, sql: str) -> list[tuple[Any, ...]]:
-        return self.con.execute(sql, [self.database]).fetchall()
+
+def read_sealed_catalogs(con: duckdb.DuckDBPyConnection, databases: Sequence[str]) -> dict[str, SealedCatalog]:
+    """The catalog entries of the attached `databases`, read in two statements for them all: DuckDB's
+    metadata functions list every database's entries (its function list, the costly one, with thousands
+    of built-ins), so one pass serves every file on the connection."""
+    kinds = list(_ENTRIES)
+    # every kind of entry in one statement (each statement costs its own planning and run)
+    union = " UNION ALL ".join(f"SELECT {i} AS kind, * FROM ({sql})" for i, sql in enumerate(_ENTRIES.values()))
+    catalogs = {d: SealedCatalog(d) for d in databases}
+    for kind, database, *entry in con.execute(
+            f"SELECT * FROM ({union}) WHERE list_contains(?, database_name) ORDER BY ALL",
+            [list(databases)]).fetchall():
+        catalogs[database].entries[kinds[kind]].append(tuple(entry))
+    for database, *column in con.execute(_COLUMNS_SQL, [list(databases)]).fetchall():
+        catalogs[database].columns.append(tuple(column))
+    return catalogs
+
+
+class SealedCatalog:
+    """One attached file's catalog entries, as read_sealed_catalogs read them, and the checks on them."""
+
+    def __init__(self, database: str) -> None:
+        self.database = database
+        self.entries: dict[str, list[tuple[Any, ...]]] = {kind: [] for kind in _ENTRIES}
+        self.columns: list[tuple[Any, ...]] = []   # raw's (table, column, type, default, generated), in order
 
     def check_entries(self) -> None:
         """Schemas, views and tables are the expected ones; nothing of any other kind."""
-        for schema, parent in self.rows("SELECT schema_name, parent_schema FROM duckdb_schemas() "
-                                        "WHERE database_name = ? ORDER BY ALL"):
+        for schema, parent in self.entries["schema"]:
             if parent is not None or schema not in SCHEMA_NAMES:  # raw nested in another schema too
                 raise SealedFileRefused(f"holds a schema {_name(*filter(None, (parent, schema)))}, {_NOT_A_RUN}")
-        for schema, view in self.rows("SELECT schema_name, view_name FROM duckdb_views() "
-                                      "WHERE database_name = ? ORDER BY ALL"):
+        for schema, view in self.entries["view"]:
             if schema == "raw":
                 raise SealedFileRefused(f"holds {_name('raw', view)} as a view, not a stored table: {_RUNS_SQL}")
             if view not in VIEW_NAMES:
                 raise SealedFileRefused(f"holds a view {_name(schema, view)}, {_NOT_A_RUN}")
-        expected = expected_columns()
-        tables = self.rows("SELECT schema_name, table_name FROM duckdb_tables() WHERE database_name = ? "
-                           "ORDER BY ALL")
+        expected = STORED_COLUMNS
+        tables = self.entries["table"]
         for schema, table in tables:
             if schema != "raw" or table not in expected:
                 raise SealedFileRefused(f"holds a table {_name(schema, table)}, {_NOT_A_RUN}")
         missing = [t for t in expected if ("raw", t) not in tables and t not in ADDED_TABLES]
         if missing:
             raise SealedFileRefused(f"has no table raw.{missing[0]}: not a tracelab run")
-        for kind, sql in _NEVER_HELD.items():
-            found = self.rows(sql + " ORDER BY ALL")
+        for kind in _NEVER_HELD:
+            found = self.entries[kind]
             if found:
                 raise SealedFileRefused(f"holds {kind} {_name(*found[0])}, {_NOT_A_RUN}: {_RUNS_SQL}")
 
     def check_columns(self) -> dict[str, set[str]]:
         """Each raw table's columns: stored (not generated, no default), expected, of the expected type."""
-        expected = expected_columns()
+        expected = STORED_COLUMNS
         have: dict[str, set[str]] = {t: set() for t in expected}
-        for table, column, data_type, default, generated in self.rows(
-                "SELECT table_name, column_name, data_type, column_default, is_generated FROM duckdb_columns() "
-                "WHERE database_name = ? AND schema_name = 'raw' ORDER BY table_name, column_index"):
+        for table, column, data_type, default, generated in self.columns:
             where = _name("raw", table, column)
             if generated:
                 raise SealedFileRefused(f"{where} is a generated column: {_RUNS_SQL}")

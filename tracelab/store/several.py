@@ -18,13 +18,11 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import duckdb
-import pyarrow as pa
 
 from tracelab.store import layout
-from tracelab.store.arrow_build import strings
 from tracelab.store.catalog import find_runs, is_run
 from tracelab.store.kind import can_read
 from tracelab.store.reader import (
@@ -44,6 +42,10 @@ from tracelab.store.reader import (
 )
 from tracelab.store.sandbox import lock_configuration, lock_down, refusal, sandbox_connection
 from tracelab.store.schema import TABLES, VIEW_NAMES, VIEWS_SQL
+from tracelab.store.sealed_catalog import read_sealed_catalogs
+
+if TYPE_CHECKING:  # loaded by each_run_stream only: a SQL query over several runs needs no pyarrow
+    import pyarrow as pa
 
 RUN_COLUMN = "run"
 # Runs one connection reads at most: each adds its views to the connection (about 0.25 s to open and 3 MB,
@@ -92,16 +94,19 @@ class SeveralRunsConnection(RefreshingConnection):
     live run's views are brought up to its latest flush and status (reader.LiveParts); everything else is
     the DuckDB connection's own API."""
 
-    def __init__(self, runs: Sequence[Path], names: Sequence[str]) -> None:
+    def __init__(self, runs: Sequence[Path], names: Sequence[str], union_views: bool = True) -> None:
+        """`union_views`: False for a caller of its own SQL that reads one run's raw.* at a time (use):
+        neither the union views nor each run's user-facing views are built (15 views a run)."""
         self.runs = list(runs)
         self.names = list(names)
+        self._union_views = union_views
         self._using: int | None = None    # the run whose own views unqualified names read (use)
-        self._con, self._live = _build(self.runs)
+        self._con, self._live = _build(self.runs, union_views)
 
     def refresh(self) -> None:
         for live in self._live:
             if not live.update(ready=True):   # sealed meanwhile: attach its file on a new connection
-                old, (self._con, self._live) = self._con, _build(self.runs)
+                old, (self._con, self._live) = self._con, _build(self.runs, self._union_views)
                 old.close()
                 if self._using is not None:
                     self._con.execute(f"USE {_catalog(self._using)}")
@@ -118,7 +123,7 @@ def _catalog(index: int) -> str:
     return f"run_{index + 1}"
 
 
-def _build(runs: Sequence[Path]) -> tuple[duckdb.DuckDBPyConnection, list[LiveParts]]:
+def _build(runs: Sequence[Path], union_views: bool = True) -> tuple[duckdb.DuckDBPyConnection, list[LiveParts]]:
     if len(runs) > MAX_RUNS:
         raise ValueError(f"{len(runs)} runs given ({runs[0]} ... {runs[-1]}): tracelab reads at most {MAX_RUNS} "
                          "at once; read more through their Parquet parts (docs/store.md, \"The Parquet parts\")")
@@ -134,20 +139,24 @@ def _build(runs: Sequence[Path]) -> tuple[duckdb.DuckDBPyConnection, list[LivePa
             else:
                 allowed.append(check_live_run(p))
         lock_down(con, allowed)
+        # every attached file's catalog read in one pass (each still checked before anything of it is read)
+        catalogs = read_sealed_catalogs(con, [f"store_{i + 1}" for i, s in enumerate(sealed) if s is not None])
         live = []
         for i, (p, s) in enumerate(zip(runs, sealed)):
             raw = f"{_catalog(i)}.raw"
             if s is not None:
-                create_sealed_raw_views(con, s, f"store_{i + 1}", raw)
+                create_sealed_raw_views(con, s, f"store_{i + 1}", raw, catalogs[f"store_{i + 1}"])
             else:
                 parts = LiveParts(con, p.resolve(), raw, prefix=f"{i + 1}_")
                 parts.update(ready=False)
                 create_live_raw_views(con, p.resolve(), raw, prefix=f"{i + 1}_")
                 live.append(parts)
-            con.execute(f"USE {_catalog(i)}")
-            con.execute(VIEWS_SQL)
+            if union_views:
+                con.execute(f"USE {_catalog(i)}")
+                con.execute(VIEWS_SQL)
         con.execute(f"USE {DEFAULT_CATALOG}")
-        _create_union_views(con, run_names(runs))
+        if union_views:
+            _create_union_views(con, run_names(runs))
         lock_configuration(con)
     except BaseException:
         con.close()
@@ -175,11 +184,14 @@ def open_runs(given: Sequence[str | Path]) -> SeveralRunsConnection:
 
 def each_run_stream(con: SeveralRunsConnection, sql: str, params: dict[str, Any] | None = None,
                     limit: int | None = None, offset: int = 0,
-                    needs: tuple[str, str] | None = None) -> tuple[pa.Schema, Iterator[pa.RecordBatch]]:
+                    needs: tuple[str, str] | None = None) -> "tuple[pa.Schema, Iterator[pa.RecordBatch]]":
     """A query written for one run (a saved query) run on each run in turn, its rows prefixed by the
     run's name in a first column `run`; rows [offset, offset+limit) of the whole, streamed: one run's
     rows are read while they are written. `needs` (a saved query's: "games" or
     "board", and why): refuse (ValueError naming the run) a run it cannot read (kind.can_read)."""
+    import pyarrow as pa  # deferred: see TYPE_CHECKING above
+
+    from tracelab.store.arrow_build import strings
     if needs is not None:
         for i, name in enumerate(con.names):
             con.use(i)
@@ -192,7 +204,7 @@ def each_run_stream(con: SeveralRunsConnection, sql: str, params: dict[str, Any]
     first = _open_reader(con, 0, sql, params)
     schema = pa.schema([pa.field(RUN_COLUMN, pa.string()), *first.schema])
 
-    def batches() -> Iterator[pa.RecordBatch]:
+    def batches() -> "Iterator[pa.RecordBatch]":
         reader: pa.RecordBatchReader | None = first
         for i, name in enumerate(con.names):
             try:
@@ -211,7 +223,7 @@ def each_run_stream(con: SeveralRunsConnection, sql: str, params: dict[str, Any]
 
 
 def _open_reader(con: SeveralRunsConnection, index: int, sql: str,
-                 params: dict[str, Any] | None) -> pa.RecordBatchReader:
+                 params: dict[str, Any] | None) -> "pa.RecordBatchReader":
     """The query's rows on run `index`'s own views; the connection reads that run until con.use(None)."""
     con.use(index)
     try:
