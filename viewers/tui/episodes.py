@@ -96,12 +96,6 @@ class EpisodesPane(Vertical):
         Binding("o", "next_outcome", "outcome"),
         Binding("e", "eval_only", "eval games", show=False),
     ]
-    DEFAULT_CSS = """
-    EpisodesPane #ep-filters { height: 1; }
-    EpisodesPane #ep-filters Select { width: 18; }
-    EpisodesPane #ep-filters Input { width: 16; }
-    EpisodesPane .label { width: auto; padding: 0 1; }
-    """
 
     def __init__(self, source: RunSource, place: EpisodesPlace | None = None) -> None:
         """`place`: where this run's Episodes were left earlier in the session (filters, sort, cursor)."""

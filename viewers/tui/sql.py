@@ -69,16 +69,6 @@ def _literal(value: Any) -> str:
 class SavedQueryPicker(ModalScreen[tuple[SavedQuery, dict[str, str]] | None]):
     """Choose a saved query, then fill in its parameters (defaults shown); Enter runs it."""
     BINDINGS = [Binding("escape", "dismiss(None)", "close")]
-    DEFAULT_CSS = """
-    SavedQueryPicker { align: center middle; }
-    SavedQueryPicker > Vertical { width: 90%; max-width: 100; height: auto; max-height: 90%;
-                                  border: round $accent; background: $panel; padding: 0 1; }
-    SavedQueryPicker OptionList { height: auto; max-height: 12; }
-    SavedQueryPicker Input, SavedQueryPicker Input:focus { margin: 0; height: 1; border: none; padding: 0 1; }
-    SavedQueryPicker Input:focus { background: $boost; }
-    SavedQueryPicker #params { height: auto; max-height: 20; overflow-y: auto; }
-    SavedQueryPicker #params Label { width: 100%; }
-    """
 
     def __init__(self, board: bool = True, games: bool = True) -> None:
         """board: the run has the grid game's board; games: it is a run of games. The saved queries that
@@ -124,11 +114,6 @@ class SavedQueryPicker(ModalScreen[tuple[SavedQuery, dict[str, str]] | None]):
 
 class HistoryPicker(ModalScreen[str | None]):
     BINDINGS = [Binding("escape", "dismiss(None)", "close")]
-    DEFAULT_CSS = """
-    HistoryPicker { align: center middle; }
-    HistoryPicker OptionList { width: 90%; max-width: 110; height: auto; max-height: 80%;
-                               border: round $accent; }
-    """
 
     def __init__(self, history: list[str]) -> None:
         super().__init__()
@@ -150,10 +135,6 @@ class SqlPane(Vertical):
         Binding("f4", "export", "export"),
         Binding("ctrl+t", "focus_results", "results", show=False),
     ]
-    DEFAULT_CSS = """
-    SqlPane TextArea { height: 6; }
-    SqlPane #sql-error { color: $error; height: auto; max-height: 6; }
-    """
 
     def __init__(self, source: RunSource | SeveralRunsSource) -> None:
         """source: the run's, or several runs' (SeveralRunsSource: views with a `run` column)."""

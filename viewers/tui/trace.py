@@ -93,15 +93,6 @@ class TracePane(Vertical):
         Binding("right_square_bracket", "eval_game(1)", "eval games", key_display="]/["),
         Binding("left_square_bracket", "eval_game(-1)", "previous eval game", show=False),
     ]
-    DEFAULT_CSS = """
-    TracePane #tr-filters { height: 1; }
-    TracePane #tr-filters Input { width: 1fr; margin-right: 1; }
-    TracePane #tr-range, TracePane #tr-goto { max-width: 10; }
-    TracePane #tr-body { height: 1fr; }
-    TracePane #tr-side { width: 22; height: 1fr; }
-    TracePane #tr-side BoardView { height: 1fr; }
-    TracePane #tr-side.-decision BoardView { height: auto; }   /* the decision right under the board */
-    """
 
     def __init__(self, source: RunSource) -> None:
         super().__init__()

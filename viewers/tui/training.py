@@ -36,9 +36,6 @@ def wanted(name: str, patterns: tuple[str, ...]) -> bool:
 
 class TrainingPane(Vertical, can_focus=True):
     BINDINGS = [Binding("v", "eval_games", "eval games"), Binding("m", "each_run", "each run / mean")]
-    DEFAULT_CSS = """
-    TrainingPane Grid { grid-size: 2 2; grid-gutter: 0; height: 1fr; }
-    """
 
     def __init__(self, source: RunSource, overlaid: Sequence[RunSource] = ()) -> None:
         super().__init__()

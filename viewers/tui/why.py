@@ -88,11 +88,6 @@ def parse_why_not(text: str) -> tuple[str, dict[str, str], int]:
 class WhyPane(Vertical):
     BINDINGS = [Binding("o", "expand_all", "expand all"), Binding("c", "collapse", "collapse"),
                 Binding("slash", "focus_why_not", "why-not")]
-    DEFAULT_CSS = """
-    WhyPane Tree { height: 1fr; }
-    WhyPane #why-not-out { height: auto; max-height: 10; }
-    WhyPane #why-not { height: 1; }
-    """
 
     def __init__(self, source: RunSource) -> None:
         super().__init__()
