@@ -286,3 +286,26 @@ def test_the_reasoning_picture_shows_what_docs_tui_md_says() -> None:
     assert "atoms true at t=3" in trace_text and "true matching alert" in trace_text
     assert "alert(ben-lund) at t=3" in trace_text and "maintains" in trace_text
     assert "alert(ben-lund)" in why_text and "by alert" in why_text and "critical(fast-client-plus)" in why_text
+
+
+def test_reopened_the_atoms_beside_the_trace_keep_the_static_facts_shown() -> None:
+    """`s` shows the static facts in the trace and in the atoms beside it; the run reopened in the session
+    shows them in both again (the pane's hide_static drives both: setting it refreshes them)."""
+    async def body(app: Any, pilot: Any) -> None:
+        pane, side = await open_trace_at(app, pilot, 3)
+        assert side.atoms.static_hidden > 0                        # hidden by default
+        await pilot.press("s")
+        await wait_for(pilot, lambda: side.atoms is not None and not side.hide_static and loaded(side.table))
+        await wait_for(pilot, lambda: pane.filter is not None and not pane.filter.hide_static
+                       and loaded(pane.table))
+        await pilot.press("escape", "escape")                      # trace -> episodes -> Runs
+        await wait_for(pilot, lambda: type(app.screen).__name__ == "RunsScreen")
+        app.show_run(SUPPLY)
+        await wait_for(pilot, lambda: isinstance(app.screen.panes.get("trace"), TracePane)
+                       if hasattr(app.screen, "panes") else False)
+        pane = app.screen.panes["trace"]
+        await wait_for(pilot, lambda: pane.filter is not None and loaded(pane.table) and pane.table.count > 0)
+        side = pane.query_one(GraphSide)
+        await wait_for(pilot, lambda: side.atoms is not None and side.atoms.t == 3 and loaded(side.table))
+        assert not pane.filter.hide_static and not side.hide_static and side.atoms.static_hidden == 0
+    run_app([SUPPLY], body, size=(120, 34))

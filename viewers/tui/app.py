@@ -15,17 +15,10 @@ from tracelab.viewers.tui.places import RunPlace
 from tracelab.viewers.tui.run_screen import TABS, RunScreen
 from tracelab.viewers.tui.runs_screen import RunsScreen
 
-CSS = """
-.title { background: $primary-background; color: $text; text-style: bold; height: 1; }
-.status { background: $boost; color: $text-muted; height: 1; }
-TabbedContent, TabPane { height: 1fr; }
-TabPane { padding: 0; }
-"""
-
 
 class TracelabApp(App[None]):
     TITLE = "tracelab"
-    CSS = CSS
+    CSS_PATH = "tracelab.tcss"   # every view's styles (board.py, declared_board.py, graph_side.py: inline)
     BINDINGS = [
         Binding("question_mark", "help", "help"),
         Binding("q", "quit", "quit"),

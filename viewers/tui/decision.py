@@ -95,10 +95,6 @@ class DecisionPanel(Widget, can_focus=True):
         Binding("down", "move(1)", "action", show=False),
         Binding("w", "why", "why action"),
     ]
-    DEFAULT_CSS = """
-    DecisionPanel { height: auto; border: round $primary-darken-2; }
-    DecisionPanel:focus { border: round $accent; }
-    """
 
     class Shown(Message):
         """The panel was shown or hidden (the trace offers `d` while it shows)."""

@@ -96,12 +96,6 @@ class EpisodesPane(Vertical):
         Binding("o", "next_outcome", "outcome"),
         Binding("e", "eval_only", "eval games", show=False),
     ]
-    DEFAULT_CSS = """
-    EpisodesPane #ep-filters { height: 1; }
-    EpisodesPane #ep-filters Select { width: 18; }
-    EpisodesPane #ep-filters Input { width: 16; }
-    EpisodesPane .label { width: auto; padding: 0 1; }
-    """
 
     def __init__(self, source: RunSource, place: EpisodesPlace | None = None) -> None:
         """`place`: where this run's Episodes were left earlier in the session (filters, sort, cursor)."""
@@ -127,8 +121,28 @@ class EpisodesPane(Vertical):
         yield LazyTable(id="ep-table")
         yield Static("", id="ep-status", classes="status")
 
+    @property
+    def table(self) -> LazyTable:
+        return self.query_one("#ep-table", LazyTable)
+
+    @property
+    def status(self) -> Static:
+        return self.query_one("#ep-status", Static)
+
+    @property
+    def outcome_select(self) -> Select[str]:
+        return self.query_one("#ep-outcome", Select)
+
+    @property
+    def kind_select(self) -> Select[str]:
+        return self.query_one("#ep-kind", Select)
+
+    @property
+    def length_input(self) -> Input:
+        return self.query_one("#ep-length", Input)
+
     def focus_default(self) -> None:
-        self.query_one(LazyTable).focus()
+        self.table.focus()
 
     def on_mount(self) -> None:
         self.run_worker(self._inspect, thread=True, exit_on_error=False)
@@ -171,44 +185,43 @@ class EpisodesPane(Vertical):
         else:
             self.columns = list(BOARDLESS_COLUMNS) + ([ABOUT_COLUMN] if about else [])
         self.outcomes = outcomes
-        self.query_one("#ep-outcome", Select).set_options([(o, o) for o in outcomes])
-        self.query_one("#ep-kind", Select).display = training
+        self.outcome_select.set_options([(o, o) for o in outcomes])
+        self.kind_select.display = training
         self.query_one("#ep-kind-label").display = training
         place, self._reopen = self._reopen, None
         if place is None:
             self.reload()
             return
         if place.outcome in outcomes:
-            self.query_one("#ep-outcome", Select).value = place.outcome
+            self.outcome_select.value = place.outcome
         if training and place.kind is not None:
-            self.query_one("#ep-kind", Select).value = place.kind
-        self.query_one("#ep-length", Input).value = place.length
+            self.kind_select.value = place.kind
+        self.length_input.value = place.length
         self.sort_key, self.sort_desc = place.sort_key, place.sort_desc
         self.reload(cursor=place.cursor)
 
     def place(self) -> EpisodesPlace:
         """Where the user is, for reopening the run later in the session."""
-        value = lambda name: self.query_one(name, Select).value  # noqa: E731
-        outcome, kind = value("#ep-outcome"), value("#ep-kind")
+        outcome, kind = self.outcome_select.value, self.kind_select.value
         return EpisodesPlace(None if outcome is Select.NULL else str(outcome),
                              None if kind is Select.NULL else str(kind),
-                             self.query_one("#ep-length", Input).value, self.sort_key, self.sort_desc,
-                             self.query_one(LazyTable).cursor)
+                             self.length_input.value, self.sort_key, self.sort_desc,
+                             self.table.cursor)
 
     def reload(self, keep_cursor: bool = False, cursor: int = 0) -> None:
         if not hasattr(self, "base"):
             return
         where = []
-        outcome = self.query_one("#ep-outcome", Select).value
-        self._applied = (outcome, self.query_one("#ep-kind", Select).value)
+        outcome = self.outcome_select.value
+        self._applied = (outcome, self.kind_select.value)
         if outcome not in (Select.NULL, None):
             where.append("outcome = $outcome")
-        kind = self.query_one("#ep-kind", Select).value
+        kind = self.kind_select.value
         if self.training and kind not in (Select.NULL, None):
             where.append("kind = $kind")
-        status = self.query_one("#ep-status", Static)
+        status = self.status
         try:
-            length = length_clause(self.query_one("#ep-length", Input).value)
+            length = length_clause(self.length_input.value)
         except ValueError as e:
             status.update(shown(str(e), "bold red"))
             return
@@ -218,14 +231,14 @@ class EpisodesPane(Vertical):
         sql = f"SELECT * FROM ({self.base})" + (f" WHERE {' AND '.join(where)}" if where else "")
         direction = " DESC" if self.sort_desc else ""
         order = f"{self.sort_key}{direction} NULLS LAST, episode"
-        table = self.query_one(LazyTable)
+        table = self.table
         table.sort_key, table.sort_desc = self.sort_key, self.sort_desc
         table.set_source(QuerySource(self.source, sql, order, params or None), self.columns,
                          cursor=table.cursor if keep_cursor else cursor)
 
     def on_lazy_table_loaded(self, event: LazyTable.Loaded) -> None:
         sort = f"sorted by {self.sort_key}{' (desc)' if self.sort_desc else ''}"
-        self.query_one("#ep-status", Static).update(
+        self.status.update(
             f" {event.count} episode(s), {sort} · Enter: trace · s: sort · f: filter · o: outcome")
 
     def on_lazy_table_row_selected(self, event: LazyTable.RowSelected) -> None:
@@ -251,22 +264,22 @@ class EpisodesPane(Vertical):
         self.reload()
 
     def action_focus_filter(self) -> None:
-        self.query_one("#ep-length", Input).focus()
+        self.length_input.focus()
 
     def action_next_outcome(self) -> None:
         """The outcome selector's next value: all, then each outcome of the run, then all again."""
-        select = self.query_one("#ep-outcome", Select)
+        select = self.outcome_select
         values = [Select.NULL, *self.outcomes]
         at = values.index(select.value) if select.value in values else 0
         select.value = values[(at + 1) % len(values)]
 
     def action_eval_only(self) -> None:
         if self.training:
-            self.query_one("#ep-kind", Select).value = "eval"
+            self.kind_select.value = "eval"
 
     def on_select_changed(self, event: Select.Changed) -> None:
         # a value set in code (reopening the run) is already shown: its late message reloads nothing
-        if (self.query_one("#ep-outcome", Select).value, self.query_one("#ep-kind", Select).value) != self._applied:
+        if (self.outcome_select.value, self.kind_select.value) != self._applied:
             self.reload()
 
     def on_input_submitted(self, event: Input.Submitted) -> None:

@@ -30,12 +30,6 @@ def free_name(stem: str, suffix: str = ".csv", folder: Path | None = None) -> Pa
 class ExportDialog(ModalScreen[Path | None]):
     """Ask for a file and write `table` to it; dismissed with the path written (None: closed)."""
     BINDINGS = [Binding("escape", "dismiss(None)", "close")]
-    DEFAULT_CSS = """
-    ExportDialog { align: center middle; }
-    ExportDialog > Vertical { width: 90%; max-width: 100; height: auto; border: round $accent;
-                              background: $panel; padding: 0 1; }
-    ExportDialog #export-message { height: auto; }
-    """
 
     def __init__(self, table: pa.Table, default: Path, what: str = "result") -> None:
         super().__init__()

@@ -32,11 +32,6 @@ Truth values: green `[1,1]`, orange `[0,0]`, grey `[0,1]`, yellow anything else.
 
 class HelpScreen(ModalScreen[None]):
     BINDINGS = [Binding("escape,question_mark,q", "dismiss(None)", "close")]
-    DEFAULT_CSS = """
-    HelpScreen { align: center middle; }
-    HelpScreen > VerticalScroll { width: 95%; max-width: 120; height: 90%; border: round $accent;
-                                  background: $panel; }
-    """
 
     def compose(self) -> ComposeResult:
         with VerticalScroll():

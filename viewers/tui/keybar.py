@@ -12,8 +12,6 @@ from tracelab.viewers.tui.colours import PARTIAL
 
 
 class KeyBar(Widget):
-    DEFAULT_CSS = "KeyBar { height: 1; dock: bottom; background: $panel; color: $text-muted; }"
-
     def __init__(self) -> None:
         super().__init__()
         self._spans: list[tuple[int, int, str, object]] = []   # x from, x to, action, namespace

@@ -69,10 +69,6 @@ def _narrow(columns: list[Column], excess: int) -> None:
 
 
 class LazyTable(ScrollView, can_focus=True):
-    DEFAULT_CSS = """
-    LazyTable { height: 1fr; background: $surface; }
-    LazyTable:focus { background-tint: $foreground 3%; }
-    """
     BINDINGS = [
         Binding("up", "cursor(-1)", "up", show=False),
         Binding("down", "cursor(1)", "down", show=False),

@@ -66,7 +66,6 @@ def _fmt_step(v: float) -> str:
 
 
 class BraillePlot(Widget):
-    DEFAULT_CSS = "BraillePlot { height: 1fr; min-height: 5; border: round $primary-darken-2; }"
 
     def __init__(self, title: str, *, id: str | None = None) -> None:
         super().__init__(id=id)

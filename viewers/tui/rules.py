@@ -10,6 +10,7 @@ from rich.text import Text
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Vertical
+from textual.reactive import reactive
 from textual.widgets import Static
 
 from tracelab.viewers.tui.colours import FALSE
@@ -62,11 +63,11 @@ PER_EPISODE_COLUMNS = [
 
 class RulesPane(Vertical):
     BINDINGS = [Binding("e", "toggle_view", "per episode/rule")]
+    per_episode = reactive(False, init=False)   # firings per (episode, rule) instead of per rule (e)
 
     def __init__(self, source: RunSource) -> None:
         super().__init__()
         self.source = source
-        self.per_episode = False
         self.loaded = False
 
     @property
@@ -77,32 +78,40 @@ class RulesPane(Vertical):
         yield LazyTable(self.per_rule_columns, id="rules-table")
         yield Static("", id="rules-status", classes="status")
 
+    @property
+    def table(self) -> LazyTable:
+        return self.query_one("#rules-table", LazyTable)
+
+    @property
+    def status(self) -> Static:
+        return self.query_one("#rules-status", Static)
+
     def focus_default(self) -> None:
         if not self.loaded:
             self.loaded = True
             self.reload()
-        self.query_one(LazyTable).focus()
+        self.table.focus()
 
     def reload(self) -> None:
-        table = self.query_one(LazyTable)
+        table = self.table
         if self.per_episode:
             table.set_source(QuerySource(self.source, PER_EPISODE_SQL, "episode, firings DESC, rule"),
                              PER_EPISODE_COLUMNS)
         else:
             table.set_source(QuerySource(self.source, PER_RULE_SQL, "firings DESC, rule, rule_id"),
                              self.per_rule_columns)
-        self.query_one("#rules-status", Static).update(" counting firings… (Esc cancels)")
+        self.status.update(" counting firings… (Esc cancels)")
 
     def on_lazy_table_loaded(self, event: LazyTable.Loaded) -> None:
         event.stop()
         if self.per_episode:
             text = f" {event.count} (episode, rule) pairs · e: per rule · Enter: trace of the rule"
-            self.query_one("#rules-status", Static).update(text)
+            self.status.update(text)
             return
 
         def work() -> None:
             never = self.source.scalar(f"SELECT count(*) FROM ({PER_RULE_SQL}) WHERE firings = 0")
-            self.app.call_from_thread(self.query_one("#rules-status", Static).update,
+            self.app.call_from_thread(self.status.update,
                                       f" {event.count} rules, {never} never fired · e: per episode · "
                                       f"Enter: trace filtered by the rule")
 
@@ -110,6 +119,8 @@ class RulesPane(Vertical):
 
     def action_toggle_view(self) -> None:
         self.per_episode = not self.per_episode
+
+    def watch_per_episode(self) -> None:
         self.reload()
 
     def on_lazy_table_row_selected(self, event: LazyTable.RowSelected) -> None:

@@ -113,10 +113,14 @@ class RunScreen(Screen):
             self._has_metrics = bool(self.source.scalar("SELECT count(*) FROM (SELECT 1 FROM metrics LIMIT 1)"))
         return self._has_metrics
 
+    @property
+    def tabs(self) -> RunTabs:
+        return self.query_one("#tabs", RunTabs)
+
     def _hide_missing_views(self) -> None:
         for tab, _ in TABS:
             if not self.has_view(tab):
-                self.query_one(TabbedContent).hide_tab(tab)
+                self.tabs.hide_tab(tab)
 
     def on_mount(self) -> None:
         self._hide_missing_views()
@@ -137,7 +141,7 @@ class RunScreen(Screen):
 
     def _status_changed(self) -> None:
         self.query_one("#title", Static).update(self._title())
-        if not self.source.live and self.query_one(TabbedContent).active != "training":
+        if not self.source.live and self.tabs.active != "training":
             self._hide_missing_views()
         if not self.source.can_change:
             self._status_timer.stop()
@@ -155,11 +159,11 @@ class RunScreen(Screen):
                         severity="warning")
             return
         await self.pane(tab)
-        self.query_one(TabbedContent).active = tab
+        self.tabs.active = tab
         self.call_after_refresh(self._focus_pane, tab)
 
     def _focus_pane(self, tab: str) -> None:
-        if self.query_one(TabbedContent).active != tab:
+        if self.tabs.active != tab:
             return  # focusing into a hidden pane would make TabbedContent switch back to it
         focus = getattr(self.panes[tab], "focus_default", None)
         if focus is not None and self.panes[tab].is_attached:
@@ -180,9 +184,9 @@ class RunScreen(Screen):
             self.panes["sql"].action_focus_results()  # type: ignore[attr-defined]
             return
         if isinstance(self.focused, Input):
-            self._focus_pane(self.query_one(TabbedContent).active)
+            self._focus_pane(self.tabs.active)
             return
-        active = self.query_one(TabbedContent).active
+        active = self.tabs.active
         if active == self.initial:
             self.app.pop_screen()
         else:
@@ -192,7 +196,7 @@ class RunScreen(Screen):
         """Where the user is: the view, the Episodes' filters and cursor, the trace's episode and cursor."""
         episodes, trace = self.panes["episodes"], self.panes["trace"]
         assert isinstance(episodes, EpisodesPane) and isinstance(trace, TracePane)
-        return RunPlace(self.query_one(TabbedContent).active or self.initial,
+        return RunPlace(self.tabs.active or self.initial,
                         episodes.place() if episodes.is_mounted else None, trace.place())
 
     def on_screen_suspend(self) -> None:

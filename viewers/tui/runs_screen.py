@@ -56,8 +56,12 @@ class RunsScreen(Screen):
         yield Static("", id="runs-status", classes="status")
         yield KeyBar()
 
+    @property
+    def table(self) -> LazyTable:
+        return self.query_one("#runs-table", LazyTable)
+
     def on_mount(self) -> None:
-        self.query_one(LazyTable).focus()
+        self.table.focus()
         self.set_interval(REFRESH_S, self._tick)
 
     def on_screen_resume(self) -> None:
@@ -80,7 +84,7 @@ class RunsScreen(Screen):
         changed = [r.as_row() for r in runs] != [r.as_row() for r in self.runs]
         self.runs = runs
         self.marked = [p for p in self.marked if p in {str(r.path) for r in runs}]   # runs that went away
-        table = self.query_one(LazyTable)
+        table = self.table
         if changed or redraw or not table.ready:
             rows = [r.as_row() for r in runs]
             table.set_source(ArrowSource(catalog_table(rows)),
@@ -91,7 +95,7 @@ class RunsScreen(Screen):
             f" {len(runs)} run(s), {live} running · Enter opens · {marked} · refreshes every {REFRESH_S:g} s")
 
     def action_mark(self) -> None:
-        table = self.query_one(LazyTable)
+        table = self.table
         if not 0 <= table.cursor < len(self.runs):
             return
         path = str(self.runs[table.cursor].path)
@@ -112,7 +116,7 @@ class RunsScreen(Screen):
         self.app.show_run(first, others)  # type: ignore[attr-defined]
 
     def action_open(self) -> None:
-        table = self.query_one(LazyTable)
+        table = self.table
         if 0 <= table.cursor < len(self.runs):
             self.app.show_run(self.runs[table.cursor].path)  # type: ignore[attr-defined]
 

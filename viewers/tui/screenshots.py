@@ -55,7 +55,7 @@ async def _trace_and_why(run: Path) -> tuple[str, str]:
         await pilot.press("enter")
         pane = app.screen.query_one(TracePane)
         await _until(pilot, lambda: pane.table.idle and pane.table.count > 0)
-        pane.query_one("#tr-range").value = "15"
+        pane.field("range").value = "15"
         await pilot.press("slash", "enter")
         await _until(pilot, lambda: pane.filter is not None and pane.filter.t_from == 15 and pane.table.idle)
         death = next(i for i in range(pane.table.count) if pane.table.row(i)["atom"] == "alive(red-agent-1)")
@@ -64,7 +64,7 @@ async def _trace_and_why(run: Path) -> tuple[str, str]:
         trace_svg = app.export_screenshot(title="tracelab tui · trace")
         await pilot.press("w")
         why = app.screen.query_one(WhyPane)
-        await _until(pilot, lambda: why.query_one("Tree").root.data is not None)
+        await _until(pilot, lambda: why.why_tree.root.data is not None)
         await pilot.press("o")
         await pilot.pause(0.3)
         return trace_svg, app.export_screenshot(title="tracelab tui · why")
@@ -78,8 +78,8 @@ async def _reasoning(run: Path) -> tuple[str, str]:
         await pilot.press("enter")
         pane = app.screen.query_one(TracePane)
         await _until(pilot, lambda: pane.table.idle and pane.table.count > 0)
-        pane.query_one("#tr-rule").value = "alert"
-        pane.query_one("#tr-range").value = "3"
+        pane.field("rule").value = "alert"
+        pane.field("range").value = "3"
         await pilot.press("slash", "enter")
         await _until(pilot, lambda: pane.filter is not None and pane.filter.rule == "alert" and pane.table.idle
                      and pane.table.count > 0)
@@ -95,7 +95,7 @@ async def _reasoning(run: Path) -> tuple[str, str]:
         trace_svg = app.export_screenshot(title="tracelab tui · a reasoning run: atoms and graph")
         await pilot.press("w")
         why = app.screen.query_one(WhyPane)
-        await _until(pilot, lambda: why.query_one("Tree").root.data is not None)
+        await _until(pilot, lambda: why.why_tree.root.data is not None)
         await pilot.press("o")
         await pilot.pause(0.3)
         return trace_svg, app.export_screenshot(title="tracelab tui · why")
@@ -111,7 +111,7 @@ async def _decision(run: Path) -> tuple[str, str]:
         await _until(pilot, lambda: pane.filter is not None and pane.table.idle)
         await pilot.press("right_square_bracket")             # the first evaluation game (traced)
         await _until(pilot, lambda: pane.table.idle and pane.table.count > 0)
-        pane.query_one("#tr-goto").value = "10"
+        pane.field("goto").value = "10"
         await pilot.press("g", "enter")
         panel = pane.query_one(DecisionPanel)
         await _until(pilot, lambda: panel.step is not None and panel.step.step == 10 and panel.display

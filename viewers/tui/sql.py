@@ -69,16 +69,6 @@ def _literal(value: Any) -> str:
 class SavedQueryPicker(ModalScreen[tuple[SavedQuery, dict[str, str]] | None]):
     """Choose a saved query, then fill in its parameters (defaults shown); Enter runs it."""
     BINDINGS = [Binding("escape", "dismiss(None)", "close")]
-    DEFAULT_CSS = """
-    SavedQueryPicker { align: center middle; }
-    SavedQueryPicker > Vertical { width: 90%; max-width: 100; height: auto; max-height: 90%;
-                                  border: round $accent; background: $panel; padding: 0 1; }
-    SavedQueryPicker OptionList { height: auto; max-height: 12; }
-    SavedQueryPicker Input, SavedQueryPicker Input:focus { margin: 0; height: 1; border: none; padding: 0 1; }
-    SavedQueryPicker Input:focus { background: $boost; }
-    SavedQueryPicker #params { height: auto; max-height: 20; overflow-y: auto; }
-    SavedQueryPicker #params Label { width: 100%; }
-    """
 
     def __init__(self, board: bool = True, games: bool = True) -> None:
         """board: the run has the grid game's board; games: it is a run of games. The saved queries that
@@ -124,11 +114,6 @@ class SavedQueryPicker(ModalScreen[tuple[SavedQuery, dict[str, str]] | None]):
 
 class HistoryPicker(ModalScreen[str | None]):
     BINDINGS = [Binding("escape", "dismiss(None)", "close")]
-    DEFAULT_CSS = """
-    HistoryPicker { align: center middle; }
-    HistoryPicker OptionList { width: 90%; max-width: 110; height: auto; max-height: 80%;
-                               border: round $accent; }
-    """
 
     def __init__(self, history: list[str]) -> None:
         super().__init__()
@@ -150,10 +135,6 @@ class SqlPane(Vertical):
         Binding("f4", "export", "export"),
         Binding("ctrl+t", "focus_results", "results", show=False),
     ]
-    DEFAULT_CSS = """
-    SqlPane TextArea { height: 6; }
-    SqlPane #sql-error { color: $error; height: auto; max-height: 6; }
-    """
 
     def __init__(self, source: RunSource | SeveralRunsSource) -> None:
         """source: the run's, or several runs' (SeveralRunsSource: views with a `run` column)."""
@@ -193,11 +174,20 @@ class SqlPane(Vertical):
                 self.notify(f"SQL history not saved: {e}", severity="warning")
 
     def focus_default(self) -> None:
-        self.query_one(TextArea).focus()
+        self.editor.focus()
 
     @property
     def editor(self) -> TextArea:
-        return self.query_one(TextArea)
+        return self.query_one("#sql-editor", TextArea)
+
+    @property
+    def results(self) -> LazyTable:
+        return self.query_one("#sql-results", LazyTable)
+
+    @property
+    def error_line(self) -> Static:
+        """The query's error, over the results (empty when it ran)."""
+        return self.query_one("#sql-error", Static)
 
     def action_run(self) -> None:
         sql = self.editor.text.strip()
@@ -215,7 +205,7 @@ class SqlPane(Vertical):
         self._run_id += 1
         run_id = self._run_id
         self.last_error = None
-        self.query_one("#sql-error", Static).update("")
+        self.error_line.update("")
         doing = f"running {label or 'query'}… (Esc cancels)"
         self._clear_result(doing)
         self._set_status(("previous query cancelled · " if superseded else "") + doing)
@@ -259,7 +249,7 @@ class SqlPane(Vertical):
         """Empty the results table (a failed or cancelled query has no result: the previous one must not
         stay under its message), saying why in its first row."""
         self.result = None
-        table = self.query_one(LazyTable)
+        table = self.results
         table.placeholder = f"  {placeholder}"
         table.set_source(None)
 
@@ -271,7 +261,7 @@ class SqlPane(Vertical):
             return  # superseded by a newer query
         self.result = table
         columns = [Column(name, name, None) for name in table.column_names]
-        self.query_one(LazyTable).set_source(ArrowSource(table), columns)
+        self.results.set_source(ArrowSource(table), columns)
         capped = " (first rows only)" if table.num_rows >= MAX_ROWS else ""
         self._set_status(f"{label + ': ' if label else ''}{table.num_rows:,} row(s){capped}")
 
@@ -287,7 +277,7 @@ class SqlPane(Vertical):
         err = locate_error(sql, message)
         self.last_error = err
         where = f" (line {err.line + 1}, column {err.column + 1})" if err.line is not None else ""
-        self.query_one("#sql-error", Static).update(shown(err.message + where, "bold"))
+        self.error_line.update(shown(err.message + where, "bold"))
         self._clear_result("no result: the query failed (the error is above)")
         self._set_status("error · fix the query and Ctrl+R")
         if err.line is not None and self.editor.text.strip() == sql:
@@ -303,7 +293,7 @@ class SqlPane(Vertical):
             try:
                 params = query.bind(given)
             except (KeyError, ValueError) as e:
-                self.query_one("#sql-error", Static).update(Text(str(e).strip("'\""), style="bold"))
+                self.error_line.update(Text(str(e).strip("'\""), style="bold"))
                 return
             self.editor.text = query.sql
             self.params, self.params_for = params or None, query.sql.strip()
@@ -336,4 +326,4 @@ class SqlPane(Vertical):
         self.app.push_screen(dialog, written)
 
     def action_focus_results(self) -> None:
-        self.query_one(LazyTable).focus()
+        self.results.focus()

@@ -20,6 +20,7 @@ from rich.text import Text
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
+from textual.reactive import reactive
 from textual.widgets import Input, Static
 
 from tracelab.store.names import UnknownName, check_name
@@ -93,15 +94,9 @@ class TracePane(Vertical):
         Binding("right_square_bracket", "eval_game(1)", "eval games", key_display="]/["),
         Binding("left_square_bracket", "eval_game(-1)", "previous eval game", show=False),
     ]
-    DEFAULT_CSS = """
-    TracePane #tr-filters { height: 1; }
-    TracePane #tr-filters Input { width: 1fr; margin-right: 1; }
-    TracePane #tr-range, TracePane #tr-goto { max-width: 10; }
-    TracePane #tr-body { height: 1fr; }
-    TracePane #tr-side { width: 22; height: 1fr; }
-    TracePane #tr-side BoardView { height: 1fr; }
-    TracePane #tr-side.-decision BoardView { height: auto; }   /* the decision right under the board */
-    """
+    # Setting one of these shows it (its watch_ method): by a key, the terminal's width or a reopened place.
+    side_shown = reactive(True, init=False, bindings=True)   # the board, or the atoms, beside the table (b)
+    hide_static = reactive(True, init=False)                 # the rows of static facts left out (s)
 
     def __init__(self, source: RunSource) -> None:
         super().__init__()
@@ -110,8 +105,7 @@ class TracePane(Vertical):
         self.trace: TraceSource | None = None
         self._goto_t: int | None = None
         self.jumps = 0            # jumps that landed (benchmarks and tests wait on it)
-        self._board_choice: bool | None = None   # the user's b, else by width
-        self.hide_static = True                    # the user's s
+        self._board_choice: bool | None = None   # the user's b, else side_shown follows the width
         self.live_reads = LiveReads(source)
 
     def compose(self) -> ComposeResult:
@@ -139,19 +133,19 @@ class TracePane(Vertical):
         if self.filter is None:
             return None
         row = self.table.cursor_row
-        value = lambda name: self.query_one(name, Input).value  # noqa: E731
-        return TracePlace(self.filter.episode, value("#tr-range"), value("#tr-atom"), value("#tr-label"),
-                          value("#tr-rule"), self.filter.atom_id, self.hide_static, self._board_choice,
+        value = lambda name: self.field(name).value  # noqa: E731
+        return TracePlace(self.filter.episode, value("range"), value("atom"), value("label"),
+                          value("rule"), self.filter.atom_id, self.hide_static, self._board_choice,
                           None if row is None else int(row["seq"]))
 
     def reopen(self, place: TracePlace) -> None:
         """Show the episode, filters and cursor of `place` (the run was left there earlier)."""
-        for name, text in (("#tr-range", place.time_range), ("#tr-atom", place.atom),
-                           ("#tr-label", place.label), ("#tr-rule", place.rule)):
-            self.query_one(name, Input).value = text
+        for name, text in (("range", place.time_range), ("atom", place.atom),
+                           ("label", place.label), ("rule", place.rule)):
+            self.field(name).value = text
         self.hide_static, self._board_choice = place.hide_static, place.board
         if place.board is not None:
-            self.side_box.display = place.board
+            self.side_shown = place.board
         self.apply_filters(place.episode, keep_seq=place.seq, atom_id=place.atom_id)
         self._read_game_later(place.episode)
 
@@ -180,11 +174,16 @@ class TracePane(Vertical):
 
     def _refollow(self) -> None:
         side = self.side
-        if isinstance(side, GraphSide) and side.display:   # the grown episode may change the atoms at t
+        if isinstance(side, GraphSide) and self.side_shown:   # the grown episode may change the atoms at t
             side.reread()
+        self._refilter()
+
+    def _refilter(self, keep_atom: bool = True) -> None:
+        """Apply the filters again, the cursor kept on its change (or the next one shown); `keep_atom`: and
+        the selected atom's filter (a, or Enter on an atom beside the trace)."""
         row = self.table.cursor_row
         self.apply_filters(keep_seq=None if row is None else int(row["seq"]),
-                           atom_id=None if self.filter is None else self.filter.atom_id)
+                           atom_id=self.filter.atom_id if keep_atom and self.filter is not None else None)
 
     @property
     def board(self) -> BoardView | None:
@@ -215,24 +214,33 @@ class TracePane(Vertical):
         if action == "toggle_side":
             return self.source.board is None
         if action == "atoms_mode":
-            return self.source.board is None and self.is_mounted and self.side.display
+            return self.source.board is None and self.side_shown
         if action == "focus_decision":   # offered while the cursor's step has a decision shown
             panel = self.decision
-            return panel is not None and panel.display and self.side_box.display
+            return panel is not None and panel.display and self.side_shown
         return True
+
+    def watch_side_shown(self, shown: bool) -> None:
+        """The board (or the atoms) beside the table shown or hidden, at the cursor's change once shown; `c`
+        and `d` are offered while it shows (bindings=True)."""
+        self.side_box.display = shown
+        row = self.table.cursor_row
+        if shown and row is not None:
+            self._follow_cursor(row)
+
+    def watch_hide_static(self, hide: bool) -> None:
+        """The rows of static facts left out or shown, in the table and in the atoms beside it."""
+        side = self.side
+        if isinstance(side, GraphSide):
+            side.set_hide_static(hide)
+        self._refilter()
 
     def on_resize(self) -> None:
         if self._board_choice is None:   # by default the board shows when there is room beside the table
-            self.side_box.display = self.size.width >= BOARD_MIN_WIDTH
-            self.refresh_bindings()
+            self.side_shown = self.size.width >= BOARD_MIN_WIDTH
 
     def action_toggle_board(self) -> None:
-        side = self.side_box
-        self._board_choice = side.display = not side.display
-        self.refresh_bindings()     # `c` is offered while the atoms show
-        row = self.table.cursor_row
-        if side.display and row is not None:
-            self._follow_cursor(row)
+        self._board_choice = self.side_shown = not self.side_shown
 
     action_toggle_side = action_toggle_board
 
@@ -261,12 +269,20 @@ class TracePane(Vertical):
     def table(self) -> LazyTable:
         return self.query_one("#tr-table", LazyTable)
 
+    @property
+    def status(self) -> Static:
+        return self.query_one("#tr-status", Static)
+
+    def field(self, name: str) -> Input:
+        """A filter's input line: range, atom, label, rule or goto."""
+        return self.query_one(f"#tr-{name}", Input)
+
     # ---- what is shown -------------------------------------------------------------------------------
     def show_episode(self, episode: int, rule: str = "", at_t: int | None = None) -> None:
-        self.query_one("#tr-rule", Input).value = rule
+        self.field("rule").value = rule
         if self.filter is None or self.filter.episode != episode:
-            for name in ("#tr-range", "#tr-atom", "#tr-label"):
-                self.query_one(name, Input).value = ""
+            for name in ("range", "atom", "label"):
+                self.field(name).value = ""
         self._goto_t = at_t
         self.apply_filters(episode)
         self._read_game_later(episode)
@@ -277,20 +293,19 @@ class TracePane(Vertical):
             if self.filter is None:
                 return
             episode = self.filter.episode
-        status = self.query_one("#tr-status", Static)
         try:
-            t_from, t_to = parse_range(self.query_one("#tr-range", Input).value)
+            t_from, t_to = parse_range(self.field("range").value)
         except ValueError as e:
-            status.update(shown(str(e), "bold red"))
+            self.status.update(shown(str(e), "bold red"))
             return
-        value = lambda name: self.query_one(name, Input).value.strip()  # noqa: E731
-        self.filter = TraceFilter(episode, t_from, t_to, value("#tr-atom"), value("#tr-label"),
-                                  value("#tr-rule"), atom_id, self.hide_static, self._atom_text(atom_id))
+        value = lambda name: self.field(name).value.strip()  # noqa: E731
+        self.filter = TraceFilter(episode, t_from, t_to, value("atom"), value("label"),
+                                  value("rule"), atom_id, self.hide_static, self._atom_text(atom_id))
         start = ("seq", keep_seq) if keep_seq is not None else ("t", self._goto_t) if self._goto_t is not None \
             else None
         self._goto_t = None
         self.trace = TraceSource(self.source, self.filter, start)
-        status.update(f" {self.filter.describe()} · loading…")
+        self.status.update(f" {self.filter.describe()} · loading…")
         self.table.set_source(self.trace)
 
     def _atom_text(self, atom_id: int | None) -> str:
@@ -340,33 +355,26 @@ class TracePane(Vertical):
             return
         table = self.table
         if table.error:      # e.g. a filter that matches nothing in the run: the message says how to write one
-            self.query_one("#tr-status", Static).update(shown(f" {table.error}", "bold red"))
+            self.status.update(shown(f" {table.error}", "bold red"))
             return
         where = f"row {table.cursor + 1:,} of {table.count:,}" if table.count else "no rows"
         row = table.cursor_row
         atom = f" · {self._place(row['atom'])}" if row else ""
         hidden = self.trace.hidden if self.trace is not None else 0
         static = f" · {hidden:,} static hidden (s shows)" if hidden else ""
-        self.query_one("#tr-status", Static).update(shown(f" {self.filter.describe()} · {where}{static}{atom}"))
+        self.status.update(shown(f" {self.filter.describe()} · {where}{static}{atom}"))
 
     def _place(self, text: str) -> str:
         grid = self.trace.grid if self.trace is not None else None
         return text if grid is None else grid.with_coordinates(text) or text
 
     def action_toggle_static(self) -> None:
-        """Show or hide the rows of static facts, the cursor kept on its change (or the next one shown)."""
         self.hide_static = not self.hide_static
-        side = self.side
-        if isinstance(side, GraphSide):
-            side.set_hide_static(self.hide_static)
-        row = self.table.cursor_row
-        self.apply_filters(keep_seq=None if row is None else int(row["seq"]),
-                           atom_id=None if self.filter is None else self.filter.atom_id)
 
     def on_lazy_table_row_highlighted(self, event: LazyTable.RowHighlighted) -> None:
         event.stop()
         self._update_status()
-        if event.row is not None and self.side_box.display:
+        if event.row is not None and self.side_shown:
             self._follow_cursor(event.row)
 
     def on_graph_side_only_atom(self, event: GraphSide.OnlyAtom) -> None:
@@ -388,8 +396,7 @@ class TracePane(Vertical):
                 self._jump(lambda tr: tr.row_of_t(t))
             event.input.value = ""
         else:
-            row = self.table.cursor_row
-            self.apply_filters(keep_seq=None if row is None else int(row["seq"]))
+            self._refilter(keep_atom=False)
         self.focus_default()
 
     # ---- moving ----------------------------------------------------------------------------------------
@@ -508,7 +515,6 @@ class TracePane(Vertical):
             self.apply_filters(keep_seq=int(row["seq"]), atom_id=int(row["atom_id"]))
 
     def action_clear(self) -> None:
-        for name in ("#tr-range", "#tr-atom", "#tr-label", "#tr-rule"):
-            self.query_one(name, Input).value = ""
-        row = self.table.cursor_row
-        self.apply_filters(keep_seq=None if row is None else int(row["seq"]))
+        for name in ("range", "atom", "label", "rule"):
+            self.field(name).value = ""
+        self._refilter(keep_atom=False)

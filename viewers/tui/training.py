@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Grid, Vertical
+from textual.reactive import reactive
 from textual.widgets import Static, TabbedContent
 
 from tracelab.viewers.tui.colours import BLUE_TEAM, PARTIAL, RED_TEAM, TRUE, UNKNOWN
@@ -36,16 +37,13 @@ def wanted(name: str, patterns: tuple[str, ...]) -> bool:
 
 class TrainingPane(Vertical, can_focus=True):
     BINDINGS = [Binding("v", "eval_games", "eval games"), Binding("m", "each_run", "each run / mean")]
-    DEFAULT_CSS = """
-    TrainingPane Grid { grid-size: 2 2; grid-gutter: 0; height: 1fr; }
-    """
+    each_run = reactive(False, init=False)   # several runs: one curve per run instead of their mean and band
 
     def __init__(self, source: RunSource, overlaid: Sequence[RunSource] = ()) -> None:
         super().__init__()
         self.source = source
         labels = run_labels([source.path, *(o.path for o in overlaid)])
         self.runs = [RunCurves(s, label) for s, label in zip([source, *overlaid], labels)]
-        self.each_run = False     # several runs: one curve per run instead of their mean and band
         self.updates = 0          # how many times new metrics were drawn (tests watch it)
 
     @property
@@ -134,6 +132,8 @@ class TrainingPane(Vertical, can_focus=True):
 
     def action_each_run(self) -> None:
         self.each_run = not self.each_run
+
+    def watch_each_run(self) -> None:
         self._draw()
 
     async def action_eval_games(self) -> None:

@@ -88,11 +88,6 @@ def parse_why_not(text: str) -> tuple[str, dict[str, str], int]:
 class WhyPane(Vertical):
     BINDINGS = [Binding("o", "expand_all", "expand all"), Binding("c", "collapse", "collapse"),
                 Binding("slash", "focus_why_not", "why-not")]
-    DEFAULT_CSS = """
-    WhyPane Tree { height: 1fr; }
-    WhyPane #why-not-out { height: auto; max-height: 10; }
-    WhyPane #why-not { height: 1; }
-    """
 
     def __init__(self, source: RunSource) -> None:
         super().__init__()
@@ -110,8 +105,21 @@ class WhyPane(Vertical):
         with VerticalScroll(id="why-not-out"):
             yield Static("", id="why-not-text")
 
+    @property
+    def head(self) -> Static:
+        """The line over the tree: what it explains, or that it is working."""
+        return self.query_one("#why-head", Static)
+
+    @property
+    def why_tree(self) -> Tree[Any]:
+        return self.query_one("#why-tree", Tree)
+
+    @property
+    def why_not_line(self) -> Input:
+        return self.query_one("#why-not", Input)
+
     def focus_default(self) -> None:
-        self.query_one(Tree).focus()
+        self.why_tree.focus()
 
     def explain(self, episode: int, atom: str, t: int, seq: int | None = None) -> None:
         """The why tree of the selected change `seq` (its own rule and grounding, tracelab.store.why.
@@ -119,7 +127,7 @@ class WhyPane(Vertical):
         bound at the end of t (what `tracelab why --at t` prints)."""
         self.episode, self.at = episode, t
         what = f"the change of {atom} (seq {seq})" if seq is not None else f"{atom} at the end of t={t}"
-        self.query_one("#why-head", Static).update(f" why {what}, episode {episode} · working…")
+        self.head.update(f" why {what}, episode {episode} · working…")
 
         def work() -> None:
             try:
@@ -136,7 +144,7 @@ class WhyPane(Vertical):
         """The why of `agent`'s decision at `step` (`tracelab why --action`); `action` not the one taken:
         its why-not too (`why-not --action`)."""
         self.episode, self.at = episode, step
-        self.query_one("#why-head", Static).update(
+        self.head.update(
             shown(f" why {agent} did what it did at step {step}, episode {episode} · working…"))
 
         def work() -> None:
@@ -153,7 +161,7 @@ class WhyPane(Vertical):
         """The decision as a tree: the text of `why --action`, one node a line, its sections expandable;
         a feature read from an atom carries it (Enter opens the atom's why)."""
         self.action = e
-        tree = self.query_one(Tree)
+        tree = self.why_tree
         tree.clear()
         lines = render_action(e).splitlines()
         if action != e.action:
@@ -168,7 +176,7 @@ class WhyPane(Vertical):
             else:
                 section = tree.root.add(Text(line), expand=True)
         tree.root.expand()
-        self.query_one("#why-head", Static).update(shown(
+        self.head.update(shown(
             f" why {e.agent}'s {e.action} at step {e.step}, episode {e.episode} · Enter on a feature: its atom's why"))
 
     def on_tree_node_selected(self, event: Tree.NodeSelected[Any]) -> None:
@@ -180,11 +188,11 @@ class WhyPane(Vertical):
             self.explain(e.episode, atom, e.observed_at)
 
     def _failed(self, message: str) -> None:
-        self.query_one("#why-head", Static).update(Text(f" {message}", style="bold red"))
+        self.head.update(Text(f" {message}", style="bold red"))
 
     def _show(self, root: WhyNode, t: int, episode: int, of_change: bool) -> None:
         self.action = None
-        tree = self.query_one(Tree)
+        tree = self.why_tree
         tree.clear()
         tree.root.set_label(node_label(root, None if of_change else t))
         tree.root.data = root
@@ -196,11 +204,11 @@ class WhyPane(Vertical):
             what = f"the change {root.atom} {old}{bound_text(*root.value)} at t={root.t} pass {root.pass_no}"
         else:
             what = f"{root.atom} at the end of t={t}"
-        self.query_one("#why-head", Static).update(
+        self.head.update(
             f" why {what}, episode {episode} · {rule} · Enter/click expands, o all")
-        if self.query_one("#why-not", Input).value == "" and root.cause and root.cause.kind == "rule":
+        if self.why_not_line.value == "" and root.cause and root.cause.kind == "rule":
             binds = ",".join(f"{k}={v}" for k, v in root.cause.bindings.items())
-            self.query_one("#why-not", Input).placeholder = f"why-not: {rule} {binds} at {root.t}"
+            self.why_not_line.placeholder = f"why-not: {rule} {binds} at {root.t}"
 
     def _add_children(self, parent: TreeNode[WhyNode], node: WhyNode, expand_levels: int) -> None:
         for child in node.children:
@@ -211,15 +219,15 @@ class WhyPane(Vertical):
                 parent.add_leaf(node_label(child), data=child)
 
     def action_expand_all(self) -> None:
-        self.query_one(Tree).root.expand_all()
+        self.why_tree.root.expand_all()
 
     def action_collapse(self) -> None:
-        tree = self.query_one(Tree)
+        tree = self.why_tree
         tree.root.collapse_all()
         tree.root.expand()
 
     def action_focus_why_not(self) -> None:
-        self.query_one("#why-not", Input).focus()
+        self.why_not_line.focus()
 
     def on_input_submitted(self, event: Input.Submitted) -> None:
         event.stop()
