@@ -20,6 +20,10 @@ Why the code looks the way it does:
   reset (one row per atom), the application of a pass's groups (one per touched atom) and each
   immediate application (one); a world stopped inside its step resumes where it stopped (CFG_RESUME_*),
   so a step of any size fits.
+- The step state is one record (StepState, below), built by backend_counting.CountingState.step_state and
+  passed as one argument to step_worlds and _step_world (which read its fields into locals by name: the
+  compiled backend's generator folds cfg[...], rule_i[...], rule_f[...]); the fused steps of RuleSim and
+  the declared worlds call fused_step with it. A new field is added to StepState and to step_state().
 - Calls from one kernel function to another pass np.int64 values, never a bare constant or an int32
   table entry: numba compiles a callee once per distinct argument types, and each constant is a type of
   its own (Literal[int](2)), so _set_atom was compiled seven times (5 s of a first run's compile).
