@@ -44,6 +44,7 @@ class CountingState:
         self._stamp = np.zeros(1, np.int64)  # aggregated rules: distinct-atom marks are stamps
         self._req_n = np.zeros(1, np.int64)
         self._scratch(0, 0)
+        self._state_version = -1  # the layout_version step_state() was built at
 
     @property
     def n_atoms(self) -> int:
@@ -95,7 +96,7 @@ class CountingState:
                                  self._act_pos)
         self._n_grounded = n_inst
         self._scratch(n_atoms, n_inst)
-        self.eng.layout_version += 1  # kernel_args() changed
+        self.eng.layout_version += 1  # step_state() changed
 
     def _agg_args(self) -> tuple[np.ndarray, ...]:
         agg = self.agg
@@ -116,21 +117,29 @@ class CountingState:
             lo, up = annotations.call_user(name, fn, rule.name, atoms[0, a:b], atoms[1, a:b], atoms[2, a:b])
             self._req_f[i] = effective_bound(lo, up, rule.head.negated)
 
-    def kernel_args(self) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
-        """step_kernel's arguments around the external rows, for a caller that runs the counting kernel
-        inside its own compiled call (tracelab/game/rulesim_fused.py): (rule_i .. fact_order, settable ..
-        pend_f); the call is step_kernel(cfg, w_first, *before, ext_ptr, ext_i, ext_f, *after). Valid
-        until eng.layout_version changes (a buffer replaced)."""
-        eng, kt = self.eng, self.kt
-        before = (eng._rule_i, eng._rule_f, kt.inst, self._kind_base, kt.wc_ptr, kt.wc_bnd,
-                  kt.wc_flags, kt.wc_gptr, kt.wg, kt.ih_ptr, kt.ih_inst, eng._fact_i, eng._fact_f,
-                  eng._fact_order)
-        after = (eng._settable, self.lower, self.upper, self.static, self.last_cause, self._unsat, self._act,
-                 self._act_n, self._act_pos, self._pend, self._pend_n, eng.trace_on, eng._tri, eng._trf,
-                 eng._tr_n, eng._stats, eng._err, self._slot_of, self._touched, self._n_touched, self._si,
-                 self._sf, self._out, self._heap, self._in_heap, self._changed, *self._agg_args(), self._req_i,
-                 self._req_f, self._req_n, self._pend_f)
-        return before, after
+    def step_state(self) -> K.StepState:
+        """The kernel's step state over the current buffers: the one place that gathers them (built once
+        per Engine.layout_version; a caller running the kernel in its own compiled call holds it while
+        layout_version stays the same, see Engine.fused_binding)."""
+        eng = self.eng
+        if self._state_version == eng.layout_version:
+            return self._step_state
+        kt, agg = self.kt, self.agg
+        self._step_state = K.StepState(
+            cfg=eng._cfg, rule_i=eng._rule_i, rule_f=eng._rule_f, inst=kt.inst, kind_base=self._kind_base,
+            wc_ptr=kt.wc_ptr, wc_bnd=kt.wc_bnd, wc_flags=kt.wc_flags, wc_gptr=kt.wc_gptr, wg=kt.wg,
+            ih_ptr=kt.ih_ptr, ih_inst=kt.ih_inst, fact_i=eng._fact_i, fact_f=eng._fact_f,
+            fact_order=eng._fact_order, settable=eng._settable, lo=self.lower, up=self.upper, static=self.static,
+            last_cause=self.last_cause, unsat=self._unsat, act=self._act, act_n=self._act_n, act_pos=self._act_pos,
+            pend=self._pend, pend_n=self._pend_n, trace_on=eng.trace_on, tri=eng._tri, trf=eng._trf,
+            tr_n=eng._tr_n, stats=eng._stats, err=eng._err, slot_of=self._slot_of, touched=self._touched,
+            n_touched=self._n_touched, si=self._si, sf=self._sf, out=self._out, heap=self._heap,
+            in_heap=self._in_heap, changed=self._changed, hg_i=agg.hg_i, hg_ptr=agg.hg_ptr, je_g=agg.je_g,
+            je_body=agg.je_body, ag_rule=agg.ag_rule, ag_cf=agg.ag_cf, ag_cn=agg.ag_cn, ag_q=agg.ag_q,
+            ag_qv=agg.ag_qv, mark=self._mark, stamp=self._stamp, g_l=self._g[0], g_u=self._g[1], g_w=self._g[2],
+            req_i=self._req_i, req_f=self._req_f, req_n=self._req_n, pend_f=self._pend_f)
+        self._state_version = eng.layout_version
+        return self._step_state
 
     def step(self, ext_ptr: np.ndarray, ext_i: np.ndarray, ext_f: np.ndarray) -> int:
         """One timestep of every world; returns the kernel's status (buffers grown as needed)."""
@@ -141,19 +150,10 @@ class CountingState:
         """Go on with a step whose kernel call returned (status, w_first) (None: not called yet) until it
         is done or fails, as step() does: grow a buffer or compute user functions and call the kernel
         again from world w_first. Returns the final status."""
-        eng, kt = self.eng, self.kt
         while True:
             if status is not None and not self._serve(status, w_first):
                 break
-            status, w_first = self.step_kernel(
-                eng._cfg, w_first, eng._rule_i, eng._rule_f, kt.inst, self._kind_base, kt.wc_ptr,
-                kt.wc_bnd, kt.wc_flags, kt.wc_gptr, kt.wg, kt.ih_ptr, kt.ih_inst, eng._fact_i,
-                eng._fact_f, eng._fact_order, ext_ptr, ext_i, ext_f, eng._settable,
-                self.lower, self.upper, self.static, self.last_cause, self._unsat, self._act, self._act_n,
-                self._act_pos, self._pend, self._pend_n, eng.trace_on, eng._tri, eng._trf, eng._tr_n,
-                eng._stats, eng._err, self._slot_of, self._touched, self._n_touched, self._si, self._sf,
-                self._out, self._heap, self._in_heap, self._changed, *self._agg_args(), self._req_i, self._req_f,
-                self._req_n, self._pend_f)
+            status, w_first = self.step_kernel(self.step_state(), w_first, ext_ptr, ext_i, ext_f)
         if status != K.STATUS_OK:
             self._reset_after_error()
         return status

@@ -529,15 +529,15 @@ class Engine:
 
     # ---- a caller's own compiled step (tracelab/game/rulesim_fused.py) ----
 
-    def fused_binding(self) -> tuple[np.ndarray, tuple[np.ndarray, ...], tuple[np.ndarray, ...]] | None:
-        """For a caller that runs the counting kernel (kernel.step_worlds) inside its own compiled call:
-        after sync(), (cfg, arrays before the external rows, arrays after them), see
-        CountingState.kernel_args; None on another kernel. Valid while layout_version stays the same;
-        such a step is begun with prepare_fused_step() and ended with finish_fused_step()."""
+    def fused_binding(self) -> K.StepState | None:
+        """For a caller that runs the counting kernel inside its own compiled call (kernel.fused_step):
+        after sync(), the kernel's step state (CountingState.step_state); None on another kernel. Valid
+        while layout_version stays the same; such a step is begun with prepare_fused_step() and ended with
+        finish_fused_step()."""
         self._sync()
         if self._state.name != "counting":
             return None
-        return (self._cfg, *self._state.kernel_args())
+        return self._state.step_state()
 
     def prepare_fused_step(self) -> int:
         """Before a fused step: ground what is new (as step() does); returns layout_version, which the

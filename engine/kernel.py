@@ -20,6 +20,10 @@ Why the code looks the way it does:
   reset (one row per atom), the application of a pass's groups (one per touched atom) and each
   immediate application (one); a world stopped inside its step resumes where it stopped (CFG_RESUME_*),
   so a step of any size fits.
+- The step state is one record (StepState, below), built by backend_counting.CountingState.step_state and
+  passed as one argument to step_worlds and _step_world (which read its fields into locals by name: the
+  compiled backend's generator folds cfg[...], rule_i[...], rule_f[...]); the fused steps of RuleSim and
+  the declared worlds call fused_step with it. A new field is added to StepState and to step_state().
 - Calls from one kernel function to another pass np.int64 values, never a bare constant or an int32
   table entry: numba compiles a callee once per distinct argument types, and each constant is a type of
   its own (Literal[int](2)), so _set_atom was compiled seven times (5 s of a first run's compile).
@@ -30,6 +34,8 @@ Why the code looks the way it does:
   where several sources may meet on one atom, go through the grouping scratch.
 """
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -105,6 +111,86 @@ AR_RULE, AR_KIND, AR_FN, AR_USER, AR_Q0, AR_Q1, AR_NBODY, AR_HNEG = range(8)
 N_AR = 8
 FN_FIXED, FN_AVERAGE, FN_WEIGHTED_AVERAGE, FN_MIN, FN_MAX, FN_AVERAGE_LOWER, FN_USER = range(7)
 CMP_GE, CMP_GT, CMP_LE, CMP_LT, CMP_EQ = range(5)  # the order of program.COMPARISONS
+
+class StepState(NamedTuple):
+    """The step state: every array step_worlds reads or writes besides the step's external rows, built in
+    one place (backend_counting.CountingState.step_state) and passed as one argument. Shapes: W worlds,
+    A atoms, G groundings, R rules; the columns are the constants above.
+
+    Why a NamedTuple (docs/benchmarks/history.md, "One step-state record"): numba types it by its fields'
+    array types, so one compiled signature serves every program and its disk cache is hit across
+    processes, and its fields are read without reference counting (a structref's need it). It is defined
+    here, not in a module of its own, because numba reads its fields by position: a change of the fields
+    must change this file, which stamps the kernels' disk cache and keys the compiled backend's. It holds
+    the arrays, never copies them: valid until Engine.layout_version changes (a buffer replaced)."""
+    cfg: np.ndarray         # int64 [N_CFG]: the step's settings and resume point (kernel.CFG_*)
+    # the program (Engine)
+    rule_i: np.ndarray      # int64 [R, N_RULE_COLUMNS]
+    rule_f: np.ndarray      # float64 [R, 2]: the head's bound
+    # the groundings (kernel_tables.KernelTables) and the active lists' layout
+    inst: np.ndarray
+    kind_base: np.ndarray   # int64 [N_KINDS]: where each kind's active list starts
+    wc_ptr: np.ndarray
+    wc_bnd: np.ndarray
+    wc_flags: np.ndarray
+    wc_gptr: np.ndarray
+    wg: np.ndarray
+    ih_ptr: np.ndarray
+    ih_inst: np.ndarray
+    # the program's facts and the atoms a fact can set (Engine)
+    fact_i: np.ndarray
+    fact_f: np.ndarray
+    fact_order: np.ndarray
+    settable: np.ndarray    # bool [A]
+    # per world: intervals, counts, active lists, schedule (CountingState)
+    lo: np.ndarray          # float64 [W, A]
+    up: np.ndarray          # float64 [W, A]
+    static: np.ndarray      # bool [W, A]
+    last_cause: np.ndarray  # int32 [W, A, 2]
+    unsat: np.ndarray       # int8 [W, G]
+    act: np.ndarray         # int32 [W, G]
+    act_n: np.ndarray       # int64 [W, N_KINDS]
+    act_pos: np.ndarray     # int32 [W, G]
+    pend: np.ndarray        # int32 [W, cap, 2]: (due, grounding)
+    pend_n: np.ndarray      # int64 [W]
+    # the trace, statistics and error record (Engine)
+    trace_on: np.ndarray    # bool [W]
+    tri: np.ndarray         # int32 [cap, TRACE_INT_COLUMNS]
+    trf: np.ndarray         # float64 [cap, TRACE_FLOAT_COLUMNS]
+    tr_n: np.ndarray        # int64 [1]
+    stats: np.ndarray       # int64 [W, N_STATS]
+    err: np.ndarray         # int64 [N_ERR]
+    # scratch of a pass (CountingState)
+    slot_of: np.ndarray
+    touched: np.ndarray
+    n_touched: np.ndarray
+    si: np.ndarray
+    sf: np.ndarray
+    out: np.ndarray
+    heap: np.ndarray
+    in_heap: np.ndarray
+    changed: np.ndarray
+    # aggregated rules (kernel_tables.AggregateTables) and their scratch
+    hg_i: np.ndarray
+    hg_ptr: np.ndarray
+    je_g: np.ndarray
+    je_body: np.ndarray
+    ag_rule: np.ndarray
+    ag_cf: np.ndarray
+    ag_cn: np.ndarray
+    ag_q: np.ndarray
+    ag_qv: np.ndarray
+    mark: np.ndarray
+    stamp: np.ndarray
+    g_l: np.ndarray
+    g_u: np.ndarray
+    g_w: np.ndarray
+    # user annotation functions' requests (computed by Python between kernel calls)
+    req_i: np.ndarray
+    req_f: np.ndarray
+    req_n: np.ndarray
+    pend_f: np.ndarray      # float64 [W, cap, 2]: the bound each scheduled firing sets
+
 
 kernel_jit = njit(cache=True, _nrt=False)
 
@@ -535,15 +621,16 @@ def _reset_world(w, t, policy, rule_i, rule_f, lo, up, static, last_cause, trace
 
 
 @kernel_jit
-def step_worlds(cfg, w_first, rule_i, rule_f, inst, kind_base, wc_ptr, wc_bnd, wc_flags, wc_gptr, wg, ih_ptr,
-                ih_inst, fact_i, fact_f, fact_order, ext_ptr, ext_i, ext_f, settable,
-                lo, up, static, last_cause, unsat, act, act_n, act_pos, pend, pend_n,
-                trace_on, tri, trf, tr_n, stats, err, slot_of, touched, n_touched, si, sf, out, heap, in_heap,
-                changed, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn, ag_q, ag_qv, mark, stamp, g_l, g_u,
-                g_w, req_i, req_f, req_n, pend_f):
-    """Compute timestep cfg[CFG_T] for worlds w_first.. in order. Returns (status, world): STATUS_OK and
-    the number of worlds, or a status and the world it concerns (STATUS_TRACE_ROOM / STATUS_PEND_ROOM:
-    grow that buffer and call again from that world)."""
+def step_worlds(s, w_first, ext_ptr, ext_i, ext_f):
+    """Compute timestep cfg[CFG_T] for worlds w_first.. in order; s: the StepState,
+    ext_*: the step's external rows, world w's from ext_ptr[w] to ext_ptr[w + 1]. Returns (status, world):
+    STATUS_OK and the number of worlds, or a status and the world it concerns (STATUS_TRACE_ROOM /
+    STATUS_PEND_ROOM: grow that buffer and call again from that world)."""
+    # fields read by name (the compiled backend's generator folds cfg[...], rule_i[...] and rule_f[...])
+    cfg, rule_i, rule_f, err, req_i, req_f, req_n = s.cfg, s.rule_i, s.rule_f, s.err, s.req_i, s.req_f, s.req_n
+    lo, act, act_n, inst, hg_i = s.lo, s.act, s.act_n, s.inst, s.hg_i
+    pend, pend_n, pend_f = s.pend, s.pend_n, s.pend_f
+    ag_rule, out, trace_on, tri, tr_n, settable = s.ag_rule, s.out, s.trace_on, s.tri, s.tr_n, s.settable
     t = cfg[CFG_T]
     prog_mode = cfg[CFG_MODE]
     policy = cfg[CFG_POLICY]
@@ -577,13 +664,8 @@ def step_worlds(cfg, w_first, rule_i, rule_f, inst, kind_base, wc_ptr, wc_bnd, w
                 err[E_WORLD] = w
                 cfg[CFG_TRACE_NEED] = room
                 return STATUS_TRACE_ROOM, w
-            status = _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rule_i, rule_f, inst,
-                                 kind_base, wc_ptr, wc_bnd, wc_flags, wc_gptr, wg, ih_ptr, ih_inst, fact_i, fact_f,
-                                 fact_order, ext_ptr, ext_i, ext_f, cfg[CFG_RESET] == 1, lo, up, static,
-                                 last_cause, unsat, act, act_n, act_pos, pend, pend_n, trace_on, tri, trf, tr_n,
-                                 stats, err, slot_of, touched, n_touched, si, sf, out, heap, in_heap, changed,
-                                 hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn, ag_q, ag_qv, mark, stamp, g_l,
-                                 g_u, g_w, req_i, req_f, req_n, pend_f)
+            status = _step_world(s, w, t, fact_override, policy, max_passes, max_immediate,
+                                 cfg[CFG_RESET] == 1, ext_ptr, ext_i, ext_f)
             if status != STATUS_OK:
                 return status, w
         # delayed rules read the final interpretation of t and schedule their heads (room for every
@@ -593,7 +675,7 @@ def step_worlds(cfg, w_first, rule_i, rule_f, inst, kind_base, wc_ptr, wc_bnd, w
         if n + n_del + hg_i.shape[0] > pend.shape[1]:
             err[E_WORLD] = w
             return STATUS_PEND_ROOM, w
-        base = kind_base[KIND_DELAYED]
+        base = s.kind_base[KIND_DELAYED]
         for k in range(n_del):
             g = act[w, base + k]
             r = inst[g, INST_RULE]
@@ -606,8 +688,8 @@ def step_worlds(cfg, w_first, rule_i, rule_f, inst, kind_base, wc_ptr, wc_bnd, w
             ai = hg_i[h, 0]
             if ag_rule[ai, AR_KIND] != KIND_DELAYED:
                 continue
-            g = _agg_fire(w, rule_f, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn, ag_q, ag_qv, lo, up,
-                          unsat, mark, stamp, g_l, g_u, g_w, req_i, req_n, out, h)
+            g = _agg_fire(w, rule_f, hg_i, s.hg_ptr, s.je_g, s.je_body, ag_rule, s.ag_cf, s.ag_cn, s.ag_q, s.ag_qv,
+                          lo, s.up, s.unsat, s.mark, s.stamp, s.g_l, s.g_u, s.g_w, req_i, req_n, out, h)
             if g >= 0:
                 pend[w, n, 0] = t + rule_i[ag_rule[ai, AR_RULE], RULE_DELAY]
                 pend[w, n, 1] = g
@@ -623,15 +705,35 @@ def step_worlds(cfg, w_first, rule_i, rule_f, inst, kind_base, wc_ptr, wc_bnd, w
 
 
 @kernel_jit
-def _step_world(cfg, w, t, fact_override, policy, max_passes, max_immediate, rule_i, rule_f, inst, kind_base,
-                wc_ptr, wc_bnd, wc_flags, wc_gptr, wg, ih_ptr, ih_inst, fact_i, fact_f, fact_order, ext_ptr,
-                ext_i, ext_f, reset, lo, up, static, last_cause, unsat, act, act_n, act_pos, pend, pend_n,
-                trace_on, tri, trf, tr_n, stats, err, slot_of, touched, n_touched, si, sf, out, heap, in_heap,
-                changed, hg_i, hg_ptr, je_g, je_body, ag_rule, ag_cf, ag_cn, ag_q, ag_qv, mark, stamp, g_l, g_u,
-                g_w, req_i, req_f, req_n, pend_f):
+def fused_step(s, t, ext_ptr, ext_i, ext_f):
+    """Timestep t of every world, for a caller that runs the kernel inside its own compiled step (the
+    fused steps of GridWar's RuleSim and of the declared worlds) over Engine.fused_binding()'s state s;
+    the caller hands the returned (status, world) to Engine.finish_fused_step. The kernel reads rows
+    ext_ptr[w]..ext_ptr[w + 1] only, so whole row buffers stand for the rows used."""
+    s.cfg[CFG_T] = t
+    return step_worlds(s, np.int64(0), ext_ptr, ext_i, ext_f)
+
+
+@kernel_jit
+def _step_world(s, w, t, fact_override, policy, max_passes, max_immediate, reset, ext_ptr, ext_i,
+                ext_f):
     """One world's timestep t up to its fixpoint (docs/language.md, 'One timestep t'), without the
     scheduling of delayed rules. Returns a status (STATUS_TRACE_ROOM: resume by calling again, cfg says
     where)."""
+    # the step state's fields by name, as the callees take them
+    cfg, rule_i, rule_f, inst, kind_base = s.cfg, s.rule_i, s.rule_f, s.inst, s.kind_base
+    wc_ptr, wc_bnd, wc_flags, wc_gptr, wg = s.wc_ptr, s.wc_bnd, s.wc_flags, s.wc_gptr, s.wg
+    ih_ptr, ih_inst = s.ih_ptr, s.ih_inst
+    fact_i, fact_f, fact_order = s.fact_i, s.fact_f, s.fact_order
+    lo, up, static, last_cause, unsat = s.lo, s.up, s.static, s.last_cause, s.unsat
+    act, act_n, act_pos, pend, pend_n, pend_f = s.act, s.act_n, s.act_pos, s.pend, s.pend_n, s.pend_f
+    trace_on, tri, trf, tr_n, stats, err = s.trace_on, s.tri, s.trf, s.tr_n, s.stats, s.err
+    slot_of, touched, n_touched, si, sf, out = s.slot_of, s.touched, s.n_touched, s.si, s.sf, s.out
+    heap, in_heap, changed = s.heap, s.in_heap, s.changed
+    hg_i, hg_ptr, je_g, je_body = s.hg_i, s.hg_ptr, s.je_g, s.je_body
+    ag_rule, ag_cf, ag_cn = s.ag_rule, s.ag_cf, s.ag_cn
+    ag_q, ag_qv, mark, stamp, g_l, g_u, g_w = s.ag_q, s.ag_qv, s.mark, s.stamp, s.g_l, s.g_u, s.g_w
+    req_i, req_f, req_n = s.req_i, s.req_f, s.req_n
     phase = cfg[CFG_RESUME_PHASE]
     cfg[CFG_RESUME_PHASE] = PHASE_FRESH
     pass_no = cfg[CFG_RESUME_PASS] if phase != PHASE_FRESH else 0

@@ -24,6 +24,7 @@ from numba.extending import overload
 
 from tracelab.engine import kernel as K
 from tracelab.engine.numba_cache import stamp_with_sources
+from tracelab.engine.kernel import StepState
 from tracelab.game import observe as _observe
 from tracelab.game import rulesim_kernel as _rk
 from tracelab.game.observe import observe_step
@@ -31,9 +32,8 @@ from tracelab.game.rulesim_kernel import encode_actions, read_and_settle
 
 STATUS_OK = K.STATUS_OK
 STATUS_BAD_ACTION = -1  # an action the scenario does not offer: nothing was changed
-_CFG_T = K.CFG_T
 # the bound arrays, by field; each is a tuple of arrays (or one array) whose order the call fixes
-FIELDS = ("encode", "cfg", "before", "after", "lower", "read_atoms", "truth", "settle", "observe", "res")
+FIELDS = ("encode", "state", "read_atoms", "truth", "settle", "observe", "res")
 
 
 @structref.register
@@ -49,23 +49,19 @@ class StepBuffers(structref.StructRefProxy):
 structref.define_boxing(StepBuffersType, StepBuffers)
 
 
-def _new_buffers(encode, cfg, before, after, lower, read_atoms, truth, settle, observe, res):  # noqa: ANN001
+def _new_buffers(encode, state, read_atoms, truth, settle, observe, res):  # noqa: ANN001
     raise NotImplementedError("compiled code only")
 
 
 @overload(_new_buffers)
-def _new_buffers_impl(encode, cfg, before, after, lower, read_atoms, truth, settle, observe, res):  # noqa: ANN001
+def _new_buffers_impl(encode, state, read_atoms, truth, settle, observe, res):  # noqa: ANN001
     # the struct's type from its fields' types (numba's own define_proxy constructor is not cached)
-    typ = StepBuffersType(list(zip(FIELDS, (encode, cfg, before, after, lower, read_atoms, truth, settle,
-                                            observe, res))))
+    typ = StepBuffersType(list(zip(FIELDS, (encode, state, read_atoms, truth, settle, observe, res))))
 
-    def impl(encode, cfg, before, after, lower, read_atoms, truth, settle, observe, res):  # noqa: ANN001
+    def impl(encode, state, read_atoms, truth, settle, observe, res):  # noqa: ANN001
         b = structref.new(typ)
         b.encode = encode
-        b.cfg = cfg
-        b.before = before
-        b.after = after
-        b.lower = lower
+        b.state = state
         b.read_atoms = read_atoms
         b.truth = truth
         b.settle = settle
@@ -76,22 +72,20 @@ def _new_buffers_impl(encode, cfg, before, after, lower, read_atoms, truth, sett
 
 
 @njit(cache=True)
-def _make_buffers(encode, cfg, before, after, lower, read_atoms, truth, settle, observe, res):  # noqa: ANN001
-    return _new_buffers(encode, cfg, before, after, lower, read_atoms, truth, settle, observe, res)
+def _make_buffers(encode, state, read_atoms, truth, settle, observe, res):  # noqa: ANN001
+    return _new_buffers(encode, state, read_atoms, truth, settle, observe, res)
 
 
-def bind(encode: tuple, binding: tuple, read_atoms: np.ndarray, settle: tuple,
+def bind(encode: tuple, state: StepState, read_atoms: np.ndarray, settle: tuple,
          observe: tuple) -> tuple[StepBuffers, np.ndarray]:
     """The buffers of a fused step. encode: encode_actions' arrays after red and blue, without first_id
     (terminated, truncated, allowed, action_atoms, prev, ext_ptr, ext_i, ext_f: the row buffers, whole);
-    binding: Engine.fused_binding(); read_atoms: the read-back's atom ids; settle / observe: the
+    state: Engine.fused_binding(); read_atoms: the read-back's atom ids; settle / observe: the
     arguments of read_and_settle after the truth table / of observe_step. Returns the buffers and
     their `res` array (what fused_step reports besides its status)."""
-    cfg, before, after = binding
-    lower = after[1]
-    truth = np.empty((lower.shape[0], len(read_atoms)), np.bool_)
+    truth = np.empty((state.lo.shape[0], len(read_atoms)), np.bool_)
     res = np.zeros(2, np.int64)
-    return _make_buffers(encode, cfg, before, after, lower, read_atoms, truth, settle, observe, res), res
+    return _make_buffers(encode, state, read_atoms, truth, settle, observe, res), res
 
 
 @njit(cache=True)
@@ -105,14 +99,11 @@ def fused_step(b, red, blue, t, first_id):  # noqa: ANN001, ANN201
     b.res[1] = k
     if k < 0:
         return STATUS_BAD_ACTION
-    cfg = b.cfg
-    cfg[_CFG_T] = t
-    # the kernel reads rows ext_ptr[w]..ext_ptr[w + 1] only: the whole row buffers stand for rows[:k]
-    status, w_first = K.step_worlds(*((cfg, 0) + b.before + (ext_ptr, ext_i, ext_f) + b.after))
+    status, w_first = K.fused_step(b.state, t, ext_ptr, ext_i, ext_f)
     b.res[0] = w_first
     if status != STATUS_OK:
         return status
-    K.gather_truth(b.lower, b.read_atoms, 1.0, b.truth)
+    K.gather_truth(b.state.lo, b.read_atoms, 1.0, b.truth)
     read_and_settle(b.truth, *b.settle)
     observe_step(*b.observe)
     return status

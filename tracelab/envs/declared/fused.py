@@ -26,12 +26,13 @@ from numba.extending import overload
 
 from tracelab.engine import kernel as K
 from tracelab.engine.numba_cache import stamp_with_sources
+from tracelab.engine.kernel import StepState
 
 if TYPE_CHECKING:
     from tracelab.engine import Engine
 
 STATUS_OK = K.STATUS_OK
-FIELDS = ("cfg", "before", "after", "lower", "tables", "ext", "reads", "out")
+FIELDS = ("state", "tables", "ext", "reads", "out")
 
 
 @structref.register
@@ -47,20 +48,17 @@ class DeclaredBuffers(structref.StructRefProxy):
 structref.define_boxing(DeclaredBuffersType, DeclaredBuffers)
 
 
-def _new_buffers(cfg, before, after, lower, tables, ext, reads, out):  # noqa: ANN001
+def _new_buffers(state, tables, ext, reads, out):  # noqa: ANN001
     raise NotImplementedError("compiled code only")
 
 
 @overload(_new_buffers)
-def _new_buffers_impl(cfg, before, after, lower, tables, ext, reads, out):  # noqa: ANN001
-    typ = DeclaredBuffersType(list(zip(FIELDS, (cfg, before, after, lower, tables, ext, reads, out))))
+def _new_buffers_impl(state, tables, ext, reads, out):  # noqa: ANN001
+    typ = DeclaredBuffersType(list(zip(FIELDS, (state, tables, ext, reads, out))))
 
-    def impl(cfg, before, after, lower, tables, ext, reads, out):  # noqa: ANN001
+    def impl(state, tables, ext, reads, out):  # noqa: ANN001
         b = structref.new(typ)
-        b.cfg = cfg
-        b.before = before
-        b.after = after
-        b.lower = lower
+        b.state = state
         b.tables = tables
         b.ext = ext
         b.reads = reads
@@ -70,14 +68,13 @@ def _new_buffers_impl(cfg, before, after, lower, tables, ext, reads, out):  # no
 
 
 @njit(cache=True)
-def _make_buffers(cfg, before, after, lower, tables, ext, reads, out):  # noqa: ANN001
-    return _new_buffers(cfg, before, after, lower, tables, ext, reads, out)
+def _make_buffers(state, tables, ext, reads, out):  # noqa: ANN001
+    return _new_buffers(state, tables, ext, reads, out)
 
 
-def bind(binding: tuple, tables: tuple, ext: tuple, reads: tuple, out: tuple) -> DeclaredBuffers:
-    """The buffers of a fused step over Engine.fused_binding() (cfg, before, after)."""
-    cfg, before, after = binding
-    return _make_buffers(cfg, before, after, after[1], tables, ext, reads, out)
+def bind(state: StepState, tables: tuple, ext: tuple, reads: tuple, out: tuple) -> DeclaredBuffers:
+    """The buffers of a fused step over Engine.fused_binding()'s step state."""
+    return _make_buffers(state, tables, ext, reads, out)
 
 
 class FusedBinding:
@@ -159,9 +156,7 @@ def fused_step(b, actions, picks, t, first_id):  # noqa: ANN001, ANN201
     k = world_fact_rows(b.tables, prev, prev_n, 0, actions, picks, ext_i, ext_f, first_id, 0)
     ext_ptr[0] = 0
     ext_ptr[1] = k
-    cfg = b.cfg
-    cfg[K.CFG_T] = t
-    status, w_first = K.step_worlds(*((cfg, 0) + b.before + (ext_ptr, ext_i, ext_f) + b.after))
+    status, w_first = K.fused_step(b.state, t, ext_ptr, ext_i, ext_f)
     b.out[4][0] = w_first
     if status == STATUS_OK:
         read_step(b)
@@ -175,7 +170,7 @@ def read_step(b):  # noqa: ANN001, ANN201
     [1,1])."""
     part_ptr, part_atoms, table_atoms, table_values, table_agent, term_atoms, trunc_atoms, mask_atoms = b.reads
     index, rewards, res, mask, _ = b.out
-    lower = b.lower
+    lower = b.state.lo
     for p in range(len(part_ptr) - 1):
         index[p] = -1
         for j in range(part_ptr[p], part_ptr[p + 1]):

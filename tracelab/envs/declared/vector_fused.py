@@ -43,9 +43,7 @@ def step_batch(b, rows, picks, t, first_id):  # noqa: ANN001, ANN201
     (read_batch). Returns the kernel's status (b.out[4][0]: the world it paused at)."""
     build_rows(b.tables, b.ext, rows, picks, first_id)
     ext_ptr, ext_i, ext_f = b.ext
-    cfg = b.cfg
-    cfg[K.CFG_T] = t
-    status, w_first = K.step_worlds(*((cfg, 0) + b.before + (ext_ptr, ext_i, ext_f) + b.after))
+    status, w_first = K.fused_step(b.state, t, ext_ptr, ext_i, ext_f)
     b.out[4][0] = w_first
     if status == STATUS_OK:
         read_batch(b)
@@ -56,7 +54,7 @@ def step_batch(b, rows, picks, t, first_id):  # noqa: ANN001, ANN201
 def read_batch(b):  # noqa: ANN001, ANN201
     """The reads of every world from the counting kernel's bounds."""
     read_atoms, truth = b.reads[0], b.reads[1]
-    K.gather_truth(b.lower, read_atoms, 1.0, truth)
+    K.gather_truth(b.state.lo, read_atoms, 1.0, truth)
     read_truth(truth, b.reads, b.out)
 
 
