@@ -19,7 +19,6 @@ replay) read it back from there (`board_of_config`), checked, as a run's config 
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -34,7 +33,6 @@ MAX_RECORDED_SIDE = 256  # rows and columns of a board read from a run (the spec
 
 DIRECTION_ARROWS = {"up": "↑", "down": "↓", "left": "←", "right": "→", "north": "↑", "south": "↓",
                     "west": "←", "east": "→"}
-DIRECTION_STEPS = {"↑": (-1, 0), "↓": (1, 0), "←": (0, -1), "→": (0, 1)}  # (row step, column step)
 MAX_PIECE_KINDS = 16
 
 
@@ -217,14 +215,3 @@ def board_of_config(config: Any) -> Board | None:
     return Board(tuple(rows), cell, {}, {}, "stay", dict(marks), {k: hex_color(v) for k, v in colors.items()},
                  {k: hex_color(v) for k, v in mark_colors.items() if k in marks}, pieces=pieces,
                  annotate=tuple(annotate))
-
-
-def marked_cells(board: Board, true_atoms: dict[str, Iterable[str]]) -> dict[str, str]:
-    """Cell constant -> the `marks` predicate true there, from each mark predicate's true atoms' texts
-    (`at(c1_2)`); the last predicate listed wins a cell where several hold."""
-    out: dict[str, str] = {}
-    for pred, atoms in true_atoms.items():
-        for atom in atoms:
-            if atom.startswith(pred + "(") and atom.endswith(")"):
-                out[atom[len(pred) + 1:-1]] = pred
-    return out
