@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import bisect
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from tracelab import RULES_DIR
@@ -70,8 +70,9 @@ def _scenario(config: dict[str, Any]) -> dict[str, Any] | None:
 
 
 def gridwar_board(config: dict[str, Any]) -> Board | None:
-    """war.toml's board for a RuleSim run: the map of its `[data.maps]` whose rows are the scenario's
-    (its width, height, mountains and bases), with its team size and ammo; None when no map is."""
+    """war.toml's board for a RuleSim run, with its team size and ammo, drawn with the rows of the
+    scenario's map (its width, height, mountains and bases): the `[data.maps]` entry they match, else
+    the default's board with them; None for a config without a scenario that reads."""
     from tracelab.envs.declared.spec import load_spec   # the envs package registers gymnasium's ids: late
 
     s = _scenario(config)
@@ -90,8 +91,10 @@ def gridwar_board(config: dict[str, Any]) -> Board | None:
         return None
     rows = ["".join(r) for r in grid]
     maps = tomllib.loads(WAR_SPEC.read_text())["data"]["maps"]
-    name = next((m for m, v in maps.items() if v["rows"] == rows), None)
-    return None if name is None else load_spec(WAR_SPEC, map=name, **params).board
+    name = next((m for m, v in maps.items() if v["rows"] == rows), "default")
+    board = load_spec(WAR_SPEC, map=name, **params).board
+    # a map of no [data.maps] entry (a scenario file's own): war.toml's board drawn with its rows
+    return None if board is None else replace(board, rows=tuple(rows))
 
 
 def locator(board: Board, grid: Grid | None) -> dict[str, tuple[int, int]]:

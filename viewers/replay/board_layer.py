@@ -18,7 +18,7 @@ from tracelab.board import Board, piece_label
 from tracelab.envs.declared.render import DeclaredPainter
 from tracelab.envs.render_rgb import CELL
 from tracelab.store.reader import RunConnection
-from tracelab.viewers.board_state import BoardTrack
+from tracelab.viewers.board_state import BoardTrack, Piece
 
 MAX_IMAGE_SIDE = 1536  # pixels: a big board's cells are drawn smaller (a frame of 256 x 24 px a side is 113 MB)
 MAX_RULES_PER_LABEL = 3
@@ -59,30 +59,41 @@ def log_board(rec: rr.RecordingStream, con: RunConnection, board: Board, episode
 
 
 def _log_pieces(rec: rr.RecordingStream, board: Board, track: BoardTrack) -> None:
-    shown: dict[str, tuple] = {}
+    """Each piece's entity, a row where it changed (an empty row where it left the board), as columns."""
+    rows: dict[str, list[tuple[int, Piece | None]]] = {}
     for t, state in zip(track.times, track.states):
         now = {p.thing: p for p in state.pieces}
-        for thing in [x for x in shown if x not in now]:          # left the board (a bullet's end)
-            rec.set_time(style.STEP, sequence=t)
-            rec.log(_path(shown.pop(thing)[0], thing), rr.Clear(recursive=False))
+        for thing, seen in rows.items():
+            if thing not in now and seen[-1][1] is not None:
+                seen.append((t, None))
         for thing, p in now.items():
-            key = (p.kind, p.row, p.col, p.alive, p.arrow)
-            if shown.get(thing) == key:
-                continue
-            shown[thing] = key
-            rec.set_time(style.STEP, sequence=t)
-            rgb = board.pieces[p.kind].color(thing) or (255, 255, 255)
-            at = (p.col + 0.5, p.row + 0.5)
-            if p.arrow:
-                dx, dy = ARROW_VECTORS[p.arrow]
-                rec.log(_path(p.kind, thing), rr.Arrows2D(origins=[(at[0] - dx / 2, at[1] - dy / 2)],
-                                                          vectors=[(dx, dy)], radii=0.07, colors=[rgb],
-                                                          draw_order=12.0))
-            else:
-                label = f"{piece_label(thing)}{'' if p.alive else ' dead'}"
-                rec.log(_path(p.kind, thing), rr.Points2D([at], radii=0.32 if p.alive else 0.18,
-                                                          colors=[rgb if p.alive else DEAD], labels=[label],
-                                                          show_labels=True, draw_order=10.0))
+            seen = rows.setdefault(thing, [])
+            if not seen or seen[-1][1] is None or _key(seen[-1][1]) != _key(p):
+                seen.append((t, p))
+    for thing, seen in rows.items():
+        pieces = [p for _, p in seen if p is not None]
+        lengths = [int(p is not None) for _, p in seen]
+        times = [rr.TimeColumn(style.STEP, sequence=[t for t, _ in seen])]
+        kind = next(p.kind for p in pieces)
+        rgb = board.pieces[kind].color(thing) or (255, 255, 255)
+        at = np.array([(p.col + 0.5, p.row + 0.5) for p in pieces], np.float32).reshape(-1, 2)
+        n = len(pieces)
+        if board.pieces[kind].heading:
+            vec = np.array([ARROW_VECTORS.get(p.arrow, (0.0, 0.0)) for p in pieces], np.float32).reshape(-1, 2)
+            columns = rr.Arrows2D.columns(origins=at - vec / 2, vectors=vec, radii=np.full(n, 0.07, np.float32),
+                                          colors=np.tile(np.array(rgb, np.uint8), (n, 1)),
+                                          draw_order=np.full(n, 12.0, np.float32))
+        else:
+            columns = rr.Points2D.columns(
+                positions=at, radii=np.array([0.32 if p.alive else 0.18 for p in pieces], np.float32),
+                colors=np.array([rgb if p.alive else DEAD for p in pieces], np.uint8).reshape(-1, 3),
+                labels=[f"{piece_label(thing)}{'' if p.alive else ' dead'}" for p in pieces],
+                show_labels=np.ones(n, bool), draw_order=np.full(n, 10.0, np.float32))
+        rec.send_columns(_path(kind, thing), indexes=times, columns=columns.partition(lengths))
+
+
+def _key(p: Piece) -> tuple[int, int, bool, str]:
+    return p.row, p.col, p.alive, p.arrow
 
 
 def _path(kind: str, thing: str) -> str:
@@ -124,14 +135,18 @@ def _label(rules: list[str]) -> str:
 
 
 def _log_fired(rec: rr.RecordingStream, con: RunConnection, board: Board, track: BoardTrack) -> None:
+    """A row at each step that outlines cells, and an empty one at the step after (within the episode)."""
     fired = fired_cells(con, board, track)
-    for t in range(track.last_t + 2):                 # each step's outlines go at the next step
-        cells = fired.get(t)
-        if cells is None and t - 1 not in fired:
-            continue
-        rec.set_time(style.STEP, sequence=t)
-        cells = cells or {}
-        centers = np.array([(c + 0.5, r + 0.5) for r, c in cells], np.float32).reshape(-1, 2)
-        rec.log(style.FIRED, rr.Boxes2D(centers=centers, half_sizes=np.full((len(cells), 2), 0.46, np.float32),
-                                        labels=[_label(v) for v in cells.values()], colors=[style.FIRED_COLOR],
-                                        radii=0.025, draw_order=5.0))
+    steps = sorted({*fired, *(t + 1 for t in fired if t + 1 <= track.last_t)})
+    if not steps:
+        return
+    cells = [(r, c) for t in steps for r, c in fired.get(t, {})]
+    labels = [_label(rules) for t in steps for rules in fired.get(t, {}).values()]
+    n = len(cells)
+    rec.send_columns(style.FIRED, indexes=[rr.TimeColumn(style.STEP, sequence=steps)],
+                     columns=rr.Boxes2D.columns(
+                         centers=np.array([(c + 0.5, r + 0.5) for r, c in cells], np.float32).reshape(-1, 2),
+                         half_sizes=np.full((n, 2), 0.46, np.float32), labels=labels,
+                         colors=np.tile(np.array(style.FIRED_COLOR, np.uint8), (n, 1)),
+                         radii=np.full(n, 0.025, np.float32), draw_order=np.full(n, 5.0, np.float32),
+                     ).partition([len(fired.get(t, {})) for t in steps]))
