@@ -83,3 +83,19 @@ def test_a_bad_piece_is_a_located_error(tmp_path: Path, line: str, where: str) -
     with pytest.raises(SpecError) as e:
         load_spec(spec)
     assert "war.toml:" in str(e.value) and where in str(e.value)
+
+
+def test_a_training_runs_evaluation_game_has_its_agents_on_the_board() -> None:
+    """sample_runs/base-train declares no grid (its config's `scenario` is the name, the TOML is under
+    `scenario_toml`): its cells are still located, red-agent-1 where the trace's first atLoc puts it."""
+    con = open_run(SAMPLES / "base-train")
+    board = board_of_run(con)
+    episode = con.execute("SELECT min(episode) FROM episodes WHERE json_extract_string(begin_info, '$.kind') = 'eval' "
+                          "AND steps > 0 AND episode IN (SELECT DISTINCT episode FROM raw.changes)").fetchall()[0][0]
+    cell = con.execute("SELECT n1.name FROM raw.changes c JOIN raw.atoms a USING (atom) "
+                       "JOIN raw.labels l USING (label) JOIN raw.nodes n0 ON n0.node = a.arg0 "
+                       "JOIN raw.nodes n1 ON n1.node = a.arg1 WHERE l.name = 'atLoc' "
+                       "AND n0.name = 'red-agent-1' AND c.episode = ? AND c.t = 1 AND c.new_lower = 1",
+                       [episode]).fetchall()[0][0]
+    red = next(p for p in BoardTrack.read(con, board, episode).at(1).pieces if p.thing == "red-agent-1")
+    assert (red.col, board.height - 1 - red.row) == (int(cell) % 8, int(cell) // 8)

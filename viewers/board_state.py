@@ -118,7 +118,9 @@ class BoardTrack:
 
     @classmethod
     def read(cls, con: RunConnection, board: Board, episode: int) -> BoardTrack:
-        cells = locator(board, run_grid(con))
+        # a RuleSim run names its cells y·W + x of its own map (a training run's config may not declare it)
+        grid = run_grid(con) or (Grid(board.width, board.height) if run_board(con) == GRIDWAR_BOARD else None)
+        cells = locator(board, grid)
         kinds = _thing_kinds(con, board)
         preds = sorted({*board.marks, *(p for k in board.pieces.values() for p in k.predicates)})
         rows = con.execute(
