@@ -11,7 +11,7 @@ from tui_helpers import open_trace_at, run_app, wait_for
 from tracelab.cli import main
 from tracelab.store import open_run
 from tracelab.board import board_of_config
-from tracelab.viewers.tui.declared_board import DeclaredBoard
+from tracelab.viewers.tui.board import BoardView
 
 
 @pytest.fixture(scope="module")
@@ -31,9 +31,9 @@ def test_the_tui_shows_where_the_agent_stands_at_the_cursors_step(lake: Path) ->
     async def body(app: Any, pilot: Any) -> None:
         _, side = await open_trace_at(app, pilot, 1)
         seen["atoms"] = [r["atom"] for r in side.atoms.rows]
-        board = side.query_one(DeclaredBoard)
-        await wait_for(pilot, lambda: board.marked is not None)
-        seen["marked"], seen["text"] = board.marked, board.render().plain
+        board = side.query_one(BoardView)
+        await wait_for(pilot, lambda: board.board is not None and board.step == 1)
+        seen["marked"], seen["text"] = board.board.at(1).marked, board.render().plain
     run_app([lake], body, (120, 34))
     assert want in seen["atoms"] and sum(a.startswith("at(") for a in seen["atoms"]) == 1
     # the board: the 4x4 lake's rows, `@` on the agent's cell

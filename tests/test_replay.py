@@ -80,9 +80,9 @@ def test_one_recording_per_played_episode_that_rerun_verifies(advanced, advanced
 
 def test_entity_paths_and_steps(advanced_data) -> None:
     ep0 = advanced_data["advanced/episode-0"]
-    for path in ("/board", "/board/terrain", "/board/grid", "/board/bases", "/board/agents/red-agent-1",
-                 "/board/agents/blue-agent-1", "/board/bullets/red", "/board/bullets/blue",
-                 "/board/actions/red/move", "/board/actions/red/shot", "/board/fired", "/rules/log", "/why",
+    for path in ("/board/terrain", "/board/agents/red-agent-1",       # war.toml's [board] pieces
+                 "/board/agents/blue-agent-1", "/board/bullets/red-bullet-1-1", "/board/bullets/blue-bullet-1-1",
+                 "/board/fired", "/rules/log", "/why",
                  "/lanes/alive/red-agent-1", "/lanes/atLoc/blue-agent-1", "/plots/return/red",
                  "/plots/reward/blue"):
         assert path in ep0, path
@@ -107,12 +107,18 @@ def test_the_fired_rule_log_of_a_known_step(advanced_data) -> None:
 
 
 def test_the_struck_cell_is_marked_with_the_rule(advanced_data) -> None:
-    fired = advanced_data["advanced/episode-0"]["/board/fired"]
-    bullets_phase = next(r for r in fired if r["pass"] == 151)                 # step 15, phase 1 (bullets)
-    assert bullets_phase["Boxes2D:centers"] == [[4.5, 4.5]]                      # cell (4,3), drawn y = 8-0.5-3
-    assert bullets_phase["Boxes2D:labels"] == ["b_hit"]
-    end = [r for r in fired if r["step"] == 15][-1]
-    assert "d_killed" in end["Boxes2D:labels"][0] and "g_eliminated" in end["Boxes2D:labels"][0]
+    """war.toml's `annotate`: at step 15 the hit, the kill and the death on red's cell (4,3), drawn at
+    row 8-1-3 = 4; nothing is drawn past the episode's last step."""
+    ep0 = advanced_data["advanced/episode-0"]
+    fired = {r["step"]: r for r in ep0["/board/fired"]}
+    assert fired[15]["Boxes2D:centers"] == [[4.5, 4.5]]
+    assert fired[15]["Boxes2D:labels"][0].split("\n")[:3] == ["b_hit", "h_killed", "d_killed"]
+    assert max(fired) == 15
+    # the bullet that hit flew left from (5,3) at step 14 and is off the board at 15
+    bullet = ep0["/board/bullets/blue-bullet-1-1"]
+    np.testing.assert_allclose(latest_at(bullet, 14, "Arrows2D:origins"), [[5.8, 4.5]], atol=1e-5)
+    np.testing.assert_allclose(latest_at(bullet, 14, "Arrows2D:vectors"), [[-0.6, 0.0]], atol=1e-5)
+    assert [r.get("Arrows2D:origins") for r in bullet if r.get("step") == 15] == [[]]
 
 
 @pytest.mark.parametrize("run", ["advanced", "nonmarkov"])

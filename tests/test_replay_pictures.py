@@ -65,6 +65,7 @@ def test_the_plots_and_the_lanes_reach_past_the_longest_games_last_step(saved: P
 def test_the_board_leaves_room_under_the_bottom_row_for_a_base_label(saved: Path) -> None:
     bounds = blueprint_views(saved)["Board"]["VisualBounds2D:range"]
     assert bounds["y_range"][1] >= 8 + 0.5  # the advanced board is 8 rows; the red base is in the bottom one
+    assert bounds["x_range"][0] < 0 and bounds["x_range"][1] > 8   # both edges of its 8 columns in view
 
 
 def test_the_action_lane_fits_a_one_step_segment(saved: Path) -> None:

@@ -10,12 +10,15 @@ to the edge (`up = [-1, 0]` -> the cells straight above: what is "in line"); eac
 predicate true of the cells whose step that way leaves the board. Cells are listed row by row, top row
 first: that order is the domain `cells`.
 
+What the viewers draw on it (no rule reads these): `marks` (a character on each cell where a predicate of
+one argument holds), `pieces` (things standing on cells: an agent, a bullet; `Pieces`) and `annotate` (the
+predicates whose rule firings the replay outlines on the board, labelled with the rules).
+
 A run of the world's games records its board in its config (`board_config`); the viewers (the TUI, the
 replay) read it back from there (`board_of_config`), checked, as a run's config comes from anywhere."""
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -26,6 +29,40 @@ MAX_BOARD_FACTS = 2_000_000  # rays make a row or a column per cell: refused bef
 CELL_FORMAT = re.compile(r"(?:[A-Za-z0-9_-]|\{row\}|\{col\})+")
 RUN_CONFIG_KEY = "declared_board"  # where a run's config holds the board (board_config)
 MAX_RECORDED_SIDE = 256  # rows and columns of a board read from a run (the spec's own limit is 65,536 cells)
+
+
+DIRECTION_ARROWS = {"up": "↑", "down": "↓", "left": "←", "right": "→", "north": "↑", "south": "↓",
+                    "west": "←", "east": "→"}
+MAX_PIECE_KINDS = 16
+
+
+@dataclass(frozen=True)
+class Pieces:
+    """One kind of thing drawn on the board where it stands: the things an atom of `things` names
+    (`agent(red-agent-1)`), each on the cell where `at(Thing, Cell)` holds, in the colour of the longest
+    `colors` key its name starts with ("red-" -> red); with `alive`, drawn dead (grey, a cross) where
+    `alive(Thing)` does not hold; with `heading`, drawn as an arrow the way `heading(Thing, D)` names
+    (up, down, left, right)."""
+    at: str
+    things: str
+    colors: dict[str, tuple[int, int, int]] = field(default_factory=dict)
+    alive: str | None = None
+    heading: str | None = None
+
+    def color(self, thing: str) -> tuple[int, int, int] | None:
+        keys = [k for k in self.colors if thing.startswith(k)]
+        return self.colors[max(keys, key=len)] if keys else None
+
+    @property
+    def predicates(self) -> list[str]:
+        return [p for p in (self.at, self.alive, self.heading) if p]
+
+
+def piece_label(thing: str) -> str:
+    """Two characters for a thing on a cell: its name's first letter and its first number
+    (red-agent-1 -> R1)."""
+    digits = next((p for p in thing.split("-")[1:] if p.isdigit()), "")
+    return (thing[:1].upper() + digits)[:2]
 
 
 @dataclass(frozen=True)
@@ -40,6 +77,8 @@ class Board:
     mark_colors: dict[str, tuple[int, int, int]]  # marks' predicate -> its disc's colour (rgb_array)
     rays: dict[str, tuple[int, int]] = field(default_factory=dict)  # predicate -> the offset repeated
     edges: dict[str, tuple[int, int]] = field(default_factory=dict)  # predicate -> the offset leaving the board
+    pieces: dict[str, Pieces] = field(default_factory=dict)  # a kind's name -> its things (drawn only)
+    annotate: tuple[str, ...] = ()  # predicates whose rule firings the replay outlines (drawn only)
 
     @property
     def height(self) -> int:
@@ -115,11 +154,42 @@ def hex_color(text: str) -> tuple[int, int, int] | None:
         return None
 
 
+def _hexes(colors: dict[str, tuple[int, int, int]]) -> dict[str, str]:
+    return {k: "#{:02x}{:02x}{:02x}".format(*rgb) for k, rgb in colors.items()}
+
+
 def board_config(board: Board) -> dict[str, Any]:
     """What a run records of the board for the viewers to draw it (its facts are in the run already)."""
-    hexes = lambda colors: {k: "#{:02x}{:02x}{:02x}".format(*rgb) for k, rgb in colors.items()}  # noqa: E731
+    pieces = {name: {"at": p.at, "things": p.things, "colors": _hexes(p.colors),
+                     **({"alive": p.alive} if p.alive else {}), **({"heading": p.heading} if p.heading else {})}
+              for name, p in board.pieces.items()}
     return {"rows": list(board.rows), "cell": board.cell_format, "marks": dict(board.marks),
-            "colors": hexes(board.colors), "mark_colors": hexes(board.mark_colors)}
+            "colors": _hexes(board.colors), "mark_colors": _hexes(board.mark_colors), "pieces": pieces,
+            "annotate": list(board.annotate)}
+
+
+def _is_name(x: Any) -> bool:
+    return isinstance(x, str) and len(x) <= 100 and x.isidentifier()
+
+
+def _colors_ok(c: Any) -> bool:
+    return isinstance(c, dict) and len(c) <= 256 and all(
+        isinstance(k, str) and len(k) <= 100 and isinstance(v, str) and hex_color(v) for k, v in c.items())
+
+
+def _pieces_of_config(doc: Any) -> dict[str, Pieces] | None:
+    """The recorded pieces (board_config), or None when they do not hold."""
+    if not isinstance(doc, dict) or len(doc) > MAX_PIECE_KINDS:
+        return None
+    out = {}
+    for name, p in doc.items():
+        if not (isinstance(p, dict) and _is_name(name) and _is_name(p.get("at")) and _is_name(p.get("things"))
+                and all(p.get(k) is None or _is_name(p.get(k)) for k in ("alive", "heading"))
+                and _colors_ok(p.get("colors", {}))):
+            return None
+        out[name] = Pieces(p["at"], p["things"], {k: hex_color(v) for k, v in p.get("colors", {}).items()},
+                           p.get("alive"), p.get("heading"))
+    return out
 
 
 def board_of_config(config: Any) -> Board | None:
@@ -136,21 +206,12 @@ def board_of_config(config: Any) -> Board | None:
           and isinstance(marks, dict) and len(marks) <= 64
           and all(isinstance(k, str) and k.isidentifier() and isinstance(v, str) and len(v) == 1
                   for k, v in marks.items())
-          and all(isinstance(c, dict) and len(c) <= 256 and all(
-              isinstance(k, str) and isinstance(v, str) and hex_color(v) for k, v in c.items())
-              for c in (colors, mark_colors)))
-    if not ok:
+          and all(_colors_ok(c) for c in (colors, mark_colors)))
+    pieces = _pieces_of_config(doc.get("pieces", {}))
+    annotate = doc.get("annotate", [])
+    if not ok or pieces is None or not (isinstance(annotate, list) and len(annotate) <= 64
+                                        and all(_is_name(a) for a in annotate)):
         return None
     return Board(tuple(rows), cell, {}, {}, "stay", dict(marks), {k: hex_color(v) for k, v in colors.items()},
-                 {k: hex_color(v) for k, v in mark_colors.items() if k in marks})
-
-
-def marked_cells(board: Board, true_atoms: dict[str, Iterable[str]]) -> dict[str, str]:
-    """Cell constant -> the `marks` predicate true there, from each mark predicate's true atoms' texts
-    (`at(c1_2)`); the last predicate listed wins a cell where several hold."""
-    out: dict[str, str] = {}
-    for pred, atoms in true_atoms.items():
-        for atom in atoms:
-            if atom.startswith(pred + "(") and atom.endswith(")"):
-                out[atom[len(pred) + 1:-1]] = pred
-    return out
+                 {k: hex_color(v) for k, v in mark_colors.items() if k in marks}, pieces=pieces,
+                 annotate=tuple(annotate))

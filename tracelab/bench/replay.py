@@ -120,7 +120,7 @@ def layer_times(run: Path, repeats: int) -> dict[str, float]:
         board = ctx.loader.load(episode)
         rewards = plots.team_rewards(board, ctx.step_rewards(episode))
         times.setdefault("load (board from the run)", []).append(time.perf_counter() - t0)
-        for name, fn, args in (("board", board_layer.log_board, (rec, board)),
+        for name, fn, args in (("board", board_layer.log_board, (rec, con, ctx.board, episode)),
                                ("rule log", rules_layer.log_rule_log, (rec, board)),
                                ("state lanes", rules_layer.log_lanes, (rec, board)),
                                ("plots", plots.log_rewards, (rec, rewards)),

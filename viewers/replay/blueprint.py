@@ -10,10 +10,10 @@ import rerun.blueprint as rrb
 from rerun.blueprint.encodings import TextLogColumn, TextLogColumnKind
 from tracelab.viewers.replay import style
 
-from tracelab.viewers.board import BoardMap
+from tracelab.board import Board
+from tracelab.viewers.replay.board_layer import visual_bounds
 
 STEP_MARGIN = 0.06      # of the steps (at least 2), past the last one on the plots' and lanes' axes
-BASE_LABEL_ROOM = 0.5   # cells below the board: a base in the bottom row has its label under it
 
 
 def step_axis(last_step: int) -> rrb.archetypes.TimeAxis:
@@ -31,7 +31,7 @@ def agent_views(last_step: int, values: bool, terms: bool) -> list[rrb.View]:
          if terms else [])
 
 
-def replay_blueprint(board_map: BoardMap, training: bool = False, open_at: str = "start",
+def replay_blueprint(board: Board | None, training: bool = False, open_at: str = "start",
                      last_step: int = 0, values: bool = False, terms: bool = False) -> rrb.Blueprint:
     """open_at: where the time cursor starts, "start" (paused at step 0) or "end" (following: the last
     step). last_step: the longest episode's last step, where the plots' and lanes' axes end. values,
@@ -41,15 +41,13 @@ def replay_blueprint(board_map: BoardMap, training: bool = False, open_at: str =
                              *agent_views(last_step, values, terms)]
     if training:
         plots.append(rrb.TimeSeriesView(origin=style.TRAIN, name="Training"))
-    board = rrb.Spatial2DView(
-        origin=style.BOARD, name="Board", background=(24, 24, 28),
-        visual_bounds=rrb.VisualBounds2D(x_range=[-0.2, board_map.width + 0.2],
-                                         y_range=[-0.2, board_map.height + BASE_LABEL_ROOM]))
+    board_view = rrb.Spatial2DView(origin=style.BOARD, name="Board", background=(24, 24, 28),
+                                   visual_bounds=None if board is None else visual_bounds(board))
     rule_log = rrb.TextLogView(
         origin=style.RULE_LOG, name="Fired rules (level = phase)",
         columns=rrb.TextLogColumns(text_log_columns=[TextLogColumn(TextLogColumnKind.LogLevel),
                                                      TextLogColumn(TextLogColumnKind.Body)]))
-    top = rrb.Horizontal(board, rule_log, rrb.Vertical(*plots), column_shares=[4, 5, 3])
+    top = rrb.Horizontal(board_view, rule_log, rrb.Vertical(*plots), column_shares=[4, 5, 3])
     bottom = rrb.Horizontal(rrb.TextDocumentView(origin=style.WHY, name="Why"),
                             rrb.StateTimelineView(origin=style.LANES, name="State lanes",
                                                   time_view=step_axis(last_step)),

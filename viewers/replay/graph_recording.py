@@ -9,7 +9,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 from rerun.blueprint.encodings import TextLogColumn, TextLogColumnKind
-from tracelab.viewers.replay import agent_plots, graph_layer, graph_rules, plots, spec_board, style
+from tracelab.viewers.replay import agent_plots, board_layer, graph_layer, graph_rules, plots, style
 from tracelab.viewers.replay.blueprint import agent_views, step_axis
 from tracelab.viewers.replay.graph_layout import fit_given, layout
 from tracelab.viewers.replay.graph_run import GraphEpisode, RunGraph, read_episode
@@ -114,7 +114,8 @@ def graph_blueprint(positions: np.ndarray, color_label: str | None, open_at: str
         columns=rrb.TextLogColumns(text_log_columns=[TextLogColumn(TextLogColumnKind.LogLevel),
                                                      TextLogColumn(TextLogColumnKind.Body)]))
     if board is not None:
-        graph = rrb.Spatial2DView(origin=style.BOARD, name="Board", background=(24, 24, 28))
+        graph = rrb.Spatial2DView(origin=style.BOARD, name="Board", background=(24, 24, 28),
+                                  visual_bounds=board_layer.visual_bounds(board))
     if rewards:
         plot = rrb.TimeSeriesView(origin=style.PLOTS, name="Reward and return", axis_x=step_axis(last_step),
                                   contents=[f"+ {style.PLOTS}/reward/**", f"+ {style.PLOTS}/return/**"])
@@ -148,7 +149,7 @@ def record_graph_episode(ctx: GraphRunContext, episode: int, rec: rr.RecordingSt
                                            bool(agent.values), bool(agent.terms)))
     drawn = graph_layer.log_graph(rec, ctx.graph, positions, data)
     if ctx.board is not None:
-        spec_board.log_board(rec, ctx.con, ctx.board, episode, data.steps)
+        board_layer.log_board(rec, ctx.con, ctx.board, episode)
     if rows:
         agents = list(dict.fromkeys(agent for _, agent, _ in rows))
         plots.log_rewards(rec, plots.agent_rewards(agents, rows), agents)

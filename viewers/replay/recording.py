@@ -9,7 +9,9 @@ import rerun as rr
 from tracelab.viewers.replay import agent_plots, board_layer, plots, rules_layer
 from tracelab.viewers.replay.blueprint import replay_blueprint
 
+from tracelab.board import Board
 from tracelab.viewers.board import BoardLoader, EpisodeBoard
+from tracelab.viewers.board_state import board_of_run
 from tracelab.store.model import RunModel
 from tracelab.store.reader import RunConnection
 
@@ -33,6 +35,7 @@ class RunContext:
     con: RunConnection
     name: str
     loader: BoardLoader
+    board: Board | None             # what the board layer draws (war.toml's for a RuleSim run)
     metrics: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     _model: RunModel | None = None
     _rewards: dict[int, list[tuple[int, str, float]]] = field(default_factory=dict)
@@ -40,7 +43,7 @@ class RunContext:
 
     @classmethod
     def of(cls, con: RunConnection, name: str) -> RunContext:
-        return cls(con, name, BoardLoader(con), plots.training_metrics(con))
+        return cls(con, name, BoardLoader(con), board_of_run(con), plots.training_metrics(con))
 
     def prefetch(self, episodes: list[int]) -> None:
         """Read these episodes' change rows, outcomes, grounding texts and `steps` rewards, one query each;
@@ -98,9 +101,10 @@ def record_episode(ctx: RunContext, episode: int, rec: rr.RecordingStream,
     rec.send_recording_name(f"{ctx.name} episode {episode} ({board.outcome or 'running'}, {board.steps} steps)")
     agent = agent_plots.read_series(ctx.con, episode)
     if blueprint:
-        rec.send_blueprint(replay_blueprint(board.map, bool(ctx.metrics), options.open_at,
+        rec.send_blueprint(replay_blueprint(ctx.board, bool(ctx.metrics), options.open_at,
                                             max(last_step, board.steps), bool(agent.values), bool(agent.terms)))
-    board_layer.log_board(rec, board)
+    if ctx.board is not None:
+        board_layer.log_board(rec, ctx.con, ctx.board, episode)
     rules_layer.log_rule_log(rec, board)
     rules_layer.log_lanes(rec, board, options.lanes)
     rewards = plots.team_rewards(board, ctx.step_rewards(episode))

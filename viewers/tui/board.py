@@ -1,7 +1,9 @@
-"""BoardView: the grid world at the trace's cursor, beside the trace (tracelab.viewers.board rebuilds it from
-the run's change rows). Team-coloured agents (R1, B1; ✕ when dead), bullets as arrows, mountains, bases,
-and under the grid each agent's health, ammo and action. It follows the cursor to the phase of the
-selected change within its step. A run that is not a grid-world game shows a note instead."""
+"""BoardView: a run's board at the trace cursor's timestep, beside the trace: the spec's `[board]`
+(tracelab.board; a RuleSim GridWar run's is war.toml's: viewers/board_state.py), each cell's character in
+its colour, a mark's character where its predicate holds (FrozenLake's `@`), the pieces where they stand
+(GridWar's agents R1, B1 in their team's colour, ✕ when dead; its bullets as arrows) and under the grid
+each living or dead piece of a kind with `alive`. A cell is one character, two when the board has pieces
+(a label). A run without a board shows a note instead."""
 from __future__ import annotations
 
 from typing import Any
@@ -9,70 +11,80 @@ from typing import Any
 from rich.text import Text
 from textual.widget import Widget
 
-from tracelab.viewers.board import DIRECTIONS, NO_ACTION, PHASES, BoardLoader, EpisodeBoard
-from tracelab.viewers.tui.colours import BLUE_TEAM, DIM, MOUNTAIN, RED_TEAM
+from tracelab.board import Board, piece_label
+from tracelab.viewers.board_state import BoardState, BoardTrack, board_of_run
+from tracelab.viewers.tui.colours import DIM
 from tracelab.viewers.tui.source import RunSource
 
-TEAM_COLOURS = (RED_TEAM, BLUE_TEAM)
-ARROWS = {"up": "↑", "down": "↓", "left": "←", "right": "→"}
-ACTIONS = ("up", "down", "left", "right", "shoot↑", "shoot↓", "shoot←", "shoot→", "stay")
+SHADE = 0.3      # a terrain cell's background: its colour this bright
 
 
-def _short(name: str) -> str:
-    """red-agent-1 -> R1."""
-    digits = "".join(p for p in name.split("-")[2:] if p.isdigit())
-    return (name[0].upper() + digits)[:2]
+def _hex(rgb: tuple[int, int, int] | None) -> str:
+    return "" if rgb is None else "#{:02x}{:02x}{:02x}".format(*rgb)
 
 
-def draw(board: EpisodeBoard, step: int, phase: int = -1) -> Text:
-    """The board at the end of `phase` of `step` as text: two characters a cell, y up."""
-    frame = board.frame(step, phase)
-    w, h = board.map.width, board.map.height
-    cells: dict[tuple[int, int], tuple[str, str]] = {}
-    for x, y in board.map.mountains.tolist():
-        cells[(x, y)] = ("▲▲", MOUNTAIN)
-    for team, (x, y) in enumerate(board.map.bases.tolist()):
-        cells[(x, y)] = ("[]", f"{TEAM_COLOURS[team]}")
-    for b in frame.bullets:
-        cells[(b.x, b.y)] = (" " + ARROWS[DIRECTIONS[b.direction]], f"bold {TEAM_COLOURS[b.team == 'blue']}")
-    for a in frame.agents:
-        colour = TEAM_COLOURS[a.team == "blue"]
-        cells[(a.x, a.y)] = (_short(a.name), f"bold white on {colour}") if a.alive else ("✕ ", f"{colour}")
+def _cell_style(rgb: tuple[int, int, int] | None) -> str:
+    """A terrain cell: its colour on a dark shade of it (a board's light floor stays calm on a dark
+    terminal, a dark mountain still shows)."""
+    if rgb is None:
+        return DIM
+    return f"{_hex(rgb)} on {_hex(tuple(int(v * SHADE) for v in rgb))}"  # type: ignore[arg-type]
+
+
+def draw(board: Board, state: BoardState) -> Text:
+    """The board at the end of `state.t` as text, top row first."""
+    wide = bool(board.pieces)
+    on: dict[tuple[int, int], tuple[str, str]] = {}
+    for p in state.pieces:                    # later kinds (bullets) over earlier ones only where alone
+        colour = _hex(board.pieces[p.kind].color(p.thing)) or "white"
+        if p.arrow:
+            glyph = (" " + p.arrow, f"bold {colour}")
+        elif p.alive:
+            glyph = (piece_label(p.thing).ljust(2), f"bold white on {colour}")
+        else:
+            glyph = ("✕ ", colour)
+        if (p.row, p.col) not in on or p.alive and not p.arrow:
+            on[(p.row, p.col)] = glyph if wide else (glyph[0].strip()[:1] or "?", glyph[1])
     text = Text()
-    text.append(f"step {step} · {PHASES[phase % len(PHASES)]}\n", style="bold")
-    for y in range(h - 1, -1, -1):
-        for x in range(w):
-            glyph, style = cells.get((x, y), ("· ", DIM))
-            text.append(glyph, style=style)
-        text.append("\n")
-    for a in frame.agents:
-        colour = TEAM_COLOURS[a.team == "blue"]
-        act = "" if a.action == NO_ACTION else ACTIONS[a.action] if 0 <= a.action < len(ACTIONS) else str(a.action)
-        state = f"♥{a.health:g} ammo {a.ammo}" if a.alive else "dead"
-        text.append(f"{_short(a.name)}", style=f"bold {colour}")
-        text.append(f" {state} {act}\n")
+    for r, line in enumerate(board.rows):
+        if r:
+            text.append("\n")
+        for c, ch in enumerate(line):
+            pred = state.marked.get(board.cell(r, c))
+            if (r, c) in on:
+                text.append(*on[(r, c)])
+            elif pred:
+                text.append(board.marks[pred] + (" " if wide else ""), style="bold reverse")
+            else:
+                shown = "·" if ch == "." else ch
+                text.append(shown + (" " if wide else ""), style=_cell_style(board.colors.get(ch)))
+    for p in state.pieces:
+        if board.pieces[p.kind].alive:
+            text.append("\n")
+            text.append(piece_label(p.thing), style=f"bold {_hex(board.pieces[p.kind].color(p.thing))}")
+            text.append(f" {'alive' if p.alive else 'dead'}")
     return text
 
 
 class BoardView(Widget):
     DEFAULT_CSS = """
-    BoardView { width: 22; height: 1fr; border: round $primary-darken-2; padding: 0 0; }
+    BoardView { width: 1fr; height: auto; border: round $primary-darken-2; padding: 0 0; }
     """
 
-    def __init__(self, source: RunSource) -> None:
-        super().__init__()
+    def __init__(self, source: RunSource, board: Board | None = None) -> None:
+        super().__init__(id="board")
         self.source = source
         self.border_title = "board"
-        self.board: EpisodeBoard | None = None
-        self.step, self.phase = 0, -1
+        self.declared = board                 # the run's board, read from the run when not given
+        self.board: BoardTrack | None = None  # the episode's board over time (tests read it)
+        self.step = 0
         self.note = "select a change"
-        self._loader: BoardLoader | None = None
         self._loading: int | None = None
-        self._want: tuple[int, int, int] | None = None
+        self._want: tuple[int, int] | None = None
 
-    def show(self, episode: int, t: int, seq: int) -> None:
-        """Follow the trace's cursor: the board of `episode` at timestep t, at the phase of change seq."""
-        self._want = (episode, t, seq)
+    def show(self, episode: int, t: int, seq: int | None = None) -> None:
+        """Follow the trace's cursor: the board of `episode` at the end of timestep t."""
+        self._want = (episode, t)
         if self.board is not None and self.board.episode == episode:
             self._place()
         elif self._loading != episode:
@@ -81,33 +93,32 @@ class BoardView(Widget):
                             exit_on_error=False)
 
     def _load(self, episode: int) -> None:
-        def load(con: Any) -> EpisodeBoard:
-            if self._loader is None:
-                self._loader = BoardLoader(con)
-            return self._loader.load(episode)
+        def load(con: Any) -> BoardTrack:
+            if self.declared is None:
+                self.declared = board_of_run(con)
+            if self.declared is None:
+                raise ValueError("this run declares no board to draw")
+            return BoardTrack.read(con, self.declared, episode)
         try:
-            board, note = self.source.call(load), ""
-        except Exception as e:  # noqa: BLE001 - not a game run, or no rows: a note, not a crash
-            board, note = None, str(e).splitlines()[0] if str(e) else type(e).__name__
-        self.app.call_from_thread(self._loaded, episode, board, note)
+            track, note = self.source.call(load), ""
+        except Exception as e:  # noqa: BLE001 - no board, or no rows: a note, not a crash
+            track, note = None, str(e).splitlines()[0] if str(e) else type(e).__name__
+        self.app.call_from_thread(self._loaded, track, note)
 
-    def _loaded(self, episode: int, board: EpisodeBoard | None, note: str) -> None:
+    def _loaded(self, track: BoardTrack | None, note: str) -> None:
         self._loading = None
-        self.board, self.note = board, note
-        if board is not None:
+        self.board, self.note = track, note
+        if track is not None:
             self._place()
-        self.refresh(layout=True)   # beside the decision panel its height is its content's
+        self.refresh(layout=True)
 
     def _place(self) -> None:
         assert self.board is not None and self._want is not None
-        _, t, seq = self._want
-        self.step = max(0, min(self.board.steps, t))
-        f = self.board.firings
-        rows = [i for i in f.at(self.step) if int(f.seq[i]) == seq]
-        self.phase = int(f.phase[rows[0]]) if rows else -1
-        self.refresh()
+        self.step = max(0, self._want[1])
+        self.border_title = f"board at t={self.step}"
+        self.refresh(layout=True)
 
     def render(self) -> Text:
-        if self.board is None:
-            return Text(self.note, style="italic dim")
-        return draw(self.board, self.step, self.phase)
+        if self.board is None or self.declared is None:
+            return Text(self.note, style=f"italic {DIM}")
+        return draw(self.declared, self.board.at(self.step))

@@ -1,6 +1,6 @@
 """GraphSide: what stands beside the trace where a game run has its board, for a run without one (a
-reasoning run). A declared world's run (`tracelab play --env`) has its spec's board on top, its marks
-where they hold at the cursor's t (declared_board.py), the
+reasoning run). A declared world's run (`tracelab play --env`) has its spec's board on top at the
+cursor's t (board.py), the
 decision of the cursor's step under it (decision.py). Above: the atoms true at the end of the cursor's timestep, or the atoms changed in it
 (`c`), filtered by a predicate name or an atom pattern (`exposed`, `exposed(*)`; `/`), each with its bound,
 at most graph_state.ATOMS_LIMIT of them with the count of all. Below: the neighbourhood in the graph of
@@ -26,9 +26,9 @@ from textual.widget import Widget
 from textual.widgets import Input, Static
 
 from tracelab.viewers.tui.colours import DIM, bound_colour, styled_bound
-from tracelab.board import Board, board_of_config, marked_cells
+from tracelab.board import Board, board_of_config
 from tracelab.store.kind import run_config
-from tracelab.viewers.tui.declared_board import DeclaredBoard
+from tracelab.viewers.tui.board import BoardView
 from tracelab.viewers.tui.decision import DecisionPanel
 from tracelab.viewers.tui.graph_state import AtomsAt, Neighbourhood, atoms_at, neighbourhood, unknown_pattern
 from tracelab.viewers.tui.lazy_table import Column, LazyTable
@@ -159,7 +159,7 @@ class GraphSide(Vertical):
 
     def compose(self) -> ComposeResult:
         if self.declared is not None:
-            yield DeclaredBoard(self.declared)
+            yield BoardView(self.source, self.declared)
             yield DecisionPanel(self.source)   # the trace cursor's step's decision (TracePane)
         with Vertical(id="gs-atoms"):
             yield Input(placeholder="atoms: exposed or exposed(*)", id="gs-filter", compact=True)
@@ -248,19 +248,15 @@ class GraphSide(Vertical):
             found = atoms_at(reader, episode, t, mode, pattern, hide_static)
             if not found.rows and pattern:
                 problem = unknown_pattern(reader, pattern)
-            marked = None if self.declared is None else marked_cells(self.declared, {
-                pred: [r["atom"] for r in atoms_at(reader, episode, t, "true", f"{pred}(*)", False).rows]
-                for pred in self.declared.marks})
         except Exception as e:  # noqa: BLE001 - a bad pattern or a cancelled query: a message, not a crash
-            found, problem, marked = None, str(e).splitlines()[0] if str(e) else type(e).__name__, None
-        self.app.call_from_thread(self._atoms_read, asked, found, problem, marked)
+            found, problem = None, str(e).splitlines()[0] if str(e) else type(e).__name__
+        self.app.call_from_thread(self._atoms_read, asked, found, problem)
 
-    def _atoms_read(self, asked: tuple[Any, ...], found: AtomsAt | None, problem: str | None,
-                    marked: dict[str, str] | None = None) -> None:
+    def _atoms_read(self, asked: tuple[Any, ...], found: AtomsAt | None, problem: str | None) -> None:
         if asked != self._asked:
             return
-        if marked is not None:
-            self.query_one(DeclaredBoard).show(asked[1], marked)
+        if self.declared is not None:
+            self.query_one(BoardView).show(asked[0], asked[1])
         self.atoms = found
         table, status = self.table, self.query_one("#gs-status", Static)
         rows = found.rows if found is not None else []

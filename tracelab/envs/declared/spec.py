@@ -23,7 +23,7 @@ from tracelab.engine.errors import ProgramError
 from tracelab.engine.parser import check_program, load_program, parse_literal
 from tracelab.engine.safe_files import FileRefused, path_inside
 from tracelab.engine.program import CONSTANT_RE, Fact, Literal, Program, SourceLoc, Term
-from tracelab.board import CELL_FORMAT, MAX_BOARD_CELLS, MAX_BOARD_FACTS, Board, hex_color
+from tracelab.board import CELL_FORMAT, MAX_BOARD_CELLS, MAX_BOARD_FACTS, MAX_PIECE_KINDS, Board, Pieces, hex_color
 from tracelab.expressions import ExpressionError, evaluate
 from tracelab.envs.declared.spec_file import KeyPath, SpecError, SpecSource, read_spec_file
 from tracelab.errors import close_names
@@ -437,6 +437,14 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     check = _Names(r, program, [*(board.cells if board else []), *agents, *constants])
     for pred in (board.marks if board else {}):  # a predicate of one argument, true of cells
         check.pattern(("board", "marks", pred), f"{pred}(Cell)", ("Cell",))
+    for name, p in (board.pieces if board else {}).items():  # drawn only: each predicate with its arity
+        for key, text in (("at", f"{p.at}(Thing, Cell)"), ("things", f"{p.things}(Thing)"),
+                          ("alive", p.alive and f"{p.alive}(Thing)"), ("heading", p.heading and f"{p.heading}(Thing, D)")):
+            if text:
+                check.pattern(("board", "pieces", name, key), text, ("Thing", "Cell", "D"))
+    for i, pred in enumerate(board.annotate if board else ()):
+        if pred not in check.arity:
+            raise r.err(("board", "annotate", i), f"{pred!r}: the program has no predicate {pred!r}")
 
     action_names, action_facts, mask = _actions(r, check, agents, agents_t.get("mask"))
     domains = {"cells": board.cells} if board else {}
@@ -636,7 +644,7 @@ def _with_board(r: _Reader, program: Program, board: Board | None) -> Program:
 
 def _board(r: _Reader) -> Board:
     r.table(("board",), ("rows", "cell", "legend", "neighbours", "rays", "edges", "edge", "marks", "colors",
-                         "mark_colors"))
+                         "mark_colors", "pieces", "annotate"))
     rows = r.value(("board", "rows"))
     if isinstance(rows, list):  # rows of single characters, as gymnasium's np.asarray(desc, dtype="c") reads
         rows = ["".join(x) if isinstance(x, list) and all(isinstance(c, str) for c in x) else x for x in rows]
@@ -676,7 +684,8 @@ def _board(r: _Reader) -> Board:
     for pred in mark_colors:
         if pred not in marks:
             raise r.err(("board", "mark_colors", pred), "not a predicate of `marks`")
-    board = Board(tuple(rows), fmt, legend, neighbours, edge, marks, colors, mark_colors, rays, edges)
+    board = Board(tuple(rows), fmt, legend, neighbours, edge, marks, colors, mark_colors, rays, edges,
+                  _pieces(r), tuple(r.strings(("board", "annotate"), [])))
     if board.fact_count() > MAX_BOARD_FACTS:  # refused before the facts are built
         raise r.err(("board",), f"makes {board.fact_count():,} facts; a board may make at most {MAX_BOARD_FACTS:,}")
     try:
@@ -684,6 +693,23 @@ def _board(r: _Reader) -> Board:
     except SpecTooBig as e:
         raise r.err(("board",), str(e)) from None
     return board
+
+
+def _pieces(r: _Reader) -> dict[str, Pieces]:
+    """`[board.pieces.NAME]`: things the viewers draw where they stand (their predicates are checked
+    against the program with the marks')."""
+    out = {}
+    kinds = r.table(("board", "pieces"), default={})
+    if len(kinds) > MAX_PIECE_KINDS:
+        raise r.err(("board", "pieces"), f"at most {MAX_PIECE_KINDS} kinds of pieces")
+    for name in kinds:
+        path = ("board", "pieces", name)
+        r.table(path, ("at", "things", "colors", "alive", "heading"))
+        colors = {k: _color(r, (*path, "colors", k)) for k in r.table((*path, "colors"), default={})}
+        optional = [r.string((*path, k)) if r.raw((*path, k), None) is not None else None
+                    for k in ("alive", "heading")]
+        out[name] = Pieces(r.string((*path, "at")), r.string((*path, "things")), colors, *optional)
+    return out
 
 
 def _offsets(r: _Reader, path: KeyPath, *, several: bool = False) -> tuple[tuple[int, int], ...]:

@@ -1,0 +1,213 @@
+"""A run's board over an episode, for the viewers (the TUI's board, the replay's): the spec's `[board]`
+(tracelab.board) and, at the end of each timestep t, its marks and its pieces (where each thing stands,
+alive or dead, which way it heads), read from the run's changes of the board's predicates.
+
+Which board: the one the run's config records (a spec world's run: `tracelab play --env`, a training's
+evaluation games); a GridWar run written by RuleSim (`BOARD`, its scenario in the config and no spec
+among its sources) is drawn from rules/gridworld/war.toml's `[board]` with the map its scenario implies.
+Such a run names its cells by id (y·W + x, its declared grid: tracelab.store.coordinates), a spec's run
+by the board's cell constants: both are located.
+
+    board = board_of_run(con)
+    track = BoardTrack.read(con, board, episode)
+    track.at(5).pieces        # the Piece list at the end of t = 5
+"""
+from __future__ import annotations
+
+import bisect
+import tomllib
+from dataclasses import dataclass, replace
+from typing import Any
+
+from tracelab import RULES_DIR
+from tracelab.board import DIRECTION_ARROWS, Board, board_of_config
+from tracelab.store.coordinates import Grid, run_grid
+from tracelab.store.kind import run_board, run_config, spec_text
+from tracelab.store.reader import RunConnection
+
+GRIDWAR_BOARD = "gridworld"      # the board a RuleSim run declares (tracelab.game.scenario.BOARD)
+WAR_SPEC = RULES_DIR / "gridworld" / "war.toml"
+_SCENARIO_KEYS = ("scenario_toml", "scenario")   # where play, train and eval recorded the scenario's TOML
+
+
+@dataclass(frozen=True)
+class Piece:
+    kind: str                    # the `[board.pieces]` name
+    thing: str
+    row: int
+    col: int
+    alive: bool
+    arrow: str                   # the heading's arrow, "" without one
+
+
+@dataclass(frozen=True)
+class BoardState:
+    """The board at the end of timestep t: cell constant -> its mark's predicate, and the pieces on it."""
+    t: int
+    marked: dict[str, str]
+    pieces: list[Piece]
+
+
+def board_of_run(con: RunConnection) -> Board | None:
+    """The board to draw a run's episodes on, or None (a run without one: a reasoning, a world without a
+    `[board]`)."""
+    config = run_config(con)
+    board = board_of_config(config)
+    if board is not None or run_board(con) != GRIDWAR_BOARD or spec_text(con, config) is not None:
+        return board
+    return gridwar_board(config)
+
+
+def _scenario(config: dict[str, Any]) -> dict[str, Any] | None:
+    for key in _SCENARIO_KEYS:
+        text = config.get(key)
+        if isinstance(text, str) and "\n" in text:
+            try:
+                return tomllib.loads(text)
+            except tomllib.TOMLDecodeError:
+                return None
+    return None
+
+
+def gridwar_board(config: dict[str, Any]) -> Board | None:
+    """war.toml's board for a RuleSim run, with its team size and ammo, drawn with the rows of the
+    scenario's map (its width, height, mountains and bases): the `[data.maps]` entry they match, else
+    the default's board with them; None for a config without a scenario that reads."""
+    from tracelab.envs.declared.spec import load_spec   # the envs package registers gymnasium's ids: late
+
+    s = _scenario(config)
+    if s is None:
+        return None
+    try:
+        w, h = int(s["width"]), int(s["height"])
+        grid = [["."] * w for _ in range(h)]
+        for x, y in s.get("mountains", []):
+            grid[h - 1 - int(y)][int(x)] = "M"
+        for key, ch in (("red_base", "r"), ("blue_base", "b")):
+            x, y = s[key]
+            grid[h - 1 - int(y)][int(x)] = ch
+        params = {"agents_per_team": int(s.get("agents_per_team", 1)), "ammo": int(s.get("ammo", 3))}
+    except (KeyError, TypeError, ValueError, IndexError):
+        return None
+    rows = ["".join(r) for r in grid]
+    maps = tomllib.loads(WAR_SPEC.read_text())["data"]["maps"]
+    name = next((m for m, v in maps.items() if v["rows"] == rows), "default")
+    board = load_spec(WAR_SPEC, map=name, **params).board
+    # a map of no [data.maps] entry (a scenario file's own): war.toml's board drawn with its rows
+    return None if board is None else replace(board, rows=tuple(rows))
+
+
+def locator(board: Board, grid: Grid | None) -> dict[str, tuple[int, int]]:
+    """Node name -> (row, col) of each board cell: the board's constants, and a run's cell ids (y·W + x)
+    when the run declares a grid of the board's size."""
+    out = {name: divmod(i, board.width) for i, name in enumerate(board.cells)}
+    if grid is not None and (grid.width, grid.height) == (board.width, board.height):
+        out.update({str(y * board.width + x): (board.height - 1 - y, x)
+                    for y in range(board.height) for x in range(board.width)})
+    return out
+
+
+@dataclass
+class BoardTrack:
+    """An episode's board state at each timestep where it changed (`at` takes the last one at or before t)."""
+    board: Board
+    episode: int
+    times: list[int]
+    states: list[BoardState]
+    cells: dict[str, tuple[int, int]]
+
+    @classmethod
+    def read(cls, con: RunConnection, board: Board, episode: int) -> BoardTrack:
+        # a RuleSim run names its cells y·W + x of its own map (a training run's config may not declare it)
+        grid = run_grid(con) or (Grid(board.width, board.height) if run_board(con) == GRIDWAR_BOARD else None)
+        cells = locator(board, grid)
+        kinds = _thing_kinds(con, board)
+        preds = sorted({*board.marks, *(p for k in board.pieces.values() for p in k.predicates)})
+        rows = con.execute(
+            "SELECT c.t, l.name, n0.name, n1.name, c.new_lower >= 1 FROM raw.changes c "
+            "JOIN raw.atoms a ON a.atom = c.atom JOIN raw.labels l ON l.label = a.label "
+            "JOIN raw.nodes n0 ON n0.node = a.arg0 LEFT JOIN raw.nodes n1 ON n1.node = a.arg1 "
+            "WHERE c.episode = ? AND l.name IN (SELECT unnest(?::VARCHAR[])) ORDER BY c.seq",
+            [episode, preds]).fetchall()
+        marks: dict[str, set[str]] = {p: set() for p in board.marks}
+        where: dict[str, str] = {}           # thing -> its cell node
+        alive: dict[str, bool] = {}
+        heading: dict[str, str] = {}
+        times: list[int] = []
+        states: list[BoardState] = []
+
+        def snapshot(t: int) -> None:
+            marked = {cell: p for p in board.marks for cell in sorted(marks[p])}
+            pieces = []
+            for thing, node in where.items():
+                kind = kinds.get(thing)
+                if kind is None or node not in cells:
+                    continue
+                spec = board.pieces[kind]
+                r, c = cells[node]
+                pieces.append(Piece(kind, thing, r, c, alive.get(thing, False) if spec.alive else True,
+                                    DIRECTION_ARROWS.get(heading.get(thing, ""), "") if spec.heading else ""))
+            pieces.sort(key=lambda p: (list(board.pieces).index(p.kind), _ordinal(p.thing)))
+            times.append(t)
+            states.append(BoardState(t, marked, pieces))
+
+        at_preds = {k.at for k in board.pieces.values()}
+        alive_preds = {k.alive for k in board.pieces.values() if k.alive}
+        heading_preds = {k.heading for k in board.pieces.values() if k.heading}
+        last = None
+        for t, pred, a0, a1, holds in rows:
+            if last is not None and t != last:
+                snapshot(last)
+            last = t
+            if pred in marks:
+                (marks[pred].add if holds else marks[pred].discard)(a0)
+            if pred in at_preds and a1 is not None:
+                if holds:
+                    where[a0] = a1
+                elif where.get(a0) == a1:
+                    del where[a0]
+            if pred in alive_preds and a1 is None:
+                alive[a0] = bool(holds)
+            if pred in heading_preds and a1 is not None:
+                if holds:
+                    heading[a0] = a1
+                elif heading.get(a0) == a1:
+                    del heading[a0]
+        if last is not None:
+            snapshot(last)
+        if not times or times[0] > 0:
+            times.insert(0, 0)
+            states.insert(0, BoardState(0, {}, []))
+        return cls(board, episode, times, states, cells)
+
+    @property
+    def last_t(self) -> int:
+        return self.times[-1]
+
+    def at(self, t: int) -> BoardState:
+        """The board at the end of timestep t."""
+        i = bisect.bisect_right(self.times, t) - 1
+        return self.states[max(i, 0)]
+
+    def cell_of(self, node: str, t: int) -> tuple[int, int] | None:
+        """(row, col) of a node at t: a cell itself, or the cell where a piece stands."""
+        if node in self.cells:
+            return self.cells[node]
+        piece = next((p for p in self.at(t).pieces if p.thing == node), None)
+        return None if piece is None else (piece.row, piece.col)
+
+
+def _thing_kinds(con: RunConnection, board: Board) -> dict[str, str]:
+    """Thing -> its pieces' kind: the things an atom of the kind's `things` predicate names."""
+    out: dict[str, str] = {}
+    for kind, spec in board.pieces.items():
+        for (name,) in con.execute(
+                "SELECT DISTINCT n.name FROM raw.atoms a JOIN raw.labels l ON l.label = a.label "
+                "JOIN raw.nodes n ON n.node = a.arg0 WHERE l.name = ? AND a.arg1 < 0", [spec.things]).fetchall():
+            out.setdefault(name, kind)
+    return out
+
+
+def _ordinal(name: str) -> tuple[Any, ...]:
+    """red-agent-10 after red-agent-2."""
+    return tuple(int(p) if p.isdigit() else p for p in name.split("-"))
