@@ -435,13 +435,18 @@ class Engine:
     def atom_text(self, aid: int) -> str:
         return self.vocab.atom_text(aid)
 
-    def _lookup(self, text: str) -> int | None:
-        lit = parse_literal(text)
-        label = self.vocab.label_ids.get(lit.pred)
-        nodes = [self.vocab.node_ids.get(a.name) for a in lit.args]
+    def known_atom(self, pred: str, *args: str) -> int | None:
+        """The id of pred(args) if the engine knows it, else None (never interns: a reader's question does
+        not grow the engine)."""
+        label = self.vocab.label_ids.get(pred)
+        nodes = [self.vocab.node_ids.get(a) for a in args]
         if label is None or any(n is None for n in nodes):
             return None
         return self.vocab.find(label, tuple(nodes))
+
+    def _lookup(self, text: str) -> int | None:
+        lit = parse_literal(text)
+        return self.known_atom(lit.pred, *(a.name for a in lit.args))
 
     # ---- facts in, steps, values out ----
 

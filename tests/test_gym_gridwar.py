@@ -95,10 +95,35 @@ def test_rgb_array_draws_the_specs_board() -> None:
     frame = env.render()
     assert frame.shape == (8 * CELL, 8 * CELL, 3) and frame.dtype == np.uint8
 
-    def centre(row: int, col: int) -> tuple[int, ...]:
-        return tuple(frame[row * CELL + CELL // 2, col * CELL + CELL // 2])
+    def centre(row: int, col: int) -> tuple[int, ...]:  # a tile's corner: the agents stand on the bases
+        return tuple(frame[row * CELL + 2, col * CELL + 2])
     assert centre(2, 4) == (0x6b, 0x4f, 0x3a) and centre(7, 7) == (0xe6, 0x39, 0x46)
     assert centre(0, 0) == (0x3a, 0x86, 0xff)
+
+
+def test_rgb_array_draws_the_pieces_where_they_stand() -> None:
+    """[board] pieces in the frame: each agent a disc in its team's colour with a dark outline, on the cell
+    its atLoc atom names; the frame follows the game (before: every frame of a game was the same picture)."""
+    env = gym.make(IDS["base"], render_mode="rgb_array")
+    env.reset(seed=0)
+    first = env.render()
+    rng = np.random.default_rng(0)
+    for _ in range(40):
+        env.step(int(rng.integers(env.action_space.n)))
+        red = next(p for p in env.unwrapped.world.pieces_now() if p[1] == "red-agent-1")
+        if red[2:4] != (7, 7) and red[4]:
+            break
+    else:
+        pytest.fail("red never left its base alive in 40 steps")
+    frame = env.render()
+    row, col = red[2:4]
+    outline = int(CELL * 0.42)  # a pixel of the ring, between the disc (0.36) and its edge (0.44)
+
+    def at(f: np.ndarray, r: int, c: int, dy: int = 0) -> tuple[int, ...]:
+        return tuple(int(v) for v in f[r * CELL + CELL // 2 - dy, c * CELL + CELL // 2])
+    assert at(frame, row, col) == (0xe6, 0x39, 0x46) and at(frame, row, col, outline) == (25, 25, 25)
+    assert at(first, 7, 7, outline) == (25, 25, 25) and at(frame, 7, 7, outline) == (0xe6, 0x39, 0x46)
+    assert (first != frame).any()
 
 
 def test_the_sb3_evaluations_of_a_gridwar_id_play_the_declared_env_against_eval_p() -> None:

@@ -152,7 +152,7 @@ def render_world(world: DeclaredWorld, render_mode: str | None, painter: Declare
     with its marks, or the atoms that are set when the spec has no board)."""
     board = world.spec.board
     if painter is not None:
-        return painter(world.marked_cells(), board.mark_colors)
+        return painter(world.marked_cells(), board.mark_colors, world.pieces_now())
     if render_mode != "ansi":
         return None
     head = f"  ({last_actions})\n" if last_actions is not None else "\n"

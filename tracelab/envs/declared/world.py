@@ -29,6 +29,7 @@ from tracelab.envs.declared.computed import ComputedFacts
 from tracelab.envs.declared.observe_kernel import ObservationProgram, ObservationReader, split_parts
 from tracelab.envs.declared.spec import Atom, Draw, WorldSpec
 from tracelab.envs.declared.state_errors import no_index, no_weights_hold
+from tracelab.board import DIRECTION_ARROWS
 from tracelab.first_run_figures import say_first_compile
 
 log = logging.getLogger(__name__)
@@ -161,6 +162,7 @@ class DeclaredWorld:
         self._out = (np.zeros(n * len(self._index_parts), np.int64), np.zeros(n), np.zeros(2),
                      np.zeros(len(mask_ids), np.int8), np.zeros(1, np.int64))
         board = spec.board
+        self._piece_ids: list[tuple[str, str, np.ndarray, np.ndarray, int, list[str], np.ndarray]] | None = None
         self._marks = [] if board is None else \
             [(pred, np.array([eng.atom(pred, c) for c in board.cells], np.int64)) for pred in board.marks]
         self._tables = self._step_tables()
@@ -410,6 +412,43 @@ class DeclaredWorld:
         if not self._has_mask:
             return None
         return self._out[3][agent * self.n_actions:(agent + 1) * self.n_actions].copy()
+
+    def pieces_now(self) -> list[tuple[str, str, int, int, bool, str]]:
+        """The board's pieces standing now, as (kind, thing, row, col, alive, heading: "" without one), each
+        thing on the first cell where its `at` atom holds (a thing on no cell is left out)."""
+        board = self.spec.board
+        if board is None or not board.pieces:
+            return []
+        if self._piece_ids is None:
+            self._piece_ids = self._piece_atoms()
+        out = []
+        for kind, thing, cells, at_ids, alive_id, headings, heading_ids in self._piece_ids:
+            on = np.flatnonzero(self.true(at_ids))
+            if not on.size:
+                continue
+            row, col = divmod(int(cells[on[0]]), board.width)
+            alive = alive_id < 0 or bool(self.true(np.array([alive_id]))[0])
+            held = np.flatnonzero(self.true(heading_ids))
+            out.append((kind, thing, row, col, alive, headings[held[0]] if held.size else ""))
+        return out
+
+    def _piece_atoms(self) -> list[tuple[str, str, np.ndarray, np.ndarray, int, list[str], np.ndarray]]:
+        """Each piece's known atoms (looked up, never interned): its cells with at(Thing, Cell), alive(Thing)
+        (-1 without), the headings with heading(Thing, D)."""
+        eng, board = self.engine, self.spec.board
+        out = []
+        for kind, spec in board.pieces.items():
+            for binding, _ in eng.match(f"{spec.things}(X)"):
+                thing = binding["X"]
+                at = [(k, eng.known_atom(spec.at, thing, c)) for k, c in enumerate(board.cells)]
+                at = [(k, aid) for k, aid in at if aid is not None]
+                alive = eng.known_atom(spec.alive, thing) if spec.alive else None
+                heads = [(d, eng.known_atom(spec.heading, thing, d)) for d in DIRECTION_ARROWS] if spec.heading else []
+                heads = [(d, aid) for d, aid in heads if aid is not None]
+                out.append((kind, thing, np.array([k for k, _ in at], np.int64), np.array([a for _, a in at], np.int64),
+                            -1 if alive is None else alive, [d for d, _ in heads],
+                            np.array([a for _, a in heads], np.int64)))
+        return out
 
     def marked_cells(self) -> dict[str, str]:
         """Board cell -> the `marks` predicate true there (the last one written, when several are)."""
