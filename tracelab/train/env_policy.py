@@ -74,6 +74,26 @@ def one_env_actor(policy: Any, env: Any = None) -> Callable[[Any, dict[str, Any]
     return act
 
 
+def team_actor(policy: Any, env: Any = None) -> Callable[[Any, dict[str, Any]], Any]:
+    """The greedy actions in one env of a policy of GridWar's trainer (policy.Policy: one network per agent
+    over the team's view, its own blocks first) from the observation (a TeamEnv's [agents, D], each agent's
+    the team's view; a one-agent Env's [D]) and the masks; recorded as the step's decisions where `env`
+    records them. Every agent decides (a slow agent's choice on its off step the world ignores)."""
+    record = env is not None and getattr(env.unwrapped, "records_decisions", False)
+    n = policy.scenario.agents_per_team
+
+    def act(obs: Any, info: dict[str, Any]) -> Any:
+        obs = np.asarray(obs, np.float32)
+        team_obs = obs.reshape(-1, obs.shape[-1])[:1]  # every agent's is the team's view
+        mask = info.get("action_mask")
+        masks = None if mask is None else np.asarray(mask).reshape(1, n, -1)
+        idx, output = policy.decide(team_obs, np.ones((1, n), bool), masks if policy.mask else None)
+        if record:
+            env.unwrapped.decided(output.rows(0), None if masks is None else masks[0])
+        return int(idx[0, 0]) if n == 1 else idx[0]
+    return act
+
+
 def save_env_policy(path: str | Path, source: EnvSource, weights: dict[str, Any], network: dict[str, Any],
                     encoder: ObservationEncoder, action_names: list[str], mask: bool,
                     trained: dict[str, Any]) -> Path:
