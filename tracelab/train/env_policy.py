@@ -74,6 +74,21 @@ def one_env_actor(policy: Any, env: Any = None) -> Callable[[Any, dict[str, Any]
     return act
 
 
+class OneAgentGridWarPolicy:
+    """A one-agent policy of GridWar's trainer (policy.Policy) acting as EnvPolicy does on a batch of
+    worlds (observations [W, D], masks [W, A]): what evaluate_env plays on GridWar's spec."""
+
+    def __init__(self, policy: Any) -> None:
+        if policy.scenario.agents_per_team != 1:
+            raise ValueError("a team's policy plays one world at a time (tracelab play --policy)")
+        self.policy = policy
+
+    def act(self, obs: Any, masks: np.ndarray | None = None) -> np.ndarray:
+        obs = np.asarray(obs, np.float32)
+        masks = None if masks is None or not self.policy.mask else np.asarray(masks)[:, None]
+        return self.policy.act(obs, np.ones((len(obs), 1), bool), masks)[:, 0]
+
+
 def team_actor(policy: Any, env: Any = None) -> Callable[[Any, dict[str, Any]], Any]:
     """The greedy actions in one env of a policy of GridWar's trainer (policy.Policy: one network per agent
     over the team's view, its own blocks first) from the observation (a TeamEnv's [agents, D], each agent's
