@@ -98,7 +98,8 @@ def _world(args: argparse.Namespace) -> tuple[Any, Any, Any]:
     with store_errors():  # a policy that does not load is the user's to fix
         fmt = None if trained_path is None else policy_format(trained_path)
     if args.env is not None:
-        for value, flag in ((args.scenario, "--scenario"), (args.agents, "--agents"), (args.opponent_p, "--opponent-p")):
+        gridwar_flags = ((args.scenario, "--scenario"), (args.agents, "--agents"), (args.opponent_p, "--opponent-p"))
+        for value, flag in gridwar_flags:
             if value is not None:
                 raise UserError(f"{flag} is GridWar's; --env plays the world its spec declares "
                                 "(GridWar's spec takes --env-arg p_toward=...)")
