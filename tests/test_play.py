@@ -89,7 +89,7 @@ def test_an_old_gridwar_policy_plays_as_it_did_on_rulesim(tmp_path):
     from tracelab.envs.declared.play import load_declared, make_declared_env, play_episodes
     from tracelab.envs.gym_env import GridWarEnv
     from tracelab.train.env_policy import team_actor
-    from tracelab.train.policy import load_policy
+    from tracelab.train.env_policy import load_policy
 
     policy = load_policy(ROOT / "sample_runs" / "base-train" / "policy")
     ref = GridWarEnv(policy.scenario)

@@ -46,7 +46,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
-    from tracelab.train.policy import load_policy, policy_scenario, read_policy_spec
+    from tracelab.train.env_policy import load_policy, policy_scenario, read_policy_spec
 
     # deferred: loads gymnasium; every command is imported to build the CLI's parser
     from tracelab.train.env_policy import ENV_FORMAT, policy_format
@@ -60,8 +60,9 @@ def run(args: argparse.Namespace) -> int:
         spec = read_policy_spec(args.policy)
         scenario = load_scenario_arg(args.scenario) if args.scenario else policy_scenario(spec)
         policy = load_policy(args.policy, scenario)
-    if args.run is None and args.backend == "rules" and scenario.agents_per_team == 1:
-        return _run_spec(args, policy, scenario)
+    source = _spec_source(args, policy, scenario)
+    if source is not None:
+        return _run_spec(args, policy, scenario, source)
     with progress(f"evaluating on {scenario.name}", total=args.games, unit="games") as bar:
         result = _evaluate(args, policy, scenario, spec, _counting(bar))
     if args.json:
@@ -74,16 +75,25 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _run_spec(args: argparse.Namespace, policy, scenario) -> int:
-    """A one-agent GridWar policy played greedily on its scenario's spec (rules/gridworld/war.toml)."""
-    # deferred: loads gymnasium, numba; every command is imported to build the CLI's parser
+def _spec_source(args: argparse.Namespace, policy, scenario):
+    """The EnvSource of the scenario's spec where eval plays the GridWar policy through it (one agent a
+    team, untraced, the rules backend), else None: RuleSim's evaluate plays it (teams, --run, --backend
+    reference, and scenarios no spec plays, until the trainer writes policies of specs)."""
+    # deferred: loads gymnasium; every command is imported to build the CLI's parser
     from tracelab.envs.declared.env_source import EnvSource
     from tracelab.envs.declared.gridwar import scenario_spec
-    from tracelab.train.env_policy import OneAgentGridWarPolicy, evaluate_env
+    if args.run is not None or args.backend != "rules" or scenario.agents_per_team != 1:
+        return None
     try:
-        source = EnvSource(*scenario_spec(scenario, policy.stack_previous, args.opponent_p))
-    except ValueError as e:
-        raise UserError(str(e)) from None
+        return EnvSource(*scenario_spec(scenario, policy.stack_previous, args.opponent_p))
+    except ValueError:
+        return None
+
+
+def _run_spec(args: argparse.Namespace, policy, scenario, source) -> int:
+    """A one-agent GridWar policy played greedily on its scenario's spec (rules/gridworld/war.toml)."""
+    # deferred: loads gymnasium, numba; every command is imported to build the CLI's parser
+    from tracelab.train.env_policy import OneAgentGridWarPolicy, evaluate_env
     with progress(f"evaluating on {scenario.name}", total=args.games, unit="games") as bar:
         result = evaluate_env(OneAgentGridWarPolicy(policy), source, args.games, args.seed, args.envs,
                               lambda _: bar.advance(1))

@@ -129,7 +129,7 @@ def _gridwar(args: argparse.Namespace, policy_path: str | None) -> tuple[Any, An
     from tracelab.commands.train import load_scenario_arg
     from tracelab.envs.declared.env_source import EnvSource
     from tracelab.envs.declared.gridwar import scenario_spec
-    from tracelab.train.policy import load_policy, policy_scenario, read_policy_spec
+    from tracelab.train.env_policy import load_policy, policy_scenario, read_policy_spec
 
     if args.opponent_p is not None and not 0.0 <= args.opponent_p <= 1.0:
         raise UserError(f"--opponent-p must be in [0, 1], got {args.opponent_p}")

@@ -80,7 +80,7 @@ def eval_info(step: int, round_no: int, **more: Any) -> dict[str, Any]:
 # GridWar
 # ---------------------------------------------------------------------------------------------------------
 class _GreedyTeam:
-    """tracelab.train.policy.Policy's acting interface over an `Act`: the library's actions for the agents
+    """tracelab.train.env_policy.Policy's acting interface over an `Act`: the library's actions for the agents
     that decide this step, do-nothing for the others (no action mask: the library's policy has none).
     An `Act` that can also `decide` (obs -> actions and its PolicyOutput, or None) gives its values to
     the traced games."""
