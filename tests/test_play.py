@@ -100,3 +100,11 @@ def test_an_old_gridwar_policy_plays_as_it_did_on_rulesim(tmp_path):
     assert [(g["steps"], g["return"]) for g in games[0]] == [(g["steps"], g["return"]) for g in games[1]]
     assert [outcomes.get(g["outcome"], "other") for g in games[1]].count("win") >= 1
     assert np.std([g["steps"] for g in games[1]]) > 0  # not one game six times
+
+
+def test_a_policy_refused_on_a_world_of_another_shape_in_one_line(capsys):
+    policy = ROOT / "sample_runs" / "base-train" / "policy"
+    assert main(["play", "--env", "tracelab/GridWar-advanced-v0", "--policy", str(policy), "--no-trace"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "trained on GridWar's 'base' (1 agents, 5 actions, 4 observations)" in err
+    assert "9 actions, 7 observations" in err

@@ -89,61 +89,56 @@ def _world(args: argparse.Namespace) -> tuple[Any, Any, Any]:
     """(the EnvSource played, GridWar's Scenario or None, the loaded trained policy or None)."""
     # deferred: loads gymnasium; every command is imported to build the CLI's parser
     from tracelab.envs.declared.env_source import EnvSource, parse_env_args
-    from tracelab.train.env_policy import ENV_FORMAT, load_env_policy, policy_format
+    from tracelab.train.env_policy import ENV_FORMAT, load_trained, policy_format, read_policy_spec
 
     if args.policy == "scripted":
         raise UserError("--policy scripted: red's scripted policy was the grid simulator's; play takes random "
                         "(the default) or a trained policy (RUN/policy)")
-    trained_path = args.policy if args.policy not in (None, "random") else None
+    path = args.policy if args.policy not in (None, "random") else None
     with store_errors():  # a policy that does not load is the user's to fix
-        fmt = None if trained_path is None else policy_format(trained_path)
+        gridwar_spec = None if path is None or policy_format(path) == ENV_FORMAT else read_policy_spec(path)
     if args.env is not None:
         gridwar_flags = ((args.scenario, "--scenario"), (args.agents, "--agents"), (args.opponent_p, "--opponent-p"))
         for value, flag in gridwar_flags:
             if value is not None:
                 raise UserError(f"{flag} is GridWar's; --env plays the world its spec declares "
                                 "(GridWar's spec takes --env-arg p_toward=...)")
-        source, scenario, gridwar_policy = EnvSource.given(args.env, parse_env_args(args.env_arg)), None, None
+        source, scenario = EnvSource.given(args.env, parse_env_args(args.env_arg)), None
     elif args.env_arg:
         raise UserError("--env-arg goes with --env")
-    elif fmt == ENV_FORMAT and args.scenario is None:
-        raise UserError(f"{trained_path} was trained with train --env: name that env with --env SPEC_OR_ID (and "
-                        "its --env-arg values); its policy.json says which under \"env\"")
+    elif path is not None and gridwar_spec is None and args.scenario is None:
+        raise UserError(f"{path} was trained with train --env: name that env with --env SPEC_OR_ID (and its "
+                        "--env-arg values); its policy.json says which under \"env\"")
     else:
-        source, scenario, gridwar_policy = _gridwar(args, trained_path if fmt != ENV_FORMAT else None)
-    if trained_path is None:
+        source, scenario = _gridwar(args, gridwar_spec)
+    if path is None:
         return source, scenario, None
-    if fmt != ENV_FORMAT:
-        if gridwar_policy is None:
-            raise UserError(f"{trained_path} is a GridWar policy: play it with --scenario (default: the one it "
-                            "was trained on), not --env")
-        return source, scenario, gridwar_policy
-    with store_errors():  # a policy that does not load, or was trained on another env
-        return source, scenario, load_env_policy(trained_path, source)[0]
+    with store_errors():  # a policy that does not load, or was trained on another world
+        return source, scenario, load_trained(path, source)
 
 
-def _gridwar(args: argparse.Namespace, policy_path: str | None) -> tuple[Any, Any, Any]:
-    """GridWar's --scenario (or the scenario the policy at `policy_path` was trained on) as its spec's
-    EnvSource, the scenario, and that policy loaded (None without one)."""
+def _gridwar(args: argparse.Namespace, policy_spec: dict[str, Any] | None) -> tuple[Any, Any]:
+    """GridWar's --scenario (or the scenario of the GridWar policy whose policy.json is `policy_spec`) as its
+    spec's EnvSource (with the policy's observation of the previous step), and the scenario."""
     # deferred: loads the game's modules; every command is imported to build the CLI's parser
     from tracelab.commands.train import load_scenario_arg
     from tracelab.envs.declared.env_source import EnvSource
     from tracelab.envs.declared.gridwar import scenario_spec
-    from tracelab.train.env_policy import load_policy, policy_scenario, read_policy_spec
+    from tracelab.train.env_policy import policy_scenario
 
     if args.opponent_p is not None and not 0.0 <= args.opponent_p <= 1.0:
         raise UserError(f"--opponent-p must be in [0, 1], got {args.opponent_p}")
-    with store_errors():  # a scenario or policy that does not load
-        if policy_path is not None and args.scenario is None and args.agents is None:
-            scenario = policy_scenario(read_policy_spec(policy_path))
+    with store_errors():  # a scenario that does not load
+        if policy_spec is not None and args.scenario is None and args.agents is None:
+            scenario = policy_scenario(policy_spec)
         else:
             scenario = load_scenario_arg(args.scenario or DEFAULT_SCENARIO, args.agents)
-        policy = None if policy_path is None else load_policy(policy_path, scenario)
+    stack = policy_spec is not None and policy_spec["observation"]["stack_previous"]
     try:
-        path, params = scenario_spec(scenario, policy is not None and policy.stack_previous, args.opponent_p)
+        path, params = scenario_spec(scenario, stack, args.opponent_p)
     except ValueError as e:
         raise UserError(str(e)) from None
-    return EnvSource(path, params), scenario, policy
+    return EnvSource(path, params), scenario
 
 
 def _name(source: Any, scenario: Any) -> str:
@@ -174,7 +169,7 @@ def _play(source: Any, spec: Any, trained: Any, args: argparse.Namespace, writer
     and a progress bar over the episodes (on a terminal)."""
     # deferred: loads gymnasium; every command is imported to build the CLI's parser
     from tracelab.envs.declared.play import make_declared_env, play_episodes, random_policy
-    from tracelab.train.env_policy import EVAL_STEP_CAP, EnvPolicy, one_env_actor, team_actor
+    from tracelab.train.env_policy import EVAL_STEP_CAP, greedy_actor
 
     with compiling_engine(busy=f"building {source.short_name}'s rules…", local_trace=writer is not None,
                           phase=None):  # the declared world says what compiles (its library notice)
@@ -183,8 +178,7 @@ def _play(source: Any, spec: Any, trained: Any, args: argparse.Namespace, writer
     if trained is None:
         policy, cap = random_policy(env, args.seed), None
     else:  # greedy: it may walk in circles where the env sets no step limit (CliffWalking)
-        actor = one_env_actor if isinstance(trained, EnvPolicy) else team_actor
-        policy, cap = actor(trained, env), EVAL_STEP_CAP
+        policy, cap = greedy_actor(trained, env), EVAL_STEP_CAP
     try:
         with CtrlCBetweenSteps() as ctrl_c, \
                 progress(f"playing {source.short_name}", total=args.episodes, unit="episodes") as bar:

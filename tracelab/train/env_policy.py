@@ -392,6 +392,35 @@ def load_env_policy(path: str | Path, given: EnvSource) -> tuple[EnvPolicy, dict
     return EnvPolicy(q, encoder, spec.get("mask", False)), spec
 
 
+def load_trained(path: str | Path, given: EnvSource) -> Any:
+    """A policy of either format, to play on the world `given` names: an EnvPolicy (load_env_policy: the same
+    env it was trained on), or GridWar's trainer's Policy where the world has its agents, actions and
+    observation size (a scenario's spec: gridwar.scenario_spec). A mismatch is one line naming both."""
+    if policy_format(path) == ENV_FORMAT:
+        return load_env_policy(path, given)[0]
+    spec = read_policy_spec(path)
+    policy = load_policy(path)
+    # deferred: a declared world's env module loads the engine (numba)
+    from tracelab.envs.declared.gym_env import observation_space
+    from tracelab.envs.declared.spec import load_spec
+    spec_path, params = given.declared()
+    world = load_spec(spec_path, **params)
+    obs_size = int(np.prod(observation_space(world).shape))
+    shape = (len(world.agents), len(world.action_names))
+    want = (policy.scenario.agents_per_team, policy.scenario.n_actions)
+    if shape != want or obs_size != spec["network"]["inputs"]:
+        raise ValueError(f"{_policy_dir(path)}: trained on GridWar's {policy.scenario.name!r} ({want[0]} agents, "
+                         f"{want[1]} actions, {spec['network']['inputs']} observations); {given.describe()} has "
+                         f"{shape[0]} agents, {shape[1]} actions, {obs_size} observations")
+    return policy
+
+
+def greedy_actor(policy: Any, env: Any = None) -> Callable[[Any, dict[str, Any]], Any]:
+    """The greedy actions in one env of a policy load_trained gave (EnvPolicy or GridWar's Policy), recorded as
+    the step's decisions where `env` records them."""
+    return one_env_actor(policy, env) if isinstance(policy, EnvPolicy) else team_actor(policy, env)
+
+
 # ---------------------------------------------------------------------------------------------------------
 # Greedy evaluation
 # ---------------------------------------------------------------------------------------------------------
