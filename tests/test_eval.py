@@ -128,3 +128,24 @@ def test_play_plays_and_traces_a_saved_policy(tmp_path, capsys):
                          "WHERE list_position(values, list_max(values)) - 1 = action").fetchone()[0]
     con.close()
     assert steps > 0 and greedy == steps
+
+
+def test_eval_plays_a_teams_policy_on_its_spec(tmp_path, capsys):
+    """A 2v2 policy of GridWar's trainer's format (one network for both agents, always "up"), evaluated
+    on war.toml at agents_per_team = 2: every game counted, by the spec's outcomes."""
+    from dataclasses import replace
+
+    import torch
+
+    from tracelab.game.scenario import builtin_scenario
+    team = replace(builtin_scenario("base"), agents_per_team=2, red_starts=None, blue_starts=None, max_steps=12)
+    net = NetSpec(8, (8,), team.n_actions)  # the team's view: 4 numbers an agent
+    weights = {k: np.zeros(shape, np.float32) for k, shape in net.state_dict_shapes().items()}
+    weights["2.bias"][0] = 1.0
+    path = save_policy(tmp_path / "pol", team, {"shared": {k: torch.from_numpy(v) for k, v in weights.items()}},
+                       {"shared": [0, 1]}, net.to_json(), False, False, {"run": None, "step": 0})
+    assert main(["eval", str(path), "--games", "3", "--json"]) == 0
+    figures = json.loads(capsys.readouterr().out)
+    assert figures["env"]["kwargs"]["agents_per_team"] == 2 and figures["games"] == 3
+    # walking up from (7, 0) never reaches blue's base: lost to the opponent, or cut at 12 steps
+    assert figures["wins"] == 0 and figures["losses"] + figures["truncated"] == 3

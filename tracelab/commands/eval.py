@@ -76,13 +76,13 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _spec_source(args: argparse.Namespace, policy, scenario):
-    """The EnvSource of the scenario's spec where eval plays the GridWar policy through it (one agent a
-    team, untraced, the rules backend), else None: RuleSim's evaluate plays it (teams, --run, --backend
-    reference, and scenarios no spec plays, until the trainer writes policies of specs)."""
+    """The EnvSource of the scenario's spec where eval plays the GridWar policy through it (untraced, the
+    rules backend), else None: RuleSim's evaluate plays it (--run, --backend reference, and scenarios no
+    spec plays, until the trainer writes policies of specs)."""
     # deferred: loads gymnasium; every command is imported to build the CLI's parser
     from tracelab.envs.declared.env_source import EnvSource
     from tracelab.envs.declared.gridwar import scenario_spec
-    if args.run is not None or args.backend != "rules" or scenario.agents_per_team != 1:
+    if args.run is not None or args.backend != "rules":
         return None
     try:
         return EnvSource(*scenario_spec(scenario, policy.stack_previous, args.opponent_p))
@@ -91,12 +91,16 @@ def _spec_source(args: argparse.Namespace, policy, scenario):
 
 
 def _run_spec(args: argparse.Namespace, policy, scenario, source) -> int:
-    """A one-agent GridWar policy played greedily on its scenario's spec (rules/gridworld/war.toml)."""
+    """A GridWar policy played greedily on its scenario's spec (rules/gridworld/war*.toml): one agent in
+    --num-envs worlds stepped together, a team one world at a time."""
     # deferred: loads gymnasium, numba; every command is imported to build the CLI's parser
-    from tracelab.train.env_policy import OneAgentGridWarPolicy, evaluate_env
+    from tracelab.train.env_policy import OneAgentGridWarPolicy, evaluate_env, evaluate_team
     with progress(f"evaluating on {scenario.name}", total=args.games, unit="games") as bar:
-        result = evaluate_env(OneAgentGridWarPolicy(policy), source, args.games, args.seed, args.envs,
-                              lambda _: bar.advance(1))
+        if scenario.agents_per_team == 1:
+            result = evaluate_env(OneAgentGridWarPolicy(policy), source, args.games, args.seed, args.envs,
+                                  lambda _: bar.advance(1))
+        else:
+            result = evaluate_team(policy, source, args.games, args.seed, lambda _: bar.advance(1))
     if args.json:
         json.dump({"policy": str(args.policy), "scenario": scenario.name, "opponent_p": args.opponent_p,
                    "seed": args.seed, "env": source.to_json(), **result.to_dict()}, sys.stdout, indent=1)

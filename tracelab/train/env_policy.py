@@ -26,6 +26,7 @@ from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 from tracelab.engine.safe_files import read_json
 from tracelab.envs.declared.env_source import EnvSource, check_same_env, env_source_from_json
+from tracelab.envs.declared.spec import load_spec
 from tracelab.errors import UserError
 from tracelab.game.scenario import ACTION_NAMES, NOTHING, Scenario, scenario_from_dict
 from tracelab.store import layout
@@ -402,7 +403,6 @@ def load_trained(path: str | Path, given: EnvSource) -> Any:
     policy = load_policy(path)
     # deferred: a declared world's env module loads the engine (numba)
     from tracelab.envs.declared.gym_env import observation_space
-    from tracelab.envs.declared.spec import load_spec
     spec_path, params = given.declared()
     world = load_spec(spec_path, **params)
     obs_size = int(np.prod(observation_space(world).shape))
@@ -609,3 +609,23 @@ def evaluate_env(policy: EnvPolicy, source: EnvSource, games: int, seed: int, wo
         return play_env_games(env, policy, games, seed, on_game)
     finally:
         env.close()
+
+
+def evaluate_team(policy: Policy, source: EnvSource, games: int, seed: int,
+                  on_game: Callable[[float], None] | None = None) -> EnvEvalResult:
+    """`games` greedy episodes of a team's policy (GridWar's trainer's) on a declared world of several agents,
+    one world at a time (TeamEnv: the batched engine plays one agent), counted as evaluate_env counts."""
+    # deferred: loads the engine (numba)
+    from tracelab.envs.declared.play import TeamEnv, play_episodes
+    spec_path, params = source.declared()
+    env = TeamEnv(load_spec(spec_path, **params))
+    declares = bool(env.world_spec.win or env.world_spec.loss)
+    result = EnvEvalResult()
+
+    def ended(game: dict[str, Any]) -> None:
+        cut = game["outcome"] == "truncated"
+        result.add(game["return"], game["steps"], not cut, cut, game["outcome"] if declares else None)
+        if on_game is not None:
+            on_game(game["return"])
+    play_episodes(env, games, seed, team_actor(policy), on_episode=ended, step_cap=EVAL_STEP_CAP)
+    return result
