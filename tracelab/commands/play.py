@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     source, scenario, trained = _world(args)
     spec = load_declared(source)
     if args.no_trace:
-        _summary(_name(source, scenario), spec, _play(source, spec, trained, args, None))
+        _summary(_name(source, scenario), spec, _play(source, spec, trained, args, None, _name(source, scenario)))
         return 0
     # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store import TraceWriter
@@ -79,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
     except OSError as e:
         raise UserError(f"cannot create the run directory {run_dir}: {e.strerror or e}") from e
     with recording_into(writer, run_dir):
-        stats = _play(source, spec, trained, args, writer)
+        stats = _play(source, spec, trained, args, writer, _name(source, scenario))
     _summary(_name(source, scenario), spec, stats)
     _what_to_open(run_dir, spec)
     return 0
@@ -164,14 +164,15 @@ def run_meta(source: Any, spec: Any, args: argparse.Namespace, scenario: Any = N
     return meta
 
 
-def _play(source: Any, spec: Any, trained: Any, args: argparse.Namespace, writer: Any) -> dict[str, Any]:
+def _play(source: Any, spec: Any, trained: Any, args: argparse.Namespace, writer: Any,
+          name: str) -> dict[str, Any]:
     """args.episodes episodes of the world, showing the compile (first run) or the build while it happens
     and a progress bar over the episodes (on a terminal)."""
     # deferred: loads gymnasium; every command is imported to build the CLI's parser
     from tracelab.envs.declared.play import make_declared_env, play_episodes, random_policy
     from tracelab.train.env_policy import EVAL_STEP_CAP, greedy_actor
 
-    with compiling_engine(busy=f"building {source.short_name}'s rules…", local_trace=writer is not None,
+    with compiling_engine(busy=f"building {name}'s rules…", local_trace=writer is not None,
                           phase=None):  # the declared world says what compiles (its library notice)
         env = make_declared_env(source, spec, kernel=args.kernel,
                                 **({} if writer is None else {"trace_writer": writer}))
@@ -181,7 +182,7 @@ def _play(source: Any, spec: Any, trained: Any, args: argparse.Namespace, writer
         policy, cap = greedy_actor(trained, env), EVAL_STEP_CAP
     try:
         with CtrlCBetweenSteps() as ctrl_c, \
-                progress(f"playing {source.short_name}", total=args.episodes, unit="episodes") as bar:
+                progress(f"playing {name}", total=args.episodes, unit="episodes") as bar:
             def act(obs: Any, info: dict[str, Any]) -> Any:
                 ctrl_c.check()  # a Ctrl-C stops the game between two steps (see CtrlCBetweenSteps)
                 return policy(obs, info)
