@@ -21,7 +21,7 @@ from tracelab.store import TraceWriter, open_run
 from tracelab.train.env_policy import EnvPolicy, one_env_actor
 from tracelab.train.env_source import ObservationEncoder
 from tracelab.train.evaluate import evaluate_into
-from tracelab.train.policy import Policy, save_policy
+from tracelab.train.env_policy import Policy, save_policy
 from tracelab.train.qnet import NetSpec, NumpyQ
 
 ROOT = Path(__file__).resolve().parent.parent

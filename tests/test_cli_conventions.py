@@ -92,8 +92,6 @@ def test_an_unknown_flag_is_one_line_of_its_subcommand(argv: list[str], expected
 
 
 def test_one_name_and_one_default_for_one_thing() -> None:
-    for flag in ("--num-envs", "--worlds", "--envs"):          # play: CleanRL's name, the old ones as aliases
-        assert parse("play", flag, "3").worlds == 3
     assert parse("eval", "pol", "--num-envs", "4").envs == parse("eval", "pol", "--envs", "4").envs == 4
     assert parse("eval", "pol").envs == TrainConfig().eval_envs == 64
     from tracelab.commands.play import DEFAULT_SCENARIO

@@ -1,5 +1,5 @@
 """A declared world's games recorded into the trace store (tracelab/envs/declared/recording.py) and
-`tracelab play --env` (tracelab/commands/play_env.py): real runs, read back through DuckDB."""
+`tracelab play --env` (tracelab/commands/play.py): real runs, read back through DuckDB."""
 from __future__ import annotations
 
 import json
@@ -133,7 +133,7 @@ def test_play_env_plays_gridwar_ids_through_its_spec(tmp_path: Path, capsys, mon
     (["--env", "tracelab/FrozenLake-v1", "--env-arg", "slippery=false"], "unknown keyword argument 'slippery'"),
     (["--env", "tracelab/FrozenLake-v1", "--env-arg", "is_slippery"], "write KEY=VALUE"),
     (["--env", "tracelab/FrozenLake-v1", "--env-arg", "map_name=9x9"], "map_name"),
-    (["--env", "tracelab/FrozenLake-v1", "--scenario", "base"], "--scenario is the grid game's"),
+    (["--env", "tracelab/FrozenLake-v1", "--scenario", "base"], "--scenario is GridWar's"),
     (["--env", "tracelab/FrozenLake-v1", "--policy", "scripted"], "--policy scripted"),
 ])
 def test_play_env_mistakes_are_one_line(tmp_path: Path, args: list[str], fragment: str) -> None:
@@ -200,11 +200,14 @@ def test_ctrl_c_keeps_the_games_played_and_says_so(tmp_path: Path) -> None:
     con.close()
 
 
-def test_play_env_refuses_a_spec_of_several_agents_in_one_line(tmp_path: Path, capsys) -> None:
+def test_play_env_plays_a_spec_of_several_agents_recording_each(tmp_path: Path, capsys) -> None:
     from test_env_spec_agents import RULES, SPEC
     (tmp_path / "pair.rules").write_text(RULES)
     (tmp_path / "pair.toml").write_text(SPEC)
-    assert main(["play", "--env", str(tmp_path / "pair.toml"), "--run", str(tmp_path / "run")]) == 1
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "the spec declares 2 agents; play --env plays one" in err
-    assert not (tmp_path / "run").exists()
+    assert main(["play", "--env", str(tmp_path / "pair.toml"), "--episodes", "3", "--run", str(tmp_path / "run")]) == 0
+    assert "played 3 episodes of pair" in capsys.readouterr().out
+    con = open_run(tmp_path / "run")
+    per_agent = con.execute("SELECT agent, count(*) FROM steps GROUP BY agent ORDER BY agent").fetchall()
+    assert con.execute("SELECT count(*) FROM episodes").fetchone()[0] == 3
+    con.close()
+    assert len(per_agent) == 2 and per_agent[0][1] == per_agent[1][1] > 0

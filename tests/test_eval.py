@@ -3,6 +3,7 @@ the CLI's table, JSON and traced run, and `tracelab play --policy`."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,7 +12,7 @@ from tracelab.cli import main
 from tracelab.game.scenario import Scenario
 from tracelab.store import open_run
 from tracelab.train.evaluate import EvalResult, GameRecord, evaluate
-from tracelab.train.policy import Policy, save_policy
+from tracelab.train.env_policy import Policy, save_policy
 from tracelab.train.qnet import NetSpec, NumpyQ
 
 # red starts one step below blue's base; blue needs 6 moves to red's base
@@ -80,11 +81,22 @@ def _saved(tmp_path, scenario: Scenario, action_id: int):
                        {"shared": [0]}, net.to_json(), False, False, {"run": None, "step": 0})
 
 
-def test_eval_command_table_json_and_traced_run(tmp_path, capsys):
+SAMPLE_POLICY = Path(__file__).resolve().parent.parent / "sample_runs" / "base-train" / "policy"
+
+
+def test_eval_command_plays_a_one_agent_policy_on_its_spec(capsys):
+    """GridWar's trainer's policy evaluated on rules/gridworld/war.toml: the spec's outcomes counted."""
+    assert main(["eval", str(SAMPLE_POLICY), "--games", "8", "--envs", "4", "--json"]) == 0
+    figures = json.loads(capsys.readouterr().out)
+    assert figures["env"]["name"].endswith("war.toml") and figures["scenario"] == "base"
+    assert figures["games"] == 8 == figures["wins"] + figures["losses"] + figures["draws"] + figures["truncated"]
+    assert figures["wins"] >= 6  # it wins nearly all its games against the method's opponent (p = 0.3)
+    assert main(["eval", str(SAMPLE_POLICY), "--games", "4", "--envs", "2"]) == 0
+    assert "win rate" in capsys.readouterr().out
+
+
+def test_eval_command_traced_run(tmp_path, capsys):
     path = _saved(tmp_path, NEAR, 0)
-    assert main(["eval", str(path), "--games", "9", "--envs", "4"]) == 0
-    out = capsys.readouterr().out
-    assert "method (cut at 200 steps)" in out and "100.0%" in out
     run = tmp_path / "evalrun"
     assert main(["eval", str(path), "--games", "5", "--json", "--run", str(run), "--seed", "3"]) == 0
     figures = json.loads(capsys.readouterr().out)
@@ -106,11 +118,34 @@ def test_eval_command_errors_are_one_line(tmp_path, capsys):
 
 
 def test_play_plays_and_traces_a_saved_policy(tmp_path, capsys):
-    path = _saved(tmp_path, NEAR, 0)
     run = tmp_path / "played"
-    assert main(["play", "--policy", str(path), "--episodes", "3", "--run", str(run)]) == 0
-    assert "3 win" in capsys.readouterr().out
+    assert main(["play", "--policy", str(SAMPLE_POLICY), "--episodes", "3", "--run", str(run)]) == 0
+    assert "played 3 episodes of base" in capsys.readouterr().out
     con = open_run(run)
-    actions = con.execute("SELECT DISTINCT action FROM steps WHERE agent = 'red-agent-1'").fetchall()
+    steps = con.execute("SELECT count(*) FROM steps WHERE agent = 'red-agent-1'").fetchone()[0]
+    # each step's decision is the policy's greedy choice among its Q-values
+    greedy = con.execute("SELECT count(*) FROM raw.decisions "
+                         "WHERE list_position(values, list_max(values)) - 1 = action").fetchone()[0]
     con.close()
-    assert actions == [(0,)]  # up, every step
+    assert steps > 0 and greedy == steps
+
+
+def test_eval_plays_a_teams_policy_on_its_spec(tmp_path, capsys):
+    """A 2v2 policy of GridWar's trainer's format (one network for both agents, always "up"), evaluated
+    on war.toml at agents_per_team = 2: every game counted, by the spec's outcomes."""
+    from dataclasses import replace
+
+    import torch
+
+    from tracelab.game.scenario import builtin_scenario
+    team = replace(builtin_scenario("base"), agents_per_team=2, red_starts=None, blue_starts=None, max_steps=12)
+    net = NetSpec(8, (8,), team.n_actions)  # the team's view: 4 numbers an agent
+    weights = {k: np.zeros(shape, np.float32) for k, shape in net.state_dict_shapes().items()}
+    weights["2.bias"][0] = 1.0
+    path = save_policy(tmp_path / "pol", team, {"shared": {k: torch.from_numpy(v) for k, v in weights.items()}},
+                       {"shared": [0, 1]}, net.to_json(), False, False, {"run": None, "step": 0})
+    assert main(["eval", str(path), "--games", "3", "--json"]) == 0
+    figures = json.loads(capsys.readouterr().out)
+    assert figures["env"]["kwargs"]["agents_per_team"] == 2 and figures["games"] == 3
+    # walking up from (7, 0) never reaches blue's base: lost to the opponent, or cut at 12 steps
+    assert figures["wins"] == 0 and figures["losses"] + figures["truncated"] == 3

@@ -18,7 +18,7 @@ from tracelab.train.dqn import DQN, make_q_network
 from tracelab.train.learner import DQNLearner
 from tracelab.train.loop import Trainer
 from tracelab.train.network import to_state_dict
-from tracelab.train.policy import load_policy, read_policy_spec
+from tracelab.train.env_policy import load_policy, read_policy_spec
 from tracelab.train.qnet import NetSpec, NumpyQ
 from tracelab.train.replay import ReplayBuffer
 from train_helpers import SMALL, WALK

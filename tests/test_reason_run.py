@@ -352,10 +352,13 @@ def test_a_board_that_is_not_a_name_is_refused_in_one_line(run: Path, tmp_path: 
 
 
 def test_a_played_game_declares_its_board(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """GridWar through its spec: the run declares the spec's [board] (the default map's rows), which the
+    TUI and the replay draw, not RuleSim's built-in `gridworld` board."""
+    from tracelab.board import RUN_CONFIG_KEY
     code, _, err = cli(capsys, "play", "--scenario", "base", "--episodes", "1", "--run", tmp_path / "g")
     assert code == 0, err
-    assert json.loads((tmp_path / "g" / "meta.json").read_text())["board"] == "gridworld"
-    assert rows(tmp_path / "g", "SELECT board FROM run") == [("gridworld",)]
+    meta = json.loads((tmp_path / "g" / "meta.json").read_text())
+    assert meta.get("board") is None and meta["config"][RUN_CONFIG_KEY]["rows"][2] == "....M..."
 
 
 def test_runs_written_before_the_edges_table_still_open_and_seal(run: Path, tmp_path: Path) -> None:

@@ -136,25 +136,25 @@ def test_a_run_whose_rewards_are_all_zero_reads_as_zero_returns(tmp_path: Path,
     assert "landed(hole) is 0 in this run, so its occurrences were not recorded" in err
 
 
-def test_gridwar_terms_are_rescored_with_the_scenarios_values(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    """GridWar's values per occurrence come from the run's scenario [rewards]: re-scoring `unsafe` to -50
-    adds 150 per unsafe move (counted in the `rewards` rows), and the note says the game refuses the move
-    whatever it pays."""
+def test_gridwar_terms_are_rescored_with_the_specs_values(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """A play --scenario run (GridWar through war.toml) names its terms by the spec's reward atoms: re-scoring
+    `canAct(Agent)` (each valid action's cost) to -1 and `won(red)` to 100 moves each game's return by the
+    occurrences counted in its `rewards` rows; the notes say the win's value is a params expression."""
     run = tmp_path / "g"
-    assert main(["play", "--policy", str(ROOT / "sample_runs" / "base-train" / "policy"), "--episodes", "2",
-                 "--seed", "0", "--run", str(run)]) == 0
+    assert main(["play", "--scenario", "base", "--episodes", "3", "--seed", "0", "--run", str(run)]) == 0
     con = open_run(run)
     try:
-        unsafe = {(int(e), str(a)): int(n) for e, a, n in con.execute(
-            "SELECT episode, agent, count(*) FILTER (WHERE term = 'unsafe') FROM rewards GROUP BY ALL").fetchall()}
+        acted = {(int(e), str(a)): int(n) for e, a, n in con.execute(
+            "SELECT episode, agent, count(*) FILTER (WHERE term = 'canAct(Agent)') FROM rewards GROUP BY ALL"
+        ).fetchall()}
     finally:
         con.close()
     capsys.readouterr()
-    assert main(["rewards", str(run), "--json", "--set", "unsafe=-50", "--set", "win=100"]) == 0
+    assert main(["rewards", str(run), "--json", "--set", "canAct(Agent)=-1", "--set", "won(red)=100"]) == 0
     got = json.loads(capsys.readouterr().out)
-    assert got["set"] == {"unsafe": {"old": -200.0, "new": -50.0}, "win": {"old": 250.0, "new": 100.0}}
+    assert got["set"] == {"canAct(Agent)": {"old": -2.0, "new": -1.0}, "won(red)": {"old": 250.0, "new": 100.0}}
     for r in got["episodes"]:
-        won = r["by_term"].get("win", 0.0)
+        won = r["by_term"].get("won(red)", 0.0)
         assert won in (0.0, 250.0)
-        assert r["rescored"] == pytest.approx(r["return"] + 150 * unsafe[r["episode"], r["agent"]] - 150 * (won > 0))
-    assert any(unsafe.values()) and any("unsafe: an unsafe move is refused" in n for n in got["notes"])
+        assert r["rescored"] == pytest.approx(r["return"] + acted[r["episode"], r["agent"]] - 150 * (won > 0))
+    assert all(acted.values()) and any("win * reward_scale" in n for n in got["notes"])

@@ -24,7 +24,7 @@ PROC = Path(__file__).resolve().parent / "store_proc.py"
 
 def test_play_stores_exactly_the_episodes_asked_for(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     run = tmp_path / "play"
-    assert main(["play", "--scenario", "base", "--episodes", "5", "--worlds", "2", "--seed", "9",
+    assert main(["play", "--scenario", "base", "--episodes", "5", "--seed", "9",
                  "--run", str(run)]) == 0
     assert "played 5 episodes" in capsys.readouterr().out
     con = open_run(run)
@@ -32,7 +32,7 @@ def test_play_stores_exactly_the_episodes_asked_for(tmp_path: Path, capsys: pyte
                        "ORDER BY episode").fetchall()
     assert [r[0] for r in rows] == [0, 1, 2, 3, 4]
     for episode, ended, outcome, steps, t_start, t_end, seed in rows:
-        assert ended and outcome in ("win", "loss", "draw", "truncated"), rows
+        assert ended and outcome in ("win", "loss", "terminated", "truncated"), rows
         assert (t_start, t_end, seed) == (0, steps, 9)
     last_t = dict(con.execute("SELECT episode, max(t) FROM changes GROUP BY 1").fetchall())
     last_step = dict(con.execute("SELECT episode, max(step) FROM steps GROUP BY 1").fetchall())

@@ -24,7 +24,7 @@ from tracelab.train.torch_files import load_tensors
 from tracelab.train.config import TrainConfig
 from tracelab.train.loop import Trainer
 from tracelab.train.metric_log import WALL_CLOCK_METRICS
-from tracelab.train.policy import load_policy, read_policy_spec
+from tracelab.train.env_policy import load_policy, read_policy_spec
 from train_helpers import SMALL, WALK
 
 TRAINING_METRICS = {"loss", "epsilon", "q_max_mean", "env_steps_per_s", "updates_per_s", "train_return"}

@@ -18,7 +18,7 @@ from tracelab.store.diff import first_divergence
 
 ROOT = Path(__file__).resolve().parents[1]
 WORLDS = {"frozen": (["--env", "tracelab/FrozenLake-v1", "--episodes", "4", "--seed", "3"], 2),
-          "war": (["--env", str(ROOT / "rules/gridworld/war.toml"), "--episodes", "2", "--seed", "1"], 1)}
+          "war": (["--scenario", "base", "--episodes", "2", "--seed", "1"], 1)}  # GridWar through its spec
 
 
 @pytest.fixture(scope="module")
@@ -167,3 +167,14 @@ def test_a_training_runs_traced_evaluation_game_branches_and_a_policy_plays_on(t
     assert main(["whatif", str(run), "--episode", "0", "--at", "1", "--action", "left",
                  "--run", str(tmp_path / "no")]) == 1
     assert "episode 0 records no steps (only traced games keep theirs" in capsys.readouterr().err
+
+
+def test_a_gridwar_trainers_policy_plays_on_a_branch_of_a_scenario_game(origins: dict[str, Path], tmp_path: Path,
+                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """An old policy (GridWar's trainer, RUN/policy of a RuleSim run) loads for whatif on a play --scenario
+    run and plays the branch on greedily: its actions after `at` are its greedy choices."""
+    policy = ROOT / "sample_runs" / "base-train" / "policy"
+    run = branch(origins["war"], tmp_path / "b", 0, 1, "nothing", "--policy", str(policy))
+    capsys.readouterr()
+    played = rows(run, "SELECT count(*) FROM raw.decisions WHERE list_position(values, list_max(values)) - 1 = action")
+    assert played[0][0] > 0 and played == rows(run, "SELECT count(*) FROM raw.decisions")

@@ -35,7 +35,7 @@ class Games:
     order they begin; those numbered past the last one asked for are played (every world steps) but
     neither counted nor recorded (the tracer's limit), so a run holds exactly the episodes asked for, none
     cut short. Building it resets every world; call `step()` until `done`. `trained`: a loaded policy
-    (tracelab.train.policy), else red plays `policy`. `kernel`: the engine's (Engine)."""
+    (tracelab.train.env_policy), else red plays `policy`. `kernel`: the engine's (Engine)."""
 
     def __init__(self, scenario: Scenario, episodes: int, *, worlds: int = 1, policy: str = "scripted",
                  trained: Any = None, seed: int = 0, sink: TraceSink | None = None, kernel: str = "auto",
@@ -106,7 +106,7 @@ class Games:
     def _red_actions(self) -> np.ndarray:
         """Red's spec action ids [W, N]."""
         if self.trained is not None:
-            from tracelab.train.policy import may_act
+            from tracelab.train.env_policy import may_act
             n = self.scenario.agents_per_team
             obs = np.ascontiguousarray(self._obs[:, RED])
             traced = self.tracer is not None

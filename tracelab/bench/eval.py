@@ -49,7 +49,7 @@ def _policy() -> Any:
     from tracelab.game.scenario import builtin_scenario
     from tracelab.train.config import TrainConfig
     from tracelab.train.loop import acting_q, make_learner, training_net
-    from tracelab.train.policy import Policy
+    from tracelab.train.env_policy import Policy
     scenario = builtin_scenario(SCENARIO)
     cfg = TrainConfig(scenario=SCENARIO)
     net = training_net(cfg, scenario)

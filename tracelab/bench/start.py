@@ -19,7 +19,7 @@ from tracelab.bench.common import summarize
 # what the commands import before their first step, loaded before the clock starts
 IMPORTS = ("numpy", "torch", "numba", "duckdb", "gymnasium", "tracelab.cli", "tracelab.commands.eval",
            "tracelab.commands.train", "tracelab.envs.vector_env", "tracelab.train.evaluate", "tracelab.train.loop",
-           "tracelab.train.policy", "tracelab.store", "tracelab.game.rulesim")
+           "tracelab.train.env_policy", "tracelab.store", "tracelab.game.rulesim")
 GOAL_S = 1.0
 TIMEOUT_S = 600
 

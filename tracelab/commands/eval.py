@@ -46,7 +46,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
-    from tracelab.train.policy import load_policy, policy_scenario, read_policy_spec
+    from tracelab.train.env_policy import load_policy, policy_scenario, read_policy_spec
 
     # deferred: loads gymnasium; every command is imported to build the CLI's parser
     from tracelab.train.env_policy import ENV_FORMAT, policy_format
@@ -60,6 +60,9 @@ def run(args: argparse.Namespace) -> int:
         spec = read_policy_spec(args.policy)
         scenario = load_scenario_arg(args.scenario) if args.scenario else policy_scenario(spec)
         policy = load_policy(args.policy, scenario)
+    source = _spec_source(args, policy, scenario)
+    if source is not None:
+        return _run_spec(args, policy, scenario, source)
     with progress(f"evaluating on {scenario.name}", total=args.games, unit="games") as bar:
         result = _evaluate(args, policy, scenario, spec, _counting(bar))
     if args.json:
@@ -69,6 +72,43 @@ def run(args: argparse.Namespace) -> int:
         print()
     else:
         _table(result, args, scenario.name)
+    return 0
+
+
+def _spec_source(args: argparse.Namespace, policy, scenario):
+    """The EnvSource of the scenario's spec where eval plays the GridWar policy through it (untraced, the
+    rules backend), else None: RuleSim's evaluate plays it (--run, --backend reference, and scenarios no
+    spec plays, until the trainer writes policies of specs)."""
+    # deferred: loads gymnasium; every command is imported to build the CLI's parser
+    from tracelab.envs.declared.env_source import EnvSource
+    from tracelab.envs.declared.gridwar import scenario_spec
+    if args.run is not None or args.backend != "rules":
+        return None
+    try:
+        return EnvSource(*scenario_spec(scenario, policy.stack_previous, args.opponent_p))
+    except ValueError:
+        return None
+
+
+def _run_spec(args: argparse.Namespace, policy, scenario, source) -> int:
+    """A GridWar policy played greedily on its scenario's spec (rules/gridworld/war*.toml): one agent in
+    --num-envs worlds stepped together, a team one world at a time."""
+    # deferred: loads gymnasium, numba; every command is imported to build the CLI's parser
+    from tracelab.train.env_policy import OneAgentGridWarPolicy, evaluate_env, evaluate_team
+    with progress(f"evaluating on {scenario.name}", total=args.games, unit="games") as bar:
+        if scenario.agents_per_team == 1:
+            result = evaluate_env(OneAgentGridWarPolicy(policy), source, args.games, args.seed, args.envs,
+                                  lambda _: bar.advance(1))
+        else:
+            result = evaluate_team(policy, source, args.games, args.seed, lambda _: bar.advance(1))
+    if args.json:
+        json.dump({"policy": str(args.policy), "scenario": scenario.name, "opponent_p": args.opponent_p,
+                   "seed": args.seed, "env": source.to_json(), **result.to_dict()}, sys.stdout, indent=1)
+        print()
+        return 0
+    print(f"{args.policy} on {scenario.name} (its spec, {source.name}), against the scripted opponent "
+          f"(p={args.opponent_p}), seed {args.seed}")
+    _env_table(result)
     return 0
 
 
@@ -96,8 +136,13 @@ def _run_env(args: argparse.Namespace) -> int:
                   sys.stdout, indent=1)
         print()
         return 0
-    low, high = wilson(result.successes, result.games)
     print(f"{args.policy} on {source.describe()}, {result.games} greedy games, seed {args.seed}")
+    _env_table(result)
+    return 0
+
+
+def _env_table(result) -> None:
+    low, high = wilson(result.successes, result.games)
     print(f"  mean return     {result.mean_return:.3f}")
     print(f"  success rate    {100 * result.success_rate:.1f}% [{100 * low:.1f}%, {100 * high:.1f}%] "
           f"(return > 0; 95% Wilson interval)")
@@ -110,7 +155,6 @@ def _run_env(args: argparse.Namespace) -> int:
               f"short is lost)")
     print(f"  ended           {result.terminated} terminated, {result.truncated} truncated; mean "
           f"{result.metrics('')['mean_steps']:.1f} steps")
-    return 0
 
 
 def _counting(bar: Progress):

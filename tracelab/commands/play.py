@@ -1,185 +1,231 @@
-"""`tracelab play`: play games of the rule-driven simulator, traced into a run of the trace store.
+"""`tracelab play`: games of a world declared by a spec, traced into a run of the trace store.
 
-Red is played by a simple policy (random, or the scripted base policy), blue by the scripted opponent.
-Every interpretation change of every episode goes to the run, with per-step actions and rewards, and
-the command ends by saying what to open.
+The world is GridWar's `--scenario NAME` (a built-in scenario or a scenario .toml file, played through its
+spec in rules/gridworld/, tracelab.envs.declared.gridwar.scenario_spec), or any declared world with `--env
+SPEC_OR_ID` (docs/worlds.md). Red (the learners) is played by a random policy or a trained one (`--policy
+RUN/policy`); GridWar's blue by its scripted opponent, written as rules. Every change of every episode goes
+to the run with its cause, the actions, rewards by term and the policy's decisions, and the command ends by
+saying what to open (tracelab/envs/declared/recording.py).
 """
 from __future__ import annotations
 
 import argparse
 import shlex
-import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, non_negative_int, positive_int
 from tracelab.commands._interrupt import CtrlCBetweenSteps
-from tracelab.commands._notices import say_running_compiles
 from tracelab.commands._progress import compiling_engine, progress
 from tracelab.commands._recording import read_for_hints, recording_into
-from tracelab.commands.play_env import run_env
+from tracelab.engine.errors import is_interrupt
 from tracelab.errors import UserError, store_errors
 
 DEFAULT_SCENARIO = "base"  # the one train defaults to (TrainConfig.scenario)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("play", help="play traced games (red: a simple policy; blue: the scripted "
-                                    "opponent) into a trace-store run")
+    p = sub.add_parser("play", help="play traced games of a world (GridWar's --scenario, or a spec's --env; "
+                                    "red: a random or a trained policy) into a trace-store run")
     p.add_argument("--scenario", default=None,
-                   help="a built-in scenario name (base, advanced, nonmarkov) or a scenario .toml file "
-                        "(default: base, as train and eval, or the scenario a --policy PATH was trained on)")
-    p.add_argument("--episodes", type=positive_int, default=5, help="episodes to play (default 5)")
-    p.add_argument("--num-envs", dest="worlds", type=positive_int, default=1,
-                   help="worlds stepped together (default 1)")
-    for alias in ("--worlds", "--envs"):  # earlier spellings: accepted, not listed
-        p.add_argument(alias, dest="worlds", type=positive_int, help=argparse.SUPPRESS)
+                   help="a GridWar scenario: a built-in name (base, advanced, nonmarkov) or a scenario .toml "
+                        "file, played through its spec in rules/gridworld/ (default: base, or the scenario a "
+                        "--policy PATH was trained on)")
     p.add_argument("--env", default=None, metavar="SPEC_OR_ID",
-                   help="play a world declared in rules instead of the grid game: a spec file or a registered id "
-                        "such as tracelab/FrozenLake-v1 (docs/worlds.md; a random policy unless --policy)")
+                   help="play a world declared in rules instead: a spec file or a registered id such as "
+                        "tracelab/FrozenLake-v1 (docs/worlds.md)")
     p.add_argument("--env-arg", action="append", default=[], metavar="KEY=VALUE",
                    help="a keyword argument of the --env (its spec's [params]), e.g. is_slippery=false (repeatable)")
+    p.add_argument("--episodes", type=positive_int, default=5, help="episodes to play (default 5)")
     p.add_argument("--policy", default=None,
-                   help="red's policy: random, scripted (the scripted base policy, default) or the path of "
-                        "a trained policy (e.g. RUN/policy); with --env, random (default) or a policy that "
-                        "train --env trained on that env")
+                   help="red's policy: random (default) or the path of a trained policy (e.g. RUN/policy)")
+    p.add_argument("--agents", type=positive_int, default=None,
+                   help="GridWar: agents a team, each starting on its base (default: the scenario's)")
     p.add_argument("--opponent-p", type=float, default=None,
-                   help="the opponent's probability of a move towards red's base (default 0.7)")
+                   help="GridWar: the opponent's probability of a move towards red's base (default 0.7)")
     p.add_argument("--seed", type=non_negative_int, default=0,
                    help="seed of the episodes and of the random policy (default 0)")
     p.add_argument("--kernel", choices=ENGINE_KERNELS, default="auto",
-                   help="the rule engine's kernel: auto (default: lanes from 64 worlds, else counting, stepped "
-                        "with the game as one compiled call), counting, lanes, or compiled (built in the "
-                        "background while the games start on the counting kernel, unless `tracelab compile` "
-                        "built it ahead)")
-    p.add_argument("--run", help="a new (or empty) run directory (default runs/play-<scenario>-<time>)")
+                   help="the rule engine's kernel: auto (default: counting, stepped with the world as one "
+                        "compiled call), counting, lanes, or compiled (built in the background while the games "
+                        "start on the counting kernel, unless `tracelab compile` built it ahead)")
+    p.add_argument("--run", help="a new (or empty) run directory (default runs/play-<world>-<time>)")
     p.add_argument("--no-trace", action="store_true", help="play without recording a run")
     add_max_groundings(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
-    from tracelab.game.scenario import (
-        builtin_scenario,
-        builtin_scenario_names,
-        load_scenario,
-    )
+    # deferred: loads gymnasium; every command is imported to build the CLI's parser
+    from tracelab.envs.declared.play import load_declared
 
-    if args.env is not None or args.env_arg:  # a declared world: its own module (play_env.py)
-        return run_env(args)
-    args.policy = args.policy or "scripted"
-    args.trained = None
-    builtin = args.policy in ("random", "scripted")
-    if not builtin:
-        # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
-        from tracelab.train.policy import load_policy, policy_scenario, read_policy_spec
-        with store_errors():  # a policy that does not load is the user's to fix
-            scenario = policy_scenario(read_policy_spec(args.policy))
-    if args.scenario is not None or builtin:
-        name = args.scenario or DEFAULT_SCENARIO
-        scenario = builtin_scenario(name) if name in builtin_scenario_names() else load_scenario(name)
-    if not builtin:
-        with store_errors():
-            args.trained = load_policy(args.policy, scenario)
+    source, scenario, trained = _world(args)
+    spec = load_declared(source)
     if args.no_trace:
-        _summary(play(scenario, args, sink=None))
+        _summary(_name(source, scenario), spec, _play(source, spec, trained, args, None, _name(source, scenario)))
         return 0
     # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.game.facts import GAME_RULES
-    from tracelab.game.scenario import BOARD
     from tracelab.store import TraceWriter
-    from tracelab.store.sink import StoreSink
-
-    run_dir = Path(args.run or f"runs/play-{scenario.name}-{time.strftime('%Y%m%d-%H%M%S')}")
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.layout import check_new_run_dir
+
+    run_dir = Path(args.run or f"runs/play-{_name(source, scenario)}-{time.strftime('%Y%m%d-%H%M%S')}")
     check_new_run_dir(run_dir)
-    meta = {"command": " ".join(shlex.quote(a) for a in sys.argv), "scenario": scenario.name,
-            "config": {"episodes": args.episodes, "worlds": args.worlds, "policy": args.policy, "kernel": args.kernel,
-                       "opponent_p": args.opponent_p, "scenario": scenario.to_toml()},
-            "rule_files": [str(GAME_RULES)], "seed": args.seed, "board": BOARD}
     try:
         with store_errors():  # another process took the directory since the check: a RuntimeError
-            writer = TraceWriter.open(run_dir, meta)
+            writer = TraceWriter.open(run_dir, run_meta(source, spec, args, scenario))
     except OSError as e:
         raise UserError(f"cannot create the run directory {run_dir}: {e.strerror or e}") from e
     with recording_into(writer, run_dir):
-        stats = play(scenario, args, sink=StoreSink(writer))
-    _summary(stats)
-    _what_to_open(run_dir)
+        stats = _play(source, spec, trained, args, writer, _name(source, scenario))
+    _summary(_name(source, scenario), spec, stats)
+    _what_to_open(run_dir, spec)
     return 0
 
 
-def play(scenario, args: argparse.Namespace, sink) -> dict:
-    """Play exactly args.episodes episodes in args.worlds worlds (tracelab.playing.Games), showing the
-    compile (first run) or the build while it happens and a progress bar over the episodes (on a
-    terminal); the steps/s leave out the first step, which includes any compiling."""
-    # deferred: loads gymnasium, numba; every command is imported to build the CLI's parser
-    from tracelab.engine.core import LANES_MIN_WORLDS
-    from tracelab.playing import Games
+def _world(args: argparse.Namespace) -> tuple[Any, Any, Any]:
+    """(the EnvSource played, GridWar's Scenario or None, the loaded trained policy or None)."""
+    # deferred: loads gymnasium; every command is imported to build the CLI's parser
+    from tracelab.envs.declared.env_source import EnvSource, parse_env_args
+    from tracelab.train.env_policy import ENV_FORMAT, load_trained, policy_format, read_policy_spec
 
-    n = scenario.agents_per_team
-    agents = f"{n} agent{'s' if n != 1 else ''} a team"
-    kernel = getattr(args, "kernel", "auto")
-    n_worlds = min(args.worlds, args.episodes)
-    lanes = kernel == "lanes" or (kernel == "auto" and n_worlds >= LANES_MIN_WORLDS)
-    with CtrlCBetweenSteps() as ctrl_c:
-        with compiling_engine(simulator=True, lanes=lanes,
-                              busy=f"building the game's rules ({agents})…") as first:
-            games = Games(scenario, args.episodes, worlds=args.worlds, policy=args.policy,
-                          trained=getattr(args, "trained", None), seed=args.seed, sink=sink, kernel=kernel,
-                          opponent_p=getattr(args, "opponent_p", None))
-            first_steps, ended = games.step()
-        steps = 0
-        t0 = time.perf_counter()
-        with progress(f"playing {scenario.name}", total=args.episodes, unit="episodes") as bar:
-            bar.advance(ended)
-            while not games.done:
-                ctrl_c.check()
-                played, ended = games.step()
-                steps += played
-                if ended:
-                    bar.advance(ended)
-                    elapsed = time.perf_counter() - t0
-                    bar.set_fields(wins=games.wins,
-                                   **{"steps/s": steps / max(elapsed, 1e-9)})
-    elapsed = time.perf_counter() - t0
-    games.close()
-    say_running_compiles()
-    return {"episodes": [games.finished[e] for e in sorted(games.finished)], "steps": steps + first_steps,
-            "timed_steps": steps, "seconds": elapsed, "scenario": scenario.name,
-            "first_step_s": first.seconds, "compiled": first.compiled}
+    if args.policy == "scripted":
+        raise UserError("--policy scripted: red's scripted policy was the grid simulator's; play takes random "
+                        "(the default) or a trained policy (RUN/policy)")
+    path = args.policy if args.policy not in (None, "random") else None
+    with store_errors():  # a policy that does not load is the user's to fix
+        gridwar_spec = None if path is None or policy_format(path) == ENV_FORMAT else read_policy_spec(path)
+    if args.env is not None:
+        gridwar_flags = ((args.scenario, "--scenario"), (args.agents, "--agents"), (args.opponent_p, "--opponent-p"))
+        for value, flag in gridwar_flags:
+            if value is not None:
+                raise UserError(f"{flag} is GridWar's; --env plays the world its spec declares "
+                                "(GridWar's spec takes --env-arg p_toward=...)")
+        source, scenario = EnvSource.given(args.env, parse_env_args(args.env_arg)), None
+    elif args.env_arg:
+        raise UserError("--env-arg goes with --env")
+    elif path is not None and gridwar_spec is None and args.scenario is None:
+        raise UserError(f"{path} was trained with train --env: name that env with --env SPEC_OR_ID (and its "
+                        "--env-arg values); its policy.json says which under \"env\"")
+    else:
+        source, scenario = _gridwar(args, gridwar_spec)
+    if path is None:
+        return source, scenario, None
+    with store_errors():  # a policy that does not load, or was trained on another world
+        return source, scenario, load_trained(path, source)
 
 
-def _summary(stats: dict) -> None:
+def _gridwar(args: argparse.Namespace, policy_spec: dict[str, Any] | None) -> tuple[Any, Any]:
+    """GridWar's --scenario (or the scenario of the GridWar policy whose policy.json is `policy_spec`) as its
+    spec's EnvSource (with the policy's observation of the previous step), and the scenario."""
+    # deferred: loads the game's modules; every command is imported to build the CLI's parser
+    from tracelab.commands.train import load_scenario_arg
+    from tracelab.envs.declared.env_source import EnvSource
+    from tracelab.envs.declared.gridwar import scenario_spec
+    from tracelab.train.env_policy import policy_scenario
+
+    if args.opponent_p is not None and not 0.0 <= args.opponent_p <= 1.0:
+        raise UserError(f"--opponent-p must be in [0, 1], got {args.opponent_p}")
+    with store_errors():  # a scenario that does not load
+        if policy_spec is not None and args.scenario is None and args.agents is None:
+            scenario = policy_scenario(policy_spec)
+        else:
+            scenario = load_scenario_arg(args.scenario or DEFAULT_SCENARIO, args.agents)
+    stack = policy_spec is not None and policy_spec["observation"]["stack_previous"]
+    try:
+        path, params = scenario_spec(scenario, stack, args.opponent_p)
+    except ValueError as e:
+        raise UserError(str(e)) from None
+    return EnvSource(path, params), scenario
+
+
+def _name(source: Any, scenario: Any) -> str:
+    return source.short_name if scenario is None else scenario.name
+
+
+def run_meta(source: Any, spec: Any, args: argparse.Namespace, scenario: Any = None) -> dict[str, Any]:
+    """The run's metadata: the command, the world (id or spec file, its arguments, the spec and the rule files
+    by path, size and hash: their texts go in the run's `sources` table), what sets each external fact
+    (recording.declared_facts), the board's rows; GridWar's scenario by name and as its TOML."""
+    # deferred: loads DuckDB, gymnasium, numba; every command is imported to build the CLI's parser
+    from tracelab.envs.declared.recording import declared_run_config
+
+    spec_path, params = source.declared()
+    config = {"env": source.name, "env_id": source.env_id, "spec_path": spec_path,
+              "env_args": params, "episodes": args.episodes, "policy": args.policy or "random",
+              "kernel": args.kernel, **declared_run_config(spec)}
+    meta = {"command": " ".join(shlex.quote(a) for a in ["tracelab", *args.argv]), "config": config,
+            "rule_files": list(spec.program.files), "seed": args.seed}
+    if scenario is not None:
+        config.update(scenario=scenario.to_toml(), opponent_p=args.opponent_p)
+        meta["scenario"] = scenario.name
+    return meta
+
+
+def _play(source: Any, spec: Any, trained: Any, args: argparse.Namespace, writer: Any,
+          name: str) -> dict[str, Any]:
+    """args.episodes episodes of the world, showing the compile (first run) or the build while it happens
+    and a progress bar over the episodes (on a terminal)."""
+    # deferred: loads gymnasium; every command is imported to build the CLI's parser
+    from tracelab.envs.declared.play import make_declared_env, play_episodes, random_policy
+    from tracelab.train.env_policy import EVAL_STEP_CAP, greedy_actor
+
+    with compiling_engine(busy=f"building {name}'s rules…", local_trace=writer is not None,
+                          phase=None):  # the declared world says what compiles (its library notice)
+        env = make_declared_env(source, spec, kernel=args.kernel,
+                                **({} if writer is None else {"trace_writer": writer}))
+    if trained is None:
+        policy, cap = random_policy(env, args.seed), None
+    else:  # greedy: it may walk in circles where the env sets no step limit (CliffWalking)
+        policy, cap = greedy_actor(trained, env), EVAL_STEP_CAP
+    try:
+        with CtrlCBetweenSteps() as ctrl_c, \
+                progress(f"playing {name}", total=args.episodes, unit="episodes") as bar:
+            def act(obs: Any, info: dict[str, Any]) -> Any:
+                ctrl_c.check()  # a Ctrl-C stops the game between two steps (see CtrlCBetweenSteps)
+                return policy(obs, info)
+
+            stats = play_episodes(env, args.episodes, args.seed, act, on_episode=lambda e: bar.advance(1),
+                                  step_cap=cap)
+    except BaseException as e:  # the run records how it ended, with what was played until then
+        env.unwrapped.close(status="interrupted" if is_interrupt(e) else "failed")
+        raise
+    env.close()  # a traced env closes its writer: the last rows and episode ends are written
+    return stats
+
+
+def _summary(name: str, spec: Any, stats: dict[str, Any]) -> None:
     eps = stats["episodes"]
-    outcomes = {k: sum(e["outcome"] == k for e in eps) for k in ("win", "loss", "draw", "truncated")}
-    mean_return = np.mean([e["return"] for e in eps]) if eps else 0.0
-    rate = (f"{stats['timed_steps'] / stats['seconds']:,.0f} steps/s" if stats["timed_steps"]
-            else "too short to time")
-    first = (f"; compiling the engine and the first step took {stats['first_step_s']:.0f} s"
-             if stats["compiled"] else "")
-    print(f"played {len(eps)} episodes of {stats['scenario']} ({stats['steps']} steps, {rate} after the "
-          f"first step{first})")
-    print("red: " + ", ".join(f"{v} {k}" for k, v in outcomes.items()) + f"; mean return {mean_return:.1f}")
+    returns = np.array([e["return"] for e in eps])
+    rate = f"{stats['steps'] / stats['seconds']:,.0f} steps/s" if stats["seconds"] > 0 else "too short to time"
+    print(f"played {len(eps)} episodes of {name} ({stats['steps']} steps, {rate})")
+    outcomes = [e["outcome"] for e in eps]
+    truncated = f"{outcomes.count('truncated')} truncated; mean return {returns.mean():.2f}"
+    if spec.win:  # the spec's `[end] win/loss` says what counts
+        print(f"{outcomes.count('win')} won, {outcomes.count('loss')} lost, {truncated}")
+    else:
+        print(f"{int((returns > 0).sum())} with a positive return, {truncated}")
 
 
-def _what_to_open(run_dir: Path) -> None:
-    ep = 0
-    row = read_for_hints(run_dir, lambda con: con.execute(
-        "SELECT a.text, c.t FROM raw.changes c JOIN (SELECT atom, text FROM atoms WHERE label = 'atLoc' AND "
-        "text LIKE 'atLoc(red-agent-1,%') a ON a.atom = c.atom WHERE c.episode = ? AND c.new_lower = 1 "
-        "ORDER BY c.t DESC LIMIT 1", [ep]).fetchone())
+def _what_to_open(run_dir: Path, spec: Any) -> None:
+    names = [str(a) for a, _ in spec.reward_table[0]]
+    best = read_for_hints(run_dir, lambda con: con.execute(
+        "SELECT episode, t_end FROM raw.episode_end ORDER BY reward DESC, steps, episode LIMIT 1").fetchone())
+    row = None
+    if best is not None and names:
+        row = read_for_hints(run_dir, lambda con: con.execute(
+            "SELECT a.text, c.t FROM raw.changes c JOIN (SELECT atom, text FROM atoms WHERE text IN "
+            "(SELECT unnest(?))) a ON a.atom = c.atom WHERE c.episode = ? AND c.new_lower = 1 "
+            "ORDER BY c.t DESC LIMIT 1", [names, best[0]]).fetchone())
     run = shlex.quote(str(run_dir))
+    ep, last = best if best else (0, 1)
     print(f"\nrun written to {run_dir}/  — what to open:")
-    print(f"  tracelab trace {run} --episode {ep} --from 1 --to 4        # the trace table (the map, t=0, hidden)")
+    print(f"  tracelab sql {run} \"SELECT episode, steps, reward, outcome FROM episodes "
+          f"ORDER BY reward DESC, steps, episode LIMIT 5\"")
+    print(f"  tracelab trace {run} --episode {ep} --from {last} --to {last}            # its last step")
     if row:
         print(f"  tracelab why {run} {shlex.quote(row[0])} --episode {ep} --at {row[1]}   # why is it true?")
-    print(f"  tracelab sql {run} \"SELECT rule, count(*) AS n FROM firings GROUP BY rule ORDER BY n DESC\"")
-    print(f"  tracelab sql {run} --query episode_summary")
-    print(f"  tracelab tui {run}                                           # browse it in the terminal")
-    print(f"  tracelab replay {run} --episode {ep} --save replay.rrd            # a rerun recording of a game")
-    print(f"  tracelab seal {run}                                          # one .duckdb file")
+    print(f"  tracelab tui {run}")
+    print(f"  tracelab replay {run} --episode {ep} --save replay.rrd")

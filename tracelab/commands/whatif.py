@@ -82,10 +82,9 @@ def run(args: argparse.Namespace) -> int:
 def _policy(path: str, world: Any) -> Any:
     # deferred: loads torch
     from tracelab.envs.declared.env_source import EnvSource
-    from tracelab.train.env_policy import load_env_policy
+    from tracelab.train.env_policy import load_trained
     with store_errors():  # a policy that does not load, or was trained on another env
-        policy, _ = load_env_policy(path, EnvSource(world.env, dict(world.env_args)))
-    return policy
+        return load_trained(path, EnvSource(world.env, dict(world.env_args)))
 
 
 def _meta(args: argparse.Namespace, plan: Any, spec: Any, origin: Any) -> dict[str, Any]:

@@ -36,7 +36,7 @@ from tracelab.train.episode_log import EpisodeLog
 from tracelab.train.exploration import Exploration
 from tracelab.train.loop import acting_q, load_shared_state, make_learner, train_loop
 from tracelab.train.metric_log import MetricLog
-from tracelab.train.policy import BEST_POLICY_DIR
+from tracelab.train.env_policy import BEST_POLICY_DIR
 from tracelab.train.rngs import Generators
 from tracelab.train.tensorboard import MetricSink
 from tracelab.train.update_schedule import UpdateSchedule

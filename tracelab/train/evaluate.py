@@ -23,7 +23,7 @@ from tracelab.store.agent_rows import Decisions, RewardTerms
 from tracelab.store.sink import StoreSink
 from tracelab.store.writer import TraceWriter
 from tracelab.train.experiments.stats import spread, wilson
-from tracelab.train.policy import Policy, may_act
+from tracelab.train.env_policy import Policy, may_act
 
 METHOD_CUT = 200  # the method's evaluation cut games at 200 steps
 

@@ -34,7 +34,7 @@ from tracelab.train.game_record import GameRecord
 from tracelab.train.learner import DQNLearner
 from tracelab.train.learner_protocol import Learner
 from tracelab.train.metric_log import MetricLog
-from tracelab.train.policy import BEST_POLICY_DIR, Policy, may_act, save_policy
+from tracelab.train.env_policy import BEST_POLICY_DIR, Policy, may_act, save_policy
 from tracelab.train.qnet import NetSpec, NumpyQ, QFunction, TorchQ
 from tracelab.train.replay import ReplayBuffer
 from tracelab.train.rngs import Generators

@@ -197,8 +197,8 @@ class BranchPlan:
         greedy = None
         if policy is not None:
             # deferred: loads torch, which a branch on the recorded actions does not need
-            from tracelab.train.env_policy import one_env_actor
-            greedy = one_env_actor(policy, env)
+            from tracelab.train.env_policy import greedy_actor
+            greedy = greedy_actor(policy, env)
 
         def act(k: int, obs: Any, info: dict[str, Any]) -> int | None:
             if k == self.at:

@@ -29,7 +29,7 @@ from tracelab.train.experiments.runner import (
     train_seed,
 )
 from tracelab.train.experiments.stats import bootstrap_diff_ci, two_proportion_test
-from tracelab.train.policy import load_policy
+from tracelab.train.env_policy import load_policy
 
 RESULT_POLL_S = 0.2  # how often the experiment looks for a worker's finished training
 TRAIN_P, EVAL_PS = 0.7, (0.3, 0.7)  # the method's code: trained against p = 0.7, evaluated against 0.3

@@ -18,7 +18,7 @@ from tracelab.store.queries import get_query
 from tracelab.store.reader import fetch_arrow, open_run, query_readonly, retrying
 from tracelab.train.config import TrainConfig
 from tracelab.train.evaluate import EvalResult, evaluate, evaluate_into
-from tracelab.train.policy import BEST_POLICY_DIR, Policy, load_policy
+from tracelab.train.env_policy import BEST_POLICY_DIR, Policy, load_policy
 
 if TYPE_CHECKING:
     from tracelab.envs.declared.env_source import EnvSource
