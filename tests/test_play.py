@@ -80,19 +80,20 @@ def test_play_a_team_records_each_agent(tmp_path, capsys):
 
 
 def test_an_old_gridwar_policy_plays_as_it_did_on_rulesim(tmp_path):
-    """sample_runs/base-train/policy (GridWar's trainer, RuleSim) played greedily on GridWarEnv and through
-    the spec path, the same seed: the same games, step for step (its observation is the spec's)."""
+    """sample_runs/base-train/policy (GridWar's trainer, RuleSim) played greedily on RefSim (the hand-written
+    oracle) and through the spec path, the same seed: the same games, step for step (its observation is the
+    spec's)."""
     import numpy as np
 
     from tracelab.envs.declared.env_source import EnvSource
     from tracelab.envs.declared.gridwar import scenario_spec
     from tracelab.envs.declared.play import load_declared, make_declared_env, play_episodes
-    from tracelab.envs.gym_env import GridWarEnv
+    from gridwar_refsim import RefGridWar
     from tracelab.train.env_policy import team_actor
     from tracelab.train.env_policy import load_policy
 
     policy = load_policy(ROOT / "sample_runs" / "base-train" / "policy")
-    ref = GridWarEnv(policy.scenario)
+    ref = RefGridWar(policy.scenario)
     source = EnvSource(*scenario_spec(policy.scenario))
     dec = make_declared_env(source, load_declared(source))
     games = [play_episodes(env, 6, 3, team_actor(policy))["episodes"] for env in (ref, dec)]
