@@ -88,7 +88,9 @@ def test_train_decompose_on_taxi_stores_q_by_term_and_why_prints_it(tmp_path, ca
     assert main(["train", "--resume", str(run), "--env", str(TAXI), "--total-timesteps", "700"]) == 0
 
 
-def test_a_plain_policy_stores_no_terms_and_gridwar_refuses_decompose(tmp_path, capsys):
+def test_a_plain_policy_stores_no_terms_and_a_gridwar_scenario_trains_decomposed(tmp_path, capsys):
+    """Since `train --scenario` trains GridWar's spec, its reward terms are the spec's: --decompose takes it
+    (before: refused, RuleSim's trainer had no terms)."""
     run = tmp_path / "plain"
     assert main(["train", "--env", str(TAXI), "--total-timesteps", "300", "--num-envs", "4",
                  "--learning-starts", "200", "--eval-every", "0", "--eval-games", "1", "--trace-eval-games", "1",
@@ -101,8 +103,8 @@ def test_a_plain_policy_stores_no_terms_and_gridwar_refuses_decompose(tmp_path, 
         con.close()
     assert counts[0] > 0 and counts[1:] == (0, 0)
     capsys.readouterr()
-    assert main(["train", "--scenario", "base", "--decompose", "--total-timesteps", "8", "--run",
-                 str(tmp_path / "g")]) != 0
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("tracelab: error: --decompose needs a world whose reward is split")
-    assert not (tmp_path / "g").exists()
+    assert main(["train", "--scenario", "base", "--decompose", "--total-timesteps", "8", "--num-envs", "4",
+                 "--learning-starts", "4", "--eval-every", "0", "--eval-games", "1", "--trace-eval-games", "1",
+                 "--run", str(tmp_path / "g")]) == 0
+    terms = json.loads((tmp_path / "g" / "policy" / "policy.json").read_text())["network"]["terms"]
+    assert len(terms) > 1, terms

@@ -127,7 +127,6 @@ def test_play_env_plays_gridwar_ids_through_its_spec(tmp_path: Path, capsys, mon
 
 @pytest.mark.parametrize("args, fragment", [
     (["--env", "tracelab/NoSuchLake-v9"], "--env tracelab/NoSuchLake-v9: neither a spec file nor a registered id"),
-    (["--env", "tracelab/GridWar-nonmarkov-v0"], "the spec declares 2 agents; play --env plays one"),
     (["--env", "tracelab/GridWar-base-v0", "--env-arg", "map=moon"], "war.toml:26: env.require.map in maps"),
     (["--env", "tracelab/GridWar-advanced-v0", "--env-arg", "agents_per_team=2"], "plays one agent a team for now"),
     (["--env", "tracelab/FrozenLake-v1", "--env-arg", "slippery=false"], "unknown keyword argument 'slippery'"),

@@ -21,6 +21,7 @@ from tracelab.train.network import to_state_dict
 from tracelab.train.env_policy import load_policy, read_policy_spec
 from tracelab.train.qnet import NetSpec, NumpyQ
 from tracelab.train.replay import ReplayBuffer
+from tracelab.train.torch_files import load_tensors
 from train_helpers import SMALL, WALK
 
 
@@ -149,11 +150,11 @@ def test_train_says_in_its_first_line_which_learner_runs_and_why(tmp_path, capsy
     assert first_line().split(" steps with ")[1].split("; torch on")[0] == (
         "the readable learner (tracelab/train/dqn.py; --learner auto: the fused one supports one hidden layer "
         "without --double-dqn, --dueling or --decompose (given: --dueling, --hidden 8,8))")
-    assert load_checkpoint(tmp_path / "a")["learner"] == "readable"
+    assert load_tensors(checkpoint_path(tmp_path / "a"), 10**9)["learner"] == "readable"
     assert main([*common, "--run", str(tmp_path / "b")]) == 0
     assert "with the fused learner (tracelab/train/learner.py, dqn.py's update written by hand; --learner auto " \
            "takes it for the method's network; an edited dqn.py trains with --learner readable)" in first_line()
-    assert load_checkpoint(tmp_path / "b")["learner"] == "fused"
+    assert load_tensors(checkpoint_path(tmp_path / "b"), 10**9)["learner"] == "fused"
     assert main([*common, "--run", str(tmp_path / "r"), "--learner", "readable"]) == 0
     assert "with the readable learner (tracelab/train/dqn.py, --learner readable); torch on" in first_line()
     assert main([*common, "--run", str(tmp_path / "c"), "--learner", "fused", "--double-dqn"]) == 1

@@ -131,7 +131,7 @@ def test_the_replay_draws_the_board_and_the_return_to_the_last_step(played: Path
     assert max(docs) == t_end
     assert f"step {t_end} of {t_end}" in docs[t_end] and f"dead(me) = [1,1] at the end of t={t_end}" in docs[t_end]
     # the board, as the env's rgb_array draws it: the last frame has the agent on the trap's cell
-    frames = [r for r in rec["/board"] if r.get("Image:buffer")]
+    frames = [r for r in rec["/board/terrain"] if r.get("Image:buffer")]
     assert frames[0]["step"] == 0 and frames[-1]["step"] <= t_end
     env = make_env(played.parent.parent / "trap.toml", render_mode="rgb_array")
     painter_image = env.unwrapped._painter({"c0_0": "at"}, env.unwrapped.world_spec.board.mark_colors)

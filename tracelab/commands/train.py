@@ -261,7 +261,9 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
         what = source.describe() if scenario is None else \
             f"{scenario.name} ({'non-Markov' if cfg.non_markov else 'Markov'}, opponent p {cfg.opponent_p:g}, " \
             f"evaluated against p {cfg.eval_p:g}; --env {source.describe()})"
-        print(f"training on {what} ({encoding} observations, {cfg.envs} worlds in {type(trainer.env).__name__}, "
+        kernel = "" if cfg.kernel == "auto" else f", the {cfg.kernel} kernel"
+        print(f"training on {what} ({encoding} observations, {cfg.envs} worlds in {type(trainer.env).__name__}"
+              f"{kernel}, "
               f"{reward_scale_text(cfg.reward_scale)}) for {cfg.steps:,} steps with {cfg.learner_text()}; "
               f"torch on {torch.get_num_threads()} CPU thread{'s' if torch.get_num_threads() != 1 else ''} "
               f"(--threads); run: {run_dir}", file=sys.stderr)

@@ -521,12 +521,14 @@ class EnvEvalResult:
         return d
 
 
-def make_vector_env(source: EnvSource, worlds: int, by_term: bool = False) -> tuple[Any, str | None]:
+def make_vector_env(source: EnvSource, worlds: int, by_term: bool = False,
+                    kernel: str = "auto") -> tuple[Any, str | None]:
     """`worlds` copies of the env stepped together, a world that ends reset within its step (SAME_STEP, as
     GridWar's vector env): a declared world's own batched engine (DeclaredVectorEnv, every world in one
     engine call), else gymnasium's SyncVectorEnv over the env. World i steps as the env reset with seed
     s + i either way. `by_term`: each world's reward by term is read (train --decompose), which only a
-    world of its own keeps: SyncVectorEnv. Returns (the env, why a declared world is not batched, or None)."""
+    world of its own keeps: SyncVectorEnv. `kernel`: the batched engine's (train --kernel). Returns (the env,
+    why a declared world is not batched, or None)."""
     if by_term:
         note = f"{source.short_name}: --decompose reads each world's reward by term; its worlds step in " \
                "gymnasium's SyncVectorEnv"
@@ -539,7 +541,7 @@ def make_vector_env(source: EnvSource, worlds: int, by_term: bool = False) -> tu
     from tracelab.envs.declared.vector_env import DeclaredVectorEnv
     limit = gym.registry[source.env_id].max_episode_steps if source.env_id is not None else None
     try:
-        return DeclaredVectorEnv(spec_file, worlds, max_episode_steps=limit, **params), None
+        return DeclaredVectorEnv(spec_file, worlds, max_episode_steps=limit, kernel=kernel, **params), None
     except ValueError as e:  # a spec the batched engine does not play yet (several agents, draws `after`)
         note = f"{source.short_name}: {str(e).splitlines()[0]}; its worlds step in gymnasium's SyncVectorEnv"
         return SyncVectorEnv([source.make] * worlds, autoreset_mode=AutoresetMode.SAME_STEP), note

@@ -59,7 +59,7 @@ class EnvTrainer:
         self.eval_source = eval_source or source
         self.worlds = w = cfg.envs
         # a declared world's own batched engine where its spec allows (else SyncVectorEnv, and why)
-        self.env, self.vector_note = make_vector_env(source, w, by_term=cfg.decompose)
+        self.env, self.vector_note = make_vector_env(source, w, by_term=cfg.decompose, kernel=cfg.kernel)
         self.actions_log = ActionLog(w)  # a checkpoint replays the worlds from their reset (env_checkpoint.py)
         single = self.env.single_observation_space
         self.encoder = ObservationEncoder(single, source.name)
@@ -170,7 +170,8 @@ class EnvTrainer:
             result = self._evaluator.play(self.policy, self.step, self.eval_round)
         else:
             if self._eval_env is None:
-                self._eval_env, _ = make_vector_env(self.eval_source, min(cfg.eval_envs, cfg.eval_games))
+                self._eval_env, _ = make_vector_env(self.eval_source, min(cfg.eval_envs, cfg.eval_games),
+                                                   kernel=cfg.kernel)
             result = play_env_games(self._eval_env, self.policy, cfg.eval_games, self.rngs.eval_seed(self.eval_round))
         self.write_metrics(result.metrics())
         self.eval_round += 1

@@ -8,7 +8,6 @@ honour is refused in one line naming it. `train --scenario NAME` trains a scenar
 `scenario_env` maps it to."""
 from __future__ import annotations
 
-from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -115,11 +114,10 @@ _SPEC_DEFAULTS = {"ammo": 3, "health": 1.0, "damage": 1.0, "p_toward": 0.7, "max
 
 
 def scenario_env(scenario: Scenario, p_toward: float, stack_previous: bool) -> tuple[str, dict[str, Any]]:
-    """(the GridWar id, its --env-arg params) that play `scenario` against an opponent moving towards red's
-    base with `p_toward`, the previous observation after the current one with `stack_previous`; params at
-    war.toml's defaults are left out. UserError naming the scenario and what war.toml cannot say of it: a
-    map other than its [data.maps], other starts, slow agents, several agents a team (the spec plays them as a
-    PettingZoo env, which the trainer does not train yet)."""
+    """What the trainer trains for `scenario`: scenario_spec's one-agent case as (the GridWar id, its
+    --env-arg params), params at war.toml's defaults left out. UserError naming the scenario and what the
+    trainer cannot take of it: several agents a team (the spec plays them as a PettingZoo env, which the
+    trainer does not train yet), a map other than war.toml's [data.maps], what no spec plays."""
     where = f"scenario {scenario.name!r}"
     if scenario.agents_per_team != 1:
         raise UserError(f"{where}: {scenario.agents_per_team} agents a team: training goes through its spec "
@@ -129,14 +127,14 @@ def scenario_env(scenario: Scenario, p_toward: float, stack_previous: bool) -> t
             frozenset(scenario.mountains) not in _MAPS:
         raise UserError(f"{where}: its map is not one of war.toml's [data.maps] (default, open): write the map "
                         f"there and train --env rules/gridworld/war.toml --env-arg map=NAME")
-    if set(scenario.red_starts or ()) - {scenario.red_base} or set(scenario.blue_starts or ()) - {scenario.blue_base} \
-            or scenario.slow_agents.red or scenario.slow_agents.blue:
-        raise UserError(f"{where}: starts off the bases and slow agents are not war.toml params")
-    params = {"ammo": scenario.ammo, "health": scenario.health, "damage": scenario.damage, "p_toward": p_toward,
-              "max_steps": scenario.max_steps, "map": _MAPS[frozenset(scenario.mountains)],
-              "stack_previous": stack_previous, **asdict(scenario.rewards)}
-    name = "tracelab/GridWar-advanced-v0" if scenario.advanced else "tracelab/GridWar-base-v0"
+    try:
+        _, params = scenario_spec(scenario, stack_previous, p_toward)
+    except ValueError as e:
+        raise UserError(str(e)) from None
+    name = "tracelab/GridWar-advanced-v0" if params.pop("advanced") else "tracelab/GridWar-base-v0"
+    del params["agents_per_team"]
     return name, {k: v for k, v in params.items() if v != _SPEC_DEFAULTS[k]}
+
 
 # hand-written specs of scenarios war.toml cannot generate yet, with the fields they fix
 WAR_ADVANCED_2V2 = RULES_DIR / "gridworld" / "war_advanced_2v2.toml"
