@@ -154,19 +154,26 @@ def load_env_checkpoint(run: str | Path, given: EnvSource | None, limit: Limit) 
         raise FileRefused(f"{f}: config: {e}") from None
     learner, best = learner_schema(cfg, net)
     w = cfg.envs
+    agents = getattr(encoder, "n_agents", 1)  # a team: a row per world and agent (env_trainer.py)
+    team = {} if agents == 1 else {"pending": {
+        "obs": Tensor(torch.float32, (w, agents, encoder.size)), "action": Tensor(torch.int64, (w, agents)),
+        "reward": Tensor(torch.float64, (w, agents)), "discount": Tensor(torch.float64, (w, agents)),
+        "open": Tensor(torch.bool, (w, agents))}}
     state.pop("best_rows", None)  # GridWar's old layout of the best networks: never an --env run's
     try:
         check(state, {
             **parts_schema(), **best, "learners": {"shared": learner},
-            "games": {**episode_games_schema(w), "obs": Tensor(torch.float32, (w, encoder.size))},
-            "env_seed": IntRange(0), "env_actions": Tensor(torch.int64, (None, w))})
+            "games": {**episode_games_schema(w), "obs": Tensor(torch.float32, (w * agents, encoder.size))},
+            "env_seed": IntRange(0), "env_actions": Tensor(torch.int64, (None, w * agents)), **team})
         check_buffer_rows(state["learners"]["shared"]["buffer"], n_actions, "learners.shared.buffer")
         check_best(state, {"shared"})
         passes = state["step"] // w
         if state["env_actions"].shape[0] != passes:
             raise Mismatch("env_actions", f"{passes} rows (step {state['step']} of {w} worlds)",
                            f"{state['env_actions'].shape[0]} rows")
-        in_range(state["env_actions"], 0, n_actions - 1, "env_actions")
+        in_range(state["env_actions"], 0 if agents == 1 else -1, n_actions - 1, "env_actions")  # -1: does nothing
+        if team:
+            in_range(state["pending"]["action"], 0, n_actions - 1, "pending.action")
         try:
             np.random.PCG64().state = state["rng"]
         except (ValueError, TypeError, OverflowError) as e:
@@ -175,6 +182,8 @@ def load_env_checkpoint(run: str | Path, given: EnvSource | None, limit: Limit) 
         raise FileRefused(f"{f}: {e}") from None
     state["env_actions"] = state["env_actions"].numpy()
     state["games"] = {k: v.numpy() for k, v in state["games"].items()}
+    if team:
+        state["pending"] = {k: v.numpy() for k, v in state["pending"].items()}
     buf = state["learners"]["shared"]["buffer"]
     state["learners"]["shared"]["buffer"] = {k: v.numpy() if isinstance(v, torch.Tensor) else v
                                              for k, v in buf.items()}

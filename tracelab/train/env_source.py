@@ -59,15 +59,52 @@ class ObservationEncoder:
         return out
 
 
+class TeamEncoder:
+    """Observations [W, agents, ...] of a world of several agents -> float32 [W * agents, size]: each agent's
+    encoded observation, then its one-hot index (one network for every agent: team_policy.py)."""
+
+    def __init__(self, agent_encoder: ObservationEncoder, n_agents: int) -> None:
+        self.agent, self.n_agents = agent_encoder, n_agents
+        self.size = agent_encoder.size + n_agents
+        self._indicator = np.eye(n_agents, dtype=np.float32)
+
+    def describe(self) -> str:
+        return f"{self.agent.describe()} an agent, then its one-hot index among {self.n_agents} agents"
+
+    def __call__(self, obs: Any) -> np.ndarray:
+        each = self.agent(obs)  # [W * agents, D]: an agent's rows follow its world's order
+        worlds = len(each) // self.n_agents
+        return np.concatenate([each, np.tile(self._indicator, (worlds, 1))], axis=1)
+
+
 def action_count(space: spaces.Space[Any], where: str) -> int:
     if not isinstance(space, spaces.Discrete):
         raise UserError(f"{where}: action space {space} is not Discrete: DQN picks one of n actions")
     return int(space.n)
 
 
-def probe_env(source: Any) -> tuple[ObservationEncoder, int, Any]:
+def team_spec(source: Any) -> Any:
+    """The WorldSpec of a declared world of several agents (trained as a team), else None."""
+    # deferred: the spec module loads the engine's parser
+    from tracelab.envs.declared.spec import load_spec
+    try:
+        spec_path, params = source.declared()
+    except UserError:  # not a declared world
+        return None
+    spec = load_spec(spec_path, **params)
+    return spec if len(spec.agents) > 1 else None
+
+
+def probe_env(source: Any) -> tuple[ObservationEncoder | TeamEncoder, int, Any]:
     """(the encoder of `source`'s observations, its action count, its WorldSpec or None) from one env made
-    and closed: what sizes a training on it (a bad id, spec or keyword argument fails here, in one line)."""
+    and closed: what sizes a training on it (a bad id, spec or keyword argument fails here, in one line). A
+    declared world of several agents: its TeamEncoder, from its spec."""
+    team = team_spec(source)
+    if team is not None:
+        # deferred: the declared env's module loads the engine (numba)
+        from tracelab.envs.declared.gym_env import observation_space
+        encoder = ObservationEncoder(observation_space(team), source.name)
+        return TeamEncoder(encoder, len(team.agents)), len(team.action_names), team
     probe = source.make()
     try:
         return (ObservationEncoder(probe.observation_space, source.name),

@@ -9,7 +9,16 @@ EpisodeLog, MetricLog, BestPolicy), each saving and loading itself (EnvTrainer.s
 and target-copy cadence, the same metric names where they mean the same thing. Observations are encoded
 for the network by env_source.ObservationEncoder (a Discrete one is one-hot). Checkpoints and the replay
 of the worlds' episodes are env_checkpoint.py's; a declared world's first evaluation games are traced into
-the run (external_eval.DeclaredEvaluator), as GridWar's are."""
+the run (external_eval.DeclaredEvaluator), as GridWar's are.
+
+Several agents a team (a declared world whose `[agents] names` are several: GridWar's 5v5, its non-Markov
+scenario): one network for all of them (parameter sharing, team_policy.py: each agent's observation and its
+one-hot index is a row of the batch), every world stepped by one engine call (DeclaredVectorEnv's team
+mode). As GridWar's trainer on RuleSim (loop.py, transitions.py), an agent's transition runs from a step
+where it decides (the spec's `[agents] decides`: alive, a slow agent on its even steps) to its next
+decision, the end of the episode or its death (`[agents] alive`: no bootstrap), earning its own reward (the
+spec's per-agent reward, RuleSim's agent_reward) discounted by the steps it spans; an agent that does not
+decide does nothing and adds no transition."""
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
@@ -28,7 +37,7 @@ from tracelab.train.env_checkpoint import ActionLog, replay_actions, save_env_ch
 from tracelab.train.env_policy import (EnvEvalResult, EnvPolicy, declares_outcomes, make_vector_env, play_env_games,
                                        save_env_policy, world_spec_of)
 from tracelab.envs.declared.env_source import EnvSource
-from tracelab.train.env_source import ObservationEncoder, action_count
+from tracelab.train.env_source import ObservationEncoder, TeamEncoder, action_count
 from tracelab.train.external_eval import DeclaredEvaluator, EvalSettings
 from tracelab.train.learner_protocol import Learner
 from tracelab.train.best_policy import BestPolicy
@@ -38,6 +47,8 @@ from tracelab.train.loop import acting_q, load_shared_state, make_learner, train
 from tracelab.train.metric_log import MetricLog
 from tracelab.train.env_policy import BEST_POLICY_DIR
 from tracelab.train.rngs import Generators
+from tracelab.train.team_policy import TeamPolicy
+from tracelab.train.transitions import PendingTransitions
 from tracelab.train.tensorboard import MetricSink
 from tracelab.train.update_schedule import UpdateSchedule
 
@@ -60,11 +71,18 @@ class EnvTrainer:
         self.worlds = w = cfg.envs
         # a declared world's own batched engine where its spec allows (else SyncVectorEnv, and why)
         self.env, self.vector_note = make_vector_env(source, w, by_term=cfg.decompose, kernel=cfg.kernel)
-        self.actions_log = ActionLog(w)  # a checkpoint replays the worlds from their reset (env_checkpoint.py)
-        single = self.env.single_observation_space
-        self.encoder = ObservationEncoder(single, source.name)
-        self.n_actions = action_count(self.env.single_action_space, source.name)
+        # a checkpoint replays the worlds from their reset (env_checkpoint.py); a team's, each agent's
+        self.actions_log = ActionLog(w * getattr(self.env, "n_agents", 1))
         declared = world_spec_of(self.env)  # a declared world names its actions
+        self.agents = n = getattr(self.env, "n_agents", 1)
+        if n == 1:
+            self.encoder: Any = ObservationEncoder(self.env.single_observation_space, source.name)
+            self.n_actions = action_count(self.env.single_action_space, source.name)
+        else:  # a team: each agent's observation and index a row (team_policy.py)
+            if cfg.decompose:
+                raise UserError(f"{source.name}: --decompose trains one agent; this world has {n}")
+            self.encoder = TeamEncoder(ObservationEncoder(self.env.agent_observation_space, source.name), n)
+            self.n_actions = len(declared.action_names)
         self.declared = declared is not None
         self.counts_wins = declares_outcomes(self.env)  # its [end] win / loss: the method's counting
         self.action_names = list(declared.action_names) if declared is not None else \
@@ -76,7 +94,10 @@ class EnvTrainer:
             env.unwrapped.world.keep_reward_terms = True
         self.learner_kind, self.learner_note = cfg.learner_choice()
         self.learner: Learner = make_learner(self.learner_kind, self.net, cfg, self.rngs.torch)
-        self.policy = EnvPolicy(acting_q(self.learner, self.net), self.encoder, cfg.mask)
+        rows = EnvPolicy(acting_q(self.learner, self.net), self.encoder, cfg.mask)
+        self.policy: Any = rows if n == 1 else TeamPolicy(rows, n)
+        # a team's open transitions (world, agent): from a decision to the next, the end, or a death
+        self.pending = PendingTransitions(w, n, self.encoder.size, cfg.gamma) if n > 1 else None
         self.schedule = UpdateSchedule(cfg, w)
         self.episodes = EpisodeLog(w, writer, logging=False)  # begins are written once train() starts
         self.metrics = MetricLog(writer, metric_sinks)
@@ -92,6 +113,10 @@ class EnvTrainer:
         self.env_seed = self.rngs.env_seed()
         self.obs, self.info = self.env.reset(seed=self.env_seed)
         self.episodes.begin(np.arange(w), self.step)
+
+    def _flag(self, info: dict[str, Any], key: str) -> np.ndarray:
+        """A team's `decides` or `alive` [W, agents] (every agent, where the spec does not declare it)."""
+        return info[key] if key in info else np.ones((self.worlds, self.agents), bool)
 
     @property
     def best_eval(self) -> tuple[float, int] | None:
@@ -113,6 +138,8 @@ class EnvTrainer:
         return np.where(explore, random, self.policy.act(self.obs, masks))
 
     def env_step(self) -> None:
+        if self.agents > 1:
+            return self.team_step()
         cfg = self.cfg
         actions = self._choose()
         obs_now = self.encoder(self.obs)
@@ -137,11 +164,56 @@ class EnvTrainer:
         self.step += self.worlds
         self.obs, self.info = obs, info
         if done.any():
-            ended = np.flatnonzero(done)
-            named = info.get("final_info", {}).get("outcome")  # win / loss, where the world declares them
-            self.episodes.end(ended, [str(named[k]) if named is not None and named[k] else
-                                      "terminated" if terminated[k] else "truncated" for k in ended.tolist()])
-            self.episodes.begin(ended, self.step)
+            self._end_games(done, terminated, info)
+
+    def team_step(self) -> None:
+        """Every world one step of every agent: the deciding agents ε-greedy, the others doing nothing (-1);
+        the transitions that close (the agent decides again, dies, or its episode ends) into the replay."""
+        cfg, w, n = self.cfg, self.worlds, self.agents
+        masks = self._masks()
+        acting = self._flag(self.info, "decides")
+        explore, random = self.exploration.draw(self.step, (w, n), self.n_actions, masks)
+        greedy = acting & ~explore
+        actions = random
+        if greedy.any():
+            actions = np.where(greedy, self.policy.act(self.obs, masks), random)
+        actions = np.where(acting, actions, -1)
+        x = self.encoder(self.obs).reshape(w, n, -1)
+        self.pending.start(acting, [x[:, j] for j in range(n)], actions)
+        obs, reward, terminated, truncated, info = self.env.step(actions)
+        self.actions_log.add(actions.reshape(-1))
+        self.pending.earn(info["agent_reward"] * cfg.reward_scale)
+        done = terminated | truncated
+        true_next, alive = obs, self._flag(info, "alive")
+        if done.any():  # SAME_STEP autoreset: an ended world's last state is in final_obs / final_info
+            true_next, alive = np.array(obs, copy=True), alive.copy()
+            true_next[done] = info["final_obs"][done]
+            if "alive" in info:
+                alive[done] = info["final_info"]["alive"][done]
+        decides = self._flag(info, "decides")
+        dead = ~alive
+        closed = self.pending.close(done[:, None] | dead | decides, terminated[:, None] | dead)
+        if len(closed["action"]):
+            cw, ca = closed["world"], closed["agent"]
+            allowed = None
+            if cfg.mask and "action_mask" in info:  # s' mask bounds the target's max; an ended world's: all
+                allowed = info["action_mask"][cw, ca].astype(bool)
+                allowed[done[cw]] = True
+            next_x = self.encoder(true_next).reshape(w, n, -1)[cw, ca]
+            self.learner.buffer.add(closed["obs"], closed["action"], closed["reward"], next_x, closed["discount"],
+                                    allowed)
+        self.episodes.add_step(reward)
+        self.step += w
+        self.obs, self.info = obs, info
+        if done.any():
+            self._end_games(done, terminated, info)
+
+    def _end_games(self, done: np.ndarray, terminated: np.ndarray, info: dict[str, Any]) -> None:
+        ended = np.flatnonzero(done)
+        named = info.get("final_info", {}).get("outcome")  # win / loss, where the world declares them
+        self.episodes.end(ended, [str(named[k]) if named is not None and named[k] else
+                                  "terminated" if terminated[k] else "truncated" for k in ended.tolist()])
+        self.episodes.begin(ended, self.step)
 
     # ---- logging, evaluation, policies ----
     def log_metrics(self) -> dict[str, float]:
@@ -215,6 +287,7 @@ class EnvTrainer:
             **self.rngs.state(), **self.schedule.state(), **self.metrics.state(), **self.best.state(), **episodes,
             "games": {**episodes["games"], "obs": self.encoder(self.obs)},
             "env_seed": self.env_seed, "env_actions": self.actions_log.array(),
+            **({"pending": self.pending.state()} if self.pending is not None else {}),
         }
 
     def load_state(self, st: dict[str, Any]) -> None:
@@ -225,11 +298,15 @@ class EnvTrainer:
         g = st["games"]
         self.env_seed = int(st["env_seed"])
         self.actions_log.load(st["env_actions"])
-        obs, self.info = replay_actions(self.env, self.env_seed, self.actions_log.array())
+        actions = self.actions_log.array()
+        obs, self.info = replay_actions(self.env, self.env_seed,
+                                        actions if self.agents == 1 else actions.reshape(len(actions), -1, self.agents))
         if not np.array_equal(self.encoder(obs), g["obs"]):
             raise ValueError("replaying the checkpoint's games did not reproduce their observations: another env "
                              "(or version of it) than the one it was written with, or an edited file")
         self.obs = obs
+        if self.pending is not None:
+            self.pending.load_state(st["pending"])
 
     def renumber_games(self, first_free: int) -> None:
         """After a restore into the checkpoint's own run: the games go on under new episode ids

@@ -25,7 +25,9 @@ from tracelab.store.writer import TraceWriter
 from tracelab.train.env_policy import (EVAL_STEP_CAP, EnvEvalResult, declares_outcomes, make_vector_env,
                                        one_env_actor, play_env_games)
 from tracelab.envs.declared.env_source import EnvSource
+from tracelab.train.env_source import team_spec
 from tracelab.train.rngs import eval_seed
+from tracelab.train.team_policy import team_env_actor
 
 Act = Callable[[Any], np.ndarray]  # a batch of observations -> the batch's (greedy) actions
 NewId = Callable[[], int]          # the run's next free episode id
@@ -128,8 +130,15 @@ class DeclaredEvaluator:
     def __init__(self, source: EnvSource, writer: TraceWriter, new_id: NewId, settings: EvalSettings) -> None:
         self.source, self.settings = source, settings
         self.traced = min(settings.traced, settings.games)
-        self.trace_env = EnvSource(source.name, {**source.kwargs, "trace_writer": writer,
-                                                 "trace_episode_ids": new_id}).make() if self.traced else None
+        self.team = team_spec(source)  # several agents: a TeamEnv records each agent's decisions
+        if not self.traced:
+            self.trace_env: Any = None
+        elif self.team is not None:
+            from tracelab.envs.declared.play import TeamEnv  # deferred: loads the engine (numba)
+            self.trace_env = TeamEnv(self.team, trace_writer=writer, trace_episode_ids=new_id)
+        else:
+            self.trace_env = EnvSource(source.name, {**source.kwargs, "trace_writer": writer,
+                                                     "trace_episode_ids": new_id}).make()
         rest = settings.games - self.traced
         self.env = make_vector_env(source, min(settings.envs, rest))[0] if rest else None
 
@@ -157,7 +166,7 @@ class DeclaredEvaluator:
         """One greedy game in the traced env; one that runs EVAL_STEP_CAP steps without an end is counted
         truncated (its record ends 'aborted' at the next game's reset)."""
         env = self.trace_env
-        act = one_env_actor(agent, env)
+        act = one_env_actor(agent, env) if self.team is None else team_env_actor(agent, env)
         obs, info = env.reset(seed=seed)
         ret, steps, terminated, truncated = 0.0, 0, False, False
         while not (terminated or truncated) and steps < EVAL_STEP_CAP:

@@ -108,31 +108,31 @@ def register_gridwar() -> None:
 # war.toml's [data.maps] as a scenario's mountains (x, y): the built-in scenarios' map, and the same board open
 _DEFAULT_MOUNTAINS = ((2, 3), (3, 3), (2, 4), (3, 4), (4, 4), (4, 5))
 _MAPS = {frozenset(_DEFAULT_MOUNTAINS): "default", frozenset(): "open"}
-_SPEC_DEFAULTS = {"ammo": 3, "health": 1.0, "damage": 1.0, "p_toward": 0.7, "max_steps": 200, "map": "default",
+_NONMARKOV_DEFAULTS = {"p_toward": 0.7, "max_steps": 200, "stack_previous": True}
+_SPEC_DEFAULTS = {"agents_per_team": 1, "ammo": 3, "health": 1.0, "damage": 1.0, "p_toward": 0.7, "max_steps": 200, "map": "default",
                   "stack_previous": False, "win": 250.0, "loss": -250.0, "hit_opponent": 400.0, "got_shot": -200.0,
                   "valid_action": -2.0, "unsafe": -200.0, "invalid": -10.0}
 
 
 def scenario_env(scenario: Scenario, p_toward: float, stack_previous: bool) -> tuple[str, dict[str, Any]]:
-    """What the trainer trains for `scenario`: scenario_spec's one-agent case as (the GridWar id, its
-    --env-arg params), params at war.toml's defaults left out. UserError naming the scenario and what the
-    trainer cannot take of it: several agents a team (the spec plays them as a PettingZoo env, which the
-    trainer does not train yet), a map other than war.toml's [data.maps], what no spec plays."""
+    """What the trainer trains for `scenario` (scenario_spec's spec and params): a GridWar id and its
+    --env-arg params, params at war.toml's defaults left out (the non-Markov scenario: its id; the advanced
+    game with several agents a team: its spec file). UserError naming the scenario and what no spec plays
+    (a map other than war.toml's [data.maps], a scenario file's own starts, ...)."""
     where = f"scenario {scenario.name!r}"
-    if scenario.agents_per_team != 1:
-        raise UserError(f"{where}: {scenario.agents_per_team} agents a team: training goes through its spec "
-                        f"(rules/gridworld/war.toml), whose several agents make a PettingZoo env the trainer does "
-                        f"not train yet; train 1v1 (--agents 1), or train an older tracelab for team play")
     if (scenario.width, scenario.height, scenario.red_base, scenario.blue_base) != (8, 8, (7, 0), (0, 7)) or \
             frozenset(scenario.mountains) not in _MAPS:
         raise UserError(f"{where}: its map is not one of war.toml's [data.maps] (default, open): write the map "
                         f"there and train --env rules/gridworld/war.toml --env-arg map=NAME")
     try:
-        _, params = scenario_spec(scenario, stack_previous, p_toward)
+        path, params = scenario_spec(scenario, stack_previous, p_toward)
     except ValueError as e:
         raise UserError(str(e)) from None
+    if Path(path) == WAR_NONMARKOV:
+        return "tracelab/GridWar-nonmarkov-v0", {k: v for k, v in params.items() if v != _NONMARKOV_DEFAULTS[k]}
+    if Path(path) != WAR_SPEC:
+        return path, params
     name = "tracelab/GridWar-advanced-v0" if params.pop("advanced") else "tracelab/GridWar-base-v0"
-    del params["agents_per_team"]
     return name, {k: v for k, v in params.items() if v != _SPEC_DEFAULTS[k]}
 
 

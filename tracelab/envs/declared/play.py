@@ -44,9 +44,11 @@ class TeamEnv:
     """A declared world of several agents, played by one policy for all of them, as play_episodes plays an
     Env: the observation [agents, ...] (each agent's), `info["action_mask"]` [agents, actions], a step takes
     an action per agent and gives the agents' summed reward; `info["outcome"]` at the end where the world
-    declares one. Seeded as DeclaredParallelEnv (the same draws); `trace_writer`: the run its games go to."""
+    declares one. Seeded as DeclaredParallelEnv (the same draws); `trace_writer`: the run its games go to
+    (`trace_episode_ids`: their episode ids, where the run is another's, as DeclaredEnv's)."""
 
-    def __init__(self, spec: WorldSpec, *, kernel: str = "auto", trace_writer: TraceWriter | None = None) -> None:
+    def __init__(self, spec: WorldSpec, *, kernel: str = "auto", trace_writer: TraceWriter | None = None,
+                 trace_episode_ids: Callable[[], int] | None = None) -> None:
         # deferred: the world loads the engine (numba)
         from tracelab.envs.declared.world import DeclaredWorld
         self.world_spec = spec
@@ -59,7 +61,7 @@ class TeamEnv:
         if trace_writer is not None:
             # deferred: the store's modules (DuckDB) only load for a traced world
             from tracelab.envs.declared.recording import DeclaredRecorder
-            self._recorder = DeclaredRecorder(self.world, trace_writer)
+            self._recorder = DeclaredRecorder(self.world, trace_writer, trace_episode_ids)
 
     @property
     def unwrapped(self) -> "TeamEnv":
@@ -73,6 +75,11 @@ class TeamEnv:
         """The policy's output for the next step, one row per agent (recorded as its decisions)."""
         if self._recorder is not None:
             self._recorder.decided(output, mask)
+
+    def trace_info(self, info: dict[str, Any] | None) -> None:
+        """The begin info of the games it records from its next reset on (DeclaredEnv.trace_info)."""
+        if self._recorder is not None:
+            self._recorder.begin_info = info
 
     def reset(self, seed: int | None = None) -> tuple[np.ndarray, dict[str, Any]]:
         if seed is not None:

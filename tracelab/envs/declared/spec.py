@@ -177,6 +177,10 @@ class WorldSpec:
     previous: int = 0
     clocks: tuple[Clock, ...] = ()
     nearest_facts: tuple[NearestFacts, ...] = ()
+    # `[agents] decides`, `alive` (per agent, or empty): whether an agent chooses its action this step, and
+    # whether it still plays (a trainer's transitions: env_trainer.py, "Several agents a team")
+    decides: tuple[Atom, ...] = ()
+    alive: tuple[Atom, ...] = ()
 
 
 # ---- reading typed values, located ----
@@ -419,7 +423,7 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     board = _board(r) if "board" in src.data else None
     rules = _load_rules(r, rule_files)
 
-    agents_t = r.table(("agents",), ("names", "mask"))
+    agents_t = r.table(("agents",), ("names", "mask", "decides", "alive"))
     agents = r.strings(("agents", "names"))
     if not agents or len(set(agents)) != len(agents):
         raise r.err(("agents", "names"), "expected one or more distinct agents")
@@ -447,6 +451,7 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
             raise r.err(("board", "annotate", i), f"{pred!r}: the program has no predicate {pred!r}")
 
     action_names, action_facts, mask = _actions(r, check, agents, agents_t.get("mask"))
+    decides, alive = (_per_agent(r, check, key, agents, agents_t.get(key)) for key in ("decides", "alive"))
     domains = {"cells": board.cells} if board else {}
     space, parts = _observation(r, check, domains, agents)
     previous = _previous(r, space)
@@ -479,7 +484,7 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     if board is not None:
         spec_read = [*(a for part in parts for atoms in part.per_agent for a in atoms), *terminated, *truncated,
                      *(a for per_agent in (*reward_table, *reward_scaled) for a, _ in per_agent),
-                     *(a for per_agent in (mask or ()) for a in per_agent),
+                     *(a for per_agent in (mask or ()) for a in per_agent), *decides, *alive,
                      *(a for d in (*choices, *randoms) for value in (d.weights or ()) for a in value),
                      *(a for n in nearest_facts for a in n.where)]
         _check_board_names(r, rules, board, {a.pred for a in spec_read})
@@ -491,7 +496,7 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     return WorldSpec(src.path, names, program, tuple(agents), action_names, action_facts, mask, space, parts,
                      reward_table, reward_scaled, terminated, truncated, max_steps, start_facts, choices,
                      randoms, board, fps, src, r.budget.board_facts + r.budget.atoms, reward_terms, win, loss,
-                     previous, clocks, nearest_facts)
+                     previous, clocks, nearest_facts, decides, alive)
 
 
 def _require(r: _Reader) -> None:
@@ -575,6 +580,14 @@ def _plain(value: Any) -> Any:
     if isinstance(value, np.generic):
         return value.item()
     return value
+
+
+def _per_agent(r: _Reader, check: _Names, key: str, agents: list[str], text: Any) -> tuple[Atom, ...]:
+    """`[agents] decides` / `alive`: an atom with `Agent`, one per agent (none when the key is absent)."""
+    if text is None:
+        return ()
+    lit = check.pattern(("agents", key), text, (AGENT_VAR,))
+    return tuple(check.ground(lit, {AGENT_VAR: a}) for a in agents)
 
 
 def _every_agents(r: _Reader, check: _Names, path: KeyPath, agents: list[str], *, bounds: bool = False

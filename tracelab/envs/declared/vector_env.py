@@ -17,7 +17,15 @@ steps exactly as DeclaredEnv (and gymnasium's own game) reset with seed s + i an
 worlds) and counting below (every world in one compiled call with the reads, vector_fused.py).
 
 `max_episode_steps`: truncation after that many steps (gymnasium's TimeLimit; make_vec passes the
-registered limit)."""
+registered limit).
+
+Several agents (a spec whose `[agents] names` are more than one, an array observation): the worlds as a
+team env, as play.TeamEnv steps one world: observations [W, agents, ...] (each agent's, read with `Agent` =
+it), actions [W, agents] (-1: the agent does nothing, as one left out of a PettingZoo step), the reward
+[W] the agents' sum and info["agent_reward"] [W, agents] each one's (the step's, also for a world that
+ended), info["action_mask"] [W, agents, actions]; where the spec declares `[agents] decides` and `alive`,
+info["decides"] and info["alive"] [W, agents] (the returned observation's state; final_info holds the ended
+worlds' last ones). What the trainer trains a team on (env_trainer.py)."""
 from __future__ import annotations
 
 import os
@@ -57,29 +65,36 @@ class DeclaredVectorEnv(VectorEnv):
         if max_episode_steps is not None and max_episode_steps < 1:
             raise ValueError(f"max_episode_steps must be at least 1, got {max_episode_steps}")
         self.world_spec = spec if isinstance(spec, WorldSpec) else load_spec(spec, **params)
-        if len(self.world_spec.agents) != 1:
-            raise ValueError(f"{self.world_spec.path}: the vector env plays one agent; this spec declares "
-                             f"{len(self.world_spec.agents)}")
+        self.n_agents = n = len(self.world_spec.agents)
+        if n > 1 and self.world_spec.space == "Dict":
+            raise ValueError(f"{self.world_spec.path}: the vector env plays several agents of an array "
+                             f"observation (Box, Discrete, MultiDiscrete); this spec's is a Dict")
         self.num_envs = num_envs
         self.max_episode_steps = max_episode_steps
         self.copy = copy  # observations are new arrays either way; kept for SyncVectorEnv's signature
         self.worlds = DeclaredWorlds(self.world_spec, num_envs, kernel)
-        self.single_observation_space = observation_space(self.world_spec)
-        self.single_action_space = spaces.Discrete(len(self.world_spec.action_names))
+        self.agent_observation_space = observation_space(self.world_spec)  # each agent's
+        n_actions = len(self.world_spec.action_names)
+        self.single_observation_space = self.agent_observation_space if n == 1 else \
+            batch_space(self.agent_observation_space, n)
+        self.single_action_space = spaces.Discrete(n_actions) if n == 1 else spaces.MultiDiscrete([n_actions] * n)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
         self._rngs: list[np.random.Generator] = []
         self._all = np.ones(num_envs, bool)
         self._all.flags.writeable = False  # shared by every `_key` mask that covers all worlds
         self._everywhere = np.arange(num_envs)
-        self._history = ObservationHistory(self.world_spec.previous)
+        self._histories = [ObservationHistory(self.world_spec.previous) for _ in range(n)]
+        one = self.worlds.one
+        self._flags = {"decides": one._decides_ids, "alive": one._alive_ids}  # [agents] decides, alive
 
     def reset(self, *, seed: int | Sequence[int] | None = None, options: dict[str, Any] | None = None
               ) -> tuple[Any, dict[str, Any]]:
         mask = (options or {}).get("reset_mask")
         if mask is not None and self._rngs:  # only these worlds restart, drawing on from their generators
-            self.worlds.reset(np.flatnonzero(np.asarray(mask, bool)))
-            return self.worlds.observations(), self._info(self._all)
+            reset = np.flatnonzero(np.asarray(mask, bool))
+            self.worlds.reset(reset)
+            return self._observe(reset), self._info(self._all)
         if seed is None:
             seeds: list[int | None] = [None] * self.num_envs
         elif isinstance(seed, (int, np.integer)):
@@ -94,19 +109,24 @@ class DeclaredVectorEnv(VectorEnv):
         if isinstance(seed, (int, np.integer)):
             super().reset(seed=int(seed))
         self.worlds.reset(self._everywhere)
-        return self._history.start(self.worlds.observations()), self._info(self._all)
+        return self._observe(self._everywhere), self._info(self._all)
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         if not self._rngs:
             raise RuntimeError("call reset() before step()")
         a = np.asarray(actions)
-        n = self.single_action_space.n
-        if a.shape != (self.num_envs,) or not np.issubdtype(a.dtype, np.integer) or a.min() < 0 or a.max() >= n:
-            raise ValueError(f"actions must be {self.num_envs} integers in 0..{n - 1}, got {actions!r}")
+        n, shape = len(self.world_spec.action_names), (self.num_envs,) + ((self.n_agents,) if self.n_agents > 1 else ())
+        low = -1 if self.n_agents > 1 else 0
+        if a.shape != shape or not np.issubdtype(a.dtype, np.integer) or a.min() < low or a.max() >= n:
+            raise ValueError(f"actions must be {shape} integers in {low}..{n - 1}, got {actions!r}")
         w = self.worlds
         w.step(a.astype(np.int64))
-        obs = self._history.step(w.observations())
-        reward = w.rewards()
+        obs = self._observe()
+        if self.n_agents == 1:
+            reward = w.rewards()
+        else:
+            each = np.stack([w.rewards(j) for j in range(self.n_agents)], axis=1)
+            reward = each.sum(axis=1)
         terminated, truncated = w.terminated(), w.truncated(self.max_episode_steps)
         info = self._info(self._all)
         done = terminated | truncated
@@ -118,16 +138,30 @@ class DeclaredVectorEnv(VectorEnv):
             ended = np.flatnonzero(done)
             w.reset(ended)
             # the others' observations read again, unchanged; the restarted worlds' history is their start
-            final_obs, obs = obs, self._history.start(w.observations(), ended)
+            final_obs, obs = obs, self._observe(ended)
             info = self._info(self._all)
             info.update(final_obs=final_obs, _final_obs=done, final_info=final_info, _final_info=done)
+        if self.n_agents > 1:
+            info.update(agent_reward=each, _agent_reward=self._all)
         return obs, reward, terminated, truncated, info
 
+    def _observe(self, start: np.ndarray | None = None) -> Any:
+        """Every agent's observation with its history (`start`: the worlds whose history starts now)."""
+        w = self.worlds
+        each = [h.step(w.observations(j)) if start is None else h.start(w.observations(j), start)
+                for j, h in enumerate(self._histories)]
+        return each[0] if self.n_agents == 1 else np.stack(each, axis=1)
+
     def _info(self, mask: np.ndarray) -> dict[str, Any]:
-        info: dict[str, Any] = {"t": self.worlds.steps.copy()}
-        masks = self.worlds.action_masks()
-        if masks is not None:
-            info["action_mask"] = masks
+        w = self.worlds
+        info: dict[str, Any] = {"t": w.steps.copy()}
+        masks = [w.action_masks(j) for j in range(self.n_agents)]
+        if masks[0] is not None:
+            info["action_mask"] = masks[0] if self.n_agents == 1 else np.stack(masks, axis=1)
+        for key, ids in self._flags.items() if self.n_agents > 1 else ():  # what a team's trainer reads
+            held = w.holds(ids)
+            if held is not None:
+                info[key] = held
         return self._with_masks(info, mask)
 
     _with_masks = staticmethod(with_masks)

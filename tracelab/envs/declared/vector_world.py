@@ -55,6 +55,7 @@ class DeclaredWorlds:
                      np.zeros((w, len(mask)), np.int8), np.zeros(1, np.int64))
         self._binding = fused.FusedBinding(self.engine, self._tables, self._ext, self._reads, self._out)
         self._rows = np.full((w, self.n_agents), -1, np.int64)
+        self._agent_rows = np.arange(self.n_agents, dtype=np.int64) * self.n_actions
         self._picks = np.full((w, len(one._picks)), -1, np.int64)
         self.steps = np.zeros(w, np.int64)
         # every draw one np_random.random() (the toy-text games): drawn a block at a time (_Uniforms)
@@ -108,8 +109,12 @@ class DeclaredWorlds:
         self._read()
 
     def step(self, actions: np.ndarray) -> None:
-        """Every world plays actions[w] (one agent) and draws this step's random facts from its generator."""
-        self._rows[:, 0] = actions
+        """Every world plays actions[w] (one agent; [W, agents] for several, -1: the agent does nothing) and
+        draws this step's random facts from its generator."""
+        if self.n_agents == 1:
+            self._rows[:, 0] = actions
+        else:  # an engine row is agent * n_actions + action (DeclaredWorld.step)
+            self._rows[:] = np.where(actions >= 0, actions + self._agent_rows, -1)
         picks, before = self._picks, self.one._before
         # every draw one random() a world: the step's numbers of all draws taken at once, in the spec's order
         u = self.uniforms.each(len(before)) if self.uniforms is not None and before else None
@@ -130,6 +135,11 @@ class DeclaredWorlds:
         if ids.size:
             r += self.engine.lower[:, ids] @ scales
         return r
+
+    def holds(self, atoms: np.ndarray) -> np.ndarray | None:
+        """bool [W, len(atoms)]: where each atom holds (the spec's per-agent `[agents] decides`, `alive`);
+        None for no atoms (the spec does not declare them)."""
+        return self.engine.is_true(atoms) if atoms.size else None
 
     def terminated(self) -> np.ndarray:
         return self._out[2][:, 0] == 1.0

@@ -128,6 +128,7 @@ class DeclaredWorld:
         self._start_ids, self._start_bounds = ids(spec.start_facts), _bounds(spec.start_facts)
         self._computed = ComputedFacts(spec, ids)  # the clocks' and nearest facts, set for each step
         self._win_ids, self._loss_ids = ids(spec.win), ids(spec.loss)
+        self._decides_ids, self._alive_ids = ids(spec.decides), ids(spec.alive)  # [agents] decides, alive
         env_set = [self._start_ids, *self._action_ids]
         for drawer in (*self._choices, *self._before, *self._after):
             env_set.extend(drawer.value_ids)
