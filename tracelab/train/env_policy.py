@@ -31,10 +31,11 @@ from tracelab.errors import UserError
 from tracelab.game.scenario import ACTION_NAMES, NOTHING, Scenario, scenario_from_dict
 from tracelab.store import layout
 from tracelab.store.agent_rows import PolicyOutput
-from tracelab.train.env_source import ObservationEncoder
+from tracelab.train.env_source import ObservationEncoder, TeamEncoder, probe_env
 from tracelab.train.experiments.stats import spread, wilson
 from tracelab.train.memory import check_policy_memory, memory_limit
 from tracelab.train.qnet import HiddenWidths, NetSpec, NumpyQ, QFunction
+from tracelab.train.team_policy import TeamPolicy, team_env_actor
 from tracelab.validation import Const, IntRange, ListOf, MapOf, OptionalKey, check_file
 
 
@@ -370,10 +371,10 @@ def policy_format(path: str | Path) -> str | None:
     return d.get("format") if isinstance(d, dict) and isinstance(d.get("format"), str) else None
 
 
-def load_env_policy(path: str | Path, given: EnvSource) -> tuple[EnvPolicy, dict[str, Any]]:
+def load_env_policy(path: str | Path, given: EnvSource) -> tuple[Any, dict[str, Any]]:
     """(the policy, its policy.json), refused in one line unless it was trained on `given` (the env the
     user named: a policy file never decides which spec file tracelab reads), its network's shape checked
-    against the env's spaces."""
+    against the env's spaces. A world of several agents: a TeamPolicy (every agent's action)."""
     f = _policy_dir(path) / POLICY_JSON
     spec = check_file(read_json(f, what="policy description", follow_symlinks=False), ENV_SPEC_SCHEMA, f)
     check_same_env(env_source_from_json(spec["env"], str(f)), given, str(_policy_dir(path)))
@@ -381,16 +382,12 @@ def load_env_policy(path: str | Path, given: EnvSource) -> tuple[EnvPolicy, dict
     net = spec_net(spec)
     states = read_policy_networks(path, spec)
     q = NumpyQ(net, {k: v.float().numpy() for k, v in states["shared"].items()})
-    env = source.make()
-    try:
-        encoder = ObservationEncoder(env.observation_space, source.name)
-        n_actions = int(env.action_space.n)
-    finally:
-        env.close()
+    encoder, n_actions, _ = probe_env(source)
     if (encoder.size, n_actions) != (net.inputs, net.actions):
         raise ValueError(f"{f}: its network reads {net.inputs} inputs and gives {net.actions} Q-values; "
                          f"{source.describe()} has {encoder.size} and {n_actions} now")
-    return EnvPolicy(q, encoder, spec.get("mask", False)), spec
+    policy = EnvPolicy(q, encoder, spec.get("mask", False))
+    return (policy if not isinstance(encoder, TeamEncoder) else TeamPolicy(policy, encoder.n_agents)), spec
 
 
 def load_trained(path: str | Path, given: EnvSource) -> Any:
@@ -418,6 +415,8 @@ def load_trained(path: str | Path, given: EnvSource) -> Any:
 def greedy_actor(policy: Any, env: Any = None) -> Callable[[Any, dict[str, Any]], Any]:
     """The greedy actions in one env of a policy load_trained gave (EnvPolicy or GridWar's Policy), recorded as
     the step's decisions where `env` records them."""
+    if isinstance(policy, TeamPolicy):
+        return team_env_actor(policy, env)
     return one_env_actor(policy, env) if isinstance(policy, EnvPolicy) else team_actor(policy, env)
 
 
