@@ -53,8 +53,8 @@ from tracelab.train.tensorboard import MetricSink
 from tracelab.train.update_schedule import UpdateSchedule
 
 # GridWar's settings the spec path does not train yet: each refused in one line when set
-NOT_ON_THE_SPEC_PATH = {"split_networks": "one network for every agent", "slow_every_step": "no slow agents",
-                        "explore_scripted": "uniform exploration (no scripted policy for red)",
+NOT_ON_THE_SPEC_PATH = {"split_networks": "one network for every agent",
+                        "slow_every_step": "a slow agent deciding only where it may act ([agents] decides)",
                         "backend": "the rule engine"}
 SHARED = "shared"  # the one network's name (GridWar's trainer may have one per team role)
 Progress = Callable[[dict[str, Any]], None]
@@ -92,6 +92,10 @@ class EnvTrainer:
         self.net = cfg.network(self.encoder.size, self.n_actions, declared.reward_terms if declared else ())
         for env in self.env.envs if self.net.terms else ():  # --decompose: each step's reward by term
             env.unwrapped.world.keep_reward_terms = True
+        if cfg.explore_scripted > 0 and (declared is None or declared.script is None or n == 1 and
+                                         not hasattr(self.env, "script")):
+            raise UserError(f"{flag_of('explore_scripted')} {cfg.explore_scripted}: {source.name} declares no "
+                            f"scripted choice ([agents] script, docs/worlds.md) in a batched declared env")
         self.learner_kind, self.learner_note = cfg.learner_choice()
         self.learner: Learner = make_learner(self.learner_kind, self.net, cfg, self.rngs.torch)
         rows = EnvPolicy(acting_q(self.learner, self.net), self.encoder, cfg.mask)
@@ -133,9 +137,20 @@ class EnvTrainer:
     def _choose(self) -> np.ndarray:
         masks = self._masks()
         explore, random = self.exploration.draw(self.step, (self.worlds,), self.n_actions, masks)
+        random = self._scripted(random, masks)
         if explore.all():
             return random
         return np.where(explore, random, self.policy.act(self.obs, masks))
+
+    def _scripted(self, random: np.ndarray, masks: np.ndarray | None) -> np.ndarray:
+        """--explore-scripted: that share of the exploring actions is the world's scripted choice (the
+        spec's `[agents] script`: one of the actions it names, uniformly; none named: the random one)."""
+        if self.cfg.explore_scripted <= 0:
+            return random
+        named = self.env.script()
+        rng = self.exploration.rng
+        scripted = np.where(named.any(axis=-1), np.argmax(rng.random(named.shape) * named, axis=-1), random)
+        return self.exploration.mix_in(random, scripted, masks)
 
     def env_step(self) -> None:
         if self.agents > 1:
@@ -173,6 +188,7 @@ class EnvTrainer:
         masks = self._masks()
         acting = self._flag(self.info, "decides")
         explore, random = self.exploration.draw(self.step, (w, n), self.n_actions, masks)
+        random = self._scripted(random, masks)
         greedy = acting & ~explore
         actions = random
         if greedy.any():

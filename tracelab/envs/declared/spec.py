@@ -181,6 +181,9 @@ class WorldSpec:
     # whether it still plays (a trainer's transitions: env_trainer.py, "Several agents a team")
     decides: tuple[Atom, ...] = ()
     alive: tuple[Atom, ...] = ()
+    # `[agents] script`: [agent][action] -> the atom naming that action as the world's scripted choice (what
+    # a trainer's --explore-scripted explores with), or None
+    script: tuple[tuple[Atom, ...], ...] | None = None
 
 
 # ---- reading typed values, located ----
@@ -423,7 +426,7 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     board = _board(r) if "board" in src.data else None
     rules = _load_rules(r, rule_files)
 
-    agents_t = r.table(("agents",), ("names", "mask", "decides", "alive"))
+    agents_t = r.table(("agents",), ("names", "mask", "decides", "alive", "script"))
     agents = r.strings(("agents", "names"))
     if not agents or len(set(agents)) != len(agents):
         raise r.err(("agents", "names"), "expected one or more distinct agents")
@@ -452,6 +455,10 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
 
     action_names, action_facts, mask = _actions(r, check, agents, agents_t.get("mask"))
     decides, alive = (_per_agent(r, check, key, agents, agents_t.get(key)) for key in ("decides", "alive"))
+    script = None
+    if agents_t.get("script") is not None:  # as the mask: an atom per agent and action
+        lit = check.pattern(("agents", "script"), agents_t["script"], (AGENT_VAR, ACTION_VAR))
+        script = tuple(tuple(check.ground(lit, {AGENT_VAR: a, ACTION_VAR: n}) for n in action_names) for a in agents)
     domains = {"cells": board.cells} if board else {}
     space, parts = _observation(r, check, domains, agents)
     previous = _previous(r, space)
@@ -496,7 +503,7 @@ def load_spec(path: str | os.PathLike[str], **params: Any) -> WorldSpec:
     return WorldSpec(src.path, names, program, tuple(agents), action_names, action_facts, mask, space, parts,
                      reward_table, reward_scaled, terminated, truncated, max_steps, start_facts, choices,
                      randoms, board, fps, src, r.budget.board_facts + r.budget.atoms, reward_terms, win, loss,
-                     previous, clocks, nearest_facts, decides, alive)
+                     previous, clocks, nearest_facts, decides, alive, script)
 
 
 def _require(r: _Reader) -> None:

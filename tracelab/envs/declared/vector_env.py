@@ -164,5 +164,14 @@ class DeclaredVectorEnv(VectorEnv):
                 info[key] = held
         return self._with_masks(info, mask)
 
+    def script(self) -> np.ndarray | None:
+        """bool [W, A] ([W, agents, A] for several) of the current state: the actions the spec's `[agents]
+        script` names as the world's scripted choice (a trainer's --explore-scripted); None where undeclared."""
+        held = self.worlds.holds(self.worlds.one._script_ids)
+        if held is None:
+            return None
+        held = held.reshape(self.num_envs, self.n_agents, -1)
+        return held[:, 0] if self.n_agents == 1 else held
+
     _with_masks = staticmethod(with_masks)
 

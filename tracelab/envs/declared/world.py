@@ -129,6 +129,8 @@ class DeclaredWorld:
         self._computed = ComputedFacts(spec, ids)  # the clocks' and nearest facts, set for each step
         self._win_ids, self._loss_ids = ids(spec.win), ids(spec.loss)
         self._decides_ids, self._alive_ids = ids(spec.decides), ids(spec.alive)  # [agents] decides, alive
+        # [agents] script: [agent * action]
+        self._script_ids = np.concatenate([ids(m) for m in spec.script]) if spec.script else np.zeros(0, np.int64)
         env_set = [self._start_ids, *self._action_ids]
         for drawer in (*self._choices, *self._before, *self._after):
             env_set.extend(drawer.value_ids)
