@@ -65,10 +65,8 @@ def test_train_scenario_runs_through_the_spec_and_resumes(tmp_path: Path,
 
 
 @pytest.mark.parametrize("argv, fragment", [
-    (["--scenario", "nonmarkov"], "scenario 'nonmarkov': 2 agents a team"),
-    (["--agents", "2"], "scenario 'base': 2 agents a team"),
-    (["--explore-scripted", "0.5"], "--explore-scripted 0.5: GridWar trains through its spec"),
     (["--split-networks"], "--split-networks True: GridWar trains through its spec"),
+    (["--backend", "reference"], "--backend reference: GridWar trains through its spec"),
 ])
 def test_what_the_spec_path_cannot_train_is_refused_in_one_line(argv: list[str], fragment: str, tmp_path: Path,
                                                                  capsys: pytest.CaptureFixture[str]) -> None:

@@ -53,9 +53,7 @@ from tracelab.train.tensorboard import MetricSink
 from tracelab.train.update_schedule import UpdateSchedule
 
 # GridWar's settings the spec path does not train yet: each refused in one line when set
-NOT_ON_THE_SPEC_PATH = {"split_networks": "one network for every agent",
-                        "slow_every_step": "a slow agent deciding only where it may act ([agents] decides)",
-                        "backend": "the rule engine"}
+NOT_ON_THE_SPEC_PATH = {"split_networks": "one network for every agent", "backend": "the rule engine"}
 SHARED = "shared"  # the one network's name (GridWar's trainer may have one per team role)
 Progress = Callable[[dict[str, Any]], None]
 
@@ -102,6 +100,8 @@ class EnvTrainer:
         self.policy: Any = rows if n == 1 else TeamPolicy(rows, n)
         # a team's open transitions (world, agent): from a decision to the next, the end, or a death
         self.pending = PendingTransitions(w, n, self.encoder.size, cfg.gamma) if n > 1 else None
+        # --slow-every-step: every living agent decides every step (the world ignores what it may not do)
+        self.decides = "alive" if cfg.slow_every_step else "decides"
         self.schedule = UpdateSchedule(cfg, w)
         self.episodes = EpisodeLog(w, writer, logging=False)  # begins are written once train() starts
         self.metrics = MetricLog(writer, metric_sinks)
@@ -186,7 +186,7 @@ class EnvTrainer:
         the transitions that close (the agent decides again, dies, or its episode ends) into the replay."""
         cfg, w, n = self.cfg, self.worlds, self.agents
         masks = self._masks()
-        acting = self._flag(self.info, "decides")
+        acting = self._flag(self.info, self.decides)
         explore, random = self.exploration.draw(self.step, (w, n), self.n_actions, masks)
         random = self._scripted(random, masks)
         greedy = acting & ~explore
@@ -206,7 +206,7 @@ class EnvTrainer:
             true_next[done] = info["final_obs"][done]
             if "alive" in info:
                 alive[done] = info["final_info"]["alive"][done]
-        decides = self._flag(info, "decides")
+        decides = self._flag(info, self.decides)
         dead = ~alive
         closed = self.pending.close(done[:, None] | dead | decides, terminated[:, None] | dead)
         if len(closed["action"]):

@@ -114,13 +114,11 @@ EXPERIMENTS: dict[str, Experiment] = {e.name: e for e in (
              "the gap no larger than sampling noise"),
     Experiment(
         "markov-vs-nonmarkov", "Markov vs non-Markov policies in the nonmarkov scenario",
-        # The first two arms differ only in the observation; the third is the setup reported before the
-        # seventh session (non-Markov with a network per agent speed), kept to show what splitting costs.
+        # The arms differ only in the observation. (RuleSim's trainer also had a network per agent speed,
+        # --split-networks; the spec path trains one network for every agent: docs/experiments/README.md.)
         (Arm("Markov", "nonmarkov", published=0.59, published_note="best Markov 59%, 15.51 actions per win"),
          Arm("non-Markov", "nonmarkov", non_markov=True, published=0.85,
-             published_note="best non-Markov 85%, 18.01 actions per win"),
-         Arm("non-Markov, split networks", "nonmarkov", non_markov=True, train={"split_networks": True},
-             published=0.85, published_note="best non-Markov 85%, 18.01 actions per win")),
+             published_note="best non-Markov 85%, 18.01 actions per win")),
         full=Budget(seeds=3, steps=300_000, eval_games=500, evals=10),
         quick=Budget(seeds=1, steps=1_500, eval_games=20, evals=1),
         goal="non-Markov above Markov by a margin outside the seed spread",

@@ -81,13 +81,10 @@ def train_config(exp: Experiment, arm: Arm, budget: Budget, seed: int) -> TrainC
                        eval_p=EVAL_PS[0], **common)
 
 
-# The experiments that still train on RuleSim's Trainer, and why: the spec path trains one agent a team
-# with uniform exploration (train --scenario's refusals), and two measure RuleSim's policies themselves
-RULESIM = {"5v5-base": "five agents a team, scripted exploration",
-           "portability": "it compares RuleSim's policies in RuleSim and RefSim",
-           "markov-vs-nonmarkov": "two agents a team, one slow, scripted exploration",
-           "markov-vs-nonmarkov-every-step": "two agents a team, one slow, scripted exploration",
-           "reward-shaping": "scripted exploration; its saved queries read RuleSim's traced games"}
+# The experiments that still train on RuleSim's Trainer, and why: their own measurements read RuleSim's
+# policies and traced games (the spec path trains teams, slow agents and scripted exploration since issue 38)
+RULESIM = {"portability": "it compares RuleSim's policies in RuleSim and RefSim",
+           "reward-shaping": "its saved queries read RuleSim's traced games"}
 
 
 def trainer_note(exp: Experiment) -> str:
