@@ -17,7 +17,7 @@ from tracelab.envs.declared.spec import load_spec
 from tracelab.envs.declared.vector_env import DeclaredVectorEnv
 from tracelab.train.checkpoint import checkpoint_path
 from tracelab.train.config import TrainConfig
-from tracelab.train.env_checkpoint import load_env_checkpoint
+from tracelab.train.env_checkpoint import load_env_checkpoint, save_env_checkpoint
 from tracelab.train.env_trainer import EnvTrainer
 from tracelab.train.memory import memory_limit
 from tracelab.train.torch_files import load_tensors
@@ -92,25 +92,40 @@ def test_slow_every_step_asks_the_slow_agent_every_step() -> None:
     tr.close()
 
 
-def test_train_2v2_counts_wins_traces_every_agent_and_resumes_exactly(tmp_path: Path) -> None:
-    straight, stopped = tmp_path / "straight", tmp_path / "stopped"
+def test_train_2v2_counts_wins_traces_every_agent_and_resumes(tmp_path: Path) -> None:
+    run = tmp_path / "run"
     argv = ["train", "--scenario", "base", "--agents", "2", "--explore-scripted", "0.5", *TINY]
-    assert main([*argv, "--run", str(straight)]) == 0
+    assert main([*argv, "--total-timesteps", "120", "--run", str(run)]) == 0
     # the traced evaluation game records each agent's decision; the games count as wins or losses
-    agents = {a for (a,) in run_rows(straight, "SELECT DISTINCT agent FROM decisions")}
+    agents = {a for (a,) in run_rows(run, "SELECT DISTINCT agent FROM decisions")}
     assert agents == {"red-agent-1", "red-agent-2"}
-    outcomes = {o for (o,) in run_rows(straight, "SELECT outcome FROM episodes WHERE kind = 'eval'")}
+    outcomes = {o for (o,) in run_rows(run, "SELECT outcome FROM episodes WHERE kind = 'eval'")}
     assert outcomes and outcomes <= {"win", "loss", "truncated"}, outcomes
-    names = {n for (n,) in run_rows(straight, "SELECT name FROM metrics WHERE name LIKE 'eval/%'")}
+    names = {n for (n,) in run_rows(run, "SELECT name FROM metrics WHERE name LIKE 'eval/%'")}
     assert {"eval/method_win_rate", "eval/wins", "eval/losses"} <= names, names
-    # stopped at its first checkpoint (step 120), then resumed: the same learner as straight through
-    assert main([*argv, "--total-timesteps", "120", "--run", str(stopped)]) == 0
-    state = load_env_checkpoint(stopped, EnvSource("tracelab/GridWar-base-v0", {"agents_per_team": 2}),
-                                memory_limit(None, "--max-memory"))
+    assert main(["train", "--resume", str(run), "--total-timesteps", "240"]) == 0
+    assert load_tensors(checkpoint_path(run), 10**9)["step"] == 240
+
+
+def test_a_team_checkpoint_resumes_exactly_as_one_trained_straight_through(tmp_path: Path) -> None:
+    """Stopped at step 120, written and read back as a checkpoint file, then trained on: the learner ends
+    where one trained straight through does (the open transitions, the worlds' replay, the streams)."""
+    source = EnvSource("tracelab/GridWar-base-v0", {"agents_per_team": 2})
+    cfg = TrainConfig(steps=240, envs=4, warmup=40, buffer=600, batch=16, eval_every=0, log_every=80,
+                      checkpoint_every=0, seed=1, explore_scripted=0.5)
+    straight, stopped = EnvTrainer(cfg, source), EnvTrainer(cfg, source)
+    straight.train()
+    stopped.train(stop_at=120)
+    save_env_checkpoint(stopped, tmp_path)
+    state = load_env_checkpoint(tmp_path, source, memory_limit(None, "--max-memory"))
     assert state["pending"]["open"].shape == (4, 2)
-    assert main(["train", "--resume", str(stopped), "--total-timesteps", "240"]) == 0
-    a, b = (load_tensors(checkpoint_path(r), 10**9)["learners"]["shared"] for r in (straight, stopped))
-    assert a["updates"] == b["updates"] > 0 and np.array_equal(a["params"], b["params"])
+    resumed = EnvTrainer(cfg, source)
+    resumed.load_state(state)
+    resumed.train()
+    assert resumed.learner.updates == straight.learner.updates > 0
+    assert np.array_equal(resumed.learner.state()["params"], straight.learner.state()["params"])
+    for tr in (straight, stopped, resumed):
+        tr.close()
 
 
 def test_the_non_markov_scenario_trains_through_its_spec(tmp_path: Path) -> None:

@@ -4,9 +4,11 @@ one (tracelab/train/dqn.py), and beside them, in the same process: the update al
 the readable learner's, and the textbook autograd + torch.optim.Adam update of the same network and batch
 written inline) and the env alone. The loop's share = 1 - (update time / training-step time).
 Goals (docs/benchmarks/history.md, "Training"): loop around the update <= 15% of a step; >= 5,000 transitions/s;
-the fused update >= 4x the textbook one."""
+the fused update >= 4x the textbook one. Beside them, 5v5 base end to end on both trainers: GridWar's spec
+(EnvTrainer, every agent a row of the shared network) and RuleSim's Trainer, in world-steps per CPU second."""
 from __future__ import annotations
 
+import dataclasses
 import tempfile
 import time
 from collections.abc import Callable
@@ -18,10 +20,12 @@ import torch
 
 from tracelab.bench.common import fmt_num, format_table, machine_info, summarize
 from tracelab.bench.engine import machine_line
+from tracelab.envs.declared.env_source import EnvSource
 from tracelab.envs.vector_env import GridWarVectorEnv
 from tracelab.game.scenario import builtin_scenario
 from tracelab.store import TraceWriter
 from tracelab.train.config import TrainConfig
+from tracelab.train.env_trainer import EnvTrainer
 from tracelab.train.loop import Trainer, make_learner
 from tracelab.train.qnet import NetSpec
 
@@ -36,14 +40,25 @@ def _config(envs: int, threads: int, learner: str = "fused") -> Any:
                        checkpoint_every=0, learner=learner)
 
 
+TEAM = 5  # the team size of the spec path's figure beside RuleSim's
+
+
 class EndToEnd:
     """A Trainer with the method's defaults logging into a run, past its warm-up; `run(k)` trains k more
-    steps through Trainer.train (logging, ε, replay, updates: everything but evaluations)."""
+    steps through Trainer.train (logging, ε, replay, updates: everything but evaluations). `team`: TEAM
+    agents a team on RuleSim's Trainer ("rulesim") or on GridWar's spec (EnvTrainer, "spec")."""
 
-    def __init__(self, envs: int, threads: int, run_dir: Path, learner: str) -> None:
+    def __init__(self, envs: int, threads: int, run_dir: Path, learner: str, team: str | None = None) -> None:
         cfg = _config(envs, threads, learner)
         self.writer = TraceWriter.open(run_dir, {"command": "tracelab bench train", "config": cfg.to_dict()})
-        self.trainer = Trainer(cfg, builtin_scenario("base"), self.writer)
+        scenario = builtin_scenario("base")
+        if team == "spec":
+            self.trainer: Any = EnvTrainer(cfg, EnvSource("tracelab/GridWar-base-v0", {"agents_per_team": TEAM}),
+                                           self.writer)
+        else:
+            if team == "rulesim":
+                scenario = dataclasses.replace(scenario, agents_per_team=TEAM, red_starts=None, blue_starts=None)
+            self.trainer = Trainer(cfg, scenario, self.writer)
         self.trainer.train(stop_at=cfg.warmup + 2 * cfg.batch)  # updates run from here on
 
     def run(self, k: int) -> None:
@@ -133,6 +148,8 @@ def run(quick: bool = False, repeats: int = 5, envs: int = 64, threads: int = 1)
     with tempfile.TemporaryDirectory(prefix="tracelab-bench-train-") as tmp:
         e2e = EndToEnd(envs, threads, Path(tmp) / "run", "fused")
         e2e_readable = EndToEnd(envs, threads, Path(tmp) / "run-readable", "readable")
+        team_rulesim = EndToEnd(envs, threads, Path(tmp) / "run-5v5-rulesim", "fused", "rulesim")
+        team_spec = EndToEnd(envs, threads, Path(tmp) / "run-5v5-spec", "fused", "spec")
         fused, readable = learner_updates(threads, "fused"), learner_updates(threads, "readable")
         textbook = textbook_updates(threads)
         env_run, env = env_steps(envs)
@@ -140,7 +157,7 @@ def run(quick: bool = False, repeats: int = 5, envs: int = 64, threads: int = 1)
         for fn, k in ((fused, 20), (readable, 20), (textbook, 20), (env_run, 20)):
             fn(k)  # warm-up
         rounds: dict[str, list[float]] = {"e2e": [], "e2e_readable": [], "fused": [], "readable": [],
-                                          "textbook": [], "env": []}
+                                          "textbook": [], "env": [], "team_rulesim": [], "team_spec": []}
         cpu: dict[str, list[float]] = {k: [] for k in rounds}
         try:
             for _ in range(repeats):
@@ -148,13 +165,17 @@ def run(quick: bool = False, repeats: int = 5, envs: int = 64, threads: int = 1)
                                           ("e2e_readable", e2e_readable.run, block, block),
                                           ("fused", fused, n_upd, n_upd), ("readable", readable, n_upd, n_upd),
                                           ("textbook", textbook, n_upd, n_upd),
-                                          ("env", env_run, passes, passes * envs)):
+                                          ("env", env_run, passes, passes * envs),
+                                          ("team_rulesim", team_rulesim.run, block // 4, block // 4),
+                                          ("team_spec", team_spec.run, block // 4, block // 4)):
                     wall, used = _timed(fn, k)
                     rounds[key].append(units / wall)
                     cpu[key].append(units / max(used, 1e-9))
         finally:
             e2e.close()
             e2e_readable.close()
+            team_rulesim.close()
+            team_spec.close()
             env.close()
     loop_shares = [1.0 - f_e2e / f_upd for f_e2e, f_upd in zip(rounds["e2e"], rounds["fused"])]
     rest_shares = [1.0 - f_e2e / f_upd - f_e2e / f_env
@@ -163,6 +184,7 @@ def run(quick: bool = False, repeats: int = 5, envs: int = 64, threads: int = 1)
     over_readable = [f / t for f, t in zip(rounds["fused"], rounds["readable"])]
     e2e_over_readable = [f / t for f, t in zip(rounds["e2e"], rounds["e2e_readable"])]
     e2e_s = summarize(rounds["e2e"])
+    spec_over_rulesim = [s / r for s, r in zip(cpu["team_spec"], cpu["team_rulesim"])]
     loop_share = summarize(loop_shares).median
     speedup = summarize(speedups).median
     info["load_average_end"] = machine_info()["load_average"]
@@ -178,6 +200,9 @@ def run(quick: bool = False, repeats: int = 5, envs: int = 64, threads: int = 1)
             "fused_over_textbook": summarize(speedups).to_dict(),
             "loop_share": summarize(loop_shares).to_dict(), "rest_share": summarize(rest_shares).to_dict(),
             "per_cpu_second": {k: summarize(v).to_dict() for k, v in cpu.items()},
+            "team": TEAM, "team_spec_over_rulesim_cpu": summarize(spec_over_rulesim).to_dict(),
+            "team_rulesim_per_s": summarize(rounds["team_rulesim"]).to_dict(),
+            "team_spec_per_s": summarize(rounds["team_spec"]).to_dict(),
             "goals": [{"goal": "loop around the update", "target": f"<= {100 * GOAL_LOOP_SHARE:.0f}% of a step",
                        "measured": f"{100 * loop_share:.0f}%", "met": loop_share <= GOAL_LOOP_SHARE},
                       {"goal": "transitions/s, one update each", "target": f">= {GOAL_TRANSITIONS_PER_S:,}",
@@ -201,12 +226,16 @@ def report(r: dict[str, Any]) -> str:
              sp(r["textbook_update_per_s"]), us(r["textbook_update_per_s"])],
             [f"env alone, {r['envs']} worlds (world-steps/s)", r["env_steps_per_s"]["median"],
              sp(r["env_steps_per_s"]), us(r["env_steps_per_s"])]]
+    rows += [[f"{r['team']}v{r['team']} base end to end, {what} (world-steps/s)", r[f"{key}_per_s"]["median"],
+              sp(r[f"{key}_per_s"]), us(r[f"{key}_per_s"])]
+             for key, what in (("team_rulesim", "RuleSim's Trainer"), ("team_spec", "GridWar's spec, EnvTrainer"))]
     shares = (f"medians of per-round ratios: fused update {r['fused_over_textbook']['median']:.2f}x the "
               f"textbook one, {r['fused_over_readable']['median']:.2f}x the readable learner's; end to end, "
               f"fused {r['e2e_fused_over_readable']['median']:.2f}x readable; the loop around the update "
               f"{100 * r['loop_share']['median']:.0f}% of a training step (env included), the rest "
               f"(buffer, ε, transitions, logging) "
-              f"{100 * r['rest_share']['median']:.0f}%")
+              f"{100 * r['rest_share']['median']:.0f}%; {r['team']}v{r['team']} base, the spec path "
+              f"{r['team_spec_over_rulesim_cpu']['median']:.2f}x RuleSim's Trainer per CPU-second")
     goals = format_table(["goal", "target", "measured", "result"],
                          [[g["goal"], g["target"], g["measured"], "met" if g["met"] else "not met"]
                           for g in r["goals"]])
@@ -215,7 +244,8 @@ def report(r: dict[str, Any]) -> str:
             f"{r['repeats']} rounds of {r['block_steps']:,} training steps, {r['updates_per_block']:,} updates "
             f"of each kind, and env steps")
     pc = r["per_cpu_second"]
-    for row, key in zip(rows, ("e2e", "e2e_readable", "fused", "readable", "textbook", "env")):
+    for row, key in zip(rows, ("e2e", "e2e_readable", "fused", "readable", "textbook", "env", "team_rulesim",
+                               "team_spec")):
         row.append(pc[key]["median"])
     table = format_table(["figure", "median", "spread", "µs each", "per CPU-second"], rows)
     cpu_note = ("per CPU-second: the same work per second of this process's CPU time (all its threads), "

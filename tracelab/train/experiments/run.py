@@ -93,7 +93,7 @@ def trainer_note(exp: Experiment) -> str:
         return "trains through the world's spec (EnvTrainer)"
     why = RULESIM.get(exp.name)
     return f"trains on RuleSim's Trainer ({why})" if why else \
-        "trains GridWar through its spec (rules/gridworld/war.toml, EnvTrainer)"
+        "trains GridWar through its spec (rules/gridworld/war*.toml, EnvTrainer)"
 
 
 def eval_ps(exp: Experiment) -> tuple[float, ...]:
