@@ -118,7 +118,8 @@ class DeclaredVectorEnv(VectorEnv):
         n, shape = len(self.world_spec.action_names), (self.num_envs,) + ((self.n_agents,) if self.n_agents > 1 else ())
         low = -1 if self.n_agents > 1 else 0
         if a.shape != shape or not np.issubdtype(a.dtype, np.integer) or a.min() < low or a.max() >= n:
-            raise ValueError(f"actions must be {shape} integers in {low}..{n - 1}, got {actions!r}")
+            size = f"{self.num_envs}" if self.n_agents == 1 else f"{self.num_envs} x {self.n_agents}"
+            raise ValueError(f"actions must be {size} integers in {low}..{n - 1}, got {actions!r}")
         w = self.worlds
         w.step(a.astype(np.int64))
         obs = self._observe()
