@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from store_helpers import run_rows as rows
 
 from tracelab.cli import main
 
@@ -73,15 +74,6 @@ def run(inputs: dict[str, Path], tmp_path_factory: pytest.TempPathFactory) -> Pa
     assert main(["reason", str(inputs["spread"]), "--graph", str(inputs["contacts"]), "--steps", "6",
                  "--run", str(path)]) == 0
     return path
-
-
-def rows(run: Path, sql: str) -> list[tuple]:
-    from tracelab.store import open_run
-    con = open_run(run)
-    try:
-        return con.execute(sql).fetchall()
-    finally:
-        con.close()
 
 
 # ---- recording ----------------------------------------------------------------------------------------
