@@ -66,8 +66,6 @@ def test_play_kernel_reaches_the_engine(tmp_path, capsys) -> None:
     assert "played 2 episodes" in capsys.readouterr().out
 
 
-@pytest.mark.xfail(strict=True, reason="play plays GridWar through its spec now: a declared world's "
-                   "--kernel compiled does not start the background build yet (issue 38)")
 def test_play_kernel_compiled_does_not_wait_for_the_compile(tmp_path) -> None:
     """The game's kernel is not in an empty cache: the games start on the counting kernel at once, the
     compile goes on in the background and outlives the short run (this test then stops it)."""

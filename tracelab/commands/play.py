@@ -19,6 +19,7 @@ import numpy as np
 
 from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, non_negative_int, positive_int
 from tracelab.commands._interrupt import CtrlCBetweenSteps
+from tracelab.commands._notices import say_running_compiles
 from tracelab.commands._progress import compiling_engine, progress
 from tracelab.commands._recording import read_for_hints, recording_into
 from tracelab.engine.errors import is_interrupt
@@ -66,6 +67,7 @@ def run(args: argparse.Namespace) -> int:
     spec = load_declared(source)
     if args.no_trace:
         _summary(_name(source, scenario), spec, _play(source, spec, trained, args, None, _name(source, scenario)))
+        say_running_compiles()
         return 0
     # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store import TraceWriter
@@ -82,6 +84,7 @@ def run(args: argparse.Namespace) -> int:
         stats = _play(source, spec, trained, args, writer, _name(source, scenario))
     _summary(_name(source, scenario), spec, stats)
     _what_to_open(run_dir, spec)
+    say_running_compiles()
     return 0
 
 
