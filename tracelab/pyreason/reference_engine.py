@@ -63,6 +63,9 @@ class ReferenceEngine:
         self._passes = 0
         self._changes = 0
         self._rows_from = 0  # the evaluator's changes already taken
+        self._steps = 0
+        self._static_of: tuple[int, int] | None = None
+        self._static = np.zeros((1, 0), np.bool_)
 
     @property
     def t(self) -> int:
@@ -96,7 +99,13 @@ class ReferenceEngine:
 
     @property
     def static(self) -> np.ndarray:
-        return np.array([[self.ref.is_static(self._parts(a)) for a in range(self.vocab.n_atoms)]], np.bool_)
+        """[1, atoms]: the static flags, built once per step and atom count (the trace reads them per atom)."""
+        key = (self._steps, self.vocab.n_atoms)
+        if self._static_of != key:
+            self._static = np.array([[self.ref.is_static(self._parts(a)) for a in range(self.vocab.n_atoms)]],
+                                    np.bool_)
+            self._static_of = key
+        return self._static
 
     @property
     def stats(self) -> dict[str, np.ndarray]:
@@ -118,6 +127,7 @@ class ReferenceEngine:
 
     def step(self) -> None:
         self.ref.step()
+        self._steps += 1
         new = self.ref.changes[self._rows_from:]
         for c in new:  # the atoms the step set, interned as the rows name them
             self._id(c.atom)
