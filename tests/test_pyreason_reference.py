@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 import tracelab.pyreason as pr
+from tracelab.errors import UserError
 
 nx = pytest.importorskip("networkx")
 pytest.importorskip("pandas")
@@ -146,3 +147,11 @@ def test_auto_takes_the_reference_evaluator_for_a_small_program_only() -> None:
 def test_the_evaluator_setting_is_checked() -> None:
     with pytest.raises(ValueError, match="tracelab_evaluator: one of auto, compiled, reference, got 'fast'"):
         pr.settings.tracelab_evaluator = "fast"
+
+
+def test_a_recorded_reasoning_is_not_asked_of_the_reference_evaluator(tmp_path: Path) -> None:
+    pr.settings.tracelab_evaluator = "reference"
+    pr.settings.tracelab_run = str(tmp_path / "run")
+    with pytest.raises(UserError, match="a recorded reasoning runs on the compiled engine"):
+        hello_world()
+    assert not (tmp_path / "run").exists()

@@ -25,7 +25,7 @@ from tracelab.engine.program import SourceLoc
 from tracelab.errors import UserError
 
 from .facts import PFact, read_facts
-from .frozen_modules import freeze_loaded_modules
+from .frozen_modules import import_frozen
 from .files import PyReasonFileError
 from .graphml import load_pyreason_graphml, load_pyreason_networkx
 from .interpretation import Interpretation
@@ -344,9 +344,14 @@ def _reason(timesteps: int, convergence_threshold: int, convergence_bound_thresh
 def _on_reference(translated: Any, graph: Graph | None, timesteps: int) -> bool:
     """Whether this reasoning runs on the reference evaluator (settings.tracelab_evaluator; with "auto", a
     small program, not recorded, without functions of add_annotation_function or add_head_function)."""
+    if settings.tracelab_run is not None:
+        if settings.tracelab_evaluator == "reference":
+            raise UserError("pr.settings.tracelab_run: a recorded reasoning runs on the compiled engine; set "
+                            "pr.settings.tracelab_evaluator to 'auto' or 'compiled'")
+        return False
     if settings.tracelab_evaluator != "auto":
         return settings.tracelab_evaluator == "reference"
-    if settings.tracelab_run is not None or _program.annotation_functions or _program.head_functions:
+    if _program.annotation_functions or _program.head_functions:
         return False
     from .reference_engine import serves
     return serves(translated.program, graph, timesteps)
@@ -453,10 +458,9 @@ class _Reasoning:
         return self._interpretation(timesteps, converged)
 
     def _engine_episode(self, recorder: Any) -> Any:
+        import_frozen("tracelab.engine.core")  # numba's and the engine's modules, kept out of collections
         from tracelab.reasoning import EpisodeRun, plan_episodes
-        episode = EpisodeRun(self.inputs, plan_episodes(self.inputs)[0], trace=True, recorder=recorder)
-        freeze_loaded_modules()  # numba's and the engine's, loaded just now
-        return episode
+        return EpisodeRun(self.inputs, plan_episodes(self.inputs)[0], trace=True, recorder=recorder)
 
     def _reference_episode(self) -> Any:
         from .reference_engine import ReferenceEngine, ReferenceEpisode
