@@ -20,9 +20,10 @@ REFERENCE_MAX_ASSIGNMENTS = 50_000
 CAUSE_NAMES = {1: "external", 4: "reset"}  # the engine's names (Engine.cause_name) of causes without an id
 
 
-def reference_fits(program: Program, steps: int) -> bool:
-    """Whether the reference evaluator answers this program over `steps` steps quickly (see the module)."""
-    nodes = max(1, len(ordered_nodes(program, [])))
+def reference_fits(program: Program, steps: int, graph_nodes: Sequence[str] = ()) -> bool:
+    """Whether the reference evaluator answers this program over `steps` steps quickly (see the module),
+    on a graph of these nodes."""
+    nodes = max(1, len(ordered_nodes(program, list(graph_nodes))))
     return steps * sum(nodes ** len(r.variables) for r in program.rules) <= REFERENCE_MAX_ASSIGNMENTS
 
 
