@@ -25,8 +25,9 @@ TRAIN = str(RUNS / "base-train")
 
 ALLOWED = {"duckdb", "pyarrow", "numpy"}
 DUCKDB_ONLY = {"duckdb"}
-HEAVY = ("torch", "ray", "pandas", "pyarrow", "numpy", "tracelab.engine.parser", "duckdb", "rerun", "textual", "matplotlib", "numba", "llvmlite",
-         "scipy", "stable_baselines3", "tensorboard", "gymnasium", "pettingzoo", "networkx")
+HEAVY = ("torch", "ray", "pandas", "pyarrow", "numpy", "tracelab.engine.parser", "duckdb", "rerun", "textual",
+         "matplotlib", "numba", "llvmlite", "scipy", "stable_baselines3", "tensorboard", "gymnasium", "pettingzoo",
+         "networkx")
 
 # These print tables from DuckDB's rows, or answer why from them: DuckDB is all they load.
 DUCKDB_COMMANDS = [

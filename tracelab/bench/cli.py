@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 import tracelab
+from tracelab.bench import start
 from tracelab.bench.common import children_cpu_s, fmt_num, format_table, machine_info, summarize
 from tracelab.provenance import load_average
 
@@ -82,8 +83,6 @@ def run(quick: bool, repeats: int, only: Sequence[str] | None = None) -> dict[st
         for _ in range(repeats):
             for name, argv, _ in timed:
                 cpu[name].append(_cpu_of(argv, env))
-    # deferred: its child imports torch; the reading commands' rounds above do not need it
-    from tracelab.bench import start
     starts = start.run(runs, repeats) if only is None or "start" in only else []
     floor = summarize(cpu["floor"]).median
     rows = []

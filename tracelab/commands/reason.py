@@ -23,6 +23,9 @@ from tracelab.errors import UserError, store_errors
 from tracelab.reasoning import EpisodeRun, load_inputs, open_reasoning_run, plan_episodes
 from tracelab.reasoning_reference import reference_fits, reference_reasoning
 
+# deferred: the store (DuckDB), with --run only, and the PyReason trace writer (numba), with --pyreason-trace only:
+# a small program printed as it reasons runs on the reference evaluator without them
+
 
 def run(args: argparse.Namespace) -> int:
     """Program errors (located), unreadable files, InconsistencyError and FixpointError (naming the atom,
@@ -35,7 +38,6 @@ def run(args: argparse.Namespace) -> int:
     if args.run is not None and args.no_trace:
         raise UserError("--run records the trace and --no-trace drops it: give one of them")
     if args.run is not None:
-        # deferred: loads DuckDB; every command is imported to build the CLI's parser
         from tracelab.store.layout import check_new_run_dir
         check_new_run_dir(Path(args.run))
     inputs = load_inputs(args.program, dialect=args.dialect, graph_file=args.graph, fact_files=args.facts,
@@ -62,7 +64,6 @@ def run(args: argparse.Namespace) -> int:
 
 def _record(args: argparse.Namespace, inputs: Any, plans: list[Any]) -> int:
     """The reasoning into a new run of the store (tracelab.store.reasoning): the trace goes there."""
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.reasoning import ReasoningRecorder
 
     run_dir = Path(args.run)
@@ -109,7 +110,6 @@ def _reason(args: argparse.Namespace, inputs: Any, plan: Any, recorder: Any, sev
                              recorder=recorder)
         engine = episode.engine
         if args.pyreason_trace is not None:
-            # deferred: loads numba; every command is imported to build the CLI's parser
             from tracelab.pyreason.trace_csv import PyReasonTrace
             pr_trace = PyReasonTrace(engine, inputs.names, inputs.graph_facts)
         stepper = episode.steps(args.steps, rows_each_step=printing or pr_trace is not None)
