@@ -182,3 +182,10 @@ def test_the_parser_is_the_command_table_and_each_command_runs_from_the_module_n
             "not m.rpartition('.')[2].startswith('_')])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_experiments_choices_in_the_table_are_the_experiments() -> None:
+    """The command table names without importing them: experiment's choices are the experiments."""
+    from tracelab.commands._table import EXPERIMENT_NAMES
+    from tracelab.train.experiments.definitions import EXPERIMENTS
+    assert sorted(EXPERIMENT_NAMES) == sorted(EXPERIMENTS)

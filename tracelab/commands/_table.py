@@ -28,6 +28,8 @@ from tracelab.commands._output import add_format_options, add_paging_options
 # deferred: train's and sweep's arguments come from tracelab.train.config and .sweep_spec (they load numpy),
 # imported in _train and _sweep when their parser is built: a reading command's start-up does not pay for them
 
+# experiment's choices: the keys of tracelab.train.experiments.definitions.EXPERIMENTS (which loads the
+# trainers), held equal by tests/test_cli_conventions.py
 EXPERIMENT_NAMES = ("1v1-base", "5v5-base", "portability", "markov-vs-nonmarkov", "markov-vs-nonmarkov-every-step",
                     "reward-shaping", "trap-corridor")
 RULES_SHOWN = 40  # show's rules without --all-rules; the rest: `tracelab sql RUN "SELECT * FROM rules"`
@@ -57,7 +59,6 @@ def _runner(module: str) -> Callable[[argparse.Namespace], int]:
     """`func` of a command's parser: imports the command's module when the command runs, and runs it."""
     def run(args: argparse.Namespace) -> int:
         return importlib.import_module(module).run(args)
-    run.__qualname__ = f"{module}.run"
     return run
 
 
