@@ -17,7 +17,7 @@ from tracelab.commands._output import write_rows, write_table
 from tracelab.commands.show import OWN_SECTIONS
 from tracelab.errors import UserError, store_errors
 from tracelab.store.kind import spec_text, world_params
-from tracelab.store.reader import resolve_run, query_readonly, retrying
+from tracelab.store.reader import query_readonly, resolve_run, retrying
 from tracelab.store.several import SeveralRunsConnection, run_names
 from tracelab.train.config import METHOD_REWARD_SCALE
 

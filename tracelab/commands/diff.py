@@ -15,7 +15,7 @@ from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.errors import UserError, store_errors
 from tracelab.store.branch_origin import origin_episode
 from tracelab.store.diff import first_divergence, render_divergence
-from tracelab.store.reader import resolve_run, open_run, retrying
+from tracelab.store.reader import open_run, resolve_run, retrying
 
 
 def _episode(text: str, what: str) -> int:

@@ -19,17 +19,17 @@ from tracelab.game.facts import GAME_RULES
 from tracelab.game.scenario import BOARD
 from tracelab.store import TraceWriter
 from tracelab.train.env_policy import (
-    load_policy,
-    policy_scenario,
-    read_policy_spec,
     ENV_FORMAT,
-    policy_format,
     OneAgentGridWarPolicy,
     evaluate_env,
     evaluate_team,
     load_env_policy,
+    load_policy,
+    policy_format,
+    policy_scenario,
+    read_policy_spec,
 )
-from tracelab.train.evaluate import evaluate, evaluate_into, METHOD_CUT, comparison_rows
+from tracelab.train.evaluate import METHOD_CUT, comparison_rows, evaluate, evaluate_into
 from tracelab.train.experiments.stats import wilson
 
 

@@ -12,7 +12,7 @@ from pathlib import Path
 from tracelab.errors import UserError, store_errors
 from tracelab.train.experiments.definitions import EXPERIMENTS
 from tracelab.train.experiments.report import write_report
-from tracelab.train.experiments.run import scaled, run_experiment, load_result
+from tracelab.train.experiments.run import load_result, run_experiment, scaled
 from tracelab.train.ray_session import check_address
 
 def run(args: argparse.Namespace) -> int:

@@ -31,12 +31,12 @@ from tracelab.store import TraceWriter
 from tracelab.store.layout import check_new_run_dir
 from tracelab.train.env_policy import (
     ENV_FORMAT,
-    load_trained,
-    policy_format,
-    read_policy_spec,
-    policy_scenario,
     EVAL_STEP_CAP,
     greedy_actor,
+    load_trained,
+    policy_format,
+    policy_scenario,
+    read_policy_spec,
 )
 
 DEFAULT_SCENARIO = "base"  # the one train defaults to (TrainConfig.scenario)

@@ -13,17 +13,12 @@ from pathlib import Path
 from typing import Any
 
 from tracelab.commands._interrupt import ctrl_c_stops_queries
-from tracelab.commands._output import (
-    DEFAULT_TABLE_ROWS,
-    arrow_rows,
-    write_rows,
-    write_stream,
-)
+from tracelab.commands._output import DEFAULT_TABLE_ROWS, arrow_rows, write_rows, write_stream
 from tracelab.errors import UserError, store_errors
 from tracelab.store.kind import can_read
-from tracelab.store.queries import list_queries, get_query
-from tracelab.store.reader import arrow_stream, open_run, query_readonly, retrying, fetch_rows
-from tracelab.store.several import expand_runs, SeveralRunsConnection, each_run_stream, run_names
+from tracelab.store.queries import get_query, list_queries
+from tracelab.store.reader import arrow_stream, fetch_rows, open_run, query_readonly, retrying
+from tracelab.store.several import SeveralRunsConnection, each_run_stream, expand_runs, run_names
 
 # a result as the table format prints it: column names, which are numbers, the rows
 Rows = tuple[list[str], list[bool], list[tuple[Any, ...]]]

@@ -12,10 +12,7 @@ import sys
 from typing import TYPE_CHECKING
 
 from tracelab.commands._interrupt import ctrl_c_stops_queries
-from tracelab.commands._output import (
-    write_rows,
-    write_stream,
-)
+from tracelab.commands._output import write_rows, write_stream
 from tracelab.errors import UserError, store_errors
 from tracelab.store.coordinates import run_grid
 from tracelab.store.names import check_name

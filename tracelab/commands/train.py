@@ -42,10 +42,10 @@ from tracelab.train.env_trainer import EnvTrainer, env_run_meta, gridwar_sources
 from tracelab.train.loop import Trainer
 from tracelab.train.memory import (
     check_estimate,
+    check_training_memory,
     env_training_estimate,
     env_world_bytes,
     memory_limit,
-    check_training_memory,
 )
 from tracelab.train.qnet import NetSpec
 
