@@ -46,6 +46,8 @@ def commands(runs: Path, copies: Path) -> list[tuple[str, tuple[str, ...], float
         ("trace", ("trace", play, "--episode", "0", "--from", "1", "--to", "4"), 1.5),
         ("why", ("why", play, "captured(red)", "--episode", "2", "--at", "18", "--depth", "3"), 1.5),
         ("why-not", ("why-not", play, "--rule", "snap_at", "--episode", "2", "--at", "18"), 1.5),
+        ("why --action", ("why", str(runs / "base-train"), "--action", "red-agent-1", "--episode", "772", "--at", "2"),
+         1.5),
         ("show", ("show", play), 1.5),
         ("check", ("check", play), 1.5),
         ("diff", ("diff", play, "0", "1"), None),
