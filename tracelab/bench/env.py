@@ -22,6 +22,8 @@ from tracelab.bench.sims import get_sim, measure, measure_engine_only, release, 
 from tracelab.envs import make_env, make_vec_env
 from tracelab.game.rulesim import RuleSim
 
+# deferred: gymnasium and RuleSim's vector env (the game's numba glue) load in the sections that measure them
+
 GOAL_BATCHED_ENV_STEPS_PER_S = 1_000_000  # batched, tracing off
 GOAL_MAX_SLOWDOWN = 5.0  # rule-driven within 5x of the hand-written simulator
 ENV_ID = "tracelab/GridWar-advanced-v0"
@@ -90,7 +92,6 @@ def goals(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 def gym_rates(worlds: int, repeats: int, target_s: float) -> dict[str, Any]:
     """Steps/s through gymnasium: the single env (gymnasium.make, 1v1) and the vector env (`worlds`
     worlds, gymnasium.make_vec) of GridWar's id, the declared spec's, tracing off."""
-    # deferred: gymnasium is only needed here
     import gymnasium as gym
     out: dict[str, Any] = {"env_id": ENV_ID, "vector_worlds": worlds, "trace": False, "rows": []}
     env = gym.make(ENV_ID)
@@ -110,7 +111,6 @@ def declared_rates(worlds: int, repeats: int, target_s: float) -> list[dict[str,
     Python glue) and through its declared spec (DeclaredEnv, DeclaredVectorEnv over rules/gridworld/war.toml),
     base and advanced, one world and `worlds` worlds, untraced and traced (the engine's change log on,
     taken after every step), the same random actions; the ratio declared / RuleSim."""
-    # deferred: RuleSim's env loads the game's numba glue
     from tracelab.envs.vector_env import GridWarVectorEnv
     rows = []
     for name in ("base", "advanced"):

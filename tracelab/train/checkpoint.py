@@ -32,6 +32,9 @@ from tracelab.validation import (Const, ExactKeys, IntRange, ListOf, MapOf, Mism
 from tracelab.train.config import TrainConfig, config_schema
 from tracelab.train.torch_files import CodeInFile, Tensor, load_tensors
 
+# deferred: tracelab.train.run_networks loads the game's numba modules, which an env's checkpoint does not need
+# (RuleSim's checkpoints only)
+
 CHECKPOINT_DIR, CHECKPOINT_FILE = "checkpoint", "checkpoint.pt"
 FORMAT = "tracelab-dqn-checkpoint/2"
 OLD_FORMATS = (b"tracelab-dqn-checkpoint/1",)  # held numpy arrays: loadable only by running the pickle
@@ -142,7 +145,6 @@ def load_checkpoint(run: str | Path, limit: Limit | None = None, network: Any = 
     except Mismatch as e:
         raise FileRefused(f"{f}: {e}") from None
     if "best_rows" in state:  # written before the readable learner: the fused layout's rows
-        # deferred: run_networks loads the game's numba modules, which an env's checkpoint does not need
         from tracelab.train.run_networks import training_net
         net = training_net(cfg, scenario)
         state["best_weights"] = {name: to_state_dict(row, net) for name, row in state.pop("best_rows").items()}
@@ -179,7 +181,6 @@ def _network_tensors(net: Any, network: Any) -> tuple[dict[str, Any], dict[str, 
 def _state_schema(cfg: TrainConfig, scenario: Scenario, network: Any = None) -> dict[str, Any]:
     """Every key of a format-2 checkpoint of this config and scenario, with its type and shape (cfg.learner:
     the learner the checkpoint names)."""
-    # deferred: see load_checkpoint
     from tracelab.train.run_networks import network_groups, training_net
     net = training_net(cfg, scenario)
     w, n, d = cfg.envs, scenario.agents_per_team, net.inputs

@@ -19,6 +19,9 @@ if TYPE_CHECKING:
     from tracelab.store.agent_rows import PolicyOutput
     from tracelab.store.writer import TraceWriter
 
+# deferred: the declared env and world load the engine (numba), once a world is built (a registered id goes through
+# gym.make); the recorder loads the store (DuckDB) for a traced world only
+
 
 def make_declared_env(source: EnvSource, spec: WorldSpec, **options: Any) -> Any:
     """The env of `source` over its loaded `spec`, with `options` (kernel, trace_writer): an id through
@@ -28,7 +31,6 @@ def make_declared_env(source: EnvSource, spec: WorldSpec, **options: Any) -> Any
         return TeamEnv(spec, **options)
     if source.env_id is not None:
         return gym.make(source.env_id, spec=spec, **options)
-    # deferred: the declared env loads the engine (numba); a registered id goes through gym.make
     from tracelab.envs.declared.gym_env import DeclaredEnv
     return DeclaredEnv(spec, **options)
 
@@ -47,7 +49,6 @@ class TeamEnv:
     declares one. Seeded as DeclaredParallelEnv (the same draws); `trace_writer`: the run its games go to."""
 
     def __init__(self, spec: WorldSpec, *, kernel: str = "auto", trace_writer: TraceWriter | None = None) -> None:
-        # deferred: the world loads the engine (numba)
         from tracelab.envs.declared.world import DeclaredWorld
         self.world_spec = spec
         self.world = DeclaredWorld(spec, kernel=kernel, trace=trace_writer is not None)
@@ -57,7 +58,6 @@ class TeamEnv:
         self._rng = np.random.default_rng()
         self._recorder = None
         if trace_writer is not None:
-            # deferred: the store's modules (DuckDB) only load for a traced world
             from tracelab.envs.declared.recording import DeclaredRecorder
             self._recorder = DeclaredRecorder(self.world, trace_writer)
 
