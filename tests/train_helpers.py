@@ -3,6 +3,7 @@ and reading a run and stopping a training the way a user does (tests/test_train_
 from __future__ import annotations
 
 import os
+import shlex
 import signal
 import subprocess
 import sys
@@ -31,15 +32,15 @@ def walk_source(p_toward: float = 0.5, **params: object) -> EnvSource:
 
 
 def walk_argv(p_toward: float = 0.5) -> list[str]:
-    """The walk's --env and --env-arg flags (as a run of it is resumed)."""
-    return ["--env", WALK_ID, *(a for k, v in walk_source(p_toward).kwargs.items()
-                                for a in ("--env-arg", f"{k}={v if not isinstance(v, str) else repr(v)}"))]
+    """The walk's --env and --env-arg flags (a run of it is resumed naming its env again)."""
+    return ["--env", *shlex.split(walk_source(p_toward).describe())]
 
 
-# opponent_p and eval_p are RuleSim's trainer's (the tests left on it); the spec path's walk sets p_toward
 SMALL = dict(warmup=100, envs=4, batch=32, buffer=2000, target_every=100, log_every=100, eval_every=200,
-             eval_games=8, trace_eval_games=2, eval_envs=3, checkpoint_every=200, opponent_p=0.5, eval_p=0.3,
-             lr=3e-3, reward_scale=1.0)  # the walk's rewards (-1, 10) are near 1 already: seen as they are
+             eval_games=8, trace_eval_games=2, eval_envs=3, checkpoint_every=200, lr=3e-3,
+             reward_scale=1.0)  # the walk's rewards (-1, 10) are near 1 already: seen as they are
+# RuleSim's trainer's settings (the tests left on it, issue 38): its opponent's p in training and evaluation
+RULESIM_SMALL = {**SMALL, "opponent_p": 0.5, "eval_p": 0.3}
 
 
 def walk_config(steps: int = 200, seed: int = 1, **options: object):  # -> TrainConfig
