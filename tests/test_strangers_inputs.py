@@ -204,7 +204,7 @@ def test_a_stranger_s_env_checkpoint_asking_for_a_billion_worlds_is_refused_on_r
 
     from tracelab.commands.train import train_env_into
     from tracelab.envs.declared.env_source import EnvSource
-    from tracelab.train.checkpoint import checkpoint_path
+    from tracelab.train.env_checkpoint import checkpoint_path
     from tracelab.train.config import TrainConfig
 
     run = tmp_path / "run"
