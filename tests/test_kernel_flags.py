@@ -10,11 +10,10 @@ import subprocess
 import sys
 
 import pytest
-from test_train import SMALL, WALK
 from tracelab.cli import main
 from tracelab.store import run_info
 from tracelab.train.config import TrainConfig
-from tracelab.train.loop import Trainer
+from train_helpers import walk_config, walk_trainer
 
 CLI = [sys.executable, "-m", "tracelab"]
 
@@ -37,11 +36,11 @@ def test_a_kernel_the_command_cannot_use_is_a_one_line_error(tmp_path) -> None:
 
 
 def test_train_kernel_reaches_the_training_and_evaluation_engines(tmp_path, capsys) -> None:
-    cfg = TrainConfig(scenario="walk4", steps=200, seed=1, kernel="lanes", **SMALL)  # 4 worlds: auto is not lanes
-    trainer = Trainer(cfg, WALK)
+    cfg = walk_config(steps=200, seed=1, kernel="lanes")  # 4 worlds: auto is not lanes
+    trainer = walk_trainer(cfg)  # writing no run: its evaluations play untraced, in an env of their own
     try:
         trainer.run_eval()
-        engines = [trainer.env.sim.engine, trainer._eval_env.sim.engine]
+        engines = [trainer.env.worlds.engine, trainer._eval_env.worlds.engine]
         assert [e.kernel for e in engines] == ["lanes", "lanes"]
     finally:
         trainer.close()

@@ -92,13 +92,14 @@ def checkpoint_file(run: Path) -> Path:
     return f
 
 
-def _refusal_with_a_way_on(run: Path, said: str) -> FileRefused:
+def refusal_with_a_way_on(run: Path, said: str, env: str = "") -> FileRefused:
     """A checkpoint refused for what it would run: say so, and what the user can do instead (use the
-    run's policy, start a new run from its settings)."""
+    run's policy, start a new run from its settings). `env`: what its policy needs named again (` --env
+    ENV`: a train --env run's, whose env the refused file cannot tell)."""
     policy = run / "policy"
     if (policy / "policy.json").is_file():
-        instead = f"its policy still plays: tracelab eval {policy}, tracelab play --policy {policy}; to " \
-                  f"train on, start a new run with tracelab train (its settings: tracelab show {run})"
+        instead = f"its policy still plays: tracelab eval {policy}{env}, tracelab play --policy {policy}{env}; " \
+                  f"to train on, start a new run with tracelab train (its settings: tracelab show {run})"
     else:
         instead = f"start a new run with tracelab train (its settings: tracelab show {run})"
     return FileRefused(f"{said}: {instead}")
@@ -116,7 +117,7 @@ def load_checkpoint(run: str | Path, limit: Limit | None = None, network: Any = 
     except CodeInFile as e:
         said = f"{f}: a checkpoint of an older tracelab (format 1, holding numpy objects that only a loader " \
                f"that runs code could read); refused" if any(mark in e.pickled for mark in OLD_FORMATS) else str(e)
-        raise _refusal_with_a_way_on(run, said) from None
+        raise refusal_with_a_way_on(run, said) from None
     try:
         check(state, {"format": Const(FORMAT), "config": config_schema(), "scenario_toml": str,
                       "learner": OptionalKey(OneOf("fused", "readable")), "custom_network": OptionalKey(bool)})
