@@ -189,12 +189,31 @@ class BoardTrack:
         i = bisect.bisect_right(self.times, t) - 1
         return self.states[max(i, 0)]
 
+    def deaths(self) -> dict[int, list[str]]:
+        """t -> the `alive` atoms (`alive(red-agent-1)`) of the pieces that died in t: the atoms whose
+        why-trees the replay's step documents show."""
+        out: dict[int, list[str]] = {}
+        before: dict[str, bool] = {}
+        for t, state in zip(self.times, self.states):
+            for p in state.pieces:
+                alive = self.board.pieces[p.kind].alive
+                if alive and before.get(p.thing) and not p.alive:
+                    out.setdefault(t, []).append(f"{alive}({p.thing})")
+                before[p.thing] = p.alive
+        return out
+
     def cell_of(self, node: str, t: int) -> tuple[int, int] | None:
         """(row, col) of a node at t: a cell itself, or the cell where a piece stands."""
         if node in self.cells:
             return self.cells[node]
         piece = next((p for p in self.at(t).pieces if p.thing == node), None)
         return None if piece is None else (piece.row, piece.col)
+
+
+def piece_color(board: Board, thing: str) -> tuple[int, int, int] | None:
+    """The colour `thing` is drawn in on the board (the first kind of pieces whose `colors` name it),
+    or None: what its plots' lines take."""
+    return next((c for k in board.pieces.values() if (c := k.color(thing)) is not None), None)
 
 
 def _thing_kinds(con: RunConnection, board: Board) -> dict[str, str]:

@@ -1,7 +1,7 @@
-"""What the replay of a run without a board (a reasoning run, `tracelab reason --run`) reads from the run:
-its nodes, their positions when the graph gives them (node attributes `x` and `y`), its predicates,
-and per episode the bounds of the colour predicate over time, the binary atoms that draw the edges, the
-fired rules and how many atoms of each predicate changed in each step.
+"""What the replay reads from a run: of a run without a board (a reasoning run, `tracelab reason --run`)
+its nodes, their positions when the graph gives them (node attributes `x` and `y`), its predicates, and
+per episode the bounds of the colour predicate over time and the binary atoms that draw the edges; of
+every run, per episode the fired rules and how many atoms of each predicate changed in each step.
 
 Everything is read through the run's sandboxed connection (tracelab.store.reader.open_run), as numpy
 columns, one query each; what a big episode holds is bounded by what it changed: the rule log keeps at
@@ -118,7 +118,7 @@ class Firings:
 
 @dataclass
 class GraphEpisode:
-    """One episode of a run without a board, as the replay draws it."""
+    """One episode as the replay draws it (the colour and edge rows: a run without a board's)."""
     episode: int
     steps: int                     # timesteps drawn: t = 0 .. steps - 1
     outcome: str | None
@@ -147,9 +147,10 @@ def read_firings(con: RunConnection, episode: int) -> Firings:
                    {int(t): int(n) for t, n in per_step.items()})
 
 
-def read_episode(con: RunConnection, graph: RunGraph, episode: int, label: str | None) -> GraphEpisode:
-    """The episode's rows of the colour predicate `label`, edge rows, rule log and change counts (one
-    query each)."""
+def read_episode(con: RunConnection, graph: RunGraph | None, episode: int, label: str | None,
+                 edges: bool = True) -> GraphEpisode:
+    """The episode's rows of the colour predicate `label` (None: none), edge rows (`edges`: the graph is
+    drawn), rule log and change counts (one query each)."""
     # the timesteps drawn are t = 0 .. the last: an env's episode of n steps ends at t = n (its t = 0 is the
     # start), a reasoning's of n timesteps at t = n - 1, a running episode at its last change so far
     ends = con.execute("SELECT outcome, t_end FROM episodes WHERE episode = ?", [episode]).fetchall()
@@ -159,7 +160,7 @@ def read_episode(con: RunConnection, graph: RunGraph, episode: int, label: str |
     color_rows: dict[str, np.ndarray] = {"t": np.zeros(0, np.int64), "node": np.zeros(0, np.int64),
                                          "lower": np.zeros(0), "upper": np.zeros(0)}
     color_nodes = np.zeros(0, np.int64)
-    if label is not None:
+    if label is not None and graph is not None:
         color_nodes = np.asarray(con.execute("SELECT DISTINCT arg0 FROM raw.atoms WHERE label = ? AND arg0 >= 0",
                                              [graph.unary[label]]).fetchnumpy()["arg0"], np.int64)
         cols = con.execute("SELECT c.t, a.arg0 AS node, c.new_lower AS lower, c.new_upper AS upper "
@@ -169,7 +170,7 @@ def read_episode(con: RunConnection, graph: RunGraph, episode: int, label: str |
         color_rows = {k: np.asarray(v) for k, v in cols.items()}
     cols = con.execute("SELECT c.t, a.label, a.arg0 AS source, a.arg1 AS target, c.new_lower AS lower "
                        "FROM raw.changes c JOIN raw.atoms a ON a.atom = c.atom "
-                       "WHERE c.episode = ? AND a.arg1 >= 0 ORDER BY c.seq", [episode]).fetchnumpy()
+                       f"WHERE c.episode = ? AND a.arg1 >= 0 AND {edges} ORDER BY c.seq", [episode]).fetchnumpy()
     edge_rows = {k: np.asarray(v) for k, v in cols.items()}
     changed: dict[int, dict[str, int]] = {}
     for t, name, n in con.execute(
