@@ -67,10 +67,6 @@ def draw(board: Board, state: BoardState) -> Text:
 
 
 class BoardView(Widget):
-    DEFAULT_CSS = """
-    BoardView { width: 1fr; height: auto; border: round $primary-darken-2; padding: 0 0; }
-    """
-
     def __init__(self, source: RunSource, board: Board | None = None) -> None:
         super().__init__(id="board")
         self.source = source
