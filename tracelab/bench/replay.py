@@ -124,10 +124,10 @@ def layer_times(run: Path, repeats: int) -> dict[str, float]:
         memory = rec.memory_recording()
         t0 = time.perf_counter()
         data = read_episode(con, None, episode, None, edges=False)
-        rows = ctx.step_rewards(episode)
+        rows = ctx.step_rows(episode)
         agent = agent_plots.read_series(con, episode)
         times.setdefault("read (rule log, changes, rewards)", []).append(time.perf_counter() - t0)
-        agents = list(dict.fromkeys(a for _, a, _ in rows))
+        agents = list(dict.fromkeys(a for _, a, *_ in rows))
         deaths: dict[int, list[str]] = {}
 
         def board(rec: Any, deaths: dict[int, list[str]]) -> None:
@@ -136,11 +136,12 @@ def layer_times(run: Path, repeats: int) -> dict[str, float]:
         for name, fn, args in (("board", board, (rec, deaths)),
                                ("plots", plots.log_rewards, (rec, plots.agent_rewards(agents, rows), agents)),
                                ("agent plots", agent_plots.log_agent_series, (rec, agent)),
-                               ("state lanes", lanes.log_lanes, (rec, con, episode, ctx.lanes)),
+                               ("state lanes", lanes.log_lanes, (rec, con, episode, ctx.lanes, rows)),
                                ("rule log", graph_rules.log_rule_log, (rec, data)),
                                ("changes per step", graph_rules.log_changed, (rec, data)),
                                ("why documents", graph_rules.log_why,
-                                (rec, con, data, (), 6, _model_of(ctx), graph_rules.no_edges, deaths)),
+                                (rec, con, data, (), 6, _model_of(ctx), graph_rules.no_edges, deaths,
+                                 plots.step_notes(rows))),
                                ("flush", rec.flush, ())):
             t0 = time.perf_counter()
             fn(*args)

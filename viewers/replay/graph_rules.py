@@ -75,11 +75,12 @@ def check_atoms(model: RunModel, atoms: tuple[str, ...]) -> None:
             raise ValueError(f"--why {atom}: {msg}") from None
 
 
-def _step_header(episode: GraphEpisode, s: int, edges: dict[str, int]) -> list[str]:
+def _step_header(episode: GraphEpisode, s: int, edges: dict[str, int], notes: list[str]) -> list[str]:
     last = episode.steps - 1
     lines = [f"## Episode {episode.episode}, step {s} of {last}"]
     if s == last and episode.outcome:
         lines.append(f"**It ended: {literal(episode.outcome)}.**\n")
+    lines += notes
     changed = episode.changed.get(s, {})
     if edges:
         lines.append("- edges: " + ", ".join(f"{literal(name)} {n:,}" for name, n in edges.items()))
@@ -94,11 +95,13 @@ def _step_header(episode: GraphEpisode, s: int, edges: dict[str, int]) -> list[s
 def why_documents(con: RunConnection, episode: GraphEpisode, atoms: tuple[str, ...], depth: int = 6,
                   model: Callable[[], RunModel] | None = None,
                   edges: Callable[[int], dict[str, int]] = no_edges,
-                  at_step: dict[int, list[str]] | None = None) -> list[str]:
-    """A markdown document per step 0 .. steps-1: the edges per predicate (`edges(step)`), what changed
-    and fired, the why-tree of each of `atoms` at the end of the step (a tree is explained again only
-    when its atom changed) and of each of `at_step[step]` (a piece's death, in that step only)."""
-    at_step = at_step or {}
+                  at_step: dict[int, list[str]] | None = None,
+                  notes: dict[int, list[str]] | None = None) -> list[str]:
+    """A markdown document per step 0 .. steps-1: `notes[step]` (a game's actions and rewards), the
+    edges per predicate (`edges(step)`), what changed and fired, the why-tree of each of `atoms` at the end
+    of the step (a tree is explained again only when its atom changed) and of each of `at_step[step]` (a
+    piece's death, in that step only)."""
+    at_step, notes = at_step or {}, notes or {}
     trace = None
     if atoms or at_step:
         run_model = model() if model else RunModel(con)
@@ -109,7 +112,7 @@ def why_documents(con: RunConnection, episode: GraphEpisode, atoms: tuple[str, .
     trees: dict[tuple[str, int], WhyNode] = {}
     docs = []
     for s in range(episode.steps):
-        lines = _step_header(episode, s, edges(s))
+        lines = _step_header(episode, s, edges(s), notes.get(s, []))
         if not atoms:
             example = next((head for head, t in zip(episode.firings.head, episode.firings.t.tolist())
                             if t == s and "`" not in head), None)  # a backtick would end the code span
@@ -130,8 +133,9 @@ def why_documents(con: RunConnection, episode: GraphEpisode, atoms: tuple[str, .
 
 def log_why(rec: rr.RecordingStream, con: RunConnection, episode: GraphEpisode, atoms: tuple[str, ...],
             depth: int = 6, model: Callable[[], RunModel] | None = None,
-            edges: Callable[[int], dict[str, int]] = no_edges, at_step: dict[int, list[str]] | None = None) -> None:
-    docs = why_documents(con, episode, atoms, depth, model, edges, at_step)
+            edges: Callable[[int], dict[str, int]] = no_edges, at_step: dict[int, list[str]] | None = None,
+            notes: dict[int, list[str]] | None = None) -> None:
+    docs = why_documents(con, episode, atoms, depth, model, edges, at_step, notes)
     rec.send_columns(style.WHY, indexes=[rr.TimeColumn(style.STEP, sequence=np.arange(len(docs)))],
                      columns=rr.TextDocument.columns(text=[printable(d, keep="\n\t") for d in docs],
                                                      media_type=["text/markdown"] * len(docs)))

@@ -2,15 +2,17 @@
 an atom of it is about (its first argument), the atom's state at the end of each step where it changed:
 a binary predicate's second argument where it holds (`atLoc(red-agent-1, c3_4)`: `c3_4`; a run's cell ids
 with their (x, y)), a unary one's `true`, `false` or its bound. Any run's predicates, a game's or a
-reasoning's."""
+reasoning's; and `action`, each agent's action in each step (the run's `steps` rows)."""
 from __future__ import annotations
 
+from collections.abc import Sequence
 from functools import lru_cache
 
 import numpy as np
 import rerun as rr
 from tracelab.viewers.replay import style
 from tracelab.viewers.replay.columns import send_per_entity
+from tracelab.viewers.replay.plots import StepRow
 
 from tracelab.engine.terminal_text import printable
 from tracelab.store.coordinates import run_grid
@@ -21,6 +23,7 @@ from tracelab.store.reader import RunConnection
 DEFAULT_LANES = ("alive", "atLoc", "health", "ammo", "action")
 MAX_LANES = 200     # lanes drawn (a predicate over every cell of a big board would make thousands)
 NOTHING = "-"       # a binary predicate that holds for no second argument
+ACTION = "action"   # the lane of the agents' actions (a predicate of that name is drawn instead)
 
 
 def parse_lanes(text: str) -> tuple[str, ...]:
@@ -32,6 +35,8 @@ def check_lanes(con: RunConnection, lanes: tuple[str, ...]) -> tuple[str, ...]:
     """The lanes the run can draw: `lanes` when every one is a predicate of the run (else a ValueError
     naming its predicates), the default's that are when `lanes` is the default."""
     names = [n for (n,) in con.execute("SELECT name FROM raw.labels WHERE arity IN (1, 2) ORDER BY name").fetchall()]
+    if con.execute("SELECT EXISTS (SELECT 1 FROM steps)").fetchall()[0][0]:
+        names.append(ACTION)
     if lanes == DEFAULT_LANES:
         return tuple(lane for lane in lanes if lane in names)
     for lane in lanes:
@@ -44,11 +49,17 @@ def _state(lower: float, upper: float) -> str:
     return "true" if lower >= 1 else "false" if upper <= 0 else f"[{lower:g},{upper:g}]"
 
 
-def lane_rows(con: RunConnection, episode: int, lanes: tuple[str, ...]) -> dict[tuple[str, str], list[tuple[int, str]]]:
+def lane_rows(con: RunConnection, episode: int, lanes: tuple[str, ...], steps: Sequence[StepRow] = ()
+              ) -> dict[tuple[str, str], list[tuple[int, str]]]:
     """(predicate, thing) -> [(t, its state at the end of t)] at each t where the state changed (one query),
-    for at most MAX_LANES lanes."""
+    for at most MAX_LANES lanes; `action`'s from the episode's `steps` rows."""
     if not lanes:
         return {}
+    actions: dict[tuple[str, str], list[tuple[int, str]]] = {}
+    if ACTION in lanes and not con.execute("SELECT EXISTS (SELECT 1 FROM raw.labels WHERE name = ?)",
+                                           [ACTION]).fetchall()[0][0]:
+        for t, agent, _, action in steps:
+            actions.setdefault((ACTION, agent), []).append((t, action))
     grid = run_grid(con)
     rows = con.execute(
         "SELECT c.t, l.name, n0.name, n1.name, c.new_lower, c.new_upper FROM raw.changes c "
@@ -86,7 +97,7 @@ def lane_rows(con: RunConnection, episode: int, lanes: tuple[str, ...]) -> dict[
     if last is not None:
         close(last)
     order = {p: i for i, p in enumerate(lanes)}
-    return dict(sorted(out.items(), key=lambda kv: (order[kv[0][0]], kv[0][1])))
+    return dict(sorted({**out, **actions}.items(), key=lambda kv: (order[kv[0][0]], kv[0][1])))
 
 
 @lru_cache(maxsize=1)
@@ -95,9 +106,11 @@ def _truth_states() -> rr.StateConfiguration:
     return rr.StateConfiguration(values=["true", "false"], colors=[0x4CAF50FF, 0x808080FF])
 
 
-def log_lanes(rec: rr.RecordingStream, con: RunConnection, episode: int, lanes: tuple[str, ...]) -> int:
-    """The episode's lanes, a row where a state changed; returns how many lanes were drawn."""
-    rows = lane_rows(con, episode, lanes)
+def log_lanes(rec: rr.RecordingStream, con: RunConnection, episode: int, lanes: tuple[str, ...],
+              steps: Sequence[StepRow] = ()) -> int:
+    """The episode's lanes, a row where a state changed (an action at each step); returns how many lanes
+    were drawn."""
+    rows = lane_rows(con, episode, lanes, steps)
     if not rows:
         return 0
     paths = [f"{style.LANES}/{rr.escape_entity_path_part(p)}/{rr.escape_entity_path_part(thing)}"

@@ -9,31 +9,44 @@ import numpy as np
 import rerun as rr
 from tracelab.viewers.replay import style
 from tracelab.viewers.replay.columns import send_per_entity
+from tracelab.viewers.replay.markdown_text import literal
 
 from tracelab.store.reader import RunConnection
 
 REWARD_PALER = 0.5      # a reward line's team colour, this far towards white
 
 
-def step_rewards(con: RunConnection, episodes: list[int]) -> dict[int, list[tuple[int, str, float]]]:
-    """episode -> its `steps` rows (t, agent, reward), for all these episodes in one query (`t`: the
-    timestep an env step ended at, the replay's `step`)."""
-    out: dict[int, list[tuple[int, str, float]]] = {}
-    for episode, step, agent, reward in con.execute(
-            "SELECT episode, t, agent, reward FROM steps WHERE episode IN (SELECT unnest(?::BIGINT[]))",
-            [list(episodes)]).fetchall():
-        out.setdefault(episode, []).append((step, agent, reward))
+StepRow = tuple[int, str, float, str]     # t, agent, reward, action (its name, else its number)
+
+
+def step_rows(con: RunConnection, episodes: list[int]) -> dict[int, list[StepRow]]:
+    """episode -> its `steps` rows (t, agent, reward, action) in t order, for all these episodes in one
+    query (`t`: the timestep an env step ended at, the replay's `step`)."""
+    out: dict[int, list[StepRow]] = {}
+    for episode, step, agent, reward, action in con.execute(
+            "SELECT episode, t, agent, reward, coalesce(action_name, action::VARCHAR) FROM steps "
+            "WHERE episode IN (SELECT unnest(?::BIGINT[])) ORDER BY episode, t, agent", [list(episodes)]).fetchall():
+        out.setdefault(episode, []).append((step, agent, reward, action))
     return out
 
 
-def agent_rewards(agents: list[str], rows: list[tuple[int, str, float]]) -> np.ndarray | None:
+def step_notes(rows: list[StepRow]) -> dict[int, list[str]]:
+    """t -> the step document's lines of what the agents did and got in that step."""
+    by_t: dict[int, list[StepRow]] = {}
+    for row in rows:
+        by_t.setdefault(row[0], []).append(row)
+    return {t: [f"- actions: {', '.join(f'{literal(a)} {literal(act)}' for _, a, _, act in at)}",
+                f"- reward: {', '.join(f'{literal(a)} {r:g}' for _, a, r, _ in at)}"] for t, at in by_t.items()}
+
+
+def agent_rewards(agents: list[str], rows: list[StepRow]) -> np.ndarray | None:
     """[last t + 1, len(agents)] each agent's reward per timestep (0 where it took no step) from the
     episode's `steps` rows, or None when the run has none for it."""
     if not rows:
         return None
     column = {a: i for i, a in enumerate(agents)}
-    out = np.zeros((max(t for t, _, _ in rows) + 1, len(agents)))
-    for t, agent, reward in rows:
+    out = np.zeros((max(t for t, *_ in rows) + 1, len(agents)))
+    for t, agent, reward, _ in rows:
         if t >= 0 and agent in column:
             out[t, column[agent]] += reward
     return out

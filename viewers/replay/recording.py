@@ -45,7 +45,7 @@ class RunContext:
     _positions: np.ndarray | None = None
     _model: RunModel | None = None
     _color_label: tuple[str | None] | None = None   # decided at the first episode, kept for the others
-    _rewards: dict[int, list[tuple[int, str, float]]] = field(default_factory=dict)
+    _steps: dict[int, list[plots.StepRow]] = field(default_factory=dict)
 
     @classmethod
     def of(cls, con: RunConnection, name: str) -> RunContext:
@@ -97,16 +97,16 @@ class RunContext:
         self.lanes = lanes.check_lanes(self.con, options.lanes)
 
     def prefetch(self, episodes: list[int]) -> None:
-        """The `steps` rewards of these episodes in one query (the rest of an episode is read when it is
+        """The `steps` rows of these episodes in one query (the rest of an episode is read when it is
         recorded: a reasoning's rows may be millions)."""
-        rewards = plots.step_rewards(self.con, episodes)
-        self._rewards.update({e: rewards.get(e, []) for e in episodes})
+        rows = plots.step_rows(self.con, episodes)
+        self._steps.update({e: rows.get(e, []) for e in episodes})
 
-    def step_rewards(self, episode: int) -> list[tuple[int, str, float]]:
+    def step_rows(self, episode: int) -> list[plots.StepRow]:
         """The episode's `steps` rows (prefetched ones from memory, once)."""
-        if episode not in self._rewards:
-            return plots.step_rewards(self.con, [episode]).get(episode, [])
-        return self._rewards.pop(episode)
+        if episode not in self._steps:
+            return plots.step_rows(self.con, [episode]).get(episode, [])
+        return self._steps.pop(episode)
 
     def refresh(self) -> None:
         """Catch up with a run being written: its metrics so far (the model reads a grown vocabulary
@@ -131,7 +131,7 @@ def record_episode(ctx: RunContext, episode: int, rec: rr.RecordingStream, optio
     label = ctx.color_label(options.color_by, episode)
     data = read_episode(ctx.con, ctx.graph, episode, label, edges=ctx.board is None)
     rec.send_recording_name(f"{ctx.name} episode {episode} ({data.outcome or 'running'}, {data.steps} steps)")
-    rows = ctx.step_rewards(episode)
+    rows = ctx.step_rows(episode)
     agent = agent_plots.read_series(ctx.con, episode)
     if blueprint:
         main = board_view(ctx.board) if ctx.board is not None else graph_view(ctx.positions(episode), label)
@@ -149,13 +149,14 @@ def record_episode(ctx: RunContext, episode: int, rec: rr.RecordingStream, optio
     else:
         edges = graph_layer.log_graph(rec, ctx.graph, ctx.positions(episode), data).edge_counts
     if rows:
-        agents = list(dict.fromkeys(agent for _, agent, _ in rows))
+        agents = list(dict.fromkeys(agent for _, agent, *_ in rows))
         plots.log_rewards(rec, plots.agent_rewards(agents, rows), agents, [colour_of(a) for a in agents])
     agent_plots.log_agent_series(rec, agent, colour_of)
-    lanes.log_lanes(rec, ctx.con, episode, ctx.lanes)
+    lanes.log_lanes(rec, ctx.con, episode, ctx.lanes, rows)
     graph_rules.log_rule_log(rec, data)
     graph_rules.log_changed(rec, data)
-    graph_rules.log_why(rec, ctx.con, data, options.why_atoms, options.why_depth, lambda: ctx.model, edges, deaths)
+    graph_rules.log_why(rec, ctx.con, data, options.why_atoms, options.why_depth, lambda: ctx.model, edges, deaths,
+                        plots.step_notes(rows))
     if ctx.metrics:
         plots.log_training(rec, ctx.metrics)
     return data
