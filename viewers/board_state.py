@@ -20,7 +20,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from tracelab import RULES_DIR
-from tracelab.board import DIRECTION_ARROWS, Board, board_of_config
+from tracelab.board import DIRECTION_ARROWS, MAX_RECORDED_SIDE, Board, board_of_config
 from tracelab.store.coordinates import Grid, run_grid
 from tracelab.store.kind import run_board, run_config, spec_text
 from tracelab.store.reader import RunConnection
@@ -80,6 +80,8 @@ def gridwar_board(config: dict[str, Any]) -> Board | None:
         return None
     try:
         w, h = int(s["width"]), int(s["height"])
+        if not (0 < w <= MAX_RECORDED_SIDE and 0 < h <= MAX_RECORDED_SIDE):
+            return None           # a stranger's config: no board rather than a grid of any size
         grid = [["."] * w for _ in range(h)]
         for x, y in s.get("mountains", []):
             grid[h - 1 - int(y)][int(x)] = "M"
