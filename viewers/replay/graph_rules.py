@@ -75,7 +75,20 @@ def check_atoms(model: RunModel, atoms: tuple[str, ...]) -> None:
             raise ValueError(f"--why {atom}: {msg}") from None
 
 
-def _step_header(episode: GraphEpisode, s: int, edges: dict[str, int], notes: list[str]) -> list[str]:
+def _per_step(episode: GraphEpisode) -> tuple[dict[int, Counter[str]], dict[int, str]]:
+    """Each step's logged firings per rule, and the first head a step's rules set that can be quoted (a
+    backtick would end the code span): one pass over the log, not one a step."""
+    fired: dict[int, Counter[str]] = {}
+    example: dict[int, str] = {}
+    for rule, head, t in zip(episode.firings.rule, episode.firings.head, episode.firings.t.tolist()):
+        fired.setdefault(t, Counter())[rule] += 1
+        if t not in example and "`" not in head:
+            example[t] = head
+    return fired, example
+
+
+def _step_header(episode: GraphEpisode, s: int, edges: dict[str, int], notes: list[str],
+                 fired: Counter[str]) -> list[str]:
     last = episode.steps - 1
     lines = [f"## Episode {episode.episode}, step {s} of {last}"]
     if s == last and episode.outcome:
@@ -85,7 +98,6 @@ def _step_header(episode: GraphEpisode, s: int, edges: dict[str, int], notes: li
     if edges:
         lines.append("- edges: " + ", ".join(f"{literal(name)} {n:,}" for name, n in edges.items()))
     lines.append("- changed: " + (", ".join(f"{literal(name)} {n:,}" for name, n in changed.items()) or "nothing"))
-    fired = Counter(r for r, t in zip(episode.firings.rule, episode.firings.t.tolist()) if t == s)
     total = episode.firings.per_step.get(s, 0)
     if total:
         lines.append(f"- fired: {total:,} (" + ", ".join(f"{literal(r)} {n:,}" for r, n in fired.most_common()) + ")")
@@ -111,11 +123,11 @@ def why_documents(con: RunConnection, episode: GraphEpisode, atoms: tuple[str, .
     grid = run_grid(con)     # a run's cell ids with their (x, y), as `tracelab why` shows them
     trees: dict[tuple[str, int], WhyNode] = {}
     docs = []
+    fired, examples = _per_step(episode)
     for s in range(episode.steps):
-        lines = _step_header(episode, s, edges(s), notes.get(s, []))
+        lines = _step_header(episode, s, edges(s), notes.get(s, []), fired.get(s, Counter()))
         if not atoms:
-            example = next((head for head, t in zip(episode.firings.head, episode.firings.t.tolist())
-                            if t == s and "`" not in head), None)  # a backtick would end the code span
+            example = examples.get(s)
             if example:
                 lines.append(f"\nAsk why an atom has its bound: `tracelab replay RUN --why '{example}'`.")
         for atom in at_step.get(s, []):
