@@ -127,7 +127,7 @@ def test_bench_replay_quick(capsys: pytest.CaptureFixture) -> None:
     for key in ("one_game_s", "games_s", "one_game_cpu_s", "games_cpu_s"):
         positive(r[key])
     assert r["big_rrd_bytes"] > 0 and r["many_rrd_bytes"] > r["big_rrd_bytes"] / 10
-    assert set(r["layers_s"]) >= {"load (board from the run)", "board", "rule log", "why documents"}
+    assert set(r["layers_s"]) >= {"read (rule log, changes, rewards)", "board", "rule log", "why documents"}
 
 
 def test_bench_train_quick(capsys: pytest.CaptureFixture) -> None:

@@ -11,7 +11,7 @@ from tracelab.store.reader import open_run, resolve_run
 from tracelab.viewers.replay.outputs import GrpcOutput, SaveOutput
 from tracelab.viewers.replay.recording import ReplayOptions
 from tracelab.viewers.replay.replay import context_of, follow_run, replay_run
-from tracelab.viewers.replay.rules_layer import parse_lanes
+from tracelab.viewers.replay.lanes import parse_lanes
 from tracelab.viewers.replay.select import EpisodeFilter, EpisodeIds, parse_episodes
 
 
