@@ -2,9 +2,12 @@
 side, by team size, one world and batched, RuleSim with tracing on and off; then GridWar's registered id
 through gymnasium (gym.make, gym.make_vec: the declared env over rules/gridworld/war.toml); then GridWar
 through both paths: RuleSim's vector env (tracelab.envs.vector_env, the trainer's) against the declared
-spec's (docs/worlds.md), one world and batched, with their ratios. Goals: docs/benchmarks.md."""
+spec's (docs/worlds.md), one world and batched, with their ratios; then the spec path with every agent of a
+team playing (war.toml's base game at each team size: its advanced game plays one agent a team) beside RuleSim
+and RefSim on the same scenario, ratios to RefSim (issue 38's speed points). Goals: docs/benchmarks.md."""
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -20,7 +23,13 @@ from tracelab.bench.common import (
 from tracelab.bench.engine import GOAL_STEPS_PER_S, machine_line
 from tracelab.bench.sims import get_sim, measure, measure_engine_only, release, scenario_for
 from tracelab.envs import make_env, make_vec_env
+from tracelab.envs.declared.gridwar import scenario_spec
+from tracelab.envs.declared.spec import load_spec
+from tracelab.envs.declared.vector_world import DeclaredWorlds
+from tracelab.envs.tracer import handover_due
+from tracelab.game.refsim import RefSim
 from tracelab.game.rulesim import RuleSim
+from tracelab.game.scenario import Scenario, builtin_scenario
 
 GOAL_BATCHED_ENV_STEPS_PER_S = 1_000_000  # batched, tracing off
 GOAL_MAX_SLOWDOWN = 5.0  # rule-driven within 5x of the hand-written simulator
@@ -133,6 +142,80 @@ def declared_rates(worlds: int, repeats: int, target_s: float) -> list[dict[str,
     return rows
 
 
+def team_scenario(agents: int) -> Scenario:
+    """GridWar's base game with `agents` a team on the default map, every agent on its base: what war.toml
+    plays at every team size (its advanced game plays one agent a team, war.toml's [env.require])."""
+    base = builtin_scenario("base")
+    if agents == 1:
+        return base
+    return replace(base, name=f"base-{agents}v{agents}", agents_per_team=agents, red_starts=None,
+                   blue_starts=None)
+
+
+class SpecLoop:
+    """A batch of the spec's worlds stepped as sims.Loop steps a simulator: fixed-seed random actions of
+    every red agent (the spec's rules play blue), every agent's observation and reward read, finished worlds
+    restarted, and (with `trace`) the change log taken at the tracer's cadence."""
+
+    def __init__(self, worlds: DeclaredWorlds, trace: bool, seed: int = 0) -> None:
+        self.worlds, self.trace = worlds, trace
+        self.rng = np.random.default_rng(seed)
+        self._steps_waiting = 0
+        worlds.use_generators([np.random.default_rng(seed + i) for i in range(worlds.n_worlds)])
+        worlds.engine.trace_on[:] = trace
+        worlds.engine.take_trace()
+        worlds.reset(np.arange(worlds.n_worlds))
+
+    def run(self, steps: int) -> None:
+        w = self.worlds
+        red = self.rng.integers(0, w.n_actions, (steps, w.n_worlds, w.n_agents))
+        for i in range(steps):
+            w.step(red[i])
+            for agent in range(w.n_agents):
+                w.observations(agent)
+                w.rewards(agent)
+            done = w.terminated() | w.truncated(None)
+            ended = bool(done.any())
+            if self.trace:
+                self._steps_waiting += 1
+                if handover_due(w, self._steps_waiting, ended):  # type: ignore[arg-type]
+                    self._steps_waiting = 0
+                    w.engine.take_trace()
+            if ended:
+                w.reset(np.flatnonzero(done))
+
+
+def spec_rates(agents: list[int], worlds: list[int], repeats: int, target_s: float) -> list[dict[str, Any]]:
+    """One row per (agents, worlds): GridWar's base game at that team size (team_scenario) through RefSim,
+    RuleSim and the spec path (DeclaredWorlds over war.toml: the engine and reads in one compiled call),
+    traced and untraced, each as env-steps/s and as a ratio to RefSim."""
+    rows = []
+    for n in agents:
+        sc = team_scenario(n)
+        path, params = scenario_spec(sc)
+        spec = load_spec(path, **params)
+        for w in worlds:
+            row: dict[str, Any] = {"scenario": sc.name, "agents": n, "worlds": w}
+            row["reference"] = measure(RefSim(sc, w, seed=0), False, repeats, target_s)["env_steps_per_s"]
+            rules = RuleSim(sc, w, seed=0, trace=True)
+            for trace in (False, True):
+                key = "on" if trace else "off"
+                row[f"rulesim_{key}"] = measure(rules, trace, repeats, target_s, engine_time=False)["env_steps_per_s"]
+            del rules
+            declared = DeclaredWorlds(spec, w)
+            row["spec_kernel"] = declared.kernel
+            for trace in (False, True):
+                key = "on" if trace else "off"
+                rates = block_rates(SpecLoop(declared, trace).run, repeats, target_s)
+                row[f"spec_{key}"] = summarize([x * w for x in rates["steps_per_s"]["runs"]]).to_dict()
+            del declared
+            ref = row["reference"]["median"]
+            for k in ("rulesim_off", "rulesim_on", "spec_off", "spec_on"):
+                row[f"{k}_over_reference"] = row[k]["median"] / ref
+            rows.append(row)
+    return rows
+
+
 def _engine_of(env: Any) -> Any:
     """The engine an env steps (RuleSim's, a declared world's or batch's), its change log switched on."""
     eng = env.sim.engine if hasattr(env, "sim") else (env.world if hasattr(env, "world") else env.worlds).engine
@@ -181,9 +264,10 @@ def run(quick: bool = False, repeats: int = 5, agents: list[int] | None = None,
     rows = sim_rates(agents or ([1, 2] if quick else [1, 5, 20]), sorted({1, batch}), repeats, target_s, kernel)
     gym = gym_rates(batch, repeats, target_s)
     declared = declared_rates(batch, repeats, target_s)
+    teams = spec_rates(agents or ([1, 2] if quick else [1, 5, 20]), sorted({1, batch}), repeats, target_s)
     info["load_average_end"] = machine_info()["load_average"]
     return {"machine": info, "quick": quick, "repeats": repeats, "batched_worlds": batch, "sims": rows,
-            "goals": goals(rows), "gym": gym, "declared": declared}
+            "goals": goals(rows), "gym": gym, "declared": declared, "spec_teams": teams}
 
 
 def report(r: dict[str, Any]) -> str:
@@ -221,7 +305,17 @@ def report(r: dict[str, Any]) -> str:
                      f"{100 * d['rulesim']['spread']:.0f}%/{100 * d['declared']['spread']:.0f}%"]
                     for d in measured]) + "".join(
                    f"\nnot measured: {d['spec']}: {d['skipped']}" for d in r.get("declared", []) if "skipped" in d)
+    teams = "GridWar's base game by team size: RefSim, RuleSim and the spec path (war.toml, every red agent " \
+            "playing), env-steps/s and /RefSim\n" + format_table(
+                ["scenario", "worlds", "spec kernel", "RefSim", "RuleSim off", "RuleSim on", "spec off", "spec on",
+                 "RuleSim/ref off/on", "spec/ref off/on", "spread ref/spec off/on"],
+                [[t["scenario"], t["worlds"], t["spec_kernel"], t["reference"]["median"], t["rulesim_off"]["median"],
+                  t["rulesim_on"]["median"], t["spec_off"]["median"], t["spec_on"]["median"],
+                  f"{t['rulesim_off_over_reference']:.3f}/{t['rulesim_on_over_reference']:.3f}",
+                  f"{t['spec_off_over_reference']:.3f}/{t['spec_on_over_reference']:.3f}",
+                  "/".join(f"{100 * t[k]['spread']:.0f}%" for k in ("reference", "spec_off", "spec_on"))]
+                 for t in r.get("spec_teams", [])])
     return "\n\n".join([machine_line(r["machine"], r["quick"], r["repeats"]),
                         "simulators (env-steps/s = steps/s x worlds)\n" + sims,
                         "the engine alone, replaying the loop's steps (share = loop / engine alone)\n" + alone,
-                        goals_t, gym_t, declared])
+                        goals_t, gym_t, declared, teams])
