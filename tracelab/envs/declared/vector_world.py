@@ -55,6 +55,7 @@ class DeclaredWorlds:
                      np.zeros((w, len(mask)), np.int8), np.zeros(1, np.int64))
         self._binding = fused.FusedBinding(self.engine, self._tables, self._ext, self._reads, self._out)
         self._rows = np.full((w, self.n_agents), -1, np.int64)
+        self._agent_rows = np.arange(self.n_agents) * self.n_actions  # agent i's first action row
         self._picks = np.full((w, len(one._picks)), -1, np.int64)
         self.steps = np.zeros(w, np.int64)
         # every draw one np_random.random() (the toy-text games): drawn a block at a time (_Uniforms)
@@ -117,7 +118,7 @@ class DeclaredWorlds:
         if actions.ndim == 1:
             self._rows[:, 0] = actions
         else:  # agent i's action a is its row a + i * n_actions, as DeclaredWorld.step
-            self._rows[:] = np.where(actions >= 0, actions + np.arange(self.n_agents) * self.n_actions, -1)
+            self._rows[:] = np.where(actions >= 0, actions + self._agent_rows, -1)
         picks, before = self._picks, self.one._before
         # every draw one random() a world: the step's numbers of all draws taken at once, in the spec's order
         u = self.uniforms.each(len(before)) if self.uniforms is not None and before else None
