@@ -7,6 +7,7 @@ team playing (war.toml's base game at each team size: its advanced game plays on
 and RefSim on the same scenario, ratios to RefSim (issue 38's speed points). Goals: docs/benchmarks.md."""
 from __future__ import annotations
 
+import time
 from dataclasses import replace
 from typing import Any
 
@@ -15,13 +16,14 @@ import numpy as np
 from tracelab.envs.declared.gridwar import WAR_SPEC
 from tracelab.bench.common import (
     block_rates,
+    calibrate,
     fmt_num,
     format_table,
     machine_info,
     summarize,
 )
 from tracelab.bench.engine import GOAL_STEPS_PER_S, machine_line
-from tracelab.bench.sims import get_sim, measure, measure_engine_only, release, scenario_for
+from tracelab.bench.sims import Loop, get_sim, measure, measure_engine_only, release, scenario_for
 from tracelab.envs import make_env, make_vec_env
 from tracelab.envs.declared.gridwar import scenario_spec
 from tracelab.envs.declared.spec import load_spec
@@ -188,8 +190,8 @@ class SpecLoop:
 
 def spec_rates(agents: list[int], worlds: list[int], repeats: int, target_s: float) -> list[dict[str, Any]]:
     """One row per (agents, worlds): GridWar's base game at that team size (team_scenario) through RefSim,
-    RuleSim and the spec path (DeclaredWorlds over war.toml: the engine and reads in one compiled call),
-    traced and untraced, each as env-steps/s and as a ratio to RefSim."""
+    RuleSim (sims.Loop) and the spec path (SpecLoop: DeclaredWorlds over war.toml, the engine and reads in
+    one compiled call), traced and untraced, as env-steps per CPU second (cpu_rates) and as ratios to RefSim."""
     rows = []
     for n in agents:
         sc = team_scenario(n)
@@ -197,11 +199,10 @@ def spec_rates(agents: list[int], worlds: list[int], repeats: int, target_s: flo
         spec = load_spec(path, **params)
         for w in worlds:
             row: dict[str, Any] = {"scenario": sc.name, "agents": n, "worlds": w}
-            row["reference"] = measure(RefSim(sc, w, seed=0), False, repeats, target_s)["env_steps_per_s"]
+            row["reference"] = cpu_rates(Loop(RefSim(sc, w, seed=0), False).run, w, repeats, target_s)
             rules = RuleSim(sc, w, seed=0, trace=True)
             for trace in (False, True):
-                key = "on" if trace else "off"
-                row[f"rulesim_{key}"] = measure(rules, trace, repeats, target_s, engine_time=False)["env_steps_per_s"]
+                row[f"rulesim_{'on' if trace else 'off'}"] = cpu_rates(Loop(rules, trace).run, w, repeats, target_s)
             del rules
             try:
                 declared = DeclaredWorlds(spec, w)
@@ -211,8 +212,8 @@ def spec_rates(agents: list[int], worlds: list[int], repeats: int, target_s: flo
             if declared is not None:
                 row["spec_kernel"] = declared.kernel
                 for trace in (False, True):
-                    runs = block_rates(SpecLoop(declared, trace).run, repeats, target_s)["steps_per_s"]["runs"]
-                    row[f"spec_{'on' if trace else 'off'}"] = summarize([x * w for x in runs]).to_dict()
+                    row[f"spec_{'on' if trace else 'off'}"] = cpu_rates(SpecLoop(declared, trace).run, w, repeats,
+                                                                         target_s)
                 del declared
             ref = row["reference"]["median"]
             for k in ("rulesim_off", "rulesim_on", "spec_off", "spec_on"):
@@ -220,6 +221,20 @@ def spec_rates(agents: list[int], worlds: list[int], repeats: int, target_s: flo
                     row[f"{k}_over_reference"] = row[k]["median"] / ref
             rows.append(row)
     return rows
+
+
+def cpu_rates(run: Any, worlds: int, repeats: int, target_s: float) -> dict[str, Any]:
+    """Env-steps per CPU second of run(k) (k steps of `worlds` worlds): a calibrated block, a warm-up, then
+    `repeats` blocks timed by this process's CPU time (on this shared machine the wall clock also counts the
+    turns of other processes, which differ from one block to the next)."""
+    block = calibrate(run, target_s)
+    run(block)
+    rates_ = []
+    for _ in range(max(1, repeats)):
+        c0 = time.process_time()
+        run(block)
+        rates_.append(block * worlds / max(time.process_time() - c0, 1e-9))
+    return summarize(rates_).to_dict()
 
 
 def _engine_of(env: Any) -> Any:
@@ -312,7 +327,7 @@ def report(r: dict[str, Any]) -> str:
                     for d in measured]) + "".join(
                    f"\nnot measured: {d['spec']}: {d['skipped']}" for d in r.get("declared", []) if "skipped" in d)
     teams = "GridWar's base game by team size: RefSim, RuleSim and the spec path (war.toml, every red agent " \
-            "playing), env-steps/s and /RefSim\n" + format_table(
+            "playing), env-steps per CPU second and /RefSim\n" + format_table(
                 ["scenario", "worlds", "spec kernel", "RefSim", "RuleSim off", "RuleSim on", "spec off", "spec on",
                  "RuleSim/ref off/on", "spec/ref off/on", "spread ref/spec off/on"],
                 [[t["scenario"], t["worlds"], t["spec_kernel"], t["reference"]["median"], t["rulesim_off"]["median"],
