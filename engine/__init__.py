@@ -4,7 +4,8 @@ The language and its semantics: docs/language.md.
 
 The files by stage (a program flows down; each boundary is a named type, as Soufflé names its stages):
 
-    language   parser.py -> program.py (the AST), errors.py, annotations.py, head_functions.py
+    language   parser.py -> program.py (the AST), errors.py, annotations.py, head_functions.py,
+               cause_kinds.py (what a trace row's cause_kind means)
     inputs     graph.py, graphml_scan.py, graphml_expat.py, graphml_raw.py, facttable.py, safe_files.py,
                vocabulary.py (nodes, labels and atoms as dense ids)
     grounding  grounding.py, grounding_limit.py, aggregate_tables.py -> kernel_tables.py (what the kernels read)
@@ -39,8 +40,8 @@ _EXPORTS = {
     "load_fact_table": "facttable",
     "Graph": "graph", "load_graphml": "graph",
     "GroundingTable": "grounding",
-    "CAUSE_EXTERNAL": "kernel", "CAUSE_FACT": "kernel", "CAUSE_POLICY": "kernel", "CAUSE_RESET": "kernel",
-    "CAUSE_RULE": "kernel",
+    "CAUSE_EXTERNAL": "cause_kinds", "CAUSE_FACT": "cause_kinds", "CAUSE_POLICY": "cause_kinds",
+    "CAUSE_RESET": "cause_kinds", "CAUSE_RULE": "cause_kinds",
     "check_program": "parser", "load_program": "parser", "parse_literal": "parser", "parse_program": "parser",
 }
 __all__ = sorted(_EXPORTS)
@@ -68,5 +69,5 @@ if TYPE_CHECKING:  # for type checkers and editors: the same names, imported eag
     from .facttable import load_fact_table
     from .graph import Graph, load_graphml
     from .grounding import GroundingTable
-    from .kernel import CAUSE_EXTERNAL, CAUSE_FACT, CAUSE_POLICY, CAUSE_RESET, CAUSE_RULE
+    from .cause_kinds import CAUSE_EXTERNAL, CAUSE_FACT, CAUSE_POLICY, CAUSE_RESET, CAUSE_RULE
     from .parser import check_program, load_program, parse_literal, parse_program

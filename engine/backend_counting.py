@@ -13,6 +13,7 @@ import numpy as np
 from . import annotations
 from . import kernel as K
 from .backend_api import EngineTables
+from .direct_call import DirectCall
 from .kernel_tables import AggregateTables, KernelTables
 from .program import effective_bound
 from .restore_kernel import restore_groundings
@@ -45,6 +46,7 @@ class CountingState:
         self._req_n = np.zeros(1, np.int64)
         self._scratch(0, 0)
         self._state_version = -1  # the layout_version step_state() was built at
+        self._step_call: DirectCall | None = None  # step_kernel over step_state(), past numba's dispatch
 
     @property
     def n_atoms(self) -> int:
@@ -153,10 +155,17 @@ class CountingState:
         while True:
             if status is not None and not self._serve(status, w_first):
                 break
-            status, w_first = self.step_kernel(self.step_state(), w_first, ext_ptr, ext_i, ext_f)
+            status, w_first = self._kernel_call()(w_first, ext_ptr, ext_i, ext_f)
         if status != K.STATUS_OK:
             self._reset_after_error()
         return status
+
+    def _kernel_call(self) -> DirectCall:
+        """step_kernel bound to the current step state (new when the layout or the kernel changes)."""
+        state, call = self.step_state(), self._step_call
+        if call is None or call.record is not state or call.dispatcher is not self.step_kernel:
+            call = self._step_call = DirectCall(self.step_kernel, state)
+        return call
 
     def _serve(self, status: int, w_first: int) -> bool:
         """What a kernel call that paused with `status` at world w_first needs before it goes on; False

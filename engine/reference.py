@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import annotations, head_functions
+from .cause_kinds import CAUSE_EXTERNAL, CAUSE_FACT, CAUSE_POLICY, CAUSE_RESET, CAUSE_RULE
 from .errors import FixpointError, InconsistencyError, ProgramError
 from .program import (
     EPS,
@@ -31,9 +32,6 @@ Atom = tuple[str, tuple[str, ...]]
 Interval = tuple[float, float]
 
 FULL: Interval = (0.0, 1.0)
-
-# cause kinds of a change row (docs/language.md "Trace")
-CAUSE_FACT, CAUSE_EXTERNAL, CAUSE_RULE, CAUSE_POLICY, CAUSE_RESET = 0, 1, 2, 3, 4
 
 
 @dataclass(frozen=True)

@@ -30,6 +30,16 @@ WALK_STEPS = 6
 WALK_OUTCOMES = {10: "win", 11: "truncated", 12: "loss"}
 
 
+def run_rows(run: Path, sql: str) -> list[tuple]:
+    """The rows of `sql` over a run, read through the store's sandboxed path."""
+    from tracelab.store import open_run
+    con = open_run(run)
+    try:
+        return con.execute(sql).fetchall()
+    finally:
+        con.close()
+
+
 def walk_action(world: int, t: int) -> int:
     """1 = move along the path, 0 = stay."""
     if world == 0:

@@ -118,6 +118,15 @@ def test_bench_env_quick(capsys: pytest.CaptureFixture) -> None:
         positive(d["rulesim"])
         positive(d["declared"])
         assert d["declared_over_rulesim"] == pytest.approx(d["declared"]["median"] / d["rulesim"]["median"])
+    # the spec path with every red agent playing, beside RuleSim and RefSim on the same base game
+    teams = r["spec_teams"]
+    assert [(t["scenario"], t["agents"], t["worlds"]) for t in teams] == [
+        ("base", 1, 1), ("base", 1, 16), ("base-2v2", 2, 1), ("base-2v2", 2, 16)]
+    for t in teams:
+        for key in ("reference", "rulesim_off", "rulesim_on", "spec_off", "spec_on"):
+            positive(t[key])
+            if key != "reference":
+                assert t[f"{key}_over_reference"] == pytest.approx(t[key]["median"] / t["reference"]["median"])
 
 
 def test_bench_replay_quick(capsys: pytest.CaptureFixture) -> None:
@@ -127,7 +136,7 @@ def test_bench_replay_quick(capsys: pytest.CaptureFixture) -> None:
     for key in ("one_game_s", "games_s", "one_game_cpu_s", "games_cpu_s"):
         positive(r[key])
     assert r["big_rrd_bytes"] > 0 and r["many_rrd_bytes"] > r["big_rrd_bytes"] / 10
-    assert set(r["layers_s"]) >= {"load (board from the run)", "board", "rule log", "why documents"}
+    assert set(r["layers_s"]) >= {"read (rule log, changes, rewards)", "board", "rule log", "why documents"}
 
 
 def test_bench_train_quick(capsys: pytest.CaptureFixture) -> None:

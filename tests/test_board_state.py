@@ -99,3 +99,13 @@ def test_a_training_runs_evaluation_game_has_its_agents_on_the_board() -> None:
                        [episode]).fetchall()[0][0]
     red = next(p for p in BoardTrack.read(con, board, episode).at(1).pieces if p.thing == "red-agent-1")
     assert (red.col, board.height - 1 - red.row) == (int(cell) % 8, int(cell) // 8)
+
+
+def test_a_scenario_too_big_or_not_a_grid_gives_no_board() -> None:
+    """A RuleSim run's config is a stranger's: a side past the recorded limit is no board (drawn as the
+    run's graph), not a grid built to its size."""
+    from tracelab.viewers.board_state import gridwar_board
+    text = 'width = {w}\nheight = 8\nred_base = [0, 0]\nblue_base = [1, 1]\n'
+    assert gridwar_board({"scenario": text.format(w=8)}) is not None
+    for w in (100_000, 0, -3):
+        assert gridwar_board({"scenario": text.format(w=w)}) is None

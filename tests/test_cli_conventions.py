@@ -159,15 +159,33 @@ def test_an_atom_given_after_the_flags_is_the_same_question(capsys: pytest.Captu
     assert "unexpected argument: extra" in capsys.readouterr().err
 
 
-def test_each_command_module_registers_the_command_named_after_it() -> None:
-    """`tracelab CMD ...` builds CMD's parser alone from the module named after it (cli.command_module):
-    a module that registered another command too, or under another name, would lose it there."""
-    from tracelab.cli import COMMAND_MODULES, command_module
+def test_the_parser_is_the_command_table_and_each_command_runs_from_the_module_named_after_it() -> None:
+    """`tracelab CMD ...` builds CMD's parser alone from the command table (tracelab/commands/_table.py),
+    importing no command module; the command runs `run(args)` of the module named after it."""
+    import importlib
+    import subprocess
+    import sys
+
+    from tracelab.cli import command_module
+    from tracelab.commands._table import COMMANDS
     full = build_parser()
     names = next(a for a in full._actions if isinstance(a, argparse._SubParsersAction)).choices
-    assert sorted(command_module(name) for name in names) == sorted(COMMAND_MODULES)
+    assert list(names) == [c.name for c in COMMANDS]
     for name in names:
         alone = build_parser(name)
         assert list(next(a for a in alone._actions if isinstance(a, argparse._SubParsersAction)).choices) == [name]
+        assert callable(importlib.import_module(command_module(name)).run)
     assert command_module("no-such-command") is None
     assert build_parser("no-such-command").format_help() == full.format_help()  # the typo's message names all
+    code = ("import sys; from tracelab.cli import build_parser; build_parser(); "
+            "print([m for m in sys.modules if m.startswith('tracelab.commands.') and "
+            "not m.rpartition('.')[2].startswith('_')])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True)
+    assert out.stdout.strip() == "[]"
+
+
+def test_experiments_choices_in_the_table_are_the_experiments() -> None:
+    """The command table names without importing them: experiment's choices are the experiments."""
+    from tracelab.commands._table import EXPERIMENT_NAMES
+    from tracelab.train.experiments.definitions import EXPERIMENTS
+    assert sorted(EXPERIMENT_NAMES) == sorted(EXPERIMENTS)

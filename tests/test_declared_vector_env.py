@@ -304,3 +304,39 @@ def test_gridwar_worlds_equal_single_declared_envs(kernel: str) -> None:
             np.testing.assert_array_equal(obs[i], o, err_msg=f"step {step}, world {i}")
             np.testing.assert_array_equal(info["action_mask"][i], inf["action_mask"])
     assert ends >= n  # the restarts were compared too
+
+
+def test_gridwar_team_worlds_equal_single_declared_worlds() -> None:
+    """Several agents a world (war.toml's base game, 2 a team): DeclaredWorlds.step takes one action per
+    world and agent (-1: none), and each world then equals a DeclaredWorld given the same actions and a
+    generator of the same seed: every agent's observation and reward, the ends, across restarts."""
+    from tracelab import RULES_DIR
+    from tracelab.envs.declared.spec import load_spec
+    from tracelab.envs.declared.vector_world import DeclaredWorlds
+    from tracelab.envs.declared.world import DeclaredWorld
+    spec = load_spec(RULES_DIR / "gridworld" / "war.toml", agents_per_team=2)
+    n, seed = 3, 5
+    batch = DeclaredWorlds(spec, n, kernel="counting")
+    batch.use_generators([np.random.default_rng(seed + i) for i in range(n)])
+    batch.reset(np.arange(n))
+    singles = [DeclaredWorld(spec, kernel="counting") for _ in range(n)]
+    rngs = [np.random.default_rng(seed + i) for i in range(n)]
+    for world, r in zip(singles, rngs):
+        world.reset(r)
+    rng, ends = np.random.default_rng(8), 0
+    for step in range(150):
+        actions = rng.integers(-1, batch.n_actions, (n, 2))
+        batch.step(actions)
+        done = batch.terminated() | batch.truncated(None)
+        for i, world in enumerate(singles):
+            world.step(actions[i], rngs[i])
+            for agent in range(2):
+                np.testing.assert_array_equal(batch.observations(agent)[i], world.observation(agent),
+                                              err_msg=f"step {step}, world {i}, agent {agent}")
+                assert batch.rewards(agent)[i] == world.last_rewards[agent], (step, i, agent)
+            assert done[i] == (world.terminated() or world.truncated()), (step, i)
+            if done[i]:
+                world.reset(rngs[i])
+                ends += 1
+        batch.reset(np.flatnonzero(done))
+    assert ends >= n  # restarts compared too

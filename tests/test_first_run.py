@@ -1,9 +1,10 @@
 """A newcomer's first run (issue 31 part 4): `tracelab play` on an empty numba cache compiles each kernel
-once, for one signature, the game's kernels in a second process (loaded, not compiled, by the play
-itself), and says so in one line. Times are measured by `tracelab bench first-run`, never here."""
+once, for one signature, and says so in one line; the next run loads them and says nothing. GridWar plays
+through its spec (rules/gridworld/war.toml): the engine's kernels and the declared world's (its fused step,
+observation reads, nearest-thing loop). RuleSim's second-process warm-up is held by the last two tests
+while RuleSim stands. Times are measured by `tracelab bench first-run`, never here."""
 from __future__ import annotations
 
-import pytest
 
 import json
 import os
@@ -17,8 +18,7 @@ from tracelab.game import rulesim_warmup, rulesim_warmup_child
 from tracelab.game.rulesim import RuleSim
 from tracelab.game.scenario import builtin_scenario
 
-# a play in this process, then what numba holds: each kernel.py function's signatures, the lanes
-# kernel's, and for each game kernel how often it was loaded from the disk cache and compiled here
+# a play in this process, then what numba holds: each kernel function's signatures, per module
 PROBE = r"""
 import json, sys
 from numba.core.registry import CPUDispatcher
@@ -26,17 +26,14 @@ from tracelab.cli import main
 code = main(["play", "--scenario", "advanced", "--episodes", "2", "--run", sys.argv[1]])
 import tracelab.engine.kernel as K
 import tracelab.engine.lanes as L
-from tracelab.game import rulesim_kernel as RK
-from tracelab.game.rulesim_warmup import game_kernels
+from tracelab.envs.declared import computed, fused, observe_kernel
 
-def signatures(module):
-    return {n: len(v.signatures) for n, v in vars(module).items()
-            if isinstance(v, CPUDispatcher) and v.py_func.__module__ == module.__name__ and v.signatures}
+def signatures(*modules):
+    return {f"{m.__name__.rsplit('.', 1)[-1]}.{n}": len(v.signatures) for m in modules for n, v in vars(m).items()
+            if isinstance(v, CPUDispatcher) and v.py_func.__module__ == m.__name__ and v.signatures}
 
-game = {k.__name__: [sum(k.stats.cache_hits.values()), sum(k.stats.cache_misses.values())]
-        for k in game_kernels(True)}
-print(json.dumps({"code": code, "kernel": signatures(K), "rulesim_kernel": signatures(RK),
-                  "lanes": signatures(L), "game": game}))
+print(json.dumps({"code": code, "kernel": signatures(K), "declared": signatures(computed, fused, observe_kernel),
+                  "lanes": signatures(L)}))
 """
 
 
@@ -53,28 +50,24 @@ def _play(cache: Path, run_dir: Path) -> tuple[dict, list[str]]:
     return json.loads(done.stdout.splitlines()[-1]), done.stderr.splitlines()
 
 
-@pytest.mark.xfail(strict=True, reason="play plays GridWar through its spec now (issue 38): it compiles the declared "
-                   "world's kernels, not RuleSim's game kernels in a second process; this test is to be rewritten "
-                   "for the spec path's first run")
-def test_a_first_play_compiles_each_kernel_once_and_the_games_in_a_second_process(tmp_path: Path) -> None:
+def test_a_first_play_compiles_each_kernel_once_and_says_so_in_one_line(tmp_path: Path) -> None:
     got, err = _play(tmp_path, tmp_path / "cold")
     assert got["code"] == 0
     # one signature per function: a constant argument no longer compiles a callee again (kernel.py's docstring)
-    assert got["kernel"]["step_worlds"] == 1 and got["kernel"]["_set_atom"] == 1
+    assert got["kernel"]["kernel.step_worlds"] == 1
     assert {n: c for n, c in got["kernel"].items() if c != 1} == {}
-    assert {n: c for n, c in got["rulesim_kernel"].items() if c != 1} == {}
+    assert got["declared"]["fused.fused_step"] == 1  # the world's step, fused with the engine's
+    assert {n: c for n, c in got["declared"].items() if c != 1} == {}
     assert got["lanes"] == {}  # one world: the counting kernel only, the lanes kernel never compiles
-    # the game's kernels came from numba's disk cache, written by the second process: none compiled here
-    assert all(hits >= 1 and misses == 0 for hits, misses in got["game"].values()), got["game"]
     notice = [ln for ln in err if "compiling" in ln]
     assert len(notice) == 1, err  # one line, once
-    assert notice[0].startswith("tracelab: compiling the engine (first run only")
-    assert "the rule engine's step kernel and the game's kernels (in a second process)" in notice[0]
-    assert str(tmp_path / "numba") in notice[0]  # where they are cached
+    assert notice[0].startswith("tracelab: compiling the rule engine's step kernel and a declared world's step"), notice
+    assert "war.toml (first run only" in notice[0]
 
     again, err = _play(tmp_path, tmp_path / "warm")  # the next run loads everything: nothing said
     assert again["code"] == 0 and not [ln for ln in err if "compiling" in ln], err
-    assert all(misses == 0 for _, misses in again["game"].values())
+    loaded = {**again["kernel"], **again["declared"]}  # the entry points, loaded for the signatures compiled cold
+    assert loaded and all(got["kernel"].get(n, got["declared"].get(n)) == c == 1 for n, c in loaded.items()), loaded
 
 
 def test_the_second_process_calls_the_game_kernels_with_the_types_a_rulesim_passes() -> None:

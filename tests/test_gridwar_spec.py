@@ -219,3 +219,16 @@ def test_nonmarkov_scenario_equals_refsim_step_by_step() -> None:
     seen = play_teams(RULES_DIR / "gridworld" / "war_nonmarkov.toml", {}, builtin_scenario("nonmarkov"), 400, 1,
                       stack_previous=True)
     assert seen["ends"] > 5 and seen["slow move"] and seen["slow move hit"] and seen["hit"], seen
+
+
+@pytest.mark.parametrize("name", ["base", "advanced"])
+def test_the_walk4_map_equals_refsim_step_by_step(name: str) -> None:
+    """map = "walk4" (a 4x4 open board, the bases 6 moves apart; the training tests' world,
+    tests/train_helpers.py): its board, starts and observation are RefSim's 4x4 scenario's, step by step,
+    with the walk's rewards and step limit."""
+    from train_helpers import WALK, WALK_ARGS
+    scenario = replace(WALK, advanced=name == "advanced")
+    params = {k: v for k, v in WALK_ARGS.items() if k != "max_steps"}
+    seen = play_both(name, 300, 3, WALK.max_steps, scenario, **params)
+    assert seen["red won"] and seen["blue won"] and seen["unsafe"], seen
+    assert name == "base" or seen["hit"] and seen["invalid"], seen

@@ -10,11 +10,10 @@ import subprocess
 import sys
 
 import pytest
-from test_train import SMALL, WALK
 from tracelab.cli import main
 from tracelab.store import run_info
 from tracelab.train.config import TrainConfig
-from tracelab.train.loop import Trainer
+from train_helpers import walk_config, walk_trainer
 
 CLI = [sys.executable, "-m", "tracelab"]
 
@@ -37,11 +36,11 @@ def test_a_kernel_the_command_cannot_use_is_a_one_line_error(tmp_path) -> None:
 
 
 def test_train_kernel_reaches_the_training_and_evaluation_engines(tmp_path, capsys) -> None:
-    cfg = TrainConfig(scenario="walk4", steps=200, seed=1, kernel="lanes", **SMALL)  # 4 worlds: auto is not lanes
-    trainer = Trainer(cfg, WALK)
+    cfg = walk_config(steps=200, seed=1, kernel="lanes")  # 4 worlds: auto is not lanes
+    trainer = walk_trainer(cfg)  # writing no run: its evaluations play untraced, in an env of their own
     try:
         trainer.run_eval()
-        engines = [trainer.env.sim.engine, trainer._eval_env.sim.engine]
+        engines = [trainer.env.worlds.engine, trainer._eval_env.worlds.engine]
         assert [e.kernel for e in engines] == ["lanes", "lanes"]
     finally:
         trainer.close()
@@ -66,8 +65,6 @@ def test_play_kernel_reaches_the_engine(tmp_path, capsys) -> None:
     assert "played 2 episodes" in capsys.readouterr().out
 
 
-@pytest.mark.xfail(strict=True, reason="play plays GridWar through its spec now: a declared world's "
-                   "--kernel compiled does not start the background build yet (issue 38)")
 def test_play_kernel_compiled_does_not_wait_for_the_compile(tmp_path) -> None:
     """The game's kernel is not in an empty cache: the games start on the counting kernel at once, the
     compile goes on in the background and outlives the short run (this test then stops it)."""

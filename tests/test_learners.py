@@ -12,17 +12,18 @@ import torch
 
 from tracelab.cli import main
 from tracelab.commands.train import train_into
-from tracelab.train.checkpoint import checkpoint_path, load_checkpoint, restore
+from tracelab.train.checkpoint import load_checkpoint, restore
 from tracelab.train.config import TrainConfig
 from tracelab.train.dqn import DQN, make_q_network
+from tracelab.train.env_checkpoint import checkpoint_path
+from tracelab.train.env_policy import load_env_policy, load_policy
 from tracelab.train.learner import DQNLearner
 from tracelab.train.loop import Trainer
 from tracelab.train.network import to_state_dict
-from tracelab.train.env_policy import load_policy, read_policy_spec
 from tracelab.train.qnet import NetSpec, NumpyQ
 from tracelab.train.replay import ReplayBuffer
 from tracelab.train.torch_files import load_tensors
-from train_helpers import SMALL, WALK
+from train_helpers import RULESIM_SMALL, WALK, train_walk, walk_argv, walk_config, walk_source
 
 
 def _filled(buffer: ReplayBuffer, masked: bool) -> None:
@@ -116,29 +117,30 @@ def test_a_dueling_double_dqn_two_layer_run_learns_resumes_and_its_policy_loads(
     """Through `tracelab train`: auto falls back to the readable learner and says so in one line; the
     checkpoint names the learner and resumes as an uninterrupted run; the policy records the architecture
     and tracelab eval plays it."""
-    cfg = TrainConfig(scenario="walk4", steps=480, seed=11, hidden="32,32", double_dqn=True, dueling=True, **SMALL)
+    cfg = walk_config(steps=480, seed=11, hidden="32,32", double_dqn=True, dueling=True)
     straight, first = tmp_path / "straight", tmp_path / "first"
-    assert train_into(cfg, WALK, straight) == 0
-    assert train_into(cfg, WALK, first, stop_at=246) == 130
-    state = load_checkpoint(first)
+    assert train_walk(cfg, straight) == 0
+    assert train_walk(cfg, first, stop_at=246) == 130
+    checkpoint = lambda run: load_tensors(checkpoint_path(run), 10**9)  # noqa: E731
+    state = checkpoint(first)
     assert state["learner"] == "readable" and set(state["learners"]["shared"]["online"]) == \
         set(NetSpec(4, (32, 32), 5, True).state_dict_shapes())
-    assert main(["train", "--resume", str(first)]) == 0
-    a, b = load_checkpoint(straight), load_checkpoint(first)
+    assert main(["train", "--resume", str(first), *walk_argv()]) == 0
+    a, b = checkpoint(straight), checkpoint(first)
     for key in ("online", "target"):
         for name, value in a["learners"]["shared"][key].items():
             assert torch.equal(value, b["learners"]["shared"][key][name]), (key, name)
     assert a["learners"]["shared"]["adam"]["advantage.weight"]["step"] == \
         b["learners"]["shared"]["adam"]["advantage.weight"]["step"] > 0
-    spec = read_policy_spec(straight / "policy")
+    policy, spec = load_env_policy(straight / "policy", walk_source())
     assert spec["network"]["hidden"] == [32, 32] and spec["network"]["dueling"] is True
     obs = np.random.default_rng(0).integers(0, 4, (50, 4)).astype(np.float32)
     trained = make_q_network(NetSpec(4, (32, 32), 5, dueling=True))
     trained.load_state_dict(torch.load(straight / "policy" / "policy.pt", weights_only=True)["shared"])
     with torch.no_grad():
         greedy = trained(torch.from_numpy(obs)).argmax(1).numpy()
-    np.testing.assert_array_equal(load_policy(straight / "policy").act(obs, np.ones((50, 1), bool))[:, 0], greedy)
-    assert main(["eval", str(straight / "policy"), "--games", "4", "--json"]) == 0
+    np.testing.assert_array_equal(policy.act(obs), greedy)
+    assert main(["eval", str(straight / "policy"), *walk_argv(), "--games", "4", "--json"]) == 0
 
 
 def test_train_says_in_its_first_line_which_learner_runs_and_why(tmp_path, capsys):
@@ -164,10 +166,11 @@ def test_train_says_in_its_first_line_which_learner_runs_and_why(tmp_path, capsy
     assert not (tmp_path / "c").exists()
 
 
+# RuleSim's trainer: goes with it (issue 38). Its checkpoint format 2 as written before the readable learner
 def test_a_checkpoint_written_before_the_readable_learner_still_resumes(tmp_path):
     """Format 2 as it was: no `learner` key, the best networks as fused parameter rows (`best_rows`)."""
     run = tmp_path / "old"
-    cfg = TrainConfig(scenario="walk4", steps=480, seed=4, **SMALL)
+    cfg = TrainConfig(scenario="walk4", steps=480, seed=4, **RULESIM_SMALL)
     assert train_into(cfg, WALK, run, stop_at=246) == 130
     state = torch.load(checkpoint_path(run), weights_only=True)
     del state["learner"], state["custom_network"]
@@ -187,13 +190,14 @@ def test_a_checkpoint_written_before_the_readable_learner_still_resumes(tmp_path
     assert load_checkpoint(run)["learner"] == "fused"
 
 
+# RuleSim's trainer: goes with it (issue 38). EnvTrainer takes no network= (any torch module) yet
 def test_any_torch_module_trains_through_the_python_api(tmp_path):
     """A custom module (here with a LayerNorm) trains with the readable learner; its policy says `custom`
     and tracelab refuses to rebuild it from the file; its checkpoint loads with the same module."""
     def network(inputs: int, actions: int) -> torch.nn.Module:
         return torch.nn.Sequential(torch.nn.Linear(inputs, 32), torch.nn.LayerNorm(32), torch.nn.ReLU(),
                                    torch.nn.Linear(32, actions))
-    cfg = TrainConfig(scenario="walk4", steps=400, seed=1, **SMALL)
+    cfg = TrainConfig(scenario="walk4", steps=400, seed=1, **RULESIM_SMALL)
     trainer = Trainer(cfg, WALK, run_dir=tmp_path / "run", network=network)
     assert trainer.learner_kind == "readable" and trainer.train() == "finished"
     trainer.close()
@@ -220,6 +224,7 @@ class ConservativeDQN(DQN):
         return super().loss(q, actions, td_target) + self.alpha * conservative
 
 
+# RuleSim's trainer: goes with it (issue 38). EnvTrainer takes no learner_class= (a new loss) yet
 def test_a_new_loss_is_a_subclass_and_trains_through_the_trainer(tmp_path):
     """The worked example: its loss is the method's plus the conservative term, it trains through
     Trainer(learner_class=...) into a run whose checkpoint resumes."""
@@ -235,7 +240,7 @@ def test_a_new_loss_is_a_subclass_and_trains_through_the_trainer(tmp_path):
         want = torch.nn.functional.smooth_l1_loss(taken, y) + 0.5 * (torch.logsumexp(q, 1, keepdim=True) - taken).mean()
     learner.update(np.random.default_rng(3))
     assert learner.take_loss() == pytest.approx(want.item(), rel=1e-6)
-    cfg = TrainConfig(scenario="walk4", steps=400, seed=1, **SMALL)
+    cfg = TrainConfig(scenario="walk4", steps=400, seed=1, **RULESIM_SMALL)
     trainer = Trainer(cfg, WALK, run_dir=tmp_path / "run", learner_class=ConservativeDQN)
     assert isinstance(trainer.learners["shared"], ConservativeDQN) and trainer.train() == "finished"
     trainer.close()

@@ -230,3 +230,27 @@ def test_facts_on_frozen_atoms_are_rows_as_pyreasons_committed_cybersecurity_tra
     # the grounding's atoms; PyReason lists every has_cve edge)
     assert [r[:11] for r in got] == [r[:11] for r in expected]
     assert [r[11] for r in got if r[6] != "exposure_rule"] == [r[11] for r in expected if r[6] != "exposure_rule"]
+
+
+def test_a_set_static_rule_freezes_its_ipl_partner_too_as_pyreason(tmp_path: Path) -> None:
+    # PyReason's _update_node sets the partner's static flag with the update's (`set_static(static)`):
+    # a set_static rule on sick(a) freezes healthy(a) at the complement, kept through the non-persistent
+    # resets, and a later fact on it is a row on a frozen atom (its own bound), not a conflict
+    g = nx.DiGraph()
+    g.add_node("a")
+    pr.load_graph(g)
+    pr.add_inconsistent_predicate("sick", "healthy")
+    pr.add_fact(pr.Fact("p(a)", "f_p", 0, 0))
+    pr.add_fact(pr.Fact("healthy(a):[0.9,1]", "f_h", 2, 2))
+    pr.add_rule(pr.Rule("sick(x):[0.8,1] <- p(x)", "r", set_static=True))
+    interpretation = pr.reason(timesteps=3)
+    assert interpretation.query(pr.Query("healthy(a) : [0, 0.2]"), return_bool=False) == (0.0, 1 - 0.8)
+    assert interpretation.query(pr.Query("sick(a) : [0.8, 1]"))
+    rows = [(r["Time"], r["Label"], r["Old Bound"], r["New Bound"], r["Occurred Due To"], r["Consistent"],
+             r["Triggered By"]) for r in saved_node_rows(interpretation, tmp_path)]
+    partner = f"[0.0,{1 - 0.8!r}]"
+    assert rows == [("0", "p", "[0.0,1.0]", "[1.0,1.0]", "f_p", "True", "Fact"),
+                    ("0", "sick", "[0.0,1.0]", "[0.8,1.0]", "r", "True", "Rule"),
+                    ("0", "healthy", "[0.0,1.0]", partner, "IPL: sick", "True", "IPL"),
+                    ("2", "healthy", "[0.9,1.0]", "[0.9,1.0]", "f_h", "True", "Fact"),
+                    ("2", "sick", "[0.8,1.0]", "[0.8,1.0]", "f_h", "True", "IPL")]

@@ -1,6 +1,9 @@
 """A reading command loads only what it uses (issue 40): printing a table, DuckDB alone (its rows print
-without pyarrow: commands._output.write_rows); streaming CSV/JSON/Parquet, diffing and the why searches
-also pyarrow and numpy (which pyarrow imports); never pandas (pyarrow's converter imports it for a Python
+without pyarrow: commands._output.write_rows); the why searches (why, why-not, and of an agent's
+action) DuckDB alone too, without the engine's parser (an atom written as the store writes it is read
+without it: store.model.RunModel.parse_atom; a small episode's rows are Python lists:
+store.episode.PYTHON_ROWS); streaming CSV/JSON/Parquet and diffing also pyarrow and numpy (which pyarrow
+imports); never pandas (pyarrow's converter imports it for a Python
 list: tracelab.store.arrow_build builds from buffers), numba, torch, rerun, textual or the rest. Each
 command runs in one child interpreter, in turn (the DuckDB-only ones first, so that what they leave in
 sys.modules is theirs alone), and the heavy packages loaded so far are printed after each: one that
@@ -22,11 +25,12 @@ TRAIN = str(RUNS / "base-train")
 
 ALLOWED = {"duckdb", "pyarrow", "numpy"}
 DUCKDB_ONLY = {"duckdb"}
-HEAVY = ("torch", "ray", "pandas", "pyarrow", "duckdb", "rerun", "textual", "matplotlib", "numba", "llvmlite",
-         "scipy", "stable_baselines3", "tensorboard", "gymnasium", "pettingzoo", "networkx")
+HEAVY = ("torch", "ray", "pandas", "pyarrow", "numpy", "tracelab.engine.parser", "duckdb", "rerun", "textual",
+         "matplotlib", "numba", "llvmlite", "scipy", "stable_baselines3", "tensorboard", "gymnasium", "pettingzoo",
+         "networkx")
 
-# These print tables from DuckDB's rows: DuckDB is all they load.
-TABLE_COMMANDS = [
+# These print tables from DuckDB's rows, or answer why from them: DuckDB is all they load.
+DUCKDB_COMMANDS = [
     ["sql", PLAY, "SELECT label, count(*) FROM atoms GROUP BY ALL ORDER BY ALL LIMIT 3"],
     ["sql", str(RUNS / "base"), str(RUNS / "nonmarkov"), "SELECT run, count(*) FROM changes GROUP BY ALL"],
     ["sql", "--query", "rule_coverage", PLAY],
@@ -35,17 +39,19 @@ TABLE_COMMANDS = [
     ["show", TRAIN],
     ["runs", str(RUNS)],
     ["check", PLAY],
+    ["why", PLAY, "captured(red)", "--episode", "2", "--at", "18", "--depth", "3"],
+    ["why", PLAY, "captured(red)", "--episode", "2", "--at", "18", "--depth", "3", "--json"],
+    ["why-not", PLAY, "--rule", "snap_at", "--episode", "2", "--at", "18"],
+    ["why", TRAIN, "--action", "red-agent-1", "--episode", "772", "--at", "2"],
+    ["why-not", TRAIN, "--action", "up", "--episode", "772", "--at", "2"],
 ]
 COMMANDS = [
-    *TABLE_COMMANDS,
+    *DUCKDB_COMMANDS,
     ["sql", "--format", "csv", PLAY, "SELECT * FROM changes LIMIT 3"],
     ["sql", "--format", "json", str(RUNS / "base"), str(RUNS / "nonmarkov"),
      "SELECT run, count(*) FROM changes GROUP BY ALL"],
     ["sql", "--query", "rule_coverage", str(RUNS / "base"), str(RUNS / "nonmarkov")],
     ["trace", PLAY, "--episode", "0", "--from", "1", "--to", "4", "--format", "csv"],
-    ["why", PLAY, "captured(red)", "--episode", "2", "--at", "18", "--depth", "3"],
-    ["why", PLAY, "captured(red)", "--episode", "2", "--at", "18", "--depth", "3", "--json"],
-    ["why-not", PLAY, "--rule", "snap_at", "--episode", "2", "--at", "18"],
     ["diff", PLAY, "0", "1"],
     ["runs", "--format", "json", str(RUNS)],
     ["compare", TRAIN],
@@ -76,7 +82,7 @@ def test_reading_commands_load_only_duckdb_and_for_arrow_output_pyarrow_and_nump
     assert [r["argv"] for r in reports] == COMMANDS, out.stderr
     for r in reports:
         assert r["status"] == 0 and r["printed"], (r, out.stderr)  # each command did its work
-        allowed = DUCKDB_ONLY if r["argv"] in TABLE_COMMANDS else ALLOWED
+        allowed = DUCKDB_ONLY if r["argv"] in DUCKDB_COMMANDS else ALLOWED
         assert set(r["loaded"]) <= allowed, f"{' '.join(r['argv'][:1])} loaded {sorted(set(r['loaded']) - allowed)}"
         ran = {command_module(argv[0]) for argv in COMMANDS[:reports.index(r) + 1]}
         assert set(r["commands"]) <= ran, f"{r['argv'][0]} imported {sorted(set(r['commands']) - ran)}"

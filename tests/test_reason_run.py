@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from store_helpers import run_rows as rows
 
 from tracelab.cli import main
 
@@ -73,15 +74,6 @@ def run(inputs: dict[str, Path], tmp_path_factory: pytest.TempPathFactory) -> Pa
     assert main(["reason", str(inputs["spread"]), "--graph", str(inputs["contacts"]), "--steps", "6",
                  "--run", str(path)]) == 0
     return path
-
-
-def rows(run: Path, sql: str) -> list[tuple]:
-    from tracelab.store import open_run
-    con = open_run(run)
-    try:
-        return con.execute(sql).fetchall()
-    finally:
-        con.close()
 
 
 # ---- recording ----------------------------------------------------------------------------------------
@@ -327,17 +319,16 @@ def test_a_pyreason_program_recorded_and_explained(tmp_path: Path, capsys: pytes
 
 # ---- the store without a game -----------------------------------------------------------------------
 
-def test_a_run_declares_its_board_and_the_decoder_reads_only_those(run: Path) -> None:
+def test_a_run_declares_its_board_and_the_viewers_draw_only_those(run: Path) -> None:
     from tracelab.store import open_run
     from tracelab.store.kind import run_board
-    from tracelab.viewers.board import BoardLoader
-    with pytest.raises(ValueError, match="this run has no board"):
-        BoardLoader(open_run(run))
+    from tracelab.viewers.board_state import board_of_run
+    assert board_of_run(open_run(run)) is None
     # runs written before boards were declared (the sample runs) are the grid game's
     assert run_board(open_run(SAMPLES / "base")) == "gridworld"
-    assert BoardLoader(open_run(SAMPLES / "base")).load(0).steps > 0
+    assert board_of_run(open_run(SAMPLES / "base")) is not None
     import importlib.util
-    assert importlib.util.find_spec("tracelab.store.board") is None  # one decoder, in viewers/
+    assert importlib.util.find_spec("tracelab.store.board") is None  # one board, in viewers/
 
 
 def test_a_board_that_is_not_a_name_is_refused_in_one_line(run: Path, tmp_path: Path,

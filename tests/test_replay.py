@@ -1,6 +1,8 @@
-"""`tracelab replay`, headless: .rrd files checked with rerun's own CLI and read back through rerun's chunk
-reader (entity paths, steps, fired-rule lines, agent positions against the run's steps rows), a training
-run per the training-run contract, --live on a run being written, and a golden file.
+"""`tracelab replay` of GridWar's games, headless, on the one path every run takes (a RuleSim sample run
+drawn on rules/gridworld/war.toml's `[board]`, a run of the spec path): .rrd files checked with rerun's own
+CLI and read back through rerun's chunk reader (entity paths, steps, fired-rule lines, agent positions
+against the run's steps rows, lanes, why documents), a training run per the training-run contract, --live
+on a run being written, and a golden file.
 
 The golden file: regenerate it (after an intended change) with
     tracelab replay sample_runs/base --episode 2 --why-depth 2 --save tests/data/replay_golden.rrd
@@ -40,7 +42,7 @@ def read_rrd(path: Path) -> dict[str, dict[str, list[dict]]]:
             rows = entities.setdefault(chunk.entity_path, [])
             rows += [{k: v[i] for k, v in cols.items()} for i in range(batch.num_rows)]
         for rows in entities.values():
-            rows.sort(key=lambda r: (r.get("step", -1), r.get("pass", -1)))
+            rows.sort(key=lambda r: r.get("step", -1))
         out[store.recording_id] = entities
     return out
 
@@ -82,13 +84,24 @@ def test_entity_paths_and_steps(advanced_data) -> None:
     ep0 = advanced_data["advanced/episode-0"]
     for path in ("/board/terrain", "/board/agents/red-agent-1",       # war.toml's [board] pieces
                  "/board/agents/blue-agent-1", "/board/bullets/red-bullet-1-1", "/board/bullets/blue-bullet-1-1",
-                 "/board/fired", "/rules/log", "/why",
-                 "/lanes/alive/red-agent-1", "/lanes/atLoc/blue-agent-1", "/plots/return/red",
-                 "/plots/reward/blue"):
+                 "/board/fired", "/rules/log", "/why", "/plots/changed/atLoc",
+                 "/lanes/alive/red-agent-1", "/lanes/atLoc/blue-agent-1", "/plots/return/red-agent-1",
+                 "/plots/reward/blue-agent-1"):
         assert path in ep0, path
     assert [r["step"] for r in ep0["/why"]] == list(range(16))                   # steps 0..15
-    assert max(r["pass"] for r in ep0["/rules/log"]) // 10 == 15
-    assert not any(p.startswith("/train") for p in ep0)                          # not a training run
+    assert max(r["step"] for r in ep0["/rules/log"]) == 15
+    assert not any(p.startswith(("/train", "/graph")) for p in ep0)             # no training, no graph drawn
+
+
+def test_the_return_plots_are_the_steps_rows_in_the_pieces_colours(advanced_data) -> None:
+    ep0 = advanced_data["advanced/episode-0"]
+    con = open_run(SAMPLES / "advanced")
+    for agent, colour in (("red-agent-1", (0xe6, 0x39, 0x46)), ("blue-agent-1", (0x34, 0x78, 0xf6))):
+        rows = con.execute("SELECT t, reward FROM steps WHERE episode = 0 AND agent = ? ORDER BY t", [agent]).fetchall()
+        returns = [(r["step"], r["Scalars:scalars"][0]) for r in ep0[f"/plots/return/{agent}"] if "step" in r]
+        assert returns[-1] == (rows[-1][0], pytest.approx(sum(w for _, w in rows)))
+        style = next(r for r in ep0[f"/plots/return/{agent}"] if r.get("SeriesLines:colors"))
+        assert style["SeriesLines:colors"][0] == int.from_bytes(bytes([*colour, 255]), "big")   # war.toml's
 
 
 def test_the_fired_rule_log_of_a_known_step(advanced_data) -> None:
@@ -97,13 +110,11 @@ def test_the_fired_rule_log_of_a_known_step(advanced_data) -> None:
     con = open_run(SAMPLES / "advanced")
     n = con.execute("SELECT count(*) FROM firings WHERE episode = 0 AND t = 15").fetchall()[0][0]
     assert len(log) == n
-    lines = {(r["TextLog:level"][0], r["TextLog:text"][0]) for r in log}
-    hit = "b_hit(B=blue-bullet-1-1, A=red-agent-1, Y=28): struck(blue-bullet-1-1,red-agent-1) [0,1] -> [1,1]"
-    assert ("bullets", hit) in lines
-    assert ("deaths", "d_killed(A=red-agent-1): alive(red-agent-1) [1,1] -> [0,0]") in lines
-    assert ("end", "g_eliminated(T=red, A=red-agent-1): eliminated(red) [0,1] -> [1,1]") in lines
-    passes = [r["pass"] for r in log]
-    assert passes == sorted(passes)                     # phases in engine order within the step
+    lines = [(r["TextLog:level"][0], r["TextLog:text"][0]) for r in log]
+    hit = ("b_hit", "b_hit(B=blue-bullet-1-1, A=red-agent-1, Y=28): struck(blue-bullet-1-1,red-agent-1) [0,1] -> [1,1]")
+    death = ("d_killed", "d_killed(A=red-agent-1): alive(red-agent-1) [1,1] -> [0,0]")
+    end = ("g_eliminated", "g_eliminated(T=red, A=red-agent-1): eliminated(red) [0,1] -> [1,1]")
+    assert lines.index(hit) < lines.index(death) < lines.index(end)   # in the engine's order
 
 
 def test_the_struck_cell_is_marked_with_the_rule(advanced_data) -> None:
@@ -151,13 +162,24 @@ def test_agent_positions_agree_with_the_runs_steps_rows(run: str, tmp_path: Path
 def test_lanes_and_the_why_document_of_a_death(advanced_data) -> None:
     ep0 = advanced_data["advanced/episode-0"]
     alive = [(r["step"], r["StateChange:state"]) for r in ep0["/lanes/alive/red-agent-1"] if "step" in r]
-    assert alive == [(0, ["alive"]), (15, ["dead"])]
+    assert alive == [(0, ["true"]), (15, ["false"])]
+    where = [r["StateChange:state"][0] for r in ep0["/lanes/atLoc/red-agent-1"] if "step" in r]
+    assert where[0] == "7@(7,0)"                                     # red's base, a cell id with its (x, y)
     doc = ep0["/why"][15]["TextDocument:text"][0]
     con = open_run(SAMPLES / "advanced")
     tree = render_why(explain(con, 0, "alive(red-agent-1)", 15), 15, run_grid(con))   # cells with (x, y)
     assert "### Why alive(red-agent-1)" in doc and tree in doc       # as `tracelab why` prints it
-    assert "### Why eliminated(red)" in doc and "End of the game: loss" in doc
-    assert "No death" in ep0["/why"][3]["TextDocument:text"][0]
+    assert "It ended: loss" in doc
+    assert "### Why" not in ep0["/why"][3]["TextDocument:text"][0]   # nobody died in step 3
+
+
+def test_why_names_any_atom_of_a_game(tmp_path: Path) -> None:
+    out = tmp_path / "why.rrd"
+    assert replay(SAMPLES / "advanced", "--episode", "0", "--why", "eliminated(red)", "--save", out) == 0
+    docs = [r["TextDocument:text"][0] for r in read_rrd(out)["advanced/episode-0"]["/why"]]
+    con = open_run(SAMPLES / "advanced")
+    assert render_why(explain(con, 0, "eliminated(red)", 15), 15, run_grid(con)) in docs[15]
+    assert "### Why eliminated(red)" in docs[3]                     # never set until step 15, shown each step
 
 
 def test_episode_selection_and_user_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -167,10 +189,9 @@ def test_episode_selection_and_user_errors(tmp_path: Path, capsys: pytest.Captur
     assert replay(SAMPLES / "advanced", "--outcome", "loss", "--limit", "1", "--save", out) == 0
     assert sorted(read_rrd(out)) == ["advanced/episode-0"]
     capsys.readouterr()
-    assert replay(SAMPLES / "base", "--episode", "0", "--lanes", "alive,ammo", "--save", out) == 0
+    assert replay(SAMPLES / "base", "--episode", "0", "--lanes", "alive,won", "--save", out) == 0
     assert sorted(p for p in read_rrd(out)["base/episode-0"] if p.startswith("/lanes/")) == [
-        "/lanes/alive/blue-agent-1", "/lanes/alive/red-agent-1", "/lanes/ammo/blue-agent-1",
-        "/lanes/ammo/red-agent-1"]
+        "/lanes/alive/blue-agent-1", "/lanes/alive/red-agent-1", "/lanes/won/red"]   # any predicate of the run
     for bad in (["--episode", "9"], ["--episodes", "3-x"], ["--outcome", "tie"], ["--lanes", "alive,mood"]):
         assert replay(SAMPLES / "advanced", *bad, "--save", tmp_path / "bad.rrd") == 1
         err = capsys.readouterr().err
@@ -234,7 +255,12 @@ def test_live_follows_a_run_being_written(tmp_path: Path) -> None:
     finally:
         play.wait(timeout=120)
     assert play.returncode == 0
-    assert sorted(read_rrd(out)) == [f"live/episode-{e}" for e in range(3)]
+    data = read_rrd(out)
+    assert sorted(data) == [f"live/episode-{e}" for e in range(3)]
+    # a game of the spec path (war.toml): the same board, pieces, lanes and plots as a RuleSim run's
+    for path in ("/board/terrain", "/board/agents/red-agent-1", "/board/agents/blue-agent-1", "/board/fired",
+                 "/lanes/alive/red-agent-1", "/plots/return/red-agent-1", "/rules/log", "/why"):
+        assert all(path in episode for episode in data.values()), path
 
 
 def test_the_golden_recording_is_unchanged(tmp_path: Path) -> None:

@@ -8,17 +8,21 @@ import subprocess
 import sys
 
 from tracelab.cli import main
-from tracelab.commands.train import train_into
 from tracelab.store import run_info
 from tracelab.store.seal import seal_run
-from tracelab.train.checkpoint import checkpoint_config, checkpoint_path, checkpoint_scenario, load_checkpoint
-from tracelab.train.config import TrainConfig
+from tracelab.train.checkpoint import checkpoint_config
+from tracelab.train.env_checkpoint import checkpoint_path, load_env_checkpoint
+from tracelab.train.memory import memory_limit
 from tracelab.train.torch_files import load_tensors
-from train_helpers import SMALL, WALK, ctrl_c_once_training, run_rows
+from train_helpers import ctrl_c_once_training, run_rows, train_walk, walk_argv, walk_config, walk_source
 
 
 def _steps_of(run, name: str) -> list[int]:
     return [s for (s,) in run_rows(run, f"SELECT step FROM metrics WHERE name = '{name}' ORDER BY step")]
+
+
+def load_checkpoint(run) -> dict:
+    return load_tensors(checkpoint_path(run), 10**9)
 
 
 def _error_line(capsys, status: int) -> str:
@@ -29,10 +33,10 @@ def _error_line(capsys, status: int) -> str:
 
 def test_resume_continues_the_same_run_after_a_stop(tmp_path, capsys):
     run = tmp_path / "run"
-    cfg = TrainConfig(scenario="walk4", steps=480, seed=11, **SMALL)
-    assert train_into(cfg, WALK, run, stop_at=246) == 130  # stops as Ctrl-C would, at step 248
+    cfg = walk_config(steps=480, seed=11)
+    assert train_walk(cfg, run, stop_at=246) == 130  # stops as Ctrl-C would, at step 248
     before = run_rows(run, "SELECT count(*) FROM episodes")[0][0]
-    assert main(["train", "--resume", str(run)]) == 0
+    assert main(["train", "--resume", str(run), *walk_argv()]) == 0
     assert not list(tmp_path.glob("run-from-*"))  # no second run
     info = run_info(run)
     assert info.status == "finished"
@@ -84,10 +88,10 @@ def test_ctrl_c_then_resume_gives_one_run_whose_metrics_continue(tmp_path):
 
 def test_run_new_branches_as_before(tmp_path):
     run, branch = tmp_path / "run", tmp_path / "branch"
-    cfg = TrainConfig(scenario="walk4", steps=480, seed=11, **SMALL)
-    assert train_into(cfg, WALK, run, stop_at=246) == 130
+    cfg = walk_config(steps=480, seed=11)
+    assert train_walk(cfg, run, stop_at=246) == 130
     # a branch may raise the budget too; RUN stays as it was
-    assert main(["train", "--resume", str(run), "--run", str(branch), "--total-timesteps", "600"]) == 0
+    assert main(["train", "--resume", str(run), *walk_argv(), "--run", str(branch), "--total-timesteps", "600"]) == 0
     assert run_info(run).status == "interrupted" and _steps_of(run, "epsilon") == [100, 200]
     assert "resumes" not in run_info(run).meta and not _steps_of(run, "resumed")
     assert _steps_of(branch, "epsilon") == [300, 400, 500, 600]
@@ -97,25 +101,25 @@ def test_run_new_branches_as_before(tmp_path):
 
 def test_total_timesteps_raises_the_budget_of_a_finished_run(tmp_path, capsys):
     run = tmp_path / "run"
-    assert train_into(TrainConfig(scenario="walk4", steps=400, seed=2, **SMALL), WALK, run) == 0
-    assert main(["train", "--resume", str(run), "--total-timesteps", "600"]) == 0
+    assert train_walk(walk_config(steps=400, seed=2), run) == 0
+    assert main(["train", "--resume", str(run), *walk_argv(), "--total-timesteps", "600"]) == 0
     assert _steps_of(run, "epsilon") == [100, 200, 300, 400, 500, 600]
     meta = run_info(run).meta
     assert meta["status"] == "finished" and meta["config"]["steps"] == 600
     assert [(r["step"], r["after"], r["steps"]) for r in meta["resumes"]] == [(400, "finished", 600)]
     # the old spelling is accepted too
-    assert main(["train", "--resume", str(run), "--steps", "700"]) == 0
+    assert main(["train", "--resume", str(run), *walk_argv(), "--steps", "700"]) == 0
     assert _steps_of(run, "epsilon")[-1] == 700 and len(run_info(run).meta["resumes"]) == 2
 
 
 def test_nothing_to_resume_and_a_budget_below_the_checkpoint_say_so(tmp_path, capsys):
     run = tmp_path / "run"
-    assert train_into(TrainConfig(scenario="walk4", steps=200, seed=2, **SMALL), WALK, run) == 0
+    assert train_walk(walk_config(steps=200, seed=2), run) == 0
     capsys.readouterr()
     metrics = run_rows(run, "SELECT count(*) FROM metrics")[0][0]
-    line = _error_line(capsys, main(["train", "--resume", str(run)]))
+    line = _error_line(capsys, main(["train", "--resume", str(run), *walk_argv()]))
     assert "nothing to resume" in line and "--total-timesteps" in line and "200" in line
-    line = _error_line(capsys, main(["train", "--resume", str(run), "--total-timesteps", "100"]))
+    line = _error_line(capsys, main(["train", "--resume", str(run), *walk_argv(), "--total-timesteps", "100"]))
     assert "--total-timesteps 100 is below the checkpoint's step 200" in line
     # nothing was written: the run is as it was
     assert run_info(run).status == "finished" and "resumes" not in run_info(run).meta
@@ -125,24 +129,25 @@ def test_nothing_to_resume_and_a_budget_below_the_checkpoint_say_so(tmp_path, ca
 
 def test_a_sealed_run_is_refused_with_the_way_to_branch(tmp_path, capsys):
     run = tmp_path / "run"
-    cfg = TrainConfig(scenario="walk4", steps=480, seed=11, **SMALL)
-    assert train_into(cfg, WALK, run, stop_at=246) == 130
+    cfg = walk_config(steps=480, seed=11)
+    assert train_walk(cfg, run, stop_at=246) == 130
     seal_run(run)
     capsys.readouterr()
-    line = _error_line(capsys, main(["train", "--resume", str(run)]))
+    line = _error_line(capsys, main(["train", "--resume", str(run), *walk_argv()]))
     assert "is sealed" in line and "--run NEW" in line
     assert run_info(run).status == "interrupted"
-    assert main(["train", "--resume", str(run), "--run", str(tmp_path / "branch")]) == 0
+    assert main(["train", "--resume", str(run), *walk_argv(), "--run", str(tmp_path / "branch")]) == 0
 
 
 def test_a_run_resumed_twice_keeps_counting(tmp_path):
     run = tmp_path / "run"
-    cfg = TrainConfig(scenario="walk4", steps=480, seed=11, **SMALL)
-    assert train_into(cfg, WALK, run, stop_at=120) == 130
-    state = load_checkpoint(run)
-    assert train_into(checkpoint_config(state), checkpoint_scenario(state), run, state, resumed_from=str(run),
-                 stop_at=300, same_run=True) == 130
-    assert main(["train", "--resume", str(run)]) == 0
+    cfg = walk_config(steps=480, seed=11)
+    assert train_walk(cfg, run, stop_at=120) == 130
+    source = walk_source()
+    state = load_env_checkpoint(run, source, memory_limit(None, "--max-memory"))
+    assert train_walk(checkpoint_config(state), run, stop_at=300, source=source, state=state, resumed_from=str(run),
+                      same_run=True) == 130
+    assert main(["train", "--resume", str(run), *walk_argv()]) == 0
     assert _steps_of(run, "epsilon") == [100, 200, 300, 400, 480]
     assert [v for (v,) in run_rows(run, "SELECT value FROM metrics WHERE name = 'resumed' ORDER BY step")] == \
         [1.0, 2.0]

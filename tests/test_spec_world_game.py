@@ -11,12 +11,12 @@ from typing import Any
 
 import numpy as np
 import pytest
+from store_helpers import run_rows as rows
 from test_replay import read_rrd
 from tui_helpers import episodes_ready, run_app, wait_for
 
 from tracelab.cli import main
 from tracelab.envs import make_env
-from tracelab.store import open_run
 
 RULES = """%mode override
 %closed dest
@@ -90,14 +90,6 @@ def played(world: Path) -> Path:
     run = world / "runs" / "play"
     assert main(["play", "--env", str(world / "trap.toml"), "--episodes", "30", "--seed", "1", "--run", str(run)]) == 0
     return run
-
-
-def rows(run: Path, sql: str) -> list[tuple]:
-    con = open_run(run)
-    try:
-        return con.execute(sql).fetchall()
-    finally:
-        con.close()
 
 
 def test_a_worlds_declared_win_and_loss_are_its_games_outcomes(played: Path, capsys: pytest.CaptureFixture) -> None:

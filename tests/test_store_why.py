@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 from store_helpers import write_walk_run
 
+from tracelab.cli import main
 from tracelab.store.reader import open_run
 from tracelab.store.why import WhyNode, explain, explain_change, render_why, render_why_not, why_not
 
@@ -222,3 +223,23 @@ def test_a_run_written_before_the_closed_column_reads_as_not_closed(tmp_path: Pa
     assert [c.closed for c in model.rule("exposed").body] == [False, False, False]
     fresh = RunModel(open_run(write_walk_run(tmp_path / "new", rules=CLOSED_RULES)))
     assert [c.closed for c in fresh.rule("exposed").body] == [False, False, True]
+
+
+def test_a_declared_worlds_external_facts_say_what_set_them(tmp_path: Path) -> None:
+    """why names an external fact's setter from the run's declared_facts: the agent's action, a named
+    draw, the start; a run that does not declare them reads every one as `action`."""
+    run = tmp_path / "lake"
+    assert main(["play", "--env", "tracelab/FrozenLake-v1", "--episodes", "3", "--seed", "0", "--run", str(run)]) == 0
+    con = open_run(run)
+    try:
+        slip_t, slip = con.execute("SELECT t, atom FROM changes WHERE episode = 0 AND label = 'slip' AND new_lower = 1 "
+                                   "ORDER BY t LIMIT 1").fetchone()
+        key_t, key = con.execute("SELECT t, atom FROM changes WHERE episode = 0 AND label = 'pressed' "
+                                 "AND new_lower = 1 ORDER BY t LIMIT 1").fetchone()
+        whys = [render_why(explain(con, 0, atom, t, depth=1)) for atom, t in ((slip, slip_t), (key, key_t),
+                                                                            ("at(c0_0)", 0))]
+    finally:
+        con.close()
+    assert whys[0].splitlines()[0].endswith("by draw:slip"), whys[0]
+    assert whys[1].splitlines()[0].endswith("by action"), whys[1]
+    assert whys[2].splitlines()[0].endswith("by draw:start"), whys[2]  # [[start.choose]] named start

@@ -204,7 +204,7 @@ def test_a_stranger_s_env_checkpoint_asking_for_a_billion_worlds_is_refused_on_r
 
     from tracelab.commands.train import train_env_into
     from tracelab.envs.declared.env_source import EnvSource
-    from tracelab.train.checkpoint import checkpoint_path
+    from tracelab.train.env_checkpoint import checkpoint_path
     from tracelab.train.config import TrainConfig
 
     run = tmp_path / "run"
@@ -222,13 +222,13 @@ def test_a_stranger_s_env_checkpoint_asking_for_a_billion_worlds_is_refused_on_r
 def test_a_stranger_s_checkpoint_asking_for_a_billion_worlds_is_refused_on_resume(tmp_path: Path) -> None:
     import torch
 
-    from tracelab.train.checkpoint import checkpoint_path
-    from train_helpers import tiny_training_run
+    from tracelab.train.env_checkpoint import checkpoint_path
+    from train_helpers import tiny_training_run, walk_argv
 
-    run = tiny_training_run(tmp_path / "run")
+    run = tiny_training_run(tmp_path / "run")  # GridWar's walk, through its spec
     f = checkpoint_path(run)
     state = torch.load(f, weights_only=True)
     state["config"]["envs"] = 10 ** 9
     torch.save(state, f)
-    refusal(tracelab("train", "--resume", str(run), "--total-timesteps", "400"),
-            "checkpoint.pt: config: --envs 1000000000")
+    refusal(tracelab("train", "--resume", str(run), *walk_argv(), "--total-timesteps", "400"),
+            "checkpoint.pt: config: --num-envs 1000000000")

@@ -235,7 +235,8 @@ def test_train_resume_never_writes_through_a_link_in_the_run(trained: Path, tmp_
     shutil.rmtree(run / linked)
     (run / linked).symlink_to(outside, target_is_directory=True)
     before = tree_digest(outside)
-    status = main(["train", "--resume", str(run), "--steps", "400"])
+    from train_helpers import walk_argv
+    status = main(["train", "--resume", str(run), *walk_argv(), "--steps", "400"])
     err = capsys.readouterr().err
     assert tree_digest(outside) == before
     errors = [line for line in err.splitlines() if line.startswith("tracelab: error:")]

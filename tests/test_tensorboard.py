@@ -12,10 +12,8 @@ from pathlib import Path
 import pytest
 
 from tracelab.cli import main
-from tracelab.commands.train import train_into
 from tracelab.store import open_run
-from tracelab.train.config import TrainConfig
-from train_helpers import SMALL, WALK
+from train_helpers import train_walk, walk_argv, walk_config
 
 ROOT = Path(__file__).resolve().parent.parent
 TRAINING_RUN = ROOT / "sample_runs" / "base-train"   # sealed, a real 200K-step training
@@ -51,10 +49,10 @@ def assert_same_curves(events: dict[str, list[tuple[int, float]]], store: dict[s
 def test_train_writes_tensorboard_events_and_a_resume_in_place_continues_them(tmp_path, capsys):
     pytest.importorskip("tensorboard")
     run, tb = tmp_path / "walk", tmp_path / "tb"
-    cfg = TrainConfig(scenario="walk4", steps=480, seed=11, **SMALL)
-    assert train_into(cfg, WALK, run, stop_at=246, tensorboard=tb / "walk") == 130   # stopped as by Ctrl-C
+    cfg = walk_config(steps=480, seed=11)
+    assert train_walk(cfg, run, stop_at=246, tensorboard=tb / "walk") == 130   # stopped as by Ctrl-C
     assert [s for s, _ in event_scalars(tb / "walk")["epsilon"]] == [100, 200]    # written while training
-    assert main(["train", "--resume", str(run), "--tensorboard", str(tb)]) == 0
+    assert main(["train", "--resume", str(run), *walk_argv(), "--tensorboard", str(tb)]) == 0
     assert f"tensorboard --logdir {tb}" in capsys.readouterr().out
     events = event_scalars(tb / "walk")
     assert_same_curves(events, store_metrics(run))                   # both sessions, the `resumed` event too

@@ -4,28 +4,23 @@ checkpoint."""
 from __future__ import annotations
 
 import json
-import os
-import signal
-import subprocess
-import sys
-import time
-from dataclasses import replace
+from dataclasses import asdict, replace
 
 import numpy as np
 import pytest
 import torch
 
 from tracelab.cli import main
-from tracelab.commands.train import train_into
 from tracelab.store import open_run, run_info
 from tracelab.store.why import explain, render_why
-from tracelab.train.checkpoint import checkpoint_path, load_checkpoint
-from tracelab.train.torch_files import load_tensors
 from tracelab.train.config import TrainConfig
+from tracelab.train.env_checkpoint import checkpoint_path
+from tracelab.train.env_policy import load_env_policy
 from tracelab.train.loop import Trainer
 from tracelab.train.metric_log import WALL_CLOCK_METRICS
-from tracelab.train.env_policy import load_policy, read_policy_spec
-from train_helpers import SMALL, WALK
+from tracelab.train.torch_files import load_tensors
+from train_helpers import (RULESIM_SMALL, WALK, ctrl_c_once_training, train_walk, walk_argv, walk_config, walk_source,
+                           walk_trainer)
 
 TRAINING_METRICS = {"loss", "epsilon", "q_max_mean", "env_steps_per_s", "updates_per_s", "train_return"}
 EVAL_METRICS = {f"eval/{k}" for k in ("games", "wins", "losses", "draws", "truncated", "win_rate", "mean_return",
@@ -48,10 +43,14 @@ def _ended_training_episodes(run) -> list[tuple]:
     return rows
 
 
+def load_checkpoint(run) -> dict:
+    return load_tensors(checkpoint_path(run), 10**9)
+
+
 def test_a_run_logs_metrics_episodes_evaluations_checkpoint_and_policy(tmp_path):
     run = tmp_path / "run"
-    cfg = TrainConfig(scenario="walk4", steps=400, seed=3, **SMALL)
-    assert train_into(cfg, WALK, run) == 0
+    cfg = walk_config(steps=400, seed=3)
+    assert train_walk(cfg, run) == 0
     info = run_info(run)
     assert info.status == "finished" and info.meta["command"].startswith("tracelab train")
     assert info.meta["config"]["steps"] == 400 and info.meta["config"]["lr"] == 3e-3
@@ -68,14 +67,14 @@ def test_a_run_logs_metrics_episodes_evaluations_checkpoint_and_policy(tmp_path)
     # training episodes: one row each with outcome, return and length, begun with their training step
     train = con.execute("SELECT outcome, steps, reward, train_step FROM episodes WHERE kind = 'train' "
                         "AND outcome <> 'aborted'").fetchall()
-    assert train and all(o in ("win", "loss", "draw", "truncated") and 0 < n <= 30 and 0 <= s < 400
+    assert train and all(o in ("win", "loss", "terminated", "truncated") and 0 < n <= 30 and 0 <= s < 400
                          for o, n, _, s in train)
     assert con.execute("SELECT count(*) FROM episodes WHERE kind = 'train' AND NOT ended").fetchone()[0] == 0
     # the first 2 evaluation games of each evaluation are traced in full, and why explains them
     traced = con.execute("SELECT episode, train_step, begin_info FROM episodes WHERE kind = 'eval' "
                          "ORDER BY episode").fetchall()
     assert [s for _, s, _ in traced] == [200, 200, 400, 400]
-    assert json.loads(traced[2][2]) == {"kind": "eval", "train_step": 400, "eval_round": 1, "opponent_p": 0.3}
+    assert json.loads(traced[2][2]) == {"kind": "eval", "train_step": 400, "eval_round": 1}
     ep = traced[0][0]
     atom, t = con.execute("SELECT atom, t FROM changes WHERE episode = ? AND label = 'atLoc' AND new_lower = 1 "
                           "AND atom LIKE 'atLoc(red-agent-1,%' ORDER BY t DESC LIMIT 1", [ep]).fetchone()
@@ -86,28 +85,29 @@ def test_a_run_logs_metrics_episodes_evaluations_checkpoint_and_policy(tmp_path)
     con.close()
     state = load_checkpoint(run)
     assert state["step"] == 400 and checkpoint_path(run).exists()
-    spec = read_policy_spec(run / "policy")
+    spec = load_env_policy(run / "policy", walk_source())[1]
     assert spec["network"] == {**spec["network"], "inputs": 4, "hidden": 64, "outputs": 5}
-    assert spec["actions"]["ids"] == [0, 1, 2, 3, 8] and spec["trained"]["step"] == 400
+    assert spec["actions"]["names"] == ["up", "down", "left", "right", "nothing"]
+    assert spec["env"] == walk_source().to_json() and spec["trained"]["step"] == 400
     # the policy of the best evaluation (the earliest of equals) is kept beside the final one
     con = open_run(run)
     rates = con.execute("SELECT step, value FROM metrics WHERE name = 'eval/method_win_rate' ORDER BY step").fetchall()
     con.close()
     best_step, best = max(rates, key=lambda sv: (sv[1], -sv[0]))
-    kept = read_policy_spec(run / "policy-best")["trained"]
+    kept = load_env_policy(run / "policy-best", walk_source())[1]["trained"]
     assert kept["step"] == best_step and kept["selected_by"]["value"] == pytest.approx(best)
     assert state["best_eval"] == (pytest.approx(best), best_step)
 
 
 def test_resume_gives_the_same_networks_metrics_and_episodes_as_no_interruption(tmp_path):
-    cfg = TrainConfig(scenario="walk4", steps=480, seed=11, **SMALL)
+    cfg = walk_config(steps=480, seed=11)
     straight, first, resumed = tmp_path / "straight", tmp_path / "first", tmp_path / "resumed"
-    assert train_into(cfg, WALK, straight) == 0
-    assert train_into(cfg, WALK, first, stop_at=246) == 130  # stops after the pass that crosses 246
+    assert train_walk(cfg, straight) == 0
+    assert train_walk(cfg, first, stop_at=246) == 130  # stops after the pass that crosses 246
     assert run_info(first).status == "interrupted"
     assert load_checkpoint(first)["step"] == 248
-    # the checkpoint holds the scenario (built in code here) and the config
-    assert main(["train", "--resume", str(first), "--run", str(resumed)]) == 0
+    # the checkpoint holds the config; the env is named again (a run never names the spec tracelab reads)
+    assert main(["train", "--resume", str(first), *walk_argv(), "--run", str(resumed)]) == 0
     a, b = load_checkpoint(straight), load_checkpoint(resumed)
     assert a["step"] == b["step"] == 480
     assert torch.equal(a["learners"]["shared"]["params"], b["learners"]["shared"]["params"])
@@ -119,35 +119,34 @@ def test_resume_gives_the_same_networks_metrics_and_episodes_as_no_interruption(
     assert run_info(resumed).meta["config"]["resumed_from"] == {"run": str(first), "step": 248}
     # the kept best policy carries over into the resumed run
     assert a["best_eval"] == b["best_eval"]
-    assert read_policy_spec(resumed / "policy-best")["trained"]["step"] == a["best_eval"][1]
+    assert load_env_policy(resumed / "policy-best", walk_source())[1]["trained"]["step"] == a["best_eval"][1]
     for name, weights in a["best_weights"].items():
         assert all(torch.equal(w, b["best_weights"][name][k]) for k, w in weights.items())
 
 
 def test_the_learner_learns_to_walk_to_the_enemy_base():
     """A real assertion that learning happens: >= 95% wins after 4,000 steps (a random policy wins ~10%)."""
-    cfg = TrainConfig(scenario="walk4", steps=4000, seed=0, warmup=200, envs=8, lr=3e-3, gamma=0.9,
-                      target_every=250, buffer=5000, batch=64, opponent_p=0.0, eval_p=0.0, eval_every=0,
-                      eval_games=200, eval_envs=50, log_every=1000, checkpoint_every=0, reward_scale=1.0)
-    trainer = Trainer(cfg, WALK)
+    cfg = TrainConfig(steps=4000, seed=0, warmup=200, envs=8, lr=3e-3, gamma=0.9, target_every=250, buffer=5000,
+                      batch=64, eval_every=0, eval_games=200, eval_envs=50, log_every=1000, checkpoint_every=0,
+                      reward_scale=1.0)
+    trainer = walk_trainer(cfg, walk_source(p_toward=0.0))  # blue walks at random
     before = trainer.run_eval().win_rate
     assert trainer.train() == "finished"
     result = trainer.last_eval
     trainer.close()
     assert before < 0.5
     assert result.games == 200 and result.win_rate >= 0.95, result.to_dict()
-    assert result.actions_per_win <= 8  # the shortest walk is 6 moves
+    assert np.mean(result.win_steps) <= 8  # the shortest walk is 6 moves
 
 
 def test_reward_scale_scales_what_the_learner_sees_and_nothing_that_is_logged():
     """--reward-scale multiplies the replay rewards only: the same seed plays the same games (warm-up, so
     no update changes the actions) and logs the same returns."""
     def buffered(scale):
-        cfg = TrainConfig(scenario="walk4", steps=400, seed=5,
-                          **{**SMALL, "warmup": 1000, "eval_every": 0, "reward_scale": scale})
-        trainer = Trainer(cfg, WALK)
+        cfg = walk_config(steps=400, seed=5, warmup=1000, eval_every=0, reward_scale=scale)
+        trainer = walk_trainer(cfg)
         trainer.train()
-        st = trainer.learners["shared"].buffer.state()
+        st = trainer.learner.buffer.state()
         returns = trainer.episodes.returns.copy()
         trainer.close()
         return st, returns
@@ -159,18 +158,21 @@ def test_reward_scale_scales_what_the_learner_sees_and_nothing_that_is_logged():
 
 
 def test_train_says_when_the_learner_sees_rewards_beyond_smooth_l1s_quadratic_zone(tmp_path, capsys):
-    big = replace(WALK, rewards=replace(WALK.rewards, win=250.0, loss=-250.0))
-    small_steps = {**SMALL, "eval_every": 0, "checkpoint_every": 0}
-    method = TrainConfig(scenario="walk4", steps=40, **{**small_steps, "reward_scale": 1.0})   # the method's
-    assert train_into(method, big, tmp_path / "a") == 0
-    assert "note: the learner sees rewards up to 250, where Smooth L1 caps the gradient; --reward-scale 0.01" \
+    """GridWar's scenarios (train --scenario): the note reads the scenario's rewards."""
+    quiet = tmp_path / "quiet.toml"  # the built-in map with the walk's rewards (up to 10)
+    quiet.write_text('name = "quiet"\nwidth = 8\nheight = 8\nred_base = [7, 0]\nblue_base = [0, 7]\n'
+                     'mountains = [[2, 3], [3, 3], [2, 4], [3, 4], [4, 4], [4, 5]]\nmax_steps = 30\n[rewards]\n' +
+                     "".join(f"{k} = {v}\n" for k, v in asdict(WALK.rewards).items()))
+    small = ["--total-timesteps", "40", "--num-envs", "4", "--learning-starts", "20", "--eval-every", "0",
+             "--eval-games", "2", "--eval-envs", "2", "--trace-eval-games", "0", "--checkpoint-every", "0"]
+    method = ["--reward-scale", "1"]  # the method's: base's hits are worth 400
+    assert main(["train", "--scenario", "base", *small, *method, "--run", str(tmp_path / "a")]) == 0
+    assert "note: the learner sees rewards up to 400, where Smooth L1 caps the gradient; --reward-scale 0.01" \
         in capsys.readouterr().err
-    cfg = TrainConfig(scenario="walk4", steps=40, **{**small_steps, "reward_scale": 0.01})
-    assert train_into(cfg, big, tmp_path / "b") == 0
+    assert main(["train", "--scenario", "base", *small, "--reward-scale", "0.01", "--run", str(tmp_path / "b")]) == 0
     assert "note:" not in capsys.readouterr().err
     # the default scale (for GridWar's hundreds) on the walk's own rewards (up to 10): too small
-    cfg = TrainConfig(scenario="walk4", steps=40, **{k: v for k, v in small_steps.items() if k != "reward_scale"})
-    assert train_into(cfg, WALK, tmp_path / "c") == 0
+    assert main(["train", "--scenario", str(quiet), *small, "--run", str(tmp_path / "c")]) == 0
     assert "note: the learner sees rewards up to 0.1 only (--reward-scale 0.01 suits rewards in the hundreds); " \
         "--reward-scale 0.1 puts them near 1" in capsys.readouterr().err
 
@@ -178,10 +180,10 @@ def test_train_says_when_the_learner_sees_rewards_beyond_smooth_l1s_quadratic_zo
 def test_masked_training_records_the_moves_the_shield_allows_in_the_next_state():
     """--mask: each stored transition carries the actions allowed where it lands (up, down, left, right,
     nothing on the 4x4 walk: a move off the map is forbidden), which bound the target's max."""
-    cfg = TrainConfig(scenario="walk4", steps=400, seed=4, mask=True, **{**SMALL, "eval_every": 0})
-    trainer = Trainer(cfg, WALK)
+    cfg = walk_config(steps=400, seed=4, mask=True, eval_every=0)
+    trainer = walk_trainer(cfg)
     trainer.train()
-    st = trainer.learners["shared"].buffer.state()
+    st = trainer.learner.buffer.state()
     trainer.close()
     boot = st["discount"] > 0  # bootstrapped transitions: their next state is the one the mask describes
     x, y = st["next_obs"][boot, 0], st["next_obs"][boot, 1]
@@ -190,13 +192,15 @@ def test_masked_training_records_the_moves_the_shield_allows_in_the_next_state()
     np.testing.assert_array_equal(st["next_allowed"][boot], expect)
 
 
+# RuleSim's trainer: goes with it (issue 38). Several agents a team train through the PettingZoo env
+# (teamtrain, tests/test_team_train.py); EnvTrainer trains one agent.
 def test_a_team_s_closing_transitions_carry_the_win_or_loss_term():
     """With several agents each learns from its own reward; the step that ends a game resets the world
     within the step (SAME_STEP), so the terminal rewards must come from final_info. Every transition cut
     by a capture (discount 0: nobody dies on the walk) carries +-10 plus its small step term; a draw
     has no terminal term."""
     team = replace(WALK, agents_per_team=2, red_starts=None, blue_starts=None)
-    cfg = TrainConfig(scenario="walk4", steps=1200, seed=3, **{**SMALL, "warmup": 5000, "eval_every": 0})
+    cfg = TrainConfig(scenario="walk4", steps=1200, seed=3, **{**RULESIM_SMALL, "warmup": 5000, "eval_every": 0})
     trainer = Trainer(cfg, team)
     trainer.train()
     st = trainer.learners["shared"].buffer.state()
@@ -209,12 +213,14 @@ def test_a_team_s_closing_transitions_carry_the_win_or_loss_term():
     assert (np.abs(st["reward"][~closing]) <= 1.0).all()  # step terms only: -0.1, or -1 when unsafe
 
 
+# RuleSim's trainer: goes with it (issue 38). The spec path explores uniformly (--explore-scripted is refused
+# there: env_trainer.NOT_ON_THE_SPEC_PATH)
 @pytest.mark.parametrize("share", [1.0, 0.0])
 def test_explore_scripted_takes_exploring_actions_from_the_scripted_policy(share):
     """--explore-scripted 1: every exploring move is the scripted policy's, a step towards blue's base at
     (0, 3) (one always exists on the open walk); 0: uniform, so other actions appear too."""
     cfg = TrainConfig(scenario="walk4", steps=400, seed=6, explore_scripted=share,
-                      **{**SMALL, "warmup": 5000, "eval_every": 0})
+                      **{**RULESIM_SMALL, "warmup": 5000, "eval_every": 0})
     trainer = Trainer(cfg, WALK)
     trainer.train()
     st = trainer.learners["shared"].buffer.state()
@@ -227,29 +233,30 @@ def test_explore_scripted_takes_exploring_actions_from_the_scripted_policy(share
 
 
 def test_saved_policy_round_trips_and_plain_torch_loads_it(tmp_path):
-    cfg = TrainConfig(scenario="walk4", steps=200, seed=2, **{**SMALL, "eval_every": 0})
-    trainer = Trainer(cfg, WALK)
+    cfg = walk_config(steps=200, seed=2, eval_every=0)
+    trainer = walk_trainer(cfg)
     trainer.train()
     path = trainer.save_policy(tmp_path / "policy")
-    loaded = load_policy(path)
+    loaded, spec = load_env_policy(path, walk_source())
     obs = np.random.default_rng(0).integers(0, 4, (50, 4)).astype(np.float32)
-    acting = np.ones((50, 1), bool)
-    np.testing.assert_array_equal(loaded.act(obs, acting), trainer.policy.act(obs, acting))
+    np.testing.assert_array_equal(loaded.act(obs), trainer.policy.act(obs))
+    assert len(set(loaded.act(obs).tolist())) > 1  # a trained network: not one action everywhere
     net = torch.nn.Sequential(torch.nn.Linear(4, 64), torch.nn.Tanh(), torch.nn.Linear(64, 5))
     net.load_state_dict(torch.load(path / "policy.pt", weights_only=True)["shared"])
     with torch.no_grad():
-        assert (net(torch.from_numpy(obs)).argmax(1).numpy() == loaded.act(obs, acting)[:, 0]).all()
-    spec = read_policy_spec(path)
-    assert spec["observation"]["layout"] == ["self_x", "self_y", "opponent1_x", "opponent1_y"]
-    assert spec["networks"] == {"shared": [0]} and spec["scenario"]["name"] == "walk4"
+        assert (net(torch.from_numpy(obs)).argmax(1).numpy() == loaded.act(obs)).all()
+    assert spec["observation"] == {"size": 4, "encoding": "Box, 4 numbers"}
+    assert spec["networks"] == {"shared": [0]} and spec["env"] == walk_source().to_json()
     trainer.close()
 
 
+# RuleSim's trainer: goes with it (issue 38). Split networks, the slow agents' two-step transitions and
+# --slow-every-step are its own (env_trainer.NOT_ON_THE_SPEC_PATH); the nonmarkov scenario is a team game
 def trained_on_nonmarkov(steps: int, **options) -> Trainer:
     """A trainer after `steps` steps of the nonmarkov scenario (40-step games), no updates (warmup)."""
     from tracelab.game.scenario import builtin_scenario
     cfg = TrainConfig(scenario="nonmarkov", steps=steps, seed=1, **options,
-                      **{**SMALL, "eval_every": 0, "warmup": 1000})
+                      **{**RULESIM_SMALL, "eval_every": 0, "warmup": 1000})
     trainer = Trainer(cfg, replace(builtin_scenario("nonmarkov"), max_steps=40))
     trainer.train()
     return trainer
@@ -303,30 +310,9 @@ def test_configs_written_before_split_networks_keep_their_networks():
 
 def test_ctrl_c_leaves_an_interrupted_run_with_a_checkpoint(tmp_path):
     run = tmp_path / "run"
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    proc = subprocess.Popen([sys.executable, "-m", "tracelab.cli", "train", "--scenario", "base",
-                             "--steps", "10000000", "--log-every", "64", "--eval-every", "0", "--warmup", "64",
-                             "--run", str(run)], stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
-                            env=env)
-    try:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline:  # wait until training metrics are published
-            if run.exists() and (run / "meta.json").exists():
-                try:
-                    con = open_run(run)
-                    n = con.execute("SELECT count(*) FROM metrics WHERE name = 'loss'").fetchone()[0]
-                    con.close()
-                    if n:
-                        break
-                except Exception:  # noqa: BLE001 - the run may be between flushes
-                    pass
-            time.sleep(0.5)
-        proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=120)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    assert proc.returncode == 130, err
+    status, out, err = ctrl_c_once_training(["train", "--scenario", "base", "--steps", "10000000", "--log-every",
+                                             "64", "--eval-every", "0", "--warmup", "64", "--run", str(run)], run)
+    assert status == 130, err
     assert "interrupted at step" in out and "--resume" in out
     assert run_info(run).status == "interrupted"
     state = load_tensors(checkpoint_path(run), 10**9)  # --scenario base trains through its spec: its format

@@ -10,24 +10,23 @@ from tracelab.train.best_policy import BestPolicy
 from tracelab.train.config import TrainConfig
 from tracelab.train.episode_log import EpisodeLog
 from tracelab.train.exploration import Exploration
-from tracelab.train.loop import Trainer
 from tracelab.train.rngs import Generators
 from tracelab.train.update_schedule import UpdateSchedule
-from train_helpers import SMALL, WALK
+from train_helpers import walk_config, walk_trainer
 
 
 def test_a_trainer_loaded_from_anothers_state_continues_as_it_does() -> None:
-    """No files: Trainer.state() into a fresh Trainer's load_state(); both train on to the same weights,
-    replay buffers and episode counts (the worlds rebuilt by replaying their games)."""
-    cfg = TrainConfig(scenario="walk4", steps=500, seed=4, **{**SMALL, "eval_every": 0, "explore_scripted": 0.2})
-    first, second = Trainer(cfg, WALK), Trainer(cfg, WALK)
+    """No files: EnvTrainer.state() into a fresh EnvTrainer's load_state(); both train on to the same weights,
+    replay buffers and episode counts (the worlds rebuilt by replaying their actions)."""
+    cfg = walk_config(steps=500, seed=4, eval_every=0)
+    first, second = walk_trainer(cfg), walk_trainer(cfg)
     try:
         first.train(stop_at=248)
         assert first.episodes.lengths.any()  # games in progress: the load must replay them
         second.load_state(first.state())
         for tr in (first, second):
             tr.train()
-        one, two = first.learners["shared"], second.learners["shared"]
+        one, two = first.learner, second.learner
         for k, v in one.online_weights().items():
             torch.testing.assert_close(two.online_weights()[k], v, rtol=0, atol=0)
         np.testing.assert_array_equal(one.buffer.state()["obs"], two.buffer.state()["obs"])
@@ -39,12 +38,13 @@ def test_a_trainer_loaded_from_anothers_state_continues_as_it_does() -> None:
 
 
 def test_the_checkpoint_keys_are_the_parts_states_side_by_side() -> None:
-    tr = Trainer(TrainConfig(scenario="walk4", steps=100, seed=1, **SMALL), WALK)
+    tr = walk_trainer(walk_config(steps=100, seed=1))
     try:
         st = tr.state()
         parts = (tr.rngs, tr.schedule, tr.metrics, tr.best, tr.episodes)
         assert {k for p in parts for k in p.state()} <= set(st)
-        assert set(st["games"]) == {"ep_len", "ep_return", "ep_id", "ep_start", "history", "obs"}
+        assert set(st["games"]) == {"ep_len", "ep_return", "ep_id", "ep_start", "obs"}
+        assert st["env_actions"].shape == (0, 4)  # the worlds' actions since their reset: none yet
     finally:
         tr.close()
 

@@ -8,16 +8,17 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+import torch
 
 from tracelab.cli import main
 from tracelab.envs.declared.gridwar import scenario_env
 from tracelab.game.scenario import Rewards, builtin_scenario
 from tracelab.store.meta import current_meta
-from tracelab.train.checkpoint import checkpoint_path
-from tracelab.train.env_checkpoint import ENV_FORMAT
+from tracelab.train.config import TrainConfig
+from tracelab.train.env_checkpoint import ENV_FORMAT, RULESIM_FORMATS, checkpoint_path
 from tracelab.train.torch_files import load_tensors
 
-from train_helpers import run_rows, tiny_training_run
+from train_helpers import run_rows
 
 TINY = ["--total-timesteps", "200", "--num-envs", "4", "--learning-starts", "50", "--eval-every", "200",
         "--eval-games", "4", "--eval-envs", "3", "--trace-eval-games", "1", "--log-every", "100",
@@ -87,8 +88,12 @@ def test_an_old_rulesim_checkpoint_on_the_spec_path_is_refused_saying_how_to_sta
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A RuleSim run (RuleSim's observations, its replay of the worlds) does not convert to the spec's
     trainer: resumed on a GridWar id it is refused with the command that starts it again."""
-    run = tiny_training_run(tmp_path / "old", seed=4)
-    capsys.readouterr()
+    # its checkpoint as RuleSim's trainer wrote it, as far as the refusal reads it: its format and config
+    run = tmp_path / "old"
+    (run / "checkpoint").mkdir(parents=True)
+    config = TrainConfig(scenario="walk4", steps=200, seed=4, envs=4).to_dict()
+    torch.save({"format": RULESIM_FORMATS[0], "config": config}, checkpoint_path(run))
     err = error_line(capsys, main(["train", "--resume", str(run), "--env", "tracelab/GridWar-base-v0"]))
     assert "trained by tracelab's RuleSim trainer" in err
-    assert "start a new run with its settings: tracelab train --scenario walk4 --total-timesteps 200 --seed 4" in err
+    assert "start a new run with its settings: tracelab train --scenario walk4 --total-timesteps 200 --seed 4 " \
+        "--num-envs 4" in err

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from store_helpers import run_rows as rows
 
 from tracelab.cli import main
 from tracelab.store import open_run
@@ -29,14 +30,6 @@ def origins(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
         out[name] = folder / name
         assert main(["play", *flags, "--run", str(out[name])]) == 0
     return out
-
-
-def rows(run: Path, sql: str) -> list[tuple]:
-    con = open_run(run)
-    try:
-        return con.execute(sql).fetchall()
-    finally:
-        con.close()
 
 
 def steps_of(run: Path, episode: int) -> list[tuple]:

@@ -3,31 +3,70 @@ and reading a run and stopping a training the way a user does (tests/test_train_
 from __future__ import annotations
 
 import os
+import shlex
 import signal
 import subprocess
 import sys
+from dataclasses import asdict
 from pathlib import Path
 
 from patience import PATIENCE, wait_until
 
+from tracelab.envs.declared.env_source import EnvSource
 from tracelab.game.scenario import Rewards, Scenario
 
-# A 4x4 walk: red starts on its base (3,0) and wins by reaching blue's (0,3) in 6 moves; blue is a random
-# walker (opponent_p = 0), so the best policy almost always wins. Small rewards keep Q-values small.
+# A 4x4 walk: red starts on its base (3,0) and wins by reaching blue's (0,3) in 6 moves; blue walks towards
+# red's base half the time (p_toward 0.5), so the best policy almost always wins. Small rewards keep Q-values
+# small. GridWar's spec plays it as war.toml's map walk4 with these params (WALK_ARGS); WALK is RefSim's
+# scenario of it, which tests/test_gridwar_spec.py holds the spec equal to step by step.
 WALK = Scenario(name="walk4", width=4, height=4, red_base=(3, 0), blue_base=(0, 3), max_steps=30,
                 rewards=Rewards(win=10, loss=-10, valid_action=-0.1, unsafe=-1, invalid=-0.5, hit_opponent=0,
                                 got_shot=0))
+WALK_ARGS = {"map": "walk4", "max_steps": WALK.max_steps, **asdict(WALK.rewards)}
+WALK_ID = "tracelab/GridWar-base-v0"
+
+
+def walk_source(p_toward: float = 0.5, **params: object) -> EnvSource:
+    """The walk as `train --env tracelab/GridWar-base-v0 --env-arg map=walk4 ...` names it."""
+    return EnvSource(WALK_ID, {**WALK_ARGS, "p_toward": p_toward, **params})
+
+
+def walk_argv(p_toward: float = 0.5) -> list[str]:
+    """The walk's --env and --env-arg flags (a run of it is resumed naming its env again)."""
+    return ["--env", *shlex.split(walk_source(p_toward).describe())]
+
+
 SMALL = dict(warmup=100, envs=4, batch=32, buffer=2000, target_every=100, log_every=100, eval_every=200,
-             eval_games=8, trace_eval_games=2, eval_envs=3, checkpoint_every=200, opponent_p=0.5, eval_p=0.3,
-             lr=3e-3, reward_scale=1.0)  # the walk's rewards (-1, 10) are near 1 already: seen as they are
+             eval_games=8, trace_eval_games=2, eval_envs=3, checkpoint_every=200, lr=3e-3,
+             reward_scale=1.0)  # the walk's rewards (-1, 10) are near 1 already: seen as they are
+# RuleSim's trainer's settings (the tests left on it, issue 38): its opponent's p in training and evaluation
+RULESIM_SMALL = {**SMALL, "opponent_p": 0.5, "eval_p": 0.3}
+
+
+def walk_config(steps: int = 200, seed: int = 1, **options: object):  # -> TrainConfig
+    """The TrainConfig of a tiny training of the walk (SMALL, overridden by `options`)."""
+    from tracelab.train.config import TrainConfig
+    return TrainConfig(steps=steps, seed=seed, **{**SMALL, **options})
+
+
+def train_walk(cfg, run: Path, stop_at: int | None = None, source: EnvSource | None = None, **kwargs: object) -> int:
+    """`tracelab train --env` of the walk (or `source`) into `run` from Python (train_env_into); its exit
+    status (130: stopped at `stop_at` as by Ctrl-C)."""
+    from tracelab.commands.train import train_env_into
+    from tracelab.train.env_source import probe_env
+    source = source or walk_source()
+    return train_env_into(cfg, source, run, probe_env(source)[0].describe(), stop_at=stop_at, **kwargs)
+
+
+def walk_trainer(cfg, source: EnvSource | None = None, **kwargs: object):  # -> EnvTrainer
+    """An EnvTrainer of the walk (or `source`), not writing a run (close it)."""
+    from tracelab.train.env_trainer import EnvTrainer
+    return EnvTrainer(cfg, source or walk_source(), **kwargs)
 
 
 def tiny_training_run(run: Path, steps: int = 200, seed: int = 1, **options: object) -> Path:
-    """A finished training run of WALK into `run` (a few seconds): checkpoint, policy, policy-best."""
-    from tracelab.commands.train import train_into
-    from tracelab.train.config import TrainConfig
-    cfg = TrainConfig(scenario="walk4", steps=steps, seed=seed, **{**SMALL, **options})
-    assert train_into(cfg, WALK, run) == 0
+    """A finished training run of the walk into `run` (a few seconds): checkpoint, policy, policy-best."""
+    assert train_walk(walk_config(steps, seed, **options), run) == 0
     return run
 
 

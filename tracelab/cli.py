@@ -1,9 +1,10 @@
 """tracelab: a semantic simulation proxy for reinforcement learning that explains itself.
 
-The `tracelab` command. Each subcommand lives in its own module under tracelab/commands/, named after it
-(`why-not`: commands/why_not.py), and exposes `register(subparsers)`; modules are imported lazily so that
-`tracelab --help` stays fast (no torch), and a command builds its own parser only (`tracelab sql ...` does
-not build the other 23: they cost ~0.3 s of CPU, a reading command's budget, docs/benchmarks.md).
+The `tracelab` command. The parser is built from the command table (tracelab/commands/_table.py: every
+command's name, help and arguments), which imports no command module: `tracelab --help` loads no heavy
+package, and a command builds its own parser only. Each command lives in its own module under
+tracelab/commands/, named after it (`why-not`: commands/why_not.py), imported when the command runs; its
+`run(args)` does the work.
 
 Output: everything a command prints goes through commands._output.escaped_output (control characters
 escaped: a run's strings never reach the terminal as escape sequences).
@@ -14,7 +15,7 @@ closed pipe (`tracelab trace ... | head`) ends quietly; anything else is a bug a
 from __future__ import annotations
 
 import argparse
-import importlib
+import difflib
 import os
 import sys
 
@@ -22,22 +23,8 @@ from tracelab import __version__
 from tracelab.commands._args import grounding_limit_of
 from tracelab.commands._notices import showing_library_notices
 from tracelab.commands._output import escaped_output
+from tracelab.commands._table import BY_NAME, COMMANDS
 from tracelab.errors import user_error_message
-
-# One line per subcommand module; each module adds the parser of the command it is named after and sets
-# `func` on it.
-COMMAND_MODULES = [
-    "tracelab.commands.play", "tracelab.commands.reason", "tracelab.commands.convert_pyreason",
-    "tracelab.commands.run_pyreason",
-    "tracelab.commands.trace", "tracelab.commands.why", "tracelab.commands.why_not",
-    "tracelab.commands.sql", "tracelab.commands.diff", "tracelab.commands.seal",
-    "tracelab.commands.bench", "tracelab.commands.check", "tracelab.commands.show",
-    "tracelab.commands.replay", "tracelab.commands.train", "tracelab.commands.eval",
-    "tracelab.commands.runs", "tracelab.commands.tui",
-    "tracelab.commands.experiment", "tracelab.commands.sweep", "tracelab.commands.compile",
-    "tracelab.commands.compare", "tracelab.commands.export", "tracelab.commands.rewards",
-    "tracelab.commands.whatif",
-]
 EXIT_USER_ERROR = 1
 EXIT_USAGE = 2  # argparse's status for a usage error
 EXIT_BROKEN_PIPE = 141  # what a shell reports for a process ended by SIGPIPE
@@ -45,8 +32,7 @@ EXIT_BROKEN_PIPE = 141  # what a shell reports for a process ended by SIGPIPE
 
 def command_module(command: str) -> str | None:
     """The module of a command's name (`why-not`: tracelab.commands.why_not), None for no command."""
-    module = "tracelab.commands." + command.replace("-", "_")
-    return module if module in COMMAND_MODULES else None
+    return BY_NAME[command].module if command in BY_NAME else None
 
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
@@ -54,9 +40,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="tracelab", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"tracelab {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
-    only = command_module(command) if command is not None else None
-    for name in [only] if only else COMMAND_MODULES:
-        importlib.import_module(name).register(sub)
+    for c in [BY_NAME[command]] if command in BY_NAME else COMMANDS:
+        c.add_to(sub)
     return parser
 
 
@@ -76,7 +61,6 @@ def _late_positionals(parser: argparse.ArgumentParser, args: argparse.Namespace,
 def _unknown_arguments(parser: argparse.ArgumentParser, command: str, unknown: list[str]) -> int:
     """An unknown flag is a usage error of its subcommand: one line naming it, with the closest flags,
     not the usage of every subcommand (what the top-level parser would print)."""
-    import difflib  # deferred: only an unknown flag needs it; every command starts through this module
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices[command]
     flags = [s for a in sub._actions for s in a.option_strings if s.startswith("--")]
     flag = next((u.partition("=")[0] for u in unknown if u.startswith("-")), None)

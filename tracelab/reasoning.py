@@ -24,6 +24,10 @@ import numpy as np
 
 from tracelab.engine.errors import is_interrupt
 
+# deferred: the engine's readers and Engine (numba), the PyReason translator (numba) and the store (DuckDB, pyarrow)
+# load where they are used: import tracelab.pyreason needs no engine, the tracelab dialect no translator, a printed
+# reasoning no store
+
 
 @dataclass(frozen=True)
 class Source:
@@ -47,11 +51,9 @@ def load_inputs(program_files: Sequence[str], *, dialect: str = "tracelab", grap
                 fact_files: Sequence[str] = (), fact_tables: Sequence[str] = (),
                 persistent: bool = False) -> ReasoningInputs:
     """Read and check the program, graph and facts (errors are the engine's located ones)."""
-    # deferred: the graph and fact readers load numba, which `import tracelab.pyreason` does not need
     from tracelab.engine import check_program, load_fact_table, load_graphml, load_program
     names, translation = None, None
     if dialect == "pyreason":
-        # deferred: the PyReason translator loads numba, which the tracelab dialect does not need
         from tracelab.pyreason.translate import load_pyreason
         translated = load_pyreason(program_files, fact_files, graph_file, persistent=persistent)
         program, graph, names = translated.program, translated.graph, translated.names
@@ -125,7 +127,7 @@ class EpisodeRun:
 
     def __init__(self, inputs: ReasoningInputs, plan: EpisodePlan, *, trace: bool = True, kernel: str = "auto",
                  recorder: Any = None) -> None:
-        from tracelab.engine import Engine  # deferred: see load_inputs
+        from tracelab.engine import Engine
         self.plan = plan
         self.recorder = recorder
         if recorder is not None:  # the program and facts first: written while the engine grounds
@@ -211,7 +213,6 @@ def run_meta(inputs: ReasoningInputs, command: str, settings: dict[str, Any],
     files and a PyReason program's translation (`sources`: their run_sources rows, by path, size and hash;
     their texts go in the run's `sources` table), the graph and fact tables by path and size. No board: a
     reasoning run's episodes are a trace, not games."""
-    # deferred: tracelab.store loads pyarrow, which a printed reasoning does not need
     from tracelab.store.sources import source_summaries
     read = {(r["role"], r["path"]): r for r in source_summaries(sources)}
     listed = [read.pop((s.role, s.path), None) or {"role": s.role, "path": s.path, "bytes": _size(s.path)}
@@ -227,7 +228,6 @@ def run_meta(inputs: ReasoningInputs, command: str, settings: dict[str, Any],
 def run_sources(inputs: ReasoningInputs) -> list[dict[str, Any]]:
     """The run's `sources` rows (tracelab.store.sources): each rule and fact file with its text, then the
     tracelab program a PyReason program became (role `translation`, no path)."""
-    # deferred: tracelab.store loads pyarrow, which a printed reasoning does not need
     from tracelab.store.sources import read_sources, text_source
     rows = read_sources((s.role, s.path) for s in inputs.sources if s.role in ("rules", "facts"))
     return rows if inputs.translation is None else [*rows, text_source("translation", inputs.translation)]
@@ -235,7 +235,6 @@ def run_sources(inputs: ReasoningInputs) -> list[dict[str, Any]]:
 
 def open_reasoning_run(run_dir: Path, inputs: ReasoningInputs, command: str, settings: dict[str, Any]) -> Any:
     """A new run of the store (a TraceWriter) for a reasoning: its metadata (run_meta) and its sources."""
-    # deferred: tracelab.store loads pyarrow, which a printed reasoning does not need
     from tracelab.store import TraceWriter
     sources = run_sources(inputs)
     writer = TraceWriter.open(run_dir, run_meta(inputs, command, settings, sources))

@@ -14,15 +14,17 @@ from collections.abc import Sequence
 from typing import Any
 
 from tracelab.engine.program import INCONSISTENCY_POLICIES, Program, constant_text, ordered_nodes
+from tracelab.engine.reference import CAUSE_FACT, CAUSE_POLICY, CAUSE_RULE, ReferenceEvaluator, atom_text
 
 # rules x nodes ** variables x steps at most: a few thousand evaluations of a body per pass in plain Python
 REFERENCE_MAX_ASSIGNMENTS = 50_000
 CAUSE_NAMES = {1: "external", 4: "reset"}  # the engine's names (Engine.cause_name) of causes without an id
 
 
-def reference_fits(program: Program, steps: int) -> bool:
-    """Whether the reference evaluator answers this program over `steps` steps quickly (see the module)."""
-    nodes = max(1, len(ordered_nodes(program, [])))
+def reference_fits(program: Program, steps: int, graph_nodes: Sequence[str] = ()) -> bool:
+    """Whether the reference evaluator answers this program over `steps` steps quickly (see the module),
+    on a graph of these nodes."""
+    nodes = max(1, len(ordered_nodes(program, list(graph_nodes))))
     return steps * sum(nodes ** len(r.variables) for r in program.rules) <= REFERENCE_MAX_ASSIGNMENTS
 
 
@@ -30,9 +32,6 @@ def reference_reasoning(program: Program, steps: int) -> tuple[list[list[dict[st
                                                                  dict[str, tuple[float, float]]]:
     """Each step's trace rows (as `tracelab reason` prints them: t, pass, atom, old, new, cause,
     grounding) and the final interpretation by atom text. Raises what the evaluator raises."""
-    # deferred: not needed unless a program is reasoned (the CLI imports this module with `reason`)
-    from tracelab.engine.reference import ReferenceEvaluator, atom_text
-
     ref = ReferenceEvaluator(program)
     rows: list[list[dict[str, Any]]] = []
     for _ in range(steps):
@@ -50,8 +49,6 @@ def _row(program: Program, c: Any, atom_text: Any) -> dict[str, Any]:
 
 def _cause(program: Program, kind: int, cid: int) -> str:
     """Engine.cause_name's text for a reference row's cause."""
-    # deferred: the kind numbers live with the evaluator
-    from tracelab.engine.reference import CAUSE_FACT, CAUSE_POLICY, CAUSE_RULE
     if kind == CAUSE_RULE:
         return program.rules[cid].name
     if kind == CAUSE_FACT:

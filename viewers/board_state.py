@@ -20,7 +20,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from tracelab import RULES_DIR
-from tracelab.board import DIRECTION_ARROWS, Board, board_of_config
+from tracelab.board import DIRECTION_ARROWS, MAX_RECORDED_SIDE, Board, board_of_config
 from tracelab.store.coordinates import Grid, run_grid
 from tracelab.store.kind import run_board, run_config, spec_text
 from tracelab.store.reader import RunConnection
@@ -80,6 +80,8 @@ def gridwar_board(config: dict[str, Any]) -> Board | None:
         return None
     try:
         w, h = int(s["width"]), int(s["height"])
+        if not (0 < w <= MAX_RECORDED_SIDE and 0 < h <= MAX_RECORDED_SIDE):
+            return None           # a stranger's config: no board rather than a grid of any size
         grid = [["."] * w for _ in range(h)]
         for x, y in s.get("mountains", []):
             grid[h - 1 - int(y)][int(x)] = "M"
@@ -189,12 +191,31 @@ class BoardTrack:
         i = bisect.bisect_right(self.times, t) - 1
         return self.states[max(i, 0)]
 
+    def deaths(self) -> dict[int, list[str]]:
+        """t -> the `alive` atoms (`alive(red-agent-1)`) of the pieces that died in t: the atoms whose
+        why-trees the replay's step documents show."""
+        out: dict[int, list[str]] = {}
+        before: dict[str, bool] = {}
+        for t, state in zip(self.times, self.states):
+            for p in state.pieces:
+                alive = self.board.pieces[p.kind].alive
+                if alive and before.get(p.thing) and not p.alive:
+                    out.setdefault(t, []).append(f"{alive}({p.thing})")
+                before[p.thing] = p.alive
+        return out
+
     def cell_of(self, node: str, t: int) -> tuple[int, int] | None:
         """(row, col) of a node at t: a cell itself, or the cell where a piece stands."""
         if node in self.cells:
             return self.cells[node]
         piece = next((p for p in self.at(t).pieces if p.thing == node), None)
         return None if piece is None else (piece.row, piece.col)
+
+
+def piece_color(board: Board, thing: str) -> tuple[int, int, int] | None:
+    """The colour `thing` is drawn in on the board (the first kind of pieces whose `colors` name it),
+    or None: what its plots' lines take."""
+    return next((c for k in board.pieces.values() if (c := k.color(thing)) is not None), None)
 
 
 def _thing_kinds(con: RunConnection, board: Board) -> dict[str, str]:

@@ -4,7 +4,7 @@
 #   apt-get install -y mesa-vulkan-drivers xvfb
 #   bash docs/images/regenerate.sh
 # Every picture is of a real run: the sample runs (sample_runs/regenerate.sh, the supply-chain reasoning
-# included) and a 3v3 game played here.
+# included) and games of specs played here.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 tmp=$(mktemp -d)
@@ -35,22 +35,14 @@ shot "$tmp/2v2.rrd" docs/images/replay-2v2.png
 tracelab replay sample_runs/base-train --episode 772 --open-at end --save "$tmp/values.rrd"
 shot "$tmp/values.rrd" docs/images/replay-values.png
 
-# a 3v3 game of the advanced rules
-cat > "$tmp/3v3.toml" <<'TOML'
-name = "advanced3v3"
-width = 9
-height = 9
-red_base = [8, 0]
-blue_base = [0, 8]
-mountains = [[3, 4], [4, 4], [5, 4], [4, 3], [4, 5]]
-agents_per_team = 3
-red_starts = [[8, 0], [7, 0], [8, 1]]
-blue_starts = [[0, 8], [1, 8], [0, 7]]
-advanced = true
-TOML
-tracelab play --scenario "$tmp/3v3.toml" --episodes 1 --seed 3 --run "$tmp/3v3" >/dev/null
-tracelab replay "$tmp/3v3" --episode 0 --open-at end --save "$tmp/3v3.rrd"
-shot "$tmp/3v3.rrd" docs/images/replay-3v3.png
+# a game played here through the spec path: the advanced rules at two a team (war_advanced_2v2.toml)
+tracelab play --env rules/gridworld/war_advanced_2v2.toml --episodes 1 --seed 3 --run "$tmp/a2v2" >/dev/null
+tracelab replay "$tmp/a2v2" --episode 0 --open-at end --save "$tmp/a2v2.rrd"
+shot "$tmp/a2v2.rrd" docs/images/replay-advanced-2v2.png
+# a world of docs/worlds.md's kind with a board: the trap corridor, its agent dying a step after the trap
+tracelab play --env rules/examples/trap_corridor.toml --episodes 2 --seed 1 --run "$tmp/trap" >/dev/null
+tracelab replay "$tmp/trap" --episode 1 --open-at end --save "$tmp/trap.rrd"
+shot "$tmp/trap.rrd" docs/images/replay-spec.png
 # a run without a board: the supply-chain sample's reasoning over its 2,430-node graph at its last step,
 # coloured by `exposed` (the default), with the why-tree of an alert
 tracelab replay sample_runs/supply-chain --open-at end --why 'alert(sam-gray)' --save "$tmp/graph.rrd"

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 import tracelab
+from tracelab.bench import start
 from tracelab.bench.common import children_cpu_s, fmt_num, format_table, machine_info, summarize
 from tracelab.provenance import load_average
 
@@ -45,6 +46,8 @@ def commands(runs: Path, copies: Path) -> list[tuple[str, tuple[str, ...], float
         ("trace", ("trace", play, "--episode", "0", "--from", "1", "--to", "4"), 1.5),
         ("why", ("why", play, "captured(red)", "--episode", "2", "--at", "18", "--depth", "3"), 1.5),
         ("why-not", ("why-not", play, "--rule", "snap_at", "--episode", "2", "--at", "18"), 1.5),
+        ("why --action", ("why", str(runs / "base-train"), "--action", "red-agent-1", "--episode", "772", "--at", "2"),
+         1.5),
         ("show", ("show", play), 1.5),
         ("check", ("check", play), 1.5),
         ("diff", ("diff", play, "0", "1"), None),
@@ -82,8 +85,6 @@ def run(quick: bool, repeats: int, only: Sequence[str] | None = None) -> dict[st
         for _ in range(repeats):
             for name, argv, _ in timed:
                 cpu[name].append(_cpu_of(argv, env))
-    # deferred: its child imports torch; the reading commands' rounds above do not need it
-    from tracelab.bench import start
     starts = start.run(runs, repeats) if only is None or "start" in only else []
     floor = summarize(cpu["floor"]).median
     rows = []

@@ -28,6 +28,9 @@ from tracelab.bench.common import (
     summarize,
 )
 
+# deferred: the simulators (tracelab.bench.sims) load numba, which machine_line's importers (bench tui, bench
+# replay) do not need
+
 REFERENCE_S_PER_STEP = 0.8  # the method's reference system: ~0.8 s per step
 GOAL_STEPS_PER_S = 20_000  # single 1v1 world, tracing on
 OTHER_PROGRAM = str(RULES_DIR / "examples" / "reach.rules")
@@ -119,7 +122,6 @@ def warm_start(repeats: int) -> dict[str, Any]:
 
 def step_rates(agents: list[int], repeats: int, target_s: float, kernel: str = "auto") -> list[dict[str, Any]]:
     """(c) RuleSim steps/s for each team size, one world, tracing on and off (engine kernel `kernel`)."""
-    # deferred: the simulators load numba, which machine_line's importers (bench tui, bench replay) do not need
     from tracelab.bench.sims import get_sim, measure
     rows = []
     for n in agents:
@@ -135,7 +137,6 @@ def step_rates(agents: list[int], repeats: int, target_s: float, kernel: str = "
 
 def memory(steps: int) -> dict[str, Any]:
     """(d) RSS of this process every 10% of a `steps`-step traced 1v1 run (trace taken as the envs take it)."""
-    # deferred: as in engine_benchmark
     from tracelab.bench.sims import Loop, scenario_for
     from tracelab.game.rulesim import RuleSim
     loop = Loop(RuleSim(scenario_for(1), 1, seed=0, trace=True), trace=True)

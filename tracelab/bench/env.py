@@ -2,9 +2,13 @@
 side, by team size, one world and batched, RuleSim with tracing on and off; then GridWar's registered id
 through gymnasium (gym.make, gym.make_vec: the declared env over rules/gridworld/war.toml); then GridWar
 through both paths: RuleSim's vector env (tracelab.envs.vector_env, the trainer's) against the declared
-spec's (docs/worlds.md), one world and batched, with their ratios. Goals: docs/benchmarks.md."""
+spec's (docs/worlds.md), one world and batched, with their ratios; then the spec path with every agent of a
+team playing (war.toml's base game at each team size: its advanced game plays one agent a team) beside RuleSim
+and RefSim on the same scenario, ratios to RefSim (issue 38's speed points). Goals: docs/benchmarks.md."""
 from __future__ import annotations
 
+import time
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -12,15 +16,25 @@ import numpy as np
 from tracelab.envs.declared.gridwar import WAR_SPEC
 from tracelab.bench.common import (
     block_rates,
+    calibrate,
     fmt_num,
     format_table,
     machine_info,
     summarize,
 )
 from tracelab.bench.engine import GOAL_STEPS_PER_S, machine_line
-from tracelab.bench.sims import get_sim, measure, measure_engine_only, release, scenario_for
+from tracelab.bench.sims import Loop, get_sim, measure, measure_engine_only, release, scenario_for
 from tracelab.envs import make_env, make_vec_env
+from tracelab.envs.declared.gridwar import scenario_spec
+from tracelab.envs.declared.spec import load_spec
+from tracelab.envs.declared.spec_size import SpecTooBig
+from tracelab.envs.declared.vector_world import DeclaredWorlds
+from tracelab.envs.tracer import handover_due
+from tracelab.game.refsim import RefSim
 from tracelab.game.rulesim import RuleSim
+from tracelab.game.scenario import Scenario, builtin_scenario
+
+# deferred: gymnasium and RuleSim's vector env (the game's numba glue) load in the sections that measure them
 
 GOAL_BATCHED_ENV_STEPS_PER_S = 1_000_000  # batched, tracing off
 GOAL_MAX_SLOWDOWN = 5.0  # rule-driven within 5x of the hand-written simulator
@@ -90,7 +104,6 @@ def goals(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 def gym_rates(worlds: int, repeats: int, target_s: float) -> dict[str, Any]:
     """Steps/s through gymnasium: the single env (gymnasium.make, 1v1) and the vector env (`worlds`
     worlds, gymnasium.make_vec) of GridWar's id, the declared spec's, tracing off."""
-    # deferred: gymnasium is only needed here
     import gymnasium as gym
     out: dict[str, Any] = {"env_id": ENV_ID, "vector_worlds": worlds, "trace": False, "rows": []}
     env = gym.make(ENV_ID)
@@ -110,7 +123,6 @@ def declared_rates(worlds: int, repeats: int, target_s: float) -> list[dict[str,
     Python glue) and through its declared spec (DeclaredEnv, DeclaredVectorEnv over rules/gridworld/war.toml),
     base and advanced, one world and `worlds` worlds, untraced and traced (the engine's change log on,
     taken after every step), the same random actions; the ratio declared / RuleSim."""
-    # deferred: RuleSim's env loads the game's numba glue
     from tracelab.envs.vector_env import GridWarVectorEnv
     rows = []
     for name in ("base", "advanced"):
@@ -131,6 +143,98 @@ def declared_rates(worlds: int, repeats: int, target_s: float) -> list[dict[str,
                 row["declared_over_rulesim"] = row["declared"]["median"] / row["rulesim"]["median"]
                 rows.append(row)
     return rows
+
+
+def team_scenario(agents: int) -> Scenario:
+    """GridWar's base game with `agents` a team on the default map, every agent on its base: what war.toml
+    plays at every team size (its advanced game plays one agent a team, war.toml's [env.require])."""
+    base = builtin_scenario("base")
+    if agents == 1:
+        return base
+    return replace(base, name=f"base-{agents}v{agents}", agents_per_team=agents, red_starts=None,
+                   blue_starts=None)
+
+
+class SpecLoop:
+    """A batch of the spec's worlds stepped as sims.Loop steps a simulator: fixed-seed random actions of
+    every red agent (the spec's rules play blue), every agent's observation and reward read, finished worlds
+    restarted, and (with `trace`) the change log taken at the tracer's cadence."""
+
+    def __init__(self, worlds: DeclaredWorlds, trace: bool, seed: int = 0) -> None:
+        self.worlds, self.trace = worlds, trace
+        self.rng = np.random.default_rng(seed)
+        self._steps_waiting = 0
+        worlds.use_generators([np.random.default_rng(seed + i) for i in range(worlds.n_worlds)])
+        worlds.engine.trace_on[:] = trace
+        worlds.engine.take_trace()
+        worlds.reset(np.arange(worlds.n_worlds))
+
+    def run(self, steps: int) -> None:
+        w = self.worlds
+        red = self.rng.integers(0, w.n_actions, (steps, w.n_worlds, w.n_agents))
+        for i in range(steps):
+            w.step(red[i])
+            for agent in range(w.n_agents):
+                w.observations(agent)
+                w.rewards(agent)
+            done = w.terminated() | w.truncated(None)
+            ended = bool(done.any())
+            if self.trace:
+                self._steps_waiting += 1
+                if handover_due(w, self._steps_waiting, ended):  # type: ignore[arg-type]
+                    self._steps_waiting = 0
+                    w.engine.take_trace()
+            if ended:
+                w.reset(np.flatnonzero(done))
+
+
+def spec_rates(agents: list[int], worlds: list[int], repeats: int, target_s: float) -> list[dict[str, Any]]:
+    """One row per (agents, worlds): GridWar's base game at that team size (team_scenario) through RefSim,
+    RuleSim (sims.Loop) and the spec path (SpecLoop: DeclaredWorlds over war.toml, the engine and reads in
+    one compiled call), traced and untraced, as env-steps per CPU second (cpu_rates) and as ratios to RefSim."""
+    rows = []
+    for n in agents:
+        sc = team_scenario(n)
+        path, params = scenario_spec(sc)
+        spec = load_spec(path, **params)
+        for w in worlds:
+            row: dict[str, Any] = {"scenario": sc.name, "agents": n, "worlds": w}
+            row["reference"] = cpu_rates(Loop(RefSim(sc, w, seed=0), False).run, w, repeats, target_s)
+            rules = RuleSim(sc, w, seed=0, trace=True)
+            for trace in (False, True):
+                row[f"rulesim_{'on' if trace else 'off'}"] = cpu_rates(Loop(rules, trace).run, w, repeats, target_s)
+            del rules
+            try:
+                declared = DeclaredWorlds(spec, w)
+            except SpecTooBig as e:  # the batch's memory bound (TRACELAB_SPEC_MEMORY raises it)
+                row["spec_skipped"] = str(e)
+                declared = None
+            if declared is not None:
+                row["spec_kernel"] = declared.kernel
+                for trace in (False, True):
+                    row[f"spec_{'on' if trace else 'off'}"] = cpu_rates(SpecLoop(declared, trace).run, w, repeats,
+                                                                         target_s)
+                del declared
+            ref = row["reference"]["median"]
+            for k in ("rulesim_off", "rulesim_on", "spec_off", "spec_on"):
+                if k in row:
+                    row[f"{k}_over_reference"] = row[k]["median"] / ref
+            rows.append(row)
+    return rows
+
+
+def cpu_rates(run: Any, worlds: int, repeats: int, target_s: float) -> dict[str, Any]:
+    """Env-steps per CPU second of run(k) (k steps of `worlds` worlds): a calibrated block, a warm-up, then
+    `repeats` blocks timed by this process's CPU time (on this shared machine the wall clock also counts the
+    turns of other processes, which differ from one block to the next)."""
+    block = calibrate(run, target_s)
+    run(block)
+    rates_ = []
+    for _ in range(max(1, repeats)):
+        c0 = time.process_time()
+        run(block)
+        rates_.append(block * worlds / max(time.process_time() - c0, 1e-9))
+    return summarize(rates_).to_dict()
 
 
 def _engine_of(env: Any) -> Any:
@@ -181,9 +285,10 @@ def run(quick: bool = False, repeats: int = 5, agents: list[int] | None = None,
     rows = sim_rates(agents or ([1, 2] if quick else [1, 5, 20]), sorted({1, batch}), repeats, target_s, kernel)
     gym = gym_rates(batch, repeats, target_s)
     declared = declared_rates(batch, repeats, target_s)
+    teams = spec_rates(agents or ([1, 2] if quick else [1, 5, 20]), sorted({1, batch}), repeats, target_s)
     info["load_average_end"] = machine_info()["load_average"]
     return {"machine": info, "quick": quick, "repeats": repeats, "batched_worlds": batch, "sims": rows,
-            "goals": goals(rows), "gym": gym, "declared": declared}
+            "goals": goals(rows), "gym": gym, "declared": declared, "spec_teams": teams}
 
 
 def report(r: dict[str, Any]) -> str:
@@ -221,7 +326,19 @@ def report(r: dict[str, Any]) -> str:
                      f"{100 * d['rulesim']['spread']:.0f}%/{100 * d['declared']['spread']:.0f}%"]
                     for d in measured]) + "".join(
                    f"\nnot measured: {d['spec']}: {d['skipped']}" for d in r.get("declared", []) if "skipped" in d)
+    teams = "GridWar's base game by team size: RefSim, RuleSim and the spec path (war.toml, every red agent " \
+            "playing), env-steps per CPU second and /RefSim\n" + format_table(
+                ["scenario", "worlds", "spec kernel", "RefSim", "RuleSim off", "RuleSim on", "spec off", "spec on",
+                 "RuleSim/ref off/on", "spec/ref off/on", "spread ref/spec off/on"],
+                [[t["scenario"], t["worlds"], t["spec_kernel"], t["reference"]["median"], t["rulesim_off"]["median"],
+                  t["rulesim_on"]["median"], t["spec_off"]["median"], t["spec_on"]["median"],
+                  f"{t['rulesim_off_over_reference']:.3f}/{t['rulesim_on_over_reference']:.3f}",
+                  f"{t['spec_off_over_reference']:.3f}/{t['spec_on_over_reference']:.3f}",
+                  "/".join(f"{100 * t[k]['spread']:.0f}%" for k in ("reference", "spec_off", "spec_on"))]
+                 for t in r.get("spec_teams", []) if "spec_skipped" not in t]) + "".join(
+                f"\nspec path not measured: {t['scenario']} x{t['worlds']}: {t['spec_skipped']}"
+                for t in r.get("spec_teams", []) if "spec_skipped" in t)
     return "\n\n".join([machine_line(r["machine"], r["quick"], r["repeats"]),
                         "simulators (env-steps/s = steps/s x worlds)\n" + sims,
                         "the engine alone, replaying the loop's steps (share = loop / engine alone)\n" + alone,
-                        goals_t, gym_t, declared])
+                        goals_t, gym_t, declared, teams])

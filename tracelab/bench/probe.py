@@ -12,19 +12,21 @@ import json
 import sys
 import time
 
+# deferred: the probe times the imports of what it measures (the engine, numpy, the simulator), and reads the kernel
+# after the timed steps
+
 
 def _first_step(target: str) -> tuple[float, float, float]:
     """(import s, build s, first step s) of one target, in this process."""
     t0 = time.perf_counter()
-    # deferred: the probe times these imports
     from tracelab.engine import Engine, load_program
     from tracelab.game.scenario import builtin_scenario
     if target == "rulesim":
-        import numpy as np  # deferred: timed with the rest
+        import numpy as np
 
-        from tracelab.game.rulesim import RuleSim  # deferred: timed with the rest
+        from tracelab.game.rulesim import RuleSim
     else:
-        from tracelab.game.facts import scenario_program  # deferred: timed with the rest
+        from tracelab.game.facts import scenario_program
     t1 = time.perf_counter()
     if target == "rulesim":
         sim = RuleSim(builtin_scenario("advanced"), 1, seed=0, trace=True)
@@ -44,7 +46,6 @@ def main(argv: list[str]) -> int:
         import_s, build_s, step_s = _first_step(target)
         print(json.dumps({"target": target, "import_s": import_s, "build_s": build_s, "step_s": step_s}),
               flush=True)
-    # deferred: read after the timed steps
     from tracelab.engine import kernel
     print(json.dumps({"signatures": len(kernel.step_worlds.signatures)}), flush=True)
     return 0

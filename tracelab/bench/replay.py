@@ -6,7 +6,11 @@ Two runs are written first (not timed), sealed, then converted `repeats` times e
 - 100 games of 1v1 (the advanced scenario, scripted red against the scripted opponent), goal <= 5 s.
 A conversion is everything `tracelab replay RUN --save FILE` does after start-up: open the run, read
 what its episodes share, rebuild and log every episode, write the file (merging the recordings of
-several episodes with `rerun rrd merge`). Medians, with a breakdown of the 5v5 game by layer."""
+several episodes with `rerun rrd merge`). Medians, with a breakdown of the 5v5 game by layer.
+
+The games are written by RuleSim (its tracer, scripted and idle agents the spec's random play has no
+way to ask for); the replay reads them as any run, on rules/gridworld/war.toml's `[board]` with their
+scenario's map (viewers/board_state.py): what is measured is the one path every world's replay takes."""
 from __future__ import annotations
 
 import os
@@ -28,10 +32,11 @@ from tracelab.playing import Games
 from tracelab.store import TraceWriter, seal_run
 from tracelab.store.reader import open_run
 from tracelab.store.sink import StoreSink
-from tracelab.viewers.replay import board_layer, plots, rules_layer
+from tracelab.viewers.replay import agent_plots, board_layer, graph_rules, lanes, plots
+from tracelab.viewers.replay.graph_run import read_episode
 from tracelab.viewers.replay.outputs import SaveOutput
-from tracelab.viewers.replay.recording import RunContext, new_recording
-from tracelab.viewers.replay.replay import replay_run
+from tracelab.viewers.replay.recording import ReplayOptions, RunContext, new_recording
+from tracelab.viewers.replay.replay import context_of, replay_run
 from tracelab.viewers.replay.select import EpisodeFilter
 
 GOAL_5V5_S = 0.5
@@ -79,7 +84,7 @@ def convert(run: Path, out: Path) -> int:
     """`tracelab replay RUN --save OUT` without the process start-up; returns the recordings written."""
     con = open_run(run)
     try:
-        return replay_run(RunContext.of(con, run.name), EpisodeFilter(), SaveOutput(out))
+        return replay_run(context_of(con, run.name), EpisodeFilter(), SaveOutput(out))
     finally:
         con.close()
 
@@ -102,29 +107,41 @@ def _cpu_seconds() -> float:
     return t.user + t.system + t.children_user + t.children_system
 
 
-def _model_of(ctx: Any) -> Callable[[], Any]:
+def _model_of(ctx: RunContext) -> Callable[[], Any]:
     return lambda: ctx.model
 
 
 def layer_times(run: Path, repeats: int) -> dict[str, float]:
-    """Median seconds of each part of converting the run's first episode (recording kept in memory)."""
-
+    """Median seconds of each part of converting the run's first episode (recording kept in memory), in
+    the order record_episode logs them."""
     con = open_run(run)
-    ctx = RunContext.of(con, run.name)
+    ctx = context_of(con, run.name)
+    ctx.check(ReplayOptions(), 0)                # the lanes the run can draw, as `replay_run` decides them
     episode = con.execute("SELECT min(episode) FROM episodes WHERE steps > 0").fetchall()[0][0]
     times: dict[str, list[float]] = {}
     for _ in range(repeats):
         rec = new_recording(run.name, episode)
         memory = rec.memory_recording()
         t0 = time.perf_counter()
-        board = ctx.loader.load(episode)
-        rewards = plots.team_rewards(board, ctx.step_rewards(episode))
-        times.setdefault("load (board from the run)", []).append(time.perf_counter() - t0)
-        for name, fn, args in (("board", board_layer.log_board, (rec, con, ctx.board, episode)),
-                               ("rule log", rules_layer.log_rule_log, (rec, board)),
-                               ("state lanes", rules_layer.log_lanes, (rec, board)),
-                               ("plots", plots.log_rewards, (rec, rewards)),
-                               ("why documents", rules_layer.log_why, (rec, con, board, rewards, 6, _model_of(ctx))),
+        data = read_episode(con, None, episode, None, edges=False)
+        rows = ctx.step_rows(episode)
+        agent = agent_plots.read_series(con, episode)
+        times.setdefault("read (rule log, changes, rewards)", []).append(time.perf_counter() - t0)
+        agents = list(dict.fromkeys(a for _, a, *_ in rows))
+        deaths: dict[int, list[str]] = {}
+
+        def board(rec: Any, deaths: dict[int, list[str]]) -> None:
+            deaths.update(board_layer.log_board(rec, con, ctx.board, episode).deaths())
+
+        for name, fn, args in (("board", board, (rec, deaths)),
+                               ("plots", plots.log_rewards, (rec, plots.agent_rewards(agents, rows), agents)),
+                               ("agent plots", agent_plots.log_agent_series, (rec, agent)),
+                               ("state lanes", lanes.log_lanes, (rec, con, episode, ctx.lanes, rows)),
+                               ("rule log", graph_rules.log_rule_log, (rec, data)),
+                               ("changes per step", graph_rules.log_changed, (rec, data)),
+                               ("why documents", graph_rules.log_why,
+                                (rec, con, data, (), 6, _model_of(ctx), graph_rules.no_edges, deaths,
+                                 plots.step_notes(rows))),
                                ("flush", rec.flush, ())):
             t0 = time.perf_counter()
             fn(*args)

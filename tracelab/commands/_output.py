@@ -19,6 +19,9 @@ from tracelab.errors import UserError
 if TYPE_CHECKING:  # imported where used, so that `tracelab --help` stays fast
     import pyarrow as pa
 
+# deferred: tracelab.store.table_files (DuckDB) and pyarrow, when a table is written: cli.py and the command table
+# import this module for escaped_output and the format options
+
 FORMATS = ("table", "csv", "json", "parquet")
 
 
@@ -81,7 +84,6 @@ def _json_value(v: Any) -> Any:
 
 def write_table(table: "pa.Table", fmt: str, output: str | None = None, out: TextIO | None = None) -> None:
     """Write `table` in `fmt` to `output` (a path) or to `out` (default stdout)."""
-    # deferred: importing tracelab.store loads DuckDB and pandas, which `tracelab --help` does not need
     from tracelab.store.table_files import python_rows, write_csv, write_parquet
 
     if fmt == "parquet":
@@ -109,9 +111,9 @@ def write_table(table: "pa.Table", fmt: str, output: str | None = None, out: Tex
 
 def arrow_rows(table: "pa.Table") -> tuple[list[str], list[bool], list[tuple[Any, ...]]]:
     """An Arrow table as write_rows takes it: its column names, which are numbers, its rows."""
-    import pyarrow as pa  # deferred: loads pyarrow; every command is imported to build the CLI's parser
+    import pyarrow as pa
 
-    from tracelab.store.table_files import column_values  # deferred: see write_table
+    from tracelab.store.table_files import column_values
     names = table.column_names
     columns = [column_values(table.column(i), name) for i, name in enumerate(names)]
     return (names, [pa.types.is_integer(t) or pa.types.is_floating(t) for t in table.schema.types],
@@ -122,7 +124,6 @@ def write_rows(names: Sequence[str], numeric: Sequence[bool], rows: Sequence[Seq
                output: str | None = None, out: TextIO | None = None) -> None:
     """Rows as an aligned text table (numbers right-aligned), then their count, to `output` (a path) or
     to `out` (default stdout): the table format, from Python values (DuckDB's rows need no pyarrow)."""
-    # deferred: importing tracelab.store loads DuckDB, which `tracelab --help` does not need
     from tracelab.store.table_files import cell_text
     if output:
         with open(output, "w", newline="") as f:
@@ -144,7 +145,7 @@ DEFAULT_TABLE_ROWS = 1000  # rows a table-format result shows unless --limit say
 
 
 def _rows(batches: "Iterable[pa.RecordBatch]") -> "Iterator[dict[str, Any]]":
-    from tracelab.store.table_files import python_rows  # deferred: see write_table
+    from tracelab.store.table_files import python_rows
 
     for batch in batches:
         yield from python_rows(batch)
@@ -154,7 +155,7 @@ def write_stream(schema: "pa.Schema", batches: "Iterable[pa.RecordBatch]", fmt: 
                  output: str | None = None, out: TextIO | None = None) -> int:
     """Write record batches as CSV, JSON or Parquet as they come (one batch in memory at a time); returns
     the number of rows. Table format needs every row for its widths: use write_table."""
-    from tracelab.store.table_files import write_csv, write_parquet  # deferred: see write_table
+    from tracelab.store.table_files import write_csv, write_parquet
 
     if fmt == "parquet":
         if not output:

@@ -20,6 +20,9 @@ from typing import Any
 
 from tracelab.commands._output import raw_stream
 
+# deferred: rich, on a terminal only; the engine's cache and grounding watch and the game's warm-up (numba) when an
+# engine is built: seal and a small printed reasoning need none of them
+
 # the numba kernels whose first call compiles the engine (the counting kernel serves every program, the
 # lanes kernel batches of 64 worlds or more), the trace taker of a recorder with an episode clock (a simulator's,
 # a declared env's recording; not `reason`: a notice about it would show on every reasoning), and those the rule
@@ -74,7 +77,6 @@ def progress(description: str, total: int | None, unit: str | None = "steps") ->
     if not on_terminal():
         yield Progress()
         return
-    # deferred: loads rich; every command is imported to build the CLI's parser
     from rich.console import Console
     from rich.progress import (
         BarColumn,
@@ -107,7 +109,6 @@ def working(description: str, refresh_per_second: float = 10) -> Iterator[Progre
     if not on_terminal():
         yield Progress()
         return
-    # deferred: loads rich; every command is imported to build the CLI's parser
     from rich.console import Console
     from rich.progress import Progress as RichProgress
     from rich.progress import SpinnerColumn, TextColumn, TimeElapsedColumn
@@ -126,7 +127,6 @@ def _kernels(pairs: tuple[tuple[str, str], ...]) -> tuple[Any, ...] | None:
 
 def _cold(pairs: tuple[tuple[str, str], ...]) -> bool | None:
     """True when some of these kernels must compile, False when all are loaded or cached, None: unknown."""
-    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
     from tracelab.engine.numba_cache import all_cached
     kernels = _kernels(pairs)
     cached = all_cached(kernels) if kernels is not None else None
@@ -159,17 +159,14 @@ def compile_notice(simulator: bool = False, lanes: bool = False, local_trace: bo
         both = engine and _game_warmup_runs(lanes)
         what += (" and " if what else "") + "the game's kernels" + (" (in a second process)" if both else "")
     kernels = _kernels(_ENGINE_KERNELS[:1])
-    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
     from tracelab.engine.numba_cache import cache_folder
     folder = cache_folder(kernels[0]) if kernels else None
     cached = f"; cached for the next runs in {folder}" if folder else ""
-    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
     from tracelab.first_run_figures import measured
     return f"compiling the engine ({measured(phase)}): {what}{cached}"
 
 
 def _game_warmup_runs(lanes: bool) -> bool:
-    # deferred: loads numba; every command is imported to build the CLI's parser
     from tracelab.game.rulesim_warmup import needed
     return needed("lanes" if lanes else "counting", fused=not lanes)
 
@@ -190,7 +187,6 @@ def compiling_engine(simulator: bool = False, lanes: bool = False, busy: str | N
     given) as a spinner on a terminal. The spinner counts the groundings found (a big build's work).
     `phase`: the first run `tracelab bench first-run` measured for the notice's figure; None: the body's
     library code says its own notice (a declared world: tracelab/envs/declared/world.py)."""
-    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
     from tracelab.engine.grounding import watch_grounding
     cold = engine_cache_is_cold(simulator, lanes, local_trace)
     notice = compile_notice(simulator, lanes, local_trace, phase) if cold and phase else None

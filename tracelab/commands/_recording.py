@@ -12,6 +12,9 @@ from typing import Any, TypeVar
 
 from tracelab.engine.errors import is_interrupt
 
+# deferred: tracelab.store (DuckDB), when a run is read: reason imports this module and prints a reasoning without
+# the store
+
 T = TypeVar("T")
 
 
@@ -19,7 +22,6 @@ def read_for_hints(run_dir: Path, read: Callable[[Any], T]) -> T | None:
     """`read(con)` on the run just written, for the "what to open" hints printed after it; None if the
     run cannot be opened or the read fails (a big run past the query memory, say): the command did its
     job, and a hint is not worth failing it. Hints read the raw tables they need, not the joined views."""
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store import open_run
     try:
         con = open_run(run_dir)
@@ -56,7 +58,6 @@ def recording_into(writer: Any, run_dir: Path) -> Iterator[None]:
 
 def ended_episodes(run_dir: Path) -> int:
     """How many episodes of the run have ended."""
-    # deferred: importing tracelab.store loads DuckDB and pandas, which `tracelab --help` does not need
     from tracelab.store import open_run
 
     con = open_run(run_dir)

@@ -16,9 +16,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import torch
+
 from tracelab.commands._progress import progress
 from tracelab.errors import UserError
+from tracelab.store import TraceWriter
+from tracelab.store.meta import current_meta, now_iso
+from tracelab.store.writer import RunSealed
 from tracelab.train.config import flag_of
+from tracelab.train.determinism import use_deterministic_algorithms
 from tracelab.train.tensorboard import TensorBoardSink, run_log_dir
 
 # what --resume may change (the rest is the checkpoint's): the threads and the kernel change no result; the
@@ -109,10 +115,6 @@ def same_directory(a: Path, b: Path) -> bool:
 def reopen_run(run_dir: Path, cfg: Any, step: int, command: str) -> Any:
     """The checkpoint's own run, reopened for appending: its config takes the (maybe raised) budget and
     meta.json's `resumes` records this resume (when, at which step, after which status)."""
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store import TraceWriter
-    from tracelab.store.meta import current_meta, now_iso
-    from tracelab.store.writer import RunSealed
     before = current_meta(run_dir)
     resume = {"at": now_iso(), "step": step, "after": before.get("status"), "steps": cfg.steps,
               "command": command}
@@ -148,12 +150,6 @@ def training_session(writer: Any, torch_deterministic: bool, tensorboard: Path |
     (a second one, or one before the trainer's handler) ends it as "interrupted". Whatever happens, the
     SIGINT handler and torch's mode are put back, the trainer, the sink and the run closed, the run with
     the session's status."""
-    # deferred: torch, which `tracelab --help` (it imports this module) does not need
-    import torch
-
-    # deferred: loads torch, as above
-    from tracelab.train.determinism import use_deterministic_algorithms
-
     was_deterministic = torch.are_deterministic_algorithms_enabled()
     use_deterministic_algorithms(torch_deterministic)
     previous = signal.getsignal(signal.SIGINT)

@@ -5,15 +5,7 @@ from __future__ import annotations
 import argparse
 
 from tracelab.errors import store_errors
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("check", help="verify a run's files; --repair quarantines damaged parts")
-    p.add_argument("run", help="run directory, .duckdb file, or run name under runs/")
-    p.add_argument("--repair", action="store_true",
-                   help="move damaged parts to <run>/quarantine/, take them out of the manifest, and "
-                        "remove temp files and parts the manifest no longer lists")
-    p.set_defaults(func=run)
+from tracelab.store.check import check_run
 
 
 def _size(n: int) -> str:
@@ -21,8 +13,6 @@ def _size(n: int) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.check import check_run
     with store_errors():
         report = check_run(args.run, repair=args.repair)
     kind = "sealed file" if report.sealed else "parts"

@@ -13,9 +13,12 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from tracelab.commands._interrupt import ctrl_c_stops_queries
-from tracelab.commands._output import add_format_options, write_rows, write_table
+from tracelab.commands._output import write_rows, write_table
 from tracelab.commands.show import OWN_SECTIONS
 from tracelab.errors import UserError, store_errors
+from tracelab.store.kind import spec_text, world_params
+from tracelab.store.reader import query_readonly, resolve_run, retrying
+from tracelab.store.several import SeveralRunsConnection, run_names
 from tracelab.train.config import METHOD_REWARD_SCALE
 
 if TYPE_CHECKING:
@@ -39,18 +42,6 @@ class TrainingRun:
     params: dict[str, Any] | None = None           # a spec world's params (store.kind.world_params)
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("compare", help="training runs side by side: final metrics and the config keys that differ",
-                       description="Training runs (from `tracelab train`) side by side, one column per run: "
-                                   "their status and last step, the config keys whose values differ, and "
-                                   "each metric's value at the run's end (win rates also at their best, "
-                                   "'VALUE @STEP'). For a run's episodes see `tracelab diff`.")
-    p.add_argument("runs", nargs="+", metavar="RUN",
-                   help="training runs: directories, .duckdb files or names under runs/")
-    add_format_options(p)
-    p.set_defaults(func=run)
-
-
 def run(args: argparse.Namespace) -> int:
     repeated = next((r for i, r in enumerate(args.runs) if r in args.runs[:i]), None)
     if repeated is not None:
@@ -62,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     if args.format == "table":
         write_rows(names, [False] * len(names), rows, args.output)
     else:
-        # deferred: loads pyarrow; every command is imported to build the CLI's parser
+        # deferred: pyarrow, for --format csv/json/parquet only (a table prints from DuckDB's rows)
         import pyarrow as pa
 
         from tracelab.store.arrow_build import strings  # not pa.array of strings: it imports pandas (arrow_build)
@@ -80,9 +71,6 @@ def run(args: argparse.Namespace) -> int:
 def read_training_runs(paths: list[str]) -> list[TrainingRun]:
     """The runs (as the user named them) read on one sandboxed connection: one DuckDB instance for them
     all, not one per run, and only their raw.* tables, which is all compare reads (tracelab.store.several)."""
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.reader import resolve_run
-    from tracelab.store.several import SeveralRunsConnection, run_names
     resolved = [resolve_run(p) for p in paths]
     con = SeveralRunsConnection(resolved, run_names(resolved), union_views=False)
     try:
@@ -98,9 +86,6 @@ def read_training_runs(paths: list[str]) -> list[TrainingRun]:
 def read_training_run(con: "RunConnection", path: str) -> TrainingRun:
     """A training run's status, config and final metrics, read on `con` (its raw.* are the run's); a
     UserError (one line) for a run that is not one."""
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.kind import spec_text, world_params
-    from tracelab.store.reader import query_readonly, retrying
     def rows(sql: str) -> list[tuple]:
         return retrying(lambda: query_readonly(con, sql).fetchall())
 

@@ -7,16 +7,11 @@ import argparse
 import sys
 from contextlib import ExitStack
 
-from tracelab.commands._args import add_max_groundings
 from tracelab.commands._progress import working
+from tracelab.engine import load_program
+from tracelab.engine.backend_compiled import unsupported
+from tracelab.engine.compile_job import CompileRefused, compile_program
 from tracelab.errors import UserError
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("compile", help="compile a rule program to its own kernel and cache it on disk")
-    p.add_argument("program", nargs="+", help="rule files (merged into one program, as `reason` merges them)")
-    add_max_groundings(p)
-    p.set_defaults(func=run)
 
 
 def _say(text: str) -> None:
@@ -24,11 +19,6 @@ def _say(text: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    # deferred: loads numba; every command is imported to build the CLI's parser
-    from tracelab.engine import load_program
-    from tracelab.engine.backend_compiled import unsupported
-    from tracelab.engine.compile_job import CompileRefused, compile_program
-
     program = load_program(*args.program)
     names = " ".join(args.program)
     if why := unsupported(program):

@@ -6,24 +6,10 @@ import argparse
 import sys
 
 from tracelab.errors import UserError
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("convert-pyreason", help="write PyReason rules/facts/graph as a tracelab program")
-    p.add_argument("rules", nargs="+", help="PyReason rule files (.txt one rule a line, .csv, .json)")
-    p.add_argument("--facts", action="append", default=[], help="PyReason fact files (.csv, .json)")
-    p.add_argument("--graph", help="a GraphML graph read with PyReason's mapping; its facts are written into "
-                                   "the program as static facts")
-    p.add_argument("--persistent", action="store_true",
-                   help="PyReason's persistent=True (default: PyReason's non-persistent timesteps)")
-    p.add_argument("-o", "--output", help="the tracelab rule file to write (default: standard output)")
-    p.set_defaults(func=run)
+from tracelab.pyreason import load_pyreason
 
 
 def run(args: argparse.Namespace) -> int:
-    # deferred: loads numba; every command is imported to build the CLI's parser
-    from tracelab.pyreason import load_pyreason
-
     translated = load_pyreason(args.rules, args.facts, args.graph, persistent=args.persistent, embed_graph=True)
     if args.output is None:
         sys.stdout.write(translated.text)

@@ -13,22 +13,9 @@ import json
 
 from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.errors import UserError, store_errors
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("diff", help="what two episodes were given, where they ended and where they first "
-                                    "diverge, of one run (RUN A B) or of two runs (RUN_A[:EP] RUN_B[:EP])",
-                       description="What two episodes were given (rules and facts of one side only), where "
-                                   "they ended (atoms with other bounds at the end) and where they first "
-                                   "diverge: `diff RUN A B` compares episodes A and B of one run, `diff "
-                                   "RUN_A:EP RUN_B:EP` an episode of each of two runs, `diff RUN_A RUN_B` two "
-                                   "runs of one episode each (atoms, rules, facts and causes are compared by "
-                                   "their text, so the runs' ids may differ).")
-    p.add_argument("sides", nargs="+", metavar="RUN[:EP]",
-                   help="RUN A B (one run, two episodes) or RUN_A[:EP] RUN_B[:EP] (two runs; without :EP, "
-                        "the run's only episode); a run is a run directory, .duckdb file, or run name under runs/")
-    p.add_argument("--json", action="store_true", help="the divergence as JSON")
-    p.set_defaults(func=run)
+from tracelab.store.branch_origin import origin_episode
+from tracelab.store.diff import first_divergence, render_divergence
+from tracelab.store.reader import open_run, resolve_run, retrying
 
 
 def _episode(text: str, what: str) -> int:
@@ -50,8 +37,6 @@ def _run_and_episode(text: str) -> tuple[str, int]:
 
 def _side(text: str) -> tuple[str, int | None]:
     """RUN:EP, or a RUN alone (episode None: its only one)."""
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.reader import resolve_run
     try:
         return _run_and_episode(text)
     except UserError as bad_episode:
@@ -66,8 +51,6 @@ def _side(text: str) -> tuple[str, int | None]:
 
 
 def _is_run(text: str) -> bool:
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.reader import resolve_run
     try:
         resolve_run(text)
     except FileNotFoundError:
@@ -98,25 +81,17 @@ def only_episode(con: object, run: str) -> int:
 
 
 def _is_one_run(run_a: str, run_b: str) -> bool:
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.reader import resolve_run
     return resolve_run(run_a).resolve() == resolve_run(run_b).resolve()
 
 
 def _episode_of(con: object, run: str, other: object) -> int:
     """The episode of `run` to compare when none is named: the one the other run branched off when it is
     a what-if branch of `run` (tracelab whatif), else its only one."""
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.branch_origin import origin_episode
-    from tracelab.store.reader import resolve_run
     e = origin_episode(other, resolve_run(run))  # type: ignore[arg-type]
     return only_episode(con, run) if e is None else e
 
 
 def run(args: argparse.Namespace) -> int:
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.diff import first_divergence, render_divergence
-    from tracelab.store.reader import open_run, retrying
     (run_a, a), (run_b, b) = parse_sides(args.sides)
     with store_errors(), ctrl_c_stops_queries():
         con_a = open_run(run_a)

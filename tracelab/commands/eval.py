@@ -9,47 +9,32 @@ import shlex
 import sys
 from pathlib import Path
 
-from tracelab.commands._args import add_max_groundings, non_negative_int, positive_int
+from tracelab.bench.common import format_table
 from tracelab.commands._progress import Progress, progress
-from tracelab.commands.train import load_scenario_arg
-from tracelab.commands.train import env_source_of
+from tracelab.commands._worlds import env_source_of, load_scenario_arg
+from tracelab.envs.declared.env_source import EnvSource
+from tracelab.envs.declared.gridwar import scenario_spec
 from tracelab.errors import UserError, store_errors
+from tracelab.game.facts import GAME_RULES
+from tracelab.game.scenario import BOARD
+from tracelab.store import TraceWriter
+from tracelab.train.env_policy import (
+    ENV_FORMAT,
+    OneAgentGridWarPolicy,
+    evaluate_env,
+    evaluate_team,
+    load_env_policy,
+    load_policy,
+    policy_format,
+    policy_scenario,
+    read_policy_spec,
+)
+from tracelab.train.evaluate import METHOD_CUT, comparison_rows, evaluate, evaluate_into
 from tracelab.train.experiments.stats import wilson
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("eval", help="evaluate a saved policy: wins, losses, draws, truncations, and the "
-                                    "method's counting side by side")
-    p.add_argument("policy", help="a policy directory (policy.json + policy.pt), e.g. RUN/policy")
-    p.add_argument("--games", type=positive_int, default=500, help="games to play (default 500)")
-    p.add_argument("--scenario", default=None,
-                   help="play on this scenario (built-in name or .toml; default: the policy's own)")
-    p.add_argument("--backend", choices=("rules", "reference"), default="rules",
-                   help="the rule-driven simulator or the hand-written one (default: rules)")
-    p.add_argument("--opponent-p", type=float, default=0.3,
-                   help="the opponent's probability of a move towards red's base (default 0.3, the "
-                        "method's evaluation)")
-    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the games (default 0)")
-    p.add_argument("--num-envs", dest="envs", type=positive_int, default=64,
-                   help="worlds stepped together (default 64, as train's --eval-envs)")
-    p.add_argument("--envs", dest="envs", type=positive_int, help=argparse.SUPPRESS)  # the earlier name
-    p.add_argument("--run", default=None, help="trace every game into this new run directory")
-    p.add_argument("--json", action="store_true", help="print the figures as JSON")
-    p.add_argument("--env", default=None, metavar="SPEC_OR_ID",
-                   help="play a policy trained with train --env on that env (the same id or spec file and "
-                        "--env-arg values it was trained with)")
-    p.add_argument("--env-arg", action="append", default=[], metavar="KEY=VALUE",
-                   help="a keyword argument of --env (repeatable), as train --env-arg")
-    add_max_groundings(p)
-    p.set_defaults(func=run)
-
-
 def run(args: argparse.Namespace) -> int:
-    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
-    from tracelab.train.env_policy import load_policy, policy_scenario, read_policy_spec
 
-    # deferred: loads gymnasium; every command is imported to build the CLI's parser
-    from tracelab.train.env_policy import ENV_FORMAT, policy_format
     with store_errors():
         trained_on_env = policy_format(args.policy) == ENV_FORMAT
     if args.env is not None or args.env_arg or trained_on_env:
@@ -79,9 +64,6 @@ def _spec_source(args: argparse.Namespace, policy, scenario):
     """The EnvSource of the scenario's spec where eval plays the GridWar policy through it (untraced, the
     rules backend), else None: RuleSim's evaluate plays it (--run, --backend reference, and scenarios no
     spec plays, until the trainer writes policies of specs)."""
-    # deferred: loads gymnasium; every command is imported to build the CLI's parser
-    from tracelab.envs.declared.env_source import EnvSource
-    from tracelab.envs.declared.gridwar import scenario_spec
     if args.run is not None or args.backend != "rules":
         return None
     try:
@@ -93,8 +75,6 @@ def _spec_source(args: argparse.Namespace, policy, scenario):
 def _run_spec(args: argparse.Namespace, policy, scenario, source) -> int:
     """A GridWar policy played greedily on its scenario's spec (rules/gridworld/war*.toml): one agent in
     --num-envs worlds stepped together, a team one world at a time."""
-    # deferred: loads gymnasium, numba; every command is imported to build the CLI's parser
-    from tracelab.train.env_policy import OneAgentGridWarPolicy, evaluate_env, evaluate_team
     with progress(f"evaluating on {scenario.name}", total=args.games, unit="games") as bar:
         if scenario.agents_per_team == 1:
             result = evaluate_env(OneAgentGridWarPolicy(policy), source, args.games, args.seed, args.envs,
@@ -114,8 +94,6 @@ def _run_spec(args: argparse.Namespace, policy, scenario, source) -> int:
 
 def _run_env(args: argparse.Namespace) -> int:
     """eval --env: a policy of train --env, played greedily on the env it was trained on."""
-    # deferred: loads gymnasium; every command is imported to build the CLI's parser
-    from tracelab.train.env_policy import evaluate_env, load_env_policy, policy_format, ENV_FORMAT
     with store_errors():
         fmt = policy_format(args.policy)
     if fmt != ENV_FORMAT:
@@ -170,16 +148,10 @@ def _counting(bar: Progress):
 
 
 def _evaluate(args: argparse.Namespace, policy, scenario, spec, on_game):
-    # deferred: loads DuckDB, gymnasium, numba; every command is imported to build the CLI's parser
-    from tracelab.train.evaluate import evaluate, evaluate_into
     if args.run is None:
         return evaluate(policy, scenario, games=args.games, backend=args.backend, seed=args.seed,
                         opponent_p=args.opponent_p, stack_previous=policy.stack_previous,
                         envs=args.envs, on_game=on_game)
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.game.facts import GAME_RULES
-    from tracelab.game.scenario import BOARD
-    from tracelab.store import TraceWriter
     meta = {"command": " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]),
             "scenario": scenario.name, "seed": args.seed, "rule_files": [str(GAME_RULES)], "board": BOARD,
             "config": {"policy": str(args.policy), "games": args.games, "backend": args.backend,
@@ -192,9 +164,6 @@ def _evaluate(args: argparse.Namespace, policy, scenario, spec, on_game):
 
 
 def _table(result, args: argparse.Namespace, scenario: str) -> None:
-    # deferred: loads DuckDB, gymnasium, numba; every command is imported to build the CLI's parser
-    from tracelab.bench.common import format_table
-    from tracelab.train.evaluate import METHOD_CUT, comparison_rows
     print(f"{args.policy} on {scenario} ({args.backend} backend), {result.games} games against the scripted "
           f"opponent (p={args.opponent_p}), seed {args.seed}")
     rows = [[name, str(a), str(b)] for name, a, b in comparison_rows(result)]

@@ -9,46 +9,13 @@ import signal
 import sys
 from pathlib import Path
 
-from tracelab.commands._args import ENGINE_KERNELS, positive_int
 from tracelab.errors import UserError, store_errors
-
-NAMES = ("1v1-base", "5v5-base", "portability", "markov-vs-nonmarkov", "markov-vs-nonmarkov-every-step",
-         "reward-shaping", "trap-corridor")
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("experiment", help="run one of the method's experiments: train (one run per seed), "
-                                          "evaluate, write a report with plots under docs/experiments/")
-    p.add_argument("name", choices=NAMES, help="the experiment")
-    p.add_argument("--seeds", type=positive_int, default=None,
-                   help="seeds per setting (default: the experiment's, >= 3)")
-    p.add_argument("--steps", type=positive_int, default=None,
-                   help="training steps per run (default: the experiment's)")
-    p.add_argument("--eval-games", type=positive_int, default=None,
-                   help="games per evaluation and per final evaluation (default 500)")
-    p.add_argument("--quick", action="store_true",
-                   help="a smoke run: few steps, one seed, a small evaluation, small plots (under 2 minutes)")
-    p.add_argument("--jobs", type=positive_int, default=1,
-                   help="trainings run at a time, each in its own process (default 1)")
-    p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
-                   help="run each training as a Ray task: on a local Ray started for the command, limited to this "
-                        "machine's cores, or on the Ray cluster at ADDRESS (host:port, auto, ray://...); --out "
-                        "must then be a folder every node sees (docs/scaling.md; pip install 'tracelab[ray]')")
-    p.add_argument("--kernel", choices=ENGINE_KERNELS, default="auto",
-                   help="the rule engine's kernel of the trainings (train --kernel; default auto)")
-    p.add_argument("--out", default=None, help="directory of the runs (default runs/experiments/NAME)")
-    p.add_argument("--report-dir", default=None,
-                   help="where NAME.md and NAME/*.png go (default docs/experiments; with --quick: --out)")
-    p.add_argument("--report-only", action="store_true",
-                   help="write the report and plots again from the finished experiment in --out (no training)")
-    p.set_defaults(func=run)
-
+from tracelab.train.experiments.definitions import EXPERIMENTS
+from tracelab.train.experiments.report import write_report
+from tracelab.train.experiments.run import load_result, run_experiment, scaled
+from tracelab.train.ray_session import check_address
 
 def run(args: argparse.Namespace) -> int:
-    # deferred: loads DuckDB, gymnasium, numba; every command is imported to build the CLI's parser
-    from tracelab.train.experiments.definitions import EXPERIMENTS
-    from tracelab.train.experiments.run import scaled
-
     exp = EXPERIMENTS[args.name]
     budget = scaled(exp.quick if args.quick else exp.full, args.seeds, args.steps, args.eval_games)
     out = Path(args.out or f"runs/experiments/{args.name}")
@@ -65,16 +32,11 @@ def run(args: argparse.Namespace) -> int:
                             f"use --jobs")
         if args.jobs > 1:
             raise UserError("--jobs and --ray: Ray decides how many trainings run at a time; give one of them")
-        # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
-        from tracelab.train.ray_session import check_address
         check_address(args.ray)  # the install hint, or an address where nothing answers, before any training
     taken = [out / f"{a.slug}-seed{s}{tail}" for a in exp.arms for s in range(budget.seeds)
              for tail in ("", "-traces") if (out / f"{a.slug}-seed{s}{tail}").exists()]
     if taken:
         raise UserError(f"{taken[0]} already exists: give another --out or remove it")
-    # deferred: loads DuckDB, gymnasium, numba; every command is imported to build the CLI's parser
-    from tracelab.train.experiments.report import write_report
-    from tracelab.train.experiments.run import run_experiment
 
     command = " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]])
     if not command.startswith("tracelab experiment"):
@@ -98,9 +60,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _report_again(exp, out: Path, report_dir: Path) -> int:
-    # deferred: loads DuckDB, gymnasium, numba; every command is imported to build the CLI's parser
-    from tracelab.train.experiments.report import write_report
-    from tracelab.train.experiments.run import load_result
     with store_errors():  # no finished experiment in --out
         result = load_result(exp, out)
     print(f"report: {write_report(result, report_dir)}")

@@ -12,20 +12,8 @@ from typing import Any
 from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.commands.compare import without_metrics
 from tracelab.errors import UserError, store_errors
+from tracelab.store.reader import open_run, query_readonly, resolve_run, retrying
 from tracelab.train.tensorboard import EVENTS_GLOB, TensorBoardSink, export_metrics, run_log_dir
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("export", help="a training run's metrics for other tools: TensorBoard event files",
-                       description="Convert a training run's metrics (every row of its `metrics`, at its "
-                                   "step and wall time) into TensorBoard event files in DIR/<run name>/; "
-                                   "`tensorboard --logdir DIR` then shows it beside other runs exported or "
-                                   "trained (train --tensorboard) into DIR.")
-    p.add_argument("run", help="run directory, .duckdb file, or run name under runs/")
-    p.add_argument("--tensorboard", required=True, metavar="DIR",
-                   help="write TensorBoard event files into DIR/<run name>/ (needs the tensorboard package: "
-                        "pip install 'tracelab[tensorboard]')")
-    p.set_defaults(func=run)
 
 
 def run_name(run: Path) -> str:
@@ -37,8 +25,6 @@ def run_name(run: Path) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.reader import open_run, query_readonly, resolve_run, retrying
     with store_errors(), ctrl_c_stops_queries():
         path = resolve_run(args.run)
         log_dir = run_log_dir(Path(args.tensorboard), run_name(path))

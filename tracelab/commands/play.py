@@ -17,59 +17,39 @@ from typing import Any
 
 import numpy as np
 
-from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, non_negative_int, positive_int
 from tracelab.commands._interrupt import CtrlCBetweenSteps
+from tracelab.commands._notices import say_running_compiles
 from tracelab.commands._progress import compiling_engine, progress
 from tracelab.commands._recording import read_for_hints, recording_into
+from tracelab.commands._worlds import load_scenario_arg
 from tracelab.engine.errors import is_interrupt
+from tracelab.envs.declared.env_source import EnvSource, parse_env_args
+from tracelab.envs.declared.gridwar import scenario_spec
+from tracelab.envs.declared.play import load_declared, make_declared_env, play_episodes, random_policy
+from tracelab.envs.declared.recording import declared_run_config
 from tracelab.errors import UserError, store_errors
+from tracelab.store import TraceWriter
+from tracelab.store.layout import check_new_run_dir
+from tracelab.train.env_policy import (
+    ENV_FORMAT,
+    EVAL_STEP_CAP,
+    greedy_actor,
+    load_trained,
+    policy_format,
+    policy_scenario,
+    read_policy_spec,
+)
 
 DEFAULT_SCENARIO = "base"  # the one train defaults to (TrainConfig.scenario)
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("play", help="play traced games of a world (GridWar's --scenario, or a spec's --env; "
-                                    "red: a random or a trained policy) into a trace-store run")
-    p.add_argument("--scenario", default=None,
-                   help="a GridWar scenario: a built-in name (base, advanced, nonmarkov) or a scenario .toml "
-                        "file, played through its spec in rules/gridworld/ (default: base, or the scenario a "
-                        "--policy PATH was trained on)")
-    p.add_argument("--env", default=None, metavar="SPEC_OR_ID",
-                   help="play a world declared in rules instead: a spec file or a registered id such as "
-                        "tracelab/FrozenLake-v1 (docs/worlds.md)")
-    p.add_argument("--env-arg", action="append", default=[], metavar="KEY=VALUE",
-                   help="a keyword argument of the --env (its spec's [params]), e.g. is_slippery=false (repeatable)")
-    p.add_argument("--episodes", type=positive_int, default=5, help="episodes to play (default 5)")
-    p.add_argument("--policy", default=None,
-                   help="red's policy: random (default) or the path of a trained policy (e.g. RUN/policy)")
-    p.add_argument("--agents", type=positive_int, default=None,
-                   help="GridWar: agents a team, each starting on its base (default: the scenario's)")
-    p.add_argument("--opponent-p", type=float, default=None,
-                   help="GridWar: the opponent's probability of a move towards red's base (default 0.7)")
-    p.add_argument("--seed", type=non_negative_int, default=0,
-                   help="seed of the episodes and of the random policy (default 0)")
-    p.add_argument("--kernel", choices=ENGINE_KERNELS, default="auto",
-                   help="the rule engine's kernel: auto (default: counting, stepped with the world as one "
-                        "compiled call), counting, lanes, or compiled (built in the background while the games "
-                        "start on the counting kernel, unless `tracelab compile` built it ahead)")
-    p.add_argument("--run", help="a new (or empty) run directory (default runs/play-<world>-<time>)")
-    p.add_argument("--no-trace", action="store_true", help="play without recording a run")
-    add_max_groundings(p)
-    p.set_defaults(func=run)
-
-
 def run(args: argparse.Namespace) -> int:
-    # deferred: loads gymnasium; every command is imported to build the CLI's parser
-    from tracelab.envs.declared.play import load_declared
-
     source, scenario, trained = _world(args)
     spec = load_declared(source)
     if args.no_trace:
         _summary(_name(source, scenario), spec, _play(source, spec, trained, args, None, _name(source, scenario)))
+        say_running_compiles()
         return 0
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store import TraceWriter
-    from tracelab.store.layout import check_new_run_dir
 
     run_dir = Path(args.run or f"runs/play-{_name(source, scenario)}-{time.strftime('%Y%m%d-%H%M%S')}")
     check_new_run_dir(run_dir)
@@ -82,15 +62,12 @@ def run(args: argparse.Namespace) -> int:
         stats = _play(source, spec, trained, args, writer, _name(source, scenario))
     _summary(_name(source, scenario), spec, stats)
     _what_to_open(run_dir, spec)
+    say_running_compiles()
     return 0
 
 
 def _world(args: argparse.Namespace) -> tuple[Any, Any, Any]:
     """(the EnvSource played, GridWar's Scenario or None, the loaded trained policy or None)."""
-    # deferred: loads gymnasium; every command is imported to build the CLI's parser
-    from tracelab.envs.declared.env_source import EnvSource, parse_env_args
-    from tracelab.train.env_policy import ENV_FORMAT, load_trained, policy_format, read_policy_spec
-
     if args.policy == "scripted":
         raise UserError("--policy scripted: red's scripted policy was the grid simulator's; play takes random "
                         "(the default) or a trained policy (RUN/policy)")
@@ -120,12 +97,6 @@ def _world(args: argparse.Namespace) -> tuple[Any, Any, Any]:
 def _gridwar(args: argparse.Namespace, policy_spec: dict[str, Any] | None) -> tuple[Any, Any]:
     """GridWar's --scenario (or the scenario of the GridWar policy whose policy.json is `policy_spec`) as its
     spec's EnvSource (with the policy's observation of the previous step), and the scenario."""
-    # deferred: loads the game's modules; every command is imported to build the CLI's parser
-    from tracelab.commands.train import load_scenario_arg
-    from tracelab.envs.declared.env_source import EnvSource
-    from tracelab.envs.declared.gridwar import scenario_spec
-    from tracelab.train.env_policy import policy_scenario
-
     if args.opponent_p is not None and not 0.0 <= args.opponent_p <= 1.0:
         raise UserError(f"--opponent-p must be in [0, 1], got {args.opponent_p}")
     with store_errors():  # a scenario that does not load
@@ -149,9 +120,6 @@ def run_meta(source: Any, spec: Any, args: argparse.Namespace, scenario: Any = N
     """The run's metadata: the command, the world (id or spec file, its arguments, the spec and the rule files
     by path, size and hash: their texts go in the run's `sources` table), what sets each external fact
     (recording.declared_facts), the board's rows; GridWar's scenario by name and as its TOML."""
-    # deferred: loads DuckDB, gymnasium, numba; every command is imported to build the CLI's parser
-    from tracelab.envs.declared.recording import declared_run_config
-
     spec_path, params = source.declared()
     config = {"env": source.name, "env_id": source.env_id, "spec_path": spec_path,
               "env_args": params, "episodes": args.episodes, "policy": args.policy or "random",
@@ -168,10 +136,6 @@ def _play(source: Any, spec: Any, trained: Any, args: argparse.Namespace, writer
           name: str) -> dict[str, Any]:
     """args.episodes episodes of the world, showing the compile (first run) or the build while it happens
     and a progress bar over the episodes (on a terminal)."""
-    # deferred: loads gymnasium; every command is imported to build the CLI's parser
-    from tracelab.envs.declared.play import make_declared_env, play_episodes, random_policy
-    from tracelab.train.env_policy import EVAL_STEP_CAP, greedy_actor
-
     with compiling_engine(busy=f"building {name}'s rules…", local_trace=writer is not None,
                           phase=None):  # the declared world says what compiles (its library notice)
         env = make_declared_env(source, spec, kernel=args.kernel,

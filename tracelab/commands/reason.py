@@ -14,60 +14,23 @@ from typing import Any
 
 import numpy as np
 
-from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, positive_int
 from tracelab.commands._progress import compiling_engine
 from tracelab.commands._recording import read_for_hints
+from tracelab.engine import ProgramError, parse_literal
 from tracelab.engine.errors import is_interrupt
 from tracelab.engine.program import constant_text
 from tracelab.errors import UserError, store_errors
 from tracelab.reasoning import EpisodeRun, load_inputs, open_reasoning_run, plan_episodes
+from tracelab.reasoning_reference import reference_fits, reference_reasoning
 
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("reason", help="run a rule program and print its trace and final interpretation")
-    p.add_argument("program", nargs="+", help="rule files (merged into one program)")
-    p.add_argument("--dialect", choices=("tracelab", "pyreason"), default="tracelab",
-                   help="the language of the rule, fact and graph files: tracelab's (default) or PyReason's "
-                        "(rules .txt/.csv/.json, facts .csv/.json, its GraphML mapping; docs/pyreason.md)")
-    p.add_argument("--graph", help="a GraphML graph (node/edge attributes become static facts)")
-    p.add_argument("--facts", action="append", default=[], help="a file of facts (rule syntax, or PyReason's "
-                                                                "fact files with --dialect pyreason)")
-    p.add_argument("--facts-table", action="append", default=[], metavar="TABLE",
-                   help="a Parquet or CSV table of facts (columns atom, lower, upper, start, end, static)")
-    p.add_argument("--steps", type=positive_int, required=True, help="timesteps to run (at least 1)")
-    p.add_argument("--json", action="store_true", help="machine-readable output")
-    p.add_argument("--no-trace", action="store_true", help="print the final interpretation only")
-    p.add_argument("--query", action="append", default=[], metavar="LITERAL",
-                   help='print the bindings and bounds where a literal holds, e.g. "infected(X)" or '
-                        '"link(a,Y):[0.5,1]" (repeatable; replaces the final interpretation)')
-    p.add_argument("--query-at", choices=("end", "each"), default="end",
-                   help="answer the queries after the last step (default) or after each step")
-    p.add_argument("--persistent", action="store_true",
-                   help="--dialect pyreason: PyReason's persistent=True (atoms keep their bounds between steps)")
-    p.add_argument("--pyreason-trace", metavar="DIR",
-                   help="also write the rule trace in PyReason's CSV layout (rule_trace_nodes_*.csv, "
-                        "rule_trace_edges_*.csv) into DIR")
-    p.add_argument("--kernel", choices=ENGINE_KERNELS, default=None,
-                   help="the engine's kernel (default auto, or the reference evaluator for a small program "
-                        "printed as it reasons; compiled: the program's own, docs/engine-api.md)")
-    add_max_groundings(p)
-    p.add_argument("--run", metavar="DIR",
-                   help="record the reasoning into a new (or empty) run directory of the trace store instead of "
-                        "printing its trace: every change with its cause, the program, facts, atoms, groundings and "
-                        "the graph's edges, for trace, why, why-not, sql, diff, show and the TUI (docs/store.md)")
-    p.add_argument("--repeat", type=positive_int, default=1,
-                   help="reason N times, one episode each (default 1); a --facts-table with an `episode` column "
-                        "gives one episode per value instead")
-    p.set_defaults(func=run)
+# deferred: the store (DuckDB), with --run only, and the PyReason trace writer (numba), with --pyreason-trace only:
+# a small program printed as it reasons runs on the reference evaluator without them
 
 
 def run(args: argparse.Namespace) -> int:
     """Program errors (located), unreadable files, InconsistencyError and FixpointError (naming the atom,
     the time and the rules and facts with their file:line) are raised for main() to report; with --run
     the run keeps what was reasoned until then (status failed)."""
-    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
-    from tracelab.engine import ProgramError, parse_literal
-
     args.kernel_chosen, args.kernel = args.kernel is not None, args.kernel or "auto"
 
     if args.persistent and args.dialect != "pyreason":
@@ -75,7 +38,6 @@ def run(args: argparse.Namespace) -> int:
     if args.run is not None and args.no_trace:
         raise UserError("--run records the trace and --no-trace drops it: give one of them")
     if args.run is not None:
-        # deferred: loads DuckDB; every command is imported to build the CLI's parser
         from tracelab.store.layout import check_new_run_dir
         check_new_run_dir(Path(args.run))
     inputs = load_inputs(args.program, dialect=args.dialect, graph_file=args.graph, fact_files=args.facts,
@@ -102,7 +64,6 @@ def run(args: argparse.Namespace) -> int:
 
 def _record(args: argparse.Namespace, inputs: Any, plans: list[Any]) -> int:
     """The reasoning into a new run of the store (tracelab.store.reasoning): the trace goes there."""
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
     from tracelab.store.reasoning import ReasoningRecorder
 
     run_dir = Path(args.run)
@@ -149,7 +110,6 @@ def _reason(args: argparse.Namespace, inputs: Any, plan: Any, recorder: Any, sev
                              recorder=recorder)
         engine = episode.engine
         if args.pyreason_trace is not None:
-            # deferred: loads numba; every command is imported to build the CLI's parser
             from tracelab.pyreason.trace_csv import PyReasonTrace
             pr_trace = PyReasonTrace(engine, inputs.names, inputs.graph_facts)
         stepper = episode.steps(args.steps, rows_each_step=printing or pr_trace is not None)
@@ -202,8 +162,6 @@ def _reason(args: argparse.Namespace, inputs: Any, plan: Any, recorder: Any, sev
 def _reference_serves(args: argparse.Namespace, inputs: Any, plan: Any, recorder: Any) -> bool:
     """A small program printed as it reasons, and nothing the reference evaluator does not do (a run, a
     graph or fact table, PyReason's trace, queries, a chosen kernel): no need to load the compiled engine."""
-    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
-    from tracelab.reasoning_reference import reference_fits
     return (recorder is None and not args.kernel_chosen and args.pyreason_trace is None and not args.query
             and inputs.graph is None and plan.graph is None and reference_fits(inputs.program, args.steps))
 
@@ -211,8 +169,6 @@ def _reference_serves(args: argparse.Namespace, inputs: Any, plan: Any, recorder
 def _reason_by_reference(args: argparse.Namespace, inputs: Any) -> dict[str, Any] | None:
     """The episode on the reference evaluator, printed as the compiled engine's is; None (nothing printed)
     when it cannot finish it: the compiled engine then runs it and says why in its own words."""
-    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
-    from tracelab.reasoning_reference import reference_reasoning
     try:
         steps, final = reference_reasoning(inputs.program, args.steps)
     except Exception:  # noqa: BLE001 - no fixpoint, an inconsistency: the engine's error names the rules

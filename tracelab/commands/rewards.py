@@ -7,25 +7,13 @@ import json
 import sys
 from typing import TYPE_CHECKING
 
-from tracelab.commands._args import non_negative_int
 from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.errors import store_errors
+from tracelab.store.reader import open_run, retrying
+from tracelab.store.reward_rescore import rescore
 
 if TYPE_CHECKING:
     from tracelab.store.reward_rescore import Rescored
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("rewards", help="each episode's return by reward term, or re-scored with other term values "
-                                       "(--set) from the record, without re-simulating")
-    p.add_argument("run", help="run directory, .duckdb file, or run name under runs/")
-    p.add_argument("--set", dest="sets", action="append", default=[], metavar="TERM=VALUE",
-                   help="re-score with TERM's value per occurrence VALUE (repeatable): a spec's [reward.table] key "
-                        "(quote it: --set 'home(me)=5') or its scaled atom (VALUE: the scale); GridWar's win, loss, "
-                        "hit, got_shot, step, unsafe, invalid")
-    p.add_argument("--episode", "-e", type=non_negative_int, help="this episode only (default: every episode)")
-    p.add_argument("--json", action="store_true", help="the table as JSON")
-    p.set_defaults(func=run)
 
 
 def _fmt(v: float) -> str:
@@ -54,9 +42,6 @@ def render(r: "Rescored") -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.reader import open_run, retrying
-    from tracelab.store.reward_rescore import rescore
     with store_errors(), ctrl_c_stops_queries():
         con = open_run(args.run)
         try:

@@ -7,21 +7,12 @@ import sys
 from pathlib import Path
 
 from tracelab.commands._interrupt import ctrl_c_stops_queries
-from tracelab.commands._output import add_format_options, write_rows, write_table
+from tracelab.commands._output import write_rows, write_table
 from tracelab.errors import store_errors
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("runs", help="list runs: status, command, scenario, episodes, rows, size, start")
-    p.add_argument("dirs", nargs="*", metavar="DIR",
-                   help="directories holding runs, or runs themselves (default: runs/ and sample_runs/)")
-    add_format_options(p)
-    p.set_defaults(func=run)
+from tracelab.store.catalog import DEFAULT_ROOTS, ROW_COLUMNS, catalog_table, list_runs
 
 
 def run(args: argparse.Namespace) -> int:
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.catalog import DEFAULT_ROOTS, ROW_COLUMNS, catalog_table, list_runs
     roots = args.dirs or list(DEFAULT_ROOTS)
     with store_errors(), ctrl_c_stops_queries():
         for d in args.dirs:

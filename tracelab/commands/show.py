@@ -7,18 +7,12 @@ import json
 from typing import Any
 
 from tracelab.commands._interrupt import ctrl_c_stops_queries
+from tracelab.commands._table import RULES_SHOWN
 from tracelab.errors import store_errors
+from tracelab.store.kind import spec_text, world_params
+from tracelab.store.reader import open_run, retrying
 
 DECLARED_FACTS = "declared_facts"  # a spec world's config entry (tracelab.envs.declared.recording.CONFIG_KEY)
-RULES_SHOWN = 40  # the rest: `tracelab sql RUN "SELECT * FROM rules"`
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("show", help="a run's metadata, program, scenario and counts")
-    p.add_argument("run", help="run directory, .duckdb file, or run name under runs/")
-    p.add_argument("--all-rules", action="store_true", help=f"list every rule (default: the first {RULES_SHOWN})")
-    p.add_argument("--json", action="store_true", help="everything as one JSON document")
-    p.set_defaults(func=run)
 
 
 def _json_field(text: str | None, default: Any) -> Any:
@@ -30,8 +24,6 @@ def _json_field(text: str | None, default: Any) -> Any:
 
 def describe_run(con: Any) -> dict[str, Any]:
     """The run's metadata, program, scenario (or a spec world's params) and counts as plain data."""
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.kind import spec_text, world_params
     rel = con.execute("SELECT * FROM run")
     names = [d[0] for d in rel.description]
     meta = dict(zip(names, rel.fetchall()[0]))
@@ -133,8 +125,6 @@ def render(doc: dict[str, Any], all_rules: bool = False) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.reader import open_run, retrying
     with store_errors(), ctrl_c_stops_queries():
         con = open_run(args.run)
         doc = retrying(lambda: describe_run(con))

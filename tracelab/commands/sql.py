@@ -13,37 +13,15 @@ from pathlib import Path
 from typing import Any
 
 from tracelab.commands._interrupt import ctrl_c_stops_queries
-from tracelab.commands._output import (
-    DEFAULT_TABLE_ROWS,
-    add_format_options,
-    add_paging_options,
-    arrow_rows,
-    write_rows,
-    write_stream,
-)
+from tracelab.commands._output import DEFAULT_TABLE_ROWS, arrow_rows, write_rows, write_stream
 from tracelab.errors import UserError, store_errors
+from tracelab.store.kind import can_read
+from tracelab.store.queries import get_query, list_queries
+from tracelab.store.reader import arrow_stream, fetch_rows, open_run, query_readonly, retrying
+from tracelab.store.several import SeveralRunsConnection, each_run_stream, expand_runs, run_names
 
 # a result as the table format prints it: column names, which are numbers, the rows
 Rows = tuple[list[str], list[bool], list[tuple[Any, ...]]]
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("sql", help="read-only SQL on a run, or on several (a `run` column): views changes, "
-                                   "firings, episodes, steps, metrics, rules, facts, atoms, groundings, run",
-                       usage="tracelab sql [options] RUN [RUN ...] QUERY\n"
-                             "       tracelab sql [options] RUN [RUN ...] --query NAME [-p NAME=VALUE ...]\n"
-                             "       tracelab sql --list")
-    p.add_argument("words", nargs="*", metavar="RUN ... QUERY",
-                   help="runs (directories, .duckdb files, names under runs/, or folders of runs), then one "
-                        "SELECT statement; on several runs every view has a first column `run`")
-    p.add_argument("--query", "-q", dest="saved", metavar="NAME", help="run a saved query instead")
-    p.add_argument("--param", "-p", action="append", default=[], metavar="NAME=VALUE",
-                   help="a saved query's parameter (repeatable)")
-    p.add_argument("--list", action="store_true", help="list the saved queries and their parameters "
-                                                       "(no RUN needed)")
-    add_format_options(p)
-    add_paging_options(p)
-    p.set_defaults(func=run)
 
 
 def _params(items: list[str]) -> dict[str, str]:
@@ -68,8 +46,6 @@ def utf8_text(text: str, what: str) -> str:
 
 
 def print_saved_queries() -> None:
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.queries import list_queries
     for q in list_queries():
         print(f"{q.name}: {q.description}{' (game runs only)' if q.needs_board else ''}")
         for p in q.params:
@@ -90,8 +66,6 @@ def _runs_and_query(args: argparse.Namespace) -> tuple[list[str], str | None]:
 
 def _statement(args: argparse.Namespace, query: str | None) -> tuple[str, dict | None, str | None]:
     """The SQL, its parameters, and why it needs a game run (a saved query about games), if it does."""
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.queries import get_query
     if args.saved is not None:
         saved = get_query(args.saved)
         return saved.sql, saved.bind(_params(args.param)), saved.needs and (saved.needs, saved.needs_board)
@@ -109,8 +83,6 @@ def run(args: argparse.Namespace) -> int:
         if not runs:
             raise UserError("give a run and a SQL query, or --query NAME (see --list)")
         sql, params, needs = _statement(args, query)
-        # deferred: loads DuckDB; every command is imported to build the CLI's parser
-        from tracelab.store.several import expand_runs
         paths, folder = expand_runs(runs)
         if len(paths) == 1 and not folder:
             _query_one_run(args, runs[0], sql, params, needs)
@@ -121,13 +93,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _query_one_run(args: argparse.Namespace, run: str, sql: str, params: dict | None,
                    needs: tuple[str, str] | None) -> None:
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.kind import can_read
-    from tracelab.store.reader import arrow_stream, open_run, query_readonly, retrying
     con = open_run(run)
     if needs is not None and not can_read(con, needs[0]):
-        # deferred: loads DuckDB; every command is imported to build the CLI's parser
-        from tracelab.store.queries import list_queries
         any_run = ", ".join(q.name for q in list_queries() if not q.needs_board)
         lacks = "is not a run of games" if needs[0] == "games" else "has no board"
         raise UserError(f"saved query {args.saved} reads games ({needs[1]}), and {run} {lacks} (a reasoning "
@@ -142,8 +109,6 @@ def _query_one_run(args: argparse.Namespace, run: str, sql: str, params: dict | 
 
 def _rows(con: Any, sql: str, params: dict | None, limit: int | None, offset: int) -> Rows:
     """The query's rows [offset, offset+limit) as the table format prints them (no pyarrow)."""
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.reader import fetch_rows, query_readonly
     result = fetch_rows(query_readonly(con, sql, params), limit, offset)
     return result.names, result.numeric, result.rows
 
@@ -152,9 +117,6 @@ def _query_several_runs(args: argparse.Namespace, paths: list, sql: str, params:
                         needs: tuple[str, str] | None) -> None:
     """The SQL on the union of the runs' views; a saved query on each run in turn (its rows prefixed by
     the run's name)."""
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.reader import arrow_stream, query_readonly, retrying
-    from tracelab.store.several import SeveralRunsConnection, each_run_stream, run_names
     con = SeveralRunsConnection(paths, run_names(paths))
 
     def stream(limit: int | None):
@@ -166,7 +128,7 @@ def _query_several_runs(args: argparse.Namespace, paths: list, sql: str, params:
         _write_table_output(args, lambda limit: retrying(lambda: _rows(con, sql, params, limit, args.offset)))
     elif args.format == "table":
         def rows(limit: int | None) -> Rows:
-            import pyarrow as pa  # deferred: loads pyarrow, which a saved query's stream needs
+            import pyarrow as pa  # deferred: only a saved query's stream printed as a table needs it
             schema, batches = stream(limit)
             return arrow_rows(pa.Table.from_batches(list(batches), schema=schema))
         _write_table_output(args, lambda limit: retrying(lambda: rows(limit)))

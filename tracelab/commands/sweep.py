@@ -9,60 +9,22 @@ import sys
 import time
 from pathlib import Path
 
-from tracelab.commands._args import byte_size, positive_int
 from tracelab.commands._interrupt import CtrlCStops
-from tracelab.commands.train import load_scenario_arg
+from tracelab.commands._worlds import load_scenario_arg
+from tracelab.envs.declared.env_source import EnvSource, parse_env_args
 from tracelab.errors import UserError, store_errors
-from tracelab.train.sweep_spec import DEFAULT_METRIC, MODES, SCHEDULERS, build_spec, check_trials_memory
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("sweep", help="search training settings with Ray Tune (grid, random, ASHA early stopping): "
-                                     "one run per trial under --out, the best trial named at the end")
-    p.add_argument("spec", nargs="?", default=None, metavar="SWEEP.toml",
-                   help="a sweep file ([set], [grid], [random], samples, scheduler, metric, mode); the flags "
-                        "below add to it")
-    p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
-                   help="a training setting of every trial, e.g. steps=20000 (repeatable; any train flag's field; "
-                        "env=SPEC_OR_ID trains every trial on that env, as train --env)")
-    p.add_argument("--env-arg", action="append", default=[], metavar="KEY=VALUE",
-                   help="a keyword argument of the --set env=... (its spec's [params]; repeatable)")
-    p.add_argument("--grid", action="append", default=[], metavar="FIELD=V1,V2,...",
-                   help="try each value, e.g. lr=1e-4,3e-4 (repeatable; grids multiply)")
-    p.add_argument("--random", action="append", default=[], metavar="FIELD=DIST:LOW,HIGH",
-                   help="draw the field per trial: uniform:A,B, loguniform:A,B (floats), randint:A,B (integers, "
-                        "both bounds included) or choice:V1,V2 (repeatable)")
-    p.add_argument("--samples", type=positive_int, default=None,
-                   help="trials drawn (default 1); with --grid, per grid point")
-    p.add_argument("--scheduler", choices=SCHEDULERS, default=None,
-                   help="fifo: every trial trains to the end (default); asha: trials behind the others at an "
-                        "evaluation stop there (needs eval_every below steps)")
-    p.add_argument("--metric", default=None, help=f"the metric Tune compares (default {DEFAULT_METRIC}, the "
-                                                  f"evaluations' win rate of the method)")
-    p.add_argument("--mode", choices=MODES, default=None, help="max (default) or min of --metric")
-    p.add_argument("--out", default=None, help="directory of the trials' runs (default runs/sweeps/sweep-<time>); "
-                                               "on a cluster, a folder every node sees")
-    p.add_argument("--ray", default="local", metavar="ADDRESS",
-                   help="the Ray cluster (host:port, auto, ray://...; default: a local Ray started for the "
-                        "command, limited to this machine's cores)")
-    p.add_argument("--max-memory", type=byte_size, default=None, metavar="SIZE",
-                   help="refuse a sweep whose largest trial's networks, replay buffers and worlds are estimated "
-                        "to need more, as train does (e.g. 12G; default: half of this machine's memory)")
-    p.set_defaults(func=run)
+from tracelab.train.memory import memory_limit
+from tracelab.train.ray_session import check_address, ray_session
+from tracelab.train.sweep import run_sweep
+from tracelab.train.sweep_spec import build_spec, check_trials_memory
 
 
 def run(args: argparse.Namespace) -> int:
-    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
-    from tracelab.train.memory import memory_limit
-    from tracelab.train.ray_session import check_address, ray_session
-
     spec = build_spec(sets=args.set, grids=args.grid, randoms=args.random, file=args.spec, samples=args.samples,
                       scheduler=args.scheduler, metric=args.metric, mode=args.mode)
     cfg = spec.base_config()
     with store_errors():  # a scenario file, an env or a spec that does not load
         if spec.env is not None:
-            # deferred: loads gymnasium; every command is imported to build the CLI's parser
-            from tracelab.envs.declared.env_source import EnvSource, parse_env_args
             scenario = EnvSource.given(spec.env, parse_env_args(args.env_arg))
             scenario.make().close()  # a bad id, spec or keyword argument: one line, before Ray starts
         elif args.env_arg:
@@ -75,8 +37,6 @@ def run(args: argparse.Namespace) -> int:
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise UserError(f"{out} is not empty: give another --out or remove it")
     check_address(args.ray)  # the install hint, or an address where nothing answers, before anything starts
-    # deferred: loads DuckDB, Ray, gymnasium, numba; every command is imported to build the CLI's parser
-    from tracelab.train.sweep import run_sweep
 
     command = " ".join(shlex.quote(a) for a in ["tracelab", "sweep", *args.argv[1:]])
     say = lambda s: print(s, file=sys.stderr, flush=True)  # noqa: E731

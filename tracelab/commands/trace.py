@@ -11,15 +11,13 @@ import argparse
 import sys
 from typing import TYPE_CHECKING
 
-from tracelab.commands._args import non_negative_int
 from tracelab.commands._interrupt import ctrl_c_stops_queries
-from tracelab.commands._output import (
-    add_format_options,
-    add_paging_options,
-    write_rows,
-    write_stream,
-)
+from tracelab.commands._output import write_rows, write_stream
 from tracelab.errors import UserError, store_errors
+from tracelab.store.coordinates import run_grid
+from tracelab.store.names import check_name
+from tracelab.store.reader import arrow_stream, fetch_rows, open_run, retrying
+from tracelab.store.static_facts import STATIC_ROW_SQL
 
 if TYPE_CHECKING:
     import duckdb
@@ -29,27 +27,6 @@ if TYPE_CHECKING:
 
 FULL_COLUMNS = ("t, pass_no, atom, node, label, old_lower, old_upper, new_lower, new_upper, rule, "
                 "grounding, seq")
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("trace", help="the trace table of an episode: every bound change and its rule")
-    p.add_argument("run", help="run directory, .duckdb file, or run name under runs/")
-    p.add_argument("--episode", "-e", type=non_negative_int, required=True, help="the episode to show")
-    p.add_argument("--from", dest="t_from", type=non_negative_int, help="first timestep (default: the start)")
-    p.add_argument("--to", dest="t_to", type=non_negative_int, help="last timestep (default: the end)")
-    p.add_argument("--atom", action="append", default=[],
-                   help="atom text or glob, e.g. 'atLoc(red-agent-1,*)' (repeatable)")
-    p.add_argument("--label", action="append", default=[], help="predicate name or glob (repeatable)")
-    p.add_argument("--rule", action="append", default=[],
-                   help="rule name or glob, also fact:NAME, action, policy:NAME, reset (repeatable)")
-    static = p.add_mutually_exclusive_group()
-    static.add_argument("--static", dest="static", action="store_true", default=None,
-                        help="show the rows of static facts (e.g. the map at t=0; the table hides them)")
-    static.add_argument("--hide-static", dest="static", action="store_false",
-                        help="hide the rows of static facts (the exports keep them otherwise)")
-    add_format_options(p)
-    add_paging_options(p)
-    p.set_defaults(func=run)
 
 
 def hides_static(args: argparse.Namespace) -> bool:
@@ -75,8 +52,6 @@ def trace_where(args: argparse.Namespace) -> tuple[list[str], list[object]]:
 
 
 def trace_sql(args: argparse.Namespace) -> tuple[str, list[object]]:
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.static_facts import STATIC_ROW_SQL
     where, params = trace_where(args)
     if hides_static(args):
         where.append(f"NOT {STATIC_ROW_SQL}")
@@ -95,17 +70,12 @@ def check_range(args: argparse.Namespace) -> None:
 
 def check_filters(con: "duckdb.DuckDBPyConnection", args: argparse.Namespace) -> None:
     """A filter that matches nothing in the run is a typo: say so, with the close names, not "(0 rows)"."""
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.names import check_name
     for kind, patterns in (("atom", args.atom), ("label", args.label), ("cause", args.rule)):
         for pattern in patterns:
             check_name(con, kind, pattern)
 
 
 def run(args: argparse.Namespace) -> int:
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.coordinates import run_grid
-    from tracelab.store.reader import arrow_stream, fetch_rows, open_run, retrying
     check_range(args)
     with store_errors(), ctrl_c_stops_queries():
         con = open_run(args.run)
@@ -134,8 +104,6 @@ def run(args: argparse.Namespace) -> int:
 
 def hidden_static_rows(con: "duckdb.DuckDBPyConnection", args: argparse.Namespace) -> int:
     """How many rows under the user's filters are static facts' (the ones hiding them leaves out)."""
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.static_facts import STATIC_ROW_SQL
     where, params = trace_where(args)
     sql = f"SELECT count(*) FROM changes WHERE {' AND '.join(where)} AND {STATIC_ROW_SQL}"
     return int(con.execute(sql, params).fetchall()[0][0])

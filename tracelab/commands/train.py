@@ -13,7 +13,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from tracelab.commands._args import ENGINE_KERNELS, add_max_groundings, boolean, byte_size, integer
+import torch
+
 from tracelab.commands._notices import say_running_compiles
 from tracelab.commands._training import (
     check_budget,
@@ -25,93 +26,31 @@ from tracelab.commands._training import (
     training_session,
     where_to_train,
 )
+from tracelab.commands._worlds import env_source_of, load_scenario_arg
+from tracelab.envs.declared.gridwar import GRIDWAR_SPEC_IDS
 from tracelab.errors import UserError, store_errors
+from tracelab.game.facts import GAME_RULES
+from tracelab.game.scenario import BOARD, builtin_scenario_names
+from tracelab.store import TraceWriter
+from tracelab.store.meta import current_meta
 from tracelab.train.budget import reward_scale_note, too_short_hint
-from tracelab.train.config import (GRIDWAR_ONLY, LEARNERS, METHOD_REWARD_SCALE, TrainConfig, config_fields,
-                                   flag_of, reward_scale_text)
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("train", help="train red with DQN, logging metrics, episodes and traced evaluation "
-                                     "games into a run", argument_default=argparse.SUPPRESS)
-    for f in config_fields():
-        flag, name = "--" + f.flag, f.name
-        shown = f.help if f.default is None or isinstance(f.default, bool) else f"{f.help} (default: {f.default})"
-        if name == "non_markov":
-            p.add_argument("--non-markov", dest="non_markov", action="store_true", help=shown)
-            p.add_argument("--markov", dest="non_markov", action="store_false",
-                           help="the Markov setup: the current observation only (default)")
-            continue
-        if name == "torch_deterministic":  # CleanRL's spelling: --torch-deterministic [true|false]
-            p.add_argument(flag, dest=name, type=boolean, nargs="?", const=True, metavar="BOOL",
-                           help=f"{shown} (default: on)")
-            p.add_argument("--no-" + f.flag, dest=name, action="store_false", help=argparse.SUPPRESS)
-            continue
-        if f.type in ("bool", bool):
-            kw: dict[str, Any] = {"action": "store_true"}
-        elif name == "backend":
-            kw = {"choices": ("rules", "reference")}
-        elif name == "kernel":
-            kw = {"choices": ENGINE_KERNELS}
-        elif name == "learner":
-            kw = {"choices": LEARNERS}
-        else:
-            conv = {"int": integer, "float": float, "str": str, "int | None": integer}.get(str(f.type), str)
-            kw = {"type": conv, "metavar": f.flag.upper().replace("-", "_")}
-        p.add_argument(flag, dest=name, help=shown, **kw)
-        if f.alias:  # the field's own name, as earlier versions and docs wrote it: accepted, not listed
-            p.add_argument("--" + f.alias, dest=name, help=argparse.SUPPRESS, **kw)
-    p.add_argument("--exp-name", default=None, type=run_name, metavar="NAME",
-                   help="name the run runs/NAME-<scenario>-<time> (default NAME: train)")
-    p.add_argument("--run", default=None, help="run directory (default runs/train-<scenario>-<time>)")
-    p.add_argument("--resume", default=None, metavar="RUN",
-                   help="continue RUN's last checkpoint in RUN itself (its config; --total-timesteps may "
-                        "raise the budget); with --run NEW, into a new run NEW instead")
-    p.add_argument("--max-memory", type=byte_size, default=None, metavar="SIZE",
-                   help="refuse a run whose networks, replay buffers and worlds are estimated to need more "
-                        "(e.g. 12G; default: half of this machine's memory)")
-    p.add_argument("--tensorboard", default=None, metavar="DIR",
-                   help="also write the metrics as TensorBoard event files into DIR/<run name>/ while training "
-                        "(needs the tensorboard package: pip install 'tracelab[tensorboard]')")
-    p.add_argument("--env", default=None, metavar="SPEC_OR_ID",
-                   help="train on this gymnasium env instead of GridWar: a registered id "
-                        "(tracelab/FrozenLake-v1, tracelab/Taxi-v4, ...) or a spec file (docs/worlds.md); a "
-                        "Discrete observation is one-hot encoded for the network (docs/training.md)")
-    p.add_argument("--env-arg", action="append", default=[], metavar="KEY=VALUE",
-                   help="a keyword argument of --env (repeatable), its value read as TOML: is_slippery=false")
-    add_max_groundings(p)
-    p.set_defaults(func=run)
-
-
-def run_name(text: str) -> str:
-    """--exp-name: a name, not a path (the run goes under runs/)."""
-    if not text or "/" in text or "\\" in text or text in (".", ".."):
-        raise argparse.ArgumentTypeError(f"expected a name without '/', got {text!r} (--run takes a path)")
-    return text
-
-
-def load_scenario_arg(text: str, agents: int | None = None) -> Any:
-    """A built-in scenario name or a .toml file, with `agents` per team if given."""
-    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
-    from tracelab.game.scenario import builtin_scenario, builtin_scenario_names, load_scenario
-    sc = builtin_scenario(text) if text in builtin_scenario_names() else load_scenario(text)
-    if agents is not None and agents != sc.agents_per_team:
-        sc = dataclasses.replace(sc, agents_per_team=agents, red_starts=None, blue_starts=None)
-    return sc
-
-
-def env_source_of(args: argparse.Namespace) -> Any:
-    # deferred: loads gymnasium; every command is imported to build the CLI's parser
-    from tracelab.envs.declared.env_source import EnvSource, parse_env_args
-    if args.env is None:
-        raise UserError("--env-arg needs --env SPEC_OR_ID")
-    return EnvSource.given(args.env, parse_env_args(args.env_arg))
+from tracelab.train.checkpoint import checkpoint_config, checkpoint_scenario, load_checkpoint, restore
+from tracelab.train.config import GRIDWAR_ONLY, METHOD_REWARD_SCALE, TrainConfig, flag_of, reward_scale_text
+from tracelab.train.env_checkpoint import checkpoint_env, load_env_checkpoint
+from tracelab.train.env_source import probe_env
+from tracelab.train.env_trainer import EnvTrainer, env_run_meta, gridwar_sources
+from tracelab.train.loop import Trainer
+from tracelab.train.memory import (
+    check_estimate,
+    check_training_memory,
+    env_training_estimate,
+    env_world_bytes,
+    memory_limit,
+)
+from tracelab.train.qnet import NetSpec
 
 
 def run(args: argparse.Namespace) -> int:
-    # deferred: not needed to build the CLI's parser (`tracelab --help` imports every command)
-    from tracelab.train.memory import check_estimate, env_training_estimate, env_world_bytes, memory_limit
-    from tracelab.train.qnet import NetSpec
 
     # --max-memory and --max-groundings are no training settings (cli.main applies the second): not in the
     # config, free with --resume; argv is the command line cli.main keeps
@@ -127,8 +66,6 @@ def run(args: argparse.Namespace) -> int:
                         f"--env {args.env} takes the DQN flags only")
     if args.resume and not on_env and is_rulesim_run(Path(args.resume)):
         return _resume_rulesim(args, given, limit)
-    # deferred: loads gymnasium, torch; every command is imported to build the CLI's parser
-    from tracelab.train.env_trainer import gridwar_sources
     state, scenario = None, None
     with store_errors():  # a bad value in the config or a checkpoint that does not load
         if args.resume:
@@ -144,8 +81,6 @@ def run(args: argparse.Namespace) -> int:
         eval_source = None
         if scenario is not None:
             source, eval_source = gridwar_sources(cfg, scenario)
-        # deferred: loads gymnasium; every command is imported to build the CLI's parser
-        from tracelab.train.env_source import probe_env
         encoder, n_actions, spec = probe_env(source)
     with store_errors():  # --num-envs 1e7 would build ten million worlds before its first step
         check_estimate(env_training_estimate(cfg, NetSpec(encoder.size, cfg.hidden_sizes, n_actions, cfg.dueling),
@@ -162,8 +97,6 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_config(run: Path) -> dict[str, Any]:
     """The config in `run`'s meta.json ({} when it is not a run: the checkpoint's loader says what it is)."""
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.meta import current_meta
     try:
         config = current_meta(run).get("config", {})
     except (OSError, ValueError, AttributeError):
@@ -181,9 +114,6 @@ def is_rulesim_run(run: Path) -> bool:
 def _resume_rulesim(args: argparse.Namespace, given: dict[str, Any], limit: Any) -> int:
     """--resume of a RuleSim run: it continues in its own format and trainer (its observations are not the
     spec's), until that trainer goes (issue 38)."""
-    # deferred: loads torch; every command is imported to build the CLI's parser
-    from tracelab.train.checkpoint import checkpoint_config, checkpoint_scenario, load_checkpoint
-    from tracelab.train.memory import check_training_memory
     with store_errors():  # a bad value in the config or a checkpoint that does not load
         check_resume_flags(given)
         state = load_checkpoint(args.resume, limit)
@@ -200,12 +130,6 @@ def _resumed(args: argparse.Namespace, given: dict[str, Any], source: Any, limit
     """--resume: (the checkpoint, its config with the flags given, the env it trains on, GridWar's scenario
     or None). A GridWar run's env is rebuilt from its config's scenario (a built-in one, or --scenario FILE
     given again: a file never names the file tracelab reads) and checked equal to the checkpoint's."""
-    # deferred: loads gymnasium, torch; every command is imported to build the CLI's parser
-    from tracelab.envs.declared.gridwar import GRIDWAR_SPEC_IDS
-    from tracelab.game.scenario import builtin_scenario_names
-    from tracelab.train.checkpoint import checkpoint_config
-    from tracelab.train.env_checkpoint import checkpoint_env, load_env_checkpoint
-    from tracelab.train.env_trainer import gridwar_sources
     scenario_given = given.pop("scenario", None)
     check_resume_flags(given)
     raw, recorded = checkpoint_env(args.resume, limit.bytes)
@@ -236,13 +160,6 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
     would (tests). `scenario`: the GridWar scenario `source` plays (the run names it and its settings),
     `eval_source` the env its evaluations play (the opponent at --eval-p); `tensorboard`: a log directory
     that also receives the metrics (tracelab.train.tensorboard)."""
-    # deferred: loads torch; every command is imported to build the CLI's parser
-    import torch
-
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store import TraceWriter
-    # deferred: loads DuckDB, gymnasium, numba, torch; every command is imported to build the CLI's parser
-    from tracelab.train.env_trainer import EnvTrainer, env_run_meta
 
     meta = env_run_meta(cfg, source, " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]),
                         None if state is None else {"run": resumed_from, "step": state["step"]}, scenario)
@@ -329,16 +246,6 @@ def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None
     (train_env_into). Train into a new run at `run_dir` (from a checkpoint `state` if given; `same_run`: the
     checkpoint's own run, `run_dir`, continues); returns the exit status. `stop_at`: stop there as Ctrl-C would (tests).
     `tensorboard`: a log directory that also receives the metrics (tracelab.train.tensorboard)."""
-    # deferred: loads torch; every command is imported to build the CLI's parser
-    import torch
-
-    # deferred: loads DuckDB, torch; every command is imported to build the CLI's parser
-    from tracelab.game.facts import GAME_RULES
-    from tracelab.game.scenario import BOARD
-    from tracelab.store import TraceWriter
-    from tracelab.train.checkpoint import restore
-    # deferred: loads DuckDB, gymnasium, numba, torch; every command is imported to build the CLI's parser
-    from tracelab.train.loop import Trainer
 
     meta = {"command": " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]),
             "scenario": scenario.name, "seed": cfg.seed, "rule_files": [str(GAME_RULES)], "board": BOARD,

@@ -11,46 +11,25 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from tracelab.commands._args import non_negative_int, positive_int
 from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.commands._recording import recording_into
+from tracelab.envs.declared.branch import plan_branch, rebuilt_spec
+from tracelab.envs.declared.env_source import EnvSource
+from tracelab.envs.declared.recording import declared_run_config
 from tracelab.errors import UserError, store_errors
+from tracelab.store import TraceWriter
+from tracelab.store.branch_compare import compare_branch
+from tracelab.store.branch_origin import ORIGIN_KEY
+from tracelab.store.diff import render_divergence
+from tracelab.store.layout import check_new_run_dir
+from tracelab.store.reader import open_run, resolve_run, retrying, run_info
+from tracelab.train.env_policy import load_trained
 
 if TYPE_CHECKING:
     from tracelab.store.branch_compare import BranchComparison
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("whatif", help="replay a recorded game of a spec world to a step, take another action "
-                                      "there, play on, and show the branch beside the original",
-                       description="Rebuild the world of episode E at step T from the run (its spec and rule "
-                                   "texts, its seeds, its recorded actions), take NAME at step T instead, "
-                                   "play on with --policy's greedy actions or the recorded ones, record the "
-                                   "branch as the one episode of a new run (--run) that names its origin, "
-                                   "and print both games' return, outcome, return by reward term and first "
-                                   "divergence.")
-    p.add_argument("run", help="run directory, .duckdb file, or run name under runs/ (a spec world's: play --env, "
-                               "train --env's traced evaluations)")
-    p.add_argument("--episode", "-e", type=non_negative_int, required=True, help="the episode to branch")
-    p.add_argument("--at", type=positive_int, required=True, help="the step (from 1) whose action is replaced")
-    p.add_argument("--action", required=True, metavar="NAME", help="the action taken at --at, by its name in the "
-                                                                   "spec's [actions]")
-    p.add_argument("--agent", default=None, help="the agent whose action is replaced (default: the run's only one)")
-    p.add_argument("--policy", default=None, metavar="RUN/policy",
-                   help="play on with this policy's greedy actions (trained by train --env on the run's env); "
-                        "default: the recorded actions, until they run out")
-    p.add_argument("--steps", type=positive_int, default=None, help="play at most this many steps after --at")
-    p.add_argument("--run", dest="out", default=None, metavar="OUT",
-                   help="a new (or empty) run directory for the branch (default runs/whatif-<run>-e<E>-t<T>-<time>)")
-    p.add_argument("--json", action="store_true", help="the comparison as JSON")
-    p.set_defaults(func=run)
-
-
 def run(args: argparse.Namespace) -> int:
-    # deferred: loads DuckDB, gymnasium and the engine; every command is imported to build the CLI's parser
-    from tracelab.envs.declared.branch import plan_branch, rebuilt_spec
-    from tracelab.store.reader import open_run, resolve_run, run_info
-
     with store_errors(), ctrl_c_stops_queries():
         origin_dir = resolve_run(args.run).resolve()
         run_id = str(run_info(origin_dir).meta.get("run_id") or origin_dir.name)
@@ -80,9 +59,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _policy(path: str, world: Any) -> Any:
-    # deferred: loads torch
-    from tracelab.envs.declared.env_source import EnvSource
-    from tracelab.train.env_policy import load_trained
     with store_errors():  # a policy that does not load, or was trained on another env
         return load_trained(path, EnvSource(world.env, dict(world.env_args)))
 
@@ -90,9 +66,6 @@ def _policy(path: str, world: Any) -> Any:
 def _meta(args: argparse.Namespace, plan: Any, spec: Any, origin: Any) -> dict[str, Any]:
     """The branch run's metadata: the command, the origin's env as it names it, the spec's summaries and
     facts (recording.declared_run_config), the origin (branch_origin.ORIGIN_KEY)."""
-    # deferred: loads gymnasium and the engine
-    from tracelab.envs.declared.recording import declared_run_config
-    from tracelab.store.branch_origin import ORIGIN_KEY
     w = plan.world
     config = {"env": w.env, "env_id": w.env_id, "spec_path": w.spec_path, "env_args": w.env_args, "episodes": 1,
               "policy": args.policy or "recorded", **declared_run_config(spec), ORIGIN_KEY: origin.to_json()}
@@ -101,9 +74,6 @@ def _meta(args: argparse.Namespace, plan: Any, spec: Any, origin: Any) -> dict[s
 
 
 def _open_writer(out: Path, meta: dict[str, Any]) -> Any:
-    # deferred: loads DuckDB
-    from tracelab.store import TraceWriter
-    from tracelab.store.layout import check_new_run_dir
     check_new_run_dir(out)
     try:
         with store_errors():  # another process took the directory since the check: a RuntimeError
@@ -113,9 +83,6 @@ def _open_writer(out: Path, meta: dict[str, Any]) -> Any:
 
 
 def _compare(origin_dir: Path, out: Path, origin: Any) -> "BranchComparison":
-    # deferred: loads DuckDB
-    from tracelab.store.branch_compare import compare_branch
-    from tracelab.store.reader import open_run, retrying
     a, b = open_run(origin_dir), open_run(out)
     try:
         return retrying(lambda: compare_branch(a, origin_dir.name, b, out.name, origin))
@@ -130,8 +97,6 @@ def _fmt(v: float) -> str:
 
 def render(c: "BranchComparison", stopped: str | None) -> str:
     """The two games side by side (steps, return, outcome, return by term), then diff's first divergence."""
-    # deferred: loads DuckDB
-    from tracelab.store.diff import render_divergence
     o, b = c.original, c.branch
     terms = list(dict.fromkeys([*o.by_term, *b.by_term]))
     rows = [["", f"original {o.name}:{o.episode}", f"branch {b.name}:{b.episode}"],

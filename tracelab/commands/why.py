@@ -8,33 +8,15 @@ import shlex
 import sys
 from typing import TYPE_CHECKING, Any
 
-from tracelab.commands._args import non_negative_int, positive_int
 from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.errors import UserError, store_errors
+from tracelab.store.agent_why import explain_action, render_action
+from tracelab.store.coordinates import run_grid
+from tracelab.store.reader import open_run, retrying
+from tracelab.store.why import explain, explain_change, render_why
 
 if TYPE_CHECKING:
     import duckdb
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("why", help="why an atom had its bound at a time: the rules, facts and actions behind it")
-    p.add_argument("run", help="run directory, .duckdb file, or run name under runs/")
-    p.add_argument("atom", nargs="?", help="a ground atom, e.g. 'atLoc(red-agent-1,16)' (not a complement "
-                                           "'~...': ask about the atom itself)")
-    p.add_argument("--action", metavar="AGENT",
-                   help="instead of an atom: why AGENT took its action at step --at (its policy's value of "
-                        "every action, the mask, the observation it acted on, the step's reward terms)")
-    p.add_argument("--episode", "-e", type=non_negative_int, required=True, help="the episode to explain")
-    p.add_argument("--at", type=non_negative_int,
-                   help="timestep, at most the episode's last (default: the episode's last)")
-    p.add_argument("--pass", dest="pass_no", type=non_negative_int,
-                   help="explain the atom's change in this pass of step --at (immediate rules cascade in "
-                        "passes, so an atom may change more than once in a step; default: its bound at the "
-                        "end of the step)")
-    p.add_argument("--depth", type=positive_int, default=6,
-                   help="how many rule firings deep to explain (default 6)")
-    p.add_argument("--json", action="store_true", help="the tree as JSON")
-    p.set_defaults(func=run)
 
 
 def last_t(con: "duckdb.DuckDBPyConnection", episode: int) -> int:
@@ -81,9 +63,6 @@ def change_in_pass(changes: list[tuple[int, int]], atom: str, t: int, pass_no: i
 
 def action_explanation(args: argparse.Namespace) -> Any:
     """The decision of --action AGENT at --at (required) of --episode, read from the run."""
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.agent_why import explain_action
-    from tracelab.store.reader import open_run, retrying
     if args.at is None:
         raise UserError("--action needs --at STEP: the step whose action to explain")
     with store_errors(), ctrl_c_stops_queries():
@@ -95,17 +74,12 @@ def action_explanation(args: argparse.Namespace) -> Any:
 
 
 def run_action(args: argparse.Namespace) -> int:
-    from tracelab.store.agent_why import render_action  # deferred: loads DuckDB, as above
     e = action_explanation(args)
     print(json.dumps(e.to_dict(), indent=1) if args.json else render_action(e, shlex.quote(str(args.run))))
     return 0
 
 
 def run(args: argparse.Namespace) -> int:
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.coordinates import run_grid
-    from tracelab.store.reader import open_run, retrying
-    from tracelab.store.why import explain, explain_change, render_why
     if (args.atom is None) == (args.action is None):
         raise UserError("why explains an atom (why RUN ATOM ...) or an agent's action (why RUN --action AGENT "
                         "...): give one of them")

@@ -4,33 +4,15 @@ from __future__ import annotations
 import argparse
 import json
 
-from tracelab.commands._args import non_negative_int
 from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.commands.why import action_explanation, check_at, last_t
 from tracelab.errors import UserError, store_errors
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("why-not", help="the first body clause of a rule that failed for a grounding at a time")
-    p.add_argument("run", help="run directory, .duckdb file, or run name under runs/")
-    p.add_argument("--episode", "-e", type=non_negative_int, required=True, help="the episode to look in")
-    p.add_argument("--rule", help="rule name")
-    p.add_argument("--action", metavar="NAME",
-                   help="instead of a rule: why --agent did not take action NAME at step --at (the mask, or "
-                        "how far its value fell below the chosen action's)")
-    p.add_argument("--agent", help="with --action: the agent (default: the episode's one deciding agent)")
-    p.add_argument("--grounding", default="", help="variable values, e.g. A=red-agent-1,X=16 "
-                                                   "(unbound variables are searched)")
-    p.add_argument("--at", type=non_negative_int, required=True,
-                   help="the timestep the head would have changed (a rule with delay k reads its body at at-k)")
-    p.add_argument("--json", action="store_true", help="the result as JSON")
-    p.set_defaults(func=run)
+from tracelab.store.agent_why import render_why_not_action, why_not_action
+from tracelab.store.reader import open_run, retrying
+from tracelab.store.why import parse_bindings, render_why_not, why_not
 
 
 def run(args: argparse.Namespace) -> int:
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.reader import open_run, retrying
-    from tracelab.store.why import parse_bindings, render_why_not, why_not
     if (args.rule is None) == (args.action is None):
         raise UserError("why-not asks about a rule (--rule NAME) or an agent's action (--action NAME): give one")
     if args.action is not None:
@@ -44,9 +26,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def run_action(args: argparse.Namespace) -> int:
-    # deferred: loads DuckDB; every command is imported to build the CLI's parser
-    from tracelab.store.agent_why import render_why_not_action, why_not_action
-    from tracelab.store.reader import open_run
     if args.grounding:
         raise UserError("--grounding goes with --rule, not --action")
     name = args.action

@@ -15,11 +15,13 @@ if TYPE_CHECKING:
     from tracelab.envs.declared.gym_env import DeclaredEnv
     from tracelab.envs.declared.vector_env import DeclaredVectorEnv
 
+# deferred: the declared envs (tracelab.envs.declared.*) load the engine (numba) when an env is made; importing
+# tracelab.envs only registers the ids
+
 
 def make_env(spec: str | os.PathLike[str], **kwargs: Any) -> DeclaredEnv:
     """The gymnasium Env a spec declares (docs/worlds.md); kwargs: the spec's [params], `render_mode`,
     `kernel` (the engine's)."""
-    # deferred: declared worlds load the engine (numba); importing tracelab.envs only registers the ids
     from tracelab.envs.declared.gym_env import DeclaredEnv
     return DeclaredEnv(spec, **kwargs)
 
@@ -27,7 +29,6 @@ def make_env(spec: str | os.PathLike[str], **kwargs: Any) -> DeclaredEnv:
 def make_vec_env(spec: str | os.PathLike[str], num_envs: int, **kwargs: Any) -> DeclaredVectorEnv:
     """`num_envs` worlds of a spec as one gymnasium VectorEnv on one engine (SAME_STEP autoreset); kwargs:
     the spec's [params], `max_episode_steps`."""
-    # deferred: as in make_env
     from tracelab.envs.declared.vector_env import DeclaredVectorEnv
     return DeclaredVectorEnv(spec, num_envs, **kwargs)
 

@@ -31,6 +31,8 @@ from tracelab.game.rulesim_fused import _make_buffers
 from tracelab.game.rulesim_kernel import encode_actions, read_and_settle, read_back
 from tracelab.game.scenario import Scenario
 
+# deferred: the engine kernel asked for only (tracelab.engine.lanes or .kernel): each module compiles its own
+
 WAIT_S = 600  # a compile that takes longer is left to die; the RuleSim compiles what it still lacks
 
 
@@ -43,10 +45,9 @@ def game_kernels(fused: bool) -> tuple[Any, ...]:
 
 def _step_kernel(engine_kernel: str) -> Any:
     if engine_kernel == "lanes":
-        # deferred: only the engine kernel asked for (each module compiles its own)
         from tracelab.engine.lanes import step_lanes
         return step_lanes
-    from tracelab.engine.kernel import step_worlds  # deferred: as above
+    from tracelab.engine.kernel import step_worlds
     return step_worlds
 
 

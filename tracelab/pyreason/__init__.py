@@ -10,6 +10,8 @@ written in PyReason's CSV layout.
 - classifier.py: LogicIntegratedClassifier (a torch model's outputs as facts; imports torch when used);
 - temporal_classifier.py: TemporalLogicIntegratedClassifier (the same, polled from a thread on a clock);
 - numba_interval.py: PyReason's annotation functions (closed(), the adapter);
+- reference_engine.py: a small program reasoned by the reference evaluator (no numba), read as the Engine;
+- frozen_modules.py: the loaded modules' objects kept out of garbage collections;
 - unsupported.py: UnsupportedFeature, the error of what tracelab does not have;
 - rules.py: PyReason's rule text (and its CSV / JSON rule files, with thresholds and rule options);
 - facts.py: PyReason's fact text in its CSV / JSON fact files;
@@ -21,10 +23,6 @@ written in PyReason's CSV layout.
 - files.py: what the rule and fact files share (CSV rows, JSON items, PyReason's raise_errors contract);
 - as_pyreason.py, __main__.py: `python -m tracelab.pyreason SCRIPT.py`, a PyReason script run unchanged.
 """
-import gc
-
-from tracelab.engine.numba_startup import defer_scipy_import
-
 from . import ruleset_filter
 from .api import (
     _Settings,
@@ -56,18 +54,15 @@ from .api import (
     save_rule_trace,
     settings,
 )
+from .frozen_modules import freeze_loaded_modules
 from .interpretation import Interpretation
 from .objects import Fact, Query, Rule, Threshold, closed
 from .translate import PyReasonProgram, load_pyreason
 from .unsupported import UnsupportedFeature
 
-defer_scipy_import()  # a reasoning loads kernels; numba would import scipy.linalg then, unused (0.17 s)
-# The ~70,000 objects of the modules imported so far (numba's above all) live until the process exits:
-# frozen, no later garbage collection traverses them, the interpreter's final ones at exit included
-# (~0.25 s of CPU, a quarter of the warm hello world; docs/pyreason.md, "Speed"). Objects made from here
-# on are collected as before (a script's reference cycles too, at exit). What this gives up: an object
-# made before this import that later becomes cyclic garbage is never freed.
-gc.freeze()
+# numba and pandas are not loaded here: a small program reasons on the reference evaluator, and pandas
+# is imported when a DataFrame is made (tests/test_pyreason_imports.py)
+freeze_loaded_modules()
 
 __all__ = [
     "Fact", "Interpretation", "LogicIntegratedClassifier", "TemporalLogicIntegratedClassifier", "_Settings", "ModelInterfaceOptions", "PyReasonProgram", "Query",

@@ -25,6 +25,7 @@ from tracelab.engine.program import SourceLoc
 from tracelab.errors import UserError
 
 from .facts import PFact, read_facts
+from .frozen_modules import import_frozen
 from .files import PyReasonFileError
 from .graphml import load_pyreason_graphml, load_pyreason_networkx
 from .interpretation import Interpretation
@@ -325,10 +326,35 @@ def _reason(timesteps: int, convergence_threshold: int, convergence_bound_thresh
     _program.timestamp = time.strftime("%Y%m%d-%H%M%S")
     rules = filter_ruleset(queries, _program.rules) if queries else _program.rules
     graph = settings.graph_for_engine(_program.graph) if _program.graph is not None else None
-    _program.reasoning = _Reasoning(_translated(rules, facts, graph), graph, facts, list(_program.rules))
-    _program.last = _program.reasoning.run(timesteps, convergence)
+    translated = _translated(rules, facts, graph)
+    _program.reasoning = _Reasoning(translated, graph, facts, list(_program.rules))
+    reference = _on_reference(translated, graph, timesteps)
+    try:
+        _program.last = _program.reasoning.run(timesteps, convergence, reference=reference)
+    except Exception:
+        if not reference or settings.tracelab_evaluator == "reference":
+            raise
+        # no fixpoint, no convergence: the compiled engine runs it again and says why in its own words
+        _program.reasoning = _Reasoning(translated, graph, facts, list(_program.rules))
+        _program.last = _program.reasoning.run(timesteps, convergence)
     _program.facts.clear()  # used up only once reasoned with: a reason() that failed keeps them
     return _program.last
+
+
+def _on_reference(translated: Any, graph: Graph | None, timesteps: int) -> bool:
+    """Whether this reasoning runs on the reference evaluator (settings.tracelab_evaluator; with "auto", a
+    small program, not recorded, without functions of add_annotation_function or add_head_function)."""
+    if settings.tracelab_run is not None:
+        if settings.tracelab_evaluator == "reference":
+            raise UserError("pr.settings.tracelab_run: a recorded reasoning runs on the compiled engine; set "
+                            "pr.settings.tracelab_evaluator to 'auto' or 'compiled'")
+        return False
+    if settings.tracelab_evaluator != "auto":
+        return settings.tracelab_evaluator == "reference"
+    if _program.annotation_functions or _program.head_functions:
+        return False
+    from .reference_engine import serves
+    return serves(translated.program, graph, timesteps)
 
 
 def _translated(rules: Sequence[Rule], facts: list[PFact], graph: Graph | None) -> Any:
@@ -408,12 +434,13 @@ class _Reasoning:
         self.recorded = False
         self.external: list[tuple[PFact, int]] = []  # facts of again(), with their first step
 
-    def run(self, timesteps: int, convergence: _Convergence) -> Interpretation:
-        from tracelab.reasoning import EpisodeRun, plan_episodes
-        writer, recorder = self._recorder(timesteps)
+    def run(self, timesteps: int, convergence: _Convergence, reference: bool = False) -> Interpretation:
+        """Reason `timesteps` steps (-1: until convergence) on the compiled engine, or on the reference
+        evaluator (reference_engine.py: not recorded)."""
+        writer, recorder = (None, None) if reference else self._recorder(timesteps)
         self.recorded = writer is not None
         try:
-            self.episode = EpisodeRun(self.inputs, plan_episodes(self.inputs)[0], trace=True, recorder=recorder)
+            self.episode = self._reference_episode() if reference else self._engine_episode(recorder)
             self.trace = PyReasonTrace(self.episode.engine, self.translated.names, self.graph_facts,
                                        self.translated.ipl_rules,
                                        skip_graph_facts=not settings.save_graph_attributes_to_trace,
@@ -429,6 +456,15 @@ class _Reasoning:
         if writer is not None:
             writer.close()
         return self._interpretation(timesteps, converged)
+
+    def _engine_episode(self, recorder: Any) -> Any:
+        import_frozen("tracelab.engine.core")  # numba's and the engine's modules, kept out of collections
+        from tracelab.reasoning import EpisodeRun, plan_episodes
+        return EpisodeRun(self.inputs, plan_episodes(self.inputs)[0], trace=True, recorder=recorder)
+
+    def _reference_episode(self) -> Any:
+        from .reference_engine import ReferenceEngine, ReferenceEpisode
+        return ReferenceEpisode(ReferenceEngine(self.inputs.program, self.inputs.graph))
 
     def continued_with(self, translated: Any, rules: list[Rule]) -> _Reasoning:
         """This reasoning going on in a new engine built from `translated` (its rules changed): world 0's

@@ -8,17 +8,18 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+from .frozen_modules import import_frozen
 from .objects import Interval, Query, _pair
 from .trace_csv import EDGE_HEADER, NODE_HEADER, PyReasonTrace
 from .unsupported import UnsupportedFeature, unsupported
 
 
 def _pandas() -> Any:
+    """pandas, imported by the first DataFrame made (0.5 s of CPU a script without one does not pay)."""
     try:
-        import pandas
+        return import_frozen("pandas")
     except ImportError:
         raise UnsupportedFeature("PyReason's DataFrames need pandas: pip install 'tracelab[pyreason]'") from None
-    return pandas
 
 
 class Interpretation:

@@ -33,7 +33,10 @@ SETTINGS: dict[str, tuple[Any, str]] = {
     "allow_ground_rules": (False, "True: a rule component that names a node is that node (a constant)"),
     "fp_version": (False, "no-op: one engine, the same answers"),
     "tracelab_run": (None, "a directory: each reason() records into this new tracelab run"),
+    "tracelab_evaluator": ("auto", "'auto': a small program on the reference evaluator (plain Python, no numba), "
+                                   "others on the compiled engine; 'compiled' or 'reference' chooses"),
 }
+EVALUATORS = ("auto", "compiled", "reference")
 
 
 class Settings:
@@ -59,6 +62,8 @@ class Settings:
             raise TypeError(f"pr.settings.{name}: file_name has to be a string, got {value!r}")
         if name == "tracelab_run" and value is not None and not isinstance(value, (str, os.PathLike)):
             raise TypeError(f"pr.settings.tracelab_run must be a directory path or None, got {value!r}")
+        if name == "tracelab_evaluator" and value not in EVALUATORS:
+            raise ValueError(f"pr.settings.tracelab_evaluator: one of {', '.join(EVALUATORS)}, got {value!r}")
         object.__setattr__(self, name, value)
 
     def directives(self) -> list[str]:

@@ -285,8 +285,8 @@ def ipl_twins(rules: Sequence[PRule], ipl: Sequence[tuple[str, str]]) -> list[tu
                     continue
                 # unrounded, as the pair's `~` rules and PyReason compute it (1 - 0.8 = 0.19999999999999996)
                 head = dataclasses.replace(r.head, pred=dst, lower=1 - r.head.upper, upper=1 - r.head.lower)
-                out.append((dataclasses.replace(r, name=f"pyreason_ipl_twin_{i}_{dst}", head=head,
-                                                set_static=False), src, r.name))
+                # a `set_static` rule freezes the partner too (PyReason's _update_node: set_static(static))
+                out.append((dataclasses.replace(r, name=f"pyreason_ipl_twin_{i}_{dst}", head=head), src, r.name))
     return out
 
 

@@ -22,6 +22,9 @@ from tracelab.store.schema import BOARD_BEFORE_DECLARED
 if TYPE_CHECKING:  # loaded by recorded_steps only: finding a run's origin (runs, diff) needs no numpy
     import numpy as np
 
+# deferred: the engine's parser (numpy) and numpy load where a branch's origin is read: runs and diff import this
+# module and need neither
+
 ORIGIN_KEY = "whatif"
 MAX_REPLAY_ENV = "TRACELAB_WHATIF_MAX_STEPS"
 MAX_REPLAY_STEPS = 1_000_000  # steps replayed to rebuild a world (the episodes before it on its seed's stream)
@@ -71,7 +74,7 @@ class RecordedSteps:
 def recorded_world(con: RunConnection, run: str) -> RecordedWorld:
     """The spec world of the run (UserError, one line, for a run of no spec world: a GridWar run, a
     reasoning run, or one whose texts are missing or past the store's caps)."""
-    from tracelab.engine.parser import RULE_FILE_CAP  # deferred: the parser loads numpy; runs and diff need none
+    from tracelab.engine.parser import RULE_FILE_CAP
     config = run_config(con)
     text = spec_text(con, config)
     if text is None:
@@ -117,7 +120,7 @@ def stream_of(seeds: dict[int, int | None], episode: int) -> list[int]:
 
 def recorded_steps(con: RunConnection, episode: int, agent: str) -> RecordedSteps:
     """The step rows of `agent` in `episode`."""
-    import numpy as np  # deferred: see TYPE_CHECKING above
+    import numpy as np
     rows = con.execute("SELECT step, action, reward, terminated, truncated, obs FROM raw.steps "
                        "WHERE episode = ? AND agent = ? ORDER BY step", [episode, agent]).fetchall()
     cols = list(zip(*rows)) if rows else [[]] * 6

@@ -24,6 +24,9 @@ from tracelab.store.sealed_catalog import check_sealed_catalog, read_sealed_cata
 if TYPE_CHECKING:
     import pyarrow as pa
 
+# deferred: pyarrow (listing runs as a text table needs none) and branch_origin (sql imports this module and needs
+# none)
+
 DEFAULT_ROOTS = (Path("runs"), Path("sample_runs"))
 # RunSummary.as_row()'s columns, in the order `tracelab runs` prints them
 # A row of the catalog (RunSummary.as_row()): its columns, and which are numbers.
@@ -54,7 +57,7 @@ class RunSummary:
 
 def catalog_table(rows: Sequence[dict[str, Any]]) -> "pa.Table":
     """Rows of RunSummary.as_row() as an Arrow table (built from buffers: Table.from_pylist imports pandas)."""
-    import pyarrow as pa  # deferred: listing runs as a text table needs none
+    import pyarrow as pa
 
     from tracelab.store.arrow_build import table_from_rows
     schema = pa.schema([(name, pa.int64() if number else pa.string()) for name, number in ROW_COLUMNS.items()])
@@ -199,7 +202,7 @@ def summarize_run(path: Path, counts: tuple[int, int] | Exception | None = None)
                           error=str(e).splitlines()[0] if str(e) else type(e).__name__)
     meta = info.meta
     config = meta.get("config")
-    from tracelab.store.branch_origin import branch_origin  # deferred: `sql` imports this module, needs none
+    from tracelab.store.branch_origin import branch_origin
     origin = branch_origin(config) if isinstance(config, dict) else None
     return RunSummary(path, name, info.status, short_command(str(meta.get("command") or "")),
                       str(meta.get("scenario") or ""), episodes, rows, _disk_size(path),

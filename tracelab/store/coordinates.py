@@ -70,10 +70,10 @@ def grid_from_config(config: dict[str, Any]) -> Grid | None:
     for key in _SCENARIO_KEYS:   # game runs written before the declaration
         text = config.get(key)
         if isinstance(text, str):
-            try:
+            try:  # `scenario` is the TOML in older runs, a name (the TOML is then in scenario_toml) in newer
                 scenario = tomllib.loads(text)
             except tomllib.TOMLDecodeError:
-                return None
+                continue
             return _checked(scenario.get("width"), scenario.get("height"))
     return None
 

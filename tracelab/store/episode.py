@@ -5,15 +5,20 @@ Points in an episode: the end of timestep t (the final interpretation of t, what
 just before a given row (what an immediate rule applied in that row read)."""
 from __future__ import annotations
 
+from bisect import bisect_left, bisect_right
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-
-import numpy as np
+from typing import Any
 
 from tracelab.store.model import DEFAULT_BOUND
 from tracelab.store.reader import RunConnection
 
 _COLUMNS = ("seq", "t", "pass_no", "atom", "old_lower", "old_upper", "new_lower", "new_upper",
             "cause_kind", "cause_id", "grounding")
+# Up to this many rows an episode is read as Python lists, which needs no numpy (~0.15 s of CPU to import:
+# a `why` on a small run starts about as fast as DuckDB does); a bigger one as numpy arrays (8 bytes a
+# value, not ~30, and no Python object per value). The searches read both alike (bisect, indexing).
+PYTHON_ROWS = 100_000
 
 
 @dataclass(frozen=True)
@@ -32,26 +37,20 @@ class Row:
 
 class EpisodeTrace:
     def __init__(self, con: RunConnection, episode: int, upto_t: int | None = None,
-                 columns: dict[str, np.ndarray] | None = None) -> None:
+                 columns: Mapping[str, Sequence[Any]] | None = None) -> None:
         """The episode's rows up to `upto_t`, read from the run; or `columns`, the episode's rows (the
-        _COLUMNS, in seq order) already read by the caller."""
+        _COLUMNS, in seq order, so in t order) already read by the caller."""
         self.episode = episode
         if columns is not None:
-            keep = slice(None) if upto_t is None else columns["t"] <= upto_t
-            self.c = {k: np.asarray(columns[k])[keep] for k in _COLUMNS}
+            cut = len(columns["t"]) if upto_t is None else bisect_right(columns["t"], upto_t)
+            self.c = {k: columns[k][:cut] for k in _COLUMNS}
         else:
-            sql = f"SELECT {', '.join(_COLUMNS)} FROM raw.changes WHERE episode = ?"
-            params: list[int] = [episode]
-            if upto_t is not None:
-                sql += " AND t <= ?"
-                params.append(upto_t)
-            cols = con.execute(sql + " ORDER BY seq", params).fetchnumpy()
-            self.c = {k: np.asarray(v) for k, v in cols.items()}
-        n = len(self.c["seq"])
-        self.n = n
-        order = np.lexsort((self.c["seq"], self.c["atom"])) if n else np.zeros(0, np.int64)
-        self._by_atom = order
-        self._atom_sorted = self.c["atom"][order]
+            self.c = _read_columns(con, episode, upto_t)
+        self.n = len(self.c["seq"])
+        # row indices in (atom, seq) order: a stable sort by atom of rows in seq order
+        atom = self.c["atom"]
+        self._by_atom = atom.argsort(kind="stable") if hasattr(atom, "argsort") else \
+            sorted(range(self.n), key=atom.__getitem__)
 
     def row(self, i: int) -> Row:
         c = self.c
@@ -62,24 +61,25 @@ class EpisodeTrace:
 
     def index_of_seq(self, seq: int) -> int | None:
         """The position of the change row `seq` among the episode's rows (None if it is not one)."""
-        i = int(np.searchsorted(self.c["seq"], seq, "left"))
+        i = bisect_left(self.c["seq"], seq)
         return i if i < self.n and int(self.c["seq"][i]) == seq else None
 
-    def _rows_of(self, atom: int) -> np.ndarray:
-        lo = np.searchsorted(self._atom_sorted, atom, "left")
-        hi = np.searchsorted(self._atom_sorted, atom, "right")
+    def _rows_of(self, atom: int) -> Sequence[int]:
+        key = self.c["atom"].__getitem__
+        lo = bisect_left(self._by_atom, atom, key=key)
+        hi = bisect_right(self._by_atom, atom, lo=lo, key=key)
         return self._by_atom[lo:hi]  # row indices of this atom, in seq order
 
     def last_at_end_of(self, atom: int, t: int) -> Row | None:
         """The change in force at the end of timestep t (the latest with t' <= t)."""
         rows = self._rows_of(atom)
-        k = np.searchsorted(self.c["t"][rows], t, "right") - 1
+        k = bisect_right(rows, t, key=self.c["t"].__getitem__) - 1
         return self.row(int(rows[k])) if k >= 0 else None
 
     def last_before(self, atom: int, index: int) -> Row | None:
         """The change in force just before row `index` of this episode."""
         rows = self._rows_of(atom)
-        k = np.searchsorted(rows, index, "left") - 1
+        k = bisect_left(rows, index) - 1
         return self.row(int(rows[k])) if k >= 0 else None
 
     def ordinary_pass_start(self, index: int, immediate_rules: set[int]) -> int:
@@ -97,3 +97,17 @@ class EpisodeTrace:
     @staticmethod
     def bound(row: Row | None) -> tuple[float, float]:
         return row.new if row is not None else DEFAULT_BOUND
+
+
+def _read_columns(con: RunConnection, episode: int, upto_t: int | None) -> dict[str, Sequence[Any]]:
+    """The episode's _COLUMNS up to `upto_t` in seq order: lists, or numpy arrays past PYTHON_ROWS rows."""
+    where, params = "WHERE episode = ?", [episode]
+    if upto_t is not None:
+        where += " AND t <= ?"
+        params.append(upto_t)
+    (n,) = con.execute(f"SELECT count(*) FROM raw.changes {where}", params).fetchall()[0]
+    result = con.execute(f"SELECT {', '.join(_COLUMNS)} FROM raw.changes {where} ORDER BY seq", params)
+    if n > PYTHON_ROWS:
+        return dict(result.fetchnumpy())  # DuckDB imports numpy for it
+    rows = result.fetchall()
+    return {k: list(column) for k, column in zip(_COLUMNS, zip(*rows))} if rows else {k: [] for k in _COLUMNS}

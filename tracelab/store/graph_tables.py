@@ -12,12 +12,15 @@ from tracelab.engine.program import CONSTANT_RE, constant_text
 from tracelab.store import arrow_build as ab
 from tracelab.store.schema import SCHEMAS
 
+# deferred: pyarrow.compute builds a wrapper per compute function (~7 MB resident), which a process that writes a
+# game's run (a graph with no facts to compute on) never needs (docs/benchmarks/history.md, "Memory of long runs")
+
 
 def _quoted_names(names: pa.Array) -> pa.Array | None:
     """Each node as the rule language writes it (engine.program.constant_text): bare when it can be,
     quoted otherwise; None when every node is bare. The regular expression runs in Arrow, only the nodes
     that need quotes in Python."""
-    import pyarrow.compute as pc  # deferred: ~7 MB resident, and a game's graph has no facts to compute on
+    import pyarrow.compute as pc
     bare = pc.match_substring_regex(names, f"^(?:{CONSTANT_RE.pattern})$")
     if pc.all(bare).as_py() is not False:
         return None
@@ -29,7 +32,7 @@ def _quoted_names(names: pa.Array) -> pa.Array | None:
 
 def _atom_texts(labels: pa.Array, names: pa.Array, a0: np.ndarray, a1: np.ndarray) -> pa.Array:
     """label(a) or label(a,b) per row (a1 < 0: no second argument)."""
-    import pyarrow.compute as pc  # deferred: ~7 MB resident, and a game's graph has no facts to compute on
+    import pyarrow.compute as pc
     opening, comma, closing, nothing = (ab.scalar(s) for s in ("(", ",", ")", ""))
     first = pc.take(names, ab.from_numpy(a0))
     binary = a1 >= 0
@@ -47,7 +50,7 @@ def _atom_texts(labels: pa.Array, names: pa.Array, a0: np.ndarray, a1: np.ndarra
 def _bound_texts(bounds: np.ndarray) -> pa.Array:
     """`:[l,u]` per row, formatted as Literal.__str__ does ({:g}); each distinct bound formatted once (a
     bound as one complex number: a 1-D unique, several times faster than unique(axis=0))."""
-    import pyarrow.compute as pc  # deferred: ~7 MB resident, and a game's graph has no facts to compute on
+    import pyarrow.compute as pc
     pairs = np.ascontiguousarray(bounds, np.float64).view(np.complex128).reshape(-1)
     if len(pairs) and (pairs == pairs[0]).all():  # the usual graph: every fact [1,1]
         lo, up = bounds[0]
@@ -65,9 +68,7 @@ def graph_fact_table(graph: Any, first_id: int = 0) -> pa.Table:
     n = graph.n_facts
     if n == 0:  # a game's graph: its facts are the program's
         return ab.empty_table(SCHEMAS["facts"])
-    # deferred: pyarrow.compute builds a wrapper per compute function (~7 MB resident), which a process
-    # that writes a game's run never needs (docs/benchmarks/history.md, "Memory of long runs")
-    import pyarrow.compute as pc  # deferred: ~7 MB resident, and a game's graph has no facts to compute on
+    import pyarrow.compute as pc
     a0, a1 = graph.fact_args[:, 0], graph.fact_args[:, 1]
     labels = pc.take(ab.strings(list(graph.labels)), ab.from_numpy(np.asarray(graph.fact_label)))
     plain = ab.strings(list(graph.nodes))

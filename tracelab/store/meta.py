@@ -28,6 +28,9 @@ from tracelab.validation import (INT64, Const, IsoTime, ListOf, MapOf, Nullable,
 if TYPE_CHECKING:
     import pyarrow as pa
 
+# deferred: numpy (library_versions: a writer has loaded it, a reader of meta.json need not) and arrow_build
+# (pyarrow, for raw.run's table): every reading command reads meta.json through this module
+
 FORMAT = "tracelab-run/1"
 STATUSES = ("running", "finished", "failed", "interrupted", "crashed")
 # The most meta.json may hold: what its readers accept (read_meta) is what its writer may write, so a run
@@ -63,7 +66,6 @@ def file_sha256(path: str | Path) -> str:
 
 
 def library_versions() -> dict[str, str]:
-    # deferred: a writer has loaded both; a reader of meta.json (every reading command) need not
     import numpy as np
     import pyarrow as pa
     return {"tracelab": tracelab.__version__, "python": platform.python_version(),
@@ -228,6 +230,5 @@ def meta_row(doc: dict[str, Any], status: str) -> dict[str, Any]:
 
 def meta_table(doc: dict[str, Any], status: str) -> "pa.Table":
     """raw.run as an Arrow table of its one row (meta_row)."""
-    # deferred: loads pyarrow, which a reader need not; not Table.from_pylist: it imports pandas (arrow_build)
     from tracelab.store.arrow_build import table_from_rows
     return table_from_rows([meta_row(doc, status)], arrow_schema("run"))

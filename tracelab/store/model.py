@@ -2,17 +2,21 @@
 (why, why-not, diff): rules with their clauses, fact and policy names, nodes, labels and atom lookups."""
 from __future__ import annotations
 
+import re
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-import numpy as np
-
 from tracelab.engine.errors import ProgramError
-from tracelab.engine.parser import parse_literal
+from tracelab.engine.program import CONSTANT_RE, PREDICATE_RE
 from tracelab.engine.program import satisfies as engine_satisfies
 from tracelab.store.names import UnknownName, unknown_name_message
 from tracelab.store.reader import RunConnection
 
 DEFAULT_BOUND = (0.0, 1.0)  # an atom never set
+# deferred: the engine's parser (it loads numpy) reads an atom only when it is not written as the store
+# writes atoms, label(a,b) of plain constants (RunModel.parse_atom): `why ATOM` on such an atom needs neither
+_C = CONSTANT_RE.pattern
+_PLAIN_ATOM = re.compile(rf"[ \t]*({PREDICATE_RE.pattern})\([ \t]*({_C})(?:[ \t]*,[ \t]*({_C}))?[ \t]*\)[ \t]*")
 
 
 @dataclass(frozen=True)
@@ -83,7 +87,7 @@ class RunModel:
         self.labels = {name: (lid, arity) for lid, name, arity in
                        con.execute("SELECT label, name, arity FROM raw.labels").fetchall()}
         self._atom_text: dict[int, str] = {}
-        self._atom_label = self._atom_arg0 = self._atom_arg1 = np.zeros(0, np.int64)
+        self._atom_keys: list[tuple[int, int, int] | None] = []  # per atom id: (label, arg0, arg1 or -1)
         self._label_names: dict[int, str] = {}
         self._atom_ids: dict[tuple[int, int, int], int] = {}
         self._groundings: dict[int, tuple[int, list[int], list[int]]] = {}
@@ -121,9 +125,9 @@ class RunModel:
             self._groundings[g] = (row[0], list(row[1]), list(row[2]))
         return self._groundings[g]
 
-    def prefetch_groundings(self, ids: list[int] | np.ndarray) -> None:
+    def prefetch_groundings(self, ids: Iterable[int]) -> None:
         """Read these groundings in one query (callers about to explain many rows of an episode)."""
-        wanted = {g for g in np.asarray(ids, dtype=np.int64).tolist() if g >= 0}
+        wanted = {int(g) for g in ids if g >= 0}
         missing = sorted(wanted - self._groundings.keys())
         if missing:
             for g, rule, body, values in self.con.execute(
@@ -136,37 +140,37 @@ class RunModel:
         return {v: self.nodes[x] for v, x in zip(self.rules[rule].variables, values)}
 
     # ---- atoms -------------------------------------------------------------------------------------------
-    def atom_texts(self, ids: list[int] | np.ndarray) -> dict[int, str]:
+    def atom_texts(self, ids: Iterable[int]) -> dict[int, str]:
         """label(arg0[,arg1]) of atom ids, as the atoms view writes them; built from the atoms table read
         once (again when an id is past it: a live run's vocabulary grows), not a query per call."""
         out = {}
         for a in (int(x) for x in ids):
             text = self._atom_text.get(a)
             if text is None:
-                if a >= len(self._atom_label):
+                if a >= len(self._atom_keys):
                     self._read_atoms()
-                if a < 0 or a >= len(self._atom_label) or self._atom_label[a] < 0:
+                key = self._atom_keys[a] if 0 <= a < len(self._atom_keys) else None
+                if key is None:
                     text = f"atom#{a}"
                 else:
-                    args = [self.nodes[n] for n in (self._atom_arg0[a], self._atom_arg1[a]) if n >= 0]
-                    text = f"{self._label_names.get(int(self._atom_label[a]), '?')}({','.join(args)})"
+                    args = [self.nodes[n] for n in key[1:] if n >= 0]
+                    text = f"{self._label_names.get(key[0], '?')}({','.join(args)})"
                 self._atom_text[a] = text
             out[a] = text
         return out
 
     def _read_atoms(self) -> None:
-        cols = self.con.execute("SELECT atom, label, arg0, arg1 FROM raw.atoms").fetchnumpy()
-        n = int(cols["atom"].max()) + 1 if len(cols["atom"]) else 0
-        self._atom_label, self._atom_arg0, self._atom_arg1 = (np.full(n, -1, np.int64) for _ in range(3))
-        for arr, name in ((self._atom_label, "label"), (self._atom_arg0, "arg0"), (self._atom_arg1, "arg1")):
-            arr[np.asarray(cols["atom"])] = np.asarray(cols[name])
+        rows = self.con.execute("SELECT atom, label, arg0, arg1 FROM raw.atoms").fetchall()
+        keys: list[tuple[int, int, int] | None] = [None] * (max((r[0] for r in rows), default=-1) + 1)
+        for atom, label, arg0, arg1 in rows:
+            keys[atom] = (label, arg0, -1 if arg1 is None else arg1)
+        self._atom_keys = keys
         self.nodes = [n for (n,) in self.con.execute("SELECT name FROM raw.nodes ORDER BY node").fetchall()]
         self.node_ids = {n: i for i, n in enumerate(self.nodes)}
         self.labels = {name: (lid, arity) for lid, name, arity in
                        self.con.execute("SELECT label, name, arity FROM raw.labels").fetchall()}
         self._label_names = {lid: name for name, (lid, _) in self.labels.items()}
-        self._atom_ids = {key: a for a, key in enumerate(zip(self._atom_label.tolist(), self._atom_arg0.tolist(),
-                                                            self._atom_arg1.tolist())) if key[0] >= 0}
+        self._atom_ids = {key: a for a, key in enumerate(keys) if key is not None}
 
     def atom_text(self, aid: int) -> str:
         return self.atom_texts([aid])[aid]
@@ -194,24 +198,29 @@ class RunModel:
         return self._atom_ids.get(key)
 
     def _vocabulary_grew(self) -> bool:
-        if not len(self._atom_label):
+        if not self._atom_keys:
             return True
         rows = self.con.execute("SELECT max(atom) FROM raw.atoms").fetchall()
-        return rows[0][0] is not None and rows[0][0] >= len(self._atom_label)
+        return rows[0][0] is not None and rows[0][0] >= len(self._atom_keys)
 
     def parse_atom(self, text: str) -> int:
         """The id of a ground atom written as text, e.g. atLoc(red-agent-1,16); errors name what is missing."""
-        try:
-            lit = parse_literal(text)
-        except ProgramError as e:
-            raise ValueError(f"cannot read atom {text!r}: {e}") from None
-        if any(t.is_var for t in lit.args):
-            raise ValueError(f"atom {text!r} is not ground")
-        args = tuple(t.name for t in lit.args)
-        self.label_id(lit.pred, len(args))
+        plain = _PLAIN_ATOM.fullmatch(text)
+        if plain:  # what the parser reads it as, without loading it
+            label, args = plain[1], tuple(a for a in plain.groups()[1:] if a is not None)
+        else:
+            from tracelab.engine.parser import parse_literal
+            try:
+                lit = parse_literal(text)
+            except ProgramError as e:
+                raise ValueError(f"cannot read atom {text!r}: {e}") from None
+            if any(t.is_var for t in lit.args):
+                raise ValueError(f"atom {text!r} is not ground")
+            label, args = lit.pred, tuple(t.name for t in lit.args)
+        self.label_id(label, len(args))
         for a in args:
             self.node_id(a)
-        aid = self.find_atom(lit.pred, args)
+        aid = self.find_atom(label, args)
         if aid is None:
             raise KeyError(f"atom {text!r} never occurs in this run (its label and nodes do)")
         return aid

@@ -46,6 +46,9 @@ from tracelab.store.sealed_catalog import SealedCatalog, SealedFileRefused, chec
 if TYPE_CHECKING:  # loaded by what streams Arrow (arrow_stream): a command printing a table needs none
     import pyarrow as pa
 
+# deferred: pyarrow, for a live run's parts (store.parts) and Arrow streams only: the reading commands that print
+# DuckDB's rows open every run through this module
+
 RUNS_DIR = Path("runs")
 
 
@@ -149,7 +152,7 @@ class LiveParts:
                 raise
             return False   # sealed between the two looks
         if raw != self._seen:
-            from tracelab.store.parts import read_manifest  # deferred: loads pyarrow (a live run's parts)
+            from tracelab.store.parts import read_manifest
             for table, files in read_manifest(self.run_dir).items():
                 self.con.execute(f"SET VARIABLE {_parts_variable(table, self.prefix)} = ?",
                                  [[exact_file(f) for f in files]])
@@ -260,7 +263,7 @@ def create_live_raw_views(con: duckdb.DuckDBPyConnection, run_dir: Path, raw: st
                           prefix: str = "") -> None:
     """The views `raw`.<table> over the parts the run's manifest lists (read from the DuckDB variables
     LiveParts keeps current: it must have run once)."""
-    from tracelab.store.parts import read_manifest  # deferred: loads pyarrow (a live run's parts)
+    from tracelab.store.parts import read_manifest
     listed = read_manifest(run_dir)
     for t in TABLES:
         if not listed[t]:  # a table added after the run was written (schema.ADDED_TABLES)
@@ -436,7 +439,7 @@ def fetch_rows(rel: duckdb.DuckDBPyRelation, limit: int | None = None, offset: i
 def fetch_arrow(rel: duckdb.DuckDBPyRelation, limit: int | None = None, offset: int = 0) -> "pa.Table":
     """The rows [offset, offset+limit) of a relation as an Arrow table; rows past the limit are never
     materialised."""
-    import pyarrow as pa  # deferred: see TYPE_CHECKING above
+    import pyarrow as pa
     schema, batches = arrow_stream(rel, limit, offset)
     return pa.Table.from_batches(list(batches), schema=schema)
 

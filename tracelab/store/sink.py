@@ -12,6 +12,9 @@ from tracelab.store.agent_rows import AgentRows, Decisions, ObservationName, Rew
 from tracelab.store.convert import utc_now
 from tracelab.store.writer import TraceWriter
 
+# deferred: the game's scenario module (most of a second) and observation module (numba) load in the methods of a
+# game's sink: the store's other users (readers, a declared world's recorder) need not pay
+
 
 # What the env streams is written in chunks: when WRITE_ROWS step rows wait, or WRITE_INTERVAL_S after
 # the last write, and at close (Arrow tables per step, or per episode at one world, cost more than the
@@ -54,8 +57,6 @@ class StoreSink:
         self._agents = [f"{team}-agent-{j + 1}" for team in ("red", "blue") for j in range(n)]
         if engine is not None:
             self.writer.write_engine_program(engine)
-        # deferred: importing the game's scenario module takes most of a second, which the store's other
-        # users (readers, a declared world's recorder) need not pay
         from tracelab.game.scenario import ACTION_NAMES
         offered = list(scenario.action_ids)
         self.writer.write_action_names(ACTION_NAMES, [offered.index(a) if a in offered else None
@@ -124,7 +125,6 @@ class StoreSink:
     def _write_observation_names(self, size: int) -> None:
         """What the steps' observation entries are, with the first steps (their size says whether the
         observation stacks the previous one)."""
-        # deferred: the game's observation module loads numba, which a sink's importers need not
         from tracelab.game.observe import obs_size, team_observation_names
         self._observation_named = True
         names = team_observation_names(self._scenario, size == obs_size(self._scenario, True))

@@ -18,6 +18,7 @@ from typing import Any
 
 from tracelab.store.coordinates import Grid
 from tracelab.store.episode import EpisodeTrace, Row
+from tracelab.store.kind import run_config
 from tracelab.store.model import Clause, RuleInfo, RunModel, satisfies
 from tracelab.store.reader import RunConnection
 from tracelab.store.schema import CAUSE_NAMES
@@ -71,10 +72,39 @@ class WhyNode:
         return asdict(self)
 
 
+def external_causes(config: dict[str, Any]) -> dict[str, str]:
+    """What set each predicate of a declared world's external facts, from its run's config
+    (tracelab.envs.declared.recording.declared_facts): `action`, `draw:NAME`, `env` (computed each step);
+    {} for a run that does not say (every external fact then reads `action`)."""
+    declared = config.get("declared_facts")
+    if not isinstance(declared, dict):
+        return {}
+    names: dict[str, str] = {}
+    for pred in declared.get("computed") or ():
+        names[str(pred)] = "env"
+    draws = declared.get("draws")
+    for draw, preds in (draws.items() if isinstance(draws, dict) else ()):
+        for pred in preds if isinstance(preds, list) else ():
+            names[str(pred)] = f"draw:{draw}"
+    for pred in declared.get("actions") or ():
+        names[str(pred)] = "action"
+    return names
+
+
+def set_by(model: RunModel, external: dict[str, str], row: Row) -> str:
+    """The name of what set `row` (its rule, fact:NAME, ...); an external fact of a declared world by
+    what set its predicate (external_causes), `start` for the start facts no action, draw or computation sets."""
+    if row.cause_kind == 1 and external:
+        return external.get(model.atom_text(row.atom).split("(", 1)[0], "start")
+    return model.cause_name(row.cause_kind, row.cause_id)
+
+
 class _Explainer:
     def __init__(self, model: RunModel, trace: EpisodeTrace) -> None:
         self.m = model
         self.tr = trace
+        # a declared world's external facts: actions, draws, computed ones, and its start facts (the rest)
+        self.external = external_causes(run_config(model.con))
         self.immediate = {r.rule for r in model.rules if r.immediate}
         self.seen: set[int] = set()
 
@@ -121,7 +151,7 @@ class _Explainer:
 
     def _cause(self, row: Row) -> Cause:
         kind = CAUSE_NAMES.get(row.cause_kind, str(row.cause_kind))
-        c = Cause(kind, self.m.cause_name(row.cause_kind, row.cause_id), grounding=row.grounding)
+        c = Cause(kind, set_by(self.m, self.external, row), grounding=row.grounding)
         if row.cause_kind == 0:
             c.text = self.m.facts.get(row.cause_id, ("", ""))[1]
         rule = self._rule_of(row)
@@ -324,6 +354,7 @@ class _Search:
     def __init__(self, model: RunModel, trace: EpisodeTrace, rule: RuleInfo, reads_at: int,
                  budget: int) -> None:
         self.m, self.tr, self.rule, self.at, self.budget = model, trace, rule, reads_at, budget
+        self.external = external_causes(run_config(model.con))
         self.best: list[ClauseCheck] = []
         self.best_binding: dict[str, str] = {}
 
@@ -333,7 +364,7 @@ class _Search:
         value = EpisodeTrace.bound(row)
         return ClauseCheck(pos, clause.ground_text(binding), atom, list(value), satisfies(value, clause),
                            set_at=None if row is None else row.t,
-                           set_by=None if row is None else self.m.cause_name(row.cause_kind, row.cause_id),
+                           set_by=None if row is None else set_by(self.m, self.external, row),
                            closed=clause.closed)
 
     def run(self, binding: dict[str, str]) -> tuple[list[ClauseCheck], bool, dict[str, str]]:

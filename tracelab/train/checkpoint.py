@@ -32,6 +32,9 @@ from tracelab.validation import (Const, ExactKeys, IntRange, ListOf, MapOf, Mism
 from tracelab.train.config import TrainConfig, config_schema
 from tracelab.train.torch_files import CodeInFile, Tensor, load_tensors
 
+# deferred: tracelab.train.run_networks loads the game's numba modules, which an env's checkpoint does not need
+# (RuleSim's checkpoints only)
+
 CHECKPOINT_DIR, CHECKPOINT_FILE = "checkpoint", "checkpoint.pt"
 FORMAT = "tracelab-dqn-checkpoint/2"
 OLD_FORMATS = (b"tracelab-dqn-checkpoint/1",)  # held numpy arrays: loadable only by running the pickle
@@ -89,13 +92,14 @@ def checkpoint_file(run: Path) -> Path:
     return f
 
 
-def _refusal_with_a_way_on(run: Path, said: str) -> FileRefused:
+def refusal_with_a_way_on(run: Path, said: str, env: str = "") -> FileRefused:
     """A checkpoint refused for what it would run: say so, and what the user can do instead (use the
-    run's policy, start a new run from its settings)."""
+    run's policy, start a new run from its settings). `env`: what its policy needs named again (` --env
+    ENV`: a train --env run's, whose env the refused file cannot tell)."""
     policy = run / "policy"
     if (policy / "policy.json").is_file():
-        instead = f"its policy still plays: tracelab eval {policy}, tracelab play --policy {policy}; to " \
-                  f"train on, start a new run with tracelab train (its settings: tracelab show {run})"
+        instead = f"its policy still plays: tracelab eval {policy}{env}, tracelab play --policy {policy}{env}; " \
+                  f"to train on, start a new run with tracelab train (its settings: tracelab show {run})"
     else:
         instead = f"start a new run with tracelab train (its settings: tracelab show {run})"
     return FileRefused(f"{said}: {instead}")
@@ -113,7 +117,7 @@ def load_checkpoint(run: str | Path, limit: Limit | None = None, network: Any = 
     except CodeInFile as e:
         said = f"{f}: a checkpoint of an older tracelab (format 1, holding numpy objects that only a loader " \
                f"that runs code could read); refused" if any(mark in e.pickled for mark in OLD_FORMATS) else str(e)
-        raise _refusal_with_a_way_on(run, said) from None
+        raise refusal_with_a_way_on(run, said) from None
     try:
         check(state, {"format": Const(FORMAT), "config": config_schema(), "scenario_toml": str,
                       "learner": OptionalKey(OneOf("fused", "readable")), "custom_network": OptionalKey(bool)})
@@ -142,7 +146,6 @@ def load_checkpoint(run: str | Path, limit: Limit | None = None, network: Any = 
     except Mismatch as e:
         raise FileRefused(f"{f}: {e}") from None
     if "best_rows" in state:  # written before the readable learner: the fused layout's rows
-        # deferred: run_networks loads the game's numba modules, which an env's checkpoint does not need
         from tracelab.train.run_networks import training_net
         net = training_net(cfg, scenario)
         state["best_weights"] = {name: to_state_dict(row, net) for name, row in state.pop("best_rows").items()}
@@ -179,7 +182,6 @@ def _network_tensors(net: Any, network: Any) -> tuple[dict[str, Any], dict[str, 
 def _state_schema(cfg: TrainConfig, scenario: Scenario, network: Any = None) -> dict[str, Any]:
     """Every key of a format-2 checkpoint of this config and scenario, with its type and shape (cfg.learner:
     the learner the checkpoint names)."""
-    # deferred: see load_checkpoint
     from tracelab.train.run_networks import network_groups, training_net
     net = training_net(cfg, scenario)
     w, n, d = cfg.envs, scenario.agents_per_team, net.inputs

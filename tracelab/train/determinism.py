@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import sys
 
+import torch
+
 
 def use_deterministic_algorithms(mode: bool) -> None:
     """torch.use_deterministic_algorithms(mode), without importing torch._inductor when nothing has."""
-    # deferred: torch, which the CLI's parser (it imports the commands' helpers) does not need
-    import torch
     set_eager = getattr(torch._C, "_set_deterministic_algorithms", None)
     if "torch._inductor.config" in sys.modules or set_eager is None:
         torch.use_deterministic_algorithms(mode)

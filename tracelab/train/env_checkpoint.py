@@ -30,12 +30,12 @@ from tracelab.envs.declared.env_source import EnvSource, check_same_env, env_sou
 from tracelab.errors import UserError
 from tracelab.train.checkpoint import (check_best, check_buffer_rows, checkpoint_config,
                                        checkpoint_file, checkpoint_path, episode_games_schema, in_range,
-                                       learner_schema, parts_schema, write_checkpoint)
+                                       learner_schema, parts_schema, refusal_with_a_way_on, write_checkpoint)
 from tracelab.train.config import TrainConfig, config_fields, config_schema
 from tracelab.train.env_source import probe_env
 from tracelab.train.memory import (Limit, MemoryLimitExceeded, check_estimate, env_training_estimate,
                                    env_world_bytes)
-from tracelab.train.torch_files import Tensor, load_tensors
+from tracelab.train.torch_files import CodeInFile, Tensor, load_tensors
 from tracelab.validation import Const, IntRange, MapOf, Mismatch, OneOf, check
 
 ENV_FORMAT = "tracelab-dqn-env-checkpoint/2"
@@ -91,7 +91,10 @@ def save_env_checkpoint(tr: Any, run_dir: Path) -> Path:
 def checkpoint_env(run: str | Path, max_bytes: int) -> tuple[dict[str, Any], EnvSource]:
     """(the raw checkpoint of an --env run, the env it names), its format checked; FileRefused otherwise."""
     f = checkpoint_file(Path(run))
-    state = load_tensors(f, max_bytes)
+    try:
+        state = load_tensors(f, max_bytes)
+    except CodeInFile as e:  # a stranger's (or a damaged) file: the run's policy may still play
+        raise refusal_with_a_way_on(Path(run), str(e), " --env ENV") from None
     if state.get("format") in OLD_FORMATS:
         raise FileRefused(f"{f}: written by an earlier tracelab ({state['format']}), whose worlds this one "
                           f"cannot rebuild: resume it with that version, or train again from its policy's "

@@ -38,6 +38,9 @@ from tracelab.train.qnet import HiddenWidths, NetSpec, NumpyQ, QFunction
 from tracelab.train.team_policy import TeamPolicy, team_env_actor
 from tracelab.validation import Const, IntRange, ListOf, MapOf, OptionalKey, check_file
 
+# deferred: torch (and torch_files), the game's observation module (numba) and the declared envs (the engine) load
+# in the functions that use them: reading a policy's spec (policy.json) needs none of them
+
 
 FORMAT = "tracelab-dqn-policy/1"
 POLICY_JSON, POLICY_PT = "policy.json", "policy.pt"
@@ -126,7 +129,6 @@ def save_policy(path: str | Path, scenario: Scenario, weights: dict[str, dict[st
     """Write policy.pt and policy.json into directory `path`. weights: network name -> its state dict;
     agents: network name -> red agent indices it plays; network: policy.json's description of the
     architecture (NetSpec.to_json, or a custom module's)."""
-    # deferred: the game's observation module loads numba, which reading a policy's spec does not need
     from tracelab.game.observe import observation_layout
     spec = {
         "format": FORMAT,
@@ -147,7 +149,7 @@ def write_policy_files(out: Path, weights: dict[str, dict[str, Any]], spec: dict
     policy/ or policy-best/), through the store's path resolver: `out` is made or must be a folder, not
     a link, and each file is created new under a temp name and renamed in (never written through a link
     a stranger's run planted there). policy.pt is renamed first: the pair appears together for readers."""
-    import torch  # deferred: reading a policy's spec does not need it
+    import torch
 
     out.parent.mkdir(parents=True, exist_ok=True)  # the run's own folder, which the caller named
     out = layout.make_run_dirs(out.parent, out.name)
@@ -208,7 +210,6 @@ def spec_net(spec: dict[str, Any]) -> NetSpec:
 
 def _state_dict_schema(names: list[str], net: NetSpec) -> dict[str, Any]:
     """policy.pt: per network, the state dict of the module `net` describes."""
-    # deferred: torch_files loads torch
     from tracelab.train.torch_files import Tensor
     layers = {k: Tensor(None, shape) for k, shape in net.state_dict_shapes().items()}
     return {name: layers for name in names}
@@ -217,7 +218,6 @@ def _state_dict_schema(names: list[str], net: NetSpec) -> dict[str, Any]:
 def read_policy_networks(path: str | Path, spec: dict[str, Any]) -> dict[str, Any]:
     """policy.pt of a policy directory, whose policy.json is `spec`: loaded without running code (torch's
     weights_only), no bigger than the networks it declares, each network's state dict of their shape."""
-    # deferred: torch_files loads torch
     from tracelab.train.torch_files import load_tensors
     d = _policy_dir(path)
     net, names = spec_net(spec), list(spec["networks"])
@@ -238,7 +238,6 @@ def load_policy(path: str | Path, scenario: Scenario | None = None) -> Policy:
     scenario = scenario or trained_on
     stack = spec["observation"]["stack_previous"]
     net = spec_net(spec)
-    # deferred: the game's observation module loads numba
     from tracelab.game.observe import obs_size
     if (obs_size(scenario, stack), scenario.n_actions, scenario.agents_per_team) != \
             (net.inputs, net.actions, trained_on.agents_per_team):
@@ -398,7 +397,6 @@ def load_trained(path: str | Path, given: EnvSource) -> Any:
         return load_env_policy(path, given)[0]
     spec = read_policy_spec(path)
     policy = load_policy(path)
-    # deferred: a declared world's env module loads the engine (numba)
     from tracelab.envs.declared.gym_env import observation_space
     spec_path, params = given.declared()
     world = load_spec(spec_path, **params)
@@ -536,7 +534,6 @@ def make_vector_env(source: EnvSource, worlds: int, by_term: bool = False,
         spec_file, params = source.declared()
     except UserError:  # not a declared world: any gymnasium env
         return SyncVectorEnv([source.make] * worlds, autoreset_mode=AutoresetMode.SAME_STEP), None
-    # deferred: loads the engine (numba)
     from tracelab.envs.declared.vector_env import DeclaredVectorEnv
     limit = gym.registry[source.env_id].max_episode_steps if source.env_id is not None else None
     try:
@@ -616,7 +613,6 @@ def evaluate_team(policy: Policy, source: EnvSource, games: int, seed: int,
                   on_game: Callable[[float], None] | None = None) -> EnvEvalResult:
     """`games` greedy episodes of a team's policy (GridWar's trainer's) on a declared world of several agents,
     one world at a time (TeamEnv: the batched engine plays one agent), counted as evaluate_env counts."""
-    # deferred: loads the engine (numba)
     from tracelab.envs.declared.play import TeamEnv, play_episodes
     spec_path, params = source.declared()
     env = TeamEnv(load_spec(spec_path, **params))

@@ -22,6 +22,9 @@ import numpy as np
 
 from tracelab.validation import Mismatch, Spec
 
+# deferred: torch, in the functions that build a torch network: config.py imports this module, and train's parser
+# (tracelab --help) imports config.py
+
 QFunction = Callable[[np.ndarray], np.ndarray]  # observations [K, D] -> Q-values [K, A]
 MAX_LAYERS = 32  # hidden layers a config or a policy file may declare (a stranger's file could say millions)
 
@@ -108,7 +111,6 @@ def draw_weights(spec: NetSpec, generator: Any = None) -> dict[str, Any]:
     """The network's initial weights as a state dict: nn.Linear's default initialisation (uniform in
     ±1/sqrt(fan_in), weight then bias, layer by layer in `linears()` order) drawn from a seeded torch
     generator. Both learners start from these, so the same seed draws the same network in either."""
-    # deferred: torch, which `tracelab --help` (config.py imports this module) does not need
     import torch
     weights = {}
     for name, fan_in, fan_out in spec.linears():
@@ -168,7 +170,6 @@ class TorchQ:
         self.module = module
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
-        # deferred: torch, which `tracelab --help` (config.py imports this module) does not need
         import torch
         with torch.no_grad():
             return self.module(torch.from_numpy(np.ascontiguousarray(obs, np.float32))).numpy()

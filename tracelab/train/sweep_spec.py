@@ -29,6 +29,9 @@ from tracelab.train.config import GRIDWAR_ONLY, TrainConfig, config_fields
 if TYPE_CHECKING:
     from tracelab.train.memory import Limit
 
+# deferred: the evaluators (torch, the engine), the spec reader (gymnasium's ids), the game's scenarios and memory's
+# estimate, in the functions that use them: the sweep's parser (tracelab --help) imports this module for its choices
+
 DISTRIBUTIONS = ("uniform", "loguniform", "randint", "choice")
 SCHEDULERS = ("fifo", "asha")
 MODES = ("max", "min")
@@ -273,10 +276,8 @@ def evaluation_metrics(env: bool = False) -> list[str]:
     """What a trainer's evaluation writes (Tune reads a trial at its evaluations): GridWar's, or (`env`)
     an env's (`eval/win_rate` when its world declares a win)."""
     if env:
-        # deferred: loads torch; `tracelab --help` imports this module
         from tracelab.train.env_policy import EnvEvalResult
         return list(EnvEvalResult(wins=0).metrics())
-    # deferred: evaluate loads the engine (numba) and the store; `tracelab --help` imports this module
     from tracelab.train.evaluate import EvalResult
     return list(EvalResult(games=0, actions_per_win=0.0).metrics())
 
@@ -284,7 +285,6 @@ def evaluation_metrics(env: bool = False) -> list[str]:
 def _read_file(path: str) -> tuple[dict[str, dict[str, tuple[Any, str]]], dict[str, Any]]:
     """A sweep file's tables (field -> (value, where: FILE:LINE:COLUMN: TABLE.KEY)) and top-level settings;
     a file is data only, and the scenario file it names lies inside its folder."""
-    # deferred: tracelab.envs registers gymnasium's ids; `tracelab --help` imports this module
     from tracelab.envs.declared.spec_file import KeyLines, SpecError, parse_toml
     try:
         text = read_text(path, SPEC_FILE_CAP, what="sweep file")
@@ -320,7 +320,6 @@ def _read_file(path: str) -> tuple[dict[str, dict[str, tuple[Any, str]]], dict[s
 def _scenario_inside(path: str, value: Any, where: str) -> tuple[Any, str]:
     """A sweep file's scenario: a built-in name, or a file relative to the sweep file's folder and inside
     it (links resolved): a stranger's sweep file never makes tracelab read /etc/passwd."""
-    # deferred: loads the game's modules; `tracelab --help` imports this module
     from tracelab.game.scenario import builtin_scenario_names
     if not isinstance(value, str) or value in builtin_scenario_names():
         return value, where
@@ -345,7 +344,6 @@ def check_trials_memory(spec: SweepSpec, scenario: Any, limit: Limit) -> None:
     """Refuse a sweep whose largest trial would not fit `limit`, as `train` refuses a run, before Ray
     starts: each searched field at its value (a grid's, a choice's, a range's bound) that takes the most
     memory (each size grows the estimate whatever the others are), the others at the fixed settings."""
-    # deferred: memory's estimate loads the game's modules; `tracelab --help` imports this module
     from tracelab.train.memory import MemoryLimitExceeded, check_training_memory, training_estimate
 
     def estimate(settings: dict[str, Any]) -> int:

@@ -13,6 +13,9 @@ from typing import Any, Protocol
 
 from tracelab.errors import UserError
 
+# deferred: the tensorboard package, optional (tracelab[tensorboard]), when events are written; the store's reader
+# (DuckDB) only to export a run's metrics, which writing events live does not need
+
 INSTALL_HINT = ("writing TensorBoard event files needs the tensorboard package: "
                 "pip install 'tracelab[tensorboard]' (or pip install tensorboard)")
 EVENTS_GLOB = "events.out.tfevents.*"
@@ -30,7 +33,6 @@ class MetricSink(Protocol):
 def summary_writer_class() -> Any:
     """torch's SummaryWriter, or a UserError saying how to install what it needs."""
     try:
-        # deferred: the tensorboard package is optional (tracelab[tensorboard])
         from torch.utils.tensorboard import SummaryWriter
     except ImportError as e:
         raise UserError(INSTALL_HINT) from e
@@ -77,7 +79,6 @@ def export_metrics(con: Any, sink: TensorBoardSink) -> dict[str, int]:
     """Every row of the run's `metrics` (con: a connection from tracelab.store.open_run) into `sink`, at
     its step and wall time, streamed in batches: memory stays bounded whatever the run's size. Returns
     {"scalars", "names", "first_step", "last_step"}."""
-    # deferred: tracelab.store loads DuckDB and pandas, which writing events live does not need
     from tracelab.store.reader import arrow_stream, query_readonly
     names, first, last = query_readonly(con, "SELECT count(DISTINCT name), coalesce(min(step), 0), "
                                              "coalesce(max(step), 0) FROM metrics WHERE value IS NOT NULL"

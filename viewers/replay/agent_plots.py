@@ -1,10 +1,11 @@
 """The agent's half of an episode as plots (the run's `decisions` and `rewards` views, docs/store.md): the
 policy's value of every action per step, a series per action (/values/AGENT/ACTION), and each agent's
 return by reward term, stacked under its return (/terms/AGENT/TERM, /terms/AGENT/return): the deciding
-agents' where the policy decided for some (GridWar's red against the scripted blue), else every agent's. A run without
+agents' where the policy decided for some (the learners, beside a scripted opponent), else every agent's. A run without
 decisions or reward terms (written before they were recorded, or played by a scripted policy) has none."""
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -50,7 +51,7 @@ def read_series(con: RunConnection, episode: int) -> AgentSeries:
             continue
         running = per_term.setdefault(agent, {}).setdefault(term, np.zeros(len(ts)))
         running[np.searchsorted(ts, t):] += value     # a running sum: the term's return up to each step
-    # a run whose policy decided for some agents (GridWar's red; blue is the scripted opponent): theirs only
+    # a run whose policy decided for some agents (a scripted opponent beside them): theirs only
     deciders = {agent for agent, _ in out.values}
     for agent, terms in per_term.items():
         if deciders and agent not in deciders:
@@ -69,9 +70,11 @@ def _part(name: str) -> str:
     return rr.escape_entity_path_part(name)
 
 
-def log_agent_series(rec: rr.RecordingStream, series: AgentSeries) -> None:
+def log_agent_series(rec: rr.RecordingStream, series: AgentSeries,
+                     colour_of: Callable[[str], tuple[int, int, int] | None] = lambda agent: None) -> None:
     """The values per action (one colour per action, named by it; by agent too when several decide) and
-    the stacked terms under each agent's return."""
+    the stacked terms under each agent's return (in `colour_of(agent)`: its piece's on the board; else
+    white)."""
     deciders = {agent for agent, _ in series.values}
     actions = list(dict.fromkeys(action for _, action in series.values))
     lines: list[tuple[str, list[int] | np.ndarray, list[float] | np.ndarray]] = []
@@ -85,8 +88,7 @@ def log_agent_series(rec: rr.RecordingStream, series: AgentSeries) -> None:
         for i, (term, (ts, vs)) in enumerate(stacked.items()):
             path = f"{style.TERMS}/{_part(agent)}/{_part(term)}"
             top = term == RETURN
-            colour = style.TEAM_COLOR[int(agent.startswith("blue"))] if top and agent.startswith(("red", "blue")) else \
-                (255, 255, 255) if top else style.SERIES_COLORS[i % len(style.SERIES_COLORS)]
+            colour = (colour_of(agent) or (255, 255, 255)) if top else style.SERIES_COLORS[i % len(style.SERIES_COLORS)]
             name = f"{agent} {term}" if len(series.terms) > 1 else term
             rec.log(path, rr.SeriesLines(colors=[tuple(int(c) for c in colour)], names=name,
                                          widths=2.5 if top else 1.0), static=True)
@@ -95,6 +97,5 @@ def log_agent_series(rec: rr.RecordingStream, series: AgentSeries) -> None:
         return
     every = np.concatenate([np.asarray(ts, np.int64) for _, ts, _ in lines])
     send_per_entity(rec, [p for p, _, _ in lines], [len(ts) for _, ts, _ in lines],
-                    [rr.TimeColumn(style.STEP, sequence=every),
-                     rr.TimeColumn(style.PASS, sequence=style.pass_time(every, 0))],
+                    [rr.TimeColumn(style.STEP, sequence=every)],
                     rr.Scalars.columns(scalars=np.concatenate([np.asarray(vs, np.float64) for _, _, vs in lines])))

@@ -1,5 +1,5 @@
-"""The board of an episode in the replay, any run's with a `[board]` (tracelab.board; a RuleSim GridWar
-run's is war.toml's: viewers/board_state.py), the same the TUI draws: the cells as the env's `rgb_array`
+"""The board of an episode in the replay, any run's with a `[board]` (tracelab.board; an older run's
+without a spec: viewers/board_state.py), the same the TUI draws: the cells as the env's `rgb_array`
 paints them (tracelab.envs.declared.render), a frame at t = 0 and wherever a mark moved; each piece
 (/board/agents/red-agent-1) a point in its colour labelled with its name (grey and small when dead) or an
 arrow the way it heads (a bullet), logged where it changed; and at each step the cells where a rule set

@@ -1,7 +1,7 @@
-"""The rules' side of the replay of a run without a board: every firing as a TextLog line (its level is
-the rule, so the log view filters by rule), a markdown document per step (what changed, what fired, and
-the why-tree of each atom `--why` names, as `tracelab why` prints it), and per predicate how many of its
-atoms changed in each step."""
+"""The rules' side of a replay, any run's: every firing as a TextLog line (its level is the rule, so the
+log view filters by rule), a markdown document per step (what changed, what fired, the rewards, and the
+why-tree of each atom `--why` names and of each piece that died on the board, as `tracelab why` prints
+it), and per predicate how many of its atoms changed in each step."""
 from __future__ import annotations
 
 from collections import Counter
@@ -13,6 +13,7 @@ from tracelab.viewers.replay import style
 from tracelab.viewers.replay.columns import send_per_entity
 from tracelab.viewers.replay.graph_run import GraphEpisode
 
+from tracelab.store.coordinates import run_grid
 from tracelab.store.episode import EpisodeTrace
 from tracelab.store.model import RunModel
 from tracelab.store.reader import RunConnection
@@ -21,6 +22,11 @@ from tracelab.engine.terminal_text import printable
 from tracelab.viewers.replay.markdown_text import code_block, literal
 
 MORE = "more"   # the level of the line that counts a step's firings past the log's limit
+
+
+def no_edges(step: int) -> dict[str, int]:
+    """The edges per predicate of a run drawn on its board (none: the graph is not drawn)."""
+    return {}
 
 
 def log_rule_log(rec: rr.RecordingStream, episode: GraphEpisode) -> None:
@@ -69,16 +75,29 @@ def check_atoms(model: RunModel, atoms: tuple[str, ...]) -> None:
             raise ValueError(f"--why {atom}: {msg}") from None
 
 
-def _step_header(episode: GraphEpisode, s: int, edges: dict[str, int]) -> list[str]:
+def _per_step(episode: GraphEpisode) -> tuple[dict[int, Counter[str]], dict[int, str]]:
+    """Each step's logged firings per rule, and the first head a step's rules set that can be quoted (a
+    backtick would end the code span): one pass over the log, not one a step."""
+    fired: dict[int, Counter[str]] = {}
+    example: dict[int, str] = {}
+    for rule, head, t in zip(episode.firings.rule, episode.firings.head, episode.firings.t.tolist()):
+        fired.setdefault(t, Counter())[rule] += 1
+        if t not in example and "`" not in head:
+            example[t] = head
+    return fired, example
+
+
+def _step_header(episode: GraphEpisode, s: int, edges: dict[str, int], notes: list[str],
+                 fired: Counter[str]) -> list[str]:
     last = episode.steps - 1
     lines = [f"## Episode {episode.episode}, step {s} of {last}"]
     if s == last and episode.outcome:
         lines.append(f"**It ended: {literal(episode.outcome)}.**\n")
+    lines += notes
     changed = episode.changed.get(s, {})
     if edges:
         lines.append("- edges: " + ", ".join(f"{literal(name)} {n:,}" for name, n in edges.items()))
     lines.append("- changed: " + (", ".join(f"{literal(name)} {n:,}" for name, n in changed.items()) or "nothing"))
-    fired = Counter(r for r, t in zip(episode.firings.rule, episode.firings.t.tolist()) if t == s)
     total = episode.firings.per_step.get(s, 0)
     if total:
         lines.append(f"- fired: {total:,} (" + ", ".join(f"{literal(r)} {n:,}" for r, n in fired.most_common()) + ")")
@@ -87,39 +106,48 @@ def _step_header(episode: GraphEpisode, s: int, edges: dict[str, int]) -> list[s
 
 def why_documents(con: RunConnection, episode: GraphEpisode, atoms: tuple[str, ...], depth: int = 6,
                   model: Callable[[], RunModel] | None = None,
-                  edges: Callable[[int], dict[str, int]] = lambda s: {}) -> list[str]:
-    """A markdown document per step 0 .. steps-1: the edges per predicate (`edges(step)`), what changed
-    and fired, and the why-tree of each of `atoms` at the end of the step (a tree is explained again only
-    when its atom changed)."""
+                  edges: Callable[[int], dict[str, int]] = no_edges,
+                  at_step: dict[int, list[str]] | None = None,
+                  notes: dict[int, list[str]] | None = None) -> list[str]:
+    """A markdown document per step 0 .. steps-1: `notes[step]` (a game's actions and rewards), the
+    edges per predicate (`edges(step)`), what changed and fired, the why-tree of each of `atoms` at the end
+    of the step (a tree is explained again only when its atom changed) and of each of `at_step[step]` (a
+    piece's death, in that step only)."""
+    at_step, notes = at_step or {}, notes or {}
     trace = None
-    if atoms:
+    if atoms or at_step:
         run_model = model() if model else RunModel(con)
         trace = EpisodeTrace(con, episode.episode)
         run_model.prefetch_groundings(np.unique(trace.c["grounding"]))
         ids = {a: run_model.parse_atom(a) for a in atoms}
+    grid = run_grid(con)     # a run's cell ids with their (x, y), as `tracelab why` shows them
     trees: dict[tuple[str, int], WhyNode] = {}
     docs = []
+    fired, examples = _per_step(episode)
     for s in range(episode.steps):
-        lines = _step_header(episode, s, edges(s))
-        if trace is None:
-            example = next((head for head, t in zip(episode.firings.head, episode.firings.t.tolist())
-                            if t == s and "`" not in head), None)  # a backtick would end the code span
+        lines = _step_header(episode, s, edges(s), notes.get(s, []), fired.get(s, Counter()))
+        if not atoms:
+            example = examples.get(s)
             if example:
                 lines.append(f"\nAsk why an atom has its bound: `tracelab replay RUN --why '{example}'`.")
+        for atom in at_step.get(s, []):
+            lines += [f"\n### Why {literal(atom)}",
+                      *code_block(render_why(explain_in(run_model, trace, atom, s, depth), s, grid))]
         for atom in atoms:
             last = trace.last_at_end_of(ids[atom], s)
             key = (atom, -1 if last is None else last.index)
             if key not in trees:
                 trees[key] = explain_in(run_model, trace, atom, s, depth)
-            lines += [f"\n### Why {literal(atom)}", *code_block(render_why(trees[key], s))]
+            lines += [f"\n### Why {literal(atom)}", *code_block(render_why(trees[key], s, grid))]
         docs.append("\n".join(lines))
     return docs
 
 
 def log_why(rec: rr.RecordingStream, con: RunConnection, episode: GraphEpisode, atoms: tuple[str, ...],
             depth: int = 6, model: Callable[[], RunModel] | None = None,
-            edges: Callable[[int], dict[str, int]] = lambda s: {}) -> None:
-    docs = why_documents(con, episode, atoms, depth, model, edges)
+            edges: Callable[[int], dict[str, int]] = no_edges, at_step: dict[int, list[str]] | None = None,
+            notes: dict[int, list[str]] | None = None) -> None:
+    docs = why_documents(con, episode, atoms, depth, model, edges, at_step, notes)
     rec.send_columns(style.WHY, indexes=[rr.TimeColumn(style.STEP, sequence=np.arange(len(docs)))],
                      columns=rr.TextDocument.columns(text=[printable(d, keep="\n\t") for d in docs],
                                                      media_type=["text/markdown"] * len(docs)))

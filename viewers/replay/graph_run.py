@@ -1,7 +1,7 @@
-"""What the replay of a run without a board (a reasoning run, `tracelab reason --run`) reads from the run:
-its nodes, their positions when the graph gives them (node attributes `x` and `y`), its predicates,
-and per episode the bounds of the colour predicate over time, the binary atoms that draw the edges, the
-fired rules and how many atoms of each predicate changed in each step.
+"""What the replay reads from a run: of a run without a board (a reasoning run, `tracelab reason --run`)
+its nodes, their positions when the graph gives them (node attributes `x` and `y`), its predicates, and
+per episode the bounds of the colour predicate over time and the binary atoms that draw the edges; of
+every run, per episode the fired rules and how many atoms of each predicate changed in each step.
 
 Everything is read through the run's sandboxed connection (tracelab.store.reader.open_run), as numpy
 columns, one query each; what a big episode holds is bounded by what it changed: the rule log keeps at
@@ -118,7 +118,7 @@ class Firings:
 
 @dataclass
 class GraphEpisode:
-    """One episode of a run without a board, as the replay draws it."""
+    """One episode as the replay draws it (the colour and edge rows: a run without a board's)."""
     episode: int
     steps: int                     # timesteps drawn: t = 0 .. steps - 1
     outcome: str | None
@@ -135,31 +135,41 @@ def _bound(lo: float, hi: float) -> str:
 
 
 def read_firings(con: RunConnection, episode: int) -> Firings:
+    # one query: the step's count of firings beside each logged one (the window counts before QUALIFY keeps);
+    # the bindings' text once per grounding (the `firings` view spells it out per firing: 5x the time)
     rows = con.execute(
-        "SELECT f.t, f.rule, f.bindings, f.head, c.old_lower, c.old_upper, f.new_lower, f.new_upper "
-        "FROM firings f JOIN raw.changes c ON c.episode = f.episode AND c.seq = f.seq WHERE f.episode = ? "
-        "QUALIFY row_number() OVER (PARTITION BY f.t ORDER BY f.seq) <= ? ORDER BY f.seq",
-        [episode, MAX_LOGGED_FIRINGS]).fetchall()
-    per_step = dict(con.execute("SELECT t, count(*) FROM firings WHERE episode = ? GROUP BY t",
-                                [episode]).fetchall())
+        "WITH f AS (SELECT c.seq, c.t, r.name AS rule, c.grounding, a.text AS head, c.old_lower, c.old_upper, "
+        "  c.new_lower, c.new_upper, count(*) OVER (PARTITION BY c.t) AS n "
+        "  FROM raw.changes c JOIN raw.rules r ON c.cause_kind = 2 AND r.rule = c.cause_id "
+        "  LEFT JOIN atoms a ON a.atom = c.atom WHERE c.episode = ? "
+        "  QUALIFY row_number() OVER (PARTITION BY c.t ORDER BY c.seq) <= ?), "
+        "v AS (SELECT g.grounding, r.variables, unnest(g.var_values) AS node, "
+        "  generate_subscripts(g.var_values, 1) AS i FROM raw.groundings g JOIN raw.rules r ON r.rule = g.rule "
+        "  WHERE g.grounding IN (SELECT grounding FROM f)), "
+        "b AS (SELECT v.grounding, string_agg(v.variables[v.i] || '=' || n.name, ', ' ORDER BY v.i) AS bindings "
+        "  FROM v JOIN raw.nodes n ON n.node = v.node GROUP BY v.grounding) "
+        "SELECT f.t, f.rule, coalesce(b.bindings, ''), f.head, f.old_lower, f.old_upper, f.new_lower, f.new_upper, "
+        "f.n FROM f LEFT JOIN b USING (grounding) ORDER BY f.seq", [episode, MAX_LOGGED_FIRINGS]).fetchall()
     return Firings(np.array([r[0] for r in rows], np.int64), [r[1] for r in rows], [r[3] for r in rows],
-                   [f"{r}({b}): {h} {_bound(ol, ou)} -> {_bound(nl, nu)}" for _, r, b, h, ol, ou, nl, nu in rows],
-                   {int(t): int(n) for t, n in per_step.items()})
+                   [f"{r}({b}): {h} {_bound(ol, ou)} -> {_bound(nl, nu)}" for _, r, b, h, ol, ou, nl, nu, _ in rows],
+                   {int(r[0]): int(r[8]) for r in rows})
 
 
-def read_episode(con: RunConnection, graph: RunGraph, episode: int, label: str | None) -> GraphEpisode:
-    """The episode's rows of the colour predicate `label`, edge rows, rule log and change counts (one
-    query each)."""
+def read_episode(con: RunConnection, graph: RunGraph | None, episode: int, label: str | None,
+                 edges: bool = True) -> GraphEpisode:
+    """The episode's rows of the colour predicate `label` (None: none), edge rows (`edges`: the graph is
+    drawn), rule log and change counts (one query each)."""
     # the timesteps drawn are t = 0 .. the last: an env's episode of n steps ends at t = n (its t = 0 is the
     # start), a reasoning's of n timesteps at t = n - 1, a running episode at its last change so far
-    ends = con.execute("SELECT outcome, t_end FROM episodes WHERE episode = ?", [episode]).fetchall()
-    last = con.execute("SELECT max(t) FROM raw.changes WHERE episode = ?", [episode]).fetchall()[0][0]
-    steps = max(int(last or 0), int(ends[0][1] or 0) if ends else 0) + 1
-    outcome = ends[0][0] if ends else None
+    (outcome, t_end, last), = con.execute(
+        "SELECT (SELECT any_value(outcome) FROM episodes WHERE episode = $e), "
+        "(SELECT any_value(t_end) FROM episodes WHERE episode = $e), "
+        "(SELECT max(t) FROM raw.changes WHERE episode = $e)", {"e": episode}).fetchall()
+    steps = max(int(last or 0), int(t_end or 0)) + 1
     color_rows: dict[str, np.ndarray] = {"t": np.zeros(0, np.int64), "node": np.zeros(0, np.int64),
                                          "lower": np.zeros(0), "upper": np.zeros(0)}
     color_nodes = np.zeros(0, np.int64)
-    if label is not None:
+    if label is not None and graph is not None:
         color_nodes = np.asarray(con.execute("SELECT DISTINCT arg0 FROM raw.atoms WHERE label = ? AND arg0 >= 0",
                                              [graph.unary[label]]).fetchnumpy()["arg0"], np.int64)
         cols = con.execute("SELECT c.t, a.arg0 AS node, c.new_lower AS lower, c.new_upper AS upper "
@@ -167,10 +177,13 @@ def read_episode(con: RunConnection, graph: RunGraph, episode: int, label: str |
                            "WHERE c.episode = ? AND a.label = ? ORDER BY c.seq",
                            [episode, graph.unary[label]]).fetchnumpy()
         color_rows = {k: np.asarray(v) for k, v in cols.items()}
-    cols = con.execute("SELECT c.t, a.label, a.arg0 AS source, a.arg1 AS target, c.new_lower AS lower "
-                       "FROM raw.changes c JOIN raw.atoms a ON a.atom = c.atom "
-                       "WHERE c.episode = ? AND a.arg1 >= 0 ORDER BY c.seq", [episode]).fetchnumpy()
-    edge_rows = {k: np.asarray(v) for k, v in cols.items()}
+    edge_rows = {"t": np.zeros(0, np.int64), "label": np.zeros(0, np.int64), "source": np.zeros(0, np.int64),
+                 "target": np.zeros(0, np.int64), "lower": np.zeros(0)}
+    if edges:
+        cols = con.execute("SELECT c.t, a.label, a.arg0 AS source, a.arg1 AS target, c.new_lower AS lower "
+                           "FROM raw.changes c JOIN raw.atoms a ON a.atom = c.atom "
+                           "WHERE c.episode = ? AND a.arg1 >= 0 ORDER BY c.seq", [episode]).fetchnumpy()
+        edge_rows = {k: np.asarray(v) for k, v in cols.items()}
     changed: dict[int, dict[str, int]] = {}
     for t, name, n in con.execute(
             f"SELECT c.t, l.name, count(DISTINCT c.atom) FROM raw.changes c JOIN raw.atoms a ON a.atom = c.atom "

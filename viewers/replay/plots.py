@@ -1,7 +1,6 @@
-"""Plots: the reward and return per step of an episode (from the run's `steps` rows), each team's in a
-grid game, each agent's in any other game, and a
-training run's curves (its `metrics` rows, docs/store.md and the training-run contract) on their own
-`train_step` timeline."""
+"""Plots: each agent's reward and return per step of an episode (from the run's `steps` rows), in its
+piece's colour when it is one of the board's, and a training run's curves (its `metrics` rows,
+docs/store.md and the training-run contract) on their own `train_step` timeline."""
 from __future__ import annotations
 
 from functools import cache
@@ -10,45 +9,44 @@ import numpy as np
 import rerun as rr
 from tracelab.viewers.replay import style
 from tracelab.viewers.replay.columns import send_per_entity
+from tracelab.viewers.replay.markdown_text import literal
 
-from tracelab.viewers.board import TEAMS, EpisodeBoard
 from tracelab.store.reader import RunConnection
 
 REWARD_PALER = 0.5      # a reward line's team colour, this far towards white
 
 
-def step_rewards(con: RunConnection, episodes: list[int]) -> dict[int, list[tuple[int, str, float]]]:
-    """episode -> its `steps` rows (t, agent, reward), for all these episodes in one query (`t`: the
-    timestep an env step ended at, the replay's `step`)."""
-    out: dict[int, list[tuple[int, str, float]]] = {}
-    for episode, step, agent, reward in con.execute(
-            "SELECT episode, t, agent, reward FROM steps WHERE episode IN (SELECT unnest(?::BIGINT[]))",
-            [list(episodes)]).fetchall():
-        out.setdefault(episode, []).append((step, agent, reward))
+StepRow = tuple[int, str, float, str]     # t, agent, reward, action (its name, else its number)
+
+
+def step_rows(con: RunConnection, episodes: list[int]) -> dict[int, list[StepRow]]:
+    """episode -> its `steps` rows (t, agent, reward, action) in t order, for all these episodes in one
+    query (`t`: the timestep an env step ended at, the replay's `step`)."""
+    out: dict[int, list[StepRow]] = {}
+    for episode, step, agent, reward, action in con.execute(
+            "SELECT episode, t, agent, reward, coalesce(action_name, action::VARCHAR) FROM steps "
+            "WHERE episode IN (SELECT unnest(?::BIGINT[])) ORDER BY episode, t, agent", [list(episodes)]).fetchall():
+        out.setdefault(episode, []).append((step, agent, reward, action))
     return out
 
 
-def team_rewards(board: EpisodeBoard, rows: list[tuple[int, str, float]]) -> np.ndarray | None:
-    """[steps + 1, 2] each team's reward per step (the sum of its agents'; step 0 is 0) from the
-    episode's `steps` rows, or None when the run has none for it."""
-    if not rows:
-        return None
-    team_of = dict(zip(board.agents, board.agent_team.tolist()))
-    out = np.zeros((board.steps + 1, 2))
-    for step, agent, reward in rows:
-        if 0 <= step <= board.steps and agent in team_of:
-            out[step, team_of[agent]] += reward
-    return out
+def step_notes(rows: list[StepRow]) -> dict[int, list[str]]:
+    """t -> the step document's lines of what the agents did and got in that step."""
+    by_t: dict[int, list[StepRow]] = {}
+    for row in rows:
+        by_t.setdefault(row[0], []).append(row)
+    return {t: [f"- actions: {', '.join(f'{literal(a)} {literal(act)}' for _, a, _, act in at)}",
+                f"- reward: {', '.join(f'{literal(a)} {r:g}' for _, a, r, _ in at)}"] for t, at in by_t.items()}
 
 
-def agent_rewards(agents: list[str], rows: list[tuple[int, str, float]]) -> np.ndarray | None:
+def agent_rewards(agents: list[str], rows: list[StepRow]) -> np.ndarray | None:
     """[last t + 1, len(agents)] each agent's reward per timestep (0 where it took no step) from the
     episode's `steps` rows, or None when the run has none for it."""
     if not rows:
         return None
     column = {a: i for i, a in enumerate(agents)}
-    out = np.zeros((max(t for t, _, _ in rows) + 1, len(agents)))
-    for t, agent, reward in rows:
+    out = np.zeros((max(t for t, *_ in rows) + 1, len(agents)))
+    for t, agent, reward, _ in rows:
         if t >= 0 and agent in column:
             out[t, column[agent]] += reward
     return out
@@ -63,13 +61,12 @@ def _series_style(name: str, kind: str, colour: tuple[int, int, int]) -> rr.Seri
     return rr.SeriesLines(colors=[int(v) for v in c], names=f"{name} {kind}", widths=2.0 if kind == "return" else 1.0)
 
 
-def log_rewards(rec: rr.RecordingStream, rewards: np.ndarray, names: list[str] | tuple[str, ...] = TEAMS,
-                colours: list[tuple[int, int, int]] | None = None) -> None:
-    """Each column of `rewards` ([steps, len(names)]: a team's or an agent's reward at each step) as its
-    reward and its return (the running sum), in `colours` (the teams' by default, else the palette's)."""
-    if colours is None:
-        colours = [tuple(int(v) for v in c) for c in style.TEAM_COLOR] if tuple(names) == TEAMS else \
-            [style.SERIES_COLORS[i % len(style.SERIES_COLORS)] for i in range(len(names))]
+def log_rewards(rec: rr.RecordingStream, rewards: np.ndarray, names: list[str],
+                colours: list[tuple[int, int, int] | None] | None = None) -> None:
+    """Each column of `rewards` ([steps, len(names)]: an agent's reward at each step) as its reward and its
+    return (the running sum), in `colours` (None, or a None in it: the palette's)."""
+    palette = [style.SERIES_COLORS[i % len(style.SERIES_COLORS)] for i in range(len(names))]
+    colours = [c or p for c, p in zip(colours or [None] * len(names), palette)]
     steps = np.arange(len(rewards))
     series = [(name, kind, values) for i, name in enumerate(names)
               for kind, values in (("reward", rewards[:, i]), ("return", np.cumsum(rewards[:, i])))]
@@ -77,8 +74,7 @@ def log_rewards(rec: rr.RecordingStream, rewards: np.ndarray, names: list[str] |
         rec.log(f"{style.PLOTS}/{kind}/{name}", _series_style(name, kind, colour), static=True)
     every = np.tile(steps, len(series))
     send_per_entity(rec, [f"{style.PLOTS}/{kind}/{name}" for name, kind, _ in series], [len(steps)] * len(series),
-                    [rr.TimeColumn(style.STEP, sequence=every),
-                     rr.TimeColumn(style.PASS, sequence=style.pass_time(every, 0))],
+                    [rr.TimeColumn(style.STEP, sequence=every)],
                     rr.Scalars.columns(scalars=np.concatenate([v for _, _, v in series])))
 
 

@@ -1,19 +1,22 @@
-"""One traced episode as one rerun recording: the board, the fired rules, the state lanes, the why
-documents, the plots (the agent's: agent_plots.py) and the blueprint."""
+"""One episode of any run as one rerun recording: the board (a run whose world declares a `[board]`:
+viewers/board_state.py) or else the run's graph, the fired rules, the changes per step, the step and
+why documents, the state lanes, the rewards and returns, the agent's plots, a training's curves and the
+blueprint (docs/replay.md)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
 import numpy as np
 import rerun as rr
-from tracelab.viewers.replay import agent_plots, board_layer, plots, rules_layer
-from tracelab.viewers.replay.blueprint import replay_blueprint
+from tracelab.viewers.replay import agent_plots, board_layer, graph_layer, graph_rules, lanes, plots
+from tracelab.viewers.replay.blueprint import board_view, graph_view, replay_blueprint
+from tracelab.viewers.replay.graph_layout import fit_given, layout
+from tracelab.viewers.replay.graph_run import GraphEpisode, RunGraph, read_episode
 
 from tracelab.board import Board
-from tracelab.viewers.board import BoardLoader, EpisodeBoard
-from tracelab.viewers.board_state import board_of_run
 from tracelab.store.model import RunModel
 from tracelab.store.reader import RunConnection
+from tracelab.viewers.board_state import board_of_run, piece_color
 
 APPLICATION_ID = "tracelab-replay"
 
@@ -21,68 +24,97 @@ APPLICATION_ID = "tracelab-replay"
 @dataclass
 class ReplayOptions:
     why_depth: int = 6
-    lanes: tuple[str, ...] = rules_layer.LANE_LABELS
+    lanes: tuple[str, ...] = lanes.DEFAULT_LANES
     open_at: str = "start"          # where the viewer's time cursor starts: start | end
     color_by: str | None = None     # a run without a board: the predicate colouring the nodes (None: default)
-    why_atoms: tuple[str, ...] = () # a run without a board: the atoms whose why-trees the documents show
+    why_atoms: tuple[str, ...] = () # the atoms whose why-trees the step documents show
 
 
 @dataclass
 class RunContext:
-    """What every episode of a run shares: its board loader (cast, vocabulary), its program model (for
-    the why-trees) and, for a training run, its metrics. `prefetch` reads what a batch of episodes needs
-    in a few queries instead of a few per episode."""
+    """What every episode of a run shares: its board (None: its graph is drawn instead, with the nodes'
+    positions: the graph's own `x`/`y`, else a layout computed once), its program model (for the
+    why-trees), the lanes it can draw and, for a training run, its metrics. `prefetch` reads the `steps`
+    rewards of a batch of episodes in one query."""
     con: RunConnection
     name: str
-    loader: BoardLoader
-    board: Board | None             # what the board layer draws (war.toml's for a RuleSim run)
+    board: Board | None
+    graph: RunGraph | None          # a run without a board's
     metrics: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    lanes: tuple[str, ...] = ()
+    _positions: np.ndarray | None = None
     _model: RunModel | None = None
-    _rewards: dict[int, list[tuple[int, str, float]]] = field(default_factory=dict)
-    _groundings: np.ndarray | None = None     # the prefetched episodes' groundings, for the model
+    _color_label: tuple[str | None] | None = None   # decided at the first episode, kept for the others
+    _steps: dict[int, list[plots.StepRow]] = field(default_factory=dict)
 
     @classmethod
     def of(cls, con: RunConnection, name: str) -> RunContext:
-        return cls(con, name, BoardLoader(con), board_of_run(con), plots.training_metrics(con))
+        board = board_of_run(con)
+        return cls(con, name, board, None if board is not None else RunGraph.read(con),
+                   plots.training_metrics(con))
 
-    def prefetch(self, episodes: list[int]) -> None:
-        """Read these episodes' change rows, outcomes, grounding texts and `steps` rewards, one query each;
-        their groundings go to the model when a why-tree is first wanted."""
-        self._groundings = self.loader.prefetch(episodes)
-        rewards = plots.step_rewards(self.con, episodes)
-        self._rewards.update({e: rewards.get(e, []) for e in episodes})
+    def positions(self, episode: int) -> np.ndarray:
+        """[nodes, 2] float32 drawing positions of a run without a board, decided at the first episode."""
+        assert self.graph is not None
+        if self._positions is None:
+            given = self.graph.given_positions(self.con, episode)
+            if given is not None:
+                drawn = fit_given(given)
+            else:
+                drawn = layout(len(self.graph.nodes), np.concatenate([self.graph.edges, self._binary_pairs()]))
+            self._positions = drawn.astype(np.float32)
+        return self._positions
 
-    def step_rewards(self, episode: int) -> list[tuple[int, str, float]]:
-        """The episode's `steps` rows (prefetched ones from memory, once)."""
-        if episode not in self._rewards:
-            return plots.step_rewards(self.con, [episode]).get(episode, [])
-        return self._rewards.pop(episode)
+    def _binary_pairs(self) -> np.ndarray:
+        """Node pairs of the run's binary atoms: what pulls nodes together in a layout when the run has
+        no graph file's edges (facts written in a program)."""
+        cols = self.con.execute("SELECT DISTINCT arg0, arg1 FROM raw.atoms WHERE arg0 >= 0 AND arg1 >= 0 "
+                                "AND arg0 <> arg1").fetchnumpy()
+        return np.stack([np.asarray(cols["arg0"], np.int64), np.asarray(cols["arg1"], np.int64)], axis=1)
+
+    def color_label(self, wanted: str | None, episode: int) -> str | None:
+        """--color-by, or the default of the first episode replayed (every recording colours alike); None
+        on a board."""
+        if self.graph is None:
+            return None
+        if self._color_label is None:
+            self._color_label = (self.graph.color_label(self.con, wanted, episode),)
+        return self._color_label[0]
 
     @property
     def model(self) -> RunModel:
-        """The run's program model, read when a why-tree is first wanted; with the groundings of the
-        prefetched episodes."""
         if self._model is None:
             self._model = RunModel(self.con)
-        if self._groundings is not None:
-            self._model.prefetch_groundings(self._groundings)
-            self._groundings = None
         return self._model
+
+    def check(self, options: ReplayOptions, episode: int) -> None:
+        """The user's names before anything is drawn: --color-by, --why and --lanes (one-line errors)."""
+        if self.board is not None and options.color_by is not None:
+            raise ValueError("--color-by colours a graph's nodes; this run's episodes are drawn on its world's "
+                             "board (--lanes draws a predicate's states, --why an atom's why-trees)")
+        self.color_label(options.color_by, episode)
+        graph_rules.check_atoms(self.model, options.why_atoms)
+        self.lanes = lanes.check_lanes(self.con, options.lanes)
+
+    def prefetch(self, episodes: list[int]) -> None:
+        """The `steps` rows of these episodes in one query (the rest of an episode is read when it is
+        recorded: a reasoning's rows may be millions)."""
+        rows = plots.step_rows(self.con, episodes)
+        self._steps.update({e: rows.get(e, []) for e in episodes})
+
+    def step_rows(self, episode: int) -> list[plots.StepRow]:
+        """The episode's `steps` rows (prefetched ones from memory, once)."""
+        if episode not in self._steps:
+            return plots.step_rows(self.con, [episode]).get(episode, [])
+        return self._steps.pop(episode)
 
     def refresh(self) -> None:
         """Catch up with a run being written: its metrics so far (the model reads a grown vocabulary
         by itself)."""
         self.metrics = plots.training_metrics(self.con)
 
-    def check(self, options: ReplayOptions, episode: int) -> None:
-        """The options of a run without a board have no meaning on a game's (one-line errors)."""
-        if options.color_by is not None or options.why_atoms:
-            raise ValueError(f"--{'color-by' if options.color_by is not None else 'why'} is for a run "
-                             "without a board (a reasoning run); this run's episodes are games on its board, "
-                             "whose replay explains each step's deaths and the game's end (--why-depth)")
-
     def record(self, episode: int, rec: rr.RecordingStream, options: ReplayOptions, blueprint: bool = True,
-               last_step: int = 0) -> EpisodeBoard:
+               last_step: int = 0) -> GraphEpisode:
         return record_episode(self, episode, rec, options, blueprint, last_step)
 
 
@@ -90,28 +122,41 @@ def new_recording(run_name: str, episode: int) -> rr.RecordingStream:
     return rr.RecordingStream(APPLICATION_ID, recording_id=f"{run_name}/episode-{episode}")
 
 
-def record_episode(ctx: RunContext, episode: int, rec: rr.RecordingStream,
-                   options: ReplayOptions | None = None, blueprint: bool = True,
-                   last_step: int = 0) -> EpisodeBoard:
-    """Log one episode into `rec` (which already has its sink) and return its board. The blueprint
-    belongs to the application, so one per output is enough (`blueprint`: send it with this one; its
-    step axes end at `last_step`, or at this episode's end if later)."""
+def record_episode(ctx: RunContext, episode: int, rec: rr.RecordingStream, options: ReplayOptions | None = None,
+                   blueprint: bool = True, last_step: int = 0) -> GraphEpisode:
+    """Log one episode into `rec` (which already has its sink). The blueprint belongs to the application,
+    so one per output is enough (`blueprint`: send it with this one; its step axes end at `last_step`, or
+    at this episode's end if later)."""
     options = options or ReplayOptions()
-    board = ctx.loader.load(episode)
-    rec.send_recording_name(f"{ctx.name} episode {episode} ({board.outcome or 'running'}, {board.steps} steps)")
+    label = ctx.color_label(options.color_by, episode)
+    data = read_episode(ctx.con, ctx.graph, episode, label, edges=ctx.board is None)
+    rec.send_recording_name(f"{ctx.name} episode {episode} ({data.outcome or 'running'}, {data.steps} steps)")
+    rows = ctx.step_rows(episode)
     agent = agent_plots.read_series(ctx.con, episode)
     if blueprint:
-        rec.send_blueprint(replay_blueprint(ctx.board, bool(ctx.metrics), options.open_at,
-                                            max(last_step, board.steps), bool(agent.values), bool(agent.terms)))
-    if ctx.board is not None:
-        board_layer.log_board(rec, ctx.con, ctx.board, episode)
-    rules_layer.log_rule_log(rec, board)
-    rules_layer.log_lanes(rec, board, options.lanes)
-    rewards = plots.team_rewards(board, ctx.step_rewards(episode))
-    if rewards is not None:
-        plots.log_rewards(rec, rewards)
-    agent_plots.log_agent_series(rec, agent)
-    rules_layer.log_why(rec, ctx.con, board, rewards, options.why_depth, lambda: ctx.model)
+        main = board_view(ctx.board) if ctx.board is not None else graph_view(ctx.positions(episode), label)
+        rec.send_blueprint(replay_blueprint(main, options.open_at, max(last_step, data.steps - 1), bool(rows),
+                                            bool(agent.values), bool(agent.terms), bool(ctx.metrics),
+                                            bool(ctx.lanes)))
+    board = ctx.board
+
+    def colour_of(agent: str) -> tuple[int, int, int] | None:
+        return None if board is None else piece_color(board, agent)
+
+    edges, deaths = graph_rules.no_edges, {}
+    if board is not None:
+        deaths = board_layer.log_board(rec, ctx.con, board, episode).deaths()
+    else:
+        edges = graph_layer.log_graph(rec, ctx.graph, ctx.positions(episode), data).edge_counts
+    if rows:
+        agents = list(dict.fromkeys(agent for _, agent, *_ in rows))
+        plots.log_rewards(rec, plots.agent_rewards(agents, rows), agents, [colour_of(a) for a in agents])
+    agent_plots.log_agent_series(rec, agent, colour_of)
+    lanes.log_lanes(rec, ctx.con, episode, ctx.lanes, rows)
+    graph_rules.log_rule_log(rec, data)
+    graph_rules.log_changed(rec, data)
+    graph_rules.log_why(rec, ctx.con, data, options.why_atoms, options.why_depth, lambda: ctx.model, edges, deaths,
+                        plots.step_notes(rows))
     if ctx.metrics:
         plots.log_training(rec, ctx.metrics)
-    return board
+    return data

@@ -1,6 +1,5 @@
 """Replaying a run: the chosen episodes, once (`replay_run`) or as they finish in a run being written
-(`follow_run`, --live). A game run's episodes are drawn on its board (recording.py), a run without a
-board's on its graph (graph_recording.py)."""
+(`follow_run`, --live), each as one recording (recording.py: on the world's board, or the run's graph)."""
 from __future__ import annotations
 
 import time
@@ -8,24 +7,20 @@ from collections.abc import Callable
 from functools import partial
 
 from tracelab.viewers.replay.outputs import Output
-from tracelab.viewers.replay.graph_recording import GraphRunContext
 from tracelab.viewers.replay.recording import ReplayOptions, RunContext
 from tracelab.viewers.replay.select import EpisodeFilter, longest_episode, select_episodes
 
-from tracelab.store.kind import has_board
 from tracelab.store.reader import RunConnection, retrying, run_info
 
 PREFETCH_EPISODES = 50      # episodes read from the run per batch (their change rows are held in memory)
 
-Context = RunContext | GraphRunContext
+
+def context_of(con: RunConnection, name: str) -> RunContext:
+    """What every episode of the run shares (its board or its graph, its model, its metrics)."""
+    return RunContext.of(con, name)
 
 
-def context_of(con: RunConnection, name: str) -> Context:
-    """The run's board context when it declares a board, else its graph's."""
-    return RunContext.of(con, name) if has_board(con) else GraphRunContext.of(con, name)
-
-
-def replay_episodes(ctx: Context, episodes: list[int], out: Output,
+def replay_episodes(ctx: RunContext, episodes: list[int], out: Output,
                     options: ReplayOptions | None = None) -> int:
     """Each episode as its own recording into `out`; returns how many were sent. What the episodes need
     from the run is read a batch at a time. The blueprint, sent once per output, gets step axes as long
@@ -42,7 +37,7 @@ def replay_episodes(ctx: Context, episodes: list[int], out: Output,
     return len(episodes)
 
 
-def replay_run(ctx: Context, f: EpisodeFilter, out: Output, options: ReplayOptions | None = None) -> int:
+def replay_run(ctx: RunContext, f: EpisodeFilter, out: Output, options: ReplayOptions | None = None) -> int:
     episodes = retrying(lambda: select_episodes(ctx.con, f))
     if not episodes:
         raise ValueError("no episode of this run matches (played episodes with steps > 0"
@@ -60,7 +55,7 @@ def follow_run(con: RunConnection, name: str, run: str, f: EpisodeFilter, out: O
     Returns how many were sent. The run's program is read once its first episode has ended (a run
     just started may not have published it yet)."""
     sent: set[int] = set()
-    ctx: Context | None = None
+    ctx: RunContext | None = None
     while True:
         running = run_info(run).status == "running"
         new = retrying(lambda: select_episodes(con, EpisodeFilter(None, f.outcome), exclude=sent))

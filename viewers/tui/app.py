@@ -18,7 +18,7 @@ from tracelab.viewers.tui.runs_screen import RunsScreen
 
 class TracelabApp(App[None]):
     TITLE = "tracelab"
-    CSS_PATH = "tracelab.tcss"   # every view's styles (board.py, declared_board.py, graph_side.py: inline)
+    CSS_PATH = "tracelab.tcss"   # every view's styles
     BINDINGS = [
         Binding("question_mark", "help", "help"),
         Binding("q", "quit", "quit"),

@@ -1,7 +1,7 @@
 """BoardView: a run's board at the trace cursor's timestep, beside the trace: the spec's `[board]`
-(tracelab.board; a RuleSim GridWar run's is war.toml's: viewers/board_state.py), each cell's character in
+(tracelab.board; an older run's without a spec: viewers/board_state.py), each cell's character in
 its colour, a mark's character where its predicate holds (FrozenLake's `@`), the pieces where they stand
-(GridWar's agents R1, B1 in their team's colour, ✕ when dead; its bullets as arrows) and under the grid
+(war.toml's agents R1, B1 in their team's colour, ✕ when dead; its bullets as arrows) and under the grid
 each living or dead piece of a kind with `alive`. A cell is one character, two when the board has pieces
 (a label). A run without a board shows a note instead."""
 from __future__ import annotations
@@ -67,10 +67,6 @@ def draw(board: Board, state: BoardState) -> Text:
 
 
 class BoardView(Widget):
-    DEFAULT_CSS = """
-    BoardView { width: 1fr; height: auto; border: round $primary-darken-2; padding: 0 0; }
-    """
-
     def __init__(self, source: RunSource, board: Board | None = None) -> None:
         super().__init__(id="board")
         self.source = source

@@ -103,8 +103,6 @@ def draw_neighbourhood(hood: Neighbourhood, width: int = 80) -> Text:
 
 class HoodText(Widget):
     """The neighbourhood, drawn at the pane's width (its lines wrap under each neighbour's name)."""
-    DEFAULT_CSS = "HoodText { height: auto; }"
-
     def __init__(self) -> None:
         super().__init__(id="gs-hood-text")
         self.hood: Neighbourhood | None = None
@@ -123,15 +121,6 @@ class GraphSide(Vertical):
         Binding("slash", "focus_filter", "filter atoms"),
         Binding("c", "toggle_mode", "true/changed"),    # also from the trace (TracePane)
     ]
-    DEFAULT_CSS = """
-    GraphSide { width: 33%; min-width: 32; max-width: 64; height: 1fr; }
-    GraphSide #gs-atoms { height: 3fr; border: round $primary-darken-2; }
-    GraphSide #gs-filter { height: 1; }
-    GraphSide #gs-table { height: 1fr; }
-    GraphSide #gs-status { height: auto; max-height: 2; color: $text-muted; }
-    GraphSide #gs-hood { height: 2fr; border: round $primary-darken-2; }
-    """
-
     class OnlyAtom(Message):
         """Show only this atom's changes in the trace (Enter on an atom of the list)."""
         def __init__(self, atom_id: int) -> None:

@@ -206,7 +206,7 @@ class TracePane(Vertical):
 
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
         # a run without a board has its atoms beside the trace (key b: "atoms"); evaluation games are a
-        # game's (GridWar's board) or a training's of a declared world (no such board); a live run may get them
+        # game run's (it declares a board) or a training's of a declared world (no such board); a live run may get them
         if action == "eval_game":
             return self.source.board is not None or self.source.has_eval_games or self.source.live
         if action == "toggle_board":

@@ -22,6 +22,9 @@ if TYPE_CHECKING:
     from tracelab.envs.declared.vector_env import DeclaredVectorEnv
     from tracelab.game.scenario import Scenario
 
+# deferred: the declared envs load the engine (numba) when gym.make calls an entry point here, and the game's
+# scenario module only to compare a scenario with what a spec plays; registering the ids does not need them
+
 WAR_SPEC = RULES_DIR / "gridworld" / "war.toml"
 # a GridWar id -> its spec and the params that make its scenario (the others keep the spec's defaults)
 GRIDWAR_SPEC_IDS: dict[str, tuple[Path, dict[str, Any]]] = {
@@ -65,7 +68,6 @@ def spec_and_params(env_id: str, kwargs: dict[str, Any]) -> tuple[Path, dict[str
 
 def make_env(env_id: str, **kwargs: Any) -> DeclaredEnv:
     """gym.make's entry point of a GridWar id: the declared gymnasium Env (one agent a team)."""
-    # deferred: the declared worlds load the engine (numba); registering the ids does not
     from tracelab.envs.declared.gym_env import DeclaredEnv
     spec, params = spec_and_params(env_id, kwargs)
     _one_agent(env_id, params, "a gymnasium Env")
@@ -74,7 +76,6 @@ def make_env(env_id: str, **kwargs: Any) -> DeclaredEnv:
 
 def make_vec_env(env_id: str, num_envs: int = 1, **kwargs: Any) -> DeclaredVectorEnv:
     """gym.make_vec's entry point of a GridWar id: `num_envs` worlds on one engine (SAME_STEP autoreset)."""
-    # deferred: as in make_env
     from tracelab.envs.declared.vector_env import DeclaredVectorEnv
     spec, params = spec_and_params(env_id, kwargs)
     _one_agent(env_id, params, "the vector env")
@@ -84,7 +85,6 @@ def make_vec_env(env_id: str, num_envs: int = 1, **kwargs: Any) -> DeclaredVecto
 def parallel_env(env_id: str = "tracelab/GridWar-base-v0", **kwargs: Any) -> DeclaredParallelEnv:
     """GridWar as a PettingZoo ParallelEnv: every red agent a player (agents_per_team of them), the blue
     team the scripted opponent written as rules."""
-    # deferred: as in make_env
     from tracelab.envs.declared.parallel_env import DeclaredParallelEnv
     if env_id not in GRIDWAR_SPEC_IDS:
         raise UserError(f"{env_id!r}: not a GridWar id ({', '.join(GRIDWAR_SPEC_IDS)})")
@@ -147,7 +147,6 @@ def scenario_spec(scenario: Any, stack_previous: bool = False,
     """The spec file and params that play GridWar's `scenario` (a tracelab.game.scenario.Scenario) as RuleSim
     does; ValueError naming the first field no spec can say (a scenario file's own starts, mountains, board
     size or slow agents beyond the built-in nonmarkov's)."""
-    # deferred: the game's scenario module is only needed to compare a scenario with what a spec plays
     from dataclasses import fields, replace
 
     from tracelab.game.scenario import builtin_scenario

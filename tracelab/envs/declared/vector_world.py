@@ -55,13 +55,15 @@ class DeclaredWorlds:
                      np.zeros((w, len(mask)), np.int8), np.zeros(1, np.int64))
         self._binding = fused.FusedBinding(self.engine, self._tables, self._ext, self._reads, self._out)
         self._rows = np.full((w, self.n_agents), -1, np.int64)
-        self._agent_rows = np.arange(self.n_agents, dtype=np.int64) * self.n_actions
+        self._agent_rows = np.arange(self.n_agents) * self.n_actions  # agent i's first action row
         self._picks = np.full((w, len(one._picks)), -1, np.int64)
         self.steps = np.zeros(w, np.int64)
         # every draw one np_random.random() (the toy-text games): drawn a block at a time (_Uniforms)
         self._only_uniforms = all(d.draw.method == "categorical" for d in (*one._choices, *one._before)) and \
             all(d.weight_ids is None for d in one._before)
+        self._categorical = _CategoricalTable(one._before) if self._only_uniforms else None
         self._observer = one._observer  # built for the engine's n_worlds worlds
+        self._numbers: np.ndarray | None = None  # every agent's observed numbers, read once after a change
         self._starts = _StartOutcomes(self)
 
     @property
@@ -73,6 +75,7 @@ class DeclaredWorlds:
     def engine_step(self, rows: np.ndarray, picks: np.ndarray) -> None:
         """One engine step of every world (rows, picks: vector_fused.build_rows'), then the reads."""
         eng = self.engine
+        self._numbers = None
         ext_ptr, ext_i, ext_f = self._ext
         if eng.kernel != "counting":  # lanes (or compiled): the engine's own step, then the reads
             k = vector_fused.build_rows(self._tables, self._ext, rows, picks, eng.next_external_id())
@@ -85,6 +88,7 @@ class DeclaredWorlds:
             self._read()
 
     def _read(self) -> None:
+        self._numbers = None
         if self.engine.kernel == "counting":
             vector_fused.read_batch(self._binding.buffers())
         else:
@@ -109,17 +113,20 @@ class DeclaredWorlds:
         self._read()
 
     def step(self, actions: np.ndarray) -> None:
-        """Every world plays actions[w] (one agent; [W, agents] for several, -1: the agent does nothing) and
+        """Every world plays actions[w] (one agent), or actions[w, i] for agent i (several; -1: none), and
         draws this step's random facts from its generator."""
-        if self.n_agents == 1:
+        if actions.ndim == 1:
             self._rows[:, 0] = actions
-        else:  # an engine row is agent * n_actions + action (DeclaredWorld.step)
+        else:  # agent i's action a is its row a + i * n_actions, as DeclaredWorld.step
             self._rows[:] = np.where(actions >= 0, actions + self._agent_rows, -1)
         picks, before = self._picks, self.one._before
         # every draw one random() a world: the step's numbers of all draws taken at once, in the spec's order
         u = self.uniforms.each(len(before)) if self.uniforms is not None and before else None
-        for d, drawer in enumerate(before):
-            picks[:, d] = _draw_batch(drawer, self, None if u is None else u[:, d])
+        if u is not None and self._categorical is not None and self._categorical.holds(before):
+            picks[:, :len(before)] = self._categorical.picks(u)  # every draw of every world at once
+        else:
+            for d, drawer in enumerate(before):
+                picks[:, d] = _draw_batch(drawer, self, None if u is None else u[:, d])
         computed = self.one._computed
         if len(computed):
             base = self.one.computed_base
@@ -182,7 +189,7 @@ class DeclaredWorlds:
         one, spec = self.one, self.spec
         n_index = len(one._index_parts)
         index = self._out[0][:, agent * n_index:(agent + 1) * n_index]
-        for p in range(n_index):
+        for p in range(n_index) if index.size and index.min() < 0 else ():  # which part misses its atom
             part = spec.parts[one._index_parts[p]]
             if missing_index(part, index[:, p]):
                 w = int(np.flatnonzero(index[:, p] < 0)[0])
@@ -195,7 +202,9 @@ class DeclaredWorlds:
         if spec.space == "MultiDiscrete":
             return index.astype(np.int64)
         width = one.observation_program.width
-        numbers = self._observer.read(self.engine)[:, agent * width:(agent + 1) * width].copy()
+        if self._numbers is None:  # every agent's numbers come from one read of the engine (until it changes)
+            self._numbers = self._observer.read(self.engine)
+        numbers = self._numbers[:, agent * width:(agent + 1) * width].copy()
         if spec.space == "Box":
             return numbers
         parts = split_parts(spec, numbers)
@@ -246,6 +255,30 @@ def _draw_batch(drawer: Any, worlds: DeclaredWorlds, u: np.ndarray | None = None
             cumulative = np.cumsum(ok[i] / ok[i].sum())
             out[i] = int(np.argmax(cumulative > r.random())) if (cumulative > 0).any() else 0
     return out
+
+
+class _CategoricalTable:
+    """The step's categorical draws of fixed probabilities, all worlds at once: _draw_batch's searchsorted
+    (side="right": how many cumulative sums are <= u; past the last one, value 0) for every draw together,
+    the cumulative sums padded with +inf so that a shorter draw counts none of the padding."""
+
+    def __init__(self, drawers: list[Any]) -> None:
+        sums = [d.cumulative or [] for d in drawers]
+        self.cumulative = np.full((len(sums), max((len(c) for c in sums), default=0)), np.inf)
+        for d, c in enumerate(sums):
+            self.cumulative[d, :len(c)] = c
+        self.sizes = np.array([len(c) for c in sums], np.int64)
+
+    @staticmethod
+    def holds(drawers: list[Any]) -> bool:
+        """Whether every draw has fixed probabilities now (none weighed by the state, none frozen)."""
+        return all(d.weight_ids is None and d.possible is None and d.cumulative is not None for d in drawers)
+
+    def picks(self, u: np.ndarray) -> np.ndarray:
+        """int64 [worlds, draws]: each draw's value for u [worlds, draws]."""
+        picks = (self.cumulative[None, :, :] <= u[:, :, None]).sum(axis=2)
+        picks[picks == self.sizes] = 0
+        return picks
 
 
 def _nbytes(snapshot: Any) -> int:

@@ -10,17 +10,19 @@ import numpy as np
 
 from tracelab.train.experiments.stats import spread
 
+# deferred: matplotlib, an optional extra (tracelab[experiments]), imported when a plot is drawn (pyplot after
+# matplotlib.use, as matplotlib asks)
+
 ARM_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd")
 
 
 def _pyplot():
     try:
-        # deferred: matplotlib is an optional extra (tracelab[experiments])
         import matplotlib
     except ImportError as e:
         raise RuntimeError("the experiment plots need matplotlib: pip install 'tracelab[experiments]'") from e
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # deferred: after matplotlib.use, as matplotlib asks
+    import matplotlib.pyplot as plt
     return plt
 
 
@@ -135,6 +137,5 @@ def _title(ax, lines: Sequence[str], small: bool) -> None:
 
 
 def _thousands():
-    # deferred: matplotlib, see _pyplot
     from matplotlib.ticker import FuncFormatter
     return FuncFormatter(lambda v, _: f"{v / 1000:g}K" if abs(v) >= 1000 else f"{v:g}")
