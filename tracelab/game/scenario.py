@@ -18,7 +18,8 @@ from typing import Any
 import numpy as np
 from tracelab.engine.safe_files import FileRefused, read_bytes
 
-# The board a run of this game declares in its metadata (RunMeta.board); viewers/board_state.py draws it (war.toml's [board] for the scenario's map).
+# The board a run of this game declares in its metadata (RunMeta.board); viewers/board_state.py draws it
+# (war.toml's [board] for the scenario's map).
 BOARD = "gridworld"
 
 # Action ids of the spec's table. Moves use the first four ids, shots the next four in the same
