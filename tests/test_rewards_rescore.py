@@ -1,11 +1,14 @@
 """`tracelab rewards RUN --set TERM=VALUE` re-scores every recorded episode from the run's reward terms
 without re-simulating (issue 39 item 5): on a spec world's run, the re-scored returns are the returns of
 the same games played again with the edited spec (the same seed, the same random actions), for a table
-term, a term that also ends the game and the scaled atom (whose --set is the scale). A run written before
-terms were recorded says so in one line; an unknown term is one line with a did-you-mean."""
+term, a term that also ends the game and the scaled atom (whose --set is the scale), and so for terms worth 0
+in the run (their occurrences are recorded as rows of value 0 with their quantity). A run written before
+terms were recorded, or before their quantities were, says so in one line; an unknown term is one line
+with a did-you-mean; a term that never occurred is re-scored to no change, and a note says so."""
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -14,6 +17,8 @@ import pytest
 from test_reading_imports import ALLOWED, CHILD, HEAVY
 from older_runs import older_run
 from test_spec_world_game import RULES, SPEC
+
+import duckdb
 
 from tracelab.cli import main
 from tracelab.store import open_run
@@ -26,6 +31,8 @@ BASE = SPEC.replace(TABLE, '[reward]\natom = "was(c0_2)"\nscale = 0.5\n\n' + TAB
 SETS = {"at(c0_3)": 2.0, "home(me)": 5.0, "was(c0_2)": 3.0}
 EDITED = BASE.replace('"at(c0_3)" = 0.25', '"at(c0_3)" = 2.0').replace("door_reward = 1.0", "door_reward = 5.0") \
     .replace("scale = 0.5", "scale = 3.0")
+# the same world with the table term and the scaled atom worth 0: their occurrences pay nothing
+ZERO = BASE.replace('"at(c0_3)" = 0.25', '"at(c0_3)" = 0').replace("scale = 0.5", "scale = 0")
 
 
 def play(folder: Path, name: str, text: str) -> Path:
@@ -37,10 +44,10 @@ def play(folder: Path, name: str, text: str) -> Path:
 
 
 @pytest.fixture(scope="module")
-def runs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+def runs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, Path]:
     folder = tmp_path_factory.mktemp("rescore")
     (folder / "trap.rules").write_text(RULES)
-    return play(folder, "base", BASE), play(folder, "edited", EDITED)
+    return play(folder, "base", BASE), play(folder, "edited", EDITED), play(folder, "zero", ZERO)
 
 
 def returns(run: Path) -> dict[int, float]:
@@ -51,9 +58,9 @@ def returns(run: Path) -> dict[int, float]:
         con.close()
 
 
-def test_rescored_returns_match_the_games_played_with_the_edited_spec(runs: tuple[Path, Path],
+def test_rescored_returns_match_the_games_played_with_the_edited_spec(runs: tuple[Path, Path, Path],
                                                                      capsys: pytest.CaptureFixture) -> None:
-    base, edited = runs
+    base, edited, _ = runs
     old, new = returns(base), returns(edited)
     assert old.keys() == new.keys() and old != new  # the edit changes some return
     capsys.readouterr()
@@ -73,8 +80,28 @@ def test_rescored_returns_match_the_games_played_with_the_edited_spec(runs: tupl
     assert "at(c0_3) also ends" not in notes
 
 
-def test_the_table_has_a_column_per_term_and_a_total(runs: tuple[Path, Path], capsys: pytest.CaptureFixture) -> None:
-    base, _ = runs
+def test_terms_worth_0_are_rescored_as_the_games_played_with_their_new_values(
+        runs: tuple[Path, Path, Path], capsys: pytest.CaptureFixture) -> None:
+    """at(c0_3) and the scaled atom's scale are 0 in the `zero` run: their occurrences (and the atom's
+    bounds) are recorded all the same, so --set gives the returns of the edited spec's games."""
+    _, edited, zero = runs
+    con = open_run(zero)
+    try:
+        paid = dict(con.execute("SELECT term, sum(value) FROM rewards WHERE quantity <> 0 GROUP BY term").fetchall())
+    finally:
+        con.close()
+    assert paid["at(c0_3)"] == 0 and paid["was(c0_2)"] == 0  # they occurred, and paid nothing
+    capsys.readouterr()
+    argv = ["rewards", str(zero), "--json", *(a for t, v in SETS.items() for a in ("--set", f"{t}={v}"))]
+    assert main(argv) == 0
+    got = json.loads(capsys.readouterr().out)
+    assert got["set"]["at(c0_3)"] == {"old": 0.0, "new": 2.0} and got["set"]["was(c0_2)"] == {"old": 0.0, "new": 3.0}
+    assert {r["episode"]: r["rescored"] for r in got["episodes"]} == pytest.approx(returns(edited))
+
+
+def test_the_table_has_a_column_per_term_and_a_total(runs: tuple[Path, Path, Path],
+                                                     capsys: pytest.CaptureFixture) -> None:
+    base = runs[0]
     capsys.readouterr()
     assert main(["rewards", str(base)]) == 0
     lines = capsys.readouterr().out.splitlines()
@@ -98,7 +125,7 @@ def one_error_line(capsys: pytest.CaptureFixture, argv: list[str]) -> str:
     return out.err
 
 
-def test_an_unknown_term_is_one_line_with_a_did_you_mean(runs: tuple[Path, Path],
+def test_an_unknown_term_is_one_line_with_a_did_you_mean(runs: tuple[Path, Path, Path],
                                                          capsys: pytest.CaptureFixture) -> None:
     err = one_error_line(capsys, ["rewards", str(runs[0]), "--set", "home(m)=2"])
     assert err.startswith("tracelab: error: --set: no reward term 'home(m)' in this run; did you mean home(me)")
@@ -110,7 +137,7 @@ def test_a_run_written_before_reward_terms_says_it_has_none(capsys: pytest.Captu
     assert err.startswith("tracelab: error: the run records no reward terms")
 
 
-def test_rewards_loads_only_duckdb_pyarrow_and_numpy(runs: tuple[Path, Path]) -> None:
+def test_rewards_loads_only_duckdb_pyarrow_and_numpy(runs: tuple[Path, Path, Path]) -> None:
     """A reading command (tests/test_reading_imports.py): the spec's values are read from the run's config
     with tomllib and tracelab.expressions, not through the env package (which loads gymnasium)."""
     argv = [["rewards", str(runs[0]), "--set", "was(c0_2)=2", "--set", "at(c0_3)=1"]]
@@ -122,18 +149,47 @@ def test_rewards_loads_only_duckdb_pyarrow_and_numpy(runs: tuple[Path, Path]) ->
     assert {"duckdb", "pyarrow"} <= set(report["loaded"]) <= ALLOWED, report["loaded"]
 
 
-def test_a_run_whose_rewards_are_all_zero_reads_as_zero_returns(tmp_path: Path,
-                                                                 capsys: pytest.CaptureFixture) -> None:
-    """No term rows and no non-zero reward is not an older run: FrozenLake's random games (ice and holes
-    pay 0). A term worth 0 in the run left no rows, so it cannot be re-scored from the record."""
-    run = tmp_path / "lake"
-    assert main(["play", "--env", "tracelab/FrozenLake-v1", "--episodes", "2", "--seed", "0", "--run", str(run)]) == 0
+def without_quantities(run: Path, into: Path) -> Path:
+    """`run` as tracelab wrote it before it kept the reward terms' quantities (nor rows of terms worth 0)."""
+    shutil.copytree(run, into)
+    assert main(["seal", str(into)]) == 0
+    con = duckdb.connect(str(into / "run.duckdb"))
+    try:
+        for (view,) in con.execute("SELECT view_name FROM duckdb_views() WHERE NOT internal").fetchall():
+            con.execute(f'DROP VIEW IF EXISTS "{view}"')  # made again when the run is opened
+        con.execute("DELETE FROM raw.reward_terms WHERE value = 0")
+        con.execute("ALTER TABLE raw.reward_terms DROP COLUMN quantity")
+    finally:
+        con.close()
+    return into
+
+
+def test_a_lake_run_rescores_its_zero_terms_and_says_which_never_occurred(
+        tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """FrozenLake pays 0 for ice and holes: the random games' --set of both equals the games played with
+    those values in its `reward_schedule`; the goal, never reached, re-scores to no change and a note says
+    so; a run written before quantities were kept says in one line why it cannot re-score a term worth 0."""
+    lake, paid = tmp_path / "lake", tmp_path / "paid"
+    assert main(["play", "--env", "tracelab/FrozenLake-v1", "--episodes", "4", "--seed", "0", "--run", str(lake)]) == 0
+    assert main(["play", "--env", "tracelab/FrozenLake-v1", "--env-arg", "reward_schedule=[1, -1, -0.01]",
+                 "--episodes", "4", "--seed", "0", "--run", str(paid)]) == 0
     capsys.readouterr()
-    assert main(["rewards", str(run), "--json"]) == 0
-    got = json.loads(capsys.readouterr().out)
-    assert [(r["episode"], r["return"], r["by_term"]) for r in got["episodes"]] == [(0, 0.0, {}), (1, 0.0, {})]
-    err = one_error_line(capsys, ["rewards", str(run), "--set", "landed(hole)=-1"])
-    assert "landed(hole) is 0 in this run, so its occurrences were not recorded" in err
+    assert main(["rewards", str(lake), "--json", "--set", "landed(ice)=-0.01", "--set", "landed(hole)=-1",
+                 "--set", "landed(goal)=2"]) == 0
+    out = capsys.readouterr()
+    got = json.loads(out.out)
+    assert [r["return"] for r in got["episodes"]] == [0.0] * 4
+    assert {r["episode"]: r["rescored"] for r in got["episodes"]} == pytest.approx(returns(paid))
+    assert returns(paid) != returns(lake)
+    assert "landed(goal) never occurred in the recorded episodes: re-scoring it changes nothing" in got["notes"]
+    assert "note: landed(goal) never occurred" not in out.err  # --json carries its notes inside
+    older = without_quantities(lake, tmp_path / "older")
+    err = one_error_line(capsys, ["rewards", str(older), "--set", "landed(hole)=-1"])
+    assert err == ("tracelab: error: --set: landed(hole) is 0 in this run, which was written before tracelab "
+                   "recorded the occurrences of terms worth 0: it cannot be re-scored from the record\n")
+    capsys.readouterr()
+    assert main(["rewards", str(older)]) == 0  # an all-zero run without term rows reads as zero returns
+    assert capsys.readouterr().out.splitlines()[-1].split() == ["total", "0"]
 
 
 def test_gridwar_terms_are_rescored_with_the_specs_values(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
@@ -158,3 +214,28 @@ def test_gridwar_terms_are_rescored_with_the_specs_values(tmp_path: Path, capsys
         assert won in (0.0, 250.0)
         assert r["rescored"] == pytest.approx(r["return"] + acted[r["episode"], r["agent"]] - 150 * (won > 0))
     assert all(acted.values()) and any("win * reward_scale" in n for n in got["notes"])
+
+
+def test_gridwar_tracer_counts_hits_worth_0_but_not_a_step_worth_0() -> None:
+    """RuleSim's tracer (envs/tracer.py) derives GridWar's terms from the step's events: a hit worth 0 is
+    still counted (two hits: quantity 2), the step term worth 0 is not (its log keeps no `acted` flag), so
+    `rewards --set step=V` there says in one line why it cannot re-score it."""
+    import numpy as np
+
+    from tracelab.envs.tracer import REWARD_TERMS, reward_terms
+    from tracelab.errors import UserError
+    from tracelab.game.scenario import Rewards
+    from tracelab.store.reward_rescore import Term, parse_sets
+
+    events = np.zeros((1, 2, 1, 4))
+    events[0, 0, 0, 2] = 2  # red made two hits
+    events[0, 1, 0, 3] = 2  # blue took them
+    weights = Rewards(hit_opponent=0.0, valid_action=0.0)
+    values, quantities = reward_terms(weights, np.array([[[0.0], [-400.0]]]), events, np.array([-1]))
+    hit, shot, step = (REWARD_TERMS.index(t) for t in ("hit", "got_shot", "step"))
+    assert values[0, 0, 0, hit] == 0 and quantities[0, 0, 0, hit] == 2
+    assert values[0, 1, 0, shot] == -400 and quantities[0, 1, 0, shot] == 2
+    assert values[..., step].tolist() == [[[0.0], [0.0]]] and not quantities[..., step].any()
+    with pytest.raises(UserError, match="does not count its occurrences where it is worth 0"):
+        parse_sets(["step=-1"], [Term("step", 0.0, counted_at_zero=False)])
+    assert parse_sets(["hit=5"], [Term("hit", 0.0)]) == {"hit": (0.0, 5.0)}

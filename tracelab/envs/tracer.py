@@ -50,24 +50,29 @@ def handover_due(sim: RuleSim, steps_waiting: int, episode_ended: bool) -> bool:
 REWARD_TERMS = ("win", "loss", "hit", "got_shot", "step", "unsafe", "invalid")
 
 
-def reward_terms(weights: Rewards, rewards: np.ndarray, events: np.ndarray, winner: np.ndarray) -> np.ndarray:
-    """float64 [K, 2, N, len(REWARD_TERMS)]: each agent's reward of K logged world-steps split by term, from
-    the step's events (`events` [K, 2, N, 4]: unsafe, invalid, hits made, hits taken; `winner` [K]) and the
-    scenario's reward `weights`; the step term (a valid action's) is what the others leave of the agent's
-    reward `rewards` [K, 2, N], so the terms sum to it (tests check that it is 0 or valid_action)."""
+def reward_terms(weights: Rewards, rewards: np.ndarray, events: np.ndarray,
+                 winner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """float64 [K, 2, N, len(REWARD_TERMS)] twice: each agent's reward of K logged world-steps split by term,
+    and the quantities those values are of (a term's occurrences: hits counted one by one), from the step's
+    events (`events` [K, 2, N, 4]: unsafe, invalid, hits made, hits taken; `winner` [K]) and the scenario's
+    reward `weights`; the step term (a valid action's) is what the others leave of the agent's reward
+    `rewards` [K, 2, N], so the terms sum to it (tests check that it is 0 or valid_action). The step
+    term's occurrences are known only where it is worth something (the log keeps no `acted` flag)."""
     k, _, n, _ = events.shape
-    out = np.zeros((k, 2, n, len(REWARD_TERMS)))
+    count = np.zeros((k, 2, n, len(REWARD_TERMS)))
     unsafe = events[..., 0] != 0
-    won = np.stack([winner == WINNER_RED, winner == WINNER_BLUE], axis=1)[:, :, None]  # [K, 2, 1]
-    lost = np.stack([winner == WINNER_BLUE, winner == WINNER_RED], axis=1)[:, :, None]
-    out[..., 0] = np.where(won, weights.win, 0.0)
-    out[..., 1] = np.where(lost, weights.loss, 0.0)
-    out[..., 2] = events[..., 2] * weights.hit_opponent
-    out[..., 3] = events[..., 3] * weights.got_shot
-    out[..., 5] = np.where(unsafe, weights.unsafe, 0.0)
-    out[..., 6] = np.where(~unsafe & (events[..., 1] != 0), weights.invalid, 0.0)
+    count[..., 0] = np.stack([winner == WINNER_RED, winner == WINNER_BLUE], axis=1)[:, :, None]  # won
+    count[..., 1] = np.stack([winner == WINNER_BLUE, winner == WINNER_RED], axis=1)[:, :, None]  # lost
+    count[..., 2] = events[..., 2]
+    count[..., 3] = events[..., 3]
+    count[..., 5] = unsafe
+    count[..., 6] = ~unsafe & (events[..., 1] != 0)
+    out = count * np.array([weights.win, weights.loss, weights.hit_opponent, weights.got_shot, 0.0,
+                            weights.unsafe, weights.invalid])
     out[..., 4] = rewards - out.sum(axis=-1)
-    return out
+    if weights.valid_action:
+        count[..., 4] = out[..., 4] / weights.valid_action
+    return out, count
 
 
 def outcome_name(winner: int, truncated: bool) -> str:
@@ -184,12 +189,13 @@ class EpisodeTracer:
         self.sink.step(world, episode, t, obs, actions, rewards)
         if not self.agent_rows:
             return
-        terms = reward_terms(self.scenario.rewards, rewards, events, winner)  # [K, 2, N, T]
+        terms, quantities = reward_terms(self.scenario.rewards, rewards, events, winner)  # [K, 2, N, T]
         k, m, n_terms = len(t), len(self._agent_names), len(REWARD_TERMS)
         per_row = m * n_terms
         self.sink.reward_terms(RewardTerms(
             np.repeat(episode, per_row), np.repeat(t, per_row), np.tile(np.repeat(np.arange(m), n_terms), k),
-            self._agent_names, np.tile(np.arange(n_terms), k * m), REWARD_TERMS, terms.reshape(-1)))
+            self._agent_names, np.tile(np.arange(n_terms), k * m), REWARD_TERMS, terms.reshape(-1),
+            quantities.reshape(-1)))
 
     def _flush(self) -> None:
         if not self._rules:

@@ -119,7 +119,9 @@ class Decisions:
 @dataclass(frozen=True)
 class RewardTerms:
     """Reward-term rows: episode, step, agent and term (codes: agents[code], terms[code] their names),
-    value (zeros are left out by `table`)."""
+    value, and `quantity`: what the term's value per occurrence multiplied (a table term's occurrences in
+    the step, a scaled atom's bound; None: not known). `table` keeps the rows where the term was paid:
+    its value or its quantity is not 0, so a term worth 0 that occurred keeps a row of value 0."""
     episode: np.ndarray
     step: np.ndarray
     agent: np.ndarray
@@ -127,11 +129,13 @@ class RewardTerms:
     term: np.ndarray
     terms: Sequence[str]
     value: np.ndarray
+    quantity: np.ndarray | None = None
 
     def rows(self, keep: np.ndarray, episode: np.ndarray | None = None) -> "RewardTerms":
         """The rows at `keep` (a mask), with `episode` as their episodes if given."""
         return RewardTerms(self.episode[keep] if episode is None else episode, self.step[keep], self.agent[keep],
-                           self.agents, self.term[keep], self.terms, self.value[keep])
+                           self.agents, self.term[keep], self.terms, self.value[keep],
+                           None if self.quantity is None else self.quantity[keep])
 
     @staticmethod
     def concat(batches: Sequence["RewardTerms"]) -> "RewardTerms":
@@ -140,17 +144,25 @@ class RewardTerms:
             return first
         cols = {f: np.concatenate([getattr(b, f) for b in batches]) for f in ("episode", "step", "agent", "term",
                                                                                 "value")}
+        quantity = None if any(b.quantity is None for b in batches) else \
+            np.concatenate([b.quantity for b in batches])
         return RewardTerms(cols["episode"], cols["step"], cols["agent"], first.agents, cols["term"], first.terms,
-                           cols["value"])
+                           cols["value"], quantity)
 
     def table(self) -> pa.Table:
         value = np.asarray(self.value, np.float64)
-        keep = np.flatnonzero(value != 0.0)
+        if self.quantity is None:
+            keep = np.flatnonzero(value != 0.0)
+            quantity = pa.nulls(len(keep), pa.float64())
+        else:
+            q = np.asarray(self.quantity, np.float64)
+            keep = np.flatnonzero((value != 0.0) | (q != 0.0))
+            quantity = ab.from_numpy(q[keep])
         return pa.Table.from_arrays([
             ab.from_numpy(np.asarray(self.episode, np.int64)[keep]),
             ab.from_numpy(np.asarray(self.step, np.int32)[keep]),
             coded_strings(np.asarray(self.agent)[keep], self.agents),
-            coded_strings(np.asarray(self.term)[keep], self.terms), ab.from_numpy(value[keep]),
+            coded_strings(np.asarray(self.term)[keep], self.terms), ab.from_numpy(value[keep]), quantity,
         ], schema=SCHEMAS["reward_terms"])
 
 

@@ -1,8 +1,10 @@
 """A run's returns by reward term, and re-scored under other term values without re-simulating (`tracelab
-rewards RUN [--set TERM=VALUE ...]`). The run records each step's reward by term (the `rewards` view); a
-term's value per occurrence is read from the run's config (a spec world's `[reward]` with the run's params,
-GridWar's scenario `[rewards]`), so a term re-scored to NEW is its recorded value x NEW / OLD: exact for a
-table term (its value per occurrence is fixed) and for the scaled atom (OLD and NEW are its scale). The
+rewards RUN [--set TERM=VALUE ...]`). The run records each step's reward by term (the `rewards` view) with
+the quantity the value is of (a table term's occurrences, the scaled atom's bound; a term worth 0 that
+occurred has a row of value 0), so a term re-scored to NEW is its recorded quantity x NEW: exact for a table
+term and for the scaled atom (NEW is its scale). A run written before quantities were kept re-scores a term
+as its recorded value x NEW / OLD, OLD its value per occurrence from the run's config (a spec world's
+`[reward]` with the run's params, GridWar's scenario `[rewards]`), and cannot re-score a term worth 0. The
 actions stay the recorded ones: re-scoring changes no step, no end and no choice a learner made."""
 from __future__ import annotations
 
@@ -27,6 +29,8 @@ GRIDWAR_NOTES = {
                "never chooses one: re-scoring changes the reward only",
     "step": "the step term is not paid on a step with an unsafe or invalid action (those terms replace it)",
 }
+# GridWar's terms whose occurrences its tracer cannot record where they are worth 0 (envs/tracer.py)
+GRIDWAR_UNCOUNTED_AT_ZERO = ("step",)
 NO_TERMS = ("the run records no reward terms (written before tracelab recorded them by term, or by a "
             "caller that records the world's half only)")
 
@@ -39,6 +43,7 @@ class Term:
     per: float | None
     unit: str = "value"
     notes: tuple[str, ...] = ()
+    counted_at_zero: bool = True  # the run records the term's occurrences where it is worth 0
 
 
 @dataclass
@@ -116,7 +121,8 @@ def _gridwar_terms(config: dict[str, Any]) -> list[Term] | None:
     given = given if isinstance(given, dict) else {}
     defaults = Rewards()  # a scenario's [rewards] key left out has the game's default
     return [Term(term, _number(given.get(key, getattr(defaults, key)), {}),
-                 notes=(f"{term}: {GRIDWAR_NOTES[term]}",) if term in GRIDWAR_NOTES else ())
+                 notes=(f"{term}: {GRIDWAR_NOTES[term]}",) if term in GRIDWAR_NOTES else (),
+                 counted_at_zero=term not in GRIDWAR_UNCOUNTED_AT_ZERO)
             for term, key in GRIDWAR_TERMS.items()]
 
 
@@ -135,9 +141,10 @@ def run_terms(con: RunConnection) -> tuple[list[Term], list[str]]:
     return terms, notes
 
 
-def parse_sets(sets: list[str], terms: list[Term]) -> dict[str, tuple[float, float]]:
+def parse_sets(sets: list[str], terms: list[Term], counts_zeros: bool = True) -> dict[str, tuple[float, float]]:
     """--set TERM=VALUE texts as term -> (old, new); a UserError names an unknown term (with a did-you-mean),
-    a value that is not a number, or a term whose old value the run does not give."""
+    a value that is not a number, a term whose old value the run does not give, or a term worth 0 whose
+    occurrences the run does not record (`counts_zeros` False: a run written before they were kept)."""
     by_name = {t.name.replace(" ", ""): t for t in terms}
     out: dict[str, tuple[float, float]] = {}
     for text in sets:
@@ -159,9 +166,12 @@ def parse_sets(sets: list[str], terms: list[Term]) -> dict[str, tuple[float, flo
         if term.per is None:
             raise UserError(f"--set: the run does not say {term.name}'s {term.unit} (its config has no value "
                             "for it): it cannot be re-scored")
-        if term.per == 0:
-            raise UserError(f"--set: {term.name} is 0 in this run, so its occurrences were not recorded: "
-                            "it cannot be re-scored from the record")
+        if term.per == 0 and not counts_zeros:
+            raise UserError(f"--set: {term.name} is 0 in this run, which was written before tracelab recorded "
+                            "the occurrences of terms worth 0: it cannot be re-scored from the record")
+        if term.per == 0 and not term.counted_at_zero:
+            raise UserError(f"--set: {term.name} is 0 in this run, and this world's record does not count its "
+                            "occurrences where it is worth 0: it cannot be re-scored from the record")
         out[term.name] = (term.per, new)
     return out
 
@@ -175,17 +185,22 @@ def rescore(con: RunConnection, sets: list[str], episode: int | None = None) -> 
             con.execute("SELECT EXISTS (SELECT 1 FROM raw.steps WHERE reward <> 0)").fetchall()[0][0]:
         raise KeyError(NO_TERMS)
     terms, notes = run_terms(con)
-    changed = parse_sets(sets, terms)
+    # quantities are NULL in runs written before they were kept (schema.ADDED_COLUMNS)
+    counts_zeros = con.execute("SELECT EXISTS (SELECT 1 FROM raw.reward_terms WHERE quantity IS NOT NULL)"
+                               ).fetchall()[0][0]
+    changed = parse_sets(sets, terms, counts_zeros)
     where, params = ("WHERE episode = ?", [episode]) if episode is not None else ("", [])
     returns = con.execute(f"SELECT episode, agent, sum(reward) FROM steps {where} GROUP BY ALL ORDER BY ALL",
                           params).fetchall()
     if not returns:
         raise KeyError("the run records no steps (not a run of games)" if episode is None else
                        f"episode {episode} has no steps in this run")
-    by_term = con.execute(f"SELECT episode, agent, term, value FROM returns {where}", params).fetchall()
+    by_term = con.execute(f"SELECT episode, agent, term, value, quantity FROM returns {where}", params).fetchall()
     values: dict[tuple[int, str], dict[str, float]] = {}
-    for e, a, t, v in by_term:
+    quantities: dict[tuple[int, str], dict[str, float | None]] = {}
+    for e, a, t, v, q in by_term:
         values.setdefault((int(e), str(a)), {})[str(t)] = float(v)
+        quantities.setdefault((int(e), str(a)), {})[str(t)] = None if q is None else float(q)
     present = {t for v in values.values() for t in v}
     order = [t.name for t in terms if t.name in present]
     out = Rescored(order, sets=changed)
@@ -193,12 +208,22 @@ def rescore(con: RunConnection, sets: list[str], episode: int | None = None) -> 
         terms_of = values.get((int(e), str(a)), {})
         row = {"episode": int(e), "agent": str(a), "return": float(ret), "by_term": terms_of}
         if changed:
-            row["rescored"] = float(ret) + sum(v * (changed[t][1] / changed[t][0] - 1)
-                                               for t, v in terms_of.items() if t in changed)
+            row["rescored"] = float(ret) + sum(
+                _term_change(v, quantities[(int(e), str(a))][t], *changed[t])
+                for t, v in terms_of.items() if t in changed)
         out.rows.append(row)
     if changed:
-        out.notes = [n for t in terms if t.name in changed for n in t.notes] + notes + [
+        scope = f"episode {episode}" if episode is not None else "the recorded episodes"
+        never = [f"{t} never occurred in {scope}: re-scoring it changes nothing" for t in changed if t not in present]
+        out.notes = never + [n for t in terms if t.name in changed for n in t.notes] + notes + [
             "the actions are the recorded ones: a learner trained under the new values may act otherwise"]
     else:
         out.notes = notes
     return out
+
+
+def _term_change(value: float, quantity: float | None, old: float, new: float) -> float:
+    """What re-scoring a term from `old` to `new` adds to a return where it paid `value` in total: its
+    quantity (occurrences, or the scaled atom's bounds) x new, less what it paid; a run without quantities
+    scales the value (parse_sets refused a term worth 0 there)."""
+    return quantity * new - value if quantity is not None else value * (new / old - 1)

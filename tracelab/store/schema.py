@@ -58,7 +58,8 @@ COLUMNS: dict[str, dict[str, str]] = {
               "reward": "DOUBLE", "terminated": "BOOLEAN", "truncated": "BOOLEAN", "obs": "FLOAT[]"},
     # The run's actions (steps.action -> name; `position`: the action's place in decisions.values, NULL
     # for an action the policy does not offer), the policy's decision per agent and step, and each
-    # step's reward split by term (tracelab.store.agent_rows). Only non-zero terms have a row.
+    # step's reward split by term (tracelab.store.agent_rows): a term has a row where it was paid (its
+    # value or its quantity not 0).
     "action_names": {"action": "INTEGER", "name": "VARCHAR", "position": "INTEGER"},
     # What each entry of steps.obs is: entry `position`, read as (obs // divisor) % size when `size` is
     # set (one number holding several parts: a Discrete space), and `labels[value]` the atom a value
@@ -72,8 +73,10 @@ COLUMNS: dict[str, dict[str, str]] = {
                   # `term_values` holds each term's values of every action back to back (term-major,
                   # len(terms) x len(values)); NULL for any other policy
                   "terms": "VARCHAR[]", "term_values": "FLOAT[]"},
+    # a reward term's row: `value` paid, `quantity` what its value per occurrence multiplied (a table
+    # term's occurrences, a scaled atom's bound; NULL: not known, as in runs written before it was kept)
     "reward_terms": {"episode": "BIGINT", "step": "INTEGER", "agent": "VARCHAR", "term": "VARCHAR",
-                     "value": "DOUBLE"},
+                     "value": "DOUBLE", "quantity": "DOUBLE"},
     "metrics": {"step": "BIGINT", "name": "VARCHAR", "value": "DOUBLE", "episode": "BIGINT", "time": "TIMESTAMP"},
     "episode_end": {"episode": "BIGINT", "steps": "INTEGER", "t_end": "INTEGER", "outcome": "VARCHAR",
                     "reward": "DOUBLE", "rewards": "VARCHAR", "ended_at": "TIMESTAMP", "info": "VARCHAR"},
@@ -128,7 +131,8 @@ ADDED_COLUMNS: dict[str, dict[str, str]] = {"clauses": {"closed": "false"},
                                             "run": {"board": f"'{BOARD_BEFORE_DECLARED}'"},
                                             "facts": {"episode": "CAST(NULL AS BIGINT)"},
                                             "decisions": {"terms": "CAST(NULL AS VARCHAR[])",
-                                                          "term_values": "CAST(NULL AS FLOAT[])"}}
+                                                          "term_values": "CAST(NULL AS FLOAT[])"},
+                                            "reward_terms": {"quantity": "CAST(NULL AS DOUBLE)"}}
 # Tables added after the first release: a run written before has none and reads it as empty (EMPTY_SQL).
 ADDED_TABLES: tuple[str, ...] = ("edges", "action_names", "observation_names", "decisions", "reward_terms",
                                   "sources")
@@ -155,7 +159,7 @@ DICTIONARY_COLUMNS: dict[str, list[str]] = {
     "facts": ["start", "end", "static", "file", "line", "episode"],
     "atoms": ["label"], "groundings": ["rule"], "edges": [], "nodes": [], "sources": ["role"],
     "decisions": ["episode", "agent", "output", "explored", "epsilon"],
-    "reward_terms": ["episode", "agent", "term", "value"],
+    "reward_terms": ["episode", "agent", "term", "value", "quantity"],
 }
 # Parquet options of a table's parts beyond the dictionaries: the change rows' `seq` (a counter) delta
 # encoded, and min/max statistics only on the columns readers filter a live run by (episode, time, seq;
@@ -262,11 +266,12 @@ SELECT d.episode, d.step, d.agent, u.pos - 1 AS position, d.actions[u.pos] AS ac
 FROM decisions d, (SELECT unnest(range(1, 1 + max(len("values")))) AS pos FROM raw.decisions) u
 WHERE u.pos <= len(d."values");
 
--- each step's reward by term (rows of non-zero terms: their sum is steps.reward), and each episode's
--- return by term
-CREATE OR REPLACE VIEW rewards AS SELECT episode, step, agent, term, value FROM raw.reward_terms;
+-- each step's reward by term (a row per term paid, a term worth 0 included: their sum is steps.reward),
+-- and each episode's return by term (`quantity`: the occurrences, or the scaled atom's bounds, summed)
+CREATE OR REPLACE VIEW rewards AS SELECT episode, step, agent, term, value, quantity FROM raw.reward_terms;
 CREATE OR REPLACE VIEW returns AS
-SELECT episode, agent, term, sum(value) AS value, count(*) AS steps FROM raw.reward_terms GROUP BY ALL;
+SELECT episode, agent, term, sum(value) AS value, count(*) AS steps, sum(quantity) AS quantity
+FROM raw.reward_terms GROUP BY ALL;
 CREATE OR REPLACE VIEW metrics AS SELECT * FROM raw.metrics;
 CREATE OR REPLACE VIEW run AS SELECT * FROM raw.run;
 """

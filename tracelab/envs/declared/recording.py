@@ -138,7 +138,7 @@ class DeclaredRecorder:
         # step, [agent, term] values) of the steps kept, as tuples (a record per step costs more)
         self._decided: tuple[PolicyOutput, np.ndarray | None] | None = None
         self._decisions: list[tuple[int, int, int, int, PolicyOutput, np.ndarray | None]] = []
-        self._terms: list[tuple[int, int, np.ndarray]] = []
+        self._terms: list[tuple[int, int, np.ndarray, np.ndarray]] = []  # ..., values, quantities
         self._setup = eng.take_trace()  # the build's rows (t = 0), replayed at every episode's start
         self.episode = -1
         self._episode_ids = episode_ids
@@ -196,7 +196,8 @@ class DeclaredRecorder:
             return
         self._length += 1
         t = self.world.engine.t - 1 - self._t0
-        self._terms.append((self.episode, self._length, self.world.last_reward_terms))
+        self._terms.append((self.episode, self._length, self.world.last_reward_terms,
+                            self.world.last_reward_quantities))
         if decided is not None:
             for a, act in enumerate(np.asarray(actions, np.int64).reshape(-1).tolist()):
                 mask = decided[1]
@@ -263,14 +264,15 @@ class DeclaredRecorder:
     def _keep_agent_rows(self) -> None:
         """The kept decisions and reward terms as the store's records (agent_rows)."""
         if self._terms:
-            episode, step, terms = zip(*self._terms)
+            episode, step, terms, quantities = zip(*self._terms)
             self._terms = []
             values = np.stack(terms)  # [steps, agents, terms]
             k, m, n_terms = values.shape
             per_step = m * n_terms
             self._agent_rows.reward_terms(RewardTerms(
                 np.repeat(episode, per_step), np.repeat(step, per_step), np.tile(np.repeat(np.arange(m), n_terms), k),
-                self.agents, np.tile(np.arange(n_terms), k * m), self.world.spec.reward_terms, values.reshape(-1)))
+                self.agents, np.tile(np.arange(n_terms), k * m), self.world.spec.reward_terms, values.reshape(-1),
+                np.stack(quantities).reshape(-1)))
         if self._decisions:
             episode, step, agent, action, outputs, masks = zip(*self._decisions)
             self._decisions = []

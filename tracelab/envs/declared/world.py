@@ -181,9 +181,11 @@ class DeclaredWorld:
         self._start_picks[-1] = 0  # the start facts: a draw with one value
         self.steps = 0
         self.last_rewards = [0.0] * self.n_agents
-        # a recorder's: each step's reward by term [agent, term] (spec.reward_terms) in `last_reward_terms`
+        # a recorder's: each step's reward by term [agent, term] (spec.reward_terms) in `last_reward_terms`,
+        # and what each value is of (occurrences, a scaled atom's bound) in `last_reward_quantities`
         self.keep_reward_terms = False
         self.last_reward_terms: np.ndarray | None = None
+        self.last_reward_quantities: np.ndarray | None = None
         # one world on the counting kernel stays on it (only a lanes engine moves to counting)
         self._fused = eng.kernel == "counting"
         self._single_index = spec.space == "Discrete" and len(spec.parts) == 1
@@ -244,7 +246,7 @@ class DeclaredWorld:
             picks[base:base + len(self._computed)] = self._computed.picks(self.engine, np.array([self.steps]))[0]
         self._fused_step(rows, picks)
         rewards = self._rewards()
-        terms = self._reward_terms() if self.keep_reward_terms else None
+        terms = self._reward_terms() if self.keep_reward_terms else None  # (values, quantities)
         if self._after:
             n_before = len(self._before)
             picks[:n_before] = -1
@@ -256,10 +258,10 @@ class DeclaredWorld:
                 self._fused_step(rows, picks)
                 rewards = [a + b for a, b in zip(rewards, self._rewards())]
                 if terms is not None:
-                    terms = terms + self._reward_terms()
+                    terms = tuple(a + b for a, b in zip(terms, self._reward_terms()))
                 picks[n_before:] = -1
         self.last_rewards = rewards
-        self.last_reward_terms = terms
+        self.last_reward_terms, self.last_reward_quantities = (None, None) if terms is None else terms
         self.steps += 1
 
     def _fused_step(self, rows: np.ndarray, picks: np.ndarray) -> None:
@@ -386,13 +388,17 @@ class DeclaredWorld:
                 rewards[a] += float((self.engine.lower[0, ids] * scales).sum())
         return rewards
 
-    def _reward_terms(self) -> np.ndarray:
+    def _reward_terms(self) -> tuple[np.ndarray, np.ndarray]:
         """The engine step's reward by term [agent, term]: each [reward.table] entry's value where its atom
-        is true, then the scaled atom's bound times its scale (what _rewards sums)."""
+        is true, then the scaled atom's bound times its scale (what _rewards sums); and the quantities the
+        values are of (the table atoms' truth, the scaled atom's bound), so a term worth 0 shows it occurred."""
         _, _, table_atoms, table_values, _, _, _, _ = self._reads
-        table = (table_values * self.true(table_atoms)).reshape(self.n_agents, -1)
-        scaled = [self.engine.lower[0, ids] * scales for ids, scales in self._scaled]
-        return np.concatenate([table, np.asarray(scaled, np.float64).reshape(self.n_agents, -1)], axis=1)
+        held = self.true(table_atoms).astype(np.float64).reshape(self.n_agents, -1)
+        n = self.n_agents
+        bounds = np.asarray([self.engine.lower[0, ids] for ids, _ in self._scaled], np.float64).reshape(n, -1)
+        scales = np.asarray([scales for _, scales in self._scaled], np.float64).reshape(n, -1)
+        return (np.concatenate([table_values.reshape(n, -1) * held, bounds * scales], axis=1),
+                np.concatenate([held, bounds], axis=1))
 
     def terminated(self) -> bool:
         return self._ends[0]
