@@ -11,6 +11,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 from patience import PATIENCE, wait_until
+from store_helpers import run_rows  # noqa: F401 - re-exported for the training tests
 
 from tracelab.envs.declared.env_source import EnvSource
 from tracelab.game.scenario import Rewards, Scenario
@@ -82,16 +83,6 @@ def training(proc: subprocess.Popen, runs: list[Path]) -> bool:
     """Whether every run in `runs` has logged a loss; fails at once if `proc` (their training) ended."""
     assert proc.poll() is None, f"the training ended first: {proc.stderr.read() if proc.stderr else ''}"
     return all(has_trained(r) for r in runs)
-
-
-def run_rows(run: Path, sql: str) -> list[tuple]:
-    """The rows of `sql` over a run."""
-    from tracelab.store import open_run
-    con = open_run(run)
-    try:
-        return con.execute(sql).fetchall()
-    finally:
-        con.close()
 
 
 def ctrl_c_once_training(argv: list[str], run: Path) -> tuple[int, str, str]:
