@@ -14,6 +14,7 @@ from gymnasium import spaces
 
 from tracelab.errors import UserError
 
+# deferred: the spec and the declared env (the engine's parser, numba), for a declared world's team only
 
 MAX_INPUTS = 1_000_000  # network inputs: a spec's Discrete(10**9) is refused before anything is built
 
@@ -85,7 +86,6 @@ def action_count(space: spaces.Space[Any], where: str) -> int:
 
 def team_spec(source: Any) -> Any:
     """The WorldSpec of a declared world of several agents (trained as a team), else None."""
-    # deferred: the spec module loads the engine's parser
     from tracelab.envs.declared.spec import load_spec
     try:
         spec_path, params = source.declared()
@@ -101,7 +101,6 @@ def probe_env(source: Any) -> tuple[ObservationEncoder | TeamEncoder, int, Any]:
     declared world of several agents: its TeamEncoder, from its spec."""
     team = team_spec(source)
     if team is not None:
-        # deferred: the declared env's module loads the engine (numba)
         from tracelab.envs.declared.gym_env import observation_space
         encoder = ObservationEncoder(observation_space(team), source.name)
         return TeamEncoder(encoder, len(team.agents)), len(team.action_names), team

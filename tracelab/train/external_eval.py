@@ -29,6 +29,9 @@ from tracelab.train.env_source import team_spec
 from tracelab.train.rngs import eval_seed
 from tracelab.train.team_policy import team_env_actor
 
+# deferred: the declared world's recording and TeamEnv load the engine (numba), which a gymnasium env's
+# training does not need
+
 Act = Callable[[Any], np.ndarray]  # a batch of observations -> the batch's (greedy) actions
 NewId = Callable[[], int]          # the run's next free episode id
 
@@ -107,7 +110,6 @@ class DeclaredTarget:
         return self.source.name
 
     def run_meta(self) -> dict[str, Any]:
-        # deferred: the game's modules load numba, which a gymnasium env's training does not need
         from tracelab.envs.declared.recording import declared_run_config
         return {"scenario": Path(self.source.name).name, "rule_files": list(self.spec.program.files),
                 "config": {"env": self.source.to_json(), **declared_run_config(self.spec)}}
@@ -134,7 +136,7 @@ class DeclaredEvaluator:
         if not self.traced:
             self.trace_env: Any = None
         elif self.team is not None:
-            from tracelab.envs.declared.play import TeamEnv  # deferred: loads the engine (numba)
+            from tracelab.envs.declared.play import TeamEnv
             self.trace_env = TeamEnv(self.team, trace_writer=writer, trace_episode_ids=new_id)
         else:
             self.trace_env = EnvSource(source.name, {**source.kwargs, "trace_writer": writer,
