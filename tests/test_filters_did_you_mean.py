@@ -41,7 +41,7 @@ def cli(capsys: pytest.CaptureFixture, *argv: str) -> tuple[int, str, str]:
      "no rule 'd_kiled' in this run; did you mean d_killed, h_killed?"),
     (["why-not", ADVANCED, "-e", "0", "--rule", "d_killed", "--grounding", "A=red_agent_1", "--at", "3"],
      "no node 'red_agent_1' in this run; did you mean red-agent-1, blue-agent-1?"),
-    (["replay", ADVANCED, "--lanes", "aliv,ammo"], "no lane 'aliv'; did you mean alive?"),
+    (["replay", ADVANCED, "--lanes", "aliv,ammo"], "no predicate 'aliv' in this run (--lanes); did you mean alive?"),
     (["replay", ADVANCED, "--outcome", "wn"], "no outcome 'wn'; did you mean win?"),
 ])
 def test_an_unknown_name_is_one_line_with_the_close_names(argv: list[str], message: str,

@@ -35,9 +35,11 @@ def run_digests(run: Path) -> dict[str, tuple[int, str]]:
 
 # Digests of main at 37fd478 (before issue 31's recording speed work). gridwar's since issue 38: play --scenario
 # plays GridWar through its spec (war.toml, the declared recorder; red random), a new baseline taken then
-# (RuleSim's scripted games had 14,222 changes and 518 steps; the episode begins are unchanged).
+# (RuleSim's scripted games had 14,222 changes and 518 steps; the episode begins are unchanged). Its changes
+# again on 2026-11-29: the opponent's goal cells are derived for every agent (env.rules, opponent.rules, for
+# --explore-scripted's scriptMove), 3,954 more rows; the steps and episodes, the games, are the same.
 EXPECTED = {
-    "gridwar": {"raw.changes": (33152, "a4cf35b088c81443"), "raw.steps": (316, "1c59708717304daf"),
+    "gridwar": {"raw.changes": (37106, "21ddcca570c63e58"), "raw.steps": (316, "1c59708717304daf"),
                 "raw.episode_begin": (12, "e5922dd3df8262e7"), "raw.episode_end": (12, "d515e398b502c416")},
     "frozenlake": {"raw.changes": (12492, "37ac591e13f7b5ed"), "raw.steps": (455, "a3d8f1232317cea3"),
                    "raw.episode_begin": (60, "c181fb942608bd40"), "raw.episode_end": (60, "6dc7d68960f21851")},
