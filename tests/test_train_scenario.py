@@ -81,7 +81,7 @@ def test_a_scenario_file_with_another_map_is_refused_in_one_line(tmp_path: Path,
     f = tmp_path / "small.toml"
     f.write_text('name = "small"\nwidth = 4\nheight = 4\nred_base = [3, 0]\nblue_base = [0, 3]\n')
     err = error_line(capsys, main(["train", "--scenario", str(f), *TINY, "--run", str(tmp_path / "run")]))
-    assert "scenario 'small': its map is not one of war.toml's [data.maps]" in err
+    assert "scenario 'small': its board is not war.toml's 8x8 map, default or open" in err
 
 
 def test_an_old_rulesim_checkpoint_on_the_spec_path_is_refused_saying_how_to_start_again(

@@ -96,7 +96,7 @@ def _run_env(args: argparse.Namespace) -> int:
     """eval --env: a policy of train --env, played greedily on the env it was trained on."""
     with store_errors():
         fmt = policy_format(args.policy)
-    if fmt != ENV_FORMAT:
+    if fmt is not None and fmt != ENV_FORMAT:  # None: no format to read; the env policy's loader says what is wrong
         raise UserError(f"{args.policy} is a GridWar policy ({fmt}); --env plays policies of train --env")
     if args.env is None:
         raise UserError(f"{args.policy} was trained with train --env: name that env with --env SPEC_OR_ID "

@@ -122,8 +122,8 @@ def scenario_env(scenario: Scenario, p_toward: float, stack_previous: bool) -> t
     where = f"scenario {scenario.name!r}"
     if (scenario.width, scenario.height, scenario.red_base, scenario.blue_base) != (8, 8, (7, 0), (0, 7)) or \
             frozenset(scenario.mountains) not in _MAPS:
-        raise UserError(f"{where}: its map is not one of war.toml's [data.maps] (default, open): write the map "
-                        f"there and train --env rules/gridworld/war.toml --env-arg map=NAME")
+        raise UserError(f"{where}: its board is not war.toml's 8x8 map, default or open: write it in war.toml's "
+                        f"[data.maps] (as walk4) and train --env rules/gridworld/war.toml --env-arg map=NAME")
     try:
         path, params = scenario_spec(scenario, stack_previous, p_toward)
     except ValueError as e:
