@@ -70,10 +70,36 @@ def one_line(text: str) -> str:
     return " ".join(kept)
 
 
+# The optional packages (pyproject.toml's extras): the extra that installs each, and what needs it. The
+# main job's `pip install -e .` leaves them out (torch and rerun-sdk are 1.3 GB of a 1.9 GB install).
+OPTIONAL_PACKAGES = {
+    "torch": ("train", "training and policies: train, eval, play --policy, whatif --policy"),
+    "rerun": ("replay", "tracelab replay"),
+    "stable_baselines3": ("sb3", "Stable-Baselines3 trainings"),
+    "ray": ("ray", "experiment --ray, sweep"),
+    "tensorboard": ("tensorboard", "TensorBoard logs"),
+    "matplotlib": ("experiments", "the experiment plots"),
+    "pandas": ("pyreason", "PyReason's DataFrames"),
+    "networkx": ("pyreason", "PyReason's graphs"),
+}
+
+
+def missing_package_message(e: ModuleNotFoundError) -> str | None:
+    """`<package> is not installed (needed for ...): pip install 'tracelab[extra]'` for an optional
+    package, else None."""
+    package = (e.name or "").partition(".")[0]
+    if package not in OPTIONAL_PACKAGES:
+        return None
+    extra, needed_for = OPTIONAL_PACKAGES[package]
+    return f"{package} is not installed (needed for {needed_for}): pip install 'tracelab[{extra}]'"
+
+
 def user_error_message(e: BaseException) -> str | None:
     """The one-line message of a user error, or None for an error that is not one (a bug)."""
     if isinstance(e, UserError):
         return one_line(str(e))
+    if isinstance(e, ModuleNotFoundError):
+        return missing_package_message(e)
     engine_errors = sys.modules.get("tracelab.engine.errors")
     if engine_errors is not None and isinstance(e, engine_errors.ProgramError):
         return f"{e.location}: {one_line(e.message)}"  # the source line and caret would make it 3 lines
