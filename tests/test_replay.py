@@ -269,3 +269,12 @@ def test_the_golden_recording_is_unchanged(tmp_path: Path) -> None:
     compare = subprocess.run([rerun_cli(), "rrd", "compare", "--unordered", str(GOLDEN), str(out)],
                              capture_output=True, text=True, check=False)
     assert compare.returncode == 0, (compare.stdout + compare.stderr)[-2000:]
+
+
+def test_the_default_lanes_follow_the_agents_and_lanes_names_show_every_thing(advanced_data, tmp_path: Path) -> None:
+    ep0 = advanced_data["advanced/episode-0"]
+    lanes = {p for p in ep0 if p.startswith("/lanes/")}
+    assert "/lanes/atLoc/red-agent-1" in lanes and not any("bullet" in p for p in lanes)   # a game's agents only
+    out = tmp_path / "atloc.rrd"
+    assert replay(SAMPLES / "advanced", "--episode", "0", "--lanes", "atLoc", "--save", out) == 0
+    assert any("bullet" in p for p in read_rrd(out)["advanced/episode-0"] if p.startswith("/lanes/atLoc/"))

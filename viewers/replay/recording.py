@@ -152,7 +152,8 @@ def record_episode(ctx: RunContext, episode: int, rec: rr.RecordingStream, optio
         agents = list(dict.fromkeys(agent for _, agent, *_ in rows))
         plots.log_rewards(rec, plots.agent_rewards(agents, rows), agents, [colour_of(a) for a in agents])
     agent_plots.log_agent_series(rec, agent, colour_of)
-    lanes.log_lanes(rec, ctx.con, episode, ctx.lanes, rows)
+    # the default lanes follow a game's agents (its bullets' atLoc would crowd them); --lanes shows all
+    lanes.log_lanes(rec, ctx.con, episode, ctx.lanes, rows, agents_only=options.lanes == lanes.DEFAULT_LANES)
     graph_rules.log_rule_log(rec, data)
     graph_rules.log_changed(rec, data)
     graph_rules.log_why(rec, ctx.con, data, options.why_atoms, options.why_depth, lambda: ctx.model, edges, deaths,
