@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from tracelab.envs.declared.recording import HANDOVER_ROWS, HANDOVER_STEPS
 from tracelab.envs.sinks import TraceSink
 from tracelab.envs.step_log import DecisionLog, StepLog, label_rows
 from tracelab.game.facts import agent_name
@@ -35,6 +34,11 @@ from tracelab.game.rulesim import RuleSim
 from tracelab.game.scenario import TEAMS, Rewards, Scenario
 from tracelab.game.state import WINNER_BLUE, WINNER_DRAW, WINNER_RED, StepResult
 from tracelab.store.agent_rows import PolicyOutput, RewardTerms
+
+# the declared recorder's cadence too (envs/declared/recording.py), kept apart so that RuleSim's env
+# loads none of the declared modules
+HANDOVER_STEPS = 64
+HANDOVER_ROWS = 65_536
 
 
 def handover_due(sim: RuleSim, steps_waiting: int, episode_ended: bool) -> bool:
