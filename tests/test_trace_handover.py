@@ -22,7 +22,7 @@ WAR = RULES_DIR / "gridworld" / "war.toml"
 
 class LoggingWriter(TraceWriter):
     """A TraceWriter that also logs the order of the calls: ('changes', {episode: its rows' t}) and
-    ('end', episode)."""
+    ('end', (episode, its last step's t))."""
 
     def __init__(self, run_dir: Path) -> None:
         super().__init__(run_dir, {"command": "pytest"})
@@ -34,7 +34,7 @@ class LoggingWriter(TraceWriter):
         return super().write_engine(episode, engine, rows)
 
     def end_episodes(self, episodes: Any) -> None:
-        self.log += [("end", int(e["episode"])) for e in episodes]
+        self.log += [("end", (int(e["episode"]), int(e["t_end"]))) for e in episodes]
         super().end_episodes(episodes)
 
 
@@ -82,10 +82,12 @@ def test_an_episodes_rows_are_written_before_its_end(tmp_path: Path, monkeypatch
     play(writer, 160)
     ends = [e for kind, e in writer.log if kind == "end"]
     assert len(ends) >= 3
-    for e in ends:
-        end_at = writer.log.index(("end", e))
+    for e, t_end in ends:
+        end_at = writer.log.index(("end", (e, t_end)))
         written = [k for k, (kind, ts) in enumerate(writer.log) if kind == "changes" and e in ts]
         assert written and max(written) < end_at, e
+        # up to its last step, under its own id (not taken later, under the next episode's clock)
+        assert set().union(*(writer.log[k][1][e] for k in written)) == set(range(t_end + 1)), e
 
 
 def test_rows_wait_at_most_handover_steps_within_an_episode(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
