@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from tracelab.envs.common import ActionMasker
+from tracelab.game.action_mask import ActionMasker
 from tracelab.game.refsim import RefSim
 from tracelab.game.scenario import RED, Scenario, builtin_scenario
 

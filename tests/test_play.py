@@ -24,6 +24,11 @@ def test_play_records_episodes_changes_steps_and_explains_a_position(tmp_path, c
     assert con.execute("SELECT scenario FROM run").fetchone()[0] == "advanced"
     assert con.execute("SELECT count(DISTINCT term) FROM raw.reward_terms").fetchone()[0] >= 5
     assert ended == 3 == con.execute("SELECT count(*) FROM episodes").fetchone()[0]
+    # what play says of the games is what the run records of them
+    won, lost, truncated, mean = con.execute(
+        "SELECT count(*) FILTER (outcome = 'win'), count(*) FILTER (outcome = 'loss'), "
+        "count(*) FILTER (outcome = 'truncated'), avg(reward) FROM episodes").fetchone()
+    assert f"{won} won, {lost} lost, {truncated} truncated; mean return {mean:.2f}" in out
     # every episode starts from its own set-up rows, then the rules move the agents
     per_ep = con.execute("SELECT episode, min(t), count(*) FILTER (rule = 'm_go') FROM changes "
                          "GROUP BY episode ORDER BY episode").fetchall()

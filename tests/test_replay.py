@@ -200,31 +200,30 @@ def test_episode_selection_and_user_errors(tmp_path: Path, capsys: pytest.Captur
 
 
 def _write_training_run(run_dir: Path) -> None:
-    """A run following the training-run contract: traced eval games (begin info kind=eval), an untraced
-    training episode, and metrics."""
-    from tracelab.envs.vector_env import GridWarVectorEnv
+    """A run following the training-run contract, as the trainer writes it through the spec path
+    (tracelab/train/external_eval.py): traced eval games of GridWar's advanced spec (begin info
+    kind=eval, episode ids from the training's run), an untraced training episode, and metrics."""
+    from tracelab import RULES_DIR
+    from tracelab.envs.declared.gym_env import DeclaredEnv
+    from tracelab.envs.declared.play import play_episodes, random_policy
+    from tracelab.envs.declared.recording import declared_run_config
+    from tracelab.envs.declared.spec import load_spec
     from tracelab.store import TraceWriter
-    from tracelab.store.sink import StoreSink
 
-    class EvalSink(StoreSink):
-        def begin_episode(self, world: int, episode: int, seed: int | None, scenario: object) -> None:
-            self.writer.begin_episode(int(episode), world=int(world), t_start=0, seed=seed, info={
-                "kind": "eval", "train_step": 100 * (episode + 1), "eval_round": episode, "opponent_p": 0.3})
-
-    writer = TraceWriter.open(run_dir, {"command": "tracelab train --test", "scenario": "advanced",
-                                        "config": {"steps": 300}, "seed": 0, "board": "gridworld"})
-    env = GridWarVectorEnv(1, "advanced", trace_sink=EvalSink(writer))
-    env.reset(seed=4)
-    ended = 0
-    while ended < 2:
-        red = env.sim.scripted_actions("red")
-        _, _, term, trunc, _ = env.step(np.array([red[0, 0]]))
-        ended += int(term[0] or trunc[0])
+    spec = load_spec(RULES_DIR / "gridworld" / "war.toml", advanced=True)
+    writer = TraceWriter.open(run_dir, {"command": "tracelab train --test", "scenario": "war.toml", "seed": 0,
+                                        "config": {"steps": 300, **declared_run_config(spec)}})
+    ids = iter(range(1000))
+    env = DeclaredEnv(spec, trace_writer=writer, trace_episode_ids=lambda: next(ids))
+    for episode in range(2):
+        env.trace_info({"kind": "eval", "train_step": 100 * (episode + 1), "eval_round": episode, "opponent_p": 0.3})
+        play_episodes(env, 1, 4 + episode, random_policy(env, episode))
+    env.close()  # the recorder writes what it kept; the run stays open (trace_episode_ids)
     writer.begin_episode(1000, info={"kind": "train", "train_step": 50})
     writer.end_episode(1000, steps=12, outcome="loss", reward=-260.0)
     for step in (100, 200, 300):
         writer.write_metrics(step, {"loss": 1.0 / step, "epsilon": 1 - step / 400, "eval/win_rate@p0.3": step / 300})
-    env.close()
+    writer.close()
 
 
 def test_a_training_run_replays_its_eval_games_with_the_training_curves(tmp_path: Path) -> None:

@@ -1,49 +1,43 @@
-"""The action mask of the rules backend is read from the shield rules (game.rules, section 7); the
-reference backend computes it from the state. Both must agree, and the rules' mask must be right."""
+"""The action mask predicts the shield (docs/envs.md, "Action mask"): GridWar's mask is read from the
+shield rules' atoms (`allowed(Agent, Action)`, rules/gridworld/env.rules over game.rules section 7), and
+through the spec path a masked move of an agent that may act is stopped and paid as unsafe, an allowed
+one never (unless a bullet hits the agent before it acts, which no mask can foresee). The mask's
+equality with RefSim's, step by step, is tests/test_gridwar_spec.py's."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from tracelab.envs.common import ActionMasker
-from tracelab.game.rulesim import RuleSim
-from tracelab.game.scenario import SlowAgents, builtin_scenario, generate_scenario
+from tracelab.envs.declared.gridwar import parallel_env
+
+GAMES = {"advanced": ("tracelab/GridWar-advanced-v0", {}), "nonmarkov": ("tracelab/GridWar-nonmarkov-v0", {}),
+         "base 3v3": ("tracelab/GridWar-base-v0", {"agents_per_team": 3})}
 
 
-def scenarios():
-    yield builtin_scenario("advanced")
-    yield builtin_scenario("nonmarkov")
-    yield builtin_scenario("base")
-    sc = generate_scenario(6, 5, 3, 0.2, seed=2, advanced=True)
-    yield sc.__class__(**{**sc.__dict__, "ammo": 1, "slow_agents": SlowAgents(red=(1,), blue=())})
-
-
-@pytest.mark.parametrize("scenario", list(scenarios()), ids=lambda s: s.name)
-def test_rule_mask_equals_state_mask_and_predicts_the_shield(scenario):
-    n_worlds = 6
-    sim = RuleSim(scenario, n_worlds, seed=1)
-    masker = ActionMasker(scenario)
-    ids = np.asarray(scenario.action_ids)
-    rng = np.random.default_rng(0)
-    checked_unsafe = 0
-    for _ in range(120):
-        from_rules = masker.for_sim(sim, 0)
-        np.testing.assert_array_equal(from_rules, masker(sim.state, 0))
-        red = rng.choice(ids, size=(n_worlds, scenario.agents_per_team))
-        idx = np.searchsorted(ids, red) if np.all(np.diff(ids) > 0) else \
-            np.array([[list(ids).index(a) for a in row] for row in red])
-        masked = np.take_along_axis(from_rules, idx[..., None], axis=-1)[..., 0] == 0
-        result = sim.step(red, sim.scripted_actions("blue"))
-        moves = red <= 3
-        # a masked move of an agent that may act is stopped by the shield and flagged unsafe (unless a
-        # bullet hits the agent before it acts, which no mask can foresee)
-        nothing_allowed = from_rules[..., -1] == 1
-        acting = from_rules[..., :4].any(axis=-1)
-        stopped = masked & moves & acting & (result.hits_taken[:, 0] == 0)
-        checked_unsafe += int(stopped.sum())
-        assert nothing_allowed.all()
-        assert np.all(result.unsafe[:, 0][stopped])
-        done = result.terminated | result.truncated
-        if done.any():
-            sim.reset(worlds=done)
-    assert checked_unsafe > 0 or scenario.name == "base"
+@pytest.mark.parametrize("game", list(GAMES))
+def test_a_masked_move_is_paid_as_unsafe_and_an_allowed_one_never(game: str) -> None:
+    env_id, kwargs = GAMES[game]
+    env = parallel_env(env_id, max_steps=40, **kwargs)
+    spec, world = env.world_spec, env.world
+    world.keep_reward_terms = True  # each agent's occurrences of each reward term, every step
+    unsafe = spec.reward_terms.index("unsafe(Agent)")
+    shot = [k for k, term in enumerate(spec.reward_terms) if term.startswith("shotBy(")]
+    moves = [spec.action_names.index(m) for m in ("up", "down", "left", "right")]
+    rng = np.random.default_rng(1)
+    _, infos = env.reset(seed=1)
+    checked = {"masked": 0, "allowed": 0}
+    for _ in range(300):
+        actions = {a: int(rng.integers(0, len(spec.action_names))) for a in env.agents}
+        masks = {a: infos[a]["action_mask"] for a in env.agents}
+        _, _, term, trunc, infos = env.step(actions)
+        count = world.last_reward_quantities  # [agent, term]
+        for j, agent in enumerate(env.possible_agents):
+            a, mask = actions[agent], masks[agent]
+            if a not in moves or not mask[moves].any() or count[j, shot].any():
+                continue  # not a move, an agent that may not act, or hit before it acted
+            kind = "allowed" if mask[a] else "masked"
+            assert count[j, unsafe] == (kind == "masked"), (agent, spec.action_names[a], mask)
+            checked[kind] += 1
+        if any(term.values()) or any(trunc.values()):
+            _, infos = env.reset()
+    assert checked["masked"] > 20 and checked["allowed"] > 20, checked

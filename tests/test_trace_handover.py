@@ -1,120 +1,116 @@
-"""The envs' tracer hands the simulator's trace rows over in chunks (tracelab/envs/tracer.py): at an
-episode's end, every HANDOVER_STEPS steps, before an env reset and at close. The rows a sink gets are the
-same as when they were taken after every step; an episode's rows are all out before its end."""
+"""A traced declared env hands the engine's trace rows over in chunks (tracelab/envs/declared/recording.py):
+at an episode's end, every HANDOVER_STEPS steps, before a reset and at close. The run it writes is the
+one a handover after every step writes; an episode's rows are all written before its end; rows wait at
+most HANDOVER_STEPS steps within an episode; the steps table holds every step as the env returned it.
+GridWar's advanced game through its spec, written into real runs of the trace store."""
 from __future__ import annotations
 
-from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 
-from tracelab.envs import tracer
-from tracelab.envs.sinks import MemorySink
-from tracelab.envs.vector_env import GridWarVectorEnv
-from tracelab.game.scenario import builtin_scenario
+from tracelab import RULES_DIR
+from tracelab.envs.declared import recording
+from tracelab.envs.declared.gym_env import DeclaredEnv
+from tracelab.store.reader import open_run
+from tracelab.store.writer import TraceWriter
+
+WAR = RULES_DIR / "gridworld" / "war.toml"
 
 
-class LoggingSink(MemorySink):
-    """A MemorySink that also logs the order of the calls: ('changes', episodes) / ('end', episode)."""
+class LoggingWriter(TraceWriter):
+    """A TraceWriter that also logs the order of the calls: ('changes', {episode: its rows' t}) and
+    ('end', (episode, its last step's t))."""
 
-    def __init__(self) -> None:
-        super().__init__()
+    def __init__(self, run_dir: Path) -> None:
+        super().__init__(run_dir, {"command": "pytest"})
         self.log: list[tuple[str, Any]] = []
 
-    def changes(self, rows: dict[str, np.ndarray], episode_of_world: np.ndarray, t0_of_world: np.ndarray) -> None:
-        super().changes(rows, episode_of_world, t0_of_world)
-        self.log.append(("changes", set(rows["episode"].tolist())))
+    def write_engine(self, episode: Any, engine: Any, rows: Any = None) -> int:
+        ts = {int(e): set(rows["t"][rows["episode"] == e].tolist()) for e in np.unique(rows["episode"])}
+        self.log.append(("changes", ts))
+        return super().write_engine(episode, engine, rows)
 
-    def end_episode(self, world: int, episode: int, steps: int, outcome: str, rewards: Any) -> None:
-        super().end_episode(world, episode, steps, outcome, rewards)
-        self.log.append(("end", episode))
+    def end_episodes(self, episodes: Any) -> None:
+        self.log += [("end", (int(e["episode"]), int(e["t_end"]))) for e in episodes]
+        super().end_episodes(episodes)
 
 
-def play_vector(sink: MemorySink, steps: int, worlds: int = 3, max_steps: int = 90) -> None:
-    env = GridWarVectorEnv(worlds, replace(builtin_scenario("advanced"), max_steps=max_steps), backend="rules",
-                           trace_sink=sink)
+def play(writer: TraceWriter, steps: int, max_steps: int = 90) -> list[tuple[int, float, list[float]]]:
+    """Random actions in the advanced game, a reset half-way (it cuts the running episode short); returns
+    each step's (action, reward, observation) as the env gave them."""
+    env = DeclaredEnv(WAR, advanced=True, max_steps=max_steps, trace_writer=writer)
     env.reset(seed=3)
-    rng = np.random.default_rng(3)
+    rng, out = np.random.default_rng(3), []
     for k in range(steps):
-        env.step(rng.integers(0, 9, env.action_space.shape))
-        if k == steps // 2:
-            env.reset()  # cuts the running episodes short
+        a = int(rng.integers(0, 9))
+        obs, reward, terminated, truncated, _ = env.step(a)
+        out.append((a, float(reward), obs.tolist()))
+        if terminated or truncated or k == steps // 2:
+            env.reset()
     env.close()
+    return out
 
 
-def test_chunked_handover_gives_the_rows_of_a_handover_after_every_step(monkeypatch: pytest.MonkeyPatch) -> None:
-    chunked = LoggingSink()
-    play_vector(chunked, 160)
-    monkeypatch.setattr(tracer, "HANDOVER_STEPS", 1)
-    every = LoggingSink()
-    play_vector(every, 160)
-    assert len(chunked.change_chunks) < len(every.change_chunks) / 2  # fewer, bigger handovers
-    assert [e["episode"] for e in chunked.ended] == [e["episode"] for e in every.ended]
-    for ep in sorted({e["episode"] for e in every.ended}):
-        a, b = chunked.rows(ep), every.rows(ep)
-        assert a.keys() == b.keys() and len(b["t"]) > 0
-        for col in b:
-            np.testing.assert_array_equal(a[col], b[col], err_msg=f"episode {ep}, column {col}")
+def changes(run: Path) -> list[tuple]:
+    con = open_run(run)
+    try:
+        return con.execute("SELECT * EXCLUDE (seq) FROM raw.changes ORDER BY seq").fetchall()
+    finally:
+        con.close()
 
 
-def test_an_episodes_rows_are_out_before_its_end() -> None:
-    sink = LoggingSink()
-    play_vector(sink, 160)
-    aborted = {e["episode"] for e in sink.ended if e["outcome"] == "aborted"}
-    assert len(aborted) >= 3 and len(sink.ended) > len(aborted)  # resets cut some short, others finished
-    for e in sink.ended:
-        end_at = sink.log.index(("end", e["episode"]))
-        after = [k for k, (kind, eps) in enumerate(sink.log) if kind == "changes" and e["episode"] in eps]
-        assert after and max(after) < end_at, e
+def test_chunked_handover_writes_the_run_a_handover_after_every_step_writes(tmp_path: Path,
+                                                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    takes = []
+    take = recording.DeclaredRecorder._take_rows
+    monkeypatch.setattr(recording.DeclaredRecorder, "_take_rows", lambda self: (takes.append(1), take(self)))
+    play(TraceWriter(tmp_path / "chunked", {"command": "pytest"}), 160)
+    chunked_takes, takes[:] = len(takes), []
+    monkeypatch.setattr(recording, "HANDOVER_STEPS", 1)
+    play(TraceWriter(tmp_path / "every", {"command": "pytest"}), 160)
+    assert chunked_takes < len(takes) / 2  # fewer, bigger handovers
+    a, b = changes(tmp_path / "chunked"), changes(tmp_path / "every")
+    assert len(a) > 1000 and a == b
 
 
-def test_rows_wait_at_most_handover_steps_within_an_episode(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(tracer, "HANDOVER_STEPS", 6)
-    sink = MemorySink()
-    env = GridWarVectorEnv(1, replace(builtin_scenario("advanced"), max_steps=500), backend="rules", trace_sink=sink)
+def test_an_episodes_rows_are_written_before_its_end(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(recording, "WRITE_ROWS", 1)  # a write after every step: the order shows
+    writer = LoggingWriter(tmp_path / "run")
+    play(writer, 160)
+    ends = [e for kind, e in writer.log if kind == "end"]
+    assert len(ends) >= 3
+    for e, t_end in ends:
+        end_at = writer.log.index(("end", (e, t_end)))
+        written = [k for k, (kind, ts) in enumerate(writer.log) if kind == "changes" and e in ts]
+        assert written and max(written) < end_at, e
+        # up to its last step, under its own id (not taken later, under the next episode's clock)
+        assert set().union(*(writer.log[k][1][e] for k in written)) == set(range(t_end + 1)), e
+
+
+def test_rows_wait_at_most_handover_steps_within_an_episode(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(recording, "HANDOVER_STEPS", 6)
+    monkeypatch.setattr(recording, "WRITE_ROWS", 1)
+    writer = LoggingWriter(tmp_path / "run")
+    env = DeclaredEnv(WAR, advanced=True, max_steps=500, trace_writer=writer)
     env.reset(seed=0)
-    nothing = np.array([8])  # the learner stays put; the episode runs on unless blue ends it
+    nothing = env.world_spec.action_names.index("nothing")  # red stays put: the game runs on unless blue ends it
     for k in range(1, 13):
-        _, _, term, trunc, _ = env.step(nothing)
-        assert not (term[0] or trunc[0]), "this test needs an episode of 12 steps at least (another seed)"
-        t = set(sink.rows(0)["t"].tolist()) if sink.change_chunks else set()
-        handed_up_to = 6 * (k // 6)  # the last handover's step (none before step 6)
-        assert t == (set(range(handed_up_to + 1)) if handed_up_to else set()), k
+        _, _, terminated, truncated, _ = env.step(nothing)
+        assert not (terminated or truncated), "this test needs an episode of 12 steps at least (another seed)"
+        written = set().union(*(ts.get(0, set()) for kind, ts in writer.log if kind == "changes"))
+        handed_up_to = 6 * (k // 6)  # the last handover's step (before step 6: the build's rows at t = 0)
+        assert written == set(range(handed_up_to + 1)), k
     env.close()
 
 
-def test_the_store_gets_every_step_record_in_chunks(tmp_path) -> None:  # noqa: ANN001
-    """StoreSink writes step records in chunks (WRITE_ROWS step rows, WRITE_INTERVAL_S, close): the steps
-    table holds, per world-step, one row per agent with its team's observation, action and reward, as the
-    env handed them over (MemorySink keeps the same calls)."""
-    from tracelab.store.reader import open_run
-    from tracelab.store.sink import StoreSink
-    from tracelab.store.writer import TraceWriter
-
-    memory = MemorySink()
-    play_vector(memory, 150)
-    writer = TraceWriter(tmp_path / "run", {"command": "pytest", "scenario": "advanced"})
-    play_vector(StoreSink(writer), 150)  # the env closes the sink and the writer
-    got = open_run(tmp_path / "run").execute(
-        "SELECT episode, step, t, agent, action, reward, obs FROM steps ORDER BY episode, step, agent").fetchall()
-    want = []
-    agents = ["blue-agent-1", "red-agent-1"]  # sorted, as the query orders them
-    for chunk in memory.step_chunks:
-        for i in range(len(chunk["world"])):
-            for team, name in ((1, agents[0]), (0, agents[1])):
-                want.append((int(chunk["episode"][i]), int(chunk["t"][i]), int(chunk["t"][i]), name,
-                             int(chunk["actions"][i, team, 0]), float(chunk["rewards"][i, team, 0]),
-                             chunk["obs"][i, team].tolist()))
-    want.sort(key=lambda r: (r[0], r[1], r[3]))
-    assert len(got) == len(want) > 300
-    for g, w in zip(got, want):
-        assert g[:6] == w[:6] and np.allclose(g[6], w[6]), (g[:6], w[:6])
-    # ends are written in chunks, but each keeps the time its episode ended: before the next one began
-    times = open_run(tmp_path / "run").execute(
-        "SELECT world, started_at, ended_at FROM episodes ORDER BY world, episode").fetchall()
-    assert len(times) > 6
-    for (w0, s0, e0), (w1, s1, _) in zip(times, times[1:]):
-        assert s0 <= e0
-        if w0 == w1:
-            assert e0 <= s1, (w0, s0, e0, s1)
+def test_the_store_gets_every_step_as_the_env_returned_it(tmp_path: Path) -> None:
+    played = play(TraceWriter(tmp_path / "run", {"command": "pytest"}), 150)
+    con = open_run(tmp_path / "run")
+    got = con.execute("SELECT action, reward, obs FROM steps ORDER BY episode, step").fetchall()
+    con.close()
+    assert len(got) == len(played) == 150
+    for (a, r, o), (want_a, want_r, want_o) in zip(got, played):
+        assert (a, r) == (want_a, want_r) and np.allclose(o, want_o)

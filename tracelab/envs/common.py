@@ -1,5 +1,5 @@
 """What RuleSim's batched env (vector_env) and the GridWar trainer share: the simulator backend, the spaces,
-the action masks (the shield, read from the state) and the resets."""
+the resets and a step (the action masks: tracelab/game/action_mask.py, RefSim's too)."""
 from __future__ import annotations
 
 from typing import Any
@@ -8,19 +8,10 @@ import numpy as np
 from gymnasium import spaces
 
 from tracelab.envs.tracer import EpisodeTracer
+from tracelab.game.action_mask import ActionMasker
 from tracelab.game.refsim import RefSim
 from tracelab.game.rulesim import RuleSim
-from tracelab.game.scenario import (
-    DIRECTION_DELTAS,
-    DOWN,
-    LEFT,
-    NOTHING,
-    RIGHT,
-    UP,
-    Scenario,
-    builtin_scenario,
-)
-from tracelab.game.state import GameState
+from tracelab.game.scenario import Scenario, builtin_scenario
 
 BACKENDS = ("rules", "reference")
 Simulator = RuleSim | RefSim
@@ -64,55 +55,6 @@ def learner_action_space(scenario: Scenario) -> spaces.Discrete | spaces.MultiDi
     """Indices into scenario.action_ids: Discrete for one agent, MultiDiscrete for a team."""
     n_act, n = scenario.n_actions, scenario.agents_per_team
     return spaces.Discrete(n_act) if n == 1 else spaces.MultiDiscrete([n_act] * n)
-
-
-class ActionMasker:
-    """Which learner actions are safe and valid in the current state, per world, team and agent.
-
-    For the rules backend `for_sim` reads the mask from the shield rules' atoms (game.rules, section 7);
-    this Python version serves the reference backend, and tests check that the two agree.
-    It mirrors the rules (rules/gridworld/game.rules): only an agent that may act gets a choice
-    (t_fast / t_slow: alive, and a slow agent on even steps only; others can only do nothing, since
-    the simulator ignores their actions); a move off the map (u_*_edge) or into a mountain (u_*_mtn) is
-    masked, a shot with no ammo (s_empty, s_unarmed) is masked; do nothing is always allowed. It reads
-    positions, ammo, alive and t from GameState (what RuleSim reads back from atoms) and the map. It cannot
-    foresee a bullet that kills the agent in phase 1 of the next step, before it acts.
-    """
-
-    def __init__(self, scenario: Scenario) -> None:
-        self.ids = np.asarray(scenario.action_ids, np.int64)
-        self.n_actions = len(self.ids)
-        # the layout both action sets share: moves at 0-3, shots at 4-7 (advanced), nothing last
-        assert tuple(self.ids[:4]) == (UP, DOWN, LEFT, RIGHT) and self.ids[-1] == NOTHING
-        self._shots = scenario.advanced
-        # move_ok[x, y, d]: the move in direction d from (x, y) stays on the map and off the mountains
-        w, h = scenario.width, scenario.height
-        free = np.zeros((w + 2, h + 2), bool)  # padded with a blocked border
-        free[1:-1, 1:-1] = ~scenario.mountain_grid
-        x, y = np.meshgrid(np.arange(w), np.arange(h), indexing="ij")
-        self._move_ok = np.stack([free[x + 1 + dx, y + 1 + dy] for dx, dy in DIRECTION_DELTAS], axis=-1)
-        self._slow = scenario.slow_mask
-
-    def for_sim(self, sim: Any, team: int | None = None) -> np.ndarray:
-        """The mask for a simulator's current state: read from the shield rules' atoms when the
-        simulator runs on rules (RuleSim.allowed_actions), else computed from the state (RefSim)."""
-        allowed = getattr(sim, "allowed_actions", None)
-        if allowed is None:
-            return self(sim.state, team)
-        sel = slice(None) if team is None else team
-        return np.ascontiguousarray(allowed()[:, sel][..., self.ids]).view(np.int8)
-
-    def __call__(self, state: GameState, team: int | None = None) -> np.ndarray:
-        """int8 (gymnasium's mask dtype), 1 = allowed: [W, N, n_actions] for one team, or
-        [W, 2, N, n_actions] for both (team=None)."""
-        sel = slice(None) if team is None else team
-        pos, can_act = state.pos[:, sel], state.choosing(self._slow)[:, sel]
-        out = np.empty((*can_act.shape, self.n_actions), bool)
-        out[..., :4] = self._move_ok[pos[..., 0], pos[..., 1]] & can_act[..., None]
-        if self._shots:
-            out[..., 4:8] = (can_act & (state.ammo[:, sel] > 0))[..., None]
-        out[..., -1] = True
-        return out.view(np.int8)
 
 
 def reset_sim(sim: Any, tracer: EpisodeTracer | None, seed: int | None) -> np.ndarray:

@@ -1,4 +1,5 @@
-"""Where an environment streams its trace: the `TraceSink` protocol, and `MemorySink` (keeps everything).
+"""Where RuleSim's batched env (vector_env.py) streams its trace: the `TraceSink` protocol (the store's is
+tracelab.store.sink.StoreSink).
 
 An env given `trace_sink=` calls, in this order:
 
@@ -38,8 +39,7 @@ Conventions:
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -70,68 +70,3 @@ class TraceSink(Protocol):
                     rewards: Mapping[str, float]) -> None: ...
 
     def close(self) -> None: ...
-
-
-def _concat(chunks: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
-    if not chunks:
-        return {}
-    return {k: np.concatenate([c[k] for c in chunks]) for k in chunks[0]}
-
-
-@dataclass
-class MemorySink:
-    """A TraceSink that keeps every call in lists (tests, notebooks, small runs)."""
-    runs: list[tuple[Any, Any]] = field(default_factory=list)        # (engine, scenario)
-    begun: list[dict[str, Any]] = field(default_factory=list)        # world, episode, seed
-    change_chunks: list[dict[str, np.ndarray]] = field(default_factory=list)
-    step_chunks: list[dict[str, np.ndarray]] = field(default_factory=list)
-    ended: list[dict[str, Any]] = field(default_factory=list)        # world, episode, steps, outcome, rewards
-    decision_rows: list["Decisions"] = field(default_factory=list)
-    reward_term_rows: list["RewardTerms"] = field(default_factory=list)
-    closed: bool = False
-
-    def begin_run(self, engine: "Engine | None", scenario: "Scenario") -> None:
-        self.runs.append((engine, scenario))
-
-    def begin_episode(self, world: int, episode: int, seed: int | None, scenario: "Scenario") -> None:
-        self.begun.append({"world": world, "episode": episode, "seed": seed})
-
-    def changes(self, rows: dict[str, np.ndarray], episode_of_world: np.ndarray,
-                t0_of_world: np.ndarray) -> None:
-        self.change_chunks.append(rows)
-
-    def step(self, world: np.ndarray, episode: np.ndarray, t: np.ndarray, obs: np.ndarray,
-             actions: np.ndarray, rewards: np.ndarray) -> None:
-        self.step_chunks.append({"world": world, "episode": episode, "t": t, "obs": obs,
-                                 "actions": actions, "rewards": rewards})
-
-    def decisions(self, rows: "Decisions") -> None:
-        self.decision_rows.append(rows)
-
-    def reward_terms(self, rows: "RewardTerms") -> None:
-        self.reward_term_rows.append(rows)
-
-    def end_episode(self, world: int, episode: int, steps: int, outcome: str,
-                    rewards: Mapping[str, float]) -> None:
-        self.ended.append({"world": world, "episode": episode, "steps": steps, "outcome": outcome,
-                           "rewards": dict(rewards)})
-
-    def close(self) -> None:
-        self.closed = True
-
-    # ---- reading back ----
-    def rows(self, episode: int | None = None) -> dict[str, np.ndarray]:
-        """All change rows in arrival order (or one episode's), as one dict of columns."""
-        out = _concat(self.change_chunks)
-        if episode is None or not out:
-            return out
-        keep = out["episode"] == episode
-        return {k: v[keep] for k, v in out.items()}
-
-    def steps(self, episode: int | None = None) -> dict[str, np.ndarray]:
-        """All step records (or one episode's), one row per world and step."""
-        out = _concat(self.step_chunks)
-        if episode is None or not out:
-            return out
-        keep = out["episode"] == episode
-        return {k: v[keep] for k, v in out.items()}

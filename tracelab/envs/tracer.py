@@ -35,7 +35,8 @@ from tracelab.game.scenario import TEAMS, Rewards, Scenario
 from tracelab.game.state import WINNER_BLUE, WINNER_DRAW, WINNER_RED, StepResult
 from tracelab.store.agent_rows import PolicyOutput, RewardTerms
 
-
+# the declared recorder's cadence too (envs/declared/recording.py), kept apart so that RuleSim's env
+# loads none of the declared modules
 HANDOVER_STEPS = 64
 HANDOVER_ROWS = 65_536
 

@@ -1,5 +1,6 @@
-"""StoreSink: the TraceSink (tracelab/envs/sinks.py) that streams an environment's trace into a run of
-the trace store, through TraceWriter."""
+"""StoreSink: the TraceSink (tracelab/envs/sinks.py) that streams RuleSim's trace (tracelab/envs/tracer.py)
+into a run of the trace store, through TraceWriter, at the writer's cadence (WRITE_ROWS, WRITE_INTERVAL_S).
+A declared world's games are recorded by tracelab/envs/declared/recording.py."""
 from __future__ import annotations
 
 import time
@@ -10,20 +11,10 @@ import numpy as np
 
 from tracelab.store.agent_rows import AgentRows, Decisions, ObservationName, RewardTerms
 from tracelab.store.convert import utc_now
-from tracelab.store.writer import TraceWriter
+from tracelab.store.writer import WRITE_INTERVAL_S, WRITE_ROWS, TraceWriter
 
 # deferred: the game's scenario module (most of a second) and observation module (numba) load in the methods of a
 # game's sink: the store's other users (readers, a declared world's recorder) need not pay
-
-
-# What the env streams is written in chunks: when WRITE_ROWS step rows wait, or WRITE_INTERVAL_S after
-# the last write, and at close (Arrow tables per step, or per episode at one world, cost more than the
-# simulator's step: docs/benchmarks.md). Each write costs ~2 ms in this thread and a publication of four
-# tables in the writer's (an episode end asks for one), whatever its size: every 0.1 s, that was a fifth
-# of a traced play's CPU at one world. A live reader sees an episode ~0.3 s after it ended; the writer
-# publishes rows at most a second later anyway.
-WRITE_ROWS = 4096
-WRITE_INTERVAL_S = 0.25
 
 
 class StoreSink:

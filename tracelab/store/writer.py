@@ -55,6 +55,15 @@ _OPEN_WRITERS: "weakref.WeakSet[TraceWriter]" = weakref.WeakSet()
 # a loaded machine) holds about twice this: at 500k rows a 10,000-episode play peaked ~60 MB higher
 # (docs/benchmarks/history.md, "Memory of long runs").
 MAX_PENDING_ROWS = 131_072
+# The cadence of a caller that streams an env's games (envs/declared/recording.py): it keeps what it
+# records and calls the writer when WRITE_ROWS step rows wait, or WRITE_INTERVAL_S after its last write,
+# and at close (Arrow tables per step, or per episode at one world, cost more than the engine's step:
+# docs/benchmarks.md). Each write costs ~2 ms in the caller and a publication of four tables here (an
+# episode end asks for one), whatever its size: every 0.1 s, that was a fifth of a traced play's CPU at
+# one world. A live reader sees an episode ~0.3 s after it ended; the writer publishes rows at most a
+# second later anyway.
+WRITE_ROWS = 4096
+WRITE_INTERVAL_S = 0.25
 
 
 def _use_system_allocator() -> None:

@@ -1,11 +1,11 @@
 """GridWar's registered ids (`tracelab/GridWar-{base,advanced,nonmarkov}-v0`) as declared worlds: each id is
 a spec in rules/gridworld/ with its fixed params (war.toml sized by its params: agents_per_team, ammo,
 health, damage, p_toward, max_steps, map, the rewards and reward_scale, stack_previous; docs/worlds.md,
-"GridWar through the same path"). `gym.make(id, **kwargs)`, `gym.make_vec`, the PettingZoo env
-(`parallel_env(id, **kwargs)`, several agents a team) and the commands' `--env id --env-arg ...` all map
-their keyword arguments onto the spec's params here (`spec_and_params`), where a keyword the spec cannot
-honour is refused in one line naming it. `train --scenario NAME` trains a scenario as the id and params
-`scenario_env` maps it to."""
+"GridWar through the same path"). `gym.make(id, **kwargs)` (one agent a team), `gym.make_vec` (one
+agent, or a team of several: observations [W, agents, D]), the PettingZoo env (`parallel_env(id,
+**kwargs)`) and the commands' `--env id --env-arg ...` all map their keyword arguments onto the spec's
+params here (`spec_and_params`), where a keyword the spec cannot honour is refused in one line naming it.
+`train --scenario NAME` trains a scenario as the id and params `scenario_env` maps it to."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -30,7 +30,7 @@ WAR_SPEC = RULES_DIR / "gridworld" / "war.toml"
 GRIDWAR_SPEC_IDS: dict[str, tuple[Path, dict[str, Any]]] = {
     "tracelab/GridWar-base-v0": (WAR_SPEC, {"advanced": False}),
     "tracelab/GridWar-advanced-v0": (WAR_SPEC, {"advanced": True}),
-    # two agents a team, agent 2 slow, observing the last step too: a PettingZoo env (parallel_env)
+    # two agents a team, agent 2 slow, observing the last step too: a team (gym.make_vec, parallel_env)
     "tracelab/GridWar-nonmarkov-v0": (RULES_DIR / "gridworld" / "war_nonmarkov.toml", {}),
 }
 # the old RuleSim env's keyword arguments, as the spec's params name them
@@ -70,15 +70,16 @@ def make_env(env_id: str, **kwargs: Any) -> DeclaredEnv:
     """gym.make's entry point of a GridWar id: the declared gymnasium Env (one agent a team)."""
     from tracelab.envs.declared.gym_env import DeclaredEnv
     spec, params = spec_and_params(env_id, kwargs)
-    _one_agent(env_id, params, "a gymnasium Env")
+    _one_agent(env_id, params)
     return DeclaredEnv(spec, **params)
 
 
 def make_vec_env(env_id: str, num_envs: int = 1, **kwargs: Any) -> DeclaredVectorEnv:
-    """gym.make_vec's entry point of a GridWar id: `num_envs` worlds on one engine (SAME_STEP autoreset)."""
+    """gym.make_vec's entry point of a GridWar id: `num_envs` worlds on one engine (SAME_STEP autoreset).
+    Several agents a team (agents_per_team > 1, the nonmarkov id): the team vector env, every red agent
+    acting in every world (observations [W, agents, D], actions [W, agents]; DeclaredVectorEnv)."""
     from tracelab.envs.declared.vector_env import DeclaredVectorEnv
     spec, params = spec_and_params(env_id, kwargs)
-    _one_agent(env_id, params, "the vector env")
     return DeclaredVectorEnv(spec, num_envs, **params)
 
 
@@ -92,11 +93,12 @@ def parallel_env(env_id: str = "tracelab/GridWar-base-v0", **kwargs: Any) -> Dec
     return DeclaredParallelEnv(spec, **params)
 
 
-def _one_agent(env_id: str, params: dict[str, Any], what: str) -> None:
+def _one_agent(env_id: str, params: dict[str, Any]) -> None:
     if env_id == "tracelab/GridWar-nonmarkov-v0" or params.get("agents_per_team", 1) != 1:
         size = params.get("agents_per_team", 2)
-        raise UserError(f"{env_id}: agents_per_team={size!r} is not supported by {what}, which plays one agent "
-                        "(tracelab.envs.declared.gridwar.parallel_env plays every red agent)")
+        raise UserError(f"{env_id}: agents_per_team={size!r} is not supported by a gymnasium Env, which plays "
+                        "one agent (gym.make_vec's team vector env and tracelab.envs.declared.gridwar.parallel_env "
+                        "play every red agent)")
 
 
 def register_gridwar() -> None:

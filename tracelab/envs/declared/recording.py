@@ -1,7 +1,6 @@
-"""A declared world's games recorded into a run of the trace store, as GridWar's envs record theirs
-(tracelab/envs/tracer.py, tracelab/store/sink.py): the program (rules, facts, the board's facts), the
-vocabulary and groundings, every change row with its cause and grounding, a step row per env step and
-one episode per game (seed; steps, return, outcome).
+"""A declared world's games recorded into a run of the trace store: the program (rules, facts, the
+board's facts), the vocabulary and groundings, every change row with its cause and grounding, a step row
+per env step and one episode per game (seed; steps, return, outcome).
 
 Episode time. Each episode's trace starts at t = 0 with the rows of the world's build (the program's and
 the board's facts, and the env's atoms set to [0,0]), replayed for every episode so that its rows alone
@@ -14,10 +13,12 @@ The env's facts are external facts (cause `action` in the store's views): the ac
 (`pressed(right)`) and each drawn random fact (`slip(cw)`), so that `tracelab why` ends at them. Which
 predicates are the agent's and which are draws (by name) is in the run's config (`declared_facts`).
 
-Rows are taken from the engine in chunks (tracelab.envs.tracer's cadence): when an episode ends, every
-HANDOVER_STEPS steps, when HANDOVER_ROWS rows wait, before a reset, and at close; everything is written
-at StoreSink's cadence (WRITE_ROWS steps, or WRITE_INTERVAL_S seconds), so a live reader sees a game
-that late at most, plus the writer's own delay. Outcomes:
+Rows are taken from the engine in chunks: when an episode ends (so an episode's rows are all out before
+its end is written), every HANDOVER_STEPS steps, when HANDOVER_ROWS rows wait (the engine's buffer stays
+bounded), before a reset, and at close; taking them after every step cost more than the engine's step at
+one world (docs/benchmarks.md). Everything is written at the writer's cadence (store/writer.py: WRITE_ROWS
+steps, or WRITE_INTERVAL_S seconds), so a live reader sees a game that late at most, plus the writer's own
+delay. Outcomes:
 "terminated", "truncated", or "aborted" (cut short by a reset or close)."""
 from __future__ import annotations
 
@@ -29,11 +30,10 @@ import numpy as np
 from tracelab.board import RUN_CONFIG_KEY, board_config
 from tracelab.envs.declared.spec import WorldSpec
 from tracelab.envs.declared.world import DeclaredWorld
-from tracelab.envs.tracer import HANDOVER_ROWS, HANDOVER_STEPS
 from tracelab.store.agent_rows import AgentRows, Decisions, ObservationName, PolicyOutput, RewardTerms
 from tracelab.store.convert import utc_now
-from tracelab.store.sink import WRITE_INTERVAL_S, WRITE_ROWS
 from tracelab.store.sources import read_sources, source_summaries
+from tracelab.store.writer import WRITE_INTERVAL_S, WRITE_ROWS
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Mapping
@@ -41,6 +41,8 @@ if TYPE_CHECKING:
     from tracelab.store.writer import TraceWriter
 
 CONFIG_KEY = "declared_facts"
+HANDOVER_STEPS = 64  # steps whose rows may wait in the engine (a live reader sees them that late)
+HANDOVER_ROWS = 65_536  # rows that may wait in the engine
 
 
 def declared_facts(spec: WorldSpec) -> dict[str, Any]:
@@ -114,7 +116,7 @@ class DeclaredRecorder:
     and must not have stepped since it was built. `close()` closes the writer.
 
     What an episode records is kept and written every WRITE_ROWS steps or WRITE_INTERVAL_S seconds (and
-    at close), as StoreSink does: episode begins, change rows, step rows, then episode ends, so a reader never sees an ended
+    at close): episode begins, change rows, step rows, then episode ends, so a reader never sees an ended
     episode without its rows. Writing per episode cost more than the toy-text games' steps.
 
     `episode_ids`: a run the recorder does not own (a training's, whose evaluation games it records):

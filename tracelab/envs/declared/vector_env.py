@@ -2,12 +2,12 @@
 stepped by one engine call (vector_world.DeclaredWorlds). Spaces, rewards and infos are DeclaredEnv's,
 batched (gymnasium.vector.utils.batch_space).
 
-Autoreset: SAME_STEP, as tracelab.envs.vector_env.GridWarVectorEnv and gymnasium's SyncVectorEnv with
-autoreset_mode=SAME_STEP: a world whose episode ends returns its terminal reward and flags but its reset
-observation; info["final_obs"] (the observations' dtype and shape, valid where info["_final_obs"]) holds
-the terminal observations, info["final_info"] the step's info of those worlds (each key with its `_key`
-mask, the worlds that ended), info["_final_info"] marks them; the top-level info describes the returned
-observation (for a reset world: t = 0 and the new episode's action_mask). Every key has its `_key` mask.
+Autoreset: SAME_STEP, as gymnasium's SyncVectorEnv with autoreset_mode=SAME_STEP: a world whose episode
+ends returns its terminal reward and flags but its reset observation; info["final_obs"] (the
+observations' dtype and shape, valid where info["_final_obs"]) holds the terminal observations,
+info["final_info"] the step's info of those worlds (each key with its `_key` mask, the worlds that
+ended), info["_final_info"] marks them; the top-level info describes the returned observation (for a
+reset world: t = 0 and the new episode's action_mask). Every key has its `_key` mask.
 
 Seeding, as SyncVectorEnv seeds its envs: reset(seed=s) seeds world i's np_random with s + i, a list
 seeds world i with seed[i]; a world that restarts later draws on from its own generator. So world i
@@ -25,7 +25,8 @@ it), actions [W, agents] (-1: the agent does nothing, as one left out of a Petti
 [W] the agents' sum and info["agent_reward"] [W, agents] each one's (the step's, also for a world that
 ended), info["action_mask"] [W, agents, actions]; where the spec declares `[agents] decides` and `alive`,
 info["decides"] and info["alive"] [W, agents] (the returned observation's state; final_info holds the ended
-worlds' last ones). What the trainer trains a team on (env_trainer.py)."""
+worlds' last ones). What the trainer trains a team on (env_trainer.py), and what gym.make_vec of a GridWar
+id with several agents a team builds (gridwar.make_vec_env)."""
 from __future__ import annotations
 
 import os
