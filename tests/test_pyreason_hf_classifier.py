@@ -79,6 +79,7 @@ def test_limit_classes_renormalises_over_the_allowed_labels_and_names_the_top_on
         ("tench(shark_1) : [0.0,1.0]" + when, "shark_1-tench-fact"),
     ]
     assert classify.class_names == ALLOWED  # PyReason keeps the filtered labels aside
+    assert [(f.pred, f.component) for f in facts[:2]] == [("tigershark", "shark_1"), ("hammerhead", "shark_1")]
 
 
 def test_without_limit_the_class_names_read_the_first_probabilities_of_the_whole_softmax() -> None:
