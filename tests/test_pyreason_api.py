@@ -25,6 +25,7 @@ def fresh() -> None:
     pr.reset()
     pr.reset_rules()
     pr.reset_settings()
+    pr.settings.atom_trace = True  # the traces these tests read are PyReason's with atom_trace
     pr.api._program.ipl.clear()  # PyReason's reset() keeps the inconsistent predicate list; tests start without
 
 

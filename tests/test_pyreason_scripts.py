@@ -63,13 +63,14 @@ def test_run_pyreason_command_and_nothing_installed_as_pyreason(tmp_path: Path) 
 
 
 def test_a_pyreason_module_tracelab_lacks_and_a_missing_script_are_one_line(tmp_path: Path) -> None:
-    script = tmp_path / "hf.py"
-    script.write_text("from pyreason.scripts.learning.classification.hf_classifier import X\n")
+    script = tmp_path / "yolo.py"
+    script.write_text("from pyreason.scripts.learning.classification.yolo_classifier import X\n")
     r = subprocess.run([sys.executable, "-m", "tracelab.pyreason", str(script)], capture_output=True, text=True,
                        timeout=300, check=False)
     assert r.returncode == 1
     assert r.stderr.strip().splitlines()[-1].endswith(
-        "tracelab.pyreason has no module standing for PyReason's pyreason.scripts.learning.classification.hf_classifier"
+        "tracelab.pyreason has no module standing for PyReason's "
+        "pyreason.scripts.learning.classification.yolo_classifier"
         " (docs/pyreason.md, 'Scripts as they are')")
     r = subprocess.run([sys.executable, "-m", "tracelab.pyreason", str(tmp_path / "none.py")], capture_output=True,
                        text=True, timeout=300, check=False)

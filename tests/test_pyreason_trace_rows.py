@@ -19,6 +19,7 @@ def fresh() -> None:
     pr.reset()
     pr.reset_rules()
     pr.reset_settings()
+    pr.settings.atom_trace = True  # the rows these tests hold are PyReason's with atom_trace (its committed traces)
     pr.api._program.ipl.clear()
 
 
@@ -254,3 +255,54 @@ def test_a_set_static_rule_freezes_its_ipl_partner_too_as_pyreason(tmp_path: Pat
                     ("0", "healthy", "[0.0,1.0]", partner, "IPL: sick", "True", "IPL"),
                     ("2", "healthy", "[0.9,1.0]", "[0.9,1.0]", "f_h", "True", "Fact"),
                     ("2", "sick", "[0.8,1.0]", "[0.8,1.0]", "f_h", "True", "IPL")]
+
+
+def basic_tutorial() -> pr.Interpretation:
+    """PyReason's examples/basic_tutorial_ex.py: its graph, rule and fact, default settings."""
+    g = nx.DiGraph()
+    g.add_nodes_from(["John", "Mary", "Justin", "Dog", "Cat"])
+    for a, b in [("Justin", "Mary"), ("John", "Mary"), ("John", "Justin")]:
+        g.add_edge(a, b, Friends=1)
+    for a, b in [("Mary", "Cat"), ("Justin", "Cat"), ("Justin", "Dog"), ("John", "Dog")]:
+        g.add_edge(a, b, owns=1)
+    pr.load_graph(g)
+    pr.add_rule(pr.Rule("popular(x) <-1 popular(y), Friends(x,y), owns(y,z), owns(x,z)", "popular_rule"))
+    pr.add_fact(pr.Fact("popular(Mary)", "popular_fact", 0, 2))
+    return pr.reason(timesteps=2)
+
+
+def test_without_atom_trace_the_trace_has_pyreasons_short_layout(tmp_path: Path) -> None:
+    # PyReason's default atom_trace=False: its Output writes '-' for the old bound and the cause, no
+    # message and no clause columns (pyreason/scripts/utils/output.py). The first 7 columns are its
+    # committed examples/csv_outputs/basic_rule_trace_nodes_20241125-114246.csv, row for row.
+    pr.settings.atom_trace = False
+    interpretation = basic_tutorial()
+    assert csv_rows(interpretation, tmp_path) == [
+        '0,0,Mary,popular,-,"[1.0,1.0]",-,True,Fact,',
+        '1,1,Mary,popular,-,"[1.0,1.0]",-,True,Fact,',
+        '1,1,Justin,popular,-,"[1.0,1.0]",-,True,Rule,',
+        '2,2,Mary,popular,-,"[1.0,1.0]",-,True,Fact,',
+        '2,2,John,popular,-,"[1.0,1.0]",-,True,Rule,',
+        '2,2,Justin,popular,-,"[1.0,1.0]",-,True,Rule,']
+    nodes, edges = pr.get_rule_trace(interpretation)
+    assert list(nodes.columns) == ["Time", "Fixed-Point-Operation", "Node", "Label", "Old Bound", "New Bound",
+                                   "Occurred Due To", "Consistent", "Triggered By", "Inconsistency Message"]
+    assert list(edges.columns)[2] == "Edge" and len(edges.columns) == 10
+
+
+def test_without_atom_trace_an_ipl_row_keeps_its_ipl_name_and_a_conflict_loses_its_message() -> None:
+    pr.settings.atom_trace = False
+    pr.add_inconsistent_predicate("sick", "healthy")
+    g = nx.DiGraph()
+    g.add_nodes_from(["Alice", "Bob"])
+    pr.load_graph(g)
+    pr.add_rule(pr.Rule("rested(x) <- healthy(x)", "rest_rule"))
+    pr.add_fact(pr.Fact("sick(Bob):[0.8,1.0]", "bob_sick", 0, 0))
+    pr.add_fact(pr.Fact("sick(Alice):[0.8,1.0]", "alice_sick", 0, 0))
+    pr.add_fact(pr.Fact("healthy(Alice):[0.9,1.0]", "alice_healthy", 0, 0))
+    nodes, _ = pr.get_rule_trace(pr.reason(timesteps=0))
+    rows = nodes[["Node", "Label", "Old Bound", "Occurred Due To", "Consistent", "Triggered By",
+                  "Inconsistency Message"]].values.tolist()
+    assert ["Bob", "healthy", "-", "IPL: sick", True, "IPL", ""] in rows  # PyReason: f'IPL: {l}'
+    conflicts = [r for r in rows if not r[4]]
+    assert conflicts and all(r[3] == "-" and r[6] == "" for r in conflicts)  # actual_name, msg: atom_trace only

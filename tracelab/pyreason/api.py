@@ -538,7 +538,7 @@ class _Reasoning:
         engine, graph = self.episode.engine, self.inputs.graph
         edges = [(graph.nodes[a], graph.nodes[b]) for a, b in graph.edges.tolist()] if graph is not None else []
         return Interpretation(engine, self.trace, list(engine.vocab.nodes), edges, self.t_last, self.passes,
-                              settings.persistent)
+                              settings.persistent, settings.atom_trace)
 
     def _converged(self, engine: Any, rows: dict[str, np.ndarray], t: int, convergence: _Convergence) -> bool:
         from tracelab.engine import CAUSE_RESET
@@ -593,7 +593,8 @@ def get_rule_trace(interpretation: Interpretation) -> tuple[Any, Any]:
 
 def save_rule_trace(interpretation: Interpretation, folder: str | os.PathLike[str] = "./") -> None:
     """rule_trace_nodes_<timestamp>.csv and rule_trace_edges_<timestamp>.csv in `folder`."""
-    _interp(interpretation).trace.write(folder, _program.timestamp or None)
+    interpretation = _interp(interpretation)
+    interpretation.trace.write(folder, _program.timestamp or None, interpretation.atom_trace)
 
 
 def get_interpretation() -> Interpretation:

@@ -8,11 +8,14 @@ from __future__ import annotations
 import importlib
 import importlib.abc
 import importlib.machinery
+import importlib.util
 import os
 import runpy
 import sys
 import types
 from collections.abc import Sequence
+
+from tracelab.errors import UserError
 
 # PyReason's module -> tracelab's module that holds what PyReason's examples import from it
 MODULES = {
@@ -26,9 +29,12 @@ MODULES = {
     "pyreason.scripts.interval.interval": "tracelab.pyreason.numba_interval",
     "pyreason.scripts.learning.classification.classifier": "tracelab.pyreason.classifier",
     "pyreason.scripts.learning.classification.temporal_classifier": "tracelab.pyreason.temporal_classifier",
+    "pyreason.scripts.learning.classification.hf_classifier": "tracelab.pyreason.hf_classifier",
     "pyreason.scripts.learning.utils.model_interface": "tracelab.pyreason.classifier",
     "pyreason.scripts.utils.filter_ruleset": "tracelab.pyreason.ruleset_filter",
 }
+# the pip name of a package PyReason's examples import under another name (any other: its own name)
+PIP_NAMES = {"cv2": "opencv-python", "PIL": "pillow", "yaml": "pyyaml", "sklearn": "scikit-learn"}
 # the packages on the way to those modules (`pyreason.scripts`, `pyreason.scripts.rules`, ...): empty
 PACKAGES = {name.rsplit(".", k)[0] for name in MODULES for k in range(1, name.count(".") + 1)} - set(MODULES)
 
@@ -74,4 +80,32 @@ def run_script(script: str, args: Sequence[str] = ()) -> None:
         sys.meta_path.insert(0, PyReasonFinder())
     sys.argv = [script, *args]
     sys.path.insert(0, os.path.dirname(os.path.abspath(script)))  # as python puts a script's folder first
-    runpy.run_path(script, run_name="__main__")
+    try:
+        runpy.run_path(script, run_name="__main__")
+    except ModuleNotFoundError as e:
+        missing = _not_installed(e)
+        if missing is None:
+            raise  # a module the script or a package it uses got wrong: the script's own error
+        here = os.path.abspath(script)
+        line = next((f.tb_lineno for f in _frames(e.__traceback__)
+                     if os.path.abspath(f.tb_frame.f_code.co_filename) == here), None)
+        where = script if line is None else f"{script}:{line}"
+        raise UserError(f"{where}: the script imports {missing}, which is not installed "
+                        f"(pip install {PIP_NAMES.get(missing, missing)})") from e
+
+
+def _not_installed(e: ModuleNotFoundError) -> str | None:
+    """The top-level package a ModuleNotFoundError says is missing, when it is not installed at all (a
+    PyReason module tracelab lacks is not such a package: the finder's own message says what it is)."""
+    top = (e.name or "").partition(".")[0]
+    if not top or top == "pyreason" or top in sys.modules:
+        return None
+    return top if importlib.util.find_spec(top) is None else None
+
+
+def _frames(tb: types.TracebackType | None) -> list[types.TracebackType]:
+    out = []
+    while tb is not None:
+        out.append(tb)
+        tb = tb.tb_next
+    return out

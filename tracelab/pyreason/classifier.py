@@ -43,15 +43,30 @@ class LogicIntegratedClassifier(torch.nn.Module):
         return logits, probabilities, self._facts(probabilities, t1, t2)
 
     def _facts(self, probabilities: torch.Tensor, t1: int, t2: int) -> list[Fact]:
-        opts = self.interface_options
-        out = []
-        for row in probabilities.detach().tolist():
-            for name, p in zip(self.class_names, row):
-                lower, upper = 0.0, 1.0
-                if p > opts.threshold:
-                    value = p if opts.snap_value is None else opts.snap_value
-                    lower = value if opts.set_lower_bound else 0.0
-                    upper = value if opts.set_upper_bound else 1.0
-                out.append(Fact(f"{name}({self.identifier}) : [{lower:.3f}, {upper:.3f}]",
-                                name=f"{self.identifier}-{name}-fact", start_time=t1, end_time=t2))
-        return out
+        lower, upper = fact_bounds(probabilities, self.interface_options)
+        return [class_fact(name, self.identifier, low, up, t1, t2)
+                for low_row, up_row in zip(lower.tolist(), upper.tolist())
+                for name, low, up in zip(self.class_names, low_row, up_row)]
+
+
+def fact_bounds(probabilities: torch.Tensor, opts: ModelInterfaceOptions) -> tuple[torch.Tensor, torch.Tensor]:
+    """The facts' lower and upper bounds, of the probabilities' shape, computed in their dtype as PyReason
+    does (so a probability equal to the threshold in float32 compares as it does there)."""
+    like = {"dtype": probabilities.dtype, "device": probabilities.device}
+    above = probabilities > torch.tensor(opts.threshold, **like)
+    if opts.snap_value is not None:
+        snap = torch.tensor(opts.snap_value, **like)
+        lower_if = snap if opts.set_lower_bound else torch.tensor(0.0, **like)
+        upper_if = snap if opts.set_upper_bound else torch.tensor(1.0, **like)
+    else:
+        lower_if = probabilities if opts.set_lower_bound else torch.zeros_like(probabilities)
+        upper_if = probabilities if opts.set_upper_bound else torch.ones_like(probabilities)
+    return (torch.where(above, lower_if, torch.zeros_like(probabilities)),
+            torch.where(above, upper_if, torch.ones_like(probabilities)))
+
+
+def class_fact(label: str, identifier: str, lower: float, upper: float, t1: int, t2: int) -> Fact:
+    """PyReason's fact of one class: `label(identifier) : [l, u]` (3 decimals), named
+    `identifier-label-fact` (PyReason's parser deletes the spaces of a label such as 'tiger shark')."""
+    return Fact(f"{label}({identifier}) : [{lower:.3f}, {upper:.3f}]", name=f"{identifier}-{label}-fact",
+                start_time=t1, end_time=t2)

@@ -10,7 +10,7 @@ from typing import Any
 
 from .frozen_modules import import_frozen
 from .objects import Interval, Query, _pair
-from .trace_csv import EDGE_HEADER, NODE_HEADER, PyReasonTrace
+from .trace_csv import PyReasonTrace
 from .unsupported import UnsupportedFeature, unsupported
 
 
@@ -26,7 +26,7 @@ class Interpretation:
     """The reasoning's final state and its trace (one engine, world 0)."""
 
     def __init__(self, engine: Any, trace: PyReasonTrace, nodes: Sequence[str], edges: Sequence[tuple[str, str]],
-                 time: int, fp_cnt: int, persistent: bool) -> None:
+                 time: int, fp_cnt: int, persistent: bool, atom_trace: bool = True) -> None:
         self.engine = engine
         self.trace = trace
         self.nodes = list(nodes)
@@ -34,6 +34,7 @@ class Interpretation:
         self.time = time
         self.fp_cnt = fp_cnt
         self.persistent = persistent
+        self.atom_trace = atom_trace  # PyReason's setting when reason() ran: the rule trace's layout
 
     def _atom(self, pred: str, component: str | tuple[str, ...]) -> int | None:
         """The engine's id of PyReason's pred(component), None if the engine never made it."""
@@ -98,12 +99,8 @@ class Interpretation:
                 for d in per_time]
 
     def rule_trace(self) -> tuple[Any, Any]:
-        """(nodes, edges) DataFrames with PyReason's columns; clause columns hold lists of components."""
+        """(nodes, edges) DataFrames with PyReason's columns (its layout for the reasoning's atom_trace);
+        clause columns hold lists of components."""
         pd = _pandas()
-        out = []
-        for rows, header, which in ((self.trace.node_rows, NODE_HEADER, "node"),
-                                    (self.trace.edge_rows, EDGE_HEADER, "edge")):
-            n = self.trace.clauses[which]
-            cols = header + [f"Clause-{k}" for k in range(1, n + 1)]
-            out.append(pd.DataFrame([r + [None] * (len(cols) - len(r)) for r in rows], columns=cols))
-        return out[0], out[1]
+        return tuple(pd.DataFrame(rows, columns=cols)
+                     for cols, rows in (self.trace.layout(which, self.atom_trace) for which in ("nodes", "edges")))

@@ -116,6 +116,17 @@ class Fact:
         self.static = bool(static)
         self.type = "node" if len(self.literal.args) == 1 else "edge"
 
+    @property
+    def pred(self) -> str:
+        """PyReason's `fact.pred`: the predicate as its parser reads it (spaces deleted)."""
+        return self.literal.pred
+
+    @property
+    def component(self) -> str | tuple[str, ...]:
+        """PyReason's `fact.component`: the node, or the (source, target) edge."""
+        args = tuple(self.literal.args)
+        return args[0] if len(args) == 1 else args
+
     @classmethod
     def from_parsed(cls, fact: PFact) -> "Fact":
         """A fact read from a file (facts.py) as a pr.Fact."""

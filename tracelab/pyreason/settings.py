@@ -21,7 +21,7 @@ SETTINGS: dict[str, tuple[Any, str]] = {
     "abort_on_inconsistency": (False, "no-op, as in PyReason 3.x (which never reads it)"),
     "memory_profile": (False, "no-op"),
     "reverse_digraph": (False, "True: every edge of the graph is reversed, its attributes with it"),
-    "atom_trace": (False, "no-op: the rule trace always has the clause columns and old bounds"),
+    "atom_trace": (False, "True: the rule trace has the old bounds, names, messages and clause columns"),
     "save_graph_attributes_to_trace": (False, "True: the graph's facts are rows of the rule trace"),
     "canonical": (False, "no-op, as in PyReason 3.x (persistent decides)"),
     "persistent": (False, "False: `%timesteps reset`; True: atoms keep their bounds between steps"),

@@ -334,18 +334,37 @@ class PyReasonTrace:
         return (f"Inconsistency occurred. Conflicting bounds for {atom}. Update from {old} is not allowed. "
                 "Setting bounds to [0,1] and static=True for this timestep.")
 
-    def write(self, folder: str | os.PathLike[str], timestamp: str | None = None) -> tuple[str, str]:
+    def layout(self, which: str, atom_trace: bool = True) -> tuple[list[str], list[list[object]]]:
+        """The header and rows of the nodes' or edges' trace as PyReason's Output makes them. With
+        atom_trace (PyReason's setting) the rows as collected, clause columns padded with None; without it
+        (PyReason's default) its short layout: Old Bound '-', no clause columns, no inconsistency message,
+        Occurred Due To '-' except a consistent IPL row's `IPL: <the predicate whose update set it>`."""
+        header, rows = (NODE_HEADER, self.node_rows) if which == "nodes" else (EDGE_HEADER, self.edge_rows)
+        if not atom_trace:
+            return list(header), [r[:4] + ["-", r[5], self._short_due(r), r[7], r[8], ""] for r in rows]
+        n = self.clauses["node" if which == "nodes" else "edge"]
+        cols = header + [f"Clause-{k}" for k in range(1, n + 1)]
+        return cols, [r + [None] * (len(cols) - len(r)) for r in rows]
+
+    def _short_due(self, row: list[object]) -> object:
+        """Occurred Due To without atom_trace: PyReason keeps a name there only on a consistent IPL row."""
+        if row[8] != "IPL" or not row[7]:
+            return "-"
+        partner = self.ipl_partners.get(str(row[3]))
+        return f"IPL: {partner}" if partner is not None else row[6]
+
+    def write(self, folder: str | os.PathLike[str], timestamp: str | None = None,
+              atom_trace: bool = True) -> tuple[str, str]:
         """rule_trace_nodes_<timestamp>.csv and rule_trace_edges_<timestamp>.csv in `folder` (created)."""
         os.makedirs(folder, exist_ok=True)
         stamp = timestamp or time.strftime("%Y%m%d-%H%M%S")
         paths = []
-        for which, header, rows in (("nodes", NODE_HEADER, self.node_rows), ("edges", EDGE_HEADER, self.edge_rows)):
-            n = self.clauses["node" if which == "nodes" else "edge"]
+        for which in ("nodes", "edges"):
+            header, rows = self.layout(which, atom_trace)
             path = os.path.join(os.fspath(folder), f"rule_trace_{which}_{stamp}.csv")
             with open(path, "w", newline="", encoding="utf-8") as f:
                 w = csv.writer(f, lineterminator="\n")
-                w.writerow(header + [f"Clause-{k}" for k in range(1, n + 1)])
-                for r in rows:
-                    w.writerow(r + [""] * (len(header) + n - len(r)))
+                w.writerow(header)
+                w.writerows([["" if v is None else v for v in r] for r in rows])
             paths.append(path)
         return paths[0], paths[1]
