@@ -26,8 +26,8 @@ from tracelab.engine.codegen import Specialisation, generate
 from tracelab.engine.core import KERNELS
 from tracelab.engine.errors import FixpointError, InconsistencyError
 from tracelab.engine.program import Rule
-from tracelab.game.rulesim import RuleSim
-from tracelab.bench.sims import scenario_for
+from tracelab.bench.sims import team_spec
+from tracelab.envs.declared.vector_world import DeclaredWorlds
 
 FEW_PROGRAMS = settings(max_examples=2, derandomize=True, database=None, deadline=None,
                         suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
@@ -152,22 +152,29 @@ def test_random_programs(sc: Scenario) -> None:
 
 @pytest.mark.parametrize(("agents", "worlds", "steps"), [(1, 1, 300), (1, 4, 300), (5, 3, 300), (20, 1, 30)])
 def test_the_game_batched_with_restores(agents: int, worlds: int, steps: int) -> None:
-    """The game's one kernel (team size and map are facts, not compiled in) at 1, 5 and 20 agents a team;
-    300 steps see episodes end and worlds restored, 20v20 (slow to step) is checked for its first 30."""
-    scenario = scenario_for(agents)
+    """GridWar's spec (war.toml's base game: team size and map are facts, not compiled in) at 1, 5 and 20
+    agents a team, its worlds stepped by the declared batch (the counting kernel inside the world's fused
+    step, the compiled one on its own); 300 steps see episodes end and worlds restored, 20v20 (slow to step)
+    is checked for its first 30."""
+    spec = team_spec(agents)
+    Engine(spec.program, kernel="compiled").step()  # compiled here (or loaded): a world does it in a child
     restores = []
 
     def make(kernel: str):  # noqa: ANN202
-        sim = RuleSim(scenario, worlds, seed=7, trace=True, kernel=kernel)
-        return sim, sim.engine
+        batch = DeclaredWorlds(spec, worlds, kernel=kernel)
+        batch.use_generators([np.random.default_rng(7 + w) for w in range(worlds)])
+        batch.engine.trace_on[:] = True
+        batch.reset(np.arange(worlds))
+        return (batch, np.random.default_rng(7)), batch.engine
 
-    def drive(sim: RuleSim, t: int) -> None:
-        done = sim.terminated | sim.truncated
+    def drive(owner, t: int) -> None:  # noqa: ANN001
+        batch, rng = owner
+        done = batch.terminated() | batch.truncated(None)
         if done.any():  # episode ends: those worlds are restored to the start state
             restores.append(t)
-            sim.reset(worlds=done)
-        # both teams scripted: the simulators' own generators are seeded alike and see the same state
-        sim.step(sim.scripted_actions("red"), sim.scripted_actions("blue"))
+            batch.reset(np.flatnonzero(done))
+        # red random from a generator seeded alike; blue: the rules' opponent with the worlds' own draws
+        batch.step(rng.integers(0, batch.n_actions, (worlds, batch.n_agents)))
 
     _lockstep(make, drive, steps)
     if steps >= 300:  # the run did restore worlds (otherwise this test would not cover restores)

@@ -1,22 +1,14 @@
 """A newcomer's first run (issue 31 part 4): `tracelab play` on an empty numba cache compiles each kernel
 once, for one signature, and says so in one line; the next run loads them and says nothing. GridWar plays
 through its spec (rules/gridworld/war.toml): the engine's kernels and the declared world's (its fused step,
-observation reads, nearest-thing loop). RuleSim's second-process warm-up is held by the last two tests
-while RuleSim stands. Times are measured by `tracelab bench first-run`, never here."""
+observation reads, nearest-thing loop). Times are measured by `tracelab bench first-run`, never here."""
 from __future__ import annotations
-
 
 import json
 import os
 import subprocess
 import sys
 from pathlib import Path
-
-import numpy as np
-
-from tracelab.game import rulesim_warmup, rulesim_warmup_child
-from tracelab.game.rulesim import RuleSim
-from tracelab.game.scenario import builtin_scenario
 
 # a play in this process, then what numba holds: each kernel function's signatures, per module
 PROBE = r"""
@@ -68,26 +60,3 @@ def test_a_first_play_compiles_each_kernel_once_and_says_so_in_one_line(tmp_path
     assert again["code"] == 0 and not [ln for ln in err if "compiling" in ln], err
     loaded = {**again["kernel"], **again["declared"]}  # the entry points, loaded for the signatures compiled cold
     assert loaded and all(got["kernel"].get(n, got["declared"].get(n)) == c == 1 for n, c in loaded.items()), loaded
-
-
-def test_the_second_process_calls_the_game_kernels_with_the_types_a_rulesim_passes() -> None:
-    """Its RuleSim is built from the scenario's TOML text and never steps its engine; if it passed other
-    argument types (a writable copy of a read-only array, another dtype), its compiles would be in vain."""
-    scenario = builtin_scenario("advanced")
-    sim = RuleSim(scenario, 1, trace=True, kernel="counting", fused=False)  # each kernel called from Python
-    sim.step(np.zeros((1, 1), np.int64), sim.scripted_actions("blue"))
-    sim.reset(worlds=np.array([0]))
-    sim._bind()  # the fused step's buffers
-    # other tests in this process may have called a kernel with other types: only what the child adds counts
-    before = {k.__name__: len(k.signatures) for k in rulesim_warmup.game_kernels(True)}
-    message = rulesim_warmup.to_child(scenario, 1, False, sim.engine.kernel, True)
-    rulesim_warmup_child.compile_game_kernels(**rulesim_warmup_child.from_parent(message))
-    assert {k.__name__: len(k.signatures) for k in rulesim_warmup.game_kernels(True)} == before
-
-
-def test_no_second_process_once_the_kernels_are_cached() -> None:
-    sim = RuleSim(builtin_scenario("base"), 1)  # loads (or compiles) the engine's and the game's kernels
-    sim.step(np.zeros((1, 1), np.int64), sim.scripted_actions("blue"))  # and the fused step's
-    assert rulesim_warmup.needed("counting", fused=True) is False
-    from tracelab.commands._progress import compile_notice
-    assert compile_notice(simulator=True) is None

@@ -24,7 +24,7 @@ def _cold_in_a_fresh_process(cache_dir: str | None) -> str:
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
     if cache_dir:
         env["NUMBA_CACHE_DIR"] = cache_dir
-    code = "from tracelab.commands._progress import engine_cache_is_cold as c; print(c(), c(simulator=True))"
+    code = "from tracelab.commands._progress import engine_cache_is_cold as c; print(c(), c(local_trace=True))"
     return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=False,
                           timeout=300).stdout.strip()
 

@@ -1,7 +1,7 @@
-"""Both simulators in the situations the spec lists (docs/game.md), plus the scripted policy.
+"""RefSim, the hand-written oracle, in the situations the spec lists (docs/game.md), plus the scripted policy.
 
-Every test that takes `start` or `sim_class` runs once per simulator: RefSim (hand-written) and RuleSim
-(rules/gridworld/game.rules on the engine), some also with health 2 (two hits to kill). Maps are 8x8
+The rules (rules/gridworld/war.toml over game.rules) are held equal to RefSim step by step by
+tests/test_gridwar_spec.py. Some tests run also with health 2 (two hits to kill). Maps are 8x8
 with red base (7,0) and blue base (0,7) unless a test says otherwise; agents start where the test puts
 them. Actions are the spec ids.
 """
@@ -13,7 +13,6 @@ import pytest
 from tracelab.game.observe import obs_size, observe
 from tracelab.game.opponent import ScriptedPolicy, scripted_actions
 from tracelab.game.refsim import RefSim
-from tracelab.game.rulesim import RuleSim
 from tracelab.game.scenario import (
     Scenario,
     SlowAgents,
@@ -40,22 +39,20 @@ def make(red, blue, *, mountains=(), advanced=True, **kw) -> Scenario:
                     advanced=advanced, **kw)
 
 
-Sim = RefSim | RuleSim
-# Rows for tests parametrized over health: health 2 takes two hits to kill (game.rules section 2 counts
-# them)
-HEALTH_ROWS = [pytest.param(RefSim, 1.0, id="refsim-h1"), pytest.param(RuleSim, 1.0, id="rulesim-h1"),
-               pytest.param(RefSim, 2.0, id="refsim-h2"), pytest.param(RuleSim, 2.0, id="rulesim-h2")]
+Sim = RefSim
+# Rows for tests parametrized over health: health 2 takes two hits to kill
+HEALTH_ROWS = [pytest.param(RefSim, 1.0, id="refsim-h1"), pytest.param(RefSim, 2.0, id="refsim-h2")]
 
 
-@pytest.fixture(params=[RefSim, RuleSim], ids=["refsim", "rulesim"])
-def sim_class(request) -> type:
-    return request.param
+@pytest.fixture
+def sim_class() -> type:
+    return RefSim
 
 
 @pytest.fixture(scope="module")
 def sim_cache() -> dict:
-    """Simulators built in this module, by (class, scenario, n_worlds, stack_previous): RuleSim grounds an
-    engine per instance, so tests on the same scenario share one instance and only reset() it."""
+    """Simulators built in this module, by (class, scenario, n_worlds, stack_previous): tests on the same
+    scenario share one instance and only reset() it."""
     return {}
 
 
@@ -496,7 +493,7 @@ def test_observations_layout_and_sentinels(start):
     # Bullets now at (1,4) and (4,4): nearest to red 0 at (6,1) is (4,4) (distance 5 against 8).
     assert r.obs[0, 0, 8:11].tolist() == [2, 4, 4]
     # A dead agent reports (-1, -1), and so does its nearest-bullet entry.
-    state = sim.state.copy()  # (a RuleSim's state is read-only: it shares its arrays with the results)
+    state = sim.state.copy()
     state.alive[0, 0, 1] = False
     obs = observe(state, "red", sim.scenario)
     assert obs[0, 2:4].tolist() == [-1, -1] and obs[0, 11:14].tolist() == [2, -1, -1]
@@ -554,7 +551,7 @@ def rollout_actions(scenario: Scenario, n_worlds: int, steps: int, seed: int) ->
 
 def test_batched_worlds_match_single_worlds(sim_class):
     scenario = generate_scenario(10, 10, 3, 0.15, seed=3, advanced=True)
-    n_worlds = 12 if sim_class is RefSim else 4  # a RuleSim instance costs an engine build
+    n_worlds = 12
     steps = 40
     acts = rollout_actions(scenario, n_worlds, steps, seed=5)
     batch = sim_class(scenario, n_worlds)
@@ -574,10 +571,8 @@ def test_batched_worlds_match_single_worlds(sim_class):
 
 
 def test_random_rollouts_keep_the_invariants(sim_class):
-    # RuleSim on a smaller game: grounding 12x12 with 5 agents a team takes seconds.
-    big = sim_class is RefSim
-    scenario = generate_scenario(*((12, 12, 5) if big else (8, 8, 3)), 0.2, seed=11, advanced=True)
-    n_worlds = 64 if big else 16
+    scenario = generate_scenario(12, 12, 5, 0.2, seed=11, advanced=True)
+    n_worlds = 64
     grid = scenario.mountain_grid
     sim = sim_class(scenario, n_worlds, seed=2)
     sim.reset()

@@ -15,20 +15,22 @@ from test_lanes import assert_same
 from tracelab.engine import Engine
 from tracelab.engine.errors import FixpointError, InconsistencyError
 
-from tracelab.bench.sims import scenario_for
-from tracelab.game.rulesim import RuleSim
+from tracelab.bench.sims import team_spec
+from tracelab.envs.declared.vector_world import DeclaredWorlds
 
 SCALE = float(os.environ.get("TRACELAB_EXAMPLES", "1"))
 
 
-def full_copy_restore(eng: Engine, snap: dict, worlds: np.ndarray) -> None:
-    """Engine.restore, then the groundings' arrays copied whole from the snapshot (the code before)."""
-    Engine.restore(eng, snap, worlds)
+def full_copy_restore(eng: Engine, snap: dict, worlds: np.ndarray, source: np.ndarray | None = None) -> None:
+    """Engine.restore, then the groundings' arrays copied whole from the snapshot (the code before);
+    `source`: the snapshot's worlds they take (Engine.restore's)."""
+    worlds = np.flatnonzero(worlds) if np.asarray(worlds).dtype == np.bool_ else np.asarray(worlds)
+    Engine.restore(eng, snap, worlds, source)
     st_ = eng._state
     if snap["unsat"].shape == st_._unsat.shape and snap["lower"].shape[1] == st_.n_atoms:  # else it recounts
         for key, arr in (("unsat", st_._unsat), ("act", st_._act), ("act_pos", st_._act_pos),
                          ("act_n", st_._act_n)):
-            arr[worlds] = snap[key][worlds]
+            arr[worlds] = snap[key][worlds if source is None else np.asarray(source)]
 
 
 def assert_same_groundings(a: Engine, b: Engine, where: str) -> None:
@@ -73,22 +75,30 @@ def test_restore_matches_the_full_copy_on_random_programs(sc, seed: int) -> None
 
 
 def test_restore_matches_the_full_copy_in_the_game() -> None:
-    """RuleSim's resets (a restore of the start state at every episode end) against the full copy."""
+    """GridWar's spec (war.toml's base game) on the declared batch: its resets (a restore of a start state
+    at every episode end) against the full copy."""
     for agents, steps in ((1, 300), (5, 120)):
-        sims = [RuleSim(scenario_for(agents), 4, seed=1, trace=True) for _ in range(2)]
+        spec = team_spec(agents)
+        batches = [DeclaredWorlds(spec, 4, kernel="counting") for _ in range(2)]
+        for b in batches:
+            b.use_generators([np.random.default_rng(1 + w) for w in range(4)])
+            b.engine.trace_on[:] = True
+            b.reset(np.arange(4))
+        a, b = batches
+        b.engine.restore = lambda snap, worlds, source=None, eng=b.engine: full_copy_restore(  # the code before
+            eng, snap, worlds, source)
         rng = np.random.default_rng(agents)
-        ids = np.asarray(sims[0].scenario.action_ids)
+        restored = 0
         for t in range(steps):
-            red = rng.choice(ids, (4, agents))
-            results = [s.step(red, s.scripted_actions("blue")) for s in sims]
-            assert_same(sims[0].engine, sims[1].engine, t)
-            done = results[0].terminated | results[0].truncated
-            np.testing.assert_array_equal(done, results[1].terminated | results[1].truncated)
+            red = rng.integers(0, a.n_actions, (4, agents))
+            for x in batches:
+                x.step(red)
+            assert_same(a.engine, b.engine, t)
+            done = a.terminated() | a.truncated(None)
+            np.testing.assert_array_equal(done, b.terminated() | b.truncated(None))
             if done.any():
-                sims[0].reset(worlds=done)
-                b = sims[1]
-                b.engine.restore = lambda snap, worlds, eng=b.engine: full_copy_restore(  # the code before
-                    eng, snap, worlds if np.asarray(worlds).dtype != bool else np.flatnonzero(worlds))
-                b.reset(worlds=done)
-                del b.engine.restore
-                assert_same_groundings(sims[0].engine, sims[1].engine, f"after resets at step {t}")
+                for x in batches:
+                    x.reset(np.flatnonzero(done))
+                restored += 1
+                assert_same_groundings(a.engine, b.engine, f"after resets at step {t}")
+        assert restored  # episodes ended, so that resets were compared

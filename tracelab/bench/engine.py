@@ -3,8 +3,8 @@
 (a) first-ever compile: a fresh process with NUMBA_CACHE_DIR on an empty directory builds an Engine on
     the game program and runs its first step; (b) warm start: fresh processes with the normal cache,
     from process start to the first step, for the game program, for another rule file (no recompile:
-    one compiled signature serves both) and for a RuleSim; (c) RuleSim steps/s by team size, tracing on
-    and off, with the time inside engine.step() and the engine's work counters; (d) resident memory
+    one compiled signature serves both) and for GridWar's spec; (c) the spec path's steps per CPU second by
+    team size (tracelab.bench.sims), tracing on and off, with the engine's work counters; (d) resident memory
     over a long traced run; (e) the big graph: load, build and run of the spread rule on random graphs
     of 2k / 20k / 200k nodes (tracelab/bench/biggraph.py). Figures: docs/benchmarks.md."""
 from __future__ import annotations
@@ -99,10 +99,10 @@ class ColdCompile:
 
 def warm_start(repeats: int) -> dict[str, Any]:
     """(b) Fresh processes with the normal cache: process start to first step for the game program, for
-    another rule file alone, and for a RuleSim; the second program's build and step in a process that ran
-    the game first; the compiled signatures of step_worlds after both."""
-    Probe(["game", "rulesim"]).result()  # fill the cache if a source changed since it was written
-    game, second, other, rulesim, build, signatures = [], [], [], [], [], []
+    another rule file alone, and for GridWar's spec (one world); the second program's build and step in a
+    process that ran the game first; the compiled signatures of step_worlds after both."""
+    Probe(["game", "spec"]).result()  # fill the cache if a source changed since it was written
+    game, second, other, spec, build, signatures = [], [], [], [], [], []
     for _ in range(max(1, repeats)):
         both = Probe(["game", OTHER_PROGRAM]).result()
         game.append(both[0]["since_start_s"])
@@ -110,36 +110,50 @@ def warm_start(repeats: int) -> dict[str, Any]:
         second.append(both[1]["build_s"] + both[1]["step_s"])
         signatures.append(both[2]["signatures"])
         other.append(Probe([OTHER_PROGRAM]).result()[0]["since_start_s"])
-        rulesim.append(Probe(["rulesim"]).result()[0]["since_start_s"])
+        spec.append(Probe(["spec"]).result()[0]["since_start_s"])
     return {"game_to_first_step_s": summarize(game).to_dict(),
             "game_build_and_first_step_s": summarize(build).to_dict(),
             "other_program": os.path.relpath(OTHER_PROGRAM, RULES_DIR.parent),
             "other_program_to_first_step_s": summarize(other).to_dict(),
             "other_program_after_game_s": summarize(second).to_dict(),
-            "rulesim_to_first_step_s": summarize(rulesim).to_dict(),
+            "spec_to_first_step_s": summarize(spec).to_dict(),
             "step_worlds_signatures": max(signatures), "one_signature": max(signatures) == 1}
 
 
 def step_rates(agents: list[int], repeats: int, target_s: float, kernel: str = "auto") -> list[dict[str, Any]]:
-    """(c) RuleSim steps/s for each team size, one world, tracing on and off (engine kernel `kernel`)."""
-    from tracelab.bench.sims import get_sim, measure
+    """(c) The spec path's steps per CPU second for each team size (GridWar's base game, war.toml), one world,
+    tracing on and off (engine kernel `kernel`), with the engine's work counters per step."""
+    from tracelab.bench.sims import SpecLoop, cpu_rates, team_spec
+    from tracelab.envs.declared.vector_world import DeclaredWorlds
     rows = []
     for n in agents:
-        sim, build_s = get_sim("rules", n, 1, kernel)
+        t0 = time.perf_counter()
+        worlds = DeclaredWorlds(team_spec(n), 1, kernel)
+        build_s = time.perf_counter() - t0
+        eng = worlds.engine
         for trace in (True, False):
-            row = measure(sim, trace, repeats, target_s)
-            row["build_s"] = build_s
-            row["atoms"] = int(sim.engine.lower.shape[1])
-            row["groundings"] = len(sim.engine.groundings.rule)
-            rows.append(row)
+            loop, steps = SpecLoop(worlds, trace), [0]
+
+            def counted(k: int, loop: SpecLoop = loop, steps: list[int] = steps) -> None:
+                loop.run(k)
+                steps[0] += k
+            before = eng.stats
+            rates = cpu_rates(counted, 1, repeats, target_s)
+            after = eng.stats
+            rows.append({"agents": n, "trace": trace, "kernel": eng.kernel, "steps_per_s": rates,
+                         "stats_per_step": {k: float((after[k] - before[k]).sum()) / max(steps[0], 1)
+                                            for k in after},
+                         "build_s": build_s, "atoms": int(eng.lower.shape[1]),
+                         "groundings": len(eng.groundings.rule)})
     return rows
 
 
 def memory(steps: int) -> dict[str, Any]:
-    """(d) RSS of this process every 10% of a `steps`-step traced 1v1 run (trace taken as the envs take it)."""
-    from tracelab.bench.sims import Loop, scenario_for
-    from tracelab.game.rulesim import RuleSim
-    loop = Loop(RuleSim(scenario_for(1), 1, seed=0, trace=True), trace=True)
+    """(d) RSS of this process every 10% of a `steps`-step traced 1v1 run of the spec path (the trace taken
+    as the envs take it)."""
+    from tracelab.bench.sims import SpecLoop, team_spec
+    from tracelab.envs.declared.vector_world import DeclaredWorlds
+    loop = SpecLoop(DeclaredWorlds(team_spec(1), 1), trace=True)
     gc.collect()
     marks = [round(i * steps / 10) for i in range(11)]
     samples = [{"step": 0, "rss_mb": rss_bytes() / 2**20}]
@@ -215,18 +229,17 @@ def report(r: dict[str, Any]) -> str:
          sp(w["other_program_to_first_step_s"]), len(w["other_program_to_first_step_s"]["runs"])],
         [f"warm: {w['other_program']} after the game, same process", med(w["other_program_after_game_s"]),
          sp(w["other_program_after_game_s"]), len(w["other_program_after_game_s"]["runs"])],
-        ["warm: process start to first RuleSim step (1v1)", med(w["rulesim_to_first_step_s"]),
-         sp(w["rulesim_to_first_step_s"]), len(w["rulesim_to_first_step_s"]["runs"])],
+        ["warm: process start to first step of GridWar's spec (1v1)", med(w["spec_to_first_step_s"]),
+         sp(w["spec_to_first_step_s"]), len(w["spec_to_first_step_s"]["runs"])],
     ])
     if "skipped" in c:
         start += f"\nfirst-ever compile: skipped ({c['skipped']})"
     sig = f"step_worlds signatures after both programs: {w['step_worlds_signatures']} " \
           f"({'ok' if w['one_signature'] else 'RECOMPILED'})"
     steps = format_table(
-        ["agents", "trace", "steps/s", "spread", "engine µs/step", "engine share", "firings", "changes",
-         "watch visits", "candidates", "build s"],
-        [[s["agents"], "on" if s["trace"] else "off", med(s["steps_per_s"]), sp(s["steps_per_s"]),
-          1e6 * med(s["engine_s_per_step"]), f"{100 * s['engine_share']:.0f}%",
+        ["agents", "trace", "kernel", "steps/CPU s", "spread", "firings", "changes", "watch visits", "candidates",
+         "build s"],
+        [[s["agents"], "on" if s["trace"] else "off", s["kernel"], med(s["steps_per_s"]), sp(s["steps_per_s"]),
           s["stats_per_step"]["firings"], s["stats_per_step"]["changes"],
           s["stats_per_step"]["watch_visits"], s["stats_per_step"]["candidates"], s["build_s"]]
          for s in r["steps"]])
@@ -239,7 +252,8 @@ def report(r: dict[str, Any]) -> str:
                 f"reference system's {ref['reference_s_per_step']} s/step; goal >= "
                 f"{ref['goal_steps_per_s']:,} steps/s: {'met' if ref['goal_met'] else 'not met'}")
     return "\n\n".join([machine_line(r["machine"], r["quick"], r["repeats"]), start + "\n" + sig,
-                        "RuleSim, one world (work counters per step)\n" + steps, mem_line, ref_line,
+                        "GridWar's spec (war.toml's base game), one world (work counters per step)\n" + steps,
+                        mem_line, ref_line,
                         biggraph.report(r["big_graph"])])
 
 

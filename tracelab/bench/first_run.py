@@ -4,7 +4,8 @@ NUMBA_CACHE_DIR, tracelab's compile cache through TRACELAB_CACHE_DIR, both in a 
 user's own caches are neither read nor touched), then once more on the caches it filled, as every later
 run does:
 
-- `play`: the README's main command, `tracelab play --scenario advanced --episodes 5`;
+- `play`: the README's main command, `tracelab play --scenario advanced --episodes 5` (GridWar through its
+  spec, rules/gridworld/war.toml: the engine's kernels and the declared world's fused step);
 - `reason-small`, `reason-large`: `tracelab reason` of reach.rules (5 lines: the reference evaluator) and of
   the supply chain over its 2,430-node graph (the compiled engine);
 - `spec-env`, `spec-vector-env`: a declared world's gymnasium env (`make_env`) and vector env (`make_vec_env`,
@@ -13,12 +14,11 @@ run does:
 
 Each phase has its own empty caches (what a user meets when it is their first command). Each figure is
 the median of --repeats such pairs: wall time, and CPU time (user + sys of the command and of every
-process it waited for, such as the second process that compiles the game's kernels), which the other load
-of a shared machine inflates far less than wall time. `--fresh-venv`: the commands run in a new venv
-(`--system-site-packages`, the project installed into it without dependencies and without its .pyc files),
-so that Python's bytecode cache is as cold as numba's. `--write-figures`: the cold figures go into
-tracelab/first_run_figures.json, which the compile notices quote (tracelab/first_run_figures.py). The load
-average before and after is part of the result."""
+process it waited for), which the other load of a shared machine inflates far less than wall time.
+`--fresh-venv`: the commands run in a new venv (`--system-site-packages`, the project installed into it
+without dependencies and without its .pyc files), so that Python's bytecode cache is as cold as numba's.
+`--write-figures`: the cold figures go into tracelab/first_run_figures.json, which the compile notices quote
+(tracelab/first_run_figures.py). The load average before and after is part of the result."""
 from __future__ import annotations
 
 import datetime

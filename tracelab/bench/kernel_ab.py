@@ -1,11 +1,11 @@
-"""Two engine kernels on the same recorded work, in one process, in alternating blocks (CPU time):
+"""Two engine kernels on the same workload, in one process, in alternating blocks (CPU time):
 `python -m tracelab.bench.kernel_ab [--agents 1,5] [--worlds 1] [--steps 2000] [--rounds 9]
 [--kernels counting,compiled]`.
 
 On a shared, loaded machine the wall-clock figures of two separate `bench env` runs move by more than
 the difference between kernels; a paired ratio of CPU times, alternating A and B, does not. For each
-(agents, worlds, trace) the RuleSim's stepping loop is recorded once (sims.record_replay: each step's
-external rows and each restore) and replayed on one engine per kernel, from the same start state.
+(agents, worlds, trace) one batch of GridWar's spec worlds (tracelab.bench.sims: war.toml's base game) is
+built per kernel and stepped by the same seeded loop (sims.SpecLoop), blocks alternating A, B / B, A.
 Prints one JSON line per case: the median CPU µs per world-step of each kernel and the median of the
 paired ratios B/A (below 1: B is faster)."""
 from __future__ import annotations
@@ -13,40 +13,34 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-from tracelab.bench.sims import Loop, record_replay, scenario_for
-from tracelab.game.rulesim import RuleSim
+from tracelab.bench.sims import SpecLoop, team_spec
+from tracelab.envs.declared.vector_world import DeclaredWorlds
 
 
-def _replayer(sim: RuleSim, trace: bool, steps: int) -> Callable[[], float]:
-    """The CPU seconds of one replay of `steps` recorded steps of the stepping loop."""
-    replay, _ = record_replay(Loop(sim, trace), steps)
-
-    def timed() -> float:
-        c0 = time.process_time()
-        replay()
-        return time.process_time() - c0
-    return timed
+def _block(loop: SpecLoop, steps: int) -> float:
+    c0 = time.process_time()
+    loop.run(steps)
+    return time.process_time() - c0
 
 
 def compare(agents: int, worlds: int, trace: bool, steps: int, rounds: int, kernels: list[str]) -> dict[str, Any]:
-    replays = []
+    spec = team_spec(agents)
+    loops = []
     for k in kernels:
-        sim = RuleSim(scenario_for(agents), worlds, seed=0, trace=True, kernel=k)
-        assert sim.engine.kernel == k, (k, sim.engine.kernel, sim.engine.kernel_notice)
-        sim.engine.trace_on[:] = trace
-        replays.append(_replayer(sim, trace, steps))
-    for r in replays:
-        r()  # warm-up
+        batch = DeclaredWorlds(spec, worlds, kernel=k)
+        assert batch.kernel == k, (k, batch.kernel, batch.engine.kernel_notice)
+        loops.append(SpecLoop(batch, trace))
+    for loop in loops:
+        loop.run(steps)  # warm-up (first calls, caches)
     times: list[list[float]] = [[] for _ in kernels]
     for i in range(rounds):
         order = range(len(kernels)) if i % 2 == 0 else reversed(range(len(kernels)))
         for j in order:
-            times[j].append(replays[j]())
+            times[j].append(_block(loops[j], steps))
     us = [1e6 * float(np.median(t)) / (steps * worlds) for t in times]
     ratio = float(np.median(np.asarray(times[1]) / np.asarray(times[0])))
     return {"agents": agents, "worlds": worlds, "trace": trace, "steps": steps,

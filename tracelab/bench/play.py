@@ -1,18 +1,17 @@
 """`tracelab bench play`: how fast `tracelab play` records games into the trace store, against the
-simulator's own traced loop, and how much memory a long recorded run holds.
+spec path's own traced loop, and how much memory a long recorded run holds.
 
-Speed, in one process, for one world and `worlds` worlds (default 64): the scenario of
-`tracelab play --scenario base` (red: the scripted base policy, blue: the scripted opponent, seed 1).
-- `loop`: bench env's traced stepping loop (tracelab.bench.sims.Loop, red scripted): the simulator steps,
-  finished worlds reset, the trace taken as the envs' tracer takes it; nothing is kept;
-- `play`: what `tracelab play --run` does after its first step (tracelab.playing.Games into a StoreSink
-  and a TraceWriter on a new run, closed at the end: the last rows written), `episodes` episodes;
+Speed, in one process, one world (what `tracelab play` plays): `tracelab play --scenario base` (GridWar's
+base game through its spec, rules/gridworld/war.toml; red random, blue: the rules' opponent, seed 1).
+- `loop`: bench env's traced stepping loop (tracelab.bench.sims.SpecLoop): the world steps, finished
+  episodes restart, the trace taken as the envs' tracer takes it; nothing is kept;
+- `play`: what `tracelab play --run` does after its first step (the declared env with a TraceWriter on a new
+  run, play_episodes, closed at the end: the last rows written), `episodes` episodes;
 - `play_untraced`: the same without a run (`--no-trace`).
-Each figure is steps/s (batched steps; x worlds for env-steps), the median of `repeats` blocks of about
-a second taken in turn (loop, play, untraced play, ...), so the three see the same load. `ratio`: play's
-median over the loop's (the goal: >= 0.7 at both sizes). `steps_per_cpu_s`, `cpu_ratio`: the same per CPU
-second of the process (all threads, the store writer's too), which leaves out a busy machine's waits
-for a core.
+Each figure is steps/s, the median of `repeats` blocks of about a second taken in turn (loop, play,
+untraced play, ...), so the three see the same load. `ratio`: play's median over the loop's (the goal:
+>= 0.7). `steps_per_cpu_s`, `cpu_ratio`: the same per CPU second of the process (all threads, the store
+writer's too), which leaves out a busy machine's waits for a core.
 
 Memory (`--memory`, or `memory_episodes`): `tracelab play --scenario advanced --seed 3 --run R
 --episodes N` for N = 100, 1,000 and 10,000 (`--quick`: 100, 1,000), each in a fresh process
@@ -31,12 +30,14 @@ from typing import Any
 
 from tracelab.bench.common import calibrate, format_table, high_water_bytes, machine_info, rss_bytes, summarize
 from tracelab.bench.engine import machine_line
-from tracelab.bench.sims import Loop
-from tracelab.game.rulesim import RuleSim
+from tracelab.bench.sims import SpecLoop
+from tracelab.envs.declared.env_source import EnvSource
+from tracelab.envs.declared.gridwar import scenario_spec
+from tracelab.envs.declared.play import load_declared, make_declared_env, play_episodes, random_policy
+from tracelab.envs.declared.recording import declared_run_config
+from tracelab.envs.declared.vector_world import DeclaredWorlds
 from tracelab.game.scenario import builtin_scenario
-from tracelab.playing import Games
 from tracelab.store import TraceWriter
-from tracelab.store.sink import StoreSink
 
 GOAL_RATIO = 0.7
 GOAL_PEAK_MB = 300
@@ -44,33 +45,45 @@ SCENARIO, SEED = "base", 1
 MEMORY_SCENARIO, MEMORY_SEED = "advanced", 3
 
 
-def _play(scenario: Any, episodes: int, worlds: int, run_dir: Path | None) -> tuple[int, float, float]:
-    """A `tracelab play` of `episodes` episodes (into a new run at `run_dir`, or untraced): (batched
-    steps after the first, wall and CPU seconds from after the first step to the run closed)."""
-    sink = None if run_dir is None else StoreSink(TraceWriter.open(run_dir, {"command": "tracelab bench play",
-                                                                            "scenario": scenario.name}))
-    games = Games(scenario, episodes, worlds=worlds, seed=SEED, sink=sink)
-    games.step()  # the first step is not timed by play either (it holds any compiling)
-    steps = 0
+def _source(scenario: str) -> EnvSource:
+    """The spec and params `tracelab play --scenario NAME` plays."""
+    path, params = scenario_spec(builtin_scenario(scenario))
+    return EnvSource(path, params)
+
+
+def _env(source: EnvSource, run_dir: Path | None) -> Any:
+    """The declared env `tracelab play` makes: into a new run at `run_dir` (its metadata as play writes it:
+    the spec, its params, the board), or untraced."""
+    spec = load_declared(source)
+    if run_dir is None:
+        return make_declared_env(source, spec)
+    spec_path, params = source.declared()
+    meta = {"command": "tracelab bench play", "rule_files": list(spec.program.files), "seed": SEED,
+            "config": {"env": source.name, "env_id": None, "spec_path": spec_path, "env_args": params,
+                       "policy": "random", **declared_run_config(spec)}}
+    return make_declared_env(source, spec, trace_writer=TraceWriter.open(run_dir, meta))
+
+
+def _play(source: EnvSource, episodes: int, run_dir: Path | None) -> tuple[int, float, float]:
+    """A `tracelab play` of `episodes` episodes (into a new run at `run_dir`, or untraced): (steps, wall and
+    CPU seconds from after the env's build to the run closed)."""
+    env = _env(source, run_dir)
     t0, c0 = time.perf_counter(), time.process_time()
-    while not games.done:
-        games.step()
-        steps += 1
-    games.close()
-    return steps, time.perf_counter() - t0, time.process_time() - c0
+    played = play_episodes(env, episodes, SEED, random_policy(env, SEED))
+    env.close()  # a traced env closes its writer: the last rows and episode ends are written
+    return played["steps"], time.perf_counter() - t0, time.process_time() - c0
 
 
-def speed(worlds: int, repeats: int, target_s: float, tmp: Path) -> dict[str, Any]:
-    """The loop, play traced and play untraced at `worlds` worlds, in turn (module docstring)."""
-    scenario = builtin_scenario(SCENARIO)
-    loop = Loop(RuleSim(scenario, worlds, seed=SEED, trace=True), True, seed=SEED, red="scripted")
-    loop.run(100)  # the first steps ground the rules that the start left ungrounded: not a block's pace
+def speed(repeats: int, target_s: float, tmp: Path) -> dict[str, Any]:
+    """The loop, play traced and play untraced, one world, in turn (module docstring)."""
+    source = _source(SCENARIO)
+    loop = SpecLoop(DeclaredWorlds(load_declared(source), 1), True, seed=SEED)
     block = calibrate(loop.run, target_s)
     loop.run(block)  # warm-up at full size
     # episodes for a block of play: from a warm-up play, its steps per episode
-    probe = max(worlds * 10, 20)
-    steps, _, _ = _play(scenario, probe, worlds, tmp / f"probe-{worlds}")
-    episodes = max(worlds, int(probe * block / max(steps, 1)))
+    probe = 20
+    steps, _, _ = _play(source, probe, tmp / "probe")
+    episodes = max(1, int(probe * block / max(steps, 1)))
     names = ("loop", "play", "play_untraced")
     wall: dict[str, list[float]] = {name: [] for name in names}
     cpu: dict[str, list[float]] = {name: [] for name in names}
@@ -79,15 +92,14 @@ def speed(worlds: int, repeats: int, target_s: float, tmp: Path) -> dict[str, An
         loop.run(block)
         wall["loop"].append(block / (time.perf_counter() - t0))
         cpu["loop"].append(block / (time.process_time() - c0))
-        for name, run_dir in (("play", tmp / f"run-{worlds}-{i}"), ("play_untraced", None)):
-            steps, seconds, cpu_s = _play(scenario, episodes, worlds, run_dir)
+        for name, run_dir in (("play", tmp / f"run-{i}"), ("play_untraced", None)):
+            steps, seconds, cpu_s = _play(source, episodes, run_dir)
             wall[name].append(steps / seconds)
             cpu[name].append(steps / cpu_s)
-        shutil.rmtree(tmp / f"run-{worlds}-{i}", ignore_errors=True)
-    out: dict[str, Any] = {"worlds": worlds, "loop_steps": block, "play_episodes": episodes}
+        shutil.rmtree(tmp / f"run-{i}", ignore_errors=True)
+    out: dict[str, Any] = {"worlds": 1, "loop_steps": block, "play_episodes": episodes}
     for name in names:
         out[name] = {"steps_per_s": summarize(wall[name]).to_dict(),
-                     "env_steps_per_s": summarize([v * worlds for v in wall[name]]).to_dict(),
                      "steps_per_cpu_s": summarize(cpu[name]).to_dict()}
     med = lambda name, key="steps_per_s": out[name][key]["median"]  # noqa: E731
     out["ratio"] = med("play") / med("loop")
@@ -108,13 +120,11 @@ def memory(episodes: int) -> dict[str, Any]:
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-def run(quick: bool = False, repeats: int = 5, worlds: int = 64, memory_lengths: list[int] | None = None
-        ) -> dict[str, Any]:
+def run(quick: bool = False, repeats: int = 5, memory_lengths: list[int] | None = None) -> dict[str, Any]:
     info = machine_info()
     target_s = 0.2 if quick else 1.0
-    sizes = sorted({1, 8 if quick else worlds})
     with tempfile.TemporaryDirectory(prefix="tracelab-bench-play-") as tmp:
-        rows = [speed(w, repeats, target_s, Path(tmp)) for w in sizes]
+        rows = [speed(repeats, target_s, Path(tmp))]
     mem = [memory(n) for n in (memory_lengths or [])]
     info["load_average_end"] = machine_info()["load_average"]
     return {"machine": info, "quick": quick, "repeats": repeats, "scenario": SCENARIO, "speed": rows,
@@ -126,7 +136,7 @@ def report(r: dict[str, Any]) -> str:
     sp = lambda d: f"{100 * d['steps_per_s']['spread']:.0f}%"  # noqa: E731
     cpu = lambda d: d["steps_per_cpu_s"]["median"]  # noqa: E731
     parts = [machine_line(r["machine"], r["quick"], r["repeats"]),
-             f"play --scenario {r['scenario']} (red scripted) against bench env's traced loop, steps/s (batched)\n"
+             f"play --scenario {r['scenario']} (red random) against bench env's traced loop, steps/s\n"
              + format_table(["worlds", "loop", "play traced", "play untraced", "traced/loop", "untraced/loop",
                              "spread loop/play/untraced", f"goal >= {GOAL_RATIO}"],
                             [[s["worlds"], med(s["loop"]), med(s["play"]), med(s["play_untraced"]), s["ratio"],
@@ -152,19 +162,19 @@ def report(r: dict[str, Any]) -> str:
 def _memory_child(episodes: int) -> dict[str, Any]:
     """Play `episodes` episodes as `tracelab play --scenario advanced --seed 3 --run R` does (one world),
     sampling RSS every tenth of them."""
-    scenario = builtin_scenario(MEMORY_SCENARIO)
     tmp = Path(tempfile.mkdtemp(prefix="tracelab-bench-play-memory-"))
     try:
-        sink = StoreSink(TraceWriter.open(tmp / "run", {"command": "tracelab bench play", "scenario": scenario.name}))
-        games = Games(scenario, episodes, seed=MEMORY_SEED, sink=sink)
-        samples, next_at = [], max(1, episodes // 10)
-        t0 = time.perf_counter()
-        while not games.done:
-            games.step()
-            if len(games.finished) >= next_at:
+        env = _env(_source(MEMORY_SCENARIO), tmp / "run")
+        samples: list[float] = []
+        every, played = max(1, episodes // 10), [0]
+
+        def counted(_: dict[str, Any]) -> None:
+            played[0] += 1
+            if played[0] % every == 0:
                 samples.append(rss_bytes() / 2**20)
-                next_at += max(1, episodes // 10)
-        games.close()
+        t0 = time.perf_counter()
+        play_episodes(env, episodes, MEMORY_SEED, random_policy(env, MEMORY_SEED), on_episode=counted)
+        env.close()
         seconds = time.perf_counter() - t0
         run_mb = sum(f.stat().st_size for f in (tmp / "run").rglob("*") if f.is_file()) / 2**20
     finally:

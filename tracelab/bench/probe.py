@@ -2,9 +2,9 @@
 TARGET...` imports the engine, then for each target builds it and runs its first step, printing one JSON
 line as soon as that step is done (the parent timestamps the lines: process start to first step).
 
-Targets: `game` (an Engine on the game rules with the advanced scenario's facts), `rulesim` (a 1v1
-RuleSim of the advanced scenario and its first step, with the scripted opponent), or the path of a rule
-file. The last line reports how many compiled signatures `kernel.step_worlds` holds (one serves every
+Targets: `game` (an Engine on the game rules with the advanced scenario's facts), `spec` (GridWar's base
+game through its spec, rules/gridworld/war.toml: one DeclaredWorlds world and its first step), or the path of
+a rule file. The last line reports how many compiled signatures `kernel.step_worlds` holds (one serves every
 program: a new rule file must not recompile)."""
 from __future__ import annotations
 
@@ -21,17 +21,20 @@ def _first_step(target: str) -> tuple[float, float, float]:
     t0 = time.perf_counter()
     from tracelab.engine import Engine, load_program
     from tracelab.game.scenario import builtin_scenario
-    if target == "rulesim":
+    if target == "spec":
         import numpy as np
 
-        from tracelab.game.rulesim import RuleSim
+        from tracelab.bench.sims import team_spec
+        from tracelab.envs.declared.vector_world import DeclaredWorlds
     else:
         from tracelab.game.facts import scenario_program
     t1 = time.perf_counter()
-    if target == "rulesim":
-        sim = RuleSim(builtin_scenario("advanced"), 1, seed=0, trace=True)
+    if target == "spec":
+        worlds = DeclaredWorlds(team_spec(1), 1)
+        worlds.use_generators([np.random.default_rng(0)])
+        worlds.reset(np.arange(1))
         t2 = time.perf_counter()
-        sim.step(np.full((1, 1), 8), sim.scripted_actions("blue"))
+        worlds.step(np.zeros((1, worlds.n_agents), np.int64))
     else:
         program = scenario_program(builtin_scenario("advanced")) if target == "game" else load_program(target)
         engine = Engine(program, worlds=1, trace=True)

@@ -1,16 +1,16 @@
 """`tracelab bench replay`: how fast `tracelab replay` turns traced games into a rerun .rrd file.
 
 Two runs are written first (not timed), sealed, then converted `repeats` times each:
-- one 5v5 game of 500 steps (advanced rules on a 16x16 map, health 10 so nobody dies, both teams mostly
-  idle so the game runs to its step limit), goal <= 0.5 s;
-- 100 games of 1v1 (the advanced scenario, scripted red against the scripted opponent), goal <= 5 s.
+- one 5v5 game of GridWar's base game (war.toml, agents_per_team 5, up to 500 steps; the opponent's
+  p_toward 0 and red mostly idle, so that the game runs long), goal <= 0.5 s;
+- 100 games of 1v1 (the advanced game, random red against the rules' opponent), goal <= 5 s.
 A conversion is everything `tracelab replay RUN --save FILE` does after start-up: open the run, read
 what its episodes share, rebuild and log every episode, write the file (merging the recordings of
 several episodes with `rerun rrd merge`). Medians, with a breakdown of the 5v5 game by layer.
 
-The games are written by RuleSim (its tracer, scripted and idle agents the spec's random play has no
-way to ask for); the replay reads them as any run, on rules/gridworld/war.toml's `[board]` with their
-scenario's map (viewers/board_state.py): what is measured is the one path every world's replay takes."""
+The games are played through GridWar's spec (rules/gridworld/war.toml) as `tracelab play --env` plays it,
+with its run metadata (the spec, its params, its `[board]`): what is measured is the path every world's
+replay takes."""
 from __future__ import annotations
 
 import os
@@ -24,14 +24,12 @@ import numpy as np
 
 from tracelab.bench.common import Summary, format_table, machine_info, summarize
 from tracelab.bench.engine import machine_line
-from tracelab.envs.tracer import EpisodeTracer
-from tracelab.game.facts import GAME_RULES
-from tracelab.game.rulesim import RuleSim
-from tracelab.game.scenario import BOARD, Scenario, builtin_scenario
-from tracelab.playing import Games
+from tracelab.envs.declared.env_source import EnvSource
+from tracelab.envs.declared.gridwar import WAR_SPEC
+from tracelab.envs.declared.play import load_declared, make_declared_env, play_episodes, random_policy
+from tracelab.envs.declared.recording import declared_run_config
 from tracelab.store import TraceWriter, seal_run
 from tracelab.store.reader import open_run
-from tracelab.store.sink import StoreSink
 from tracelab.viewers.replay import agent_plots, board_layer, graph_rules, lanes, plots
 from tracelab.viewers.replay.graph_run import read_episode
 from tracelab.viewers.replay.outputs import SaveOutput
@@ -43,41 +41,36 @@ GOAL_5V5_S = 0.5
 GOAL_100_GAMES_S = 5.0
 
 
-def write_idle_game(run_dir: Path, agents: int = 5, steps: int = 500, seed: int = 0) -> None:
-    """One traced game that lasts `steps` steps: each agent does nothing 80% of the time, else a random
-    action (moves and shots); health 10 makes a kill take 10 hits, more than the bullets in play."""
-    scenario = Scenario(name=f"bench{agents}v{agents}", width=16, height=16, red_base=(15, 0),
-                        blue_base=(0, 15), mountains=((7, 7), (8, 7), (7, 8), (8, 8), (3, 12), (12, 3)),
-                        agents_per_team=agents, advanced=True, health=10.0, max_steps=steps)
-    meta = {"command": "tracelab bench replay", "scenario": scenario.name,
-            "config": {"scenario": scenario.to_toml()}, "rule_files": [str(GAME_RULES)], "seed": seed,
-            "board": BOARD}
-    sim = RuleSim(scenario, 1, seed=seed, trace=True)
-    tracer = EpisodeTracer(StoreSink(TraceWriter.open(run_dir, meta)), scenario, sim)
-    rng = np.random.default_rng(seed)
-    sim.reset(seed=seed)
-    tracer.begin(np.arange(1), seed)
-    for _ in range(steps):
-        acts = np.where(rng.random((2, 1, agents)) < 0.8, 8, rng.integers(0, 8, (2, 1, agents)))
-        res = sim.step(acts[0], acts[1])
-        tracer.stepped(res, acts[0], acts[1])
-        if res.terminated[0] or res.truncated[0]:
-            break
-    tracer.close()
+def write_games(run_dir: Path, params: dict[str, Any], games: int, seed: int = 0, idle: float = 0.0) -> None:
+    """`games` traced games of war.toml with `params`, written to a new run as `tracelab play --env` writes
+    them: red random, or idle (the action `nothing`) with probability `idle`."""
+    source = EnvSource(str(WAR_SPEC), params)
+    spec = load_declared(source)
+    config = {"env": source.name, "env_id": None, "spec_path": str(WAR_SPEC), "env_args": params,
+              "episodes": games, "policy": "random", **declared_run_config(spec)}
+    meta = {"command": "tracelab bench replay", "config": config, "rule_files": list(spec.program.files),
+            "seed": seed}
+    env = make_declared_env(source, spec, trace_writer=TraceWriter.open(run_dir, meta))
+    rng, noop = np.random.default_rng(seed), spec.action_names.index("nothing")
+    random_red = random_policy(env, seed)
+
+    def act(obs: Any, info: dict[str, Any]) -> Any:
+        actions = random_red(obs, info)
+        return np.where(rng.random(np.shape(actions)) < idle, noop, actions)
+    play_episodes(env, games, seed, act)
+    env.close()
     seal_run(run_dir)
+
+
+def write_idle_game(run_dir: Path, agents: int = 5, steps: int = 500, seed: int = 0) -> None:
+    """One traced game of `agents` a team that lasts up to `steps` steps: red does nothing 80% of the time,
+    and the opponent never heads for red's base on purpose (p_toward 0)."""
+    write_games(run_dir, {"agents_per_team": agents, "max_steps": steps, "p_toward": 0.0}, 1, seed, idle=0.8)
 
 
 def write_1v1_games(run_dir: Path, games: int = 100, seed: int = 0) -> None:
-    """`games` traced 1v1 games of the advanced scenario, as `tracelab play` plays them."""
-    scenario = builtin_scenario("advanced")
-    meta = {"command": "tracelab bench replay", "scenario": scenario.name,
-            "config": {"scenario": scenario.to_toml()}, "rule_files": [str(GAME_RULES)], "seed": seed,
-            "board": BOARD}
-    played = Games(scenario, games, seed=seed, sink=StoreSink(TraceWriter.open(run_dir, meta)))
-    while not played.done:
-        played.step()
-    played.close()
-    seal_run(run_dir)
+    """`games` traced 1v1 games of the advanced game, random red."""
+    write_games(run_dir, {"advanced": True}, games, seed)
 
 
 def convert(run: Path, out: Path) -> int:
@@ -152,7 +145,7 @@ def layer_times(run: Path, repeats: int) -> dict[str, float]:
 
 
 def run(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
-    """--quick: a 2v2 game of 100 steps and 10 games of 1v1 (a smoke run, not for figures)."""
+    """--quick: a 2v2 game of up to 100 steps and 10 games of 1v1 (a smoke run, not for figures)."""
     info = machine_info()
     agents, steps, games = (2, 100, 10) if quick else (5, 500, 100)
     with tempfile.TemporaryDirectory(prefix="tracelab-bench-replay-") as tmp:

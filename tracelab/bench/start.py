@@ -1,9 +1,9 @@
 """How much CPU `tracelab eval --games N` and `tracelab train` spend before their first step, after their
 imports (issue 40's goal: within 1 s). A fresh process imports what the command imports (timed apart: the
 imports' figure), then runs the command through `tracelab.cli.main`; the vector env it steps (the declared
-one, GridWar's spec; RuleSim's for what still runs there) reports the CPU seconds at its first step and ends
-the process there (python -m tracelab.bench.start COMMAND). Warm caches:
-numba's, as the user's later runs find them (the first run's compiles are `bench first-run`'s)."""
+one, GridWar's spec) reports the CPU seconds at its first step and ends the process there
+(python -m tracelab.bench.start COMMAND). Warm caches: numba's, as the user's later runs find them (the first
+run's compiles are `bench first-run`'s)."""
 from __future__ import annotations
 
 import json
@@ -20,7 +20,7 @@ from tracelab.bench.common import summarize
 # what the commands import before their first step, loaded before the clock starts
 IMPORTS = ("numpy", "torch", "numba", "duckdb", "gymnasium", "tracelab.cli", "tracelab.commands.eval",
            "tracelab.commands.train", "tracelab.envs.declared.vector_env", "tracelab.train.env_trainer",
-           "tracelab.train.env_policy", "tracelab.store", "tracelab.envs.vector_env")
+           "tracelab.train.env_policy", "tracelab.store")
 GOAL_S = 1.0
 TIMEOUT_S = 600
 
@@ -39,14 +39,13 @@ def _child(name: str, runs: Path) -> None:
     imported = time.process_time()
     from tracelab.cli import main
     from tracelab.envs.declared.vector_env import DeclaredVectorEnv
-    from tracelab.envs.vector_env import GridWarVectorEnv
 
     def first_step(*_: Any) -> None:
         print(json.dumps({"imports_s": imported - t0, "to_first_step_s": time.process_time() - imported}),
               file=sys.__stdout__, flush=True)
         os._exit(0)  # the figure is taken: the rest of the command is not the start
 
-    DeclaredVectorEnv.step = GridWarVectorEnv.step = first_step  # type: ignore[method-assign]
+    DeclaredVectorEnv.step = first_step  # type: ignore[method-assign]
     with tempfile.TemporaryDirectory(prefix="tracelab-bench-start-") as tmp:
         sys.stdout = open(os.devnull, "w")  # noqa: SIM115 (the process ends in first_step)
         main(commands(runs, os.path.join(tmp, "run"))[name])

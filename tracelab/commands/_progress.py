@@ -20,20 +20,16 @@ from typing import Any
 
 from tracelab.commands._output import raw_stream
 
-# deferred: rich, on a terminal only; the engine's cache and grounding watch and the game's warm-up (numba) when an
-# engine is built: seal and a small printed reasoning need none of them
+# deferred: rich, on a terminal only; the engine's cache and grounding watch (numba) when an engine is built: seal
+# and a small printed reasoning need none of them
 
 # the numba kernels whose first call compiles the engine (the counting kernel serves every program, the
-# lanes kernel batches of 64 worlds or more), the trace taker of a recorder with an episode clock (a simulator's,
-# a declared env's recording; not `reason`: a notice about it would show on every reasoning), and those the rule
-# simulator adds
+# lanes kernel batches of 64 worlds or more) and the trace taker of a recorder with an episode clock (a declared
+# env's recording; not `reason`: a notice about it would show on every reasoning). A declared world's own step
+# says its compile itself (tracelab/envs/declared/world.py)
 _ENGINE_KERNELS = (("tracelab.engine.kernel", "step_worlds"),)
 _LOCAL_TRACE_KERNELS = (("tracelab.engine.trace_take", "take_local_columns"),)
 _LANES_KERNELS = (("tracelab.engine.lanes", "step_lanes"),)
-_SIMULATOR_KERNELS = (("tracelab.game.rulesim_kernel", "encode_actions"),
-                      ("tracelab.game.rulesim_kernel", "read_and_settle"),
-                      ("tracelab.game.rulesim_kernel", "settle_step"),
-                      ("tracelab.game.rulesim_fused", "fused_step"))  # one call per step
 
 
 def on_terminal() -> bool:
@@ -137,38 +133,25 @@ def _engine_kernels(lanes: bool, local_trace: bool) -> tuple[tuple[str, str], ..
     return _ENGINE_KERNELS + (_LANES_KERNELS if lanes else ()) + (_LOCAL_TRACE_KERNELS if local_trace else ())
 
 
-def engine_cache_is_cold(simulator: bool = False, lanes: bool = False, local_trace: bool = False) -> bool | None:
-    """True when the engine's compiled kernels (with `lanes` the lanes kernel's too, with `simulator`
-    the rule simulator's and its trace taker's, with `local_trace` the trace taker's) are neither loaded
-    nor in numba's disk cache (the first run compiles them), False when they are, None when it cannot
-    tell. Reads numba's cache index of each entry point (a few ms)."""
-    return _cold(_engine_kernels(lanes, local_trace or simulator) + (_SIMULATOR_KERNELS if simulator else ()))
+def engine_cache_is_cold(lanes: bool = False, local_trace: bool = False) -> bool | None:
+    """True when the engine's compiled kernels (with `lanes` the lanes kernel's too, with `local_trace`
+    the trace taker's) are neither loaded nor in numba's disk cache (the first run compiles them), False
+    when they are, None when it cannot tell. Reads numba's cache index of each entry point (a few ms)."""
+    return _cold(_engine_kernels(lanes, local_trace))
 
 
-def compile_notice(simulator: bool = False, lanes: bool = False, local_trace: bool = False,
-                   phase: str = "play") -> str | None:
-    """What a first run compiles, in words (None when nothing, or unknown): the engine's kernels, the
-    game's, and whether a second process takes the game's share (tracelab/game/rulesim_warmup.py); with
-    what `tracelab bench first-run` measured for `phase` (tracelab/first_run_figures.py)."""
-    engine = _cold(_engine_kernels(lanes, local_trace or simulator))
-    game = _cold(_SIMULATOR_KERNELS) if simulator else False
-    if not engine and not game:
+def compile_notice(lanes: bool = False, local_trace: bool = False, phase: str = "play") -> str | None:
+    """What a first run compiles, in words (None when nothing, or unknown), with what `tracelab bench
+    first-run` measured for `phase` (tracelab/first_run_figures.py)."""
+    if not _cold(_engine_kernels(lanes, local_trace)):
         return None
-    what = "the rule engine's step kernel" if engine else ""
-    if game:
-        both = engine and _game_warmup_runs(lanes)
-        what += (" and " if what else "") + "the game's kernels" + (" (in a second process)" if both else "")
+    what = "the rule engine's step kernel"
     kernels = _kernels(_ENGINE_KERNELS[:1])
     from tracelab.engine.numba_cache import cache_folder
     folder = cache_folder(kernels[0]) if kernels else None
     cached = f"; cached for the next runs in {folder}" if folder else ""
     from tracelab.first_run_figures import measured
     return f"compiling the engine ({measured(phase)}): {what}{cached}"
-
-
-def _game_warmup_runs(lanes: bool) -> bool:
-    from tracelab.game.rulesim_warmup import needed
-    return needed("lanes" if lanes else "counting", fused=not lanes)
 
 
 class Warmup(Progress):
@@ -179,17 +162,17 @@ class Warmup(Progress):
 
 
 @contextmanager
-def compiling_engine(simulator: bool = False, lanes: bool = False, busy: str | None = None,
-                     local_trace: bool = False, phase: str | None = "play") -> Iterator[Warmup]:
-    """Around the engine's build and first step (with `lanes`: a batch that takes the lanes kernel; with
-    `simulator`: the rule simulator's too): when the kernels must be compiled, say so while it happens
-    (a spinner on a terminal, one line on stderr otherwise); when they are cached, show `busy` (if
-    given) as a spinner on a terminal. The spinner counts the groundings found (a big build's work).
-    `phase`: the first run `tracelab bench first-run` measured for the notice's figure; None: the body's
-    library code says its own notice (a declared world: tracelab/envs/declared/world.py)."""
+def compiling_engine(lanes: bool = False, busy: str | None = None, local_trace: bool = False,
+                     phase: str | None = "play") -> Iterator[Warmup]:
+    """Around the engine's build and first step (with `lanes`: a batch that takes the lanes kernel): when
+    the kernels must be compiled, say so while it happens (a spinner on a terminal, one line on stderr
+    otherwise); when they are cached, show `busy` (if given) as a spinner on a terminal. The spinner
+    counts the groundings found (a big build's work). `phase`: the first run `tracelab bench first-run`
+    measured for the notice's figure; None: the body's library code says its own notice (a declared
+    world: tracelab/envs/declared/world.py)."""
     from tracelab.engine.grounding import watch_grounding
-    cold = engine_cache_is_cold(simulator, lanes, local_trace)
-    notice = compile_notice(simulator, lanes, local_trace, phase) if cold and phase else None
+    cold = engine_cache_is_cold(lanes, local_trace)
+    notice = compile_notice(lanes, local_trace, phase) if cold and phase else None
     t0 = time.perf_counter()
     if notice and not on_terminal():  # one line, once: on a terminal the spinner says it
         print(f"tracelab: {notice}", file=sys.stderr, flush=True)

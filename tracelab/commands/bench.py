@@ -39,7 +39,7 @@ def _run_section(name: str, args: argparse.Namespace) -> tuple[dict[str, Any], s
         return r, train.report(r)
     if name == "play":
         from tracelab.bench import play
-        r = play.run(args.quick, args.repeats, args.worlds, args.memory)
+        r = play.run(args.quick, args.repeats, args.memory)
         return r, play.report(r)
     if name == "eval":
         from tracelab.bench import eval as evaluations
