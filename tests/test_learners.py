@@ -19,7 +19,7 @@ from tracelab.train.env_checkpoint import checkpoint_path, load_env_checkpoint
 from tracelab.train.env_policy import load_env_policy
 from tracelab.train.learner import DQNLearner
 from tracelab.train.memory import memory_limit
-from tracelab.train.network import to_state_dict
+from tracelab.train.network import state_dict_views
 from tracelab.train.qnet import NetSpec, NumpyQ
 from tracelab.train.replay import ReplayBuffer
 from tracelab.train.torch_files import load_tensors
@@ -52,7 +52,7 @@ def test_fused_update_equals_the_readable_one_loss_and_weights(masked):
     _filled(fused.buffer, masked)
     _filled(readable.buffer, masked)
     fused.params[1] += 0.1  # a target network that differs from the online one
-    readable.target_network.load_state_dict(to_state_dict(fused.params[1], spec))
+    readable.target_network.load_state_dict(state_dict_views(fused.params[1], spec))
     rng_f, rng_r = np.random.default_rng(5), np.random.default_rng(5)
     compared = 0
     for i in range(40):
