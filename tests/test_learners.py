@@ -1,29 +1,29 @@
 """The two learners: the fused update equals the readable one (autograd + torch.optim.Adam,
 tracelab/train/dqn.py) for every option the fused one supports; the readable one's options (Double DQN,
-a dueling head, more layers, any torch module) train through the Trainer and the CLI, are recorded in
+a dueling head, more layers, any torch module, a new loss) train through EnvTrainer and the CLI, are recorded in
 checkpoints and policies, and resume; `--learner auto` says when it takes the readable one."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
 import torch
 
 from tracelab.cli import main
-from tracelab.commands.train import train_into
-from tracelab.train.checkpoint import load_checkpoint, restore
-from tracelab.train.config import TrainConfig
+from tracelab.engine.safe_files import FileRefused
+from tracelab.errors import UserError
 from tracelab.train.dqn import DQN, make_q_network
-from tracelab.train.env_checkpoint import checkpoint_path
-from tracelab.train.env_policy import load_env_policy, load_policy
+from tracelab.train.env_checkpoint import checkpoint_path, load_env_checkpoint
+from tracelab.train.env_policy import load_env_policy
 from tracelab.train.learner import DQNLearner
-from tracelab.train.loop import Trainer
-from tracelab.train.network import to_state_dict
+from tracelab.train.memory import memory_limit
+from tracelab.train.network import state_dict_views
 from tracelab.train.qnet import NetSpec, NumpyQ
 from tracelab.train.replay import ReplayBuffer
 from tracelab.train.torch_files import load_tensors
-from train_helpers import RULESIM_SMALL, WALK, train_walk, walk_argv, walk_config, walk_source
+from train_helpers import train_walk, walk_argv, walk_config, walk_source, walk_trainer
 
 
 def _filled(buffer: ReplayBuffer, masked: bool) -> None:
@@ -52,7 +52,7 @@ def test_fused_update_equals_the_readable_one_loss_and_weights(masked):
     _filled(fused.buffer, masked)
     _filled(readable.buffer, masked)
     fused.params[1] += 0.1  # a target network that differs from the online one
-    readable.target_network.load_state_dict(to_state_dict(fused.params[1], spec))
+    readable.target_network.load_state_dict(state_dict_views(fused.params[1], spec))
     rng_f, rng_r = np.random.default_rng(5), np.random.default_rng(5)
     compared = 0
     for i in range(40):
@@ -166,53 +166,32 @@ def test_train_says_in_its_first_line_which_learner_runs_and_why(tmp_path, capsy
     assert not (tmp_path / "c").exists()
 
 
-# RuleSim's trainer: goes with it (issue 38). Its checkpoint format 2 as written before the readable learner
-def test_a_checkpoint_written_before_the_readable_learner_still_resumes(tmp_path):
-    """Format 2 as it was: no `learner` key, the best networks as fused parameter rows (`best_rows`)."""
-    run = tmp_path / "old"
-    cfg = TrainConfig(scenario="walk4", steps=480, seed=4, **RULESIM_SMALL)
-    assert train_into(cfg, WALK, run, stop_at=246) == 130
-    state = torch.load(checkpoint_path(run), weights_only=True)
-    del state["learner"], state["custom_network"]
-    best = state.pop("best_weights")
-    assert best  # an evaluation at step 200 kept a best policy
-    state["best_rows"] = {name: torch.cat([w.t().reshape(-1) if k.endswith("weight") else w
-                                           for k, w in sd.items()]) for name, sd in best.items()}
-    state["config"]["hidden"] = 64  # an integer then
-    for key in ("learner", "double_dqn", "dueling"):
-        del state["config"][key]
-    torch.save(state, checkpoint_path(run))
-    loaded = load_checkpoint(run)
-    for name, sd in best.items():
-        for k, w in to_state_dict(state["best_rows"][name], NetSpec(4, (64,), 5)).items():
-            assert torch.equal(loaded["best_weights"][name][k], w) and torch.equal(w, sd[k])
-    assert main(["train", "--resume", str(run)]) == 0
-    assert load_checkpoint(run)["learner"] == "fused"
-
-
-# RuleSim's trainer: goes with it (issue 38). EnvTrainer takes no network= (any torch module) yet
 def test_any_torch_module_trains_through_the_python_api(tmp_path):
     """A custom module (here with a LayerNorm) trains with the readable learner; its policy says `custom`
-    and tracelab refuses to rebuild it from the file; its checkpoint loads with the same module."""
+    and tracelab refuses to rebuild it from the file; its checkpoint loads with the same module and a
+    trainer built with it continues from there."""
     def network(inputs: int, actions: int) -> torch.nn.Module:
         return torch.nn.Sequential(torch.nn.Linear(inputs, 32), torch.nn.LayerNorm(32), torch.nn.ReLU(),
                                    torch.nn.Linear(32, actions))
-    cfg = TrainConfig(scenario="walk4", steps=400, seed=1, **RULESIM_SMALL)
-    trainer = Trainer(cfg, WALK, run_dir=tmp_path / "run", network=network)
+    cfg = walk_config(steps=400, seed=1)
+    trainer = walk_trainer(cfg, run_dir=tmp_path / "run", network=network)
     assert trainer.learner_kind == "readable" and trainer.train() == "finished"
+    assert isinstance(trainer.learner.q_network[1], torch.nn.LayerNorm)
     trainer.close()
     spec = json.loads((tmp_path / "run" / "policy" / "policy.json").read_text())
     assert "LayerNorm" in spec["network"]["custom"]
     with pytest.raises(ValueError, match="a custom torch module"):
-        load_policy(tmp_path / "run" / "policy")
-    with pytest.raises(Exception, match="custom torch module"):
-        load_checkpoint(tmp_path / "run")
-    state = load_checkpoint(tmp_path / "run", network=network)
-    again = Trainer(cfg, WALK, network=network)
-    restore(again, state)
-    for k, v in again.learners["shared"].online_weights().items():
+        load_env_policy(tmp_path / "run" / "policy", walk_source())
+    with pytest.raises(FileRefused, match="custom torch module"):
+        load_env_checkpoint(tmp_path / "run", walk_source(), memory_limit())
+    state = load_env_checkpoint(tmp_path / "run", walk_source(), memory_limit(), network=network)
+    again = walk_trainer(cfg, network=network)
+    again.load_state(state)
+    for k, v in again.learner.online_weights().items():
         assert torch.equal(v, state["learners"]["shared"]["online"][k])
     again.close()
+    with pytest.raises(UserError, match="readable learner"):
+        walk_trainer(walk_config(learner="fused"), network=network)
 
 
 class ConservativeDQN(DQN):
@@ -224,10 +203,9 @@ class ConservativeDQN(DQN):
         return super().loss(q, actions, td_target) + self.alpha * conservative
 
 
-# RuleSim's trainer: goes with it (issue 38). EnvTrainer takes no learner_class= (a new loss) yet
 def test_a_new_loss_is_a_subclass_and_trains_through_the_trainer(tmp_path):
     """The worked example: its loss is the method's plus the conservative term, it trains through
-    Trainer(learner_class=...) into a run whose checkpoint resumes."""
+    EnvTrainer(learner_class=...) into a run whose checkpoint resumes with the same class."""
     learner = ConservativeDQN(make_q_network(NetSpec(4, (8,), 5), torch.Generator().manual_seed(1)),
                               ReplayBuffer(50, 4, 5, 50), lr=1e-3)
     _filled(learner.buffer, False)
@@ -240,8 +218,14 @@ def test_a_new_loss_is_a_subclass_and_trains_through_the_trainer(tmp_path):
         want = torch.nn.functional.smooth_l1_loss(taken, y) + 0.5 * (torch.logsumexp(q, 1, keepdim=True) - taken).mean()
     learner.update(np.random.default_rng(3))
     assert learner.take_loss() == pytest.approx(want.item(), rel=1e-6)
-    cfg = TrainConfig(scenario="walk4", steps=400, seed=1, **RULESIM_SMALL)
-    trainer = Trainer(cfg, WALK, run_dir=tmp_path / "run", learner_class=ConservativeDQN)
-    assert isinstance(trainer.learners["shared"], ConservativeDQN) and trainer.train() == "finished"
+    cfg = walk_config(steps=400, seed=1)
+    trainer = walk_trainer(cfg, run_dir=tmp_path / "run", learner_class=ConservativeDQN)
+    assert isinstance(trainer.learner, ConservativeDQN) and trainer.train() == "finished"
     trainer.close()
-    assert load_checkpoint(tmp_path / "run")["learner"] == "readable"
+    state = load_env_checkpoint(tmp_path / "run", walk_source(), memory_limit())
+    assert state["learner"] == "readable"
+    again = walk_trainer(replace(cfg, steps=600), learner_class=ConservativeDQN)
+    again.load_state(state)
+    assert again.step == 400 and again.train() == "finished"
+    assert again.learner.updates > state["learners"]["shared"]["updates"]
+    again.close()

@@ -10,8 +10,7 @@ import sys
 from tracelab.cli import main
 from tracelab.store import run_info
 from tracelab.store.seal import seal_run
-from tracelab.train.checkpoint import checkpoint_config
-from tracelab.train.env_checkpoint import checkpoint_path, load_env_checkpoint
+from tracelab.train.env_checkpoint import checkpoint_config, checkpoint_path, load_env_checkpoint
 from tracelab.train.memory import memory_limit
 from tracelab.train.torch_files import load_tensors
 from train_helpers import ctrl_c_once_training, run_rows, train_walk, walk_argv, walk_config, walk_source

@@ -15,9 +15,8 @@ from tracelab.envs.declared.env_source import EnvSource
 from tracelab.envs.declared.play import TeamEnv
 from tracelab.envs.declared.spec import load_spec
 from tracelab.envs.declared.vector_env import DeclaredVectorEnv
-from tracelab.train.checkpoint import checkpoint_path
 from tracelab.train.config import TrainConfig
-from tracelab.train.env_checkpoint import load_env_checkpoint, save_env_checkpoint
+from tracelab.train.env_checkpoint import checkpoint_path, load_env_checkpoint, save_env_checkpoint
 from tracelab.train.env_trainer import EnvTrainer
 from tracelab.train.memory import memory_limit
 from tracelab.train.torch_files import load_tensors

@@ -4,7 +4,7 @@ checkpoint."""
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, replace
+from dataclasses import asdict
 
 import numpy as np
 import pytest
@@ -16,11 +16,9 @@ from tracelab.store.why import explain, render_why
 from tracelab.train.config import TrainConfig
 from tracelab.train.env_checkpoint import checkpoint_path
 from tracelab.train.env_policy import load_env_policy
-from tracelab.train.loop import Trainer
 from tracelab.train.metric_log import WALL_CLOCK_METRICS
 from tracelab.train.torch_files import load_tensors
-from train_helpers import (RULESIM_SMALL, WALK, ctrl_c_once_training, train_walk, walk_argv, walk_config, walk_source,
-                           walk_trainer)
+from train_helpers import WALK, ctrl_c_once_training, train_walk, walk_argv, walk_config, walk_source, walk_trainer
 
 TRAINING_METRICS = {"loss", "epsilon", "q_max_mean", "env_steps_per_s", "updates_per_s", "train_return"}
 EVAL_METRICS = {f"eval/{k}" for k in ("games", "wins", "losses", "draws", "truncated", "win_rate", "mean_return",
@@ -192,38 +190,34 @@ def test_masked_training_records_the_moves_the_shield_allows_in_the_next_state()
     np.testing.assert_array_equal(st["next_allowed"][boot], expect)
 
 
-# RuleSim's trainer: goes with it (issue 38). Several agents a team train through the PettingZoo env
-# (teamtrain, tests/test_team_train.py); EnvTrainer trains one agent.
 def test_a_team_s_closing_transitions_carry_the_win_or_loss_term():
     """With several agents each learns from its own reward; the step that ends a game resets the world
-    within the step (SAME_STEP), so the terminal rewards must come from final_info. Every transition cut
-    by a capture (discount 0: nobody dies on the walk) carries +-10 plus its small step term; a draw
-    has no terminal term."""
-    team = replace(WALK, agents_per_team=2, red_starts=None, blue_starts=None)
-    cfg = TrainConfig(scenario="walk4", steps=1200, seed=3, **{**RULESIM_SMALL, "warmup": 5000, "eval_every": 0})
-    trainer = Trainer(cfg, team)
+    within the step (SAME_STEP), so the terminal rewards must come from final_info. Nearly every transition
+    cut by the game's end or a death (discount 0) carries +-10 plus its small step term; the rest carry
+    step terms only."""
+    cfg = walk_config(steps=1200, seed=3, warmup=5000, eval_every=0)
+    trainer = walk_trainer(cfg, walk_source(agents_per_team=2))
     trainer.train()
-    st = trainer.learners["shared"].buffer.state()
+    st = trainer.learner.buffer.state()
     trainer.close()
+    assert trainer.agents == 2
     closing = st["discount"] == 0
     assert closing.sum() >= 20
-    won_or_lost = np.abs(st["reward"][closing]) > 8.5  # the rest are draws: no terminal term
+    won_or_lost = np.abs(st["reward"][closing]) > 8.5
     assert won_or_lost.mean() > 0.9, st["reward"][closing]
     assert (st["reward"][closing] > 8.5).any() and (st["reward"][closing] < -8.5).any()
     assert (np.abs(st["reward"][~closing]) <= 1.0).all()  # step terms only: -0.1, or -1 when unsafe
 
 
-# RuleSim's trainer: goes with it (issue 38). The spec path explores uniformly (--explore-scripted is refused
-# there: env_trainer.NOT_ON_THE_SPEC_PATH)
 @pytest.mark.parametrize("share", [1.0, 0.0])
 def test_explore_scripted_takes_exploring_actions_from_the_scripted_policy(share):
-    """--explore-scripted 1: every exploring move is the scripted policy's, a step towards blue's base at
-    (0, 3) (one always exists on the open walk); 0: uniform, so other actions appear too."""
-    cfg = TrainConfig(scenario="walk4", steps=400, seed=6, explore_scripted=share,
-                      **{**RULESIM_SMALL, "warmup": 5000, "eval_every": 0})
-    trainer = Trainer(cfg, WALK)
+    """--explore-scripted 1: every exploring move is the spec's scripted choice (`[agents] script`), a
+    step towards blue's base at (0, 3) (one always exists on the open walk); 0: uniform, so other actions
+    appear too."""
+    cfg = walk_config(steps=400, seed=6, explore_scripted=share, warmup=5000, eval_every=0)
+    trainer = walk_trainer(cfg)
     trainer.train()
-    st = trainer.learners["shared"].buffer.state()
+    st = trainer.learner.buffer.state()
     trainer.close()
     steps = st["discount"] > 0  # the closing transitions' next obs is the terminal one: keep the rest
     dist = lambda o: o[:, 0] + (3 - o[:, 1])  # noqa: E731  Manhattan distance of red to (0, 3)
@@ -247,57 +241,6 @@ def test_saved_policy_round_trips_and_plain_torch_loads_it(tmp_path):
         assert (net(torch.from_numpy(obs)).argmax(1).numpy() == loaded.act(obs)).all()
     assert spec["observation"] == {"size": 4, "encoding": "Box, 4 numbers"}
     assert spec["networks"] == {"shared": [0]} and spec["env"] == walk_source().to_json()
-    trainer.close()
-
-
-# RuleSim's trainer: goes with it (issue 38). Split networks, the slow agents' two-step transitions and
-# --slow-every-step are its own (env_trainer.NOT_ON_THE_SPEC_PATH); the nonmarkov scenario is a team game
-def trained_on_nonmarkov(steps: int, **options) -> Trainer:
-    """A trainer after `steps` steps of the nonmarkov scenario (40-step games), no updates (warmup)."""
-    from tracelab.game.scenario import builtin_scenario
-    cfg = TrainConfig(scenario="nonmarkov", steps=steps, seed=1, **options,
-                      **{**RULESIM_SMALL, "eval_every": 0, "warmup": 1000})
-    trainer = Trainer(cfg, replace(builtin_scenario("nonmarkov"), max_steps=40))
-    trainer.train()
-    return trainer
-
-
-def test_split_networks_train_separately_and_slow_transitions_span_two_steps():
-    trainer = trained_on_nonmarkov(160, non_markov=True, split_networks=True)
-    cfg = trainer.cfg
-    fast, slow = trainer.learners["fast"].buffer, trainer.learners["slow"].buffer
-    assert trainer.groups == {"fast": [0], "slow": [1]}
-    assert fast.obs_size == slow.obs_size == 28  # 14 numbers, and the previous step's
-    g = cfg.gamma
-    fast_d = np.unique(fast.state()["discount"]).astype(np.float64)
-    slow_d = np.unique(slow.state()["discount"]).astype(np.float64)
-    # fast: one step per transition; slow: two (acts on even steps), unless the episode or its life ended
-    assert np.isclose(fast_d[:, None], [0.0, g]).any(axis=1).all(), fast_d
-    assert np.isclose(slow_d[:, None], [0.0, g, g * g]).any(axis=1).all(), slow_d
-    assert np.isclose(slow_d, g * g).any()
-    assert fast.size > slow.size
-    trainer.close()
-
-
-def test_non_markov_alone_stacks_the_observation_for_one_shared_network():
-    trainer = trained_on_nonmarkov(120, non_markov=True)
-    cfg = trainer.cfg
-    assert trainer.groups == {"shared": [0, 1]}
-    shared = trainer.learners["shared"].buffer
-    assert shared.obs_size == 28
-    # both agents' transitions in one buffer: the slow agent's two-step ones among them
-    assert np.isclose(np.unique(shared.state()["discount"]).astype(np.float64), cfg.gamma ** 2).any()
-    trainer.close()
-
-
-def test_slow_every_step_makes_every_slow_transition_one_step_long():
-    trainer = trained_on_nonmarkov(160, split_networks=True, slow_every_step=True)
-    cfg = trainer.cfg
-    fast, slow = trainer.learners["fast"].buffer, trainer.learners["slow"].buffer
-    slow_d = np.unique(slow.state()["discount"]).astype(np.float64)
-    assert np.isclose(slow_d[:, None], [0.0, cfg.gamma]).any(axis=1).all(), slow_d  # never two steps
-    # it decides whenever it is alive, as the fast agent does (deaths differ between the two)
-    assert slow.size > 0.6 * fast.size
     trainer.close()
 
 

@@ -18,7 +18,7 @@ from test_spec_world_game import RULES, SPEC, rows
 from tracelab.cli import main
 from tracelab.envs import make_vec_env
 from tracelab.envs.declared.env_source import EnvSource
-from tracelab.train.checkpoint import checkpoint_path
+from tracelab.train.env_checkpoint import checkpoint_path
 
 TINY = ["--total-timesteps", "200", "--learning-starts", "20", "--eval-every", "100", "--eval-games", "12",
         "--trace-eval-games", "2", "--num-envs", "4", "--seed", "5"]

@@ -13,7 +13,7 @@ from tracelab.cli import main
 from tracelab.commands.train import train_env_into
 from tracelab.envs.declared.env_source import EnvSource
 from tracelab.store.meta import current_meta
-from tracelab.train.checkpoint import checkpoint_path
+from tracelab.train.env_checkpoint import checkpoint_path
 from tracelab.train.config import TrainConfig
 from tracelab.train.metric_log import WALL_CLOCK_METRICS
 from tracelab.viewers.tui.eval_games import eval_games, neighbour

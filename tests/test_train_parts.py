@@ -1,5 +1,5 @@
 """The trainer's parts (tracelab/train: rngs, exploration, update_schedule, episode_log, best_policy,
-metric_log, game_record) each save and load themselves; a trainer's state is theirs side by side, so a
+metric_log) each save and load themselves; a trainer's state is theirs side by side, so a
 trainer loaded from another's state continues exactly as the other does."""
 from __future__ import annotations
 

@@ -1,12 +1,15 @@
 """`tracelab train --scenario NAME` trains GridWar through its spec (issue 38 item 2, one trainer): the
 scenario and GridWar's flags become rules/gridworld/war.toml params of a GridWar id, EnvTrainer trains it
 and writes env_checkpoint's format, the run still names the scenario and its settings; what the spec path
-cannot train is refused in one line; an old RuleSim run resumed with --env is refused in one line saying
-how to start again."""
+cannot train is refused in one line; an old RuleSim run, resumed with or without --env, is refused in one
+line saying how to start again."""
 from __future__ import annotations
 
 from pathlib import Path
 
+import json
+
+import numpy as np
 import pytest
 import torch
 
@@ -97,3 +100,33 @@ def test_an_old_rulesim_checkpoint_on_the_spec_path_is_refused_saying_how_to_sta
     assert "trained by tracelab's RuleSim trainer" in err
     assert "start a new run with its settings: tracelab train --scenario walk4 --total-timesteps 200 --seed 4 " \
         "--num-envs 4" in err
+
+
+def _rulesim_run(run: Path, checkpoint: dict) -> Path:
+    """A run as RuleSim's trainer left it, as far as a resume reads it: its meta (a scenario, no env) and
+    its checkpoint."""
+    (run / "checkpoint").mkdir(parents=True)
+    config = TrainConfig(scenario="advanced", steps=5000, seed=4, envs=4).to_dict()
+    meta = {"command": "tracelab train", "scenario": "advanced", "status": "finished",
+            "config": {**config, "scenario_toml": 'name = "advanced"'}}
+    (run / "meta.json").write_text(json.dumps(meta))
+    torch.save({**checkpoint, "config": config}, checkpoint_path(run))
+    return run
+
+
+def test_resuming_a_rulesim_run_is_refused_with_the_command_that_starts_it_again(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`train --resume OLD` (no --env: how a GridWar run was resumed) of a RuleSim run, in its format 2 or
+    in its first format (numpy objects, which only a loader that runs code reads): one line each, nothing
+    written into the run."""
+    run = _rulesim_run(tmp_path / "old", {"format": RULESIM_FORMATS[0], "step": 100})
+    before = sorted(p.name for p in run.rglob("*"))
+    err = error_line(capsys, main(["train", "--resume", str(run)]))
+    assert "trained by tracelab's RuleSim trainer" in err
+    assert "start a new run with its settings: tracelab train --scenario advanced --total-timesteps 5000 " \
+        "--seed 4 --num-envs 4" in err
+    assert sorted(p.name for p in run.rglob("*")) == before
+    first = _rulesim_run(tmp_path / "first", {"format": "tracelab-dqn-checkpoint/1", "games": np.zeros(3)})
+    err = error_line(capsys, main(["train", "--resume", str(first), "--total-timesteps", "9000"]))
+    assert "a checkpoint of RuleSim's trainer in its first format" in err
+    assert "start a new run with tracelab train (its settings: tracelab show" in err

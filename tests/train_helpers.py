@@ -40,8 +40,6 @@ def walk_argv(p_toward: float = 0.5) -> list[str]:
 SMALL = dict(warmup=100, envs=4, batch=32, buffer=2000, target_every=100, log_every=100, eval_every=200,
              eval_games=8, trace_eval_games=2, eval_envs=3, checkpoint_every=200, lr=3e-3,
              reward_scale=1.0)  # the walk's rewards (-1, 10) are near 1 already: seen as they are
-# RuleSim's trainer's settings (the tests left on it, issue 38): its opponent's p in training and evaluation
-RULESIM_SMALL = {**SMALL, "opponent_p": 0.5, "eval_p": 0.3}
 
 
 def walk_config(steps: int = 200, seed: int = 1, **options: object):  # -> TrainConfig

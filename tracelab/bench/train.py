@@ -1,14 +1,14 @@
-"""`tracelab bench train`: training transitions/s end to end with the method's defaults (1v1 base, rules
-backend, one update per transition, live logging into a run) with the fused learner and with the readable
-one (tracelab/train/dqn.py), and beside them, in the same process: the update alone (the fused learner's,
-the readable learner's, and the textbook autograd + torch.optim.Adam update of the same network and batch
-written inline) and the env alone. The loop's share = 1 - (update time / training-step time).
+"""`tracelab bench train`: training transitions/s end to end with the method's defaults (1v1 base through
+GridWar's spec, as `tracelab train --scenario base` trains it: EnvTrainer, one update per transition, live
+logging into a run) with the fused learner and with the readable one (tracelab/train/dqn.py), and beside
+them, in the same process: the update alone (the fused learner's, the readable learner's, and the textbook
+autograd + torch.optim.Adam update of the same network and batch written inline) and the spec's batched env
+alone. The loop's share = 1 - (update time / training-step time).
 Goals (docs/benchmarks/history.md, "Training"): loop around the update <= 15% of a step; >= 5,000 transitions/s;
-the fused update >= 4x the textbook one. Beside them, 5v5 base end to end on both trainers: GridWar's spec
-(EnvTrainer, every agent a row of the shared network) and RuleSim's Trainer, in world-steps per CPU second."""
+the fused update >= 4x the textbook one. Beside them, 5v5 base end to end (every agent a row of the shared
+network), in world-steps per CPU second."""
 from __future__ import annotations
 
-import dataclasses
 import tempfile
 import time
 from collections.abc import Callable
@@ -21,13 +21,13 @@ import torch
 from tracelab.bench.common import fmt_num, format_table, machine_info, summarize
 from tracelab.bench.engine import machine_line
 from tracelab.envs.declared.env_source import EnvSource
-from tracelab.envs.vector_env import GridWarVectorEnv
 from tracelab.game.scenario import builtin_scenario
 from tracelab.store import TraceWriter
 from tracelab.train.config import TrainConfig
-from tracelab.train.env_trainer import EnvTrainer
-from tracelab.train.loop import Trainer, make_learner
+from tracelab.train.env_policy import make_vector_env
+from tracelab.train.env_trainer import EnvTrainer, gridwar_sources
 from tracelab.train.qnet import NetSpec
+from tracelab.train.train_loop import make_learner
 
 GOAL_TRANSITIONS_PER_S = 5_000
 GOAL_LOOP_SHARE = 0.15
@@ -40,25 +40,26 @@ def _config(envs: int, threads: int, learner: str = "fused") -> Any:
                        checkpoint_every=0, learner=learner)
 
 
-TEAM = 5  # the team size of the spec path's figure beside RuleSim's
+TEAM = 5  # the team size of the 5v5 figure
+
+
+def _base_source(cfg: TrainConfig) -> EnvSource:
+    """The env `tracelab train --scenario base` trains on with these settings (GridWar's spec id)."""
+    return gridwar_sources(cfg, builtin_scenario("base"))[0]
 
 
 class EndToEnd:
-    """A Trainer with the method's defaults logging into a run, past its warm-up; `run(k)` trains k more
-    steps through Trainer.train (logging, ε, replay, updates: everything but evaluations). `team`: TEAM
-    agents a team on RuleSim's Trainer ("rulesim") or on GridWar's spec (EnvTrainer, "spec")."""
+    """An EnvTrainer on the 1v1 base game with the method's defaults logging into a run, past its warm-up;
+    `run(k)` trains k more steps through EnvTrainer.train (logging, ε, replay, updates: everything but
+    evaluations). `team`: TEAM agents a team."""
 
-    def __init__(self, envs: int, threads: int, run_dir: Path, learner: str, team: str | None = None) -> None:
+    def __init__(self, envs: int, threads: int, run_dir: Path, learner: str, team: bool = False) -> None:
         cfg = _config(envs, threads, learner)
         self.writer = TraceWriter.open(run_dir, {"command": "tracelab bench train", "config": cfg.to_dict()})
-        scenario = builtin_scenario("base")
-        if team == "spec":
-            self.trainer: Any = EnvTrainer(cfg, EnvSource("tracelab/GridWar-base-v0", {"agents_per_team": TEAM}),
-                                           self.writer)
-        else:
-            if team == "rulesim":
-                scenario = dataclasses.replace(scenario, agents_per_team=TEAM, red_starts=None, blue_starts=None)
-            self.trainer = Trainer(cfg, scenario, self.writer)
+        source = _base_source(cfg)
+        if team:
+            source = EnvSource(source.name, {**source.kwargs, "agents_per_team": TEAM})
+        self.trainer = EnvTrainer(cfg, source, self.writer)
         self.trainer.train(stop_at=cfg.warmup + 2 * cfg.batch)  # updates run from here on
 
     def run(self, k: int) -> None:
@@ -120,13 +121,13 @@ def textbook_updates(threads: int) -> Callable[[int], None]:
 
 
 def env_steps(envs: int) -> tuple[Callable[[int], None], Any]:
-    """The batched env alone (random actions, rules backend, no trace): run(k) makes k passes."""
-    env = GridWarVectorEnv(envs, "base", backend="rules")
+    """The batched env the trainer steps, alone (random actions, no trace): run(k) makes k passes."""
+    env, _ = make_vector_env(_base_source(_config(envs, 1)), envs)
     env.reset(seed=0)
     rng = np.random.default_rng(0)
 
     def run(k: int) -> None:
-        for a in rng.integers(0, 5, (k, envs)):
+        for a in rng.integers(0, env.single_action_space.n, (k, envs)):
             env.step(a)
     return run, env
 
@@ -148,8 +149,7 @@ def run(quick: bool = False, repeats: int = 5, envs: int = 64, threads: int = 1)
     with tempfile.TemporaryDirectory(prefix="tracelab-bench-train-") as tmp:
         e2e = EndToEnd(envs, threads, Path(tmp) / "run", "fused")
         e2e_readable = EndToEnd(envs, threads, Path(tmp) / "run-readable", "readable")
-        team_rulesim = EndToEnd(envs, threads, Path(tmp) / "run-5v5-rulesim", "fused", "rulesim")
-        team_spec = EndToEnd(envs, threads, Path(tmp) / "run-5v5-spec", "fused", "spec")
+        team = EndToEnd(envs, threads, Path(tmp) / "run-5v5", "fused", team=True)
         fused, readable = learner_updates(threads, "fused"), learner_updates(threads, "readable")
         textbook = textbook_updates(threads)
         env_run, env = env_steps(envs)
@@ -157,7 +157,7 @@ def run(quick: bool = False, repeats: int = 5, envs: int = 64, threads: int = 1)
         for fn, k in ((fused, 20), (readable, 20), (textbook, 20), (env_run, 20)):
             fn(k)  # warm-up
         rounds: dict[str, list[float]] = {"e2e": [], "e2e_readable": [], "fused": [], "readable": [],
-                                          "textbook": [], "env": [], "team_rulesim": [], "team_spec": []}
+                                          "textbook": [], "env": [], "team": []}
         cpu: dict[str, list[float]] = {k: [] for k in rounds}
         try:
             for _ in range(repeats):
@@ -166,16 +166,14 @@ def run(quick: bool = False, repeats: int = 5, envs: int = 64, threads: int = 1)
                                           ("fused", fused, n_upd, n_upd), ("readable", readable, n_upd, n_upd),
                                           ("textbook", textbook, n_upd, n_upd),
                                           ("env", env_run, passes, passes * envs),
-                                          ("team_rulesim", team_rulesim.run, block // 4, block // 4),
-                                          ("team_spec", team_spec.run, block // 4, block // 4)):
+                                          ("team", team.run, block // 4, block // 4)):
                     wall, used = _timed(fn, k)
                     rounds[key].append(units / wall)
                     cpu[key].append(units / max(used, 1e-9))
         finally:
             e2e.close()
             e2e_readable.close()
-            team_rulesim.close()
-            team_spec.close()
+            team.close()
             env.close()
     loop_shares = [1.0 - f_e2e / f_upd for f_e2e, f_upd in zip(rounds["e2e"], rounds["fused"])]
     rest_shares = [1.0 - f_e2e / f_upd - f_e2e / f_env
@@ -184,7 +182,6 @@ def run(quick: bool = False, repeats: int = 5, envs: int = 64, threads: int = 1)
     over_readable = [f / t for f, t in zip(rounds["fused"], rounds["readable"])]
     e2e_over_readable = [f / t for f, t in zip(rounds["e2e"], rounds["e2e_readable"])]
     e2e_s = summarize(rounds["e2e"])
-    spec_over_rulesim = [s / r for s, r in zip(cpu["team_spec"], cpu["team_rulesim"])]
     loop_share = summarize(loop_shares).median
     speedup = summarize(speedups).median
     info["load_average_end"] = machine_info()["load_average"]
@@ -200,9 +197,7 @@ def run(quick: bool = False, repeats: int = 5, envs: int = 64, threads: int = 1)
             "fused_over_textbook": summarize(speedups).to_dict(),
             "loop_share": summarize(loop_shares).to_dict(), "rest_share": summarize(rest_shares).to_dict(),
             "per_cpu_second": {k: summarize(v).to_dict() for k, v in cpu.items()},
-            "team": TEAM, "team_spec_over_rulesim_cpu": summarize(spec_over_rulesim).to_dict(),
-            "team_rulesim_per_s": summarize(rounds["team_rulesim"]).to_dict(),
-            "team_spec_per_s": summarize(rounds["team_spec"]).to_dict(),
+            "team": TEAM, "team_per_s": summarize(rounds["team"]).to_dict(),
             "goals": [{"goal": "loop around the update", "target": f"<= {100 * GOAL_LOOP_SHARE:.0f}% of a step",
                        "measured": f"{100 * loop_share:.0f}%", "met": loop_share <= GOAL_LOOP_SHARE},
                       {"goal": "transitions/s, one update each", "target": f">= {GOAL_TRANSITIONS_PER_S:,}",
@@ -226,26 +221,23 @@ def report(r: dict[str, Any]) -> str:
              sp(r["textbook_update_per_s"]), us(r["textbook_update_per_s"])],
             [f"env alone, {r['envs']} worlds (world-steps/s)", r["env_steps_per_s"]["median"],
              sp(r["env_steps_per_s"]), us(r["env_steps_per_s"])]]
-    rows += [[f"{r['team']}v{r['team']} base end to end, {what} (world-steps/s)", r[f"{key}_per_s"]["median"],
-              sp(r[f"{key}_per_s"]), us(r[f"{key}_per_s"])]
-             for key, what in (("team_rulesim", "RuleSim's Trainer"), ("team_spec", "GridWar's spec, EnvTrainer"))]
+    rows.append([f"{r['team']}v{r['team']} base end to end, fused learner (world-steps/s)", r["team_per_s"]["median"],
+                 sp(r["team_per_s"]), us(r["team_per_s"])])
     shares = (f"medians of per-round ratios: fused update {r['fused_over_textbook']['median']:.2f}x the "
               f"textbook one, {r['fused_over_readable']['median']:.2f}x the readable learner's; end to end, "
               f"fused {r['e2e_fused_over_readable']['median']:.2f}x readable; the loop around the update "
               f"{100 * r['loop_share']['median']:.0f}% of a training step (env included), the rest "
               f"(buffer, ε, transitions, logging) "
-              f"{100 * r['rest_share']['median']:.0f}%; {r['team']}v{r['team']} base, the spec path "
-              f"{r['team_spec_over_rulesim_cpu']['median']:.2f}x RuleSim's Trainer per CPU-second")
+              f"{100 * r['rest_share']['median']:.0f}%")
     goals = format_table(["goal", "target", "measured", "result"],
                          [[g["goal"], g["target"], g["measured"], "met" if g["met"] else "not met"]
                           for g in r["goals"]])
-    head = (f"1v1 base, rules backend, method's DQN defaults (64 tanh, batch 128, Adam 5e-4), "
+    head = (f"1v1 base through GridWar's spec (EnvTrainer), method's DQN defaults (64 tanh, batch 128, Adam 5e-4), "
             f"{r['envs']} worlds, torch threads {r['threads']}, live logging into a run; "
             f"{r['repeats']} rounds of {r['block_steps']:,} training steps, {r['updates_per_block']:,} updates "
             f"of each kind, and env steps")
     pc = r["per_cpu_second"]
-    for row, key in zip(rows, ("e2e", "e2e_readable", "fused", "readable", "textbook", "env", "team_rulesim",
-                               "team_spec")):
+    for row, key in zip(rows, ("e2e", "e2e_readable", "fused", "readable", "textbook", "env", "team")):
         row.append(pc[key]["median"])
     table = format_table(["figure", "median", "spread", "µs each", "per CPU-second"], rows)
     cpu_note = ("per CPU-second: the same work per second of this process's CPU time (all its threads), "

@@ -29,24 +29,15 @@ from tracelab.commands._training import (
 from tracelab.commands._worlds import env_source_of, load_scenario_arg
 from tracelab.envs.declared.gridwar import GRIDWAR_SPEC_IDS
 from tracelab.errors import UserError, store_errors
-from tracelab.game.facts import GAME_RULES
-from tracelab.game.scenario import BOARD, builtin_scenario_names
+from tracelab.game.scenario import builtin_scenario_names
 from tracelab.store import TraceWriter
 from tracelab.store.meta import current_meta
 from tracelab.train.budget import reward_scale_note, too_short_hint
-from tracelab.train.checkpoint import checkpoint_config, checkpoint_scenario, load_checkpoint, restore
 from tracelab.train.config import GRIDWAR_ONLY, METHOD_REWARD_SCALE, TrainConfig, flag_of, reward_scale_text
-from tracelab.train.env_checkpoint import checkpoint_env, load_env_checkpoint
+from tracelab.train.env_checkpoint import checkpoint_config, checkpoint_env, load_env_checkpoint
 from tracelab.train.env_source import probe_env
 from tracelab.train.env_trainer import EnvTrainer, env_run_meta, gridwar_sources
-from tracelab.train.loop import Trainer
-from tracelab.train.memory import (
-    check_estimate,
-    check_training_memory,
-    env_training_estimate,
-    env_world_bytes,
-    memory_limit,
-)
+from tracelab.train.memory import check_estimate, env_training_estimate, env_world_bytes, memory_limit
 from tracelab.train.qnet import NetSpec
 
 
@@ -64,8 +55,6 @@ def run(args: argparse.Namespace) -> int:
     if on_env and gridwar:
         raise UserError(f"{', '.join(gridwar)} describe{'s' if len(gridwar) == 1 else ''} GridWar; "
                         f"--env {args.env} takes the DQN flags only")
-    if args.resume and not on_env and is_rulesim_run(Path(args.resume)):
-        return _resume_rulesim(args, given, limit)
     state, scenario = None, None
     with store_errors():  # a bad value in the config or a checkpoint that does not load
         if args.resume:
@@ -102,28 +91,6 @@ def _run_config(run: Path) -> dict[str, Any]:
     except (OSError, ValueError, AttributeError):
         return {}
     return config if isinstance(config, dict) else {}
-
-
-def is_rulesim_run(run: Path) -> bool:
-    """Whether `run` was trained by RuleSim's trainer (tracelab before GridWar trained through its spec, or
-    train_into from Python): its config names a scenario and no env."""
-    config = _run_config(run)
-    return "scenario_toml" in config and config.get("env") is None
-
-
-def _resume_rulesim(args: argparse.Namespace, given: dict[str, Any], limit: Any) -> int:
-    """--resume of a RuleSim run: it continues in its own format and trainer (its observations are not the
-    spec's), until that trainer goes (issue 38)."""
-    with store_errors():  # a bad value in the config or a checkpoint that does not load
-        check_resume_flags(given)
-        state = load_checkpoint(args.resume, limit)
-        cfg = dataclasses.replace(checkpoint_config(state), **given)
-        check_budget(args.resume, state["step"], cfg.steps, "steps" in given)
-        scenario = checkpoint_scenario(state)
-        check_training_memory(cfg, scenario, limit)  # before anything is built
-    run_dir, same_run, tensorboard = where_to_train(args, True, scenario.name)
-    return train_into(cfg, scenario, run_dir, state, resumed_from=args.resume, same_run=same_run,
-                      tensorboard=tensorboard)
 
 
 def _resumed(args: argparse.Namespace, given: dict[str, Any], source: Any, limit: Any) -> tuple[Any, ...]:
@@ -236,80 +203,3 @@ def _report(trainer: Any, source: Any, run_dir: Path, status: str, gridwar: bool
     print(f"  tracelab sql {run} \"SELECT step, value FROM metrics WHERE name = 'eval/mean_return' ORDER BY step\"")
     if status == "finished":
         print(f"  tracelab eval {run}/policy --env {source.describe()} --games 1000")
-
-
-def train_into(cfg: Any, scenario: Any, run_dir: Path, state: dict | None = None,
-               resumed_from: str | None = None, stop_at: int | None = None, same_run: bool = False,
-               tensorboard: Path | None = None) -> int:
-    """RuleSim's trainer (tracelab.train.loop.Trainer) on a Scenario object, from Python only: the tests' small
-    worlds (a 4x4 walk) that war.toml's maps do not hold yet; `tracelab train` trains through the spec
-    (train_env_into). Train into a new run at `run_dir` (from a checkpoint `state` if given; `same_run`: the
-    checkpoint's own run, `run_dir`, continues); returns the exit status. `stop_at`: stop there as Ctrl-C would (tests).
-    `tensorboard`: a log directory that also receives the metrics (tracelab.train.tensorboard)."""
-
-    meta = {"command": " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]),
-            "scenario": scenario.name, "seed": cfg.seed, "rule_files": [str(GAME_RULES)], "board": BOARD,
-            "config": {**cfg.to_dict(), "scenario_toml": scenario.to_toml(),
-                       "resumed_from": None if state is None else {"run": resumed_from, "step": state["step"]}}}
-    if not meta["command"].startswith("tracelab train"):  # called from Python: say what it stands for
-        meta["command"] = "tracelab train (python: tracelab.commands.train.train_into)"
-    with store_errors():  # the run directory exists, or another writer holds it
-        writer = reopen_run(run_dir, cfg, state["step"], meta["command"]) if same_run else \
-            TraceWriter.open(run_dir, meta)
-    torch.set_num_threads(cfg.threads)
-    kernel = '' if cfg.kernel == 'auto' else f', {cfg.kernel} kernel'
-    print(f"training {scenario.name} ({scenario.agents_per_team}v{scenario.agents_per_team}, "
-          f"{'non-Markov' if cfg.non_markov else 'Markov'}, {cfg.backend} backend{kernel}, {cfg.envs} worlds, "
-          f"{reward_scale_text(cfg.reward_scale)}) for {cfg.steps:,} steps with {cfg.learner_text()}; "
-          f"torch on {torch.get_num_threads()} "
-          f"CPU thread{'s' if torch.get_num_threads() != 1 else ''} (--threads); run: {run_dir}", file=sys.stderr)
-    note = reward_scale_note(max(abs(v) for v in dataclasses.asdict(scenario.rewards).values()), cfg.reward_scale)
-    if note:
-        print(f"note: {note}", file=sys.stderr)
-    purge_step = state["step"] if same_run else None
-    with training_session(writer, cfg.torch_deterministic, tensorboard, purge_step) as session:
-        session.trainer = trainer = Trainer(cfg, scenario, writer, run_dir, metric_sinks=session.metric_sinks)
-        if state is not None:
-            with store_errors():  # games that do not replay to their observations: another simulator
-                restore(trainer, state)
-            if same_run:
-                trainer.renumber_games(writer.next_free_episode)
-            say_resumed(trainer, writer, run_dir, resumed_from, same_run)
-        session.status = train_until_stopped(trainer, cfg.steps, stop_at, "a checkpoint", lambda fig: {
-            "win": "-" if fig["win_rate"] is None else f"{100 * fig['win_rate']:.1f}%"})
-    trainer, sink, status = session.trainer, session.sink, session.status
-    _report_rulesim(trainer, run_dir, status)
-    if sink is not None:
-        print(f"  tensorboard --logdir {shlex.quote(str(tensorboard.parent))}   # {sink.scalars:,} scalars in "
-              f"{tensorboard}/")
-    if trainer is not None and trainer.last_eval is not None:
-        hint = too_short_hint(trainer.step, trainer.last_eval.wins, scenario.agents_per_team)
-        if hint:
-            print(f"hint: {hint}", file=sys.stderr)
-    say_running_compiles()
-    return 0 if status == "finished" else 130
-
-
-def _report_rulesim(trainer: Any, run_dir: Path, status: str) -> None:
-    if trainer is None:
-        return
-    ev = trainer.last_eval
-    run = shlex.quote(str(run_dir))
-    print(f"{status} at step {trainer.step:,}, {reward_scale_text(trainer.cfg.reward_scale)}"
-          + (f"; last evaluation: {ev.wins}/{ev.games} wins "
-          f"({100 * ev.win_rate:.1f}%), method's counting {100 * ev.method_win_rate:.1f}%" if ev else ""))
-    timing = eval_time_line(trainer.metrics)
-    if timing:
-        print(timing)
-    best = trainer.best_eval
-    if best is not None and ev is not None and best[0] > ev.method_win_rate:  # training got worse after it
-        print(f"best evaluation at step {best[1]:,} (method's counting {100 * best[0]:.1f}%): its policy is "
-              f"kept in {run_dir}/policy-best/")
-    print(f"run: {run_dir}/  checkpoint: {run_dir}/checkpoint/  policy: {run_dir}/policy/"
-          if status == "finished" else f"run: {run_dir}/  checkpoint: {run_dir}/checkpoint/  "
-          f"(continue with: tracelab train --resume {run})")
-    print(f"  tracelab sql {run} \"SELECT step, value FROM metrics WHERE name = 'eval/win_rate' ORDER BY step\"")
-    print(f"  tracelab sql {run} \"SELECT episode, train_step, outcome, steps FROM episodes WHERE kind = 'eval'\"")
-    if status == "finished":
-        print(f"  tracelab eval {run}/policy --games 500")
-        print(f"  tracelab play --policy {run}/policy --episodes 3")

@@ -53,14 +53,16 @@ class TrainConfig:
                          default="base")
     non_markov: bool = _opt("the non-Markov setup: the previous observation appended to the current one "
                             "(default: Markov, the current observation only)", default=False)
-    split_networks: bool = _opt("one network for the fast and one for the slow agents (the nonmarkov "
-                                "scenario) instead of one shared by all red agents", default=False)
+    split_networks: bool = _opt("refused: training runs through the world's spec, with one network for every "
+                                "agent (RuleSim's trainer had one for the fast and one for the slow agents; "
+                                "earlier runs' configs keep the field)", default=False)
     slow_every_step: bool = _opt("the slow agent decides on every step, each transition one step long; the "
                                  "game ignores its choices on steps where it may not act, and nothing in a "
                                  "Markov observation says which steps those are (default: it decides only "
                                  "where it may act, one transition spanning its two-step move)", default=False)
     agents: int | None = _opt("agents per team (default: the scenario's)", default=None)
-    backend: str = _opt("simulator: rules (the rule engine) or reference (hand-written)", default="rules")
+    backend: str = _opt("simulator: rules (the rule engine, the spec); reference (RefSim, hand-written) is "
+                        "refused in training (earlier runs' configs keep the field)", default="rules")
     kernel: str = _opt("the rule engine's kernel (--backend rules): auto (lanes from 64 worlds, else "
                        "counting, stepped with the game as one compiled call), counting, lanes, or compiled "
                        "(built in the "

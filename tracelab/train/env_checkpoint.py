@@ -1,21 +1,23 @@
-"""Checkpoints of a `train --env` run, in the same place as GridWar's (RUN/checkpoint/checkpoint.pt,
-checkpoint.py) under their own format: the config, the env as the user named it, the network and Adam,
-the replay buffer, the generators, the step and the logging state, and the worlds' actions.
+"""Training checkpoints: RUN/checkpoint/checkpoint.pt (the latest; written new under a temporary name, then
+renamed in) holds the config, the env as the user named it, the network and Adam, the replay buffer, the
+generators, the step and the logging state, and the worlds' actions. `learner` says which learner wrote
+the networks' state (fused or readable), and a resume takes that one whatever `--learner auto` would pick.
 
-The trainer's state is its parts' (EnvTrainer.state, as GridWar's Trainer.state). An env's worlds are not
-pickled (a declared world's engine does not move between processes, and gymnasium's envs are not made to
-be): the training's vector env (a declared world's DeclaredVectorEnv, or gymnasium's SyncVectorEnv) was
-reset once with the run's env seed, and ActionLog keeps every action its worlds took since; a restore
-resets a new vector env with that seed and steps it through them again. That brings the worlds back
-exactly when all of their randomness comes from the seed (gymnasium's contract, and how every declared
-world draws), whatever buffering of random numbers the vector env does; the observations the replay ends
-in are checked against the saved ones. The log costs 8 bytes a training step; the replay runs the env
-alone (no network), as many steps as the run has trained.
+The trainer's state is its parts' (EnvTrainer.state; their schemas: checkpoint_schema.py). An env's
+worlds are not pickled (a declared world's engine does not move between processes, and gymnasium's envs
+are not made to be): the training's vector env (a declared world's DeclaredVectorEnv, or gymnasium's
+SyncVectorEnv) was reset once with the run's env seed, and ActionLog keeps every action its worlds took
+since; a restore resets a new vector env with that seed and steps it through them again. That brings the
+worlds back exactly when all of their randomness comes from the seed (gymnasium's contract, and how every
+declared world draws), whatever buffering of random numbers the vector env does; the observations the
+replay ends in are checked against the saved ones. The log costs 8 bytes a training step; the replay runs
+the env alone (no network), as many steps as the run has trained.
 
 A checkpoint may come from a stranger: it holds only tensors and plain values, loads with torch's
 weights_only unpickler and is checked against the shapes its config and env imply. It names its env, but
 a resume makes the env the user names (`--env`, checked equal to the checkpoint's): a file never decides
-which spec file tracelab reads."""
+which spec file tracelab reads. Checkpoints of RuleSim's trainer (every GridWar run before GridWar trained
+through its spec) are refused in one line that gives the command starting a new run with their settings."""
 from __future__ import annotations
 
 import shlex
@@ -28,15 +30,15 @@ import torch
 from tracelab.engine.safe_files import FileRefused
 from tracelab.envs.declared.env_source import EnvSource, check_same_env, env_source_from_json
 from tracelab.errors import UserError
-from tracelab.train.checkpoint import (check_best, check_buffer_rows, checkpoint_config,
-                                       checkpoint_file, checkpoint_path, episode_games_schema, in_range,
-                                       learner_schema, parts_schema, refusal_with_a_way_on, write_checkpoint)
+from tracelab.store import layout
+from tracelab.train.checkpoint_schema import (check_best, check_buffer_rows, episode_games_schema, in_range,
+                                              learner_schema, parts_schema)
 from tracelab.train.config import TrainConfig, config_fields, config_schema
 from tracelab.train.env_source import probe_env
 from tracelab.train.memory import (Limit, MemoryLimitExceeded, check_estimate, env_training_estimate,
                                    env_world_bytes)
 from tracelab.train.torch_files import CodeInFile, Tensor, load_tensors
-from tracelab.validation import Const, IntRange, MapOf, Mismatch, OneOf, check
+from tracelab.validation import Const, IntRange, MapOf, Mismatch, OneOf, OptionalKey, check
 
 ENV_FORMAT = "tracelab-dqn-env-checkpoint/2"
 # the first format kept each world's generator state and its episode's actions (per-world replay in
@@ -44,8 +46,72 @@ ENV_FORMAT = "tracelab-dqn-env-checkpoint/2"
 OLD_FORMATS = ("tracelab-dqn-env-checkpoint/1",)
 # GridWar's RuleSim trainer's checkpoints (tracelab before GridWar trained through its spec, issue 38): its
 # observations (RuleSim's, with the nearest bullet) and its replay of the worlds are not the spec's, so its
-# networks and buffer cannot continue here honestly
+# networks and buffer cannot continue here honestly. Its format 1 held numpy objects (only an unpickler
+# that runs code reads them): recognised by its mark in the pickle
 RULESIM_FORMATS = ("tracelab-dqn-checkpoint/2",)
+RULESIM_FORMAT_1 = b"tracelab-dqn-checkpoint/1"
+CHECKPOINT_DIR, CHECKPOINT_FILE = "checkpoint", "checkpoint.pt"
+
+
+def checkpoint_path(run_dir: Path) -> Path:
+    return Path(run_dir) / CHECKPOINT_DIR / CHECKPOINT_FILE
+
+
+def as_tensors(value: Any) -> Any:
+    """Our own state with numpy arrays as tensors and numpy scalars as Python numbers: what weights_only
+    loads."""
+    if isinstance(value, dict):
+        return {k: as_tensors(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return type(value)(as_tensors(v) for v in value)
+    if isinstance(value, np.ndarray):
+        return torch.from_numpy(np.array(value))  # a copy: the trainer's arrays go on changing
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def write_checkpoint(run_dir: Path, state: dict[str, Any]) -> Path:
+    """RUN/checkpoint/checkpoint.pt, through the store's path resolver (as parts and meta.json are
+    written): created new under a temp name and renamed in, never through a link; returns the file."""
+    layout.make_run_dirs(run_dir, CHECKPOINT_DIR)
+    path = layout.run_path(run_dir, CHECKPOINT_DIR, CHECKPOINT_FILE)
+    with layout.new_file(path) as f:
+        torch.save(as_tensors(state), f)
+    return path
+
+
+def checkpoint_file(run: Path) -> Path:
+    """RUN/checkpoint/checkpoint.pt of a run directory, refusing anything else before it is opened."""
+    if not run.is_dir():
+        raise FileRefused(f"{run}: not a training run's directory (one holding {CHECKPOINT_DIR}/"
+                          f"{CHECKPOINT_FILE}); refused")
+    folder = run / CHECKPOINT_DIR
+    if folder.is_symlink():
+        raise FileRefused(f"{folder}: is a symbolic link; refused")
+    f = folder / CHECKPOINT_FILE
+    if not folder.is_dir() or not (f.exists() or f.is_symlink()):
+        raise FileNotFoundError(f"no checkpoint at {str(f)!r} (a training run writes {CHECKPOINT_DIR}/"
+                                f"{CHECKPOINT_FILE} into its run directory)")
+    return f
+
+
+def refusal_with_a_way_on(run: Path, said: str, env: str = "") -> FileRefused:
+    """A checkpoint refused for what it would run: say so, and what the user can do instead (use the
+    run's policy, start a new run from its settings). `env`: what its policy needs named again (` --env
+    ENV`: a train --env run's, whose env the refused file cannot tell)."""
+    policy = run / "policy"
+    if (policy / "policy.json").is_file():
+        instead = f"its policy still plays: tracelab eval {policy}{env}, tracelab play --policy {policy}{env}; " \
+                  f"to train on, start a new run with tracelab train (its settings: tracelab show {run})"
+    else:
+        instead = f"start a new run with tracelab train (its settings: tracelab show {run})"
+    return FileRefused(f"{said}: {instead}")
+
+
+def checkpoint_config(state: dict[str, Any]) -> TrainConfig:
+    """The run's config, with the learner that wrote the checkpoint (fused when it does not say)."""
+    return TrainConfig.from_dict({**state["config"], "learner": state.get("learner", "fused")})
 
 
 class ActionLog:
@@ -81,8 +147,8 @@ def replay_actions(vector_env: Any, seed: int, actions: np.ndarray) -> tuple[Any
 
 
 def save_env_checkpoint(tr: Any, run_dir: Path) -> Path:
-    """Write an EnvTrainer's whole state (its parts', EnvTrainer.state) with its config and env; returns
-    the file."""
+    """Write a trainer's whole state (its parts', EnvTrainer.state) with its config and env; returns the
+    file."""
     state = {"format": ENV_FORMAT, "config": tr.cfg.to_dict(), "env": tr.source.to_json(), "run": str(run_dir),
              **tr.state()}
     return write_checkpoint(run_dir, state)
@@ -94,7 +160,9 @@ def checkpoint_env(run: str | Path, max_bytes: int) -> tuple[dict[str, Any], Env
     try:
         state = load_tensors(f, max_bytes)
     except CodeInFile as e:  # a stranger's (or a damaged) file: the run's policy may still play
-        raise refusal_with_a_way_on(Path(run), str(e), " --env ENV") from None
+        said = f"{f}: a checkpoint of RuleSim's trainer in its first format (numpy objects, which only a loader " \
+               f"that runs code reads); refused" if RULESIM_FORMAT_1 in e.pickled else str(e)
+        raise refusal_with_a_way_on(Path(run), said, " --env ENV") from None
     if state.get("format") in OLD_FORMATS:
         raise FileRefused(f"{f}: written by an earlier tracelab ({state['format']}), whose worlds this one "
                           f"cannot rebuild: resume it with that version, or train again from its policy's "
@@ -132,10 +200,13 @@ def _new_run_command(config: Any) -> str:
     return " ".join(out)
 
 
-def load_env_checkpoint(run: str | Path, given: EnvSource | None, limit: Limit) -> dict[str, Any]:
-    """The checkpoint of a `train --env` run, checked against the env the user names (`given`; None: a
+def load_env_checkpoint(run: str | Path, given: EnvSource | None, limit: Limit,
+                        network: Any = None) -> dict[str, Any]:
+    """The checkpoint of a training run, checked against the env the user names (`given`; None: a
     UserError saying how to name it) and the shapes that env and the checkpoint's config imply; a config
-    whose training would not fit `limit` is refused before anything it sizes is built."""
+    whose training would not fit `limit` is refused before anything it sizes is built. `network`: the
+    factory of the custom module the run trained (Python API, EnvTrainer's `network`), whose state dict
+    says what the checkpoint's networks hold."""
     f = checkpoint_path(Path(run))
     state, recorded = checkpoint_env(run, limit.bytes)
     if given is None:
@@ -155,17 +226,20 @@ def load_env_checkpoint(run: str | Path, given: EnvSource | None, limit: Limit) 
         check_estimate(env_training_estimate(cfg, net, env_world_bytes(spec)), limit)
     except MemoryLimitExceeded as e:
         raise FileRefused(f"{f}: config: {e}") from None
-    learner, best = learner_schema(cfg, net)
+    if state.get("custom_network") and network is None:
+        raise FileRefused(f"{f}: the run trained a custom torch module (Python API): resume it in Python, "
+                          f"load_env_checkpoint(run, source, limit, network=...) and EnvTrainer(..., "
+                          f"network=...) with the same module")
+    learner, best = learner_schema(cfg, net, network)
     w = cfg.envs
     agents = getattr(encoder, "n_agents", 1)  # a team: a row per world and agent (env_trainer.py)
     team = {} if agents == 1 else {"pending": {
         "obs": Tensor(torch.float32, (w, agents, encoder.size)), "action": Tensor(torch.int64, (w, agents)),
         "reward": Tensor(torch.float64, (w, agents)), "discount": Tensor(torch.float64, (w, agents)),
         "open": Tensor(torch.bool, (w, agents))}}
-    state.pop("best_rows", None)  # GridWar's old layout of the best networks: never an --env run's
     try:
         check(state, {
-            **parts_schema(), **best, "learners": {"shared": learner},
+            **parts_schema(), **best, "learners": {"shared": learner}, "custom_network": OptionalKey(bool),
             "games": {**episode_games_schema(w), "obs": Tensor(torch.float32, (w * agents, encoder.size))},
             "env_seed": IntRange(0), "env_actions": Tensor(torch.int64, (None, w * agents)), **team})
         check_buffer_rows(state["learners"]["shared"]["buffer"], n_actions, "learners.shared.buffer")

@@ -1,24 +1,25 @@
-"""DQN on any gymnasium env with Discrete actions (`tracelab train --env`): one agent, ε-greedy over the
-batched worlds, transitions into replay, one update per world-step, target copies, evaluations, the run's
-metrics and episodes, the final and the best policy.
+"""tracelab's DQN trainer, on any gymnasium env with Discrete actions (`tracelab train`, GridWar through its
+spec and any other world): ε-greedy over the batched worlds, transitions into replay, one update per
+world-step, target copies, evaluations, the run's metrics and episodes, checkpoints, the final and the
+best policy.
 
-It is the GridWar Trainer's loop (loop.py) without what is GridWar's (teams, the scripted opponent, slow
-agents): the same TrainConfig and the same parts (rngs.Generators, Exploration, UpdateSchedule,
-EpisodeLog, MetricLog, BestPolicy), each saving and loading itself (EnvTrainer.state), the same learners
-(make_learner: fused or readable, behind the Learner protocol), the same replay buffer, the same update
-and target-copy cadence, the same metric names where they mean the same thing. Observations are encoded
-for the network by env_source.ObservationEncoder (a Discrete one is one-hot). Checkpoints and the replay
-of the worlds' episodes are env_checkpoint.py's; a declared world's first evaluation games are traced into
-the run (external_eval.DeclaredEvaluator), as GridWar's are.
+Its state is owned by parts that each save and load themselves (EnvTrainer.state; a checkpoint is their
+states side by side, env_checkpoint.py): `rngs` (every generator, from the seed), `exploration` (ε and the
+random actions), `learner` (network and optimiser, with its replay buffer: make_learner, fused or
+readable, behind the Learner protocol), `schedule` (when updates and target copies are due), `pending` (a
+team's open transitions), `episodes` (the worlds' episodes and their rows in the run), `actions_log` (the
+worlds' actions since their reset, to rebuild them), `metrics` and `best` (the best evaluation's network).
+The loop is train_loop.py's. Observations are encoded for the network by env_source.ObservationEncoder (a
+Discrete one is one-hot); a declared world's first evaluation games are traced into the run
+(external_eval.DeclaredEvaluator).
 
 Several agents a team (a declared world whose `[agents] names` are several: GridWar's 5v5, its non-Markov
 scenario): one network for all of them (parameter sharing, team_policy.py: each agent's observation and its
 one-hot index is a row of the batch), every world stepped by one engine call (DeclaredVectorEnv's team
-mode). As GridWar's trainer on RuleSim (loop.py, transitions.py), an agent's transition runs from a step
-where it decides (the spec's `[agents] decides`: alive, a slow agent on its even steps) to its next
-decision, the end of the episode or its death (`[agents] alive`: no bootstrap), earning its own reward (the
-spec's per-agent reward, RuleSim's agent_reward) discounted by the steps it spans; an agent that does not
-decide does nothing and adds no transition."""
+mode). An agent's transition (transitions.py) runs from a step where it decides (the spec's `[agents]
+decides`: alive, a slow agent on its even steps) to its next decision, the end of the episode or its
+death (`[agents] alive`: no bootstrap), earning its own reward (the spec's per-agent reward) discounted by
+the steps it spans; an agent that does not decide does nothing and adds no transition."""
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
@@ -39,11 +40,12 @@ from tracelab.train.env_policy import (EnvEvalResult, EnvPolicy, declares_outcom
 from tracelab.envs.declared.env_source import EnvSource
 from tracelab.train.env_source import ObservationEncoder, TeamEncoder, action_count
 from tracelab.train.external_eval import DeclaredEvaluator, EvalSettings
+from tracelab.train.dqn import DQN
 from tracelab.train.learner_protocol import Learner
 from tracelab.train.best_policy import BestPolicy
 from tracelab.train.episode_log import EpisodeLog
 from tracelab.train.exploration import Exploration
-from tracelab.train.loop import acting_q, load_shared_state, make_learner, train_loop
+from tracelab.train.train_loop import NetworkFactory, acting_q, load_shared_state, make_learner, train_loop
 from tracelab.train.metric_log import MetricLog
 from tracelab.train.env_policy import BEST_POLICY_DIR
 from tracelab.train.rngs import Generators
@@ -54,15 +56,20 @@ from tracelab.train.update_schedule import UpdateSchedule
 
 # GridWar's settings the spec path does not train yet: each refused in one line when set
 NOT_ON_THE_SPEC_PATH = {"split_networks": "one network for every agent", "backend": "the rule engine"}
-SHARED = "shared"  # the one network's name (GridWar's trainer may have one per team role)
+SHARED = "shared"  # the one network's name (policy.json's `networks`)
 Progress = Callable[[dict[str, Any]], None]
 
 
 class EnvTrainer:
     def __init__(self, cfg: TrainConfig, source: EnvSource, writer: TraceWriter | None = None,
                  run_dir: Path | None = None, progress: Progress | None = None,
-                 metric_sinks: Sequence[MetricSink] = (), eval_source: EnvSource | None = None) -> None:
-        """`eval_source`: the env evaluations play, if not `source` (GridWar's opponent at --eval-p)."""
+                 metric_sinks: Sequence[MetricSink] = (), eval_source: EnvSource | None = None,
+                 network: NetworkFactory | None = None, learner_class: type[DQN] | None = None) -> None:
+        """`eval_source`: the env evaluations play, if not `source` (GridWar's opponent at --eval-p); the
+        rest is the Python API (docs/training.md, "The learner"): `network` trains the readable learner on
+        this module instead of the MLP cfg.hidden describes (its policy files say `custom`), `learner_class`
+        is the readable learner's class (a subclass of DQN with another loss, say); `metric_sinks` receive
+        the metrics besides the run (e.g. TensorBoard, train --tensorboard)."""
         torch.set_num_threads(cfg.threads)
         self.cfg, self.source, self.writer, self.run_dir, self.progress = cfg, source, writer, run_dir, progress
         self.eval_source = eval_source or source
@@ -95,8 +102,16 @@ class EnvTrainer:
             raise UserError(f"{flag_of('explore_scripted')} {cfg.explore_scripted}: {source.name} declares no "
                             f"scripted choice ([agents] script, docs/worlds.md) in a batched declared env")
         self.learner_kind, self.learner_note = cfg.learner_choice()
-        self.learner: Learner = make_learner(self.learner_kind, self.net, cfg, self.rngs.torch)
-        rows = EnvPolicy(acting_q(self.learner, self.net), self.encoder, cfg.mask)
+        self.custom_network = network is not None
+        if network is not None or learner_class is not None:
+            if cfg.learner == "fused":
+                raise UserError("a network module or a learner class trains with the readable learner, not "
+                                "--learner fused")
+            self.learner_kind, self.learner_note = "readable", None
+        self.learner: Learner = make_learner(self.learner_kind, self.net, cfg, self.rngs.torch, network,
+                                             learner_class or DQN)
+        # a custom module acts through torch (TorchQ), a described one in numpy
+        rows = EnvPolicy(acting_q(self.learner, None if self.custom_network else self.net), self.encoder, cfg.mask)
         self.policy: Any = rows if n == 1 else TeamPolicy(rows, n)
         # a team's open transitions (world, agent): from a decision to the next, the end, or a death
         self.pending = PendingTransitions(w, n, self.encoder.size, cfg.gamma) if n > 1 else None
@@ -280,16 +295,23 @@ class EnvTrainer:
               selected_by: dict[str, Any] | None = None) -> Path:
         trained = {"run": str(self.run_dir) if self.run_dir else None, "step": step,
                    "config": self.cfg.to_dict(), **({"selected_by": selected_by} if selected_by else {})}
-        return save_env_policy(path, self.source, weights, self.net.to_json(), self.encoder, self.action_names,
+        return save_env_policy(path, self.source, weights, self.network_json(), self.encoder, self.action_names,
                                self.cfg.mask, trained)
+
+    def network_json(self) -> dict[str, Any]:
+        """policy.json's `network`: the architecture, or what a custom module is (no file rebuilds one)."""
+        if not self.custom_network:
+            return self.net.to_json()
+        module = self.learner.q_network  # type: ignore[attr-defined]  # the readable learner's
+        return {"inputs": self.net.inputs, "outputs": self.net.actions, "custom": repr(module)[:4000]}
 
     def save_policy(self, path: Path) -> Path:
         return self._save(path, self.learner.online_weights(), self.step)
 
     # ---- the loop ----
     def train(self, stop_at: int | None = None) -> str:
-        """Train until cfg.steps, or until stop_requested (Ctrl-C) or step `stop_at`: the loop GridWar's
-        trainer runs (loop.train_loop), each step one env_step of every world."""
+        """Train until cfg.steps, or until stop_requested (Ctrl-C) or step `stop_at` (train_loop.train_loop),
+        each pass one env_step of every world; returns "finished" or "interrupted"."""
         return train_loop(self, stop_at, self.env_step, [self.learner], save_env_checkpoint)
 
     # ---- checkpoints: the parts' states side by side (env_checkpoint.py writes and checks them) ----
@@ -299,7 +321,8 @@ class EnvTrainer:
         episodes = self.episodes.state()
         return {
             "step": self.step, "eval_round": self.eval_round, "eval_step": self.eval_step,
-            "learner": self.learner_kind, "learners": {SHARED: self.learner.state()},
+            "learner": self.learner_kind, "custom_network": self.custom_network,
+            "learners": {SHARED: self.learner.state()},
             **self.rngs.state(), **self.schedule.state(), **self.metrics.state(), **self.best.state(), **episodes,
             "games": {**episodes["games"], "obs": self.encoder(self.obs)},
             "env_seed": self.env_seed, "env_actions": self.actions_log.array(),

@@ -1,16 +1,11 @@
-"""The training loop: ε-greedy red agents in the batched env, transitions into replay, one update per
-world-step, target copies, live logging into a trace-store run, evaluations, checkpoints.
-
-A training step is one world-step (one env transition of one world); with `envs` worlds one pass of the
-loop makes `envs` steps and `envs * updates_per_step` updates per network. Trainer.train() reads as
-CleanRL's loop: collect, store, update, then log, evaluate and checkpoint when due. Everything that
-decides what happens next is owned by the trainer's parts (Trainer's docstring), each saving and
-loading itself, and is in the checkpoint, so a resumed run continues exactly as an uninterrupted one
-would (tests/test_train.py, tests/test_train_parts.py)."""
+"""RuleSim's GridWar trainer (issue 38: going). `tracelab train` trains through EnvTrainer
+(env_trainer.py); this Trainer is left only for its last importers, tracelab/train/experiments/runner.py's
+RuleSim arm and tracelab/bench/eval.py, which are moving off it; delete this module (and game_record.py)
+when they have. Its checkpoints are written in RuleSim's format, which nothing resumes any more
+(env_checkpoint.py refuses it in one line)."""
 from __future__ import annotations
 
-import time
-from collections.abc import Callable, Collection, Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -24,50 +19,31 @@ from tracelab.game.opponent import scripted_actions
 from tracelab.game.scenario import NOTHING, RED, Scenario
 from tracelab.store.writer import TraceWriter
 from tracelab.train.best_policy import BestPolicy
-from tracelab.train.checkpoint import save_checkpoint
+from tracelab.train.env_checkpoint import write_checkpoint
 from tracelab.train.config import TrainConfig
 from tracelab.train.evaluate import EvalResult, EvalTrace, evaluate
-from tracelab.train.dqn import DQN, DecomposedDQN, make_q_network
+from tracelab.train.dqn import DQN
 from tracelab.train.episode_log import EpisodeLog
 from tracelab.train.exploration import Exploration
 from tracelab.train.game_record import GameRecord
-from tracelab.train.learner import DQNLearner
 from tracelab.train.learner_protocol import Learner
 from tracelab.train.metric_log import MetricLog
 from tracelab.train.env_policy import BEST_POLICY_DIR, Policy, may_act, save_policy
-from tracelab.train.qnet import NetSpec, NumpyQ, QFunction, TorchQ
-from tracelab.train.replay import ReplayBuffer
 from tracelab.train.rngs import Generators
+from tracelab.train.train_loop import NetworkFactory, acting_q, load_shared_state, make_learner, train_loop
 from tracelab.train.run_networks import network_groups, training_net
 from tracelab.train.tensorboard import MetricSink
 from tracelab.train.transitions import PendingTransitions
 from tracelab.train.update_schedule import UpdateSchedule
 
 Progress = Callable[[dict[str, Any]], None]
-NetworkFactory = Callable[[int, int], torch.nn.Module]  # (observation size, actions) -> a Q-network
+RULESIM_FORMAT = "tracelab-dqn-checkpoint/2"
 
 
-def make_learner(kind: str, net: NetSpec, cfg: TrainConfig, generator: torch.Generator,
-                 network: NetworkFactory | None = None, learner_class: type[DQN] = DQN) -> Learner:
-    """The fused learner for `net` (one tanh layer), or the readable one (`learner_class`: DQN or a
-    subclass) on `network`'s module (default: the module `net` describes, drawn from `generator`)."""
-    if kind == "fused":
-        return DQNLearner(net, lr=cfg.lr, batch=cfg.batch,
-                          buffer=cfg.buffer, generator=generator, masked=cfg.mask)
-    module = network(net.inputs, net.actions) if network is not None else \
-        make_q_network(net, generator)
-    if net.terms:  # --decompose: a head per reward term, a reward per term in the buffer
-        learner_class = DecomposedDQN
-    return learner_class(module, ReplayBuffer(cfg.buffer, net.inputs, net.actions, cfg.batch, cfg.mask,
-                                              max(1, len(net.terms))), lr=cfg.lr, double_dqn=cfg.double_dqn)
-
-
-def acting_q(learner: Learner, net: NetSpec | None) -> QFunction:
-    """Greedy acting's Q-values from the learner's live online weights: in numpy for a described network,
-    through torch for a custom module (net None)."""
-    if net is None:
-        return TorchQ(learner.q_network)  # type: ignore[attr-defined]  # only the readable learner takes one
-    return NumpyQ(net, {k: v.numpy() for k, v in learner.online_weights().items()})
+def save_checkpoint(tr: Any, run_dir: Path) -> Path:
+    """RuleSim's checkpoint format (refused by env_checkpoint.checkpoint_env: nothing resumes it)."""
+    return write_checkpoint(run_dir, {"format": RULESIM_FORMAT, "config": tr.cfg.to_dict(),
+                                      "scenario_toml": tr.scenario.to_toml(), "run": str(run_dir), **tr.state()})
 
 
 def _agent_rewards(info: dict, done: np.ndarray) -> np.ndarray:
@@ -77,91 +53,6 @@ def _agent_rewards(info: dict, done: np.ndarray) -> np.ndarray:
     if not done.any():
         return info["agent_reward"]
     return np.where(done[:, None], info["final_info"]["agent_reward"], info["agent_reward"])
-
-
-def end_training(tr: Any) -> str:
-    """After a trainer's loop (GridWar's, or env_trainer's): "finished" or "interrupted"; a finished run's
-    final figures, unless its last pass just wrote them; the games still open end 'aborted'."""
-    status = "interrupted" if tr.step < tr.cfg.steps else "finished"
-    if status == "finished":
-        if tr.metrics.logged_step != tr.step:
-            tr.log_metrics()
-        if tr.eval_step != tr.step:
-            timed_eval(tr)
-    tr.episodes.abort_open()
-    return status
-
-
-def timed_eval(tr: Any) -> None:
-    """A trainer's evaluation (run_eval), and its wall time into the run's metrics at the same step
-    (MetricLog.evaluation_timed: this evaluation's seconds, its traced and untraced games', and the
-    evaluations' share of the training's wall time)."""
-    t0 = time.perf_counter()
-    result = tr.run_eval()
-    seconds = time.perf_counter() - t0
-    tr.write_metrics(tr.metrics.evaluation_timed(seconds, getattr(result, "seconds", {})))
-
-
-def train_loop(tr: Any, stop_at: int | None, collect_and_store: Callable[[], None],
-               learners: Collection[Learner], save_checkpoint: Callable[[Any, Path], None]) -> str:
-    """The loop both trainers run (GridWar's Trainer, env_trainer's EnvTrainer), top to bottom: every
-    world makes one step and its closed transitions are stored (`collect_and_store`); the updates and
-    target copies that are due; the log, the evaluation and the checkpoint at their intervals. Until
-    cfg.steps, stop_requested (Ctrl-C) or step `stop_at` (as an interruption there would); returns
-    "finished" or "interrupted"."""
-    cfg = tr.cfg
-    last_progress = 0.0
-    tr.episodes.start_logging(tr.step)
-    end = cfg.steps if stop_at is None else min(cfg.steps, stop_at)
-    tr.metrics.loop_started()
-    try:
-        while tr.step < end and not tr.stop_requested:
-            before = tr.step
-            collect_and_store()
-            tr.schedule.run(tr.step, learners, tr.rngs.numpy)  # updates, target copies
-            if _crossed(cfg.log_every, before, tr.step):
-                tr.log_metrics()
-            if _crossed(cfg.eval_every, before, tr.step):
-                timed_eval(tr)
-            if tr.run_dir is not None and _crossed(cfg.checkpoint_every, before, tr.step):
-                tr.episodes.flush()  # the run holds every episode the checkpoint has counted
-                save_checkpoint(tr, tr.run_dir)
-            if tr.progress is not None and time.monotonic() - last_progress > 0.2:
-                last_progress = time.monotonic()
-                tr.progress(tr.figures())
-        status = end_training(tr)
-        if tr.run_dir is not None:
-            save_checkpoint(tr, tr.run_dir)
-            tr.save_policy(tr.run_dir / "policy")
-    finally:
-        tr.metrics.loop_stopped()
-    if tr.progress is not None:
-        tr.progress(tr.figures())
-    return status
-
-
-def _crossed(every: int, before: int, step: int) -> bool:
-    """A multiple of `every` lies in (before, step]: the interval's work is due."""
-    return every > 0 and step // every > before // every
-
-
-def load_shared_state(tr: Any, learners: dict[str, Learner], st: dict[str, Any]) -> None:
-    """What both trainers' load_state restore alike (GridWar's, env_trainer's): the learners (by network
-    name; ValueError when the checkpoint is another learner's), the step and evaluation rounds, and the
-    parts both have (UpdateSchedule, MetricLog, BestPolicy, Generators, EpisodeLog)."""
-    kind = st.get("learner", "fused")  # absent: written before there were two learners
-    if tr.learner_kind != kind:
-        raise ValueError(f"the checkpoint holds the {kind} learner's state; this trainer runs the "
-                         f"{tr.learner_kind} one")
-    for name, lr in learners.items():
-        lr.load_state(st["learners"][name])
-    tr.step, tr.eval_round, tr.eval_step = int(st["step"]), int(st["eval_round"]), int(st["eval_step"])
-    tr.schedule.load_state(st)
-    tr.metrics.load_state(st)
-    tr.best.load_state(st)
-    tr.write_best_policy()  # a resumed run into a new directory keeps it too
-    tr.rngs.load_state(st)
-    tr.episodes.load_state(st)
 
 
 class Trainer:

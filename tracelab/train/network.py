@@ -39,11 +39,6 @@ def state_dict_views(row: torch.Tensor, spec: NetSpec) -> dict[str, torch.Tensor
     return out
 
 
-def to_state_dict(row: torch.Tensor, spec: NetSpec) -> dict[str, torch.Tensor]:
-    """The same, copied."""
-    return {k: v.contiguous().clone() for k, v in state_dict_views(row, spec).items()}
-
-
 def init_row(spec: NetSpec, generator: torch.Generator) -> torch.Tensor:
     """The row of `draw_weights(spec, generator)`: the readable learner's initial network, laid out flat."""
     row = torch.empty(spec.n_params)
