@@ -62,11 +62,13 @@ def spec_sources(spec: WorldSpec) -> list[dict[str, Any]]:
     return read_sources([("spec", str(spec.path)), *(("rules", str(f)) for f in spec.program.files)])
 
 
-def declared_run_config(spec: WorldSpec) -> dict[str, Any]:
+def declared_run_config(spec: WorldSpec, sources: list[dict[str, Any]] | None = None) -> dict[str, Any]:
     """What a run of a declared world's games records of it in its config, for its readers: the spec's
     and the rule files' paths, sizes and hashes (their texts go in the run's `sources` table, written by
-    DeclaredRecorder), what sets each external fact (CONFIG_KEY), the board the viewers draw."""
-    return {"sources": source_summaries(spec_sources(spec)), CONFIG_KEY: declared_facts(spec),
+    DeclaredRecorder), what sets each external fact (CONFIG_KEY), the board the viewers draw. Every
+    recorder writes it (DeclaredRecorder), whoever opened the run; `sources`: spec_sources(spec), if read."""
+    sources = spec_sources(spec) if sources is None else sources
+    return {"sources": source_summaries(sources), CONFIG_KEY: declared_facts(spec),
             RUN_CONFIG_KEY: None if spec.board is None else board_config(spec.board)}
 
 
@@ -119,6 +121,9 @@ class DeclaredRecorder:
     at close): episode begins, change rows, step rows, then episode ends, so a reader never sees an ended
     episode without its rows. Writing per episode cost more than the toy-text games' steps.
 
+    The run's config gets declared_run_config (the world's external facts, its board, its sources), so a run
+opened by gym.make(id, trace_writer=...) reads as one `tracelab play` wrote.
+
     `episode_ids`: a run the recorder does not own (a training's, whose evaluation games it records):
     episodes take their ids from it, begin with `begin_info`, and close() leaves the writer open."""
 
@@ -131,7 +136,10 @@ class DeclaredRecorder:
         self.writer = writer
         self.agents = list(world.spec.agents)
         writer.write_engine_program(eng)
-        writer.write_sources(spec_sources(world.spec))
+        sources = spec_sources(world.spec)
+        writer.write_sources(sources)
+        # the run's config says what `why`, the replay and the TUI read of the world, however it was opened
+        writer.add_config(declared_run_config(world.spec, sources))
         writer.write_action_names(world.spec.action_names)
         writer.write_observation_names(observation_names(world.spec))
         world.keep_reward_terms = True
