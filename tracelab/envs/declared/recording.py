@@ -14,7 +14,7 @@ The env's facts are external facts (cause `action` in the store's views): the ac
 predicates are the agent's and which are draws (by name) is in the run's config (`declared_facts`).
 
 Rows are taken from the engine in chunks: when an episode ends (so an episode's rows are all out before
-its end is written), every HANDOVER_STEPS steps, when HANDOVER_ROWS rows wait (the engine's buffer stays
+its end is written), every HANDOVER_STEPS steps, when the engine's TRACE_HANDOVER_ROWS rows wait (the engine's buffer stays
 bounded), before a reset, and at close; taking them after every step cost more than the engine's step at
 one world (docs/benchmarks.md). Everything is written at the writer's cadence (store/writer.py: WRITE_ROWS
 steps, or WRITE_INTERVAL_S seconds), so a live reader sees a game that late at most, plus the writer's own
@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from tracelab.board import RUN_CONFIG_KEY, board_config
+from tracelab.engine.core import TRACE_HANDOVER_ROWS
 from tracelab.envs.declared.spec import WorldSpec
 from tracelab.envs.declared.world import DeclaredWorld
 from tracelab.store.agent_rows import AgentRows, Decisions, ObservationName, PolicyOutput, RewardTerms
@@ -41,8 +42,8 @@ if TYPE_CHECKING:
     from tracelab.store.writer import TraceWriter
 
 CONFIG_KEY = "declared_facts"
-HANDOVER_STEPS = 64  # steps whose rows may wait in the engine (a live reader sees them that late)
-HANDOVER_ROWS = 65_536  # rows that may wait in the engine
+HANDOVER_STEPS = 64  # steps whose rows may wait in the engine (a live reader sees them that late); a
+# reasoning's recorder (store/reasoning.py) takes them as often
 
 
 def declared_facts(spec: WorldSpec) -> dict[str, Any]:
@@ -225,7 +226,7 @@ opened by gym.make(id, trace_writer=...) reads as one `tracelab play` wrote.
         self._steps_kept += 1
         ended = terminated or truncated
         if ended or self._steps_waiting >= HANDOVER_STEPS or \
-                self.world.engine.trace_rows_waiting >= HANDOVER_ROWS:
+                self.world.engine.trace_rows_waiting >= TRACE_HANDOVER_ROWS:
             self._take_rows()
         if ended:
             self._end(self.world.outcome() if terminated else "truncated")
