@@ -10,8 +10,9 @@ engine's error (an inconsistency, no fixpoint) and the rows up to it, info with 
 engine's counters), and every change row with its cause and grounding. No `steps` rows (nobody
 acts) and no board (RunMeta.board stays None).
 
-Trace rows are taken from the engine in chunks, as the envs' tracer does (tracelab/envs/tracer.py): after
-HANDOVER_STEPS steps, when TRACE_HANDOVER_ROWS rows wait in the engine (a step that big hands its
+Trace rows are taken from the engine in chunks, as a declared env's recorder does
+(tracelab/envs/declared/recording.py, whose HANDOVER_STEPS this is): after HANDOVER_STEPS steps, when
+TRACE_HANDOVER_ROWS rows wait in the engine (a step that big hands its
 buffers over without a copy), and at the episode's end; the writer publishes them as Parquet parts in
 its own thread. So a reasoning of any size holds at most one chunk of its trace in memory."""
 from __future__ import annotations
@@ -26,15 +27,16 @@ import numpy as np
 
 from tracelab.store.writer import TraceWriter
 
-HANDOVER_STEPS = 64  # steps whose rows may wait in the engine (a live reader sees them that late)
-
 
 class ReasoningRecorder:
     """Records the `episodes` episodes of one program over one graph into `writer` (which the caller
     closes)."""
 
     def __init__(self, writer: TraceWriter, episodes: int = 1) -> None:
-        from tracelab.engine.core import TRACE_HANDOVER_ROWS  # when used: core imports numba and the kernels
+        # when used: core imports numba and the kernels (and the recorder the declared world, which loads core)
+        from tracelab.engine.core import TRACE_HANDOVER_ROWS
+        from tracelab.envs.declared.recording import HANDOVER_STEPS
+        self._handover_steps = HANDOVER_STEPS
         self.writer = writer
         self.rows = 0
         self.seconds = 0.0  # spent in this recorder's calls: what recording held the reasoning up
@@ -89,7 +91,7 @@ class ReasoningRecorder:
     def stepped(self, engine: Any) -> None:
         """After a step: hand the engine's rows over when a chunk is due."""
         self._steps_waiting += 1
-        if self._steps_waiting >= HANDOVER_STEPS or engine.trace_rows_waiting >= self._handover_rows:
+        if self._steps_waiting >= self._handover_steps or engine.trace_rows_waiting >= self._handover_rows:
             self.write(engine, engine.take_trace())
 
     def write(self, engine: Any, rows: dict[str, np.ndarray]) -> None:

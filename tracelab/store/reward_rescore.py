@@ -19,7 +19,9 @@ from tracelab.game.scenario import Rewards
 from tracelab.store.kind import MAX_SPEC_TEXT, run_config, spec_text, world_params
 from tracelab.store.reader import RunConnection
 
-# GridWar's terms as the store names them (envs/tracer.REWARD_TERMS) -> the scenario's [rewards] keys
+# GridWar's terms as a run written by RuleSim's tracer names them (sample_runs/, runs before the spec
+# path; a spec world's run names its terms from the spec's [reward], WorldSpec.reward_terms, and
+# re-scores through _spec_terms) -> the scenario's [rewards] keys
 GRIDWAR_TERMS = {"win": "win", "loss": "loss", "hit": "hit_opponent", "got_shot": "got_shot",
                  "step": "valid_action", "unsafe": "unsafe", "invalid": "invalid"}
 GRIDWAR_NOTES = {
@@ -29,7 +31,7 @@ GRIDWAR_NOTES = {
                "never chooses one: re-scoring changes the reward only",
     "step": "the step term is not paid on a step with an unsafe or invalid action (those terms replace it)",
 }
-# GridWar's terms whose occurrences its tracer cannot record where they are worth 0 (envs/tracer.py)
+# those of its terms whose occurrences such a run does not hold where they are worth 0
 GRIDWAR_UNCOUNTED_AT_ZERO = ("step",)
 NO_TERMS = ("the run records no reward terms (written before tracelab recorded them by term, or by a "
             "caller that records the world's half only)")

@@ -554,6 +554,15 @@ class TraceWriter:
                                         f"readable ({os.strerror(error.errno)})", str(self.run_dir))
         return RuntimeError(f"the trace writer of {str(self.run_dir)!r} failed: {error!r}")
 
+    def add_config(self, entries: Mapping[str, Any]) -> None:
+        """`entries` set in the run's config (meta.json's `config`), written now: what a recorder knows of
+        the run that its opener did not say (a declared world's facts and board: envs/declared/recording.py).
+        Refused (ValueError) as a new run's metadata is, when its readers would refuse it."""
+        doc = {**self._meta, "config": {**self._meta.get("config", {}), **entries}}
+        meta_bytes(self.run_dir, doc)
+        write_meta(self.run_dir, doc)
+        self._meta = doc
+
     @property
     def meta(self) -> dict[str, Any]:
         """meta.json as this writer last wrote it (a copy)."""

@@ -14,7 +14,7 @@ The env's facts are external facts (cause `action` in the store's views): the ac
 predicates are the agent's and which are draws (by name) is in the run's config (`declared_facts`).
 
 Rows are taken from the engine in chunks: when an episode ends (so an episode's rows are all out before
-its end is written), every HANDOVER_STEPS steps, when HANDOVER_ROWS rows wait (the engine's buffer stays
+its end is written), every HANDOVER_STEPS steps, when the engine's TRACE_HANDOVER_ROWS rows wait (the engine's buffer stays
 bounded), before a reset, and at close; taking them after every step cost more than the engine's step at
 one world (docs/benchmarks.md). Everything is written at the writer's cadence (store/writer.py: WRITE_ROWS
 steps, or WRITE_INTERVAL_S seconds), so a live reader sees a game that late at most, plus the writer's own
@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from tracelab.board import RUN_CONFIG_KEY, board_config
+from tracelab.engine.core import TRACE_HANDOVER_ROWS
 from tracelab.envs.declared.spec import WorldSpec
 from tracelab.envs.declared.world import DeclaredWorld
 from tracelab.store.agent_rows import AgentRows, Decisions, ObservationName, PolicyOutput, RewardTerms
@@ -41,8 +42,8 @@ if TYPE_CHECKING:
     from tracelab.store.writer import TraceWriter
 
 CONFIG_KEY = "declared_facts"
-HANDOVER_STEPS = 64  # steps whose rows may wait in the engine (a live reader sees them that late)
-HANDOVER_ROWS = 65_536  # rows that may wait in the engine
+HANDOVER_STEPS = 64  # steps whose rows may wait in the engine (a live reader sees them that late); a
+# reasoning's recorder (store/reasoning.py) takes them as often
 
 
 def declared_facts(spec: WorldSpec) -> dict[str, Any]:
@@ -62,11 +63,13 @@ def spec_sources(spec: WorldSpec) -> list[dict[str, Any]]:
     return read_sources([("spec", str(spec.path)), *(("rules", str(f)) for f in spec.program.files)])
 
 
-def declared_run_config(spec: WorldSpec) -> dict[str, Any]:
+def declared_run_config(spec: WorldSpec, sources: list[dict[str, Any]] | None = None) -> dict[str, Any]:
     """What a run of a declared world's games records of it in its config, for its readers: the spec's
     and the rule files' paths, sizes and hashes (their texts go in the run's `sources` table, written by
-    DeclaredRecorder), what sets each external fact (CONFIG_KEY), the board the viewers draw."""
-    return {"sources": source_summaries(spec_sources(spec)), CONFIG_KEY: declared_facts(spec),
+    DeclaredRecorder), what sets each external fact (CONFIG_KEY), the board the viewers draw. Every
+    recorder writes it (DeclaredRecorder), whoever opened the run; `sources`: spec_sources(spec), if read."""
+    sources = spec_sources(spec) if sources is None else sources
+    return {"sources": source_summaries(sources), CONFIG_KEY: declared_facts(spec),
             RUN_CONFIG_KEY: None if spec.board is None else board_config(spec.board)}
 
 
@@ -119,6 +122,9 @@ class DeclaredRecorder:
     at close): episode begins, change rows, step rows, then episode ends, so a reader never sees an ended
     episode without its rows. Writing per episode cost more than the toy-text games' steps.
 
+    The run's config gets declared_run_config (the world's external facts, its board, its sources), so a run
+opened by gym.make(id, trace_writer=...) reads as one `tracelab play` wrote.
+
     `episode_ids`: a run the recorder does not own (a training's, whose evaluation games it records):
     episodes take their ids from it, begin with `begin_info`, and close() leaves the writer open."""
 
@@ -131,7 +137,10 @@ class DeclaredRecorder:
         self.writer = writer
         self.agents = list(world.spec.agents)
         writer.write_engine_program(eng)
-        writer.write_sources(spec_sources(world.spec))
+        sources = spec_sources(world.spec)
+        writer.write_sources(sources)
+        # the run's config says what `why`, the replay and the TUI read of the world, however it was opened
+        writer.add_config(declared_run_config(world.spec, sources))
         writer.write_action_names(world.spec.action_names)
         writer.write_observation_names(observation_names(world.spec))
         world.keep_reward_terms = True
@@ -217,7 +226,7 @@ class DeclaredRecorder:
         self._steps_kept += 1
         ended = terminated or truncated
         if ended or self._steps_waiting >= HANDOVER_STEPS or \
-                self.world.engine.trace_rows_waiting >= HANDOVER_ROWS:
+                self.world.engine.trace_rows_waiting >= TRACE_HANDOVER_ROWS:
             self._take_rows()
         if ended:
             self._end(self.world.outcome() if terminated else "truncated")
