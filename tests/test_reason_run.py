@@ -139,7 +139,7 @@ def test_a_big_reasoning_is_handed_to_the_store_in_chunks(tmp_path: Path) -> Non
     from tracelab.engine import parse_program
     from tracelab.reasoning import EpisodeRun, ReasoningInputs, plan_episodes
     from tracelab.store import TraceWriter, open_run
-    from tracelab.envs.declared.recording import HANDOVER_STEPS
+    from tracelab.store.writer import HANDOVER_STEPS
     from tracelab.store.reasoning import ReasoningRecorder
     chain = "".join(f"next(n{i}, n{i + 1})\n" for i in range(300))
     program = parse_program("on(n0)\n" + chain + "walk: on(Y) <-1 on(X), next(X,Y)\n", "walk.rules")

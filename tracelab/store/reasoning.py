@@ -11,7 +11,7 @@ engine's counters), and every change row with its cause and grounding. No `steps
 acts) and no board (RunMeta.board stays None).
 
 Trace rows are taken from the engine in chunks, as a declared env's recorder does
-(tracelab/envs/declared/recording.py, whose HANDOVER_STEPS this is): after HANDOVER_STEPS steps, when
+(tracelab/envs/declared/recording.py): after HANDOVER_STEPS steps (store/writer.py), when
 TRACE_HANDOVER_ROWS rows wait in the engine (a step that big hands its
 buffers over without a copy), and at the episode's end; the writer publishes them as Parquet parts in
 its own thread. So a reasoning of any size holds at most one chunk of its trace in memory."""
@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from tracelab.store.writer import TraceWriter
+from tracelab.store.writer import HANDOVER_STEPS, TraceWriter
 
 
 class ReasoningRecorder:
@@ -33,9 +33,8 @@ class ReasoningRecorder:
     closes)."""
 
     def __init__(self, writer: TraceWriter, episodes: int = 1) -> None:
-        # when used: core imports numba and the kernels (and the recorder the declared world, which loads core)
+        # when used: core imports numba and the kernels
         from tracelab.engine.core import TRACE_HANDOVER_ROWS
-        from tracelab.envs.declared.recording import HANDOVER_STEPS
         self._handover_steps = HANDOVER_STEPS
         self.writer = writer
         self.rows = 0

@@ -64,6 +64,9 @@ MAX_PENDING_ROWS = 131_072
 # second later anyway.
 WRITE_ROWS = 4096
 WRITE_INTERVAL_S = 0.25
+# How many steps' trace rows a recorder (a declared env's, a reasoning's) lets wait in the engine before it
+# takes them: a live reader sees a step that late at most.
+HANDOVER_STEPS = 64
 
 
 def _use_system_allocator() -> None:

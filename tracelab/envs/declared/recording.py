@@ -34,7 +34,7 @@ from tracelab.envs.declared.world import DeclaredWorld
 from tracelab.store.agent_rows import AgentRows, Decisions, ObservationName, PolicyOutput, RewardTerms
 from tracelab.store.convert import utc_now
 from tracelab.store.sources import read_sources, source_summaries
-from tracelab.store.writer import WRITE_INTERVAL_S, WRITE_ROWS
+from tracelab.store.writer import HANDOVER_STEPS, WRITE_INTERVAL_S, WRITE_ROWS
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Mapping
@@ -42,8 +42,6 @@ if TYPE_CHECKING:
     from tracelab.store.writer import TraceWriter
 
 CONFIG_KEY = "declared_facts"
-HANDOVER_STEPS = 64  # steps whose rows may wait in the engine (a live reader sees them that late); a
-# reasoning's recorder (store/reasoning.py) takes them as often
 
 
 def declared_facts(spec: WorldSpec) -> dict[str, Any]:
