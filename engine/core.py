@@ -278,7 +278,7 @@ class Engine:
         self.background = None
         if status == "ready" and self.kernel == "counting":
             self._state = CompiledState.taking_over(self._state, job.entry)
-            self.layout_version += 1  # a fused caller (RuleSim) sees another kernel and steps it apart
+            self.layout_version += 1  # a fused caller (envs/declared/fused.py) sees another kernel and steps it apart
             log.info(f"the compiled kernel is ready ({job.describe()}); switched to it at t={self.t}")
         elif status == "failed":
             self.kernel_notice = (f"kernel 'compiled' not used: the background compile failed ({job.why}); "
@@ -532,7 +532,7 @@ class Engine:
             self._ext_count += n
         self.t += 1
 
-    # ---- a caller's own compiled step (tracelab/game/rulesim_fused.py) ----
+    # ---- a caller's own compiled step (tracelab/envs/declared/fused.py, vector_fused.py) ----
 
     def fused_binding(self) -> K.StepState | None:
         """For a caller that runs the counting kernel inside its own compiled call (kernel.fused_step):

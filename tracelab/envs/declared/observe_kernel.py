@@ -37,11 +37,20 @@ class ObservationProgram:
     def __init__(self, spec: WorldSpec, part_ids: list[list[np.ndarray]]) -> None:
         rows, missing, values, atoms = [], [], [np.zeros(0, np.float32)], [np.zeros(0, np.int64)]
         self.python_parts: list[tuple[int, int]] = []  # (part, column) per agent 0; others shifted by width
+        # (agent, earlier agent) whose compiled parts read the same atoms (a team's shared view, as GridWar's):
+        # its rows are skipped and read() copies the earlier agent's numbers (20v20: 1 read of 20)
+        self.copies: list[tuple[int, int]] = []
+        seen: dict[tuple, int] = {}
         n_atoms = n_values = 0
         for agent in range(len(spec.agents)):
+            key = tuple((k, part_ids[k][agent].tobytes()) for k, part in enumerate(spec.parts)
+                        if KINDS.get(part.read, SKIP) != SKIP)
+            copied = seen.setdefault(key, agent) != agent
+            if copied:
+                self.copies.append((agent, seen[key]))
             for k, part in enumerate(spec.parts):
                 kind = KINDS.get(part.read, SKIP)
-                if kind == SKIP:
+                if kind == SKIP or copied:
                     if agent == 0:
                         self.python_parts.append((k, len(rows)))
                     rows.extend([(SKIP, 0, 0, -1, 0, 0)] * part.width)
@@ -150,6 +159,9 @@ class ObservationReader:
             observe_lower(engine.lower, p.atoms, self._truth, p.table, p.missing, p.values, out)
         else:
             observe(engine.is_true(p.atoms), p.table, p.missing, p.values, out)
+        w = p.width
+        for agent, source in p.copies:
+            out[:, agent * w:(agent + 1) * w] = out[:, source * w:(source + 1) * w]
         for k, col in p.python_parts:  # lower and bounds: the engine's bounds, in numpy
             part = self._spec.parts[k]
             for agent, ids in enumerate(self._part_ids[k]):

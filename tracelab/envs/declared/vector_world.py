@@ -61,7 +61,10 @@ class DeclaredWorlds:
         # every draw one np_random.random() (the toy-text games): drawn a block at a time (_Uniforms)
         self._only_uniforms = all(d.draw.method == "categorical" for d in (*one._choices, *one._before)) and \
             all(d.weight_ids is None for d in one._before)
-        self._categorical = _CategoricalTable(one._before) if self._only_uniforms else None
+        # every draw of fixed probabilities: a draw with no weights never freezes (world._Drawer), so this
+        # holds for good and is not asked again each step (60 draws a 20v20 step)
+        self._categorical = _CategoricalTable(one._before) \
+            if self._only_uniforms and _CategoricalTable.holds(one._before) else None
         self._observer = one._observer  # built for the engine's n_worlds worlds
         self._numbers: np.ndarray | None = None  # every agent's observed numbers, read once after a change
         self._starts = _StartOutcomes(self)
@@ -102,7 +105,8 @@ class DeclaredWorlds:
             raise ValueError(f"{len(rngs)} generators for {self.n_worlds} worlds")
         self.rngs = rngs
         self._randoms = [r.random for r in rngs]  # bound once: a step draws one number per world
-        self.uniforms = _Uniforms(rngs) if self._only_uniforms else None
+        # a block of several steps' numbers: a 20v20 step draws 60, which a 64-number block refilled every step
+        self.uniforms = _Uniforms(rngs, 8 * len(self.one._before)) if self._only_uniforms else None
 
     def reset(self, worlds: np.ndarray) -> None:
         """Restart `worlds` (int64 indices): each draws its start choices from its generator; then the
@@ -122,7 +126,7 @@ class DeclaredWorlds:
         picks, before = self._picks, self.one._before
         # every draw one random() a world: the step's numbers of all draws taken at once, in the spec's order
         u = self.uniforms.each(len(before)) if self.uniforms is not None and before else None
-        if u is not None and self._categorical is not None and self._categorical.holds(before):
+        if u is not None and self._categorical is not None:
             picks[:, :len(before)] = self._categorical.picks(u)  # every draw of every world at once
         else:
             for d, drawer in enumerate(before):
@@ -189,7 +193,7 @@ class DeclaredWorlds:
         one, spec = self.one, self.spec
         n_index = len(one._index_parts)
         index = self._out[0][:, agent * n_index:(agent + 1) * n_index]
-        for p in range(n_index) if index.size and index.min() < 0 else ():  # which part misses its atom
+        for p in range(n_index) if one._index_checked and index.min() < 0 else ():  # which part misses its atom
             part = spec.parts[one._index_parts[p]]
             if missing_index(part, index[:, p]):
                 w = int(np.flatnonzero(index[:, p] < 0)[0])
@@ -271,7 +275,7 @@ class _CategoricalTable:
 
     @staticmethod
     def holds(drawers: list[Any]) -> bool:
-        """Whether every draw has fixed probabilities now (none weighed by the state, none frozen)."""
+        """Whether every draw has fixed probabilities (none weighed by the state)."""
         return all(d.weight_ids is None and d.possible is None and d.cumulative is not None for d in drawers)
 
     def picks(self, u: np.ndarray) -> np.ndarray:
@@ -293,21 +297,22 @@ def _nbytes(snapshot: Any) -> int:
 
 
 class _Uniforms:
-    """Each world's next np_random.random() numbers, BLOCK at a time: Generator.random(n) gives the numbers
+    """Each world's next np_random.random() numbers, a block at a time: Generator.random(n) gives the numbers
     n calls of random() give, one after another (both take next_double of the bit generator), so a world
-    whose every draw is one random() draws exactly what it would call by call, for one call per BLOCK."""
-    BLOCK = 64
+    whose every draw is one random() draws exactly what it would call by call, for one call per block (at
+    least 64, or `block`)."""
 
-    def __init__(self, rngs: list[np.random.Generator]) -> None:
+    def __init__(self, rngs: list[np.random.Generator], block: int = 0) -> None:
         self.rngs = rngs
-        self.buf = np.empty((len(rngs), self.BLOCK))
-        self.pos = np.full(len(rngs), self.BLOCK)  # empty: filled on first use
+        self.block = max(64, block)
+        self.buf = np.empty((len(rngs), self.block))
+        self.pos = np.full(len(rngs), self.block)  # empty: filled on first use
         self._every = np.arange(len(rngs))
 
     def each(self, k: int) -> np.ndarray:
-        """The next k numbers of every world [worlds, k] (k <= BLOCK)."""
-        if self.pos.max() > self.BLOCK - k:
-            for w in np.flatnonzero(self.pos > self.BLOCK - k):
+        """The next k numbers of every world [worlds, k] (k <= block)."""
+        if self.pos.max() > self.block - k:
+            for w in np.flatnonzero(self.pos > self.block - k):
                 self._fill(w)
         u = self.buf[self._every[:, None], self.pos[:, None] + np.arange(k)]
         self.pos += k
@@ -315,7 +320,7 @@ class _Uniforms:
 
     def take(self, worlds: np.ndarray) -> np.ndarray:
         """One number for each of `worlds` (distinct indices)."""
-        for w in worlds[self.pos[worlds] >= self.BLOCK]:
+        for w in worlds[self.pos[worlds] >= self.block]:
             self._fill(w)
         u = self.buf[worlds, self.pos[worlds]]
         self.pos[worlds] += 1
@@ -323,9 +328,9 @@ class _Uniforms:
 
     def _fill(self, w: int) -> None:
         """World w's numbers not taken yet, moved to the front, then new ones after them."""
-        left = self.BLOCK - self.pos[w]
+        left = self.block - self.pos[w]
         self.buf[w, :left] = self.buf[w, self.pos[w]:]
-        self.buf[w, left:] = self.rngs[w].random(self.BLOCK - left)
+        self.buf[w, left:] = self.rngs[w].random(self.block - left)
         self.pos[w] = 0
 
 

@@ -143,6 +143,9 @@ class DeclaredWorld:
         # what is read after each step: index parts, the reward table, the ends and the mask in one
         # compiled call (fused.read_step); the other parts and scaled rewards from the bound arrays
         self._index_parts = [i for i, p in enumerate(spec.parts) if p.read == "index"]
+        # an index part with no `missing` makes a -1 an error; with none such (GridWar's: a dead agent is
+        # seen nowhere), observations skip the per-part check (20v20: 80 parts an agent, in Python at each read)
+        self._index_checked = any(spec.parts[i].missing is None for i in self._index_parts)
         self._part_ids = [[ids(atoms) for atoms in p.per_agent] for p in spec.parts]  # [part][agent]
         self._part_sizes = [len(p.atoms) for p in spec.parts]
         # a Box or Dict observation: every agent's numbers in one compiled call (observe_kernel.py)
@@ -157,13 +160,17 @@ class DeclaredWorld:
         n = self.n_agents
         mask_ids = np.concatenate([ids(m) for m in spec.mask]) if spec.mask is not None else np.zeros(0, np.int64)
         self._has_mask = spec.mask is not None
-        part_ptr, part_atoms, _ = fused.csr([self._part_ids[i][a] for a in range(n) for i in self._index_parts], [])
+        # the index parts' first true atoms are read in the fused step only where something uses them: a
+        # Discrete or MultiDiscrete space, or a part whose -1 is an error (a Box or Dict has its numbers
+        # from the observer; GridWar's 5v5 batch spent more on them than on the rest of its reads)
+        read_index = self._index_parts if spec.space in ("Discrete", "MultiDiscrete") or self._index_checked else []
+        part_ptr, part_atoms, _ = fused.csr([self._part_ids[i][a] for a in range(n) for i in read_index], [])
         table = [(atom, value, a) for a, pairs in enumerate(spec.reward_table) for atom, value in pairs]
         self._reads = (part_ptr, part_atoms, ids(t[0] for t in table), np.array([t[1] for t in table], np.float64),
                        np.array([t[2] for t in table], np.int64), ids(spec.terminated), ids(spec.truncated),
                        mask_ids)
         # read_step's results: indices [agent * index parts], rewards [agent], ends, masks, a paused world
-        self._out = (np.zeros(n * len(self._index_parts), np.int64), np.zeros(n), np.zeros(2),
+        self._out = (np.zeros(n * len(read_index), np.int64), np.zeros(n), np.zeros(2),
                      np.zeros(len(mask_ids), np.int8), np.zeros(1, np.int64))
         board = spec.board
         self._piece_ids: list[tuple[str, str, np.ndarray, np.ndarray, int, list[str], np.ndarray]] | None = None
@@ -357,7 +364,7 @@ class DeclaredWorld:
                 return value
         n_index = len(self._index_parts)
         indices = self._out[0][agent * n_index:(agent + 1) * n_index]
-        for p, i in enumerate(indices.tolist()):
+        for p, i in enumerate(indices.tolist() if self._index_checked else ()):
             part = spec.parts[self._index_parts[p]]
             if i < 0 and part.missing is None:
                 raise no_index(spec, part)
