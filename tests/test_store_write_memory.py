@@ -23,17 +23,22 @@ DEFERRED = ("duckdb", "pandas", "pyarrow.dataset", "pyarrow.compute")
 PLAY_INTO_A_RUN = """
 import json, sys
 from pathlib import Path
-from tracelab.game.scenario import builtin_scenario
-from tracelab.playing import Games
+from tracelab.envs.declared.env_source import EnvSource
+from tracelab.envs.declared.play import load_declared, make_declared_env, play_episodes, random_policy
 from tracelab.store import TraceWriter
-from tracelab.store.sink import StoreSink
 
 writer = TraceWriter.open(Path(sys.argv[1]), {"command": "test"}, compact_files=2)  # merges early
-games = Games(builtin_scenario("advanced"), 12, seed=3, sink=StoreSink(writer))
-while not games.done:
-    games.step()
+source = EnvSource.given("tracelab/GridWar-advanced-v0", {})
+env = make_declared_env(source, load_declared(source), trace_writer=writer)
+act = random_policy(env, 3)
+
+def flushed(obs, info):
     writer.flush()  # a part per step: small parts, merged in twos
-games.close()
+    return act(obs, info)
+
+play_episodes(env, 12, 3, flushed)
+env.close()
+writer.close()
 print(json.dumps({"loaded": [m for m in sys.argv[2:] if m in sys.modules],
                   "compactions": writer.stats()["compactions"]}))
 """
