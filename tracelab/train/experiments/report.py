@@ -223,10 +223,10 @@ def goal_lines(result: ExperimentResult) -> list[str]:
                 fb, fa = ({k: v for k, v in (ar.extra.get(s.seed) or {}).items() if k != "trace_run"}
                           for ar, s in ((before, sb), (after, sa)))
                 same = "the same figures (the change did not move the greedy policy's games)" if fb == fa else \
-                    "hidden steps/game {:.2f} -> {:.2f}, red shot/game {:.2f} -> {:.2f}, shoot share {} -> {}, " \
+                    "hidden steps/game {} -> {}, red shot/game {} -> {}, shoot share {} -> {}, " \
                     "method's win rate {} -> {}".format(
-                        fb.get("hidden_steps_per_game", 0), fa.get("hidden_steps_per_game", 0),
-                        fb.get("shot_per_game", 0), fa.get("shot_per_game", 0), pct(fb.get("shoot_share")),
+                        num(fb.get("hidden_steps_per_game")), num(fa.get("hidden_steps_per_game")),
+                        num(fb.get("shot_per_game")), num(fa.get("shot_per_game")), pct(fb.get("shoot_share")),
                         pct(fa.get("shoot_share")), pct(sb.final[0.3].method_win_rate),
                         pct(sa.final[0.3].method_win_rate))
                 out.append(f"- seed {sb.seed}, {before.arm.label} -> {after.arm.label}: {same}.")
@@ -361,7 +361,12 @@ def experiment_sections(result: ExperimentResult) -> list[str]:
               "saved queries (`tracelab sql RUN --query NAME`) read them: `hid_behind_mountain` (timesteps red "
               "ended next to a mountain between it and a blue agent), `learner_events` (red shot, unsafe moves, "
               "invalid actions = shooting with no ammo), `actions_per_win`, `steps_before_loss` (red's last "
-              "actions in lost games); `shoot share` = red's shooting actions among its actions (from `steps`).",
+              "actions in lost games); `shoot share` = red's shooting actions among its actions (from `steps`). "
+              "The traces are the spec world's (rules/gridworld/war.toml): `hid_behind_mountain` reads a cell as "
+              "its number y * width + x, the spec's board names it c{row}_{col}, so its columns read `-` (not "
+              "measured) until the query reads the board's names; and `tracelab sql RUN --query NAME` refuses "
+              "the queries that need a board on a spec run (its board is in its config, not the run's `board`): "
+              "the figures here come through the library (experiments/runner.py, run_query).",
               "", "| reward setting | seed | games | hidden steps / game | games with hiding | red shot / game | "
               "invalid (no ammo) / game | unsafe / game | shoot share | wins | actions per win | losses | last "
               "actions before a loss | method win rate (500-game eval) |",
