@@ -8,7 +8,7 @@ import threading
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
@@ -30,6 +30,10 @@ from tracelab.train.experiments.runner import (
     train_seed,
 )
 from tracelab.train.experiments.stats import bootstrap_diff_ci, two_proportion_test
+from tracelab.train.env_policy import load_env_policy
+
+if TYPE_CHECKING:
+    from tracelab.envs.declared.env_source import EnvSource
 
 RESULT_POLL_S = 0.2  # how often the experiment looks for a worker's finished training
 TRAIN_P, EVAL_PS = 0.7, (0.3, 0.7)  # the method's code: trained against p = 0.7, evaluated against 0.3
@@ -191,8 +195,7 @@ def portability(sr: SeedRun, scenario: Any, cfg: TrainConfig, games: int, say: S
     """Per opponent p: the spec policy's games in the reference simulator (RefSim) with the spec world's
     final-evaluation seeds (game by game identical if the simulators agree) and with other seeds (an
     independent sample: the gap and a test of it)."""
-    # deferred: the policy's loader and RefSim's numba kernels, which a report written again does not need
-    from tracelab.train.env_policy import load_env_policy
+    # deferred: RefSim's numba kernels, which a report written again does not need
     from tracelab.train.experiments.refsim_games import refsim_games
 
     policy = load_env_policy(sr.policy_dir, gridwar_source(cfg, scenario))[0]
@@ -218,10 +221,9 @@ def portability(sr: SeedRun, scenario: Any, cfg: TrainConfig, games: int, say: S
 
 
 # ---- reward shaping: the saved queries on traced evaluation games ----
-def shaping_traces(sr: SeedRun, source: Any, out_dir: Path, games: int, command: str, say: Say) -> dict[str, Any]:
+def shaping_traces(sr: SeedRun, source: EnvSource, out_dir: Path, games: int, command: str, say: Say) -> dict[str, Any]:
     """Trace `games` evaluation games of the final policy (against p = 0.3) in its spec world (`source`,
     the arm's GridWar id and params) into their own run and read the saved queries' figures off it."""
-    from tracelab.train.env_policy import load_env_policy
     policy = load_env_policy(sr.policy_dir, source)[0]
     trace_dir = out_dir / f"{sr.run_dir.name}-traces"
     traced_games(policy, against_p(source, EVAL_PS[0]), trace_dir, games=games,
@@ -234,7 +236,7 @@ def shaping_traces(sr: SeedRun, source: Any, out_dir: Path, games: int, command:
     return figures
 
 
-def action_names(source: Any) -> list[str]:
+def action_names(source: EnvSource) -> list[str]:
     """The spec's action names, by action id (what the traces' steps.action holds)."""
     from tracelab.envs.declared.play import load_declared
     return list(load_declared(source).action_names)
