@@ -88,22 +88,148 @@ def test_1v1_base_quick(tmp_path, capsys):
     assert "already exists" in capsys.readouterr().err
 
 
-def test_portability_quick(tmp_path, capsys):
+# RuleSim's stack (issue 38): none of it may train or evaluate while an experiment runs
+RULESIM_ENTRY_POINTS = (("tracelab.train.loop", "Trainer"), ("tracelab.game.rulesim", "RuleSim"),
+                        ("tracelab.envs.vector_env", "GridWarVectorEnv"), ("tracelab.train.evaluate", None))
+RULESIM_MODULES = ("tracelab.game.rulesim", "tracelab.train.loop", "tracelab.train.evaluate",
+                   "tracelab.train.checkpoint", "tracelab.envs.vector_env", "tracelab.envs.tracer",
+                   "tracelab.envs.common", "tracelab.envs.gym_env", "tracelab.playing")
+
+
+@pytest.fixture
+def no_rulesim(monkeypatch):
+    """A tripwire on RuleSim's trainer, simulator, vector env and evaluation: using any of them fails the
+    test (a module already deleted cannot be used)."""
+    import importlib
+
+    def tripped(*args, **kwargs):
+        raise AssertionError("an experiment used RuleSim's stack")
+    for module, cls in RULESIM_ENTRY_POINTS:
+        try:
+            mod = importlib.import_module(module)
+        except ModuleNotFoundError:
+            continue
+        if cls is not None:
+            monkeypatch.setattr(getattr(mod, cls), "__init__", tripped)
+        else:
+            for name in ("evaluate", "evaluate_into", "play_games"):
+                monkeypatch.setattr(mod, name, tripped)
+
+
+def test_no_experiment_module_imports_rulesims_stack():
+    """tracelab/train/experiments/ imports no module of RuleSim's stack, at the top or deferred in a function."""
+    import ast
+    import tracelab.train.experiments as pkg
+    for path in sorted(Path(pkg.__file__).parent.glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+                [node.module or ""] if isinstance(node, ast.ImportFrom) else []
+            bad = [n for n in names if n.startswith(RULESIM_MODULES)]
+            assert not bad, f"{path.name}:{node.lineno} imports {bad}"
+
+
+SPEC_TRAINER = "trains GridWar through its spec (rules/gridworld/war*.toml, EnvTrainer)"
+
+
+@pytest.mark.parametrize("name", ["1v1-base", "5v5-base", "portability", "markov-vs-nonmarkov",
+                                  "markov-vs-nonmarkov-every-step", "reward-shaping"])
+def test_every_gridwar_experiment_trains_through_its_spec(name):
+    from tracelab.train.experiments import run
+    from tracelab.train.experiments.definitions import EXPERIMENTS
+    assert run.trainer_note(EXPERIMENTS[name]) == SPEC_TRAINER
+    assert not hasattr(run, "RULESIM")
+
+
+def action_shares(text: str, label: str) -> list[float]:
+    """The action shares of a report's "What the final policies do" row of `label`, seed 0."""
+    rows = text.split("## What the final policies do")[1].splitlines()
+    row = next(r for r in rows if r.startswith(f"| {label} | 0 |"))
+    return [float(c.strip().rstrip("%")) for c in row.strip("|").split("|")[3:-1]]
+
+
+def test_portability_plays_the_spec_policy_in_refsim_game_by_game(tmp_path, capsys, no_rulesim):
+    """portability trains through GridWar's spec and plays the final spec policy in RefSim with the spec
+    world's evaluation seeds: the same games, game by game, and with other seeds; no RuleSim on the way."""
     out = tmp_path / "exp"
-    run_quick("portability", out, capsys)
+    run_quick("portability", out, capsys, "--steps", "300", "--eval-games", "10")
     text = (out / "portability.md").read_text()
+    assert f"| trainer | {SPEC_TRAINER} |" in text
     assert "## Portability: the same policy in both simulators" in text
+    policy = json.loads((out / "1v1-base-seed0" / "policy" / "policy.json").read_text())
+    assert policy["format"] == "tracelab-dqn-env-policy/1" and policy["env"]["name"] == "tracelab/GridWar-base-v0"
     summary = json.loads((out / "portability.json").read_text())
     extra = summary["arms"][0]["seeds"][0]["extra"]
     for key in ("@p0.3", "@p0.7"):
         d = extra[key]
         # the simulators agree step by step: the same seeds give the same games, game by game
-        assert d["identical_games"] == d["games"] == 30
-        assert d["reference_same_seeds"]["method_wins"] == d["rules"]["method_wins"]
+        assert d["identical_games"] == d["games"] == 10
+        for field in ("method_wins", "losses", "draws", "truncated", "mean_return"):
+            assert d["reference_same_seeds"][field] == d["rules"][field], field
+        assert d["rules"]["games"] == d["reference_other_seeds"]["games"] == 10
         assert 0.0 <= d["p_value"] <= 1.0
         assert f"| 0 | {key[2:]} |" in text
+    # the spec's five actions (its ids 0-4, "nothing" the last), each game's every action counted
+    assert sum(action_shares(text, "1v1 base")) == pytest.approx(100.0, abs=0.3)
+    assert "| setting | seed | games | up | down | left | right | nothing | outcomes |" in text
     for png in ("win_rate.png", "mean_return.png", "final_win_rate.png", "portability.png"):
         check_png(out / "portability" / png)
+
+
+def test_a_spec_policy_plays_the_same_games_in_refsim(tmp_path):
+    """refsim_games: an untrained spec policy (its network as initialised, seeded) in RefSim and in the spec's
+    vector env with the same seed: the same returns and lengths in the same order, for both opponents."""
+    import torch
+
+    from tracelab.envs.declared.env_source import EnvSource
+    from tracelab.game.scenario import builtin_scenario
+    from tracelab.train.env_policy import EnvPolicy, evaluate_env
+    from tracelab.train.env_source import probe_env
+    from tracelab.train.dqn import make_q_network
+    from tracelab.train.experiments.refsim_games import refsim_games
+    from tracelab.train.qnet import NetSpec, TorchQ
+
+    source = EnvSource("tracelab/GridWar-base-v0", {})
+    encoder, n_actions, _ = probe_env(source)
+    net = make_q_network(NetSpec(encoder.size, (16,), n_actions), torch.Generator().manual_seed(3))
+    policy = EnvPolicy(TorchQ(net), encoder)
+    for p in (0.3, 0.7):
+        spec = evaluate_env(policy, EnvSource(source.name, {"p_toward": p}), 12, 5, 4)
+        ref = refsim_games(policy, builtin_scenario("base"), 12, 5, 4, p)
+        assert (ref.returns, ref.steps, ref.wins, ref.losses, ref.draws, ref.truncated) == \
+            (spec.returns, spec.steps, spec.wins, spec.losses, spec.draws, spec.truncated)
+        assert len(set(spec.returns)) > 1  # different games, not one repeated
+
+
+def test_reward_shaping_traces_spec_games_with_the_specs_reward_params(tmp_path, capsys, no_rulesim):
+    """reward-shaping trains each arm on GridWar's advanced spec with its rewards as the spec's params, and
+    its saved queries read traced games of the spec world (a run of their own per seed)."""
+    out = tmp_path / "exp"
+    run_quick("reward-shaping", out, capsys, "--steps", "200", "--eval-games", "8")
+    text = (out / "reward-shaping.md").read_text()
+    assert f"| trainer | {SPEC_TRAINER} |" in text
+    assert "`--env-arg got_shot=-400`" in text
+    summary = json.loads((out / "reward-shaping.json").read_text())
+    for arm, kwargs in zip(summary["arms"], ({"got_shot": -400.0}, {}, {"invalid": -200.0})):
+        seed = arm["seeds"][0]
+        assert run_info(Path(seed["run"])).meta["config"]["env"] == {"name": "tracelab/GridWar-advanced-v0",
+                                                                      "kwargs": kwargs}
+        figures = seed["extra"]
+        traces = run_info(Path(figures["trace_run"])).meta
+        assert traces["config"]["env"] == {"name": "tracelab/GridWar-advanced-v0",
+                                           "kwargs": {**kwargs, "p_toward": 0.3}}
+        con = open_run(Path(figures["trace_run"]))
+        try:
+            episodes, shots = con.execute("SELECT count(*), sum(steps) FROM episodes").fetchone()
+            shot, invalid = con.execute(
+                "SELECT count(*) FILTER (label = 'gotShot'), count(*) FILTER (label = 'invalid') FROM changes "
+                "WHERE node LIKE 'red-agent-%' AND new_lower = 1 AND new_upper = 1").fetchone()
+        finally:
+            con.close()
+        assert episodes == figures["games"] == 6
+        assert figures["shot_per_game"] == pytest.approx(shot / 6)
+        assert figures["invalid_per_game"] == pytest.approx(invalid / 6)
+        assert figures["hidden_steps_per_game"] is None  # the spec's cells are named, not numbered
+        assert figures["wins"] + figures["losses"] <= 6
 
 
 def test_markov_vs_nonmarkov_quick_compares_observations_with_one_shared_network(tmp_path, capsys):

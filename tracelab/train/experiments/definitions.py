@@ -106,7 +106,7 @@ EXPERIMENTS: dict[str, Experiment] = {e.name: e for e in (
         quick=Budget(seeds=1, steps=2_000, eval_games=20, evals=2),
         goal="method's win rate >= 79.4% against p = 0.3"),
     Experiment(
-        "portability", "Portability: the same policies in the rule-driven and the hand-written simulator",
+        "portability", "Portability: the same policies in the spec world and the hand-written simulator",
         (Arm("1v1 base", "base", published=0.976, published_note="97.6% proxy, 100% other simulators"),),
         full=Budget(seeds=3, steps=200_000, eval_games=500, evals=5),
         quick=Budget(seeds=1, steps=1_500, eval_games=30, evals=1),

@@ -9,13 +9,11 @@ from typing import Any
 
 import numpy as np
 
-from tracelab.game.scenario import ACTION_NAMES
-from tracelab.train.evaluate import METHOD_CUT, EvalResult
 from tracelab.train.experiments import plots
 from tracelab.train.config import METHOD_REWARD_SCALE, TrainConfig
-from tracelab.train.experiments.run import (TRAIN_P, ExperimentResult, commit, eval_ps, is_world, machine, trainer_note,
-                                           train_config)
-from tracelab.train.experiments.runner import curves, p_suffix, run_sql
+from tracelab.train.experiments.run import (TRAIN_P, ExperimentResult, action_names, commit, eval_ps, is_world, machine,
+                                           trainer_note, train_config)
+from tracelab.train.experiments.runner import METHOD_CUT, EvalFigures, curves, gridwar_source, p_suffix, run_sql
 from tracelab.train.experiments.stats import spread, wilson
 
 
@@ -162,8 +160,10 @@ def action_section(result: ExperimentResult) -> list[str]:
     (GridWar's; a world's actions are in its runs' `steps`)."""
     if is_world(result.experiment):
         return []
-    ids = sorted({int(i) for ar in result.arms for i in ar.arm.build_scenario().action_ids})
-    names = [ACTION_NAMES[i] for i in ids]
+    # the traces' steps.action is the spec's action id: the arms' spec's action names, by id
+    names = max((action_names(gridwar_source(train_config(result.experiment, ar.arm, result.budget, 0),
+                                             ar.arm.build_scenario())) for ar in result.arms), key=len)
+    ids = range(len(names))
     L = ["## What the final policies do", "",
          "Red's actions in the traced games of each seed's last evaluation during training (the run's "
          "`episodes` with `kind = 'eval'` at the last `train_step`, joined with `steps`), and how those games "
@@ -223,10 +223,10 @@ def goal_lines(result: ExperimentResult) -> list[str]:
                 fb, fa = ({k: v for k, v in (ar.extra.get(s.seed) or {}).items() if k != "trace_run"}
                           for ar, s in ((before, sb), (after, sa)))
                 same = "the same figures (the change did not move the greedy policy's games)" if fb == fa else \
-                    "hidden steps/game {:.2f} -> {:.2f}, red shot/game {:.2f} -> {:.2f}, shoot share {} -> {}, " \
+                    "hidden steps/game {} -> {}, red shot/game {} -> {}, shoot share {} -> {}, " \
                     "method's win rate {} -> {}".format(
-                        fb.get("hidden_steps_per_game", 0), fa.get("hidden_steps_per_game", 0),
-                        fb.get("shot_per_game", 0), fa.get("shot_per_game", 0), pct(fb.get("shoot_share")),
+                        num(fb.get("hidden_steps_per_game")), num(fa.get("hidden_steps_per_game")),
+                        num(fb.get("shot_per_game")), num(fa.get("shot_per_game")), pct(fb.get("shoot_share")),
                         pct(fa.get("shoot_share")), pct(sb.final[0.3].method_win_rate),
                         pct(sa.final[0.3].method_win_rate))
                 out.append(f"- seed {sb.seed}, {before.arm.label} -> {after.arm.label}: {same}.")
@@ -313,14 +313,15 @@ def experiment_sections(result: ExperimentResult) -> list[str]:
     L: list[str] = []
     if exp.name == "portability":
         L += ["## Portability: the same policy in both simulators", "",
-              "Each seed's final policy (trained in the rule-driven env) plays the same number of games in the "
-              "hand-written simulator (`reference` backend): once with the rules run's evaluation seeds (the "
-              "games should be identical, outcome, length, return and actions, since the simulators agree "
+              "Each seed's final policy (trained through GridWar's spec, rules/gridworld/war.toml) plays the same "
+              "number of games in the hand-written simulator (RefSim, game/refsim.py): once with the spec "
+              "world's final-evaluation seeds (the "
+              "games should be identical, length and return compared game by game, since the simulators agree "
               "step by step) and once with other seeds (an independent sample: the gap there is sampling "
               "noise, tested with a two-proportion z-test on the method's wins and a bootstrap 95% interval of "
               "the mean-return difference).", "",
-              "| seed | opponent p | rules: method win rate | reference, same seeds | identical games | "
-              "reference, other seeds | win-rate gap (points) | z-test p | return rules / reference | return gap "
+              "| seed | opponent p | spec: method win rate | reference, same seeds | identical games | "
+              "reference, other seeds | win-rate gap (points) | z-test p | return spec / reference | return gap "
               "[95% bootstrap CI] | relative |", "|---|---|---|---|---|---|---|---|---|---|---|"]
         for ar in result.arms:
             for s in ar.seeds:
@@ -360,7 +361,12 @@ def experiment_sections(result: ExperimentResult) -> list[str]:
               "saved queries (`tracelab sql RUN --query NAME`) read them: `hid_behind_mountain` (timesteps red "
               "ended next to a mountain between it and a blue agent), `learner_events` (red shot, unsafe moves, "
               "invalid actions = shooting with no ammo), `actions_per_win`, `steps_before_loss` (red's last "
-              "actions in lost games); `shoot share` = red's shooting actions among its actions (from `steps`).",
+              "actions in lost games); `shoot share` = red's shooting actions among its actions (from `steps`). "
+              "The traces are the spec world's (rules/gridworld/war.toml): `hid_behind_mountain` reads a cell as "
+              "its number y * width + x, the spec's board names it c{row}_{col}, so its columns read `-` (not "
+              "measured) until the query reads the board's names; and `tracelab sql RUN --query NAME` refuses "
+              "the queries that need a board on a spec run (its board is in its config, not the run's `board`): "
+              "the figures here come through the library (experiments/runner.py, run_query).",
               "", "| reward setting | seed | games | hidden steps / game | games with hiding | red shot / game | "
               "invalid (no ammo) / game | unsafe / game | shoot share | wins | actions per win | losses | last "
               "actions before a loss | method win rate (500-game eval) |",
@@ -374,9 +380,9 @@ def experiment_sections(result: ExperimentResult) -> list[str]:
                          f"{num(f.get('invalid_per_game'))} | {num(f.get('unsafe_per_game'))} | "
                          f"{pct(f.get('shoot_share'))} | {f.get('wins', 0)} | {num(f.get('actions_per_win'))} | "
                          f"{f.get('losses', 0)} | {last} | {pct(s.final[0.3].method_win_rate)} |")
-        L += ["", "Rewards: " + "; ".join(f"{ar.arm.label}: " + ", ".join(f"{k} = {v:g}" for k, v in
-                                                                         ar.arm.rewards.items())
-                                          for ar in result.arms) + " (the rest the method's).", ""]
+        L += ["", "Rewards, the spec's `[reward]` params (`--env-arg`, docs/worlds.md): " + "; ".join(
+            f"{ar.arm.label}: " + " ".join(f"`--env-arg {k}={v:g}`" for k, v in ar.arm.rewards.items())
+            for ar in result.arms) + " (the rest war.toml's defaults, the method's).", ""]
     return L
 
 
@@ -413,7 +419,7 @@ def make_plots(result: ExperimentResult, fig_dir: Path) -> list[tuple[str, Path]
             groups.append(f"{textwrap.fill(ar.arm.label, 12)}\nseed {s.seed}" if len(result.arms) > 1
                           else f"seed {s.seed}")
             for p in ps:
-                r: EvalResult = s.final[p]
+                r: EvalFigures = s.final[p]
                 lo, hi = wilson(r.method_wins, r.games)
                 by_p[p_label(result, p)].append((r.method_win_rate, lo, hi))
     ref = result.arms[0].arm.published if len(result.arms) == 1 else None
@@ -424,19 +430,19 @@ def make_plots(result: ExperimentResult, fig_dir: Path) -> list[tuple[str, Path]
                                   title=f"Final evaluation, {result.budget.eval_games} games each, {n} "
                                         f"seed{'s' if n != 1 else ''} per setting")))
     if result.experiment.name == "portability":
-        groups, series_ = [], {"rules backend": [], "reference, same seeds": [], "reference, other seeds": []}
+        groups, series_ = [], {"spec world": [], "reference, same seeds": [], "reference, other seeds": []}
         for ar in result.arms:
             for s in ar.seeds:
                 for key, d in (ar.extra.get(s.seed) or {}).items():
                     groups.append(f"seed {s.seed}\np = {key[2:]}")
-                    for name, k in (("rules backend", "rules"), ("reference, same seeds", "reference_same_seeds"),
+                    for name, k in (("spec world", "rules"), ("reference, same seeds", "reference_same_seeds"),
                                     ("reference, other seeds", "reference_other_seeds")):
                         r = d[k]
                         series_[name].append((r["method_win_rate"], *wilson(r["method_wins"], r["games"])))
         out.append(("Portability: the same policies in both simulators (95% Wilson intervals)",
                     plots.paired_bars(fig_dir / "portability.png", groups, series_, small=small,
                                       ylabel="win rate, method's counting (%)",
-                                      title=f"Same policies, rule-driven vs hand-written simulator, "
+                                      title=f"Same policies, spec world vs hand-written simulator, "
                                             f"{result.budget.eval_games} games each, {n} seed{'s' if n != 1 else ''}")))
     return out
 

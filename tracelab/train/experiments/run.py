@@ -8,20 +8,21 @@ import threading
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
-from tracelab.game.scenario import ACTION_NAMES
 from tracelab.provenance import machine_summary, source_commit
 from tracelab.train.config import TrainConfig
-from tracelab.train.evaluate import EvalResult, evaluate
 from tracelab.train.experiments.definitions import Arm, Budget, Experiment
 from tracelab.train.experiments.runner import (
     CLOSE_WAIT_S,
     WORLD_P,
+    EvalFigures,
     SeedRun,
+    against_p,
     final_eval_seed,
+    gridwar_source,
     p_suffix,
     run_query,
     run_sql,
@@ -29,7 +30,10 @@ from tracelab.train.experiments.runner import (
     train_seed,
 )
 from tracelab.train.experiments.stats import bootstrap_diff_ci, two_proportion_test
-from tracelab.train.env_policy import load_policy
+from tracelab.train.env_policy import load_env_policy
+
+if TYPE_CHECKING:
+    from tracelab.envs.declared.env_source import EnvSource
 
 RESULT_POLL_S = 0.2  # how often the experiment looks for a worker's finished training
 TRAIN_P, EVAL_PS = 0.7, (0.3, 0.7)  # the method's code: trained against p = 0.7, evaluated against 0.3
@@ -81,19 +85,12 @@ def train_config(exp: Experiment, arm: Arm, budget: Budget, seed: int) -> TrainC
                        eval_p=EVAL_PS[0], **common)
 
 
-# The experiments that still train on RuleSim's Trainer, and why: their own measurements read RuleSim's
-# policies and traced games (the spec path trains teams, slow agents and scripted exploration since issue 38)
-RULESIM = {"portability": "it compares RuleSim's policies in RuleSim and RefSim",
-           "reward-shaping": "its saved queries read RuleSim's traced games"}
-
-
 def trainer_note(exp: Experiment) -> str:
-    """Which trainer the experiment's GridWar arms go through, as its log and report say it."""
+    """Which trainer the experiment's arms go through, as its log and report say it: every one trains
+    through a spec (issue 38: RuleSim's Trainer is no longer used)."""
     if is_world(exp):
         return "trains through the world's spec (EnvTrainer)"
-    why = RULESIM.get(exp.name)
-    return f"trains on RuleSim's Trainer ({why})" if why else \
-        "trains GridWar through its spec (rules/gridworld/war*.toml, EnvTrainer)"
+    return "trains GridWar through its spec (rules/gridworld/war*.toml, EnvTrainer)"
 
 
 def eval_ps(exp: Experiment) -> tuple[float, ...]:
@@ -122,8 +119,7 @@ def run_experiment(exp: Experiment, budget: Budget, out_dir: Path, command: str,
     def task_args(ar: ArmResult, seed: int) -> tuple:
         cfg = train_config(exp, ar.arm, budget, seed)
         return (cfg if is_world(exp) else replace(cfg, kernel=kernel), ar.arm.build_world(),
-                out_dir / f"{ar.arm.slug}-seed{seed}", command, eval_ps(exp), budget.eval_games, (), None,
-                exp.name in RULESIM)
+                out_dir / f"{ar.arm.slug}-seed{seed}", command, eval_ps(exp), budget.eval_games)
 
     say(f"[{exp.name}] {trainer_note(exp)}")
 
@@ -146,10 +142,12 @@ def run_experiment(exp: Experiment, budget: Budget, out_dir: Path, command: str,
             + ", ".join(f"method's win rate{'' if is_world(exp) else f' vs p={p:g}'}: "
                         f"{100 * r.method_win_rate:.1f}%" for p, r in sr.final.items()))
         if exp.name == "portability":
-            scenario = ar.arm.build_scenario()
-            ar.extra[seed] = portability(sr, scenario, budget.eval_games, say)
+            ar.extra[seed] = portability(sr, ar.arm.build_scenario(), train_config(exp, ar.arm, budget, seed),
+                                         budget.eval_games, say)
         elif exp.name == "reward-shaping":
-            ar.extra[seed] = shaping_traces(sr, ar.arm.build_scenario(), out_dir, 6 if quick else 100, command, say)
+            ar.extra[seed] = shaping_traces(sr, gridwar_source(train_config(exp, ar.arm, budget, seed),
+                                                               ar.arm.build_scenario()),
+                                            out_dir, 6 if quick else 100, command, say)
     result.wall_s = time.perf_counter() - t0
     result.machine = machine()
     (out_dir / f"{exp.name}.json").write_text(json.dumps(summary_json(result), indent=1))
@@ -193,21 +191,22 @@ def _terminate(pool: Any) -> None:
 
 
 # ---- portability: the same policy in both simulators ----
-def portability(sr: SeedRun, scenario: Any, games: int, say: Say) -> dict[str, Any]:
-    """Per opponent p: the policy's games in the reference simulator with the rules run's seeds (game by
-    game identical if the simulators agree) and with other seeds (an independent sample: the gap and a
-    test of it)."""
-    policy = load_policy(sr.policy_dir, scenario)
+def portability(sr: SeedRun, scenario: Any, cfg: TrainConfig, games: int, say: Say) -> dict[str, Any]:
+    """Per opponent p: the spec policy's games in the reference simulator (RefSim) with the spec world's
+    final-evaluation seeds (game by game identical if the simulators agree) and with other seeds (an
+    independent sample: the gap and a test of it)."""
+    # deferred: RefSim's numba kernels, which a report written again does not need
+    from tracelab.train.experiments.refsim_games import refsim_games
+
+    policy = load_env_policy(sr.policy_dir, gridwar_source(cfg, scenario))[0]
     out: dict[str, Any] = {}
     for p in EVAL_PS:
         rules = sr.final[p]
-        same = evaluate(policy, scenario, games=games, backend="reference", seed=final_eval_seed(sr.seed, p),
-                        opponent_p=p, stack_previous=policy.stack_previous)
-        other = evaluate(policy, scenario, games=games, backend="reference",
-                         seed=final_eval_seed(sr.seed, p) + 1, opponent_p=p, stack_previous=policy.stack_previous)
-        identical = sum(a == b for a, b in zip(rules.records, same.records))
+        same, other = (EvalFigures.of(refsim_games(policy, scenario, games, final_eval_seed(sr.seed, p) + k,
+                                                   cfg.eval_envs, p, cfg.non_markov)) for k in (0, 1))
+        identical = sum(a == b for a, b in zip(zip(rules.returns, rules.lengths), zip(same.returns, same.lengths)))
         z, pval = two_proportion_test(rules.method_wins, rules.games, other.method_wins, other.games)
-        lo, hi = bootstrap_diff_ci([g.reward for g in rules.records], [g.reward for g in other.records])
+        lo, hi = bootstrap_diff_ci(rules.returns, other.returns)
         rel = (abs(rules.mean_return - other.mean_return) / abs(other.mean_return)
                if other.mean_return else float("nan"))
         out[p_suffix(p)] = {
@@ -222,40 +221,51 @@ def portability(sr: SeedRun, scenario: Any, games: int, say: Say) -> dict[str, A
 
 
 # ---- reward shaping: the saved queries on traced evaluation games ----
-def shaping_traces(sr: SeedRun, scenario: Any, out_dir: Path, games: int, command: str,
-                   say: Say) -> dict[str, Any]:
-    """Trace `games` evaluation games of the final policy (against p = 0.3) into their own run and read
-    the saved queries' figures off it."""
-    policy = load_policy(sr.policy_dir, scenario)
+def shaping_traces(sr: SeedRun, source: EnvSource, out_dir: Path, games: int, command: str, say: Say) -> dict[str, Any]:
+    """Trace `games` evaluation games of the final policy (against p = 0.3) in its spec world (`source`,
+    the arm's GridWar id and params) into their own run and read the saved queries' figures off it."""
+    policy = load_env_policy(sr.policy_dir, source)[0]
     trace_dir = out_dir / f"{sr.run_dir.name}-traces"
-    traced_games(policy, scenario, trace_dir, games=games, backend="rules", seed=final_eval_seed(sr.seed, 0.3) + 2,
-                 opponent_p=EVAL_PS[0], command=f"tracelab eval (from: {command})",
+    traced_games(policy, against_p(source, EVAL_PS[0]), trace_dir, games=games,
+                 seed=final_eval_seed(sr.seed, EVAL_PS[0]) + 2, command=f"tracelab eval (from: {command})",
                  about={"policy": str(sr.policy_dir)})
-    figures = query_figures(trace_dir)
+    figures = query_figures(trace_dir, action_names(source))
     figures["trace_run"] = str(trace_dir)
     say(f"  traced {games} games into {trace_dir}: " + ", ".join(
         f"{k} {v:.2f}" for k, v in figures.items() if isinstance(v, float)))
     return figures
 
 
-def query_figures(run: Path) -> dict[str, Any]:
-    """Per-game figures of the four saved queries on a run of traced evaluation games."""
+def action_names(source: EnvSource) -> list[str]:
+    """The spec's action names, by action id (what the traces' steps.action holds)."""
+    from tracelab.envs.declared.play import load_declared
+    return list(load_declared(source).action_names)
+
+
+def query_figures(run: Path, actions: list[str]) -> dict[str, Any]:
+    """Per-game figures of the four saved queries on a run of traced evaluation games of a world whose
+    action ids name `actions`."""
     hid = run_query(run, "hid_behind_mountain")
     ev = run_query(run, "learner_events")
     apw = run_query(run, "actions_per_win", learner="red-agent-%")
     before_loss = run_query(run, "steps_before_loss", learner="red-agent-%")
     games = max(1, len(ev))
-    shoot_ids = ", ".join(str(i) for i, name in enumerate(ACTION_NAMES) if name.startswith("shoot"))
+    shoot_ids = ", ".join(str(i) for i, name in enumerate(actions) if name.startswith("shoot")) or "NULL"
     shots = run_sql(run, f"SELECT count(*) FILTER (action IN ({shoot_ids})) AS shots, count(*) AS actions "
                          "FROM steps WHERE agent LIKE 'red-agent-%'")[0]
     last_actions: dict[str, int] = {}
     for r in before_loss:  # steps.action is the spec's action id
-        name = ACTION_NAMES[r["action"]] if 0 <= r["action"] < len(ACTION_NAMES) else str(r["action"])
+        name = actions[r["action"]] if 0 <= r["action"] < len(actions) else str(r["action"])
         last_actions[name] = last_actions.get(name, 0) + 1
+    # hid_behind_mountain reads a cell as its number y * width + x (RuleSim's graph); the spec's board names
+    # it c{row}_{col}, which the query reads as no cell: its figures are left out (None), not a false 0
+    numbered = run_sql(run, "SELECT count(*) AS n FROM changes c JOIN atoms a ON a.atom = c.atom_id WHERE "
+                            "c.label = 'atLoc' AND TRY_CAST(a.arg1 AS INTEGER) IS NOT NULL")[0]["n"]
     return {
         "games": len(ev),
-        "hidden_steps_per_game": float(np.mean([r["hidden_steps"] for r in hid])) if hid else 0.0,
-        "games_with_hiding": float(sum(r["hidden_steps"] > 0 for r in hid) / games),
+        "hidden_steps_per_game": (float(np.mean([r["hidden_steps"] for r in hid])) if hid else 0.0) if numbered
+        else None,
+        "games_with_hiding": float(sum(r["hidden_steps"] > 0 for r in hid) / games) if numbered else None,
         "shot_per_game": float(sum(r["shot"] for r in ev) / games),
         "unsafe_per_game": float(sum(r["unsafe"] for r in ev) / games),
         "invalid_per_game": float(sum(r["invalid"] for r in ev) / games),
@@ -290,12 +300,12 @@ def load_result(exp: Experiment, out_dir: Path) -> ExperimentResult:
         d = json.loads(path.read_text())
     except (OSError, ValueError) as e:
         raise ValueError(f"{path}: no result of a finished experiment here ({e})") from None
-    fields_ = set(EvalResult.__dataclass_fields__) - {"records"}
+    fields_ = set(EvalFigures.__dataclass_fields__) - {"returns", "lengths"}
     result = ExperimentResult(exp, Budget(**d["budget"]), d["quick"], out_dir, [ArmResult(a) for a in exp.arms],
                               wall_s=d["wall_s"], command=d.get("command", ""), commit=d.get("commit", ""),
                               machine=d.get("machine", ""))
-    def evals(saved: dict[str, Any]) -> dict[float, EvalResult]:
-        return {float(k[2:]): EvalResult(**{f: v for f, v in r.items() if f in fields_}) for k, r in saved.items()}
+    def evals(saved: dict[str, Any]) -> dict[float, EvalFigures]:
+        return {float(k[2:]): EvalFigures(**{f: v for f, v in r.items() if f in fields_}) for k, r in saved.items()}
 
     for ar, saved in zip(result.arms, d["arms"]):
         for s in saved["seeds"]:
@@ -316,4 +326,4 @@ def scaled(budget: Budget, seeds: int | None, steps: int | None, eval_games: int
                               if v is not None})
 
 
-__all__ = ["run_experiment", "scaled", "ExperimentResult", "EvalResult"]
+__all__ = ["run_experiment", "scaled", "ExperimentResult", "EvalFigures"]

@@ -1,33 +1,94 @@
-"""Training and evaluating for the experiments, on the training API (Trainer, evaluate): one run per
-seed, with the final policy evaluated against each opponent setting and those figures written into the
-run's own `metrics` (suffix `@p0.3`, `@p0.7`, docs/training.md), so `tracelab sql` sees them."""
+"""Training and evaluating for the experiments, through the spec path (EnvTrainer on GridWar's spec,
+rules/gridworld/war*.toml, or on a world of its own): one run per seed, with the final policy evaluated
+against each opponent setting and those figures written into the run's own `metrics` (suffix `@p0.3`,
+`@p0.7`, docs/training.md), so `tracelab sql` sees them."""
 from __future__ import annotations
 
+import itertools
 import shlex
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
-from tracelab.game.facts import GAME_RULES
-from tracelab.game.scenario import BOARD, Scenario
+from tracelab.game.scenario import Scenario
 from tracelab.store import TraceWriter
 from tracelab.store.queries import get_query
 from tracelab.store.reader import fetch_arrow, open_run, query_readonly, retrying
 from tracelab.train.config import TrainConfig
-from tracelab.train.evaluate import EvalResult, evaluate, evaluate_into
-from tracelab.train.env_policy import BEST_POLICY_DIR, Policy, load_policy
+from tracelab.train.env_policy import BEST_POLICY_DIR
+from tracelab.train.experiments.stats import spread, wilson
 
 if TYPE_CHECKING:
     from tracelab.envs.declared.env_source import EnvSource
-    from tracelab.train.env_policy import EnvEvalResult
-    from tracelab.train.loop import Trainer
+    from tracelab.train.env_policy import EnvEvalResult, EnvPolicy
+    from tracelab.train.env_trainer import EnvTrainer
     from tracelab.train.tensorboard import MetricSink
 
 WORLD_P = 0.0  # a world other than GridWar has no opponent setting: its final evaluation's key
 FINAL_EVAL_ROUND = 1_000_000  # seeds of the final evaluations: apart from the training's rounds
+METHOD_CUT = 200  # the method's evaluation cut games at 200 steps: GridWar's spec's step limit
+
+
+@dataclass
+class EvalFigures:
+    """An evaluation's games as the reports read them (an env_policy.EnvEvalResult of a world that declares
+    its outcomes, counted as the method counts: a game cut at the world's step limit a loss, draws non-wins).
+    Its fields but the per-game lists are those of the reports' JSON (load_result reads them back)."""
+    games: int = 0
+    wins: int = 0
+    losses: int = 0
+    draws: int = 0
+    truncated: int = 0
+    mean_return: float = 0.0
+    actions_per_win: float | None = None
+    method_wins: int = 0
+    method_losses: int = 0       # losses, plus games cut at the step limit
+    method_non_wins: int = 0     # draws
+    method_actions_per_win: float | None = None
+    # per game, in the order the games ended (not in the JSON): portability compares two evaluations by them
+    returns: list[float] = field(default_factory=list, repr=False)
+    lengths: list[int] = field(default_factory=list, repr=False)
+
+    @classmethod
+    def of(cls, r: EnvEvalResult) -> "EvalFigures":
+        wins = r.wins or 0  # none declared: no wins
+        apw = float(np.mean(r.win_steps)) if r.win_steps else None
+        return cls(games=r.games, wins=wins, losses=r.losses, draws=r.draws, truncated=r.truncated,
+                   mean_return=r.mean_return, actions_per_win=apw, method_wins=wins,
+                   method_losses=r.losses + r.truncated, method_non_wins=r.draws, method_actions_per_win=apw,
+                   returns=list(r.returns), lengths=list(r.steps))
+
+    @property
+    def win_rate(self) -> float:
+        return self.wins / self.games if self.games else 0.0
+
+    @property
+    def method_win_rate(self) -> float:
+        return self.method_wins / self.games if self.games else 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON of a report: the counts, both win rates and their 95% intervals (Wilson; a t-interval of
+        the mean return with two games or more)."""
+        d = {k: v for k, v in asdict(self).items() if k not in ("returns", "lengths")}
+        d.update(win_rate=self.win_rate, method_win_rate=self.method_win_rate,
+                 win_rate_ci95=list(wilson(self.wins, self.games)),
+                 method_win_rate_ci95=list(wilson(self.method_wins, self.games)))
+        if len(self.returns) > 1:
+            s = spread(self.returns)
+            d["mean_return_ci95"] = [s["ci_low"], s["ci_high"]]
+        return d
+
+    def metrics(self, suffix: str = "", prefix: str = "eval/") -> dict[str, float]:
+        """The run's `eval/...` metric rows (docs/training.md); `eval_best/` for the kept best policy."""
+        m = {"games": self.games, "wins": self.wins, "losses": self.losses, "draws": self.draws,
+             "truncated": self.truncated, "win_rate": self.win_rate, "mean_return": self.mean_return,
+             "method_win_rate": self.method_win_rate}
+        if self.actions_per_win is not None:
+            m["actions_per_win"] = self.actions_per_win
+        return {f"{prefix}{k}{suffix}": float(v) for k, v in m.items()}
 
 
 @dataclass
@@ -37,9 +98,9 @@ class SeedRun:
     run_dir: Path
     steps: int
     status: str
-    final: dict[float, EvalResult] = field(default_factory=dict)
+    final: dict[float, EvalFigures] = field(default_factory=dict)
     policy_dir: Path | None = None
-    best: dict[float, EvalResult] = field(default_factory=dict)  # the kept best policy's (RUN/policy-best)
+    best: dict[float, EvalFigures] = field(default_factory=dict)  # the kept best policy's (RUN/policy-best)
     best_step: int | None = None                                 # the step it was saved at
     wall_s: float = 0.0
 
@@ -57,19 +118,18 @@ def final_eval_seed(seed: int, p: float) -> int:
 
 def train_seed(cfg: TrainConfig, scenario: Scenario | EnvSource, run_dir: Path, command: str,
                eval_ps: tuple[float, ...], eval_games: int, metric_sinks: Sequence[MetricSink] = (),
-               started: Callable[[Trainer], None] | None = None, rulesim: bool = False) -> SeedRun:
+               started: Callable[[EnvTrainer], None] | None = None) -> SeedRun:
     """Train `cfg` into a new run at `run_dir`, then evaluate the final policy `eval_games` games
     against each opponent p in `eval_ps`, writing `eval/...@pP` metrics at the last step. `metric_sinks`
-    receive the training's metrics besides the run; `started` is called with the Trainer before it trains
-    (a sweep's trial stops it through it: Trainer.stop_requested). `scenario` an EnvSource: a world other
-    than GridWar, trained with train --env's trainer (_world_parts); a GridWar scenario trains through its
-    spec as `train --scenario` does (_gridwar_parts), or with `rulesim` through RuleSim's Trainer
-    (_rulesim_parts: what the spec path does not train yet, experiments/run.py's RULESIM)."""
+    receive the training's metrics besides the run; `started` is called with the trainer before it trains
+    (a sweep's trial stops it through it: stop_requested). `scenario` an EnvSource: a world other than
+    GridWar, trained with train --env's trainer (_world_parts); a GridWar scenario trains through its spec
+    as `train --scenario` does (_gridwar_parts)."""
     # deferred: torch and the trainers, which reading results and queries does not need
     import torch
 
     from tracelab.envs.declared.env_source import EnvSource
-    parts = _world_parts if isinstance(scenario, EnvSource) else _rulesim_parts if rulesim else _gridwar_parts
+    parts = _world_parts if isinstance(scenario, EnvSource) else _gridwar_parts
     meta, make_trainer, final_evaluation = parts(cfg, scenario, command, eval_ps, eval_games)
     writer = TraceWriter.open(run_dir, meta)
     torch.set_num_threads(cfg.threads)
@@ -100,7 +160,20 @@ def train_seed(cfg: TrainConfig, scenario: Scenario | EnvSource, run_dir: Path, 
         writer.close(status=status)
 
 
-FinalEvaluation = Callable[[Any, Any], dict[float, EvalResult]]  # (trainer, policy or its folder) -> per p
+FinalEvaluation = Callable[[Any, Any], dict[float, EvalFigures]]  # (trainer, policy or its folder) -> per p
+
+
+def gridwar_source(cfg: TrainConfig, scenario: Scenario) -> EnvSource:
+    """The GridWar spec id and params `scenario` trains on (env_trainer.gridwar_sources: its --env-arg
+    values, the scenario's rewards among them)."""
+    from tracelab.train.env_trainer import gridwar_sources
+    return gridwar_sources(cfg, scenario)[0]
+
+
+def against_p(source: EnvSource, p: float) -> EnvSource:
+    """GridWar's `source` with the scripted opponent at p (the spec's p_toward)."""
+    from tracelab.envs.declared.env_source import EnvSource
+    return EnvSource(source.name, {**source.kwargs, "p_toward": p})
 
 
 def _gridwar_parts(cfg: TrainConfig, scenario: Scenario, command: str, eval_ps: tuple[float, ...],
@@ -108,7 +181,6 @@ def _gridwar_parts(cfg: TrainConfig, scenario: Scenario, command: str, eval_ps: 
     """GridWar through its spec, as `train --scenario` trains it: the run meta, EnvTrainer on the scenario's
     GridWar id (evaluating at --eval-p), and the final evaluation against each opponent p of `eval_ps`
     (the same env with that p_toward), counted by the spec's [end] win / loss."""
-    from tracelab.envs.declared.env_source import EnvSource
     from tracelab.train.env_policy import evaluate_env, load_env_policy
     from tracelab.train.env_trainer import EnvTrainer, env_run_meta, gridwar_sources
 
@@ -119,31 +191,13 @@ def _gridwar_parts(cfg: TrainConfig, scenario: Scenario, command: str, eval_ps: 
     def make_trainer(cfg: TrainConfig, _: Scenario, *args: Any, **kw: Any) -> EnvTrainer:
         return EnvTrainer(cfg, source, *args, eval_source=eval_source, **kw)
 
-    def final_evaluation(trainer: Any, policy: Any) -> dict[float, EvalResult]:
+    def final_evaluation(trainer: Any, policy: Any) -> dict[float, EvalFigures]:
         if isinstance(policy, Path):
             policy = load_env_policy(policy, source)[0]
-        return {p: as_eval_result(evaluate_env(policy, EnvSource(source.name, {**source.kwargs, "p_toward": p}),
-                                               eval_games, final_eval_seed(cfg.seed, p), cfg.eval_envs))
+        return {p: EvalFigures.of(evaluate_env(policy, against_p(source, p), eval_games,
+                                               final_eval_seed(cfg.seed, p), cfg.eval_envs))
                 for p in eval_ps}
     return meta, make_trainer, final_evaluation
-
-
-def _rulesim_parts(cfg: TrainConfig, scenario: Scenario, command: str, eval_ps: tuple[float, ...],
-                   eval_games: int) -> tuple[dict[str, Any], Any, FinalEvaluation]:
-    """GridWar on RuleSim: the run meta, its Trainer, and the final evaluation against each opponent p of
-    `eval_ps`."""
-    from tracelab.train.loop import Trainer
-
-    meta = {"command": f"tracelab train (from: {command})", "scenario": scenario.name, "seed": cfg.seed,
-            "rule_files": [str(GAME_RULES)], "board": BOARD,
-            "config": {**cfg.to_dict(), "scenario_toml": scenario.to_toml(), "resumed_from": None}}
-
-    def final_evaluation(trainer: Any, policy: Any) -> dict[float, EvalResult]:
-        if isinstance(policy, Path):
-            policy = load_policy(policy, scenario)
-        return {p: evaluate(policy, scenario, games=eval_games, backend=cfg.backend, seed=final_eval_seed(cfg.seed, p),
-                            opponent_p=p, stack_previous=trainer.stack, envs=cfg.eval_envs) for p in eval_ps}
-    return meta, Trainer, final_evaluation
 
 
 def _world_parts(cfg: TrainConfig, source: EnvSource, command: str, eval_ps: tuple[float, ...],
@@ -153,34 +207,37 @@ def _world_parts(cfg: TrainConfig, source: EnvSource, command: str, eval_ps: tup
     from tracelab.train.env_policy import evaluate_env, load_env_policy
     from tracelab.train.env_trainer import EnvTrainer, env_run_meta
 
-    def final_evaluation(trainer: Any, policy: Any) -> dict[float, EvalResult]:
+    def final_evaluation(trainer: Any, policy: Any) -> dict[float, EvalFigures]:
         if isinstance(policy, Path):
             policy = load_env_policy(policy, source)[0]
-        return {WORLD_P: as_eval_result(evaluate_env(policy, source, eval_games, final_eval_seed(cfg.seed, WORLD_P),
+        return {WORLD_P: EvalFigures.of(evaluate_env(policy, source, eval_games, final_eval_seed(cfg.seed, WORLD_P),
                                                      cfg.eval_envs))}
     return env_run_meta(cfg, source, f"tracelab train --env (from: {command})"), EnvTrainer, final_evaluation
 
 
-def as_eval_result(r: EnvEvalResult) -> EvalResult:
-    """An evaluation of any world as GridWar's EvalResult, which the reports read: its declared outcomes
-    (none declared: no wins); the method's counting is the world's own (a cut game lost, draws non-wins)."""
-    wins = r.wins or 0
-    apw = float(np.mean(r.win_steps)) if r.win_steps else None
-    return EvalResult(games=r.games, wins=wins, losses=r.losses, draws=r.draws, truncated=r.truncated,
-                      mean_return=r.mean_return, actions_per_win=apw, method_wins=wins,
-                      method_losses=r.losses + r.truncated, method_non_wins=r.draws, method_actions_per_win=apw)
+def traced_games(policy: EnvPolicy, source: EnvSource, run_dir: Path, *, games: int, seed: int, command: str,
+                 about: dict[str, Any]) -> EvalFigures:
+    """`games` greedy games of `policy` on the declared world `source`, every one traced in full into a new
+    run (as a training's traced evaluation games are, external_eval.DeclaredEvaluator): the saved queries
+    then read only these games. Game k is seeded from `seed` (eval_seed(seed, 0) + 1 + k)."""
+    from tracelab.envs.declared.play import load_declared
+    from tracelab.train.external_eval import DeclaredEvaluator, DeclaredTarget, EvalSettings
 
-
-def traced_games(policy: Policy, scenario: Scenario, run_dir: Path, *, games: int, backend: str, seed: int,
-                 opponent_p: float, command: str, about: dict[str, Any]) -> EvalResult:
-    """`games` evaluation games of `policy`, every one traced in full into a new run (as `tracelab eval
-    --run` does): the saved queries then read only evaluation games."""
-    meta = {"command": command, "scenario": scenario.name, "seed": seed, "rule_files": [str(GAME_RULES)],
-            "board": BOARD,
-            "config": {**about, "games": games, "backend": backend, "opponent_p": opponent_p,
-                       "scenario_toml": scenario.to_toml()}}
-    return evaluate_into(TraceWriter.open(run_dir, meta), policy, scenario, games=games, backend=backend,
-                         seed=seed, opponent_p=opponent_p, metrics_suffix=p_suffix(opponent_p))
+    described = DeclaredTarget(source, load_declared(source)).run_meta()
+    meta = {"command": command, "seed": seed, **described,
+            "config": {**about, "games": games, **described["config"]}}
+    writer = TraceWriter.open(run_dir, meta)
+    status = "failed"
+    evaluator = DeclaredEvaluator(source, writer, itertools.count().__next__,
+                                  EvalSettings(every=0, games=games, traced=games, envs=1, seed=seed))
+    try:
+        result = EvalFigures.of(evaluator.play(policy, 0, 0))
+        writer.write_metrics(0, result.metrics(p_suffix(source.kwargs.get("p_toward", WORLD_P))))
+        status = "finished"
+        return result
+    finally:
+        evaluator.close()
+        writer.close(status=status)
 
 
 def run_query(run_dir: Path, name: str, **params: str) -> list[dict[str, Any]]:
