@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
@@ -260,12 +260,12 @@ def check_live_run(p: Path) -> str:
 
 
 def create_live_raw_views(con: duckdb.DuckDBPyConnection, run_dir: Path, raw: str = "raw",
-                          prefix: str = "") -> None:
+                          prefix: str = "", tables: Sequence[str] = TABLES) -> None:
     """The views `raw`.<table> over the parts the run's manifest lists (read from the DuckDB variables
-    LiveParts keeps current: it must have run once)."""
+    LiveParts keeps current: it must have run once); `tables`: those of the part tables only."""
     from tracelab.store.parts import read_manifest
     listed = read_manifest(run_dir)
-    for t in TABLES:
+    for t in tables:
         if not listed[t]:  # a table added after the run was written (schema.ADDED_TABLES)
             con.execute(f"CREATE VIEW {raw}.{t} AS {empty_sql(t)}")
             continue
@@ -316,18 +316,22 @@ def attach_sealed_file(con: duckdb.DuckDBPyConnection, sealed: Path, database: s
 
 
 def create_sealed_raw_views(con: duckdb.DuckDBPyConnection, sealed: Path, database: str, raw: str,
-                            catalog: SealedCatalog | None = None) -> None:
-    """Check the attached file's catalog (nothing of it is read before; `catalog`: its entries read with
-    other files', sealed_catalog.read_sealed_catalogs), then the views `raw`.<table> over its stored
-    tables (with the added columns and tables an older run lacks), and check raw.run."""
+                            catalog: SealedCatalog | None = None,
+                            tables: Sequence[str] = tuple(STORED_COLUMNS)) -> None:
+    """Check the attached file's whole catalog (nothing of it is read before; `catalog`: its entries read
+    with other files', sealed_catalog.read_sealed_catalogs), then the views `raw`.<table> over its stored
+    tables (with the added columns and tables an older run lacks), all in one statement (`tables`: those
+    only; raw.run always), and check raw.run."""
     columns = check_sealed_catalog(con, database, sealed, catalog)
-    for t, names in STORED_COLUMNS.items():
+    views = []
+    for t in dict.fromkeys([*tables, "run"]):
         if t in ADDED_TABLES and not columns[t]:  # a table added after the run was sealed
-            con.execute(f"CREATE VIEW {raw}.{t} AS {empty_sql(t)}")
+            views.append(f"CREATE VIEW {raw}.{t} AS {empty_sql(t)}")
             continue
         extra = _defaults_for_missing(t, columns[t])
-        cols = ", ".join([f'"{c}"' for c in names if c in columns[t]] + ([extra] if extra else []))
-        con.execute(f"CREATE VIEW {raw}.{t} AS SELECT {cols} FROM {database}.raw.{t}")
+        cols = ", ".join([f'"{c}"' for c in STORED_COLUMNS[t] if c in columns[t]] + ([extra] if extra else []))
+        views.append(f"CREATE VIEW {raw}.{t} AS SELECT {cols} FROM {database}.raw.{t}")
+    con.execute(";\n".join(views))
     _check_run_row(con, sealed, raw)
 
 
