@@ -32,6 +32,7 @@ import duckdb
 from tracelab.engine.duckdb_limits import exact_file
 from tracelab.engine.safe_files import JSON_CAP, check_regular, read_bytes
 from tracelab.store import layout
+from tracelab.store.checked_files import file_identity, same_file
 from tracelab.store.meta import current_meta, meta_row
 from tracelab.store.sandbox import (
     check_readonly,
@@ -300,29 +301,35 @@ def _attach_sealed(con: duckdb.DuckDBPyConnection, sealed: Path) -> None:
     """Attach the sealed file read-only (before external access is switched off: ATTACH needs the file),
     check its catalog before reading anything (tracelab.store.sealed_catalog), then map raw.<table> onto
     its stored tables."""
-    attach_sealed_file(con, sealed, "store")
+    identity = attach_sealed_file(con, sealed, "store")
     lock_down(con)
     con.execute("CREATE SCHEMA raw")
-    create_sealed_raw_views(con, sealed, "store", "raw")
+    create_sealed_raw_views(con, sealed, "store", "raw", identity=identity)
 
 
-def attach_sealed_file(con: duckdb.DuckDBPyConnection, sealed: Path, database: str) -> None:
-    """ATTACH the sealed file READ_ONLY as `database`; refused if a write-ahead log lies beside it."""
-    wal = Path(f"{sealed.resolve()}.wal")
+def attach_sealed_file(con: duckdb.DuckDBPyConnection, sealed: Path, database: str) -> os.stat_result | None:
+    """ATTACH the sealed file READ_ONLY as `database`; refused if a write-ahead log lies beside it.
+    Returns the identity of the file attached (checked_files: the same before and after), or None."""
+    path = sealed.resolve()
+    wal = Path(f"{path}.wal")
     if os.path.lexists(wal):  # ATTACH replays a write-ahead log, running the SQL in it (ALTER ... USING)
         raise SealedFileRefused(f"{str(wal)!r}: a sealed run has no write-ahead log, and tracelab does not "
                                 "replay one it brings along (it holds SQL that would run on opening)")
-    con.execute(f"ATTACH {_sql_str(sealed.resolve())} AS {database} (READ_ONLY)")
+    before = file_identity(path)
+    con.execute(f"ATTACH {_sql_str(path)} AS {database} (READ_ONLY)")
+    after = file_identity(path)
+    return after if same_file(before, after) else None
 
 
 def create_sealed_raw_views(con: duckdb.DuckDBPyConnection, sealed: Path, database: str, raw: str,
                             catalog: SealedCatalog | None = None,
-                            tables: Sequence[str] = tuple(STORED_COLUMNS)) -> None:
+                            tables: Sequence[str] = tuple(STORED_COLUMNS),
+                            identity: os.stat_result | None = None) -> None:
     """Check the attached file's whole catalog (nothing of it is read before; `catalog`: its entries read
-    with other files', sealed_catalog.read_sealed_catalogs), then the views `raw`.<table> over its stored
-    tables (with the added columns and tables an older run lacks), all in one statement (`tables`: those
-    only; raw.run always), and check raw.run."""
-    columns = check_sealed_catalog(con, database, sealed, catalog)
+    with other files', sealed_catalog.read_sealed_catalogs; `identity`: attach_sealed_file's), then the
+    views `raw`.<table> over its stored tables (with the added columns and tables an older run lacks),
+    all in one statement (`tables`: those only; raw.run always), and check raw.run."""
+    columns = check_sealed_catalog(con, database, sealed, catalog, identity)
     views = []
     for t in dict.fromkeys([*tables, "run"]):
         if t in ADDED_TABLES and not columns[t]:  # a table added after the run was sealed

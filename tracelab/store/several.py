@@ -42,7 +42,7 @@ from tracelab.store.reader import (
 )
 from tracelab.store.sandbox import lock_configuration, lock_down, refusal, sandbox_connection
 from tracelab.store.schema import STORED_COLUMNS, TABLES, VIEW_NAMES, VIEWS_SQL
-from tracelab.store.sealed_catalog import read_sealed_catalogs
+from tracelab.store.sealed_catalog import entries_checked, read_sealed_catalogs
 
 if TYPE_CHECKING:  # loaded by each_run_stream only: a SQL query over several runs needs no pyarrow
     import pyarrow as pa
@@ -135,22 +135,24 @@ def _build(runs: Sequence[Path], union_views: bool = True, raw_tables: Sequence[
     con = sandbox_connection()
     try:
         sealed = [sealed_file_of_run(p) for p in runs]
-        allowed = []
+        allowed, identities = [], {}
         for i, (p, s) in enumerate(zip(runs, sealed)):
             con.execute(f"ATTACH ':memory:' AS {catalog_of(i)}")
             con.execute(f"CREATE SCHEMA {catalog_of(i)}.raw")
             if s is not None:
-                attach_sealed_file(con, s, f"store_{i + 1}")
+                identities[f"store_{i + 1}"] = attach_sealed_file(con, s, f"store_{i + 1}")
             else:
                 allowed.append(check_live_run(p))
         lock_down(con, allowed)
         # every attached file's catalog read in one pass (each still checked before anything of it is read)
-        catalogs = read_sealed_catalogs(con, [f"store_{i + 1}" for i, s in enumerate(sealed) if s is not None])
+        catalogs = read_sealed_catalogs(con, list(identities),
+                                        [d for d, identity in identities.items() if entries_checked(identity)])
         live = []
         for i, (p, s) in enumerate(zip(runs, sealed)):
             raw = f"{catalog_of(i)}.raw"
             if s is not None:
-                create_sealed_raw_views(con, s, f"store_{i + 1}", raw, catalogs[f"store_{i + 1}"], raw_tables)
+                create_sealed_raw_views(con, s, f"store_{i + 1}", raw, catalogs[f"store_{i + 1}"], raw_tables,
+                                        identities[f"store_{i + 1}"])
             else:
                 parts = LiveParts(con, p.resolve(), raw, prefix=f"{i + 1}_")
                 parts.update(ready=False)
