@@ -4,20 +4,22 @@ so that reading the same file again skips the costly half of the check: DuckDB's
 
 A file is known by its identity: device, inode, size, modification and status-change times (st_ctime:
 no user can set it; any write, rename or chmod moves it). A checked file's identity is recorded as an
-empty file named by its hash (with the checker's version: a tracelab that checks more checks again) under
-$TRACELAB_CACHE_DIR/checked-runs, else $XDG_CACHE_HOME/tracelab/checked-runs, else
-~/.cache/tracelab/checked-runs: a folder private to this user (0700, owned by them; any other is not
-used). Nothing is read from a record but its existence. A file changed within RACY_S of its check could
-keep its times (they tick every few milliseconds), so such a file is not recorded: it is checked each
-time until it has been left alone that long. Whoever can write into this user's folders can run code as
-the user anyway: the folder's privacy is the protection, as for the compile cache (engine/compile_cache.py).
-What is still checked every time: the columns of the stored tables (they decide the views), raw.run's one
-row, and the write-ahead log."""
+empty file named by its hash (with the checker's version: a tracelab that checks more checks again) in
+$TRACELAB_CACHE_DIR/checked-runs, else in this user's runtime folder
+($XDG_RUNTIME_DIR/tracelab-checked-runs), else in the temp folder (tracelab-checked-runs-UID): never in
+the home folder (a reading command writes nothing there), and gone at reboot. The folder must be private
+to this user (0700, owned by them, not a link); any other is not used, and whoever can write into this
+user's private folders can run code as the user anyway (as for the compile cache, engine/compile_cache.py).
+Nothing is read from a record but its existence. A file changed within RACY_S of its check could keep its
+times (they tick every few milliseconds), so such a file is not recorded: it is checked each time until
+it has been left alone that long. What is still checked every time: the columns of the stored tables
+(they decide the views), raw.run's one row, and the write-ahead log."""
 from __future__ import annotations
 
 import hashlib
 import os
 import stat
+import tempfile
 import time
 from pathlib import Path
 
@@ -27,10 +29,11 @@ RACY_S = 2.0
 
 
 def records_folder() -> Path:
-    base = os.environ.get(CACHE_ENV)
-    if base:
-        return Path(base) / FOLDER
-    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "tracelab" / FOLDER
+    if os.environ.get(CACHE_ENV):
+        return Path(os.environ[CACHE_ENV]) / FOLDER
+    if os.environ.get("XDG_RUNTIME_DIR"):
+        return Path(os.environ["XDG_RUNTIME_DIR"]) / f"tracelab-{FOLDER}"
+    return Path(tempfile.gettempdir()) / f"tracelab-{FOLDER}-{os.geteuid()}"
 
 
 def file_identity(path: Path) -> os.stat_result | None:
@@ -73,7 +76,8 @@ def record_checked(st: os.stat_result | None, checker: str) -> None:
         return
     folder = records_folder()
     try:
-        folder.mkdir(mode=0o700, parents=True, exist_ok=True)
+        folder.parent.mkdir(parents=True, exist_ok=True)   # $TRACELAB_CACHE_DIR's
+        folder.mkdir(mode=0o700, exist_ok=True)
         if not _private(folder):
             return
         os.close(os.open(_record(st, checker), os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600))
