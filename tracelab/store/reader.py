@@ -295,13 +295,23 @@ _NO_VIEWS_NEEDED = frozenset({"close", "interrupt", "extract_statements", "descr
 
 
 def _named(sql: str) -> list[str] | None:
-    """The views and raw tables a statement may read: every one whose name is a word of its text (a column
-    of that name too: a view too many costs little); None: it may list them all."""
+    """The views and raw tables a statement may read (_names_in); None: it may list them all."""
+    return None if _LISTING.search(sql.lower()) else _names_in(sql)
+
+
+# A raw table named (raw.<table>, "raw"."<table>"); a name not after a dot (`c.steps` is a column) or
+# after `main.`: a view's
+_RAW_NAME = re.compile(r'\braw"?\s*\.\s*"?(\w+)')
+_VIEW_NAME = re.compile(r'(?<![\w.])"?(\w+)|\bmain"?\s*\.\s*"?(\w+)')
+
+
+def _names_in(sql: str) -> list[str]:
+    """Every view whose name is a word of the text, every raw table named as raw.<table> (a column or
+    alias of a view's name too: a view too many costs little, one too few is made when DuckDB misses it)."""
     text = sql.lower()
-    if _LISTING.search(text):
-        return None
-    words = set(re.findall(r"\w+", text))
-    return [n for n in _ALL_VIEWS if n.removeprefix("raw.") in words]
+    tables = set(_RAW_NAME.findall(text))
+    words = {a or b for a, b in _VIEW_NAME.findall(text)}
+    return [n for n in _ALL_VIEWS if (n[4:] in tables if n.startswith("raw.") else n in words)]
 
 
 def _with_dependencies(names: Iterable[str]) -> list[str]:
@@ -313,15 +323,8 @@ def _with_dependencies(names: Iterable[str]) -> list[str]:
             continue
         wanted.add(name)
         if name in VIEW_STATEMENTS:
-            statement = VIEW_STATEMENTS[name].split(" AS", 1)[1]
-            todo += [n for n in _named_in_view(statement) if n != name]
+            todo += [n for n in _names_in(VIEW_STATEMENTS[name].split(" AS", 1)[1]) if n != name]
     return [n for n in _ALL_VIEWS if n in wanted]
-
-
-def _named_in_view(statement: str) -> list[str]:
-    words = set(re.findall(r"\w+", statement.lower()))
-    tables = set(re.findall(r"raw\.(\w+)", statement))
-    return [n for n in _ALL_VIEWS if (n[4:] in tables if n.startswith("raw.") else n in words)]
 
 
 RunConnection = duckdb.DuckDBPyConnection | RefreshingConnection
