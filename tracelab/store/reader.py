@@ -16,7 +16,8 @@ compaction, or a `seal` that removes the parts, can fail with "file not found" (
 rows): long-lived readers run queries through retrying(), and a live connection moves to the sealed file
 once the run is sealed.
 Sealed run (run.duckdb, or any lone .duckdb file): the file is attached READ_ONLY and raw.<table> are
-views over its stored tables. Either way the user-facing views (tracelab.store.schema.VIEWS_SQL) are the
+views over its stored tables, made with the user-facing views as statements name them
+(SealedRunConnection). Either way the user-facing views (tracelab.store.schema.VIEWS_SQL) are the
 same."""
 from __future__ import annotations
 
@@ -234,8 +235,8 @@ class LiveRunConnection(RefreshingConnection):
 
 class SealedRunConnection(RefreshingConnection):
     """A sealed run's connection whose views are made when a statement first names them: a view (or a
-    raw.<table>) is made, with the views it reads, before the first statement whose text holds its name
-    as a word, and every view before a statement that may list them (SHOW, DESCRIBE, DuckDB's catalog
+    raw.<table>) is made, with the views it reads, before the first statement that names it (_names_in),
+    and every view before a statement that may list them (SHOW, DESCRIBE, DuckDB's catalog
     functions and schemas) or that names a table there is none of (so DuckDB's error, and its "did you
     mean", is the one the full set of views gives), or before any use of the connection but running a
     statement (cursor() and the like). Making the 35 views costs about as much CPU as a command's
