@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import os
 import re
+import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
@@ -247,6 +248,7 @@ class SealedRunConnection(RefreshingConnection):
         self._database = database
         self._columns = columns   # what each stored table has (sealed_catalog.check_sealed_catalog)
         self._made: set[str] = set()   # "raw.<table>" and view names
+        self._making = threading.Lock()   # two threads' statements must not make one view twice
 
     def refresh(self) -> None:
         pass   # a sealed run does not change
@@ -254,13 +256,13 @@ class SealedRunConnection(RefreshingConnection):
     def make_views(self, names: Iterable[str] | None = None) -> None:
         """The views `names` (view names, "raw.<table>"; None: all of them) and those they read."""
         wanted = _ALL_VIEWS if names is None else _with_dependencies(names)
-        missing = [n for n in wanted if n not in self._made]
-        if not missing:
-            return
-        self._con.execute(";\n".join(VIEW_STATEMENTS[n] if n in VIEW_STATEMENTS else
-                                      _sealed_raw_view_sql(n[4:], self._columns, self._database, "raw")
-                                      for n in missing))
-        self._made.update(missing)
+        with self._making:
+            missing = [n for n in wanted if n not in self._made]
+            if missing:
+                self._con.execute(";\n".join(VIEW_STATEMENTS[n] if n in VIEW_STATEMENTS else
+                                              _sealed_raw_view_sql(n[4:], self._columns, self._database, "raw")
+                                              for n in missing))
+                self._made.update(missing)
 
     def _run(self, query: Any, run: Callable[[], T]) -> T:
         text = getattr(query, "query", query)   # a DuckDB Statement, or its text
