@@ -9,6 +9,7 @@ import json
 import math
 import sys
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -16,9 +17,9 @@ from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.commands._output import write_rows, write_table
 from tracelab.commands.show import OWN_SECTIONS
 from tracelab.errors import UserError, store_errors
-from tracelab.store.kind import spec_text, world_params
+from tracelab.store.kind import spec_source_sql, spec_text_of, world_params
 from tracelab.store.reader import query_readonly, resolve_run, retrying
-from tracelab.store.several import SeveralRunsConnection, run_names
+from tracelab.store.several import SeveralRunsConnection, catalog_of, run_names
 from tracelab.train.config import METHOD_REWARD_SCALE
 
 if TYPE_CHECKING:
@@ -68,45 +69,62 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+# What compare reads of each run: its metadata row, its metrics, its spec (kind.spec_source_sql).
+READ_TABLES = ("run", "metrics", "sources")
+
+
 def read_training_runs(paths: list[str]) -> list[TrainingRun]:
     """The runs (as the user named them) read on one sandboxed connection: one DuckDB instance for them
-    all, not one per run, and only their raw.* tables, which is all compare reads (tracelab.store.several)."""
+    all, with views over only the tables compare reads (tracelab.store.several), each kind of row read
+    for every run in one statement."""
     resolved = [resolve_run(p) for p in paths]
-    con = SeveralRunsConnection(resolved, run_names(resolved), union_views=False)
+    con = SeveralRunsConnection(resolved, run_names(resolved), union_views=False, raw_tables=READ_TABLES)
     try:
-        runs = []
-        for i, path in enumerate(paths):
-            con.use(i)
-            runs.append(read_training_run(con, path))
-        return runs
+        return retrying(lambda: _read_all(con, paths))
     finally:
         con.close()
 
 
-def read_training_run(con: "RunConnection", path: str) -> TrainingRun:
-    """A training run's status, config and final metrics, read on `con` (its raw.* are the run's); a
-    UserError (one line) for a run that is not one."""
-    def rows(sql: str) -> list[tuple]:
-        return retrying(lambda: query_readonly(con, sql).fetchall())
+def _each_run(sql: Callable[[str], str], count: int) -> str:
+    """The rows of `sql(raw)` (`raw`: the schema of a run's raw tables) for each of `count` runs together,
+    each row's run first (`i`)."""
+    return " UNION ALL ".join(f"SELECT {i} AS i, * FROM ({sql(f'{catalog_of(i)}.raw')})" for i in range(count))
 
-    status, config_text, board, command = rows("SELECT status, config, board, command FROM raw.run")[0]
+
+def _read_all(con: "RunConnection", paths: list[str]) -> list[TrainingRun]:
+    """Each training run as training_run makes it, from three statements for them all."""
+    def rows(sql: Callable[[str], str]) -> list[tuple]:
+        return query_readonly(con, _each_run(sql, len(paths)) + " ORDER BY ALL").fetchall()
+
+    heads = rows(lambda raw: f"SELECT status, config, board, command, (SELECT count(DISTINCT name) FROM "
+                             f"{raw}.metrics), {spec_source_sql(raw)} FROM {raw}.run")
+    last: list[list[tuple]] = [[] for _ in paths]
+    for i, *row in rows(lambda raw: f"""
+            SELECT name, step, value
+            FROM (SELECT DISTINCT name FROM {raw}.metrics ORDER BY name LIMIT {MAX_METRIC_NAMES})
+            JOIN {raw}.metrics USING (name)
+            QUALIFY row_number() OVER (PARTITION BY name ORDER BY step DESC, time DESC) = 1"""):
+        last[i].append(tuple(row))
+    best: list[dict[str, tuple]] = [{} for _ in paths]
+    for i, name, step, value in rows(lambda raw: f"""
+            SELECT name, step, value FROM {raw}.metrics
+            WHERE name IN ({", ".join(_sql_text(n) for n in BEST_OF)}) AND NOT isnan(value)
+            QUALIFY row_number() OVER (PARTITION BY name ORDER BY value DESC, step) = 1"""):
+        best[i][name] = (value, step)
+    return [training_run(path, head, last[i], best[i]) for i, (path, (_, *head)) in enumerate(zip(paths, heads))]
+
+
+def training_run(path: str, head: list[Any], last: list[tuple], best_of: dict[str, tuple]) -> TrainingRun:
+    """A training run from what _read_all read of it: `head` (status, config, board, command, how many
+    metric names, its spec's source), each metric's last (name, step, value) in name order, the best
+    (value, step) of BEST_OF's; a UserError (one line) for a run without metrics."""
+    status, config_text, board, command, names, source = head
     config = _json_object(config_text)
-    spec = retrying(lambda: spec_text(con, config))
-    (names,) = rows("SELECT count(DISTINCT name) FROM raw.metrics")[0]
     if not names:
         raise UserError(f"{without_metrics(path, board, command)}: compare puts training runs side by side; "
                         f"`tracelab diff RUN_A RUN_B` compares the episodes of two runs")
-    last = rows(f"""
-        SELECT name, step, value FROM (SELECT DISTINCT name FROM raw.metrics ORDER BY name LIMIT {MAX_METRIC_NAMES})
-        JOIN raw.metrics USING (name)
-        QUALIFY row_number() OVER (PARTITION BY name ORDER BY step DESC, time DESC) = 1 ORDER BY name""")
-    best = rows(f"""
-        SELECT name, step, value FROM raw.metrics
-        WHERE name IN ({", ".join(_sql_text(n) for n in BEST_OF)}) AND NOT isnan(value)
-        QUALIFY row_number() OVER (PARTITION BY name ORDER BY value DESC, step) = 1""")
-    best_of = {name: (value, step) for name, step, value in best}
     metrics = {name: (step, value, best_of.get(name) if name in BEST_OF else None) for name, step, value in last}
-    params = world_params(config, spec)
+    params = world_params(config, spec_text_of(source, config))
     if params is not None:  # a spec world's: its texts are not settings, its params are listed as such
         config = {k: v for k, v in config.items() if k not in OWN_SECTIONS and k != "env"}
     return TrainingRun(path, str(status), flat_config(config), max(step for step, _, _ in metrics.values()),

@@ -19,7 +19,7 @@ import duckdb
 from tracelab.store import layout
 from tracelab.store.reader import attach_sealed_file, open_run, query_readonly, retrying, run_info, sealed_file_of_run
 from tracelab.store.sandbox import lock_down, sandbox_connection
-from tracelab.store.sealed_catalog import check_sealed_catalog, read_sealed_catalogs
+from tracelab.store.sealed_catalog import check_sealed_catalog, entries_checked, read_sealed_catalogs
 
 if TYPE_CHECKING:
     import pyarrow as pa
@@ -161,20 +161,21 @@ def _sealed_counts(sealed: dict[Path, Path]) -> dict[Path, tuple[int, int] | Exc
     for start in range(0, len(runs), SEALED_PER_CONNECTION):
         con = sandbox_connection()
         try:
-            attached = {}
+            attached, identities = {}, {}
             for i, run in enumerate(runs[start:start + SEALED_PER_CONNECTION]):
                 try:
-                    attach_sealed_file(con, sealed[run], f"store_{i}")
+                    identities[run] = attach_sealed_file(con, sealed[run], f"store_{i}")
                     attached[run] = f"store_{i}"
                 except duckdb.InterruptException:
                     raise
                 except Exception as e:  # noqa: BLE001 - one broken run must not hide the others
                     found[run] = e
             lock_down(con)
-            catalogs = read_sealed_catalogs(con, list(attached.values()))  # one pass for every file
+            catalogs = read_sealed_catalogs(con, list(attached.values()),  # one pass for every file
+                                            [attached[r] for r in attached if entries_checked(identities[r])])
             for run, database in attached.items():
                 try:
-                    check_sealed_catalog(con, database, sealed[run], catalogs[database])
+                    check_sealed_catalog(con, database, sealed[run], catalogs[database], identities[run])
                     eps, rows = con.execute(_counts_sql(f"{database}.raw")).fetchall()[0]
                     found[run] = (int(eps), int(rows))
                 except duckdb.InterruptException:

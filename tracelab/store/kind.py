@@ -48,12 +48,23 @@ def run_config(con: RunConnection) -> dict[str, Any]:
 MAX_SPEC_TEXT = 1 << 20  # a spec file's own limit
 
 
+def spec_source_sql(raw: str = "raw") -> str:
+    """The spec's text in the run's `sources` (`raw`: the schema of its raw tables) as a scalar subquery:
+    a list of the text of its one row (NULL where the file was not UTF-8), [] where it has none."""
+    return (f"(SELECT list(text) FROM (SELECT text FROM {raw}.sources WHERE role = 'spec' AND bytes <= "
+            f"{MAX_SPEC_TEXT} LIMIT 1))")
+
+
 def spec_text(con: RunConnection, config: dict[str, Any]) -> str | None:
-    """A spec world's run's spec text: its `sources` row (role `spec`), or in a run written before that
-    table, its config's `spec`; None for a run of no spec world, or a spec past MAX_SPEC_TEXT bytes."""
-    rows = con.execute("SELECT text FROM raw.sources WHERE role = 'spec' AND bytes <= ? LIMIT 1",
-                       [MAX_SPEC_TEXT]).fetchall()
-    text = rows[0][0] if rows else config.get("spec")
+    """A spec world's run's spec text (spec_text_of), read on `con`."""
+    return spec_text_of(con.execute(f"SELECT {spec_source_sql()}").fetchall()[0][0], config)
+
+
+def spec_text_of(source: list[str | None], config: dict[str, Any]) -> str | None:
+    """A spec world's run's spec text: its `sources` row (role `spec`; `source` as spec_source_sql reads
+    it), or in a run written before that table, its config's `spec`; None for a run of no spec world, or a
+    spec past MAX_SPEC_TEXT bytes."""
+    text = source[0] if source else config.get("spec")
     return text if isinstance(text, str) and len(text) <= MAX_SPEC_TEXT else None
 
 

@@ -16,13 +16,16 @@ compaction, or a `seal` that removes the parts, can fail with "file not found" (
 rows): long-lived readers run queries through retrying(), and a live connection moves to the sealed file
 once the run is sealed.
 Sealed run (run.duckdb, or any lone .duckdb file): the file is attached READ_ONLY and raw.<table> are
-views over its stored tables. Either way the user-facing views (tracelab.store.schema.VIEWS_SQL) are the
+views over its stored tables, made with the user-facing views as statements name them
+(SealedRunConnection). Either way the user-facing views (tracelab.store.schema.VIEWS_SQL) are the
 same."""
 from __future__ import annotations
 
 import os
+import re
+import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
@@ -32,6 +35,7 @@ import duckdb
 from tracelab.engine.duckdb_limits import exact_file
 from tracelab.engine.safe_files import JSON_CAP, check_regular, read_bytes
 from tracelab.store import layout
+from tracelab.store.checked_files import file_identity, same_file
 from tracelab.store.meta import current_meta, meta_row
 from tracelab.store.sandbox import (
     check_readonly,
@@ -40,7 +44,16 @@ from tracelab.store.sandbox import (
     refusal,
     sandbox_connection,
 )
-from tracelab.store.schema import ADDED_COLUMNS, ADDED_TABLES, RUN_COLUMNS, STORED_COLUMNS, TABLES, VIEWS_SQL, empty_sql
+from tracelab.store.schema import (
+    ADDED_COLUMNS,
+    ADDED_TABLES,
+    RUN_COLUMNS,
+    STORED_COLUMNS,
+    TABLES,
+    VIEW_STATEMENTS,
+    VIEWS_SQL,
+    empty_sql,
+)
 from tracelab.store.sealed_catalog import SealedCatalog, SealedFileRefused, check_sealed_catalog
 
 if TYPE_CHECKING:  # loaded by what streams Arrow (arrow_stream): a command printing a table needs none
@@ -50,6 +63,7 @@ if TYPE_CHECKING:  # loaded by what streams Arrow (arrow_stream): a command prin
 # DuckDB's rows open every run through this module
 
 RUNS_DIR = Path("runs")
+T = TypeVar("T")
 
 
 @dataclass
@@ -220,6 +234,102 @@ class LiveRunConnection(RefreshingConnection):
         self.sealed = True
         old.close()
 
+class SealedRunConnection(RefreshingConnection):
+    """A sealed run's connection whose views are made when a statement first names them: a view (or a
+    raw.<table>) is made, with the views it reads, before the first statement that names it (_names_in),
+    and every view before a statement that may list them (SHOW, DESCRIBE, DuckDB's catalog
+    functions and schemas) or that names a table there is none of (so DuckDB's error, and its "did you
+    mean", is the one the full set of views gives), or before any use of the connection but running a
+    statement (cursor() and the like). Making the 35 views costs about as much CPU as a command's
+    queries, and a command reads a few."""
+
+    def __init__(self, con: duckdb.DuckDBPyConnection, database: str, columns: dict[str, set[str]]) -> None:
+        self._con = con
+        self._database = database
+        self._columns = columns   # what each stored table has (sealed_catalog.check_sealed_catalog)
+        self._made: set[str] = set()   # "raw.<table>" and view names
+        self._making = threading.Lock()   # two threads' statements must not make one view twice
+
+    def refresh(self) -> None:
+        pass   # a sealed run does not change
+
+    def make_views(self, names: Iterable[str] | None = None) -> None:
+        """The views `names` (view names, "raw.<table>"; None: all of them) and those they read."""
+        wanted = _ALL_VIEWS if names is None else _with_dependencies(names)
+        with self._making:
+            missing = [n for n in wanted if n not in self._made]
+            if missing:
+                self._con.execute(";\n".join(VIEW_STATEMENTS[n] if n in VIEW_STATEMENTS else
+                                              _sealed_raw_view_sql(n[4:], self._columns, self._database, "raw")
+                                              for n in missing))
+                self._made.update(missing)
+
+    def _run(self, query: Any, run: Callable[[], T]) -> T:
+        text = getattr(query, "query", query)   # a DuckDB Statement, or its text
+        self.make_views(_named(text) if isinstance(text, str) else None)
+        try:
+            return run()
+        except duckdb.CatalogException:
+            if len(self._made) == len(_ALL_VIEWS):
+                raise
+            self.make_views()   # a name the statement did not show as a word, or no view at all
+            return run()
+
+    def execute(self, query: Any, parameters: Any = None) -> duckdb.DuckDBPyConnection:
+        return self._run(query, lambda: self._con.execute(query, parameters))
+
+    def sql(self, query: str, **options: Any) -> duckdb.DuckDBPyRelation:
+        return self._run(query, lambda: self._con.sql(query, **options))
+
+    def __getattr__(self, name: str) -> Any:
+        if name not in _NO_VIEWS_NEEDED:
+            self.make_views()
+        return getattr(self._con, name)
+
+
+# What a sealed run's views read: raw.<table> for each stored table, and each view's views and tables.
+_ALL_VIEWS: tuple[str, ...] = (*(f"raw.{t}" for t in STORED_COLUMNS), *VIEW_STATEMENTS)
+# Words of a statement that may list the views, or read the catalog
+_LISTING = re.compile(r"\b(show|describe|information_schema|pg_catalog|sqlite_master|pg_\w+|duckdb_\w+|"
+                      r"pragma_\w+|query_table)\b")
+# Attributes of the connection that run nothing on the views
+_NO_VIEWS_NEEDED = frozenset({"close", "interrupt", "extract_statements", "description", "fetchall", "fetchone",
+                              "fetchmany", "rowcount"})
+
+
+def _named(sql: str) -> list[str] | None:
+    """The views and raw tables a statement may read (_names_in); None: it may list them all."""
+    return None if _LISTING.search(sql.lower()) else _names_in(sql)
+
+
+# A raw table named (raw.<table>, "raw"."<table>"); a name not after a dot (`c.steps` is a column) or
+# after `main.`: a view's
+_RAW_NAME = re.compile(r'\braw"?\s*\.\s*"?(\w+)')
+_VIEW_NAME = re.compile(r'(?<![\w.])"?(\w+)|\bmain"?\s*\.\s*"?(\w+)')
+
+
+def _names_in(sql: str) -> list[str]:
+    """Every view whose name is a word of the text, every raw table named as raw.<table> (a column or
+    alias of a view's name too: a view too many costs little, one too few is made when DuckDB misses it)."""
+    text = sql.lower()
+    tables = set(_RAW_NAME.findall(text))
+    words = {a or b for a, b in _VIEW_NAME.findall(text)}
+    return [n for n in _ALL_VIEWS if (n[4:] in tables if n.startswith("raw.") else n in words)]
+
+
+def _with_dependencies(names: Iterable[str]) -> list[str]:
+    """`names` and the views and raw tables they read, each after what it reads (in _ALL_VIEWS's order)."""
+    wanted, todo = set(), list(names)
+    while todo:
+        name = todo.pop()
+        if name in wanted:
+            continue
+        wanted.add(name)
+        if name in VIEW_STATEMENTS:
+            todo += [n for n in _names_in(VIEW_STATEMENTS[name].split(" AS", 1)[1]) if n != name]
+    return [n for n in _ALL_VIEWS if n in wanted]
+
+
 RunConnection = duckdb.DuckDBPyConnection | RefreshingConnection
 
 
@@ -232,14 +342,13 @@ def open_run(run: str | Path) -> RunConnection:
     con = sandbox_connection()
     try:
         if sealed is not None:
-            _attach_sealed(con, sealed)
-            result: RunConnection = con
+            result: RunConnection = _attach_sealed(con, sealed)
         else:
             lock_down(con, [check_live_run(p)])
             con.execute("CREATE SCHEMA raw")
             result = LiveRunConnection(con, p.resolve())  # sets the variables the views read, and raw.run
             create_live_raw_views(con, p.resolve())
-        con.execute(VIEWS_SQL)
+            con.execute(VIEWS_SQL)
         lock_configuration(con)
         if isinstance(result, LiveRunConnection):
             result.views_ready()
@@ -260,12 +369,12 @@ def check_live_run(p: Path) -> str:
 
 
 def create_live_raw_views(con: duckdb.DuckDBPyConnection, run_dir: Path, raw: str = "raw",
-                          prefix: str = "") -> None:
+                          prefix: str = "", tables: Sequence[str] = TABLES) -> None:
     """The views `raw`.<table> over the parts the run's manifest lists (read from the DuckDB variables
-    LiveParts keeps current: it must have run once)."""
+    LiveParts keeps current: it must have run once); `tables`: those of the part tables only."""
     from tracelab.store.parts import read_manifest
     listed = read_manifest(run_dir)
-    for t in TABLES:
+    for t in tables:
         if not listed[t]:  # a table added after the run was written (schema.ADDED_TABLES)
             con.execute(f"CREATE VIEW {raw}.{t} AS {empty_sql(t)}")
             continue
@@ -296,39 +405,53 @@ def _check_run_row(con: duckdb.DuckDBPyConnection, sealed: Path, raw: str = "raw
                          "tracelab run, or a damaged one")
 
 
-def _attach_sealed(con: duckdb.DuckDBPyConnection, sealed: Path) -> None:
+def _attach_sealed(con: duckdb.DuckDBPyConnection, sealed: Path) -> SealedRunConnection:
     """Attach the sealed file read-only (before external access is switched off: ATTACH needs the file),
-    check its catalog before reading anything (tracelab.store.sealed_catalog), then map raw.<table> onto
-    its stored tables."""
-    attach_sealed_file(con, sealed, "store")
+    check its catalog before reading anything (tracelab.store.sealed_catalog), check raw.run; raw.<table>
+    over its stored tables and the views are made as statements name them (SealedRunConnection)."""
+    identity = attach_sealed_file(con, sealed, "store")
     lock_down(con)
     con.execute("CREATE SCHEMA raw")
-    create_sealed_raw_views(con, sealed, "store", "raw")
+    result = SealedRunConnection(con, "store", check_sealed_catalog(con, "store", sealed, identity=identity))
+    result.make_views(["raw.run"])
+    _check_run_row(con, sealed)
+    return result
 
 
-def attach_sealed_file(con: duckdb.DuckDBPyConnection, sealed: Path, database: str) -> None:
-    """ATTACH the sealed file READ_ONLY as `database`; refused if a write-ahead log lies beside it."""
-    wal = Path(f"{sealed.resolve()}.wal")
+def attach_sealed_file(con: duckdb.DuckDBPyConnection, sealed: Path, database: str) -> os.stat_result | None:
+    """ATTACH the sealed file READ_ONLY as `database`; refused if a write-ahead log lies beside it.
+    Returns the identity of the file attached (checked_files: the same before and after), or None."""
+    path = sealed.resolve()
+    wal = Path(f"{path}.wal")
     if os.path.lexists(wal):  # ATTACH replays a write-ahead log, running the SQL in it (ALTER ... USING)
         raise SealedFileRefused(f"{str(wal)!r}: a sealed run has no write-ahead log, and tracelab does not "
                                 "replay one it brings along (it holds SQL that would run on opening)")
-    con.execute(f"ATTACH {_sql_str(sealed.resolve())} AS {database} (READ_ONLY)")
+    before = file_identity(path)
+    con.execute(f"ATTACH {_sql_str(path)} AS {database} (READ_ONLY)")
+    after = file_identity(path)
+    return after if same_file(before, after) else None
 
 
 def create_sealed_raw_views(con: duckdb.DuckDBPyConnection, sealed: Path, database: str, raw: str,
-                            catalog: SealedCatalog | None = None) -> None:
-    """Check the attached file's catalog (nothing of it is read before; `catalog`: its entries read with
-    other files', sealed_catalog.read_sealed_catalogs), then the views `raw`.<table> over its stored
-    tables (with the added columns and tables an older run lacks), and check raw.run."""
-    columns = check_sealed_catalog(con, database, sealed, catalog)
-    for t, names in STORED_COLUMNS.items():
-        if t in ADDED_TABLES and not columns[t]:  # a table added after the run was sealed
-            con.execute(f"CREATE VIEW {raw}.{t} AS {empty_sql(t)}")
-            continue
-        extra = _defaults_for_missing(t, columns[t])
-        cols = ", ".join([f'"{c}"' for c in names if c in columns[t]] + ([extra] if extra else []))
-        con.execute(f"CREATE VIEW {raw}.{t} AS SELECT {cols} FROM {database}.raw.{t}")
+                            catalog: SealedCatalog | None = None,
+                            tables: Sequence[str] = tuple(STORED_COLUMNS),
+                            identity: os.stat_result | None = None) -> None:
+    """Check the attached file's whole catalog (nothing of it is read before; `catalog`: its entries read
+    with other files', sealed_catalog.read_sealed_catalogs; `identity`: attach_sealed_file's), then the
+    views `raw`.<table> over its stored tables (with the added columns and tables an older run lacks),
+    all in one statement (`tables`: those only; raw.run always), and check raw.run."""
+    columns = check_sealed_catalog(con, database, sealed, catalog, identity)
+    con.execute(";\n".join(_sealed_raw_view_sql(t, columns, database, raw) for t in dict.fromkeys([*tables, "run"])))
     _check_run_row(con, sealed, raw)
+
+
+def _sealed_raw_view_sql(table: str, columns: dict[str, set[str]], database: str, raw: str) -> str:
+    """The view `raw`.<table> over the attached file's stored table, whose columns are `columns[table]`."""
+    if table in ADDED_TABLES and not columns[table]:  # a table added after the run was sealed
+        return f"CREATE VIEW {raw}.{table} AS {empty_sql(table)}"
+    extra = _defaults_for_missing(table, columns[table])
+    cols = ", ".join([f'"{c}"' for c in STORED_COLUMNS[table] if c in columns[table]] + ([extra] if extra else []))
+    return f"CREATE VIEW {raw}.{table} AS SELECT {cols} FROM {database}.raw.{table}"
 
 
 def _defaults_for_missing(table: str, have: set[str]) -> str:
@@ -443,8 +566,6 @@ def fetch_arrow(rel: duckdb.DuckDBPyRelation, limit: int | None = None, offset: 
     schema, batches = arrow_stream(rel, limit, offset)
     return pa.Table.from_batches(list(batches), schema=schema)
 
-
-T = TypeVar("T")
 
 
 # How DuckDB says a part a statement was bound to is gone: when it opens the file, or when it expands the

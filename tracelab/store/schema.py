@@ -277,3 +277,6 @@ CREATE OR REPLACE VIEW run AS SELECT * FROM raw.run;
 """
 # The views above, by name (a sealed file holds a copy of each in its schema `main`).
 VIEW_NAMES: tuple[str, ...] = tuple(re.findall(r"^CREATE OR REPLACE VIEW (\w+) AS", VIEWS_SQL, re.M))
+# Each view's statement, in VIEWS_SQL's order (a view follows the views it reads).
+VIEW_STATEMENTS: dict[str, str] = dict(zip(VIEW_NAMES, re.findall(
+    r"^CREATE OR REPLACE VIEW \w+ AS.*?;$", VIEWS_SQL, re.M | re.S), strict=True))

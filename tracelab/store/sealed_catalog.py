@@ -9,15 +9,21 @@ triggers and sequences hold expressions too. A file `seal` writes holds none of 
 existed), and tracelab's views
 in `main` (which the reader never uses: it builds its own). `check_sealed_catalog` reads the catalog
 through DuckDB's metadata functions, which report stored definitions as text and evaluate nothing, and
-refuses anything else with one line naming the entry."""
+refuses anything else with one line naming the entry. A file whose entries passed is recorded by its
+identity (tracelab.store.checked_files), and its entries are not read again while it stays the same; its
+columns are, every time."""
 from __future__ import annotations
 
-from collections.abc import Sequence
+import hashlib
+import os
+from collections.abc import Collection, Sequence
+from functools import cache
 from pathlib import Path
 from typing import Any
 
 import duckdb
 
+from tracelab.store import checked_files
 from tracelab.store.schema import ADDED_COLUMNS, ADDED_TABLES, STORED_COLUMNS, VIEW_NAMES
 
 SCHEMA_NAMES = ("main", "raw")
@@ -40,15 +46,36 @@ class SealedFileRefused(ValueError):
     """A sealed run file whose catalog is not the one `seal` writes (one line, names the entry)."""
 
 
+@cache
+def checker_version() -> str:
+    """What decides this check's verdict besides the file: this module's text, the schema it checks
+    against, DuckDB's version (checked_files records verdicts under it)."""
+    h = hashlib.sha256(Path(__file__).read_bytes())
+    h.update(repr((STORED_COLUMNS, ADDED_COLUMNS, ADDED_TABLES, VIEW_NAMES, duckdb.__version__)).encode())
+    return h.hexdigest()
+
+
+def entries_checked(identity: os.stat_result | None) -> bool:
+    """Whether the file of this identity (checked_files.file_identity, of the file attached) passed
+    check_entries before: its entries need not be read again."""
+    return checked_files.was_checked(identity, checker_version())
+
+
 def check_sealed_catalog(con: duckdb.DuckDBPyConnection, database: str, path: Path,
-                         catalog: SealedCatalog | None = None) -> dict[str, set[str]]:
+                         catalog: SealedCatalog | None = None,
+                         identity: os.stat_result | None = None) -> dict[str, set[str]]:
     """Refuse (SealedFileRefused) the attached `database` unless it holds what a sealed run holds and
     nothing else; return the columns each raw table has (an older run lacks some ADDED_COLUMNS, and has
     no columns of an ADDED_TABLES table it lacks). `catalog`: its entries as read_sealed_catalogs read
-    them (with the others' on the connection), else read here."""
-    catalog = catalog or read_sealed_catalogs(con, [database])[database]
+    them (with the others' on the connection), else read here. `identity`: the attached file's
+    (checked_files): its entries are not read again once they passed, and are recorded when they pass."""
+    if catalog is None:
+        known = [database] if entries_checked(identity) else []
+        catalog = read_sealed_catalogs(con, [database], known)[database]
     try:
-        catalog.check_entries()
+        if catalog.entries is not None:
+            catalog.check_entries()
+            checked_files.record_checked(identity, checker_version())
         return catalog.check_columns()
     except SealedFileRefused as e:
         raise SealedFileRefused(f"{str(path)!r}: {e}") from None
@@ -73,17 +100,20 @@ _COLUMNS_SQL = ("SELECT database_name, table_name, column_name, data_type, colum
                 "ORDER BY database_name, table_name, column_index")
 
 
-def read_sealed_catalogs(con: duckdb.DuckDBPyConnection, databases: Sequence[str]) -> dict[str, SealedCatalog]:
-    """The catalog entries of the attached `databases`, read in two statements for them all: DuckDB's
-    metadata functions list every database's entries (its function list, the costly one, with thousands
-    of built-ins), so one pass serves every file on the connection."""
+def read_sealed_catalogs(con: duckdb.DuckDBPyConnection, databases: Sequence[str],
+                         entries_known: Collection[str] = ()) -> dict[str, SealedCatalog]:
+    """The catalog entries of the attached `databases` (but those of `entries_known`: files whose entries
+    passed before, entries_checked), read in two statements for them all: DuckDB's metadata functions
+    list every database's entries (its function list, the costly one, with thousands of built-ins), so
+    one pass serves every file on the connection."""
     kinds = list(_ENTRIES)
+    catalogs = {d: SealedCatalog(d, d not in entries_known) for d in databases}
+    unknown = [d for d in databases if d not in entries_known]
     # every kind of entry in one statement (each statement costs its own planning and run)
     union = " UNION ALL ".join(f"SELECT {i} AS kind, * FROM ({sql})" for i, sql in enumerate(_ENTRIES.values()))
-    catalogs = {d: SealedCatalog(d) for d in databases}
     for kind, database, *entry in con.execute(
             f"SELECT * FROM ({union}) WHERE list_contains(?, database_name) ORDER BY ALL",
-            [list(databases)]).fetchall():
+            [unknown]).fetchall() if unknown else ():
         catalogs[database].entries[kinds[kind]].append(tuple(entry))
     for database, *column in con.execute(_COLUMNS_SQL, [list(databases)]).fetchall():
         catalogs[database].columns.append(tuple(column))
@@ -93,13 +123,16 @@ def read_sealed_catalogs(con: duckdb.DuckDBPyConnection, databases: Sequence[str
 class SealedCatalog:
     """One attached file's catalog entries, as read_sealed_catalogs read them, and the checks on them."""
 
-    def __init__(self, database: str) -> None:
+    def __init__(self, database: str, read_entries: bool = True) -> None:
         self.database = database
-        self.entries: dict[str, list[tuple[Any, ...]]] = {kind: [] for kind in _ENTRIES}
+        # None: not read (they passed check_entries before: checked_files)
+        self.entries: dict[str, list[tuple[Any, ...]]] | None = {kind: [] for kind in _ENTRIES} if read_entries \
+            else None
         self.columns: list[tuple[Any, ...]] = []   # raw's (table, column, type, default, generated), in order
 
     def check_entries(self) -> None:
         """Schemas, views and tables are the expected ones; nothing of any other kind."""
+        assert self.entries is not None
         for schema, parent in self.entries["schema"]:
             if parent is not None or schema not in SCHEMA_NAMES:  # raw nested in another schema too
                 raise SealedFileRefused(f"holds a schema {_name(*filter(None, (parent, schema)))}, {_NOT_A_RUN}")

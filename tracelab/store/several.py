@@ -41,8 +41,8 @@ from tracelab.store.reader import (
     sealed_file_of_run,
 )
 from tracelab.store.sandbox import lock_configuration, lock_down, refusal, sandbox_connection
-from tracelab.store.schema import TABLES, VIEW_NAMES, VIEWS_SQL
-from tracelab.store.sealed_catalog import read_sealed_catalogs
+from tracelab.store.schema import STORED_COLUMNS, TABLES, VIEW_NAMES, VIEWS_SQL
+from tracelab.store.sealed_catalog import entries_checked, read_sealed_catalogs
 
 if TYPE_CHECKING:  # loaded by each_run_stream only: a SQL query over several runs needs no pyarrow
     import pyarrow as pa
@@ -94,65 +94,73 @@ class SeveralRunsConnection(RefreshingConnection):
     live run's views are brought up to its latest flush and status (reader.LiveParts); everything else is
     the DuckDB connection's own API."""
 
-    def __init__(self, runs: Sequence[Path], names: Sequence[str], union_views: bool = True) -> None:
-        """`union_views`: False for a caller of its own SQL that reads one run's raw.* at a time (use):
+    def __init__(self, runs: Sequence[Path], names: Sequence[str], union_views: bool = True,
+                 raw_tables: Sequence[str] | None = None) -> None:
+        """`union_views`: False for a caller of its own SQL that reads each run's raw.* (`raw_tables`: of
+        these tables only, and run) as run_N.raw.<table> (catalog_of), or one run's at a time (use):
         neither the union views nor each run's user-facing views are built (15 views a run)."""
         self.runs = list(runs)
         self.names = list(names)
         self._union_views = union_views
+        self._raw_tables = tuple(STORED_COLUMNS) if raw_tables is None else tuple(raw_tables)
         self._using: int | None = None    # the run whose own views unqualified names read (use)
-        self._con, self._live = _build(self.runs, union_views)
+        self._con, self._live = _build(self.runs, union_views, self._raw_tables)
 
     def refresh(self) -> None:
         for live in self._live:
             if not live.update(ready=True):   # sealed meanwhile: attach its file on a new connection
-                old, (self._con, self._live) = self._con, _build(self.runs, self._union_views)
+                old, (self._con, self._live) = self._con, _build(self.runs, self._union_views, self._raw_tables)
                 old.close()
                 if self._using is not None:
-                    self._con.execute(f"USE {_catalog(self._using)}")
+                    self._con.execute(f"USE {catalog_of(self._using)}")
                 return
 
     def use(self, index: int | None) -> None:
         """Unqualified names read run `index`'s own views (no `run` column: a saved query written for one
         run), or the union of every run's again (None)."""
         self._using = index
-        self._con.execute(f"USE {DEFAULT_CATALOG if index is None else _catalog(index)}")
+        self._con.execute(f"USE {DEFAULT_CATALOG if index is None else catalog_of(index)}")
 
 
-def _catalog(index: int) -> str:
+def catalog_of(index: int) -> str:
+    """The catalog of run `index`'s own views: its raw.<table> are catalog_of(index).raw.<table>."""
     return f"run_{index + 1}"
 
 
-def _build(runs: Sequence[Path], union_views: bool = True) -> tuple[duckdb.DuckDBPyConnection, list[LiveParts]]:
+def _build(runs: Sequence[Path], union_views: bool = True, raw_tables: Sequence[str] = tuple(STORED_COLUMNS),
+           ) -> tuple[duckdb.DuckDBPyConnection, list[LiveParts]]:
     if len(runs) > MAX_RUNS:
         raise ValueError(f"{len(runs)} runs given ({runs[0]} ... {runs[-1]}): tracelab reads at most {MAX_RUNS} "
                          "at once; read more through their Parquet parts (docs/store.md, \"The Parquet parts\")")
     con = sandbox_connection()
     try:
         sealed = [sealed_file_of_run(p) for p in runs]
-        allowed = []
+        allowed, identities = [], {}
         for i, (p, s) in enumerate(zip(runs, sealed)):
-            con.execute(f"ATTACH ':memory:' AS {_catalog(i)}")
-            con.execute(f"CREATE SCHEMA {_catalog(i)}.raw")
+            con.execute(f"ATTACH ':memory:' AS {catalog_of(i)}")
+            con.execute(f"CREATE SCHEMA {catalog_of(i)}.raw")
             if s is not None:
-                attach_sealed_file(con, s, f"store_{i + 1}")
+                identities[f"store_{i + 1}"] = attach_sealed_file(con, s, f"store_{i + 1}")
             else:
                 allowed.append(check_live_run(p))
         lock_down(con, allowed)
         # every attached file's catalog read in one pass (each still checked before anything of it is read)
-        catalogs = read_sealed_catalogs(con, [f"store_{i + 1}" for i, s in enumerate(sealed) if s is not None])
+        catalogs = read_sealed_catalogs(con, list(identities),
+                                        [d for d, identity in identities.items() if entries_checked(identity)])
         live = []
         for i, (p, s) in enumerate(zip(runs, sealed)):
-            raw = f"{_catalog(i)}.raw"
+            raw = f"{catalog_of(i)}.raw"
             if s is not None:
-                create_sealed_raw_views(con, s, f"store_{i + 1}", raw, catalogs[f"store_{i + 1}"])
+                create_sealed_raw_views(con, s, f"store_{i + 1}", raw, catalogs[f"store_{i + 1}"], raw_tables,
+                                        identities[f"store_{i + 1}"])
             else:
                 parts = LiveParts(con, p.resolve(), raw, prefix=f"{i + 1}_")
                 parts.update(ready=False)
-                create_live_raw_views(con, p.resolve(), raw, prefix=f"{i + 1}_")
+                create_live_raw_views(con, p.resolve(), raw, prefix=f"{i + 1}_",
+                                      tables=[t for t in raw_tables if t in TABLES])
                 live.append(parts)
             if union_views:
-                con.execute(f"USE {_catalog(i)}")
+                con.execute(f"USE {catalog_of(i)}")
                 con.execute(VIEWS_SQL)
         con.execute(f"USE {DEFAULT_CATALOG}")
         if union_views:
@@ -170,7 +178,7 @@ def _create_union_views(con: duckdb.DuckDBPyConnection, names: Sequence[str]) ->
     for schema, views in (("main", VIEW_NAMES), ("raw", (*TABLES, "run"))):
         for view in views:
             union = " UNION ALL BY NAME ".join(
-                f'SELECT {_sql_str(name)} AS "{RUN_COLUMN}", * FROM {_catalog(i)}.{schema}.{view}'
+                f'SELECT {_sql_str(name)} AS "{RUN_COLUMN}", * FROM {catalog_of(i)}.{schema}.{view}'
                 for i, name in enumerate(names))
             con.execute(f"CREATE VIEW {schema}.{view} AS {union}")
 
