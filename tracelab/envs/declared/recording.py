@@ -118,10 +118,11 @@ class DeclaredRecorder:
     episode without its rows. Writing per episode cost more than the toy-text games' steps.
 
     `episode_ids`: a run the recorder does not own (a training's, whose evaluation games it records):
-    episodes take their ids from it, begin with `begin_info`, and close() leaves the writer open."""
+    episodes take their ids from it, begin with `begin_info`, and close() leaves the writer open.
+    `agent_rows` False: no decisions and no reward terms (the world's trace alone)."""
 
     def __init__(self, world: DeclaredWorld, writer: TraceWriter,
-                 episode_ids: Callable[[], int] | None = None) -> None:
+                 episode_ids: Callable[[], int] | None = None, agent_rows: bool = True) -> None:
         eng = world.engine
         if not eng.trace_on.any():
             raise ValueError("the declared world's engine does not trace: build it with trace=True")
@@ -132,7 +133,8 @@ class DeclaredRecorder:
         writer.write_sources(spec_sources(world.spec))
         writer.write_action_names(world.spec.action_names)
         writer.write_observation_names(observation_names(world.spec))
-        world.keep_reward_terms = True
+        # the agent's half (decisions, reward terms); off: the world's alone (bench eval's baseline)
+        self.agent_rows = world.keep_reward_terms = agent_rows
         self._agent_rows = AgentRows()
         # decisions (episode, step, agent, action, the policy's output, mask) and reward terms (episode,
         # step, [agent, term] values) of the steps kept, as tuples (a record per step costs more)
@@ -196,9 +198,10 @@ class DeclaredRecorder:
             return
         self._length += 1
         t = self.world.engine.t - 1 - self._t0
-        self._terms.append((self.episode, self._length, self.world.last_reward_terms,
-                            self.world.last_reward_quantities))
-        if decided is not None:
+        if self.agent_rows:
+            self._terms.append((self.episode, self._length, self.world.last_reward_terms,
+                                self.world.last_reward_quantities))
+        if decided is not None and self.agent_rows:
             for a, act in enumerate(np.asarray(actions, np.int64).reshape(-1).tolist()):
                 mask = decided[1]
                 self._decisions.append((self.episode, self._length, a, act, decided[0].rows(slice(a, a + 1)),
