@@ -252,3 +252,30 @@ def test_why_action_reads_the_run_without_torch(taxi_run):
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert "actions by Q-value" in r.stdout
+
+
+def test_a_recorder_without_the_agents_rows_records_the_same_games_without_them(gridwar_run, tmp_path):
+    """bench eval's baseline (DeclaredEvaluator agent_rows=False): the world's trace of the same games, no
+    decisions and no reward terms."""
+    encoder, n_actions, _ = probe_env(ADVANCED_ID)
+    net = NetSpec(encoder.size, (16,), n_actions)
+    policy = EnvPolicy(NumpyQ(net, random_weights(net, 0)), encoder)
+    run = tmp_path / "world-only"
+    writer = TraceWriter.open(run, {})
+    ids = iter(range(1 << 62))
+    evaluator = DeclaredEvaluator(ADVANCED_ID, writer, lambda: next(ids), EvalSettings(games=4, traced=4),
+                                  agent_rows=False)
+    evaluator.play(policy, 0, 0)
+    evaluator.close()
+    writer.close()
+    counts = []
+    for r in (gridwar_run, run):
+        con = open_run(r)
+        try:
+            counts.append([con.execute(f"SELECT count(*) FROM {v}").fetchone()[0]
+                           for v in ("steps", "changes", "decisions", "rewards")])
+        finally:
+            con.close()
+    (steps, changes, decisions, rewards), world_only = counts
+    assert decisions == steps > 0 and rewards > 0
+    assert world_only == [steps, changes, 0, 0]
