@@ -623,7 +623,7 @@ COMMANDS = (
             "train red with DQN, logging metrics, episodes and traced evaluation games into a run",
             argument_default=argparse.SUPPRESS),
     Command("eval", _eval,
-            "evaluate a saved policy: wins, losses, draws, truncations, and the method's counting side by side"),
+            "evaluate a saved policy on its world's spec: wins, losses, draws, truncations, the method's win rate"),
     Command("runs", _runs,
             "list runs: status, command, scenario, episodes, rows, size, start"),
     Command("tui", _tui,
