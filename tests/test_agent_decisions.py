@@ -1,7 +1,8 @@
 """The agent explained in the store (issue 39): traced games record each agent-step's decision (the action
 by name, the policy's value of every action, greedy or explored, the mask) and each step's reward by term,
-on GridWar (a freshly initialised 1v1 policy: train's traced evaluations, `play --policy`) and on a
-declared world (Taxi: `play --env --policy`'s path). Runs written before read as having none."""
+on GridWar's spec (a freshly initialised 1v1 policy: train's traced evaluations, external_eval.DeclaredEvaluator;
+`play --policy`) and on a declared world (Taxi: `play --env --policy`'s path). Runs written before read as
+having none."""
 from __future__ import annotations
 
 import json
@@ -13,19 +14,19 @@ import pytest
 from older_runs import older_run
 
 from tracelab.cli import main
-from tracelab.envs.common import resolve_scenario
 from tracelab.envs.declared.env_source import EnvSource
 from tracelab.envs.declared.play import load_declared, make_declared_env, play_episodes
 from tracelab.game.observe import obs_size
+from tracelab.game.scenario import builtin_scenario
 from tracelab.store import TraceWriter, open_run
-from tracelab.train.env_policy import EnvPolicy, one_env_actor
-from tracelab.train.env_source import ObservationEncoder
-from tracelab.train.evaluate import evaluate_into
-from tracelab.train.env_policy import Policy, save_policy
+from tracelab.train.env_policy import EnvPolicy, one_env_actor, save_policy
+from tracelab.train.env_source import ObservationEncoder, probe_env
+from tracelab.train.external_eval import DeclaredEvaluator, EvalSettings
 from tracelab.train.qnet import NetSpec, NumpyQ
 
 ROOT = Path(__file__).resolve().parent.parent
-ADVANCED = resolve_scenario("advanced")  # one agent a team, shots
+ADVANCED = builtin_scenario("advanced")  # one agent a team, shots
+ADVANCED_ID = EnvSource("tracelab/GridWar-advanced-v0", {"p_toward": 0.3})
 
 
 def random_weights(net: NetSpec, seed: int) -> dict[str, np.ndarray]:
@@ -40,11 +41,18 @@ def gridwar_net() -> NetSpec:
 
 @pytest.fixture(scope="module")
 def gridwar_run(tmp_path_factory) -> Path:
-    """Four traced evaluation games of a fresh 1v1 policy, as train's evaluations trace them."""
+    """Four traced evaluation games of a fresh 1v1 policy on GridWar's advanced spec, as train's evaluations
+    trace them (external_eval.DeclaredEvaluator)."""
     run = tmp_path_factory.mktemp("agent") / "gridwar"
-    net = gridwar_net()
-    policy = Policy(ADVANCED, [NumpyQ(net, random_weights(net, 0))], [0], stack_previous=False)
-    evaluate_into(TraceWriter.open(run, {}), policy, ADVANCED, games=4, backend="rules", seed=0, opponent_p=0.3)
+    encoder, n_actions, _ = probe_env(ADVANCED_ID)
+    net = NetSpec(encoder.size, (16,), n_actions)
+    policy = EnvPolicy(NumpyQ(net, random_weights(net, 0)), encoder)
+    writer = TraceWriter.open(run, {})
+    ids = iter(range(1 << 62))
+    evaluator = DeclaredEvaluator(ADVANCED_ID, writer, lambda: next(ids), EvalSettings(games=4, traced=4))
+    evaluator.play(policy, 0, 0)
+    evaluator.close()
+    writer.close()
     return run
 
 
@@ -118,14 +126,16 @@ def test_gridwar_rewards_sum_to_the_step_reward_by_the_games_terms(gridwar_run):
         terms = dict(con.execute("SELECT term, list(DISTINCT value) FROM rewards GROUP BY term").fetchall())
         by_episode = con.execute("SELECT e.episode, e.outcome, r.term FROM episodes e JOIN returns r "
                                  "ON r.episode = e.episode AND r.agent = 'red-agent-1' "
-                                 "WHERE r.term IN ('win', 'loss')").fetchall()
+                                 "WHERE r.term IN ('won(red)', 'won(blue)')").fetchall()
     finally:
         con.close()
     r = ADVANCED.rewards
-    assert set(terms) <= {"win", "loss", "hit", "got_shot", "step", "unsafe", "invalid"}
-    assert terms["step"] == [r.valid_action]  # what the other terms leave is exactly a valid action's
-    assert set(terms.get("unsafe", [r.unsafe])) == {r.unsafe}
-    assert all((outcome, term) in (("win", "win"), ("loss", "loss")) for _, outcome, term in by_episode)
+    assert set(terms) <= set(load_declared(ADVANCED_ID).reward_terms)  # the spec's [reward] entries
+    assert terms["canAct(Agent)"] == [r.valid_action]  # every step an agent acts pays a valid action's
+    # an unsafe step pays the valid action's and the rest of RuleSim's unsafe reward
+    assert set(terms.get("unsafe(Agent)", [r.unsafe - r.valid_action])) == {r.unsafe - r.valid_action}
+    assert by_episode and all((outcome, term) in (("win", "won(red)"), ("loss", "won(blue)"))
+                              for _, outcome, term in by_episode)
 
 
 def test_taxi_decisions_and_reward_terms(taxi_run):
@@ -200,7 +210,7 @@ def test_why_action_names_the_choice_the_ranking_the_observation_and_the_reward_
 def test_why_action_on_gridwar_names_the_observation_layout(gridwar_run, capsys):
     assert main(["why", str(gridwar_run), "--action", "red-agent-1", "--episode", "0", "--at", "2", "--json"]) == 0
     e = json.loads(capsys.readouterr().out)
-    assert [f["name"] for f in e["features"]][:4] == ["agent1_x", "agent1_y", "opponent1_x", "opponent1_y"]
+    assert [f["name"] for f in e["features"]][:4] == ["red_1_x", "red_1_y", "blue_1_x", "blue_1_y"]  # the spec's parts
     assert len(e["ranked"]) == ADVANCED.n_actions
 
 
@@ -242,3 +252,30 @@ def test_why_action_reads_the_run_without_torch(taxi_run):
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert "actions by Q-value" in r.stdout
+
+
+def test_a_recorder_without_the_agents_rows_records_the_same_games_without_them(gridwar_run, tmp_path):
+    """bench eval's baseline (DeclaredEvaluator agent_rows=False): the world's trace of the same games, no
+    decisions and no reward terms."""
+    encoder, n_actions, _ = probe_env(ADVANCED_ID)
+    net = NetSpec(encoder.size, (16,), n_actions)
+    policy = EnvPolicy(NumpyQ(net, random_weights(net, 0)), encoder)
+    run = tmp_path / "world-only"
+    writer = TraceWriter.open(run, {})
+    ids = iter(range(1 << 62))
+    evaluator = DeclaredEvaluator(ADVANCED_ID, writer, lambda: next(ids), EvalSettings(games=4, traced=4),
+                                  agent_rows=False)
+    evaluator.play(policy, 0, 0)
+    evaluator.close()
+    writer.close()
+    counts = []
+    for r in (gridwar_run, run):
+        con = open_run(r)
+        try:
+            counts.append([con.execute(f"SELECT count(*) FROM {v}").fetchone()[0]
+                           for v in ("steps", "changes", "decisions", "rewards")])
+        finally:
+            con.close()
+    (steps, changes, decisions, rewards), world_only = counts
+    assert decisions == steps > 0 and rewards > 0
+    assert world_only == [steps, changes, 0, 0]

@@ -1,19 +1,23 @@
 """`tracelab bench eval`: what tracing costs `tracelab train`'s evaluations, and the memory of a long
 training with traced evaluations.
 
-Speed, in one process: the same evaluation games (one policy: a seeded untrained network of the 1v1 base
-game; the same seeds) played
-- `traced`: as train traces them (train/evaluate.py's EvalTrace: `worlds` worlds, one game each, into a
-  run of the store that stays open, as the training's run does), and
-- `untraced`: as train plays the rest (play_games in a vector env of as many worlds, no trace),
-- `traced_world`: traced as before issue 39, the world's half only: no decisions, no reward terms
-  (EvalTrace's agent_rows=False, into a second run),
+Speed, in one process: the same evaluation games of GridWar's 1v1 base game through its spec
+(tracelab/GridWar-base-v0 against the opponent at train's --eval-p; one policy: a seeded untrained network;
+the same seeds) played
+- `traced`: as train traces them (external_eval.DeclaredEvaluator: `worlds` games one at a time in a traced
+  env, into a run of the store that stays open, as the training's run does), the policy's decisions and
+  the reward terms recorded,
+- `untraced`: as train plays the rest (env_policy.play_env_games in a vector env of `worlds` worlds, no
+  trace),
+- `traced_world`: traced as before issue 39, the world's half only: no decisions, no reward terms (a
+  recorder without the agent's rows, into a second run),
 in turn, `evaluations` evaluations per block, `repeats` blocks of each; a traced block ends when the run's
 writer has published its rows (its thread would otherwise encode them during the next untraced block,
 whose process CPU time would count them). Figures are seconds per evaluation,
 medians: wall clock, CPU of the whole process (the store writer's thread included) and CPU of the game's
-thread alone. `ratio`: traced over untraced per CPU second and per wall second (the goal: <= 1.3). Both
-must play the same games (`same_games`: their outcomes and lengths compared).
+thread alone. `ratio`: traced over untraced per CPU second and per wall second (the goal: <= 1.3);
+`agent_ratio`: traced over traced_world (issue 39's goal: <= 1.1). All must play the same games
+(`same_games`: their returns and lengths compared).
 
 Memory (`--memory STEPS`): `tracelab train --scenario base --total-timesteps STEPS --eval-every 10000
 --eval-games 50 --trace-eval-games 5` in a fresh process, its resident memory sampled every second
@@ -37,49 +41,63 @@ from tracelab.bench.engine import machine_line
 GOAL_RATIO = 1.3
 AGENT_GOAL_RATIO = 1.1  # issue 39: recording the agent's half costs traced evaluations at most 10%
 SCENARIO = "base"
+ENV_ID = "tracelab/GridWar-base-v0"  # the base scenario's spec
 EVAL_P = 0.3   # train's --eval-p
 MEMORY_TRAIN_ARGS = ("--scenario", SCENARIO, "--eval-every", "10000", "--eval-games", "50",
                      "--trace-eval-games", "5")
 
 
-def _policy() -> Any:
-    """A seeded, untrained greedy policy of the 1v1 base game (the networks a Trainer starts from)."""
-    import torch
+class _ActOnly:
+    """A policy that only acts: a traced env records no decisions of it."""
 
-    from tracelab.game.scenario import builtin_scenario
+    def __init__(self, policy: Any) -> None:
+        self.act = policy.act
+
+
+def _policy(source: Any) -> Any:
+    """A seeded, untrained greedy policy of the 1v1 base game (the network shape train starts from, its
+    weights drawn as torch's default initialisation draws them: uniform in +-1/sqrt(fan-in))."""
     from tracelab.train.config import TrainConfig
-    from tracelab.train.loop import acting_q, make_learner, training_net
-    from tracelab.train.env_policy import Policy
-    scenario = builtin_scenario(SCENARIO)
-    cfg = TrainConfig(scenario=SCENARIO)
-    net = training_net(cfg, scenario)
-    learner = make_learner("fused", net, cfg, torch.Generator().manual_seed(0))
-    return Policy(scenario, [acting_q(learner, net)], [0] * scenario.agents_per_team, False, False)
+    from tracelab.train.env_policy import EnvPolicy
+    from tracelab.train.env_source import probe_env
+    from tracelab.train.qnet import NumpyQ
+    encoder, n_actions, _ = probe_env(source)
+    net = TrainConfig().network(encoder.size, n_actions)
+    rng = np.random.default_rng(0)
+    weights = {}
+    for key, shape in net.state_dict_shapes().items():
+        fan_in = shape[-1] if len(shape) > 1 else shape[0]
+        weights[key] = rng.uniform(-1, 1, shape).astype(np.float32) / np.sqrt(fan_in)
+    return EnvPolicy(NumpyQ(net, weights), encoder)
 
 
-Evaluation = Callable[[int], list[Any]]  # seed -> the games' records
+Evaluation = Callable[[int], list[tuple[float, int]]]  # evaluation round -> the games' (return, steps)
 
 
 def evaluations(worlds: int, run_dir: Path) -> tuple[Evaluation, Evaluation, Evaluation, Callable[[], None],
                                                      Callable[[], None]]:
-    """(traced, untraced, traced_world, published, close): an evaluation of `worlds` games with a seed,
-    traced into a new run at `run_dir`, untraced, or traced without the agent's decisions and reward
-    terms into `run_dir`-world; `published()` returns once the traced rows are in the runs."""
-    from tracelab.envs.vector_env import GridWarVectorEnv
-    from tracelab.game.scenario import builtin_scenario
+    """(traced, untraced, traced_world, published, close): an evaluation round of `worlds` games, traced
+    into a new run at `run_dir`, untraced, or traced without the agent's decisions and reward terms into
+    `run_dir`-world; `published()` returns once the traced rows are in the runs."""
+    from tracelab.envs.declared.env_source import EnvSource
     from tracelab.store import TraceWriter
-    from tracelab.train.evaluate import EvalTrace, play_games
+    from tracelab.train.env_policy import make_vector_env, play_env_games
+    from tracelab.train.external_eval import DeclaredEvaluator, EvalSettings
+    from tracelab.train.rngs import eval_seed
 
-    scenario, policy = builtin_scenario(SCENARIO), _policy()
+    source = EnvSource(ENV_ID, {"p_toward": EVAL_P})
+    policy = _policy(source)
+    settings = EvalSettings(games=worlds, traced=worlds, envs=worlds, opponent_p=EVAL_P)
     writer = TraceWriter.open(run_dir, {"command": "tracelab bench eval", "scenario": SCENARIO})
     ids = iter(range(1 << 62))
-    trace = EvalTrace(writer, scenario, "rules", False, worlds, EVAL_P, lambda: next(ids))
+    trace = DeclaredEvaluator(source, writer, lambda: next(ids), settings)
     world_writer = TraceWriter.open(run_dir.with_name(run_dir.name + "-world"), {"command": "tracelab bench eval"})
     world_ids = iter(range(1 << 62))
-    world_trace = EvalTrace(world_writer, scenario, "rules", False, worlds, EVAL_P, lambda: next(world_ids),
-                            agent_rows=False)
-    env = GridWarVectorEnv(worlds, scenario, backend="rules", opponent_p=EVAL_P, copy=False)
-    one_each = np.ones(worlds, np.int64)
+    world_trace = DeclaredEvaluator(source, world_writer, lambda: next(world_ids), settings, agent_rows=False)
+    env, _ = make_vector_env(source, worlds)
+
+    def games(result: Any) -> list[tuple[float, int]]:
+        return list(zip(result.returns, result.steps))
 
     def published() -> None:
         writer.flush()
@@ -92,9 +110,10 @@ def evaluations(worlds: int, run_dir: Path) -> tuple[Evaluation, Evaluation, Eva
         writer.close()
         world_writer.close()
 
-    return (lambda seed: trace.play(policy, seed, {"kind": "eval"}),
-            lambda seed: play_games(env, policy, one_each, seed),
-            lambda seed: world_trace.play(policy, seed, {"kind": "eval"}), published, close)
+    # the traced games of round r are seeded eval_seed + 1 + k, as world k of a vector env reset with eval_seed + 1
+    return (lambda r: games(trace.play(policy, 0, r)),
+            lambda r: games(play_env_games(env, policy, worlds, eval_seed(settings.seed, r) + 1)),
+            lambda r: games(world_trace.play(_ActOnly(policy), 0, r)), published, close)
 
 
 def speed(worlds: int, per_block: int, repeats: int) -> dict[str, Any]:
@@ -102,19 +121,17 @@ def speed(worlds: int, per_block: int, repeats: int) -> dict[str, Any]:
     with tempfile.TemporaryDirectory(prefix="tracelab-bench-eval-") as tmp:
         traced, untraced, traced_world, published, close = evaluations(worlds, Path(tmp) / "run")
         try:
-            games = [(r.outcome, r.steps) for r in traced(0)]
-            same = games == [(r.outcome, r.steps) for r in untraced(0)] == \
-                [(r.outcome, r.steps) for r in traced_world(0)]
+            same = sorted(traced(0)) == sorted(untraced(0)) == sorted(traced_world(0))  # untraced: in order of ending
             published()
             kinds = {"traced": traced, "untraced": untraced, "traced_world": traced_world}
             figures: dict[str, dict[str, list[float]]] = {k: {"wall": [], "cpu": [], "thread": []} for k in kinds}
             steps = {k: 0 for k in kinds}
             for block in range(max(1, repeats)):
-                seeds = range(1 + block * per_block, 1 + (block + 1) * per_block)
+                rounds = range(1 + block * per_block, 1 + (block + 1) * per_block)
                 for name, play in kinds.items():
                     t0, c0, m0 = time.perf_counter(), time.process_time(), time.thread_time()
-                    for seed in seeds:
-                        steps[name] += sum(r.steps for r in play(seed))
+                    for round_no in rounds:
+                        steps[name] += sum(n for _, n in play(round_no))
                     if name.startswith("traced"):
                         published()
                     for key, used in (("wall", time.perf_counter() - t0), ("cpu", time.process_time() - c0),

@@ -440,10 +440,11 @@ def _eval(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenario", default=None,
                    help="play on this scenario (built-in name or .toml; default: the policy's own)")
     p.add_argument("--backend", choices=("rules", "reference"), default="rules",
-                   help="the rule-driven simulator or the hand-written one (default: rules)")
-    p.add_argument("--opponent-p", type=float, default=0.3,
-                   help="the opponent's probability of a move towards red's base (default 0.3, the "
-                        "method's evaluation)")
+                   help="rules (the default, and the only one left: every policy plays its world's spec)")
+    p.add_argument("--opponent-p", type=float, default=None,
+                   help="GridWar's opponent's probability of a move towards red's base (default 0.3, the "
+                        "method's evaluation, for a policy of RuleSim's trainer; a policy of train --env: "
+                        "the p it was trained with)")
     p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the games (default 0)")
     p.add_argument("--num-envs", dest="envs", type=positive_int, default=64,
                    help="worlds stepped together (default 64, as train's --eval-envs)")
@@ -622,7 +623,7 @@ COMMANDS = (
             "train red with DQN, logging metrics, episodes and traced evaluation games into a run",
             argument_default=argparse.SUPPRESS),
     Command("eval", _eval,
-            "evaluate a saved policy: wins, losses, draws, truncations, and the method's counting side by side"),
+            "evaluate a saved policy on its world's spec: wins, losses, draws, truncations, the method's win rate"),
     Command("runs", _runs,
             "list runs: status, command, scenario, episodes, rows, size, start"),
     Command("tui", _tui,

@@ -168,6 +168,9 @@ DICTIONARY_COLUMNS: dict[str, list[str]] = {
 PART_OPTIONS: dict[str, dict[str, object]] = {
     "changes": {"column_encoding": {"seq": "DELTA_BINARY_PACKED"},
                 "write_statistics": ["seq", "episode", "world", "t"]},
+    # the agent's rows are read by episode and step: no statistics of the value and mask lists (issue 39's cost)
+    "decisions": {"write_statistics": ["episode", "step"]},
+    "reward_terms": {"write_statistics": ["episode", "step"]},
 }
 
 # Sort order of each table in a sealed file (point queries by episode and time).

@@ -424,7 +424,7 @@ def greedy_actor(policy: Any, env: Any = None) -> Callable[[Any, dict[str, Any]]
 @dataclass
 class EnvEvalResult:
     """An evaluation's games on any env. Where the world declares how a game ends (a spec's `[end] win`,
-    `loss`) its outcomes are counted as GridWar's are (evaluate.EvalResult): wins, losses, draws (ended by
+    `loss`) its outcomes are counted as the method counted GridWar's: wins, losses, draws (ended by
     neither) and truncated games, and the method's win rate, in which a game cut short counts as a loss
     (a spec world's cut is its own step limit, so its method win rate is its win rate); otherwise returns
     and the success rate (return > 0)."""
@@ -609,14 +609,13 @@ def evaluate_env(policy: EnvPolicy, source: EnvSource, games: int, seed: int, wo
         env.close()
 
 
-def evaluate_team(policy: Policy, source: EnvSource, games: int, seed: int,
-                  on_game: Callable[[float], None] | None = None) -> EnvEvalResult:
-    """`games` greedy episodes of a team's policy (GridWar's trainer's) on a declared world of several agents,
-    one world at a time (TeamEnv: the batched engine plays one agent), counted as evaluate_env counts."""
-    from tracelab.envs.declared.play import TeamEnv, play_episodes
-    spec_path, params = source.declared()
-    env = TeamEnv(load_spec(spec_path, **params))
-    declares = bool(env.world_spec.win or env.world_spec.loss)
+def evaluate_in_env(policy: Any, env: Any, games: int, seed: int,
+                    on_game: Callable[[float], None] | None = None) -> EnvEvalResult:
+    """`games` greedy episodes of a policy load_trained gave, one at a time in `env` (a declared world's Env
+    or TeamEnv: a team's policy of GridWar's earlier trainer, or every game traced with its decisions where
+    `env` records), counted as evaluate_env counts."""
+    from tracelab.envs.declared.play import play_episodes
+    declares = declares_outcomes(env)
     result = EnvEvalResult()
 
     def ended(game: dict[str, Any]) -> None:
@@ -624,5 +623,5 @@ def evaluate_team(policy: Policy, source: EnvSource, games: int, seed: int,
         result.add(game["return"], game["steps"], not cut, cut, game["outcome"] if declares else None)
         if on_game is not None:
             on_game(game["return"])
-    play_episodes(env, games, seed, team_actor(policy), on_episode=ended, step_cap=EVAL_STEP_CAP)
+    play_episodes(env, games, seed, greedy_actor(policy, env), on_episode=ended, step_cap=EVAL_STEP_CAP)
     return result

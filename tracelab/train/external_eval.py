@@ -129,7 +129,10 @@ class DeclaredEvaluator:
     """The traced games one at a time in one traced env (kept for the run: its program is written once);
     the rest in a vector env of untraced copies, as `train --env` evaluates (env_policy.play_env_games)."""
 
-    def __init__(self, source: EnvSource, writer: TraceWriter, new_id: NewId, settings: EvalSettings) -> None:
+    def __init__(self, source: EnvSource, writer: TraceWriter, new_id: NewId, settings: EvalSettings,
+                 agent_rows: bool = True) -> None:
+        """`agent_rows` False: the traced games record the world alone, no decisions or reward terms (bench
+        eval's baseline)."""
         self.source, self.settings = source, settings
         self.traced = min(settings.traced, settings.games)
         self.team = team_spec(source)  # several agents: a TeamEnv records each agent's decisions
@@ -137,10 +140,11 @@ class DeclaredEvaluator:
             self.trace_env: Any = None
         elif self.team is not None:
             from tracelab.envs.declared.play import TeamEnv
-            self.trace_env = TeamEnv(self.team, trace_writer=writer, trace_episode_ids=new_id)
+            self.trace_env = TeamEnv(self.team, trace_writer=writer, trace_episode_ids=new_id,
+                                     trace_agent_rows=agent_rows)
         else:
-            self.trace_env = EnvSource(source.name, {**source.kwargs, "trace_writer": writer,
-                                                     "trace_episode_ids": new_id}).make()
+            self.trace_env = EnvSource(source.name, {**source.kwargs, "trace_writer": writer, "trace_episode_ids":
+                                                     new_id, "trace_agent_rows": agent_rows}).make()
         rest = settings.games - self.traced
         self.env = make_vector_env(source, min(settings.envs, rest))[0] if rest else None
 

@@ -265,21 +265,19 @@ def _top_level(top: dict[str, Any], samples: int | None, scheduler: str | None, 
             raise SweepSpecError(f"{key} must be one of {', '.join(allowed)}, got {out[key]!r}")
     if env is not None and "metric" not in out:  # every env's evaluation has it (a win rate, only some)
         out["metric"] = "eval/mean_return"
-    known = evaluation_metrics(env is not None)
+    known = evaluation_metrics()
     if "metric" in out and out["metric"] not in known:
         raise SweepSpecError(f"metric must be one of the evaluations' metrics ({', '.join(known)}), "
                              f"got {out['metric']!r}")
     return out
 
 
-def evaluation_metrics(env: bool = False) -> list[str]:
-    """What a trainer's evaluation writes (Tune reads a trial at its evaluations): GridWar's, or (`env`)
-    an env's (`eval/win_rate` when its world declares a win)."""
-    if env:
-        from tracelab.train.env_policy import EnvEvalResult
-        return list(EnvEvalResult(wins=0).metrics())
-    from tracelab.train.evaluate import EvalResult
-    return list(EvalResult(games=0, actions_per_win=0.0).metrics())
+def evaluation_metrics() -> list[str]:
+    """What a trainer's evaluation writes (Tune reads a trial at its evaluations): the spec path's
+    (env_policy.EnvEvalResult), with the counts and win rates of a world that declares a win (GridWar's
+    scenarios; `--set env=...` only where its world declares one, `eval/mean_return` its default)."""
+    from tracelab.train.env_policy import EnvEvalResult
+    return list(EnvEvalResult(wins=0, win_steps=[0]).metrics())
 
 
 def _read_file(path: str) -> tuple[dict[str, dict[str, tuple[Any, str]]], dict[str, Any]]:

@@ -35,7 +35,8 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
 
     def __init__(self, spec: WorldSpec | str | os.PathLike[str], *, render_mode: str | None = None,
                  kernel: str = "auto", trace_writer: TraceWriter | None = None,
-                 trace_episode_ids: Callable[[], int] | None = None, **params: Any) -> None:
+                 trace_episode_ids: Callable[[], int] | None = None, trace_agent_rows: bool = True,
+                 **params: Any) -> None:
         self.world_spec = spec if isinstance(spec, WorldSpec) else load_spec(spec, **params)
         if len(self.world_spec.agents) != 1:
             raise ValueError(f"{self.world_spec.path}: a gymnasium Env plays one agent; this spec declares "
@@ -48,7 +49,7 @@ class DeclaredEnv(gym.Env[Any, np.int64]):
         if trace_writer is not None:
             # deferred: the store's modules (DuckDB) only load for a traced env
             from tracelab.envs.declared.recording import DeclaredRecorder
-            self._recorder = DeclaredRecorder(self.world, trace_writer, trace_episode_ids)
+            self._recorder = DeclaredRecorder(self.world, trace_writer, trace_episode_ids, trace_agent_rows)
         self.metadata = {**self.metadata, "render_fps": self.world_spec.render_fps}
         self._n_actions = len(self.world_spec.action_names)
         self.action_space = spaces.Discrete(self._n_actions)

@@ -50,7 +50,7 @@ class TeamEnv:
     (`trace_episode_ids`: their episode ids, where the run is another's, as DeclaredEnv's)."""
 
     def __init__(self, spec: WorldSpec, *, kernel: str = "auto", trace_writer: TraceWriter | None = None,
-                 trace_episode_ids: Callable[[], int] | None = None) -> None:
+                 trace_episode_ids: Callable[[], int] | None = None, trace_agent_rows: bool = True) -> None:
         from tracelab.envs.declared.world import DeclaredWorld
         self.world_spec = spec
         self.world = DeclaredWorld(spec, kernel=kernel, trace=trace_writer is not None)
@@ -61,7 +61,7 @@ class TeamEnv:
         self._recorder = None
         if trace_writer is not None:
             from tracelab.envs.declared.recording import DeclaredRecorder
-            self._recorder = DeclaredRecorder(self.world, trace_writer, trace_episode_ids)
+            self._recorder = DeclaredRecorder(self.world, trace_writer, trace_episode_ids, trace_agent_rows)
 
     @property
     def unwrapped(self) -> "TeamEnv":

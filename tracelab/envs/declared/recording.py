@@ -124,10 +124,11 @@ class DeclaredRecorder:
 opened by gym.make(id, trace_writer=...) reads as one `tracelab play` wrote.
 
     `episode_ids`: a run the recorder does not own (a training's, whose evaluation games it records):
-    episodes take their ids from it, begin with `begin_info`, and close() leaves the writer open."""
+    episodes take their ids from it, begin with `begin_info`, and close() leaves the writer open.
+    `agent_rows` False: no decisions and no reward terms (the world's trace alone)."""
 
     def __init__(self, world: DeclaredWorld, writer: TraceWriter,
-                 episode_ids: Callable[[], int] | None = None) -> None:
+                 episode_ids: Callable[[], int] | None = None, agent_rows: bool = True) -> None:
         eng = world.engine
         if not eng.trace_on.any():
             raise ValueError("the declared world's engine does not trace: build it with trace=True")
@@ -141,13 +142,14 @@ opened by gym.make(id, trace_writer=...) reads as one `tracelab play` wrote.
         writer.add_config(declared_run_config(world.spec, sources))
         writer.write_action_names(world.spec.action_names)
         writer.write_observation_names(observation_names(world.spec))
-        world.keep_reward_terms = True
+        # the agent's half (decisions, reward terms); off: the world's alone (bench eval's baseline)
+        self.agent_rows = world.keep_reward_terms = agent_rows
         self._agent_rows = AgentRows()
-        # decisions (episode, step, agent, action, the policy's output, mask) and reward terms (episode,
-        # step, [agent, term] values) of the steps kept, as tuples (a record per step costs more)
+        # decisions (episode, step, actions, the policy's output, masks) and reward terms (episode, step,
+        # [agent, term] quantities) of the steps kept, as tuples (a record per step costs more)
         self._decided: tuple[PolicyOutput, np.ndarray | None] | None = None
-        self._decisions: list[tuple[int, int, int, int, PolicyOutput, np.ndarray | None]] = []
-        self._terms: list[tuple[int, int, np.ndarray, np.ndarray]] = []  # ..., values, quantities
+        self._decisions: list[tuple[int, int, Any, PolicyOutput, np.ndarray | None]] = []  # per step, every agent
+        self._terms: list[tuple[int, int, np.ndarray]] = []
         self._setup = eng.take_trace()  # the build's rows (t = 0), replayed at every episode's start
         self.episode = -1
         self._episode_ids = episode_ids
@@ -205,13 +207,11 @@ opened by gym.make(id, trace_writer=...) reads as one `tracelab play` wrote.
             return
         self._length += 1
         t = self.world.engine.t - 1 - self._t0
-        self._terms.append((self.episode, self._length, self.world.last_reward_terms,
-                            self.world.last_reward_quantities))
-        if decided is not None:
-            for a, act in enumerate(np.asarray(actions, np.int64).reshape(-1).tolist()):
-                mask = decided[1]
-                self._decisions.append((self.episode, self._length, a, act, decided[0].rows(slice(a, a + 1)),
-                                        None if mask is None else np.asarray(mask).reshape(len(self.agents), -1)[a]))
+        if self.agent_rows:
+            self._terms.append((self.episode, self._length, self.world.last_reward_quantities))
+        if decided is not None and self.agent_rows:  # the output's rows are the agents' (split when written)
+            kept = actions if isinstance(actions, (int, np.integer)) else np.array(actions, np.int64)
+            self._decisions.append((self.episode, self._length, kept, *decided))
         if isinstance(actions, (int, np.integer)):  # one agent (kept short: the toy-text games' case)
             self._returns[0] += rewards[0]
             self._steps.append((self.episode, self._length, t, 0, rewards[0], int(actions), terminated, truncated))
@@ -273,21 +273,23 @@ opened by gym.make(id, trace_writer=...) reads as one `tracelab play` wrote.
     def _keep_agent_rows(self) -> None:
         """The kept decisions and reward terms as the store's records (agent_rows)."""
         if self._terms:
-            episode, step, terms, quantities = zip(*self._terms)
+            episode, step, quantities = zip(*self._terms)
             self._terms = []
-            values = np.stack(terms)  # [steps, agents, terms]
-            k, m, n_terms = values.shape
+            q = np.asarray(quantities, np.float64)  # [steps, agents, terms]
+            k, m, n_terms = q.shape
             per_step = m * n_terms
             self._agent_rows.reward_terms(RewardTerms(
                 np.repeat(episode, per_step), np.repeat(step, per_step), np.tile(np.repeat(np.arange(m), n_terms), k),
-                self.agents, np.tile(np.arange(n_terms), k * m), self.world.spec.reward_terms, values.reshape(-1),
-                np.stack(quantities).reshape(-1)))
+                self.agents, np.tile(np.arange(n_terms), k * m), self.world.spec.reward_terms,
+                (q * self.world.reward_term_values).reshape(-1), q.reshape(-1)))
         if self._decisions:
-            episode, step, agent, action, outputs, masks = zip(*self._decisions)
+            episode, step, actions, outputs, masks = zip(*self._decisions)
             self._decisions = []
+            m, k = len(self.agents), len(episode)
             self._agent_rows.decisions(Decisions(
-                np.array(episode), np.array(step), np.array(agent), self.agents, np.array(action),
-                PolicyOutput.concat(outputs), None if masks[0] is None else np.stack(masks)))
+                np.repeat(episode, m), np.repeat(step, m), np.tile(np.arange(m), k), self.agents,
+                np.asarray(actions, np.int64).reshape(-1), PolicyOutput.concat(outputs),
+                None if masks[0] is None else np.asarray(masks).reshape(k * m, -1)))
 
     def _take_rows(self) -> None:
         """The engine's rows, t counted from the episode's start and labelled with the episode (the

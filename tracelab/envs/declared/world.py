@@ -169,6 +169,14 @@ class DeclaredWorld:
         self._reads = (part_ptr, part_atoms, ids(t[0] for t in table), np.array([t[1] for t in table], np.float64),
                        np.array([t[2] for t in table], np.int64), ids(spec.terminated), ids(spec.truncated),
                        mask_ids)
+        # each step's reward by term in one read (_reward_quantities): per agent, the table's atoms (their value
+        # where true), then the scaled atoms (their bound times the scale)
+        scaled = [ids for ids, _ in self._scaled], [scales for _, scales in self._scaled]
+        scaled_ids, scales = (np.concatenate(x).reshape(n, -1) if x else np.zeros((n, 0)) for x in scaled)
+        self._term_atoms = np.concatenate([self._reads[2].reshape(n, -1), scaled_ids], axis=1).astype(np.int64)
+        self.reward_term_values = np.concatenate([self._reads[3].reshape(n, -1), scales], axis=1)  # per occurrence
+        self._term_is_table = np.arange(self._term_atoms.shape[1]) < self._reads[2].size // max(n, 1)
+        self._terms_all_table = bool(self._term_is_table.all())
         # read_step's results: indices [agent * index parts], rewards [agent], ends, masks, a paused world
         self._out = (np.zeros(n * len(read_index), np.int64), np.zeros(n), np.zeros(2),
                      np.zeros(len(mask_ids), np.int8), np.zeros(1, np.int64))
@@ -188,10 +196,9 @@ class DeclaredWorld:
         self._start_picks[-1] = 0  # the start facts: a draw with one value
         self.steps = 0
         self.last_rewards = [0.0] * self.n_agents
-        # a recorder's: each step's reward by term [agent, term] (spec.reward_terms) in `last_reward_terms`,
-        # and what each value is of (occurrences, a scaled atom's bound) in `last_reward_quantities`
+        # a recorder's: what each term of each step's reward is of [agent, term] (spec.reward_terms: a table
+        # atom's occurrence, a scaled atom's bound) in `last_reward_quantities`; its value, last_reward_terms
         self.keep_reward_terms = False
-        self.last_reward_terms: np.ndarray | None = None
         self.last_reward_quantities: np.ndarray | None = None
         # one world on the counting kernel stays on it (only a lanes engine moves to counting)
         self._fused = eng.kernel == "counting"
@@ -253,7 +260,7 @@ class DeclaredWorld:
             picks[base:base + len(self._computed)] = self._computed.picks(self.engine, np.array([self.steps]))[0]
         self._fused_step(rows, picks)
         rewards = self._rewards()
-        terms = self._reward_terms() if self.keep_reward_terms else None  # (values, quantities)
+        terms = self._reward_quantities() if self.keep_reward_terms else None
         if self._after:
             n_before = len(self._before)
             picks[:n_before] = -1
@@ -265,10 +272,10 @@ class DeclaredWorld:
                 self._fused_step(rows, picks)
                 rewards = [a + b for a, b in zip(rewards, self._rewards())]
                 if terms is not None:
-                    terms = tuple(a + b for a, b in zip(terms, self._reward_terms()))
+                    terms = np.add(terms, self._reward_quantities(), dtype=np.float64)
                 picks[n_before:] = -1
         self.last_rewards = rewards
-        self.last_reward_terms, self.last_reward_quantities = (None, None) if terms is None else terms
+        self.last_reward_quantities = terms
         self.steps += 1
 
     def _fused_step(self, rows: np.ndarray, picks: np.ndarray) -> None:
@@ -395,17 +402,19 @@ class DeclaredWorld:
                 rewards[a] += float((self.engine.lower[0, ids] * scales).sum())
         return rewards
 
-    def _reward_terms(self) -> tuple[np.ndarray, np.ndarray]:
-        """The engine step's reward by term [agent, term]: each [reward.table] entry's value where its atom
-        is true, then the scaled atom's bound times its scale (what _rewards sums); and the quantities the
-        values are of (the table atoms' truth, the scaled atom's bound), so a term worth 0 shows it occurred."""
-        _, _, table_atoms, table_values, _, _, _, _ = self._reads
-        held = self.true(table_atoms).astype(np.float64).reshape(self.n_agents, -1)
-        n = self.n_agents
-        bounds = np.asarray([self.engine.lower[0, ids] for ids, _ in self._scaled], np.float64).reshape(n, -1)
-        scales = np.asarray([scales for _, scales in self._scaled], np.float64).reshape(n, -1)
-        return (np.concatenate([table_values.reshape(n, -1) * held, bounds * scales], axis=1),
-                np.concatenate([held, bounds], axis=1))
+    @property
+    def last_reward_terms(self) -> np.ndarray | None:
+        """The last step's reward by term [agent, term] (its quantities times the terms' values; they add up
+        to last_rewards), where the world keeps them (keep_reward_terms)."""
+        q = self.last_reward_quantities
+        return None if q is None else q * self.reward_term_values
+
+    def _reward_quantities(self) -> np.ndarray:
+        """The engine step's reward terms' quantities [agent, term]: each [reward.table] entry's atom's truth,
+        then each scaled atom's bound (so a term worth 0 shows it occurred); a step's cost, kept small (the
+        values are these times reward_term_values, taken when read)."""
+        bounds = self.engine.lower[0, self._term_atoms]  # a table atom is true where its lower bound is 1
+        return bounds == 1.0 if self._terms_all_table else np.where(self._term_is_table, bounds == 1.0, bounds)
 
     def terminated(self) -> bool:
         return self._ends[0]
