@@ -3,9 +3,8 @@ episode (Engine.take_trace(t_start=..., episode=...); a simulator's episode cloc
 
 Its own module, calling nothing elsewhere: numba's disk cache does not notice changes to callees in
 other modules. The layout is kernel.py's trace buffer (int32 [rows, 8]: world, t, pass_no, atom,
-cause_kind, cause_id, grounding, n_sources; float64 [rows, 4]); tests/test_rulesim_fused.py compares
-the result with the Python path. Few arrays are returned because numba boxes each (its cost:
-docs/benchmarks.md, "Figures behind the code")."""
+cause_kind, cause_id, grounding, n_sources; float64 [rows, 4]). Few arrays are returned because numba
+boxes each (its cost: docs/benchmarks.md, "Figures behind the code")."""
 from __future__ import annotations
 
 import numpy as np

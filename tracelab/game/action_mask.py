@@ -1,8 +1,6 @@
-"""ActionMasker: GridWar's action mask (the shield) computed from the state, RefSim's (the hand-written
-oracle's; tests/gridwar_refsim.py) and, through `for_sim`, read from RuleSim's shield atoms."""
+"""ActionMasker: GridWar's action mask (the shield) computed from RefSim's state (the hand-written
+oracle's; tests/gridwar_refsim.py), which the differential tests compare with the spec's mask rules."""
 from __future__ import annotations
-
-from typing import Any
 
 import numpy as np
 
@@ -13,13 +11,11 @@ from tracelab.game.state import GameState
 class ActionMasker:
     """Which learner actions are safe and valid in the current state, per world, team and agent.
 
-    For the rules backend `for_sim` reads the mask from the shield rules' atoms (game.rules, section 7);
-    this Python version serves the reference backend, and tests check that the two agree.
     It mirrors the rules (rules/gridworld/game.rules): only an agent that may act gets a choice
     (t_fast / t_slow: alive, and a slow agent on even steps only; others can only do nothing, since
     the simulator ignores their actions); a move off the map (u_*_edge) or into a mountain (u_*_mtn) is
     masked, a shot with no ammo (s_empty, s_unarmed) is masked; do nothing is always allowed. It reads
-    positions, ammo, alive and t from GameState (what RuleSim reads back from atoms) and the map. It cannot
+    positions, ammo, alive and t from GameState and the map. It cannot
     foresee a bullet that kills the agent in phase 1 of the next step, before it acts.
     """
 
@@ -36,15 +32,6 @@ class ActionMasker:
         x, y = np.meshgrid(np.arange(w), np.arange(h), indexing="ij")
         self._move_ok = np.stack([free[x + 1 + dx, y + 1 + dy] for dx, dy in DIRECTION_DELTAS], axis=-1)
         self._slow = scenario.slow_mask
-
-    def for_sim(self, sim: Any, team: int | None = None) -> np.ndarray:
-        """The mask for a simulator's current state: read from the shield rules' atoms when the
-        simulator runs on rules (RuleSim.allowed_actions), else computed from the state (RefSim)."""
-        allowed = getattr(sim, "allowed_actions", None)
-        if allowed is None:
-            return self(sim.state, team)
-        sel = slice(None) if team is None else team
-        return np.ascontiguousarray(allowed()[:, sel][..., self.ids]).view(np.int8)
 
     def __call__(self, state: GameState, team: int | None = None) -> np.ndarray:
         """int8 (gymnasium's mask dtype), 1 = allowed: [W, N, n_actions] for one team, or

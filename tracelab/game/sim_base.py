@@ -1,6 +1,5 @@
-"""What the two simulators (RefSim, hand-written; RuleSim, rule-driven) share: the set-up of their
-common fields, the step contract (buffers, or copies with `copy=True`), the observations they hand out,
-and the scripted policy on their state."""
+"""RefSim's base: the set-up of its fields, the step contract (buffers, or copies with `copy=True`),
+the observations it hands out, and the scripted policy on its state."""
 from __future__ import annotations
 
 import numpy as np
@@ -20,7 +19,8 @@ def read_only(a: np.ndarray) -> np.ndarray:
 
 
 class GameSim:
-    """Base of RefSim and RuleSim. Subclasses keep `self.state` (a GameState), `self._obs` (the
+    """Base of RefSim (RuleSim, the rule-driven simulator deleted on 2026-11-29, was the other).
+    Subclasses keep `self.state` (a GameState), `self._obs` (the
     observation buffer handed out, [W, 2, D]), `self._result` (the StepResult of read-only views of
     their buffers, handed out by every step) and `self._policy_state` (the writable pos, alive, ammo
     arrays the scripted policy reads).

@@ -1,5 +1,5 @@
-"""The game's state in W worlds and what one step hands out: the data both simulators (RefSim, RuleSim)
-share. The layout of every array is in tracelab/game/refsim.py's module docstring."""
+"""The game's state in W worlds and what one step hands out: RefSim's data. The layout of every array
+is in tracelab/game/refsim.py's module docstring."""
 from __future__ import annotations
 
 from dataclasses import dataclass, fields

@@ -1,5 +1,5 @@
 """A training run by another library (Stable-Baselines3, ...) logged into a tracelab run, live, as
-tracelab's own trainer logs its own (train/loop.py, docs/training.md "What is logged, and where"):
+tracelab's own trainer logs its own (train/env_trainer.py, docs/training.md "What is logged, and where"):
 
 - meta.json: the command, the env (the scenario or the declared world, its board and rule files), the
   learner's settings under `config`; status `running` until close() records finished / interrupted /

@@ -3,8 +3,7 @@ step, and the reads (observation indices, the reward table, the ends, the action
 
 Why: a numba call from Python unboxes every array it is given (~0.5 µs each on this machine); the
 counting kernel's step takes ~60 arrays, so calling it from Python costs ~40 µs, more than the step's
-work on a toy-text game. As in RuleSim's fused step (tracelab/game/rulesim_fused.py), the arrays are
-bound once into a structref (one object to unbox) and bound again only when the engine replaces one of
+work on a toy-text game. So the arrays are bound once into a structref (one object to unbox) and bound again only when the engine replaces one of
 its arrays (Engine.layout_version). When the kernel pauses (trace or schedule room) or fails, the call
 returns its status and Python goes on with Engine.finish_fused_step, then `read_step`.
 

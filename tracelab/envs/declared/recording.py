@@ -44,6 +44,12 @@ if TYPE_CHECKING:
 CONFIG_KEY = "declared_facts"
 
 
+def handover_due(engine: Any, steps_waiting: int, episode_ended: bool) -> bool:
+    """Whether a recorder takes the engine's trace rows now: an episode ended (its rows are all out
+    before its end is written), HANDOVER_STEPS steps wait, or TRACE_HANDOVER_ROWS rows."""
+    return episode_ended or steps_waiting >= HANDOVER_STEPS or engine.trace_rows_waiting >= TRACE_HANDOVER_ROWS
+
+
 def declared_facts(spec: WorldSpec) -> dict[str, Any]:
     """What sets each external fact of a run: the action facts' predicates, and each draw's name with
     its atoms' predicates, and the predicates the env computes ([[clock]], [[nearest]]; the run's config
@@ -223,8 +229,7 @@ opened by gym.make(id, trace_writer=...) reads as one `tracelab play` wrote.
         self._steps_waiting += 1
         self._steps_kept += 1
         ended = terminated or truncated
-        if ended or self._steps_waiting >= HANDOVER_STEPS or \
-                self.world.engine.trace_rows_waiting >= TRACE_HANDOVER_ROWS:
+        if handover_due(self.world.engine, self._steps_waiting, ended):
             self._take_rows()
         if ended:
             self._end(self.world.outcome() if terminated else "truncated")
