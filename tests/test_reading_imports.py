@@ -44,6 +44,7 @@ DUCKDB_COMMANDS = [
     ["why-not", PLAY, "--rule", "snap_at", "--episode", "2", "--at", "18"],
     ["why", TRAIN, "--action", "red-agent-1", "--episode", "772", "--at", "2"],
     ["why-not", TRAIN, "--action", "up", "--episode", "772", "--at", "2"],
+    ["compare", TRAIN],   # the reward scale's text without the trainer's config (numpy): train/reward_scale.py
 ]
 COMMANDS = [
     *DUCKDB_COMMANDS,
@@ -54,7 +55,6 @@ COMMANDS = [
     ["trace", PLAY, "--episode", "0", "--from", "1", "--to", "4", "--format", "csv"],
     ["diff", PLAY, "0", "1"],
     ["runs", "--format", "json", str(RUNS)],
-    ["compare", TRAIN],
     ["compare", "--format", "json", TRAIN],
 ]
 

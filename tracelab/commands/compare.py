@@ -20,7 +20,7 @@ from tracelab.errors import UserError, store_errors
 from tracelab.store.kind import spec_source_sql, spec_text_of, world_params
 from tracelab.store.reader import query_readonly, resolve_run, retrying
 from tracelab.store.several import SeveralRunsConnection, catalog_of, run_names
-from tracelab.train.config import METHOD_REWARD_SCALE
+from tracelab.train.reward_scale import METHOD_REWARD_SCALE
 
 if TYPE_CHECKING:
     from tracelab.store.reader import RunConnection

@@ -33,12 +33,13 @@ from tracelab.game.scenario import builtin_scenario_names
 from tracelab.store import TraceWriter
 from tracelab.store.meta import current_meta
 from tracelab.train.budget import reward_scale_note, too_short_hint
-from tracelab.train.config import GRIDWAR_ONLY, METHOD_REWARD_SCALE, TrainConfig, flag_of, reward_scale_text
+from tracelab.train.config import GRIDWAR_ONLY, TrainConfig, flag_of
 from tracelab.train.env_checkpoint import checkpoint_config, checkpoint_env, load_env_checkpoint
 from tracelab.train.env_source import probe_env
 from tracelab.train.env_trainer import EnvTrainer, env_run_meta, gridwar_sources
 from tracelab.train.memory import check_estimate, env_training_estimate, env_world_bytes, memory_limit
 from tracelab.train.qnet import NetSpec
+from tracelab.train.reward_scale import METHOD_REWARD_SCALE, reward_scale_text
 
 
 def run(args: argparse.Namespace) -> int:

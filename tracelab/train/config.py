@@ -11,26 +11,16 @@ from typing import Any
 
 from tracelab.engine.kernel_names import KERNELS as ENGINE_KERNELS
 from tracelab.train.qnet import NetSpec, parse_hidden
+from tracelab.train.reward_scale import LEARNING_REWARD_SCALE, METHOD_REWARD_SCALE
 from tracelab.validation import Mismatch, Nullable, OptionalKey, Spec
 
 
 LEARNERS = ("auto", "fused", "readable")
 LEARNER_FILES = {"fused": "tracelab/train/learner.py", "readable": "tracelab/train/dqn.py"}
 
-# The game's rewards (hundreds) times this are what the learner sees. The method uses them as they are (1),
-# which does not learn the 1v1 base scenario in 760,000 steps; 0.01 learns it in 200,000 (docs/training.md,
-# "Reward scale"; docs/experiments/1v1-base.md), so 0.01 is the default and `--reward-scale 1` the method's.
-LEARNING_REWARD_SCALE = 0.01
-METHOD_REWARD_SCALE = 1.0
 # torch CPU threads: one is fastest for these networks; past this many a stranger's config (a checkpoint, a
 # sweep file) is asking the system for threads it cannot start ("can't start new thread" at 100,000)
 MAX_THREADS = 256
-
-
-def reward_scale_text(scale: float) -> str:
-    """How reports name a run's reward scale: `reward scale 0.01 (the method's: 1)`."""
-    return (f"reward scale {scale:g}" + (" (the method's)" if scale == METHOD_REWARD_SCALE
-                                         else f" (the method's: {METHOD_REWARD_SCALE:g})"))
 
 
 def _opt(help: str, flag: str | None = None, **kw: Any) -> Any:

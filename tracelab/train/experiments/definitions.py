@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Any
 
 from tracelab import RULES_DIR
 from tracelab.game.scenario import Rewards, Scenario, builtin_scenario
-from tracelab.train.config import LEARNING_REWARD_SCALE, METHOD_REWARD_SCALE
+from tracelab.train.reward_scale import LEARNING_REWARD_SCALE, METHOD_REWARD_SCALE
 
 if TYPE_CHECKING:
     from tracelab.envs.declared.env_source import EnvSource

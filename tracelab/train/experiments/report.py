@@ -10,11 +10,12 @@ from typing import Any
 import numpy as np
 
 from tracelab.train.experiments import plots
-from tracelab.train.config import METHOD_REWARD_SCALE, TrainConfig
+from tracelab.train.config import TrainConfig
 from tracelab.train.experiments.run import (TRAIN_P, ExperimentResult, action_names, commit, eval_ps, is_world, machine,
                                            trainer_note, train_config)
 from tracelab.train.experiments.runner import METHOD_CUT, EvalFigures, curves, gridwar_source, p_suffix, run_sql
 from tracelab.train.experiments.stats import spread, wilson
+from tracelab.train.reward_scale import METHOD_REWARD_SCALE
 
 
 # the settings of the method's DQN (docs/training.md, "The command"); a report names those an arm changes
