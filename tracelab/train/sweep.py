@@ -15,6 +15,7 @@ import os
 import queue
 import re
 import threading
+import time
 from collections.abc import Mapping
 from contextlib import redirect_stdout
 from dataclasses import dataclass
@@ -25,6 +26,7 @@ from ray import tune
 
 from tracelab.envs.declared.env_source import EnvSource
 from tracelab.game.scenario import Scenario
+from tracelab.store.meta import current_meta
 from tracelab.train.config import TrainConfig
 from tracelab.train.experiments.runner import train_seed
 from tracelab.train.sweep_spec import Axis, SweepSpec
@@ -180,6 +182,18 @@ class SweepResult:
     trials: list[dict[str, Any]]      # per trial: run, config, its best value, that step, the last value, error
 
 
+def wait_for_trials_to_close(out: Path, ceiling_s: float = CLOSE_WAIT_S) -> None:
+    """Tune's fit() returns once every trial has reported its end, before the trials' actors have run
+    cleanup() to its end (the run's last pass, checkpoint and policy: seconds under load); Ray's shutdown
+    after it would kill them mid-close and leave their runs `crashed`. So wait on the runs' own state
+    (`running` until closed), with a generous ceiling."""
+    deadline = time.monotonic() + ceiling_s
+    for run in sorted(out.glob("trial-*")):
+        while (run / "meta.json").is_file() and current_meta(run)["status"] == "running" \
+                and time.monotonic() < deadline:
+            time.sleep(0.2)
+
+
 def run_sweep(spec: SweepSpec, scenario: Scenario | EnvSource, out: Path, command: str) -> SweepResult:
     """The search (Ray initialised by the caller): trials under `out`, Tune's records in out/tune, what
     Tune prints in out/tune.log."""
@@ -215,6 +229,7 @@ def run_sweep(spec: SweepSpec, scenario: Scenario | EnvSource, out: Path, comman
         finally:
             tune_logger.removeHandler(handler)
             tune_logger.propagate, tune_logger.level = True, level
+    wait_for_trials_to_close(out)
     trials = []
     for r in grid:
         trial_id = r.metrics.get("trial_id") or re.search(r"_([0-9a-f]+_\d{5})_", Path(r.path).name).group(1)
