@@ -36,8 +36,8 @@ from tracelab.train.env_policy import (
     greedy_actor,
     load_trained,
     policy_format,
-    policy_scenario,
-    read_policy_spec,
+    read_rulesim_spec,
+    rulesim_scenario,
 )
 
 DEFAULT_SCENARIO = "base"  # the one train defaults to (TrainConfig.scenario)
@@ -73,7 +73,8 @@ def _world(args: argparse.Namespace) -> tuple[Any, Any, Any]:
                         "(the default) or a trained policy (RUN/policy)")
     path = args.policy if args.policy not in (None, "random") else None
     with store_errors():  # a policy that does not load is the user's to fix
-        gridwar_spec = None if path is None or policy_format(path) == ENV_FORMAT else read_policy_spec(path)
+        # a policy of GridWar's earlier trainer names its scenario (and whether it saw the previous step)
+        gridwar_spec = None if path is None or policy_format(path) == ENV_FORMAT else read_rulesim_spec(path)
     if args.env is not None:
         gridwar_flags = ((args.scenario, "--scenario"), (args.agents, "--agents"), (args.opponent_p, "--opponent-p"))
         for value, flag in gridwar_flags:
@@ -101,7 +102,7 @@ def _gridwar(args: argparse.Namespace, policy_spec: dict[str, Any] | None) -> tu
         raise UserError(f"--opponent-p must be in [0, 1], got {args.opponent_p}")
     with store_errors():  # a scenario that does not load
         if policy_spec is not None and args.scenario is None and args.agents is None:
-            scenario = policy_scenario(policy_spec)
+            scenario = rulesim_scenario(policy_spec)
         else:
             scenario = load_scenario_arg(args.scenario or DEFAULT_SCENARIO, args.agents)
     stack = policy_spec is not None and policy_spec["observation"]["stack_previous"]
