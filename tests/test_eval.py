@@ -136,7 +136,37 @@ def test_eval_command_errors_are_one_line(tmp_path, capsys):
     assert "tracelab/GridWar-advanced-v0 --env-arg p_toward=0.3 has 1 agents, 9 actions, 7 observations" in err
     assert "drop --backend" in error(["eval", str(RULESIM_POLICY), "--backend", "reference", "--games", "3"])
     walk, _ = _walk_policy(tmp_path)
+    on_file = json.loads((walk / "policy.json").read_text())  # the walk's world named by its spec file
+    on_file["env"]["name"] = str(Path(__file__).resolve().parent.parent / "rules" / "gridworld" / "war.toml")
+    (walk / "policy.json").write_text(json.dumps(on_file))
+    assert "trained with train --env on a spec file: name that env with --env" in error(["eval", str(walk)])
+    walk, _ = _walk_policy(tmp_path / "again")
     assert "has none" in error(["eval", str(walk), "--env", "tracelab/FrozenLake-v1", "--opponent-p", "0.5"])
+
+
+def test_a_policy_of_train_on_a_gridwar_id_plays_without_env(tmp_path, capsys):
+    """README's `tracelab eval runs/base-1/policy`: a policy train --scenario base wrote (its env:
+    tracelab/GridWar-base-v0) is evaluated on that id without --env, against the method's opponent (p = 0.3)
+    unless --opponent-p says, and played by play --policy."""
+    import torch
+
+    from tracelab.envs.declared.env_source import EnvSource
+    source = EnvSource("tracelab/GridWar-base-v0", {})
+    encoder, n_actions, spec = probe_env(source)
+    net = NetSpec(encoder.size, (16,), n_actions)
+    rng = np.random.default_rng(4)
+    weights = {k: rng.normal(0, 1, shape).astype(np.float32) for k, shape in net.state_dict_shapes().items()}
+    path = save_env_policy(tmp_path / "policy", source, {k: torch.from_numpy(v) for k, v in weights.items()},
+                           net.to_json(), encoder, list(spec.action_names), False, {"run": None, "step": 0})
+    assert main(["eval", str(path), "--games", "8", "--num-envs", "4", "--seed", "2", "--json"]) == 0
+    figures = json.loads(capsys.readouterr().out)
+    against = EnvSource(source.name, {"p_toward": 0.3})
+    expected = evaluate_env(EnvPolicy(NumpyQ(net, weights), encoder), against, 8, 2, 4).to_dict()
+    assert figures["env"] == against.to_json() and figures["opponent_p"] == 0.3
+    for key in ("games", "wins", "losses", "truncated", "mean_return", "mean_steps"):
+        assert figures[key] == pytest.approx(expected[key]), key
+    assert main(["play", "--policy", str(path), "--episodes", "2", "--opponent-p", "0.2", "--no-trace"]) == 0
+    assert "played 2 episodes of GridWar-base-v0" in capsys.readouterr().out
 
 
 def test_play_plays_and_traces_a_saved_policy(tmp_path, capsys):

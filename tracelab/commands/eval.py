@@ -28,6 +28,7 @@ from tracelab.train.env_policy import (
     load_trained,
     policy_format,
     read_rulesim_spec,
+    recorded_env,
     rulesim_scenario,
 )
 from tracelab.train.experiments.stats import wilson
@@ -42,16 +43,13 @@ def run(args: argparse.Namespace) -> int:
     if args.backend != "rules":
         raise UserError(f"--backend {args.backend}: eval plays every policy on its world's spec (GridWar's: "
                         f"rules/gridworld/war.toml) with the rule engine; drop --backend")
-    with store_errors():
-        fmt = policy_format(args.policy)
-    if args.env is not None or args.env_arg or fmt == ENV_FORMAT:
-        source, scenario = _env_world(args), None
-    else:
-        source, scenario = _scenario_world(args)
+    source, scenario, recorded = _world(args)
     with store_errors():  # a policy that does not load, or was trained on another world
         policy = load_trained(args.policy, source)
-    if args.opponent_p is not None and scenario is None:
-        source = EnvSource(source.name, {**source.kwargs, "p_toward": args.opponent_p})
+    # GridWar's opponent at --opponent-p (a policy of train on its own id: at the method's p by default)
+    p = DEFAULT_OPPONENT_P if args.opponent_p is None and recorded and _is_gridwar(source) else args.opponent_p
+    if scenario is None and p is not None:
+        source = EnvSource(source.name, {**source.kwargs, "p_toward": p})
     name = scenario.name if scenario is not None else source.short_name
     with progress(f"evaluating on {name}", total=args.games, unit="games") as bar:
         if args.run is None:
@@ -74,18 +72,30 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _env_world(args: argparse.Namespace) -> EnvSource:
-    """The env --env (and --env-arg) names, which a policy of train --env must have been trained on; GridWar's
-    opponent at --opponent-p is set once the policy is loaded (it was trained at its own p)."""
-    if args.env is None:
-        raise UserError(f"{args.policy} was trained with train --env: name that env with --env SPEC_OR_ID "
-                        f"(and its --env-arg values); its policy.json says which under \"env\"")
+def _world(args: argparse.Namespace) -> tuple[EnvSource, Any, bool]:
+    """(the env the policy plays, GridWar's scenario or None, whether the env is the one the policy recorded):
+    --env (and --env-arg); else a policy of train on one of tracelab's ids plays that id; a policy of train on
+    a spec file needs --env; an older GridWar policy plays its scenario's spec (_scenario_world)."""
+    with store_errors():  # a policy.json that does not load
+        fmt = policy_format(args.policy)
+        given = args.env is not None or bool(args.env_arg)
+        recorded = recorded_env(args.policy) if fmt == ENV_FORMAT and not given else None
+    if fmt != ENV_FORMAT and not given:
+        return (*_scenario_world(args), False)
     if args.scenario is not None:
-        raise UserError("--scenario is GridWar's; eval --env plays the env it names (its --env-arg values)")
-    source = env_source_of(args)
-    if args.opponent_p is not None and source.name not in GRIDWAR_SPEC_IDS and source.name not in GRIDWAR_SPECS:
+        raise UserError("--scenario is GridWar's earlier policies'; a policy of train plays the env it was "
+                        "trained on (--env, --env-arg)")
+    if recorded is None and args.env is None:
+        raise UserError(f"{args.policy} was trained with train --env on a spec file: name that env with --env "
+                        f"SPEC_OR_ID (and its --env-arg values); its policy.json says which under \"env\"")
+    source = recorded or env_source_of(args)
+    if args.opponent_p is not None and not _is_gridwar(source):
         raise UserError(f"--opponent-p is GridWar's scripted opponent's; {source.describe()} has none")
-    return source
+    return source, None, recorded is not None
+
+
+def _is_gridwar(source: EnvSource) -> bool:
+    return source.name in GRIDWAR_SPEC_IDS or source.name in GRIDWAR_SPECS
 
 
 def _scenario_world(args: argparse.Namespace) -> tuple[EnvSource, Any]:

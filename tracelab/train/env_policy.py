@@ -235,6 +235,15 @@ def load_env_policy(path: str | Path, given: EnvSource) -> tuple[EnvPolicy | Tea
     return (policy if not isinstance(encoder, TeamEncoder) else TeamPolicy(policy, encoder.n_agents)), spec
 
 
+def recorded_env(path: str | Path) -> EnvSource | None:
+    """The env a policy of train (ENV_FORMAT) was trained on, where it is one of tracelab's registered ids
+    (GridWar's, the toy-text worlds'), which eval and play then play without --env; None for a spec file or
+    another id, which the user names (a policy file never decides which file tracelab reads)."""
+    f, raw = _read_policy_json(path)
+    source = env_source_from_json(check_file(raw, ENV_SPEC_SCHEMA, f)["env"], str(f))
+    return source if source.name.startswith("tracelab/") and source.name in gym.registry else None
+
+
 def read_rulesim_spec(path: str | Path) -> dict[str, Any]:
     """policy.json of a policy of GridWar's earlier trainer (RULESIM_FORMAT), checked against its schema, and
     refused in one line unless it converts exactly into an EnvPolicy: one agent, one network (a team's
