@@ -270,7 +270,8 @@ def _old_pt_with_code(policy: Path, marker: Path) -> None:
     (_spec_edit("networks", {"shared": [0], "other": [0]}), "policy.json: key 'networks': expected one network"),
     (_spec_edit("network.hidden", 10 ** 9), "policy.json: network: 1 network of 4 inputs x 1,000,000,000 "
                                             "hidden units x 5 outputs would take an estimated"),
-    (_spec_edit("network.inputs", 7), "trained on GridWar's 'base' (1 agents, 5 actions, 7 observations); "),
+    (_spec_edit("network.inputs", 7), "policy.pt: key 'shared.0.weight': expected a floating tensor of shape "
+                                      "64 x 7, got a float32 tensor of shape (64, 4)"),
     (_json_links_to_dev_zero, "policy.json: is a symbolic link; refused"),
     (lambda policy: torch.save({"shared": {}}, policy / "policy.pt"),
      "policy.pt: key 'shared.0.weight': expected a floating tensor of shape 64 x 4, got nothing"),

@@ -1,7 +1,8 @@
 """`tracelab eval POLICY`: play a saved policy greedily on its world's spec and count the outcomes (the
 method's counting where the world declares a win: tracelab/train/env_policy.py's EnvEvalResult), as a table
-or as JSON. A policy of train --env plays the env it was trained on (--env, --env-arg); an older GridWar
-policy (RuleSim's format, converted at load) its scenario's spec (rules/gridworld/war*.toml), or --env.
+or as JSON. A policy of train plays the env it was trained on (its tracelab id, or --env and --env-arg);
+an older GridWar policy (RuleSim's format, converted at load) its scenario's spec (rules/gridworld/war*.toml)
+or --env.
 With --run, every game is traced into a new run, the policy's decisions and the reward terms included."""
 from __future__ import annotations
 

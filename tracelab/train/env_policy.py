@@ -284,6 +284,7 @@ def load_rulesim_policy(path: str | Path, given: EnvSource) -> EnvPolicy:
     spec = read_rulesim_spec(path)
     trained_on = rulesim_scenario(spec)
     net = spec_net(spec)
+    (state,) = read_policy_networks(path, spec).values()  # sized and checked before the world is built
     encoder, n_actions, world = probe_env(given)
     agents = encoder.n_agents if isinstance(encoder, TeamEncoder) else 1
     names = [ACTION_NAMES[a] for a in trained_on.action_ids]
@@ -294,7 +295,6 @@ def load_rulesim_policy(path: str | Path, given: EnvSource) -> EnvPolicy:
                          f"agents, {n_actions} actions, {encoder.size} observations"
                          + ("" if len(world_names) != len(names) or world_names == names else
                             f" (actions {', '.join(world_names)}, not {', '.join(names)})"))
-    (state,) = read_policy_networks(path, spec).values()
     return EnvPolicy(_network(net, state), encoder, spec.get("mask", False))
 
 
