@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from older_runs import older_run
+from rulesim_policies import write_rulesim_policy
 
 from tracelab.cli import main
 from tracelab.envs.declared.env_source import EnvSource
@@ -19,7 +20,7 @@ from tracelab.envs.declared.play import load_declared, make_declared_env, play_e
 from tracelab.game.observe import obs_size
 from tracelab.game.scenario import builtin_scenario
 from tracelab.store import TraceWriter, open_run
-from tracelab.train.env_policy import EnvPolicy, one_env_actor, save_policy
+from tracelab.train.env_policy import EnvPolicy, one_env_actor
 from tracelab.train.env_source import ObservationEncoder, probe_env
 from tracelab.train.external_eval import DeclaredEvaluator, EvalSettings
 from tracelab.train.qnet import NetSpec, NumpyQ
@@ -150,11 +151,8 @@ def test_taxi_decisions_and_reward_terms(taxi_run):
 
 
 def test_play_policy_records_decisions(tmp_path):
-    import torch
-    net = gridwar_net()
-    path = save_policy(tmp_path / "policy", ADVANCED, {"shared": {k: torch.from_numpy(v) for k, v in
-                                                                  random_weights(net, 2).items()}},
-                       {"shared": [0]}, net.to_json(), False, False, {"run": None, "step": 0})
+    net = gridwar_net()  # a policy of GridWar's earlier trainer (RuleSim's format), converted at load
+    path = write_rulesim_policy(tmp_path / "policy", ADVANCED, net, {"shared": random_weights(net, 2)}, {"shared": [0]})
     run = tmp_path / "played"
     assert main(["play", "--policy", str(path), "--episodes", "2", "--run", str(run)]) == 0
     check_decisions(run, "red%", ADVANCED.n_actions, masked=False)

@@ -1,6 +1,7 @@
-"""`tracelab eval`: every policy played on its world's spec, GridWar's earlier policies (RuleSim's format)
-on their scenario's; the method's counting (wins, losses, draws, truncations, the win rate and its Wilson
-interval, per opponent p), the CLI's table, JSON and traced run, and `tracelab play --policy`."""
+"""`tracelab eval`: every policy played on its world's spec, GridWar's earlier policies (RuleSim's format,
+converted at load: tests/data/rulesim-policy) on their scenario's; the method's counting (wins, losses,
+draws, truncations, the win rate and its Wilson interval, per opponent p), the CLI's table, JSON and traced
+run, and `tracelab play --policy`."""
 from __future__ import annotations
 
 import json
@@ -9,35 +10,26 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from rulesim_policies import RULESIM_POLICY, constant_weights, write_rulesim_policy
 from train_helpers import walk_argv, walk_source
 
 from tracelab.cli import main
 from tracelab.game.scenario import Scenario
 from tracelab.store import open_run
-from tracelab.train.env_policy import EnvEvalResult, EnvPolicy, evaluate_env, save_env_policy, save_policy
+from tracelab.train.env_policy import EnvEvalResult, EnvPolicy, evaluate_env, save_env_policy
 from tracelab.train.env_source import probe_env
 from tracelab.train.experiments.stats import wilson
 from tracelab.train.qnet import NetSpec, NumpyQ
 
 # red starts one step below blue's base on a 4x4 board: no spec plays it (RuleSim's scenario file)
 NEAR = Scenario(name="near", width=4, height=4, red_base=(3, 0), blue_base=(0, 3), red_starts=((0, 2),))
-SAMPLE_POLICY = Path(__file__).resolve().parent.parent / "sample_runs" / "base-train" / "policy"
-
-
-def constant_weights(net: NetSpec, action: int) -> dict[str, np.ndarray]:
-    """A network that always prefers one action: zero weights, a bias of 1 on it."""
-    weights = {k: np.zeros(shape, np.float32) for k, shape in net.state_dict_shapes().items()}
-    weights["2.bias"][action] = 1.0
-    return weights
 
 
 def _saved(tmp_path, scenario: Scenario, action_id: int) -> Path:
     """A policy of GridWar's earlier trainer (RuleSim's format) always taking one action."""
-    import torch
     net = NetSpec(4 if not scenario.advanced else 7, (8,), scenario.n_actions)
     weights = constant_weights(net, scenario.action_ids.index(action_id))
-    return save_policy(tmp_path / "policy", scenario, {"shared": {k: torch.from_numpy(v) for k, v in weights.items()}},
-                       {"shared": [0]}, net.to_json(), False, False, {"run": None, "step": 0})
+    return write_rulesim_policy(tmp_path / "policy", scenario, net, {"shared": weights}, {"shared": [0]})
 
 
 def _walk_policy(tmp_path) -> tuple[Path, EnvPolicy]:
@@ -71,23 +63,25 @@ def test_the_methods_counting_of_a_spec_worlds_games():
     assert d["method_win_rate_ci95"] == d["win_rate_ci95"] == list(wilson(2, 5))
 
 
-def test_eval_command_plays_a_one_agent_policy_on_its_spec(capsys):
-    """GridWar's earlier trainer's policy evaluated on its scenario's spec (tracelab/GridWar-base-v0)."""
-    assert main(["eval", str(SAMPLE_POLICY), "--games", "8", "--envs", "4", "--json"]) == 0
+def test_eval_command_plays_an_old_policy_as_main_did(capsys):
+    """GridWar's earlier trainer's policy (tests/data/rulesim-policy, RuleSim's format), converted at load and
+    evaluated on its scenario's spec (tracelab/GridWar-base-v0): the figures main gave on 2026-11-29 with its
+    own player of that format (64 of 64 won, mean return 188.75, 30.625 steps a game)."""
+    assert main(["eval", str(RULESIM_POLICY), "--games", "64", "--seed", "0", "--json"]) == 0
     figures = json.loads(capsys.readouterr().out)
     assert figures["env"] == {"name": "tracelab/GridWar-base-v0", "kwargs": {"p_toward": 0.3}}
     assert figures["scenario"] == "base" and figures["opponent_p"] == 0.3
-    assert figures["games"] == 8 == figures["wins"] + figures["losses"] + figures["draws"] + figures["truncated"]
-    assert figures["wins"] >= 6  # it wins nearly all its games against the method's opponent (p = 0.3)
-    assert main(["eval", str(SAMPLE_POLICY), "--games", "4", "--envs", "2"]) == 0
+    assert (figures["games"], figures["wins"], figures["losses"], figures["truncated"]) == (64, 64, 0, 0)
+    assert (figures["mean_return"], figures["mean_steps"]) == (188.75, 30.625)
+    assert main(["eval", str(RULESIM_POLICY), "--games", "4", "--envs", "2"]) == 0
     assert "win rate" in capsys.readouterr().out
 
 
 def test_eval_run_traces_every_game_and_counts_them_as_the_run_records_them(tmp_path, capsys):
-    """eval --run on GridWar's earlier policy: every game in the run with its decisions and reward terms; the
-    figures printed are the run's episodes counted (wins, Wilson interval, mean return)."""
+    """eval --run on GridWar's earlier policy (converted): every game in the run with its decisions and reward
+    terms; the figures printed are the run's episodes counted (wins, Wilson interval, mean return)."""
     run = tmp_path / "evalrun"
-    assert main(["eval", str(SAMPLE_POLICY), "--games", "5", "--json", "--run", str(run), "--seed", "3"]) == 0
+    assert main(["eval", str(RULESIM_POLICY), "--games", "5", "--json", "--run", str(run), "--seed", "3"]) == 0
     figures = json.loads(capsys.readouterr().out)
     con = open_run(run)
     try:
@@ -137,15 +131,47 @@ def test_eval_command_errors_are_one_line(tmp_path, capsys):
     # an earlier policy of a scenario no spec plays: refused, saying how to go on
     err = error(["eval", str(path), "--games", "3"])
     assert "RuleSim" in err and "near" in err and "[data.maps]" in err
-    assert "does not match" in error(["eval", str(SAMPLE_POLICY), "--scenario", "advanced", "--games", "3"])
-    assert "drop --backend" in error(["eval", str(SAMPLE_POLICY), "--backend", "reference", "--games", "3"])
+    err = error(["eval", str(RULESIM_POLICY), "--scenario", "advanced", "--games", "3"])
+    assert "trained on GridWar's 'base' (1 agents, 5 actions, 4 observations)" in err
+    assert "tracelab/GridWar-advanced-v0 --env-arg p_toward=0.3 has 1 agents, 9 actions, 7 observations" in err
+    assert "drop --backend" in error(["eval", str(RULESIM_POLICY), "--backend", "reference", "--games", "3"])
     walk, _ = _walk_policy(tmp_path)
+    on_file = json.loads((walk / "policy.json").read_text())  # the walk's world named by its spec file
+    on_file["env"]["name"] = str(Path(__file__).resolve().parent.parent / "rules" / "gridworld" / "war.toml")
+    (walk / "policy.json").write_text(json.dumps(on_file))
+    assert "trained with train --env on a spec file: name that env with --env" in error(["eval", str(walk)])
+    walk, _ = _walk_policy(tmp_path / "again")
     assert "has none" in error(["eval", str(walk), "--env", "tracelab/FrozenLake-v1", "--opponent-p", "0.5"])
+
+
+def test_a_policy_of_train_on_a_gridwar_id_plays_without_env(tmp_path, capsys):
+    """README's `tracelab eval runs/base-1/policy`: a policy train --scenario base wrote (its env:
+    tracelab/GridWar-base-v0) is evaluated on that id without --env, against the method's opponent (p = 0.3)
+    unless --opponent-p says, and played by play --policy."""
+    import torch
+
+    from tracelab.envs.declared.env_source import EnvSource
+    source = EnvSource("tracelab/GridWar-base-v0", {})
+    encoder, n_actions, spec = probe_env(source)
+    net = NetSpec(encoder.size, (16,), n_actions)
+    rng = np.random.default_rng(4)
+    weights = {k: rng.normal(0, 1, shape).astype(np.float32) for k, shape in net.state_dict_shapes().items()}
+    path = save_env_policy(tmp_path / "policy", source, {k: torch.from_numpy(v) for k, v in weights.items()},
+                           net.to_json(), encoder, list(spec.action_names), False, {"run": None, "step": 0})
+    assert main(["eval", str(path), "--games", "8", "--num-envs", "4", "--seed", "2", "--json"]) == 0
+    figures = json.loads(capsys.readouterr().out)
+    against = EnvSource(source.name, {"p_toward": 0.3})
+    expected = evaluate_env(EnvPolicy(NumpyQ(net, weights), encoder), against, 8, 2, 4).to_dict()
+    assert figures["env"] == against.to_json() and figures["opponent_p"] == 0.3
+    for key in ("games", "wins", "losses", "truncated", "mean_return", "mean_steps"):
+        assert figures[key] == pytest.approx(expected[key]), key
+    assert main(["play", "--policy", str(path), "--episodes", "2", "--opponent-p", "0.2", "--no-trace"]) == 0
+    assert "played 2 episodes of GridWar-base-v0" in capsys.readouterr().out
 
 
 def test_play_plays_and_traces_a_saved_policy(tmp_path, capsys):
     run = tmp_path / "played"
-    assert main(["play", "--policy", str(SAMPLE_POLICY), "--episodes", "3", "--run", str(run)]) == 0
+    assert main(["play", "--policy", str(RULESIM_POLICY), "--episodes", "3", "--run", str(run)]) == 0
     assert "played 3 episodes of base" in capsys.readouterr().out
     con = open_run(run)
     steps = con.execute("SELECT count(*) FROM steps WHERE agent = 'red-agent-1'").fetchone()[0]
@@ -156,31 +182,19 @@ def test_play_plays_and_traces_a_saved_policy(tmp_path, capsys):
     assert steps > 0 and greedy == steps
 
 
-def test_eval_plays_a_teams_policy_on_its_spec(tmp_path, capsys):
-    """A 2v2 policy of GridWar's earlier trainer's format (one network for both agents, always "up"), evaluated
-    on war.toml at agents_per_team = 2: every game counted, by the spec's outcomes; --run traces each."""
+@pytest.mark.parametrize("command", [["eval", "{}", "--games", "3"], ["play", "--policy", "{}", "--no-trace"]])
+def test_an_old_teams_policy_is_refused_with_the_command_that_trains_it_again(command, tmp_path, capsys):
+    """A 2v2 policy of GridWar's earlier trainer: each agent read the team with its own blocks first, which no
+    policy of today reads; eval and play refuse it in one line that gives the command to train it again."""
     from dataclasses import replace
-
-    import torch
 
     from tracelab.game.scenario import builtin_scenario
     team = replace(builtin_scenario("base"), agents_per_team=2, red_starts=None, blue_starts=None, max_steps=12)
     net = NetSpec(8, (8,), team.n_actions)  # the team's view: 4 numbers an agent
-    weights = constant_weights(net, 0)
-    path = save_policy(tmp_path / "pol", team, {"shared": {k: torch.from_numpy(v) for k, v in weights.items()}},
-                       {"shared": [0, 1]}, net.to_json(), False, False, {"run": None, "step": 0})
-    assert main(["eval", str(path), "--games", "3", "--json"]) == 0
-    figures = json.loads(capsys.readouterr().out)
-    assert figures["env"]["kwargs"]["agents_per_team"] == 2 and figures["games"] == 3
-    # walking up from (7, 0) never reaches blue's base: lost to the opponent, or cut at 12 steps
-    assert figures["wins"] == 0 and figures["losses"] + figures["truncated"] == 3
-    run = tmp_path / "teamrun"
-    assert main(["eval", str(path), "--games", "2", "--json", "--run", str(run)]) == 0
-    capsys.readouterr()
-    con = open_run(run)
-    try:
-        agents = con.execute("SELECT DISTINCT agent FROM decisions ORDER BY agent").fetchall()
-        actions = con.execute("SELECT DISTINCT action_name FROM decisions").fetchall()
-    finally:
-        con.close()
-    assert agents == [("red-agent-1",), ("red-agent-2",)] and actions == [("up",)]
+    path = write_rulesim_policy(tmp_path / "pol", team, net, {"shared": constant_weights(net, 0)},
+                                {"shared": [0, 1]})
+    assert main([a.format(path) for a in command]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("tracelab: error:") and err.count("\n") == 1, err
+    assert "RuleSim's format" in err and "2 agents a team" in err
+    assert err.rstrip().endswith("train it again on its spec: tracelab train --scenario base --agents 2"), err

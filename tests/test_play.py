@@ -85,23 +85,23 @@ def test_play_a_team_records_each_agent(tmp_path, capsys):
 
 
 def test_an_old_gridwar_policy_plays_as_it_did_on_rulesim(tmp_path):
-    """sample_runs/base-train/policy (GridWar's trainer, RuleSim) played greedily on RefSim (the hand-written
-    oracle) and through the spec path, the same seed: the same games, step for step (its observation is the
-    spec's)."""
+    """tests/data/rulesim-policy (GridWar's trainer on RuleSim) converted at load and played greedily on RefSim
+    (the hand-written oracle) and through the spec path, the same seed: the same games, step for step (its
+    observation is the spec's)."""
     import numpy as np
 
+    from gridwar_refsim import RefGridWar
+    from rulesim_policies import RULESIM_POLICY
     from tracelab.envs.declared.env_source import EnvSource
     from tracelab.envs.declared.gridwar import scenario_spec
     from tracelab.envs.declared.play import load_declared, make_declared_env, play_episodes
-    from gridwar_refsim import RefGridWar
-    from tracelab.train.env_policy import team_actor
-    from tracelab.train.env_policy import load_policy
+    from tracelab.train.env_policy import greedy_actor, load_trained, read_rulesim_spec, rulesim_scenario
 
-    policy = load_policy(ROOT / "sample_runs" / "base-train" / "policy")
-    ref = RefGridWar(policy.scenario)
-    source = EnvSource(*scenario_spec(policy.scenario))
-    dec = make_declared_env(source, load_declared(source))
-    games = [play_episodes(env, 6, 3, team_actor(policy))["episodes"] for env in (ref, dec)]
+    scenario = rulesim_scenario(read_rulesim_spec(RULESIM_POLICY))
+    source = EnvSource(*scenario_spec(scenario))
+    policy = load_trained(RULESIM_POLICY, source)
+    ref, dec = RefGridWar(scenario), make_declared_env(source, load_declared(source))
+    games = [play_episodes(env, 6, 3, greedy_actor(policy))["episodes"] for env in (ref, dec)]
     outcomes = {"win": "win", "loss": "loss"}
     assert [(g["steps"], g["return"]) for g in games[0]] == [(g["steps"], g["return"]) for g in games[1]]
     assert [outcomes.get(g["outcome"], "other") for g in games[1]].count("win") >= 1
@@ -109,8 +109,8 @@ def test_an_old_gridwar_policy_plays_as_it_did_on_rulesim(tmp_path):
 
 
 def test_a_policy_refused_on_a_world_of_another_shape_in_one_line(capsys):
-    policy = ROOT / "sample_runs" / "base-train" / "policy"
-    assert main(["play", "--env", "tracelab/GridWar-advanced-v0", "--policy", str(policy), "--no-trace"]) == 1
+    from rulesim_policies import RULESIM_POLICY
+    assert main(["play", "--env", "tracelab/GridWar-advanced-v0", "--policy", str(RULESIM_POLICY), "--no-trace"]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "trained on GridWar's 'base' (1 agents, 5 actions, 4 observations)" in err
     assert "9 actions, 7 observations" in err

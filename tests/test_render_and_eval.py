@@ -16,7 +16,7 @@ from tracelab.cli import main
 from tracelab.envs.declared.render import CELL
 from tracelab.train.experiments.stats import wilson
 
-from test_eval import SAMPLE_POLICY
+from rulesim_policies import RULESIM_POLICY as SAMPLE_POLICY
 from test_progress import run_on_a_terminal
 
 

@@ -20,6 +20,7 @@ import torch
 
 from tracelab.cli import main
 from tracelab.train.env_checkpoint import checkpoint_path
+from rulesim_policies import RULESIM_POLICY
 from train_helpers import tiny_training_run, walk_argv
 
 TIMEOUT = 120  # seconds; the command itself takes a few (importing torch), a hang takes forever
@@ -245,9 +246,46 @@ def test_a_fifo_in_a_policy_is_refused_without_waiting(name, run):
                             f"{name}: is a named pipe (FIFO)")
 
 
-def test_the_sample_run_s_policy_still_loads(capsys):
-    sample = Path(__file__).resolve().parents[1] / "sample_runs" / "base-train" / "policy"
-    assert main(["eval", str(sample), "--games", "2"]) == 0
+def test_an_old_rulesim_policy_still_loads(capsys):
+    assert main(["eval", str(RULESIM_POLICY), "--games", "2"]) == 0
+
+
+@pytest.fixture
+def old_policy(tmp_path: Path) -> Path:
+    """A copy of a policy of GridWar's earlier trainer (RuleSim's format, tests/data/rulesim-policy)."""
+    return Path(shutil.copytree(RULESIM_POLICY, tmp_path / "old-policy"))
+
+
+def _old_pt_with_code(policy: Path, marker: Path) -> None:
+    code_that_would_run(policy / "policy.pt", marker, torch.load(policy / "policy.pt", weights_only=True))
+
+
+@pytest.mark.parametrize("command", ["eval", "play"])
+@pytest.mark.parametrize("edit, fragment", [
+    (_spec_edit("format", "tracelab-dqn-policy/9"), "policy.json: key 'format': expected 'tracelab-dqn-policy/1'"),
+    (_spec_edit("scenario.toml", "name = "), "policy.json: key 'scenario.toml': not TOML: Invalid value"),
+    (_spec_edit("scenario.toml", "name = 'x'\nwidth = -3"), "policy.json: key 'scenario.toml'"),
+    (_spec_edit("scenario", {"name": "base"}), "policy.json: key 'scenario.toml': expected a string"),
+    (_spec_edit("observation.stack_previous", "no"), "policy.json: key 'observation.stack_previous': expected"),
+    (_spec_edit("networks", {"shared": [0], "other": [0]}), "policy.json: key 'networks': expected one network"),
+    (_spec_edit("network.hidden", 10 ** 9), "policy.json: network: 1 network of 4 inputs x 1,000,000,000 "
+                                            "hidden units x 5 outputs would take an estimated"),
+    (_spec_edit("network.inputs", 7), "policy.pt: key 'shared.0.weight': expected a floating tensor of shape "
+                                      "64 x 7, got a float32 tensor of shape (64, 4)"),
+    (_json_links_to_dev_zero, "policy.json: is a symbolic link; refused"),
+    (lambda policy: torch.save({"shared": {}}, policy / "policy.pt"),
+     "policy.pt: key 'shared.0.weight': expected a floating tensor of shape 64 x 4, got nothing"),
+    (lambda policy: _old_pt_with_code(policy, policy.parent / "payload-ran"), "policy.pt: refers to posix.system"),
+])
+def test_a_malformed_old_policy_is_refused_in_one_line_and_runs_nothing(command, edit, fragment, old_policy,
+                                                                         capsys):
+    """A policy of RuleSim's format from a stranger: checked as the trainer's own are, before its networks are
+    built (sizes, shapes, no code run), each failure one line naming the key."""
+    edit(old_policy)
+    argv = ["eval", str(old_policy), "--games", "2"] if command == "eval" else \
+        ["play", "--policy", str(old_policy), "--episodes", "1", "--no-trace"]
+    assert fragment in error_line(capsys, main(argv))
+    assert not (old_policy.parent / "payload-ran").exists()
 
 
 # ---------------------------------------------------------------------------------------------------------

@@ -76,7 +76,9 @@ def test_eval_env_refuses_another_env_in_one_line(dry_lake_run: Path) -> None:
                     "trained on --env tracelab/FrozenLake-v1 --env-arg is_slippery=false, not "
                     "tracelab/FrozenLake-v1")
     _one_line_error(tracelab("eval", pol, "--env", "tracelab/Taxi-v4", cwd=cwd), "not tracelab/Taxi-v4")
-    _one_line_error(tracelab("eval", pol, cwd=cwd), "name that env with --env")
+    # without --env: the tracelab id it was trained on, as trained
+    played = tracelab("eval", pol, "--games", "2", cwd=cwd)
+    assert played.returncode == 0 and "on tracelab/FrozenLake-v1 --env-arg is_slippery=false" in played.stdout
     _one_line_error(tracelab("train", "--resume", str(dry_lake_run), cwd=cwd),
                     f"tracelab train --resume {dry_lake_run} --env tracelab/FrozenLake-v1 --env-arg is_slippery=false")
 

@@ -1,8 +1,9 @@
 """`tracelab eval POLICY`: play a saved policy greedily on its world's spec and count the outcomes (the
 method's counting where the world declares a win: tracelab/train/env_policy.py's EnvEvalResult), as a table
-or as JSON. A policy of train --env plays the env it was trained on (--env, --env-arg); an older GridWar
-policy (RuleSim's format) its scenario's spec (rules/gridworld/war*.toml). With --run, every game is traced
-into a new run, the policy's decisions and the reward terms included."""
+or as JSON. A policy of train plays the env it was trained on (its tracelab id, or --env and --env-arg);
+an older GridWar policy (RuleSim's format, converted at load) its scenario's spec (rules/gridworld/war*.toml)
+or --env.
+With --run, every game is traced into a new run, the policy's decisions and the reward terms included."""
 from __future__ import annotations
 
 import argparse
@@ -23,18 +24,15 @@ from tracelab.store import TraceWriter
 from tracelab.store.layout import check_new_run_dir
 from tracelab.train.env_policy import (
     ENV_FORMAT,
-    EnvPolicy,
-    OneAgentGridWarPolicy,
     evaluate_env,
     evaluate_in_env,
-    load_env_policy,
-    load_policy,
+    load_trained,
     policy_format,
-    policy_scenario,
-    read_policy_spec,
+    read_rulesim_spec,
+    recorded_env,
+    rulesim_scenario,
 )
 from tracelab.train.experiments.stats import wilson
-from tracelab.train.team_policy import TeamPolicy
 
 DEFAULT_OPPONENT_P = 0.3  # the method's evaluation
 GRIDWAR_SPECS = {str(WAR_SPEC), str(WAR_NONMARKOV), str(WAR_ADVANCED_2V2)}
@@ -46,16 +44,17 @@ def run(args: argparse.Namespace) -> int:
     if args.backend != "rules":
         raise UserError(f"--backend {args.backend}: eval plays every policy on its world's spec (GridWar's: "
                         f"rules/gridworld/war.toml) with the rule engine; drop --backend")
-    with store_errors():
-        fmt = policy_format(args.policy)
-    if args.env is not None or args.env_arg or fmt == ENV_FORMAT:
-        source, policy, scenario = _env_policy(args, fmt)
-    else:
-        source, policy, scenario = _gridwar_policy(args)
+    source, scenario, recorded = _world(args)
+    with store_errors():  # a policy that does not load, or was trained on another world
+        policy = load_trained(args.policy, source)
+    # GridWar's opponent at --opponent-p (a policy of train on its own id: at the method's p by default)
+    p = DEFAULT_OPPONENT_P if args.opponent_p is None and recorded and _is_gridwar(source) else args.opponent_p
+    if scenario is None and p is not None:
+        source = EnvSource(source.name, {**source.kwargs, "p_toward": p})
     name = scenario.name if scenario is not None else source.short_name
     with progress(f"evaluating on {name}", total=args.games, unit="games") as bar:
         if args.run is None:
-            result = _untraced(args, policy, source, lambda _: bar.advance(1))
+            result = evaluate_env(policy, source, args.games, args.seed, args.envs, lambda _: bar.advance(1))
         else:
             result = _traced(args, policy, source, scenario, lambda _: bar.advance(1))
     if args.json:
@@ -74,56 +73,49 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _env_policy(args: argparse.Namespace, fmt: str | None) -> tuple[EnvSource, Any, None]:
-    """A policy of train --env and the env it plays: the one it was trained on (--env, --env-arg), with
-    --opponent-p as the opponent's p where the world is GridWar's."""
-    if fmt is not None and fmt != ENV_FORMAT:  # None: no format to read; the env policy's loader says what is wrong
-        raise UserError(f"{args.policy} is a GridWar policy ({fmt}) of an earlier tracelab: eval plays it on its "
-                        f"scenario's spec without --env (--scenario to name another)")
-    if args.env is None:
-        raise UserError(f"{args.policy} was trained with train --env: name that env with --env SPEC_OR_ID "
-                        f"(and its --env-arg values); its policy.json says which under \"env\"")
+def _world(args: argparse.Namespace) -> tuple[EnvSource, Any, bool]:
+    """(the env the policy plays, GridWar's scenario or None, whether the env is the one the policy recorded):
+    --env (and --env-arg); else a policy of train on one of tracelab's ids plays that id; a policy of train on
+    a spec file needs --env; an older GridWar policy plays its scenario's spec (_scenario_world)."""
+    with store_errors():  # a policy.json that does not load
+        fmt = policy_format(args.policy)
+        given = args.env is not None or bool(args.env_arg)
+        recorded = recorded_env(args.policy) if fmt == ENV_FORMAT and not given else None
+    if fmt != ENV_FORMAT and not given:
+        return (*_scenario_world(args), False)
     if args.scenario is not None:
-        raise UserError("--scenario is GridWar's; eval --env plays the env it names (its --env-arg values)")
-    source = env_source_of(args)
-    if args.opponent_p is not None and source.name not in GRIDWAR_SPEC_IDS and source.name not in GRIDWAR_SPECS:
+        raise UserError("--scenario is GridWar's earlier policies'; a policy of train plays the env it was "
+                        "trained on (--env, --env-arg)")
+    if recorded is None and args.env is None:
+        raise UserError(f"{args.policy} was trained with train --env on a spec file: name that env with --env "
+                        f"SPEC_OR_ID (and its --env-arg values); its policy.json says which under \"env\"")
+    source = recorded or env_source_of(args)
+    if args.opponent_p is not None and not _is_gridwar(source):
         raise UserError(f"--opponent-p is GridWar's scripted opponent's; {source.describe()} has none")
-    with store_errors():
-        policy, _ = load_env_policy(args.policy, source)
-    if args.opponent_p is not None:
-        source = EnvSource(source.name, {**source.kwargs, "p_toward": args.opponent_p})
-    return source, policy, None
+    return source, None, recorded is not None
 
 
-def _gridwar_policy(args: argparse.Namespace) -> tuple[EnvSource, Any, Any]:
-    """A policy of GridWar's earlier trainer (RuleSim's format) and the spec that plays its scenario (or
-    --scenario) against the opponent at --opponent-p; a scenario no spec plays is refused in one line
-    saying how to go on."""
+def _is_gridwar(source: EnvSource) -> bool:
+    return source.name in GRIDWAR_SPEC_IDS or source.name in GRIDWAR_SPECS
+
+
+def _scenario_world(args: argparse.Namespace) -> tuple[EnvSource, Any]:
+    """The spec that plays the scenario of a policy of GridWar's earlier trainer (RuleSim's format), or
+    --scenario, against the opponent at --opponent-p, and that scenario; a policy that does not convert, or
+    a scenario no spec plays, is refused in one line saying how to go on."""
     with store_errors():  # a policy or scenario that does not load
-        spec = read_policy_spec(args.policy)
-        scenario = load_scenario_arg(args.scenario) if args.scenario else policy_scenario(spec)
-        policy = load_policy(args.policy, scenario)
+        spec = read_rulesim_spec(args.policy)
+        scenario = load_scenario_arg(args.scenario) if args.scenario else rulesim_scenario(spec)
     p = DEFAULT_OPPONENT_P if args.opponent_p is None else args.opponent_p
     try:
-        name, params = scenario_env(scenario, p, policy.stack_previous)
+        name, params = scenario_env(scenario, p, spec["observation"]["stack_previous"])
     except UserError as e:
         raise UserError(f"{args.policy} (a GridWar policy of RuleSim's trainer) cannot be played: {e}") from None
-    return EnvSource(name, {**params, "p_toward": p}), policy, scenario
+    return EnvSource(name, {**params, "p_toward": p}), scenario
 
 
 def _opponent_p(source: EnvSource) -> float | None:
     return source.kwargs.get("p_toward")
-
-
-def _untraced(args: argparse.Namespace, policy: Any, source: EnvSource, on_game: Any) -> Any:
-    """The games in --num-envs worlds stepped together where the policy acts on batches of one agent's (or
-    a team's) observations; an older GridWar team's policy one world at a time."""
-    if isinstance(policy, (EnvPolicy, TeamPolicy)):
-        return evaluate_env(policy, source, args.games, args.seed, args.envs, on_game)
-    if policy.scenario.agents_per_team == 1:
-        return evaluate_env(OneAgentGridWarPolicy(policy), source, args.games, args.seed, args.envs, on_game)
-    spec = load_declared(source)
-    return evaluate_in_env(policy, make_declared_env(source, spec), args.games, args.seed, on_game)
 
 
 def _traced(args: argparse.Namespace, policy: Any, source: EnvSource, scenario: Any, on_game: Any) -> Any:

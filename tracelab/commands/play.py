@@ -24,7 +24,7 @@ from tracelab.commands._recording import read_for_hints, recording_into
 from tracelab.commands._worlds import load_scenario_arg
 from tracelab.engine.errors import is_interrupt
 from tracelab.envs.declared.env_source import EnvSource, parse_env_args
-from tracelab.envs.declared.gridwar import scenario_spec
+from tracelab.envs.declared.gridwar import GRIDWAR_SPEC_IDS, scenario_spec
 from tracelab.envs.declared.play import load_declared, make_declared_env, play_episodes, random_policy
 from tracelab.envs.declared.recording import declared_run_config
 from tracelab.errors import UserError, store_errors
@@ -36,8 +36,9 @@ from tracelab.train.env_policy import (
     greedy_actor,
     load_trained,
     policy_format,
-    policy_scenario,
-    read_policy_spec,
+    read_rulesim_spec,
+    recorded_env,
+    rulesim_scenario,
 )
 
 DEFAULT_SCENARIO = "base"  # the one train defaults to (TrainConfig.scenario)
@@ -73,7 +74,8 @@ def _world(args: argparse.Namespace) -> tuple[Any, Any, Any]:
                         "(the default) or a trained policy (RUN/policy)")
     path = args.policy if args.policy not in (None, "random") else None
     with store_errors():  # a policy that does not load is the user's to fix
-        gridwar_spec = None if path is None or policy_format(path) == ENV_FORMAT else read_policy_spec(path)
+        # a policy of GridWar's earlier trainer names its scenario (and whether it saw the previous step)
+        gridwar_spec = None if path is None or policy_format(path) == ENV_FORMAT else read_rulesim_spec(path)
     if args.env is not None:
         gridwar_flags = ((args.scenario, "--scenario"), (args.agents, "--agents"), (args.opponent_p, "--opponent-p"))
         for value, flag in gridwar_flags:
@@ -84,14 +86,34 @@ def _world(args: argparse.Namespace) -> tuple[Any, Any, Any]:
     elif args.env_arg:
         raise UserError("--env-arg goes with --env")
     elif path is not None and gridwar_spec is None and args.scenario is None:
-        raise UserError(f"{path} was trained with train --env: name that env with --env SPEC_OR_ID (and its "
-                        "--env-arg values); its policy.json says which under \"env\"")
+        return _recorded(args, path)
     else:
         source, scenario = _gridwar(args, gridwar_spec)
     if path is None:
         return source, scenario, None
     with store_errors():  # a policy that does not load, or was trained on another world
         return source, scenario, load_trained(path, source)
+
+
+def _recorded(args: argparse.Namespace, path: str) -> tuple[Any, None, Any]:
+    """A policy of train without --env: the env it was trained on where that is one of tracelab's ids (with
+    GridWar's opponent at --opponent-p); a spec file the user names with --env."""
+    with store_errors():  # a policy that does not load
+        source = recorded_env(path)
+        if source is None:
+            raise UserError(f"{path} was trained with train --env on a spec file: name that env with --env "
+                            "SPEC_OR_ID (and its --env-arg values); its policy.json says which under \"env\"")
+        if args.agents is not None:
+            raise UserError(f"--agents is GridWar's scenario's; {path} plays the env it was trained on "
+                            f"({source.describe()})")
+        if args.opponent_p is not None and not 0.0 <= args.opponent_p <= 1.0:
+            raise UserError(f"--opponent-p must be in [0, 1], got {args.opponent_p}")
+        if args.opponent_p is not None and source.name not in GRIDWAR_SPEC_IDS:
+            raise UserError(f"--opponent-p is GridWar's scripted opponent's; {source.describe()} has none")
+        policy = load_trained(path, source)
+    if args.opponent_p is not None:
+        source = EnvSource(source.name, {**source.kwargs, "p_toward": args.opponent_p})
+    return source, None, policy
 
 
 def _gridwar(args: argparse.Namespace, policy_spec: dict[str, Any] | None) -> tuple[Any, Any]:
@@ -101,7 +123,7 @@ def _gridwar(args: argparse.Namespace, policy_spec: dict[str, Any] | None) -> tu
         raise UserError(f"--opponent-p must be in [0, 1], got {args.opponent_p}")
     with store_errors():  # a scenario that does not load
         if policy_spec is not None and args.scenario is None and args.agents is None:
-            scenario = policy_scenario(policy_spec)
+            scenario = rulesim_scenario(policy_spec)
         else:
             scenario = load_scenario_arg(args.scenario or DEFAULT_SCENARIO, args.agents)
     stack = policy_spec is not None and policy_spec["observation"]["stack_previous"]

@@ -1,19 +1,22 @@
-"""A trained policy: how it chooses actions, its files, and its greedy evaluation on any env. One module
-for the two formats a policy directory holds (docs/training.md, "Policy format"):
+"""A trained policy: how it chooses actions, its files, and its greedy evaluation on any env. One policy in
+memory, EnvPolicy (TeamPolicy for a world of several agents), read from a policy directory of either format
+(docs/training.md, "Policy format"):
 
 - `tracelab-dqn-env-policy/1` (ENV_FORMAT, what the trainer writes): one network over the observations of the
   env it was trained on (`env`: a registered id or a spec file and its params; `observation.encoding`), so
-  that play and eval play it on that env and refuse another in one line (load_env_policy, EnvPolicy);
-- `tracelab-dqn-policy/1` (FORMAT, GridWar's trainer on RuleSim): the scenario, a network per group of red
-  agents, each agent seeing the team observation with its own blocks first (agent_view_order, Policy).
-  GridWar's spec gives the same observation as RuleSim did, so such a policy plays its scenario's spec
-  (gridwar.scenario_spec) as it played RuleSim (tests/test_play.py).
+  that play and eval play it on that env and refuse another in one line (load_env_policy);
+- `tracelab-dqn-policy/1` (RULESIM_FORMAT, written by GridWar's earlier trainer on RuleSim, read only): a
+  GridWar scenario and its network, converted at load into the EnvPolicy of that scenario's spec, whose
+  observation is RuleSim's (tests/test_gridwar_spec.py), so that it plays as it played RuleSim
+  (load_rulesim_policy). A team's policy of that format read each agent's view with its own blocks first,
+  which no EnvPolicy reads: refused in one line giving the command that trains it again.
 
 Both are `policy.pt` (`{network name: state dict}`, loaded without running code) beside `policy.json`,
 written through write_policy_files. Nothing here needs the training code's objects or the run."""
 from __future__ import annotations
 
 import json
+import shlex
 import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -26,9 +29,8 @@ from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 from tracelab.engine.safe_files import read_json
 from tracelab.envs.declared.env_source import EnvSource, check_same_env, env_source_from_json
-from tracelab.envs.declared.spec import load_spec
 from tracelab.errors import UserError
-from tracelab.game.scenario import ACTION_NAMES, NOTHING, Scenario, scenario_from_dict
+from tracelab.game.scenario import ACTION_NAMES, Scenario, builtin_scenario_names, scenario_from_dict
 from tracelab.store import layout
 from tracelab.store.agent_rows import PolicyOutput
 from tracelab.train.env_source import ObservationEncoder, TeamEncoder, probe_env
@@ -38,227 +40,14 @@ from tracelab.train.qnet import HiddenWidths, NetSpec, NumpyQ, QFunction
 from tracelab.train.team_policy import TeamPolicy, team_env_actor
 from tracelab.validation import Const, IntRange, ListOf, MapOf, OptionalKey, check_file
 
-# deferred: torch (and torch_files), the game's observation module (numba) and the declared envs (the engine) load
-# in the functions that use them: reading a policy's spec (policy.json) needs none of them
-
-
-FORMAT = "tracelab-dqn-policy/1"
-POLICY_JSON, POLICY_PT = "policy.json", "policy.pt"
-BEST_POLICY_DIR = "policy-best"  # a training run's policy of its best evaluation, beside RUN/policy/
-
-
-def agent_view_order(scenario: Scenario, stack_previous: bool) -> np.ndarray:
-    """int [N, D]: agent j's observation is team_obs[..., order[j]] (its own blocks first)."""
-    n = scenario.agents_per_team
-    block = (7 if scenario.advanced else 4) * n
-    orders = []
-    for j in range(n):
-        mates = [j] + [k for k in range(n) if k != j]
-        half = [2 * k + c for k in mates for c in (0, 1)]             # own positions
-        half += [2 * n + c for c in range(2 * n)]                     # opponents, as they are
-        if scenario.advanced:
-            half += [4 * n + 3 * k + c for k in mates for c in range(3)]  # own bullet triples
-        if stack_previous:
-            half = half + [block + i for i in half]
-        orders.append(half)
-    return np.asarray(orders, np.int64)
-
-
-def may_act(scenario: Scenario, state: Any, slow_every_step: bool = False) -> np.ndarray:
-    """bool [W, N]: which red agents choose an action this step (alive; a slow agent on even steps, or on
-    every step with `slow_every_step`: the game ignores its choices where it may not act)."""
-    if slow_every_step:
-        return state.alive[:, 0].copy()
-    return state.choosing(scenario.slow_mask)[:, 0]
-
-
-class Policy:
-    """Greedy action choice of red's agents. `nets`: per network, its Q-values of observations [K, D] (from
-    the learner's live weights while training, loaded ones otherwise); `network_of_agent[j]` which one
-    plays agent j."""
-
-    def __init__(self, scenario: Scenario, nets: list[QFunction], network_of_agent: list[int],
-                 stack_previous: bool, mask: bool = False) -> None:
-        self.scenario = scenario
-        self.nets = nets
-        self.network_of_agent = list(network_of_agent)
-        self.stack_previous = stack_previous
-        self.mask = mask
-        self.order = agent_view_order(scenario, stack_previous)
-        self.nothing = scenario.action_ids.index(NOTHING)
-        self._identity = scenario.agents_per_team == 1
-
-    def agent_obs(self, team_obs: np.ndarray, j: int) -> np.ndarray:
-        """Agent j's view [W, D] of the team observations [W, D]."""
-        return team_obs if self._identity else team_obs[:, self.order[j]]
-
-    def act(self, team_obs: np.ndarray, acting: np.ndarray, masks: np.ndarray | None = None) -> np.ndarray:
-        """Action indices [W, N]: greedy for acting agents (among allowed ones if the policy masks and
-        `masks` [W, N, A] is given), do-nothing for the others."""
-        return self.decide(team_obs, acting, masks)[0]
-
-    def decide(self, team_obs: np.ndarray, acting: np.ndarray, masks: np.ndarray | None = None
-               ) -> tuple[np.ndarray, PolicyOutput]:
-        """act()'s actions [W, N] and the Q-values they were chosen from ([W, N, A], unmasked; NaN for
-        agents that do not act), for a traced game's decisions (tracelab.store.agent_rows)."""
-        w, n = acting.shape
-        if n == 1 and acting.all():  # one agent, choosing in every world (the 1v1 games): no copies
-            values = self.nets[self.network_of_agent[0]](team_obs)
-            q = np.where(masks[:, 0].astype(bool), values, -np.inf) if self.mask and masks is not None else values
-            return q.argmax(axis=1)[:, None], PolicyOutput(values[:, None])
-        out = np.full((w, n), self.nothing, np.int64)
-        values = np.full((w, n, self.scenario.n_actions), np.nan, np.float32)
-        for j in range(n):
-            rows = np.flatnonzero(acting[:, j])
-            if not len(rows):
-                continue
-            q = self.nets[self.network_of_agent[j]](self.agent_obs(team_obs[rows], j))
-            values[rows, j] = q
-            if self.mask and masks is not None:
-                q = np.where(masks[rows, j].astype(bool), q, -np.inf)
-            out[rows, j] = q.argmax(axis=1)
-        return out, PolicyOutput(values)
-
-
-# ---------------------------------------------------------------------------------------------------------
-# Files
-# ---------------------------------------------------------------------------------------------------------
-def save_policy(path: str | Path, scenario: Scenario, weights: dict[str, dict[str, Any]],
-                agents: dict[str, list[int]], network: dict[str, Any], stack_previous: bool, mask: bool,
-                trained: dict[str, Any]) -> Path:
-    """Write policy.pt and policy.json into directory `path`. weights: network name -> its state dict;
-    agents: network name -> red agent indices it plays; network: policy.json's description of the
-    architecture (NetSpec.to_json, or a custom module's)."""
-    from tracelab.game.observe import observation_layout
-    spec = {
-        "format": FORMAT,
-        "scenario": {"name": scenario.name, "toml": scenario.to_toml()},
-        "observation": {"size": network["inputs"], "stack_previous": stack_previous, "agent_first": True,
-                        "layout": observation_layout(scenario, stack_previous)},
-        "actions": {"ids": list(scenario.action_ids), "names": [ACTION_NAMES[a] for a in scenario.action_ids]},
-        "network": network,
-        "networks": {name: list(map(int, idx)) for name, idx in agents.items()},
-        "mask": mask,
-        "trained": trained,
-    }
-    return write_policy_files(Path(path), weights, spec)
-
-
-def write_policy_files(out: Path, weights: dict[str, dict[str, Any]], spec: dict[str, Any]) -> Path:
-    """policy.pt (weights: network name -> state dict) and policy.json into the folder `out` (a run's
-    policy/ or policy-best/), through the store's path resolver: `out` is made or must be a folder, not
-    a link, and each file is created new under a temp name and renamed in (never written through a link
-    a stranger's run planted there). policy.pt is renamed first: the pair appears together for readers."""
-    import torch
-
-    out.parent.mkdir(parents=True, exist_ok=True)  # the run's own folder, which the caller named
-    out = layout.make_run_dirs(out.parent, out.name)
-    with layout.new_file(layout.run_path(out, POLICY_JSON)) as spec_file, \
-            layout.new_file(layout.run_path(out, POLICY_PT)) as weights_file:
-        torch.save({name: {k: v.contiguous().clone() for k, v in sd.items()} for name, sd in weights.items()},
-                   weights_file)
-        spec_file.write((json.dumps(spec, indent=1) + "\n").encode())
-    return out
-
-
-def _policy_dir(path: str | Path) -> Path:
-    p = Path(path)
-    if p.is_dir():
-        return p
-    if p.name in (POLICY_JSON, POLICY_PT) and p.parent.is_dir():
-        return p.parent
-    raise FileNotFoundError(f"no policy at {str(path)!r}: expected a directory holding {POLICY_JSON} and "
-                            f"{POLICY_PT} (or the path of one of them)")
-
-
-# what load_policy reads of policy.json (the rest describes the policy for people and other tools)
-SPEC_SCHEMA = {
-    "format": Const(FORMAT),
-    "scenario": {"name": str, "toml": str},
-    "observation": {"stack_previous": bool},
-    "network": {"inputs": IntRange(1), "hidden": OptionalKey(HiddenWidths()), "outputs": IntRange(1),
-                "dueling": OptionalKey(bool), "custom": OptionalKey(str), "terms": OptionalKey(ListOf(str, min_len=1))},
-    "networks": MapOf(ListOf(IntRange(0), min_len=1), min_len=1),
-    "mask": OptionalKey(bool),
-}
-
-
-def read_policy_spec(path: str | Path) -> dict[str, Any]:
-    """policy.json of a policy directory, read with a size cap and checked against SPEC_SCHEMA (a policy
-    may come from a stranger: each failure is one line naming the key)."""
-    d = _policy_dir(path)
-    f = d / POLICY_JSON
-    if not (f.exists() or f.is_symlink()):
-        raise FileNotFoundError(f"{str(d)!r} holds no {POLICY_JSON}")
-    spec = read_json(f, what="policy description", follow_symlinks=False)
-    return check_file(spec, SPEC_SCHEMA, f)
-
-
-def policy_scenario(spec: dict[str, Any]) -> Scenario:
-    return scenario_from_dict(tomllib.loads(spec["scenario"]["toml"]), source="policy.json scenario")
-
-
-def spec_net(spec: dict[str, Any]) -> NetSpec:
-    """The architecture policy.json describes (ValueError for a custom module's: no file rebuilds one)."""
-    net = spec["network"]
-    if "custom" in net or "hidden" not in net:
-        raise ValueError(f"{POLICY_JSON}: network: a custom torch module ({net.get('custom', '?')[:80]}), "
-                         f"written through the Python API: tracelab rebuilds only the networks --hidden and "
-                         f"--dueling describe; load its policy.pt with torch into that module")
-    return NetSpec.from_json(net)
-
-
-def _state_dict_schema(names: list[str], net: NetSpec) -> dict[str, Any]:
-    """policy.pt: per network, the state dict of the module `net` describes."""
-    from tracelab.train.torch_files import Tensor
-    layers = {k: Tensor(None, shape) for k, shape in net.state_dict_shapes().items()}
-    return {name: layers for name in names}
-
-
-def read_policy_networks(path: str | Path, spec: dict[str, Any]) -> dict[str, Any]:
-    """policy.pt of a policy directory, whose policy.json is `spec`: loaded without running code (torch's
-    weights_only), no bigger than the networks it declares, each network's state dict of their shape."""
-    from tracelab.train.torch_files import load_tensors
-    d = _policy_dir(path)
-    net, names = spec_net(spec), list(spec["networks"])
-    check_policy_memory(net, len(names), memory_limit(), str(d / POLICY_JSON))
-    f = d / POLICY_PT
-    if not (f.exists() or f.is_symlink()):
-        raise FileNotFoundError(f"{str(d)!r} holds no {POLICY_PT}")
-    # the tensors it declares (float64 at most), with room for the pickle and the alignment torch.save adds
-    states = load_tensors(f, len(names) * net.n_params * 8 + (1 << 20))
-    return check_file(states, _state_dict_schema(names, net), f)
-
-
-def load_policy(path: str | Path, scenario: Scenario | None = None) -> Policy:
-    """A saved policy, ready to act. `scenario`: play it on another scenario of the same shape (same
-    agents, actions and observation size); default: the one it was trained on."""
-    spec = read_policy_spec(path)
-    trained_on = policy_scenario(spec)
-    scenario = scenario or trained_on
-    stack = spec["observation"]["stack_previous"]
-    net = spec_net(spec)
-    from tracelab.game.observe import obs_size
-    if (obs_size(scenario, stack), scenario.n_actions, scenario.agents_per_team) != \
-            (net.inputs, net.actions, trained_on.agents_per_team):
-        raise ValueError(f"the policy was trained on {trained_on.name!r} ({trained_on.agents_per_team} agents, "
-                         f"{net.inputs} observations, {net.actions} actions); scenario {scenario.name!r} "
-                         f"does not match")
-    states = read_policy_networks(path, spec)
-    nets: list[QFunction] = []
-    owner = {}
-    for i, name in enumerate(spec["networks"]):
-        nets.append(NumpyQ(net, {k: v.float().numpy() for k, v in states[name].items()}))
-        for j in spec["networks"][name]:
-            owner[j] = i
-    if sorted(owner) != list(range(scenario.agents_per_team)):
-        raise ValueError(f"{POLICY_JSON}: networks {spec['networks']} do not cover agents "
-                         f"0..{scenario.agents_per_team - 1}")
-    return Policy(scenario, nets, [owner[j] for j in range(scenario.agents_per_team)], stack,
-                  spec.get("mask", False))
+# deferred: torch (and torch_files) and the declared envs (the engine) load in the functions that use them:
+# reading a policy's spec (policy.json) needs none of them
 
 
 ENV_FORMAT = "tracelab-dqn-env-policy/1"
+RULESIM_FORMAT = "tracelab-dqn-policy/1"  # GridWar's earlier trainer's (RuleSim): read and converted, never written
+POLICY_JSON, POLICY_PT = "policy.json", "policy.pt"
+BEST_POLICY_DIR = "policy-best"  # a training run's policy of its best evaluation, beside RUN/policy/
 
 
 class EnvPolicy:
@@ -306,39 +95,30 @@ def one_env_actor(policy: Any, env: Any = None) -> Callable[[Any, dict[str, Any]
     return act
 
 
-class OneAgentGridWarPolicy:
-    """A one-agent policy of GridWar's trainer (policy.Policy) acting as EnvPolicy does on a batch of
-    worlds (observations [W, D], masks [W, A]): what evaluate_env plays on GridWar's spec."""
-
-    def __init__(self, policy: Any) -> None:
-        if policy.scenario.agents_per_team != 1:
-            raise ValueError("a team's policy plays one world at a time (tracelab play --policy)")
-        self.policy = policy
-
-    def act(self, obs: Any, masks: np.ndarray | None = None) -> np.ndarray:
-        obs = np.asarray(obs, np.float32)
-        masks = None if masks is None or not self.policy.mask else np.asarray(masks)[:, None]
-        return self.policy.act(obs, np.ones((len(obs), 1), bool), masks)[:, 0]
+def greedy_actor(policy: EnvPolicy | TeamPolicy, env: Any = None) -> Callable[[Any, dict[str, Any]], Any]:
+    """The greedy actions in one env of a policy load_trained gave, recorded as the step's decisions where
+    `env` records them."""
+    return team_env_actor(policy, env) if isinstance(policy, TeamPolicy) else one_env_actor(policy, env)
 
 
-def team_actor(policy: Any, env: Any = None) -> Callable[[Any, dict[str, Any]], Any]:
-    """The greedy actions in one env of a policy of GridWar's trainer (policy.Policy: one network per agent
-    over the team's view, its own blocks first) from the observation (a TeamEnv's [agents, D], each agent's
-    the team's view; a one-agent Env's [D]) and the masks; recorded as the step's decisions where `env`
-    records them. Every agent decides (a slow agent's choice on its off step the world ignores)."""
-    record = env is not None and getattr(env.unwrapped, "records_decisions", False)
-    n = policy.scenario.agents_per_team
+# ---------------------------------------------------------------------------------------------------------
+# Files
+# ---------------------------------------------------------------------------------------------------------
+def write_policy_files(out: Path, weights: dict[str, dict[str, Any]], spec: dict[str, Any]) -> Path:
+    """policy.pt (weights: network name -> state dict) and policy.json into the folder `out` (a run's
+    policy/ or policy-best/), through the store's path resolver: `out` is made or must be a folder, not
+    a link, and each file is created new under a temp name and renamed in (never written through a link
+    a stranger's run planted there). policy.pt is renamed first: the pair appears together for readers."""
+    import torch
 
-    def act(obs: Any, info: dict[str, Any]) -> Any:
-        obs = np.asarray(obs, np.float32)
-        team_obs = obs.reshape(-1, obs.shape[-1])[:1]  # every agent's is the team's view
-        mask = info.get("action_mask")
-        masks = None if mask is None else np.asarray(mask).reshape(1, n, -1)
-        idx, output = policy.decide(team_obs, np.ones((1, n), bool), masks if policy.mask else None)
-        if record:
-            env.unwrapped.decided(output.rows(0), None if masks is None else masks[0])
-        return int(idx[0, 0]) if n == 1 else idx[0]
-    return act
+    out.parent.mkdir(parents=True, exist_ok=True)  # the run's own folder, which the caller named
+    out = layout.make_run_dirs(out.parent, out.name)
+    with layout.new_file(layout.run_path(out, POLICY_JSON)) as spec_file, \
+            layout.new_file(layout.run_path(out, POLICY_PT)) as weights_file:
+        torch.save({name: {k: v.contiguous().clone() for k, v in sd.items()} for name, sd in weights.items()},
+                   weights_file)
+        spec_file.write((json.dumps(spec, indent=1) + "\n").encode())
+    return out
 
 
 def save_env_policy(path: str | Path, source: EnvSource, weights: dict[str, Any], network: dict[str, Any],
@@ -351,14 +131,43 @@ def save_env_policy(path: str | Path, source: EnvSource, weights: dict[str, Any]
     return write_policy_files(Path(path), {"shared": weights}, spec)
 
 
+def _policy_dir(path: str | Path) -> Path:
+    p = Path(path)
+    if p.is_dir():
+        return p
+    if p.name in (POLICY_JSON, POLICY_PT) and p.parent.is_dir():
+        return p.parent
+    raise FileNotFoundError(f"no policy at {str(path)!r}: expected a directory holding {POLICY_JSON} and "
+                            f"{POLICY_PT} (or the path of one of them)")
+
+
+NETWORK_SCHEMA = {"inputs": IntRange(1), "hidden": OptionalKey(HiddenWidths()), "outputs": IntRange(1),
+                  "dueling": OptionalKey(bool), "custom": OptionalKey(str),
+                  "terms": OptionalKey(ListOf(str, min_len=1))}
+# what the loaders read of policy.json (the rest describes the policy for people and other tools)
 ENV_SPEC_SCHEMA = {
     "format": Const(ENV_FORMAT),
     "env": {"name": str, "kwargs": MapOf(object)},
-    "network": {"inputs": IntRange(1), "hidden": OptionalKey(HiddenWidths()), "outputs": IntRange(1),
-                "dueling": OptionalKey(bool), "custom": OptionalKey(str), "terms": OptionalKey(ListOf(str, min_len=1))},
+    "network": NETWORK_SCHEMA,
     "networks": MapOf(ListOf(IntRange(0), min_len=1), min_len=1),
     "mask": OptionalKey(bool),
 }
+RULESIM_SPEC_SCHEMA = {
+    "format": Const(RULESIM_FORMAT),
+    "scenario": {"name": str, "toml": str},
+    "observation": {"stack_previous": bool},
+    "network": NETWORK_SCHEMA,
+    "networks": MapOf(ListOf(IntRange(0), min_len=1), min_len=1),
+    "mask": OptionalKey(bool),
+}
+
+
+def _read_policy_json(path: str | Path) -> tuple[Path, Any]:
+    """(policy.json's path, its decoded contents), read with a size cap and without following a link."""
+    f = _policy_dir(path) / POLICY_JSON
+    if not (f.exists() or f.is_symlink()):
+        raise FileNotFoundError(f"{str(f.parent)!r} holds no {POLICY_JSON}")
+    return f, read_json(f, what="policy description", follow_symlinks=False)
 
 
 def policy_format(path: str | Path) -> str | None:
@@ -370,52 +179,131 @@ def policy_format(path: str | Path) -> str | None:
     return d.get("format") if isinstance(d, dict) and isinstance(d.get("format"), str) else None
 
 
-def load_env_policy(path: str | Path, given: EnvSource) -> tuple[Any, dict[str, Any]]:
+def spec_net(spec: dict[str, Any]) -> NetSpec:
+    """The architecture policy.json describes (ValueError for a custom module's: no file rebuilds one)."""
+    net = spec["network"]
+    if "custom" in net or "hidden" not in net:
+        raise ValueError(f"{POLICY_JSON}: network: a custom torch module ({net.get('custom', '?')[:80]}), "
+                         f"written through the Python API: tracelab rebuilds only the networks --hidden and "
+                         f"--dueling describe; load its policy.pt with torch into that module")
+    return NetSpec.from_json(net)
+
+
+def _state_dict_schema(names: list[str], net: NetSpec) -> dict[str, Any]:
+    """policy.pt: per network, the state dict of the module `net` describes."""
+    from tracelab.train.torch_files import Tensor
+    layers = {k: Tensor(None, shape) for k, shape in net.state_dict_shapes().items()}
+    return {name: layers for name in names}
+
+
+def read_policy_networks(path: str | Path, spec: dict[str, Any]) -> dict[str, Any]:
+    """policy.pt of a policy directory, whose policy.json is `spec`: loaded without running code (torch's
+    weights_only), no bigger than the networks it declares, each network's state dict of their shape."""
+    from tracelab.train.torch_files import load_tensors
+    d = _policy_dir(path)
+    net, names = spec_net(spec), list(spec["networks"])
+    check_policy_memory(net, len(names), memory_limit(), str(d / POLICY_JSON))
+    f = d / POLICY_PT
+    if not (f.exists() or f.is_symlink()):
+        raise FileNotFoundError(f"{str(d)!r} holds no {POLICY_PT}")
+    # the tensors it declares (float64 at most), with room for the pickle and the alignment torch.save adds
+    states = load_tensors(f, len(names) * net.n_params * 8 + (1 << 20))
+    return check_file(states, _state_dict_schema(names, net), f)
+
+
+def _network(net: NetSpec, state: dict[str, Any]) -> NumpyQ:
+    return NumpyQ(net, {k: v.float().numpy() for k, v in state.items()})
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Loading
+# ---------------------------------------------------------------------------------------------------------
+def load_env_policy(path: str | Path, given: EnvSource) -> tuple[EnvPolicy | TeamPolicy, dict[str, Any]]:
     """(the policy, its policy.json), refused in one line unless it was trained on `given` (the env the
     user named: a policy file never decides which spec file tracelab reads), its network's shape checked
     against the env's spaces. A world of several agents: a TeamPolicy (every agent's action)."""
-    f = _policy_dir(path) / POLICY_JSON
-    spec = check_file(read_json(f, what="policy description", follow_symlinks=False), ENV_SPEC_SCHEMA, f)
-    check_same_env(env_source_from_json(spec["env"], str(f)), given, str(_policy_dir(path)))
-    source = given
+    f, raw = _read_policy_json(path)
+    spec = check_file(raw, ENV_SPEC_SCHEMA, f)
+    check_same_env(env_source_from_json(spec["env"], str(f)), given, str(f.parent))
     net = spec_net(spec)
     states = read_policy_networks(path, spec)
-    q = NumpyQ(net, {k: v.float().numpy() for k, v in states["shared"].items()})
-    encoder, n_actions, _ = probe_env(source)
+    encoder, n_actions, _ = probe_env(given)
     if (encoder.size, n_actions) != (net.inputs, net.actions):
         raise ValueError(f"{f}: its network reads {net.inputs} inputs and gives {net.actions} Q-values; "
-                         f"{source.describe()} has {encoder.size} and {n_actions} now")
-    policy = EnvPolicy(q, encoder, spec.get("mask", False))
+                         f"{given.describe()} has {encoder.size} and {n_actions} now")
+    policy = EnvPolicy(_network(net, states["shared"]), encoder, spec.get("mask", False))
     return (policy if not isinstance(encoder, TeamEncoder) else TeamPolicy(policy, encoder.n_agents)), spec
 
 
-def load_trained(path: str | Path, given: EnvSource) -> Any:
-    """A policy of either format, to play on the world `given` names: an EnvPolicy (load_env_policy: the same
-    env it was trained on), or GridWar's trainer's Policy where the world has its agents, actions and
-    observation size (a scenario's spec: gridwar.scenario_spec). A mismatch is one line naming both."""
-    if policy_format(path) == ENV_FORMAT:
-        return load_env_policy(path, given)[0]
-    spec = read_policy_spec(path)
-    policy = load_policy(path)
-    from tracelab.envs.declared.gym_env import observation_space
-    spec_path, params = given.declared()
-    world = load_spec(spec_path, **params)
-    obs_size = int(np.prod(observation_space(world).shape))
-    shape = (len(world.agents), len(world.action_names))
-    want = (policy.scenario.agents_per_team, policy.scenario.n_actions)
-    if shape != want or obs_size != spec["network"]["inputs"]:
-        raise ValueError(f"{_policy_dir(path)}: trained on GridWar's {policy.scenario.name!r} ({want[0]} agents, "
-                         f"{want[1]} actions, {spec['network']['inputs']} observations); {given.describe()} has "
-                         f"{shape[0]} agents, {shape[1]} actions, {obs_size} observations")
-    return policy
+def recorded_env(path: str | Path) -> EnvSource | None:
+    """The env a policy of train (ENV_FORMAT) was trained on, where it is one of tracelab's registered ids
+    (GridWar's, the toy-text worlds'), which eval and play then play without --env; None for a spec file or
+    another id, which the user names (a policy file never decides which file tracelab reads)."""
+    f, raw = _read_policy_json(path)
+    source = env_source_from_json(check_file(raw, ENV_SPEC_SCHEMA, f)["env"], str(f))
+    return source if source.name.startswith("tracelab/") and source.name in gym.registry else None
 
 
-def greedy_actor(policy: Any, env: Any = None) -> Callable[[Any, dict[str, Any]], Any]:
-    """The greedy actions in one env of a policy load_trained gave (EnvPolicy or GridWar's Policy), recorded as
-    the step's decisions where `env` records them."""
-    if isinstance(policy, TeamPolicy):
-        return team_env_actor(policy, env)
-    return one_env_actor(policy, env) if isinstance(policy, EnvPolicy) else team_actor(policy, env)
+def read_rulesim_spec(path: str | Path) -> dict[str, Any]:
+    """policy.json of a policy of GridWar's earlier trainer (RULESIM_FORMAT), checked against its schema, and
+    refused in one line unless it converts exactly into an EnvPolicy: one agent, one network (a team's
+    network read each agent's view with its own blocks first, which tracelab's team policies do not: the
+    line gives the command that trains the scenario again, on its spec)."""
+    f, raw = _read_policy_json(path)
+    spec = check_file(raw, RULESIM_SPEC_SCHEMA, f)
+    scenario = rulesim_scenario(spec, f)
+    if scenario.agents_per_team != 1:
+        named = shlex.quote(scenario.name) if scenario.name in builtin_scenario_names() else "SCENARIO_FILE"
+        retrain = f"tracelab train --scenario {named} --agents {scenario.agents_per_team}" + \
+            (" --non-markov" if spec["observation"]["stack_previous"] else "")
+        raise ValueError(f"{f.parent}: a policy of GridWar's earlier trainer (RuleSim's format) for "
+                         f"{scenario.agents_per_team} agents a team, each reading the team with its own blocks "
+                         f"first, which today's team policies (one network, each agent's index as input) cannot "
+                         f"play as trained; train it again on its spec: {retrain}")
+    if list(spec["networks"].values()) != [[0]]:
+        raise ValueError(f"{f}: key 'networks': expected one network, playing agent 0 (a one-agent scenario)")
+    return spec
+
+
+def rulesim_scenario(spec: dict[str, Any], where: str | Path = POLICY_JSON) -> Scenario:
+    """The GridWar scenario a RuleSim-format policy.json (read_rulesim_spec) was trained on."""
+    where = f"{where}: key 'scenario.toml'"
+    try:
+        table = tomllib.loads(spec["scenario"]["toml"])
+    except tomllib.TOMLDecodeError as e:
+        raise ValueError(f"{where}: not TOML: {e}") from None
+    return scenario_from_dict(table, source=where)
+
+
+def load_rulesim_policy(path: str | Path, given: EnvSource) -> EnvPolicy:
+    """A policy of GridWar's earlier trainer (read_rulesim_spec: one agent) as the EnvPolicy that plays it on
+    the world `given` names, a GridWar spec whose observation and actions are its scenario's (eval and play
+    name its scenario's: scenario_env, scenario_spec). RuleSim gave one agent the team's view, as the spec
+    does, so its network reads the spec's observation as it is: the same games (tests/test_play.py). A world
+    of another shape is refused in one line naming both."""
+    spec = read_rulesim_spec(path)
+    trained_on = rulesim_scenario(spec)
+    net = spec_net(spec)
+    (state,) = read_policy_networks(path, spec).values()  # sized and checked before the world is built
+    encoder, n_actions, world = probe_env(given)
+    agents = encoder.n_agents if isinstance(encoder, TeamEncoder) else 1
+    names = [ACTION_NAMES[a] for a in trained_on.action_ids]
+    world_names = names if world is None else list(world.action_names)
+    if (agents, n_actions, encoder.size, world_names) != (1, net.actions, net.inputs, names):
+        raise ValueError(f"{_policy_dir(path)}: trained on GridWar's {trained_on.name!r} (1 agents, "
+                         f"{net.actions} actions, {net.inputs} observations); {given.describe()} has {agents} "
+                         f"agents, {n_actions} actions, {encoder.size} observations"
+                         + ("" if len(world_names) != len(names) or world_names == names else
+                            f" (actions {', '.join(world_names)}, not {', '.join(names)})"))
+    return EnvPolicy(_network(net, state), encoder, spec.get("mask", False))
+
+
+def load_trained(path: str | Path, given: EnvSource) -> EnvPolicy | TeamPolicy:
+    """A policy of either format, to play on the world `given` names: one of train (load_env_policy: the same
+    env it was trained on), or one of GridWar's earlier trainer converted (load_rulesim_policy)."""
+    if policy_format(path) == RULESIM_FORMAT:
+        return load_rulesim_policy(path, given)
+    return load_env_policy(path, given)[0]
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -612,8 +500,7 @@ def evaluate_env(policy: EnvPolicy, source: EnvSource, games: int, seed: int, wo
 def evaluate_in_env(policy: Any, env: Any, games: int, seed: int,
                     on_game: Callable[[float], None] | None = None) -> EnvEvalResult:
     """`games` greedy episodes of a policy load_trained gave, one at a time in `env` (a declared world's Env
-    or TeamEnv: a team's policy of GridWar's earlier trainer, or every game traced with its decisions where
-    `env` records), counted as evaluate_env counts."""
+    or TeamEnv: every game traced with its decisions where `env` records), counted as evaluate_env counts."""
     from tracelab.envs.declared.play import play_episodes
     declares = declares_outcomes(env)
     result = EnvEvalResult()

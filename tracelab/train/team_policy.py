@@ -1,9 +1,9 @@
 """One network for every agent of a team (parameter sharing): each agent's observation is a row of the
 batch, followed by its one-hot index among the spec's agents, so that the shared network tells them apart
 (the agent indicator of Gupta et al. 2017 and SuperSuit's `agent_indicator_v0`; GridWar's own trainer on
-RuleSim put each agent's own blocks first instead, agent_view_order). What env_trainer.py trains on a
-world of several agents, and plays in its evaluations (batched, and traced one world at a time). The
-encoding is env_source.TeamEncoder."""
+RuleSim put each agent's own blocks first instead: such a policy is refused at load,
+env_policy.read_rulesim_spec). What env_trainer.py trains on a world of several agents, and plays in its
+evaluations (batched, and traced one world at a time). The encoding is env_source.TeamEncoder."""
 from __future__ import annotations
 
 from collections.abc import Callable
