@@ -368,8 +368,8 @@ class EnvTrainer:
 def gridwar_sources(cfg: TrainConfig, scenario: Scenario) -> tuple[EnvSource, EnvSource]:
     """(the env GridWar's `scenario` trains on, the one its evaluations play: the opponent at --eval-p), as
     GridWar spec ids and params (scenario_env: a UserError naming what its spec cannot play)."""
-    name, params = scenario_env(scenario, cfg.opponent_p, cfg.non_markov)
-    return EnvSource(name, params), EnvSource(name, {**params, "p_toward": cfg.eval_p})
+    source = EnvSource(*scenario_env(scenario, cfg.opponent_p, cfg.non_markov))
+    return source, source.with_args(p_toward=cfg.eval_p)
 
 
 def env_run_meta(cfg: TrainConfig, source: EnvSource, command: str,
