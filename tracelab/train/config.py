@@ -30,10 +30,10 @@ def _opt(help: str, flag: str | None = None, **kw: Any) -> Any:
     return field(metadata={"help": help, "flag": flag}, **kw)
 
 
-# TrainConfig fields that describe GridWar (its scenario, teams, opponent, simulator): refused with --env,
-# and not recorded as an env training's settings
-GRIDWAR_ONLY = ("scenario", "non_markov", "slow_every_step", "agents", "kernel", "opponent_p", "eval_p",
-                "explore_scripted")
+# TrainConfig fields that describe GridWar's scenario (its team size, observation, opponent): refused with
+# --env, and not recorded as an env training's settings. The kernel, --slow-every-step (a spec's `[agents]
+# decides`) and --explore-scripted (its `[agents] script`) train any spec world.
+GRIDWAR_ONLY = ("scenario", "non_markov", "agents", "opponent_p", "eval_p")
 
 # RuleSim's trainer's flags, gone with their fields (an earlier run's config that holds them still loads:
 # from_dict drops them): `train` refuses each in one line, saying why
