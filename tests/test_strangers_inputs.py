@@ -155,8 +155,10 @@ GRID = "[grid]\nlr = [1e-4, 3e-4]\n"
 
 @pytest.mark.parametrize("text, fragments", [
     ('[set]\nhidden = "100000000"\n' + GRID, ["s.toml:2:1: set.hidden", "--hidden 100000000", "--max-memory"]),
-    ("[set]\nbuffer = 100000000\n" + GRID, ["s.toml:2:1: set.buffer", "replay buffers", "--max-memory"]),
+    ("[set]\nbuffer = 100000000\n" + GRID, ["s.toml:2:1: set.buffer", "a replay buffer of", "--max-memory"]),
     ("[grid]\nbuffer = [100, 100000000]\n", ["s.toml:2:1: grid.buffer", "100,000,000 transitions"]),
+    ('[set]\nenv = "tracelab/FrozenLake-v1"\nbuffer = 100000000\n' + GRID,
+     ["s.toml:3:1: set.buffer", "a replay buffer of", "--max-memory"]),
     ('[random]\nenvs = "randint:1,1000000000"\n', ["s.toml:2:1: random.envs", "1,000,000,000 training worlds"]),
     ("[set]\nthreads = 100000\n" + GRID, ["s.toml:2:1: set.threads", "at most 256"]),
     ("[set]\nsteps = 100\n" + "x = " + "[" * 5000 + "]" * 5000 + "\n" + GRID, ["s.toml", "nested too deeply"]),

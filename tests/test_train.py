@@ -244,11 +244,12 @@ def test_saved_policy_round_trips_and_plain_torch_loads_it(tmp_path):
     trainer.close()
 
 
-def test_configs_written_before_split_networks_keep_their_networks():
-    assert TrainConfig.from_dict({"scenario": "nonmarkov", "non_markov": True}).split_networks
-    assert not TrainConfig.from_dict({"scenario": "nonmarkov", "non_markov": False}).split_networks
-    assert not TrainConfig.from_dict({"scenario": "nonmarkov", "non_markov": True,
-                                      "split_networks": False}).split_networks
+def test_a_config_with_rulesim_s_retired_fields_still_loads():
+    """split_networks and backend went with RuleSim's trainer: a run's config that holds them loads without them."""
+    cfg = TrainConfig.from_dict({"scenario": "nonmarkov", "non_markov": True, "split_networks": True,
+                                 "backend": "reference", "kernel": "lanes"})
+    assert (cfg.scenario, cfg.non_markov, cfg.kernel) == ("nonmarkov", True, "lanes")
+    assert not {"split_networks", "backend"} & set(cfg.to_dict())
 
 
 def test_ctrl_c_leaves_an_interrupted_run_with_a_checkpoint(tmp_path):

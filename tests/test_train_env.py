@@ -11,10 +11,12 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
+from tracelab import RULES_DIR
 from tracelab.cli import main
 from tracelab.envs.declared.spec import load_spec
 from tracelab.envs.declared.toytext import spec_path
 from tracelab.envs.declared.env_source import EnvSource, parse_env_args
+from tracelab.store import run_info
 from tracelab.train.env_source import ObservationEncoder
 from tracelab.train.tabular import enumerate_transitions, optimal_start_value, value_iteration
 
@@ -97,6 +99,17 @@ def test_train_env_mistakes_are_one_line(args: list[str], text: str, tmp_path: P
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and text in err[0], err
     assert not (tmp_path / "r").exists()
+
+
+def test_a_spec_world_trains_with_the_kernel_and_scripted_exploration_flags(tmp_path: Path) -> None:
+    """--kernel and --explore-scripted (the spec's `[agents] script`) are any spec world's, not GridWar's alone."""
+    run = tmp_path / "r"
+    assert main(["train", "--env", str(RULES_DIR / "gridworld" / "war.toml"), "--kernel", "counting",
+                 "--explore-scripted", "0.5", "--total-timesteps", "64", "--num-envs", "2", "--learning-starts", "32",
+                 "--batch-size", "16", "--eval-every", "0", "--eval-games", "2", "--eval-envs", "2",
+                 "--trace-eval-games", "0", "--log-every", "32", "--run", str(run)]) == 0
+    config = run_info(run).meta["config"]
+    assert (config["kernel"], config["explore_scripted"]) == ("counting", 0.5)
 
 
 def test_env_args_are_read_as_toml_values() -> None:

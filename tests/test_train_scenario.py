@@ -69,8 +69,9 @@ def test_train_scenario_runs_through_the_spec_and_resumes(tmp_path: Path,
 
 
 @pytest.mark.parametrize("argv, fragment", [
-    (["--split-networks"], "--split-networks True: GridWar trains through its spec"),
-    (["--backend", "reference"], "--backend reference: GridWar trains through its spec"),
+    (["--split-networks"], "--split-networks is gone: training runs through the world's spec with one network"),
+    (["--backend", "reference"], "--backend is gone: training plays the world's spec on the rule engine"),
+    (["--backend=rules", "--env", "tracelab/FrozenLake-v1"], "--backend is gone"),
 ])
 def test_what_the_spec_path_cannot_train_is_refused_in_one_line(argv: list[str], fragment: str, tmp_path: Path,
                                                                  capsys: pytest.CaptureFixture[str]) -> None:

@@ -34,7 +34,6 @@ from tracelab.bench.sims import SpecLoop
 from tracelab.envs.declared.env_source import EnvSource
 from tracelab.envs.declared.gridwar import scenario_spec
 from tracelab.envs.declared.play import load_declared, make_declared_env, play_episodes, random_policy
-from tracelab.envs.declared.recording import declared_run_config
 from tracelab.envs.declared.vector_world import DeclaredWorlds
 from tracelab.game.scenario import builtin_scenario
 from tracelab.store import TraceWriter
@@ -53,14 +52,14 @@ def _source(scenario: str) -> EnvSource:
 
 def _env(source: EnvSource, run_dir: Path | None) -> Any:
     """The declared env `tracelab play` makes: into a new run at `run_dir` (its metadata as play writes it:
-    the spec, its params, the board), or untraced."""
+    the spec and its params; the recorder adds the board and the sources), or untraced."""
     spec = load_declared(source)
     if run_dir is None:
         return make_declared_env(source, spec)
     spec_path, params = source.declared()
     meta = {"command": "tracelab bench play", "rule_files": list(spec.program.files), "seed": SEED,
             "config": {"env": source.name, "env_id": None, "spec_path": spec_path, "env_args": params,
-                       "policy": "random", **declared_run_config(spec)}}
+                       "policy": "random"}}
     return make_declared_env(source, spec, trace_writer=TraceWriter.open(run_dir, meta))
 
 

@@ -27,7 +27,6 @@ from tracelab.bench.engine import machine_line
 from tracelab.envs.declared.env_source import EnvSource
 from tracelab.envs.declared.gridwar import WAR_SPEC
 from tracelab.envs.declared.play import load_declared, make_declared_env, play_episodes, random_policy
-from tracelab.envs.declared.recording import declared_run_config
 from tracelab.store import TraceWriter, seal_run
 from tracelab.store.reader import open_run
 from tracelab.viewers.replay import agent_plots, board_layer, graph_rules, lanes, plots
@@ -47,7 +46,7 @@ def write_games(run_dir: Path, params: dict[str, Any], games: int, seed: int = 0
     source = EnvSource(str(WAR_SPEC), params)
     spec = load_declared(source)
     config = {"env": source.name, "env_id": None, "spec_path": str(WAR_SPEC), "env_args": params,
-              "episodes": games, "policy": "random", **declared_run_config(spec)}
+              "episodes": games, "policy": "random"}
     meta = {"command": "tracelab bench replay", "config": config, "rule_files": list(spec.program.files),
             "seed": seed}
     env = make_declared_env(source, spec, trace_writer=TraceWriter.open(run_dir, meta))

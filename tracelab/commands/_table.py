@@ -383,7 +383,7 @@ def _replay(p: argparse.ArgumentParser) -> None:
 
 
 def _train(p: argparse.ArgumentParser) -> None:
-    from tracelab.train.config import LEARNERS, config_fields
+    from tracelab.train.config import LEARNERS, RETIRED_FLAGS, config_fields
     for f in config_fields():
         flag, name = "--" + f.flag, f.name
         shown = f.help if f.default is None or isinstance(f.default, bool) else f"{f.help} (default: {f.default})"
@@ -399,8 +399,6 @@ def _train(p: argparse.ArgumentParser) -> None:
             continue
         if f.type in ("bool", bool):
             kw: dict[str, Any] = {"action": "store_true"}
-        elif name == "backend":
-            kw = {"choices": ("rules", "reference")}
         elif name == "kernel":
             kw = {"choices": ENGINE_KERNELS}
         elif name == "learner":
@@ -411,6 +409,8 @@ def _train(p: argparse.ArgumentParser) -> None:
         p.add_argument(flag, dest=name, help=shown, **kw)
         if f.alias:  # the field's own name, as earlier versions and docs wrote it: accepted, not listed
             p.add_argument("--" + f.alias, dest=name, help=argparse.SUPPRESS, **kw)
+    for flag in RETIRED_FLAGS:  # RuleSim's trainer's: train refuses each in one line, saying why
+        p.add_argument(flag, dest=flag, nargs="?", const="", help=argparse.SUPPRESS)
     p.add_argument("--exp-name", default=None, type=run_name, metavar="NAME",
                    help="name the run runs/NAME-<scenario>-<time> (default NAME: train)")
     p.add_argument("--run", default=None, help="run directory (default runs/train-<scenario>-<time>)")

@@ -13,6 +13,8 @@ from tracelab.commands._interrupt import CtrlCStops
 from tracelab.commands._worlds import load_scenario_arg
 from tracelab.envs.declared.env_source import EnvSource, parse_env_args
 from tracelab.errors import UserError, store_errors
+from tracelab.train.env_source import probe_env
+from tracelab.train.env_trainer import gridwar_sources
 from tracelab.train.memory import memory_limit
 from tracelab.train.ray_session import check_address, ray_session
 from tracelab.train.sweep import run_sweep
@@ -25,14 +27,14 @@ def run(args: argparse.Namespace) -> int:
     cfg = spec.base_config()
     with store_errors():  # a scenario file, an env or a spec that does not load
         if spec.env is not None:
-            scenario = EnvSource.given(spec.env, parse_env_args(args.env_arg))
-            scenario.make().close()  # a bad id, spec or keyword argument: one line, before Ray starts
+            scenario = source = EnvSource.given(spec.env, parse_env_args(args.env_arg))
         elif args.env_arg:
             raise UserError("--env-arg needs --set env=SPEC_OR_ID")
         else:
             scenario = load_scenario_arg(cfg.scenario, cfg.agents)
-    if spec.env is None:  # a GridWar trial's memory, before Ray starts (an env trial's is train --env's)
-        check_trials_memory(spec, scenario, memory_limit(args.max_memory, "--max-memory"))
+            source = gridwar_sources(cfg, scenario)[0]
+        probe = probe_env(source)  # a bad id, spec or keyword argument: one line, before Ray starts
+    check_trials_memory(spec, probe, memory_limit(args.max_memory, "--max-memory"))
     out = Path(args.out or _default_out())
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise UserError(f"{out} is not empty: give another --out or remove it")

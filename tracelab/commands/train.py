@@ -33,7 +33,7 @@ from tracelab.game.scenario import builtin_scenario_names
 from tracelab.store import TraceWriter
 from tracelab.store.meta import current_meta
 from tracelab.train.budget import reward_scale_note, too_short_hint
-from tracelab.train.config import GRIDWAR_ONLY, TrainConfig, flag_of
+from tracelab.train.config import GRIDWAR_ONLY, RETIRED_FLAGS, TrainConfig, flag_of
 from tracelab.train.env_checkpoint import checkpoint_config, checkpoint_env, load_env_checkpoint
 from tracelab.train.env_source import probe_env
 from tracelab.train.env_trainer import EnvTrainer, env_run_meta, gridwar_sources
@@ -49,6 +49,9 @@ def run(args: argparse.Namespace) -> int:
     given = {k: v for k, v in vars(args).items()
              if k not in ("func", "command", "argv", "run", "resume", "max_memory", "max_groundings", "exp_name",
                           "tensorboard", "env", "env_arg")}
+    retired = sorted(RETIRED_FLAGS.keys() & given.keys())
+    if retired:
+        raise UserError(f"{retired[0]} is gone: {RETIRED_FLAGS[retired[0]]}; drop the flag")
     limit = memory_limit(args.max_memory, "--max-memory")
     on_env = args.env is not None or bool(args.env_arg)
     source = env_source_of(args) if on_env else None

@@ -15,7 +15,6 @@ from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.commands._recording import recording_into
 from tracelab.envs.declared.branch import plan_branch, rebuilt_spec
 from tracelab.envs.declared.env_source import EnvSource
-from tracelab.envs.declared.recording import declared_run_config
 from tracelab.errors import UserError, store_errors
 from tracelab.store import TraceWriter
 from tracelab.store.branch_compare import compare_branch
@@ -64,11 +63,12 @@ def _policy(path: str, world: Any) -> Any:
 
 
 def _meta(args: argparse.Namespace, plan: Any, spec: Any, origin: Any) -> dict[str, Any]:
-    """The branch run's metadata: the command, the origin's env as it names it, the spec's summaries and
-    facts (recording.declared_run_config), the origin (branch_origin.ORIGIN_KEY)."""
+    """The branch run's metadata: the command, the origin's env as it names it, the origin
+    (branch_origin.ORIGIN_KEY); the recorder adds the spec's summaries, facts and board
+    (recording.declared_run_config)."""
     w = plan.world
     config = {"env": w.env, "env_id": w.env_id, "spec_path": w.spec_path, "env_args": w.env_args, "episodes": 1,
-              "policy": args.policy or "recorded", **declared_run_config(spec), ORIGIN_KEY: origin.to_json()}
+              "policy": args.policy or "recorded", ORIGIN_KEY: origin.to_json()}
     return {"command": " ".join(shlex.quote(a) for a in ["tracelab", *args.argv]), "config": config,
             "rule_files": list(spec.program.files), "seed": plan.seed}
 

@@ -1,7 +1,8 @@
 """The scripted base policy of the spec ("Opponent (blue) base policy"), for either team.
 
-It is a function of plain state arrays so that the hand-written simulator (refsim) and the
-rule-driven one draw the same actions from the same seed. Decisions (docs/game.md, "Scripted policy"):
+It is a function of plain state arrays, RefSim's (the hand-written simulator); the spec's opponent
+(rules/gridworld/opponent.rules, its draws in this order) plays the same actions from the same seed.
+Decisions (docs/game.md, "Scripted policy"):
 
 - Shooting (advanced scenario, ammo > 0) comes first: among the *living* enemies in the same row or
   column, it shoots towards the nearest (Manhattan distance); a tie between enemies in different

@@ -1,8 +1,8 @@
 """The reference simulator: the game of docs/game.md written directly, without the logic engine.
 
-The rule-driven simulator is differentially tested against this one, so it follows the spec's
-"one step, in order" literally, one phase after the other, in a numba kernel looping over worlds
-(one call per batched step). All njit code lives in this module so numba's cache cannot go stale
+The spec (rules/gridworld/war*.toml) is differentially tested against this one (tests/test_gridwar_spec.py),
+so it follows docs/game.md's "One step" literally, one phase after the other, in a numba kernel looping
+over worlds (one call per batched step). All njit code lives in this module so numba's cache cannot go stale
 through a changed callee elsewhere.
 
 State layout (all arrays have a leading world axis W; team 0 = red, 1 = blue; N agents per team):
@@ -17,9 +17,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .observe import observe_step
-from .scenario import DEAD_EPS, Scenario
-from .sim_base import GameSim, read_only
+from .observe import obs_size, observe_both, observe_step
+from .opponent import P_TOWARD, TeamPolicy
+from .scenario import DEAD_EPS, Scenario, team_index
 from .state import GameState, StepResult
 
 _DX = np.array([0, 0, -1, 1], dtype=np.int64)
@@ -245,19 +245,40 @@ def _step_kernel(red, blue, allowed, t, pos, health, ammo, alive, moving, dest, 
 # ----------------------------------------------------------------------------------------------------
 # The simulator
 # ----------------------------------------------------------------------------------------------------
-class RefSim(GameSim):
+def read_only(a: np.ndarray) -> np.ndarray:
+    """A read-only view of a buffer: what the simulator hands out (made once, valid until the next step or
+    reset overwrites the buffer)."""
+    v = a.view()
+    v.flags.writeable = False
+    return v
+
+
+class RefSim:
     """The game in `n_worlds` independent worlds, stepped together.
 
     The dynamics are deterministic; `seed` drives `rng`, used by `scripted_actions()` (the scripted
-    policy for either team). With `stack_previous`, observations are [current, previous] (at reset the
-    previous observation is the current one). `copy`: the step contract (GameSim): by default a
-    StepResult's arrays are read-only views of the state and event buffers, valid until the next step
-    or reset; `copy=True` returns new arrays every time.
+    policy for either team, moving towards the enemy base with probability `opponent_p`). With
+    `stack_previous`, observations are [current, previous] (at reset the previous observation is the
+    current one).
+
+    The step contract (the convention of batched RL envs): with `copy=False` (the default) the arrays of
+    a StepResult and of reset()'s observation are read-only views of buffers the simulator owns and
+    overwrites at its next step or reset; with `copy=True` every step and reset returns new arrays that
+    nothing changes later.
     """
 
     def __init__(self, scenario: Scenario, n_worlds: int = 1, seed: int | None = None,
                  stack_previous: bool = False, copy: bool = False):
-        super().__init__(scenario, n_worlds, seed, stack_previous, copy)
+        if n_worlds < 1:
+            raise ValueError(f"n_worlds must be at least 1, got {n_worlds}")
+        self.scenario = scenario
+        self.n_worlds = n_worlds
+        self.stack_previous = stack_previous
+        self.copy = copy
+        self.rng = np.random.default_rng(seed)
+        self.obs_size = obs_size(scenario, stack_previous)
+        self.opponent_p = P_TOWARD
+        self._policy = TeamPolicy(scenario, n_worlds)
         n = scenario.agents_per_team
         self._allowed = np.zeros(9, dtype=bool)
         self._allowed[list(scenario.action_ids)] = True
@@ -269,14 +290,13 @@ class RefSim(GameSim):
                                  r.valid_action, r.unsafe, r.invalid], dtype=np.float64)
         self._initial = GameState.initial(scenario, n_worlds)
         self.state = s = self._initial.copy()  # stepped and reset in place: the buffers handed out
-        self._policy_state = (s.pos, s.alive, s.ammo)
         self._bullet_owner = np.stack([s.bullet_team, s.bullet_agent], axis=1).astype(np.int64)
         shape = (n_worlds, 2, n)
         # the step's events, rewritten by every step: unsafe, invalid, hits made / taken, rewards
         self._events = (np.zeros(shape, bool), np.zeros(shape, bool), np.zeros(shape, np.int32),
                         np.zeros(shape, np.int32), np.zeros(shape), np.zeros((n_worlds, 2)))
         self._was_done = np.zeros(n_worlds, bool)
-        cur = self._current_obs()
+        cur = observe_both(s, scenario)
         self._obs = self._with_history(cur, cur)  # [W, 2, D]: the observation buffer
         self._obs_view = read_only(self._obs)
         self._shape = (n_worlds, n)
@@ -298,10 +318,23 @@ class RefSim(GameSim):
         sel = slice(None) if worlds is None else (
             np.flatnonzero(worlds) if np.asarray(worlds).dtype == bool else np.array(worlds))
         self.state.assign(self._initial, sel)
-        return self._reset_obs(sel)
+        # their observation becomes the start's (history at a reset: the current observation)
+        cur = observe_both(self.state, self.scenario)
+        self._obs[sel] = self._with_history(cur, cur)[sel]
+        return self._obs.copy() if self.copy else self._obs_view
 
-    def _current_obs(self) -> np.ndarray:
-        return self._observe_both(self.state)
+    def _with_history(self, cur: np.ndarray, prev: np.ndarray) -> np.ndarray:
+        return np.concatenate([cur, prev], axis=2) if self.stack_previous else cur
+
+    def observe(self, team: int | str) -> np.ndarray:
+        """The last observation of one team (from reset or step), [W, D]."""
+        return self._obs[:, team_index(team)].copy()
+
+    def scripted_actions(self, team: int | str = "blue") -> np.ndarray:
+        """The scripted policy's actions for `team` in the current state, drawn from `self.rng` (new
+        int64 [W, N])."""
+        s = self.state
+        return self._policy(s.pos, s.alive, s.ammo, team_index(team), self.rng, float(self.opponent_p))
 
     def _actions(self, name: str, actions: np.ndarray) -> np.ndarray:
         a = actions if type(actions) is np.ndarray and actions.dtype == np.int64 else np.asarray(actions, np.int64)
@@ -329,4 +362,4 @@ class RefSim(GameSim):
         # a finished world's observation stays as it was, history included
         observe_step(s.pos, s.alive, s.bullet_pos, s.bullet_dir, s.bullet_team, self.scenario.advanced,
                      self.stack_previous, self._was_done, self._obs)
-        return self._handed_out()
+        return self._result.copy() if self.copy else self._result

@@ -30,10 +30,19 @@ def _opt(help: str, flag: str | None = None, **kw: Any) -> Any:
     return field(metadata={"help": help, "flag": flag}, **kw)
 
 
-# TrainConfig fields that describe GridWar (its scenario, teams, opponent, simulator): refused with --env,
-# and not recorded as an env training's settings
-GRIDWAR_ONLY = ("scenario", "non_markov", "split_networks", "slow_every_step", "agents", "backend", "kernel",
-                "opponent_p", "eval_p", "explore_scripted")
+# TrainConfig fields that describe GridWar's scenario (its team size, observation, opponent): refused with
+# --env, and not recorded as an env training's settings. The kernel, --slow-every-step (a spec's `[agents]
+# decides`) and --explore-scripted (its `[agents] script`) train any spec world.
+GRIDWAR_ONLY = ("scenario", "non_markov", "agents", "opponent_p", "eval_p")
+
+# RuleSim's trainer's flags, gone with their fields (an earlier run's config that holds them still loads:
+# from_dict drops them): `train` refuses each in one line, saying why
+RETIRED_FLAGS = {
+    "--split-networks": "training runs through the world's spec with one network for every agent (RuleSim's "
+                        "trainer had one for the fast and one for the slow agents)",
+    "--backend": "training plays the world's spec on the rule engine; RefSim, the hand-written simulator, is the "
+                 "oracle of the differential tests and `bench env`",
+}
 
 
 @dataclass
@@ -43,17 +52,12 @@ class TrainConfig:
                          default="base")
     non_markov: bool = _opt("the non-Markov setup: the previous observation appended to the current one "
                             "(default: Markov, the current observation only)", default=False)
-    split_networks: bool = _opt("refused: training runs through the world's spec, with one network for every "
-                                "agent (RuleSim's trainer had one for the fast and one for the slow agents; "
-                                "earlier runs' configs keep the field)", default=False)
     slow_every_step: bool = _opt("the slow agent decides on every step, each transition one step long; the "
                                  "game ignores its choices on steps where it may not act, and nothing in a "
                                  "Markov observation says which steps those are (default: it decides only "
                                  "where it may act, one transition spanning its two-step move)", default=False)
     agents: int | None = _opt("agents per team (default: the scenario's)", default=None)
-    backend: str = _opt("simulator: rules (the rule engine, the spec); reference (RefSim, hand-written) is "
-                        "refused in training (earlier runs' configs keep the field)", default="rules")
-    kernel: str = _opt("the rule engine's kernel (--backend rules): auto (lanes from 64 worlds, else "
+    kernel: str = _opt("the rule engine's kernel: auto (lanes from 64 worlds, else "
                        "counting, stepped with the game as one compiled call), counting, lanes, or compiled "
                        "(built in the "
                        "background while training starts on the counting kernel, unless `tracelab compile` "
@@ -143,13 +147,8 @@ class TrainConfig:
             problems.append(f"reward_scale must be a positive number, got {self.reward_scale}")
         if self.updates_per_step < 0:
             problems.append(f"updates_per_step must be >= 0, got {self.updates_per_step}")
-        if self.backend not in ("rules", "reference"):
-            problems.append(f"backend must be rules or reference, got {self.backend!r}")
         if self.kernel not in ENGINE_KERNELS:
             problems.append(f"kernel must be one of {', '.join(ENGINE_KERNELS)}, got {self.kernel!r}")
-        elif self.kernel != "auto" and self.backend != "rules":
-            problems.append(f"kernel {self.kernel} is the rule engine's: it needs --backend rules, not "
-                            f"{self.backend}")
         if isinstance(self.hidden, int) and not isinstance(self.hidden, bool):  # one width, as configs had it
             self.hidden = str(self.hidden)
         try:
@@ -228,10 +227,8 @@ class TrainConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "TrainConfig":
-        known = {f.name for f in fields(cls)}
+        known = {f.name for f in fields(cls)}  # a field retired since (split_networks, backend) is dropped
         d = {k: v for k, v in d.items() if k in known}
-        if "split_networks" not in d:  # written before the two were separate: non-Markov implied split
-            d["split_networks"] = bool(d.get("non_markov", False))
         if "reward_scale" not in d:     # written before the flag: the learner saw the game's rewards
             d["reward_scale"] = METHOD_REWARD_SCALE
         return cls(**d)

@@ -54,8 +54,6 @@ from tracelab.train.transitions import PendingTransitions
 from tracelab.train.tensorboard import MetricSink
 from tracelab.train.update_schedule import UpdateSchedule
 
-# GridWar's settings the spec path does not train yet: each refused in one line when set
-NOT_ON_THE_SPEC_PATH = {"split_networks": "one network for every agent", "backend": "the rule engine"}
 SHARED = "shared"  # the one network's name (policy.json's `networks`)
 Progress = Callable[[dict[str, Any]], None]
 
@@ -369,14 +367,9 @@ class EnvTrainer:
 
 def gridwar_sources(cfg: TrainConfig, scenario: Scenario) -> tuple[EnvSource, EnvSource]:
     """(the env GridWar's `scenario` trains on, the one its evaluations play: the opponent at --eval-p), as
-    GridWar spec ids and params; a UserError naming a setting the spec path does not train."""
-    defaults = TrainConfig()
-    for name, only in NOT_ON_THE_SPEC_PATH.items():
-        if getattr(cfg, name) != getattr(defaults, name):
-            raise UserError(f"{flag_of(name)} {getattr(cfg, name)}: GridWar trains through its spec "
-                            f"(rules/gridworld/war.toml) with {only}; drop the flag")
-    name, params = scenario_env(scenario, cfg.opponent_p, cfg.non_markov)
-    return EnvSource(name, params), EnvSource(name, {**params, "p_toward": cfg.eval_p})
+    GridWar spec ids and params (scenario_env: a UserError naming what its spec cannot play)."""
+    source = EnvSource(*scenario_env(scenario, cfg.opponent_p, cfg.non_markov))
+    return source, source.with_args(p_toward=cfg.eval_p)
 
 
 def env_run_meta(cfg: TrainConfig, source: EnvSource, command: str,

@@ -12,7 +12,7 @@ from tracelab.store.writer import TraceWriter
 
 class EpisodeLog:
     def __init__(self, worlds: int, writer: TraceWriter | None, *, logging: bool = True) -> None:
-        """`logging` False: episode begins are written from `start_logging()` on (GridWar's trainer
+        """`logging` False: episode begins are written from `start_logging()` on (EnvTrainer
         starts logging in train(), after a checkpoint may have renumbered the games)."""
         self.worlds, self.writer, self.logging = worlds, writer, logging
         self.ids = np.zeros(worlds, np.int64)

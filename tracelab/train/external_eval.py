@@ -110,9 +110,10 @@ class DeclaredTarget:
         return self.source.name
 
     def run_meta(self) -> dict[str, Any]:
-        from tracelab.envs.declared.recording import declared_run_config
+        """The run's meta of the env; the recorder of its traced games adds the spec's sources, facts and
+        board to its config (recording.declared_run_config)."""
         return {"scenario": Path(self.source.name).name, "rule_files": list(self.spec.program.files),
-                "config": {"env": self.source.to_json(), **declared_run_config(self.spec)}}
+                "config": {"env": self.source.to_json()}}
 
     def outcome(self, info: Mapping[str, Any], terminated: bool, truncated: bool) -> str:
         # the world's own outcome where it declares a win ([end] win, loss: "win", "loss")
@@ -121,7 +122,7 @@ class DeclaredTarget:
     def evaluator(self, writer: TraceWriter, new_id: NewId, settings: EvalSettings) -> Evaluator:
         source = self.source
         if source.name in GRIDWAR_SPEC_IDS:  # the games against the scripted opponent of the evaluations
-            source = EnvSource(source.name, {**source.kwargs, "opponent_p": settings.opponent_p})
+            source = source.with_args(p_toward=settings.opponent_p)
         return DeclaredEvaluator(source, writer, new_id, settings)
 
 

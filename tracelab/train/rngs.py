@@ -5,8 +5,8 @@ Each part is handed its stream here, so a reader finds every source of randomnes
   minibatch sampling. One stream for both, drawn in the loop's order: a seeded run repeats, and
   checkpoints written before the parts existed (one generator state, `rng`) resume exactly.
 - `torch`: the networks' initialisation.
-- `env_seed()`: the training worlds' reset (the scripted opponent's generator then lives in the
-  simulator; a GridWar checkpoint saves it as `env_rng`).
+- `env_seed()`: the training worlds' reset (their draws, a scripted opponent's among them, come from the
+  worlds' generators seeded there; a checkpoint replays the worlds from that reset: env_checkpoint.py).
 - `eval_seed(round)`: each evaluation's games, the same for every run of the seed.
 """
 from __future__ import annotations

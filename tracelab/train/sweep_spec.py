@@ -338,14 +338,22 @@ def _spec_inside(path: str, value: Any, where: str) -> tuple[Any, str]:
         raise SweepSpecError(f"{where}: {e}") from None
 
 
-def check_trials_memory(spec: SweepSpec, scenario: Any, limit: Limit) -> None:
+def check_trials_memory(spec: SweepSpec, probe: tuple[Any, int, Any], limit: Limit) -> None:
     """Refuse a sweep whose largest trial would not fit `limit`, as `train` refuses a run, before Ray
     starts: each searched field at its value (a grid's, a choice's, a range's bound) that takes the most
-    memory (each size grows the estimate whatever the others are), the others at the fixed settings."""
-    from tracelab.train.memory import MemoryLimitExceeded, check_training_memory, training_estimate
+    memory (each size grows the estimate whatever the others are), the others at the fixed settings.
+    `probe`: env_source.probe_env of the trials' env (its encoder, action count and WorldSpec or None)."""
+    from tracelab.train.memory import MemoryLimitExceeded, check_estimate, env_training_estimate, env_world_bytes
+    from tracelab.train.qnet import NetSpec
+    encoder, n_actions, world = probe
+    world_bytes = env_world_bytes(world)
+
+    def parts(cfg: TrainConfig) -> list[tuple[str, str, int]]:
+        return env_training_estimate(cfg, NetSpec(encoder.size, cfg.hidden_sizes, n_actions, cfg.dueling),
+                                     world_bytes)
 
     def estimate(settings: dict[str, Any]) -> int:
-        return sum(b for *_, b in training_estimate(TrainConfig(**settings), scenario))
+        return sum(b for *_, b in parts(TrainConfig(**settings)))
 
     largest = dict(spec.fixed)
     for axis in spec.axes:
@@ -356,7 +364,7 @@ def check_trials_memory(spec: SweepSpec, scenario: Any, limit: Limit) -> None:
         trials = [TrainConfig(**{**spec.fixed, a.name: largest[a.name]}) for a in spec.axes]
     try:
         for cfg in trials:
-            check_training_memory(cfg, scenario, limit)
+            check_estimate(parts(cfg), limit)
     except MemoryLimitExceeded as e:
         name = field_name(e.flags.split()[0], "the estimate")
         raise SweepSpecError(f"{spec.sources.get(name, 'a trial')}: {e}") from None

@@ -70,6 +70,10 @@ class EnvSource:
         raise UserError(f"--env {self.name}: neither a spec file nor a registered id (the declared ids: "
                         f"{', '.join(declared)})")
 
+    def with_args(self, **kwargs: Any) -> "EnvSource":
+        """The same env with these keyword arguments set (GridWar's opponent at another p: p_toward=P)."""
+        return EnvSource(self.name, {**self.kwargs, **kwargs})
+
     def to_json(self) -> dict[str, Any]:
         return {"name": self.name, "kwargs": dict(self.kwargs)}
 

@@ -97,7 +97,7 @@ class TeamEnv:
         w.step(rows, self._rng)
         terminated, truncated = w.terminated(), w.truncated()
         obs = self._observe()
-        if self._recorder is not None:  # the team's view (each agent's is the same in GridWar) as the step's
+        if self._recorder is not None:  # the team's view (each agent's is the same in war.toml) as the step's
             self._recorder.stepped(rows, w.last_rewards, obs[0], terminated, truncated)
         info = self._info()
         if (self.world_spec.win or self.world_spec.loss) and (terminated or truncated):

@@ -1,5 +1,5 @@
 """A spec's generated parts (docs/worlds.md, "Generated parts: `for`"): tables and list items written once
-and repeated over ranges computed from the params, so that one spec makes a world of any size (GridWar's
+and repeated over ranges computed from the params, so that one spec makes a world of any size (war.toml's
 agents 1..agents_per_team, bullets 1..ammo, the tally's steps 1..hits to kill).
 
 - In a list, a table with `for` is repeated once per combination of its variables (the first variable
@@ -30,7 +30,7 @@ NOT_GENERATED = ("params", "data")  # read before any expression can be computed
 MAX_GENERATED = 1_000_000  # values generated in all (strings, numbers, tables), whatever the memory budget
 # the expressions of all `for`s and `{expr}`s together, in the evaluator's steps (a node, an item), plus
 # one a character parsed: seconds (~30 s of CPU at most on a loaded machine), where 1,000,000 copies of an expression of
-# MAX_EXPRESSION_STEPS each would never end (GridWar at 20 agents a team takes ~0.3M)
+# MAX_EXPRESSION_STEPS each would never end (war.toml at 20 agents a team takes ~0.3M)
 MAX_GENERATION_STEPS = 8 * MAX_EXPRESSION_STEPS
 
 # a generated path -> (its template's path, the variables' values), as SpecSource.origins holds them

@@ -21,7 +21,7 @@ from tracelab.train.reward_scale import METHOD_REWARD_SCALE
 # the settings of the method's DQN (docs/training.md, "The command"); a report names those an arm changes
 DQN_FIELDS = ("hidden", "lr", "gamma", "batch", "buffer", "target_every", "eps_start", "eps_end",
               "eps_decay_start", "eps_decay_end", "updates_per_step", "reward_scale", "mask", "explore_scripted",
-              "split_networks", "slow_every_step", "double_dqn", "dueling")
+              "slow_every_step", "double_dqn", "dueling")
 
 
 def _setting(name: str, value: Any) -> str:

@@ -20,7 +20,6 @@ from tracelab.train.experiments.runner import (
     WORLD_P,
     EvalFigures,
     SeedRun,
-    against_p,
     final_eval_seed,
     gridwar_source,
     p_suffix,
@@ -226,7 +225,7 @@ def shaping_traces(sr: SeedRun, source: EnvSource, out_dir: Path, games: int, co
     the arm's GridWar id and params) into their own run and read the saved queries' figures off it."""
     policy = load_env_policy(sr.policy_dir, source)[0]
     trace_dir = out_dir / f"{sr.run_dir.name}-traces"
-    traced_games(policy, against_p(source, EVAL_PS[0]), trace_dir, games=games,
+    traced_games(policy, source.with_args(p_toward=EVAL_PS[0]), trace_dir, games=games,
                  seed=final_eval_seed(sr.seed, EVAL_PS[0]) + 2, command=f"tracelab eval (from: {command})",
                  about={"policy": str(sr.policy_dir)})
     figures = query_figures(trace_dir, action_names(source))

@@ -170,12 +170,6 @@ def gridwar_source(cfg: TrainConfig, scenario: Scenario) -> EnvSource:
     return gridwar_sources(cfg, scenario)[0]
 
 
-def against_p(source: EnvSource, p: float) -> EnvSource:
-    """GridWar's `source` with the scripted opponent at p (the spec's p_toward)."""
-    from tracelab.envs.declared.env_source import EnvSource
-    return EnvSource(source.name, {**source.kwargs, "p_toward": p})
-
-
 def _gridwar_parts(cfg: TrainConfig, scenario: Scenario, command: str, eval_ps: tuple[float, ...],
                    eval_games: int) -> tuple[dict[str, Any], Any, FinalEvaluation]:
     """GridWar through its spec, as `train --scenario` trains it: the run meta, EnvTrainer on the scenario's
@@ -194,7 +188,7 @@ def _gridwar_parts(cfg: TrainConfig, scenario: Scenario, command: str, eval_ps: 
     def final_evaluation(trainer: Any, policy: Any) -> dict[float, EvalFigures]:
         if isinstance(policy, Path):
             policy = load_env_policy(policy, source)[0]
-        return {p: EvalFigures.of(evaluate_env(policy, against_p(source, p), eval_games,
+        return {p: EvalFigures.of(evaluate_env(policy, source.with_args(p_toward=p), eval_games,
                                                final_eval_seed(cfg.seed, p), cfg.eval_envs))
                 for p in eval_ps}
     return meta, make_trainer, final_evaluation
