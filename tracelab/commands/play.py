@@ -26,7 +26,6 @@ from tracelab.engine.errors import is_interrupt
 from tracelab.envs.declared.env_source import EnvSource, parse_env_args
 from tracelab.envs.declared.gridwar import GRIDWAR_SPEC_IDS, scenario_spec
 from tracelab.envs.declared.play import load_declared, make_declared_env, play_episodes, random_policy
-from tracelab.envs.declared.recording import declared_run_config
 from tracelab.errors import UserError, store_errors
 from tracelab.store import TraceWriter
 from tracelab.store.layout import check_new_run_dir
@@ -141,11 +140,12 @@ def _name(source: Any, scenario: Any) -> str:
 def run_meta(source: Any, spec: Any, args: argparse.Namespace, scenario: Any = None) -> dict[str, Any]:
     """The run's metadata: the command, the world (id or spec file, its arguments, the spec and the rule files
     by path, size and hash: their texts go in the run's `sources` table), what sets each external fact
-    (recording.declared_facts), the board's rows; GridWar's scenario by name and as its TOML."""
+    and the board's rows (the recorder adds those: recording.declared_run_config); GridWar's scenario by name
+    and as its TOML."""
     spec_path, params = source.declared()
     config = {"env": source.name, "env_id": source.env_id, "spec_path": spec_path,
               "env_args": params, "episodes": args.episodes, "policy": args.policy or "random",
-              "kernel": args.kernel, **declared_run_config(spec)}
+              "kernel": args.kernel}
     meta = {"command": " ".join(shlex.quote(a) for a in ["tracelab", *args.argv]), "config": config,
             "rule_files": list(spec.program.files), "seed": args.seed}
     if scenario is not None:

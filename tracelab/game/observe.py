@@ -105,33 +105,6 @@ def obs_size(scenario: Scenario, stack_previous: bool = False) -> int:
     return 2 * size if stack_previous else size
 
 
-def observation_layout(scenario: Scenario, stack_previous: bool) -> list[str]:
-    """Names of an agent's observation entries, in the order its network reads them."""
-    n = scenario.agents_per_team
-    own = ["self"] + [f"mate{k}" for k in range(1, n)]
-    names = [f"{a}_{c}" for a in own for c in "xy"]
-    names += [f"opponent{k + 1}_{c}" for k in range(n) for c in "xy"]
-    if scenario.advanced:
-        names += [f"{a}_{c}" for a in own for c in ("opponent_bullets", "nearest_bullet_x", "nearest_bullet_y")]
-    if stack_previous:
-        names += [f"previous_{x}" for x in names]
-    return names
-
-
-def team_observation_names(scenario: Scenario, stack_previous: bool) -> list[str]:
-    """Names of a team's observation entries in the env's order (its agents in index order: agent1,
-    agent2, ...; what a traced game's steps.obs holds)."""
-    names = observation_layout(scenario, stack_previous)
-    mates = {"self": "agent1", **{f"mate{k}": f"agent{k + 1}" for k in range(1, scenario.agents_per_team)}}
-    return [_rename_owner(x, mates) for x in names]
-
-
-def _rename_owner(name: str, owners: dict[str, str]) -> str:
-    prefix = "previous_" if name.startswith("previous_") else ""
-    owner, _, rest = name.removeprefix(prefix).partition("_")
-    return f"{prefix}{owners.get(owner, owner)}_{rest}"
-
-
 def observe(state: GameState, team: int | str, scenario: Scenario,
             history: np.ndarray | None = None) -> np.ndarray:
     """Observation of `team` in every world: float32 [W, D]. With `history` (the previous step's

@@ -17,9 +17,6 @@ from tracelab.train.replay import row_length
 
 MACHINE_SHARE = 0.5  # the default limit: this share of the machine's physical memory
 FLOAT = 4            # bytes of a float32
-# the rule engine's state per world and per map cell and agent: measured 0.7-4 KiB on 8x8 maps (counting
-# and lanes kernels, base and advanced scenarios; 256 to 8,192 worlds), rounded up
-WORLD_BYTES_PER_CELL_AGENT = 4096
 # a gymnasium env's world in train --env's vector env that is not declared in rules: a small Python object
 # at least (a declared world's is estimated from its spec: spec_size.env_bytes)
 GYM_WORLD_BYTES = 4 << 10
@@ -77,38 +74,6 @@ def activation_bytes(batch: int, shape: NetSpec) -> int:
     return batch * (ACTIVATION_COPIES * sum(h + 1 for h in shape.hidden) + 4 * shape.actions) * FLOAT
 
 
-def world_bytes(scenario: Any, shape: NetSpec) -> int:
-    """One world: the engine's state, the game's action history, the open transitions, acting's
-    activations."""
-    n = scenario.agents_per_team
-    engine = WORLD_BYTES_PER_CELL_AGENT * scenario.width * scenario.height * n
-    history = scenario.max_steps * 2 * n * 2  # int16 per step, team and agent
-    return engine + history + 4 * n * shape.inputs * FLOAT + 2 * shape.widest * FLOAT
-
-
-def training_estimate(cfg: Any, scenario: Any) -> list[tuple[str, str, int]]:
-    """(flags with their values, what they size, estimated bytes) of each part of a training run that
-    grows with a setting."""
-    # deferred: run_networks loads the game's numba modules, which the memory limit alone does not need
-    from tracelab.train.run_networks import network_groups, training_net
-    shape, k = training_net(cfg, scenario), len(network_groups(scenario, cfg.split_networks))
-    nets = f"{k} network{'s' * (k > 1)}"
-    eval_worlds = min(cfg.eval_envs, cfg.eval_games)
-    return [
-        (f"--hidden {cfg.hidden}", f"{nets} of {shape.inputs:,} inputs x {shape.hidden_text()} hidden units x "
-                                   f"{shape.actions} actions", k * network_bytes(shape)),
-        (f"--hidden {cfg.hidden} and --batch {cfg.batch}", f"the update's activations ({cfg.batch:,} "
-         f"transitions x {shape.hidden_text()} hidden units, {nets})", k * activation_bytes(cfg.batch, shape)),
-        (f"--batch {cfg.batch}", f"minibatches of {cfg.batch:,} transitions ({nets})",
-         k * minibatch_bytes(cfg.batch, shape, cfg.mask)),
-        (f"--buffer {cfg.buffer}", f"replay buffers of {cfg.buffer:,} transitions ({nets})",
-         k * replay_bytes(cfg.buffer, shape, cfg.mask)),
-        (f"--envs {cfg.envs}", f"{cfg.envs:,} training worlds", cfg.envs * world_bytes(scenario, shape)),
-        (f"--eval-envs {cfg.eval_envs}", f"{eval_worlds:,} evaluation worlds",
-         eval_worlds * world_bytes(scenario, shape)),
-    ]
-
-
 def env_world_bytes(spec: Any) -> int:
     """One world of train --env's vector env: a world declared in rules (`spec`, its WorldSpec) from the atoms
     its spec names, any other env (None) a small Python object."""
@@ -116,8 +81,8 @@ def env_world_bytes(spec: Any) -> int:
 
 
 def env_training_estimate(cfg: Any, shape: NetSpec, world_bytes: int) -> list[tuple[str, str, int]]:
-    """training_estimate's parts for `train --env`: one network of `shape`, its env's worlds of
-    `world_bytes` each (env_world_bytes)."""
+    """(flags with their values, what they size, estimated bytes) of each part of a training run that grows
+    with a setting: one network of `shape`, its env's worlds of `world_bytes` each (env_world_bytes)."""
     world = world_bytes + 2 * shape.inputs * FLOAT  # and its observation, current and next
     eval_worlds = min(cfg.eval_envs, cfg.eval_games)
     return [
@@ -138,15 +103,9 @@ def _gib(n: int) -> str:
     return f"{n / (1 << 30):,.1f} GiB" if n >= 1 << 30 else f"{n / (1 << 20):,.1f} MiB"
 
 
-def check_training_memory(cfg: Any, scenario: Any, limit: Limit) -> int:
-    """Refuse a training run whose estimate is over `limit`, naming the setting that takes the most;
-    returns the estimate."""
-    return check_estimate(training_estimate(cfg, scenario), limit)
-
-
 def check_estimate(parts: list[tuple[str, str, int]], limit: Limit) -> int:
-    """Refuse an estimate (training_estimate's or env_training_estimate's parts) over `limit`, naming the
-    setting that takes the most; returns the total."""
+    """Refuse an estimate (env_training_estimate's parts) over `limit`, naming the setting that takes the
+    most; returns the total."""
     total = sum(b for _, _, b in parts)
     if total > limit.bytes:
         flags, what, most = max(parts, key=lambda p: p[2])
