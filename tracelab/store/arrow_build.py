@@ -81,6 +81,8 @@ def strings(values: Sequence[str | None]) -> pa.StringArray:
 def coded_strings(codes: np.ndarray, names: Sequence[str]) -> pa.StringArray:
     """names[codes] as an Arrow string array, its bytes gathered by numpy (a Python string per row costs
     more; Arrow's dictionary_decode loads pyarrow.compute, which a writing process does without)."""
+    if len(names) == 1:  # a constant column (one agent, one output kind): its bytes repeated
+        return _repeated_string(names[0].encode(), len(codes))
     encoded = [n.encode() for n in names]
     name_len = np.array([len(b) for b in encoded], dtype=np.int64)
     name_start = np.cumsum(name_len) - name_len
@@ -93,6 +95,14 @@ def coded_strings(codes: np.ndarray, names: Sequence[str]) -> pa.StringArray:
     at = np.repeat(name_start[codes] - offsets[:-1], lengths) + np.arange(offsets[-1])
     return pa.Array.from_buffers(pa.string(), len(codes), [None, pa.py_buffer(offsets.astype(np.int32)),
                                                            pa.py_buffer(pool[at].tobytes())], null_count=0)
+
+
+def _repeated_string(value: bytes, n: int) -> pa.StringArray:
+    """`value` n times as an Arrow string array."""
+    if n * len(value) >= 2**31:
+        raise ValueError(f"string column too large for int32 offsets: {n * len(value)} bytes")
+    offsets = np.arange(n + 1, dtype=np.int32) * np.int32(len(value))
+    return pa.Array.from_buffers(pa.string(), n, [None, pa.py_buffer(offsets), pa.py_buffer(value * n)], null_count=0)
 
 
 def scalar(value: str) -> pa.Scalar:

@@ -83,14 +83,15 @@ def one_env_actor(policy: Any, env: Any = None) -> Callable[[Any, dict[str, Any]
     (a DeclaredEnv with a recorder) and a policy that can `decide`, its output is recorded as the step's
     decision."""
     record = env is not None and getattr(env.unwrapped, "records_decisions", False) and hasattr(policy, "decide")
+    decided = env.unwrapped.decided if record else None  # bound once: `unwrapped` walks the wrappers per call
 
     def act(obs: Any, info: dict[str, Any]) -> int:
         mask = info.get("action_mask")
         masks = None if mask is None else np.asarray(mask)[None]
-        if not record:
+        if decided is None:
             return int(np.asarray(policy.act(batch_of_one(obs), masks)).reshape(-1)[0])
         actions, output = policy.decide(batch_of_one(obs), masks)
-        env.unwrapped.decided(output, masks)
+        decided(output, masks)
         return int(np.asarray(actions).reshape(-1)[0])
     return act
 

@@ -151,11 +151,11 @@ opened by gym.make(id, trace_writer=...) reads as one `tracelab play` wrote.
         # the agent's half (decisions, reward terms); off: the world's alone (bench eval's baseline)
         self.agent_rows = world.keep_reward_terms = agent_rows
         self._agent_rows = AgentRows()
-        # decisions (episode, step, actions, the policy's output, masks) and reward terms (episode, step,
-        # [agent, term] quantities) of the steps kept, as tuples (a record per step costs more)
+        # the agent's half of each step kept, one tuple a step (a record, or a tuple per table, costs more):
+        # (episode, step, the reward terms' [agent, term] quantities, the actions, (the policy's output for
+        # every agent, masks) or None where the policy said nothing)
         self._decided: tuple[PolicyOutput, np.ndarray | None] | None = None
-        self._decisions: list[tuple[int, int, Any, PolicyOutput, np.ndarray | None]] = []  # per step, every agent
-        self._terms: list[tuple[int, int, np.ndarray]] = []
+        self._agent_steps: list[tuple[int, int, np.ndarray, Any, tuple[PolicyOutput, np.ndarray | None] | None]] = []
         self._setup = eng.take_trace()  # the build's rows (t = 0), replayed at every episode's start
         self.episode = -1
         self._episode_ids = episode_ids
@@ -213,11 +213,10 @@ opened by gym.make(id, trace_writer=...) reads as one `tracelab play` wrote.
             return
         self._length += 1
         t = self.world.engine.t - 1 - self._t0
-        if self.agent_rows:
-            self._terms.append((self.episode, self._length, self.world.last_reward_quantities))
-        if decided is not None and self.agent_rows:  # the output's rows are the agents' (split when written)
-            kept = actions if isinstance(actions, (int, np.integer)) else np.array(actions, np.int64)
-            self._decisions.append((self.episode, self._length, kept, *decided))
+        if self.agent_rows:  # the output's rows are the agents' (split when written)
+            self._agent_steps.append((self.episode, self._length, self.world.last_reward_quantities,
+                                      actions if isinstance(actions, (int, np.integer)) else np.array(actions, np.int64),
+                                      decided))
         if isinstance(actions, (int, np.integer)):  # one agent (kept short: the toy-text games' case)
             self._returns[0] += rewards[0]
             self._steps.append((self.episode, self._length, t, 0, rewards[0], int(actions), terminated, truncated))
@@ -277,24 +276,26 @@ opened by gym.make(id, trace_writer=...) reads as one `tracelab play` wrote.
 
     def _keep_agent_rows(self) -> None:
         """The kept decisions and reward terms as the store's records (agent_rows)."""
-        if self._terms:
-            episode, step, quantities = zip(*self._terms)
-            self._terms = []
-            q = np.asarray(quantities, np.float64)  # [steps, agents, terms]
-            k, m, n_terms = q.shape
-            per_step = m * n_terms
-            self._agent_rows.reward_terms(RewardTerms(
-                np.repeat(episode, per_step), np.repeat(step, per_step), np.tile(np.repeat(np.arange(m), n_terms), k),
-                self.agents, np.tile(np.arange(n_terms), k * m), self.world.spec.reward_terms,
-                (q * self.world.reward_term_values).reshape(-1), q.reshape(-1)))
-        if self._decisions:
-            episode, step, actions, outputs, masks = zip(*self._decisions)
-            self._decisions = []
-            m, k = len(self.agents), len(episode)
+        if not self._agent_steps:
+            return
+        episode, step, quantities, actions, decided = zip(*self._agent_steps)
+        self._agent_steps = []
+        # [steps, agents, terms], joined in one concatenate (np.asarray of a list of small arrays is ~3x slower)
+        q = np.concatenate(quantities).astype(np.float64, copy=False).reshape(len(quantities), *quantities[0].shape)
+        k, m, n_terms = q.shape
+        per_step = m * n_terms
+        self._agent_rows.reward_terms(RewardTerms(
+            np.repeat(episode, per_step), np.repeat(step, per_step), np.tile(np.repeat(np.arange(m), n_terms), k),
+            self.agents, np.tile(np.arange(n_terms), k * m), self.world.spec.reward_terms,
+            (q * self.world.reward_term_values).reshape(-1), q.reshape(-1)))
+        told = [i for i, d in enumerate(decided) if d is not None]  # the steps the policy's output was given for
+        if told:
+            outputs, masks = zip(*(decided[i] for i in told))
+            m, k = len(self.agents), len(told)
             self._agent_rows.decisions(Decisions(
-                np.repeat(episode, m), np.repeat(step, m), np.tile(np.arange(m), k), self.agents,
-                np.asarray(actions, np.int64).reshape(-1), PolicyOutput.concat(outputs),
-                None if masks[0] is None else np.asarray(masks).reshape(k * m, -1)))
+                np.repeat(np.take(episode, told), m), np.repeat(np.take(step, told), m), np.tile(np.arange(m), k),
+                self.agents, np.asarray([actions[i] for i in told], np.int64).reshape(-1),
+                PolicyOutput.concat(outputs), None if masks[0] is None else np.asarray(masks).reshape(k * m, -1)))
 
     def _take_rows(self) -> None:
         """The engine's rows, t counted from the episode's start and labelled with the episode (the

@@ -177,6 +177,7 @@ class DeclaredWorld:
         self.reward_term_values = np.concatenate([self._reads[3].reshape(n, -1), scales], axis=1)  # per occurrence
         self._term_is_table = np.arange(self._term_atoms.shape[1]) < self._reads[2].size // max(n, 1)
         self._terms_all_table = bool(self._term_is_table.all())
+        self._term_ones = np.ones(self._term_atoms.shape)
         # read_step's results: indices [agent * index parts], rewards [agent], ends, masks, a paused world
         self._out = (np.zeros(n * len(read_index), np.int64), np.zeros(n), np.zeros(2),
                      np.zeros(len(mask_ids), np.int8), np.zeros(1, np.int64))
@@ -413,8 +414,10 @@ class DeclaredWorld:
         """The engine step's reward terms' quantities [agent, term]: each [reward.table] entry's atom's truth,
         then each scaled atom's bound (so a term worth 0 shows it occurred); a step's cost, kept small (the
         values are these times reward_term_values, taken when read)."""
-        bounds = self.engine.lower[0, self._term_atoms]  # a table atom is true where its lower bound is 1
-        return bounds == 1.0 if self._terms_all_table else np.where(self._term_is_table, bounds == 1.0, bounds)
+        # world 0's bounds by flat take (a 2-D fancy index and a compare with a Python float cost ~4x more)
+        bounds = self.engine.lower.ravel().take(self._term_atoms)  # a table atom is true where its lower bound is 1
+        true = bounds == self._term_ones
+        return true if self._terms_all_table else np.where(self._term_is_table, true, bounds)
 
     def terminated(self) -> bool:
         return self._ends[0]
