@@ -8,8 +8,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from tracelab.engine.errors import ProgramError
-from tracelab.engine.program import CONSTANT_RE, PREDICATE_RE
-from tracelab.engine.program import satisfies as engine_satisfies
+from tracelab.engine.bounds import satisfies as engine_satisfies
+from tracelab.engine.spelling import CONSTANT_RE, PREDICATE_RE
 from tracelab.store.kind import run_config
 from tracelab.store.names import UnknownName, unknown_name_message
 from tracelab.store.reader import RunConnection
