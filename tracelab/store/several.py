@@ -3,7 +3,7 @@ runs, saved queries across runs (docs/store.md, "Several runs").
 
 Each run gets an in-memory catalog of its own, `run_N` (N its place in the list, from 1), holding its
 raw.<table> views and the store's views, built exactly as open_run builds them for one run
-(reader.create_live_raw_views / create_sealed_raw_views, schema.VIEWS_SQL). A DuckDB view binds the names
+(reader.create_live_raw_views / sealed_raw_views_sql, schema.VIEWS_SQL). A DuckDB view binds the names
 in its text in its own catalog, so run_2.main.changes reads run_2.raw.* and run_2.main.atoms. The
 connection's own views (changes, firings, ..., run, and raw.<table>) are the union of every run's, with a
 first column `run`: the run's name (run_names).
