@@ -4,7 +4,8 @@ The language and its semantics: docs/language.md.
 
 The files by stage (a program flows down; each boundary is a named type, as Soufflé names its stages):
 
-    language   parser.py -> program.py (the AST), errors.py, annotations.py, head_functions.py,
+    language   parser.py -> program.py (the AST), spelling.py and bounds.py (its names and bound test,
+               without its types), errors.py, annotations.py, head_functions.py,
                cause_kinds.py (what a trace row's cause_kind means)
     inputs     graph.py, graphml_scan.py, graphml_expat.py, graphml_raw.py, facttable.py, safe_files.py,
                vocabulary.py (nodes, labels and atoms as dense ids)

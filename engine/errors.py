@@ -2,7 +2,10 @@
 errors."""
 from __future__ import annotations
 
-from .program import SourceLoc
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # an annotation only: the store's readers import these errors without the program's types
+    from .program import SourceLoc
 
 
 class ProgramError(Exception):

@@ -2,9 +2,13 @@
 the compiled engine and the reference evaluator."""
 from __future__ import annotations
 
-import re
 from collections.abc import Collection
 from dataclasses import dataclass, field
+
+# the bound test and the spelling of names live in light modules (a reader of runs needs them alone);
+# the engine's modules import them from here too
+from .bounds import EPS, effective_bound, satisfies  # noqa: F401
+from .spelling import CONSTANT_RE, PREDICATE_RE  # noqa: F401
 
 UPDATE_MODES = ("intersection", "override")
 TIMESTEP_MODES = ("persistent", "reset")
@@ -16,9 +20,6 @@ EDGE_HEAD_MODES = ("any", "graph")  # `%edge_heads`: where a binary rule head ma
 MAX_TIME = 1_000_000_000
 MAX_BINDING_CLAUSES = 127
 
-CONSTANT_RE = re.compile(r"[a-z0-9][A-Za-z0-9_-]*")  # unquoted constants; anything else must be quoted
-# predicate names; annotation functions and GraphML attribute names that become predicates are written so
-PREDICATE_RE = re.compile(r"[a-z][A-Za-z0-9_]*")
 
 
 def constant_text(name: str) -> str:
@@ -237,23 +238,6 @@ def ordered_nodes(program: Program, graph_nodes: list[str] | tuple[str, ...] = (
 
 
 # Bounds come from text and from 1 - x (complements); a small tolerance keeps 1 - 0.9 inside [0.1, 1].
-EPS = 1e-9
-
-
-def effective_bound(lower: float, upper: float, negated: bool) -> tuple[float, float]:
-    """The interval a literal tests or sets on its atom: `~p:[l,u]` speaks of p as [1-u, 1-l]."""
-    return (1.0 - upper, 1.0 - lower) if negated else (lower, upper)
-
-
-def satisfies(atom_lower: float, atom_upper: float, lit: Literal, closed: bool = False) -> bool:
-    """I ⊨ lit iff the atom's interval (complemented for `~`) is contained in the literal's bound. On a
-    closed predicate (`%closed`) an atom that is [0,1] is read as [0,0]."""
-    if closed and atom_lower == 0.0 and atom_upper == 1.0:
-        atom_upper = 0.0
-    a, b = effective_bound(atom_lower, atom_upper, lit.negated)
-    return a >= lit.lower - EPS and b <= lit.upper + EPS
-
-
 def clause_binds(lit: Literal, closed: bool) -> bool:
     """Whether a body clause enumerates its variables: it does not hold of an atom nothing ever set
     ([0,1], read as [0,0] on a closed predicate), so each of its groundings needs a settable atom. A

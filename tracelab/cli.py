@@ -15,7 +15,6 @@ closed pipe (`tracelab trace ... | head`) ends quietly; anything else is a bug a
 from __future__ import annotations
 
 import argparse
-import difflib
 import os
 import sys
 
@@ -67,6 +66,7 @@ def _unknown_arguments(parser: argparse.ArgumentParser, command: str, unknown: l
     if flag is None:
         message = f"unexpected argument{'s' if len(unknown) > 1 else ''}: {' '.join(unknown)}"
     else:
+        import difflib  # deferred: only a mistyped flag needs it
         near = difflib.get_close_matches(flag, flags, n=3)
         message = f"unknown flag {flag}" + (f"; did you mean {', '.join(near)}?" if near else "")
     print(f"tracelab {command}: error: {message} (tracelab {command} --help lists them)", file=sys.stderr)

@@ -6,7 +6,6 @@ imports nothing heavy: the error classes of the engine, the scenarios and DuckDB
 their modules were imported, since an error of a module never imported cannot have been raised."""
 from __future__ import annotations
 
-import difflib
 import re
 import sys
 from collections.abc import Iterable, Iterator
@@ -27,6 +26,7 @@ def close_names(name: str, known: Iterable[str], n: int = 5) -> list[str]:
     if len(name) > SUGGESTION_LENGTH:
         return []
     candidates = [k for _, k in zip(range(SUGGESTION_CANDIDATES), known) if len(k) <= SUGGESTION_LENGTH]
+    import difflib  # deferred: only a mistyped name needs it (every command imports this module)
     return difflib.get_close_matches(name, candidates, n=n)
 
 

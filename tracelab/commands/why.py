@@ -10,10 +10,9 @@ from typing import TYPE_CHECKING, Any
 
 from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.errors import UserError, store_errors
-from tracelab.store.agent_why import explain_action, render_action
 from tracelab.store.coordinates import run_grid
 from tracelab.store.reader import open_run, retrying
-from tracelab.store.why import explain, explain_change, render_why
+from tracelab.store.why import episode_at, explain_change_in, explain_in, render_why
 
 if TYPE_CHECKING:
     import duckdb
@@ -42,13 +41,6 @@ def refuse_complement(atom: str) -> None:
                         f"(the bound of {atom.strip()} is [1-u,1-l] where [l,u] is the bound of {plain})")
 
 
-def passes_changed(con: "duckdb.DuckDBPyConnection", episode: int, atom: str, t: int) -> list[tuple[int, int]]:
-    """(pass, seq) of each change of `atom` at step t, in order."""
-    rows = con.execute("SELECT pass_no, seq FROM changes WHERE episode = $e AND t = $t AND atom = $a ORDER BY seq",
-                       {"e": episode, "t": t, "a": atom}).fetchall()
-    return [(int(p), int(q)) for p, q in rows]
-
-
 def change_in_pass(changes: list[tuple[int, int]], atom: str, t: int, pass_no: int) -> int:
     """The seq of the atom's last change in `pass_no` of step t, or a UserError naming the passes it has."""
     seqs = [seq for p, seq in changes if p == pass_no]
@@ -65,6 +57,7 @@ def action_explanation(args: argparse.Namespace) -> Any:
     """The decision of --action AGENT at --at (required) of --episode, read from the run."""
     if args.at is None:
         raise UserError("--action needs --at STEP: the step whose action to explain")
+    from tracelab.store.agent_why import explain_action  # deferred: why of an atom does not read decisions
     with store_errors(), ctrl_c_stops_queries():
         con = open_run(args.run)
         try:
@@ -75,6 +68,7 @@ def action_explanation(args: argparse.Namespace) -> Any:
 
 def run_action(args: argparse.Namespace) -> int:
     e = action_explanation(args)
+    from tracelab.store.agent_why import render_action
     print(json.dumps(e.to_dict(), indent=1) if args.json else render_action(e, shlex.quote(str(args.run))))
     return 0
 
@@ -92,15 +86,15 @@ def run(args: argparse.Namespace) -> int:
         end = last_t(con, args.episode)
         check_at(args.at, args.episode, end)
         at = end if args.at is None else args.at
-        atom = args.atom.replace(" ", "")
-        changes = retrying(lambda: passes_changed(con, args.episode, atom, at))
+        # one read of the run's vocabulary and of the episode's rows up to `at`, for the tree and the note
+        model, trace = retrying(lambda: episode_at(con, args.episode, at))
+        aid = model.parse_atom(args.atom)  # an atom outside the run's vocabulary: its error first
+        changes = trace.changes_at(aid, at)
         if args.pass_no is not None:
-            if not changes:  # an atom outside the run's vocabulary gets explain's own error first
-                retrying(lambda: explain(con, args.episode, args.atom, at, depth=1))
             seq = change_in_pass(changes, args.atom, at, args.pass_no)
-            tree = retrying(lambda: explain_change(con, args.episode, seq, depth=args.depth))
+            tree = retrying(lambda: explain_change_in(model, trace, seq, depth=args.depth))
         else:
-            tree = retrying(lambda: explain(con, args.episode, args.atom, at, depth=args.depth))
+            tree = retrying(lambda: explain_in(model, trace, aid, at, depth=args.depth))
             if len(changes) > 1:  # the end-of-step bound hides the earlier changes: say how to see them
                 earlier = sorted({p for p, _ in changes[:-1]})
                 print(f"note: {args.atom} changed {len(changes)} times at t={at} (passes "

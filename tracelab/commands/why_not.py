@@ -7,7 +7,6 @@ import json
 from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.commands.why import action_explanation, check_at, last_t
 from tracelab.errors import UserError, store_errors
-from tracelab.store.agent_why import render_why_not_action, why_not_action
 from tracelab.store.reader import open_run, retrying
 from tracelab.store.why import parse_bindings, render_why_not, why_not
 
@@ -43,6 +42,7 @@ def run_action(args: argparse.Namespace) -> int:
         args.agent = agents[0]
     args.action = args.agent
     e = action_explanation(args)
+    from tracelab.store.agent_why import render_why_not_action, why_not_action  # deferred: --action only
     with store_errors():
         result = why_not_action(e, name)
     print(json.dumps(result.to_dict(), indent=1) if args.json else render_why_not_action(result))

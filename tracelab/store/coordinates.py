@@ -65,11 +65,10 @@ def grid_from_config(config: dict[str, Any]) -> Grid | None:
     declared = config.get(GRID_KEY)
     if isinstance(declared, dict):
         return _checked(declared.get("width"), declared.get("height"))
-    import tomllib  # deferred: only runs written before the declaration need it
-
     for key in _SCENARIO_KEYS:   # game runs written before the declaration
         text = config.get(key)
-        if isinstance(text, str):
+        if isinstance(text, str) and "=" in text:  # TOML declaring a size has a `key = value` (a name has none)
+            import tomllib  # deferred: only runs written before the declaration need it
             try:  # `scenario` is the TOML in older runs, a name (the TOML is then in scenario_toml) in newer
                 scenario = tomllib.loads(text)
             except tomllib.TOMLDecodeError:

@@ -76,6 +76,13 @@ class EpisodeTrace:
         k = bisect_right(rows, t, key=self.c["t"].__getitem__) - 1
         return self.row(int(rows[k])) if k >= 0 else None
 
+    def changes_at(self, atom: int, t: int) -> list[tuple[int, int]]:
+        """(pass, seq) of each change of `atom` at timestep t, in order."""
+        rows, at_t = self._rows_of(atom), self.c["t"].__getitem__
+        lo = bisect_left(rows, t, key=at_t)
+        return [(int(self.c["pass_no"][i]), int(self.c["seq"][i]))
+                for i in rows[lo:bisect_right(rows, t, lo=lo, key=at_t)]]
+
     def last_before(self, atom: int, index: int) -> Row | None:
         """The change in force just before row `index` of this episode."""
         rows = self._rows_of(atom)
@@ -105,9 +112,9 @@ def _read_columns(con: RunConnection, episode: int, upto_t: int | None) -> dict[
     if upto_t is not None:
         where += " AND t <= ?"
         params.append(upto_t)
-    (n,) = con.execute(f"SELECT count(*) FROM raw.changes {where}", params).fetchall()[0]
-    result = con.execute(f"SELECT {', '.join(_COLUMNS)} FROM raw.changes {where} ORDER BY seq", params)
-    if n > PYTHON_ROWS:
-        return dict(result.fetchnumpy())  # DuckDB imports numpy for it
-    rows = result.fetchall()
+    select = f"SELECT {', '.join(_COLUMNS)} FROM raw.changes {where} ORDER BY seq"
+    # one statement for an episode of Python lists; a bigger one is read again, as numpy arrays
+    rows = con.execute(f"{select} LIMIT {PYTHON_ROWS + 1}", params).fetchall()
+    if len(rows) > PYTHON_ROWS:
+        return dict(con.execute(select, params).fetchnumpy())  # DuckDB imports numpy for it
     return {k: list(column) for k, column in zip(_COLUMNS, zip(*rows))} if rows else {k: [] for k in _COLUMNS}

@@ -5,10 +5,12 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable
 from dataclasses import dataclass, field
+from typing import Any
 
 from tracelab.engine.errors import ProgramError
-from tracelab.engine.program import CONSTANT_RE, PREDICATE_RE
-from tracelab.engine.program import satisfies as engine_satisfies
+from tracelab.engine.bounds import satisfies as engine_satisfies
+from tracelab.engine.spelling import CONSTANT_RE, PREDICATE_RE
+from tracelab.store.kind import run_config
 from tracelab.store.names import UnknownName, unknown_name_message
 from tracelab.store.reader import RunConnection
 
@@ -64,6 +66,25 @@ def satisfies(bound: tuple[float, float], clause: Clause) -> bool:
     return engine_satisfies(bound[0], bound[1], clause, clause.closed)  # type: ignore[arg-type]
 
 
+def external_causes(config: dict[str, Any]) -> dict[str, str]:
+    """What set each predicate of a declared world's external facts, from its run's config
+    (tracelab.envs.declared.recording.declared_facts): `action`, `draw:NAME`, `env` (computed each step);
+    {} for a run that does not say (every external fact then reads `action`)."""
+    declared = config.get("declared_facts")
+    if not isinstance(declared, dict):
+        return {}
+    names: dict[str, str] = {}
+    for pred in declared.get("computed") or ():
+        names[str(pred)] = "env"
+    draws = declared.get("draws")
+    for draw, preds in (draws.items() if isinstance(draws, dict) else ()):
+        for pred in preds if isinstance(preds, list) else ():
+            names[str(pred)] = f"draw:{draw}"
+    for pred in declared.get("actions") or ():
+        names[str(pred)] = "action"
+    return names
+
+
 class RunModel:
     def __init__(self, con: RunConnection) -> None:
         self.con = con
@@ -80,17 +101,62 @@ class RunModel:
             self.rules.append(RuleInfo(rid, name, delay, immediate, tuple(variables or ()), text,
                                        head=cl[0], body=cl[1:]))
         self.rule_by_name = {r.name: r for r in self.rules}
-        self.facts = {f: (n, t) for f, n, t in con.execute("SELECT fact, name, literal FROM raw.facts").fetchall()}
-        self.policies = dict(con.execute("SELECT code, name FROM raw.policies").fetchall())
-        self.nodes = [n for (n,) in con.execute("SELECT name FROM raw.nodes ORDER BY node").fetchall()]
-        self.node_ids = {n: i for i, n in enumerate(self.nodes)}
-        self.labels = {name: (lid, arity) for lid, name, arity in
-                       con.execute("SELECT label, name, arity FROM raw.labels").fetchall()}
+        self._facts: dict[int, tuple[str, str]] | None = None   # read on first use: few explanations name one
+        self._policies: dict[int, str] | None = None
+        self._external: dict[str, str] | None = None
+        # nodes, labels and atoms: read together on first use (_read_atoms), so that every atom's nodes and
+        # label are among those read (a live run's vocabulary grows)
+        self._nodes: list[str] = []
+        self._node_ids: dict[str, int] = {}
+        self._labels: dict[str, tuple[int, int]] = {}
+        self._vocabulary_read = False
         self._atom_text: dict[int, str] = {}
         self._atom_keys: list[tuple[int, int, int] | None] = []  # per atom id: (label, arg0, arg1 or -1)
         self._label_names: dict[int, str] = {}
         self._atom_ids: dict[tuple[int, int, int], int] = {}
         self._groundings: dict[int, tuple[int, list[int], list[int]]] = {}
+
+    @property
+    def facts(self) -> dict[int, tuple[str, str]]:
+        """{fact id: (name, literal)}."""
+        if self._facts is None:
+            self._facts = {f: (n, t) for f, n, t in
+                           self.con.execute("SELECT fact, name, literal FROM raw.facts").fetchall()}
+        return self._facts
+
+    @property
+    def policies(self) -> dict[int, str]:
+        """{policy code: name}."""
+        if self._policies is None:
+            self._policies = dict(self.con.execute("SELECT code, name FROM raw.policies").fetchall())
+        return self._policies
+
+    @property
+    def external(self) -> dict[str, str]:
+        """external_causes of the run's config, read when a row set by an action is first named."""
+        if self._external is None:
+            self._external = external_causes(run_config(self.con))
+        return self._external
+
+    @property
+    def nodes(self) -> list[str]:
+        """Node names by node id."""
+        if not self._vocabulary_read:
+            self._read_atoms()
+        return self._nodes
+
+    @property
+    def node_ids(self) -> dict[str, int]:
+        if not self._vocabulary_read:
+            self._read_atoms()
+        return self._node_ids
+
+    @property
+    def labels(self) -> dict[str, tuple[int, int]]:
+        """{label name: (label id, arity)}."""
+        if not self._vocabulary_read:
+            self._read_atoms()
+        return self._labels
 
     # ---- rules -----------------------------------------------------------------------------------------
     def rule(self, name: str) -> RuleInfo:
@@ -165,11 +231,12 @@ class RunModel:
         for atom, label, arg0, arg1 in rows:
             keys[atom] = (label, arg0, -1 if arg1 is None else arg1)
         self._atom_keys = keys
-        self.nodes = [n for (n,) in self.con.execute("SELECT name FROM raw.nodes ORDER BY node").fetchall()]
-        self.node_ids = {n: i for i, n in enumerate(self.nodes)}
-        self.labels = {name: (lid, arity) for lid, name, arity in
-                       self.con.execute("SELECT label, name, arity FROM raw.labels").fetchall()}
-        self._label_names = {lid: name for name, (lid, _) in self.labels.items()}
+        self._vocabulary_read = True
+        self._nodes = [n for (n,) in self.con.execute("SELECT name FROM raw.nodes ORDER BY node").fetchall()]
+        self._node_ids = {n: i for i, n in enumerate(self._nodes)}
+        self._labels = {name: (lid, arity) for lid, name, arity in
+                        self.con.execute("SELECT label, name, arity FROM raw.labels").fetchall()}
+        self._label_names = {lid: name for name, (lid, _) in self._labels.items()}
         self._atom_ids = {key: a for a, key in enumerate(keys) if key is not None}
 
     def atom_text(self, aid: int) -> str:

@@ -5,7 +5,6 @@ Every command and viewer that takes a name from the user (trace's filters, why, 
 trace filters) checks it here, so a typo reads the same everywhere instead of an empty table."""
 from __future__ import annotations
 
-import difflib
 import re
 from collections.abc import Sequence
 from typing import Any
@@ -84,6 +83,7 @@ def check_atom(con: Any, pattern: str) -> None:
     same_label = " WHERE label = ?" if m and not _GLOB.search(label) else ""
     candidates = [n for n, _ in con.execute(f"{_ATOMS_SQL}{same_label} LIMIT {MAX_CANDIDATES}",
                                             [label] if same_label else []).fetchall()]
+    import difflib  # deferred: only a name that matches nothing needs it
     near = difflib.get_close_matches(pattern.replace(" ", ""), candidates, n=5)
     labels = names_of(con, "label")
     example = label if same_label else pattern.strip() if pattern.strip() in labels else (labels or ["label"])[0]

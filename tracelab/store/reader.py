@@ -397,12 +397,17 @@ def _refuse_links(parts: Path) -> None:
             check_regular(entry, follow_symlinks=False)  # FileRefused naming what it is
 
 
-def _check_run_row(con: duckdb.DuckDBPyConnection, sealed: Path, raw: str = "raw") -> None:
-    """raw.run is the run's one metadata row: every reader of the run takes it for granted."""
-    (rows,) = con.execute(f"SELECT count(*) FROM {raw}.run").fetchone()
-    if rows != 1:
-        raise ValueError(f"{sealed}: raw.run holds {rows} rows, not the run's one metadata row: not a "
-                         "tracelab run, or a damaged one")
+def check_run_rows(con: duckdb.DuckDBPyConnection, runs: Sequence[tuple[Path, str]]) -> None:
+    """Each run's raw.run (`runs`: (its file, the schema of its raw views)) is its one metadata row:
+    every reader of a run takes it for granted. One statement for them all."""
+    if not runs:
+        return
+    (counts,) = con.execute("SELECT [" + ", ".join(f"(SELECT count(*) FROM {raw}.run)" for _, raw in runs)
+                            + "]").fetchone()
+    for (sealed, _), rows in zip(runs, counts):
+        if rows != 1:
+            raise ValueError(f"{sealed}: raw.run holds {rows} rows, not the run's one metadata row: not a "
+                             "tracelab run, or a damaged one")
 
 
 def _attach_sealed(con: duckdb.DuckDBPyConnection, sealed: Path) -> SealedRunConnection:
@@ -414,7 +419,7 @@ def _attach_sealed(con: duckdb.DuckDBPyConnection, sealed: Path) -> SealedRunCon
     con.execute("CREATE SCHEMA raw")
     result = SealedRunConnection(con, "store", check_sealed_catalog(con, "store", sealed, identity=identity))
     result.make_views(["raw.run"])
-    _check_run_row(con, sealed)
+    check_run_rows(con, [(sealed, "raw")])
     return result
 
 
@@ -432,17 +437,17 @@ def attach_sealed_file(con: duckdb.DuckDBPyConnection, sealed: Path, database: s
     return after if same_file(before, after) else None
 
 
-def create_sealed_raw_views(con: duckdb.DuckDBPyConnection, sealed: Path, database: str, raw: str,
-                            catalog: SealedCatalog | None = None,
-                            tables: Sequence[str] = tuple(STORED_COLUMNS),
-                            identity: os.stat_result | None = None) -> None:
+def sealed_raw_views_sql(con: duckdb.DuckDBPyConnection, sealed: Path, database: str, raw: str,
+                         catalog: SealedCatalog | None = None,
+                         tables: Sequence[str] = tuple(STORED_COLUMNS),
+                         identity: os.stat_result | None = None) -> str:
     """Check the attached file's whole catalog (nothing of it is read before; `catalog`: its entries read
     with other files', sealed_catalog.read_sealed_catalogs; `identity`: attach_sealed_file's), then the
-    views `raw`.<table> over its stored tables (with the added columns and tables an older run lacks),
-    all in one statement (`tables`: those only; raw.run always), and check raw.run."""
+    statements that make the views `raw`.<table> over its stored tables (with the added columns and
+    tables an older run lacks; `tables`: those only; raw.run always). The caller runs them, several
+    runs' in one go, then checks raw.run (check_run_rows)."""
     columns = check_sealed_catalog(con, database, sealed, catalog, identity)
-    con.execute(";\n".join(_sealed_raw_view_sql(t, columns, database, raw) for t in dict.fromkeys([*tables, "run"])))
-    _check_run_row(con, sealed, raw)
+    return ";\n".join(_sealed_raw_view_sql(t, columns, database, raw) for t in dict.fromkeys([*tables, "run"]))
 
 
 def _sealed_raw_view_sql(table: str, columns: dict[str, set[str]], database: str, raw: str) -> str:

@@ -3,7 +3,7 @@ runs, saved queries across runs (docs/store.md, "Several runs").
 
 Each run gets an in-memory catalog of its own, `run_N` (N its place in the list, from 1), holding its
 raw.<table> views and the store's views, built exactly as open_run builds them for one run
-(reader.create_live_raw_views / create_sealed_raw_views, schema.VIEWS_SQL). A DuckDB view binds the names
+(reader.create_live_raw_views / sealed_raw_views_sql, schema.VIEWS_SQL). A DuckDB view binds the names
 in its text in its own catalog, so run_2.main.changes reads run_2.raw.* and run_2.main.atoms. The
 connection's own views (changes, firings, ..., run, and raw.<table>) are the union of every run's, with a
 first column `run`: the run's name (run_names).
@@ -34,11 +34,12 @@ from tracelab.store.reader import (
     _sql_str,
     attach_sealed_file,
     check_live_run,
+    check_run_rows,
     create_live_raw_views,
-    create_sealed_raw_views,
     query_readonly,
     resolve_run,
     sealed_file_of_run,
+    sealed_raw_views_sql,
 )
 from tracelab.store.sandbox import lock_configuration, lock_down, refusal, sandbox_connection
 from tracelab.store.schema import STORED_COLUMNS, TABLES, VIEW_NAMES, VIEWS_SQL
@@ -136,9 +137,10 @@ def _build(runs: Sequence[Path], union_views: bool = True, raw_tables: Sequence[
     try:
         sealed = [sealed_file_of_run(p) for p in runs]
         allowed, identities = [], {}
+        # each run's own catalog for its views, all in one statement
+        con.execute(";\n".join(f"ATTACH ':memory:' AS {catalog_of(i)}; CREATE SCHEMA {catalog_of(i)}.raw"
+                                for i in range(len(runs))))
         for i, (p, s) in enumerate(zip(runs, sealed)):
-            con.execute(f"ATTACH ':memory:' AS {catalog_of(i)}")
-            con.execute(f"CREATE SCHEMA {catalog_of(i)}.raw")
             if s is not None:
                 identities[f"store_{i + 1}"] = attach_sealed_file(con, s, f"store_{i + 1}")
             else:
@@ -148,12 +150,15 @@ def _build(runs: Sequence[Path], union_views: bool = True, raw_tables: Sequence[
         catalogs = read_sealed_catalogs(con, list(identities),
                                         [d for d, identity in identities.items() if entries_checked(identity)])
         live = []
+        sealed_views = [sealed_raw_views_sql(con, s, f"store_{i + 1}", f"{catalog_of(i)}.raw",
+                                             catalogs[f"store_{i + 1}"], raw_tables, identities[f"store_{i + 1}"])
+                        for i, s in enumerate(sealed) if s is not None]
+        if sealed_views:  # every sealed run's views in one statement, their raw.run rows checked in one
+            con.execute(";\n".join(sealed_views))
+            check_run_rows(con, [(s, f"{catalog_of(i)}.raw") for i, s in enumerate(sealed) if s is not None])
         for i, (p, s) in enumerate(zip(runs, sealed)):
             raw = f"{catalog_of(i)}.raw"
-            if s is not None:
-                create_sealed_raw_views(con, s, f"store_{i + 1}", raw, catalogs[f"store_{i + 1}"], raw_tables,
-                                        identities[f"store_{i + 1}"])
-            else:
+            if s is None:
                 parts = LiveParts(con, p.resolve(), raw, prefix=f"{i + 1}_")
                 parts.update(ready=False)
                 create_live_raw_views(con, p.resolve(), raw, prefix=f"{i + 1}_",

@@ -18,7 +18,6 @@ from typing import Any
 
 from tracelab.store.coordinates import Grid
 from tracelab.store.episode import EpisodeTrace, Row
-from tracelab.store.kind import run_config
 from tracelab.store.model import Clause, RuleInfo, RunModel, satisfies
 from tracelab.store.reader import RunConnection
 from tracelab.store.schema import CAUSE_NAMES
@@ -72,30 +71,11 @@ class WhyNode:
         return asdict(self)
 
 
-def external_causes(config: dict[str, Any]) -> dict[str, str]:
-    """What set each predicate of a declared world's external facts, from its run's config
-    (tracelab.envs.declared.recording.declared_facts): `action`, `draw:NAME`, `env` (computed each step);
-    {} for a run that does not say (every external fact then reads `action`)."""
-    declared = config.get("declared_facts")
-    if not isinstance(declared, dict):
-        return {}
-    names: dict[str, str] = {}
-    for pred in declared.get("computed") or ():
-        names[str(pred)] = "env"
-    draws = declared.get("draws")
-    for draw, preds in (draws.items() if isinstance(draws, dict) else ()):
-        for pred in preds if isinstance(preds, list) else ():
-            names[str(pred)] = f"draw:{draw}"
-    for pred in declared.get("actions") or ():
-        names[str(pred)] = "action"
-    return names
-
-
-def set_by(model: RunModel, external: dict[str, str], row: Row) -> str:
+def set_by(model: RunModel, row: Row) -> str:
     """The name of what set `row` (its rule, fact:NAME, ...); an external fact of a declared world by
     what set its predicate (external_causes), `start` for the start facts no action, draw or computation sets."""
-    if row.cause_kind == 1 and external:
-        return external.get(model.atom_text(row.atom).split("(", 1)[0], "start")
+    if row.cause_kind == 1 and model.external:
+        return model.external.get(model.atom_text(row.atom).split("(", 1)[0], "start")
     return model.cause_name(row.cause_kind, row.cause_id)
 
 
@@ -103,8 +83,6 @@ class _Explainer:
     def __init__(self, model: RunModel, trace: EpisodeTrace) -> None:
         self.m = model
         self.tr = trace
-        # a declared world's external facts: actions, draws, computed ones, and its start facts (the rest)
-        self.external = external_causes(run_config(model.con))
         self.immediate = {r.rule for r in model.rules if r.immediate}
         self.seen: set[int] = set()
 
@@ -133,8 +111,11 @@ class _Explainer:
         _, body_atoms, _ = self.m.grounding(row.grounding)
         self.m.atom_texts(body_atoms)
         binding = n.cause.bindings
-        for clause_i, aid in zip(rule.body, body_atoms):
-            n.children.append(self.node(aid, self._read(rule, row, aid), depth - 1, clause_i, binding))
+        reads = [self._read(rule, row, aid) for aid in body_atoms]
+        # the children's groundings in one query, not one each
+        self.m.prefetch_groundings(r.grounding for r in reads if r is not None and r.cause_kind in (2, 3))
+        for clause_i, aid, read in zip(rule.body, body_atoms, reads):
+            n.children.append(self.node(aid, read, depth - 1, clause_i, binding))
         return n
 
     def _rule_of(self, row: Row) -> RuleInfo | None:
@@ -151,7 +132,7 @@ class _Explainer:
 
     def _cause(self, row: Row) -> Cause:
         kind = CAUSE_NAMES.get(row.cause_kind, str(row.cause_kind))
-        c = Cause(kind, set_by(self.m, self.external, row), grounding=row.grounding)
+        c = Cause(kind, set_by(self.m, row), grounding=row.grounding)
         if row.cause_kind == 0:
             c.text = self.m.facts.get(row.cause_id, ("", ""))[1]
         rule = self._rule_of(row)
@@ -177,13 +158,18 @@ def _check_episode(con: RunConnection, episode: int, trace: EpisodeTrace) -> Non
                        f"(episodes with rows: {known if known else 'none'})")
 
 
-def explain(con: RunConnection, episode: int, atom: str | int, at: int,
-            depth: int = 6) -> WhyNode:
-    """Why `atom` (text or id) had its bound at the end of timestep `at` in `episode`."""
+def episode_at(con: RunConnection, episode: int, at: int) -> tuple[RunModel, EpisodeTrace]:
+    """The run's model and the episode's rows up to the end of timestep `at`: what explaining reads."""
     model = RunModel(con)
     trace = EpisodeTrace(con, episode, upto_t=at)
     _check_episode(con, episode, trace)
-    return explain_in(model, trace, atom, at, depth)
+    return model, trace
+
+
+def explain(con: RunConnection, episode: int, atom: str | int, at: int,
+            depth: int = 6) -> WhyNode:
+    """Why `atom` (text or id) had its bound at the end of timestep `at` in `episode`."""
+    return explain_in(*episode_at(con, episode, at), atom, at, depth)
 
 
 def explain_in(model: RunModel, trace: EpisodeTrace, atom: str | int, at: int, depth: int = 6) -> WhyNode:
@@ -201,10 +187,14 @@ def explain_change(con: RunConnection, episode: int, seq: int, depth: int = 6) -
                         {"e": episode, "s": seq}).fetchone()
     if found is None:
         raise KeyError(f"episode {episode} has no change row with seq {seq}")
-    model = RunModel(con)
-    trace = EpisodeTrace(con, episode, upto_t=int(found[0]))
+    return explain_change_in(RunModel(con), EpisodeTrace(con, episode, upto_t=int(found[0])), seq, depth)
+
+
+def explain_change_in(model: RunModel, trace: EpisodeTrace, seq: int, depth: int = 6) -> WhyNode:
+    """`explain_change` on a model and an episode trace already loaded that hold the row `seq`."""
     index = trace.index_of_seq(seq)
-    assert index is not None, "the row read above is in the episode's rows up to its t"
+    if index is None:
+        raise KeyError(f"episode {trace.episode} has no change row with seq {seq} in the rows read")
     row = trace.row(index)
     return _Explainer(model, trace).node(row.atom, row, depth)
 
@@ -354,7 +344,6 @@ class _Search:
     def __init__(self, model: RunModel, trace: EpisodeTrace, rule: RuleInfo, reads_at: int,
                  budget: int) -> None:
         self.m, self.tr, self.rule, self.at, self.budget = model, trace, rule, reads_at, budget
-        self.external = external_causes(run_config(model.con))
         self.best: list[ClauseCheck] = []
         self.best_binding: dict[str, str] = {}
 
@@ -364,7 +353,7 @@ class _Search:
         value = EpisodeTrace.bound(row)
         return ClauseCheck(pos, clause.ground_text(binding), atom, list(value), satisfies(value, clause),
                            set_at=None if row is None else row.t,
-                           set_by=None if row is None else set_by(self.m, self.external, row),
+                           set_by=None if row is None else set_by(self.m, row),
                            closed=clause.closed)
 
     def run(self, binding: dict[str, str]) -> tuple[list[ClauseCheck], bool, dict[str, str]]:
