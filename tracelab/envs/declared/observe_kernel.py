@@ -42,6 +42,8 @@ class ObservationProgram:
         # its rows are skipped and read() copies the earlier agent's numbers (20v20: 1 read of 20)
         self.copies: list[tuple[int, int]] = []
         seen: dict[tuple, int] = {}
+        # parts that read the same atoms (GridWar's x and y of an agent: its cell) share their truth columns
+        placed: dict[bytes, int] = {}
         n_atoms = n_values = 0
         for agent in range(len(spec.agents)):
             key = tuple((k, part_ids[k][agent].tobytes()) for k, part in enumerate(spec.parts)
@@ -58,9 +60,12 @@ class ObservationProgram:
                     missing.extend([np.nan] * part.width)
                     continue
                 ids = part_ids[k][agent]
-                atoms.append(ids)
+                at = placed.setdefault(ids.tobytes(), n_atoms)
+                if at == n_atoms:
+                    atoms.append(ids)
+                    n_atoms += len(ids)
                 if kind == TRUTH:
-                    rows.extend((TRUTH, n_atoms + j, n_atoms + j + 1, -1, 0, 0) for j in range(len(ids)))
+                    rows.extend((TRUTH, at + j, at + j + 1, -1, 0, 0) for j in range(len(ids)))
                     missing.extend([np.nan] * len(ids))
                 else:
                     first = -1
@@ -68,9 +73,8 @@ class ObservationProgram:
                         first = n_values
                         values.append(part.value_array)
                         n_values += len(part.value_array)
-                    rows.append((kind, n_atoms, n_atoms + len(ids), first, part.n_things, part.board_width))
+                    rows.append((kind, at, at + len(ids), first, part.n_things, part.board_width))
                     missing.append(np.nan if part.missing is None else part.missing)
-                n_atoms += len(ids)
         self.width = len(rows) // max(len(spec.agents), 1)  # numbers per agent
         self.atoms = np.concatenate(atoms).astype(np.int64)  # the truth table's columns
         self.table = np.array(rows, np.int64).reshape(-1, 6)
@@ -103,8 +107,10 @@ def observe(truth, table, missing, values, copies, obs):  # noqa: ANN001, ANN201
 
 @njit(cache=True)
 def _observe_rows(truth, table, missing, values, obs):  # noqa: ANN001, ANN201
-    """observe()'s numbers of every row of `table`."""
+    """observe()'s numbers of every row of `table` (an index part over the same columns as the index part
+    before it, as GridWar's y after its x, takes that part's position)."""
     for w in range(truth.shape[0]):
+        last_lo, last_hi, last_i = -1, -1, -1
         for c in range(table.shape[0]):
             kind, lo, hi, first, things, width = table[c, 0], table[c, 1], table[c, 2], table[c, 3], \
                 table[c, 4], table[c, 5]
@@ -121,7 +127,8 @@ def _observe_rows(truth, table, missing, values, obs):  # noqa: ANN001, ANN201
                 obs[w, c] = n
                 continue
             if kind == INDEX:
-                i = _first_true(truth, w, lo, hi)
+                i = last_i if lo == last_lo and hi == last_hi else _first_true(truth, w, lo, hi)
+                last_lo, last_hi, last_i = lo, hi, i
             else:
                 cells = (hi - lo) // (1 + things)
                 i = -1
