@@ -11,11 +11,12 @@ Tables (int64 unless said): `act_ptr`/`act_atoms`/`act_bnd` (float64 [n, 2]): ea
 row's facts (row agent * n_actions + action);
 `val_ptr`/`val_atoms`/`val_bnd`: each value's facts, draws' values numbered one after another
 (`draw_base[d]` is draw d's value 0); `prev`/`prev_n`: the step facts set by the last engine step;
-`now`/`now_bnd`: scratch for this step's."""
+`now`/`now_bnd`: scratch for this step's. `batch`: a batch's own arrays (vector_fused.py: the step's draws and the
+observation), an empty tuple for one world."""
 from __future__ import annotations
 
 import inspect
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numba import njit
@@ -24,6 +25,7 @@ from numba.experimental import structref
 from numba.extending import overload
 
 from tracelab.engine import kernel as K
+from tracelab.engine.direct_call import DirectCall
 from tracelab.engine.numba_cache import stamp_with_sources
 from tracelab.engine.kernel import StepState
 
@@ -31,7 +33,7 @@ if TYPE_CHECKING:
     from tracelab.engine import Engine
 
 STATUS_OK = K.STATUS_OK
-FIELDS = ("state", "tables", "ext", "reads", "out")
+FIELDS = ("state", "tables", "ext", "reads", "out", "batch")
 
 
 @structref.register
@@ -47,33 +49,34 @@ class DeclaredBuffers(structref.StructRefProxy):
 structref.define_boxing(DeclaredBuffersType, DeclaredBuffers)
 
 
-def _new_buffers(state, tables, ext, reads, out):  # noqa: ANN001
+def _new_buffers(state, tables, ext, reads, out, batch):  # noqa: ANN001
     raise NotImplementedError("compiled code only")
 
 
 @overload(_new_buffers)
-def _new_buffers_impl(state, tables, ext, reads, out):  # noqa: ANN001
-    typ = DeclaredBuffersType(list(zip(FIELDS, (state, tables, ext, reads, out))))
+def _new_buffers_impl(state, tables, ext, reads, out, batch):  # noqa: ANN001
+    typ = DeclaredBuffersType(list(zip(FIELDS, (state, tables, ext, reads, out, batch))))
 
-    def impl(state, tables, ext, reads, out):  # noqa: ANN001
+    def impl(state, tables, ext, reads, out, batch):  # noqa: ANN001
         b = structref.new(typ)
         b.state = state
         b.tables = tables
         b.ext = ext
         b.reads = reads
         b.out = out
+        b.batch = batch
         return b
     return impl
 
 
 @njit(cache=True)
-def _make_buffers(state, tables, ext, reads, out):  # noqa: ANN001
-    return _new_buffers(state, tables, ext, reads, out)
+def _make_buffers(state, tables, ext, reads, out, batch):  # noqa: ANN001
+    return _new_buffers(state, tables, ext, reads, out, batch)
 
 
-def bind(state: StepState, tables: tuple, ext: tuple, reads: tuple, out: tuple) -> DeclaredBuffers:
+def bind(state: StepState, tables: tuple, ext: tuple, reads: tuple, out: tuple, batch: tuple = ()) -> DeclaredBuffers:
     """The buffers of a fused step over Engine.fused_binding()'s step state."""
-    return _make_buffers(state, tables, ext, reads, out)
+    return _make_buffers(state, tables, ext, reads, out, batch)
 
 
 class FusedBinding:
@@ -81,11 +84,12 @@ class FusedBinding:
     changes (a regrounding moves the kernel's arrays). One world (world.py) and a batch (vector_world.py)
     keep one each; their tables, rows, reads and outputs are allocated once, before the first bind."""
 
-    def __init__(self, engine: Engine, tables: tuple, ext: tuple, reads: tuple, out: tuple) -> None:
+    def __init__(self, engine: Engine, tables: tuple, ext: tuple, reads: tuple, out: tuple, batch: tuple = ()) -> None:
         self._engine = engine
-        self._arrays = (tables, ext, reads, out)
+        self._arrays = (tables, ext, reads, out, batch)
         self._buffers: DeclaredBuffers | None = None
         self._version = -1
+        self._calls: dict[Any, DirectCall] = {}
 
     def buffers(self) -> DeclaredBuffers:
         """The buffers for the next fused step (grounds what is new first, as Engine.step() does)."""
@@ -94,6 +98,15 @@ class FusedBinding:
             self._buffers = bind(self._engine.fused_binding(), *self._arrays)
             self._version = self._engine.layout_version
         return self._buffers
+
+    def call(self, dispatcher: Any, *args: Any) -> Any:
+        """dispatcher(buffers(), *args), past numba's per-call dispatch (engine/direct_call.py: typing the
+        buffers' arrays cost ~2 µs a call)."""
+        buffers = self.buffers()
+        call = self._calls.get(dispatcher)
+        if call is None or call.record is not buffers:
+            call = self._calls[dispatcher] = DirectCall(dispatcher, buffers)
+        return call(*args)
 
 
 @njit(cache=True)

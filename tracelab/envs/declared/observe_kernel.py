@@ -8,7 +8,8 @@ Why: read part by part in numpy, an observation of GridWar's advanced spec (7 pa
 The program (ObservationProgram) has one row per number of the observation, agent by agent, part by part:
 `table` [numbers, 6] int64 (kind, first and last+1 column of the part's atoms in the truth table, the
 first of its numbers in `values` or -1 for the index itself, things, board width), `missing` [numbers]
-(NaN: none declared) and `values` (every index and nearest part's numbers, float32)."""
+(NaN: none declared), `values` (every index and nearest part's numbers, float32) and `copy_table` [copies, 3]
+(first column, source column, width: an agent that reads what an earlier one reads takes its numbers)."""
 from __future__ import annotations
 
 import inspect
@@ -41,6 +42,8 @@ class ObservationProgram:
         # its rows are skipped and read() copies the earlier agent's numbers (20v20: 1 read of 20)
         self.copies: list[tuple[int, int]] = []
         seen: dict[tuple, int] = {}
+        # parts that read the same atoms (GridWar's x and y of an agent: its cell) share their truth columns
+        placed: dict[bytes, int] = {}
         n_atoms = n_values = 0
         for agent in range(len(spec.agents)):
             key = tuple((k, part_ids[k][agent].tobytes()) for k, part in enumerate(spec.parts)
@@ -57,9 +60,12 @@ class ObservationProgram:
                     missing.extend([np.nan] * part.width)
                     continue
                 ids = part_ids[k][agent]
-                atoms.append(ids)
+                at = placed.setdefault(ids.tobytes(), n_atoms)
+                if at == n_atoms:
+                    atoms.append(ids)
+                    n_atoms += len(ids)
                 if kind == TRUTH:
-                    rows.extend((TRUTH, n_atoms + j, n_atoms + j + 1, -1, 0, 0) for j in range(len(ids)))
+                    rows.extend((TRUTH, at + j, at + j + 1, -1, 0, 0) for j in range(len(ids)))
                     missing.extend([np.nan] * len(ids))
                 else:
                     first = -1
@@ -67,30 +73,44 @@ class ObservationProgram:
                         first = n_values
                         values.append(part.value_array)
                         n_values += len(part.value_array)
-                    rows.append((kind, n_atoms, n_atoms + len(ids), first, part.n_things, part.board_width))
+                    rows.append((kind, at, at + len(ids), first, part.n_things, part.board_width))
                     missing.append(np.nan if part.missing is None else part.missing)
-                n_atoms += len(ids)
         self.width = len(rows) // max(len(spec.agents), 1)  # numbers per agent
         self.atoms = np.concatenate(atoms).astype(np.int64)  # the truth table's columns
         self.table = np.array(rows, np.int64).reshape(-1, 6)
         self.missing = np.array(missing, np.float64)
         self.values = np.concatenate(values).astype(np.float32)
+        self.copy_table = np.array([(agent * self.width, source * self.width, self.width)
+                                    for agent, source in self.copies], np.int64).reshape(-1, 3)
 
 
 @njit(cache=True)
-def observe_lower(lower, atoms, truth, table, missing, values, obs):  # noqa: ANN001, ANN201
+def observe_lower(lower, atoms, truth, table, missing, values, copies, obs):  # noqa: ANN001, ANN201
     """observe() on the truth of `atoms` read off the counting kernel's lower bounds [worlds, atoms]
     (an atom is true where [1,1]: its lower bound is 1)."""
     K.gather_truth(lower, atoms, 1.0, truth)
-    observe(truth, table, missing, values, obs)
+    observe(truth, table, missing, values, copies, obs)
 
 
 @njit(cache=True)
-def observe(truth, table, missing, values, obs):  # noqa: ANN001, ANN201
+def observe(truth, table, missing, values, copies, obs):  # noqa: ANN001, ANN201
     """obs [worlds, numbers] (float32) from truth [worlds, program atoms]: per row of `table`, an index
     part's number (the first true atom's), a nearest part's (the cell of the thing nearest the `from`
-    cell, rows plus columns, a tie to the thing listed first), a count of true atoms, or one atom's truth."""
+    cell, rows plus columns, a tie to the thing listed first), a count of true atoms, or one atom's truth;
+    then the copied agents' numbers (`copies`: the program's copy_table)."""
+    _observe_rows(truth, table, missing, values, obs)
+    for w in range(obs.shape[0]):
+        for r in range(copies.shape[0]):
+            at, source, width = copies[r, 0], copies[r, 1], copies[r, 2]
+            obs[w, at:at + width] = obs[w, source:source + width]
+
+
+@njit(cache=True)
+def _observe_rows(truth, table, missing, values, obs):  # noqa: ANN001, ANN201
+    """observe()'s numbers of every row of `table` (an index part over the same columns as the index part
+    before it, as GridWar's y after its x, takes that part's position)."""
     for w in range(truth.shape[0]):
+        last_lo, last_hi, last_i = -1, -1, -1
         for c in range(table.shape[0]):
             kind, lo, hi, first, things, width = table[c, 0], table[c, 1], table[c, 2], table[c, 3], \
                 table[c, 4], table[c, 5]
@@ -107,7 +127,8 @@ def observe(truth, table, missing, values, obs):  # noqa: ANN001, ANN201
                 obs[w, c] = n
                 continue
             if kind == INDEX:
-                i = _first_true(truth, w, lo, hi)
+                i = last_i if lo == last_lo and hi == last_hi else _first_true(truth, w, lo, hi)
+                last_lo, last_hi, last_i = lo, hi, i
             else:
                 cells = (hi - lo) // (1 + things)
                 i = -1
@@ -138,7 +159,7 @@ def _first_true(truth, w, lo, hi):  # noqa: ANN001, ANN201
     return -1
 
 
-for _f in (observe_lower, observe, _first_true):
+for _f in (observe_lower, observe, _observe_rows, _first_true):
     stamp_with_sources(_f, (inspect.getmodule(observe), K))
 
 
@@ -151,17 +172,26 @@ class ObservationReader:
         self._truth = np.zeros((worlds, len(program.atoms)), np.bool_)
         self.numbers = np.zeros((worlds, len(program.table)), np.float32)
 
+    @property
+    def arrays(self) -> tuple[np.ndarray, ...]:
+        """What observe_lower reads and writes after `lower`: (atoms, truth, table, missing, values, copies,
+        numbers), for a caller that reads inside its own compiled step (vector_fused.step_worlds)."""
+        p = self.program
+        return p.atoms, self._truth, p.table, p.missing, p.values, p.copy_table, self.numbers
+
     def read(self, engine: Engine) -> np.ndarray:
         """numbers [worlds, agents * width] as the engine stands (the counting kernel's bounds are read
         in place; another kernel's truth comes from Engine.is_true)."""
         p, out = self.program, self.numbers
         if engine.kernel == "counting":
-            observe_lower(engine.lower, p.atoms, self._truth, p.table, p.missing, p.values, out)
+            observe_lower(engine.lower, *self.arrays)
         else:
-            observe(engine.is_true(p.atoms), p.table, p.missing, p.values, out)
-        w = p.width
-        for agent, source in p.copies:
-            out[:, agent * w:(agent + 1) * w] = out[:, source * w:(source + 1) * w]
+            observe(engine.is_true(p.atoms), p.table, p.missing, p.values, p.copy_table, out)
+        return self.finish(engine)
+
+    def finish(self, engine: Engine) -> np.ndarray:
+        """The parts the compiled read leaves to numpy (`lower`, `bounds`), after it; returns the numbers."""
+        p, out = self.program, self.numbers
         for k, col in p.python_parts:  # lower and bounds: the engine's bounds, in numpy
             part = self._spec.parts[k]
             for agent, ids in enumerate(self._part_ids[k]):

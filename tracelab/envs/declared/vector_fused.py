@@ -9,7 +9,17 @@ step facts each world's last step set), and the reads' results `index` [W, parts
 
 The reads go through a truth table [W, read atoms] (`reads`: read_atoms, truth, part_ptr, table_values,
 table_agent, sizes), so that a batch on the lanes kernel (which this call cannot step: the engine steps
-it) reads with the same code from Engine.is_true (read_truth)."""
+it) reads with the same code from Engine.is_true (read_truth).
+
+The step's own Python is one call too (step_worlds): each agent's action to its row, the step's draws
+(the categorical draws of fixed probabilities, from each world's block of np_random numbers) and, after the
+kernel and the reads, every agent's observation numbers (observe_kernel). A small numpy operation costs a
+microsecond or more, and a one-world GridWar step did ~20 of them around a compiled step of ~40 µs.
+`batch` (the structref's field): `draws` (int64 [2]: DRAW_UNIFORMS or DRAW_GIVEN, then the number of draws),
+`uniforms` [W, block] and `position` [W] (vector_world._Uniforms' buffer: the next number of world w is
+uniforms[w, position[w]]), `cumulative` [draws, values] (padded with +inf) and `sizes` [draws]
+(vector_world._CategoricalTable's), `agent_rows` [agents] (agent i's first action row), `rows` [W, agents]
+and `picks` [W, groups] (the step's, written here), and observe_kernel.ObservationReader.arrays (a tuple)."""
 from __future__ import annotations
 
 import inspect
@@ -18,9 +28,10 @@ from numba import njit
 
 from tracelab.engine import kernel as K
 from tracelab.engine.numba_cache import stamp_with_sources
-from tracelab.envs.declared import fused
+from tracelab.envs.declared import fused, observe_kernel
 
 STATUS_OK = K.STATUS_OK
+DRAW_GIVEN, DRAW_UNIFORMS = 0, 1  # batch's draws[0]: picks written by the caller, or drawn here
 
 
 @njit(cache=True)
@@ -38,15 +49,50 @@ def build_rows(tables, ext, rows, picks, first_id):  # noqa: ANN001, ANN201
 
 
 @njit(cache=True)
-def step_batch(b, rows, picks, t, first_id):  # noqa: ANN001, ANN201
-    """On the counting kernel: build_rows, the kernel's step of every world, and on STATUS_OK the reads
-    (read_batch). Returns the kernel's status (b.out[4][0]: the world it paused at)."""
-    build_rows(b.tables, b.ext, rows, picks, first_id)
+def draw_rows(batch, actions):  # noqa: ANN001, ANN201
+    """The step's rows [W, agents] from actions [W, agents] (-1: none; agent i's action a is row
+    agent_rows[i] + a) and, with DRAW_UNIFORMS, every world's draws from its next numbers, as
+    vector_world._CategoricalTable.picks (how many cumulative sums are <= u; past the last, value 0)."""
+    draws, uniforms, position, cumulative, sizes = batch[0], batch[1], batch[2], batch[3], batch[4]
+    agent_rows, rows, picks = batch[5], batch[6], batch[7]
+    for w in range(rows.shape[0]):
+        for i in range(rows.shape[1]):
+            rows[w, i] = actions[w, i] + agent_rows[i] if actions[w, i] >= 0 else -1
+    if draws[0] != DRAW_UNIFORMS:
+        return
+    for w in range(rows.shape[0]):
+        at = position[w]
+        for d in range(draws[1]):
+            u = uniforms[w, at + d]
+            c = 0
+            while c < sizes[d] and cumulative[d, c] <= u:
+                c += 1
+            picks[w, d] = 0 if c == sizes[d] else c
+        position[w] = at + draws[1]
+
+
+@njit(cache=True)
+def prepare_batch(tables, ext, batch, actions, first_id):  # noqa: ANN001, ANN201
+    """draw_rows and build_rows, for a batch the engine steps itself (the lanes kernel). Returns the rows."""
+    draw_rows(batch, actions)
+    return build_rows(tables, ext, batch[6], batch[7], first_id)
+
+
+@njit(cache=True)
+def step_worlds(b, actions, t, first_id):  # noqa: ANN001, ANN201
+    """On the counting kernel, a whole step: draw_rows, build_rows, the kernel's step of every world, and on
+    STATUS_OK the reads (read_batch) and every agent's observation numbers. Returns the kernel's status
+    (b.out[4][0]: the world it paused at)."""
+    batch = b.batch
+    draw_rows(batch, actions)
+    build_rows(b.tables, b.ext, batch[6], batch[7], first_id)
     ext_ptr, ext_i, ext_f = b.ext
     status, w_first = K.fused_step(b.state, t, ext_ptr, ext_i, ext_f)
     b.out[4][0] = w_first
     if status == STATUS_OK:
         read_batch(b)
+        o = batch[8]
+        observe_kernel.observe_lower(b.state.lo, o[0], o[1], o[2], o[3], o[4], o[5], o[6])
     return status
 
 
@@ -62,10 +108,11 @@ def read_batch(b):  # noqa: ANN001, ANN201
 def read_truth(truth, reads, out):  # noqa: ANN001, ANN201
     """fused.read_step for every world, from truth [W, read atoms] (columns: the index parts' atoms, the
     reward table's, the terminated, truncated and mask atoms): per index part the position of its first
-    true atom (-1: none), per agent the reward table's sum, the ends, the mask."""
-    part_ptr, table_values, table_agent, sizes = reads[2], reads[3], reads[4], reads[5]
+    true atom (-1: none), per agent the reward table's sum, the ends, the mask. A world truncates also at
+    the spec's max_steps (sizes[5], -1: none) of its steps (reads[6]) when it did not terminate."""
+    part_ptr, table_values, table_agent, sizes, steps = reads[2], reads[3], reads[4], reads[5], reads[6]
     index, rewards, res, mask, _ = out
-    n_parts, n_table, n_term, n_trunc = sizes[0], sizes[1], sizes[2], sizes[3]
+    n_parts, n_table, n_term, n_trunc, limit = sizes[0], sizes[1], sizes[2], sizes[3], sizes[5]
     for w in range(truth.shape[0]):
         for p in range(len(part_ptr) - 1):
             index[w, p] = -1
@@ -88,11 +135,13 @@ def read_truth(truth, reads, out):  # noqa: ANN001, ANN201
         for j in range(n_trunc):
             if truth[w, c + j]:
                 res[w, 1] = 1.0
+        if limit >= 0 and steps[w] >= limit and res[w, 0] != 1.0:
+            res[w, 1] = 1.0
         c += n_trunc
         for j in range(mask.shape[1]):
             mask[w, j] = 1 if truth[w, c + j] else 0
 
 
-SOURCE_STAMP = stamp_with_sources(step_batch, (inspect.getmodule(step_batch), K, fused))
-for _f in (build_rows, read_batch, read_truth):
-    stamp_with_sources(_f, (inspect.getmodule(step_batch), K, fused))
+SOURCE_STAMP = stamp_with_sources(step_worlds, (inspect.getmodule(step_worlds), K, fused, observe_kernel))
+for _f in (build_rows, read_batch, read_truth, draw_rows, prepare_batch):
+    stamp_with_sources(_f, (inspect.getmodule(step_worlds), K, fused, observe_kernel))

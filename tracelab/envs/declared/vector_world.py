@@ -49,24 +49,37 @@ class DeclaredWorlds:
         self._ext = (np.zeros(w + 1, np.int64), np.zeros((w * 2 * cap, 3), np.int64), np.zeros((w * 2 * cap, 2)))
         part_ptr, part_atoms, table_atoms, table_values, table_agent, term, trunc, mask = one._reads
         read_atoms = np.concatenate([part_atoms, table_atoms, term, trunc, mask]).astype(np.int64)
+        self.steps = np.zeros(w, np.int64)  # each world's steps into its episode
+        limit = -1 if spec.max_steps is None else spec.max_steps
         self._reads = (read_atoms, np.zeros((w, len(read_atoms)), np.bool_), part_ptr, table_values, table_agent,
-                       np.array([len(part_atoms), len(table_atoms), len(term), len(trunc), len(mask)], np.int64))
+                       np.array([len(part_atoms), len(table_atoms), len(term), len(trunc), len(mask), limit],
+                                np.int64), self.steps)
         self._out = (np.zeros((w, len(one._out[0])), np.int64), np.zeros((w, self.n_agents)), np.zeros((w, 2)),
                      np.zeros((w, len(mask)), np.int8), np.zeros(1, np.int64))
-        self._binding = fused.FusedBinding(self.engine, self._tables, self._ext, self._reads, self._out)
-        self._rows = np.full((w, self.n_agents), -1, np.int64)
-        self._agent_rows = np.arange(self.n_agents) * self.n_actions  # agent i's first action row
         self._picks = np.full((w, len(one._picks)), -1, np.int64)
-        self.steps = np.zeros(w, np.int64)
         # every draw one np_random.random() (the toy-text games): drawn a block at a time (_Uniforms)
         self._only_uniforms = all(d.draw.method == "categorical" for d in (*one._choices, *one._before)) and \
             all(d.weight_ids is None for d in one._before)
         # every draw of fixed probabilities: a draw with no weights never freezes (world._Drawer), so this
-        # holds for good and is not asked again each step (60 draws a 20v20 step)
+        # holds for good and is not asked again each step (60 draws a 20v20 step); then the compiled step
+        # draws them (vector_fused.draw_rows)
         self._categorical = _CategoricalTable(one._before) \
             if self._only_uniforms and _CategoricalTable.holds(one._before) else None
+        # a block of several steps' numbers: a 20v20 step draws 60, which a 64-number block refilled every step
+        block = max(64, 8 * len(one._before))
+        self._uniform_arrays = (np.empty((w, block)), np.full(w, block, np.int64))  # filled on first use
+        self.uniforms: _Uniforms | None = None
         self._observer = one._observer  # built for the engine's n_worlds worlds
         self._numbers: np.ndarray | None = None  # every agent's observed numbers, read once after a change
+        # the compiled step reads every agent's numbers but a `lower` or `bounds` part's (numpy's, after it)
+        self._observed = self._observer is not None and not self._observer.program.python_parts
+        table = self._categorical or _CategoricalTable([])
+        self._draws = np.array([vector_fused.DRAW_GIVEN, len(one._before)], np.int64)
+        observe = self._observer.arrays if self._observer is not None else _no_observation(w)
+        self._batch = (self._draws, *self._uniform_arrays, table.cumulative, table.sizes,
+                       np.arange(self.n_agents, dtype=np.int64) * self.n_actions,  # agent i's first action row
+                       np.full((w, self.n_agents), -1, np.int64), self._picks, observe)
+        self._binding = fused.FusedBinding(self.engine, self._tables, self._ext, self._reads, self._out, self._batch)
         self._starts = _StartOutcomes(self)
 
     @property
@@ -75,20 +88,35 @@ class DeclaredWorlds:
 
     # ---- the engine step of every world ----
 
-    def engine_step(self, rows: np.ndarray, picks: np.ndarray) -> None:
-        """One engine step of every world (rows, picks: vector_fused.build_rows'), then the reads."""
+    def engine_step(self, actions: np.ndarray, picks: np.ndarray | None = None) -> None:
+        """One engine step of every world (actions int64 [W, agents], -1: none), then the reads. `picks`:
+        every group's value [W, groups] (-1: none), else the step's (drawn in the compiled step, or
+        written into self._picks by step())."""
+        if picks is None:
+            self._step_engine(actions)
+            return
+        self._picks[:] = picks
+        self._draws[0] = vector_fused.DRAW_GIVEN
+        try:
+            self._step_engine(actions)
+        finally:
+            self._picks[:] = -1  # a step sets only its draws' and computed facts' groups
+
+    def _step_engine(self, actions: np.ndarray) -> None:
         eng = self.engine
         self._numbers = None
         ext_ptr, ext_i, ext_f = self._ext
         if eng.kernel != "counting":  # lanes (or compiled): the engine's own step, then the reads
-            k = vector_fused.build_rows(self._tables, self._ext, rows, picks, eng.next_external_id())
+            k = vector_fused.prepare_batch(self._tables, self._ext, self._batch, actions, eng.next_external_id())
             eng.step(external=(ext_ptr, ext_i[:k], ext_f[:k]))
             self._read()
             return
-        status = vector_fused.step_batch(self._binding.buffers(), rows, picks, eng.t, eng.next_external_id())
+        status = self._binding.call(vector_fused.step_worlds, actions, eng.t, eng.next_external_id())
         eng.finish_fused_step(status, int(self._out[4][0]), ext_ptr, ext_i, ext_f)
         if status != vector_fused.STATUS_OK:  # the kernel paused (buffer room) and finish went on: read now
             self._read()
+        elif self._observed:  # every agent's numbers came with the step
+            self._numbers = self._observer.numbers
 
     def _read(self) -> None:
         self._numbers = None
@@ -105,8 +133,7 @@ class DeclaredWorlds:
             raise ValueError(f"{len(rngs)} generators for {self.n_worlds} worlds")
         self.rngs = rngs
         self._randoms = [r.random for r in rngs]  # bound once: a step draws one number per world
-        # a block of several steps' numbers: a 20v20 step draws 60, which a 64-number block refilled every step
-        self.uniforms = _Uniforms(rngs, 8 * len(self.one._before)) if self._only_uniforms else None
+        self.uniforms = _Uniforms(rngs, *self._uniform_arrays) if self._only_uniforms else None
 
     def reset(self, worlds: np.ndarray) -> None:
         """Restart `worlds` (int64 indices): each draws its start choices from its generator; then the
@@ -119,24 +146,23 @@ class DeclaredWorlds:
     def step(self, actions: np.ndarray) -> None:
         """Every world plays actions[w] (one agent), or actions[w, i] for agent i (several; -1: none), and
         draws this step's random facts from its generator."""
-        if actions.ndim == 1:
-            self._rows[:, 0] = actions
-        else:  # agent i's action a is its row a + i * n_actions, as DeclaredWorld.step
-            self._rows[:] = np.where(actions >= 0, actions + self._agent_rows, -1)
+        actions = _call_layout(actions).reshape(self.n_worlds, -1)  # agent i's row: vector_fused.draw_rows
         picks, before = self._picks, self.one._before
-        # every draw one random() a world: the step's numbers of all draws taken at once, in the spec's order
-        u = self.uniforms.each(len(before)) if self.uniforms is not None and before else None
-        if u is not None and self._categorical is not None:
-            picks[:, :len(before)] = self._categorical.picks(u)  # every draw of every world at once
+        if self._categorical is not None and self.uniforms is not None:  # drawn in the compiled step
+            self.uniforms.make_room(len(before))
+            self._draws[0] = vector_fused.DRAW_UNIFORMS
         else:
+            self._draws[0] = vector_fused.DRAW_GIVEN
+            # every draw one random() a world: the step's numbers of all draws taken at once, in the spec's order
+            u = self.uniforms.each(len(before)) if self.uniforms is not None and before else None
             for d, drawer in enumerate(before):
                 picks[:, d] = _draw_batch(drawer, self, None if u is None else u[:, d])
         computed = self.one._computed
         if len(computed):
             base = self.one.computed_base
             picks[:, base:base + len(computed)] = computed.picks(self.engine, self.steps)
-        self.engine_step(self._rows, picks)
-        self.steps += 1
+        self.steps += 1  # before the step: its reads truncate at the spec's max_steps (vector_fused.read_truth)
+        self._step_engine(actions)
 
     # ---- reading (after a step or a reset) ----
 
@@ -173,11 +199,10 @@ class DeclaredWorlds:
         return out
 
     def truncated(self, limit: int | None) -> np.ndarray:
-        """A truncated atom, or the spec's step limit reached in a world that did not terminate, or
-        `limit` (a TimeLimit's, which truncates whatever the step did) reached."""
+        """A truncated atom, or the spec's step limit reached in a world that did not terminate (both read
+        with the step: vector_fused.read_truth), or `limit` (a TimeLimit's, which truncates whatever the
+        step did) reached."""
         out = self._out[2][:, 1] == 1.0
-        if self.spec.max_steps is not None:
-            out |= (self.steps >= self.spec.max_steps) & ~self.terminated()
         if limit is not None:
             out |= self.steps >= limit
         return out
@@ -229,6 +254,21 @@ def _world(spec: WorldSpec, n_worlds: int, kernel: str) -> DeclaredWorld:
     return DeclaredWorld(spec, kernel="counting", worlds=n_worlds)
 
 
+def _call_layout(a: np.ndarray) -> np.ndarray:
+    """`a` as a writeable C-ordered int64 array: the one array type the compiled step is compiled for (another
+    layout would compile it again, with the engine's kernel in it: minutes)."""
+    a = np.asarray(a)
+    if a.dtype == np.int64 and a.flags.c_contiguous and a.flags.writeable:
+        return a
+    return np.array(a, np.int64, order="C")
+
+
+def _no_observation(n_worlds: int) -> tuple[np.ndarray, ...]:
+    """ObservationReader.arrays of no observation program (a Discrete or MultiDiscrete space's)."""
+    return (np.zeros(0, np.int64), np.zeros((n_worlds, 0), np.bool_), np.zeros((0, 6), np.int64), np.zeros(0),
+            np.zeros(0, np.float32), np.zeros((0, 3), np.int64), np.zeros((n_worlds, 0), np.float32))
+
+
 def _draw_batch(drawer: Any, worlds: DeclaredWorlds, u: np.ndarray | None = None) -> np.ndarray:
     """One value of `drawer` per world, each from its world's generator, exactly as _Drawer.pick draws
     for one world (categorical: one random() u, the first value whose cumulative probability exceeds u,
@@ -262,9 +302,10 @@ def _draw_batch(drawer: Any, worlds: DeclaredWorlds, u: np.ndarray | None = None
 
 
 class _CategoricalTable:
-    """The step's categorical draws of fixed probabilities, all worlds at once: _draw_batch's searchsorted
-    (side="right": how many cumulative sums are <= u; past the last one, value 0) for every draw together,
-    the cumulative sums padded with +inf so that a shorter draw counts none of the padding."""
+    """The step's categorical draws of fixed probabilities, as the compiled step draws them for all worlds
+    (vector_fused.draw_rows): _draw_batch's searchsorted (side="right": how many cumulative sums are <= u;
+    past the last one, value 0) for every draw together, the cumulative sums padded with +inf so that a
+    shorter draw counts none of the padding."""
 
     def __init__(self, drawers: list[Any]) -> None:
         sums = [d.cumulative or [] for d in drawers]
@@ -278,11 +319,6 @@ class _CategoricalTable:
         """Whether every draw has fixed probabilities (none weighed by the state)."""
         return all(d.weight_ids is None and d.possible is None and d.cumulative is not None for d in drawers)
 
-    def picks(self, u: np.ndarray) -> np.ndarray:
-        """int64 [worlds, draws]: each draw's value for u [worlds, draws]."""
-        picks = (self.cumulative[None, :, :] <= u[:, :, None]).sum(axis=2)
-        picks[picks == self.sizes] = 0
-        return picks
 
 
 def _nbytes(snapshot: Any) -> int:
@@ -302,18 +338,26 @@ class _Uniforms:
     whose every draw is one random() draws exactly what it would call by call, for one call per block (at
     least 64, or `block`)."""
 
-    def __init__(self, rngs: list[np.random.Generator], block: int = 0) -> None:
+    def __init__(self, rngs: list[np.random.Generator], buf: np.ndarray, pos: np.ndarray) -> None:
+        """`buf` [worlds, block], `pos` [worlds]: the arrays the numbers are kept in (the compiled step's)."""
         self.rngs = rngs
-        self.block = max(64, block)
-        self.buf = np.empty((len(rngs), self.block))
-        self.pos = np.full(len(rngs), self.block)  # empty: filled on first use
+        self.buf, self.pos = buf, pos
+        self.block = buf.shape[1]
+        pos[:] = self.block  # empty: filled on first use
+        self.low = 0  # every world has at least this many numbers left
         self._every = np.arange(len(rngs))
+
+    def make_room(self, k: int) -> None:
+        """At least k numbers left in every world, which the caller then takes (vector_fused.draw_rows)."""
+        if self.low < k:
+            for w in np.flatnonzero(self.pos > self.block - k):
+                self._fill(w)
+            self.low = self.block - int(self.pos.max())
+        self.low -= k
 
     def each(self, k: int) -> np.ndarray:
         """The next k numbers of every world [worlds, k] (k <= block)."""
-        if self.pos.max() > self.block - k:
-            for w in np.flatnonzero(self.pos > self.block - k):
-                self._fill(w)
+        self.make_room(k)
         u = self.buf[self._every[:, None], self.pos[:, None] + np.arange(k)]
         self.pos += k
         return u
@@ -324,6 +368,7 @@ class _Uniforms:
             self._fill(w)
         u = self.buf[worlds, self.pos[worlds]]
         self.pos[worlds] += 1
+        self.low -= 1
         return u
 
     def _fill(self, w: int) -> None:

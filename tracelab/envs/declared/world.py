@@ -95,9 +95,9 @@ def _say_if_cold(spec: WorldSpec, kernel: str, worlds: int) -> None:
     numba's cache yet, so their first call compiles them (the notice quotes what bench first-run measured)."""
     if kernel == "counting":
         engine = counting_kernel.step_worlds
-        world = (fused.fused_step, fused.read_step) if worlds == 1 else (vector_fused.step_batch, vector_fused.read_batch)
+        world = (fused.fused_step, fused.read_step) if worlds == 1 else (vector_fused.step_worlds, vector_fused.read_batch)
     elif kernel == "lanes":
-        engine, world = lanes_kernel.step_lanes, (vector_fused.build_rows, vector_fused.read_truth)
+        engine, world = lanes_kernel.step_lanes, (vector_fused.prepare_batch, vector_fused.read_truth)
     else:
         return  # the compiled backend says its own (tracelab compile)
     phase = "spec-env" if worlds == 1 else "spec-vector-env"
@@ -285,7 +285,7 @@ class DeclaredWorld:
         if not self._fused:  # the engine's own step, then the reads
             self._unfused_step(rows, picks)
             return
-        status = fused.fused_step(self._binding.buffers(), rows, picks, eng.t, eng.next_external_id())
+        status = self._binding.call(fused.fused_step, rows, picks, eng.t, eng.next_external_id())
         ext_ptr, ext_i, ext_f = self._ext
         eng.finish_fused_step(status, int(self._out[4][0]), ext_ptr, ext_i, ext_f)
         if status != fused.STATUS_OK:  # the kernel paused (buffer room) and finish went on: read now
