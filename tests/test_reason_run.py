@@ -351,6 +351,13 @@ def test_a_played_game_declares_its_board(tmp_path: Path, capsys: pytest.Capture
     assert code == 0, err
     meta = json.loads((tmp_path / "g" / "meta.json").read_text())
     assert meta.get("board") is None and meta["config"][RUN_CONFIG_KEY]["rows"][2] == "....M..."
+    # a saved query that needs a board reads it (it was refused: "has no board")
+    from tracelab.store import open_run
+    from tracelab.store.kind import can_read, has_board
+    assert has_board(open_run(tmp_path / "g")) and can_read(open_run(tmp_path / "g"), "board")
+    for name in ("learner_events", "hid_behind_mountain"):
+        code, out, err = cli(capsys, "sql", tmp_path / "g", "--query", name)
+        assert code == 0 and err == "" and "(1 row)" in out, (name, err)
 
 
 def test_runs_written_before_the_edges_table_still_open_and_seal(run: Path, tmp_path: Path) -> None:
