@@ -21,7 +21,8 @@ from tracelab.train.qnet import NetSpec, NumpyQ
 
 # red starts one step below blue's base on a 4x4 board: no spec plays it (RuleSim's scenario file)
 NEAR = Scenario(name="near", width=4, height=4, red_base=(3, 0), blue_base=(0, 3), red_starts=((0, 2),))
-SAMPLE_POLICY = Path(__file__).resolve().parent.parent / "sample_runs" / "base-train" / "policy"
+# GridWar's earlier trainer's policy (RuleSim's format): sample_runs/base-train's until 2026-11-29
+SAMPLE_POLICY = Path(__file__).resolve().parent / "data" / "rulesim" / "base-policy"
 
 
 def constant_weights(net: NetSpec, action: int) -> dict[str, np.ndarray]:

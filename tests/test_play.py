@@ -85,7 +85,7 @@ def test_play_a_team_records_each_agent(tmp_path, capsys):
 
 
 def test_an_old_gridwar_policy_plays_as_it_did_on_rulesim(tmp_path):
-    """sample_runs/base-train/policy (GridWar's trainer, RuleSim) played greedily on RefSim (the hand-written
+    """tests/data/rulesim/base-policy (GridWar's trainer, RuleSim) played greedily on RefSim (the hand-written
     oracle) and through the spec path, the same seed: the same games, step for step (its observation is the
     spec's)."""
     import numpy as np
@@ -97,7 +97,7 @@ def test_an_old_gridwar_policy_plays_as_it_did_on_rulesim(tmp_path):
     from tracelab.train.env_policy import team_actor
     from tracelab.train.env_policy import load_policy
 
-    policy = load_policy(ROOT / "sample_runs" / "base-train" / "policy")
+    policy = load_policy(ROOT / "tests" / "data" / "rulesim" / "base-policy")
     ref = RefGridWar(policy.scenario)
     source = EnvSource(*scenario_spec(policy.scenario))
     dec = make_declared_env(source, load_declared(source))
@@ -109,7 +109,7 @@ def test_an_old_gridwar_policy_plays_as_it_did_on_rulesim(tmp_path):
 
 
 def test_a_policy_refused_on_a_world_of_another_shape_in_one_line(capsys):
-    policy = ROOT / "sample_runs" / "base-train" / "policy"
+    policy = ROOT / "tests" / "data" / "rulesim" / "base-policy"   # GridWar's earlier trainer's
     assert main(["play", "--env", "tracelab/GridWar-advanced-v0", "--policy", str(policy), "--no-trace"]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "trained on GridWar's 'base' (1 agents, 5 actions, 4 observations)" in err

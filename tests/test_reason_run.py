@@ -325,9 +325,11 @@ def test_a_run_declares_its_board_and_the_viewers_draw_only_those(run: Path) -> 
     from tracelab.store.kind import run_board
     from tracelab.viewers.board_state import board_of_run
     assert board_of_run(open_run(run)) is None
-    # runs written before boards were declared (the sample runs) are the grid game's
-    assert run_board(open_run(SAMPLES / "base")) == "gridworld"
-    assert board_of_run(open_run(SAMPLES / "base")) is not None
+    # RuleSim's runs (tests/data/rulesim/base) are the grid game's; a spec world's run (the sample runs)
+    # declares its spec's [board] in its config
+    assert run_board(open_run(ROOT / "tests" / "data" / "rulesim" / "base")) == "gridworld"
+    assert board_of_run(open_run(ROOT / "tests" / "data" / "rulesim" / "base")) is not None
+    assert run_board(open_run(SAMPLES / "base")) is None and board_of_run(open_run(SAMPLES / "base")) is not None
     import importlib.util
     assert importlib.util.find_spec("tracelab.store.board") is None  # one board, in viewers/
 

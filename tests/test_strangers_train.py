@@ -247,7 +247,9 @@ def test_a_fifo_in_a_policy_is_refused_without_waiting(name, run):
 
 def test_the_sample_run_s_policy_still_loads(capsys):
     sample = Path(__file__).resolve().parents[1] / "sample_runs" / "base-train" / "policy"
-    assert main(["eval", str(sample), "--games", "2"]) == 0
+    assert main(["eval", str(sample), "--env", "tracelab/GridWar-base-v0", "--games", "2"]) == 0
+    earlier = Path(__file__).resolve().parent / "data" / "rulesim" / "base-policy"   # RuleSim's format
+    assert main(["eval", str(earlier), "--games", "2"]) == 0
 
 
 # ---------------------------------------------------------------------------------------------------------
