@@ -111,7 +111,8 @@ def test_the_fired_rule_log_of_a_known_step(advanced_data) -> None:
     n = con.execute("SELECT count(*) FROM firings WHERE episode = 2 AND t = 14").fetchall()[0][0]
     assert len(log) == n
     lines = [(r["TextLog:level"][0], r["TextLog:text"][0]) for r in log]
-    hit = ("b_hit", "b_hit(B=blue-bullet-1-2, A=red-agent-1, Y=c6_3): struck(blue-bullet-1-2,red-agent-1) [0,1] -> [1,1]")
+    hit = ("b_hit", "b_hit(B=blue-bullet-1-2, A=red-agent-1, Y=c6_3): "
+                    "struck(blue-bullet-1-2,red-agent-1) [0,1] -> [1,1]")
     death = ("d_killed", "d_killed(A=red-agent-1): alive(red-agent-1) [1,1] -> [0,0]")
     end = ("g_eliminated", "g_eliminated(T=red, A=red-agent-1): eliminated(red) [0,1] -> [1,1]")
     assert lines.index(hit) < lines.index(death) < lines.index(end)   # in the engine's order
