@@ -20,7 +20,8 @@ from tracelab.store.reader import open_run  # noqa: E402
 from tracelab.viewers.tui.trace import TracePane  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
-BASE = str(ROOT / "sample_runs" / "base")     # `tracelab play --scenario base` (8x8), sealed
+# RuleSim's `tracelab play --scenario base` (8x8), sealed: its map rows at t=0 static, cells numbered y * 8 + x
+BASE = str(ROOT / "tests" / "data" / "rulesim" / "base")
 NOTE = "rows of static facts hidden"
 
 

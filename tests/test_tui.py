@@ -351,17 +351,17 @@ def test_board_follows_the_trace_cursor() -> None:
         board = pane.board
         assert board is not None and pane.side_box.display          # 120 columns: room for it
         jumps = pane.jumps
-        pane.query_one("#tr-goto").value = "15"
+        pane.query_one("#tr-goto").value = "21"
         await pilot.press("g", "enter")
         await wait_for(pilot, lambda: pane.jumps > jumps and loaded(trace))
-        await wait_for(pilot, lambda: board.board is not None and board.step == 15)
+        await wait_for(pilot, lambda: board.board is not None and board.step == 21)
         text = await shown(app, pilot)
-        assert "board at t=15" in text
-        # advanced episode 0: blue's bullet kills red-agent-1 at t=15 on (4,3), the board's row 4
-        state = board.board.at(15)
-        red = next(p for p in state.pieces if p.thing == "red-agent-1")
-        assert (red.row, red.col, red.alive) == (4, 4, False)
-        assert "R1 dead" in text and "✕" in text
+        assert "board at t=21" in text
+        # advanced episode 0: blue-agent-1 reaches red's base c7_7 at t=21 (the board's last row and column)
+        state = board.board.at(21)
+        blue = next(p for p in state.pieces if p.thing == "blue-agent-1")
+        assert (blue.row, blue.col, blue.alive) == (7, 7, True)
+        assert "B1 alive" in text and "R1 alive" in text
         await pilot.press("b")                                         # hide it (its box, with the decision)
         assert not pane.side_box.display
     run_app([ADVANCED], body, size=(120, 34))
@@ -376,12 +376,12 @@ def test_the_mouse_selects_rows_sorts_by_header_and_opens_on_double_click() -> N
         x = sum(c.width + 1 for c in table.columns[:3]) + 1            # the "length" header
         await pilot.click(table, offset=(x, 0))
         await wait_for(pilot, lambda: table.sort_key == "steps" and loaded(table))
-        assert [table.row(i)["steps"] for i in range(table.count)] == [15, 18, 25]
-        await pilot.click(table, offset=(3, 1))                      # the shortest game: episode 0
+        assert [table.row(i)["steps"] for i in range(table.count)] == [14, 21, 48]
+        await pilot.click(table, offset=(3, 1))                      # the shortest game: episode 2
         await pilot.click(table, offset=(3, 1), times=2)               # double click: the trace
         trace = app.screen.query_one("#tr-table", LazyTable)
         await wait_for(pilot, lambda: app.screen.query_one(TracePane).filter is not None and loaded(trace))
-        assert app.screen.query_one(TracePane).filter.episode == 0
+        assert app.screen.query_one(TracePane).filter.episode == 2
         await pilot.click(app.screen.query_one("KeyBar"), offset=(app.size.width - 3, 0))  # ^p palette
         await pilot.pause()
         assert type(app.screen).__name__ == "CommandPalette"
