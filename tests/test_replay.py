@@ -193,7 +193,7 @@ def test_episode_selection_and_user_errors(tmp_path: Path, capsys: pytest.Captur
     capsys.readouterr()
     assert replay(SAMPLES / "base", "--episode", "0", "--lanes", "alive,won", "--save", out) == 0
     assert sorted(p for p in read_rrd(out)["base/episode-0"] if p.startswith("/lanes/")) == [
-        "/lanes/alive/blue-agent-1", "/lanes/alive/red-agent-1", "/lanes/won/red"]   # any predicate of the run
+        "/lanes/alive/blue-agent-1", "/lanes/alive/red-agent-1", "/lanes/won/blue"]   # any predicate of the run
     for bad in (["--episode", "9"], ["--episodes", "3-x"], ["--outcome", "tie"], ["--lanes", "alive,mood"]):
         assert replay(SAMPLES / "advanced", *bad, "--save", tmp_path / "bad.rrd") == 1
         err = capsys.readouterr().err
