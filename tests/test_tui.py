@@ -454,7 +454,8 @@ def test_next_and_previous_evaluation_game_from_the_trace_of_a_training_run() ->
     evals = [e for e, _, _, _ in rows]
     assert len(evals) >= 4 and rows[0][1] == rows[2][1] < rows[3][1]  # 3 games a round
     first_step, second_step = f"{rows[0][1]:,}", f"{rows[3][1]:,}"
-    first_game = f"eval game 1/3 · round 0 · train step {first_step} · opponent p=0.3 · {rows[0][2]}, {rows[0][3]} steps"
+    # the spec path's trainer records no opponent p with its evaluation games (RuleSim's did: "· opponent p=0.3")
+    first_game = f"eval game 1/3 · round 0 · train step {first_step} · {rows[0][2]}, {rows[0][3]} steps"
 
     async def body(app: Any, pilot: Any) -> None:
         await episodes_ready(app, pilot)
