@@ -1,6 +1,6 @@
 """Policies as GridWar's earlier trainer (on RuleSim, deleted) wrote them (`tracelab-dqn-policy/1`), for the
-tests that such policies still load, converted, or are refused in one line. tests/data/rulesim-policy is one
-it wrote (sample_runs/base-train/policy of 2026-11-28); this writes others of any scenario and weights."""
+tests that such policies still load, converted, or are refused in one line. tests/data/rulesim/base-policy is
+one it wrote (tests/data/rulesim/README.md); this writes others of any scenario and weights."""
 from __future__ import annotations
 
 import json
@@ -12,7 +12,7 @@ import torch
 from tracelab.game.scenario import ACTION_NAMES, Scenario
 from tracelab.train.qnet import NetSpec
 
-RULESIM_POLICY = Path(__file__).resolve().parent / "data" / "rulesim-policy"
+RULESIM_POLICY = Path(__file__).resolve().parent / "data" / "rulesim" / "base-policy"
 
 
 def constant_weights(net: NetSpec, action: int) -> dict[str, np.ndarray]:

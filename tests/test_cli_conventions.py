@@ -151,11 +151,11 @@ def test_an_atom_given_after_the_flags_is_the_same_question(capsys: pytest.Captu
     """`why`'s atom is optional (--action asks about a decision instead): argparse alone would match it,
     empty, before the first flag and call a late atom an unexpected argument."""
     run = str(Path(__file__).resolve().parent.parent / "sample_runs" / "advanced")
-    assert main(["why", run, "captured(red)", "--episode", "2", "--at", "18", "--depth", "2"]) == 0
+    assert main(["why", run, "captured(blue)", "--episode", "0", "--at", "21", "--depth", "2"]) == 0
     first = capsys.readouterr().out
-    assert main(["why", run, "--episode", "2", "--at", "18", "--depth", "2", "captured(red)"]) == 0
-    assert capsys.readouterr().out == first and "captured(red)" in first
-    assert main(["why", run, "--episode", "2", "captured(red)", "extra"]) == 2
+    assert main(["why", run, "--episode", "0", "--at", "21", "--depth", "2", "captured(blue)"]) == 0
+    assert capsys.readouterr().out == first and "captured(blue)" in first
+    assert main(["why", run, "--episode", "0", "captured(blue)", "extra"]) == 2
     assert "unexpected argument: extra" in capsys.readouterr().err
 
 

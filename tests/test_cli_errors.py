@@ -16,7 +16,7 @@ import pytest
 from tracelab.cli import build_parser
 
 ROOT = Path(__file__).resolve().parent.parent
-RUN = str(ROOT / "sample_runs" / "base")  # 3 episodes; episode 0 ends at t=21
+RUN = str(ROOT / "sample_runs" / "base")  # 3 episodes; episode 0 ends at t=74
 CLI = [sys.executable, "-m", "tracelab"]
 
 
@@ -72,10 +72,10 @@ USER_ERRORS = [
     (["sql", RUN, "SELECT nope FROM changes"], "(at line 1, column 8 of the query)"),
     (["sql", RUN, "SELECT 1", "--format", "parquet"], "--format parquet needs --output FILE"),
     (["sql", "{d}/no-such-run", "SELECT 1"], "no run"),
-    (["why", RUN, "atLoc(red-agent-1,49)", "-e", "0", "--at", "9999"],
-     "--at 9999 is past the end of episode 0: its last timestep is t=21"),
+    (["why", RUN, "atLoc(red-agent-1,c1_1)", "-e", "0", "--at", "9999"],
+     "--at 9999 is past the end of episode 0: its last timestep is t=74"),
     (["why-not", RUN, "-e", "0", "--rule", "m_up", "--at", "500"],
-     "--at 500 is past the end of episode 0: its last timestep is t=21"),
+     "--at 500 is past the end of episode 0: its last timestep is t=74"),
     (["why", RUN, "~alive(red-agent-1)", "-e", "0"], "not a complement: ask `why 'alive(red-agent-1)'`"),
     (["trace", RUN, "-e", "0", "--from", "10", "--to", "2"], "--from 10 is after --to 2"),
     (["trace", RUN, "-e", "0", "--label", "nosuch"], "no label 'nosuch' in this run; its labels: "),

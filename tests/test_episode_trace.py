@@ -19,9 +19,9 @@ RUN = Path(__file__).resolve().parents[1] / "sample_runs" / "advanced"
 def _answers() -> list[dict]:
     con = open_run(RUN)
     try:
-        return [explain(con, 2, "captured(red)", at=18, depth=4).to_dict(),
-                explain(con, 0, "atLoc(red-agent-1,57)", at=9, depth=3).to_dict(),
-                why_not(con, 2, "snap_at", {}, 18).to_dict()]
+        return [explain(con, 0, "captured(blue)", at=21, depth=4).to_dict(),
+                explain(con, 0, "atLoc(red-agent-1,c6_6)", at=9, depth=3).to_dict(),
+                why_not(con, 0, "snap_at", {}, 21).to_dict()]
     finally:
         con.close()
 
@@ -41,10 +41,10 @@ def test_a_plain_atom_is_read_as_the_parser_reads_it() -> None:
     con = open_run(RUN)
     try:
         model = RunModel(con)
-        for text in ("captured(red)", "atLoc(red-agent-1,57)", " atLoc( red-agent-1 , 57 ) "):
+        for text in ("captured(blue)", "atLoc(red-agent-1,c6_6)", " atLoc( red-agent-1 , c6_6 ) "):
             lit = parse_literal(text)
             assert model.parse_atom(text) == model.find_atom(lit.pred, tuple(t.name for t in lit.args))
         with pytest.raises(ValueError, match="not ground"):  # a variable: the parser's path, its message
-            model.parse_atom("atLoc(A,57)")
+            model.parse_atom("atLoc(A,c6_6)")
     finally:
         con.close()

@@ -1,5 +1,5 @@
 """`tracelab eval`: every policy played on its world's spec, GridWar's earlier policies (RuleSim's format,
-converted at load: tests/data/rulesim-policy) on their scenario's; the method's counting (wins, losses,
+converted at load: tests/data/rulesim/base-policy) on their scenario's; the method's counting (wins, losses,
 draws, truncations, the win rate and its Wilson interval, per opponent p), the CLI's table, JSON and traced
 run, and `tracelab play --policy`."""
 from __future__ import annotations
@@ -64,7 +64,7 @@ def test_the_methods_counting_of_a_spec_worlds_games():
 
 
 def test_eval_command_plays_an_old_policy_as_main_did(capsys):
-    """GridWar's earlier trainer's policy (tests/data/rulesim-policy, RuleSim's format), converted at load and
+    """GridWar's earlier trainer's policy (tests/data/rulesim/base-policy, RuleSim's format), converted at load and
     evaluated on its scenario's spec (tracelab/GridWar-base-v0): the figures main gave on 2026-11-29 with its
     own player of that format (64 of 64 won, mean return 188.75, 30.625 steps a game)."""
     assert main(["eval", str(RULESIM_POLICY), "--games", "64", "--seed", "0", "--json"]) == 0

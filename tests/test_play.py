@@ -85,7 +85,7 @@ def test_play_a_team_records_each_agent(tmp_path, capsys):
 
 
 def test_an_old_gridwar_policy_plays_as_it_did_on_rulesim(tmp_path):
-    """tests/data/rulesim-policy (GridWar's trainer on RuleSim) converted at load and played greedily on RefSim
+    """tests/data/rulesim/base-policy (GridWar's trainer on RuleSim) converted at load and played greedily on RefSim
     (the hand-written oracle) and through the spec path, the same seed: the same games, step for step (its
     observation is the spec's)."""
     import numpy as np

@@ -20,7 +20,8 @@ from tracelab.store.reader import open_run  # noqa: E402
 from tracelab.viewers.tui.trace import TracePane  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
-BASE = str(ROOT / "sample_runs" / "base")     # `tracelab play --scenario base` (8x8), sealed
+# RuleSim's `tracelab play --scenario base` (8x8), sealed: its map rows at t=0 static, cells numbered y * 8 + x
+BASE = str(ROOT / "tests" / "data" / "rulesim" / "base")
 NOTE = "rows of static facts hidden"
 
 
@@ -102,9 +103,9 @@ def test_what_a_run_may_declare_as_its_grid() -> None:
                 {"grid": {"width": True, "height": 8}}, {"grid": {"width": 2**20, "height": 2**20}},
                 {"scenario": "width = ["}, {"worlds": 3}):
         assert grid_from_config(bad) is None            # read as ids, never as wrong places
-    # a train --scenario run names its scenario and keeps the TOML beside it (sample_runs/base-train)
+    # a RuleSim train --scenario run named its scenario and kept the TOML beside it; a play run, the TOML
     assert grid_from_config({"scenario": "base", "scenario_toml": "width = 8\nheight = 8\n"}) == Grid(8, 8)
-    assert run_grid(open_run(ROOT / "sample_runs" / "base-train")) == Grid(8, 8)
+    assert run_grid(open_run(ROOT / "tests" / "data" / "rulesim" / "base")) == Grid(8, 8)
 
 
 def test_the_tui_trace_hides_static_facts_until_s_and_shows_coordinates() -> None:

@@ -43,11 +43,11 @@ DUCKDB_COMMANDS = [
     ["show", TRAIN],
     ["runs", str(RUNS)],
     ["check", PLAY],
-    ["why", PLAY, "captured(red)", "--episode", "2", "--at", "18", "--depth", "3"],
-    ["why", PLAY, "captured(red)", "--episode", "2", "--at", "18", "--depth", "3", "--json"],
-    ["why-not", PLAY, "--rule", "snap_at", "--episode", "2", "--at", "18"],
-    ["why", TRAIN, "--action", "red-agent-1", "--episode", "772", "--at", "2"],
-    ["why-not", TRAIN, "--action", "up", "--episode", "772", "--at", "2"],
+    ["why", PLAY, "captured(blue)", "--episode", "0", "--at", "21", "--depth", "3"],
+    ["why", PLAY, "captured(blue)", "--episode", "0", "--at", "21", "--depth", "3", "--json"],
+    ["why-not", PLAY, "--rule", "snap_at", "--episode", "0", "--at", "21"],
+    ["why", TRAIN, "--action", "red-agent-1", "--episode", "776", "--at", "2"],
+    ["why-not", TRAIN, "--action", "up", "--episode", "776", "--at", "2"],
     ["compare", TRAIN],   # the reward scale's text without the trainer's config (numpy): train/reward_scale.py
 ]
 COMMANDS = [

@@ -325,9 +325,11 @@ def test_a_run_declares_its_board_and_the_viewers_draw_only_those(run: Path) -> 
     from tracelab.store.kind import run_board
     from tracelab.viewers.board_state import board_of_run
     assert board_of_run(open_run(run)) is None
-    # runs written before boards were declared (the sample runs) are the grid game's
-    assert run_board(open_run(SAMPLES / "base")) == "gridworld"
-    assert board_of_run(open_run(SAMPLES / "base")) is not None
+    # RuleSim's runs (tests/data/rulesim/base) are the grid game's; a spec world's run (the sample runs)
+    # declares its spec's [board] in its config
+    assert run_board(open_run(ROOT / "tests" / "data" / "rulesim" / "base")) == "gridworld"
+    assert board_of_run(open_run(ROOT / "tests" / "data" / "rulesim" / "base")) is not None
+    assert run_board(open_run(SAMPLES / "base")) is None and board_of_run(open_run(SAMPLES / "base")) is not None
     import importlib.util
     assert importlib.util.find_spec("tracelab.store.board") is None  # one board, in viewers/
 
@@ -351,6 +353,13 @@ def test_a_played_game_declares_its_board(tmp_path: Path, capsys: pytest.Capture
     assert code == 0, err
     meta = json.loads((tmp_path / "g" / "meta.json").read_text())
     assert meta.get("board") is None and meta["config"][RUN_CONFIG_KEY]["rows"][2] == "....M..."
+    # a saved query that needs a board reads it (it was refused: "has no board")
+    from tracelab.store import open_run
+    from tracelab.store.kind import can_read, has_board
+    assert has_board(open_run(tmp_path / "g")) and can_read(open_run(tmp_path / "g"), "board")
+    for name in ("learner_events", "hid_behind_mountain"):
+        code, out, err = cli(capsys, "sql", tmp_path / "g", "--query", name)
+        assert code == 0 and err == "" and "(1 row)" in out, (name, err)
 
 
 def test_runs_written_before_the_edges_table_still_open_and_seal(run: Path, tmp_path: Path) -> None:

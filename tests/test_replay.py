@@ -1,5 +1,5 @@
-"""`tracelab replay` of GridWar's games, headless, on the one path every run takes (a RuleSim sample run
-drawn on rules/gridworld/war.toml's `[board]`, a run of the spec path): .rrd files checked with rerun's own
+"""`tracelab replay` of GridWar's games, headless, on the one path every run takes (the sample runs, played
+through rules/gridworld/war*.toml and drawn on its `[board]`): .rrd files checked with rerun's own
 CLI and read back through rerun's chunk reader (entity paths, steps, fired-rule lines, agent positions
 against the run's steps rows, lanes, why documents), a training run per the training-run contract, --live
 on a run being written, and a golden file.
@@ -81,22 +81,22 @@ def test_one_recording_per_played_episode_that_rerun_verifies(advanced, advanced
 
 
 def test_entity_paths_and_steps(advanced_data) -> None:
-    ep0 = advanced_data["advanced/episode-0"]
+    ep2 = advanced_data["advanced/episode-2"]
     for path in ("/board/terrain", "/board/agents/red-agent-1",       # war.toml's [board] pieces
                  "/board/agents/blue-agent-1", "/board/bullets/red-bullet-1-1", "/board/bullets/blue-bullet-1-1",
                  "/board/fired", "/rules/log", "/why", "/plots/changed/atLoc",
-                 "/lanes/alive/red-agent-1", "/lanes/atLoc/blue-agent-1", "/plots/return/red-agent-1",
-                 "/plots/reward/blue-agent-1"):
-        assert path in ep0, path
-    assert [r["step"] for r in ep0["/why"]] == list(range(16))                   # steps 0..15
-    assert max(r["step"] for r in ep0["/rules/log"]) == 15
-    assert not any(p.startswith(("/train", "/graph")) for p in ep0)             # no training, no graph drawn
+                 "/lanes/alive/red-agent-1", "/lanes/atLoc/red-agent-1", "/plots/return/red-agent-1",
+                 "/plots/reward/red-agent-1"):
+        assert path in ep2, path
+    assert [r["step"] for r in ep2["/why"]] == list(range(15))                   # steps 0..14
+    assert max(r["step"] for r in ep2["/rules/log"]) == 14
+    assert not any(p.startswith(("/train", "/graph")) for p in ep2)             # no training, no graph drawn
 
 
 def test_the_return_plots_are_the_steps_rows_in_the_pieces_colours(advanced_data) -> None:
     ep0 = advanced_data["advanced/episode-0"]
     con = open_run(SAMPLES / "advanced")
-    for agent, colour in (("red-agent-1", (0xe6, 0x39, 0x46)), ("blue-agent-1", (0x34, 0x78, 0xf6))):
+    for agent, colour in (("red-agent-1", (0xe6, 0x39, 0x46)),):   # the learner's steps (blue is the spec's script)
         rows = con.execute("SELECT t, reward FROM steps WHERE episode = 0 AND agent = ? ORDER BY t", [agent]).fetchall()
         returns = [(r["step"], r["Scalars:scalars"][0]) for r in ep0[f"/plots/return/{agent}"] if "step" in r]
         assert returns[-1] == (rows[-1][0], pytest.approx(sum(w for _, w in rows)))
@@ -105,31 +105,33 @@ def test_the_return_plots_are_the_steps_rows_in_the_pieces_colours(advanced_data
 
 
 def test_the_fired_rule_log_of_a_known_step(advanced_data) -> None:
-    """Advanced episode 0, step 15: blue's bullet hits red on (4,3) and red dies."""
-    log = [r for r in advanced_data["advanced/episode-0"]["/rules/log"] if r["step"] == 15]
+    """Advanced episode 2, step 14: blue's bullet hits red on c6_3 and red dies."""
+    log = [r for r in advanced_data["advanced/episode-2"]["/rules/log"] if r["step"] == 14]
     con = open_run(SAMPLES / "advanced")
-    n = con.execute("SELECT count(*) FROM firings WHERE episode = 0 AND t = 15").fetchall()[0][0]
+    n = con.execute("SELECT count(*) FROM firings WHERE episode = 2 AND t = 14").fetchall()[0][0]
     assert len(log) == n
     lines = [(r["TextLog:level"][0], r["TextLog:text"][0]) for r in log]
-    hit = ("b_hit", "b_hit(B=blue-bullet-1-1, A=red-agent-1, Y=28): struck(blue-bullet-1-1,red-agent-1) [0,1] -> [1,1]")
+    hit = ("b_hit", "b_hit(B=blue-bullet-1-2, A=red-agent-1, Y=c6_3): "
+                    "struck(blue-bullet-1-2,red-agent-1) [0,1] -> [1,1]")
     death = ("d_killed", "d_killed(A=red-agent-1): alive(red-agent-1) [1,1] -> [0,0]")
     end = ("g_eliminated", "g_eliminated(T=red, A=red-agent-1): eliminated(red) [0,1] -> [1,1]")
     assert lines.index(hit) < lines.index(death) < lines.index(end)   # in the engine's order
 
 
 def test_the_struck_cell_is_marked_with_the_rule(advanced_data) -> None:
-    """war.toml's `annotate`: at step 15 the hit, the kill and the death on red's cell (4,3), drawn at
-    row 8-1-3 = 4; nothing is drawn past the episode's last step."""
-    ep0 = advanced_data["advanced/episode-0"]
-    fired = {r["step"]: r for r in ep0["/board/fired"]}
-    assert fired[15]["Boxes2D:centers"] == [[4.5, 4.5]]
-    assert fired[15]["Boxes2D:labels"][0].split("\n")[:3] == ["b_hit", "h_killed", "d_killed"]
-    assert max(fired) == 15
-    # the bullet that hit flew left from (5,3) at step 14 and is off the board at 15
-    bullet = ep0["/board/bullets/blue-bullet-1-1"]
-    np.testing.assert_allclose(latest_at(bullet, 14, "Arrows2D:origins"), [[5.8, 4.5]], atol=1e-5)
-    np.testing.assert_allclose(latest_at(bullet, 14, "Arrows2D:vectors"), [[-0.6, 0.0]], atol=1e-5)
-    assert [r.get("Arrows2D:origins") for r in bullet if r.get("step") == 15] == [[]]
+    """war.toml's `annotate`: at step 14 the hit, the kill and the death on red's cell c6_3 (row 6, column
+    3: the box at (3.5, 6.5)), the cell the bullet left (c5_3) beside it; nothing is drawn past the
+    episode's last step."""
+    ep2 = advanced_data["advanced/episode-2"]
+    fired = {r["step"]: r for r in ep2["/board/fired"]}
+    assert fired[14]["Boxes2D:centers"] == [[3.5, 6.5], [3.5, 5.5]]
+    assert fired[14]["Boxes2D:labels"][0].split("\n")[:3] == ["b_hit", "h_killed", "d_killed"]
+    assert max(fired) == 14
+    # the bullet that hit flew down from c5_3 at step 13 and is off the board at 14
+    bullet = ep2["/board/bullets/blue-bullet-1-2"]
+    np.testing.assert_allclose(latest_at(bullet, 13, "Arrows2D:origins"), [[3.5, 5.2]], atol=1e-5)
+    np.testing.assert_allclose(latest_at(bullet, 13, "Arrows2D:vectors"), [[0.0, 0.6]], atol=1e-5)
+    assert [r.get("Arrows2D:origins") for r in bullet if r.get("step") == 14] == [[]]
 
 
 @pytest.mark.parametrize("run", ["advanced", "nonmarkov"])
@@ -160,26 +162,26 @@ def test_agent_positions_agree_with_the_runs_steps_rows(run: str, tmp_path: Path
 
 
 def test_lanes_and_the_why_document_of_a_death(advanced_data) -> None:
-    ep0 = advanced_data["advanced/episode-0"]
-    alive = [(r["step"], r["StateChange:state"]) for r in ep0["/lanes/alive/red-agent-1"] if "step" in r]
-    assert alive == [(0, ["true"]), (15, ["false"])]
-    where = [r["StateChange:state"][0] for r in ep0["/lanes/atLoc/red-agent-1"] if "step" in r]
-    assert where[0] == "7@(7,0)"                                     # red's base, a cell id with its (x, y)
-    doc = ep0["/why"][15]["TextDocument:text"][0]
+    ep2 = advanced_data["advanced/episode-2"]
+    alive = [(r["step"], r["StateChange:state"]) for r in ep2["/lanes/alive/red-agent-1"] if "step" in r]
+    assert alive == [(0, ["true"]), (14, ["false"])]
+    where = [r["StateChange:state"][0] for r in ep2["/lanes/atLoc/red-agent-1"] if "step" in r]
+    assert where[0] == "c7_7"                                        # red's base, the spec's cell name
+    doc = ep2["/why"][14]["TextDocument:text"][0]
     con = open_run(SAMPLES / "advanced")
-    tree = render_why(explain(con, 0, "alive(red-agent-1)", 15), 15, run_grid(con))   # cells with (x, y)
+    tree = render_why(explain(con, 2, "alive(red-agent-1)", 14), 14, run_grid(con))
     assert "### Why alive(red-agent-1)" in doc and tree in doc       # as `tracelab why` prints it
     assert "It ended: loss" in doc
-    assert "### Why" not in ep0["/why"][3]["TextDocument:text"][0]   # nobody died in step 3
+    assert "### Why" not in ep2["/why"][3]["TextDocument:text"][0]   # nobody died in step 3
 
 
 def test_why_names_any_atom_of_a_game(tmp_path: Path) -> None:
     out = tmp_path / "why.rrd"
-    assert replay(SAMPLES / "advanced", "--episode", "0", "--why", "eliminated(red)", "--save", out) == 0
-    docs = [r["TextDocument:text"][0] for r in read_rrd(out)["advanced/episode-0"]["/why"]]
+    assert replay(SAMPLES / "advanced", "--episode", "2", "--why", "eliminated(red)", "--save", out) == 0
+    docs = [r["TextDocument:text"][0] for r in read_rrd(out)["advanced/episode-2"]["/why"]]
     con = open_run(SAMPLES / "advanced")
-    assert render_why(explain(con, 0, "eliminated(red)", 15), 15, run_grid(con)) in docs[15]
-    assert "### Why eliminated(red)" in docs[3]                     # never set until step 15, shown each step
+    assert render_why(explain(con, 2, "eliminated(red)", 14), 14, run_grid(con)) in docs[14]
+    assert "### Why eliminated(red)" in docs[3]                     # never set until step 14, shown each step
 
 
 def test_episode_selection_and_user_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -191,7 +193,7 @@ def test_episode_selection_and_user_errors(tmp_path: Path, capsys: pytest.Captur
     capsys.readouterr()
     assert replay(SAMPLES / "base", "--episode", "0", "--lanes", "alive,won", "--save", out) == 0
     assert sorted(p for p in read_rrd(out)["base/episode-0"] if p.startswith("/lanes/")) == [
-        "/lanes/alive/blue-agent-1", "/lanes/alive/red-agent-1", "/lanes/won/red"]   # any predicate of the run
+        "/lanes/alive/blue-agent-1", "/lanes/alive/red-agent-1", "/lanes/won/blue"]   # any predicate of the run
     for bad in (["--episode", "9"], ["--episodes", "3-x"], ["--outcome", "tie"], ["--lanes", "alive,mood"]):
         assert replay(SAMPLES / "advanced", *bad, "--save", tmp_path / "bad.rrd") == 1
         err = capsys.readouterr().err

@@ -127,3 +127,15 @@ def test_diff_of_identical_episodes(game) -> None:  # noqa: ANN001
     assert d.identical and d.rel_t is None
     d = first_divergence(game, 1, 2)
     assert d.rel_t == 0 and {r["atom"] for r in d.only_in_a} == {"atLoc(red-agent-1,18)"}
+
+
+def test_hid_behind_mountain_reads_a_spec_runs_cell_names() -> None:
+    """A spec run names its cells c{row}_{col} and states its mountains as static facts of the board:
+    sample_runs/base, episode 0, t=49 and 50, red on c5_3 below the mountain c4_3 with blue further up
+    column 3 (it read 0 everywhere while it took cells for y * 8 + x). RuleSim's numbered cells read as
+    before."""
+    root = Path(__file__).resolve().parents[1]
+    spec_run = open_run(root / "sample_runs" / "base")
+    assert run_query(spec_run, "hid_behind_mountain") == [(0, "loss", 74, 2), (1, "loss", 34, 0), (2, "loss", 17, 0)]
+    rulesim = open_run(root / "tests" / "data" / "rulesim" / "base")
+    assert run_query(rulesim, "hid_behind_mountain") == [(0, "win", 21, 0), (1, "win", 24, 0), (2, "win", 17, 0)]

@@ -252,7 +252,7 @@ def test_an_old_rulesim_policy_still_loads(capsys):
 
 @pytest.fixture
 def old_policy(tmp_path: Path) -> Path:
-    """A copy of a policy of GridWar's earlier trainer (RuleSim's format, tests/data/rulesim-policy)."""
+    """A copy of a policy of GridWar's earlier trainer (RuleSim's format, tests/data/rulesim/base-policy)."""
     return Path(shutil.copytree(RULESIM_POLICY, tmp_path / "old-policy"))
 
 
@@ -286,6 +286,11 @@ def test_a_malformed_old_policy_is_refused_in_one_line_and_runs_nothing(command,
         ["play", "--policy", str(old_policy), "--episodes", "1", "--no-trace"]
     assert fragment in error_line(capsys, main(argv))
     assert not (old_policy.parent / "payload-ran").exists()
+
+
+def test_the_sample_run_s_policy_still_loads(capsys):
+    sample = Path(__file__).resolve().parents[1] / "sample_runs" / "base-train" / "policy"
+    assert main(["eval", str(sample), "--games", "2"]) == 0
 
 
 # ---------------------------------------------------------------------------------------------------------

@@ -16,7 +16,7 @@ from tracelab.store import open_run
 from train_helpers import train_walk, walk_argv, walk_config
 
 ROOT = Path(__file__).resolve().parent.parent
-TRAINING_RUN = ROOT / "sample_runs" / "base-train"   # sealed, a real 200K-step training
+TRAINING_RUN = ROOT / "sample_runs" / "base-train"   # sealed, a real 150K-step training
 PLAY_RUN = ROOT / "sample_runs" / "base"
 
 
@@ -67,7 +67,7 @@ def test_export_converts_a_finished_run_to_tensorboard_events(tmp_path, capsys):
     out = capsys.readouterr().out
     store = store_metrics(TRAINING_RUN)
     rows = sum(len(v) for v in store.values())
-    assert out.startswith(f"wrote {rows:,} scalars ({len(store)} metric names, steps 2,048-200,000) to "
+    assert out.startswith(f"wrote {rows:,} scalars ({len(store)} metric names, steps 2,048-150,016) to "
                           f"{tb / 'base-train'}/")
     assert_same_curves(event_scalars(tb / "base-train"), store)
     # a second export into the same place would mix two copies under one name: refused, nothing touched

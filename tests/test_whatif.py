@@ -133,7 +133,7 @@ def tui_lists(root: Path, scenario: str) -> None:
 def test_a_user_error_is_one_line_and_writes_nothing(world: str, flags: list[str], message: str,
                                                     origins: dict[str, Path], tmp_path: Path,
                                                     capsys: pytest.CaptureFixture) -> None:
-    origin = ROOT / "sample_runs" / "base" if world == "gridwar" else origins[world]
+    origin = ROOT / "tests" / "data" / "rulesim" / "base" if world == "gridwar" else origins[world]
     out = tmp_path / "branch"
     assert main(["whatif", str(origin), *flags, "--run", str(out)]) == 1
     err = capsys.readouterr().err
@@ -166,7 +166,7 @@ def test_a_gridwar_trainers_policy_plays_on_a_branch_of_a_scenario_game(origins:
                                                                       capsys: pytest.CaptureFixture[str]) -> None:
     """An old policy (GridWar's trainer, RUN/policy of a RuleSim run) loads for whatif on a play --scenario
     run and plays the branch on greedily: its actions after `at` are its greedy choices."""
-    policy = ROOT / "sample_runs" / "base-train" / "policy"
+    policy = ROOT / "tests" / "data" / "rulesim" / "base-policy"
     run = branch(origins["war"], tmp_path / "b", 0, 1, "nothing", "--policy", str(policy))
     capsys.readouterr()
     played = rows(run, "SELECT count(*) FROM raw.decisions WHERE list_position(values, list_max(values)) - 1 = action")

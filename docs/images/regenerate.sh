@@ -23,16 +23,16 @@ im.resize((im.width // 2, im.height // 2), Image.LANCZOS).save(sys.argv[2])' "$t
 }
 
 # README and the top of docs/replay.md: a hit, a death, the end of the game and their why-trees
-tracelab replay sample_runs/advanced --episode 0 --open-at end --save "$tmp/kill.rrd"
+tracelab replay sample_runs/advanced --episode 2 --open-at end --save "$tmp/kill.rrd"
 shot "$tmp/kill.rrd" docs/images/replay.png
 
 # the non-Markov sample: 2v2 with slow agents
 tracelab replay sample_runs/nonmarkov --episode 0 --open-at end --save "$tmp/2v2.rrd"
 shot "$tmp/2v2.rrd" docs/images/replay-2v2.png
 
-# the trained sample's first traced evaluation game (episode 772): the policy's value of each action per
+# the trained sample's first traced evaluation game (episode 776): the policy's value of each action per
 # step and the return by reward term, stacked under the return, beside the board
-tracelab replay sample_runs/base-train --episode 772 --open-at end --save "$tmp/values.rrd"
+tracelab replay sample_runs/base-train --episode 776 --open-at end --save "$tmp/values.rrd"
 shot "$tmp/values.rrd" docs/images/replay-values.png
 
 # a game played here through the spec path: the advanced rules at two a team (war_advanced_2v2.toml)

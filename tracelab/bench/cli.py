@@ -44,9 +44,9 @@ def commands(runs: Path, copies: Path) -> list[tuple[str, tuple[str, ...], float
     return [
         ("sql", ("sql", play, "SELECT 1"), 1.5),
         ("trace", ("trace", play, "--episode", "0", "--from", "1", "--to", "4"), 1.5),
-        ("why", ("why", play, "captured(red)", "--episode", "2", "--at", "18", "--depth", "3"), 1.5),
-        ("why-not", ("why-not", play, "--rule", "snap_at", "--episode", "2", "--at", "18"), 1.5),
-        ("why --action", ("why", str(runs / "base-train"), "--action", "red-agent-1", "--episode", "772", "--at", "2"),
+        ("why", ("why", play, "captured(blue)", "--episode", "0", "--at", "21", "--depth", "3"), 1.5),
+        ("why-not", ("why-not", play, "--rule", "snap_at", "--episode", "0", "--at", "21"), 1.5),
+        ("why --action", ("why", str(runs / "base-train"), "--action", "red-agent-1", "--episode", "776", "--at", "2"),
          1.5),
         ("show", ("show", play), 1.5),
         ("check", ("check", play), 1.5),

@@ -120,7 +120,8 @@ def training_run(path: str, head: list[Any], last: list[tuple], best_of: dict[st
     status, config_text, board, command, names, source = head
     config = _json_object(config_text)
     if not names:
-        raise UserError(f"{without_metrics(path, board, command)}: compare puts training runs side by side; "
+        games = board is not None or spec_text_of(source, config) is not None
+        raise UserError(f"{without_metrics(path, games, command)}: compare puts training runs side by side; "
                         f"`tracelab diff RUN_A RUN_B` compares the episodes of two runs")
     metrics = {name: (step, value, best_of.get(name) if name in BEST_OF else None) for name, step, value in last}
     params = world_params(config, spec_text_of(source, config))
@@ -130,9 +131,10 @@ def training_run(path: str, head: list[Any], last: list[tuple], best_of: dict[st
                        metrics, max(0, names - MAX_METRIC_NAMES), params)
 
 
-def without_metrics(path: str, board: str | None, command: str | None) -> str:
-    """What a run without metrics is, for a one-line error: "'PATH' is a play run (...)"."""
-    if board is None:
+def without_metrics(path: str, games: bool, command: str | None) -> str:
+    """What a run without metrics is, for a one-line error: "'PATH' is a play run (...)"; `games`: a run of
+    games (RuleSim's board, or a spec world's: kind.is_game_run), else a reasoning."""
+    if not games:
         what = "a reasoning run (a trace, no training metrics)"
     elif str(command or "").startswith("tracelab train"):
         what = "a training run without metrics yet (stopped before its first log)"

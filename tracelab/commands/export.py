@@ -12,6 +12,7 @@ from typing import Any
 from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.commands.compare import without_metrics
 from tracelab.errors import UserError, store_errors
+from tracelab.store.kind import is_game_run
 from tracelab.store.reader import open_run, query_readonly, resolve_run, retrying
 from tracelab.train.tensorboard import EVENTS_GLOB, TensorBoardSink, export_metrics, run_log_dir
 
@@ -30,11 +31,11 @@ def run(args: argparse.Namespace) -> int:
         log_dir = run_log_dir(Path(args.tensorboard), run_name(path))
         con = open_run(path)
         try:
-            (status, board, command, metrics), = retrying(lambda: query_readonly(
-                con, "SELECT status, board, command, (SELECT count(*) FROM metrics) FROM run").fetchall())
+            (status, command, metrics), = retrying(lambda: query_readonly(
+                con, "SELECT status, command, (SELECT count(*) FROM metrics) FROM run").fetchall())
             if not metrics:
-                raise UserError(f"{without_metrics(args.run, board, command)}: export --tensorboard converts a "
-                                f"training run's metrics")
+                raise UserError(f"{without_metrics(args.run, is_game_run(con), command)}: export --tensorboard "
+                                f"converts a training run's metrics")
             counts = _export(con, log_dir)
         finally:
             con.close()

@@ -1,13 +1,15 @@
-"""What kind of run a run is, as the run itself says: the board it declares in its metadata
-(RunMeta.board, the `board` column of the `run` view). A game run declares its board and viewers draw its
-episodes on it; a run without a board (a reasoning run, `tracelab reason --run`) has only its trace,
-program and graph. The store reads no game's vocabulary to tell them apart. What the run says of its
-world beyond that (a spec world's board, params and wins) is in its config (`run_config`)."""
+"""What kind of run a run is, as the run itself says: the board it declares, in its metadata (RunMeta.board,
+the `board` column of the `run` view: runs written by RuleSim) or in its config (a spec world's `[board]`,
+tracelab.board.board_of_config). A game run declares its board and viewers draw its episodes on it; a run
+without a board (a reasoning run, `tracelab reason --run`) has only its trace, program and graph. The
+store reads no game's vocabulary to tell them apart. What the run says of its world beyond that (a spec
+world's board, params and wins) is in its config (`run_config`)."""
 from __future__ import annotations
 
 import json
 from typing import Any
 
+from tracelab.board import board_of_config
 from tracelab.store.reader import RunConnection
 
 
@@ -19,11 +21,12 @@ def run_board(con: RunConnection) -> str | None:
 
 
 def has_board(con: RunConnection) -> bool:
-    return run_board(con) is not None
+    """Whether the run declares a board: RuleSim's grid (run_board) or a spec's `[board]` in its config."""
+    return run_board(con) is not None or board_of_config(run_config(con)) is not None
 
 
 def is_game_run(con: RunConnection) -> bool:
-    """A run of games: it declares a board (the grid game's), or its episodes have returns (a spec
+    """A run of games: it declares a board (has_board), or its episodes have returns (a spec
     world's games, any env's); a reasoning run's have none."""
     return has_board(con) or bool(con.execute(
         "SELECT EXISTS (SELECT 1 FROM episodes WHERE reward IS NOT NULL)").fetchall()[0][0])

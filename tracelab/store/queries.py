@@ -6,7 +6,7 @@ with TYPE int, float or str and DEFAULT a literal or `null`. The SQL refers to i
 e.g. CAST($episode AS BIGINT), where DuckDB cannot infer its type from the context). A query about games
 says so with a line
     -- needs games : why        (agents' steps, outcomes: any run of games, a spec world's too)
-    -- needs board : why        (the grid game's board and labels)
+    -- needs board : why        (a board: the grid game's or a spec world's `[board]`)
 and is refused, with that reason, on a run that is not one (a reasoning run; tracelab.store.kind)."""
 from __future__ import annotations
 
@@ -44,7 +44,7 @@ class SavedQuery:
     sql: str
     params: list[Param] = field(default_factory=list)
     needs_board: str | None = None     # why it reads only game runs (None: it reads any run)
-    needs: str | None = None           # "games" (any game run) or "board" (the grid game's), as kind.can_read
+    needs: str | None = None           # "games" (any game run) or "board" (a run with a board), as kind.can_read
 
     def bind(self, given: dict[str, str]) -> dict[str, Any]:
         """Parameter values: the given ones (text, converted) over the defaults."""

@@ -71,7 +71,7 @@ class TracelabApp(App[None]):
                                     lambda tab=tab: screen.action_show(tab))
             yield SystemCommand("Saved queries", "pick a saved SQL query and its parameters",
                                 lambda: self._saved_queries(screen))
-            for direction, which in ((1, "Next"), (-1, "Previous")) if screen.source.board else ():
+            for direction, which in ((1, "Next"), (-1, "Previous")) if screen.source.games else ():
                 yield SystemCommand(f"{which} evaluation game", f"a training run's {which.lower()} evaluation game "
                                     f"in the trace (key {']' if direction > 0 else '['})",
                                     lambda d=direction: self._eval_game(screen, d))

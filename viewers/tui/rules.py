@@ -1,6 +1,6 @@
 """The Rules view: firings per rule (total, episodes it fired in, per outcome of those episodes; on a run
-without a board, whose outcomes are not games, the first and last t it fired at) with the rules that never
-fired listed as such (coverage); `e` switches to firings per episode and rule. Enter on a
+that is not of games, a reasoning run, the first and last t it fired at) with the rules that never fired
+listed as such (coverage); `e` switches to firings per episode and rule. Enter on a
 rule filters the trace by it."""
 from __future__ import annotations
 
@@ -72,7 +72,7 @@ class RulesPane(Vertical):
 
     @property
     def per_rule_columns(self) -> list[Column]:
-        return PER_RULE_COLUMNS if self.source.board else BOARDLESS_PER_RULE_COLUMNS
+        return PER_RULE_COLUMNS if self.source.games else BOARDLESS_PER_RULE_COLUMNS
 
     def compose(self) -> ComposeResult:
         yield LazyTable(self.per_rule_columns, id="rules-table")

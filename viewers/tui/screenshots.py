@@ -1,6 +1,6 @@
 """The README's pictures of the TUI, made by driving the app headless (`tracelab tui --screenshots DIR`):
 
-tui-trace-why.png   sample_runs/advanced, episode 0 filtered to the death of red-agent-1 (the trace with
+tui-trace-why.png   sample_runs/advanced, episode 2 filtered to the death of red-agent-1 (the trace with
                     its board), above the why tree of that change
 tui-reasoning.png   sample_runs/supply-chain, a reasoning run (no board): the trace filtered by the rule
                     alert at t=3 with the alerts true then beside it and the graph around the alerted
@@ -35,6 +35,7 @@ from tracelab.viewers.tui.trace import TracePane
 from tracelab.viewers.tui.why import WhyPane
 
 SIZE = (124, 34)
+DEATH = (2, 14)  # sample_runs/advanced: red-agent-1 is shot dead in episode 2 at t=14 (episode, t)
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -52,14 +53,20 @@ async def _trace_and_why(run: Path) -> tuple[str, str]:
     async with app.run_test(size=SIZE) as pilot:
         episodes = app.screen.query_one("#ep-table", LazyTable)
         await _until(pilot, lambda: episodes.idle and episodes.cursor_row is not None)
+        episodes.move_to(next(i for i in range(episodes.count) if episodes.row(i)["episode"] == DEATH[0]))
         await pilot.press("enter")
         pane = app.screen.query_one(TracePane)
         await _until(pilot, lambda: pane.table.idle and pane.table.count > 0)
-        pane.field("range").value = "15"
+        pane.field("range").value = str(DEATH[1])
         await pilot.press("slash", "enter")
-        await _until(pilot, lambda: pane.filter is not None and pane.filter.t_from == 15 and pane.table.idle)
+        await _until(pilot, lambda: pane.filter is not None and pane.filter.t_from == DEATH[1] and pane.table.idle)
         death = next(i for i in range(pane.table.count) if pane.table.row(i)["atom"] == "alive(red-agent-1)")
         pane.table.move_to(death)
+        side = pane.side      # a spec's board above the atoms at t and the graph (GraphSide), or RuleSim's
+        await _until(pilot, lambda: pane.board is not None and pane.board.board is not None
+                     and pane.board.step == DEATH[1] and (not isinstance(side, GraphSide) or (
+                         side.atoms is not None and side.atoms.t == DEATH[1] and side.hood is not None
+                         and side.table.idle)))
         await pilot.pause(0.5)
         trace_svg = app.export_screenshot(title="tracelab tui · trace")
         await pilot.press("w")

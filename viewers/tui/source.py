@@ -14,7 +14,7 @@ from typing import Any, TypeVar
 import pyarrow as pa
 
 from tracelab.store.catalog import short_command
-from tracelab.store.kind import is_game_run, run_board
+from tracelab.store.kind import has_board, is_game_run, run_board
 from tracelab.store.reader import RunConnection, fetch_arrow, open_run, query_readonly, retrying, run_info
 from tracelab.store.several import SeveralRunsConnection, each_run_stream, run_names
 
@@ -90,6 +90,9 @@ class RunSource(LockedConnection):
         # the board the run declares (a game's), None for a run without one (a reasoning run): the views
         # show the atoms and the graph instead, and no game columns
         self.board: str | None = self.call(run_board)
+        # a board of either kind (RuleSim's above, or a spec's [board] in the config): the saved queries
+        # that read the board's labels are offered
+        self.has_board: bool = self.call(has_board)
         # a run of games (a board, or episodes with returns: a spec world's): return, outcome, game queries
         self.games: bool = self.call(is_game_run)
         # a training run's evaluation games (kind 'eval'), with a board or without (a declared world's,
@@ -138,12 +141,14 @@ class SeveralRunsSource(LockedConnection):
                   for name in con.names]
         # the saved queries about games are offered only when every run has a board
         self.board: str | None = boards[0] if all(boards) else None
-        games = []
+        games, with_board = [], []
         for i in range(len(con.names)):
             con.use(i)
             games.append(is_game_run(con))
+            with_board.append(has_board(con))
         con.use(None)
         self.games = all(games)
+        self.has_board = all(with_board)   # the saved queries that read a board: every run has one
 
     def fetch(self, con: RunConnection, sql: str, params: dict[str, Any] | None, saved: bool,
               limit: int) -> pa.Table:

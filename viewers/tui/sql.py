@@ -71,8 +71,8 @@ class SavedQueryPicker(ModalScreen[tuple[SavedQuery, dict[str, str]] | None]):
     BINDINGS = [Binding("escape", "dismiss(None)", "close")]
 
     def __init__(self, board: bool = True, games: bool = True) -> None:
-        """board: the run has the grid game's board; games: it is a run of games. The saved queries that
-        need what the run is not are not offered (`-- needs board` or `-- needs games` in their header:
+        """board: the run has a board (RuleSim's or a spec's); games: it is a run of games. The saved
+        queries that need what the run is not are not offered (`-- needs board` or `-- needs games` in their header:
         `tracelab sql --query` refuses them on such a run)."""
         super().__init__()
         self.queries = [q for q in list_queries() if q.needs is None or (board if q.needs == "board" else games)]
@@ -299,7 +299,7 @@ class SqlPane(Vertical):
             self.params, self.params_for = params or None, query.sql.strip()
             self.run_sql(query.sql.strip(), params or None, label=query.name)
 
-        self.app.push_screen(SavedQueryPicker(board=self.source.board is not None, games=self.source.games), chosen)
+        self.app.push_screen(SavedQueryPicker(board=self.source.has_board, games=self.source.games), chosen)
 
     def action_history(self) -> None:
         if not self.history:

@@ -206,9 +206,10 @@ class TracePane(Vertical):
 
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
         # a run without a board has its atoms beside the trace (key b: "atoms"); evaluation games are a
-        # game run's (it declares a board) or a training's of a declared world (no such board); a live run may get them
+        # game run's (RuleSim's or a spec world's: it says so when it has none) or a training's; a live run may
+        # get them
         if action == "eval_game":
-            return self.source.board is not None or self.source.has_eval_games or self.source.live
+            return self.source.games or self.source.has_eval_games or self.source.live
         if action == "toggle_board":
             return self.source.board is not None
         if action == "toggle_side":
