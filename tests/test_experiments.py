@@ -22,6 +22,7 @@ from train_helpers import training  # noqa: E402
 
 from tracelab.cli import main  # noqa: E402
 from tracelab.store import open_run, run_info  # noqa: E402
+from tracelab.train.experiments.runner import run_query  # noqa: E402
 from tracelab.train.experiments.stats import spread, two_proportion_test, wilson  # noqa: E402
 
 
@@ -187,7 +188,9 @@ def test_reward_shaping_traces_spec_games_with_the_specs_reward_params(tmp_path,
         assert episodes == figures["games"] == 6
         assert figures["shot_per_game"] == pytest.approx(shot / 6)
         assert figures["invalid_per_game"] == pytest.approx(invalid / 6)
-        assert figures["hidden_steps_per_game"] is None  # the spec's cells are named, not numbered
+        hid = run_query(Path(figures["trace_run"]), "hid_behind_mountain")  # the spec's cells, c{row}_{col}
+        assert len(hid) == 6 and figures["hidden_steps_per_game"] == pytest.approx(
+            sum(r["hidden_steps"] for r in hid) / 6)
         assert figures["wins"] + figures["losses"] <= 6
 
 

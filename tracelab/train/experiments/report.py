@@ -363,11 +363,7 @@ def experiment_sections(result: ExperimentResult) -> list[str]:
               "ended next to a mountain between it and a blue agent), `learner_events` (red shot, unsafe moves, "
               "invalid actions = shooting with no ammo), `actions_per_win`, `steps_before_loss` (red's last "
               "actions in lost games); `shoot share` = red's shooting actions among its actions (from `steps`). "
-              "The traces are the spec world's (rules/gridworld/war.toml): `hid_behind_mountain` reads a cell as "
-              "its number y * width + x, the spec's board names it c{row}_{col}, so its columns read `-` (not "
-              "measured) until the query reads the board's names; and `tracelab sql RUN --query NAME` refuses "
-              "the queries that need a board on a spec run (its board is in its config, not the run's `board`): "
-              "the figures here come through the library (experiments/runner.py, run_query).",
+              "The traces are the spec world's (rules/gridworld/war.toml).",
               "", "| reward setting | seed | games | hidden steps / game | games with hiding | red shot / game | "
               "invalid (no ammo) / game | unsafe / game | shoot share | wins | actions per win | losses | last "
               "actions before a loss | method win rate (500-game eval) |",

@@ -256,15 +256,10 @@ def query_figures(run: Path, actions: list[str]) -> dict[str, Any]:
     for r in before_loss:  # steps.action is the spec's action id
         name = actions[r["action"]] if 0 <= r["action"] < len(actions) else str(r["action"])
         last_actions[name] = last_actions.get(name, 0) + 1
-    # hid_behind_mountain reads a cell as its number y * width + x (RuleSim's graph); the spec's board names
-    # it c{row}_{col}, which the query reads as no cell: its figures are left out (None), not a false 0
-    numbered = run_sql(run, "SELECT count(*) AS n FROM changes c JOIN atoms a ON a.atom = c.atom_id WHERE "
-                            "c.label = 'atLoc' AND TRY_CAST(a.arg1 AS INTEGER) IS NOT NULL")[0]["n"]
     return {
         "games": len(ev),
-        "hidden_steps_per_game": (float(np.mean([r["hidden_steps"] for r in hid])) if hid else 0.0) if numbered
-        else None,
-        "games_with_hiding": float(sum(r["hidden_steps"] > 0 for r in hid) / games) if numbered else None,
+        "hidden_steps_per_game": float(np.mean([r["hidden_steps"] for r in hid])) if hid else 0.0,
+        "games_with_hiding": float(sum(r["hidden_steps"] > 0 for r in hid) / games),
         "shot_per_game": float(sum(r["shot"] for r in ev) / games),
         "unsafe_per_game": float(sum(r["unsafe"] for r in ev) / games),
         "invalid_per_game": float(sum(r["invalid"] for r in ev) / games),
