@@ -213,7 +213,7 @@ def _why_not(p: argparse.ArgumentParser) -> None:
                    help="instead of a rule: why --agent did not take action NAME at step --at (the mask, or "
                         "how far its value fell below the chosen action's)")
     p.add_argument("--agent", help="with --action: the agent (default: the episode's one deciding agent)")
-    p.add_argument("--grounding", default="", help="variable values, e.g. A=red-agent-1,X=16 "
+    p.add_argument("--grounding", default="", help="variable values, e.g. A=red-agent-1,X=c3_1 "
                                                    "(unbound variables are searched)")
     p.add_argument("--at", type=non_negative_int, required=True,
                    help="the timestep the head would have changed (a rule with delay k reads its body at at-k)")

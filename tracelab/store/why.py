@@ -24,7 +24,7 @@ from tracelab.store.schema import CAUSE_NAMES
 
 
 def parse_bindings(text: str) -> dict[str, str]:
-    """`A=red-agent-1,X=16` as {variable: value} (why-not's --grounding, the TUI's why-not line); raises
+    """`A=red-agent-1,X=c3_1` as {variable: value} (why-not's --grounding, the TUI's why-not line); raises
     ValueError naming the part it cannot read."""
     out: dict[str, str] = {}
     for part in filter(None, (p.strip() for p in text.split(","))):

@@ -1,6 +1,6 @@
 """The Why view: the proof tree of the change selected in the trace (tracelab.store.why.explain_change: that
 row's own rule and grounding, even when its atom changed again later in the step) as an expandable tree,
-and why-not for a rule and bindings (`tracelab why-not`): type `RULE A=red-agent-1,X=16 at T` in the
+and why-not for a rule and bindings (`tracelab why-not`): type `RULE A=red-agent-1,X=c3_1 at T` in the
 why-not line. For a decision (`w` in the trace's decision panel) the agent's why, as `tracelab why
 --action` prints it: the actions ranked by value, the observation it acted on (Enter on a feature read
 from an atom opens that atom's why tree), the reward terms; and why-not of the action under the panel's
@@ -81,7 +81,7 @@ def parse_why_not(text: str) -> tuple[str, dict[str, str], int]:
     """`RULE A=x,B=y at T` (bindings optional); raises ValueError."""
     m = _WHY_NOT.match(text)
     if not m:
-        raise ValueError(f"cannot read {text!r}: write RULE A=red-agent-1,X=16 at 12")
+        raise ValueError(f"cannot read {text!r}: write RULE A=red-agent-1,X=c3_1 at 12")
     return m[1], parse_bindings(m[2].replace(" ", ",")), int(m[3])
 
 
@@ -101,7 +101,7 @@ class WhyPane(Vertical):
         tree: Tree[WhyNode] = Tree("(no explanation yet)", id="why-tree")
         tree.show_root = True
         yield tree
-        yield Input(placeholder="why-not: RULE A=red-agent-1,X=16 at T", id="why-not", compact=True)
+        yield Input(placeholder="why-not: RULE A=red-agent-1,X=c3_1 at T", id="why-not", compact=True)
         with VerticalScroll(id="why-not-out"):
             yield Static("", id="why-not-text")
 
