@@ -106,8 +106,8 @@ def test_a_run_reopened_in_the_session_opens_where_it_was_left() -> None:
         table = await episodes_ready(app, pilot)
         episodes = app.screen.query_one("EpisodesPane")
         app.screen.query_one("#ep-outcome").value = "loss"
-        await pilot.press("s", "s")                                 # losses, sorted by return
-        await wait_for(pilot, lambda: loaded(table) and table.count == 2 and episodes.sort_key == "reward")
+        await pilot.press("s", "s")                                 # losses (all 3: red plays at random), by return
+        await wait_for(pilot, lambda: loaded(table) and table.count == 3 and episodes.sort_key == "reward")
         await pilot.press("down")
         await wait_for(pilot, lambda: table.cursor == 1)
         chosen = table.cursor_row["episode"]
@@ -127,10 +127,10 @@ def test_a_run_reopened_in_the_session_opens_where_it_was_left() -> None:
         table = await episodes_ready(app, pilot)
         episodes = app.screen.query_one("EpisodesPane")
         assert active_view(app) == "episodes"
-        await wait_for(pilot, lambda: loaded(table) and table.count == 2)  # the kept filter's reload, late when loaded
+        await wait_for(pilot, lambda: loaded(table) and table.count == 3)  # the kept filter's reload, late when loaded
         await pilot.pause(0.3)                                      # no late reload puts the cursor on row 1
         assert app.screen.query_one("#ep-outcome").value == "loss" and episodes.sort_key == "reward"
-        assert table.count == 2 and table.cursor == 1 and table.cursor_row["episode"] == chosen
+        assert table.count == 3 and table.cursor == 1 and table.cursor_row["episode"] == chosen
         await pilot.press("2")                                      # and its trace as left
         pane = app.screen.query_one(TracePane)
         trace = pane.table
