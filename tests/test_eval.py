@@ -35,13 +35,17 @@ def _saved(tmp_path, scenario: Scenario, action_id: int) -> Path:
 def _walk_policy(tmp_path) -> tuple[Path, EnvPolicy]:
     """A policy of train --env on the 4x4 walk (tests/train_helpers.py), seeded random weights: it wins some
     games and loses others against the opponent."""
+    return _random_policy(tmp_path / "walk-policy", walk_source(), seed=3)
+
+
+def _random_policy(path: Path, source, seed: int) -> tuple[Path, EnvPolicy]:  # noqa: ANN001
+    """A policy of train --env on `source` with seeded random weights (16 hidden units), saved at `path`."""
     import torch
-    source = walk_source()
     encoder, n_actions, spec = probe_env(source)
     net = NetSpec(encoder.size, (16,), n_actions)
-    rng = np.random.default_rng(3)
+    rng = np.random.default_rng(seed)
     weights = {k: rng.normal(0, 1, shape).astype(np.float32) for k, shape in net.state_dict_shapes().items()}
-    path = save_env_policy(tmp_path / "walk-policy", source, {k: torch.from_numpy(v) for k, v in weights.items()},
+    path = save_env_policy(path, source, {k: torch.from_numpy(v) for k, v in weights.items()},
                            net.to_json(), encoder, list(spec.action_names), False, {"run": None, "step": 0})
     return path, EnvPolicy(NumpyQ(net, weights), encoder)
 
@@ -148,20 +152,13 @@ def test_a_policy_of_train_on_a_gridwar_id_plays_without_env(tmp_path, capsys):
     """README's `tracelab eval runs/base-1/policy`: a policy train --scenario base wrote (its env:
     tracelab/GridWar-base-v0) is evaluated on that id without --env, against the method's opponent (p = 0.3)
     unless --opponent-p says, and played by play --policy."""
-    import torch
-
     from tracelab.envs.declared.env_source import EnvSource
     source = EnvSource("tracelab/GridWar-base-v0", {})
-    encoder, n_actions, spec = probe_env(source)
-    net = NetSpec(encoder.size, (16,), n_actions)
-    rng = np.random.default_rng(4)
-    weights = {k: rng.normal(0, 1, shape).astype(np.float32) for k, shape in net.state_dict_shapes().items()}
-    path = save_env_policy(tmp_path / "policy", source, {k: torch.from_numpy(v) for k, v in weights.items()},
-                           net.to_json(), encoder, list(spec.action_names), False, {"run": None, "step": 0})
+    path, policy = _random_policy(tmp_path / "policy", source, seed=4)
     assert main(["eval", str(path), "--games", "8", "--num-envs", "4", "--seed", "2", "--json"]) == 0
     figures = json.loads(capsys.readouterr().out)
     against = EnvSource(source.name, {"p_toward": 0.3})
-    expected = evaluate_env(EnvPolicy(NumpyQ(net, weights), encoder), against, 8, 2, 4).to_dict()
+    expected = evaluate_env(policy, against, 8, 2, 4).to_dict()
     assert figures["env"] == against.to_json() and figures["opponent_p"] == 0.3
     for key in ("games", "wins", "losses", "truncated", "mean_return", "mean_steps"):
         assert figures[key] == pytest.approx(expected[key]), key
