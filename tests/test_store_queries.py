@@ -37,11 +37,23 @@ def test_generic_queries_on_the_walk_run(tmp_path: Path) -> None:
     assert sorted((e, r, n) for e, r, n, *_ in firings) == sorted(direct)
     coverage = {r[0]: r[3] for r in run_query(con, "rule_coverage")}
     assert coverage == {"near": 7, "go": 5, "leave": 5, "alarm": 2}
-    assert run_query(con, "actions_per_win") == [(1, 6.0, 6.0)]
+    assert run_query(con, "actions_per_win") == [(1, 6.0, 1, 6.0)]
     before = run_query(con, "steps_before_loss", n=2)
     assert [(r[0], r[1], r[4]) for r in before] == [(12, 4, 1), (12, 5, 1)]
     summary = {r[0]: r[2:8] for r in run_query(con, "episode_summary")}
     assert summary[11] == ("truncated", 6, -12.0, 7, 1, 0)
+
+
+def test_actions_per_win_counts_only_the_won_games_whose_steps_were_recorded() -> None:
+    """A training run traces a few evaluation games among thousands: an untraced win has no step rows,
+    and counting it as 0 actions made base-train's figure 0.2 actions a win (it is about 30)."""
+    con = open_run(Path(__file__).resolve().parents[1] / "sample_runs" / "base-train")
+    (wins, _, traced, per_win), = run_query(con, "actions_per_win", learner="red-agent-%")
+    counts = [n for _, n in con.execute(
+        "SELECT e.episode, count(*) FROM episodes e JOIN steps s ON s.episode = e.episode "
+        "WHERE e.outcome = 'win' AND s.agent LIKE 'red-agent-%' GROUP BY e.episode").fetchall()]
+    assert 0 < traced == len(counts) < wins
+    assert per_win == pytest.approx(sum(counts) / len(counts))
 
 
 # ---- a hand-made grid-world trace: 8 wide, a mountain at cell 19 (x=3, y=2) ---------------------------

@@ -265,7 +265,7 @@ def query_figures(run: Path, actions: list[str]) -> dict[str, Any]:
         "invalid_per_game": float(sum(r["invalid"] for r in ev) / games),
         "shoot_share": float(shots["shots"] / shots["actions"]) if shots["actions"] else 0.0,
         "wins": int(apw[0]["wins"]) if apw else 0,
-        "actions_per_win": float(apw[0]["actions_per_win"]) if apw and apw[0]["wins"] else float("nan"),
+        "actions_per_win": float(apw[0]["actions_per_win"]) if apw and apw[0]["traced_wins"] else float("nan"),
         "losses": len({r["episode"] for r in before_loss}),
         "actions_before_loss": dict(sorted(last_actions.items(), key=lambda kv: -kv[1])),
     }
