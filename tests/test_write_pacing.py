@@ -7,8 +7,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from tracelab import RULES_DIR
 from tracelab.envs.declared.gym_env import DeclaredEnv
+from tracelab.store import write_pacing
 from tracelab.store.reader import open_run
 from tracelab.store.write_pacing import WRITE_INTERVAL_S, WRITE_MAX_INTERVAL_S, WritePacing
 from tracelab.store.writer import TraceWriter
@@ -159,3 +162,12 @@ def test_the_writer_reports_its_last_publications_cpu(tmp_path: Path) -> None:
 
 def test_the_defaults_keep_a_quarter_second_and_a_ceiling() -> None:
     assert WRITE_INTERVAL_S == 0.25 and WRITE_INTERVAL_S < WRITE_MAX_INTERVAL_S <= 2.0
+
+
+def test_a_program_sets_the_constants_before_it_makes_its_env(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(write_pacing, "WRITE_COST_FACTOR", 2.0)
+    c = Clocks()
+    pacing = WritePacing(lambda: c.publish_s, wall=c.wall, cpu=c.cpu)
+    write_costing(c, pacing, 0.1)  # owes 2 x 0.1 s of CPU (the default factor: 1 s)
+    c.work(0.25, 0.25)
+    assert pacing.due()

@@ -2,8 +2,8 @@
 writer: a write is a table per kind of row in the caller and a publication of every table in the writer's
 thread (a Parquet part each, and a manifest; ended episodes ask for one at once), a cost that hardly
 depends on its size. Written on a fixed clock, a recorder slowed by the machine's load or by heavier rows
-(decisions and reward terms) published more often for the same games, and the writer's thread took 30-50%
-of the stepping thread's CPU at load 8-15 (docs/benchmarks.md, "`bench eval`").
+(decisions and reward terms) published more often for the same games, and the writer's thread took about
+40% of the stepping thread's CPU in `tracelab bench eval` at load 8 (docs/benchmarks.md, "`bench eval`").
 
 The rule (WritePacing): a write is due
 - when WRITE_ROWS step rows wait (the writer's buffers stay bounded), or
@@ -32,14 +32,17 @@ class WritePacing:
 
     def __init__(self, publish_cost: Callable[[], float] = lambda: 0.0, *,
                  wall: Callable[[], float] = time.monotonic, cpu: Callable[[], float] = time.thread_time,
-                 interval_s: float = WRITE_INTERVAL_S, cost_factor: float = WRITE_COST_FACTOR,
-                 max_interval_s: float = WRITE_MAX_INTERVAL_S) -> None:
+                 interval_s: float | None = None, cost_factor: float | None = None,
+                 max_interval_s: float | None = None) -> None:
+        """The module's constants unless given, read now (a program may set them before making its env)."""
         self.publish_cost, self.wall, self.cpu = publish_cost, wall, cpu
-        self.interval_s, self.cost_factor, self.max_interval_s = interval_s, cost_factor, max_interval_s
+        self.interval_s = WRITE_INTERVAL_S if interval_s is None else interval_s
+        self.cost_factor = WRITE_COST_FACTOR if cost_factor is None else cost_factor
+        self.max_interval_s = WRITE_MAX_INTERVAL_S if max_interval_s is None else max_interval_s
         self.write_cost_s = 0.0  # the last write's CPU in the caller
         self._written_at = wall()
         self._cpu_at = cpu()
-        self._look_at = self._written_at + interval_s  # no clock but the wall's before this
+        self._look_at = self._written_at + self.interval_s  # no clock but the wall's before this
 
     def due(self) -> bool:
         now = self.wall()
