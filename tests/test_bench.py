@@ -190,6 +190,9 @@ def test_bench_eval_quick(capsys: pytest.CaptureFixture) -> None:
     assert all(s[f"ratio_{k}"] > 0 for k in ("wall", "cpu", "thread")) and isinstance(s["goal_met"], bool)
     assert all(s[f"agent_ratio_{k}"] > 0 for k in ("wall", "cpu", "thread"))  # decisions and reward terms
     assert isinstance(s["agent_goal_met"], bool)
+    # every traced block publishes at least its last flush (each block's 2 evaluations of 3 games)
+    assert set(s["publications_per_evaluation"]) == {"traced", "traced_world"}
+    assert all(n >= 0.5 for n in s["publications_per_evaluation"].values())
     m = r["memory"]
     assert m["steps"] == 1000 and m["command"].startswith("tracelab train --scenario base")
     assert m["rss_mb"] and all(mb > 0 for _, mb in m["rss_mb"]) and m["peak_mb"] >= max(mb for _, mb in m["rss_mb"])

@@ -74,11 +74,12 @@ def _policy(source: Any) -> Any:
 Evaluation = Callable[[int], list[tuple[float, int]]]  # evaluation round -> the games' (return, steps)
 
 
-def evaluations(worlds: int, run_dir: Path) -> tuple[Evaluation, Evaluation, Evaluation, Callable[[], None],
-                                                     Callable[[], None]]:
+def evaluations(worlds: int, run_dir: Path) -> tuple[Evaluation, Evaluation, Evaluation,
+                                                     Callable[[], tuple[int, int]], Callable[[], None]]:
     """(traced, untraced, traced_world, published, close): an evaluation round of `worlds` games, traced
     into a new run at `run_dir`, untraced, or traced without the agent's decisions and reward terms into
-    `run_dir`-world; `published()` returns once the traced rows are in the runs."""
+    `run_dir`-world; `published()` returns once the traced rows are in the runs, with the two runs'
+    publications so far (traced, traced_world)."""
     from tracelab.envs.declared.env_source import EnvSource
     from tracelab.store import TraceWriter
     from tracelab.train.env_policy import make_vector_env, play_env_games
@@ -99,9 +100,10 @@ def evaluations(worlds: int, run_dir: Path) -> tuple[Evaluation, Evaluation, Eva
     def games(result: Any) -> list[tuple[float, int]]:
         return list(zip(result.returns, result.steps))
 
-    def published() -> None:
+    def published() -> tuple[int, int]:
         writer.flush()
         world_writer.flush()
+        return writer.flushes, world_writer.flushes
 
     def close() -> None:
         trace.close()
@@ -126,21 +128,25 @@ def speed(worlds: int, per_block: int, repeats: int) -> dict[str, Any]:
             kinds = {"traced": traced, "untraced": untraced, "traced_world": traced_world}
             figures: dict[str, dict[str, list[float]]] = {k: {"wall": [], "cpu": [], "thread": []} for k in kinds}
             steps = {k: 0 for k in kinds}
+            publications = {"traced": 0, "traced_world": 0}
             for block in range(max(1, repeats)):
                 rounds = range(1 + block * per_block, 1 + (block + 1) * per_block)
                 for name, play in kinds.items():
+                    before = published() if name.startswith("traced") else (0, 0)
                     t0, c0, m0 = time.perf_counter(), time.process_time(), time.thread_time()
                     for round_no in rounds:
                         steps[name] += sum(n for _, n in play(round_no))
                     if name.startswith("traced"):
-                        published()
+                        publications[name] += published()[name == "traced_world"] - before[name == "traced_world"]
                     for key, used in (("wall", time.perf_counter() - t0), ("cpu", time.process_time() - c0),
                                       ("thread", time.thread_time() - m0)):
                         figures[name][key].append(used / per_block)
         finally:
             close()
     out: dict[str, Any] = {"worlds": worlds, "evaluations_per_block": per_block, "same_games": same,
-                           "game_steps": steps}
+                           "game_steps": steps,
+                           "publications_per_evaluation": {k: n / (per_block * max(1, repeats))
+                                                           for k, n in publications.items()}}
     for name, f in figures.items():
         out[name] = {f"{key}_s": summarize(v).to_dict() for key, v in f.items()}
     for key in ("wall", "cpu", "thread"):  # medians of the blocks' ratios: each pair shares the load
@@ -195,7 +201,9 @@ def report(r: dict[str, Any]) -> str:
              f"an evaluation of {s['worlds']} games of {r['scenario']} (one per world, a seeded untrained policy, "
              f"the same seeds), ms each, {s['evaluations_per_block']} per block; the same games: "
              f"{'yes' if s['same_games'] else 'NO'}\n"
-             + format_table(["evaluation", "wall", "CPU (process)", "CPU (game's thread)", "CPU spread"], rows),
+             + format_table(["evaluation", "wall", "CPU (process)", "CPU (game's thread)", "CPU spread"], rows)
+             + "\nthe writer's publications per evaluation (the block's last flush included): "
+             + ", ".join(f"{k} {v:.2f}" for k, v in s.get("publications_per_evaluation", {}).items()),
              f"goal traced <= {GOAL_RATIO}x untraced per CPU second: "
              f"{'met' if s['goal_met'] else 'not met'} ({s['ratio_cpu']:.2f}x)",
              f"goal decisions and reward terms <= {AGENT_GOAL_RATIO}x the world's trace alone (traced_world) per "

@@ -55,15 +55,6 @@ _OPEN_WRITERS: "weakref.WeakSet[TraceWriter]" = weakref.WeakSet()
 # a loaded machine) holds about twice this: at 500k rows a 10,000-episode play peaked ~60 MB higher
 # (docs/benchmarks/history.md, "Memory of long runs").
 MAX_PENDING_ROWS = 131_072
-# The cadence of a caller that streams an env's games (envs/declared/recording.py): it keeps what it
-# records and calls the writer when WRITE_ROWS step rows wait, or WRITE_INTERVAL_S after its last write,
-# and at close (Arrow tables per step, or per episode at one world, cost more than the engine's step:
-# docs/benchmarks.md). Each write costs ~2 ms in the caller and a publication of four tables here (an
-# episode end asks for one), whatever its size: every 0.1 s, that was a fifth of a traced play's CPU at
-# one world. A live reader sees an episode ~0.3 s after it ended; the writer publishes rows at most a
-# second later anyway.
-WRITE_ROWS = 4096
-WRITE_INTERVAL_S = 0.25
 # How many steps' trace rows a recorder (a declared env's, a reasoning's) lets wait in the engine before it
 # takes them: a live reader sees a step that late at most.
 HANDOVER_STEPS = 64
@@ -162,6 +153,9 @@ class TraceWriter:
         self._sources_written = False
         self._open_episodes: set[int] = set()
         self.flushes = 0
+        # the flusher thread's CPU seconds for its last publication, read by a recorder that paces its writes by
+        # it (store/write_pacing.py; a float's assignment is atomic)
+        self.last_publish_cpu_s = 0.0
         # A reopened run's program and vocabulary, to check a new engine's against (first call only)
         self._stored_tables: dict[str, pa.Table] | None = None
         self.next_free_episode = 0  # one past the highest episode id the run held when opened
@@ -508,11 +502,13 @@ class TraceWriter:
                 request, closing = self._requested, self._closing
                 self._cond.notify_all()  # a caller held back by back-pressure goes on now
             try:
+                cpu0 = time.thread_time()
                 if any(take.values()):
                     for name in TABLES:
                         if take[name]:
                             self._parts[name].publish(take[name])
                     write_manifest(self.run_dir, self._parts, self.flushes + 1)  # now readers see them
+                    self.last_publish_cpu_s = time.thread_time() - cpu0
             except BaseException as e:  # noqa: BLE001 - reported to the caller by _check()
                 with self._cond:
                     self._error = e

@@ -16,13 +16,13 @@ predicates are the agent's and which are draws (by name) is in the run's config 
 Rows are taken from the engine in chunks: when an episode ends (so an episode's rows are all out before
 its end is written), every HANDOVER_STEPS steps, when the engine's TRACE_HANDOVER_ROWS rows wait (the engine's buffer stays
 bounded), before a reset, and at close; taking them after every step cost more than the engine's step at
-one world (docs/benchmarks.md). Everything is written at the writer's cadence (store/writer.py: WRITE_ROWS
-steps, or WRITE_INTERVAL_S seconds), so a live reader sees a game that late at most, plus the writer's own
-delay. Outcomes:
+one world (docs/benchmarks.md). Everything is written at the pace of store/write_pacing.py: after
+WRITE_INTERVAL_S (0.25 s) on a quiet machine, later when the writes would cost more than a tenth of the
+stepping thread's CPU (a loaded machine, heavier rows), at most WRITE_MAX_INTERVAL_S (2 s) after the last
+write; a live reader sees a game that late at most, plus the writer's own delay. Outcomes:
 "terminated", "truncated", or "aborted" (cut short by a reset or close)."""
 from __future__ import annotations
 
-import time
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -34,7 +34,8 @@ from tracelab.envs.declared.world import DeclaredWorld
 from tracelab.store.agent_rows import AgentRows, Decisions, ObservationName, PolicyOutput, RewardTerms
 from tracelab.store.convert import utc_now
 from tracelab.store.sources import read_sources, source_summaries
-from tracelab.store.writer import HANDOVER_STEPS, WRITE_INTERVAL_S, WRITE_ROWS
+from tracelab.store.write_pacing import WRITE_ROWS, WritePacing
+from tracelab.store.writer import HANDOVER_STEPS
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Mapping
@@ -122,8 +123,8 @@ class DeclaredRecorder:
     """Records `world`'s episodes into `writer`; the world's engine must trace (DeclaredWorld(trace=True))
     and must not have stepped since it was built. `close()` closes the writer.
 
-    What an episode records is kept and written every WRITE_ROWS steps or WRITE_INTERVAL_S seconds (and
-    at close): episode begins, change rows, step rows, then episode ends, so a reader never sees an ended
+    What an episode records is kept and written every WRITE_ROWS steps or when `pacing` says (and at
+    close): episode begins, change rows, step rows, then episode ends, so a reader never sees an ended
     episode without its rows. Writing per episode cost more than the toy-text games' steps.
 
     The run's config gets declared_run_config (the world's external facts, its board, its sources), so a run
@@ -170,7 +171,9 @@ opened by gym.make(id, trace_writer=...) reads as one `tracelab play` wrote.
         self._obs: list[np.ndarray] = []
         self._ends: list[dict[str, Any]] = []
         self._clock = (np.zeros(1, np.int64), np.zeros(1, np.int64))  # (t0, episode) for take_trace
-        self._written_at = time.monotonic()
+        # when the kept records are written (store/write_pacing.py); the writer's last publication is part
+        # of a write's cost
+        self.pacing = WritePacing(lambda: writer.last_publish_cpu_s)
         self._steps_waiting = 0  # steps whose rows the engine holds
         self._steps_kept = 0     # steps whose records are kept here
         self._length = 0
@@ -232,8 +235,8 @@ opened by gym.make(id, trace_writer=...) reads as one `tracelab play` wrote.
             self._take_rows()
         if ended:
             self._end(self.world.outcome() if terminated else "truncated")
-        if self._steps_kept >= WRITE_ROWS or time.monotonic() - self._written_at >= WRITE_INTERVAL_S:
-            self.write_pending()
+        if self._steps_kept >= WRITE_ROWS or self.pacing.due():
+            self.pacing.write(self.write_pending)
 
     def close(self, status: str = "finished") -> None:
         """The rows still in the engine, the running episode ended as "aborted", all written, the
@@ -252,7 +255,6 @@ opened by gym.make(id, trace_writer=...) reads as one `tracelab play` wrote.
         records (a row per agent), the episode ends."""
         w, eng = self.writer, self.world.engine
         self._steps_kept = 0
-        self._written_at = time.monotonic()
         if self._begins:
             begins, self._begins = self._begins, []
             w.begin_episodes(begins)
