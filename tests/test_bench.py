@@ -164,6 +164,11 @@ def test_bench_aggregates_quick(capsys: pytest.CaptureFixture) -> None:
     assert by_rule["spread Δt=1"] == by_rule["[>= 1] Δt=1"]  # the same meaning, the same atoms
 
 
+# The kernel folds a process's RSS counters into its high-water mark (wait4's ru_maxrss) lazily, so a sample
+# of the live RSS can read a little above the peak reported at exit (467.44 against 467.30 MB, seen once).
+PEAK_LAG_MB = 2.0
+
+
 def test_bench_play_quick(capsys: pytest.CaptureFixture) -> None:
     r = bench_json(capsys, "play", "--repeats", "1", "--memory", "20")
     machine(r["machine"])
@@ -174,7 +179,8 @@ def test_bench_play_quick(capsys: pytest.CaptureFixture) -> None:
             positive(s[name]["steps_per_cpu_s"])
         assert s["ratio"] > 0 and s["cpu_ratio"] > 0 and isinstance(s["goal_met"], bool)
     (m,) = r["memory"]
-    assert m["episodes"] == 20 and len(m["rss_mb"]) == 10 and m["peak_mb"] >= max(m["rss_mb"]) > 0
+    assert m["episodes"] == 20 and len(m["rss_mb"]) == 10 and max(m["rss_mb"]) > 0
+    assert m["peak_mb"] >= max(m["rss_mb"]) - PEAK_LAG_MB
 
 
 def test_bench_eval_quick(capsys: pytest.CaptureFixture) -> None:
@@ -195,7 +201,8 @@ def test_bench_eval_quick(capsys: pytest.CaptureFixture) -> None:
     assert all(n >= 0.5 for n in s["publications_per_evaluation"].values())
     m = r["memory"]
     assert m["steps"] == 1000 and m["command"].startswith("tracelab train --scenario base")
-    assert m["rss_mb"] and all(mb > 0 for _, mb in m["rss_mb"]) and m["peak_mb"] >= max(mb for _, mb in m["rss_mb"])
+    assert m["rss_mb"] and all(mb > 0 for _, mb in m["rss_mb"])
+    assert m["peak_mb"] >= max(mb for _, mb in m["rss_mb"]) - PEAK_LAG_MB
     assert m["growth_mb"] == pytest.approx(m["end_mb"] - m["after_warm_up_mb"])
 
 
