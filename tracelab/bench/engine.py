@@ -92,7 +92,7 @@ class ColdCompile:
             finally:
                 self._tmp.cleanup()
                 self._probe = None
-        return {"program": "game rules + advanced scenario", "runs": len(runs),
+        return {"program": "war.toml's advanced game (its program and facts)", "runs": len(runs),
                 "build_and_first_step_s": summarize([r["build_s"] + r["step_s"] for r in runs]).to_dict(),
                 "process_to_first_step_s": summarize([r["since_start_s"] for r in runs]).to_dict()}
 
