@@ -21,11 +21,12 @@ import torch
 from tracelab.bench.common import fmt_num, format_table, machine_info, summarize
 from tracelab.bench.engine import machine_line
 from tracelab.envs.declared.env_source import EnvSource
+from tracelab.envs.declared.gridwar_scenarios import training_sources
 from tracelab.game.scenario import builtin_scenario
 from tracelab.store import TraceWriter
 from tracelab.train.config import TrainConfig
 from tracelab.train.env_policy import make_vector_env
-from tracelab.train.env_trainer import EnvTrainer, gridwar_sources
+from tracelab.train.env_trainer import EnvTrainer
 from tracelab.train.qnet import NetSpec
 from tracelab.train.train_loop import make_learner
 
@@ -44,8 +45,8 @@ TEAM = 5  # the team size of the 5v5 figure
 
 
 def _base_source(cfg: TrainConfig) -> EnvSource:
-    """The env `tracelab train --scenario base` trains on with these settings (GridWar's spec id)."""
-    return gridwar_sources(cfg, builtin_scenario("base"))[0]
+    """The env `tracelab train --scenario base` trains on with these settings (its spec id)."""
+    return training_sources(builtin_scenario("base"), cfg.opponent_p, cfg.eval_p, cfg.non_markov)[0]
 
 
 class EndToEnd:

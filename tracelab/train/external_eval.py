@@ -23,11 +23,10 @@ from tracelab.errors import UserError
 from tracelab.store.agent_rows import PolicyOutput
 from tracelab.store.writer import TraceWriter
 from tracelab.train.env_policy import (EVAL_STEP_CAP, EnvEvalResult, declares_outcomes, make_vector_env,
-                                       one_env_actor, play_env_games)
+                                       one_env_actor, play_env_games, team_env_actor)
 from tracelab.envs.declared.env_source import EnvSource
 from tracelab.train.env_source import team_spec
 from tracelab.train.rngs import eval_seed
-from tracelab.train.team_policy import team_env_actor
 
 # deferred: the declared world's recording and TeamEnv load the engine (numba), which a gymnasium env's
 # training does not need

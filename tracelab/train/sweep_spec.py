@@ -42,7 +42,7 @@ FILE_KEYS = {"set", "grid", "random", "samples", "scheduler", "metric", "mode"}
 # one sweep trains one scenario or world (its runs are compared with each other); where the runs go is --out's
 NOT_SEARCHED = {"scenario": "one sweep trains one scenario", "agents": "one sweep trains one scenario",
                 "env": "one sweep trains one world"}
-ENV_KEY = "env"  # `--set env=SPEC_OR_ID`: the trials train on that env (train --env), not on GridWar
+ENV_KEY = "env"  # `--set env=SPEC_OR_ID`: the trials train on that env (train --env), not on a scenario
 
 
 class SweepSpecError(UserError):
@@ -205,10 +205,12 @@ def build_spec(*, sets: list[str] = (), grids: list[str] = (), randoms: list[str
             env = value.strip()
         else:
             fixed[name] = parse_value(name, value, where)
-    gridwar = [k for k in (*fixed, *raw["grid"], *raw["random"]) if k in GRIDWAR_ONLY] if env else []
-    if gridwar:
-        raise SweepSpecError(f"{', '.join(gridwar)} describe{'s' * (len(gridwar) == 1)} GridWar; a sweep of "
-                             f"--set env={env} searches the DQN's settings only")
+    if env:
+        from tracelab.envs.declared.gridwar_scenarios import scenario_settings_given
+        refused = scenario_settings_given([k for k in (*fixed, *raw["grid"], *raw["random"]) if k in GRIDWAR_ONLY],
+                                          f"a sweep of --set env={env} searches the DQN's settings only")
+        if refused:
+            raise SweepSpecError(refused)
     try:
         TrainConfig(**fixed)
     except ValueError as e:

@@ -21,7 +21,7 @@ from tracelab.train.experiments.runner import (
     EvalFigures,
     SeedRun,
     final_eval_seed,
-    gridwar_source,
+    scenario_arm_source,
     p_suffix,
     run_query,
     run_sql,
@@ -144,7 +144,7 @@ def run_experiment(exp: Experiment, budget: Budget, out_dir: Path, command: str,
             ar.extra[seed] = portability(sr, ar.arm.build_scenario(), train_config(exp, ar.arm, budget, seed),
                                          budget.eval_games, say)
         elif exp.name == "reward-shaping":
-            ar.extra[seed] = shaping_traces(sr, gridwar_source(train_config(exp, ar.arm, budget, seed),
+            ar.extra[seed] = shaping_traces(sr, scenario_arm_source(train_config(exp, ar.arm, budget, seed),
                                                                ar.arm.build_scenario()),
                                             out_dir, 6 if quick else 100, command, say)
     result.wall_s = time.perf_counter() - t0
@@ -197,7 +197,7 @@ def portability(sr: SeedRun, scenario: Any, cfg: TrainConfig, games: int, say: S
     # deferred: RefSim's numba kernels, which a report written again does not need
     from tracelab.train.experiments.refsim_games import refsim_games
 
-    policy = load_env_policy(sr.policy_dir, gridwar_source(cfg, scenario))[0]
+    policy = load_env_policy(sr.policy_dir, scenario_arm_source(cfg, scenario))[0]
     out: dict[str, Any] = {}
     for p in EVAL_PS:
         rules = sr.final[p]

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
+from tracelab.envs.declared.gridwar_scenarios import training_sources
 from tracelab.game.scenario import Scenario
 from tracelab.store import TraceWriter
 from tracelab.store.queries import get_query
@@ -124,12 +125,12 @@ def train_seed(cfg: TrainConfig, scenario: Scenario | EnvSource, run_dir: Path, 
     receive the training's metrics besides the run; `started` is called with the trainer before it trains
     (a sweep's trial stops it through it: stop_requested). `scenario` an EnvSource: a world other than
     GridWar, trained with train --env's trainer (_world_parts); a GridWar scenario trains through its spec
-    as `train --scenario` does (_gridwar_parts)."""
+    as `train --scenario` does (_scenario_parts)."""
     # deferred: torch and the trainers, which reading results and queries does not need
     import torch
 
     from tracelab.envs.declared.env_source import EnvSource
-    parts = _world_parts if isinstance(scenario, EnvSource) else _gridwar_parts
+    parts = _world_parts if isinstance(scenario, EnvSource) else _scenario_parts
     meta, make_trainer, final_evaluation = parts(cfg, scenario, command, eval_ps, eval_games)
     writer = TraceWriter.open(run_dir, meta)
     torch.set_num_threads(cfg.threads)
@@ -163,22 +164,21 @@ def train_seed(cfg: TrainConfig, scenario: Scenario | EnvSource, run_dir: Path, 
 FinalEvaluation = Callable[[Any, Any], dict[float, EvalFigures]]  # (trainer, policy or its folder) -> per p
 
 
-def gridwar_source(cfg: TrainConfig, scenario: Scenario) -> EnvSource:
-    """The GridWar spec id and params `scenario` trains on (env_trainer.gridwar_sources: its --env-arg
+def scenario_arm_source(cfg: TrainConfig, scenario: Scenario) -> EnvSource:
+    """The spec id and params a scenario arm trains on (gridwar_scenarios.training_sources: its --env-arg
     values, the scenario's rewards among them)."""
-    from tracelab.train.env_trainer import gridwar_sources
-    return gridwar_sources(cfg, scenario)[0]
+    return training_sources(scenario, cfg.opponent_p, cfg.eval_p, cfg.non_markov)[0]
 
 
-def _gridwar_parts(cfg: TrainConfig, scenario: Scenario, command: str, eval_ps: tuple[float, ...],
+def _scenario_parts(cfg: TrainConfig, scenario: Scenario, command: str, eval_ps: tuple[float, ...],
                    eval_games: int) -> tuple[dict[str, Any], Any, FinalEvaluation]:
     """GridWar through its spec, as `train --scenario` trains it: the run meta, EnvTrainer on the scenario's
     GridWar id (evaluating at --eval-p), and the final evaluation against each opponent p of `eval_ps`
     (the same env with that p_toward), counted by the spec's [end] win / loss."""
     from tracelab.train.env_policy import evaluate_env, load_env_policy
-    from tracelab.train.env_trainer import EnvTrainer, env_run_meta, gridwar_sources
+    from tracelab.train.env_trainer import EnvTrainer, env_run_meta
 
-    source, eval_source = gridwar_sources(cfg, scenario)
+    source, eval_source = training_sources(scenario, cfg.opponent_p, cfg.eval_p, cfg.non_markov)
     meta = env_run_meta(cfg, source, f"tracelab train (from: {command})", None, scenario)
     meta["config"]["eval_env"] = eval_source.to_json()
 
