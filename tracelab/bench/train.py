@@ -1,5 +1,5 @@
 """`tracelab bench train`: training transitions/s end to end with the method's defaults (1v1 base through
-GridWar's spec, as `tracelab train --scenario base` trains it: EnvTrainer, one update per transition, live
+war.toml, as `tracelab train --scenario base` trains it: EnvTrainer, one update per transition, live
 logging into a run) with the fused learner and with the readable one (tracelab/train/dqn.py), and beside
 them, in the same process: the update alone (the fused learner's, the readable learner's, and the textbook
 autograd + torch.optim.Adam update of the same network and batch written inline) and the spec's batched env
@@ -233,7 +233,7 @@ def report(r: dict[str, Any]) -> str:
     goals = format_table(["goal", "target", "measured", "result"],
                          [[g["goal"], g["target"], g["measured"], "met" if g["met"] else "not met"]
                           for g in r["goals"]])
-    head = (f"1v1 base through GridWar's spec (EnvTrainer), method's DQN defaults (64 tanh, batch 128, Adam 5e-4), "
+    head = (f"1v1 base through war.toml (EnvTrainer), method's DQN defaults (64 tanh, batch 128, Adam 5e-4), "
             f"{r['envs']} worlds, torch threads {r['threads']}, live logging into a run; "
             f"{r['repeats']} rounds of {r['block_steps']:,} training steps, {r['updates_per_block']:,} updates "
             f"of each kind, and env steps")

@@ -260,7 +260,7 @@ def load_env_policy(path: str | Path, given: EnvSource) -> tuple[EnvPolicy | Tea
 
 def recorded_env(path: str | Path) -> EnvSource | None:
     """The env a policy of train (ENV_FORMAT) was trained on, where it is one of tracelab's registered ids
-    (GridWar's, the toy-text worlds'), which eval and play then play without --env; None for a spec file or
+    (the war game's, the toy-text worlds'), which eval and play then play without --env; None for a spec file or
     another id, which the user names (a policy file never decides which file tracelab reads)."""
     f, raw = read_policy_json(path)
     source = env_source_from_json(check_file(raw, ENV_SPEC_SCHEMA, f)["env"], str(f))
@@ -273,7 +273,7 @@ def recorded_env(path: str | Path) -> EnvSource | None:
 @dataclass
 class EnvEvalResult:
     """An evaluation's games on any env. Where the world declares how a game ends (a spec's `[end] win`,
-    `loss`) its outcomes are counted as the method counted GridWar's: wins, losses, draws (ended by
+    `loss`) its outcomes are counted as the method counted the war game's: wins, losses, draws (ended by
     neither) and truncated games, and the method's win rate, in which a game cut short counts as a loss
     (a spec world's cut is its own step limit, so its method win rate is its win rate); otherwise returns
     and the success rate (return > 0)."""
@@ -349,7 +349,7 @@ class EnvEvalResult:
         m = {"games": self.games, "mean_return": self.mean_return, "success_rate": self.success_rate,
              "terminated": self.terminated, "truncated": self.truncated,
              "mean_steps": float(np.mean(self.steps)) if self.steps else 0.0}
-        if self.wins is not None:  # GridWar's names, which the views plot and the reports read
+        if self.wins is not None:  # the war game's names, which the views plot and the reports read
             m.update(wins=self.wins, losses=self.losses, draws=self.draws, win_rate=self.win_rate,
                      method_win_rate=self.win_rate)
             if self.win_steps:
@@ -370,7 +370,7 @@ class EnvEvalResult:
 def make_vector_env(source: EnvSource, worlds: int, by_term: bool = False,
                     kernel: str = "auto") -> tuple[Any, str | None]:
     """`worlds` copies of the env stepped together, a world that ends reset within its step (SAME_STEP, as
-    GridWar's vector env): a declared world's own batched engine (DeclaredVectorEnv, every world in one
+    the war game's vector env): a declared world's own batched engine (DeclaredVectorEnv, every world in one
     engine call), else gymnasium's SyncVectorEnv over the env. World i steps as the env reset with seed
     s + i either way. `by_term`: each world's reward by term is read (train --decompose), which only a
     world of its own keeps: SyncVectorEnv. `kernel`: the batched engine's (train --kernel). Returns (the env,

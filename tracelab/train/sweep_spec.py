@@ -276,7 +276,7 @@ def _top_level(top: dict[str, Any], samples: int | None, scheduler: str | None, 
 
 def evaluation_metrics() -> list[str]:
     """What a trainer's evaluation writes (Tune reads a trial at its evaluations): the spec path's
-    (env_policy.EnvEvalResult), with the counts and win rates of a world that declares a win (GridWar's
+    (env_policy.EnvEvalResult), with the counts and win rates of a world that declares a win (the war game's
     scenarios; `--set env=...` only where its world declares one, `eval/mean_return` its default)."""
     from tracelab.train.env_policy import EnvEvalResult
     return list(EnvEvalResult(wins=0, win_steps=[0]).metrics())

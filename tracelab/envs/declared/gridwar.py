@@ -26,12 +26,15 @@ if TYPE_CHECKING:
 # scenario module only to compare a scenario with what a spec plays; registering the ids does not need them
 
 WAR_SPEC = RULES_DIR / "gridworld" / "war.toml"
+# the ids, as the benches, the experiments and the tests name them
+BASE_ID, ADVANCED_ID = "tracelab/GridWar-base-v0", "tracelab/GridWar-advanced-v0"
+NONMARKOV_ID = "tracelab/GridWar-nonmarkov-v0"
 # a GridWar id -> its spec and the params that make its scenario (the others keep the spec's defaults)
 GRIDWAR_SPEC_IDS: dict[str, tuple[Path, dict[str, Any]]] = {
-    "tracelab/GridWar-base-v0": (WAR_SPEC, {"advanced": False}),
-    "tracelab/GridWar-advanced-v0": (WAR_SPEC, {"advanced": True}),
+    BASE_ID: (WAR_SPEC, {"advanced": False}),
+    ADVANCED_ID: (WAR_SPEC, {"advanced": True}),
     # two agents a team, agent 2 slow, observing the last step too: a team (gym.make_vec, parallel_env)
-    "tracelab/GridWar-nonmarkov-v0": (RULES_DIR / "gridworld" / "war_nonmarkov.toml", {}),
+    NONMARKOV_ID: (RULES_DIR / "gridworld" / "war_nonmarkov.toml", {}),
 }
 # the old RuleSim env's keyword arguments, as the spec's params name them
 RENAMED = {"opponent_p": "p_toward"}
@@ -83,7 +86,7 @@ def make_vec_env(env_id: str, num_envs: int = 1, **kwargs: Any) -> DeclaredVecto
     return DeclaredVectorEnv(spec, num_envs, **params)
 
 
-def parallel_env(env_id: str = "tracelab/GridWar-base-v0", **kwargs: Any) -> DeclaredParallelEnv:
+def parallel_env(env_id: str = BASE_ID, **kwargs: Any) -> DeclaredParallelEnv:
     """GridWar as a PettingZoo ParallelEnv: every red agent a player (agents_per_team of them), the blue
     team the scripted opponent written as rules."""
     from tracelab.envs.declared.parallel_env import DeclaredParallelEnv
@@ -94,7 +97,7 @@ def parallel_env(env_id: str = "tracelab/GridWar-base-v0", **kwargs: Any) -> Dec
 
 
 def _one_agent(env_id: str, params: dict[str, Any]) -> None:
-    if env_id == "tracelab/GridWar-nonmarkov-v0" or params.get("agents_per_team", 1) != 1:
+    if env_id == NONMARKOV_ID or params.get("agents_per_team", 1) != 1:
         size = params.get("agents_per_team", 2)
         raise UserError(f"{env_id}: agents_per_team={size!r} is not supported by a gymnasium Env, which plays "
                         "one agent (gym.make_vec's team vector env and tracelab.envs.declared.gridwar.parallel_env "
@@ -131,10 +134,10 @@ def scenario_env(scenario: Scenario, p_toward: float, stack_previous: bool) -> t
     except ValueError as e:
         raise UserError(str(e)) from None
     if Path(path) == WAR_NONMARKOV:
-        return "tracelab/GridWar-nonmarkov-v0", {k: v for k, v in params.items() if v != _NONMARKOV_DEFAULTS[k]}
+        return NONMARKOV_ID, {k: v for k, v in params.items() if v != _NONMARKOV_DEFAULTS[k]}
     if Path(path) != WAR_SPEC:
         return path, params
-    name = "tracelab/GridWar-advanced-v0" if params.pop("advanced") else "tracelab/GridWar-base-v0"
+    name = ADVANCED_ID if params.pop("advanced") else BASE_ID
     return name, {k: v for k, v in params.items() if v != _SPEC_DEFAULTS[k]}
 
 

@@ -1,4 +1,4 @@
-"""Training and evaluating for the experiments, through the spec path (EnvTrainer on GridWar's spec,
+"""Training and evaluating for the experiments, through the spec path (EnvTrainer on war.toml,
 rules/gridworld/war*.toml, or on a world of its own): one run per seed, with the final policy evaluated
 against each opponent setting and those figures written into the run's own `metrics` (suffix `@p0.3`,
 `@p0.7`, docs/training.md), so `tracelab sql` sees them."""
@@ -28,9 +28,9 @@ if TYPE_CHECKING:
     from tracelab.train.env_trainer import EnvTrainer
     from tracelab.train.tensorboard import MetricSink
 
-WORLD_P = 0.0  # a world other than GridWar has no opponent setting: its final evaluation's key
+WORLD_P = 0.0  # a world other than the war game has no opponent setting: its final evaluation's key
 FINAL_EVAL_ROUND = 1_000_000  # seeds of the final evaluations: apart from the training's rounds
-METHOD_CUT = 200  # the method's evaluation cut games at 200 steps: GridWar's spec's step limit
+METHOD_CUT = 200  # the method's evaluation cut games at 200 steps: war.toml's step limit
 
 
 @dataclass
@@ -124,7 +124,7 @@ def train_seed(cfg: TrainConfig, scenario: Scenario | EnvSource, run_dir: Path, 
     against each opponent p in `eval_ps`, writing `eval/...@pP` metrics at the last step. `metric_sinks`
     receive the training's metrics besides the run; `started` is called with the trainer before it trains
     (a sweep's trial stops it through it: stop_requested). `scenario` an EnvSource: a world other than
-    GridWar, trained with train --env's trainer (_world_parts); a GridWar scenario trains through its spec
+    the war game, trained with train --env's trainer (_world_parts); a war game scenario trains through its spec
     as `train --scenario` does (_scenario_parts)."""
     # deferred: torch and the trainers, which reading results and queries does not need
     import torch
@@ -172,8 +172,8 @@ def scenario_arm_source(cfg: TrainConfig, scenario: Scenario) -> EnvSource:
 
 def _scenario_parts(cfg: TrainConfig, scenario: Scenario, command: str, eval_ps: tuple[float, ...],
                    eval_games: int) -> tuple[dict[str, Any], Any, FinalEvaluation]:
-    """GridWar through its spec, as `train --scenario` trains it: the run meta, EnvTrainer on the scenario's
-    GridWar id (evaluating at --eval-p), and the final evaluation against each opponent p of `eval_ps`
+    """A scenario through its spec, as `train --scenario` trains it: the run meta, EnvTrainer on the
+    scenario's spec id (evaluating at --eval-p), and the final evaluation against each opponent p of `eval_ps`
     (the same env with that p_toward), counted by the spec's [end] win / loss."""
     from tracelab.train.env_policy import evaluate_env, load_env_policy
     from tracelab.train.env_trainer import EnvTrainer, env_run_meta
@@ -196,7 +196,7 @@ def _scenario_parts(cfg: TrainConfig, scenario: Scenario, command: str, eval_ps:
 
 def _world_parts(cfg: TrainConfig, source: EnvSource, command: str, eval_ps: tuple[float, ...],
                  eval_games: int) -> tuple[dict[str, Any], Any, FinalEvaluation]:
-    """A world other than GridWar: train --env's run meta and trainer; its final evaluation, `eval_games`
+    """A world other than the war game: train --env's run meta and trainer; its final evaluation, `eval_games`
     games counted as the world declares, keyed WORLD_P (it has no opponent setting)."""
     from tracelab.train.env_policy import evaluate_env, load_env_policy
     from tracelab.train.env_trainer import EnvTrainer, env_run_meta
