@@ -98,9 +98,6 @@ def _scenario_world(args: argparse.Namespace) -> tuple[EnvSource, Any]:
     plays, is refused in one line saying how to go on."""
     with store_errors():  # a policy or scenario that does not load
         spec = read_rulesim_spec(args.policy)
-        if spec is None:
-            raise UserError(f"{args.policy}: not a tracelab policy (policy.json's format is neither train's nor "
-                            f"RuleSim's trainer's)")
         scenario = load_scenario_arg(args.scenario) if args.scenario else rulesim_scenario(spec)
     return rulesim_source(args.policy, spec, scenario, args.opponent_p), scenario
 

@@ -37,7 +37,7 @@ from tracelab.envs.declared.play import load_declared, make_declared_env, play_e
 from tracelab.errors import UserError, store_errors
 from tracelab.store import TraceWriter
 from tracelab.store.layout import check_new_run_dir
-from tracelab.train.env_policy import EVAL_STEP_CAP, greedy_actor, recorded_env
+from tracelab.train.env_policy import ENV_FORMAT, EVAL_STEP_CAP, greedy_actor, policy_format, recorded_env
 
 
 def run(args: argparse.Namespace) -> int:
@@ -71,7 +71,7 @@ def _world(args: argparse.Namespace) -> tuple[Any, Any, Any]:
     path = args.policy if args.policy not in (None, "random") else None
     with store_errors():  # a policy that does not load is the user's to fix
         # a policy of RuleSim's trainer names its scenario (and whether it saw the previous step)
-        rulesim = None if path is None else read_rulesim_spec(path)
+        rulesim = None if path is None or policy_format(path) == ENV_FORMAT else read_rulesim_spec(path)
     if args.env is not None:
         refuse_scenario_flags(args, "--env plays the world its spec declares (war.toml takes --env-arg "
                                     "p_toward=...)")

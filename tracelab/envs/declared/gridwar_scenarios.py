@@ -123,13 +123,11 @@ RULESIM_SPEC_SCHEMA = {
 }
 
 
-def read_rulesim_spec(path: str | Path) -> dict[str, Any] | None:
-    """policy.json of a policy of RuleSim's trainer, checked against its schema, or None for a policy of
-    another format; refused in one line unless it converts exactly into an EnvPolicy: one agent, one
-    network (a team's network read each agent's view with its own blocks first, which tracelab's team
-    policies do not: the line gives the command that trains the scenario again, on its spec)."""
-    if policy_format(path) != RULESIM_FORMAT:
-        return None
+def read_rulesim_spec(path: str | Path) -> dict[str, Any]:
+    """policy.json of a policy of RuleSim's trainer, checked against its schema, and refused in one line
+    unless it converts exactly into an EnvPolicy: one agent, one network (a team's network read each
+    agent's view with its own blocks first, which tracelab's team policies do not: the line gives the
+    command that trains the scenario again, on its spec)."""
     f, raw = read_policy_json(path)
     spec = check_file(raw, RULESIM_SPEC_SCHEMA, f)
     scenario = rulesim_scenario(spec, f)
@@ -194,5 +192,6 @@ def _load_rulesim_policy(path: str | Path, spec: dict[str, Any], given: EnvSourc
 def load_trained(path: str | Path, given: EnvSource) -> EnvPolicy | TeamPolicy:
     """A policy of either format, to play on the world `given` names: one of train (load_env_policy: the same
     env it was trained on), or one of RuleSim's trainer converted."""
-    spec = read_rulesim_spec(path)
-    return load_env_policy(path, given)[0] if spec is None else _load_rulesim_policy(path, spec, given)
+    if policy_format(path) == RULESIM_FORMAT:
+        return _load_rulesim_policy(path, read_rulesim_spec(path), given)
+    return load_env_policy(path, given)[0]
