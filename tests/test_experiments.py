@@ -89,7 +89,7 @@ def test_1v1_base_quick(tmp_path, capsys):
     assert "already exists" in capsys.readouterr().err
 
 
-SPEC_TRAINER = "trains GridWar through its spec (rules/gridworld/war*.toml, EnvTrainer)"
+SPEC_TRAINER = "trains the war game through its spec (rules/gridworld/war*.toml, EnvTrainer)"
 
 
 @pytest.mark.parametrize("name", ["1v1-base", "5v5-base", "portability", "markov-vs-nonmarkov",

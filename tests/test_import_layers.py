@@ -156,3 +156,12 @@ def test_the_commands_parser_loads_no_heavy_package() -> None:
 def test_the_cycle_finder_finds_one() -> None:
     assert _a_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
     assert _a_cycle({"a": {"b"}, "b": set()}) is None
+
+
+def test_only_the_war_games_registration_and_refsim_name_it() -> None:
+    """Issue 38: the war game's code lives in its registration (envs/declared/gridwar*.py) and in RefSim, its
+    oracle (tracelab/game/); the generic stack names it nowhere, not even as an example."""
+    named = sorted(p.relative_to(ROOT).as_posix() for tree in ("tracelab", "viewers")
+                   for p in (ROOT / tree).rglob("*.py") if "GridWar" in p.read_text())
+    assert "tracelab/envs/declared/gridwar.py" in named  # the reading found the registration
+    assert [f for f in named if not f.startswith(("tracelab/envs/declared/gridwar", "tracelab/game/"))] == []

@@ -94,8 +94,9 @@ def test_an_old_gridwar_policy_plays_as_it_did_on_rulesim(tmp_path):
     from rulesim_policies import RULESIM_POLICY
     from tracelab.envs.declared.env_source import EnvSource
     from tracelab.envs.declared.gridwar import scenario_spec
+    from tracelab.envs.declared.gridwar_scenarios import load_trained, read_rulesim_spec, rulesim_scenario
     from tracelab.envs.declared.play import load_declared, make_declared_env, play_episodes
-    from tracelab.train.env_policy import greedy_actor, load_trained, read_rulesim_spec, rulesim_scenario
+    from tracelab.train.env_policy import greedy_actor
 
     scenario = rulesim_scenario(read_rulesim_spec(RULESIM_POLICY))
     source = EnvSource(*scenario_spec(scenario))

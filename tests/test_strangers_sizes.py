@@ -226,19 +226,6 @@ def test_a_huge_scenario_is_refused_up_front_naming_its_field(tmp_path: Path, wh
     assert f"{toml}: {needle}" in line
 
 
-def test_the_scenario_size_check_counts_the_facts_the_game_makes() -> None:
-    import dataclasses
-
-    from tracelab.game.facts import scenario_facts
-    from tracelab.game.scenario import builtin_scenario, builtin_scenario_names, game_fact_counts, generate_scenario
-    made = [builtin_scenario(name) for name in builtin_scenario_names()]
-    made += [dataclasses.replace(generate_scenario(w, h, n, 0.1, seed=1), ammo=ammo, health=health)
-             for w, h, n, ammo, health in [(5, 7, 3, 0, 1.0), (9, 4, 2, 5, 2.5), (16, 16, 20, 3, 1.0)]]
-    for sc in made:
-        counts = game_fact_counts(sc.width, sc.height, sc.agents_per_team, sc.ammo, sc.hits_to_kill)
-        assert sum(counts.values()) == len(scenario_facts(sc)), sc.name
-
-
 # ---- a full disk -----------------------------------------------------------------------------------------
 
 @pytest.fixture

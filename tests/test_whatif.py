@@ -128,7 +128,7 @@ def tui_lists(root: Path, scenario: str) -> None:
     ("frozen", ["--episode", "0", "--at", "1", "--action", "lefft"],
      "--action 'lefft': no such action (the spec's: left, down, right, up); did you mean left?"),
     ("war", ["--episode", "0", "--at", "1", "--action", "right"], "--action right: masked at step 1 of episode 0"),
-    ("gridwar", ["--episode", "0", "--at", "1", "--action", "up"], "a GridWar (RuleSim) run: whatif rebuilds"),
+    ("gridwar", ["--episode", "0", "--at", "1", "--action", "up"], "a RuleSim run: whatif rebuilds"),
 ])
 def test_a_user_error_is_one_line_and_writes_nothing(world: str, flags: list[str], message: str,
                                                     origins: dict[str, Path], tmp_path: Path,

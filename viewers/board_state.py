@@ -3,7 +3,7 @@
 alive or dead, which way it heads), read from the run's changes of the board's predicates.
 
 Which board: the one the run's config records (a spec world's run: `tracelab play --env`, a training's
-evaluation games); a GridWar run written by RuleSim (`BOARD`, its scenario in the config and no spec
+evaluation games); a war game run written by RuleSim (`BOARD`, its scenario in the config and no spec
 among its sources) is drawn from rules/gridworld/war.toml's `[board]` with the map its scenario implies.
 Such a run names its cells by id (y·W + x, its declared grid: tracelab.store.coordinates), a spec's run
 by the board's cell constants: both are located.

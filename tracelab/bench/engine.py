@@ -3,7 +3,7 @@
 (a) first-ever compile: a fresh process with NUMBA_CACHE_DIR on an empty directory builds an Engine on
     the game program and runs its first step; (b) warm start: fresh processes with the normal cache,
     from process start to the first step, for the game program, for another rule file (no recompile:
-    one compiled signature serves both) and for GridWar's spec; (c) the spec path's steps per CPU second by
+    one compiled signature serves both) and for war.toml; (c) the spec path's steps per CPU second by
     team size (tracelab.bench.sims), tracing on and off, with the engine's work counters; (d) resident memory
     over a long traced run; (e) the big graph: load, build and run of the spread rule on random graphs
     of 2k / 20k / 200k nodes (tracelab/bench/biggraph.py). Figures: docs/benchmarks.md."""
@@ -92,14 +92,14 @@ class ColdCompile:
             finally:
                 self._tmp.cleanup()
                 self._probe = None
-        return {"program": "game rules + advanced scenario", "runs": len(runs),
+        return {"program": "war.toml's advanced game (its program and facts)", "runs": len(runs),
                 "build_and_first_step_s": summarize([r["build_s"] + r["step_s"] for r in runs]).to_dict(),
                 "process_to_first_step_s": summarize([r["since_start_s"] for r in runs]).to_dict()}
 
 
 def warm_start(repeats: int) -> dict[str, Any]:
     """(b) Fresh processes with the normal cache: process start to first step for the game program, for
-    another rule file alone, and for GridWar's spec (one world); the second program's build and step in a
+    another rule file alone, and for war.toml (one world); the second program's build and step in a
     process that ran the game first; the compiled signatures of step_worlds after both."""
     Probe(["game", "spec"]).result()  # fill the cache if a source changed since it was written
     game, second, other, spec, build, signatures = [], [], [], [], [], []
@@ -121,7 +121,7 @@ def warm_start(repeats: int) -> dict[str, Any]:
 
 
 def step_rates(agents: list[int], repeats: int, target_s: float, kernel: str = "auto") -> list[dict[str, Any]]:
-    """(c) The spec path's steps per CPU second for each team size (GridWar's base game, war.toml), one world,
+    """(c) The spec path's steps per CPU second for each team size (war.toml's base game), one world,
     tracing on and off (engine kernel `kernel`), with the engine's work counters per step."""
     from tracelab.bench.sims import SpecLoop, cpu_rates, team_spec
     from tracelab.envs.declared.vector_world import DeclaredWorlds
@@ -229,7 +229,7 @@ def report(r: dict[str, Any]) -> str:
          sp(w["other_program_to_first_step_s"]), len(w["other_program_to_first_step_s"]["runs"])],
         [f"warm: {w['other_program']} after the game, same process", med(w["other_program_after_game_s"]),
          sp(w["other_program_after_game_s"]), len(w["other_program_after_game_s"]["runs"])],
-        ["warm: process start to first step of GridWar's spec (1v1)", med(w["spec_to_first_step_s"]),
+        ["warm: process start to first step of war.toml (1v1)", med(w["spec_to_first_step_s"]),
          sp(w["spec_to_first_step_s"]), len(w["spec_to_first_step_s"]["runs"])],
     ])
     if "skipped" in c:
@@ -252,7 +252,7 @@ def report(r: dict[str, Any]) -> str:
                 f"reference system's {ref['reference_s_per_step']} s/step; goal >= "
                 f"{ref['goal_steps_per_s']:,} steps/s: {'met' if ref['goal_met'] else 'not met'}")
     return "\n\n".join([machine_line(r["machine"], r["quick"], r["repeats"]), start + "\n" + sig,
-                        "GridWar's spec (war.toml's base game), one world (work counters per step)\n" + steps,
+                        "war.toml's base game, one world (work counters per step)\n" + steps,
                         mem_line, ref_line,
                         biggraph.report(r["big_graph"])])
 

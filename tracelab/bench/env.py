@@ -1,7 +1,7 @@
-"""`tracelab bench env`: GridWar through its spec (rules/gridworld/war.toml's base game, every red agent
+"""`tracelab bench env`: the war game through its spec (rules/gridworld/war.toml's base game, every red agent
 playing, on DeclaredWorlds: tracelab.bench.sims) beside RefSim, the hand-written oracle, by team size, one world
 and batched, traced and untraced, as env-steps per CPU second and ratios to RefSim (issue 38's speed points);
-then GridWar's registered id through gymnasium (gym.make, gym.make_vec). Goals: docs/benchmarks.md."""
+then its registered id through gymnasium (gym.make, gym.make_vec). Goals: docs/benchmarks.md."""
 from __future__ import annotations
 
 from typing import Any
@@ -11,6 +11,7 @@ import numpy as np
 from tracelab.bench.common import block_rates, fmt_num, format_table, machine_info, summarize
 from tracelab.bench.engine import GOAL_STEPS_PER_S, machine_line
 from tracelab.bench.sims import RefLoop, SpecLoop, cpu_rates, team_scenario, team_spec
+from tracelab.envs.declared.gridwar import ADVANCED_ID
 from tracelab.envs.declared.spec_size import SpecTooBig
 from tracelab.envs.declared.vector_world import DeclaredWorlds
 from tracelab.game.refsim import RefSim
@@ -19,12 +20,12 @@ from tracelab.game.refsim import RefSim
 
 GOAL_BATCHED_ENV_STEPS_PER_S = 1_000_000  # batched, tracing off
 GOAL_MAX_SLOWDOWN = 5.0  # rule-driven within 5x of the hand-written simulator
-ENV_ID = "tracelab/GridWar-advanced-v0"
+ENV_ID = ADVANCED_ID
 
 
 def spec_rates(agents: list[int], worlds: list[int], repeats: int, target_s: float,
                kernel: str = "auto") -> list[dict[str, Any]]:
-    """One row per (agents, worlds): GridWar's base game at that team size through RefSim (RefLoop) and the
+    """One row per (agents, worlds): war.toml's base game at that team size through RefSim (RefLoop) and the
     spec path (SpecLoop, engine kernel `kernel`), traced and untraced, as env-steps per CPU second and as
     ratios to RefSim."""
     rows = []
@@ -75,7 +76,7 @@ def goals(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def gym_rates(worlds: int, repeats: int, target_s: float) -> dict[str, Any]:
     """Steps/s through gymnasium: the single env (gymnasium.make, 1v1) and the vector env (`worlds`
-    worlds, gymnasium.make_vec) of GridWar's id, the declared spec's, tracing off."""
+    worlds, gymnasium.make_vec) of war.toml's id, the declared spec's, tracing off."""
     import gymnasium as gym
     out: dict[str, Any] = {"env_id": ENV_ID, "vector_worlds": worlds, "trace": False, "rows": []}
     env = gym.make(ENV_ID)
@@ -135,7 +136,7 @@ def report(r: dict[str, Any]) -> str:
     med = lambda d: d["steps_per_s"]["median"]  # noqa: E731
     env = lambda d: d["env_steps_per_s"]["median"]  # noqa: E731
     sp = lambda d: f"{100 * d['steps_per_s']['spread']:.0f}%"  # noqa: E731
-    teams = "GridWar's base game by team size: RefSim and the spec path (war.toml, every red agent playing), " \
+    teams = "war.toml's base game by team size: RefSim and the spec path (war.toml, every red agent playing), " \
             "env-steps per CPU second and /RefSim\n" + format_table(
                 ["scenario", "worlds", "spec kernel", "RefSim", "spec off", "spec on", "spec/ref off", "spec/ref on",
                  "spread ref/spec off/on"],

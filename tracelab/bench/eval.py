@@ -1,9 +1,8 @@
 """`tracelab bench eval`: what tracing costs `tracelab train`'s evaluations, and the memory of a long
 training with traced evaluations.
 
-Speed, in one process: the same evaluation games of GridWar's 1v1 base game through its spec
-(tracelab/GridWar-base-v0 against the opponent at train's --eval-p; one policy: a seeded untrained network;
-the same seeds) played
+Speed, in one process: the same evaluation games of war.toml's 1v1 base game (gridwar.BASE_ID, against
+the opponent at train's --eval-p; one policy: a seeded untrained network; the same seeds) played
 - `traced`: as train traces them (external_eval.DeclaredEvaluator: `worlds` games one at a time in a traced
   env, into a run of the store that stays open, as the training's run does), the policy's decisions and
   the reward terms recorded,
@@ -37,11 +36,12 @@ import numpy as np
 
 from tracelab.bench.common import format_table, machine_info, sampled_child_rss, summarize
 from tracelab.bench.engine import machine_line
+from tracelab.envs.declared.gridwar import BASE_ID
 
 GOAL_RATIO = 1.3
 AGENT_GOAL_RATIO = 1.1  # issue 39: recording the agent's half costs traced evaluations at most 10%
 SCENARIO = "base"
-ENV_ID = "tracelab/GridWar-base-v0"  # the base scenario's spec
+ENV_ID = BASE_ID  # the base scenario's spec
 EVAL_P = 0.3   # train's --eval-p
 MEMORY_TRAIN_ARGS = ("--scenario", SCENARIO, "--eval-every", "10000", "--eval-games", "50",
                      "--trace-eval-games", "5")

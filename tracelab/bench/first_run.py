@@ -4,7 +4,7 @@ NUMBA_CACHE_DIR, tracelab's compile cache through TRACELAB_CACHE_DIR, both in a 
 user's own caches are neither read nor touched), then once more on the caches it filled, as every later
 run does:
 
-- `play`: the README's main command, `tracelab play --scenario advanced --episodes 5` (GridWar through its
+- `play`: the README's main command, `tracelab play --scenario advanced --episodes 5` (the war game through its
   spec, rules/gridworld/war.toml: the engine's kernels and the declared world's fused step);
 - `reason-small`, `reason-large`: `tracelab reason` of reach.rules (5 lines: the reference evaluator) and of
   the supply chain over its 2,430-node graph (the compiled engine);

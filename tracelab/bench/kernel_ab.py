@@ -4,7 +4,7 @@
 
 On a shared, loaded machine the wall-clock figures of two separate `bench env` runs move by more than
 the difference between kernels; a paired ratio of CPU times, alternating A and B, does not. For each
-(agents, worlds, trace) one batch of GridWar's spec worlds (tracelab.bench.sims: war.toml's base game) is
+(agents, worlds, trace) one batch of war.toml worlds (tracelab.bench.sims: war.toml's base game) is
 built per kernel and stepped by the same seeded loop (sims.SpecLoop), blocks alternating A, B / B, A.
 Prints one JSON line per case: the median CPU µs per world-step of each kernel and the median of the
 paired ratios B/A (below 1: B is faster)."""

@@ -1,7 +1,7 @@
 """`tracelab bench play`: how fast `tracelab play` records games into the trace store, against the
 spec path's own traced loop, and how much memory a long recorded run holds.
 
-Speed, in one process, one world (what `tracelab play` plays): `tracelab play --scenario base` (GridWar's
+Speed, in one process, one world (what `tracelab play` plays): `tracelab play --scenario base` (the war game's
 base game through its spec, rules/gridworld/war.toml; red random, blue: the rules' opponent, seed 1).
 - `loop`: bench env's traced stepping loop (tracelab.bench.sims.SpecLoop): the world steps, finished
   episodes restart, the trace taken as the envs' tracer takes it; nothing is kept;

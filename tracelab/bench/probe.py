@@ -2,8 +2,8 @@
 TARGET...` imports the engine, then for each target builds it and runs its first step, printing one JSON
 line as soon as that step is done (the parent timestamps the lines: process start to first step).
 
-Targets: `game` (an Engine on the game rules with the advanced scenario's facts), `spec` (GridWar's base
-game through its spec, rules/gridworld/war.toml: one DeclaredWorlds world and its first step), or the path of
+Targets: `game` (an Engine on the program and facts of war.toml's advanced game, as its spec loads them),
+`spec` (war.toml's base game: one DeclaredWorlds world and its first step), or the path of
 a rule file. The last line reports how many compiled signatures `kernel.step_worlds` holds (one serves every
 program: a new rule file must not recompile)."""
 from __future__ import annotations
@@ -20,14 +20,14 @@ def _first_step(target: str) -> tuple[float, float, float]:
     """(import s, build s, first step s) of one target, in this process."""
     t0 = time.perf_counter()
     from tracelab.engine import Engine, load_program
-    from tracelab.game.scenario import builtin_scenario
     if target == "spec":
         import numpy as np
 
         from tracelab.bench.sims import team_spec
         from tracelab.envs.declared.vector_world import DeclaredWorlds
     else:
-        from tracelab.game.facts import scenario_program
+        from tracelab.envs.declared.gridwar import WAR_SPEC
+        from tracelab.envs.declared.spec import load_spec
     t1 = time.perf_counter()
     if target == "spec":
         worlds = DeclaredWorlds(team_spec(1), 1)
@@ -36,7 +36,7 @@ def _first_step(target: str) -> tuple[float, float, float]:
         t2 = time.perf_counter()
         worlds.step(np.zeros((1, worlds.n_agents), np.int64))
     else:
-        program = scenario_program(builtin_scenario("advanced")) if target == "game" else load_program(target)
+        program = load_spec(WAR_SPEC, advanced=True).program if target == "game" else load_program(target)
         engine = Engine(program, worlds=1, trace=True)
         t2 = time.perf_counter()
         engine.step()

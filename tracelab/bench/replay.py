@@ -1,14 +1,14 @@
 """`tracelab bench replay`: how fast `tracelab replay` turns traced games into a rerun .rrd file.
 
 Two runs are written first (not timed), sealed, then converted `repeats` times each:
-- one 5v5 game of GridWar's base game (war.toml, agents_per_team 5, up to 500 steps; the opponent's
+- one 5v5 game of war.toml's base game (war.toml, agents_per_team 5, up to 500 steps; the opponent's
   p_toward 0 and red mostly idle, so that the game runs long), goal <= 0.5 s;
 - 100 games of 1v1 (the advanced game, random red against the rules' opponent), goal <= 5 s.
 A conversion is everything `tracelab replay RUN --save FILE` does after start-up: open the run, read
 what its episodes share, rebuild and log every episode, write the file (merging the recordings of
 several episodes with `rerun rrd merge`). Medians, with a breakdown of the 5v5 game by layer.
 
-The games are played through GridWar's spec (rules/gridworld/war.toml) as `tracelab play --env` plays it,
+The games are played through war.toml (rules/gridworld/) as `tracelab play --env` plays it,
 with its run metadata (the spec, its params, its `[board]`): what is measured is the path every world's
 replay takes."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The simulator workloads of `bench env`, `bench engine` and kernel_ab: GridWar's base game at a team size
+"""The simulator workloads of `bench env`, `bench engine` and kernel_ab: war.toml's base game at a team size
 (every agent on its base, the default map) through its spec (rules/gridworld/war.toml on DeclaredWorlds: the
 engine, the read-back and the observations in one compiled call) and through RefSim (the hand-written oracle),
 each stepped by a loop of fixed-seed random red actions (blue: the spec's rules, RefSim's scripted opponent)
@@ -22,7 +22,7 @@ from tracelab.game.scenario import Scenario, builtin_scenario
 
 
 def team_scenario(agents: int) -> Scenario:
-    """GridWar's base game with `agents` a team on the default map, every agent on its base: what war.toml
+    """war.toml's base game with `agents` a team on the default map, every agent on its base: what war.toml
     plays at every team size (its advanced game plays one agent a team, war.toml's [env.require])."""
     base = builtin_scenario("base")
     if agents == 1:

@@ -1,7 +1,7 @@
 """How much CPU `tracelab eval --games N` and `tracelab train` spend before their first step, after their
 imports (issue 40's goal: within 1 s). A fresh process imports what the command imports (timed apart: the
 imports' figure), then runs the command through `tracelab.cli.main`; the vector env it steps (the declared
-one, GridWar's spec) reports the CPU seconds at its first step and ends the process there
+one, war.toml) reports the CPU seconds at its first step and ends the process there
 (python -m tracelab.bench.start COMMAND). Warm caches: numba's, as the user's later runs find them (the first
 run's compiles are `bench first-run`'s)."""
 from __future__ import annotations

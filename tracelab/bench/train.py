@@ -1,5 +1,5 @@
 """`tracelab bench train`: training transitions/s end to end with the method's defaults (1v1 base through
-GridWar's spec, as `tracelab train --scenario base` trains it: EnvTrainer, one update per transition, live
+war.toml, as `tracelab train --scenario base` trains it: EnvTrainer, one update per transition, live
 logging into a run) with the fused learner and with the readable one (tracelab/train/dqn.py), and beside
 them, in the same process: the update alone (the fused learner's, the readable learner's, and the textbook
 autograd + torch.optim.Adam update of the same network and batch written inline) and the spec's batched env
@@ -21,11 +21,12 @@ import torch
 from tracelab.bench.common import fmt_num, format_table, machine_info, summarize
 from tracelab.bench.engine import machine_line
 from tracelab.envs.declared.env_source import EnvSource
+from tracelab.envs.declared.gridwar_scenarios import training_sources
 from tracelab.game.scenario import builtin_scenario
 from tracelab.store import TraceWriter
 from tracelab.train.config import TrainConfig
 from tracelab.train.env_policy import make_vector_env
-from tracelab.train.env_trainer import EnvTrainer, gridwar_sources
+from tracelab.train.env_trainer import EnvTrainer
 from tracelab.train.qnet import NetSpec
 from tracelab.train.train_loop import make_learner
 
@@ -44,8 +45,8 @@ TEAM = 5  # the team size of the 5v5 figure
 
 
 def _base_source(cfg: TrainConfig) -> EnvSource:
-    """The env `tracelab train --scenario base` trains on with these settings (GridWar's spec id)."""
-    return gridwar_sources(cfg, builtin_scenario("base"))[0]
+    """The env `tracelab train --scenario base` trains on with these settings (its spec id)."""
+    return training_sources(builtin_scenario("base"), cfg.opponent_p, cfg.eval_p, cfg.non_markov)[0]
 
 
 class EndToEnd:
@@ -232,7 +233,7 @@ def report(r: dict[str, Any]) -> str:
     goals = format_table(["goal", "target", "measured", "result"],
                          [[g["goal"], g["target"], g["measured"], "met" if g["met"] else "not met"]
                           for g in r["goals"]])
-    head = (f"1v1 base through GridWar's spec (EnvTrainer), method's DQN defaults (64 tanh, batch 128, Adam 5e-4), "
+    head = (f"1v1 base through war.toml (EnvTrainer), method's DQN defaults (64 tanh, batch 128, Adam 5e-4), "
             f"{r['envs']} worlds, torch threads {r['threads']}, live logging into a run; "
             f"{r['repeats']} rounds of {r['block_steps']:,} training steps, {r['updates_per_block']:,} updates "
             f"of each kind, and env steps")

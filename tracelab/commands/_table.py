@@ -90,7 +90,7 @@ def run_name(text: str) -> str:
 
 def _play(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenario", default=None,
-                   help="a GridWar scenario: a built-in name (base, advanced, nonmarkov) or a scenario .toml "
+                   help="a war game scenario: a built-in name (base, advanced, nonmarkov) or a scenario .toml "
                         "file, played through its spec in rules/gridworld/ (default: base, or the scenario a "
                         "--policy PATH was trained on)")
     p.add_argument("--env", default=None, metavar="SPEC_OR_ID",
@@ -102,9 +102,9 @@ def _play(p: argparse.ArgumentParser) -> None:
     p.add_argument("--policy", default=None,
                    help="red's policy: random (default) or the path of a trained policy (e.g. RUN/policy)")
     p.add_argument("--agents", type=positive_int, default=None,
-                   help="GridWar: agents a team, each starting on its base (default: the scenario's)")
+                   help="the war game: agents a team, each starting on its base (default: the scenario's)")
     p.add_argument("--opponent-p", type=float, default=None,
-                   help="GridWar: the opponent's probability of a move towards red's base (default 0.7)")
+                   help="the war game: the opponent's probability of a move towards red's base (default 0.7)")
     p.add_argument("--seed", type=non_negative_int, default=0,
                    help="seed of the episodes and of the random policy (default 0)")
     p.add_argument("--kernel", choices=ENGINE_KERNELS, default="auto",
@@ -248,7 +248,7 @@ def _seal(p: argparse.ArgumentParser) -> None:
 def _bench(p: argparse.ArgumentParser) -> None:
     what = p.add_subparsers(dest="bench", required=True)
     helps = {"engine": "compile and warm-start time, the spec's steps/s and engine work, memory over a long run",
-             "env": "GridWar's spec vs RefSim steps/s (one world and batched), the gymnasium envs, the goals",
+             "env": "war.toml vs RefSim steps/s (one world and batched), the gymnasium envs, the goals",
              "store": "trace-store ingest rows/s, sealing, point queries",
              "replay": "tracelab replay: a 500-step 5v5 game and 100 games of 1v1 converted to .rrd",
              "train": "DQN training transitions/s end to end, the update alone, the env alone, the loop's share",
@@ -424,7 +424,7 @@ def _train(p: argparse.ArgumentParser) -> None:
                    help="also write the metrics as TensorBoard event files into DIR/<run name>/ while training "
                         "(needs the tensorboard package: pip install 'tracelab[tensorboard]')")
     p.add_argument("--env", default=None, metavar="SPEC_OR_ID",
-                   help="train on this gymnasium env instead of GridWar: a registered id "
+                   help="train on this gymnasium env instead of the war game: a registered id "
                         "(tracelab/FrozenLake-v1, tracelab/Taxi-v4, ...) or a spec file (docs/worlds.md); a "
                         "Discrete observation is one-hot encoded for the network (docs/training.md)")
     p.add_argument("--env-arg", action="append", default=[], metavar="KEY=VALUE",
@@ -440,7 +440,7 @@ def _eval(p: argparse.ArgumentParser) -> None:
     p.add_argument("--backend", choices=("rules", "reference"), default="rules",
                    help="rules (the default, and the only one left: every policy plays its world's spec)")
     p.add_argument("--opponent-p", type=float, default=None,
-                   help="GridWar's opponent's probability of a move towards red's base (default 0.3, the "
+                   help="the war game's opponent's probability of a move towards red's base (default 0.3, the "
                         "method's evaluation, for a policy of RuleSim's trainer; a policy of train --env: "
                         "the p it was trained with)")
     p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the games (default 0)")
@@ -554,8 +554,8 @@ def _rewards(p: argparse.ArgumentParser) -> None:
     p.add_argument("run", help="run directory, .duckdb file, or run name under runs/")
     p.add_argument("--set", dest="sets", action="append", default=[], metavar="TERM=VALUE",
                    help="re-score with TERM's value per occurrence VALUE (repeatable): a spec's [reward.table] key "
-                        "(quote it: --set 'home(me)=5') or its scaled atom (VALUE: the scale); GridWar's win, loss, "
-                        "hit, got_shot, step, unsafe, invalid")
+                        "(quote it: --set 'home(me)=5') or its scaled atom (VALUE: the scale); a RuleSim run's win, "
+                        "loss, hit, got_shot, step, unsafe, invalid")
     p.add_argument("--episode", "-e", type=non_negative_int, help="this episode only (default: every episode)")
     p.add_argument("--json", action="store_true", help="the table as JSON")
 
@@ -579,7 +579,7 @@ def _whatif(p: argparse.ArgumentParser) -> None:
 
 COMMANDS = (
     Command("play", _play,
-            "play traced games of a world (GridWar's --scenario, or a spec's --env; red: a random or a trained "
+            "play traced games of a world (the war game's --scenario, or a spec's --env; red: a random or a trained "
             "policy) into a trace-store run"),
     Command("reason", _reason,
             "run a rule program and print its trace and final interpretation"),

@@ -28,8 +28,8 @@ def run(args: argparse.Namespace) -> int:
         return _report_again(exp, out, report_dir)
     if args.ray is not None:
         if any(a.env is not None for a in exp.arms):
-            raise UserError(f"--ray runs GridWar's experiments only for now; {exp.name} trains a world of its own: "
-                            f"use --jobs")
+            raise UserError(f"--ray runs the war game's experiments only for now; {exp.name} trains a world of "
+                            f"its own: use --jobs")
         if args.jobs > 1:
             raise UserError("--jobs and --ray: Ray decides how many trainings run at a time; give one of them")
         check_address(args.ray)  # the install hint, or an address where nothing answers, before any training

@@ -1,11 +1,11 @@
 """`tracelab play`: games of a world declared by a spec, traced into a run of the trace store.
 
-The world is GridWar's `--scenario NAME` (a built-in scenario or a scenario .toml file, played through its
-spec in rules/gridworld/, tracelab.envs.declared.gridwar.scenario_spec), or any declared world with `--env
-SPEC_OR_ID` (docs/worlds.md). Red (the learners) is played by a random policy or a trained one (`--policy
-RUN/policy`); GridWar's blue by its scripted opponent, written as rules. Every change of every episode goes
-to the run with its cause, the actions, rewards by term and the policy's decisions, and the command ends by
-saying what to open (tracelab/envs/declared/recording.py).
+The world is any declared world, `--env SPEC_OR_ID` (docs/worlds.md), or the war game's `--scenario NAME`
+(a built-in scenario or a scenario .toml file, played through its spec in rules/gridworld/:
+tracelab.envs.declared.gridwar_scenarios). Red (the learners) is played by a random policy or a trained one
+(`--policy RUN/policy`); the war game's blue by its scripted opponent, written as rules. Every change of
+every episode goes to the run with its cause, the actions, rewards by term and the policy's decisions, and
+the command ends by saying what to open (tracelab/envs/declared/recording.py).
 """
 from __future__ import annotations
 
@@ -21,26 +21,23 @@ from tracelab.commands._interrupt import CtrlCBetweenSteps
 from tracelab.commands._notices import say_running_compiles
 from tracelab.commands._progress import compiling_engine, progress
 from tracelab.commands._recording import read_for_hints, recording_into
-from tracelab.commands._worlds import load_scenario_arg
 from tracelab.engine.errors import is_interrupt
 from tracelab.envs.declared.env_source import EnvSource, parse_env_args
-from tracelab.envs.declared.gridwar import GRIDWAR_SPEC_IDS, scenario_spec
+from tracelab.envs.declared.gridwar_scenarios import (
+    DEFAULT_SCENARIO,
+    load_scenario_arg,
+    load_trained,
+    read_rulesim_spec,
+    refuse_scenario_flags,
+    rulesim_scenario,
+    scenario_source,
+    with_opponent_p,
+)
 from tracelab.envs.declared.play import load_declared, make_declared_env, play_episodes, random_policy
 from tracelab.errors import UserError, store_errors
 from tracelab.store import TraceWriter
 from tracelab.store.layout import check_new_run_dir
-from tracelab.train.env_policy import (
-    ENV_FORMAT,
-    EVAL_STEP_CAP,
-    greedy_actor,
-    load_trained,
-    policy_format,
-    read_rulesim_spec,
-    recorded_env,
-    rulesim_scenario,
-)
-
-DEFAULT_SCENARIO = "base"  # the one train defaults to (TrainConfig.scenario)
+from tracelab.train.env_policy import ENV_FORMAT, EVAL_STEP_CAP, greedy_actor, policy_format, recorded_env
 
 
 def run(args: argparse.Namespace) -> int:
@@ -67,27 +64,30 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _world(args: argparse.Namespace) -> tuple[Any, Any, Any]:
-    """(the EnvSource played, GridWar's Scenario or None, the loaded trained policy or None)."""
+    """(the EnvSource played, the war game's Scenario or None, the loaded trained policy or None)."""
     if args.policy == "scripted":
         raise UserError("--policy scripted: red's scripted policy was the grid simulator's; play takes random "
                         "(the default) or a trained policy (RUN/policy)")
     path = args.policy if args.policy not in (None, "random") else None
     with store_errors():  # a policy that does not load is the user's to fix
-        # a policy of GridWar's earlier trainer names its scenario (and whether it saw the previous step)
-        gridwar_spec = None if path is None or policy_format(path) == ENV_FORMAT else read_rulesim_spec(path)
+        # a policy of RuleSim's trainer names its scenario (and whether it saw the previous step)
+        rulesim = None if path is None or policy_format(path) == ENV_FORMAT else read_rulesim_spec(path)
     if args.env is not None:
-        gridwar_flags = ((args.scenario, "--scenario"), (args.agents, "--agents"), (args.opponent_p, "--opponent-p"))
-        for value, flag in gridwar_flags:
-            if value is not None:
-                raise UserError(f"{flag} is GridWar's; --env plays the world its spec declares "
-                                "(GridWar's spec takes --env-arg p_toward=...)")
+        refuse_scenario_flags(args, "--env plays the world its spec declares (war.toml takes --env-arg "
+                                    "p_toward=...)")
         source, scenario = EnvSource.given(args.env, parse_env_args(args.env_arg)), None
     elif args.env_arg:
         raise UserError("--env-arg goes with --env")
-    elif path is not None and gridwar_spec is None and args.scenario is None:
+    elif path is not None and rulesim is None and args.scenario is None:
         return _recorded(args, path)
     else:
-        source, scenario = _gridwar(args, gridwar_spec)
+        with store_errors():  # a scenario that does not load
+            if rulesim is not None and args.scenario is None and args.agents is None:
+                scenario = rulesim_scenario(rulesim)
+            else:
+                scenario = load_scenario_arg(args.scenario or DEFAULT_SCENARIO, args.agents)
+        stack = rulesim is not None and rulesim["observation"]["stack_previous"]
+        source = scenario_source(scenario, args.opponent_p, stack)
     if path is None:
         return source, scenario, None
     with store_errors():  # a policy that does not load, or was trained on another world
@@ -95,42 +95,16 @@ def _world(args: argparse.Namespace) -> tuple[Any, Any, Any]:
 
 
 def _recorded(args: argparse.Namespace, path: str) -> tuple[Any, None, Any]:
-    """A policy of train without --env: the env it was trained on where that is one of tracelab's ids (with
-    GridWar's opponent at --opponent-p); a spec file the user names with --env."""
+    """A policy of train without --env: the env it was trained on where that is one of tracelab's ids (its
+    scripted opponent at --opponent-p); a spec file the user names with --env."""
     with store_errors():  # a policy that does not load
         source = recorded_env(path)
         if source is None:
             raise UserError(f"{path} was trained with train --env on a spec file: name that env with --env "
                             "SPEC_OR_ID (and its --env-arg values); its policy.json says which under \"env\"")
-        if args.agents is not None:
-            raise UserError(f"--agents is GridWar's scenario's; {path} plays the env it was trained on "
-                            f"({source.describe()})")
-        if args.opponent_p is not None and not 0.0 <= args.opponent_p <= 1.0:
-            raise UserError(f"--opponent-p must be in [0, 1], got {args.opponent_p}")
-        if args.opponent_p is not None and source.name not in GRIDWAR_SPEC_IDS:
-            raise UserError(f"--opponent-p is GridWar's scripted opponent's; {source.describe()} has none")
+        refuse_scenario_flags(args, f"{path} plays the env it was trained on ({source.describe()})", ("agents",))
         policy = load_trained(path, source)
-    if args.opponent_p is not None:
-        source = EnvSource(source.name, {**source.kwargs, "p_toward": args.opponent_p})
-    return source, None, policy
-
-
-def _gridwar(args: argparse.Namespace, policy_spec: dict[str, Any] | None) -> tuple[Any, Any]:
-    """GridWar's --scenario (or the scenario of the GridWar policy whose policy.json is `policy_spec`) as its
-    spec's EnvSource (with the policy's observation of the previous step), and the scenario."""
-    if args.opponent_p is not None and not 0.0 <= args.opponent_p <= 1.0:
-        raise UserError(f"--opponent-p must be in [0, 1], got {args.opponent_p}")
-    with store_errors():  # a scenario that does not load
-        if policy_spec is not None and args.scenario is None and args.agents is None:
-            scenario = rulesim_scenario(policy_spec)
-        else:
-            scenario = load_scenario_arg(args.scenario or DEFAULT_SCENARIO, args.agents)
-    stack = policy_spec is not None and policy_spec["observation"]["stack_previous"]
-    try:
-        path, params = scenario_spec(scenario, stack, args.opponent_p)
-    except ValueError as e:
-        raise UserError(str(e)) from None
-    return EnvSource(path, params), scenario
+    return with_opponent_p(source, args.opponent_p), None, policy
 
 
 def _name(source: Any, scenario: Any) -> str:
@@ -140,8 +114,8 @@ def _name(source: Any, scenario: Any) -> str:
 def run_meta(source: Any, spec: Any, args: argparse.Namespace, scenario: Any = None) -> dict[str, Any]:
     """The run's metadata: the command, the world (id or spec file, its arguments, the spec and the rule files
     by path, size and hash: their texts go in the run's `sources` table), what sets each external fact
-    and the board's rows (the recorder adds those: recording.declared_run_config); GridWar's scenario by name
-    and as its TOML."""
+    and the board's rows (the recorder adds those: recording.declared_run_config); the war game's scenario by
+    name and as its TOML."""
     spec_path, params = source.declared()
     config = {"env": source.name, "env_id": source.env_id, "spec_path": spec_path,
               "env_args": params, "episodes": args.episodes, "policy": args.policy or "random",

@@ -10,11 +10,10 @@ import time
 from pathlib import Path
 
 from tracelab.commands._interrupt import CtrlCStops
-from tracelab.commands._worlds import load_scenario_arg
+from tracelab.envs.declared.gridwar_scenarios import load_scenario_arg, training_sources
 from tracelab.envs.declared.env_source import EnvSource, parse_env_args
 from tracelab.errors import UserError, store_errors
 from tracelab.train.env_source import probe_env
-from tracelab.train.env_trainer import gridwar_sources
 from tracelab.train.memory import memory_limit
 from tracelab.train.ray_session import check_address, ray_session
 from tracelab.train.sweep import run_sweep
@@ -32,7 +31,7 @@ def run(args: argparse.Namespace) -> int:
             raise UserError("--env-arg needs --set env=SPEC_OR_ID")
         else:
             scenario = load_scenario_arg(cfg.scenario, cfg.agents)
-            source = gridwar_sources(cfg, scenario)[0]
+            source = training_sources(scenario, cfg.opponent_p, cfg.eval_p, cfg.non_markov)[0]
         probe = probe_env(source)  # a bad id, spec or keyword argument: one line, before Ray starts
     check_trials_memory(spec, probe, memory_limit(args.max_memory, "--max-memory"))
     out = Path(args.out or _default_out())

@@ -1,7 +1,7 @@
-"""`tracelab train`: DQN on a world, logged live into a trace-store run (docs/training.md): GridWar's
-scenario (`--scenario NAME`, with its flags: team size, opponent p, rewards, --non-markov) as the GridWar
-spec id and params it maps to (envs/declared/gridwar.py, scenario_env), or any gymnasium env (`--env
-SPEC_OR_ID [--env-arg key=value ...]`); both train through EnvTrainer (tracelab/train/env_trainer.py,
+"""`tracelab train`: DQN on a world, logged live into a trace-store run (docs/training.md): any gymnasium
+env (`--env SPEC_OR_ID [--env-arg key=value ...]`), or the war game's scenario (`--scenario NAME`, with its
+flags: team size, opponent p, rewards, --non-markov) as the spec id and params it maps to
+(envs/declared/gridwar_scenarios.py); both train through EnvTrainer (tracelab/train/env_trainer.py,
 checkpoints in env_checkpoint.py). Ctrl-C stops cleanly (the run ends `interrupted`, with a checkpoint);
 `--resume RUN` continues a run's last checkpoint in the same run (`--run NEW`: into a new one)."""
 from __future__ import annotations
@@ -26,8 +26,13 @@ from tracelab.commands._training import (
     training_session,
     where_to_train,
 )
-from tracelab.commands._worlds import env_source_of, load_scenario_arg
+from tracelab.commands._worlds import env_source_of
 from tracelab.envs.declared.gridwar import GRIDWAR_SPEC_IDS
+from tracelab.envs.declared.gridwar_scenarios import (
+    load_scenario_arg,
+    scenario_settings_given,
+    training_sources,
+)
 from tracelab.errors import UserError, store_errors
 from tracelab.game.scenario import builtin_scenario_names
 from tracelab.store import TraceWriter
@@ -36,7 +41,7 @@ from tracelab.train.budget import reward_scale_note, too_short_hint
 from tracelab.train.config import GRIDWAR_ONLY, RETIRED_FLAGS, TrainConfig, flag_of
 from tracelab.train.env_checkpoint import checkpoint_config, checkpoint_env, load_env_checkpoint
 from tracelab.train.env_source import probe_env
-from tracelab.train.env_trainer import EnvTrainer, env_run_meta, gridwar_sources
+from tracelab.train.env_trainer import EnvTrainer, env_run_meta
 from tracelab.train.memory import check_estimate, env_training_estimate, env_world_bytes, memory_limit
 from tracelab.train.qnet import NetSpec
 from tracelab.train.reward_scale import METHOD_REWARD_SCALE, reward_scale_text
@@ -55,10 +60,10 @@ def run(args: argparse.Namespace) -> int:
     limit = memory_limit(args.max_memory, "--max-memory")
     on_env = args.env is not None or bool(args.env_arg)
     source = env_source_of(args) if on_env else None
-    gridwar = [flag_of(k) for k in GRIDWAR_ONLY if k in given]
-    if on_env and gridwar:
-        raise UserError(f"{', '.join(gridwar)} describe{'s' if len(gridwar) == 1 else ''} GridWar; "
-                        f"--env {args.env} takes the DQN flags only")
+    refused = scenario_settings_given([flag_of(k) for k in GRIDWAR_ONLY if k in given] if on_env else [],
+                                      f"--env {args.env} takes the DQN flags only")
+    if refused:
+        raise UserError(refused)
     state, scenario = None, None
     with store_errors():  # a bad value in the config or a checkpoint that does not load
         if args.resume:
@@ -73,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
             scenario = load_scenario_arg(cfg.scenario, cfg.agents)
         eval_source = None
         if scenario is not None:
-            source, eval_source = gridwar_sources(cfg, scenario)
+            source, eval_source = training_sources(scenario, cfg.opponent_p, cfg.eval_p, cfg.non_markov)
         encoder, n_actions, spec = probe_env(source)
     with store_errors():  # --num-envs 1e7 would build ten million worlds before its first step
         check_estimate(env_training_estimate(cfg, NetSpec(encoder.size, cfg.hidden_sizes, n_actions, cfg.dueling),
@@ -98,8 +103,8 @@ def _run_config(run: Path) -> dict[str, Any]:
 
 
 def _resumed(args: argparse.Namespace, given: dict[str, Any], source: Any, limit: Any) -> tuple[Any, ...]:
-    """--resume: (the checkpoint, its config with the flags given, the env it trains on, GridWar's scenario
-    or None). A GridWar run's env is rebuilt from its config's scenario (a built-in one, or --scenario FILE
+    """--resume: (the checkpoint, its config with the flags given, the env it trains on, the war game's
+    scenario or None). A scenario run's env is rebuilt from its config's scenario (a built-in one, or --scenario FILE
     given again: a file never names the file tracelab reads) and checked equal to the checkpoint's."""
     scenario_given = given.pop("scenario", None)
     check_resume_flags(given)
@@ -114,7 +119,7 @@ def _resumed(args: argparse.Namespace, given: dict[str, Any], source: Any, limit
                             f"(tracelab reads no file a run names by itself): tracelab train --resume "
                             f"{shlex.quote(args.resume)} --scenario {shlex.quote(cfg.scenario)}")
         scenario = load_scenario_arg(cfg.scenario, cfg.agents)
-        source, _ = gridwar_sources(cfg, scenario)
+        source, _ = training_sources(scenario, cfg.opponent_p, cfg.eval_p, cfg.non_markov)
     state = load_env_checkpoint(args.resume, source, limit)  # names the env unless given
     cfg = dataclasses.replace(checkpoint_config(state), **given)
     again = "" if scenario is not None else f" --env {source.describe()}"
@@ -128,7 +133,7 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
                eval_source: Any = None) -> int:
     """Train on `source` into a new run at `run_dir` (from a checkpoint `state` if given; `same_run`: the
     checkpoint's own run, `run_dir`, continues); returns the exit status. `stop_at`: stop there as Ctrl-C
-    would (tests). `scenario`: the GridWar scenario `source` plays (the run names it and its settings),
+    would (tests). `scenario`: the war game's scenario `source` plays (the run names it and its settings),
     `eval_source` the env its evaluations play (the opponent at --eval-p); `tensorboard`: a log directory
     that also receives the metrics (tracelab.train.tensorboard)."""
 

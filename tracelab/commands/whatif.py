@@ -22,7 +22,7 @@ from tracelab.store.branch_origin import ORIGIN_KEY
 from tracelab.store.diff import render_divergence
 from tracelab.store.layout import check_new_run_dir
 from tracelab.store.reader import open_run, resolve_run, retrying, run_info
-from tracelab.train.env_policy import load_trained
+from tracelab.envs.declared.gridwar_scenarios import load_trained
 
 if TYPE_CHECKING:
     from tracelab.store.branch_compare import BranchComparison

@@ -1,7 +1,7 @@
 """The environments: worlds declared by a spec beside a rule program (declared/, docs/worlds.md) as a
-gymnasium Env, vector env and PettingZoo env: `make_env(SPEC, **kwargs)`, GridWar's ids
-(`tracelab/GridWar-base-v0`, ...: declared/gridwar.py) and the toy-text games (`tracelab/FrozenLake-v1`,
-...) registered with gymnasium. Every world, GridWar included, is made this one way (docs/envs.md)."""
+gymnasium Env, vector env and PettingZoo env: `make_env(SPEC, **kwargs)`, the ids of
+rules/gridworld/war*.toml (declared/gridwar.py) and the toy-text games (`tracelab/FrozenLake-v1`,
+...) registered with gymnasium. Every world is made this one way (docs/envs.md)."""
 from __future__ import annotations
 
 import os

@@ -39,10 +39,10 @@ TEAMS = ("red", "blue")
 
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 _MAX_SIDE = 4096  # cell ids must fit comfortably in int32
-# Sizes read from a scenario file are checked before anything is built from them. A scenario becomes
-# facts of the game (tracelab/game/facts.py: ~850 bytes each as Python objects, ~1,900 once a program;
-# a 200x200 map's 359,285 took 40 s), then atoms and groundings: at most this many facts (a 330x330 map
-# at 1 agent a team; the built-in scenarios make 600-1,600, a 8x8 map at 20 a team 4,400).
+# Sizes read from a scenario file are checked before anything is built from them, in facts of the game
+# it describes (game_fact_counts: what RuleSim's fact builder made, a 200x200 map's 359,285 in 40 s; a
+# measure of size now, as RefSim's arrays grow with the same fields): at most this many (a 330x330 map at 1
+# agent a team; the built-in scenarios count 600-1,600, a 8x8 map at 20 a team 4,400).
 MAX_GAME_FACTS = 1_000_000
 MAX_HITS_TO_KILL = 1000  # health / damage: each hit an agent can take is a step of the game's tally chain
 MAX_EPISODE_STEPS = 100_000  # max_steps: training keeps a [worlds, max_steps, 2, agents] action history
@@ -175,10 +175,10 @@ def _reachable(width: int, height: int, blocked: np.ndarray, start: Cell) -> np.
 
 
 def game_fact_counts(width: int, height: int, agents: int, ammo: int, hits_to_kill: int) -> dict[str, int]:
-    """How many facts tracelab.game.facts.scenario_facts makes of a scenario, by the field that drives
-    them (tests/test_strangers_sizes.py checks the sum against it): per cell its kind and, per direction,
-    a neighbour and nextTo or an edge; per agent 15 and per team 1; per bullet 5 and one per enemy
-    target; per bullet place of a team 1, and 3 per hit to kill; 6 more (the clock's)."""
+    """A scenario's size in facts of its game (as RuleSim's fact builder made them), by the field that
+    drives them: per cell its kind and, per direction, a neighbour and nextTo or an edge; per agent 15
+    and per team 1; per bullet 5 and one per enemy target; per bullet place of a team 1, and 3 per hit
+    to kill; 6 more (the clock's)."""
     cells = width * height + 4 * ((width - 1) * height + width * (height - 1)) + 2 * (width + height)
     bullets = agents * ammo
     return {"width": cells,

@@ -1,9 +1,9 @@
 """The agent's half of a traced step, as the store records it: what the policy valued and chose
 (`Decisions`, a row per agent and step: the action, the policy's output for every action, explored or
 greedy, ε, the action mask) and what its reward was made of (`RewardTerms`, a row per agent, step and
-non-zero term, summing to the step's reward). Both of a run's tracers (GridWar's StoreSink and a declared
-world's DeclaredRecorder) keep them in an `AgentRows` and write them with it, before the episode ends they
-belong to (tables decisions, reward_terms and action_names: tracelab/store/schema.py)."""
+non-zero term, summing to the step's reward). Both of a run's tracers (RuleSim's StoreSink, in the runs it
+wrote, and a declared world's DeclaredRecorder) keep them in an `AgentRows` and write them with it, before
+the episode ends they belong to (tables decisions, reward_terms and action_names: tracelab/store/schema.py)."""
 from __future__ import annotations
 
 from collections.abc import Sequence

@@ -72,15 +72,15 @@ class RecordedSteps:
 
 
 def recorded_world(con: RunConnection, run: str) -> RecordedWorld:
-    """The spec world of the run (UserError, one line, for a run of no spec world: a GridWar run, a
+    """The spec world of the run (UserError, one line, for a run of no spec world: a RuleSim run, a
     reasoning run, or one whose texts are missing or past the store's caps)."""
     from tracelab.engine.parser import RULE_FILE_CAP
     config = run_config(con)
     text = spec_text(con, config)
     if text is None:
         board = con.execute("SELECT board FROM raw.run").fetchall()
-        gridwar = bool(board) and board[0][0] == BOARD_BEFORE_DECLARED
-        what = "a GridWar (RuleSim) run" if gridwar else "not a run of a spec world"
+        rulesim = bool(board) and board[0][0] == BOARD_BEFORE_DECLARED
+        what = "a RuleSim run" if rulesim else "not a run of a spec world"
         raise UserError(f"{run}: {what}: whatif rebuilds the world from the spec its run keeps, and this run "
                         "keeps none (record the game with play --env, e.g. rules/gridworld/war.toml)")
     env = config.get("env")

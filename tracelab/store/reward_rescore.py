@@ -4,7 +4,7 @@ the quantity the value is of (a table term's occurrences, the scaled atom's boun
 occurred has a row of value 0), so a term re-scored to NEW is its recorded quantity x NEW: exact for a table
 term and for the scaled atom (NEW is its scale). A run written before quantities were kept re-scores a term
 as its recorded value x NEW / OLD, OLD its value per occurrence from the run's config (a spec world's
-`[reward]` with the run's params, GridWar's scenario `[rewards]`), and cannot re-score a term worth 0. The
+`[reward]` with the run's params, a RuleSim run's scenario `[rewards]`), and cannot re-score a term worth 0. The
 actions stay the recorded ones: re-scoring changes no step, no end and no choice a learner made."""
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ from tracelab.game.scenario import Rewards
 from tracelab.store.kind import MAX_SPEC_TEXT, run_config, spec_text, world_params
 from tracelab.store.reader import RunConnection
 
-# GridWar's terms as a run written by RuleSim's tracer names them (sample_runs/, runs before the spec
+# the war game's terms as a run written by RuleSim's tracer names them (sample_runs/, runs before the spec
 # path; a spec world's run names its terms from the spec's [reward], WorldSpec.reward_terms, and
 # re-scores through _spec_terms) -> the scenario's [rewards] keys
 GRIDWAR_TERMS = {"win": "win", "loss": "loss", "hit": "hit_opponent", "got_shot": "got_shot",
@@ -112,7 +112,7 @@ def _spec_terms(config: dict[str, Any], text: str | None) -> list[Term] | None:
 
 
 def _gridwar_terms(config: dict[str, Any]) -> list[Term] | None:
-    """GridWar's terms from the run's scenario (`scenario` or a training's `scenario_toml`)."""
+    """A RuleSim run's terms from its scenario (`scenario` or a training's `scenario_toml`)."""
     text = next((t for t in (config.get("scenario_toml"), config.get("scenario")) if isinstance(t, str)), None)
     if text is None or len(text) > MAX_SPEC_TEXT:
         return None

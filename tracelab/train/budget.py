@@ -9,7 +9,7 @@ from typing import NamedTuple
 
 def reward_scale_note(largest_reward: float, scale: float) -> str | None:
     """A note when the learner's largest reward (the game's largest times `scale`) lies outside [1, 10]:
-    above, Smooth L1 caps the gradient and Q-values crawl (the method's scale on GridWar's hundreds: no
+    above, Smooth L1 caps the gradient and Q-values crawl (the method's scale on the war game's hundreds: no
     win in 760,000 steps); below, the default 0.01 on a game whose rewards are already small (the walk of
     tests/test_train.py, rewards up to 10, won nothing in 4,000 steps at 0.01 and 95% at 1). None inside."""
     seen = largest_reward * scale

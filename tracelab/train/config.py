@@ -30,7 +30,7 @@ def _opt(help: str, flag: str | None = None, **kw: Any) -> Any:
     return field(metadata={"help": help, "flag": flag}, **kw)
 
 
-# TrainConfig fields that describe GridWar's scenario (its team size, observation, opponent): refused with
+# TrainConfig fields that describe the war game's scenario (its team size, observation, opponent): refused with
 # --env, and not recorded as an env training's settings. The kernel, --slow-every-step (a spec's `[agents]
 # decides`) and --explore-scripted (its `[agents] script`) train any spec world.
 GRIDWAR_ONLY = ("scenario", "non_markov", "agents", "opponent_p", "eval_p")
@@ -193,7 +193,7 @@ class TrainConfig:
         `reward_terms`: the world's, one head each with --decompose (ValueError when it has none)."""
         if self.decompose and not reward_terms:
             raise ValueError("--decompose needs a world whose reward is split into terms: a spec world's "
-                             "[reward] (train --env FILE.toml; GridWar's 1v1 base: train --env "
+                             "[reward] (train --env FILE.toml; the war game's 1v1 base: train --env "
                              "rules/gridworld/war.toml --decompose)")
         return NetSpec(inputs, self.hidden_sizes, actions, self.dueling, tuple(reward_terms) if self.decompose else ())
 
@@ -222,7 +222,7 @@ class TrainConfig:
         return asdict(self)
 
     def env_dict(self) -> dict[str, Any]:
-        """The fields an env's training uses (to_dict without GridWar's): what its run records."""
+        """The fields an env's training uses (to_dict without the war game's): what its run records."""
         return {k: v for k, v in asdict(self).items() if k not in GRIDWAR_ONLY}
 
     @classmethod

@@ -16,7 +16,7 @@ the env alone (no network), as many steps as the run has trained.
 A checkpoint may come from a stranger: it holds only tensors and plain values, loads with torch's
 weights_only unpickler and is checked against the shapes its config and env imply. It names its env, but
 a resume makes the env the user names (`--env`, checked equal to the checkpoint's): a file never decides
-which spec file tracelab reads. Checkpoints of RuleSim's trainer (every GridWar run before GridWar trained
+which spec file tracelab reads. Checkpoints of RuleSim's trainer (every war game run before it trained
 through its spec) are refused in one line that gives the command starting a new run with their settings."""
 from __future__ import annotations
 
@@ -44,7 +44,7 @@ ENV_FORMAT = "tracelab-dqn-env-checkpoint/2"
 # the first format kept each world's generator state and its episode's actions (per-world replay in
 # gymnasium's SyncVectorEnv); the batched declared env has no per-world generator state to set
 OLD_FORMATS = ("tracelab-dqn-env-checkpoint/1",)
-# GridWar's RuleSim trainer's checkpoints (tracelab before GridWar trained through its spec, issue 38): its
+# RuleSim's trainer's checkpoints (tracelab before the war game trained through its spec, issue 38): its
 # observations (RuleSim's, with the nearest bullet) and its replay of the worlds are not the spec's, so its
 # networks and buffer cannot continue here honestly. Its format 1 held numpy objects (only an unpickler
 # that runs code reads them): recognised by its mark in the pickle
@@ -168,8 +168,8 @@ def checkpoint_env(run: str | Path, max_bytes: int) -> tuple[dict[str, Any], Env
                           f"cannot rebuild: resume it with that version, or train again from its policy's "
                           f"settings (RUN/policy/policy.json, \"trained\")")
     if state.get("format") in RULESIM_FORMATS:
-        raise FileRefused(f"{f}: trained by tracelab's RuleSim trainer (before GridWar trained through its "
-                          f"spec), whose observations and worlds the spec path does not rebuild: start a new "
+        raise FileRefused(f"{f}: trained by tracelab's RuleSim trainer (before the war game trained through "
+                          f"its spec), whose observations and worlds the spec path does not rebuild: start a new "
                           f"run with its settings: {_new_run_command(state.get('config'))}")
     try:
         check(state, {"format": Const(ENV_FORMAT), "config": config_schema(),

@@ -1,25 +1,18 @@
 """A trained policy: how it chooses actions, its files, and its greedy evaluation on any env. One policy in
-memory, EnvPolicy (TeamPolicy for a world of several agents), read from a policy directory of either format
-(docs/training.md, "Policy format"):
+memory, EnvPolicy (TeamPolicy for a world of several agents), read from a policy directory of the format
+the trainer writes (docs/training.md, "Policy format"): `tracelab-dqn-env-policy/1` (ENV_FORMAT), one
+network over the observations of the env it was trained on (`env`: a registered id or a spec file and its
+params; `observation.encoding`), so that play and eval play it on that env and refuse another in one line
+(load_env_policy). The war game's earlier policies (RuleSim's trainer's format) are read by its
+registration (tracelab/envs/declared/gridwar_scenarios.py) into an EnvPolicy.
 
-- `tracelab-dqn-env-policy/1` (ENV_FORMAT, what the trainer writes): one network over the observations of the
-  env it was trained on (`env`: a registered id or a spec file and its params; `observation.encoding`), so
-  that play and eval play it on that env and refuse another in one line (load_env_policy);
-- `tracelab-dqn-policy/1` (RULESIM_FORMAT, written by GridWar's earlier trainer on RuleSim, read only): a
-  GridWar scenario and its network, converted at load into the EnvPolicy of that scenario's spec, whose
-  observation is RuleSim's (tests/test_gridwar_spec.py), so that it plays as it played RuleSim
-  (load_rulesim_policy). A team's policy of that format read each agent's view with its own blocks first,
-  which no EnvPolicy reads: refused in one line giving the command that trains it again.
-
-Both are `policy.pt` (`{network name: state dict}`, loaded without running code) beside `policy.json`,
+A policy is `policy.pt` (`{network name: state dict}`, loaded without running code) beside `policy.json`,
 written through write_policy_files. Nothing here needs the training code's objects or the run."""
 from __future__ import annotations
 
 import json
-import shlex
-import tomllib
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -30,14 +23,12 @@ from gymnasium.vector import AutoresetMode, SyncVectorEnv
 from tracelab.engine.safe_files import read_json
 from tracelab.envs.declared.env_source import EnvSource, check_same_env, env_source_from_json
 from tracelab.errors import UserError
-from tracelab.game.scenario import ACTION_NAMES, Scenario, builtin_scenario_names, scenario_from_dict
 from tracelab.store import layout
 from tracelab.store.agent_rows import PolicyOutput
 from tracelab.train.env_source import ObservationEncoder, TeamEncoder, probe_env
 from tracelab.train.experiments.stats import spread, wilson
 from tracelab.train.memory import check_policy_memory, memory_limit
 from tracelab.train.qnet import HiddenWidths, NetSpec, NumpyQ, QFunction
-from tracelab.train.team_policy import TeamPolicy, team_env_actor
 from tracelab.validation import Const, IntRange, ListOf, MapOf, OptionalKey, check_file
 
 # deferred: torch (and torch_files) and the declared envs (the engine) load in the functions that use them:
@@ -45,7 +36,6 @@ from tracelab.validation import Const, IntRange, ListOf, MapOf, OptionalKey, che
 
 
 ENV_FORMAT = "tracelab-dqn-env-policy/1"
-RULESIM_FORMAT = "tracelab-dqn-policy/1"  # GridWar's earlier trainer's (RuleSim): read and converted, never written
 POLICY_JSON, POLICY_PT = "policy.json", "policy.pt"
 BEST_POLICY_DIR = "policy-best"  # a training run's policy of its best evaluation, beside RUN/policy/
 
@@ -68,6 +58,30 @@ class EnvPolicy:
         values = by_term.sum(axis=1) if by_term is not None else self.q(x)
         q = np.where(masks.astype(bool), values, -np.inf) if self.mask and masks is not None else values
         return q.argmax(axis=1), PolicyOutput(np.asarray(values, np.float32), terms=terms, term_values=by_term)
+
+
+class TeamPolicy:
+    """One network for every agent of a team (parameter sharing): an EnvPolicy over one agent's rows (a
+    TeamEncoder: each agent's observation followed by its one-hot index among the spec's agents, the agent
+    indicator of Gupta et al. 2017 and SuperSuit's `agent_indicator_v0`) acting for every agent of a batch
+    of worlds: actions [W, agents] from observations [W, agents, ...] and masks [W, agents, A]. What
+    env_trainer.py trains on a world of several agents, and plays in its evaluations."""
+
+    def __init__(self, rows: EnvPolicy, n_agents: int) -> None:
+        self.rows, self.n_agents = rows, n_agents
+
+    def act(self, obs: Any, masks: np.ndarray | None = None) -> np.ndarray:
+        return self.decide(obs, masks)[0]
+
+    def decide(self, obs: Any, masks: np.ndarray | None = None) -> tuple[np.ndarray, PolicyOutput]:
+        """The greedy actions [W, agents] and their values [W, agents, A] (a traced world records a row per
+        agent)."""
+        n = self.n_agents
+        worlds = len(obs)
+        flat = None if masks is None else np.asarray(masks).reshape(worlds * n, -1)
+        actions, out = self.rows.decide(obs, flat)
+        terms = None if out.term_values is None else out.term_values.reshape(worlds, n, *out.term_values.shape[1:])
+        return actions.reshape(worlds, n), replace(out, values=out.values.reshape(worlds, n, -1), term_values=terms)
 
 
 def batch_of_one(obs: Any) -> Any:
@@ -93,6 +107,21 @@ def one_env_actor(policy: Any, env: Any = None) -> Callable[[Any, dict[str, Any]
         actions, output = policy.decide(batch_of_one(obs), masks)
         decided(output, masks)
         return int(np.asarray(actions).reshape(-1)[0])
+    return act
+
+
+def team_env_actor(policy: TeamPolicy, env: Any = None) -> Callable[[Any, dict[str, Any]], np.ndarray]:
+    """Every agent's greedy action in one world of several agents (play.TeamEnv: observation [agents, ...],
+    masks [agents, A]), each agent's decision recorded where `env` records its games."""
+    record = env is not None and getattr(env.unwrapped, "records_decisions", False)
+
+    def act(obs: Any, info: dict[str, Any]) -> np.ndarray:
+        mask = info.get("action_mask")
+        masks = None if mask is None else np.asarray(mask)[None]
+        actions, output = policy.decide(np.asarray(obs)[None], masks)
+        if record:
+            env.unwrapped.decided(output.rows(0), None if masks is None else masks[0])
+        return actions[0]
     return act
 
 
@@ -132,7 +161,7 @@ def save_env_policy(path: str | Path, source: EnvSource, weights: dict[str, Any]
     return write_policy_files(Path(path), {"shared": weights}, spec)
 
 
-def _policy_dir(path: str | Path) -> Path:
+def policy_dir(path: str | Path) -> Path:
     p = Path(path)
     if p.is_dir():
         return p
@@ -153,19 +182,12 @@ ENV_SPEC_SCHEMA = {
     "networks": MapOf(ListOf(IntRange(0), min_len=1), min_len=1),
     "mask": OptionalKey(bool),
 }
-RULESIM_SPEC_SCHEMA = {
-    "format": Const(RULESIM_FORMAT),
-    "scenario": {"name": str, "toml": str},
-    "observation": {"stack_previous": bool},
-    "network": NETWORK_SCHEMA,
-    "networks": MapOf(ListOf(IntRange(0), min_len=1), min_len=1),
-    "mask": OptionalKey(bool),
-}
 
 
-def _read_policy_json(path: str | Path) -> tuple[Path, Any]:
+
+def read_policy_json(path: str | Path) -> tuple[Path, Any]:
     """(policy.json's path, its decoded contents), read with a size cap and without following a link."""
-    f = _policy_dir(path) / POLICY_JSON
+    f = policy_dir(path) / POLICY_JSON
     if not (f.exists() or f.is_symlink()):
         raise FileNotFoundError(f"{str(f.parent)!r} holds no {POLICY_JSON}")
     return f, read_json(f, what="policy description", follow_symlinks=False)
@@ -173,7 +195,7 @@ def _read_policy_json(path: str | Path) -> tuple[Path, Any]:
 
 def policy_format(path: str | Path) -> str | None:
     """policy.json's `format` (None when absent or not text): which loader reads the policy."""
-    f = _policy_dir(path) / POLICY_JSON
+    f = policy_dir(path) / POLICY_JSON
     if not f.exists():
         return None
     d = read_json(f, what="policy description", follow_symlinks=False)
@@ -201,7 +223,7 @@ def read_policy_networks(path: str | Path, spec: dict[str, Any]) -> dict[str, An
     """policy.pt of a policy directory, whose policy.json is `spec`: loaded without running code (torch's
     weights_only), no bigger than the networks it declares, each network's state dict of their shape."""
     from tracelab.train.torch_files import load_tensors
-    d = _policy_dir(path)
+    d = policy_dir(path)
     net, names = spec_net(spec), list(spec["networks"])
     check_policy_memory(net, len(names), memory_limit(), str(d / POLICY_JSON))
     f = d / POLICY_PT
@@ -212,7 +234,7 @@ def read_policy_networks(path: str | Path, spec: dict[str, Any]) -> dict[str, An
     return check_file(states, _state_dict_schema(names, net), f)
 
 
-def _network(net: NetSpec, state: dict[str, Any]) -> NumpyQ:
+def numpy_network(net: NetSpec, state: dict[str, Any]) -> NumpyQ:
     return NumpyQ(net, {k: v.float().numpy() for k, v in state.items()})
 
 
@@ -223,7 +245,7 @@ def load_env_policy(path: str | Path, given: EnvSource) -> tuple[EnvPolicy | Tea
     """(the policy, its policy.json), refused in one line unless it was trained on `given` (the env the
     user named: a policy file never decides which spec file tracelab reads), its network's shape checked
     against the env's spaces. A world of several agents: a TeamPolicy (every agent's action)."""
-    f, raw = _read_policy_json(path)
+    f, raw = read_policy_json(path)
     spec = check_file(raw, ENV_SPEC_SCHEMA, f)
     check_same_env(env_source_from_json(spec["env"], str(f)), given, str(f.parent))
     net = spec_net(spec)
@@ -232,79 +254,17 @@ def load_env_policy(path: str | Path, given: EnvSource) -> tuple[EnvPolicy | Tea
     if (encoder.size, n_actions) != (net.inputs, net.actions):
         raise ValueError(f"{f}: its network reads {net.inputs} inputs and gives {net.actions} Q-values; "
                          f"{given.describe()} has {encoder.size} and {n_actions} now")
-    policy = EnvPolicy(_network(net, states["shared"]), encoder, spec.get("mask", False))
+    policy = EnvPolicy(numpy_network(net, states["shared"]), encoder, spec.get("mask", False))
     return (policy if not isinstance(encoder, TeamEncoder) else TeamPolicy(policy, encoder.n_agents)), spec
 
 
 def recorded_env(path: str | Path) -> EnvSource | None:
     """The env a policy of train (ENV_FORMAT) was trained on, where it is one of tracelab's registered ids
-    (GridWar's, the toy-text worlds'), which eval and play then play without --env; None for a spec file or
+    (the war game's, the toy-text worlds'), which eval and play then play without --env; None for a spec file or
     another id, which the user names (a policy file never decides which file tracelab reads)."""
-    f, raw = _read_policy_json(path)
+    f, raw = read_policy_json(path)
     source = env_source_from_json(check_file(raw, ENV_SPEC_SCHEMA, f)["env"], str(f))
     return source if source.name.startswith("tracelab/") and source.name in gym.registry else None
-
-
-def read_rulesim_spec(path: str | Path) -> dict[str, Any]:
-    """policy.json of a policy of GridWar's earlier trainer (RULESIM_FORMAT), checked against its schema, and
-    refused in one line unless it converts exactly into an EnvPolicy: one agent, one network (a team's
-    network read each agent's view with its own blocks first, which tracelab's team policies do not: the
-    line gives the command that trains the scenario again, on its spec)."""
-    f, raw = _read_policy_json(path)
-    spec = check_file(raw, RULESIM_SPEC_SCHEMA, f)
-    scenario = rulesim_scenario(spec, f)
-    if scenario.agents_per_team != 1:
-        named = shlex.quote(scenario.name) if scenario.name in builtin_scenario_names() else "SCENARIO_FILE"
-        retrain = f"tracelab train --scenario {named} --agents {scenario.agents_per_team}" + \
-            (" --non-markov" if spec["observation"]["stack_previous"] else "")
-        raise ValueError(f"{f.parent}: a policy of GridWar's earlier trainer (RuleSim's format) for "
-                         f"{scenario.agents_per_team} agents a team, each reading the team with its own blocks "
-                         f"first, which today's team policies (one network, each agent's index as input) cannot "
-                         f"play as trained; train it again on its spec: {retrain}")
-    if list(spec["networks"].values()) != [[0]]:
-        raise ValueError(f"{f}: key 'networks': expected one network, playing agent 0 (a one-agent scenario)")
-    return spec
-
-
-def rulesim_scenario(spec: dict[str, Any], where: str | Path = POLICY_JSON) -> Scenario:
-    """The GridWar scenario a RuleSim-format policy.json (read_rulesim_spec) was trained on."""
-    where = f"{where}: key 'scenario.toml'"
-    try:
-        table = tomllib.loads(spec["scenario"]["toml"])
-    except tomllib.TOMLDecodeError as e:
-        raise ValueError(f"{where}: not TOML: {e}") from None
-    return scenario_from_dict(table, source=where)
-
-
-def load_rulesim_policy(path: str | Path, given: EnvSource) -> EnvPolicy:
-    """A policy of GridWar's earlier trainer (read_rulesim_spec: one agent) as the EnvPolicy that plays it on
-    the world `given` names, a GridWar spec whose observation and actions are its scenario's (eval and play
-    name its scenario's: scenario_env, scenario_spec). RuleSim gave one agent the team's view, as the spec
-    does, so its network reads the spec's observation as it is: the same games (tests/test_play.py). A world
-    of another shape is refused in one line naming both."""
-    spec = read_rulesim_spec(path)
-    trained_on = rulesim_scenario(spec)
-    net = spec_net(spec)
-    (state,) = read_policy_networks(path, spec).values()  # sized and checked before the world is built
-    encoder, n_actions, world = probe_env(given)
-    agents = encoder.n_agents if isinstance(encoder, TeamEncoder) else 1
-    names = [ACTION_NAMES[a] for a in trained_on.action_ids]
-    world_names = names if world is None else list(world.action_names)
-    if (agents, n_actions, encoder.size, world_names) != (1, net.actions, net.inputs, names):
-        raise ValueError(f"{_policy_dir(path)}: trained on GridWar's {trained_on.name!r} (1 agents, "
-                         f"{net.actions} actions, {net.inputs} observations); {given.describe()} has {agents} "
-                         f"agents, {n_actions} actions, {encoder.size} observations"
-                         + ("" if len(world_names) != len(names) or world_names == names else
-                            f" (actions {', '.join(world_names)}, not {', '.join(names)})"))
-    return EnvPolicy(_network(net, state), encoder, spec.get("mask", False))
-
-
-def load_trained(path: str | Path, given: EnvSource) -> EnvPolicy | TeamPolicy:
-    """A policy of either format, to play on the world `given` names: one of train (load_env_policy: the same
-    env it was trained on), or one of GridWar's earlier trainer converted (load_rulesim_policy)."""
-    if policy_format(path) == RULESIM_FORMAT:
-        return load_rulesim_policy(path, given)
-    return load_env_policy(path, given)[0]
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -313,7 +273,7 @@ def load_trained(path: str | Path, given: EnvSource) -> EnvPolicy | TeamPolicy:
 @dataclass
 class EnvEvalResult:
     """An evaluation's games on any env. Where the world declares how a game ends (a spec's `[end] win`,
-    `loss`) its outcomes are counted as the method counted GridWar's: wins, losses, draws (ended by
+    `loss`) its outcomes are counted as the method counted the war game's: wins, losses, draws (ended by
     neither) and truncated games, and the method's win rate, in which a game cut short counts as a loss
     (a spec world's cut is its own step limit, so its method win rate is its win rate); otherwise returns
     and the success rate (return > 0)."""
@@ -389,7 +349,7 @@ class EnvEvalResult:
         m = {"games": self.games, "mean_return": self.mean_return, "success_rate": self.success_rate,
              "terminated": self.terminated, "truncated": self.truncated,
              "mean_steps": float(np.mean(self.steps)) if self.steps else 0.0}
-        if self.wins is not None:  # GridWar's names, which the views plot and the reports read
+        if self.wins is not None:  # the war game's names, which the views plot and the reports read
             m.update(wins=self.wins, losses=self.losses, draws=self.draws, win_rate=self.win_rate,
                      method_win_rate=self.win_rate)
             if self.win_steps:
@@ -410,7 +370,7 @@ class EnvEvalResult:
 def make_vector_env(source: EnvSource, worlds: int, by_term: bool = False,
                     kernel: str = "auto") -> tuple[Any, str | None]:
     """`worlds` copies of the env stepped together, a world that ends reset within its step (SAME_STEP, as
-    GridWar's vector env): a declared world's own batched engine (DeclaredVectorEnv, every world in one
+    the war game's vector env): a declared world's own batched engine (DeclaredVectorEnv, every world in one
     engine call), else gymnasium's SyncVectorEnv over the env. World i steps as the env reset with seed
     s + i either way. `by_term`: each world's reward by term is read (train --decompose), which only a
     world of its own keeps: SyncVectorEnv. `kernel`: the batched engine's (train --kernel). Returns (the env,

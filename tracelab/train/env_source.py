@@ -62,7 +62,7 @@ class ObservationEncoder:
 
 class TeamEncoder:
     """Observations [W, agents, ...] of a world of several agents -> float32 [W * agents, size]: each agent's
-    encoded observation, then its one-hot index (one network for every agent: team_policy.py)."""
+    encoded observation, then its one-hot index (one network for every agent: env_policy.TeamPolicy)."""
 
     def __init__(self, agent_encoder: ObservationEncoder, n_agents: int) -> None:
         self.agent, self.n_agents = agent_encoder, n_agents

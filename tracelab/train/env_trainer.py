@@ -1,5 +1,5 @@
-"""tracelab's DQN trainer, on any gymnasium env with Discrete actions (`tracelab train`, GridWar through its
-spec and any other world): ε-greedy over the batched worlds, transitions into replay, one update per
+"""tracelab's DQN trainer, on any gymnasium env with Discrete actions (`tracelab train`: a world's spec, a
+registered id): ε-greedy over the batched worlds, transitions into replay, one update per
 world-step, target copies, evaluations, the run's metrics and episodes, checkpoints, the final and the
 best policy.
 
@@ -13,8 +13,8 @@ The loop is train_loop.py's. Observations are encoded for the network by env_sou
 Discrete one is one-hot); a declared world's first evaluation games are traced into the run
 (external_eval.DeclaredEvaluator).
 
-Several agents a team (a declared world whose `[agents] names` are several: GridWar's 5v5, its non-Markov
-scenario): one network for all of them (parameter sharing, team_policy.py: each agent's observation and its
+Several agents a team (a declared world whose `[agents] names` are several: the war game's 5v5, its non-Markov
+scenario): one network for all of them (parameter sharing, env_policy.TeamPolicy: each agent's observation and its
 one-hot index is a row of the batch), every world stepped by one engine call (DeclaredVectorEnv's team
 mode). An agent's transition (transitions.py) runs from a step where it decides (the spec's `[agents]
 decides`: alive, a slow agent on its even steps) to its next decision, the end of the episode or its
@@ -31,12 +31,10 @@ import torch
 
 from tracelab.store.writer import TraceWriter
 from tracelab.errors import UserError
-from tracelab.envs.declared.gridwar import scenario_env
-from tracelab.game.scenario import Scenario
 from tracelab.train.config import TrainConfig, flag_of
 from tracelab.train.env_checkpoint import ActionLog, replay_actions, save_env_checkpoint
-from tracelab.train.env_policy import (EnvEvalResult, EnvPolicy, declares_outcomes, make_vector_env, play_env_games,
-                                       save_env_policy, world_spec_of)
+from tracelab.train.env_policy import (BEST_POLICY_DIR, EnvEvalResult, EnvPolicy, TeamPolicy, declares_outcomes,
+                                       make_vector_env, play_env_games, save_env_policy, world_spec_of)
 from tracelab.envs.declared.env_source import EnvSource
 from tracelab.train.env_source import ObservationEncoder, TeamEncoder, action_count
 from tracelab.train.external_eval import DeclaredEvaluator, EvalSettings
@@ -47,9 +45,7 @@ from tracelab.train.episode_log import EpisodeLog
 from tracelab.train.exploration import Exploration
 from tracelab.train.train_loop import NetworkFactory, acting_q, load_shared_state, make_learner, train_loop
 from tracelab.train.metric_log import MetricLog
-from tracelab.train.env_policy import BEST_POLICY_DIR
 from tracelab.train.rngs import Generators
-from tracelab.train.team_policy import TeamPolicy
 from tracelab.train.transitions import PendingTransitions
 from tracelab.train.tensorboard import MetricSink
 from tracelab.train.update_schedule import UpdateSchedule
@@ -63,7 +59,7 @@ class EnvTrainer:
                  run_dir: Path | None = None, progress: Progress | None = None,
                  metric_sinks: Sequence[MetricSink] = (), eval_source: EnvSource | None = None,
                  network: NetworkFactory | None = None, learner_class: type[DQN] | None = None) -> None:
-        """`eval_source`: the env evaluations play, if not `source` (GridWar's opponent at --eval-p); the
+        """`eval_source`: the env evaluations play, if not `source` (the war game's opponent at --eval-p); the
         rest is the Python API (docs/training.md, "The learner"): `network` trains the readable learner on
         this module instead of the MLP cfg.hidden describes (its policy files say `custom`), `learner_class`
         is the readable learner's class (a subclass of DQN with another loss, say); `metric_sinks` receive
@@ -81,7 +77,7 @@ class EnvTrainer:
         if n == 1:
             self.encoder: Any = ObservationEncoder(self.env.single_observation_space, source.name)
             self.n_actions = action_count(self.env.single_action_space, source.name)
-        else:  # a team: each agent's observation and index a row (team_policy.py)
+        else:  # a team: each agent's observation and index a row (env_policy.TeamPolicy)
             if cfg.decompose:
                 raise UserError(f"{source.name}: --decompose trains one agent; this world has {n}")
             self.encoder = TeamEncoder(ObservationEncoder(self.env.agent_observation_space, source.name), n)
@@ -365,20 +361,13 @@ class EnvTrainer:
             self._evaluator.close()
 
 
-def gridwar_sources(cfg: TrainConfig, scenario: Scenario) -> tuple[EnvSource, EnvSource]:
-    """(the env GridWar's `scenario` trains on, the one its evaluations play: the opponent at --eval-p), as
-    GridWar spec ids and params (scenario_env: a UserError naming what its spec cannot play)."""
-    source = EnvSource(*scenario_env(scenario, cfg.opponent_p, cfg.non_markov))
-    return source, source.with_args(p_toward=cfg.eval_p)
-
-
 def env_run_meta(cfg: TrainConfig, source: EnvSource, command: str,
                  resumed_from: dict[str, Any] | None = None, scenario: Any = None) -> dict[str, Any]:
     """The meta of a run that trains on `source` (`train --env`, a sweep's trial): the env and the
     training's settings; for a declared world whose evaluations are traced, what `why`, `tui` and
     `replay` read of it (its rule files, its spec and rules by path, size and hash, what sets each external
     fact, its board: DeclaredTarget's; the texts go in the run's `sources` table with its traced games).
-    `scenario`: the GridWar scenario `source` plays (train --scenario): the run names it and keeps its
+    `scenario`: the war game's scenario `source` plays (train --scenario): the run names it and keeps its
     settings (every config field, the scenario's TOML), as show, compare and the TUI read them."""
     # deferred: loads the engine (numba), which a gymnasium id's training does not need
     from tracelab.envs.declared.play import load_declared

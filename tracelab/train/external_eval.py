@@ -3,7 +3,7 @@ own: greedy games every so many steps, the first few of each evaluation traced i
 run (begin info `{"kind": "eval", "train_step": N, "eval_round": K, ...}`), so `tracelab why`, `replay`
 and the TUI's evaluation games work on them, and the figures as the run's `eval/...` metrics.
 
-The envs traced are the rules-declared worlds (a registered id such as tracelab/GridWar-base-v0 or
+The envs traced are the rules-declared worlds (a registered id such as tracelab/FrozenLake-v1 or
 tracelab/FrozenLake-v1, or a spec file): a traced DeclaredEnv records them, as `tracelab play --env --run`
 does. The policy is a function from a batch of observations to a batch of actions (`Act`): the library's
 greedy prediction."""
@@ -17,17 +17,16 @@ from typing import Any, Protocol
 
 import numpy as np
 
-import tracelab.envs  # noqa: F401  (registers the toy-text and GridWar ids)
+import tracelab.envs  # noqa: F401  (registers the declared worlds' ids)
 from tracelab.envs.declared.gridwar import GRIDWAR_SPEC_IDS
 from tracelab.errors import UserError
 from tracelab.store.agent_rows import PolicyOutput
 from tracelab.store.writer import TraceWriter
 from tracelab.train.env_policy import (EVAL_STEP_CAP, EnvEvalResult, declares_outcomes, make_vector_env,
-                                       one_env_actor, play_env_games)
+                                       one_env_actor, play_env_games, team_env_actor)
 from tracelab.envs.declared.env_source import EnvSource
 from tracelab.train.env_source import team_spec
 from tracelab.train.rngs import eval_seed
-from tracelab.train.team_policy import team_env_actor
 
 # deferred: the declared world's recording and TeamEnv load the engine (numba), which a gymnasium env's
 # training does not need
@@ -43,7 +42,7 @@ class EvalSettings:
     games: int = 50          # games per evaluation
     traced: int = 5          # of which traced in full into the run
     envs: int = 16           # worlds stepped together for the untraced games
-    opponent_p: float = 0.3  # GridWar's ids: the scripted opponent's probability of a move towards red's base
+    opponent_p: float = 0.3  # a scripted opponent's (p_toward): its probability of a move towards red's base
     seed: int = 0            # evaluation seeds: eval_seed(seed, round), as tracelab train's
 
     def __post_init__(self) -> None:
@@ -194,7 +193,7 @@ class DeclaredEvaluator:
 
 # ---------------------------------------------------------------------------------------------------------
 def eval_target(env_id: str, env_kwargs: Mapping[str, Any] | None = None) -> EvalTarget:
-    """What `env_id` (a declared env's id such as tracelab/GridWar-base-v0, or a spec file) is, for
+    """What `env_id` (a declared env's id such as tracelab/FrozenLake-v1, or a spec file) is, for
     recording and evaluating a training on it; a UserError names any other env (its games cannot be traced)."""
     source = EnvSource.given(env_id, dict(env_kwargs or {}))
     env = source.make()
@@ -203,6 +202,6 @@ def eval_target(env_id: str, env_kwargs: Mapping[str, Any] | None = None) -> Eva
     finally:
         env.close()
     if spec is None:
-        raise UserError(f"{env_id!r}: not a rules-declared env (tracelab/GridWar-base-v0, tracelab/FrozenLake-v1, "
+        raise UserError(f"{env_id!r}: not a rules-declared env (tracelab/FrozenLake-v1, "
                         f"a spec file): tracelab cannot trace its games")
     return DeclaredTarget(source, spec)

@@ -2,12 +2,12 @@
 Stable-Baselines3"): `TracelabCallback` writes what SB3's logger logs (rollout/ep_rew_mean, train/loss,
 time/fps, ...), every training episode, and greedy evaluations every so many steps whose first games are
 traced in full, so `tracelab tui RUN`, `tracelab why RUN ...` and `tracelab replay RUN` work on a run
-trained by SB3's PPO, A2C, DQN, ... on GridWar or on a rules-declared env.
+trained by SB3's PPO, A2C, DQN, ... on a rules-declared env (a registered id or a spec file).
 
     from stable_baselines3 import PPO
     from tracelab.train.sb3 import TracelabCallback, make_vec_env
-    model = PPO("MlpPolicy", make_vec_env("tracelab/GridWar-base-v0", n_envs=4), n_steps=256)
-    with TracelabCallback("runs/ppo-base", "tracelab/GridWar-base-v0", eval_every=10_000) as cb:
+    model = PPO("MlpPolicy", make_vec_env("tracelab/FrozenLake-v1", n_envs=4), n_steps=256)
+    with TracelabCallback("runs/ppo-lake", "tracelab/FrozenLake-v1", eval_every=10_000) as cb:
         model.learn(100_000, callback=cb)
 
 The run's status is tracelab train's: `finished` when learn() reaches its total, `interrupted` when it
@@ -83,11 +83,11 @@ class TracelabCallback(BaseCallback):
     def __init__(self, run_dir: str | Path, env_id: str, env_kwargs: Mapping[str, Any] | None = None, *,
                  eval_every: int = 10_000, eval_games: int = 50, trace_eval_games: int = 5, eval_envs: int = 16,
                  eval_p: float = 0.3, seed: int = 0, save_model: bool = True, verbose: int = 0) -> None:
-        """`run_dir`: a new run directory; `env_id`, `env_kwargs`: the env the model trains on (a GridWar id
-        such as tracelab/GridWar-base-v0, a declared env's id such as tracelab/FrozenLake-v1, or a spec
-        file), from which the evaluation games are made. Every `eval_every` steps (0: only at the end) and
-        at the end, `eval_games` greedy games, the first `trace_eval_games` traced into the run (GridWar:
-        against the scripted opponent with `eval_p`). `save_model`: the model into RUN/sb3/model.zip at
+        """`run_dir`: a new run directory; `env_id`, `env_kwargs`: the env the model trains on (a
+        declared env's id such as tracelab/FrozenLake-v1, or a spec file), from which the evaluation games
+        are made. Every `eval_every` steps (0: only at the end) and at the end, `eval_games` greedy games,
+        the first `trace_eval_games` traced into the run (a world with a scripted opponent: against it at
+        `eval_p`). `save_model`: the model into RUN/sb3/model.zip at
         the end."""
         super().__init__(verbose)
         self.run_dir = Path(run_dir)

@@ -42,7 +42,7 @@ FILE_KEYS = {"set", "grid", "random", "samples", "scheduler", "metric", "mode"}
 # one sweep trains one scenario or world (its runs are compared with each other); where the runs go is --out's
 NOT_SEARCHED = {"scenario": "one sweep trains one scenario", "agents": "one sweep trains one scenario",
                 "env": "one sweep trains one world"}
-ENV_KEY = "env"  # `--set env=SPEC_OR_ID`: the trials train on that env (train --env), not on GridWar
+ENV_KEY = "env"  # `--set env=SPEC_OR_ID`: the trials train on that env (train --env), not on a scenario
 
 
 class SweepSpecError(UserError):
@@ -205,10 +205,12 @@ def build_spec(*, sets: list[str] = (), grids: list[str] = (), randoms: list[str
             env = value.strip()
         else:
             fixed[name] = parse_value(name, value, where)
-    gridwar = [k for k in (*fixed, *raw["grid"], *raw["random"]) if k in GRIDWAR_ONLY] if env else []
-    if gridwar:
-        raise SweepSpecError(f"{', '.join(gridwar)} describe{'s' * (len(gridwar) == 1)} GridWar; a sweep of "
-                             f"--set env={env} searches the DQN's settings only")
+    if env:
+        from tracelab.envs.declared.gridwar_scenarios import scenario_settings_given
+        refused = scenario_settings_given([k for k in (*fixed, *raw["grid"], *raw["random"]) if k in GRIDWAR_ONLY],
+                                          f"a sweep of --set env={env} searches the DQN's settings only")
+        if refused:
+            raise SweepSpecError(refused)
     try:
         TrainConfig(**fixed)
     except ValueError as e:
@@ -274,7 +276,7 @@ def _top_level(top: dict[str, Any], samples: int | None, scheduler: str | None, 
 
 def evaluation_metrics() -> list[str]:
     """What a trainer's evaluation writes (Tune reads a trial at its evaluations): the spec path's
-    (env_policy.EnvEvalResult), with the counts and win rates of a world that declares a win (GridWar's
+    (env_policy.EnvEvalResult), with the counts and win rates of a world that declares a win (the war game's
     scenarios; `--set env=...` only where its world declares one, `eval/mean_return` its default)."""
     from tracelab.train.env_policy import EnvEvalResult
     return list(EnvEvalResult(wins=0, win_steps=[0]).metrics())

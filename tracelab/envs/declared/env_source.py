@@ -14,7 +14,7 @@ from typing import Any
 
 import gymnasium as gym
 
-from tracelab.envs import make_env  # importing tracelab.envs registers the toy-text and GridWar ids
+from tracelab.envs import make_env  # importing tracelab.envs registers the ids (declared/gridwar.py, toytext.py)
 from tracelab.envs.declared.gridwar import GRIDWAR_SPEC_IDS, spec_and_params
 from tracelab.errors import UserError
 
@@ -42,7 +42,7 @@ class EnvSource:
     @property
     def env_id(self) -> str | None:
         """The registered id whose entry is DeclaredEnv over its `spec` kwarg, or None for a spec file (and
-        for GridWar's ids, whose keyword arguments gridwar.spec_and_params maps onto their spec's)."""
+        for the war game's ids, whose keyword arguments gridwar.spec_and_params maps onto their spec's)."""
         return self.name if self.name in _registry() and self.name not in GRIDWAR_SPEC_IDS else None
 
     @property
@@ -61,7 +61,7 @@ class EnvSource:
             kwargs = dict(entry.kwargs)
             if entry.entry_point != DECLARED_ENTRY_POINT or "spec" not in kwargs:
                 raise UserError(f"--env {self.name}: a registered env, but not one declared in rules (play "
-                                "--scenario plays GridWar; --env takes a spec file or an id such as "
+                                "--scenario plays the war game; --env takes a spec file or an id such as "
                                 "tracelab/FrozenLake-v1)")
             return str(kwargs.pop("spec")), {**kwargs, **self.kwargs}
         if os.path.isfile(self.name):
@@ -71,7 +71,7 @@ class EnvSource:
                         f"{', '.join(declared)})")
 
     def with_args(self, **kwargs: Any) -> "EnvSource":
-        """The same env with these keyword arguments set (GridWar's opponent at another p: p_toward=P)."""
+        """The same env with these keyword arguments set (the war game's opponent at another p: p_toward=P)."""
         return EnvSource(self.name, {**self.kwargs, **kwargs})
 
     def to_json(self) -> dict[str, Any]:
@@ -83,7 +83,7 @@ class EnvSource:
                          *(f"--env-arg {shlex.quote(f'{k}={_toml_value(v)}')}" for k, v in self.kwargs.items())])
 
     def make(self) -> Any:
-        """A new env (gym.make for a registered id, GridWar's too: its TimeLimit and checks; make_env for a
+        """A new env (gym.make for a registered id, the war game's too: its TimeLimit and checks; make_env for a
         spec file)."""
         if self.name in _registry():
             return gym.make(self.name, **self.kwargs)

@@ -8,6 +8,7 @@ params here (`spec_and_params`), where a keyword the spec cannot honour is refus
 `train --scenario NAME` trains a scenario as the id and params `scenario_env` maps it to."""
 from __future__ import annotations
 
+import tomllib
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -26,12 +27,15 @@ if TYPE_CHECKING:
 # scenario module only to compare a scenario with what a spec plays; registering the ids does not need them
 
 WAR_SPEC = RULES_DIR / "gridworld" / "war.toml"
+# the ids, as the benches, the experiments and the tests name them
+BASE_ID, ADVANCED_ID = "tracelab/GridWar-base-v0", "tracelab/GridWar-advanced-v0"
+NONMARKOV_ID = "tracelab/GridWar-nonmarkov-v0"
 # a GridWar id -> its spec and the params that make its scenario (the others keep the spec's defaults)
 GRIDWAR_SPEC_IDS: dict[str, tuple[Path, dict[str, Any]]] = {
-    "tracelab/GridWar-base-v0": (WAR_SPEC, {"advanced": False}),
-    "tracelab/GridWar-advanced-v0": (WAR_SPEC, {"advanced": True}),
+    BASE_ID: (WAR_SPEC, {"advanced": False}),
+    ADVANCED_ID: (WAR_SPEC, {"advanced": True}),
     # two agents a team, agent 2 slow, observing the last step too: a team (gym.make_vec, parallel_env)
-    "tracelab/GridWar-nonmarkov-v0": (RULES_DIR / "gridworld" / "war_nonmarkov.toml", {}),
+    NONMARKOV_ID: (RULES_DIR / "gridworld" / "war_nonmarkov.toml", {}),
 }
 # the old RuleSim env's keyword arguments, as the spec's params name them
 RENAMED = {"opponent_p": "p_toward"}
@@ -83,7 +87,7 @@ def make_vec_env(env_id: str, num_envs: int = 1, **kwargs: Any) -> DeclaredVecto
     return DeclaredVectorEnv(spec, num_envs, **params)
 
 
-def parallel_env(env_id: str = "tracelab/GridWar-base-v0", **kwargs: Any) -> DeclaredParallelEnv:
+def parallel_env(env_id: str = BASE_ID, **kwargs: Any) -> DeclaredParallelEnv:
     """GridWar as a PettingZoo ParallelEnv: every red agent a player (agents_per_team of them), the blue
     team the scripted opponent written as rules."""
     from tracelab.envs.declared.parallel_env import DeclaredParallelEnv
@@ -94,7 +98,7 @@ def parallel_env(env_id: str = "tracelab/GridWar-base-v0", **kwargs: Any) -> Dec
 
 
 def _one_agent(env_id: str, params: dict[str, Any]) -> None:
-    if env_id == "tracelab/GridWar-nonmarkov-v0" or params.get("agents_per_team", 1) != 1:
+    if env_id == NONMARKOV_ID or params.get("agents_per_team", 1) != 1:
         size = params.get("agents_per_team", 2)
         raise UserError(f"{env_id}: agents_per_team={size!r} is not supported by a gymnasium Env, which plays "
                         "one agent (gym.make_vec's team vector env and tracelab.envs.declared.gridwar.parallel_env "
@@ -107,13 +111,17 @@ def register_gridwar() -> None:
         if env_id not in gym.registry:
             gym.register(id=env_id, entry_point="tracelab.envs.declared.gridwar:make_env",
                          vector_entry_point="tracelab.envs.declared.gridwar:make_vec_env", kwargs={"env_id": env_id})
-# war.toml's [data.maps] as a scenario's mountains (x, y): the built-in scenarios' map, and the same board open
-_DEFAULT_MOUNTAINS = ((2, 3), (3, 3), (2, 4), (3, 4), (4, 4), (4, 5))
-_MAPS = {frozenset(_DEFAULT_MOUNTAINS): "default", frozenset(): "open"}
-_NONMARKOV_DEFAULTS = {"p_toward": 0.7, "max_steps": 200, "stack_previous": True}
-_SPEC_DEFAULTS = {"agents_per_team": 1, "ammo": 3, "health": 1.0, "damage": 1.0, "p_toward": 0.7, "max_steps": 200, "map": "default",
-                  "stack_previous": False, "win": 250.0, "loss": -250.0, "hit_opponent": 400.0, "got_shot": -200.0,
-                  "valid_action": -2.0, "unsafe": -200.0, "invalid": -10.0}
+
+
+def _param_defaults(spec: Path) -> dict[str, Any]:
+    """A spec's [params] defaults as its file says them (read as TOML: no rule file is loaded)."""
+    return tomllib.loads(spec.read_text())["params"]
+
+
+def _map_mountains(name: str) -> frozenset[tuple[int, int]]:
+    """war.toml's map `name` ([data.maps]) as a scenario's mountains: (x, y), y growing up the rows."""
+    rows = tomllib.loads(WAR_SPEC.read_text())["data"]["maps"][name]["rows"]
+    return frozenset((x, len(rows) - 1 - r) for r, row in enumerate(rows) for x, ch in enumerate(row) if ch == "M")
 
 
 def scenario_env(scenario: Scenario, p_toward: float, stack_previous: bool) -> tuple[str, dict[str, Any]]:
@@ -123,7 +131,7 @@ def scenario_env(scenario: Scenario, p_toward: float, stack_previous: bool) -> t
     (a map other than war.toml's [data.maps], a scenario file's own starts, ...)."""
     where = f"scenario {scenario.name!r}"
     if (scenario.width, scenario.height, scenario.red_base, scenario.blue_base) != (8, 8, (7, 0), (0, 7)) or \
-            frozenset(scenario.mountains) not in _MAPS:
+            frozenset(scenario.mountains) not in (_map_mountains("default"), _map_mountains("open")):
         raise UserError(f"{where}: its board is not war.toml's 8x8 map, default or open: write it in war.toml's "
                         f"[data.maps] (as walk4) and train --env rules/gridworld/war.toml --env-arg map=NAME")
     try:
@@ -131,11 +139,13 @@ def scenario_env(scenario: Scenario, p_toward: float, stack_previous: bool) -> t
     except ValueError as e:
         raise UserError(str(e)) from None
     if Path(path) == WAR_NONMARKOV:
-        return "tracelab/GridWar-nonmarkov-v0", {k: v for k, v in params.items() if v != _NONMARKOV_DEFAULTS[k]}
+        defaults = _param_defaults(WAR_NONMARKOV)
+        return NONMARKOV_ID, {k: v for k, v in params.items() if v != defaults[k]}
     if Path(path) != WAR_SPEC:
         return path, params
-    name = "tracelab/GridWar-advanced-v0" if params.pop("advanced") else "tracelab/GridWar-base-v0"
-    return name, {k: v for k, v in params.items() if v != _SPEC_DEFAULTS[k]}
+    name = ADVANCED_ID if params.pop("advanced") else BASE_ID
+    defaults = _param_defaults(WAR_SPEC)
+    return name, {k: v for k, v in params.items() if v != defaults[k]}
 
 
 # hand-written specs of scenarios war.toml cannot generate yet, with the fields they fix

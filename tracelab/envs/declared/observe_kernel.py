@@ -2,7 +2,7 @@
 onehot) of every agent and world; the `lower` and `bounds` parts are read after it, in numpy
 (observe.bound_numbers).
 
-Why: read part by part in numpy, an observation of GridWar's advanced spec (7 parts, two of them
+Why: read part by part in numpy, an observation of war.toml's advanced game (7 parts, two of them
 `nearest`) cost ~3 ms a step, ten times the engine step (tracelab bench env, docs/benchmarks.md).
 
 The program (ObservationProgram) has one row per number of the observation, agent by agent, part by part:
@@ -38,11 +38,11 @@ class ObservationProgram:
     def __init__(self, spec: WorldSpec, part_ids: list[list[np.ndarray]]) -> None:
         rows, missing, values, atoms = [], [], [np.zeros(0, np.float32)], [np.zeros(0, np.int64)]
         self.python_parts: list[tuple[int, int]] = []  # (part, column) per agent 0; others shifted by width
-        # (agent, earlier agent) whose compiled parts read the same atoms (a team's shared view, as GridWar's):
+        # (agent, earlier agent) whose compiled parts read the same atoms (a team's shared view, as the war game's):
         # its rows are skipped and read() copies the earlier agent's numbers (20v20: 1 read of 20)
         self.copies: list[tuple[int, int]] = []
         seen: dict[tuple, int] = {}
-        # parts that read the same atoms (GridWar's x and y of an agent: its cell) share their truth columns
+        # parts that read the same atoms (the war game's x and y of an agent: its cell) share their truth columns
         placed: dict[bytes, int] = {}
         n_atoms = n_values = 0
         for agent in range(len(spec.agents)):
@@ -108,7 +108,7 @@ def observe(truth, table, missing, values, copies, obs):  # noqa: ANN001, ANN201
 @njit(cache=True)
 def _observe_rows(truth, table, missing, values, obs):  # noqa: ANN001, ANN201
     """observe()'s numbers of every row of `table` (an index part over the same columns as the index part
-    before it, as GridWar's y after its x, takes that part's position)."""
+    before it, as the war game's y after its x, takes that part's position)."""
     for w in range(truth.shape[0]):
         last_lo, last_hi, last_i = -1, -1, -1
         for c in range(table.shape[0]):

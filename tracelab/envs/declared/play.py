@@ -1,5 +1,5 @@
 """Games of a declared world (a spec file or a registered id such as tracelab/FrozenLake-v1, an
-env_source.EnvSource; GridWar's scenarios through their specs, gridwar.scenario_spec), played by a random or
+env_source.EnvSource; the war game's scenarios through their specs, gridwar.scenario_spec), played by a random or
 a trained policy: its spec, its env (TeamEnv for a world of several agents), and the play loop. `tracelab
 play` (tracelab/commands/play.py) records them into a run."""
 from __future__ import annotations

@@ -25,7 +25,7 @@ it), actions [W, agents] (-1: the agent does nothing, as one left out of a Petti
 [W] the agents' sum and info["agent_reward"] [W, agents] each one's (the step's, also for a world that
 ended), info["action_mask"] [W, agents, actions]; where the spec declares `[agents] decides` and `alive`,
 info["decides"] and info["alive"] [W, agents] (the returned observation's state; final_info holds the ended
-worlds' last ones). What the trainer trains a team on (env_trainer.py), and what gym.make_vec of a GridWar
+worlds' last ones). What the trainer trains a team on (env_trainer.py), and what gym.make_vec of a war.toml
 id with several agents a team builds (gridwar.make_vec_env)."""
 from __future__ import annotations
 

@@ -14,7 +14,7 @@ it) reads with the same code from Engine.is_true (read_truth).
 The step's own Python is one call too (step_worlds): each agent's action to its row, the step's draws
 (the categorical draws of fixed probabilities, from each world's block of np_random numbers) and, after the
 kernel and the reads, every agent's observation numbers (observe_kernel). A small numpy operation costs a
-microsecond or more, and a one-world GridWar step did ~20 of them around a compiled step of ~40 µs.
+microsecond or more, and a one-world war.toml step did ~20 of them around a compiled step of ~40 µs.
 `batch` (the structref's field): `draws` (int64 [2]: DRAW_UNIFORMS or DRAW_GIVEN, then the number of draws),
 `uniforms` [W, block] and `position` [W] (vector_world._Uniforms' buffer: the next number of world w is
 uniforms[w, position[w]]), `cumulative` [draws, values] (padded with +inf) and `sizes` [draws]

@@ -143,7 +143,7 @@ class DeclaredWorld:
         # what is read after each step: index parts, the reward table, the ends and the mask in one
         # compiled call (fused.read_step); the other parts and scaled rewards from the bound arrays
         self._index_parts = [i for i, p in enumerate(spec.parts) if p.read == "index"]
-        # an index part with no `missing` makes a -1 an error; with none such (GridWar's: a dead agent is
+        # an index part with no `missing` makes a -1 an error; with none such (the war game's: a dead agent is
         # seen nowhere), observations skip the per-part check (20v20: 80 parts an agent, in Python at each read)
         self._index_checked = any(spec.parts[i].missing is None for i in self._index_parts)
         self._part_ids = [[ids(atoms) for atoms in p.per_agent] for p in spec.parts]  # [part][agent]
@@ -162,7 +162,7 @@ class DeclaredWorld:
         self._has_mask = spec.mask is not None
         # the index parts' first true atoms are read in the fused step only where something uses them: a
         # Discrete or MultiDiscrete space, or a part whose -1 is an error (a Box or Dict has its numbers
-        # from the observer; GridWar's 5v5 batch spent more on them than on the rest of its reads)
+        # from the observer; the war game's 5v5 batch spent more on them than on the rest of its reads)
         read_index = self._index_parts if spec.space in ("Discrete", "MultiDiscrete") or self._index_checked else []
         part_ptr, part_atoms, _ = fused.csr([self._part_ids[i][a] for a in range(n) for i in read_index], [])
         table = [(atom, value, a) for a, pairs in enumerate(spec.reward_table) for atom, value in pairs]

@@ -25,16 +25,16 @@ class Arm:
     published: float | None = None                           # the method's win rate for this setting
     published_note: str = ""
     train: dict[str, Any] = field(default_factory=dict)      # TrainConfig overrides of this arm only
-    # a world other than GridWar: a spec file under rules/ (or a registered id) and its --env-arg values;
+    # a world other than the war game: a spec file under rules/ (or a registered id) and its --env-arg values;
     # its games are counted as the world declares ([end] win / loss) and it has no opponent setting
     env: str | None = None
     env_args: dict[str, Any] = field(default_factory=dict)
 
     def build_world(self) -> Scenario | EnvSource:
-        """What the arm trains on: GridWar's scenario, or the env of a world arm."""
+        """What the arm trains on: the war game's scenario, or the env of a world arm."""
         if self.env is None:
             return self.build_scenario()
-        # deferred: loads gymnasium, which GridWar's experiments do not need
+        # deferred: loads gymnasium, which the war game's experiments do not need
         from tracelab.envs.declared.env_source import EnvSource
         spec = RULES_DIR / self.env
         return EnvSource(str(spec) if spec.is_file() else self.env, dict(self.env_args))
@@ -139,14 +139,14 @@ EXPERIMENTS: dict[str, Experiment] = {e.name: e for e in (
         train={**LEARNER_REWARD_SCALE, **SCRIPTED_EXPLORATION}),
     Experiment(
         "trap-corridor", "A world of its own: the trap corridor (rules/examples/trap_corridor.toml)",
-        # any world trains, is counted and reported as GridWar is: its spec declares a win (the door) and a
+        # any world trains, is counted and reported as the war game is: its spec declares a win (the door) and a
         # loss (the trap, a step after it is stepped on); the arms differ in the door's reward (a param)
         (Arm("door reward 1", "", env=TRAP_CORRIDOR, env_args={"door_reward": 1.0}),
          Arm("door reward 0.2", "", env=TRAP_CORRIDOR, env_args={"door_reward": 0.2})),
         full=Budget(seeds=3, steps=5_000, eval_games=200, evals=5),
         quick=Budget(seeds=1, steps=300, eval_games=12, evals=1),
         goal="both arms learn to walk to the door: win rate 100% (the world's [end] win)",
-        train={"reward_scale": 1.0}),  # the world's rewards are about 1, not hundreds as GridWar's
+        train={"reward_scale": 1.0}),  # the world's rewards are about 1, not hundreds as the war game's
     Experiment(
         "reward-shaping", "Reward shaping from traces: penalty for being shot 400, then 200",
         (Arm("shot -400", "advanced", rewards=SHOT_BEFORE),

@@ -39,7 +39,7 @@ def refsim_games(policy: EnvPolicy, scenario: Scenario, games: int, seed: int, w
                          f"{policy.encoder.size}: not the spec of this scenario")
     ids = np.asarray(scenario.action_ids, np.int64)
     ret, length = np.zeros(w), np.zeros(w, np.int64)
-    result = EnvEvalResult(wins=0)  # GridWar's spec declares its outcomes
+    result = EnvEvalResult(wins=0)  # war.toml declares its outcomes
     while quota.any():
         actions = ids[np.asarray(policy.act(obs)).reshape(-1)]
         for k, sim in enumerate(sims):

@@ -13,7 +13,7 @@ from tracelab.train.experiments import plots
 from tracelab.train.config import TrainConfig
 from tracelab.train.experiments.run import (TRAIN_P, ExperimentResult, action_names, commit, eval_ps, is_world, machine,
                                            trainer_note, train_config)
-from tracelab.train.experiments.runner import METHOD_CUT, EvalFigures, curves, gridwar_source, p_suffix, run_sql
+from tracelab.train.experiments.runner import METHOD_CUT, EvalFigures, curves, scenario_arm_source, p_suffix, run_sql
 from tracelab.train.experiments.stats import spread, wilson
 from tracelab.train.reward_scale import METHOD_REWARD_SCALE
 
@@ -127,7 +127,7 @@ def write_report(result: ExperimentResult, report_dir: Path) -> Path:
 
 
 def setting_rows(result: ExperimentResult) -> list[str]:
-    """The report's rows on what is played and how games are counted: GridWar's opponent and the method's
+    """The report's rows on what is played and how games are counted: the war game's opponent and the method's
     counting, or a world's spec and its own declared outcomes."""
     if is_world(result.experiment):
         worlds = "; ".join(f"{ar.arm.label}: `{ar.arm.build_world().describe()}`" for ar in result.arms)
@@ -158,11 +158,11 @@ def p_label(result: ExperimentResult, p: float) -> str:
 
 def action_section(result: ExperimentResult) -> list[str]:
     """Red's actions in each seed's last traced evaluation games: what the final greedy policy does
-    (GridWar's; a world's actions are in its runs' `steps`)."""
+    (the war game's; a world's actions are in its runs' `steps`)."""
     if is_world(result.experiment):
         return []
     # the traces' steps.action is the spec's action id: the arms' spec's action names, by id
-    names = max((action_names(gridwar_source(train_config(result.experiment, ar.arm, result.budget, 0),
+    names = max((action_names(scenario_arm_source(train_config(result.experiment, ar.arm, result.budget, 0),
                                              ar.arm.build_scenario())) for ar in result.arms), key=len)
     ids = range(len(names))
     L = ["## What the final policies do", "",
@@ -314,7 +314,7 @@ def experiment_sections(result: ExperimentResult) -> list[str]:
     L: list[str] = []
     if exp.name == "portability":
         L += ["## Portability: the same policy in both simulators", "",
-              "Each seed's final policy (trained through GridWar's spec, rules/gridworld/war.toml) plays the same "
+              "Each seed's final policy (trained through war.toml, rules/gridworld/war.toml) plays the same "
               "number of games in the hand-written simulator (RefSim, game/refsim.py): once with the spec "
               "world's final-evaluation seeds (the "
               "games should be identical, length and return compared game by game, since the simulators agree "

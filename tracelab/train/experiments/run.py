@@ -21,7 +21,7 @@ from tracelab.train.experiments.runner import (
     EvalFigures,
     SeedRun,
     final_eval_seed,
-    gridwar_source,
+    scenario_arm_source,
     p_suffix,
     run_query,
     run_sql,
@@ -78,7 +78,7 @@ def train_config(exp: Experiment, arm: Arm, budget: Budget, seed: int) -> TrainC
                   trace_eval_games=min(5, budget.eval_games), eval_envs=min(50, budget.eval_games),
                   checkpoint_every=0, log_every=min(1_000, max(100, budget.steps // 20)),
                   warmup=min(1_000, budget.steps // 4), **{**exp.train, **arm.train})
-    if arm.env is not None:  # a world of its own: GridWar's settings do not apply
+    if arm.env is not None:  # a world of its own: the war game's settings do not apply
         return TrainConfig(**common)
     return TrainConfig(scenario=arm.scenario, agents=arm.agents, non_markov=arm.non_markov, opponent_p=TRAIN_P,
                        eval_p=EVAL_PS[0], **common)
@@ -89,17 +89,17 @@ def trainer_note(exp: Experiment) -> str:
     through a spec (issue 38: RuleSim's Trainer is no longer used)."""
     if is_world(exp):
         return "trains through the world's spec (EnvTrainer)"
-    return "trains GridWar through its spec (rules/gridworld/war*.toml, EnvTrainer)"
+    return "trains the war game through its spec (rules/gridworld/war*.toml, EnvTrainer)"
 
 
 def eval_ps(exp: Experiment) -> tuple[float, ...]:
-    """The opponent settings the final policies are evaluated against: GridWar's two, or a world's one
+    """The opponent settings the final policies are evaluated against: the war game's two, or a world's one
     evaluation (WORLD_P: it has no opponent)."""
     return (WORLD_P,) if is_world(exp) else EVAL_PS
 
 
 def is_world(exp: Experiment) -> bool:
-    """An experiment on a world other than GridWar (its arms name an env)."""
+    """An experiment on a world other than the war game (its arms name an env)."""
     return any(a.env is not None for a in exp.arms)
 
 
@@ -126,7 +126,7 @@ def run_experiment(exp: Experiment, budget: Budget, out_dir: Path, command: str,
         say(f"[{exp.name}] {ar.arm.label}, seed {seed}: training {budget.steps:,} steps into "
             f"{out_dir / f'{ar.arm.slug}-seed{seed}'}")
     if ray is not None and is_world(exp):
-        raise ValueError(f"{exp.name}: --ray runs GridWar's experiments only for now; use --jobs")
+        raise ValueError(f"{exp.name}: --ray runs the war game's experiments only for now; use --jobs")
     if ray is not None:
         # deferred: Ray is an optional extra (tracelab[ray])
         from tracelab.train.experiments.ray_tasks import in_ray_tasks
@@ -144,7 +144,7 @@ def run_experiment(exp: Experiment, budget: Budget, out_dir: Path, command: str,
             ar.extra[seed] = portability(sr, ar.arm.build_scenario(), train_config(exp, ar.arm, budget, seed),
                                          budget.eval_games, say)
         elif exp.name == "reward-shaping":
-            ar.extra[seed] = shaping_traces(sr, gridwar_source(train_config(exp, ar.arm, budget, seed),
+            ar.extra[seed] = shaping_traces(sr, scenario_arm_source(train_config(exp, ar.arm, budget, seed),
                                                                ar.arm.build_scenario()),
                                             out_dir, 6 if quick else 100, command, say)
     result.wall_s = time.perf_counter() - t0
@@ -197,7 +197,7 @@ def portability(sr: SeedRun, scenario: Any, cfg: TrainConfig, games: int, say: S
     # deferred: RefSim's numba kernels, which a report written again does not need
     from tracelab.train.experiments.refsim_games import refsim_games
 
-    policy = load_env_policy(sr.policy_dir, gridwar_source(cfg, scenario))[0]
+    policy = load_env_policy(sr.policy_dir, scenario_arm_source(cfg, scenario))[0]
     out: dict[str, Any] = {}
     for p in EVAL_PS:
         rules = sr.final[p]
@@ -222,7 +222,7 @@ def portability(sr: SeedRun, scenario: Any, cfg: TrainConfig, games: int, say: S
 # ---- reward shaping: the saved queries on traced evaluation games ----
 def shaping_traces(sr: SeedRun, source: EnvSource, out_dir: Path, games: int, command: str, say: Say) -> dict[str, Any]:
     """Trace `games` evaluation games of the final policy (against p = 0.3) in its spec world (`source`,
-    the arm's GridWar id and params) into their own run and read the saved queries' figures off it."""
+    the arm's spec id and params) into their own run and read the saved queries' figures off it."""
     policy = load_env_policy(sr.policy_dir, source)[0]
     trace_dir = out_dir / f"{sr.run_dir.name}-traces"
     traced_games(policy, source.with_args(p_toward=EVAL_PS[0]), trace_dir, games=games,

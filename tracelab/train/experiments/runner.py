@@ -1,4 +1,4 @@
-"""Training and evaluating for the experiments, through the spec path (EnvTrainer on GridWar's spec,
+"""Training and evaluating for the experiments, through the spec path (EnvTrainer on war.toml,
 rules/gridworld/war*.toml, or on a world of its own): one run per seed, with the final policy evaluated
 against each opponent setting and those figures written into the run's own `metrics` (suffix `@p0.3`,
 `@p0.7`, docs/training.md), so `tracelab sql` sees them."""
@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
+from tracelab.envs.declared.gridwar_scenarios import training_sources
 from tracelab.game.scenario import Scenario
 from tracelab.store import TraceWriter
 from tracelab.store.queries import get_query
@@ -27,9 +28,9 @@ if TYPE_CHECKING:
     from tracelab.train.env_trainer import EnvTrainer
     from tracelab.train.tensorboard import MetricSink
 
-WORLD_P = 0.0  # a world other than GridWar has no opponent setting: its final evaluation's key
+WORLD_P = 0.0  # a world other than the war game has no opponent setting: its final evaluation's key
 FINAL_EVAL_ROUND = 1_000_000  # seeds of the final evaluations: apart from the training's rounds
-METHOD_CUT = 200  # the method's evaluation cut games at 200 steps: GridWar's spec's step limit
+METHOD_CUT = 200  # the method's evaluation cut games at 200 steps: war.toml's step limit
 
 
 @dataclass
@@ -123,13 +124,13 @@ def train_seed(cfg: TrainConfig, scenario: Scenario | EnvSource, run_dir: Path, 
     against each opponent p in `eval_ps`, writing `eval/...@pP` metrics at the last step. `metric_sinks`
     receive the training's metrics besides the run; `started` is called with the trainer before it trains
     (a sweep's trial stops it through it: stop_requested). `scenario` an EnvSource: a world other than
-    GridWar, trained with train --env's trainer (_world_parts); a GridWar scenario trains through its spec
-    as `train --scenario` does (_gridwar_parts)."""
+    the war game, trained with train --env's trainer (_world_parts); a war game scenario trains through its spec
+    as `train --scenario` does (_scenario_parts)."""
     # deferred: torch and the trainers, which reading results and queries does not need
     import torch
 
     from tracelab.envs.declared.env_source import EnvSource
-    parts = _world_parts if isinstance(scenario, EnvSource) else _gridwar_parts
+    parts = _world_parts if isinstance(scenario, EnvSource) else _scenario_parts
     meta, make_trainer, final_evaluation = parts(cfg, scenario, command, eval_ps, eval_games)
     writer = TraceWriter.open(run_dir, meta)
     torch.set_num_threads(cfg.threads)
@@ -163,22 +164,21 @@ def train_seed(cfg: TrainConfig, scenario: Scenario | EnvSource, run_dir: Path, 
 FinalEvaluation = Callable[[Any, Any], dict[float, EvalFigures]]  # (trainer, policy or its folder) -> per p
 
 
-def gridwar_source(cfg: TrainConfig, scenario: Scenario) -> EnvSource:
-    """The GridWar spec id and params `scenario` trains on (env_trainer.gridwar_sources: its --env-arg
+def scenario_arm_source(cfg: TrainConfig, scenario: Scenario) -> EnvSource:
+    """The spec id and params a scenario arm trains on (gridwar_scenarios.training_sources: its --env-arg
     values, the scenario's rewards among them)."""
-    from tracelab.train.env_trainer import gridwar_sources
-    return gridwar_sources(cfg, scenario)[0]
+    return training_sources(scenario, cfg.opponent_p, cfg.eval_p, cfg.non_markov)[0]
 
 
-def _gridwar_parts(cfg: TrainConfig, scenario: Scenario, command: str, eval_ps: tuple[float, ...],
+def _scenario_parts(cfg: TrainConfig, scenario: Scenario, command: str, eval_ps: tuple[float, ...],
                    eval_games: int) -> tuple[dict[str, Any], Any, FinalEvaluation]:
-    """GridWar through its spec, as `train --scenario` trains it: the run meta, EnvTrainer on the scenario's
-    GridWar id (evaluating at --eval-p), and the final evaluation against each opponent p of `eval_ps`
+    """A scenario through its spec, as `train --scenario` trains it: the run meta, EnvTrainer on the
+    scenario's spec id (evaluating at --eval-p), and the final evaluation against each opponent p of `eval_ps`
     (the same env with that p_toward), counted by the spec's [end] win / loss."""
     from tracelab.train.env_policy import evaluate_env, load_env_policy
-    from tracelab.train.env_trainer import EnvTrainer, env_run_meta, gridwar_sources
+    from tracelab.train.env_trainer import EnvTrainer, env_run_meta
 
-    source, eval_source = gridwar_sources(cfg, scenario)
+    source, eval_source = training_sources(scenario, cfg.opponent_p, cfg.eval_p, cfg.non_markov)
     meta = env_run_meta(cfg, source, f"tracelab train (from: {command})", None, scenario)
     meta["config"]["eval_env"] = eval_source.to_json()
 
@@ -196,7 +196,7 @@ def _gridwar_parts(cfg: TrainConfig, scenario: Scenario, command: str, eval_ps: 
 
 def _world_parts(cfg: TrainConfig, source: EnvSource, command: str, eval_ps: tuple[float, ...],
                  eval_games: int) -> tuple[dict[str, Any], Any, FinalEvaluation]:
-    """A world other than GridWar: train --env's run meta and trainer; its final evaluation, `eval_games`
+    """A world other than the war game: train --env's run meta and trainer; its final evaluation, `eval_games`
     games counted as the world declares, keyed WORLD_P (it has no opponent setting)."""
     from tracelab.train.env_policy import evaluate_env, load_env_policy
     from tracelab.train.env_trainer import EnvTrainer, env_run_meta

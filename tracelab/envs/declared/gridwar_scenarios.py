@@ -1,0 +1,197 @@
+"""GridWar's scenarios where the commands meet them, part of its registration (gridwar.py): the flags that
+name one (`--scenario NAME_OR_FILE`, `--agents`, `--opponent-p`) as the EnvSource of the spec that plays it,
+and the files of RuleSim's trainer (every GridWar policy before GridWar trained through its spec, issue 38):
+its policies converted at load into the EnvPolicy of their scenario's spec, whose observation is RuleSim's
+(tests/test_gridwar_spec.py), so that they play as they played RuleSim. A team's policy of that format read
+each agent's view with its own blocks first, which no EnvPolicy reads: refused in one line giving the
+command that trains it again. play, eval, train, sweep and the experiments call these and have no branch of
+their own for the game."""
+from __future__ import annotations
+
+import dataclasses
+import shlex
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from tracelab.envs.declared.env_source import EnvSource
+from tracelab.envs.declared.gridwar import (
+    GRIDWAR_SPEC_IDS,
+    WAR_ADVANCED_2V2,
+    WAR_NONMARKOV,
+    WAR_SPEC,
+    scenario_env,
+    scenario_spec,
+)
+from tracelab.errors import UserError
+from tracelab.game.scenario import ACTION_NAMES, Scenario, builtin_scenario, builtin_scenario_names, load_scenario
+from tracelab.game.scenario import scenario_from_dict
+from tracelab.train.env_policy import (
+    NETWORK_SCHEMA,
+    POLICY_JSON,
+    EnvPolicy,
+    TeamPolicy,
+    load_env_policy,
+    numpy_network,
+    policy_dir,
+    policy_format,
+    read_policy_json,
+    read_policy_networks,
+    spec_net,
+)
+from tracelab.train.env_source import TeamEncoder, probe_env
+from tracelab.validation import Const, IntRange, ListOf, MapOf, OptionalKey, check_file
+
+DEFAULT_SCENARIO = "base"  # what play and train play without --scenario (TrainConfig.scenario)
+METHOD_EVAL_P = 0.3  # the method's evaluation: the opponent's p that eval plays by default
+_SPEC_FILES = {str(WAR_SPEC), str(WAR_NONMARKOV), str(WAR_ADVANCED_2V2)}
+
+
+def load_scenario_arg(text: str, agents: int | None = None) -> Scenario:
+    """`--scenario`: a built-in scenario name or a .toml file, with `agents` per team if given."""
+    sc = builtin_scenario(text) if text in builtin_scenario_names() else load_scenario(text)
+    if agents is not None and agents != sc.agents_per_team:
+        sc = dataclasses.replace(sc, agents_per_team=agents, red_starts=None, blue_starts=None)
+    return sc
+
+
+def check_opponent_p(p: float | None) -> None:
+    if p is not None and not 0.0 <= p <= 1.0:
+        raise UserError(f"--opponent-p must be in [0, 1], got {p}")
+
+
+def has_opponent_p(source: EnvSource) -> bool:
+    """Whether `source` is one of the game's ids or spec files: a scripted opponent --opponent-p sets."""
+    return source.name in GRIDWAR_SPEC_IDS or source.name in _SPEC_FILES
+
+
+def with_opponent_p(source: EnvSource, p: float | None) -> EnvSource:
+    """`source` with its opponent at --opponent-p `p` (unchanged for None); refused in one line for a world
+    with no scripted opponent."""
+    if p is None:
+        return source
+    check_opponent_p(p)
+    if not has_opponent_p(source):
+        raise UserError(f"--opponent-p is GridWar's scripted opponent's; {source.describe()} has none")
+    return EnvSource(source.name, {**source.kwargs, "p_toward": p})
+
+
+def refuse_scenario_flags(args: Any, why: str, flags: tuple[str, ...] = ("scenario", "agents", "opponent_p")) -> None:
+    """A UserError naming the first of the scenario's flags (`flags`: their args names) given where they
+    do not apply, and `why`."""
+    for flag in flags:
+        if getattr(args, flag, None) is not None:
+            raise UserError(f"--{flag.replace('_', '-')} is GridWar's; {why}")
+
+
+def scenario_settings_given(names: list[str], why: str) -> str | None:
+    """The line refusing the scenario's settings `names` (TrainConfig's GRIDWAR_ONLY fields, as flags or
+    field names) where a world of its own trains, or None when there are none."""
+    if not names:
+        return None
+    return f"{', '.join(names)} describe{'s' * (len(names) == 1)} GridWar; {why}"
+
+
+def scenario_source(scenario: Scenario, opponent_p: float | None = None,
+                    stack_previous: bool = False) -> EnvSource:
+    """The spec (war*.toml and its params) that plays `scenario`; a UserError naming what no spec plays."""
+    check_opponent_p(opponent_p)
+    try:
+        return EnvSource(*scenario_spec(scenario, stack_previous, opponent_p))
+    except ValueError as e:
+        raise UserError(str(e)) from None
+
+
+def training_sources(scenario: Scenario, opponent_p: float, eval_p: float,
+                     stack_previous: bool) -> tuple[EnvSource, EnvSource]:
+    """(the env `scenario` trains on, the one its evaluations play: the opponent at `eval_p`), as the game's
+    ids and params (scenario_env: a UserError naming what its spec cannot play)."""
+    source = EnvSource(*scenario_env(scenario, opponent_p, stack_previous))
+    return source, source.with_args(p_toward=eval_p)
+
+
+# ---- RuleSim's trainer's files ------------------------------------------------------------------------
+
+RULESIM_FORMAT = "tracelab-dqn-policy/1"  # RuleSim's trainer's policies: read and converted, never written
+RULESIM_SPEC_SCHEMA = {
+    "format": Const(RULESIM_FORMAT),
+    "scenario": {"name": str, "toml": str},
+    "observation": {"stack_previous": bool},
+    "network": NETWORK_SCHEMA,
+    "networks": MapOf(ListOf(IntRange(0), min_len=1), min_len=1),
+    "mask": OptionalKey(bool),
+}
+
+
+def read_rulesim_spec(path: str | Path) -> dict[str, Any]:
+    """policy.json of a policy of RuleSim's trainer, checked against its schema, and refused in one line
+    unless it converts exactly into an EnvPolicy: one agent, one network (a team's network read each
+    agent's view with its own blocks first, which tracelab's team policies do not: the line gives the
+    command that trains the scenario again, on its spec)."""
+    f, raw = read_policy_json(path)
+    spec = check_file(raw, RULESIM_SPEC_SCHEMA, f)
+    scenario = rulesim_scenario(spec, f)
+    if scenario.agents_per_team != 1:
+        named = shlex.quote(scenario.name) if scenario.name in builtin_scenario_names() else "SCENARIO_FILE"
+        retrain = f"tracelab train --scenario {named} --agents {scenario.agents_per_team}" + \
+            (" --non-markov" if spec["observation"]["stack_previous"] else "")
+        raise ValueError(f"{f.parent}: a policy of GridWar's earlier trainer (RuleSim's format) for "
+                         f"{scenario.agents_per_team} agents a team, each reading the team with its own blocks first, which today's team policies "
+                         f"(one network, each agent's index as input) cannot play as trained; train it again "
+                         f"on its spec: {retrain}")
+    if list(spec["networks"].values()) != [[0]]:
+        raise ValueError(f"{f}: key 'networks': expected one network, playing agent 0 (a one-agent scenario)")
+    return spec
+
+
+def rulesim_scenario(spec: dict[str, Any], where: str | Path = POLICY_JSON) -> Scenario:
+    """The scenario a RuleSim-format policy.json (read_rulesim_spec) was trained on."""
+    where = f"{where}: key 'scenario.toml'"
+    try:
+        table = tomllib.loads(spec["scenario"]["toml"])
+    except tomllib.TOMLDecodeError as e:
+        raise ValueError(f"{where}: not TOML: {e}") from None
+    return scenario_from_dict(table, source=where)
+
+
+def rulesim_source(path: str | Path, spec: dict[str, Any], scenario: Scenario,
+                   opponent_p: float | None) -> EnvSource:
+    """The spec that plays the RuleSim-format policy at `path` (policy.json: `spec`) on `scenario`: its id
+    at the opponent's p (the method's evaluation's unless given), its observation of the previous step
+    kept; a scenario no spec plays is refused in one line saying how to go on."""
+    p = METHOD_EVAL_P if opponent_p is None else opponent_p
+    check_opponent_p(p)
+    try:
+        name, params = scenario_env(scenario, p, spec["observation"]["stack_previous"])
+    except UserError as e:
+        raise UserError(f"{path} (a GridWar policy of RuleSim's trainer) cannot be played: {e}") from None
+    return EnvSource(name, {**params, "p_toward": p})
+
+
+def _load_rulesim_policy(path: str | Path, spec: dict[str, Any], given: EnvSource) -> EnvPolicy:
+    """A policy of RuleSim's trainer (one agent) as the EnvPolicy that plays it on the world `given` names,
+    a spec whose observation and actions are its scenario's. RuleSim gave one agent the team's view, as the
+    spec does, so its network reads the spec's observation as it is: the same games (tests/test_play.py).
+    A world of another shape is refused in one line naming both."""
+    trained_on = rulesim_scenario(spec)
+    net = spec_net(spec)
+    (state,) = read_policy_networks(path, spec).values()  # sized and checked before the world is built
+    encoder, n_actions, world = probe_env(given)
+    agents = encoder.n_agents if isinstance(encoder, TeamEncoder) else 1
+    names = [ACTION_NAMES[a] for a in trained_on.action_ids]
+    world_names = names if world is None else list(world.action_names)
+    if (agents, n_actions, encoder.size, world_names) != (1, net.actions, net.inputs, names):
+        raise ValueError(f"{policy_dir(path)}: trained on GridWar's {trained_on.name!r} (1 agents, "
+                         f"{net.actions} actions, {net.inputs} observations); {given.describe()} has {agents} "
+                         f"agents, {n_actions} actions, {encoder.size} observations"
+                         + ("" if len(world_names) != len(names) or world_names == names else
+                            f" (actions {', '.join(world_names)}, not {', '.join(names)})"))
+    return EnvPolicy(numpy_network(net, state), encoder, spec.get("mask", False))
+
+
+def load_trained(path: str | Path, given: EnvSource) -> EnvPolicy | TeamPolicy:
+    """A policy of either format, to play on the world `given` names: one of train (load_env_policy: the same
+    env it was trained on), or one of RuleSim's trainer converted."""
+    if policy_format(path) == RULESIM_FORMAT:
+        return _load_rulesim_policy(path, read_rulesim_spec(path), given)
+    return load_env_policy(path, given)[0]
