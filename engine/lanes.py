@@ -329,10 +329,37 @@ def _watch(a, skip, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs, inst, r
             if new_bits:
                 hn = _push(g, inst, heap, hn, in_heap)
     stats[0, STAT_WATCH_VISITS] += visits
+    # The immediate groundings that set a can change it only where a changed, is not static and is not
+    # already their value: most heads are set by many groundings (one per cell, say) of one value, and a
+    # change to that value leaves none of them anything to do. These masks and the active-anywhere list
+    # (apos, compact) rule most of them out before their words of gs are read.
+    to_t = ZERO  # the worlds where a changed and is not [1,1] now: a [1,1] setter may change it
+    to_f = ZERO
+    to_set = ZERO  # [1,1] or [0,0] there: an overriding [0,1] setter may change it
+    to_any = ZERO  # not static there: a {set_static} setter may freeze it
+    for k in range(nw):
+        c = ws[W_C, k] & ~st[a, P_S, k]
+        to_t |= c & ~st[a, P_T, k]
+        to_f |= c & ~st[a, P_F, k]
+        to_set |= c & (st[a, P_T, k] | st[a, P_F, k])
+        to_any |= c
+    if to_any == ZERO:
+        return hn
     for i in range(ih_ptr[a], ih_ptr[a + 1]):
         g = ih_inst[i]
-        if g == skip or in_heap[g]:
+        if g == skip or in_heap[g] or apos[g] < 0:
             continue
+        r = inst[g, INST_RULE]
+        if rule_i[r, RULE_SET_STATIC] != 1:
+            v = rule_v[r]
+            if v == V_T:
+                if to_t == ZERO:
+                    continue
+            elif v == V_F:
+                if to_f == ZERO:
+                    continue
+            elif rule_i[r, RULE_MODE] != MODE_OVERRIDE or to_set == ZERO:
+                continue
         for k in range(nw):
             if gs[g, k, 0] & ws[W_C, k] & _changes(g, k, st, inst, rule_i, rule_v):
                 hn = _push(g, inst, heap, hn, in_heap)
