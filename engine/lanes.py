@@ -26,7 +26,9 @@ here in this one module (numba's cache does not see changes in other modules).
 from __future__ import annotations
 
 import numpy as np
+import llvmlite.ir as llvm_ir
 from numba import njit, types
+from numba.core import cgutils
 from numba.core.extending import intrinsic
 
 # The codes this kernel shares with kernel.py, written out here rather than imported: numba freezes
@@ -59,6 +61,9 @@ SHARED_CODES = ("CAUSE_FACT", "CAUSE_EXTERNAL", "CAUSE_RULE", "CAUSE_POLICY", "C
                 "STAT_PASSES", "STAT_WATCH_VISITS", "STAT_CANDIDATES", "E_WORLD", "E_T", "E_ATOM", "E_OLD_KIND",
                 "E_OLD_ID", "E_KIND", "E_ID", "E_INST", "E_LAST_KIND", "E_LAST_ID", "E_LAST_INST", "E_DISAGREE",
                 "KEY_STRIDE", "HEAP_SHIFT", "HEAP_MASK")
+
+# how many groundings ahead of the one being updated _watch asks for gs's lines (_prefetch)
+PREFETCH_AHEAD = 8
 
 # the three crisp values, as codes
 V_U, V_T, V_F = 0, 1, 2  # [0,1], [1,1], [0,0]
@@ -98,6 +103,22 @@ def _cttz(typingctx, x):
     def codegen(context, builder, signature, args):
         return builder.cttz(args[0], context.get_constant(types.boolean, False))
     return types.uint64(types.uint64), codegen
+
+
+@intrinsic
+def _prefetch(typingctx, arr, i):
+    """Ask the CPU for the cache line of arr's flat element i (llvm.prefetch: read, keep it close). A
+    watch list's groundings lie anywhere in gs (megabytes for a big program in 256 worlds): fetched
+    one at a time, each waits for memory; asked for ahead, several are on their way at once."""
+    def codegen(context, builder, signature, args):
+        ary = context.make_array(signature.args[0])(context, builder, args[0])
+        i8p = llvm_ir.IntType(8).as_pointer()
+        i32 = llvm_ir.IntType(32)
+        fn = cgutils.get_or_insert_function(builder.module, llvm_ir.FunctionType(llvm_ir.VoidType(), [i8p, i32, i32, i32]),
+                                            "llvm.prefetch.p0")
+        builder.call(fn, [builder.bitcast(builder.gep(ary.data, [args[1]]), i8p), i32(0), i32(3), i32(1)])
+        return context.get_dummy_value()
+    return types.void(arr, types.int64), codegen
 
 
 @lanes_jit
@@ -288,7 +309,14 @@ def _watch(a, skip, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs, inst, r
             continue
         e1 = wc_gptr[c + 1]
         visits += e1 - wc_gptr[c]
+        stride = np.int64(gs.shape[1] * gs.shape[2])  # one grounding's words
+        first_word = wl[0] * gs.shape[2]
+        last_word = wl[n_flip - 1] * gs.shape[2]
         for e in range(wc_gptr[c], e1):
+            if e + PREFETCH_AHEAD < e1:
+                ahead = np.int64(wg[e + PREFETCH_AHEAD]) * stride
+                _prefetch(gs, ahead + first_word)
+                _prefetch(gs, ahead + last_word)
             g = wg[e]
             emptied = False  # a word of the mask went to zero: is the grounding still active anywhere?
             filled = False  # a word went from zero: it is (now) active somewhere
