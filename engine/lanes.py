@@ -62,7 +62,8 @@ SHARED_CODES = ("CAUSE_FACT", "CAUSE_EXTERNAL", "CAUSE_RULE", "CAUSE_POLICY", "C
                 "E_OLD_ID", "E_KIND", "E_ID", "E_INST", "E_LAST_KIND", "E_LAST_ID", "E_LAST_INST", "E_DISAGREE",
                 "KEY_STRIDE", "HEAP_SHIFT", "HEAP_MASK")
 
-# how many groundings ahead of the one being updated _watch asks for gs's lines (_prefetch)
+# how many groundings ahead of the one being updated a loop over a list of them asks for their gs lines
+# (_prefetch)
 PREFETCH_AHEAD = 8
 
 # the three crisp values, as codes
@@ -790,6 +791,7 @@ def step_lanes(cfg, w0, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, w
     n_worlds = n_imm.shape[0]  # this call's worlds: w0 .. w0 + n_worlds - 1 of wep, lc and rows
     nw = valid.shape[0]
     n_atoms = st.shape[0]
+    stride = np.int64(gs.shape[1] * gs.shape[2])  # one grounding's words of gs (_prefetch)
     hn = hn_box[0]
     while True:
         phase = ctl[C_PHASE]
@@ -885,7 +887,10 @@ def step_lanes(cfg, w0, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, w
                 # every immediate grounding active somewhere is a candidate of the first immediate phase;
                 # after that, groundings become candidates when they become active or their head changes
                 base = kind_base[KIND_IMMEDIATE]
-                for i in range(alist_n[KIND_IMMEDIATE]):
+                n_imm_active = alist_n[KIND_IMMEDIATE]
+                for i in range(n_imm_active):
+                    if i + PREFETCH_AHEAD < n_imm_active:
+                        _prefetch(gs, np.int64(alist[base + i + PREFETCH_AHEAD]) * stride)
                     g = alist[base + i]
                     for k in range(nw):
                         if gs[g, k, 0] & _changes(g, k, st, inst, rule_i, rule_v):
@@ -929,6 +934,8 @@ def step_lanes(cfg, w0, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, w
                 hn -= 1
                 g = key & HEAP_MASK
                 in_heap[g] = False
+                if hn > 0:  # most often the next one applied (unless this one's changes push a lower rank)
+                    _prefetch(gs, (heap[0] & HEAP_MASK) * stride)
                 status, hn = _apply_immediate(w0, g, t, pass_no, policy, max_immediate, rule_i, rule_v, inst, valid,
                                               st, wep, lc, tmask, tri, trf, tr_n, stats, err, n_imm, ws, wl, wc_ptr,
                                               wc_code, wc_gptr, wg, gs, alist, alist_n,
