@@ -309,12 +309,15 @@ class LaneState:
             if n:
                 # rows came world after world within each unit of work: order them by world (stable), as
                 # the counting kernel writes them
-                order = np.argsort(sh.tri[:n, 0], kind="stable")
+                # (16-bit keys sort by radix, and take() with mode="clip" writes in place: a 20v20 x256
+                # step's 140k rows took ~25 ms by int32 argsort and fancy indexing, ~8 ms so)
+                world = sh.tri[:n, 0]
+                order = np.argsort(world.astype(np.uint16) if eng.n_worlds <= 1 << 16 else world, kind="stable")
                 start = int(eng._tr_n[0])
                 if start + n > len(eng._tri):
                     eng._grow_trace(start + n)
-                eng._tri[start:start + n] = sh.tri[:n][order]
-                eng._trf[start:start + n] = sh.trf[:n][order]
+                np.take(sh.tri[:n], order, axis=0, out=eng._tri[start:start + n], mode="clip")
+                np.take(sh.trf[:n], order, axis=0, out=eng._trf[start:start + n], mode="clip")
                 eng._tr_n[0] = start + n
         return K.STATUS_OK
 

@@ -26,7 +26,9 @@ here in this one module (numba's cache does not see changes in other modules).
 from __future__ import annotations
 
 import numpy as np
+import llvmlite.ir as llvm_ir
 from numba import njit, types
+from numba.core import cgutils
 from numba.core.extending import intrinsic
 
 # The codes this kernel shares with kernel.py, written out here rather than imported: numba freezes
@@ -59,6 +61,10 @@ SHARED_CODES = ("CAUSE_FACT", "CAUSE_EXTERNAL", "CAUSE_RULE", "CAUSE_POLICY", "C
                 "STAT_PASSES", "STAT_WATCH_VISITS", "STAT_CANDIDATES", "E_WORLD", "E_T", "E_ATOM", "E_OLD_KIND",
                 "E_OLD_ID", "E_KIND", "E_ID", "E_INST", "E_LAST_KIND", "E_LAST_ID", "E_LAST_INST", "E_DISAGREE",
                 "KEY_STRIDE", "HEAP_SHIFT", "HEAP_MASK")
+
+# how many groundings ahead of the one being updated a loop over a list of them asks for their gs lines
+# (_prefetch)
+PREFETCH_AHEAD = 8
 
 # the three crisp values, as codes
 V_U, V_T, V_F = 0, 1, 2  # [0,1], [1,1], [0,0]
@@ -98,6 +104,22 @@ def _cttz(typingctx, x):
     def codegen(context, builder, signature, args):
         return builder.cttz(args[0], context.get_constant(types.boolean, False))
     return types.uint64(types.uint64), codegen
+
+
+@intrinsic
+def _prefetch(typingctx, arr, i):
+    """Ask the CPU for the cache line of arr's flat element i (llvm.prefetch: read, keep it close). A
+    watch list's groundings lie anywhere in gs (megabytes for a big program in 256 worlds): fetched
+    one at a time, each waits for memory; asked for ahead, several are on their way at once."""
+    def codegen(context, builder, signature, args):
+        ary = context.make_array(signature.args[0])(context, builder, args[0])
+        i8p = llvm_ir.IntType(8).as_pointer()
+        i32 = llvm_ir.IntType(32)
+        fn = cgutils.get_or_insert_function(builder.module, llvm_ir.FunctionType(llvm_ir.VoidType(), [i8p, i32, i32, i32]),
+                                            "llvm.prefetch.p0")
+        builder.call(fn, [builder.bitcast(builder.gep(ary.data, [args[1]]), i8p), i32(0), i32(3), i32(1)])
+        return context.get_dummy_value()
+    return types.void(arr, types.int64), codegen
 
 
 @lanes_jit
@@ -288,7 +310,14 @@ def _watch(a, skip, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs, inst, r
             continue
         e1 = wc_gptr[c + 1]
         visits += e1 - wc_gptr[c]
+        stride = np.int64(gs.shape[1] * gs.shape[2])  # one grounding's words
+        first_word = wl[0] * gs.shape[2]
+        last_word = wl[n_flip - 1] * gs.shape[2]
         for e in range(wc_gptr[c], e1):
+            if e + PREFETCH_AHEAD < e1:
+                ahead = np.int64(wg[e + PREFETCH_AHEAD]) * stride
+                _prefetch(gs, ahead + first_word)
+                _prefetch(gs, ahead + last_word)
             g = wg[e]
             emptied = False  # a word of the mask went to zero: is the grounding still active anywhere?
             filled = False  # a word went from zero: it is (now) active somewhere
@@ -329,10 +358,37 @@ def _watch(a, skip, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs, inst, r
             if new_bits:
                 hn = _push(g, inst, heap, hn, in_heap)
     stats[0, STAT_WATCH_VISITS] += visits
+    # The immediate groundings that set a can change it only where a changed, is not static and is not
+    # already their value: most heads are set by many groundings (one per cell, say) of one value, and a
+    # change to that value leaves none of them anything to do. These masks and the active-anywhere list
+    # (apos, compact) rule most of them out before their words of gs are read.
+    to_t = ZERO  # the worlds where a changed and is not [1,1] now: a [1,1] setter may change it
+    to_f = ZERO
+    to_set = ZERO  # [1,1] or [0,0] there: an overriding [0,1] setter may change it
+    to_any = ZERO  # not static there: a {set_static} setter may freeze it
+    for k in range(nw):
+        c = ws[W_C, k] & ~st[a, P_S, k]
+        to_t |= c & ~st[a, P_T, k]
+        to_f |= c & ~st[a, P_F, k]
+        to_set |= c & (st[a, P_T, k] | st[a, P_F, k])
+        to_any |= c
+    if to_any == ZERO:
+        return hn
     for i in range(ih_ptr[a], ih_ptr[a + 1]):
         g = ih_inst[i]
-        if g == skip or in_heap[g]:
+        if g == skip or in_heap[g] or apos[g] < 0:
             continue
+        r = inst[g, INST_RULE]
+        if rule_i[r, RULE_SET_STATIC] != 1:
+            v = rule_v[r]
+            if v == V_T:
+                if to_t == ZERO:
+                    continue
+            elif v == V_F:
+                if to_f == ZERO:
+                    continue
+            elif rule_i[r, RULE_MODE] != MODE_OVERRIDE or to_set == ZERO:
+                continue
         for k in range(nw):
             if gs[g, k, 0] & ws[W_C, k] & _changes(g, k, st, inst, rule_i, rule_v):
                 hn = _push(g, inst, heap, hn, in_heap)
@@ -735,6 +791,7 @@ def step_lanes(cfg, w0, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, w
     n_worlds = n_imm.shape[0]  # this call's worlds: w0 .. w0 + n_worlds - 1 of wep, lc and rows
     nw = valid.shape[0]
     n_atoms = st.shape[0]
+    stride = np.int64(gs.shape[1] * gs.shape[2])  # one grounding's words of gs (_prefetch)
     hn = hn_box[0]
     while True:
         phase = ctl[C_PHASE]
@@ -830,7 +887,10 @@ def step_lanes(cfg, w0, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, w
                 # every immediate grounding active somewhere is a candidate of the first immediate phase;
                 # after that, groundings become candidates when they become active or their head changes
                 base = kind_base[KIND_IMMEDIATE]
-                for i in range(alist_n[KIND_IMMEDIATE]):
+                n_imm_active = alist_n[KIND_IMMEDIATE]
+                for i in range(n_imm_active):
+                    if i + PREFETCH_AHEAD < n_imm_active:
+                        _prefetch(gs, np.int64(alist[base + i + PREFETCH_AHEAD]) * stride)
                     g = alist[base + i]
                     for k in range(nw):
                         if gs[g, k, 0] & _changes(g, k, st, inst, rule_i, rule_v):
@@ -874,6 +934,8 @@ def step_lanes(cfg, w0, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, w
                 hn -= 1
                 g = key & HEAP_MASK
                 in_heap[g] = False
+                if hn > 0:  # most often the next one applied (unless this one's changes push a lower rank)
+                    _prefetch(gs, (heap[0] & HEAP_MASK) * stride)
                 status, hn = _apply_immediate(w0, g, t, pass_no, policy, max_immediate, rule_i, rule_v, inst, valid,
                                               st, wep, lc, tmask, tri, trf, tr_n, stats, err, n_imm, ws, wl, wc_ptr,
                                               wc_code, wc_gptr, wg, gs, alist, alist_n,
