@@ -36,7 +36,6 @@ from tracelab.engine.duckdb_limits import exact_file
 from tracelab.engine.safe_files import JSON_CAP, check_regular, read_bytes
 from tracelab.store import layout
 from tracelab.store.checked_files import file_identity, same_file
-from tracelab.store.meta import current_meta, meta_row
 from tracelab.store.sandbox import (
     check_readonly,
     lock_configuration,
@@ -125,6 +124,7 @@ def run_info(run: str | Path) -> RunInfo:
             raise ValueError(f"{str(p)!r} has no row in raw.run: not a tracelab run")
         meta = dict(zip(cols, row))
         return RunInfo(p, sealed, meta, str(meta.get("status")))
+    from tracelab.store.meta import current_meta  # deferred: a sealed run's readers never read meta.json
     meta = current_meta(p)
     return RunInfo(p, sealed, meta, meta["status"])
 
@@ -172,6 +172,7 @@ class LiveParts:
                                  [[exact_file(f) for f in files]])
             self._seen = raw
         if self._status in (None, "running"):
+            from tracelab.store.meta import current_meta, meta_row
             doc = current_meta(self.run_dir)
             if doc["status"] != self._status:
                 _replace_run_table(self.con, meta_row(doc, doc["status"]), self.raw)
@@ -363,6 +364,7 @@ def open_run(run: str | Path) -> RunConnection:
 def check_live_run(p: Path) -> str:
     """Refuse a live run directory that is not a run or whose parts/ holds links or special files (before
     anything reads it); returns the one directory a query on it may read (for allowed_directories)."""
+    from tracelab.store.meta import current_meta
     current_meta(p)  # a directory without meta.json is not a run: say so first
     _refuse_links(layout.parts_dir(p))
     return str(p.resolve() / layout.PARTS) + "/"
