@@ -10,9 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.errors import UserError, store_errors
-from tracelab.store.coordinates import run_grid
 from tracelab.store.reader import open_run, retrying
-from tracelab.store.why import episode_at, explain_change_in, explain_in, render_why
 
 if TYPE_CHECKING:
     import duckdb
@@ -80,6 +78,9 @@ def run(args: argparse.Namespace) -> int:
     if args.action is not None:
         return run_action(args)
     refuse_complement(args.atom)
+    # deferred: --action reads the decision alone (tracelab.store.agent_why), not the world's trace
+    from tracelab.store.coordinates import run_grid
+    from tracelab.store.why import episode_at, explain_change_in, explain_in, render_why
     with store_errors(), ctrl_c_stops_queries():
         con = open_run(args.run)
         grid = retrying(lambda: run_grid(con))

@@ -8,7 +8,6 @@ from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.commands.why import action_explanation, check_at, last_t
 from tracelab.errors import UserError, store_errors
 from tracelab.store.reader import open_run, retrying
-from tracelab.store.why import parse_bindings, render_why_not, why_not
 
 
 def run(args: argparse.Namespace) -> int:
@@ -16,6 +15,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("why-not asks about a rule (--rule NAME) or an agent's action (--action NAME): give one")
     if args.action is not None:
         return run_action(args)
+    from tracelab.store.why import parse_bindings, render_why_not, why_not  # deferred: --action reads none of it
     with store_errors(), ctrl_c_stops_queries():
         con, bindings = open_run(args.run), parse_bindings(args.grounding)
         check_at(args.at, args.episode, last_t(con, args.episode))

@@ -26,9 +26,8 @@ import re
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, NamedTuple, TypeVar
 
 import duckdb
 
@@ -65,8 +64,7 @@ RUNS_DIR = Path("runs")
 T = TypeVar("T")
 
 
-@dataclass
-class RunInfo:
+class RunInfo(NamedTuple):  # a NamedTuple, not a dataclass: ~1 ms less start-up
     path: Path          # the run directory, or the lone .duckdb file
     sealed_file: Path | None
     meta: dict[str, Any]
@@ -543,8 +541,7 @@ _NUMBER_TYPES = frozenset({"TINYINT", "SMALLINT", "INTEGER", "BIGINT", "HUGEINT"
                            "UINTEGER", "UBIGINT", "UHUGEINT", "FLOAT", "DOUBLE"})
 
 
-@dataclass
-class QueryRows:
+class QueryRows(NamedTuple):
     """A query's result as Python rows: what a text table prints, read without pyarrow."""
     names: list[str]
     types: list[str]   # DuckDB's type names
