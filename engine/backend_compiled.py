@@ -7,7 +7,6 @@ recounts) is inherited and runs kernel.py's functions; only `step_worlds` comes 
 from __future__ import annotations
 
 import dataclasses
-import logging
 import time
 from types import ModuleType
 
@@ -18,6 +17,7 @@ from .backend_counting import CountingState
 from .codegen import GenerationError, Specialisation
 from .compile_cache import CacheEntry, CacheRefused, EntryRejected
 from .program import Fact, Literal, Program, Rule
+from .notices import library_logger
 
 # the fields of the program objects this backend knows; a program that sets any other field (a language
 # feature newer than the generator) runs on the interpreter. %closed, %edge_heads, {set_static} and
@@ -70,7 +70,7 @@ _AFTER_REMOVAL = {"compile": "it is compiled again now (about a minute)",
                   "skip": "this run uses the counting kernel (`tracelab compile` builds it again)"}
 _SAID: set[str] = set()  # notices said once per process
 # notices go to the `tracelab` loggers (warnings: a kernel not used); the CLI shows them on stderr
-log = logging.getLogger(__name__)
+log = library_logger(__name__)
 
 
 def compiled_backend(eng: EngineTables, program: Program, uncached: str

@@ -5,7 +5,6 @@ of the compiled kernel (kernel.step_worlds) for all worlds together.
 """
 from __future__ import annotations
 
-import logging
 import time
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
@@ -41,6 +40,7 @@ from .program import (
 )
 from .trace_take import INT32_COLUMNS, take_local_columns
 from .vocabulary import Vocabulary
+from .notices import library_logger
 
 if TYPE_CHECKING:
     from .backend_lanes import LaneState
@@ -67,7 +67,7 @@ LANES_MIN_WORLDS = 64
 BACKGROUND_POLL_S = 0.5
 # notices (a requested kernel not used: warning; a background compile started or taken over: info) go to
 # the `tracelab` loggers; the library prints nothing, the CLI shows them on stderr
-log = logging.getLogger(__name__)
+log = library_logger(__name__)
 STAT_NAMES = ("firings", "rederivations", "static_ignored", "changes", "passes", "watch_visits",
               "candidates")
 

@@ -7,7 +7,10 @@ and numpy (which pyarrow imports); never pandas (pyarrow's converter imports it 
 tracelab.store.arrow_build builds from buffers), numba, torch, rerun, textual or the rest. Each command runs
 in one child interpreter, in turn (the DuckDB-only ones first, so that what they leave in sys.modules is
 theirs alone), and the heavy packages loaded so far are printed after each: one that loads a forbidden package
-is named. A command builds its own parser only: no other command's module is imported."""
+is named. A command builds its own parser only: no other command's module is imported. Nor does a reading
+command load `logging` (no notice is printed: tracelab.engine.notices imports it when a module first logs),
+the board's module, or meta.json's (a sealed run's readers never read it); `why --action` loads none of
+the world's why search; and the why searches' modules define no dataclass (~1-2 ms of CPU each to make)."""
 from __future__ import annotations
 
 import json
@@ -22,16 +25,22 @@ RUNS = ROOT / "sample_runs"
 PLAY = str(RUNS / "advanced")
 TRAIN = str(RUNS / "base-train")
 
-ALLOWED = {"duckdb", "pyarrow", "numpy"}
+ALLOWED = {"duckdb", "pyarrow", "numpy", "logging"}   # pyarrow imports logging
 DUCKDB_ONLY = {"duckdb"}
-# The agent's decision (why/why-not --action) is read by tracelab.store.agent_why, loaded by those only.
-ACTION_ONLY = "tracelab.store.agent_why"
+# Modules a few commands load, allowed from the first command that does on (they share one process): the
+# agent's decision (why/why-not --action), the world's why search (why of an atom, why-not of a rule),
+# meta.json's reader (runs and check read a run's metadata file).
+LOADED_BY = {
+    "tracelab.store.agent_why": lambda argv: "--action" in argv,
+    "tracelab.store.why": lambda argv: argv[0] in ("why", "why-not") and "--action" not in argv,
+    "tracelab.store.meta": lambda argv: argv[0] in ("runs", "check"),
+}
 HEAVY = ("torch", "ray", "pandas", "pyarrow", "numpy", "tracelab.engine.parser", "duckdb", "rerun", "textual",
          "matplotlib", "numba", "llvmlite", "scipy", "stable_baselines3", "tensorboard", "gymnasium", "pettingzoo",
          "networkx",
          # lighter, still not used: the program's types (the why searches read atoms and test bounds with
          # engine.spelling and engine.bounds), a did-you-mean's difflib (a mistyped name only)
-         "tracelab.engine.program", "difflib", ACTION_ONLY)
+         "tracelab.engine.program", "difflib", "logging", "tracelab.board", *LOADED_BY)
 
 # These print tables from DuckDB's rows, or answer why from them: DuckDB is all they load.
 DUCKDB_COMMANDS = [
@@ -43,11 +52,11 @@ DUCKDB_COMMANDS = [
     ["show", TRAIN],
     ["runs", str(RUNS)],
     ["check", PLAY],
+    ["why", TRAIN, "--action", "red-agent-1", "--episode", "776", "--at", "2"],
+    ["why-not", TRAIN, "--action", "up", "--episode", "776", "--at", "2"],
     ["why", PLAY, "captured(blue)", "--episode", "0", "--at", "21", "--depth", "3"],
     ["why", PLAY, "captured(blue)", "--episode", "0", "--at", "21", "--depth", "3", "--json"],
     ["why-not", PLAY, "--rule", "snap_at", "--episode", "0", "--at", "21"],
-    ["why", TRAIN, "--action", "red-agent-1", "--episode", "776", "--at", "2"],
-    ["why-not", TRAIN, "--action", "up", "--episode", "776", "--at", "2"],
     ["compare", TRAIN],   # the reward scale's text without the trainer's config (numpy): train/reward_scale.py
 ]
 COMMANDS = [
@@ -87,9 +96,20 @@ def test_reading_commands_load_only_duckdb_and_for_arrow_output_pyarrow_and_nump
     for r in reports:
         assert r["status"] == 0 and r["printed"], (r, out.stderr)  # each command did its work
         allowed = DUCKDB_ONLY if r["argv"] in DUCKDB_COMMANDS else ALLOWED
-        if any("--action" in argv for argv in COMMANDS[:reports.index(r) + 1]):
-            allowed = allowed | {ACTION_ONLY}
+        allowed = allowed | {m for m, loads in LOADED_BY.items() if any(map(loads, COMMANDS[:reports.index(r) + 1]))}
         assert set(r["loaded"]) <= allowed, f"{' '.join(r['argv'][:1])} loaded {sorted(set(r['loaded']) - allowed)}"
         ran = {command_module(argv[0]) for argv in COMMANDS[:reports.index(r) + 1]}
         assert set(r["commands"]) <= ran, f"{r['argv'][0]} imported {sorted(set(r['commands']) - ran)}"
     assert {"duckdb", "pyarrow"} <= set(reports[-1]["loaded"])  # the check sees what a command loads
+
+
+def test_the_why_searches_define_no_dataclass() -> None:
+    """Their records are NamedTuples and plain classes: each dataclass costs ~1-2 ms of CPU to make at import,
+    a good part of what `why` adds to DuckDB's own start-up."""
+    import dataclasses
+    import importlib
+    modules = ["tracelab.store.reader", "tracelab.store.kind", "tracelab.store.coordinates", "tracelab.store.model",
+               "tracelab.store.episode", "tracelab.store.why", "tracelab.store.agent_why"]
+    found = [f"{name}.{value.__name__}" for name in modules for value in vars(importlib.import_module(name)).values()
+             if isinstance(value, type) and value.__module__ == name and dataclasses.is_dataclass(value)]
+    assert found == []

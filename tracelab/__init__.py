@@ -1,13 +1,11 @@
 """tracelab: a semantic simulation proxy for reinforcement learning that explains itself."""
-import logging
 from pathlib import Path
 
 __version__ = "0.1.0"
 
-# The library prints nothing: its notices go to the `tracelab` loggers, shown only where the application
-# configures logging (the CLI shows them on stderr: tracelab/commands/_notices.py). Without this handler,
-# Python would print warnings of an unconfigured logger to stderr itself.
-logging.getLogger(__name__).addHandler(logging.NullHandler())
+# The library prints nothing: its notices go to the `tracelab` loggers (tracelab.engine.notices, which
+# imports logging when a module first makes one), shown where the application configures logging or asks
+# for them (the CLI shows them on stderr: tracelab/commands/_notices.py).
 
 # The rule programs and specs: inside the package in a built wheel (pyproject maps rules/ to tracelab/rules),
 # beside it in the source tree that an editable install runs from.

@@ -30,7 +30,8 @@ COMPARED_RUNS = 10  # compare's figure: this many training runs side by side (co
 TIMEOUT_S = 600
 
 
-def _sample_runs() -> Path:
+def sample_runs_dir() -> Path:
+    """The source checkout's sample_runs/ (the benches that time the reading commands and the TUI read them)."""
     runs = Path(tracelab.__file__).resolve().parents[1] / "sample_runs"
     if not (runs / "advanced").is_dir():
         raise FileNotFoundError(f"bench cli reads the sample runs of a source checkout; {runs} has none")
@@ -68,7 +69,7 @@ def _cpu_of(argv: list[str], env: dict[str, str]) -> float:
 
 def run(quick: bool, repeats: int, only: Sequence[str] | None = None) -> dict[str, Any]:
     """`only`: the names of the commands to time (the floor is always timed); None: all."""
-    runs = _sample_runs()
+    runs = sample_runs_dir()
     repeats = 1 if quick else repeats
     env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
     load_before = load_average()

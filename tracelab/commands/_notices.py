@@ -1,43 +1,32 @@
 """What the library reports, shown on the command line: the library (engine, store, train) prints nothing and
-logs its notices to the `tracelab` loggers; while a command runs, `showing_library_notices` writes them to
-stderr, one line each, as the engine wrote them itself before:
+logs its notices to the `tracelab` loggers (tracelab.engine.notices); while a command runs,
+`showing_library_notices` writes them to stderr, one line each, as the engine wrote them itself before:
 
     tracelab: notice: kernel 'compiled' not used: ...         (a warning: something asked for is not done)
     tracelab: the compiled kernel is ready (...); switched...  (info: what happens in the background)
+
+A command that reports nothing (every reading command) does not load `logging`: it is imported by the
+first library module that makes a logger (library_logger), which the block's writer then hears from.
 """
 from __future__ import annotations
 
-import logging
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-LIBRARY_LOGGER = "tracelab"
+from tracelab.engine.notices import showing_notices
 
 
-class _StderrLines(logging.Handler):
-    """One line on the current sys.stderr per record (looked up at each record: tests swap it)."""
-
-    def emit(self, record: logging.LogRecord) -> None:
-        try:
-            kind = "notice: " if record.levelno >= logging.WARNING else ""
-            print(f"tracelab: {kind}{record.getMessage()}", file=sys.stderr, flush=True)
-        except Exception:  # logging's contract: a handler never raises into the code that logged
-            self.handleError(record)
+def _stderr_line(is_warning: bool, message: str) -> None:
+    """One line on the current sys.stderr (looked up at each notice: tests swap it)."""
+    print(f"tracelab: {'notice: ' if is_warning else ''}{message}", file=sys.stderr, flush=True)
 
 
 @contextmanager
 def showing_library_notices() -> Iterator[None]:
     """While the block runs, the library's info and warnings (its `tracelab` loggers) go to stderr."""
-    logger = logging.getLogger(LIBRARY_LOGGER)
-    handler, level = _StderrLines(logging.INFO), logger.level
-    logger.addHandler(handler)
-    logger.setLevel(logging.INFO)
-    try:
+    with showing_notices(_stderr_line):
         yield
-    finally:
-        logger.removeHandler(handler)
-        logger.setLevel(level)
 
 
 def say_running_compiles() -> None:

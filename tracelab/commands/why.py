@@ -6,13 +6,12 @@ import argparse
 import json
 import shlex
 import sys
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from tracelab.commands._interrupt import ctrl_c_stops_queries
 from tracelab.errors import UserError, store_errors
-from tracelab.store.coordinates import run_grid
 from tracelab.store.reader import open_run, retrying
-from tracelab.store.why import episode_at, explain_change_in, explain_in, render_why
 
 if TYPE_CHECKING:
     import duckdb
@@ -53,15 +52,17 @@ def change_in_pass(changes: list[tuple[int, int]], atom: str, t: int, pass_no: i
                     f"{'es' if len(passes) > 1 else ''} {', '.join(map(str, passes))}")
 
 
-def action_explanation(args: argparse.Namespace) -> Any:
-    """The decision of --action AGENT at --at (required) of --episode, read from the run."""
+def action_explanation(args: argparse.Namespace, agent_of: Callable[[Any], str] | None = None) -> Any:
+    """The decision of --action AGENT at --at (required) of --episode, read from the run; `agent_of(con)`:
+    the agent instead (why-not's --agent, or its episode's one deciding agent read on the same connection)."""
     if args.at is None:
         raise UserError("--action needs --at STEP: the step whose action to explain")
     from tracelab.store.agent_why import explain_action  # deferred: why of an atom does not read decisions
     with store_errors(), ctrl_c_stops_queries():
         con = open_run(args.run)
         try:
-            return retrying(lambda: explain_action(con, args.episode, args.action, args.at))
+            agent = args.action if agent_of is None else agent_of(con)
+            return retrying(lambda: explain_action(con, args.episode, agent, args.at))
         finally:
             con.close()
 
@@ -80,6 +81,9 @@ def run(args: argparse.Namespace) -> int:
     if args.action is not None:
         return run_action(args)
     refuse_complement(args.atom)
+    # deferred: --action reads the decision alone (tracelab.store.agent_why), not the world's trace
+    from tracelab.store.coordinates import run_grid
+    from tracelab.store.why import episode_at, explain_change_in, explain_in, render_why
     with store_errors(), ctrl_c_stops_queries():
         con = open_run(args.run)
         grid = retrying(lambda: run_grid(con))

@@ -6,44 +6,42 @@ in turn), and the reward terms the step received; for a decomposed policy (train
 action's expected return by reward term. Everything is in the run: no policy is loaded."""
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 from tracelab.engine.terminal_text import printable
 from tracelab.store.reader import RunConnection
 
+# Records are NamedTuples and plain classes, not dataclasses: a dataclass costs ~1-2 ms of CPU to create at
+# import, and `why --action` is asked over and over (issue 40).
 
-@dataclass(frozen=True)
-class ActionValue:
+
+class ActionValue(NamedTuple):
     name: str
     value: float
     allowed: bool
 
 
-@dataclass(frozen=True)
-class Feature:
+class Feature(NamedTuple):
     name: str
     value: str          # as shown: a number, or the atom an index stands for
     atom: str | None    # the atom it was read from (an index part's), for `tracelab why`
 
 
-@dataclass
 class ActionExplanation:
-    episode: int
-    step: int
-    agent: str
-    action: str
-    output: str                      # "q" (Q-values) or "logits"
-    explored: bool
-    epsilon: float | None
-    state_value: float | None
-    ranked: list[ActionValue]        # every action, highest value first
-    features: list[Feature] = field(default_factory=list)
-    observed_at: int | None = None   # the step whose recorded observation the agent acted on (None: the start)
-    terms: list[tuple[str, float]] = field(default_factory=list)
-    reward: float | None = None
-    # a decomposed policy's Q-values by reward term: term -> {action: value} (empty for any other policy)
-    by_term: dict[str, dict[str, float]] = field(default_factory=dict)
+    """The decision of an agent at a step, with what it read and the reward it got."""
+
+    def __init__(self, episode: int, step: int, agent: str, action: str, output: str, explored: bool,
+                 epsilon: float | None, state_value: float | None, ranked: list[ActionValue]) -> None:
+        self.episode, self.step, self.agent, self.action = episode, step, agent, action
+        self.output = output                  # "q" (Q-values) or "logits"
+        self.explored, self.epsilon, self.state_value = explored, epsilon, state_value
+        self.ranked = ranked                  # every action, highest value first
+        self.features: list[Feature] = []
+        self.observed_at: int | None = None   # the step whose recorded observation the agent acted on (None: the start)
+        self.terms: list[tuple[str, float]] = []
+        self.reward: float | None = None
+        # a decomposed policy's Q-values by reward term: term -> {action: value} (empty for any other policy)
+        self.by_term: dict[str, dict[str, float]] = {}
 
     @property
     def chosen(self) -> ActionValue:
@@ -59,21 +57,34 @@ class ActionExplanation:
         return {"episode": self.episode, "step": self.step, "agent": self.agent, "action": self.action,
                 "output": self.output, "explored": self.explored, "epsilon": self.epsilon,
                 "state_value": self.state_value, "margin": self.margin,
-                "ranked": [a.__dict__ for a in self.ranked], "observed_at": self.observed_at,
-                "features": [f.__dict__ for f in self.features],
+                "ranked": [a._asdict() for a in self.ranked], "observed_at": self.observed_at,
+                "features": [f._asdict() for f in self.features],
                 "reward": self.reward, "terms": [{"term": t, "value": v} for t, v in self.terms],
                 "q_by_term": self.by_term}
+
+
+# The decision, the observation it read (recorded after the step before), the observation's names, the
+# reward terms and the reward: one statement (each costs its own planning, ~2 ms of CPU on a cold process)
+_DECISION_SQL = """
+SELECT action_name, output, explored, epsilon, state_value, actions, "values", mask, terms, term_values,
+       (SELECT obs FROM raw.steps WHERE episode = $episode AND step = $step - 1 AND agent = $agent LIMIT 1),
+       (SELECT list({'position': position, 'name': name, 'divisor': divisor, 'size': size, 'labels': labels}
+                    ORDER BY position, divisor DESC) FROM raw.observation_names),
+       (SELECT {'term': list(term ORDER BY abs(value) DESC, term), 'value': list(value ORDER BY abs(value) DESC, term)}
+        FROM rewards WHERE episode = $episode AND step = $step AND agent = $agent),
+       (SELECT list(reward) FROM (SELECT reward FROM raw.steps WHERE episode = $episode AND step = $step
+                                  AND agent = $agent LIMIT 1))
+FROM decisions WHERE episode = $episode AND step = $step AND agent = $agent"""
 
 
 def explain_action(con: RunConnection, episode: int, agent: str, step: int) -> ActionExplanation:
     """The decision of `agent` at `step` of `episode` with its observation and reward terms (KeyError,
     naming what the run has, when there is none)."""
-    rows = con.execute("SELECT action_name, output, explored, epsilon, state_value, actions, \"values\", mask, "
-                       "terms, term_values FROM decisions WHERE episode = ? AND step = ? AND agent = ?",
-                       [episode, step, agent]).fetchall()
+    rows = con.execute(_DECISION_SQL, {"episode": episode, "step": step, "agent": agent}).fetchall()
     if not rows:
         raise KeyError(_no_decision(con, episode, agent, step))
-    name, output, explored, epsilon, state_value, actions, values, mask, term_names, term_values = rows[0]
+    (name, output, explored, epsilon, state_value, actions, values, mask, term_names, term_values,
+     obs, parts, terms, reward) = rows[0]
     allowed = mask if mask is not None else [True] * len(values)
     ranked = sorted((ActionValue(str(a), float(v), bool(m)) for a, v, m in zip(actions, values, allowed)),
                     key=lambda a: -a.value)
@@ -82,13 +93,11 @@ def explain_action(con: RunConnection, episode: int, agent: str, step: int) -> A
         a = len(actions)
         e.by_term = {str(t): {str(n): float(v) for n, v in zip(actions, term_values[k * a:(k + 1) * a])}
                      for k, t in enumerate(term_names)}
-    e.observed_at, e.features = _features(con, episode, agent, step)
-    terms = con.execute("SELECT term, value FROM rewards WHERE episode = ? AND step = ? AND agent = ? "
-                        "ORDER BY abs(value) DESC, term", [episode, step, agent]).fetchall()
-    e.terms = [(str(t), float(v)) for t, v in terms]
-    reward = con.execute("SELECT reward FROM raw.steps WHERE episode = ? AND step = ? AND agent = ?",
-                         [episode, step, agent]).fetchall()
-    e.reward = float(reward[0][0]) if reward else None
+    if step > 1:
+        e.observed_at = step - 1
+        e.features = _features(obs, [tuple(part.values()) for part in parts or []])
+    e.terms = [(str(t), float(v)) for t, v in zip(terms["term"] or [], terms["value"] or [])]
+    e.reward = float(reward[0]) if reward else None
     return e
 
 
@@ -107,20 +116,13 @@ def _no_decision(con: RunConnection, episode: int, agent: str, step: int) -> str
             f"(it decided at steps {have[1]}..{have[2]})")
 
 
-def _features(con: RunConnection, episode: int, agent: str, step: int) -> tuple[int | None, list[Feature]]:
-    """The observation the decision at `step` read: the one recorded after step - 1 (the start's is not
-    recorded), named by observation_names."""
-    if step <= 1:
-        return None, []
-    obs = con.execute("SELECT obs FROM raw.steps WHERE episode = ? AND step = ? AND agent = ?",
-                      [episode, step - 1, agent]).fetchall()
-    if not obs or obs[0][0] is None:
-        return step - 1, []
-    values = obs[0][0]
-    names = con.execute("SELECT position, name, divisor, size, labels FROM raw.observation_names "
-                        "ORDER BY position, divisor DESC").fetchall()
+def _features(values: list[float] | None, names: list[tuple[Any, ...]]) -> list[Feature]:
+    """The observation a decision read (`values`: the one recorded after the step before; the start's is not
+    recorded), named by observation_names' rows (position, name, divisor, size, labels)."""
+    if values is None:
+        return []
     if not names:
-        return step - 1, [Feature(f"obs[{i}]", f"{v:g}", None) for i, v in enumerate(values)]
+        return [Feature(f"obs[{i}]", f"{v:g}", None) for i, v in enumerate(values)]
     out = []
     for position, name, divisor, size, labels in names:
         if position >= len(values):
@@ -130,11 +132,10 @@ def _features(con: RunConnection, episode: int, agent: str, step: int) -> tuple[
             v = (int(v) // divisor) % size
         atom = labels[int(v)] if labels is not None and float(v).is_integer() and 0 <= v < len(labels) else None
         out.append(Feature(str(name), atom if atom is not None else f"{v:g}", atom))
-    return step - 1, out
+    return out
 
 
-@dataclass(frozen=True)
-class WhyNotAction:
+class WhyNotAction(NamedTuple):
     explanation: ActionExplanation
     name: str
     masked: bool

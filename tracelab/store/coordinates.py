@@ -10,8 +10,7 @@ its nodes read as their ids, as before."""
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 from tracelab.store.kind import run_config
 
@@ -21,8 +20,7 @@ _SCENARIO_KEYS = ("scenario", "scenario_toml")   # where play / train, eval reco
 _CELL_ARG = re.compile(r"(?<=[(,])(\d+)(?=[,)])")  # a whole-number argument of an atom or an edge
 
 
-@dataclass(frozen=True)
-class Grid:
+class Grid(NamedTuple):
     width: int
     height: int
 

@@ -7,8 +7,7 @@ from __future__ import annotations
 
 from bisect import bisect_left, bisect_right
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 from tracelab.store.model import DEFAULT_BOUND
 from tracelab.store.reader import RunConnection
@@ -21,8 +20,7 @@ _COLUMNS = ("seq", "t", "pass_no", "atom", "old_lower", "old_upper", "new_lower"
 PYTHON_ROWS = 100_000
 
 
-@dataclass(frozen=True)
-class Row:
+class Row(NamedTuple):
     index: int  # position in the episode's rows (seq order)
     seq: int
     t: int

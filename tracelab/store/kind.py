@@ -9,7 +9,6 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from tracelab.board import board_of_config
 from tracelab.store.reader import RunConnection
 
 
@@ -22,6 +21,7 @@ def run_board(con: RunConnection) -> str | None:
 
 def has_board(con: RunConnection) -> bool:
     """Whether the run declares a board: RuleSim's grid (run_board) or a spec's `[board]` in its config."""
+    from tracelab.board import board_of_config  # deferred: the why searches and tables never draw a board
     return run_board(con) is not None or board_of_config(run_config(con)) is not None
 
 

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Iterable
-from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 from tracelab.engine.errors import ProgramError
 from tracelab.engine.bounds import satisfies as engine_satisfies
@@ -21,8 +20,7 @@ _C = CONSTANT_RE.pattern
 _PLAIN_ATOM = re.compile(rf"[ \t]*({PREDICATE_RE.pattern})\([ \t]*({_C})(?:[ \t]*,[ \t]*({_C}))?[ \t]*\)[ \t]*")
 
 
-@dataclass(frozen=True)
-class Clause:
+class Clause(NamedTuple):
     label: str
     args: tuple[str, ...]
     is_var: tuple[bool, ...]
@@ -48,8 +46,7 @@ class Clause:
         return f"{'~' if self.negated else ''}{self.label}({args}):[{self.lower:g},{self.upper:g}]"
 
 
-@dataclass
-class RuleInfo:
+class RuleInfo(NamedTuple):
     rule: int
     name: str
     delay: int
@@ -57,7 +54,7 @@ class RuleInfo:
     variables: tuple[str, ...]
     text: str
     head: Clause
-    body: list[Clause] = field(default_factory=list)
+    body: list[Clause]
 
 
 def satisfies(bound: tuple[float, float], clause: Clause) -> bool:

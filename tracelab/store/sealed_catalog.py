@@ -9,12 +9,14 @@ triggers and sequences hold expressions too. A file `seal` writes holds none of 
 existed), and tracelab's views
 in `main` (which the reader never uses: it builds its own). `check_sealed_catalog` reads the catalog
 through DuckDB's metadata functions, which report stored definitions as text and evaluate nothing, and
-refuses anything else with one line naming the entry. A file whose entries passed is recorded by its
-identity (tracelab.store.checked_files), and its entries are not read again while it stays the same; its
-columns are, every time."""
+refuses anything else with one line naming the entry. A file whose entries and columns passed is recorded
+by its identity (tracelab.store.checked_files) with the names of its stored columns (what its views are
+made of), and neither is read again while it stays the same (a record's names are taken only where they
+are the schema's own: a record holding anything else is not used)."""
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 from collections.abc import Collection, Sequence
 from functools import cache
@@ -70,15 +72,36 @@ def check_sealed_catalog(con: duckdb.DuckDBPyConnection, database: str, path: Pa
     them (with the others' on the connection), else read here. `identity`: the attached file's
     (checked_files): its entries are not read again once they passed, and are recorded when they pass."""
     if catalog is None:
-        known = [database] if entries_checked(identity) else []
-        catalog = read_sealed_catalogs(con, [database], known)[database]
+        note = checked_files.checked_note(identity, checker_version())
+        recorded = _recorded_columns(note)
+        if recorded is not None:
+            return recorded
+        catalog = read_sealed_catalogs(con, [database], [database] if note is not None else [])[database]
     try:
         if catalog.entries is not None:
             catalog.check_entries()
-            checked_files.record_checked(identity, checker_version())
-        return catalog.check_columns()
+        columns = catalog.check_columns()
     except SealedFileRefused as e:
         raise SealedFileRefused(f"{str(path)!r}: {e}") from None
+    if catalog.entries is not None:
+        checked_files.record_checked(identity, checker_version(),
+                                     json.dumps({t: sorted(c) for t, c in columns.items()}))
+    return columns
+
+
+def _recorded_columns(note: str | None) -> dict[str, set[str]] | None:
+    """The columns a record holds (check_sealed_catalog wrote them), if every name is one of the schema's
+    own; else None (no record, an older one without them, or one not written by this check)."""
+    try:
+        doc = json.loads(note) if note else None
+    except ValueError:
+        return None
+    if not isinstance(doc, dict) or set(doc) != set(STORED_COLUMNS):
+        return None
+    if not all(isinstance(cols, list) and all(isinstance(c, str) and c in STORED_COLUMNS[t] for c in cols)
+               for t, cols in doc.items()):
+        return None
+    return {t: set(cols) for t, cols in doc.items()}
 
 
 def _name(*parts: str) -> str:

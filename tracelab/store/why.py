@@ -13,8 +13,7 @@ atoms of the vocabulary for unbound variables; reports the first clause that cou
 from __future__ import annotations
 
 import re
-from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 from tracelab.store.coordinates import Grid
 from tracelab.store.episode import EpisodeTrace, Row
@@ -39,36 +38,46 @@ def _bound_text(b: tuple[float, float] | list[float] | None) -> str:
     return "?" if b is None else f"[{b[0]:g},{b[1]:g}]"
 
 
-@dataclass
+# The records below are plain classes and NamedTuples, not dataclasses: a dataclass costs ~1-2 ms of CPU to
+# create at import, a good part of what `why` adds to DuckDB's own start-up (issue 40). to_dict() gives the
+# fields in the order written, as --json prints them.
+
 class Cause:
-    kind: str                      # rule | fact | action | policy | reset | default
-    name: str                      # as in the changes view's `rule` column ('' for default)
-    grounding: int = -1
-    bindings: dict[str, str] = field(default_factory=dict)
-    delay: int | None = None
-    immediate: bool | None = None
-    reads: str = ""                # when the body was read
-    text: str = ""                 # the rule's or fact's source text
-
-
-@dataclass
-class WhyNode:
-    atom: str
-    value: list[float]             # the bound in force at the point read
-    clause: str | None = None      # the ground body clause this node supports (None at the root)
-    holds: bool | None = None      # does `value` satisfy `clause`
-    clause_closed: bool = False    # `clause` is on a %closed predicate: [0,1] reads as [0,0]
-    t: int | None = None           # the change that set the value (None: never set)
-    pass_no: int | None = None
-    seq: int | None = None
-    old: list[float] | None = None
-    cause: Cause | None = None
-    children: list["WhyNode"] = field(default_factory=list)
-    truncated: bool = False        # the depth limit stopped the explanation here
-    repeated: bool = False         # the same change is explained higher up the tree
+    def __init__(self, kind: str, name: str, grounding: int = -1, reads: str = "") -> None:
+        self.kind = kind                        # rule | fact | action | policy | reset | default
+        self.name = name                        # as in the changes view's `rule` column ('' for default)
+        self.grounding = grounding
+        self.bindings: dict[str, str] = {}
+        self.delay: int | None = None
+        self.immediate: bool | None = None
+        self.reads = reads                      # when the body was read
+        self.text = ""                          # the rule's or fact's source text
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        return {**vars(self), "bindings": dict(self.bindings)}
+
+
+class WhyNode:
+    def __init__(self, atom: str, value: list[float], clause: str | None = None, holds: bool | None = None,
+                 clause_closed: bool = False) -> None:
+        self.atom = atom
+        self.value = value                      # the bound in force at the point read
+        self.clause = clause                    # the ground body clause this node supports (None at the root)
+        self.holds = holds                      # does `value` satisfy `clause`
+        self.clause_closed = clause_closed      # `clause` is on a %closed predicate: [0,1] reads as [0,0]
+        self.t: int | None = None               # the change that set the value (None: never set)
+        self.pass_no: int | None = None
+        self.seq: int | None = None
+        self.old: list[float] | None = None
+        self.cause: Cause | None = None
+        self.children: list[WhyNode] = []
+        self.truncated = False                  # the depth limit stopped the explanation here
+        self.repeated = False                   # the same change is explained higher up the tree
+
+    def to_dict(self) -> dict[str, Any]:
+        return {**vars(self), "value": list(self.value), "old": None if self.old is None else list(self.old),
+                "cause": None if self.cause is None else self.cause.to_dict(),
+                "children": [c.to_dict() for c in self.children]}
 
 
 def set_by(model: RunModel, row: Row) -> str:
@@ -240,8 +249,7 @@ def render_why(node: WhyNode, at: int | None = None, grid: Grid | None = None) -
 
 # ---- why-not ---------------------------------------------------------------------------------------------
 
-@dataclass
-class ClauseCheck:
+class ClauseCheck(NamedTuple):
     pos: int                       # index of the clause in the rule body
     clause: str                    # the clause with the bindings known when it was checked
     atom: str | None               # the ground atom checked (None: no atom matched an open pattern)
@@ -253,21 +261,22 @@ class ClauseCheck:
     closed: bool = False           # the clause is on a %closed predicate: [0,1] reads as [0,0]
 
 
-@dataclass
 class WhyNot:
-    rule: str
-    rule_text: str
-    bindings: dict[str, str]       # as given, extended by the search along the checks shown
-    at: int                        # when the head would change
-    reads_at: int                  # end of this timestep is when the body is read
-    checks: list[ClauseCheck]
-    failed: int | None             # index into checks of the first failed clause; None if all hold
-    head: str | None = None
-    head_value: list[float] | None = None
-    head_note: str = ""            # why the head atom is not named (a head function the run cannot call)
+    def __init__(self, rule: str, rule_text: str, bindings: dict[str, str], at: int, reads_at: int,
+                 checks: list[ClauseCheck], failed: int | None) -> None:
+        self.rule = rule
+        self.rule_text = rule_text
+        self.bindings = bindings                # as given, extended by the search along the checks shown
+        self.at = at                            # when the head would change
+        self.reads_at = reads_at                # end of this timestep is when the body is read
+        self.checks = checks
+        self.failed = failed                    # index into checks of the first failed clause; None if all hold
+        self.head: str | None = None
+        self.head_value: list[float] | None = None
+        self.head_note = ""                     # why the head atom is not named (a head function the run cannot call)
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        return {**vars(self), "bindings": dict(self.bindings), "checks": [c._asdict() for c in self.checks]}
 
 
 def why_not(con: RunConnection, episode: int, rule_name: str, bindings: dict[str, str],
@@ -286,8 +295,7 @@ def why_not(con: RunConnection, episode: int, rule_name: str, bindings: dict[str
     _check_episode(con, episode, trace)
     search = _Search(model, trace, rule, reads_at, max_candidates)
     checks, ok, binding = search.run(dict(bindings))
-    result = WhyNot(rule.name, rule.text, binding, at, reads_at, checks,
-                    failed=None if ok else len(checks) - 1)
+    result = WhyNot(rule.name, rule.text, binding, at, reads_at, checks, None if ok else len(checks) - 1)
     if ok and set(rule.head.variables()) <= set(binding):
         calls = _head_calls(model, rule.head)
         if calls:  # computed while grounding by a Python function: the run knows the head from its changes

@@ -1,7 +1,12 @@
 """The screen of one open run: a tab per view (Episodes, Trace, Why, Rules, SQL, Training; a run without
 a board, a reasoning run, has no training curves and no Training tab), the keys 1-6 to switch, and the
 messages that pass an episode, a rule or a change from one view to another. Its header follows the
-run's life: live while written, then how it ended, then sealed."""
+run's life: live while written, then how it ended, then sealed.
+
+The first screen is the Episodes table (or the view a reopened run was left on): every other view's module
+is imported, and the view made, when it is first shown; the Trace view's modules, which Enter needs, in a
+thread once the Episodes table is drawn with its cursor (issue 40: the board, plots and graph are not
+loaded before)."""
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
@@ -16,14 +21,10 @@ from textual.widgets import Input, Static, TabbedContent, TabPane, Tabs, TextAre
 
 from tracelab.viewers.tui.episodes import EpisodesPane
 from tracelab.viewers.tui.keybar import KeyBar
+from tracelab.viewers.tui.lazy_table import LazyTable
 from tracelab.viewers.tui.messages import ExplainAction, ExplainChange, OpenTrace
 from tracelab.viewers.tui.places import RunPlace
-from tracelab.viewers.tui.rules import RulesPane
 from tracelab.viewers.tui.source import RunSource, SeveralRunsSource
-from tracelab.viewers.tui.sql import SqlPane
-from tracelab.viewers.tui.trace import TracePane
-from tracelab.viewers.tui.training import TrainingPane
-from tracelab.viewers.tui.why import WhyPane
 from tracelab.viewers.tui.shown_text import shown
 
 TABS = (("episodes", "1 Episodes"), ("trace", "2 Trace"), ("why", "3 Why"), ("rules", "4 Rules"),
@@ -32,8 +33,40 @@ TABS = (("episodes", "1 Episodes"), ("trace", "2 Trace"), ("why", "3 Why"), ("ru
 # where Esc goes from a view: the why tree to the trace it explains, the trace to the run's episodes; any
 # other view to the one the run opened on, and from that one back to the Runs screen
 BACK = {"why": "trace", "trace": "episodes"}
-EAGER = ("episodes", "trace")   # built with the screen; the other views when first shown
+EAGER = ("episodes",)   # built with the screen; the trace once it is drawn, the other views when first shown
 STATUS_REFRESH_S = 1.0          # how often the run's status is read while it can change
+
+
+class Panes(dict[str, Widget]):
+    """The screen's views by tab, each made (its module imported) when first asked for."""
+
+    def __init__(self, make: Callable[[str], Widget]) -> None:
+        super().__init__()
+        self._make = make
+
+    def __missing__(self, tab: str) -> Widget:
+        pane = self[tab] = self._make(tab)
+        return pane
+
+
+def _view_class(tab: str) -> type[Widget]:
+    """The class of a tab's view, imported here: its module loads when the view is first made."""
+    if tab == "episodes":
+        return EpisodesPane
+    if tab == "trace":
+        from tracelab.viewers.tui.trace import TracePane
+        return TracePane
+    if tab == "why":
+        from tracelab.viewers.tui.why import WhyPane
+        return WhyPane
+    if tab == "rules":
+        from tracelab.viewers.tui.rules import RulesPane
+        return RulesPane
+    if tab == "sql":
+        from tracelab.viewers.tui.sql import SqlPane
+        return SqlPane
+    from tracelab.viewers.tui.training import TrainingPane
+    return TrainingPane
 
 
 class RunTabs(TabbedContent):
@@ -82,11 +115,9 @@ class RunScreen(Screen):
         self.place_left, self.keep_place = place, keep_place
         self.episode: int | None = None
         self._has_metrics: bool | None = None     # read once the run is no longer written
-        self.panes: dict[str, Widget] = {
-            "episodes": EpisodesPane(self.source, place.episodes if place else None),
-            "trace": TracePane(self.source), "why": WhyPane(self.source),
-            "rules": RulesPane(self.source), "sql": SqlPane(self.sql_source),
-            "training": TrainingPane(self.source, self.overlaid)}
+        arguments = {"episodes": lambda: (self.source, place.episodes if place else None),
+                     "sql": lambda: (self.sql_source,), "training": lambda: (self.source, self.overlaid)}
+        self.panes = Panes(lambda tab: _view_class(tab)(*arguments.get(tab, lambda: (self.source,))()))
         # reopened: on the view it was left on (the why tree: on the trace it explained)
         view = "trace" if place and place.view == "why" else place.view if place else self.initial
         self.opening = view if view in self.panes and self.has_view(view) else self.initial
@@ -96,9 +127,13 @@ class RunScreen(Screen):
         with RunTabs(initial=self.opening, id="tabs"):
             for tab, title in TABS:
                 with TabPane(title, id=tab):
-                    if tab in EAGER or tab == self.opening:
+                    if tab in EAGER or tab == self.opening or (tab == "trace" and self._reopens_trace):
                         yield self.panes[tab]
         yield KeyBar()
+
+    @property
+    def _reopens_trace(self) -> bool:
+        return self.place_left is not None and self.place_left.trace is not None
 
     def _title(self) -> Text:
         overlaid = f" + {len(self.overlaid)} overlaid in Training and SQL" if self.overlaid else ""
@@ -124,11 +159,18 @@ class RunScreen(Screen):
 
     def on_mount(self) -> None:
         self._hide_missing_views()
-        if self.place_left is not None and self.place_left.trace is not None:
+        if self._reopens_trace:
             self.episode = self.place_left.trace.episode
             self.panes["trace"].reopen(self.place_left.trace)  # type: ignore[attr-defined]
         if self.source.can_change:  # its writer may close or die, `tracelab seal` may seal it
             self._status_timer = self.set_interval(STATUS_REFRESH_S, self._check_status)
+
+    def on_lazy_table_loaded(self, event: LazyTable.Loaded) -> None:
+        """The Episodes table is drawn with its cursor: import the Trace view's modules (its board, plots
+        and graph), which Enter opens, in a thread meanwhile (mounting it waits for Enter: a view mounted
+        while the app closes would fail)."""
+        if event.table.id == "ep-table" and "trace" not in self.panes:
+            self.run_worker(lambda: _view_class("trace"), thread=True, group="preload", exit_on_error=False)
 
     def _check_status(self) -> None:
         if self.is_current:
@@ -194,10 +236,11 @@ class RunScreen(Screen):
 
     def place(self) -> RunPlace:
         """Where the user is: the view, the Episodes' filters and cursor, the trace's episode and cursor."""
-        episodes, trace = self.panes["episodes"], self.panes["trace"]
-        assert isinstance(episodes, EpisodesPane) and isinstance(trace, TracePane)
+        episodes, trace = self.panes["episodes"], self.panes.get("trace")
+        assert isinstance(episodes, EpisodesPane)
         return RunPlace(self.tabs.active or self.initial,
-                        episodes.place() if episodes.is_mounted else None, trace.place())
+                        episodes.place() if episodes.is_mounted else None,
+                        None if trace is None else trace.place())  # type: ignore[attr-defined]
 
     def on_screen_suspend(self) -> None:
         if self.keep_place is not None:   # left (back to the Runs screen, or a dialog over it)
@@ -215,18 +258,15 @@ class RunScreen(Screen):
     async def on_open_trace(self, message: OpenTrace) -> None:
         self.episode = message.episode
         trace = await self.pane("trace")
-        assert isinstance(trace, TracePane)
-        trace.show_episode(message.episode, rule=message.rule, at_t=message.at_t)
+        trace.show_episode(message.episode, rule=message.rule, at_t=message.at_t)  # type: ignore[attr-defined]
         await self.action_show("trace")
 
     async def on_explain_change(self, message: ExplainChange) -> None:
         why = await self.pane("why")
-        assert isinstance(why, WhyPane)
-        why.explain(message.episode, message.atom, message.t, message.seq)
+        why.explain(message.episode, message.atom, message.t, message.seq)  # type: ignore[attr-defined]
         await self.action_show("why")
 
     async def on_explain_action(self, message: ExplainAction) -> None:
         why = await self.pane("why")
-        assert isinstance(why, WhyPane)
-        why.explain_action(message.episode, message.agent, message.step, message.action)
+        why.explain_action(message.episode, message.agent, message.step, message.action)  # type: ignore[attr-defined]
         await self.action_show("why")

@@ -15,7 +15,6 @@ value whose cumulative probability exceeds u), "choice" is `np_random.choice` ov
 (one `integers(0, n)`), so a seeded world draws exactly as gymnasium's toy-text games do."""
 from __future__ import annotations
 
-import logging
 from typing import Any
 
 import numpy as np
@@ -31,8 +30,9 @@ from tracelab.envs.declared.spec import Atom, Draw, WorldSpec
 from tracelab.envs.declared.state_errors import no_index, no_weights_hold
 from tracelab.board import DIRECTION_ARROWS
 from tracelab.first_run_figures import say_first_compile
+from tracelab.engine.notices import library_logger
 
-log = logging.getLogger(__name__)
+log = library_logger(__name__)
 
 
 def categorical(cumulative: list[float], rng: np.random.Generator) -> int:
