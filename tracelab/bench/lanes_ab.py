@@ -1,5 +1,5 @@
 """This tree's lanes kernel (engine/lanes.py) against another tree's, in one process, on bench env's
-workload (tracelab.bench.sims.SpecLoop over GridWar's spec): `python -m tracelab.bench.lanes_ab
+workload (tracelab.bench.sims.SpecLoop over the war game's spec): `python -m tracelab.bench.lanes_ab
 --other /work/main/engine/lanes.py --agents 20 --worlds 256 [--steps 20] [--rounds 7] [--trace]`.
 
 The other file is compiled here without numba's disk cache (nothing is written beside it) and has to keep

@@ -1,4 +1,4 @@
-"""Where a batch's step goes on GridWar's spec (bench env's workload, tracelab.bench.sims.SpecLoop): CPU seconds
+"""Where a batch's step goes on the war game's spec (bench env's workload, tracelab.bench.sims.SpecLoop): CPU seconds
 inside the lanes kernel's step (lanes.step_lanes), its restores (restore_worlds, restore_worlds_from) and the
 rest, with the engine's work counters per world-step:
 `python -m tracelab.bench.step_split --agents 20 --worlds 256 [--steps 40] [--trace]`.
