@@ -7,7 +7,6 @@ import os
 from pathlib import Path
 from typing import Any
 
-import pytest
 
 os.environ["TEXTUAL_ANIMATIONS"] = "none"
 
@@ -146,8 +145,6 @@ def test_a_run_reopened_in_the_session_opens_where_it_was_left() -> None:
     run_app([ROOT / "sample_runs"], body, size=(100, 30))
 
 
-@pytest.mark.xfail(strict=True, reason="a spec run's board and atoms panel leave the trace 46 columns at 80x24, "
-                   "its columns need 56 (sample_runs made on the spec path, 2026-11-29): the side panel must narrow")
 def test_at_80x24_beside_the_board_every_trace_column_fits_and_the_cursor_row_shows() -> None:
     """80x24 is the floor: with the board shown (b) the trace's columns narrow to fit beside it (the rule
     column 12 wide, not two characters behind a sideways scroll), and the cursor row stays on screen."""
@@ -173,3 +170,35 @@ def test_at_80x24_beside_the_board_every_trace_column_fits_and_the_cursor_row_sh
                   and row["label"][:6] in ln]
             assert at, (row, "\n".join(lines))                   # the cursor's row, its rule readable
     run_app([ADVANCED], body, size=(80, 24))
+
+
+def test_the_key_bar_draws_every_key_whole_at_120_columns_and_drops_whole_keys_help_last_at_80() -> None:
+    """The key bar of a play run's Trace: at 120 columns every key fits (it read `q qui` on the spec
+    runs); at 80 the keys that do not fit are dropped whole from the end of the list, `? help` kept."""
+    def expect(app: Any) -> list[tuple[str, str]]:
+        out, seen = [], set()
+        for _, binding, enabled, _ in app.screen.active_bindings.values():
+            if binding.show and enabled and binding.action not in seen:
+                seen.add(binding.action)
+                out.append((binding.action, f" {app.get_key_display(binding)} {binding.description}"))
+        return out
+
+    for size in ((120, 40), (80, 24)):
+        async def body(app: Any, pilot: Any, size: tuple[int, int] = size) -> None:
+            await open_trace(app, pilot)
+            keys = expect(app)
+            bar = (await shown(app, pilot)).splitlines()[-1]
+            assert bar.rstrip().endswith("^p palette")
+            drawn = [action for action, text in keys if text + " " in bar + " "]
+            assert "help" in drawn, bar
+            rest = bar.replace("^p palette", "")
+            for action, text in keys:
+                if action in drawn:
+                    rest = rest.replace(text, "", 1)
+            assert not rest.strip(), (rest, bar)                     # nothing cut: only whole keys drawn
+            if size[0] == 120:
+                assert drawn == [a for a, _ in keys], bar            # every key
+            else:                                                    # dropped from the end, help kept
+                kept = [a for a, _ in keys if a != "help"][:len(drawn) - 1]
+                assert drawn == [a for a, _ in keys if a in kept or a == "help"], bar
+        run_app([ADVANCED], body, size=size)
