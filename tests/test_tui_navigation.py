@@ -202,3 +202,24 @@ def test_the_key_bar_draws_every_key_whole_at_120_columns_and_drops_whole_keys_h
                 kept = [a for a, _ in keys if a != "help"][:len(drawn) - 1]
                 assert drawn == [a for a, _ in keys if a in kept or a == "help"], bar
         run_app([ADVANCED], body, size=size)
+
+
+def test_a_spec_run_and_an_older_rulesim_run_draw_their_board_the_same_way() -> None:
+    """One board path: a spec run (its config's [board]) and a run RuleSim wrote (board_state reads
+    war.toml for it) both show the board beside the trace, the decision panel under it, and no atoms
+    panel (a spec run had the board inside the boardless runs' atoms and graph side)."""
+    from tracelab.viewers.tui.board import BoardView, draw
+    from tracelab.viewers.tui.decision import DecisionPanel
+    from tracelab.viewers.tui.graph_side import GraphSide
+
+    for run in (ADVANCED, ROOT / "tests" / "data" / "rulesim" / "base"):
+        async def body(app: Any, pilot: Any) -> None:
+            pane, _ = await open_trace(app, pilot)
+            assert not app.screen.query(GraphSide)
+            board = pane.side
+            assert isinstance(board, BoardView) and board.parent is pane.query_one("#tr-side")
+            assert pane.query_one("#tr-side").query(DecisionPanel)
+            await wait_for(pilot, lambda: board.board is not None)
+            drawn = draw(board.declared, board.board.at(board.step)).plain
+            assert "R1" in drawn and "B1" in drawn, drawn
+        run_app([run], body, size=(120, 34))
