@@ -56,8 +56,9 @@ class KeyBar(Widget):
             if not binding.show or not enabled or binding.action in seen:
                 continue
             seen.add(binding.action)
-            text = Text(f" {self.app.get_key_display(binding)} ", style=f"bold {PARTIAL}")
-            text.append(binding.description)
+            text = Text()
+            text.append(f" {self.app.get_key_display(binding)} ", style=f"bold {PARTIAL}")
+            text.append(binding.description)     # plain: the key alone is marked
             keys.append(Key(text, binding.action, node))
         self._keys = keys
         self.refresh()

@@ -450,9 +450,6 @@ class TracePane(Vertical):
     def on_decision_panel_shown(self, event: DecisionPanel.Shown) -> None:
         event.stop()
         self.refresh_bindings()     # `d` is offered while a decision shows
-        panel = self.decision
-        for side in self.query("#tr-side"):
-            side.set_class(panel is not None and panel.display, "-decision")
 
     def action_why(self) -> None:
         row = self.table.cursor_row
