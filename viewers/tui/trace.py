@@ -61,6 +61,8 @@ TRACE_COLUMNS = [
 LIVE_REFRESH_S = 2.0
 BOARD_MIN_WIDTH = 100      # the table needs ~78 columns, the board ~22 (the atoms beside it 36%)
 SIDE_MIN_WIDTH = 22        # the board's side: the decision panel's bars need ~20 columns
+SIDE_ROOMY_WIDTH = 32      # with a decision shown, where the table keeps TABLE_WIDTH: its names whole
+TABLE_WIDTH = 86           # the table's columns at their natural widths
 
 _RANGE = re.compile(r"^\s*(-?\d+)?\s*(?:\.\.\s*(-?\d+)?)?\s*$")
 
@@ -122,10 +124,7 @@ class TracePane(Vertical):
         with Horizontal(id="tr-body"):
             yield LazyTable(TRACE_COLUMNS, id="tr-table")
             if self.source.board is not None:
-                side = Vertical(id="tr-side")
-                # as wide as the board (and its border), at least the decision panel's width
-                side.styles.width = max(SIDE_MIN_WIDTH, drawn_width(self.source.board) + 2)
-                with side:
+                with Vertical(id="tr-side"):
                     yield BoardView(self.source, self.source.board)
                     yield DecisionPanel(self.source)
             else:
@@ -239,7 +238,18 @@ class TracePane(Vertical):
             side.set_hide_static(hide)
         self._refilter()
 
+    def _size_side(self) -> None:
+        """The board's side: as wide as the board (and its border), at least the decision panel's bars;
+        with a decision shown, roomier where the table keeps its natural widths (action and reward term
+        names whole)."""
+        if self.source.board is None:
+            return
+        panel = self.decision
+        roomy = min(SIDE_ROOMY_WIDTH, self.size.width - TABLE_WIDTH) if panel is not None and panel.display else 0
+        self.side_box.styles.width = max(SIDE_MIN_WIDTH, drawn_width(self.source.board) + 2, roomy)
+
     def on_resize(self) -> None:
+        self._size_side()
         if self._board_choice is None:   # by default the board shows when there is room beside the table
             self.side_shown = self.size.width >= BOARD_MIN_WIDTH
 
@@ -450,6 +460,7 @@ class TracePane(Vertical):
     def on_decision_panel_shown(self, event: DecisionPanel.Shown) -> None:
         event.stop()
         self.refresh_bindings()     # `d` is offered while a decision shows
+        self._size_side()
 
     def action_why(self) -> None:
         row = self.table.cursor_row
