@@ -240,6 +240,9 @@ def test_a_training_run_replays_its_eval_games_on_the_step_timeline_only(tmp_pat
     assert "/board/agents/red-agent-1" in entities and "/why" in entities
     timed = {k for rows in entities.values() for r in rows for k, v in r.items() if v is not None}
     assert "train_step" not in timed and not any(p.startswith("/train") for p in entities)
+    for episode, train_step in (("train/episode-0", 100), ("train/episode-1", 200)):   # what it shows of them
+        docs = [r["TextDocument:text"] for r in data[episode]["/why"] if r.get("step") is not None]
+        assert all(f"an evaluation game of the training, at train step {train_step}, round" in d[0] for d in docs)
 
 
 def test_live_follows_a_run_being_written(tmp_path: Path) -> None:

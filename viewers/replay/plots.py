@@ -40,6 +40,25 @@ def step_notes(rows: list[StepRow]) -> dict[int, list[str]]:
                 f"- reward: {', '.join(f'{literal(a)} {r:g}' for _, a, r, _ in at)}"] for t, at in by_t.items()}
 
 
+def eval_game_note(con: RunConnection, episode: int) -> str | None:
+    """The step document's line that places a training's evaluation game in its training (its begin info,
+    docs/store.md's training-run contract), None for any other episode: the replay has no training curves
+    (module docstring), this is what it shows of them."""
+    rows = con.execute(
+        "SELECT TRY_CAST(json_extract(begin_info, '$.train_step') AS BIGINT), "
+        "TRY_CAST(json_extract(begin_info, '$.eval_round') AS BIGINT), "
+        "TRY_CAST(json_extract(begin_info, '$.opponent_p') AS DOUBLE) FROM episodes "
+        "WHERE episode = ? AND json_extract_string(begin_info, '$.kind') = 'eval'", [episode]).fetchall()
+    if not rows:
+        return None
+    train_step, eval_round, opponent_p = rows[0]
+    where = [f"at train step {train_step:,}" if train_step is not None else "",
+             f"round {eval_round}" if eval_round is not None else "",
+             f"opponent p {opponent_p:g}" if opponent_p is not None else ""]
+    return ("- an evaluation game of the training, " + ", ".join(w for w in where if w)
+            + " (its curves: `tracelab tui RUN`, 6 Training)")
+
+
 def agent_rewards(agents: list[str], rows: list[StepRow]) -> np.ndarray | None:
     """[last t + 1, len(agents)] each agent's reward per timestep (0 where it took no step) from the
     episode's `steps` rows, or None when the run has none for it."""

@@ -153,6 +153,10 @@ def record_episode(ctx: RunContext, episode: int, rec: rr.RecordingStream, optio
                     agents=players if options.lanes == lanes.DEFAULT_LANES and players else None)
     graph_rules.log_rule_log(rec, data)
     graph_rules.log_changed(rec, data)
+    notes = plots.step_notes(rows)
+    game = plots.eval_game_note(ctx.con, episode)
+    if game is not None:
+        notes = {s: [game, *notes.get(s, [])] for s in range(data.steps)}
     graph_rules.log_why(rec, ctx.con, data, options.why_atoms, options.why_depth, lambda: ctx.model, edges, deaths,
-                        plots.step_notes(rows))
+                        notes)
     return data
