@@ -228,17 +228,21 @@ def _write_training_run(run_dir: Path) -> None:
     writer.close()
 
 
-def test_a_training_run_replays_its_eval_games_with_the_training_curves(tmp_path: Path) -> None:
+def test_a_training_run_replays_its_eval_games_on_the_step_timeline_only(tmp_path: Path) -> None:
+    """The eval games, everything on `step`: its metrics on a `train_step` timeline were a Training panel
+    that stood empty under the time panel's `step` (rerun plots the active timeline only)."""
     _write_training_run(tmp_path / "train")
     out = tmp_path / "train.rrd"
     assert replay(tmp_path / "train", "--save", out) == 0
     data = read_rrd(out)
     assert sorted(data) == ["train/episode-0", "train/episode-1"]              # the eval games only
     entities = data["train/episode-0"]
-    win = entities["/train/eval/win_rate/p0.3"]
-    assert [r["train_step"] for r in win] == [100, 200, 300]
-    assert [r["Scalars:scalars"][0] for r in win] == pytest.approx([1 / 3, 2 / 3, 1.0])
-    assert "/train/loss" in entities and "/train/epsilon" in entities
+    assert "/board/agents/red-agent-1" in entities and "/why" in entities
+    timed = {k for rows in entities.values() for r in rows for k, v in r.items() if v is not None}
+    assert "train_step" not in timed and not any(p.startswith("/train") for p in entities)
+    for episode, train_step in (("train/episode-0", 100), ("train/episode-1", 200)):   # what it shows of them
+        docs = [r["TextDocument:text"] for r in data[episode]["/why"] if r.get("step") is not None]
+        assert all(f"an evaluation game of the training, at train step {train_step}, round" in d[0] for d in docs)
 
 
 def test_live_follows_a_run_being_written(tmp_path: Path) -> None:
@@ -276,6 +280,8 @@ def test_the_default_lanes_follow_the_agents_and_lanes_names_show_every_thing(ad
     ep0 = advanced_data["advanced/episode-0"]
     lanes = {p for p in ep0 if p.startswith("/lanes/")}
     assert "/lanes/atLoc/red-agent-1" in lanes and not any("bullet" in p for p in lanes)   # a game's agents only
+    # blue plays scripted (no steps rows of its own): its lanes are drawn too, as the board's pieces that live
+    assert {"/lanes/alive/blue-agent-1", "/lanes/atLoc/blue-agent-1"} <= lanes, sorted(lanes)
     out = tmp_path / "atloc.rrd"
     assert replay(SAMPLES / "advanced", "--episode", "0", "--lanes", "atLoc", "--save", out) == 0
     assert any("bullet" in p for p in read_rrd(out)["advanced/episode-0"] if p.startswith("/lanes/atLoc/"))

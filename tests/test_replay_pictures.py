@@ -65,3 +65,28 @@ def test_the_board_leaves_room_under_the_bottom_row_for_a_base_label(saved: Path
     bounds = blueprint_views(saved)["Board"]["VisualBounds2D:range"]
     assert bounds["y_range"][1] >= 8 + 0.5  # the advanced board is 8 rows; the red base is in the bottom one
     assert bounds["x_range"][0] < 0 and bounds["x_range"][1] > 8   # both edges of its 8 columns in view
+
+
+def test_every_view_of_a_training_runs_replay_has_data_on_the_step_timeline(tmp_path: Path) -> None:
+    """sample_runs/base-train's first traced evaluation game (docs/images/replay-values.png): no view of the
+    blueprint stands empty under the time panel's `step` timeline (its Training panel did: the metrics
+    were on `train_step`, which rerun does not plot while `step` is the active timeline)."""
+    con = open_run(SAMPLES / "base-train")
+    try:
+        episode = con.execute("SELECT min(episode) FROM episodes WHERE kind = 'eval'").fetchall()[0][0]
+    finally:
+        con.close()
+    path = tmp_path / "values.rrd"
+    assert main(["replay", str(SAMPLES / "base-train"), "--episode", str(episode), "--save", str(path)]) == 0
+    reader = RrdReader(path)
+    on_step: set[str] = set()
+    for store in reader.recordings():
+        for chunk in reader.stream(store=store):
+            batch = chunk.to_record_batch()
+            if "step" in batch.schema.names or chunk.is_static:
+                on_step.add(chunk.entity_path)
+    views = blueprint_views(path)
+    assert "Training" not in views
+    for name, view in views.items():
+        origin = str(view.get("ViewBlueprint:space_origin"))
+        assert any(p == origin or p.startswith(origin.rstrip("/") + "/") for p in on_step), (name, origin)

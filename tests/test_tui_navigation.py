@@ -7,7 +7,6 @@ import os
 from pathlib import Path
 from typing import Any
 
-import pytest
 
 os.environ["TEXTUAL_ANIMATIONS"] = "none"
 
@@ -146,8 +145,6 @@ def test_a_run_reopened_in_the_session_opens_where_it_was_left() -> None:
     run_app([ROOT / "sample_runs"], body, size=(100, 30))
 
 
-@pytest.mark.xfail(strict=True, reason="a spec run's board and atoms panel leave the trace 46 columns at 80x24, "
-                   "its columns need 56 (sample_runs made on the spec path, 2026-11-29): the side panel must narrow")
 def test_at_80x24_beside_the_board_every_trace_column_fits_and_the_cursor_row_shows() -> None:
     """80x24 is the floor: with the board shown (b) the trace's columns narrow to fit beside it (the rule
     column 12 wide, not two characters behind a sideways scroll), and the cursor row stays on screen."""
@@ -173,3 +170,56 @@ def test_at_80x24_beside_the_board_every_trace_column_fits_and_the_cursor_row_sh
                   and row["label"][:6] in ln]
             assert at, (row, "\n".join(lines))                   # the cursor's row, its rule readable
     run_app([ADVANCED], body, size=(80, 24))
+
+
+def test_the_key_bar_draws_every_key_whole_at_120_columns_and_drops_whole_keys_help_last_at_80() -> None:
+    """The key bar of a play run's Trace: at 120 columns every key fits (it read `q qui` on the spec
+    runs); at 80 the keys that do not fit are dropped whole from the end of the list, `? help` kept."""
+    def expect(app: Any) -> list[tuple[str, str]]:
+        out, seen = [], set()
+        for _, binding, enabled, _ in app.screen.active_bindings.values():
+            if binding.show and enabled and binding.action not in seen:
+                seen.add(binding.action)
+                out.append((binding.action, f" {app.get_key_display(binding)} {binding.description}"))
+        return out
+
+    for size in ((120, 40), (80, 24)):
+        async def body(app: Any, pilot: Any, size: tuple[int, int] = size) -> None:
+            await open_trace(app, pilot)
+            keys = expect(app)
+            bar = (await shown(app, pilot)).splitlines()[-1]
+            assert bar.rstrip().endswith("^p palette")
+            drawn = [action for action, text in keys if text + " " in bar + " "]
+            assert "help" in drawn, bar
+            rest = bar.replace("^p palette", "")
+            for action, text in keys:
+                if action in drawn:
+                    rest = rest.replace(text, "", 1)
+            assert not rest.strip(), (rest, bar)                     # nothing cut: only whole keys drawn
+            if size[0] == 120:
+                assert drawn == [a for a, _ in keys], bar            # every key
+            else:                                                    # dropped from the end, help kept
+                kept = [a for a, _ in keys if a != "help"][:len(drawn) - 1]
+                assert drawn == [a for a, _ in keys if a in kept or a == "help"], bar
+        run_app([ADVANCED], body, size=size)
+
+
+def test_a_spec_run_and_an_older_rulesim_run_draw_their_board_the_same_way() -> None:
+    """One board path: a spec run (its config's [board]) and a run RuleSim wrote (board_state reads
+    war.toml for it) both show the board beside the trace, the decision panel under it, and no atoms
+    panel (a spec run had the board inside the boardless runs' atoms and graph side)."""
+    from tracelab.viewers.tui.board import BoardView, draw
+    from tracelab.viewers.tui.decision import DecisionPanel
+    from tracelab.viewers.tui.graph_side import GraphSide
+
+    for run in (ADVANCED, ROOT / "tests" / "data" / "rulesim" / "base"):
+        async def body(app: Any, pilot: Any) -> None:
+            pane, _ = await open_trace(app, pilot)
+            assert not app.screen.query(GraphSide)
+            board = pane.side
+            assert isinstance(board, BoardView) and board.parent is pane.query_one("#tr-side")
+            assert pane.query_one("#tr-side").query(DecisionPanel)
+            await wait_for(pilot, lambda: board.board is not None)
+            drawn = draw(board.declared, board.board.at(board.step)).plain
+            assert "R1" in drawn and "B1" in drawn, drawn
+        run_app([run], body, size=(120, 34))

@@ -1,5 +1,5 @@
 """The replay's layout, every run's: the board (a run whose world declares one) or the graph on the left,
-the plots under it (rewards and returns, the agent's values and terms, a training's curves); on the
+the plots under it (rewards and returns, the agent's values and terms); on the
 right the rule log, the step document, the atoms changed per step and the state lanes; the time panel on
 the `step` timeline.
 
@@ -63,8 +63,7 @@ def agent_views(last_step: int, values: bool, terms: bool) -> list[rrb.View]:
 
 
 def replay_blueprint(main: rrb.View, open_at: str = "start", last_step: int = 0, rewards: bool = False,
-                     values: bool = False, terms: bool = False, training: bool = False,
-                     lanes: bool = False) -> rrb.Blueprint:
+                     values: bool = False, terms: bool = False, lanes: bool = False) -> rrb.Blueprint:
     """`main`: the board's or the graph's view. open_at: where the time cursor starts, "start" (paused at
     step 0) or "end" (following: the last step). last_step: the longest episode's last step, where the
     plots' and lanes' axes end. The other flags: which plots and views the run has data for."""
@@ -72,8 +71,6 @@ def replay_blueprint(main: rrb.View, open_at: str = "start", last_step: int = 0,
                                                  axis_x=step_axis(last_step),
                                                  contents=[f"+ {style.PLOTS}/reward/**", f"+ {style.PLOTS}/return/**"])]
                              if rewards else []) + agent_views(last_step, values, terms)
-    if training:
-        plots.append(rrb.TimeSeriesView(origin=style.TRAIN, name="Training"))
     left: rrb.View | rrb.Container = rrb.Vertical(main, rrb.Horizontal(*plots), row_shares=[3, 2]) if plots else main
     rule_log = rrb.TextLogView(
         origin=style.RULE_LOG, name="Fired rules (level = rule)",

@@ -50,14 +50,12 @@ def _state(lower: float, upper: float) -> str:
 
 
 def lane_rows(con: RunConnection, episode: int, lanes: tuple[str, ...], steps: Sequence[StepRow] = (),
-              agents_only: bool = False) -> dict[tuple[str, str], list[tuple[int, str]]]:
+              agents: set[str] | None = None) -> dict[tuple[str, str], list[tuple[int, str]]]:
     """(predicate, thing) -> [(t, its state at the end of t)] at each t where the state changed (one query),
-    for at most MAX_LANES lanes; `action`'s from the episode's `steps` rows. `agents_only` (the default
-    lanes of a game): only the things that are the steps' agents, not every bullet or cell an atom of the
-    predicate is about."""
+    for at most MAX_LANES lanes; `action`'s from the episode's `steps` rows. `agents` (the default lanes
+    of a game): only these things, not every bullet or cell an atom of the predicate is about."""
     if not lanes:
         return {}
-    agents = {agent for _, agent, *_ in steps} if agents_only and steps else None
     actions: dict[tuple[str, str], list[tuple[int, str]]] = {}
     if ACTION in lanes and not con.execute("SELECT EXISTS (SELECT 1 FROM raw.labels WHERE name = ?)",
                                            [ACTION]).fetchall()[0][0]:
@@ -112,10 +110,10 @@ def _truth_states() -> rr.StateConfiguration:
 
 
 def log_lanes(rec: rr.RecordingStream, con: RunConnection, episode: int, lanes: tuple[str, ...],
-              steps: Sequence[StepRow] = (), agents_only: bool = False) -> int:
-    """The episode's lanes, a row where a state changed (an action at each step); returns how many lanes
-    were drawn."""
-    rows = lane_rows(con, episode, lanes, steps, agents_only)
+              steps: Sequence[StepRow] = (), agents: set[str] | None = None) -> int:
+    """The episode's lanes (only `agents`' when given), a row where a state changed (an action at each
+    step); returns how many lanes were drawn."""
+    rows = lane_rows(con, episode, lanes, steps, agents)
     if not rows:
         return 0
     paths = [f"{style.LANES}/{rr.escape_entity_path_part(p)}/{rr.escape_entity_path_part(thing)}"

@@ -1,6 +1,7 @@
 """Plots: each agent's reward and return per step of an episode (from the run's `steps` rows), in its
-piece's colour when it is one of the board's, and a training run's curves (its `metrics` rows,
-docs/store.md and the training-run contract) on their own `train_step` timeline."""
+piece's colour when it is one of the board's. A training's curves are not drawn: rerun plots a view on
+the time panel's timeline only, and on the episode's `step` a panel of them stood empty; they are in
+`tracelab tui RUN`'s Training view and `tracelab show`."""
 from __future__ import annotations
 
 from functools import cache
@@ -37,6 +38,25 @@ def step_notes(rows: list[StepRow]) -> dict[int, list[str]]:
         by_t.setdefault(row[0], []).append(row)
     return {t: [f"- actions: {', '.join(f'{literal(a)} {literal(act)}' for _, a, _, act in at)}",
                 f"- reward: {', '.join(f'{literal(a)} {r:g}' for _, a, r, _ in at)}"] for t, at in by_t.items()}
+
+
+def eval_game_note(con: RunConnection, episode: int) -> str | None:
+    """The step document's line that places a training's evaluation game in its training (its begin info,
+    docs/store.md's training-run contract), None for any other episode: the replay has no training curves
+    (module docstring), this is what it shows of them."""
+    rows = con.execute(
+        "SELECT TRY_CAST(json_extract(begin_info, '$.train_step') AS BIGINT), "
+        "TRY_CAST(json_extract(begin_info, '$.eval_round') AS BIGINT), "
+        "TRY_CAST(json_extract(begin_info, '$.opponent_p') AS DOUBLE) FROM episodes "
+        "WHERE episode = ? AND json_extract_string(begin_info, '$.kind') = 'eval'", [episode]).fetchall()
+    if not rows:
+        return None
+    train_step, eval_round, opponent_p = rows[0]
+    where = [f"at train step {train_step:,}" if train_step is not None else "",
+             f"round {eval_round}" if eval_round is not None else "",
+             f"opponent p {opponent_p:g}" if opponent_p is not None else ""]
+    return ("- an evaluation game of the training, " + ", ".join(w for w in where if w)
+            + " (its curves: `tracelab tui RUN`, 6 Training)")
 
 
 def agent_rewards(agents: list[str], rows: list[StepRow]) -> np.ndarray | None:
@@ -77,25 +97,3 @@ def log_rewards(rec: rr.RecordingStream, rewards: np.ndarray, names: list[str],
                     [rr.TimeColumn(style.STEP, sequence=every)],
                     rr.Scalars.columns(scalars=np.concatenate([v for _, _, v in series])))
 
-
-def training_metrics(con: RunConnection) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """name -> (training steps, values) of a run's metrics (empty for a run that logged none)."""
-    rows = con.execute("SELECT name, step, value FROM metrics WHERE value IS NOT NULL "
-                       "ORDER BY name, step").fetchall()
-    out: dict[str, tuple[list[int], list[float]]] = {}
-    for name, step, value in rows:
-        s, v = out.setdefault(name, ([], []))
-        s.append(step)
-        v.append(value)
-    return {k: (np.asarray(s, np.int64), np.asarray(v, np.float64)) for k, (s, v) in out.items()}
-
-
-def log_training(rec: rr.RecordingStream, metrics: dict[str, tuple[np.ndarray, np.ndarray]]) -> None:
-    """Each metric as a series under /train (eval/win_rate -> /train/eval/win_rate; an opponent suffix
-    such as @p0.3 becomes a path part), on the train_step timeline."""
-    if not metrics:
-        return
-    send_per_entity(rec, [f"{style.TRAIN}/{name.replace('@', '/')}" for name in metrics],
-                    [len(steps) for steps, _ in metrics.values()],
-                    [rr.TimeColumn(style.TRAIN_STEP, sequence=np.concatenate([s for s, _ in metrics.values()]))],
-                    rr.Scalars.columns(scalars=np.concatenate([v for _, v in metrics.values()])))

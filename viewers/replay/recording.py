@@ -1,7 +1,6 @@
 """One episode of any run as one rerun recording: the board (a run whose world declares a `[board]`:
 viewers/board_state.py) or else the run's graph, the fired rules, the changes per step, the step and
-why documents, the state lanes, the rewards and returns, the agent's plots, a training's curves and the
-blueprint (docs/replay.md)."""
+why documents, the state lanes, the rewards and returns, the agent's plots and the blueprint (docs/replay.md)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -34,13 +33,12 @@ class ReplayOptions:
 class RunContext:
     """What every episode of a run shares: its board (None: its graph is drawn instead, with the nodes'
     positions: the graph's own `x`/`y`, else a layout computed once), its program model (for the
-    why-trees), the lanes it can draw and, for a training run, its metrics. `prefetch` reads the `steps`
+    why-trees) and the lanes it can draw. `prefetch` reads the `steps`
     rewards of a batch of episodes in one query."""
     con: RunConnection
     name: str
     board: Board | None
     graph: RunGraph | None          # a run without a board's
-    metrics: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     lanes: tuple[str, ...] = ()
     _positions: np.ndarray | None = None
     _model: RunModel | None = None
@@ -50,8 +48,7 @@ class RunContext:
     @classmethod
     def of(cls, con: RunConnection, name: str) -> RunContext:
         board = board_of_run(con)
-        return cls(con, name, board, None if board is not None else RunGraph.read(con),
-                   plots.training_metrics(con))
+        return cls(con, name, board, None if board is not None else RunGraph.read(con))
 
     def positions(self, episode: int) -> np.ndarray:
         """[nodes, 2] float32 drawing positions of a run without a board, decided at the first episode."""
@@ -108,11 +105,6 @@ class RunContext:
             return plots.step_rows(self.con, [episode]).get(episode, [])
         return self._steps.pop(episode)
 
-    def refresh(self) -> None:
-        """Catch up with a run being written: its metrics so far (the model reads a grown vocabulary
-        by itself)."""
-        self.metrics = plots.training_metrics(self.con)
-
     def record(self, episode: int, rec: rr.RecordingStream, options: ReplayOptions, blueprint: bool = True,
                last_step: int = 0) -> GraphEpisode:
         return record_episode(self, episode, rec, options, blueprint, last_step)
@@ -136,7 +128,7 @@ def record_episode(ctx: RunContext, episode: int, rec: rr.RecordingStream, optio
     if blueprint:
         main = board_view(ctx.board) if ctx.board is not None else graph_view(ctx.positions(episode), label)
         rec.send_blueprint(replay_blueprint(main, options.open_at, max(last_step, data.steps - 1), bool(rows),
-                                            bool(agent.values), bool(agent.terms), bool(ctx.metrics),
+                                            bool(agent.values), bool(agent.terms),
                                             bool(ctx.lanes)))
     board = ctx.board
 
@@ -144,20 +136,27 @@ def record_episode(ctx: RunContext, episode: int, rec: rr.RecordingStream, optio
         return None if board is None else piece_color(board, agent)
 
     edges, deaths = graph_rules.no_edges, {}
+    players = {agent for _, agent, *_ in rows}     # who acted; on a board also the pieces that can die
     if board is not None:
-        deaths = board_layer.log_board(rec, ctx.con, board, episode).deaths()
+        track = board_layer.log_board(rec, ctx.con, board, episode)
+        deaths = track.deaths()
+        players |= {p.thing for state in track.states for p in state.pieces if board.pieces[p.kind].alive}
     else:
         edges = graph_layer.log_graph(rec, ctx.graph, ctx.positions(episode), data).edge_counts
     if rows:
         agents = list(dict.fromkeys(agent for _, agent, *_ in rows))
         plots.log_rewards(rec, plots.agent_rewards(agents, rows), agents, [colour_of(a) for a in agents])
     agent_plots.log_agent_series(rec, agent, colour_of)
-    # the default lanes follow a game's agents (its bullets' atLoc would crowd them); --lanes shows all
-    lanes.log_lanes(rec, ctx.con, episode, ctx.lanes, rows, agents_only=options.lanes == lanes.DEFAULT_LANES)
+    # the default lanes follow a game's agents, the policy's and the scripted ones (its bullets' atLoc
+    # would crowd them); --lanes shows all
+    lanes.log_lanes(rec, ctx.con, episode, ctx.lanes, rows,
+                    agents=players if options.lanes == lanes.DEFAULT_LANES and players else None)
     graph_rules.log_rule_log(rec, data)
     graph_rules.log_changed(rec, data)
+    notes = plots.step_notes(rows)
+    game = plots.eval_game_note(ctx.con, episode)
+    if game is not None:
+        notes = {s: [game, *notes.get(s, [])] for s in range(data.steps)}
     graph_rules.log_why(rec, ctx.con, data, options.why_atoms, options.why_depth, lambda: ctx.model, edges, deaths,
-                        plots.step_notes(rows))
-    if ctx.metrics:
-        plots.log_training(rec, ctx.metrics)
+                        notes)
     return data

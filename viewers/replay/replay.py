@@ -16,7 +16,7 @@ PREFETCH_EPISODES = 50      # episodes read from the run per batch (their change
 
 
 def context_of(con: RunConnection, name: str) -> RunContext:
-    """What every episode of the run shares (its board or its graph, its model, its metrics)."""
+    """What every episode of the run shares (its board or its graph, its model)."""
     return RunContext.of(con, name)
 
 
@@ -67,8 +67,6 @@ def follow_run(con: RunConnection, name: str, run: str, f: EpisodeFilter, out: O
             if ctx is None:
                 ctx = retrying(lambda: context_of(con, name))
                 retrying(partial(ctx.check, options or ReplayOptions(), new[0]))
-            else:
-                ctx.refresh()                   # new metrics; the vocabulary grows while a run is written
             for e in new:
                 replay_episodes(ctx, [e], out, options)
                 sent.add(e)

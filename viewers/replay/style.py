@@ -3,9 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-# ---- timelines: `step` is the timestep (an env's step, a reasoning's timestep); a training's metrics on theirs
+# ---- the timeline: `step` is the timestep (an env's step, a reasoning's timestep)
 STEP = "step"
-TRAIN_STEP = "train_step"
 
 # ---- entity paths ----------------------------------------------------------------------------------------
 BOARD = "/board"
@@ -15,7 +14,6 @@ RULE_LOG = "/rules/log"
 LANES = "/lanes"                    # /lanes/alive/red-agent-1, /lanes/atLoc/...: --lanes' predicates
 WHY = "/why"
 PLOTS = "/plots"                    # /plots/reward/red-agent-1, /plots/return/red-agent-1
-TRAIN = "/train"                    # /train/eval/win_rate, /train/loss, ...
 VALUES = "/values"                  # /values/red-agent-1/up: the policy's value of each action
 TERMS = "/terms"                    # /terms/red-agent-1/step: the return by reward term, stacked
 

@@ -3,16 +3,16 @@
 its colour, a mark's character where its predicate holds (FrozenLake's `@`), the pieces where they stand
 (war.toml's agents R1, B1 in their team's colour, ✕ when dead; its bullets as arrows) and under the grid
 each living or dead piece of a kind with `alive`. A cell is one character, two when the board has pieces
-(a label). A run without a board shows a note instead."""
+(a label). The trace shows it for every run whose world has a board (RunSource.board); a read that
+fails shows a note instead."""
 from __future__ import annotations
 
-from typing import Any
 
 from rich.text import Text
 from textual.widget import Widget
 
 from tracelab.board import Board, piece_label
-from tracelab.viewers.board_state import BoardState, BoardTrack, board_of_run
+from tracelab.viewers.board_state import BoardState, BoardTrack
 from tracelab.viewers.tui.colours import DIM
 from tracelab.viewers.tui.source import RunSource
 
@@ -29,6 +29,12 @@ def _cell_style(rgb: tuple[int, int, int] | None) -> str:
     if rgb is None:
         return DIM
     return f"{_hex(rgb)} on {_hex(tuple(int(v * SHADE) for v in rgb))}"  # type: ignore[arg-type]
+
+
+def drawn_width(board: Board) -> int:
+    """The columns `draw` takes: a cell is two wide when the board has pieces; a piece's line under the grid
+    (`R1 alive`) eight."""
+    return max(board.width * (2 if board.pieces else 1), 8 if any(k.alive for k in board.pieces.values()) else 0)
 
 
 def draw(board: Board, state: BoardState) -> Text:
@@ -67,11 +73,11 @@ def draw(board: Board, state: BoardState) -> Text:
 
 
 class BoardView(Widget):
-    def __init__(self, source: RunSource, board: Board | None = None) -> None:
+    def __init__(self, source: RunSource, board: Board) -> None:
         super().__init__(id="board")
         self.source = source
         self.border_title = "board"
-        self.declared = board                 # the run's board, read from the run when not given
+        self.declared = board                 # the run's board (RunSource.board)
         self.board: BoardTrack | None = None  # the episode's board over time (tests read it)
         self.step = 0
         self.note = "select a change"
@@ -89,15 +95,9 @@ class BoardView(Widget):
                             exit_on_error=False)
 
     def _load(self, episode: int) -> None:
-        def load(con: Any) -> BoardTrack:
-            if self.declared is None:
-                self.declared = board_of_run(con)
-            if self.declared is None:
-                raise ValueError("this run declares no board to draw")
-            return BoardTrack.read(con, self.declared, episode)
         try:
-            track, note = self.source.call(load), ""
-        except Exception as e:  # noqa: BLE001 - no board, or no rows: a note, not a crash
+            track, note = self.source.call(lambda con: BoardTrack.read(con, self.declared, episode)), ""
+        except Exception as e:  # noqa: BLE001 - a run that cannot be read: a note, not a crash
             track, note = None, str(e).splitlines()[0] if str(e) else type(e).__name__
         self.app.call_from_thread(self._loaded, track, note)
 
@@ -115,6 +115,6 @@ class BoardView(Widget):
         self.refresh(layout=True)
 
     def render(self) -> Text:
-        if self.board is None or self.declared is None:
+        if self.board is None:
             return Text(self.note, style=f"italic {DIM}")
         return draw(self.declared, self.board.at(self.step))

@@ -1,7 +1,5 @@
 """GraphSide: what stands beside the trace where a game run has its board, for a run without one (a
-reasoning run). A declared world's run (`tracelab play --env`) has its spec's board on top at the
-cursor's t (board.py), the
-decision of the cursor's step under it (decision.py). Above: the atoms true at the end of the cursor's timestep, or the atoms changed in it
+reasoning run, a world without a `[board]`). Above: the atoms true at the end of the cursor's timestep, or the atoms changed in it
 (`c`), filtered by a predicate name or an atom pattern (`exposed`, `exposed(*)`; `/`), each with its bound,
 at most graph_state.ATOMS_LIMIT of them with the count of all. Below: the neighbourhood in the graph of
 the selected atom (the trace's cursor, or the list's when it has the focus): its node's labels, edges
@@ -26,10 +24,6 @@ from textual.widget import Widget
 from textual.widgets import Input, Static
 
 from tracelab.viewers.tui.colours import DIM, bound_colour, styled_bound
-from tracelab.board import Board, board_of_config
-from tracelab.store.kind import run_config
-from tracelab.viewers.tui.board import BoardView
-from tracelab.viewers.tui.decision import DecisionPanel
 from tracelab.viewers.tui.graph_state import AtomsAt, Neighbourhood, atoms_at, neighbourhood, unknown_pattern
 from tracelab.viewers.tui.lazy_table import Column, LazyTable
 from tracelab.viewers.tui.paging import ArrowSource
@@ -143,13 +137,8 @@ class GraphSide(Vertical):
         self._readers: dict[str, RunSource] = {}     # "atoms", "hood": connections of their own
         self._readers_lock = threading.Lock()
         self._closed = False
-        # a declared world's run (tracelab play --env) has its spec's board drawn above the atoms
-        self.declared: Board | None = board_of_config(source.call(run_config))
 
     def compose(self) -> ComposeResult:
-        if self.declared is not None:
-            yield BoardView(self.source, self.declared)
-            yield DecisionPanel(self.source)   # the trace cursor's step's decision (TracePane)
         with Vertical(id="gs-atoms"):
             yield Input(placeholder="atoms: exposed or exposed(*)", id="gs-filter", compact=True)
             yield LazyTable(TRUE_COLUMNS, id="gs-table")
@@ -244,8 +233,6 @@ class GraphSide(Vertical):
     def _atoms_read(self, asked: tuple[Any, ...], found: AtomsAt | None, problem: str | None) -> None:
         if asked != self._asked:
             return
-        if self.declared is not None:
-            self.query_one(BoardView).show(asked[0], asked[1])
         self.atoms = found
         table, status = self.table, self.query_one("#gs-status", Static)
         rows = found.rows if found is not None else []

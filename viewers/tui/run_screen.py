@@ -1,5 +1,5 @@
-"""The screen of one open run: a tab per view (Episodes, Trace, Why, Rules, SQL, Training; a run without
-a board, a reasoning run, has no training curves and no Training tab), the keys 1-6 to switch, and the
+"""The screen of one open run: a tab per view (Episodes, Trace, Why, Rules, SQL, Training; a closed run
+without metrics, a play or a reasoning, has no training curves and no Training tab), the keys 1-6 to switch, and the
 messages that pass an episode, a rule or a change from one view to another. Its header follows the
 run's life: live while written, then how it ended, then sealed.
 
@@ -140,9 +140,9 @@ class RunScreen(Screen):
         return shown(f" {self.path.name}{overlaid}  ·  {self.source.state}  ·  {self.source.command}")
 
     def has_view(self, tab: str) -> bool:
-        """Whether the run has this view: a closed run without a board (a reasoning) and without metrics
+        """Whether the run has this view: a closed run without metrics (a play, an evaluation, a reasoning)
         has no training curves to show."""
-        if tab != "training" or self.source.board is not None or self.source.live:
+        if tab != "training" or self.source.live:
             return True
         if self._has_metrics is None:
             self._has_metrics = bool(self.source.scalar("SELECT count(*) FROM (SELECT 1 FROM metrics LIMIT 1)"))
@@ -197,7 +197,7 @@ class RunScreen(Screen):
 
     async def action_show(self, tab: str) -> None:
         if not self.has_view(tab):
-            self.notify("this run has no training metrics: it is a reasoning (tracelab reason --run)",
+            self.notify("this run has no training metrics: it is not a training (tracelab train --run)",
                         severity="warning")
             return
         await self.pane(tab)

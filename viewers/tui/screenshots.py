@@ -62,11 +62,8 @@ async def _trace_and_why(run: Path) -> tuple[str, str]:
         await _until(pilot, lambda: pane.filter is not None and pane.filter.t_from == DEATH[1] and pane.table.idle)
         death = next(i for i in range(pane.table.count) if pane.table.row(i)["atom"] == "alive(red-agent-1)")
         pane.table.move_to(death)
-        side = pane.side      # a spec's board above the atoms at t and the graph (GraphSide), or RuleSim's
         await _until(pilot, lambda: pane.board is not None and pane.board.board is not None
-                     and pane.board.step == DEATH[1] and (not isinstance(side, GraphSide) or (
-                         side.atoms is not None and side.atoms.t == DEATH[1] and side.hood is not None
-                         and side.table.idle)))
+                     and pane.board.step == DEATH[1])
         await pilot.pause(0.5)
         trace_svg = app.export_screenshot(title="tracelab tui · trace")
         await pilot.press("w")

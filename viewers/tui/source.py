@@ -14,9 +14,11 @@ from typing import Any, TypeVar
 import pyarrow as pa
 
 from tracelab.store.catalog import short_command
-from tracelab.store.kind import has_board, is_game_run, run_board
+from tracelab.board import Board
+from tracelab.store.kind import has_board, is_game_run
 from tracelab.store.reader import RunConnection, fetch_arrow, open_run, query_readonly, retrying, run_info
 from tracelab.store.several import SeveralRunsConnection, each_run_stream, run_names
+from tracelab.viewers.board_state import board_of_run
 
 T = TypeVar("T")
 
@@ -87,16 +89,16 @@ class RunSource(LockedConnection):
         self.sealed = info.sealed_file is not None
         self.command = short_command(str(info.meta.get("command") or ""))
         super().__init__(open_run(self.path))
-        # the board the run declares (a game's), None for a run without one (a reasoning run): the views
-        # show the atoms and the graph instead, and no game columns
-        self.board: str | None = self.call(run_board)
-        # a board of either kind (RuleSim's above, or a spec's [board] in the config): the saved queries
-        # that read the board's labels are offered
+        # the board to draw the run's episodes on (its spec's `[board]`; an older GridWar run's from
+        # war.toml: board_state.board_of_run), None for a run without one (a reasoning run, a world without
+        # a [board]): the trace shows the atoms and the graph beside it instead
+        self.board: Board | None = self.call(board_of_run)
+        # the saved queries that read a board's labels are offered
         self.has_board: bool = self.call(has_board)
         # a run of games (a board, or episodes with returns: a spec world's): return, outcome, game queries
         self.games: bool = self.call(is_game_run)
-        # a training run's evaluation games (kind 'eval'), with a board or without (a declared world's,
-        # which the views show as a reasoning run): ] and [ step through them
+        # a training run's evaluation games (kind 'eval'), of a world with a board or without: ] and [ step
+        # through them
         self.has_eval_games: bool = self.call(lambda con: bool(con.execute(
             "SELECT EXISTS (SELECT 1 FROM episodes WHERE kind = 'eval')").fetchall()[0][0]))
 
@@ -137,10 +139,6 @@ class SeveralRunsSource(LockedConnection):
         self.path = Path(paths[0])     # the first run: names the console's export
         con = SeveralRunsConnection(list(paths), run_names(paths))
         super().__init__(con)
-        boards = [con.execute("SELECT board FROM raw.run WHERE run = ?", [name]).fetchall()[0][0]
-                  for name in con.names]
-        # the saved queries about games are offered only when every run has a board
-        self.board: str | None = boards[0] if all(boards) else None
         games, with_board = [], []
         for i in range(len(con.names)):
             con.use(i)

@@ -7,8 +7,8 @@ atoms at the cursor's time and the selected atom's graph neighbourhood (graph_si
 changed); `s` shows or hides the rows of static facts (hidden by default: the status line says how
 many). Cells read `30@(6,3)` where the run declares a grid. In a training run `]` / `[` move to the
 next / previous evaluation game (the filters and the cursor's timestep kept), and a header line says which
-game is shown. On a live run the trace is re-read when the episode grows. Under the board (a declared
-world's: above its atoms) the decision of the cursor's step: the policy's value of each action, the
+game is shown. On a live run the trace is re-read when the episode grows. Under the board (any run whose
+world has one: source.RunSource.board) the decision of the cursor's step: the policy's value of each action, the
 chosen one, explored or greedy, the reward by term (decision.py; `d` moves into it, `w` there explains the
 decision as `tracelab why --action` does)."""
 from __future__ import annotations
@@ -26,7 +26,7 @@ from textual.widgets import Input, Static
 from tracelab.store.names import UnknownName, check_name
 from tracelab.viewers.tui.colours import DIM, styled_bound, styled_name
 from tracelab.viewers.tui.lazy_table import Column, LazyTable
-from tracelab.viewers.tui.board import BoardView
+from tracelab.viewers.tui.board import BoardView, drawn_width
 from tracelab.viewers.tui.decision import DecisionPanel
 from tracelab.viewers.tui.eval_games import EvalGame, eval_games, neighbour
 from tracelab.viewers.tui.graph_side import GraphSide
@@ -60,6 +60,9 @@ TRACE_COLUMNS = [
 
 LIVE_REFRESH_S = 2.0
 BOARD_MIN_WIDTH = 100      # the table needs ~78 columns, the board ~22 (the atoms beside it 36%)
+SIDE_MIN_WIDTH = 22        # the board's side: the decision panel's bars need ~20 columns
+SIDE_ROOMY_WIDTH = 32      # with a decision shown, where the table keeps TABLE_WIDTH: its names whole
+TABLE_WIDTH = 86           # the table's columns at their natural widths
 
 _RANGE = re.compile(r"^\s*(-?\d+)?\s*(?:\.\.\s*(-?\d+)?)?\s*$")
 
@@ -120,9 +123,9 @@ class TracePane(Vertical):
             yield Input(placeholder="go to t", id="tr-goto", compact=True)
         with Horizontal(id="tr-body"):
             yield LazyTable(TRACE_COLUMNS, id="tr-table")
-            if self.source.board:
+            if self.source.board is not None:
                 with Vertical(id="tr-side"):
-                    yield BoardView(self.source)
+                    yield BoardView(self.source, self.source.board)
                     yield DecisionPanel(self.source)
             else:
                 yield GraphSide(self.source)
@@ -206,10 +209,9 @@ class TracePane(Vertical):
 
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
         # a run without a board has its atoms beside the trace (key b: "atoms"); evaluation games are a
-        # game run's (RuleSim's or a spec world's: it says so when it has none) or a training's; a live run may
-        # get them
+        # training's (a live run may get them): a play run is not offered a key that can only say no
         if action == "eval_game":
-            return self.source.games or self.source.has_eval_games or self.source.live
+            return self.source.has_eval_games or self.source.live
         if action == "toggle_board":
             return self.source.board is not None
         if action == "toggle_side":
@@ -236,7 +238,18 @@ class TracePane(Vertical):
             side.set_hide_static(hide)
         self._refilter()
 
+    def _size_side(self) -> None:
+        """The board's side: as wide as the board (and its border), at least the decision panel's bars;
+        with a decision shown, roomier where the table keeps its natural widths (action and reward term
+        names whole)."""
+        if self.source.board is None:
+            return
+        panel = self.decision
+        roomy = min(SIDE_ROOMY_WIDTH, self.size.width - TABLE_WIDTH) if panel is not None and panel.display else 0
+        self.side_box.styles.width = max(SIDE_MIN_WIDTH, drawn_width(self.source.board) + 2, roomy)
+
     def on_resize(self) -> None:
+        self._size_side()
         if self._board_choice is None:   # by default the board shows when there is room beside the table
             self.side_shown = self.size.width >= BOARD_MIN_WIDTH
 
@@ -447,9 +460,7 @@ class TracePane(Vertical):
     def on_decision_panel_shown(self, event: DecisionPanel.Shown) -> None:
         event.stop()
         self.refresh_bindings()     # `d` is offered while a decision shows
-        panel = self.decision
-        for side in self.query("#tr-side"):
-            side.set_class(panel is not None and panel.display, "-decision")
+        self._size_side()
 
     def action_why(self) -> None:
         row = self.table.cursor_row
