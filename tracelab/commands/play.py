@@ -49,6 +49,15 @@ def run(args: argparse.Namespace) -> int:
     source, scenario, trained = _world(args)
     spec = load_declared(source)
     cold = start_if_cold(spec, args.kernel, args.argv)  # empty caches: play at once, compile in the background
+    try:
+        return _run(args, source, scenario, trained, spec, cold)
+    finally:
+        if cold is not None:  # the compiled kernels again for whatever this process runs next
+            cold.kernels.restore()
+
+
+def _run(args: argparse.Namespace, source: Any, scenario: Any, trained: Any, spec: Any,
+         cold: ColdStart | None) -> int:
     if args.no_trace:
         _summary(_name(source, scenario), spec,
                  _play(source, spec, trained, args, None, _name(source, scenario), cold))
