@@ -8,6 +8,7 @@ steps each once.
 A few seconds when the cache is warm; a plain `pytest` (no -n) does not run it."""
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 
@@ -17,6 +18,10 @@ WARM_UP_TIMEOUT = 1800  # seconds: a cold compile takes one or two minutes of CP
 
 
 def pytest_configure(config: pytest.Config) -> None:
+    # a play on a cold cache compiles in this process, as the suite's other tests do: its default, Python
+    # kernels and a background compile (tracelab/commands/_cold_start.py), would compile the same kernels
+    # in a second process at the same time (the cache race above); tests/test_first_run_python.py tests it
+    os.environ.setdefault("TRACELAB_COLD_START", "wait")
     is_controller = not hasattr(config, "workerinput")
     if is_controller and getattr(config.option, "numprocesses", None):
         # the result is not checked: if the engine is broken, the tests say how, not a traceback here

@@ -25,7 +25,9 @@ VECTOR = ("import logging; logging.basicConfig(level=logging.INFO, format='%(mes
 def _first_notice(argv: list[str], cache: Path) -> str:
     """The first stderr line that says `compiling` of a process on empty caches; the process is stopped
     there (or its whole stderr when it ends without one)."""
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache / "numba"), "TRACELAB_CACHE_DIR": str(cache / "tracelab")}
+    # play compiles first (its default on empty caches plays at once: tests/test_first_run_python.py)
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache / "numba"), "TRACELAB_CACHE_DIR": str(cache / "tracelab"),
+           "TRACELAB_COLD_START": "wait"}
     child = subprocess.Popen(argv, env=env, cwd=cache, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     seen = []
     try:

@@ -1,6 +1,7 @@
-"""A newcomer's first run (issue 31 part 4): `tracelab play` on an empty numba cache compiles each kernel
-once, for one signature, and says so in one line; the next run loads them and says nothing. GridWar plays
-through its spec (rules/gridworld/war.toml): the engine's kernels and the declared world's (its fused step,
+"""A newcomer's first run (issue 31 part 4): `tracelab play` on an empty numba cache, told to compile
+first (TRACELAB_COLD_START=wait, as its background compile runs), compiles each kernel once, for one
+signature, and says so in one line; the next run loads them and says nothing. GridWar plays through
+its spec (rules/gridworld/war.toml): the engine's kernels and the declared world's (its fused step,
 observation reads, nearest-thing loop). Times are measured by `tracelab bench first-run`, never here."""
 from __future__ import annotations
 
@@ -35,7 +36,9 @@ def _play(cache: Path, run_dir: Path) -> tuple[dict, list[str]]:
     decoy = cache / "elsewhere"
     (decoy / "tracelab").mkdir(parents=True, exist_ok=True)
     (decoy / "tracelab" / "__init__.py").write_text("raise ImportError('another tracelab')\n")
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache / "numba"), "TRACELAB_CACHE_DIR": str(cache / "tracelab")}
+    # compiled before the first step (a cold play's default is to play at once: tests/test_first_run_python.py)
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache / "numba"), "TRACELAB_CACHE_DIR": str(cache / "tracelab"),
+           "TRACELAB_COLD_START": "wait"}
     done = subprocess.run([sys.executable, "-P", "-c", PROBE, str(run_dir)], env=env, capture_output=True,
                           text=True, timeout=900, check=False, cwd=decoy)
     assert done.returncode == 0, done.stderr[-3000:]

@@ -122,8 +122,12 @@ def _kernels(pairs: tuple[tuple[str, str], ...]) -> tuple[Any, ...] | None:
 
 
 def _cold(pairs: tuple[tuple[str, str], ...]) -> bool | None:
-    """True when some of these kernels must compile, False when all are loaded or cached, None: unknown."""
+    """True when some of these kernels must compile, False when all are loaded or cached (or run as Python:
+    nothing compiles), None: unknown."""
     from tracelab.engine.numba_cache import all_cached
+    from tracelab.engine.numba_python import running_as_python
+    if running_as_python():
+        return False
     kernels = _kernels(pairs)
     cached = all_cached(kernels) if kernels is not None else None
     return None if cached is None else not cached

@@ -11,12 +11,14 @@ from __future__ import annotations
 
 import argparse
 import shlex
+import sys
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from tracelab.commands._cold_start import ColdStart, start_if_cold
 from tracelab.commands._interrupt import CtrlCBetweenSteps
 from tracelab.commands._notices import say_running_compiles
 from tracelab.commands._progress import compiling_engine, progress
@@ -43,9 +45,20 @@ from tracelab.train.env_policy import ENV_FORMAT, EVAL_STEP_CAP, greedy_actor, p
 def run(args: argparse.Namespace) -> int:
     source, scenario, trained = _world(args)
     spec = load_declared(source)
+    cold = start_if_cold(spec, args.kernel, args.argv)  # empty caches: play at once, compile in the background
+    try:
+        return _run(args, source, scenario, trained, spec, cold)
+    finally:
+        if cold is not None:  # the compiled kernels again for whatever this process runs next
+            cold.kernels.restore()
+
+
+def _run(args: argparse.Namespace, source: Any, scenario: Any, trained: Any, spec: Any,
+         cold: ColdStart | None) -> int:
     if args.no_trace:
-        _summary(_name(source, scenario), spec, _play(source, spec, trained, args, None, _name(source, scenario)))
-        say_running_compiles()
+        _summary(_name(source, scenario), spec,
+                 _play(source, spec, trained, args, None, _name(source, scenario), cold))
+        _say_compiles(cold)
         return 0
 
     run_dir = Path(args.run or f"runs/play-{_name(source, scenario)}-{time.strftime('%Y%m%d-%H%M%S')}")
@@ -56,11 +69,18 @@ def run(args: argparse.Namespace) -> int:
     except OSError as e:
         raise UserError(f"cannot create the run directory {run_dir}: {e.strerror or e}") from e
     with recording_into(writer, run_dir):
-        stats = _play(source, spec, trained, args, writer, _name(source, scenario))
+        stats = _play(source, spec, trained, args, writer, _name(source, scenario), cold)
     _summary(_name(source, scenario), spec, stats)
     _what_to_open(run_dir, spec)
-    say_running_compiles()
+    _say_compiles(cold)
     return 0
+
+
+def _say_compiles(cold: ColdStart | None) -> None:
+    """At the end: what the background compiles (this play's, the compiled backend's) came to."""
+    if cold is not None:
+        print(cold.final_line(), file=sys.stderr, flush=True)
+    say_running_compiles()
 
 
 def _world(args: argparse.Namespace) -> tuple[Any, Any, Any]:
@@ -129,9 +149,10 @@ def run_meta(source: Any, spec: Any, args: argparse.Namespace, scenario: Any = N
 
 
 def _play(source: Any, spec: Any, trained: Any, args: argparse.Namespace, writer: Any,
-          name: str) -> dict[str, Any]:
+          name: str, cold: ColdStart | None = None) -> dict[str, Any]:
     """args.episodes episodes of the world, showing the compile (first run) or the build while it happens
-    and a progress bar over the episodes (on a terminal)."""
+    and a progress bar over the episodes (on a terminal); `cold`: the kernels run as Python until its
+    background compile is done (then from the next episode on, compiled)."""
     with compiling_engine(busy=f"building {name}'s rules…", local_trace=writer is not None,
                           phase=None):  # the declared world says what compiles (its library notice)
         env = make_declared_env(source, spec, kernel=args.kernel,
@@ -147,8 +168,12 @@ def _play(source: Any, spec: Any, trained: Any, args: argparse.Namespace, writer
                 ctrl_c.check()  # a Ctrl-C stops the game between two steps (see CtrlCBetweenSteps)
                 return policy(obs, info)
 
-            stats = play_episodes(env, args.episodes, args.seed, act, on_episode=lambda e: bar.advance(1),
-                                  step_cap=cap)
+            def episode_done(_: dict[str, Any]) -> None:
+                bar.advance(1)
+                if cold is not None:
+                    cold.between_episodes(bar.completed)
+
+            stats = play_episodes(env, args.episodes, args.seed, act, on_episode=episode_done, step_cap=cap)
     except BaseException as e:  # the run records how it ended, with what was played until then
         env.unwrapped.close(status="interrupted" if is_interrupt(e) else "failed")
         raise

@@ -16,6 +16,7 @@ observation), an empty tuple for one world."""
 from __future__ import annotations
 
 import inspect
+from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -25,6 +26,7 @@ from numba.experimental import structref
 from numba.extending import overload
 
 from tracelab.engine import kernel as K
+from tracelab.engine import numba_python
 from tracelab.engine.direct_call import DirectCall
 from tracelab.engine.numba_cache import stamp_with_sources
 from tracelab.engine.kernel import StepState
@@ -50,7 +52,9 @@ structref.define_boxing(DeclaredBuffersType, DeclaredBuffers)
 
 
 def _new_buffers(state, tables, ext, reads, out, batch):  # noqa: ANN001
-    raise NotImplementedError("compiled code only")
+    """The buffers as a plain object, for the kernels run as Python (engine/numba_python.py); compiled code
+    takes the overload below."""
+    return SimpleNamespace(state=state, tables=tables, ext=ext, reads=reads, out=out, batch=batch)
 
 
 @overload(_new_buffers)
@@ -88,21 +92,23 @@ class FusedBinding:
         self._engine = engine
         self._arrays = (tables, ext, reads, out, batch)
         self._buffers: DeclaredBuffers | None = None
-        self._version = -1
+        self._version = (-1, -1)  # the engine's layout and the kernels' generation the buffers were bound for
         self._calls: dict[Any, DirectCall] = {}
 
     def buffers(self) -> DeclaredBuffers:
         """The buffers for the next fused step (grounds what is new first, as Engine.step() does)."""
-        version = self._engine.prepare_fused_step()
+        version = (self._engine.prepare_fused_step(), numba_python.generation())
         if self._buffers is None or version != self._version:
             self._buffers = bind(self._engine.fused_binding(), *self._arrays)
-            self._version = self._engine.layout_version
+            self._version = (self._engine.layout_version, version[1])
         return self._buffers
 
     def call(self, dispatcher: Any, *args: Any) -> Any:
         """dispatcher(buffers(), *args), past numba's per-call dispatch (engine/direct_call.py: typing the
         buffers' arrays cost ~2 µs a call)."""
         buffers = self.buffers()
+        if numba_python.running_as_python():
+            return dispatcher(buffers, *args)
         call = self._calls.get(dispatcher)
         if call is None or call.record is not buffers:
             call = self._calls[dispatcher] = DirectCall(dispatcher, buffers)
@@ -168,7 +174,8 @@ def fused_step(b, actions, picks, t, first_id):  # noqa: ANN001, ANN201
     k = world_fact_rows(b.tables, prev, prev_n, 0, actions, picks, ext_i, ext_f, first_id, 0)
     ext_ptr[0] = 0
     ext_ptr[1] = k
-    status, w_first = K.fused_step(b.state, t, ext_ptr, ext_i, ext_f)
+    b.state.cfg[K.CFG_T] = t  # K.fused_step's work, without its own copy of the kernel to compile
+    status, w_first = K.step_worlds(b.state, np.int64(0), ext_ptr, ext_i, ext_f)
     b.out[4][0] = w_first
     if status == STATUS_OK:
         read_step(b)

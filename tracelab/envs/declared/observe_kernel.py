@@ -102,7 +102,8 @@ def observe(truth, table, missing, values, copies, obs):  # noqa: ANN001, ANN201
     for w in range(obs.shape[0]):
         for r in range(copies.shape[0]):
             at, source, width = copies[r, 0], copies[r, 1], copies[r, 2]
-            obs[w, at:at + width] = obs[w, source:source + width]
+            for k in range(width):  # not a slice assignment: its shape check's message took 5.7 s to compile
+                obs[w, at + k] = obs[w, source + k]
 
 
 @njit(cache=True)
