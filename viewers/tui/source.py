@@ -89,7 +89,7 @@ class RunSource(LockedConnection):
         self.sealed = info.sealed_file is not None
         self.command = short_command(str(info.meta.get("command") or ""))
         super().__init__(open_run(self.path))
-        # the board to draw the run's episodes on (its spec's `[board]`; an older GridWar run's from
+        # the board to draw the run's episodes on (its spec's `[board]`; an older RuleSim run's from
         # war.toml: board_state.board_of_run), None for a run without one (a reasoning run, a world without
         # a [board]): the trace shows the atoms and the graph beside it instead
         self.board: Board | None = self.call(board_of_run)
