@@ -9,16 +9,19 @@ import threading
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import pyarrow as pa
 
 from tracelab.store.catalog import short_command
-from tracelab.board import Board
 from tracelab.store.kind import has_board, is_game_run
 from tracelab.store.reader import RunConnection, fetch_arrow, open_run, query_readonly, retrying, run_info
 from tracelab.store.several import SeveralRunsConnection, each_run_stream, run_names
-from tracelab.viewers.board_state import board_of_run
+
+if TYPE_CHECKING:
+    from tracelab.board import Board
+
+_UNREAD: Any = object()  # RunSource.board not read yet
 
 T = TypeVar("T")
 
@@ -89,10 +92,7 @@ class RunSource(LockedConnection):
         self.sealed = info.sealed_file is not None
         self.command = short_command(str(info.meta.get("command") or ""))
         super().__init__(open_run(self.path))
-        # the board to draw the run's episodes on (its spec's `[board]`; an older RuleSim run's from
-        # war.toml: board_state.board_of_run), None for a run without one (a reasoning run, a world without
-        # a [board]): the trace shows the atoms and the graph beside it instead
-        self.board: Board | None = self.call(board_of_run)
+        self._board: Any = _UNREAD
         # the saved queries that read a board's labels are offered
         self.has_board: bool = self.call(has_board)
         # a run of games (a board, or episodes with returns: a spec world's): return, outcome, game queries
@@ -101,6 +101,17 @@ class RunSource(LockedConnection):
         # through them
         self.has_eval_games: bool = self.call(lambda con: bool(con.execute(
             "SELECT EXISTS (SELECT 1 FROM episodes WHERE kind = 'eval')").fetchall()[0][0]))
+
+    @property
+    def board(self) -> Board | None:
+        """The board to draw the run's episodes on (its spec's `[board]`; an older RuleSim run's from
+        war.toml: board_state.board_of_run), None for a run without one (a reasoning run, a world without a
+        [board]): the trace shows the atoms and the graph beside it instead. Read when first asked: the
+        Episodes view, the first screen, draws none."""
+        if self._board is _UNREAD:
+            from tracelab.viewers.board_state import board_of_run  # deferred: not on the first screen
+            self._board = self.call(board_of_run)
+        return self._board
 
     @property
     def live(self) -> bool:
