@@ -6,14 +6,13 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from tui_helpers import episodes_ready, loaded, run_app, wait_for
+from tui_helpers import episodes_ready, run_app, trace_at, wait_for
 
 from tracelab.cli import main
 from tracelab.store import open_run
 from tracelab.board import board_of_config
 from tracelab.viewers.tui.board import BoardView
 from tracelab.viewers.tui.graph_side import GraphSide
-from tracelab.viewers.tui.trace import TracePane
 
 
 @pytest.fixture(scope="module")
@@ -32,13 +31,7 @@ def test_the_tui_shows_where_the_agent_stands_at_the_cursors_step(lake: Path) ->
 
     async def body(app: Any, pilot: Any) -> None:
         await episodes_ready(app, pilot)
-        await pilot.press("enter")
-        pane = app.screen.query_one(TracePane)
-        await wait_for(pilot, lambda: pane.filter is not None and loaded(pane.table) and pane.table.count > 0)
-        jumps = pane.jumps
-        pane.query_one("#tr-goto").value = "1"
-        await pilot.press("g", "enter")
-        await wait_for(pilot, lambda: pane.jumps > jumps and loaded(pane.table))
+        pane = await trace_at(app, pilot, 1)
         assert not pane.query(GraphSide)          # a world with a [board]: the board beside the trace
         board = pane.query_one(BoardView)
         await wait_for(pilot, lambda: board.board is not None and board.step == 1)

@@ -10,7 +10,7 @@ from typing import Any
 
 import pytest
 from patience import PATIENCE
-from tui_helpers import episodes_ready, loaded, pick_saved_query, run_app, wait_for
+from tui_helpers import episodes_ready, loaded, pick_saved_query, run_app, trace_at, wait_for
 
 from tracelab.viewers.tui.lazy_table import LazyTable
 from tracelab.viewers.tui.trace import TracePane
@@ -142,13 +142,7 @@ def test_run_without_a_board_snapshots(size: tuple[int, int]) -> None:
         await episodes_ready(app, pilot)
         await shots.take("episodes")
 
-        await pilot.press("enter")
-        pane = app.screen.query_one(TracePane)
-        await wait_for(pilot, lambda: pane.filter is not None and loaded(pane.table) and pane.table.count > 0)
-        jumps = pane.jumps
-        pane.query_one("#tr-goto").value = "3"
-        await pilot.press("g", "enter")
-        await wait_for(pilot, lambda: pane.jumps > jumps and loaded(pane.table))
+        pane = await trace_at(app, pilot, 3)
         side = pane.side
         if not side.display:
             await pilot.press("b")

@@ -54,10 +54,8 @@ async def episodes_ready(app: Any, pilot: Any) -> LazyTable:
     return table
 
 
-async def open_trace_at(app: Any, pilot: Any, t: int) -> tuple[TracePane, GraphSide]:
-    """A run without a board: its first episode's trace at timestep t, with the atoms and the graph
-    beside it loaded."""
-    await episodes_ready(app, pilot)
+async def trace_at(app: Any, pilot: Any, t: int) -> TracePane:
+    """From the Episodes view: the first episode's trace, gone to timestep t (`g`) and loaded there."""
     await pilot.press("enter")
     pane = app.screen.query_one(TracePane)
     await wait_for(pilot, lambda: pane.filter is not None and loaded(pane.table) and pane.table.count > 0)
@@ -65,6 +63,14 @@ async def open_trace_at(app: Any, pilot: Any, t: int) -> tuple[TracePane, GraphS
     pane.query_one("#tr-goto").value = str(t)
     await pilot.press("g", "enter")
     await wait_for(pilot, lambda: pane.jumps > jumps and loaded(pane.table))
+    return pane
+
+
+async def open_trace_at(app: Any, pilot: Any, t: int) -> tuple[TracePane, GraphSide]:
+    """A run without a board: its first episode's trace at timestep t, with the atoms and the graph
+    beside it loaded."""
+    await episodes_ready(app, pilot)
+    pane = await trace_at(app, pilot, t)
     side = pane.query_one(GraphSide)
     await wait_for(pilot, lambda: side.atoms is not None and side.atoms.t == t and side.hood is not None
                    and loaded(side.table))
