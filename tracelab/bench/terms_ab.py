@@ -12,7 +12,13 @@ an evaluation, the same seeded untrained policy, the same seeds), each into its 
 Blocks of `evaluations` evaluations of each, the arms' order rotated every block; figures are the game
 thread's CPU an evaluation (time.thread_time: it holds under load, where wall time does not), medians
 of the blocks, and the medians of the blocks' ratios step / world, read / world and step / read. Both
-term arms must record the same reward-term rows (`same_rows`). Prints one JSON object."""
+term arms must record the same reward-term rows (`same_rows`).
+
+An evaluation's difference between the two reads (~1 us a step, ~280 steps) is below what its blocks
+resolve on a shared machine, so the world's step alone is timed too (`step_us`): three worlds of the same
+game (terms kept by the step, read as before, not kept) stepping the same seeded random actions in
+alternated blocks of `steps` steps, thread CPU µs a step (medians), and the medians of the blocks'
+differences from the world that keeps none (`terms_us`). Prints one JSON object."""
 from __future__ import annotations
 
 import argparse
@@ -101,13 +107,43 @@ def compare(blocks: int, evaluations: int) -> dict[str, Any]:
             "step_over_read": round(ratio("step", "read"), 3)}
 
 
+def step_costs(blocks: int, steps: int) -> dict[str, Any]:
+    """Thread CPU µs a world step: terms kept by the step, read as before, and not kept (module docstring)."""
+    from tracelab.envs.declared.env_source import EnvSource
+
+    worlds = {}
+    for name in ARMS:
+        world = EnvSource(bench_eval.ENV_ID, {"p_toward": bench_eval.EVAL_P}).make().unwrapped.world
+        world.keep_reward_terms = name != "world"
+        if name == "read":
+            main_read(world)
+        worlds[name] = world
+    us: dict[str, list[float]] = {k: [] for k in ARMS}
+    for block in range(blocks + 1):  # the first block warms up
+        for name in ARMS[block % 3:] + ARMS[:block % 3]:
+            world, rng = worlds[name], np.random.default_rng(block)
+            world.reset(rng)
+            actions = rng.integers(world.n_actions, size=steps).tolist()
+            t0 = time.thread_time()
+            for a in actions:
+                world.step(a, rng)
+                if world.terminated():
+                    world.reset(rng)
+            if block:
+                us[name].append((time.thread_time() - t0) / steps * 1e6)
+    extra = lambda a: statistics.median(x - y for x, y in zip(us[a], us["world"]))  # noqa: E731
+    return {"steps_per_block": steps, "step_us": {k: round(statistics.median(v), 2) for k, v in us.items()},
+            "terms_us": {"step": round(extra("step"), 2), "read": round(extra("read"), 2)}}
+
+
 def main() -> None:
     p = argparse.ArgumentParser(prog="python -m tracelab.bench.terms_ab", description=__doc__.split("\n")[0])
     p.add_argument("--blocks", type=int, default=12)
     p.add_argument("--evaluations", type=int, default=10)
+    p.add_argument("--steps", type=int, default=2000, help="world steps a block of step_us")
     a = p.parse_args()
     load0 = machine_info()["load_average"]
-    out = compare(a.blocks, a.evaluations)
+    out = {**compare(a.blocks, a.evaluations), **step_costs(a.blocks, a.steps)}
     print(json.dumps({**out, "load_average": [load0, machine_info()["load_average"]]}))
 
 
