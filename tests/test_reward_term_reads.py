@@ -67,3 +67,10 @@ def test_both_kernels_read_the_same_terms_and_they_make_the_reward(params: dict)
     assert (counts > 0).sum() >= 2, counts  # the walk paid more than one term (the step's, a bad drop-off)
     # a fickle passenger: some env steps took a second engine step, whose terms were added
     assert any(n == 2 for _, _, n in fused) == bool(params)
+
+
+def test_a_traced_evaluation_stores_the_same_terms_read_by_the_step_as_read_after_it() -> None:
+    from tracelab.bench.terms_ab import compare, step_costs
+    r = compare(blocks=1, evaluations=1)  # bench eval's games into three runs: rows compared through `rewards`
+    assert r["same_rows"] and r["reward_rows"] > 0 and set(r["thread_ms"]) == {"step", "read", "world"}
+    assert set(step_costs(blocks=1, steps=20)["terms_us"]) == {"step", "read"}

@@ -99,9 +99,10 @@ def compare(blocks: int, evaluations: int) -> dict[str, Any]:
         for ev, writer in arms.values():
             ev.close()
             writer.close()
-        same = _reward_rows(Path(tmp) / "step") == _reward_rows(Path(tmp) / "read")
+        rows = _reward_rows(Path(tmp) / "step")
+        same = rows == _reward_rows(Path(tmp) / "read")
     ratio = lambda a, b: statistics.median(x / y for x, y in zip(cpu[a], cpu[b]))  # noqa: E731
-    return {"blocks": blocks, "evaluations_per_block": evaluations, "same_rows": same,
+    return {"blocks": blocks, "evaluations_per_block": evaluations, "same_rows": same, "reward_rows": len(rows),
             "thread_ms": {k: round(1000 * statistics.median(v), 2) for k, v in cpu.items()},
             "step_over_world": round(ratio("step", "world"), 3), "read_over_world": round(ratio("read", "world"), 3),
             "step_over_read": round(ratio("step", "read"), 3)}
