@@ -11,7 +11,7 @@ Tables (int64 unless said): `act_ptr`/`act_atoms`/`act_bnd` (float64 [n, 2]): ea
 row's facts (row agent * n_actions + action);
 `val_ptr`/`val_atoms`/`val_bnd`: each value's facts, draws' values numbered one after another
 (`draw_base[d]` is draw d's value 0); `prev`/`prev_n`: the step facts set by the last engine step;
-`now`/`now_bnd`: scratch for this step's. `batch`: a batch's own arrays (vector_fused.py: the step's draws and the
+`now`/`now_bnd`: scratch for this step's. Reads (`reads`) and their results (`out`): read_step. `batch`: a batch's own arrays (vector_fused.py: the step's draws and the
 observation), an empty tuple for one world."""
 from __future__ import annotations
 
@@ -185,10 +185,13 @@ def fused_step(b, actions, picks, t, first_id):  # noqa: ANN001, ANN201
 @njit(cache=True)
 def read_step(b):  # noqa: ANN001, ANN201
     """After a step: per (agent, index part) the index of its first true atom (-1: none), per agent the
-    reward table's sum, whether a terminated / truncated atom is true, and the mask (1 where the atom is
-    [1,1])."""
-    part_ptr, part_atoms, table_atoms, table_values, table_agent, term_atoms, trunc_atoms, mask_atoms = b.reads
-    index, rewards, res, mask, _ = b.out
+    reward table's sum, whether a terminated / truncated atom is true, the mask (1 where the atom is
+    [1,1]), and, where a recorder keeps them (keep_terms[0] == 1), each reward term's quantity [agent *
+    term]: a table atom's truth (1 where its lower bound is 1), a scaled atom's lower bound (the reward
+    atoms are read here anyway: in Python the read cost a traced step ~1-2 us, docs/benchmarks.md)."""
+    part_ptr, part_atoms, table_atoms, table_values, table_agent, term_atoms, trunc_atoms, mask_atoms, \
+        reward_atoms, reward_is_table, keep_terms = b.reads
+    index, rewards, res, mask, _, quantities = b.out
     lower = b.state.lo
     for p in range(len(part_ptr) - 1):
         index[p] = -1
@@ -210,6 +213,10 @@ def read_step(b):  # noqa: ANN001, ANN201
             res[1] = 1.0
     for j in range(len(mask_atoms)):
         mask[j] = 1 if lower[0, mask_atoms[j]] == 1.0 else 0
+    if keep_terms[0] == 1:
+        for j in range(len(reward_atoms)):
+            bound = lower[0, reward_atoms[j]]
+            quantities[j] = (1.0 if bound == 1.0 else 0.0) if reward_is_table[j] == 1 else bound
 
 
 SOURCE_STAMP = stamp_with_sources(fused_step, (inspect.getmodule(bind), K))

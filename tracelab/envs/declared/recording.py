@@ -297,7 +297,7 @@ opened by gym.make(id, trace_writer=...) reads as one `tracelab play` wrote.
             self._agent_rows.decisions(Decisions(
                 np.repeat(np.take(episode, told), m), np.repeat(np.take(step, told), m), np.tile(np.arange(m), k),
                 self.agents, np.asarray([actions[i] for i in told], np.int64).reshape(-1),
-                PolicyOutput.concat(outputs), None if masks[0] is None else np.asarray(masks).reshape(k * m, -1)))
+                PolicyOutput.concat(outputs), None if masks[0] is None else np.concatenate(masks).reshape(k * m, -1)))
 
     def _take_rows(self) -> None:
         """The engine's rows, t counted from the episode's start and labelled with the episode (the

@@ -166,21 +166,26 @@ class DeclaredWorld:
         read_index = self._index_parts if spec.space in ("Discrete", "MultiDiscrete") or self._index_checked else []
         part_ptr, part_atoms, _ = fused.csr([self._part_ids[i][a] for a in range(n) for i in read_index], [])
         table = [(atom, value, a) for a, pairs in enumerate(spec.reward_table) for atom, value in pairs]
-        self._reads = (part_ptr, part_atoms, ids(t[0] for t in table), np.array([t[1] for t in table], np.float64),
-                       np.array([t[2] for t in table], np.int64), ids(spec.terminated), ids(spec.truncated),
-                       mask_ids)
-        # each step's reward by term in one read (_reward_quantities): per agent, the table's atoms (their value
-        # where true), then the scaled atoms (their bound times the scale)
+        table_ids = ids(t[0] for t in table)
+        # each step's reward by term, read in the same compiled call where a recorder keeps them
+        # (keep_reward_terms): per agent, the table's atoms (their truth), then the scaled atoms (their bound)
         scaled = [ids for ids, _ in self._scaled], [scales for _, scales in self._scaled]
         scaled_ids, scales = (np.concatenate(x).reshape(n, -1) if x else np.zeros((n, 0)) for x in scaled)
-        self._term_atoms = np.concatenate([self._reads[2].reshape(n, -1), scaled_ids], axis=1).astype(np.int64)
+        term_atoms = np.concatenate([table_ids.reshape(n, -1), scaled_ids], axis=1).astype(np.int64)
+        n_table = table_ids.size // max(n, 1)
+        term_is_table = np.broadcast_to(np.arange(term_atoms.shape[1]) < n_table, term_atoms.shape).astype(np.int8)
+        self._keep_terms = np.zeros(1, np.int64)  # keep_reward_terms, for the compiled step
+        self._keeps_terms = False
+        self._reads = (part_ptr, part_atoms, table_ids, np.array([t[1] for t in table], np.float64),
+                       np.array([t[2] for t in table], np.int64), ids(spec.terminated), ids(spec.truncated),
+                       mask_ids)
+        self._term_reads = (term_atoms.reshape(-1), term_is_table.reshape(-1), self._keep_terms)
         self.reward_term_values = np.concatenate([self._reads[3].reshape(n, -1), scales], axis=1)  # per occurrence
-        self._term_is_table = np.arange(self._term_atoms.shape[1]) < self._reads[2].size // max(n, 1)
-        self._terms_all_table = bool(self._term_is_table.all())
-        self._term_ones = np.ones(self._term_atoms.shape)
-        # read_step's results: indices [agent * index parts], rewards [agent], ends, masks, a paused world
+        # read_step's results: indices [agent * index parts], rewards [agent], ends, masks, a paused world,
+        # the reward terms' quantities [agent * term]
         self._out = (np.zeros(n * len(read_index), np.int64), np.zeros(n), np.zeros(2),
-                     np.zeros(len(mask_ids), np.int8), np.zeros(1, np.int64))
+                     np.zeros(len(mask_ids), np.int8), np.zeros(1, np.int64), np.zeros(term_atoms.size))
+        self._quantities = self._out[5].reshape(term_atoms.shape)  # a view: [agent, term]
         board = spec.board
         self._piece_ids: list[tuple[str, str, np.ndarray, np.ndarray, int, list[str], np.ndarray]] | None = None
         self._marks = [] if board is None else \
@@ -188,7 +193,8 @@ class DeclaredWorld:
         self._tables = self._step_tables()
         eng.step()  # t = 0: the program's and the board's facts
         self._snapshot = eng.snapshot()
-        self._binding = fused.FusedBinding(eng, self._tables, self._ext, self._reads, self._out)
+        self._binding = fused.FusedBinding(eng, self._tables, self._ext, self._reads + self._term_reads,
+                                             self._out)
         for drawer in self._choices:
             drawer.freeze(self)
         # picks per draw of the fused tables: the step's random facts, then the start's choices and facts
@@ -199,7 +205,6 @@ class DeclaredWorld:
         self.last_rewards = [0.0] * self.n_agents
         # a recorder's: what each term of each step's reward is of [agent, term] (spec.reward_terms: a table
         # atom's occurrence, a scaled atom's bound) in `last_reward_quantities`; its value, last_reward_terms
-        self.keep_reward_terms = False
         self.last_reward_quantities: np.ndarray | None = None
         # one world on the counting kernel stays on it (only a lanes engine moves to counting)
         self._fused = eng.kernel == "counting"
@@ -261,7 +266,7 @@ class DeclaredWorld:
             picks[base:base + len(self._computed)] = self._computed.picks(self.engine, np.array([self.steps]))[0]
         self._fused_step(rows, picks)
         rewards = self._rewards()
-        terms = self._reward_quantities() if self.keep_reward_terms else None
+        terms = self._reward_quantities() if self._keeps_terms else None
         if self._after:
             n_before = len(self._before)
             picks[:n_before] = -1
@@ -273,7 +278,7 @@ class DeclaredWorld:
                 self._fused_step(rows, picks)
                 rewards = [a + b for a, b in zip(rewards, self._rewards())]
                 if terms is not None:
-                    terms = np.add(terms, self._reward_quantities(), dtype=np.float64)
+                    terms += self._reward_quantities()
                 picks[n_before:] = -1
         self.last_rewards = rewards
         self.last_reward_quantities = terms
@@ -321,7 +326,11 @@ class DeclaredWorld:
     def _read_unfused(self) -> None:
         part_ptr, part_atoms, table_atoms, table_values, table_agent, term_atoms, trunc_atoms, mask_atoms = \
             self._reads
-        index, rewards, res, mask, _ = self._out
+        reward_atoms, reward_is_table, keep_terms = self._term_reads
+        index, rewards, res, mask, _, quantities = self._out
+        if keep_terms[0]:  # read_step's quantities: a table atom's truth, a scaled atom's lower bound
+            bound = self.engine.lower[0, reward_atoms]
+            quantities[:] = np.where(reward_is_table == 1, bound == 1.0, bound)
         for p in range(len(part_ptr) - 1):
             hit = self.true(part_atoms[part_ptr[p]:part_ptr[p + 1]])
             index[p] = int(np.argmax(hit)) if hit.any() else -1
@@ -404,20 +413,28 @@ class DeclaredWorld:
         return rewards
 
     @property
+    def keep_reward_terms(self) -> bool:
+        """Whether each step reads its reward terms' quantities (last_reward_quantities): a recorder's,
+        or a decomposed learner's."""
+        return self._keeps_terms
+
+    @keep_reward_terms.setter
+    def keep_reward_terms(self, keep: bool) -> None:
+        self._keeps_terms = bool(keep)
+        self._keep_terms[0] = int(keep)  # the compiled step's flag (read_step)
+
+    def _reward_quantities(self) -> np.ndarray:
+        """The engine step's reward terms' quantities [agent, term], as the step read them (read_step: a
+        table atom's truth, a scaled atom's bound, so a term worth 0 shows it occurred): a copy, kept by a
+        recorder (the values are these times reward_term_values, taken when read)."""
+        return self._quantities.copy()
+
+    @property
     def last_reward_terms(self) -> np.ndarray | None:
         """The last step's reward by term [agent, term] (its quantities times the terms' values; they add up
         to last_rewards), where the world keeps them (keep_reward_terms)."""
         q = self.last_reward_quantities
         return None if q is None else q * self.reward_term_values
-
-    def _reward_quantities(self) -> np.ndarray:
-        """The engine step's reward terms' quantities [agent, term]: each [reward.table] entry's atom's truth,
-        then each scaled atom's bound (so a term worth 0 shows it occurred); a step's cost, kept small (the
-        values are these times reward_term_values, taken when read)."""
-        # world 0's bounds by flat take (a 2-D fancy index and a compare with a Python float cost ~4x more)
-        bounds = self.engine.lower.ravel().take(self._term_atoms)  # a table atom is true where its lower bound is 1
-        true = bounds == self._term_ones
-        return true if self._terms_all_table else np.where(self._term_is_table, true, bounds)
 
     def terminated(self) -> bool:
         return self._ends[0]
