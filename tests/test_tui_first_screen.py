@@ -2,7 +2,8 @@
 `tracelab tui DIR` the Runs screen's catalog, with no pandas (pyarrow's converter imports it for Python
 lists: the catalog's table is built from buffers), numba, torch, rerun or matplotlib in the process; and
 the Episodes table is drawn before any other view's module is imported (the trace's board, plots and graph,
-the why tree, the SQL console, the training curves), the Trace view's then in the background.
+the why tree, the SQL console, the training curves), and before numpy or pyarrow is (its rows are DuckDB's
+own), the Trace view's then in the background; the Runs screen is not made under an opened run.
 Checked in a child interpreter (this one has imported them for other tests), through textual's pilot,
 waiting on the tables' state, not on time."""
 from __future__ import annotations
@@ -15,6 +16,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 HEAVY = ("pandas", "numba", "llvmlite", "torch", "rerun", "matplotlib", "scipy", "gymnasium")
+DATA = ("numpy", "pyarrow")   # the trace's paging and index, the SQL console: loaded after the first screen
 VIEWS = ("tracelab.viewers.tui.trace", "tracelab.viewers.board_state", "tracelab.viewers.tui.graph_side",
          "tracelab.viewers.tui.why", "tracelab.viewers.tui.sql", "tracelab.viewers.tui.training",
          "tracelab.viewers.tui.rules")
@@ -42,11 +44,14 @@ async def episodes_ready(app, pilot):
 heavy, views = json.loads(sys.argv[2]), json.loads(sys.argv[5])
 # which views' modules were imported before the Episodes table had its rows (its Loaded message: it is
 # drawn with them), with the app's own module or later
+data = json.loads(sys.argv[6])
 drawn, early = [], [m for m in views if m in sys.modules]
+data_early = []   # numpy, pyarrow loaded when the Episodes table had its rows
 loaded_init = LazyTable.Loaded.__init__
 def _loaded(message, table, count):
-    if table.id == "ep-table":
+    if table.id == "ep-table" and not drawn:
         drawn.append(True)
+        data_early.extend(m for m in data if m in sys.modules)
     loaded_init(message, table, count)
 LazyTable.Loaded.__init__ = _loaded
 class Watch:
@@ -63,7 +68,8 @@ async def first_screen(path, table_id, ready):
         if table_id == "#ep-table":   # the Trace view's modules follow in the background
             await wait_for(pilot, lambda: "tracelab.viewers.tui.trace" in sys.modules)
         print(json.dumps({"screen": type(app.screen).__name__, "rows": table.count, "views": early,
-                          "loaded": [m for m in heavy if m in sys.modules]}), flush=True)
+                          "data": data_early, "loaded": [m for m in heavy if m in sys.modules],
+                          "screens": [type(s).__name__ for s in app.screen_stack]}), flush=True)
 
 async def episodes(app, pilot, table_id):
     return await episodes_ready(app, pilot)
@@ -80,7 +86,8 @@ asyncio.run(first_screen(sys.argv[4], "#runs-table", catalog))
 
 def test_the_first_screen_is_drawn_without_heavy_packages() -> None:
     out = subprocess.run([sys.executable, "-c", CHILD, str(ROOT / "tests"), json.dumps(HEAVY),
-                          str(ROOT / "sample_runs" / "advanced"), str(ROOT / "sample_runs"), json.dumps(VIEWS)],
+                          str(ROOT / "sample_runs" / "advanced"), str(ROOT / "sample_runs"), json.dumps(VIEWS),
+                          json.dumps(DATA)],
                          env={**os.environ, "TEXTUAL_ANIMATIONS": "none"}, cwd=ROOT,
                          capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-3000:]
@@ -89,3 +96,5 @@ def test_the_first_screen_is_drawn_without_heavy_packages() -> None:
     assert runs["screen"] == "RunsScreen" and runs["rows"] == 5, runs    # the five sample runs
     assert run["loaded"] == [] and runs["loaded"] == [], (run, runs)
     assert run["views"] == [], run
+    assert run["data"] == [], run                              # the Episodes table drew without Arrow
+    assert "RunsScreen" not in run["screens"], run             # made when the user goes back to it

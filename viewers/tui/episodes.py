@@ -166,7 +166,7 @@ class EpisodesPane(Vertical):
         self.run_worker(work, thread=True, group="episodes-poll", exclusive=True, exit_on_error=False)
 
     def _inspect(self) -> None:
-        cols = self.source.arrow("SELECT * FROM episodes LIMIT 0").column_names
+        cols = self.source.columns("SELECT * FROM episodes")
         kind = "kind" if "kind" in cols else "json_extract_string(begin_info, '$.kind')"
         step = ("train_step" if "train_step" in cols
                 else "TRY_CAST(json_extract(begin_info, '$.train_step') AS BIGINT)")

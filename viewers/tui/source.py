@@ -6,19 +6,20 @@ views re-read a run while it is `live` and once more after it closes (LiveReads)
 from __future__ import annotations
 
 import threading
+from functools import cached_property
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, TypeVar
-
-import pyarrow as pa
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from tracelab.store.catalog import short_command
-from tracelab.board import Board
 from tracelab.store.kind import has_board, is_game_run
 from tracelab.store.reader import RunConnection, fetch_arrow, open_run, query_readonly, retrying, run_info
-from tracelab.store.several import SeveralRunsConnection, each_run_stream, run_names
-from tracelab.viewers.board_state import board_of_run
+
+if TYPE_CHECKING:   # pyarrow is loaded by the views that read Arrow, after the first screen (issue 40)
+    import pyarrow as pa
+
+    from tracelab.board import Board
 
 T = TypeVar("T")
 
@@ -50,7 +51,17 @@ class LockedConnection:
         return self.call(lambda con: query_readonly(con, sql, params).to_arrow_table())
 
     def rows(self, sql: str, params: dict[str, Any] | None = None) -> list[dict[str, Any]]:
-        return self.arrow(sql, params).to_pylist()
+        """The rows as dicts, from DuckDB's own rows (no Arrow: the first screen's table pages through
+        here before pyarrow is loaded)."""
+        def read(con: RunConnection) -> list[dict[str, Any]]:
+            rel = query_readonly(con, sql, params)
+            names = rel.columns
+            return [dict(zip(names, row)) for row in rel.fetchall()]
+        return self.call(read)
+
+    def columns(self, sql: str) -> list[str]:
+        """The names of a statement's columns (bound, not run)."""
+        return self.call(lambda con: list(query_readonly(con, sql).columns))
 
     def scalar(self, sql: str, params: dict[str, Any] | None = None) -> Any:
         rows = self.call(lambda con: query_readonly(con, sql, params).fetchall())
@@ -89,10 +100,6 @@ class RunSource(LockedConnection):
         self.sealed = info.sealed_file is not None
         self.command = short_command(str(info.meta.get("command") or ""))
         super().__init__(open_run(self.path))
-        # the board to draw the run's episodes on (its spec's `[board]`; an older RuleSim run's from
-        # war.toml: board_state.board_of_run), None for a run without one (a reasoning run, a world without
-        # a [board]): the trace shows the atoms and the graph beside it instead
-        self.board: Board | None = self.call(board_of_run)
         # the saved queries that read a board's labels are offered
         self.has_board: bool = self.call(has_board)
         # a run of games (a board, or episodes with returns: a spec world's): return, outcome, game queries
@@ -101,6 +108,15 @@ class RunSource(LockedConnection):
         # through them
         self.has_eval_games: bool = self.call(lambda con: bool(con.execute(
             "SELECT EXISTS (SELECT 1 FROM episodes WHERE kind = 'eval')").fetchall()[0][0]))
+
+    @cached_property
+    def board(self) -> Board | None:
+        """The board to draw the run's episodes on (its spec's `[board]`; an older RuleSim run's from
+        war.toml: board_state.board_of_run), None for a run without one (a reasoning run, a world without
+        a [board]): the trace shows the atoms and the graph beside it instead. Read when the trace first
+        asks: the first screen does not load the board's modules."""
+        from tracelab.viewers.board_state import board_of_run
+        return self.call(board_of_run)
 
     @property
     def live(self) -> bool:
@@ -136,6 +152,7 @@ class SeveralRunsSource(LockedConnection):
     first column `run`; a saved query runs on each run, its rows after the run's name."""
 
     def __init__(self, paths: Sequence[Path]) -> None:
+        from tracelab.store.several import SeveralRunsConnection, run_names
         self.path = Path(paths[0])     # the first run: names the console's export
         con = SeveralRunsConnection(list(paths), run_names(paths))
         super().__init__(con)
@@ -152,6 +169,9 @@ class SeveralRunsSource(LockedConnection):
               limit: int) -> pa.Table:
         if not saved:
             return super().fetch(con, sql, params, saved, limit)
+        import pyarrow as pa
+
+        from tracelab.store.several import SeveralRunsConnection, each_run_stream
         assert isinstance(con, SeveralRunsConnection)
         schema, batches = each_run_stream(con, sql, params, limit)
         return pa.Table.from_batches(list(batches), schema=schema)
