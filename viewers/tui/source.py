@@ -100,13 +100,19 @@ class RunSource(LockedConnection):
         self.sealed = info.sealed_file is not None
         self.command = short_command(str(info.meta.get("command") or ""))
         super().__init__(open_run(self.path))
-        # the saved queries that read a board's labels are offered
-        self.has_board: bool = self.call(has_board)
         # a run of games (a board, or episodes with returns: a spec world's): return, outcome, game queries
         self.games: bool = self.call(is_game_run)
-        # a training run's evaluation games (kind 'eval'), of a world with a board or without: ] and [ step
-        # through them
-        self.has_eval_games: bool = self.call(lambda con: bool(con.execute(
+
+    @cached_property
+    def has_board(self) -> bool:
+        """Whether the SQL console offers the saved queries that read a board's labels."""
+        return self.call(has_board)
+
+    @cached_property
+    def has_eval_games(self) -> bool:
+        """A training run's evaluation games (kind 'eval'), of a world with a board or without: ] and [
+        step through them in the trace."""
+        return self.call(lambda con: bool(con.execute(
             "SELECT EXISTS (SELECT 1 FROM episodes WHERE kind = 'eval')").fetchall()[0][0]))
 
     @cached_property
