@@ -1,7 +1,8 @@
 """The TUI's first screen loads nothing heavy (issue 40): `tracelab tui RUN` shows the run's Episodes table,
 `tracelab tui DIR` the Runs screen's catalog, with no pandas (pyarrow's converter imports it for Python
 lists: the catalog's table is built from buffers), numba, torch, rerun or matplotlib in the process; and
-the Episodes table is drawn before any other view's module is imported (the trace's board, plots and graph,
+the Episodes table is drawn (the command's module imported, as `tracelab tui` does) before any other view's
+module is imported (the trace's board, plots and graph,
 the why tree, the SQL console, the training curves), and before numpy or pyarrow is (its rows are DuckDB's
 own), the Trace view's then in the background; the Runs screen is not made under an opened run.
 Checked in a child interpreter (this one has imported them for other tests), through textual's pilot,
@@ -25,6 +26,7 @@ CHILD = """
 import asyncio, json, sys, time
 sys.path.insert(0, sys.argv[1])
 from patience import PATIENCE   # not tui_helpers: it imports the Trace view
+import tracelab.commands.tui    # what `tracelab tui` runs (its screenshots' module drives every view)
 from tracelab.viewers.tui.app import TracelabApp
 from tracelab.viewers.tui.lazy_table import LazyTable
 
