@@ -100,3 +100,50 @@ def test_the_first_screen_is_drawn_without_heavy_packages() -> None:
     assert run["views"] == [], run
     assert run["data"] == [], run                              # the Episodes table drew without Arrow
     assert "RunsScreen" not in run["screens"], run             # made when the user goes back to it
+
+
+def test_the_kind_selector_is_a_training_runs_and_kept_when_the_run_is_reopened() -> None:
+    """A play run's Episodes have no kind selector (not made: the first screen styles six widgets fewer); a
+    training run's has it once the run is read, `e` shows its evaluation games, and the run reopened in the
+    session (Esc to the Runs screen, Enter) opens with the selector on them."""
+    import asyncio
+    from typing import Any
+
+    from tui_helpers import episodes_ready, loaded, wait_for   # here: it imports the Trace view
+    from tracelab.viewers.tui.app import TracelabApp
+    from tracelab.viewers.tui.lazy_table import LazyTable
+
+    def kinds(table: Any) -> set[str]:
+        return {table.row(i)["kind"] for i in range(table.count)}
+
+    async def body(app: Any, pilot: Any) -> None:
+        runs = app.screen.query_one("#runs-table", LazyTable)
+        await wait_for(pilot, lambda: loaded(runs) and runs.count == 5)
+        names = [runs.row(i)["name"] for i in range(runs.count)]
+        runs.move_to(names.index("advanced"))
+        await pilot.press("enter")
+        await episodes_ready(app, pilot)
+        assert not app.screen.query("#ep-kind") and not app.screen.query("#ep-kind-label")   # a play run
+        await pilot.press("escape")
+        await wait_for(pilot, lambda: type(app.screen).__name__ == "RunsScreen")
+        runs = app.screen.query_one("#runs-table", LazyTable)
+        runs.move_to(names.index("base-train"))
+        await pilot.press("enter")
+        table = await episodes_ready(app, pilot)
+        await wait_for(pilot, lambda: bool(app.screen.query("#ep-kind")) and loaded(table))
+        assert table.count == 6322                              # every episode, training's and evaluation's
+        await pilot.press("e")                                   # evaluation games only
+        await wait_for(pilot, lambda: loaded(table) and table.count == 24)
+        assert kinds(table) == {"eval"}
+        await pilot.press("escape")
+        await wait_for(pilot, lambda: type(app.screen).__name__ == "RunsScreen")
+        await pilot.press("enter")                               # the same run again: on its eval games
+        table = await episodes_ready(app, pilot)
+        await wait_for(pilot, lambda: loaded(table) and table.count == 24)
+        assert app.screen.query_one("#ep-kind").value == "eval" and kinds(table) == {"eval"}
+
+    async def go() -> None:
+        app = TracelabApp([ROOT / "sample_runs"])
+        async with app.run_test(size=(120, 40)) as pilot:
+            await body(app, pilot)
+    asyncio.run(go())
