@@ -512,15 +512,15 @@ def header_text(pane: TracePane) -> str:
     return str(pane.query_one("#tr-game").render())
 
 
-def test_evaluation_game_keys_on_a_run_that_is_not_a_training_run_say_so() -> None:
+def test_evaluation_game_keys_are_not_offered_on_a_run_without_evaluation_games() -> None:
+    """A play run has no evaluation games: ]/[ is neither in the key bar nor bound (a key that could only
+    say no); a training run's trace offers it (test_the_trace_steps_through_evaluation_games...)."""
     async def body(app: Any, pilot: Any) -> None:
         pane, trace = await open_first_trace(app, pilot)
-        await pilot.press("right_square_bracket")
-        await wait_for(pilot, lambda: any(n.message.startswith("not a training run: it has no evaluation games")
-                                          for n in app._notifications))
+        assert not pane.source.has_eval_games and not pane.source.live
+        assert pane.check_action("eval_game", (1,)) is False and pane.check_action("eval_game", (-1,)) is False
+        assert "]/[ eval games" not in await shown(app, pilot)
         assert pane.filter.episode == 0 and not pane.query_one("#tr-game").display
-        # run_test draws no toasts (notifications=False): the notification itself is the check
-        assert "]/[ eval games" in await shown(app, pilot)             # 80 columns: the key fits
     run_app([ADVANCED], body)
 
 

@@ -6,9 +6,9 @@ views re-read a run while it is `live` and once more after it closes (LiveReads)
 from __future__ import annotations
 
 import threading
-from functools import cached_property
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
+from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
