@@ -38,6 +38,8 @@ class TracelabApp(App[None]):
 
     def close_run(self) -> None:
         """Back from an open run to the Runs screen (made now if the app opened on the run)."""
+        if isinstance(self.screen, RunScreen):
+            self.screen.keep_where()
         if isinstance(self.screen_stack[-2], RunsScreen):
             self.pop_screen()
         else:

@@ -247,7 +247,12 @@ class RunScreen(Screen):
                         None if trace is None else trace.place())  # type: ignore[attr-defined]
 
     def on_screen_suspend(self) -> None:
-        if self.keep_place is not None:   # left (back to the Runs screen, or a dialog over it)
+        self.keep_where()   # left (back to the Runs screen, or a dialog over it)
+
+    def keep_where(self) -> None:
+        """Tell keep_place where the user is (also called by the app before it leaves the run: the
+        suspend message comes only after the Runs screen is made, and Enter there may come first)."""
+        if self.keep_place is not None:
             self.keep_place(self.place())
 
     def _sources(self) -> list[RunSource | SeveralRunsSource]:
