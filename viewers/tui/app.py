@@ -42,8 +42,9 @@ class TracelabApp(App[None]):
             self.screen.keep_where()
         if isinstance(self.screen_stack[-2], RunsScreen):
             self.pop_screen()
-        else:
-            self.switch_screen(RunsScreen(self.paths))
+        else:   # popped first, as above (the run's screen suspended and removed at once), then made
+            self.pop_screen()
+            self.push_screen(RunsScreen(self.paths))
 
     def show_run(self, path: Path, overlaid: Sequence[Path] = ()) -> bool:
         """Open a run's screen; False (with a message) if the run cannot be opened."""
