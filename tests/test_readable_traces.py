@@ -140,7 +140,8 @@ def test_the_episode_index_hides_static_facts_as_sql_does() -> None:
     from dataclasses import replace
 
     from tracelab.viewers.tui.episode_index import episode_index
-    from tracelab.viewers.tui.paging import PAGE, TraceFilter, TraceSource
+    from tracelab.viewers.tui.paging import PAGE
+    from tracelab.viewers.tui.trace_paging import TraceFilter, TraceSource
     from tracelab.viewers.tui.source import RunSource
     source = RunSource(BASE)
     static = static_rows(BASE, 0)

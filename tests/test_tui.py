@@ -16,7 +16,8 @@ from tracelab.store.catalog import list_runs  # noqa: E402
 from tracelab.store.reader import open_run  # noqa: E402
 from tracelab.viewers.tui.episode_index import cached_index, episode_index  # noqa: E402
 from tracelab.viewers.tui.lazy_table import LazyTable  # noqa: E402
-from tracelab.viewers.tui.paging import PAGE, TraceFilter, TraceSource  # noqa: E402
+from tracelab.viewers.tui.paging import PAGE  # noqa: E402
+from tracelab.viewers.tui.trace_paging import TraceFilter, TraceSource  # noqa: E402
 from tracelab.viewers.tui.plot import BraillePlot  # noqa: E402
 from tracelab.viewers.tui.source import RunSource  # noqa: E402
 from tracelab.viewers.tui.sql import SqlPane, locate_error  # noqa: E402

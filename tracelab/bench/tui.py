@@ -34,7 +34,8 @@ from tracelab.store.seal import seal_run
 from tracelab.store.writer import TraceWriter
 from tracelab.viewers.tui.app import TracelabApp
 from tracelab.viewers.tui.lazy_table import LazyTable
-from tracelab.viewers.tui.paging import PAGE, TraceFilter, TraceSource
+from tracelab.viewers.tui.paging import PAGE
+from tracelab.viewers.tui.trace_paging import TraceFilter, TraceSource
 from tracelab.viewers.tui.source import RunSource
 from tracelab.viewers.tui.trace import TracePane
 

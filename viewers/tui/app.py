@@ -10,7 +10,6 @@ from textual.binding import Binding
 from textual.screen import Screen
 
 from tracelab.store.catalog import DEFAULT_ROOTS, is_run
-from tracelab.viewers.tui.help import HelpScreen
 from tracelab.viewers.tui.places import RunPlace
 from tracelab.viewers.tui.run_screen import TABS, RunScreen
 from tracelab.viewers.tui.runs_screen import RunsScreen
@@ -31,19 +30,33 @@ class TracelabApp(App[None]):
         self.run_places: dict[tuple[Path, ...], RunPlace] = {}
 
     def on_mount(self) -> None:
+        # opened on runs: the first, the others overlaid in Training and SQL; the Runs screen (its catalog
+        # read) is made only when the user goes back to it (close_run): the first screen is the run's
+        if all(is_run(p) for p in self.paths) and self.show_run(self.paths[0], self.paths[1:]):
+            return
         self.push_screen(RunsScreen(self.paths))
-        if all(is_run(p) for p in self.paths):  # several runs: the first, the others overlaid in Training and SQL
-            self.show_run(self.paths[0], self.paths[1:])
 
-    def show_run(self, path: Path, overlaid: Sequence[Path] = ()) -> None:
+    def close_run(self) -> None:
+        """Back from an open run to the Runs screen (made now if the app opened on the run)."""
+        if isinstance(self.screen, RunScreen):
+            self.screen.keep_where()
+        if isinstance(self.screen_stack[-2], RunsScreen):
+            self.pop_screen()
+        else:   # popped first, as above (the run's screen suspended and removed at once), then made
+            self.pop_screen()
+            self.push_screen(RunsScreen(self.paths))
+
+    def show_run(self, path: Path, overlaid: Sequence[Path] = ()) -> bool:
+        """Open a run's screen; False (with a message) if the run cannot be opened."""
         key = tuple(p.resolve() for p in (path, *overlaid))
         try:
             screen = RunScreen(path, overlaid, self.run_places.get(key),
                                lambda place: self.run_places.__setitem__(key, place))
         except Exception as e:  # noqa: BLE001 - a run that cannot be opened is a message, not a crash
             self.notify(f"cannot open {', '.join(map(str, [path, *overlaid]))}: {e}", severity="error", timeout=8)
-            return
+            return False
         self.push_screen(screen)
+        return True
 
     async def _saved_queries(self, screen: RunScreen) -> None:
         await screen.action_show("sql")
@@ -56,6 +69,7 @@ class TracelabApp(App[None]):
         trace.action_eval_game(direction)  # type: ignore[attr-defined]
 
     def action_help(self) -> None:
+        from tracelab.viewers.tui.help import HelpScreen   # textual's Markdown (markdown_it): when asked
         if not isinstance(self.screen, HelpScreen):
             self.push_screen(HelpScreen())
 
@@ -75,4 +89,4 @@ class TracelabApp(App[None]):
                 yield SystemCommand(f"{which} evaluation game", f"a training run's {which.lower()} evaluation game "
                                     f"in the trace (key {']' if direction > 0 else '['})",
                                     lambda d=direction: self._eval_game(screen, d))
-            yield SystemCommand("Back to runs", "close this run", self.pop_screen)
+            yield SystemCommand("Back to runs", "close this run", self.close_run)

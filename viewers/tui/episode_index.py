@@ -5,7 +5,7 @@ full scans of the change table per filter.
 
 It is read once per episode, in the background (the trace table's warm-up), through the run's sandboxed
 connection, and kept for the last episode only (a 10M-row episode takes ~170 MB). Live runs get none:
-their episodes grow, and the SQL path (paging.TraceSource) serves them."""
+their episodes grow, and the SQL path (trace_paging.TraceSource) serves them."""
 from __future__ import annotations
 
 import threading

@@ -67,6 +67,7 @@ BOARDLESS_COLUMNS = [
 ]
 ABOUT_COLUMN = Column("begin_info", "reasoning", 24, render=_about, max_width=60)
 TRAINING_COLUMNS = [Column("kind", "kind", 6), Column("train_step", "train step", 10, align="right")]
+KINDS = [("train", "train"), ("eval", "eval")]   # the kind selector's options (a training run's episodes)
 
 LIVE_REFRESH_S = 2.0
 _LENGTH = re.compile(r"^\s*(?:(\d+)?\s*\.\.\s*(\d+)?|([<>]=?|=)\s*(\d+)|(\d+))\s*$")
@@ -116,8 +117,8 @@ class EpisodesPane(Vertical):
             yield Select([], prompt="all", id="ep-outcome", compact=True)
             yield Static("length", classes="label")
             yield Input(placeholder="10..50", id="ep-length", compact=True)
-            yield Static("kind", classes="label", id="ep-kind-label")
-            yield Select([("train", "train"), ("eval", "eval")], prompt="all", id="ep-kind", compact=True)
+            # the kind selector is a training run's: mounted once the run is read (_inspected), so that the
+            # first screen of any other run has six widgets fewer to style (issue 40)
         yield LazyTable(id="ep-table")
         yield Static("", id="ep-status", classes="status")
 
@@ -136,6 +137,11 @@ class EpisodesPane(Vertical):
     @property
     def kind_select(self) -> Select[str]:
         return self.query_one("#ep-kind", Select)
+
+    @property
+    def kind(self) -> object:
+        """The kind selector's value; Select.NULL (all) on a run that is not a training (it has none)."""
+        return self.kind_select.value if self.training else Select.NULL
 
     @property
     def length_input(self) -> Input:
@@ -166,17 +172,18 @@ class EpisodesPane(Vertical):
         self.run_worker(work, thread=True, group="episodes-poll", exclusive=True, exit_on_error=False)
 
     def _inspect(self) -> None:
-        cols = self.source.arrow("SELECT * FROM episodes LIMIT 0").column_names
+        cols = self.source.columns("SELECT * FROM episodes")
         kind = "kind" if "kind" in cols else "json_extract_string(begin_info, '$.kind')"
         step = ("train_step" if "train_step" in cols
                 else "TRY_CAST(json_extract(begin_info, '$.train_step') AS BIGINT)")
         base = (f"SELECT episode, world, steps, outcome, reward, seed, ended, t_start, t_end, "
                 f"{kind} AS kind, {step} AS train_step, begin_info FROM episodes")
-        outcomes = [r["outcome"] for r in self.source.rows(
-            "SELECT DISTINCT outcome FROM episodes WHERE outcome IS NOT NULL ORDER BY outcome")]
-        training = bool(self.source.scalar(f"SELECT count(*) FROM ({base}) WHERE kind IS NOT NULL"))
-        about = bool(self.source.scalar(f"SELECT count(begin_info) FROM ({base})"))
-        self.app.call_from_thread(self._inspected, base, outcomes, training, about)
+        # the outcomes to filter by, whether it is a training (its episodes have kinds), whether its
+        # episodes say what they reasoned about: one statement (each costs its planning)
+        seen = self.source.rows(
+            "SELECT coalesce((SELECT list(DISTINCT outcome ORDER BY outcome) FROM episodes WHERE outcome IS NOT "
+            f"NULL), []) AS outcomes, count(kind) > 0 AS training, count(begin_info) > 0 AS about FROM ({base})")[0]
+        self.app.call_from_thread(self._inspected, base, seen["outcomes"], seen["training"], seen["about"])
 
     def _inspected(self, base: str, outcomes: list[str], training: bool, about: bool = False) -> None:
         self.base, self.training = base, training
@@ -186,23 +193,24 @@ class EpisodesPane(Vertical):
             self.columns = list(BOARDLESS_COLUMNS) + ([ABOUT_COLUMN] if about else [])
         self.outcomes = outcomes
         self.outcome_select.set_options([(o, o) for o in outcomes])
-        self.kind_select.display = training
-        self.query_one("#ep-kind-label").display = training
         place, self._reopen = self._reopen, None
+        if training:
+            kind = {"value": place.kind} if place is not None and place.kind in dict(KINDS) else {}
+            self.query_one("#ep-filters").mount(
+                Static("kind", classes="label", id="ep-kind-label"),
+                Select(KINDS, prompt="all", id="ep-kind", compact=True, **kind))
         if place is None:
             self.reload()
             return
         if place.outcome in outcomes:
             self.outcome_select.value = place.outcome
-        if training and place.kind is not None:
-            self.kind_select.value = place.kind
         self.length_input.value = place.length
         self.sort_key, self.sort_desc = place.sort_key, place.sort_desc
         self.reload(cursor=place.cursor)
 
     def place(self) -> EpisodesPlace:
         """Where the user is, for reopening the run later in the session."""
-        outcome, kind = self.outcome_select.value, self.kind_select.value
+        outcome, kind = self.outcome_select.value, self.kind
         return EpisodesPlace(None if outcome is Select.NULL else str(outcome),
                              None if kind is Select.NULL else str(kind),
                              self.length_input.value, self.sort_key, self.sort_desc,
@@ -213,11 +221,11 @@ class EpisodesPane(Vertical):
             return
         where = []
         outcome = self.outcome_select.value
-        self._applied = (outcome, self.kind_select.value)
+        self._applied = (outcome, self.kind)
         if outcome not in (Select.NULL, None):
             where.append("outcome = $outcome")
-        kind = self.kind_select.value
-        if self.training and kind not in (Select.NULL, None):
+        kind = self.kind
+        if kind not in (Select.NULL, None):
             where.append("kind = $kind")
         status = self.status
         try:
@@ -279,7 +287,7 @@ class EpisodesPane(Vertical):
 
     def on_select_changed(self, event: Select.Changed) -> None:
         # a value set in code (reopening the run) is already shown: its late message reloads nothing
-        if (self.outcome_select.value, self.kind_select.value) != self._applied:
+        if (self.outcome_select.value, self.kind) != self._applied:
             self.reload()
 
     def on_input_submitted(self, event: Input.Submitted) -> None:

@@ -5,8 +5,8 @@ run's life: live while written, then how it ended, then sealed.
 
 The first screen is the Episodes table (or the view a reopened run was left on): every other view's module
 is imported, and the view made, when it is first shown; the Trace view's modules, which Enter needs, in a
-thread once the Episodes table is drawn with its cursor (issue 40: the board, plots and graph are not
-loaded before)."""
+thread once the Episodes table is drawn with its cursor (issue 40: the board, plots and graph, numpy and
+pyarrow are not loaded before: the Episodes table pages DuckDB's own rows)."""
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
@@ -167,10 +167,14 @@ class RunScreen(Screen):
 
     def on_lazy_table_loaded(self, event: LazyTable.Loaded) -> None:
         """The Episodes table is drawn with its cursor: import the Trace view's modules (its board, plots
-        and graph), which Enter opens, in a thread meanwhile (mounting it waits for Enter: a view mounted
-        while the app closes would fail)."""
+        and graph, numpy, pyarrow) and read the run's board, which Enter opens, in a thread meanwhile
+        (mounting it waits for Enter: a view mounted while the app closes would fail)."""
         if event.table.id == "ep-table" and "trace" not in self.panes:
-            self.run_worker(lambda: _view_class("trace"), thread=True, group="preload", exit_on_error=False)
+            self.run_worker(self._preload_trace, thread=True, group="preload", exit_on_error=False)
+
+    def _preload_trace(self) -> None:
+        _view_class("trace")       # its modules: numpy and pyarrow with its paging, the board's drawing
+        self.source.board          # noqa: B018 - read (and kept) for the trace's first compose
 
     def _check_status(self) -> None:
         if self.is_current:
@@ -230,7 +234,7 @@ class RunScreen(Screen):
             return
         active = self.tabs.active
         if active == self.initial:
-            self.app.pop_screen()
+            self.app.close_run()  # type: ignore[attr-defined]
         else:
             await self.action_show(BACK.get(active, self.initial))
 
@@ -243,7 +247,12 @@ class RunScreen(Screen):
                         None if trace is None else trace.place())  # type: ignore[attr-defined]
 
     def on_screen_suspend(self) -> None:
-        if self.keep_place is not None:   # left (back to the Runs screen, or a dialog over it)
+        self.keep_where()   # left (back to the Runs screen, or a dialog over it)
+
+    def keep_where(self) -> None:
+        """Tell keep_place where the user is (also called by the app before it leaves the run: the
+        suspend message comes only after the Runs screen is made, and Enter there may come first)."""
+        if self.keep_place is not None:
             self.keep_place(self.place())
 
     def _sources(self) -> list[RunSource | SeveralRunsSource]:

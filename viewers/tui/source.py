@@ -8,20 +8,18 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
+from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
-
-import pyarrow as pa
 
 from tracelab.store.catalog import short_command
 from tracelab.store.kind import has_board, is_game_run
 from tracelab.store.reader import RunConnection, fetch_arrow, open_run, query_readonly, retrying, run_info
-from tracelab.store.several import SeveralRunsConnection, each_run_stream, run_names
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:   # pyarrow is loaded by the views that read Arrow, after the first screen (issue 40)
+    import pyarrow as pa
+
     from tracelab.board import Board
-
-_UNREAD: Any = object()  # RunSource.board not read yet
 
 T = TypeVar("T")
 
@@ -53,7 +51,17 @@ class LockedConnection:
         return self.call(lambda con: query_readonly(con, sql, params).to_arrow_table())
 
     def rows(self, sql: str, params: dict[str, Any] | None = None) -> list[dict[str, Any]]:
-        return self.arrow(sql, params).to_pylist()
+        """The rows as dicts, from DuckDB's own rows (no Arrow: the first screen's table pages through
+        here before pyarrow is loaded)."""
+        def read(con: RunConnection) -> list[dict[str, Any]]:
+            rel = query_readonly(con, sql, params)
+            names = rel.columns
+            return [dict(zip(names, row)) for row in rel.fetchall()]
+        return self.call(read)
+
+    def columns(self, sql: str) -> list[str]:
+        """The names of a statement's columns (bound, not run)."""
+        return self.call(lambda con: list(query_readonly(con, sql).columns))
 
     def scalar(self, sql: str, params: dict[str, Any] | None = None) -> Any:
         rows = self.call(lambda con: query_readonly(con, sql, params).fetchall())
@@ -92,26 +100,29 @@ class RunSource(LockedConnection):
         self.sealed = info.sealed_file is not None
         self.command = short_command(str(info.meta.get("command") or ""))
         super().__init__(open_run(self.path))
-        self._board: Any = _UNREAD
-        # the saved queries that read a board's labels are offered
-        self.has_board: bool = self.call(has_board)
         # a run of games (a board, or episodes with returns: a spec world's): return, outcome, game queries
         self.games: bool = self.call(is_game_run)
-        # a training run's evaluation games (kind 'eval'), of a world with a board or without: ] and [ step
-        # through them
-        self.has_eval_games: bool = self.call(lambda con: bool(con.execute(
+
+    @cached_property
+    def has_board(self) -> bool:
+        """Whether the SQL console offers the saved queries that read a board's labels."""
+        return self.call(has_board)
+
+    @cached_property
+    def has_eval_games(self) -> bool:
+        """A training run's evaluation games (kind 'eval'), of a world with a board or without: ] and [
+        step through them in the trace."""
+        return self.call(lambda con: bool(con.execute(
             "SELECT EXISTS (SELECT 1 FROM episodes WHERE kind = 'eval')").fetchall()[0][0]))
 
-    @property
+    @cached_property
     def board(self) -> Board | None:
         """The board to draw the run's episodes on (its spec's `[board]`; an older RuleSim run's from
-        war.toml: board_state.board_of_run), None for a run without one (a reasoning run, a world without a
-        [board]): the trace shows the atoms and the graph beside it instead. Read when first asked: the
-        Episodes view, the first screen, draws none."""
-        if self._board is _UNREAD:
-            from tracelab.viewers.board_state import board_of_run  # deferred: not on the first screen
-            self._board = self.call(board_of_run)
-        return self._board
+        war.toml: board_state.board_of_run), None for a run without one (a reasoning run, a world without
+        a [board]): the trace shows the atoms and the graph beside it instead. Read when the trace first
+        asks: the first screen does not load the board's modules."""
+        from tracelab.viewers.board_state import board_of_run
+        return self.call(board_of_run)
 
     @property
     def live(self) -> bool:
@@ -147,6 +158,7 @@ class SeveralRunsSource(LockedConnection):
     first column `run`; a saved query runs on each run, its rows after the run's name."""
 
     def __init__(self, paths: Sequence[Path]) -> None:
+        from tracelab.store.several import SeveralRunsConnection, run_names
         self.path = Path(paths[0])     # the first run: names the console's export
         con = SeveralRunsConnection(list(paths), run_names(paths))
         super().__init__(con)
@@ -163,6 +175,9 @@ class SeveralRunsSource(LockedConnection):
               limit: int) -> pa.Table:
         if not saved:
             return super().fetch(con, sql, params, saved, limit)
+        import pyarrow as pa
+
+        from tracelab.store.several import SeveralRunsConnection, each_run_stream
         assert isinstance(con, SeveralRunsConnection)
         schema, batches = each_run_stream(con, sql, params, limit)
         return pa.Table.from_batches(list(batches), schema=schema)

@@ -31,7 +31,8 @@ from tracelab.viewers.tui.decision import DecisionPanel
 from tracelab.viewers.tui.eval_games import EvalGame, eval_games, neighbour
 from tracelab.viewers.tui.graph_side import GraphSide
 from tracelab.viewers.tui.messages import ExplainChange
-from tracelab.viewers.tui.paging import PAGE, TraceFilter, TraceSource
+from tracelab.viewers.tui.paging import PAGE
+from tracelab.viewers.tui.trace_paging import TraceFilter, TraceSource
 from tracelab.viewers.tui.places import TracePlace
 from tracelab.viewers.tui.source import LiveReads, RunSource
 from tracelab.viewers.tui.shown_text import shown
