@@ -31,50 +31,6 @@ def world_mask(local: np.ndarray, n_words: int) -> np.ndarray:
     return mask
 
 
-def sentinel_clauses(kt: KernelTables) -> tuple[np.ndarray, np.ndarray]:
-    """Per grounding the atom and truth code of its sentinel clause (lanes._watch), or atom -1 for none.
-
-    A rule's sentinel is the position of its binding clauses whose atoms differ most across its
-    groundings, among the positions on atoms that rules set: the most specific literal, false in most of
-    them at a time (GridWar's `prevLoc(A,X)` in `dest(A,Y) <-! move(A,up), canAct(A), prevLoc(A,X), ...`:
-    one cell's of an agent's 25-100). It pays only where another clause is shared by several groundings
-    (`move(A,up)`: its change visits each of them), so a rule without one has no sentinel; nor has a
-    grounding that reads its sentinel's atom twice (its two clauses would be counted twice on a
-    recount)."""
-    n = len(kt.inst)
-    atom = np.full(n, -1, np.int32)
-    code = np.zeros(n, np.uint8)
-    n_bind = np.diff(kt.b_ptr.astype(np.int64))
-    if n == 0 or len(kt.b_atom) == 0:
-        return atom, code
-    g_of = np.repeat(np.arange(n), n_bind)
-    pos = np.arange(len(kt.b_atom)) - kt.b_ptr[g_of].astype(np.int64)
-    rule = kt.inst[g_of, K.INST_RULE].astype(np.int64)
-    width = int(n_bind.max())
-    key = rule * width + pos
-    n_keys = (int(kt.inst[:, K.INST_RULE].max()) + 1) * width
-    b_atom = kt.b_atom.astype(np.int64)
-    pairs = np.unique(key * (int(b_atom.max()) + 1) + b_atom)
-    distinct = np.bincount(pairs // (int(b_atom.max()) + 1), minlength=n_keys).reshape(-1, width)
-    is_head = np.zeros(max(int(b_atom.max()), int(kt.inst[:, K.INST_HEAD].max())) + 1, np.bool_)
-    is_head[kt.inst[:, K.INST_HEAD]] = True
-    unset = np.bincount(key, weights=~is_head[b_atom], minlength=n_keys).reshape(-1, width)
-    present = distinct > 0
-    candidate = present & (unset == 0)
-    best = np.where(candidate, distinct, -1).argmax(axis=1)
-    best_n = np.take_along_axis(distinct, best[:, None], axis=1)[:, 0]
-    fewest = np.where(present, distinct, np.iinfo(np.int64).max).min(axis=1)
-    has = candidate.any(axis=1) & (present.sum(axis=1) >= 2) & (fewest < best_n)
-    g_rule = kt.inst[:, K.INST_RULE].astype(np.int64)
-    pick = has[g_rule] & (n_bind > best[g_rule])
-    e = kt.b_ptr[:-1].astype(np.int64) + best[g_rule]
-    atom[pick] = kt.b_atom[e[pick]]
-    code[pick] = kt.b_code[e[pick]]
-    twice = np.bincount(g_of, weights=b_atom == atom[g_of], minlength=n) > 1
-    atom[twice] = -1
-    return atom, code
-
-
 class _Shard:
     """Worlds w0 .. w1-1 of the batch: their planes, grounding masks and counts, lists, schedule, scratch
     and trace rows."""
@@ -151,8 +107,7 @@ class _Shard:
         while True:
             status = L.step_lanes(
                 eng._cfg, w0, self.ctl, eng._rule_i, eng._rule_v, kt.inst, batch.kind_base, kt.wc_ptr,
-                kt.wc_code, kt.wc_gptr, kt.wg, batch.sent_atom, batch.sent_code, kt.b_ptr, kt.b_atom, kt.b_code,
-                kt.ih_ptr, kt.ih_inst, eng._fact_i, eng._fact_v,
+                kt.wc_code, kt.wc_gptr, kt.wg, kt.ih_ptr, kt.ih_inst, eng._fact_i, eng._fact_v,
                 eng._fact_order, ext_ptr, ext_i, ext_v, eng._settable, self.valid, tmask, self.st, batch.wep,
                 batch.lc, self.gs, self.alist, self.alist_n, self.apos, self.pend_due, self.pend_g,
                 self.pend_m, self.pend_n, self.tri, self.trf, self.tr_n, stats, self.err, self.slot_of,
@@ -241,7 +196,6 @@ class LaneState:
         self._snap_lc: dict[int, np.ndarray] = {}  # those snapshots' last causes [atom, world, 2]
         self.kind_base = np.zeros(K.N_KINDS, np.int64)
         self.n_ordinary = 0
-        self.sent_atom, self.sent_code = np.zeros(0, np.int32), np.zeros(0, np.uint8)
         most = max((sum(c.binds for c in r.body) for r in eng.rules), default=0)
         words = (w + 63) // 64
         n_shards = max(1, min(threads, words))
@@ -330,16 +284,8 @@ class LaneState:
         counts = np.bincount(kt.inst[:, K.INST_KIND], minlength=K.N_KINDS)
         self.kind_base = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
         self.n_ordinary = int(counts[K.KIND_ORDINARY])
-        old_atom, old_code = self.sent_atom, self.sent_code
-        self.sent_atom, self.sent_code = sentinel_clauses(kt)
-        n_old = len(old_atom)
-        moved = not (np.array_equal(old_atom, self.sent_atom[:n_old])
-                     and np.array_equal(old_code, self.sent_code[:n_old]))
         for sh in self.shards:
             sh.grow(n_atoms, kt, self.kind_base)
-            if moved:  # a grounding's sentinel changed: its stale counts were left by another
-                L.fill_counts(0, sh.valid, sh.st, kt.b_ptr, kt.b_atom, kt.b_code, sh.gs, kt.inst, sh.alist,
-                              sh.alist_n, sh.apos, self.kind_base)
 
     # ---- stepping ----
 

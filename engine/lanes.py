@@ -282,54 +282,14 @@ def _changes(g, k, st, inst, rule_i, rule_v):
 
 
 @lanes_jit
-def _recount(gs, g, k, m, st, b_ptr, b_atom, b_code):
-    """Count grounding g's unsatisfied clauses again, from every clause, in the worlds m of word k (its
-    sentinel clause just came to hold there: the counts it left alone while it did not are stale)."""
-    for p in range(1, gs.shape[2]):
-        gs[g, k, p] &= ~m
-    for e in range(b_ptr[g], b_ptr[g + 1]):
-        x = b_atom[e]
-        un = m & ~_holds(b_code[e], st[x, P_T, k], st[x, P_F, k])
-        if un != ZERO:
-            _count_add(gs, g, k, un)
-
-
-@lanes_jit
-def _sentinel_flips(g, a, code, n_flip, wl, ws, st, sent_atom, sent_code):
-    """Whether grounding g's count must change for the clause flips of a class (atom a, truth code `code`)
-    in ws[W_UP/W_DOWN] of the words wl[:n_flip]: always, unless g has a sentinel clause (sent_atom[g]),
-    this is not it, and it holds in none of the flipped worlds (there g's count is left stale)."""
-    s = sent_atom[g]
-    if s < 0 or (s == a and sent_code[g] == code):
-        return True
-    sc = sent_code[g]
-    for j in range(n_flip):
-        k = wl[j]
-        if (ws[W_UP, k] | ws[W_DOWN, k]) & _holds(sc, st[s, P_T, k], st[s, P_F, k]):
-            return True
-    return False
-
-
-@lanes_jit
-def _watch(a, skip, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, sent_atom, sent_code, b_ptr, b_atom, b_code,
-           gs, inst, rule_i, rule_v, alist, alist_n, apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap, stats):
+def _watch(a, skip, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs, inst, rule_i, rule_v, alist,
+           alist_n, apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap, stats):
     """Atom a changed in the worlds ws[W_C] (its old planes in ws[W_OLDT], ws[W_OLDF]; st holds the new):
     update the counts and active masks of the groundings that read it, keep the active-anywhere lists, and make the
     immediate groundings that became active somewhere, or that set a there (but `skip`), candidates.
-    Only the words where a clause flipped are visited (wl lists them). Returns the heap size.
-
-    Sentinels (watched literals, as SAT solvers keep them): a grounding with a sentinel clause
-    (sent_atom[g] >= 0, backend_lanes.sentinel_clauses) has exact counts only in the worlds where that
-    clause holds. Elsewhere it is inactive whatever its other clauses do, so their flips leave its count
-    alone there (stale, and at least 1: the sentinel's own clause is counted), and where every flipped
-    world is such a world its words of gs are not read at all: a move(A,D) change no longer updates every
-    cell's grounding of agent A, only those of the cells A stands on. When the sentinel comes to hold,
-    the grounding is counted again from all its clauses (_recount). Each world's counts stay consistent
-    with its own planes, so snapshots and restores of single worlds keep working."""
+    Only the words where a clause flipped are visited (wl lists them). Returns the heap size."""
     nw = valid.shape[0]
     visits = 0
-    stride = np.int64(gs.shape[1] * gs.shape[2])  # one grounding's words
-    st_stride = np.int64(st.shape[1] * st.shape[2])  # one atom's words
     for c in range(wc_ptr[a], wc_ptr[a + 1]):
         code = wc_code[c]
         n_flip = 0
@@ -349,25 +309,16 @@ def _watch(a, skip, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, sent_atom, 
         if n_flip == 0:
             continue
         e1 = wc_gptr[c + 1]
+        visits += e1 - wc_gptr[c]
+        stride = np.int64(gs.shape[1] * gs.shape[2])  # one grounding's words
         first_word = wl[0] * gs.shape[2]
         last_word = wl[n_flip - 1] * gs.shape[2]
         for e in range(wc_gptr[c], e1):
             if e + PREFETCH_AHEAD < e1:
-                ga = wg[e + PREFETCH_AHEAD]
-                sa = sent_atom[ga]
-                if sa >= 0 and sa != a:  # its sentinel's planes decide whether its counts are read
-                    _prefetch(st, np.int64(sa) * st_stride + wl[0])
-                else:
-                    ahead = np.int64(ga) * stride
-                    _prefetch(gs, ahead + first_word)
-                    _prefetch(gs, ahead + last_word)
+                ahead = np.int64(wg[e + PREFETCH_AHEAD]) * stride
+                _prefetch(gs, ahead + first_word)
+                _prefetch(gs, ahead + last_word)
             g = wg[e]
-            if not _sentinel_flips(g, a, code, n_flip, wl, ws, st, sent_atom, sent_code):
-                continue
-            visits += 1
-            s = sent_atom[g]
-            own = s == a and sent_code[g] == code  # this class is g's sentinel clause
-            masked = s >= 0 and not own
             emptied = False  # a word of the mask went to zero: is the grounding still active anywhere?
             filled = False  # a word went from zero: it is (now) active somewhere
             new_bits = False
@@ -375,18 +326,11 @@ def _watch(a, skip, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, sent_atom, 
                 k = wl[j]
                 old = gs[g, k, 0]
                 d = ws[W_DOWN, k]
-                u = ws[W_UP, k]
-                if masked:  # only the worlds where the sentinel holds keep exact counts
-                    live = _holds(sent_code[g], st[s, P_T, k], st[s, P_F, k])
-                    d &= live
-                    u &= live
                 if d != ZERO:
                     _count_add(gs, g, k, d)
+                u = ws[W_UP, k]
                 if u != ZERO:
-                    if own:
-                        _recount(gs, g, k, u, st, b_ptr, b_atom, b_code)
-                    else:
-                        _count_sub(gs, g, k, u)
+                    _count_sub(gs, g, k, u)
                     new = _count_zero(gs, g, k) & valid[k]
                 else:  # counts only went up: the worlds of d are inactive now, the others as they were
                     new = old & ~d
@@ -680,9 +624,8 @@ def _apply_group(w0, s, a, t, pass_no, policy, valid, st, wep, lc, tmask, tri, t
 
 @lanes_jit
 def _apply_immediate(w0, g, t, pass_no, policy, max_immediate, rule_i, rule_v, inst, valid, st, wep, lc, tmask,
-                     tri, trf, tr_n, stats, err, n_imm, ws, wl, wc_ptr, wc_code, wc_gptr, wg,
-                     sent_atom, sent_code, b_ptr, b_atom, b_code, gs, alist, alist_n, apos, kind_base, ih_ptr,
-                     ih_inst, heap, hn, in_heap):
+                     tri, trf, tr_n, stats, err, n_imm, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs,
+                      alist, alist_n, apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap):
     """Apply immediate grounding g in every world where it is active and would change its head.
     Returns (status, heap size)."""
     nw = valid.shape[0]
@@ -797,8 +740,7 @@ def _apply_immediate(w0, g, t, pass_no, policy, max_immediate, rule_i, rule_v, i
             else:
                 _cause(lc, wep, a, w0 + w, CAUSE_RULE, r)
                 _row(w0, w, t, pass_no, a, ov, nv, CAUSE_RULE, r, g, 1, tmask, tri, trf, tr_n)
-    hn = _watch(a, -1 if any_inc else g, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg,
-                sent_atom, sent_code, b_ptr, b_atom, b_code, gs,
+    hn = _watch(a, -1 if any_inc else g, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs,
                 inst, rule_i, rule_v, alist, alist_n, apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap, stats)
     return STATUS_OK, hn
 
@@ -833,8 +775,8 @@ def _reset_atom(w0, a, t, valid, st, wep, lc, tmask, tri, trf, tr_n, stats, ws):
 
 
 @lanes_jit
-def step_lanes(cfg, w0, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, wc_gptr, wg, sent_atom,
-               sent_code, b_ptr, b_atom, b_code, ih_ptr, ih_inst, fact_i, fact_v, fact_order, ext_ptr, ext_i, ext_v, settable, valid, tmask,
+def step_lanes(cfg, w0, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, wc_gptr, wg,
+               ih_ptr, ih_inst, fact_i, fact_v, fact_order, ext_ptr, ext_i, ext_v, settable, valid, tmask,
                st, wep, lc, gs, alist, alist_n, apos, pend_due, pend_g, pend_m, pend_n,
                tri, trf, tr_n, stats, err, slot_of, touched, n_touched, gm, slot_src, src_i, src_m, src_n,
                heap, hn_box, in_heap, n_imm, pw, ws, wl):
@@ -874,8 +816,7 @@ def step_lanes(cfg, w0, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, w
                     hn_box[0] = hn
                     return STATUS_TRACE_ROOM
                 if _reset_atom(w0, a, t, valid, st, wep, lc, tmask, tri, trf, tr_n, stats, ws):
-                    hn = _watch(a, -1, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg,
-                                sent_atom, sent_code, b_ptr, b_atom, b_code, gs,
+                    hn = _watch(a, -1, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs,
                                 inst, rule_i, rule_v, alist, alist_n, apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap,
                                 stats)
             ctl[C_PHASE] = PH_PASS0
@@ -937,8 +878,7 @@ def step_lanes(cfg, w0, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, w
                     if ws[W_C, k] != ZERO:
                         any_c = True
                 if any_c:
-                    hn = _watch(a, -1, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg,
-                                sent_atom, sent_code, b_ptr, b_atom, b_code, gs,
+                    hn = _watch(a, -1, st, valid, ws, wl, wc_ptr, wc_code, wc_gptr, wg, gs,
                                 inst, rule_i, rule_v, alist, alist_n, apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap,
                                 stats)
             n_touched[0] = 0
@@ -998,8 +938,7 @@ def step_lanes(cfg, w0, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, w
                     _prefetch(gs, (heap[0] & HEAP_MASK) * stride)
                 status, hn = _apply_immediate(w0, g, t, pass_no, policy, max_immediate, rule_i, rule_v, inst, valid,
                                               st, wep, lc, tmask, tri, trf, tr_n, stats, err, n_imm, ws, wl, wc_ptr,
-                                              wc_code, wc_gptr, wg, sent_atom, sent_code, b_ptr, b_atom, b_code,
-                                              gs, alist, alist_n,
+                                              wc_code, wc_gptr, wg, gs, alist, alist_n,
                                               apos, kind_base, ih_ptr, ih_inst, heap, hn, in_heap)
                 if status != STATUS_OK:
                     return status

@@ -182,38 +182,3 @@ def test_abort_after_a_restore_names_the_snapshots_cause() -> None:
         messages.append(str(e.value))
     assert messages[0] == messages[1]
     assert "(world 1)" in messages[1] and "came from fact start (abort.rules:4" in messages[1], messages[1]
-
-
-# An agent on a ring of ten cells; go(a) moves it on. `step` and `leave` are grounded per cell (20 groundings
-# read go(a)), and in each world was(a,X) holds of one cell only: their sentinel clause (lanes._watch).
-RING = "%mode override\nstart: at(a, c0) @0..0\n" \
-    "snap: was(A, X) <-1 at(A, X)\n" \
-    "unsnap: was(A, X):[0,0] <-1 was(A, X), at(A, X):[0,0]\n" \
-    "step: at(A, Y) <-! go(A), was(A, X), next(X, Y)\n" \
-    "leave: at(A, X):[0,0] <-! go(A), was(A, X), next(X, Y)\n" + \
-    "".join(f"next(c{i}, c{(i + 1) % 10}) static\n" for i in range(10))
-
-
-def test_a_change_visits_only_the_groundings_whose_sentinel_holds_where_it_changed() -> None:
-    """go(a) flips in two worlds a step (on in one, off in the one before): only the cells the agent stands
-    on there have their counts updated, not all 20 groundings that read go(a), and every step is still the
-    counting kernel's (the stale counts of the other cells are counted again when the agent comes)."""
-    worlds, steps = 130, 24
-    a = Engine(parse_program(RING), worlds=worlds, kernel="counting", trace=True)
-    b = Engine(parse_program(RING), worlds=worlds, kernel="lanes", trace=True)
-    rng = np.random.default_rng(5)
-    on = np.zeros(0, np.int64)
-    visits = []
-    for t in range(steps):
-        off, on = on, rng.choice(worlds, 2, replace=False)
-        for eng in (a, b):
-            go = eng.atom("go", "a")
-            eng.add_facts(np.full(len(off), go), 0.0, 0.0, off)
-            eng.add_facts(np.full(len(on), go), 1.0, 1.0, on)
-        before = int(b.stats["watch_visits"].sum())
-        for eng in (a, b):
-            eng.step()
-        visits.append(int(b.stats["watch_visits"].sum()) - before)
-        assert_same(a, b, t)
-    # the steps after the first, when the agent has left c0 in some worlds: fewer than go(a)'s 20 readers
-    assert max(visits[2:]) < 20, visits
