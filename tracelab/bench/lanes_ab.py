@@ -4,7 +4,7 @@ workload (tracelab.bench.sims.SpecLoop over the war game's spec): `python -m tra
 
 The other file is compiled here without numba's disk cache (nothing is written beside it) and has to keep
 this tree's signatures (backend_lanes calls it as its own), but for step_lanes: where its parameters differ,
-it is given this tree's arguments by name (a tree before the sentinels takes no sent_atom, b_ptr, ...).
+it is given this tree's arguments by name (one that takes more tables than this tree has fails at its call).
 Each kernel steps its own batch (the same spec and seeds); blocks alternate A, B / B, A and are timed by
 this thread's CPU time. Prints one JSON line per case: the median CPU µs per world-step of each and the
 median of the paired ratios other / this (above 1: this tree is faster)."""
@@ -40,7 +40,8 @@ def load_uncached(path: Path, name: str) -> ModuleType:
 
 def by_name(other: ModuleType, mine: ModuleType) -> Any:
     """`other`, its step_lanes called with this tree's arguments picked by its own parameter names (an
-    argument it does not know is left out; one it needs that this tree lacks raises)."""
+    argument it does not know is left out; one it needs that this tree lacks raises a KeyError): a kernel
+    that takes fewer tables (main's, against a branch's new ones) runs on this tree's backend."""
     have = list(inspect.signature(mine.step_lanes.py_func).parameters)
     want = list(inspect.signature(other.step_lanes.py_func).parameters)
     if have == want:
