@@ -90,7 +90,8 @@ def run(args: argparse.Namespace) -> int:
     run_dir, same_run, tensorboard = where_to_train(args, state is not None,
                                                     source.short_name if scenario is None else scenario.name)
     return train_env_into(cfg, source, run_dir, encoder.describe(), tensorboard=tensorboard, state=state,
-                      resumed_from=args.resume, same_run=same_run, scenario=scenario, eval_source=eval_source)
+                      resumed_from=args.resume, same_run=same_run, scenario=scenario, eval_source=eval_source,
+                      spec=spec)
 
 
 def _run_config(run: Path) -> dict[str, Any]:
@@ -130,15 +131,16 @@ def _resumed(args: argparse.Namespace, given: dict[str, Any], source: Any, limit
 def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at: int | None = None,
                tensorboard: Path | None = None, state: dict[str, Any] | None = None,
                resumed_from: str | None = None, same_run: bool = False, scenario: Any = None,
-               eval_source: Any = None) -> int:
+               eval_source: Any = None, spec: Any = None) -> int:
     """Train on `source` into a new run at `run_dir` (from a checkpoint `state` if given; `same_run`: the
     checkpoint's own run, `run_dir`, continues); returns the exit status. `stop_at`: stop there as Ctrl-C
     would (tests). `scenario`: the war game's scenario `source` plays (the run names it and its settings),
     `eval_source` the env its evaluations play (the opponent at --eval-p); `tensorboard`: a log directory
-    that also receives the metrics (tracelab.train.tensorboard)."""
+    that also receives the metrics (tracelab.train.tensorboard); `spec`: `source`'s WorldSpec if loaded
+    already (probe_env's), which the run's meta reads instead of parsing the spec again."""
 
     meta = env_run_meta(cfg, source, " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]),
-                        None if state is None else {"run": resumed_from, "step": state["step"]}, scenario)
+                        None if state is None else {"run": resumed_from, "step": state["step"]}, scenario, spec)
     if not meta["command"].startswith("tracelab train"):  # called from Python: say what it stands for
         meta["command"] = "tracelab train (python: tracelab.commands.train.train_env_into)"
     if eval_source is not None:  # the env of the traced evaluation games (the opponent at --eval-p)
