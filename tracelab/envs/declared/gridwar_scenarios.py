@@ -106,14 +106,6 @@ def scenario_source(scenario: Scenario, opponent_p: float | None = None,
         raise UserError(str(e)) from None
 
 
-def training_sources(scenario: Scenario, opponent_p: float, eval_p: float,
-                     stack_previous: bool) -> tuple[EnvSource, EnvSource]:
-    """(the env `scenario` trains on, the one its evaluations play: the opponent at `eval_p`), as the game's
-    ids and params (scenario_env: a UserError naming what its spec cannot play)."""
-    source = EnvSource(*scenario_env(scenario, opponent_p, stack_previous))
-    return source, source.with_args(p_toward=eval_p)
-
-
 @dataclass(frozen=True)
 class ScenarioTraining:
     """`train --scenario`: the scenario a TrainConfig names (its scenario, agents, opponent and evaluation
@@ -124,8 +116,16 @@ class ScenarioTraining:
 
     @classmethod
     def of(cls, cfg: Any) -> ScenarioTraining:
-        scenario = load_scenario_arg(cfg.scenario, cfg.agents)
-        return cls(scenario, *training_sources(scenario, cfg.opponent_p, cfg.eval_p, cfg.non_markov))
+        """The scenario `cfg` names (--scenario, --agents), trained as `cfg` says."""
+        return cls.for_scenario(load_scenario_arg(cfg.scenario, cfg.agents), cfg)
+
+    @classmethod
+    def for_scenario(cls, scenario: Scenario, cfg: Any) -> ScenarioTraining:
+        """`scenario` (an experiment's arm: its own rewards) trained as `cfg` says: the game's id and params
+        (scenario_env: a UserError naming what its spec cannot play), evaluated against the opponent at
+        --eval-p."""
+        source = EnvSource(*scenario_env(scenario, cfg.opponent_p, cfg.non_markov))
+        return cls(scenario, source, source.with_args(p_toward=cfg.eval_p))
 
     def describe(self, cfg: Any) -> str:
         return f"{self.scenario.name} ({'non-Markov' if cfg.non_markov else 'Markov'}, opponent p " \
