@@ -140,6 +140,7 @@ def test_a_run_reopened_in_the_session_opens_where_it_was_left() -> None:
         trace = pane.table
         await wait_for(pilot, lambda: active_view(app) == "trace" and pane.filter is not None and loaded(trace))
         assert pane.filter.episode == chosen and pane.filter.label == "atLoc" and not pane.hide_static
+        assert trace.error is None and trace.count > 0, (trace.error, trace.count, pane.filter)
         assert trace.cursor_row["seq"] == left["seq"] and trace.cursor == 3
         assert pane.query_one("#tr-label").value == "atLoc"
     run_app([ROOT / "sample_runs"], body, size=(100, 30))
