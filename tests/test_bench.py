@@ -236,6 +236,16 @@ def test_bench_cli_start_quick(capsys: pytest.CaptureFixture) -> None:
         assert s["met"] == (s["to_first_step_cpu_s"]["median"] <= s["goal_s"] == 1.0)
 
 
+def test_bench_cli_tui_first_screen_quick(capsys: pytest.CaptureFixture) -> None:
+    """The TUI's first screen (issue 40's row) in the same bench as the reading commands: CPU s against 1 s."""
+    r = bench_json(capsys, "cli", "--only", "tui")
+    t = r["tui_first_screen"]
+    positive(t["cpu_s"])
+    positive(t["wall_s"])
+    assert t["run"].endswith("advanced") and t["met"] == (t["cpu_s"]["median"] <= t["goal_s"] == 1.0)
+    assert r["start"] == [] and [c["name"] for c in r["commands"]] == ["floor"]
+
+
 def test_bench_first_run_phase_and_the_figures_it_writes(capsys: pytest.CaptureFixture, tmp_path: Path,
                                                          monkeypatch: pytest.MonkeyPatch) -> None:
     """A phase from empty caches and again warm, in fresh processes; the table the notices quote."""

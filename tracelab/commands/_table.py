@@ -314,7 +314,7 @@ def _bench(p: argparse.ArgumentParser) -> None:
         if name == "cli":
             q.add_argument("--only", action="append", default=None, metavar="COMMAND",
                            help="time this command only, beside the floor (repeatable; e.g. sql, compare; start: "
-                                "eval's and train's CPU before their first step)")
+                                "eval's and train's CPU before their first step; tui: the TUI's first screen)")
         if name == "pyreason":
             q.add_argument("--pyreason-python", metavar="PYTHON", default=None,
                            help="the interpreter of a PyReason install (e.g. a venv's bin/python); without "
