@@ -66,17 +66,17 @@ class ActionExplanation:
 # The decision, the run's action names, the observation it read (recorded after the step before), the
 # observation's names, the reward terms and the reward: one statement (each costs its own planning, ~2 ms of CPU
 # on a cold process), on the raw tables (the `decisions` and `rewards` views cost their own binding and a join
-# each: ~5 ms of a cold `why --action`; the names are matched here as the `decisions` view matches them)
+# each: ~5 ms of a cold `why --action`; the names are matched here as the `decisions` view matches them); lists,
+# not scalar subqueries (whose check for a second row costs more planning)
 _DECISION_SQL = """
 SELECT action, output, explored, epsilon, state_value, "values", mask, terms, term_values,
        (SELECT list((action, name, position)) FROM raw.action_names),
-       (SELECT obs FROM raw.steps WHERE episode = $episode AND step = $step - 1 AND agent = $agent LIMIT 1),
+       (SELECT list(obs) FROM raw.steps WHERE episode = $episode AND step = $step - 1 AND agent = $agent),
        (SELECT list((position, name, divisor, size, labels) ORDER BY position, divisor DESC)
         FROM raw.observation_names),
        (SELECT list((term, value) ORDER BY abs(value) DESC, term)
         FROM raw.reward_terms WHERE episode = $episode AND step = $step AND agent = $agent),
-       (SELECT list(reward) FROM (SELECT reward FROM raw.steps WHERE episode = $episode AND step = $step
-                                  AND agent = $agent LIMIT 1))
+       (SELECT list(reward) FROM raw.steps WHERE episode = $episode AND step = $step AND agent = $agent)
 FROM raw.decisions WHERE episode = $episode AND step = $step AND agent = $agent"""
 
 
@@ -99,7 +99,7 @@ def explain_action(con: RunConnection, episode: int, agent: str, step: int) -> A
                      for k, t in enumerate(term_names)}
     if step > 1:
         e.observed_at = step - 1
-        e.features = _features(obs, parts or [])
+        e.features = _features(obs[0] if obs else None, parts or [])
     e.terms = [(str(t), float(v)) for t, v in terms or []]
     e.reward = float(reward[0]) if reward else None
     return e
