@@ -88,7 +88,8 @@ class _no_collection_while_starting:
     there found little to free and cost ~15 ms of CPU of `why --action` (DuckDB's own start, the reading
     commands' floor, pays ~10 ms of them). Then what the imports made is moved out of the collector's
     generations (gc.freeze: else the first collection after would scan all of it at once) and the collector
-    is back on (if it was) for the command's own work; main() puts them back when the command ends."""
+    is back on (if it was) for the command's own work (main() puts them back after a command run in a
+    caller's process)."""
 
     def __enter__(self) -> None:
         self.was_enabled = gc.isenabled()
@@ -101,11 +102,17 @@ class _no_collection_while_starting:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The `tracelab` command (argv None: the process's own command line), or the command `argv` run in the
+    caller's process."""
     with escaped_output():  # strings from runs, specs and rule files reach the terminal escaped
         try:
             return _main(argv)
         finally:
-            gc.unfreeze()   # what the start froze can be collected again (a caller's own objects among it)
+            # The process that runs the command line exits with the start's objects frozen: the interpreter's
+            # collection at exit does not traverse them (~10 ms of CPU: DuckDB's own start pays it). A caller
+            # running a command in its own process (the tests) gets its objects back into the collector's care.
+            if argv is not None:
+                gc.unfreeze()
 
 
 def _main(argv: list[str] | None) -> int:
