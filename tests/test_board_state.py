@@ -15,7 +15,8 @@ from tracelab.envs.declared.spec import SpecError, load_spec
 from tracelab.game.refsim import RefSim
 from tracelab.game.scenario import scenario_from_dict
 from tracelab.store.reader import open_run
-from tracelab.viewers.board_state import WAR_SPEC, BoardTrack, board_of_run
+from tracelab.envs.declared.gridwar import WAR_SPEC
+from tracelab.viewers.board_state import BoardTrack, board_of_run
 
 SAMPLES = Path(__file__).resolve().parent.parent / "sample_runs"
 RULESIM = Path(__file__).resolve().parent / "data" / "rulesim"   # runs RuleSim wrote (the sample runs until 2026-11-29)
@@ -107,8 +108,9 @@ def test_a_training_runs_evaluation_game_has_its_agents_on_the_board() -> None:
 def test_a_scenario_too_big_or_not_a_grid_gives_no_board() -> None:
     """A RuleSim run's config is a stranger's: a side past the recorded limit is no board (drawn as the
     run's graph), not a grid built to its size."""
-    from tracelab.viewers.board_state import gridwar_board
+    from tracelab.world_extras import old_run_board
     text = 'width = {w}\nheight = 8\nred_base = [0, 0]\nblue_base = [1, 1]\n'
-    assert gridwar_board({"scenario": text.format(w=8)}) is not None
+    assert old_run_board("gridworld", {"scenario": text.format(w=8)}) is not None
+    assert old_run_board("another", {"scenario": text.format(w=8)}) is None  # not a RuleSim run's board
     for w in (100_000, 0, -3):
-        assert gridwar_board({"scenario": text.format(w=w)}) is None
+        assert old_run_board("gridworld", {"scenario": text.format(w=w)}) is None

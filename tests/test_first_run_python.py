@@ -109,3 +109,23 @@ def test_the_play_switches_to_the_compiled_kernels_once_the_background_compile_e
         assert kernel.step_worlds is watched[0]  # the dispatchers are back
     finally:
         kernels.restore()
+
+
+def test_the_background_compiles_output_goes_to_a_log_that_a_failure_names(tmp_path: Path,
+                                                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    """Its output went to /dev/null, so an error there was lost: it goes to a log in tracelab's cache folder,
+    removed when the compile succeeds, named by the last line when it failed."""
+    from tracelab.commands._cold_start import LOG_FOLDER, start_compile
+    monkeypatch.setenv("TRACELAB_CACHE_DIR", str(tmp_path / "tl"))
+    missing = tmp_path / "missing.toml"
+    job, log = start_compile(["play", "--env", str(missing)])
+    assert job.wait(timeout=300) != 0
+    assert log is not None and log.parent == tmp_path / "tl" / LOG_FOLDER
+    said = log.read_text()
+    assert "tracelab: error:" in said and "missing.toml" in said, said
+    line = ColdStart(PythonKernels(), job, (), log).final_line()
+    assert "background compile of the kernels failed" in line and str(log) in line, line
+
+    job, log = start_compile(["play", "--env", SPEC, "--no-trace"])  # the suite's cache holds its kernels
+    assert job.wait(timeout=300) == 0
+    assert log is not None and not log.exists()  # nothing to read: removed

@@ -132,7 +132,7 @@ def test_the_sb3_evaluations_of_a_gridwar_id_play_the_declared_env_against_eval_
     from tracelab.train.external_eval import DeclaredTarget, EvalSettings, eval_target
     target = eval_target(IDS["base"], {"map": "open"})
     assert isinstance(target, DeclaredTarget)
-    evaluator = target.evaluator(None, lambda: 0, EvalSettings(games=2, traced=0, envs=2, opponent_p=0.1))
+    evaluator = target.evaluator(None, lambda: 0, EvalSettings(games=2, traced=0, envs=2, level=0.1))
     try:
         assert evaluator.env.world_spec.params["p_toward"] == 0.1 and evaluator.env.world_spec.params["map"] == "open"
         assert target.outcome({"outcome": "win"}, True, False) == "win"

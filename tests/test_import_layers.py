@@ -135,7 +135,7 @@ def _tree_graph() -> dict[str, set[str]]:
 
 def test_tracelab_modules_import_each_other_without_a_circle() -> None:
     graph = _tree_graph()
-    assert len(graph) > 250 and "tracelab.viewers.tui.app" in graph["tracelab.commands.tui"]  # the reading found them
+    assert len(graph) > 250 and "tracelab.viewers.tui.app" in graph["tracelab.viewers.tui"]  # the reading found them
     assert "tracelab.train.experiments.run" in graph["tracelab.train.experiments.report"]
     assert _a_cycle(graph) is None, " -> ".join(_a_cycle(graph) or [])
 
@@ -165,3 +165,46 @@ def test_only_the_war_games_registration_and_refsim_name_it() -> None:
                    for p in (ROOT / tree).rglob("*.py") if "GridWar" in p.read_text())
     assert "tracelab/envs/declared/gridwar.py" in named  # the reading found the registration
     assert [f for f in named if not f.startswith(("tracelab/envs/declared/gridwar", "tracelab/game/"))] == []
+
+
+# the war game's notions a generic module must leave to its registration: its opponent's p, names of the game or
+# of RuleSim (its earlier simulator, whose files the registration reads), and the modules of its scenarios, of
+# RuleSim's files and of RefSim's game (tracelab.game: the scenario dataclass among them)
+WAR_NOTIONS = {"opponent_p", "p_toward"}
+WAR_WORDS = ("gridwar", "rulesim")
+WAR_MODULES = ("tracelab.envs.declared.gridwar_scenarios", "tracelab.envs.declared.gridwar_runs", "tracelab.game")
+# where they may be named: the registration itself (envs/__init__.py registers every world's ids) and RefSim's
+# game; the commands and the sweep file's reader
+# (their flags: --scenario, --opponent-p); the benches and the method's experiments, which measure and train
+# the war game by name. Left to do: TrainConfig's scenario fields (the train flags and the checkpoints' config
+# hold them).
+MAY_NAME_THE_WAR_GAME = ("tracelab/envs/declared/gridwar", "tracelab/game/", "tracelab/envs/__init__.py",
+                         "tracelab/commands/",
+                         "tracelab/train/sweep_spec.py", "tracelab/bench/", "tracelab/train/experiments/",
+                         "tracelab/train/config.py")
+
+
+def _war_game_notions(path: Path) -> list[str]:
+    """`line: what` for each use of WAR_NOTIONS or a name holding WAR_WORDS (a variable, attribute, parameter,
+    keyword, function or class; not in a string) and each import of WAR_MODULES in the file, at any depth."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        names = [node.id] if isinstance(node, ast.Name) else [node.attr] if isinstance(node, ast.Attribute) else \
+            [node.arg] if isinstance(node, (ast.arg, ast.keyword)) and node.arg else []
+        if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+            names.append(node.name)
+        found += [f"{node.lineno}: {n}" for n in names if n in WAR_NOTIONS or any(w in n.lower() for w in WAR_WORDS)]
+        modules = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+            [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level else []
+        found += [f"{node.lineno}: imports {m}" for m in modules if m.startswith(WAR_MODULES)]
+    return found
+
+
+def test_the_generic_modules_leave_the_war_games_notions_to_its_registration() -> None:
+    """Issue 38: checkpoints, evaluations, reward terms, sweeps and the rest ask a world's registration
+    (tracelab/world_extras.py) instead of naming the war game's opponent, scenarios or RuleSim's files."""
+    assert _war_game_notions(ROOT / "tracelab" / "envs" / "declared" / "gridwar_scenarios.py")  # the reading finds them
+    found = [f"{p.relative_to(ROOT).as_posix()}:{use}" for tree in ("tracelab", "viewers", "engine")
+             for p in sorted((ROOT / tree).rglob("*.py"))
+             if not p.relative_to(ROOT).as_posix().startswith(MAY_NAME_THE_WAR_GAME) for use in _war_game_notions(p)]
+    assert found == []

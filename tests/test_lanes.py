@@ -182,3 +182,19 @@ def test_abort_after_a_restore_names_the_snapshots_cause() -> None:
         messages.append(str(e.value))
     assert messages[0] == messages[1]
     assert "(world 1)" in messages[1] and "came from fact start (abort.rules:4" in messages[1], messages[1]
+
+
+def test_lanes_ab_calls_another_trees_kernel_with_the_arguments_it_names() -> None:
+    """bench.lanes_ab measures a branch's kernel against main's, whose step_lanes may take fewer tables."""
+    import types
+
+    from tracelab.bench.lanes_ab import by_name
+
+    def kernel(fn: types.FunctionType) -> types.SimpleNamespace:
+        fn.py_func = fn  # type: ignore[attr-defined]  (as a numba dispatcher has it)
+        return types.SimpleNamespace(step_lanes=fn)
+
+    mine = kernel(lambda cfg, w0, sent_atom, ctl: None)
+    other = kernel(lambda cfg, w0, ctl: (cfg, w0, ctl))
+    assert by_name(other, mine).step_lanes(1, 2, "sentinels", 3) == (1, 2, 3)
+    assert by_name(mine, mine) is mine

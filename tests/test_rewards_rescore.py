@@ -228,3 +228,16 @@ def test_a_term_not_counted_where_it_is_worth_0_cannot_be_rescored() -> None:
     with pytest.raises(UserError, match="does not count its occurrences where it is worth 0"):
         parse_sets(["step=-1"], [Term("step", 0.0, counted_at_zero=False)])
     assert parse_sets(["hit=5"], [Term("hit", 0.0)]) == {"hit": (0.0, 5.0)}
+
+
+def test_a_rulesim_run_is_rescored_with_its_scenarios_rewards(capsys: pytest.CaptureFixture) -> None:
+    """A run RuleSim's tracer wrote (tests/data/rulesim/base: no spec in it) re-scores its terms from its
+    scenario's [rewards], as the war game's registration reads them (world_extras.old_run_terms)."""
+    run = Path(__file__).parent / "data" / "rulesim" / "base"
+    assert main(["rewards", str(run), "--json", "--set", "step=-1", "--set", "win=100"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    assert got["set"] == {"step": {"old": -2.0, "new": -1.0}, "win": {"old": 250.0, "new": 100.0}}
+    assert any(n.startswith("step: the step term is not paid") for n in got["notes"])
+    for r in got["episodes"]:
+        by = r["by_term"]
+        assert r["rescored"] == pytest.approx(r["return"] - by.get("step", 0) / 2 - 150 * (by.get("win", 0) > 0))

@@ -184,9 +184,10 @@ def test_training_counts_wins_and_show_and_compare_list_the_worlds_params(
 def test_a_sweep_trains_the_world_with_its_trials_reading_its_evaluations(world: Path) -> None:
     """`tracelab sweep --set env=SPEC` (was: "TrainConfig has no field 'env'"): the spec names the world and
     defaults to a metric every env's evaluation writes; each trial is a `train --env` whose evaluations
-    reach the sink Tune reads. Ray itself is left out (tests/test_ray.py runs Tune)."""
+    reach the sink Tune reads (train_seed, as a trial calls it). Ray itself is left out (tests/test_ray.py
+    runs Tune)."""
     from tracelab.envs.declared.env_source import EnvSource
-    from tracelab.train.sweep import train_env_seed
+    from tracelab.train.experiments.runner import train_seed
     from tracelab.train.sweep_spec import SweepSpecError, build_spec
 
     spec = build_spec(sets=[f"env={world / 'trap.toml'}", "steps=100", "eval_every=50", "eval_games=4",
@@ -212,8 +213,8 @@ def test_a_sweep_trains_the_world_with_its_trials_reading_its_evaluations(world:
     sink, started = Sink(), []
     run = world / "runs" / "trial"
     cfg = spec.base_config()
-    assert train_env_seed(cfg, EnvSource.given(spec.env, {}), run, "tracelab sweep (test)", [sink],
-                          started.append) == "finished"
+    assert train_seed(cfg, EnvSource.given(spec.env, {}), run, "tracelab sweep (test)", (), cfg.eval_games, [sink],
+                      started.append).status == "finished"
     assert len(started) == 1
     evaluations = [(step, v["eval/win_rate"]) for step, v in sink.rows if "eval/win_rate" in v]
     assert [s for s, _ in evaluations][-1] >= 100 and all(0 <= w <= 1 for _, w in evaluations)

@@ -18,7 +18,8 @@ from tracelab.envs.declared.gridwar import scenario_env
 from tracelab.game.scenario import Rewards, builtin_scenario
 from tracelab.store.meta import current_meta
 from tracelab.train.config import TrainConfig
-from tracelab.train.env_checkpoint import ENV_FORMAT, RULESIM_FORMATS, checkpoint_path
+from tracelab.envs.declared.gridwar_runs import RULESIM_FORMATS
+from tracelab.train.env_checkpoint import ENV_FORMAT, checkpoint_path
 from tracelab.train.torch_files import load_tensors
 
 from train_helpers import run_rows

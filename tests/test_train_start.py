@@ -28,3 +28,51 @@ def test_the_deterministic_switch_loads_no_compiler() -> None:
     assert got["seen"] == [True, False, True]
     assert got["loaded"] is False
     assert got["inductor"] is False and got["eager"] is False
+
+
+def test_sizing_a_declared_world_builds_no_engine_and_reads_the_env_spaces(monkeypatch) -> None:  # noqa: ANN001
+    """probe_env (what sizes a training and checks a policy before eval) reads a declared world's spaces from
+    its spec: no engine is built (grounding war.toml and stepping it cost ~1 s, which the command's vector
+    env then did again); the sizes are the env's own."""
+    from tracelab.engine.core import Engine
+    from tracelab.envs.declared.env_source import EnvSource
+    from tracelab.train.env_source import ObservationEncoder, probe_env
+    built = []
+    real_init = Engine.__init__
+
+    def counted(self, *args, **kwargs):  # noqa: ANN001, ANN002, ANN003, ANN202
+        built.append(1)
+        real_init(self, *args, **kwargs)
+
+    monkeypatch.setattr(Engine, "__init__", counted)
+    for name in ("tracelab/GridWar-base-v0", "tracelab/FrozenLake-v1"):
+        source = EnvSource(name, {})
+        encoder, n_actions, spec = probe_env(source)
+        assert built == [], name
+        env = source.make()  # the env itself: its spaces are the ones the probe read
+        try:
+            assert (encoder.size, n_actions) == (ObservationEncoder(env.observation_space, name).size,
+                                                 int(env.action_space.n))
+            assert spec is not None and spec.path == env.unwrapped.world_spec.path
+        finally:
+            env.close()
+        built.clear()
+
+
+def test_the_runs_meta_reads_the_spec_train_loaded_already(monkeypatch) -> None:  # noqa: ANN001
+    """train loads the spec once to size the training (probe_env) and hands it to the run's meta, which
+    parsed it again (~0.2 s of CPU before the first step); the meta is the same either way."""
+    from tracelab.envs.declared import play
+    from tracelab.envs.declared.env_source import EnvSource
+    from tracelab.train.config import TrainConfig
+    from tracelab.train.env_source import probe_env
+    from tracelab.train.env_trainer import env_run_meta
+    source = EnvSource("tracelab/FrozenLake-v1", {})
+    cfg = TrainConfig(steps=100, eval_games=4, trace_eval_games=2)
+    parsed = env_run_meta(cfg, source, "tracelab train")
+    _, _, spec = probe_env(source)
+    loads = []
+    real = play.load_declared
+    monkeypatch.setattr(play, "load_declared", lambda s: loads.append(s) or real(s))
+    assert env_run_meta(cfg, source, "tracelab train", spec=spec) == parsed
+    assert loads == []

@@ -4,7 +4,8 @@ lists: the catalog's table is built from buffers), numba, torch, rerun or matplo
 the Episodes table is drawn (the command's module imported, as `tracelab tui` does) before any other view's
 module is imported (the trace's board, plots and graph,
 the why tree, the SQL console, the training curves), and before numpy or pyarrow is (its rows are DuckDB's
-own), the Trace view's then in the background; the Runs screen is not made under an opened run.
+own), the Trace view's then in the background; the Runs screen is not made under an opened run; the
+table is focused first, its count read with its first page, and the imports' objects frozen (load_app).
 Checked in a child interpreter (this one has imported them for other tests), through textual's pilot,
 waiting on the tables' state, not on time."""
 from __future__ import annotations
@@ -20,15 +21,34 @@ HEAVY = ("pandas", "numba", "llvmlite", "torch", "rerun", "matplotlib", "scipy",
 DATA = ("numpy", "pyarrow")   # the trace's paging and index, the SQL console: loaded after the first screen
 VIEWS = ("tracelab.viewers.tui.trace", "tracelab.viewers.board_state", "tracelab.viewers.tui.graph_side",
          "tracelab.viewers.tui.why", "tracelab.viewers.tui.sql", "tracelab.viewers.tui.training",
-         "tracelab.viewers.tui.rules")
+         "tracelab.viewers.tui.rules",
+         "textual.widgets._text_area")   # the SQL editor's (tree-sitter, its themes): with the SQL view
 
 CHILD = """
 import asyncio, json, sys, time
 sys.path.insert(0, sys.argv[1])
 from patience import PATIENCE   # not tui_helpers: it imports the Trace view
 import tracelab.commands.tui    # what `tracelab tui` runs (its screenshots' module drives every view)
-from tracelab.viewers.tui.app import TracelabApp
+import gc
+from tracelab.viewers.tui import load_app
+TracelabApp = load_app()        # as the command imports it: with no collections, then frozen
+collectable_after_import = len(gc.get_objects())   # what a collection still walks of it: nothing
+from textual.screen import Screen
 from tracelab.viewers.tui.lazy_table import LazyTable
+import tracelab.viewers.tui.source as source_module
+focused = []        # every widget focused, in order (set_focus)
+set_focus = Screen.set_focus
+def _set_focus(screen, widget, *args, **kwargs):
+    focused.append(getattr(widget, "id", None) or type(widget).__name__)
+    return set_focus(screen, widget, *args, **kwargs)
+Screen.set_focus = _set_focus
+statements = []     # the statements the views ran before the Episodes table had its rows
+query_readonly = source_module.query_readonly
+def _query(con, sql, params=None):
+    if not drawn:
+        statements.append(" ".join(sql.split()))
+    return query_readonly(con, sql, params)
+source_module.query_readonly = _query
 
 async def wait_for(pilot, done, timeout=PATIENCE):
     t0 = time.monotonic()
@@ -71,7 +91,10 @@ async def first_screen(path, table_id, ready):
             await wait_for(pilot, lambda: "tracelab.viewers.tui.trace" in sys.modules)
         print(json.dumps({"screen": type(app.screen).__name__, "rows": table.count, "views": early,
                           "data": data_early, "loaded": [m for m in heavy if m in sys.modules],
-                          "screens": [type(s).__name__ for s in app.screen_stack]}), flush=True)
+                          "screens": [type(s).__name__ for s in app.screen_stack], "focused": focused[:1],
+                          "statements": statements, "collectable": collectable_after_import,
+                          "frozen": gc.get_freeze_count()}), flush=True)
+        focused.clear()
 
 async def episodes(app, pilot, table_id):
     return await episodes_ready(app, pilot)
@@ -100,6 +123,14 @@ def test_the_first_screen_is_drawn_without_heavy_packages() -> None:
     assert run["views"] == [], run
     assert run["data"] == [], run                              # the Episodes table drew without Arrow
     assert "RunsScreen" not in run["screens"], run             # made when the user goes back to it
+    # the table is the first widget focused (not the tabs, then the table: each change restyles the tabs)
+    assert run["focused"] == ["ep-table"], run
+    # the Episodes table's count and first page in one statement (main: a count, then the page)
+    table = [s for s in run["statements"] if "FROM (SELECT * FROM (SELECT episode, world" in s]
+    assert len(table) == 1 and "count(*) OVER ()" in table[0] and "LIMIT 256" in table[0], run["statements"]
+    # textual's, DuckDB's and the views' objects imported as `tracelab tui` does: frozen, out of every
+    # garbage collection (they cost the first screen ~0.1 s of CPU in collections)
+    assert run["frozen"] > 20_000 and run["collectable"] < 1_000, run
 
 
 def test_the_kind_selector_is_a_training_runs_and_kept_when_the_run_is_reopened() -> None:

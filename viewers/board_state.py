@@ -3,10 +3,10 @@
 alive or dead, which way it heads), read from the run's changes of the board's predicates.
 
 Which board: the one the run's config records (a spec world's run: `tracelab play --env`, a training's
-evaluation games); a war game run written by RuleSim (`BOARD`, its scenario in the config and no spec
-among its sources) is drawn from rules/gridworld/war.toml's `[board]` with the map its scenario implies.
-Such a run names its cells by id (y·W + x, its declared grid: tracelab.store.coordinates), a spec's run
-by the board's cell constants: both are located.
+evaluation games); a run an earlier tracelab wrote, with no spec among its sources, is drawn with the
+board its world's registration gives (world_extras.old_run_board: the war game's RuleSim runs on
+war.toml's `[board]`). Such a run names its cells by id (y·W + x, its declared grid:
+tracelab.store.coordinates), a spec's run by the board's cell constants: both are located.
 
     board = board_of_run(con)
     track = BoardTrack.read(con, board, episode)
@@ -15,19 +15,15 @@ by the board's cell constants: both are located.
 from __future__ import annotations
 
 import bisect
-import tomllib
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
-from tracelab import RULES_DIR
-from tracelab.board import DIRECTION_ARROWS, MAX_RECORDED_SIDE, Board, board_of_config
+from tracelab.board import DIRECTION_ARROWS, Board, board_of_config
 from tracelab.store.coordinates import Grid, run_grid
 from tracelab.store.kind import run_board, run_config, spec_text
 from tracelab.store.reader import RunConnection
+from tracelab.world_extras import old_run_board
 
-GRIDWAR_BOARD = "gridworld"      # the board a RuleSim run declares (tracelab.game.scenario.BOARD)
-WAR_SPEC = RULES_DIR / "gridworld" / "war.toml"
-_SCENARIO_KEYS = ("scenario_toml", "scenario")   # where play, train and eval recorded the scenario's TOML
 
 
 @dataclass(frozen=True)
@@ -53,50 +49,9 @@ def board_of_run(con: RunConnection) -> Board | None:
     `[board]`)."""
     config = run_config(con)
     board = board_of_config(config)
-    if board is not None or run_board(con) != GRIDWAR_BOARD or spec_text(con, config) is not None:
+    if board is not None or spec_text(con, config) is not None:
         return board
-    return gridwar_board(config)
-
-
-def _scenario(config: dict[str, Any]) -> dict[str, Any] | None:
-    for key in _SCENARIO_KEYS:
-        text = config.get(key)
-        if isinstance(text, str) and "\n" in text:
-            try:
-                return tomllib.loads(text)
-            except tomllib.TOMLDecodeError:
-                return None
-    return None
-
-
-def gridwar_board(config: dict[str, Any]) -> Board | None:
-    """war.toml's board for a RuleSim run, with its team size and ammo, drawn with the rows of the
-    scenario's map (its width, height, mountains and bases): the `[data.maps]` entry they match, else
-    the default's board with them; None for a config without a scenario that reads."""
-    from tracelab.envs.declared.spec import load_spec   # the envs package registers gymnasium's ids: late
-
-    s = _scenario(config)
-    if s is None:
-        return None
-    try:
-        w, h = int(s["width"]), int(s["height"])
-        if not (0 < w <= MAX_RECORDED_SIDE and 0 < h <= MAX_RECORDED_SIDE):
-            return None           # a stranger's config: no board rather than a grid of any size
-        grid = [["."] * w for _ in range(h)]
-        for x, y in s.get("mountains", []):
-            grid[h - 1 - int(y)][int(x)] = "M"
-        for key, ch in (("red_base", "r"), ("blue_base", "b")):
-            x, y = s[key]
-            grid[h - 1 - int(y)][int(x)] = ch
-        params = {"agents_per_team": int(s.get("agents_per_team", 1)), "ammo": int(s.get("ammo", 3))}
-    except (KeyError, TypeError, ValueError, IndexError):
-        return None
-    rows = ["".join(r) for r in grid]
-    maps = tomllib.loads(WAR_SPEC.read_text())["data"]["maps"]
-    name = next((m for m, v in maps.items() if v["rows"] == rows), "default")
-    board = load_spec(WAR_SPEC, map=name, **params).board
-    # a map of no [data.maps] entry (a scenario file's own): war.toml's board drawn with its rows
-    return None if board is None else replace(board, rows=tuple(rows))
+    return old_run_board(run_board(con), config)  # an older run of a world: its registration's
 
 
 def locator(board: Board, grid: Grid | None) -> dict[str, tuple[int, int]]:
@@ -120,8 +75,11 @@ class BoardTrack:
 
     @classmethod
     def read(cls, con: RunConnection, board: Board, episode: int) -> BoardTrack:
-        # a RuleSim run names its cells y·W + x of its own map (a training run's config may not declare it)
-        grid = run_grid(con) or (Grid(board.width, board.height) if run_board(con) == GRIDWAR_BOARD else None)
+        # an older run (its board its world's registration's: none in its config, no spec) names its cells
+        # y·W + x of its own map (a training run's config may not declare it)
+        config = run_config(con)
+        older = board_of_config(config) is None and spec_text(con, config) is None
+        grid = run_grid(con) or (Grid(board.width, board.height) if older else None)
         cells = locator(board, grid)
         kinds = _thing_kinds(con, board)
         preds = sorted({*board.marks, *(p for k in board.pieces.values() for p in k.predicates)})

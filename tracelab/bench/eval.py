@@ -88,7 +88,7 @@ def evaluations(worlds: int, run_dir: Path) -> tuple[Evaluation, Evaluation, Eva
 
     source = EnvSource(ENV_ID, {"p_toward": EVAL_P})
     policy = _policy(source)
-    settings = EvalSettings(games=worlds, traced=worlds, envs=worlds, opponent_p=EVAL_P)
+    settings = EvalSettings(games=worlds, traced=worlds, envs=worlds, level=EVAL_P)
     writer = TraceWriter.open(run_dir, {"command": "tracelab bench eval", "scenario": SCENARIO})
     ids = iter(range(1 << 62))
     trace = DeclaredEvaluator(source, writer, lambda: next(ids), settings)

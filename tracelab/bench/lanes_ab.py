@@ -3,19 +3,21 @@ workload (tracelab.bench.sims.SpecLoop over the war game's spec): `python -m tra
 --other /work/main/engine/lanes.py --agents 20 --worlds 256 [--steps 20] [--rounds 7] [--trace]`.
 
 The other file is compiled here without numba's disk cache (nothing is written beside it) and has to keep
-this tree's signatures (backend_lanes calls it as its own). Each kernel steps its own batch (the same spec
-and seeds); blocks alternate A, B / B, A and are timed by this thread's CPU time. Prints one JSON line per
-case: the median CPU µs per world-step of each and the median of the paired ratios other / this (above 1:
-this tree is faster)."""
+this tree's signatures (backend_lanes calls it as its own), but for step_lanes: where its parameters differ,
+it is given this tree's arguments by name (one that takes more tables than this tree has fails at its call).
+Each kernel steps its own batch (the same spec and seeds); blocks alternate A, B / B, A and are timed by
+this thread's CPU time. Prints one JSON line per case: the median CPU µs per world-step of each and the
+median of the paired ratios other / this (above 1: this tree is faster)."""
 from __future__ import annotations
 
 import argparse
 import importlib.util
+import inspect
 import json
 import sys
 import time
 from pathlib import Path
-from types import ModuleType
+from types import ModuleType, SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -36,14 +38,29 @@ def load_uncached(path: Path, name: str) -> ModuleType:
     return module
 
 
-def _block(loop: SpecLoop, kernel: ModuleType, steps: int) -> float:
+def by_name(other: ModuleType, mine: ModuleType) -> Any:
+    """`other`, its step_lanes called with this tree's arguments picked by its own parameter names (an
+    argument it does not know is left out; one it needs that this tree lacks raises a KeyError): a kernel
+    that takes fewer tables (main's, against a branch's new ones) runs on this tree's backend."""
+    have = list(inspect.signature(mine.step_lanes.py_func).parameters)
+    want = list(inspect.signature(other.step_lanes.py_func).parameters)
+    if have == want:
+        return other
+
+    def step_lanes(*args: Any) -> Any:
+        named = dict(zip(have, args))
+        return other.step_lanes(*(named[p] for p in want))
+    return SimpleNamespace(**{**vars(other), "step_lanes": step_lanes})
+
+
+def _block(loop: SpecLoop, kernel: Any, steps: int) -> float:
     backend_lanes.L = kernel
     c0 = time.thread_time()
     loop.run(steps)
     return time.thread_time() - c0
 
 
-def compare(other: ModuleType, agents: int, worlds: int, trace: bool, steps: int, rounds: int) -> dict[str, Any]:
+def compare(other: Any, agents: int, worlds: int, trace: bool, steps: int, rounds: int) -> dict[str, Any]:
     mine = backend_lanes.L
     kernels = (mine, other)
     try:
@@ -75,7 +92,7 @@ def main() -> None:
     p.add_argument("--rounds", type=int, default=7)
     p.add_argument("--trace", action="store_true")
     a = p.parse_args()
-    other = load_uncached(a.other, "tracelab_lanes_other")
+    other = by_name(load_uncached(a.other, "tracelab_lanes_other"), backend_lanes.L)
     for n in (int(x) for x in a.agents.split(",")):
         for w in (int(x) for x in a.worlds.split(",")):
             print(json.dumps(compare(other, n, w, a.trace, a.steps, a.rounds)), flush=True)

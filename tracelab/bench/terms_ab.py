@@ -71,7 +71,7 @@ def compare(blocks: int, evaluations: int) -> dict[str, Any]:
 
     source = EnvSource(bench_eval.ENV_ID, {"p_toward": bench_eval.EVAL_P})
     policy = bench_eval._policy(source)
-    settings = EvalSettings(games=5, traced=5, envs=5, opponent_p=bench_eval.EVAL_P)
+    settings = EvalSettings(games=5, traced=5, envs=5, level=bench_eval.EVAL_P)
     with tempfile.TemporaryDirectory(prefix="tracelab-bench-terms-ab-") as tmp:
         arms: dict[str, tuple[Any, Any]] = {}
         for name in ARMS:

@@ -21,7 +21,7 @@ import torch
 from tracelab.bench.common import fmt_num, format_table, machine_info, summarize
 from tracelab.bench.engine import machine_line
 from tracelab.envs.declared.env_source import EnvSource
-from tracelab.envs.declared.gridwar_scenarios import training_sources
+from tracelab.envs.declared.gridwar_scenarios import ScenarioTraining
 from tracelab.game.scenario import builtin_scenario
 from tracelab.store import TraceWriter
 from tracelab.train.config import TrainConfig
@@ -46,7 +46,7 @@ TEAM = 5  # the team size of the 5v5 figure
 
 def _base_source(cfg: TrainConfig) -> EnvSource:
     """The env `tracelab train --scenario base` trains on with these settings (its spec id)."""
-    return training_sources(builtin_scenario("base"), cfg.opponent_p, cfg.eval_p, cfg.non_markov)[0]
+    return ScenarioTraining.for_scenario(builtin_scenario("base"), cfg).source
 
 
 class EndToEnd:

@@ -1,5 +1,6 @@
 """`tracelab bench tui`'s first figure, in a fresh process: `python -m tracelab.bench.tui_first_screen RUN`
-opens the TUI on RUN in textual's headless pilot (`TracelabApp([RUN]).run_test(size=(120, 40))`) and prints,
+opens the TUI on RUN in textual's headless pilot (`load_app()([RUN]).run_test(size=(120, 40))`, the app
+imported as `tracelab tui` imports it) and prints,
 as one JSON line, the CPU seconds of this process (imports included: from its first instruction) and the
 wall clock (time.time(), for the parent to subtract its spawn time) when the episodes table `#ep-table`
 first has a cursor: the first screen a user sees, drawn."""
@@ -19,8 +20,8 @@ def _cpu_s() -> float:
 
 
 async def _first_screen(run: Path) -> dict[str, float]:
-    from tracelab.viewers.tui.app import TracelabApp   # timed: what `tracelab tui` imports
-    app = TracelabApp([run])
+    from tracelab.viewers.tui import load_app   # timed: what `tracelab tui` imports, as it imports it
+    app = load_app()([run])
     async with app.run_test(size=(120, 40)):
         while True:
             tables = app.screen.query("#ep-table")

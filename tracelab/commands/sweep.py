@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 from tracelab.commands._interrupt import CtrlCStops
-from tracelab.envs.declared.gridwar_scenarios import load_scenario_arg, training_sources
+from tracelab.envs.declared.gridwar_scenarios import ScenarioTraining
 from tracelab.envs.declared.env_source import EnvSource, parse_env_args
 from tracelab.errors import UserError, store_errors
 from tracelab.train.env_source import probe_env
@@ -30,8 +30,8 @@ def run(args: argparse.Namespace) -> int:
         elif args.env_arg:
             raise UserError("--env-arg needs --set env=SPEC_OR_ID")
         else:
-            scenario = load_scenario_arg(cfg.scenario, cfg.agents)
-            source = training_sources(scenario, cfg.opponent_p, cfg.eval_p, cfg.non_markov)[0]
+            training = ScenarioTraining.of(cfg)
+            scenario, source = training.scenario, training.source
         probe = probe_env(source)  # a bad id, spec or keyword argument: one line, before Ray starts
     check_trials_memory(spec, probe, memory_limit(args.max_memory, "--max-memory"))
     out = Path(args.out or _default_out())

@@ -27,17 +27,9 @@ from tracelab.commands._training import (
     where_to_train,
 )
 from tracelab.commands._worlds import env_source_of
-from tracelab.envs.declared.gridwar import GRIDWAR_SPEC_IDS
-from tracelab.envs.declared.gridwar_scenarios import (
-    load_scenario_arg,
-    scenario_settings_given,
-    training_sources,
-)
+from tracelab.envs.declared.gridwar_scenarios import ScenarioTraining, resumed_scenario, scenario_settings_given
 from tracelab.errors import UserError, store_errors
-from tracelab.game.scenario import builtin_scenario_names
 from tracelab.store import TraceWriter
-from tracelab.store.meta import current_meta
-from tracelab.train.budget import reward_scale_note, too_short_hint
 from tracelab.train.config import GRIDWAR_ONLY, RETIRED_FLAGS, TrainConfig, flag_of
 from tracelab.train.env_checkpoint import checkpoint_config, checkpoint_env, load_env_checkpoint
 from tracelab.train.env_source import probe_env
@@ -75,10 +67,8 @@ def run(args: argparse.Namespace) -> int:
             cfg = TrainConfig(**given)
         else:
             cfg = TrainConfig(**given)
-            scenario = load_scenario_arg(cfg.scenario, cfg.agents)
-        eval_source = None
-        if scenario is not None:
-            source, eval_source = training_sources(scenario, cfg.opponent_p, cfg.eval_p, cfg.non_markov)
+            scenario = ScenarioTraining.of(cfg)
+            source = scenario.source
         encoder, n_actions, spec = probe_env(source)
     with store_errors():  # --num-envs 1e7 would build ten million worlds before its first step
         check_estimate(env_training_estimate(cfg, NetSpec(encoder.size, cfg.hidden_sizes, n_actions, cfg.dueling),
@@ -88,38 +78,19 @@ def run(args: argparse.Namespace) -> int:
     elif cfg.trace_eval_games > cfg.eval_games:
         raise UserError(f"--trace-eval-games ({cfg.trace_eval_games}) exceeds --eval-games ({cfg.eval_games})")
     run_dir, same_run, tensorboard = where_to_train(args, state is not None,
-                                                    source.short_name if scenario is None else scenario.name)
+                                                    source.short_name if scenario is None else scenario.scenario.name)
     return train_env_into(cfg, source, run_dir, encoder.describe(), tensorboard=tensorboard, state=state,
-                      resumed_from=args.resume, same_run=same_run, scenario=scenario, eval_source=eval_source)
-
-
-def _run_config(run: Path) -> dict[str, Any]:
-    """The config in `run`'s meta.json ({} when it is not a run: the checkpoint's loader says what it is)."""
-    try:
-        config = current_meta(run).get("config", {})
-    except (OSError, ValueError, AttributeError):
-        return {}
-    return config if isinstance(config, dict) else {}
+                      resumed_from=args.resume, same_run=same_run, scenario=scenario, spec=spec)
 
 
 def _resumed(args: argparse.Namespace, given: dict[str, Any], source: Any, limit: Any) -> tuple[Any, ...]:
     """--resume: (the checkpoint, its config with the flags given, the env it trains on, the war game's
-    scenario or None). A scenario run's env is rebuilt from its config's scenario (a built-in one, or --scenario FILE
-    given again: a file never names the file tracelab reads) and checked equal to the checkpoint's."""
+    scenario training or None: resumed_scenario rebuilds its env, checked equal to the checkpoint's)."""
     scenario_given = given.pop("scenario", None)
     check_resume_flags(given)
     raw, recorded = checkpoint_env(args.resume, limit.bytes)
-    scenario = None
-    if source is None and recorded.name in GRIDWAR_SPEC_IDS and "scenario_toml" in _run_config(Path(args.resume)):
-        cfg = checkpoint_config(raw)
-        if scenario_given not in (None, cfg.scenario):
-            raise UserError(f"--scenario {scenario_given}: {args.resume} trained scenario {cfg.scenario!r}")
-        if scenario_given is None and cfg.scenario not in builtin_scenario_names():
-            raise UserError(f"{args.resume} trained the scenario file {cfg.scenario!r}: name it again to resume "
-                            f"(tracelab reads no file a run names by itself): tracelab train --resume "
-                            f"{shlex.quote(args.resume)} --scenario {shlex.quote(cfg.scenario)}")
-        scenario = load_scenario_arg(cfg.scenario, cfg.agents)
-        source, _ = training_sources(scenario, cfg.opponent_p, cfg.eval_p, cfg.non_markov)
+    scenario = None if source is not None else resumed_scenario(args.resume, recorded, raw, scenario_given)
+    source = source if scenario is None else scenario.source
     state = load_env_checkpoint(args.resume, source, limit)  # names the env unless given
     cfg = dataclasses.replace(checkpoint_config(state), **given)
     again = "" if scenario is not None else f" --env {source.describe()}"
@@ -129,18 +100,21 @@ def _resumed(args: argparse.Namespace, given: dict[str, Any], source: Any, limit
 
 def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at: int | None = None,
                tensorboard: Path | None = None, state: dict[str, Any] | None = None,
-               resumed_from: str | None = None, same_run: bool = False, scenario: Any = None,
-               eval_source: Any = None) -> int:
+               resumed_from: str | None = None, same_run: bool = False,
+               scenario: ScenarioTraining | None = None, spec: Any = None) -> int:
     """Train on `source` into a new run at `run_dir` (from a checkpoint `state` if given; `same_run`: the
     checkpoint's own run, `run_dir`, continues); returns the exit status. `stop_at`: stop there as Ctrl-C
-    would (tests). `scenario`: the war game's scenario `source` plays (the run names it and its settings),
-    `eval_source` the env its evaluations play (the opponent at --eval-p); `tensorboard`: a log directory
-    that also receives the metrics (tracelab.train.tensorboard)."""
+    would (tests). `scenario`: the war game's scenario `source` plays (the run names it and its settings; its
+    evaluations play its eval_source, the opponent at --eval-p); `tensorboard`: a log directory
+    that also receives the metrics (tracelab.train.tensorboard); `spec`: `source`'s WorldSpec if loaded
+    already (probe_env's), which the run's meta reads instead of parsing the spec again."""
 
     meta = env_run_meta(cfg, source, " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]),
-                        None if state is None else {"run": resumed_from, "step": state["step"]}, scenario)
+                        None if state is None else {"run": resumed_from, "step": state["step"]},
+                        None if scenario is None else scenario.scenario, spec)
     if not meta["command"].startswith("tracelab train"):  # called from Python: say what it stands for
         meta["command"] = "tracelab train (python: tracelab.commands.train.train_env_into)"
+    eval_source = None if scenario is None else scenario.eval_source
     if eval_source is not None:  # the env of the traced evaluation games (the opponent at --eval-p)
         meta["config"]["eval_env"] = eval_source.to_json()
     with store_errors():  # the run directory exists, or another writer holds it
@@ -151,9 +125,7 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
     with training_session(writer, cfg.torch_deterministic, tensorboard, purge_step) as session:
         session.trainer = trainer = EnvTrainer(cfg, source, writer, run_dir, metric_sinks=session.metric_sinks,
                                                eval_source=eval_source)
-        what = source.describe() if scenario is None else \
-            f"{scenario.name} ({'non-Markov' if cfg.non_markov else 'Markov'}, opponent p {cfg.opponent_p:g}, " \
-            f"evaluated against p {cfg.eval_p:g}; --env {source.describe()})"
+        what = source.describe() if scenario is None else scenario.describe(cfg)
         kernel = "" if cfg.kernel == "auto" else f", the {cfg.kernel} kernel"
         print(f"training on {what} ({encoding} observations, {cfg.envs} worlds in {type(trainer.env).__name__}"
               f"{kernel}, "
@@ -162,11 +134,9 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
               f"(--threads); run: {run_dir}", file=sys.stderr)
         if trainer.vector_note:
             print(f"note: {trainer.vector_note}", file=sys.stderr)
-        if scenario is not None:
-            note = reward_scale_note(max(abs(v) for v in dataclasses.asdict(scenario.rewards).values()),
-                                     cfg.reward_scale)
-            if note:
-                print(f"note: {note}", file=sys.stderr)
+        note = None if scenario is None else scenario.reward_note(cfg.reward_scale)
+        if note:
+            print(f"note: {note}", file=sys.stderr)
         if state is not None:
             with store_errors():  # games that do not replay to their observations: another env
                 trainer.load_state(state)
@@ -181,7 +151,7 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
         _report(trainer, source, run_dir, status, scenario is not None)
         ev = trainer.last_eval
         if scenario is not None and ev is not None and ev.wins is not None:
-            hint = too_short_hint(trainer.step, ev.wins, scenario.agents_per_team)
+            hint = scenario.hint(trainer.step, ev.wins)
             if hint:
                 print(f"hint: {hint}", file=sys.stderr)
     if sink is not None:

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from tracelab.errors import UserError, store_errors
-from tracelab.viewers.tui.app import TracelabApp
+from tracelab.viewers.tui import load_app
 
 
 def run(args: argparse.Namespace) -> int:
@@ -22,5 +22,5 @@ def run(args: argparse.Namespace) -> int:
             for path in write_screenshots(Path(args.screenshots), trace_run, training_run, reasoning_run):
                 print(path)
         return 0
-    TracelabApp(args.paths).run()
+    load_app()(args.paths).run()
     return 0

@@ -79,8 +79,8 @@ def recorded_world(con: RunConnection, run: str) -> RecordedWorld:
     text = spec_text(con, config)
     if text is None:
         board = con.execute("SELECT board FROM raw.run").fetchall()
-        rulesim = bool(board) and board[0][0] == BOARD_BEFORE_DECLARED
-        what = "a RuleSim run" if rulesim else "not a run of a spec world"
+        older = bool(board) and board[0][0] == BOARD_BEFORE_DECLARED  # the war game's, by RuleSim
+        what = "a RuleSim run" if older else "not a run of a spec world"
         raise UserError(f"{run}: {what}: whatif rebuilds the world from the spec its run keeps, and this run "
                         "keeps none (record the game with play --env, e.g. rules/gridworld/war.toml)")
     env = config.get("env")

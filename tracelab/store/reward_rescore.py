@@ -4,7 +4,8 @@ the quantity the value is of (a table term's occurrences, the scaled atom's boun
 occurred has a row of value 0), so a term re-scored to NEW is its recorded quantity x NEW: exact for a table
 term and for the scaled atom (NEW is its scale). A run written before quantities were kept re-scores a term
 as its recorded value x NEW / OLD, OLD its value per occurrence from the run's config (a spec world's
-`[reward]` with the run's params, a RuleSim run's scenario `[rewards]`), and cannot re-score a term worth 0. The
+`[reward]` with the run's params, or what the world's registration reads in an older run's config:
+world_extras.old_run_terms), and cannot re-score a term worth 0. The
 actions stay the recorded ones: re-scoring changes no step, no end and no choice a learner made."""
 from __future__ import annotations
 
@@ -15,24 +16,10 @@ from typing import Any
 
 from tracelab.expressions import ExpressionError, evaluate
 from tracelab.errors import UserError, close_names
-from tracelab.game.scenario import Rewards
 from tracelab.store.kind import MAX_SPEC_TEXT, run_config, spec_text, world_params
 from tracelab.store.reader import RunConnection
+from tracelab.world_extras import old_run_terms
 
-# the war game's terms as a run written by RuleSim's tracer names them (sample_runs/, runs before the spec
-# path; a spec world's run names its terms from the spec's [reward], WorldSpec.reward_terms, and
-# re-scores through _spec_terms) -> the scenario's [rewards] keys
-GRIDWAR_TERMS = {"win": "win", "loss": "loss", "hit": "hit_opponent", "got_shot": "got_shot",
-                 "step": "valid_action", "unsafe": "unsafe", "invalid": "invalid"}
-GRIDWAR_NOTES = {
-    "unsafe": "an unsafe move is refused by the game whatever its reward (the agent stays), and a learner "
-              "trained with --mask never chooses one: re-scoring changes the reward only",
-    "invalid": "a shot without ammo does nothing whatever its reward, and a learner trained with --mask "
-               "never chooses one: re-scoring changes the reward only",
-    "step": "the step term is not paid on a step with an unsafe or invalid action (those terms replace it)",
-}
-# those of its terms whose occurrences such a run does not hold where they are worth 0
-GRIDWAR_UNCOUNTED_AT_ZERO = ("step",)
 NO_TERMS = ("the run records no reward terms (written before tracelab recorded them by term, or by a "
             "caller that records the world's half only)")
 
@@ -64,7 +51,7 @@ class Rescored:
                 "episodes": self.rows, "total": total, "notes": self.notes}
 
 
-def _number(v: Any, names: dict[str, Any]) -> float | None:
+def number(v: Any, names: dict[str, Any]) -> float | None:
     """A spec's number (a literal or an expression over its params and data), None if it is not one."""
     if isinstance(v, str):
         try:
@@ -101,38 +88,21 @@ def _spec_terms(config: dict[str, Any], text: str | None) -> list[Term] | None:
         return tuple(out)
 
     table = reward.get("table", {})
-    terms = [Term(str(k), _number(v, names), notes=notes(str(k), v))
+    terms = [Term(str(k), number(v, names), notes=notes(str(k), v))
              for k, v in (table.items() if isinstance(table, dict) else [])]
     if "atom" in reward:
         atom = str(reward["atom"])
-        terms.append(Term(atom, _number(reward.get("scale", 1.0), names), "scale",
+        terms.append(Term(atom, number(reward.get("scale", 1.0), names), "scale",
                           (f"{atom} is the atom's lower bound x scale: --set {atom}=S sets the scale",
                            *notes(atom, reward.get("scale")))))
     return terms
-
-
-def _gridwar_terms(config: dict[str, Any]) -> list[Term] | None:
-    """A RuleSim run's terms from its scenario (`scenario` or a training's `scenario_toml`)."""
-    text = next((t for t in (config.get("scenario_toml"), config.get("scenario")) if isinstance(t, str)), None)
-    if text is None or len(text) > MAX_SPEC_TEXT:
-        return None
-    try:
-        given = tomllib.loads(text).get("rewards", {})
-    except (tomllib.TOMLDecodeError, RecursionError):
-        return None
-    given = given if isinstance(given, dict) else {}
-    defaults = Rewards()  # a scenario's [rewards] key left out has the game's default
-    return [Term(term, _number(given.get(key, getattr(defaults, key)), {}),
-                 notes=(f"{term}: {GRIDWAR_NOTES[term]}",) if term in GRIDWAR_NOTES else (),
-                 counted_at_zero=term not in GRIDWAR_UNCOUNTED_AT_ZERO)
-            for term, key in GRIDWAR_TERMS.items()]
 
 
 def run_terms(con: RunConnection) -> tuple[list[Term], list[str]]:
     """The run's reward terms with their values per occurrence (from its config; a term recorded but not
     in the config has per None), and the run-wide notes (a learner's reward scale)."""
     config = run_config(con)
-    terms = _spec_terms(config, spec_text(con, config)) or _gridwar_terms(config) or []
+    terms = _spec_terms(config, spec_text(con, config)) or old_run_terms(config) or []
     named = {t.name for t in terms}
     recorded = [r[0] for r in con.execute("SELECT DISTINCT term FROM raw.reward_terms ORDER BY 1").fetchall()]
     terms += [Term(str(t), None) for t in recorded if t not in named]

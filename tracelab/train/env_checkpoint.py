@@ -16,11 +16,10 @@ the env alone (no network), as many steps as the run has trained.
 A checkpoint may come from a stranger: it holds only tensors and plain values, loads with torch's
 weights_only unpickler and is checked against the shapes its config and env imply. It names its env, but
 a resume makes the env the user names (`--env`, checked equal to the checkpoint's): a file never decides
-which spec file tracelab reads. Checkpoints of RuleSim's trainer (every war game run before it trained
-through its spec) are refused in one line that gives the command starting a new run with their settings."""
+which spec file tracelab reads. Checkpoints an earlier trainer of a world wrote (the war game's RuleSim
+trainer) are refused in one line its registration gives (world_extras.retired_checkpoint), saying how to go on."""
 from __future__ import annotations
 
-import shlex
 from pathlib import Path
 from typing import Any
 
@@ -33,23 +32,18 @@ from tracelab.errors import UserError
 from tracelab.store import layout
 from tracelab.train.checkpoint_schema import (check_best, check_buffer_rows, episode_games_schema, in_range,
                                               learner_schema, parts_schema)
-from tracelab.train.config import TrainConfig, config_fields, config_schema
+from tracelab.train.config import TrainConfig, config_schema
 from tracelab.train.env_source import probe_env
 from tracelab.train.memory import (Limit, MemoryLimitExceeded, check_estimate, env_training_estimate,
                                    env_world_bytes)
 from tracelab.train.torch_files import CodeInFile, Tensor, load_tensors
 from tracelab.validation import Const, IntRange, MapOf, Mismatch, OneOf, OptionalKey, check
+from tracelab.world_extras import retired_checkpoint
 
 ENV_FORMAT = "tracelab-dqn-env-checkpoint/2"
 # the first format kept each world's generator state and its episode's actions (per-world replay in
 # gymnasium's SyncVectorEnv); the batched declared env has no per-world generator state to set
 OLD_FORMATS = ("tracelab-dqn-env-checkpoint/1",)
-# RuleSim's trainer's checkpoints (tracelab before the war game trained through its spec, issue 38): its
-# observations (RuleSim's, with the nearest bullet) and its replay of the worlds are not the spec's, so its
-# networks and buffer cannot continue here honestly. Its format 1 held numpy objects (only an unpickler
-# that runs code reads them): recognised by its mark in the pickle
-RULESIM_FORMATS = ("tracelab-dqn-checkpoint/2",)
-RULESIM_FORMAT_1 = b"tracelab-dqn-checkpoint/1"
 CHECKPOINT_DIR, CHECKPOINT_FILE = "checkpoint", "checkpoint.pt"
 
 
@@ -160,44 +154,21 @@ def checkpoint_env(run: str | Path, max_bytes: int) -> tuple[dict[str, Any], Env
     try:
         state = load_tensors(f, max_bytes)
     except CodeInFile as e:  # a stranger's (or a damaged) file: the run's policy may still play
-        said = f"{f}: a checkpoint of RuleSim's trainer in its first format (numpy objects, which only a loader " \
-               f"that runs code reads); refused" if RULESIM_FORMAT_1 in e.pickled else str(e)
+        said = retired_checkpoint(None, e.pickled, str(f)) or str(e)
         raise refusal_with_a_way_on(Path(run), said, " --env ENV") from None
     if state.get("format") in OLD_FORMATS:
         raise FileRefused(f"{f}: written by an earlier tracelab ({state['format']}), whose worlds this one "
                           f"cannot rebuild: resume it with that version, or train again from its policy's "
                           f"settings (RUN/policy/policy.json, \"trained\")")
-    if state.get("format") in RULESIM_FORMATS:
-        raise FileRefused(f"{f}: trained by tracelab's RuleSim trainer (before the war game trained through "
-                          f"its spec), whose observations and worlds the spec path does not rebuild: start a new "
-                          f"run with its settings: {_new_run_command(state.get('config'))}")
+    retired = retired_checkpoint(state, b"", str(f))  # an earlier trainer's of a world (its registration's)
+    if retired:
+        raise FileRefused(retired)
     try:
         check(state, {"format": Const(ENV_FORMAT), "config": config_schema(),
                       "env": {"name": str, "kwargs": MapOf(object)}, "learner": OneOf("fused", "readable")})
     except Mismatch as e:
         raise FileRefused(f"{f}: not a tracelab --env training checkpoint ({e})") from None
     return state, env_source_from_json(state["env"], str(f))
-
-
-def _new_run_command(config: Any) -> str:
-    """`tracelab train` with the flags of an old checkpoint's config that differ from the defaults (a
-    stranger's: only known fields of the right types, quoted)."""
-    out = ["tracelab train"]
-    try:
-        cfg = checkpoint_config({"config": config})
-    except (ValueError, TypeError, Mismatch):
-        return " ".join(out + ["--scenario NAME ..."])
-    default = TrainConfig()
-    for f in config_fields():
-        value = getattr(cfg, f.name)
-        if value == getattr(default, f.name):
-            continue
-        if isinstance(value, bool):
-            out.append(("--" if value else "--no-") + f.flag if f.name != "non_markov" else
-                       ("--non-markov" if value else "--markov"))
-        else:
-            out.append(f"--{f.flag} {shlex.quote(str(value))}")
-    return " ".join(out)
 
 
 def load_env_checkpoint(run: str | Path, given: EnvSource | None, limit: Limit,

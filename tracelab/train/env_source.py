@@ -84,26 +84,34 @@ def action_count(space: spaces.Space[Any], where: str) -> int:
     return int(space.n)
 
 
-def team_spec(source: Any) -> Any:
-    """The WorldSpec of a declared world of several agents (trained as a team), else None."""
+def declared_spec(source: Any) -> Any:
+    """The WorldSpec of a declared world (loaded with its [params]), else None."""
     from tracelab.envs.declared.spec import load_spec
     try:
         spec_path, params = source.declared()
     except UserError:  # not a declared world
         return None
-    spec = load_spec(spec_path, **params)
-    return spec if len(spec.agents) > 1 else None
+    return load_spec(spec_path, **params)
+
+
+def team_spec(source: Any) -> Any:
+    """The WorldSpec of a declared world of several agents (trained as a team), else None."""
+    spec = declared_spec(source)
+    return spec if spec is not None and len(spec.agents) > 1 else None
 
 
 def probe_env(source: Any) -> tuple[ObservationEncoder | TeamEncoder, int, Any]:
-    """(the encoder of `source`'s observations, its action count, its WorldSpec or None) from one env made
-    and closed: what sizes a training on it (a bad id, spec or keyword argument fails here, in one line). A
-    declared world of several agents: its TeamEncoder, from its spec."""
-    team = team_spec(source)
-    if team is not None:
+    """(the encoder of `source`'s observations, its action count, its WorldSpec or None): what sizes a
+    training on it (a bad id, spec or keyword argument fails here, in one line). A declared world's spaces
+    come from its spec alone (gym_env.DeclaredEnv's), so no engine is built for them: building one grounds the
+    program and steps it, ~1 s of CPU for war.toml, which the command's own env then did again. Any other env
+    is made and closed. A declared world of several agents: its TeamEncoder."""
+    spec = declared_spec(source)
+    if spec is not None:
         from tracelab.envs.declared.gym_env import observation_space
-        encoder = ObservationEncoder(observation_space(team), source.name)
-        return TeamEncoder(encoder, len(team.agents)), len(team.action_names), team
+        encoder = ObservationEncoder(observation_space(spec), source.name)
+        n_actions = len(spec.action_names)
+        return (TeamEncoder(encoder, len(spec.agents)) if len(spec.agents) > 1 else encoder), n_actions, spec
     probe = source.make()
     try:
         return (ObservationEncoder(probe.observation_space, source.name),

@@ -362,13 +362,16 @@ class EnvTrainer:
 
 
 def env_run_meta(cfg: TrainConfig, source: EnvSource, command: str,
-                 resumed_from: dict[str, Any] | None = None, scenario: Any = None) -> dict[str, Any]:
+                 resumed_from: dict[str, Any] | None = None, scenario: Any = None,
+                 spec: Any = None) -> dict[str, Any]:
     """The meta of a run that trains on `source` (`train --env`, a sweep's trial): the env and the
     training's settings; for a declared world whose evaluations are traced, what `why`, `tui` and
     `replay` read of it (its rule files, its spec and rules by path, size and hash, what sets each external
     fact, its board: DeclaredTarget's; the texts go in the run's `sources` table with its traced games).
     `scenario`: the war game's scenario `source` plays (train --scenario): the run names it and keeps its
-    settings (every config field, the scenario's TOML), as show, compare and the TUI read them."""
+    settings (every config field, the scenario's TOML), as show, compare and the TUI read them. `spec`:
+    `source`'s WorldSpec where the caller loaded it already (probe_env's: parsing war.toml again cost train
+    ~0.2 s of CPU before its first step)."""
     # deferred: loads the engine (numba), which a gymnasium id's training does not need
     from tracelab.envs.declared.play import load_declared
     from tracelab.train.external_eval import DeclaredTarget
@@ -379,7 +382,7 @@ def env_run_meta(cfg: TrainConfig, source: EnvSource, command: str,
     if not cfg.trace_eval_games:
         return meta
     try:
-        spec = load_declared(source)
+        spec = spec if spec is not None else load_declared(source)
     except UserError:  # not a declared world: its evaluations are not traced
         return meta
     described = DeclaredTarget(source, spec).run_meta()

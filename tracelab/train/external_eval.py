@@ -18,7 +18,6 @@ from typing import Any, Protocol
 import numpy as np
 
 import tracelab.envs  # noqa: F401  (registers the declared worlds' ids)
-from tracelab.envs.declared.gridwar import GRIDWAR_SPEC_IDS
 from tracelab.errors import UserError
 from tracelab.store.agent_rows import PolicyOutput
 from tracelab.store.writer import TraceWriter
@@ -27,6 +26,7 @@ from tracelab.train.env_policy import (EVAL_STEP_CAP, EnvEvalResult, declares_ou
 from tracelab.envs.declared.env_source import EnvSource
 from tracelab.train.env_source import team_spec
 from tracelab.train.rngs import eval_seed
+from tracelab.world_extras import evaluation_env
 
 # deferred: the declared world's recording and TeamEnv load the engine (numba), which a gymnasium env's
 # training does not need
@@ -42,14 +42,15 @@ class EvalSettings:
     games: int = 50          # games per evaluation
     traced: int = 5          # of which traced in full into the run
     envs: int = 16           # worlds stepped together for the untraced games
-    opponent_p: float = 0.3  # a scripted opponent's (p_toward): its probability of a move towards red's base
+    level: float = 0.3       # the evaluation's level, where a world's registration gives it one (the war game:
+    #                          its scripted opponent's probability of a move towards red's base)
     seed: int = 0            # evaluation seeds: eval_seed(seed, round), as tracelab train's
 
     def __post_init__(self) -> None:
         if self.every < 0 or self.games < 1 or self.traced < 0 or self.envs < 1:
             raise ValueError(f"evaluation settings: every >= 0, games >= 1, traced >= 0, envs >= 1; got {self}")
-        if not 0.0 <= self.opponent_p <= 1.0:
-            raise ValueError(f"evaluation settings: opponent_p must lie in [0, 1], got {self.opponent_p}")
+        if not 0.0 <= self.level <= 1.0:
+            raise ValueError(f"evaluation settings: level must lie in [0, 1], got {self.level}")
 
 
 class Evaluator(Protocol):
@@ -119,9 +120,7 @@ class DeclaredTarget:
         return str(info.get("outcome", "terminated" if terminated else "truncated"))
 
     def evaluator(self, writer: TraceWriter, new_id: NewId, settings: EvalSettings) -> Evaluator:
-        source = self.source
-        if source.name in GRIDWAR_SPEC_IDS:  # the games against the scripted opponent of the evaluations
-            source = source.with_args(p_toward=settings.opponent_p)
+        source = evaluation_env(self.source, settings.level) or self.source
         return DeclaredEvaluator(source, writer, new_id, settings)
 
 

@@ -93,7 +93,7 @@ class TracelabCallback(BaseCallback):
         self.run_dir = Path(run_dir)
         self.env_id, self.env_kwargs = env_id, dict(env_kwargs or {})
         self.settings = EvalSettings(every=eval_every, games=eval_games, traced=trace_eval_games, envs=eval_envs,
-                                     opponent_p=eval_p, seed=seed)
+                                     level=eval_p, seed=seed)
         self.save_model = save_model
         self.run: ExternalRun | None = None
         self._output: _RunOutput | None = None

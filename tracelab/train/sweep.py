@@ -1,6 +1,6 @@
 """A hyperparameter search with Ray Tune (tracelab sweep, docs/scaling.md "Sweeps"): each trial is an
-ordinary training run in the store (OUT/trial-NNN, the experiments' train_seed, or `train --env`'s
-EnvTrainer for a sweep of an env, `--set env=SPEC_OR_ID`) whose evaluations Tune
+ordinary training run in the store (OUT/trial-NNN, the experiments' train_seed: an env, `--set
+env=SPEC_OR_ID`, or the war game's scenario) whose evaluations Tune
 reads as they are written, through a metric sink of the trainer; the scheduler (FIFO, or ASHA stopping
 weak trials at their evaluations) and the search are Tune's.
 
@@ -25,7 +25,6 @@ from typing import Any
 from ray import tune
 
 from tracelab.envs.declared.env_source import EnvSource
-from tracelab.game.scenario import Scenario
 from tracelab.store.meta import current_meta
 from tracelab.train.config import TrainConfig
 from tracelab.train.experiments.runner import train_seed
@@ -77,8 +76,9 @@ class _TuneSink:
 class TracelabTrial(tune.Trainable):
     """One trial: TrainConfig(fixed + the trial's values) trained into OUT/trial-NNN."""
 
-    def setup(self, config: dict[str, Any], fixed: dict[str, Any], scenario: Scenario | EnvSource, out: str,
+    def setup(self, config: dict[str, Any], fixed: dict[str, Any], world: EnvSource | Any, out: str,
               metric: str, command: str) -> None:
+        """`world`: what train_seed trains, an env or the war game's scenario."""
         cfg = TrainConfig(**{**fixed, **config})
         self.steps = cfg.steps
         self.results: queue.Queue = queue.Queue()
@@ -91,10 +91,7 @@ class TracelabTrial(tune.Trainable):
 
         def train() -> None:
             try:
-                if isinstance(scenario, EnvSource):
-                    train_env_seed(cfg, scenario, run_dir, command, [sink], self._started)
-                else:
-                    train_seed(cfg, scenario, run_dir, command, (), cfg.eval_games, [sink], self._started)
+                train_seed(cfg, world, run_dir, command, (), cfg.eval_games, [sink], self._started)
                 self.results.put(None)  # trained to the end
             except BaseException as e:  # noqa: BLE001  (handed to Tune's thread: the trial errors)
                 self.results.put(e)
@@ -133,32 +130,6 @@ class TracelabTrial(tune.Trainable):
         self.thread.join(CLOSE_WAIT_S)
 
 
-def train_env_seed(cfg: TrainConfig, source: EnvSource, run_dir: Path, command: str, metric_sinks: list[Any],
-                   started: Any) -> str:
-    """A `train --env` of `source` into a new run at `run_dir` (a sweep's trial); returns its status."""
-    # deferred: torch and the trainer, which building the search does not need
-    import torch
-
-    from tracelab.store.writer import TraceWriter
-    from tracelab.train.env_trainer import EnvTrainer, env_run_meta
-
-    writer = TraceWriter.open(run_dir, env_run_meta(cfg, source, f"tracelab train --env (from: {command})"))
-    torch.set_num_threads(cfg.threads)
-    trainer, status = None, "failed"
-    try:
-        trainer = EnvTrainer(cfg, source, writer, run_dir, metric_sinks=metric_sinks)
-        started(trainer)
-        status = str(trainer.train())
-        return status
-    except (KeyboardInterrupt, SystemExit):
-        status = "interrupted"
-        raise
-    finally:
-        if trainer is not None:
-            trainer.close()
-        writer.close(status=status)
-
-
 def best_evaluation(results: Any, metric: str, mode: str) -> tuple[float | None, int | None, float | None]:
     """A trial's best evaluation by `metric` (the earliest of equals), its step, and the metric's last
     value; from Tune's results of the trial (a DataFrame; heartbeats have no metric). The best, not the
@@ -194,7 +165,7 @@ def wait_for_trials_to_close(out: Path, ceiling_s: float = CLOSE_WAIT_S) -> None
             time.sleep(0.2)
 
 
-def run_sweep(spec: SweepSpec, scenario: Scenario | EnvSource, out: Path, command: str) -> SweepResult:
+def run_sweep(spec: SweepSpec, world: EnvSource | Any, out: Path, command: str) -> SweepResult:
     """The search (Ray initialised by the caller): trials under `out`, Tune's records in out/tune, what
     Tune prints in out/tune.log."""
     given, out = out, out.absolute()  # Tune's actors work in folders of their own
@@ -204,7 +175,7 @@ def run_sweep(spec: SweepSpec, scenario: Scenario | EnvSource, out: Path, comman
         cfg = spec.base_config()
         scheduler = tune.schedulers.ASHAScheduler(time_attr="step", max_t=cfg.steps, grace_period=cfg.eval_every,
                                                   reduction_factor=ASHA_REDUCTION)
-    trainable = tune.with_parameters(TracelabTrial, fixed=spec.fixed, scenario=scenario, out=str(out),
+    trainable = tune.with_parameters(TracelabTrial, fixed=spec.fixed, world=world, out=str(out),
                                      metric=spec.metric, command=command)
     tuner = tune.Tuner(
         tune.with_resources(trainable, {"cpu": 1}),

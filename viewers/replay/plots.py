@@ -51,10 +51,10 @@ def eval_game_note(con: RunConnection, episode: int) -> str | None:
         "WHERE episode = ? AND json_extract_string(begin_info, '$.kind') = 'eval'", [episode]).fetchall()
     if not rows:
         return None
-    train_step, eval_round, opponent_p = rows[0]
+    train_step, eval_round, level = rows[0]  # level: RuleSim's evaluation games recorded their opponent's p
     where = [f"at train step {train_step:,}" if train_step is not None else "",
              f"round {eval_round}" if eval_round is not None else "",
-             f"opponent p {opponent_p:g}" if opponent_p is not None else ""]
+             f"opponent p {level:g}" if level is not None else ""]
     return ("- an evaluation game of the training, " + ", ".join(w for w in where if w)
             + " (its curves: `tracelab tui RUN`, 6 Training)")
 

@@ -1,7 +1,8 @@
 """The traced evaluation games of a training run, for the trace's `]` / `[` keys and its header line.
 
 A training run (HELPER_GUIDE's contract, docs/training.md) begins each evaluation game with the info
-`{"kind": "eval", "train_step": N, "eval_round": K, "opponent_p": P}` and stores its full trace; a run
+`{"kind": "eval", "train_step": N, "eval_round": K}` (RuleSim's, the war game's trainer before its spec, also
+`"opponent_p": P`) and stores its full trace; a run
 that is not a training run has none. Read from the begin info itself, so a run sealed before the
 episodes view had its `kind` column reads the same."""
 from __future__ import annotations
@@ -12,13 +13,13 @@ from tracelab.viewers.tui.source import RunSource
 
 # every evaluation game in episode order; nth / of: its place among the games of its evaluation round
 EVAL_GAMES_SQL = """
-SELECT episode, train_step, eval_round, opponent_p, outcome, steps,
+SELECT episode, train_step, eval_round, level, outcome, steps,
        row_number() OVER (PARTITION BY train_step, eval_round ORDER BY episode) AS nth,
        count(*) OVER (PARTITION BY train_step, eval_round) AS of_round
 FROM (SELECT episode, outcome, steps,
              TRY_CAST(json_extract(begin_info, '$.train_step') AS BIGINT) AS train_step,
              TRY_CAST(json_extract(begin_info, '$.eval_round') AS BIGINT) AS eval_round,
-             TRY_CAST(json_extract(begin_info, '$.opponent_p') AS DOUBLE) AS opponent_p
+             TRY_CAST(json_extract(begin_info, '$.opponent_p') AS DOUBLE) AS level
       FROM episodes WHERE json_extract_string(begin_info, '$.kind') = 'eval')
 ORDER BY episode
 """
@@ -29,7 +30,7 @@ class EvalGame:
     episode: int
     train_step: int | None
     eval_round: int | None
-    opponent_p: float | None
+    level: float | None        # the evaluation's level where its begin info says it (RuleSim's opponent p)
     outcome: str | None        # None while the game is still being played (a live run)
     steps: int | None
     nth: int                   # 1-based place among the games of its evaluation round
@@ -42,8 +43,8 @@ class EvalGame:
             parts.append(f"round {self.eval_round}")
         if self.train_step is not None:
             parts.append(f"train step {self.train_step:,}")
-        if self.opponent_p is not None:
-            parts.append(f"opponent p={self.opponent_p:g}")
+        if self.level is not None:
+            parts.append(f"opponent p={self.level:g}")
         ended = "playing" if self.outcome is None else \
             f"{self.outcome}, {self.steps} steps" if self.steps is not None else self.outcome
         return " · ".join(parts + [ended])

@@ -7,7 +7,7 @@ screen's and the app's), each whole or not at all. When the line is too narrow, 
 the end of the list, `? help` last of all (it lists every key); `^p palette` stays at the right edge."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from rich.text import Text
 from textual import events
@@ -19,8 +19,7 @@ from tracelab.viewers.tui.colours import PARTIAL
 KEPT_ACTION = "help"       # the key dropped last: its screen lists the keys that did not fit
 
 
-@dataclass(frozen=True)
-class Key:
+class Key(NamedTuple):   # not a dataclass: ~1-2 ms to make at import (the first screen's)
     text: Text            # " g goto t"
     action: str
     node: object          # the binding's namespace (the widget whose action it is)

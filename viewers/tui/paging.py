@@ -46,19 +46,36 @@ class ArrowSource:
         return self.table.slice(page * PAGE, PAGE).to_pylist()
 
 
+ROW_COUNT = "tracelab_row_count"   # QuerySource's count column beside the first page's rows
+
+
 class QuerySource:
     """`sql` (one SELECT) ordered by `order` (tie-broken by the caller: every ORDER BY is total)."""
 
     def __init__(self, source: RunSource, sql: str, order: str, params: dict[str, Any] | None = None
                  ) -> None:
         self.source, self.sql, self.order, self.params = source, sql, order, params
+        self._first_page: list[dict[str, Any]] | None = None
 
     def prepare(self) -> int:
-        return int(self.source.scalar(f"SELECT count(*) FROM ({self.sql})", self.params))
+        """The row count, read with the first page in one statement (each costs its planning: the
+        Episodes table is the first screen's, issue 40); the page is kept for the first fetch of it."""
+        rows = self._page(0, f", count(*) OVER () AS {ROW_COUNT}")
+        count = rows[0][ROW_COUNT] if rows else 0
+        for row in rows:
+            del row[ROW_COUNT]
+        self._first_page = rows
+        return int(count)
 
     def warm(self) -> None:
         pass
 
     def fetch(self, page: int) -> list[dict[str, Any]]:
-        return self.source.rows(f"SELECT * FROM ({self.sql}) ORDER BY {self.order} "
+        if page == 0 and self._first_page is not None:
+            rows, self._first_page = self._first_page, None
+            return rows
+        return self._page(page)
+
+    def _page(self, page: int, extra: str = "") -> list[dict[str, Any]]:
+        return self.source.rows(f"SELECT *{extra} FROM ({self.sql}) ORDER BY {self.order} "
                                 f"LIMIT {PAGE} OFFSET {page * PAGE}", self.params)

@@ -1,14 +1,14 @@
 """Where the user was in a run, kept for the session: a run closed (Esc to the Runs screen) and opened again
 opens on the view it was left on, with the Episodes' filters, sort and cursor and the trace's episode,
 filters and cursor as they were. The app holds one RunPlace per open run (by its paths); nothing is
-written to disk."""
+written to disk. NamedTuples, not dataclasses: a dataclass costs ~1-2 ms of CPU to make at import, and these
+are imported with the first screen (issue 40)."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 
-@dataclass(frozen=True)
-class EpisodesPlace:
+class EpisodesPlace(NamedTuple):
     outcome: str | None        # the outcome selector's value (None: all)
     kind: str | None           # the kind selector's value (None: all)
     length: str                # the length filter's text
@@ -17,8 +17,7 @@ class EpisodesPlace:
     cursor: int                # the row the cursor was on (the same filter and sort give the same rows)
 
 
-@dataclass(frozen=True)
-class TracePlace:
+class TracePlace(NamedTuple):
     episode: int
     time_range: str            # the filter fields' text
     atom: str
@@ -30,8 +29,7 @@ class TracePlace:
     seq: int | None            # the change the cursor was on
 
 
-@dataclass(frozen=True)
-class RunPlace:
+class RunPlace(NamedTuple):
     view: str                  # the tab it was left on
     episodes: EpisodesPlace | None
     trace: TracePlace | None   # None: no episode was opened

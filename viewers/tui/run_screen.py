@@ -17,7 +17,7 @@ from textual.binding import Binding
 from textual.screen import Screen
 from textual.widget import Widget
 from rich.text import Text
-from textual.widgets import Input, Static, TabbedContent, TabPane, Tabs, TextArea
+from textual.widgets import Input, Static, TabbedContent, TabPane, Tabs
 
 from tracelab.viewers.tui.episodes import EpisodesPane
 from tracelab.viewers.tui.keybar import KeyBar
@@ -121,6 +121,10 @@ class RunScreen(Screen):
         # reopened: on the view it was left on (the why tree: on the trace it explained)
         view = "trace" if place and place.view == "why" else place.view if place else self.initial
         self.opening = view if view in self.panes and self.has_view(view) else self.initial
+        if self.opening == "episodes":
+            # focused as the screen starts: textual's default (the first focusable widget) focused the tabs,
+            # then the view its table, restyling the tabs' 11 nodes on each change (issue 40: the first screen)
+            self.AUTO_FOCUS = "#ep-table"
 
     def compose(self) -> ComposeResult:
         yield Static(self._title(), id="title", classes="title")
@@ -226,8 +230,11 @@ class RunScreen(Screen):
         if [source for source in self._sources() if source.interrupt()]:   # every one: no short cut
             self.notify("query cancelled")
             return
-        if isinstance(self.focused, TextArea):   # the SQL editor: to its results (where 1-6 work again)
-            self.panes["sql"].action_focus_results()  # type: ignore[attr-defined]
+        # the SQL editor: to its results (where 1-6 work again). `get` does not make the view: textual's
+        # TextArea (tree-sitter, its themes) is imported with the SQL view, not on the first screen
+        sql = self.panes.get("sql")
+        if sql is not None and sql.is_attached and sql.editor.has_focus:  # type: ignore[attr-defined]
+            sql.action_focus_results()  # type: ignore[attr-defined]
             return
         if isinstance(self.focused, Input):
             self._focus_pane(self.tabs.active)

@@ -15,8 +15,8 @@ from typing import Any
 import gymnasium as gym
 
 from tracelab.envs import make_env  # importing tracelab.envs registers the ids (declared/gridwar.py, toytext.py)
-from tracelab.envs.declared.gridwar import GRIDWAR_SPEC_IDS, spec_and_params
 from tracelab.errors import UserError
+from tracelab.world_extras import declared_id
 
 DECLARED_ENTRY_POINT = "tracelab.envs.declared.gym_env:DeclaredEnv"
 
@@ -42,8 +42,8 @@ class EnvSource:
     @property
     def env_id(self) -> str | None:
         """The registered id whose entry is DeclaredEnv over its `spec` kwarg, or None for a spec file (and
-        for the war game's ids, whose keyword arguments gridwar.spec_and_params maps onto their spec's)."""
-        return self.name if self.name in _registry() and self.name not in GRIDWAR_SPEC_IDS else None
+        for an id whose registration maps its keyword arguments onto its spec's: world_extras.declared_id)."""
+        return self.name if self.name in _registry() and declared_id(self.name, {}) is None else None
 
     @property
     def short_name(self) -> str:
@@ -53,9 +53,9 @@ class EnvSource:
     def declared(self) -> tuple[str, dict[str, Any]]:
         """The spec file of a declared world and the spec's [params] to load it with (an id's own fixed
         ones, map_name of FrozenLake8x8, then the user's); UserError when the source is not one."""
-        if self.name in GRIDWAR_SPEC_IDS:
-            spec, params = spec_and_params(self.name, self.kwargs)
-            return str(spec), params
+        mapped = declared_id(self.name, self.kwargs)
+        if mapped is not None:
+            return mapped
         if self.env_id is not None:
             entry = _registry()[self.env_id]
             kwargs = dict(entry.kwargs)
@@ -71,7 +71,7 @@ class EnvSource:
                         f"{', '.join(declared)})")
 
     def with_args(self, **kwargs: Any) -> "EnvSource":
-        """The same env with these keyword arguments set (the war game's opponent at another p: p_toward=P)."""
+        """The same env with these keyword arguments set (an evaluation's: world_extras.evaluation_env)."""
         return EnvSource(self.name, {**self.kwargs, **kwargs})
 
     def to_json(self) -> dict[str, Any]:

@@ -9,6 +9,7 @@ their own for the game."""
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 import shlex
 import tomllib
 from pathlib import Path
@@ -39,6 +40,9 @@ from tracelab.train.env_policy import (
     read_policy_networks,
     spec_net,
 )
+from tracelab.store.meta import current_meta
+from tracelab.train.budget import reward_scale_note, too_short_hint
+from tracelab.train.env_checkpoint import checkpoint_config
 from tracelab.train.env_source import TeamEncoder, probe_env
 from tracelab.validation import Const, IntRange, ListOf, MapOf, OptionalKey, check_file
 
@@ -102,12 +106,65 @@ def scenario_source(scenario: Scenario, opponent_p: float | None = None,
         raise UserError(str(e)) from None
 
 
-def training_sources(scenario: Scenario, opponent_p: float, eval_p: float,
-                     stack_previous: bool) -> tuple[EnvSource, EnvSource]:
-    """(the env `scenario` trains on, the one its evaluations play: the opponent at `eval_p`), as the game's
-    ids and params (scenario_env: a UserError naming what its spec cannot play)."""
-    source = EnvSource(*scenario_env(scenario, opponent_p, stack_previous))
-    return source, source.with_args(p_toward=eval_p)
+@dataclass(frozen=True)
+class ScenarioTraining:
+    """`train --scenario`: the scenario a TrainConfig names (its scenario, agents, opponent and evaluation
+    p, non_markov fields) and what train says of it."""
+    scenario: Scenario
+    source: EnvSource       # the env it trains on
+    eval_source: EnvSource  # the one its evaluations play (the opponent at --eval-p)
+
+    @classmethod
+    def of(cls, cfg: Any) -> ScenarioTraining:
+        """The scenario `cfg` names (--scenario, --agents), trained as `cfg` says."""
+        return cls.for_scenario(load_scenario_arg(cfg.scenario, cfg.agents), cfg)
+
+    @classmethod
+    def for_scenario(cls, scenario: Scenario, cfg: Any) -> ScenarioTraining:
+        """`scenario` (an experiment's arm: its own rewards) trained as `cfg` says: the game's id and params
+        (scenario_env: a UserError naming what its spec cannot play), evaluated against the opponent at
+        --eval-p."""
+        source = EnvSource(*scenario_env(scenario, cfg.opponent_p, cfg.non_markov))
+        return cls(scenario, source, source.with_args(p_toward=cfg.eval_p))
+
+    def describe(self, cfg: Any) -> str:
+        return f"{self.scenario.name} ({'non-Markov' if cfg.non_markov else 'Markov'}, opponent p " \
+               f"{cfg.opponent_p:g}, evaluated against p {cfg.eval_p:g}; --env {self.source.describe()})"
+
+    def reward_note(self, reward_scale: float) -> str | None:
+        """The note on a reward scale far from the scenario's rewards (budget.reward_scale_note)."""
+        rewards = dataclasses.asdict(self.scenario.rewards).values()
+        return reward_scale_note(max(abs(v) for v in rewards), reward_scale)
+
+    def hint(self, steps: int, wins: int) -> str | None:
+        """The hint for a training too short to win (budget.too_short_hint)."""
+        return too_short_hint(steps, wins, self.scenario.agents_per_team)
+
+
+def resumed_scenario(run: str, recorded: EnvSource, checkpoint: dict[str, Any],
+                     scenario_given: str | None) -> ScenarioTraining | None:
+    """`train --resume RUN` of a `train --scenario` run (one of the game's ids, its meta's config holding the
+    scenario's TOML): the scenario rebuilt from its `checkpoint`'s config (a built-in one, or --scenario FILE
+    given again: a file never names the file tracelab reads); None for any other run."""
+    if recorded.name not in GRIDWAR_SPEC_IDS or "scenario_toml" not in _run_config(Path(run)):
+        return None
+    cfg = checkpoint_config(checkpoint)
+    if scenario_given not in (None, cfg.scenario):
+        raise UserError(f"--scenario {scenario_given}: {run} trained scenario {cfg.scenario!r}")
+    if scenario_given is None and cfg.scenario not in builtin_scenario_names():
+        raise UserError(f"{run} trained the scenario file {cfg.scenario!r}: name it again to resume "
+                        f"(tracelab reads no file a run names by itself): tracelab train --resume "
+                        f"{shlex.quote(run)} --scenario {shlex.quote(cfg.scenario)}")
+    return ScenarioTraining.of(cfg)
+
+
+def _run_config(run: Path) -> dict[str, Any]:
+    """The config in `run`'s meta.json ({} when it is not a run: the checkpoint's loader says what it is)."""
+    try:
+        config = current_meta(run).get("config", {})
+    except (OSError, ValueError, AttributeError):
+        return {}
+    return config if isinstance(config, dict) else {}
 
 
 # ---- RuleSim's trainer's files ------------------------------------------------------------------------

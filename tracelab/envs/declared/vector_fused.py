@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import inspect
 
+import numpy as np
 from numba import njit
 
 from tracelab.engine import kernel as K
@@ -87,7 +88,8 @@ def step_worlds(b, actions, t, first_id):  # noqa: ANN001, ANN201
     draw_rows(batch, actions)
     build_rows(b.tables, b.ext, batch[6], batch[7], first_id)
     ext_ptr, ext_i, ext_f = b.ext
-    status, w_first = K.fused_step(b.state, t, ext_ptr, ext_i, ext_f)
+    b.state.cfg[K.CFG_T] = t  # what kernel.fused_step does, without its own copy of the kernel to compile
+    status, w_first = K.step_worlds(b.state, np.int64(0), ext_ptr, ext_i, ext_f)
     b.out[4][0] = w_first
     if status == STATUS_OK:
         read_batch(b)

@@ -65,8 +65,10 @@ class DeclaredWorlds:
         # draws them (vector_fused.draw_rows)
         self._categorical = _CategoricalTable(one._before) \
             if self._only_uniforms and _CategoricalTable.holds(one._before) else None
-        # a block of several steps' numbers: a 20v20 step draws 60, which a 64-number block refilled every step
-        block = max(64, 8 * len(one._before))
+        # a block of several steps' numbers: a 20v20 step draws 60, which a 64-number block refilled every step;
+        # a refill costs ~10-30 µs of Python, so a small batch (a one-world 5v5 step is ~150 µs) keeps 64
+        # steps' numbers (at most 64 * 64 steps' numbers in all: ~2 MB at 20v20)
+        block = max(64, (8 if w >= LANES_MIN_WORLDS else 64) * len(one._before))
         self._uniform_arrays = (np.empty((w, block)), np.full(w, block, np.int64))  # filled on first use
         self.uniforms: _Uniforms | None = None
         self._observer = one._observer  # built for the engine's n_worlds worlds
@@ -80,6 +82,15 @@ class DeclaredWorlds:
                        np.arange(self.n_agents, dtype=np.int64) * self.n_actions,  # agent i's first action row
                        np.full((w, self.n_agents), -1, np.int64), self._picks, observe)
         self._binding = fused.FusedBinding(self.engine, self._tables, self._ext, self._reads, self._out, self._batch)
+        # per-agent views of the reads, made once: a reader called per agent and step (an env's obs and
+        # reward of each agent) pays a slice's copy, not the slicing and lookups around it as well
+        self._reward_columns = [self._out[1][:, a] for a in range(self.n_agents)]
+        self._ends = (self._out[2][:, 0], self._out[2][:, 1])
+        n_index = len(one._index_parts)
+        self._index_columns = [self._out[0][:, a * n_index:(a + 1) * n_index] for a in range(self.n_agents)]
+        width = one.observation_program.width if one.observation_program is not None else 0
+        self._number_columns = [slice(a * width, (a + 1) * width) for a in range(self.n_agents)]
+        self._box_numbers = spec.space == "Box" and not one._index_checked  # observations(): numbers only
         self._starts = _StartOutcomes(self)
 
     @property
@@ -167,10 +178,11 @@ class DeclaredWorlds:
     # ---- reading (after a step or a reset) ----
 
     def rewards(self, agent: int = 0) -> np.ndarray:
-        r = self._out[1][:, agent].copy()
-        ids, scales = self.one._scaled[agent]
-        if ids.size:
-            r += self.engine.lower[:, ids] @ scales
+        r = self._reward_columns[agent].copy()
+        if self.one._any_scaled:
+            ids, scales = self.one._scaled[agent]
+            if ids.size:
+                r += self.engine.lower[:, ids] @ scales
         return r
 
     def holds(self, atoms: np.ndarray) -> np.ndarray | None:
@@ -179,7 +191,7 @@ class DeclaredWorlds:
         return self.engine.is_true(atoms) if atoms.size else None
 
     def terminated(self) -> np.ndarray:
-        return self._out[2][:, 0] == 1.0
+        return self._ends[0] == 1.0
 
     def won(self) -> np.ndarray:
         """Per world: terminated with one of the spec's `[end] win` atoms [1,1] (DeclaredWorld.outcome)."""
@@ -202,7 +214,7 @@ class DeclaredWorlds:
         """A truncated atom, or the spec's step limit reached in a world that did not terminate (both read
         with the step: vector_fused.read_truth), or `limit` (a TimeLimit's, which truncates whatever the
         step did) reached."""
-        out = self._out[2][:, 1] == 1.0
+        out = self._ends[1] == 1.0
         if limit is not None:
             out |= self.steps >= limit
         return out
@@ -215,14 +227,16 @@ class DeclaredWorlds:
     def observations(self, agent: int = 0) -> Any:
         """Agent `agent`'s observation of every world: an array with a world axis (a dict of them for a
         Dict space), as gymnasium's batch_space lays it out."""
+        if self._box_numbers:  # the usual case, first
+            return self._agent_numbers(agent)
         one, spec = self.one, self.spec
-        n_index = len(one._index_parts)
-        index = self._out[0][:, agent * n_index:(agent + 1) * n_index]
-        for p in range(n_index) if one._index_checked and index.min() < 0 else ():  # which part misses its atom
-            part = spec.parts[one._index_parts[p]]
-            if missing_index(part, index[:, p]):
-                w = int(np.flatnonzero(index[:, p] < 0)[0])
-                raise no_index(spec, part, w)
+        index = self._index_columns[agent]
+        if one._index_checked and index.min() < 0:  # which part misses its atom
+            for p in range(index.shape[1]):
+                part = spec.parts[one._index_parts[p]]
+                if missing_index(part, index[:, p]):
+                    w = int(np.flatnonzero(index[:, p] < 0)[0])
+                    raise no_index(spec, part, w)
         if spec.space == "Discrete":
             value = np.zeros(self.n_worlds, np.int64)
             for size, col in zip(one._part_sizes, index.T):  # first part slowest, as observation()
@@ -230,14 +244,18 @@ class DeclaredWorlds:
             return value
         if spec.space == "MultiDiscrete":
             return index.astype(np.int64)
-        width = one.observation_program.width
-        if self._numbers is None:  # every agent's numbers come from one read of the engine (until it changes)
-            self._numbers = self._observer.read(self.engine)
-        numbers = self._numbers[:, agent * width:(agent + 1) * width].copy()
+        numbers = self._agent_numbers(agent)
         if spec.space == "Box":
             return numbers
         parts = split_parts(spec, numbers)
         return {p.name: (v[:, 0].astype(np.int64) if p.is_discrete else v) for p, v in zip(spec.parts, parts)}
+
+    def _agent_numbers(self, agent: int) -> np.ndarray:
+        """A copy of agent `agent`'s observed numbers [W, width]; every agent's come from one read of the
+        engine (until it changes)."""
+        if self._numbers is None:
+            self._numbers = self._observer.read(self.engine)
+        return self._numbers[:, self._number_columns[agent]].copy()
 
 
 def _world(spec: WorldSpec, n_worlds: int, kernel: str) -> DeclaredWorld:

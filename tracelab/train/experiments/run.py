@@ -225,9 +225,8 @@ def shaping_traces(sr: SeedRun, source: EnvSource, out_dir: Path, games: int, co
     the arm's spec id and params) into their own run and read the saved queries' figures off it."""
     policy = load_env_policy(sr.policy_dir, source)[0]
     trace_dir = out_dir / f"{sr.run_dir.name}-traces"
-    traced_games(policy, source.with_args(p_toward=EVAL_PS[0]), trace_dir, games=games,
-                 seed=final_eval_seed(sr.seed, EVAL_PS[0]) + 2, command=f"tracelab eval (from: {command})",
-                 about={"policy": str(sr.policy_dir)})
+    traced_games(policy, source, trace_dir, games=games, seed=final_eval_seed(sr.seed, EVAL_PS[0]) + 2,
+                 command=f"tracelab eval (from: {command})", about={"policy": str(sr.policy_dir)}, level=EVAL_PS[0])
     figures = query_figures(trace_dir, action_names(source))
     figures["trace_run"] = str(trace_dir)
     say(f"  traced {games} games into {trace_dir}: " + ", ".join(

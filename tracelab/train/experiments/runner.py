@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
-from tracelab.envs.declared.gridwar_scenarios import training_sources
+from tracelab.envs.declared.gridwar_scenarios import ScenarioTraining
 from tracelab.game.scenario import Scenario
 from tracelab.store import TraceWriter
 from tracelab.store.queries import get_query
@@ -21,6 +21,7 @@ from tracelab.store.reader import fetch_arrow, open_run, query_readonly, retryin
 from tracelab.train.config import TrainConfig
 from tracelab.train.env_policy import BEST_POLICY_DIR
 from tracelab.train.experiments.stats import spread, wilson
+from tracelab.world_extras import evaluation_env
 
 if TYPE_CHECKING:
     from tracelab.envs.declared.env_source import EnvSource
@@ -117,27 +118,24 @@ def final_eval_seed(seed: int, p: float) -> int:
     return int(np.random.SeedSequence([seed, 3, FINAL_EVAL_ROUND, int(round(p * 1000))]).generate_state(1)[0])
 
 
-def train_seed(cfg: TrainConfig, scenario: Scenario | EnvSource, run_dir: Path, command: str,
+def train_seed(cfg: TrainConfig, world: Scenario | EnvSource, run_dir: Path, command: str,
                eval_ps: tuple[float, ...], eval_games: int, metric_sinks: Sequence[MetricSink] = (),
                started: Callable[[EnvTrainer], None] | None = None) -> SeedRun:
     """Train `cfg` into a new run at `run_dir`, then evaluate the final policy `eval_games` games
     against each opponent p in `eval_ps`, writing `eval/...@pP` metrics at the last step. `metric_sinks`
     receive the training's metrics besides the run; `started` is called with the trainer before it trains
-    (a sweep's trial stops it through it: stop_requested). `scenario` an EnvSource: a world other than
-    the war game, trained with train --env's trainer (_world_parts); a war game scenario trains through its spec
-    as `train --scenario` does (_scenario_parts)."""
+    (a sweep's trial stops it through it: stop_requested). `world`: an env, or the war game's scenario
+    (_parts)."""
     # deferred: torch and the trainers, which reading results and queries does not need
     import torch
 
-    from tracelab.envs.declared.env_source import EnvSource
-    parts = _world_parts if isinstance(scenario, EnvSource) else _scenario_parts
-    meta, make_trainer, final_evaluation = parts(cfg, scenario, command, eval_ps, eval_games)
+    meta, make_trainer, final_evaluation = _parts(cfg, world, command, eval_ps, eval_games)
     writer = TraceWriter.open(run_dir, meta)
     torch.set_num_threads(cfg.threads)
     trainer, status = None, "failed"
     t0 = time.perf_counter()
     try:
-        trainer = make_trainer(cfg, scenario, writer, run_dir, metric_sinks=metric_sinks)
+        trainer = make_trainer(cfg, world, writer, run_dir, metric_sinks=metric_sinks)
         if started is not None:
             started(trainer)
         status = trainer.train()
@@ -165,58 +163,53 @@ FinalEvaluation = Callable[[Any, Any], dict[float, EvalFigures]]  # (trainer, po
 
 
 def scenario_arm_source(cfg: TrainConfig, scenario: Scenario) -> EnvSource:
-    """The spec id and params a scenario arm trains on (gridwar_scenarios.training_sources: its --env-arg
+    """The spec id and params a scenario arm trains on (its registration's ScenarioTraining: its --env-arg
     values, the scenario's rewards among them)."""
-    return training_sources(scenario, cfg.opponent_p, cfg.eval_p, cfg.non_markov)[0]
+    return ScenarioTraining.for_scenario(scenario, cfg).source
 
 
-def _scenario_parts(cfg: TrainConfig, scenario: Scenario, command: str, eval_ps: tuple[float, ...],
-                   eval_games: int) -> tuple[dict[str, Any], Any, FinalEvaluation]:
-    """A scenario through its spec, as `train --scenario` trains it: the run meta, EnvTrainer on the
-    scenario's spec id (evaluating at --eval-p), and the final evaluation against each opponent p of `eval_ps`
-    (the same env with that p_toward), counted by the spec's [end] win / loss."""
+def _parts(cfg: TrainConfig, world: Scenario | EnvSource, command: str, eval_ps: tuple[float, ...],
+           eval_games: int) -> tuple[dict[str, Any], Any, FinalEvaluation]:
+    """The run meta, the trainer and the final evaluation of `world`: an env, as `train --env` trains it, or
+    the war game's scenario, as `train --scenario` does (its registration's ScenarioTraining: the run names
+    the scenario, its evaluations play the opponent at --eval-p). The final evaluation: `eval_games` games
+    at each level of `eval_ps` (the env world_extras.evaluation_env gives there, else the world's own: one
+    level, WORLD_P), counted as the world declares ([end] win / loss)."""
+    from tracelab.envs.declared.env_source import EnvSource
     from tracelab.train.env_policy import evaluate_env, load_env_policy
     from tracelab.train.env_trainer import EnvTrainer, env_run_meta
 
-    source, eval_source = training_sources(scenario, cfg.opponent_p, cfg.eval_p, cfg.non_markov)
-    meta = env_run_meta(cfg, source, f"tracelab train (from: {command})", None, scenario)
-    meta["config"]["eval_env"] = eval_source.to_json()
+    if isinstance(world, EnvSource):
+        source, eval_source = world, None
+        meta = env_run_meta(cfg, source, f"tracelab train --env (from: {command})")
+    else:
+        training = ScenarioTraining.for_scenario(world, cfg)
+        source, eval_source = training.source, training.eval_source
+        meta = env_run_meta(cfg, source, f"tracelab train (from: {command})", None, world)
+        meta["config"]["eval_env"] = eval_source.to_json()
 
-    def make_trainer(cfg: TrainConfig, _: Scenario, *args: Any, **kw: Any) -> EnvTrainer:
+    def make_trainer(cfg: TrainConfig, _: Any, *args: Any, **kw: Any) -> EnvTrainer:
         return EnvTrainer(cfg, source, *args, eval_source=eval_source, **kw)
 
     def final_evaluation(trainer: Any, policy: Any) -> dict[float, EvalFigures]:
         if isinstance(policy, Path):
             policy = load_env_policy(policy, source)[0]
-        return {p: EvalFigures.of(evaluate_env(policy, source.with_args(p_toward=p), eval_games,
+        return {p: EvalFigures.of(evaluate_env(policy, evaluation_env(source, p) or source, eval_games,
                                                final_eval_seed(cfg.seed, p), cfg.eval_envs))
                 for p in eval_ps}
     return meta, make_trainer, final_evaluation
 
 
-def _world_parts(cfg: TrainConfig, source: EnvSource, command: str, eval_ps: tuple[float, ...],
-                 eval_games: int) -> tuple[dict[str, Any], Any, FinalEvaluation]:
-    """A world other than the war game: train --env's run meta and trainer; its final evaluation, `eval_games`
-    games counted as the world declares, keyed WORLD_P (it has no opponent setting)."""
-    from tracelab.train.env_policy import evaluate_env, load_env_policy
-    from tracelab.train.env_trainer import EnvTrainer, env_run_meta
-
-    def final_evaluation(trainer: Any, policy: Any) -> dict[float, EvalFigures]:
-        if isinstance(policy, Path):
-            policy = load_env_policy(policy, source)[0]
-        return {WORLD_P: EvalFigures.of(evaluate_env(policy, source, eval_games, final_eval_seed(cfg.seed, WORLD_P),
-                                                     cfg.eval_envs))}
-    return env_run_meta(cfg, source, f"tracelab train --env (from: {command})"), EnvTrainer, final_evaluation
-
-
 def traced_games(policy: EnvPolicy, source: EnvSource, run_dir: Path, *, games: int, seed: int, command: str,
-                 about: dict[str, Any]) -> EvalFigures:
-    """`games` greedy games of `policy` on the declared world `source`, every one traced in full into a new
-    run (as a training's traced evaluation games are, external_eval.DeclaredEvaluator): the saved queries
-    then read only these games. Game k is seeded from `seed` (eval_seed(seed, 0) + 1 + k)."""
+                 about: dict[str, Any], level: float | None = None) -> EvalFigures:
+    """`games` greedy games of `policy` on the declared world `source` (at the evaluation `level`, if given, as
+    the final evaluation's), every one traced in full into a new run (as a training's traced evaluation games are,
+    external_eval.DeclaredEvaluator): the saved queries then read only these games. Game k is seeded from
+    `seed` (eval_seed(seed, 0) + 1 + k)."""
     from tracelab.envs.declared.play import load_declared
     from tracelab.train.external_eval import DeclaredEvaluator, DeclaredTarget, EvalSettings
 
+    source = source if level is None else evaluation_env(source, level) or source
     described = DeclaredTarget(source, load_declared(source)).run_meta()
     meta = {"command": command, "seed": seed, **described,
             "config": {**about, "games": games, **described["config"]}}
@@ -226,7 +219,7 @@ def traced_games(policy: EnvPolicy, source: EnvSource, run_dir: Path, *, games: 
                                   EvalSettings(every=0, games=games, traced=games, envs=1, seed=seed))
     try:
         result = EvalFigures.of(evaluator.play(policy, 0, 0))
-        writer.write_metrics(0, result.metrics(p_suffix(source.kwargs.get("p_toward", WORLD_P))))
+        writer.write_metrics(0, result.metrics(p_suffix(WORLD_P if level is None else level)))
         status = "finished"
         return result
     finally:
