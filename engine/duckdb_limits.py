@@ -6,7 +6,7 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from tracelab.engine.grounding_limit import usable_memory
 from tracelab.engine.safe_files import human_bytes, size_setting
@@ -29,9 +29,9 @@ class SandboxSettingError(ValueError):
     """A setting of the sandbox given in the environment that cannot be used (one line, names it)."""
 
 
-@dataclass(frozen=True)
-class QueryMemory:
-    """What one sandbox connection may use: bytes of memory and of spill files, and threads."""
+class QueryMemory(NamedTuple):
+    """What one sandbox connection may use: bytes of memory and of spill files, and threads. (A NamedTuple,
+    not a dataclass: ~1 ms less of every reading command's start.)"""
     memory: int
     spill: int
     threads: int

@@ -63,18 +63,21 @@ class ActionExplanation:
                 "q_by_term": self.by_term}
 
 
-# The decision, the observation it read (recorded after the step before), the observation's names, the
-# reward terms and the reward: one statement (each costs its own planning, ~2 ms of CPU on a cold process)
+# The decision, the run's action names, the observation it read (recorded after the step before), the
+# observation's names, the reward terms and the reward: one statement (each costs its own planning, ~2 ms of CPU
+# on a cold process), on the raw tables (the `decisions` and `rewards` views cost their own binding and a join
+# each: ~5 ms of a cold `why --action`; the names are matched here as the `decisions` view matches them); lists,
+# not scalar subqueries (whose check for a second row costs more planning)
 _DECISION_SQL = """
-SELECT action_name, output, explored, epsilon, state_value, actions, "values", mask, terms, term_values,
-       (SELECT obs FROM raw.steps WHERE episode = $episode AND step = $step - 1 AND agent = $agent LIMIT 1),
-       (SELECT list({'position': position, 'name': name, 'divisor': divisor, 'size': size, 'labels': labels}
-                    ORDER BY position, divisor DESC) FROM raw.observation_names),
-       (SELECT {'term': list(term ORDER BY abs(value) DESC, term), 'value': list(value ORDER BY abs(value) DESC, term)}
-        FROM rewards WHERE episode = $episode AND step = $step AND agent = $agent),
-       (SELECT list(reward) FROM (SELECT reward FROM raw.steps WHERE episode = $episode AND step = $step
-                                  AND agent = $agent LIMIT 1))
-FROM decisions WHERE episode = $episode AND step = $step AND agent = $agent"""
+SELECT action, output, explored, epsilon, state_value, "values", mask, terms, term_values,
+       (SELECT list((action, name, position)) FROM raw.action_names),
+       (SELECT list(obs) FROM raw.steps WHERE episode = $episode AND step = $step - 1 AND agent = $agent),
+       (SELECT list((position, name, divisor, size, labels) ORDER BY position, divisor DESC)
+        FROM raw.observation_names),
+       (SELECT list((term, value) ORDER BY abs(value) DESC, term)
+        FROM raw.reward_terms WHERE episode = $episode AND step = $step AND agent = $agent),
+       (SELECT list(reward) FROM raw.steps WHERE episode = $episode AND step = $step AND agent = $agent)
+FROM raw.decisions WHERE episode = $episode AND step = $step AND agent = $agent"""
 
 
 def explain_action(con: RunConnection, episode: int, agent: str, step: int) -> ActionExplanation:
@@ -83,8 +86,9 @@ def explain_action(con: RunConnection, episode: int, agent: str, step: int) -> A
     rows = con.execute(_DECISION_SQL, {"episode": episode, "step": step, "agent": agent}).fetchall()
     if not rows:
         raise KeyError(_no_decision(con, episode, agent, step))
-    (name, output, explored, epsilon, state_value, actions, values, mask, term_names, term_values,
-     obs, parts, terms, reward) = rows[0]
+    (action, output, explored, epsilon, state_value, values, mask, term_names, term_values,
+     action_names, obs, parts, terms, reward) = rows[0]
+    name, actions = _action_names(action, action_names or [])
     allowed = mask if mask is not None else [True] * len(values)
     ranked = sorted((ActionValue(str(a), float(v), bool(m)) for a, v, m in zip(actions, values, allowed)),
                     key=lambda a: -a.value)
@@ -95,10 +99,19 @@ def explain_action(con: RunConnection, episode: int, agent: str, step: int) -> A
                      for k, t in enumerate(term_names)}
     if step > 1:
         e.observed_at = step - 1
-        e.features = _features(obs, [tuple(part.values()) for part in parts or []])
-    e.terms = [(str(t), float(v)) for t, v in zip(terms["term"] or [], terms["value"] or [])]
+        e.features = _features(obs[0] if obs else None, parts or [])
+    e.terms = [(str(t), float(v)) for t, v in terms or []]
     e.reward = float(reward[0]) if reward else None
     return e
+
+
+def _action_names(action: int, rows: list[tuple[int, str, int | None]]) -> tuple[str | None, list[str]]:
+    """The chosen action's name and the names of the actions the policy's values are of (in their order), from
+    raw.action_names' rows (action, name, position), as the `decisions` view reads them (tracelab.store.schema):
+    the name of the action-th action by number, and those with a position, in its order."""
+    by_number = [n for _, n, _ in sorted(rows, key=lambda r: r[0])]
+    offered = [n for _, n, p in sorted((r for r in rows if r[2] is not None), key=lambda r: r[2])]
+    return (by_number[action] if action is not None and 0 <= action < len(by_number) else None), offered
 
 
 def _no_decision(con: RunConnection, episode: int, agent: str, step: int) -> str:

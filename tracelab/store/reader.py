@@ -36,9 +36,11 @@ from tracelab.engine.safe_files import JSON_CAP, check_regular, read_bytes
 from tracelab.store import layout
 from tracelab.store.checked_files import file_identity, same_file
 from tracelab.store.sandbox import (
+    LOCK_CONFIGURATION_SQL,
     check_readonly,
     lock_configuration,
     lock_down,
+    lock_down_sql,
     refusal,
     sandbox_connection,
 )
@@ -254,14 +256,23 @@ class SealedRunConnection(RefreshingConnection):
 
     def make_views(self, names: Iterable[str] | None = None) -> None:
         """The views `names` (view names, "raw.<table>"; None: all of them) and those they read."""
-        wanted = _ALL_VIEWS if names is None else _with_dependencies(names)
         with self._making:
-            missing = [n for n in wanted if n not in self._made]
+            missing, sql = self.views_sql(names)
             if missing:
-                self._con.execute(";\n".join(VIEW_STATEMENTS[n] if n in VIEW_STATEMENTS else
-                                              _sealed_raw_view_sql(n[4:], self._columns, self._database, "raw")
-                                              for n in missing))
-                self._made.update(missing)
+                self._con.execute(sql)
+                self.views_made(missing)
+
+    def views_sql(self, names: Iterable[str] | None = None) -> tuple[list[str], str]:
+        """The views `names` and those they read that are not made yet, and the statements that make them,
+        for a caller that runs them with others in one call (_attach_sealed) and then calls views_made."""
+        wanted = _ALL_VIEWS if names is None else _with_dependencies(names)
+        missing = [n for n in wanted if n not in self._made]
+        return missing, ";\n".join(VIEW_STATEMENTS[n] if n in VIEW_STATEMENTS else
+                                    _sealed_raw_view_sql(n[4:], self._columns, self._database, "raw")
+                                    for n in missing)
+
+    def views_made(self, names: Iterable[str]) -> None:
+        self._made.update(names)
 
     def _run(self, query: Any, run: Callable[[], T]) -> T:
         text = getattr(query, "query", query)   # a DuckDB Statement, or its text
@@ -341,15 +352,14 @@ def open_run(run: str | Path) -> RunConnection:
     con = sandbox_connection()
     try:
         if sealed is not None:
-            result: RunConnection = _attach_sealed(con, sealed)
+            result: RunConnection = _attach_sealed(con, sealed)   # its configuration locked too
         else:
             lock_down(con, [check_live_run(p)])
             con.execute("CREATE SCHEMA raw")
             result = LiveRunConnection(con, p.resolve())  # sets the variables the views read, and raw.run
             create_live_raw_views(con, p.resolve())
             con.execute(VIEWS_SQL)
-        lock_configuration(con)
-        if isinstance(result, LiveRunConnection):
+            lock_configuration(con)
             result.views_ready()
     except BaseException as e:
         con.close()
@@ -397,13 +407,18 @@ def _refuse_links(parts: Path) -> None:
             check_regular(entry, follow_symlinks=False)  # FileRefused naming what it is
 
 
-def check_run_rows(con: duckdb.DuckDBPyConnection, runs: Sequence[tuple[Path, str]]) -> None:
+def check_run_rows(con: duckdb.DuckDBPyConnection, runs: Sequence[tuple[Path, str]], before: str = "") -> None:
     """Each run's raw.run (`runs`: (its file, the schema of its raw views)) is its one metadata row:
-    every reader of a run takes it for granted. One statement for them all."""
+    every reader of a run takes it for granted. One statement for them all, run in the same call as the
+    statements `before` (each call costs its own round trip)."""
     if not runs:
+        if before:
+            con.execute(before)
         return
-    (counts,) = con.execute("SELECT [" + ", ".join(f"(SELECT count(*) FROM {raw}.run)" for _, raw in runs)
-                            + "]").fetchone()
+    # fetchall: a result read by fetchone is left unfinished after several statements, and DuckDB refuses the
+    # connection's next statement
+    ((counts,),) = con.execute((before + ";\n" if before else "") + "SELECT ["
+                               + ", ".join(f"(SELECT count(*) FROM {raw}.run)" for _, raw in runs) + "]").fetchall()
     for (sealed, _), rows in zip(runs, counts):
         if rows != 1:
             raise ValueError(f"{sealed}: raw.run holds {rows} rows, not the run's one metadata row: not a "
@@ -412,27 +427,30 @@ def check_run_rows(con: duckdb.DuckDBPyConnection, runs: Sequence[tuple[Path, st
 
 def _attach_sealed(con: duckdb.DuckDBPyConnection, sealed: Path) -> SealedRunConnection:
     """Attach the sealed file read-only (before external access is switched off: ATTACH needs the file),
-    check its catalog before reading anything (tracelab.store.sealed_catalog), check raw.run; raw.<table>
-    over its stored tables and the views are made as statements name them (SealedRunConnection)."""
-    identity = attach_sealed_file(con, sealed, "store")
-    lock_down(con)
-    con.execute("CREATE SCHEMA raw")
+    check its catalog before reading anything (tracelab.store.sealed_catalog), check raw.run and lock the
+    connection's configuration; raw.<table> over its stored tables and the views are made as statements
+    name them (SealedRunConnection). Three calls of DuckDB when the file was checked before: each costs
+    its own round trip (~1 ms of a cold `why --action`)."""
+    identity = attach_sealed_file(con, sealed, "store", then=f"{lock_down_sql()};\nCREATE SCHEMA raw")
     result = SealedRunConnection(con, "store", check_sealed_catalog(con, "store", sealed, identity=identity))
-    result.make_views(["raw.run"])
-    check_run_rows(con, [(sealed, "raw")])
+    made, views = result.views_sql(["raw.run"])
+    check_run_rows(con, [(sealed, "raw")], before=f"{views};\n{LOCK_CONFIGURATION_SQL}")
+    result.views_made(made)
     return result
 
 
-def attach_sealed_file(con: duckdb.DuckDBPyConnection, sealed: Path, database: str) -> os.stat_result | None:
-    """ATTACH the sealed file READ_ONLY as `database`; refused if a write-ahead log lies beside it.
-    Returns the identity of the file attached (checked_files: the same before and after), or None."""
+def attach_sealed_file(con: duckdb.DuckDBPyConnection, sealed: Path, database: str,
+                       then: str = "") -> os.stat_result | None:
+    """ATTACH the sealed file READ_ONLY as `database`, then run the statements `then` in the same call;
+    refused if a write-ahead log lies beside it. Returns the identity of the file attached (checked_files:
+    the same before and after), or None."""
     path = sealed.resolve()
     wal = Path(f"{path}.wal")
     if os.path.lexists(wal):  # ATTACH replays a write-ahead log, running the SQL in it (ALTER ... USING)
         raise SealedFileRefused(f"{str(wal)!r}: a sealed run has no write-ahead log, and tracelab does not "
                                 "replay one it brings along (it holds SQL that would run on opening)")
     before = file_identity(path)
-    con.execute(f"ATTACH {_sql_str(path)} AS {database} (READ_ONLY)")
+    con.execute(f"ATTACH {_sql_str(path)} AS {database} (READ_ONLY)" + (f";\n{then}" if then else ""))
     after = file_identity(path)
     return after if same_file(before, after) else None
 

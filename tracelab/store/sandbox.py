@@ -121,19 +121,30 @@ def _sql_list(items: Sequence[str]) -> str:
 
 
 def lock_down(con: duckdb.DuckDBPyConnection, allowed_directories: Sequence[str] = ()) -> None:
-    """Switch external access off, except for reading under `allowed_directories` (absolute paths ending
-    in '/'). Each is allowed as written and as exact_file writes it: a run's files are named to DuckDB
+    """Switch external access off, except for reading under `allowed_directories` (lock_down_sql)."""
+    con.execute(lock_down_sql(allowed_directories))
+
+
+def lock_down_sql(allowed_directories: Sequence[str] = ()) -> str:
+    """The statements that switch external access off, except for reading under `allowed_directories`
+    (absolute paths ending in '/'), for a caller that runs them with others in one call (each call costs its
+    own round trip). Each is allowed as written and as exact_file writes it: a run's files are named to DuckDB
     that way (a folder `r*` as `r[*]`), and DuckDB checks the name it is given as well as the files it
     finds, so a name can still reach only files under a directory as written."""
+    statements = []
     if allowed_directories:
         allowed = list(dict.fromkeys([*allowed_directories, *map(exact_file, allowed_directories)]))
-        con.execute(f"SET allowed_directories = {_sql_list(allowed)}")
-    con.execute("SET enable_external_access = false")
+        statements.append(f"SET allowed_directories = {_sql_list(allowed)}")
+    return ";\n".join([*statements, "SET enable_external_access = false"])
+
+
+# From here on no SET, RESET or PRAGMA can change any setting of the connection.
+LOCK_CONFIGURATION_SQL = "SET lock_configuration = true"
 
 
 def lock_configuration(con: duckdb.DuckDBPyConnection) -> None:
     """From here on no SET, RESET or PRAGMA can change any setting of this connection."""
-    con.execute("SET lock_configuration = true")
+    con.execute(LOCK_CONFIGURATION_SQL)
 
 
 def _explained_statement(query: str) -> str:
