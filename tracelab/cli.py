@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import gc
-import importlib
 import os
 import sys
 
@@ -26,6 +25,7 @@ from tracelab.commands._notices import showing_library_notices
 from tracelab.commands._output import escaped_output
 from tracelab.commands._table import BY_NAME, COMMANDS
 from tracelab.errors import user_error_message
+from tracelab.frozen_imports import import_frozen
 EXIT_USER_ERROR = 1
 EXIT_USAGE = 2  # argparse's status for a usage error
 EXIT_BROKEN_PIPE = 141  # what a shell reports for a process ended by SIGPIPE
@@ -82,25 +82,6 @@ def _silence_stdout() -> None:
     os.dup2(devnull, sys.stdout.fileno())
 
 
-class _no_collection_while_starting:
-    """Python's garbage collector off while the command's module is imported, with what it imports (DuckDB's
-    import alone makes ~20,000 objects, which live to the end of the process): the ~30 collections it ran
-    there found little to free and cost ~15 ms of CPU of `why --action` (DuckDB's own start, the reading
-    commands' floor, pays ~10 ms of them). Then what the imports made is moved out of the collector's
-    generations (gc.freeze: else the first collection after would scan all of it at once) and the collector
-    is back on (if it was) for the command's own work (main() puts them back after a command run in a
-    caller's process)."""
-
-    def __enter__(self) -> None:
-        self.was_enabled = gc.isenabled()
-        gc.disable()
-
-    def __exit__(self, *exc: object) -> None:
-        gc.freeze()
-        if self.was_enabled:
-            gc.enable()
-
-
 def main(argv: list[str] | None = None) -> int:
     """The `tracelab` command (argv None: the process's own command line), or the command `argv` run in the
     caller's process."""
@@ -126,8 +107,7 @@ def _main(argv: list[str] | None) -> int:
     args.argv = list(sys.argv[1:] if argv is None else argv)  # the command line, for runs that record it
     try:
         with grounding_limit_of(args), showing_library_notices():
-            with _no_collection_while_starting():
-                importlib.import_module(BY_NAME[args.command].module)   # and what it imports (DuckDB, torch, ...)
+            import_frozen(BY_NAME[args.command].module)   # and what it imports (DuckDB, torch, ...)
             status = int(args.func(args) or 0)
         sys.stdout.flush()  # a closed pipe shows here for output still buffered
         return status

@@ -24,21 +24,14 @@ from typing import Any
 
 import tracelab
 from tracelab.bench import start
-from tracelab.bench.common import children_cpu_s, fmt_num, format_table, machine_info, summarize
+from tracelab.bench.common import children_cpu_s, fmt_num, format_table, machine_info, sample_runs_dir, summarize
+from tracelab.bench.tui import first_screen
 from tracelab.provenance import load_average
 
 FLOOR = ("python", "-c", "import duckdb; duckdb.sql('select 1').fetchall()")
 COMPARED_RUNS = 10  # compare's figure: this many training runs side by side (copies of base-train)
 TIMEOUT_S = 600
 TUI_FIRST_SCREEN_GOAL_S = 1.0  # issue 40: the TUI's first screen drawn within 1 s of its start
-
-
-def sample_runs_dir() -> Path:
-    """The source checkout's sample_runs/ (the benches that time the reading commands and the TUI read them)."""
-    runs = Path(tracelab.__file__).resolve().parents[1] / "sample_runs"
-    if not (runs / "advanced").is_dir():
-        raise FileNotFoundError(f"bench cli reads the sample runs of a source checkout; {runs} has none")
-    return runs
 
 
 def commands(runs: Path, copies: Path) -> list[tuple[str, tuple[str, ...], float | None]]:
@@ -107,7 +100,6 @@ def run(quick: bool, repeats: int, only: Sequence[str] | None = None) -> dict[st
 
 
 def _tui_first_screen(runs: Path, repeats: int) -> dict[str, Any]:
-    from tracelab.bench.tui import first_screen   # bench tui imports this module
     r = first_screen(runs / "advanced", repeats)
     return {**r, "goal_s": TUI_FIRST_SCREEN_GOAL_S, "met": r["cpu_s"]["median"] <= TUI_FIRST_SCREEN_GOAL_S}
 

@@ -17,6 +17,8 @@ from typing import Any
 
 import psutil
 
+import tracelab
+
 from tracelab.provenance import cpu_model, load_average, source_commit
 
 
@@ -176,3 +178,11 @@ def block_rates(run: Callable[[int], object], repeats: int, target_s: float) -> 
     run(block)  # warm-up at full size
     return {"steps_per_repeat": block, "steps_per_s": rates(median_of(lambda: run(block), repeats),
                                                              block).to_dict()}
+
+
+def sample_runs_dir() -> Path:
+    """The source checkout's sample_runs/ (the benches that time the reading commands and the TUI read them)."""
+    runs = Path(tracelab.__file__).resolve().parents[1] / "sample_runs"
+    if not (runs / "advanced").is_dir():
+        raise FileNotFoundError(f"bench cli reads the sample runs of a source checkout; {runs} has none")
+    return runs

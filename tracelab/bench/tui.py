@@ -26,8 +26,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from tracelab.bench.cli import sample_runs_dir
-from tracelab.bench.common import format_table, machine_info, summarize
+from tracelab.bench.common import format_table, machine_info, sample_runs_dir, summarize
 from tracelab.bench.engine import machine_line
 from tracelab.store.bench import synthetic_trace, synthetic_vocabulary
 from tracelab.store.seal import seal_run

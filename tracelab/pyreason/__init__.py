@@ -11,7 +11,6 @@ written in PyReason's CSV layout.
 - temporal_classifier.py: TemporalLogicIntegratedClassifier (the same, polled from a thread on a clock);
 - numba_interval.py: PyReason's annotation functions (closed(), the adapter);
 - reference_engine.py: a small program reasoned by the reference evaluator (no numba), read as the Engine;
-- frozen_modules.py: the loaded modules' objects kept out of garbage collections;
 - unsupported.py: UnsupportedFeature, the error of what tracelab does not have;
 - rules.py: PyReason's rule text (and its CSV / JSON rule files, with thresholds and rule options);
 - facts.py: PyReason's fact text in its CSV / JSON fact files;
@@ -23,6 +22,8 @@ written in PyReason's CSV layout.
 - files.py: what the rule and fact files share (CSV rows, JSON items, PyReason's raise_errors contract);
 - as_pyreason.py, __main__.py: `python -m tracelab.pyreason SCRIPT.py`, a PyReason script run unchanged.
 """
+import gc
+
 from . import ruleset_filter
 from .api import (
     _Settings,
@@ -54,7 +55,6 @@ from .api import (
     save_rule_trace,
     settings,
 )
-from .frozen_modules import freeze_loaded_modules
 from .interpretation import Interpretation
 from .objects import Fact, Query, Rule, Threshold, closed
 from .translate import PyReasonProgram, load_pyreason
@@ -62,7 +62,7 @@ from .unsupported import UnsupportedFeature
 
 # numba and pandas are not loaded here: a small program reasons on the reference evaluator, and pandas
 # is imported when a DataFrame is made (tests/test_pyreason_imports.py)
-freeze_loaded_modules()
+gc.freeze()   # the modules loaded so far: no collection traverses them (tracelab/frozen_imports.py)
 
 __all__ = [
     "Fact", "Interpretation", "LogicIntegratedClassifier", "TemporalLogicIntegratedClassifier", "_Settings", "ModelInterfaceOptions", "PyReasonProgram", "Query",

@@ -25,7 +25,7 @@ from tracelab.engine.program import SourceLoc
 from tracelab.errors import UserError
 
 from .facts import PFact, read_facts
-from .frozen_modules import import_frozen
+from tracelab.frozen_imports import import_frozen
 from .files import PyReasonFileError
 from .graphml import load_pyreason_graphml, load_pyreason_networkx
 from .interpretation import Interpretation

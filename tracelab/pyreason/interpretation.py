@@ -8,7 +8,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from .frozen_modules import import_frozen
+from tracelab.frozen_imports import import_frozen
 from .objects import Interval, Query, _pair
 from .trace_csv import PyReasonTrace
 from .unsupported import UnsupportedFeature, unsupported

@@ -2,7 +2,6 @@
 read-only SQL console and live training curves. docs/tui.md lists the screens and keys."""
 from __future__ import annotations
 
-import gc
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
@@ -15,12 +14,5 @@ def load_app() -> type[TracelabApp]:
     objects that live as long as the process; collecting them cost the first screen ~0.1 s of CPU (~80
     collections while importing, a full one while the screen is composed: issue 40). What this gives up: an
     object made before the app that later becomes cyclic garbage is never freed (none of the TUI's)."""
-    collecting = gc.isenabled()
-    gc.disable()
-    try:
-        from tracelab.viewers.tui.app import TracelabApp
-    finally:
-        if collecting:
-            gc.enable()
-    gc.freeze()
-    return TracelabApp
+    from tracelab.frozen_imports import import_frozen
+    return import_frozen("tracelab.viewers.tui.app").TracelabApp
