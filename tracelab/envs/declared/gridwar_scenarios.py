@@ -42,7 +42,6 @@ from tracelab.train.env_policy import (
 )
 from tracelab.store.meta import current_meta
 from tracelab.train.budget import reward_scale_note, too_short_hint
-from tracelab.train.env_checkpoint import checkpoint_config
 from tracelab.train.env_source import TeamEncoder, probe_env
 from tracelab.validation import Const, IntRange, ListOf, MapOf, OptionalKey, check_file
 
@@ -148,6 +147,7 @@ def resumed_scenario(run: str, recorded: EnvSource, checkpoint: dict[str, Any],
     given again: a file never names the file tracelab reads); None for any other run."""
     if recorded.name not in GRIDWAR_SPEC_IDS or "scenario_toml" not in _run_config(Path(run)):
         return None
+    from tracelab.train.env_checkpoint import checkpoint_config  # torch: play and eval import this module
     cfg = checkpoint_config(checkpoint)
     if scenario_given not in (None, cfg.scenario):
         raise UserError(f"--scenario {scenario_given}: {run} trained scenario {cfg.scenario!r}")
