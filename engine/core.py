@@ -535,8 +535,9 @@ class Engine:
     # ---- a caller's own compiled step (tracelab/envs/declared/fused.py, vector_fused.py) ----
 
     def fused_binding(self) -> K.StepState | None:
-        """For a caller that runs the counting kernel inside its own compiled call (kernel.fused_step):
-        after sync(), the kernel's step state (CountingState.step_state); None on another kernel. Valid
+        """For a caller that runs the counting kernel inside its own compiled call (it sets cfg[CFG_T], then
+        calls kernel.step_worlds): after sync(), the kernel's step state (CountingState.step_state); None on
+        another kernel. Valid
         while layout_version stays the same; such a step is begun with prepare_fused_step() and ended with
         finish_fused_step()."""
         self._sync()

@@ -22,8 +22,9 @@ Why the code looks the way it does:
   so a step of any size fits.
 - The step state is one record (StepState, below), built by backend_counting.CountingState.step_state and
   passed as one argument to step_worlds and _step_world (which read its fields into locals by name: the
-  compiled backend's generator folds cfg[...], rule_i[...], rule_f[...]); the fused steps of RuleSim and
-  the declared worlds call fused_step with it. A new field is added to StepState and to step_state().
+  compiled backend's generator folds cfg[...], rule_i[...], rule_f[...]); the declared worlds' fused steps
+  (tracelab/envs/declared/fused.py, vector_fused.py) set cfg[CFG_T] and call step_worlds with it. A new
+  field is added to StepState and to step_state().
 - Calls from one kernel function to another pass np.int64 values, never a bare constant or an int32
   table entry: numba compiles a callee once per distinct argument types, and each constant is a type of
   its own (Literal[int](2)), so _set_atom was compiled seven times (5 s of a first run's compile).
@@ -702,16 +703,6 @@ def step_worlds(s, w_first, ext_ptr, ext_i, ext_f):
             err[E_WORLD] = w
             return STATUS_USER_FN, w
     return STATUS_OK, n_worlds
-
-
-@kernel_jit
-def fused_step(s, t, ext_ptr, ext_i, ext_f):
-    """Timestep t of every world, for a caller that runs the kernel inside its own compiled step (the
-    fused steps of GridWar's RuleSim and of the declared worlds) over Engine.fused_binding()'s state s;
-    the caller hands the returned (status, world) to Engine.finish_fused_step. The kernel reads rows
-    ext_ptr[w]..ext_ptr[w + 1] only, so whole row buffers stand for the rows used."""
-    s.cfg[CFG_T] = t
-    return step_worlds(s, np.int64(0), ext_ptr, ext_i, ext_f)
 
 
 @kernel_jit

@@ -29,8 +29,8 @@ def test_fused_binding_is_the_step_state_over_the_engines_current_buffers():
 
 
 def test_fused_hook_steps_as_the_engines_own_step():
-    """kernel.fused_step over the record (what RuleSim's and the declared worlds' fused steps call) makes
-    the same interpretation as Engine.step()."""
+    """kernel.step_worlds over the record with the step's t set, as the declared worlds' fused steps call it
+    (tracelab/envs/declared/fused.py, vector_fused.py), makes the same interpretation as Engine.step()."""
     own, fused = (Engine(parse_program(CHAIN), kernel="counting") for _ in range(2))
     for eng in (own, fused):
         eng.add_fact(eng.atom("reach", "a"))
@@ -39,7 +39,9 @@ def test_fused_hook_steps_as_the_engines_own_step():
     empty = (np.zeros(2, np.int64), np.zeros((0, 3), np.int64), np.zeros((0, 2)))
     for _ in range(2):
         fused.prepare_fused_step()
-        status, w = kernel.fused_step(fused.fused_binding(), fused.t, *empty)
+        state = fused.fused_binding()
+        state.cfg[kernel.CFG_T] = fused.t
+        status, w = kernel.step_worlds(state, np.int64(0), *empty)
         fused.finish_fused_step(status, w, *empty)
     assert fused.t == own.t == 3
     assert fused.interpretation(0) == own.interpretation(0)
