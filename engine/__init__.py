@@ -9,7 +9,8 @@ The files by stage (a program flows down; each boundary is a named type, as Souf
                cause_kinds.py (what a trace row's cause_kind means)
     inputs     graph.py, graphml_scan.py, graphml_expat.py, graphml_raw.py, facttable.py, safe_files.py,
                vocabulary.py (nodes, labels and atoms as dense ids)
-    grounding  grounding.py, grounding_limit.py, aggregate_tables.py -> kernel_tables.py (what the kernels read)
+    grounding  grounding.py, grounding_limit.py, grounding_cache.py (a build's groundings kept on disk, in
+               array_file.py's plain arrays), aggregate_tables.py -> kernel_tables.py (what the kernels read)
     kernels    kernel.py (counting), lanes.py (crisp, 64 worlds a word), restore_kernel.py, trace_take.py,
                codegen.py (kernel.py rewritten for one program)
     backends   backend_api.py (what a backend may touch of the Engine), backend_counting.py, backend_lanes.py,

@@ -112,7 +112,7 @@ def _not_yours(st: os.stat_result, path: Path) -> str | None:
     return None
 
 
-def _private_folder(path: Path, *, follow_symlinks: bool) -> None:
+def private_folder(path: Path, *, follow_symlinks: bool) -> None:
     """Create `path` private to this user (0700), or check that the existing one is this user's folder
     (made 0700 if it was looser). The root may be reached through a link the user made (~/.cache on
     another disk); an entry may not."""
@@ -200,8 +200,8 @@ class CacheEntry:
 
     def prepare(self) -> None:
         """The cache root and this entry's folder, private to this user (CacheRefused when they cannot be)."""
-        _private_folder(self.root, follow_symlinks=True)
-        _private_folder(self.dir, follow_symlinks=False)
+        private_folder(self.root, follow_symlinks=True)
+        private_folder(self.dir, follow_symlinks=False)
 
     @contextmanager
     def locked(self) -> Iterator[None]:

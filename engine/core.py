@@ -13,6 +13,7 @@ import numpy as np
 
 from . import annotations
 from . import compile_background
+from . import grounding_cache
 from . import kernel as K
 from .aggregate_tables import aggregate_tables, aggregated_rules
 from .backend_compiled import CompiledState, compiled_backend
@@ -88,9 +89,11 @@ class Engine:
                  trace: bool | Sequence[bool] | np.ndarray = True, max_passes: int = 1000,
                  max_immediate: int = 100_000, trace_rows_per_step: int = 65_536,
                  kernel: str = "auto", threads: int | None = None, background_compile: bool = False,
-                 max_groundings: int | None = None) -> None:
+                 max_groundings: int | None = None, cache_grounding: bool = False) -> None:
         """`max_groundings`: refuse (ProgramError at the rule) a program whose groundings could pass it,
-        before they are built; None: the limit of engine/grounding_limit.py (from the machine's memory)."""
+        before they are built; None: the limit of engine/grounding_limit.py (from the machine's memory).
+        `cache_grounding`: the groundings made before the first step is taken are read from (or kept in)
+        the grounding cache (grounding_cache.py), for a program built again and again (a declared world's)."""
         if worlds < 1:
             raise ValueError(f"worlds must be >= 1, got {worlds}")
         self.program = program
@@ -108,6 +111,7 @@ class Engine:
                                                   "binding body clauses")
         self.grounder = Grounder(self.rules, self.vocab, program.closed, program.edge_heads, self.graph.edges,
                                  max_groundings)
+        self.cache_grounding = cache_grounding
         # user annotation functions, bound now: registering another one later changes nothing here
         self._user_functions: list[tuple[str, object]] = []
         for r in self.rules:
@@ -342,7 +346,10 @@ class Engine:
         if not g.has_pending and self.vocab.n_atoms == self._state.n_atoms \
                 and g.n_groundings == self._n_grounded and g.n_settable == self._n_settable:
             return  # the usual case at every step: nothing was interned or made settable since
-        g.close()
+        if self.cache_grounding and self.t == 0:
+            grounding_cache.close(g)
+        else:
+            g.close()
         n_atoms = self.vocab.n_atoms
         if len(self._settable) != n_atoms or g.n_settable != self._n_settable:
             self._settable = g.settable_mask(n_atoms)

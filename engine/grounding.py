@@ -431,13 +431,13 @@ class Grounder:
         return rows[keep], None if found is None else {c: a[keep] for c, a in found.items()}
 
     @staticmethod
-    def _columns(args: list[int], rows: np.ndarray) -> list[np.ndarray]:
+    def argument_columns(args: list[int], rows: np.ndarray) -> list[np.ndarray]:
         """Node ids per row of each argument (a variable's column or a constant)."""
         return [np.full(len(rows), -x - 1, np.int64) if x < 0 else rows[:, x].astype(np.int64) for x in args]
 
     def _head_columns(self, cr: _CompiledRule, rows: np.ndarray) -> list[np.ndarray]:
         """The head's node ids per row, a head function call's computed (once per distinct arguments)."""
-        cols = self._columns(cr.head_args, rows)
+        cols = self.argument_columns(cr.head_args, rows)
         for k, hc in enumerate(cr.head_calls):
             if hc is not None:
                 cols[k] = self._called(cr, *hc, rows)
@@ -445,7 +445,7 @@ class Grounder:
 
     def _called(self, cr: _CompiledRule, term: Term, fn: HeadFunction, args: list[int], rows: np.ndarray
                 ) -> np.ndarray:
-        arg_cols = np.stack(self._columns(args, rows), axis=1) if len(rows) else np.zeros((0, len(args)), np.int64)
+        arg_cols = np.stack(self.argument_columns(args, rows), axis=1) if len(rows) else np.zeros((0, len(args)), np.int64)
         distinct, inverse = np.unique(arg_cols, axis=0, return_inverse=True)
         nodes = self.vocab.nodes
         out = np.empty(len(distinct), np.int64)
@@ -465,7 +465,7 @@ class Grounder:
 
     def _ground_atoms(self, label: int, args: list[int], rows: np.ndarray,
                       cols: list[np.ndarray] | None = None) -> np.ndarray:
-        cols = cols if cols is not None else self._columns(args, rows)
+        cols = cols if cols is not None else self.argument_columns(args, rows)
         a1 = cols[1] if len(cols) > 1 else np.full(len(rows), -1, np.int64)
         return self.vocab.atoms(np.full(len(rows), label, np.int64), cols[0], a1)
 
@@ -479,12 +479,7 @@ class Grounder:
         body = [found[ci] if ci in found else self._ground_atoms(lab, args, rows)
                 for ci, (lab, args) in enumerate(zip(cr.clause_labels, cr.clause_args))]
         n = self._n
-        if n + m > len(self._rule):
-            cap = max(n + m, 2 * len(self._rule))
-            self._rule = np.concatenate([self._rule, np.zeros(cap - len(self._rule), np.int32)])
-            self._head = np.concatenate([self._head, np.zeros(cap - len(self._head), np.int32)])
-            self._vals = np.concatenate([self._vals, _growable(cap - len(self._vals), self.max_vars, np.int32)])
-            self._body = np.concatenate([self._body, _growable(cap - len(self._body), self.max_body, np.int32)])
+        self._room_for(n + m)
         self._rule[n:n + m] = cr.index
         self._head[n:n + m] = heads
         self._vals[n:n + m, :cr.n_vars] = rows
@@ -492,6 +487,70 @@ class Grounder:
             self._body[n:n + m, ci] = atoms
         self._n = n + m
         self.add_settable_many(heads)
+
+    def _room_for(self, groundings: int) -> None:
+        if groundings > len(self._rule):
+            cap = max(groundings, 2 * len(self._rule))
+            self._rule = np.concatenate([self._rule, np.zeros(cap - len(self._rule), np.int32)])
+            self._head = np.concatenate([self._head, np.zeros(cap - len(self._head), np.int32)])
+            self._vals = np.concatenate([self._vals, _growable(cap - len(self._vals), self.max_vars, np.int32)])
+            self._body = np.concatenate([self._body, _growable(cap - len(self._body), self.max_body, np.int32)])
+
+    # ---- a close's result, as the grounding cache keeps it (grounding_cache.py) ----
+
+    @property
+    def compiled_rules(self) -> list[_CompiledRule]:
+        return self._compiled
+
+    def state_parts(self) -> Iterator[bytes]:
+        """Everything of the grounder's state that decides what close() finds, besides its rules and the
+        vocabulary (which the grounding cache hashes itself)."""
+        n = self._n
+        yield repr((self._closed_once, self.n_settable, sorted(self.closed), self.edge_heads,
+                    self.max_groundings)).encode()
+        yield self._edge_keys.tobytes()
+        for a in (self._rule[:n], self._head[:n], self._vals[:n], self._body[:n]):
+            yield a.tobytes()
+        yield self.settable_mask(self.vocab.n_atoms).tobytes()
+        yield np.concatenate([np.zeros(0, np.int64), *self._pending]).tobytes()
+        for label in sorted(self._by_label):
+            yield label.to_bytes(4, "little") + self._relation(label).tobytes()
+
+    def relations(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every label's joined settable atoms, in the order joined: (ptr int64[labels + 1], atoms int64)."""
+        rels = [self._relation(label) for label in range(len(self.vocab.labels))]
+        ptr = np.zeros(len(rels) + 1, np.int64)
+        np.cumsum([len(r) for r in rels], out=ptr[1:])
+        return ptr, np.concatenate([np.zeros(0, np.int64), *rels])
+
+    def grown_since(self, groundings_before: int) -> dict[str, np.ndarray]:
+        """What close() added after `groundings_before` groundings: the new groundings' rows, the settable
+        atoms and the relations (whole)."""
+        n = self._n
+        ptr, atoms = self.relations()
+        return {"rule": self._rule[groundings_before:n], "head": self._head[groundings_before:n],
+                "vals": self._vals[groundings_before:n], "body": self._body[groundings_before:n],
+                "settable": self.settable_mask(self.vocab.n_atoms).view(np.uint8),
+                "relation_ptr": ptr, "relation_atoms": atoms}
+
+    def take_grown(self, grown: dict[str, np.ndarray], estimated_added: int) -> None:
+        """The state close() would reach, from grown_since()'s arrays of a close from this very state (the
+        grounding cache's, checked by it; the vocabulary already holds the atoms that close interned)."""
+        n, m = self._n, len(grown["rule"])
+        self._room_for(n + m)
+        for mine, name in ((self._rule, "rule"), (self._head, "head"), (self._vals, "vals"), (self._body, "body")):
+            mine[n:n + m] = grown[name]
+        self._n = n + m
+        self._settable = grown["settable"].astype(np.bool_)
+        self.n_settable = int(self._settable.sum())
+        ptr, atoms = grown["relation_ptr"], grown["relation_atoms"]
+        self._by_label = {label: [atoms[ptr[label]:ptr[label + 1]]] for label in range(len(ptr) - 1)
+                          if ptr[label + 1] > ptr[label]}
+        self._pending = []
+        self._closed_once = True
+        self.estimated += estimated_added
+        for watch in _watchers:
+            watch(self._n)
 
     # ---- integer tables for the kernel and the trace ----
 

@@ -141,6 +141,23 @@ class Vocabulary:
         out[order] = ids[group]
         return out
 
+    def are_new(self, labels: np.ndarray, a0: np.ndarray, a1: np.ndarray) -> bool:
+        """Whether these atoms are distinct and none of them is interned yet."""
+        self._merge()
+        keys = np.sort(self._keys(labels, a0, a1))
+        if len(keys) > 1 and (keys[1:] == keys[:-1]).any():
+            return False
+        pos = np.minimum(np.searchsorted(self._skeys, keys), max(len(self._skeys) - 1, 0))
+        return not len(self._skeys) or not (self._skeys[pos] == keys).any()
+
+    def append_atoms(self, labels: np.ndarray, a0: np.ndarray, a1: np.ndarray) -> None:
+        """Intern atoms known to be new and distinct (are_new), in order (the grounding cache's)."""
+        self._merge()
+        first = self._append(labels, a0, a1)
+        keys = self._keys(labels, a0, a1)
+        order = np.argsort(keys)
+        self._insert_sorted(keys[order], first + order)
+
     def _append(self, labels: np.ndarray, a0: np.ndarray, a1: np.ndarray) -> int:
         n, k = self._n, len(labels)
         if n + k > self._cols.shape[1]:

@@ -92,13 +92,13 @@ def start_compile(argv: list[str]) -> tuple[subprocess.Popen, Path | None]:
 def _new_log() -> tuple[Path | None, IO[str] | None]:
     """A new file in tracelab's cache folder, private to this user (created new, never through a link),
     open for writing; (None, None) when the folder cannot be used."""
-    from tracelab.engine.compile_cache import CacheRefused, _private_folder, cache_root
+    from tracelab.engine.compile_cache import CacheRefused, private_folder, cache_root
     from tracelab.engine.safe_files import create_new
     folder = cache_root().parent / LOG_FOLDER
     log = folder / f"compile.{os.getpid()}.{time.time_ns()}.log"
     try:
-        _private_folder(folder.parent, follow_symlinks=True)
-        _private_folder(folder, follow_symlinks=False)
+        private_folder(folder.parent, follow_symlinks=True)
+        private_folder(folder, follow_symlinks=False)
         return log, os.fdopen(create_new(log), "w")
     except (CacheRefused, OSError):
         return None, None

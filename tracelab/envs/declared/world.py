@@ -116,7 +116,8 @@ class DeclaredWorld:
         _say_if_cold(spec, "counting" if kernel == "auto" else kernel, worlds)  # the engine's build steps it once
         # an env never waits for a compile: "compiled" not yet cached is built in a child meanwhile
         self.engine = eng = Engine(spec.program, worlds=worlds, trace=trace,
-                                   kernel="counting" if kernel == "auto" else kernel, background_compile=True)
+                                   kernel="counting" if kernel == "auto" else kernel, background_compile=True,
+                                   cache_grounding=True)
         ids = self._ids
         # the facts of each (agent, action) row: row agent * n_actions + action
         self.n_agents, self.n_actions = len(spec.agents), len(spec.action_names)
