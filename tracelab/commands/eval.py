@@ -34,6 +34,7 @@ from tracelab.errors import UserError, store_errors
 from tracelab.store import TraceWriter
 from tracelab.store.layout import check_new_run_dir
 from tracelab.train.env_policy import ENV_FORMAT, evaluate_env, evaluate_in_env, policy_format, recorded_env
+from tracelab.train.env_source import declared_spec
 from tracelab.train.experiments.stats import wilson
 
 
@@ -42,19 +43,19 @@ def run(args: argparse.Namespace) -> int:
     if args.backend != "rules":
         raise UserError(f"--backend {args.backend}: eval plays every policy on its world's spec with the rule "
                         f"engine; drop --backend")
-    source, scenario, recorded = _world(args)
-    with store_errors():  # a policy that does not load, or was trained on another world
-        policy = load_trained(args.policy, source)
+    given, scenario, recorded = _world(args)
     # a scripted opponent at --opponent-p (a policy of train on its own id: at the method's p by default)
-    p = METHOD_EVAL_P if args.opponent_p is None and recorded and has_opponent_p(source) else args.opponent_p
-    if scenario is None:
-        source = with_opponent_p(source, p)
+    p = METHOD_EVAL_P if args.opponent_p is None and recorded and has_opponent_p(given) else args.opponent_p
+    source = with_opponent_p(given, p) if scenario is None else given
+    with store_errors():  # a spec that does not load; a policy that does not, or was trained on another world
+        spec = declared_spec(source)  # parsed once: the policy's check reads its spaces, the games play it
+        policy = load_trained(args.policy, given, spec)
     name = scenario.name if scenario is not None else source.short_name
     with progress(f"evaluating on {name}", total=args.games, unit="games") as bar:
         if args.run is None:
-            result = evaluate_env(policy, source, args.games, args.seed, args.envs, lambda _: bar.advance(1))
+            result = evaluate_env(policy, source, args.games, args.seed, args.envs, lambda _: bar.advance(1), spec)
         else:
-            result = _traced(args, policy, source, scenario, lambda _: bar.advance(1))
+            result = _traced(args, policy, source, spec, scenario, lambda _: bar.advance(1))
     if args.json:
         about = {"policy": str(args.policy), **({"scenario": scenario.name} if scenario is not None else {}),
                  "opponent_p": _opponent_p(source), "seed": args.seed, "env": source.to_json(), "run": args.run}
@@ -106,13 +107,14 @@ def _opponent_p(source: EnvSource) -> float | None:
     return source.kwargs.get("p_toward")
 
 
-def _traced(args: argparse.Namespace, policy: Any, source: EnvSource, scenario: Any, on_game: Any) -> Any:
+def _traced(args: argparse.Namespace, policy: Any, source: EnvSource, spec: Any, scenario: Any, on_game: Any) -> Any:
     """Every game, one at a time, traced into the new run --run (its world, the policy's decisions, the
-    reward terms; begin info `{"kind": "eval", "opponent_p": P}`)."""
+    reward terms; begin info `{"kind": "eval", "opponent_p": P}`). `spec`: the world's WorldSpec (None: not
+    a declared world, refused)."""
     run_dir = Path(args.run)
     with store_errors():
         check_new_run_dir(run_dir)
-        spec = load_declared(source)
+        spec = spec if spec is not None else load_declared(source)
         writer = TraceWriter.open(run_dir, _run_meta(args, source, spec, scenario))
     with recording_into(writer, run_dir):
         env = make_declared_env(source, spec, trace_writer=writer)

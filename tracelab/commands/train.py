@@ -124,7 +124,7 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
     purge_step = state["step"] if same_run else None
     with training_session(writer, cfg.torch_deterministic, tensorboard, purge_step) as session:
         session.trainer = trainer = EnvTrainer(cfg, source, writer, run_dir, metric_sinks=session.metric_sinks,
-                                               eval_source=eval_source)
+                                               eval_source=eval_source, spec=spec)
         what = source.describe() if scenario is None else scenario.describe(cfg)
         kernel = "" if cfg.kernel == "auto" else f", the {cfg.kernel} kernel"
         print(f"training on {what} ({encoding} observations, {cfg.envs} worlds in {type(trainer.env).__name__}"

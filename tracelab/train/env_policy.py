@@ -241,16 +241,17 @@ def numpy_network(net: NetSpec, state: dict[str, Any]) -> NumpyQ:
 # ---------------------------------------------------------------------------------------------------------
 # Loading
 # ---------------------------------------------------------------------------------------------------------
-def load_env_policy(path: str | Path, given: EnvSource) -> tuple[EnvPolicy | TeamPolicy, dict[str, Any]]:
+def load_env_policy(path: str | Path, given: EnvSource, spec: Any = None) -> tuple[EnvPolicy | TeamPolicy, dict[str, Any]]:
     """(the policy, its policy.json), refused in one line unless it was trained on `given` (the env the
     user named: a policy file never decides which spec file tracelab reads), its network's shape checked
-    against the env's spaces. A world of several agents: a TeamPolicy (every agent's action)."""
+    against the env's spaces (`spec`: `given`'s WorldSpec if loaded already, probe_env's). A world of several
+    agents: a TeamPolicy (every agent's action)."""
     f, raw = read_policy_json(path)
     spec = check_file(raw, ENV_SPEC_SCHEMA, f)
     check_same_env(env_source_from_json(spec["env"], str(f)), given, str(f.parent))
     net = spec_net(spec)
     states = read_policy_networks(path, spec)
-    encoder, n_actions, _ = probe_env(given)
+    encoder, n_actions, _ = probe_env(given, spec)
     if (encoder.size, n_actions) != (net.inputs, net.actions):
         raise ValueError(f"{f}: its network reads {net.inputs} inputs and gives {net.actions} Q-values; "
                          f"{given.describe()} has {encoder.size} and {n_actions} now")
@@ -368,12 +369,13 @@ class EnvEvalResult:
 
 
 def make_vector_env(source: EnvSource, worlds: int, by_term: bool = False,
-                    kernel: str = "auto") -> tuple[Any, str | None]:
+                    kernel: str = "auto", spec: Any = None) -> tuple[Any, str | None]:
     """`worlds` copies of the env stepped together, a world that ends reset within its step (SAME_STEP, as
     the war game's vector env): a declared world's own batched engine (DeclaredVectorEnv, every world in one
     engine call), else gymnasium's SyncVectorEnv over the env. World i steps as the env reset with seed
     s + i either way. `by_term`: each world's reward by term is read (train --decompose), which only a
-    world of its own keeps: SyncVectorEnv. `kernel`: the batched engine's (train --kernel). Returns (the env,
+    world of its own keeps: SyncVectorEnv. `kernel`: the batched engine's (train --kernel). `spec`: the
+    declared world's WorldSpec where the caller loaded it already (not parsed again). Returns (the env,
     why a declared world is not batched, or None)."""
     if by_term:
         note = f"{source.short_name}: --decompose reads each world's reward by term; its worlds step in " \
@@ -386,7 +388,8 @@ def make_vector_env(source: EnvSource, worlds: int, by_term: bool = False,
     from tracelab.envs.declared.vector_env import DeclaredVectorEnv
     limit = gym.registry[source.env_id].max_episode_steps if source.env_id is not None else None
     try:
-        return DeclaredVectorEnv(spec_file, worlds, max_episode_steps=limit, kernel=kernel, **params), None
+        return DeclaredVectorEnv(spec if spec is not None else spec_file, worlds, max_episode_steps=limit,
+                                 kernel=kernel, **params), None
     except ValueError as e:  # a spec the batched engine does not play yet (several agents, draws `after`)
         note = f"{source.short_name}: {str(e).splitlines()[0]}; its worlds step in gymnasium's SyncVectorEnv"
         return SyncVectorEnv([source.make] * worlds, autoreset_mode=AutoresetMode.SAME_STEP), note
@@ -450,8 +453,10 @@ def _reset_worlds(env: Any, obs: Any, info: dict[str, Any], worlds: np.ndarray) 
 
 
 def evaluate_env(policy: EnvPolicy, source: EnvSource, games: int, seed: int, worlds: int = 16,
-                 on_game: Callable[[float], None] | None = None) -> EnvEvalResult:
-    env, _ = make_vector_env(source, min(worlds, games))
+                 on_game: Callable[[float], None] | None = None, spec: Any = None) -> EnvEvalResult:
+    """`games` greedy games in `worlds` worlds stepped together (make_vector_env's; `spec`: its WorldSpec
+    if loaded already)."""
+    env, _ = make_vector_env(source, min(worlds, games), spec=spec)
     try:
         return play_env_games(env, policy, games, seed, on_game)
     finally:

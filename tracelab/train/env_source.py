@@ -100,13 +100,14 @@ def team_spec(source: Any) -> Any:
     return spec if spec is not None and len(spec.agents) > 1 else None
 
 
-def probe_env(source: Any) -> tuple[ObservationEncoder | TeamEncoder, int, Any]:
+def probe_env(source: Any, spec: Any = None) -> tuple[ObservationEncoder | TeamEncoder, int, Any]:
     """(the encoder of `source`'s observations, its action count, its WorldSpec or None): what sizes a
     training on it (a bad id, spec or keyword argument fails here, in one line). A declared world's spaces
     come from its spec alone (gym_env.DeclaredEnv's), so no engine is built for them: building one grounds the
     program and steps it, ~1 s of CPU for war.toml, which the command's own env then did again. Any other env
-    is made and closed. A declared world of several agents: its TeamEncoder."""
-    spec = declared_spec(source)
+    is made and closed. A declared world of several agents: its TeamEncoder. `spec`: the declared world's
+    WorldSpec where the caller loaded it already (a command parses its spec once)."""
+    spec = spec if spec is not None else declared_spec(source)
     if spec is not None:
         from tracelab.envs.declared.gym_env import observation_space
         encoder = ObservationEncoder(observation_space(spec), source.name)

@@ -58,18 +58,20 @@ class EnvTrainer:
     def __init__(self, cfg: TrainConfig, source: EnvSource, writer: TraceWriter | None = None,
                  run_dir: Path | None = None, progress: Progress | None = None,
                  metric_sinks: Sequence[MetricSink] = (), eval_source: EnvSource | None = None,
-                 network: NetworkFactory | None = None, learner_class: type[DQN] | None = None) -> None:
+                 network: NetworkFactory | None = None, learner_class: type[DQN] | None = None,
+                 spec: Any = None) -> None:
         """`eval_source`: the env evaluations play, if not `source` (the war game's opponent at --eval-p); the
         rest is the Python API (docs/training.md, "The learner"): `network` trains the readable learner on
         this module instead of the MLP cfg.hidden describes (its policy files say `custom`), `learner_class`
         is the readable learner's class (a subclass of DQN with another loss, say); `metric_sinks` receive
-        the metrics besides the run (e.g. TensorBoard, train --tensorboard)."""
+        the metrics besides the run (e.g. TensorBoard, train --tensorboard); `spec`: `source`'s WorldSpec if
+        loaded already (not parsed again)."""
         torch.set_num_threads(cfg.threads)
         self.cfg, self.source, self.writer, self.run_dir, self.progress = cfg, source, writer, run_dir, progress
         self.eval_source = eval_source or source
         self.worlds = w = cfg.envs
         # a declared world's own batched engine where its spec allows (else SyncVectorEnv, and why)
-        self.env, self.vector_note = make_vector_env(source, w, by_term=cfg.decompose, kernel=cfg.kernel)
+        self.env, self.vector_note = make_vector_env(source, w, by_term=cfg.decompose, kernel=cfg.kernel, spec=spec)
         # a checkpoint replays the worlds from their reset (env_checkpoint.py); a team's, each agent's
         self.actions_log = ActionLog(w * getattr(self.env, "n_agents", 1))
         declared = world_spec_of(self.env)  # a declared world names its actions

@@ -225,7 +225,7 @@ def rulesim_source(path: str | Path, spec: dict[str, Any], scenario: Scenario,
     return EnvSource(name, {**params, "p_toward": p})
 
 
-def _load_rulesim_policy(path: str | Path, spec: dict[str, Any], given: EnvSource) -> EnvPolicy:
+def _load_rulesim_policy(path: str | Path, spec: dict[str, Any], given: EnvSource, world_spec: Any = None) -> EnvPolicy:
     """A policy of RuleSim's trainer (one agent) as the EnvPolicy that plays it on the world `given` names,
     a spec whose observation and actions are its scenario's. RuleSim gave one agent the team's view, as the
     spec does, so its network reads the spec's observation as it is: the same games (tests/test_play.py).
@@ -233,7 +233,7 @@ def _load_rulesim_policy(path: str | Path, spec: dict[str, Any], given: EnvSourc
     trained_on = rulesim_scenario(spec)
     net = spec_net(spec)
     (state,) = read_policy_networks(path, spec).values()  # sized and checked before the world is built
-    encoder, n_actions, world = probe_env(given)
+    encoder, n_actions, world = probe_env(given, world_spec)
     agents = encoder.n_agents if isinstance(encoder, TeamEncoder) else 1
     names = [ACTION_NAMES[a] for a in trained_on.action_ids]
     world_names = names if world is None else list(world.action_names)
@@ -246,9 +246,10 @@ def _load_rulesim_policy(path: str | Path, spec: dict[str, Any], given: EnvSourc
     return EnvPolicy(numpy_network(net, state), encoder, spec.get("mask", False))
 
 
-def load_trained(path: str | Path, given: EnvSource) -> EnvPolicy | TeamPolicy:
+def load_trained(path: str | Path, given: EnvSource, spec: Any = None) -> EnvPolicy | TeamPolicy:
     """A policy of either format, to play on the world `given` names: one of train (load_env_policy: the same
-    env it was trained on), or one of RuleSim's trainer converted."""
+    env it was trained on), or one of RuleSim's trainer converted. `spec`: `given`'s WorldSpec if loaded
+    already."""
     if policy_format(path) == RULESIM_FORMAT:
-        return _load_rulesim_policy(path, read_rulesim_spec(path), given)
-    return load_env_policy(path, given)[0]
+        return _load_rulesim_policy(path, read_rulesim_spec(path), given, spec)
+    return load_env_policy(path, given, spec)[0]
