@@ -76,3 +76,16 @@ def test_the_runs_meta_reads_the_spec_train_loaded_already(monkeypatch) -> None:
     monkeypatch.setattr(play, "load_declared", lambda s: loads.append(s) or real(s))
     assert env_run_meta(cfg, source, "tracelab train", spec=spec) == parsed
     assert loads == []
+
+
+def test_eval_parses_the_world_spec_once(monkeypatch) -> None:  # noqa: ANN001
+    """eval checks the policy against the spaces of the spec it then plays (the opponent at the method's p):
+    one parse, where it parsed the spec again for its vector env (~0.1 s of CPU before the first step)."""
+    from tracelab.bench.common import sample_runs_dir
+    from tracelab.cli import main
+    from tracelab.envs.declared import spec as spec_module
+    reads = []
+    real = spec_module.read_spec_file
+    monkeypatch.setattr(spec_module, "read_spec_file", lambda path: reads.append(path) or real(path))
+    assert main(["eval", str(sample_runs_dir() / "base-train" / "policy"), "--games", "2", "--num-envs", "2"]) == 0
+    assert len(reads) == 1

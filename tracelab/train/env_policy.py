@@ -241,17 +241,17 @@ def numpy_network(net: NetSpec, state: dict[str, Any]) -> NumpyQ:
 # ---------------------------------------------------------------------------------------------------------
 # Loading
 # ---------------------------------------------------------------------------------------------------------
-def load_env_policy(path: str | Path, given: EnvSource, spec: Any = None) -> tuple[EnvPolicy | TeamPolicy, dict[str, Any]]:
+def load_env_policy(path: str | Path, given: EnvSource, world: Any = None) -> tuple[EnvPolicy | TeamPolicy, dict[str, Any]]:
     """(the policy, its policy.json), refused in one line unless it was trained on `given` (the env the
     user named: a policy file never decides which spec file tracelab reads), its network's shape checked
-    against the env's spaces (`spec`: `given`'s WorldSpec if loaded already, probe_env's). A world of several
+    against the env's spaces (`world`: `given`'s WorldSpec if loaded already, probe_env's). A world of several
     agents: a TeamPolicy (every agent's action)."""
     f, raw = read_policy_json(path)
     spec = check_file(raw, ENV_SPEC_SCHEMA, f)
     check_same_env(env_source_from_json(spec["env"], str(f)), given, str(f.parent))
     net = spec_net(spec)
     states = read_policy_networks(path, spec)
-    encoder, n_actions, _ = probe_env(given, spec)
+    encoder, n_actions, _ = probe_env(given, world)
     if (encoder.size, n_actions) != (net.inputs, net.actions):
         raise ValueError(f"{f}: its network reads {net.inputs} inputs and gives {net.actions} Q-values; "
                          f"{given.describe()} has {encoder.size} and {n_actions} now")
