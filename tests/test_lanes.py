@@ -198,6 +198,8 @@ def test_lanes_ab_calls_another_trees_kernel_with_the_arguments_it_names() -> No
     other = kernel(lambda cfg, w0, ctl: (cfg, w0, ctl))
     assert by_name(other, mine).step_lanes(1, 2, "sentinels", 3) == (1, 2, 3)
     assert by_name(mine, mine) is mine
+    mine.C_SETTLED, mine.N_CTL, other.N_CTL = 3, 5, 3  # the backend sizes ctl and names its fields by the module's
+    assert (by_name(other, mine).C_SETTLED, by_name(other, mine).N_CTL) == (3, 5)
 
 
 def test_a_step_the_lanes_kernel_finished_leaves_its_worlds_settled() -> None:
