@@ -89,6 +89,7 @@ class _Shard:
             self.apos = np.full(n_inst, -1, np.int32)
             L.fill_counts(first, self.valid, self.st, kt.b_ptr, kt.b_atom, kt.b_code, self.gs,
                           kt.inst, self.alist, self.alist_n, self.apos, kind_base)
+            self.ctl[L.C_SETTLED] = 0  # new groundings, none of them a candidate yet
         self.scratch(n_atoms, n_inst)
 
     def step(self, batch: LaneState, ext_ptr: np.ndarray, ext_i: np.ndarray, ext_v: np.ndarray) -> int:
@@ -143,7 +144,7 @@ class _Shard:
 
     def snapshot(self) -> dict[str, Any]:
         n = int(self.pend_n[0])
-        return {"st": self.st.copy(), "gs": self.gs.copy(),
+        return {"st": self.st.copy(), "gs": self.gs.copy(), "settled": int(self.ctl[L.C_SETTLED]),
                 "pend_due": self.pend_due[:n].copy(), "pend_g": self.pend_g[:n].copy(),
                 "pend_m": self.pend_m[:n].copy()}
 
@@ -152,6 +153,7 @@ class _Shard:
         need = int(self.pend_n[0]) + len(part["pend_g"])
         if need > len(self.pend_g):
             self.grow_pending(need)
+        self._settle_after_restore(part)
         L.restore_worlds(local, shift, part["st"], part["gs"], part["pend_due"], part["pend_g"], part["pend_m"],
                          self.st, self.gs, kt.inst, self.alist, self.alist_n, self.apos, batch.kind_base,
                          self.pend_due, self.pend_g, self.pend_m, self.pend_n, self.wmask)
@@ -163,10 +165,16 @@ class _Shard:
         need = int(self.pend_n[0]) + len(part["pend_g"]) * len(local)
         if need > len(self.pend_g):
             self.grow_pending(need)
+        self._settle_after_restore(part)
         L.restore_worlds_from(local, sources, shift, part["st"], part["gs"], part["pend_due"], part["pend_g"],
                               part["pend_m"], self.st, self.gs, batch.kt.inst, self.alist, self.alist_n,
                               self.apos, batch.kind_base, self.pend_due, self.pend_g, self.pend_m, self.pend_n)
         self._recount_if_grown(batch, part)
+
+    def _settle_after_restore(self, part: dict[str, Any]) -> None:
+        """The restored worlds are settled (lanes.C_SETTLED) if the snapshot was and no grounding came after it."""
+        if not part["settled"] or len(part["gs"]) < len(self.gs):
+            self.ctl[L.C_SETTLED] = 0
 
     def _recount_if_grown(self, batch: LaneState, part: dict[str, Any]) -> None:
         if len(part["gs"]) < len(self.gs):  # groundings grew: count them all again

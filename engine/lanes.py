@@ -79,9 +79,12 @@ CAUSE_SNAPSHOT = -2
 # intersection sources setting T, F, U, static sources
 G_OT, G_OF, G_OU, G_IT, G_IF, G_IU, G_STAT = 0, 1, 2, 3, 4, 5, 6
 N_GPLANES = 7
-# ctl: where the step is (it can return to grow a buffer and go on from there)
-C_PHASE, C_POS, C_PASS = 0, 1, 2
-N_CTL = 3
+# ctl: where the step is (it can return to grow a buffer and go on from there); C_SETTLED: 1 when every
+# world's state is the end of a step this kernel finished (no active immediate grounding would change its
+# head), which the backend clears when it writes planes or counts itself (new groundings, restores);
+# C_SCAN: this step's pass 0 looks at every active immediate grounding (the state was not settled)
+C_PHASE, C_POS, C_PASS, C_SETTLED, C_SCAN = 0, 1, 2, 3, 4
+N_CTL = 5
 PH_START, PH_RESET, PH_PASS0, PH_GROUPS, PH_IMMEDIATE, PH_ORDINARY, PH_SCHEDULE, PH_DONE = 0, 1, 2, 3, 4, 5, 6, 7
 # word scratch rows, ws[row, word]
 W_RUN, W_CHANGED, W_C, W_OLDT, W_OLDF, W_UP, W_DOWN, W_ONE, W_TMP = 0, 1, 2, 3, 4, 5, 6, 7, 8
@@ -808,6 +811,8 @@ def step_lanes(cfg, w0, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, w
             hn = 0
             ctl[C_POS] = 0
             ctl[C_PASS] = 0
+            ctl[C_SCAN] = 1 - ctl[C_SETTLED]
+            ctl[C_SETTLED] = 0  # until this step is done (an error leaves it unsettled)
             ctl[C_PHASE] = PH_RESET if cfg[CFG_RESET] == 1 and t > 0 else PH_PASS0
         elif phase == PH_RESET:
             for a in range(ctl[C_POS], n_atoms):
@@ -884,10 +889,13 @@ def step_lanes(cfg, w0, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, w
             n_touched[0] = 0
             src_n[0] = 0
             if pass_no == 0:
-                # every immediate grounding active somewhere is a candidate of the first immediate phase;
-                # after that, groundings become candidates when they become active or their head changes
+                # every immediate grounding active somewhere that could change its head is a candidate of
+                # the first immediate phase; after that, groundings become candidates when they become
+                # active or their head changes. After a step this kernel finished no active one could
+                # (the immediate phase ran until none would), and pass 0's changes pushed those that now
+                # can (_watch): only a state the backend wrote needs them all looked at
                 base = kind_base[KIND_IMMEDIATE]
-                n_imm_active = alist_n[KIND_IMMEDIATE]
+                n_imm_active = alist_n[KIND_IMMEDIATE] if ctl[C_SCAN] == 1 else 0
                 for i in range(n_imm_active):
                     if i + PREFETCH_AHEAD < n_imm_active:
                         _prefetch(gs, np.int64(alist[base + i + PREFETCH_AHEAD]) * stride)
@@ -978,6 +986,7 @@ def step_lanes(cfg, w0, ctl, rule_i, rule_v, inst, kind_base, wc_ptr, wc_code, w
                 n += 1
             pend_n[0] = n
             ctl[C_PHASE] = PH_DONE
+            ctl[C_SETTLED] = 1
             hn_box[0] = 0
             return STATUS_OK
         else:

@@ -198,3 +198,41 @@ def test_lanes_ab_calls_another_trees_kernel_with_the_arguments_it_names() -> No
     other = kernel(lambda cfg, w0, ctl: (cfg, w0, ctl))
     assert by_name(other, mine).step_lanes(1, 2, "sentinels", 3) == (1, 2, 3)
     assert by_name(mine, mine) is mine
+    mine.C_SETTLED, mine.N_CTL, other.N_CTL = 3, 5, 3  # the backend sizes ctl and names its fields by the module's
+    assert (by_name(other, mine).C_SETTLED, by_name(other, mine).N_CTL) == (3, 5)
+
+
+def test_a_step_the_lanes_kernel_finished_leaves_its_worlds_settled() -> None:
+    """After a step the lanes kernel finished, no active immediate grounding could change its head (the
+    immediate phase ran until none would), so the next step's pass 0 looks only at what its changes push,
+    not at every active immediate grounding (lanes.C_SCAN). A restore from a snapshot that was not settled
+    and new groundings make it look at them all again; the counting kernel agrees at every step."""
+    from tracelab.engine import lanes as L
+
+    prog = parse_program(GAME_LIKE)
+    a = Engine(prog, worlds=70, kernel="counting")
+    b = Engine(prog, worlds=70, kernel="lanes")
+    before_any_step = (a.snapshot(), b.snapshot())
+    shard = b._state.shards[0]
+
+    def step(t: int, agent: str = "a") -> int:
+        for eng in (a, b):
+            eng.add_facts(np.full(35, eng.atom("go", agent)), 1.0, 1.0, np.arange(0, 70, 2))
+            if agent != "a":  # a new agent: its groundings are new
+                eng.add_facts(np.full(70, eng.atom("at", agent, "c0")), 1.0, 1.0, np.arange(70))
+            eng.step()
+        assert_same(a, b, t)
+        return int(shard.ctl[L.C_SCAN])
+
+    assert [step(t) for t in range(3)] == [1, 0, 0]
+    settled = (a.snapshot(), b.snapshot())
+    for eng, snap in zip((a, b), before_any_step):
+        eng.restore(snap, np.arange(0, 70, 3))
+    assert step(3) == 1
+    for eng, snap in zip((a, b), settled):
+        eng.restore(snap, np.arange(1, 70, 3))
+    assert step(4) == 0
+    n_groundings = len(shard.gs)
+    assert step(5, agent="b") == 1
+    assert len(shard.gs) > n_groundings
+    assert step(6) == 0

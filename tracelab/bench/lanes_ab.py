@@ -40,17 +40,21 @@ def load_uncached(path: Path, name: str) -> ModuleType:
 
 def by_name(other: ModuleType, mine: ModuleType) -> Any:
     """`other`, its step_lanes called with this tree's arguments picked by its own parameter names (an
-    argument it does not know is left out; one it needs that this tree lacks raises a KeyError): a kernel
-    that takes fewer tables (main's, against a branch's new ones) runs on this tree's backend."""
+    argument it does not know is left out; one it needs that this tree lacks raises a KeyError), and this
+    tree's integer constants that it lacks (the backend names them, as ctl's C_SETTLED) or that size a
+    table larger (N_CTL: the other kernel reads its own fields of it): a kernel that takes fewer tables
+    (main's, against a branch's new ones) runs on this tree's backend."""
     have = list(inspect.signature(mine.step_lanes.py_func).parameters)
     want = list(inspect.signature(other.step_lanes.py_func).parameters)
-    if have == want:
+    lacking = {k: v for k, v in vars(mine).items() if k.isupper() and type(v) is int
+               and (not hasattr(other, k) or (k.startswith("N_") and v > getattr(other, k)))}
+    if have == want and not lacking:
         return other
 
     def step_lanes(*args: Any) -> Any:
         named = dict(zip(have, args))
         return other.step_lanes(*(named[p] for p in want))
-    return SimpleNamespace(**{**vars(other), "step_lanes": step_lanes})
+    return SimpleNamespace(**{**vars(other), **lacking, "step_lanes": other.step_lanes if have == want else step_lanes})
 
 
 def _block(loop: SpecLoop, kernel: Any, steps: int) -> float:
