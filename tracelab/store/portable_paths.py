@@ -10,8 +10,6 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import pyarrow as pa
-
 from tracelab import RULES_DIR
 
 RUN = "{run}"  # the run's own directory, in a path it records
@@ -33,7 +31,7 @@ def portable_path(path: str, run_dir: Path) -> str:
 def portable_config(value: Any, run_dir: Path) -> Any:
     """A run's config (meta.json's, any JSON value) with every string that names a file of RULES or the run
     portable: an absolute path by where it points, a relative one only if it names a file that exists (a
-    relative string such as an env id `tracelab/GridWar-base-v0` is no path, wherever the command ran)."""
+    registered env id, `namespace/Name-v0`, is no path, wherever the command ran)."""
     if isinstance(value, Mapping):
         return {k: portable_config(v, run_dir) for k, v in value.items()}
     if isinstance(value, list):
@@ -42,17 +40,3 @@ def portable_config(value: Any, run_dir: Path) -> Any:
         return portable_path(value, run_dir)
     return value
 
-
-def portable_column(table: pa.Table, name: str, run_dir: Path) -> pa.Table:
-    """`table` with its string column `name` (a program's rule or fact file) portable; each distinct path is
-    looked at once (a graph's facts, millions of rows, share one)."""
-    column = table.column(name).combine_chunks()
-    if len(column) == 0 or column.null_count == len(column):
-        return table
-    encoded = column.dictionary_encode()
-    paths = pa.array([None if p is None else portable_path(p, run_dir) for p in encoded.dictionary.to_pylist()],
-                     pa.string())
-    if paths.equals(encoded.dictionary):
-        return table
-    decoded = pa.DictionaryArray.from_arrays(encoded.indices, paths).cast(pa.string())
-    return table.set_column(table.schema.get_field_index(name), table.schema.field(name), decoded)

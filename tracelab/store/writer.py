@@ -41,7 +41,7 @@ from tracelab.store.graph_tables import edges_table
 from tracelab.store.meta import (RunMeta, initial_meta, meta_bytes, now_iso, open_writer_lock, read_meta,
                                  reopened_meta, write_meta)
 from tracelab.store.parts import TableParts, remove_unlisted, write_manifest
-from tracelab.store.portable_paths import portable_column, portable_config, portable_path
+from tracelab.store.portable_paths import portable_config, portable_path
 from tracelab.store.stored import PROGRAM_TABLES, VOCABULARY_TABLES, StoredRun, stored_run
 from tracelab.store.schema import SCHEMAS, TABLES
 from tracelab.store.sources import sources_tables
@@ -59,6 +59,21 @@ MAX_PENDING_ROWS = 131_072
 # How many steps' trace rows a recorder (a declared env's, a reasoning's) lets wait in the engine before it
 # takes them: a live reader sees a step that late at most.
 HANDOVER_STEPS = 64
+
+
+def _portable_files(table: pa.Table, run_dir: Path) -> pa.Table:
+    """A program table with its `file` column's paths portable (portable_paths); each distinct path looked at
+    once (a graph's facts, millions of rows, share one)."""
+    column = table.column("file").combine_chunks()
+    if column.null_count == len(column):
+        return table
+    encoded = column.dictionary_encode()
+    paths = arrow_build.strings([None if p is None else portable_path(p, run_dir)
+                                 for p in encoded.dictionary.to_pylist()])
+    if paths.equals(encoded.dictionary):
+        return table
+    column = pa.DictionaryArray.from_arrays(encoded.indices, paths).cast(pa.string())
+    return table.set_column(table.schema.get_field_index("file"), table.schema.field("file"), column)
 
 
 def _without_file(table: pa.Table) -> pa.Table:
@@ -253,7 +268,7 @@ class TraceWriter:
         With an engine at hand, write_engine_program(engine) passes the program, graph, vocabulary and
         groundings, and the graph's edges."""
         tables = convert.program_tables(program, facts, graph)
-        tables.update({name: portable_column(tables[name], "file", self.run_dir) for name in ("rules", "facts")})
+        tables.update({name: _portable_files(tables[name], self.run_dir) for name in ("rules", "facts")})
         if self._program_written and self._stored_tables is not None:  # a reopened run: the same program
             self._check_stored(tables, PROGRAM_TABLES, "program")
             for name in PROGRAM_TABLES:
