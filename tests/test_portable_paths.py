@@ -63,8 +63,8 @@ def test_files_inside_the_run_are_named_from_the_run(tmp_path: Path, capsys: pyt
     write_walk_run(run, rules)
     other = tmp_path / "made-here" / "other"
     spec = RULES_DIR / "gridworld" / "war.toml"
-    config = {"policy": str(rules.parent), "env": {"name": str(spec), "kwargs": {}}, "env_id": "tracelab/GridWar-base-v0",
-              "elsewhere": str(tmp_path / "not-a-run-file")}
+    config = {"policy": str(rules.parent), "env": {"name": str(spec), "kwargs": {}},
+              "env_id": "tracelab/GridWar-base-v0", "elsewhere": str(tmp_path / "not-a-run-file")}
     with TraceWriter(other, {"config": config}) as w:
         w.add_config({"spec_path": str(spec)})
     assert read_meta(run)["rule_files"][0]["path"] == "{run}/program/walk.rules"
