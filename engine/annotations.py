@@ -98,10 +98,6 @@ def is_known(name: str) -> bool:
     return name in BUILTINS or name in _user
 
 
-def known_names() -> list[str]:
-    return [*BUILTINS, *sorted(_user)]
-
-
 def lookup(name: str) -> Callable[..., tuple[float, float] | None]:
     """The Python function of a built-in or registered name (KeyError if neither)."""
     if name in BUILTINS:

@@ -336,10 +336,6 @@ class Engine:
         kinds[aggregated_rules(self.rules)] = K.KIND_AGGREGATE  # fired per head group, not per grounding
         return kinds
 
-    def sync(self) -> None:
-        """Grow the per-world arrays to every atom interned so far (step() does this itself)."""
-        self._sync()
-
     def _sync(self) -> None:
         """Ground any new settable atoms and grow the per-world state to the vocabulary and groundings."""
         g = self.grounder

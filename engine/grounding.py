@@ -180,10 +180,6 @@ class Grounder:
 
     # ---- settable atoms ----
 
-    def add_settable(self, aid: int) -> None:
-        """Declare that atom aid can be set (a fact, an external fact, a rule head)."""
-        self.add_settable_many(np.array([aid], np.int64))
-
     def add_settable_many(self, aids: np.ndarray) -> None:
         aids = np.asarray(aids, np.int64)
         if not len(aids):

@@ -200,16 +200,6 @@ class Program:
     files: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
 
-    def enumerates(self, lit: Literal) -> bool:
-        """Whether body clause `lit` enumerates its variables in this program (`clause_binds`)."""
-        return clause_binds(lit, lit.pred in self.closed)
-
-    def rule_index(self, name: str) -> int:
-        for i, r in enumerate(self.rules):
-            if r.name == name:
-                return i
-        raise KeyError(f"no rule named {name!r}")
-
     def constants(self) -> list[str]:
         """Every constant of the program, in order of first appearance (facts and rules in file order)."""
         seen: dict[str, None] = {}

@@ -184,9 +184,6 @@ class Vocabulary:
         self._skeys = np.insert(self._skeys, at, keys)
         self._sids = np.insert(self._sids, at, ids.astype(np.int32))
 
-    def atom_key(self, label: int, args: tuple[int, ...]) -> tuple[int, int, int]:
-        return (label, args[0], args[1] if len(args) > 1 else -1)
-
     def atom_by_name(self, pred: str, args: tuple[str, ...]) -> int:
         return self.atom(self.label(pred, len(args)), tuple(self.node(a) for a in args))
 

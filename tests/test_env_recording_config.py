@@ -15,6 +15,7 @@ from tracelab.cli import main
 from tracelab.envs.declared.play import TeamEnv
 from tracelab.envs.declared.recording import declared_run_config
 from tracelab.envs.declared.spec import load_spec
+from tracelab.store.portable_paths import portable_config
 from tracelab.store.reader import open_run
 from tracelab.store.why import explain, render_why
 from tracelab.store.writer import TraceWriter
@@ -59,8 +60,8 @@ def test_a_gym_make_run_has_the_board_and_names_its_draws_as_a_play_run(tmp_path
     env.close()
     spec = env.unwrapped.world_spec
     for run in (played, made):
-        config = run_config(run)
-        assert {k: config.get(k) for k in declared_run_config(spec)} == declared_run_config(spec), run
+        config, declared = run_config(run), portable_config(declared_run_config(spec), run)  # rules/toytext/...
+        assert {k: config.get(k) for k in declared} == declared and config["sources"][0]["path"].startswith("rules/")
         assert first_slip_why(run).endswith("by draw:slip"), run
 
 
@@ -72,8 +73,9 @@ def test_a_team_env_run_records_the_worlds_config(tmp_path: Path) -> None:
     for _ in range(3):
         env.step(np.zeros(env.n_agents, np.int64))
     env.close()
-    config = run_config(run)
-    assert {k: config.get(k) for k in declared_run_config(spec)} == declared_run_config(spec)
+    config, declared = run_config(run), portable_config(declared_run_config(spec), run)
+    assert {k: config.get(k) for k in declared} == declared
+    assert config["sources"][0]["path"] == "rules/gridworld/war.toml"
     con = open_run(run)
     try:
         assert board_of_run(con) is not None

@@ -172,7 +172,6 @@ def test_load_program_merges_files_and_makes_names_unique(tmp_path: Path) -> Non
     assert [f.name for f in p.facts] == ["fact3", "b_fact3"]
     assert [r.loc.file for r in p.rules] == [str(a), str(b)]
     assert (p.mode, p.timesteps) == ("override", "reset")
-    assert p.rule_index("b_rule2") == 1
 
 
 def test_load_program_same_stem_gets_a_counter(tmp_path: Path) -> None:

@@ -76,7 +76,6 @@ def test_defaults_of_a_minimal_file(tmp_path):
     assert s.action_ids == BASE_ACTION_IDS and s.rewards == Rewards()
     assert s.slow_agents == SlowAgents()
     assert s.mountain_grid[2, 3] and not s.mountain_grid[3, 2]
-    assert s.cell_id(3, 2) == 19
 
 
 @pytest.mark.parametrize("name", ["base", "advanced", "nonmarkov"])

@@ -156,20 +156,3 @@ class TeamPolicy:
         _policy_kernel(pos, alive, ammo, team, self._draws, self._action_ids, self._blocked, self._goals[team],
                        self._advanced, p_toward, out)
         return out
-
-
-class ScriptedPolicy:
-    """The scripted policy bound to a scenario, a team and its own seeded generator."""
-
-    def __init__(self, scenario: Scenario, team: int | str = "blue", seed: int | None = None,
-                 p_toward: float = P_TOWARD):
-        self.scenario = scenario
-        self.team = team_index(team)
-        self.p_toward = p_toward
-        self.rng = np.random.default_rng(seed)
-
-    def reseed(self, seed: int | None) -> None:
-        self.rng = np.random.default_rng(seed)
-
-    def __call__(self, positions: np.ndarray, alive: np.ndarray, ammo: np.ndarray) -> np.ndarray:
-        return scripted_actions(positions, alive, ammo, self.team, self.scenario, self.rng, self.p_toward)

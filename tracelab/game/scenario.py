@@ -329,9 +329,6 @@ class Scenario:
     def starts(self, team: int | str) -> tuple[Cell, ...]:
         return (self.red_starts, self.blue_starts)[team_index(team)]  # type: ignore[return-value]
 
-    def cell_id(self, x: int, y: int) -> int:
-        return y * self.width + x
-
     @property
     def hits_to_kill(self) -> int:
         """How many hits take an agent's health to 0: the least k with health - k·damage <= DEAD_EPS

@@ -9,7 +9,6 @@ import numpy as np
 from .scenario import Scenario
 
 WINNER_NONE, WINNER_RED, WINNER_BLUE, WINNER_DRAW = -1, 0, 1, 2
-WINNER_NAMES = {WINNER_NONE: "none", WINNER_RED: "red", WINNER_BLUE: "blue", WINNER_DRAW: "draw"}
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -129,5 +128,3 @@ class StepResult:
     def done(self) -> np.ndarray:
         return self.terminated | self.truncated
 
-    def winner_name(self, world: int = 0) -> str:
-        return WINNER_NAMES[int(self.winner[world])]

@@ -3,10 +3,8 @@ why trees (`free(30)` reads `free(30@(6,3))`, `leftOf(29,30)` reads `leftOf(29@(
 
 A run declares a grid in its metadata's config: `"grid": {"width": W, "height": H}` says that the nodes
 named by the whole numbers 0 .. W·H-1 are the cells of a W x H grid, cell id = y·W + x (x right, y up).
-The game's commands (play, train, eval, experiment) write it from the scenario (grid_declaration). Game
-runs written before the declaration existed carry the scenario's TOML in their config instead; its width
-and height are read as the same declaration. A run with neither (a reasoning run) has no coordinates:
-its nodes read as their ids, as before."""
+A war game's run carries its scenario's TOML in its config instead; its width and height are read as the
+same declaration. A run with neither (a reasoning run) has no coordinates: its nodes read as their ids."""
 from __future__ import annotations
 
 import re
@@ -47,11 +45,6 @@ class Grid(NamedTuple):
         return _CELL_ARG.sub(lambda m: self.node_text(m.group(1)), text)
 
 
-def grid_declaration(width: int, height: int) -> dict[str, dict[str, int]]:
-    """The config entry by which a run declares its grid (merge it into the run's config)."""
-    return {GRID_KEY: {"width": int(width), "height": int(height)}}
-
-
 def _checked(width: Any, height: Any) -> Grid | None:
     ok = all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in (width, height))
     return Grid(width, height) if ok and width * height <= _MAX_CELLS else None
@@ -63,10 +56,10 @@ def grid_from_config(config: dict[str, Any]) -> Grid | None:
     declared = config.get(GRID_KEY)
     if isinstance(declared, dict):
         return _checked(declared.get("width"), declared.get("height"))
-    for key in _SCENARIO_KEYS:   # game runs written before the declaration
+    for key in _SCENARIO_KEYS:   # a war game's run: its scenario's TOML
         text = config.get(key)
         if isinstance(text, str) and "=" in text:  # TOML declaring a size has a `key = value` (a name has none)
-            import tomllib  # deferred: only runs written before the declaration need it
+            import tomllib  # deferred: only a game run needs it
             try:  # `scenario` is the TOML in older runs, a name (the TOML is then in scenario_toml) in newer
                 scenario = tomllib.loads(text)
             except tomllib.TOMLDecodeError:

@@ -21,6 +21,7 @@ from typing import IO, TYPE_CHECKING, Any
 import tracelab
 from tracelab.engine.safe_files import JSON_CAP, FileRefused, human_bytes, open_regular, read_json
 from tracelab.store import layout
+from tracelab.store.portable_paths import portable_config, portable_path
 from tracelab.store.schema import BOARD_BEFORE_DECLARED, arrow_schema
 from tracelab.validation import (INT64, Const, IsoTime, ListOf, MapOf, Nullable, OneOf, OptionalKey, check_file,
                                  utc_time)
@@ -86,7 +87,8 @@ def _duckdb_version() -> str:
 
 
 def initial_meta(run_dir: Path, meta: RunMeta | dict[str, Any] | None) -> dict[str, Any]:
-    """The meta.json document of a run being opened now by this process."""
+    """The meta.json document of a run being opened now by this process; the files it names by portable
+    paths (tracelab.store.portable_paths), the program by its name alone (argv[0], where it is installed)."""
     if meta is None:
         meta = RunMeta()
     elif isinstance(meta, dict):
@@ -99,20 +101,23 @@ def initial_meta(run_dir: Path, meta: RunMeta | dict[str, Any] | None) -> dict[s
     for p in meta.rule_files:
         if not Path(p).is_file():
             raise FileNotFoundError(f"rule file {str(p)!r} named in the run metadata does not exist")
-        rule_files.append({"path": str(p), "sha256": file_sha256(p)})
+        rule_files.append({"path": portable_path(str(p), run_dir), "sha256": file_sha256(p)})
     doc = asdict(meta)
-    doc.update(format=FORMAT, run_id=run_dir.name, rule_files=rule_files,
+    doc.update(format=FORMAT, run_id=run_dir.name, rule_files=rule_files, config=portable_config(meta.config, run_dir),
                versions={**library_versions(), **meta.versions}, started_at=now_iso(), ended_at=None,
-               status="running", pid=os.getpid(), host=socket.gethostname(), argv=list(sys.argv),
-               sealed_at=None)
+               status="running", pid=os.getpid(), host=socket.gethostname(), argv=_argv(), sealed_at=None)
     return doc
 
 
-def reopened_meta(doc: dict[str, Any], changes: dict[str, Any]) -> dict[str, Any]:
+def _argv() -> list[str]:
+    return [os.path.basename(a) if i == 0 else a for i, a in enumerate(sys.argv)]
+
+
+def reopened_meta(run_dir: Path, doc: dict[str, Any], changes: dict[str, Any]) -> dict[str, Any]:
     """meta.json of a closed run reopened now by this process for appending (TraceWriter.reopen): running
-    again, with `changes` applied (checked as a read meta.json is)."""
-    doc = {**doc, **changes, "status": "running", "ended_at": None, "pid": os.getpid(),
-           "host": socket.gethostname(), "argv": list(sys.argv)}
+    again, with `changes` applied (checked as a read meta.json is; the paths they name portable)."""
+    doc = {**doc, **portable_config(changes, run_dir), "status": "running", "ended_at": None, "pid": os.getpid(),
+           "host": socket.gethostname(), "argv": _argv()}
     return check_file(doc, META_SCHEMA, Path(layout.META))
 
 

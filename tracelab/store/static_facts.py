@@ -5,13 +5,6 @@ episode's rows. The trace views hide them by default (tracelab trace's table, th
 and say how many they hid."""
 from __future__ import annotations
 
-from typing import Any
-
 # A change row (raw.changes, or the changes view: both have cause_kind and cause_id) set by a static fact.
 STATIC_ROW_SQL = "(cause_kind = 0 AND cause_id IN (SELECT fact FROM raw.facts WHERE static))"
 FACT_CAUSE = 0   # tracelab.engine's CAUSE_FACT, as schema.CAUSE_NAMES names it
-
-
-def static_fact_ids(con: Any) -> list[int]:
-    """The ids of the facts the run's program declares static."""
-    return [int(f) for (f,) in con.execute("SELECT fact FROM raw.facts WHERE static ORDER BY fact").fetchall()]

@@ -41,6 +41,7 @@ from tracelab.store.graph_tables import edges_table
 from tracelab.store.meta import (RunMeta, initial_meta, meta_bytes, now_iso, open_writer_lock, read_meta,
                                  reopened_meta, write_meta)
 from tracelab.store.parts import TableParts, remove_unlisted, write_manifest
+from tracelab.store.portable_paths import portable_config, portable_path
 from tracelab.store.stored import PROGRAM_TABLES, VOCABULARY_TABLES, StoredRun, stored_run
 from tracelab.store.schema import SCHEMAS, TABLES
 from tracelab.store.sources import sources_tables
@@ -58,6 +59,25 @@ MAX_PENDING_ROWS = 131_072
 # How many steps' trace rows a recorder (a declared env's, a reasoning's) lets wait in the engine before it
 # takes them: a live reader sees a step that late at most.
 HANDOVER_STEPS = 64
+
+
+def _portable_files(table: pa.Table, run_dir: Path) -> pa.Table:
+    """A program table with its `file` column's paths portable (portable_paths); each distinct path looked at
+    once (a graph's facts, millions of rows, share one)."""
+    column = table.column("file").combine_chunks()
+    if column.null_count == len(column):
+        return table
+    encoded = column.dictionary_encode()
+    paths = arrow_build.strings([None if p is None else portable_path(p, run_dir)
+                                 for p in encoded.dictionary.to_pylist()])
+    if paths.equals(encoded.dictionary):
+        return table
+    column = pa.DictionaryArray.from_arrays(encoded.indices, paths).cast(pa.string())
+    return table.set_column(table.schema.get_field_index("file"), table.schema.field("file"), column)
+
+
+def _without_file(table: pa.Table) -> pa.Table:
+    return table.drop_columns(["file"]) if "file" in table.column_names else table
 
 
 def _use_system_allocator() -> None:
@@ -164,7 +184,7 @@ class TraceWriter:
             self._meta = new_meta
         else:
             self._continue_counts(stored)
-            self._meta = reopened_meta(read_meta(self.run_dir), _reopen)
+            self._meta = reopened_meta(self.run_dir, read_meta(self.run_dir), _reopen)
         write_meta(self.run_dir, self._meta)  # the run exists (or runs again) from here on
 
         self._lock = threading.Lock()  # the caller's thread takes it only by `with` (see the module's doc)
@@ -248,6 +268,7 @@ class TraceWriter:
         With an engine at hand, write_engine_program(engine) passes the program, graph, vocabulary and
         groundings, and the graph's edges."""
         tables = convert.program_tables(program, facts, graph)
+        tables.update({name: _portable_files(tables[name], self.run_dir) for name in ("rules", "facts")})
         if self._program_written and self._stored_tables is not None:  # a reopened run: the same program
             self._check_stored(tables, PROGRAM_TABLES, "program")
             for name in PROGRAM_TABLES:
@@ -303,11 +324,12 @@ class TraceWriter:
         self.write_vocabulary(engine.vocabulary() if grown else None, engine.groundings)
 
     def _check_stored(self, tables: Mapping[str, pa.Table], names: Sequence[str], what: str) -> None:
-        """A reopened run: the stored rows of `names` must begin `tables` (the new engine's)."""
+        """A reopened run: the stored rows of `names` must begin `tables` (the new engine's). Whatever
+        file a rule or fact was read from: the same program read where the run was moved to, or by a run
+        recorded before its paths were portable (portable_paths), is the run's."""
         assert self._stored_tables is not None
         for name in names:
-            have = self._stored_tables[name]
-            new = tables[name]
+            have, new = (_without_file(t[name]) for t in (self._stored_tables, tables))
             if new.num_rows < have.num_rows or not new.slice(0, have.num_rows).equals(have):
                 raise ValueError(f"run {str(self.run_dir)!r}: this engine's {what} ({name}) differs from "
                                  f"the one the run holds; write into a new run")
@@ -418,6 +440,7 @@ class TraceWriter:
         if self._sources_written or not rows:
             return
         self._sources_written = True
+        rows = [{**r, "path": None if r.get("path") is None else portable_path(r["path"], self.run_dir)} for r in rows]
         self._append({"sources": pa.concat_tables(sources_tables(rows))})
 
     def write_metrics(self, step: int, values: Mapping[str, float], episode: int | None = None) -> None:
@@ -557,7 +580,7 @@ class TraceWriter:
         """`entries` set in the run's config (meta.json's `config`), written now: what a recorder knows of
         the run that its opener did not say (a declared world's facts and board: envs/declared/recording.py).
         Refused (ValueError) as a new run's metadata is, when its readers would refuse it."""
-        doc = {**self._meta, "config": {**self._meta.get("config", {}), **entries}}
+        doc = {**self._meta, "config": {**self._meta.get("config", {}), **portable_config(entries, self.run_dir)}}
         meta_bytes(self.run_dir, doc)
         write_meta(self.run_dir, doc)
         self._meta = doc

@@ -180,13 +180,11 @@ class TrainConfig:
             return None
         return f"supports one hidden layer without --double-dqn, --dueling or --decompose (given: {', '.join(given)})"
 
-    def learner_choice(self) -> tuple[str, str | None]:
-        """(the learner a run uses, fused or readable; why auto fell back to the readable one, or None)."""
+    def learner_choice(self) -> str:
+        """The learner a run uses, fused or readable (auto: fused unless it refuses the config, learner_text)."""
         if self.learner != "auto":
-            return self.learner, None
-        why = self.fused_refusal()
-        return ("readable", f"--learner auto takes the readable learner (autograd, tracelab/train/dqn.py): the "
-                            f"fused one {why}") if why else ("fused", None)
+            return self.learner
+        return "readable" if self.fused_refusal() else "fused"
 
     def network(self, inputs: int, actions: int, reward_terms: tuple[str, ...] = ()) -> NetSpec:
         """The Q-network this config trains on `inputs` observation features and `actions` actions;
@@ -199,10 +197,10 @@ class TrainConfig:
 
     def learner_text(self) -> str:
         """Which learner trains and why, as `train`'s first line says it (docs/training.md, "The learner")."""
-        kind, fell_back = self.learner_choice()
+        kind = self.learner_choice()
         if self.learner != "auto":
             return f"the {kind} learner ({LEARNER_FILES[kind]}, --learner {kind})"
-        if fell_back:
+        if kind == "readable":
             return f"the readable learner ({LEARNER_FILES['readable']}; --learner auto: the fused one " \
                    f"{self.fused_refusal()})"
         return (f"the fused learner ({LEARNER_FILES['fused']}, dqn.py's update written by hand; --learner auto takes "

@@ -97,13 +97,13 @@ class EnvTrainer:
                                          not hasattr(self.env, "script")):
             raise UserError(f"{flag_of('explore_scripted')} {cfg.explore_scripted}: {source.name} declares no "
                             f"scripted choice ([agents] script, docs/worlds.md) in a batched declared env")
-        self.learner_kind, self.learner_note = cfg.learner_choice()
+        self.learner_kind = cfg.learner_choice()
         self.custom_network = network is not None
         if network is not None or learner_class is not None:
             if cfg.learner == "fused":
                 raise UserError("a network module or a learner class trains with the readable learner, not "
                                 "--learner fused")
-            self.learner_kind, self.learner_note = "readable", None
+            self.learner_kind = "readable"
         self.learner: Learner = make_learner(self.learner_kind, self.net, cfg, self.rngs.torch, network,
                                              learner_class or DQN)
         # a custom module acts through torch (TorchQ), a described one in numpy

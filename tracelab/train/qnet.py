@@ -73,10 +73,6 @@ class NetSpec:
     def n_params(self) -> int:
         return sum((fan_in + 1) * fan_out for _, fan_in, fan_out in self.linears())
 
-    @property
-    def widest(self) -> int:
-        return max(self.hidden)
-
     def hidden_text(self) -> str:
         return ",".join(f"{h:,}" if len(self.hidden) == 1 else str(h) for h in self.hidden)
 

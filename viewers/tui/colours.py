@@ -11,7 +11,6 @@ TRUE = "#5fd75f"
 FALSE = "#d7875f"
 UNKNOWN = "#8a8a8a"
 PARTIAL = "#d7d75f"
-MOUNTAIN = "#a0a0a0"
 DIM = "#6c6c6c"
 
 

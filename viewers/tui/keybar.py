@@ -62,11 +62,6 @@ class KeyBar(Widget):
         self._keys = keys
         self.refresh()
 
-    @property
-    def shown_actions(self) -> list[str]:
-        """The actions of the keys drawn at the bar's width (tests read it)."""
-        return [k.action for k in fitting(self._keys, self.size.width - self._palette.cell_len)]
-
     def render(self) -> Text:
         room = self.size.width - self._palette.cell_len
         text, spans = Text(), []

@@ -36,7 +36,6 @@ if TYPE_CHECKING:
 
 RESULT_POLL_S = 0.2  # how often the experiment looks for a worker's finished training
 TRAIN_P, EVAL_PS = 0.7, (0.3, 0.7)  # the method's code: trained against p = 0.7, evaluated against 0.3
-SAVED_QUERIES = ("hid_behind_mountain", "learner_events", "actions_per_win", "steps_before_loss")
 
 Say = Callable[[str], None]
 
