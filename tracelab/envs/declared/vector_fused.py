@@ -22,7 +22,8 @@ uniforms[w, position[w]]), `cumulative` [draws, values] (padded with +inf) and `
 (vector_world._CategoricalTable's), `agent_rows` [agents] (agent i's first action row), `rows` [W, agents]
 and `picks` [W, groups] (the step's, written here), observe_kernel.ObservationReader.arrays (a tuple), and
 `steps` [W] (each world's steps into its episode, counted here with the step: a numpy `+= 1` costs a one-world
-step ~2 µs)."""
+step ~2 µs), `clock` (int64 [2]: the engine's t and its next external id, which step_worlds reads here rather than
+as arguments: each argument of a call from Python is checked, engine/direct_call.py)."""
 from __future__ import annotations
 
 import inspect
@@ -85,11 +86,12 @@ def prepare_batch(tables, ext, batch, actions, first_id):  # noqa: ANN001, ANN20
 
 
 @njit(cache=True)
-def step_worlds(b, actions, t, first_id):  # noqa: ANN001, ANN201
-    """On the counting kernel, a whole step: draw_rows, build_rows, the kernel's step of every world, and on
-    STATUS_OK the reads (read_batch) and every agent's observation numbers. Returns the kernel's status
-    (b.out[4][0]: the world it paused at)."""
+def step_worlds(b, actions):  # noqa: ANN001, ANN201
+    """On the counting kernel, a whole step at the batch's clock (t, first external id): draw_rows,
+    build_rows, the kernel's step of every world, and on STATUS_OK the reads (read_batch) and every agent's
+    observation numbers. Returns the kernel's status (b.out[4][0]: the world it paused at)."""
     batch = b.batch
+    t, first_id = batch[10][0], batch[10][1]
     draw_rows(batch, actions)
     build_rows(b.tables, b.ext, batch[6], batch[7], first_id)
     ext_ptr, ext_i, ext_f = b.ext

@@ -54,8 +54,8 @@ class DeclaredWorlds:
         self._reads = (read_atoms, np.zeros((w, len(read_atoms)), np.bool_), part_ptr, table_values, table_agent,
                        np.array([len(part_atoms), len(table_atoms), len(term), len(trunc), len(mask), limit],
                                 np.int64), self.steps)
-        self._out = (np.zeros((w, len(one._out[0])), np.int64), np.zeros((w, self.n_agents)), np.zeros((2, w), np.bool_),
-                     np.zeros((w, len(mask)), np.int8), np.zeros(1, np.int64))
+        self._out = (np.zeros((w, len(one._out[0])), np.int64), np.zeros((w, self.n_agents)),
+                     np.zeros((2, w), np.bool_), np.zeros((w, len(mask)), np.int8), np.zeros(1, np.int64))
         self._picks = np.full((w, len(one._picks)), -1, np.int64)
         # every draw one np_random.random() (the toy-text games): drawn a block at a time (_Uniforms)
         self._only_uniforms = all(d.draw.method == "categorical" for d in (*one._choices, *one._before)) and \
@@ -80,7 +80,8 @@ class DeclaredWorlds:
         observe = self._observer.arrays if self._observer is not None else _no_observation(w)
         self._batch = (self._draws, *self._uniform_arrays, table.cumulative, table.sizes,
                        np.arange(self.n_agents, dtype=np.int64) * self.n_actions,  # agent i's first action row
-                       np.full((w, self.n_agents), -1, np.int64), self._picks, observe, self.steps)
+                       np.full((w, self.n_agents), -1, np.int64), self._picks, observe, self.steps,
+                       np.zeros(2, np.int64))  # the step's clock: vector_fused.step_worlds
         self._binding = fused.FusedBinding(self.engine, self._tables, self._ext, self._reads, self._out, self._batch)
         # per-agent views of the reads, made once: a reader called per agent and step (an env's obs and
         # reward of each agent) pays a slice's copy, not the slicing and lookups around it as well
@@ -126,7 +127,9 @@ class DeclaredWorlds:
             eng.step(external=(ext_ptr, ext_i[:k], ext_f[:k]))
             self._read()
             return
-        status = self._binding.call(vector_fused.step_worlds, actions, eng.t, eng.next_external_id())
+        clock = self._batch[10]
+        clock[0], clock[1] = eng.t, eng.next_external_id()
+        status = self._binding.call(vector_fused.step_worlds, actions)
         eng.finish_fused_step(status, int(self._out[4][0]), ext_ptr, ext_i, ext_f)
         if status != vector_fused.STATUS_OK:  # the kernel paused (buffer room) and finish went on: read now
             self._read()
@@ -230,10 +233,8 @@ class DeclaredWorlds:
     def observations(self, agent: int = 0) -> Any:
         """Agent `agent`'s observation of every world: an array with a world axis (a dict of them for a
         Dict space), as gymnasium's batch_space lays it out."""
-        if self._box_numbers:  # the usual case, first (an env reads it per agent and step)
-            if not self._numbers_read:
-                self._read_numbers()
-            return self._number_views[agent].copy()
+        if self._box_numbers:  # the usual case, first
+            return self._agent_numbers(agent)
         one, spec = self.one, self.spec
         index = self._index_columns[agent]
         if one._index_checked and index.min() < 0:  # which part misses its atom
