@@ -103,20 +103,18 @@ class DeclaredWorlds:
 
     # ---- the engine step of every world ----
 
-    def engine_step(self, actions: np.ndarray, picks: np.ndarray | None = None) -> None:
-        """One engine step of every world (actions int64 [W, agents], -1: none) that does not count in their
-        episodes' steps, then the reads. `picks`: every group's value [W, groups] (-1: none), else the
-        step's (drawn in the compiled step, or written into self._picks by step())."""
+    def engine_step(self, actions: np.ndarray, picks: np.ndarray) -> None:
+        """One engine step of every world outside their episodes (a start's: it does not count in `steps`),
+        then the reads: actions int64 [W, agents] (-1: none), every group's value picks [W, groups] (-1:
+        none)."""
+        self._picks[:] = picks
+        self._draws[0] = vector_fused.DRAW_GIVEN
         self._draws[2] = 0
-        if picks is not None:
-            self._picks[:] = picks
-            self._draws[0] = vector_fused.DRAW_GIVEN
         try:
             self._step_engine(actions)
         finally:
             self._draws[2] = 1
-            if picks is not None:
-                self._picks[:] = -1  # a step sets only its draws' and computed facts' groups
+            self._picks[:] = -1  # a step sets only its draws' and computed facts' groups
 
     def _step_engine(self, actions: np.ndarray) -> None:
         eng = self.engine
