@@ -38,6 +38,7 @@ class CountingState:
         self._pend = np.zeros((w, 16, 2), np.int32)
         self._pend_f = np.zeros((w, 16, 2), np.float64)  # the bound each scheduled firing sets
         self._pend_n = np.zeros(w, np.int64)
+        self._fixed = np.zeros(w, np.bool_)  # StepState.fixed: cleared wherever the state changes outside a step
         self._n_touched = np.zeros(1, np.int64)
         self._changed = np.zeros(1, np.int64)
         self._out = np.zeros(5, np.float64)
@@ -97,6 +98,7 @@ class CountingState:
                                  kt.b_bnd, kt.inst, self._kind_base, self._unsat, self._act, self._act_n,
                                  self._act_pos)
         self._n_grounded = n_inst
+        self._fixed[:] = False  # new groundings, counted from the intervals: any may apply
         self._scratch(n_atoms, n_inst)
         self.eng.layout_version += 1  # step_state() changed
 
@@ -139,7 +141,7 @@ class CountingState:
             in_heap=self._in_heap, changed=self._changed, hg_i=agg.hg_i, hg_ptr=agg.hg_ptr, je_g=agg.je_g,
             je_body=agg.je_body, ag_rule=agg.ag_rule, ag_cf=agg.ag_cf, ag_cn=agg.ag_cn, ag_q=agg.ag_q,
             ag_qv=agg.ag_qv, mark=self._mark, stamp=self._stamp, g_l=self._g[0], g_u=self._g[1], g_w=self._g[2],
-            req_i=self._req_i, req_f=self._req_f, req_n=self._req_n, pend_f=self._pend_f)
+            req_i=self._req_i, req_f=self._req_f, req_n=self._req_n, pend_f=self._pend_f, fixed=self._fixed)
         self._state_version = eng.layout_version
         return self._step_state
 
@@ -218,6 +220,7 @@ class CountingState:
         self.upper[world, atoms] = upper
         self.static[world, atoms] = static
         self.last_cause[world, atoms] = -1
+        self._fixed[world] = False
         kt = self.kt
         K.recount_worlds(np.array([world], np.int64), self.lower, self.upper, kt.b_ptr, kt.b_atom, kt.b_flags,
                          kt.b_bnd, kt.inst, self._kind_base, self._unsat, self._act, self._act_n, self._act_pos)
@@ -227,6 +230,7 @@ class CountingState:
         """Worlds `indices` take their state from snap's worlds `sources` (default: the same worlds); their
         scheduled firings move `shift` steps later."""
         sources = indices if sources is None else sources
+        self._fixed[indices] = False  # a snapshot's state may not be a fixpoint (one taken before any step)
         worlds: slice | np.ndarray = indices
         src: slice | np.ndarray = sources
         if indices.size == 1:  # one world (the usual episode end): basic indexing, no fancy-index copies

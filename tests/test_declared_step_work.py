@@ -1,12 +1,18 @@
 """The Python work around a small batch's compiled step (tracelab/envs/declared/vector_world.py): a one-world
 GridWar batch takes its np_random numbers in blocks of many steps, and every agent's observation and reward
-is its own copy of the step's reads. (Speed itself is bench env's; this holds the work that it counts.)"""
+is its own copy of the step's reads, and each world's steps into its episode are counted inside the
+compiled step (the ends it writes with them). (Speed itself is bench env's; this holds the work that it
+counts.)"""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from tracelab.bench.sims import team_spec
+from tracelab.envs.declared.gridwar import scenario_spec
+from tracelab.envs.declared.spec import load_spec
 from tracelab.envs.declared.vector_world import DeclaredWorlds
+from tracelab.game.scenario import builtin_scenario
 
 
 class CountingGenerator:
@@ -58,3 +64,31 @@ def test_each_agents_observation_and_reward_is_its_own_copy() -> None:
         reward = worlds.rewards(agent)
         reward[:] = 99.0
         assert worlds.rewards(agent)[0] != 99.0
+
+
+@pytest.mark.parametrize("worlds, kernel", [(1, "counting"), (64, "lanes")])
+def test_a_step_counts_in_its_episode_and_truncates_at_the_specs_limit(worlds: int, kernel: str) -> None:
+    """steps counts each world's steps since its reset (an engine_step outside the episodes does not
+    count); at the spec's max_steps a world that did not terminate is truncated, on that step, not one
+    later; the ends read are the caller's copies."""
+    path, params = scenario_spec(builtin_scenario("base"))
+    batch = DeclaredWorlds(load_spec(path, **{**params, "max_steps": 3}), worlds, kernel)
+    assert batch.kernel == kernel
+    batch.use_generators([np.random.default_rng(seed) for seed in range(worlds)])
+    batch.reset(np.arange(worlds))
+    stay = np.full((worlds, batch.n_agents), -1, np.int64)  # no red action: no game ends in 3 steps
+    for step in (1, 2):
+        batch.step(stay)
+        assert batch.steps.tolist() == [step] * worlds
+        assert not batch.truncated(None).any() and not batch.terminated().any()
+    batch.engine_step(stay, np.full_like(batch._picks, -1))
+    assert batch.steps.tolist() == [2] * worlds
+    batch.step(stay)
+    assert batch.steps.tolist() == [3] * worlds
+    truncated = batch.truncated(None)
+    assert truncated.all()
+    truncated[:] = False
+    batch.terminated()[:] = True
+    assert batch.truncated(None).all() and not batch.terminated().any()
+    batch.reset(np.arange(1))
+    assert batch.steps.tolist() == [0] + [3] * (worlds - 1)

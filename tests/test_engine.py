@@ -270,6 +270,31 @@ def test_restore_after_groundings_grew_recounts():
     assert eng.query("reach(e)", 0) == (1.0, 1.0)
 
 
+def test_an_immediate_grounding_made_active_between_steps_applies_at_the_next_one():
+    """After a step that ended at its fixpoint the kernel does not look again at every active immediate
+    grounding (none would apply); set_bounds and a restore change a world outside the kernel, and the
+    groundings they make active apply at the world's next step, in that world only."""
+    eng = Engine(parse_program("""
+    node(a) static
+    node(b) static
+    p: p(X) <-! q(X), node(X)
+    """), worlds=2)
+    q = np.array([eng.atom("q", "a"), eng.atom("q", "b")])
+    for world in (0, 1):  # settable, unknown: no grounding of p is active
+        eng.set_bounds(q, np.zeros(2), np.ones(2), np.zeros(2, bool), world)
+    eng.run(2)
+    eng.set_bounds(q[1:], np.ones(1), np.ones(1), np.zeros(1, bool), world=1)
+    eng.step()
+    assert eng.query("p(b)", 1) == (1.0, 1.0) and eng.query("p(b)", 0) == (0.0, 1.0)
+    eng.set_bounds(q[:1], np.ones(1), np.ones(1), np.zeros(1, bool), world=0)
+    snap = eng.snapshot()  # not a fixpoint: p(a) applies at world 0's next step
+    eng.step()
+    assert eng.query("p(a)", 0) == (1.0, 1.0) and eng.query("p(a)", 1) == (0.0, 1.0)
+    eng.restore(snap, np.array([1]), source=np.array([0]))
+    eng.step()
+    assert eng.query("p(a)", 1) == (1.0, 1.0)
+
+
 def test_a_rule_with_too_many_binding_clauses_is_refused_by_name():
     body = ", ".join(f"p{i}(X)" for i in range(128))
     with pytest.raises(ProgramCheckError, match="<string>:1:1: .*rule 'big' has 128 binding body clauses; "

@@ -92,25 +92,27 @@ class FusedBinding:
         self._engine = engine
         self._arrays = (tables, ext, reads, out, batch)
         self._buffers: DeclaredBuffers | None = None
-        self._version = (-1, -1)  # the engine's layout and the kernels' generation the buffers were bound for
-        self._calls: dict[Any, DirectCall] = {}
+        self._layout = -1  # the engine's layout_version the buffers were bound for
+        self._generation = -1  # and numba_python.generation(): kernels compiled or run as Python
+        self._calls: dict[Any, DirectCall] = {}  # empty while the kernels run as Python
 
     def buffers(self) -> DeclaredBuffers:
         """The buffers for the next fused step (grounds what is new first, as Engine.step() does)."""
-        version = (self._engine.prepare_fused_step(), numba_python.generation())
-        if self._buffers is None or version != self._version:
+        if self._engine.prepare_fused_step() != self._layout or numba_python.generation() != self._generation:
             self._buffers = bind(self._engine.fused_binding(), *self._arrays)
-            self._version = (self._engine.layout_version, version[1])
+            self._layout, self._generation = self._engine.layout_version, numba_python.generation()
+            self._calls.clear()
+        assert self._buffers is not None
         return self._buffers
 
     def call(self, dispatcher: Any, *args: Any) -> Any:
         """dispatcher(buffers(), *args), past numba's per-call dispatch (engine/direct_call.py: typing the
         buffers' arrays cost ~2 µs a call)."""
         buffers = self.buffers()
-        if numba_python.running_as_python():
-            return dispatcher(buffers, *args)
         call = self._calls.get(dispatcher)
-        if call is None or call.record is not buffers:
+        if call is None:
+            if numba_python.running_as_python():
+                return dispatcher(buffers, *args)
             call = self._calls[dispatcher] = DirectCall(dispatcher, buffers)
         return call(*args)
 

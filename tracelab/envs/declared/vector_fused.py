@@ -5,7 +5,7 @@ The batched twin of fused.py, over the same structref (fused.bind; numba compile
 shapes). Tables are fused.py's with a world axis where a world has its own: `rows` [W, agents] (each
 agent's action row, -1: none), `picks` [W, draws] (-1: not drawn), `prev` [W, cap] / `prev_n` [W] (the
 step facts each world's last step set), and the reads' results `index` [W, parts], `rewards` [W, agents],
-`res` [W, 2] (terminated, truncated), `mask` [W, mask atoms]. `now`/`now_bnd` are one world's scratch.
+`ends` bool [2, W] (terminated, truncated: a reader copies a row), `mask` [W, mask atoms]. `now`/`now_bnd` are one world's scratch.
 
 The reads go through a truth table [W, read atoms] (`reads`: read_atoms, truth, part_ptr, table_values,
 table_agent, sizes), so that a batch on the lanes kernel (which this call cannot step: the engine steps
@@ -15,11 +15,15 @@ The step's own Python is one call too (step_worlds): each agent's action to its 
 (the categorical draws of fixed probabilities, from each world's block of np_random numbers) and, after the
 kernel and the reads, every agent's observation numbers (observe_kernel). A small numpy operation costs a
 microsecond or more, and a one-world war.toml step did ~20 of them around a compiled step of ~40 µs.
-`batch` (the structref's field): `draws` (int64 [2]: DRAW_UNIFORMS or DRAW_GIVEN, then the number of draws),
+`batch` (the structref's field): `draws` (int64 [3]: DRAW_UNIFORMS or DRAW_GIVEN, the number of draws, and 1
+where the step counts in each world's `steps`, 0 for a step outside the episodes: the starts' steps),
 `uniforms` [W, block] and `position` [W] (vector_world._Uniforms' buffer: the next number of world w is
 uniforms[w, position[w]]), `cumulative` [draws, values] (padded with +inf) and `sizes` [draws]
 (vector_world._CategoricalTable's), `agent_rows` [agents] (agent i's first action row), `rows` [W, agents]
-and `picks` [W, groups] (the step's, written here), and observe_kernel.ObservationReader.arrays (a tuple)."""
+and `picks` [W, groups] (the step's, written here), observe_kernel.ObservationReader.arrays (a tuple), and
+`steps` [W] (each world's steps into its episode, counted here with the step: a numpy `+= 1` costs a one-world
+step ~2 µs), `clock` (int64 [2]: the engine's t and its next external id, which step_worlds reads here rather than
+as arguments: each argument of a call from Python is checked, engine/direct_call.py)."""
 from __future__ import annotations
 
 import inspect
@@ -52,13 +56,15 @@ def build_rows(tables, ext, rows, picks, first_id):  # noqa: ANN001, ANN201
 @njit(cache=True)
 def draw_rows(batch, actions):  # noqa: ANN001, ANN201
     """The step's rows [W, agents] from actions [W, agents] (-1: none; agent i's action a is row
-    agent_rows[i] + a) and, with DRAW_UNIFORMS, every world's draws from its next numbers, as
+    agent_rows[i] + a), each world's step counted (draws[2] == 1) and, with DRAW_UNIFORMS, every world's draws from its next numbers, as
     vector_world._CategoricalTable.picks (how many cumulative sums are <= u; past the last, value 0)."""
     draws, uniforms, position, cumulative, sizes = batch[0], batch[1], batch[2], batch[3], batch[4]
-    agent_rows, rows, picks = batch[5], batch[6], batch[7]
+    agent_rows, rows, picks, steps = batch[5], batch[6], batch[7], batch[9]
     for w in range(rows.shape[0]):
         for i in range(rows.shape[1]):
             rows[w, i] = actions[w, i] + agent_rows[i] if actions[w, i] >= 0 else -1
+        if draws[2] == 1:
+            steps[w] += 1
     if draws[0] != DRAW_UNIFORMS:
         return
     for w in range(rows.shape[0]):
@@ -80,11 +86,12 @@ def prepare_batch(tables, ext, batch, actions, first_id):  # noqa: ANN001, ANN20
 
 
 @njit(cache=True)
-def step_worlds(b, actions, t, first_id):  # noqa: ANN001, ANN201
-    """On the counting kernel, a whole step: draw_rows, build_rows, the kernel's step of every world, and on
-    STATUS_OK the reads (read_batch) and every agent's observation numbers. Returns the kernel's status
-    (b.out[4][0]: the world it paused at)."""
+def step_worlds(b, actions):  # noqa: ANN001, ANN201
+    """On the counting kernel, a whole step at the batch's clock (t, first external id): draw_rows,
+    build_rows, the kernel's step of every world, and on STATUS_OK the reads (read_batch) and every agent's
+    observation numbers. Returns the kernel's status (b.out[4][0]: the world it paused at)."""
     batch = b.batch
+    t, first_id = batch[10][0], batch[10][1]
     draw_rows(batch, actions)
     build_rows(b.tables, b.ext, batch[6], batch[7], first_id)
     ext_ptr, ext_i, ext_f = b.ext
@@ -113,7 +120,7 @@ def read_truth(truth, reads, out):  # noqa: ANN001, ANN201
     true atom (-1: none), per agent the reward table's sum, the ends, the mask. A world truncates also at
     the spec's max_steps (sizes[5], -1: none) of its steps (reads[6]) when it did not terminate."""
     part_ptr, table_values, table_agent, sizes, steps = reads[2], reads[3], reads[4], reads[5], reads[6]
-    index, rewards, res, mask, _ = out
+    index, rewards, ends, mask, _ = out
     n_parts, n_table, n_term, n_trunc, limit = sizes[0], sizes[1], sizes[2], sizes[3], sizes[5]
     for w in range(truth.shape[0]):
         for p in range(len(part_ptr) - 1):
@@ -128,17 +135,17 @@ def read_truth(truth, reads, out):  # noqa: ANN001, ANN201
             if truth[w, c + j]:
                 rewards[w, table_agent[j]] += table_values[j]
         c += n_table
-        res[w, 0] = 0.0
+        ends[0, w] = False
         for j in range(n_term):
             if truth[w, c + j]:
-                res[w, 0] = 1.0
+                ends[0, w] = True
         c += n_term
-        res[w, 1] = 0.0
+        ends[1, w] = False
         for j in range(n_trunc):
             if truth[w, c + j]:
-                res[w, 1] = 1.0
-        if limit >= 0 and steps[w] >= limit and res[w, 0] != 1.0:
-            res[w, 1] = 1.0
+                ends[1, w] = True
+        if limit >= 0 and steps[w] >= limit and not ends[0, w]:
+            ends[1, w] = True
         c += n_trunc
         for j in range(mask.shape[1]):
             mask[w, j] = 1 if truth[w, c + j] else 0

@@ -54,8 +54,8 @@ class DeclaredWorlds:
         self._reads = (read_atoms, np.zeros((w, len(read_atoms)), np.bool_), part_ptr, table_values, table_agent,
                        np.array([len(part_atoms), len(table_atoms), len(term), len(trunc), len(mask), limit],
                                 np.int64), self.steps)
-        self._out = (np.zeros((w, len(one._out[0])), np.int64), np.zeros((w, self.n_agents)), np.zeros((w, 2)),
-                     np.zeros((w, len(mask)), np.int8), np.zeros(1, np.int64))
+        self._out = (np.zeros((w, len(one._out[0])), np.int64), np.zeros((w, self.n_agents)),
+                     np.zeros((2, w), np.bool_), np.zeros((w, len(mask)), np.int8), np.zeros(1, np.int64))
         self._picks = np.full((w, len(one._picks)), -1, np.int64)
         # every draw one np_random.random() (the toy-text games): drawn a block at a time (_Uniforms)
         self._only_uniforms = all(d.draw.method == "categorical" for d in (*one._choices, *one._before)) and \
@@ -72,24 +72,28 @@ class DeclaredWorlds:
         self._uniform_arrays = (np.empty((w, block)), np.full(w, block, np.int64))  # filled on first use
         self.uniforms: _Uniforms | None = None
         self._observer = one._observer  # built for the engine's n_worlds worlds
-        self._numbers: np.ndarray | None = None  # every agent's observed numbers, read once after a change
+        self._numbers_read = False  # whether the observer's numbers are every agent's as the engine stands
         # the compiled step reads every agent's numbers but a `lower` or `bounds` part's (numpy's, after it)
         self._observed = self._observer is not None and not self._observer.program.python_parts
         table = self._categorical or _CategoricalTable([])
-        self._draws = np.array([vector_fused.DRAW_GIVEN, len(one._before)], np.int64)
+        self._draws = np.array([vector_fused.DRAW_GIVEN, len(one._before), 1], np.int64)
         observe = self._observer.arrays if self._observer is not None else _no_observation(w)
         self._batch = (self._draws, *self._uniform_arrays, table.cumulative, table.sizes,
                        np.arange(self.n_agents, dtype=np.int64) * self.n_actions,  # agent i's first action row
-                       np.full((w, self.n_agents), -1, np.int64), self._picks, observe)
+                       np.full((w, self.n_agents), -1, np.int64), self._picks, observe, self.steps,
+                       np.zeros(2, np.int64))  # the step's clock: vector_fused.step_worlds
         self._binding = fused.FusedBinding(self.engine, self._tables, self._ext, self._reads, self._out, self._batch)
         # per-agent views of the reads, made once: a reader called per agent and step (an env's obs and
         # reward of each agent) pays a slice's copy, not the slicing and lookups around it as well
         self._reward_columns = [self._out[1][:, a] for a in range(self.n_agents)]
-        self._ends = (self._out[2][:, 0], self._out[2][:, 1])
+        self._ends = (self._out[2][0], self._out[2][1])
         n_index = len(one._index_parts)
         self._index_columns = [self._out[0][:, a * n_index:(a + 1) * n_index] for a in range(self.n_agents)]
         width = one.observation_program.width if one.observation_program is not None else 0
-        self._number_columns = [slice(a * width, (a + 1) * width) for a in range(self.n_agents)]
+        numbers = self._observer.numbers if self._observer is not None else np.zeros((w, 0), np.float32)
+        self._number_views = [numbers[:, a * width:(a + 1) * width] for a in range(self.n_agents)]
+        self._scaled = self.one._scaled if self.one._any_scaled else None
+        self._computed = self.one._computed if len(self.one._computed) else None
         self._box_numbers = spec.space == "Box" and not one._index_checked  # observations(): numbers only
         self._starts = _StartOutcomes(self)
 
@@ -99,38 +103,39 @@ class DeclaredWorlds:
 
     # ---- the engine step of every world ----
 
-    def engine_step(self, actions: np.ndarray, picks: np.ndarray | None = None) -> None:
-        """One engine step of every world (actions int64 [W, agents], -1: none), then the reads. `picks`:
-        every group's value [W, groups] (-1: none), else the step's (drawn in the compiled step, or
-        written into self._picks by step())."""
-        if picks is None:
-            self._step_engine(actions)
-            return
+    def engine_step(self, actions: np.ndarray, picks: np.ndarray) -> None:
+        """One engine step of every world outside their episodes (a start's: it does not count in `steps`),
+        then the reads: actions int64 [W, agents] (-1: none), every group's value picks [W, groups] (-1:
+        none)."""
         self._picks[:] = picks
         self._draws[0] = vector_fused.DRAW_GIVEN
+        self._draws[2] = 0
         try:
             self._step_engine(actions)
         finally:
+            self._draws[2] = 1
             self._picks[:] = -1  # a step sets only its draws' and computed facts' groups
 
     def _step_engine(self, actions: np.ndarray) -> None:
         eng = self.engine
-        self._numbers = None
+        self._numbers_read = False
         ext_ptr, ext_i, ext_f = self._ext
         if eng.kernel != "counting":  # lanes (or compiled): the engine's own step, then the reads
             k = vector_fused.prepare_batch(self._tables, self._ext, self._batch, actions, eng.next_external_id())
             eng.step(external=(ext_ptr, ext_i[:k], ext_f[:k]))
             self._read()
             return
-        status = self._binding.call(vector_fused.step_worlds, actions, eng.t, eng.next_external_id())
+        clock = self._batch[10]
+        clock[0], clock[1] = eng.t, eng.next_external_id()
+        status = self._binding.call(vector_fused.step_worlds, actions)
         eng.finish_fused_step(status, int(self._out[4][0]), ext_ptr, ext_i, ext_f)
         if status != vector_fused.STATUS_OK:  # the kernel paused (buffer room) and finish went on: read now
             self._read()
-        elif self._observed:  # every agent's numbers came with the step
-            self._numbers = self._observer.numbers
+        else:  # every agent's numbers came with the step, but a `lower` or `bounds` part's
+            self._numbers_read = self._observed
 
     def _read(self) -> None:
-        self._numbers = None
+        self._numbers_read = False
         if self.engine.kernel == "counting":
             vector_fused.read_batch(self._binding.buffers())
         else:
@@ -168,19 +173,18 @@ class DeclaredWorlds:
             u = self.uniforms.each(len(before)) if self.uniforms is not None and before else None
             for d, drawer in enumerate(before):
                 picks[:, d] = _draw_batch(drawer, self, None if u is None else u[:, d])
-        computed = self.one._computed
-        if len(computed):
+        computed = self._computed
+        if computed is not None:
             base = self.one.computed_base
             picks[:, base:base + len(computed)] = computed.picks(self.engine, self.steps)
-        self.steps += 1  # before the step: its reads truncate at the spec's max_steps (vector_fused.read_truth)
-        self._step_engine(actions)
+        self._step_engine(actions)  # counts the step in `steps` before its reads (vector_fused.draw_rows)
 
     # ---- reading (after a step or a reset) ----
 
     def rewards(self, agent: int = 0) -> np.ndarray:
         r = self._reward_columns[agent].copy()
-        if self.one._any_scaled:
-            ids, scales = self.one._scaled[agent]
+        if self._scaled is not None:
+            ids, scales = self._scaled[agent]
             if ids.size:
                 r += self.engine.lower[:, ids] @ scales
         return r
@@ -191,7 +195,7 @@ class DeclaredWorlds:
         return self.engine.is_true(atoms) if atoms.size else None
 
     def terminated(self) -> np.ndarray:
-        return self._ends[0] == 1.0
+        return self._ends[0].copy()
 
     def won(self) -> np.ndarray:
         """Per world: terminated with one of the spec's `[end] win` atoms [1,1] (DeclaredWorld.outcome)."""
@@ -214,7 +218,7 @@ class DeclaredWorlds:
         """A truncated atom, or the spec's step limit reached in a world that did not terminate (both read
         with the step: vector_fused.read_truth), or `limit` (a TimeLimit's, which truncates whatever the
         step did) reached."""
-        out = self._ends[1] == 1.0
+        out = self._ends[1].copy()
         if limit is not None:
             out |= self.steps >= limit
         return out
@@ -253,9 +257,14 @@ class DeclaredWorlds:
     def _agent_numbers(self, agent: int) -> np.ndarray:
         """A copy of agent `agent`'s observed numbers [W, width]; every agent's come from one read of the
         engine (until it changes)."""
-        if self._numbers is None:
-            self._numbers = self._observer.read(self.engine)
-        return self._numbers[:, self._number_columns[agent]].copy()
+        if not self._numbers_read:
+            self._read_numbers()
+        return self._number_views[agent].copy()
+
+    def _read_numbers(self) -> None:
+        """Every agent's numbers into the observer's buffer (which the per-agent views look at)."""
+        self._observer.read(self.engine)
+        self._numbers_read = True
 
 
 def _world(spec: WorldSpec, n_worlds: int, kernel: str) -> DeclaredWorld:
