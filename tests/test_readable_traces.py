@@ -15,7 +15,7 @@ from store_helpers import write_walk_run  # noqa: E402
 from tui_helpers import episodes_ready, loaded, run_app, shown_once, wait_for  # noqa: E402
 
 from tracelab.cli import main  # noqa: E402
-from tracelab.store.coordinates import Grid, grid_declaration, grid_from_config, run_grid  # noqa: E402
+from tracelab.store.coordinates import Grid, grid_from_config, run_grid  # noqa: E402
 from tracelab.store.reader import open_run  # noqa: E402
 from tracelab.viewers.tui.trace import TracePane  # noqa: E402
 
@@ -95,7 +95,7 @@ def test_a_run_without_coordinates_reads_ids_as_before(walk: str, capsys: pytest
 
 
 def test_what_a_run_may_declare_as_its_grid() -> None:
-    assert grid_from_config(grid_declaration(4, 3)) == Grid(4, 3)
+    assert grid_from_config({"grid": {"width": 4, "height": 3}}) == Grid(4, 3)
     assert Grid(4, 3).with_coordinates("nextTo(11,7)") == "nextTo(11@(3,2),7@(3,1))"
     assert Grid(4, 3).with_coordinates("at(red-agent-1,12)") == "at(red-agent-1,12)"   # 12: not a cell
     assert Grid(4, 3).with_coordinates("tally(red-agent-1,q0_0)") == "tally(red-agent-1,q0_0)"
@@ -105,6 +105,9 @@ def test_what_a_run_may_declare_as_its_grid() -> None:
         assert grid_from_config(bad) is None            # read as ids, never as wrong places
     # a RuleSim train --scenario run named its scenario and kept the TOML beside it; a play run, the TOML
     assert grid_from_config({"scenario": "base", "scenario_toml": "width = 8\nheight = 8\n"}) == Grid(8, 8)
+    # ... as its registration reads it, for a run from before boards were declared only: a declared world's
+    # board names its cells (c0_0), and its whole-number arguments are no cells
+    assert grid_from_config({"scenario": "width = 8\nheight = 8\n"}, board=None) is None
     assert run_grid(open_run(ROOT / "tests" / "data" / "rulesim" / "base")) == Grid(8, 8)
 
 
