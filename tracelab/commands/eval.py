@@ -38,13 +38,9 @@ def run(args: argparse.Namespace) -> int:
     if args.backend != "rules":
         raise UserError(f"--backend {args.backend}: eval plays every policy on its world's spec with the rule "
                         f"engine; drop --backend")
-    source, scenario, recorded = _world(args)
+    trained_on, source, scenario = _world(args)
     with store_errors():  # a policy that does not load, or was trained on another world
-        policy = load_trained(args.policy, source)
-    # a scripted opponent at --opponent-p (a policy of train on its own id: at the method's p by default)
-    p = METHOD_EVAL_P if args.opponent_p is None and recorded and has_opponent_p(source) else args.opponent_p
-    if scenario is None:
-        source = with_opponent_p(source, p)
+        policy = load_trained(args.policy, trained_on)
     name = scenario.name if scenario is not None else source.short_name
     with progress(f"evaluating on {name}", total=args.games, unit="games") as bar:
         if args.run is None:
@@ -67,11 +63,12 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _world(args: argparse.Namespace) -> tuple[EnvSource, Any, bool]:
-    """(the env the policy plays, the war game's scenario or None, whether the env is the one the policy
-    recorded): --env (and --env-arg); else a policy of train on one of tracelab's ids plays that id; a
-    policy of train on a spec file needs --env; an older policy of RuleSim's trainer plays its scenario's
-    spec, or --scenario's, against the opponent at --opponent-p (scenario_world)."""
+def _world(args: argparse.Namespace) -> tuple[EnvSource, EnvSource, Any]:
+    """(the env the policy is loaded on, the one it plays, the war game's scenario or None): --env (and
+    --env-arg); else a policy of train on one of tracelab's ids plays that id (a scripted opponent at
+    --opponent-p, the method's p by default); a policy of train on a spec file needs --env; an older policy
+    of RuleSim's trainer plays its scenario's spec, or --scenario's, against the opponent at --opponent-p
+    (scenario_world)."""
     with store_errors():  # a policy.json that does not load
         fmt = policy_format(args.policy)
         given = args.env is not None or bool(args.env_arg)
@@ -79,15 +76,15 @@ def _world(args: argparse.Namespace) -> tuple[EnvSource, Any, bool]:
     if fmt != ENV_FORMAT and not given:  # an older policy of RuleSim's trainer: its scenario's spec
         with store_errors():  # a policy or scenario that does not load
             scenario, source = scenario_world(args, read_rulesim_spec(args.policy), METHOD_EVAL_P)
-        return source, scenario, False
+        return source, source, scenario
     refuse_scenario_flags(args, "a policy of train plays the env it was trained on (--env, --env-arg)",
                           ("scenario",))
     if recorded is None and args.env is None:
         raise UserError(f"{args.policy} was trained with train --env on a spec file: name that env with --env "
                         f"SPEC_OR_ID (and its --env-arg values); its policy.json says which under \"env\"")
     source = recorded or env_source_of(args)
-    with_opponent_p(source, args.opponent_p)  # refused for a world with no scripted opponent
-    return source, None, recorded is not None
+    p = METHOD_EVAL_P if args.opponent_p is None and recorded and has_opponent_p(source) else args.opponent_p
+    return source, with_opponent_p(source, p), None  # refused for a world with no scripted opponent
 
 
 def _traced(args: argparse.Namespace, policy: Any, source: EnvSource, scenario: Any, on_game: Any) -> Any:

@@ -30,8 +30,8 @@ from tracelab.commands._worlds import env_source_of
 from tracelab.envs.declared.gridwar_scenarios import (
     SCENARIO_FLAGS,
     ScenarioTraining,
+    refuse_scenario_flags,
     resumed_scenario,
-    scenario_settings_given,
 )
 from tracelab.errors import UserError, store_errors
 from tracelab.store import TraceWriter
@@ -58,10 +58,8 @@ def run(args: argparse.Namespace) -> int:
     on_env = args.env is not None or bool(args.env_arg)
     source = env_source_of(args) if on_env else None
     world = {k: given.pop(k) for k in SCENARIO_FLAGS if k in given}  # the war game's scenario, as its params
-    refused = scenario_settings_given([f"--{k.replace('_', '-')}" for k in world] if on_env else [],
-                                      f"--env {args.env} takes the DQN flags only")
-    if refused:
-        raise UserError(refused)
+    if on_env:
+        refuse_scenario_flags(args, f"--env {args.env} takes the DQN flags only", SCENARIO_FLAGS)
     state, scenario = None, None
     with store_errors():  # a bad value in the config or a checkpoint that does not load
         if args.resume:

@@ -82,16 +82,17 @@ def with_opponent_p(source: EnvSource, p: float | None) -> EnvSource:
 
 
 def refuse_scenario_flags(args: Any, why: str, flags: tuple[str, ...] = ("scenario", "agents", "opponent_p")) -> None:
-    """A UserError naming the first of the scenario's flags (`flags`: their args names) given where they
-    do not apply, and `why`."""
-    for flag in flags:
-        if getattr(args, flag, None) is not None:
-            raise UserError(f"--{flag.replace('_', '-')} is GridWar's; {why}")
+    """A UserError naming the scenario's flags (`flags`: their args names) given where they do not apply,
+    and `why`."""
+    given = [f"--{f.replace('_', '-')}" for f in flags if getattr(args, f, None) is not None]
+    refused = scenario_settings_given(given, why)
+    if refused:
+        raise UserError(refused)
 
 
 def scenario_settings_given(names: list[str], why: str) -> str | None:
     """The line refusing the scenario's settings `names` (SCENARIO_FLAGS, as flags or field names) where a
-    world of its own trains, or None when there are none."""
+    world of its own plays or trains, or None when there are none."""
     if not names:
         return None
     return f"{', '.join(names)} describe{'s' * (len(names) == 1)} GridWar; {why}"
