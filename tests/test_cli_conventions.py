@@ -94,8 +94,8 @@ def test_an_unknown_flag_is_one_line_of_its_subcommand(argv: list[str], expected
 def test_one_name_and_one_default_for_one_thing() -> None:
     assert parse("eval", "pol", "--num-envs", "4").envs == parse("eval", "pol", "--envs", "4").envs == 4
     assert parse("eval", "pol").envs == TrainConfig().eval_envs == 64
-    from tracelab.commands.play import DEFAULT_SCENARIO
-    assert DEFAULT_SCENARIO == TrainConfig().scenario == "base"
+    from tracelab.envs.declared.gridwar_scenarios import DEFAULT_SCENARIO, ScenarioTraining
+    assert DEFAULT_SCENARIO == ScenarioTraining.given({}).name == "base"
 
 
 def test_a_training_too_short_to_learn_says_so(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:

@@ -132,7 +132,7 @@ def test_play_env_plays_gridwar_ids_through_its_spec(tmp_path: Path, capsys, mon
     (["--env", "tracelab/FrozenLake-v1", "--env-arg", "slippery=false"], "unknown keyword argument 'slippery'"),
     (["--env", "tracelab/FrozenLake-v1", "--env-arg", "is_slippery"], "write KEY=VALUE"),
     (["--env", "tracelab/FrozenLake-v1", "--env-arg", "map_name=9x9"], "map_name"),
-    (["--env", "tracelab/FrozenLake-v1", "--scenario", "base"], "--scenario is GridWar's"),
+    (["--env", "tracelab/FrozenLake-v1", "--scenario", "base"], "--scenario describes GridWar"),
     (["--env", "tracelab/FrozenLake-v1", "--policy", "scripted"], "--policy scripted"),
 ])
 def test_play_env_mistakes_are_one_line(tmp_path: Path, args: list[str], fragment: str) -> None:

@@ -74,7 +74,7 @@ def test_eval_command_plays_an_old_policy_as_main_did(capsys):
     assert main(["eval", str(RULESIM_POLICY), "--games", "64", "--seed", "0", "--json"]) == 0
     figures = json.loads(capsys.readouterr().out)
     assert figures["env"] == {"name": "tracelab/GridWar-base-v0", "kwargs": {"p_toward": 0.3}}
-    assert figures["scenario"] == "base" and figures["opponent_p"] == 0.3
+    assert figures["scenario"] == "base"
     assert (figures["games"], figures["wins"], figures["losses"], figures["truncated"]) == (64, 64, 0, 0)
     assert (figures["mean_return"], figures["mean_steps"]) == (188.75, 30.625)
     assert main(["eval", str(RULESIM_POLICY), "--games", "4", "--envs", "2"]) == 0
@@ -93,9 +93,12 @@ def test_eval_run_traces_every_game_and_counts_them_as_the_run_records_them(tmp_
         decided = con.execute("SELECT count(DISTINCT episode), count(*) FROM decisions").fetchone()
         steps = con.execute("SELECT count(*) FROM steps").fetchone()[0]
         terms = con.execute("SELECT count(DISTINCT episode) FROM rewards").fetchone()[0]
+        began = {b for (b,) in con.execute("SELECT DISTINCT begin_info FROM episodes").fetchall()}
     finally:
         con.close()
     assert [k for k, _, _ in episodes] == ["eval"] * 5 and decided == (5, steps) and terms == 5
+    # each game begins with the world's own params (the id's and the opponent's p as its spec names them)
+    assert [json.loads(b) for b in began] == [{"kind": "eval", "params": {"advanced": False, "p_toward": 0.3}}]
     wins = sum(o == "win" for _, o, _ in episodes)
     assert figures["games"] == 5 and figures["wins"] == wins and figures["run"] == str(run)
     assert figures["method_win_rate"] == pytest.approx(wins / 5)
@@ -115,7 +118,7 @@ def test_eval_of_a_spec_policy_counts_as_the_experiments_do_per_opponent_p(tmp_p
         figures = json.loads(capsys.readouterr().out)
         source = walk_source(p_toward=p)
         expected = evaluate_env(policy, source, 12, 5, 4).to_dict()
-        assert figures["env"] == source.to_json() and figures["opponent_p"] == p
+        assert figures["env"] == source.to_json() and figures["env"]["kwargs"]["p_toward"] == p
         for key in ("games", "wins", "losses", "draws", "truncated", "method_win_rate", "mean_return"):
             assert figures[key] == pytest.approx(expected[key]), key
         assert figures["method_win_rate_ci95"] == pytest.approx(list(wilson(int(expected["wins"]), 12)))
@@ -159,7 +162,7 @@ def test_a_policy_of_train_on_a_gridwar_id_plays_without_env(tmp_path, capsys):
     figures = json.loads(capsys.readouterr().out)
     against = EnvSource(source.name, {"p_toward": 0.3})
     expected = evaluate_env(policy, against, 8, 2, 4).to_dict()
-    assert figures["env"] == against.to_json() and figures["opponent_p"] == 0.3
+    assert figures["env"] == against.to_json()
     for key in ("games", "wins", "losses", "truncated", "mean_return", "mean_steps"):
         assert figures[key] == pytest.approx(expected[key]), key
     assert main(["play", "--policy", str(path), "--episodes", "2", "--opponent-p", "0.2", "--no-trace"]) == 0

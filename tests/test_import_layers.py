@@ -174,14 +174,12 @@ WAR_NOTIONS = {"opponent_p", "p_toward"}
 WAR_WORDS = ("gridwar", "rulesim")
 WAR_MODULES = ("tracelab.envs.declared.gridwar_scenarios", "tracelab.envs.declared.gridwar_runs", "tracelab.game")
 # where they may be named: the registration itself (envs/__init__.py registers every world's ids) and RefSim's
-# game; the commands and the sweep file's reader
-# (their flags: --scenario, --opponent-p); the benches and the method's experiments, which measure and train
-# the war game by name. Left to do: TrainConfig's scenario fields (the train flags and the checkpoints' config
-# hold them).
+# game; the commands and the sweep file's reader (their flags: --scenario, --opponent-p); the benches and the
+# method's experiments, which measure and train the war game by name. TrainConfig holds none of its settings
+# (they are its spec's params).
 MAY_NAME_THE_WAR_GAME = ("tracelab/envs/declared/gridwar", "tracelab/game/", "tracelab/envs/__init__.py",
-                         "tracelab/commands/",
-                         "tracelab/train/sweep_spec.py", "tracelab/bench/", "tracelab/train/experiments/",
-                         "tracelab/train/config.py")
+                         "tracelab/commands/", "tracelab/train/sweep_spec.py", "tracelab/bench/",
+                         "tracelab/train/experiments/")
 
 
 def _war_game_notions(path: Path) -> list[str]:

@@ -65,7 +65,8 @@ def test_play_refuses_a_scenario_no_spec_plays_in_one_line(tmp_path, capsys):
                    'mountains = [[1, 1]]\n')
     assert main(["play", "--scenario", str(odd), "--episodes", "1", "--no-trace"]) == 1
     err = capsys.readouterr().err
-    assert err.startswith("tracelab: error: scenario 'odd': its mountains") and err.count("\n") == 1
+    assert err.startswith("tracelab: error: scenario 'odd': its board is not war.toml's 8x8 map") \
+        and err.count("\n") == 1
     assert main(["play", "--policy", "scripted", "--no-trace"]) == 1
     err = capsys.readouterr().err
     assert "--policy scripted" in err and err.count("\n") == 1

@@ -105,6 +105,9 @@ def test_what_a_run_may_declare_as_its_grid() -> None:
         assert grid_from_config(bad) is None            # read as ids, never as wrong places
     # a RuleSim train --scenario run named its scenario and kept the TOML beside it; a play run, the TOML
     assert grid_from_config({"scenario": "base", "scenario_toml": "width = 8\nheight = 8\n"}) == Grid(8, 8)
+    # ... as its registration reads it, for a run from before boards were declared only: a declared world's
+    # board names its cells (c0_0), and its whole-number arguments are no cells
+    assert grid_from_config({"scenario": "width = 8\nheight = 8\n"}, board=None) is None
     assert run_grid(open_run(ROOT / "tests" / "data" / "rulesim" / "base")) == Grid(8, 8)
 
 

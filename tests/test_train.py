@@ -244,12 +244,17 @@ def test_saved_policy_round_trips_and_plain_torch_loads_it(tmp_path):
     trainer.close()
 
 
-def test_a_config_with_rulesim_s_retired_fields_still_loads():
-    """split_networks and backend went with RuleSim's trainer: a run's config that holds them loads without them."""
-    cfg = TrainConfig.from_dict({"scenario": "nonmarkov", "non_markov": True, "split_networks": True,
-                                 "backend": "reference", "kernel": "lanes"})
-    assert (cfg.scenario, cfg.non_markov, cfg.kernel) == ("nonmarkov", True, "lanes")
-    assert not {"split_networks", "backend"} & set(cfg.to_dict())
+def test_a_config_with_retired_fields_still_loads():
+    """split_networks and backend went with RuleSim's trainer, the scenario's fields into the world's params: a
+    run's config (a checkpoint's, checked against its schema) that holds them loads without them."""
+    from tracelab.train.config import RETIRED_FIELDS, config_schema
+    from tracelab.validation import check
+    old = {"scenario": "nonmarkov", "non_markov": True, "agents": None, "opponent_p": 0.7, "eval_p": 0.3,
+           "kernel": "lanes"}
+    check(old, config_schema(), "config")
+    cfg = TrainConfig.from_dict({**old, "split_networks": True, "backend": "reference"})
+    assert cfg.kernel == "lanes"
+    assert not {"split_networks", "backend", *RETIRED_FIELDS} & set(cfg.to_dict())
 
 
 def test_ctrl_c_leaves_an_interrupted_run_with_a_checkpoint(tmp_path):

@@ -18,7 +18,9 @@ from tracelab.envs.declared.gridwar import scenario_env
 from tracelab.game.scenario import Rewards, builtin_scenario
 from tracelab.store.meta import current_meta
 from tracelab.train.config import TrainConfig
+from tracelab.envs.declared.env_source import EnvSource
 from tracelab.envs.declared.gridwar_runs import RULESIM_FORMATS
+from tracelab.envs.declared.gridwar_scenarios import resumed_scenario
 from tracelab.train.env_checkpoint import ENV_FORMAT, checkpoint_path
 from tracelab.train.torch_files import load_tensors
 
@@ -52,10 +54,10 @@ def test_train_scenario_runs_through_the_spec_and_resumes(tmp_path: Path,
     assert main(["train", "--scenario", "base", "--opponent-p", "0.5", *TINY, "--run", str(run)]) == 0
     meta = current_meta(run)
     config = meta["config"]
-    # the run names the scenario and every GridWar setting, as show / compare / the TUI read them
-    assert meta["scenario"] == "base" and config["opponent_p"] == 0.5 and config["eval_p"] == 0.3
-    assert 'name = "base"' in config["scenario_toml"]
-    # ... and the env it trained on: the spec's id with the opponent's p; evaluations at --eval-p
+    # the run names the scenario (its TOML kept); its settings are no TrainConfig fields but the params of
+    # the env it trained on (the spec's id with the opponent's p) and of its evaluations' (at --eval-p)
+    assert meta["scenario"] == "base" and 'name = "base"' in config["scenario_toml"]
+    assert not {"scenario", "agents", "non_markov", "opponent_p", "eval_p"} & set(config)
     assert config["env"] == {"name": "tracelab/GridWar-base-v0", "kwargs": {"p_toward": 0.5}}
     assert config["eval_env"] == {"name": "tracelab/GridWar-base-v0", "kwargs": {"p_toward": 0.3}}
     state = load_tensors(checkpoint_path(run), 10**9)
@@ -67,6 +69,26 @@ def test_train_scenario_runs_through_the_spec_and_resumes(tmp_path: Path,
     # --resume needs no --env: the scenario's env is rebuilt from the config and checked equal
     assert main(["train", "--resume", str(run), "--total-timesteps", "300"]) == 0
     assert load_tensors(checkpoint_path(run), 10**9)["step"] == 300
+    _as_an_earlier_tracelab_wrote_it(run, eval_p=0.2)
+    recorded = EnvSource("tracelab/GridWar-base-v0", {"p_toward": 0.5})
+    # the scenario's settings read from the earlier fields: the evaluations' p from eval_p
+    assert resumed_scenario(str(run), recorded, None).eval_source == recorded.with_args(p_toward=0.2)
+    assert main(["train", "--resume", str(run), "--total-timesteps", "400"]) == 0
+    assert load_tensors(checkpoint_path(run), 10**9)["step"] == 400
+    capsys.readouterr()
+    assert "--scenario advanced: " in error_line(capsys, main(["train", "--resume", str(run), "--scenario",
+                                                               "advanced", "--total-timesteps", "500"]))
+
+
+def _as_an_earlier_tracelab_wrote_it(run: Path, eval_p: float) -> None:
+    """`run`'s meta and checkpoint as tracelab wrote them while the scenario's settings were TrainConfig
+    fields: in the config, with no eval_env."""
+    old = {"scenario": "base", "agents": None, "non_markov": False, "opponent_p": 0.5, "eval_p": eval_p}
+    meta = json.loads((run / "meta.json").read_text())
+    meta["config"] = {**{k: v for k, v in meta["config"].items() if k != "eval_env"}, **old}
+    (run / "meta.json").write_text(json.dumps(meta))
+    state = load_tensors(checkpoint_path(run), 10**9)
+    torch.save({**state, "config": {**state["config"], **old}}, checkpoint_path(run))
 
 
 @pytest.mark.parametrize("argv, fragment", [
@@ -96,7 +118,7 @@ def test_an_old_rulesim_checkpoint_on_the_spec_path_is_refused_saying_how_to_sta
     # its checkpoint as RuleSim's trainer wrote it, as far as the refusal reads it: its format and config
     run = tmp_path / "old"
     (run / "checkpoint").mkdir(parents=True)
-    config = TrainConfig(scenario="walk4", steps=200, seed=4, envs=4).to_dict()
+    config = {**TrainConfig(steps=200, seed=4, envs=4).to_dict(), "scenario": "walk4"}  # its field then
     torch.save({"format": RULESIM_FORMATS[0], "config": config}, checkpoint_path(run))
     err = error_line(capsys, main(["train", "--resume", str(run), "--env", "tracelab/GridWar-base-v0"]))
     assert "trained by tracelab's RuleSim trainer" in err
@@ -108,7 +130,7 @@ def _rulesim_run(run: Path, checkpoint: dict) -> Path:
     """A run as RuleSim's trainer left it, as far as a resume reads it: its meta (a scenario, no env) and
     its checkpoint."""
     (run / "checkpoint").mkdir(parents=True)
-    config = TrainConfig(scenario="advanced", steps=5000, seed=4, envs=4).to_dict()
+    config = {**TrainConfig(steps=5000, seed=4, envs=4).to_dict(), "scenario": "advanced"}
     meta = {"command": "tracelab train", "scenario": "advanced", "status": "finished",
             "config": {**config, "scenario_toml": 'name = "advanced"'}}
     (run / "meta.json").write_text(json.dumps(meta))

@@ -1,13 +1,13 @@
 """What a world's registration adds to its spec where the generic stack meets files and settings the spec
 does not hold: checkpoints and runs an earlier tracelab wrote for it, the env its evaluations play, and ids
 whose keyword arguments it maps onto the spec's params. The generic modules (env_checkpoint, external_eval,
-reward_rescore, env_source, the viewers' board) ask here and name no world; a world's
+reward_rescore, env_source, coordinates, the viewers' board) ask here and name no world; a world's
 registration module (the war game's: envs/declared/gridwar_runs.py) answers, imported on the first question
 only (by name: asking loads none of it, nor tracelab.envs's ids, until then, and the layers stay one-way)."""
 from __future__ import annotations
 
 import importlib
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
@@ -18,12 +18,13 @@ if TYPE_CHECKING:
 REGISTRATIONS = ("tracelab.envs.declared.gridwar_runs",)
 
 
-def _answers(question: str) -> list[Callable[..., Any]]:
-    return [getattr(importlib.import_module(m), question) for m in REGISTRATIONS]
-
-
 def _first(question: str, *args: Any) -> Any:
-    return next((a for a in (f(*args) for f in _answers(question)) if a is not None), None)
+    """The first registration's answer that is not None, or None."""
+    for module in REGISTRATIONS:
+        answer = getattr(importlib.import_module(module), question)(*args)
+        if answer is not None:
+            return answer
+    return None
 
 
 def retired_checkpoint(state: Mapping[str, Any] | None, pickled: bytes, where: str) -> str | None:
@@ -43,6 +44,12 @@ def evaluation_env(source: Any, level: float) -> Any:
     `source` at the evaluation `level` a world's registration gives a meaning to (the war game: its scripted
     opponent's p), or None: `source` itself."""
     return _first("evaluation_env", source, level)
+
+
+def old_run_grid(config: Mapping[str, Any]) -> tuple[Any, Any] | None:
+    """The width and height (unchecked) of the grid of a run an earlier tracelab wrote for a world before runs
+    declared their grid (their config's `grid`: coordinates.py), from its config; or None."""
+    return _first("old_run_grid", config)
 
 
 def old_run_board(board_name: str | None, config: Mapping[str, Any]) -> Board | None:

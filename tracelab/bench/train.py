@@ -37,16 +37,16 @@ GOAL_FUSED_OVER_TEXTBOOK = 4.0
 
 def _config(envs: int, threads: int, learner: str = "fused") -> Any:
     # the method's defaults; no evaluations or checkpoints inside the timed blocks
-    return TrainConfig(scenario="base", steps=10_000_000, envs=envs, threads=threads, eval_every=0,
+    return TrainConfig(steps=10_000_000, envs=envs, threads=threads, eval_every=0,
                        checkpoint_every=0, learner=learner)
 
 
 TEAM = 5  # the team size of the 5v5 figure
 
 
-def _base_source(cfg: TrainConfig) -> EnvSource:
-    """The env `tracelab train --scenario base` trains on with these settings (its spec id)."""
-    return ScenarioTraining.for_scenario(builtin_scenario("base"), cfg).source
+def _base_source() -> EnvSource:
+    """The env `tracelab train --scenario base` trains on (its spec id)."""
+    return ScenarioTraining.of(builtin_scenario("base")).source
 
 
 class EndToEnd:
@@ -57,7 +57,7 @@ class EndToEnd:
     def __init__(self, envs: int, threads: int, run_dir: Path, learner: str, team: bool = False) -> None:
         cfg = _config(envs, threads, learner)
         self.writer = TraceWriter.open(run_dir, {"command": "tracelab bench train", "config": cfg.to_dict()})
-        source = _base_source(cfg)
+        source = _base_source()
         if team:
             source = EnvSource(source.name, {**source.kwargs, "agents_per_team": TEAM})
         self.trainer = EnvTrainer(cfg, source, self.writer)
@@ -123,7 +123,7 @@ def textbook_updates(threads: int) -> Callable[[int], None]:
 
 def env_steps(envs: int) -> tuple[Callable[[int], None], Any]:
     """The batched env the trainer steps, alone (random actions, no trace): run(k) makes k passes."""
-    env, _ = make_vector_env(_base_source(_config(envs, 1)), envs)
+    env, _ = make_vector_env(_base_source(), envs)
     env.reset(seed=0)
     rng = np.random.default_rng(0)
 

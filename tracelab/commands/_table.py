@@ -387,11 +387,6 @@ def _train(p: argparse.ArgumentParser) -> None:
     for f in config_fields():
         flag, name = "--" + f.flag, f.name
         shown = f.help if f.default is None or isinstance(f.default, bool) else f"{f.help} (default: {f.default})"
-        if name == "non_markov":
-            p.add_argument("--non-markov", dest="non_markov", action="store_true", help=shown)
-            p.add_argument("--markov", dest="non_markov", action="store_false",
-                           help="the Markov setup: the current observation only (default)")
-            continue
         if name == "torch_deterministic":  # CleanRL's spelling: --torch-deterministic [true|false]
             p.add_argument(flag, dest=name, type=boolean, nargs="?", const=True, metavar="BOOL",
                            help=f"{shown} (default: on)")
@@ -404,11 +399,25 @@ def _train(p: argparse.ArgumentParser) -> None:
         elif name == "learner":
             kw = {"choices": LEARNERS}
         else:
-            conv = {"int": integer, "float": float, "str": str, "int | None": integer}.get(str(f.type), str)
+            conv = {"int": integer, "float": float, "str": str}.get(str(f.type), str)
             kw = {"type": conv, "metavar": f.flag.upper().replace("-", "_")}
         p.add_argument(flag, dest=name, help=shown, **kw)
         if f.alias:  # the field's own name, as earlier versions and docs wrote it: accepted, not listed
             p.add_argument("--" + f.alias, dest=name, help=argparse.SUPPRESS, **kw)
+    # the war game's scenario, as its spec's id and params (gridwar_scenarios.ScenarioTraining.given)
+    p.add_argument("--scenario", help="a built-in war game scenario (base, advanced, nonmarkov) or a scenario .toml "
+                                      "file, trained as its spec (default: base, without --env)")
+    p.add_argument("--agents", type=positive_int, help="the scenario's agents per team (default: the scenario's)")
+    p.add_argument("--non-markov", dest="non_markov", action="store_true",
+                   help="the scenario's non-Markov setup: the previous observation appended to the current one "
+                        "(its spec's stack_previous)")
+    p.add_argument("--markov", dest="non_markov", action="store_false",
+                   help="the Markov setup: the current observation only (default)")
+    p.add_argument("--opponent-p", type=float, metavar="P",
+                   help="the scenario's opponent's probability of a move towards red's base while training (its "
+                        "spec's p_toward; default 0.7)")
+    p.add_argument("--eval-p", type=float, metavar="P",
+                   help="the same in the evaluations (default 0.3)")
     for flag in RETIRED_FLAGS:  # RuleSim's trainer's: train refuses each in one line, saying why
         p.add_argument(flag, dest=flag, nargs="?", const="", help=argparse.SUPPRESS)
     p.add_argument("--exp-name", default=None, type=run_name, metavar="NAME",

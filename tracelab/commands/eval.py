@@ -19,14 +19,11 @@ from tracelab.commands._worlds import env_source_of
 from tracelab.envs.declared.env_source import EnvSource
 from tracelab.envs.declared.gridwar_scenarios import (
     METHOD_EVAL_P,
-    check_opponent_p,
     has_opponent_p,
-    load_scenario_arg,
     load_trained,
     read_rulesim_spec,
     refuse_scenario_flags,
-    rulesim_scenario,
-    rulesim_source,
+    scenario_world,
     with_opponent_p,
 )
 from tracelab.envs.declared.play import load_declared, make_declared_env
@@ -39,17 +36,13 @@ from tracelab.train.experiments.stats import wilson
 
 
 def run(args: argparse.Namespace) -> int:
-    check_opponent_p(args.opponent_p)
     if args.backend != "rules":
         raise UserError(f"--backend {args.backend}: eval plays every policy on its world's spec with the rule "
                         f"engine; drop --backend")
-    given, scenario, recorded = _world(args)
-    # a scripted opponent at --opponent-p (a policy of train on its own id: at the method's p by default)
-    p = METHOD_EVAL_P if args.opponent_p is None and recorded and has_opponent_p(given) else args.opponent_p
-    source = with_opponent_p(given, p) if scenario is None else given
+    trained_on, source, scenario = _world(args)
     with store_errors():  # a spec that does not load; a policy that does not, or was trained on another world
         spec = declared_spec(source)  # parsed once: the policy's check reads its spaces, the games play it
-        policy = load_trained(args.policy, given, spec)
+        policy = load_trained(args.policy, trained_on, spec)
     name = scenario.name if scenario is not None else source.short_name
     with progress(f"evaluating on {name}", total=args.games, unit="games") as bar:
         if args.run is None:
@@ -58,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
             result = _traced(args, policy, source, spec, scenario, lambda _: bar.advance(1))
     if args.json:
         about = {"policy": str(args.policy), **({"scenario": scenario.name} if scenario is not None else {}),
-                 "opponent_p": _opponent_p(source), "seed": args.seed, "env": source.to_json(), "run": args.run}
+                 "seed": args.seed, "env": source.to_json(), "run": args.run}
         json.dump({**about, **result.to_dict()}, sys.stdout, indent=1)
         print()
         return 0
@@ -72,45 +65,34 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _world(args: argparse.Namespace) -> tuple[EnvSource, Any, bool]:
-    """(the env the policy plays, the war game's scenario or None, whether the env is the one the policy
-    recorded): --env (and --env-arg); else a policy of train on one of tracelab's ids plays that id; a
-    policy of train on a spec file needs --env; an older policy of RuleSim's trainer plays its scenario's
-    spec (_scenario_world)."""
+def _world(args: argparse.Namespace) -> tuple[EnvSource, EnvSource, Any]:
+    """(the env the policy is loaded on, the one it plays, the war game's scenario or None): --env (and
+    --env-arg); else a policy of train on one of tracelab's ids plays that id (a scripted opponent at
+    --opponent-p, the method's p by default); a policy of train on a spec file needs --env; an older policy
+    of RuleSim's trainer plays its scenario's spec, or --scenario's, against the opponent at --opponent-p
+    (scenario_world)."""
     with store_errors():  # a policy.json that does not load
         fmt = policy_format(args.policy)
         given = args.env is not None or bool(args.env_arg)
         recorded = recorded_env(args.policy) if fmt == ENV_FORMAT and not given else None
-    if fmt != ENV_FORMAT and not given:
-        return (*_scenario_world(args), False)
+    if fmt != ENV_FORMAT and not given:  # an older policy of RuleSim's trainer: its scenario's spec
+        with store_errors():  # a policy or scenario that does not load
+            scenario, source = scenario_world(args, read_rulesim_spec(args.policy), METHOD_EVAL_P)
+        return source, source, scenario
     refuse_scenario_flags(args, "a policy of train plays the env it was trained on (--env, --env-arg)",
                           ("scenario",))
     if recorded is None and args.env is None:
         raise UserError(f"{args.policy} was trained with train --env on a spec file: name that env with --env "
                         f"SPEC_OR_ID (and its --env-arg values); its policy.json says which under \"env\"")
     source = recorded or env_source_of(args)
-    with_opponent_p(source, args.opponent_p)  # refused for a world with no scripted opponent
-    return source, None, recorded is not None
-
-
-def _scenario_world(args: argparse.Namespace) -> tuple[EnvSource, Any]:
-    """The spec that plays the scenario of a policy of RuleSim's trainer, or --scenario, against the
-    opponent at --opponent-p, and that scenario; a policy that does not convert, or a scenario no spec
-    plays, is refused in one line saying how to go on."""
-    with store_errors():  # a policy or scenario that does not load
-        spec = read_rulesim_spec(args.policy)
-        scenario = load_scenario_arg(args.scenario) if args.scenario else rulesim_scenario(spec)
-    return rulesim_source(args.policy, spec, scenario, args.opponent_p), scenario
-
-
-def _opponent_p(source: EnvSource) -> float | None:
-    return source.kwargs.get("p_toward")
+    p = METHOD_EVAL_P if args.opponent_p is None and recorded and has_opponent_p(source) else args.opponent_p
+    return source, with_opponent_p(source, p), None  # refused for a world with no scripted opponent
 
 
 def _traced(args: argparse.Namespace, policy: Any, source: EnvSource, spec: Any, scenario: Any, on_game: Any) -> Any:
     """Every game, one at a time, traced into the new run --run (its world, the policy's decisions, the
-    reward terms; begin info `{"kind": "eval", "opponent_p": P}`). `spec`: the world's WorldSpec (None: not
-    a declared world, refused)."""
+    reward terms; begin info `{"kind": "eval", "params": the world's params}`). `spec`: the world's WorldSpec
+    (None: not a declared world, refused)."""
     run_dir = Path(args.run)
     with store_errors():
         check_new_run_dir(run_dir)
@@ -118,8 +100,7 @@ def _traced(args: argparse.Namespace, policy: Any, source: EnvSource, spec: Any,
         writer = TraceWriter.open(run_dir, _run_meta(args, source, spec, scenario))
     with recording_into(writer, run_dir):
         env = make_declared_env(source, spec, trace_writer=writer)
-        env.unwrapped.trace_info({"kind": "eval", **({"opponent_p": _opponent_p(source)}
-                                                      if _opponent_p(source) is not None else {})})
+        env.unwrapped.trace_info({"kind": "eval", "params": source.declared()[1]})
         try:
             result = evaluate_in_env(policy, env, args.games, args.seed, on_game)
         except BaseException:
@@ -134,8 +115,7 @@ def _run_meta(args: argparse.Namespace, source: EnvSource, spec: Any, scenario: 
     (external_eval.DeclaredTarget), the policy and the games; the war game's scenario by name and TOML."""
     from tracelab.train.external_eval import DeclaredTarget
     described = DeclaredTarget(source, spec).run_meta()
-    config = {**described["config"], "policy": str(args.policy), "games": args.games,
-              "opponent_p": _opponent_p(source)}
+    config = {**described["config"], "policy": str(args.policy), "games": args.games}
     meta = {"command": " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]), "seed": args.seed,
             "scenario": described["scenario"], "rule_files": described["rule_files"], "config": config}
     if scenario is not None:

@@ -23,16 +23,13 @@ from tracelab.commands._interrupt import CtrlCBetweenSteps
 from tracelab.commands._notices import say_running_compiles
 from tracelab.commands._progress import compiling_engine, progress
 from tracelab.commands._recording import read_for_hints, recording_into
+from tracelab.commands._worlds import env_source_of
 from tracelab.engine.errors import is_interrupt
-from tracelab.envs.declared.env_source import EnvSource, parse_env_args
 from tracelab.envs.declared.gridwar_scenarios import (
-    DEFAULT_SCENARIO,
-    load_scenario_arg,
     load_trained,
     read_rulesim_spec,
     refuse_scenario_flags,
-    rulesim_scenario,
-    scenario_source,
+    scenario_world,
     with_opponent_p,
 )
 from tracelab.envs.declared.play import load_declared, make_declared_env, play_episodes, random_policy
@@ -95,19 +92,14 @@ def _world(args: argparse.Namespace) -> tuple[Any, Any, Any]:
     if args.env is not None:
         refuse_scenario_flags(args, "--env plays the world its spec declares (war.toml takes --env-arg "
                                     "p_toward=...)")
-        source, scenario = EnvSource.given(args.env, parse_env_args(args.env_arg)), None
+        source, scenario = env_source_of(args), None
     elif args.env_arg:
         raise UserError("--env-arg goes with --env")
     elif path is not None and rulesim is None and args.scenario is None:
         return _recorded(args, path)
     else:
         with store_errors():  # a scenario that does not load
-            if rulesim is not None and args.scenario is None and args.agents is None:
-                scenario = rulesim_scenario(rulesim)
-            else:
-                scenario = load_scenario_arg(args.scenario or DEFAULT_SCENARIO, args.agents)
-        stack = rulesim is not None and rulesim["observation"]["stack_previous"]
-        source = scenario_source(scenario, args.opponent_p, stack)
+            scenario, source = scenario_world(args, rulesim)
     if path is None:
         return source, scenario, None
     with store_errors():  # a policy that does not load, or was trained on another world
@@ -143,7 +135,7 @@ def run_meta(source: Any, spec: Any, args: argparse.Namespace, scenario: Any = N
     meta = {"command": " ".join(shlex.quote(a) for a in ["tracelab", *args.argv]), "config": config,
             "rule_files": list(spec.program.files), "seed": args.seed}
     if scenario is not None:
-        config.update(scenario=scenario.to_toml(), opponent_p=args.opponent_p)
+        config["scenario"] = scenario.to_toml()
         meta["scenario"] = scenario.name
     return meta
 

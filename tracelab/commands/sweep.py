@@ -23,15 +23,14 @@ from tracelab.train.sweep_spec import build_spec, check_trials_memory
 def run(args: argparse.Namespace) -> int:
     spec = build_spec(sets=args.set, grids=args.grid, randoms=args.random, file=args.spec, samples=args.samples,
                       scheduler=args.scheduler, metric=args.metric, mode=args.mode)
-    cfg = spec.base_config()
     with store_errors():  # a scenario file, an env or a spec that does not load
         if spec.env is not None:
-            scenario = source = EnvSource.given(spec.env, parse_env_args(args.env_arg))
+            world = source = EnvSource.given(spec.env, parse_env_args(args.env_arg))
         elif args.env_arg:
             raise UserError("--env-arg needs --set env=SPEC_OR_ID")
         else:
-            training = ScenarioTraining.of(cfg)
-            scenario, source = training.scenario, training.source
+            world = ScenarioTraining.given(spec.scenario)
+            source = world.source
         probe = probe_env(source)  # a bad id, spec or keyword argument: one line, before Ray starts
     check_trials_memory(spec, probe, memory_limit(args.max_memory, "--max-memory"))
     out = Path(args.out or _default_out())
@@ -54,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         with stopped:
             with ray_session(args.ray):
-                result = run_sweep(spec, scenario, out, command)
+                result = run_sweep(spec, world, out, command)
             for t in sorted(result.trials, key=lambda t: t["run"]):
                 shown = ("no evaluation" if t["value"] is None
                          else f"best {spec.metric} {t['value']:.3f} at step {t['step']:,} (last {t['last']:.3f})")

@@ -27,10 +27,15 @@ from tracelab.commands._training import (
     where_to_train,
 )
 from tracelab.commands._worlds import env_source_of
-from tracelab.envs.declared.gridwar_scenarios import ScenarioTraining, resumed_scenario, scenario_settings_given
+from tracelab.envs.declared.gridwar_scenarios import (
+    SCENARIO_FLAGS,
+    ScenarioTraining,
+    refuse_scenario_flags,
+    resumed_scenario,
+)
 from tracelab.errors import UserError, store_errors
 from tracelab.store import TraceWriter
-from tracelab.train.config import GRIDWAR_ONLY, RETIRED_FLAGS, TrainConfig, flag_of
+from tracelab.train.config import RETIRED_FLAGS, TrainConfig
 from tracelab.train.env_checkpoint import checkpoint_config, checkpoint_env, load_env_checkpoint
 from tracelab.train.env_source import probe_env
 from tracelab.train.env_trainer import EnvTrainer, env_run_meta
@@ -52,14 +57,13 @@ def run(args: argparse.Namespace) -> int:
     limit = memory_limit(args.max_memory, "--max-memory")
     on_env = args.env is not None or bool(args.env_arg)
     source = env_source_of(args) if on_env else None
-    refused = scenario_settings_given([flag_of(k) for k in GRIDWAR_ONLY if k in given] if on_env else [],
-                                      f"--env {args.env} takes the DQN flags only")
-    if refused:
-        raise UserError(refused)
+    world = {k: given.pop(k) for k in SCENARIO_FLAGS if k in given}  # the war game's scenario, as its params
+    if on_env:
+        refuse_scenario_flags(args, f"--env {args.env} takes the DQN flags only", SCENARIO_FLAGS)
     state, scenario = None, None
     with store_errors():  # a bad value in the config or a checkpoint that does not load
         if args.resume:
-            state, cfg, source, scenario = _resumed(args, given, source, limit)
+            state, cfg, source, scenario = _resumed(args, given, world, source, limit)
         elif on_env:
             # gymnasium's envs reward about 1 already: the scale that learns the game's hundreds would shrink
             # them 100x, so an env is trained at its own scale unless told (docs/experiments/toytext.md)
@@ -67,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
             cfg = TrainConfig(**given)
         else:
             cfg = TrainConfig(**given)
-            scenario = ScenarioTraining.of(cfg)
+            scenario = ScenarioTraining.given(world)
             source = scenario.source
         encoder, n_actions, spec = probe_env(source)
     with store_errors():  # --num-envs 1e7 would build ten million worlds before its first step
@@ -78,18 +82,18 @@ def run(args: argparse.Namespace) -> int:
     elif cfg.trace_eval_games > cfg.eval_games:
         raise UserError(f"--trace-eval-games ({cfg.trace_eval_games}) exceeds --eval-games ({cfg.eval_games})")
     run_dir, same_run, tensorboard = where_to_train(args, state is not None,
-                                                    source.short_name if scenario is None else scenario.scenario.name)
+                                                    source.short_name if scenario is None else scenario.name)
     return train_env_into(cfg, source, run_dir, encoder.describe(), tensorboard=tensorboard, state=state,
                       resumed_from=args.resume, same_run=same_run, scenario=scenario, spec=spec)
 
 
-def _resumed(args: argparse.Namespace, given: dict[str, Any], source: Any, limit: Any) -> tuple[Any, ...]:
+def _resumed(args: argparse.Namespace, given: dict[str, Any], world: dict[str, Any], source: Any,
+             limit: Any) -> tuple[Any, ...]:
     """--resume: (the checkpoint, its config with the flags given, the env it trains on, the war game's
-    scenario training or None: resumed_scenario rebuilds its env, checked equal to the checkpoint's)."""
-    scenario_given = given.pop("scenario", None)
-    check_resume_flags(given)
+    scenario training or None: resumed_scenario reads it from the run, on the checkpoint's env)."""
+    check_resume_flags({**given, **{k: v for k, v in world.items() if k != "scenario"}})
     raw, recorded = checkpoint_env(args.resume, limit.bytes)
-    scenario = None if source is not None else resumed_scenario(args.resume, recorded, raw, scenario_given)
+    scenario = None if source is not None else resumed_scenario(args.resume, recorded, world.get("scenario"))
     source = source if scenario is None else scenario.source
     state = load_env_checkpoint(args.resume, source, limit)  # names the env unless given
     cfg = dataclasses.replace(checkpoint_config(state), **given)
@@ -104,19 +108,16 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
                scenario: ScenarioTraining | None = None, spec: Any = None) -> int:
     """Train on `source` into a new run at `run_dir` (from a checkpoint `state` if given; `same_run`: the
     checkpoint's own run, `run_dir`, continues); returns the exit status. `stop_at`: stop there as Ctrl-C
-    would (tests). `scenario`: the war game's scenario `source` plays (the run names it and its settings; its
-    evaluations play its eval_source, the opponent at --eval-p); `tensorboard`: a log directory
+    would (tests). `scenario`: the war game's scenario `source` plays (the run names it and keeps its
+    run_config; its evaluations play its eval_source); `tensorboard`: a log directory
     that also receives the metrics (tracelab.train.tensorboard); `spec`: `source`'s WorldSpec if loaded
     already (probe_env's), which the run's meta reads instead of parsing the spec again."""
 
     meta = env_run_meta(cfg, source, " ".join(shlex.quote(a) for a in ["tracelab", *sys.argv[1:]]),
-                        None if state is None else {"run": resumed_from, "step": state["step"]},
-                        None if scenario is None else scenario.scenario, spec)
+                        None if state is None else {"run": resumed_from, "step": state["step"]}, scenario, spec)
     if not meta["command"].startswith("tracelab train"):  # called from Python: say what it stands for
         meta["command"] = "tracelab train (python: tracelab.commands.train.train_env_into)"
     eval_source = None if scenario is None else scenario.eval_source
-    if eval_source is not None:  # the env of the traced evaluation games (the opponent at --eval-p)
-        meta["config"]["eval_env"] = eval_source.to_json()
     with store_errors():  # the run directory exists, or another writer holds it
         writer = reopen_run(run_dir, cfg, state["step"], meta["command"]) if same_run else \
             TraceWriter.open(run_dir, meta)
@@ -125,7 +126,7 @@ def train_env_into(cfg: Any, source: Any, run_dir: Path, encoding: str, stop_at:
     with training_session(writer, cfg.torch_deterministic, tensorboard, purge_step) as session:
         session.trainer = trainer = EnvTrainer(cfg, source, writer, run_dir, metric_sinks=session.metric_sinks,
                                                eval_source=eval_source, spec=spec)
-        what = source.describe() if scenario is None else scenario.describe(cfg)
+        what = source.describe() if scenario is None else scenario.describe()
         kernel = "" if cfg.kernel == "auto" else f", the {cfg.kernel} kernel"
         print(f"training on {what} ({encoding} observations, {cfg.envs} worlds in {type(trainer.env).__name__}"
               f"{kernel}, "

@@ -3,18 +3,21 @@ why trees (`free(30)` reads `free(30@(6,3))`, `leftOf(29,30)` reads `leftOf(29@(
 
 A run declares a grid in its metadata's config: `"grid": {"width": W, "height": H}` says that the nodes
 named by the whole numbers 0 .. W·H-1 are the cells of a W x H grid, cell id = y·W + x (x right, y up).
-A war game's run carries its scenario's TOML in its config instead; its width and height are read as the
-same declaration. A run with neither (a reasoning run) has no coordinates: its nodes read as their ids."""
+A run written before runs declared their board may have its grid from its world's registration instead
+(world_extras.old_run_grid: the war game's RuleSim runs, their scenario's size; asked of those runs only, so
+that reading any other run loads no registration). A run with neither (a reasoning run, a declared world's,
+whose board names its cells) has no coordinates: its nodes read as their ids."""
 from __future__ import annotations
 
 import re
 from typing import Any, NamedTuple
 
 from tracelab.store.kind import run_config
+from tracelab.store.schema import BOARD_BEFORE_DECLARED
+from tracelab.world_extras import old_run_grid
 
 GRID_KEY = "grid"
 _MAX_CELLS = 2**31 - 1            # cell ids are int32 node names
-_SCENARIO_KEYS = ("scenario", "scenario_toml")   # where play / train, eval recorded the scenario's TOML
 _CELL_ARG = re.compile(r"(?<=[(,])(\d+)(?=[,)])")  # a whole-number argument of an atom or an edge
 
 
@@ -50,24 +53,18 @@ def _checked(width: Any, height: Any) -> Grid | None:
     return Grid(width, height) if ok and width * height <= _MAX_CELLS else None
 
 
-def grid_from_config(config: dict[str, Any]) -> Grid | None:
-    """The grid a run's config declares, or None (nothing declared, or a declaration that does not hold
-    two positive sizes: then the run reads as ids, never as wrong places)."""
+def grid_from_config(config: dict[str, Any], board: str | None = BOARD_BEFORE_DECLARED) -> Grid | None:
+    """The grid a run's config declares (or, for a run whose `board` says it was written before runs
+    declared theirs, its world's registration gives), or None (nothing declared, or a declaration that does
+    not hold two positive sizes: then the run reads as ids, never as wrong places)."""
     declared = config.get(GRID_KEY)
     if isinstance(declared, dict):
         return _checked(declared.get("width"), declared.get("height"))
-    for key in _SCENARIO_KEYS:   # a war game's run: its scenario's TOML
-        text = config.get(key)
-        if isinstance(text, str) and "=" in text:  # TOML declaring a size has a `key = value` (a name has none)
-            import tomllib  # deferred: only a game run needs it
-            try:  # `scenario` is the TOML in older runs, a name (the TOML is then in scenario_toml) in newer
-                scenario = tomllib.loads(text)
-            except tomllib.TOMLDecodeError:
-                continue
-            return _checked(scenario.get("width"), scenario.get("height"))
-    return None
+    sizes = old_run_grid(config) if board == BOARD_BEFORE_DECLARED else None
+    return None if sizes is None else _checked(*sizes)
 
 
 def run_grid(con: Any) -> Grid | None:
     """The grid the run open on `con` (tracelab.store.open_run) declares, or None."""
-    return grid_from_config(run_config(con))
+    board = con.execute("SELECT board FROM run").fetchall()
+    return grid_from_config(run_config(con), board[0][0] if board else None)

@@ -30,10 +30,11 @@ def _opt(help: str, flag: str | None = None, **kw: Any) -> Any:
     return field(metadata={"help": help, "flag": flag}, **kw)
 
 
-# TrainConfig fields that describe the war game's scenario (its team size, observation, opponent): refused with
-# --env, and not recorded as an env training's settings. The kernel, --slow-every-step (a spec's `[agents]
-# decides`) and --explore-scripted (its `[agents] script`) train any spec world.
-GRIDWAR_ONLY = ("scenario", "non_markov", "agents", "opponent_p", "eval_p")
+# fields an earlier TrainConfig had for the war game's scenario: a world's params now (its registration reads
+# them from an earlier run's config: gridwar_scenarios.ScenarioTraining.given); a stored config holding them
+# still loads, without them
+RETIRED_FIELDS = {"scenario": str, "non_markov": bool, "agents": Nullable(int), "opponent_p": float,
+                  "eval_p": float}
 
 # RuleSim's trainer's flags, gone with their fields (an earlier run's config that holds them still loads:
 # from_dict drops them): `train` refuses each in one line, saying why
@@ -48,15 +49,10 @@ RETIRED_FLAGS = {
 @dataclass
 class TrainConfig:
     # ---- what is trained ----
-    scenario: str = _opt("a built-in scenario (base, advanced, nonmarkov) or a scenario .toml file",
-                         default="base")
-    non_markov: bool = _opt("the non-Markov setup: the previous observation appended to the current one "
-                            "(default: Markov, the current observation only)", default=False)
     slow_every_step: bool = _opt("the slow agent decides on every step, each transition one step long; the "
                                  "game ignores its choices on steps where it may not act, and nothing in a "
                                  "Markov observation says which steps those are (default: it decides only "
                                  "where it may act, one transition spanning its two-step move)", default=False)
-    agents: int | None = _opt("agents per team (default: the scenario's)", default=None)
     kernel: str = _opt("the rule engine's kernel: auto (lanes from 64 worlds, else "
                        "counting, stepped with the game as one compiled call), counting, lanes, or compiled "
                        "(built in the "
@@ -72,8 +68,6 @@ class TrainConfig:
                      "kernel, ~2x cheaper per world-step); one update per world-step either way",
                  flag="num-envs", default=64)
     mask: bool = _opt("act only among the shield's allowed actions (off in the method)", default=False)
-    opponent_p: float = _opt("the opponent's probability of a move towards red's base while training",
-                             default=0.7)
     # ---- the method's DQN ----
     hidden: str = _opt("hidden layer widths, tanh layers, comma-separated: 64 (the method's), 64,64 (two layers)",
                        default="64")
@@ -113,8 +107,6 @@ class TrainConfig:
     # ---- evaluation and logging ----
     eval_every: int = _opt("evaluate every this many steps (0: only at the end)", default=20_000)
     eval_games: int = _opt("games per evaluation", default=500)
-    eval_p: float = _opt("the opponent's probability of a move towards red's base in evaluations",
-                         default=0.3)
     trace_eval_games: int = _opt("evaluation games traced in full (change rows) per evaluation",
                                  default=5)
     eval_envs: int = _opt("worlds stepped together in evaluations", default=64)
@@ -134,7 +126,7 @@ class TrainConfig:
         for name in ("warmup", "eval_every", "trace_eval_games", "checkpoint_every"):
             if getattr(self, name) < 0:
                 problems.append(f"{name} must be >= 0, got {getattr(self, name)}")
-        for name in ("opponent_p", "eval_p", "eps_start", "eps_end", "eps_decay_start", "eps_decay_end",
+        for name in ("eps_start", "eps_end", "eps_decay_start", "eps_decay_end",
                      "explore_scripted"):
             v = getattr(self, name)
             if not 0.0 <= v <= 1.0:
@@ -161,8 +153,6 @@ class TrainConfig:
             problems.append("--decompose and --dueling: a decomposed network has one plain head per reward term")
         elif self.learner == "fused" and not problems and self.fused_refusal():
             problems.append(f"learner fused {self.fused_refusal()}; use --learner readable (or auto)")
-        if self.agents is not None and self.agents < 1:
-            problems.append(f"agents must be at least 1, got {self.agents}")
         if problems:
             raise ValueError("; ".join(problems))
 
@@ -219,26 +209,23 @@ class TrainConfig:
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
-    def env_dict(self) -> dict[str, Any]:
-        """The fields an env's training uses (to_dict without the war game's): what its run records."""
-        return {k: v for k, v in asdict(self).items() if k not in GRIDWAR_ONLY}
-
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "TrainConfig":
-        known = {f.name for f in fields(cls)}  # a field retired since (split_networks, backend) is dropped
+        known = {f.name for f in fields(cls)}  # a field retired since (RETIRED_FIELDS, split_networks, ...) is dropped
         d = {k: v for k, v in d.items() if k in known}
         if "reward_scale" not in d:     # written before the flag: the learner saw the game's rewards
             d["reward_scale"] = METHOD_REWARD_SCALE
         return cls(**d)
 
 
-_FIELD_SCHEMAS = {"int": int, "float": float, "bool": bool, "str": str, "int | None": Nullable(int)}
+_FIELD_SCHEMAS = {"int": int, "float": float, "bool": bool, "str": str}
 
 
 def config_schema() -> dict[str, Any]:
     """The type of every field, to check a config read from a file (a checkpoint) before building it:
     absent fields take their defaults (written before they existed)."""
     schema = {f.name: OptionalKey(_FIELD_SCHEMAS[str(f.type)]) for f in fields(TrainConfig)}
+    schema.update({name: OptionalKey(kind) for name, kind in RETIRED_FIELDS.items()})
     schema["hidden"] = OptionalKey(HiddenField())  # one width, as a number, before --hidden took layers
     return schema
 

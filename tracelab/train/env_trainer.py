@@ -60,7 +60,7 @@ class EnvTrainer:
                  metric_sinks: Sequence[MetricSink] = (), eval_source: EnvSource | None = None,
                  network: NetworkFactory | None = None, learner_class: type[DQN] | None = None,
                  spec: Any = None) -> None:
-        """`eval_source`: the env evaluations play, if not `source` (the war game's opponent at --eval-p); the
+        """`eval_source`: the env evaluations play, if not `source` (the same world at other params); the
         rest is the Python API (docs/training.md, "The learner"): `network` trains the readable learner on
         this module instead of the MLP cfg.hidden describes (its policy files say `custom`), `learner_class`
         is the readable learner's class (a subclass of DQN with another loss, say); `metric_sinks` receive
@@ -364,22 +364,21 @@ class EnvTrainer:
 
 
 def env_run_meta(cfg: TrainConfig, source: EnvSource, command: str,
-                 resumed_from: dict[str, Any] | None = None, scenario: Any = None,
+                 resumed_from: dict[str, Any] | None = None, world: Any = None,
                  spec: Any = None) -> dict[str, Any]:
     """The meta of a run that trains on `source` (`train --env`, a sweep's trial): the env and the
     training's settings; for a declared world whose evaluations are traced, what `why`, `tui` and
     `replay` read of it (its rule files, its spec and rules by path, size and hash, what sets each external
     fact, its board: DeclaredTarget's; the texts go in the run's `sources` table with its traced games).
-    `scenario`: the war game's scenario `source` plays (train --scenario): the run names it and keeps its
-    settings (every config field, the scenario's TOML), as show, compare and the TUI read them. `spec`:
-    `source`'s WorldSpec where the caller loaded it already (probe_env's: parsing war.toml again cost train
-    ~0.2 s of CPU before its first step)."""
+    `world`: a registration's training of `source` (the war game's ScenarioTraining): the run takes its
+    `name` and keeps its `run_config()`. `spec`: `source`'s WorldSpec where the caller loaded it already
+    (probe_env's: parsing war.toml again cost train ~0.2 s of CPU before its first step)."""
     # deferred: loads the engine (numba), which a gymnasium id's training does not need
     from tracelab.envs.declared.play import load_declared
     from tracelab.train.external_eval import DeclaredTarget
 
-    settings = cfg.env_dict() if scenario is None else {**cfg.to_dict(), "scenario_toml": scenario.to_toml()}
-    meta = {"command": command, "scenario": source.name if scenario is None else scenario.name, "seed": cfg.seed,
+    settings = cfg.to_dict() if world is None else {**cfg.to_dict(), **world.run_config()}
+    meta = {"command": command, "scenario": source.name if world is None else world.name, "seed": cfg.seed,
             "config": {**settings, "env": source.to_json(), "resumed_from": resumed_from}}
     if not cfg.trace_eval_games:
         return meta

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 from tracelab.engine.safe_files import FileRefused, path_inside, read_text
 from tracelab.errors import UserError
-from tracelab.train.config import GRIDWAR_ONLY, TrainConfig, config_fields
+from tracelab.train.config import TrainConfig, config_fields
 
 if TYPE_CHECKING:
     from tracelab.train.memory import Limit
@@ -40,7 +40,10 @@ MAX_TRIALS = 1_000           # a spec's trials (grid points x samples): refused 
 SPEC_FILE_CAP = 64 * 1024    # a sweep file is a few lines
 FILE_KEYS = {"set", "grid", "random", "samples", "scheduler", "metric", "mode"}
 # one sweep trains one scenario or world (its runs are compared with each other); where the runs go is --out's
-NOT_SEARCHED = {"scenario": "one sweep trains one scenario", "agents": "one sweep trains one scenario",
+# the war game's scenario settings (train's flags for it, its spec's params: gridwar_scenarios.SCENARIO_FLAGS)
+SCENARIO_SETTINGS = {"scenario": "str", "agents": "int", "non_markov": "bool", "opponent_p": "float",
+                     "eval_p": "float"}
+NOT_SEARCHED = {**dict.fromkeys(SCENARIO_SETTINGS, "one sweep trains one scenario"),
                 "env": "one sweep trains one world"}
 ENV_KEY = "env"  # `--set env=SPEC_OR_ID`: the trials train on that env (train --env), not on a scenario
 
@@ -72,6 +75,7 @@ class SweepSpec:
     mode: str = "max"
     sources: dict[str, str] = field(default_factory=dict, compare=False)  # field -> where it was given
     env: str | None = None     # a spec file or a registered id: every trial is a `train --env` of it
+    scenario: dict[str, Any] = field(default_factory=dict)  # else the war game's SCENARIO_SETTINGS given
 
     @property
     def trials(self) -> int:
@@ -81,12 +85,13 @@ class SweepSpec:
         return TrainConfig(**self.fixed)
 
 
-_TYPES = {f.name: str(f.type) for f in fields(TrainConfig)}
+_TYPES = {**{f.name: str(f.type) for f in fields(TrainConfig)}, **SCENARIO_SETTINGS}
 
 
 def field_name(text: str, where: str) -> str:
-    """A TrainConfig field from its name or its flag (lr, learning-rate, reward_scale, reward-scale)."""
-    names = {}
+    """A TrainConfig field (or a SCENARIO_SETTINGS name) from its name or its flag (lr, learning-rate,
+    reward_scale, reward-scale)."""
+    names = {spelling: name for name in SCENARIO_SETTINGS for spelling in (name, name.replace("_", "-"))}
     for f in config_fields():
         for spelling in (f.name, f.flag, f.alias, f.name.replace("_", "-")):
             if spelling:
@@ -105,7 +110,7 @@ def parse_value(name: str, text: Any, where: str) -> Any:
     if not isinstance(text, str):  # from TOML: already typed
         if kind == "float" and isinstance(text, int) and not isinstance(text, bool):
             return float(text)
-        expected = {"int": int, "int | None": int, "float": float, "bool": bool, "str": str}[kind]
+        expected = {"int": int, "float": float, "bool": bool, "str": str}[kind]
         if isinstance(text, expected) and not (expected is int and isinstance(text, bool)):
             return text
         raise SweepSpecError(f"{where}: {text!r} is not {'an int' if 'int' in kind else 'a ' + kind} ({name})")
@@ -116,7 +121,7 @@ def parse_value(name: str, text: Any, where: str) -> Any:
             if not math.isfinite(value):
                 raise ValueError
             return value
-        if kind in ("int", "int | None"):
+        if kind == "int":
             whole = float(s.replace("_", ""))
             if whole != int(whole):
                 raise ValueError
@@ -157,7 +162,7 @@ def random_axis(name: str, text: str, fixed: dict[str, Any], where: str) -> Axis
     if dist == "choice":
         return Axis(name, "choice", grid_axis(name, parts, fixed, where).values)
     kind = _TYPES[name]
-    if kind not in ("int", "float", "int | None"):
+    if kind not in ("int", "float"):
         raise SweepSpecError(f"{where}: {name} is a {kind} field: it takes choice:V1,V2, not {dist}")
     if dist == "randint" and kind == "float" or dist != "randint" and kind != "float":
         right = "randint" if kind != "float" else "uniform or loguniform"
@@ -205,9 +210,11 @@ def build_spec(*, sets: list[str] = (), grids: list[str] = (), randoms: list[str
             env = value.strip()
         else:
             fixed[name] = parse_value(name, value, where)
+    scenario = {k: fixed.pop(k) for k in SCENARIO_SETTINGS if k in fixed}
     if env:
         from tracelab.envs.declared.gridwar_scenarios import scenario_settings_given
-        refused = scenario_settings_given([k for k in (*fixed, *raw["grid"], *raw["random"]) if k in GRIDWAR_ONLY],
+        refused = scenario_settings_given([k for k in (*scenario, *raw["grid"], *raw["random"])
+                                           if k in SCENARIO_SETTINGS],
                                           f"a sweep of --set env={env} searches the DQN's settings only")
         if refused:
             raise SweepSpecError(refused)
@@ -233,7 +240,7 @@ def build_spec(*, sets: list[str] = (), grids: list[str] = (), randoms: list[str
                              "(or a sweep file with [grid] or [random])")
     sources = {name: where for table in raw.values() for name, (_, where) in table.items()}
     spec = SweepSpec(fixed, tuple(axes), sources=sources, **_top_level(top, samples, scheduler, metric, mode, env),
-                     env=env)
+                     env=env, scenario=scenario)
     if spec.trials > MAX_TRIALS:
         raise SweepSpecError(f"{spec.trials:,} trials (grid points x samples): more than {MAX_TRIALS:,}")
     if spec.scheduler == "asha":
@@ -248,6 +255,8 @@ def _culprit(fixed: dict[str, Any], given: dict[str, tuple[Any, str]]) -> str:
     """Where the first fixed setting that TrainConfig refuses on its own was given ("--set" if they are
     refused only together)."""
     for name, (_, where) in given.items():
+        if name not in fixed:  # the env, a scenario setting
+            continue
         try:
             TrainConfig(**{name: fixed[name]})
         except ValueError:

@@ -1,10 +1,10 @@
 """The war game's answers to world_extras.py's questions, part of its registration (gridwar.py): the files
 RuleSim's trainer and tracer wrote (every war game run before it trained through its spec, issue 38) and the
 evaluations' opponent. Its checkpoints are refused in one line giving the command that starts the run again;
-its runs' reward terms are read from their scenario's [rewards]; a training's evaluations play the scripted
-opponent at the evaluation's p; its runs' board is war.toml's, drawn with their scenario's map; its ids map
-their keyword arguments onto the spec's params. Light at import: `tracelab rewards` and the viewers ask
-here."""
+its runs' reward terms are read from their scenario's [rewards], their grid from its size; a training's
+evaluations play the scripted opponent at the evaluation's p; its runs' board is war.toml's, drawn with their
+scenario's map; its ids map their keyword arguments onto the spec's params. Light at import: `tracelab
+rewards`, the viewers and the traces' coordinates ask here."""
 from __future__ import annotations
 
 import shlex
@@ -53,42 +53,49 @@ def retired_checkpoint(state: Mapping[str, Any] | None, pickled: bytes, where: s
            f"{_new_run_command(state.get('config'))}"
 
 
+# the scenario's settings an earlier TrainConfig held (train.config.RETIRED_FIELDS), at their defaults then
+_OLD_SCENARIO_FIELDS = {"scenario": "base", "agents": None, "non_markov": False, "opponent_p": 0.7, "eval_p": 0.3}
+
+
 def _new_run_command(config: Any) -> str:
-    """`tracelab train` with the flags of an old checkpoint's config that differ from the defaults (a
-    stranger's: only known fields of the right types, quoted)."""
-    from tracelab.train.config import TrainConfig, config_fields
+    """`tracelab train` with the flags of an old checkpoint's config that differ from the defaults, the
+    scenario's settings (its fields then, train's flags for the scenario now) first (a stranger's: only known
+    fields of the right types, quoted)."""
+    from tracelab.train.config import RETIRED_FIELDS, TrainConfig, config_fields
     from tracelab.train.env_checkpoint import checkpoint_config
-    from tracelab.validation import Mismatch
+    from tracelab.validation import Mismatch, check
     out = ["tracelab train"]
     try:
         cfg = checkpoint_config({"config": config})
-    except (ValueError, TypeError, Mismatch):
+        old = {k: config.get(k, default) for k, default in _OLD_SCENARIO_FIELDS.items()}
+        for name, value in old.items():
+            check(value, RETIRED_FIELDS[name], f"config.{name}")
+    except (ValueError, TypeError, AttributeError, Mismatch):
         return " ".join(out + ["--scenario NAME ..."])
+    for name, value in old.items():
+        if value != _OLD_SCENARIO_FIELDS[name]:
+            out.append("--non-markov" if name == "non_markov" else f"--{name.replace('_', '-')} "
+                                                                   f"{shlex.quote(str(value))}")
     default = TrainConfig()
     for f in config_fields():
         value = getattr(cfg, f.name)
         if value == getattr(default, f.name):
             continue
         if isinstance(value, bool):
-            out.append(("--" if value else "--no-") + f.flag if f.name != "non_markov" else
-                       ("--non-markov" if value else "--markov"))
+            out.append(("--" if value else "--no-") + f.flag)
         else:
             out.append(f"--{f.flag} {shlex.quote(str(value))}")
     return " ".join(out)
 
 
 def old_run_terms(config: Mapping[str, Any]) -> list[Term] | None:
-    """A RuleSim run's terms from its scenario (`scenario` or a training's `scenario_toml`), or None."""
+    """A RuleSim run's terms from its scenario's [rewards] (_scenario), or None."""
     from tracelab.game.scenario import Rewards
-    from tracelab.store.kind import MAX_SPEC_TEXT
     from tracelab.store.reward_rescore import Term, number
-    text = next((t for t in (config.get("scenario_toml"), config.get("scenario")) if isinstance(t, str)), None)
-    if text is None or len(text) > MAX_SPEC_TEXT:
+    s = _scenario(config)
+    if s is None:
         return None
-    try:
-        given = tomllib.loads(text).get("rewards", {})
-    except (tomllib.TOMLDecodeError, RecursionError):
-        return None
+    given = s.get("rewards", {})
     given = given if isinstance(given, dict) else {}
     defaults = Rewards()  # a scenario's [rewards] key left out has the game's default
     return [Term(term, number(given.get(key, getattr(defaults, key)), {}),
@@ -97,14 +104,16 @@ def old_run_terms(config: Mapping[str, Any]) -> list[Term] | None:
             for term, key in RULESIM_TERMS.items()]
 
 
+def old_run_grid(config: Mapping[str, Any]) -> tuple[Any, Any] | None:
+    """The width and height (unchecked) of a RuleSim run's scenario (_scenario), or None."""
+    s = _scenario(config)
+    return None if s is None else (s.get("width"), s.get("height"))
+
+
 def evaluation_env(source: EnvSource, p: float) -> EnvSource | None:
     """One of the game's ids with its scripted opponent at the evaluation's `p` (p_toward), or None."""
     from tracelab.envs.declared.gridwar import GRIDWAR_SPEC_IDS
     return source.with_args(p_toward=p) if source.name in GRIDWAR_SPEC_IDS else None
-
-
-# where play, train and eval recorded a RuleSim run's scenario's TOML
-_SCENARIO_KEYS = ("scenario_toml", "scenario")
 
 
 def old_run_board(board_name: str | None, config: Mapping[str, Any]) -> Board | None:
@@ -145,14 +154,18 @@ def old_run_board(board_name: str | None, config: Mapping[str, Any]) -> Board | 
 
 
 def _scenario(config: Mapping[str, Any]) -> dict[str, Any] | None:
-    for key in _SCENARIO_KEYS:
-        text = config.get(key)
-        if isinstance(text, str) and "\n" in text:
-            try:
-                return tomllib.loads(text)
-            except tomllib.TOMLDecodeError:
-                return None
-    return None
+    """The scenario a RuleSim run's config holds as TOML (train's `scenario_toml`; play's `scenario`, a name
+    where scenario_toml is beside it), parsed; None when neither holds TOML that reads (a stranger's: its
+    length bounded)."""
+    from tracelab.store.kind import MAX_SPEC_TEXT
+    text = next((t for t in (config.get("scenario_toml"), config.get("scenario")) if isinstance(t, str)
+                 and "=" in t), None)  # TOML has a `key = value`, a name none
+    if text is None or len(text) > MAX_SPEC_TEXT:
+        return None
+    try:
+        return tomllib.loads(text)
+    except (tomllib.TOMLDecodeError, RecursionError):
+        return None
 
 
 def declared_id(name: str, kwargs: Mapping[str, Any]) -> tuple[str, dict[str, Any]] | None:

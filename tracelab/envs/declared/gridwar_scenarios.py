@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import shlex
 import tomllib
 from pathlib import Path
+from collections.abc import Mapping
 from typing import Any
 
 from tracelab.envs.declared.env_source import EnvSource
@@ -22,7 +23,6 @@ from tracelab.envs.declared.gridwar import (
     WAR_NONMARKOV,
     WAR_SPEC,
     scenario_env,
-    scenario_spec,
 )
 from tracelab.errors import UserError
 from tracelab.game.scenario import ACTION_NAMES, Scenario, builtin_scenario, builtin_scenario_names, load_scenario
@@ -45,7 +45,9 @@ from tracelab.train.budget import reward_scale_note, too_short_hint
 from tracelab.train.env_source import TeamEncoder, probe_env
 from tracelab.validation import Const, IntRange, ListOf, MapOf, OptionalKey, check_file
 
-DEFAULT_SCENARIO = "base"  # what play and train play without --scenario (TrainConfig.scenario)
+DEFAULT_SCENARIO = "base"  # what play and train play without --scenario
+# train's flags for the scenario (TrainConfig's fields once: train.config.RETIRED_FIELDS), by their args names
+SCENARIO_FLAGS = ("scenario", "agents", "non_markov", "opponent_p", "eval_p")
 METHOD_EVAL_P = 0.3  # the method's evaluation: the opponent's p that eval plays by default
 _SPEC_FILES = {str(WAR_SPEC), str(WAR_NONMARKOV), str(WAR_ADVANCED_2V2)}
 
@@ -58,9 +60,9 @@ def load_scenario_arg(text: str, agents: int | None = None) -> Scenario:
     return sc
 
 
-def check_opponent_p(p: float | None) -> None:
+def check_opponent_p(p: float | None, flag: str = "--opponent-p") -> None:
     if p is not None and not 0.0 <= p <= 1.0:
-        raise UserError(f"--opponent-p must be in [0, 1], got {p}")
+        raise UserError(f"{flag} must be in [0, 1], got {p}")
 
 
 def has_opponent_p(source: EnvSource) -> bool:
@@ -76,59 +78,85 @@ def with_opponent_p(source: EnvSource, p: float | None) -> EnvSource:
     check_opponent_p(p)
     if not has_opponent_p(source):
         raise UserError(f"--opponent-p is GridWar's scripted opponent's; {source.describe()} has none")
-    return EnvSource(source.name, {**source.kwargs, "p_toward": p})
+    return source.with_args(p_toward=p)
 
 
 def refuse_scenario_flags(args: Any, why: str, flags: tuple[str, ...] = ("scenario", "agents", "opponent_p")) -> None:
-    """A UserError naming the first of the scenario's flags (`flags`: their args names) given where they
-    do not apply, and `why`."""
-    for flag in flags:
-        if getattr(args, flag, None) is not None:
-            raise UserError(f"--{flag.replace('_', '-')} is GridWar's; {why}")
+    """A UserError naming the scenario's flags (`flags`: their args names) given where they do not apply,
+    and `why`."""
+    given = [f"--{f.replace('_', '-')}" for f in flags if getattr(args, f, None) is not None]
+    refused = scenario_settings_given(given, why)
+    if refused:
+        raise UserError(refused)
 
 
 def scenario_settings_given(names: list[str], why: str) -> str | None:
-    """The line refusing the scenario's settings `names` (TrainConfig's GRIDWAR_ONLY fields, as flags or
-    field names) where a world of its own trains, or None when there are none."""
+    """The line refusing the scenario's settings `names` (SCENARIO_FLAGS, as flags or field names) where a
+    world of its own plays or trains, or None when there are none."""
     if not names:
         return None
     return f"{', '.join(names)} describe{'s' * (len(names) == 1)} GridWar; {why}"
 
 
-def scenario_source(scenario: Scenario, opponent_p: float | None = None,
-                    stack_previous: bool = False) -> EnvSource:
-    """The spec (war*.toml and its params) that plays `scenario`; a UserError naming what no spec plays."""
-    check_opponent_p(opponent_p)
+def scenario_world(args: Any, trained: dict[str, Any] | None = None,
+                   p: float | None = None) -> tuple[Scenario, EnvSource]:
+    """play's and eval's `--scenario NAME_OR_FILE` (base without it; the scenario of `trained`, a policy of
+    RuleSim's trainer's policy.json, unless --scenario or play's --agents says), its --opponent-p (`p`
+    without it): the scenario and the GridWar id and params that play it (scenario_env, with `trained`'s
+    observation of the previous step); a UserError naming what no spec plays."""
+    agents = getattr(args, "agents", None)
+    if trained is not None and args.scenario is None and agents is None:
+        scenario = rulesim_scenario(trained)
+    else:
+        scenario = load_scenario_arg(args.scenario or DEFAULT_SCENARIO, agents)
+    p = p if args.opponent_p is None else args.opponent_p
+    check_opponent_p(p)
     try:
-        return EnvSource(*scenario_spec(scenario, stack_previous, opponent_p))
-    except ValueError as e:
-        raise UserError(str(e)) from None
+        return scenario, EnvSource(*scenario_env(scenario, p, trained is not None and
+                                                 trained["observation"]["stack_previous"]))
+    except UserError as e:
+        if trained is None:
+            raise
+        raise UserError(f"{args.policy} (a GridWar policy of RuleSim's trainer) cannot be played: {e}") from None
 
 
 @dataclass(frozen=True)
 class ScenarioTraining:
-    """`train --scenario`: the scenario a TrainConfig names (its scenario, agents, opponent and evaluation
-    p, non_markov fields) and what train says of it."""
+    """`train --scenario`: the scenario as the spec id and params it trains on (its flags are the spec's
+    params: --agents agents_per_team, --non-markov stack_previous, --opponent-p p_toward) and the env its
+    evaluations play (p_toward at --eval-p); the run names the scenario and keeps its TOML (run_config)."""
     scenario: Scenario
     source: EnvSource       # the env it trains on
-    eval_source: EnvSource  # the one its evaluations play (the opponent at --eval-p)
+    eval_source: EnvSource  # the one its evaluations play
 
     @classmethod
-    def of(cls, cfg: Any) -> ScenarioTraining:
-        """The scenario `cfg` names (--scenario, --agents), trained as `cfg` says."""
-        return cls.for_scenario(load_scenario_arg(cfg.scenario, cfg.agents), cfg)
+    def of(cls, scenario: Scenario, opponent_p: float | None = None, eval_p: float | None = None,
+           non_markov: bool = False) -> ScenarioTraining:
+        """`scenario` (an experiment's arm: its own rewards) against the opponent at `opponent_p` (the spec's
+        default: None), evaluated at `eval_p` (the method's: None); a UserError naming what its spec cannot
+        play (scenario_env)."""
+        check_opponent_p(opponent_p)
+        check_opponent_p(eval_p, "--eval-p")
+        source = EnvSource(*scenario_env(scenario, opponent_p, non_markov))
+        return cls(scenario, source, source.with_args(p_toward=METHOD_EVAL_P if eval_p is None else eval_p))
 
     @classmethod
-    def for_scenario(cls, scenario: Scenario, cfg: Any) -> ScenarioTraining:
-        """`scenario` (an experiment's arm: its own rewards) trained as `cfg` says: the game's id and params
-        (scenario_env: a UserError naming what its spec cannot play), evaluated against the opponent at
-        --eval-p."""
-        source = EnvSource(*scenario_env(scenario, cfg.opponent_p, cfg.non_markov))
-        return cls(scenario, source, source.with_args(p_toward=cfg.eval_p))
+    def given(cls, flags: Mapping[str, Any]) -> ScenarioTraining:
+        """train's (or a sweep's) scenario flags, by their SCENARIO_FLAGS names: base without --scenario."""
+        return cls.of(load_scenario_arg(flags.get("scenario") or DEFAULT_SCENARIO, flags.get("agents")),
+                      flags.get("opponent_p"), flags.get("eval_p"), bool(flags.get("non_markov")))
 
-    def describe(self, cfg: Any) -> str:
-        return f"{self.scenario.name} ({'non-Markov' if cfg.non_markov else 'Markov'}, opponent p " \
-               f"{cfg.opponent_p:g}, evaluated against p {cfg.eval_p:g}; --env {self.source.describe()})"
+    @property
+    def name(self) -> str:
+        return self.scenario.name
+
+    def run_config(self) -> dict[str, Any]:
+        """What the run's config keeps of it beside the env it trained on: the scenario's TOML (show and
+        compare list its fields) and the evaluations' env."""
+        return {"scenario_toml": self.scenario.to_toml(), "eval_env": self.eval_source.to_json()}
+
+    def describe(self) -> str:
+        return f"{self.name} (--env {self.source.describe()}; its evaluations: --env {self.eval_source.describe()})"
 
     def reward_note(self, reward_scale: float) -> str | None:
         """The note on a reward scale far from the scenario's rewards (budget.reward_scale_note)."""
@@ -140,22 +168,24 @@ class ScenarioTraining:
         return too_short_hint(steps, wins, self.scenario.agents_per_team)
 
 
-def resumed_scenario(run: str, recorded: EnvSource, checkpoint: dict[str, Any],
-                     scenario_given: str | None) -> ScenarioTraining | None:
+def resumed_scenario(run: str, recorded: EnvSource, scenario_given: str | None) -> ScenarioTraining | None:
     """`train --resume RUN` of a `train --scenario` run (one of the game's ids, its meta's config holding the
-    scenario's TOML): the scenario rebuilt from its `checkpoint`'s config (a built-in one, or --scenario FILE
-    given again: a file never names the file tracelab reads); None for any other run."""
-    if recorded.name not in GRIDWAR_SPEC_IDS or "scenario_toml" not in _run_config(Path(run)):
+    scenario's TOML): that scenario on the checkpoint's env `recorded`, evaluated at its config's eval_env's
+    p_toward (a run of an earlier tracelab: its config's eval_p, once a TrainConfig field); None for any other
+    run. `--scenario` given again must name the same scenario."""
+    config = _run_config(Path(run))
+    text = config.get("scenario_toml")
+    if recorded.name not in GRIDWAR_SPEC_IDS or not isinstance(text, str):
         return None
-    from tracelab.train.env_checkpoint import checkpoint_config  # torch: play and eval import this module
-    cfg = checkpoint_config(checkpoint)
-    if scenario_given not in (None, cfg.scenario):
-        raise UserError(f"--scenario {scenario_given}: {run} trained scenario {cfg.scenario!r}")
-    if scenario_given is None and cfg.scenario not in builtin_scenario_names():
-        raise UserError(f"{run} trained the scenario file {cfg.scenario!r}: name it again to resume "
-                        f"(tracelab reads no file a run names by itself): tracelab train --resume "
-                        f"{shlex.quote(run)} --scenario {shlex.quote(cfg.scenario)}")
-    return ScenarioTraining.of(cfg)
+    scenario = scenario_of_toml(text, f"{run}/meta.json: key 'config.scenario_toml'")
+    if scenario_given is not None and load_scenario_arg(scenario_given).to_toml() != scenario.to_toml():
+        raise UserError(f"--scenario {scenario_given}: {run} trained scenario {scenario.name!r}")
+    evaluated = config.get("eval_env")
+    p = evaluated.get("kwargs", {}).get("p_toward") if isinstance(evaluated, dict) else config.get("eval_p")
+    if p is not None and (isinstance(p, bool) or not isinstance(p, (int, float))):
+        raise UserError(f"{run}/meta.json: config: the evaluations' p_toward must be a number, got {p!r}")
+    check_opponent_p(p, f"{run}/meta.json: config: the evaluations' p_toward")
+    return ScenarioTraining(scenario, recorded, recorded.with_args(p_toward=METHOD_EVAL_P if p is None else p))
 
 
 def _run_config(run: Path) -> dict[str, Any]:
@@ -203,29 +233,20 @@ def read_rulesim_spec(path: str | Path) -> dict[str, Any]:
 
 def rulesim_scenario(spec: dict[str, Any], where: str | Path = POLICY_JSON) -> Scenario:
     """The scenario a RuleSim-format policy.json (read_rulesim_spec) was trained on."""
-    where = f"{where}: key 'scenario.toml'"
+    return scenario_of_toml(spec["scenario"]["toml"], f"{where}: key 'scenario.toml'")
+
+
+def scenario_of_toml(text: str, where: str) -> Scenario:
+    """A scenario's TOML as a file (a policy's, a run's config) holds it; a ValueError naming `where`."""
     try:
-        table = tomllib.loads(spec["scenario"]["toml"])
+        table = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ValueError(f"{where}: not TOML: {e}") from None
     return scenario_from_dict(table, source=where)
 
 
-def rulesim_source(path: str | Path, spec: dict[str, Any], scenario: Scenario,
-                   opponent_p: float | None) -> EnvSource:
-    """The spec that plays the RuleSim-format policy at `path` (policy.json: `spec`) on `scenario`: its id
-    at the opponent's p (the method's evaluation's unless given), its observation of the previous step
-    kept; a scenario no spec plays is refused in one line saying how to go on."""
-    p = METHOD_EVAL_P if opponent_p is None else opponent_p
-    check_opponent_p(p)
-    try:
-        name, params = scenario_env(scenario, p, spec["observation"]["stack_previous"])
-    except UserError as e:
-        raise UserError(f"{path} (a GridWar policy of RuleSim's trainer) cannot be played: {e}") from None
-    return EnvSource(name, {**params, "p_toward": p})
-
-
-def _load_rulesim_policy(path: str | Path, spec: dict[str, Any], given: EnvSource, world_spec: Any = None) -> EnvPolicy:
+def _load_rulesim_policy(path: str | Path, spec: dict[str, Any], given: EnvSource,
+                         world_spec: Any = None) -> EnvPolicy:
     """A policy of RuleSim's trainer (one agent) as the EnvPolicy that plays it on the world `given` names,
     a spec whose observation and actions are its scenario's. RuleSim gave one agent the team's view, as the
     spec does, so its network reads the spec's observation as it is: the same games (tests/test_play.py).

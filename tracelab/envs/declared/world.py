@@ -295,7 +295,7 @@ class DeclaredWorld:
         ext_ptr, ext_i, ext_f = self._ext
         eng.finish_fused_step(status, int(self._out[4][0]), ext_ptr, ext_i, ext_f)
         if status != fused.STATUS_OK:  # the kernel paused (buffer room) and finish went on: read now
-            self._read()
+            fused.read_step(self._binding.buffers())
 
     def _unfused_step(self, rows: np.ndarray, picks: np.ndarray) -> None:
         """The fused step's work with the engine's own calls (lanes or compiled kernel)."""
@@ -316,13 +316,7 @@ class DeclaredWorld:
         self._step_engine(np.concatenate([off, new]), np.concatenate([np.zeros((len(off), 2)), *bnd]))
         prev[:len(new)] = new
         prev_n[0] = len(new)
-        self._read()
-
-    def _read(self) -> None:
-        if not self._fused:
-            self._read_unfused()
-        else:
-            fused.read_step(self._binding.buffers())
+        self._read_unfused()
 
     def _read_unfused(self) -> None:
         part_ptr, part_atoms, table_atoms, table_values, table_agent, term_atoms, trunc_atoms, mask_atoms = \

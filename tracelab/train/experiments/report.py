@@ -11,9 +11,9 @@ import numpy as np
 
 from tracelab.train.experiments import plots
 from tracelab.train.config import TrainConfig
-from tracelab.train.experiments.run import (TRAIN_P, ExperimentResult, action_names, commit, eval_ps, is_world, machine,
-                                           trainer_note, train_config)
-from tracelab.train.experiments.runner import METHOD_CUT, EvalFigures, curves, scenario_arm_source, p_suffix, run_sql
+from tracelab.train.experiments.run import (TRAIN_P, ExperimentResult, action_names, arm_world, commit, eval_ps, is_world,
+                                           machine, trainer_note, train_config)
+from tracelab.train.experiments.runner import METHOD_CUT, EvalFigures, curves, p_suffix, run_sql
 from tracelab.train.experiments.stats import spread, wilson
 from tracelab.train.reward_scale import METHOD_REWARD_SCALE
 
@@ -162,8 +162,7 @@ def action_section(result: ExperimentResult) -> list[str]:
     if is_world(result.experiment):
         return []
     # the traces' steps.action is the spec's action id: the arms' spec's action names, by id
-    names = max((action_names(scenario_arm_source(train_config(result.experiment, ar.arm, result.budget, 0),
-                                             ar.arm.build_scenario())) for ar in result.arms), key=len)
+    names = max((action_names(arm_world(ar.arm).source) for ar in result.arms), key=len)
     ids = range(len(names))
     L = ["## What the final policies do", "",
          "Red's actions in the traced games of each seed's last evaluation during training (the run's "

@@ -21,7 +21,6 @@ from tracelab.train.experiments.runner import (
     EvalFigures,
     SeedRun,
     final_eval_seed,
-    scenario_arm_source,
     p_suffix,
     run_query,
     run_sql,
@@ -33,6 +32,7 @@ from tracelab.train.env_policy import load_env_policy
 
 if TYPE_CHECKING:
     from tracelab.envs.declared.env_source import EnvSource
+    from tracelab.envs.declared.gridwar_scenarios import ScenarioTraining
 
 RESULT_POLL_S = 0.2  # how often the experiment looks for a worker's finished training
 TRAIN_P, EVAL_PS = 0.7, (0.3, 0.7)  # the method's code: trained against p = 0.7, evaluated against 0.3
@@ -77,10 +77,16 @@ def train_config(exp: Experiment, arm: Arm, budget: Budget, seed: int) -> TrainC
                   trace_eval_games=min(5, budget.eval_games), eval_envs=min(50, budget.eval_games),
                   checkpoint_every=0, log_every=min(1_000, max(100, budget.steps // 20)),
                   warmup=min(1_000, budget.steps // 4), **{**exp.train, **arm.train})
-    if arm.env is not None:  # a world of its own: the war game's settings do not apply
-        return TrainConfig(**common)
-    return TrainConfig(scenario=arm.scenario, agents=arm.agents, non_markov=arm.non_markov, opponent_p=TRAIN_P,
-                       eval_p=EVAL_PS[0], **common)
+    return TrainConfig(**common)
+
+
+def arm_world(arm: Arm) -> ScenarioTraining | EnvSource:
+    """What an arm trains on: a world arm's env, or the war game's scenario against the opponent at TRAIN_P,
+    evaluated during training at EVAL_PS[0]."""
+    if arm.env is not None:
+        return arm.build_world()
+    from tracelab.envs.declared.gridwar_scenarios import ScenarioTraining  # deferred: gymnasium, the engine
+    return ScenarioTraining.of(arm.build_scenario(), TRAIN_P, EVAL_PS[0], arm.non_markov)
 
 
 def trainer_note(exp: Experiment) -> str:
@@ -116,7 +122,7 @@ def run_experiment(exp: Experiment, budget: Budget, out_dir: Path, command: str,
 
     def task_args(ar: ArmResult, seed: int) -> tuple:
         cfg = train_config(exp, ar.arm, budget, seed)
-        return (cfg if is_world(exp) else replace(cfg, kernel=kernel), ar.arm.build_world(),
+        return (cfg if is_world(exp) else replace(cfg, kernel=kernel), arm_world(ar.arm),
                 out_dir / f"{ar.arm.slug}-seed{seed}", command, eval_ps(exp), budget.eval_games)
 
     say(f"[{exp.name}] {trainer_note(exp)}")
@@ -140,12 +146,11 @@ def run_experiment(exp: Experiment, budget: Budget, out_dir: Path, command: str,
             + ", ".join(f"method's win rate{'' if is_world(exp) else f' vs p={p:g}'}: "
                         f"{100 * r.method_win_rate:.1f}%" for p, r in sr.final.items()))
         if exp.name == "portability":
-            ar.extra[seed] = portability(sr, ar.arm.build_scenario(), train_config(exp, ar.arm, budget, seed),
+            ar.extra[seed] = portability(sr, ar.arm, train_config(exp, ar.arm, budget, seed),
                                          budget.eval_games, say)
         elif exp.name == "reward-shaping":
-            ar.extra[seed] = shaping_traces(sr, scenario_arm_source(train_config(exp, ar.arm, budget, seed),
-                                                               ar.arm.build_scenario()),
-                                            out_dir, 6 if quick else 100, command, say)
+            ar.extra[seed] = shaping_traces(sr, arm_world(ar.arm).source, out_dir, 6 if quick else 100, command,
+                                            say)
     result.wall_s = time.perf_counter() - t0
     result.machine = machine()
     (out_dir / f"{exp.name}.json").write_text(json.dumps(summary_json(result), indent=1))
@@ -189,19 +194,20 @@ def _terminate(pool: Any) -> None:
 
 
 # ---- portability: the same policy in both simulators ----
-def portability(sr: SeedRun, scenario: Any, cfg: TrainConfig, games: int, say: Say) -> dict[str, Any]:
+def portability(sr: SeedRun, arm: Arm, cfg: TrainConfig, games: int, say: Say) -> dict[str, Any]:
     """Per opponent p: the spec policy's games in the reference simulator (RefSim) with the spec world's
     final-evaluation seeds (game by game identical if the simulators agree) and with other seeds (an
     independent sample: the gap and a test of it)."""
     # deferred: RefSim's numba kernels, which a report written again does not need
     from tracelab.train.experiments.refsim_games import refsim_games
 
-    policy = load_env_policy(sr.policy_dir, scenario_arm_source(cfg, scenario))[0]
+    policy = load_env_policy(sr.policy_dir, arm_world(arm).source)[0]
+    scenario = arm.build_scenario()
     out: dict[str, Any] = {}
     for p in EVAL_PS:
         rules = sr.final[p]
         same, other = (EvalFigures.of(refsim_games(policy, scenario, games, final_eval_seed(sr.seed, p) + k,
-                                                   cfg.eval_envs, p, cfg.non_markov)) for k in (0, 1))
+                                                   cfg.eval_envs, p, arm.non_markov)) for k in (0, 1))
         identical = sum(a == b for a, b in zip(zip(rules.returns, rules.lengths), zip(same.returns, same.lengths)))
         z, pval = two_proportion_test(rules.method_wins, rules.games, other.method_wins, other.games)
         lo, hi = bootstrap_diff_ci(rules.returns, other.returns)

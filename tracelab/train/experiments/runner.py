@@ -13,8 +13,6 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
-from tracelab.envs.declared.gridwar_scenarios import ScenarioTraining
-from tracelab.game.scenario import Scenario
 from tracelab.store import TraceWriter
 from tracelab.store.queries import get_query
 from tracelab.store.reader import fetch_arrow, open_run, query_readonly, retrying
@@ -25,6 +23,7 @@ from tracelab.world_extras import evaluation_env
 
 if TYPE_CHECKING:
     from tracelab.envs.declared.env_source import EnvSource
+    from tracelab.envs.declared.gridwar_scenarios import ScenarioTraining
     from tracelab.train.env_policy import EnvEvalResult, EnvPolicy
     from tracelab.train.env_trainer import EnvTrainer
     from tracelab.train.tensorboard import MetricSink
@@ -118,7 +117,7 @@ def final_eval_seed(seed: int, p: float) -> int:
     return int(np.random.SeedSequence([seed, 3, FINAL_EVAL_ROUND, int(round(p * 1000))]).generate_state(1)[0])
 
 
-def train_seed(cfg: TrainConfig, world: Scenario | EnvSource, run_dir: Path, command: str,
+def train_seed(cfg: TrainConfig, world: ScenarioTraining | EnvSource, run_dir: Path, command: str,
                eval_ps: tuple[float, ...], eval_games: int, metric_sinks: Sequence[MetricSink] = (),
                started: Callable[[EnvTrainer], None] | None = None) -> SeedRun:
     """Train `cfg` into a new run at `run_dir`, then evaluate the final policy `eval_games` games
@@ -162,19 +161,13 @@ def train_seed(cfg: TrainConfig, world: Scenario | EnvSource, run_dir: Path, com
 FinalEvaluation = Callable[[Any, Any], dict[float, EvalFigures]]  # (trainer, policy or its folder) -> per p
 
 
-def scenario_arm_source(cfg: TrainConfig, scenario: Scenario) -> EnvSource:
-    """The spec id and params a scenario arm trains on (its registration's ScenarioTraining: its --env-arg
-    values, the scenario's rewards among them)."""
-    return ScenarioTraining.for_scenario(scenario, cfg).source
-
-
-def _parts(cfg: TrainConfig, world: Scenario | EnvSource, command: str, eval_ps: tuple[float, ...],
+def _parts(cfg: TrainConfig, world: ScenarioTraining | EnvSource, command: str, eval_ps: tuple[float, ...],
            eval_games: int) -> tuple[dict[str, Any], Any, FinalEvaluation]:
     """The run meta, the trainer and the final evaluation of `world`: an env, as `train --env` trains it, or
-    the war game's scenario, as `train --scenario` does (its registration's ScenarioTraining: the run names
-    the scenario, its evaluations play the opponent at --eval-p). The final evaluation: `eval_games` games
-    at each level of `eval_ps` (the env world_extras.evaluation_env gives there, else the world's own: one
-    level, WORLD_P), counted as the world declares ([end] win / loss)."""
+    the war game's scenario training, as `train --scenario` does (the run names the scenario, its
+    evaluations play its eval_source). The final evaluation: `eval_games` games at each level of `eval_ps`
+    (the env world_extras.evaluation_env gives there, else the world's own: one level, WORLD_P), counted as
+    the world declares ([end] win / loss)."""
     from tracelab.envs.declared.env_source import EnvSource
     from tracelab.train.env_policy import evaluate_env, load_env_policy
     from tracelab.train.env_trainer import EnvTrainer, env_run_meta
@@ -183,10 +176,8 @@ def _parts(cfg: TrainConfig, world: Scenario | EnvSource, command: str, eval_ps:
         source, eval_source = world, None
         meta = env_run_meta(cfg, source, f"tracelab train --env (from: {command})")
     else:
-        training = ScenarioTraining.for_scenario(world, cfg)
-        source, eval_source = training.source, training.eval_source
+        source, eval_source = world.source, world.eval_source
         meta = env_run_meta(cfg, source, f"tracelab train (from: {command})", None, world)
-        meta["config"]["eval_env"] = eval_source.to_json()
 
     def make_trainer(cfg: TrainConfig, _: Any, *args: Any, **kw: Any) -> EnvTrainer:
         return EnvTrainer(cfg, source, *args, eval_source=eval_source, **kw)
