@@ -441,7 +441,8 @@ class Grounder:
 
     def _called(self, cr: _CompiledRule, term: Term, fn: HeadFunction, args: list[int], rows: np.ndarray
                 ) -> np.ndarray:
-        arg_cols = np.stack(self.argument_columns(args, rows), axis=1) if len(rows) else np.zeros((0, len(args)), np.int64)
+        arg_cols = (np.stack(self.argument_columns(args, rows), axis=1) if len(rows)
+                    else np.zeros((0, len(args)), np.int64))
         distinct, inverse = np.unique(arg_cols, axis=0, return_inverse=True)
         nodes = self.vocab.nodes
         out = np.empty(len(distinct), np.int64)

@@ -163,7 +163,8 @@ def _mismatch(g: Grounder, key: str, fields: dict, arrays: dict[str, np.ndarray]
     if not _within(rule, 0, len(g.rules)) or not _within(head, 0, total):
         return "a grounding of an unknown rule or head atom"
     labels = np.concatenate([v.atom_label, new[0]]).astype(np.int64)
-    args = (np.concatenate([v.atom_arg0, new[1]]).astype(np.int64), np.concatenate([v.atom_arg1, new[2]]).astype(np.int64))
+    args = (np.concatenate([v.atom_arg0, new[1]]).astype(np.int64),
+            np.concatenate([v.atom_arg1, new[2]]).astype(np.int64))
     for r in np.unique(rule):
         if why := _not_instances(g.compiled_rules[r], vals[rule == r], body[rule == r], head[rule == r],
                                  labels, args, n_nodes):

@@ -241,7 +241,8 @@ def numpy_network(net: NetSpec, state: dict[str, Any]) -> NumpyQ:
 # ---------------------------------------------------------------------------------------------------------
 # Loading
 # ---------------------------------------------------------------------------------------------------------
-def load_env_policy(path: str | Path, given: EnvSource, world: Any = None) -> tuple[EnvPolicy | TeamPolicy, dict[str, Any]]:
+def load_env_policy(path: str | Path, given: EnvSource,
+                    world: Any = None) -> tuple[EnvPolicy | TeamPolicy, dict[str, Any]]:
     """(the policy, its policy.json), refused in one line unless it was trained on `given` (the env the
     user named: a policy file never decides which spec file tracelab reads), its network's shape checked
     against the env's spaces (`world`: `given`'s WorldSpec if loaded already, probe_env's). A world of several
