@@ -13,7 +13,7 @@ os.environ["TEXTUAL_ANIMATIONS"] = "none"
 from tracelab.store.reader import open_run  # noqa: E402
 from tracelab.viewers.tui.lazy_table import LazyTable  # noqa: E402
 from tracelab.viewers.tui.trace import TracePane  # noqa: E402
-from tui_helpers import episodes_ready, loaded, run_app, shown, wait_for  # noqa: E402
+from tui_helpers import episodes_ready, has_rows, loaded, run_app, shown, wait_for  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 ADVANCED = ROOT / "sample_runs" / "advanced"
@@ -28,7 +28,7 @@ async def open_trace(app: Any, pilot: Any) -> tuple[TracePane, LazyTable]:
     await episodes_ready(app, pilot)
     await pilot.press("enter")
     pane = app.screen.query_one(TracePane)
-    await wait_for(pilot, lambda: pane.filter is not None and pane.table.count > 0 and loaded(pane.table))
+    await wait_for(pilot, lambda: pane.filter is not None and has_rows(pane.table))
     await wait_for(pilot, lambda: app.focused is pane.table)
     return pane, pane.table
 
@@ -64,7 +64,7 @@ def test_quick_eval_game_presses_keep_the_timestep() -> None:
         trace = pane.table
         await wait_for(pilot, lambda: pane.filter is not None and loaded(trace))
         await pilot.press("right_square_bracket")
-        await wait_for(pilot, lambda: pane.filter.episode == evals[0] and trace.count > 0 and loaded(trace))
+        await wait_for(pilot, lambda: pane.filter.episode == evals[0] and has_rows(trace))
         await wait_for(pilot, lambda: app.focused is trace)
         jumps = pane.jumps
         pane.query_one("#tr-goto").value = "20"
@@ -72,7 +72,7 @@ def test_quick_eval_game_presses_keep_the_timestep() -> None:
         await wait_for(pilot, lambda: pane.jumps > jumps and loaded(trace) and trace.cursor_row["t"] == 20)
         for _ in range(3):             # as fast as keys come: before the next game has loaded
             pane.action_eval_game(1)
-        await wait_for(pilot, lambda: pane.filter.episode == evals[3] and loaded(trace) and trace.count > 0)
+        await wait_for(pilot, lambda: pane.filter.episode == evals[3] and has_rows(trace))
         await pilot.pause(0.3)
         assert pane.filter.episode == evals[3]
         assert trace.cursor_row["t"] == 20 and trace.row(trace.cursor - 1)["t"] < 20
