@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from tui_helpers import (episodes_ready, has_rows, loaded, open_trace_at, run_app, shown, shown_once, svg_text,
+from tui_helpers import (back, episodes_ready, has_rows, loaded, open_trace_at, run_app, shown, shown_once, svg_text,
                          wait_for)
 
 from tracelab.store.reader import open_run
@@ -299,7 +299,9 @@ def test_reopened_the_atoms_beside_the_trace_keep_the_static_facts_shown() -> No
         await wait_for(pilot, lambda: side.atoms is not None and not side.hide_static and loaded(side.table))
         await wait_for(pilot, lambda: pane.filter is not None and not pane.filter.hide_static
                        and loaded(pane.table))
-        await pilot.press("escape", "escape")                      # trace -> episodes -> Runs
+        await back(app, pilot)                                     # trace -> episodes
+        await wait_for(pilot, lambda: app.screen.query_one("TabbedContent").active == "episodes")
+        await back(app, pilot)                                     # -> Runs
         await wait_for(pilot, lambda: type(app.screen).__name__ == "RunsScreen")
         app.show_run(SUPPLY)
         await wait_for(pilot, lambda: isinstance(app.screen.panes.get("trace"), TracePane)

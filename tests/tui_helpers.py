@@ -53,6 +53,15 @@ def has_rows(table: LazyTable) -> bool:
     return table.count > 0 and loaded(table)
 
 
+async def back(app: Any, pilot: Any) -> None:
+    """Esc as "back one view", pressed once no query runs on the open run's connection: while one runs
+    (a view still loading, or background work such as the trace's warm-up or the board read for Enter),
+    Esc cancels it instead and stays (RunScreen.action_cancel_or_back), and a test waiting for the view
+    it meant to reach would wait out PATIENCE."""
+    await wait_for(pilot, lambda: not (getattr(app.screen, "source", None) and app.screen.source.busy))
+    await pilot.press("escape")
+
+
 async def episodes_ready(app: Any, pilot: Any) -> LazyTable:
     """The run's Episodes table loaded and focused: keys pressed before the focus lands (the app sets it
     after a refresh, late on a loaded machine) would go nowhere."""
