@@ -25,6 +25,7 @@ from tracelab.viewers.tui.trace import TracePane, parse_range  # noqa: E402
 from tracelab.viewers.tui.why import WhyPane  # noqa: E402
 from tui_helpers import (  # noqa: E402
     episodes_ready,
+    has_rows,
     live_run,
     loaded,
     pick_saved_query,
@@ -43,7 +44,7 @@ async def open_first_trace(app: Any, pilot: Any) -> tuple[TracePane, LazyTable]:
     await episodes_ready(app, pilot)
     await pilot.press("enter")
     pane = app.screen.query_one(TracePane)
-    await wait_for(pilot, lambda: pane.table.count > 0 and loaded(pane.table))
+    await wait_for(pilot, lambda: has_rows(pane.table))
     return pane, pane.table
 
 
@@ -170,7 +171,7 @@ def test_open_a_run_go_to_an_episode_filter_by_rule_and_explain_a_death() -> Non
         await wait_for(pilot, lambda: episodes.cursor_row is not None and episodes.cursor_row["episode"] == 2)
         await pilot.press("enter")                                  # episode 2's trace
         trace = app.screen.query_one("#tr-table", LazyTable)
-        await wait_for(pilot, lambda: trace.count > 0 and loaded(trace))
+        await wait_for(pilot, lambda: has_rows(trace))
         all_rows = trace.count
         pane = app.screen.query_one(TracePane)
         pane.query_one("#tr-rule").value = "d_killed"
@@ -258,7 +259,7 @@ def test_sql_console_saved_query_inline_error_and_write_refused() -> None:
         sql: SqlPane = app.screen.panes["sql"]
         results = sql.query_one(LazyTable)
         await pick_saved_query(app, pilot, "firings_per_episode", "1")   # its parameter: episode 1
-        await wait_for(pilot, lambda: results.ready and loaded(results) and results.count > 0)
+        await wait_for(pilot, lambda: has_rows(results))
         assert {results.row(i)["episode"] for i in range(results.count)} == {1}
         assert "firings_per_episode" in await shown(app, pilot)
 
@@ -289,7 +290,7 @@ def test_rules_view_counts_firings_and_lists_rules_that_never_fired() -> None:
         await pilot.press("4")
         await wait_for(pilot, lambda: app.screen.panes["rules"].is_attached)
         table = app.screen.panes["rules"].query_one(LazyTable)
-        await wait_for(pilot, lambda: loaded(table) and table.count > 0)
+        await wait_for(pilot, lambda: has_rows(table))
         rows = [table.row(i) for i in range(min(table.count, PAGE))]
         con = open_run(ADVANCED)
         fired = dict(con.execute("SELECT rule, count(*) FROM firings GROUP BY rule").fetchall())
@@ -397,7 +398,7 @@ def test_the_trace_of_a_live_episode_grows_and_keeps_its_cursor(tmp_path: Path) 
             await pilot.press("enter")
             pane = app.screen.query_one(TracePane)
             trace = pane.table
-            await wait_for(pilot, lambda: trace.count > 0 and loaded(trace))
+            await wait_for(pilot, lambda: has_rows(trace))
             first = trace.count
             trace.move_to(first - 1)
             await wait_for(pilot, lambda: loaded(trace))
@@ -468,7 +469,7 @@ def test_next_and_previous_evaluation_game_from_the_trace_of_a_training_run() ->
         await wait_for(pilot, lambda: pane.filter is not None and loaded(trace) and pane.query_one("#tr-game").display)
         assert trace.count == 0 and "episode 0: a training episode, not an evaluation game" in header_text(pane)
         await pilot.press("right_square_bracket")
-        await wait_for(pilot, lambda: pane.filter.episode == evals[0] and trace.count > 0 and loaded(trace))
+        await wait_for(pilot, lambda: pane.filter.episode == evals[0] and has_rows(trace))
         first = trace.cursor_row
         text = await shown(app, pilot)
         assert first_game in text

@@ -13,7 +13,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from tui_helpers import episodes_ready, loaded, open_trace_at, run_app, shown, shown_once, svg_text, wait_for
+from tui_helpers import (back, episodes_ready, has_rows, loaded, open_trace_at, run_app, shown, shown_once, svg_text,
+                         wait_for)
 
 from tracelab.store.reader import open_run
 from tracelab.viewers.tui.graph_side import GraphSide
@@ -212,7 +213,7 @@ def test_at_80x24_the_atoms_show_on_b_and_the_cursor_row_stays_above_the_scrollb
         await episodes_ready(app, pilot)
         await pilot.press("enter")
         pane = app.screen.query_one(TracePane)
-        await wait_for(pilot, lambda: pane.filter is not None and loaded(pane.table) and pane.table.count > 0)
+        await wait_for(pilot, lambda: pane.filter is not None and has_rows(pane.table))
         side = pane.query_one(GraphSide)
         assert not side.display                                # no room beside the table: hidden
         await pilot.press("end")
@@ -298,13 +299,15 @@ def test_reopened_the_atoms_beside_the_trace_keep_the_static_facts_shown() -> No
         await wait_for(pilot, lambda: side.atoms is not None and not side.hide_static and loaded(side.table))
         await wait_for(pilot, lambda: pane.filter is not None and not pane.filter.hide_static
                        and loaded(pane.table))
-        await pilot.press("escape", "escape")                      # trace -> episodes -> Runs
+        await back(app, pilot)                                     # trace -> episodes
+        await wait_for(pilot, lambda: app.screen.query_one("TabbedContent").active == "episodes")
+        await back(app, pilot)                                     # -> Runs
         await wait_for(pilot, lambda: type(app.screen).__name__ == "RunsScreen")
         app.show_run(SUPPLY)
         await wait_for(pilot, lambda: isinstance(app.screen.panes.get("trace"), TracePane)
                        if hasattr(app.screen, "panes") else False)
         pane = app.screen.panes["trace"]
-        await wait_for(pilot, lambda: pane.filter is not None and loaded(pane.table) and pane.table.count > 0)
+        await wait_for(pilot, lambda: pane.filter is not None and has_rows(pane.table))
         side = pane.query_one(GraphSide)
         await wait_for(pilot, lambda: side.atoms is not None and side.atoms.t == 3 and loaded(side.table))
         assert not pane.filter.hide_static and not side.hide_static and side.atoms.static_hidden == 0

@@ -8,7 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from tui_helpers import episodes_ready, loaded, run_app, wait_for
+from tui_helpers import episodes_ready, has_rows, loaded, run_app, wait_for
 
 from tracelab.store.reader import open_run
 from tracelab.viewers.tui.decision import DecisionPanel, draw
@@ -29,7 +29,7 @@ async def trace_at(app: Any, pilot: Any, t: int) -> TracePane:
     await wait_for(pilot, lambda: pane.filter is not None and loaded(pane.table))
     if pane.table.count == 0:
         await pilot.press("right_square_bracket")
-        await wait_for(pilot, lambda: pane.table.count > 0 and loaded(pane.table))
+        await wait_for(pilot, lambda: has_rows(pane.table))
     jumps = pane.jumps
     pane.query_one("#tr-goto").value = str(t)
     await pilot.press("g", "enter")

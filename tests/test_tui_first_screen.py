@@ -140,7 +140,7 @@ def test_the_kind_selector_is_a_training_runs_and_kept_when_the_run_is_reopened(
     import asyncio
     from typing import Any
 
-    from tui_helpers import episodes_ready, loaded, wait_for   # here: it imports the Trace view
+    from tui_helpers import back, episodes_ready, loaded, wait_for   # here: it imports the Trace view
     from tracelab.viewers.tui.app import TracelabApp
     from tracelab.viewers.tui.lazy_table import LazyTable
 
@@ -155,7 +155,7 @@ def test_the_kind_selector_is_a_training_runs_and_kept_when_the_run_is_reopened(
         await pilot.press("enter")
         await episodes_ready(app, pilot)
         assert not app.screen.query("#ep-kind") and not app.screen.query("#ep-kind-label")   # a play run
-        await pilot.press("escape")
+        await back(app, pilot)
         await wait_for(pilot, lambda: type(app.screen).__name__ == "RunsScreen")
         runs = app.screen.query_one("#runs-table", LazyTable)
         runs.move_to(names.index("base-train"))
@@ -166,7 +166,7 @@ def test_the_kind_selector_is_a_training_runs_and_kept_when_the_run_is_reopened(
         await pilot.press("e")                                   # evaluation games only
         await wait_for(pilot, lambda: loaded(table) and table.count == 24)
         assert kinds(table) == {"eval"}
-        await pilot.press("escape")
+        await back(app, pilot)
         await wait_for(pilot, lambda: type(app.screen).__name__ == "RunsScreen")
         await pilot.press("enter")                               # the same run again: on its eval games
         table = await episodes_ready(app, pilot)

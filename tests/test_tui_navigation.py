@@ -13,7 +13,7 @@ os.environ["TEXTUAL_ANIMATIONS"] = "none"
 from tracelab.store.reader import open_run  # noqa: E402
 from tracelab.viewers.tui.lazy_table import LazyTable  # noqa: E402
 from tracelab.viewers.tui.trace import TracePane  # noqa: E402
-from tui_helpers import episodes_ready, loaded, run_app, shown, wait_for  # noqa: E402
+from tui_helpers import back, episodes_ready, has_rows, loaded, run_app, shown, wait_for  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 ADVANCED = ROOT / "sample_runs" / "advanced"
@@ -28,7 +28,7 @@ async def open_trace(app: Any, pilot: Any) -> tuple[TracePane, LazyTable]:
     await episodes_ready(app, pilot)
     await pilot.press("enter")
     pane = app.screen.query_one(TracePane)
-    await wait_for(pilot, lambda: pane.filter is not None and pane.table.count > 0 and loaded(pane.table))
+    await wait_for(pilot, lambda: pane.filter is not None and has_rows(pane.table))
     await wait_for(pilot, lambda: app.focused is pane.table)
     return pane, pane.table
 
@@ -38,15 +38,18 @@ def test_esc_steps_back_one_view_why_trace_episodes_then_runs() -> None:
         pane, trace = await open_trace(app, pilot)
         await pilot.press("w")
         await wait_for(pilot, lambda: active_view(app) == "why")
-        await pilot.press("escape")                               # why -> the trace it explained
+        await back(app, pilot)                                    # why -> the trace it explained
         await wait_for(pilot, lambda: active_view(app) == "trace" and app.focused is trace)
-        await pilot.press("escape")                               # trace -> the run's episodes
+        await back(app, pilot)                                    # trace -> the run's episodes
         await wait_for(pilot, lambda: active_view(app) == "episodes")
         assert type(app.screen).__name__ == "RunScreen"
-        await pilot.press("4", "escape")                          # any other view -> episodes
+        await pilot.press("4")
+        rules = app.screen.query_one("#rules-table", LazyTable)
+        await wait_for(pilot, lambda: active_view(app) == "rules" and loaded(rules))
+        await back(app, pilot)                                    # any other view -> episodes
         await wait_for(pilot, lambda: active_view(app) == "episodes")
         await wait_for(pilot, lambda: app.focused is app.screen.query_one("#ep-table"))
-        await pilot.press("escape")                               # episodes -> the Runs list
+        await back(app, pilot)                                    # episodes -> the Runs list
         await wait_for(pilot, lambda: type(app.screen).__name__ == "RunsScreen")
     run_app([ADVANCED], body)
 
@@ -64,7 +67,7 @@ def test_quick_eval_game_presses_keep_the_timestep() -> None:
         trace = pane.table
         await wait_for(pilot, lambda: pane.filter is not None and loaded(trace))
         await pilot.press("right_square_bracket")
-        await wait_for(pilot, lambda: pane.filter.episode == evals[0] and trace.count > 0 and loaded(trace))
+        await wait_for(pilot, lambda: pane.filter.episode == evals[0] and has_rows(trace))
         await wait_for(pilot, lambda: app.focused is trace)
         jumps = pane.jumps
         pane.query_one("#tr-goto").value = "20"
@@ -72,7 +75,7 @@ def test_quick_eval_game_presses_keep_the_timestep() -> None:
         await wait_for(pilot, lambda: pane.jumps > jumps and loaded(trace) and trace.cursor_row["t"] == 20)
         for _ in range(3):             # as fast as keys come: before the next game has loaded
             pane.action_eval_game(1)
-        await wait_for(pilot, lambda: pane.filter.episode == evals[3] and loaded(trace) and trace.count > 0)
+        await wait_for(pilot, lambda: pane.filter.episode == evals[3] and has_rows(trace))
         await pilot.pause(0.3)
         assert pane.filter.episode == evals[3]
         assert trace.cursor_row["t"] == 20 and trace.row(trace.cursor - 1)["t"] < 20
@@ -125,7 +128,9 @@ def test_a_run_reopened_in_the_session_opens_where_it_was_left() -> None:
         await pilot.press("down", "down", "down", "s")              # static facts shown, cursor kept
         await wait_for(pilot, lambda: not pane.hide_static and loaded(trace) and trace.cursor > 0)
         left = trace.cursor_row
-        await pilot.press("escape", "escape")                       # trace -> episodes -> Runs
+        await back(app, pilot)                                      # trace -> episodes
+        await wait_for(pilot, lambda: active_view(app) == "episodes")
+        await back(app, pilot)                                      # -> Runs
         await wait_for(pilot, lambda: type(app.screen).__name__ == "RunsScreen")
         await pilot.press("enter")                                  # the same run again: its Episodes as left
         table = await episodes_ready(app, pilot)

@@ -10,7 +10,7 @@ from typing import Any
 
 import pytest
 from patience import PATIENCE
-from tui_helpers import episodes_ready, loaded, pick_saved_query, run_app, trace_at, wait_for
+from tui_helpers import episodes_ready, has_rows, loaded, pick_saved_query, run_app, trace_at, wait_for
 
 from tracelab.viewers.tui.lazy_table import LazyTable
 from tracelab.viewers.tui.trace import TracePane
@@ -88,7 +88,7 @@ def test_run_screens_snapshots(run: str) -> None:
         await wait_for(pilot, lambda: pane.filter is not None and loaded(pane.table))
         if pane.table.count == 0:                                     # a training episode: not traced,
             await pilot.press("right_square_bracket")                 # so the first evaluation game
-            await wait_for(pilot, lambda: pane.table.count > 0 and loaded(pane.table))
+            await wait_for(pilot, lambda: has_rows(pane.table))
         jumps = pane.jumps
         pane.query_one("#tr-goto").value = "10"
         await pilot.press("g", "enter")                               # a step with a board worth seeing
@@ -113,7 +113,7 @@ def test_run_screens_snapshots(run: str) -> None:
         await wait_for(pilot, lambda: sql.is_attached and app.focused is sql.editor)
         await pick_saved_query(app, pilot, "firings_per_episode", str(pane.filter.episode))
         results = sql.query_one(LazyTable)
-        await wait_for(pilot, lambda: results.ready and loaded(results) and results.count > 0
+        await wait_for(pilot, lambda: has_rows(results)
                        and app.focused is sql.editor)
         await pilot.press("escape")                                   # from the editor to the results
         await wait_for(pilot, lambda: app.focused is results)
@@ -166,7 +166,7 @@ def test_run_without_a_board_snapshots(size: tuple[int, int]) -> None:
         await wait_for(pilot, lambda: sql.is_attached and app.focused is sql.editor)
         await pick_saved_query(app, pilot, "firings_per_episode", "0")
         results = sql.query_one(LazyTable)
-        await wait_for(pilot, lambda: results.ready and loaded(results) and results.count > 0
+        await wait_for(pilot, lambda: has_rows(results)
                        and app.focused is sql.editor)
         await pilot.press("escape")
         await wait_for(pilot, lambda: app.focused is results)
@@ -187,7 +187,7 @@ def test_trace_beside_the_board_at_80x24_snapshot() -> None:
         await episodes_ready(app, pilot)
         await pilot.press("enter")
         pane = app.screen.query_one(TracePane)
-        await wait_for(pilot, lambda: pane.filter is not None and loaded(pane.table) and pane.table.count > 0)
+        await wait_for(pilot, lambda: pane.filter is not None and has_rows(pane.table))
         await wait_for(pilot, lambda: app.focused is pane.table)
         jumps = pane.jumps
         pane.query_one("#tr-goto").value = "10"

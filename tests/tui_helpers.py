@@ -46,6 +46,22 @@ def loaded(table: LazyTable) -> bool:
     return table.ready and table.idle and (table.count == 0 or table.cursor_row is not None)
 
 
+def has_rows(table: LazyTable) -> bool:
+    """Loaded with rows; a table that loaded without rows and with an error fails the test at once, saying
+    the error, instead of waiting out PATIENCE for rows that cannot come."""
+    assert not (table.ready and table.error and not table.count), f"the table failed to load: {table.error}"
+    return table.count > 0 and loaded(table)
+
+
+async def back(app: Any, pilot: Any) -> None:
+    """Esc as "back one view", pressed once no query runs on the open run's connection: while one runs
+    (a view still loading, or background work such as the trace's warm-up or the board read for Enter),
+    Esc cancels it instead and stays (RunScreen.action_cancel_or_back), and a test waiting for the view
+    it meant to reach would wait out PATIENCE."""
+    await wait_for(pilot, lambda: not (getattr(app.screen, "source", None) and app.screen.source.busy))
+    await pilot.press("escape")
+
+
 async def episodes_ready(app: Any, pilot: Any) -> LazyTable:
     """The run's Episodes table loaded and focused: keys pressed before the focus lands (the app sets it
     after a refresh, late on a loaded machine) would go nowhere."""
@@ -58,7 +74,7 @@ async def trace_at(app: Any, pilot: Any, t: int) -> TracePane:
     """From the Episodes view: the first episode's trace, gone to timestep t (`g`) and loaded there."""
     await pilot.press("enter")
     pane = app.screen.query_one(TracePane)
-    await wait_for(pilot, lambda: pane.filter is not None and loaded(pane.table) and pane.table.count > 0)
+    await wait_for(pilot, lambda: pane.filter is not None and has_rows(pane.table))
     jumps = pane.jumps
     pane.query_one("#tr-goto").value = str(t)
     await pilot.press("g", "enter")

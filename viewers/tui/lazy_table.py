@@ -158,23 +158,27 @@ class LazyTable(ScrollView, can_focus=True):
         self.scroll_to(y=0, animate=False)
         self.refresh()
         if source is not None:
-            self.run_worker(lambda: self._prepare(source, self._generation), thread=True,
+            # the rows the screen shows are read here, on the UI thread: a widget's size read in the worker
+            # (a table in a hidden tab) made textual lay out the whole screen in that thread, which raised
+            # LookupError (no active app there) and raced the UI thread's own layout
+            generation, reach = self._generation, max(1, self.size.height)
+            self.run_worker(lambda: self._prepare(source, generation, cursor, reach), thread=True,
                             group=f"prepare-{id(self)}", exclusive=True, exit_on_error=False)
 
-    def _prepare(self, source: PageSource, generation: int) -> None:
+    def _prepare(self, source: PageSource, generation: int, cursor: int, reach: int) -> None:
         """Count the rows and, in the same worker, fetch the page the cursor opens on (one round trip
-        to the UI thread instead of two)."""
+        to the UI thread instead of two): the pages `reach` rows either side of it. In a worker thread:
+        it reads none of the widget's state (set_source passes it in)."""
         start, pages, error = None, [], None
         try:
             count = source.prepare()
             start = getattr(source, "start_row", None)
-            target = start if start else (self._pending_cursor or 0)
+            target = start if start else cursor
             target = max(0, min(count - 1, target if target >= 0 else count + target))
             if count:  # the cursor's page, and the next or previous one if the screen reaches into it
-                reach = max(1, self.size.height)
                 pages = fetch_span(source, max(0, target - reach) // PAGE, min(count - 1, target + reach) // PAGE)
         except Exception as e:  # noqa: BLE001 - shown in the table, the app goes on
-            count, error = 0, str(e)
+            count, error = 0, str(e) or type(e).__name__
         self.app.call_from_thread(self._prepared, generation, count, error, start, pages)
 
     def _start_warm(self, generation: int) -> None:
@@ -238,7 +242,8 @@ class LazyTable(ScrollView, can_focus=True):
             start = not self._fetching
             self._fetching = True
         if start:
-            self.run_worker(lambda: self._fetch(self.source, self._generation), thread=True,
+            source, generation = self.source, self._generation   # read here, not in the worker
+            self.run_worker(lambda: self._fetch(source, generation), thread=True,
                             group=f"fetch-{id(self)}", exit_on_error=False)
 
     def _fetch(self, source: PageSource | None, generation: int) -> None:

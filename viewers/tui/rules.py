@@ -109,9 +109,11 @@ class RulesPane(Vertical):
             self.status.update(text)
             return
 
+        status = self.status   # queried here: the worker reads no widget (docs/tui.md)
+
         def work() -> None:
             never = self.source.scalar(f"SELECT count(*) FROM ({PER_RULE_SQL}) WHERE firings = 0")
-            self.app.call_from_thread(self.status.update,
+            self.app.call_from_thread(status.update,
                                       f" {event.count} rules, {never} never fired · e: per episode · "
                                       f"Enter: trace filtered by the rule")
 
