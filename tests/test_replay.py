@@ -172,6 +172,8 @@ def test_lanes_and_the_why_document_of_a_death(advanced_data) -> None:
     tree = render_why(explain(con, 2, "alive(red-agent-1)", 14), 14, run_grid(con))
     assert "### Why alive(red-agent-1)" in doc and tree in doc       # as `tracelab why` prints it
     assert "It ended: loss" in doc
+    # the death's why before the step's long tallies: the panel's first screen shows it (docs/images/replay.png)
+    assert doc.index("### Why alive(red-agent-1)") < doc.index("- changed: ") < doc.index("- fired: ")
     assert "### Why" not in ep2["/why"][3]["TextDocument:text"][0]   # nobody died in step 3
 
 

@@ -87,17 +87,23 @@ def _per_step(episode: GraphEpisode) -> tuple[dict[int, Counter[str]], dict[int,
     return fired, example
 
 
-def _step_header(episode: GraphEpisode, s: int, edges: dict[str, int], notes: list[str],
-                 fired: Counter[str]) -> list[str]:
+def _step_header(episode: GraphEpisode, s: int, edges: dict[str, int], notes: list[str]) -> list[str]:
     last = episode.steps - 1
     lines = [f"## Episode {episode.episode}, step {s} of {last}"]
     if s == last and episode.outcome:
         lines.append(f"**It ended: {literal(episode.outcome)}.**\n")
     lines += notes
-    changed = episode.changed.get(s, {})
     if edges:
         lines.append("- edges: " + ", ".join(f"{literal(name)} {n:,}" for name, n in edges.items()))
-    lines.append("- changed: " + (", ".join(f"{literal(name)} {n:,}" for name, n in changed.items()) or "nothing"))
+    return lines
+
+
+def _step_counts(episode: GraphEpisode, s: int, fired: Counter[str]) -> list[str]:
+    """What changed and fired in step s, per predicate and rule: long lists, so they come after the step's
+    why-trees (a panel's first screen shows the why of a death, not the tally)."""
+    changed = episode.changed.get(s, {})
+    lines = ["\n### Changed and fired",
+             "- changed: " + (", ".join(f"{literal(name)} {n:,}" for name, n in changed.items()) or "nothing")]
     total = episode.firings.per_step.get(s, 0)
     if total:
         lines.append(f"- fired: {total:,} (" + ", ".join(f"{literal(r)} {n:,}" for r, n in fired.most_common()) + ")")
@@ -125,11 +131,7 @@ def why_documents(con: RunConnection, episode: GraphEpisode, atoms: tuple[str, .
     docs = []
     fired, examples = _per_step(episode)
     for s in range(episode.steps):
-        lines = _step_header(episode, s, edges(s), notes.get(s, []), fired.get(s, Counter()))
-        if not atoms:
-            example = examples.get(s)
-            if example:
-                lines.append(f"\nAsk why an atom has its bound: `tracelab replay RUN --why '{example}'`.")
+        lines = _step_header(episode, s, edges(s), notes.get(s, []))
         for atom in at_step.get(s, []):
             lines += [f"\n### Why {literal(atom)}",
                       *code_block(render_why(explain_in(run_model, trace, atom, s, depth), s, grid))]
@@ -139,6 +141,9 @@ def why_documents(con: RunConnection, episode: GraphEpisode, atoms: tuple[str, .
             if key not in trees:
                 trees[key] = explain_in(run_model, trace, atom, s, depth)
             lines += [f"\n### Why {literal(atom)}", *code_block(render_why(trees[key], s, grid))]
+        lines += _step_counts(episode, s, fired.get(s, Counter()))
+        if not atoms and examples.get(s):
+            lines.append(f"\nAsk why an atom has its bound: `tracelab replay RUN --why '{examples[s]}'`.")
         docs.append("\n".join(lines))
     return docs
 
