@@ -121,3 +121,14 @@ def test_an_older_run_with_opponent_p_still_shows_its_level(tmp_path: Path) -> N
     assert " eval game 1/1 · round 2 · train step 500 · opponent p=0.25 · " in first_game_header(run)
     assert note_of_first_eval_game(run) == ("- an evaluation game of the training, at train step 500, round 2, "
                                        "opponent p=0.25 (its curves: `tracelab tui RUN`, 6 Training)")
+
+
+def test_a_strangers_params_are_shown_safely_and_bounded() -> None:
+    """A run is anyone's: control characters escaped, a long params cut, JSON that is nested too deep, has a
+    number past int's digits or is no object reads as none (then an older run's level, if any)."""
+    from tracelab.store.eval_params import MAX_PARAMS_TEXT, eval_params_text
+    assert eval_params_text('{"name": "\\u001b[2J", "on": true, "p": 0.1}', None) == "name=\\x1b[2J on=true p=0.1"
+    assert len(eval_params_text(json.dumps({"x": "y" * 1000}), None)) == MAX_PARAMS_TEXT
+    assert eval_params_text("[" * 100_000 + "]" * 100_000, 0.3) == "opponent p=0.3"
+    assert eval_params_text('{"a": ' + "9" * 5000 + "}", None) is None
+    assert eval_params_text('"p_toward"', None) is None and eval_params_text("{}", None) is None

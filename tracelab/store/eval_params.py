@@ -10,10 +10,12 @@ from typing import Any
 
 from tracelab.engine.terminal_text import printable
 
+MAX_PARAMS_JSON = 1 << 16  # a run is anyone's: params longer than this read as none
+MAX_PARAMS_TEXT = 200      # and they are shown cut to this many characters at most
 # the begin info's params (JSON text, NULL where it has none) and an older run's level, as `params`, `level`
-EVAL_PARAMS_COLUMNS = ("json_extract(begin_info, '$.params')::VARCHAR AS params, "
+EVAL_PARAMS_COLUMNS = (f"(SELECT CASE WHEN length(p) <= {MAX_PARAMS_JSON} THEN p END "
+                       "FROM (SELECT json_extract(begin_info, '$.params')::VARCHAR AS p)) AS params, "
                        "TRY_CAST(json_extract(begin_info, '$.opponent_p') AS DOUBLE) AS level")
-MAX_PARAMS_TEXT = 200  # a run is anyone's: its params are shown cut to this many characters at most
 
 
 def _value_text(value: Any) -> str:
@@ -28,13 +30,12 @@ def eval_params_text(params: str | None, level: float | None, max_chars: int = M
     safe on a terminal (printable), cut to `max_chars` (at least 1) with an ellipsis."""
     try:
         parsed = json.loads(params) if params else None
-    except ValueError:
-        parsed = None
-    if isinstance(parsed, dict) and parsed:
-        text = " ".join(f"{k}={_value_text(v)}" for k, v in parsed.items())
-    elif level is not None:
+        text = " ".join(f"{k}={_value_text(v)}" for k, v in parsed.items()) if isinstance(parsed, dict) else ""
+    except (ValueError, RecursionError):  # not JSON, a number past int's digits, nested too deep
+        text = ""
+    if not text and level is not None:
         text = f"opponent p={level:g}"
-    else:
+    if not text:
         return None
     text = printable(text)
     return text if len(text) <= max_chars else text[:max(max_chars, 1) - 1] + "…"

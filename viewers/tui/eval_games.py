@@ -1,4 +1,4 @@
-"""The traced evaluation games of a training run, for the trace's `]` / `[` keys and its header line.
+"""The traced evaluation games of a run (a training's, `tracelab eval --run`'s), for the trace's `]` / `[` keys and its header line.
 
 A training run (HELPER_GUIDE's contract, docs/training.md) begins each evaluation game with the info
 `{"kind": "eval", "train_step": N, "eval_round": K, "params": {...}}` and stores its full trace; `tracelab
