@@ -11,15 +11,14 @@ import numpy as np
 import pytest
 
 from rulesim_policies import RULESIM_POLICY, constant_weights, write_rulesim_policy
-from train_helpers import walk_argv, walk_source
+from train_helpers import random_env_policy, walk_argv, walk_source
 
 from tracelab.cli import main
 from tracelab.game.scenario import Scenario
 from tracelab.store import open_run
-from tracelab.train.env_policy import EnvEvalResult, EnvPolicy, evaluate_env, save_env_policy
-from tracelab.train.env_source import probe_env
+from tracelab.train.env_policy import EnvEvalResult, EnvPolicy, evaluate_env
 from tracelab.train.experiments.stats import wilson
-from tracelab.train.qnet import NetSpec, NumpyQ
+from tracelab.train.qnet import NetSpec
 
 # red starts one step below blue's base on a 4x4 board: no spec plays it (RuleSim's scenario file)
 NEAR = Scenario(name="near", width=4, height=4, red_base=(3, 0), blue_base=(0, 3), red_starts=((0, 2),))
@@ -35,19 +34,7 @@ def _saved(tmp_path, scenario: Scenario, action_id: int) -> Path:
 def _walk_policy(tmp_path) -> tuple[Path, EnvPolicy]:
     """A policy of train --env on the 4x4 walk (tests/train_helpers.py), seeded random weights: it wins some
     games and loses others against the opponent."""
-    return _random_policy(tmp_path / "walk-policy", walk_source(), seed=3)
-
-
-def _random_policy(path: Path, source, seed: int) -> tuple[Path, EnvPolicy]:  # noqa: ANN001
-    """A policy of train --env on `source` with seeded random weights (16 hidden units), saved at `path`."""
-    import torch
-    encoder, n_actions, spec = probe_env(source)
-    net = NetSpec(encoder.size, (16,), n_actions)
-    rng = np.random.default_rng(seed)
-    weights = {k: rng.normal(0, 1, shape).astype(np.float32) for k, shape in net.state_dict_shapes().items()}
-    path = save_env_policy(path, source, {k: torch.from_numpy(v) for k, v in weights.items()},
-                           net.to_json(), encoder, list(spec.action_names), False, {"run": None, "step": 0})
-    return path, EnvPolicy(NumpyQ(net, weights), encoder)
+    return random_env_policy(tmp_path / "walk-policy", walk_source(), seed=3)
 
 
 def test_the_methods_counting_of_a_spec_worlds_games():
@@ -157,7 +144,7 @@ def test_a_policy_of_train_on_a_gridwar_id_plays_without_env(tmp_path, capsys):
     unless --opponent-p says, and played by play --policy."""
     from tracelab.envs.declared.env_source import EnvSource
     source = EnvSource("tracelab/GridWar-base-v0", {})
-    path, policy = _random_policy(tmp_path / "policy", source, seed=4)
+    path, policy = random_env_policy(tmp_path / "policy", source, seed=4)
     assert main(["eval", str(path), "--games", "8", "--num-envs", "4", "--seed", "2", "--json"]) == 0
     figures = json.loads(capsys.readouterr().out)
     against = EnvSource(source.name, {"p_toward": 0.3})

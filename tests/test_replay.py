@@ -245,6 +245,7 @@ def test_a_training_run_replays_its_eval_games_on_the_step_timeline_only(tmp_pat
     for episode, train_step in (("train/episode-0", 100), ("train/episode-1", 200)):   # what it shows of them
         docs = [r["TextDocument:text"] for r in data[episode]["/why"] if r.get("step") is not None]
         assert all(f"an evaluation game of the training, at train step {train_step}, round" in d[0] for d in docs)
+        assert all("opponent p=0.3 (its curves" in d[0] for d in docs)  # the level such an older run recorded
 
 
 def test_live_follows_a_run_being_written(tmp_path: Path) -> None:

@@ -18,7 +18,8 @@ from tracelab.train.env_checkpoint import checkpoint_path
 from tracelab.train.env_policy import load_env_policy
 from tracelab.train.metric_log import WALL_CLOCK_METRICS
 from tracelab.train.torch_files import load_tensors
-from train_helpers import WALK, ctrl_c_once_training, train_walk, walk_argv, walk_config, walk_source, walk_trainer
+from train_helpers import (WALK, WALK_ARGS, ctrl_c_once_training, train_walk, walk_argv, walk_config, walk_source,
+                           walk_trainer)
 
 TRAINING_METRICS = {"loss", "epsilon", "q_max_mean", "env_steps_per_s", "updates_per_s", "train_return"}
 EVAL_METRICS = {f"eval/{k}" for k in ("games", "wins", "losses", "draws", "truncated", "win_rate", "mean_return",
@@ -72,7 +73,9 @@ def test_a_run_logs_metrics_episodes_evaluations_checkpoint_and_policy(tmp_path)
     traced = con.execute("SELECT episode, train_step, begin_info FROM episodes WHERE kind = 'eval' "
                          "ORDER BY episode").fetchall()
     assert [s for _, s, _ in traced] == [200, 200, 400, 400]
-    assert json.loads(traced[2][2]) == {"kind": "eval", "train_step": 400, "eval_round": 1}
+    # begun as `tracelab eval --run` begins its games: with the world's params the evaluation plays (its spec's)
+    assert json.loads(traced[2][2]) == {"kind": "eval", "train_step": 400, "eval_round": 1,
+                                        "params": {"advanced": False, **WALK_ARGS, "p_toward": 0.5}}
     ep = traced[0][0]
     atom, t = con.execute("SELECT atom, t FROM changes WHERE episode = ? AND label = 'atLoc' AND new_lower = 1 "
                           "AND atom LIKE 'atLoc(red-agent-1,%' ORDER BY t DESC LIMIT 1", [ep]).fetchone()

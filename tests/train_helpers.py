@@ -42,6 +42,23 @@ SMALL = dict(warmup=100, envs=4, batch=32, buffer=2000, target_every=100, log_ev
              reward_scale=1.0)  # the walk's rewards (-1, 10) are near 1 already: seen as they are
 
 
+def random_env_policy(path: Path, source: EnvSource, seed: int):  # -> (Path, EnvPolicy)
+    """A policy of train --env on `source` with seeded random weights (16 hidden units), saved at `path`."""
+    import numpy as np
+    import torch
+
+    from tracelab.train.env_policy import EnvPolicy, save_env_policy
+    from tracelab.train.env_source import probe_env
+    from tracelab.train.qnet import NetSpec, NumpyQ
+    encoder, n_actions, spec = probe_env(source)
+    net = NetSpec(encoder.size, (16,), n_actions)
+    rng = np.random.default_rng(seed)
+    weights = {k: rng.normal(0, 1, shape).astype(np.float32) for k, shape in net.state_dict_shapes().items()}
+    path = save_env_policy(path, source, {k: torch.from_numpy(v) for k, v in weights.items()},
+                           net.to_json(), encoder, list(spec.action_names), False, {"run": None, "step": 0})
+    return path, EnvPolicy(NumpyQ(net, weights), encoder)
+
+
 def walk_config(steps: int = 200, seed: int = 1, **options: object):  # -> TrainConfig
     """The TrainConfig of a tiny training of the walk (SMALL, overridden by `options`)."""
     from tracelab.train.config import TrainConfig

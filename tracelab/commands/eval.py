@@ -91,8 +91,9 @@ def _world(args: argparse.Namespace) -> tuple[EnvSource, EnvSource, Any]:
 
 def _traced(args: argparse.Namespace, policy: Any, source: EnvSource, spec: Any, scenario: Any, on_game: Any) -> Any:
     """Every game, one at a time, traced into the new run --run (its world, the policy's decisions, the
-    reward terms; begin info `{"kind": "eval", "params": the world's params}`). `spec`: the world's WorldSpec
-    (None: not a declared world, refused)."""
+    reward terms; begin info `{"kind": "eval", "params": the world's params}`: external_eval.eval_info, as a
+    training's traced evaluations). `spec`: the world's WorldSpec (None: not a declared world, refused)."""
+    from tracelab.train.external_eval import eval_info
     run_dir = Path(args.run)
     with store_errors():
         check_new_run_dir(run_dir)
@@ -100,7 +101,7 @@ def _traced(args: argparse.Namespace, policy: Any, source: EnvSource, spec: Any,
         writer = TraceWriter.open(run_dir, _run_meta(args, source, spec, scenario))
     with recording_into(writer, run_dir):
         env = make_declared_env(source, spec, trace_writer=writer)
-        env.unwrapped.trace_info({"kind": "eval", "params": source.declared()[1]})
+        env.unwrapped.trace_info(eval_info(source))
         try:
             result = evaluate_in_env(policy, env, args.games, args.seed, on_game)
         except BaseException:

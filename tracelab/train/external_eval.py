@@ -1,7 +1,8 @@
 """Evaluations of a policy another library trains (Stable-Baselines3, ...), as tracelab's trainer makes its
 own: greedy games every so many steps, the first few of each evaluation traced in full into the training's
-run (begin info `{"kind": "eval", "train_step": N, "eval_round": K, ...}`), so `tracelab why`, `replay`
-and the TUI's evaluation games work on them, and the figures as the run's `eval/...` metrics.
+run (begin info `{"kind": "eval", "train_step": N, "eval_round": K, "params": {...}}`: eval_info), so
+`tracelab why`, `replay` and the TUI's evaluation games work on them, and the figures as the run's `eval/...`
+metrics.
 
 The envs traced are the rules-declared worlds (a registered id such as tracelab/FrozenLake-v1 or
 tracelab/FrozenLake-v1, or a spec file): a traced DeclaredEnv records them, as `tracelab play --env --run`
@@ -73,9 +74,14 @@ class EvalTarget(Protocol):
     def evaluator(self, writer: TraceWriter, new_id: NewId, settings: EvalSettings) -> Evaluator: ...
 
 
-def eval_info(step: int, round_no: int, **more: Any) -> dict[str, Any]:
-    """An evaluation game's begin info (docs/training.md, "What is logged, and where")."""
-    return {"kind": "eval", "train_step": int(step), "eval_round": int(round_no), **more}
+def eval_info(source: EnvSource, step: int | None = None, round_no: int | None = None) -> dict[str, Any]:
+    """An evaluation game's begin info (docs/training.md, "What is logged, and where"): the world's params it
+    is played with (`source`'s, as its spec reads them), and a training's step and round (`tracelab eval
+    --run` has none)."""
+    info: dict[str, Any] = {"kind": "eval", "params": source.declared()[1]}
+    if step is not None and round_no is not None:
+        info.update(train_step=int(step), eval_round=int(round_no))
+    return info
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -156,7 +162,7 @@ class DeclaredEvaluator:
         result = EnvEvalResult()
         if self.trace_env is not None:
             t0 = time.perf_counter()
-            self.trace_env.unwrapped.trace_info(eval_info(step, round_no))
+            self.trace_env.unwrapped.trace_info(eval_info(self.source, step, round_no))
             for k in range(self.traced):
                 self._play_one(agent, seed + 1 + k, result)
             result.seconds["traced"] = time.perf_counter() - t0

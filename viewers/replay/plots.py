@@ -12,6 +12,7 @@ from tracelab.viewers.replay import style
 from tracelab.viewers.replay.columns import send_per_entity
 from tracelab.viewers.replay.markdown_text import literal
 
+from tracelab.store.eval_params import EVAL_PARAMS_COLUMNS, eval_params_text
 from tracelab.store.reader import RunConnection
 
 REWARD_PALER = 0.5      # a reward line's team colour, this far towards white
@@ -41,22 +42,26 @@ def step_notes(rows: list[StepRow]) -> dict[int, list[str]]:
 
 
 def eval_game_note(con: RunConnection, episode: int) -> str | None:
-    """The step document's line that places a training's evaluation game in its training (its begin info,
-    docs/store.md's training-run contract), None for any other episode: the replay has no training curves
-    (module docstring), this is what it shows of them."""
+    """The step document's line that says what an evaluation game was played against (the world's params, an
+    older run's opponent level) and places a training's in its training (its begin info, docs/store.md's
+    training-run contract), None for any other episode: the replay has no training curves (module
+    docstring), this is what it shows of them."""
     rows = con.execute(
         "SELECT TRY_CAST(json_extract(begin_info, '$.train_step') AS BIGINT), "
         "TRY_CAST(json_extract(begin_info, '$.eval_round') AS BIGINT), "
-        "TRY_CAST(json_extract(begin_info, '$.opponent_p') AS DOUBLE) FROM episodes "
+        f"{EVAL_PARAMS_COLUMNS} FROM episodes "
         "WHERE episode = ? AND json_extract_string(begin_info, '$.kind') = 'eval'", [episode]).fetchall()
     if not rows:
         return None
-    train_step, eval_round, level = rows[0]  # level: RuleSim's evaluation games recorded their opponent's p
+    train_step, eval_round, params, level = rows[0]
+    played_against = eval_params_text(params, level)
     where = [f"at train step {train_step:,}" if train_step is not None else "",
              f"round {eval_round}" if eval_round is not None else "",
-             f"opponent p {level:g}" if level is not None else ""]
-    return ("- an evaluation game of the training, " + ", ".join(w for w in where if w)
-            + " (its curves: `tracelab tui RUN`, 6 Training)")
+             literal(played_against) if played_against is not None else ""]
+    where = ", ".join(w for w in where if w)
+    if train_step is None and eval_round is None:  # tracelab eval --run's: no training to place it in
+        return "- an evaluation game" + (f", {where}" if where else "")
+    return f"- an evaluation game of the training, {where} (its curves: `tracelab tui RUN`, 6 Training)"
 
 
 def agent_rewards(agents: list[str], rows: list[StepRow]) -> np.ndarray | None:

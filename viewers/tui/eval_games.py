@@ -1,25 +1,29 @@
-"""The traced evaluation games of a training run, for the trace's `]` / `[` keys and its header line.
+"""The traced evaluation games of a run (a training's, `tracelab eval --run`'s), for the trace's `]` / `[` keys and its header line.
 
 A training run (HELPER_GUIDE's contract, docs/training.md) begins each evaluation game with the info
-`{"kind": "eval", "train_step": N, "eval_round": K}` (RuleSim's, the war game's trainer before its spec, also
-`"opponent_p": P`) and stores its full trace; a run
-that is not a training run has none. Read from the begin info itself, so a run sealed before the
-episodes view had its `kind` column reads the same."""
+`{"kind": "eval", "train_step": N, "eval_round": K, "params": {...}}` and stores its full trace; `tracelab
+eval --run` begins each of its games with `{"kind": "eval", "params": {...}}` (the world's params: what the
+game was played against, tracelab.store.eval_params). A run with no evaluation games has none. Read from the
+begin info itself, so a run sealed before the episodes view had its `kind` column reads the same."""
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+from tracelab.store.eval_params import EVAL_PARAMS_COLUMNS, eval_params_text
 from tracelab.viewers.tui.source import RunSource
 
+HEADER_WIDTH = 79     # the header line's game part, after its leading space, fits an 80-column terminal
+MIN_PARAMS_ROOM = 8  # less room than this: no params rather than a stump of them
+
 # every evaluation game in episode order; nth / of: its place among the games of its evaluation round
-EVAL_GAMES_SQL = """
-SELECT episode, train_step, eval_round, level, outcome, steps,
+EVAL_GAMES_SQL = f"""
+SELECT episode, train_step, eval_round, params, level, outcome, steps,
        row_number() OVER (PARTITION BY train_step, eval_round ORDER BY episode) AS nth,
        count(*) OVER (PARTITION BY train_step, eval_round) AS of_round
 FROM (SELECT episode, outcome, steps,
              TRY_CAST(json_extract(begin_info, '$.train_step') AS BIGINT) AS train_step,
              TRY_CAST(json_extract(begin_info, '$.eval_round') AS BIGINT) AS eval_round,
-             TRY_CAST(json_extract(begin_info, '$.opponent_p') AS DOUBLE) AS level
+             {EVAL_PARAMS_COLUMNS}
       FROM episodes WHERE json_extract_string(begin_info, '$.kind') = 'eval')
 ORDER BY episode
 """
@@ -30,7 +34,8 @@ class EvalGame:
     episode: int
     train_step: int | None
     eval_round: int | None
-    level: float | None        # the evaluation's level where its begin info says it (RuleSim's opponent p)
+    params: str | None         # the world's params (JSON text) where its begin info records them
+    level: float | None        # an older run's level instead (RuleSim's opponent p)
     outcome: str | None        # None while the game is still being played (a live run)
     steps: int | None
     nth: int                   # 1-based place among the games of its evaluation round
@@ -43,11 +48,11 @@ class EvalGame:
             parts.append(f"round {self.eval_round}")
         if self.train_step is not None:
             parts.append(f"train step {self.train_step:,}")
-        if self.level is not None:
-            parts.append(f"opponent p={self.level:g}")
         ended = "playing" if self.outcome is None else \
             f"{self.outcome}, {self.steps} steps" if self.steps is not None else self.outcome
-        return " · ".join(parts + [ended])
+        room = HEADER_WIDTH - len(" · ".join([*parts, ended, ""]))  # the params take what the rest leaves
+        played_against = eval_params_text(self.params, self.level, room) if room >= MIN_PARAMS_ROOM else None
+        return " · ".join([*parts, *([played_against] if played_against else []), ended])
 
 
 def eval_games(source: RunSource) -> list[EvalGame]:

@@ -113,7 +113,7 @@ class TracePane(Vertical):
         self.live_reads = LiveReads(source)
 
     def compose(self) -> ComposeResult:
-        game = Static("", id="tr-game", classes="title")
+        game = Static("", id="tr-game", classes="title", markup=False)  # a run's params and outcomes are anyone's
         game.display = False           # shown for the episodes of a training run
         yield game
         with Horizontal(id="tr-filters"):
