@@ -5,8 +5,9 @@ Numeric columns are handed to Arrow without copies where the dtype already match
 from __future__ import annotations
 
 import datetime as _dt
+import functools
 import json
-from collections.abc import Collection, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -159,11 +160,6 @@ def groundings_table(groundings: Any, have: int) -> pa.Table:
 
 # ---- the program ---------------------------------------------------------------------------------------
 
-def _loc(item: Any) -> tuple[str | None, int | None]:
-    loc = getattr(item, "loc", None)
-    return (loc.file, loc.line) if loc else (None, None)
-
-
 def _clause_row(rule_id: int, pos: int, lit: Any, closed: Collection[str]) -> dict[str, Any]:
     return {"rule": rule_id, "pos": pos, "label": lit.pred, "args": [t.name for t in lit.args],
             "is_var": [bool(t.is_var) for t in lit.args], "negated": bool(lit.negated),
@@ -171,12 +167,21 @@ def _clause_row(rule_id: int, pos: int, lit: Any, closed: Collection[str]) -> di
             "closed": lit.pred in closed}
 
 
-def program_tables(program: Any, facts: Sequence[Any] | None = None,
-                   graph: Any = None) -> dict[str, pa.Table]:
+def program_tables(program: Any, facts: Sequence[Any] | None = None, graph: Any = None,
+                   file_name: Callable[[str], str] | None = None) -> dict[str, pa.Table]:
     """raw.rules, raw.clauses, raw.facts and raw.policies of a parsed Program (tracelab.engine.program).
     facts: the fact list the trace's fact ids index (Engine.facts: graph facts, then the program's);
     defaults to program.facts. graph: a Graph whose facts come first (Engine.facts' order), written as
-    columns (tracelab.store.graph_tables); then `facts` are the program's and are numbered after them."""
+    columns (tracelab.store.graph_tables); then `facts` are the program's and are numbered after them.
+    file_name: how a rule's or fact's file is recorded (the writer's portable paths), asked once a file."""
+    recorded = functools.cache(file_name) if file_name is not None else None
+
+    def _loc(item: Any) -> tuple[str | None, int | None]:
+        loc = getattr(item, "loc", None)
+        if not loc:
+            return None, None
+        return (recorded(loc.file) if recorded is not None and loc.file is not None else loc.file), loc.line
+
     rules, clauses, fact_rows = [], [], []
     for i, r in enumerate(program.rules):
         file, line = _loc(r)
@@ -196,7 +201,7 @@ def program_tables(program: Any, facts: Sequence[Any] | None = None,
     return {
         "rules": ab.table_from_rows(rules, SCHEMAS["rules"]),
         "clauses": ab.table_from_rows(clauses, SCHEMAS["clauses"]),
-        "facts": pa.concat_tables([*([graph_fact_table(graph)] if graph is not None else []),
+        "facts": pa.concat_tables([*([graph_fact_table(graph, recorded)] if graph is not None else []),
                                    ab.table_from_rows(fact_rows, SCHEMAS["facts"])]),
         "policies": ab.table_from_rows(policies, SCHEMAS["policies"]),
     }

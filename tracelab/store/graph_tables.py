@@ -3,6 +3,7 @@ store's `facts` and `edges` tables, built column by column: a million-edge graph
 calls, not a Python object per fact (Graph.fact(i) builds one; the rows here are the same)."""
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -60,11 +61,11 @@ def _bound_texts(bounds: np.ndarray) -> pa.Array:
     return pc.take(texts, ab.from_numpy(inverse.reshape(-1).astype(np.int32)))
 
 
-def graph_fact_table(graph: Any, first_id: int = 0) -> pa.Table:
+def graph_fact_table(graph: Any, file_name: Callable[[str], str] | None = None, first_id: int = 0) -> pa.Table:
     """The graph's facts as `facts` rows numbered from `first_id`, in the graph's order (Engine.facts
     puts them first): name and text `label(a,b)` (constants quoted as in rules), literal
-    `label(a,b):[l,u]`, the window and static flag, the graph's file and line 0, and the episode a
-    fact table gave the fact (NULL: every episode)."""
+    `label(a,b):[l,u]`, the window and static flag, the graph's file (as `file_name` records it) and line 0,
+    and the episode a fact table gave the fact (NULL: every episode)."""
     n = graph.n_facts
     if n == 0:  # a game's graph: its facts are the program's
         return ab.empty_table(SCHEMAS["facts"])
@@ -83,7 +84,8 @@ def graph_fact_table(graph: Any, first_id: int = 0) -> pa.Table:
         "name": name, "text": name, "literal": literal,
         "start": ab.from_numpy(windows[:, 0].astype(np.int32)), "end": ab.from_numpy(windows[:, 1].astype(np.int32)),
         "static": ab.from_numpy(np.asarray(graph.statics, dtype=np.bool_)),
-        "file": pa.repeat(ab.column([graph.file], pa.string())[0], n),
+        "file": pa.repeat(ab.column([file_name(graph.file) if file_name and graph.file else graph.file],
+                                    pa.string())[0], n),
         "line": ab.from_numpy(np.zeros(n, np.int32)),
         "episode": ab.from_numpy(np.asarray(episode, dtype=np.int64), null=episode < 0),
     }

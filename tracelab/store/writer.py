@@ -61,21 +61,6 @@ MAX_PENDING_ROWS = 131_072
 HANDOVER_STEPS = 64
 
 
-def _portable_files(table: pa.Table, run_dir: Path) -> pa.Table:
-    """A program table with its `file` column's paths portable (portable_paths); each distinct path looked at
-    once (a graph's facts, millions of rows, share one)."""
-    column = table.column("file").combine_chunks()
-    if column.null_count == len(column):
-        return table
-    encoded = column.dictionary_encode()
-    paths = arrow_build.strings([None if p is None else portable_path(p, run_dir)
-                                 for p in encoded.dictionary.to_pylist()])
-    if paths.equals(encoded.dictionary):
-        return table
-    column = pa.DictionaryArray.from_arrays(encoded.indices, paths).cast(pa.string())
-    return table.set_column(table.schema.get_field_index("file"), table.schema.field("file"), column)
-
-
 def _without_file(table: pa.Table) -> pa.Table:
     return table.drop_columns(["file"]) if "file" in table.column_names else table
 
@@ -267,8 +252,7 @@ class TraceWriter:
         program's; its edges go through write_edges, once the nodes they name are written).
         With an engine at hand, write_engine_program(engine) passes the program, graph, vocabulary and
         groundings, and the graph's edges."""
-        tables = convert.program_tables(program, facts, graph)
-        tables.update({name: _portable_files(tables[name], self.run_dir) for name in ("rules", "facts")})
+        tables = convert.program_tables(program, facts, graph, lambda path: portable_path(path, self.run_dir))
         if self._program_written and self._stored_tables is not None:  # a reopened run: the same program
             self._check_stored(tables, PROGRAM_TABLES, "program")
             for name in PROGRAM_TABLES:
