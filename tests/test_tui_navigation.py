@@ -1,23 +1,27 @@
 """The TUI keeps your place (issue 27 part 7): Esc steps back one view, a reopened run opens where it was
 left, quick `]` presses keep the timestep, the Episodes' outcome selector has a key, and 80x24 with the
-board shown keeps the rule column readable and the cursor row on screen. Headless, on the sample runs."""
+board shown keeps the rule column readable and the cursor row on screen; Esc cancels the query the user
+waits on, never background work. Headless, on the sample runs."""
 from __future__ import annotations
 
 import os
+import threading
 from pathlib import Path
 from typing import Any
 
 
 os.environ["TEXTUAL_ANIMATIONS"] = "none"
 
-from tracelab.store.reader import open_run  # noqa: E402
+from tracelab.store.reader import open_run, query_readonly  # noqa: E402
 from tracelab.viewers.tui.lazy_table import LazyTable  # noqa: E402
+from tracelab.viewers.tui.source import background  # noqa: E402
 from tracelab.viewers.tui.trace import TracePane  # noqa: E402
 from tui_helpers import back, episodes_ready, has_rows, loaded, run_app, shown, wait_for  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 ADVANCED = ROOT / "sample_runs" / "advanced"
 BASE_TRAIN = ROOT / "sample_runs" / "base-train"
+ENDLESS = "SELECT sum(a.range * b.range) FROM range(1000000) a, range(1000000) b"  # minutes of work
 
 
 def active_view(app: Any) -> str:
@@ -52,6 +56,57 @@ def test_esc_steps_back_one_view_why_trace_episodes_then_runs() -> None:
         await back(app, pilot)                                    # episodes -> the Runs list
         await wait_for(pilot, lambda: type(app.screen).__name__ == "RunsScreen")
     run_app([ADVANCED], body)
+
+
+def cancelled_notes(app: Any) -> list[str]:
+    return [str(n.message) for n in app._notifications if "cancelled" in str(n.message)]
+
+
+def test_esc_goes_back_past_background_work_and_closing_the_run_stops_it() -> None:
+    """Before: Esc cancelled whatever query ran, background work the user never asked for too (the
+    trace's warm-up, the board read for Enter, the Rules view's never-fired count): "query cancelled", and
+    the user stayed where they were. Here a minutes-long query of background work holds the connection."""
+    started, ended = threading.Event(), threading.Event()
+
+    async def body(app: Any, pilot: Any) -> None:
+        await episodes_ready(app, pilot)
+        await pilot.press("4")
+        rules = app.screen.query_one("#rules-table", LazyTable)
+        await wait_for(pilot, lambda: active_view(app) == "rules" and loaded(rules))
+        source = app.screen.source
+
+        def endless() -> None:
+            try:
+                source.call(lambda con: (started.set(), query_readonly(con, ENDLESS).fetchall()))
+            except Exception:  # noqa: BLE001 - interrupted when the run closes
+                pass
+            ended.set()
+
+        app.screen.run_worker(background(endless), thread=True, exit_on_error=False)
+        await wait_for(pilot, started.is_set)                   # it holds the connection
+        await pilot.press("escape")                               # rules -> episodes, at once
+        await wait_for(pilot, lambda: active_view(app) == "episodes" or cancelled_notes(app))
+        assert active_view(app) == "episodes" and not cancelled_notes(app)
+        assert source.busy and not ended.is_set()                 # still at work
+        await pilot.press("escape")                               # closing the run stops it
+        await wait_for(pilot, lambda: type(app.screen).__name__ == "RunsScreen" and ended.is_set())
+        assert not cancelled_notes(app)
+    run_app([ADVANCED], body)
+
+
+def test_esc_cancels_the_query_the_user_waits_on_and_stays() -> None:
+    async def body(app: Any, pilot: Any) -> None:
+        await episodes_ready(app, pilot)
+        await pilot.press("5")
+        sql = app.screen.panes["sql"]
+        await wait_for(pilot, lambda: sql.is_attached and app.focused is sql.editor)
+        sql.editor.text = ENDLESS
+        await pilot.press("ctrl+r")
+        await wait_for(pilot, lambda: app.screen.source.foreground_busy and sql._executing is not None)
+        await pilot.press("escape")
+        await wait_for(pilot, lambda: "cancelled" in str(sql.query_one("#sql-status").render()))
+        assert active_view(app) == "sql" and cancelled_notes(app) == ["query cancelled"]
+    run_app([ADVANCED], body, size=(100, 30))
 
 
 def test_quick_eval_game_presses_keep_the_timestep() -> None:

@@ -54,11 +54,11 @@ def has_rows(table: LazyTable) -> bool:
 
 
 async def back(app: Any, pilot: Any) -> None:
-    """Esc as "back one view", pressed once no query runs on the open run's connection: while one runs
-    (a view still loading, or background work such as the trace's warm-up or the board read for Enter),
-    Esc cancels it instead and stays (RunScreen.action_cancel_or_back), and a test waiting for the view
-    it meant to reach would wait out PATIENCE."""
-    await wait_for(pilot, lambda: not (getattr(app.screen, "source", None) and app.screen.source.busy))
+    """Esc as "back one view", pressed once no query the user waits on runs on the open run's connection:
+    while one runs (a view still loading), Esc cancels it instead and stays (RunScreen.action_cancel_or_back),
+    and a test waiting for the view it meant to reach would wait out PATIENCE. Background work (the trace's
+    warm-up, the board read for Enter) does not hold Esc back."""
+    await wait_for(pilot, lambda: not (getattr(app.screen, "source", None) and app.screen.source.foreground_busy))
     await pilot.press("escape")
 
 

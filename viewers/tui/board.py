@@ -14,7 +14,7 @@ from textual.widget import Widget
 from tracelab.board import Board, piece_label
 from tracelab.viewers.board_state import BoardState, BoardTrack
 from tracelab.viewers.tui.colours import DIM
-from tracelab.viewers.tui.source import RunSource
+from tracelab.viewers.tui.source import RunSource, background
 
 SHADE = 0.3      # a terrain cell's background: its colour this bright
 
@@ -91,7 +91,7 @@ class BoardView(Widget):
             self._place()
         elif self._loading != episode:
             self._loading = episode
-            self.run_worker(lambda: self._load(episode), thread=True, group="board", exclusive=True,
+            self.run_worker(background(lambda: self._load(episode)), thread=True, group="board", exclusive=True,
                             exit_on_error=False)
 
     def _load(self, episode: int) -> None:

@@ -19,7 +19,7 @@ from tracelab.engine.terminal_text import printable
 from tracelab.store.agent_why import ActionExplanation, explain_action
 from tracelab.viewers.tui.colours import DIM, FALSE, PARTIAL, TRUE, team_colour
 from tracelab.viewers.tui.messages import ExplainAction
-from tracelab.viewers.tui.source import RunSource
+from tracelab.viewers.tui.source import RunSource, background
 
 VALUE_WIDTH = 6     # "-12.3" and a space
 MIN_WIDTH = 18      # narrower, the bars have no room
@@ -115,7 +115,7 @@ class DecisionPanel(Widget, can_focus=True):
         if self._asked == (episode, t):
             return
         self._asked = (episode, t)
-        self.run_worker(lambda: self._read(episode, t), thread=True, group="decision", exclusive=True,
+        self.run_worker(background(lambda: self._read(episode, t)), thread=True, group="decision", exclusive=True,
                         exit_on_error=False)
 
     def _read(self, episode: int, t: int) -> None:

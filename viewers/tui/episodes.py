@@ -21,7 +21,7 @@ from tracelab.viewers.tui.lazy_table import Column, LazyTable
 from tracelab.viewers.tui.messages import OpenTrace
 from tracelab.viewers.tui.paging import QuerySource
 from tracelab.viewers.tui.places import EpisodesPlace
-from tracelab.viewers.tui.source import LiveReads, RunSource
+from tracelab.viewers.tui.source import LiveReads, RunSource, background
 from tracelab.viewers.tui.shown_text import shown
 
 OUTCOME_COLOURS = {"win": TRUE, "loss": FALSE, "draw": PARTIAL, "truncated": UNKNOWN,
@@ -151,7 +151,7 @@ class EpisodesPane(Vertical):
         self.table.focus()
 
     def on_mount(self) -> None:
-        self.run_worker(self._inspect, thread=True, exit_on_error=False)
+        self.run_worker(background(self._inspect), thread=True, exit_on_error=False)
         if self.source.live:  # a run being written: new episodes appear as they begin and end
             self.set_interval(LIVE_REFRESH_S, self._poll)
 
@@ -169,7 +169,7 @@ class EpisodesPane(Vertical):
                     if not first:
                         self.app.call_from_thread(self.reload, True)
 
-        self.run_worker(work, thread=True, group="episodes-poll", exclusive=True, exit_on_error=False)
+        self.run_worker(background(work), thread=True, group="episodes-poll", exclusive=True, exit_on_error=False)
 
     def _inspect(self) -> None:
         cols = self.source.columns("SELECT * FROM episodes")

@@ -24,6 +24,7 @@ from textual.strip import Strip
 
 from tracelab.viewers.tui.paging import PAGE, PageSource, fetch_span
 from tracelab.viewers.tui.shown_text import shown, shown_text
+from tracelab.viewers.tui.source import background
 
 Row = dict[str, Any]
 CACHED_PAGES = 64
@@ -194,7 +195,7 @@ class LazyTable(ScrollView, can_focus=True):
             except Exception:  # noqa: BLE001 - a failing warm-up shows up again when a page needs it
                 pass
 
-        self.run_worker(warm, thread=True, group=f"warm-{id(self)}", exit_on_error=False)
+        self.run_worker(background(warm), thread=True, group=f"warm-{id(self)}", exit_on_error=False)
 
     def _prepared(self, generation: int, count: int, error: str | None, start: int | None = None,
                   pages: list[tuple[int, list[Row]]] | None = None) -> None:

@@ -17,7 +17,7 @@ from tracelab.viewers.tui.colours import FALSE
 from tracelab.viewers.tui.lazy_table import Column, LazyTable
 from tracelab.viewers.tui.messages import OpenTrace
 from tracelab.viewers.tui.paging import QuerySource
-from tracelab.viewers.tui.source import RunSource
+from tracelab.viewers.tui.source import RunSource, background
 from tracelab.engine.terminal_text import printable
 
 PER_RULE_SQL = """
@@ -117,7 +117,7 @@ class RulesPane(Vertical):
                                       f" {event.count} rules, {never} never fired · e: per episode · "
                                       f"Enter: trace filtered by the rule")
 
-        self.run_worker(work, thread=True, group="rules-never", exclusive=True, exit_on_error=False)
+        self.run_worker(background(work), thread=True, group="rules-never", exclusive=True, exit_on_error=False)
 
     def action_toggle_view(self) -> None:
         self.per_episode = not self.per_episode

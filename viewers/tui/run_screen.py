@@ -24,7 +24,7 @@ from tracelab.viewers.tui.keybar import KeyBar
 from tracelab.viewers.tui.lazy_table import LazyTable
 from tracelab.viewers.tui.messages import ExplainAction, ExplainChange, OpenTrace
 from tracelab.viewers.tui.places import RunPlace
-from tracelab.viewers.tui.source import RunSource, SeveralRunsSource
+from tracelab.viewers.tui.source import RunSource, SeveralRunsSource, background
 from tracelab.viewers.tui.shown_text import shown
 
 TABS = (("episodes", "1 Episodes"), ("trace", "2 Trace"), ("why", "3 Why"), ("rules", "4 Rules"),
@@ -174,7 +174,7 @@ class RunScreen(Screen):
         and graph, numpy, pyarrow) and read the run's board, which Enter opens, in a thread meanwhile
         (mounting it waits for Enter: a view mounted while the app closes would fail)."""
         if event.table.id == "ep-table" and "trace" not in self.panes:
-            self.run_worker(self._preload_trace, thread=True, group="preload", exit_on_error=False)
+            self.run_worker(background(self._preload_trace), thread=True, group="preload", exit_on_error=False)
 
     def _preload_trace(self) -> None:
         _view_class("trace")       # its modules: numpy and pyarrow with its paging, the board's drawing
@@ -225,9 +225,10 @@ class RunScreen(Screen):
             self.call_after_refresh(self._focus_pane, event.pane.id)
 
     async def action_cancel_or_back(self) -> None:
-        """Esc: cancel the running query; else leave a text field (for its view's table); else go back one
-        view (BACK), and from the view the run opened on to the Runs screen."""
-        if [source for source in self._sources() if source.interrupt()]:   # every one: no short cut
+        """Esc: cancel the running query the user waits on (not background work: a warm-up, a panel
+        following the cursor); else leave a text field (for its view's table); else go back one view (BACK),
+        and from the view the run opened on to the Runs screen."""
+        if [source for source in self._sources() if source.interrupt_foreground()]:   # every one: no short cut
             self.notify("query cancelled")
             return
         # the SQL editor: to its results (where 1-6 work again). `get` does not make the view: textual's

@@ -1,10 +1,12 @@
 """One open run for the TUI (or several, for the SQL console: SeveralRunsSource): its connection
 (tracelab.store.open_run) behind a lock, so that queries from worker threads never overlap on it, and
-every statement through the store's read-only path (query_readonly inside retrying). `interrupt()` cancels the running query (Esc). The run's life as
+every statement through the store's read-only path (query_readonly inside retrying). Esc cancels the query
+the user waits on (`interrupt_foreground()`), not background work (`background()`). The run's life as
 other processes change it (its writer closing or dying, `tracelab seal`) is read by `follow()`; the
 views re-read a run while it is `live` and once more after it closes (LiveReads)."""
 from __future__ import annotations
 
+import functools
 import threading
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
@@ -23,29 +25,55 @@ if TYPE_CHECKING:   # pyarrow is loaded by the views that read Arrow, after the 
 
 T = TypeVar("T")
 
+_thread = threading.local()
+
+
+def background(work: Callable[[], None]) -> Callable[[], None]:
+    """`work` (a worker thread's body) marked as background: reads the user did not ask for and is not
+    waiting on (a warm-up, a panel following the cursor, a live run's re-read). Esc does not cancel its
+    queries (interrupt_foreground), so that it goes back at once; closing the run does (close)."""
+    @functools.wraps(work)
+    def marked() -> None:
+        _thread.background = True
+        try:
+            work()
+        finally:
+            _thread.background = False
+    return marked
+
 
 class LockedConnection:
     """A store connection behind a lock: queries from worker threads never overlap on it, every statement
     goes through the store's read-only path (query_readonly inside retrying), `interrupt()` cancels the
-    running query (Esc)."""
+    running query, `interrupt_foreground()` only one the user waits on (Esc)."""
 
     def __init__(self, con: RunConnection) -> None:
         self.con = con
         self._lock = threading.Lock()
-        self._busy = 0
+        # the call holding the connection: None, "foreground" or "background"; read and changed under
+        # _running_lock, so that Esc's interrupt cannot land on a background call that has just begun
+        self._running: str | None = None
+        self._running_lock = threading.Lock()
 
     @property
     def busy(self) -> bool:
-        return self._busy > 0
+        return self._running is not None
+
+    @property
+    def foreground_busy(self) -> bool:
+        """A query the user waits on is running (Esc would cancel it)."""
+        return self._running == "foreground"
 
     def call(self, fn: Callable[[RunConnection], T]) -> T:
         """fn(connection) alone on the connection (the explain functions take a connection)."""
         with self._lock:
-            self._busy += 1
+            with self._running_lock:
+                self._running = "background" if getattr(_thread, "background", False) else "foreground"
             try:
                 return retrying(lambda: fn(self.con))
             finally:
-                self._busy -= 1
+                with self._running_lock:
+                    self._running = None
 
     def arrow(self, sql: str, params: dict[str, Any] | None = None) -> pa.Table:
         return self.call(lambda con: query_readonly(con, sql, params).to_arrow_table())
@@ -74,10 +102,19 @@ class LockedConnection:
 
     def interrupt(self) -> bool:
         """Cancel the query running now, if any; True if there was one."""
-        if not self.busy:
-            return False
-        self.con.interrupt()
-        return True
+        with self._running_lock:
+            if self._running is None:
+                return False
+            self.con.interrupt()
+            return True
+
+    def interrupt_foreground(self) -> bool:
+        """Cancel the query running now if the user waits on it (not background work); True if so."""
+        with self._running_lock:
+            if self._running != "foreground":
+                return False
+            self.con.interrupt()
+            return True
 
     def close(self) -> None:
         # a long query would otherwise hold the lock, and closing the app, for minutes; interrupted again

@@ -34,7 +34,7 @@ from tracelab.viewers.tui.messages import ExplainChange
 from tracelab.viewers.tui.paging import PAGE
 from tracelab.viewers.tui.trace_paging import TraceFilter, TraceSource
 from tracelab.viewers.tui.places import TracePlace
-from tracelab.viewers.tui.source import LiveReads, RunSource
+from tracelab.viewers.tui.source import LiveReads, RunSource, background
 from tracelab.viewers.tui.shown_text import shown
 from tracelab.engine.terminal_text import printable
 
@@ -154,7 +154,7 @@ class TracePane(Vertical):
         self._read_game_later(place.episode)
 
     def _read_game_later(self, episode: int) -> None:
-        self.run_worker(lambda: self._read_game(episode), thread=True, group="trace-game", exclusive=True,
+        self.run_worker(background(lambda: self._read_game(episode)), thread=True, group="trace-game", exclusive=True,
                         exit_on_error=False)
 
     def on_mount(self) -> None:
@@ -174,7 +174,7 @@ class TracePane(Vertical):
             if grown and trace is self.trace:
                 self.app.call_from_thread(self._refollow)
 
-        self.run_worker(work, thread=True, group="trace-follow", exclusive=True, exit_on_error=False)
+        self.run_worker(background(work), thread=True, group="trace-follow", exclusive=True, exit_on_error=False)
 
     def _refollow(self) -> None:
         side = self.side

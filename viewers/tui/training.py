@@ -20,7 +20,7 @@ from tracelab.viewers.tui.colours import BLUE_TEAM, PARTIAL, RED_TEAM, TRUE, UNK
 from tracelab.viewers.tui.episodes import EpisodesPane
 from tracelab.viewers.tui.plot import Band, BraillePlot, Series
 from tracelab.viewers.tui.run_overlay import RunCurves, mean_band, run_labels
-from tracelab.viewers.tui.source import LiveReads, RunSource
+from tracelab.viewers.tui.source import LiveReads, RunSource, background
 
 REFRESH_S = 1.0
 PALETTE = (TRUE, BLUE_TEAM, PARTIAL, RED_TEAM, UNKNOWN)
@@ -69,7 +69,7 @@ class TrainingPane(Vertical, can_focus=True):
             return
         if any(r.source.busy for r in self.runs):
             return  # another query holds a connection; try again on the next tick
-        self.run_worker(self._read, thread=True, group="training", exclusive=True, exit_on_error=False)
+        self.run_worker(background(self._read), thread=True, group="training", exclusive=True, exit_on_error=False)
 
     @property
     def is_visible_tab(self) -> bool:
