@@ -6,8 +6,10 @@ The files by stage (a program flows down; each boundary is a named type, as Souf
 
     language   parser.py -> program.py (the AST), spelling.py and bounds.py (its names and bound test,
                without its types), errors.py, annotations.py, head_functions.py,
-               cause_kinds.py (what a trace row's cause_kind means)
+               cause_kinds.py (what a trace row's cause_kind means), parse_limit.py (the parser's memory),
+               crisp.py (bounds as value codes: which kernel a program gets)
     inputs     graph.py, graphml_scan.py, graphml_expat.py, graphml_raw.py, facttable.py, safe_files.py,
+               duckdb_limits.py, terminal_text.py (a stranger's strings made safe to show),
                vocabulary.py (nodes, labels and atoms as dense ids)
     grounding  grounding.py, grounding_limit.py, grounding_cache.py (a build's groundings kept on disk, in
                array_file.py's plain arrays), aggregate_tables.py -> kernel_tables.py (what the kernels read)
@@ -15,13 +17,14 @@ The files by stage (a program flows down; each boundary is a named type, as Souf
                codegen.py (kernel.py rewritten for one program)
     backends   backend_api.py (what a backend may touch of the Engine), backend_counting.py, backend_lanes.py,
                backend_compiled.py, compile_cache.py, compile_job.py, compile_background.py, numba_cache.py,
-               kernel_names.py
-    the Engine core.py (builds, steps, traces, snapshots), memory.py
+               numba_startup.py, numba_python.py (the kernels as Python before their first compile),
+               direct_call.py (the step's compiled call without numba's dispatch), kernel_names.py
+    the Engine core.py (builds, steps, traces, snapshots), memory.py, notices.py (what it logs, never prints)
     oracle     reference.py (docs/language.md run naively; the differential tests' other side)
 
 They stay in one flat folder, not a folder per stage: numba keys its disk cache by a function's file,
 so moving kernel.py, lanes.py, restore_kernel.py, trace_take.py or graphml_scan.py would make every user's
-first run compile them all again, and 79 files outside engine/ import its modules by name. With 33 files
+first run compile them all again, and ~130 files outside engine/ import its modules by name. With 46 files
 the stage is already in most names (backend_*, compile_*, graphml_*, grounding*) and in this map;
 Soufflé's stage folders each hold dozens.
 
