@@ -230,10 +230,12 @@ def test_a_huge_scenario_is_refused_up_front_naming_its_field(tmp_path: Path, wh
 
 @pytest.fixture
 def small_disk(tmp_path: Path):  # noqa: ANN201
-    """A 1 MiB tmpfs (needs root, as on this project's machines; skipped elsewhere)."""
+    """A 4 MiB tmpfs (needs root, as on this project's machines; skipped elsewhere): room for the run's first
+    write whatever the machine's speed (a write holds at most write_pacing.WRITE_ROWS steps: ~1 MB of the war
+    game's changes; at 1 MiB a quiet machine's first write did not fit), not for 2,000 games (~13 MB)."""
     disk = tmp_path / "disk"
     disk.mkdir()
-    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(disk)],
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=4m", "tmpfs", str(disk)],
                              capture_output=True, check=False)
     if mounted.returncode != 0:
         pytest.skip(f"cannot mount a small tmpfs here: {mounted.stderr.decode().strip()}")
