@@ -6,8 +6,9 @@ The key is a hash of everything a close reads: the rules (their full text, place
 (nodes, labels, atoms), the grounder's state (its groundings, settable atoms and relations so far, its
 limit), and the code that grounds (the sources of grounding.py, vocabulary.py, program.py, bounds.py and of
 this module and array_file.py) with the versions of tracelab, numpy and Python. A program with a head
-function (Python code the key cannot see) is never cached. Old keys are never read again; deleting the
-folder is always safe.
+function (Python code the key cannot see) is never cached. Old keys are never read again, so the folder is
+kept bounded: a new entry removes the least recently used ones beyond FOLDER_CAP bytes or MAX_ENTRIES
+entries (a hit marks its entry used). Deleting the folder is always safe.
 
 An entry holds what the close added, as plain arrays (array_file.py): the atoms it interned, its new
 groundings' rows, the settable atoms and the relations. It is a file from a stranger: read under a size cap,
@@ -21,6 +22,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
+import os
 import sys
 from importlib import metadata
 from pathlib import Path
@@ -37,6 +39,9 @@ from .safe_files import MIB, FileRefused
 FOLDER = "grounded"
 FORMAT = 1  # part of every key: bump when an entry's arrays or their meaning change
 FILE_CAP = 256 * MIB  # a bigger grounding is not cached (war.toml's: well under 1 MiB)
+FOLDER_CAP = 512 * MIB  # the folder's entries together, after a new one is written
+MAX_ENTRIES = 256  # every spec, size and param set a user builds makes one or two
+SUFFIX = ".grounding"
 # the arrays of an entry: numpy dtype and number of dimensions
 ARRAYS = {"atoms": ("<i4", 2), "rule": ("<i4", 1), "head": ("<i4", 1), "vals": ("<i4", 2), "body": ("<i4", 2),
           "settable": ("|u1", 1), "relation_ptr": ("<i8", 1), "relation_atoms": ("<i8", 1)}
@@ -88,7 +93,7 @@ def close(g: Grounder) -> None:
     if key is None:
         g.close()
         return
-    path = folder / f"{key}.grounding"
+    path = folder / f"{key}{SUFFIX}"
     try:
         if _load(g, key, path):
             return
@@ -101,8 +106,30 @@ def close(g: Grounder) -> None:
     g.close()
     try:
         _store(g, key, path, *before)
+        prune(folder, keep=path)
     except OSError:  # an unwritable folder, a full disk: the next build grounds again
         pass
+
+
+def prune(folder: Path, keep: Path, max_entries: int | None = None, max_bytes: int | None = None) -> None:
+    """Remove the least recently used entries (by modification time: a hit touches its entry) until at
+    most `max_entries` (MAX_ENTRIES) remain, of `max_bytes` (FOLDER_CAP) together; `keep` (the entry just
+    written) stays. Only this cache's own files (the suffix, regular files) are looked at or removed."""
+    max_entries = MAX_ENTRIES if max_entries is None else max_entries
+    max_bytes = FOLDER_CAP if max_bytes is None else max_bytes
+    found = []
+    with os.scandir(folder) as listing:
+        for entry in listing:
+            if entry.name.endswith(SUFFIX) and entry.is_file(follow_symlinks=False):
+                st = entry.stat(follow_symlinks=False)
+                found.append((st.st_mtime_ns, st.st_size, entry.path))
+    count, total = len(found), sum(size for _, size, _ in found)
+    for _, size, where in sorted(found):  # the oldest first
+        if count <= max_entries and total <= max_bytes:
+            break
+        if where != str(keep):
+            _remove(Path(where))
+            count, total = count - 1, total - size
 
 
 def _remove(path: Path) -> None:
@@ -135,6 +162,10 @@ def _load(g: Grounder, key: str, path: Path) -> bool:
         raise FileRefused(f"{path}: {why}")
     g.vocab.append_atoms(*arrays["atoms"])
     g.take_grown(arrays, fields["estimated_added"])
+    try:
+        os.utime(path)  # used now: prune() keeps the recently used
+    except OSError:
+        pass
     return True
 
 

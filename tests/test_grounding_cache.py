@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import tracelab
-from tracelab.engine import compile_cache
+from tracelab.engine import compile_cache, grounding_cache
 from tracelab.engine.array_file import MAGIC, read_arrays, write_arrays
 from tracelab.engine.grounding_cache import ARRAYS, FILE_CAP, cache_folder
 from tracelab.engine.notices import showing_notices
@@ -144,3 +144,24 @@ def test_a_link_in_place_of_an_entry_is_not_read(spec: WorldSpec, cache: Path, t
     entry.symlink_to(elsewhere)
     assert played(spec) == first
     assert not entry.is_symlink()  # refused, removed and written again
+
+
+def test_the_folder_keeps_the_recently_used_entries_within_its_bounds(spec: WorldSpec, cache: Path) -> None:
+    played(spec)  # writes war.toml's entries
+    ours = set(entries(cache))
+    cache.joinpath("notes.txt").write_text("not the cache's")  # another file: never looked at
+    for i in range(6):  # older strangers' entries, oldest first
+        old = cache / f"{i:032x}{grounding_cache.SUFFIX}"
+        old.write_bytes(b"x" * 1000)
+        os.utime(old, ns=(10**18 + i, 10**18 + i))
+    for mine in ours:  # the hit below touches our entries: make them the oldest before it
+        os.utime(cache / mine, ns=(10**17, 10**17))
+    played(spec)  # a hit: our entries are used now
+    newest = cache / f"{'f' * 32}{grounding_cache.SUFFIX}"
+    newest.write_bytes(b"y" * 1000)
+    grounding_cache.prune(cache, keep=newest, max_entries=len(ours) + 3)
+    left = set(entries(cache))
+    assert ours <= left and newest.name in left and "notes.txt" in left
+    assert left - ours - {newest.name, "notes.txt"} == {f"{i:032x}{grounding_cache.SUFFIX}" for i in (4, 5)}
+    grounding_cache.prune(cache, keep=newest, max_bytes=1500)  # bytes: all but the entry just written
+    assert set(entries(cache)) == {newest.name, "notes.txt"}
