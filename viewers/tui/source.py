@@ -102,16 +102,15 @@ class LockedConnection:
 
     def interrupt(self) -> bool:
         """Cancel the query running now, if any; True if there was one."""
-        with self._running_lock:
-            if self._running is None:
-                return False
-            self.con.interrupt()
-            return True
+        return self._interrupt(("foreground", "background"))
 
     def interrupt_foreground(self) -> bool:
         """Cancel the query running now if the user waits on it (not background work); True if so."""
+        return self._interrupt(("foreground",))
+
+    def _interrupt(self, kinds: tuple[str, ...]) -> bool:
         with self._running_lock:
-            if self._running != "foreground":
+            if self._running not in kinds:
                 return False
             self.con.interrupt()
             return True
